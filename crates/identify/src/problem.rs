@@ -1,0 +1,122 @@
+//! The problem trait that every identification problem implements, and its named parameter layout.
+
+use faer::{ColMut, ColRef, MatMut};
+
+/// Physical unit of one parameter; used for reporting and for the rank tolerance.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum Unit {
+    /// A length in m.
+    Meter,
+    /// An angle in rad.
+    Radian,
+    /// A pure number (ratio, scale factor, polynomial coefficient).
+    Dimensionless,
+}
+
+impl Unit {
+    /// Symbol used in reports: `m`, `rad` or `1`.
+    pub fn symbol(self) -> &'static str {
+        match self {
+            Unit::Meter => "m",
+            Unit::Radian => "rad",
+            Unit::Dimensionless => "1",
+        }
+    }
+}
+
+/// Role of a parameter in the problem.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum Role {
+    /// A parameter the user wants (kinematic deviation, transmission parameter).
+    Model,
+    /// A nuisance parameter (unknown socket point, …): identified, reported apart, never pruned
+    /// before model parameters.
+    Nuisance,
+}
+
+/// One named parameter.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamSpec {
+    /// Stable name, e.g. `dtheta3` or `joint_a2.rx` or `socket0.x`.
+    pub name: String,
+    /// Physical unit.
+    pub unit: Unit,
+    /// Model or nuisance.
+    pub role: Role,
+}
+
+/// Names and order of the entries of a parameter vector `x` (length `len()`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ParamLayout {
+    specs: Vec<ParamSpec>,
+}
+
+impl ParamLayout {
+    /// Builds a layout from its specs, in the order of `x`.
+    pub fn new(specs: Vec<ParamSpec>) -> Self {
+        Self { specs }
+    }
+    /// Number of parameters `n`.
+    pub fn len(&self) -> usize {
+        self.specs.len()
+    }
+    /// True when there is no parameter.
+    pub fn is_empty(&self) -> bool {
+        self.specs.is_empty()
+    }
+    /// All specs, in the order of `x`.
+    pub fn specs(&self) -> &[ParamSpec] {
+        &self.specs
+    }
+    /// Spec of entry `idx`.
+    ///
+    /// # Panics
+    /// If `idx >= len()`.
+    #[track_caller]
+    pub fn spec(&self, idx: usize) -> &ParamSpec {
+        &self.specs[idx]
+    }
+    /// Name of entry `idx`.
+    ///
+    /// # Panics
+    /// If `idx >= len()`.
+    #[track_caller]
+    pub fn name(&self, idx: usize) -> &str {
+        &self.specs[idx].name
+    }
+    /// Index of the parameter called `name`, if any.
+    pub fn index_of(&self, name: &str) -> Option<usize> {
+        self.specs.iter().position(|s| s.name == name)
+    }
+}
+
+/// A model evaluation that failed for data-dependent reasons (e.g. a singular configuration).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("evaluation failed: {reason}")]
+pub struct EvalError {
+    /// What went wrong, in plain words.
+    pub reason: String,
+}
+
+/// A nonlinear least-squares problem `min_x ½‖r(x)‖²` with an analytic Jacobian.
+///
+/// Residuals are expected to be already weighted (divided by their standard deviation, or in a
+/// common unit such as m): the solver treats them as having equal variance.
+pub trait Problem {
+    /// Names and order of the entries of `x` (length `n`).
+    fn layout(&self) -> &ParamLayout;
+    /// Number of residuals `m`.
+    fn n_residuals(&self) -> usize;
+    /// Writes `r(x)` into `out` (length `m`).
+    ///
+    /// # Errors
+    /// [`EvalError`] when the model cannot be evaluated at `x`.
+    fn residuals(&self, x: ColRef<'_, f64>, out: ColMut<'_, f64>) -> Result<(), EvalError>;
+    /// Writes `∂r/∂x` into `jac` (`m × n`; row i = residual i, column j = `layout()` entry j).
+    ///
+    /// # Errors
+    /// [`EvalError`] when the model cannot be evaluated at `x`.
+    fn jacobian(&self, x: ColRef<'_, f64>, jac: MatMut<'_, f64>) -> Result<(), EvalError>;
+}

@@ -1,0 +1,1 @@
+//! hapcal-io (stub).

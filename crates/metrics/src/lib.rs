@@ -1,0 +1,1 @@
+//! hapcal-metrics (stub).
