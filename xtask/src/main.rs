@@ -1,1 +1,45 @@
-fn main() {}
+//! Automation for the hapcal workspace (the cargo-xtask pattern): what CI runs, and the
+//! reproduction runs that write `docs/results/`.
+#![allow(clippy::print_stdout, clippy::print_stderr)] // a task runner reports on the terminal
+
+mod mukca;
+
+use anyhow::Result;
+use clap::Parser;
+use std::path::PathBuf;
+use xshell::{Shell, cmd};
+
+#[derive(Parser)]
+enum Task {
+    /// fmt, clippy, tests, docs: what CI runs.
+    Ci,
+    /// Calibrate every MUKCa split of docs/results/mukca.md with the release binary and write
+    /// the table (ours beside MUKCa's own optimiser); `--check` only verifies the acceptance
+    /// criteria against the committed reference figures.
+    Mukca {
+        /// Compare instead of writing.
+        #[arg(long)]
+        check: bool,
+    },
+}
+
+fn project_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn main() -> Result<()> {
+    let sh = Shell::new()?;
+    sh.change_dir(project_root());
+    match Task::parse() {
+        Task::Ci => ci(&sh),
+        Task::Mukca { check } => mukca::run(&sh, check),
+    }
+}
+
+fn ci(sh: &Shell) -> Result<()> {
+    cmd!(sh, "cargo fmt --all --check").run()?;
+    cmd!(sh, "cargo clippy --workspace --all-targets --quiet -- -D warnings").run()?;
+    cmd!(sh, "cargo test --workspace --quiet").run()?;
+    cmd!(sh, "cargo doc --workspace --no-deps --quiet").env("RUSTDOCFLAGS", "-D warnings").run()?;
+    Ok(())
+}

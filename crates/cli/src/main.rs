@@ -1,1 +1,108 @@
-fn main() {}
+//! `hapcal`: kinematic calibration of haptic devices and serial robots.
+#![allow(clippy::print_stdout, clippy::print_stderr)] // a binary prints its results (STYLE.md §12)
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use hapcal::calibrate::{self, ModelChoice, Plan};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Kinematic calibration of capstan-driven haptic devices and serial robots.
+///
+/// Exit codes: 0 success, 2 error (bad input, unreadable file; the message names the file,
+/// line and column), clap's own 2 for bad usage.
+#[derive(Parser, Debug)]
+#[command(name = "hapcal", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Identify kinematic deviations from measurements and report accuracy before and after.
+    ///
+    /// With no arguments: MUKCa kuka_14, training on `front`, testing on `left_back` and
+    /// `raised_left` (bundled in fixtures/mukca).
+    Calibrate {
+        /// Device file (.toml) or URDF (.urdf, with --tip).
+        #[arg(long)]
+        device: Option<PathBuf>,
+        /// Tip link when the device is a URDF.
+        #[arg(long, default_value = "ball_link")]
+        tip: String,
+        /// Training data: MUKCa placement folders (hole_0.csv, hole_1.csv), run folders of
+        /// placements, or hapcal log CSV files.
+        #[arg(long, num_args = 1..)]
+        data: Vec<PathBuf>,
+        /// Test data, same kinds; only evaluated, never fitted.
+        #[arg(long, num_args = 1..)]
+        test: Vec<PathBuf>,
+        /// Write the calibrated device: `.urdf` (copy of the source URDF with calibrated joint
+        /// origins) or `.toml` (device file with a [calibration] table).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print the report as one JSON document instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Model: auto (chosen by cross-validation on the training data), geometric, compliance.
+        #[arg(long, value_enum, default_value_t = ModelChoice::Auto)]
+        model: ModelChoice,
+        /// Known distance between the two sockets of a placement, m.
+        #[arg(long, default_value_t = 0.05)]
+        socket_distance_m: f64,
+        /// Cross-validation folds (time-contiguous blocks).
+        #[arg(long, default_value_t = 5)]
+        folds: usize,
+        /// Measurement noise standard deviation, m (default: estimated from the residuals).
+        #[arg(long)]
+        sigma_m: Option<f64>,
+    },
+    /// Import a URDF chain as a hapcal device file (TOML on stdout).
+    ImportUrdf {
+        /// The URDF file.
+        urdf: PathBuf,
+        /// The tip link (e.g. ball_link).
+        #[arg(long)]
+        tip: String,
+    },
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Calibrate { device, tip, data, test, out, json, model, socket_distance_m, folds, sigma_m } => {
+            let default = Plan::bundled_default();
+            let plan = if device.is_none() && data.is_empty() && test.is_empty() {
+                Plan { model, socket_distance_m, folds, sigma_m, ..default }
+            } else {
+                Plan { device: device.unwrap_or(default.device), tip, data, test, socket_distance_m, model, folds, sigma_m }
+            };
+            let outcome = calibrate::run(&plan)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&outcome.report)?);
+            } else {
+                print!("{}", hapcal::report::render(&outcome.report));
+            }
+            if let Some(out) = out {
+                calibrate::write_outputs(&outcome, &out)?;
+                eprintln!("hapcal: wrote {}", out.display());
+            }
+            Ok(())
+        }
+        Command::ImportUrdf { urdf, tip } => {
+            let device = hapcal_io::import_urdf(&urdf, &tip)?;
+            print!("{}", hapcal_io::write_device(&device));
+            Ok(())
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("hapcal: error: {err:#}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,1 +1,82 @@
-//! hapcal-problems (stub).
+//! Calibration problems: measurement residuals with analytic Jacobians, on a kinematic chain.
+//!
+//! Architecture invariant: *`problems` turns a chain and observations into an
+//! [`hapcal_identify::Problem`]; it never reads files and never solves.*
+//!
+//! Measurement types (each a residual with its analytic Jacobian):
+//! - [`RowKind::Distance`]: distance from the rig origin (the chain's base) to the end point,
+//!   the paper's cable encoder (eq. 5): `r = (|P| − δ)/σ`;
+//! - [`RowKind::Position`]: end point in the rig frame (a tracker): `r = (P − P_meas)/σ`;
+//! - [`RowKind::Point`]: the end point sits at unknown point `k` (a socket): `r = (P − s_k)/σ`,
+//!   with `s_k` a nuisance parameter;
+//! - [`PointDistance`]: a known distance between two unknown points: `r = (|s_a − s_b| − D)/σ`.
+//!
+//! Optionally a [`GravityCompliance`] term adds one parameter per joint (non-geometric
+//! calibration, Judd & Knasinski 1990; Zhou et al. 2014): each joint deflects by `k_j·τ̂_j(q)`.
+//!
+//! ```
+//! use hapcal_kinematics::{Chain, DhConvention, DhRow};
+//! use hapcal_problems::{CalibrationProblem, Observations, Row, RowKind, Weights};
+//! use hapcal_identify::Problem;
+//!
+//! let row = |a_m: f64, joint: usize| DhRow { convention: DhConvention::Standard, a_m,
+//!     alpha_rad: 0.0, d_m: 0.0, theta_rad: 0.0, beta_rad: None, joint: Some(joint) };
+//! let chain = Chain::from_dh(&[row(0.3, 0), row(0.2, 1)])?;
+//! let obs = Observations {
+//!     rows: vec![Row { q: vec![0.1, 0.2], kind: RowKind::Distance { distance_m: 0.49 } }],
+//!     point_distances: vec![],
+//!     n_points: 0,
+//! };
+//! let problem = CalibrationProblem::new(chain, obs, Weights::default(), None)?;
+//! assert_eq!(problem.n_residuals(), 1);
+//! assert_eq!(problem.layout().len(), 8);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+mod compliance;
+mod model;
+mod problem;
+
+pub use compliance::GravityCompliance;
+pub use model::CalibratedModel;
+pub use problem::{CalibrationProblem, Observations, PointDistance, Row, RowKind, Weights};
+
+/// Errors of problem construction: inconsistent observations.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A configuration has a different number of joint angles than the chain.
+    #[error("observation {row} has {found} joint angles, the chain has {expected} joints")]
+    JointCount {
+        /// Index of the observation.
+        row: usize,
+        /// Joints of the chain.
+        expected: usize,
+        /// Angles in the observation.
+        found: usize,
+    },
+    /// An observation names an unknown point that does not exist.
+    #[error("observation {row} refers to point {point}, but there are only {n_points} points")]
+    NoSuchPoint {
+        /// Index of the observation (or of the point distance).
+        row: usize,
+        /// The point index.
+        point: usize,
+        /// Number of unknown points.
+        n_points: usize,
+    },
+    /// A weight is not a positive finite number.
+    #[error("measurement standard deviation {name} = {value} must be positive and finite")]
+    BadSigma {
+        /// Which sigma.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A value in an observation is NaN or infinite.
+    #[error("observation {row} holds a value that is not finite")]
+    NotFinite {
+        /// Index of the observation.
+        row: usize,
+    },
+}

@@ -1,0 +1,14 @@
+//! The `hapcal` command line: flags, glue, and the calibration workflow that ties the crates
+//! together (read → build problem → cross-validate the model → identify → report).
+//!
+//! Architecture invariant: *the library part never prints; `main.rs` prints what it returns.*
+
+pub mod calibrate;
+pub mod report;
+
+use std::path::PathBuf;
+
+/// Root of the source tree (where `fixtures/` lives), fixed at build time.
+pub fn project_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}

@@ -1,0 +1,172 @@
+//! The identification procedure users run: prune, fit, re-decide at the estimate, covariance.
+
+use faer::{Col, Mat};
+
+use crate::covariance::{Covariance, covariance, sigma_from_residuals};
+use crate::error::{Error, check_config};
+use crate::lm::{Fit, LmConfig, check_jacobian_finite, levenberg_marquardt};
+use crate::problem::{ParamLayout, Problem};
+use crate::rank::{Identifiability, RankConfigBase, identifiability};
+
+/// Most fits [`identify`] runs while the kept set changes.
+pub const MAX_ROUNDS: usize = 3;
+
+/// Smallest noise level used for the rank decision, in residual units, so that exact
+/// (synthetic) data still give a finite, purely numerical decision.
+pub const SIGMA_FLOOR: f64 = 1e-12;
+
+/// Configuration of [`identify`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct IdentifyConfig {
+    /// The solver's stopping tests.
+    pub lm: LmConfig,
+    /// Priors and numerical floor of the rank decision (the noise comes from `sigma`).
+    pub rank: RankConfigBase,
+    /// Standard deviation of one residual, in residual units, when known; `None` estimates it
+    /// from the residuals of the fit ([`sigma_from_residuals`]).
+    pub sigma: Option<f64>,
+}
+
+/// Where [`Identified::sigma`] comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SigmaSource {
+    /// [`IdentifyConfig::sigma`].
+    Given,
+    /// Estimated from the residuals of the final fit, `√(‖r‖²/(m − n_kept))`.
+    Residuals,
+}
+
+/// Result of [`identify`].
+#[derive(Clone, Debug)]
+pub struct Identified {
+    /// The final fit over the kept parameters (pruned entries keep their `x0` values).
+    pub fit: Fit,
+    /// The pruning decision; `identifiability.kept` is the free set of `fit`.
+    pub identifiability: Identifiability,
+    /// Covariance of the kept parameters at the estimate.
+    pub covariance: Covariance,
+    /// Residual noise used for the covariance (and the last rank decision), residual units.
+    pub sigma: f64,
+    /// Whether `sigma` was given or estimated.
+    pub sigma_source: SigmaSource,
+    /// The problem's layout (for names and units).
+    pub layout: ParamLayout,
+    /// Number of fits run (1 to [`MAX_ROUNDS`]).
+    pub rounds: usize,
+    /// True when the decision at the estimate reproduced the kept set of the fit; false when
+    /// [`MAX_ROUNDS`] fits did not settle it (then `identifiability` is the decision the last
+    /// fit used, taken at the previous estimate).
+    pub pruning_converged: bool,
+}
+
+impl Identified {
+    /// Estimated value of parameter `name` (pruned ones hold their `x0` value), in its unit.
+    pub fn value(&self, name: &str) -> Option<f64> {
+        self.layout.index_of(name).map(|j| self.fit.x[j])
+    }
+    /// Standard deviation of parameter `name`, in its unit; `None` if unknown or pruned.
+    pub fn std(&self, name: &str) -> Option<f64> {
+        self.covariance.std_of(name)
+    }
+}
+
+/// Identifies the parameters of `p` that the data determine, starting from the nominal `x0`.
+///
+/// 1. Prune at `x0` ([`identifiability`]) with `σ₀` = `cfg.sigma`, or the RMS of `r(x0)` when
+///    `None` (an overestimate: it contains the deviations still to be identified), floored at
+///    [`SIGMA_FLOOR`].
+/// 2. Fit the kept parameters from `x0` ([`levenberg_marquardt`]).
+/// 3. Re-estimate `σ` from the fit residuals (unless given) and re-decide the pruning with the
+///    Jacobian at the estimate: identifiability is a property of the estimate, not of the
+///    nominal.
+/// 4. If the kept set changed, refit from `x0` with the new set (at most [`MAX_ROUNDS`] fits).
+/// 5. Covariance of the kept parameters at the estimate ([`covariance`]).
+///
+/// Non-convergence of the fit is reported in `fit.termination`, not as an error.
+///
+/// # Errors
+/// - [`Error::InvalidConfig`] for a non-positive `sigma`, a non-positive prior, a negative
+///   `rel_tol` or tolerance;
+/// - [`Error::WrongLength`], [`Error::Eval`], [`Error::NonFiniteResidual`],
+///   [`Error::NonFiniteJacobian`], [`Error::TooFewResiduals`] as for [`levenberg_marquardt`];
+/// - [`Error::EvalAtEstimate`] if `J` cannot be evaluated (or is not finite) at an estimate;
+/// - [`Error::NoDegreesOfFreedom`] if `sigma` is `None` and `m` equals the number of kept
+///   parameters;
+/// - [`Error::Singular`] if the kept columns are singular at the estimate (only possible when
+///   the last decision was not reproduced, see [`Identified::pruning_converged`]).
+pub fn identify(
+    p: &impl Problem,
+    x0: Col<f64>,
+    cfg: &IdentifyConfig,
+) -> Result<Identified, Error> {
+    if let Some(sigma) = cfg.sigma {
+        check_config("sigma", sigma, true)?;
+    }
+    check_config("prior_m", cfg.rank.prior_m, true)?;
+    check_config("prior_rad", cfg.rank.prior_rad, true)?;
+    check_config("prior_dimensionless", cfg.rank.prior_dimensionless, true)?;
+    check_config("rel_tol", cfg.rank.rel_tol, false)?;
+    let layout = p.layout().clone();
+    let n = layout.len();
+    if x0.nrows() != n {
+        return Err(Error::WrongLength { expected: n, found: x0.nrows() });
+    }
+    let m = p.n_residuals();
+    let mut r0 = Col::<f64>::zeros(m);
+    p.residuals(x0.as_ref(), r0.as_mut())?;
+    if let Some(index) = (0..m).find(|&i| !r0[i].is_finite()) {
+        return Err(Error::NonFiniteResidual { index });
+    }
+    let mut jac = Mat::<f64>::zeros(m, n);
+    p.jacobian(x0.as_ref(), jac.as_mut())?;
+    check_jacobian_finite(jac.as_ref(), &layout)?;
+
+    let (mut sigma, sigma_source) = match cfg.sigma {
+        Some(s) => (s, SigmaSource::Given),
+        None => {
+            let rms = if m > 0 { (r0.squared_norm_l2() / m as f64).sqrt() } else { 0.0 };
+            (rms, SigmaSource::Residuals)
+        }
+    };
+    let candidates: Vec<usize> = (0..n).collect();
+    let decide = |jac: &Mat<f64>, sigma: f64| {
+        identifiability(jac.as_ref(), &layout, &candidates, &cfg.rank.with_sigma(sigma.max(SIGMA_FLOOR)))
+    };
+    let mut ident = decide(&jac, sigma);
+    let mut rounds = 0;
+    let (fit, pruning_converged) = loop {
+        rounds += 1;
+        let fit = levenberg_marquardt(p, x0.clone(), &ident.kept, &cfg.lm)?;
+        if sigma_source == SigmaSource::Residuals {
+            sigma = sigma_from_residuals(fit.residuals.as_ref(), ident.kept.len()).ok_or(
+                Error::NoDegreesOfFreedom { n_residuals: m, n_free: ident.kept.len() },
+            )?;
+        }
+        p.jacobian(fit.x.as_ref(), jac.as_mut()).map_err(Error::EvalAtEstimate)?;
+        if !jac.is_all_finite() {
+            return Err(Error::EvalAtEstimate(crate::problem::EvalError {
+                reason: "the jacobian is not finite".to_owned(),
+            }));
+        }
+        let next = decide(&jac, sigma);
+        if next.kept == ident.kept {
+            ident = next;
+            break (fit, true);
+        }
+        if rounds == MAX_ROUNDS {
+            break (fit, false);
+        }
+        ident = next;
+    };
+    let covariance = covariance(jac.as_ref(), &layout, &ident.kept, sigma)?;
+    Ok(Identified {
+        fit,
+        identifiability: ident,
+        covariance,
+        sigma,
+        sigma_source,
+        layout,
+        rounds,
+        pruning_converged,
+    })
+}

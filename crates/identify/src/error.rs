@@ -1,0 +1,106 @@
+//! The crate's error type: input that the solvers cannot accept.
+
+use crate::problem::EvalError;
+
+/// Input that [`levenberg_marquardt`](crate::levenberg_marquardt),
+/// [`covariance`](crate::covariance) or [`identify`](crate::identify) cannot work with.
+///
+/// Data-dependent outcomes (no convergence, a pruned parameter) are not errors: they are
+/// reported in [`Fit::termination`](crate::Fit::termination) and
+/// [`Identifiability::pruned`](crate::Identifiability::pruned).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// `x0` does not have one entry per parameter of the layout.
+    #[error("x0 has {found} entries but the layout has {expected} parameters")]
+    WrongLength {
+        /// `layout().len()`.
+        expected: usize,
+        /// `x0.nrows()`.
+        found: usize,
+    },
+    /// An index in `free` is not a parameter of the layout.
+    #[error("free parameter index {index} is out of range for a layout of {n_params} parameters")]
+    FreeOutOfRange {
+        /// The offending index.
+        index: usize,
+        /// `layout().len()`.
+        n_params: usize,
+    },
+    /// An index appears twice in `free`.
+    #[error("parameter {name:?} appears twice in the free set")]
+    DuplicateFree {
+        /// Name of the repeated parameter.
+        name: String,
+    },
+    /// Fewer residuals than free parameters: the least-squares problem is underdetermined.
+    #[error("{n_residuals} residuals cannot determine {n_free} free parameters")]
+    TooFewResiduals {
+        /// Number of residuals `m`.
+        n_residuals: usize,
+        /// Number of free parameters.
+        n_free: usize,
+    },
+    /// As many residuals as kept parameters, so the noise cannot be estimated from the residuals.
+    #[error(
+        "{n_residuals} residuals leave no degree of freedom to estimate sigma with {n_free} free \
+         parameters; give sigma explicitly"
+    )]
+    NoDegreesOfFreedom {
+        /// Number of residuals `m`.
+        n_residuals: usize,
+        /// Number of free parameters.
+        n_free: usize,
+    },
+    /// The problem could not be evaluated at the initial guess.
+    #[error("at the initial guess x0")]
+    Eval(#[from] EvalError),
+    /// The problem could not be evaluated at the estimate (after a successful fit).
+    #[error("at the estimate")]
+    EvalAtEstimate(#[source] EvalError),
+    /// A residual is NaN or infinite at the initial guess.
+    #[error("residual {index} is not finite at x0")]
+    NonFiniteResidual {
+        /// Row of the residual.
+        index: usize,
+    },
+    /// A Jacobian entry is NaN or infinite.
+    #[error("jacobian entry (row {row}, parameter {name:?}) is not finite")]
+    NonFiniteJacobian {
+        /// Row (residual index).
+        row: usize,
+        /// Parameter name of the column.
+        name: String,
+    },
+    /// The free columns of the Jacobian are linearly dependent (or one is zero), so the
+    /// covariance does not exist.
+    #[error("covariance is singular: parameter {name:?} is not determined by the data")]
+    Singular {
+        /// The parameter whose column made `R` singular.
+        name: String,
+    },
+    /// A configuration value is out of its domain.
+    #[error("{field} = {value} is invalid: it must be finite and {requirement}")]
+    InvalidConfig {
+        /// Name of the field, e.g. `sigma`.
+        field: &'static str,
+        /// The value given.
+        value: f64,
+        /// What it must satisfy besides being finite, e.g. `positive`.
+        requirement: &'static str,
+    },
+}
+
+/// Checks a configuration value: finite and `> 0` (`positive`) or `>= 0`.
+pub(crate) fn check_config(field: &'static str, value: f64, positive: bool) -> Result<(), Error> {
+    let ok = value.is_finite() && if positive { value > 0.0 } else { value >= 0.0 };
+    if ok {
+        Ok(())
+    } else {
+        Err(Error::InvalidConfig {
+            field,
+            value,
+            requirement: if positive { "positive" } else { "non-negative" },
+        })
+    }
+}

@@ -1,0 +1,441 @@
+//! Levenberg–Marquardt for `min_x ½‖r(x)‖²` over a subset of the parameters.
+//!
+//! Source: J. J. Moré, "The Levenberg–Marquardt algorithm: implementation and theory",
+//! Numerical Analysis, LNM 630, Springer 1978, and its implementation MINPACK `lmder`/`lmpar`
+//! (Moré, Garbow, Hillstrom, 1980): column scaling `D`, a trust region of radius `Δ` in the
+//! scaled variables, `λ` found from `Δ` by Moré's safeguarded Newton iteration, the damped
+//! subproblem solved by QR (never by forming `JᵀJ`), and the MINPACK stopping tests. Choosing
+//! `λ` from the trust region (rather than a direct `λ` update such as Nielsen's) gives `λ = 0`,
+//! i.e. exact Gauss–Newton steps, whenever the Gauss–Newton step fits in the region: linear
+//! problems are solved in one step and small-residual problems converge quadratically.
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::householder;
+use faer::linalg::solvers::SolveLstsq;
+use faer::{Col, ColRef, Conj, Mat, MatRef, Par};
+
+use crate::error::{Error, check_config};
+use crate::problem::{ParamLayout, Problem};
+
+/// Stopping tolerances of [`levenberg_marquardt`] (the MINPACK `lmder` tests).
+///
+/// Tolerances below machine epsilon act as machine epsilon, so the solver stops when no
+/// further progress is possible in floating point (MINPACK `info` 6–8).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LmConfig {
+    /// Stop when both the actual and the predicted relative reduction of the cost in one step
+    /// are at most `ftol` ([`Termination::FtolReached`]).
+    pub ftol: f64,
+    /// Stop when the trust radius `Δ`, which bounds the scaled step `‖D·p‖`, is at most
+    /// `xtol·(‖D·x‖ + xtol)` ([`Termination::XtolReached`]); `D` are the (running maximum)
+    /// column norms of `J`. The `+ xtol` lets a solution at `x = 0` stop too.
+    pub xtol: f64,
+    /// Stop when the largest cosine between `r` and a column of `J`,
+    /// `max_j |J_jᵀ r| / (‖J_j‖·‖r‖)`, is at most `gtol` ([`Termination::GtolReached`]).
+    pub gtol: f64,
+    /// Stop after this many evaluations of `r` (the initial one included)
+    /// ([`Termination::MaxEvaluations`]).
+    pub max_evaluations: usize,
+}
+
+impl Default for LmConfig {
+    /// `ftol = xtol = gtol = 1e-12`, `max_evaluations = 200`: tighter than MINPACK's
+    /// `lmder1` (`ftol = xtol = √ε ≈ 1.5e-8`, `gtol = 0`) because our problems are small and
+    /// the covariance is computed at the estimate; 200 is MINPACK's `100·(n + 1)` for `n = 1`,
+    /// a budget that well-posed calibration problems meet in a few tens of evaluations.
+    fn default() -> Self {
+        Self { ftol: 1e-12, xtol: 1e-12, gtol: 1e-12, max_evaluations: 200 }
+    }
+}
+
+/// Why [`levenberg_marquardt`] stopped.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum Termination {
+    /// The relative reduction of the cost fell below [`LmConfig::ftol`].
+    FtolReached,
+    /// The scaled step fell below [`LmConfig::xtol`] relative to `‖D·x‖`.
+    XtolReached,
+    /// The gradient (as a cosine, see [`LmConfig::gtol`]) fell below `gtol`; also reported
+    /// for a zero residual and for an empty free set.
+    GtolReached,
+    /// [`LmConfig::max_evaluations`] residual evaluations were spent without convergence.
+    MaxEvaluations,
+    /// The step or the Jacobian became NaN or infinite, or the damping overflowed.
+    Numerical,
+    /// The Jacobian could not be evaluated at an accepted point.
+    EvalFailed(crate::problem::EvalError),
+}
+
+impl Termination {
+    /// True for the three convergence criteria (`Ftol`, `Xtol`, `Gtol`).
+    pub fn is_success(&self) -> bool {
+        matches!(self, Self::FtolReached | Self::XtolReached | Self::GtolReached)
+    }
+}
+
+/// Result of [`levenberg_marquardt`]: the estimate and how it was reached.
+#[derive(Clone, Debug)]
+pub struct Fit {
+    /// The estimate, length `n` (entries not in `free` are exactly those of `x0`).
+    pub x: Col<f64>,
+    /// Why the solver stopped; check [`Termination::is_success`].
+    pub termination: Termination,
+    /// Number of evaluations of `r` (the one at `x0` included).
+    pub n_evaluations: usize,
+    /// Number of evaluations of `J`.
+    pub n_jacobians: usize,
+    /// `½‖r(x)‖²` at [`Fit::x`], in squared residual units.
+    pub cost: f64,
+    /// `r(x)` at [`Fit::x`], length `m`.
+    pub residuals: Col<f64>,
+}
+
+/// Checks that `free` holds distinct indices of `layout`.
+pub(crate) fn check_free(free: &[usize], layout: &ParamLayout) -> Result<(), Error> {
+    let n_params = layout.len();
+    let mut seen = vec![false; n_params];
+    for &index in free {
+        match seen.get_mut(index) {
+            None => return Err(Error::FreeOutOfRange { index, n_params }),
+            Some(true) => return Err(Error::DuplicateFree { name: layout.name(index).to_owned() }),
+            Some(s) => *s = true,
+        }
+    }
+    Ok(())
+}
+
+/// Returns `Err(NonFiniteJacobian)` naming the first non-finite entry of `jac`.
+pub(crate) fn check_jacobian_finite(jac: MatRef<'_, f64>, layout: &ParamLayout) -> Result<(), Error> {
+    for j in 0..jac.ncols() {
+        if let Some(row) = (0..jac.nrows()).find(|&i| !jac[(i, j)].is_finite()) {
+            return Err(Error::NonFiniteJacobian { row, name: layout.name(j).to_owned() });
+        }
+    }
+    Ok(())
+}
+
+/// Initial trust radius relative to `‖D·x0‖` (MINPACK `factor`).
+const FACTOR: f64 = 100.0;
+
+/// Minimises `½‖r(x)‖²` over the parameters listed in `free`, starting from `x0`.
+///
+/// The Jacobian is evaluated in full (`m × n`) and its `free` columns are used; the other
+/// entries of `x` keep their `x0` values (this is how pruning is applied).
+///
+/// Algorithm (MINPACK `lmder`, Moré 1978): `D` holds the column norms of `J`, as their running
+/// maximum over iterations (`mode = 1`; a zero column gets 1). In the scaled variables
+/// `u = D·p`, each trial step solves the damped problem `[J D⁻¹; √λ·I] u ≈ [−r; 0]` with the
+/// smallest `λ ≥ 0` such that `‖u‖ ≤ Δ` (within 10 %): `J D⁻¹` is factorised once per
+/// Jacobian by column-pivoted Householder QR, and `[R; √λ·I]` (size `2n_free × n_free`) by
+/// Householder QR for each `λ` tried. `Δ` starts at `100·‖D·x0‖` (100 if zero) and follows the
+/// gain ratio `ρ = actual / predicted reduction`: shrunk when `ρ ≤ 1/4`, set to `2‖u‖` when
+/// `ρ ≥ 3/4` or `λ = 0`; a step is accepted when `ρ ≥ 10⁻⁴`. A trial point where `r` cannot be
+/// evaluated or is not finite is rejected like a step that increases the cost tenfold (`Δ` is
+/// divided by 10). See [`LmConfig`] for the stopping tests.
+///
+/// Non-convergence is a result: check `fit.termination.is_success()`.
+///
+/// # Errors
+/// - [`Error::WrongLength`] if `x0.nrows() != p.layout().len()`;
+/// - [`Error::FreeOutOfRange`], [`Error::DuplicateFree`] for a bad `free`;
+/// - [`Error::TooFewResiduals`] if `m < free.len()`;
+/// - [`Error::InvalidConfig`] for a negative or non-finite tolerance;
+/// - [`Error::Eval`] if `r` or `J` cannot be evaluated at `x0`;
+/// - [`Error::NonFiniteResidual`], [`Error::NonFiniteJacobian`] for NaN or ∞ at `x0`.
+///
+/// # Panics
+/// If the problem writes outside the shapes it declared (faer's shape checks).
+pub fn levenberg_marquardt(
+    p: &impl Problem,
+    x0: Col<f64>,
+    free: &[usize],
+    cfg: &LmConfig,
+) -> Result<Fit, Error> {
+    let layout = p.layout();
+    let n = layout.len();
+    if x0.nrows() != n {
+        return Err(Error::WrongLength { expected: n, found: x0.nrows() });
+    }
+    check_free(free, layout)?;
+    check_config("ftol", cfg.ftol, false)?;
+    check_config("xtol", cfg.xtol, false)?;
+    check_config("gtol", cfg.gtol, false)?;
+    let m = p.n_residuals();
+    let nf = free.len();
+    if m < nf {
+        return Err(Error::TooFewResiduals { n_residuals: m, n_free: nf });
+    }
+
+    let mut x = x0;
+    let mut r = Col::<f64>::zeros(m);
+    p.residuals(x.as_ref(), r.as_mut())?;
+    if let Some(index) = (0..m).find(|&i| !r[i].is_finite()) {
+        return Err(Error::NonFiniteResidual { index });
+    }
+    let mut n_evaluations = 1;
+    if nf == 0 {
+        let cost = 0.5 * r.squared_norm_l2();
+        return Ok(Fit {
+            x,
+            termination: Termination::GtolReached,
+            n_evaluations,
+            n_jacobians: 0,
+            cost,
+            residuals: r,
+        });
+    }
+    let mut jac = Mat::<f64>::zeros(m, n);
+    p.jacobian(x.as_ref(), jac.as_mut())?;
+    check_jacobian_finite(jac.as_ref(), layout)?;
+    let mut n_jacobians = 1;
+
+    let ftol = cfg.ftol.max(f64::EPSILON);
+    let xtol = cfg.xtol.max(f64::EPSILON);
+    let gtol = cfg.gtol.max(f64::EPSILON);
+    let scaled_norm = |diag: &[f64], x: &Col<f64>| {
+        free.iter().zip(diag).map(|(&k, d)| (d * x[k]).powi(2)).sum::<f64>().sqrt()
+    };
+    let mut diag = vec![0.0_f64; nf];
+    let mut delta = 0.0_f64;
+    let mut x_norm = 0.0_f64;
+    let mut lambda = 0.0_f64;
+    let mut f_norm = r.norm_l2();
+    let mut first = true;
+    let mut x_trial = x.clone();
+    let mut r_trial = Col::<f64>::zeros(m);
+
+    let termination = 'outer: loop {
+        let col_norms: Vec<f64> = free.iter().map(|&k| jac.col(k).norm_l2()).collect();
+        for (d, &c) in diag.iter_mut().zip(&col_norms) {
+            *d = if first { c } else { d.max(c) };
+            if *d == 0.0 {
+                *d = 1.0;
+            }
+        }
+        if first {
+            x_norm = scaled_norm(&diag, &x);
+            delta = if x_norm > 0.0 { FACTOR * x_norm } else { FACTOR };
+        }
+        if f_norm == 0.0 {
+            break Termination::GtolReached;
+        }
+        let g_cos = (0..nf)
+            .filter(|&j| col_norms[j] > 0.0)
+            .map(|j| (jac.col(free[j]).transpose() * r.as_ref()).abs() / (col_norms[j] * f_norm))
+            .fold(0.0_f64, f64::max);
+        if g_cos <= gtol {
+            break Termination::GtolReached;
+        }
+        let factor = ScaledQr::new(jac.as_ref(), free, &diag, r.as_ref());
+
+        loop {
+            if n_evaluations >= cfg.max_evaluations {
+                break 'outer Termination::MaxEvaluations;
+            }
+            let (u, new_lambda) = lmpar(&factor, delta, lambda);
+            lambda = new_lambda;
+            if !u.iter().all(|v| v.is_finite()) || !lambda.is_finite() {
+                break 'outer Termination::Numerical;
+            }
+            let u_norm = norm(&u);
+            if first {
+                delta = delta.min(u_norm);
+            }
+            x_trial.copy_from(&x);
+            for (k, &pos) in factor.perm.iter().enumerate() {
+                x_trial[free[pos]] += u[k] / diag[pos];
+            }
+            n_evaluations += 1;
+            let f_norm_trial = match p.residuals(x_trial.as_ref(), r_trial.as_mut()) {
+                Ok(()) if r_trial.is_all_finite() => r_trial.norm_l2(),
+                _ => f64::INFINITY,
+            };
+            // Relative reductions of ‖r‖² (MINPACK actred, prered, dirder).
+            let actual = if 0.1 * f_norm_trial < f_norm {
+                1.0 - (f_norm_trial / f_norm).powi(2)
+            } else {
+                -1.0
+            };
+            let t1 = norm(&factor.r_times(&u)) / f_norm;
+            let t2 = lambda.sqrt() * u_norm / f_norm;
+            let predicted = t1 * t1 + 2.0 * t2 * t2;
+            let directional = -(t1 * t1 + t2 * t2);
+            let ratio = if predicted != 0.0 { actual / predicted } else { 0.0 };
+            if ratio <= 0.25 {
+                let mut shrink =
+                    if actual >= 0.0 { 0.5 } else { 0.5 * directional / (directional + 0.5 * actual) };
+                if 0.1 * f_norm_trial >= f_norm || shrink < 0.1 {
+                    shrink = 0.1;
+                }
+                delta = shrink * delta.min(u_norm / 0.1);
+                lambda /= shrink;
+            } else if lambda == 0.0 || ratio >= 0.75 {
+                delta = u_norm / 0.5;
+                lambda *= 0.5;
+            }
+            let accepted = ratio >= 1e-4;
+            if accepted {
+                std::mem::swap(&mut x, &mut x_trial);
+                std::mem::swap(&mut r, &mut r_trial);
+                f_norm = f_norm_trial;
+                x_norm = scaled_norm(&diag, &x);
+            }
+            if actual.abs() <= ftol && predicted <= ftol && 0.5 * ratio <= 1.0 {
+                break 'outer Termination::FtolReached;
+            }
+            if delta <= xtol * (x_norm + xtol) {
+                break 'outer Termination::XtolReached;
+            }
+            if accepted {
+                break;
+            }
+        }
+        first = false;
+        if let Err(e) = p.jacobian(x.as_ref(), jac.as_mut()) {
+            break Termination::EvalFailed(e);
+        }
+        n_jacobians += 1;
+        if !jac.is_all_finite() {
+            break Termination::Numerical;
+        }
+    };
+    let cost = 0.5 * r.squared_norm_l2();
+    Ok(Fit { x, termination, n_evaluations, n_jacobians, cost, residuals: r })
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|a| a * a).sum::<f64>().sqrt()
+}
+
+/// Column-pivoted QR of the scaled free Jacobian, `J D⁻¹ Π = Q R`, and `Q₁ᵀ r`.
+struct ScaledQr {
+    /// `R`, `n_free × n_free` upper triangular.
+    r: Mat<f64>,
+    /// `perm[k]`: position in `free` of pivot column `k`.
+    perm: Vec<usize>,
+    /// First `n_free` entries of `Qᵀ r`.
+    qtr: Vec<f64>,
+    /// Number of leading pivots with a nonzero `|R_kk|` (MINPACK `nsing`).
+    n_sing: usize,
+}
+
+impl ScaledQr {
+    fn new(jac: MatRef<'_, f64>, free: &[usize], diag: &[f64], r: ColRef<'_, f64>) -> Self {
+        let (m, nf) = (jac.nrows(), free.len());
+        let scaled = Mat::from_fn(m, nf, |i, j| jac[(i, free[j])] / diag[j]);
+        let qr = scaled.col_piv_qr();
+        let perm = qr.P().arrays().0.to_vec();
+        let rmat = qr.R().get(..nf, ..nf).to_owned();
+        let mut qtr = r.to_owned();
+        let block = qr.Q_coeff().nrows();
+        let mut buf = MemBuffer::new(
+            householder::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
+                m, block, 1,
+            ),
+        );
+        householder::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
+            qr.Q_basis(),
+            qr.Q_coeff(),
+            Conj::No,
+            qtr.as_mat_mut(),
+            Par::Seq,
+            MemStack::new(&mut buf),
+        );
+        // Pivoting sorts |R_kk| down; below ε·max(m, n)·|R_00| a pivot is zero at working
+        // precision and the Gauss–Newton step leaves its component at 0.
+        let r00 = if nf > 0 { rmat[(0, 0)].abs() } else { 0.0 };
+        let tiny = f64::EPSILON * m.max(nf) as f64 * r00;
+        let n_sing = (0..nf).find(|&k| rmat[(k, k)].abs() <= tiny).unwrap_or(nf);
+        Self { r: rmat, perm, qtr: (0..nf).map(|i| qtr[i]).collect(), n_sing }
+    }
+
+    /// `R·u` (the scaled `J·p` up to `Q`).
+    fn r_times(&self, u: &[f64]) -> Vec<f64> {
+        let nf = u.len();
+        (0..nf).map(|i| (i..nf).map(|j| self.r[(i, j)] * u[j]).sum()).collect()
+    }
+}
+
+/// Moré's `lmpar`: the step `u` (pivoted scaled coordinates) and `λ ≥ 0` with
+/// `‖u‖ ≈ Δ` (within 10 %) or `λ = 0` when the Gauss–Newton step is shorter than `1.1·Δ`.
+/// `lambda0` is the previous `λ`, the starting guess.
+fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
+    let nf = f.qtr.len();
+    // Gauss–Newton step: R₁₁ u₁ = −(Qᵀr)₁, zero in the singular part.
+    let mut u = vec![0.0; nf];
+    let ns = f.n_sing;
+    if ns > 0 {
+        let mut rhs = Col::from_fn(ns, |i| -f.qtr[i]);
+        f.r.get(..ns, ..ns).solve_upper_triangular_in_place(rhs.as_mut());
+        u[..ns].iter_mut().enumerate().for_each(|(i, v)| *v = rhs[i]);
+    }
+    let mut u_norm = norm(&u);
+    let mut fp = u_norm - delta;
+    if fp <= 0.1 * delta {
+        return (u, 0.0);
+    }
+    // Lower bound from the Newton step at λ = 0 (full rank only).
+    let newton_denominator = |r: MatRef<'_, f64>, u: &[f64], u_norm: f64| {
+        let mut y = Col::from_fn(nf, |i| u[i] / u_norm);
+        r.transpose().solve_lower_triangular_in_place(y.as_mut());
+        y.squared_norm_l2()
+    };
+    let mut lower =
+        if ns == nf { (fp / delta) / newton_denominator(f.r.as_ref(), &u, u_norm) } else { 0.0 };
+    // Upper bound: ‖Rᵀ Qᵀr‖ / Δ.
+    let gradient: Vec<f64> = (0..nf).map(|j| (0..=j).map(|i| f.r[(i, j)] * f.qtr[i]).sum()).collect();
+    let g_norm = norm(&gradient);
+    let mut upper = g_norm / delta;
+    if upper == 0.0 {
+        upper = f64::MIN_POSITIVE / delta.min(0.1);
+    }
+    let mut lambda = lambda0.max(lower).min(upper);
+    if lambda == 0.0 {
+        lambda = g_norm / u_norm;
+    }
+    for iteration in 1..=10 {
+        if lambda == 0.0 {
+            lambda = f64::MIN_POSITIVE.max(0.001 * upper);
+        }
+        let (step, s) = damped_step(f.r.as_ref(), &f.qtr, lambda);
+        u = step;
+        u_norm = norm(&u);
+        let fp_old = fp;
+        fp = u_norm - delta;
+        if fp.abs() <= 0.1 * delta || (lower == 0.0 && fp <= fp_old && fp_old < 0.0) || iteration == 10 {
+            break;
+        }
+        let correction = (fp / delta) / newton_denominator(s.as_ref(), &u, u_norm);
+        if fp > 0.0 {
+            lower = lower.max(lambda);
+        } else if fp < 0.0 {
+            upper = upper.min(lambda);
+        }
+        lambda = lower.max(lambda + correction);
+    }
+    (u, lambda)
+}
+
+/// Solves `min ‖[R; √λ·I] u + [Qᵀr; 0]‖` by Householder QR of the `2n × n` stacked matrix;
+/// returns `u` and the triangular factor `S` (`SᵀS = RᵀR + λI`).
+fn damped_step(rmat: MatRef<'_, f64>, qtr: &[f64], lambda: f64) -> (Vec<f64>, Mat<f64>) {
+    let nf = qtr.len();
+    let sqrt_lambda = lambda.sqrt();
+    let stacked = Mat::from_fn(2 * nf, nf, |i, j| {
+        if i < nf {
+            rmat[(i, j)]
+        } else if i - nf == j {
+            sqrt_lambda
+        } else {
+            0.0
+        }
+    });
+    let qr = stacked.qr();
+    let mut rhs = Col::from_fn(2 * nf, |i| if i < nf { -qtr[i] } else { 0.0 });
+    qr.solve_lstsq_in_place(rhs.as_mut());
+    ((0..nf).map(|i| rhs[i]).collect(), qr.R().to_owned())
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,169 @@
+use faer::{ColMut, ColRef, MatMut, col};
+
+use super::*;
+use crate::problem::{EvalError, ParamSpec, Role, Unit};
+
+fn layout(names: &[&str]) -> ParamLayout {
+    ParamLayout::new(
+        names
+            .iter()
+            .map(|&name| ParamSpec { name: name.to_owned(), unit: Unit::Dimensionless, role: Role::Model })
+            .collect(),
+    )
+}
+
+/// Rosenbrock as least squares: r = [10(x2 − x1²), 1 − x1], minimum 0 at (1, 1)
+/// (Moré, Garbow, Hillstrom, "Testing unconstrained optimization software", 1981, problem 1).
+struct Rosenbrock(ParamLayout);
+
+impl Problem for Rosenbrock {
+    fn layout(&self) -> &ParamLayout {
+        &self.0
+    }
+    fn n_residuals(&self) -> usize {
+        2
+    }
+    fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
+        out[0] = 10.0 * (x[1] - x[0] * x[0]);
+        out[1] = 1.0 - x[0];
+        Ok(())
+    }
+    fn jacobian(&self, x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+        jac[(0, 0)] = -20.0 * x[0];
+        jac[(0, 1)] = 10.0;
+        jac[(1, 0)] = -1.0;
+        jac[(1, 1)] = 0.0;
+        Ok(())
+    }
+}
+
+fn rosenbrock() -> Rosenbrock {
+    Rosenbrock(layout(&["x1", "x2"]))
+}
+
+#[test]
+fn rosenbrock_reaches_the_minimum_from_the_standard_start() {
+    let fit = levenberg_marquardt(&rosenbrock(), col![-1.2, 1.0], &[0, 1], &LmConfig::default())
+        .expect("valid input");
+    assert!(fit.termination.is_success(), "{:?}", fit.termination);
+    assert!((fit.x[0] - 1.0).abs() < 1e-10 && (fit.x[1] - 1.0).abs() < 1e-10, "{:?}", fit.x);
+    assert!(fit.cost < 1e-20);
+    assert!(fit.n_evaluations <= 200 && fit.n_jacobians >= 2);
+}
+
+#[test]
+fn fixed_parameter_keeps_its_initial_value() {
+    // Only x1 is free with x2 = 0.25: the minimum of 100(0.25 − x1²)² + (1 − x1)² is near 0.5.
+    let fit = levenberg_marquardt(&rosenbrock(), col![-1.2, 0.25], &[0], &LmConfig::default())
+        .expect("valid input");
+    assert!(fit.termination.is_success(), "{:?}", fit.termination);
+    assert_eq!(fit.x[1], 0.25);
+    // Stationary in x1: d/dx1 ½‖r‖² = −200·x1·(0.25 − x1²) − (1 − x1) = 0. The residual is not
+    // zero (cost ≈ 1.1), so the cost comparison limits x1 to ≈ √(ε·cost/J²) ≈ 1e-9, i.e. the
+    // gradient to ≈ J²·1e-9 ≈ 1e-7.
+    let g = -200.0 * fit.x[0] * (0.25 - fit.x[0] * fit.x[0]) - (1.0 - fit.x[0]);
+    assert!(g.abs() < 1e-6, "gradient {g} at {:?}", fit.x);
+}
+
+#[test]
+fn evaluation_budget_is_reported_as_a_termination() {
+    let cfg = LmConfig { max_evaluations: 3, ..LmConfig::default() };
+    let fit = levenberg_marquardt(&rosenbrock(), col![-1.2, 1.0], &[0, 1], &cfg).expect("valid input");
+    assert_eq!(fit.termination, Termination::MaxEvaluations);
+    assert!(!fit.termination.is_success());
+    assert_eq!(fit.n_evaluations, 3);
+}
+
+#[test]
+fn empty_free_set_returns_x0() {
+    let fit = levenberg_marquardt(&rosenbrock(), col![-1.2, 1.0], &[], &LmConfig::default())
+        .expect("valid input");
+    assert_eq!(fit.x, col![-1.2, 1.0]);
+    assert_eq!(fit.termination, Termination::GtolReached);
+    assert!((fit.cost - 0.5 * (4.4_f64.powi(2) + 2.2_f64.powi(2))).abs() < 1e-9);
+}
+
+#[test]
+fn unusable_input_is_an_error_with_a_message() {
+    let p = rosenbrock();
+    let cfg = LmConfig::default();
+    let err = levenberg_marquardt(&p, col![1.0], &[0], &cfg).expect_err("wrong length");
+    assert_eq!(err.to_string(), "x0 has 1 entries but the layout has 2 parameters");
+    let err = levenberg_marquardt(&p, col![1.0, 1.0], &[0, 2], &cfg).expect_err("out of range");
+    assert_eq!(err, Error::FreeOutOfRange { index: 2, n_params: 2 });
+    let err = levenberg_marquardt(&p, col![1.0, 1.0], &[1, 1], &cfg).expect_err("repeated");
+    assert_eq!(err.to_string(), "parameter \"x2\" appears twice in the free set");
+    let err = levenberg_marquardt(&p, col![f64::NAN, 1.0], &[0], &cfg).expect_err("NaN");
+    assert_eq!(err.to_string(), "residual 0 is not finite at x0");
+    let bad = LmConfig { ftol: -1.0, ..LmConfig::default() };
+    let err = levenberg_marquardt(&p, col![1.0, 1.0], &[0], &bad).expect_err("negative ftol");
+    assert_eq!(err.to_string(), "ftol = -1 is invalid: it must be finite and non-negative");
+}
+
+/// One residual, three parameters: always too few residuals for three free parameters.
+struct Failing(ParamLayout);
+
+impl Problem for Failing {
+    fn layout(&self) -> &ParamLayout {
+        &self.0
+    }
+    fn n_residuals(&self) -> usize {
+        1
+    }
+    fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
+        if x[0] < 0.0 {
+            return Err(EvalError { reason: "x0 below zero".to_owned() });
+        }
+        out[0] = x[0];
+        Ok(())
+    }
+    fn jacobian(&self, _x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+        jac.fill(1.0);
+        Ok(())
+    }
+}
+
+#[test]
+fn evaluation_failure_and_too_few_residuals_are_errors() {
+    let p = Failing(layout(&["a", "b", "c"]));
+    let cfg = LmConfig::default();
+    let err = levenberg_marquardt(&p, col![1.0, 0.0, 0.0], &[0, 1, 2], &cfg).expect_err("m < n");
+    assert_eq!(err, Error::TooFewResiduals { n_residuals: 1, n_free: 3 });
+    assert_eq!(err.to_string(), "1 residuals cannot determine 3 free parameters");
+    let err = levenberg_marquardt(&p, col![-1.0, 0.0, 0.0], &[0], &cfg).expect_err("eval");
+    assert_eq!(err.to_string(), "at the initial guess x0");
+    assert_eq!(
+        std::error::Error::source(&err).map(ToString::to_string).as_deref(),
+        Some("evaluation failed: x0 below zero")
+    );
+}
+
+#[test]
+fn trial_points_that_fail_to_evaluate_are_rejected() {
+    // r = x, undefined below 0.5: the minimum over the domain is on its edge. Steps that leave
+    // the domain must be rejected (larger damping), not abort the fit.
+    struct Edge(ParamLayout);
+    impl Problem for Edge {
+        fn layout(&self) -> &ParamLayout {
+            &self.0
+        }
+        fn n_residuals(&self) -> usize {
+            1
+        }
+        fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
+            if x[0] < 0.5 {
+                return Err(EvalError { reason: "outside the domain".to_owned() });
+            }
+            out[0] = x[0];
+            Ok(())
+        }
+        fn jacobian(&self, _x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+            jac[(0, 0)] = 1.0;
+            Ok(())
+        }
+    }
+    let fit = levenberg_marquardt(&Edge(layout(&["a"])), col![2.0], &[0], &LmConfig::default())
+        .expect("valid input");
+    assert!(fit.x[0] >= 0.5 && fit.x[0] < 0.5 + 1e-6, "{:?} {:?}", fit.x, fit.termination);
+    assert!(fit.termination.is_success(), "{:?}", fit.termination);
+}

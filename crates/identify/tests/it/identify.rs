@@ -1,0 +1,128 @@
+//! The whole procedure: prune, fit, re-decide at the estimate, covariance.
+
+use faer::{Col, ColMut, ColRef, Mat, MatMut, col};
+use hapcal_identify::{
+    Error, EvalError, IdentifyConfig, ParamLayout, Problem, PruneReason, Role, SigmaSource, Unit,
+    identify,
+};
+
+use crate::problems::{Linear, mean_std, meters, normal, random_matrix, rng, spec};
+
+/// `y = a·t + a·b·t²`: at `a = 0` the column of `b` is zero, at the estimate it is not.
+struct Product {
+    layout: ParamLayout,
+    t: Vec<f64>,
+    y: Vec<f64>,
+}
+
+impl Problem for Product {
+    fn layout(&self) -> &ParamLayout {
+        &self.layout
+    }
+    fn n_residuals(&self) -> usize {
+        self.t.len()
+    }
+    fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
+        for (i, (&t, &y)) in self.t.iter().zip(&self.y).enumerate() {
+            out[i] = x[0] * t + x[0] * x[1] * t * t - y;
+        }
+        Ok(())
+    }
+    fn jacobian(&self, x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+        for (i, &t) in self.t.iter().enumerate() {
+            jac[(i, 0)] = t + x[1] * t * t;
+            jac[(i, 1)] = x[0] * t * t;
+        }
+        Ok(())
+    }
+}
+
+fn product(sigma: f64, seed: u64) -> Product {
+    let (a, b) = (0.5, 0.2);
+    let mut rng = rng(seed);
+    let t: Vec<f64> = (1..=40).map(|i| 0.05 * i as f64).collect();
+    let y = t.iter().map(|&t| a * t + a * b * t * t + sigma * normal(&mut rng)).collect();
+    let layout = ParamLayout::new(vec![
+        spec("a", Unit::Dimensionless, Role::Model),
+        spec("b", Unit::Dimensionless, Role::Model),
+    ]);
+    Product { layout, t, y }
+}
+
+#[test]
+fn identifiability_is_decided_again_at_the_estimate() {
+    // At x0 = (0, 0) the column of b is zero, so round 1 fits a alone; at that estimate b's
+    // column is a·t², which the data determine: round 2 refits (a, b) and the decision holds.
+    let sigma = 1e-4;
+    let p = product(sigma, 30);
+    let id = identify(&p, Col::zeros(2), &IdentifyConfig::default()).expect("valid");
+    assert_eq!(id.rounds, 2);
+    assert!(id.pruning_converged);
+    assert_eq!(id.identifiability.kept, [0, 1]);
+    assert!(id.fit.termination.is_success(), "{:?}", id.fit.termination);
+    assert_eq!(id.sigma_source, SigmaSource::Residuals);
+    assert!((0.7 * sigma..1.3 * sigma).contains(&id.sigma), "sigma {}", id.sigma);
+    for (name, truth) in [("a", 0.5), ("b", 0.2)] {
+        let (value, std) = (id.value(name).expect("a"), id.std(name).expect("kept"));
+        assert!((value - truth).abs() < 4.0 * std, "{name} = {value} ± {std}");
+    }
+}
+
+#[test]
+fn given_sigma_is_used_as_is() {
+    let p = product(1e-4, 31);
+    let cfg = IdentifyConfig { sigma: Some(2e-4), ..IdentifyConfig::default() };
+    let id = identify(&p, Col::zeros(2), &cfg).expect("valid");
+    assert_eq!(id.sigma_source, SigmaSource::Given);
+    assert_eq!(id.sigma, 2e-4);
+    assert_eq!(id.std("nope"), None);
+}
+
+#[test]
+fn pruned_duplicate_and_covariance_are_consistent_over_500_trials() {
+    // p3 duplicates p1 (pruned every time, the same one); the kept estimates normalised by
+    // their std (with sigma estimated from the residuals: Student t with 36 degrees of
+    // freedom, std √(36/34) ≈ 1.03) must have a standard deviation within 0.9–1.1 (sampling
+    // error ±3/√1000 ≈ ±0.095).
+    let sigma = 1e-3;
+    let truth = [0.01, -0.02, 0.005];
+    let mut rng = rng(32);
+    let base = random_matrix(&mut rng, 40, 3);
+    let a = Mat::from_fn(40, 4, |i, j| base[(i, [0, 1, 2, 1][j])]);
+    let x_truth = col![truth[0], truth[1], truth[2], 0.0];
+    let mut errors = vec![Vec::new(); 3];
+    for _ in 0..500 {
+        let y = &a * &x_truth + Col::from_fn(40, |_| sigma * normal(&mut rng));
+        let p = Linear { layout: meters(4), a: a.clone(), y };
+        let id = identify(&p, Col::zeros(4), &IdentifyConfig::default()).expect("valid");
+        assert_eq!(id.identifiability.pruned_names(), ["p3"]);
+        assert!(matches!(&id.identifiability.pruned[0].reason, PruneReason::Dependent { on } if on[0].0 == "p1"));
+        for (j, e) in errors.iter_mut().enumerate() {
+            let name = format!("p{j}");
+            let std = id.std(&name).expect("kept");
+            e.push((id.value(&name).expect("in layout") - truth[j]) / std);
+        }
+    }
+    for (j, e) in errors.iter().enumerate() {
+        let (mean, sd) = mean_std(e);
+        assert!((0.9..=1.1).contains(&sd), "p{j}: std of normalised errors {sd}");
+        assert!(mean.abs() < 0.15, "p{j}: mean {mean}");
+    }
+}
+
+#[test]
+fn bad_configuration_and_no_degrees_of_freedom_are_errors() {
+    let p = product(1e-4, 33);
+    let cfg = IdentifyConfig { sigma: Some(-1.0), ..IdentifyConfig::default() };
+    let err = identify(&p, Col::zeros(2), &cfg).expect_err("negative sigma");
+    assert_eq!(err.to_string(), "sigma = -1 is invalid: it must be finite and positive");
+    let err = identify(&p, Col::zeros(3), &IdentifyConfig::default()).expect_err("length");
+    assert_eq!(err, Error::WrongLength { expected: 2, found: 3 });
+    // Two residuals, two identifiable parameters: nothing left to estimate sigma.
+    let square = Linear { layout: meters(2), a: Mat::<f64>::identity(2, 2) * 100.0, y: col![0.01, 0.02] };
+    let err = identify(&square, Col::zeros(2), &IdentifyConfig::default()).expect_err("dof");
+    assert_eq!(err, Error::NoDegreesOfFreedom { n_residuals: 2, n_free: 2 });
+    let cfg = IdentifyConfig { sigma: Some(0.1), ..IdentifyConfig::default() };
+    let id = identify(&square, Col::zeros(2), &cfg).expect("sigma given");
+    assert!((id.value("p1").expect("p1") - 2e-4).abs() < 1e-15);
+}

@@ -1,0 +1,174 @@
+//! Pruning: dependent, zero, nuisance and rescaled columns.
+
+use faer::Mat;
+use hapcal_identify::{
+    Identifiability, ParamLayout, PruneReason, RankConfig, RankConfigBase, Role, Unit, identifiability,
+};
+use proptest::prelude::*;
+
+use crate::problems::{meters, random_matrix, rng, spec};
+
+fn cfg(sigma: f64) -> RankConfig {
+    RankConfigBase::default().with_sigma(sigma)
+}
+
+fn all(n: usize) -> Vec<usize> {
+    (0..n).collect()
+}
+
+/// The `(name, coefficient)` list of a `Dependent` reason; panics otherwise.
+fn dependent_on<'a>(id: &'a Identifiability, name: &str) -> &'a [(String, f64)] {
+    match &id.find_pruned(name).expect("pruned").reason {
+        PruneReason::Dependent { on } => on,
+        other => panic!("{name}: expected Dependent, got {other:?}"),
+    }
+}
+
+#[test]
+fn duplicated_column_with_factor_two_prunes_exactly_one_of_the_pair() {
+    // p4's column is 2× p1's: a change δ of p4 is reproduced by 2δ of p1. The pair ties, so
+    // the one earlier in the layout (p1) is kept.
+    let mut rng = rng(10);
+    let base = random_matrix(&mut rng, 30, 4);
+    let jac = Mat::from_fn(30, 5, |i, j| if j == 4 { 2.0 * base[(i, 1)] } else { base[(i, j)] });
+    let id = identifiability(jac.as_ref(), &meters(5), &all(5), &cfg(1e-6));
+    assert_eq!(id.kept, [0, 1, 2, 3]);
+    assert_eq!(id.pruned_names(), ["p4"]);
+    let on = dependent_on(&id, "p4");
+    assert_eq!(on.len(), 1, "{on:?}");
+    assert_eq!(on[0].0, "p1");
+    assert!((on[0].1 - 2.0).abs() < 1e-10, "{on:?}");
+    assert!(id.pruned[0].std_if_kept > 1e3, "{}", id.pruned[0].std_if_kept);
+    assert_eq!(id.pivot_order.len(), 5);
+    assert_eq!(id.r_diag.len(), 5);
+}
+
+#[test]
+fn zero_column_is_near_zero() {
+    let mut rng = rng(11);
+    let base = random_matrix(&mut rng, 20, 3);
+    let jac = Mat::from_fn(20, 4, |i, j| if j == 2 { 0.0 } else { base[(i, j.min(2))] });
+    let id = identifiability(jac.as_ref(), &meters(4), &all(4), &cfg(1e-6));
+    assert_eq!(id.kept, [0, 1, 3]);
+    assert_eq!(id.pruned.len(), 1);
+    assert_eq!(id.pruned[0].reason, PruneReason::NearZeroColumn);
+    assert_eq!(id.pruned[0].std_if_kept, f64::INFINITY);
+    assert_eq!(id.pruned[0].reason.to_string(), "near-zero column");
+}
+
+#[test]
+fn nuisance_is_kept_and_the_model_parameter_it_duplicates_is_pruned() {
+    // socket.x (last in the layout) has −3× the column of p0. The nuisance parameter is pivoted
+    // first and kept; p0 is dependent on it: δp0 is reproduced by −δ/3 of socket.x. A second
+    // nuisance parameter is weak (std 10 m ≫ prior 0.01 m) but still kept: nuisance parameters
+    // are pruned only when numerically dependent.
+    let mut rng = rng(12);
+    let base = random_matrix(&mut rng, 25, 3);
+    let jac = Mat::from_fn(25, 5, |i, j| match j {
+        0..=2 => base[(i, j)],
+        3 => -3.0 * base[(i, 0)],
+        _ => if i == 0 { 1e-7 } else { 0.0 },
+    });
+    let layout = ParamLayout::new(vec![
+        spec("p0", Unit::Meter, Role::Model),
+        spec("p1", Unit::Meter, Role::Model),
+        spec("p2", Unit::Radian, Role::Model),
+        spec("socket.x", Unit::Meter, Role::Nuisance),
+        spec("socket.y", Unit::Meter, Role::Nuisance),
+    ]);
+    let id = identifiability(jac.as_ref(), &layout, &all(5), &cfg(1e-6));
+    assert_eq!(id.kept, [1, 2, 3, 4]);
+    assert_eq!(id.pivot_order[..2], [3, 4], "nuisance first");
+    let on = dependent_on(&id, "p0");
+    assert_eq!(on[0].0, "socket.x");
+    assert!((on[0].1 + 1.0 / 3.0).abs() < 1e-10, "{on:?}");
+}
+
+#[test]
+fn noise_decides_between_kept_and_insensitive() {
+    // p2's column is orthogonal to the others with norm 1e-3: std = sigma / 1e-3. With
+    // sigma = 1e-6 it is 1e-3 m (kept, prior 0.01 m); with sigma = 1e-4 it is 0.1 m (pruned).
+    let jac = Mat::from_fn(3, 3, |i, j| if i == j { [1.0, 2.0, 1e-3][j] } else { 0.0 });
+    let kept = identifiability(jac.as_ref(), &meters(3), &all(3), &cfg(1e-6));
+    assert_eq!(kept.kept, [0, 1, 2]);
+    let pruned = identifiability(jac.as_ref(), &meters(3), &all(3), &cfg(1e-4));
+    assert_eq!(pruned.kept, [0, 1]);
+    assert_eq!(pruned.pruned[0].reason, PruneReason::Insensitive);
+    assert!((pruned.pruned[0].std_if_kept - 0.1).abs() < 1e-12);
+}
+
+#[test]
+fn changing_the_unit_of_one_parameter_does_not_change_the_kept_set() {
+    // p5 = p1 + p2 (a dependent triple). Expressing p1 in mm divides its column by 1000;
+    // the kept set is the same and the coefficient on p1 is 1000× larger.
+    let mut rng = rng(13);
+    let base = random_matrix(&mut rng, 40, 5);
+    let jac = Mat::from_fn(40, 6, |i, j| if j == 5 { base[(i, 1)] + base[(i, 2)] } else { base[(i, j)] });
+    let mut jac_mm = jac.clone();
+    for i in 0..40 {
+        jac_mm[(i, 1)] /= 1000.0;
+    }
+    let id = identifiability(jac.as_ref(), &meters(6), &all(6), &cfg(1e-9));
+    let id_mm = identifiability(jac_mm.as_ref(), &meters(6), &all(6), &cfg(1e-9));
+    assert_eq!(id.kept.len(), 5);
+    assert_eq!(id.kept, id_mm.kept);
+    let (on, on_mm) = (dependent_on(&id, "p5"), dependent_on(&id_mm, "p5"));
+    let coefficient = |on: &[(String, f64)], name: &str| {
+        on.iter().find(|(n, _)| n == name).map(|(_, c)| *c).expect("listed")
+    };
+    assert!((coefficient(on, "p1") - 1.0).abs() < 1e-10, "{on:?}");
+    assert!((coefficient(on_mm, "p1") - 1000.0).abs() < 1e-7, "{on_mm:?}");
+    assert!((coefficient(on_mm, "p2") - 1.0).abs() < 1e-10, "{on_mm:?}");
+}
+
+#[test]
+fn candidates_restrict_the_decision() {
+    let mut rng = rng(14);
+    let jac = random_matrix(&mut rng, 10, 4);
+    let id = identifiability(jac.as_ref(), &meters(4), &[3, 1], &cfg(1e-6));
+    assert_eq!(id.kept, [1, 3]);
+    assert!(id.pruned.is_empty());
+}
+
+fn dependent_jacobian(seed: u64, alpha: f64, beta: f64) -> Mat<f64> {
+    let base = random_matrix(&mut rng(seed), 20, 5);
+    Mat::from_fn(20, 6, |i, j| if j == 5 { alpha * base[(i, 0)] + beta * base[(i, 3)] } else { base[(i, j)] })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    #[test]
+    fn reported_coefficients_reproduce_the_pruned_column(
+        seed in 0u64..1000, alpha in 0.5..2.0f64, beta in -2.0..-0.5f64,
+    ) {
+        let jac = dependent_jacobian(seed, alpha, beta);
+        let layout = meters(6);
+        let id = identifiability(jac.as_ref(), &layout, &all(6), &cfg(1e-9));
+        prop_assert_eq!(id.kept.len(), 5);
+        prop_assert_eq!(id.pruned.len(), 1);
+        let pruned = &id.pruned[0];
+        prop_assert!([0, 3, 5].contains(&pruned.index));
+        let PruneReason::Dependent { on } = &pruned.reason else {
+            return Err(TestCaseError::fail(format!("{:?}", pruned.reason)));
+        };
+        // J[:, pruned] = Σ coefficient·J[:, kept] (exactly dependent: all coefficients listed).
+        let mut diff = jac.col(pruned.index).to_owned();
+        for (name, coefficient) in on {
+            let j = layout.index_of(name).expect("a layout name");
+            diff -= *coefficient * jac.col(j);
+        }
+        prop_assert!(diff.norm_l2() < 1e-10 * jac.col(pruned.index).norm_l2(), "{:?}", on);
+    }
+
+    #[test]
+    fn kept_set_is_invariant_under_column_scaling(
+        seed in 0u64..1000, exponents in prop::collection::vec(-3.0..3.0f64, 6),
+    ) {
+        let jac = dependent_jacobian(seed, 1.0, -1.0);
+        let scaled = Mat::from_fn(20, 6, |i, j| jac[(i, j)] * 10f64.powf(exponents[j]));
+        let id = identifiability(jac.as_ref(), &meters(6), &all(6), &cfg(1e-9));
+        let id_scaled = identifiability(scaled.as_ref(), &meters(6), &all(6), &cfg(1e-9));
+        prop_assert_eq!(id.kept, id_scaled.kept);
+    }
+}

@@ -1,0 +1,487 @@
+//! The device file (TOML, DESIGN.md §5): kinematic chain, joint limits, transmissions,
+//! measurement rig and, once calibrated, the identified values.
+
+use std::path::{Path, PathBuf};
+
+use hapcal_kinematics::{Chain, DhConvention, DhRow, Isometry3, Placement, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::Error;
+
+mod serde_helpers;
+mod validate;
+mod write;
+
+#[cfg(test)]
+mod tests;
+
+pub use write::write_device;
+
+/// A device as described by its TOML file (DESIGN.md §5), lengths in m, angles in rad.
+///
+/// The kinematic chain is either a D-H table (`[[dh]]` rows) or URDF-style joint placements
+/// (`[[placement]]` rows, usually imported with [`import_urdf`](crate::import_urdf), with
+/// `[urdf]` remembering the source for [`write_calibrated_urdf`](crate::write_calibrated_urdf)).
+/// A value returned by [`read_device`] has passed every check listed there; a value built
+/// by hand is checked when [`Device::chain`] compiles it.
+///
+/// Unknown keys are rejected (a misspelt `[parallelogam]` must not vanish silently); new
+/// sections are added as typed fields.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Device {
+    /// Free-form device name.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// D-H convention of the `[[dh]]` rows: `"dh"` (standard, the default) or `"mdh"`
+    /// (modified). Ignored for placement chains.
+    #[serde(
+        default = "serde_helpers::standard",
+        with = "serde_helpers::convention"
+    )]
+    pub convention: DhConvention,
+    /// D-H rows, row 0 first (`[[dh]]`); empty for a placement chain.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub dh: Vec<DhEntry>,
+    /// The URDF the placements came from (`[urdf]`), for writing the calibration back.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub urdf: Option<UrdfSource>,
+    /// URDF joint placements, root to tip (`[[placement]]`); empty for a D-H chain.
+    #[serde(
+        default,
+        rename = "placement",
+        with = "serde_helpers::placements",
+        skip_serializing_if = "Vec::is_empty"
+    )]
+    pub placements: Vec<Placement>,
+    /// One entry per joint of the chain, in joint order (`[[joint]]`).
+    #[serde(default, rename = "joint")]
+    pub joints: Vec<JointSpec>,
+    /// Capstan drives (`[[capstan]]`).
+    #[serde(default, rename = "capstan", skip_serializing_if = "Vec::is_empty")]
+    pub capstans: Vec<Capstan>,
+    /// Parallelogram (four-bar) transmission (`[parallelogram]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parallelogram: Option<Parallelogram>,
+    /// The cable encoder of the measurement rig (`[cable_encoder]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cable_encoder: Option<CableEncoder>,
+    /// The handle, the one link not statically balanced (`[handle]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub handle: Option<Handle>,
+    /// Identified values of a calibrated device (`[calibration]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<Calibration>,
+}
+
+/// One `[[dh]]` row as written in the device file (DESIGN.md §2, paper eq. 3).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DhEntry {
+    /// Link length `a`, m.
+    pub a_m: f64,
+    /// Link twist `alpha`, rad.
+    pub alpha_rad: f64,
+    /// Link offset `d`, m.
+    pub d_m: f64,
+    /// Joint angle offset `theta`, rad (the joint reading is added to it).
+    pub theta_rad: f64,
+    /// Hayati `beta`, rad, for near-parallel consecutive axes; absent = no beta.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beta_rad: Option<f64>,
+    /// The row's joint: a 1-based joint number or `"fixed"`.
+    pub joint: JointRef,
+}
+
+/// Which joint a `[[dh]]` row carries: `joint = 3` or `joint = "fixed"`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum JointRef {
+    /// Revolute joint number, 1-based (`q1` is joint 1); 0 is invalid.
+    Joint(usize),
+    /// No joint: a constant transform (e.g. row 0, rig → base).
+    Fixed,
+}
+
+/// Where a placement chain came from (`[urdf]`).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UrdfSource {
+    /// The URDF file, relative to the device file's folder (or absolute).
+    pub path: PathBuf,
+    /// The link whose origin is the chain's tip.
+    pub tip: String,
+}
+
+impl UrdfSource {
+    /// The URDF's path for a device read from `device_file`: `path` itself if absolute,
+    /// else `path` relative to `device_file`'s folder.
+    pub fn resolve(&self, device_file: &Path) -> PathBuf {
+        if self.path.is_absolute() {
+            return self.path.clone();
+        }
+        match device_file.parent() {
+            Some(dir) => dir.join(&self.path),
+            None => self.path.clone(),
+        }
+    }
+}
+
+/// One `[[joint]]`: name, limits and encoder of a joint, in joint order.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointSpec {
+    /// Joint name (`q1`, `joint_a1`, …), used in messages.
+    pub name: String,
+    /// Lower joint limit, rad.
+    pub lower_rad: f64,
+    /// Upper joint limit, rad (> `lower_rad`).
+    pub upper_rad: f64,
+    /// Encoder counts per revolution of the encoder shaft (the motor, for a capstan joint:
+    /// DESIGN.md §2), if known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub counts_per_rev: Option<u32>,
+}
+
+/// One capstan drive (`[[capstan]]`, paper eq. 1).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Capstan {
+    /// The driven joint, 1-based.
+    pub joint: usize,
+    /// Transmission ratio `R` (motor angle / joint angle), > 0.
+    pub ratio: f64,
+    /// Distance `D` between the drum centres, m, > 0.
+    pub drum_distance_m: f64,
+}
+
+/// The parallelogram (four-bar) driving joint 4 (`[parallelogram]`, paper eq. 2).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Parallelogram {
+    /// Crank length `L1`, m.
+    pub l1_m: f64,
+    /// Coupler length `L2`, m.
+    pub l2_m: f64,
+    /// Rocker length `L3`, m.
+    pub l3_m: f64,
+    /// Ground length `L4`, m.
+    pub l4_m: f64,
+}
+
+/// The cable encoder measuring the distance to the end point (`[cable_encoder]`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CableEncoder {
+    /// Drum radius `R_d`, m.
+    pub drum_radius_m: f64,
+    /// Encoder counts per drum revolution.
+    pub counts_per_rev: u32,
+}
+
+/// The handle (`[handle]`): a point mass at the end point.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Handle {
+    /// Mass, kg (≥ 0).
+    pub mass_kg: f64,
+}
+
+/// The identified values of a calibrated device (`[calibration]`).
+///
+/// In the file the values form the table `[calibration.values]`, one inline table per
+/// parameter in identification order: `dtheta3 = { value = 1.2e-3, std = 4e-5, unit = "rad" }`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Calibration {
+    /// Date of the calibration, free text (e.g. `"2025-05-01"`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub date: Option<String>,
+    /// Hash of the measurement data it was identified from.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data_hash: Option<String>,
+    /// Free text.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub notes: Option<String>,
+    /// Identified values, in identification order.
+    #[serde(default, with = "serde_helpers::values")]
+    pub values: Vec<CalibratedValue>,
+}
+
+/// One identified value with its standard deviation, in SI units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CalibratedValue {
+    /// Parameter name (`dtheta3`, `joint_a2.rx`, or a transmission parameter).
+    pub name: String,
+    /// Identified value, in `unit`.
+    pub value: f64,
+    /// Its standard deviation, in `unit` (≥ 0).
+    pub std: f64,
+    /// Unit symbol: `m`, `rad` or `1`.
+    pub unit: String,
+}
+
+/// What [`Device::with_calibration`] records beside the values.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct CalibrationMeta {
+    /// Date of the calibration.
+    pub date: Option<String>,
+    /// Hash of the measurement data.
+    pub data_hash: Option<String>,
+    /// Free text.
+    pub notes: Option<String>,
+}
+
+/// Reads and checks a device file.
+///
+/// Checks, beyond the TOML syntax and the types: every number is finite; the chain is
+/// given by exactly one of `[[dh]]` or `[[placement]]` (`[urdf]` needs placements); D-H
+/// joints are numbered 1, 2, … in row order; placement names are unique and axes non-zero;
+/// the chain has at least one joint and exactly as many `[[joint]]` rows, with unique names
+/// and `lower_rad < upper_rad`; capstans name existing joints (once each) with positive
+/// ratio and drum distance; lengths, radii and counts are positive, the handle mass is not
+/// negative; calibrated values are finite with `std ≥ 0`.
+///
+/// # Errors
+///
+/// [`Error::Io`] if the file cannot be read; [`Error::Toml`] for a syntax error, a missing
+/// or unknown key or a value of the wrong type; [`Error::NotFinite`] for a NaN or infinite
+/// number; [`Error::JointCount`] if `[[joint]]` and the chain disagree on the number of
+/// joints; [`Error::InvalidDevice`] for any other failed check. All name the file, line and
+/// column.
+pub fn read_device(path: &Path) -> Result<Device, Error> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    parse_device(&text, path)
+}
+
+/// Parses and checks device-file text; `path` is only used in messages. See [`read_device`].
+///
+/// # Errors
+///
+/// As [`read_device`], except [`Error::Io`].
+pub fn parse_device(text: &str, path: &Path) -> Result<Device, Error> {
+    let device: Device = toml::from_str(text).map_err(|e| {
+        let (line, column) = e
+            .span()
+            .map_or((1, 1), |span| crate::error::line_column(text, span.start));
+        Error::Toml {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message: e.message().trim_end().to_owned(),
+        }
+    })?;
+    validate::validate(&device, &validate::Locator::new(path, text))?;
+    Ok(device)
+}
+
+impl Device {
+    /// The number of joints of the chain (non-fixed `[[dh]]` rows, or placements with an axis).
+    pub fn n_joints(&self) -> usize {
+        if self.dh.is_empty() {
+            self.placements.iter().filter(|p| p.axis.is_some()).count()
+        } else {
+            (self.dh.iter())
+                .filter(|r| matches!(r.joint, JointRef::Joint(_)))
+                .count()
+        }
+    }
+
+    /// `(lower, upper)` limits in rad of each `[[joint]]`, in joint order.
+    pub fn joint_limits(&self) -> Vec<(f64, f64)> {
+        (self.joints.iter())
+            .map(|j| (j.lower_rad, j.upper_rad))
+            .collect()
+    }
+
+    /// The `[[dh]]` rows as [`hapcal_kinematics::DhRow`]s (with the device's convention and
+    /// 0-based joint indices); empty for a placement chain.
+    pub fn dh_rows(&self) -> Vec<DhRow> {
+        (self.dh.iter())
+            .map(|r| DhRow {
+                convention: self.convention,
+                a_m: r.a_m,
+                alpha_rad: r.alpha_rad,
+                d_m: r.d_m,
+                theta_rad: r.theta_rad,
+                beta_rad: r.beta_rad,
+                joint: match r.joint {
+                    // Joint 0 becomes an out-of-range index that `Chain::from_dh` rejects.
+                    JointRef::Joint(j) => Some(j.wrapping_sub(1)),
+                    JointRef::Fixed => None,
+                },
+            })
+            .collect()
+    }
+
+    /// Compiles the kinematic chain: [`Chain::from_dh`] of the D-H rows, or
+    /// [`Chain::from_placements`] of the placements.
+    ///
+    /// # Errors
+    ///
+    /// [`Error::Chain`] if the kinematics crate rejects the description (cannot happen for a
+    /// device returned by [`read_device`] or [`import_urdf`](crate::import_urdf)).
+    pub fn chain(&self) -> Result<Chain, Error> {
+        let chain = if self.dh.is_empty() {
+            Chain::from_placements(&self.placements)
+        } else {
+            Chain::from_dh(&self.dh_rows())
+        };
+        chain.map_err(|source| Error::Chain { source })
+    }
+
+    /// A calibrated copy: the kinematic deviations among `values` applied to the nominal
+    /// rows, and `[calibration]` set to `values` and `meta` (replacing any earlier one).
+    ///
+    /// Kinematic names are those of [`Chain`]'s parameters. For a D-H chain, `da{i}`,
+    /// `dd{i}` (unit `m`) and `dalpha{i}`, `dtheta{i}`, `dbeta{i}` (unit `rad`) add to
+    /// `a_m`, `d_m`, `alpha_rad`, `theta_rad`, `beta_rad` of row `i` (a missing `beta_rad`
+    /// counts as 0). For a placement chain, the deviation
+    /// `Δ = Tx(x)·Ty(y)·Tz(z)·Rx(rx)·Ry(ry)·Rz(rz)` of `{name}.x` … `{name}.rz` (units `m`
+    /// and `rad`) is composed onto that placement's origin: new origin = origin · Δ, written
+    /// back as `xyz`/`rpy`. This holds for a revolute placement (whose Δ follows its
+    /// origin) and for the tip element named after the last placement (whose Δ follows the
+    /// trailing fixed origins, i.e. the last one). Every other name (transmission
+    /// parameters, …) is only recorded.
+    ///
+    /// # Errors
+    ///
+    /// [`Error::Parameter`] if a name appears twice, a value or std is not finite (or std
+    /// is negative), a kinematic name refers to a row or placement the chain has no such
+    /// parameter for (`da9` on an 8-row table, `{fixed joint}.x`), or its unit is not the
+    /// parameter's.
+    pub fn with_calibration(
+        &self,
+        values: &[CalibratedValue],
+        meta: CalibrationMeta,
+    ) -> Result<Device, Error> {
+        let mut device = self.clone();
+        let mut pending: Vec<[f64; 6]> = vec![[0.0; 6]; device.placements.len()];
+        for (k, v) in values.iter().enumerate() {
+            let err = |message: String| Error::Parameter {
+                name: v.name.clone(),
+                message,
+            };
+            if values.iter().take(k).any(|w| w.name == v.name) {
+                return Err(err("appears twice".into()));
+            }
+            if !v.value.is_finite() || !v.std.is_finite() || v.std < 0.0 {
+                return Err(err(format!(
+                    "value {} with std {} must be finite, std ≥ 0",
+                    v.value, v.std
+                )));
+            }
+            let check_unit = |unit: &str| {
+                if v.unit == unit {
+                    Ok(())
+                } else {
+                    Err(err(format!("unit is {:?}, expected {unit:?}", v.unit)))
+                }
+            };
+            if device.dh.is_empty() {
+                let Some((name, kind)) = parse_placement_param(&v.name) else {
+                    continue;
+                };
+                let n = device.placements.len();
+                let eligible = (device.placements.iter().enumerate())
+                    .position(|(i, p)| p.name == name && (p.axis.is_some() || i + 1 == n));
+                let Some(index) = eligible else {
+                    return Err(err(format!(
+                        "no revolute or tip placement named {name:?} carries it"
+                    )));
+                };
+                check_unit(if kind < 3 { "m" } else { "rad" })?;
+                if let Some(slot) = pending.get_mut(index).and_then(|d| d.get_mut(kind)) {
+                    *slot += v.value;
+                }
+            } else {
+                let Some((field, row)) = parse_dh_param(&v.name) else {
+                    continue;
+                };
+                let n_rows = device.dh.len();
+                let Some(entry) = device.dh.get_mut(row) else {
+                    return Err(err(format!("the D-H table has rows 0..{n_rows}")));
+                };
+                check_unit(match field {
+                    DhField::A | DhField::D => "m",
+                    _ => "rad",
+                })?;
+                match field {
+                    DhField::A => entry.a_m += v.value,
+                    DhField::Alpha => entry.alpha_rad += v.value,
+                    DhField::D => entry.d_m += v.value,
+                    DhField::Theta => entry.theta_rad += v.value,
+                    DhField::Beta => entry.beta_rad = Some(entry.beta_rad.unwrap_or(0.0) + v.value),
+                }
+            }
+        }
+        for (placement, delta) in device.placements.iter_mut().zip(&pending) {
+            if delta.iter().any(|d| *d != 0.0) {
+                compose_deviation(placement, delta);
+            }
+        }
+        device.calibration = Some(Calibration {
+            date: meta.date,
+            data_hash: meta.data_hash,
+            notes: meta.notes,
+            values: values.to_vec(),
+        });
+        Ok(device)
+    }
+}
+
+#[derive(Clone, Copy)]
+enum DhField {
+    A,
+    Alpha,
+    D,
+    Theta,
+    Beta,
+}
+
+/// `dalpha3` → (Alpha, 3); names that are not D-H parameters → `None`.
+fn parse_dh_param(name: &str) -> Option<(DhField, usize)> {
+    // Longest prefixes first: `dalpha3` also starts with `da`.
+    let prefixes = [
+        ("dalpha", DhField::Alpha),
+        ("dtheta", DhField::Theta),
+        ("dbeta", DhField::Beta),
+        ("da", DhField::A),
+        ("dd", DhField::D),
+    ];
+    prefixes.into_iter().find_map(|(prefix, field)| {
+        let digits = name.strip_prefix(prefix)?;
+        let canonical = !digits.is_empty()
+            && digits.bytes().all(|b| b.is_ascii_digit())
+            && (digits == "0" || !digits.starts_with('0'));
+        if !canonical {
+            return None;
+        }
+        digits.parse().ok().map(|i| (field, i))
+    })
+}
+
+/// `joint_a2.rx` → ("joint_a2", 3): index into `[x, y, z, rx, ry, rz]`.
+fn parse_placement_param(name: &str) -> Option<(&str, usize)> {
+    let (placement, suffix) = name.rsplit_once('.')?;
+    let kind = ["x", "y", "z", "rx", "ry", "rz"]
+        .iter()
+        .position(|s| *s == suffix)?;
+    Some((placement, kind))
+}
+
+/// origin ← origin · Tx(x)·Ty(y)·Tz(z)·Rx(rx)·Ry(ry)·Rz(rz), `delta = [x, y, z, rx, ry, rz]`.
+fn compose_deviation(placement: &mut Placement, delta: &[f64; 6]) {
+    let [x, y, z, rx, ry, rz] = *delta;
+    let translation = Isometry3::translation(x, y, z);
+    let rotation = Isometry3::rotation(Vector3::x() * rx)
+        * Isometry3::rotation(Vector3::y() * ry)
+        * Isometry3::rotation(Vector3::z() * rz);
+    let origin = placement.origin() * translation * rotation;
+    let t = origin.translation.vector;
+    placement.xyz_m = [t.x + 0.0, t.y + 0.0, t.z + 0.0];
+    if [rx, ry, rz].iter().any(|d| *d != 0.0) {
+        let (roll, pitch, yaw) = origin.rotation.euler_angles();
+        // `+ 0.0` turns −0 into +0, which reads better in the files.
+        placement.rpy_rad = [roll + 0.0, pitch + 0.0, yaw + 0.0];
+    }
+}

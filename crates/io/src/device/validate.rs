@@ -1,0 +1,335 @@
+//! Semantic checks of a parsed device file, with file:line:column of the offending value.
+
+use std::collections::HashSet;
+use std::ops::Range;
+use std::path::Path;
+
+use toml::Spanned;
+use toml::de::{DeTable, DeValue};
+
+use super::{Device, JointRef};
+use crate::Error;
+use crate::error::line_column;
+
+/// A step into the TOML document: a key of a table or an index of an array.
+#[derive(Clone, Copy)]
+pub(super) enum Key<'k> {
+    Name(&'k str),
+    Index(usize),
+}
+
+use Key::{Index as I, Name as N};
+
+/// Finds where a value sits in the device file's text.
+pub(super) struct Locator<'a> {
+    path: &'a Path,
+    text: &'a str,
+    root: Option<Spanned<DeTable<'a>>>,
+}
+
+impl<'a> Locator<'a> {
+    pub(super) fn new(path: &'a Path, text: &'a str) -> Self {
+        Locator {
+            path,
+            text,
+            root: DeTable::parse(text).ok(),
+        }
+    }
+
+    /// Span of the deepest value along `keys` that exists.
+    fn span(&self, keys: &[Key<'_>]) -> Option<Range<usize>> {
+        let root = self.root.as_ref()?;
+        let mut found = None;
+        let mut current: Option<&Spanned<DeValue<'_>>> = None;
+        for (k, key) in keys.iter().enumerate() {
+            let next = match (k, key) {
+                (0, N(name)) => root.get_ref().get(*name),
+                (0, I(_)) => None,
+                (_, N(name)) => current.and_then(|v| v.get_ref().get(*name)),
+                (_, I(i)) => current.and_then(|v| v.get_ref().get(*i)),
+            };
+            let Some(next) = next else { break };
+            found = Some(next.span());
+            current = Some(next);
+        }
+        found
+    }
+
+    /// 1-based (line, column) of the value at `keys`, or of its nearest existing parent,
+    /// or (1, 1).
+    fn at(&self, keys: &[Key<'_>]) -> (u64, u64) {
+        self.span(keys)
+            .map_or((1, 1), |s| line_column(self.text, s.start))
+    }
+
+    pub(super) fn invalid(&self, keys: &[Key<'_>], message: impl Into<String>) -> Error {
+        let (line, column) = self.at(keys);
+        Error::InvalidDevice {
+            path: self.path.to_path_buf(),
+            line,
+            column,
+            message: message.into(),
+        }
+    }
+
+    fn finite(&self, keys: &[Key<'_>], value: f64) -> Result<(), Error> {
+        if value.is_finite() {
+            return Ok(());
+        }
+        let (line, column) = self.at(keys);
+        let name = keys
+            .iter()
+            .map(|k| match k {
+                N(n) => format!(".{n}"),
+                I(i) => format!("[{i}]"),
+            })
+            .collect::<String>();
+        Err(Error::NotFinite {
+            path: self.path.to_path_buf(),
+            line,
+            column,
+            name: name.trim_start_matches('.').to_owned(),
+            found: format!("{value}"),
+        })
+    }
+
+    /// Checks `value` is finite and `ok(value)`, else reports `requirement` at `keys`.
+    fn check(
+        &self,
+        keys: &[Key<'_>],
+        value: f64,
+        ok: impl Fn(f64) -> bool,
+        requirement: &str,
+    ) -> Result<(), Error> {
+        self.finite(keys, value)?;
+        if ok(value) {
+            Ok(())
+        } else {
+            let field = match keys.last() {
+                Some(N(n)) => (*n).to_owned(),
+                _ => "value".to_owned(),
+            };
+            Err(self.invalid(keys, format!("{field} = {value} {requirement}")))
+        }
+    }
+}
+
+fn any(_: f64) -> bool {
+    true
+}
+
+fn positive(v: f64) -> bool {
+    v > 0.0
+}
+
+/// Every check listed at [`read_device`](super::read_device).
+pub(super) fn validate(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
+    check_chain(device, loc)?;
+    check_joints(device, loc)?;
+    check_transmissions(device, loc)?;
+    check_calibration(device, loc)?;
+    // Anything the kinematics crate still rejects (it should not) is reported at 1:1.
+    device
+        .chain()
+        .map_err(|e| loc.invalid(&[], e.to_string()))?;
+    Ok(())
+}
+
+fn check_chain(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
+    match (device.dh.is_empty(), device.placements.is_empty()) {
+        (true, true) => {
+            return Err(loc.invalid(
+                &[],
+                "no kinematic chain: expected [[dh]] rows or [[placement]] rows",
+            ));
+        }
+        (false, false) => {
+            return Err(loc.invalid(
+                &[N("placement"), I(0)],
+                "both [[dh]] and [[placement]] rows; a device has one or the other",
+            ));
+        }
+        _ => {}
+    }
+    if device.urdf.is_some() && device.placements.is_empty() {
+        return Err(loc.invalid(
+            &[N("urdf")],
+            "[urdf] needs the [[placement]] rows imported from it",
+        ));
+    }
+
+    let mut previous = 0;
+    for (i, row) in device.dh.iter().enumerate() {
+        for (field, value) in [
+            ("a_m", row.a_m),
+            ("alpha_rad", row.alpha_rad),
+            ("d_m", row.d_m),
+            ("theta_rad", row.theta_rad),
+            ("beta_rad", row.beta_rad.unwrap_or(0.0)),
+        ] {
+            loc.finite(&[N("dh"), I(i), N(field)], value)?;
+        }
+        if let JointRef::Joint(j) = row.joint {
+            if j != previous + 1 {
+                return Err(loc.invalid(
+                    &[N("dh"), I(i), N("joint")],
+                    format!(
+                        "[[dh]] row {i} has joint {j}, expected {}: joints are numbered 1, 2, … in row order",
+                        previous + 1
+                    ),
+                ));
+            }
+            previous = j;
+        }
+    }
+
+    let mut names = HashSet::new();
+    for (i, p) in device.placements.iter().enumerate() {
+        let at = |field| [N("placement"), I(i), N(field)];
+        if p.name.is_empty() {
+            return Err(loc.invalid(&at("name"), "placement name is empty"));
+        }
+        if !names.insert(p.name.as_str()) {
+            return Err(loc.invalid(
+                &at("name"),
+                format!("placement name {:?} is used twice", p.name),
+            ));
+        }
+        for (field, values) in [("xyz_m", p.xyz_m), ("rpy_rad", p.rpy_rad)]
+            .into_iter()
+            .chain(p.axis.map(|a| ("axis", a)))
+        {
+            for (k, v) in values.into_iter().enumerate() {
+                loc.finite(&[N("placement"), I(i), N(field), I(k)], v)?;
+            }
+        }
+        if let Some(axis) = p.axis
+            && axis.iter().map(|a| a * a).sum::<f64>().sqrt() < 1e-12
+        {
+            return Err(loc.invalid(
+                &at("axis"),
+                format!("placement {:?}: axis {axis:?} has zero length", p.name),
+            ));
+        }
+    }
+    if device.n_joints() == 0 {
+        return Err(loc.invalid(&[], "the kinematic chain has no joints"));
+    }
+    Ok(())
+}
+
+fn check_joints(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
+    let n = device.n_joints();
+    if device.joints.len() != n {
+        let (line, _) = loc.at(&[N("joint"), I(device.joints.len().min(n))]);
+        return Err(Error::JointCount {
+            path: loc.path.to_path_buf(),
+            line,
+            expected: n,
+            found: device.joints.len(),
+        });
+    }
+    let mut names = HashSet::new();
+    for (i, joint) in device.joints.iter().enumerate() {
+        let at = |field| [N("joint"), I(i), N(field)];
+        if joint.name.is_empty() {
+            return Err(loc.invalid(&at("name"), "joint name is empty"));
+        }
+        if !names.insert(joint.name.as_str()) {
+            return Err(loc.invalid(
+                &at("name"),
+                format!("joint name {:?} is used twice", joint.name),
+            ));
+        }
+        loc.finite(&at("lower_rad"), joint.lower_rad)?;
+        loc.finite(&at("upper_rad"), joint.upper_rad)?;
+        if joint.lower_rad >= joint.upper_rad {
+            return Err(loc.invalid(
+                &at("lower_rad"),
+                format!(
+                    "joint {:?}: lower_rad = {} must be below upper_rad = {}",
+                    joint.name, joint.lower_rad, joint.upper_rad
+                ),
+            ));
+        }
+        if joint.counts_per_rev == Some(0) {
+            return Err(loc.invalid(&at("counts_per_rev"), "counts_per_rev must be positive"));
+        }
+    }
+    Ok(())
+}
+
+fn check_transmissions(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
+    let n = device.n_joints();
+    let mut driven = HashSet::new();
+    for (i, c) in device.capstans.iter().enumerate() {
+        let at = |field| [N("capstan"), I(i), N(field)];
+        if c.joint == 0 || c.joint > n {
+            return Err(loc.invalid(
+                &at("joint"),
+                format!(
+                    "capstan joint = {} does not exist: joints are 1..={n}",
+                    c.joint
+                ),
+            ));
+        }
+        if !driven.insert(c.joint) {
+            return Err(loc.invalid(&at("joint"), format!("joint {} has two capstans", c.joint)));
+        }
+        loc.check(&at("ratio"), c.ratio, positive, "must be positive")?;
+        loc.check(
+            &at("drum_distance_m"),
+            c.drum_distance_m,
+            positive,
+            "must be positive",
+        )?;
+    }
+    if let Some(p) = &device.parallelogram {
+        for (field, value) in [
+            ("l1_m", p.l1_m),
+            ("l2_m", p.l2_m),
+            ("l3_m", p.l3_m),
+            ("l4_m", p.l4_m),
+        ] {
+            loc.check(
+                &[N("parallelogram"), N(field)],
+                value,
+                positive,
+                "must be positive",
+            )?;
+        }
+    }
+    if let Some(c) = &device.cable_encoder {
+        let at = |field| [N("cable_encoder"), N(field)];
+        loc.check(
+            &at("drum_radius_m"),
+            c.drum_radius_m,
+            positive,
+            "must be positive",
+        )?;
+        if c.counts_per_rev == 0 {
+            return Err(loc.invalid(&at("counts_per_rev"), "counts_per_rev must be positive"));
+        }
+    }
+    if let Some(h) = &device.handle {
+        loc.check(
+            &[N("handle"), N("mass_kg")],
+            h.mass_kg,
+            |m| m >= 0.0,
+            "must not be negative",
+        )?;
+    }
+    Ok(())
+}
+
+fn check_calibration(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
+    let Some(calibration) = &device.calibration else {
+        return Ok(());
+    };
+    for v in &calibration.values {
+        let at = |field| [N("calibration"), N("values"), N(&v.name), N(field)];
+        loc.check(&at("value"), v.value, any, "")?;
+        loc.check(&at("std"), v.std, |s| s >= 0.0, "must not be negative")?;
+    }
+    Ok(())
+}

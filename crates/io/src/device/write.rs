@@ -1,0 +1,167 @@
+//! Device → TOML text, laid out like a hand-written device file.
+
+use std::fmt::Write as _;
+
+use super::serde_helpers::convention;
+use super::{Device, JointRef};
+
+/// The device file text of `device` (DESIGN.md §5); [`parse_device`](crate::parse_device)
+/// reads it back to an equal [`Device`].
+///
+/// Numbers are written in Rust's shortest form that parses back to the same `f64`
+/// (at most 17 significant digits), so nothing is lost in the round trip.
+pub fn write_device(device: &Device) -> String {
+    let mut out = String::new();
+    let mut line = |text: String| {
+        out.push_str(&text);
+        out.push('\n');
+    };
+    line("# hapcal device file (DESIGN.md §5); lengths in m, angles in rad".into());
+    if let Some(name) = &device.name {
+        line(format!("name = {}", string(name)));
+    }
+    if !device.dh.is_empty() {
+        line(format!(
+            "convention = {}",
+            string(convention::name(device.convention))
+        ));
+    }
+    for row in &device.dh {
+        line(String::new());
+        line("[[dh]]".into());
+        line(format!("a_m = {}", float(row.a_m)));
+        line(format!("alpha_rad = {}", float(row.alpha_rad)));
+        line(format!("d_m = {}", float(row.d_m)));
+        line(format!("theta_rad = {}", float(row.theta_rad)));
+        if let Some(beta) = row.beta_rad {
+            line(format!("beta_rad = {}", float(beta)));
+        }
+        line(match row.joint {
+            JointRef::Joint(j) => format!("joint = {j}"),
+            JointRef::Fixed => "joint = \"fixed\"".into(),
+        });
+    }
+    if let Some(urdf) = &device.urdf {
+        line(String::new());
+        line("[urdf]".into());
+        line(format!("path = {}", string(&urdf.path.to_string_lossy())));
+        line(format!("tip = {}", string(&urdf.tip)));
+    }
+    for p in &device.placements {
+        line(String::new());
+        line("[[placement]]".into());
+        line(format!("name = {}", string(&p.name)));
+        line(format!("xyz_m = {}", array(&p.xyz_m)));
+        line(format!("rpy_rad = {}", array(&p.rpy_rad)));
+        if let Some(axis) = p.axis {
+            line(format!("axis = {}", array(&axis)));
+        }
+    }
+    for j in &device.joints {
+        line(String::new());
+        line("[[joint]]".into());
+        line(format!("name = {}", string(&j.name)));
+        line(format!("lower_rad = {}", float(j.lower_rad)));
+        line(format!("upper_rad = {}", float(j.upper_rad)));
+        if let Some(counts) = j.counts_per_rev {
+            line(format!("counts_per_rev = {counts}"));
+        }
+    }
+    for c in &device.capstans {
+        line(String::new());
+        line("[[capstan]]".into());
+        line(format!("joint = {}", c.joint));
+        line(format!("ratio = {}", float(c.ratio)));
+        line(format!("drum_distance_m = {}", float(c.drum_distance_m)));
+    }
+    if let Some(p) = &device.parallelogram {
+        line(String::new());
+        line("[parallelogram]".into());
+        line(format!("l1_m = {}", float(p.l1_m)));
+        line(format!("l2_m = {}", float(p.l2_m)));
+        line(format!("l3_m = {}", float(p.l3_m)));
+        line(format!("l4_m = {}", float(p.l4_m)));
+    }
+    if let Some(c) = &device.cable_encoder {
+        line(String::new());
+        line("[cable_encoder]".into());
+        line(format!("drum_radius_m = {}", float(c.drum_radius_m)));
+        line(format!("counts_per_rev = {}", c.counts_per_rev));
+    }
+    if let Some(h) = &device.handle {
+        line(String::new());
+        line("[handle]".into());
+        line(format!("mass_kg = {}", float(h.mass_kg)));
+    }
+    if let Some(c) = &device.calibration {
+        line(String::new());
+        line("[calibration]".into());
+        for (key, value) in [
+            ("date", &c.date),
+            ("data_hash", &c.data_hash),
+            ("notes", &c.notes),
+        ] {
+            if let Some(value) = value {
+                line(format!("{key} = {}", string(value)));
+            }
+        }
+        line(String::new());
+        line("[calibration.values]".into());
+        for v in &c.values {
+            line(format!(
+                "{} = {{ value = {}, std = {}, unit = {} }}",
+                key(&v.name),
+                float(v.value),
+                float(v.std),
+                string(&v.unit)
+            ));
+        }
+    }
+    out
+}
+
+/// A TOML float that parses back to exactly `v`.
+pub(crate) fn float(v: f64) -> String {
+    if v.is_nan() {
+        "nan".into()
+    } else if v.is_infinite() {
+        if v > 0.0 { "inf".into() } else { "-inf".into() }
+    } else {
+        // Debug is the shortest round-trip form and always has a `.` or an exponent.
+        format!("{v:?}")
+    }
+}
+
+fn array(values: &[f64]) -> String {
+    let items: Vec<String> = values.iter().map(|v| float(*v)).collect();
+    format!("[{}]", items.join(", "))
+}
+
+/// A TOML basic string.
+fn string(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            '\t' => out.push_str("\\t"),
+            '\r' => out.push_str("\\r"),
+            c if c.is_control() => {
+                let _ = write!(out, "\\u{:04X}", c as u32);
+            }
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+/// A TOML key: bare if it can be, else quoted.
+fn key(k: &str) -> String {
+    let bare = !k.is_empty()
+        && k.bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-');
+    if bare { k.to_owned() } else { string(k) }
+}

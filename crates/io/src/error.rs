@@ -1,0 +1,285 @@
+//! The crate's one error type.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong turning a file into a domain value.
+///
+/// Every parse error names the file, the 1-based line and (where one cell or value is at
+/// fault) the 1-based column. In CSV files the column is the field number (first field = 1);
+/// in TOML and XML files it is the character column within the line.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// The file or folder could not be read.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// What the operating system said.
+        source: std::io::Error,
+    },
+    /// A cell that must hold a number does not parse as one.
+    #[error("{path}:{line}:{column}: expected a number in column {name:?}, found {found:?}")]
+    NotANumber {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// 1-based column (CSV field number).
+        column: u64,
+        /// Column name (`q3`, `distance_m`, …).
+        name: String,
+        /// The text found in the cell.
+        found: String,
+    },
+    /// A number is NaN or infinite.
+    #[error("{path}:{line}:{column}: expected a finite number in {name:?}, found {found}")]
+    NotFinite {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// 1-based column.
+        column: u64,
+        /// Column or field name.
+        name: String,
+        /// The value found (`NaN`, `inf`, …).
+        found: String,
+    },
+    /// A CSV row has a different number of fields than the rows (or header) before it.
+    #[error("{path}:{line}: expected {expected} fields, found {found}")]
+    Ragged {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// Number of fields of the header or first row.
+        expected: usize,
+        /// Number of fields of this row.
+        found: usize,
+    },
+    /// A file has a different number of joints than the device.
+    #[error("{path}:{line}: expected {expected} joints (as the device has), found {found}")]
+    JointCount {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// The device's number of joints.
+        expected: usize,
+        /// The number of joints in the file.
+        found: usize,
+    },
+    /// A required column is absent from a CSV header.
+    #[error("{path}:1: missing column {name:?}")]
+    MissingColumn {
+        /// The file.
+        path: PathBuf,
+        /// The missing column's name.
+        name: String,
+    },
+    /// A CSV header names the same column twice.
+    #[error("{path}:1:{column}: column {name:?} appears twice")]
+    DuplicateColumn {
+        /// The file.
+        path: PathBuf,
+        /// 1-based column of the second occurrence.
+        column: u64,
+        /// The column name.
+        name: String,
+    },
+    /// A joint reading lies outside the device's joint limits (bounds inclusive).
+    #[error(
+        "{path}:{line}:{column}: joint {joint:?} = {value_rad} rad is outside [{min_rad}, {max_rad}] rad"
+    )]
+    OutsideJointLimits {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// 1-based column.
+        column: u64,
+        /// The joint's name in the device file.
+        joint: String,
+        /// The reading in rad.
+        value_rad: f64,
+        /// Lower limit in rad.
+        min_rad: f64,
+        /// Upper limit in rad.
+        max_rad: f64,
+    },
+    /// `t_s` decreases from one row to the next.
+    #[error("{path}:{line}: t_s = {t_s} s is before the previous row's {previous_t_s} s")]
+    TimeOrder {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// This row's time in s.
+        t_s: f64,
+        /// The previous row's time in s.
+        previous_t_s: f64,
+    },
+    /// The CSV reader failed (invalid UTF-8, …).
+    #[error("{path}:{line}: {message}")]
+    Csv {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// What went wrong.
+        message: String,
+    },
+    /// A file holds fewer data rows than needed.
+    #[error("{path}: expected at least {min} data rows, found {found}")]
+    TooFewRows {
+        /// The file.
+        path: PathBuf,
+        /// The minimum number of rows.
+        min: usize,
+        /// The number of rows found.
+        found: usize,
+    },
+    /// A TOML syntax or type error.
+    #[error("{path}:{line}:{column}: {message}")]
+    Toml {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// 1-based column.
+        column: u64,
+        /// What the TOML parser expected.
+        message: String,
+    },
+    /// A device file is well-formed TOML but describes an impossible device.
+    #[error("{path}:{line}:{column}: {message}")]
+    InvalidDevice {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line of the offending row or value (1 if the whole file is at fault).
+        line: u64,
+        /// 1-based column.
+        column: u64,
+        /// What is wrong.
+        message: String,
+    },
+    /// A URDF file cannot be parsed or holds something hapcal does not support.
+    #[error("{path}: {message}")]
+    Urdf {
+        /// The URDF file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A URDF joint type other than revolute, continuous or fixed lies on the chain.
+    #[error(
+        "{path}: joint {joint:?} is {kind}; only revolute, continuous and fixed joints are supported"
+    )]
+    UnsupportedJoint {
+        /// The URDF file.
+        path: PathBuf,
+        /// The joint's name.
+        joint: String,
+        /// Its type (`prismatic`, `floating`, …).
+        kind: String,
+    },
+    /// The requested tip link is not in the URDF.
+    #[error("{path}: no link named {tip:?}; the links are: {}", available.join(", "))]
+    TipNotFound {
+        /// The URDF file.
+        path: PathBuf,
+        /// The requested tip.
+        tip: String,
+        /// Every link of the URDF, in file order.
+        available: Vec<String>,
+    },
+    /// A placement to write back names a joint that the URDF does not have.
+    #[error("{path}: no joint named {joint:?} to write back")]
+    UnknownJoint {
+        /// The URDF file.
+        path: PathBuf,
+        /// The joint's name.
+        joint: String,
+    },
+    /// The XML of a URDF is malformed.
+    #[error("{path}:{line}:{column}: {message}")]
+    Xml {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// 1-based column.
+        column: u64,
+        /// What the XML reader said.
+        message: String,
+    },
+    /// A MUKCa placement folder (or run folder) holds no `hole_0.csv`.
+    #[error("{dir}: no socket file hole_0.csv, neither in it nor in its subfolders")]
+    NoSockets {
+        /// The folder.
+        dir: PathBuf,
+    },
+    /// The socket files of a MUKCa placement are not numbered 0, 1, … without gaps.
+    #[error("{dir}: {missing} is missing, but a socket file with a higher number exists")]
+    SocketGap {
+        /// The placement folder.
+        dir: PathBuf,
+        /// The missing file name (`hole_1.csv`).
+        missing: String,
+    },
+    /// The kinematics crate rejected the chain description.
+    #[error("invalid kinematic chain: {source}")]
+    Chain {
+        /// Why.
+        source: hapcal_kinematics::Error,
+    },
+    /// A calibrated value cannot be applied to the device.
+    #[error("parameter {name:?}: {message}")]
+    Parameter {
+        /// The parameter name (`dtheta3`, `joint_a2.rx`).
+        name: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+impl Error {
+    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}
+
+/// 1-based (line, column) of byte offset `offset` in `text`; the column counts characters.
+pub(crate) fn line_column(text: &str, offset: usize) -> (u64, u64) {
+    let offset = offset.min(text.len());
+    // Step back to a char boundary so that slicing cannot panic.
+    let offset = (0..=offset)
+        .rev()
+        .find(|&i| text.is_char_boundary(i))
+        .unwrap_or(0);
+    let before = text.get(..offset).unwrap_or("");
+    let line = before.matches('\n').count() as u64 + 1;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    let column = before.get(line_start..).unwrap_or("").chars().count() as u64 + 1;
+    (line, column)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::line_column;
+
+    #[test]
+    fn line_column_is_one_based() {
+        let text = "ab\ncdé\nf";
+        assert_eq!(line_column(text, 0), (1, 1));
+        assert_eq!(line_column(text, 1), (1, 2));
+        assert_eq!(line_column(text, 3), (2, 1));
+        assert_eq!(line_column(text, 7), (2, 4)); // after 'é' (2 bytes)
+        assert_eq!(line_column(text, 8), (3, 1));
+        assert_eq!(line_column(text, 100), (3, 2));
+    }
+}

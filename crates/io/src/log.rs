@@ -1,0 +1,256 @@
+//! The hapcal measurement log (CSV, DESIGN.md §5).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use crate::Error;
+use crate::device::Device;
+use crate::table::{Table, number};
+
+/// Number of external encoder columns (`ext1..ext4`, one per transmission output shaft).
+pub const N_EXT: usize = 4;
+
+/// A measurement log: one row per sample, in file order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Log {
+    /// The samples.
+    pub rows: Vec<LogRow>,
+    /// Things worth telling the user that did not stop the reading (unknown columns),
+    /// each starting with `file:line:column:`.
+    pub warnings: Vec<String>,
+}
+
+/// One sample of a measurement log.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LogRow {
+    /// Joint readings `q1..qn`, rad (length = the device's number of joints).
+    pub q: Vec<f64>,
+    /// Cable-encoder distance, m.
+    pub distance_m: f64,
+    /// External encoder output angles `ext1..ext4`, rad; always length [`N_EXT`], `None`
+    /// where the column is absent or the cell empty.
+    pub ext: Vec<Option<f64>>,
+    /// Time, s, if the log has a `t_s` column.
+    pub t_s: Option<f64>,
+    /// 1-based line in the file.
+    pub line: u64,
+}
+
+/// What a header column holds.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Column {
+    Q(usize),
+    Distance,
+    Ext(usize),
+    Time,
+    Unknown,
+}
+
+fn classify(name: &str) -> Column {
+    let index = |prefix: &str| {
+        let digits = name.strip_prefix(prefix)?;
+        let canonical = !digits.is_empty()
+            && digits.bytes().all(|b| b.is_ascii_digit())
+            && !digits.starts_with('0');
+        canonical.then(|| digits.parse::<usize>().ok()).flatten()
+    };
+    match name {
+        "distance_m" => Column::Distance,
+        "t_s" => Column::Time,
+        _ => match (index("q"), index("ext")) {
+            (Some(j), _) => Column::Q(j - 1),
+            (_, Some(k)) if k <= N_EXT => Column::Ext(k - 1),
+            _ => Column::Unknown,
+        },
+    }
+}
+
+/// Reads a measurement log for `device`.
+///
+/// The header row names the columns, in any order: `q1..qn` (rad; n = the device's number
+/// of joints) and `distance_m` (m) are required; `ext1..ext4` (rad; an empty cell means no
+/// reading) and `t_s` (s, non-decreasing) are optional. Unknown columns are ignored with a
+/// warning in [`Log::warnings`]. Joint readings must lie within the device's limits
+/// (inclusive).
+///
+/// # Errors
+///
+/// [`Error::Io`] if the file cannot be read; [`Error::TooFewRows`] without a header or a
+/// data row; [`Error::DuplicateColumn`]; [`Error::JointCount`] if the header has another
+/// number of `q` columns than the device has joints; [`Error::MissingColumn`];
+/// [`Error::Ragged`] for a row with another number of fields than the header;
+/// [`Error::NotANumber`], [`Error::NotFinite`], [`Error::OutsideJointLimits`] for a bad
+/// cell and [`Error::TimeOrder`] if `t_s` decreases (all with file:line:column, column =
+/// field number); [`Error::Csv`] for invalid UTF-8.
+pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
+    let n_joints = device.n_joints();
+    let limits = device.joint_limits();
+    let mut table = Table::open(path)?;
+    let Some((header_line, header)) = table.next_record()? else {
+        return Err(Error::TooFewRows {
+            path: path.to_path_buf(),
+            min: 1,
+            found: 0,
+        });
+    };
+    let names: Vec<String> = header.iter().map(str::to_owned).collect();
+    let columns: Vec<Column> = names.iter().map(|n| classify(n)).collect();
+    let mut warnings = Vec::new();
+    for (c, (name, column)) in names.iter().zip(&columns).enumerate() {
+        if names.iter().take(c).any(|earlier| earlier == name) {
+            return Err(Error::DuplicateColumn {
+                path: path.to_path_buf(),
+                column: c as u64 + 1,
+                name: name.clone(),
+            });
+        }
+        if *column == Column::Unknown {
+            warnings.push(format!(
+                "{}:{header_line}:{}: unknown column {name:?} ignored",
+                path.display(),
+                c + 1
+            ));
+        }
+    }
+    let n_q = columns.iter().filter(|c| matches!(c, Column::Q(_))).count();
+    if n_q != n_joints {
+        return Err(Error::JointCount {
+            path: path.to_path_buf(),
+            line: header_line,
+            expected: n_joints,
+            found: n_q,
+        });
+    }
+    let required = (0..n_joints)
+        .map(|j| (Column::Q(j), format!("q{}", j + 1)))
+        .chain([(Column::Distance, "distance_m".to_owned())]);
+    for (column, name) in required {
+        if !columns.contains(&column) {
+            return Err(Error::MissingColumn {
+                path: path.to_path_buf(),
+                name,
+            });
+        }
+    }
+
+    let mut rows = Vec::new();
+    let mut previous_t: Option<f64> = None;
+    while let Some((line, record)) = table.next_record()? {
+        if record.len() != columns.len() {
+            return Err(Error::Ragged {
+                path: path.to_path_buf(),
+                line,
+                expected: columns.len(),
+                found: record.len(),
+            });
+        }
+        let mut row = LogRow {
+            q: vec![0.0; n_joints],
+            distance_m: 0.0,
+            ext: vec![None; N_EXT],
+            t_s: None,
+            line,
+        };
+        for (c, ((cell, column), name)) in record.iter().zip(&columns).zip(&names).enumerate() {
+            let col = c as u64 + 1;
+            let parse = || number(path, line, col, name, cell);
+            match *column {
+                Column::Q(j) => {
+                    let value = parse()?;
+                    let (min_rad, max_rad) = limits
+                        .get(j)
+                        .copied()
+                        .unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
+                    if !(min_rad..=max_rad).contains(&value) {
+                        let joint =
+                            (device.joints.get(j)).map_or_else(|| name.clone(), |s| s.name.clone());
+                        return Err(Error::OutsideJointLimits {
+                            path: path.to_path_buf(),
+                            line,
+                            column: col,
+                            joint,
+                            value_rad: value,
+                            min_rad,
+                            max_rad,
+                        });
+                    }
+                    if let Some(q) = row.q.get_mut(j) {
+                        *q = value;
+                    }
+                }
+                Column::Distance => row.distance_m = parse()?,
+                Column::Ext(k) if !cell.is_empty() => {
+                    if let Some(ext) = row.ext.get_mut(k) {
+                        *ext = Some(parse()?);
+                    }
+                }
+                Column::Time => row.t_s = Some(parse()?),
+                Column::Ext(_) | Column::Unknown => {}
+            }
+        }
+        if let (Some(t_s), Some(previous_t_s)) = (row.t_s, previous_t)
+            && t_s < previous_t_s
+        {
+            return Err(Error::TimeOrder {
+                path: path.to_path_buf(),
+                line,
+                t_s,
+                previous_t_s,
+            });
+        }
+        previous_t = row.t_s;
+        rows.push(row);
+    }
+    if rows.is_empty() {
+        return Err(Error::TooFewRows {
+            path: path.to_path_buf(),
+            min: 1,
+            found: 0,
+        });
+    }
+    Ok(Log { rows, warnings })
+}
+
+/// The CSV text of `rows` in the format [`read_log`] reads: `q1..qn`, `distance_m`, then
+/// each `ext{k}` that some row has a value for, then `t_s` if some row has a time.
+/// Numbers are written in Rust's shortest form that parses back to the same `f64`; `None`
+/// is an empty cell. `line` is not written.
+///
+/// # Panics
+///
+/// If the rows do not all have the same number of joint readings (a bug in the caller).
+#[track_caller]
+pub fn write_log(rows: &[LogRow]) -> String {
+    let n_joints = rows.first().map_or(0, |r| r.q.len());
+    assert!(
+        rows.iter().all(|r| r.q.len() == n_joints),
+        "write_log: rows have different numbers of joint readings"
+    );
+    let ext_columns: Vec<usize> = (0..N_EXT)
+        .filter(|k| {
+            rows.iter()
+                .any(|r| r.ext.get(*k).copied().flatten().is_some())
+        })
+        .collect();
+    let has_time = rows.iter().any(|r| r.t_s.is_some());
+
+    let mut header: Vec<String> = (1..=n_joints).map(|j| format!("q{j}")).collect();
+    header.push("distance_m".into());
+    header.extend(ext_columns.iter().map(|k| format!("ext{}", k + 1)));
+    if has_time {
+        header.push("t_s".into());
+    }
+    let mut out = header.join(",");
+    out.push('\n');
+    let cell = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v:?}"));
+    for row in rows {
+        let mut cells: Vec<String> = row.q.iter().map(|v| format!("{v:?}")).collect();
+        cells.push(format!("{:?}", row.distance_m));
+        cells.extend((ext_columns.iter()).map(|k| cell(row.ext.get(*k).copied().flatten())));
+        if has_time {
+            cells.push(cell(row.t_s));
+        }
+        let _ = writeln!(out, "{}", cells.join(","));
+    }
+    out
+}

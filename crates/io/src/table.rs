@@ -1,0 +1,118 @@
+//! Shared CSV reading: records with their line numbers, cells parsed to finite numbers.
+
+use std::path::Path;
+
+use crate::Error;
+
+/// A CSV file read record by record, without header handling, fields trimmed.
+///
+/// Line numbers are counted here from the records' byte offsets, because the csv crate's
+/// own line count skips blank lines.
+pub(crate) struct Table<'p> {
+    path: &'p Path,
+    bytes: std::sync::Arc<[u8]>,
+    reader: csv::Reader<std::io::Cursor<std::sync::Arc<[u8]>>>,
+    record: csv::StringRecord,
+    /// Byte offset up to which newlines have been counted, and their count.
+    counted: (usize, u64),
+}
+
+impl<'p> Table<'p> {
+    /// Reads `path` into memory.
+    pub(crate) fn open(path: &'p Path) -> Result<Self, Error> {
+        let bytes: std::sync::Arc<[u8]> =
+            std::fs::read(path).map_err(|e| Error::io(path, e))?.into();
+        let reader = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .flexible(true)
+            .trim(csv::Trim::All)
+            .from_reader(std::io::Cursor::new(bytes.clone()));
+        Ok(Table {
+            path,
+            bytes,
+            reader,
+            record: csv::StringRecord::new(),
+            counted: (0, 0),
+        })
+    }
+
+    /// 1-based line of the first character at or after byte offset `byte` that is not a
+    /// line break (the csv crate reports a record's position before the blank lines it
+    /// skipped); offsets must not decrease between calls.
+    fn line_at(&mut self, byte: u64) -> u64 {
+        let mut end = usize::try_from(byte)
+            .unwrap_or(usize::MAX)
+            .min(self.bytes.len());
+        while self
+            .bytes
+            .get(end)
+            .is_some_and(|b| *b == b'\n' || *b == b'\r')
+        {
+            end += 1;
+        }
+        let (from, count) = self.counted;
+        let more = self
+            .bytes
+            .get(from..end)
+            .map_or(0, |s| s.iter().filter(|b| **b == b'\n').count() as u64);
+        self.counted = (end.max(from), count + more);
+        self.counted.1 + 1
+    }
+
+    /// The next non-empty record and its 1-based line, or `None` at the end.
+    pub(crate) fn next_record(&mut self) -> Result<Option<(u64, &csv::StringRecord)>, Error> {
+        match self.reader.read_record(&mut self.record) {
+            Ok(true) => {
+                let byte = self.record.position().map_or(0, |p| p.byte());
+                let line = self.line_at(byte);
+                Ok(Some((line, &self.record)))
+            }
+            Ok(false) => Ok(None),
+            Err(e) => {
+                let byte = e.position().map_or(0, |p| p.byte());
+                Err(Error::Csv {
+                    path: self.path.to_path_buf(),
+                    line: self.line_at(byte),
+                    message: csv_message(&e),
+                })
+            }
+        }
+    }
+}
+
+fn csv_message(e: &csv::Error) -> String {
+    match e.kind() {
+        csv::ErrorKind::Utf8 { err, .. } => {
+            format!("invalid UTF-8 in field {}", err.field() + 1)
+        }
+        _ => e.to_string(),
+    }
+}
+
+/// Parses one cell as a finite number; `column` is 1-based, `name` the column's name.
+pub(crate) fn number(
+    path: &Path,
+    line: u64,
+    column: u64,
+    name: &str,
+    cell: &str,
+) -> Result<f64, Error> {
+    let value: f64 = cell.parse().map_err(|_| Error::NotANumber {
+        path: path.to_path_buf(),
+        line,
+        column,
+        name: name.to_owned(),
+        found: cell.to_owned(),
+    })?;
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(Error::NotFinite {
+            path: path.to_path_buf(),
+            line,
+            column,
+            name: name.to_owned(),
+            found: cell.to_owned(),
+        })
+    }
+}

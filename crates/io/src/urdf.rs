@@ -1,0 +1,537 @@
+//! URDF import (a device from a URDF joint chain) and write-back of calibrated joint origins.
+
+use std::collections::HashMap;
+use std::ops::Range;
+use std::path::Path;
+
+use hapcal_kinematics::Placement;
+use quick_xml::XmlVersion;
+use quick_xml::events::{BytesStart, Event};
+use quick_xml::reader::Reader;
+
+use crate::Error;
+use crate::device::{Device, JointSpec, UrdfSource};
+use crate::error::line_column;
+
+/// A device whose chain is the URDF's joints from the root link to the link `tip`.
+///
+/// The chain is found by walking from `tip` to its parent link until a link without a
+/// parent joint (the root). Each joint becomes a [`Placement`] (its `<origin xyz rpy>`;
+/// its `<axis>` for revolute and continuous joints, none for fixed ones) and each moving
+/// joint a `[[joint]]` entry named after it, with the URDF's `<limit lower upper>` for a
+/// revolute joint and [−π, π] for a continuous one (hapcal needs finite limits to check
+/// and sample joint readings; widen them in the device file if the joint turns further).
+/// `[urdf]` records `path` (as given) and `tip`, for
+/// [`write_calibrated_urdf`]. Transmissions, rig and handle are left empty.
+///
+/// # Errors
+///
+/// [`Error::Io`] if the file cannot be read; [`Error::Xml`] (file:line:column) for
+/// malformed XML; [`Error::Urdf`] if urdf-rs cannot parse it, a link has two parent joints, the joints form a loop, the chain has no moving joint,
+/// or a number is not finite or a revolute joint lacks finite `lower < upper` limits;
+/// [`Error::TipNotFound`] (listing every link) if there is no link `tip`;
+/// [`Error::UnsupportedJoint`] for a prismatic, floating or planar joint on the chain.
+pub fn import_urdf(path: &Path, tip: &str) -> Result<Device, Error> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let urdf_err = |message: String| Error::Urdf {
+        path: path.to_path_buf(),
+        message,
+    };
+    check_xml(&text, path)?;
+    let robot =
+        urdf_rs::read_from_string(&text).map_err(|e| urdf_err(format!("not a valid URDF: {e}")))?;
+    if !robot.links.iter().any(|l| l.name == tip) {
+        return Err(Error::TipNotFound {
+            path: path.to_path_buf(),
+            tip: tip.to_owned(),
+            available: robot.links.iter().map(|l| l.name.clone()).collect(),
+        });
+    }
+
+    let mut chain = Vec::new();
+    let mut link = tip;
+    loop {
+        let mut parents = robot.joints.iter().filter(|j| j.child.link == link);
+        let Some(joint) = parents.next() else { break };
+        if let Some(other) = parents.next() {
+            return Err(urdf_err(format!(
+                "link {link:?} has two parent joints, {:?} and {:?}",
+                joint.name, other.name
+            )));
+        }
+        if chain.len() >= robot.joints.len() {
+            return Err(urdf_err(format!(
+                "the joints above link {tip:?} form a loop"
+            )));
+        }
+        chain.push(joint);
+        link = &joint.parent.link;
+    }
+    chain.reverse();
+
+    let mut placements = Vec::with_capacity(chain.len());
+    let mut joints = Vec::new();
+    for joint in chain {
+        let name = &joint.name;
+        let (xyz, rpy) = (joint.origin.xyz.0, joint.origin.rpy.0);
+        if xyz.iter().chain(&rpy).any(|v| !v.is_finite()) {
+            return Err(urdf_err(format!(
+                "joint {name:?}: origin xyz {xyz:?} rpy {rpy:?} is not finite"
+            )));
+        }
+        let axis = match joint.joint_type {
+            urdf_rs::JointType::Fixed => None,
+            urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => {
+                let axis = joint.axis.xyz.0;
+                let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
+                if !norm.is_finite() || norm < 1e-12 {
+                    return Err(urdf_err(format!(
+                        "joint {name:?}: axis {axis:?} has no direction"
+                    )));
+                }
+                Some(axis)
+            }
+            ref other => {
+                return Err(Error::UnsupportedJoint {
+                    path: path.to_path_buf(),
+                    joint: name.clone(),
+                    kind: format!("{other:?}").to_lowercase(),
+                });
+            }
+        };
+        if axis.is_some() {
+            let (lower_rad, upper_rad) = match joint.joint_type {
+                urdf_rs::JointType::Continuous => (-std::f64::consts::PI, std::f64::consts::PI),
+                _ => (joint.limit.lower, joint.limit.upper),
+            };
+            if !(lower_rad.is_finite() && upper_rad.is_finite() && lower_rad < upper_rad) {
+                return Err(urdf_err(format!(
+                    "joint {name:?}: limits [{lower_rad}, {upper_rad}] rad are not finite with lower < upper"
+                )));
+            }
+            joints.push(JointSpec {
+                name: name.clone(),
+                lower_rad,
+                upper_rad,
+                counts_per_rev: None,
+            });
+        }
+        placements.push(Placement {
+            name: name.clone(),
+            xyz_m: xyz,
+            rpy_rad: rpy,
+            axis,
+        });
+    }
+    if joints.is_empty() {
+        return Err(urdf_err(format!(
+            "no revolute or continuous joint between the root link {link:?} and {tip:?}"
+        )));
+    }
+
+    let device = Device {
+        name: Some(robot.name.clone()),
+        convention: hapcal_kinematics::DhConvention::Standard,
+        dh: Vec::new(),
+        urdf: Some(UrdfSource {
+            path: path.to_path_buf(),
+            tip: tip.to_owned(),
+        }),
+        placements,
+        joints,
+        capstans: Vec::new(),
+        parallelogram: None,
+        cable_encoder: None,
+        handle: None,
+        calibration: None,
+    };
+    device.chain()?;
+    Ok(device)
+}
+
+/// The text of `source_urdf` with the `<origin xyz rpy>` of each joint named in
+/// `placements` set to the placement's `xyz_m` and `rpy_rad`.
+///
+/// Only those attribute values change (a `quat_xyzw` attribute is dropped, as it would
+/// contradict `rpy`); comments, formatting and every other element stay byte for byte. A
+/// joint without `<origin>` gets one as its first child. Numbers are written in Rust's
+/// shortest form that parses back to the same `f64` (at most 17 significant digits).
+/// Placement axes are not written (calibration moves origins, not axes). The result is
+/// read back with urdf-rs and checked to hold exactly the new values.
+///
+/// # Errors
+///
+/// [`Error::Io`] if the file cannot be read; [`Error::Urdf`] if urdf-rs cannot parse it
+/// or a named joint has no children; [`Error::Xml`] for malformed XML (file, line,
+/// column); [`Error::UnknownJoint`] if a placement names no joint of the URDF;
+/// [`Error::Parameter`] if a placement is given twice or holds a non-finite number.
+pub fn write_calibrated_urdf(
+    source_urdf: &Path,
+    placements: &[Placement],
+) -> Result<String, Error> {
+    let path = source_urdf;
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let urdf_err = |message: String| Error::Urdf {
+        path: path.to_path_buf(),
+        message,
+    };
+
+    let mut targets: HashMap<&str, &Placement> = HashMap::new();
+    for p in placements {
+        if p.xyz_m.iter().chain(&p.rpy_rad).any(|v| !v.is_finite()) {
+            return Err(Error::Parameter {
+                name: p.name.clone(),
+                message: "placement xyz/rpy is not finite".into(),
+            });
+        }
+        if targets.insert(&p.name, p).is_some() {
+            return Err(Error::Parameter {
+                name: p.name.clone(),
+                message: "placement given twice".into(),
+            });
+        }
+    }
+
+    let edits = plan_edits(&text, path, &targets)?;
+    urdf_rs::read_from_string(&text).map_err(|e| urdf_err(format!("not a valid URDF: {e}")))?;
+    if let Some(missing) = placements.iter().find(|p| !edits.joints.contains(&p.name)) {
+        return Err(Error::UnknownJoint {
+            path: path.to_path_buf(),
+            joint: missing.name.clone(),
+        });
+    }
+    let mut out = text.clone();
+    let mut edits = edits.splices;
+    edits.sort_by_key(|(range, _)| std::cmp::Reverse(range.start));
+    for (range, replacement) in edits {
+        if out.get(range.clone()).is_none() {
+            return Err(urdf_err("internal error: edit outside the text".into()));
+        }
+        out.replace_range(range, &replacement);
+    }
+
+    let robot = urdf_rs::read_from_string(&out).map_err(|e| {
+        urdf_err(format!(
+            "internal error: the written URDF does not parse: {e}"
+        ))
+    })?;
+    for p in placements {
+        let ok = (robot.joints.iter().filter(|j| j.name == p.name))
+            .all(|j| j.origin.xyz.0 == p.xyz_m && j.origin.rpy.0 == p.rpy_rad);
+        if !ok {
+            return Err(urdf_err(format!(
+                "internal error: joint {:?} does not read back with the new origin",
+                p.name
+            )));
+        }
+    }
+    Ok(out)
+}
+
+/// Checks that `text` is well-formed XML, reporting the position of the first fault.
+fn check_xml(text: &str, path: &Path) -> Result<(), Error> {
+    plan_edits(text, path, &HashMap::new()).map(|_| ())
+}
+
+struct Edits {
+    /// Byte range of the source → its replacement.
+    splices: Vec<(Range<usize>, String)>,
+    /// Names of the target joints found.
+    joints: Vec<String>,
+}
+
+/// A target joint whose element is open.
+struct OpenJoint<'p> {
+    placement: &'p Placement,
+    /// Byte offset just after `<joint …>`.
+    start_tag_end: usize,
+    /// Whitespace right after the start tag, reused to indent an inserted `<origin>`.
+    indent: String,
+    has_origin: bool,
+}
+
+fn plan_edits(
+    text: &str,
+    path: &Path,
+    targets: &HashMap<&str, &Placement>,
+) -> Result<Edits, Error> {
+    let mut reader = Reader::from_str(text);
+    let xml_err = |reader: &Reader<&[u8]>, message: String| {
+        let (line, column) = line_column(text, reader.error_position() as usize);
+        Error::Xml {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message,
+        }
+    };
+    let mut edits = Edits {
+        splices: Vec::new(),
+        joints: Vec::new(),
+    };
+    let mut depth = 0usize;
+    let mut open: Option<OpenJoint<'_>> = None;
+    loop {
+        let start = reader.buffer_position() as usize;
+        let event = match reader.read_event() {
+            Ok(event) => event,
+            Err(e) => return Err(xml_err(&reader, e.to_string())),
+        };
+        let end = reader.buffer_position() as usize;
+        match event {
+            Event::Start(ref e) | Event::Empty(ref e) => {
+                let is_empty = matches!(event, Event::Empty(_));
+                let name = e.name();
+                if depth == 1 && name.as_ref() == "joint" {
+                    let joint_name = attribute(e, "name")
+                        .map_err(|m| xml_err(&reader, m))?
+                        .unwrap_or_default();
+                    if let Some(placement) = targets.get(joint_name.as_str()) {
+                        if is_empty {
+                            return Err(Error::Urdf {
+                                path: path.to_path_buf(),
+                                message: format!("joint {joint_name:?} has no children"),
+                            });
+                        }
+                        edits.joints.push(joint_name);
+                        open = Some(OpenJoint {
+                            placement,
+                            start_tag_end: end,
+                            indent: String::new(),
+                            has_origin: false,
+                        });
+                    }
+                } else if let Some(joint) = open.as_mut().filter(|_| depth == 2)
+                    && name.as_ref() == "origin"
+                {
+                    let tag = text.get(start..end).unwrap_or_default();
+                    let new_tag = rewrite_origin_tag(tag, joint.placement)
+                        .ok_or_else(|| xml_err(&reader, "malformed <origin> tag".into()))?;
+                    edits.splices.push((start..end, new_tag));
+                    joint.has_origin = true;
+                }
+                if !is_empty {
+                    depth += 1;
+                }
+            }
+            Event::End(_) => {
+                depth = depth.saturating_sub(1);
+                if depth == 1
+                    && let Some(joint) = open.take()
+                    && !joint.has_origin
+                    && (joint.placement.xyz_m != [0.0; 3] || joint.placement.rpy_rad != [0.0; 3])
+                {
+                    let (xyz, rpy) = (joint.placement.xyz_m, joint.placement.rpy_rad);
+                    let element = format!(
+                        "{}<origin xyz=\"{}\" rpy=\"{}\"/>",
+                        joint.indent,
+                        triple(&xyz),
+                        triple(&rpy)
+                    );
+                    let at = joint.start_tag_end;
+                    edits.splices.push((at..at, element));
+                }
+            }
+            Event::Text(_) => {
+                if let Some(joint) = open.as_mut().filter(|j| j.start_tag_end == start) {
+                    let raw = text.get(start..end).unwrap_or_default();
+                    if raw.chars().all(char::is_whitespace) {
+                        joint.indent = raw.to_owned();
+                    }
+                }
+            }
+            Event::Eof => break,
+            _ => {}
+        }
+    }
+    Ok(edits)
+}
+
+/// The value of attribute `name` of `e`, if present.
+fn attribute(e: &BytesStart<'_>, name: &str) -> Result<Option<String>, String> {
+    let attr = e.try_get_attribute(name).map_err(|err| err.to_string())?;
+    attr.map(|a| {
+        a.normalized_value(XmlVersion::Implicit1_0)
+            .map(|v| v.into_owned())
+            .map_err(|err| err.to_string())
+    })
+    .transpose()
+}
+
+/// Three numbers separated by whitespace, as urdf-rs reads them.
+fn parse_triple(text: &str) -> Option<[f64; 3]> {
+    let values: Vec<f64> = text
+        .split_whitespace()
+        .map(str::parse)
+        .collect::<Result<_, _>>()
+        .ok()?;
+    values.try_into().ok()
+}
+
+/// `x y z` with each number in shortest round-trip form.
+fn triple(v: &[f64; 3]) -> String {
+    format!("{:?} {:?} {:?}", v[0], v[1], v[2])
+}
+
+/// One attribute inside a start tag: its whole extent (with the whitespace before it) and
+/// its value's extent, as byte ranges of the tag.
+struct AttrSpan<'t> {
+    name: &'t str,
+    whole: Range<usize>,
+    value: Range<usize>,
+}
+
+/// Scans the attributes of a start tag `<name a="…" b='…' …>` or `…/>`.
+fn scan_attributes(tag: &str) -> Option<(Vec<AttrSpan<'_>>, usize)> {
+    let bytes = tag.as_bytes();
+    let mut i = 1 + bytes
+        .get(1..)?
+        .iter()
+        .position(|b| b.is_ascii_whitespace() || *b == b'/' || *b == b'>')?;
+    let mut name_end = i;
+    let mut attrs = Vec::new();
+    loop {
+        let ws_start = i;
+        while bytes.get(i).is_some_and(u8::is_ascii_whitespace) {
+            i += 1;
+        }
+        match bytes.get(i)? {
+            b'/' | b'>' => return Some((attrs, name_end)),
+            _ => {}
+        }
+        let name_start = i;
+        while bytes
+            .get(i)
+            .is_some_and(|b| !b.is_ascii_whitespace() && *b != b'=')
+        {
+            i += 1;
+        }
+        let name = tag.get(name_start..i)?;
+        while bytes.get(i).is_some_and(u8::is_ascii_whitespace) {
+            i += 1;
+        }
+        if *bytes.get(i)? != b'=' {
+            return None;
+        }
+        i += 1;
+        while bytes.get(i).is_some_and(u8::is_ascii_whitespace) {
+            i += 1;
+        }
+        let quote = *bytes.get(i)?;
+        if quote != b'"' && quote != b'\'' {
+            return None;
+        }
+        let value_start = i + 1;
+        let value_end = value_start + bytes.get(value_start..)?.iter().position(|b| *b == quote)?;
+        i = value_end + 1;
+        attrs.push(AttrSpan {
+            name,
+            whole: ws_start..i,
+            value: value_start..value_end,
+        });
+        name_end = i;
+    }
+}
+
+/// `tag` (`<origin …/>` or `<origin …>`) with `xyz` and `rpy` set to the placement's values
+/// and `quat_xyzw` removed; `None` if the tag cannot be scanned.
+fn rewrite_origin_tag(tag: &str, placement: &Placement) -> Option<String> {
+    let (attrs, last_attr_end) = scan_attributes(tag)?;
+    let targets = [("xyz", placement.xyz_m), ("rpy", placement.rpy_rad)];
+    let mut splices: Vec<(Range<usize>, String)> = Vec::new();
+    // Absent attributes are zero in URDF; only non-zero ones need inserting.
+    let mut missing: Vec<(&str, [f64; 3])> = targets
+        .into_iter()
+        .filter(|(_, v)| *v != [0.0; 3])
+        .collect();
+    for attr in &attrs {
+        if let Some((_, new)) = targets.iter().find(|(name, _)| *name == attr.name) {
+            // A value that already reads as the new one keeps its spelling.
+            if parse_triple(tag.get(attr.value.clone())?) != Some(*new) {
+                splices.push((attr.value.clone(), triple(new)));
+            }
+        } else if attr.name == "quat_xyzw" {
+            splices.push((attr.whole.clone(), String::new()));
+            // Without the quaternion, a missing rpy means zero: it must be written.
+            if let Some((_, rpy)) = targets.get(1) {
+                missing.push(("rpy", *rpy));
+            }
+        }
+    }
+    missing.retain(|(name, _)| !attrs.iter().any(|a| a.name == *name));
+    missing.dedup_by_key(|(name, _)| *name);
+    let missing: Vec<(&str, String)> = missing.iter().map(|(n, v)| (*n, triple(v))).collect();
+    let inserted: String = missing
+        .iter()
+        .map(|(name, value)| format!(" {name}=\"{value}\""))
+        .collect();
+    if !inserted.is_empty() {
+        splices.push((last_attr_end..last_attr_end, inserted));
+    }
+    splices.sort_by_key(|(range, _)| std::cmp::Reverse(range.start));
+    let mut out = tag.to_owned();
+    for (range, replacement) in splices {
+        out.get(range.clone())?;
+        out.replace_range(range, &replacement);
+    }
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn placement(xyz: [f64; 3], rpy: [f64; 3]) -> Placement {
+        Placement {
+            name: "j".into(),
+            xyz_m: xyz,
+            rpy_rad: rpy,
+            axis: None,
+        }
+    }
+
+    #[test]
+    fn origin_tag_keeps_order_quotes_and_other_attributes() {
+        let p = placement([0.5, -1e-7, 0.0], [0.1, 0.2, 0.3]);
+        let tag = "<origin rpy='0 0 0'  foo=\"a>b\" xyz=\"0 0 0.36\"/>";
+        assert_eq!(
+            rewrite_origin_tag(tag, &p).as_deref(),
+            Some("<origin rpy='0.1 0.2 0.3'  foo=\"a>b\" xyz=\"0.5 -1e-7 0.0\"/>")
+        );
+    }
+
+    #[test]
+    fn origin_tag_gets_missing_attributes_and_loses_quaternion() {
+        let p = placement([1.0, 2.0, 3.0], [0.0, 0.0, 0.5]);
+        assert_eq!(
+            rewrite_origin_tag("<origin xyz=\"0 0 0\" quat_xyzw=\"0 0 0 1\" />", &p).as_deref(),
+            Some("<origin xyz=\"1.0 2.0 3.0\" rpy=\"0.0 0.0 0.5\" />")
+        );
+        assert_eq!(
+            rewrite_origin_tag("<origin/>", &p).as_deref(),
+            Some("<origin xyz=\"1.0 2.0 3.0\" rpy=\"0.0 0.0 0.5\"/>")
+        );
+        assert_eq!(
+            rewrite_origin_tag("<origin>", &p).as_deref(),
+            Some("<origin xyz=\"1.0 2.0 3.0\" rpy=\"0.0 0.0 0.5\">")
+        );
+    }
+
+    #[test]
+    fn unchanged_values_keep_their_spelling() {
+        let p = placement([0.0, 0.0, 0.36], [0.0; 3]);
+        let tag = "<origin xyz=\"0 0 3.6e-1\" rpy=\"0 0 0\"/>";
+        assert_eq!(rewrite_origin_tag(tag, &p).as_deref(), Some(tag));
+        assert_eq!(
+            rewrite_origin_tag("<origin xyz=\"0 0 .36\"/>", &p).as_deref(),
+            Some("<origin xyz=\"0 0 .36\"/>")
+        );
+    }
+
+    #[test]
+    fn malformed_tag_is_none() {
+        let p = placement([0.0; 3], [0.0; 3]);
+        assert!(rewrite_origin_tag("<origin xyz=\"0 0 0/>", &p).is_none());
+        assert!(rewrite_origin_tag("<origin xyz/>", &p).is_none());
+    }
+}

@@ -1,0 +1,239 @@
+use std::path::Path;
+
+use hapcal_io::{
+    CalibratedValue, CalibrationMeta, DhConvention, Error, JointRef, parse_device, read_device,
+    write_device,
+};
+
+use crate::{assert_contains, data, message};
+
+fn value(name: &str, value: f64, unit: &str) -> CalibratedValue {
+    CalibratedValue {
+        name: name.into(),
+        value,
+        std: 1e-5,
+        unit: unit.into(),
+    }
+}
+
+#[test]
+fn reference_device_reads() {
+    let device = read_device(&data("reference.toml")).unwrap();
+    assert_eq!(
+        device.name.as_deref(),
+        Some("reference 7-DOF haptic device")
+    );
+    assert_eq!(device.convention, DhConvention::Standard);
+    assert_eq!(device.dh.len(), 8);
+    assert_eq!(device.dh[0].joint, JointRef::Fixed);
+    assert_eq!(device.dh[7].joint, JointRef::Joint(7));
+    assert_eq!(device.dh[7].a_m, 0.03);
+    assert_eq!(device.n_joints(), 7);
+    assert_eq!(
+        device.joint_limits(),
+        [
+            (-1.0, 1.0),
+            (-0.3, 1.2),
+            (-0.8, 0.8),
+            (0.3, 1.8),
+            (-2.0, 2.0),
+            (-1.2, 1.2),
+            (-2.5, 2.5)
+        ]
+    );
+    assert_eq!(device.capstans.len(), 4);
+    assert_eq!(device.capstans[2].ratio, 11.0);
+    assert_eq!(device.parallelogram.map(|p| p.l2_m), Some(0.21));
+    assert_eq!(device.cable_encoder.map(|c| c.counts_per_rev), Some(20000));
+    assert_eq!(device.handle.map(|h| h.mass_kg), Some(0.2));
+    assert!(device.calibration.is_none());
+
+    let chain = device.chain().unwrap();
+    assert_eq!(chain.n_joints(), 7);
+    assert_eq!(chain.n_params(), 32); // 8 rows × (da, dalpha, dd, dtheta)
+    let rows = device.dh_rows();
+    assert_eq!(rows[0].joint, None);
+    assert_eq!(rows[1].joint, Some(0));
+    assert_eq!(rows[7].joint, Some(6));
+}
+
+#[test]
+fn device_file_round_trips() {
+    let device = read_device(&data("reference.toml")).unwrap();
+    let text = write_device(&device);
+    let again = parse_device(&text, Path::new("written.toml")).unwrap();
+    assert_eq!(again, device);
+    assert_eq!(write_device(&again), text);
+}
+
+#[test]
+fn calibrated_device_round_trips_and_applies_deviations() {
+    let device = read_device(&data("reference.toml")).unwrap();
+    let values = [
+        value("da0", 1e-3, "m"),
+        value("dalpha1", -2e-3, "rad"),
+        value("dd2", 3e-4, "m"),
+        value("dtheta3", 0.1 + 0.2, "rad"), // not exactly 0.3
+        value("dbeta4", 5e-3, "rad"),
+        value("capstan1.c", 1.5e-3, "rad"),
+        value("weird \"key\".é", 7.0, "1"),
+    ];
+    let meta = CalibrationMeta {
+        date: Some("2025-05-01".into()),
+        data_hash: Some("sha256:0123abcd".into()),
+        notes: Some("two lines\nwith \"quotes\" and a \\ backslash".into()),
+    };
+    let calibrated = device.with_calibration(&values, meta.clone()).unwrap();
+    assert_eq!(calibrated.dh[0].a_m, 0.35 + 1e-3);
+    assert_eq!(
+        calibrated.dh[1].alpha_rad,
+        -std::f64::consts::FRAC_PI_2 - 2e-3
+    );
+    assert_eq!(calibrated.dh[2].d_m, 3e-4);
+    assert_eq!(calibrated.dh[3].theta_rad, 0.1 + 0.2);
+    assert_eq!(calibrated.dh[4].beta_rad, Some(5e-3));
+    assert_eq!(calibrated.dh[5], device.dh[5]);
+    let calibration = calibrated.calibration.as_ref().unwrap();
+    assert_eq!(calibration.values, values);
+    assert_eq!(calibration.notes, meta.notes);
+
+    let text = write_device(&calibrated);
+    assert_contains(
+        &text,
+        &["[calibration.values]\nda0 = { value = 0.001, std = 1e-5, unit = \"m\" }\n"],
+    );
+    let again = parse_device(&text, Path::new("calibrated.toml")).unwrap();
+    assert_eq!(again, calibrated);
+    // The order of the values is kept (not sorted by name).
+    let again_values = again.calibration.map(|c| c.values).unwrap_or_default();
+    let names: Vec<&str> = again_values.iter().map(|v| v.name.as_str()).collect();
+    assert_eq!(names[..3], ["da0", "dalpha1", "dd2"]);
+}
+
+#[test]
+fn calibration_rejects_what_it_cannot_apply() {
+    let device = read_device(&data("reference.toml")).unwrap();
+    let meta = CalibrationMeta::default();
+    let cases = [
+        (
+            vec![value("da8", 1e-3, "m")],
+            "parameter \"da8\": the D-H table has rows 0..8",
+        ),
+        (
+            vec![value("dtheta2", 1e-3, "m")],
+            "parameter \"dtheta2\": unit is \"m\", expected \"rad\"",
+        ),
+        (
+            vec![value("da1", 1e-3, "m"), value("da1", 1e-3, "m")],
+            "parameter \"da1\": appears twice",
+        ),
+        (
+            vec![value("dd1", f64::NAN, "m")],
+            "parameter \"dd1\": value NaN",
+        ),
+    ];
+    for (values, expected) in cases {
+        let msg = message(device.with_calibration(&values, meta.clone()));
+        assert_contains(&msg, &[expected]);
+    }
+}
+
+#[test]
+fn each_bad_device_file_names_file_line_and_column() {
+    let cases = [
+        ("bad_syntax.toml", "bad_syntax.toml:12:"),
+        (
+            "bad_unknown_key.toml",
+            "bad_unknown_key.toml:21:1: unknown field `uper_rad`",
+        ),
+        (
+            "bad_limits.toml",
+            "bad_limits.toml:25:13: joint \"elbow\": lower_rad = -2 must be below upper_rad = -2.5",
+        ),
+        (
+            "bad_joint_numbers.toml",
+            "bad_joint_numbers.toml:16:9: [[dh]] row 1 has joint 3, expected 2",
+        ),
+        (
+            "bad_joint_count.toml",
+            "bad_joint_count.toml:18: expected 2 joints (as the device has), found 1",
+        ),
+        (
+            "bad_nan.toml",
+            "bad_nan.toml:14:7: expected a finite number in \"dh[1].d_m\", found NaN",
+        ),
+    ];
+    for (file, expected) in cases {
+        let msg = message(read_device(&data(file)));
+        assert_contains(&msg, &[expected]);
+    }
+    let err = read_device(&data("bad_syntax.toml")).unwrap_err();
+    assert!(matches!(err, Error::Toml { line: 12, .. }), "{err:?}");
+}
+
+#[test]
+fn semantic_checks_point_at_the_offending_value() {
+    let planar = std::fs::read_to_string(data("planar.toml")).unwrap();
+    let path = Path::new("edited.toml");
+    let with = |extra: &str| format!("{planar}\n{extra}");
+    let cases = [
+        (
+            with("[[capstan]]\njoint = 3\nratio = 10.0\ndrum_distance_m = 0.06\n"),
+            "edited.toml:29:9: capstan joint = 3 does not exist: joints are 1..=2",
+        ),
+        (
+            with("[[capstan]]\njoint = 1\nratio = -10.0\ndrum_distance_m = 0.06\n"),
+            "edited.toml:30:9: ratio = -10 must be positive",
+        ),
+        (
+            with("[cable_encoder]\ndrum_radius_m = 0.015\ncounts_per_rev = 0\n"),
+            "edited.toml:30:18: counts_per_rev must be positive",
+        ),
+        (
+            with("[handle]\nmass_kg = -0.2\n"),
+            "edited.toml:29:11: mass_kg = -0.2 must not be negative",
+        ),
+        (
+            with(
+                "[[placement]]\nname = \"a\"\nxyz_m = [0.0, 0.0, 0.0]\nrpy_rad = [0.0, 0.0, 0.0]\n",
+            ),
+            "edited.toml:28:1: both [[dh]] and [[placement]] rows",
+        ),
+        (
+            planar.replace("name = \"elbow\"", "name = \"shoulder\""),
+            "edited.toml:24:8: joint name \"shoulder\" is used twice",
+        ),
+        (
+            planar.replace("joint = 1", "joint = 0"),
+            "edited.toml:9:9: joint number 0 is invalid",
+        ),
+        (
+            planar.replace("joint = 1", "joint = \"fixd\""),
+            "edited.toml:9:9: joint \"fixd\" is invalid",
+        ),
+        (
+            planar.replace("name = \"planar\"", "convention = \"craig\""),
+            "edited.toml:2:14: unknown convention \"craig\"",
+        ),
+        (
+            "[[joint]]\nname = \"q1\"\nlower_rad = 0.0\nupper_rad = 1.0\n".to_owned(),
+            "edited.toml:1:1: no kinematic chain",
+        ),
+        (
+            planar
+                .replace("joint = 1", "joint = \"fixed\"")
+                .replace("joint = 2", "joint = \"fixed\""),
+            "edited.toml:1:1: the kinematic chain has no joints",
+        ),
+    ];
+    for (text, expected) in cases {
+        let msg = message(parse_device(&text, path));
+        assert_contains(&msg, &[expected]);
+    }
+}
+
+#[test]
+fn missing_device_file_is_an_io_error() {
+    let msg = message(read_device(&data("no_such_device.toml")));
+    assert_contains(&msg, &["cannot read ", "no_such_device.toml: "]);
+}

@@ -1,0 +1,126 @@
+use hapcal_io::{Device, Error, LogRow, read_device, read_log, write_log};
+
+use crate::{assert_contains, data, message};
+
+fn planar() -> Device {
+    read_device(&data("planar.toml")).expect("planar.toml is valid")
+}
+
+#[test]
+fn good_log_reads_every_column_and_warns_about_unknown_ones() {
+    let log = read_log(&data("logs/good.csv"), &planar()).unwrap();
+    assert_eq!(log.rows.len(), 3);
+    let first = &log.rows[0];
+    assert_eq!(first.q, [0.1, -0.2]);
+    assert_eq!(first.distance_m, 0.45);
+    assert_eq!(first.ext, [Some(0.1001), None, None, None]);
+    assert_eq!(first.t_s, Some(0.0));
+    assert_eq!(first.line, 2);
+    // A blank line is skipped; line numbers stay those of the file. Limits are inclusive.
+    let last = &log.rows[2];
+    assert_eq!(last.line, 5);
+    assert_eq!(last.q, [1.5, -2.0]);
+    assert_eq!(last.ext, [None, None, Some(0.51), None]);
+    assert_eq!(log.warnings.len(), 1);
+    assert_contains(
+        &log.warnings[0],
+        &["good.csv:1:7: unknown column \"temperature_c\" ignored"],
+    );
+}
+
+#[test]
+fn written_log_reads_back() {
+    let device = planar();
+    let log = read_log(&data("logs/good.csv"), &device).unwrap();
+    let text = write_log(&log.rows);
+    assert_eq!(
+        text.lines().next(),
+        Some("q1,q2,distance_m,ext1,ext3,t_s"),
+        "{text}"
+    );
+    let dir = std::env::temp_dir().join(format!("hapcal-io-log-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("roundtrip.csv");
+    std::fs::write(&path, &text).unwrap();
+    let again = read_log(&path, &device).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+    let strip = |rows: &[LogRow]| -> Vec<LogRow> {
+        rows.iter()
+            .map(|r| LogRow {
+                line: 0,
+                ..r.clone()
+            })
+            .collect()
+    };
+    assert_eq!(strip(&again.rows), strip(&log.rows));
+    assert!(again.warnings.is_empty());
+}
+
+#[test]
+fn each_bad_log_names_file_line_and_column() {
+    let device = planar();
+    let cases = [
+        ("ragged.csv", "ragged.csv:3: expected 3 fields, found 2"),
+        (
+            "nan.csv",
+            "nan.csv:4:1: expected a finite number in \"q1\", found NaN",
+        ),
+        (
+            "not_a_number.csv",
+            "not_a_number.csv:3:2: expected a number in column \"q2\", found \"1,57\"",
+        ),
+        (
+            "joint_count.csv",
+            "joint_count.csv:1: expected 2 joints (as the device has), found 3",
+        ),
+        (
+            "missing_column.csv",
+            "missing_column.csv:1: missing column \"distance_m\"",
+        ),
+        (
+            "outside_limits.csv",
+            "outside_limits.csv:3:2: joint \"elbow\" = 2.1 rad is outside [-2, 2] rad",
+        ),
+        (
+            "time_order.csv",
+            "time_order.csv:3: t_s = 0.5 s is before the previous row's 1 s",
+        ),
+        (
+            "duplicate_column.csv",
+            "duplicate_column.csv:1:4: column \"q1\" appears twice",
+        ),
+        (
+            "header_only.csv",
+            "header_only.csv: expected at least 1 data rows, found 0",
+        ),
+    ];
+    for (file, expected) in cases {
+        let msg = message(read_log(&data(&format!("logs/{file}")), &device));
+        assert_contains(&msg, &[expected]);
+    }
+}
+
+#[test]
+fn outside_limits_carries_the_numbers() {
+    let err = read_log(&data("logs/outside_limits.csv"), &planar()).unwrap_err();
+    match err {
+        Error::OutsideJointLimits {
+            line,
+            column,
+            value_rad,
+            min_rad,
+            max_rad,
+            ..
+        } => assert_eq!(
+            (line, column, value_rad, min_rad, max_rad),
+            (3, 2, 2.1, -2.0, 2.0)
+        ),
+        other => panic!("unexpected {other:?}"),
+    }
+}
+
+#[test]
+fn missing_log_is_an_io_error() {
+    let msg = message(read_log(&data("logs/no_such_log.csv"), &planar()));
+    assert_contains(&msg, &["cannot read ", "no_such_log.csv: "]);
+}

@@ -1,0 +1,32 @@
+//! Integration tests of hapcal-io against the fixtures in `test_data/`.
+
+mod device;
+mod log;
+mod mukca;
+mod urdf;
+
+use std::path::PathBuf;
+
+/// A fixture path under `crates/io/test_data/`.
+fn data(relative: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("test_data")
+        .join(relative)
+}
+
+/// The error's message, failing the test if `result` is `Ok`.
+#[track_caller]
+fn message<T: std::fmt::Debug>(result: Result<T, hapcal_io::Error>) -> String {
+    match result {
+        Ok(value) => panic!("expected an error, got {value:?}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// Asserts that `text` contains every one of `parts`.
+#[track_caller]
+fn assert_contains(text: &str, parts: &[&str]) {
+    for part in parts {
+        assert!(text.contains(part), "{text:?} does not contain {part:?}");
+    }
+}

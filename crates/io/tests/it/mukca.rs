@@ -1,0 +1,104 @@
+use hapcal_io::{Error, read_mukca_paths, read_mukca_placement};
+
+use crate::{assert_contains, data, message};
+
+#[test]
+fn kuka_front_has_two_sockets_of_31_rows_of_7_joints() {
+    let placement = read_mukca_placement(&data("mukca/kuka_14/front"), 7).unwrap();
+    assert_eq!(placement.name, "front");
+    assert_eq!(placement.sockets.len(), 2);
+    for (k, socket) in placement.sockets.iter().enumerate() {
+        assert!(socket.file.ends_with(format!("hole_{k}.csv")));
+        assert_eq!(socket.q.len(), 31);
+        assert!(socket.q.iter().all(|row| row.len() == 7));
+        assert_eq!(socket.line_numbers, (1..=31).collect::<Vec<u64>>());
+    }
+    // First cell of hole_0.csv, exactly as printed there.
+    let first: f64 = "-2.115545261886588868e-01".parse().unwrap();
+    assert_eq!(placement.sockets[0].q[0][0], first);
+    assert_eq!(placement.sockets[1].q[30].len(), 7);
+}
+
+#[test]
+fn run_folder_lists_its_placements_in_name_order() {
+    let placements = read_mukca_paths(&[data("mukca/kuka_14")], 7).unwrap();
+    let names: Vec<&str> = placements.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(names, ["front", "left_back"]);
+
+    // A placement folder and a run folder can be mixed.
+    let mixed =
+        read_mukca_paths(&[data("mukca/kuka_14/left_back"), data("mukca/kuka_14")], 7).unwrap();
+    let names: Vec<&str> = mixed.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(names, ["left_back", "front", "left_back"]);
+}
+
+#[test]
+fn wrong_joint_count_names_the_first_line() {
+    let msg = message(read_mukca_placement(&data("mukca/kuka_14/front"), 6));
+    assert_contains(&msg, &["hole_0.csv:1:", "expected 6 joints", "found 7"]);
+    let msg = message(read_mukca_placement(&data("mukca_bad/joint_count"), 3));
+    assert_contains(&msg, &["joint_count/hole_0.csv:1: ", "found 4"]);
+}
+
+#[test]
+fn ragged_row_names_its_line() {
+    let msg = message(read_mukca_placement(&data("mukca_bad/ragged"), 3));
+    assert_contains(&msg, &["ragged/hole_0.csv:3: expected 3 fields, found 2"]);
+    let msg = message(read_mukca_placement(&data("mukca_bad/ragged_second"), 3));
+    assert_contains(
+        &msg,
+        &["ragged_second/hole_1.csv:3: expected 3 fields, found 4"],
+    );
+}
+
+#[test]
+fn nan_is_not_finite() {
+    let err = read_mukca_placement(&data("mukca_bad/nan"), 3).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            Error::NotFinite {
+                line: 2,
+                column: 3,
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    assert_contains(
+        &err.to_string(),
+        &["nan/hole_0.csv:2:3: expected a finite number in \"q3\", found NaN"],
+    );
+}
+
+#[test]
+fn non_numeric_cell_names_line_and_column() {
+    let msg = message(read_mukca_placement(&data("mukca_bad/not_a_number"), 3));
+    assert_contains(
+        &msg,
+        &["hole_0.csv:3:2: expected a number in column \"q2\", found \"abc\""],
+    );
+}
+
+#[test]
+fn socket_files_must_be_contiguous_and_present() {
+    let msg = message(read_mukca_placement(&data("mukca_bad/gap"), 3));
+    assert_contains(&msg, &["gap: hole_1.csv is missing"]);
+    // hole_0_pose.csv is not a socket file.
+    let msg = message(read_mukca_placement(&data("mukca_bad/no_sockets"), 3));
+    assert_contains(&msg, &["no_sockets: no socket file hole_0.csv"]);
+    let msg = message(read_mukca_paths(&[data("mukca_bad/no_sockets")], 3));
+    assert_contains(&msg, &["no_sockets: no socket file hole_0.csv"]);
+    let msg = message(read_mukca_placement(&data("mukca_bad/empty"), 3));
+    assert_contains(
+        &msg,
+        &["empty/hole_0.csv: expected at least 1 data rows, found 0"],
+    );
+}
+
+#[test]
+fn missing_folder_is_an_io_error() {
+    let err = read_mukca_placement(&data("mukca/no_such_robot"), 7).unwrap_err();
+    assert!(matches!(err, Error::Io { .. }), "{err:?}");
+    assert_contains(&err.to_string(), &["cannot read ", "no_such_robot: "]);
+}

@@ -1,0 +1,47 @@
+//! A calibrated model: the chain with identified deviations and compliance.
+
+use crate::GravityCompliance;
+use hapcal_kinematics::{Chain, Point3};
+
+/// A chain plus identified parameter deviations, ready to predict end points.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CalibratedModel {
+    /// The nominal chain.
+    pub chain: Chain,
+    /// Kinematic deviations (length `chain.n_params()`, m or rad; zeros = nominal).
+    pub x_kin: Vec<f64>,
+    /// Compliance model and its `k_j` (length `n_joints`, rad/m), if modelled.
+    pub compliance: Option<(GravityCompliance, Vec<f64>)>,
+}
+
+impl CalibratedModel {
+    /// The nominal model of `chain` (no deviation, no compliance).
+    pub fn nominal(chain: Chain) -> Self {
+        let x_kin = vec![0.0; chain.n_params()];
+        Self { chain, x_kin, compliance: None }
+    }
+
+    /// Joint angles the chain actually takes for readings `q` (rad): `q + k∘τ̂(q)`.
+    ///
+    /// # Panics
+    /// If `q.len()` differs from the chain's joint count.
+    #[track_caller]
+    pub fn effective_angles(&self, q: &[f64]) -> Vec<f64> {
+        match &self.compliance {
+            None => q.to_vec(),
+            Some((model, k)) => {
+                let tau = model.lumped_torques(&self.chain, q);
+                q.iter().zip(k).zip(&tau).map(|((q, k), t)| q + k * t).collect()
+            }
+        }
+    }
+
+    /// End point (m, base frame) for joint readings `q` (rad).
+    ///
+    /// # Panics
+    /// If `q.len()` differs from the chain's joint count.
+    #[track_caller]
+    pub fn end_point(&self, q: &[f64]) -> Point3<f64> {
+        self.chain.end_point(&self.x_kin, &self.effective_angles(q))
+    }
+}

@@ -1,0 +1,382 @@
+//! The calibration problem: residuals and analytic Jacobian over kinematic deviations,
+//! optional compliance, and unknown points.
+
+use crate::{CalibratedModel, Error, GravityCompliance};
+use faer::{Col, ColMut, ColRef, MatMut};
+use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, Unit};
+use hapcal_kinematics::{Chain, FkWorkspace, ParamUnit, Point3, Vector3};
+use std::cell::RefCell;
+
+/// What one configuration measured.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RowKind {
+    /// Distance from the chain's base origin to the end point, m (cable encoder, paper eq. 5).
+    Distance {
+        /// Measured distance δ, m.
+        distance_m: f64,
+    },
+    /// End point position in the base (rig) frame, m (tracker).
+    Position {
+        /// Measured position, m.
+        position_m: [f64; 3],
+    },
+    /// The end point is at unknown point `point` (a socket); 3 residuals.
+    Point {
+        /// Index of the unknown point, `0..n_points`.
+        point: usize,
+    },
+}
+
+/// One measured configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    /// Joint readings, rad (length `n_joints`).
+    pub q: Vec<f64>,
+    /// What was measured.
+    pub kind: RowKind,
+}
+
+/// A known distance between two unknown points (e.g. MUKCa's two sockets, 0.05 m apart).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointDistance {
+    /// First point index.
+    pub a: usize,
+    /// Second point index.
+    pub b: usize,
+    /// Known distance, m.
+    pub distance_m: f64,
+}
+
+/// All observations of one calibration.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Observations {
+    /// Measured configurations.
+    pub rows: Vec<Row>,
+    /// Known distances between unknown points.
+    pub point_distances: Vec<PointDistance>,
+    /// Number of unknown points (3 nuisance parameters each).
+    pub n_points: usize,
+}
+
+/// Standard deviations that weight each measurement type (residual = error / sigma).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Weights {
+    /// Cable or other distance measurement, m.
+    pub sigma_distance_m: f64,
+    /// Tracker position, per axis, m.
+    pub sigma_position_m: f64,
+    /// Point (socket) seating, per axis, m.
+    pub sigma_point_m: f64,
+    /// Known distance between points (tool manufacturing tolerance), m.
+    pub sigma_point_distance_m: f64,
+}
+
+impl Default for Weights {
+    /// All sigmas 1 m: residuals stay in metres, every measurement weighs the same per metre.
+    /// Callers with a noise model (the simulator, DESIGN.md §3) should pass it instead.
+    fn default() -> Self {
+        Self { sigma_distance_m: 1.0, sigma_position_m: 1.0, sigma_point_m: 1.0, sigma_point_distance_m: 1.0 }
+    }
+}
+
+/// A calibration problem: `x = [kinematic deviations | compliance k | unknown points (3 each)]`.
+#[derive(Debug)]
+pub struct CalibrationProblem {
+    chain: Chain,
+    obs: Observations,
+    weights: Weights,
+    compliance: Option<GravityCompliance>,
+    /// Lumped torques per row (empty without compliance).
+    torques: Vec<Vec<f64>>,
+    layout: ParamLayout,
+    n_residuals: usize,
+    ws: RefCell<(FkWorkspace, Vec<f64>)>,
+}
+
+impl CalibrationProblem {
+    /// Builds the problem.
+    ///
+    /// # Errors
+    /// [`Error::JointCount`], [`Error::NoSuchPoint`], [`Error::NotFinite`] or [`Error::BadSigma`]
+    /// for inconsistent observations.
+    pub fn new(
+        chain: Chain,
+        obs: Observations,
+        weights: Weights,
+        compliance: Option<GravityCompliance>,
+    ) -> Result<Self, Error> {
+        for (name, value) in [
+            ("sigma_distance_m", weights.sigma_distance_m),
+            ("sigma_position_m", weights.sigma_position_m),
+            ("sigma_point_m", weights.sigma_point_m),
+            ("sigma_point_distance_m", weights.sigma_point_distance_m),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(Error::BadSigma { name, value });
+            }
+        }
+        let n_joints = chain.n_joints();
+        let mut n_residuals = obs.point_distances.len();
+        for (row_idx, row) in obs.rows.iter().enumerate() {
+            if row.q.len() != n_joints {
+                return Err(Error::JointCount { row: row_idx, expected: n_joints, found: row.q.len() });
+            }
+            let finite = row.q.iter().all(|v| v.is_finite())
+                && match &row.kind {
+                    RowKind::Distance { distance_m } => distance_m.is_finite(),
+                    RowKind::Position { position_m } => position_m.iter().all(|v| v.is_finite()),
+                    RowKind::Point { .. } => true,
+                };
+            if !finite {
+                return Err(Error::NotFinite { row: row_idx });
+            }
+            n_residuals += match row.kind {
+                RowKind::Distance { .. } => 1,
+                RowKind::Position { .. } => 3,
+                RowKind::Point { point } => {
+                    if point >= obs.n_points {
+                        return Err(Error::NoSuchPoint { row: row_idx, point, n_points: obs.n_points });
+                    }
+                    3
+                }
+            };
+        }
+        for (idx, pd) in obs.point_distances.iter().enumerate() {
+            for point in [pd.a, pd.b] {
+                if point >= obs.n_points {
+                    return Err(Error::NoSuchPoint { row: idx, point, n_points: obs.n_points });
+                }
+            }
+        }
+        let mut specs: Vec<ParamSpec> = chain
+            .params()
+            .iter()
+            .map(|p| ParamSpec {
+                name: p.name.clone(),
+                unit: match p.unit {
+                    ParamUnit::Meter => Unit::Meter,
+                    ParamUnit::Radian => Unit::Radian,
+                },
+                role: Role::Model,
+            })
+            .collect();
+        let torques = match &compliance {
+            Some(model) => {
+                specs.extend(chain.joint_names().iter().map(|j| ParamSpec {
+                    name: format!("compliance.{j}"),
+                    unit: Unit::Radian,
+                    role: Role::Model,
+                }));
+                obs.rows.iter().map(|row| model.lumped_torques(&chain, &row.q)).collect()
+            }
+            None => Vec::new(),
+        };
+        for point in 0..obs.n_points {
+            for axis in ["x", "y", "z"] {
+                specs.push(ParamSpec { name: format!("point{point}.{axis}"), unit: Unit::Meter, role: Role::Nuisance });
+            }
+        }
+        let ws = RefCell::new((FkWorkspace::new(&chain), vec![0.0; 3 * chain.n_params()]));
+        Ok(Self { chain, obs, weights, compliance, torques, layout: ParamLayout::new(specs), n_residuals, ws })
+    }
+
+    /// The chain.
+    pub fn chain(&self) -> &Chain {
+        &self.chain
+    }
+
+    /// The observations.
+    pub fn observations(&self) -> &Observations {
+        &self.obs
+    }
+
+    /// Number of compliance parameters (0 without compliance, else `n_joints`).
+    pub fn n_compliance(&self) -> usize {
+        if self.compliance.is_some() { self.chain.n_joints() } else { 0 }
+    }
+
+    /// Index of the first unknown-point parameter in `x`.
+    pub fn points_offset(&self) -> usize {
+        self.chain.n_params() + self.n_compliance()
+    }
+
+    /// Start vector: zero deviations and compliance, each unknown point at the mean of the nominal
+    /// end points of its rows (origin if it has none). Length `layout().len()`.
+    pub fn initial_guess(&self) -> Col<f64> {
+        let mut x = Col::<f64>::zeros(self.layout.len());
+        let x_kin = vec![0.0; self.chain.n_params()];
+        let mut sums = vec![(Vector3::zeros(), 0usize); self.obs.n_points];
+        for row in &self.obs.rows {
+            if let RowKind::Point { point } = row.kind {
+                let p = self.chain.end_point(&x_kin, &row.q);
+                sums[point].0 += p.coords;
+                sums[point].1 += 1;
+            }
+        }
+        let off = self.points_offset();
+        for (point, (sum, n)) in sums.iter().enumerate() {
+            let mean = if *n > 0 { sum / *n as f64 } else { Vector3::zeros() };
+            for k in 0..3 {
+                x[off + 3 * point + k] = mean[k];
+            }
+        }
+        x
+    }
+
+    /// The model that `x` describes (deviations and compliance; points are dropped).
+    ///
+    /// # Panics
+    /// If `x.nrows() != layout().len()`.
+    #[track_caller]
+    pub fn model(&self, x: ColRef<'_, f64>) -> CalibratedModel {
+        assert_eq!(x.nrows(), self.layout.len(), "parameter vector length");
+        let n = self.chain.n_params();
+        let x_kin: Vec<f64> = (0..n).map(|i| x[i]).collect();
+        let compliance = self
+            .compliance
+            .as_ref()
+            .map(|c| (c.clone(), (0..self.chain.n_joints()).map(|j| x[n + j]).collect::<Vec<_>>()));
+        CalibratedModel { chain: self.chain.clone(), x_kin, compliance }
+    }
+
+    /// The unknown points that `x` holds (m).
+    ///
+    /// # Panics
+    /// If `x.nrows() != layout().len()`.
+    #[track_caller]
+    pub fn points(&self, x: ColRef<'_, f64>) -> Vec<Point3<f64>> {
+        assert_eq!(x.nrows(), self.layout.len(), "parameter vector length");
+        let off = self.points_offset();
+        (0..self.obs.n_points).map(|p| Point3::new(x[off + 3 * p], x[off + 3 * p + 1], x[off + 3 * p + 2])).collect()
+    }
+
+    fn effective_q(&self, row_idx: usize, x: ColRef<'_, f64>) -> Vec<f64> {
+        let q = &self.obs.rows[row_idx].q;
+        if self.compliance.is_none() {
+            return q.clone();
+        }
+        let n = self.chain.n_params();
+        q.iter().enumerate().map(|(j, qj)| qj + x[n + j] * self.torques[row_idx][j]).collect()
+    }
+
+    /// Residuals and, if `jac` is given, the Jacobian; one pass shares the forward kinematics.
+    fn eval(&self, x: ColRef<'_, f64>, mut out: Option<ColMut<'_, f64>>, mut jac: Option<MatMut<'_, f64>>) {
+        let n_kin = self.chain.n_params();
+        let n_comp = self.n_compliance();
+        let off = self.points_offset();
+        let x_kin: Vec<f64> = (0..n_kin).map(|i| x[i]).collect();
+        let mut guard = self.ws.borrow_mut();
+        let (ws, buf) = &mut *guard;
+        if let Some(j) = jac.as_mut() {
+            j.fill(0.0);
+        }
+        let mut r = 0usize;
+        for (row_idx, row) in self.obs.rows.iter().enumerate() {
+            let q_eff = self.effective_q(row_idx, x);
+            let p = self.chain.point_and_jacobian_in(&x_kin, &q_eff, ws, buf);
+            // ∂p/∂k_j = (∂p/∂q_j)·τ̂_j, from the geometric Jacobian's linear rows.
+            let jq = if n_comp > 0 && jac.is_some() { Some(self.chain.geometric_jacobian(&x_kin, &q_eff)) } else { None };
+            let dp = |k: usize, col: usize| -> f64 {
+                if col < n_kin {
+                    buf[3 * col + k]
+                } else {
+                    let j = col - n_kin;
+                    jq.as_ref().map_or(0.0, |m| m[(k, j)] * self.torques[row_idx][j])
+                }
+            };
+            match &row.kind {
+                RowKind::Distance { distance_m } => {
+                    let s = self.weights.sigma_distance_m;
+                    let norm = p.coords.norm();
+                    if let Some(o) = out.as_mut() {
+                        o[r] = (norm - distance_m) / s;
+                    }
+                    if let Some(j) = jac.as_mut() {
+                        let u = if norm > 0.0 { p.coords / norm } else { Vector3::zeros() };
+                        for col in 0..n_kin + n_comp {
+                            j[(r, col)] = (0..3).map(|k| u[k] * dp(k, col)).sum::<f64>() / s;
+                        }
+                    }
+                    r += 1;
+                }
+                RowKind::Position { position_m } => {
+                    let s = self.weights.sigma_position_m;
+                    for k in 0..3 {
+                        if let Some(o) = out.as_mut() {
+                            o[r + k] = (p[k] - position_m[k]) / s;
+                        }
+                        if let Some(j) = jac.as_mut() {
+                            for col in 0..n_kin + n_comp {
+                                j[(r + k, col)] = dp(k, col) / s;
+                            }
+                        }
+                    }
+                    r += 3;
+                }
+                RowKind::Point { point } => {
+                    let s = self.weights.sigma_point_m;
+                    for k in 0..3 {
+                        if let Some(o) = out.as_mut() {
+                            o[r + k] = (p[k] - x[off + 3 * point + k]) / s;
+                        }
+                        if let Some(j) = jac.as_mut() {
+                            for col in 0..n_kin + n_comp {
+                                j[(r + k, col)] = dp(k, col) / s;
+                            }
+                            j[(r + k, off + 3 * point + k)] = -1.0 / s;
+                        }
+                    }
+                    r += 3;
+                }
+            }
+        }
+        let s = self.weights.sigma_point_distance_m;
+        for pd in &self.obs.point_distances {
+            let d = Vector3::from_fn(|k, _| x[off + 3 * pd.a + k] - x[off + 3 * pd.b + k]);
+            let norm = d.norm();
+            if let Some(o) = out.as_mut() {
+                o[r] = (norm - pd.distance_m) / s;
+            }
+            if let Some(j) = jac.as_mut() {
+                let u = if norm > 0.0 { d / norm } else { Vector3::zeros() };
+                for k in 0..3 {
+                    j[(r, off + 3 * pd.a + k)] = u[k] / s;
+                    j[(r, off + 3 * pd.b + k)] = -u[k] / s;
+                }
+            }
+            r += 1;
+        }
+    }
+}
+
+impl Problem for CalibrationProblem {
+    fn layout(&self) -> &ParamLayout {
+        &self.layout
+    }
+
+    fn n_residuals(&self) -> usize {
+        self.n_residuals
+    }
+
+    fn residuals(&self, x: ColRef<'_, f64>, out: ColMut<'_, f64>) -> Result<(), EvalError> {
+        check_shape(x.nrows(), self.layout.len(), out.nrows(), self.n_residuals)?;
+        self.eval(x, Some(out), None);
+        Ok(())
+    }
+
+    fn jacobian(&self, x: ColRef<'_, f64>, jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+        check_shape(x.nrows(), self.layout.len(), jac.nrows(), self.n_residuals)?;
+        if jac.ncols() != self.layout.len() {
+            return Err(EvalError { reason: format!("jacobian has {} columns, expected {}", jac.ncols(), self.layout.len()) });
+        }
+        self.eval(x, None, Some(jac));
+        Ok(())
+    }
+}
+
+fn check_shape(nx: usize, n: usize, nr: usize, m: usize) -> Result<(), EvalError> {
+    if nx != n || nr != m {
+        return Err(EvalError { reason: format!("shape mismatch: x has {nx} entries (expected {n}), output {nr} rows (expected {m})") });
+    }
+    Ok(())
+}

@@ -1,0 +1,106 @@
+//! Integration tests of hapcal-problems: analytic Jacobians against central differences.
+
+use faer::{Col, Mat};
+use hapcal_identify::Problem;
+use hapcal_kinematics::{Chain, Placement};
+use hapcal_problems::{CalibrationProblem, GravityCompliance, Observations, PointDistance, Row, RowKind, Weights};
+use proptest::prelude::*;
+
+/// iiwa-like chain from URDF placements (MUKCa `iiwa14.urdf` joint origins).
+fn iiwa_like() -> Chain {
+    let rev = |name: &str, xyz: [f64; 3], axis: [f64; 3]| Placement {
+        name: name.into(),
+        xyz_m: xyz,
+        rpy_rad: [0.0; 3],
+        axis: Some(axis),
+    };
+    Chain::from_placements(&[
+        rev("j1", [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
+        rev("j2", [-0.00043624, 0.0, 0.36], [0.0, 1.0, 0.0]),
+        rev("j3", [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
+        rev("j4", [0.00043624, 0.0, 0.42], [0.0, -1.0, 0.0]),
+        rev("j5", [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
+        rev("j6", [0.0, 0.0, 0.4], [0.0, 1.0, 0.0]),
+        rev("j7", [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
+        Placement { name: "tool".into(), xyz_m: [0.0, 0.0, 0.126], rpy_rad: [0.0; 3], axis: None },
+        Placement { name: "ball".into(), xyz_m: [0.0, 0.0, 0.04], rpy_rad: [0.0; 3], axis: None },
+    ])
+    .expect("valid chain")
+}
+
+fn problem_with(qs: &[Vec<f64>], compliance: bool) -> CalibrationProblem {
+    let mut rows = Vec::new();
+    for (i, q) in qs.iter().enumerate() {
+        let kind = match i % 4 {
+            0 => RowKind::Distance { distance_m: 0.9 },
+            1 => RowKind::Position { position_m: [0.1, 0.2, 0.8] },
+            2 => RowKind::Point { point: 0 },
+            _ => RowKind::Point { point: 1 },
+        };
+        rows.push(Row { q: q.clone(), kind });
+    }
+    let obs = Observations { rows, point_distances: vec![PointDistance { a: 0, b: 1, distance_m: 0.05 }], n_points: 2 };
+    let weights = Weights { sigma_distance_m: 1e-5, sigma_position_m: 2e-5, sigma_point_m: 5e-5, sigma_point_distance_m: 1e-4 };
+    CalibrationProblem::new(iiwa_like(), obs, weights, compliance.then(GravityCompliance::default)).expect("valid")
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+    #[test]
+    fn jacobian_matches_central_differences(
+        qs in prop::collection::vec(prop::collection::vec(-2.0..2.0f64, 7), 8),
+        dev in prop::collection::vec(-1e-2..1e-2f64, 120),
+        compliance in any::<bool>(),
+    ) {
+        let problem = problem_with(&qs, compliance);
+        let n = problem.layout().len();
+        let m = problem.n_residuals();
+        let mut x = problem.initial_guess();
+        for i in 0..n { x[i] += dev[i % dev.len()] * if i < problem.points_offset() { 1.0 } else { 0.1 }; }
+        let mut jac = Mat::<f64>::zeros(m, n);
+        problem.jacobian(x.as_ref(), jac.as_mut()).unwrap();
+        let h = 1e-6;
+        let (mut up, mut down) = (Col::<f64>::zeros(m), Col::<f64>::zeros(m));
+        for col in 0..n {
+            let mut xp = x.clone(); xp[col] += h;
+            let mut xm = x.clone(); xm[col] -= h;
+            problem.residuals(xp.as_ref(), up.as_mut()).unwrap();
+            problem.residuals(xm.as_ref(), down.as_mut()).unwrap();
+            for row in 0..m {
+                let fd = (up[row] - down[row]) / (2.0 * h);
+                let a = jac[(row, col)];
+                // Residuals are divided by sigma ~ 1e-5, so absolute values are ~1e5 per unit.
+                prop_assert!((a - fd).abs() <= 1e-3 + 1e-6 * fd.abs(),
+                    "{}: row {row}: analytic {a} vs central difference {fd}", problem.layout().name(col));
+            }
+        }
+    }
+}
+
+#[test]
+fn residual_counts_and_names() {
+    let qs = vec![vec![0.1; 7]; 8];
+    let p = problem_with(&qs, true);
+    // 2 distances + 2 positions ×3 + 4 points ×3 + 1 point distance.
+    assert_eq!(p.n_residuals(), 2 + 6 + 12 + 1);
+    // 7 joints + tip, 6 each, then 7 compliance, then 2 points ×3.
+    assert_eq!(p.layout().len(), 48 + 7 + 6);
+    assert_eq!(p.layout().name(48), "compliance.j1");
+    assert_eq!(p.layout().name(55), "point0.x");
+}
+
+#[test]
+fn vertical_first_axis_has_no_gravity_torque() {
+    let chain = iiwa_like();
+    let tau = GravityCompliance::default().lumped_torques(&chain, &[0.3, 0.5, -0.2, -1.0, 0.4, 0.6, 0.1]);
+    assert!(tau[0].abs() < 1e-12, "{tau:?}");
+    // Joint 2 (axis y) carries the whole lumped arm: a clearly non-zero lever arm.
+    assert!(tau[1].abs() > 0.1, "{tau:?}");
+}
+
+#[test]
+fn wrong_joint_count_is_an_error() {
+    let obs = Observations { rows: vec![Row { q: vec![0.0; 6], kind: RowKind::Point { point: 0 } }], point_distances: vec![], n_points: 1 };
+    let err = CalibrationProblem::new(iiwa_like(), obs, Weights::default(), None).unwrap_err();
+    assert_eq!(err.to_string(), "observation 0 has 6 joint angles, the chain has 7 joints");
+}
