@@ -9,18 +9,68 @@ use xshell::{Shell, cmd};
 /// objective, 48 URDF-placement parameters, IPOPT): (unit, urdf, train, test, MAE before, MAE
 /// after, distance error after), mm. `None` where only a range over placements was given.
 const REFERENCE: &[(&str, &str, &str, &str, Option<[f64; 3]>)] = &[
-    ("kuka_14", "iiwa14", "front", "left_back", Some([0.808, 0.131, 0.006])),
-    ("kuka_14", "iiwa14", "front", "raised_left", Some([0.804, 0.404, 0.164])),
-    ("panda_1", "panda", "front", "back-high", Some([7.459, 0.825, 0.955])),
-    ("panda_1", "panda", "front", "right", Some([7.987, 0.412, 0.261])),
-    ("panda_6", "panda", "front", "left", Some([10.604, 0.227, 0.196])),
-    ("panda_6", "panda", "front", "right", Some([10.577, 0.297, 0.073])),
-    ("panda_7", "panda", "front", "right", Some([5.920, 0.301, 0.089])),
+    (
+        "kuka_14",
+        "iiwa14",
+        "front",
+        "left_back",
+        Some([0.808, 0.131, 0.006]),
+    ),
+    (
+        "kuka_14",
+        "iiwa14",
+        "front",
+        "raised_left",
+        Some([0.804, 0.404, 0.164]),
+    ),
+    (
+        "panda_1",
+        "panda",
+        "front",
+        "back-high",
+        Some([7.459, 0.825, 0.955]),
+    ),
+    (
+        "panda_1",
+        "panda",
+        "front",
+        "right",
+        Some([7.987, 0.412, 0.261]),
+    ),
+    (
+        "panda_6",
+        "panda",
+        "front",
+        "left",
+        Some([10.604, 0.227, 0.196]),
+    ),
+    (
+        "panda_6",
+        "panda",
+        "front",
+        "right",
+        Some([10.577, 0.297, 0.073]),
+    ),
+    (
+        "panda_7",
+        "panda",
+        "front",
+        "right",
+        Some([5.920, 0.301, 0.089]),
+    ),
 ];
 
 /// panda_2: trained on back_left, tested on the 8 others; MUKCa's figures only as ranges.
-const PANDA_2_TESTS: &[&str] =
-    &["back_right", "front_center", "front_left", "front_right", "high", "mid-high", "mid_left", "mid_right"];
+const PANDA_2_TESTS: &[&str] = &[
+    "back_right",
+    "front_center",
+    "front_left",
+    "front_right",
+    "high",
+    "mid-high",
+    "mid_left",
+    "mid_right",
+];
 
 struct Row {
     unit: String,
@@ -38,19 +88,24 @@ fn calibrate(sh: &Shell, unit: &str, urdf: &str, train: &str, tests: &[&str]) ->
     let device = format!("fixtures/mukca/urdf/{urdf}.urdf");
     let data = format!("{base}/{train}");
     let tests: Vec<String> = tests.iter().map(|t| format!("{base}/{t}")).collect();
-    let out = cmd!(sh, "target/release/hapcal calibrate --device {device} --data {data} --test {tests...} --json")
+    let out = cmd!(sh, "cargo run --release --quiet -p hapcal -- calibrate --device {device} --data {data} --test {tests...} --json")
         .read()
         .with_context(|| format!("calibrating {unit} on {train}"))?;
     Ok(serde_json::from_str(&out)?)
 }
 
 fn mm(v: &Value, role: &str, name: &str, when: &str, key: &str) -> Result<f64> {
-    let placements = v["placements"].as_array().context("no placements in the report")?;
+    let placements = v["placements"]
+        .as_array()
+        .context("no placements in the report")?;
     let p = placements
         .iter()
         .find(|p| p["name"] == name && p["role"] == role)
         .with_context(|| format!("placement {name} missing"))?;
-    p[when][key].as_f64().map(|m| m * 1e3).with_context(|| format!("{name}: {when}.{key} missing"))
+    p[when][key]
+        .as_f64()
+        .map(|m| m * 1e3)
+        .with_context(|| format!("{name}: {when}.{key} missing"))
 }
 
 pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
@@ -66,12 +121,21 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
             None => units.push((unit, urdf, train, vec![test], vec![theirs])),
         }
     }
-    units.push(("panda_2", "panda", "back_left", PANDA_2_TESTS.to_vec(), vec![None; PANDA_2_TESTS.len()]));
+    units.push((
+        "panda_2",
+        "panda",
+        "back_left",
+        PANDA_2_TESTS.to_vec(),
+        vec![None; PANDA_2_TESTS.len()],
+    ));
     let mut timing = Vec::new();
     for (unit, urdf, train, tests, theirs) in &units {
         let v = calibrate(sh, unit, urdf, train, tests)?;
         let model = v["model"].as_str().unwrap_or("?").to_string();
-        timing.push((unit.to_string(), v["elapsed_s"].as_f64().unwrap_or(f64::NAN)));
+        timing.push((
+            unit.to_string(),
+            v["elapsed_s"].as_f64().unwrap_or(f64::NAN),
+        ));
         for (test, theirs) in tests.iter().zip(theirs) {
             rows.push(Row {
                 unit: unit.to_string(),
@@ -88,9 +152,15 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     let mut md = String::new();
     writeln!(md, "# hapcal on MUKCa real-robot recordings")?;
     writeln!(md)?;
-    writeln!(md, "Written by `cargo xtask mukca` (release build; each split is one `hapcal calibrate --device fixtures/mukca/urdf/<urdf>.urdf --data <train> --test <tests…> --json`). Figures in mm: MAE = mean absolute error of the ball positions to their socket mean on the *test* placement, dist = socket-distance error; MUKCa's own optimiser (IPOPT, 48 URDF-placement parameters, regularised) beside ours.")?;
+    writeln!(
+        md,
+        "Written by `cargo xtask mukca` (release build; each split is one `hapcal calibrate --device fixtures/mukca/urdf/<urdf>.urdf --data <train> --test <tests…> --json`). Figures in mm: MAE = mean absolute error of the ball positions to their socket mean on the *test* placement, dist = socket-distance error; MUKCa's own optimiser (IPOPT, 48 URDF-placement parameters, regularised) beside ours."
+    )?;
     writeln!(md)?;
-    writeln!(md, "| unit | train | test | MAE before (ours) | MAE before (MUKCa) | model | MAE after (ours) | MAE after (MUKCa) | change | dist after (ours) | dist after (MUKCa) |")?;
+    writeln!(
+        md,
+        "| unit | train | test | MAE before (ours) | MAE before (MUKCa) | model | MAE after (ours) | MAE after (MUKCa) | change | dist after (ours) | dist after (MUKCa) |"
+    )?;
     writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|")?;
     let mut ratios = Vec::new();
     let mut failures = Vec::new();
@@ -99,14 +169,30 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
             Some([b, a, d]) => {
                 ratios.push(r.after / a);
                 if (r.before - b).abs() > 0.0005 {
-                    failures.push(format!("{} {}: before {:.4} mm differs from MUKCa's {b:.3}", r.unit, r.test, r.before));
+                    failures.push(format!(
+                        "{} {}: before {:.4} mm differs from MUKCa's {b:.3}",
+                        r.unit, r.test, r.before
+                    ));
                 }
                 if r.after > 1.10 * a {
-                    failures.push(format!("{} {}: after {:.3} mm is more than 10 % worse than {a:.3}", r.unit, r.test, r.after));
+                    failures.push(format!(
+                        "{} {}: after {:.3} mm is more than 10 % worse than {a:.3}",
+                        r.unit, r.test, r.after
+                    ));
                 }
-                (format!("{b:.3}"), format!("{a:.3}"), format!("{d:.3}"), format!("{:+.0} %", (r.after / a - 1.0) * 100.0))
+                (
+                    format!("{b:.3}"),
+                    format!("{a:.3}"),
+                    format!("{d:.3}"),
+                    format!("{:+.0} %", (r.after / a - 1.0) * 100.0),
+                )
             }
-            None => ("5.6–11.1".into(), "0.65–1.36".into(), "0.02–0.77".into(), "-".into()),
+            None => (
+                "5.6–11.1".into(),
+                "0.65–1.36".into(),
+                "0.02–0.77".into(),
+                "-".into(),
+            ),
         };
         writeln!(
             md,
@@ -116,9 +202,18 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     }
     let mean_ratio = ratios.iter().sum::<f64>() / ratios.len().max(1) as f64;
     writeln!(md)?;
-    writeln!(md, "Mean of ours/MUKCa over the {} placements with individual reference figures: {:.3} ({:+.1} %).", ratios.len(), mean_ratio, (mean_ratio - 1.0) * 100.0)?;
+    writeln!(
+        md,
+        "Mean of ours/MUKCa over the {} placements with individual reference figures: {:.3} ({:+.1} %).",
+        ratios.len(),
+        mean_ratio,
+        (mean_ratio - 1.0) * 100.0
+    )?;
     writeln!(md)?;
-    writeln!(md, "Wall time of one `hapcal calibrate` run (reading, cross-validation of two models × 5 folds, final fit, evaluation), from its JSON `elapsed_s`:")?;
+    writeln!(
+        md,
+        "Wall time of one `hapcal calibrate` run (reading, cross-validation of two models × 5 folds, final fit, evaluation), from its JSON `elapsed_s`:"
+    )?;
     writeln!(md)?;
     for (unit, t) in &timing {
         writeln!(md, "- {unit}: {:.1} ms", t * 1e3)?;

@@ -2,12 +2,13 @@
 //! training data asks for it, joint compliance) from socket or distance measurements.
 
 use anyhow::{Context, Result, bail};
-use hapcal_identify::{IdentifyConfig, Identified, Problem, PruneReason, identify};
+use hapcal_identify::{Identified, IdentifyConfig, Problem, PruneReason, identify};
 use hapcal_io::{Device, SocketPlacement};
 use hapcal_kinematics::Chain;
 use hapcal_metrics::socket_figures;
 use hapcal_problems::{
-    CalibratedModel, CalibrationProblem, GravityCompliance, Observations, PointDistance, Row, RowKind, Weights,
+    CalibratedModel, CalibrationProblem, GravityCompliance, Observations, PointDistance, Row,
+    RowKind, Weights,
 };
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -55,7 +56,10 @@ impl Plan {
             device: root.join("urdf/iiwa14.urdf"),
             tip: "ball_link".into(),
             data: vec![root.join("data/kuka_14/front")],
-            test: vec![root.join("data/kuka_14/left_back"), root.join("data/kuka_14/raised_left")],
+            test: vec![
+                root.join("data/kuka_14/left_back"),
+                root.join("data/kuka_14/raised_left"),
+            ],
             socket_distance_m: 0.05,
             model: ModelChoice::Auto,
             folds: 5,
@@ -200,7 +204,9 @@ pub struct Outcome {
 /// # Errors
 /// Whatever `hapcal-io` reports, with the path as context.
 pub fn load_device(path: &Path, tip: &str) -> Result<Device> {
-    let is_urdf = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    let is_urdf = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
     if is_urdf {
         hapcal_io::import_urdf(path, tip).with_context(|| format!("importing {}", path.display()))
     } else {
@@ -216,16 +222,21 @@ pub fn load_data(paths: &[PathBuf], device: &Device) -> Result<Vec<DataSet>> {
     let mut sets = Vec::new();
     for path in paths {
         if path.is_file() {
-            let log = hapcal_io::read_log(path, device).with_context(|| format!("reading log {}", path.display()))?;
-            let name = path.file_stem().map_or_else(|| path.display().to_string(), |s| s.to_string_lossy().into_owned());
+            let log = hapcal_io::read_log(path, device)
+                .with_context(|| format!("reading log {}", path.display()))?;
+            let name = path.file_stem().map_or_else(
+                || path.display().to_string(),
+                |s| s.to_string_lossy().into_owned(),
+            );
             sets.push(DataSet::Distances {
                 name,
                 q: log.rows.iter().map(|r| r.q.clone()).collect(),
                 distance_m: log.rows.iter().map(|r| r.distance_m).collect(),
             });
         } else {
-            let placements = hapcal_io::read_mukca_paths(std::slice::from_ref(path), device.n_joints())
-                .with_context(|| format!("reading measurements in {}", path.display()))?;
+            let placements =
+                hapcal_io::read_mukca_paths(std::slice::from_ref(path), device.n_joints())
+                    .with_context(|| format!("reading measurements in {}", path.display()))?;
             sets.extend(placements.into_iter().map(DataSet::Sockets));
         }
     }
@@ -233,7 +244,11 @@ pub fn load_data(paths: &[PathBuf], device: &Device) -> Result<Vec<DataSet>> {
 }
 
 /// Observations of `sets`; `keep(set, socket, row)` selects rows (for cross-validation).
-fn observations(sets: &[DataSet], socket_distance_m: f64, keep: &dyn Fn(usize, usize, usize) -> bool) -> Observations {
+fn observations(
+    sets: &[DataSet],
+    socket_distance_m: f64,
+    keep: &dyn Fn(usize, usize, usize) -> bool,
+) -> Observations {
     let mut obs = Observations::default();
     for (set_idx, set) in sets.iter().enumerate() {
         match set {
@@ -244,18 +259,28 @@ fn observations(sets: &[DataSet], socket_distance_m: f64, keep: &dyn Fn(usize, u
                     obs.n_points += 1;
                     for (row_idx, q) in socket.q.iter().enumerate() {
                         if keep(set_idx, socket_idx, row_idx) {
-                            obs.rows.push(Row { q: q.clone(), kind: RowKind::Point { point } });
+                            obs.rows.push(Row {
+                                q: q.clone(),
+                                kind: RowKind::Point { point },
+                            });
                         }
                     }
                 }
                 if p.sockets.len() == 2 {
-                    obs.point_distances.push(PointDistance { a: first, b: first + 1, distance_m: socket_distance_m });
+                    obs.point_distances.push(PointDistance {
+                        a: first,
+                        b: first + 1,
+                        distance_m: socket_distance_m,
+                    });
                 }
             }
             DataSet::Distances { q, distance_m, .. } => {
                 for (row_idx, (q, d)) in q.iter().zip(distance_m).enumerate() {
                     if keep(set_idx, 0, row_idx) {
-                        obs.rows.push(Row { q: q.clone(), kind: RowKind::Distance { distance_m: *d } });
+                        obs.rows.push(Row {
+                            q: q.clone(),
+                            kind: RowKind::Distance { distance_m: *d },
+                        });
                     }
                 }
             }
@@ -265,13 +290,26 @@ fn observations(sets: &[DataSet], socket_distance_m: f64, keep: &dyn Fn(usize, u
 }
 
 fn identify_config(sigma_m: Option<f64>) -> IdentifyConfig {
-    IdentifyConfig { sigma: sigma_m, ..IdentifyConfig::default() }
+    IdentifyConfig {
+        sigma: sigma_m,
+        ..IdentifyConfig::default()
+    }
 }
 
-fn solve(chain: &Chain, obs: Observations, compliance: bool, sigma_m: Option<f64>) -> Result<(CalibrationProblem, Identified)> {
+fn solve(
+    chain: &Chain,
+    obs: Observations,
+    compliance: bool,
+    sigma_m: Option<f64>,
+) -> Result<(CalibrationProblem, Identified)> {
     let n_rows = obs.rows.len();
-    let problem = CalibrationProblem::new(chain.clone(), obs, Weights::default(), compliance.then(GravityCompliance::default))
-        .context("building the calibration problem")?;
+    let problem = CalibrationProblem::new(
+        chain.clone(),
+        obs,
+        Weights::default(),
+        compliance.then(GravityCompliance::default),
+    )
+    .context("building the calibration problem")?;
     let x0 = problem.initial_guess();
     let identified = identify(&problem, x0, &identify_config(sigma_m))
         .with_context(|| format!("identifying parameters from {n_rows} configurations"))?;
@@ -290,7 +328,9 @@ fn cross_validate(chain: &Chain, sets: &[DataSet], plan: &Plan, compliance: bool
     let block = |set: usize, socket: usize, row: usize| row * plan.folds / lens[set][socket].max(1);
     let (mut sum_sq, mut count) = (0.0, 0usize);
     for fold in 0..plan.folds {
-        let obs = observations(sets, plan.socket_distance_m, &|s, k, r| block(s, k, r) != fold);
+        let obs = observations(sets, plan.socket_distance_m, &|s, k, r| {
+            block(s, k, r) != fold
+        });
         let (problem, identified) = solve(chain, obs, compliance, plan.sigma_m)?;
         let model = problem.model(identified.fit.x.as_ref());
         let points = problem.points(identified.fit.x.as_ref());
@@ -301,7 +341,8 @@ fn cross_validate(chain: &Chain, sets: &[DataSet], plan: &Plan, compliance: bool
                     for (socket_idx, socket) in p.sockets.iter().enumerate() {
                         for (row_idx, q) in socket.q.iter().enumerate() {
                             if block(set_idx, socket_idx, row_idx) == fold {
-                                sum_sq += (model.end_point(q) - points[point_base + socket_idx]).norm_squared();
+                                sum_sq += (model.end_point(q) - points[point_base + socket_idx])
+                                    .norm_squared();
                                 count += 1;
                             }
                         }
@@ -325,6 +366,24 @@ fn cross_validate(chain: &Chain, sets: &[DataSet], plan: &Plan, compliance: bool
     Ok((sum_sq / count as f64).sqrt())
 }
 
+/// Refuses a calibration whose data determine no parameter, or fewer configurations than the
+/// parameters they would keep.
+fn check_determined(n_configurations: usize, n_kept: usize, n_model_params: usize) -> Result<()> {
+    if n_kept == 0 {
+        bail!(
+            "{n_configurations} configurations determine none of the {n_model_params} model parameters: \
+             record more configurations, spread over the joint ranges"
+        );
+    }
+    if n_configurations < n_kept {
+        bail!(
+            "{n_configurations} configurations cannot determine the {n_kept} parameters the data would keep: \
+             record at least {n_kept} configurations (a few times more for a useful calibration)"
+        );
+    }
+    Ok(())
+}
+
 /// Figures of one data set under `model`.
 ///
 /// # Errors
@@ -332,13 +391,29 @@ fn cross_validate(chain: &Chain, sets: &[DataSet], plan: &Plan, compliance: bool
 pub fn figures(set: &DataSet, model: &CalibratedModel, socket_distance_m: f64) -> Result<Figures> {
     Ok(match set {
         DataSet::Sockets(p) => {
-            let points: Vec<Vec<_>> = p.sockets.iter().map(|s| s.q.iter().map(|q| model.end_point(q)).collect()).collect();
+            let points: Vec<Vec<_>> = p
+                .sockets
+                .iter()
+                .map(|s| s.q.iter().map(|q| model.end_point(q)).collect())
+                .collect();
             let f = socket_figures(&points, socket_distance_m)?;
-            Figures { mean_absolute_error_m: Some(f.mean_absolute_error_m), distance_error_m: f.distance_error_m, distance_rms_m: None }
+            Figures {
+                mean_absolute_error_m: Some(f.mean_absolute_error_m),
+                distance_error_m: f.distance_error_m,
+                distance_rms_m: None,
+            }
         }
         DataSet::Distances { q, distance_m, .. } => {
-            let r: Vec<f64> = q.iter().zip(distance_m).map(|(q, d)| model.end_point(q).coords.norm() - d).collect();
-            Figures { mean_absolute_error_m: None, distance_error_m: None, distance_rms_m: Some(hapcal_metrics::rms(&r)) }
+            let r: Vec<f64> = q
+                .iter()
+                .zip(distance_m)
+                .map(|(q, d)| model.end_point(q).coords.norm() - d)
+                .collect();
+            Figures {
+                mean_absolute_error_m: None,
+                distance_error_m: None,
+                distance_rms_m: Some(hapcal_metrics::rms(&r)),
+            }
         }
     })
 }
@@ -357,29 +432,51 @@ fn n_rows(set: &DataSet) -> usize {
 /// Unreadable or inconsistent input, or too few configurations for the kept parameters.
 pub fn run(plan: &Plan) -> Result<Outcome> {
     let start = Instant::now();
-    if plan.data.is_empty() {
-        bail!("no training data: give at least one --data PATH");
-    }
     if plan.folds < 2 {
         bail!("--folds must be at least 2, got {}", plan.folds);
     }
     if !(plan.socket_distance_m.is_finite() && plan.socket_distance_m > 0.0) {
-        bail!("--socket-distance-m must be a positive length, got {}", plan.socket_distance_m);
+        bail!(
+            "--socket-distance-m must be a positive length, got {}",
+            plan.socket_distance_m
+        );
     }
     let device = load_device(&plan.device, &plan.tip)?;
-    let chain = device.chain().with_context(|| format!("building the kinematic chain of {}", plan.device.display()))?;
+    let chain = device
+        .chain()
+        .with_context(|| format!("building the kinematic chain of {}", plan.device.display()))?;
     let train = load_data(&plan.data, &device)?;
     let test = load_data(&plan.test, &device)?;
 
+    // Refuse data that cannot determine the model before spending time on cross-validation.
+    {
+        let obs = observations(&train, plan.socket_distance_m, &|_, _, _| true);
+        let n_configurations = obs.rows.len();
+        let (problem, identified) = solve(&chain, obs, false, plan.sigma_m)?;
+        let n_kept = identified
+            .identifiability
+            .kept
+            .iter()
+            .filter(|&&i| i < problem.points_offset())
+            .count();
+        check_determined(n_configurations, n_kept, problem.points_offset())?;
+    }
     let mut cross_validation = Vec::new();
     let compliance = match plan.model {
         ModelChoice::Geometric => false,
         ModelChoice::Compliance => true,
         ModelChoice::Auto => {
             let mut best = (f64::INFINITY, false);
-            for (choice, compliance) in [(ModelChoice::Geometric, false), (ModelChoice::Compliance, true)] {
+            for (choice, compliance) in [
+                (ModelChoice::Geometric, false),
+                (ModelChoice::Compliance, true),
+            ] {
                 let rms = cross_validate(&chain, &train, plan, compliance)?;
-                cross_validation.push(CvReport { model: choice, heldout_rms_m: rms, n_kept: 0 });
+                cross_validation.push(CvReport {
+                    model: choice,
+                    heldout_rms_m: rms,
+                    n_kept: 0,
+                });
                 if rms < best.0 {
                     best = (rms, compliance);
                 }
@@ -388,11 +485,21 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         }
     };
     let obs = observations(&train, plan.socket_distance_m, &|_, _, _| true);
+    let n_configurations = obs.rows.len();
     let (problem, identified) = solve(&chain, obs, compliance, plan.sigma_m)?;
     let model = problem.model(identified.fit.x.as_ref());
     let layout = problem.layout();
-    let n_kept_model = identified.identifiability.kept.iter().filter(|&&i| i < problem.points_offset()).count();
-    if let Some(cv) = cross_validation.iter_mut().find(|c| (c.model == ModelChoice::Compliance) == compliance) {
+    let n_kept_model = identified
+        .identifiability
+        .kept
+        .iter()
+        .filter(|&&i| i < problem.points_offset())
+        .count();
+    check_determined(n_configurations, n_kept_model, problem.points_offset())?;
+    if let Some(cv) = cross_validation
+        .iter_mut()
+        .find(|c| (c.model == ModelChoice::Compliance) == compliance)
+    {
         cv.n_kept = n_kept_model;
     }
 
@@ -420,7 +527,12 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
                 PruneReason::Dependent { on } => ("dependent", on.clone()),
                 _ => ("other", Vec::new()),
             };
-            PrunedReport { name: p.name.clone(), reason, depends_on, std_if_kept: p.std_if_kept }
+            PrunedReport {
+                name: p.name.clone(),
+                reason,
+                depends_on,
+                std_if_kept: p.std_if_kept,
+            }
         })
         .collect();
     let correlated = identified
@@ -446,7 +558,11 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     }
     let report = CalibrationReport {
         device: plan.device.display().to_string(),
-        model: if compliance { ModelChoice::Compliance } else { ModelChoice::Geometric },
+        model: if compliance {
+            ModelChoice::Compliance
+        } else {
+            ModelChoice::Geometric
+        },
         cross_validation,
         sigma_m: identified.sigma,
         sigma_source: match identified.sigma_source {
@@ -460,7 +576,12 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         placements,
         elapsed_s: start.elapsed().as_secs_f64(),
     };
-    Ok(Outcome { report, device, device_path: plan.device.clone(), model })
+    Ok(Outcome {
+        report,
+        device,
+        device_path: plan.device.clone(),
+        model,
+    })
 }
 
 /// Writes the calibrated device: a `.urdf` path gets a copy of the source URDF with the
@@ -474,7 +595,12 @@ pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<()> {
         .parameters
         .iter()
         .filter(|p| outcome.model.chain.param_index(&p.name).is_some())
-        .map(|p| hapcal_io::CalibratedValue { name: p.name.clone(), value: p.value, std: p.std, unit: p.unit.to_string() })
+        .map(|p| hapcal_io::CalibratedValue {
+            name: p.name.clone(),
+            value: p.value,
+            std: p.std,
+            unit: p.unit.to_string(),
+        })
         .collect();
     let meta = hapcal_io::CalibrationMeta {
         date: None,
@@ -489,18 +615,36 @@ pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<()> {
         .device
         .with_calibration(&values, meta)
         .context("applying the identified deviations to the device description")?;
-    let text = if out.extension().is_some_and(|e| e.eq_ignore_ascii_case("urdf")) {
-        let from_urdf = outcome.device_path.extension().is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    let text = if out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
+    {
+        let from_urdf = outcome
+            .device_path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
         let source = if from_urdf {
             Some(outcome.device_path.clone())
         } else {
-            outcome.device.urdf.as_ref().map(|u| u.resolve(&outcome.device_path))
+            outcome
+                .device
+                .urdf
+                .as_ref()
+                .map(|u| u.resolve(&outcome.device_path))
         };
         let Some(source) = source else {
-            bail!("{} is a URDF output, but the device {} did not come from a URDF", out.display(), outcome.device_path.display());
+            bail!(
+                "{} is a URDF output, but the device {} did not come from a URDF",
+                out.display(),
+                outcome.device_path.display()
+            );
         };
-        hapcal_io::write_calibrated_urdf(&source, &calibrated.placements)
-            .with_context(|| format!("writing the calibrated joint origins into a copy of {}", source.display()))?
+        hapcal_io::write_calibrated_urdf(&source, &calibrated.placements).with_context(|| {
+            format!(
+                "writing the calibrated joint origins into a copy of {}",
+                source.display()
+            )
+        })?
     } else {
         hapcal_io::write_device(&calibrated)
     };

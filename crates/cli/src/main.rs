@@ -70,12 +70,38 @@ enum Command {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Calibrate { device, tip, data, test, out, json, model, socket_distance_m, folds, sigma_m } => {
+        Command::Calibrate {
+            device,
+            tip,
+            data,
+            test,
+            out,
+            json,
+            model,
+            socket_distance_m,
+            folds,
+            sigma_m,
+        } => {
             let default = Plan::bundled_default();
             let plan = if device.is_none() && data.is_empty() && test.is_empty() {
-                Plan { model, socket_distance_m, folds, sigma_m, ..default }
+                Plan {
+                    model,
+                    socket_distance_m,
+                    folds,
+                    sigma_m,
+                    ..default
+                }
             } else {
-                Plan { device: device.unwrap_or(default.device), tip, data, test, socket_distance_m, model, folds, sigma_m }
+                Plan {
+                    device: device.unwrap_or(default.device),
+                    tip,
+                    data,
+                    test,
+                    socket_distance_m,
+                    model,
+                    folds,
+                    sigma_m,
+                }
             };
             let outcome = calibrate::run(&plan)?;
             if json {

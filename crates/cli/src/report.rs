@@ -16,7 +16,11 @@ fn scaled(value: f64, unit: &str) -> (f64, &'static str) {
 }
 
 fn figures_cells(f: &Figures) -> [String; 3] {
-    [mm(f.mean_absolute_error_m), mm(f.distance_error_m), mm(f.distance_rms_m)]
+    [
+        mm(f.mean_absolute_error_m),
+        mm(f.distance_error_m),
+        mm(f.distance_rms_m),
+    ]
 }
 
 /// Renders the report as the table `hapcal calibrate` prints.
@@ -24,9 +28,18 @@ pub fn render(r: &CalibrationReport) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "hapcal calibrate: {}", r.device);
     if !r.cross_validation.is_empty() {
-        let _ = writeln!(s, "\nmodel choice by {}-fold cross-validation on the training data (held-out RMS):", "k");
+        let _ = writeln!(
+            s,
+            "\nmodel choice by {}-fold cross-validation on the training data (held-out RMS):",
+            "k"
+        );
         for cv in &r.cross_validation {
-            let _ = writeln!(s, "  {:<11} {:>9.4} mm", format!("{:?}", cv.model).to_lowercase(), cv.heldout_rms_m * 1e3);
+            let _ = writeln!(
+                s,
+                "  {:<11} {:>9.4} mm",
+                format!("{:?}", cv.model).to_lowercase(),
+                cv.heldout_rms_m * 1e3
+            );
         }
     }
     let _ = writeln!(
@@ -37,20 +50,32 @@ pub fn render(r: &CalibrationReport) -> String {
         r.sigma_source,
         r.termination
     );
-    let _ = writeln!(s, "\nidentified ({} parameters, value ± std):", r.parameters.len());
+    let _ = writeln!(
+        s,
+        "\nidentified ({} parameters, value ± std):",
+        r.parameters.len()
+    );
     for p in &r.parameters {
         let (v, unit) = scaled(p.value, p.unit);
         let (sd, _) = scaled(p.std, p.unit);
         let _ = writeln!(s, "  {:<28} {:>+10.4} ± {:<8.4} {unit}", p.name, v, sd);
     }
-    let _ = writeln!(s, "\npruned ({} parameters, not identifiable from these data):", r.pruned.len());
+    let _ = writeln!(
+        s,
+        "\npruned ({} parameters, not identifiable from these data):",
+        r.pruned.len()
+    );
     for p in &r.pruned {
         let why = if p.reason == "near_zero_column" {
             "no effect on the measurements".to_string()
         } else if p.depends_on.is_empty() {
             "not determined better than its plausible range".to_string()
         } else {
-            let terms: Vec<String> = p.depends_on.iter().map(|(n, c)| format!("{c:+.3}·{n}")).collect();
+            let terms: Vec<String> = p
+                .depends_on
+                .iter()
+                .map(|(n, c)| format!("{c:+.3}·{n}"))
+                .collect();
             format!("≈ {}", terms.join(" "))
         };
         let _ = writeln!(s, "  {:<28} {why}", p.name);
@@ -61,11 +86,22 @@ pub fn render(r: &CalibrationReport) -> String {
             let _ = writeln!(s, "  {a} ~ {b}: {c:+.3}");
         }
     }
-    let _ = writeln!(s, "\nfigures of merit (mm): MAE = mean absolute error to the socket mean, dist = socket distance error");
+    let _ = writeln!(
+        s,
+        "\nfigures of merit (mm): MAE = mean absolute error to the socket mean, dist = socket distance error"
+    );
     let _ = writeln!(
         s,
         "  {:<16} {:<5} {:>4}  {:>10} {:>10} {:>10}  {:>10} {:>10} {:>10}",
-        "placement", "role", "rows", "MAE before", "dist bef.", "rms before", "MAE after", "dist after", "rms after"
+        "placement",
+        "role",
+        "rows",
+        "MAE before",
+        "dist bef.",
+        "rms before",
+        "MAE after",
+        "dist after",
+        "rms after"
     );
     for p in &r.placements {
         let b = figures_cells(&p.before);

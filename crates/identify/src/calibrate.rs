@@ -94,11 +94,7 @@ impl Identified {
 ///   parameters;
 /// - [`Error::Singular`] if the kept columns are singular at the estimate (only possible when
 ///   the last decision was not reproduced, see [`Identified::pruning_converged`]).
-pub fn identify(
-    p: &impl Problem,
-    x0: Col<f64>,
-    cfg: &IdentifyConfig,
-) -> Result<Identified, Error> {
+pub fn identify(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Result<Identified, Error> {
     if let Some(sigma) = cfg.sigma {
         check_config("sigma", sigma, true)?;
     }
@@ -109,7 +105,10 @@ pub fn identify(
     let layout = p.layout().clone();
     let n = layout.len();
     if x0.nrows() != n {
-        return Err(Error::WrongLength { expected: n, found: x0.nrows() });
+        return Err(Error::WrongLength {
+            expected: n,
+            found: x0.nrows(),
+        });
     }
     let m = p.n_residuals();
     let mut r0 = Col::<f64>::zeros(m);
@@ -124,13 +123,22 @@ pub fn identify(
     let (mut sigma, sigma_source) = match cfg.sigma {
         Some(s) => (s, SigmaSource::Given),
         None => {
-            let rms = if m > 0 { (r0.squared_norm_l2() / m as f64).sqrt() } else { 0.0 };
+            let rms = if m > 0 {
+                (r0.squared_norm_l2() / m as f64).sqrt()
+            } else {
+                0.0
+            };
             (rms, SigmaSource::Residuals)
         }
     };
     let candidates: Vec<usize> = (0..n).collect();
     let decide = |jac: &Mat<f64>, sigma: f64| {
-        identifiability(jac.as_ref(), &layout, &candidates, &cfg.rank.with_sigma(sigma.max(SIGMA_FLOOR)))
+        identifiability(
+            jac.as_ref(),
+            &layout,
+            &candidates,
+            &cfg.rank.with_sigma(sigma.max(SIGMA_FLOOR)),
+        )
     };
     let mut ident = decide(&jac, sigma);
     let mut rounds = 0;
@@ -139,10 +147,14 @@ pub fn identify(
         let fit = levenberg_marquardt(p, x0.clone(), &ident.kept, &cfg.lm)?;
         if sigma_source == SigmaSource::Residuals {
             sigma = sigma_from_residuals(fit.residuals.as_ref(), ident.kept.len()).ok_or(
-                Error::NoDegreesOfFreedom { n_residuals: m, n_free: ident.kept.len() },
+                Error::NoDegreesOfFreedom {
+                    n_residuals: m,
+                    n_free: ident.kept.len(),
+                },
             )?;
         }
-        p.jacobian(fit.x.as_ref(), jac.as_mut()).map_err(Error::EvalAtEstimate)?;
+        p.jacobian(fit.x.as_ref(), jac.as_mut())
+            .map_err(Error::EvalAtEstimate)?;
         if !jac.is_all_finite() {
             return Err(Error::EvalAtEstimate(crate::problem::EvalError {
                 reason: "the jacobian is not finite".to_owned(),

@@ -24,7 +24,9 @@ pub struct Covariance {
 impl Covariance {
     /// Standard deviations, in the order of [`Covariance::free`], each in its parameter's unit.
     pub fn std(&self) -> Vec<f64> {
-        (0..self.free.len()).map(|a| self.matrix[(a, a)].max(0.0).sqrt()).collect()
+        (0..self.free.len())
+            .map(|a| self.matrix[(a, a)].max(0.0).sqrt())
+            .collect()
     }
 
     /// Standard deviation of parameter `name`, if it is free.
@@ -39,7 +41,11 @@ impl Covariance {
         let std = self.std();
         Mat::from_fn(self.free.len(), self.free.len(), |a, b| {
             let s = std[a] * std[b];
-            if s > 0.0 { self.matrix[(a, b)] / s } else { 0.0 }
+            if s > 0.0 {
+                self.matrix[(a, b)] / s
+            } else {
+                0.0
+            }
         })
     }
 
@@ -95,7 +101,10 @@ pub fn covariance(
     let m = jac.nrows();
     let nf = free.len();
     if m < nf {
-        return Err(Error::TooFewResiduals { n_residuals: m, n_free: nf });
+        return Err(Error::TooFewResiduals {
+            n_residuals: m,
+            n_free: nf,
+        });
     }
     let jf = Mat::from_fn(m, nf, |i, a| jac[(i, free[a])]);
     let names: Vec<String> = free.iter().map(|&j| layout.name(j).to_owned()).collect();
@@ -103,7 +112,9 @@ pub fn covariance(
     check_jacobian_finite(jf.as_ref(), &free_layout)?;
     let c: Vec<f64> = (0..nf).map(|a| jf.col(a).norm_l2()).collect();
     if let Some(a) = c.iter().position(|&ca| ca == 0.0) {
-        return Err(Error::Singular { name: names[a].clone() });
+        return Err(Error::Singular {
+            name: names[a].clone(),
+        });
     }
     let scaled = Mat::from_fn(m, nf, |i, a| jf[(i, a)] / c[a]);
     let matrix = if nf == 0 {
@@ -113,7 +124,9 @@ pub fn covariance(
         let r = qr.R();
         let tiny = f64::EPSILON * m.max(nf) as f64;
         if let Some(k) = (0..nf).find(|&k| r[(k, k)].abs() <= tiny) {
-            return Err(Error::Singular { name: names[k].clone() });
+            return Err(Error::Singular {
+                name: names[k].clone(),
+            });
         }
         let mut r_inv = Mat::<f64>::identity(nf, nf);
         r.solve_upper_triangular_in_place(r_inv.as_mut());
@@ -121,7 +134,11 @@ pub fn covariance(
         let s2 = sigma * sigma;
         Mat::from_fn(nf, nf, |a, b| s2 * scaled_cov[(a, b)] / (c[a] * c[b]))
     };
-    Ok(Covariance { free: free.to_vec(), names, matrix })
+    Ok(Covariance {
+        free: free.to_vec(),
+        names,
+        matrix,
+    })
 }
 
 /// Unbiased estimate of the residual standard deviation, `√(‖r‖² / (m − n_free))`, in residual
@@ -141,7 +158,11 @@ mod tests {
     fn layout(n: usize) -> ParamLayout {
         ParamLayout::new(
             (0..n)
-                .map(|j| ParamSpec { name: format!("p{j}"), unit: Unit::Meter, role: Role::Model })
+                .map(|j| ParamSpec {
+                    name: format!("p{j}"),
+                    unit: Unit::Meter,
+                    role: Role::Model,
+                })
                 .collect(),
         )
     }
@@ -161,14 +182,25 @@ mod tests {
     fn duplicated_column_is_singular() {
         let jac = Mat::from_fn(4, 2, |i, _| i as f64 + 1.0);
         let err = covariance(jac.as_ref(), &layout(2), &[0, 1], 1.0).expect_err("rank 1");
-        assert_eq!(err, Error::Singular { name: "p1".to_owned() });
-        assert_eq!(err.to_string(), "covariance is singular: parameter \"p1\" is not determined by the data");
+        assert_eq!(
+            err,
+            Error::Singular {
+                name: "p1".to_owned()
+            }
+        );
+        assert_eq!(
+            err.to_string(),
+            "covariance is singular: parameter \"p1\" is not determined by the data"
+        );
     }
 
     #[test]
     fn sigma_from_residuals_divides_by_degrees_of_freedom() {
         let r = Col::from_fn(5, |_| 2.0);
-        assert_eq!(sigma_from_residuals(r.as_ref(), 1), Some((20.0_f64 / 4.0).sqrt()));
+        assert_eq!(
+            sigma_from_residuals(r.as_ref(), 1),
+            Some((20.0_f64 / 4.0).sqrt())
+        );
         assert_eq!(sigma_from_residuals(r.as_ref(), 5), None);
     }
 }

@@ -60,11 +60,9 @@ mod lm;
 mod problem;
 mod rank;
 
-pub use calibrate::{IdentifyConfig, Identified, MAX_ROUNDS, SIGMA_FLOOR, SigmaSource, identify};
+pub use calibrate::{Identified, IdentifyConfig, MAX_ROUNDS, SIGMA_FLOOR, SigmaSource, identify};
 pub use covariance::{Covariance, covariance, sigma_from_residuals};
 pub use error::Error;
 pub use lm::{Fit, LmConfig, Termination, levenberg_marquardt};
 pub use problem::{EvalError, ParamLayout, ParamSpec, Problem, Role, Unit};
-pub use rank::{
-    Identifiability, PruneReason, Pruned, RankConfig, RankConfigBase, identifiability,
-};
+pub use rank::{Identifiability, PruneReason, Pruned, RankConfig, RankConfigBase, identifiability};

@@ -39,12 +39,18 @@ pub struct LmConfig {
 }
 
 impl Default for LmConfig {
-    /// `ftol = xtol = gtol = 1e-12`, `max_evaluations = 200`: tighter than MINPACK's
-    /// `lmder1` (`ftol = xtol = √ε ≈ 1.5e-8`, `gtol = 0`) because our problems are small and
-    /// the covariance is computed at the estimate; 200 is MINPACK's `100·(n + 1)` for `n = 1`,
-    /// a budget that well-posed calibration problems meet in a few tens of evaluations.
+    /// `ftol = xtol = gtol = 1e-12`, `max_evaluations = 200`, MINPACK-like (`lmder1` takes
+    /// `ftol = xtol = tol`, `gtol = 0`, `100·(n + 1)` evaluations). 1e-12 puts the stopping
+    /// error far below any statistical uncertainty of a calibration; 200 evaluations are ample
+    /// for problems started near their solution (calibration starts at the nominal), which
+    /// converge in a few tens, and a fit that needs more is reported rather than run on.
     fn default() -> Self {
-        Self { ftol: 1e-12, xtol: 1e-12, gtol: 1e-12, max_evaluations: 200 }
+        Self {
+            ftol: 1e-12,
+            xtol: 1e-12,
+            gtol: 1e-12,
+            max_evaluations: 200,
+        }
     }
 }
 
@@ -54,7 +60,8 @@ impl Default for LmConfig {
 pub enum Termination {
     /// The relative reduction of the cost fell below [`LmConfig::ftol`].
     FtolReached,
-    /// The scaled step fell below [`LmConfig::xtol`] relative to `‖D·x‖`.
+    /// The trust radius, which bounds the scaled step, fell below [`LmConfig::xtol`]
+    /// relative to `‖D·x‖`.
     XtolReached,
     /// The gradient (as a cosine, see [`LmConfig::gtol`]) fell below `gtol`; also reported
     /// for a zero residual and for an empty free set.
@@ -70,7 +77,10 @@ pub enum Termination {
 impl Termination {
     /// True for the three convergence criteria (`Ftol`, `Xtol`, `Gtol`).
     pub fn is_success(&self) -> bool {
-        matches!(self, Self::FtolReached | Self::XtolReached | Self::GtolReached)
+        matches!(
+            self,
+            Self::FtolReached | Self::XtolReached | Self::GtolReached
+        )
     }
 }
 
@@ -98,7 +108,11 @@ pub(crate) fn check_free(free: &[usize], layout: &ParamLayout) -> Result<(), Err
     for &index in free {
         match seen.get_mut(index) {
             None => return Err(Error::FreeOutOfRange { index, n_params }),
-            Some(true) => return Err(Error::DuplicateFree { name: layout.name(index).to_owned() }),
+            Some(true) => {
+                return Err(Error::DuplicateFree {
+                    name: layout.name(index).to_owned(),
+                });
+            }
             Some(s) => *s = true,
         }
     }
@@ -106,10 +120,16 @@ pub(crate) fn check_free(free: &[usize], layout: &ParamLayout) -> Result<(), Err
 }
 
 /// Returns `Err(NonFiniteJacobian)` naming the first non-finite entry of `jac`.
-pub(crate) fn check_jacobian_finite(jac: MatRef<'_, f64>, layout: &ParamLayout) -> Result<(), Error> {
+pub(crate) fn check_jacobian_finite(
+    jac: MatRef<'_, f64>,
+    layout: &ParamLayout,
+) -> Result<(), Error> {
     for j in 0..jac.ncols() {
         if let Some(row) = (0..jac.nrows()).find(|&i| !jac[(i, j)].is_finite()) {
-            return Err(Error::NonFiniteJacobian { row, name: layout.name(j).to_owned() });
+            return Err(Error::NonFiniteJacobian {
+                row,
+                name: layout.name(j).to_owned(),
+            });
         }
     }
     Ok(())
@@ -155,7 +175,10 @@ pub fn levenberg_marquardt(
     let layout = p.layout();
     let n = layout.len();
     if x0.nrows() != n {
-        return Err(Error::WrongLength { expected: n, found: x0.nrows() });
+        return Err(Error::WrongLength {
+            expected: n,
+            found: x0.nrows(),
+        });
     }
     check_free(free, layout)?;
     check_config("ftol", cfg.ftol, false)?;
@@ -164,7 +187,10 @@ pub fn levenberg_marquardt(
     let m = p.n_residuals();
     let nf = free.len();
     if m < nf {
-        return Err(Error::TooFewResiduals { n_residuals: m, n_free: nf });
+        return Err(Error::TooFewResiduals {
+            n_residuals: m,
+            n_free: nf,
+        });
     }
 
     let mut x = x0;
@@ -194,7 +220,11 @@ pub fn levenberg_marquardt(
     let xtol = cfg.xtol.max(f64::EPSILON);
     let gtol = cfg.gtol.max(f64::EPSILON);
     let scaled_norm = |diag: &[f64], x: &Col<f64>| {
-        free.iter().zip(diag).map(|(&k, d)| (d * x[k]).powi(2)).sum::<f64>().sqrt()
+        free.iter()
+            .zip(diag)
+            .map(|(&k, d)| (d * x[k]).powi(2))
+            .sum::<f64>()
+            .sqrt()
     };
     let mut diag = vec![0.0_f64; nf];
     let mut delta = 0.0_f64;
@@ -215,7 +245,11 @@ pub fn levenberg_marquardt(
         }
         if first {
             x_norm = scaled_norm(&diag, &x);
-            delta = if x_norm > 0.0 { FACTOR * x_norm } else { FACTOR };
+            delta = if x_norm > 0.0 {
+                FACTOR * x_norm
+            } else {
+                FACTOR
+            };
         }
         if f_norm == 0.0 {
             break Termination::GtolReached;
@@ -261,10 +295,17 @@ pub fn levenberg_marquardt(
             let t2 = lambda.sqrt() * u_norm / f_norm;
             let predicted = t1 * t1 + 2.0 * t2 * t2;
             let directional = -(t1 * t1 + t2 * t2);
-            let ratio = if predicted != 0.0 { actual / predicted } else { 0.0 };
+            let ratio = if predicted != 0.0 {
+                actual / predicted
+            } else {
+                0.0
+            };
             if ratio <= 0.25 {
-                let mut shrink =
-                    if actual >= 0.0 { 0.5 } else { 0.5 * directional / (directional + 0.5 * actual) };
+                let mut shrink = if actual >= 0.0 {
+                    0.5
+                } else {
+                    0.5 * directional / (directional + 0.5 * actual)
+                };
                 if 0.1 * f_norm_trial >= f_norm || shrink < 0.1 {
                     shrink = 0.1;
                 }
@@ -301,7 +342,14 @@ pub fn levenberg_marquardt(
         }
     };
     let cost = 0.5 * r.squared_norm_l2();
-    Ok(Fit { x, termination, n_evaluations, n_jacobians, cost, residuals: r })
+    Ok(Fit {
+        x,
+        termination,
+        n_evaluations,
+        n_jacobians,
+        cost,
+        residuals: r,
+    })
 }
 
 fn norm(v: &[f64]) -> f64 {
@@ -330,9 +378,9 @@ impl ScaledQr {
         let mut qtr = r.to_owned();
         let block = qr.Q_coeff().nrows();
         let mut buf = MemBuffer::new(
-            householder::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<f64>(
-                m, block, 1,
-            ),
+            householder::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<
+                f64,
+            >(m, block, 1),
         );
         householder::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
             qr.Q_basis(),
@@ -347,13 +395,20 @@ impl ScaledQr {
         let r00 = if nf > 0 { rmat[(0, 0)].abs() } else { 0.0 };
         let tiny = f64::EPSILON * m.max(nf) as f64 * r00;
         let n_sing = (0..nf).find(|&k| rmat[(k, k)].abs() <= tiny).unwrap_or(nf);
-        Self { r: rmat, perm, qtr: (0..nf).map(|i| qtr[i]).collect(), n_sing }
+        Self {
+            r: rmat,
+            perm,
+            qtr: (0..nf).map(|i| qtr[i]).collect(),
+            n_sing,
+        }
     }
 
     /// `R·u` (the scaled `J·p` up to `Q`).
     fn r_times(&self, u: &[f64]) -> Vec<f64> {
         let nf = u.len();
-        (0..nf).map(|i| (i..nf).map(|j| self.r[(i, j)] * u[j]).sum()).collect()
+        (0..nf)
+            .map(|i| (i..nf).map(|j| self.r[(i, j)] * u[j]).sum())
+            .collect()
     }
 }
 
@@ -367,8 +422,12 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
     let ns = f.n_sing;
     if ns > 0 {
         let mut rhs = Col::from_fn(ns, |i| -f.qtr[i]);
-        f.r.get(..ns, ..ns).solve_upper_triangular_in_place(rhs.as_mut());
-        u[..ns].iter_mut().enumerate().for_each(|(i, v)| *v = rhs[i]);
+        f.r.get(..ns, ..ns)
+            .solve_upper_triangular_in_place(rhs.as_mut());
+        u[..ns]
+            .iter_mut()
+            .enumerate()
+            .for_each(|(i, v)| *v = rhs[i]);
     }
     let mut u_norm = norm(&u);
     let mut fp = u_norm - delta;
@@ -381,10 +440,15 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
         r.transpose().solve_lower_triangular_in_place(y.as_mut());
         y.squared_norm_l2()
     };
-    let mut lower =
-        if ns == nf { (fp / delta) / newton_denominator(f.r.as_ref(), &u, u_norm) } else { 0.0 };
+    let mut lower = if ns == nf {
+        (fp / delta) / newton_denominator(f.r.as_ref(), &u, u_norm)
+    } else {
+        0.0
+    };
     // Upper bound: ‖Rᵀ Qᵀr‖ / Δ.
-    let gradient: Vec<f64> = (0..nf).map(|j| (0..=j).map(|i| f.r[(i, j)] * f.qtr[i]).sum()).collect();
+    let gradient: Vec<f64> = (0..nf)
+        .map(|j| (0..=j).map(|i| f.r[(i, j)] * f.qtr[i]).sum())
+        .collect();
     let g_norm = norm(&gradient);
     let mut upper = g_norm / delta;
     if upper == 0.0 {
@@ -403,7 +467,10 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
         u_norm = norm(&u);
         let fp_old = fp;
         fp = u_norm - delta;
-        if fp.abs() <= 0.1 * delta || (lower == 0.0 && fp <= fp_old && fp_old < 0.0) || iteration == 10 {
+        if fp.abs() <= 0.1 * delta
+            || (lower == 0.0 && fp <= fp_old && fp_old < 0.0)
+            || iteration == 10
+        {
             break;
         }
         let correction = (fp / delta) / newton_denominator(s.as_ref(), &u, u_norm);

@@ -36,7 +36,12 @@ impl Default for RankConfigBase {
     /// `rel_tol = 1e-10` (columns closer than this to the span of the others are dependent at
     /// working precision: √ε ≈ 1.5e-8 would drop genuinely weak ones, ε·m noise is ≈ 1e-13).
     fn default() -> Self {
-        Self { prior_m: 0.01, prior_rad: 0.01, prior_dimensionless: 1.0, rel_tol: 1e-10 }
+        Self {
+            prior_m: 0.01,
+            prior_rad: 0.01,
+            prior_dimensionless: 1.0,
+            rel_tol: 1e-10,
+        }
     }
 }
 
@@ -214,29 +219,48 @@ pub fn identifiability(
     cfg: &RankConfig,
 ) -> Identifiability {
     let n = layout.len();
-    assert!(jac.ncols() == n, "jacobian has {} columns, layout has {n}", jac.ncols());
+    assert!(
+        jac.ncols() == n,
+        "jacobian has {} columns, layout has {n}",
+        jac.ncols()
+    );
     let mut seen = vec![false; n];
     for &j in candidates {
         assert!(j < n, "candidate {j} is out of range for {n} parameters");
         assert!(!seen[j], "candidate {j} is repeated");
         seen[j] = true;
     }
-    assert!(cfg.sigma.is_finite() && cfg.sigma >= 0.0, "sigma must be finite and >= 0");
-    assert!(cfg.rel_tol.is_finite() && cfg.rel_tol >= 0.0, "rel_tol must be finite and >= 0");
+    assert!(
+        cfg.sigma.is_finite() && cfg.sigma >= 0.0,
+        "sigma must be finite and >= 0"
+    );
+    assert!(
+        cfg.rel_tol.is_finite() && cfg.rel_tol >= 0.0,
+        "rel_tol must be finite and >= 0"
+    );
     for prior in [cfg.prior_m, cfg.prior_rad, cfg.prior_dimensionless] {
-        assert!(prior.is_finite() && prior > 0.0, "priors must be finite and > 0");
+        assert!(
+            prior.is_finite() && prior > 0.0,
+            "priors must be finite and > 0"
+        );
     }
     for &j in candidates {
-        assert!(jac.col(j).is_all_finite(), "jacobian column {j} is not finite");
+        assert!(
+            jac.col(j).is_all_finite(),
+            "jacobian column {j} is not finite"
+        );
     }
 
     let m = jac.nrows();
     let mut sorted = candidates.to_vec();
     sorted.sort_unstable();
-    let norm: Vec<f64> = (0..n).map(|j| if seen[j] { jac.col(j).norm_l2() } else { 0.0 }).collect();
+    let norm: Vec<f64> = (0..n)
+        .map(|j| if seen[j] { jac.col(j).norm_l2() } else { 0.0 })
+        .collect();
     let max_norm = norm.iter().copied().fold(0.0_f64, f64::max);
-    let (zero_cols, cols): (Vec<usize>, Vec<usize>) =
-        sorted.iter().partition(|&&j| norm[j] == 0.0 || norm[j] < cfg.rel_tol * max_norm);
+    let (zero_cols, cols): (Vec<usize>, Vec<usize>) = sorted
+        .iter()
+        .partition(|&&j| norm[j] == 0.0 || norm[j] < cfg.rel_tol * max_norm);
 
     // W: the R factor of the unit-norm columns (same Gram matrix), one Vec per column.
     let mut w: Vec<Vec<f64>> = if cols.is_empty() {
@@ -244,12 +268,20 @@ pub fn identifiability(
     } else {
         let scaled = Mat::from_fn(m, cols.len(), |i, k| jac[(i, cols[k])] / norm[cols[k]]);
         let r = scaled.qr().R().to_owned();
-        (0..cols.len()).map(|k| (0..r.nrows()).map(|i| r[(i, k)]).collect()).collect()
+        (0..cols.len())
+            .map(|k| (0..r.nrows()).map(|i| r[(i, k)]).collect())
+            .collect()
     };
     let rows = w.first().map_or(0, Vec::len);
     let c: Vec<f64> = cols.iter().map(|&j| norm[j]).collect();
-    let prior: Vec<f64> = cols.iter().map(|&j| cfg.prior_scale(layout.spec(j).unit)).collect();
-    let is_nuisance: Vec<bool> = cols.iter().map(|&j| layout.spec(j).role == Role::Nuisance).collect();
+    let prior: Vec<f64> = cols
+        .iter()
+        .map(|&j| cfg.prior_scale(layout.spec(j).unit))
+        .collect();
+    let is_nuisance: Vec<bool> = cols
+        .iter()
+        .map(|&j| layout.spec(j).role == Role::Nuisance)
+        .collect();
 
     let mut kept_pos: Vec<usize> = Vec::new();
     let mut open = vec![true; cols.len()];
@@ -272,13 +304,16 @@ pub fn identifiability(
             }
             let rho_max = eligible.iter().map(|e| e.1).fold(0.0_f64, f64::max);
             // Eligible entries are in layout order: the first near-maximal one wins ties.
-            let Some(&(pivot, _)) =
-                eligible.iter().find(|e| e.1 >= rho_max * (1.0 - TIE_REL) - TIE_ABS)
+            let Some(&(pivot, _)) = eligible
+                .iter()
+                .find(|e| e.1 >= rho_max * (1.0 - TIE_REL) - TIE_ABS)
             else {
                 break;
             };
             open[pivot] = false;
-            reflect(&mut w, k, pivot, |pos| pos != pivot && !kept_pos.contains(&pos));
+            reflect(&mut w, k, pivot, |pos| {
+                pos != pivot && !kept_pos.contains(&pos)
+            });
             kept_pos.push(pivot);
         }
     }
@@ -333,7 +368,9 @@ fn explain(
     let r11 = Mat::from_fn(nk, nk, |i, l| if i <= l { w[kept_pos[l]][i] } else { 0.0 });
     let mut r_diag: Vec<f64> = (0..nk).map(|k| r11[(k, k)].abs()).collect();
     let mut pivot_order: Vec<usize> = kept_pos.iter().map(|&pos| cols[pos]).collect();
-    let dependent: Vec<usize> = (0..cols.len()).filter(|pos| !kept_pos.contains(pos)).collect();
+    let dependent: Vec<usize> = (0..cols.len())
+        .filter(|pos| !kept_pos.contains(pos))
+        .collect();
     // z = R11⁻¹ R12, one column per dependent parameter.
     let mut z = Mat::from_fn(nk, dependent.len(), |i, t| w[dependent[t]][i]);
     r11.solve_upper_triangular_in_place(z.as_mut());
@@ -342,29 +379,58 @@ fn explain(
     let mut by_rho = Vec::new();
     for (t, &pos) in dependent.iter().enumerate() {
         let j = cols[pos];
-        let rho = if nk < rows { norm_l2(&w[pos][nk..]) } else { 0.0 };
+        let rho = if nk < rows {
+            norm_l2(&w[pos][nk..])
+        } else {
+            0.0
+        };
         let mut coefficients: Vec<(usize, f64)> = (0..nk).map(|i| (i, z[(i, t)])).collect();
         coefficients.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
         // Listed: |z_i| > 0.05; for a column dependent at working precision, at least the
         // largest ones (a combination of many small contributions).
-        let n_large = coefficients.iter().take_while(|(_, zi)| zi.abs() > 0.05).count();
-        let n_listed = if n_large == 0 && rho < cfg.rel_tol { nk } else { n_large };
+        let n_large = coefficients
+            .iter()
+            .take_while(|(_, zi)| zi.abs() > 0.05)
+            .count();
+        let n_listed = if n_large == 0 && rho < cfg.rel_tol {
+            nk
+        } else {
+            n_large
+        };
         let on: Vec<(String, f64)> = coefficients
             .iter()
             .take(n_listed.min(6))
-            .map(|&(i, zi)| (layout.name(cols[kept_pos[i]]).to_owned(), zi * c[pos] / c[kept_pos[i]]))
+            .map(|&(i, zi)| {
+                (
+                    layout.name(cols[kept_pos[i]]).to_owned(),
+                    zi * c[pos] / c[kept_pos[i]],
+                )
+            })
             .collect();
         let reason = if on.is_empty() {
             PruneReason::Insensitive
         } else {
             PruneReason::Dependent { on }
         };
-        let std_if_kept = if rho > 0.0 { cfg.sigma / (c[pos] * rho) } else { f64::INFINITY };
-        pruned.push(Pruned { index: j, name: layout.name(j).to_owned(), reason, std_if_kept });
+        let std_if_kept = if rho > 0.0 {
+            cfg.sigma / (c[pos] * rho)
+        } else {
+            f64::INFINITY
+        };
+        pruned.push(Pruned {
+            index: j,
+            name: layout.name(j).to_owned(),
+            reason,
+            std_if_kept,
+        });
         by_rho.push((j, rho));
     }
     for &j in zero_cols {
-        let std_if_kept = if norm[j] > 0.0 { cfg.sigma / norm[j] } else { f64::INFINITY };
+        let std_if_kept = if norm[j] > 0.0 {
+            cfg.sigma / norm[j]
+        } else {
+            f64::INFINITY
+        };
         pruned.push(Pruned {
             index: j,
             name: layout.name(j).to_owned(),
@@ -381,7 +447,12 @@ fn explain(
     pruned.sort_by_key(|p| p.index);
     let mut kept: Vec<usize> = kept_pos.iter().map(|&pos| cols[pos]).collect();
     kept.sort_unstable();
-    Identifiability { kept, pruned, r_diag, pivot_order }
+    Identifiability {
+        kept,
+        pruned,
+        r_diag,
+        pivot_order,
+    }
 }
 
 #[cfg(test)]
@@ -393,7 +464,11 @@ mod tests {
         ParamLayout::new(
             names
                 .iter()
-                .map(|&(name, role)| ParamSpec { name: name.to_owned(), unit: Unit::Meter, role })
+                .map(|&(name, role)| ParamSpec {
+                    name: name.to_owned(),
+                    unit: Unit::Meter,
+                    role,
+                })
                 .collect(),
         )
     }
@@ -421,9 +496,16 @@ mod tests {
         for k in 1..5 {
             let prefix = &id.pivot_order[..k];
             let chosen = distance(prefix, id.pivot_order[k]);
-            assert!((id.r_diag[k] - chosen).abs() < 1e-13, "k = {k}: {} vs {chosen}", id.r_diag[k]);
+            assert!(
+                (id.r_diag[k] - chosen).abs() < 1e-13,
+                "k = {k}: {} vs {chosen}",
+                id.r_diag[k]
+            );
             for j in (0..5).filter(|j| !prefix.contains(j)) {
-                assert!(chosen >= distance(prefix, j) - 1e-13, "k = {k}: {j} is farther");
+                assert!(
+                    chosen >= distance(prefix, j) - 1e-13,
+                    "k = {k}: {j} is farther"
+                );
             }
         }
     }
@@ -438,7 +520,11 @@ mod tests {
             (2, 2) => 0.5,
             _ => 0.0,
         });
-        let l = layout(&[("weak", Role::Model), ("a", Role::Model), ("b", Role::Model)]);
+        let l = layout(&[
+            ("weak", Role::Model),
+            ("a", Role::Model),
+            ("b", Role::Model),
+        ]);
         let cfg = RankConfigBase::default().with_sigma(1e-3);
         let id = identifiability(jac.as_ref(), &l, &[0, 1, 2], &cfg);
         assert_eq!(id.kept, [1, 2]);
@@ -449,8 +535,13 @@ mod tests {
 
     #[test]
     fn reason_display_lists_coefficients() {
-        let reason = PruneReason::Dependent { on: vec![("da1".to_owned(), 2.0), ("dd1".to_owned(), -0.5)] };
-        assert_eq!(reason.to_string(), "dependent on da1 (×2.0000), dd1 (×-0.5000)");
+        let reason = PruneReason::Dependent {
+            on: vec![("da1".to_owned(), 2.0), ("dd1".to_owned(), -0.5)],
+        };
+        assert_eq!(
+            reason.to_string(),
+            "dependent on da1 (×2.0000), dd1 (×-0.5000)"
+        );
         assert_eq!(PruneReason::NearZeroColumn.to_string(), "near-zero column");
     }
 }

@@ -50,7 +50,11 @@ pub fn rms(values: &[f64]) -> f64 {
 ///
 /// # Errors
 /// [`Error::ZeroAssignedDeviation`] when `assigned == nominal`.
-pub fn parameter_improvement_pct(assigned: f64, identified: f64, nominal: f64) -> Result<f64, Error> {
+pub fn parameter_improvement_pct(
+    assigned: f64,
+    identified: f64,
+    nominal: f64,
+) -> Result<f64, Error> {
     let denom = (assigned - nominal).abs();
     if denom == 0.0 {
         return Err(Error::ZeroAssignedDeviation { nominal });
@@ -111,7 +115,10 @@ pub struct SocketFigures {
 ///
 /// # Errors
 /// [`Error::EmptySocket`] when a socket has no row.
-pub fn socket_figures(sockets: &[Vec<Point3<f64>>], nominal_distance_m: f64) -> Result<SocketFigures, Error> {
+pub fn socket_figures(
+    sockets: &[Vec<Point3<f64>>],
+    nominal_distance_m: f64,
+) -> Result<SocketFigures, Error> {
     let mut means = Vec::with_capacity(sockets.len());
     let mut sum = 0.0;
     let mut n_rows = 0;
@@ -119,7 +126,10 @@ pub fn socket_figures(sockets: &[Vec<Point3<f64>>], nominal_distance_m: f64) -> 
         if points.is_empty() {
             return Err(Error::EmptySocket { socket });
         }
-        let mean = points.iter().fold(nalgebra::Vector3::zeros(), |acc, p| acc + p.coords) / points.len() as f64;
+        let mean = points
+            .iter()
+            .fold(nalgebra::Vector3::zeros(), |acc, p| acc + p.coords)
+            / points.len() as f64;
         sum += points.iter().map(|p| (p.coords - mean).norm()).sum::<f64>();
         n_rows += points.len();
         means.push(mean);
@@ -128,7 +138,15 @@ pub fn socket_figures(sockets: &[Vec<Point3<f64>>], nominal_distance_m: f64) -> 
         [a, b] => Some(((a - b).norm() - nominal_distance_m).abs()),
         _ => None,
     };
-    Ok(SocketFigures { mean_absolute_error_m: if n_rows == 0 { 0.0 } else { sum / n_rows as f64 }, distance_error_m, n_rows })
+    Ok(SocketFigures {
+        mean_absolute_error_m: if n_rows == 0 {
+            0.0
+        } else {
+            sum / n_rows as f64
+        },
+        distance_error_m,
+        n_rows,
+    })
 }
 
 #[cfg(test)]
@@ -157,7 +175,10 @@ mod tests {
     fn eq9_matches_hand_value() {
         assert!((accuracy_improvement_pct(0.25, 1.0).unwrap() - 75.0).abs() < 1e-12);
         assert_eq!(accuracy_improvement_pct(0.1, 0.0), Err(Error::ZeroBaseline));
-        assert_eq!(Error::ZeroBaseline.to_string(), "accuracy improvement is undefined: the uncalibrated RMS is zero");
+        assert_eq!(
+            Error::ZeroBaseline.to_string(),
+            "accuracy improvement is undefined: the uncalibrated RMS is zero"
+        );
     }
 
     #[test]
@@ -181,6 +202,9 @@ mod tests {
         assert!((f.mean_absolute_error_m - 2.0e-3 / 3.0).abs() < 1e-15);
         assert!((f.distance_error_m.unwrap() - 0.001).abs() < 1e-12);
         assert_eq!(f.n_rows, 3);
-        assert_eq!(socket_figures(&[vec![]], 0.05), Err(Error::EmptySocket { socket: 0 }));
+        assert_eq!(
+            socket_figures(&[vec![]], 0.05),
+            Err(Error::EmptySocket { socket: 0 })
+        );
     }
 }

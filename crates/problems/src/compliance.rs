@@ -24,7 +24,9 @@ pub struct GravityCompliance {
 impl Default for GravityCompliance {
     /// Gravity along −z of the base frame: a robot mounted upright (ROS REP 103 convention).
     fn default() -> Self {
-        Self { gravity_dir: -Vector3::z() }
+        Self {
+            gravity_dir: -Vector3::z(),
+        }
     }
 }
 
@@ -41,7 +43,13 @@ impl GravityCompliance {
         let mut origin = vec![Vector3::zeros(); n];
         let mut axis = vec![Vector3::zeros(); n];
         for (factor, pose) in chain.factors().iter().zip(&poses) {
-            if let Factor::Screw { motion: Motion::Rotation, axis: a, joint: Some(j), .. } = factor {
+            if let Factor::Screw {
+                motion: Motion::Rotation,
+                axis: a,
+                joint: Some(j),
+                ..
+            } = factor
+            {
                 origin[*j] = pose.translation.vector;
                 axis[*j] = pose.rotation * a.into_inner();
             }

@@ -18,7 +18,11 @@ impl CalibratedModel {
     /// The nominal model of `chain` (no deviation, no compliance).
     pub fn nominal(chain: Chain) -> Self {
         let x_kin = vec![0.0; chain.n_params()];
-        Self { chain, x_kin, compliance: None }
+        Self {
+            chain,
+            x_kin,
+            compliance: None,
+        }
     }
 
     /// Joint angles the chain actually takes for readings `q` (rad): `q + k∘τ̂(q)`.
@@ -31,7 +35,11 @@ impl CalibratedModel {
             None => q.to_vec(),
             Some((model, k)) => {
                 let tau = model.lumped_torques(&self.chain, q);
-                q.iter().zip(k).zip(&tau).map(|((q, k), t)| q + k * t).collect()
+                q.iter()
+                    .zip(k)
+                    .zip(&tau)
+                    .map(|((q, k), t)| q + k * t)
+                    .collect()
             }
         }
     }

@@ -75,7 +75,12 @@ impl Default for Weights {
     /// All sigmas 1 m: residuals stay in metres, every measurement weighs the same per metre.
     /// Callers with a noise model (the simulator, DESIGN.md §3) should pass it instead.
     fn default() -> Self {
-        Self { sigma_distance_m: 1.0, sigma_position_m: 1.0, sigma_point_m: 1.0, sigma_point_distance_m: 1.0 }
+        Self {
+            sigma_distance_m: 1.0,
+            sigma_position_m: 1.0,
+            sigma_point_m: 1.0,
+            sigma_point_distance_m: 1.0,
+        }
     }
 }
 
@@ -119,7 +124,11 @@ impl CalibrationProblem {
         let mut n_residuals = obs.point_distances.len();
         for (row_idx, row) in obs.rows.iter().enumerate() {
             if row.q.len() != n_joints {
-                return Err(Error::JointCount { row: row_idx, expected: n_joints, found: row.q.len() });
+                return Err(Error::JointCount {
+                    row: row_idx,
+                    expected: n_joints,
+                    found: row.q.len(),
+                });
             }
             let finite = row.q.iter().all(|v| v.is_finite())
                 && match &row.kind {
@@ -135,7 +144,11 @@ impl CalibrationProblem {
                 RowKind::Position { .. } => 3,
                 RowKind::Point { point } => {
                     if point >= obs.n_points {
-                        return Err(Error::NoSuchPoint { row: row_idx, point, n_points: obs.n_points });
+                        return Err(Error::NoSuchPoint {
+                            row: row_idx,
+                            point,
+                            n_points: obs.n_points,
+                        });
                     }
                     3
                 }
@@ -144,7 +157,11 @@ impl CalibrationProblem {
         for (idx, pd) in obs.point_distances.iter().enumerate() {
             for point in [pd.a, pd.b] {
                 if point >= obs.n_points {
-                    return Err(Error::NoSuchPoint { row: idx, point, n_points: obs.n_points });
+                    return Err(Error::NoSuchPoint {
+                        row: idx,
+                        point,
+                        n_points: obs.n_points,
+                    });
                 }
             }
         }
@@ -167,17 +184,33 @@ impl CalibrationProblem {
                     unit: Unit::Radian,
                     role: Role::Model,
                 }));
-                obs.rows.iter().map(|row| model.lumped_torques(&chain, &row.q)).collect()
+                obs.rows
+                    .iter()
+                    .map(|row| model.lumped_torques(&chain, &row.q))
+                    .collect()
             }
             None => Vec::new(),
         };
         for point in 0..obs.n_points {
             for axis in ["x", "y", "z"] {
-                specs.push(ParamSpec { name: format!("point{point}.{axis}"), unit: Unit::Meter, role: Role::Nuisance });
+                specs.push(ParamSpec {
+                    name: format!("point{point}.{axis}"),
+                    unit: Unit::Meter,
+                    role: Role::Nuisance,
+                });
             }
         }
         let ws = RefCell::new((FkWorkspace::new(&chain), vec![0.0; 3 * chain.n_params()]));
-        Ok(Self { chain, obs, weights, compliance, torques, layout: ParamLayout::new(specs), n_residuals, ws })
+        Ok(Self {
+            chain,
+            obs,
+            weights,
+            compliance,
+            torques,
+            layout: ParamLayout::new(specs),
+            n_residuals,
+            ws,
+        })
     }
 
     /// The chain.
@@ -192,7 +225,11 @@ impl CalibrationProblem {
 
     /// Number of compliance parameters (0 without compliance, else `n_joints`).
     pub fn n_compliance(&self) -> usize {
-        if self.compliance.is_some() { self.chain.n_joints() } else { 0 }
+        if self.compliance.is_some() {
+            self.chain.n_joints()
+        } else {
+            0
+        }
     }
 
     /// Index of the first unknown-point parameter in `x`.
@@ -215,7 +252,11 @@ impl CalibrationProblem {
         }
         let off = self.points_offset();
         for (point, (sum, n)) in sums.iter().enumerate() {
-            let mean = if *n > 0 { sum / *n as f64 } else { Vector3::zeros() };
+            let mean = if *n > 0 {
+                sum / *n as f64
+            } else {
+                Vector3::zeros()
+            };
             for k in 0..3 {
                 x[off + 3 * point + k] = mean[k];
             }
@@ -232,11 +273,19 @@ impl CalibrationProblem {
         assert_eq!(x.nrows(), self.layout.len(), "parameter vector length");
         let n = self.chain.n_params();
         let x_kin: Vec<f64> = (0..n).map(|i| x[i]).collect();
-        let compliance = self
-            .compliance
-            .as_ref()
-            .map(|c| (c.clone(), (0..self.chain.n_joints()).map(|j| x[n + j]).collect::<Vec<_>>()));
-        CalibratedModel { chain: self.chain.clone(), x_kin, compliance }
+        let compliance = self.compliance.as_ref().map(|c| {
+            (
+                c.clone(),
+                (0..self.chain.n_joints())
+                    .map(|j| x[n + j])
+                    .collect::<Vec<_>>(),
+            )
+        });
+        CalibratedModel {
+            chain: self.chain.clone(),
+            x_kin,
+            compliance,
+        }
     }
 
     /// The unknown points that `x` holds (m).
@@ -247,7 +296,9 @@ impl CalibrationProblem {
     pub fn points(&self, x: ColRef<'_, f64>) -> Vec<Point3<f64>> {
         assert_eq!(x.nrows(), self.layout.len(), "parameter vector length");
         let off = self.points_offset();
-        (0..self.obs.n_points).map(|p| Point3::new(x[off + 3 * p], x[off + 3 * p + 1], x[off + 3 * p + 2])).collect()
+        (0..self.obs.n_points)
+            .map(|p| Point3::new(x[off + 3 * p], x[off + 3 * p + 1], x[off + 3 * p + 2]))
+            .collect()
     }
 
     fn effective_q(&self, row_idx: usize, x: ColRef<'_, f64>) -> Vec<f64> {
@@ -256,11 +307,19 @@ impl CalibrationProblem {
             return q.clone();
         }
         let n = self.chain.n_params();
-        q.iter().enumerate().map(|(j, qj)| qj + x[n + j] * self.torques[row_idx][j]).collect()
+        q.iter()
+            .enumerate()
+            .map(|(j, qj)| qj + x[n + j] * self.torques[row_idx][j])
+            .collect()
     }
 
     /// Residuals and, if `jac` is given, the Jacobian; one pass shares the forward kinematics.
-    fn eval(&self, x: ColRef<'_, f64>, mut out: Option<ColMut<'_, f64>>, mut jac: Option<MatMut<'_, f64>>) {
+    fn eval(
+        &self,
+        x: ColRef<'_, f64>,
+        mut out: Option<ColMut<'_, f64>>,
+        mut jac: Option<MatMut<'_, f64>>,
+    ) {
         let n_kin = self.chain.n_params();
         let n_comp = self.n_compliance();
         let off = self.points_offset();
@@ -275,13 +334,18 @@ impl CalibrationProblem {
             let q_eff = self.effective_q(row_idx, x);
             let p = self.chain.point_and_jacobian_in(&x_kin, &q_eff, ws, buf);
             // ∂p/∂k_j = (∂p/∂q_j)·τ̂_j, from the geometric Jacobian's linear rows.
-            let jq = if n_comp > 0 && jac.is_some() { Some(self.chain.geometric_jacobian(&x_kin, &q_eff)) } else { None };
+            let jq = if n_comp > 0 && jac.is_some() {
+                Some(self.chain.geometric_jacobian(&x_kin, &q_eff))
+            } else {
+                None
+            };
             let dp = |k: usize, col: usize| -> f64 {
                 if col < n_kin {
                     buf[3 * col + k]
                 } else {
                     let j = col - n_kin;
-                    jq.as_ref().map_or(0.0, |m| m[(k, j)] * self.torques[row_idx][j])
+                    jq.as_ref()
+                        .map_or(0.0, |m| m[(k, j)] * self.torques[row_idx][j])
                 }
             };
             match &row.kind {
@@ -292,7 +356,11 @@ impl CalibrationProblem {
                         o[r] = (norm - distance_m) / s;
                     }
                     if let Some(j) = jac.as_mut() {
-                        let u = if norm > 0.0 { p.coords / norm } else { Vector3::zeros() };
+                        let u = if norm > 0.0 {
+                            p.coords / norm
+                        } else {
+                            Vector3::zeros()
+                        };
                         for col in 0..n_kin + n_comp {
                             j[(r, col)] = (0..3).map(|k| u[k] * dp(k, col)).sum::<f64>() / s;
                         }
@@ -338,7 +406,11 @@ impl CalibrationProblem {
                 o[r] = (norm - pd.distance_m) / s;
             }
             if let Some(j) = jac.as_mut() {
-                let u = if norm > 0.0 { d / norm } else { Vector3::zeros() };
+                let u = if norm > 0.0 {
+                    d / norm
+                } else {
+                    Vector3::zeros()
+                };
                 for k in 0..3 {
                     j[(r, off + 3 * pd.a + k)] = u[k] / s;
                     j[(r, off + 3 * pd.b + k)] = -u[k] / s;
@@ -367,7 +439,13 @@ impl Problem for CalibrationProblem {
     fn jacobian(&self, x: ColRef<'_, f64>, jac: MatMut<'_, f64>) -> Result<(), EvalError> {
         check_shape(x.nrows(), self.layout.len(), jac.nrows(), self.n_residuals)?;
         if jac.ncols() != self.layout.len() {
-            return Err(EvalError { reason: format!("jacobian has {} columns, expected {}", jac.ncols(), self.layout.len()) });
+            return Err(EvalError {
+                reason: format!(
+                    "jacobian has {} columns, expected {}",
+                    jac.ncols(),
+                    self.layout.len()
+                ),
+            });
         }
         self.eval(x, None, Some(jac));
         Ok(())
@@ -376,7 +454,11 @@ impl Problem for CalibrationProblem {
 
 fn check_shape(nx: usize, n: usize, nr: usize, m: usize) -> Result<(), EvalError> {
     if nx != n || nr != m {
-        return Err(EvalError { reason: format!("shape mismatch: x has {nx} entries (expected {n}), output {nr} rows (expected {m})") });
+        return Err(EvalError {
+            reason: format!(
+                "shape mismatch: x has {nx} entries (expected {n}), output {nr} rows (expected {m})"
+            ),
+        });
     }
     Ok(())
 }

@@ -7,7 +7,11 @@ fn layout(names: &[&str]) -> ParamLayout {
     ParamLayout::new(
         names
             .iter()
-            .map(|&name| ParamSpec { name: name.to_owned(), unit: Unit::Dimensionless, role: Role::Model })
+            .map(|&name| ParamSpec {
+                name: name.to_owned(),
+                unit: Unit::Dimensionless,
+                role: Role::Model,
+            })
             .collect(),
     )
 }
@@ -43,10 +47,19 @@ fn rosenbrock() -> Rosenbrock {
 
 #[test]
 fn rosenbrock_reaches_the_minimum_from_the_standard_start() {
-    let fit = levenberg_marquardt(&rosenbrock(), col![-1.2, 1.0], &[0, 1], &LmConfig::default())
-        .expect("valid input");
+    let fit = levenberg_marquardt(
+        &rosenbrock(),
+        col![-1.2, 1.0],
+        &[0, 1],
+        &LmConfig::default(),
+    )
+    .expect("valid input");
     assert!(fit.termination.is_success(), "{:?}", fit.termination);
-    assert!((fit.x[0] - 1.0).abs() < 1e-10 && (fit.x[1] - 1.0).abs() < 1e-10, "{:?}", fit.x);
+    assert!(
+        (fit.x[0] - 1.0).abs() < 1e-10 && (fit.x[1] - 1.0).abs() < 1e-10,
+        "{:?}",
+        fit.x
+    );
     assert!(fit.cost < 1e-20);
     assert!(fit.n_evaluations <= 200 && fit.n_jacobians >= 2);
 }
@@ -67,8 +80,12 @@ fn fixed_parameter_keeps_its_initial_value() {
 
 #[test]
 fn evaluation_budget_is_reported_as_a_termination() {
-    let cfg = LmConfig { max_evaluations: 3, ..LmConfig::default() };
-    let fit = levenberg_marquardt(&rosenbrock(), col![-1.2, 1.0], &[0, 1], &cfg).expect("valid input");
+    let cfg = LmConfig {
+        max_evaluations: 3,
+        ..LmConfig::default()
+    };
+    let fit =
+        levenberg_marquardt(&rosenbrock(), col![-1.2, 1.0], &[0, 1], &cfg).expect("valid input");
     assert_eq!(fit.termination, Termination::MaxEvaluations);
     assert!(!fit.termination.is_success());
     assert_eq!(fit.n_evaluations, 3);
@@ -88,16 +105,34 @@ fn unusable_input_is_an_error_with_a_message() {
     let p = rosenbrock();
     let cfg = LmConfig::default();
     let err = levenberg_marquardt(&p, col![1.0], &[0], &cfg).expect_err("wrong length");
-    assert_eq!(err.to_string(), "x0 has 1 entries but the layout has 2 parameters");
+    assert_eq!(
+        err.to_string(),
+        "x0 has 1 entries but the layout has 2 parameters"
+    );
     let err = levenberg_marquardt(&p, col![1.0, 1.0], &[0, 2], &cfg).expect_err("out of range");
-    assert_eq!(err, Error::FreeOutOfRange { index: 2, n_params: 2 });
+    assert_eq!(
+        err,
+        Error::FreeOutOfRange {
+            index: 2,
+            n_params: 2
+        }
+    );
     let err = levenberg_marquardt(&p, col![1.0, 1.0], &[1, 1], &cfg).expect_err("repeated");
-    assert_eq!(err.to_string(), "parameter \"x2\" appears twice in the free set");
+    assert_eq!(
+        err.to_string(),
+        "parameter \"x2\" appears twice in the free set"
+    );
     let err = levenberg_marquardt(&p, col![f64::NAN, 1.0], &[0], &cfg).expect_err("NaN");
     assert_eq!(err.to_string(), "residual 0 is not finite at x0");
-    let bad = LmConfig { ftol: -1.0, ..LmConfig::default() };
+    let bad = LmConfig {
+        ftol: -1.0,
+        ..LmConfig::default()
+    };
     let err = levenberg_marquardt(&p, col![1.0, 1.0], &[0], &bad).expect_err("negative ftol");
-    assert_eq!(err.to_string(), "ftol = -1 is invalid: it must be finite and non-negative");
+    assert_eq!(
+        err.to_string(),
+        "ftol = -1 is invalid: it must be finite and non-negative"
+    );
 }
 
 /// One residual, three parameters: always too few residuals for three free parameters.
@@ -112,7 +147,9 @@ impl Problem for Failing {
     }
     fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
         if x[0] < 0.0 {
-            return Err(EvalError { reason: "x0 below zero".to_owned() });
+            return Err(EvalError {
+                reason: "x0 below zero".to_owned(),
+            });
         }
         out[0] = x[0];
         Ok(())
@@ -128,12 +165,23 @@ fn evaluation_failure_and_too_few_residuals_are_errors() {
     let p = Failing(layout(&["a", "b", "c"]));
     let cfg = LmConfig::default();
     let err = levenberg_marquardt(&p, col![1.0, 0.0, 0.0], &[0, 1, 2], &cfg).expect_err("m < n");
-    assert_eq!(err, Error::TooFewResiduals { n_residuals: 1, n_free: 3 });
-    assert_eq!(err.to_string(), "1 residuals cannot determine 3 free parameters");
+    assert_eq!(
+        err,
+        Error::TooFewResiduals {
+            n_residuals: 1,
+            n_free: 3
+        }
+    );
+    assert_eq!(
+        err.to_string(),
+        "1 residuals cannot determine 3 free parameters"
+    );
     let err = levenberg_marquardt(&p, col![-1.0, 0.0, 0.0], &[0], &cfg).expect_err("eval");
     assert_eq!(err.to_string(), "at the initial guess x0");
     assert_eq!(
-        std::error::Error::source(&err).map(ToString::to_string).as_deref(),
+        std::error::Error::source(&err)
+            .map(ToString::to_string)
+            .as_deref(),
         Some("evaluation failed: x0 below zero")
     );
 }
@@ -152,7 +200,9 @@ fn trial_points_that_fail_to_evaluate_are_rejected() {
         }
         fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
             if x[0] < 0.5 {
-                return Err(EvalError { reason: "outside the domain".to_owned() });
+                return Err(EvalError {
+                    reason: "outside the domain".to_owned(),
+                });
             }
             out[0] = x[0];
             Ok(())
@@ -164,6 +214,11 @@ fn trial_points_that_fail_to_evaluate_are_rejected() {
     }
     let fit = levenberg_marquardt(&Edge(layout(&["a"])), col![2.0], &[0], &LmConfig::default())
         .expect("valid input");
-    assert!(fit.x[0] >= 0.5 && fit.x[0] < 0.5 + 1e-6, "{:?} {:?}", fit.x, fit.termination);
+    assert!(
+        fit.x[0] >= 0.5 && fit.x[0] < 0.5 + 1e-6,
+        "{:?} {:?}",
+        fit.x,
+        fit.termination
+    );
     assert!(fit.termination.is_success(), "{:?}", fit.termination);
 }

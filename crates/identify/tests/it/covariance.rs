@@ -34,7 +34,12 @@ fn covariance_equals_sigma_squared_times_inverse_normal_matrix() {
         for b in 0..3 {
             let scale = (naive[(a, a)] * naive[(b, b)]).sqrt();
             let err = (cov.matrix[(a, b)] - naive[(a, b)]).abs() / scale;
-            assert!(err < 1e-10, "({a}, {b}): {} vs {}", cov.matrix[(a, b)], naive[(a, b)]);
+            assert!(
+                err < 1e-10,
+                "({a}, {b}): {} vs {}",
+                cov.matrix[(a, b)],
+                naive[(a, b)]
+            );
         }
     }
     assert_eq!(cov.free, free);
@@ -64,7 +69,11 @@ fn normalised_errors_have_unit_standard_deviation_over_500_trials() {
     for _ in 0..500 {
         let x_truth = Col::from_fn(3, |j| truth[j]);
         let y = &jac * &x_truth + Col::from_fn(30, |_| sigma * normal(&mut rng));
-        let p = Linear { layout: meters(3), a: jac.clone(), y };
+        let p = Linear {
+            layout: meters(3),
+            a: jac.clone(),
+            y,
+        };
         let fit = levenberg_marquardt(&p, Col::zeros(3), &[0, 1, 2], &LmConfig::default())
             .expect("valid");
         assert!(fit.termination.is_success(), "{:?}", fit.termination);
@@ -74,7 +83,10 @@ fn normalised_errors_have_unit_standard_deviation_over_500_trials() {
     }
     for (j, e) in errors.iter().enumerate() {
         let (mean, sd) = mean_std(e);
-        assert!((0.9..=1.1).contains(&sd), "p{j}: std of normalised errors {sd}");
+        assert!(
+            (0.9..=1.1).contains(&sd),
+            "p{j}: std of normalised errors {sd}"
+        );
         assert!(mean.abs() < 0.15, "p{j}: mean of normalised errors {mean}");
     }
 }

@@ -41,7 +41,10 @@ fn product(sigma: f64, seed: u64) -> Product {
     let (a, b) = (0.5, 0.2);
     let mut rng = rng(seed);
     let t: Vec<f64> = (1..=40).map(|i| 0.05 * i as f64).collect();
-    let y = t.iter().map(|&t| a * t + a * b * t * t + sigma * normal(&mut rng)).collect();
+    let y = t
+        .iter()
+        .map(|&t| a * t + a * b * t * t + sigma * normal(&mut rng))
+        .collect();
     let layout = ParamLayout::new(vec![
         spec("a", Unit::Dimensionless, Role::Model),
         spec("b", Unit::Dimensionless, Role::Model),
@@ -61,17 +64,27 @@ fn identifiability_is_decided_again_at_the_estimate() {
     assert_eq!(id.identifiability.kept, [0, 1]);
     assert!(id.fit.termination.is_success(), "{:?}", id.fit.termination);
     assert_eq!(id.sigma_source, SigmaSource::Residuals);
-    assert!((0.7 * sigma..1.3 * sigma).contains(&id.sigma), "sigma {}", id.sigma);
+    assert!(
+        (0.7 * sigma..1.3 * sigma).contains(&id.sigma),
+        "sigma {}",
+        id.sigma
+    );
     for (name, truth) in [("a", 0.5), ("b", 0.2)] {
         let (value, std) = (id.value(name).expect("a"), id.std(name).expect("kept"));
-        assert!((value - truth).abs() < 4.0 * std, "{name} = {value} ± {std}");
+        assert!(
+            (value - truth).abs() < 4.0 * std,
+            "{name} = {value} ± {std}"
+        );
     }
 }
 
 #[test]
 fn given_sigma_is_used_as_is() {
     let p = product(1e-4, 31);
-    let cfg = IdentifyConfig { sigma: Some(2e-4), ..IdentifyConfig::default() };
+    let cfg = IdentifyConfig {
+        sigma: Some(2e-4),
+        ..IdentifyConfig::default()
+    };
     let id = identify(&p, Col::zeros(2), &cfg).expect("valid");
     assert_eq!(id.sigma_source, SigmaSource::Given);
     assert_eq!(id.sigma, 2e-4);
@@ -93,10 +106,16 @@ fn pruned_duplicate_and_covariance_are_consistent_over_500_trials() {
     let mut errors = vec![Vec::new(); 3];
     for _ in 0..500 {
         let y = &a * &x_truth + Col::from_fn(40, |_| sigma * normal(&mut rng));
-        let p = Linear { layout: meters(4), a: a.clone(), y };
+        let p = Linear {
+            layout: meters(4),
+            a: a.clone(),
+            y,
+        };
         let id = identify(&p, Col::zeros(4), &IdentifyConfig::default()).expect("valid");
         assert_eq!(id.identifiability.pruned_names(), ["p3"]);
-        assert!(matches!(&id.identifiability.pruned[0].reason, PruneReason::Dependent { on } if on[0].0 == "p1"));
+        assert!(
+            matches!(&id.identifiability.pruned[0].reason, PruneReason::Dependent { on } if on[0].0 == "p1")
+        );
         for (j, e) in errors.iter_mut().enumerate() {
             let name = format!("p{j}");
             let std = id.std(&name).expect("kept");
@@ -105,7 +124,10 @@ fn pruned_duplicate_and_covariance_are_consistent_over_500_trials() {
     }
     for (j, e) in errors.iter().enumerate() {
         let (mean, sd) = mean_std(e);
-        assert!((0.9..=1.1).contains(&sd), "p{j}: std of normalised errors {sd}");
+        assert!(
+            (0.9..=1.1).contains(&sd),
+            "p{j}: std of normalised errors {sd}"
+        );
         assert!(mean.abs() < 0.15, "p{j}: mean {mean}");
     }
 }
@@ -113,16 +135,41 @@ fn pruned_duplicate_and_covariance_are_consistent_over_500_trials() {
 #[test]
 fn bad_configuration_and_no_degrees_of_freedom_are_errors() {
     let p = product(1e-4, 33);
-    let cfg = IdentifyConfig { sigma: Some(-1.0), ..IdentifyConfig::default() };
+    let cfg = IdentifyConfig {
+        sigma: Some(-1.0),
+        ..IdentifyConfig::default()
+    };
     let err = identify(&p, Col::zeros(2), &cfg).expect_err("negative sigma");
-    assert_eq!(err.to_string(), "sigma = -1 is invalid: it must be finite and positive");
+    assert_eq!(
+        err.to_string(),
+        "sigma = -1 is invalid: it must be finite and positive"
+    );
     let err = identify(&p, Col::zeros(3), &IdentifyConfig::default()).expect_err("length");
-    assert_eq!(err, Error::WrongLength { expected: 2, found: 3 });
+    assert_eq!(
+        err,
+        Error::WrongLength {
+            expected: 2,
+            found: 3
+        }
+    );
     // Two residuals, two identifiable parameters: nothing left to estimate sigma.
-    let square = Linear { layout: meters(2), a: Mat::<f64>::identity(2, 2) * 100.0, y: col![0.01, 0.02] };
+    let square = Linear {
+        layout: meters(2),
+        a: Mat::<f64>::identity(2, 2) * 100.0,
+        y: col![0.01, 0.02],
+    };
     let err = identify(&square, Col::zeros(2), &IdentifyConfig::default()).expect_err("dof");
-    assert_eq!(err, Error::NoDegreesOfFreedom { n_residuals: 2, n_free: 2 });
-    let cfg = IdentifyConfig { sigma: Some(0.1), ..IdentifyConfig::default() };
+    assert_eq!(
+        err,
+        Error::NoDegreesOfFreedom {
+            n_residuals: 2,
+            n_free: 2
+        }
+    );
+    let cfg = IdentifyConfig {
+        sigma: Some(0.1),
+        ..IdentifyConfig::default()
+    };
     let id = identify(&square, Col::zeros(2), &cfg).expect("sigma given");
     assert!((id.value("p1").expect("p1") - 2e-4).abs() < 1e-15);
 }

@@ -16,9 +16,14 @@ fn exponential_fit_on_exact_data_recovers_the_parameters() {
         spec("b", Unit::Dimensionless, Role::Model),
     ]);
     let p = Exponential { layout, t, y };
-    let fit = levenberg_marquardt(&p, col![1.0, 0.0], &[0, 1], &LmConfig::default()).expect("valid");
+    let fit =
+        levenberg_marquardt(&p, col![1.0, 0.0], &[0, 1], &LmConfig::default()).expect("valid");
     assert!(fit.termination.is_success(), "{:?}", fit.termination);
-    assert!((fit.x[0] - a).abs() < 1e-10 && (fit.x[1] - b).abs() < 1e-10, "{:?}", fit.x);
+    assert!(
+        (fit.x[0] - a).abs() < 1e-10 && (fit.x[1] - b).abs() < 1e-10,
+        "{:?}",
+        fit.x
+    );
 }
 
 #[test]
@@ -27,11 +32,21 @@ fn linear_least_squares_equals_the_direct_qr_solution() {
     let a = random_matrix(&mut rng, 50, 4);
     let y = Col::from_fn(50, |i| (i as f64 * 0.37).sin());
     let x_qr = a.qr().solve_lstsq(&y);
-    let p = Linear { layout: meters(4), a, y };
-    let fit = levenberg_marquardt(&p, Col::zeros(4), &[0, 1, 2, 3], &LmConfig::default()).expect("valid");
+    let p = Linear {
+        layout: meters(4),
+        a,
+        y,
+    };
+    let fit =
+        levenberg_marquardt(&p, Col::zeros(4), &[0, 1, 2, 3], &LmConfig::default()).expect("valid");
     assert!(fit.termination.is_success(), "{:?}", fit.termination);
     for j in 0..4 {
-        assert!((fit.x[j] - x_qr[j]).abs() < 1e-12, "x{j}: {} vs {}", fit.x[j], x_qr[j]);
+        assert!(
+            (fit.x[j] - x_qr[j]).abs() < 1e-12,
+            "x{j}: {} vs {}",
+            fit.x[j],
+            x_qr[j]
+        );
     }
 }
 
@@ -46,7 +61,11 @@ fn parameters_outside_the_free_set_are_untouched() {
     let fixed_part = &a * col![0.0, x0[1], 0.0, x0[3]];
     let a_free = Mat::from_fn(30, 2, |i, k| a[(i, free[k])]);
     let x_ref = a_free.qr().solve_lstsq(&(&y - &fixed_part));
-    let p = Linear { layout: meters(4), a, y };
+    let p = Linear {
+        layout: meters(4),
+        a,
+        y,
+    };
     let fit = levenberg_marquardt(&p, x0.clone(), &free, &LmConfig::default()).expect("valid");
     assert_eq!((fit.x[1], fit.x[3]), (x0[1], x0[3]));
     assert!((fit.x[0] - x_ref[0]).abs() < 1e-12 && (fit.x[2] - x_ref[1]).abs() < 1e-12);
@@ -62,8 +81,17 @@ fn rank_deficient_jacobian_still_converges() {
     let y = Col::from_fn(25, |i| (i as f64 * 0.5).sin());
     let x_min = base.qr().solve_lstsq(&y);
     let cost_min = 0.5 * (&base * &x_min - &y).squared_norm_l2();
-    let p = Linear { layout: meters(4), a, y };
-    let fit = levenberg_marquardt(&p, Col::zeros(4), &[0, 1, 2, 3], &LmConfig::default()).expect("valid");
+    let p = Linear {
+        layout: meters(4),
+        a,
+        y,
+    };
+    let fit =
+        levenberg_marquardt(&p, Col::zeros(4), &[0, 1, 2, 3], &LmConfig::default()).expect("valid");
     assert!(fit.termination.is_success(), "{:?}", fit.termination);
-    assert!((fit.cost - cost_min).abs() < 1e-12 * cost_min.max(1.0), "{} vs {cost_min}", fit.cost);
+    assert!(
+        (fit.cost - cost_min).abs() < 1e-12 * cost_min.max(1.0),
+        "{} vs {cost_min}",
+        fit.cost
+    );
 }

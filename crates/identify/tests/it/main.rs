@@ -6,4 +6,3 @@ mod identify;
 mod lm;
 mod problems;
 mod rank;
-mod scratch;

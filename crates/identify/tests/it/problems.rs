@@ -7,12 +7,20 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 pub(crate) fn spec(name: &str, unit: Unit, role: Role) -> ParamSpec {
-    ParamSpec { name: name.to_owned(), unit, role }
+    ParamSpec {
+        name: name.to_owned(),
+        unit,
+        role,
+    }
 }
 
 /// `n` model parameters in m, named `p0`, `p1`, ….
 pub(crate) fn meters(n: usize) -> ParamLayout {
-    ParamLayout::new((0..n).map(|j| spec(&format!("p{j}"), Unit::Meter, Role::Model)).collect())
+    ParamLayout::new(
+        (0..n)
+            .map(|j| spec(&format!("p{j}"), Unit::Meter, Role::Model))
+            .collect(),
+    )
 }
 
 pub(crate) fn rng(seed: u64) -> ChaCha8Rng {

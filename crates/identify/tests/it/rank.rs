@@ -2,7 +2,8 @@
 
 use faer::Mat;
 use hapcal_identify::{
-    Identifiability, ParamLayout, PruneReason, RankConfig, RankConfigBase, Role, Unit, identifiability,
+    Identifiability, ParamLayout, PruneReason, RankConfig, RankConfigBase, Role, Unit,
+    identifiability,
 };
 use proptest::prelude::*;
 
@@ -30,7 +31,13 @@ fn duplicated_column_with_factor_two_prunes_exactly_one_of_the_pair() {
     // the one earlier in the layout (p1) is kept.
     let mut rng = rng(10);
     let base = random_matrix(&mut rng, 30, 4);
-    let jac = Mat::from_fn(30, 5, |i, j| if j == 4 { 2.0 * base[(i, 1)] } else { base[(i, j)] });
+    let jac = Mat::from_fn(30, 5, |i, j| {
+        if j == 4 {
+            2.0 * base[(i, 1)]
+        } else {
+            base[(i, j)]
+        }
+    });
     let id = identifiability(jac.as_ref(), &meters(5), &all(5), &cfg(1e-6));
     assert_eq!(id.kept, [0, 1, 2, 3]);
     assert_eq!(id.pruned_names(), ["p4"]);
@@ -38,7 +45,11 @@ fn duplicated_column_with_factor_two_prunes_exactly_one_of_the_pair() {
     assert_eq!(on.len(), 1, "{on:?}");
     assert_eq!(on[0].0, "p1");
     assert!((on[0].1 - 2.0).abs() < 1e-10, "{on:?}");
-    assert!(id.pruned[0].std_if_kept > 1e3, "{}", id.pruned[0].std_if_kept);
+    assert!(
+        id.pruned[0].std_if_kept > 1e3,
+        "{}",
+        id.pruned[0].std_if_kept
+    );
     assert_eq!(id.pivot_order.len(), 5);
     assert_eq!(id.r_diag.len(), 5);
 }
@@ -67,7 +78,13 @@ fn nuisance_is_kept_and_the_model_parameter_it_duplicates_is_pruned() {
     let jac = Mat::from_fn(25, 5, |i, j| match j {
         0..=2 => base[(i, j)],
         3 => -3.0 * base[(i, 0)],
-        _ => if i == 0 { 1e-7 } else { 0.0 },
+        _ => {
+            if i == 0 {
+                1e-7
+            } else {
+                0.0
+            }
+        }
     });
     let layout = ParamLayout::new(vec![
         spec("p0", Unit::Meter, Role::Model),
@@ -103,7 +120,13 @@ fn changing_the_unit_of_one_parameter_does_not_change_the_kept_set() {
     // the kept set is the same and the coefficient on p1 is 1000× larger.
     let mut rng = rng(13);
     let base = random_matrix(&mut rng, 40, 5);
-    let jac = Mat::from_fn(40, 6, |i, j| if j == 5 { base[(i, 1)] + base[(i, 2)] } else { base[(i, j)] });
+    let jac = Mat::from_fn(40, 6, |i, j| {
+        if j == 5 {
+            base[(i, 1)] + base[(i, 2)]
+        } else {
+            base[(i, j)]
+        }
+    });
     let mut jac_mm = jac.clone();
     for i in 0..40 {
         jac_mm[(i, 1)] /= 1000.0;
@@ -114,10 +137,16 @@ fn changing_the_unit_of_one_parameter_does_not_change_the_kept_set() {
     assert_eq!(id.kept, id_mm.kept);
     let (on, on_mm) = (dependent_on(&id, "p5"), dependent_on(&id_mm, "p5"));
     let coefficient = |on: &[(String, f64)], name: &str| {
-        on.iter().find(|(n, _)| n == name).map(|(_, c)| *c).expect("listed")
+        on.iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, c)| *c)
+            .expect("listed")
     };
     assert!((coefficient(on, "p1") - 1.0).abs() < 1e-10, "{on:?}");
-    assert!((coefficient(on_mm, "p1") - 1000.0).abs() < 1e-7, "{on_mm:?}");
+    assert!(
+        (coefficient(on_mm, "p1") - 1000.0).abs() < 1e-7,
+        "{on_mm:?}"
+    );
     assert!((coefficient(on_mm, "p2") - 1.0).abs() < 1e-10, "{on_mm:?}");
 }
 
@@ -132,7 +161,13 @@ fn candidates_restrict_the_decision() {
 
 fn dependent_jacobian(seed: u64, alpha: f64, beta: f64) -> Mat<f64> {
     let base = random_matrix(&mut rng(seed), 20, 5);
-    Mat::from_fn(20, 6, |i, j| if j == 5 { alpha * base[(i, 0)] + beta * base[(i, 3)] } else { base[(i, j)] })
+    Mat::from_fn(20, 6, |i, j| {
+        if j == 5 {
+            alpha * base[(i, 0)] + beta * base[(i, 3)]
+        } else {
+            base[(i, j)]
+        }
+    })
 }
 
 proptest! {

@@ -3,7 +3,9 @@
 use faer::{Col, Mat};
 use hapcal_identify::Problem;
 use hapcal_kinematics::{Chain, Placement};
-use hapcal_problems::{CalibrationProblem, GravityCompliance, Observations, PointDistance, Row, RowKind, Weights};
+use hapcal_problems::{
+    CalibrationProblem, GravityCompliance, Observations, PointDistance, Row, RowKind, Weights,
+};
 use proptest::prelude::*;
 
 /// iiwa-like chain from URDF placements (MUKCa `iiwa14.urdf` joint origins).
@@ -22,8 +24,18 @@ fn iiwa_like() -> Chain {
         rev("j5", [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
         rev("j6", [0.0, 0.0, 0.4], [0.0, 1.0, 0.0]),
         rev("j7", [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
-        Placement { name: "tool".into(), xyz_m: [0.0, 0.0, 0.126], rpy_rad: [0.0; 3], axis: None },
-        Placement { name: "ball".into(), xyz_m: [0.0, 0.0, 0.04], rpy_rad: [0.0; 3], axis: None },
+        Placement {
+            name: "tool".into(),
+            xyz_m: [0.0, 0.0, 0.126],
+            rpy_rad: [0.0; 3],
+            axis: None,
+        },
+        Placement {
+            name: "ball".into(),
+            xyz_m: [0.0, 0.0, 0.04],
+            rpy_rad: [0.0; 3],
+            axis: None,
+        },
     ])
     .expect("valid chain")
 }
@@ -33,15 +45,36 @@ fn problem_with(qs: &[Vec<f64>], compliance: bool) -> CalibrationProblem {
     for (i, q) in qs.iter().enumerate() {
         let kind = match i % 4 {
             0 => RowKind::Distance { distance_m: 0.9 },
-            1 => RowKind::Position { position_m: [0.1, 0.2, 0.8] },
+            1 => RowKind::Position {
+                position_m: [0.1, 0.2, 0.8],
+            },
             2 => RowKind::Point { point: 0 },
             _ => RowKind::Point { point: 1 },
         };
         rows.push(Row { q: q.clone(), kind });
     }
-    let obs = Observations { rows, point_distances: vec![PointDistance { a: 0, b: 1, distance_m: 0.05 }], n_points: 2 };
-    let weights = Weights { sigma_distance_m: 1e-5, sigma_position_m: 2e-5, sigma_point_m: 5e-5, sigma_point_distance_m: 1e-4 };
-    CalibrationProblem::new(iiwa_like(), obs, weights, compliance.then(GravityCompliance::default)).expect("valid")
+    let obs = Observations {
+        rows,
+        point_distances: vec![PointDistance {
+            a: 0,
+            b: 1,
+            distance_m: 0.05,
+        }],
+        n_points: 2,
+    };
+    let weights = Weights {
+        sigma_distance_m: 1e-5,
+        sigma_position_m: 2e-5,
+        sigma_point_m: 5e-5,
+        sigma_point_distance_m: 1e-4,
+    };
+    CalibrationProblem::new(
+        iiwa_like(),
+        obs,
+        weights,
+        compliance.then(GravityCompliance::default),
+    )
+    .expect("valid")
 }
 
 proptest! {
@@ -92,7 +125,8 @@ fn residual_counts_and_names() {
 #[test]
 fn vertical_first_axis_has_no_gravity_torque() {
     let chain = iiwa_like();
-    let tau = GravityCompliance::default().lumped_torques(&chain, &[0.3, 0.5, -0.2, -1.0, 0.4, 0.6, 0.1]);
+    let tau =
+        GravityCompliance::default().lumped_torques(&chain, &[0.3, 0.5, -0.2, -1.0, 0.4, 0.6, 0.1]);
     assert!(tau[0].abs() < 1e-12, "{tau:?}");
     // Joint 2 (axis y) carries the whole lumped arm: a clearly non-zero lever arm.
     assert!(tau[1].abs() > 0.1, "{tau:?}");
@@ -100,7 +134,17 @@ fn vertical_first_axis_has_no_gravity_torque() {
 
 #[test]
 fn wrong_joint_count_is_an_error() {
-    let obs = Observations { rows: vec![Row { q: vec![0.0; 6], kind: RowKind::Point { point: 0 } }], point_distances: vec![], n_points: 1 };
+    let obs = Observations {
+        rows: vec![Row {
+            q: vec![0.0; 6],
+            kind: RowKind::Point { point: 0 },
+        }],
+        point_distances: vec![],
+        n_points: 1,
+    };
     let err = CalibrationProblem::new(iiwa_like(), obs, Weights::default(), None).unwrap_err();
-    assert_eq!(err.to_string(), "observation 0 has 6 joint angles, the chain has 7 joints");
+    assert_eq!(
+        err.to_string(),
+        "observation 0 has 6 joint angles, the chain has 7 joints"
+    );
 }

@@ -1,0 +1,274 @@
+//! End-to-end tests of the `hapcal` binary: the bundled default, JSON shape, URDF write-back,
+//! and one clear error (non-zero exit, file:line:column) for each kind of bad input.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn hapcal(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hapcal"))
+        .args(args)
+        .output()
+        .expect("the binary runs")
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// A fresh scratch folder per test.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("hapcal-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+/// A MUKCa placement folder whose hole_0.csv is `bad` and hole_1.csv a copy of real data.
+fn placement_with(name: &str, bad: &str) -> PathBuf {
+    let dir = scratch(name);
+    let front = root().join("fixtures/mukca/data/kuka_14/front");
+    std::fs::write(dir.join("hole_0.csv"), bad).expect("write");
+    std::fs::copy(front.join("hole_1.csv"), dir.join("hole_1.csv")).expect("copy");
+    dir
+}
+
+fn iiwa() -> String {
+    root()
+        .join("fixtures/mukca/urdf/iiwa14.urdf")
+        .display()
+        .to_string()
+}
+
+fn json(out: &Output) -> Value {
+    assert!(out.status.success(), "hapcal failed: {}", stderr(out));
+    serde_json::from_slice(&out.stdout).expect("stdout is one JSON document")
+}
+
+fn figure(v: &Value, name: &str, when: &str, key: &str) -> f64 {
+    let p = v["placements"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == name)
+        .unwrap();
+    p[when][key].as_f64().unwrap()
+}
+
+#[test]
+fn bundled_default_reproduces_mukca_before_figures_and_improves_on_test_data() {
+    let v = json(&hapcal(&["calibrate", "--model", "geometric", "--json"]));
+    // MUKCa's own figures for the nominal iiwa URDF (issue #2 table), to 0.001 mm: a check of
+    // our forward kinematics and of the metric.
+    assert!((figure(&v, "left_back", "before", "mean_absolute_error_m") - 0.808e-3).abs() < 0.5e-6);
+    assert!(
+        (figure(&v, "raised_left", "before", "mean_absolute_error_m") - 0.804e-3).abs() < 0.5e-6
+    );
+    let roles: Vec<&str> = v["placements"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["role"].as_str().unwrap())
+        .collect();
+    assert_eq!(roles, ["train", "test", "test"]);
+    // Calibration removes most of the error on the held-out placements (MUKCa: 0.131, 0.404 mm).
+    assert!(figure(&v, "left_back", "after", "mean_absolute_error_m") < 0.2e-3);
+    assert!(figure(&v, "raised_left", "after", "mean_absolute_error_m") < 0.45e-3);
+    assert!(figure(&v, "front", "after", "distance_error_m") < 0.05e-3);
+    // The three gauge freedoms of the base translation are found by the pruning.
+    let pruned: Vec<&str> = v["pruned"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
+    for name in [
+        "joint_a1.x",
+        "joint_a1.y",
+        "joint_a1.z",
+        "ball_joint.rx",
+        "ball_joint.ry",
+        "ball_joint.rz",
+    ] {
+        assert!(pruned.contains(&name), "{name} not pruned: {pruned:?}");
+    }
+}
+
+#[test]
+fn calibrated_urdf_reproduces_the_calibrated_figures() {
+    let dir = scratch("urdf-out");
+    let out_urdf = dir.join("iiwa14_calibrated.urdf");
+    let front = root().join("fixtures/mukca/data/kuka_14/front");
+    let test = root().join("fixtures/mukca/data/kuka_14/left_back");
+    let (front, test) = (front.display().to_string(), test.display().to_string());
+    let args = [
+        "calibrate",
+        "--device",
+        &iiwa(),
+        "--data",
+        &front,
+        "--test",
+        &test,
+        "--model",
+        "geometric",
+        "--json",
+    ];
+    let mut with_out = args.to_vec();
+    let out_s = out_urdf.display().to_string();
+    with_out.extend(["--out", &out_s]);
+    let first = json(&hapcal(&with_out));
+    // Calibrating again from the written URDF starts where the first calibration ended.
+    let second = json(&hapcal(&[
+        "calibrate",
+        "--device",
+        &out_s,
+        "--data",
+        &front,
+        "--test",
+        &test,
+        "--model",
+        "geometric",
+        "--json",
+    ]));
+    let after = figure(&first, "left_back", "after", "mean_absolute_error_m");
+    let before_again = figure(&second, "left_back", "before", "mean_absolute_error_m");
+    assert!(
+        (after - before_again).abs() < 1e-9,
+        "{after} vs {before_again}"
+    );
+}
+
+#[test]
+fn missing_data_folder_is_one_clear_error() {
+    let out = hapcal(&[
+        "calibrate",
+        "--device",
+        &iiwa(),
+        "--data",
+        "/nonexistent/placement",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr(&out);
+    assert!(
+        err.starts_with("hapcal: error: reading measurements in /nonexistent/placement"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+fn bad_placement_error(name: &str, content: &str) -> String {
+    let dir = placement_with(name, content);
+    let out = hapcal(&[
+        "calibrate",
+        "--device",
+        &iiwa(),
+        "--data",
+        &dir.display().to_string(),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(!err.contains("panicked"), "{err}");
+    err
+}
+
+const GOOD: &str = "0.1,0.2,0.3,-1.0,0.5,0.6,0.7\n";
+
+#[test]
+fn ragged_row_names_file_and_line() {
+    let err = bad_placement_error("ragged", &format!("{GOOD}0.1,0.2,0.3\n"));
+    assert!(err.contains("hole_0.csv:2"), "{err}");
+}
+
+#[test]
+fn nan_names_file_line_and_column() {
+    let err = bad_placement_error("nan", &format!("{GOOD}0.1,NaN,0.3,-1.0,0.5,0.6,0.7\n"));
+    assert!(err.contains("hole_0.csv:2:2"), "{err}");
+}
+
+#[test]
+fn non_numeric_cell_names_file_line_and_column() {
+    let err = bad_placement_error(
+        "text",
+        &format!("{GOOD}{GOOD}0.1,0.2,abc,-1.0,0.5,0.6,0.7\n"),
+    );
+    assert!(err.contains("hole_0.csv:3:3"), "{err}");
+    assert!(err.contains("abc"), "{err}");
+}
+
+#[test]
+fn joint_count_mismatch_is_an_error() {
+    let err = bad_placement_error(
+        "joints",
+        "0.1,0.2,0.3,-1.0,0.5,0.6\n0.1,0.2,0.3,-1.0,0.5,0.6\n",
+    );
+    assert!(err.contains("hole_0.csv:1"), "{err}");
+    assert!(err.contains('7') && err.contains('6'), "{err}");
+}
+
+#[test]
+fn fewer_configurations_than_parameters_is_an_error() {
+    let dir = scratch("few");
+    std::fs::write(
+        dir.join("hole_0.csv"),
+        format!("{GOOD}0.2,0.1,0.3,-1.1,0.5,0.6,0.7\n"),
+    )
+    .unwrap();
+    std::fs::write(dir.join("hole_1.csv"), "0.1,0.25,0.3,-1.0,0.5,0.6,0.75\n").unwrap();
+    let out = hapcal(&[
+        "calibrate",
+        "--device",
+        &iiwa(),
+        "--data",
+        &dir.display().to_string(),
+        "--model",
+        "geometric",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr(&out);
+    assert!(err.contains("3 configurations"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn urdf_without_the_tip_link_is_an_error() {
+    let out = hapcal(&["calibrate", "--device", &iiwa(), "--tip", "no_such_link"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr(&out);
+    assert!(
+        err.contains("no_such_link") && err.contains("ball_link"),
+        "{err}"
+    );
+}
+
+#[test]
+fn import_urdf_writes_a_device_file_that_calibrates_alike() {
+    let out = hapcal(&["import-urdf", &iiwa(), "--tip", "ball_link"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.contains("joint_a4") && text.contains("ball_joint"),
+        "{text}"
+    );
+    let dir = scratch("import");
+    let toml_path: &Path = &dir.join("iiwa14.toml");
+    std::fs::write(toml_path, &text).unwrap();
+    let front = root()
+        .join("fixtures/mukca/data/kuka_14/front")
+        .display()
+        .to_string();
+    let v = json(&hapcal(&[
+        "calibrate",
+        "--device",
+        &toml_path.display().to_string(),
+        "--data",
+        &front,
+        "--model",
+        "geometric",
+        "--json",
+    ]));
+    assert!((figure(&v, "front", "before", "mean_absolute_error_m") - 0.723e-3).abs() < 0.5e-6);
+}
