@@ -8,7 +8,12 @@ use xshell::{Shell, cmd};
 /// MUKCa's own optimiser on the same splits (issue #2; run by the project lead with their full
 /// objective, 48 URDF-placement parameters, IPOPT): (unit, urdf, train, test, MAE before, MAE
 /// after, distance error after), mm. `None` where only a range over placements was given.
-const REFERENCE: &[(&str, &str, &str, &str, Option<[f64; 3]>)] = &[
+/// MAE before, MAE after, distance error after (mm).
+type Figures = Option<[f64; 3]>;
+/// A split to calibrate: unit, URDF stem, training placement, test placements and their figures.
+type Split<'a> = (&'a str, &'a str, &'a str, Vec<&'a str>, Vec<Figures>);
+
+const REFERENCE: &[(&str, &str, &str, &str, Figures)] = &[
     (
         "kuka_14",
         "iiwa14",
@@ -80,7 +85,7 @@ struct Row {
     before: f64,
     after: f64,
     dist_after: f64,
-    theirs: Option<[f64; 3]>,
+    theirs: Figures,
 }
 
 fn calibrate(sh: &Shell, unit: &str, urdf: &str, train: &str, tests: &[&str]) -> Result<Value> {
@@ -111,7 +116,7 @@ fn mm(v: &Value, role: &str, name: &str, when: &str, key: &str) -> Result<f64> {
 pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     cmd!(sh, "cargo build --release --quiet -p hapcal").run()?;
     let mut rows = Vec::new();
-    let mut units: Vec<(&str, &str, &str, Vec<&str>, Vec<Option<[f64; 3]>>)> = Vec::new();
+    let mut units: Vec<Split<'_>> = Vec::new();
     for &(unit, urdf, train, test, theirs) in REFERENCE {
         match units.iter_mut().find(|u| u.0 == unit) {
             Some(u) => {

@@ -166,6 +166,8 @@ pub struct CalibrationReport {
     pub device: String,
     /// Chosen model.
     pub model: ModelChoice,
+    /// Cross-validation folds (time-contiguous blocks per socket).
+    pub folds: usize,
     /// Cross-validation scores (empty when the model was given).
     pub cross_validation: Vec<CvReport>,
     /// Residual noise used for the rank decision and the covariance, m.
@@ -563,6 +565,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         } else {
             ModelChoice::Geometric
         },
+        folds: plan.folds,
         cross_validation,
         sigma_m: identified.sigma,
         sigma_source: match identified.sigma_source {

@@ -31,7 +31,7 @@ pub fn render(r: &CalibrationReport) -> String {
         let _ = writeln!(
             s,
             "\nmodel choice by {}-fold cross-validation on the training data (held-out RMS):",
-            "k"
+            r.folds
         );
         for cv in &r.cross_validation {
             let _ = writeln!(

@@ -1,6 +1,8 @@
 //! End-to-end tests of the `hapcal` binary: the bundled default, JSON shape, URDF write-back,
 //! and one clear error (non-zero exit, file:line:column) for each kind of bad input.
 
+#![allow(clippy::unwrap_used)] // test helpers fail loudly on a malformed report; that is the test
+
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
