@@ -182,6 +182,12 @@ pub struct CalibrationReport {
     pub correlated: Vec<(String, String, f64)>,
     /// LM termination.
     pub termination: String,
+    /// Residual evaluations of the final fit.
+    pub n_evaluations: usize,
+    /// Jacobian evaluations of the final fit.
+    pub n_jacobians: usize,
+    /// Prune-and-refit rounds (identifiability re-decided at the estimate).
+    pub rounds: usize,
     /// Data sets, training first.
     pub placements: Vec<SetReport>,
     /// Wall time from reading the files to the finished report, s.
@@ -576,6 +582,9 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         pruned,
         correlated,
         termination: format!("{:?}", identified.fit.termination),
+        n_evaluations: identified.fit.n_evaluations,
+        n_jacobians: identified.fit.n_jacobians,
+        rounds: identified.rounds,
         placements,
         elapsed_s: start.elapsed().as_secs_f64(),
     };
