@@ -456,19 +456,24 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     let train = load_data(&plan.data, &device)?;
     let test = load_data(&plan.test, &device)?;
 
-    // Refuse data that cannot determine the model before spending time on cross-validation.
-    {
-        let obs = observations(&train, plan.socket_distance_m, &|_, _, _| true);
-        let n_configurations = obs.rows.len();
-        let (problem, identified) = solve(&chain, obs, false, plan.sigma_m)?;
-        let n_kept = identified
-            .identifiability
+    // The geometric fit on all training data comes first: it refuses data that cannot determine
+    // the model before any time goes into cross-validation, and it is the answer whenever the
+    // geometric model is chosen.
+    let obs = observations(&train, plan.socket_distance_m, &|_, _, _| true);
+    let n_configurations = obs.rows.len();
+    let geometric = solve(&chain, obs.clone(), false, plan.sigma_m)?;
+    let n_kept = |p: &CalibrationProblem, id: &Identified| {
+        id.identifiability
             .kept
             .iter()
-            .filter(|&&i| i < problem.points_offset())
-            .count();
-        check_determined(n_configurations, n_kept, problem.points_offset())?;
-    }
+            .filter(|&&i| i < p.points_offset())
+            .count()
+    };
+    check_determined(
+        n_configurations,
+        n_kept(&geometric.0, &geometric.1),
+        geometric.0.points_offset(),
+    )?;
     let mut cross_validation = Vec::new();
     let compliance = match plan.model {
         ModelChoice::Geometric => false,
@@ -492,17 +497,14 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             best.1
         }
     };
-    let obs = observations(&train, plan.socket_distance_m, &|_, _, _| true);
-    let n_configurations = obs.rows.len();
-    let (problem, identified) = solve(&chain, obs, compliance, plan.sigma_m)?;
+    let (problem, identified) = if compliance {
+        solve(&chain, obs, true, plan.sigma_m)?
+    } else {
+        geometric
+    };
     let model = problem.model(identified.fit.x.as_ref());
     let layout = problem.layout();
-    let n_kept_model = identified
-        .identifiability
-        .kept
-        .iter()
-        .filter(|&&i| i < problem.points_offset())
-        .count();
+    let n_kept_model = n_kept(&problem, &identified);
     check_determined(n_configurations, n_kept_model, problem.points_offset())?;
     if let Some(cv) = cross_validation
         .iter_mut()

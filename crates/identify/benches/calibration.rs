@@ -21,12 +21,25 @@ fn problem(urdf: &Path, placement: &Path) -> (hapcal_io::Device, CalibrationProb
     let device = hapcal_io::import_urdf(urdf, "ball_link").unwrap();
     let chain = device.chain().unwrap();
     let p = hapcal_io::read_mukca_placement(placement, chain.n_joints()).unwrap();
-    let mut obs = Observations { n_points: p.sockets.len(), ..Observations::default() };
+    let mut obs = Observations {
+        n_points: p.sockets.len(),
+        ..Observations::default()
+    };
     for (point, socket) in p.sockets.iter().enumerate() {
-        obs.rows.extend(socket.q.iter().map(|q| Row { q: q.clone(), kind: RowKind::Point { point } }));
+        obs.rows.extend(socket.q.iter().map(|q| Row {
+            q: q.clone(),
+            kind: RowKind::Point { point },
+        }));
     }
-    obs.point_distances.push(PointDistance { a: 0, b: 1, distance_m: 0.05 });
-    (device, CalibrationProblem::new(chain, obs, Weights::default(), None).unwrap())
+    obs.point_distances.push(PointDistance {
+        a: 0,
+        b: 1,
+        distance_m: 0.05,
+    });
+    (
+        device,
+        CalibrationProblem::new(chain, obs, Weights::default(), None).unwrap(),
+    )
 }
 
 fn bench(c: &mut Criterion) {
@@ -55,7 +68,9 @@ fn bench(c: &mut Criterion) {
                     unit: fit.layout.spec(i).unit.symbol().to_string(),
                 })
                 .collect();
-            let calibrated = device.with_calibration(&values, hapcal_io::CalibrationMeta::default()).unwrap();
+            let calibrated = device
+                .with_calibration(&values, hapcal_io::CalibrationMeta::default())
+                .unwrap();
             hapcal_io::write_calibrated_urdf(&urdf, &calibrated.placements).unwrap()
         })
     });

@@ -79,7 +79,8 @@ impl Identified {
 /// 3. Re-estimate `σ` from the fit residuals (unless given) and re-decide the pruning with the
 ///    Jacobian at the estimate: identifiability is a property of the estimate, not of the
 ///    nominal.
-/// 4. If the kept set changed, refit from `x0` with the new set (at most [`MAX_ROUNDS`] fits).
+/// 4. If the kept set changed, refit with the new set (at most [`MAX_ROUNDS`] fits), starting
+///    from the previous estimate for the kept parameters and from `x0` for the others.
 /// 5. Covariance of the kept parameters at the estimate ([`covariance`]).
 ///
 /// Non-convergence of the fit is reported in `fit.termination`, not as an error.
@@ -142,9 +143,12 @@ pub fn identify(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Result<
     };
     let mut ident = decide(&jac, sigma);
     let mut rounds = 0;
+    // Later rounds start from the previous estimate (warm start): the kept parameters are already
+    // near their optimum, and newly pruned ones return to their x0 values.
+    let mut x_start = x0.clone();
     let (fit, pruning_converged) = loop {
         rounds += 1;
-        let fit = levenberg_marquardt(p, x0.clone(), &ident.kept, &cfg.lm)?;
+        let fit = levenberg_marquardt(p, x_start.clone(), &ident.kept, &cfg.lm)?;
         if sigma_source == SigmaSource::Residuals {
             sigma = sigma_from_residuals(fit.residuals.as_ref(), ident.kept.len()).ok_or(
                 Error::NoDegreesOfFreedom {
@@ -167,6 +171,10 @@ pub fn identify(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Result<
         }
         if rounds == MAX_ROUNDS {
             break (fit, false);
+        }
+        x_start = x0.clone();
+        for &i in &next.kept {
+            x_start[i] = fit.x[i];
         }
         ident = next;
     };

@@ -95,6 +95,11 @@ fn apply(pose: &mut Isometry3<f64>, factor: &Factor, x: &[f64], q: &[f64]) {
             joint,
         } => {
             let value = nominal + param.map_or(0.0, |j| x[j]) + joint.map_or(0.0, |j| q[j]);
+            // A zero screw is the identity: most deviation parameters are zero or pruned, and
+            // skipping them halves the cost of a URDF-placement chain (6 screws per joint).
+            if value == 0.0 {
+                return;
+            }
             match motion {
                 Motion::Rotation => pose.rotation *= UnitQuaternion::from_axis_angle(axis, value),
                 Motion::Translation => {

@@ -332,7 +332,11 @@ impl CalibrationProblem {
         let mut r = 0usize;
         for (row_idx, row) in self.obs.rows.iter().enumerate() {
             let q_eff = self.effective_q(row_idx, x);
-            let p = self.chain.point_and_jacobian_in(&x_kin, &q_eff, ws, buf);
+            let p = if jac.is_some() {
+                self.chain.point_and_jacobian_in(&x_kin, &q_eff, ws, buf)
+            } else {
+                self.chain.end_point(&x_kin, &q_eff)
+            };
             // ∂p/∂k_j = (∂p/∂q_j)·τ̂_j, from the geometric Jacobian's linear rows.
             let jq = if n_comp > 0 && jac.is_some() {
                 Some(self.chain.geometric_jacobian(&x_kin, &q_eff))

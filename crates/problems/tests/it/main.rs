@@ -151,16 +151,30 @@ fn wrong_joint_count_is_an_error() {
 
 /// Real socket data (MUKCa kuka_14 `front`, fixtures/mukca) as point observations.
 fn kuka_front() -> Observations {
-    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/mukca/data/kuka_14/front");
-    let mut obs = Observations { n_points: 2, ..Observations::default() };
+    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/mukca/data/kuka_14/front");
+    let mut obs = Observations {
+        n_points: 2,
+        ..Observations::default()
+    };
     for point in 0..2 {
         let text = std::fs::read_to_string(dir.join(format!("hole_{point}.csv"))).expect("fixture");
         for line in text.lines().filter(|l| !l.trim().is_empty()) {
-            let q: Vec<f64> = line.split(',').map(|v| v.trim().parse().expect("number")).collect();
-            obs.rows.push(Row { q, kind: RowKind::Point { point } });
+            let q: Vec<f64> = line
+                .split(',')
+                .map(|v| v.trim().parse().expect("number"))
+                .collect();
+            obs.rows.push(Row {
+                q,
+                kind: RowKind::Point { point },
+            });
         }
     }
-    obs.point_distances.push(PointDistance { a: 0, b: 1, distance_m: 0.05 });
+    obs.point_distances.push(PointDistance {
+        a: 0,
+        b: 1,
+        distance_m: 0.05,
+    });
     obs
 }
 
@@ -178,7 +192,11 @@ fn a_deliberately_duplicated_parameter_is_pruned() {
         .position(|f| matches!(f, Factor::Screw { param: Some(p), .. } if *p == j4x))
         .expect("factor of j4.x");
     let mut params = chain.params().to_vec();
-    params.push(ParamInfo { name: "duplicate_of_j4.x".into(), unit: ParamUnit::Meter, element: 3 });
+    params.push(ParamInfo {
+        name: "duplicate_of_j4.x".into(),
+        unit: ParamUnit::Meter,
+        element: 3,
+    });
     factors.insert(
         at + 1,
         Factor::Screw {
@@ -189,11 +207,25 @@ fn a_deliberately_duplicated_parameter_is_pruned() {
             joint: None,
         },
     );
-    let dup = Chain::from_factors(factors, params, chain.joint_names().to_vec(), chain.element_names().to_vec())
-        .expect("valid chain");
-    let problem = CalibrationProblem::new(dup, kuka_front(), Weights::default(), None).expect("valid");
-    let fit = identify(&problem, problem.initial_guess(), &IdentifyConfig::default()).expect("identifies");
-    let pruned = fit.identifiability.find_pruned("duplicate_of_j4.x").or_else(|| fit.identifiability.find_pruned("j4.x"));
+    let dup = Chain::from_factors(
+        factors,
+        params,
+        chain.joint_names().to_vec(),
+        chain.element_names().to_vec(),
+    )
+    .expect("valid chain");
+    let problem =
+        CalibrationProblem::new(dup, kuka_front(), Weights::default(), None).expect("valid");
+    let fit = identify(
+        &problem,
+        problem.initial_guess(),
+        &IdentifyConfig::default(),
+    )
+    .expect("identifies");
+    let pruned = fit
+        .identifiability
+        .find_pruned("duplicate_of_j4.x")
+        .or_else(|| fit.identifiability.find_pruned("j4.x"));
     let pruned = pruned.expect("one of the two duplicates is pruned");
     match &pruned.reason {
         PruneReason::Dependent { on } => {
@@ -204,6 +236,14 @@ fn a_deliberately_duplicated_parameter_is_pruned() {
         other => panic!("expected a dependence on its twin, got {other:?}"),
     }
     // The other twin is kept: the pair carries information, only the split is arbitrary.
-    let kept: Vec<&str> = fit.identifiability.kept.iter().map(|&i| problem.layout().name(i)).collect();
-    assert!(kept.contains(&"j4.x") != kept.contains(&"duplicate_of_j4.x"), "{kept:?}");
+    let kept: Vec<&str> = fit
+        .identifiability
+        .kept
+        .iter()
+        .map(|&i| problem.layout().name(i))
+        .collect();
+    assert!(
+        kept.contains(&"j4.x") != kept.contains(&"duplicate_of_j4.x"),
+        "{kept:?}"
+    );
 }
