@@ -11,8 +11,15 @@ use xshell::{Shell, cmd};
 
 #[derive(Parser)]
 enum Task {
-    /// fmt, clippy, tests, docs: what CI runs.
+    /// fmt, clippy, tests, docs, one release `reproduce-tables --check`: what CI runs.
     Ci,
+    /// Reproduce the paper's tables (release build) into docs/results/paper; `--check` compares
+    /// with fixtures/golden/ours/paper.csv instead (UPDATE_GOLDEN=1 rewrites it and fails).
+    ReproduceTables {
+        /// Compare instead of writing.
+        #[arg(long)]
+        check: bool,
+    },
     /// Calibrate every MUKCa split of docs/results/mukca.md with the release binary and write
     /// the table (ours beside MUKCa's own optimiser); `--check` only verifies the acceptance
     /// criteria against the committed reference figures.
@@ -33,6 +40,7 @@ fn main() -> Result<()> {
     match Task::parse() {
         Task::Ci => ci(&sh),
         Task::Mukca { check } => mukca::run(&sh, check),
+        Task::ReproduceTables { check } => reproduce_tables(&sh, check),
     }
 }
 

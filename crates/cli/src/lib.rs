@@ -4,7 +4,9 @@
 //! Architecture invariant: *the library part never prints; `main.rs` prints what it returns.*
 
 pub mod calibrate;
+pub mod paper;
 pub mod report;
+pub mod reproduce;
 
 use std::path::PathBuf;
 

@@ -58,6 +58,25 @@ enum Command {
         #[arg(long)]
         sigma_m: Option<f64>,
     },
+    /// Reproduce the paper's tables on the simulated reference device (Tables 2, 3, Figs. 7, 8)
+    /// and write them to --out; with --check, compare with fixtures/golden/ours/paper.csv.
+    Reproduce {
+        /// Truth file (its device file is named inside).
+        #[arg(long)]
+        truth: Option<PathBuf>,
+        /// Monte Carlo seeds (seed 0 is the single-seed run).
+        #[arg(long, default_value_t = 100)]
+        seeds: usize,
+        /// Poses per identification and per validation.
+        #[arg(long, default_value_t = 200)]
+        poses: usize,
+        /// Output folder.
+        #[arg(long, default_value = "docs/results/paper")]
+        out: PathBuf,
+        /// Compare with the golden file instead of writing (UPDATE_GOLDEN=1 rewrites it and fails).
+        #[arg(long)]
+        check: bool,
+    },
     /// Import a URDF chain as a hapcal device file (TOML on stdout).
     ImportUrdf {
         /// The URDF file.
@@ -112,6 +131,63 @@ fn run(cli: Cli) -> Result<()> {
             if let Some(out) = out {
                 calibrate::write_outputs(&outcome, &out)?;
                 eprintln!("hapcal: wrote {}", out.display());
+            }
+            Ok(())
+        }
+        Command::Reproduce {
+            truth,
+            seeds,
+            poses,
+            out,
+            check,
+        } => {
+            let root = hapcal::project_root();
+            let truth = truth.unwrap_or_else(|| root.join("fixtures/reference-device/truth.toml"));
+            let bar = indicatif::ProgressBar::new(seeds as u64);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{msg} [{bar:40}] {pos}/{len} seeds, eta {eta}",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            bar.set_message("reproducing");
+            let result = hapcal::reproduce::run(&truth, seeds, poses, &|done| {
+                bar.set_position(done as u64)
+            })?;
+            bar.finish_and_clear();
+            let golden_path = root.join("fixtures/golden/ours/paper.csv");
+            if check {
+                if std::env::var_os("UPDATE_GOLDEN").is_some() {
+                    std::fs::write(&golden_path, hapcal::reproduce::golden_csv(&result.golden))?;
+                    anyhow::bail!(
+                        "UPDATE_GOLDEN: rewrote {}; review the diff and run again without it",
+                        golden_path.display()
+                    );
+                }
+                let bad = hapcal::reproduce::check_golden(&result.golden, &golden_path)?;
+                if !bad.is_empty() {
+                    anyhow::bail!(
+                        "reproduction differs from {}:\n{}",
+                        golden_path.display(),
+                        bad.join("\n")
+                    );
+                }
+                println!(
+                    "reproduce --check: {} values within tolerance of {}",
+                    result.golden.len(),
+                    golden_path.display()
+                );
+            } else {
+                std::fs::create_dir_all(&out)?;
+                for (name, text) in &result.files {
+                    std::fs::write(out.join(name), text)?;
+                }
+                print!("{}", result.summary);
+                eprintln!(
+                    "hapcal: wrote {} files to {}",
+                    result.files.len(),
+                    out.display()
+                );
             }
             Ok(())
         }

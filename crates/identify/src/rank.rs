@@ -197,8 +197,11 @@ const TIE_ABS: f64 = 1e-13;
 ///    the parameters before it is below its plausible deviation). The pivot is the eligible
 ///    column of largest `ρ_j`; a column that fails a test is pruned at once, since `ρ_j` only
 ///    decreases as columns are kept. Pivoting stops when no column is eligible.
-/// 3. **Near-ties** (within 1e-6 relative) go to the candidate earlier in the layout, so exact
-///    duplicates are resolved the same way at every estimate.
+/// 3. **Near-ties** (within 1e-6 relative) go to the candidate *later* in the layout, so exact
+///    duplicates are resolved the same way at every estimate, and a gauge freedom shared by a
+///    base-side and a distal parameter is given to the base side (a chain's layout runs from the
+///    base outwards: of the collinear `d0` and `θ1` of a distance rig, `θ1` is kept and `d0` is
+///    pruned, as Baser & Konukseven fix `d0 = 0` by choice of frames).
 /// 4. **Reasons.** For each pruned column the same factorisation gives its least-squares
 ///    coefficients on the kept columns, `R11·z = R12[:, j]` (unscaled to parameter units by
 ///    `c_j / c_i`), and its distance `ρ_j` to their span.
@@ -303,9 +306,10 @@ pub fn identifiability(
                 }
             }
             let rho_max = eligible.iter().map(|e| e.1).fold(0.0_f64, f64::max);
-            // Eligible entries are in layout order: the first near-maximal one wins ties.
+            // Eligible entries are in layout order: the last near-maximal one wins ties.
             let Some(&(pivot, _)) = eligible
                 .iter()
+                .rev()
                 .find(|e| e.1 >= rho_max * (1.0 - TIE_REL) - TIE_ABS)
             else {
                 break;

@@ -1,0 +1,418 @@
+//! The paper's pipeline on the simulated reference device (Baser & Konukseven, Fig. 6):
+//! step 1 identifies each transmission from external-encoder data, step 2 corrects the joint
+//! readings and identifies the kinematic deviations from cable distances; validation on fresh
+//! poses (Fig. 8) and a Monte Carlo over seeds.
+
+use anyhow::{Context, Result, bail};
+use faer::Col;
+use hapcal_identify::{Identified, IdentifyConfig, Problem, identify};
+use hapcal_io::{Device, LogRow};
+use hapcal_kinematics::{Chain, DhRow};
+use hapcal_metrics::pose_error;
+use hapcal_problems::{CalibrationProblem, Observations, Row, RowKind, Weights};
+use hapcal_sim::{NoiseModel, SimConfig, Truth};
+use hapcal_transmission::{
+    Capstan, CapstanParams, CapstanProblem, Chebyshev, JointRad, PolynomialProblem,
+};
+use rand::SeedableRng;
+use std::path::Path;
+
+/// Degree of the joint-4 polynomial (paper: tenth order).
+pub const POLY_DEGREE: usize = 10;
+/// The joint whose capstan feeds the parallelogram (1-based).
+pub const PARALLELOGRAM_JOINT: usize = 4;
+
+/// The reference device, its truth, and the noise model of the simulation.
+#[derive(Clone, Debug)]
+pub struct Reference {
+    /// Nominal device.
+    pub device: Device,
+    /// Truth (deviations and transmission parameters).
+    pub truth: Truth,
+    /// Nominal chain (D-H rows 0..7).
+    pub chain: Chain,
+    /// Chain of rows 1..7 (base frame → end effector), for validation in the base frame.
+    pub base_chain: Chain,
+    /// Truth deviation vector of `chain`.
+    pub x_truth: Vec<f64>,
+    /// Noise model (paper's by default).
+    pub noise: NoiseModel,
+}
+
+impl Reference {
+    /// Reads the device and truth files.
+    ///
+    /// # Errors
+    /// Unreadable or inconsistent files.
+    pub fn load(truth_path: &Path) -> Result<Self> {
+        let truth = hapcal_sim::read_truth(truth_path)
+            .with_context(|| format!("reading truth {}", truth_path.display()))?;
+        let device = truth.read_device(truth_path)?;
+        let chain = device.chain()?;
+        let rows: Vec<DhRow> = device.dh_rows();
+        if rows.len() < 2 || rows.iter().any(|r| r.beta_rad.is_some()) {
+            bail!("the reference pipeline expects standard D-H rows without beta, row 0 fixed");
+        }
+        let base_chain = Chain::from_dh(&rows[1..])?;
+        let x_truth = hapcal_sim::truth_deviations(&chain, &truth)?;
+        let Some(cable) = device.cable_encoder.as_ref() else {
+            bail!("the device has no [cable_encoder]")
+        };
+        let noise = NoiseModel::paper(cable);
+        Ok(Self {
+            device,
+            truth,
+            chain,
+            base_chain,
+            x_truth,
+            noise,
+        })
+    }
+
+    /// Capstans of the device by 1-based joint.
+    fn capstan(&self, joint: usize) -> Result<Capstan> {
+        let c = self
+            .device
+            .capstans
+            .iter()
+            .find(|c| c.joint == joint)
+            .with_context(|| format!("no capstan on joint {joint}"))?;
+        Ok(Capstan::try_new(c.ratio, c.drum_distance_m)?)
+    }
+
+    /// The x of `base_chain` from an x of `chain` (drops row 0's four parameters).
+    pub fn base_x(&self, x: &[f64]) -> Vec<f64> {
+        x[self.chain.n_params() - self.base_chain.n_params()..].to_vec()
+    }
+}
+
+/// One identified capstan (paper eq. 1, Table 2).
+#[derive(Clone, Debug)]
+pub struct CapstanFit {
+    /// Joint, 1-based.
+    pub joint: usize,
+    /// Geometry.
+    pub capstan: Capstan,
+    /// Identified parameters.
+    pub params: CapstanParams,
+    /// The identification (names, std, correlations, pruning).
+    pub identified: Identified,
+}
+
+/// Identified transmissions: capstans of joints 1–3 and the joint-4 polynomial.
+#[derive(Clone, Debug)]
+pub struct TransmissionFit {
+    /// Capstans 1–3.
+    pub capstans: Vec<CapstanFit>,
+    /// Joint-4 error polynomial (Chebyshev on the joint range).
+    pub poly: Chebyshev,
+    /// Its identification.
+    pub poly_identified: Identified,
+}
+
+impl TransmissionFit {
+    /// Corrected joint angles (rad) for readings `theta` (rad): capstan joints through their
+    /// identified eq. 1, joint 4 plus the polynomial, direct joints unchanged.
+    pub fn corrected(&self, theta: &[f64]) -> Vec<f64> {
+        let mut q = theta.to_vec();
+        for c in &self.capstans {
+            if let Some(v) = q.get_mut(c.joint - 1) {
+                *v = c.capstan.output_rad(&c.params, JointRad(*v));
+            }
+        }
+        if let Some(v) = q.get_mut(PARALLELOGRAM_JOINT - 1) {
+            *v += self.poly.eval(*v);
+        }
+        q
+    }
+}
+
+/// Options of step 1.
+#[derive(Clone, Copy, Debug)]
+pub struct Step1Options {
+    /// Run the external-encoder identification over a full output revolution (±π) instead of
+    /// the joint range (the documented option of issue #3: it decorrelates Re and r_o).
+    pub full_revolution: bool,
+}
+
+fn ext(rows: &[LogRow], joint: usize) -> Result<Vec<f64>> {
+    rows.iter()
+        .map(|r| {
+            r.ext
+                .get(joint - 1)
+                .copied()
+                .flatten()
+                .with_context(|| format!("log line {}: no ext{joint}", r.line))
+        })
+        .collect()
+}
+
+/// Identification settings of step 1: residuals are already divided by σ_e (so σ = 1), and the
+/// plausible ranges are the transmission's, not the kinematic ones: an eccentricity phase may be
+/// anywhere in (−π, π], an eccentricity up to 1 mm, a ratio error up to 0.1.
+pub fn transmission_config() -> IdentifyConfig {
+    let mut cfg = IdentifyConfig {
+        sigma: Some(1.0),
+        ..IdentifyConfig::default()
+    };
+    cfg.rank.prior_rad = std::f64::consts::PI;
+    cfg.rank.prior_m = 1e-3;
+    cfg.rank.prior_dimensionless = 0.1;
+    cfg
+}
+
+/// Step 1 (paper Fig. 6): each transmission from its external encoder.
+///
+/// # Errors
+/// Missing ext columns, or an identification failure.
+pub fn identify_transmissions(r: &Reference, rows: &[LogRow]) -> Result<TransmissionFit> {
+    let sigma = r.noise.sigma_e_rad;
+    let cfg = transmission_config();
+    let mut capstans = Vec::new();
+    for joint in 1..PARALLELOGRAM_JOINT {
+        let capstan = r.capstan(joint)?;
+        let theta: Vec<f64> = rows.iter().map(|row| row.q[joint - 1]).collect();
+        let problem = CapstanProblem::new(capstan, joint, theta, ext(rows, joint)?, sigma)?;
+        let identified = identify(&problem, problem.initial_guess(), &cfg)
+            .with_context(|| format!("identifying capstan {joint}"))?;
+        let params = CapstanProblem::params(identified.fit.x.as_ref());
+        capstans.push(CapstanFit {
+            joint,
+            capstan,
+            params,
+            identified,
+        });
+    }
+    let (lo, hi) = r.device.joint_limits()[PARALLELOGRAM_JOINT - 1];
+    let theta: Vec<f64> = rows
+        .iter()
+        .map(|row| row.q[PARALLELOGRAM_JOINT - 1])
+        .collect();
+    let problem = PolynomialProblem::new(
+        PARALLELOGRAM_JOINT,
+        POLY_DEGREE,
+        lo,
+        hi,
+        theta,
+        ext(rows, PARALLELOGRAM_JOINT)?,
+        sigma,
+    )?;
+    let poly_identified = identify(&problem, problem.initial_guess(), &cfg)
+        .context("identifying the joint-4 polynomial")?;
+    let poly = problem.polynomial(poly_identified.fit.x.as_ref());
+    Ok(TransmissionFit {
+        capstans,
+        poly,
+        poly_identified,
+    })
+}
+
+/// Step 2: kinematic deviations from cable distances, with joint readings corrected by
+/// `transmissions` (or raw when `None`: the paper's "transmission errors left out").
+///
+/// # Errors
+/// Inconsistent data or an identification failure.
+pub fn identify_kinematics(
+    r: &Reference,
+    rows: &[LogRow],
+    transmissions: Option<&TransmissionFit>,
+) -> Result<(CalibrationProblem, Identified)> {
+    let obs = Observations {
+        rows: rows
+            .iter()
+            .map(|row| Row {
+                q: transmissions.map_or_else(|| row.q.clone(), |t| t.corrected(&row.q)),
+                kind: RowKind::Distance {
+                    distance_m: row.distance_m,
+                },
+            })
+            .collect(),
+        point_distances: Vec::new(),
+        n_points: 0,
+    };
+    let weights = Weights {
+        sigma_distance_m: r.noise.sigma_m_m,
+        ..Weights::default()
+    };
+    let problem = CalibrationProblem::new(r.chain.clone(), obs, weights, None)?;
+    let x0: Col<f64> = problem.initial_guess();
+    let identified = identify(&problem, x0, &IdentifyConfig::default())
+        .context("identifying kinematic deviations")?;
+    Ok((problem, identified))
+}
+
+/// Accuracy on fresh poses (paper Fig. 8 and the distance RMS of eq. 9).
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct Validation {
+    /// End-effector position RMS in the base frame, nominal model, m.
+    pub position_rms_before_m: f64,
+    /// Same, calibrated model, m.
+    pub position_rms_after_m: f64,
+    /// Orientation RMS (angle of the relative rotation), nominal model, rad.
+    pub orientation_rms_before_rad: f64,
+    /// Same, calibrated model, rad.
+    pub orientation_rms_after_rad: f64,
+    /// Orientation RMS of the calibrated model once the unidentifiable parameters (α7 in the
+    /// base frame) take their true values: what they alone leave, rad.
+    pub orientation_rms_after_true_unidentifiable_rad: f64,
+    /// Cable-distance RMS, nominal model, m.
+    pub distance_rms_before_m: f64,
+    /// Cable-distance RMS, full calibration (transmissions + kinematics), m.
+    pub distance_rms_after_m: f64,
+    /// Cable-distance RMS, kinematics calibrated on raw readings (transmissions left out), m.
+    pub distance_rms_kinematics_only_m: f64,
+}
+
+/// Everything one seed produced.
+#[derive(Clone, Debug)]
+pub struct SeedResult {
+    /// Step 1.
+    pub transmissions: TransmissionFit,
+    /// Step 2 (full calibration).
+    pub kinematics: Identified,
+    /// Step 2 without transmissions.
+    pub kinematics_only: Identified,
+    /// Fresh-pose accuracy.
+    pub validation: Validation,
+}
+
+fn rms(v: &[f64]) -> f64 {
+    hapcal_metrics::rms(v)
+}
+
+/// Runs the pipeline for one seed: simulate `n_poses` (seed), identify, validate on `n_poses`
+/// fresh poses (seed + 1_000_000).
+///
+/// # Errors
+/// Simulation or identification failures.
+pub fn run_seed(r: &Reference, seed: u64, n_poses: usize) -> Result<SeedResult> {
+    let cfg = SimConfig::new(seed, n_poses).with_noise(r.noise);
+    let rows = hapcal_sim::simulate(&r.device, &r.truth, &cfg)?;
+    let transmissions = identify_transmissions(r, &rows)?;
+    let (_, kinematics) = identify_kinematics(r, &rows, Some(&transmissions))?;
+    let (_, kinematics_only) = identify_kinematics(r, &rows, None)?;
+    let validation = validate(
+        r,
+        seed + 1_000_000,
+        n_poses,
+        &transmissions,
+        &kinematics,
+        &kinematics_only,
+    )?;
+    Ok(SeedResult {
+        transmissions,
+        kinematics,
+        kinematics_only,
+        validation,
+    })
+}
+
+fn x_of(id: &Identified, n: usize) -> Vec<f64> {
+    (0..n).map(|i| id.fit.x[i]).collect()
+}
+
+/// Validation on fresh poses drawn with `seed`.
+///
+/// # Errors
+/// Simulation failures.
+pub fn validate(
+    r: &Reference,
+    seed: u64,
+    n_poses: usize,
+    t: &TransmissionFit,
+    kin: &Identified,
+    kin_only: &Identified,
+) -> Result<Validation> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let readings = hapcal_sim::sample_readings(&r.device, &mut rng, n_poses);
+    let n = r.chain.n_params();
+    let x_cal = x_of(kin, n);
+    let x_only = x_of(kin_only, n);
+    let zero = vec![0.0; n];
+    let (xb_truth, xb_cal, xb_zero) = (r.base_x(&r.x_truth), r.base_x(&x_cal), r.base_x(&zero));
+    // The calibrated model with the parameters the data cannot see set to their truth.
+    let mut x_cal_true_unid = x_cal.clone();
+    for pruned in &kin.identifiability.pruned {
+        if pruned.index < n {
+            x_cal_true_unid[pruned.index] = r.x_truth[pruned.index];
+        }
+    }
+    let xb_cal_true_unid = r.base_x(&x_cal_true_unid);
+    let (mut pb, mut pa, mut ob, mut oa, mut oau, mut db, mut da, mut dk) = (
+        vec![],
+        vec![],
+        vec![],
+        vec![],
+        vec![],
+        vec![],
+        vec![],
+        vec![],
+    );
+    for theta in &readings {
+        let theta = hapcal_sim::quantise_readings(&r.device, theta);
+        let q_true = hapcal_sim::true_joint_angles(&r.device, &r.truth, &theta)?;
+        let q_cor = t.corrected(&theta);
+        let truth = r.base_chain.end_pose(&xb_truth, &q_true);
+        let before = pose_error(&truth, &r.base_chain.end_pose(&xb_zero, &theta));
+        let after = pose_error(&truth, &r.base_chain.end_pose(&xb_cal, &q_cor));
+        let after_u = pose_error(&truth, &r.base_chain.end_pose(&xb_cal_true_unid, &q_cor));
+        pb.push(before.position_m);
+        pa.push(after.position_m);
+        ob.push(before.orientation_rad);
+        oa.push(after.orientation_rad);
+        oau.push(after_u.orientation_rad);
+        let d_true = r.chain.end_point(&r.x_truth, &q_true).coords.norm();
+        db.push(r.chain.end_point(&zero, &theta).coords.norm() - d_true);
+        da.push(r.chain.end_point(&x_cal, &q_cor).coords.norm() - d_true);
+        dk.push(r.chain.end_point(&x_only, &theta).coords.norm() - d_true);
+    }
+    Ok(Validation {
+        position_rms_before_m: rms(&pb),
+        position_rms_after_m: rms(&pa),
+        orientation_rms_before_rad: rms(&ob),
+        orientation_rms_after_rad: rms(&oa),
+        orientation_rms_after_true_unidentifiable_rad: rms(&oau),
+        distance_rms_before_m: rms(&db),
+        distance_rms_after_m: rms(&da),
+        distance_rms_kinematics_only_m: rms(&dk),
+    })
+}
+
+/// A kinematic parameter's outcome in one seed.
+#[derive(Clone, Debug)]
+pub struct ParamOutcome {
+    /// Name (`da0`, `dtheta3`, …).
+    pub name: String,
+    /// Assigned (truth) deviation.
+    pub assigned: f64,
+    /// Identified deviation, `None` when pruned.
+    pub identified: Option<f64>,
+    /// Its standard deviation.
+    pub std: Option<f64>,
+}
+
+/// Per-parameter outcomes of step 2 in one seed.
+pub fn kinematic_outcomes(r: &Reference, kin: &Identified) -> Vec<ParamOutcome> {
+    let stds = kin.covariance.std();
+    r.chain
+        .params()
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let pos = kin.covariance.free.iter().position(|&f| f == i);
+            ParamOutcome {
+                name: p.name.clone(),
+                assigned: r.x_truth[i],
+                identified: pos.map(|_| kin.fit.x[i]),
+                std: pos.map(|k| stds[k]),
+            }
+        })
+        .collect()
+}
+
+/// Names of the kinematic layout (for reports).
+pub fn layout_names(p: &CalibrationProblem) -> Vec<String> {
+    (0..p.layout().len())
+        .map(|i| p.layout().name(i).to_string())
+        .collect()
+}

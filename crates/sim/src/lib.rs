@@ -1,0 +1,56 @@
+//! Synthetic measurement logs from a "truth" device: the nominal device plus known kinematic
+//! deviations and transmission errors, sampled within the joint limits, with encoder
+//! quantisation and Gaussian measurement noise (paper, simulation section, Tables 2 and 3;
+//! DESIGN.md §3).
+//!
+//! **Invariant:** `sim` is the only place that knows the truth; everything it returns is what
+//! a real rig would record.
+//!
+//! - [`read_truth`] reads a [`Truth`] file (TOML): the nominal device file, `[deviations]`
+//!   by chain parameter name, `[[capstan]]` parameters (paper eq. 1), `[parallelogram]`
+//!   length deviations (paper eq. 2).
+//! - [`simulate`] draws joint readings uniformly within the limits, quantises them to the
+//!   encoders' joint-side resolution, maps them through the truth transmissions
+//!   ([`true_joint_angles`]) and the truth chain, and returns [`hapcal_io::LogRow`]s:
+//!   readings, the cable distance `|P| + N(0, σ_m)`, and the external encoders (true output
+//!   angles of joints 1–4 `+ N(0, σ_e)`).
+//!
+//! The paper's truth and a 200-pose log (seed 1, paper noise) are in
+//! `fixtures/reference-device/` (`truth.toml`, `device.toml`, `log.csv`; the log is written by
+//! `cargo run -p hapcal-sim --example write_reference_log`).
+//!
+//! # Example
+//!
+//! ```
+//! use std::path::Path;
+//!
+//! use hapcal_sim::{NoiseModel, SimConfig, read_truth, simulate};
+//!
+//! let truth_file = Path::new(env!("CARGO_MANIFEST_DIR"))
+//!     .join("../../fixtures/reference-device/truth.toml");
+//! let truth = read_truth(&truth_file)?;
+//! let device = truth.read_device(&truth_file)?;
+//! assert_eq!(truth.deviations.len(), 30); // paper Table 3
+//!
+//! // The paper's set-up: 200 poses, σ_e = 2π/20000/3 rad, σ_m = 2π·R_d·σ_e ≈ 9.87 µm.
+//! let cable = device.cable_encoder.ok_or("no cable encoder")?;
+//! let cfg = SimConfig::new(1, 200).with_noise(NoiseModel::paper(&cable));
+//! let rows = simulate(&device, &truth, &cfg)?;
+//! assert_eq!(rows.len(), 200);
+//! assert!(rows.iter().all(|r| r.ext.iter().all(Option::is_some)));
+//!
+//! // The same seed gives the same log, bit for bit.
+//! assert_eq!(simulate(&device, &truth, &cfg)?, rows);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+mod error;
+mod sim;
+mod truth;
+
+pub use error::Error;
+pub use sim::{
+    NoiseModel, PARALLELOGRAM_JOINT, SimConfig, joint_resolutions_rad, quantise_readings,
+    sample_readings, simulate, true_joint_angles, truth_deviations,
+};
+pub use truth::{CapstanTruth, ParallelogramTruth, Truth, parse_truth, read_truth};

@@ -1,0 +1,422 @@
+//! The truth file (TOML): what the simulated device really is.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use hapcal_io::Device;
+use hapcal_transmission::{CapstanParams, Joint4Transmission};
+use serde::{Deserialize, Serialize};
+use toml::Spanned;
+
+use crate::Error;
+
+/// The "truth" of a simulated device: the nominal device file plus the deviations and
+/// transmission errors the simulator applies (the paper's "assigned" values, Tables 2 and 3).
+///
+/// In the file (see `fixtures/reference-device/truth.toml`):
+///
+/// ```toml
+/// device = "device.toml"      # nominal device file, relative to the truth file
+///
+/// [deviations]                # kinematic deviations, m or rad, by chain parameter name
+/// dalpha0 = 1.5e-3
+/// da0 = 1.9e-3
+///
+/// [[capstan]]                 # one per capstan drive (paper eq. 1)
+/// joint = 1
+/// c_rad = 0.0
+/// re = -0.025
+/// r_o_m = 0.2e-3
+/// beta_o_rad = -1.832595714594046
+/// r_i_m = 0.005e-3
+/// beta_i_rad = -0.2617993877991494
+///
+/// [parallelogram]             # length deviations of the four-bar driving joint 4
+/// dl1_m = -0.5e-3
+/// dl2_m = -0.7e-3
+/// dl3_m = 0.0
+/// dl4_m = 0.0
+/// phi0_rad = 0.0
+/// ```
+///
+/// [`read_truth`] checks the file; a value built by hand (or deserialised directly) is
+/// checked against the device when [`simulate`](crate::simulate) uses it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Truth {
+    /// The nominal device file, relative to the truth file's folder (or absolute); see
+    /// [`Truth::device_path`].
+    pub device: PathBuf,
+    /// Kinematic parameter deviations `(name, value)` in file order, SI units (m for
+    /// `da*`, `dd*`; rad for `dalpha*`, `dtheta*`, `dbeta*`). Names are the chain's
+    /// ([`hapcal_kinematics::Chain::params`]); parameters not listed are 0.
+    #[serde(default, with = "ordered_map")]
+    pub deviations: Vec<(String, f64)>,
+    /// True capstan parameters, one per capstan drive of the device (`[[capstan]]`).
+    #[serde(default, rename = "capstan")]
+    pub capstans: Vec<CapstanTruth>,
+    /// True parallelogram (`[parallelogram]`), required if the device has one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parallelogram: Option<ParallelogramTruth>,
+}
+
+/// True parameters of one capstan drive (`[[capstan]]`, paper eq. 1 and Table 2).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CapstanTruth {
+    /// The driven joint, 1-based.
+    pub joint: usize,
+    /// Offset `c`, rad.
+    pub c_rad: f64,
+    /// Ratio error `Re` (dimensionless; the true ratio is `R + Re`).
+    pub re: f64,
+    /// Output-drum eccentricity `r_o`, m.
+    pub r_o_m: f64,
+    /// Output-drum eccentricity phase `beta_o`, rad.
+    pub beta_o_rad: f64,
+    /// Input-drum (motor) eccentricity `r_i`, m.
+    pub r_i_m: f64,
+    /// Input-drum eccentricity phase `beta_i`, rad.
+    pub beta_i_rad: f64,
+}
+
+impl CapstanTruth {
+    /// The values as the transmission model's [`CapstanParams`].
+    pub fn params(&self) -> CapstanParams {
+        CapstanParams {
+            c_rad: self.c_rad,
+            re: self.re,
+            r_o_m: self.r_o_m,
+            beta_o_rad: self.beta_o_rad,
+            r_i_m: self.r_i_m,
+            beta_i_rad: self.beta_i_rad,
+        }
+    }
+}
+
+/// True parallelogram (`[parallelogram]`, paper eq. 2): deviations of the four link
+/// lengths from the device file's nominal `L1..L4` (m), and the crank angle offset.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParallelogramTruth {
+    /// Crank length deviation `ΔL1`, m.
+    pub dl1_m: f64,
+    /// Coupler length deviation `ΔL2`, m.
+    pub dl2_m: f64,
+    /// Rocker length deviation `ΔL3`, m.
+    pub dl3_m: f64,
+    /// Ground length deviation `ΔL4`, m.
+    pub dl4_m: f64,
+    /// Crank angle offset `phi0`, rad, as
+    /// [`Joint4Transmission::phi0_rad`](hapcal_transmission::Joint4Transmission).
+    pub phi0_rad: f64,
+}
+
+impl Truth {
+    /// The nominal device file of a truth read from `truth_file`: [`Truth::device`] itself
+    /// if absolute, else relative to `truth_file`'s folder.
+    pub fn device_path(&self, truth_file: &Path) -> PathBuf {
+        if self.device.is_absolute() {
+            return self.device.clone();
+        }
+        (truth_file.parent())
+            .unwrap_or_else(|| Path::new(""))
+            .join(&self.device)
+    }
+
+    /// Reads the nominal device of a truth read from `truth_file` (see
+    /// [`Truth::device_path`]).
+    ///
+    /// # Errors
+    ///
+    /// [`Error::Device`] if [`hapcal_io::read_device`] fails.
+    pub fn read_device(&self, truth_file: &Path) -> Result<Device, Error> {
+        hapcal_io::read_device(&self.device_path(truth_file))
+            .map_err(|source| Error::Device { source })
+    }
+
+    /// The truth of an error-free device: no deviations, every capstan of `device` with
+    /// all-zero parameters and, if `device` has a parallelogram, zero length deviations with
+    /// the crank perpendicular to the ground link at mid-range of its joint
+    /// ([`Joint4Transmission::phi0_mid_range_rad`] of joint
+    /// [`PARALLELOGRAM_JOINT`](crate::PARALLELOGRAM_JOINT)'s limits). `device_file` is stored
+    /// as [`Truth::device`].
+    pub fn nominal(device_file: PathBuf, device: &Device) -> Truth {
+        let phi0_rad = (device.joints.get(crate::PARALLELOGRAM_JOINT - 1))
+            .map_or(std::f64::consts::FRAC_PI_2, |j| {
+                Joint4Transmission::phi0_mid_range_rad(j.lower_rad, j.upper_rad)
+            });
+        let capstans = (device.capstans.iter())
+            .map(|c| CapstanTruth {
+                joint: c.joint,
+                c_rad: 0.0,
+                re: 0.0,
+                r_o_m: 0.0,
+                beta_o_rad: 0.0,
+                r_i_m: 0.0,
+                beta_i_rad: 0.0,
+            })
+            .collect();
+        let parallelogram = device.parallelogram.map(|_| ParallelogramTruth {
+            dl1_m: 0.0,
+            dl2_m: 0.0,
+            dl3_m: 0.0,
+            dl4_m: 0.0,
+            phi0_rad,
+        });
+        Truth {
+            device: device_file,
+            deviations: Vec::new(),
+            capstans,
+            parallelogram,
+        }
+    }
+}
+
+/// Reads and checks a truth file.
+///
+/// Checks, beyond the TOML syntax and types (unknown keys are errors): every number is
+/// finite; every `[deviations]` name has the form of a chain parameter (`da`, `dalpha`,
+/// `dd`, `dtheta` or `dbeta` followed by a row number); capstan joints are ≥ 1 and unique;
+/// the device path is not empty. Whether the names and joints exist on the device is
+/// checked by [`simulate`](crate::simulate) and [`truth_deviations`](crate::truth_deviations).
+///
+/// # Errors
+///
+/// [`Error::Io`] if the file cannot be read; [`Error::Toml`] for a syntax error, a missing
+/// or unknown key or a value of the wrong type; [`Error::InvalidTruth`] for a failed check.
+/// Both name the file, line and column.
+pub fn read_truth(path: &Path) -> Result<Truth, Error> {
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_truth(&text, path)
+}
+
+/// Parses and checks truth-file text; `path` is only used in messages. See [`read_truth`].
+///
+/// # Errors
+///
+/// As [`read_truth`], except [`Error::Io`].
+pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
+    let raw: RawTruth = toml::from_str(text).map_err(|e| {
+        let (line, column) = e
+            .span()
+            .map_or((1, 1), |span| line_column(text, span.start));
+        Error::Toml {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message: e.message().trim_end().to_owned(),
+        }
+    })?;
+    let invalid = |offset: usize, message: String| {
+        let (line, column) = line_column(text, offset);
+        Error::InvalidTruth {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message,
+        }
+    };
+    let finite = |name: &str, value: &Spanned<f64>| {
+        let v = *value.get_ref();
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(invalid(
+                value.span().start,
+                format!("expected a finite number for {name:?}, found {v}"),
+            ))
+        }
+    };
+
+    if raw.device.get_ref().as_os_str().is_empty() {
+        return Err(invalid(
+            raw.device.span().start,
+            "the device path is empty".to_owned(),
+        ));
+    }
+
+    let mut entries: Vec<_> = raw.deviations.iter().collect();
+    entries.sort_by_key(|(name, _)| name.span().start);
+    let mut deviations = Vec::with_capacity(entries.len());
+    for (name, value) in entries {
+        if !is_param_name(name.get_ref()) {
+            return Err(invalid(
+                name.span().start,
+                format!(
+                    "{:?} is not a parameter name: expected da, dalpha, dd, dtheta or dbeta \
+                     followed by a row number, e.g. \"dtheta3\"",
+                    name.get_ref()
+                ),
+            ));
+        }
+        deviations.push((name.get_ref().clone(), finite(name.get_ref(), value)?));
+    }
+
+    let mut capstans: Vec<CapstanTruth> = Vec::with_capacity(raw.capstans.len());
+    for c in &raw.capstans {
+        let joint = *c.joint.get_ref();
+        if joint == 0 {
+            return Err(invalid(
+                c.joint.span().start,
+                "capstan joint numbers are 1-based; found 0".to_owned(),
+            ));
+        }
+        if capstans.iter().any(|earlier| earlier.joint == joint) {
+            return Err(invalid(
+                c.joint.span().start,
+                format!("a second [[capstan]] for joint {joint}"),
+            ));
+        }
+        capstans.push(CapstanTruth {
+            joint,
+            c_rad: finite("c_rad", &c.c_rad)?,
+            re: finite("re", &c.re)?,
+            r_o_m: finite("r_o_m", &c.r_o_m)?,
+            beta_o_rad: finite("beta_o_rad", &c.beta_o_rad)?,
+            r_i_m: finite("r_i_m", &c.r_i_m)?,
+            beta_i_rad: finite("beta_i_rad", &c.beta_i_rad)?,
+        });
+    }
+
+    let parallelogram = match &raw.parallelogram {
+        None => None,
+        Some(p) => Some(ParallelogramTruth {
+            dl1_m: finite("dl1_m", &p.dl1_m)?,
+            dl2_m: finite("dl2_m", &p.dl2_m)?,
+            dl3_m: finite("dl3_m", &p.dl3_m)?,
+            dl4_m: finite("dl4_m", &p.dl4_m)?,
+            phi0_rad: finite("phi0_rad", &p.phi0_rad)?,
+        }),
+    };
+
+    Ok(Truth {
+        device: raw.device.into_inner(),
+        deviations,
+        capstans,
+        parallelogram,
+    })
+}
+
+/// Whether `name` has the form of a D-H chain parameter: `da3`, `dalpha0`, `dbeta12`, …
+fn is_param_name(name: &str) -> bool {
+    ["dalpha", "dtheta", "dbeta", "da", "dd"]
+        .iter()
+        .any(|prefix| {
+            name.strip_prefix(prefix).is_some_and(|digits| {
+                !digits.is_empty()
+                    && digits.bytes().all(|b| b.is_ascii_digit())
+                    && (digits == "0" || !digits.starts_with('0'))
+            })
+        })
+}
+
+/// 1-based (line, column) of byte offset `offset` in `text`; the column counts characters.
+fn line_column(text: &str, offset: usize) -> (u64, u64) {
+    let offset = offset.min(text.len());
+    let offset = (0..=offset)
+        .rev()
+        .find(|&i| text.is_char_boundary(i))
+        .unwrap_or(0);
+    let before = text.get(..offset).unwrap_or("");
+    let line = before.matches('\n').count() as u64 + 1;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    let column = before.get(line_start..).unwrap_or("").chars().count() as u64 + 1;
+    (line, column)
+}
+
+/// The file as parsed, with spans for messages.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTruth {
+    device: Spanned<PathBuf>,
+    #[serde(default)]
+    deviations: BTreeMap<Spanned<String>, Spanned<f64>>,
+    #[serde(default, rename = "capstan")]
+    capstans: Vec<RawCapstan>,
+    #[serde(default)]
+    parallelogram: Option<RawParallelogram>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCapstan {
+    joint: Spanned<usize>,
+    c_rad: Spanned<f64>,
+    re: Spanned<f64>,
+    r_o_m: Spanned<f64>,
+    beta_o_rad: Spanned<f64>,
+    r_i_m: Spanned<f64>,
+    beta_i_rad: Spanned<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawParallelogram {
+    dl1_m: Spanned<f64>,
+    dl2_m: Spanned<f64>,
+    dl3_m: Spanned<f64>,
+    dl4_m: Spanned<f64>,
+    phi0_rad: Spanned<f64>,
+}
+
+/// `Vec<(String, f64)>` as a TOML table, keeping the order of the entries.
+mod ordered_map {
+    use std::fmt;
+
+    use serde::de::{MapAccess, Visitor};
+    use serde::{Deserializer, Serializer};
+
+    pub(super) fn serialize<S: Serializer>(v: &[(String, f64)], s: S) -> Result<S::Ok, S::Error> {
+        s.collect_map(v.iter().map(|(k, v)| (k, v)))
+    }
+
+    pub(super) fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<Vec<(String, f64)>, D::Error> {
+        struct Entries;
+        impl<'de> Visitor<'de> for Entries {
+            type Value = Vec<(String, f64)>;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a table of parameter names to numbers")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+                let mut out = Vec::new();
+                while let Some(entry) = map.next_entry::<String, f64>()? {
+                    out.push(entry);
+                }
+                Ok(out)
+            }
+        }
+        d.deserialize_map(Entries)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{is_param_name, line_column};
+
+    #[test]
+    fn parameter_names_have_the_chain_form() {
+        for ok in ["da0", "dalpha7", "dd12", "dtheta3", "dbeta2"] {
+            assert!(is_param_name(ok), "{ok}");
+        }
+        for bad in [
+            "da", "dalpha", "dtheat3", "d3", "dd01", "da-1", "DA1", "da1x", "",
+        ] {
+            assert!(!is_param_name(bad), "{bad}");
+        }
+    }
+
+    #[test]
+    fn line_column_is_one_based() {
+        let text = "ab\ncdé\nf";
+        assert_eq!(line_column(text, 0), (1, 1));
+        assert_eq!(line_column(text, 3), (2, 1));
+        assert_eq!(line_column(text, 7), (2, 4));
+        assert_eq!(line_column(text, 100), (3, 2));
+    }
+}
