@@ -55,5 +55,22 @@ fn ci(sh: &Shell) -> Result<()> {
     cmd!(sh, "cargo doc --workspace --no-deps --quiet")
         .env("RUSTDOCFLAGS", "-D warnings")
         .run()?;
+    reproduce_tables(sh, true)
+}
+
+fn reproduce_tables(sh: &Shell, check: bool) -> Result<()> {
+    if check {
+        cmd!(
+            sh,
+            "cargo run --release --quiet -p hapcal -- reproduce --check"
+        )
+        .run()?;
+    } else {
+        cmd!(
+            sh,
+            "cargo run --release --quiet -p hapcal -- reproduce --out docs/results/paper"
+        )
+        .run()?;
+    }
     Ok(())
 }

@@ -165,13 +165,15 @@ pub fn run(
             sd0 * f,
             paper_imp.map_or("–".into(), |v| format!("{v:.2}"))
         )?;
-        golden.push((
-            format!("table3.{name}.median_improvement_pct"),
-            med,
-            0.05,
-            "%",
-        ));
-        golden.push((format!("table3.{name}.coverage95_pct"), coverage, 0.5, "%"));
+        if assigned != 0.0 {
+            golden.push((
+                format!("table3.{name}.median_improvement_pct"),
+                med,
+                0.05,
+                "%",
+            ));
+            golden.push((format!("table3.{name}.coverage95_pct"), coverage, 0.5, "%"));
+        }
     }
     files.push(("table3.csv".into(), t3));
     // Which parameters the pruning removed in seed 0, and why.
