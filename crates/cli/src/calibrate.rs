@@ -297,11 +297,15 @@ fn observations(
     obs
 }
 
-fn identify_config(sigma_m: Option<f64>) -> IdentifyConfig {
-    IdentifyConfig {
+/// Identification settings of a kinematic calibration: exact ties between collinear
+/// parameters keep the one further from the base (the gauge goes to the base side).
+pub fn identify_config(sigma_m: Option<f64>) -> IdentifyConfig {
+    let mut cfg = IdentifyConfig {
         sigma: sigma_m,
         ..IdentifyConfig::default()
-    }
+    };
+    cfg.rank.tie_break = hapcal_identify::TieBreak::LaterInLayout;
+    cfg
 }
 
 fn solve(

@@ -236,7 +236,7 @@ pub fn identify_kinematics(
     };
     let problem = CalibrationProblem::new(r.chain.clone(), obs, weights, None)?;
     let x0: Col<f64> = problem.initial_guess();
-    let identified = identify(&problem, x0, &IdentifyConfig::default())
+    let identified = identify(&problem, x0, &crate::calibrate::identify_config(None))
         .context("identifying kinematic deviations")?;
     Ok((problem, identified))
 }

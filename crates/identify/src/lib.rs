@@ -65,4 +65,6 @@ pub use covariance::{Covariance, covariance, sigma_from_residuals};
 pub use error::Error;
 pub use lm::{Fit, LmConfig, Termination, levenberg_marquardt};
 pub use problem::{EvalError, ParamLayout, ParamSpec, Problem, Role, Unit};
-pub use rank::{Identifiability, PruneReason, Pruned, RankConfig, RankConfigBase, identifiability};
+pub use rank::{
+    Identifiability, PruneReason, Pruned, RankConfig, RankConfigBase, TieBreak, identifiability,
+};

@@ -27,6 +27,23 @@ pub struct RankConfigBase {
     pub prior_dimensionless: f64,
     /// Numerical floor on `|R_kk|` of the unit-norm scaled columns.
     pub rel_tol: f64,
+    /// Which of two tied candidates becomes the pivot (see [`TieBreak`]).
+    pub tie_break: TieBreak,
+}
+
+/// Which candidate wins a near-tie of the pivot choice (exactly collinear parameters).
+///
+/// Either choice gives the same predictions; it only decides which name carries the shared
+/// direction. A kinematic chain's layout runs from the base outwards, and the usual convention
+/// (Baser & Konukseven fix `d0 = 0` of the rig row and keep `θ1`) gives a gauge freedom to the
+/// base side: [`TieBreak::LaterInLayout`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TieBreak {
+    /// The candidate earlier in the layout is kept (the default).
+    #[default]
+    EarlierInLayout,
+    /// The candidate later in the layout is kept.
+    LaterInLayout,
 }
 
 impl Default for RankConfigBase {
@@ -41,6 +58,7 @@ impl Default for RankConfigBase {
             prior_rad: 0.01,
             prior_dimensionless: 1.0,
             rel_tol: 1e-10,
+            tie_break: TieBreak::EarlierInLayout,
         }
     }
 }
@@ -54,6 +72,7 @@ impl RankConfigBase {
             prior_rad: self.prior_rad,
             prior_dimensionless: self.prior_dimensionless,
             rel_tol: self.rel_tol,
+            tie_break: self.tie_break,
         }
     }
 }
@@ -78,6 +97,8 @@ pub struct RankConfig {
     /// which is `|R_00|` of their pivoted QR) is always pruned; so is a column whose norm is
     /// below `rel_tol` times the largest candidate column norm.
     pub rel_tol: f64,
+    /// Which of two tied candidates becomes the pivot (default: the earlier in the layout).
+    pub tie_break: TieBreak,
 }
 
 impl RankConfig {
@@ -197,11 +218,9 @@ const TIE_ABS: f64 = 1e-13;
 ///    the parameters before it is below its plausible deviation). The pivot is the eligible
 ///    column of largest `ρ_j`; a column that fails a test is pruned at once, since `ρ_j` only
 ///    decreases as columns are kept. Pivoting stops when no column is eligible.
-/// 3. **Near-ties** (within 1e-6 relative) go to the candidate *later* in the layout, so exact
-///    duplicates are resolved the same way at every estimate, and a gauge freedom shared by a
-///    base-side and a distal parameter is given to the base side (a chain's layout runs from the
-///    base outwards: of the collinear `d0` and `θ1` of a distance rig, `θ1` is kept and `d0` is
-///    pruned, as Baser & Konukseven fix `d0 = 0` by choice of frames).
+/// 3. **Near-ties** (within 1e-6 relative) go to the candidate earlier in the layout (or later,
+///    with [`TieBreak::LaterInLayout`]), so exact duplicates are resolved the same way at every
+///    estimate.
 /// 4. **Reasons.** For each pruned column the same factorisation gives its least-squares
 ///    coefficients on the kept columns, `R11·z = R12[:, j]` (unscaled to parameter units by
 ///    `c_j / c_i`), and its distance `ρ_j` to their span.
@@ -306,12 +325,13 @@ pub fn identifiability(
                 }
             }
             let rho_max = eligible.iter().map(|e| e.1).fold(0.0_f64, f64::max);
-            // Eligible entries are in layout order: the last near-maximal one wins ties.
-            let Some(&(pivot, _)) = eligible
-                .iter()
-                .rev()
-                .find(|e| e.1 >= rho_max * (1.0 - TIE_REL) - TIE_ABS)
-            else {
+            // Eligible entries are in layout order: the first (or last) near-maximal one wins.
+            let near_max = |e: &&(usize, f64)| e.1 >= rho_max * (1.0 - TIE_REL) - TIE_ABS;
+            let chosen = match cfg.tie_break {
+                TieBreak::EarlierInLayout => eligible.iter().find(near_max),
+                TieBreak::LaterInLayout => eligible.iter().rev().find(near_max),
+            };
+            let Some(&(pivot, _)) = chosen else {
                 break;
             };
             open[pivot] = false;
