@@ -133,14 +133,9 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
         PANDA_2_TESTS.to_vec(),
         vec![None; PANDA_2_TESTS.len()],
     ));
-    let mut timing = Vec::new();
     for (unit, urdf, train, tests, theirs) in &units {
         let v = calibrate(sh, unit, urdf, train, tests)?;
         let model = v["model"].as_str().unwrap_or("?").to_string();
-        timing.push((
-            unit.to_string(),
-            v["elapsed_s"].as_f64().unwrap_or(f64::NAN),
-        ));
         for (test, theirs) in tests.iter().zip(theirs) {
             rows.push(Row {
                 unit: unit.to_string(),
@@ -217,12 +212,8 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     writeln!(md)?;
     writeln!(
         md,
-        "Wall time of one `hapcal calibrate` run (reading, cross-validation of two models × 5 folds, final fit, evaluation), from its JSON `elapsed_s`:"
+        "Speed: docs/results/speed.md (instruction counts and the criterion bench; wall times depend on the machine's load)."
     )?;
-    writeln!(md)?;
-    for (unit, t) in &timing {
-        writeln!(md, "- {unit}: {:.1} ms", t * 1e3)?;
-    }
     println!("{md}");
     if check {
         if !failures.is_empty() {
