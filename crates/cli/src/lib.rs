@@ -4,6 +4,7 @@
 //! Architecture invariant: *the library part never prints; `main.rs` prints what it returns.*
 
 pub mod calibrate;
+pub mod figures;
 pub mod paper;
 pub mod report;
 pub mod reproduce;

@@ -77,6 +77,28 @@ enum Command {
         #[arg(long)]
         check: bool,
     },
+    /// Simulate a measurement log (DESIGN.md §5) from a truth device: joint readings quantised
+    /// to the encoders, true transmissions and deviations, Gaussian encoder and cable noise.
+    Simulate {
+        /// Nominal device file (TOML); defaults to the truth's device, or the reference device.
+        #[arg(long)]
+        device: Option<PathBuf>,
+        /// Truth file (deviations and transmission parameters); without it, the nominal device.
+        #[arg(long)]
+        truth: Option<PathBuf>,
+        /// Random seed (the log is the same for the same seed).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Number of poses.
+        #[arg(long, default_value_t = 200)]
+        poses: usize,
+        /// Cable noise: `paper` (σ_m = 2π·R_d·σ_e, the paper's formula) or `arc-length` (R_d·σ_e).
+        #[arg(long, default_value = "paper")]
+        noise: String,
+        /// Output log CSV.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Import a URDF chain as a hapcal device file (TOML on stdout).
     ImportUrdf {
         /// The URDF file.
@@ -189,6 +211,48 @@ fn run(cli: Cli) -> Result<()> {
                     out.display()
                 );
             }
+            Ok(())
+        }
+        Command::Simulate {
+            device,
+            truth,
+            seed,
+            poses,
+            noise,
+            out,
+        } => {
+            let root = hapcal::project_root();
+            let (device, truth) = match (device, truth) {
+                (device, Some(truth_path)) => {
+                    let truth = hapcal_sim::read_truth(&truth_path)?;
+                    let device = match device {
+                        Some(d) => hapcal_io::read_device(&d)?,
+                        None => truth.read_device(&truth_path)?,
+                    };
+                    (device, truth)
+                }
+                (device, None) => {
+                    let path = device
+                        .unwrap_or_else(|| root.join("fixtures/reference-device/device.toml"));
+                    let device = hapcal_io::read_device(&path)?;
+                    let truth = hapcal_sim::Truth::nominal(path, &device);
+                    (device, truth)
+                }
+            };
+            let Some(cable) = device.cable_encoder.as_ref() else {
+                anyhow::bail!(
+                    "the device has no [cable_encoder]: nothing to simulate the distance with"
+                );
+            };
+            let noise = match noise.as_str() {
+                "paper" => hapcal_sim::NoiseModel::paper(cable),
+                "arc-length" => hapcal_sim::NoiseModel::arc_length(cable),
+                other => anyhow::bail!("--noise must be `paper` or `arc-length`, got {other:?}"),
+            };
+            let cfg = hapcal_sim::SimConfig::new(seed, poses).with_noise(noise);
+            let rows = hapcal_sim::simulate(&device, &truth, &cfg)?;
+            std::fs::write(&out, hapcal_io::write_log(&rows))?;
+            eprintln!("hapcal: wrote {} poses to {}", rows.len(), out.display());
             Ok(())
         }
         Command::ImportUrdf { urdf, tip } => {

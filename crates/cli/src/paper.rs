@@ -272,6 +272,10 @@ pub struct SeedResult {
     pub kinematics: Identified,
     /// Step 2 without transmissions.
     pub kinematics_only: Identified,
+    /// Joint identification of both steps; kinematic parameters start at `joint_offset`.
+    pub joint: Identified,
+    /// Index of the first kinematic parameter in `joint`'s layout.
+    pub joint_offset: usize,
     /// Fresh-pose accuracy.
     pub validation: Validation,
 }
@@ -299,10 +303,14 @@ pub fn run_seed(r: &Reference, seed: u64, n_poses: usize) -> Result<SeedResult> 
         &kinematics,
         &kinematics_only,
     )?;
+    let (joint_problem, joint) = identify_jointly(r, &rows, &transmissions, &kinematics)?;
+    let joint_offset = joint_problem.n_trans();
     Ok(SeedResult {
         transmissions,
         kinematics,
         kinematics_only,
+        joint,
+        joint_offset,
         validation,
     })
 }
@@ -393,17 +401,22 @@ pub struct ParamOutcome {
 
 /// Per-parameter outcomes of step 2 in one seed.
 pub fn kinematic_outcomes(r: &Reference, kin: &Identified) -> Vec<ParamOutcome> {
+    kinematic_outcomes_at(r, kin, 0)
+}
+
+/// Per-parameter outcomes of an identification whose kinematic parameters start at `offset`.
+pub fn kinematic_outcomes_at(r: &Reference, kin: &Identified, offset: usize) -> Vec<ParamOutcome> {
     let stds = kin.covariance.std();
     r.chain
         .params()
         .iter()
         .enumerate()
         .map(|(i, p)| {
-            let pos = kin.covariance.free.iter().position(|&f| f == i);
+            let pos = kin.covariance.free.iter().position(|&f| f == offset + i);
             ParamOutcome {
                 name: p.name.clone(),
                 assigned: r.x_truth[i],
-                identified: pos.map(|_| kin.fit.x[i]),
+                identified: pos.map(|_| kin.fit.x[offset + i]),
                 std: pos.map(|k| stds[k]),
             }
         })
@@ -415,4 +428,299 @@ pub fn layout_names(p: &CalibrationProblem) -> Vec<String> {
     (0..p.layout().len())
         .map(|i| p.layout().name(i).to_string())
         .collect()
+}
+
+/// Both steps in one least-squares problem (DESIGN.md §3, "one joint identification"): the
+/// external-encoder residuals of every transmission and the cable-distance residuals of the
+/// corrected chain share the transmission parameters, so the transmission uncertainty reaches
+/// the kinematic covariance. `x = [capstan 1–3 (6 each) | joint-4 Chebyshev (degree+1) |
+/// kinematic deviations]`.
+pub struct JointProblem<'a> {
+    r: &'a Reference,
+    capstans: Vec<(usize, Capstan)>,
+    lo: f64,
+    hi: f64,
+    theta: Vec<Vec<f64>>,
+    ext: Vec<Vec<f64>>,
+    distance_m: Vec<f64>,
+    /// Standard deviation of the external-encoder residuals, rad.
+    pub sigma_ext_rad: f64,
+    /// Standard deviation of the distance residuals, m.
+    pub sigma_distance_m: f64,
+    layout: hapcal_identify::ParamLayout,
+}
+
+impl<'a> JointProblem<'a> {
+    /// Builds the problem from a log with ext1..ext4.
+    ///
+    /// # Errors
+    /// Missing ext columns or capstans.
+    pub fn new(r: &'a Reference, rows: &[LogRow]) -> Result<Self> {
+        use hapcal_identify::{ParamSpec, Role, Unit};
+        let mut specs = Vec::new();
+        let mut capstans = Vec::new();
+        let names = [
+            ("c", Unit::Radian),
+            ("re", Unit::Dimensionless),
+            ("r_o", Unit::Meter),
+            ("beta_o", Unit::Radian),
+            ("r_i", Unit::Meter),
+            ("beta_i", Unit::Radian),
+        ];
+        for joint in 1..PARALLELOGRAM_JOINT {
+            capstans.push((joint, r.capstan(joint)?));
+            for (n, unit) in names {
+                specs.push(ParamSpec {
+                    name: format!("capstan{joint}.{n}"),
+                    unit,
+                    role: Role::Model,
+                });
+            }
+        }
+        for k in 0..=POLY_DEGREE {
+            specs.push(ParamSpec {
+                name: format!("joint{PARALLELOGRAM_JOINT}.cheb{k}"),
+                unit: Unit::Radian,
+                role: Role::Model,
+            });
+        }
+        for p in r.chain.params() {
+            let unit = match p.unit {
+                hapcal_kinematics::ParamUnit::Meter => Unit::Meter,
+                hapcal_kinematics::ParamUnit::Radian => Unit::Radian,
+            };
+            specs.push(ParamSpec {
+                name: p.name.clone(),
+                unit,
+                role: Role::Model,
+            });
+        }
+        let ext = (1..=PARALLELOGRAM_JOINT)
+            .map(|j| ext(rows, j))
+            .collect::<Result<Vec<_>>>()?;
+        let (lo, hi) = r.device.joint_limits()[PARALLELOGRAM_JOINT - 1];
+        Ok(Self {
+            r,
+            capstans,
+            lo,
+            hi,
+            theta: rows.iter().map(|row| row.q.clone()).collect(),
+            ext,
+            distance_m: rows.iter().map(|row| row.distance_m).collect(),
+            sigma_ext_rad: r.noise.sigma_e_rad,
+            sigma_distance_m: r.noise.sigma_m_m,
+            layout: hapcal_identify::ParamLayout::new(specs),
+        })
+    }
+
+    fn n_trans(&self) -> usize {
+        6 * self.capstans.len() + POLY_DEGREE + 1
+    }
+
+    /// The transmissions that `x` describes.
+    ///
+    /// # Errors
+    /// An invalid polynomial domain (not possible for a device read from a file).
+    pub fn transmissions(
+        &self,
+        x: faer::ColRef<'_, f64>,
+    ) -> Result<(Vec<CapstanParams>, Chebyshev)> {
+        let caps = (0..self.capstans.len())
+            .map(|c| CapstanParams {
+                c_rad: x[6 * c],
+                re: x[6 * c + 1],
+                r_o_m: x[6 * c + 2],
+                beta_o_rad: x[6 * c + 3],
+                r_i_m: x[6 * c + 4],
+                beta_i_rad: x[6 * c + 5],
+            })
+            .collect();
+        let off = 6 * self.capstans.len();
+        let poly = Chebyshev::try_new(
+            self.lo,
+            self.hi,
+            (0..=POLY_DEGREE).map(|k| x[off + k]).collect(),
+        )?;
+        Ok((caps, poly))
+    }
+
+    /// Start vector from a two-step solution.
+    pub fn start_from(&self, t: &TransmissionFit, kin: &Identified) -> Col<f64> {
+        let mut x = Col::zeros(self.layout.len());
+        for (c, fit) in t.capstans.iter().enumerate() {
+            let p = fit.params;
+            for (k, v) in [p.c_rad, p.re, p.r_o_m, p.beta_o_rad, p.r_i_m, p.beta_i_rad]
+                .into_iter()
+                .enumerate()
+            {
+                x[6 * c + k] = v;
+            }
+        }
+        let off = 6 * self.capstans.len();
+        for (k, v) in t.poly.coeffs.iter().enumerate() {
+            x[off + k] = *v;
+        }
+        for i in 0..self.r.chain.n_params() {
+            x[self.n_trans() + i] = kin.fit.x[i];
+        }
+        x
+    }
+
+    fn eval(
+        &self,
+        x: faer::ColRef<'_, f64>,
+        mut out: Option<faer::ColMut<'_, f64>>,
+        mut jac: Option<faer::MatMut<'_, f64>>,
+    ) -> Result<(), hapcal_identify::EvalError> {
+        let bad = |e: &dyn std::fmt::Display| hapcal_identify::EvalError {
+            reason: e.to_string(),
+        };
+        let (caps, poly) = self.transmissions(x).map_err(|e| bad(&e))?;
+        let nt = self.n_trans();
+        let n_kin = self.r.chain.n_params();
+        let x_kin: Vec<f64> = (0..n_kin).map(|i| x[nt + i]).collect();
+        let n_rows = self.theta.len();
+        if let Some(j) = jac.as_mut() {
+            j.fill(0.0);
+        }
+        let off_poly = 6 * self.capstans.len();
+        let mut buf = vec![0.0; 3 * n_kin];
+        let mut ws = hapcal_kinematics::FkWorkspace::new(&self.r.chain);
+        for k in 0..n_rows {
+            let theta = &self.theta[k];
+            let mut q = theta.clone();
+            // dq_j/d(transmission parameter) for the corrected joints.
+            let mut dq: Vec<(usize, usize, f64)> = Vec::new();
+            for (c, (joint, capstan)) in self.capstans.iter().enumerate() {
+                let t = JointRad(theta[joint - 1]);
+                q[joint - 1] = capstan.output_rad(&caps[c], t);
+                let g = capstan.error_grad(&caps[c], t);
+                let row = (joint - 1) * n_rows + k;
+                if let Some(o) = out.as_mut() {
+                    o[row] = (q[joint - 1] - self.ext[joint - 1][k]) / self.sigma_ext_rad;
+                }
+                for (p, gp) in g.iter().enumerate() {
+                    dq.push((joint - 1, 6 * c + p, *gp));
+                    if let Some(jm) = jac.as_mut() {
+                        jm[(row, 6 * c + p)] = gp / self.sigma_ext_rad;
+                    }
+                }
+            }
+            let j4 = PARALLELOGRAM_JOINT - 1;
+            q[j4] = theta[j4] + poly.eval(theta[j4]);
+            let basis = poly.basis(theta[j4]);
+            let row = j4 * n_rows + k;
+            if let Some(o) = out.as_mut() {
+                o[row] = (q[j4] - self.ext[j4][k]) / self.sigma_ext_rad;
+            }
+            for (b, v) in basis.iter().enumerate() {
+                dq.push((j4, off_poly + b, *v));
+                if let Some(jm) = jac.as_mut() {
+                    jm[(row, off_poly + b)] = v / self.sigma_ext_rad;
+                }
+            }
+            let drow = PARALLELOGRAM_JOINT * n_rows + k;
+            let p = if jac.is_some() {
+                self.r
+                    .chain
+                    .point_and_jacobian_in(&x_kin, &q, &mut ws, &mut buf)
+            } else {
+                self.r.chain.end_point(&x_kin, &q)
+            };
+            let norm = p.coords.norm();
+            if let Some(o) = out.as_mut() {
+                o[drow] = (norm - self.distance_m[k]) / self.sigma_distance_m;
+            }
+            if let Some(jm) = jac.as_mut() {
+                let u = if norm > 0.0 {
+                    p.coords / norm
+                } else {
+                    hapcal_kinematics::Vector3::zeros()
+                };
+                for i in 0..n_kin {
+                    jm[(drow, nt + i)] =
+                        (u[0] * buf[3 * i] + u[1] * buf[3 * i + 1] + u[2] * buf[3 * i + 2])
+                            / self.sigma_distance_m;
+                }
+                let jq = self.r.chain.geometric_jacobian(&x_kin, &q);
+                for (joint, col, dqdp) in dq {
+                    let dd = (0..3).map(|a| u[a] * jq[(a, joint)]).sum::<f64>();
+                    jm[(drow, col)] += dd * dqdp / self.sigma_distance_m;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+impl hapcal_identify::Problem for JointProblem<'_> {
+    fn layout(&self) -> &hapcal_identify::ParamLayout {
+        &self.layout
+    }
+    fn n_residuals(&self) -> usize {
+        (PARALLELOGRAM_JOINT + 1) * self.theta.len()
+    }
+    fn residuals(
+        &self,
+        x: faer::ColRef<'_, f64>,
+        out: faer::ColMut<'_, f64>,
+    ) -> Result<(), hapcal_identify::EvalError> {
+        self.eval(x, Some(out), None)
+    }
+    fn jacobian(
+        &self,
+        x: faer::ColRef<'_, f64>,
+        jac: faer::MatMut<'_, f64>,
+    ) -> Result<(), hapcal_identify::EvalError> {
+        self.eval(x, None, Some(jac))
+    }
+}
+
+/// Settings of the joint identification: transmission priors (phases anywhere), distal
+/// parameters kept on exact ties, residuals already divided by their sigmas.
+pub fn joint_config() -> IdentifyConfig {
+    let mut cfg = transmission_config();
+    cfg.rank.prior_m = 0.01;
+    cfg.rank.tie_break = hapcal_identify::TieBreak::LaterInLayout;
+    cfg
+}
+
+/// Joint identification, started from the two-step solution. Each residual group's sigma is
+/// re-estimated from the first fit (joint-reading quantisation adds to the cable noise, so the
+/// nominal σ_m understates it) and the problem refitted with those sigmas, so the covariance
+/// is honest for both groups.
+///
+/// # Errors
+/// An identification failure.
+pub fn identify_jointly<'a>(
+    r: &'a Reference,
+    rows: &[LogRow],
+    t: &TransmissionFit,
+    kin: &Identified,
+) -> Result<(JointProblem<'a>, Identified)> {
+    let mut problem = JointProblem::new(r, rows)?;
+    let x0 = problem.start_from(t, kin);
+    let first = identify(&problem, x0.clone(), &joint_config()).context("joint identification")?;
+    let n = rows.len();
+    let res = &first.fit.residuals;
+    let group_rms = |from: usize, to: usize| {
+        ((from..to).map(|i| res[i] * res[i]).sum::<f64>() / (to - from) as f64).sqrt()
+    };
+    let n_kept_kin = first
+        .identifiability
+        .kept
+        .iter()
+        .filter(|&&i| i >= problem.n_trans())
+        .count();
+    let n_kept_trans = first.identifiability.kept.len() - n_kept_kin;
+    let ext_scale = group_rms(0, PARALLELOGRAM_JOINT * n)
+        * ((PARALLELOGRAM_JOINT * n) as f64 / (PARALLELOGRAM_JOINT * n - n_kept_trans) as f64)
+            .sqrt();
+    let dist_scale = group_rms(PARALLELOGRAM_JOINT * n, (PARALLELOGRAM_JOINT + 1) * n)
+        * (n as f64 / (n - n_kept_kin.min(n - 1)) as f64).sqrt();
+    problem.sigma_ext_rad *= ext_scale;
+    problem.sigma_distance_m *= dist_scale;
+    let second = identify(&problem, first.fit.x.clone(), &joint_config())
+        .context("joint identification (reweighted)")?;
+    Ok((problem, second))
 }

@@ -1,5 +1,7 @@
 //! Integration tests of hapcal-problems: analytic Jacobians against central differences.
 
+mod crosscheck;
+
 use faer::{Col, Mat};
 use hapcal_identify::Problem;
 use hapcal_kinematics::{Chain, Placement};
