@@ -278,6 +278,8 @@ pub struct SeedResult {
     pub joint_offset: usize,
     /// Fresh-pose accuracy.
     pub validation: Validation,
+    /// Per fresh pose: position error before/after (m), orientation error before/after (rad).
+    pub pose_errors: [Vec<f64>; 4],
 }
 
 fn rms(v: &[f64]) -> f64 {
@@ -295,7 +297,7 @@ pub fn run_seed(r: &Reference, seed: u64, n_poses: usize) -> Result<SeedResult> 
     let transmissions = identify_transmissions(r, &rows)?;
     let (_, kinematics) = identify_kinematics(r, &rows, Some(&transmissions))?;
     let (_, kinematics_only) = identify_kinematics(r, &rows, None)?;
-    let validation = validate(
+    let (validation, pose_errors) = validate(
         r,
         seed + 1_000_000,
         n_poses,
@@ -312,6 +314,7 @@ pub fn run_seed(r: &Reference, seed: u64, n_poses: usize) -> Result<SeedResult> 
         joint,
         joint_offset,
         validation,
+        pose_errors,
     })
 }
 
@@ -330,7 +333,7 @@ pub fn validate(
     t: &TransmissionFit,
     kin: &Identified,
     kin_only: &Identified,
-) -> Result<Validation> {
+) -> Result<(Validation, [Vec<f64>; 4])> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let readings = hapcal_sim::sample_readings(&r.device, &mut rng, n_poses);
     let n = r.chain.n_params();
@@ -374,7 +377,7 @@ pub fn validate(
         da.push(r.chain.end_point(&x_cal, &q_cor).coords.norm() - d_true);
         dk.push(r.chain.end_point(&x_only, &theta).coords.norm() - d_true);
     }
-    Ok(Validation {
+    let v = Validation {
         position_rms_before_m: rms(&pb),
         position_rms_after_m: rms(&pa),
         orientation_rms_before_rad: rms(&ob),
@@ -383,7 +386,8 @@ pub fn validate(
         distance_rms_before_m: rms(&db),
         distance_rms_after_m: rms(&da),
         distance_rms_kinematics_only_m: rms(&dk),
-    })
+    };
+    Ok((v, [pb, pa, ob, oa]))
 }
 
 /// A kinematic parameter's outcome in one seed.

@@ -102,6 +102,8 @@ pub fn run(
     )?;
     writeln!(md, "|---|---|---|---|---|---|---|")?;
     let mut pruned_always = Vec::new();
+    let (mut bar_names, mut bar_med, mut bar_p5, mut bar_p95, mut bar_paper) =
+        (vec![], vec![], vec![], vec![], vec![]);
     for (i, name) in names.iter().enumerate() {
         let (f, unit) = display_unit(name);
         let assigned = r.x_truth[i];
@@ -165,6 +167,11 @@ pub fn run(
             sd0 * f,
             paper_imp.map_or("–".into(), |v| format!("{v:.2}"))
         )?;
+        bar_names.push(name.clone());
+        bar_med.push(med);
+        bar_p5.push(p5);
+        bar_p95.push(p95);
+        bar_paper.push(paper_imp);
         if assigned != 0.0 {
             golden.push((
                 format!("table3.{name}.median_improvement_pct"),
@@ -176,6 +183,10 @@ pub fn run(
         }
     }
     files.push(("table3.csv".into(), t3));
+    files.push((
+        "table3_improvement.svg".into(),
+        crate::figures::improvement_bars(&bar_names, &bar_med, &bar_p5, &bar_p95, &bar_paper)?,
+    ));
     // Which parameters the pruning removed in seed 0, and why.
     writeln!(
         md,
@@ -442,6 +453,19 @@ pub fn run(
         fit_err.push(poly.eval(t) - e);
     }
     files.push(("fig7_polynomial.csv".into(), fig7));
+    {
+        let (mut th, mut te, mut tp) = (vec![], vec![], vec![]);
+        for (k, err) in fit_err.iter().enumerate() {
+            let t = lo + (hi - lo) * k as f64 / 200.0;
+            th.push(t);
+            tp.push(poly.eval(t));
+            te.push(poly.eval(t) - err);
+        }
+        files.push((
+            "fig7_polynomial.svg".into(),
+            crate::figures::fig7_polynomial(&th, &te, &tp, &[])?,
+        ));
+    }
     let poly_rms = hapcal_metrics::rms(&fit_err);
     let k = poly.to_monomial();
     writeln!(
@@ -593,6 +617,11 @@ pub fn run(
         )?;
     }
     files.push(("fig8_validation.csv".into(), fig8));
+    let [pb, pa, ob, oa] = &seeds[0].pose_errors;
+    files.push((
+        "fig8_validation.svg".into(),
+        crate::figures::fig8_validation(pb, pa, ob, oa)?,
+    ));
     golden.push((
         "fig8.median_position_improvement_pct".into(),
         quantile(
