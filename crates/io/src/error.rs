@@ -253,8 +253,10 @@ impl Error {
     }
 }
 
-/// 1-based (line, column) of byte offset `offset` in `text`; the column counts characters.
-pub(crate) fn line_column(text: &str, offset: usize) -> (u64, u64) {
+/// 1-based (line, column) of byte offset `offset` in `text`; the column counts characters
+/// (so a message points where an editor does). Offsets past the end or inside a multi-byte
+/// character are clamped; never panics. Used for TOML spans here and in `hapcal-sim`.
+pub fn line_column(text: &str, offset: usize) -> (u64, u64) {
     let offset = offset.min(text.len());
     // Step back to a char boundary so that slicing cannot panic.
     let offset = (0..=offset)

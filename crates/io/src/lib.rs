@@ -68,7 +68,7 @@ pub use device::{
     CableEncoder, CalibratedValue, Calibration, CalibrationMeta, Capstan, Device, DhEntry, Handle,
     JointRef, JointSpec, Parallelogram, UrdfSource, parse_device, read_device, write_device,
 };
-pub use error::Error;
+pub use error::{Error, line_column};
 pub use hapcal_kinematics::{DhConvention, DhRow, Placement};
 pub use log::{Log, LogRow, N_EXT, read_log, write_log};
 pub use mukca::{SocketPlacement, SocketSamples, read_mukca_paths, read_mukca_placement};

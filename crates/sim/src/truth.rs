@@ -203,7 +203,7 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
     let raw: RawTruth = toml::from_str(text).map_err(|e| {
         let (line, column) = e
             .span()
-            .map_or((1, 1), |span| line_column(text, span.start));
+            .map_or((1, 1), |span| hapcal_io::line_column(text, span.start));
         Error::Toml {
             path: path.to_path_buf(),
             line,
@@ -212,7 +212,7 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
         }
     })?;
     let invalid = |offset: usize, message: String| {
-        let (line, column) = line_column(text, offset);
+        let (line, column) = hapcal_io::line_column(text, offset);
         Error::InvalidTruth {
             path: path.to_path_buf(),
             line,
@@ -314,20 +314,6 @@ fn is_param_name(name: &str) -> bool {
         })
 }
 
-/// 1-based (line, column) of byte offset `offset` in `text`; the column counts characters.
-fn line_column(text: &str, offset: usize) -> (u64, u64) {
-    let offset = offset.min(text.len());
-    let offset = (0..=offset)
-        .rev()
-        .find(|&i| text.is_char_boundary(i))
-        .unwrap_or(0);
-    let before = text.get(..offset).unwrap_or("");
-    let line = before.matches('\n').count() as u64 + 1;
-    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
-    let column = before.get(line_start..).unwrap_or("").chars().count() as u64 + 1;
-    (line, column)
-}
-
 /// The file as parsed, with spans for messages.
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -397,7 +383,7 @@ mod ordered_map {
 
 #[cfg(test)]
 mod tests {
-    use super::{is_param_name, line_column};
+    use super::is_param_name;
 
     #[test]
     fn parameter_names_have_the_chain_form() {
@@ -409,14 +395,5 @@ mod tests {
         ] {
             assert!(!is_param_name(bad), "{bad}");
         }
-    }
-
-    #[test]
-    fn line_column_is_one_based() {
-        let text = "ab\ncdé\nf";
-        assert_eq!(line_column(text, 0), (1, 1));
-        assert_eq!(line_column(text, 3), (2, 1));
-        assert_eq!(line_column(text, 7), (2, 4));
-        assert_eq!(line_column(text, 100), (3, 2));
     }
 }
