@@ -8,7 +8,7 @@ use faer::Col;
 use hapcal_identify::{Identified, IdentifyConfig, Problem, identify};
 use hapcal_io::{Device, LogRow};
 use hapcal_kinematics::{Chain, DhRow};
-use hapcal_metrics::pose_error;
+use hapcal_metrics::{pose_error, rms};
 use hapcal_problems::{CalibrationProblem, Observations, Row, RowKind, Weights};
 use hapcal_sim::{NoiseModel, SimConfig, Truth};
 use hapcal_transmission::{
@@ -151,11 +151,9 @@ fn ext(rows: &[LogRow], joint: usize) -> Result<Vec<f64>> {
 /// plausible ranges are the transmission's, not the kinematic ones: an eccentricity phase may be
 /// anywhere in (−π, π], an eccentricity up to 1 mm, a ratio error up to 0.1.
 pub fn transmission_config() -> IdentifyConfig {
-    let mut cfg = IdentifyConfig {
-        sigma: Some(1.0),
-        ..IdentifyConfig::default()
-    };
-    cfg.rank.prior_rad = std::f64::consts::PI;
+    // The capstan problem's own settings (σ = 1, phases anywhere), with the ranges of this
+    // device's transmissions: eccentricities up to 1 mm, ratio errors up to 0.1.
+    let mut cfg = CapstanProblem::identify_config();
     cfg.rank.prior_m = 1e-3;
     cfg.rank.prior_dimensionless = 0.1;
     cfg
@@ -280,10 +278,6 @@ pub struct SeedResult {
     pub validation: Validation,
     /// Per fresh pose: position error before/after (m), orientation error before/after (rad).
     pub pose_errors: [Vec<f64>; 4],
-}
-
-fn rms(v: &[f64]) -> f64 {
-    hapcal_metrics::rms(v)
 }
 
 /// Runs the pipeline for one seed: simulate `n_poses` (seed), identify, validate on `n_poses`
@@ -530,14 +524,7 @@ impl<'a> JointProblem<'a> {
         x: faer::ColRef<'_, f64>,
     ) -> Result<(Vec<CapstanParams>, Chebyshev)> {
         let caps = (0..self.capstans.len())
-            .map(|c| CapstanParams {
-                c_rad: x[6 * c],
-                re: x[6 * c + 1],
-                r_o_m: x[6 * c + 2],
-                beta_o_rad: x[6 * c + 3],
-                r_i_m: x[6 * c + 4],
-                beta_i_rad: x[6 * c + 5],
-            })
+            .map(|c| CapstanProblem::params(x.subrows(6 * c, 6)))
             .collect();
         let off = 6 * self.capstans.len();
         let poly = Chebyshev::try_new(
@@ -552,13 +539,8 @@ impl<'a> JointProblem<'a> {
     pub fn start_from(&self, t: &TransmissionFit, kin: &Identified) -> Col<f64> {
         let mut x = Col::zeros(self.layout.len());
         for (c, fit) in t.capstans.iter().enumerate() {
-            let p = fit.params;
-            for (k, v) in [p.c_rad, p.re, p.r_o_m, p.beta_o_rad, p.r_i_m, p.beta_i_rad]
-                .into_iter()
-                .enumerate()
-            {
-                x[6 * c + k] = v;
-            }
+            x.subrows_mut(6 * c, 6)
+                .copy_from(CapstanProblem::col(&fit.params));
         }
         let off = 6 * self.capstans.len();
         for (k, v) in t.poly.coeffs.iter().enumerate() {
