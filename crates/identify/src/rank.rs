@@ -218,9 +218,13 @@ const TIE_ABS: f64 = 1e-13;
 ///    the parameters before it is below its plausible deviation). The pivot is the eligible
 ///    column of largest `ρ_j`; a column that fails a test is pruned at once, since `ρ_j` only
 ///    decreases as columns are kept. Pivoting stops when no column is eligible.
-/// 3. **Near-ties** (within 1e-6 relative) go to the candidate earlier in the layout (or later,
-///    with [`TieBreak::LaterInLayout`]), so exact duplicates are resolved the same way at every
-///    estimate.
+/// 3. **Near-ties** go to the candidate earlier in the layout (or later, with
+///    [`TieBreak::LaterInLayout`]), so exact duplicates are resolved the same way at every
+///    estimate. Two candidates tie when their `ρ` agree within 1e-6 relative, or when they are
+///    interchangeable at this noise level: whichever of the two is kept, the other's component
+///    orthogonal to it fails the uncertainty test. (Baser & Konukseven's `d0` and `θ1` are
+///    exactly collinear at the nominal model and nearly so at the estimate; the small
+///    deviations must not decide which name is kept.)
 /// 4. **Reasons.** For each pruned column the same factorisation gives its least-squares
 ///    coefficients on the kept columns, `R11·z = R12[:, j]` (unscaled to parameter units by
 ///    `c_j / c_i`), and its distance `ρ_j` to their span.
@@ -325,11 +329,25 @@ pub fn identifiability(
                 }
             }
             let rho_max = eligible.iter().map(|e| e.1).fold(0.0_f64, f64::max);
-            // Eligible entries are in layout order: the first (or last) near-maximal one wins.
-            let near_max = |e: &&(usize, f64)| e.1 >= rho_max * (1.0 - TIE_REL) - TIE_ABS;
+            // The greedy pivot: the largest ρ (first in layout order among exact maxima).
+            let greedy = eligible.iter().find(|e| e.1 == rho_max).map(|e| e.0);
+            // A candidate ties with it when ρ is within rounding of the maximum, or (model phase)
+            // when the two are interchangeable at this noise level: whichever is kept, the
+            // other's remaining component fails the uncertainty test.
+            let ties = |e: &&(usize, f64)| {
+                e.1 >= rho_max * (1.0 - TIE_REL) - TIE_ABS
+                    || (!nuisance_phase
+                        && greedy.is_some_and(|g| {
+                            interchangeable(&w[g][k..], &w[e.0][k..], |perp_g, perp_e| {
+                                cfg.sigma / (c[g] * perp_g) > prior[g]
+                                    && cfg.sigma / (c[e.0] * perp_e) > prior[e.0]
+                            })
+                        }))
+            };
+            // Eligible entries are in layout order: the first (or last) tied one wins.
             let chosen = match cfg.tie_break {
-                TieBreak::EarlierInLayout => eligible.iter().find(near_max),
-                TieBreak::LaterInLayout => eligible.iter().rev().find(near_max),
+                TieBreak::EarlierInLayout => eligible.iter().find(ties),
+                TieBreak::LaterInLayout => eligible.iter().rev().find(ties),
             };
             let Some(&(pivot, _)) = chosen else {
                 break;
@@ -343,6 +361,18 @@ pub fn identifiability(
     }
 
     explain(&w, layout, cfg, &cols, &c, &kept_pos, &zero_cols, &norm)
+}
+
+/// Whether two remaining columns `a`, `b` (same length) are interchangeable: `fails(ρ_a⊥b,
+/// ρ_b⊥a)` with `ρ_a⊥b` the norm of `a`'s component orthogonal to `b` (and conversely).
+fn interchangeable(a: &[f64], b: &[f64], fails: impl Fn(f64, f64) -> bool) -> bool {
+    let (na, nb) = (norm_l2(a), norm_l2(b));
+    if na == 0.0 || nb == 0.0 {
+        return false;
+    }
+    let cos = a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>() / (na * nb);
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    fails(na * sin, nb * sin)
 }
 
 fn norm_l2(x: &[f64]) -> f64 {
@@ -555,6 +585,31 @@ mod tests {
         assert_eq!(id.pruned_names(), ["weak"]);
         assert_eq!(id.pruned[0].reason, PruneReason::Insensitive);
         assert!((id.pruned[0].std_if_kept - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn columns_interchangeable_at_the_noise_level_follow_the_tie_break() {
+        // After the nuisance column c is projected out, d0 keeps ρ = 0.70711 and theta1
+        // ρ = 0.70675: 5e-4 apart (far beyond the rounding tie), so the greedy pivot is d0. Their
+        // remaining parts are 1e-3 rad apart, so whichever is kept, the other's std would be
+        // ≈ 1e-4 / (1.41 · 7.1e-4) ≈ 0.1 m > the 0.01 m prior: interchangeable at sigma = 1e-4,
+        // and the tie-break, not the greedy pivot, must decide.
+        let cols = [[1.0, 0.0, 0.0, 0.0], [1.0, 1.0, 0.0, 0.0], [1.001, 1.0, 0.001, 0.0]];
+        let jac = Mat::from_fn(4, 3, |i, j| cols[j][i]);
+        let l = layout(&[
+            ("c", Role::Nuisance),
+            ("d0", Role::Model),
+            ("theta1", Role::Model),
+        ]);
+        let mut base = RankConfigBase::default();
+        let earlier = identifiability(jac.as_ref(), &l, &[0, 1, 2], &base.with_sigma(1e-4));
+        assert_eq!(earlier.pruned_names(), ["theta1"]);
+        base.tie_break = TieBreak::LaterInLayout;
+        let later = identifiability(jac.as_ref(), &l, &[0, 1, 2], &base.with_sigma(1e-4));
+        assert_eq!(later.pruned_names(), ["d0"]);
+        // Without noise they are distinguishable: both kept.
+        let exact = identifiability(jac.as_ref(), &l, &[0, 1, 2], &base.with_sigma(0.0));
+        assert!(exact.pruned.is_empty(), "{:?}", exact.pruned);
     }
 
     #[test]
