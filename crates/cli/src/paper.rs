@@ -239,6 +239,87 @@ pub fn identify_kinematics(
     Ok((problem, identified))
 }
 
+/// Step 2's covariance with step 1's uncertainty propagated (the two-step estimator's
+/// covariance, Murphy & Topel 1985, "Estimation and inference in two-step econometric models",
+/// J. Bus. Econ. Stat. 3(4), eq. 15 without the cross term, the two steps using independent
+/// sensors):
+///
+/// `C = C₂ + G·C₁·Gᵀ`, `G = (AᵀA)⁻¹·AᵀB`,
+///
+/// with `C₂` step 2's own covariance (`kin.covariance`, kept kinematic parameters), `C₁` the
+/// block-diagonal covariance of step 1's transmission parameters (each capstan's and the
+/// joint-4 polynomial's kept parameters), `A` (`n × k`, m per kinematic unit) the distance
+/// residuals' Jacobian w.r.t. the kept kinematic parameters and `B` (`n × t`, m per
+/// transmission unit) w.r.t. the transmission parameters through the corrected joint angles,
+/// both at the two-step estimate. `G` is how a transmission error moves the kinematic
+/// estimate; without the `G·C₁·Gᵀ` term the confidence intervals of step 2 are too narrow.
+/// `C₂`'s residual-estimated σ² is first reduced by the transmission errors' expected share of
+/// step 2's residual sum of squares, `tr(C₁·EᵀE)` with `E = B − A·G`, so they are not counted
+/// twice.
+///
+/// Returns the `k × k` matrix in the order of `kin.covariance.free`.
+///
+/// # Errors
+/// Missing ext columns, or an evaluation failure of the joint problem.
+pub fn propagate_transmission_covariance(
+    r: &Reference,
+    rows: &[LogRow],
+    t: &TransmissionFit,
+    kin: &Identified,
+) -> Result<faer::Mat<f64>> {
+    use faer::linalg::solvers::SolveLstsq;
+    use hapcal_identify::Problem;
+    let problem = JointProblem::new(r, rows)?;
+    let x = problem.start_from(t, kin);
+    let (n, nt) = (rows.len(), problem.n_trans());
+    let mut jac = faer::Mat::zeros(problem.n_residuals(), problem.layout().len());
+    problem
+        .jacobian(x.as_ref(), jac.as_mut())
+        .map_err(|e| anyhow::anyhow!("joint problem Jacobian: {}", e.reason))?;
+    // Distance rows, back in metres.
+    let d0 = PARALLELOGRAM_JOINT * n;
+    let scale = problem.sigma_distance_m;
+    let free = &kin.covariance.free;
+    let a = faer::Mat::from_fn(n, free.len(), |i, k| jac[(d0 + i, nt + free[k])] * scale);
+    let b = faer::Mat::from_fn(n, nt, |i, j| jac[(d0 + i, j)] * scale);
+    // C₁: block diagonal over the capstans and the polynomial.
+    let mut c1 = faer::Mat::<f64>::zeros(nt, nt);
+    let blocks = (t.capstans.iter().enumerate())
+        .map(|(c, fit)| (6 * c, &fit.identified.covariance))
+        .chain(std::iter::once((6 * t.capstans.len(), &t.poly_identified.covariance)));
+    for (off, cov) in blocks {
+        for (a_i, &fi) in cov.free.iter().enumerate() {
+            for (b_i, &fj) in cov.free.iter().enumerate() {
+                c1[(off + fi, off + fj)] = cov.matrix[(a_i, b_i)];
+            }
+        }
+    }
+    // G = (AᵀA)⁻¹AᵀB by QR of A (least squares, column by column).
+    let g = a.qr().solve_lstsq(b.as_ref());
+    // C₂'s σ was estimated from step 2's residuals, which also carry the transmission errors
+    // (their part outside A's span, E = B − A·G, expected sum of squares tr(C₁·EᵀE)). That
+    // part is counted by G·C₁·Gᵀ, so it is taken out of C₂'s σ² rather than counted twice.
+    let e = &b - &a * &g;
+    let ete = e.transpose() * &e;
+    let trans_ss: f64 = (0..nt)
+        .flat_map(|i| (0..nt).map(move |j| (i, j)))
+        .map(|(i, j)| c1[(i, j)] * ete[(j, i)])
+        .sum();
+    let mut res = faer::Col::zeros(problem.n_residuals());
+    problem
+        .residuals(x.as_ref(), res.as_mut())
+        .map_err(|e| anyhow::anyhow!("joint problem residuals: {}", e.reason))?;
+    let rss: f64 = (0..n).map(|i| (res[d0 + i] * scale).powi(2)).sum();
+    let noise_share = if rss > 0.0 {
+        ((rss - trans_ss) / rss).clamp(0.0, 1.0)
+    } else {
+        1.0
+    };
+    let mut c = &kin.covariance.matrix * faer::Scale(noise_share);
+    c += &g * &c1 * g.transpose();
+    Ok(c)
+}
+
 /// Accuracy on fresh poses (paper Fig. 8 and the distance RMS of eq. 9).
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
 pub struct Validation {
@@ -289,7 +370,9 @@ pub fn run_seed(r: &Reference, seed: u64, n_poses: usize) -> Result<SeedResult> 
     let cfg = SimConfig::new(seed, n_poses).with_noise(r.noise);
     let rows = hapcal_sim::simulate(&r.device, &r.truth, &cfg)?;
     let transmissions = identify_transmissions(r, &rows)?;
-    let (_, kinematics) = identify_kinematics(r, &rows, Some(&transmissions))?;
+    let (_, mut kinematics) = identify_kinematics(r, &rows, Some(&transmissions))?;
+    kinematics.covariance.matrix =
+        propagate_transmission_covariance(r, &rows, &transmissions, &kinematics)?;
     let (_, kinematics_only) = identify_kinematics(r, &rows, None)?;
     let (validation, pose_errors) = validate(
         r,
