@@ -36,7 +36,8 @@ impl Readings {
 /// τ_m = diag((dq/dθ)_model / R) · J_b,model(θ_c)ᵀ · w_cmd          (controller, Fig. 11 J block)
 /// τ_j = diag(R / (dq/dθ)_truth) · τ_m                               (truth drives)
 /// J_b,truth,a(θ_d)ᵀ · w = τ_j,a      (statics of the fixed handle, unlocked joints a)
-/// ⇒ w = M · w_cmd,  M = J_b,truth,aᵀ⁻¹ · diag(g_a) · J_b,model,aᵀ,  g = (dq/dθ)_model/(dq/dθ)_truth
+/// ⇒ w = M · w_cmd,  M = J_b,truth,aᵀ⁻¹ · diag(g_a) · J_b,model,aᵀ,
+///   g = ((dq/dθ)_model / R_model) · (R_truth / (dq/dθ)_truth)
 /// ```
 ///
 /// The locked joint (`locked_joint`, 1-based; the paper locks the redundant joint 3 at
@@ -67,10 +68,12 @@ pub fn wrench_map(
     let dq_m = model.angle_derivatives(&readings.controller)?;
     let dq_t = truth.angle_derivatives(&readings.device)?;
     let (mut a_model, mut a_truth) = (Matrix6::zeros(), Matrix6::zeros());
+    let (drives_m, drives_t) = (model.drives(), truth.drives());
     for (row, &j) in active.iter().enumerate() {
-        // Rows of Jᵀ restricted to the unlocked joints; the ratio R cancels between
-        // controller and device (both use the device file's nominal R).
-        let g = dq_m[j] / dq_t[j];
+        // Rows of Jᵀ restricted to the unlocked joints, the model's scaled by the torque gain
+        // g = (dq/dθ)_model/R_model · R_truth/(dq/dθ)_truth (R cancels when both use the
+        // device file's nominal ratio).
+        let g = dq_m[j] / drives_m[j].ratio() * drives_t[j].ratio() / dq_t[j];
         for k in 0..6 {
             a_model[(row, k)] = g * jm[(k, j)];
             a_truth[(row, k)] = jt[(k, j)];
