@@ -299,6 +299,9 @@ pub fn run(
         "model,gain,direction,direction_median_deg,direction_p95_deg,magnitude_median_pct,magnitude_p95_pct\n",
     );
     let mut p95_force = Vec::new();
+    let mut per_direction = String::from(
+        "\nPer direction (|direction error| in deg, |magnitude error| in %, median / 95th percentile):\n\n| model | G | direction | dir. median | dir. p95 | mag. median | mag. p95 |\n|---|---|---|---|---|---|---|\n",
+    );
     for (name, model) in &models {
         for cfg in [open, closed] {
             let e = sweep(device, model, &truth_model, &poses, &cfg)
@@ -327,6 +330,16 @@ pub fn run(
                     .map(|w| w.magnitude_pct.abs())
                     .collect();
                 writeln!(
+                    per_direction,
+                    "| {name} | {} | {} | {:.4} | {:.4} | {:.3} | {:.3} |",
+                    cfg.gain,
+                    d.name(),
+                    quantile(&dir, 0.5),
+                    quantile(&dir, 0.95),
+                    quantile(&mag, 0.5),
+                    quantile(&mag, 0.95)
+                )?;
+                writeln!(
                     dist,
                     "{name},{},{},{},{},{},{}",
                     cfg.gain,
@@ -340,6 +353,20 @@ pub fn run(
             p95_force.push((name.to_string(), cfg.gain, p.force[1]));
         }
     }
+    md.push_str(&per_direction);
+    // The quantisation share of the floor: the best model again, with exact readings.
+    let exact = WallConfig {
+        quantise: false,
+        ..open
+    };
+    let (_, best) = &models[2];
+    let e = sweep(device, best, &truth_model, &poses, &exact).context("sweep, exact readings")?;
+    let p = pooled(&e);
+    writeln!(
+        md,
+        "\nWithout quantising the controller's readings, the \"calibrated, true pruned\" model's force direction error is {:.4}° median, {:.4}° p95 (G = 0): the rest of its error is the estimation noise of the calibration.",
+        p.force[0], p.force[1]
+    )?;
     let ratio = |a: &str, b: &str, g: f64| {
         let find = |n: &str| {
             p95_force
