@@ -80,7 +80,9 @@ pub fn wrench_map(
         }
     }
     let lu = a_truth.lu();
-    lu.solve(&a_model).ok_or(Error::Singular { which: "truth" })
+    lu.solve(&a_model).ok_or(Error::Singular {
+        which: "truth Jacobian",
+    })
 }
 
 /// The unlocked joints (0-based) of an `n`-joint device with `locked_joint` (1-based) locked.
@@ -189,9 +191,29 @@ impl Direction {
         self as usize
     }
 
-    /// Name for reports: `Fx`, …, `Mz`.
+    /// Name for reports and files: `Fx`, …, `Mz`.
     pub fn name(self) -> &'static str {
         ["Fx", "Fy", "Fz", "Mx", "My", "Mz"][self.index()]
+    }
+}
+
+impl std::fmt::Display for Direction {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Direction {
+    type Err = Error;
+
+    /// Parses `Fx`, `Fy`, `Fz`, `Mx`, `My` or `Mz` (as [`Direction::name`] writes them).
+    ///
+    /// # Errors
+    /// [`Error::UnknownDirection`] for anything else.
+    fn from_str(s: &str) -> Result<Direction, Error> {
+        (Direction::ALL.into_iter())
+            .find(|d| d.name() == s)
+            .ok_or_else(|| Error::UnknownDirection { name: s.to_owned() })
     }
 }
 

@@ -61,11 +61,17 @@ pub enum Error {
         /// The device's number of joints.
         n_joints: usize,
     },
-    /// The wrench map is singular (or numerically so) at this pose.
-    #[error("the {which} Jacobian is singular at this pose")]
+    /// A matrix of the static problem is singular (or numerically so) at this pose.
+    #[error("the {which} is singular at this pose")]
     Singular {
-        /// `model` or `truth`.
+        /// Which matrix: `truth Jacobian` or `closed-loop matrix I + G·M`.
         which: &'static str,
+    },
+    /// A wrench direction name that is not `Fx`, `Fy`, `Fz`, `Mx`, `My` or `Mz`.
+    #[error("unknown wrench direction {name:?}: expected Fx, Fy, Fz, Mx, My or Mz")]
+    UnknownDirection {
+        /// The name given.
+        name: String,
     },
     /// A configuration value is out of its range.
     #[error("{name} = {value} is invalid: expected {expected}")]

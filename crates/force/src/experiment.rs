@@ -170,6 +170,33 @@ impl SweepConfig {
     }
 }
 
+impl SweepConfig {
+    fn check(&self) -> Result<(), Error> {
+        if self.n_poses == 0 {
+            return Err(Error::InvalidConfig {
+                name: "n_poses",
+                value: 0.0,
+                expected: "at least 1",
+            });
+        }
+        if !(self.max_condition.is_finite() && self.max_condition >= 1.0) {
+            return Err(Error::InvalidConfig {
+                name: "max_condition",
+                value: self.max_condition,
+                expected: "a finite number ≥ 1",
+            });
+        }
+        if !(self.length_m.is_finite() && self.length_m > 0.0) {
+            return Err(Error::InvalidConfig {
+                name: "length_m",
+                value: self.length_m,
+                expected: "a finite length > 0 m",
+            });
+        }
+        Ok(())
+    }
+}
+
 /// Random poses for the sweep: readings drawn uniformly within the joint limits
 /// ([`hapcal_sim::sample_readings`]), the locked joint set to its home reading, redrawn while
 /// the truth's condition number exceeds `sweep.max_condition`.
@@ -177,14 +204,16 @@ impl SweepConfig {
 /// Returns the accepted readings and the number of draws.
 ///
 /// # Errors
-/// [`Error::TooFewPoses`] if fewer than `n_poses` of `100·n_poses` draws are accepted; those
-/// of [`condition_number`].
+/// [`Error::InvalidConfig`] for `n_poses = 0`, `max_condition < 1` or a non-positive
+/// `length_m`; [`Error::TooFewPoses`] if fewer than `n_poses` of `100·n_poses` draws are
+/// accepted; those of [`condition_number`].
 pub fn sample_poses(
     device: &Device,
     truth: &ForceModel,
     locked_joint: usize,
     sweep: &SweepConfig,
 ) -> Result<(Vec<Vec<f64>>, usize), Error> {
+    sweep.check()?;
     let home = home_readings(device);
     let mut rng = ChaCha8Rng::seed_from_u64(sweep.seed);
     let max_draws = 100 * sweep.n_poses.max(1);

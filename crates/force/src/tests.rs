@@ -306,3 +306,16 @@ fn calibrated_device_file_gives_the_calibrated_drives() {
         "calibration value \"capstan2.r_o\": unit is \"rad\", expected \"m\""
     );
 }
+
+/// Direction names survive the round trip through `Display` and `FromStr`.
+#[test]
+fn direction_names_round_trip() {
+    for d in Direction::ALL {
+        assert_eq!(d.to_string().parse::<Direction>().expect("round trip"), d);
+    }
+    let err = "Fw".parse::<Direction>().expect_err("not a direction");
+    assert_eq!(
+        err.to_string(),
+        "unknown wrench direction \"Fw\": expected Fx, Fy, Fz, Mx, My or Mz"
+    );
+}
