@@ -277,6 +277,20 @@ pub fn run(
         }
     }
 
+    // The exact home pose, for comparison: singular, so every error is amplified.
+    let at_home = |model: &ForceModel| -> Result<f64> {
+        let wall = virtual_wall(device, model, &truth_model, &home_readings(device), &open)?;
+        Ok(wall.last().map_or(f64::NAN, |s| {
+            s.wrench[0].hypot(s.wrench[1]) / s.wrench[2].abs() * 100.0
+        }))
+    };
+    writeln!(
+        md,
+        "\nAt the exact home pose (q6 = 0, singular) the open-loop transverse force is {:.3} % of Fz with the nominal model and {:.3} % with the calibrated one.",
+        at_home(&models[0].1)?,
+        at_home(&models[1].1)?
+    )?;
+
     // ---- Random poses.
     let (poses, drawn) = sample_poses(device, &truth_model, open.locked_joint, &plan.sweep)
         .context("drawing random poses")?;

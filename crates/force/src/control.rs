@@ -140,6 +140,8 @@ pub fn condition_number(
 /// open-loop error by about `1 + G`. `G = 0` is open-loop impedance control (`C = M`). The
 /// sensor is rigid on the handle, so `w_sens` is in the true tip frame, while `w_d` is in the
 /// frame the model believes: feedback also removes errors of the model's tip orientation.
+/// This is the equilibrium a stable loop settles to; whether the loop is stable depends on the
+/// device's dynamics (Z_h of Fig. 11), which a quasi-static model does not have.
 ///
 /// # Errors
 /// [`Error::InvalidConfig`] for a negative or non-finite `gain`; [`Error::Singular`] if
