@@ -208,10 +208,10 @@ pub fn run(
     ];
     let open = WallConfig::paper();
     let closed = open.with_gain(plan.gain);
-    let home = fig12_pose(device);
-    let home_cond = hapcal_force::condition_number(
+    let pose = fig12_pose(device);
+    let pose_cond = hapcal_force::condition_number(
         &truth_model,
-        &home,
+        &pose,
         Some(open.locked_joint),
         plan.sweep.length_m,
     )?;
@@ -227,12 +227,12 @@ pub fn run(
     writeln!(
         md,
         "## Force control: virtual wall (paper Figs. 11–12)\n\nHandle fixed at readings ({}) rad: home (mid-range) except the wrist joint 6 at half its upper limit, because at home (q6 = 0) joints 5 and 7 are collinear and the fixed-handle statics is singular (truth condition number {:.0} there, {:.1} here; linear rows / {} m). Joint {} locked at home, wall K = {} N/m moved {} mm along the tip z axis (desired force 2 N along z at the end). Controller readings quantised to the encoders; device = truth. Forces in the handle (sensor) frame at 20 mm; transverse = |(Fx, Fy)|/|Fz|.\n",
-        home.iter()
+        pose.iter()
             .map(|v| format!("{v:.3}"))
             .collect::<Vec<_>>()
             .join(", "),
         exact_home_cond,
-        home_cond,
+        pose_cond,
         plan.sweep.length_m,
         open.locked_joint,
         open.stiffness_n_per_m,
@@ -247,7 +247,7 @@ pub fn run(
     let mut csv = String::from("model,gain,travel_m,desired_n,fx_n,fy_n,fz_n,mx_nm,my_nm,mz_nm\n");
     for (name, model) in &models {
         for cfg in [open, closed] {
-            let wall = virtual_wall(device, model, &truth_model, &home, &cfg)
+            let wall = virtual_wall(device, model, &truth_model, &pose, &cfg)
                 .with_context(|| format!("wall experiment, {name} model"))?;
             for s in &wall {
                 let w = s.wrench;
