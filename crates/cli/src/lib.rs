@@ -5,6 +5,7 @@
 
 pub mod calibrate;
 pub mod figures;
+pub mod force;
 pub mod paper;
 pub mod report;
 pub mod reproduce;

@@ -1,7 +1,7 @@
 //! `hapcal`: kinematic calibration of haptic devices and serial robots.
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a binary prints its results (STYLE.md §12)
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use hapcal::calibrate::{self, ModelChoice, Plan};
 use std::path::PathBuf;
@@ -96,6 +96,46 @@ enum Command {
         #[arg(long, default_value = "paper")]
         noise: String,
         /// Output log CSV.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Force rendering before and after calibration (paper Figs. 11–12): the virtual-wall
+    /// experiment at the home pose and the errors over random poses, printed as Markdown; writes
+    /// the Fig. 12 SVG (Fx, Fy, Fz − Fd against the wall travel).
+    Force {
+        /// Nominal device file (the uncalibrated model).
+        #[arg(long)]
+        device: PathBuf,
+        /// Truth file (the simulated device).
+        #[arg(long)]
+        truth: PathBuf,
+        /// Calibrated device file (from `hapcal calibrate-reference`).
+        #[arg(long)]
+        calibrated: PathBuf,
+        /// Force-feedback gain G of the closed-loop rows.
+        #[arg(long, default_value_t = 10.0)]
+        gain: f64,
+        /// Random poses.
+        #[arg(long, default_value_t = 200)]
+        poses: usize,
+        /// Seed of the random poses.
+        #[arg(long, default_value_t = 4)]
+        seed: u64,
+        /// Where to write the SVG.
+        #[arg(long, default_value = "fig12_force.svg")]
+        svg: PathBuf,
+    },
+    /// Run the paper's pipeline (step 1 transmissions, step 2 kinematics) on a log of the
+    /// reference device and write the calibrated device file (kinematics in the D-H rows,
+    /// transmissions in [calibration.values]) that `hapcal force --calibrated` reads.
+    CalibrateReference {
+        /// Truth file (names the device; sets the noise model).
+        #[arg(long)]
+        truth: PathBuf,
+        /// Measurement log (CSV with ext1..ext4).
+        #[arg(long)]
+        log: PathBuf,
+        /// Output device file (.toml).
         #[arg(long)]
         out: PathBuf,
     },
@@ -253,6 +293,48 @@ fn run(cli: Cli) -> Result<()> {
             let rows = hapcal_sim::simulate(&device, &truth, &cfg)?;
             std::fs::write(&out, hapcal_io::write_log(&rows))?;
             eprintln!("hapcal: wrote {} poses to {}", rows.len(), out.display());
+            Ok(())
+        }
+        Command::Force {
+            device,
+            truth,
+            calibrated,
+            gain,
+            poses,
+            seed,
+            svg,
+        } => {
+            let read_device = |p: &PathBuf| {
+                hapcal_io::read_device(p).with_context(|| format!("reading {}", p.display()))
+            };
+            let nominal = read_device(&device)?;
+            let cal = read_device(&calibrated)?;
+            let truth_file = hapcal_sim::read_truth(&truth)
+                .with_context(|| format!("reading {}", truth.display()))?;
+            let mut plan = hapcal::force::ForcePlan::issue4();
+            plan.gain = gain;
+            plan.sweep.n_poses = poses;
+            plan.sweep.seed = seed;
+            let report =
+                hapcal::force::run(&nominal, &truth_file, &cal, &plan).with_context(|| {
+                    format!(
+                        "force experiment with {}, {}, {}",
+                        device.display(),
+                        truth.display(),
+                        calibrated.display()
+                    )
+                })?;
+            print!("{}", report.markdown);
+            if let Some((_, text)) = report.files.iter().find(|(n, _)| n.ends_with(".svg")) {
+                std::fs::write(&svg, text).with_context(|| format!("writing {}", svg.display()))?;
+                eprintln!("hapcal: wrote {}", svg.display());
+            }
+            Ok(())
+        }
+        Command::CalibrateReference { truth, log, out } => {
+            let text = hapcal::force::calibrate_reference(&truth, &log)?;
+            std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
+            eprintln!("hapcal: wrote {}", out.display());
             Ok(())
         }
         Command::ImportUrdf { urdf, tip } => {

@@ -651,6 +651,15 @@ pub fn run(
         0.05,
         "%",
     ));
+    // ---- Force control (issue #4, paper Figs. 11–12) with seed 0's calibrated model.
+    let s0 = &seeds[0];
+    crate::force::append_to_reproduction(
+        &r,
+        &s0.transmissions,
+        &s0.kinematics,
+        &mut files,
+        &mut md,
+    )?;
     files.push(("README.md".into(), md.clone()));
     Ok(Reproduction {
         files,

@@ -3,6 +3,8 @@
 
 #![allow(clippy::unwrap_used)] // test helpers fail loudly on a malformed report; that is the test
 
+mod force;
+
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

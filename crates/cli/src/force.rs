@@ -1,0 +1,558 @@
+//! `hapcal force`: what calibration does to rendered forces (paper Figs. 11–12, issue #4), and
+//! `hapcal calibrate-reference`, which writes the calibrated reference-device file it reads.
+//!
+//! The calibrated model comes from the paper's pipeline ([`crate::paper`]): step 1 identifies
+//! the transmissions from the external encoders, step 2 the kinematic deviations from the cable
+//! distances. [`calibrated_device`] stores both in one device file: kinematic deviations
+//! applied to the D-H rows and listed in `[calibration.values]` with the transmission
+//! parameters (`capstan{j}.c/re/r_o/beta_o/r_i/beta_i`, `joint4.cheb0..10`), which
+//! [`ForceModel::calibrated`] reads back.
+
+use crate::paper::{self, Reference, TransmissionFit};
+use anyhow::{Context, Result};
+use hapcal_force::{
+    Direction, ForceModel, SweepConfig, SweepErrors, WallConfig, WallSample, home_readings,
+    quantile, sample_poses, sweep, virtual_wall,
+};
+use hapcal_identify::Identified;
+use hapcal_io::{CalibratedValue, CalibrationMeta, Device};
+use plotters::prelude::*;
+use std::fmt::Write;
+use std::path::Path;
+
+/// The calibrated device file of the paper's pipeline: `r`'s nominal device with the kept
+/// kinematic deviations of `kin` applied to its D-H rows ([`Device::with_calibration`]) and
+/// `[calibration.values]` holding those deviations (m, rad) and every identified transmission
+/// parameter of `t` (capstans 1–3: `capstan{j}.c` rad, `.re` 1, `.r_o` m, `.beta_o` rad,
+/// `.r_i` m, `.beta_i` rad; joint 4: `joint4.cheb0..10`, rad, Chebyshev basis on q4's range),
+/// each with its standard deviation. Pruned (unidentifiable) parameters are left out, i.e. at
+/// their nominal value.
+///
+/// # Errors
+/// A value the device file rejects (non-finite, wrong unit).
+pub fn calibrated_device(
+    r: &Reference,
+    t: &TransmissionFit,
+    kin: &Identified,
+    notes: String,
+) -> Result<Device> {
+    let mut values = Vec::new();
+    let mut push_kept = |id: &Identified| {
+        for &i in &id.identifiability.kept {
+            let spec = id.layout.spec(i);
+            values.push(CalibratedValue {
+                name: spec.name.clone(),
+                value: id.fit.x[i],
+                std: id.std(&spec.name).unwrap_or(0.0),
+                unit: spec.unit.symbol().to_owned(),
+            });
+        }
+    };
+    for c in &t.capstans {
+        push_kept(&c.identified);
+    }
+    push_kept(&t.poly_identified);
+    push_kept(kin);
+    let meta = CalibrationMeta {
+        date: None,
+        data_hash: None,
+        notes: Some(notes),
+    };
+    Ok(r.device.with_calibration(&values, meta)?)
+}
+
+/// Runs the paper's pipeline (steps 1 and 2) on the log `log` of the device named in `truth`
+/// (whose noise model sets the weights) and returns the calibrated device file text
+/// ([`calibrated_device`], written by [`hapcal_io::write_device`]).
+///
+/// # Errors
+/// Unreadable files (the message names them) or a failed identification.
+pub fn calibrate_reference(truth: &Path, log: &Path) -> Result<String> {
+    let r = Reference::load(truth)?;
+    let rows = hapcal_io::read_log(log, &r.device)
+        .with_context(|| format!("reading log {}", log.display()))?
+        .rows;
+    let t = paper::identify_transmissions(&r, &rows)
+        .with_context(|| format!("step 1 on {}", log.display()))?;
+    let (_, kin) = paper::identify_kinematics(&r, &rows, Some(&t))
+        .with_context(|| format!("step 2 on {}", log.display()))?;
+    let notes = format!(
+        "paper pipeline (steps 1 and 2) on {} ({} poses); written by `hapcal calibrate-reference`",
+        log.file_name().map_or_else(
+            || log.display().to_string(),
+            |n| n.to_string_lossy().into_owned()
+        ),
+        rows.len()
+    );
+    Ok(hapcal_io::write_device(&calibrated_device(
+        &r, &t, &kin, notes,
+    )?))
+}
+
+/// Settings of [`run`].
+#[derive(Clone, Copy, Debug)]
+pub struct ForcePlan {
+    /// Force-feedback gain G of the closed-loop rows.
+    pub gain: f64,
+    /// Random-pose sweep.
+    pub sweep: SweepConfig,
+}
+
+impl ForcePlan {
+    /// Issue #4's sweep (200 poses, seed 4) and G = 10.
+    pub fn issue4() -> ForcePlan {
+        ForcePlan {
+            gain: 10.0,
+            sweep: SweepConfig::issue4(),
+        }
+    }
+}
+
+/// What [`run`] produced: a Markdown report and files to write.
+pub struct ForceReport {
+    /// Markdown: Fig. 12 at the paper's pose, the distributions, the floor explained.
+    pub markdown: String,
+    /// `(file name, content)`: `fig12_force.svg`, `fig12_force.csv`, `force_distributions.csv`.
+    pub files: Vec<(String, String)>,
+}
+
+/// The model under test with the kinematic parameters that `calibrated` does not list (the
+/// pruned, unidentifiable ones: α7, and row 0's gauge) set to the truth: what calibration
+/// could reach if they were measured some other way.
+fn with_true_unidentifiable(calibrated: &Device, truth: &hapcal_sim::Truth) -> Result<Device> {
+    let listed: Vec<&str> = calibrated
+        .calibration
+        .iter()
+        .flat_map(|c| c.values.iter().map(|v| v.name.as_str()))
+        .collect();
+    let chain = calibrated.chain()?;
+    let extra: Vec<CalibratedValue> = truth
+        .deviations
+        .iter()
+        .filter(|(name, _)| !listed.contains(&name.as_str()))
+        .filter_map(|(name, v)| {
+            let unit = chain.params()[chain.param_index(name)?].unit.symbol();
+            Some(CalibratedValue {
+                name: name.clone(),
+                value: *v,
+                std: 0.0,
+                unit: unit.to_owned(),
+            })
+        })
+        .collect();
+    // Apply the extra deviations to the rows but keep the calibrated transmissions.
+    let mut device = calibrated.with_calibration(&extra, CalibrationMeta::default())?;
+    device.calibration = calibrated.calibration.clone();
+    Ok(device)
+}
+
+/// Summary of one (model, gain) over the sweep: pooled force directions and pooled moment
+/// directions, median and 95th percentile of |direction error| (deg) and |magnitude error| (%).
+struct Pooled {
+    force: [f64; 4],
+    moment: [f64; 4],
+}
+
+fn pooled(e: &SweepErrors) -> Pooled {
+    let stats = |dirs: &[Direction]| {
+        let dir: Vec<f64> = dirs
+            .iter()
+            .flat_map(|d| e.errors[d.index()].iter().map(|w| w.direction_deg.abs()))
+            .collect();
+        let mag: Vec<f64> = dirs
+            .iter()
+            .flat_map(|d| e.errors[d.index()].iter().map(|w| w.magnitude_pct.abs()))
+            .collect();
+        [
+            quantile(&dir, 0.5),
+            quantile(&dir, 0.95),
+            quantile(&mag, 0.5),
+            quantile(&mag, 0.95),
+        ]
+    };
+    Pooled {
+        force: stats(&Direction::ALL[..3]),
+        moment: stats(&Direction::ALL[3..]),
+    }
+}
+
+/// The force experiment: Fig. 12 at the paper's pose (the home readings, joint 3 locked) and
+/// the sweep over random poses, for the nominal model of `device`, the calibrated model of
+/// `calibrated` and that model with the unidentifiable parameters at their truth, open loop
+/// and with gain `plan.gain`; the device is `truth`.
+///
+/// # Errors
+/// Inconsistent files (the caller adds their names) or a singular pose.
+pub fn run(
+    device: &Device,
+    truth: &hapcal_sim::Truth,
+    calibrated: &Device,
+    plan: &ForcePlan,
+) -> Result<ForceReport> {
+    let truth_model = ForceModel::truth(device, truth).context("building the truth model")?;
+    let floor_device = with_true_unidentifiable(calibrated, truth)?;
+    let models = [
+        (
+            "nominal",
+            ForceModel::nominal(device).context("building the nominal model")?,
+        ),
+        (
+            "calibrated",
+            ForceModel::calibrated(calibrated).context("building the calibrated model")?,
+        ),
+        (
+            "calibrated, true pruned",
+            ForceModel::calibrated(&floor_device)
+                .context("building the calibrated model with the true unidentifiable parameters")?,
+        ),
+    ];
+    let open = WallConfig::paper();
+    let closed = open.with_gain(plan.gain);
+    let pose = fig12_pose(device);
+    let pose_cond = hapcal_force::condition_number(
+        &truth_model,
+        &pose,
+        Some(open.locked_joint),
+        plan.sweep.length_m,
+    )?;
+    let exact_home_cond = hapcal_force::condition_number(
+        &truth_model,
+        &home_readings(device),
+        Some(open.locked_joint),
+        plan.sweep.length_m,
+    )?;
+    let mut md = String::new();
+
+    // ---- Fig. 12 at the paper's pose.
+    writeln!(
+        md,
+        "## Force control: virtual wall (paper Figs. 11–12)\n\nHandle fixed at readings ({}) rad: home (mid-range) except the wrist joint 6 at half its upper limit, because at home (q6 = 0) joints 5 and 7 are collinear and the fixed-handle statics is singular (truth condition number {:.0} there, {:.1} here; linear rows / {} m). Joint {} locked at home, wall K = {} N/m moved {} mm along the tip z axis (desired force 2 N along z at the end). Controller readings quantised to the encoders; device = truth. Forces in the handle (sensor) frame at 20 mm; transverse = |(Fx, Fy)|/|Fz|.\n",
+        pose.iter()
+            .map(|v| format!("{v:.3}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        exact_home_cond,
+        pose_cond,
+        plan.sweep.length_m,
+        open.locked_joint,
+        open.stiffness_n_per_m,
+        open.travel_m * 1e3
+    )?;
+    writeln!(
+        md,
+        "| model | G | Fx (mN) | Fy (mN) | Fz − 2 N (mN) | transverse (% of Fz) | direction error (deg) |"
+    )?;
+    writeln!(md, "|---|---|---|---|---|---|---|")?;
+    let mut wall_curves: Vec<(String, Vec<WallSample>)> = Vec::new();
+    let mut csv = String::from("model,gain,travel_m,desired_n,fx_n,fy_n,fz_n,mx_nm,my_nm,mz_nm\n");
+    for (name, model) in &models {
+        for cfg in [open, closed] {
+            let wall = virtual_wall(device, model, &truth_model, &pose, &cfg)
+                .with_context(|| format!("wall experiment, {name} model"))?;
+            for s in &wall {
+                let w = s.wrench;
+                writeln!(
+                    csv,
+                    "{name},{},{},{},{},{},{},{},{},{}",
+                    cfg.gain, s.travel_m, s.desired_n, w[0], w[1], w[2], w[3], w[4], w[5]
+                )?;
+            }
+            let Some(last) = wall.last() else { continue };
+            let w = last.wrench;
+            let transverse = w[0].hypot(w[1]) / w[2].abs() * 100.0;
+            let dir_deg = w[0].hypot(w[1]).atan2(w[2]).to_degrees();
+            writeln!(
+                md,
+                "| {name} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.4} |",
+                cfg.gain,
+                w[0] * 1e3,
+                w[1] * 1e3,
+                (w[2] - last.desired_n) * 1e3,
+                transverse,
+                dir_deg
+            )?;
+            if cfg.gain == 0.0 {
+                wall_curves.push((name.to_string(), wall));
+            }
+        }
+    }
+
+    // The exact home pose, for comparison: singular, so every error is amplified.
+    let at_home = |model: &ForceModel| -> Result<f64> {
+        let wall = virtual_wall(device, model, &truth_model, &home_readings(device), &open)?;
+        Ok(wall.last().map_or(f64::NAN, |s| {
+            s.wrench[0].hypot(s.wrench[1]) / s.wrench[2].abs() * 100.0
+        }))
+    };
+    writeln!(
+        md,
+        "\nAt the exact home pose (q6 = 0, singular) the open-loop transverse force is {:.3} % of Fz with the nominal model and {:.3} % with the calibrated one.",
+        at_home(&models[0].1)?,
+        at_home(&models[1].1)?
+    )?;
+
+    // ---- Random poses.
+    let (poses, drawn) = sample_poses(device, &truth_model, open.locked_joint, &plan.sweep)
+        .context("drawing random poses")?;
+    writeln!(
+        md,
+        "\n### {} random poses, six wrench directions\n\nReadings uniform within the joint limits (seed {}), joint {} at home; {} draws, poses with a truth-Jacobian condition number above {} (linear rows / {} m) redrawn. Per direction the desired wrench is a unit force (moment) along the tip axis; errors are |angle| between rendered and desired force (moment) and |magnitude error|. Pooled over the three force (moment) directions:\n",
+        poses.len(),
+        plan.sweep.seed,
+        open.locked_joint,
+        drawn,
+        plan.sweep.max_condition,
+        plan.sweep.length_m
+    )?;
+    writeln!(
+        md,
+        "| model | G | force dir. median (deg) | force dir. p95 (deg) | force mag. median (%) | force mag. p95 (%) | moment dir. median (deg) | moment dir. p95 (deg) | moment mag. median (%) | moment mag. p95 (%) |"
+    )?;
+    writeln!(md, "|---|---|---|---|---|---|---|---|---|---|")?;
+    let mut dist = String::from(
+        "model,gain,direction,direction_median_deg,direction_p95_deg,magnitude_median_pct,magnitude_p95_pct\n",
+    );
+    let mut p95_force = Vec::new();
+    let mut per_direction = String::from(
+        "\nPer direction (|direction error| in deg, |magnitude error| in %, median / 95th percentile):\n\n| model | G | direction | dir. median | dir. p95 | mag. median | mag. p95 |\n|---|---|---|---|---|---|---|\n",
+    );
+    for (name, model) in &models {
+        for cfg in [open, closed] {
+            let e = sweep(device, model, &truth_model, &poses, &cfg)
+                .with_context(|| format!("sweep, {name} model"))?;
+            let p = pooled(&e);
+            writeln!(
+                md,
+                "| {name} | {} | {:.4} | {:.4} | {:.3} | {:.3} | {:.4} | {:.4} | {:.3} | {:.3} |",
+                cfg.gain,
+                p.force[0],
+                p.force[1],
+                p.force[2],
+                p.force[3],
+                p.moment[0],
+                p.moment[1],
+                p.moment[2],
+                p.moment[3]
+            )?;
+            for d in Direction::ALL {
+                let dir: Vec<f64> = e.errors[d.index()]
+                    .iter()
+                    .map(|w| w.direction_deg.abs())
+                    .collect();
+                let mag: Vec<f64> = e.errors[d.index()]
+                    .iter()
+                    .map(|w| w.magnitude_pct.abs())
+                    .collect();
+                writeln!(
+                    per_direction,
+                    "| {name} | {} | {} | {:.4} | {:.4} | {:.3} | {:.3} |",
+                    cfg.gain,
+                    d.name(),
+                    quantile(&dir, 0.5),
+                    quantile(&dir, 0.95),
+                    quantile(&mag, 0.5),
+                    quantile(&mag, 0.95)
+                )?;
+                writeln!(
+                    dist,
+                    "{name},{},{},{},{},{},{}",
+                    cfg.gain,
+                    d.name(),
+                    quantile(&dir, 0.5),
+                    quantile(&dir, 0.95),
+                    quantile(&mag, 0.5),
+                    quantile(&mag, 0.95)
+                )?;
+            }
+            p95_force.push((name.to_string(), cfg.gain, p.force[1]));
+        }
+    }
+    md.push_str(&per_direction);
+    // The quantisation share of the floor: the best model again, with exact readings.
+    let exact = WallConfig {
+        quantise: false,
+        ..open
+    };
+    let (_, best) = &models[2];
+    let e = sweep(device, best, &truth_model, &poses, &exact).context("sweep, exact readings")?;
+    let p = pooled(&e);
+    writeln!(
+        md,
+        "\nWithout quantising the controller's readings, the \"calibrated, true pruned\" model's force direction error is {:.4}° median, {:.4}° p95 (G = 0): the rest of its error is the estimation noise of the calibration.",
+        p.force[0], p.force[1]
+    )?;
+    let ratio = |a: &str, b: &str, g: f64| {
+        let find = |n: &str| {
+            p95_force
+                .iter()
+                .find(|(m, gg, _)| m == n && *gg == g)
+                .map(|x| x.2)
+        };
+        match (find(a), find(b)) {
+            (Some(x), Some(y)) => x / y,
+            _ => f64::NAN,
+        }
+    };
+    writeln!(
+        md,
+        "\nReduction of the 95th-percentile force direction error, nominal / calibrated: {:.1}× open loop, {:.1}× with G = {}; nominal / (calibrated with the pruned parameters at their truth): {:.1}× open loop.\n",
+        ratio("nominal", "calibrated", 0.0),
+        ratio("nominal", "calibrated", plan.gain),
+        plan.gain,
+        ratio("nominal", "calibrated, true pruned", 0.0),
+    )?;
+
+    // What the calibrated model cannot know: truth deviations it does not list that act on
+    // the handle frame (row 0 only moves the base, which body-frame wrenches do not see).
+    let listed: Vec<&str> = (calibrated.calibration.iter())
+        .flat_map(|c| c.values.iter().map(|v| v.name.as_str()))
+        .collect();
+    let chain = device.chain()?;
+    let unseen: Vec<(String, f64)> = (truth.deviations.iter())
+        .filter(|(n, _)| !listed.contains(&n.as_str()))
+        .filter(|(n, _)| {
+            chain
+                .param_index(n)
+                .is_some_and(|i| chain.params()[i].element != 0)
+        })
+        .cloned()
+        .collect();
+    for (name, v) in &unseen {
+        writeln!(
+            md,
+            "Floor: `{name}` = {:.3} mrad of the truth is not identifiable from cable distances (pruned, so 0 in the calibrated model). It turns the handle (sensor) frame relative to the model's tip frame, so the calibrated model commands forces turned by {:.4}° in the sensor's frame: a transverse floor of sin({name}) = {:.3} % for a force along z, and the calibrated median force-direction error above. With `{name}` at its truth (rows \"calibrated, true pruned\") what remains is estimation noise and the encoder quantisation of the controller's readings. Force feedback removes the floor as well, because the sensor measures in the true handle frame.\n",
+            v * 1e3,
+            v.abs().to_degrees(),
+            v.abs().sin() * 100.0
+        )?;
+    }
+
+    let svg = fig12_svg(&wall_curves)?;
+    Ok(ForceReport {
+        markdown: md,
+        files: vec![
+            ("fig12_force.svg".into(), svg),
+            ("fig12_force.csv".into(), csv),
+            ("force_distributions.csv".into(), dist),
+        ],
+    })
+}
+
+/// The pose of the Fig. 12 experiment (readings, rad): the home readings (mid-range) with
+/// joint 6 at half its upper limit. The paper does not give its handle pose; at home itself
+/// (q6 = 0) the wrist axes 5 and 7 are collinear and the fixed-handle statics is singular.
+pub fn fig12_pose(device: &Device) -> Vec<f64> {
+    let mut theta = home_readings(device);
+    if let (Some(slot), Some((_, hi))) = (theta.get_mut(5), device.joint_limits().get(5)) {
+        *slot = 0.5 * hi;
+    }
+    theta
+}
+
+/// Fig. 12(b)-style plot: three stacked panels, Fx, Fy and Fz − Fd (mN; Fd = K·s, so the last
+/// point is Fz − 2 N) against the wall travel (mm), one colour per model, open loop.
+fn fig12_svg(curves: &[(String, Vec<WallSample>)]) -> Result<String> {
+    let colours = [
+        RGBColor(213, 94, 0),
+        RGBColor(0, 114, 178),
+        RGBColor(0, 158, 115),
+    ];
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (900, 900)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let root = root.titled(
+            "Virtual wall, handle fixed, open loop (cf. paper Fig. 12)",
+            ("sans-serif", 22),
+        )?;
+        let panels = root.split_evenly((3, 1));
+        let names = ["Fx (mN)", "Fy (mN)", "Fz − Fd (mN), Fd = K·s"];
+        for (c, area) in panels.iter().enumerate() {
+            let series: Vec<(&str, Vec<(f64, f64)>)> = curves
+                .iter()
+                .map(|(name, wall)| {
+                    let pts = wall
+                        .iter()
+                        .map(|s| {
+                            let v = if c == 2 {
+                                s.wrench[2] - s.desired_n
+                            } else {
+                                s.wrench[c]
+                            };
+                            (s.travel_m * 1e3, v * 1e3)
+                        })
+                        .filter(|p| p.1.is_finite())
+                        .collect();
+                    (name.as_str(), pts)
+                })
+                .collect();
+            let (mut lo, mut hi) = (0.0f64, 0.0f64);
+            for (_, pts) in &series {
+                for &(_, y) in pts {
+                    lo = lo.min(y);
+                    hi = hi.max(y);
+                }
+            }
+            let pad = 0.08 * (hi - lo).max(1e-3);
+            let x_max = (series.iter())
+                .flat_map(|(_, p)| p.iter().map(|q| q.0))
+                .fold(1e-3, f64::max);
+            let mut chart = ChartBuilder::on(area)
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(70)
+                .build_cartesian_2d(0.0..x_max, (lo - pad)..(hi + pad))?;
+            chart
+                .configure_mesh()
+                .x_desc("wall travel s (mm)")
+                .y_desc(names[c])
+                .label_style(("sans-serif", 14))
+                .light_line_style(WHITE)
+                .draw()?;
+            // Last model first and widest, so that lines that coincide all stay visible.
+            for (m, (name, pts)) in series.into_iter().enumerate().rev() {
+                let colour = colours[m % colours.len()];
+                let width = if m == 0 {
+                    2
+                } else {
+                    2 + 3 * u32::try_from(m).unwrap_or(1)
+                };
+                chart
+                    .draw_series(LineSeries::new(pts, colour.mix(0.85).stroke_width(width)))?
+                    .label(name.to_owned())
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(3))
+                    });
+            }
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .position(SeriesLabelPosition::LowerLeft)
+                .label_font(("sans-serif", 13))
+                .draw()?;
+        }
+        root.present()?;
+    }
+    Ok(svg)
+}
+
+/// The force section of `cargo xtask reproduce-tables`: runs [`run`] with the calibrated model
+/// of the reproduction's seed 0 (transmissions `t`, kinematics `kin`) and appends its report
+/// to `md` and its files to `files`.
+///
+/// # Errors
+/// As [`run`].
+pub fn append_to_reproduction(
+    r: &Reference,
+    t: &TransmissionFit,
+    kin: &Identified,
+    files: &mut Vec<(String, String)>,
+    md: &mut String,
+) -> Result<()> {
+    let calibrated = calibrated_device(r, t, kin, "reproduction seed 0".into())?;
+    let report = run(&r.device, &r.truth, &calibrated, &ForcePlan::issue4())?;
+    md.push_str(&report.markdown);
+    files.extend(report.files);
+    Ok(())
+}

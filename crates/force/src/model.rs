@@ -1,0 +1,451 @@
+//! The full static model of a device: kinematic chain plus one drive per joint.
+
+use hapcal_io::Device;
+use hapcal_kinematics::{Chain, Isometry3, Matrix6xX};
+use hapcal_sim::{PARALLELOGRAM_JOINT, Truth};
+use hapcal_transmission::{
+    Capstan, CapstanParams, Chebyshev, FourBar, Joint4Transmission, JointRad,
+};
+use nalgebra::{Matrix3, Vector6};
+
+use crate::Error;
+
+/// How one joint is driven: the map from its reading θ (motor angle / R, rad) to its joint
+/// angle q (rad), and the nominal ratio R between motor and reading.
+///
+/// The motor angle is `φ_m = R·θ` by definition of the reading. A lossless transmission
+/// obeys virtual work, `τ_m·dφ_m = τ_j·dq`, so (paper eq. 1 differentiated):
+///
+/// ```text
+/// τ_j = τ_m · R / (dq/dθ)        τ_m = τ_j · (dq/dθ) / R        (N·m, N·m)
+/// ```
+///
+/// For a pure ratio error `q = θ·R/(R + Re)` this is `τ_j = (R + Re)·τ_m`: the true ratio.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Drive {
+    /// Direct drive: `q = θ`, `R = 1`.
+    Direct,
+    /// Capstan drive, `q = θ + Δθ_caps(θ)` (paper eq. 1); all-zero parameters give `q = θ`.
+    Capstan {
+        /// Ratio and drum distance.
+        capstan: Capstan,
+        /// Transmission-error parameters.
+        params: CapstanParams,
+    },
+    /// Capstan feeding a four-bar (paper eqs. 1 and 2), as the truth device's joint 4.
+    Parallelogram(Joint4Transmission),
+    /// A calibrated joint: `q = θ + p(θ)` with `p` the identified polynomial (the paper's
+    /// tenth-order joint-4 error), behind a drive of nominal ratio `ratio`.
+    Polynomial {
+        /// Nominal ratio R (motor angle per unit reading).
+        ratio: f64,
+        /// The error polynomial, rad.
+        poly: Chebyshev,
+    },
+}
+
+impl Drive {
+    /// Nominal ratio R between the motor angle and the reading (1 for a direct drive).
+    pub fn ratio(&self) -> f64 {
+        match self {
+            Drive::Direct => 1.0,
+            Drive::Capstan { capstan, .. } => capstan.ratio(),
+            Drive::Parallelogram(j4) => j4.capstan.ratio(),
+            Drive::Polynomial { ratio, .. } => *ratio,
+        }
+    }
+
+    /// Joint angle q (rad) for reading `theta` (rad).
+    ///
+    /// # Errors
+    /// [`hapcal_transmission::Error::NoClosure`] where a four-bar cannot close.
+    pub fn angle_rad(&self, theta: f64) -> Result<f64, hapcal_transmission::Error> {
+        Ok(match self {
+            Drive::Direct => theta,
+            Drive::Capstan { capstan, params } => capstan.output_rad(params, JointRad(theta)),
+            Drive::Parallelogram(j4) => j4.output_rad(JointRad(theta))?,
+            Drive::Polynomial { poly, .. } => theta + poly.eval(theta),
+        })
+    }
+
+    /// `dq/dθ` (rad/rad) at reading `theta`, analytic: `1 + ∂Δθ_caps/∂θ` for a capstan,
+    /// `dψ/dφ · (1 + ∂Δθ_caps/∂θ)` for a parallelogram, `1 + p'(θ)` for a polynomial.
+    ///
+    /// # Errors
+    /// As [`Drive::angle_rad`], and at a four-bar dead centre.
+    pub fn angle_derivative(&self, theta: f64) -> Result<f64, hapcal_transmission::Error> {
+        Ok(match self {
+            Drive::Direct => 1.0,
+            Drive::Capstan { capstan, params } => {
+                1.0 + capstan.error_dtheta(params, JointRad(theta))
+            }
+            Drive::Parallelogram(j4) => {
+                let phi = j4.phi0_rad + j4.capstan.output_rad(&j4.params, JointRad(theta));
+                j4.four_bar.d_output_d_input(phi)?
+                    * (1.0 + j4.capstan.error_dtheta(&j4.params, JointRad(theta)))
+            }
+            Drive::Polynomial { poly, .. } => 1.0 + poly.derivative(theta),
+        })
+    }
+}
+
+/// A device as the force computation sees it: the kinematic chain with its deviations `x`
+/// and one [`Drive`] per joint. Used both for the model under test (what the controller
+/// believes) and for the truth (what the simulated device is).
+///
+/// Wrenches and Jacobians are in the **end-effector (body) frame at the end point**: a
+/// wrench `w = (f, m)` holds the force f (N) and moment m (N·m) about the end point,
+/// expressed in the tip frame of the chain — the frame of a force sensor at the handle.
+/// That makes every result independent of the base frame (row 0 and its unidentifiable
+/// `alpha0`, `theta0` do not matter).
+#[derive(Clone, Debug)]
+pub struct ForceModel {
+    chain: Chain,
+    x: Vec<f64>,
+    drives: Vec<Drive>,
+}
+
+/// The capstan of 1-based joint `joint`, if the device has one.
+fn device_capstan(device: &Device, joint: usize) -> Result<Option<Capstan>, Error> {
+    device
+        .capstans
+        .iter()
+        .find(|c| c.joint == joint)
+        .map(|c| {
+            Capstan::try_new(c.ratio, c.drum_distance_m)
+                .map_err(|source| Error::Transmission { joint, source })
+        })
+        .transpose()
+}
+
+impl ForceModel {
+    /// A model from its parts: `chain`, deviations `x` (length `chain.n_params()`, m or rad)
+    /// and one drive per joint.
+    ///
+    /// # Errors
+    /// [`Error::Length`] if `x` or `drives` has the wrong length.
+    pub fn try_new(chain: Chain, x: Vec<f64>, drives: Vec<Drive>) -> Result<ForceModel, Error> {
+        if x.len() != chain.n_params() {
+            return Err(Error::Length {
+                what: "deviations x",
+                expected: chain.n_params(),
+                found: x.len(),
+            });
+        }
+        if drives.len() != chain.n_joints() {
+            return Err(Error::Length {
+                what: "drives",
+                expected: chain.n_joints(),
+                found: drives.len(),
+            });
+        }
+        Ok(ForceModel { chain, x, drives })
+    }
+
+    /// The nominal model of `device`: its D-H rows as written (x = 0) and ideal drives
+    /// (`q = θ`) with the nominal capstan ratios. This is the uncalibrated controller; for a
+    /// calibrated device file (rows already corrected) use [`ForceModel::calibrated`].
+    ///
+    /// # Errors
+    /// [`Error::Device`] if the chain cannot be built, [`Error::Transmission`] for an invalid
+    /// capstan.
+    pub fn nominal(device: &Device) -> Result<ForceModel, Error> {
+        let chain = device.chain().map_err(|source| Error::Device { source })?;
+        let mut drives = Vec::with_capacity(chain.n_joints());
+        for joint in 1..=chain.n_joints() {
+            drives.push(match device_capstan(device, joint)? {
+                Some(capstan) => Drive::Capstan {
+                    capstan,
+                    params: CapstanParams::default(),
+                },
+                None => Drive::Direct,
+            });
+        }
+        let x = vec![0.0; chain.n_params()];
+        ForceModel::try_new(chain, x, drives)
+    }
+
+    /// The calibrated model stored in a calibrated device file: the D-H rows as written (the
+    /// identified kinematic deviations are already applied, see
+    /// [`Device::with_calibration`]) and drives from `[calibration.values]`:
+    ///
+    /// - `capstan{j}.c`, `.re`, `.r_o`, `.beta_o`, `.r_i`, `.beta_i` (units `rad`, `1`, `m`,
+    ///   `rad`, `m`, `rad`; paper eq. 1) for the capstan of joint j; missing ones are 0;
+    /// - `joint{j}.cheb0` … `joint{j}.cheb{n}` (rad): the Chebyshev coefficients of the
+    ///   joint's error polynomial on its joint range (the paper's tenth-order joint-4 model);
+    ///   they replace the joint's capstan model, keeping its nominal ratio.
+    ///
+    /// Other names (the kinematic ones) are skipped. A device without `[calibration]` gives
+    /// the nominal model.
+    ///
+    /// # Errors
+    /// [`Error::Calibration`] naming the entry for an unknown suffix, a joint without a
+    /// capstan, a wrong unit, a gap in the Chebyshev indices or invalid capstan parameters;
+    /// and the errors of [`ForceModel::nominal`].
+    pub fn calibrated(device: &Device) -> Result<ForceModel, Error> {
+        let mut model = ForceModel::nominal(device)?;
+        let Some(calibration) = &device.calibration else {
+            return Ok(model);
+        };
+        let n_joints = model.drives.len();
+        let mut cheb: Vec<Vec<Option<f64>>> = vec![Vec::new(); n_joints];
+        for v in &calibration.values {
+            let bad = |message: String| Error::Calibration {
+                name: v.name.clone(),
+                message,
+            };
+            let Some((element, field)) = v.name.split_once('.') else {
+                continue;
+            };
+            let joint_of = |prefix: &str| -> Option<usize> {
+                element
+                    .strip_prefix(prefix)
+                    .and_then(|d| d.parse::<usize>().ok())
+            };
+            let check_unit = |unit: &str| {
+                if v.unit == unit {
+                    Ok(())
+                } else {
+                    Err(bad(format!("unit is {:?}, expected {unit:?}", v.unit)))
+                }
+            };
+            if let Some(joint) = joint_of("capstan") {
+                let slot = (joint.checked_sub(1))
+                    .and_then(|j| model.drives.get_mut(j))
+                    .ok_or_else(|| bad(format!("the device has joints 1..={n_joints}")))?;
+                let Drive::Capstan { params, .. } = slot else {
+                    return Err(bad(format!("joint {joint} has no capstan")));
+                };
+                let (target, unit) = match field {
+                    "c" => (&mut params.c_rad, "rad"),
+                    "re" => (&mut params.re, "1"),
+                    "r_o" => (&mut params.r_o_m, "m"),
+                    "beta_o" => (&mut params.beta_o_rad, "rad"),
+                    "r_i" => (&mut params.r_i_m, "m"),
+                    "beta_i" => (&mut params.beta_i_rad, "rad"),
+                    other => {
+                        return Err(bad(format!(
+                            "unknown capstan parameter {other:?}: expected c, re, r_o, beta_o, \
+                             r_i or beta_i"
+                        )));
+                    }
+                };
+                check_unit(unit)?;
+                *target = v.value;
+            } else if let Some(joint) = joint_of("joint") {
+                let Some(k) = field
+                    .strip_prefix("cheb")
+                    .and_then(|d| d.parse::<usize>().ok())
+                else {
+                    return Err(bad("expected joint{j}.cheb{k}".to_owned()));
+                };
+                check_unit("rad")?;
+                let coeffs = (joint.checked_sub(1))
+                    .and_then(|j| cheb.get_mut(j))
+                    .ok_or_else(|| bad(format!("the device has joints 1..={n_joints}")))?;
+                if coeffs.len() <= k {
+                    coeffs.resize(k + 1, None);
+                }
+                coeffs[k] = Some(v.value);
+            }
+        }
+        let limits = device.joint_limits();
+        for (j, coeffs) in cheb.into_iter().enumerate() {
+            if coeffs.is_empty() {
+                continue;
+            }
+            let name = format!("joint{}.cheb*", j + 1);
+            let bad = |message: String| Error::Calibration {
+                name: name.clone(),
+                message,
+            };
+            let coeffs: Vec<f64> = (coeffs.iter().enumerate())
+                .map(|(k, c)| c.ok_or_else(|| bad(format!("coefficient {k} is missing"))))
+                .collect::<Result<_, _>>()?;
+            let (lo, hi) = limits.get(j).copied().unwrap_or((-1.0, 1.0));
+            let poly = Chebyshev::try_new(lo, hi, coeffs).map_err(|e| bad(e.to_string()))?;
+            let ratio = model.drives[j].ratio();
+            model.drives[j] = Drive::Polynomial { ratio, poly };
+        }
+        for (j, drive) in model.drives.iter().enumerate() {
+            if let Drive::Capstan { capstan, params } = drive {
+                capstan
+                    .check_params(params)
+                    .map_err(|e| Error::Calibration {
+                        name: format!("capstan{}.*", j + 1),
+                        message: e.to_string(),
+                    })?;
+            }
+        }
+        Ok(model)
+    }
+
+    /// The truth device: the chain with the truth's deviations, every capstan with its true
+    /// eq.-1 parameters, and joint [`PARALLELOGRAM_JOINT`] through its capstan and the true
+    /// four-bar (lengths `L + ΔL`, crank offset `phi0_rad`; paper eqs. 1–2). Its
+    /// [`ForceModel::joint_angles`] equal [`hapcal_sim::true_joint_angles`].
+    ///
+    /// # Errors
+    /// [`Error::Truth`] for a deviation that is not a chain parameter or a capstan the truth
+    /// lacks; [`Error::Transmission`] for invalid values; and those of
+    /// [`ForceModel::nominal`].
+    pub fn truth(device: &Device, truth: &Truth) -> Result<ForceModel, Error> {
+        let mut model = ForceModel::nominal(device)?;
+        model.x = hapcal_sim::truth_deviations(&model.chain, truth)
+            .map_err(|source| Error::Truth { source })?;
+        for (j, drive) in model.drives.iter_mut().enumerate() {
+            let joint = j + 1;
+            let Drive::Capstan { capstan, params } = drive else {
+                continue;
+            };
+            let t = (truth.capstans.iter())
+                .find(|t| t.joint == joint)
+                .ok_or(Error::Truth {
+                    source: hapcal_sim::Error::MissingCapstan { joint },
+                })?;
+            *params = t.params();
+            let transmission = |source| Error::Transmission { joint, source };
+            capstan.check_params(params).map_err(transmission)?;
+            if let (Some(p), true) = (device.parallelogram, joint == PARALLELOGRAM_JOINT) {
+                let pt = truth.parallelogram.ok_or(Error::Truth {
+                    source: hapcal_sim::Error::Parallelogram {
+                        joint,
+                        message: "the truth has no [parallelogram]".to_owned(),
+                    },
+                })?;
+                let four_bar = FourBar::try_new(
+                    p.l1_m + pt.dl1_m,
+                    p.l2_m + pt.dl2_m,
+                    p.l3_m + pt.dl3_m,
+                    p.l4_m + pt.dl4_m,
+                )
+                .map_err(transmission)?;
+                *drive = Drive::Parallelogram(Joint4Transmission {
+                    capstan: *capstan,
+                    params: *params,
+                    four_bar,
+                    phi0_rad: pt.phi0_rad,
+                });
+            }
+        }
+        Ok(model)
+    }
+
+    /// Number of joints.
+    pub fn n_joints(&self) -> usize {
+        self.drives.len()
+    }
+
+    /// The drives, one per joint.
+    pub fn drives(&self) -> &[Drive] {
+        &self.drives
+    }
+
+    fn check_readings(&self, theta: &[f64]) -> Result<(), Error> {
+        if theta.len() != self.n_joints() {
+            return Err(Error::Length {
+                what: "joint readings",
+                expected: self.n_joints(),
+                found: theta.len(),
+            });
+        }
+        Ok(())
+    }
+
+    /// Joint angles q (rad, one per joint) for readings `theta` (rad): each drive's map.
+    ///
+    /// # Errors
+    /// [`Error::Length`] for a wrong number of readings; [`Error::Transmission`] where a
+    /// four-bar cannot close.
+    pub fn joint_angles(&self, theta: &[f64]) -> Result<Vec<f64>, Error> {
+        self.check_readings(theta)?;
+        (self.drives.iter().zip(theta).enumerate())
+            .map(|(j, (d, &t))| {
+                d.angle_rad(t).map_err(|source| Error::Transmission {
+                    joint: j + 1,
+                    source,
+                })
+            })
+            .collect()
+    }
+
+    /// `dq/dθ` of each drive at readings `theta` (rad/rad, one per joint).
+    ///
+    /// # Errors
+    /// As [`ForceModel::joint_angles`].
+    pub fn angle_derivatives(&self, theta: &[f64]) -> Result<Vec<f64>, Error> {
+        self.check_readings(theta)?;
+        (self.drives.iter().zip(theta).enumerate())
+            .map(|(j, (d, &t))| {
+                d.angle_derivative(t).map_err(|source| Error::Transmission {
+                    joint: j + 1,
+                    source,
+                })
+            })
+            .collect()
+    }
+
+    /// Pose of the end-effector (tip) frame in the chain's base frame for readings `theta`
+    /// (translation in m).
+    ///
+    /// # Errors
+    /// As [`ForceModel::joint_angles`].
+    pub fn end_pose(&self, theta: &[f64]) -> Result<Isometry3<f64>, Error> {
+        let q = self.joint_angles(theta)?;
+        Ok(self.chain.end_pose(&self.x, &q))
+    }
+
+    /// Body Jacobian with respect to the joint angles at readings `theta`: 6 × `n_joints`,
+    /// `J_b = diag(Rᵀ, Rᵀ)·J_geo(q)` with R the tip orientation and `J_geo` the geometric
+    /// Jacobian at the end point (Siciliano et al. 2009, §3.1). Rows 0–2: end-point velocity
+    /// in the tip frame, m/rad; rows 3–5: angular velocity in the tip frame, rad/rad.
+    ///
+    /// # Errors
+    /// As [`ForceModel::joint_angles`].
+    pub fn body_jacobian(&self, theta: &[f64]) -> Result<Matrix6xX<f64>, Error> {
+        let q = self.joint_angles(theta)?;
+        let pose = self.chain.end_pose(&self.x, &q);
+        let rt: Matrix3<f64> = pose.rotation.to_rotation_matrix().matrix().transpose();
+        let mut jac = self.chain.geometric_jacobian(&self.x, &q);
+        for col in 0..jac.ncols() {
+            let lin = rt * jac.fixed_view::<3, 1>(0, col);
+            let ang = rt * jac.fixed_view::<3, 1>(3, col);
+            jac.fixed_view_mut::<3, 1>(0, col).copy_from(&lin);
+            jac.fixed_view_mut::<3, 1>(3, col).copy_from(&ang);
+        }
+        Ok(jac)
+    }
+
+    /// Motor torques (N·m, one per joint) that this model commands for the body-frame wrench
+    /// `wrench` (N, N·m) at readings `theta`: `τ_j = J_bᵀ w` (paper Fig. 11's Jacobian
+    /// block), then `τ_m = τ_j·(dq/dθ)/R` per drive ([`Drive`]).
+    ///
+    /// # Errors
+    /// As [`ForceModel::joint_angles`].
+    pub fn motor_torques(&self, theta: &[f64], wrench: &Vector6<f64>) -> Result<Vec<f64>, Error> {
+        let tau_j = self.body_jacobian(theta)?.transpose() * wrench;
+        let dq = self.angle_derivatives(theta)?;
+        Ok((self.drives.iter().zip(&dq).zip(tau_j.iter()))
+            .map(|((d, &g), &t)| t * g / d.ratio())
+            .collect())
+    }
+
+    /// Joint torques (N·m) that motor torques `tau_m` (N·m) produce at readings `theta`:
+    /// `τ_j = τ_m·R/(dq/dθ)` per drive ([`Drive`]).
+    ///
+    /// # Errors
+    /// [`Error::Length`] if `tau_m` has the wrong length; as [`ForceModel::joint_angles`].
+    pub fn joint_torques(&self, theta: &[f64], tau_m: &[f64]) -> Result<Vec<f64>, Error> {
+        if tau_m.len() != self.n_joints() {
+            return Err(Error::Length {
+                what: "motor torques",
+                expected: self.n_joints(),
+                found: tau_m.len(),
+            });
+        }
+        let dq = self.angle_derivatives(theta)?;
+        Ok((self.drives.iter().zip(&dq).zip(tau_m))
+            .map(|((d, &g), &t)| t * d.ratio() / g)
+            .collect())
+    }
+}
