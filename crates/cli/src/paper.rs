@@ -286,7 +286,10 @@ pub fn propagate_transmission_covariance(
     let mut c1 = faer::Mat::<f64>::zeros(nt, nt);
     let blocks = (t.capstans.iter().enumerate())
         .map(|(c, fit)| (6 * c, &fit.identified.covariance))
-        .chain(std::iter::once((6 * t.capstans.len(), &t.poly_identified.covariance)));
+        .chain(std::iter::once((
+            6 * t.capstans.len(),
+            &t.poly_identified.covariance,
+        )));
     for (off, cov) in blocks {
         for (a_i, &fi) in cov.free.iter().enumerate() {
             for (b_i, &fj) in cov.free.iter().enumerate() {

@@ -14,6 +14,15 @@ use std::path::Path;
 /// z of a two-sided 95 % interval.
 const Z95: f64 = 1.959_963_984_540_054;
 
+/// Sample standard deviation (n − 1), NaN with fewer than two values.
+fn sample_sd(v: &[f64]) -> f64 {
+    if v.len() < 2 {
+        return f64::NAN;
+    }
+    let mean = v.iter().sum::<f64>() / v.len() as f64;
+    (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
+}
+
 fn quantile(v: &mut [f64], p: f64) -> f64 {
     v.sort_by(f64::total_cmp);
     if v.is_empty() {
@@ -93,14 +102,20 @@ pub fn run(
         .collect();
     let paper3 = read_paper_table(&crate::project_root().join("fixtures/golden/paper/table3.csv"))?;
     let mut t3 = String::from(
-        "param,assigned,identified_seed0,std_seed0,ci95_lo_seed0,ci95_hi_seed0,median_improvement_pct,p5_improvement_pct,p95_improvement_pct,coverage95_pct,kept_pct,paper_improvement_pct,unit\n",
+        "param,assigned,identified_seed0,std_seed0,ci95_lo_seed0,ci95_hi_seed0,median_improvement_pct,p5_improvement_pct,p95_improvement_pct,coverage95_pct,normalised_error_sd,bound_median_improvement_pct,kept_pct,paper_improvement_pct,unit\n",
     );
     writeln!(md, "## Table 3: kinematic parameters (step 2)\n")?;
     writeln!(
         md,
-        "| param | assigned | seed 0: identified ± std | median I% (5th–95th) | paper I% | 95 % CI coverage | kept |"
+        "The standard deviations carry step 1's transmission uncertainty (two-step covariance of Murphy & Topel 1985, `paper::propagate_transmission_covariance`). *Normalised error SD* is the standard deviation over the seeds of (identified − assigned)/std: 1 when the reported uncertainty is honest (with {n} seeds its own sampling error is ±{se:.2}). *Noise bound* is the median I% that an unbiased estimator with exactly these standard deviations would reach, 100·(1 − 0.674·RMS(std)/|assigned|): the data's limit, not the estimator's.\n",
+        n = n_seeds,
+        se = 1.0 / (2.0 * (n_seeds.max(2) - 1) as f64).sqrt()
     )?;
-    writeln!(md, "|---|---|---|---|---|---|---|")?;
+    writeln!(
+        md,
+        "| param | assigned | seed 0: identified ± std | median I% (5th–95th) | noise bound | paper I% | 95 % CI coverage | normalised error SD | kept |"
+    )?;
+    writeln!(md, "|---|---|---|---|---|---|---|---|---|")?;
     let mut pruned_always = Vec::new();
     let (mut bar_names, mut bar_med, mut bar_p5, mut bar_p95, mut bar_paper) =
         (vec![], vec![], vec![], vec![], vec![]);
@@ -108,6 +123,8 @@ pub fn run(
         let (f, unit) = display_unit(name);
         let assigned = r.x_truth[i];
         let mut imp = Vec::new();
+        let mut z = Vec::new();
+        let mut var_sum = 0.0;
         let (mut covered, mut kept) = (0usize, 0usize);
         for o in &outcomes {
             if let (Some(v), Some(s)) = (o[i].identified, o[i].std) {
@@ -118,6 +135,8 @@ pub fn run(
                 if (v - assigned).abs() <= Z95 * s {
                     covered += 1;
                 }
+                z.push((v - assigned) / s);
+                var_sum += s * s;
             }
         }
         let paper_imp = paper3.iter().find(|(n, _)| n == name).map(|(_, v)| *v);
@@ -125,13 +144,13 @@ pub fn run(
             pruned_always.push(name.clone());
             writeln!(
                 t3,
-                "{name},{},,,,,,,,,0,{},{unit}",
+                "{name},{},,,,,,,,,,,0,{},{unit}",
                 assigned * f,
                 paper_imp.map_or(String::new(), |v| v.to_string())
             )?;
             writeln!(
                 md,
-                "| {name} | {:.3} {unit} | pruned | – | {} | – | 0 % |",
+                "| {name} | {:.3} {unit} | pruned | – | – | {} | – | – | 0 % |",
                 assigned * f,
                 paper_imp.map_or("–".into(), |v| format!("{v:.2}"))
             )?;
@@ -142,16 +161,48 @@ pub fn run(
             s0.identified.unwrap_or(f64::NAN),
             s0.std.unwrap_or(f64::NAN),
         );
+        let coverage = 100.0 * covered as f64 / kept as f64;
+        let kept_pct = 100.0 * kept as f64 / seeds.len() as f64;
+        let z_sd = sample_sd(&z);
+        let seed0 = if s0.identified.is_some() {
+            format!("{:.4} ± {:.4}", v0 * f, sd0 * f)
+        } else {
+            "pruned".to_owned()
+        };
+        if assigned == 0.0 {
+            // I% (eq. 8) is undefined for a zero deviation.
+            writeln!(
+                t3,
+                "{name},{},{},{},{},{},,,,{coverage},{z_sd},,{kept_pct},{},{unit}",
+                assigned * f,
+                v0 * f,
+                sd0 * f,
+                (v0 - Z95 * sd0) * f,
+                (v0 + Z95 * sd0) * f,
+                paper_imp.map_or(String::new(), |v| v.to_string())
+            )?;
+            writeln!(
+                md,
+                "| {name} | {:.3} {unit} | {seed0} | undefined (assigned 0) | – | {} | {coverage:.0} % | {} | {kept_pct:.0} % |",
+                assigned * f,
+                paper_imp.map_or("–".into(), |v| format!("{v:.2}")),
+                if z.len() > 1 {
+                    format!("{z_sd:.2}")
+                } else {
+                    "–".into()
+                }
+            )?;
+            continue;
+        }
         let med = quantile(&mut imp.clone(), 0.5);
         let (p5, p95) = (
             quantile(&mut imp.clone(), 0.05),
             quantile(&mut imp.clone(), 0.95),
         );
-        let coverage = 100.0 * covered as f64 / kept as f64;
-        let kept_pct = 100.0 * kept as f64 / seeds.len() as f64;
+        let bound = 100.0 * (1.0 - 0.674 * (var_sum / kept as f64).sqrt() / assigned.abs());
         writeln!(
             t3,
-            "{name},{},{},{},{},{},{med},{p5},{p95},{coverage},{kept_pct},{},{unit}",
+            "{name},{},{},{},{},{},{med},{p5},{p95},{coverage},{z_sd},{bound},{kept_pct},{},{unit}",
             assigned * f,
             v0 * f,
             sd0 * f,
@@ -161,10 +212,8 @@ pub fn run(
         )?;
         writeln!(
             md,
-            "| {name} | {:.3} {unit} | {:.4} ± {:.4} | {med:.2} ({p5:.2}–{p95:.2}) | {} | {coverage:.0} % | {kept_pct:.0} % |",
+            "| {name} | {:.3} {unit} | {seed0} | {med:.2} ({p5:.2}–{p95:.2}) | {bound:.2} | {} | {coverage:.0} % | {z_sd:.2} | {kept_pct:.0} % |",
             assigned * f,
-            v0 * f,
-            sd0 * f,
             paper_imp.map_or("–".into(), |v| format!("{v:.2}"))
         )?;
         bar_names.push(name.clone());
@@ -203,7 +252,7 @@ pub fn run(
         .map(|s| paper::kinematic_outcomes_at(&r, &s.joint, s.joint_offset))
         .collect();
     let mut t3j = String::from(
-        "param,assigned,median_improvement_pct,p5_improvement_pct,p95_improvement_pct,coverage95_pct,kept_pct,unit\n",
+        "param,assigned,median_improvement_pct,p5_improvement_pct,p95_improvement_pct,coverage95_pct,normalised_error_sd,kept_pct,unit\n",
     );
     writeln!(
         md,
@@ -215,20 +264,21 @@ pub fn run(
     )?;
     writeln!(
         md,
-        "| param | median I% (5th–95th) | two-step median I% | 95 % CI coverage | kept |"
+        "| param | median I% (5th–95th) | two-step median I% | 95 % CI coverage | normalised error SD | kept |"
     )?;
-    writeln!(md, "|---|---|---|---|---|")?;
+    writeln!(md, "|---|---|---|---|---|---|")?;
     for (i, name) in names.iter().enumerate() {
         let (_, unit) = display_unit(name);
         let assigned = r.x_truth[i];
         if assigned == 0.0 {
             continue;
         }
-        let (mut imp, mut imp2) = (Vec::new(), Vec::new());
+        let (mut imp, mut imp2, mut z) = (Vec::new(), Vec::new(), Vec::new());
         let (mut covered, mut kept) = (0usize, 0usize);
         for (o, o2) in joint_out.iter().zip(&outcomes) {
             if let (Some(v), Some(sd)) = (o[i].identified, o[i].std) {
                 kept += 1;
+                z.push((v - assigned) / sd);
                 imp.push(parameter_improvement_pct(assigned, v, 0.0)?);
                 if (v - assigned).abs() <= Z95 * sd {
                     covered += 1;
@@ -239,7 +289,7 @@ pub fn run(
             }
         }
         if kept == 0 {
-            writeln!(md, "| {name} | pruned | – | – | 0 % |")?;
+            writeln!(md, "| {name} | pruned | – | – | – | 0 % |")?;
             continue;
         }
         let med = quantile(&mut imp.clone(), 0.5);
@@ -250,14 +300,15 @@ pub fn run(
         let med2 = quantile(&mut imp2, 0.5);
         let coverage = 100.0 * covered as f64 / kept as f64;
         let kept_pct = 100.0 * kept as f64 / seeds.len() as f64;
+        let z_sd = sample_sd(&z);
         writeln!(
             t3j,
-            "{name},{},{med},{p5},{p95},{coverage},{kept_pct},{unit}",
+            "{name},{},{med},{p5},{p95},{coverage},{z_sd},{kept_pct},{unit}",
             assigned
         )?;
         writeln!(
             md,
-            "| {name} | {med:.2} ({p5:.2}–{p95:.2}) | {med2:.2} | {coverage:.0} % | {kept_pct:.0} % |"
+            "| {name} | {med:.2} ({p5:.2}–{p95:.2}) | {med2:.2} | {coverage:.0} % | {z_sd:.2} | {kept_pct:.0} % |"
         )?;
         golden.push((
             format!("table3_joint.{name}.median_improvement_pct"),

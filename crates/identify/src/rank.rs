@@ -594,7 +594,11 @@ mod tests {
         // remaining parts are 1e-3 rad apart, so whichever is kept, the other's std would be
         // ≈ 1e-4 / (1.41 · 7.1e-4) ≈ 0.1 m > the 0.01 m prior: interchangeable at sigma = 1e-4,
         // and the tie-break, not the greedy pivot, must decide.
-        let cols = [[1.0, 0.0, 0.0, 0.0], [1.0, 1.0, 0.0, 0.0], [1.001, 1.0, 0.001, 0.0]];
+        let cols = [
+            [1.0, 0.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0, 0.0],
+            [1.001, 1.0, 0.001, 0.0],
+        ];
         let jac = Mat::from_fn(4, 3, |i, j| cols[j][i]);
         let l = layout(&[
             ("c", Role::Nuisance),
