@@ -198,6 +198,12 @@ impl Identifiability {
 const TIE_REL: f64 = 1e-6;
 /// Absolute width of a near-tie, on unit-norm columns: rounding after many reflections.
 const TIE_ABS: f64 = 1e-13;
+/// Relative width of a noise-level tie: candidates interchangeable at the noise level tie only
+/// when their distances `ρ` to the kept span also agree this closely. Exactly collinear
+/// parameters perturbed by small deviations differ by the deviations' relative size
+/// (~1e-3 for Baser & Konukseven's d0 and θ1 at millimetre/milliradian deviations); a wider
+/// tie lets a weaker column displace a strong one and leaves a near-collinear pair behind.
+const TIE_NOISE_REL: f64 = 1e-2;
 
 /// Decides which of the `candidates` the Jacobian `jac` determines, given the noise level.
 ///
@@ -337,6 +343,7 @@ pub fn identifiability(
             let ties = |e: &&(usize, f64)| {
                 e.1 >= rho_max * (1.0 - TIE_REL) - TIE_ABS
                     || (!nuisance_phase
+                        && e.1 >= rho_max * (1.0 - TIE_NOISE_REL)
                         && greedy.is_some_and(|g| {
                             interchangeable(&w[g][k..], &w[e.0][k..], |perp_g, perp_e| {
                                 cfg.sigma / (c[g] * perp_g) > prior[g]
