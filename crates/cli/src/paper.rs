@@ -267,21 +267,8 @@ pub fn propagate_transmission_covariance(
     t: &TransmissionFit,
     kin: &Identified,
 ) -> Result<faer::Mat<f64>> {
-    use faer::linalg::solvers::SolveLstsq;
-    use hapcal_identify::Problem;
-    let problem = JointProblem::new(r, rows)?;
-    let x = problem.start_from(t, kin);
-    let (n, nt) = (rows.len(), problem.n_trans());
-    let mut jac = faer::Mat::zeros(problem.n_residuals(), problem.layout().len());
-    problem
-        .jacobian(x.as_ref(), jac.as_mut())
-        .map_err(|e| anyhow::anyhow!("joint problem Jacobian: {}", e.reason))?;
-    // Distance rows, back in metres.
-    let d0 = PARALLELOGRAM_JOINT * n;
-    let scale = problem.sigma_distance_m;
-    let free = &kin.covariance.free;
-    let a = faer::Mat::from_fn(n, free.len(), |i, k| jac[(d0 + i, nt + free[k])] * scale);
-    let b = faer::Mat::from_fn(n, nt, |i, j| jac[(d0 + i, j)] * scale);
+    let s = Sensitivity::at(r, rows, t, kin)?;
+    let nt = s.b.ncols();
     // C₁: block diagonal over the capstans and the polynomial.
     let mut c1 = faer::Mat::<f64>::zeros(nt, nt);
     let blocks = (t.capstans.iter().enumerate())
@@ -297,30 +284,77 @@ pub fn propagate_transmission_covariance(
             }
         }
     }
-    // G = (AᵀA)⁻¹AᵀB by QR of A (least squares, column by column).
-    let g = a.qr().solve_lstsq(b.as_ref());
+    let g = &s.g;
     // C₂'s σ was estimated from step 2's residuals, which also carry the transmission errors
     // (their part outside A's span, E = B − A·G, expected sum of squares tr(C₁·EᵀE)). That
     // part is counted by G·C₁·Gᵀ, so it is taken out of C₂'s σ² rather than counted twice.
-    let e = &b - &a * &g;
+    let e = &s.b - &s.a * g;
     let ete = e.transpose() * &e;
     let trans_ss: f64 = (0..nt)
         .flat_map(|i| (0..nt).map(move |j| (i, j)))
         .map(|(i, j)| c1[(i, j)] * ete[(j, i)])
         .sum();
-    let mut res = faer::Col::zeros(problem.n_residuals());
-    problem
-        .residuals(x.as_ref(), res.as_mut())
-        .map_err(|e| anyhow::anyhow!("joint problem residuals: {}", e.reason))?;
-    let rss: f64 = (0..n).map(|i| (res[d0 + i] * scale).powi(2)).sum();
-    let noise_share = if rss > 0.0 {
-        ((rss - trans_ss) / rss).clamp(0.0, 1.0)
+    let noise_share = if s.rss_m2 > 0.0 {
+        ((s.rss_m2 - trans_ss) / s.rss_m2).clamp(0.0, 1.0)
     } else {
         1.0
     };
     let mut c = &kin.covariance.matrix * faer::Scale(noise_share);
-    c += &g * &c1 * g.transpose();
+    c += g * &c1 * g.transpose();
     Ok(c)
+}
+
+/// How step 2's estimate depends on step 1's transmission parameters, at the two-step estimate
+/// (see [`propagate_transmission_covariance`]).
+#[derive(Clone, Debug)]
+pub struct Sensitivity {
+    /// `A`: distance residuals w.r.t. the kept kinematic parameters (`kin.covariance.free`
+    /// order), `n × k`, m per m or rad.
+    pub a: faer::Mat<f64>,
+    /// `B`: distance residuals w.r.t. the transmission parameters, in [`JointProblem`]'s order
+    /// (capstans 1–3, 6 each, then the joint-4 Chebyshev coefficients), `n × t`.
+    pub b: faer::Mat<f64>,
+    /// `G = (AᵀA)⁻¹AᵀB`, `k × t`: a transmission error `δp` moves the kinematic estimate by
+    /// `−G·δp` (to first order).
+    pub g: faer::Mat<f64>,
+    /// Step 2's residual sum of squares, m².
+    pub rss_m2: f64,
+}
+
+impl Sensitivity {
+    /// Evaluates `A`, `B`, `G` at the two-step estimate (`t`, `kin`) on the log `rows`.
+    ///
+    /// # Errors
+    /// Missing ext columns, or an evaluation failure of the joint problem.
+    pub fn at(
+        r: &Reference,
+        rows: &[LogRow],
+        t: &TransmissionFit,
+        kin: &Identified,
+    ) -> Result<Self> {
+        use faer::linalg::solvers::SolveLstsq;
+        use hapcal_identify::Problem;
+        let problem = JointProblem::new(r, rows)?;
+        let x = problem.start_from(t, kin);
+        let (n, nt) = (rows.len(), problem.n_trans());
+        let mut jac = faer::Mat::zeros(problem.n_residuals(), problem.layout().len());
+        problem
+            .jacobian(x.as_ref(), jac.as_mut())
+            .map_err(|e| anyhow::anyhow!("joint problem Jacobian: {}", e.reason))?;
+        let mut res = faer::Col::zeros(problem.n_residuals());
+        problem
+            .residuals(x.as_ref(), res.as_mut())
+            .map_err(|e| anyhow::anyhow!("joint problem residuals: {}", e.reason))?;
+        // Distance rows, back in metres.
+        let d0 = PARALLELOGRAM_JOINT * n;
+        let scale = problem.sigma_distance_m;
+        let free = &kin.covariance.free;
+        let a = faer::Mat::from_fn(n, free.len(), |i, k| jac[(d0 + i, nt + free[k])] * scale);
+        let b = faer::Mat::from_fn(n, nt, |i, j| jac[(d0 + i, j)] * scale);
+        let g = a.qr().solve_lstsq(b.as_ref());
+        let rss_m2 = (0..n).map(|i| (res[d0 + i] * scale).powi(2)).sum();
+        Ok(Self { a, b, g, rss_m2 })
+    }
 }
 
 /// Accuracy on fresh poses (paper Fig. 8 and the distance RMS of eq. 9).

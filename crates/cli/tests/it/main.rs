@@ -314,3 +314,41 @@ fn simulated_log_calibrates_with_the_distance_model() {
     assert!(before > 1e-3, "{before}");
     assert!(after < 0.5 * before, "{after} vs {before}");
 }
+
+/// The two-step covariance's sensitivity `G` (paper::Sensitivity) is what step 2 really does:
+/// perturbing one transmission parameter of step 1 by δ and re-running step 2 moves the
+/// kinematic estimate by −G·δ, to first order (checked to 2 % of the largest move).
+#[test]
+fn transmission_sensitivity_predicts_how_step_2_moves() {
+    use hapcal::paper::{Reference, Sensitivity, identify_kinematics, identify_transmissions};
+    use hapcal_transmission::CapstanProblem;
+    let r = Reference::load(&root().join("fixtures/reference-device/truth.toml")).unwrap();
+    let cfg = hapcal_sim::SimConfig::new(3, 120).with_noise(r.noise);
+    let rows = hapcal_sim::simulate(&r.device, &r.truth, &cfg).unwrap();
+    let t = identify_transmissions(&r, &rows).unwrap();
+    let (_, kin) = identify_kinematics(&r, &rows, Some(&t)).unwrap();
+    let s = Sensitivity::at(&r, &rows, &t, &kin).unwrap();
+    // Capstan 2's ratio error (index 1 of its six parameters; capstan 2 starts at column 6).
+    let delta = 2e-4;
+    let mut t2 = t.clone();
+    let mut col = CapstanProblem::col(&t2.capstans[1].params);
+    col[1] += delta;
+    t2.capstans[1].params = CapstanProblem::params(col.as_ref());
+    let (_, kin2) = identify_kinematics(&r, &rows, Some(&t2)).unwrap();
+    assert_eq!(kin2.covariance.free, kin.covariance.free, "same kept set");
+    let moved: Vec<f64> = (kin.covariance.free.iter())
+        .map(|&i| kin2.fit.x[i] - kin.fit.x[i])
+        .collect();
+    let largest = moved.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    assert!(
+        largest > 1e-6,
+        "the perturbation must move the estimate: {largest}"
+    );
+    for (k, m) in moved.iter().enumerate() {
+        let predicted = -s.g[(k, 6 + 1)] * delta;
+        assert!(
+            (m - predicted).abs() < 0.02 * largest,
+            "parameter {k}: moved {m:e}, predicted {predicted:e}"
+        );
+    }
+}
