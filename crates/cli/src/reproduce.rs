@@ -169,40 +169,20 @@ pub fn run(
         } else {
             "pruned".to_owned()
         };
-        if assigned == 0.0 {
-            // I% (eq. 8) is undefined for a zero deviation.
-            writeln!(
-                t3,
-                "{name},{},{},{},{},{},,,,{coverage},{z_sd},,{kept_pct},{},{unit}",
-                assigned * f,
-                v0 * f,
-                sd0 * f,
-                (v0 - Z95 * sd0) * f,
-                (v0 + Z95 * sd0) * f,
-                paper_imp.map_or(String::new(), |v| v.to_string())
-            )?;
-            writeln!(
-                md,
-                "| {name} | {:.3} {unit} | {seed0} | undefined (assigned 0) | – | {} | {coverage:.0} % | {} | {kept_pct:.0} % |",
-                assigned * f,
-                paper_imp.map_or("–".into(), |v| format!("{v:.2}")),
-                if z.len() > 1 {
-                    format!("{z_sd:.2}")
-                } else {
-                    "–".into()
-                }
-            )?;
-            continue;
-        }
-        let med = quantile(&mut imp.clone(), 0.5);
-        let (p5, p95) = (
-            quantile(&mut imp.clone(), 0.05),
-            quantile(&mut imp.clone(), 0.95),
-        );
-        let bound = 100.0 * (1.0 - 0.674 * (var_sum / kept as f64).sqrt() / assigned.abs());
+        // I% (eq. 8) is undefined for a zero deviation.
+        let improvement = (assigned != 0.0).then(|| {
+            let med = quantile(&mut imp.clone(), 0.5);
+            let p5 = quantile(&mut imp.clone(), 0.05);
+            let p95 = quantile(&mut imp.clone(), 0.95);
+            let bound = 100.0 * (1.0 - 0.674 * (var_sum / kept as f64).sqrt() / assigned.abs());
+            (med, p5, p95, bound)
+        });
+        let (csv_med, csv_bound) = improvement.map_or((",,".to_owned(), String::new()), |i| {
+            (format!("{},{},{}", i.0, i.1, i.2), i.3.to_string())
+        });
         writeln!(
             t3,
-            "{name},{},{},{},{},{},{med},{p5},{p95},{coverage},{z_sd},{bound},{kept_pct},{},{unit}",
+            "{name},{},{},{},{},{},{csv_med},{coverage},{z_sd},{csv_bound},{kept_pct},{},{unit}",
             assigned * f,
             v0 * f,
             sd0 * f,
@@ -210,26 +190,41 @@ pub fn run(
             (v0 + Z95 * sd0) * f,
             paper_imp.map_or(String::new(), |v| v.to_string())
         )?;
+        let (md_improvement, md_bound) = improvement.map_or(
+            ("undefined (assigned 0)".to_owned(), "–".to_owned()),
+            |(med, p5, p95, bound)| {
+                (
+                    format!("{med:.2} ({p5:.2}–{p95:.2})"),
+                    format!("{bound:.2}"),
+                )
+            },
+        );
         writeln!(
             md,
-            "| {name} | {:.3} {unit} | {seed0} | {med:.2} ({p5:.2}–{p95:.2}) | {bound:.2} | {} | {coverage:.0} % | {z_sd:.2} | {kept_pct:.0} % |",
+            "| {name} | {:.3} {unit} | {seed0} | {md_improvement} | {md_bound} | {} | {coverage:.0} % | {} | {kept_pct:.0} % |",
             assigned * f,
-            paper_imp.map_or("–".into(), |v| format!("{v:.2}"))
+            paper_imp.map_or("–".into(), |v| format!("{v:.2}")),
+            if z.len() > 1 {
+                format!("{z_sd:.2}")
+            } else {
+                "–".into()
+            }
         )?;
+        let Some((med, p5, p95, _)) = improvement else {
+            continue;
+        };
         bar_names.push(name.clone());
         bar_med.push(med);
         bar_p5.push(p5);
         bar_p95.push(p95);
         bar_paper.push(paper_imp);
-        if assigned != 0.0 {
-            golden.push((
-                format!("table3.{name}.median_improvement_pct"),
-                med,
-                0.05,
-                "%",
-            ));
-            golden.push((format!("table3.{name}.coverage95_pct"), coverage, 0.5, "%"));
-        }
+        golden.push((
+            format!("table3.{name}.median_improvement_pct"),
+            med,
+            0.05,
+            "%",
+        ));
+        golden.push((format!("table3.{name}.coverage95_pct"), coverage, 0.5, "%"));
     }
     files.push(("table3.csv".into(), t3));
     files.push((

@@ -3,9 +3,7 @@
 use hapcal_io::Device;
 use hapcal_kinematics::{Chain, Isometry3, Matrix6xX};
 use hapcal_sim::{PARALLELOGRAM_JOINT, Truth};
-use hapcal_transmission::{
-    Capstan, CapstanParams, Chebyshev, FourBar, Joint4Transmission, JointRad,
-};
+use hapcal_transmission::{Capstan, CapstanParams, Chebyshev, Joint4Transmission, JointRad};
 use nalgebra::{Matrix3, Vector6};
 
 use crate::Error;
@@ -306,26 +304,10 @@ impl ForceModel {
             *params = t.params();
             let transmission = |source| Error::Transmission { joint, source };
             capstan.check_params(params).map_err(transmission)?;
-            if let (Some(p), true) = (device.parallelogram, joint == PARALLELOGRAM_JOINT) {
-                let pt = truth.parallelogram.ok_or(Error::Truth {
-                    source: hapcal_sim::Error::Parallelogram {
-                        joint,
-                        message: "the truth has no [parallelogram]".to_owned(),
-                    },
-                })?;
-                let four_bar = FourBar::try_new(
-                    p.l1_m + pt.dl1_m,
-                    p.l2_m + pt.dl2_m,
-                    p.l3_m + pt.dl3_m,
-                    p.l4_m + pt.dl4_m,
-                )
-                .map_err(transmission)?;
-                *drive = Drive::Parallelogram(Joint4Transmission {
-                    capstan: *capstan,
-                    params: *params,
-                    four_bar,
-                    phi0_rad: pt.phi0_rad,
-                });
+            if device.parallelogram.is_some() && joint == PARALLELOGRAM_JOINT {
+                let joint4 = (truth.joint4(device, *capstan, *params))
+                    .map_err(|source| Error::Truth { source })?;
+                *drive = Drive::Parallelogram(joint4);
             }
         }
         Ok(model)

@@ -4,7 +4,7 @@ use std::f64::consts::TAU;
 
 use hapcal_io::{CableEncoder, Device, LogRow, N_EXT};
 use hapcal_kinematics::Chain;
-use hapcal_transmission::{Capstan, CapstanParams, FourBar, Joint4Transmission, JointRad};
+use hapcal_transmission::{Capstan, CapstanParams, Joint4Transmission, JointRad};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -160,24 +160,8 @@ impl Transmissions {
             let params = t.params();
             capstan.check_params(&params).map_err(transmission)?;
             let model = match device.parallelogram {
-                Some(p) if joint == PARALLELOGRAM_JOINT => {
-                    let pt = truth.parallelogram.ok_or_else(|| Error::Parallelogram {
-                        joint,
-                        message: "the truth has no [parallelogram]".to_owned(),
-                    })?;
-                    let four_bar = FourBar::try_new(
-                        p.l1_m + pt.dl1_m,
-                        p.l2_m + pt.dl2_m,
-                        p.l3_m + pt.dl3_m,
-                        p.l4_m + pt.dl4_m,
-                    )
-                    .map_err(transmission)?;
-                    JointModel::Joint4(Joint4Transmission {
-                        capstan,
-                        params,
-                        four_bar,
-                        phi0_rad: pt.phi0_rad,
-                    })
+                Some(_) if joint == PARALLELOGRAM_JOINT => {
+                    JointModel::Joint4(truth.joint4(device, capstan, params)?)
                 }
                 _ => JointModel::Capstan(capstan, params),
             };

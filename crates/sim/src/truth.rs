@@ -135,6 +135,42 @@ impl Truth {
             .map_err(|source| Error::Device { source })
     }
 
+    /// The true joint-4 transmission (paper eqs. 1–2): capstan `capstan` with the true
+    /// eq.-1 `params`, driving the four-bar of `device`'s nominal link lengths plus this
+    /// truth's deviations `ΔL` (m), with its crank offset `phi0_rad`.
+    ///
+    /// # Errors
+    ///
+    /// [`Error::Parallelogram`] if the device or this truth has no parallelogram;
+    /// [`Error::Transmission`] for lengths that do not close a four-bar.
+    pub fn joint4(
+        &self,
+        device: &Device,
+        capstan: hapcal_transmission::Capstan,
+        params: CapstanParams,
+    ) -> Result<Joint4Transmission, Error> {
+        let joint = crate::PARALLELOGRAM_JOINT;
+        let missing = |what: &str| Error::Parallelogram {
+            joint,
+            message: format!("the {what} has no [parallelogram]"),
+        };
+        let p = device.parallelogram.ok_or_else(|| missing("device"))?;
+        let pt = self.parallelogram.ok_or_else(|| missing("truth"))?;
+        let four_bar = hapcal_transmission::FourBar::try_new(
+            p.l1_m + pt.dl1_m,
+            p.l2_m + pt.dl2_m,
+            p.l3_m + pt.dl3_m,
+            p.l4_m + pt.dl4_m,
+        )
+        .map_err(|source| Error::Transmission { joint, source })?;
+        Ok(Joint4Transmission {
+            capstan,
+            params,
+            four_bar,
+            phi0_rad: pt.phi0_rad,
+        })
+    }
+
     /// The truth of an error-free device: no deviations, every capstan of `device` with
     /// all-zero parameters and, if `device` has a parallelogram, zero length deviations with
     /// the crank perpendicular to the ground link at mid-range of its joint
