@@ -343,25 +343,22 @@ pub fn run(
                     .iter()
                     .map(|w| w.magnitude_pct.abs())
                     .collect();
-                writeln!(
-                    per_direction,
-                    "| {name} | {} | {} | {:.4} | {:.4} | {:.3} | {:.3} |",
-                    cfg.gain,
-                    d.name(),
+                let q = [
                     quantile(&dir, 0.5),
                     quantile(&dir, 0.95),
                     quantile(&mag, 0.5),
-                    quantile(&mag, 0.95)
+                    quantile(&mag, 0.95),
+                ];
+                let (gain, d) = (cfg.gain, d.name());
+                writeln!(
+                    per_direction,
+                    "| {name} | {gain} | {d} | {:.4} | {:.4} | {:.3} | {:.3} |",
+                    q[0], q[1], q[2], q[3]
                 )?;
                 writeln!(
                     dist,
-                    "{name},{},{},{},{},{},{}",
-                    cfg.gain,
-                    d.name(),
-                    quantile(&dir, 0.5),
-                    quantile(&dir, 0.95),
-                    quantile(&mag, 0.5),
-                    quantile(&mag, 0.95)
+                    "{name},{gain},{d},{},{},{},{}",
+                    q[0], q[1], q[2], q[3]
                 )?;
             }
             p95_force.push((name.to_string(), cfg.gain, p.force[1]));
