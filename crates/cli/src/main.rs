@@ -213,7 +213,8 @@ fn run(cli: Cli) -> Result<()> {
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
             );
             bar.set_message("reproducing");
-            let result = hapcal::reproduce::run(&truth, seeds, poses, &|done| {
+            let choice = hapcal::paper::PoseChoice::Random;
+            let result = hapcal::reproduce::run(&truth, seeds, poses, &choice, &|done| {
                 bar.set_position(done as u64)
             })?;
             bar.finish_and_clear();

@@ -404,8 +404,64 @@ pub struct SeedResult {
 /// # Errors
 /// Simulation or identification failures.
 pub fn run_seed(r: &Reference, seed: u64, n_poses: usize) -> Result<SeedResult> {
-    let cfg = SimConfig::new(seed, n_poses).with_noise(r.noise);
-    let rows = hapcal_sim::simulate(&r.device, &r.truth, &cfg)?;
+    run_seed_with(r, seed, n_poses, &PoseChoice::Random)
+}
+
+/// Selects `n_select` of the candidate joint readings (rad, one `Vec` per candidate); returns
+/// their indices.
+pub type PoseSelector = dyn Fn(&[Vec<f64>], usize) -> Result<Vec<usize>> + Sync;
+
+/// How the identification poses of one seed are chosen.
+pub enum PoseChoice<'a> {
+    /// `n_poses` poses uniform in the joint limits: the paper's "200 random pose
+    /// measurements".
+    Random,
+    /// `n_poses` of `n_candidates` random poses, chosen by `select` from their joint readings
+    /// alone (as a planner does before measuring; the measurements of the others are discarded).
+    Planned {
+        /// Candidate poses drawn per seed.
+        n_candidates: usize,
+        /// Name of the design, for reports (`d-optimal`).
+        name: String,
+        /// The selection.
+        select: &'a PoseSelector,
+    },
+}
+
+/// [`run_seed`] with the identification poses chosen by `choice`.
+///
+/// # Errors
+/// Simulation, selection or identification failures.
+pub fn run_seed_with(
+    r: &Reference,
+    seed: u64,
+    n_poses: usize,
+    choice: &PoseChoice<'_>,
+) -> Result<SeedResult> {
+    let rows = match choice {
+        PoseChoice::Random => {
+            let cfg = SimConfig::new(seed, n_poses).with_noise(r.noise);
+            hapcal_sim::simulate(&r.device, &r.truth, &cfg)?
+        }
+        PoseChoice::Planned {
+            n_candidates,
+            select,
+            ..
+        } => {
+            let cfg = SimConfig::new(seed, *n_candidates).with_noise(r.noise);
+            let candidates = hapcal_sim::simulate(&r.device, &r.truth, &cfg)?;
+            let readings: Vec<Vec<f64>> = candidates.iter().map(|row| row.q.clone()).collect();
+            let chosen = select(&readings, n_poses)?;
+            chosen
+                .iter()
+                .map(|&i| {
+                    candidates.get(i).cloned().with_context(|| {
+                        format!("pose selection returned {i} of {n_candidates} candidates")
+                    })
+                })
+                .collect::<Result<Vec<_>>>()?
+        }
+    };
     let transmissions = identify_transmissions(r, &rows)?;
     let (_, mut kinematics) = identify_kinematics(r, &rows, Some(&transmissions))?;
     kinematics.covariance.matrix =

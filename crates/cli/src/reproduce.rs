@@ -67,13 +67,15 @@ pub fn run(
     truth_path: &Path,
     n_seeds: usize,
     n_poses: usize,
+    choice: &paper::PoseChoice<'_>,
     progress: &dyn Fn(usize),
 ) -> Result<Reproduction> {
     let r = Reference::load(truth_path)?;
     let mut seeds: Vec<SeedResult> = Vec::with_capacity(n_seeds);
     for seed in 0..n_seeds {
         seeds.push(
-            paper::run_seed(&r, seed as u64, n_poses).with_context(|| format!("seed {seed}"))?,
+            paper::run_seed_with(&r, seed as u64, n_poses, choice)
+                .with_context(|| format!("seed {seed}"))?,
         );
         progress(seed + 1);
     }
@@ -93,6 +95,15 @@ pub fn run(
         r.noise.sigma_m_m * 1e6,
         n_seeds - 1
     )?;
+    if let paper::PoseChoice::Planned {
+        n_candidates, name, ..
+    } = choice
+    {
+        writeln!(
+            md,
+            "**Planned poses:** the {n_poses} identification poses of each seed are chosen {name} from {n_candidates} random candidates by their joint readings alone (`--design {name} --candidates {n_candidates}`), instead of the paper's {n_poses} random poses; validation poses stay random.\n"
+        )?;
+    }
 
     // ---- Table 3: kinematic parameters.
     let names: Vec<String> = r.chain.params().iter().map(|p| p.name.clone()).collect();
