@@ -6,6 +6,7 @@
 pub mod calibrate;
 pub mod figures;
 pub mod paper;
+pub mod plan;
 pub mod report;
 pub mod reproduce;
 

@@ -99,6 +99,13 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Choose the poses to measure: from candidates sampled within the joint limits, the ones
+    /// that maximise an observability criterion of the identification Jacobian at the nominal
+    /// model (greedy start + DETMAX exchange). Writes the readings as CSV.
+    PlanPoses(hapcal::plan::PlanArgs),
+    /// Monte Carlo study of planned vs random poses on the reference device (distance data);
+    /// writes a Markdown table. Run it in release.
+    PoseStudy(hapcal::plan::StudyArgs),
     /// Import a URDF chain as a hapcal device file (TOML on stdout).
     ImportUrdf {
         /// The URDF file.
@@ -253,6 +260,20 @@ fn run(cli: Cli) -> Result<()> {
             let rows = hapcal_sim::simulate(&device, &truth, &cfg)?;
             std::fs::write(&out, hapcal_io::write_log(&rows))?;
             eprintln!("hapcal: wrote {} poses to {}", rows.len(), out.display());
+            Ok(())
+        }
+        Command::PlanPoses(args) => {
+            let (summary, out) = hapcal::plan::run_plan(&args)?;
+            print!("{summary}");
+            eprintln!("hapcal: wrote {}", out.display());
+            Ok(())
+        }
+        Command::PoseStudy(args) => {
+            let bar = indicatif::ProgressBar::new(args.seeds);
+            let text = hapcal::plan::run_study(&args, &|done| bar.set_position(done))?;
+            bar.finish_and_clear();
+            print!("{text}");
+            eprintln!("hapcal: wrote {}", args.out.display());
             Ok(())
         }
         Command::ImportUrdf { urdf, tip } => {
