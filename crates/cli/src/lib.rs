@@ -9,6 +9,7 @@ pub mod paper;
 pub mod plan;
 pub mod report;
 pub mod reproduce;
+pub mod support;
 
 use std::path::PathBuf;
 
