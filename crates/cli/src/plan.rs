@@ -92,8 +92,28 @@ fn sigmas(device: &Device, sigma_m: Option<f64>) -> (f64, f64) {
     )
 }
 
-/// Candidate blocks of the scaled Jacobian for `readings` (see the module docs), the column
-/// names, and the kinematic parameters left out because the candidates cannot determine them.
+/// Basis functions of one transmission joint's error, evaluated at a joint reading (rad).
+type Basis = Box<dyn Fn(f64) -> Vec<f64>>;
+
+/// The candidates of a plan: Jacobian blocks, column names, what they cannot determine, and the
+/// weight of I-optimality.
+#[derive(Clone, Debug)]
+pub struct Candidates {
+    /// One block per candidate pose (`rows × columns.len()`), rows divided by their σ.
+    pub blocks: Vec<Mat<f64>>,
+    /// Column names: kept kinematic parameters, then transmission basis coefficients.
+    pub columns: Vec<String>,
+    /// Kinematic parameters the candidates cannot determine (left out).
+    pub undetermined: Vec<String>,
+    /// `W = mean_c(G_cᵀG_c)`, `G_c` (3 × columns) the derivative of the end point (m, rig
+    /// frame) at candidate `c` with respect to the columns: the kinematic point Jacobian, and
+    /// for a transmission coefficient the joint's column of the geometric Jacobian times the
+    /// basis function. `trace(W·(JᵀJ)⁻¹)·σ²`-like: the mean end-point variance over the
+    /// candidates, the target of [`Criterion::IOptimal`].
+    pub weight: Mat<f64>,
+}
+
+/// Candidate blocks of the scaled Jacobian for `readings` (see the module docs).
 ///
 /// # Errors
 /// An invalid device chain, readings of the wrong length, or a Jacobian evaluation failure.
@@ -102,8 +122,9 @@ pub fn candidate_blocks(
     readings: &[Vec<f64>],
     measurement: Measurement,
     sigma_m: Option<f64>,
-) -> Result<(Vec<Mat<f64>>, Vec<String>, Vec<String>)> {
+) -> Result<Candidates> {
     let chain = device.chain().context("building the kinematic chain")?;
+    let chain_for_weight = chain.clone();
     let (sigma_m, sigma_e) = sigmas(device, sigma_m);
     let kind = match measurement {
         Measurement::Distance => RowKind::Distance { distance_m: 0.0 },
@@ -146,9 +167,12 @@ pub fn candidate_blocks(
     let mut columns: Vec<String> = kept.iter().map(|&j| layout.name(j).to_owned()).collect();
 
     // Transmission basis columns: (joint index, basis function count, evaluator).
-    let parallelogram = device.parallelogram.is_some().then_some(crate::paper::PARALLELOGRAM_JOINT);
+    let parallelogram = device
+        .parallelogram
+        .is_some()
+        .then_some(crate::paper::PARALLELOGRAM_JOINT);
     let limits = device.joint_limits();
-    let mut transmissions: Vec<(usize, Box<dyn Fn(f64) -> Vec<f64>>)> = Vec::new();
+    let mut transmissions: Vec<(usize, Basis)> = Vec::new();
     for c in &device.capstans {
         let j = c.joint - 1;
         if Some(c.joint) == parallelogram {
@@ -182,6 +206,30 @@ pub fn candidate_blocks(
     }
     let n_cols = columns.len();
     let n_rows = rows_per_pose + transmissions.len();
+    let x0 = vec![0.0; chain_for_weight.n_params()];
+    let mut weight = Mat::<f64>::zeros(n_cols, n_cols);
+    for q in readings {
+        let jp = chain_for_weight.point_jacobian_wrt_params(&x0, q);
+        let jq = chain_for_weight.geometric_jacobian(&x0, q);
+        let mut g = Mat::<f64>::zeros(3, n_cols);
+        for a in 0..3 {
+            for (k, &j) in kept.iter().enumerate() {
+                // Kinematic parameters come first in the problem's layout.
+                if j < chain_for_weight.n_params() {
+                    g[(a, k)] = jp[(a, j)];
+                }
+            }
+            let mut col = kept.len();
+            for (joint, basis) in &transmissions {
+                for v in basis(q[*joint]) {
+                    g[(a, col)] = jq[(a, *joint)] * v;
+                    col += 1;
+                }
+            }
+        }
+        weight += g.transpose() * &g;
+    }
+    weight /= readings.len().max(1) as f64;
     let blocks = readings
         .iter()
         .enumerate()
@@ -203,7 +251,16 @@ pub fn candidate_blocks(
             b
         })
         .collect();
-    Ok((blocks, columns, ident.pruned_names().iter().map(|s| (*s).to_owned()).collect()))
+    Ok(Candidates {
+        blocks,
+        columns,
+        undetermined: ident
+            .pruned_names()
+            .iter()
+            .map(|s| (*s).to_owned())
+            .collect(),
+        weight,
+    })
 }
 
 /// Plans `cfg.count` poses: samples `cfg.n_candidates` readings uniformly within the joint limits
@@ -223,13 +280,20 @@ pub fn plan_poses(device: &Device, cfg: &PlanConfig) -> Result<PosePlan> {
     }
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
     let candidates = hapcal_sim::sample_readings(device, &mut rng, cfg.n_candidates);
-    let (blocks, columns, undetermined) =
-        candidate_blocks(device, &candidates, cfg.measurement, cfg.sigma_m)?;
-    let design = select_poses(&blocks, cfg.count, &DesignConfig::new(cfg.criterion))
-        .context("choosing the poses")?;
+    let Candidates {
+        blocks,
+        columns,
+        undetermined,
+        weight,
+    } = candidate_blocks(device, &candidates, cfg.measurement, cfg.sigma_m)?;
+    let design_cfg = DesignConfig {
+        weight: Some(weight),
+        ..DesignConfig::new(cfg.criterion)
+    };
+    let design = select_poses(&blocks, cfg.count, &design_cfg).context("choosing the poses")?;
     let first: Vec<usize> = (0..cfg.count).collect();
-    let random = design_quality(&blocks, &first)
-        .context("scoring a random set of the same size")?;
+    let random =
+        design_quality(&blocks, &first).context("scoring a random set of the same size")?;
     let readings = design
         .selected
         .iter()
@@ -467,7 +531,10 @@ pub fn pose_study(
 pub fn study_markdown(study: &Study, cfg: &StudyConfig, command: &str) -> String {
     use std::fmt::Write;
     let mut s = String::new();
-    let _ = writeln!(s, "# Pose selection: planned vs random poses (reference device, distance data)\n");
+    let _ = writeln!(
+        s,
+        "# Pose selection: planned vs random poses (reference device, distance data)\n"
+    );
     let _ = writeln!(s, "Written by `{command}`.\n");
     let _ = writeln!(
         s,
@@ -477,9 +544,7 @@ pub fn study_markdown(study: &Study, cfg: &StudyConfig, command: &str) -> String
          Planned poses: {} by greedy start + DETMAX exchange over {} candidates sampled uniformly \
          within the joint limits, using the Jacobian at the nominal model (kinematic distance rows \
          and the linearised transmission rows, see `crates/cli/src/plan.rs`). Seeds 0..{}.\n",
-        cfg.criterion,
-        cfg.n_candidates,
-        cfg.seeds
+        cfg.criterion, cfg.n_candidates, cfg.seeds
     );
     let _ = writeln!(
         s,
@@ -500,10 +565,33 @@ pub fn study_markdown(study: &Study, cfg: &StudyConfig, command: &str) -> String
             row.count,
             row.planned_m * 1e3,
             row.random_m * 1e3,
-            if row.planned_m <= study.reference_m { "yes" } else { "no" },
+            if row.planned_m <= study.reference_m {
+                "yes"
+            } else {
+                "no"
+            },
             row.planned_wins,
             cfg.seeds
         );
+    }
+    let _ = writeln!(
+        s,
+        "\nPer seed, validation position RMS (mm): {} random | planned, random for each count",
+        cfg.n_random
+    );
+    let _ = writeln!(s);
+    let mut header = format!("| seed | {} random |", cfg.n_random);
+    for c in &cfg.counts {
+        let _ = write!(header, " {c} planned | {c} random |");
+    }
+    let _ = writeln!(s, "{header}");
+    let _ = writeln!(s, "|{}", "---|".repeat(2 + 2 * cfg.counts.len()));
+    for (seed, (reference, by_count)) in study.per_seed.iter().enumerate() {
+        let mut line = format!("| {seed} | {:.4} |", reference * 1e3);
+        for (planned, random) in by_count {
+            let _ = write!(line, " {:.4} | {:.4} |", planned * 1e3, random * 1e3);
+        }
+        let _ = writeln!(s, "{line}");
     }
     let fewest = study
         .rows

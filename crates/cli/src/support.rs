@@ -40,7 +40,7 @@ pub fn observability_report(
     n_poses: usize,
 ) -> Option<ObservabilityReport> {
     let kept = &identified.identifiability.kept;
-    if kept.is_empty() || n_poses == 0 || !(identified.sigma > 0.0) {
+    if kept.is_empty() || n_poses == 0 || identified.sigma.is_nan() || identified.sigma <= 0.0 {
         return None;
     }
     let layout = problem.layout();

@@ -36,6 +36,12 @@ pub enum Criterion {
     O4,
     /// O5 (Sun & Hollerbach): `1/Σ(1/σ_i)`.
     O5,
+    /// I-optimality (Fedorov 1972, ch. 2; V-optimality in Atkinson, Donev & Tobias, *Optimum
+    /// Experimental Designs*, 2007, §10.6): minimise `trace(W·(JᵀJ)⁻¹)`, the average variance of
+    /// the predictions `g·δx` whose second moment is `W = mean(gᵀg)`
+    /// ([`DesignConfig::weight`]), e.g. the end-point position over the workspace. The value
+    /// reported is `−trace(W·(JᵀJ)⁻¹)`.
+    IOptimal,
 }
 
 impl std::fmt::Display for Criterion {
@@ -46,6 +52,7 @@ impl std::fmt::Display for Criterion {
             Criterion::O3 => "o3",
             Criterion::O4 => "o4",
             Criterion::O5 => "o5",
+            Criterion::IOptimal => "i-optimal",
         })
     }
 }
@@ -59,8 +66,9 @@ impl std::str::FromStr for Criterion {
             "o3" => Ok(Criterion::O3),
             "o4" => Ok(Criterion::O4),
             "o5" => Ok(Criterion::O5),
+            "i-optimal" => Ok(Criterion::IOptimal),
             other => Err(format!(
-                "unknown criterion {other:?}: expected d-optimal, o1, o3, o4 or o5"
+                "unknown criterion {other:?}: expected d-optimal, o1, o3, o4, o5 or i-optimal"
             )),
         }
     }
@@ -75,6 +83,9 @@ pub struct DesignConfig {
     pub max_exchanges: usize,
     /// For O3/O4/O5: how many of the best additions by D-optimal gain are scored exactly.
     pub shortlist: usize,
+    /// For [`Criterion::IOptimal`]: the `n × n` symmetric positive semi-definite weight `W`
+    /// (second moment of the prediction gradients, in the units of the block columns).
+    pub weight: Option<Mat<f64>>,
 }
 
 impl DesignConfig {
@@ -85,6 +96,7 @@ impl DesignConfig {
             criterion,
             max_exchanges: 1000,
             shortlist: 20,
+            weight: None,
         }
     }
 }
@@ -109,9 +121,16 @@ pub struct Design {
 
 /// Scores of a candidate set: the criterion of [`Criterion`] for the information matrix `m`
 /// (`n × n`, `JᵀJ`), `-∞` when `m` is singular.
-fn score(criterion: Criterion, m: &Mat<f64>, n_poses: usize) -> f64 {
+fn score(cfg: &DesignConfig, m: &Mat<f64>, n_poses: usize) -> f64 {
+    let criterion = cfg.criterion;
     match criterion {
         Criterion::DOptimal | Criterion::O1 => log_det(m).unwrap_or(f64::NEG_INFINITY),
+        Criterion::IOptimal => {
+            let (Some(w), Some(minv)) = (cfg.weight.as_ref(), spd_inverse(m)) else {
+                return f64::NEG_INFINITY;
+            };
+            -trace_product(w, &minv)
+        }
         Criterion::O3 | Criterion::O4 | Criterion::O5 => {
             let Some(o) = observability_of_information(m, n_poses) else {
                 return f64::NEG_INFINITY;
@@ -143,7 +162,7 @@ fn cholesky(m: &Mat<f64>) -> Option<Mat<f64>> {
         for k in 0..j {
             d -= l[(j, k)] * l[(j, k)];
         }
-        if !(d > 1e-13 * max_diag) {
+        if d.is_nan() || d <= 1e-13 * max_diag {
             return None;
         }
         let d = d.sqrt();
@@ -159,6 +178,33 @@ fn cholesky(m: &Mat<f64>) -> Option<Mat<f64>> {
     Some(l)
 }
 
+/// `m⁻¹` of a symmetric positive definite `m`, `None` if it is not.
+fn spd_inverse(m: &Mat<f64>) -> Option<Mat<f64>> {
+    let l = cholesky(m)?;
+    let mut x = Mat::<f64>::identity(m.nrows(), m.nrows());
+    l.as_ref().solve_lower_triangular_in_place(x.as_mut());
+    Some(x.transpose() * &x)
+}
+
+/// `trace(a·b)` for symmetric `a`, `b`.
+fn trace_product(a: &Mat<f64>, b: &Mat<f64>) -> f64 {
+    let n = a.nrows();
+    (0..n)
+        .map(|i| (0..n).map(|j| a[(i, j)] * b[(j, i)]).sum::<f64>())
+        .sum()
+}
+
+/// Change of `trace(W·M⁻¹)` when block `b` is added (`sign = 1`) or removed (`sign = −1`):
+/// `−sign·trace(S⁻¹·UᵀWU)` with `U = M⁻¹Bᵀ`, `S = I + sign·B·U` (Sherman–Morrison–Woodbury);
+/// `None` when the removal makes `M` singular.
+fn i_change(minv: &Mat<f64>, w: &Mat<f64>, b: MatRef<'_, f64>, sign: f64) -> Option<f64> {
+    let u = minv * b.transpose();
+    let s = Mat::<f64>::identity(b.nrows(), b.nrows()) + (b * &u) * sign;
+    let s_inv = spd_inverse(&s)?;
+    let k = u.transpose() * w * &u;
+    Some(-sign * trace_product(&s_inv, &k))
+}
+
 fn log_det(m: &Mat<f64>) -> Option<f64> {
     let l = cholesky(m)?;
     Some(2.0 * (0..m.nrows()).map(|i| l[(i, i)].ln()).sum::<f64>())
@@ -167,8 +213,7 @@ fn log_det(m: &Mat<f64>) -> Option<f64> {
 /// `W = L⁻¹·Bᵀ` (`n × r`) for a block `B` (`r × n`), so that `B M⁻¹ Bᵀ = WᵀW`.
 fn whiten(l: &Mat<f64>, b: MatRef<'_, f64>) -> Mat<f64> {
     let mut w = b.transpose().to_owned();
-    l.as_ref()
-        .solve_lower_triangular_in_place(w.as_mut());
+    l.as_ref().solve_lower_triangular_in_place(w.as_mut());
     w
 }
 
@@ -205,6 +250,7 @@ fn add_info(m: &mut Mat<f64>, b: MatRef<'_, f64>, sign: f64) {
 /// - [`Error::TooFewCandidates`] if `n_select` exceeds the number of candidates or is 0;
 /// - [`Error::BlockShape`] if a block has no row, another column count than block 0, or a
 ///   non-finite entry;
+/// - [`Error::MissingWeight`] for [`Criterion::IOptimal`] without a finite `n × n` weight;
 /// - [`Error::NotDetermined`] if even all candidates together leave `JᵀJ` singular (a column
 ///   is not determined by any selection), or if `n_select` poses cannot give a non-singular
 ///   `JᵀJ` (too few rows).
@@ -230,6 +276,14 @@ pub fn select_poses(
                 expected_ncols: n,
             });
         }
+    }
+    if cfg.criterion == Criterion::IOptimal
+        && cfg
+            .weight
+            .as_ref()
+            .is_none_or(|w| w.nrows() != n || w.ncols() != n || !w.is_all_finite())
+    {
+        return Err(Error::MissingWeight { n_params: n });
     }
     let mut total = Mat::<f64>::zeros(n, n);
     for b in blocks {
@@ -265,7 +319,7 @@ pub fn select_poses(
             add_info(&mut m, b.as_ref(), 1.0);
         }
     }
-    let mut value = score(cfg.criterion, &m, n_select);
+    let mut value = score(cfg, &m, n_select);
     if value == f64::NEG_INFINITY {
         return Err(Error::NotDetermined {
             n_params: n,
@@ -282,6 +336,16 @@ pub fn select_poses(
         };
         let added = match cfg.criterion {
             Criterion::DOptimal | Criterion::O1 => best_addition(blocks, &in_set, &l).map(|b| b.0),
+            Criterion::IOptimal => {
+                let (Some(w), Some(minv)) = (cfg.weight.as_ref(), spd_inverse(&m)) else {
+                    break;
+                };
+                (0..n_candidates)
+                    .filter(|&c| !in_set[c])
+                    .filter_map(|c| i_change(&minv, w, blocks[c].as_ref(), 1.0).map(|d| (c, d)))
+                    .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)))
+                    .map(|b| b.0)
+            }
             _ => {
                 let mut gains = additions(blocks, &in_set, &l);
                 gains.sort_by(|a, b| b.1.total_cmp(&a.1));
@@ -291,7 +355,7 @@ pub fn select_poses(
                     .map(|&(c, _)| {
                         let mut trial = m.clone();
                         add_info(&mut trial, blocks[c].as_ref(), 1.0);
-                        (c, score(cfg.criterion, &trial, n_select + 1))
+                        (c, score(cfg, &trial, n_select + 1))
                     })
                     .max_by(|a, b| a.1.total_cmp(&b.1))
                     .map(|b| b.0)
@@ -307,6 +371,10 @@ pub fn select_poses(
         // Removal: the member of S ∪ {added} whose removal leaves the best criterion.
         let members: Vec<usize> = (0..n_candidates).filter(|&c| in_set[c]).collect();
         let l_plus = cholesky(&m_plus);
+        let minv_plus = match cfg.criterion {
+            Criterion::IOptimal => spd_inverse(&m_plus),
+            _ => None,
+        };
         let removal_score = |c: usize| -> f64 {
             match cfg.criterion {
                 Criterion::DOptimal | Criterion::O1 => {
@@ -316,10 +384,17 @@ pub fn select_poses(
                     let w = whiten(lp, blocks[c].as_ref());
                     log_det_update(&w, -1.0).map_or(f64::NEG_INFINITY, |d| d)
                 }
+                Criterion::IOptimal => {
+                    let (Some(w), Some(minv)) = (cfg.weight.as_ref(), minv_plus.as_ref()) else {
+                        return f64::NEG_INFINITY;
+                    };
+                    // Larger is better: minus the increase of trace(W M⁻¹).
+                    i_change(minv, w, blocks[c].as_ref(), -1.0).map_or(f64::NEG_INFINITY, |d| -d)
+                }
                 _ => {
                     let mut trial = m_plus.clone();
                     add_info(&mut trial, blocks[c].as_ref(), -1.0);
-                    score(cfg.criterion, &trial, n_select)
+                    score(cfg, &trial, n_select)
                 }
             }
         };
@@ -331,7 +406,7 @@ pub fn select_poses(
         in_set[removed] = false;
         let mut m_next = m_plus;
         add_info(&mut m_next, blocks[removed].as_ref(), -1.0);
-        let next_value = score(cfg.criterion, &m_next, n_select);
+        let next_value = score(cfg, &m_next, n_select);
         // A negligible improvement (rounding) ends the search as well.
         let improved = next_value > value + 1e-12 * value.abs().max(1.0);
         if removed == added || !improved {
@@ -339,9 +414,25 @@ pub fn select_poses(
                 // Undo: the exchange did not help.
                 in_set[removed] = true;
                 in_set[added] = false;
+            } else {
+                in_set[added] = false;
             }
-            converged = true;
-            break;
+            // The excursion is stuck: try the best single swap (Fedorov's exchange).
+            match best_swap(blocks, &in_set, cfg, n_select, &m) {
+                Some((out, into, swapped)) if swapped > value + 1e-12 * value.abs().max(1.0) => {
+                    in_set[out] = false;
+                    in_set[into] = true;
+                    add_info(&mut m, blocks[out].as_ref(), -1.0);
+                    add_info(&mut m, blocks[into].as_ref(), 1.0);
+                    value = score(cfg, &m, n_select);
+                    n_exchanges += 1;
+                    continue;
+                }
+                _ => {
+                    converged = true;
+                    break;
+                }
+            }
         }
         m = m_next;
         value = next_value;
@@ -360,13 +451,74 @@ pub fn select_poses(
             n_select,
         })?;
     Ok(Design {
-        value: score(cfg.criterion, &m, selected.len()),
+        value: score(cfg, &m, selected.len()),
         selected,
         log_det,
         observability,
         n_exchanges,
         converged,
     })
+}
+
+/// The best swap of one member for one non-member (V. V. Fedorov's exchange, 1972, ch. 3):
+/// `(member out, candidate in, criterion after the swap)`. For O3/O4/O5 only the best
+/// [`DesignConfig::shortlist`] candidates by D-optimal gain are tried per member.
+fn best_swap(
+    blocks: &[Mat<f64>],
+    in_set: &[bool],
+    cfg: &DesignConfig,
+    n_select: usize,
+    m: &Mat<f64>,
+) -> Option<(usize, usize, f64)> {
+    let mut best: Option<(usize, usize, f64)> = None;
+    let mut consider = |out: usize, into: usize, v: f64| {
+        if best.is_none_or(|b| v > b.2) {
+            best = Some((out, into, v));
+        }
+    };
+    for out in (0..blocks.len()).filter(|&c| in_set[c]) {
+        let mut m_out = m.clone();
+        add_info(&mut m_out, blocks[out].as_ref(), -1.0);
+        let outside = |c: usize| !in_set[c] && c != out;
+        match cfg.criterion {
+            Criterion::DOptimal | Criterion::O1 => {
+                let Some(l) = cholesky(&m_out) else { continue };
+                let base = 2.0 * (0..l.nrows()).map(|i| l[(i, i)].ln()).sum::<f64>();
+                for into in (0..blocks.len()).filter(|&c| outside(c)) {
+                    if let Some(g) = log_det_update(&whiten(&l, blocks[into].as_ref()), 1.0) {
+                        consider(out, into, base + g);
+                    }
+                }
+            }
+            Criterion::IOptimal => {
+                let (Some(w), Some(minv)) = (cfg.weight.as_ref(), spd_inverse(&m_out)) else {
+                    continue;
+                };
+                let base = trace_product(w, &minv);
+                for into in (0..blocks.len()).filter(|&c| outside(c)) {
+                    if let Some(d) = i_change(&minv, w, blocks[into].as_ref(), 1.0) {
+                        consider(out, into, -(base + d));
+                    }
+                }
+            }
+            _ => {
+                let Some(l) = cholesky(&m_out) else { continue };
+                let mut gains: Vec<(usize, f64)> = (0..blocks.len())
+                    .filter(|&c| outside(c))
+                    .filter_map(|c| {
+                        log_det_update(&whiten(&l, blocks[c].as_ref()), 1.0).map(|g| (c, g))
+                    })
+                    .collect();
+                gains.sort_by(|a, b| b.1.total_cmp(&a.1));
+                for &(into, _) in gains.iter().take(cfg.shortlist.max(1)) {
+                    let mut trial = m_out.clone();
+                    add_info(&mut trial, blocks[into].as_ref(), 1.0);
+                    consider(out, into, score(cfg, &trial, n_select));
+                }
+            }
+        }
+    }
+    best
 }
 
 /// `(candidate, log det(I + B M⁻¹ Bᵀ))` for every candidate not in the set.
@@ -395,7 +547,10 @@ fn best_addition(blocks: &[Mat<f64>], in_set: &[bool], l: &Mat<f64>) -> Option<(
 /// # Panics
 /// If an index in `chosen` is out of range (misuse).
 #[track_caller]
-pub fn design_quality(blocks: &[Mat<f64>], chosen: &[usize]) -> Result<(f64, Observability), Error> {
+pub fn design_quality(
+    blocks: &[Mat<f64>],
+    chosen: &[usize],
+) -> Result<(f64, Observability), Error> {
     let n = blocks.first().map_or(0, |b| b.ncols());
     let mut m = Mat::<f64>::zeros(n, n);
     for &c in chosen {
@@ -437,7 +592,12 @@ mod tests {
         // Candidates at 0°, 5°, 10°, 85°, 90°: the best pair is {0°, 90°} (det = 1).
         let deg = std::f64::consts::PI / 180.0;
         let blocks = directions(&[0.0, 5.0 * deg, 10.0 * deg, 85.0 * deg, 90.0 * deg]);
-        for criterion in [Criterion::DOptimal, Criterion::O4, Criterion::O3, Criterion::O5] {
+        for criterion in [
+            Criterion::DOptimal,
+            Criterion::O4,
+            Criterion::O3,
+            Criterion::O5,
+        ] {
             let d = select_poses(&blocks, 2, &DesignConfig::new(criterion)).expect("design");
             assert_eq!(d.selected, [0, 4], "{criterion}");
             assert!(d.log_det.abs() < 1e-12, "{}", d.log_det);
@@ -450,7 +610,9 @@ mod tests {
         // 12 random 2-row blocks in 4 parameters; choose 3. Compare with all 220 subsets.
         let mut state = 12345_u64;
         let mut next = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             ((state >> 11) as f64 / (1u64 << 53) as f64) - 0.5
         };
         let blocks: Vec<Mat<f64>> = (0..12).map(|_| Mat::from_fn(2, 4, |_, _| next())).collect();
@@ -473,17 +635,77 @@ mod tests {
     }
 
     #[test]
+    fn i_optimal_design_is_swap_optimal() {
+        let mut state = 777_u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        };
+        let blocks: Vec<Mat<f64>> = (0..10).map(|_| Mat::from_fn(2, 3, |_, _| next())).collect();
+        // Only parameter 0's prediction matters: W = e0·e0ᵀ, the criterion is −Var(x0)/σ².
+        let w = Mat::from_fn(3, 3, |i, j| if i == 0 && j == 0 { 1.0 } else { 0.0 });
+        let cfg = DesignConfig {
+            weight: Some(w.clone()),
+            ..DesignConfig::new(Criterion::IOptimal)
+        };
+        let d = select_poses(&blocks, 3, &cfg).expect("design");
+        let var0 = |set: &[usize]| {
+            let mut m = Mat::<f64>::zeros(3, 3);
+            for &c in set {
+                add_info(&mut m, blocks[c].as_ref(), 1.0);
+            }
+            spd_inverse(&m).map_or(f64::INFINITY, |inv| inv[(0, 0)])
+        };
+        let mut best = f64::INFINITY;
+        for a in 0..10 {
+            for b in a + 1..10 {
+                for c in b + 1..10 {
+                    best = best.min(var0(&[a, b, c]));
+                }
+            }
+        }
+        // The exchange is a local search: no single swap of a chosen block for another may
+        // improve the design (here the global optimum, found by enumeration, needs two swaps).
+        let sel = d.selected.clone();
+        assert!(
+            (-d.value - var0(&sel)).abs() <= 1e-12 * best,
+            "{} vs {}",
+            -d.value,
+            var0(&sel)
+        );
+        for k in 0..3 {
+            for c in (0..10).filter(|c| !sel.contains(c)) {
+                let mut swapped = sel.clone();
+                swapped[k] = c;
+                assert!(
+                    var0(&swapped) >= var0(&sel) * (1.0 - 1e-12),
+                    "{swapped:?} is better"
+                );
+            }
+        }
+        assert!(var0(&sel) >= best);
+        let err = select_poses(&blocks, 3, &DesignConfig::new(Criterion::IOptimal))
+            .expect_err("no weight");
+        assert_eq!(err, Error::MissingWeight { n_params: 3 });
+    }
+
+    #[test]
     fn errors_name_the_problem() {
         let blocks = directions(&[0.0, 0.0, 0.0]);
         let err = select_poses(&blocks, 2, &DesignConfig::new(Criterion::DOptimal))
             .expect_err("the second column is never seen");
-        assert_eq!(err, Error::NotDetermined { n_params: 2, n_select: 2 });
-        let err = select_poses(&blocks, 4, &DesignConfig::new(Criterion::O4))
-            .expect_err("too many");
         assert_eq!(
-            err.to_string(),
-            "cannot choose 4 poses from 3 candidates"
+            err,
+            Error::NotDetermined {
+                n_params: 2,
+                n_select: 2
+            }
         );
+        let err =
+            select_poses(&blocks, 4, &DesignConfig::new(Criterion::O4)).expect_err("too many");
+        assert_eq!(err.to_string(), "cannot choose 4 poses from 3 candidates");
     }
 
     #[test]
@@ -494,6 +716,7 @@ mod tests {
             Criterion::O3,
             Criterion::O4,
             Criterion::O5,
+            Criterion::IOptimal,
         ] {
             assert_eq!(c.to_string().parse::<Criterion>(), Ok(c));
         }

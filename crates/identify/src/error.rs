@@ -115,6 +115,12 @@ pub enum Error {
         /// Number of poses asked for.
         n_select: usize,
     },
+    /// Pose selection: I-optimality needs a finite `n × n` weight matrix.
+    #[error("the i-optimal criterion needs a finite {n_params} × {n_params} weight matrix")]
+    MissingWeight {
+        /// Number of parameters (columns).
+        n_params: usize,
+    },
     /// A configuration value is out of its domain.
     #[error("{field} = {value} is invalid: it must be finite and {requirement}")]
     InvalidConfig {

@@ -90,7 +90,10 @@ pub fn observability_from_singular_values(
     s.resize(n_params.max(s.len()), 0.0);
     s.truncate(n_params.max(1).min(s.len()));
     let n = s.len();
-    let (max, min) = (s.first().copied().unwrap_or(0.0), s.last().copied().unwrap_or(0.0));
+    let (max, min) = (
+        s.first().copied().unwrap_or(0.0),
+        s.last().copied().unwrap_or(0.0),
+    );
     let o1 = if min > 0.0 {
         (s.iter().map(|v| v.ln()).sum::<f64>() / n as f64).exp() / (n_poses as f64).sqrt()
     } else {
@@ -195,7 +198,11 @@ mod tests {
         for (got, want) in o.singular_values.iter().zip([4.0, 2.0, 1.0]) {
             assert!((got - want).abs() < 1e-13, "{:?}", o.singular_values);
         }
-        assert!((o.o1 - 8.0_f64.powf(1.0 / 3.0) / 2.0).abs() < 1e-13, "{}", o.o1);
+        assert!(
+            (o.o1 - 8.0_f64.powf(1.0 / 3.0) / 2.0).abs() < 1e-13,
+            "{}",
+            o.o1
+        );
         assert!((o.o2 - 0.25).abs() < 1e-14);
         assert!((o.o3 - 1.0).abs() < 1e-13);
         assert!((o.o4 - 0.25).abs() < 1e-13);
@@ -219,12 +226,28 @@ mod tests {
     #[test]
     fn scaling_multiplies_each_column_by_its_prior() {
         let layout = ParamLayout::new(vec![
-            ParamSpec { name: "a".into(), unit: Unit::Meter, role: Role::Model },
-            ParamSpec { name: "t".into(), unit: Unit::Radian, role: Role::Model },
-            ParamSpec { name: "k".into(), unit: Unit::Dimensionless, role: Role::Model },
+            ParamSpec {
+                name: "a".into(),
+                unit: Unit::Meter,
+                role: Role::Model,
+            },
+            ParamSpec {
+                name: "t".into(),
+                unit: Unit::Radian,
+                role: Role::Model,
+            },
+            ParamSpec {
+                name: "k".into(),
+                unit: Unit::Dimensionless,
+                role: Role::Model,
+            },
         ]);
         let jac = Mat::from_fn(2, 3, |i, j| (i + 1) as f64 * (j + 1) as f64);
-        let priors = RankConfigBase { prior_m: 0.5, prior_rad: 0.25, ..RankConfigBase::default() };
+        let priors = RankConfigBase {
+            prior_m: 0.5,
+            prior_rad: 0.25,
+            ..RankConfigBase::default()
+        };
         let s = scale_by_priors(jac.as_ref(), &layout, &[2, 0], &priors);
         assert_eq!((s.nrows(), s.ncols()), (2, 2));
         assert_eq!(s[(1, 0)], 6.0 * 1.0);

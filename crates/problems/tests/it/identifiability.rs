@@ -514,7 +514,8 @@ impl<P: Problem> Problem for Permuted<'_, P> {
     }
     fn jacobian(&self, x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
         let mut inner = Mat::zeros(jac.nrows(), jac.ncols());
-        self.inner.jacobian(self.inner_x(x).as_ref(), inner.as_mut())?;
+        self.inner
+            .jacobian(self.inner_x(x).as_ref(), inner.as_mut())?;
         for (k, &i) in self.order.iter().enumerate() {
             jac.as_mut().col_mut(k).copy_from(inner.col(i));
         }
@@ -599,7 +600,9 @@ fn the_rank_property_fails_with_a_wrong_tolerance() {
         failure_persistence: None,
         ..Config::default()
     });
-    let result = runner.run(&(case(), measurement()), |(case, m)| check_rank(&case, m, &wrong));
+    let result = runner.run(&(case(), measurement()), |(case, m)| {
+        check_rank(&case, m, &wrong)
+    });
     let err = result.expect_err("a wrong tolerance must break the rank property");
     assert!(
         err.to_string().contains("kept"),
