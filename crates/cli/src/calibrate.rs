@@ -180,6 +180,10 @@ pub struct CalibrationReport {
     pub pruned: Vec<PrunedReport>,
     /// Pairs of kept parameters with |correlation| > 0.95.
     pub correlated: Vec<(String, String, f64)>,
+    /// Observability indices O1–O5 of the scaled Jacobian at the estimate.
+    pub observability: Option<crate::support::ObservabilityReport>,
+    /// Plain-language warnings about what the data cannot support.
+    pub warnings: Vec<String>,
     /// LM termination.
     pub termination: String,
     /// Residual evaluations of the final fit.
@@ -557,6 +561,17 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         .map(|(a, b, c)| (layout.name(a).to_string(), layout.name(b).to_string(), c))
         .collect();
 
+    let priors = identify_config(plan.sigma_m).rank;
+    let observability =
+        crate::support::observability_report(&problem, &identified, &priors, n_configurations);
+    let warnings = crate::support::warnings(
+        &identified,
+        &priors,
+        problem.points_offset(),
+        0.95,
+        observability.as_ref(),
+    );
+
     let nominal = CalibratedModel::nominal(chain.clone());
     let mut placements = Vec::new();
     for (role, sets) in [("train", &train), ("test", &test)] {
@@ -587,6 +602,8 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         parameters,
         pruned,
         correlated,
+        observability,
+        warnings,
         termination: format!("{:?}", identified.fit.termination),
         n_evaluations: identified.fit.n_evaluations,
         n_jacobians: identified.fit.n_jacobians,

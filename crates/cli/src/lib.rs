@@ -7,8 +7,10 @@ pub mod calibrate;
 pub mod figures;
 pub mod force;
 pub mod paper;
+pub mod plan;
 pub mod report;
 pub mod reproduce;
+pub mod support;
 
 use std::path::PathBuf;
 

@@ -76,6 +76,14 @@ enum Command {
         /// Compare with the golden file instead of writing (UPDATE_GOLDEN=1 rewrites it and fails).
         #[arg(long)]
         check: bool,
+        /// Choose the identification poses from `--candidates` random ones by this criterion of
+        /// the distance Jacobian at the nominal model (d-optimal, o1, o3, o4, o5, i-optimal)
+        /// instead of taking random poses as the paper does.
+        #[arg(long)]
+        design: Option<hapcal_identify::Criterion>,
+        /// Random candidates per seed for `--design`.
+        #[arg(long, default_value_t = 2000)]
+        candidates: usize,
     },
     /// Simulate a measurement log (DESIGN.md §5) from a truth device: joint readings quantised
     /// to the encoders, true transmissions and deviations, Gaussian encoder and cable noise.
@@ -139,6 +147,13 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Choose the poses to measure: from candidates sampled within the joint limits, the ones
+    /// that maximise an observability criterion of the identification Jacobian at the nominal
+    /// model (greedy start + DETMAX exchange). Writes the readings as CSV.
+    PlanPoses(hapcal::plan::PlanArgs),
+    /// Monte Carlo study of planned vs random poses on the reference device (distance data);
+    /// writes a Markdown table. Run it in release.
+    PoseStudy(hapcal::plan::StudyArgs),
     /// Import a URDF chain as a hapcal device file (TOML on stdout).
     ImportUrdf {
         /// The URDF file.
@@ -202,6 +217,8 @@ fn run(cli: Cli) -> Result<()> {
             poses,
             out,
             check,
+            design,
+            candidates,
         } => {
             let root = hapcal::project_root();
             let truth = truth.unwrap_or_else(|| root.join("fixtures/reference-device/truth.toml"));
@@ -213,7 +230,27 @@ fn run(cli: Cli) -> Result<()> {
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
             );
             bar.set_message("reproducing");
-            let choice = hapcal::paper::PoseChoice::Random;
+            let reference = hapcal::paper::Reference::load(&truth)?;
+            let select = |readings: &[Vec<f64>], n: usize| -> anyhow::Result<Vec<usize>> {
+                let criterion = design.unwrap_or(hapcal_identify::Criterion::DOptimal);
+                let c = hapcal::plan::candidate_blocks(
+                    &reference.device,
+                    readings,
+                    hapcal::plan::Measurement::Distance,
+                    Some(reference.noise.sigma_m_m),
+                )?;
+                let mut cfg = hapcal_identify::DesignConfig::new(criterion);
+                cfg.weight = Some(c.weight);
+                Ok(hapcal_identify::select_poses(&c.blocks, n, &cfg)?.selected)
+            };
+            let choice = match design {
+                None => hapcal::paper::PoseChoice::Random,
+                Some(criterion) => hapcal::paper::PoseChoice::Planned {
+                    n_candidates: candidates,
+                    name: criterion.to_string(),
+                    select: &select,
+                },
+            };
             let result = hapcal::reproduce::run(&truth, seeds, poses, &choice, &|done| {
                 bar.set_position(done as u64)
             })?;
@@ -336,6 +373,20 @@ fn run(cli: Cli) -> Result<()> {
             let text = hapcal::force::calibrate_reference(&truth, &log)?;
             std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
             eprintln!("hapcal: wrote {}", out.display());
+            Ok(())
+        }
+        Command::PlanPoses(args) => {
+            let (summary, out) = hapcal::plan::run_plan(&args)?;
+            print!("{summary}");
+            eprintln!("hapcal: wrote {}", out.display());
+            Ok(())
+        }
+        Command::PoseStudy(args) => {
+            let bar = indicatif::ProgressBar::new(args.seeds);
+            let text = hapcal::plan::run_study(&args, &|done| bar.set_position(done))?;
+            bar.finish_and_clear();
+            print!("{text}");
+            eprintln!("hapcal: wrote {}", args.out.display());
             Ok(())
         }
         Command::ImportUrdf { urdf, tip } => {

@@ -409,7 +409,7 @@ pub fn run_seed(r: &Reference, seed: u64, n_poses: usize) -> Result<SeedResult> 
 
 /// Selects `n_select` of the candidate joint readings (rad, one `Vec` per candidate); returns
 /// their indices.
-pub type PoseSelector = dyn Fn(&[Vec<f64>], usize) -> Result<Vec<usize>> + Sync;
+pub type PoseSelector<'a> = dyn Fn(&[Vec<f64>], usize) -> Result<Vec<usize>> + Sync + 'a;
 
 /// How the identification poses of one seed are chosen.
 pub enum PoseChoice<'a> {
@@ -424,7 +424,7 @@ pub enum PoseChoice<'a> {
         /// Name of the design, for reports (`d-optimal`).
         name: String,
         /// The selection.
-        select: &'a PoseSelector,
+        select: &'a PoseSelector<'a>,
     },
 }
 

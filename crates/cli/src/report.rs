@@ -86,6 +86,19 @@ pub fn render(r: &CalibrationReport) -> String {
             let _ = writeln!(s, "  {a} ~ {b}: {c:+.3}");
         }
     }
+    if let Some(o) = &r.observability {
+        let _ = writeln!(
+            s,
+            "\nobservability of the scaled Jacobian ({} parameters, {} poses): O1 = {:.4e}, O2 = {:.4e} (condition number {:.1}), O3 = {:.4e}, O4 = {:.4e}, O5 = {:.4e}",
+            o.n_params, o.n_poses, o.o1, o.o2, o.condition_number, o.o3, o.o4, o.o5
+        );
+    }
+    if !r.warnings.is_empty() {
+        let _ = writeln!(s, "\nwarnings:");
+        for w in &r.warnings {
+            let _ = writeln!(s, "  - {w}");
+        }
+    }
     let _ = writeln!(
         s,
         "\nfigures of merit (mm): MAE = mean absolute error to the socket mean, dist = socket distance error"

@@ -79,6 +79,48 @@ pub enum Error {
         /// The parameter whose column made `R` singular.
         name: String,
     },
+    /// Pose selection: `n_select` is 0 or more than the candidates.
+    #[error("cannot choose {n_select} poses from {n_candidates} candidates")]
+    TooFewCandidates {
+        /// Number of candidate blocks.
+        n_candidates: usize,
+        /// Number of poses asked for.
+        n_select: usize,
+    },
+    /// Pose selection: a candidate block is empty, has the wrong number of columns, or holds a
+    /// non-finite entry.
+    #[error(
+        "candidate block {index} is {nrows} × {ncols} (expected ≥ 1 row and {expected_ncols} \
+         columns, all finite)"
+    )]
+    BlockShape {
+        /// Index of the block.
+        index: usize,
+        /// Its rows.
+        nrows: usize,
+        /// Its columns.
+        ncols: usize,
+        /// Columns of block 0.
+        expected_ncols: usize,
+    },
+    /// Pose selection: the information matrix of the candidates (or of `n_select` of them) is
+    /// singular, so some parameter cannot be determined; prune it first.
+    #[error(
+        "{n_select} poses cannot determine the {n_params} parameters: the information matrix \
+         is singular (prune the parameters the candidates cannot see, or choose more poses)"
+    )]
+    NotDetermined {
+        /// Number of parameters (columns).
+        n_params: usize,
+        /// Number of poses asked for.
+        n_select: usize,
+    },
+    /// Pose selection: I-optimality needs a finite `n × n` weight matrix.
+    #[error("the i-optimal criterion needs a finite {n_params} × {n_params} weight matrix")]
+    MissingWeight {
+        /// Number of parameters (columns).
+        n_params: usize,
+    },
     /// A configuration value is out of its domain.
     #[error("{field} = {value} is invalid: it must be finite and {requirement}")]
     InvalidConfig {

@@ -55,15 +55,21 @@
 
 mod calibrate;
 mod covariance;
+mod design;
 mod error;
 mod lm;
+mod observability;
 mod problem;
 mod rank;
 
 pub use calibrate::{Identified, IdentifyConfig, MAX_ROUNDS, SIGMA_FLOOR, SigmaSource, identify};
 pub use covariance::{Covariance, covariance, sigma_from_residuals};
+pub use design::{Criterion, Design, DesignConfig, design_quality, select_poses};
 pub use error::Error;
 pub use lm::{Fit, LmConfig, Termination, levenberg_marquardt};
+pub use observability::{
+    Observability, observability, observability_from_singular_values, scale_by_priors,
+};
 pub use problem::{EvalError, ParamLayout, ParamSpec, Problem, Role, Unit};
 pub use rank::{
     Identifiability, PruneReason, Pruned, RankConfig, RankConfigBase, TieBreak, identifiability,
