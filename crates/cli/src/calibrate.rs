@@ -41,12 +41,12 @@ impl ModelChoice {
             ModelChoice::Auto | ModelChoice::Geometric => None,
             ModelChoice::Compliance => Some(GravityCompliance::default()),
             ModelChoice::MassCompliance => Some(
-                GravityCompliance::published(&chain.joint_names()).context(
+                GravityCompliance::published(chain.joint_names()).context(
                     "--model mass-compliance: no published link masses for this robot's joint names",
                 )?,
             ),
             ModelChoice::ActuatorCompliance => Some(
-                GravityCompliance::published_by_actuator(&chain.joint_names()).context(
+                GravityCompliance::published_by_actuator(chain.joint_names()).context(
                     "--model actuator-compliance: no published link masses for this robot's joint names",
                 )?,
             ),
@@ -529,7 +529,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             // paired difference to the geometric model (and its standard error) is reported so
             // that a reader sees how clear the choice is.
             let mut candidates = vec![ModelChoice::Geometric, ModelChoice::Compliance];
-            if GravityCompliance::published(&chain.joint_names()).is_some() {
+            if GravityCompliance::published(chain.joint_names()).is_some() {
                 candidates.push(ModelChoice::MassCompliance);
                 candidates.push(ModelChoice::ActuatorCompliance);
             }

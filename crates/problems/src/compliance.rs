@@ -41,6 +41,9 @@ pub struct LinkMass {
     pub com_m: Vector3<f64>,
 }
 
+/// A link's mass (kg) and centre of mass (m, in its link frame).
+type Inertial = (f64, [f64; 3]);
+
 /// Standard gravity, m/s² (CGPM 1901).
 const G0: f64 = 9.806_65;
 
@@ -49,7 +52,7 @@ const G0: f64 = 9.806_65;
 /// Emika Panda robot with retrieval of feasible parameters using penalty-based optimization",
 /// IEEE RA-L 4(4), 2019, as `franka_description` (frankaemika/franka_ros) ships them in its
 /// `<inertial>` elements.
-const PANDA_GAZ_2019: [(f64, [f64; 3]); 7] = [
+const PANDA_GAZ_2019: [Inertial; 7] = [
     (4.970_684, [3.875e-3, 2.081e-3, -4.762e-2]),
     (0.646_926, [-3.141e-3, -2.872e-2, 3.495e-3]),
     (3.228_604, [2.7518e-2, 3.9252e-2, -6.6502e-2]),
@@ -62,7 +65,7 @@ const PANDA_GAZ_2019: [(f64, [f64; 3]); 7] = [
 /// Franka Hand: 0.73 kg at (−0.01, 0, 0.03) m in `panda_hand` (`franka_description`,
 /// hand.urdf inertial), expressed in `panda_link7`: the hand frame is 0.107 m along z and
 /// rotated −π/4 about z.
-const PANDA_HAND: (f64, [f64; 3]) = (
+const PANDA_HAND: Inertial = (
     0.73,
     [
         -0.01 * std::f64::consts::FRAC_1_SQRT_2,
@@ -78,7 +81,7 @@ const PANDA_HAND: (f64, [f64; 3]) = (
 /// which are aligned with the base at zero angles): each centre of mass is re-expressed through
 /// its world position at zero angles, relative to the joint origin at 0, 0.36, 0.36, 0.78, 0.78,
 /// 1.18, 1.18 m (x offsets of ±0.44 mm as in the URDF). No tool mass is known; none is added.
-const IIWA14_DRAKE: [(f64, [f64; 3]); 7] = [
+const IIWA14_DRAKE: [Inertial; 7] = [
     (5.76, [0.0, -0.03, 0.2775]),
     (6.35, [0.000_136, 0.042, 0.059]),
     (3.5, [0.000_436, 0.03, 0.3345]),
@@ -108,7 +111,7 @@ impl GravityCompliance {
         let named = |f: &dyn Fn(usize) -> String| {
             joint_names.len() == 7 && joint_names.iter().enumerate().all(|(i, n)| *n == f(i + 1))
         };
-        let (links, extra): (&[(f64, [f64; 3])], Option<(f64, [f64; 3])>) =
+        let (links, extra): (&[Inertial], Option<Inertial>) =
             if named(&|i| format!("panda_joint{i}")) {
                 (&PANDA_GAZ_2019, Some(PANDA_HAND))
             } else if named(&|i| format!("joint_a{i}")) {
