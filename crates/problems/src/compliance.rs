@@ -25,8 +25,8 @@ pub struct GravityCompliance {
     pub gravity_dir: Vector3<f64>,
     /// Point masses of the links; empty for the lumped unit weights.
     pub masses: Vec<LinkMass>,
-    /// Compliance parameter of each joint (`groups[j]`, 0-based, dense); empty for one
-    /// parameter per joint. Joints with the same actuator share one stiffness.
+    /// Compliance parameter of each joint (`groups[j]`, 0-based, dense, length `n_joints`);
+    /// empty for one parameter per joint. Joints with the same actuator share one stiffness.
     pub groups: Vec<usize>,
 }
 
@@ -169,7 +169,7 @@ impl GravityCompliance {
     /// (m) without [`Self::masses`], physical `τ` (N·m) with them.
     ///
     /// # Panics
-    /// If `q.len() != chain.n_joints()`.
+    /// If `q.len() != chain.n_joints()`, or a [`LinkMass::joint`] is not a joint of `chain`.
     #[track_caller]
     pub fn lumped_torques(&self, chain: &Chain, q: &[f64]) -> Vec<f64> {
         let x0 = vec![0.0; chain.n_params()];
