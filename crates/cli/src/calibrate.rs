@@ -24,6 +24,34 @@ pub enum ModelChoice {
     Geometric,
     /// Kinematic parameters plus lumped gravity compliance per joint.
     Compliance,
+    /// Kinematic parameters plus gravity compliance per joint, with the torque of the robot's
+    /// published link masses (Franka Panda, KUKA LBR iiwa 14; see
+    /// [`GravityCompliance::published`]). Not available for other robots.
+    MassCompliance,
+    /// As [`ModelChoice::MassCompliance`], with one compliance per actuator size
+    /// ([`GravityCompliance::published_by_actuator`]).
+    ActuatorCompliance,
+}
+
+impl ModelChoice {
+    /// The compliance term of a fixed choice (`None` for geometric); an error for
+    /// [`ModelChoice::MassCompliance`] on a robot without published masses.
+    fn compliance(self, chain: &Chain) -> Result<Option<GravityCompliance>> {
+        Ok(match self {
+            ModelChoice::Auto | ModelChoice::Geometric => None,
+            ModelChoice::Compliance => Some(GravityCompliance::default()),
+            ModelChoice::MassCompliance => Some(
+                GravityCompliance::published(chain.joint_names()).context(
+                    "--model mass-compliance: no published link masses for this robot's joint names",
+                )?,
+            ),
+            ModelChoice::ActuatorCompliance => Some(
+                GravityCompliance::published_by_actuator(chain.joint_names()).context(
+                    "--model actuator-compliance: no published link masses for this robot's joint names",
+                )?,
+            ),
+        })
+    }
 }
 
 /// Validated inputs of one calibration.
@@ -155,6 +183,9 @@ pub struct CvReport {
     pub model: ModelChoice,
     /// Held-out RMS of the 3-D point (or distance) error over all folds, m.
     pub heldout_rms_m: f64,
+    /// Mean over held-out rows of this model's squared error minus the geometric model's, m²,
+    /// and its standard error (0 for the geometric model itself).
+    pub paired_difference_m2: (f64, f64),
     /// Number of kept parameters on the full training data.
     pub n_kept: usize,
 }
@@ -315,25 +346,26 @@ pub fn identify_config(sigma_m: Option<f64>) -> IdentifyConfig {
 fn solve(
     chain: &Chain,
     obs: Observations,
-    compliance: bool,
+    compliance: Option<GravityCompliance>,
     sigma_m: Option<f64>,
 ) -> Result<(CalibrationProblem, Identified)> {
     let n_rows = obs.rows.len();
-    let problem = CalibrationProblem::new(
-        chain.clone(),
-        obs,
-        Weights::default(),
-        compliance.then(GravityCompliance::default),
-    )
-    .context("building the calibration problem")?;
+    let problem = CalibrationProblem::new(chain.clone(), obs, Weights::default(), compliance)
+        .context("building the calibration problem")?;
     let x0 = problem.initial_guess();
     let identified = identify(&problem, x0, &identify_config(sigma_m))
         .with_context(|| format!("identifying parameters from {n_rows} configurations"))?;
     Ok((problem, identified))
 }
 
-/// Held-out RMS (m) of k-fold cross-validation with time-contiguous blocks per socket.
-fn cross_validate(chain: &Chain, sets: &[DataSet], plan: &Plan, compliance: bool) -> Result<f64> {
+/// Held-out squared errors (m², one per training row, in a fixed order) of k-fold
+/// cross-validation with time-contiguous blocks per socket.
+fn cross_validate(
+    chain: &Chain,
+    sets: &[DataSet],
+    plan: &Plan,
+    compliance: Option<&GravityCompliance>,
+) -> Result<Vec<f64>> {
     let lens: Vec<Vec<usize>> = sets
         .iter()
         .map(|s| match s {
@@ -342,12 +374,12 @@ fn cross_validate(chain: &Chain, sets: &[DataSet], plan: &Plan, compliance: bool
         })
         .collect();
     let block = |set: usize, socket: usize, row: usize| row * plan.folds / lens[set][socket].max(1);
-    let (mut sum_sq, mut count) = (0.0, 0usize);
+    let mut errors = Vec::new();
     for fold in 0..plan.folds {
         let obs = observations(sets, plan.socket_distance_m, &|s, k, r| {
             block(s, k, r) != fold
         });
-        let (problem, identified) = solve(chain, obs, compliance, plan.sigma_m)?;
+        let (problem, identified) = solve(chain, obs, compliance.cloned(), plan.sigma_m)?;
         let model = problem.model(identified.fit.x.as_ref());
         let points = problem.points(identified.fit.x.as_ref());
         let mut point_base = 0;
@@ -357,9 +389,10 @@ fn cross_validate(chain: &Chain, sets: &[DataSet], plan: &Plan, compliance: bool
                     for (socket_idx, socket) in p.sockets.iter().enumerate() {
                         for (row_idx, q) in socket.q.iter().enumerate() {
                             if block(set_idx, socket_idx, row_idx) == fold {
-                                sum_sq += (model.end_point(q) - points[point_base + socket_idx])
-                                    .norm_squared();
-                                count += 1;
+                                errors.push(
+                                    (model.end_point(q) - points[point_base + socket_idx])
+                                        .norm_squared(),
+                                );
                             }
                         }
                     }
@@ -368,18 +401,29 @@ fn cross_validate(chain: &Chain, sets: &[DataSet], plan: &Plan, compliance: bool
                 DataSet::Distances { q, distance_m, .. } => {
                     for (row_idx, (q, d)) in q.iter().zip(distance_m).enumerate() {
                         if block(set_idx, 0, row_idx) == fold {
-                            sum_sq += (model.end_point(q).coords.norm() - d).powi(2);
-                            count += 1;
+                            errors.push((model.end_point(q).coords.norm() - d).powi(2));
                         }
                     }
                 }
             }
         }
     }
-    if count == 0 {
+    if errors.is_empty() {
         bail!("cross-validation held out no row");
     }
-    Ok((sum_sq / count as f64).sqrt())
+    Ok(errors)
+}
+
+/// Mean and standard error of `a − b`, element by element (paired held-out errors).
+fn paired_difference(a: &[f64], b: &[f64]) -> (f64, f64) {
+    let n = a.len().min(b.len());
+    if n < 2 {
+        return (0.0, f64::INFINITY);
+    }
+    let d: Vec<f64> = a.iter().zip(b).map(|(a, b)| a - b).collect();
+    let mean = d.iter().sum::<f64>() / n as f64;
+    let var = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    (mean, (var / n as f64).sqrt())
 }
 
 /// Refuses a calibration whose data determine no parameter, or fewer configurations than the
@@ -469,7 +513,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     // geometric model is chosen.
     let obs = observations(&train, plan.socket_distance_m, &|_, _, _| true);
     let n_configurations = obs.rows.len();
-    let geometric = solve(&chain, obs.clone(), false, plan.sigma_m)?;
+    let geometric = solve(&chain, obs.clone(), None, plan.sigma_m)?;
     let n_kept = |p: &CalibrationProblem, id: &Identified| {
         id.identifiability
             .kept
@@ -483,41 +527,53 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         geometric.0.points_offset(),
     )?;
     let mut cross_validation = Vec::new();
-    let compliance = match plan.model {
-        ModelChoice::Geometric => false,
-        ModelChoice::Compliance => true,
+    let choice = match plan.model {
         ModelChoice::Auto => {
-            let mut best = (f64::INFINITY, false);
-            for (choice, compliance) in [
-                (ModelChoice::Geometric, false),
-                (ModelChoice::Compliance, true),
-            ] {
-                let rms = cross_validate(&chain, &train, plan, compliance)?;
+            // Every model the robot supports is a candidate; the lowest held-out RMS wins. The
+            // paired difference to the geometric model (and its standard error) is reported so
+            // that a reader sees how clear the choice is.
+            let mut candidates = vec![ModelChoice::Geometric, ModelChoice::Compliance];
+            if GravityCompliance::published(chain.joint_names()).is_some() {
+                candidates.push(ModelChoice::MassCompliance);
+                candidates.push(ModelChoice::ActuatorCompliance);
+            }
+            let mut geometric_errors = Vec::new();
+            let mut best = (f64::INFINITY, ModelChoice::Geometric);
+            for candidate in candidates {
+                let compliance = candidate.compliance(&chain)?;
+                let errors = cross_validate(&chain, &train, plan, compliance.as_ref())?;
+                let rms = (errors.iter().sum::<f64>() / errors.len() as f64).sqrt();
+                let paired = if candidate == ModelChoice::Geometric {
+                    geometric_errors = errors;
+                    best = (rms, candidate);
+                    (0.0, 0.0)
+                } else {
+                    if rms < best.0 {
+                        best = (rms, candidate);
+                    }
+                    paired_difference(&errors, &geometric_errors)
+                };
                 cross_validation.push(CvReport {
-                    model: choice,
+                    model: candidate,
                     heldout_rms_m: rms,
+                    paired_difference_m2: paired,
                     n_kept: 0,
                 });
-                if rms < best.0 {
-                    best = (rms, compliance);
-                }
             }
             best.1
         }
+        fixed => fixed,
     };
-    let (problem, identified) = if compliance {
-        solve(&chain, obs, true, plan.sigma_m)?
-    } else {
+    let (problem, identified) = if choice == ModelChoice::Geometric {
         geometric
+    } else {
+        solve(&chain, obs, choice.compliance(&chain)?, plan.sigma_m)?
     };
     let model = problem.model(identified.fit.x.as_ref());
     let layout = problem.layout();
     let n_kept_model = n_kept(&problem, &identified);
     check_determined(n_configurations, n_kept_model, problem.points_offset())?;
-    if let Some(cv) = cross_validation
-        .iter_mut()
-        .find(|c| (c.model == ModelChoice::Compliance) == compliance)
-    {
+    if let Some(cv) = cross_validation.iter_mut().find(|c| c.model == choice) {
         cv.n_kept = n_kept_model;
     }
 
@@ -587,11 +643,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     }
     let report = CalibrationReport {
         device: plan.device.display().to_string(),
-        model: if compliance {
-            ModelChoice::Compliance
-        } else {
-            ModelChoice::Geometric
-        },
+        model: choice,
         folds: plan.folds,
         cross_validation,
         sigma_m: identified.sigma,

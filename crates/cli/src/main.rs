@@ -45,7 +45,8 @@ enum Command {
         /// Print the report as one JSON document instead of a table.
         #[arg(long)]
         json: bool,
-        /// Model: auto (chosen by cross-validation on the training data), geometric, compliance.
+        /// Model: auto (chosen by cross-validation on the training data), geometric, compliance,
+        /// mass-compliance.
         #[arg(long, value_enum, default_value_t = ModelChoice::Auto)]
         model: ModelChoice,
         /// Known distance between the two sockets of a placement, m.

@@ -15,26 +15,161 @@ use hapcal_kinematics::{Chain, Factor, Motion, Vector3};
 /// `q_j + k_j·τ̂_j(q)`, and `k_j` (rad per m of lumped lever arm) is identified; its physical
 /// meaning is compliance × weight, absorbed into one number per joint. A joint whose axis is
 /// parallel to gravity has `τ̂ ≡ 0`, and identification prunes its `k` as a zero column.
+///
+/// With published link masses ([`GravityCompliance::masses`] not empty) the torque is the
+/// physical one instead: `τ_j(q) = w_j · Σ_{i ≥ j} (c_i − o_j) × (m_i·g₀·ĝ)` (N·m), `c_i` the
+/// centre of mass of link `i` (the child link of joint `i`), and `k_j` is in rad/(N·m).
 #[derive(Clone, Debug, PartialEq)]
 pub struct GravityCompliance {
     /// Unit vector of gravity in the chain's base frame (default `−z`).
     pub gravity_dir: Vector3<f64>,
+    /// Point masses of the links; empty for the lumped unit weights.
+    pub masses: Vec<LinkMass>,
+    /// Compliance parameter of each joint (`groups[j]`, 0-based, dense, length `n_joints`);
+    /// empty for one parameter per joint. Joints with the same actuator share one stiffness.
+    pub groups: Vec<usize>,
 }
 
+/// A point mass rigidly attached to the child link of a joint.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinkMass {
+    /// Index of the joint whose child link carries the mass (0-based, chain order).
+    pub joint: usize,
+    /// Mass, kg.
+    pub mass_kg: f64,
+    /// Centre of mass in that link's frame (the frame just after the joint's rotation), m.
+    pub com_m: Vector3<f64>,
+}
+
+/// A link's mass (kg) and centre of mass (m, in its link frame).
+type Inertial = (f64, [f64; 3]);
+
+/// Standard gravity, m/s² (CGPM 1901).
+const G0: f64 = 9.806_65;
+
+/// Franka Emika Panda link masses (kg) and centres of mass (m, link frames `panda_link1..7`):
+/// Gaz, Cognetti, Oliva, Robuffo Giordano & De Luca, "Dynamic identification of the Franka
+/// Emika Panda robot with retrieval of feasible parameters using penalty-based optimization",
+/// IEEE RA-L 4(4), 2019, as `franka_description` (frankaemika/franka_ros) ships them in its
+/// `<inertial>` elements.
+const PANDA_GAZ_2019: [Inertial; 7] = [
+    (4.970_684, [3.875e-3, 2.081e-3, -4.762e-2]),
+    (0.646_926, [-3.141e-3, -2.872e-2, 3.495e-3]),
+    (3.228_604, [2.7518e-2, 3.9252e-2, -6.6502e-2]),
+    (3.587_895, [-5.317e-2, 1.04419e-1, 2.7454e-2]),
+    (1.225_946, [-1.1953e-2, 4.1065e-2, -3.8437e-2]),
+    (1.666_555, [6.0149e-2, -1.4117e-2, -1.0517e-2]),
+    (0.735_522, [1.0517e-2, -4.252e-3, 6.1597e-2]),
+];
+
+/// Franka Hand: 0.73 kg at (−0.01, 0, 0.03) m in `panda_hand` (`franka_description`,
+/// hand.urdf inertial), expressed in `panda_link7`: the hand frame is 0.107 m along z and
+/// rotated −π/4 about z.
+const PANDA_HAND: Inertial = (
+    0.73,
+    [
+        -0.01 * std::f64::consts::FRAC_1_SQRT_2,
+        0.01 * std::f64::consts::FRAC_1_SQRT_2,
+        0.137,
+    ],
+);
+
+/// KUKA LBR iiwa 14 R820 link masses (kg) and centres of mass (m): Drake's `iiwa14` model
+/// (RobotLocomotion/drake, `manipulation/models/iiwa_description`; the same values are in
+/// MuJoCo Menagerie's `kuka_iiwa_14`), masses 5.76, 6.35, 3.5, 3.5, 3.5, 1.8, 1.2 kg. Drake's
+/// link frames differ from the ROS-Industrial `joint_a1..a7` frames of MUKCa's URDF (all of
+/// which are aligned with the base at zero angles): each centre of mass is re-expressed through
+/// its world position at zero angles, relative to the joint origin at 0, 0.36, 0.36, 0.78, 0.78,
+/// 1.18, 1.18 m (x offsets of ±0.44 mm as in the URDF). No tool mass is known; none is added.
+const IIWA14_DRAKE: [Inertial; 7] = [
+    (5.76, [0.0, -0.03, 0.2775]),
+    (6.35, [0.000_136, 0.042, 0.059]),
+    (3.5, [0.000_436, 0.03, 0.3345]),
+    (3.5, [0.0, -0.034, 0.067]),
+    (3.5, [-0.000_1, -0.021, 0.2605]),
+    (1.8, [0.0, 0.000_4, 0.000_6]),
+    (1.2, [0.0, 0.0, 0.101]),
+];
+
 impl Default for GravityCompliance {
-    /// Gravity along −z of the base frame: a robot mounted upright (ROS REP 103 convention).
+    /// Gravity along −z of the base frame: a robot mounted upright (ROS REP 103 convention);
+    /// lumped unit weights.
     fn default() -> Self {
         Self {
             gravity_dir: -Vector3::z(),
+            masses: Vec::new(),
+            groups: Vec::new(),
         }
     }
 }
 
 impl GravityCompliance {
-    /// Lumped gravity torques `τ̂` (length `n_joints`, m) at angles `q` (rad) on the nominal chain.
+    /// Published link masses for a chain whose joints are named like a known robot (gravity
+    /// along −z): the Franka Emika Panda (`panda_joint1..7`: Gaz et al. 2019 plus the Franka
+    /// Hand) and the KUKA LBR iiwa 14 (`joint_a1..a7`: Drake's model). `None` for any other.
+    pub fn published(joint_names: &[String]) -> Option<Self> {
+        let named = |f: &dyn Fn(usize) -> String| {
+            joint_names.len() == 7 && joint_names.iter().enumerate().all(|(i, n)| *n == f(i + 1))
+        };
+        let (links, extra): (&[Inertial], Option<Inertial>) =
+            if named(&|i| format!("panda_joint{i}")) {
+                (&PANDA_GAZ_2019, Some(PANDA_HAND))
+            } else if named(&|i| format!("joint_a{i}")) {
+                (&IIWA14_DRAKE, None)
+            } else {
+                return None;
+            };
+        let masses = links
+            .iter()
+            .enumerate()
+            .map(|(joint, (m, c))| (joint, m, c))
+            .chain(extra.iter().map(|(m, c)| (6, m, c)))
+            .map(|(joint, m, c)| LinkMass {
+                joint,
+                mass_kg: *m,
+                com_m: Vector3::from(*c),
+            })
+            .collect();
+        Some(Self {
+            gravity_dir: -Vector3::z(),
+            masses,
+            groups: Vec::new(),
+        })
+    }
+
+    /// [`Self::published`] with one compliance per actuator size instead of per joint (fewer
+    /// parameters, the same torque shapes): the Panda's joints 1–4 and 5–7 (rated 87 and
+    /// 12 N·m, Franka Emika datasheet), the iiwa 14's A1–A2, A3–A4, A5 and A6–A7 (rated 320,
+    /// 176, 110 and 40 N·m, KUKA LBR iiwa specification). `None` for any other robot.
+    pub fn published_by_actuator(joint_names: &[String]) -> Option<Self> {
+        let mut model = Self::published(joint_names)?;
+        model.groups = if joint_names[0].starts_with("panda") {
+            vec![0, 0, 0, 0, 1, 1, 1]
+        } else {
+            vec![0, 0, 1, 1, 2, 3, 3]
+        };
+        Some(model)
+    }
+
+    /// Compliance parameter of joint `j`.
+    pub fn group(&self, j: usize) -> usize {
+        self.groups.get(j).copied().unwrap_or(j)
+    }
+
+    /// Number of compliance parameters for a chain of `n_joints` joints.
+    pub fn n_params(&self, n_joints: usize) -> usize {
+        if self.groups.is_empty() {
+            n_joints
+        } else {
+            self.groups.iter().max().map_or(0, |g| g + 1)
+        }
+    }
+
+    /// Gravity torques (length `n_joints`) at angles `q` (rad) on the nominal chain: lumped `τ̂`
+    /// (m) without [`Self::masses`], physical `τ` (N·m) with them.
     ///
     /// # Panics
-    /// If `q.len() != chain.n_joints()`.
+    /// If `q.len() != chain.n_joints()`, or a [`LinkMass::joint`] is not a joint of `chain`.
     #[track_caller]
     pub fn lumped_torques(&self, chain: &Chain, q: &[f64]) -> Vec<f64> {
         let x0 = vec![0.0; chain.n_params()];
@@ -42,6 +177,7 @@ impl GravityCompliance {
         let n = chain.n_joints();
         let mut origin = vec![Vector3::zeros(); n];
         let mut axis = vec![Vector3::zeros(); n];
+        let mut link = vec![hapcal_kinematics::Isometry3::identity(); n];
         for (factor, pose) in chain.factors().iter().zip(&poses) {
             if let Factor::Screw {
                 motion: Motion::Rotation,
@@ -52,10 +188,31 @@ impl GravityCompliance {
             {
                 origin[*j] = pose.translation.vector;
                 axis[*j] = pose.rotation * a.into_inner();
+                link[*j] = *pose;
             }
         }
-        let tip = chain.end_point(&x0, q).coords;
         let g = self.gravity_dir;
+        if !self.masses.is_empty() {
+            let weights: Vec<(usize, Vector3<f64>, Vector3<f64>)> = self
+                .masses
+                .iter()
+                .map(|m| {
+                    let c = link[m.joint] * hapcal_kinematics::Point3::from(m.com_m);
+                    (m.joint, c.coords, g * (m.mass_kg * G0))
+                })
+                .collect();
+            return (0..n)
+                .map(|j| {
+                    let moment: Vector3<f64> = weights
+                        .iter()
+                        .filter(|(i, _, _)| *i >= j)
+                        .map(|(_, c, f)| (c - origin[j]).cross(f))
+                        .sum();
+                    axis[j].dot(&moment)
+                })
+                .collect();
+        }
+        let tip = chain.end_point(&x0, q).coords;
         (0..n)
             .map(|j| {
                 let lever: Vector3<f64> = origin[j + 1..]

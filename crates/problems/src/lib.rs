@@ -37,7 +37,7 @@ mod compliance;
 mod model;
 mod problem;
 
-pub use compliance::GravityCompliance;
+pub use compliance::{GravityCompliance, LinkMass};
 pub use model::CalibratedModel;
 pub use problem::{CalibrationProblem, Observations, PointDistance, Row, RowKind, Weights};
 

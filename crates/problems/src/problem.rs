@@ -91,7 +91,7 @@ pub struct CalibrationProblem {
     obs: Observations,
     weights: Weights,
     compliance: Option<GravityCompliance>,
-    /// Lumped torques per row (empty without compliance).
+    /// Gravity torques per row and joint (empty without compliance).
     torques: Vec<Vec<f64>>,
     layout: ParamLayout,
     n_residuals: usize,
@@ -179,10 +179,17 @@ impl CalibrationProblem {
             .collect();
         let torques = match &compliance {
             Some(model) => {
-                specs.extend(chain.joint_names().iter().map(|j| ParamSpec {
-                    name: format!("compliance.{j}"),
-                    unit: Unit::Radian,
-                    role: Role::Model,
+                let names = chain.joint_names();
+                specs.extend((0..model.n_params(n_joints)).map(|g| {
+                    let joints: Vec<&str> = (0..n_joints)
+                        .filter(|&j| model.group(j) == g)
+                        .map(|j| names[j].as_str())
+                        .collect();
+                    ParamSpec {
+                        name: format!("compliance.{}", joints.join("+")),
+                        unit: Unit::Radian,
+                        role: Role::Model,
+                    }
                 }));
                 obs.rows
                     .iter()
@@ -223,13 +230,16 @@ impl CalibrationProblem {
         &self.obs
     }
 
-    /// Number of compliance parameters (0 without compliance, else `n_joints`).
+    /// Number of compliance parameters (0 without compliance, else one per joint or per
+    /// actuator group, [`GravityCompliance::n_params`]).
     pub fn n_compliance(&self) -> usize {
-        if self.compliance.is_some() {
-            self.chain.n_joints()
-        } else {
-            0
-        }
+        self.compliance
+            .as_ref()
+            .map_or(0, |c| c.n_params(self.chain.n_joints()))
+    }
+
+    fn group(&self, j: usize) -> usize {
+        self.compliance.as_ref().map_or(j, |c| c.group(j))
     }
 
     /// Index of the first unknown-point parameter in `x`.
@@ -277,7 +287,7 @@ impl CalibrationProblem {
             (
                 c.clone(),
                 (0..self.chain.n_joints())
-                    .map(|j| x[n + j])
+                    .map(|j| x[n + c.group(j)])
                     .collect::<Vec<_>>(),
             )
         });
@@ -309,7 +319,7 @@ impl CalibrationProblem {
         let n = self.chain.n_params();
         q.iter()
             .enumerate()
-            .map(|(j, qj)| qj + x[n + j] * self.torques[row_idx][j])
+            .map(|(j, qj)| qj + x[n + self.group(j)] * self.torques[row_idx][j])
             .collect()
     }
 
@@ -347,9 +357,13 @@ impl CalibrationProblem {
                 if col < n_kin {
                     buf[3 * col + k]
                 } else {
-                    let j = col - n_kin;
-                    jq.as_ref()
-                        .map_or(0.0, |m| m[(k, j)] * self.torques[row_idx][j])
+                    let g = col - n_kin;
+                    jq.as_ref().map_or(0.0, |m| {
+                        (0..self.chain.n_joints())
+                            .filter(|&j| self.group(j) == g)
+                            .map(|j| m[(k, j)] * self.torques[row_idx][j])
+                            .sum()
+                    })
                 }
             };
             match &row.kind {

@@ -5,9 +5,10 @@ mod identifiability;
 
 use faer::{Col, Mat};
 use hapcal_identify::Problem;
-use hapcal_kinematics::{Chain, Placement};
+use hapcal_kinematics::{Chain, Placement, Vector3};
 use hapcal_problems::{
-    CalibrationProblem, GravityCompliance, Observations, PointDistance, Row, RowKind, Weights,
+    CalibrationProblem, GravityCompliance, LinkMass, Observations, PointDistance, Row, RowKind,
+    Weights,
 };
 use proptest::prelude::*;
 
@@ -43,7 +44,29 @@ fn iiwa_like() -> Chain {
     .expect("valid chain")
 }
 
+/// Point masses on every link (iiwa-like magnitudes) and one compliance per actuator group.
+fn massive_grouped() -> GravityCompliance {
+    GravityCompliance {
+        masses: (0..7)
+            .map(|joint| LinkMass {
+                joint,
+                mass_kg: 5.0 - 0.5 * joint as f64,
+                com_m: Vector3::new(0.01 * joint as f64, -0.03, 0.1),
+            })
+            .collect(),
+        groups: vec![0, 0, 1, 1, 2, 3, 3],
+        ..GravityCompliance::default()
+    }
+}
+
 fn problem_with(qs: &[Vec<f64>], compliance: bool) -> CalibrationProblem {
+    problem_with_model(qs, compliance.then(GravityCompliance::default))
+}
+
+fn problem_with_model(
+    qs: &[Vec<f64>],
+    compliance: Option<GravityCompliance>,
+) -> CalibrationProblem {
     let mut rows = Vec::new();
     for (i, q) in qs.iter().enumerate() {
         let kind = match i % 4 {
@@ -71,13 +94,7 @@ fn problem_with(qs: &[Vec<f64>], compliance: bool) -> CalibrationProblem {
         sigma_point_m: 5e-5,
         sigma_point_distance_m: 1e-4,
     };
-    CalibrationProblem::new(
-        iiwa_like(),
-        obs,
-        weights,
-        compliance.then(GravityCompliance::default),
-    )
-    .expect("valid")
+    CalibrationProblem::new(iiwa_like(), obs, weights, compliance).expect("valid")
 }
 
 proptest! {
@@ -86,13 +103,23 @@ proptest! {
     fn jacobian_matches_central_differences(
         qs in prop::collection::vec(prop::collection::vec(-2.0..2.0f64, 7), 8),
         dev in prop::collection::vec(-1e-2..1e-2f64, 120),
-        compliance in any::<bool>(),
+        compliance in 0..3usize,
     ) {
-        let problem = problem_with(&qs, compliance);
+        let model = match compliance {
+            0 => None,
+            1 => Some(GravityCompliance::default()),
+            // Torques are ~10–100 N·m here: keep k·τ at the size of the lumped case.
+            _ => Some(massive_grouped()),
+        };
+        let scale = if compliance == 2 { 0.01 } else { 1.0 };
+        let problem = problem_with_model(&qs, model);
         let n = problem.layout().len();
         let m = problem.n_residuals();
         let mut x = problem.initial_guess();
-        for i in 0..n { x[i] += dev[i % dev.len()] * if i < problem.points_offset() { 1.0 } else { 0.1 }; }
+        let n_kin = problem.chain().n_params();
+        for i in 0..n {
+            x[i] += dev[i % dev.len()] * if i < n_kin { 1.0 } else if i < problem.points_offset() { scale } else { 0.1 };
+        }
         let mut jac = Mat::<f64>::zeros(m, n);
         problem.jacobian(x.as_ref(), jac.as_mut()).unwrap();
         let h = 1e-6;
@@ -249,4 +276,46 @@ fn a_deliberately_duplicated_parameter_is_pruned() {
         kept.contains(&"j4.x") != kept.contains(&"duplicate_of_j4.x"),
         "{kept:?}"
     );
+}
+
+#[test]
+fn grouped_compliance_shares_one_parameter_per_actuator() {
+    let qs = vec![vec![0.1; 7]; 8];
+    let p = problem_with_model(&qs, Some(massive_grouped()));
+    assert_eq!(p.n_compliance(), 4);
+    assert_eq!(p.layout().name(48), "compliance.j1+j2");
+    assert_eq!(p.layout().name(51), "compliance.j6+j7");
+    assert_eq!(p.layout().name(52), "point0.x");
+}
+
+#[test]
+fn a_point_mass_gives_its_hand_computed_torque() {
+    // 2 kg at 0.1 m along x of joint 2's link (axis y), arm upright: τ₂ = 0.1 m · 2 kg · g₀.
+    let model = GravityCompliance {
+        masses: vec![LinkMass {
+            joint: 1,
+            mass_kg: 2.0,
+            com_m: Vector3::new(0.1, 0.0, 0.0),
+        }],
+        ..GravityCompliance::default()
+    };
+    let tau = model.lumped_torques(&iiwa_like(), &[0.0; 7]);
+    assert!((tau[1] - 0.1 * 2.0 * 9.806_65).abs() < 1e-9, "{tau:?}");
+    assert!(
+        tau[0].abs() < 1e-12 && tau[2..].iter().all(|t| t.abs() < 1e-12),
+        "{tau:?}"
+    );
+}
+
+#[test]
+fn published_masses_are_known_for_the_panda_and_the_iiwa_only() {
+    let names = |f: &dyn Fn(usize) -> String| (1..=7).map(f).collect::<Vec<_>>();
+    let panda = GravityCompliance::published(&names(&|i| format!("panda_joint{i}"))).unwrap();
+    // Seven links plus the Franka Hand: 16.79 kg.
+    assert_eq!(panda.masses.len(), 8);
+    let total: f64 = panda.masses.iter().map(|m| m.mass_kg).sum();
+    assert!((total - 16.792).abs() < 1e-3, "{total}");
+    let iiwa = GravityCompliance::published_by_actuator(&names(&|i| format!("joint_a{i}")));
+    assert_eq!(iiwa.unwrap().groups, vec![0, 0, 1, 1, 2, 3, 3]);
+    assert!(GravityCompliance::published(&names(&|i| format!("j{i}"))).is_none());
 }
