@@ -36,8 +36,8 @@ pub fn render(r: &CalibrationReport) -> String {
         for cv in &r.cross_validation {
             let _ = writeln!(
                 s,
-                "  {:<11} {:>9.4} mm",
-                format!("{:?}", cv.model).to_lowercase(),
+                "  {:<20} {:>9.4} mm",
+                model_name(cv.model),
                 cv.heldout_rms_m * 1e3
             );
         }
@@ -45,7 +45,7 @@ pub fn render(r: &CalibrationReport) -> String {
     let _ = writeln!(
         s,
         "\nmodel: {}; sigma = {:.4} mm (from {}); LM: {}",
-        format!("{:?}", r.model).to_lowercase(),
+        model_name(r.model),
         r.sigma_m * 1e3,
         r.sigma_source,
         r.termination
@@ -127,4 +127,10 @@ pub fn render(r: &CalibrationReport) -> String {
     }
     let _ = writeln!(s, "\nelapsed: {:.1} ms", r.elapsed_s * 1e3);
     s
+}
+
+/// The command-line name of a model (`mass-compliance`).
+fn model_name(model: crate::calibrate::ModelChoice) -> String {
+    clap::ValueEnum::to_possible_value(&model)
+        .map_or_else(|| format!("{model:?}"), |v| v.get_name().to_owned())
 }
