@@ -287,7 +287,7 @@ fn simulated_log_calibrates_with_the_distance_model() {
         "--seed",
         "3",
         "--poses",
-        "45",
+        "120",
         "--out",
         &log.display().to_string(),
     ]);
