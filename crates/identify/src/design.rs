@@ -14,7 +14,11 @@
 //! `det(M + BᵀB) = det M · det(I + B M⁻¹ Bᵀ)` (the matrix determinant lemma), so one D-optimal
 //! step costs `O(C·r·n²)` for `C` candidates of `r` rows and `n` parameters. For O3/O4/O5, which
 //! need eigenvalues, additions are short-listed by their D-optimal gain (the best
-//! [`DesignConfig::shortlist`]) and then scored exactly.
+//! [`DesignConfig::shortlist`]) and then scored exactly; I-optimality uses the
+//! Sherman–Morrison–Woodbury update of `trace(W·M⁻¹)`. When an excursion no longer improves
+//! the design, the best single swap of a chosen pose for a candidate (Fedorov's exchange) is
+//! tried before stopping, so the result is swap-optimal: a local optimum, not necessarily the
+//! global one (the unit tests show both cases on small problems).
 
 use faer::{Mat, MatRef, Side};
 

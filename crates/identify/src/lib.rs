@@ -1,5 +1,7 @@
 //! Identification of model parameters from measurements: Levenberg–Marquardt, identifiability
-//! (pruning) and covariance, on any [`Problem`] with a named [`ParamLayout`].
+//! (pruning) and covariance, on any [`Problem`] with a named [`ParamLayout`]; observability
+//! indices O1–O5 of the scaled Jacobian ([`observability`]) and pose selection from candidate
+//! Jacobian blocks ([`select_poses`]).
 //!
 //! **Architecture invariant:** *`identify` knows nothing about robots.* It sees residuals, a
 //! Jacobian and parameter names, units and roles; kinematics, devices and logs live in the
@@ -7,7 +9,8 @@
 //!
 //! The usual entry point is [`identify`]: prune the parameters the data cannot determine
 //! ([`identifiability`]), fit the others ([`levenberg_marquardt`]), re-decide the pruning at the
-//! estimate, and return the covariance ([`covariance`]).
+//! estimate, and return the covariance ([`covariance`]; correlations with
+//! [`Covariance::correlation`] and [`Covariance::correlated_pairs`]).
 //!
 //! ```
 //! use faer::{Col, ColMut, ColRef, MatMut};

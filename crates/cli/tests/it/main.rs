@@ -352,3 +352,60 @@ fn transmission_sensitivity_predicts_how_step_2_moves() {
         );
     }
 }
+
+#[test]
+fn plan_poses_writes_the_chosen_readings_and_beats_a_random_set() {
+    let dir = scratch("plan");
+    let out = dir.join("poses.csv");
+    let device = root().join("fixtures/reference-device/device.toml");
+    let run = hapcal(&[
+        "plan-poses",
+        "--device",
+        device.to_str().unwrap(),
+        "--measurement",
+        "distance",
+        "--count",
+        "30",
+        "--candidates",
+        "45",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let csv = std::fs::read_to_string(&out).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some("q1,q2,q3,q4,q5,q6,q7"));
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 30);
+    // Every reading lies within the device's joint limits (DESIGN.md §2).
+    let limits = [
+        (-1.0, 1.0),
+        (-0.3, 1.2),
+        (-0.8, 0.8),
+        (0.3, 1.8),
+        (-2.0, 2.0),
+        (-1.2, 1.2),
+        (-2.5, 2.5),
+    ];
+    for q in &rows {
+        for (v, (lo, hi)) in q.iter().zip(limits) {
+            assert!((lo..=hi).contains(v), "{q:?}");
+        }
+    }
+    // The summary reports the planned set's log det above the random set's.
+    let text = String::from_utf8_lossy(&run.stdout);
+    let log_det = |name: &str| -> f64 {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("  ") && l.split_whitespace().next() == Some(name))
+            .unwrap();
+        line.split_whitespace().nth(1).unwrap().parse().unwrap()
+    };
+    assert!(log_det("planned") > log_det("random"), "{text}");
+    assert!(
+        text.contains("dalpha7"),
+        "the undetermined parameters are named: {text}"
+    );
+}
