@@ -52,6 +52,25 @@ pub enum Error {
         /// Number of free parameters.
         n_free: usize,
     },
+    /// The streaming back end was requested for a problem without row blocks.
+    #[error("the streaming back end needs a problem with row blocks (Problem::row_blocks)")]
+    NoRowBlocks,
+    /// The dense back end was requested (or is the only one available) for a Jacobian that
+    /// does not fit in the memory budget.
+    #[error(
+        "the dense jacobian would take {bytes} bytes ({n_residuals} x {n_params}), over the \
+         dense back end's limit of {limit} bytes; provide row blocks or a sparse jacobian"
+    )]
+    DenseTooLarge {
+        /// Number of residuals `m`.
+        n_residuals: usize,
+        /// Number of parameters `n`.
+        n_params: usize,
+        /// `8·m·n`.
+        bytes: u128,
+        /// [`DENSE_LIMIT_BYTES`](crate::DENSE_LIMIT_BYTES).
+        limit: u128,
+    },
     /// The problem could not be evaluated at the initial guess.
     #[error("at the initial guess x0")]
     Eval(#[from] EvalError),

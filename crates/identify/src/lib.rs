@@ -53,6 +53,7 @@
 //! # Ok::<(), hapcal_identify::Error>(())
 //! ```
 
+mod blocks;
 mod calibrate;
 mod covariance;
 mod error;
@@ -60,7 +61,11 @@ mod lm;
 mod problem;
 mod rank;
 
-pub use calibrate::{Identified, IdentifyConfig, MAX_ROUNDS, SIGMA_FLOOR, SigmaSource, identify};
+pub use blocks::{N_LEAVES, RowBlocks, levenberg_marquardt_streaming};
+pub use calibrate::{
+    Backend, DENSE_LIMIT_BYTES, Identified, IdentifyConfig, MAX_ROUNDS, SIGMA_FLOOR,
+    STREAMING_AUTO_ENTRIES, SigmaSource, identify,
+};
 pub use covariance::{Covariance, covariance, sigma_from_residuals};
 pub use error::Error;
 pub use lm::{Fit, LmConfig, Termination, levenberg_marquardt};
