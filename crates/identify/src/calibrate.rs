@@ -45,7 +45,16 @@ pub enum Backend {
     /// The Jacobian streamed block by block into its R factor (TSQR): memory independent of
     /// `m`, results equal to the dense path's up to rounding.
     Streaming,
+    /// The Jacobian in compressed sparse columns, steps by faer's sparse QR
+    /// ([`levenberg_marquardt_sparse`](crate::levenberg_marquardt_sparse)); no pruning (the
+    /// layout must be identifiable), covariance of [`SparseJacobian::covariance_of`](crate::SparseJacobian::covariance_of) only.
+    Sparse,
 }
+
+/// [`Backend::Auto`] chooses the sparse back end when the problem has a sparse Jacobian whose
+/// density (nonzeros / `m·n`) is below this, and the dense Jacobian would exceed
+/// [`STREAMING_AUTO_ENTRIES`] entries.
+pub const SPARSE_AUTO_DENSITY: f64 = 0.05;
 
 /// Above this many Jacobian entries (`m·n`, i.e. 32 MB of `f64`), [`Backend::Auto`] streams
 /// when it can: the dense path then spends its time in memory traffic and its memory grows
@@ -129,8 +138,19 @@ pub fn identify(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Result<
     let m = p.n_residuals();
     let n = p.layout().len();
     let entries = m.saturating_mul(n);
+    let sparse = match cfg.backend {
+        Backend::Sparse => true,
+        Backend::Auto => p.sparse_jacobian().is_some_and(|sj| {
+            let nnz = sj.pattern().1.len();
+            entries > STREAMING_AUTO_ENTRIES && (nnz as f64) < SPARSE_AUTO_DENSITY * entries as f64
+        }),
+        _ => false,
+    };
+    if sparse {
+        return identify_sparse(p, x0, cfg);
+    }
     let streaming = match cfg.backend {
-        Backend::Dense => false,
+        Backend::Dense | Backend::Sparse => false,
         Backend::Streaming => true,
         Backend::Auto => p.row_blocks().is_some() && entries > STREAMING_AUTO_ENTRIES,
     };
@@ -266,6 +286,44 @@ fn identify_streaming(
         layout,
         rounds,
         pruning_converged,
+    })
+}
+
+/// [`identify`] on the sparse back end: one fit of all parameters, covariance of the ones the
+/// problem names.
+fn identify_sparse(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Result<Identified, Error> {
+    let sj = p.sparse_jacobian().ok_or(Error::NoSparseJacobian)?;
+    let which = sj.covariance_of();
+    let sf = crate::sparse::levenberg_marquardt_sparse(p, x0, &cfg.lm, &which)?;
+    let layout = p.layout().clone();
+    let n = layout.len();
+    let (sigma, sigma_source, covariance) = match cfg.sigma {
+        Some(s) => {
+            let mut cov = sf.covariance;
+            let scale = if sf.sigma > 0.0 { (s / sf.sigma).powi(2) } else { 0.0 };
+            for a in 0..cov.matrix.nrows() {
+                for b in 0..cov.matrix.ncols() {
+                    cov.matrix[(a, b)] *= scale;
+                }
+            }
+            (s, SigmaSource::Given, cov)
+        }
+        None => (sf.sigma, SigmaSource::Residuals, sf.covariance),
+    };
+    Ok(Identified {
+        fit: sf.fit,
+        identifiability: Identifiability {
+            kept: (0..n).collect(),
+            pruned: Vec::new(),
+            r_diag: Vec::new(),
+            pivot_order: (0..n).collect(),
+        },
+        covariance,
+        sigma,
+        sigma_source,
+        layout,
+        rounds: 1,
+        pruning_converged: true,
     })
 }
 

@@ -52,6 +52,15 @@ pub enum Error {
         /// Number of free parameters.
         n_free: usize,
     },
+    /// The sparse back end was requested for a problem without a sparse Jacobian.
+    #[error("the sparse back end needs a problem with a sparse jacobian (Problem::sparse_jacobian)")]
+    NoSparseJacobian,
+    /// faer's sparse QR failed (out of memory, or an invalid pattern).
+    #[error("sparse QR failed: {reason}")]
+    Sparse {
+        /// faer's error, in words.
+        reason: String,
+    },
     /// The streaming back end was requested for a problem without row blocks.
     #[error("the streaming back end needs a problem with row blocks (Problem::row_blocks)")]
     NoRowBlocks,

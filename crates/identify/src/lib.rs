@@ -60,16 +60,18 @@ mod error;
 mod lm;
 mod problem;
 mod rank;
+mod sparse;
 
 pub use blocks::{N_LEAVES, RowBlocks, levenberg_marquardt_streaming};
 pub use calibrate::{
     Backend, DENSE_LIMIT_BYTES, Identified, IdentifyConfig, MAX_ROUNDS, SIGMA_FLOOR,
-    STREAMING_AUTO_ENTRIES, SigmaSource, identify,
+    SPARSE_AUTO_DENSITY, STREAMING_AUTO_ENTRIES, SigmaSource, identify,
 };
 pub use covariance::{Covariance, covariance, sigma_from_residuals};
 pub use error::Error;
 pub use lm::{Fit, LmConfig, Termination, levenberg_marquardt};
 pub use problem::{EvalError, ParamLayout, ParamSpec, Problem, Role, Unit};
+pub use sparse::{SparseFit, SparseJacobian, levenberg_marquardt_sparse};
 pub use rank::{
     Identifiability, PruneReason, Pruned, RankConfig, RankConfigBase, TieBreak, identifiability,
 };

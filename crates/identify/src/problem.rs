@@ -125,4 +125,10 @@ pub trait Problem {
     fn row_blocks(&self) -> Option<&dyn crate::RowBlocks> {
         None
     }
+    /// The Jacobian in sparse form, when the problem knows its pattern; enables the sparse
+    /// back end ([`Backend::Sparse`](crate::Backend)) for block-structured problems whose dense
+    /// Jacobian would not fit in memory. `None` (the default) means dense only.
+    fn sparse_jacobian(&self) -> Option<&dyn crate::SparseJacobian> {
+        None
+    }
 }

@@ -1,0 +1,212 @@
+//! The reference device (DESIGN.md §2) with distance data at any size: writes a data file, or
+//! reads one and calibrates it, printing timings and estimates as JSON. `cargo xtask bench`
+//! drives it (and SciPy on the same files); `/usr/bin/time -v` around `solve` gives the peak
+//! memory.
+//!
+//! ```text
+//! scale write --poses N --seed S --out data.csv
+//! scale solve --data data.csv [--repeat K] [--identify-only]
+//! ```
+//!
+//! `data.csv`: header `q1,…,q7,distance_m`, one pose per line, shortest round-trip decimals.
+//! `solve` prints one JSON object: sizes, the file-reading time, the minimum and median wall
+//! times of K runs of (a) `levenberg_marquardt` on the 28 identifiable parameters from x = 0
+//! (the problem SciPy solves) and (b) the whole `identify` (pruning, fit, covariance), the
+//! termination, the evaluation counts, and the estimates of (a) and (b) by name.
+#![allow(missing_docs, clippy::print_stdout, clippy::unwrap_used)] // a command-line tool
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use faer::Col;
+use hapcal_identify::{
+    IdentifyConfig, Problem, identify, levenberg_marquardt,
+    levenberg_marquardt_streaming,
+};
+use hapcal_problems::{CalibrationProblem, Observations, Row, RowKind, Weights};
+
+type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// σ_m = 2π·R_d·σ_e, σ_e = 2π/20000/3 rad, R_d = 0.015 m (DESIGN.md §3), m.
+fn sigma_m() -> f64 {
+    let sigma_e = std::f64::consts::TAU / 20000.0 / 3.0;
+    std::f64::consts::TAU * 0.015 * sigma_e
+}
+
+/// The 4 deviations that distance data cannot determine (DESIGN.md §2), held at 0.
+const HELD: [&str; 4] = ["dalpha0", "dd0", "dtheta0", "dalpha7"];
+
+fn arg(args: &[String], name: &str) -> Option<String> {
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1).cloned())
+}
+
+fn write(args: &[String]) -> Result<()> {
+    let n: usize = arg(args, "--poses").ok_or("--poses N")?.parse()?;
+    let seed: u64 = arg(args, "--seed").unwrap_or_else(|| "1".into()).parse()?;
+    let out = PathBuf::from(arg(args, "--out").ok_or("--out FILE")?);
+    let truth_path = root().join("fixtures/reference-device/truth.toml");
+    let truth = hapcal_sim::read_truth(&truth_path)?;
+    let device = truth.read_device(&truth_path)?;
+    let s = hapcal_sim::distance_samples(&device, &truth, seed, n, sigma_m())?;
+    let mut text = String::with_capacity(n * 180);
+    let header: Vec<String> = (1..=s.n_joints).map(|j| format!("q{j}")).collect();
+    text.push_str(&header.join(","));
+    text.push_str(",distance_m\n");
+    for k in 0..n {
+        for v in s.q(k) {
+            text.push_str(&format!("{v},"));
+        }
+        text.push_str(&format!("{}\n", s.distance_m[k]));
+    }
+    std::fs::write(&out, text)?;
+    Ok(())
+}
+
+/// Reads `q1..q7,distance_m` into distance rows.
+fn read(path: &Path, n_joints: usize) -> Result<Vec<Row>> {
+    let text = std::fs::read_to_string(path)?;
+    let mut rows = Vec::new();
+    for line in text.lines().skip(1).filter(|l| !l.is_empty()) {
+        let mut q = Vec::with_capacity(n_joints);
+        let mut d = 0.0;
+        for (k, cell) in line.split(',').enumerate() {
+            let v: f64 = cell.parse()?;
+            if k < n_joints {
+                q.push(v);
+            } else {
+                d = v;
+            }
+        }
+        rows.push(Row {
+            q,
+            kind: RowKind::Distance { distance_m: d },
+        });
+    }
+    Ok(rows)
+}
+
+fn solve(args: &[String]) -> Result<()> {
+    let data = PathBuf::from(arg(args, "--data").ok_or("--data FILE")?);
+    let repeat: usize = arg(args, "--repeat").unwrap_or_else(|| "1".into()).parse()?;
+    let identify_only = args.iter().any(|a| a == "--identify-only");
+    let device =
+        hapcal_io::read_device(&root().join("fixtures/reference-device/device.toml"))?;
+    let chain = device.chain()?;
+    let t0 = Instant::now();
+    let rows = read(&data, chain.n_joints())?;
+    let obs = Observations {
+        rows,
+        point_distances: vec![],
+        n_points: 0,
+    };
+    let weights = Weights {
+        sigma_distance_m: sigma_m(),
+        ..Weights::default()
+    };
+    let p = CalibrationProblem::new(chain, obs, weights, None)?;
+    let read_s = t0.elapsed().as_secs_f64();
+    let layout = p.layout().clone();
+    let free: Vec<usize> = (0..layout.len())
+        .filter(|&i| !HELD.contains(&layout.name(i)))
+        .collect();
+    let cfg = IdentifyConfig::default();
+    let streaming = p.n_residuals() * layout.len() > hapcal_identify::STREAMING_AUTO_ENTRIES;
+
+    let mut lm_times = Vec::new();
+    let mut lm_fit = None;
+    if !identify_only {
+        for _ in 0..repeat {
+            let t = Instant::now();
+            let x0 = Col::zeros(layout.len());
+            let fit = if streaming {
+                levenberg_marquardt_streaming(&p, x0, &free, &cfg.lm)?
+            } else {
+                levenberg_marquardt(&p, x0, &free, &cfg.lm)?
+            };
+            lm_times.push(t.elapsed().as_secs_f64());
+            lm_fit = Some(fit);
+        }
+    }
+    let mut id_times = Vec::new();
+    let mut id = None;
+    for _ in 0..repeat {
+        let t = Instant::now();
+        let fit = identify(&p, p.initial_guess(), &cfg)?;
+        id_times.push(t.elapsed().as_secs_f64());
+        id = Some(fit);
+    }
+    let id = id.ok_or("--repeat must be at least 1")?;
+    let stats = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        if v.is_empty() {
+            (f64::NAN, f64::NAN)
+        } else {
+            (v[0], v[v.len() / 2])
+        }
+    };
+    let (lm_min, lm_median) = stats(&mut lm_times);
+    let (id_min, id_median) = stats(&mut id_times);
+    let named = |x: &Col<f64>, which: &[usize]| {
+        which
+            .iter()
+            .map(|&i| format!("\"{}\": {:e}", layout.name(i), x[i]))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let lm_json = match &lm_fit {
+        Some(f) => format!(
+            "{{\"min_s\": {lm_min:e}, \"median_s\": {lm_median:e}, \"termination\": \"{:?}\", \"n_evaluations\": {}, \"n_jacobians\": {}, \"cost\": {:e}, \"x\": {{{}}}}}",
+            f.termination,
+            f.n_evaluations,
+            f.n_jacobians,
+            f.cost,
+            named(&f.x, &free)
+        ),
+        None => "null".to_owned(),
+    };
+    let std = id.covariance.std();
+    let stds = id
+        .covariance
+        .free
+        .iter()
+        .zip(&std)
+        .map(|(&i, s)| format!("\"{}\": {s:e}", layout.name(i)))
+        .collect::<Vec<_>>()
+        .join(", ");
+    println!(
+        "{{\"n_poses\": {}, \"n_params\": {}, \"n_free\": {}, \"backend\": \"{}\", \"threads\": {}, \"read_s\": {read_s:e}, \"lm\": {lm_json}, \"identify\": {{\"min_s\": {id_min:e}, \"median_s\": {id_median:e}, \"termination\": \"{:?}\", \"rounds\": {}, \"pruned\": {:?}, \"x\": {{{}}}, \"std\": {{{stds}}}}}, \"free\": {:?}}}",
+        p.n_residuals(),
+        layout.len(),
+        free.len(),
+        if streaming { "streaming" } else { "dense" },
+        rayon_threads(),
+        id.fit.termination,
+        id.rounds,
+        id.identifiability.pruned_names(),
+        named(&id.fit.x, &id.identifiability.kept),
+        free.iter().map(|&i| layout.name(i)).collect::<Vec<_>>(),
+    );
+    Ok(())
+}
+
+fn rayon_threads() -> usize {
+    std::env::var("RAYON_NUM_THREADS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.first().map(String::as_str) {
+        Some("write") => write(&args),
+        Some("solve") => solve(&args),
+        _ => Err("usage: scale write --poses N --seed S --out FILE | scale solve --data FILE [--repeat K] [--identify-only]".into()),
+    }
+}
