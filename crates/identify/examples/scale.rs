@@ -195,6 +195,46 @@ fn solve(args: &[String]) -> Result<()> {
     Ok(())
 }
 
+/// Measured peak FLOP rate of one core (faer's matrix product, 512 × 512, best of 20), and the
+/// FLOP count of one LM iteration's linear algebra at 200 poses: one Jacobian evaluation plus
+/// one Householder QR of the 200 × 28 Jacobian.
+fn peak() -> Result<()> {
+    let n = 512;
+    let a = faer::Mat::<f64>::from_fn(n, n, |i, j| ((i * 7 + j * 13) % 17) as f64 - 8.0);
+    let b = a.transpose().to_owned();
+    let mut c = faer::Mat::<f64>::zeros(n, n);
+    let mut best = f64::INFINITY;
+    for _ in 0..20 {
+        let t = Instant::now();
+        faer::linalg::matmul::matmul(
+            c.as_mut(),
+            faer::Accum::Replace,
+            a.as_ref(),
+            b.as_ref(),
+            1.0,
+            faer::Par::Seq,
+        );
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    std::hint::black_box(&c);
+    let gflops = 2.0 * (n * n * n) as f64 / best / 1e9;
+    // Per pose of the reference chain (8 constant runs, 7 revolute joints, 32 parameters:
+    // 25 parameter screws inside runs, 7 on the joints), counting multiplications and
+    // additions of FrozenChain::point_and_jacobian plus the distance projection:
+    // forward kinematics 8 × 66 (rigid products) + 7 × 18 (joint rotations) + 7 × 15 (sin_cos)
+    // = 759; Jacobian 25 × 45 + 7 × 60 = 1545; projection 32 × 6 = 192: 2496 flops per pose.
+    let (m, nf) = (200.0, 28.0);
+    let jacobian = 2496.0 * m;
+    let qr = 2.0 * m * nf * nf - 2.0 * nf * nf * nf / 3.0;
+    println!(
+        "{{\"gflops\": {gflops:.2}, \"peak_note\": \"faer matmul {n}x{n}, one thread, best of 20\", \"flops_per_iteration_200\": {:.0}, \"flops_note\": \"Jacobian {:.0} kflop (2496 per pose, counted by hand in examples/scale.rs) + Householder QR 2mn^2 - 2n^3/3 = {:.0} kflop\"}}",
+        jacobian + qr,
+        jacobian / 1e3,
+        qr / 1e3
+    );
+    Ok(())
+}
+
 fn rayon_threads() -> usize {
     std::env::var("RAYON_NUM_THREADS")
         .ok()
@@ -207,6 +247,7 @@ fn main() -> Result<()> {
     match args.first().map(String::as_str) {
         Some("write") => write(&args),
         Some("solve") => solve(&args),
+        Some("peak") => peak(),
         _ => Err("usage: scale write --poses N --seed S --out FILE | scale solve --data FILE [--repeat K] [--identify-only]".into()),
     }
 }
