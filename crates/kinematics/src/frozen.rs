@@ -77,6 +77,12 @@ impl Axis {
 #[inline]
 fn rotate_in_place(r: &mut Matrix3<f64>, axis: Axis, angle: f64) {
     let (s, c) = angle.sin_cos();
+    rotate_in_place_sc(r, axis, s, c);
+}
+
+/// As [`rotate_in_place`], from the angle's sine `s` and cosine `c`.
+#[inline]
+fn rotate_in_place_sc(r: &mut Matrix3<f64>, axis: Axis, s: f64, c: f64) {
     // Columns i, j of R·Rot(e_k, θ) for the coordinate axes (i, j, k cyclic):
     // [c·rᵢ + s·rⱼ, −s·rᵢ + c·rⱼ].
     let (i, j) = match axis {
@@ -117,6 +123,22 @@ struct JointScrew {
     joint: usize,
     /// The parameter of this screw, if any (its column is the joint's twist).
     param: Option<usize>,
+    /// `sin(offset)`, `cos(offset)`, for joint angles given by their sine and cosine.
+    sin_off: f64,
+    cos_off: f64,
+}
+
+/// A parameter screw as the distance gradient sees it, in its run's start frame: the
+/// derivative of `|P|` is `a·(T × U) − U·c` for a rotation and `U·a` for a translation, with
+/// `U`, `T` the unit end-point direction and the end point in that frame.
+#[derive(Clone, Debug, PartialEq)]
+struct DistanceTap {
+    param: usize,
+    rotation: bool,
+    /// Screw axis.
+    a: Vector3<f64>,
+    /// `a × o`, `o` the screw frame's origin (m).
+    c: Vector3<f64>,
 }
 
 /// A parameter screw inside a constant run: its frame relative to the run's start.
@@ -136,6 +158,43 @@ struct Segment {
     fixed: Rigid,
     taps: Vec<ParamTap>,
     joint: Option<JointScrew>,
+    /// All parameter screws of the run and of its joint, for the distance gradient.
+    distance_taps: Vec<DistanceTap>,
+}
+
+impl Segment {
+    fn new(fixed: Rigid, taps: Vec<ParamTap>, joint: Option<JointScrew>) -> Segment {
+        let mut distance_taps: Vec<DistanceTap> = taps
+            .iter()
+            .map(|t| DistanceTap {
+                param: t.param,
+                rotation: t.motion == Motion::Rotation,
+                a: t.axis_local,
+                c: t.axis_local.cross(&t.origin_local),
+            })
+            .collect();
+        if let Some(JointScrew {
+            motion,
+            axis,
+            param: Some(param),
+            ..
+        }) = &joint
+        {
+            let a = fixed.rot * axis.vector();
+            distance_taps.push(DistanceTap {
+                param: *param,
+                rotation: *motion == Motion::Rotation,
+                a,
+                c: a.cross(&fixed.trans),
+            });
+        }
+        Segment {
+            fixed,
+            taps,
+            joint,
+            distance_taps,
+        }
+    }
 }
 
 /// A [`Chain`] with its deviations fixed at some `x`: forward kinematics and the parameter
@@ -149,6 +208,17 @@ pub struct FrozenChain {
     segments: Vec<Segment>,
     n_params: usize,
     n_joints: usize,
+}
+
+/// `[sin q_j, cos q_j]` for each joint angle (rad), the form [`FrozenChain::end_point_trig`]
+/// and [`FrozenChain::distance_gradient`] take.
+pub fn joint_trig(q: &[f64]) -> Vec<[f64; 2]> {
+    q.iter()
+        .map(|v| {
+            let (s, c) = v.sin_cos();
+            [s, c]
+        })
+        .collect()
 }
 
 impl Chain {
@@ -209,26 +279,26 @@ impl Chain {
                     param,
                     joint: Some(joint),
                 } => {
-                    segments.push(Segment {
-                        fixed: run,
-                        taps: std::mem::take(&mut taps),
-                        joint: Some(JointScrew {
+                    let offset = nominal + param.map_or(0.0, |j| x[j]);
+                    let (sin_off, cos_off) = offset.sin_cos();
+                    segments.push(Segment::new(
+                        run,
+                        std::mem::take(&mut taps),
+                        Some(JointScrew {
                             motion: *motion,
                             axis: Axis::new(&axis.into_inner()),
-                            offset: nominal + param.map_or(0.0, |j| x[j]),
+                            offset,
                             joint: *joint,
                             param: *param,
+                            sin_off,
+                            cos_off,
                         }),
-                    });
+                    ));
                     run = Rigid::identity();
                 }
             }
         }
-        segments.push(Segment {
-            fixed: run,
-            taps,
-            joint: None,
-        });
+        segments.push(Segment::new(run, taps, None));
         FrozenChain {
             segments,
             n_params: self.n_params(),
@@ -267,6 +337,131 @@ impl FrozenChain {
             Motion::Rotation => rotate_in_place(&mut pose.rot, screw.axis, value),
             Motion::Translation => pose.trans += pose.rot * (screw.axis.vector() * value),
         }
+    }
+
+    /// As [`FrozenChain::apply_joint`], a revolute joint's angle given by `[sin q, cos q]`.
+    #[inline]
+    fn apply_joint_trig(pose: &mut Rigid, screw: &JointScrew, q: &[f64], trig: &[[f64; 2]]) {
+        match screw.motion {
+            Motion::Rotation => {
+                let [sq, cq] = trig[screw.joint];
+                let s = screw.sin_off * cq + screw.cos_off * sq;
+                let c = screw.cos_off * cq - screw.sin_off * sq;
+                rotate_in_place_sc(&mut pose.rot, screw.axis, s, c);
+            }
+            Motion::Translation => {
+                let value = screw.offset + q[screw.joint];
+                pose.trans += pose.rot * (screw.axis.vector() * value);
+            }
+        }
+    }
+
+    #[track_caller]
+    fn check_trig(&self, trig: &[[f64; 2]]) {
+        assert_eq!(
+            trig.len(),
+            self.n_joints,
+            "trig has length {}, but the chain has {} joints",
+            trig.len(),
+            self.n_joints
+        );
+    }
+
+    /// End point (m, base frame) for joint angles `q` (rad) whose sines and cosines are given
+    /// in `trig` (`trig[j] = [sin q_j, cos q_j]`, see [`joint_trig`]): the same result as
+    /// [`FrozenChain::end_point`] up to rounding, without evaluating a sine per joint, for
+    /// callers that evaluate the same configurations many times.
+    ///
+    /// # Panics
+    ///
+    /// If `q.len()` or `trig.len()` differs from `n_joints()`.
+    #[track_caller]
+    pub fn end_point_trig(&self, q: &[f64], trig: &[[f64; 2]]) -> Point3<f64> {
+        self.check_q(q);
+        self.check_trig(trig);
+        let mut pose = Rigid::identity();
+        for seg in &self.segments {
+            pose = pose.mul(&seg.fixed);
+            if let Some(screw) = &seg.joint {
+                Self::apply_joint_trig(&mut pose, screw, q, trig);
+            }
+        }
+        Point3::from(pose.trans)
+    }
+
+    /// End point `P` (m, base frame) and the gradient of its distance from the base origin,
+    /// `∂|P|/∂x_j`, written to `grad` (length `n_params()`; m/m for lengths, m/rad for angles):
+    /// the cable-encoder measurement of paper eq. 5 and its Jacobian row, in fewer operations
+    /// than projecting [`FrozenChain::point_and_jacobian`] (each screw costs one 3-vector dot
+    /// product or two, in its run's frame). `trig` as in [`FrozenChain::end_point_trig`], or
+    /// `None` to evaluate the sines. At `P = 0` the gradient is 0.
+    ///
+    /// # Panics
+    ///
+    /// If `q.len()` or `trig.len()` differs from `n_joints()`, or
+    /// `grad.len() != n_params()`.
+    #[track_caller]
+    pub fn distance_gradient(
+        &self,
+        q: &[f64],
+        trig: Option<&[[f64; 2]]>,
+        grad: &mut [f64],
+        ws: &mut FkWorkspace,
+    ) -> Point3<f64> {
+        self.check_q(q);
+        if let Some(t) = trig {
+            self.check_trig(t);
+        }
+        assert_eq!(
+            grad.len(),
+            self.n_params,
+            "grad has length {}, expected {} parameters",
+            grad.len(),
+            self.n_params
+        );
+        let starts = &mut ws.starts;
+        starts.clear();
+        let mut pose = Rigid::identity();
+        for seg in &self.segments {
+            starts.push([
+                pose.rot.column(0).into(),
+                pose.rot.column(1).into(),
+                pose.rot.column(2).into(),
+                pose.trans,
+            ]);
+            pose = pose.mul(&seg.fixed);
+            if let Some(screw) = &seg.joint {
+                match trig {
+                    Some(t) => Self::apply_joint_trig(&mut pose, screw, q, t),
+                    None => Self::apply_joint(&mut pose, screw, q),
+                }
+            }
+        }
+        let tip = pose.trans;
+        grad.fill(0.0);
+        let norm = tip.norm();
+        if norm == 0.0 {
+            return Point3::from(tip);
+        }
+        let u = tip / norm;
+        for (seg, start) in self.segments.iter().zip(starts.iter()) {
+            if seg.distance_taps.is_empty() {
+                continue;
+            }
+            // U and T in the run's start frame: Rᵀu and Rᵀ(P − t).
+            let d = tip - start[3];
+            let ul = Vector3::new(start[0].dot(&u), start[1].dot(&u), start[2].dot(&u));
+            let tl = Vector3::new(start[0].dot(&d), start[1].dot(&d), start[2].dot(&d));
+            let v = tl.cross(&ul);
+            for tap in &seg.distance_taps {
+                grad[tap.param] += if tap.rotation {
+                    tap.a.dot(&v) - ul.dot(&tap.c)
+                } else {
+                    ul.dot(&tap.a)
+                };
+            }
+        }
+        Point3::from(tip)
     }
 
     /// End point (tip origin) in the base frame, m, for joint angles `q` (rad).

@@ -4,7 +4,7 @@
 use crate::{CalibratedModel, Error, GravityCompliance};
 use faer::{Col, ColMut, ColRef, MatMut};
 use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
-use hapcal_kinematics::{Chain, FkWorkspace, ParamUnit, Point3, Vector3};
+use hapcal_kinematics::{Chain, FkWorkspace, ParamUnit, Point3, Vector3, joint_trig};
 use std::ops::Range;
 
 /// What one configuration measured.
@@ -95,6 +95,9 @@ pub struct CalibrationProblem {
     torques: Vec<Vec<f64>>,
     layout: ParamLayout,
     n_residuals: usize,
+    /// `[sin q, cos q]` per row and joint (row-major), without compliance (which moves the
+    /// angles); empty otherwise.
+    trig: Vec<[f64; 2]>,
     /// Row blocks for the streaming back end: (rows, residual rows); the last block also
     /// holds the point distances.
     blocks: Vec<(Range<usize>, Range<usize>)>,
@@ -206,6 +209,12 @@ impl CalibrationProblem {
                 });
             }
         }
+        let any_distance = (obs.rows.iter()).any(|r| matches!(r.kind, RowKind::Distance { .. }));
+        let trig = if compliance.is_none() && any_distance {
+            obs.rows.iter().flat_map(|row| joint_trig(&row.q)).collect()
+        } else {
+            Vec::new()
+        };
         let mut blocks = Vec::new();
         let mut residual = 0;
         let n_rows = obs.rows.len();
@@ -234,6 +243,7 @@ impl CalibrationProblem {
             torques,
             layout: ParamLayout::new(specs),
             n_residuals,
+            trig,
             blocks,
         })
     }
@@ -375,12 +385,40 @@ impl CalibrationProblem {
             j.fill(0.0);
         }
         let mut q_buf = Vec::new();
+        let mut grad = vec![0.0; n_kin];
+        let n_joints = self.chain.n_joints();
         let mut r = 0usize;
         for (row_idx, row) in self.obs.rows[rows.clone()]
             .iter()
             .enumerate()
             .map(|(i, row)| (rows.start + i, row))
         {
+            // Distance rows without compliance: the distance gradient directly, joint
+            // angles by their precomputed sines and cosines (the fast path at scale).
+            if n_comp == 0
+                && let RowKind::Distance { distance_m } = &row.kind
+            {
+                let trig = self
+                    .trig
+                    .get(row_idx * n_joints..(row_idx + 1) * n_joints);
+                let s = self.weights.sigma_distance_m;
+                let p = match (jac.as_mut(), trig) {
+                    (Some(j), _) => {
+                        let p = frozen.distance_gradient(&row.q, trig, &mut grad, &mut ws);
+                        for (col, g) in grad.iter().enumerate() {
+                            j[(r, col)] = g / s;
+                        }
+                        p
+                    }
+                    (None, Some(t)) => frozen.end_point_trig(&row.q, t),
+                    (None, None) => frozen.end_point(&row.q),
+                };
+                if let Some(o) = out.as_mut() {
+                    o[r] = (p.coords.norm() - distance_m) / s;
+                }
+                r += 1;
+                continue;
+            }
             let q_eff = self.effective_q(row_idx, x, &mut q_buf);
             let p = if jac.is_some() {
                 frozen.point_and_jacobian(q_eff, &mut buf, &mut ws)

@@ -1,6 +1,7 @@
 //! Integration tests of hapcal-problems: analytic Jacobians against central differences.
 
 mod crosscheck;
+mod fleet;
 mod streaming;
 
 use faer::{Col, Mat};
