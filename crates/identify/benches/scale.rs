@@ -10,8 +10,8 @@
 //!   residual at x0, one linearisation and its QR, one trial point), the back end
 //!   [`Backend::Auto`](hapcal_identify::Backend) picks (dense up to 20,000, streaming at
 //!   1,000,000; streaming runs on all cores);
-//! - `calibration`: the whole `identify` (pruning at the nominal and at the estimate, LM,
-//!   covariance).
+//! - `calibration`: the whole `identify` (pruning at the nominal and at the estimate, LM
+//!   starting with the full Gauss–Newton step, `LmConfig::factor = ∞`, covariance).
 #![allow(missing_docs, clippy::unwrap_used)] // criterion's macros generate undocumented items
 
 use std::hint::black_box;
@@ -161,7 +161,14 @@ fn bench(c: &mut Criterion) {
         configure(&mut g);
         g.bench_with_input(BenchmarkId::from_parameter(n_poses), &case, |b, case| {
             let p = &case.problem;
-            b.iter(|| identify(p, p.initial_guess(), &IdentifyConfig::default()).unwrap())
+            let cfg = IdentifyConfig {
+                lm: LmConfig {
+                    factor: f64::INFINITY,
+                    ..LmConfig::default()
+                },
+                ..IdentifyConfig::default()
+            };
+            b.iter(|| identify(p, p.initial_guess(), &cfg).unwrap())
         });
         g.finish();
     }

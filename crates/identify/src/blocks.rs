@@ -19,7 +19,7 @@ use faer::linalg::qr::no_pivoting::factor as qr_factor;
 use faer::{Col, ColMut, ColRef, Mat, MatMut, Par};
 use rayon::prelude::*;
 
-use crate::error::{Error, check_config};
+use crate::error::{Error, check_config, check_factor};
 use crate::lm::{Fit, LmConfig, Linearised, ScaledQr, Termination, check_free, run};
 use crate::problem::{EvalError, ParamLayout, Problem};
 
@@ -398,6 +398,7 @@ pub fn levenberg_marquardt_streaming(
     check_config("ftol", cfg.ftol, false)?;
     check_config("xtol", cfg.xtol, false)?;
     check_config("gtol", cfg.gtol, false)?;
+    check_factor(cfg.factor)?;
     let m = p.n_residuals();
     if m < free.len() {
         return Err(Error::TooFewResiduals {

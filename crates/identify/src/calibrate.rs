@@ -200,6 +200,7 @@ fn identify_streaming(
     check_config("ftol", cfg.lm.ftol, false)?;
     check_config("xtol", cfg.lm.xtol, false)?;
     check_config("gtol", cfg.lm.gtol, false)?;
+    crate::error::check_factor(cfg.lm.factor)?;
     let m = p.n_residuals();
     let mut lin = linearise(blocks, x0.as_ref(), n).map_err(|e| error_at_x0(e, &layout))?;
     let (mut sigma, sigma_source) = match cfg.sigma {

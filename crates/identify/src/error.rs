@@ -132,3 +132,16 @@ pub(crate) fn check_config(field: &'static str, value: f64, positive: bool) -> R
         })
     }
 }
+
+/// `LmConfig::factor` must be positive (`+∞` allowed: start with the Gauss–Newton step).
+pub(crate) fn check_factor(value: f64) -> Result<(), Error> {
+    if value > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::InvalidConfig {
+            field: "factor",
+            value,
+            requirement: "positive",
+        })
+    }
+}

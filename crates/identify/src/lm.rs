@@ -14,7 +14,7 @@ use faer::linalg::householder;
 use faer::linalg::solvers::SolveLstsq;
 use faer::{Col, ColRef, Conj, Mat, MatRef, Par};
 
-use crate::error::{Error, check_config};
+use crate::error::{Error, check_config, check_factor};
 use crate::problem::{ParamLayout, Problem};
 
 /// Stopping tolerances of [`levenberg_marquardt`] (the MINPACK `lmder` tests).
@@ -36,10 +36,16 @@ pub struct LmConfig {
     /// Stop after this many evaluations of `r` (the initial one included)
     /// ([`Termination::MaxEvaluations`]).
     pub max_evaluations: usize,
+    /// Initial trust radius: `factor·‖D·x0‖`, or `factor` when `x0 = 0` (MINPACK's `factor`,
+    /// default 100). From `x0 = 0` on a problem whose scaled Gauss–Newton step is much longer
+    /// than 100, the radius needs one doubling per iteration to reach it; `f64::INFINITY`
+    /// tries the full Gauss–Newton step first (the radius then starts at its length), which
+    /// suits calibrations started near their solution at the nominal.
+    pub factor: f64,
 }
 
 impl Default for LmConfig {
-    /// `ftol = xtol = gtol = 1e-12`, `max_evaluations = 200`, MINPACK-like (`lmder1` takes
+    /// `ftol = xtol = gtol = 1e-12`, `max_evaluations = 200`, `factor = 100`, MINPACK-like (`lmder1` takes
     /// `ftol = xtol = tol`, `gtol = 0`, `100·(n + 1)` evaluations). 1e-12 puts the stopping
     /// error far below any statistical uncertainty of a calibration; 200 evaluations are ample
     /// for problems started near their solution (calibration starts at the nominal), which
@@ -50,6 +56,7 @@ impl Default for LmConfig {
             xtol: 1e-12,
             gtol: 1e-12,
             max_evaluations: 200,
+            factor: FACTOR,
         }
     }
 }
@@ -184,6 +191,7 @@ pub fn levenberg_marquardt(
     check_config("ftol", cfg.ftol, false)?;
     check_config("xtol", cfg.xtol, false)?;
     check_config("gtol", cfg.gtol, false)?;
+    check_factor(cfg.factor)?;
     let m = p.n_residuals();
     let nf = free.len();
     if m < nf {
@@ -343,9 +351,9 @@ pub(crate) fn run(
         if first {
             x_norm = scaled_norm(&diag, &x);
             delta = if x_norm > 0.0 {
-                FACTOR * x_norm
+                cfg.factor * x_norm
             } else {
-                FACTOR
+                cfg.factor
             };
         }
         if f_norm == 0.0 {
