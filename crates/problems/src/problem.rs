@@ -5,6 +5,7 @@ use crate::{CalibratedModel, Error, GravityCompliance};
 use faer::{Col, ColMut, ColRef, MatMut};
 use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
 use hapcal_kinematics::{Chain, FkWorkspace, ParamUnit, Point3, Vector3, joint_trig};
+use rayon::prelude::*;
 use std::ops::Range;
 
 /// What one configuration measured.
@@ -360,7 +361,32 @@ impl CalibrationProblem {
         out: Option<ColMut<'_, f64>>,
         jac: Option<MatMut<'_, f64>>,
     ) {
-        self.eval_rows(x, 0..self.obs.rows.len(), true, out, jac);
+        if self.blocks.len() < 4 {
+            self.eval_rows(x, 0..self.obs.rows.len(), true, out, jac);
+            return;
+        }
+        // Large problems: the row blocks in parallel (rayon), each on its own rows of `out`
+        // and `jac`. Every row is computed the same way whatever the thread, so the result
+        // does not depend on the number of threads.
+        let mut tasks = Vec::with_capacity(self.blocks.len());
+        let (mut out, mut jac) = (out, jac);
+        for (b, (rows, res)) in self.blocks.iter().enumerate() {
+            let len = res.len();
+            let o = out.take().map(|o| {
+                let (head, tail) = o.split_at_row_mut(len);
+                out = Some(tail);
+                head
+            });
+            let j = jac.take().map(|j| {
+                let (head, tail) = j.split_at_row_mut(len);
+                jac = Some(tail);
+                head
+            });
+            tasks.push((rows.clone(), b + 1 == self.blocks.len(), o, j));
+        }
+        tasks
+            .into_par_iter()
+            .for_each(|(rows, last, o, j)| self.eval_rows(x, rows, last, o, j));
     }
 
     /// Residuals and, if `jac` is given, the Jacobian of the rows `rows` (and of the point
