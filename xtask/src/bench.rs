@@ -26,8 +26,8 @@ fn target_dir() -> PathBuf {
 fn repeats(n: usize) -> usize {
     match n {
         0..=2_000 => 20,
-        2_001..=20_000 => 5,
-        _ => 3,
+        2_001..=20_000 => 3,
+        _ => 1,
     }
 }
 
@@ -131,13 +131,17 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
             let (d, nn) = (data.display().to_string(), n.to_string());
             cmd!(sh, "{scale} write --poses {nn} --seed 1 --out {d}").run()?;
         }
-        let args = vec![
+        let mut args = vec![
             "solve".to_owned(),
             "--data".to_owned(),
             data.display().to_string(),
             "--repeat".to_owned(),
             repeats(n).to_string(),
         ];
+        if n > PEER_MAX {
+            // No peer to compare with: the calibration alone (and one peak-memory figure).
+            args.push("--identify-only".to_owned());
+        }
         let (out, rss_mb) = timed(sh, &scale, &args)?;
         let ours: Value = serde_json::from_str(&out).context("scale solve output")?;
         let lm_s = f(&ours, &["lm", "min_s"]);
@@ -153,7 +157,7 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
             .unwrap_or_default();
         let mut cells = vec![
             n.to_string(),
-            ms(lm_s),
+            if lm_s.is_nan() { "–".to_owned() } else { ms(lm_s) },
             format!("{} ({})", ms(id_s), ours["backend"].as_str().unwrap_or("?")),
         ];
         for method in ["lm", "trf"] {
@@ -162,7 +166,7 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
                     let (d, fr, rep) = (
                         data.display().to_string(),
                         free.join(","),
-                        repeats(n).min(10).to_string(),
+                        repeats(n).min(5).to_string(),
                     );
                     let out = cmd!(
                         sh,
