@@ -78,7 +78,11 @@ fn ms(s: f64) -> String {
 /// Runs the benchmarks (criterion unless `quick`), then the table with or without peers.
 pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
     let target = target_dir();
-    cmd!(sh, "cargo build --release --quiet -p hapcal-identify --examples").run()?;
+    cmd!(
+        sh,
+        "cargo build --release --quiet -p hapcal-identify --examples"
+    )
+    .run()?;
     let examples = target.join("release/examples");
     let scale = examples.join("scale");
     let fleet = examples.join("fleet");
@@ -117,7 +121,7 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
     let mut md = String::new();
     md.push_str("# Speed and scale against peers\n\n");
     md.push_str(&format!(
-        "Written by `cargo xtask bench{}` on {date}: {cpu}, {cores} cores, {uname}; load average at the start {}. Problem: the reference device (DESIGN.md §2) with distance data, 32 kinematic deviations of which the 28 identifiable ones are solved from x = 0 (`dalpha0`, `dd0`, `dtheta0`, `dalpha7` held at 0); data: joint angles uniform within the limits, distances of the paper's truth + σ_m noise (`hapcal_sim::distance_samples`, seed 1), written once by hapcal to `{}`. Every solver reads the same file. Tolerances: ftol = xtol = gtol = 1e-12 (MINPACK tests) for hapcal and SciPy; SciPy gets `x_scale=\"jac\"` (MINPACK's column scaling, as hapcal) and the analytic Jacobian. Wall times: minimum over repeats, the solve only (file reading excluded for both). hapcal runs on all cores for the streaming back end (1,000,000 poses) and on one core otherwise.\n\n",
+        "Written by `cargo xtask bench{}` on {date}: {cpu}, {cores} cores, {uname}; load average at the start {}. Problem: the reference device (DESIGN.md §2) with distance data, 32 kinematic deviations of which the 28 identifiable ones are solved from x = 0 (`dalpha0`, `dd0`, `dtheta0`, `dalpha7` held at 0); data: joint angles uniform within the limits, distances of the paper's truth + σ_m noise (`hapcal_sim::distance_samples`, seed 1), written once by hapcal to `{}`. Every solver reads the same file. Tolerances: ftol = xtol = gtol = 1e-12 (MINPACK tests) for hapcal and SciPy; SciPy gets `x_scale=\"jac\"` (MINPACK's column scaling, as hapcal) and the analytic Jacobian. Wall times: minimum over repeats, the solve only (file reading excluded for both). hapcal evaluates row blocks on all cores (rayon) from 4 blocks of 256 poses up, i.e. at 2,000 poses and more; SciPy's numpy may use several threads too.\n\n",
         if peers { " --peers" } else { "" },
         load_before.split_whitespace().take(3).collect::<Vec<_>>().join(" "),
         data_dir.display()
@@ -153,11 +157,19 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
         }
         let free: Vec<String> = ours["free"]
             .as_array()
-            .map(|a| a.iter().filter_map(|v| v.as_str().map(str::to_owned)).collect())
+            .map(|a| {
+                a.iter()
+                    .filter_map(|v| v.as_str().map(str::to_owned))
+                    .collect()
+            })
             .unwrap_or_default();
         let mut cells = vec![
             n.to_string(),
-            if lm_s.is_nan() { "–".to_owned() } else { ms(lm_s) },
+            if lm_s.is_nan() {
+                "–".to_owned()
+            } else {
+                ms(lm_s)
+            },
             format!("{} ({})", ms(id_s), ours["backend"].as_str().unwrap_or("?")),
         ];
         for method in ["lm", "trf"] {
@@ -237,7 +249,11 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
     let load_after = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     md.push_str(&format!(
         "\nLoad average at the end: {}.\n",
-        load_after.split_whitespace().take(3).collect::<Vec<_>>().join(" ")
+        load_after
+            .split_whitespace()
+            .take(3)
+            .collect::<Vec<_>>()
+            .join(" ")
     ));
     let out = sh.current_dir().join("docs/results/bench.md");
     std::fs::write(&out, md)?;

@@ -49,8 +49,8 @@ struct Case {
 }
 
 fn case(n_poses: usize) -> Case {
-    let truth_path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/reference-device/truth.toml");
+    let truth_path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/reference-device/truth.toml");
     let truth = hapcal_sim::read_truth(&truth_path).unwrap();
     let device = truth.read_device(&truth_path).unwrap();
     let s = hapcal_sim::distance_samples(&device, &truth, 1, n_poses, sigma_m()).unwrap();
@@ -119,7 +119,10 @@ fn bench(c: &mut Criterion) {
         let x = p.initial_guess();
         g.bench_with_input(BenchmarkId::from_parameter(n_poses), &case, |b, case| {
             let p = &case.problem;
-            let max_len = (0..p.n_blocks()).map(|k| p.block_rows(k).len()).max().unwrap();
+            let max_len = (0..p.n_blocks())
+                .map(|k| p.block_rows(k).len())
+                .max()
+                .unwrap();
             let mut r = Col::<f64>::zeros(max_len);
             let mut jac = Mat::<f64>::zeros(max_len, n);
             b.iter(|| {

@@ -21,8 +21,7 @@ use std::time::Instant;
 
 use faer::Col;
 use hapcal_identify::{
-    IdentifyConfig, LmConfig, Problem, identify, levenberg_marquardt,
-    levenberg_marquardt_streaming,
+    IdentifyConfig, LmConfig, Problem, identify, levenberg_marquardt, levenberg_marquardt_streaming,
 };
 use hapcal_problems::{CalibrationProblem, Observations, Row, RowKind, Weights};
 
@@ -94,10 +93,11 @@ fn read(path: &Path, n_joints: usize) -> Result<Vec<Row>> {
 
 fn solve(args: &[String]) -> Result<()> {
     let data = PathBuf::from(arg(args, "--data").ok_or("--data FILE")?);
-    let repeat: usize = arg(args, "--repeat").unwrap_or_else(|| "1".into()).parse()?;
+    let repeat: usize = arg(args, "--repeat")
+        .unwrap_or_else(|| "1".into())
+        .parse()?;
     let identify_only = args.iter().any(|a| a == "--identify-only");
-    let device =
-        hapcal_io::read_device(&root().join("fixtures/reference-device/device.toml"))?;
+    let device = hapcal_io::read_device(&root().join("fixtures/reference-device/device.toml"))?;
     let chain = device.chain()?;
     let t0 = Instant::now();
     let rows = read(&data, chain.n_joints())?;

@@ -20,7 +20,7 @@ use faer::{Col, ColMut, ColRef, Mat, MatMut, Par};
 use rayon::prelude::*;
 
 use crate::error::{Error, check_config, check_factor};
-use crate::lm::{Fit, LmConfig, Linearised, ScaledQr, Termination, check_free, run};
+use crate::lm::{Fit, Linearised, LmConfig, ScaledQr, Termination, check_free, run};
 use crate::problem::{EvalError, ParamLayout, Problem};
 
 /// A problem whose residuals split into consecutive row blocks that can be evaluated
@@ -176,11 +176,7 @@ fn reduce_leaf(
             stack[(n1 + i, n)] = r_block[i];
         }
         let k = n1 + len;
-        triangularise(
-            stack.as_mut().subrows_mut(0, k),
-            q_coeff.as_mut(),
-            &mut buf,
-        );
+        triangularise(stack.as_mut().subrows_mut(0, k), q_coeff.as_mut(), &mut buf);
     }
     Ok((stack.subrows(0, n1).to_owned(), r_norm_sq))
 }
@@ -354,10 +350,7 @@ pub(crate) fn error_at_x0(e: StreamError, layout: &ParamLayout) -> Error {
     match e {
         StreamError::Eval(e) => Error::Eval(e),
         StreamError::NonFinite { row, col: None } => Error::NonFiniteResidual { index: row },
-        StreamError::NonFinite {
-            row,
-            col: Some(j),
-        } => Error::NonFiniteJacobian {
+        StreamError::NonFinite { row, col: Some(j) } => Error::NonFiniteJacobian {
             row,
             name: layout.name(j).to_owned(),
         },

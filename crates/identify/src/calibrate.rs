@@ -2,12 +2,10 @@
 
 use faer::{Col, Mat};
 
+use crate::blocks::{Linearisation, RowBlocks, StreamError, error_at_x0, linearise, streaming_fit};
 use crate::covariance::{Covariance, covariance, sigma_from_residuals};
 use crate::error::{Error, check_config};
 use crate::lm::{Fit, LmConfig, check_jacobian_finite, levenberg_marquardt};
-use crate::blocks::{
-    Linearisation, RowBlocks, StreamError, error_at_x0, linearise, streaming_fit,
-};
 use crate::problem::{EvalError, ParamLayout, Problem};
 use crate::rank::{Identifiability, RankConfigBase, identifiability};
 
@@ -292,7 +290,11 @@ fn identify_streaming(
 
 /// [`identify`] on the sparse back end: one fit of all parameters, covariance of the ones the
 /// problem names.
-fn identify_sparse(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Result<Identified, Error> {
+fn identify_sparse(
+    p: &impl Problem,
+    x0: Col<f64>,
+    cfg: &IdentifyConfig,
+) -> Result<Identified, Error> {
     let sj = p.sparse_jacobian().ok_or(Error::NoSparseJacobian)?;
     let which = sj.covariance_of();
     let sf = crate::sparse::levenberg_marquardt_sparse(p, x0, &cfg.lm, &which)?;
@@ -301,7 +303,11 @@ fn identify_sparse(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Resu
     let (sigma, sigma_source, covariance) = match cfg.sigma {
         Some(s) => {
             let mut cov = sf.covariance;
-            let scale = if sf.sigma > 0.0 { (s / sf.sigma).powi(2) } else { 0.0 };
+            let scale = if sf.sigma > 0.0 {
+                (s / sf.sigma).powi(2)
+            } else {
+                0.0
+            };
             for a in 0..cov.matrix.nrows() {
                 for b in 0..cov.matrix.ncols() {
                     cov.matrix[(a, b)] *= scale;

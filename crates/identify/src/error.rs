@@ -53,7 +53,9 @@ pub enum Error {
         n_free: usize,
     },
     /// The sparse back end was requested for a problem without a sparse Jacobian.
-    #[error("the sparse back end needs a problem with a sparse jacobian (Problem::sparse_jacobian)")]
+    #[error(
+        "the sparse back end needs a problem with a sparse jacobian (Problem::sparse_jacobian)"
+    )]
     NoSparseJacobian,
     /// faer's sparse QR failed (out of memory, or an invalid pattern).
     #[error("sparse QR failed: {reason}")]

@@ -71,7 +71,7 @@ pub use covariance::{Covariance, covariance, sigma_from_residuals};
 pub use error::Error;
 pub use lm::{Fit, LmConfig, Termination, levenberg_marquardt};
 pub use problem::{EvalError, ParamLayout, ParamSpec, Problem, Role, Unit};
-pub use sparse::{SparseFit, SparseJacobian, levenberg_marquardt_sparse};
 pub use rank::{
     Identifiability, PruneReason, Pruned, RankConfig, RankConfigBase, TieBreak, identifiability,
 };
+pub use sparse::{SparseFit, SparseJacobian, levenberg_marquardt_sparse};

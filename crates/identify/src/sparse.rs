@@ -272,11 +272,11 @@ pub fn levenberg_marquardt_sparse(
                 x_trial[j] += step[j];
             }
             n_evaluations += 1;
-            let f_trial = match sj.residuals_and_values(x_trial.as_ref(), &mut r_trial, &mut values_trial)
-            {
-                Ok(()) if r_trial.iter().all(|v| v.is_finite()) => norm(&r_trial),
-                _ => f64::INFINITY,
-            };
+            let f_trial =
+                match sj.residuals_and_values(x_trial.as_ref(), &mut r_trial, &mut values_trial) {
+                    Ok(()) if r_trial.iter().all(|v| v.is_finite()) => norm(&r_trial),
+                    _ => f64::INFINITY,
+                };
             let actual = if 0.1 * f_trial < f_norm {
                 1.0 - (f_trial / f_norm).powi(2)
             } else {

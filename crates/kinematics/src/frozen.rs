@@ -267,7 +267,9 @@ impl Chain {
                     let value = nominal + param.map_or(0.0, |j| x[j]);
                     if value != 0.0 {
                         match motion {
-                            Motion::Rotation => rotate_in_place(&mut run.rot, Axis::new(&axis), value),
+                            Motion::Rotation => {
+                                rotate_in_place(&mut run.rot, Axis::new(&axis), value)
+                            }
                             Motion::Translation => run.trans += run.rot * (axis * value),
                         }
                     }

@@ -27,11 +27,7 @@ pub fn cable_angle(p: &Point3<f64>) -> (f64, Vector3<f64>) {
     if rho == 0.0 || r2 == 0.0 {
         return (phi, Vector3::zeros());
     }
-    let grad = Vector3::new(
-        p.x * p.z / (rho * r2),
-        p.y * p.z / (rho * r2),
-        -rho / r2,
-    );
+    let grad = Vector3::new(p.x * p.z / (rho * r2), p.y * p.z / (rho * r2), -rho / r2);
     (phi, grad)
 }
 
@@ -217,7 +213,12 @@ impl Problem for FleetProblem {
     }
 
     fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
-        check(x.nrows(), self.layout.len(), out.nrows(), self.n_residuals())?;
+        check(
+            x.nrows(),
+            self.layout.len(),
+            out.nrows(),
+            self.n_residuals(),
+        )?;
         let mut r = Vec::new();
         for d in 0..self.devices.len() {
             let (a, b) = (self.row_start[d], self.row_start[d + 1]);
@@ -231,13 +232,22 @@ impl Problem for FleetProblem {
     }
 
     fn jacobian(&self, x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
-        check(x.nrows(), self.layout.len(), jac.nrows(), self.n_residuals())?;
+        check(
+            x.nrows(),
+            self.layout.len(),
+            jac.nrows(),
+            self.n_residuals(),
+        )?;
         jac.fill(0.0);
         let np = self.device_params.len();
         let [ci, ki] = self.shared();
         for d in 0..self.devices.len() {
             let (a, b) = (self.row_start[d], self.row_start[d + 1]);
-            let (mut r, mut g, mut sh) = (vec![0.0; b - a], vec![0.0; (b - a) * np], vec![0.0; 2 * (b - a)]);
+            let (mut r, mut g, mut sh) = (
+                vec![0.0; b - a],
+                vec![0.0; (b - a) * np],
+                vec![0.0; 2 * (b - a)],
+            );
             self.eval_device(d, x, &mut r, Some((&mut g, &mut sh)));
             let off = self.device_offset(d);
             for i in 0..b - a {

@@ -339,7 +339,12 @@ impl CalibrationProblem {
 
     /// The joint angles the chain sees in row `row_idx`: the readings, deflected by the
     /// compliance when there is one (written to `buf`).
-    fn effective_q<'a>(&'a self, row_idx: usize, x: ColRef<'_, f64>, buf: &'a mut Vec<f64>) -> &'a [f64] {
+    fn effective_q<'a>(
+        &'a self,
+        row_idx: usize,
+        x: ColRef<'_, f64>,
+        buf: &'a mut Vec<f64>,
+    ) -> &'a [f64] {
         let q = &self.obs.rows[row_idx].q;
         if self.compliance.is_none() {
             return q;
@@ -355,12 +360,7 @@ impl CalibrationProblem {
     }
 
     /// Residuals and, if `jac` is given, the Jacobian; one pass shares the forward kinematics.
-    fn eval(
-        &self,
-        x: ColRef<'_, f64>,
-        out: Option<ColMut<'_, f64>>,
-        jac: Option<MatMut<'_, f64>>,
-    ) {
+    fn eval(&self, x: ColRef<'_, f64>, out: Option<ColMut<'_, f64>>, jac: Option<MatMut<'_, f64>>) {
         if self.blocks.len() < 4 {
             self.eval_rows(x, 0..self.obs.rows.len(), true, out, jac);
             return;
@@ -424,9 +424,7 @@ impl CalibrationProblem {
             if n_comp == 0
                 && let RowKind::Distance { distance_m } = &row.kind
             {
-                let trig = self
-                    .trig
-                    .get(row_idx * n_joints..(row_idx + 1) * n_joints);
+                let trig = self.trig.get(row_idx * n_joints..(row_idx + 1) * n_joints);
                 let s = self.weights.sigma_distance_m;
                 let p = match (jac.as_mut(), trig) {
                     (Some(j), _) => {

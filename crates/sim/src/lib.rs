@@ -51,7 +51,7 @@ mod truth;
 pub use error::Error;
 pub use sim::{
     DistanceSamples, NoiseModel, PARALLELOGRAM_JOINT, SimConfig, distance_samples,
-    joint_resolutions_rad, quantise_readings,
-    sample_readings, simulate, true_joint_angles, truth_deviations,
+    joint_resolutions_rad, quantise_readings, sample_readings, simulate, true_joint_angles,
+    truth_deviations,
 };
 pub use truth::{CapstanTruth, ParallelogramTruth, Truth, parse_truth, read_truth};

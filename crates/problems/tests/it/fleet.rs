@@ -109,8 +109,16 @@ fn sparse_back_end_matches_the_dense_one_and_recovers_the_rig() {
     };
     let dense = run(Backend::Dense);
     let sparse = run(Backend::Sparse);
-    assert!(dense.identifiability.pruned.is_empty(), "{:?}", dense.identifiability.pruned_names());
-    assert!(sparse.fit.termination.is_success(), "{:?}", sparse.fit.termination);
+    assert!(
+        dense.identifiability.pruned.is_empty(),
+        "{:?}",
+        dense.identifiability.pruned_names()
+    );
+    assert!(
+        sparse.fit.termination.is_success(),
+        "{:?}",
+        sparse.fit.termination
+    );
     for i in 0..p.layout().len() {
         assert!(
             (dense.fit.x[i] - sparse.fit.x[i]).abs() <= 1e-9,
@@ -121,10 +129,15 @@ fn sparse_back_end_matches_the_dense_one_and_recovers_the_rig() {
         );
     }
     for name in ["rig.cable_offset", "rig.cable_angle"] {
-        let (a, b) = (dense.std(name).expect("kept"), sparse.std(name).expect("reported"));
+        let (a, b) = (
+            dense.std(name).expect("kept"),
+            sparse.std(name).expect("reported"),
+        );
         assert!((a - b).abs() <= 1e-6 * a, "{name}: std {a} vs {b}");
     }
-    let z = |name: &str, truth: f64| (sparse.value(name).expect("value") - truth) / sparse.std(name).expect("std");
+    let z = |name: &str, truth: f64| {
+        (sparse.value(name).expect("value") - truth) / sparse.std(name).expect("std")
+    };
     assert!(z("rig.cable_offset", 2e-4).abs() < 4.0);
     assert!(z("rig.cable_angle", 1.5e-4).abs() < 4.0);
 }

@@ -100,7 +100,9 @@ fn streaming_identify_matches_dense_on_points_and_positions() {
         .collect();
     let mut rows = Vec::new();
     for k in 0..300 {
-        let q: Vec<f64> = (0..chain.n_joints()).map(|_| 2.0 * lcg(&mut state)).collect();
+        let q: Vec<f64> = (0..chain.n_joints())
+            .map(|_| 2.0 * lcg(&mut state))
+            .collect();
         let p = chain.end_point(&x_truth, &q);
         let kind = if k % 3 == 0 {
             RowKind::Distance {
@@ -147,7 +149,11 @@ fn streaming_result_does_not_depend_on_the_thread_count() {
     for threads in [2, 3] {
         let x = run(threads);
         for i in 0..one.nrows() {
-            assert_eq!(one[i].to_bits(), x[i].to_bits(), "{threads} threads, entry {i}");
+            assert_eq!(
+                one[i].to_bits(),
+                x[i].to_bits(),
+                "{threads} threads, entry {i}"
+            );
         }
     }
 }
