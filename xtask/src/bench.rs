@@ -126,7 +126,7 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
         load_before.split_whitespace().take(3).collect::<Vec<_>>().join(" "),
         data_dir.display()
     ));
-    md.push_str("| poses | hapcal LM (28 params) | hapcal identify (prune + LM + covariance) | SciPy lm | hapcal/lm | max abs diff lm | SciPy trf | hapcal/trf | max abs diff trf | peak RSS hapcal |\n|---|---|---|---|---|---|---|---|---|---|\n");
+    md.push_str("| poses | hapcal LM (28 params) | hapcal identify (prune + LM + covariance, σ known) | SciPy lm | hapcal/lm | max abs diff lm | SciPy trf | hapcal/trf | max abs diff trf | peak RSS hapcal |\n|---|---|---|---|---|---|---|---|---|---|\n");
 
     let mut per_iteration = None;
     for n in SIZES {

@@ -11,7 +11,8 @@
 //!   [`Backend::Auto`](hapcal_identify::Backend) picks (dense up to 20,000, streaming at
 //!   1,000,000; streaming runs on all cores);
 //! - `calibration`: the whole `identify` (pruning at the nominal and at the estimate, LM
-//!   starting with the full Gauss–Newton step, `LmConfig::factor = ∞`, covariance).
+//!   starting with the full Gauss–Newton step, `LmConfig::factor = ∞`, covariance; the noise
+//!   is known, σ = 1 in residual units).
 #![allow(missing_docs, clippy::unwrap_used)] // criterion's macros generate undocumented items
 
 use std::hint::black_box;
@@ -169,6 +170,8 @@ fn bench(c: &mut Criterion) {
                     factor: f64::INFINITY,
                     ..LmConfig::default()
                 },
+                // Residuals are in units of σ_m: the noise is known.
+                sigma: Some(1.0),
                 ..IdentifyConfig::default()
             };
             b.iter(|| identify(p, p.initial_guess(), &cfg).unwrap())

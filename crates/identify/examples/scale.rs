@@ -12,7 +12,8 @@
 //! `solve` prints one JSON object: sizes, the file-reading time, the minimum and median wall
 //! times of K runs of (a) `levenberg_marquardt` on the 28 identifiable parameters from x = 0
 //! (the problem SciPy solves, MINPACK's initial trust radius `factor = 100` like SciPy) and
-//! (b) the whole `identify` (pruning, fit, covariance; `factor = ∞`, see `LmConfig::factor`), the
+//! (b) the whole `identify` (pruning, fit, covariance; `factor = ∞`, see `LmConfig::factor`,
+//! and the known noise σ = 1 in residual units), the
 //! termination, the evaluation counts, and the estimates of (a) and (b) by name.
 #![allow(missing_docs, clippy::print_stdout, clippy::unwrap_used)] // a command-line tool
 
@@ -117,13 +118,16 @@ fn solve(args: &[String]) -> Result<()> {
         .filter(|&i| !HELD.contains(&layout.name(i)))
         .collect();
     // The LM run that SciPy also solves uses MINPACK's defaults (factor 100); the calibration
-    // starts with the full Gauss–Newton step (factor ∞: the nominal is close to the solution).
+    // starts with the full Gauss–Newton step (factor ∞: the nominal is close to the solution)
+    // and knows the noise: residuals are in units of σ_m (the paper's noise model), so σ = 1
+    // and the rank decision at the nominal is the one at the estimate (one round).
     let cfg = IdentifyConfig::default();
     let cfg_identify = IdentifyConfig {
         lm: LmConfig {
             factor: f64::INFINITY,
             ..LmConfig::default()
         },
+        sigma: Some(1.0),
         ..IdentifyConfig::default()
     };
     let streaming = p.n_residuals() * layout.len() > hapcal_identify::STREAMING_AUTO_ENTRIES;
