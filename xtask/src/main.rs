@@ -2,6 +2,7 @@
 //! reproduction runs that write `docs/results/`.
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a task runner reports on the terminal
 
+mod bench;
 mod mukca;
 
 use anyhow::Result;
@@ -30,6 +31,17 @@ enum Task {
         #[arg(long)]
         check: bool,
     },
+    /// Scale benchmarks (reference device at 200 to 1,000,000 poses, the 1,000-device fleet)
+    /// into docs/results/bench.md; `--peers` adds SciPy least_squares (lm, trf) on the same
+    /// data files, in a virtual environment under the target directory.
+    Bench {
+        /// Also run SciPy on the same problems.
+        #[arg(long)]
+        peers: bool,
+        /// Also run the criterion benchmarks (`cargo bench -p hapcal-identify --bench scale`).
+        #[arg(long)]
+        criterion: bool,
+    },
 }
 
 fn project_root() -> PathBuf {
@@ -42,6 +54,7 @@ fn main() -> Result<()> {
     match Task::parse() {
         Task::Ci => ci(&sh),
         Task::Mukca { check } => mukca::run(&sh, check),
+        Task::Bench { peers, criterion } => bench::run(&sh, peers, criterion),
         Task::ReproduceTables { check } => reproduce_tables(&sh, check),
     }
 }

@@ -8,6 +8,7 @@ use hapcal_metrics::{accuracy_improvement_pct, parameter_improvement_pct};
 use hapcal_transmission::{CapstanProblem, JointRad};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
+use rayon::prelude::*;
 use std::fmt::Write;
 use std::path::Path;
 
@@ -68,17 +69,21 @@ pub fn run(
     n_seeds: usize,
     n_poses: usize,
     choice: &paper::PoseChoice<'_>,
-    progress: &dyn Fn(usize),
+    progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Reproduction> {
     let r = Reference::load(truth_path)?;
-    let mut seeds: Vec<SeedResult> = Vec::with_capacity(n_seeds);
-    for seed in 0..n_seeds {
-        seeds.push(
-            paper::run_seed_with(&r, seed as u64, n_poses, choice)
-                .with_context(|| format!("seed {seed}"))?,
-        );
-        progress(seed + 1);
-    }
+    // Seeds in parallel (rayon); each seed is computed alone from its own RNG and `collect`
+    // keeps seed order, so the result does not depend on the number of threads.
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let seeds: Vec<SeedResult> = (0..n_seeds)
+        .into_par_iter()
+        .map(|seed| {
+            let result = paper::run_seed_with(&r, seed as u64, n_poses, choice)
+                .with_context(|| format!("seed {seed}"));
+            progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
+            result
+        })
+        .collect::<Result<Vec<_>>>()?;
     if seeds.is_empty() {
         bail!("--seeds must be at least 1");
     }

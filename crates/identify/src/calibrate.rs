@@ -2,10 +2,11 @@
 
 use faer::{Col, Mat};
 
+use crate::blocks::{Linearisation, RowBlocks, StreamError, error_at_x0, linearise, streaming_fit};
 use crate::covariance::{Covariance, covariance, sigma_from_residuals};
 use crate::error::{Error, check_config};
 use crate::lm::{Fit, LmConfig, check_jacobian_finite, levenberg_marquardt};
-use crate::problem::{ParamLayout, Problem};
+use crate::problem::{EvalError, ParamLayout, Problem};
 use crate::rank::{Identifiability, RankConfigBase, identifiability};
 
 /// Most fits [`identify`] runs while the kept set changes.
@@ -25,7 +26,42 @@ pub struct IdentifyConfig {
     /// Standard deviation of one residual, in residual units, when known; `None` estimates it
     /// from the residuals of the fit ([`sigma_from_residuals`]).
     pub sigma: Option<f64>,
+    /// Which linear-algebra back end evaluates and factorises the Jacobian.
+    pub backend: Backend,
 }
+
+/// The linear-algebra back end of [`identify`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Backend {
+    /// Streaming when the problem has row blocks ([`Problem::row_blocks`]) and its dense
+    /// Jacobian would exceed [`STREAMING_AUTO_ENTRIES`] entries; dense otherwise (the default).
+    #[default]
+    Auto,
+    /// The whole `m × n` Jacobian in memory, column-pivoted QR (Moré's `lmder`).
+    Dense,
+    /// The Jacobian streamed block by block into its R factor (TSQR): memory independent of
+    /// `m`, results equal to the dense path's up to rounding.
+    Streaming,
+    /// The Jacobian in compressed sparse columns, steps by faer's sparse QR
+    /// ([`levenberg_marquardt_sparse`](crate::levenberg_marquardt_sparse)); no pruning (the
+    /// layout must be identifiable), covariance of [`SparseJacobian::covariance_of`](crate::SparseJacobian::covariance_of) only.
+    Sparse,
+}
+
+/// [`Backend::Auto`] chooses the sparse back end when the problem has a sparse Jacobian whose
+/// density (nonzeros / `m·n`) is below this, and the dense Jacobian would exceed
+/// [`STREAMING_AUTO_ENTRIES`] entries.
+pub const SPARSE_AUTO_DENSITY: f64 = 0.05;
+
+/// Above this many Jacobian entries (`m·n`, i.e. 32 MB of `f64`), [`Backend::Auto`] streams
+/// when it can: the dense path then spends its time in memory traffic and its memory grows
+/// with `m`.
+pub const STREAMING_AUTO_ENTRIES: usize = 4_000_000;
+
+/// Largest dense Jacobian the dense back end allocates, in bytes (4 GiB): beyond it
+/// [`identify`] returns [`Error::DenseTooLarge`] instead of exhausting the machine's memory.
+pub const DENSE_LIMIT_BYTES: u128 = 4 << 30;
 
 /// Where [`Identified::sigma`] comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -96,6 +132,214 @@ impl Identified {
 /// - [`Error::Singular`] if the kept columns are singular at the estimate (only possible when
 ///   the last decision was not reproduced, see [`Identified::pruning_converged`]).
 pub fn identify(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Result<Identified, Error> {
+    check_identify_config(cfg)?;
+    let m = p.n_residuals();
+    let n = p.layout().len();
+    let entries = m.saturating_mul(n);
+    let sparse = match cfg.backend {
+        Backend::Sparse => true,
+        Backend::Auto => p.sparse_jacobian().is_some_and(|sj| {
+            let nnz = sj.pattern().1.len();
+            entries > STREAMING_AUTO_ENTRIES && (nnz as f64) < SPARSE_AUTO_DENSITY * entries as f64
+        }),
+        _ => false,
+    };
+    if sparse {
+        return identify_sparse(p, x0, cfg);
+    }
+    let streaming = match cfg.backend {
+        Backend::Dense | Backend::Sparse => false,
+        Backend::Streaming => true,
+        Backend::Auto => p.row_blocks().is_some() && entries > STREAMING_AUTO_ENTRIES,
+    };
+    if streaming {
+        let blocks = p.row_blocks().ok_or(Error::NoRowBlocks)?;
+        return identify_streaming(p, blocks, x0, cfg);
+    }
+    let bytes = 8 * m as u128 * n as u128;
+    if bytes > DENSE_LIMIT_BYTES {
+        return Err(Error::DenseTooLarge {
+            n_residuals: m,
+            n_params: n,
+            bytes,
+            limit: DENSE_LIMIT_BYTES,
+        });
+    }
+    identify_dense(p, x0, cfg)
+}
+
+fn check_identify_config(cfg: &IdentifyConfig) -> Result<(), Error> {
+    if let Some(sigma) = cfg.sigma {
+        check_config("sigma", sigma, true)?;
+    }
+    check_config("prior_m", cfg.rank.prior_m, true)?;
+    check_config("prior_rad", cfg.rank.prior_rad, true)?;
+    check_config("prior_dimensionless", cfg.rank.prior_dimensionless, true)?;
+    check_config("rel_tol", cfg.rank.rel_tol, false)
+}
+
+/// [`identify`] on the streaming back end: every Jacobian is reduced to the R factor of
+/// `[J r]` (see [`levenberg_marquardt_streaming`](crate::levenberg_marquardt_streaming)); the rank decision and the covariance are
+/// taken on `R`, which has the same Gram matrix as `J`.
+fn identify_streaming(
+    p: &impl Problem,
+    blocks: &dyn RowBlocks,
+    x0: Col<f64>,
+    cfg: &IdentifyConfig,
+) -> Result<Identified, Error> {
+    let layout = p.layout().clone();
+    let n = layout.len();
+    if x0.nrows() != n {
+        return Err(Error::WrongLength {
+            expected: n,
+            found: x0.nrows(),
+        });
+    }
+    check_config("ftol", cfg.lm.ftol, false)?;
+    check_config("xtol", cfg.lm.xtol, false)?;
+    check_config("gtol", cfg.lm.gtol, false)?;
+    crate::error::check_factor(cfg.lm.factor)?;
+    let m = p.n_residuals();
+    let mut lin = linearise(blocks, x0.as_ref(), n).map_err(|e| error_at_x0(e, &layout))?;
+    let (mut sigma, sigma_source) = match cfg.sigma {
+        Some(s) => (s, SigmaSource::Given),
+        None => {
+            let rms = if m > 0 {
+                (lin.r_norm_sq / m as f64).sqrt()
+            } else {
+                0.0
+            };
+            (rms, SigmaSource::Residuals)
+        }
+    };
+    let candidates: Vec<usize> = (0..n).collect();
+    let decide = |lin: &Linearisation, sigma: f64| {
+        identifiability(
+            lin.r_aug.as_ref().submatrix(0, 0, n, n),
+            &layout,
+            &candidates,
+            &cfg.rank.with_sigma(sigma.max(SIGMA_FLOOR)),
+        )
+    };
+    let mut ident = decide(&lin, sigma);
+    let mut rounds = 0;
+    let mut x_start = x0.clone();
+    let (fit, pruning_converged) = loop {
+        rounds += 1;
+        if m < ident.kept.len() {
+            return Err(Error::TooFewResiduals {
+                n_residuals: m,
+                n_free: ident.kept.len(),
+            });
+        }
+        let (fit, last, current) =
+            streaming_fit(blocks, n, x_start.clone(), &ident.kept, &cfg.lm, lin);
+        if sigma_source == SigmaSource::Residuals {
+            let k = ident.kept.len();
+            if m <= k {
+                return Err(Error::NoDegreesOfFreedom {
+                    n_residuals: m,
+                    n_free: k,
+                });
+            }
+            sigma = (2.0 * fit.cost / (m - k) as f64).sqrt();
+        }
+        lin = if current {
+            last
+        } else {
+            linearise(blocks, fit.x.as_ref(), n).map_err(|e| match e {
+                StreamError::Eval(e) => Error::EvalAtEstimate(e),
+                StreamError::NonFinite { .. } => Error::EvalAtEstimate(EvalError {
+                    reason: "the jacobian is not finite".to_owned(),
+                }),
+            })?
+        };
+        let next = decide(&lin, sigma);
+        if next.kept == ident.kept {
+            ident = next;
+            break (fit, true);
+        }
+        if rounds == MAX_ROUNDS {
+            break (fit, false);
+        }
+        x_start = x0.clone();
+        for &i in &next.kept {
+            x_start[i] = fit.x[i];
+        }
+        // The next fit starts elsewhere: linearise there.
+        lin = linearise(blocks, x_start.as_ref(), n).map_err(|e| error_at_x0(e, &layout))?;
+        ident = next;
+    };
+    let covariance = covariance(
+        lin.r_aug.as_ref().submatrix(0, 0, n, n),
+        &layout,
+        &ident.kept,
+        sigma,
+    )?;
+    Ok(Identified {
+        fit,
+        identifiability: ident,
+        covariance,
+        sigma,
+        sigma_source,
+        layout,
+        rounds,
+        pruning_converged,
+    })
+}
+
+/// [`identify`] on the sparse back end: one fit of all parameters, covariance of the ones the
+/// problem names.
+fn identify_sparse(
+    p: &impl Problem,
+    x0: Col<f64>,
+    cfg: &IdentifyConfig,
+) -> Result<Identified, Error> {
+    let sj = p.sparse_jacobian().ok_or(Error::NoSparseJacobian)?;
+    let which = sj.covariance_of();
+    let sf = crate::sparse::levenberg_marquardt_sparse(p, x0, &cfg.lm, &which)?;
+    let layout = p.layout().clone();
+    let n = layout.len();
+    let (sigma, sigma_source, covariance) = match cfg.sigma {
+        Some(s) => {
+            let mut cov = sf.covariance;
+            let scale = if sf.sigma > 0.0 {
+                (s / sf.sigma).powi(2)
+            } else {
+                0.0
+            };
+            for a in 0..cov.matrix.nrows() {
+                for b in 0..cov.matrix.ncols() {
+                    cov.matrix[(a, b)] *= scale;
+                }
+            }
+            (s, SigmaSource::Given, cov)
+        }
+        None => (sf.sigma, SigmaSource::Residuals, sf.covariance),
+    };
+    Ok(Identified {
+        fit: sf.fit,
+        identifiability: Identifiability {
+            kept: (0..n).collect(),
+            pruned: Vec::new(),
+            r_diag: Vec::new(),
+            pivot_order: (0..n).collect(),
+        },
+        covariance,
+        sigma,
+        sigma_source,
+        layout,
+        rounds: 1,
+        pruning_converged: true,
+    })
+}
+
+/// [`identify`] on the dense back end.
+fn identify_dense(
+    p: &impl Problem,
+    x0: Col<f64>,
+    cfg: &IdentifyConfig,
+) -> Result<Identified, Error> {
     if let Some(sigma) = cfg.sigma {
         check_config("sigma", sigma, true)?;
     }

@@ -52,6 +52,36 @@ pub enum Error {
         /// Number of free parameters.
         n_free: usize,
     },
+    /// The sparse back end was requested for a problem without a sparse Jacobian.
+    #[error(
+        "the sparse back end needs a problem with a sparse jacobian (Problem::sparse_jacobian)"
+    )]
+    NoSparseJacobian,
+    /// faer's sparse QR failed (out of memory, or an invalid pattern).
+    #[error("sparse QR failed: {reason}")]
+    Sparse {
+        /// faer's error, in words.
+        reason: String,
+    },
+    /// The streaming back end was requested for a problem without row blocks.
+    #[error("the streaming back end needs a problem with row blocks (Problem::row_blocks)")]
+    NoRowBlocks,
+    /// The dense back end was requested (or is the only one available) for a Jacobian that
+    /// does not fit in the memory budget.
+    #[error(
+        "the dense jacobian would take {bytes} bytes ({n_residuals} x {n_params}), over the \
+         dense back end's limit of {limit} bytes; provide row blocks or a sparse jacobian"
+    )]
+    DenseTooLarge {
+        /// Number of residuals `m`.
+        n_residuals: usize,
+        /// Number of parameters `n`.
+        n_params: usize,
+        /// `8·m·n`.
+        bytes: u128,
+        /// [`DENSE_LIMIT_BYTES`](crate::DENSE_LIMIT_BYTES).
+        limit: u128,
+    },
     /// The problem could not be evaluated at the initial guess.
     #[error("at the initial guess x0")]
     Eval(#[from] EvalError),
@@ -143,6 +173,19 @@ pub(crate) fn check_config(field: &'static str, value: f64, positive: bool) -> R
             field,
             value,
             requirement: if positive { "positive" } else { "non-negative" },
+        })
+    }
+}
+
+/// `LmConfig::factor` must be positive (`+∞` allowed: start with the Gauss–Newton step).
+pub(crate) fn check_factor(value: f64) -> Result<(), Error> {
+    if value > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::InvalidConfig {
+            field: "factor",
+            value,
+            requirement: "positive",
         })
     }
 }

@@ -56,6 +56,7 @@
 //! # Ok::<(), hapcal_identify::Error>(())
 //! ```
 
+mod blocks;
 mod calibrate;
 mod covariance;
 mod design;
@@ -64,8 +65,13 @@ mod lm;
 mod observability;
 mod problem;
 mod rank;
+mod sparse;
 
-pub use calibrate::{Identified, IdentifyConfig, MAX_ROUNDS, SIGMA_FLOOR, SigmaSource, identify};
+pub use blocks::{N_LEAVES, RowBlocks, levenberg_marquardt_streaming};
+pub use calibrate::{
+    Backend, DENSE_LIMIT_BYTES, Identified, IdentifyConfig, MAX_ROUNDS, SIGMA_FLOOR,
+    SPARSE_AUTO_DENSITY, STREAMING_AUTO_ENTRIES, SigmaSource, identify,
+};
 pub use covariance::{Covariance, covariance, sigma_from_residuals};
 pub use design::{Criterion, Design, DesignConfig, design_quality, select_poses};
 pub use error::Error;
@@ -77,3 +83,4 @@ pub use problem::{EvalError, ParamLayout, ParamSpec, Problem, Role, Unit};
 pub use rank::{
     Identifiability, PruneReason, Pruned, RankConfig, RankConfigBase, TieBreak, identifiability,
 };
+pub use sparse::{SparseFit, SparseJacobian, levenberg_marquardt_sparse};

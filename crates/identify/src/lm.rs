@@ -14,7 +14,7 @@ use faer::linalg::householder;
 use faer::linalg::solvers::SolveLstsq;
 use faer::{Col, ColRef, Conj, Mat, MatRef, Par};
 
-use crate::error::{Error, check_config};
+use crate::error::{Error, check_config, check_factor};
 use crate::problem::{ParamLayout, Problem};
 
 /// Stopping tolerances of [`levenberg_marquardt`] (the MINPACK `lmder` tests).
@@ -36,10 +36,16 @@ pub struct LmConfig {
     /// Stop after this many evaluations of `r` (the initial one included)
     /// ([`Termination::MaxEvaluations`]).
     pub max_evaluations: usize,
+    /// Initial trust radius: `factor·‖D·x0‖`, or `factor` when `x0 = 0` (MINPACK's `factor`,
+    /// default 100). From `x0 = 0` on a problem whose scaled Gauss–Newton step is much longer
+    /// than 100, the radius needs one doubling per iteration to reach it; `f64::INFINITY`
+    /// tries the full Gauss–Newton step first (the radius then starts at its length), which
+    /// suits calibrations started near their solution at the nominal.
+    pub factor: f64,
 }
 
 impl Default for LmConfig {
-    /// `ftol = xtol = gtol = 1e-12`, `max_evaluations = 200`, MINPACK-like (`lmder1` takes
+    /// `ftol = xtol = gtol = 1e-12`, `max_evaluations = 200`, `factor = 100`, MINPACK-like (`lmder1` takes
     /// `ftol = xtol = tol`, `gtol = 0`, `100·(n + 1)` evaluations). 1e-12 puts the stopping
     /// error far below any statistical uncertainty of a calibration; 200 evaluations are ample
     /// for problems started near their solution (calibration starts at the nominal), which
@@ -50,6 +56,7 @@ impl Default for LmConfig {
             xtol: 1e-12,
             gtol: 1e-12,
             max_evaluations: 200,
+            factor: FACTOR,
         }
     }
 }
@@ -184,6 +191,7 @@ pub fn levenberg_marquardt(
     check_config("ftol", cfg.ftol, false)?;
     check_config("xtol", cfg.xtol, false)?;
     check_config("gtol", cfg.gtol, false)?;
+    check_factor(cfg.factor)?;
     let m = p.n_residuals();
     let nf = free.len();
     if m < nf {
@@ -193,29 +201,126 @@ pub fn levenberg_marquardt(
         });
     }
 
-    let mut x = x0;
     let mut r = Col::<f64>::zeros(m);
-    p.residuals(x.as_ref(), r.as_mut())?;
+    p.residuals(x0.as_ref(), r.as_mut())?;
     if let Some(index) = (0..m).find(|&i| !r[i].is_finite()) {
         return Err(Error::NonFiniteResidual { index });
     }
-    let mut n_evaluations = 1;
     if nf == 0 {
         let cost = 0.5 * r.squared_norm_l2();
         return Ok(Fit {
-            x,
+            x: x0,
             termination: Termination::GtolReached,
-            n_evaluations,
+            n_evaluations: 1,
             n_jacobians: 0,
             cost,
             residuals: r,
         });
     }
     let mut jac = Mat::<f64>::zeros(m, n);
-    p.jacobian(x.as_ref(), jac.as_mut())?;
+    p.jacobian(x0.as_ref(), jac.as_mut())?;
     check_jacobian_finite(jac.as_ref(), layout)?;
-    let mut n_jacobians = 1;
+    let f_norm = r.norm_l2();
+    let mut dense = Dense {
+        p,
+        free,
+        jac,
+        r,
+        r_trial: Col::<f64>::zeros(m),
+    };
+    let run = run(&mut dense, x0, free, cfg, f_norm);
+    let cost = 0.5 * dense.r.squared_norm_l2();
+    Ok(Fit {
+        x: run.x,
+        termination: run.termination,
+        n_evaluations: run.n_evaluations,
+        n_jacobians: run.n_jacobians,
+        cost,
+        residuals: dense.r,
+    })
+}
 
+/// What the iteration needs from the problem, dense or streamed: residual norms at trial
+/// points and the linearisation at the current point.
+pub(crate) trait Linearised {
+    /// `‖r(x_trial)‖`, or `∞` when `r` cannot be evaluated or is not finite there.
+    fn trial_norm(&mut self, x_trial: ColRef<'_, f64>) -> f64;
+    /// Makes the last trial point the current one.
+    fn accept(&mut self);
+    /// Evaluates the Jacobian at the current point `x`.
+    fn relinearise(&mut self, x: ColRef<'_, f64>) -> Result<(), Termination>;
+    /// `‖J_j‖` for the free columns.
+    fn col_norms(&self) -> Vec<f64>;
+    /// `|J_jᵀ r|` for the free columns.
+    fn gradient_abs(&self, j: usize) -> f64;
+    /// The column-pivoted QR of `J_f D⁻¹` and `Q₁ᵀ r`.
+    fn scaled_qr(&self, diag: &[f64]) -> ScaledQr;
+}
+
+struct Dense<'a, P: Problem> {
+    p: &'a P,
+    free: &'a [usize],
+    jac: Mat<f64>,
+    r: Col<f64>,
+    r_trial: Col<f64>,
+}
+
+impl<P: Problem> Linearised for Dense<'_, P> {
+    fn trial_norm(&mut self, x_trial: ColRef<'_, f64>) -> f64 {
+        match self.p.residuals(x_trial, self.r_trial.as_mut()) {
+            Ok(()) if self.r_trial.is_all_finite() => self.r_trial.norm_l2(),
+            _ => f64::INFINITY,
+        }
+    }
+    fn accept(&mut self) {
+        std::mem::swap(&mut self.r, &mut self.r_trial);
+    }
+    fn relinearise(&mut self, x: ColRef<'_, f64>) -> Result<(), Termination> {
+        self.p
+            .jacobian(x, self.jac.as_mut())
+            .map_err(Termination::EvalFailed)?;
+        if !self.jac.is_all_finite() {
+            return Err(Termination::Numerical);
+        }
+        Ok(())
+    }
+    fn col_norms(&self) -> Vec<f64> {
+        self.free
+            .iter()
+            .map(|&k| self.jac.col(k).norm_l2())
+            .collect()
+    }
+    fn gradient_abs(&self, j: usize) -> f64 {
+        (self.jac.col(self.free[j]).transpose() * self.r.as_ref()).abs()
+    }
+    fn scaled_qr(&self, diag: &[f64]) -> ScaledQr {
+        ScaledQr::new(self.jac.as_ref(), self.free, diag, self.r.as_ref())
+    }
+}
+
+/// Outcome of [`run`].
+pub(crate) struct Run {
+    pub(crate) x: Col<f64>,
+    pub(crate) termination: Termination,
+    pub(crate) n_evaluations: usize,
+    pub(crate) n_jacobians: usize,
+    pub(crate) f_norm: f64,
+    /// Whether the last linearisation was taken at `x` (no step accepted since).
+    pub(crate) linearised_at_x: bool,
+}
+
+/// The MINPACK `lmder` iteration from `x0`, where `lin` is linearised and `f_norm = ‖r(x0)‖`.
+pub(crate) fn run(
+    lin: &mut impl Linearised,
+    x0: Col<f64>,
+    free: &[usize],
+    cfg: &LmConfig,
+    f_norm0: f64,
+) -> Run {
+    let nf = free.len();
+    let mut x = x0;
+    let mut n_evaluations = 1;
+    let mut n_jacobians = 1;
     let ftol = cfg.ftol.max(f64::EPSILON);
     let xtol = cfg.xtol.max(f64::EPSILON);
     let gtol = cfg.gtol.max(f64::EPSILON);
@@ -230,13 +335,13 @@ pub fn levenberg_marquardt(
     let mut delta = 0.0_f64;
     let mut x_norm = 0.0_f64;
     let mut lambda = 0.0_f64;
-    let mut f_norm = r.norm_l2();
+    let mut f_norm = f_norm0;
     let mut first = true;
     let mut x_trial = x.clone();
-    let mut r_trial = Col::<f64>::zeros(m);
+    let mut linearised_at_x = true;
 
     let termination = 'outer: loop {
-        let col_norms: Vec<f64> = free.iter().map(|&k| jac.col(k).norm_l2()).collect();
+        let col_norms = lin.col_norms();
         for (d, &c) in diag.iter_mut().zip(&col_norms) {
             *d = if first { c } else { d.max(c) };
             if *d == 0.0 {
@@ -246,9 +351,9 @@ pub fn levenberg_marquardt(
         if first {
             x_norm = scaled_norm(&diag, &x);
             delta = if x_norm > 0.0 {
-                FACTOR * x_norm
+                cfg.factor * x_norm
             } else {
-                FACTOR
+                cfg.factor
             };
         }
         if f_norm == 0.0 {
@@ -256,12 +361,12 @@ pub fn levenberg_marquardt(
         }
         let g_cos = (0..nf)
             .filter(|&j| col_norms[j] > 0.0)
-            .map(|j| (jac.col(free[j]).transpose() * r.as_ref()).abs() / (col_norms[j] * f_norm))
+            .map(|j| lin.gradient_abs(j) / (col_norms[j] * f_norm))
             .fold(0.0_f64, f64::max);
         if g_cos <= gtol {
             break Termination::GtolReached;
         }
-        let factor = ScaledQr::new(jac.as_ref(), free, &diag, r.as_ref());
+        let factor = lin.scaled_qr(&diag);
 
         loop {
             if n_evaluations >= cfg.max_evaluations {
@@ -281,10 +386,7 @@ pub fn levenberg_marquardt(
                 x_trial[free[pos]] += u[k] / diag[pos];
             }
             n_evaluations += 1;
-            let f_norm_trial = match p.residuals(x_trial.as_ref(), r_trial.as_mut()) {
-                Ok(()) if r_trial.is_all_finite() => r_trial.norm_l2(),
-                _ => f64::INFINITY,
-            };
+            let f_norm_trial = lin.trial_norm(x_trial.as_ref());
             // Relative reductions of ‖r‖² (MINPACK actred, prered, dirder).
             let actual = if 0.1 * f_norm_trial < f_norm {
                 1.0 - (f_norm_trial / f_norm).powi(2)
@@ -318,7 +420,8 @@ pub fn levenberg_marquardt(
             let accepted = ratio >= 1e-4;
             if accepted {
                 std::mem::swap(&mut x, &mut x_trial);
-                std::mem::swap(&mut r, &mut r_trial);
+                lin.accept();
+                linearised_at_x = false;
                 f_norm = f_norm_trial;
                 x_norm = scaled_norm(&diag, &x);
             }
@@ -333,23 +436,23 @@ pub fn levenberg_marquardt(
             }
         }
         first = false;
-        if let Err(e) = p.jacobian(x.as_ref(), jac.as_mut()) {
-            break Termination::EvalFailed(e);
-        }
         n_jacobians += 1;
-        if !jac.is_all_finite() {
-            break Termination::Numerical;
+        if let Err(t) = lin.relinearise(x.as_ref()) {
+            if matches!(t, Termination::EvalFailed(_)) {
+                n_jacobians -= 1;
+            }
+            break t;
         }
+        linearised_at_x = true;
     };
-    let cost = 0.5 * r.squared_norm_l2();
-    Ok(Fit {
+    Run {
         x,
         termination,
         n_evaluations,
         n_jacobians,
-        cost,
-        residuals: r,
-    })
+        f_norm,
+        linearised_at_x,
+    }
 }
 
 fn norm(v: &[f64]) -> f64 {
@@ -357,7 +460,7 @@ fn norm(v: &[f64]) -> f64 {
 }
 
 /// Column-pivoted QR of the scaled free Jacobian, `J D⁻¹ Π = Q R`, and `Q₁ᵀ r`.
-struct ScaledQr {
+pub(crate) struct ScaledQr {
     /// `R`, `n_free × n_free` upper triangular.
     r: Mat<f64>,
     /// `perm[k]`: position in `free` of pivot column `k`.
@@ -369,7 +472,12 @@ struct ScaledQr {
 }
 
 impl ScaledQr {
-    fn new(jac: MatRef<'_, f64>, free: &[usize], diag: &[f64], r: ColRef<'_, f64>) -> Self {
+    pub(crate) fn new(
+        jac: MatRef<'_, f64>,
+        free: &[usize],
+        diag: &[f64],
+        r: ColRef<'_, f64>,
+    ) -> Self {
         let (m, nf) = (jac.nrows(), free.len());
         let scaled = Mat::from_fn(m, nf, |i, j| jac[(i, free[j])] / diag[j]);
         let qr = scaled.col_piv_qr();

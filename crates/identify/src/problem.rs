@@ -119,4 +119,16 @@ pub trait Problem {
     /// # Errors
     /// [`EvalError`] when the model cannot be evaluated at `x`.
     fn jacobian(&self, x: ColRef<'_, f64>, jac: MatMut<'_, f64>) -> Result<(), EvalError>;
+    /// The same residuals and Jacobian as independent row blocks, when the problem can
+    /// evaluate them so; enables the streaming back end ([`Backend::Streaming`](crate::Backend)),
+    /// whose memory does not grow with `m`. `None` (the default) means dense only.
+    fn row_blocks(&self) -> Option<&dyn crate::RowBlocks> {
+        None
+    }
+    /// The Jacobian in sparse form, when the problem knows its pattern; enables the sparse
+    /// back end ([`Backend::Sparse`](crate::Backend)) for block-structured problems whose dense
+    /// Jacobian would not fit in memory. `None` (the default) means dense only.
+    fn sparse_jacobian(&self) -> Option<&dyn crate::SparseJacobian> {
+        None
+    }
 }

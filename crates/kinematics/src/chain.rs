@@ -133,6 +133,9 @@ pub struct Chain {
 pub struct FkWorkspace {
     /// World pose after each factor.
     poses: Vec<Isometry3<f64>>,
+    /// World frame (rotation columns, translation) at the start of each constant run of a
+    /// [`FrozenChain`](crate::FrozenChain).
+    pub(crate) starts: Vec<[Vector3<f64>; 4]>,
 }
 
 impl FkWorkspace {
@@ -140,6 +143,7 @@ impl FkWorkspace {
     pub fn new(chain: &Chain) -> FkWorkspace {
         FkWorkspace {
             poses: Vec::with_capacity(chain.factors.len()),
+            starts: Vec::with_capacity(chain.joint_names.len() + 1),
         }
     }
 }

@@ -34,10 +34,12 @@
 //! ```
 
 mod compliance;
+mod fleet;
 mod model;
 mod problem;
 
 pub use compliance::{GravityCompliance, LinkMass};
+pub use fleet::{FleetDevice, FleetProblem, cable_angle, fleet_initial_guess};
 pub use model::CalibratedModel;
 pub use problem::{CalibrationProblem, Observations, PointDistance, Row, RowKind, Weights};
 
@@ -72,6 +74,14 @@ pub enum Error {
         name: &'static str,
         /// Its value.
         value: f64,
+    },
+    /// A device parameter index is not a parameter of the chain.
+    #[error("parameter index {index} is out of range for a chain of {n_params} parameters")]
+    NoSuchParam {
+        /// The offending index.
+        index: usize,
+        /// Number of chain parameters.
+        n_params: usize,
     },
     /// A value in an observation is NaN or infinite.
     #[error("observation {row} holds a value that is not finite")]

@@ -3,9 +3,10 @@
 
 use crate::{CalibratedModel, Error, GravityCompliance};
 use faer::{Col, ColMut, ColRef, MatMut};
-use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, Unit};
-use hapcal_kinematics::{Chain, FkWorkspace, ParamUnit, Point3, Vector3};
-use std::cell::RefCell;
+use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
+use hapcal_kinematics::{Chain, FkWorkspace, ParamUnit, Point3, Vector3, joint_trig};
+use rayon::prelude::*;
+use std::ops::Range;
 
 /// What one configuration measured.
 #[derive(Clone, Debug, PartialEq)]
@@ -95,8 +96,17 @@ pub struct CalibrationProblem {
     torques: Vec<Vec<f64>>,
     layout: ParamLayout,
     n_residuals: usize,
-    ws: RefCell<(FkWorkspace, Vec<f64>)>,
+    /// `[sin q, cos q]` per row and joint (row-major), without compliance (which moves the
+    /// angles); empty otherwise.
+    trig: Vec<[f64; 2]>,
+    /// Row blocks for the streaming back end: (rows, residual rows); the last block also
+    /// holds the point distances.
+    blocks: Vec<(Range<usize>, Range<usize>)>,
 }
+
+/// Rows per block of the streaming back end: large enough to amortise the per-block set-up
+/// (one frozen chain), small enough that a block's Jacobian stays in cache.
+const ROWS_PER_BLOCK: usize = 256;
 
 impl CalibrationProblem {
     /// Builds the problem.
@@ -207,7 +217,32 @@ impl CalibrationProblem {
                 });
             }
         }
-        let ws = RefCell::new((FkWorkspace::new(&chain), vec![0.0; 3 * chain.n_params()]));
+        let any_distance = (obs.rows.iter()).any(|r| matches!(r.kind, RowKind::Distance { .. }));
+        let trig = if compliance.is_none() && any_distance {
+            obs.rows.iter().flat_map(|row| joint_trig(&row.q)).collect()
+        } else {
+            Vec::new()
+        };
+        let mut blocks = Vec::new();
+        let mut residual = 0;
+        let n_rows = obs.rows.len();
+        for start in (0..n_rows.max(1)).step_by(ROWS_PER_BLOCK) {
+            let end = (start + ROWS_PER_BLOCK).min(n_rows);
+            let len: usize = obs.rows[start..end]
+                .iter()
+                .map(|row| match row.kind {
+                    RowKind::Distance { .. } => 1,
+                    _ => 3,
+                })
+                .sum();
+            let extra = if end == n_rows {
+                obs.point_distances.len()
+            } else {
+                0
+            };
+            blocks.push((start..end, residual..residual + len + extra));
+            residual += len + extra;
+        }
         Ok(Self {
             chain,
             obs,
@@ -216,7 +251,8 @@ impl CalibrationProblem {
             torques,
             layout: ParamLayout::new(specs),
             n_residuals,
-            ws,
+            trig,
+            blocks,
         })
     }
 
@@ -311,22 +347,65 @@ impl CalibrationProblem {
             .collect()
     }
 
-    fn effective_q(&self, row_idx: usize, x: ColRef<'_, f64>) -> Vec<f64> {
+    /// The joint angles the chain sees in row `row_idx`: the readings, deflected by the
+    /// compliance when there is one (written to `buf`).
+    fn effective_q<'a>(
+        &'a self,
+        row_idx: usize,
+        x: ColRef<'_, f64>,
+        buf: &'a mut Vec<f64>,
+    ) -> &'a [f64] {
         let q = &self.obs.rows[row_idx].q;
         if self.compliance.is_none() {
-            return q.clone();
+            return q;
         }
         let n = self.chain.n_params();
-        q.iter()
-            .enumerate()
-            .map(|(j, qj)| qj + x[n + self.group(j)] * self.torques[row_idx][j])
-            .collect()
+        buf.clear();
+        buf.extend(
+            q.iter()
+                .enumerate()
+                .map(|(j, qj)| qj + x[n + self.group(j)] * self.torques[row_idx][j]),
+        );
+        buf
     }
 
     /// Residuals and, if `jac` is given, the Jacobian; one pass shares the forward kinematics.
-    fn eval(
+    fn eval(&self, x: ColRef<'_, f64>, out: Option<ColMut<'_, f64>>, jac: Option<MatMut<'_, f64>>) {
+        if self.blocks.len() < 4 {
+            self.eval_rows(x, 0..self.obs.rows.len(), true, out, jac);
+            return;
+        }
+        // Large problems: the row blocks in parallel (rayon), each on its own rows of `out`
+        // and `jac`. Every row is computed the same way whatever the thread, so the result
+        // does not depend on the number of threads.
+        let mut tasks = Vec::with_capacity(self.blocks.len());
+        let (mut out, mut jac) = (out, jac);
+        for (b, (rows, res)) in self.blocks.iter().enumerate() {
+            let len = res.len();
+            let o = out.take().map(|o| {
+                let (head, tail) = o.split_at_row_mut(len);
+                out = Some(tail);
+                head
+            });
+            let j = jac.take().map(|j| {
+                let (head, tail) = j.split_at_row_mut(len);
+                jac = Some(tail);
+                head
+            });
+            tasks.push((rows.clone(), b + 1 == self.blocks.len(), o, j));
+        }
+        tasks
+            .into_par_iter()
+            .for_each(|(rows, last, o, j)| self.eval_rows(x, rows, last, o, j));
+    }
+
+    /// Residuals and, if `jac` is given, the Jacobian of the rows `rows` (and of the point
+    /// distances when `with_point_distances`), written from row 0 of `out` / `jac`.
+    fn eval_rows(
         &self,
         x: ColRef<'_, f64>,
+        rows: Range<usize>,
+        with_point_distances: bool,
         mut out: Option<ColMut<'_, f64>>,
         mut jac: Option<MatMut<'_, f64>>,
     ) {
@@ -334,22 +413,55 @@ impl CalibrationProblem {
         let n_comp = self.n_compliance();
         let off = self.points_offset();
         let x_kin: Vec<f64> = (0..n_kin).map(|i| x[i]).collect();
-        let mut guard = self.ws.borrow_mut();
-        let (ws, buf) = &mut *guard;
+        // Constant factors between joints folded once for this x (FrozenChain).
+        let frozen = self.chain.freeze(&x_kin);
+        let mut ws = FkWorkspace::new(&self.chain);
+        let mut buf = vec![0.0; 3 * n_kin];
         if let Some(j) = jac.as_mut() {
             j.fill(0.0);
         }
+        let mut q_buf = Vec::new();
+        let mut grad = vec![0.0; n_kin];
+        let n_joints = self.chain.n_joints();
         let mut r = 0usize;
-        for (row_idx, row) in self.obs.rows.iter().enumerate() {
-            let q_eff = self.effective_q(row_idx, x);
+        for (row_idx, row) in self.obs.rows[rows.clone()]
+            .iter()
+            .enumerate()
+            .map(|(i, row)| (rows.start + i, row))
+        {
+            // Distance rows without compliance: the distance gradient directly, joint
+            // angles by their precomputed sines and cosines (the fast path at scale).
+            if n_comp == 0
+                && let RowKind::Distance { distance_m } = &row.kind
+            {
+                let trig = self.trig.get(row_idx * n_joints..(row_idx + 1) * n_joints);
+                let s = self.weights.sigma_distance_m;
+                let p = match (jac.as_mut(), trig) {
+                    (Some(j), _) => {
+                        let p = frozen.distance_gradient(&row.q, trig, &mut grad, &mut ws);
+                        for (col, g) in grad.iter().enumerate() {
+                            j[(r, col)] = g / s;
+                        }
+                        p
+                    }
+                    (None, Some(t)) => frozen.end_point_trig(&row.q, t),
+                    (None, None) => frozen.end_point(&row.q),
+                };
+                if let Some(o) = out.as_mut() {
+                    o[r] = (p.coords.norm() - distance_m) / s;
+                }
+                r += 1;
+                continue;
+            }
+            let q_eff = self.effective_q(row_idx, x, &mut q_buf);
             let p = if jac.is_some() {
-                self.chain.point_and_jacobian_in(&x_kin, &q_eff, ws, buf)
+                frozen.point_and_jacobian(q_eff, &mut buf, &mut ws)
             } else {
-                self.chain.end_point(&x_kin, &q_eff)
+                frozen.end_point(q_eff)
             };
             // ∂p/∂k_j = (∂p/∂q_j)·τ̂_j, from the geometric Jacobian's linear rows.
             let jq = if n_comp > 0 && jac.is_some() {
-                Some(self.chain.geometric_jacobian(&x_kin, &q_eff))
+                Some(self.chain.geometric_jacobian(&x_kin, q_eff))
             } else {
                 None
             };
@@ -417,7 +529,12 @@ impl CalibrationProblem {
             }
         }
         let s = self.weights.sigma_point_distance_m;
-        for pd in &self.obs.point_distances {
+        let point_distances: &[PointDistance] = if with_point_distances {
+            &self.obs.point_distances
+        } else {
+            &[]
+        };
+        for pd in point_distances {
             let d = Vector3::from_fn(|k, _| x[off + 3 * pd.a + k] - x[off + 3 * pd.b + k]);
             let norm = d.norm();
             if let Some(o) = out.as_mut() {
@@ -467,6 +584,66 @@ impl Problem for CalibrationProblem {
         }
         self.eval(x, None, Some(jac));
         Ok(())
+    }
+
+    fn row_blocks(&self) -> Option<&dyn RowBlocks> {
+        Some(self)
+    }
+}
+
+impl RowBlocks for CalibrationProblem {
+    fn n_blocks(&self) -> usize {
+        self.blocks.len()
+    }
+
+    fn block_rows(&self, block: usize) -> Range<usize> {
+        self.blocks[block].1.clone()
+    }
+
+    fn block_residuals(
+        &self,
+        x: ColRef<'_, f64>,
+        block: usize,
+        out: ColMut<'_, f64>,
+    ) -> Result<(), EvalError> {
+        let (rows, res) = self.block(block)?;
+        check_shape(x.nrows(), self.layout.len(), out.nrows(), res.len())?;
+        let last = block + 1 == self.blocks.len();
+        self.eval_rows(x, rows, last, Some(out), None);
+        Ok(())
+    }
+
+    fn block_jacobian(
+        &self,
+        x: ColRef<'_, f64>,
+        block: usize,
+        r_out: ColMut<'_, f64>,
+        jac: MatMut<'_, f64>,
+    ) -> Result<(), EvalError> {
+        let (rows, res) = self.block(block)?;
+        check_shape(x.nrows(), self.layout.len(), r_out.nrows(), res.len())?;
+        if jac.nrows() != res.len() || jac.ncols() != self.layout.len() {
+            return Err(EvalError {
+                reason: format!(
+                    "block jacobian is {} x {}, expected {} x {}",
+                    jac.nrows(),
+                    jac.ncols(),
+                    res.len(),
+                    self.layout.len()
+                ),
+            });
+        }
+        let last = block + 1 == self.blocks.len();
+        self.eval_rows(x, rows, last, Some(r_out), Some(jac));
+        Ok(())
+    }
+}
+
+impl CalibrationProblem {
+    fn block(&self, block: usize) -> Result<(Range<usize>, Range<usize>), EvalError> {
+        self.blocks.get(block).cloned().ok_or_else(|| EvalError {
+            reason: format!("block {block} of {}", self.blocks.len()),
+        })
     }
 }
 

@@ -50,7 +50,8 @@ mod truth;
 
 pub use error::Error;
 pub use sim::{
-    NoiseModel, PARALLELOGRAM_JOINT, SimConfig, joint_resolutions_rad, quantise_readings,
-    sample_readings, simulate, true_joint_angles, truth_deviations,
+    DistanceSamples, NoiseModel, PARALLELOGRAM_JOINT, SimConfig, distance_samples,
+    joint_resolutions_rad, quantise_readings, sample_readings, simulate, true_joint_angles,
+    truth_deviations,
 };
 pub use truth::{CapstanTruth, ParallelogramTruth, Truth, parse_truth, read_truth};

@@ -377,3 +377,73 @@ pub fn simulate(device: &Device, truth: &Truth, cfg: &SimConfig) -> Result<Vec<L
     }
     Ok(rows)
 }
+
+/// Distance data of the truth's *kinematics* alone, for benchmarks and scale tests: joint
+/// angles uniform within the joint limits (not quantised, no transmission errors, i.e. the
+/// readings are already corrected as after step 1 of the paper's procedure) and cable
+/// distances `|P(x_truth; q)| + N(0, σ_m)` (paper eq. 5).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DistanceSamples {
+    /// Number of joints (row length of `q_rad`).
+    pub n_joints: usize,
+    /// Joint angles, rad, row-major: pose `k` is `q_rad[k·n_joints..(k+1)·n_joints]`.
+    pub q_rad: Vec<f64>,
+    /// Measured distances, m, one per pose.
+    pub distance_m: Vec<f64>,
+}
+
+impl DistanceSamples {
+    /// Number of poses.
+    pub fn n_poses(&self) -> usize {
+        self.distance_m.len()
+    }
+
+    /// Joint angles of pose `pose_idx`, rad.
+    ///
+    /// # Panics
+    /// If `pose_idx >= n_poses()`.
+    #[track_caller]
+    pub fn q(&self, pose_idx: usize) -> &[f64] {
+        &self.q_rad[pose_idx * self.n_joints..(pose_idx + 1) * self.n_joints]
+    }
+}
+
+/// `n_poses` poses of [`DistanceSamples`] from `seed` (`ChaCha8Rng`): per pose, one uniform
+/// draw per joint then one standard normal for the distance noise of `sigma_m_m` (m).
+///
+/// # Errors
+/// [`Error::InvalidNoise`] for a negative or non-finite `sigma_m_m`; [`Error::Device`] if the
+/// device's chain cannot be built; [`Error::UnknownParameter`] for a deviation that is not a
+/// chain parameter.
+pub fn distance_samples(
+    device: &Device,
+    truth: &Truth,
+    seed: u64,
+    n_poses: usize,
+    sigma_m_m: f64,
+) -> Result<DistanceSamples, Error> {
+    NoiseModel::new(0.0, sigma_m_m).check()?;
+    let chain = device.chain().map_err(|source| Error::Device { source })?;
+    let x = truth_deviations(&chain, truth)?;
+    let frozen = chain.freeze(&x);
+    let limits = device.joint_limits();
+    let n_joints = limits.len();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut q_rad = Vec::with_capacity(n_poses * n_joints);
+    let mut distance_m = Vec::with_capacity(n_poses);
+    for _ in 0..n_poses {
+        let start = q_rad.len();
+        for &(lower, upper) in &limits {
+            let u: f64 = rng.random();
+            q_rad.push((lower + (upper - lower) * u).max(lower).min(upper));
+        }
+        let p = frozen.end_point(&q_rad[start..]);
+        let z: f64 = rng.sample(StandardNormal);
+        distance_m.push(p.coords.norm() + sigma_m_m * z);
+    }
+    Ok(DistanceSamples {
+        n_joints,
+        q_rad,
+        distance_m,
+    })
+}

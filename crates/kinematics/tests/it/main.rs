@@ -2,7 +2,9 @@
 
 use std::f64::consts::PI;
 
-use hapcal_kinematics::{Chain, DhConvention, DhRow, Isometry3, Placement};
+use hapcal_kinematics::{
+    Chain, DhConvention, DhRow, FkWorkspace, Isometry3, Placement, joint_trig,
+};
 use nalgebra::Vector3;
 use proptest::prelude::*;
 
@@ -198,5 +200,36 @@ proptest! {
         prop_assert_eq!(poses.len(), chain.factors().len());
         prop_assert!((poses[poses.len() - 1].translation.vector - end.translation.vector).norm() < 1e-15);
         prop_assert_eq!(chain.end_point(&x, &q).coords, end.translation.vector);
+    }
+
+    #[test]
+    fn frozen_chain_matches_the_factor_chain((chain, x, q) in chain_x_q()) {
+        let frozen = chain.freeze(&x);
+        let mut ws = FkWorkspace::new(&chain);
+        let mut jac = vec![0.0; 3 * chain.n_params()];
+        let mut jac_frozen = jac.clone();
+        let p = chain.point_and_jacobian_in(&x, &q, &mut ws, &mut jac);
+        // Twice, to check that the workspace is reusable.
+        for _ in 0..2 {
+            let pf = frozen.point_and_jacobian(&q, &mut jac_frozen, &mut ws);
+            prop_assert!((pf - p).norm() < 1e-12, "{pf} vs {p}");
+        }
+        prop_assert!((frozen.end_point(&q) - p).norm() < 1e-12);
+        for (k, (a, b)) in jac.iter().zip(&jac_frozen).enumerate() {
+            prop_assert!((a - b).abs() < 1e-12, "entry {k}: {a} vs {b}");
+        }
+        // Angles by their sines and cosines; the distance gradient is uᵀ·∂P/∂x.
+        let trig = joint_trig(&q);
+        prop_assert!((frozen.end_point_trig(&q, &trig) - p).norm() < 1e-12);
+        let mut grad = vec![0.0; chain.n_params()];
+        for t in [None, Some(trig.as_slice())] {
+            let pd = frozen.distance_gradient(&q, t, &mut grad, &mut ws);
+            prop_assert!((pd - p).norm() < 1e-12);
+            let u = p.coords / p.coords.norm();
+            for (j, g) in grad.iter().enumerate() {
+                let expected = u.x * jac[3 * j] + u.y * jac[3 * j + 1] + u.z * jac[3 * j + 2];
+                prop_assert!((g - expected).abs() < 1e-12, "param {j}: {g} vs {expected}");
+            }
+        }
     }
 }

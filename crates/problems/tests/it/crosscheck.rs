@@ -88,6 +88,7 @@ fn kinematic_solution_matches_the_independent_scipy_reference() {
             xtol: 1e-15,
             gtol: 1e-15,
             max_evaluations: 500,
+            ..LmConfig::default()
         },
     )
     .expect("solves");

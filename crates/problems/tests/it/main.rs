@@ -1,7 +1,9 @@
 //! Integration tests of hapcal-problems: analytic Jacobians against central differences.
 
 mod crosscheck;
+mod fleet;
 mod identifiability;
+mod streaming;
 
 use faer::{Col, Mat};
 use hapcal_identify::Problem;

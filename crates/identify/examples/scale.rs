@@ -1,0 +1,267 @@
+//! The reference device (DESIGN.md §2) with distance data at any size: writes a data file, or
+//! reads one and calibrates it, printing timings and estimates as JSON. `cargo xtask bench`
+//! drives it (and SciPy on the same files); `/usr/bin/time -v` around `solve` gives the peak
+//! memory.
+//!
+//! ```text
+//! scale write --poses N --seed S --out data.csv
+//! scale solve --data data.csv [--repeat K] [--identify-only]
+//! ```
+//!
+//! `data.csv`: header `q1,…,q7,distance_m`, one pose per line, shortest round-trip decimals.
+//! `solve` prints one JSON object: sizes, the file-reading time, the minimum and median wall
+//! times of K runs of (a) `levenberg_marquardt` on the 28 identifiable parameters from x = 0
+//! (the problem SciPy solves, MINPACK's initial trust radius `factor = 100` like SciPy) and
+//! (b) the whole `identify` (pruning, fit, covariance; `factor = ∞`, see `LmConfig::factor`,
+//! and the known noise σ = 1 in residual units), the
+//! termination, the evaluation counts, and the estimates of (a) and (b) by name.
+#![allow(missing_docs, clippy::print_stdout, clippy::unwrap_used)] // a command-line tool
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use faer::Col;
+use hapcal_identify::{
+    IdentifyConfig, LmConfig, Problem, identify, levenberg_marquardt, levenberg_marquardt_streaming,
+};
+use hapcal_problems::{CalibrationProblem, Observations, Row, RowKind, Weights};
+
+type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// σ_m = 2π·R_d·σ_e, σ_e = 2π/20000/3 rad, R_d = 0.015 m (DESIGN.md §3), m.
+fn sigma_m() -> f64 {
+    let sigma_e = std::f64::consts::TAU / 20000.0 / 3.0;
+    std::f64::consts::TAU * 0.015 * sigma_e
+}
+
+/// The 4 deviations that distance data cannot determine (DESIGN.md §2), held at 0.
+const HELD: [&str; 4] = ["dalpha0", "dd0", "dtheta0", "dalpha7"];
+
+fn arg(args: &[String], name: &str) -> Option<String> {
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1).cloned())
+}
+
+fn write(args: &[String]) -> Result<()> {
+    let n: usize = arg(args, "--poses").ok_or("--poses N")?.parse()?;
+    let seed: u64 = arg(args, "--seed").unwrap_or_else(|| "1".into()).parse()?;
+    let out = PathBuf::from(arg(args, "--out").ok_or("--out FILE")?);
+    let truth_path = root().join("fixtures/reference-device/truth.toml");
+    let truth = hapcal_sim::read_truth(&truth_path)?;
+    let device = truth.read_device(&truth_path)?;
+    let s = hapcal_sim::distance_samples(&device, &truth, seed, n, sigma_m())?;
+    let mut text = String::with_capacity(n * 180);
+    let header: Vec<String> = (1..=s.n_joints).map(|j| format!("q{j}")).collect();
+    text.push_str(&header.join(","));
+    text.push_str(",distance_m\n");
+    for k in 0..n {
+        for v in s.q(k) {
+            text.push_str(&format!("{v},"));
+        }
+        text.push_str(&format!("{}\n", s.distance_m[k]));
+    }
+    std::fs::write(&out, text)?;
+    Ok(())
+}
+
+/// Reads `q1..q7,distance_m` into distance rows.
+fn read(path: &Path, n_joints: usize) -> Result<Vec<Row>> {
+    let text = std::fs::read_to_string(path)?;
+    let mut rows = Vec::new();
+    for line in text.lines().skip(1).filter(|l| !l.is_empty()) {
+        let mut q = Vec::with_capacity(n_joints);
+        let mut d = 0.0;
+        for (k, cell) in line.split(',').enumerate() {
+            let v: f64 = cell.parse()?;
+            if k < n_joints {
+                q.push(v);
+            } else {
+                d = v;
+            }
+        }
+        rows.push(Row {
+            q,
+            kind: RowKind::Distance { distance_m: d },
+        });
+    }
+    Ok(rows)
+}
+
+fn solve(args: &[String]) -> Result<()> {
+    let data = PathBuf::from(arg(args, "--data").ok_or("--data FILE")?);
+    let repeat: usize = arg(args, "--repeat")
+        .unwrap_or_else(|| "1".into())
+        .parse()?;
+    let identify_only = args.iter().any(|a| a == "--identify-only");
+    let device = hapcal_io::read_device(&root().join("fixtures/reference-device/device.toml"))?;
+    let chain = device.chain()?;
+    let t0 = Instant::now();
+    let rows = read(&data, chain.n_joints())?;
+    let obs = Observations {
+        rows,
+        point_distances: vec![],
+        n_points: 0,
+    };
+    let weights = Weights {
+        sigma_distance_m: sigma_m(),
+        ..Weights::default()
+    };
+    let p = CalibrationProblem::new(chain, obs, weights, None)?;
+    let read_s = t0.elapsed().as_secs_f64();
+    let layout = p.layout().clone();
+    let free: Vec<usize> = (0..layout.len())
+        .filter(|&i| !HELD.contains(&layout.name(i)))
+        .collect();
+    // The LM run that SciPy also solves uses MINPACK's defaults (factor 100); the calibration
+    // starts with the full Gauss–Newton step (factor ∞: the nominal is close to the solution)
+    // and knows the noise: residuals are in units of σ_m (the paper's noise model), so σ = 1
+    // and the rank decision at the nominal is the one at the estimate (one round).
+    let cfg = IdentifyConfig::default();
+    let cfg_identify = IdentifyConfig {
+        lm: LmConfig {
+            factor: f64::INFINITY,
+            ..LmConfig::default()
+        },
+        sigma: Some(1.0),
+        ..IdentifyConfig::default()
+    };
+    let streaming = p.n_residuals() * layout.len() > hapcal_identify::STREAMING_AUTO_ENTRIES;
+
+    let mut lm_times = Vec::new();
+    let mut lm_fit = None;
+    if !identify_only {
+        for _ in 0..repeat {
+            let t = Instant::now();
+            let x0 = Col::zeros(layout.len());
+            let fit = if streaming {
+                levenberg_marquardt_streaming(&p, x0, &free, &cfg.lm)?
+            } else {
+                levenberg_marquardt(&p, x0, &free, &cfg.lm)?
+            };
+            lm_times.push(t.elapsed().as_secs_f64());
+            lm_fit = Some(fit);
+        }
+    }
+    let mut id_times = Vec::new();
+    let mut id = None;
+    for _ in 0..repeat {
+        let t = Instant::now();
+        let fit = identify(&p, p.initial_guess(), &cfg_identify)?;
+        id_times.push(t.elapsed().as_secs_f64());
+        id = Some(fit);
+    }
+    let id = id.ok_or("--repeat must be at least 1")?;
+    let stats = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        if v.is_empty() {
+            (f64::NAN, f64::NAN)
+        } else {
+            (v[0], v[v.len() / 2])
+        }
+    };
+    let (lm_min, lm_median) = stats(&mut lm_times);
+    let (id_min, id_median) = stats(&mut id_times);
+    let named = |x: &Col<f64>, which: &[usize]| {
+        which
+            .iter()
+            .map(|&i| format!("\"{}\": {:e}", layout.name(i), x[i]))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let lm_json = match &lm_fit {
+        Some(f) => format!(
+            "{{\"min_s\": {lm_min:e}, \"median_s\": {lm_median:e}, \"termination\": \"{:?}\", \"n_evaluations\": {}, \"n_jacobians\": {}, \"cost\": {:e}, \"x\": {{{}}}}}",
+            f.termination,
+            f.n_evaluations,
+            f.n_jacobians,
+            f.cost,
+            named(&f.x, &free)
+        ),
+        None => "null".to_owned(),
+    };
+    let std = id.covariance.std();
+    let stds = id
+        .covariance
+        .free
+        .iter()
+        .zip(&std)
+        .map(|(&i, s)| format!("\"{}\": {s:e}", layout.name(i)))
+        .collect::<Vec<_>>()
+        .join(", ");
+    println!(
+        "{{\"n_poses\": {}, \"n_params\": {}, \"n_free\": {}, \"backend\": \"{}\", \"threads\": {}, \"read_s\": {read_s:e}, \"lm\": {lm_json}, \"identify\": {{\"min_s\": {id_min:e}, \"median_s\": {id_median:e}, \"termination\": \"{:?}\", \"rounds\": {}, \"pruned\": {:?}, \"x\": {{{}}}, \"std\": {{{stds}}}}}, \"free\": {:?}}}",
+        p.n_residuals(),
+        layout.len(),
+        free.len(),
+        if streaming { "streaming" } else { "dense" },
+        rayon_threads(),
+        id.fit.termination,
+        id.rounds,
+        id.identifiability.pruned_names(),
+        named(&id.fit.x, &id.identifiability.kept),
+        free.iter().map(|&i| layout.name(i)).collect::<Vec<_>>(),
+    );
+    Ok(())
+}
+
+/// Measured peak FLOP rate of one core (faer's matrix product, 512 × 512, best of 20), and the
+/// FLOP count of one LM iteration's linear algebra at 200 poses: one Jacobian evaluation plus
+/// one Householder QR of the 200 × 28 Jacobian.
+fn peak() -> Result<()> {
+    let n = 512;
+    let a = faer::Mat::<f64>::from_fn(n, n, |i, j| ((i * 7 + j * 13) % 17) as f64 - 8.0);
+    let b = a.transpose().to_owned();
+    let mut c = faer::Mat::<f64>::zeros(n, n);
+    let mut best = f64::INFINITY;
+    for _ in 0..20 {
+        let t = Instant::now();
+        faer::linalg::matmul::matmul(
+            c.as_mut(),
+            faer::Accum::Replace,
+            a.as_ref(),
+            b.as_ref(),
+            1.0,
+            faer::Par::Seq,
+        );
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    std::hint::black_box(&c);
+    let gflops = 2.0 * (n * n * n) as f64 / best / 1e9;
+    // Per pose of the reference chain (8 constant runs, 7 revolute joints, 32 parameters:
+    // 25 parameter screws inside runs, 7 on the joints), counting multiplications and
+    // additions of FrozenChain::point_and_jacobian plus the distance projection:
+    // forward kinematics 8 × 66 (rigid products) + 7 × 18 (joint rotations) + 7 × 15 (sin_cos)
+    // = 759; Jacobian 25 × 45 + 7 × 60 = 1545; projection 32 × 6 = 192: 2496 flops per pose.
+    let (m, nf) = (200.0, 28.0);
+    let jacobian = 2496.0 * m;
+    let qr = 2.0 * m * nf * nf - 2.0 * nf * nf * nf / 3.0;
+    println!(
+        "{{\"gflops\": {gflops:.2}, \"peak_note\": \"faer matmul {n}x{n}, one thread, best of 20\", \"flops_per_iteration_200\": {:.0}, \"flops_note\": \"Jacobian {:.0} kflop (2496 per pose, counted by hand in examples/scale.rs) + Householder QR 2mn^2 - 2n^3/3 = {:.0} kflop\"}}",
+        jacobian + qr,
+        jacobian / 1e3,
+        qr / 1e3
+    );
+    Ok(())
+}
+
+fn rayon_threads() -> usize {
+    std::env::var("RAYON_NUM_THREADS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.first().map(String::as_str) {
+        Some("write") => write(&args),
+        Some("solve") => solve(&args),
+        Some("peak") => peak(),
+        _ => Err("usage: scale write --poses N --seed S --out FILE | scale solve --data FILE [--repeat K] [--identify-only]".into()),
+    }
+}

@@ -1,0 +1,449 @@
+//! Streaming back end: the Jacobian is reduced to its R factor block by block, so the memory
+//! of a linearisation does not grow with the number of residuals.
+//!
+//! Source: the tall-skinny QR (TSQR) of J. Demmel, L. Grigori, M. Hoemmen, J. Langou,
+//! "Communication-optimal parallel and sequential QR and LU factorizations", SIAM J. Sci.
+//! Comput. 34 (2012): each leaf reduces its rows to an `(n+1) × (n+1)` triangle by Householder
+//! QR of `[R; J_b r_b]`, and the leaves' triangles are merged the same way. The normal
+//! equations `JᵀJ` are never formed (their condition number is the square of `J`'s; Björck,
+//! *Numerical Methods for Least Squares Problems*, 1996, §2.2).
+//!
+//! Determinism: the rows are split into [`N_LEAVES`] leaves whatever the number of threads,
+//! each leaf is reduced sequentially, and the leaves are merged in index order, so the result
+//! is bit-identical for any thread count.
+
+use std::ops::Range;
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::qr::no_pivoting::factor as qr_factor;
+use faer::{Col, ColMut, ColRef, Mat, MatMut, Par};
+use rayon::prelude::*;
+
+use crate::error::{Error, check_config, check_factor};
+use crate::lm::{Fit, Linearised, LmConfig, ScaledQr, Termination, check_free, run};
+use crate::problem::{EvalError, ParamLayout, Problem};
+
+/// A problem whose residuals split into consecutive row blocks that can be evaluated
+/// independently (and concurrently): what the streaming back end needs.
+///
+/// Block `b` covers the residual rows [`RowBlocks::block_rows`]`(b)`; the blocks are
+/// consecutive, in order, and cover `0..m` exactly. Blocks of a few hundred rows amortise any
+/// per-block set-up; the memory of a block evaluation is `len × n` values.
+pub trait RowBlocks: Sync {
+    /// Number of blocks.
+    fn n_blocks(&self) -> usize;
+    /// Residual rows of block `block` (a range of `0..m`).
+    ///
+    /// # Panics
+    /// May panic if `block >= n_blocks()`.
+    fn block_rows(&self, block: usize) -> Range<usize>;
+    /// Writes the residuals of block `block` into `out` (length `block_rows(block).len()`),
+    /// in the same units as [`Problem::residuals`](crate::Problem::residuals).
+    ///
+    /// # Errors
+    /// [`EvalError`] when the model cannot be evaluated at `x`.
+    fn block_residuals(
+        &self,
+        x: ColRef<'_, f64>,
+        block: usize,
+        out: ColMut<'_, f64>,
+    ) -> Result<(), EvalError>;
+    /// Writes the residuals (`r_out`, length `len`) and the Jacobian rows (`jac`, `len × n`,
+    /// columns = layout entries) of block `block`, `len = block_rows(block).len()`.
+    ///
+    /// # Errors
+    /// [`EvalError`] when the model cannot be evaluated at `x`.
+    fn block_jacobian(
+        &self,
+        x: ColRef<'_, f64>,
+        block: usize,
+        r_out: ColMut<'_, f64>,
+        jac: MatMut<'_, f64>,
+    ) -> Result<(), EvalError>;
+}
+
+/// Number of leaves of the reduction tree, fixed so that results do not depend on the
+/// number of threads (enough to balance 2–16 threads).
+pub const N_LEAVES: usize = 64;
+
+/// What went wrong while streaming a linearisation.
+#[derive(Debug)]
+pub(crate) enum StreamError {
+    /// The problem could not be evaluated.
+    Eval(EvalError),
+    /// A residual (row index) or a Jacobian entry (row, column) is not finite.
+    NonFinite { row: usize, col: Option<usize> },
+}
+
+/// The linearisation of `r` at `x`: the upper-triangular `(n+1) × (n+1)` factor `R₊` of
+/// `[J r]` (`R₊ᵀR₊ = [J r]ᵀ[J r]`), so `R₊[..n, ..n]` is an R factor of `J`, `R₊[..n, n]`
+/// is `Q₁ᵀr` and `|R₊[n, n]|` the norm of the part of `r` outside the range of `J`.
+pub(crate) struct Linearisation {
+    /// `R₊`, `(n+1) × (n+1)`, upper triangular.
+    pub(crate) r_aug: Mat<f64>,
+    /// `‖r‖²`.
+    pub(crate) r_norm_sq: f64,
+}
+
+fn leaf_ranges(n_blocks: usize) -> Vec<Range<usize>> {
+    let n_leaves = N_LEAVES.min(n_blocks.max(1));
+    (0..n_leaves)
+        .map(|l| (l * n_blocks / n_leaves)..((l + 1) * n_blocks / n_leaves))
+        .collect()
+}
+
+/// Reduces the rows of `stack` (`k × (n+1)`, `k ≥ n+1`) to their R factor in place and
+/// zeroes everything below the diagonal.
+fn triangularise(mut stack: MatMut<'_, f64>, q_coeff: MatMut<'_, f64>, buf: &mut MemBuffer) {
+    qr_factor::qr_in_place(
+        stack.as_mut(),
+        q_coeff,
+        Par::Seq,
+        MemStack::new(buf),
+        Default::default(),
+    );
+    let n1 = stack.ncols();
+    for j in 0..n1 {
+        for i in (j + 1)..stack.nrows() {
+            stack[(i, j)] = 0.0;
+        }
+    }
+}
+
+/// One leaf: its blocks reduced in sequence to an `(n+1) × (n+1)` triangle.
+fn reduce_leaf(
+    p: &dyn RowBlocks,
+    x: ColRef<'_, f64>,
+    n: usize,
+    blocks: Range<usize>,
+) -> Result<(Mat<f64>, f64), StreamError> {
+    let n1 = n + 1;
+    let max_len = blocks
+        .clone()
+        .map(|b| p.block_rows(b).len())
+        .max()
+        .unwrap_or(0);
+    let rows = n1 + max_len;
+    let mut stack = Mat::<f64>::zeros(rows, n1);
+    let block_size = qr_factor::recommended_block_size::<f64>(rows, n1);
+    let mut q_coeff = Mat::<f64>::zeros(block_size, n1);
+    let mut buf = MemBuffer::new(qr_factor::qr_in_place_scratch::<f64>(
+        rows,
+        n1,
+        block_size,
+        Par::Seq,
+        Default::default(),
+    ));
+    let mut r_block = Col::<f64>::zeros(max_len);
+    let mut jac = Mat::<f64>::zeros(max_len, n);
+    let mut r_norm_sq = 0.0;
+    for b in blocks {
+        let range = p.block_rows(b);
+        let len = range.len();
+        if len == 0 {
+            continue;
+        }
+        p.block_jacobian(
+            x,
+            b,
+            r_block.as_mut().subrows_mut(0, len),
+            jac.as_mut().subrows_mut(0, len),
+        )
+        .map_err(StreamError::Eval)?;
+        for i in 0..len {
+            let ri = r_block[i];
+            if !ri.is_finite() {
+                return Err(StreamError::NonFinite {
+                    row: range.start + i,
+                    col: None,
+                });
+            }
+            r_norm_sq += ri * ri;
+        }
+        for j in 0..n {
+            for i in 0..len {
+                let v = jac[(i, j)];
+                if !v.is_finite() {
+                    return Err(StreamError::NonFinite {
+                        row: range.start + i,
+                        col: Some(j),
+                    });
+                }
+                stack[(n1 + i, j)] = v;
+            }
+        }
+        for i in 0..len {
+            stack[(n1 + i, n)] = r_block[i];
+        }
+        let k = n1 + len;
+        triangularise(stack.as_mut().subrows_mut(0, k), q_coeff.as_mut(), &mut buf);
+    }
+    Ok((stack.subrows(0, n1).to_owned(), r_norm_sq))
+}
+
+/// Streams `[J r]` at `x` through the blocks of `p` into its R factor (`n` parameters).
+///
+/// Work: `≈ 2(n+1)²` flops per residual for the QR updates, plus the problem's evaluation;
+/// memory: [`N_LEAVES`] triangles plus one block per thread.
+pub(crate) fn linearise(
+    p: &dyn RowBlocks,
+    x: ColRef<'_, f64>,
+    n: usize,
+) -> Result<Linearisation, StreamError> {
+    let n1 = n + 1;
+    let leaves = leaf_ranges(p.n_blocks());
+    let reduced: Vec<Result<(Mat<f64>, f64), StreamError>> = leaves
+        .into_par_iter()
+        .map(|blocks| reduce_leaf(p, x, n, blocks))
+        .collect();
+    // Merge in index order: [R; R_leaf] → R.
+    let mut stack = Mat::<f64>::zeros(2 * n1, n1);
+    let block_size = qr_factor::recommended_block_size::<f64>(2 * n1, n1);
+    let mut q_coeff = Mat::<f64>::zeros(block_size, n1);
+    let mut buf = MemBuffer::new(qr_factor::qr_in_place_scratch::<f64>(
+        2 * n1,
+        n1,
+        block_size,
+        Par::Seq,
+        Default::default(),
+    ));
+    let mut r_norm_sq = 0.0;
+    for leaf in reduced {
+        let (r_leaf, s) = leaf?;
+        r_norm_sq += s;
+        stack.as_mut().subrows_mut(n1, n1).copy_from(&r_leaf);
+        triangularise(stack.as_mut(), q_coeff.as_mut(), &mut buf);
+    }
+    Ok(Linearisation {
+        r_aug: stack.subrows(0, n1).to_owned(),
+        r_norm_sq,
+    })
+}
+
+/// `‖r(x)‖²` streamed through the blocks of `p` (deterministic like [`linearise`]).
+pub(crate) fn residual_norm_sq(p: &dyn RowBlocks, x: ColRef<'_, f64>) -> Result<f64, StreamError> {
+    let leaves = leaf_ranges(p.n_blocks());
+    let sums: Vec<Result<f64, StreamError>> = leaves
+        .into_par_iter()
+        .map(|blocks| {
+            let max_len = blocks
+                .clone()
+                .map(|b| p.block_rows(b).len())
+                .max()
+                .unwrap_or(0);
+            let mut r = Col::<f64>::zeros(max_len);
+            let mut sum = 0.0;
+            for b in blocks {
+                let range = p.block_rows(b);
+                let len = range.len();
+                p.block_residuals(x, b, r.as_mut().subrows_mut(0, len))
+                    .map_err(StreamError::Eval)?;
+                for i in 0..len {
+                    if !r[i].is_finite() {
+                        return Err(StreamError::NonFinite {
+                            row: range.start + i,
+                            col: None,
+                        });
+                    }
+                    sum += r[i] * r[i];
+                }
+            }
+            Ok(sum)
+        })
+        .collect();
+    let mut total = 0.0;
+    for s in sums {
+        total += s?;
+    }
+    Ok(total)
+}
+
+/// The R factor `(k+1) × (k+1)` of `[J_S r]` for the column subset `cols` (length `k`) of a
+/// linearisation: a QR of the `(n+1) × (k+1)` columns `cols ++ [n]` of `R₊`, which have the
+/// same Gram matrix as `[J_S r]`.
+pub(crate) fn restrict(lin: &Linearisation, cols: &[usize]) -> Mat<f64> {
+    let n = lin.r_aug.nrows() - 1;
+    let k = cols.len();
+    let sub = Mat::from_fn(n + 1, k + 1, |i, c| {
+        let j = if c < k { cols[c] } else { n };
+        lin.r_aug[(i, j)]
+    });
+    let mut r = sub.qr().R().to_owned();
+    // `qr().R()` of an (n+1) × (k+1) matrix is min(n+1, k+1) × (k+1): k+1 rows here.
+    for j in 0..r.ncols() {
+        for i in (j + 1)..r.nrows() {
+            r[(i, j)] = 0.0;
+        }
+    }
+    r
+}
+
+/// The streamed linearisation as the LM iteration sees it (free columns only).
+pub(crate) struct Streaming<'a> {
+    p: &'a dyn RowBlocks,
+    n: usize,
+    free: &'a [usize],
+    /// R factor of `[J_f r]`, `(n_f+1) × (n_f+1)`.
+    r_f: Mat<f64>,
+    /// The last full linearisation (all `n` columns), at the current point.
+    pub(crate) full: Linearisation,
+}
+
+impl<'a> Streaming<'a> {
+    pub(crate) fn new(
+        p: &'a dyn RowBlocks,
+        n: usize,
+        free: &'a [usize],
+        full: Linearisation,
+    ) -> Self {
+        let r_f = restrict(&full, free);
+        Self {
+            p,
+            n,
+            free,
+            r_f,
+            full,
+        }
+    }
+}
+
+impl Linearised for Streaming<'_> {
+    fn trial_norm(&mut self, x_trial: ColRef<'_, f64>) -> f64 {
+        residual_norm_sq(self.p, x_trial).map_or(f64::INFINITY, f64::sqrt)
+    }
+    fn accept(&mut self) {}
+    fn relinearise(&mut self, x: ColRef<'_, f64>) -> Result<(), Termination> {
+        let full = linearise(self.p, x, self.n).map_err(|e| match e {
+            StreamError::Eval(e) => Termination::EvalFailed(e),
+            StreamError::NonFinite { .. } => Termination::Numerical,
+        })?;
+        self.r_f = restrict(&full, self.free);
+        self.full = full;
+        Ok(())
+    }
+    fn col_norms(&self) -> Vec<f64> {
+        (0..self.free.len())
+            .map(|j| self.r_f.col(j).subrows(0, j + 1).norm_l2())
+            .collect()
+    }
+    fn gradient_abs(&self, j: usize) -> f64 {
+        let nf = self.free.len();
+        (0..=j)
+            .map(|i| self.r_f[(i, j)] * self.r_f[(i, nf)])
+            .sum::<f64>()
+            .abs()
+    }
+    fn scaled_qr(&self, diag: &[f64]) -> ScaledQr {
+        let nf = self.free.len();
+        let iota: Vec<usize> = (0..nf).collect();
+        ScaledQr::new(
+            self.r_f.as_ref().submatrix(0, 0, nf, nf),
+            &iota,
+            diag,
+            self.r_f.col(nf).subrows(0, nf),
+        )
+    }
+}
+
+/// Converts a streaming failure at the initial guess into the dense path's error.
+pub(crate) fn error_at_x0(e: StreamError, layout: &ParamLayout) -> Error {
+    match e {
+        StreamError::Eval(e) => Error::Eval(e),
+        StreamError::NonFinite { row, col: None } => Error::NonFiniteResidual { index: row },
+        StreamError::NonFinite { row, col: Some(j) } => Error::NonFiniteJacobian {
+            row,
+            name: layout.name(j).to_owned(),
+        },
+    }
+}
+
+/// [`levenberg_marquardt`](crate::levenberg_marquardt) on the streaming back end: the same
+/// iteration (MINPACK `lmder`, Moré 1978), with `J` never stored: each linearisation streams
+/// `[J r]` block by block into its `(n+1) × (n+1)` R factor (TSQR, see the module source),
+/// and each trial point streams `‖r‖`. The column-pivoted QR of the scaled free columns is
+/// then taken of that triangle, which has the same Gram matrix as `J_f`, so the steps equal
+/// the dense path's up to rounding.
+///
+/// Memory: `O(n²)` per leaf ([`N_LEAVES`] leaves) plus one block per thread, independent of
+/// `m`. [`Fit::residuals`] is empty (length 0); [`Fit::cost`] is `½‖r‖²` at the estimate.
+/// Blocks are evaluated in parallel on rayon's global pool; the result does not depend on the
+/// number of threads.
+///
+/// # Errors
+/// [`Error::NoRowBlocks`] if the problem does not provide [`Problem::row_blocks`]; otherwise as
+/// [`levenberg_marquardt`](crate::levenberg_marquardt).
+pub fn levenberg_marquardt_streaming(
+    p: &impl Problem,
+    x0: Col<f64>,
+    free: &[usize],
+    cfg: &LmConfig,
+) -> Result<Fit, Error> {
+    let blocks = p.row_blocks().ok_or(Error::NoRowBlocks)?;
+    let layout = p.layout();
+    let n = layout.len();
+    if x0.nrows() != n {
+        return Err(Error::WrongLength {
+            expected: n,
+            found: x0.nrows(),
+        });
+    }
+    check_free(free, layout)?;
+    check_config("ftol", cfg.ftol, false)?;
+    check_config("xtol", cfg.xtol, false)?;
+    check_config("gtol", cfg.gtol, false)?;
+    check_factor(cfg.factor)?;
+    let m = p.n_residuals();
+    if m < free.len() {
+        return Err(Error::TooFewResiduals {
+            n_residuals: m,
+            n_free: free.len(),
+        });
+    }
+    let lin = linearise(blocks, x0.as_ref(), n).map_err(|e| error_at_x0(e, layout))?;
+    Ok(streaming_fit(blocks, n, x0, free, cfg, lin).0)
+}
+
+/// The LM iteration on a linearisation at `x0`; returns the fit and the last linearisation
+/// (at the fit's estimate, or at the point before the last accepted step when the stopping
+/// test fired right after it).
+pub(crate) fn streaming_fit(
+    blocks: &dyn RowBlocks,
+    n: usize,
+    x0: Col<f64>,
+    free: &[usize],
+    cfg: &LmConfig,
+    lin: Linearisation,
+) -> (Fit, Linearisation, bool) {
+    let f_norm = lin.r_norm_sq.sqrt();
+    if free.is_empty() {
+        let cost = 0.5 * lin.r_norm_sq;
+        return (
+            Fit {
+                x: x0,
+                termination: Termination::GtolReached,
+                n_evaluations: 1,
+                n_jacobians: 0,
+                cost,
+                residuals: Col::zeros(0),
+            },
+            lin,
+            true,
+        );
+    }
+    let mut s = Streaming::new(blocks, n, free, lin);
+    let run = run(&mut s, x0, free, cfg, f_norm);
+    let current = run.linearised_at_x;
+    let cost = 0.5 * run.f_norm * run.f_norm;
+    (
+        Fit {
+            x: run.x,
+            termination: run.termination,
+            n_evaluations: run.n_evaluations,
+            n_jacobians: run.n_jacobians,
+            cost,
+            residuals: Col::zeros(0),
+        },
+        s.full,
+        current,
+    )
+}

@@ -1,0 +1,262 @@
+//! `cargo xtask bench [--peers]`: the scale benchmarks, and with `--peers` the same problems
+//! on the same data files with SciPy's `least_squares` (methods "lm" and "trf", analytic
+//! Jacobian) in a virtual environment this task creates; writes docs/results/bench.md.
+//!
+//! One run, one machine: the data files are written once by hapcal
+//! (`crates/identify/examples/scale.rs write`), then each size is solved by hapcal's release
+//! example (`scale solve`) and by `xtask/peers/scipy_peer.py`; the fleet by `examples/fleet.rs`.
+//! Peak memory comes from `/usr/bin/time -v`. Wall times are the minimum over repeats.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use serde_json::Value;
+use xshell::{Shell, cmd};
+
+/// Pose counts of the table.
+const SIZES: [usize; 4] = [200, 2_000, 20_000, 1_000_000];
+/// Largest size the peers run at (their dense Jacobian at 1,000,000 poses is 224 MB per copy
+/// and MINPACK's QR alone takes minutes).
+const PEER_MAX: usize = 20_000;
+
+fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| PathBuf::from("target"), PathBuf::from)
+}
+
+fn repeats(n: usize) -> usize {
+    match n {
+        0..=2_000 => 20,
+        2_001..=20_000 => 3,
+        _ => 1,
+    }
+}
+
+/// Runs `cmd` under `/usr/bin/time -v`; returns stdout and the peak RSS in MB.
+fn timed(sh: &Shell, program: &Path, args: &[String]) -> Result<(String, f64)> {
+    let out = cmd!(sh, "/usr/bin/time -v {program} {args...}")
+        .ignore_status()
+        .output()?;
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success() {
+        bail!("{} failed:\n{stderr}", program.display());
+    }
+    let kb: f64 = stderr
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("Maximum resident set size (kbytes):"))
+        .context("no peak RSS in /usr/bin/time output")?
+        .trim()
+        .parse()?;
+    Ok((String::from_utf8(out.stdout)?, kb / 1024.0))
+}
+
+fn f(v: &Value, path: &[&str]) -> f64 {
+    let mut v = v;
+    for p in path {
+        v = &v[*p];
+    }
+    v.as_f64().unwrap_or(f64::NAN)
+}
+
+/// Largest |a − b| over the names of `a`'s `x`.
+fn max_diff(a: &Value, b: &Value) -> f64 {
+    let (Some(a), Some(b)) = (a.as_object(), b.as_object()) else {
+        return f64::NAN;
+    };
+    a.iter()
+        .map(|(k, v)| (v.as_f64().unwrap_or(f64::NAN) - b[k].as_f64().unwrap_or(f64::NAN)).abs())
+        .fold(0.0, f64::max)
+}
+
+fn ms(s: f64) -> String {
+    if s >= 1.0 {
+        format!("{:.2} s", s)
+    } else {
+        format!("{:.3} ms", s * 1e3)
+    }
+}
+
+/// Runs the benchmarks (criterion unless `quick`), then the table with or without peers.
+pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
+    let target = target_dir();
+    cmd!(
+        sh,
+        "cargo build --release --quiet -p hapcal-identify --examples"
+    )
+    .run()?;
+    let examples = target.join("release/examples");
+    let scale = examples.join("scale");
+    let fleet = examples.join("fleet");
+    let data_dir = target.join("bench-data");
+    sh.create_dir(&data_dir)?;
+
+    let python = if peers {
+        let venv = target.join("bench-venv");
+        let py = venv.join("bin/python");
+        if !py.exists() {
+            cmd!(sh, "python3.11 -m venv {venv}").run()?;
+        }
+        cmd!(sh, "{py} -m pip install --quiet numpy scipy").run()?;
+        Some(py)
+    } else {
+        None
+    };
+    let peer_script = sh.current_dir().join("xtask/peers/scipy_peer.py");
+
+    let uname = cmd!(sh, "uname -srm").read()?;
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_owned())
+        })
+        .unwrap_or_default();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let load_before = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    let date = cmd!(sh, "date -u +%Y-%m-%dT%H:%MZ").read()?;
+
+    let peak = cmd!(sh, "{scale} peak").read()?;
+    let peak: Value = serde_json::from_str(&peak)?;
+
+    let mut md = String::new();
+    md.push_str("# Speed and scale against peers\n\n");
+    md.push_str(&format!(
+        "Written by `cargo xtask bench{}` on {date}: {cpu}, {cores} cores, {uname}; load average at the start {}. Problem: the reference device (DESIGN.md §2) with distance data, 32 kinematic deviations of which the 28 identifiable ones are solved from x = 0 (`dalpha0`, `dd0`, `dtheta0`, `dalpha7` held at 0); data: joint angles uniform within the limits, distances of the paper's truth + σ_m noise (`hapcal_sim::distance_samples`, seed 1), written once by hapcal to `{}`. Every solver reads the same file. Tolerances: ftol = xtol = gtol = 1e-12 (MINPACK tests) for hapcal and SciPy; SciPy gets `x_scale=\"jac\"` (MINPACK's column scaling, as hapcal) and the analytic Jacobian. Wall times: minimum over repeats, the solve only (file reading excluded for both). hapcal evaluates row blocks on all cores (rayon) from 4 blocks of 256 poses up, i.e. at 2,000 poses and more; SciPy's numpy may use several threads too.\n\n",
+        if peers { " --peers" } else { "" },
+        load_before.split_whitespace().take(3).collect::<Vec<_>>().join(" "),
+        data_dir.display()
+    ));
+    md.push_str("| poses | hapcal LM (28 params) | hapcal identify (prune + LM + covariance, σ known) | SciPy lm | hapcal/lm | max abs diff lm | SciPy trf | hapcal/trf | max abs diff trf | peak RSS hapcal |\n|---|---|---|---|---|---|---|---|---|---|\n");
+
+    let mut per_iteration = None;
+    for n in SIZES {
+        let data = data_dir.join(format!("poses-{n}.csv"));
+        if !data.exists() {
+            let (d, nn) = (data.display().to_string(), n.to_string());
+            cmd!(sh, "{scale} write --poses {nn} --seed 1 --out {d}").run()?;
+        }
+        let mut args = vec![
+            "solve".to_owned(),
+            "--data".to_owned(),
+            data.display().to_string(),
+            "--repeat".to_owned(),
+            repeats(n).to_string(),
+        ];
+        if n > PEER_MAX {
+            // No peer to compare with: the calibration alone (and one peak-memory figure).
+            args.push("--identify-only".to_owned());
+        }
+        let (out, rss_mb) = timed(sh, &scale, &args)?;
+        let ours: Value = serde_json::from_str(&out).context("scale solve output")?;
+        let lm_s = f(&ours, &["lm", "min_s"]);
+        let id_s = f(&ours, &["identify", "min_s"]);
+        if n == 200 {
+            let n_jac = f(&ours, &["lm", "n_jacobians"]);
+            let n_eval = f(&ours, &["lm", "n_evaluations"]);
+            per_iteration = Some((lm_s, n_jac, n_eval));
+        }
+        let free: Vec<String> = ours["free"]
+            .as_array()
+            .map(|a| {
+                a.iter()
+                    .filter_map(|v| v.as_str().map(str::to_owned))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let mut cells = vec![
+            n.to_string(),
+            if lm_s.is_nan() {
+                "–".to_owned()
+            } else {
+                ms(lm_s)
+            },
+            format!("{} ({})", ms(id_s), ours["backend"].as_str().unwrap_or("?")),
+        ];
+        for method in ["lm", "trf"] {
+            match (&python, n <= PEER_MAX) {
+                (Some(py), true) => {
+                    let (d, fr, rep) = (
+                        data.display().to_string(),
+                        free.join(","),
+                        repeats(n).min(5).to_string(),
+                    );
+                    let out = cmd!(
+                        sh,
+                        "{py} {peer_script} --data {d} --method {method} --free {fr} --repeat {rep}"
+                    )
+                    .read()?;
+                    let peer: Value = serde_json::from_str(&out).context("peer output")?;
+                    let peer_s = f(&peer, &["min_s"]);
+                    let diff = max_diff(&ours["lm"]["x"], &peer["x"]);
+                    cells.push(format!("{} ({} fev)", ms(peer_s), peer["nfev"]));
+                    cells.push(format!("1/{:.1}", peer_s / lm_s));
+                    cells.push(format!("{diff:.1e}"));
+                }
+                _ => cells.extend(["–".to_owned(), "–".to_owned(), "–".to_owned()]),
+            }
+        }
+        cells.push(format!("{rss_mb:.0} MB"));
+        md.push_str(&format!("| {} |\n", cells.join(" | ")));
+        println!("bench: {n} poses done");
+    }
+    md.push_str("\n`hapcal/peer` is the ratio of wall times (1/20 = hapcal 20 times faster). `max abs diff`: largest |hapcal − SciPy| over the 28 estimates (m or rad). Peak RSS: the whole `scale solve` process (data, problem, all repeats of both solves), from `/usr/bin/time -v`.\n\n");
+
+    if let Some((lm_s, n_jac, n_eval)) = per_iteration {
+        let gflops = f(&peak, &["gflops"]);
+        let flops = f(&peak, &["flops_per_iteration_200"]);
+        let iteration_s = lm_s / n_jac;
+        let bound_s = flops / (gflops * 1e9);
+        md.push_str(&format!(
+            "## Per-iteration cost at 200 poses\n\nhapcal's LM at 200 poses: {} for {n_jac} Jacobians and {n_eval} residual evaluations, i.e. {} per iteration (one Jacobian, its QR, the trust-region step and the trial residuals). FLOP count of one Jacobian evaluation plus one QR: {:.0} kflop ({}); at the measured peak of {gflops:.1} GFLOP/s (one core, {}) that is {}. Ratio: {:.1}×.\n\n",
+            ms(lm_s),
+            ms(iteration_s),
+            flops / 1e3,
+            peak["flops_note"].as_str().unwrap_or(""),
+            peak["peak_note"].as_str().unwrap_or(""),
+            ms(bound_s),
+            iteration_s / bound_s
+        ));
+    }
+
+    let (out, rss_mb) = timed(sh, &fleet, &[])?;
+    let fl: Value = serde_json::from_str(&out).context("fleet output")?;
+    md.push_str(&format!(
+        "## Fleet: {} devices on one rig (sparse back end)\n\n{} residuals, {} parameters ({} per device + 2 shared). The dense back end refuses: \"{}\". The sparse back end (chosen by `identify` from the Jacobian's structure) solves it in {} ({}, {} residual evaluations), peak RSS {rss_mb:.0} MB (whole process, simulation included). Shared rig parameters:\n\n| parameter | truth | estimate ± std | (estimate − truth)/std |\n|---|---|---|---|\n| cable zero offset (m) | {:.3e} | {:.4e} ± {:.1e} | {:.2} |\n| cable-angle coefficient (m/rad) | {:.3e} | {:.4e} ± {:.1e} | {:.2} |\n\nRMS error of the 28,000 per-device deviations: {:.2e} (m or rad). Command: `{} --devices 1000 --poses 200 --seed 1`.\n\n",
+        fl["n_devices"],
+        fl["n_residuals"],
+        fl["n_params"],
+        28,
+        fl["dense"].as_str().unwrap_or(""),
+        ms(f(&fl, &["solve_s"])),
+        fl["termination"].as_str().unwrap_or(""),
+        fl["n_evaluations"],
+        f(&fl, &["cable_offset", "truth"]),
+        f(&fl, &["cable_offset", "estimate"]),
+        f(&fl, &["cable_offset", "std"]),
+        f(&fl, &["cable_offset", "z"]),
+        f(&fl, &["cable_angle", "truth"]),
+        f(&fl, &["cable_angle", "estimate"]),
+        f(&fl, &["cable_angle", "std"]),
+        f(&fl, &["cable_angle", "z"]),
+        f(&fl, &["device_deviation_rms_error"]),
+        fleet.display(),
+    ));
+
+    if criterion {
+        md.push_str("## Criterion\n\n`cargo bench -p hapcal-identify --bench scale` (one group per operation, size as the parameter) ran in this task; its report is in `target/criterion/`.\n");
+        cmd!(sh, "cargo bench -p hapcal-identify --bench scale").run()?;
+    }
+    let load_after = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    md.push_str(&format!(
+        "\nLoad average at the end: {}.\n",
+        load_after
+            .split_whitespace()
+            .take(3)
+            .collect::<Vec<_>>()
+            .join(" ")
+    ));
+    let out = sh.current_dir().join("docs/results/bench.md");
+    std::fs::write(&out, md)?;
+    println!("wrote {}", out.display());
+    Ok(())
+}
