@@ -81,11 +81,18 @@ fn assert_same(dense: &Identified, streaming: &Identified, p: &CalibrationProble
     assert_eq!(dense.identifiability.kept, streaming.identifiability.kept);
     assert!(dense.fit.termination.is_success());
     assert!(streaming.fit.termination.is_success());
+    // Both back ends stop on the same MINPACK tests, at points that differ by rounding along the
+    // weakest directions: 1e-9 (m or rad), or 1e-4 of the parameter's standard deviation where
+    // that is larger (far below anything the data can tell apart).
+    let std_dense = dense.covariance.std();
     for i in 0..p.layout().len() {
         let (a, b) = (dense.fit.x[i], streaming.fit.x[i]);
+        let std_i = (dense.covariance.free.iter())
+            .position(|&f| f == i)
+            .map_or(0.0, |k| std_dense[k]);
         assert!(
-            (a - b).abs() <= 1e-9,
-            "{}: dense {a:e} vs streaming {b:e}",
+            (a - b).abs() <= 1e-9_f64.max(1e-4 * std_i),
+            "{}: dense {a:e} vs streaming {b:e} (std {std_i:e})",
             p.layout().name(i)
         );
     }
