@@ -149,10 +149,12 @@ pub(crate) enum TermKind {
     Distance { h: Vec<f64> },
     /// Adds `coef·ḋ` (the distance rate through the joint velocities), coefficient in s.
     Latency,
-    /// Adds `coef·|P|·(t − t_0)`, coefficient in 1/s.
-    ThermalDrift,
-    /// Adds `coef·(γ − sin γ)`, γ the cable's angle from the rig z axis; coefficient in m.
-    CableAngle,
+    /// Adds `coef·|P|·(t − t_0)` (coefficient in 1/s) when `scale`, else `coef·(t − t_0)`
+    /// (m/s).
+    ThermalDrift { scale: bool },
+    /// Adds `coef·f(γ)`, γ the cable's angle from the rig z axis: `f = γ − sin γ` for
+    /// `power` 0, else `cos^power γ`; coefficient in m.
+    CableAngle { power: i32 },
     /// Adds `coef·τ_j(q)` to joint `joint`'s angle, τ the handle's gravity torque (N·m);
     /// coefficient in rad/(N·m).
     Compliance { joint: usize },
@@ -327,13 +329,13 @@ impl Setup {
                         Some(qd) => (0..nj).map(|jj| dd_dq[jj] * qd[i][jj]).sum(),
                         None => 0.0,
                     },
-                    TermKind::ThermalDrift => {
+                    TermKind::ThermalDrift { scale } => {
                         let t = data.t.as_ref().map_or(0.0, |t| t[i]);
-                        norm * (t - t0)
+                        if *scale { norm * (t - t0) } else { t - t0 }
                     }
-                    TermKind::CableAngle => {
+                    TermKind::CableAngle { power } => {
                         let g = hapcal_sim::cable_angle_rad(&p);
-                        g - g.sin()
+                        if *power == 0 { g - g.sin() } else { g.cos().powi(*power) }
                     }
                     _ => continue,
                 };

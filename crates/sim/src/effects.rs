@@ -283,9 +283,10 @@ impl FromStr for Effect {
 /// The time-ordered motion of [`simulate_motion`].
 ///
 /// Each joint follows `θ_j(t) = mid_j + h_j·(0.6·sin(ω_1j·t + φ_1j) + 0.3·sin(ω_2j·t + φ_2j))`
-/// with `h_j` the half-range of its limits, `ω_1j` giving 2–6 cycles and `ω_2j` 5–11 cycles
+/// with `h_j` the half-range of its limits, `ω_1j` giving 5–10 cycles and `ω_2j` 11–19 cycles
 /// over the log (drawn from the seed): smooth, within 90 % of the range, both directions,
-/// peak speeds of a few tenths of rad/s at the default period.
+/// peak speeds of about 1 rad/s at the default period, and every fifth of the log (a
+/// cross-validation block) covers each joint's range at least once.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MotionConfig {
     /// Time between samples, s (> 0).
@@ -438,8 +439,8 @@ pub fn simulate_motion(
     let duration_s = motion.sample_period_s * cfg.n_poses.max(1) as f64;
     let paths: Vec<JointPath> = (limits.iter())
         .map(|&(lo, hi)| {
-            let c1: f64 = 2.0 + 4.0 * rng.random::<f64>();
-            let c2: f64 = 5.0 + 6.0 * rng.random::<f64>();
+            let c1: f64 = 5.0 + 5.0 * rng.random::<f64>();
+            let c2: f64 = 11.0 + 8.0 * rng.random::<f64>();
             JointPath {
                 mid: 0.5 * (lo + hi),
                 half: 0.5 * (hi - lo),
