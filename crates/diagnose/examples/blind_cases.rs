@@ -18,7 +18,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let t = std::time::Instant::now();
         let (o, d) = run_case(&device, &truth, kind_of(seed), seed, &cfg)?;
         println!(
-            "{seed:4} {:8} {:60} sizes {:?} -> {:30} {} gap {:.1}σ floor {:.1}µm closed {:.0}% loc {:?} ({:.1}s)",
+            "{seed:4} {:8} {:60} sizes {:?} -> {:30} {} gap {:.1}σ floor {:.1}µm closed {:.0}% ins {:.0}% loc {:?} ({:.1}s)",
             format!("{:?}", o.case.kind),
             o.case.effects.iter().map(ToString::to_string).collect::<Vec<_>>().join(" "),
             o.case.sizes.iter().map(|s| (s * 10.0).round() / 10.0).collect::<Vec<_>>(),
@@ -27,10 +27,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             d.gap_in_floors,
             d.floor_rms_m * 1e6,
             o.gap_closed_pct,
+            d.gap_closed_in_sample_pct,
             o.localised,
             t.elapsed().as_secs_f64()
         );
-        if !o.correct {
+        for n in &d.notes {
+            println!("       note: {n}");
+        }
+        if !o.correct && std::env::var_os("VERBOSE").is_some() {
             for c in &d.candidates {
                 println!("       r{} {:22} acc {} p {:.1e} closed {:.0}% vis {} : {}", c.round, c.effect, c.accepted, c.p_value, c.gap_closed_pct, c.n_visible, c.reason);
             }

@@ -191,6 +191,26 @@ pub(crate) struct State {
     pub terms: Vec<(Term, f64)>,
 }
 
+impl State {
+    /// Adds `delta` (in the column order of [`Setup::linearise`]) to the parameters.
+    fn apply(&mut self, delta: &[f64]) {
+        let mut off = 0;
+        for tr in &mut self.trans {
+            let np = tr.n_params();
+            tr.update(delta.get(off..off + np).unwrap_or(&[]));
+            off += np;
+        }
+        for x in &mut self.x_kin {
+            *x += delta.get(off).copied().unwrap_or(0.0);
+            off += 1;
+        }
+        for (_, coef) in &mut self.terms {
+            *coef += delta.get(off).copied().unwrap_or(0.0);
+            off += 1;
+        }
+    }
+}
+
 /// The model linearised at a state: weighted residuals and Jacobian.
 pub(crate) struct Linear {
     /// Weighted residuals (measured − model)/σ: the `n` distance rows, then the external
@@ -321,6 +341,35 @@ impl Setup {
             for &(jt, c, g) in &dq {
                 row_j[c] += dd_dq.get(jt).copied().unwrap_or(0.0) * g;
             }
+            // A cable-angle term moves with P: its derivative through γ (cos γ = P_z/|P|).
+            let grad_c = if norm > 0.0 {
+                (Vector3::z() - u * u[2]) / norm
+            } else {
+                Vector3::zeros()
+            };
+            let cos_g = u[2].clamp(-1.0, 1.0);
+            let mut dh_dc = 0.0;
+            for (term, coef) in &s.terms {
+                if let TermKind::CableAngle { power } = term.kind {
+                    let sin_g = (1.0 - cos_g * cos_g).sqrt().max(1e-9);
+                    dh_dc += coef
+                        * if power == 0 {
+                            -(1.0 - cos_g) / sin_g
+                        } else {
+                            f64::from(power) * cos_g.powi(power - 1)
+                        };
+                }
+            }
+            if dh_dc != 0.0 {
+                for k in 0..n_kin {
+                    let dp = Vector3::new(buf[3 * k], buf[3 * k + 1], buf[3 * k + 2]);
+                    row_j[n_trans + k] += dh_dc * grad_c.dot(&dp);
+                }
+                for &(jt, c, g) in &dq {
+                    let jv = Vector3::new(jq[(0, jt)], jq[(1, jt)], jq[(2, jt)]);
+                    row_j[c] += dh_dc * grad_c.dot(&jv) * g;
+                }
+            }
             for (k, (term, coef)) in s.terms.iter().enumerate() {
                 let c = n_trans + n_kin + k;
                 let h = match &term.kind {
@@ -392,6 +441,7 @@ impl Setup {
     pub(crate) fn refine(&self, data: &Data, mut s: State, iters: usize) -> (State, Linear) {
         for _ in 0..iters {
             let lin = self.linearise(data, &s);
+            let rss0 = lin.r.norm_squared();
             let (_, picked) = pivoted_basis(&lin.j, &DMatrix::zeros(lin.j.nrows(), 0), RANK_TOL);
             let kept: Vec<usize> = (0..picked.len()).filter(|&c| picked[c].is_some()).collect();
             let a = lin.j.select_columns(&kept);
@@ -400,21 +450,20 @@ impl Setup {
             for (k, &c) in kept.iter().enumerate() {
                 delta[c] = dx[k];
             }
-            let mut off = 0;
-            for tr in &mut s.trans {
-                let np = tr.n_params();
-                tr.update(&delta[off..off + np]);
-                off += np;
+            // Gauss–Newton step, halved while it increases the cost (Armijo-style backtracking).
+            let mut scale = 1.0;
+            let mut next = s.clone();
+            for _ in 0..8 {
+                next = s.clone();
+                let scaled: Vec<f64> = delta.iter().map(|d| d * scale).collect();
+                next.apply(&scaled);
+                if self.linearise(data, &next).r.norm_squared() <= rss0 * (1.0 + 1e-12) {
+                    break;
+                }
+                scale *= 0.5;
             }
-            for x in &mut s.x_kin {
-                *x += delta[off];
-                off += 1;
-            }
-            for (_, coef) in &mut s.terms {
-                *coef += delta[off];
-                off += 1;
-            }
-            let step: f64 = delta.iter().map(|d| d.abs()).fold(0.0, f64::max);
+            s = next;
+            let step: f64 = delta.iter().map(|d| (d * scale).abs()).fold(0.0, f64::max);
             if step < 1e-12 {
                 break;
             }
