@@ -135,6 +135,20 @@ enum Command {
         #[arg(long, default_value = "diagnose_residuals.svg")]
         svg: PathBuf,
     },
+    /// Run the blind test of `diagnose` on the reference device and print the Markdown report
+    /// (confusion matrix, the paper's story); `cargo xtask blind-test` writes it to
+    /// docs/results/diagnose.md.
+    BlindTest {
+        /// Number of cases (kinds stratified: 1/8 none, 1/8 outside, 1/8 two, 5/8 one effect).
+        #[arg(long, default_value_t = 240)]
+        cases: usize,
+        /// First seed.
+        #[arg(long, default_value_t = 0)]
+        first_seed: u64,
+        /// Seeds of the paper's story (kinematics baseline on static poses).
+        #[arg(long, default_value_t = 5)]
+        story: usize,
+    },
     /// Import a URDF chain as a hapcal device file (TOML on stdout).
     ImportUrdf {
         /// The URDF file.
@@ -326,6 +340,19 @@ fn run(cli: Cli) -> Result<()> {
                 Ok(()) => eprintln!("hapcal: wrote residual maps to {}", svg.display()),
                 Err(e) => eprintln!("hapcal: warning: cannot write {}: {e}", svg.display()),
             }
+            Ok(())
+        }
+        Command::BlindTest {
+            cases,
+            first_seed,
+            story,
+        } => {
+            let bar = indicatif::ProgressBar::new(cases as u64);
+            let md = hapcal::diagnose::blind_report(cases, first_seed, story, &|done| {
+                bar.set_position(done as u64)
+            })?;
+            bar.finish_and_clear();
+            print!("{md}");
             Ok(())
         }
         Command::ImportUrdf { urdf, tip } => {

@@ -7,10 +7,14 @@ use std::path::Path;
 use hapcal_diagnose::blind::{BlindConfig, kind_of, run_case};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<u64> = std::env::args().skip(1).filter_map(|a| a.parse().ok()).collect();
+    let args: Vec<u64> = std::env::args()
+        .skip(1)
+        .filter_map(|a| a.parse().ok())
+        .collect();
     let first = args.first().copied().unwrap_or(0);
     let count = args.get(1).copied().unwrap_or(8);
-    let truth_file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/reference-device/truth.toml");
+    let truth_file =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/reference-device/truth.toml");
     let truth = hapcal_sim::read_truth(&truth_file)?;
     let device = truth.read_device(&truth_file)?;
     let cfg = BlindConfig::default();
@@ -20,8 +24,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!(
             "{seed:4} {:8} {:60} sizes {:?} -> {:30} {} gap {:.1}σ floor {:.1}µm closed {:.0}% ins {:.0}% loc {:?} ({:.1}s)",
             format!("{:?}", o.case.kind),
-            o.case.effects.iter().map(ToString::to_string).collect::<Vec<_>>().join(" "),
-            o.case.sizes.iter().map(|s| (s * 10.0).round() / 10.0).collect::<Vec<_>>(),
+            o.case
+                .effects
+                .iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join(" "),
+            o.case
+                .sizes
+                .iter()
+                .map(|s| (s * 10.0).round() / 10.0)
+                .collect::<Vec<_>>(),
             o.verdict,
             if o.correct { "OK " } else { "BAD" },
             d.gap_in_floors,
@@ -36,7 +49,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         if !o.correct && std::env::var_os("VERBOSE").is_some() {
             for c in &d.candidates {
-                println!("       r{} {:22} acc {} p {:.1e} closed {:.0}% vis {} : {}", c.round, c.effect, c.accepted, c.p_value, c.gap_closed_pct, c.n_visible, c.reason);
+                println!(
+                    "       r{} {:22} acc {} p {:.1e} closed {:.0}% vis {} : {}",
+                    c.round,
+                    c.effect,
+                    c.accepted,
+                    c.p_value,
+                    c.gap_closed_pct,
+                    c.n_visible,
+                    c.reason
+                );
             }
         }
     }

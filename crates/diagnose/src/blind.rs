@@ -72,8 +72,14 @@ impl Case {
     pub fn label(&self) -> String {
         match self.kind {
             CaseKind::None => "none".to_owned(),
-            CaseKind::One => self.effects.first().map_or("?".to_owned(), |e| e.kind.name().to_owned()),
-            CaseKind::Outside => format!("outside:{}", self.effects.first().map_or("?", |e| e.kind.name())),
+            CaseKind::One => self
+                .effects
+                .first()
+                .map_or("?".to_owned(), |e| e.kind.name().to_owned()),
+            CaseKind::Outside => format!(
+                "outside:{}",
+                self.effects.first().map_or("?", |e| e.kind.name())
+            ),
             CaseKind::Two => "two".to_owned(),
         }
     }
@@ -81,12 +87,18 @@ impl Case {
 
 /// A reference-size effect of `kind` with random joints and phases (amplitudes are scaled
 /// later).
-fn reference_effect(kind: EffectKind, device: &Device, rng: &mut ChaCha8Rng) -> Result<Effect, Error> {
+fn reference_effect(
+    kind: EffectKind,
+    device: &Device,
+    rng: &mut ChaCha8Rng,
+) -> Result<Effect, Error> {
     let n = device.n_joints();
     let capstan_joints: Vec<usize> = device.capstans.iter().map(|c| c.joint).collect();
     let direct: Vec<usize> = (1..=n).filter(|j| !capstan_joints.contains(j)).collect();
     let pick = |rng: &mut ChaCha8Rng, from: &[usize]| -> usize {
-        from.get(rng.random_range(0..from.len().max(1))).copied().unwrap_or(1)
+        from.get(rng.random_range(0..from.len().max(1)))
+            .copied()
+            .unwrap_or(1)
     };
     let phase = |rng: &mut ChaCha8Rng| TAU * rng.random::<f64>();
     let all: Vec<usize> = (1..=n).collect();
@@ -109,13 +121,23 @@ fn reference_effect(kind: EffectKind, device: &Device, rng: &mut ChaCha8Rng) -> 
         }
         EffectKind::JointBump => {
             let j = pick(rng, &all);
-            let (lo, hi) = device.joint_limits().get(j - 1).copied().unwrap_or((-1.0, 1.0));
+            let (lo, hi) = device
+                .joint_limits()
+                .get(j - 1)
+                .copied()
+                .unwrap_or((-1.0, 1.0));
             let at = lo + (hi - lo) * (0.3 + 0.4 * rng.random::<f64>());
-            vec![(format!("j{j}"), 1e-3), (format!("at{j}"), at), ("width".into(), 0.12 * (hi - lo))]
+            vec![
+                (format!("j{j}"), 1e-3),
+                (format!("at{j}"), at),
+                ("width".into(), 0.12 * (hi - lo)),
+            ]
         }
         EffectKind::CableDrumRunout => vec![("a".into(), 1e-4), ("phase".into(), phase(rng))],
     };
-    Effect::try_new(kind, params).map_err(|e| Error::Blind { message: e.to_string() })
+    Effect::try_new(kind, params).map_err(|e| Error::Blind {
+        message: e.to_string(),
+    })
 }
 
 /// The effect with its amplitudes (not phases, positions or widths) multiplied by `factor`.
@@ -194,7 +216,9 @@ pub fn draw_case(
     let sim = sim_cfg(device, seed, cfg.n_samples);
     let motion = MotionConfig::default();
     let simulate = |effects: &[Effect]| {
-        simulate_motion(device, truth, &sim, &motion, effects).map_err(|e| Error::Blind { message: e.to_string() })
+        simulate_motion(device, truth, &sim, &motion, effects).map_err(|e| Error::Blind {
+            message: e.to_string(),
+        })
     };
     let clean = simulate(&[])?;
     let mut effects = Vec::new();
@@ -207,16 +231,38 @@ pub fn draw_case(
             let sign = if rng.random::<bool>() { 1.0 } else { -1.0 };
             let (lo, hi) = cfg.size_range;
             let s = lo * (hi / lo).powf(rng.random::<f64>());
-            let r1 = baseline_residuals_m(device, &simulate(std::slice::from_ref(&reference))?, &cfg.diagnose)?;
-            let visible = (r1.iter().zip(&r0).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / r0.len().max(1) as f64).sqrt();
+            let r1 = baseline_residuals_m(
+                device,
+                &simulate(std::slice::from_ref(&reference))?,
+                &cfg.diagnose,
+            )?;
+            let visible = (r1
+                .iter()
+                .zip(&r0)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                / r0.len().max(1) as f64)
+                .sqrt();
             let target = floor * (s * s - 1.0).max(0.0).sqrt();
             let factor = if visible > 0.0 { target / visible } else { 1.0 };
             effects.push(scaled(&reference, sign * factor));
             sizes.push(s);
         }
     }
-    let rows = if effects.is_empty() { clean } else { simulate(&effects)? };
-    Ok((Case { seed, kind, effects, sizes }, rows))
+    let rows = if effects.is_empty() {
+        clean
+    } else {
+        simulate(&effects)?
+    };
+    Ok((
+        Case {
+            seed,
+            kind,
+            effects,
+            sizes,
+        },
+        rows,
+    ))
 }
 
 /// One scored case.
@@ -245,17 +291,36 @@ pub struct Outcome {
 pub fn score(case: &Case, d: &Diagnosis) -> Outcome {
     let expected = case.expected();
     let mut got: Vec<&str> = d.verdict.split('+').collect();
-    got.sort_by_key(|name| name.parse::<EffectKind>().map_or(usize::MAX, |k| k as usize));
+    got.sort_by_key(|name| {
+        name.parse::<EffectKind>()
+            .map_or(usize::MAX, |k| k as usize)
+    });
     let verdict_sorted = got.join("+");
     let localised = (case.kind == CaseKind::Outside).then(|| {
-        let Some(e) = case.effects.first() else { return false };
+        let Some(e) = case.effects.first() else {
+            return false;
+        };
         match e.kind {
             EffectKind::JointBump => {
-                let j = e.params.iter().find_map(|(k, _)| k.strip_prefix('j')?.parse::<usize>().ok()).unwrap_or(0);
-                let best = d.joints.iter().max_by(|a, b| a.explained_pct.total_cmp(&b.explained_pct)).map(|p| p.joint);
-                best == Some(j) || d.signals.iter().any(|s| s.significant && s.signal == format!("q{j}"))
+                let j = e
+                    .params
+                    .iter()
+                    .find_map(|(k, _)| k.strip_prefix('j')?.parse::<usize>().ok())
+                    .unwrap_or(0);
+                let best = d
+                    .joints
+                    .iter()
+                    .max_by(|a, b| a.explained_pct.total_cmp(&b.explained_pct))
+                    .map(|p| p.joint);
+                best == Some(j)
+                    || d.signals
+                        .iter()
+                        .any(|s| s.significant && s.signal == format!("q{j}"))
             }
-            _ => d.signals.iter().any(|s| s.significant && s.signal == "drum_phase"),
+            _ => d
+                .signals
+                .iter()
+                .any(|s| s.significant && s.signal == "drum_phase"),
         }
     });
     Outcome {
@@ -274,7 +339,13 @@ pub fn score(case: &Case, d: &Diagnosis) -> Outcome {
 ///
 /// # Errors
 /// The errors of [`draw_case`] and [`diagnose`].
-pub fn run_case(device: &Device, truth: &Truth, kind: CaseKind, seed: u64, cfg: &BlindConfig) -> Result<(Outcome, Diagnosis), Error> {
+pub fn run_case(
+    device: &Device,
+    truth: &Truth,
+    kind: CaseKind,
+    seed: u64,
+    cfg: &BlindConfig,
+) -> Result<(Outcome, Diagnosis), Error> {
     let (case, rows) = draw_case(device, truth, kind, seed, cfg)?;
     let d = diagnose(device, &rows, &cfg.diagnose)?;
     Ok((score(&case, &d), d))
@@ -325,8 +396,16 @@ pub fn summarise(outcomes: &[Outcome]) -> Summary {
             s.gap_closed_80.0 += usize::from(o.gap_closed_pct >= 80.0);
             closed.push(o.gap_closed_pct);
         }
-        let col = if o.case.kind == CaseKind::Two && o.correct { "both".to_owned() } else { o.verdict.clone() };
-        *s.matrix.entry(o.label.clone()).or_default().entry(col).or_insert(0) += 1;
+        let col = if o.case.kind == CaseKind::Two && o.correct {
+            "both".to_owned()
+        } else {
+            o.verdict.clone()
+        };
+        *s.matrix
+            .entry(o.label.clone())
+            .or_default()
+            .entry(col)
+            .or_insert(0) += 1;
     }
     closed.sort_by(f64::total_cmp);
     s.median_gap_closed_pct = closed.get(closed.len() / 2).copied().unwrap_or(0.0);

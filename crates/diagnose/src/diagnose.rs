@@ -19,6 +19,9 @@ const VISIBLE_TOL: f64 = 0.005;
 /// is consistent with the floor); below it the verdict is `none`.
 const SUFFICIENT_SHARE: f64 = 0.8;
 
+/// Once the accepted effects close this share of the held-out gap, the greedy search stops.
+const STOP_SHARE: f64 = 0.95;
+
 /// The same on the in-sample weighted excess (an effect the baseline mostly absorbs is
 /// estimated poorly on training folds, so its held-out share understates it).
 const SUFFICIENT_SHARE_IN_SAMPLE: f64 = 0.9;
@@ -284,7 +287,13 @@ fn mean(it: impl Iterator<Item = f64>) -> f64 {
 
 /// Held-out residuals of the linear model with columns `cols` of `lin.j` and extra `cand`
 /// columns, folds of time-contiguous samples.
-fn cross_validate(lin: &Linear, cols: &[usize], cand: Option<&DMatrix<f64>>, folds: usize, n: usize) -> Cv {
+fn cross_validate(
+    lin: &Linear,
+    cols: &[usize],
+    cand: Option<&DMatrix<f64>>,
+    folds: usize,
+    n: usize,
+) -> Cv {
     let base = lin.j.select_columns(cols);
     let a = match cand {
         Some(c) if c.ncols() > 0 => {
@@ -300,7 +309,9 @@ fn cross_validate(lin: &Linear, cols: &[usize], cand: Option<&DMatrix<f64>>, fol
     let mut var = vec![0.0; n];
     let mut sigma2 = vec![0.0; n];
     for f in 0..folds {
-        let train: Vec<usize> = (0..a.nrows()).filter(|&r| fold_of(lin.sample[r]) != f).collect();
+        let train: Vec<usize> = (0..a.nrows())
+            .filter(|&r| fold_of(lin.sample[r]) != f)
+            .collect();
         if train.is_empty() {
             continue;
         }
@@ -321,7 +332,12 @@ fn cross_validate(lin: &Linear, cols: &[usize], cand: Option<&DMatrix<f64>>, fol
 }
 
 /// The candidate terms of an effect, or why it cannot be tested on this log.
-fn candidate_terms(effect: &str, device: &Device, data: &Data, n_joints: usize) -> Result<Vec<Term>, String> {
+fn candidate_terms(
+    effect: &str,
+    device: &Device,
+    data: &Data,
+    n_joints: usize,
+) -> Result<Vec<Term>, String> {
     let capstan_of = |j: usize| device.capstans.iter().find(|c| c.joint == j + 1);
     let need_t = || {
         if data.t.is_some() {
@@ -336,16 +352,21 @@ fn candidate_terms(effect: &str, device: &Device, data: &Data, n_joints: usize) 
         kind: TermKind::Joint { joint, g },
     };
     let col = |j: usize, f: &dyn Fn(f64) -> f64| -> Vec<f64> {
-        data.q.iter().map(|q| f(q.get(j).copied().unwrap_or(0.0))).collect()
+        data.q
+            .iter()
+            .map(|q| f(q.get(j).copied().unwrap_or(0.0)))
+            .collect()
     };
     let mut terms = Vec::new();
     match effect {
         "cable_angle" => {
             // Eyelet wrap `k·(γ − sin γ)`. (Adding powers of cos γ for other laws made the
             // mostly absorbed columns nearly collinear and the refit unstable.)
-            for (name, power) in [("cable_angle.k", 0)] {
-                terms.push(Term { name: name.into(), unit: "m", kind: TermKind::CableAngle { power } });
-            }
+            terms.push(Term {
+                name: "cable_angle.k".into(),
+                unit: "m",
+                kind: TermKind::CableAngle { power: 0 },
+            });
         }
         "joint_compliance" => {
             for j in 0..n_joints {
@@ -369,8 +390,16 @@ fn candidate_terms(effect: &str, device: &Device, data: &Data, n_joints: usize) 
         }
         "encoder_eccentricity" => {
             for j in (0..n_joints).filter(|&j| capstan_of(j).is_none()) {
-                terms.push(joint_term(format!("encoder_eccentricity.j{}_sin", j + 1), j, col(j, &f64::sin)));
-                terms.push(joint_term(format!("encoder_eccentricity.j{}_cos", j + 1), j, col(j, &f64::cos)));
+                terms.push(joint_term(
+                    format!("encoder_eccentricity.j{}_sin", j + 1),
+                    j,
+                    col(j, &f64::sin),
+                ));
+                terms.push(joint_term(
+                    format!("encoder_eccentricity.j{}_cos", j + 1),
+                    j,
+                    col(j, &f64::cos),
+                ));
             }
         }
         "capstan_harmonic" => {
@@ -379,8 +408,16 @@ fn candidate_terms(effect: &str, device: &Device, data: &Data, n_joints: usize) 
                 let r = c.ratio;
                 // Second harmonic of the motor drum, 2·R·θ. (The output drum's, 2·θ, is so
                 // smooth over a joint range that it fits any slow joint error: not tested.)
-                terms.push(joint_term(format!("capstan_harmonic.j{}_sin", j + 1), j, col(j, &|q| (2.0 * r * q).sin())));
-                terms.push(joint_term(format!("capstan_harmonic.j{}_cos", j + 1), j, col(j, &|q| (2.0 * r * q).cos())));
+                terms.push(joint_term(
+                    format!("capstan_harmonic.j{}_sin", j + 1),
+                    j,
+                    col(j, &|q| (2.0 * r * q).sin()),
+                ));
+                terms.push(joint_term(
+                    format!("capstan_harmonic.j{}_cos", j + 1),
+                    j,
+                    col(j, &|q| (2.0 * r * q).cos()),
+                ));
             }
         }
         "thermal_drift" => {
@@ -407,7 +444,9 @@ fn candidate_terms(effect: &str, device: &Device, data: &Data, n_joints: usize) 
         "cable_offset" => terms.push(Term {
             name: "cable_offset.c".into(),
             unit: "m",
-            kind: TermKind::Distance { h: vec![1.0; data.n] },
+            kind: TermKind::Distance {
+                h: vec![1.0; data.n],
+            },
         }),
         "capstan" => {
             // Paper eq. 1 to first order in r/D: offset (= dtheta), ratio error, output- and
@@ -420,22 +459,46 @@ fn candidate_terms(effect: &str, device: &Device, data: &Data, n_joints: usize) 
                 let r = c.ratio;
                 let n = j + 1;
                 terms.push(joint_term(format!("capstan.j{n}_ratio"), j, col(j, &|q| q)));
-                terms.push(joint_term(format!("capstan.j{n}_out_sin"), j, col(j, &f64::sin)));
-                terms.push(joint_term(format!("capstan.j{n}_out_cos"), j, col(j, &f64::cos)));
-                terms.push(joint_term(format!("capstan.j{n}_in_sin"), j, col(j, &|q| (r * q).sin())));
-                terms.push(joint_term(format!("capstan.j{n}_in_cos"), j, col(j, &|q| (r * q).cos())));
+                terms.push(joint_term(
+                    format!("capstan.j{n}_out_sin"),
+                    j,
+                    col(j, &f64::sin),
+                ));
+                terms.push(joint_term(
+                    format!("capstan.j{n}_out_cos"),
+                    j,
+                    col(j, &f64::cos),
+                ));
+                terms.push(joint_term(
+                    format!("capstan.j{n}_in_sin"),
+                    j,
+                    col(j, &|q| (r * q).sin()),
+                ));
+                terms.push(joint_term(
+                    format!("capstan.j{n}_in_cos"),
+                    j,
+                    col(j, &|q| (r * q).cos()),
+                ));
             }
         }
         "parallelogram" => {
             let j = hapcal_sim::PARALLELOGRAM_JOINT - 1;
             let (lo, hi) = device.joint_limits().get(j).copied().unwrap_or((-1.0, 1.0));
-            let probe = Chebyshev::try_new(lo, hi, vec![0.0; POLY_DEGREE + 1]).map_err(|e| e.to_string())?;
-            let basis: Vec<Vec<f64>> = data.q.iter().map(|q| probe.basis(q.get(j).copied().unwrap_or(0.0))).collect();
+            let probe = Chebyshev::try_new(lo, hi, vec![0.0; POLY_DEGREE + 1])
+                .map_err(|e| e.to_string())?;
+            let basis: Vec<Vec<f64>> = data
+                .q
+                .iter()
+                .map(|q| probe.basis(q.get(j).copied().unwrap_or(0.0)))
+                .collect();
             for k in 1..=POLY_DEGREE {
                 terms.push(joint_term(
                     format!("parallelogram.cheb{k}"),
                     j,
-                    basis.iter().map(|b| b.get(k).copied().unwrap_or(0.0)).collect(),
+                    basis
+                        .iter()
+                        .map(|b| b.get(k).copied().unwrap_or(0.0))
+                        .collect(),
                 ));
             }
         }
@@ -465,7 +528,14 @@ impl Base {
         let r_perp = &lin.r - &q * (q.transpose() * &lin.r);
         let rss = r_perp.norm_squared();
         let cv = cross_validate(&lin, &cols, None, folds, n);
-        Base { lin, cols, q, r_perp, rss, cv }
+        Base {
+            lin,
+            cols,
+            q,
+            r_perp,
+            rss,
+            cv,
+        }
     }
     fn dof(&self) -> f64 {
         (self.lin.r.len() as f64 - self.cols.len() as f64).max(1.0)
@@ -553,9 +623,20 @@ fn test_candidate(
     if visible.is_empty() {
         cand.reason = format!(
             "indistinguishable from baseline parameters {}",
-            if absorbed_by.is_empty() { "(zero signature)".to_owned() } else { absorbed_by.join(", ") }
+            if absorbed_by.is_empty() {
+                "(zero signature)".to_owned()
+            } else {
+                absorbed_by.join(", ")
+            }
         );
-        return Tested { cand, terms: kept_terms, fitted: DVector::zeros(n), p_raw: 1.0, cv_ok: false, share: 0.0 };
+        return Tested {
+            cand,
+            terms: kept_terms,
+            fitted: DVector::zeros(n),
+            p_raw: 1.0,
+            cv_ok: false,
+            share: 0.0,
+        };
     }
     let k = visible.len() as f64;
     let proj = qc.transpose() * &base.r_perp;
@@ -564,7 +645,9 @@ fn test_candidate(
     // Nonlinear refit with the visible terms: an effect the baseline mostly absorbs moves the
     // baseline's parameters far, and only a refit sees what is left.
     let mut s_vis = state.clone();
-    s_vis.terms.extend(visible.iter().map(|&c| (terms[c].clone(), 0.0)));
+    s_vis
+        .terms
+        .extend(visible.iter().map(|&c| (terms[c].clone(), 0.0)));
     let (s_vis, lin) = setup.refine(data, s_vis, 10);
     let mut cols = base.cols.clone();
     cols.extend((0..visible.len()).map(|c| n_base_cols + c));
@@ -583,7 +666,10 @@ fn test_candidate(
         .enumerate()
         .map(|(i, &c)| {
             let idx = base.cols.len() + i;
-            let value = s_vis.terms.get(state.terms.len() + i).map_or(0.0, |(_, v)| *v);
+            let value = s_vis
+                .terms
+                .get(state.terms.len() + i)
+                .map_or(0.0, |(_, v)| *v);
             ParamValue {
                 name: terms[c].name.clone(),
                 value: value + x[idx],
@@ -602,9 +688,20 @@ fn test_candidate(
     let md = mean(d.iter().copied());
     let sd = (d.iter().map(|v| (v - md).powi(2)).sum::<f64>() / (n as f64 - 1.0).max(1.0)).sqrt();
     let cv_ok = md > sd / (n as f64).sqrt();
-    let share = if gap2 > 0.0 { (base.cv.mse() - cv.mse()) / gap2 } else { 0.0 };
+    let share = if gap2 > 0.0 {
+        (base.cv.mse() - cv.mse()) / gap2
+    } else {
+        0.0
+    };
     cand.gap_closed_pct = 100.0 * share.clamp(-9.99, 9.99);
-    Tested { cand, terms: kept_terms, fitted, p_raw, cv_ok, share }
+    Tested {
+        cand,
+        terms: kept_terms,
+        fitted,
+        p_raw,
+        cv_ok,
+        share,
+    }
 }
 
 fn cosine(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
@@ -620,36 +717,74 @@ fn fit_transmissions(device: &Device, data: &Data, sigma_e: f64) -> Result<Vec<T
     let mut out = Vec::new();
     for c in &device.capstans {
         let j = c.joint - 1;
-        let theta: Vec<f64> = data.q.iter().map(|q| q.get(j).copied().unwrap_or(0.0)).collect();
-        let ext: Vec<f64> = data.ext.iter().map(|e| e.get(j).copied().flatten().unwrap_or(0.0)).collect();
-        let fail = |message: String| Error::Baseline { message: format!("joint {}: {message}", c.joint) };
+        let theta: Vec<f64> = data
+            .q
+            .iter()
+            .map(|q| q.get(j).copied().unwrap_or(0.0))
+            .collect();
+        let ext: Vec<f64> = data
+            .ext
+            .iter()
+            .map(|e| e.get(j).copied().flatten().unwrap_or(0.0))
+            .collect();
+        let fail = |message: String| Error::Baseline {
+            message: format!("joint {}: {message}", c.joint),
+        };
         if device.parallelogram.is_some() && c.joint == hapcal_sim::PARALLELOGRAM_JOINT {
             let (lo, hi) = device.joint_limits().get(j).copied().unwrap_or((-1.0, 1.0));
             let p = PolynomialProblem::new(c.joint, POLY_DEGREE, lo, hi, theta, ext, sigma_e)
                 .map_err(|e| fail(e.to_string()))?;
             let id = identify(&p, p.initial_guess(), &cfg).map_err(|e| fail(e.to_string()))?;
-            out.push(Trans::Poly { joint: j, poly: p.polynomial(id.fit.x.as_ref()) });
+            out.push(Trans::Poly {
+                joint: j,
+                poly: p.polynomial(id.fit.x.as_ref()),
+            });
         } else {
-            let capstan = Capstan::try_new(c.ratio, c.drum_distance_m).map_err(|e| fail(e.to_string()))?;
-            let p = CapstanProblem::new(capstan, c.joint, theta, ext, sigma_e).map_err(|e| fail(e.to_string()))?;
+            let capstan =
+                Capstan::try_new(c.ratio, c.drum_distance_m).map_err(|e| fail(e.to_string()))?;
+            let p = CapstanProblem::new(capstan, c.joint, theta, ext, sigma_e)
+                .map_err(|e| fail(e.to_string()))?;
             let id = identify(&p, p.initial_guess(), &cfg).map_err(|e| fail(e.to_string()))?;
-            out.push(Trans::Capstan { joint: j, capstan, params: CapstanProblem::params(id.fit.x.as_ref()) });
+            out.push(Trans::Capstan {
+                joint: j,
+                capstan,
+                params: CapstanProblem::params(id.fit.x.as_ref()),
+            });
         }
     }
     Ok(out)
 }
 
+/// A binned signal: name, value per sample, bin edges.
+type Signal = (String, Vec<f64>, Vec<(f64, f64)>);
+
 /// The residual map of held-out residuals `cv`.
-fn residual_map(device: &Device, data: &Data, lin: &Linear, cv: &Cv, alpha: f64) -> (Vec<Bin>, Vec<SignalTest>) {
+fn residual_map(
+    device: &Device,
+    data: &Data,
+    lin: &Linear,
+    cv: &Cv,
+    alpha: f64,
+) -> (Vec<Bin>, Vec<SignalTest>) {
     let n = data.n;
-    let mut signals: Vec<(String, Vec<f64>, Vec<(f64, f64)>)> = Vec::new();
+    let mut signals: Vec<Signal> = Vec::new();
     let quantile_edges = |v: &[f64], k: usize| -> Vec<(f64, f64)> {
         let mut s = v.to_vec();
         s.sort_by(f64::total_cmp);
-        let at = |f: f64| s.get(((s.len() as f64 - 1.0) * f).round() as usize).copied().unwrap_or(0.0);
-        (0..k).map(|b| (at(b as f64 / k as f64), at((b + 1) as f64 / k as f64))).collect()
+        let at = |f: f64| {
+            s.get(((s.len() as f64 - 1.0) * f).round() as usize)
+                .copied()
+                .unwrap_or(0.0)
+        };
+        (0..k)
+            .map(|b| (at(b as f64 / k as f64), at((b + 1) as f64 / k as f64)))
+            .collect()
     };
-    let phase_edges = |k: usize| (0..k).map(|b| (TAU * b as f64 / k as f64, TAU * (b + 1) as f64 / k as f64)).collect::<Vec<_>>();
+    let phase_edges = |k: usize| {
+        (0..k)
+            .map(|b| (TAU * b as f64 / k as f64, TAU * (b + 1) as f64 / k as f64))
+            .collect::<Vec<_>>()
+    };
     for j in 0..data.q.first().map_or(0, Vec::len) {
         let v: Vec<f64> = data.q.iter().map(|q| q[j]).collect();
         let edges = quantile_edges(&v, 5);
@@ -659,27 +794,54 @@ fn residual_map(device: &Device, data: &Data, lin: &Linear, cv: &Cv, alpha: f64)
             signals.push((format!("motor_phase{}", j + 1), ph, phase_edges(8)));
         }
         if let Some(dir) = data.direction(j) {
-            signals.push((format!("direction{}", j + 1), dir, vec![(-1.5, 0.0), (0.0, 1.5)]));
+            signals.push((
+                format!("direction{}", j + 1),
+                dir,
+                vec![(-1.5, 0.0), (0.0, 1.5)],
+            ));
         }
     }
-    signals.push(("distance".into(), data.dist.clone(), quantile_edges(&data.dist, 5)));
+    signals.push((
+        "distance".into(),
+        data.dist.clone(),
+        quantile_edges(&data.dist, 5),
+    ));
     let gamma: Vec<f64> = lin.p.iter().map(hapcal_sim::cable_angle_rad).collect();
-    signals.push(("cable_angle".into(), gamma.clone(), quantile_edges(&gamma, 5)));
+    signals.push((
+        "cable_angle".into(),
+        gamma.clone(),
+        quantile_edges(&gamma, 5),
+    ));
     if let Some(t) = &data.t {
         signals.push(("time".into(), t.clone(), quantile_edges(t, 5)));
     }
     let drum = device.cable_encoder.map_or(0.015, |c| c.drum_radius_m);
-    let ph: Vec<f64> = data.dist.iter().map(|d| (d / drum).rem_euclid(TAU)).collect();
+    let ph: Vec<f64> = data
+        .dist
+        .iter()
+        .map(|d| (d / drum).rem_euclid(TAU))
+        .collect();
     signals.push(("drum_phase".into(), ph, phase_edges(8)));
 
     let n_bins: usize = signals.iter().map(|s| s.2.len()).sum();
-    let z2: Vec<f64> = (0..n).map(|i| cv.e[i].powi(2) / cv.var[i].max(1e-300)).collect();
+    let z2: Vec<f64> = (0..n)
+        .map(|i| cv.e[i].powi(2) / cv.var[i].max(1e-300))
+        .collect();
     let mut bins = Vec::new();
     let mut tests = Vec::new();
     let n_signals = signals.len() as f64;
     for (name, v, edges) in &signals {
         let last = edges.len().saturating_sub(1);
-        let bin_of = |x: f64| edges.iter().position(|&(lo, hi)| x >= lo && x < hi).unwrap_or(if x >= edges.last().map_or(0.0, |e| e.0) { last } else { 0 });
+        let bin_of = |x: f64| {
+            edges
+                .iter()
+                .position(|&(lo, hi)| x >= lo && x < hi)
+                .unwrap_or(if x >= edges.last().map_or(0.0, |e| e.0) {
+                    last
+                } else {
+                    0
+                })
+        };
         let mut members: Vec<Vec<usize>> = vec![Vec::new(); edges.len()];
         for i in 0..n {
             members[bin_of(v[i])].push(i);
@@ -695,10 +857,15 @@ fn residual_map(device: &Device, data: &Data, lin: &Linear, cv: &Cv, alpha: f64)
             }
             let d1 = groups.saturating_sub(1) as f64;
             let d2 = (n as f64 - groups as f64).max(1.0);
-            if d1 > 0.0 && within > 0.0 { f_sf((between / d1) / (within / d2), d1, d2) } else { 1.0 }
+            if d1 > 0.0 && within > 0.0 {
+                f_sf((between / d1) / (within / d2), d1, d2)
+            } else {
+                1.0
+            }
         };
         // Mean (a bias that changes sign) and mean square (a spread), Bonferroni over both.
-        let p = (2.0 * anova(&|i| cv.e[i] / cv.var[i].max(1e-300).sqrt()).min(anova(&|i| z2[i]))).min(1.0);
+        let p = (2.0 * anova(&|i| cv.e[i] / cv.var[i].max(1e-300).sqrt()).min(anova(&|i| z2[i])))
+            .min(1.0);
         for (b, m) in members.iter().enumerate() {
             if m.is_empty() {
                 continue;
@@ -718,7 +885,11 @@ fn residual_map(device: &Device, data: &Data, lin: &Linear, cv: &Cv, alpha: f64)
                 flagged: p < alpha / n_bins as f64,
             });
         }
-        tests.push(SignalTest { signal: name.clone(), p_value: p, significant: p < alpha / n_signals });
+        tests.push(SignalTest {
+            signal: name.clone(),
+            p_value: p,
+            significant: p < alpha / n_signals,
+        });
     }
     (bins, tests)
 }
@@ -731,22 +902,36 @@ fn residual_map(device: &Device, data: &Data, lin: &Linear, cv: &Cv, alpha: f64)
 ///
 /// # Errors
 /// As [`diagnose`].
-pub fn baseline_residuals_m(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Result<Vec<f64>, Error> {
-    let chain = device.chain().map_err(|e| Error::Baseline { message: e.to_string() })?;
+pub fn baseline_residuals_m(
+    device: &Device,
+    rows: &[LogRow],
+    cfg: &DiagnoseConfig,
+) -> Result<Vec<f64>, Error> {
+    let chain = device.chain().map_err(|e| Error::Baseline {
+        message: e.to_string(),
+    })?;
     if rows.len() < 20 || rows.iter().any(|r| r.q.len() != chain.n_joints()) {
-        return Err(Error::Data { message: "the log does not fit the device or has fewer than 20 rows".to_owned() });
+        return Err(Error::Data {
+            message: "the log does not fit the device or has fewer than 20 rows".to_owned(),
+        });
     }
     let data = Data::new(rows);
     let mut setup = Setup::new(device, chain, true);
     let trans_joints: Vec<usize> = device.capstans.iter().map(|c| c.joint - 1).collect();
-    let full = cfg.baseline == Baseline::Full && !trans_joints.is_empty() && ext_available(rows, &trans_joints);
+    let full = cfg.baseline == Baseline::Full
+        && !trans_joints.is_empty()
+        && ext_available(rows, &trans_joints);
     let trans = if full {
         setup.ext_joints = trans_joints;
         fit_transmissions(device, &data, setup.sigma_e_rad)?
     } else {
         Vec::new()
     };
-    let state0 = State { trans, x_kin: vec![0.0; setup.chain.n_params()], terms: Vec::new() };
+    let state0 = State {
+        trans,
+        x_kin: vec![0.0; setup.chain.n_params()],
+        terms: Vec::new(),
+    };
     let (_, lin) = setup.refine(&data, state0, 8);
     let (q, _) = pivoted_basis(&lin.j, &DMatrix::zeros(lin.j.nrows(), 0), RANK_TOL);
     let r_perp = &lin.r - &q * (q.transpose() * &lin.r);
@@ -779,7 +964,11 @@ pub fn baseline_residuals_m(device: &Device, rows: &[LogRow], cfg: &DiagnoseConf
 /// [`Error::Config`] for bad settings; [`Error::Data`] for a log with fewer than 20 rows or
 /// rows that do not fit the device; [`Error::Baseline`] if the device has no chain or the
 /// transmissions cannot be fitted.
-pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Result<Diagnosis, Error> {
+pub fn diagnose(
+    device: &Device,
+    rows: &[LogRow],
+    cfg: &DiagnoseConfig,
+) -> Result<Diagnosis, Error> {
     if cfg.folds < 2 || !(cfg.alpha > 0.0 && cfg.alpha < 1.0) || cfg.max_effects == 0 {
         return Err(Error::Config {
             message: format!(
@@ -788,14 +977,26 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
             ),
         });
     }
-    let chain = device.chain().map_err(|e| Error::Baseline { message: e.to_string() })?;
+    let chain = device.chain().map_err(|e| Error::Baseline {
+        message: e.to_string(),
+    })?;
     let n_joints = chain.n_joints();
     if rows.len() < 20 {
-        return Err(Error::Data { message: format!("{} rows; the diagnosis needs at least 20", rows.len()) });
-    }
-    if let Some(r) = rows.iter().find(|r| r.q.len() != n_joints || !r.distance_m.is_finite()) {
         return Err(Error::Data {
-            message: format!("line {}: {} joint readings for a {n_joints}-joint device, distance {}", r.line, r.q.len(), r.distance_m),
+            message: format!("{} rows; the diagnosis needs at least 20", rows.len()),
+        });
+    }
+    if let Some(r) = rows
+        .iter()
+        .find(|r| r.q.len() != n_joints || !r.distance_m.is_finite())
+    {
+        return Err(Error::Data {
+            message: format!(
+                "line {}: {} joint readings for a {n_joints}-joint device, distance {}",
+                r.line,
+                r.q.len(),
+                r.distance_m
+            ),
         });
     }
     let data = Data::new(rows);
@@ -804,7 +1005,8 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
     let mut setup = Setup::new(device, chain, true);
     let trans_joints: Vec<usize> = device.capstans.iter().map(|c| c.joint - 1).collect();
     let mut baseline = cfg.baseline;
-    if baseline == Baseline::Full && !trans_joints.is_empty() && !ext_available(rows, &trans_joints) {
+    if baseline == Baseline::Full && !trans_joints.is_empty() && !ext_available(rows, &trans_joints)
+    {
         notes.push("the log lacks external-encoder readings for the transmissions: kinematics baseline used".to_owned());
         baseline = Baseline::Kinematics;
     }
@@ -814,7 +1016,11 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
     } else {
         Vec::new()
     };
-    let state0 = State { trans, x_kin: vec![0.0; setup.chain.n_params()], terms: Vec::new() };
+    let state0 = State {
+        trans,
+        x_kin: vec![0.0; setup.chain.n_params()],
+        terms: Vec::new(),
+    };
     let (mut state, lin) = setup.refine(&data, state0, 8);
     let mut n_base_cols = lin.j.ncols();
     let mut base = Base::new(lin, n_base_cols, cfg.folds, n);
@@ -843,12 +1049,21 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
     let mut joints = Vec::new();
     for j in 0..n_joints {
         let (lo, hi) = device.joint_limits().get(j).copied().unwrap_or((-1.0, 1.0));
-        let Ok(probe) = Chebyshev::try_new(lo, hi, vec![0.0; 7]) else { continue };
+        let Ok(probe) = Chebyshev::try_new(lo, hi, vec![0.0; 7]) else {
+            continue;
+        };
         let terms: Vec<Term> = (1..=6)
             .map(|k| Term {
                 name: format!("probe.j{}_cheb{k}", j + 1),
                 unit: "rad",
-                kind: TermKind::Joint { joint: j, g: data.q.iter().map(|q| probe.basis(q[j]).get(k).copied().unwrap_or(0.0)).collect() },
+                kind: TermKind::Joint {
+                    joint: j,
+                    g: data
+                        .q
+                        .iter()
+                        .map(|q| probe.basis(q[j]).get(k).copied().unwrap_or(0.0))
+                        .collect(),
+                },
             })
             .collect();
         let mut s = state.clone();
@@ -859,15 +1074,30 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
         let k = qc.ncols() as f64;
         let drss = (qc.transpose() * &base.r_perp).norm_squared();
         let excess = base.rss - base.dof();
-        let p = if k > 0.0 { f_sf((drss / k) / ((base.rss - drss).max(1e-300) / (base.dof() - k).max(1.0)), k, (base.dof() - k).max(1.0)) } else { 1.0 };
+        let p = if k > 0.0 {
+            f_sf(
+                (drss / k) / ((base.rss - drss).max(1e-300) / (base.dof() - k).max(1.0)),
+                k,
+                (base.dof() - k).max(1.0),
+            )
+        } else {
+            1.0
+        };
         joints.push(JointProbe {
             joint: j + 1,
-            explained_pct: if excess > 0.0 { 100.0 * ((drss - k) / excess).clamp(0.0, 1.0) } else { 0.0 },
+            explained_pct: if excess > 0.0 {
+                100.0 * ((drss - k) / excess).clamp(0.0, 1.0)
+            } else {
+                0.0
+            },
             p_value: p,
         });
     }
 
-    let mut library: Vec<String> = EffectKind::LIBRARY.iter().map(|k| k.name().to_owned()).collect();
+    let mut library: Vec<String> = EffectKind::LIBRARY
+        .iter()
+        .map(|k| k.name().to_owned())
+        .collect();
     if baseline == Baseline::Kinematics && !device.capstans.is_empty() {
         library.push("capstan".into());
         if device.parallelogram.is_some() {
@@ -882,7 +1112,9 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
         let mut tested: Vec<Tested> = Vec::new();
         for effect in library.iter().filter(|e| !accepted_names.contains(e)) {
             match candidate_terms(effect, device, &data, n_joints) {
-                Ok(terms) => tested.push(test_candidate(&setup, &data, &state, &base, effect, terms, round, cfg.folds)),
+                Ok(terms) => tested.push(test_candidate(
+                    &setup, &data, &state, &base, effect, terms, round, cfg.folds,
+                )),
                 Err(reason) => {
                     if round == 1 {
                         notes.push(format!("{effect}: {reason}"));
@@ -902,7 +1134,10 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
             } else if *p >= cfg.alpha {
                 format!("not significant (Holm-adjusted p = {p:.2e})")
             } else if t.cand.bic_gain <= 0.0 {
-                format!("does not beat the BIC penalty (gain {:.1})", t.cand.bic_gain)
+                format!(
+                    "does not beat the BIC penalty (gain {:.1})",
+                    t.cand.bic_gain
+                )
             } else if !t.cv_ok {
                 "held-out RMS not better than the baseline by one standard error".to_owned()
             } else if t.share < cfg.min_gap_share {
@@ -912,7 +1147,10 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
             };
             t.cand.accepted = reason.is_empty();
             t.cand.reason = if reason.is_empty() {
-                format!("significant (p = {p:.1e}), beats BIC and the held-out baseline, closes {:.0} % of the gap", 100.0 * t.share)
+                format!(
+                    "significant (p = {p:.1e}), beats BIC and the held-out baseline, closes {:.0} % of the gap",
+                    100.0 * t.share
+                )
             } else {
                 reason
             };
@@ -928,7 +1166,11 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
                 tested
                     .iter()
                     .enumerate()
-                    .filter(|(i, t)| *i != w && t.cand.n_visible > 0 && cosine(&t.fitted, &tested[w].fitted) > 0.9)
+                    .filter(|(i, t)| {
+                        *i != w
+                            && t.cand.n_visible > 0
+                            && cosine(&t.fitted, &tested[w].fitted) > 0.9
+                    })
                     .map(|(_, t)| t.cand.effect.clone())
                     .collect()
             })
@@ -965,7 +1207,11 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
                 let pos = new_base.cols.iter().position(|&c| c == col);
                 ParamValue {
                     name: term.name.clone(),
-                    value: state.terms.iter().find(|(t, _)| t.name == term.name).map_or(0.0, |(_, v)| *v),
+                    value: state
+                        .terms
+                        .iter()
+                        .find(|(t, _)| t.name == term.name)
+                        .map_or(0.0, |(_, v)| *v),
                     std: pos.map_or(f64::NAN, |p| (cov[(p, p)] * s2).sqrt()),
                     unit: term.unit.to_owned(),
                 }
@@ -976,7 +1222,11 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
             effect: win.cand.effect.clone(),
             heldout_rms_before_m: before,
             heldout_rms_after_m: after,
-            gap_closed_pct: if gap2 > 0.0 { 100.0 * (before * before - after * after) / gap2 } else { 0.0 },
+            gap_closed_pct: if gap2 > 0.0 {
+                100.0 * (before * before - after * after) / gap2
+            } else {
+                0.0
+            },
             parameters,
             confusable_with: confusable,
         });
@@ -985,7 +1235,14 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
         candidates.extend(tested.into_iter().map(|t| t.cand));
         base = new_base;
         round_gap_significant = chi2_sf(base.cv.chi2(), n as f64) < cfg.alpha;
-        if !round_gap_significant {
+        // Sufficient: what is left is noise, or too small a share of the gap to attribute
+        // beside the nonlinear remainder of a large first effect.
+        let closed_so_far = if gap2 > 0.0 {
+            (mse0 - base.cv.mse()) / gap2
+        } else {
+            1.0
+        };
+        if !round_gap_significant || closed_so_far >= STOP_SHARE {
             break;
         }
     }
@@ -993,12 +1250,28 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
     let (_, final_signals) = residual_map(device, &data, &base.lin, &base.cv, cfg.alpha);
     let mut leads: Vec<&SignalTest> = final_signals.iter().filter(|s| s.significant).collect();
     leads.sort_by(|a, b| a.p_value.total_cmp(&b.p_value));
-    let leads: Vec<String> = leads.iter().take(6).map(|s| format!("{} (p = {:.1e})", s.signal, s.p_value)).collect();
+    let leads: Vec<String> = leads
+        .iter()
+        .take(6)
+        .map(|s| format!("{} (p = {:.1e})", s.signal, s.p_value))
+        .collect();
     let floor_rms = floor0.sqrt();
     let gap_rms = gap2.max(0.0).sqrt();
-    let closed = if gap2 > 0.0 { (mse0 - final_mse) / gap2 } else { 0.0 };
-    let closed_in_sample = if excess0 > 0.0 { (excess0 - base_rss_excess(&base)) / excess0 } else { 0.0 };
-    let mut verdict = if accepted_names.is_empty() { "none".to_owned() } else { accepted_names.join("+") };
+    let closed = if gap2 > 0.0 {
+        (mse0 - final_mse) / gap2
+    } else {
+        0.0
+    };
+    let closed_in_sample = if excess0 > 0.0 {
+        (excess0 - base_rss_excess(&base)) / excess0
+    } else {
+        0.0
+    };
+    let mut verdict = if accepted_names.is_empty() {
+        "none".to_owned()
+    } else {
+        accepted_names.join("+")
+    };
     if !accepted_names.is_empty()
         && closed < SUFFICIENT_SHARE
         && closed_in_sample < SUFFICIENT_SHARE_IN_SAMPLE
@@ -1021,7 +1294,11 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
         floor_rms_m: floor_rms,
         heldout_rms_m: mse0.sqrt(),
         gap_rms_m: gap_rms,
-        gap_in_floors: if floor_rms > 0.0 { gap_rms / floor_rms } else { 0.0 },
+        gap_in_floors: if floor_rms > 0.0 {
+            gap_rms / floor_rms
+        } else {
+            0.0
+        },
         gap_p_value: gap_p,
         gap_significant,
         where_,
@@ -1030,7 +1307,11 @@ pub fn diagnose(device: &Device, rows: &[LogRow], cfg: &DiagnoseConfig) -> Resul
         candidates,
         steps,
         heldout_rms_final_m: final_mse.sqrt(),
-        gap_closed_pct: if gap2 > 0.0 { 100.0 * (mse0 - final_mse) / gap2 } else { 0.0 },
+        gap_closed_pct: if gap2 > 0.0 {
+            100.0 * (mse0 - final_mse) / gap2
+        } else {
+            0.0
+        },
         gap_closed_in_sample_pct: 100.0 * closed_in_sample,
         verdict,
         leads,

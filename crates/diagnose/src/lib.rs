@@ -40,8 +40,8 @@ mod model;
 mod stats;
 
 pub use diagnose::{
-    Baseline, Bin, Candidate, DiagnoseConfig, Diagnosis, JointProbe, ParamValue, SignalTest,
-    Step, baseline_residuals_m, diagnose,
+    Baseline, Bin, Candidate, DiagnoseConfig, Diagnosis, JointProbe, ParamValue, SignalTest, Step,
+    baseline_residuals_m, diagnose,
 };
 pub use error::Error;
 pub use stats::{chi2_sf, f_sf, holm};

@@ -39,7 +39,13 @@ impl Data {
                     let (a, b) = (i.saturating_sub(1), (i + 1).min(n.saturating_sub(1)));
                     let dt = t[b] - t[a];
                     (0..q[i].len())
-                        .map(|j| if dt > 0.0 { (q[b][j] - q[a][j]) / dt } else { 0.0 })
+                        .map(|j| {
+                            if dt > 0.0 {
+                                (q[b][j] - q[a][j]) / dt
+                            } else {
+                                0.0
+                            }
+                        })
                         .collect()
                 })
                 .collect()
@@ -327,7 +333,11 @@ impl Setup {
                 .point_and_jacobian_in(&s.x_kin, &q, &mut ws, &mut buf)
                 .coords;
             let norm = p.norm();
-            let u = if norm > 0.0 { p / norm } else { Vector3::zeros() };
+            let u = if norm > 0.0 {
+                p / norm
+            } else {
+                Vector3::zeros()
+            };
             let jq = self.chain.geometric_jacobian(&s.x_kin, &q);
             let dd_dq: Vec<f64> = (0..nj)
                 .map(|jj| (0..3).map(|a| u[a] * jq[(a, jj)]).sum())
@@ -336,7 +346,8 @@ impl Setup {
             let mut d_model = norm;
             let mut row_j = vec![0.0; ncols];
             for k in 0..n_kin {
-                row_j[n_trans + k] = u[0] * buf[3 * k] + u[1] * buf[3 * k + 1] + u[2] * buf[3 * k + 2];
+                row_j[n_trans + k] =
+                    u[0] * buf[3 * k] + u[1] * buf[3 * k + 1] + u[2] * buf[3 * k + 2];
             }
             for &(jt, c, g) in &dq {
                 row_j[c] += dd_dq.get(jt).copied().unwrap_or(0.0) * g;
@@ -384,7 +395,11 @@ impl Setup {
                     }
                     TermKind::CableAngle { power } => {
                         let g = hapcal_sim::cable_angle_rad(&p);
-                        if *power == 0 { g - g.sin() } else { g.cos().powi(*power) }
+                        if *power == 0 {
+                            g - g.sin()
+                        } else {
+                            g.cos().powi(*power)
+                        }
                     }
                     _ => continue,
                 };
@@ -393,9 +408,9 @@ impl Setup {
             }
             let mut var = self.sigma_m_m.powi(2);
             if self.quantisation {
-                for jj in 0..nj {
+                for (jj, dd) in dd_dq.iter().enumerate() {
                     let res = self.resolution_rad.get(jj).copied().unwrap_or(0.0);
-                    var += (dd_dq[jj] * res).powi(2) / 12.0;
+                    var += (dd * res).powi(2) / 12.0;
                 }
             }
             let sd = var.sqrt().max(1e-12);
@@ -476,7 +491,10 @@ impl Setup {
 /// Whether the log has every external encoder the device's transmissions need.
 pub(crate) fn ext_available(rows: &[LogRow], joints: &[usize]) -> bool {
     !rows.is_empty()
-        && joints
-            .iter()
-            .all(|&j| j < N_EXT && rows.iter().all(|r| r.ext.get(j).copied().flatten().is_some()))
+        && joints.iter().all(|&j| {
+            j < N_EXT
+                && rows
+                    .iter()
+                    .all(|r| r.ext.get(j).copied().flatten().is_some())
+        })
 }

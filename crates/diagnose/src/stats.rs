@@ -29,7 +29,7 @@ fn ln_gamma(x: f64) -> f64 {
 
 /// Regularised upper incomplete gamma `Q(a, x)`.
 fn gamma_q(a: f64, x: f64) -> f64 {
-    if !(x > 0.0) || !(a > 0.0) {
+    if x.is_nan() || a.is_nan() || x <= 0.0 || a <= 0.0 {
         return 1.0;
     }
     let gln = ln_gamma(a);
@@ -139,7 +139,7 @@ pub fn chi2_sf(x: f64, k: f64) -> f64 {
 
 /// `P(F(d1, d2) > f)`, the upper tail of an F variable.
 pub fn f_sf(f: f64, d1: f64, d2: f64) -> f64 {
-    if !(f > 0.0) || d1 <= 0.0 || d2 <= 0.0 {
+    if f.is_nan() || f <= 0.0 || d1 <= 0.0 || d2 <= 0.0 {
         return 1.0;
     }
     beta_i(0.5 * d2, 0.5 * d1, d2 / (d2 + d1 * f)).clamp(0.0, 1.0)
@@ -184,7 +184,7 @@ pub(crate) fn pivoted_basis(
     loop {
         let mut best: Option<(usize, f64)> = None;
         for j in 0..k {
-            if picked[j].is_some() || !(norms[j] > 0.0) {
+            if picked[j].is_some() || norms[j].is_nan() || norms[j] <= 0.0 {
                 continue;
             }
             let frac = work.column(j).norm() / norms[j];
@@ -195,8 +195,8 @@ pub(crate) fn pivoted_basis(
         let Some((j, frac)) = best else { break };
         picked[j] = Some(frac);
         let v: DVector<f64> = work.column(j) / work.column(j).norm();
-        for c in 0..k {
-            if picked[c].is_none() {
+        for (c, p) in picked.iter().enumerate() {
+            if p.is_none() {
                 let dot = v.dot(&work.column(c));
                 let mut col = work.column_mut(c);
                 col.axpy(-dot, &v, 1.0);

@@ -372,7 +372,8 @@ fn check_effects(device: &Device, effects: &[Effect]) -> Result<(), Error> {
             if j == 0 || j > n {
                 return Err(bad(format!("{key}: the device has joints 1..{n}")));
             }
-            if e.kind == EffectKind::CapstanHarmonic && !device.capstans.iter().any(|c| c.joint == j)
+            if e.kind == EffectKind::CapstanHarmonic
+                && !device.capstans.iter().any(|c| c.joint == j)
             {
                 return Err(bad(format!("{key}: joint {j} has no capstan")));
             }
@@ -455,7 +456,10 @@ pub fn simulate_motion(
         let theta: Vec<f64> = paths.iter().map(|p| p.angle(t)).collect();
         let rate: Vec<f64> = paths.iter().map(|p| p.rate(t)).collect();
         let mut q = true_joint_angles(device, truth, &theta)?;
-        let torques = if effects.iter().any(|e| e.kind == EffectKind::JointCompliance) {
+        let torques = if effects
+            .iter()
+            .any(|e| e.kind == EffectKind::JointCompliance)
+        {
             handle_gravity_torques_nm(&chain, &x, &q, mass_kg)
         } else {
             vec![0.0; n_joints]
@@ -567,7 +571,9 @@ mod tests {
         assert_eq!(e.get("j1"), 0.0);
         let round: Effect = e.to_string().parse().expect("round trip");
         assert_eq!(round, e);
-        let err = "backlash:k=1".parse::<Effect>().expect_err("k is not a backlash key");
+        let err = "backlash:k=1"
+            .parse::<Effect>()
+            .expect_err("k is not a backlash key");
         assert!(err.to_string().contains("unknown parameter \"k\""), "{err}");
         let err = "wobble:k=1".parse::<Effect>().expect_err("unknown effect");
         assert!(err.to_string().contains("unknown effect"), "{err}");

@@ -22,7 +22,10 @@ fn sim_cfg(device: &Device, seed: u64) -> SimConfig {
 
 fn motion_log(seed: u64, effects: &[&str]) -> (Device, Vec<hapcal_io::LogRow>) {
     let (device, truth) = reference();
-    let effects: Vec<Effect> = effects.iter().map(|e| e.parse().expect("valid effect")).collect();
+    let effects: Vec<Effect> = effects
+        .iter()
+        .map(|e| e.parse().expect("valid effect"))
+        .collect();
     let rows = simulate_motion(
         &device,
         &truth,
@@ -138,11 +141,23 @@ fn bad_input_is_an_error_not_a_panic() {
 fn blind_cases_small_set() {
     let (device, truth) = reference();
     let cfg = BlindConfig::default();
-    for (kind, seed) in [(CaseKind::None, 101), (CaseKind::One, 102), (CaseKind::One, 103)] {
+    for (kind, seed) in [
+        (CaseKind::None, 101),
+        (CaseKind::One, 102),
+        (CaseKind::One, 103),
+    ] {
         let (o, d) = run_case(&device, &truth, kind, seed, &cfg).expect("runs");
-        assert!(o.correct, "seed {seed}: {:?} -> {} ({:?})", o.case, o.verdict, d.notes);
+        assert!(
+            o.correct,
+            "seed {seed}: {:?} -> {} ({:?})",
+            o.case, o.verdict, d.notes
+        );
         if kind == CaseKind::One {
-            assert!(o.gap_closed_pct >= 80.0, "seed {seed}: closed {}", o.gap_closed_pct);
+            assert!(
+                o.gap_closed_pct >= 80.0,
+                "seed {seed}: closed {}",
+                o.gap_closed_pct
+            );
         }
     }
 }
