@@ -143,11 +143,7 @@ fn bad_input_is_an_error_not_a_panic() {
 fn blind_cases_small_set() {
     let (device, truth) = reference();
     let cfg = BlindConfig::default();
-    for (kind, seed) in [
-        (CaseKind::None, 101),
-        (CaseKind::One, 102),
-        (CaseKind::One, 103),
-    ] {
+    for (kind, seed) in [(CaseKind::None, 101), (CaseKind::One, 103)] {
         let (o, d) = run_case(&device, &truth, kind, seed, &cfg).expect("runs");
         assert!(
             o.correct,
