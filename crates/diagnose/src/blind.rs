@@ -1,6 +1,6 @@
 //! The blind test: draw a case (no effect, one library effect, one effect outside the
 //! library, or two library effects) with its size and a seed, simulate the log without
-//! telling [`diagnose`](crate::diagnose) which, and score the verdict.
+//! telling [`crate::diagnose`] which, and score the verdict.
 //!
 //! **Sizing** (DIAGNOSIS.md §5, issue #7): an effect's size is the ratio `s` of the
 //! baseline's residual RMS to the noise floor it would produce alone, drawn log-uniformly
