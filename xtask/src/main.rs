@@ -23,6 +23,14 @@ enum Task {
         #[arg(long)]
         check: bool,
     },
+    /// Blind test of `hapcal diagnose` (release build): simulate `--cases` logs with a withheld
+    /// effect (or none), diagnose them, write the confusion matrix and the paper's story to
+    /// docs/results/diagnose.md.
+    BlindTest {
+        /// Number of cases.
+        #[arg(long, default_value_t = 240)]
+        cases: usize,
+    },
     /// Calibrate every MUKCa split of docs/results/mukca.md with the release binary and write
     /// the table (ours beside MUKCa's own optimiser); `--check` only verifies the acceptance
     /// criteria against the committed reference figures.
@@ -55,6 +63,7 @@ fn main() -> Result<()> {
         Task::Ci => ci(&sh),
         Task::Mukca { check } => mukca::run(&sh, check),
         Task::Bench { peers, criterion } => bench::run(&sh, peers, criterion),
+        Task::BlindTest { cases } => blind_test(&sh, cases),
         Task::ReproduceTables { check } => reproduce_tables(&sh, check),
     }
 }
@@ -71,6 +80,20 @@ fn ci(sh: &Shell) -> Result<()> {
         .env("RUSTDOCFLAGS", "-D warnings")
         .run()?;
     reproduce_tables(sh, true)
+}
+
+fn blind_test(sh: &Shell, cases: usize) -> Result<()> {
+    let cases = cases.to_string();
+    let md = cmd!(
+        sh,
+        "cargo run --release --quiet -p hapcal -- blind-test --cases {cases}"
+    )
+    .read()?;
+    let mukca = "\n## Real data (MUKCa)\n\nSee docs/results/diagnose-mukca.md (hand-written: \
+                 what `diagnose` can and cannot tell from static socket data).\n";
+    sh.write_file("docs/results/diagnose.md", format!("{md}{mukca}"))?;
+    println!("wrote docs/results/diagnose.md");
+    Ok(())
 }
 
 fn reproduce_tables(sh: &Shell, check: bool) -> Result<()> {

@@ -4,6 +4,7 @@
 //! Architecture invariant: *the library part never prints; `main.rs` prints what it returns.*
 
 pub mod calibrate;
+pub mod diagnose;
 pub mod figures;
 pub mod force;
 pub mod paper;

@@ -107,6 +107,56 @@ enum Command {
         /// Output log CSV.
         #[arg(long)]
         out: PathBuf,
+        /// Inject an unmodelled effect (DESIGN.md §6), e.g. `backlash:j2=1e-3` or
+        /// `cable_angle:k=2e-4`; repeatable. Implies --motion.
+        #[arg(long = "effect")]
+        effects: Vec<String>,
+        /// Time-ordered motion (t_s column, every joint in both directions) instead of
+        /// independent random poses.
+        #[arg(long)]
+        motion: bool,
+        /// Time between samples of the time-ordered motion, s.
+        #[arg(long, default_value_t = 0.5)]
+        period_s: f64,
+    },
+    /// Diagnose the sim-to-real gap of a log: how far the calibrated model's held-out residual
+    /// lies above the noise floor, where (residual maps), which unmodelled effect explains it
+    /// and how far it shrinks. Prints a table (or one JSON document with --json) and writes the
+    /// residual maps as SVG.
+    Diagnose {
+        /// Device file (TOML).
+        #[arg(long)]
+        device: PathBuf,
+        /// Measurement log (CSV, DESIGN.md §5).
+        #[arg(long)]
+        data: PathBuf,
+        /// Baseline: `full` (transmissions + kinematics) or `kinematics` (the transmission
+        /// models then join the candidates).
+        #[arg(long, default_value = "full")]
+        baseline: String,
+        /// Cross-validation folds (time-contiguous blocks).
+        #[arg(long, default_value_t = 5)]
+        folds: usize,
+        /// Print one JSON document instead of the table.
+        #[arg(long)]
+        json: bool,
+        /// Where to write the residual maps (SVG).
+        #[arg(long, default_value = "diagnose_residuals.svg")]
+        svg: PathBuf,
+    },
+    /// Run the blind test of `diagnose` on the reference device and print the Markdown report
+    /// (confusion matrix, the paper's story); `cargo xtask blind-test` writes it to
+    /// docs/results/diagnose.md.
+    BlindTest {
+        /// Number of cases (kinds stratified: 1/8 none, 1/8 outside, 1/8 two, 5/8 one effect).
+        #[arg(long, default_value_t = 240)]
+        cases: usize,
+        /// First seed.
+        #[arg(long, default_value_t = 0)]
+        first_seed: u64,
+        /// Seeds of the paper's story (kinematics baseline on static poses).
+        #[arg(long, default_value_t = 5)]
+        story: usize,
     },
     /// Force rendering before and after calibration (paper Figs. 11–12): the virtual-wall
     /// experiment at the home pose and the errors over random poses, printed as Markdown; writes
@@ -299,6 +349,9 @@ fn run(cli: Cli) -> Result<()> {
             poses,
             noise,
             out,
+            effects,
+            motion,
+            period_s,
         } => {
             let root = hapcal::project_root();
             let (device, truth) = match (device, truth) {
@@ -329,7 +382,17 @@ fn run(cli: Cli) -> Result<()> {
                 other => anyhow::bail!("--noise must be `paper` or `arc-length`, got {other:?}"),
             };
             let cfg = hapcal_sim::SimConfig::new(seed, poses).with_noise(noise);
-            let rows = hapcal_sim::simulate(&device, &truth, &cfg)?;
+            let effects = (effects.iter())
+                .map(|e| e.parse::<hapcal_sim::Effect>())
+                .collect::<Result<Vec<_>, _>>()?;
+            let rows = if motion || !effects.is_empty() {
+                let motion = hapcal_sim::MotionConfig {
+                    sample_period_s: period_s,
+                };
+                hapcal_sim::simulate_motion(&device, &truth, &cfg, &motion, &effects)?
+            } else {
+                hapcal_sim::simulate(&device, &truth, &cfg)?
+            };
             std::fs::write(&out, hapcal_io::write_log(&rows))?;
             eprintln!("hapcal: wrote {} poses to {}", rows.len(), out.display());
             Ok(())
@@ -388,6 +451,43 @@ fn run(cli: Cli) -> Result<()> {
             bar.finish_and_clear();
             print!("{text}");
             eprintln!("hapcal: wrote {}", args.out.display());
+            Ok(())
+        }
+        Command::Diagnose {
+            device,
+            data,
+            baseline,
+            folds,
+            json,
+            svg,
+        } => {
+            let plan = hapcal::diagnose::DiagnosePlan::new(device, data, &baseline, folds)?;
+            let (d, warnings) = hapcal::diagnose::run(&plan)?;
+            for w in warnings {
+                eprintln!("hapcal: warning: {w}");
+            }
+            if json {
+                println!("{}", serde_json::to_string_pretty(&d)?);
+            } else {
+                print!("{}", hapcal::diagnose::render(&d));
+            }
+            match std::fs::write(&svg, hapcal::diagnose::residual_map_svg(&d)) {
+                Ok(()) => eprintln!("hapcal: wrote residual maps to {}", svg.display()),
+                Err(e) => eprintln!("hapcal: warning: cannot write {}: {e}", svg.display()),
+            }
+            Ok(())
+        }
+        Command::BlindTest {
+            cases,
+            first_seed,
+            story,
+        } => {
+            let bar = indicatif::ProgressBar::new(cases as u64);
+            let md = hapcal::diagnose::blind_report(cases, first_seed, story, &|done| {
+                bar.set_position(done as u64)
+            })?;
+            bar.finish_and_clear();
+            print!("{md}");
             Ok(())
         }
         Command::ImportUrdf { urdf, tip } => {

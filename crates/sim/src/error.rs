@@ -103,4 +103,13 @@ pub enum Error {
         /// The value given.
         value: f64,
     },
+    /// An unmodelled effect is malformed or does not fit the device (`--effect` syntax:
+    /// `name:key=value,…`, see [`crate::EffectKind`]).
+    #[error("effect {spec}: {message}")]
+    Effect {
+        /// The effect as given.
+        spec: String,
+        /// What is wrong.
+        message: String,
+    },
 }

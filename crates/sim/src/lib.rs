@@ -15,6 +15,9 @@
 //!   readings, the cable distance `|P| + N(0, σ_m)`, and the external encoders (true output
 //!   angles of joints 1–4 `+ N(0, σ_e)`).
 //!
+//! - [`simulate_motion`] moves the device along a time-ordered trajectory and injects the
+//!   unmodelled effects of DESIGN.md §6 ([`Effect`], [`EffectKind`]).
+//!
 //! The paper's truth and a 200-pose log (seed 1, paper noise) are in
 //! `fixtures/reference-device/` (`truth.toml`, `device.toml`, `log.csv`; the log is written by
 //! `cargo run -p hapcal-sim --example write_reference_log`).
@@ -44,10 +47,15 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod effects;
 mod error;
 mod sim;
 mod truth;
 
+pub use effects::{
+    DEFAULT_HANDLE_MASS_KG, Effect, EffectKind, GRAVITY_M_S2, MotionConfig, cable_angle_rad,
+    handle_gravity_torques_nm, simulate_motion,
+};
 pub use error::Error;
 pub use sim::{
     DistanceSamples, NoiseModel, PARALLELOGRAM_JOINT, SimConfig, distance_samples,

@@ -1,5 +1,6 @@
 //! Integration tests of `hapcal-sim`.
 
+mod effects;
 mod fixtures;
 mod simulate;
 mod truth;

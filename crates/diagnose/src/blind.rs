@@ -1,0 +1,413 @@
+//! The blind test: draw a case (no effect, one library effect, one effect outside the
+//! library, or two library effects) with its size and a seed, simulate the log without
+//! telling [`crate::diagnose`] which, and score the verdict.
+//!
+//! **Sizing** (DIAGNOSIS.md §5, issue #7): an effect's size is the ratio `s` of the
+//! baseline's residual RMS to the noise floor it would produce alone, drawn log-uniformly
+//! in `[2, 20]` ("just detectable" to "dominant"). The visible RMS `σ·sqrt(s² − 1)` is set by
+//! simulating the same seed with and without a reference-size effect, fitting the baseline
+//! to both ([`crate::baseline_residuals_m`]), and scaling the effect's amplitudes by the
+//! ratio of the target to the measured difference (effects are linear in their amplitudes
+//! to first order).
+
+use std::collections::BTreeMap;
+use std::f64::consts::TAU;
+
+use hapcal_io::{Device, LogRow};
+use hapcal_sim::{Effect, EffectKind, MotionConfig, NoiseModel, SimConfig, Truth, simulate_motion};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+use crate::{DiagnoseConfig, Diagnosis, Error, baseline_residuals_m, diagnose};
+
+/// What a blind case holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CaseKind {
+    /// No unmodelled effect: the answer must be `none`.
+    None,
+    /// One library effect: the answer must name it.
+    One,
+    /// One effect outside the library: the answer must be `none`, with a localisation.
+    Outside,
+    /// Two library effects: both should be named.
+    Two,
+}
+
+/// One blind case.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Case {
+    /// Seed of the simulation (and of the draw).
+    pub seed: u64,
+    /// Its kind.
+    pub kind: CaseKind,
+    /// The injected effects (already scaled).
+    #[serde(serialize_with = "effects_as_strings")]
+    pub effects: Vec<Effect>,
+    /// Size `s`: the baseline residual RMS the effect alone produces, in floors (per effect).
+    pub sizes: Vec<f64>,
+}
+
+fn effects_as_strings<S: serde::Serializer>(e: &[Effect], s: S) -> Result<S::Ok, S::Error> {
+    s.collect_seq(e.iter().map(ToString::to_string))
+}
+
+impl Case {
+    /// The expected verdict: `none`, an effect name, or two names joined by `+` in library
+    /// order.
+    pub fn expected(&self) -> String {
+        match self.kind {
+            CaseKind::None | CaseKind::Outside => "none".to_owned(),
+            _ => {
+                let mut names: Vec<EffectKind> = self.effects.iter().map(|e| e.kind).collect();
+                names.sort();
+                names.iter().map(|k| k.name()).collect::<Vec<_>>().join("+")
+            }
+        }
+    }
+
+    /// The row label of the confusion matrix: `none`, the effect's name, `outside:<name>`,
+    /// or `two`.
+    pub fn label(&self) -> String {
+        match self.kind {
+            CaseKind::None => "none".to_owned(),
+            CaseKind::One => self
+                .effects
+                .first()
+                .map_or("?".to_owned(), |e| e.kind.name().to_owned()),
+            CaseKind::Outside => format!(
+                "outside:{}",
+                self.effects.first().map_or("?", |e| e.kind.name())
+            ),
+            CaseKind::Two => "two".to_owned(),
+        }
+    }
+}
+
+/// A reference-size effect of `kind` with random joints and phases (amplitudes are scaled
+/// later).
+fn reference_effect(
+    kind: EffectKind,
+    device: &Device,
+    rng: &mut ChaCha8Rng,
+) -> Result<Effect, Error> {
+    let n = device.n_joints();
+    let capstan_joints: Vec<usize> = device.capstans.iter().map(|c| c.joint).collect();
+    let direct: Vec<usize> = (1..=n).filter(|j| !capstan_joints.contains(j)).collect();
+    let pick = |rng: &mut ChaCha8Rng, from: &[usize]| -> usize {
+        from.get(rng.random_range(0..from.len().max(1)))
+            .copied()
+            .unwrap_or(1)
+    };
+    let phase = |rng: &mut ChaCha8Rng| TAU * rng.random::<f64>();
+    let all: Vec<usize> = (1..=n).collect();
+    // Joints with a gravity torque that varies (not the vertical joint 1, not the tip joint).
+    let torque_joints: Vec<usize> = (2..n.max(2)).collect();
+    let params: Vec<(String, f64)> = match kind {
+        EffectKind::CableAngle => vec![("k".into(), 1e-3)],
+        EffectKind::ThermalDrift => vec![("k".into(), 1e-6)],
+        EffectKind::Latency => vec![("tau".into(), 1e-3)],
+        EffectKind::CableOffset => vec![("c".into(), 1e-3)],
+        EffectKind::JointCompliance => vec![(format!("j{}", pick(rng, &torque_joints)), 1e-3)],
+        EffectKind::Backlash => vec![(format!("j{}", pick(rng, &all)), 1e-3)],
+        EffectKind::EncoderEccentricity => {
+            let j = pick(rng, if direct.is_empty() { &all } else { &direct });
+            vec![(format!("j{j}"), 1e-3), (format!("phase{j}"), phase(rng))]
+        }
+        EffectKind::CapstanHarmonic => {
+            let j = pick(rng, &capstan_joints);
+            vec![(format!("j{j}"), 1e-3), (format!("phase{j}"), phase(rng))]
+        }
+        EffectKind::JointBump => {
+            let j = pick(rng, &all);
+            let (lo, hi) = device
+                .joint_limits()
+                .get(j - 1)
+                .copied()
+                .unwrap_or((-1.0, 1.0));
+            let at = lo + (hi - lo) * (0.3 + 0.4 * rng.random::<f64>());
+            vec![
+                (format!("j{j}"), 1e-3),
+                (format!("at{j}"), at),
+                ("width".into(), 0.12 * (hi - lo)),
+            ]
+        }
+        EffectKind::CableDrumRunout => vec![("a".into(), 1e-4), ("phase".into(), phase(rng))],
+    };
+    Effect::try_new(kind, params).map_err(|e| Error::Blind {
+        message: e.to_string(),
+    })
+}
+
+/// The effect with its amplitudes (not phases, positions or widths) multiplied by `factor`.
+fn scaled(e: &Effect, factor: f64) -> Effect {
+    Effect {
+        kind: e.kind,
+        params: e
+            .params
+            .iter()
+            .map(|(k, v)| {
+                let amplitude = !(k.starts_with("phase") || k.starts_with("at") || k == "width");
+                (k.clone(), if amplitude { v * factor } else { *v })
+            })
+            .collect(),
+    }
+}
+
+/// The settings of a blind run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BlindConfig {
+    /// Samples per log.
+    pub n_samples: usize,
+    /// Smallest and largest size `s` (residual RMS in floors).
+    pub size_range: (f64, f64),
+    /// The diagnosis settings.
+    pub diagnose: DiagnoseConfig,
+}
+
+impl Default for BlindConfig {
+    /// 200 samples (the paper's pose count), sizes 2–20 floors, default diagnosis.
+    fn default() -> BlindConfig {
+        BlindConfig {
+            n_samples: 200,
+            size_range: (2.0, 20.0),
+            diagnose: DiagnoseConfig::default(),
+        }
+    }
+}
+
+fn sim_cfg(device: &Device, seed: u64, n: usize) -> SimConfig {
+    let mut cfg = SimConfig::new(seed, n);
+    if let Some(cable) = device.cable_encoder.as_ref() {
+        cfg = cfg.with_noise(NoiseModel::paper(cable));
+    }
+    cfg
+}
+
+/// Draws case `seed` of kind `kind` and simulates its log.
+///
+/// # Errors
+/// [`Error::Blind`] if the simulation fails; the errors of [`baseline_residuals_m`].
+pub fn draw_case(
+    device: &Device,
+    truth: &Truth,
+    kind: CaseKind,
+    seed: u64,
+    cfg: &BlindConfig,
+) -> Result<(Case, Vec<LogRow>), Error> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_b11d);
+    let n_effects = match kind {
+        CaseKind::None => 0,
+        CaseKind::One | CaseKind::Outside => 1,
+        CaseKind::Two => 2,
+    };
+    let mut kinds: Vec<EffectKind> = Vec::new();
+    while kinds.len() < n_effects {
+        let k = if kind == CaseKind::Outside {
+            EffectKind::OUTSIDE[rng.random_range(0..EffectKind::OUTSIDE.len())]
+        } else {
+            EffectKind::LIBRARY[rng.random_range(0..EffectKind::LIBRARY.len())]
+        };
+        if !kinds.contains(&k) {
+            kinds.push(k);
+        }
+    }
+    let sim = sim_cfg(device, seed, cfg.n_samples);
+    let motion = MotionConfig::default();
+    let simulate = |effects: &[Effect]| {
+        simulate_motion(device, truth, &sim, &motion, effects).map_err(|e| Error::Blind {
+            message: e.to_string(),
+        })
+    };
+    let clean = simulate(&[])?;
+    let mut effects = Vec::new();
+    let mut sizes = Vec::new();
+    if !kinds.is_empty() {
+        let r0 = baseline_residuals_m(device, &clean, &cfg.diagnose)?;
+        let floor = (r0.iter().map(|r| r * r).sum::<f64>() / r0.len().max(1) as f64).sqrt();
+        for k in kinds {
+            let reference = reference_effect(k, device, &mut rng)?;
+            let sign = if rng.random::<bool>() { 1.0 } else { -1.0 };
+            let (lo, hi) = cfg.size_range;
+            let s = lo * (hi / lo).powf(rng.random::<f64>());
+            let r1 = baseline_residuals_m(
+                device,
+                &simulate(std::slice::from_ref(&reference))?,
+                &cfg.diagnose,
+            )?;
+            let visible = (r1
+                .iter()
+                .zip(&r0)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                / r0.len().max(1) as f64)
+                .sqrt();
+            let target = floor * (s * s - 1.0).max(0.0).sqrt();
+            let factor = if visible > 0.0 { target / visible } else { 1.0 };
+            effects.push(scaled(&reference, sign * factor));
+            sizes.push(s);
+        }
+    }
+    let rows = if effects.is_empty() {
+        clean
+    } else {
+        simulate(&effects)?
+    };
+    Ok((
+        Case {
+            seed,
+            kind,
+            effects,
+            sizes,
+        },
+        rows,
+    ))
+}
+
+/// One scored case.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Outcome {
+    /// The case.
+    pub case: Case,
+    /// Its confusion-matrix row label ([`Case::label`]).
+    pub label: String,
+    /// The expected verdict.
+    pub expected: String,
+    /// The verdict.
+    pub verdict: String,
+    /// Whether the verdict is right.
+    pub correct: bool,
+    /// For outside effects: whether the residual map points at it (joint probe or signal of
+    /// the bumped joint; drum phase for the runout).
+    pub localised: Option<bool>,
+    /// Gap closed by the accepted effects, %.
+    pub gap_closed_pct: f64,
+    /// Gap in floors.
+    pub gap_in_floors: f64,
+}
+
+/// Scores a diagnosis against its case.
+pub fn score(case: &Case, d: &Diagnosis) -> Outcome {
+    let expected = case.expected();
+    let mut got: Vec<&str> = d.verdict.split('+').collect();
+    got.sort_by_key(|name| {
+        name.parse::<EffectKind>()
+            .map_or(usize::MAX, |k| k as usize)
+    });
+    let verdict_sorted = got.join("+");
+    let localised = (case.kind == CaseKind::Outside).then(|| {
+        let Some(e) = case.effects.first() else {
+            return false;
+        };
+        match e.kind {
+            EffectKind::JointBump => {
+                let j = e
+                    .params
+                    .iter()
+                    .find_map(|(k, _)| k.strip_prefix('j')?.parse::<usize>().ok())
+                    .unwrap_or(0);
+                let best = d
+                    .joints
+                    .iter()
+                    .max_by(|a, b| a.explained_pct.total_cmp(&b.explained_pct))
+                    .map(|p| p.joint);
+                best == Some(j)
+                    || d.signals
+                        .iter()
+                        .any(|s| s.significant && s.signal == format!("q{j}"))
+            }
+            _ => d
+                .signals
+                .iter()
+                .any(|s| s.significant && s.signal == "drum_phase"),
+        }
+    });
+    Outcome {
+        label: case.label(),
+        correct: verdict_sorted == expected,
+        expected,
+        verdict: d.verdict.clone(),
+        localised,
+        gap_closed_pct: d.gap_closed_pct,
+        gap_in_floors: d.gap_in_floors,
+        case: case.clone(),
+    }
+}
+
+/// Draws, simulates, diagnoses and scores case `seed` of kind `kind`.
+///
+/// # Errors
+/// The errors of [`draw_case`] and [`diagnose`].
+pub fn run_case(
+    device: &Device,
+    truth: &Truth,
+    kind: CaseKind,
+    seed: u64,
+    cfg: &BlindConfig,
+) -> Result<(Outcome, Diagnosis), Error> {
+    let (case, rows) = draw_case(device, truth, kind, seed, cfg)?;
+    let d = diagnose(device, &rows, &cfg.diagnose)?;
+    Ok((score(&case, &d), d))
+}
+
+/// The kind of blind case number `i` of a stratified run: one in eight `none`, one in
+/// eight outside, one in eight two effects, the rest one library effect.
+pub fn kind_of(i: u64) -> CaseKind {
+    match i % 8 {
+        0 => CaseKind::None,
+        1 => CaseKind::Outside,
+        2 => CaseKind::Two,
+        _ => CaseKind::One,
+    }
+}
+
+/// Summary of a blind run: rates and the confusion matrix (row = truth label, column =
+/// verdict).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Summary {
+    /// Cases per kind and how many were right: `(right, total)`.
+    pub by_kind: BTreeMap<String, (usize, usize)>,
+    /// Outside cases localised: `(localised, total)`.
+    pub localised: (usize, usize),
+    /// Right one-effect cases whose accepted effect closed ≥ 80 % of the gap: `(n, right)`.
+    pub gap_closed_80: (usize, usize),
+    /// Median gap closed over right one-effect cases, %.
+    pub median_gap_closed_pct: f64,
+    /// `matrix[label][verdict]` counts.
+    pub matrix: BTreeMap<String, BTreeMap<String, usize>>,
+}
+
+/// Tallies outcomes.
+pub fn summarise(outcomes: &[Outcome]) -> Summary {
+    let mut s = Summary::default();
+    let mut closed = Vec::new();
+    for o in outcomes {
+        let kind = format!("{:?}", o.case.kind).to_lowercase();
+        let e = s.by_kind.entry(kind).or_insert((0, 0));
+        e.0 += usize::from(o.correct);
+        e.1 += 1;
+        if let Some(l) = o.localised {
+            s.localised.0 += usize::from(l);
+            s.localised.1 += 1;
+        }
+        if o.case.kind == CaseKind::One && o.correct {
+            s.gap_closed_80.1 += 1;
+            s.gap_closed_80.0 += usize::from(o.gap_closed_pct >= 80.0);
+            closed.push(o.gap_closed_pct);
+        }
+        let col = if o.case.kind == CaseKind::Two && o.correct {
+            "both".to_owned()
+        } else {
+            o.verdict.clone()
+        };
+        *s.matrix
+            .entry(o.label.clone())
+            .or_default()
+            .entry(col)
+            .or_insert(0) += 1;
+    }
+    closed.sort_by(f64::total_cmp);
+    s.median_gap_closed_pct = closed.get(closed.len() / 2).copied().unwrap_or(0.0);
+    s
+}

@@ -1,0 +1,586 @@
+//! Unmodelled effects (DESIGN.md §6) and the time-ordered motion that reveals them.
+//!
+//! [`simulate_motion`] moves the truth device along a smooth multi-sine trajectory
+//! (every joint in both directions, several cycles per log), samples it every
+//! [`MotionConfig::sample_period_s`], and injects any number of [`Effect`]s on top of the
+//! truth transmissions and deviations. Each effect has a stable name ([`EffectKind`]),
+//! parameters given by key (`backlash:j2=1e-3`), a physical model and a source, listed on
+//! [`EffectKind`].
+
+use std::f64::consts::TAU;
+use std::fmt;
+use std::str::FromStr;
+
+use hapcal_io::{Device, LogRow, N_EXT};
+use hapcal_kinematics::{Chain, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+use crate::{Error, SimConfig, Truth, quantise_readings, true_joint_angles, truth_deviations};
+
+/// Standard gravity, m/s² (used with the handle mass for [`EffectKind::JointCompliance`]).
+pub const GRAVITY_M_S2: f64 = 9.81;
+
+/// Handle mass used when the device file has no `[handle]`, kg (DESIGN.md §2: 0.2 kg).
+pub const DEFAULT_HANDLE_MASS_KG: f64 = 0.2;
+
+/// The unmodelled effects the simulator can inject, by stable name (DESIGN.md §6).
+///
+/// The first eight ([`EffectKind::LIBRARY`]) form the diagnosis library; the last two
+/// ([`EffectKind::OUTSIDE`]) exist only to test that `diagnose` answers `none` honestly
+/// for an effect it does not know. Parameters (key = value, SI units), with `j<k>` the
+/// 1-based joint `k`:
+///
+/// | name | keys | model |
+/// |---|---|---|
+/// | `cable_angle` | `k` (m) | `Δd = k·(γ − sin γ)`, γ the cable's angle from the rig z axis |
+/// | `joint_compliance` | `j1..j7` (rad/(N·m)) | `Δθ_j = c_j·τ_j(q)`, τ the handle's gravity torque |
+/// | `backlash` | `j1..j7` (rad) | `Δθ_j = −b_j·sgn(θ̇_j)` |
+/// | `encoder_eccentricity` | `j<k>`, `phase<k>` (rad) | `Δθ_j = e_j·sin(θ_j + φ_j)` |
+/// | `capstan_harmonic` | `j<k>`, `phase<k>` (rad) | `Δθ_j = h_j·sin(2·R_j·θ_j + φ_j)` |
+/// | `thermal_drift` | `k` (1/s) | `d = d_true·(1 + k·(t − t_0))` |
+/// | `latency` | `tau` (s) | `d(t) = d_true(t + τ)` |
+/// | `cable_offset` | `c` (m) | `d = d_true + c` |
+/// | `joint_bump` | `j<k>` (rad), `at<k>` (rad), `width` (rad) | `Δθ_j = A_j·exp(−(θ_j − at_j)²/(2·width²))` |
+/// | `cable_drum_runout` | `a` (m), `phase` (rad) | `Δd = a·sin(d/R_d + φ)` |
+///
+/// Joint effects change the true joint angle (the external encoders `ext1..ext4`, on the
+/// output shafts, see them too); cable effects change only `distance_m`.
+///
+/// Sources: joint compliance, backlash and gear/drum harmonics as non-geometric errors,
+/// Judd & Knasinski, "A technique to calibrate industrial robots with experimental
+/// verification", IEEE T-RA 6(1), 1990, and Whitney, Lozinski & Rourke, "Industrial robot
+/// forward calibration method and results", ASME JDSMC 108, 1986 (transmission error with
+/// harmonics of the gear/drum rotation); encoder eccentricity as a once-per-revolution
+/// error, Heidenhain, "Angle encoder accuracy" (eccentricity of the graduation); drum
+/// eccentricity and capstan ratio, the paper's eq. 1 (whose first harmonic the baseline
+/// models; the second harmonic is the next term of the same Fourier series); cable wrap
+/// around the exit eyelet of radius `k` lengthens the path by `k·(γ − sin γ)` (belt-wrap
+/// geometry); thermal expansion `ΔL = α·L·ΔT` with a temperature drifting linearly in time;
+/// latency, sampling the cable encoder `τ` after the joints.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum EffectKind {
+    /// Cable encoder error growing with the cable's angle from the rig z axis.
+    CableAngle,
+    /// Joint deflection proportional to the handle's gravity torque.
+    JointCompliance,
+    /// Half-width offset signed by motion direction.
+    Backlash,
+    /// Once-per-revolution harmonic on direct-drive joints.
+    EncoderEccentricity,
+    /// Second harmonic of the capstan's motor-drum eccentricity.
+    CapstanHarmonic,
+    /// Cable length scale drifting linearly in time.
+    ThermalDrift,
+    /// Time offset between joint and cable sampling.
+    Latency,
+    /// Zero offset of the cable encoder.
+    CableOffset,
+    /// Outside the library: a local bump in one joint's angle (a dent in a drum).
+    JointBump,
+    /// Outside the library: once-per-revolution error of the cable-encoder drum.
+    CableDrumRunout,
+}
+
+impl EffectKind {
+    /// The diagnosis library, in DESIGN.md §6 order.
+    pub const LIBRARY: [EffectKind; 8] = [
+        EffectKind::CableAngle,
+        EffectKind::JointCompliance,
+        EffectKind::Backlash,
+        EffectKind::EncoderEccentricity,
+        EffectKind::CapstanHarmonic,
+        EffectKind::ThermalDrift,
+        EffectKind::Latency,
+        EffectKind::CableOffset,
+    ];
+    /// Effects outside the library, for blind tests.
+    pub const OUTSIDE: [EffectKind; 2] = [EffectKind::JointBump, EffectKind::CableDrumRunout];
+
+    /// Every kind.
+    pub fn all() -> impl Iterator<Item = EffectKind> {
+        EffectKind::LIBRARY.into_iter().chain(EffectKind::OUTSIDE)
+    }
+
+    /// The stable name (`cable_angle`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            EffectKind::CableAngle => "cable_angle",
+            EffectKind::JointCompliance => "joint_compliance",
+            EffectKind::Backlash => "backlash",
+            EffectKind::EncoderEccentricity => "encoder_eccentricity",
+            EffectKind::CapstanHarmonic => "capstan_harmonic",
+            EffectKind::ThermalDrift => "thermal_drift",
+            EffectKind::Latency => "latency",
+            EffectKind::CableOffset => "cable_offset",
+            EffectKind::JointBump => "joint_bump",
+            EffectKind::CableDrumRunout => "cable_drum_runout",
+        }
+    }
+
+    /// Whether the diagnosis library contains this effect.
+    pub fn in_library(self) -> bool {
+        EffectKind::LIBRARY.contains(&self)
+    }
+
+    /// Whether a parameter key is valid for this effect.
+    fn accepts(self, key: &str) -> bool {
+        let joint_key = |prefix: &str| {
+            key.strip_prefix(prefix)
+                .and_then(|d| d.parse::<usize>().ok())
+                .is_some_and(|j| (1..=64).contains(&j))
+        };
+        match self {
+            EffectKind::CableAngle | EffectKind::ThermalDrift => key == "k",
+            EffectKind::Latency => key == "tau",
+            EffectKind::CableOffset => key == "c",
+            EffectKind::JointCompliance | EffectKind::Backlash => joint_key("j"),
+            EffectKind::EncoderEccentricity | EffectKind::CapstanHarmonic => {
+                joint_key("j") || joint_key("phase")
+            }
+            EffectKind::JointBump => joint_key("j") || joint_key("at") || key == "width",
+            EffectKind::CableDrumRunout => key == "a" || key == "phase",
+        }
+    }
+
+    /// Keys this effect accepts, for messages.
+    fn keys_help(self) -> &'static str {
+        match self {
+            EffectKind::CableAngle | EffectKind::ThermalDrift => "k",
+            EffectKind::Latency => "tau",
+            EffectKind::CableOffset => "c",
+            EffectKind::JointCompliance | EffectKind::Backlash => "j1, j2, …",
+            EffectKind::EncoderEccentricity | EffectKind::CapstanHarmonic => {
+                "j1, j2, …, phase1, phase2, …"
+            }
+            EffectKind::JointBump => "j1, …, at1, …, width",
+            EffectKind::CableDrumRunout => "a, phase",
+        }
+    }
+}
+
+impl fmt::Display for EffectKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for EffectKind {
+    type Err = Error;
+    /// Parses a stable name.
+    ///
+    /// # Errors
+    /// [`Error::Effect`] for an unknown name.
+    fn from_str(s: &str) -> Result<EffectKind, Error> {
+        EffectKind::all()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| Error::Effect {
+                spec: s.to_owned(),
+                message: format!(
+                    "unknown effect; expected one of {}",
+                    EffectKind::all()
+                        .map(EffectKind::name)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            })
+    }
+}
+
+/// One injected effect: its kind and parameters by key (SI units, see [`EffectKind`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Effect {
+    /// Which effect.
+    pub kind: EffectKind,
+    /// `(key, value)` pairs; keys not given are 0 (`width` defaults to 0.1 rad).
+    pub params: Vec<(String, f64)>,
+}
+
+impl Effect {
+    /// An effect with checked parameters.
+    ///
+    /// # Errors
+    /// [`Error::Effect`] for a key the effect does not accept, a repeated key or a
+    /// non-finite value.
+    pub fn try_new(kind: EffectKind, params: Vec<(String, f64)>) -> Result<Effect, Error> {
+        let bad = |message: String| Error::Effect {
+            spec: kind.name().to_owned(),
+            message,
+        };
+        for (i, (key, value)) in params.iter().enumerate() {
+            if !kind.accepts(key) {
+                return Err(bad(format!(
+                    "unknown parameter {key:?}; expected {}",
+                    kind.keys_help()
+                )));
+            }
+            if !value.is_finite() {
+                return Err(bad(format!("{key} = {value} is not finite")));
+            }
+            if params[..i].iter().any(|(k, _)| k == key) {
+                return Err(bad(format!("{key} is given twice")));
+            }
+        }
+        Ok(Effect { kind, params })
+    }
+
+    /// The value of `key`, or 0 when it is not given.
+    pub fn get(&self, key: &str) -> f64 {
+        self.get_or(key, 0.0)
+    }
+
+    fn get_or(&self, key: &str, default: f64) -> f64 {
+        (self.params.iter())
+            .find(|(k, _)| k == key)
+            .map_or(default, |(_, v)| *v)
+    }
+
+    /// The per-joint value `<prefix><joint_idx+1>` (0 when absent).
+    pub fn joint(&self, prefix: &str, joint_idx: usize) -> f64 {
+        self.get(&format!("{prefix}{}", joint_idx + 1))
+    }
+}
+
+impl fmt::Display for Effect {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.kind)?;
+        for (i, (k, v)) in self.params.iter().enumerate() {
+            write!(f, "{}{k}={v:e}", if i == 0 { ':' } else { ',' })?;
+        }
+        Ok(())
+    }
+}
+
+impl FromStr for Effect {
+    type Err = Error;
+    /// Parses `name[:key=value,key=value…]`, e.g. `backlash:j2=1e-3,j3=5e-4`.
+    ///
+    /// # Errors
+    /// [`Error::Effect`] for an unknown name or key, a malformed pair or a non-finite value.
+    fn from_str(s: &str) -> Result<Effect, Error> {
+        let (name, rest) = s.split_once(':').unwrap_or((s, ""));
+        let kind: EffectKind = name.trim().parse()?;
+        let mut params = Vec::new();
+        for pair in rest.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+            let bad = |message: String| Error::Effect {
+                spec: s.to_owned(),
+                message,
+            };
+            let (key, value) = pair
+                .split_once('=')
+                .ok_or_else(|| bad(format!("expected key=value, found {pair:?}")))?;
+            let value: f64 = value
+                .trim()
+                .parse()
+                .map_err(|_| bad(format!("expected a number for {key}, found {value:?}")))?;
+            params.push((key.trim().to_owned(), value));
+        }
+        Effect::try_new(kind, params)
+    }
+}
+
+/// The time-ordered motion of [`simulate_motion`].
+///
+/// Each joint follows `θ_j(t) = mid_j + h_j·(0.6·sin(ω_1j·t + φ_1j) + 0.3·sin(ω_2j·t + φ_2j))`
+/// with `h_j` the half-range of its limits, `ω_1j` giving 5–10 cycles and `ω_2j` 11–19 cycles
+/// over the log (drawn from the seed): smooth, within 90 % of the range, both directions,
+/// peak speeds of about 1 rad/s at the default period, and every fifth of the log (a
+/// cross-validation block) covers each joint's range at least once.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotionConfig {
+    /// Time between samples, s (> 0).
+    pub sample_period_s: f64,
+}
+
+impl Default for MotionConfig {
+    /// 0.5 s between samples (a 200-sample log lasts 100 s), chosen so that joints reach a
+    /// few tenths of rad/s: a 5 ms latency then moves the tip by tens of µm.
+    fn default() -> MotionConfig {
+        MotionConfig {
+            sample_period_s: 0.5,
+        }
+    }
+}
+
+/// One joint's trajectory: two sines around the mid-range.
+#[derive(Clone, Copy, Debug)]
+struct JointPath {
+    mid: f64,
+    half: f64,
+    w: [f64; 2],
+    phi: [f64; 2],
+}
+
+impl JointPath {
+    fn angle(&self, t: f64) -> f64 {
+        self.mid
+            + self.half
+                * (0.6 * (self.w[0] * t + self.phi[0]).sin()
+                    + 0.3 * (self.w[1] * t + self.phi[1]).sin())
+    }
+    fn rate(&self, t: f64) -> f64 {
+        self.half
+            * (0.6 * self.w[0] * (self.w[0] * t + self.phi[0]).cos()
+                + 0.3 * self.w[1] * (self.w[1] * t + self.phi[1]).cos())
+    }
+}
+
+/// Gravity torques of the handle about each joint, N·m (length `n_joints`): `τ = J_vᵀ·F`
+/// with `F = −m·g·ẑ_0`, `ẑ_0` the axis of joint 1 (vertical, DESIGN.md §2) and `J_v` the
+/// linear part of the geometric Jacobian at `q` (Siciliano et al. 2009, §3.8.1).
+///
+/// # Panics
+/// If `x` or `q` do not fit `chain`.
+#[track_caller]
+pub fn handle_gravity_torques_nm(chain: &Chain, x: &[f64], q: &[f64], mass_kg: f64) -> Vec<f64> {
+    let jac = chain.geometric_jacobian(x, q);
+    let up: Vector3<f64> = if jac.ncols() > 0 {
+        Vector3::new(jac[(3, 0)], jac[(4, 0)], jac[(5, 0)])
+    } else {
+        Vector3::z()
+    };
+    let force = -mass_kg * GRAVITY_M_S2 * up;
+    (0..jac.ncols())
+        .map(|j| jac[(0, j)] * force[0] + jac[(1, j)] * force[1] + jac[(2, j)] * force[2])
+        .collect()
+}
+
+/// The cable's angle γ from the rig z axis, rad, for an end point `p` in the rig frame.
+pub fn cable_angle_rad(p: &Vector3<f64>) -> f64 {
+    let n = p.norm();
+    if n > 0.0 {
+        (p[2] / n).clamp(-1.0, 1.0).acos()
+    } else {
+        0.0
+    }
+}
+
+/// Checks the effects against the device: joints exist, capstan harmonics on capstan joints.
+fn check_effects(device: &Device, effects: &[Effect]) -> Result<(), Error> {
+    let n = device.n_joints();
+    for e in effects {
+        for (key, _) in &e.params {
+            let digits: String = key.chars().filter(char::is_ascii_digit).collect();
+            let Ok(j) = digits.parse::<usize>() else {
+                continue;
+            };
+            let bad = |message: String| Error::Effect {
+                spec: e.to_string(),
+                message,
+            };
+            if j == 0 || j > n {
+                return Err(bad(format!("{key}: the device has joints 1..{n}")));
+            }
+            if e.kind == EffectKind::CapstanHarmonic
+                && !device.capstans.iter().any(|c| c.joint == j)
+            {
+                return Err(bad(format!("{key}: joint {j} has no capstan")));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Simulates a time-ordered log of the truth device with unmodelled `effects`.
+///
+/// Motion: [`MotionConfig`] (`cfg.n_poses` samples, `t_s = k·sample_period_s`). Per sample,
+/// the continuous motor-side joint angle θ(t) is read through the encoders (quantised to
+/// their resolution if `cfg.quantise_joints`, [`quantise_readings`]: the quantisation error
+/// is real here, unlike [`crate::simulate`], where the truth starts from the reading); the
+/// truth transmissions map θ to joint angles ([`true_joint_angles`]); the joint effects are
+/// added; `ext1..ext4 = joint angle + N(0, σ_e)` on joints with a transmission; the cable
+/// distance is `|P|` of the truth chain, modified by the cable effects, `+ N(0, σ_m)`.
+/// Effects of the same kind add. Equal inputs give equal logs.
+///
+/// # Errors
+/// [`Error::InvalidNoise`], [`Error::Effect`] (a joint the device does not have, a capstan
+/// harmonic on a joint without capstan, a period ≤ 0), and the errors of [`crate::simulate`].
+pub fn simulate_motion(
+    device: &Device,
+    truth: &Truth,
+    cfg: &SimConfig,
+    motion: &MotionConfig,
+    effects: &[Effect],
+) -> Result<Vec<LogRow>, Error> {
+    let noise = cfg.noise;
+    for (name, value) in [
+        ("sigma_e_rad", noise.sigma_e_rad),
+        ("sigma_m_m", noise.sigma_m_m),
+    ] {
+        if !(value.is_finite() && value >= 0.0) {
+            return Err(Error::InvalidNoise { name, value });
+        }
+    }
+    if !(motion.sample_period_s.is_finite() && motion.sample_period_s > 0.0) {
+        return Err(Error::Effect {
+            spec: "motion".to_owned(),
+            message: format!("sample period {} s must be > 0", motion.sample_period_s),
+        });
+    }
+    check_effects(device, effects)?;
+    let chain = device.chain().map_err(|source| Error::Device { source })?;
+    let x = truth_deviations(&chain, truth)?;
+    let n_joints = device.n_joints();
+    let limits = device.joint_limits();
+    let ratios: Vec<f64> = (0..n_joints)
+        .map(|j| {
+            (device.capstans.iter())
+                .find(|c| c.joint == j + 1)
+                .map_or(1.0, |c| c.ratio)
+        })
+        .collect();
+    let has_ext: Vec<bool> = (0..N_EXT)
+        .map(|k| device.capstans.iter().any(|c| c.joint == k + 1))
+        .collect();
+    let mass_kg = device.handle.map_or(DEFAULT_HANDLE_MASS_KG, |h| h.mass_kg);
+    let drum_radius_m = device.cable_encoder.map_or(0.015, |c| c.drum_radius_m);
+
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+    let duration_s = motion.sample_period_s * cfg.n_poses.max(1) as f64;
+    let paths: Vec<JointPath> = (limits.iter())
+        .map(|&(lo, hi)| {
+            let c1: f64 = 5.0 + 5.0 * rng.random::<f64>();
+            let c2: f64 = 11.0 + 8.0 * rng.random::<f64>();
+            JointPath {
+                mid: 0.5 * (lo + hi),
+                half: 0.5 * (hi - lo),
+                w: [TAU * c1 / duration_s, TAU * c2 / duration_s],
+                phi: [TAU * rng.random::<f64>(), TAU * rng.random::<f64>()],
+            }
+        })
+        .collect();
+
+    // True joint angles at time t: truth transmissions of θ(t), then the joint effects.
+    let joint_angles = |t: f64| -> Result<Vec<f64>, Error> {
+        let theta: Vec<f64> = paths.iter().map(|p| p.angle(t)).collect();
+        let rate: Vec<f64> = paths.iter().map(|p| p.rate(t)).collect();
+        let mut q = true_joint_angles(device, truth, &theta)?;
+        let torques = if effects
+            .iter()
+            .any(|e| e.kind == EffectKind::JointCompliance)
+        {
+            handle_gravity_torques_nm(&chain, &x, &q, mass_kg)
+        } else {
+            vec![0.0; n_joints]
+        };
+        let mut dq = vec![0.0; n_joints];
+        for e in effects {
+            for j in 0..n_joints {
+                let th = theta[j];
+                dq[j] += match e.kind {
+                    EffectKind::JointCompliance => e.joint("j", j) * torques[j],
+                    EffectKind::Backlash => -e.joint("j", j) * rate[j].signum(),
+                    EffectKind::EncoderEccentricity => {
+                        e.joint("j", j) * (th + e.joint("phase", j)).sin()
+                    }
+                    EffectKind::CapstanHarmonic => {
+                        e.joint("j", j) * (2.0 * ratios[j] * th + e.joint("phase", j)).sin()
+                    }
+                    EffectKind::JointBump => {
+                        let w = e.get_or("width", 0.1).abs().max(1e-6);
+                        let u = (th - e.joint("at", j)) / w;
+                        e.joint("j", j) * (-0.5 * u * u).exp()
+                    }
+                    _ => 0.0,
+                };
+            }
+        }
+        for (qj, d) in q.iter_mut().zip(&dq) {
+            *qj += d;
+        }
+        Ok(q)
+    };
+
+    let latency_s: f64 = (effects.iter())
+        .filter(|e| e.kind == EffectKind::Latency)
+        .map(|e| e.get("tau"))
+        .sum();
+    let mut rows = Vec::with_capacity(cfg.n_poses);
+    for k in 0..cfg.n_poses {
+        let t = k as f64 * motion.sample_period_s;
+        let theta: Vec<f64> = paths.iter().map(|p| p.angle(t)).collect();
+        let reading = if cfg.quantise_joints {
+            quantise_readings(device, &theta)
+        } else {
+            theta
+        };
+        let q_true = joint_angles(t)?;
+        let q_cable = if latency_s != 0.0 {
+            joint_angles(t + latency_s)?
+        } else {
+            q_true.clone()
+        };
+        let p = chain.end_point(&x, &q_cable).coords;
+        let d_true = p.norm();
+        let mut d = d_true;
+        for e in effects {
+            d += match e.kind {
+                EffectKind::CableAngle => {
+                    let g = cable_angle_rad(&p);
+                    e.get("k") * (g - g.sin())
+                }
+                EffectKind::ThermalDrift => d_true * e.get("k") * t,
+                EffectKind::CableOffset => e.get("c"),
+                EffectKind::CableDrumRunout => {
+                    e.get("a") * (d_true / drum_radius_m + e.get("phase")).sin()
+                }
+                _ => 0.0,
+            };
+        }
+        let z_m: f64 = rng.sample(StandardNormal);
+        let distance_m = d + noise.sigma_m_m * z_m;
+        let ext = (0..N_EXT)
+            .map(|k| {
+                let z_e: f64 = rng.sample(StandardNormal);
+                let angle = q_true.get(k).filter(|_| has_ext[k])?;
+                Some(angle + noise.sigma_e_rad * z_e)
+            })
+            .collect();
+        rows.push(LogRow {
+            q: reading,
+            distance_m,
+            ext,
+            t_s: Some(t),
+            line: k as u64 + 2,
+        });
+    }
+    Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_kind_survives_the_name_round_trip() {
+        for kind in EffectKind::all() {
+            assert_eq!(kind.name().parse::<EffectKind>().ok(), Some(kind));
+            assert_eq!(kind.to_string(), kind.name());
+        }
+        assert_eq!(EffectKind::all().count(), 10);
+        assert!(EffectKind::LIBRARY.iter().all(|k| k.in_library()));
+        assert!(EffectKind::OUTSIDE.iter().all(|k| !k.in_library()));
+    }
+
+    #[test]
+    fn effect_specs_parse_and_reject_bad_input() {
+        let e: Effect = "backlash:j2=1e-3,j3=5e-4".parse().expect("valid");
+        assert_eq!(e.kind, EffectKind::Backlash);
+        assert_eq!(e.joint("j", 1), 1e-3);
+        assert_eq!(e.get("j1"), 0.0);
+        let round: Effect = e.to_string().parse().expect("round trip");
+        assert_eq!(round, e);
+        let err = "backlash:k=1"
+            .parse::<Effect>()
+            .expect_err("k is not a backlash key");
+        assert!(err.to_string().contains("unknown parameter \"k\""), "{err}");
+        let err = "wobble:k=1".parse::<Effect>().expect_err("unknown effect");
+        assert!(err.to_string().contains("unknown effect"), "{err}");
+        let err = "latency:tau=x".parse::<Effect>().expect_err("not a number");
+        assert!(err.to_string().contains("expected a number"), "{err}");
+        let err = "latency:tau=1,tau=2".parse::<Effect>().expect_err("twice");
+        assert!(err.to_string().contains("twice"), "{err}");
+        assert!("cable_offset".parse::<Effect>().is_ok());
+    }
+}
