@@ -377,9 +377,15 @@ fn interchangeable(a: &[f64], b: &[f64], fails: impl Fn(f64, f64) -> bool) -> bo
     if na == 0.0 || nb == 0.0 {
         return false;
     }
-    let cos = a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>() / (na * nb);
-    let sin = (1.0 - cos * cos).max(0.0).sqrt();
-    fails(na * sin, nb * sin)
+    // Components orthogonal to the other column, by projection (not √(1 − cos²), which loses
+    // half the digits for nearly parallel columns).
+    let dot = a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let perp = |u: &[f64], v: &[f64], nv: f64| {
+        let t = dot / (nv * nv);
+        let r: Vec<f64> = u.iter().zip(v).map(|(x, y)| x - t * y).collect();
+        norm_l2(&r)
+    };
+    fails(perp(a, b, nb), perp(b, a, na))
 }
 
 fn norm_l2(x: &[f64]) -> f64 {
