@@ -861,8 +861,24 @@ pub fn identify_jointly<'a>(
     kin: &Identified,
 ) -> Result<(JointProblem<'a>, Identified)> {
     let mut problem = JointProblem::new(r, rows)?;
-    let x0 = problem.start_from(t, kin);
-    let first = identify(&problem, x0.clone(), &joint_config()).context("joint identification")?;
+    let mut x0 = problem.start_from(t, kin);
+    let mut first =
+        identify(&problem, x0.clone(), &joint_config()).context("joint identification")?;
+    // A kinematic parameter the joint problem prunes is held where it starts. When the two-step
+    // solution chose the other member of a gauge pair (d0 instead of θ1), that start is not the
+    // nominal: restart with it at 0, the gauge of the frames (DESIGN.md §2, d0 = 0), so the
+    // kept member carries the deviation.
+    let nt = problem.n_trans();
+    let stale: Vec<usize> = (first.identifiability.pruned.iter())
+        .map(|p| p.index)
+        .filter(|&i| i >= nt && x0[i] != 0.0)
+        .collect();
+    if !stale.is_empty() {
+        for i in stale {
+            x0[i] = 0.0;
+        }
+        first = identify(&problem, x0, &joint_config()).context("joint identification")?;
+    }
     let n = rows.len();
     let res = &first.fit.residuals;
     let group_rms = |from: usize, to: usize| {
