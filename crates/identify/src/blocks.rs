@@ -19,8 +19,8 @@ use faer::linalg::qr::no_pivoting::factor as qr_factor;
 use faer::{Col, ColMut, ColRef, Mat, MatMut, Par};
 use rayon::prelude::*;
 
-use crate::error::{Error, check_config, check_factor};
-use crate::lm::{Fit, Linearised, LmConfig, ScaledQr, Termination, check_free, run};
+use crate::error::Error;
+use crate::lm::{Fit, Linearised, LmConfig, ScaledQr, Termination, check_inputs, run};
 use crate::problem::{EvalError, ParamLayout, Problem};
 
 /// A problem whose residuals split into consecutive row blocks that can be evaluated
@@ -381,24 +381,7 @@ pub fn levenberg_marquardt_streaming(
     let blocks = p.row_blocks().ok_or(Error::NoRowBlocks)?;
     let layout = p.layout();
     let n = layout.len();
-    if x0.nrows() != n {
-        return Err(Error::WrongLength {
-            expected: n,
-            found: x0.nrows(),
-        });
-    }
-    check_free(free, layout)?;
-    check_config("ftol", cfg.ftol, false)?;
-    check_config("xtol", cfg.xtol, false)?;
-    check_config("gtol", cfg.gtol, false)?;
-    check_factor(cfg.factor)?;
-    let m = p.n_residuals();
-    if m < free.len() {
-        return Err(Error::TooFewResiduals {
-            n_residuals: m,
-            n_free: free.len(),
-        });
-    }
+    check_inputs(p, x0.as_ref(), free, cfg)?;
     let lin = linearise(blocks, x0.as_ref(), n).map_err(|e| error_at_x0(e, layout))?;
     Ok(streaming_fit(blocks, n, x0, free, cfg, lin).0)
 }

@@ -109,6 +109,38 @@ pub struct Fit {
 }
 
 /// Checks that `free` holds distinct indices of `layout`.
+/// The input checks of the dense and streaming LM: `x0` has one entry per layout parameter,
+/// `free` is valid ([`check_free`]), the tolerances and the trust-region factor are valid, and
+/// the problem has at least as many residuals as free parameters.
+pub(crate) fn check_inputs(
+    p: &impl Problem,
+    x0: ColRef<'_, f64>,
+    free: &[usize],
+    cfg: &LmConfig,
+) -> Result<(), Error> {
+    let layout = p.layout();
+    let n = layout.len();
+    if x0.nrows() != n {
+        return Err(Error::WrongLength {
+            expected: n,
+            found: x0.nrows(),
+        });
+    }
+    check_free(free, layout)?;
+    check_config("ftol", cfg.ftol, false)?;
+    check_config("xtol", cfg.xtol, false)?;
+    check_config("gtol", cfg.gtol, false)?;
+    check_factor(cfg.factor)?;
+    let m = p.n_residuals();
+    if m < free.len() {
+        return Err(Error::TooFewResiduals {
+            n_residuals: m,
+            n_free: free.len(),
+        });
+    }
+    Ok(())
+}
+
 pub(crate) fn check_free(free: &[usize], layout: &ParamLayout) -> Result<(), Error> {
     let n_params = layout.len();
     let mut seen = vec![false; n_params];
@@ -179,27 +211,11 @@ pub fn levenberg_marquardt(
     free: &[usize],
     cfg: &LmConfig,
 ) -> Result<Fit, Error> {
+    check_inputs(p, x0.as_ref(), free, cfg)?;
     let layout = p.layout();
     let n = layout.len();
-    if x0.nrows() != n {
-        return Err(Error::WrongLength {
-            expected: n,
-            found: x0.nrows(),
-        });
-    }
-    check_free(free, layout)?;
-    check_config("ftol", cfg.ftol, false)?;
-    check_config("xtol", cfg.xtol, false)?;
-    check_config("gtol", cfg.gtol, false)?;
-    check_factor(cfg.factor)?;
     let m = p.n_residuals();
     let nf = free.len();
-    if m < nf {
-        return Err(Error::TooFewResiduals {
-            n_residuals: m,
-            n_free: nf,
-        });
-    }
 
     let mut r = Col::<f64>::zeros(m);
     p.residuals(x0.as_ref(), r.as_mut())?;
