@@ -281,8 +281,10 @@ fn run(cli: Cli) -> Result<()> {
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
             );
             bar.set_message("reproducing");
-            let reference = hapcal::paper::Reference::load(&truth)?;
-            let select = |readings: &[Vec<f64>], n: usize| -> anyhow::Result<Vec<usize>> {
+            let select = |reference: &hapcal::paper::Reference,
+                          readings: &[Vec<f64>],
+                          n: usize|
+             -> anyhow::Result<Vec<usize>> {
                 let criterion = design.unwrap_or(hapcal_identify::Criterion::DOptimal);
                 let c = hapcal::plan::candidate_blocks(
                     &reference.device,

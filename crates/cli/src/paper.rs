@@ -407,9 +407,10 @@ pub fn run_seed(r: &Reference, seed: u64, n_poses: usize) -> Result<SeedResult> 
     run_seed_with(r, seed, n_poses, &PoseChoice::Random)
 }
 
-/// Selects `n_select` of the candidate joint readings (rad, one `Vec` per candidate); returns
-/// their indices.
-pub type PoseSelector<'a> = dyn Fn(&[Vec<f64>], usize) -> Result<Vec<usize>> + Sync + 'a;
+/// Selects `n_select` of the candidate joint readings (rad, one `Vec` per candidate) of the
+/// reference device; returns their indices.
+pub type PoseSelector<'a> =
+    dyn Fn(&Reference, &[Vec<f64>], usize) -> Result<Vec<usize>> + Sync + 'a;
 
 /// How the identification poses of one seed are chosen.
 pub enum PoseChoice<'a> {
@@ -451,7 +452,7 @@ pub fn run_seed_with(
             let cfg = SimConfig::new(seed, *n_candidates).with_noise(r.noise);
             let candidates = hapcal_sim::simulate(&r.device, &r.truth, &cfg)?;
             let readings: Vec<Vec<f64>> = candidates.iter().map(|row| row.q.clone()).collect();
-            let chosen = select(&readings, n_poses)?;
+            let chosen = select(r, &readings, n_poses)?;
             chosen
                 .iter()
                 .map(|&i| {
