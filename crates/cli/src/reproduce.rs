@@ -559,49 +559,30 @@ pub fn run(
     // ---- Fig. 8 and the transmissions' effect.
     let v0 = seeds[0].validation;
     let imp = |a: f64, b: f64| accuracy_improvement_pct(a, b).unwrap_or(f64::NAN);
-    let mut pos_i: Vec<f64> = seeds
-        .iter()
-        .map(|s| {
-            imp(
-                s.validation.position_rms_after_m,
-                s.validation.position_rms_before_m,
-            )
-        })
-        .collect();
-    let mut ori_i: Vec<f64> = seeds
-        .iter()
-        .map(|s| {
-            imp(
-                s.validation.orientation_rms_after_rad,
-                s.validation.orientation_rms_before_rad,
-            )
-        })
-        .collect();
-    let mut dist_full: Vec<f64> = seeds
-        .iter()
-        .map(|s| {
-            imp(
-                s.validation.distance_rms_after_m,
-                s.validation.distance_rms_before_m,
-            )
-        })
-        .collect();
-    let mut dist_kin: Vec<f64> = seeds
-        .iter()
-        .map(|s| {
-            imp(
-                s.validation.distance_rms_kinematics_only_m,
-                s.validation.distance_rms_before_m,
-            )
-        })
-        .collect();
-    let mut ori_left: Vec<f64> = seeds
-        .iter()
-        .map(|s| {
-            s.validation.orientation_rms_after_rad
-                - s.validation.orientation_rms_after_true_unidentifiable_rad
-        })
-        .collect();
+    // One figure per seed, from its validation.
+    let per_seed = |f: &dyn Fn(&crate::paper::Validation) -> f64| -> Vec<f64> {
+        seeds.iter().map(|s| f(&s.validation)).collect()
+    };
+    let pos_i = per_seed(&|v| imp(v.position_rms_after_m, v.position_rms_before_m));
+    let ori_i = per_seed(&|v| imp(v.orientation_rms_after_rad, v.orientation_rms_before_rad));
+    let dist_full = per_seed(&|v| imp(v.distance_rms_after_m, v.distance_rms_before_m));
+    let dist_kin = per_seed(&|v| imp(v.distance_rms_kinematics_only_m, v.distance_rms_before_m));
+    let mut ori_left = per_seed(&|v| {
+        v.orientation_rms_after_rad - v.orientation_rms_after_true_unidentifiable_rad
+    });
+    // (median, 5th, 95th percentile) of a per-seed figure.
+    let spread = |v: &[f64]| {
+        let mut v = v.to_vec();
+        (
+            quantile(&mut v, 0.5),
+            quantile(&mut v, 0.05),
+            quantile(&mut v, 0.95),
+        )
+    };
+    let (pos_med, pos_lo, pos_hi) = spread(&pos_i);
+    let (ori_med, ori_lo, ori_hi) = spread(&ori_i);
+    let (full_med, full_lo, full_hi) = spread(&dist_full);
+    let (kin_med, kin_lo, kin_hi) = spread(&dist_kin);
     writeln!(
         md,
         "## Fig. 8: validation on {n_poses} fresh poses, device base frame\n"
@@ -617,9 +598,9 @@ pub fn run(
         v0.position_rms_before_m * 1e3,
         v0.position_rms_after_m * 1e3,
         imp(v0.position_rms_after_m, v0.position_rms_before_m),
-        quantile(&mut pos_i.clone(), 0.5),
-        quantile(&mut pos_i.clone(), 0.05),
-        quantile(&mut pos_i, 0.95)
+        pos_med,
+        pos_lo,
+        pos_hi
     )?;
     writeln!(
         md,
@@ -627,9 +608,9 @@ pub fn run(
         v0.orientation_rms_before_rad * 1e3,
         v0.orientation_rms_after_rad * 1e3,
         imp(v0.orientation_rms_after_rad, v0.orientation_rms_before_rad),
-        quantile(&mut ori_i.clone(), 0.5),
-        quantile(&mut ori_i.clone(), 0.05),
-        quantile(&mut ori_i, 0.95)
+        ori_med,
+        ori_lo,
+        ori_hi
     )?;
     writeln!(
         md,
@@ -653,12 +634,7 @@ pub fn run(
     writeln!(
         md,
         "Median I% (eq. 9) over {n_seeds} seeds: full calibration {:.2} % (5th–95th {:.2}–{:.2}), transmissions left out {:.2} % ({:.2}–{:.2}).\n",
-        quantile(&mut dist_full.clone(), 0.5),
-        quantile(&mut dist_full.clone(), 0.05),
-        quantile(&mut dist_full.clone(), 0.95),
-        quantile(&mut dist_kin.clone(), 0.5),
-        quantile(&mut dist_kin.clone(), 0.05),
-        quantile(&mut dist_kin.clone(), 0.95)
+        full_med, full_lo, full_hi, kin_med, kin_lo, kin_hi
     )?;
     let mut fig8 = String::from(
         "seed,position_rms_before_m,position_rms_after_m,orientation_rms_before_rad,orientation_rms_after_rad,orientation_rms_after_true_unidentifiable_rad,distance_rms_before_m,distance_rms_after_m,distance_rms_kinematics_only_m\n",
@@ -686,30 +662,19 @@ pub fn run(
     ));
     golden.push((
         "fig8.median_position_improvement_pct".into(),
-        quantile(
-            &mut seeds
-                .iter()
-                .map(|s| {
-                    imp(
-                        s.validation.position_rms_after_m,
-                        s.validation.position_rms_before_m,
-                    )
-                })
-                .collect::<Vec<_>>(),
-            0.5,
-        ),
+        pos_med,
         0.01,
         "%",
     ));
     golden.push((
         "distance.median_improvement_full_pct".into(),
-        quantile(&mut dist_full, 0.5),
+        full_med,
         0.01,
         "%",
     ));
     golden.push((
         "distance.median_improvement_kinematics_only_pct".into(),
-        quantile(&mut dist_kin, 0.5),
+        kin_med,
         0.05,
         "%",
     ));
