@@ -52,8 +52,8 @@ enum Command {
         /// Known distance between the two sockets of a placement, m.
         #[arg(long, default_value_t = 0.05)]
         socket_distance_m: f64,
-        /// Cross-validation folds (time-contiguous blocks).
-        #[arg(long, default_value_t = 5)]
+        /// Cross-validation folds (time-contiguous blocks, at least 2).
+        #[arg(long, default_value_t = 5, value_parser = count_at_least::<2>)]
         folds: usize,
         /// Measurement noise standard deviation, m (default: estimated from the residuals).
         #[arg(long)]
@@ -98,8 +98,8 @@ enum Command {
         /// Random seed (the log is the same for the same seed).
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// Number of poses.
-        #[arg(long, default_value_t = 200)]
+        /// Number of poses (at least 1).
+        #[arg(long, default_value_t = 200, value_parser = count_at_least::<1>)]
         poses: usize,
         /// Cable noise: `paper` (σ_m = 2π·R_d·σ_e, the paper's formula) or `arc-length` (R_d·σ_e).
         #[arg(long, default_value = "paper")]
@@ -134,8 +134,8 @@ enum Command {
         /// models then join the candidates).
         #[arg(long, default_value = "full")]
         baseline: String,
-        /// Cross-validation folds (time-contiguous blocks).
-        #[arg(long, default_value_t = 5)]
+        /// Cross-validation folds (time-contiguous blocks, at least 2).
+        #[arg(long, default_value_t = 5, value_parser = count_at_least::<2>)]
         folds: usize,
         /// Print one JSON document instead of the table.
         #[arg(long)]
@@ -149,7 +149,7 @@ enum Command {
     /// docs/results/diagnose.md.
     BlindTest {
         /// Number of cases (kinds stratified: 1/8 none, 1/8 outside, 1/8 two, 5/8 one effect).
-        #[arg(long, default_value_t = 240)]
+        #[arg(long, default_value_t = 240, value_parser = count_at_least::<1>)]
         cases: usize,
         /// First seed.
         #[arg(long, default_value_t = 0)]
@@ -174,8 +174,8 @@ enum Command {
         /// Force-feedback gain G of the closed-loop rows.
         #[arg(long, default_value_t = 10.0)]
         gain: f64,
-        /// Random poses.
-        #[arg(long, default_value_t = 200)]
+        /// Random poses (at least 1).
+        #[arg(long, default_value_t = 200, value_parser = count_at_least::<1>)]
         poses: usize,
         /// Seed of the random poses.
         #[arg(long, default_value_t = 4)]
@@ -213,6 +213,16 @@ enum Command {
         #[arg(long)]
         tip: String,
     },
+}
+
+/// Parses a whole number that must be at least `MIN` (poses, cases, folds); clap reports a
+/// smaller or non-numeric value as a usage error naming the argument.
+fn count_at_least<const MIN: usize>(text: &str) -> std::result::Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(n) if n >= MIN => Ok(n),
+        Ok(n) => Err(format!("must be at least {MIN}, got {n}")),
+        Err(_) => Err(format!("expected a whole number, got {text:?}")),
+    }
 }
 
 fn run(cli: Cli) -> Result<()> {

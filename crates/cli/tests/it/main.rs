@@ -249,6 +249,28 @@ fn urdf_without_the_tip_link_is_an_error() {
 }
 
 #[test]
+fn zero_counts_are_usage_errors_naming_the_argument() {
+    for (args, name, floor) in [
+        (
+            &["simulate", "--poses", "0", "--out", "unused.csv"][..],
+            "--poses",
+            1,
+        ),
+        (&["blind-test", "--cases", "0"][..], "--cases", 1),
+        (&["calibrate", "--folds", "1"][..], "--folds", 2),
+    ] {
+        let out = hapcal(args);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains(name) && err.contains(&format!("at least {floor}")),
+            "{args:?}: {err}"
+        );
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+}
+
+#[test]
 fn import_urdf_writes_a_device_file_that_calibrates_alike() {
     let out = hapcal(&["import-urdf", &iiwa(), "--tip", "ball_link"]);
     assert!(out.status.success(), "{}", stderr(&out));
