@@ -43,8 +43,10 @@ pub enum Error {
     },
     /// As many residuals as kept parameters, so the noise cannot be estimated from the residuals.
     #[error(
-        "{n_residuals} residuals leave no degree of freedom to estimate sigma with {n_free} free \
-         parameters; give sigma explicitly"
+        "{n_residuals} residuals for {n_free} kept parameters leave no degree of freedom to \
+         estimate the noise sigma from the residuals (with as many or fewer residuals than \
+         parameters, the data can at most interpolate): measure more configurations than \
+         parameters, or give the noise sigma"
     )]
     NoDegreesOfFreedom {
         /// Number of residuals `m`.
