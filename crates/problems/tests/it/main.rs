@@ -218,6 +218,21 @@ fn harmonic_model_moves_the_joint_by_its_eccentricity() {
     for j in [0, 2, 3, 4, 5, 6] {
         assert_eq!(angles[j], qs[0][j]);
     }
+    // The residual the solver sees is the calibrated model's end point minus the socket point
+    // (row 2 of `problem_with_models` is a point row on point 0; sigma_point_m = 5e-5).
+    let mut r = Col::<f64>::zeros(p.n_residuals());
+    p.residuals(x.as_ref(), r.as_mut()).unwrap();
+    let tip = p.model(x.as_ref()).end_point(&qs[2]);
+    let point = p.points(x.as_ref())[0];
+    // Rows: distance (1), position (3), then the point row.
+    for k in 0..3 {
+        let expected = (tip[k] - point[k]) / 5e-5;
+        assert!(
+            (r[4 + k] - expected).abs() < 1e-9,
+            "{k}: {} vs {expected}",
+            r[4 + k]
+        );
+    }
 }
 
 #[test]
