@@ -32,7 +32,9 @@ pub enum ModelChoice {
     /// ([`GravityCompliance::published_by_actuator`]).
     ActuatorCompliance,
     /// Kinematic parameters plus once-per-revolution harmonic angle errors on every joint
-    /// ([`JointHarmonics::first_order`]: encoder eccentricity).
+    /// ([`JointHarmonics::first_order`]: encoder eccentricity). Not a candidate of
+    /// [`ModelChoice::Auto`], nor are the other harmonic models: on one MUKCa placement they
+    /// fit the training data better and the other placements worse (docs/results/mukca.md).
     Harmonic,
     /// Kinematic parameters plus first- and second-order harmonic angle errors on every joint.
     Harmonic2,
@@ -396,9 +398,10 @@ fn solve(
 }
 
 /// Repeats of the cross-validation: repeat `r` shifts every block boundary by `r/CV_REPEATS` of
-/// a block. Averaging the held-out errors over shifted partitions makes the choice insensitive
-/// to where the fold boundaries fall (measured: the same choice for 3…10 folds on the MUKCa
-/// training placements, docs/results/mukca.md), at three times the cost of one k-fold pass.
+/// a block. Averaging the held-out errors over shifted partitions makes the choice less
+/// sensitive to where the fold boundaries fall (measured for 3…10 folds on the MUKCa training
+/// placements in docs/results/mukca.md: kuka_14, panda_1 and panda_6 keep their model, panda_7
+/// moves between two compliance models), at three times the cost of one k-fold pass.
 pub const CV_REPEATS: usize = 3;
 
 /// Standard errors by which a candidate's held-out squared error must undercut the geometric
