@@ -547,6 +547,47 @@ fn blocked_difference(a: &HeldOut, b: &HeldOut) -> (f64, f64) {
     (mean, var.sqrt())
 }
 
+/// The model choice of `--model auto` from the held-out errors of each candidate
+/// (`candidates[0]` must be the geometric model, the reference of the differences): a candidate
+/// must undercut the geometric model by [`CV_SIGNIFICANCE_Z`] blocked standard errors, and the
+/// lowest held-out RMS among those that do wins (the geometric model if none does).
+///
+/// # Panics
+/// If `held` and `candidates` differ in length or are empty.
+#[track_caller]
+fn choose(candidates: &[ModelChoice], held: &[HeldOut]) -> (ModelChoice, Vec<CvReport>) {
+    assert!(
+        !held.is_empty() && held.len() == candidates.len(),
+        "one held-out set per candidate"
+    );
+    let rms =
+        |h: &HeldOut| (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt();
+    let mut choice = candidates[0];
+    let mut best_rms = rms(&held[0]);
+    let mut reports = Vec::new();
+    for (candidate, h) in candidates.iter().zip(held) {
+        let difference = blocked_difference(h, &held[0]);
+        let beats =
+            *candidate != candidates[0] && difference.0 + CV_SIGNIFICANCE_Z * difference.1 < 0.0;
+        if beats && rms(h) < best_rms {
+            choice = *candidate;
+            best_rms = rms(h);
+        }
+        reports.push(CvReport {
+            model: *candidate,
+            heldout_rms_m: rms(h),
+            difference_to_geometric_m2: if *candidate == candidates[0] {
+                (0.0, 0.0)
+            } else {
+                difference
+            },
+            beats_geometric: beats,
+            n_kept: 0,
+        });
+    }
+    (choice, reports)
+}
+
 /// Refuses a calibration whose data determine no parameter, or fewer configurations than the
 /// parameters they would keep.
 fn check_determined(n_configurations: usize, n_kept: usize, n_model_params: usize) -> Result<()> {
@@ -664,27 +705,8 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             for &candidate in &candidates {
                 held.push(cross_validate(&chain, &train, plan, candidate, CV_REPEATS)?);
             }
-            let rms = |h: &HeldOut| {
-                (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt()
-            };
-            let mut choice = ModelChoice::Geometric;
-            let mut best_rms = rms(&held[0]);
-            for (candidate, h) in candidates.iter().zip(&held) {
-                let difference = blocked_difference(h, &held[0]);
-                let beats = *candidate != ModelChoice::Geometric
-                    && difference.0 + CV_SIGNIFICANCE_Z * difference.1 < 0.0;
-                if beats && rms(h) < best_rms {
-                    choice = *candidate;
-                    best_rms = rms(h);
-                }
-                cross_validation.push(CvReport {
-                    model: *candidate,
-                    heldout_rms_m: rms(h),
-                    difference_to_geometric_m2: difference,
-                    beats_geometric: beats,
-                    n_kept: 0,
-                });
-            }
+            let (choice, reports) = choose(&candidates, &held);
+            cross_validation = reports;
             choice
         }
         fixed => fixed,
@@ -866,7 +888,47 @@ pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use super::{HeldOut, blocked_difference, fold_of};
+    use super::{HeldOut, ModelChoice, blocked_difference, choose, fold_of};
+
+    /// Held-out errors on 10 blocks of 5 rows: `base` everywhere, minus `gain` in every block,
+    /// with ±`spread` alternating between blocks (the block-to-block scatter of the gain).
+    fn held(base: f64, gain: f64, spread: f64) -> HeldOut {
+        HeldOut {
+            sq_errors: (0..50)
+                .map(|i| {
+                    let sign = if (i / 5) % 2 == 0 { 1.0 } else { -1.0 };
+                    base - gain + sign * spread
+                })
+                .collect(),
+            block: (0..50).map(|i| i / 5).collect(),
+        }
+    }
+
+    #[test]
+    fn a_candidate_must_beat_the_geometric_model_by_the_margin() {
+        use ModelChoice::{ActuatorCompliance, Compliance, Geometric, MassCompliance};
+        let geometric = held(10.0, 0.0, 0.0);
+        // Block scatter ±1 over 10 blocks: standard error 1/3 (sample SD 1.054, /√10).
+        // A gain of 0.4 is 1.2 SE (not enough), 0.6 is 1.8 SE (enough), 0.9 is 2.7 SE.
+        let candidates = [Geometric, Compliance, MassCompliance, ActuatorCompliance];
+        let sets = [
+            geometric.clone(),
+            held(10.0, 0.4, 1.0),
+            held(10.0, 0.6, 1.0),
+            held(10.0, 0.9, 1.0),
+        ];
+        let (choice, reports) = choose(&candidates, &sets);
+        let beats: Vec<bool> = reports.iter().map(|r| r.beats_geometric).collect();
+        assert_eq!(beats, [false, false, true, true]);
+        // Among those that pass, the lowest held-out RMS.
+        assert_eq!(choice, ActuatorCompliance);
+        // Only a gain inside the margin: the geometric model stays.
+        let (choice, _) = choose(&candidates[..2], &sets[..2]);
+        assert_eq!(choice, Geometric);
+        // The same gain without block scatter is decisive.
+        let (choice, _) = choose(&candidates[..2], &[geometric, held(10.0, 0.4, 0.0)]);
+        assert_eq!(choice, Compliance);
+    }
 
     #[test]
     fn every_repeat_holds_each_row_out_once_in_contiguous_blocks() {
