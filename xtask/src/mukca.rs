@@ -395,7 +395,7 @@ const WHAT_WAS_TRIED: &str = "\
 error, and with 6–10 folds back-high became 24–33 % worse than MUKCa's (mean −9.9 … −5.3 %). \
 Per-row standard errors also understate the uncertainty, because the residuals of neighbouring \
 configurations are correlated. The rule above (three shifted repeats, block standard errors, \
-1.5 SE margin) gives the same mean, 0.884–0.893, for every fold count from 3 to 10. It gives up \
+1.5 SE margin) gives a mean of 0.883–0.893 for every fold count from 3 to 10. It gives up \
 the lucky panda_1 pick, which the training data cannot support. The 1.5 is a compromise that was \
 set by looking at test placements. It was measured by rerunning this task with \
 `CV_SIGNIFICANCE_Z` (crates/cli/src/calibrate.rs) set to 1 or 2. z = 1, the textbook \
@@ -425,9 +425,9 @@ significant margin, so they are not candidates of `--model auto`.
 command with `--data fixtures/mukca/data/panda_6`), the geometric model reaches 0.180 and \
 0.177 mm on panda_6's left and right placements. From `front` alone it reaches \
 0.218 and 0.281 mm, the same as MUKCa's optimiser. What is missing is parameter precision \
-outside the training placement's configurations, not a model term we could name: on the \
-Pandas, every non-geometric model we tried (lumped, mass and actuator compliance, harmonics) \
-is within ±5 % of the geometric model on panda_6 and panda_7.
+outside the training placement's configurations, not a model term we could name. On \
+panda_6 and panda_7 no non-geometric model we tried (lumped, mass and actuator compliance, \
+harmonics) does better than the geometric one by more than 5 % (the fixed table).
 - Earlier sessions (no new numbers here): ridge prior toward the nominal URDF (it reproduces \
 MUKCa's own figures), forced compliance models, gear-ratio scale, socket-distance weight, \
 outlier rejection, link bending.
