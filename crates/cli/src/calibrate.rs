@@ -405,14 +405,13 @@ fn solve(
 pub const CV_REPEATS: usize = 3;
 
 /// Standard errors by which a candidate's held-out squared error must undercut the geometric
-/// model's before it is chosen. The one-standard-error rule (Hastie, Tibshirani & Friedman,
-/// "The Elements of Statistical Learning", 2nd ed., §7.10) is z = 1; on the MUKCa training
-/// placements z = 1 still lets a 7-parameter compliance model through on panda_1 with 7 folds
-/// (inside the placement it helps, on the others it does not), z = 2 keeps the geometric model
-/// on units where compliance does help on unseen placements (panda_2, panda_3). 1.5 is the
-/// compromise, measured over 3…10 folds in docs/results/mukca.md; it was set by looking at
-/// test placements of those units, which the document says.
-pub const CV_SIGNIFICANCE_Z: f64 = 1.5;
+/// model's before it is chosen: the one-standard-error rule (Breiman et al., "Classification and
+/// Regression Trees", 1984; Hastie, Tibshirani & Friedman, "The Elements of Statistical
+/// Learning", 2nd ed., §7.10), z = 1, taken as the textbook default before any test placement
+/// was looked at. A larger margin tuned on the MUKCa test placements (1.5 keeps panda_1 on the
+/// geometric model at every fold count 3…10) would break the rule that settings are chosen on
+/// the training placement only; docs/results/mukca.md shows the fold sweep with z = 1 as it is.
+pub const CV_SIGNIFICANCE_Z: f64 = 1.0;
 
 /// Held-out errors of one candidate: one entry per training row, in a fixed order.
 #[derive(Clone, Debug, Default)]
@@ -909,11 +908,11 @@ mod tests {
         use ModelChoice::{ActuatorCompliance, Compliance, Geometric, MassCompliance};
         let geometric = held(10.0, 0.0, 0.0);
         // Block scatter ±1 over 10 blocks: standard error 1/3 (sample SD 1.054, /√10).
-        // A gain of 0.4 is 1.2 SE (not enough), 0.6 is 1.8 SE (enough), 0.9 is 2.7 SE.
+        // A gain of 0.2 is 0.6 SE (not enough), 0.6 is 1.8 SE (enough), 0.9 is 2.7 SE.
         let candidates = [Geometric, Compliance, MassCompliance, ActuatorCompliance];
         let sets = [
             geometric.clone(),
-            held(10.0, 0.4, 1.0),
+            held(10.0, 0.2, 1.0),
             held(10.0, 0.6, 1.0),
             held(10.0, 0.9, 1.0),
         ];
@@ -926,7 +925,7 @@ mod tests {
         let (choice, _) = choose(&candidates[..2], &sets[..2]);
         assert_eq!(choice, Geometric);
         // The same gain without block scatter is decisive.
-        let (choice, _) = choose(&candidates[..2], &[geometric, held(10.0, 0.4, 0.0)]);
+        let (choice, _) = choose(&candidates[..2], &[geometric, held(10.0, 0.2, 0.0)]);
         assert_eq!(choice, Compliance);
     }
 
