@@ -88,16 +88,50 @@ struct Row {
     theirs: Figures,
 }
 
-fn calibrate(sh: &Shell, unit: &str, urdf: &str, train: &str, tests: &[&str]) -> Result<Value> {
+/// One `hapcal calibrate … --json` run of a split; `extra` adds flags (`--folds`, `--model`).
+fn calibrate(
+    sh: &Shell,
+    unit: &str,
+    urdf: &str,
+    train: &str,
+    tests: &[&str],
+    extra: &[String],
+) -> Result<Value> {
     let base = format!("fixtures/mukca/data/{unit}");
     let device = format!("fixtures/mukca/urdf/{urdf}.urdf");
     let data = format!("{base}/{train}");
     let tests: Vec<String> = tests.iter().map(|t| format!("{base}/{t}")).collect();
-    let out = cmd!(sh, "cargo run --release --quiet -p hapcal -- calibrate --device {device} --data {data} --test {tests...} --json")
+    let out = cmd!(sh, "cargo run --release --quiet -p hapcal -- calibrate --device {device} --data {data} --test {tests...} --json {extra...}")
         .read()
         .with_context(|| format!("calibrating {unit} on {train}"))?;
     Ok(serde_json::from_str(&out)?)
 }
+
+/// Ours/MUKCa test-MAE ratios of the reference placements of one split's report.
+fn ratios(v: &Value, tests: &[&str], theirs: &[Figures]) -> Result<Vec<f64>> {
+    let mut out = Vec::new();
+    for (test, theirs) in tests.iter().zip(theirs) {
+        if let Some([_, a, _]) = theirs {
+            out.push(mm(v, "test", test, "after", "mean_absolute_error_m")? / a);
+        }
+    }
+    Ok(out)
+}
+
+/// Folds of the stability sweep (issue #2: the choice must not depend on the fold count).
+const FOLD_SWEEP: std::ops::RangeInclusive<usize> = 3..=10;
+
+/// Fixed models of the diagnostic table (every candidate of `--model auto`, plus the joint
+/// harmonic models, which are not candidates).
+const FIXED_MODELS: &[&str] = &[
+    "geometric",
+    "compliance",
+    "mass-compliance",
+    "actuator-compliance",
+    "harmonic",
+    "harmonic2",
+    "mass-compliance-harmonic",
+];
 
 fn mm(v: &Value, role: &str, name: &str, when: &str, key: &str) -> Result<f64> {
     let placements = v["placements"]
@@ -133,9 +167,27 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
         PANDA_2_TESTS.to_vec(),
         vec![None; PANDA_2_TESTS.len()],
     ));
+    let mut cv_lines = Vec::new();
     for (unit, urdf, train, tests, theirs) in &units {
-        let v = calibrate(sh, unit, urdf, train, tests)?;
+        let v = calibrate(sh, unit, urdf, train, tests, &[])?;
         let model = v["model"].as_str().unwrap_or("?").to_string();
+        let mut cells = Vec::new();
+        for c in v["cross_validation"].as_array().into_iter().flatten() {
+            let d = &c["difference_to_geometric_m2"];
+            cells.push(format!(
+                "{} {:.0} µm ({:+.0} ± {:.0} µm²{})",
+                c["model"].as_str().unwrap_or("?"),
+                c["heldout_rms_m"].as_f64().unwrap_or(f64::NAN) * 1e6,
+                d[0].as_f64().unwrap_or(f64::NAN) * 1e12,
+                d[1].as_f64().unwrap_or(f64::NAN) * 1e12,
+                if c["beats_geometric"].as_bool() == Some(true) {
+                    ", beats"
+                } else {
+                    ""
+                },
+            ));
+        }
+        cv_lines.push(format!("| {unit} | {model} | {} |", cells.join("; ")));
         for (test, theirs) in tests.iter().zip(theirs) {
             rows.push(Row {
                 unit: unit.to_string(),
@@ -162,12 +214,12 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
         "| unit | train | test | MAE before (ours) | MAE before (MUKCa) | model | MAE after (ours) | MAE after (MUKCa) | change | dist after (ours) | dist after (MUKCa) |"
     )?;
     writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|")?;
-    let mut ratios = Vec::new();
+    let mut ratios_default = Vec::new();
     let mut failures = Vec::new();
     for r in &rows {
         let (tb, ta, td, change) = match r.theirs {
             Some([b, a, d]) => {
-                ratios.push(r.after / a);
+                ratios_default.push(r.after / a);
                 if (r.before - b).abs() > 0.0005 {
                     failures.push(format!(
                         "{} {}: before {:.4} mm differs from MUKCa's {b:.3}",
@@ -200,28 +252,116 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
             r.unit, r.train, r.test, r.before, r.model, r.after, r.dist_after
         )?;
     }
-    let mean_ratio = ratios.iter().sum::<f64>() / ratios.len().max(1) as f64;
+    let mean = |r: &[f64]| r.iter().sum::<f64>() / r.len().max(1) as f64;
+    let mean_ratio = mean(&ratios_default);
     writeln!(md)?;
     writeln!(
         md,
         "Mean of ours/MUKCa over the {} placements with individual reference figures: {:.3} ({:+.1} %).",
-        ratios.len(),
+        ratios_default.len(),
         mean_ratio,
         (mean_ratio - 1.0) * 100.0
     )?;
     writeln!(md)?;
     writeln!(
         md,
-        "The issue's target, −20 % on average, is not met. How firm the model choice is: on panda_1 the \
-         actuator-compliance model wins the 5-fold cross-validation by less than one standard error of \
-         the paired held-out difference (the JSON report gives both); with 6–10 folds the choice moves \
-         to per-joint or lumped compliance and back-high becomes 24–33 % worse than MUKCa's (measured \
-         with `hapcal calibrate … --folds F`, F = 3…10: mean −13.5, −14.0, −14.5, −9.9, −7.7, −5.3 %). \
-         Within one placement the shoulder's gravity torque hardly changes, so compliance and geometry \
-         are nearly confounded. Fitted on all three panda_1 placements together (a diagnostic, never \
-         used for a choice), mass compliance brings back-high to 0.362 mm against 0.554 mm for the \
-         geometric model: the effect is real but one placement cannot pin it down."
+        "The issue's target, −20 % on average, is not met (see \"What was tried\" below)."
     )?;
+
+    // How the choice was made: the cross-validation of each split at the default 5 folds.
+    writeln!(md)?;
+    writeln!(md, "## Model choice")?;
+    writeln!(md)?;
+    writeln!(
+        md,
+        "`--model auto` scores every candidate by 5-fold cross-validation on the training placement only. The held-out blocks are contiguous in recording order, per socket, and the cross-validation is repeated 3 times with the block boundaries shifted by a third of a block. A compliance model is chosen only if its held-out squared error undercuts the geometric model's by more than one standard error (the one-standard-error rule, fixed before any test placement was looked at), with the standard error taken over the held-out blocks (rows of one block are correlated). Among the models that pass, the lowest held-out RMS wins. Below: the held-out RMS of the 3-D point error, and the mean held-out squared-error difference to the geometric model ± its standard error."
+    )?;
+    writeln!(md)?;
+    writeln!(md, "| unit | chosen | candidates |")?;
+    writeln!(md, "|---|---|---|")?;
+    for line in &cv_lines {
+        writeln!(md, "{line}")?;
+    }
+
+    // Stability of the choice over the fold count.
+    writeln!(md)?;
+    writeln!(md, "## Stability over the number of folds")?;
+    writeln!(md)?;
+    writeln!(
+        md,
+        "The same splits with `--folds F` (each row: the chosen model per unit, and ours/MUKCa over the 7 reference placements):"
+    )?;
+    writeln!(md)?;
+    let names: Vec<&str> = units.iter().map(|u| u.0).collect();
+    writeln!(
+        md,
+        "| folds | {} | mean ratio | worst ratio |",
+        names.join(" | ")
+    )?;
+    writeln!(md, "|---|{}---|---|", "---|".repeat(names.len()))?;
+    for folds in FOLD_SWEEP {
+        let mut picks = Vec::new();
+        let mut all = Vec::new();
+        for (unit, urdf, train, tests, theirs) in &units {
+            let v = calibrate(
+                sh,
+                unit,
+                urdf,
+                train,
+                tests,
+                &["--folds".into(), folds.to_string()],
+            )?;
+            picks.push(v["model"].as_str().unwrap_or("?").to_string());
+            all.extend(ratios(&v, tests, theirs)?);
+        }
+        let worst = all.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        writeln!(
+            md,
+            "| {folds} | {} | {:.3} | {:.3} |",
+            picks.join(" | "),
+            mean(&all),
+            worst
+        )?;
+    }
+
+    // Every fixed model on the test placements: a diagnostic, never used for a choice.
+    writeln!(md)?;
+    writeln!(md, "## Every model, fixed (diagnostic)")?;
+    writeln!(md)?;
+    writeln!(
+        md,
+        "Ours/MUKCa test MAE with `--model M` forced, per reference placement (order of the first table). These figures look at the test placements and are never used to choose; they show what the candidates, and the joint harmonic models that are not candidates, would give."
+    )?;
+    writeln!(md)?;
+    let placements: Vec<String> = REFERENCE
+        .iter()
+        .map(|(u, _, _, t, _)| format!("{u} {t}"))
+        .collect();
+    writeln!(md, "| model | {} | mean |", placements.join(" | "))?;
+    writeln!(md, "|---|{}---|", "---|".repeat(placements.len()))?;
+    for model in FIXED_MODELS {
+        let mut all = Vec::new();
+        for (unit, urdf, train, tests, theirs) in units.iter().filter(|u| u.0 != "panda_2") {
+            let v = calibrate(
+                sh,
+                unit,
+                urdf,
+                train,
+                tests,
+                &["--model".into(), model.to_string()],
+            )?;
+            all.extend(ratios(&v, tests, theirs)?);
+        }
+        let cells: Vec<String> = all.iter().map(|r| format!("{r:.2}")).collect();
+        writeln!(
+            md,
+            "| {model} | {} | {:.3} |",
+            cells.join(" | "),
+            mean(&all)
+        )?;
+    }
+    writeln!(md)?;
+    md.push_str(WHAT_WAS_TRIED);
     writeln!(md)?;
     writeln!(
         md,
@@ -238,3 +378,54 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     }
     Ok(())
 }
+
+/// Hand-written notes on what did not reach the target (numbers from the tables above, which
+/// this task measures, or from the commands named here).
+const WHAT_WAS_TRIED: &str = "\
+## What was tried
+
+- **The earlier choice rule** (lowest 5-fold held-out RMS, one pass) gave a mean ratio of 0.855 \
+(−14.5 %), but only at 5 folds: panda_1 chose actuator compliance by less than one standard \
+error, and with 6–10 folds back-high became 24–33 % worse than MUKCa's (mean −9.9 … −5.3 %). \
+Per-row standard errors also understate the uncertainty, because the residuals of neighbouring \
+configurations are correlated. The rule above (three shifted repeats, block standard errors, \
+one-standard-error margin) gives up the lucky panda_1 pick at 5 folds, which the training data \
+cannot support (−4287 ± 5543 µm², 0.8 standard errors). It is not immune to the fold count: at \
+7 folds mass compliance passes the margin on panda_1 and back-high becomes 24 % worse than \
+MUKCa's (the sweep above; mean 0.911). A margin of 1.5 standard errors would keep the geometric model there \
+at every fold count from 3 to 10 (mean 0.883–0.893, worst 1.06–1.09, measured by rerunning this \
+task with `CV_SIGNIFICANCE_Z` in crates/cli/src/calibrate.rs set to 1.5), and z = 2 would also \
+drop compliance on panda_2 and on panda_3 of the shared MUKCa dataset, where mass compliance \
+lowers the test MAE of most placements. Those margins were found by looking at test \
+placements, which issue #2 rules out for choosing a setting, so the default stays at the \
+textbook z = 1; the default fold count (5) is checked, the sweep is reported.
+- **Other partitions** (measured with the 1.5 margin). With 15 folds, and with 30 folds, which leaves out about one \
+configuration per socket, `hapcal calibrate … --folds 15` and `--folds 30` pick the same models \
+as the table above: kuka_14 mass compliance, panda_1, panda_6 and panda_2 geometric, and panda_7 \
+actuator compliance at 15 folds, mass compliance at 30. Mean ratio 0.893 and 0.883, worst \
+1.09 and 1.06.
+- **Bagging** the geometric model: averaging the predictions of the five fits that each leave \
+out one contiguous fifth of the training rows gives a mean ratio of 0.977, against 0.995 for the \
+single fit. That is 2 %, too little to pay five fits for. Averaging ten bootstrap fits is worse, \
+1.014. (Scratch script around `hapcal calibrate --model geometric`; not kept.)
+- **Joint harmonic angle errors** (encoder eccentricity, `Δθ_j = a_j sin q_j + b_j cos q_j`, and \
+the second order): `--model harmonic`, `harmonic2` and `mass-compliance-harmonic` in the fixed \
+table. They lower the training error (panda_6 0.177 → 0.157 mm, panda_7 0.298 → 0.240 mm) but \
+do not carry over to other placements: mean ratio 1.156, 1.716 and 1.029. One placement cannot \
+tell 14 more angle-dependent parameters from the geometry. Fitted on all of a unit's placements \
+together, as a diagnostic that is never used for a choice, they do help: `hapcal calibrate \
+--device fixtures/mukca/urdf/panda.urdf --data fixtures/mukca/data/panda_1 --model \
+harmonic` gives back-high 0.421 mm, against 0.554 mm with `--model geometric`. The effect \
+exists, but it needs more than one placement. CV never favours them by a \
+significant margin, so they are not candidates of `--model auto`.
+- **Where the Panda error comes from.** Fitted on all of a unit's placements (the same \
+command with `--data fixtures/mukca/data/panda_6`), the geometric model reaches 0.180 and \
+0.177 mm on panda_6's left and right placements. From `front` alone it reaches \
+0.218 and 0.281 mm, the same as MUKCa's optimiser. What is missing is parameter precision \
+outside the training placement's configurations, not a model term we could name. On \
+panda_6 and panda_7 no non-geometric model we tried (lumped, mass and actuator compliance, \
+harmonics) does better than the geometric one by more than 5 % (the fixed table).
+- Earlier sessions (no new numbers here): ridge prior toward the nominal URDF (it reproduces \
+MUKCa's own figures), forced compliance models, gear-ratio scale, socket-distance weight, \
+outlier rejection, link bending.
+";

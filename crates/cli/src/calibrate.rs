@@ -7,8 +7,8 @@ use hapcal_io::{Device, SocketPlacement};
 use hapcal_kinematics::Chain;
 use hapcal_metrics::socket_figures;
 use hapcal_problems::{
-    CalibratedModel, CalibrationProblem, GravityCompliance, Observations, PointDistance, Row,
-    RowKind, Weights,
+    CalibratedModel, CalibrationProblem, GravityCompliance, JointHarmonics, Observations,
+    PointDistance, Row, RowKind, Weights,
 };
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -31,6 +31,17 @@ pub enum ModelChoice {
     /// As [`ModelChoice::MassCompliance`], with one compliance per actuator size
     /// ([`GravityCompliance::published_by_actuator`]).
     ActuatorCompliance,
+    /// Kinematic parameters plus once-per-revolution harmonic angle errors on every joint
+    /// ([`JointHarmonics::first_order`]: encoder eccentricity). Not a candidate of
+    /// [`ModelChoice::Auto`], nor are the other harmonic models: on one MUKCa placement they
+    /// fit the training data better and the other placements worse (docs/results/mukca.md).
+    Harmonic,
+    /// Kinematic parameters plus first- and second-order harmonic angle errors on every joint.
+    Harmonic2,
+    /// [`ModelChoice::MassCompliance`] plus [`ModelChoice::Harmonic`].
+    MassComplianceHarmonic,
+    /// [`ModelChoice::Compliance`] plus [`ModelChoice::Harmonic`].
+    ComplianceHarmonic,
 }
 
 impl ModelChoice {
@@ -39,8 +50,11 @@ impl ModelChoice {
     fn compliance(self, chain: &Chain) -> Result<Option<GravityCompliance>> {
         Ok(match self {
             ModelChoice::Auto | ModelChoice::Geometric => None,
-            ModelChoice::Compliance => Some(GravityCompliance::default()),
-            ModelChoice::MassCompliance => Some(
+            ModelChoice::Harmonic | ModelChoice::Harmonic2 => None,
+            ModelChoice::Compliance | ModelChoice::ComplianceHarmonic => {
+                Some(GravityCompliance::default())
+            }
+            ModelChoice::MassCompliance | ModelChoice::MassComplianceHarmonic => Some(
                 GravityCompliance::published(chain.joint_names()).context(
                     "--model mass-compliance: no published link masses for this robot's joint names",
                 )?,
@@ -51,6 +65,21 @@ impl ModelChoice {
                 )?,
             ),
         })
+    }
+
+    /// The harmonic angle-error term of a fixed choice (`None` without one).
+    fn harmonics(self, chain: &Chain) -> Option<JointHarmonics> {
+        let n = chain.n_joints();
+        match self {
+            ModelChoice::Harmonic
+            | ModelChoice::MassComplianceHarmonic
+            | ModelChoice::ComplianceHarmonic => Some(JointHarmonics::first_order(n)),
+            ModelChoice::Harmonic2 => Some(JointHarmonics {
+                joints: (0..n).collect(),
+                orders: vec![1, 2],
+            }),
+            _ => None,
+        }
     }
 }
 
@@ -184,8 +213,12 @@ pub struct CvReport {
     /// Held-out RMS of the 3-D point (or distance) error over all folds, m.
     pub heldout_rms_m: f64,
     /// Mean over held-out rows of this model's squared error minus the geometric model's, m²,
-    /// and its standard error (0 for the geometric model itself).
-    pub paired_difference_m2: (f64, f64),
+    /// and its standard error from the contiguous blocks (rows of one block are correlated);
+    /// `(0, 0)` for the geometric model itself.
+    pub difference_to_geometric_m2: (f64, f64),
+    /// Whether the difference is below zero by [`CV_SIGNIFICANCE_Z`] standard errors (the
+    /// condition for choosing this model over the geometric one).
+    pub beats_geometric: bool,
     /// Number of kept parameters on the full training data.
     pub n_kept: usize,
 }
@@ -346,26 +379,69 @@ pub fn identify_config(sigma_m: Option<f64>) -> IdentifyConfig {
 fn solve(
     chain: &Chain,
     obs: Observations,
-    compliance: Option<GravityCompliance>,
+    choice: ModelChoice,
     sigma_m: Option<f64>,
 ) -> Result<(CalibrationProblem, Identified)> {
     let n_rows = obs.rows.len();
-    let problem = CalibrationProblem::new(chain.clone(), obs, Weights::default(), compliance)
-        .context("building the calibration problem")?;
+    let problem = CalibrationProblem::with_harmonics(
+        chain.clone(),
+        obs,
+        Weights::default(),
+        choice.compliance(chain)?,
+        choice.harmonics(chain),
+    )
+    .context("building the calibration problem")?;
     let x0 = problem.initial_guess();
     let identified = identify(&problem, x0, &identify_config(sigma_m))
         .with_context(|| format!("identifying parameters from {n_rows} configurations"))?;
     Ok((problem, identified))
 }
 
-/// Held-out squared errors (m², one per training row, in a fixed order) of k-fold
-/// cross-validation with time-contiguous blocks per socket.
+/// Repeats of the cross-validation: repeat `r` shifts every block boundary by `r/CV_REPEATS` of
+/// a block. Averaging the held-out errors over shifted partitions makes the choice less
+/// sensitive to where the fold boundaries fall (measured for 3…10 folds on the MUKCa training
+/// placements in docs/results/mukca.md: kuka_14, panda_1 and panda_6 keep their model, panda_7
+/// moves between two compliance models), at three times the cost of one k-fold pass.
+pub const CV_REPEATS: usize = 3;
+
+/// Standard errors by which a candidate's held-out squared error must undercut the geometric
+/// model's before it is chosen: the one-standard-error rule (Breiman et al., "Classification and
+/// Regression Trees", 1984; Hastie, Tibshirani & Friedman, "The Elements of Statistical
+/// Learning", 2nd ed., §7.10), z = 1, taken as the textbook default before any test placement
+/// was looked at. A larger margin tuned on the MUKCa test placements (1.5 keeps panda_1 on the
+/// geometric model at every fold count 3…10) would break the rule that settings are chosen on
+/// the training placement only; docs/results/mukca.md shows the fold sweep with z = 1 as it is.
+pub const CV_SIGNIFICANCE_Z: f64 = 1.0;
+
+/// Held-out errors of one candidate: one entry per training row, in a fixed order.
+#[derive(Clone, Debug, Default)]
+struct HeldOut {
+    /// Squared held-out error per row, m² (3-D point or distance), averaged over the repeats.
+    sq_errors: Vec<f64>,
+    /// Block of each row: `(data set, socket, fold)` of the first repeat, numbered in that
+    /// order (a block with no row, for a socket shorter than the folds, stays empty).
+    block: Vec<usize>,
+}
+
+/// Fold (`0..k`) of row `row` of `n` in repeat `r` of `repeats`: the rows, circularly shifted
+/// by `r·n/(k·repeats)`, cut into `k` contiguous blocks of (nearly) equal length. Repeat 0 is
+/// plain contiguous k-fold.
+fn fold_of(row: usize, n: usize, k: usize, r: usize, repeats: usize) -> usize {
+    let n = n.max(1);
+    let shifted = (row * k * repeats + r * n) % (n * k * repeats);
+    shifted / (n * repeats)
+}
+
+/// Repeated k-fold cross-validation with time-contiguous blocks per socket: repeat `r` of
+/// `repeats` shifts every block boundary by `r/repeats` of a block (a circular shift of the
+/// rows), so that each row is held out once per repeat with different neighbours.
 fn cross_validate(
     chain: &Chain,
     sets: &[DataSet],
     plan: &Plan,
-    compliance: Option<&GravityCompliance>,
-) -> Result<Vec<f64>> {
+    choice: ModelChoice,
+    repeats: usize,
+) -> Result<HeldOut> {
     let lens: Vec<Vec<usize>> = sets
         .iter()
         .map(|s| match s {
@@ -373,57 +449,142 @@ fn cross_validate(
             DataSet::Distances { q, .. } => vec![q.len()],
         })
         .collect();
-    let block = |set: usize, socket: usize, row: usize| row * plan.folds / lens[set][socket].max(1);
-    let mut errors = Vec::new();
-    for fold in 0..plan.folds {
-        let obs = observations(sets, plan.socket_distance_m, &|s, k, r| {
-            block(s, k, r) != fold
-        });
-        let (problem, identified) = solve(chain, obs, compliance.cloned(), plan.sigma_m)?;
-        let model = problem.model(identified.fit.x.as_ref());
-        let points = problem.points(identified.fit.x.as_ref());
-        let mut point_base = 0;
-        for (set_idx, set) in sets.iter().enumerate() {
-            match set {
-                DataSet::Sockets(p) => {
-                    for (socket_idx, socket) in p.sockets.iter().enumerate() {
-                        for (row_idx, q) in socket.q.iter().enumerate() {
-                            if block(set_idx, socket_idx, row_idx) == fold {
-                                errors.push(
-                                    (model.end_point(q) - points[point_base + socket_idx])
-                                        .norm_squared(),
-                                );
+    let k = plan.folds;
+    let repeats = repeats.max(1);
+    let block = |r: usize, set: usize, socket: usize, row: usize| {
+        fold_of(row, lens[set][socket], k, r, repeats)
+    };
+    // Row order: sets, sockets, rows, as the evaluation loop below visits them.
+    // Blocks of the first repeat, numbered (set, socket, fold) in that order.
+    let mut sq_sum: Vec<f64> = Vec::new();
+    let mut block_id: Vec<usize> = Vec::new();
+    let mut first_block = 0;
+    for (set, socket_lens) in lens.iter().enumerate() {
+        for (socket, &n) in socket_lens.iter().enumerate() {
+            for row in 0..n {
+                block_id.push(first_block + block(0, set, socket, row));
+                sq_sum.push(0.0);
+            }
+            first_block += k;
+        }
+    }
+    for r in 0..repeats {
+        for fold in 0..k {
+            let obs = observations(sets, plan.socket_distance_m, &|s, sk, row| {
+                block(r, s, sk, row) != fold
+            });
+            let (problem, identified) = solve(chain, obs, choice, plan.sigma_m)?;
+            let model = problem.model(identified.fit.x.as_ref());
+            let points = problem.points(identified.fit.x.as_ref());
+            let mut point_base = 0;
+            let mut idx = 0;
+            for (set_idx, set) in sets.iter().enumerate() {
+                match set {
+                    DataSet::Sockets(p) => {
+                        for (socket_idx, socket) in p.sockets.iter().enumerate() {
+                            for (row_idx, q) in socket.q.iter().enumerate() {
+                                if block(r, set_idx, socket_idx, row_idx) == fold {
+                                    sq_sum[idx] += (model.end_point(q)
+                                        - points[point_base + socket_idx])
+                                        .norm_squared();
+                                }
+                                idx += 1;
                             }
                         }
+                        point_base += p.sockets.len();
                     }
-                    point_base += p.sockets.len();
-                }
-                DataSet::Distances { q, distance_m, .. } => {
-                    for (row_idx, (q, d)) in q.iter().zip(distance_m).enumerate() {
-                        if block(set_idx, 0, row_idx) == fold {
-                            errors.push((model.end_point(q).coords.norm() - d).powi(2));
+                    DataSet::Distances { q, distance_m, .. } => {
+                        for (row_idx, (q, d)) in q.iter().zip(distance_m).enumerate() {
+                            if block(r, set_idx, 0, row_idx) == fold {
+                                sq_sum[idx] += (model.end_point(q).coords.norm() - d).powi(2);
+                            }
+                            idx += 1;
                         }
                     }
                 }
             }
         }
     }
-    if errors.is_empty() {
+    if sq_sum.is_empty() {
         bail!("cross-validation held out no row");
     }
-    Ok(errors)
+    Ok(HeldOut {
+        sq_errors: sq_sum.iter().map(|v| v / repeats as f64).collect(),
+        block: block_id,
+    })
 }
 
-/// Mean and standard error of `a − b`, element by element (paired held-out errors).
-fn paired_difference(a: &[f64], b: &[f64]) -> (f64, f64) {
-    let n = a.len().min(b.len());
-    if n < 2 {
+/// Mean over rows of `a − b` and its standard error from the block means (rows of one
+/// contiguous block are correlated, so the blocks, not the rows, are the independent units:
+/// Roberts et al. 2017, "Cross-validation strategies for data with temporal, spatial,
+/// hierarchical, or phylogenetic structure", Ecography 40(8)). `(0, ∞)` with fewer than 2 blocks.
+fn blocked_difference(a: &HeldOut, b: &HeldOut) -> (f64, f64) {
+    let n = a.sq_errors.len().min(b.sq_errors.len());
+    let n_blocks = a.block.iter().max().map_or(0, |m| m + 1);
+    let mut sum = vec![0.0; n_blocks];
+    let mut count = vec![0usize; n_blocks];
+    for i in 0..n {
+        sum[a.block[i]] += a.sq_errors[i] - b.sq_errors[i];
+        count[a.block[i]] += 1;
+    }
+    let filled = count.iter().filter(|&&c| c > 0).count();
+    if filled < 2 {
         return (0.0, f64::INFINITY);
     }
-    let d: Vec<f64> = a.iter().zip(b).map(|(a, b)| a - b).collect();
-    let mean = d.iter().sum::<f64>() / n as f64;
-    let var = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
-    (mean, (var / n as f64).sqrt())
+    let mean = sum.iter().sum::<f64>() / n as f64;
+    // Ratio estimator of the mean over clusters of unequal size (Cochran, "Sampling
+    // Techniques", 3rd ed., 1977, §6.4): v = Σ (y_b − ȳ·m_b)² / ((n_b − 1)·n_b·m̄²).
+    let nb = filled as f64;
+    let m_bar = n as f64 / nb;
+    let var = sum
+        .iter()
+        .zip(&count)
+        .map(|(s, &c)| (s - mean * c as f64).powi(2))
+        .sum::<f64>()
+        / (nb - 1.0)
+        / (nb * m_bar * m_bar);
+    (mean, var.sqrt())
+}
+
+/// The model choice of `--model auto` from the held-out errors of each candidate
+/// (`candidates[0]` must be the geometric model, the reference of the differences): a candidate
+/// must undercut the geometric model by [`CV_SIGNIFICANCE_Z`] blocked standard errors, and the
+/// lowest held-out RMS among those that do wins (the geometric model if none does).
+///
+/// # Panics
+/// If `held` and `candidates` differ in length or are empty.
+#[track_caller]
+fn choose(candidates: &[ModelChoice], held: &[HeldOut]) -> (ModelChoice, Vec<CvReport>) {
+    assert!(
+        !held.is_empty() && held.len() == candidates.len(),
+        "one held-out set per candidate"
+    );
+    let rms =
+        |h: &HeldOut| (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt();
+    let mut choice = candidates[0];
+    let mut best_rms = rms(&held[0]);
+    let mut reports = Vec::new();
+    for (candidate, h) in candidates.iter().zip(held) {
+        let difference = blocked_difference(h, &held[0]);
+        let beats =
+            *candidate != candidates[0] && difference.0 + CV_SIGNIFICANCE_Z * difference.1 < 0.0;
+        if beats && rms(h) < best_rms {
+            choice = *candidate;
+            best_rms = rms(h);
+        }
+        reports.push(CvReport {
+            model: *candidate,
+            heldout_rms_m: rms(h),
+            difference_to_geometric_m2: if *candidate == candidates[0] {
+                (0.0, 0.0)
+            } else {
+                difference
+            },
+            beats_geometric: beats,
+            n_kept: 0,
+        });
+    }
+    (choice, reports)
 }
 
 /// Refuses a calibration whose data determine no parameter, or fewer configurations than the
@@ -513,7 +674,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     // geometric model is chosen.
     let obs = observations(&train, plan.socket_distance_m, &|_, _, _| true);
     let n_configurations = obs.rows.len();
-    let geometric = solve(&chain, obs.clone(), None, plan.sigma_m)?;
+    let geometric = solve(&chain, obs.clone(), ModelChoice::Geometric, plan.sigma_m)?;
     let n_kept = |p: &CalibrationProblem, id: &Identified| {
         id.identifiability
             .kept
@@ -529,45 +690,30 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     let mut cross_validation = Vec::new();
     let choice = match plan.model {
         ModelChoice::Auto => {
-            // Every model the robot supports is a candidate; the lowest held-out RMS wins. The
-            // paired difference to the geometric model (and its standard error) is reported so
-            // that a reader sees how clear the choice is.
+            // Every model the robot supports is a candidate. A compliance model must beat the
+            // geometric one by CV_SIGNIFICANCE_Z blocked standard errors of the held-out
+            // difference; among those that do, the lowest held-out RMS wins. Within one
+            // placement the gravity torques hardly change, so compliance and geometry are
+            // nearly confounded and a win inside the noise does not carry to other placements.
             let mut candidates = vec![ModelChoice::Geometric, ModelChoice::Compliance];
             if GravityCompliance::published(chain.joint_names()).is_some() {
                 candidates.push(ModelChoice::MassCompliance);
                 candidates.push(ModelChoice::ActuatorCompliance);
             }
-            let mut geometric_errors = Vec::new();
-            let mut best = (f64::INFINITY, ModelChoice::Geometric);
-            for candidate in candidates {
-                let compliance = candidate.compliance(&chain)?;
-                let errors = cross_validate(&chain, &train, plan, compliance.as_ref())?;
-                let rms = (errors.iter().sum::<f64>() / errors.len() as f64).sqrt();
-                let paired = if candidate == ModelChoice::Geometric {
-                    geometric_errors = errors;
-                    best = (rms, candidate);
-                    (0.0, 0.0)
-                } else {
-                    if rms < best.0 {
-                        best = (rms, candidate);
-                    }
-                    paired_difference(&errors, &geometric_errors)
-                };
-                cross_validation.push(CvReport {
-                    model: candidate,
-                    heldout_rms_m: rms,
-                    paired_difference_m2: paired,
-                    n_kept: 0,
-                });
+            let mut held = Vec::new();
+            for &candidate in &candidates {
+                held.push(cross_validate(&chain, &train, plan, candidate, CV_REPEATS)?);
             }
-            best.1
+            let (choice, reports) = choose(&candidates, &held);
+            cross_validation = reports;
+            choice
         }
         fixed => fixed,
     };
     let (problem, identified) = if choice == ModelChoice::Geometric {
         geometric
     } else {
-        solve(&chain, obs, choice.compliance(&chain)?, plan.sigma_m)?
+        solve(&chain, obs, choice, plan.sigma_m)?
     };
     let model = problem.model(identified.fit.x.as_ref());
     let layout = problem.layout();
@@ -737,4 +883,95 @@ pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<()> {
     };
     std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{HeldOut, ModelChoice, blocked_difference, choose, fold_of};
+
+    /// Held-out errors on 10 blocks of 5 rows: `base` everywhere, minus `gain` in every block,
+    /// with ±`spread` alternating between blocks (the block-to-block scatter of the gain).
+    fn held(base: f64, gain: f64, spread: f64) -> HeldOut {
+        HeldOut {
+            sq_errors: (0..50)
+                .map(|i| {
+                    let sign = if (i / 5) % 2 == 0 { 1.0 } else { -1.0 };
+                    base - gain + sign * spread
+                })
+                .collect(),
+            block: (0..50).map(|i| i / 5).collect(),
+        }
+    }
+
+    #[test]
+    fn a_candidate_must_beat_the_geometric_model_by_the_margin() {
+        use ModelChoice::{ActuatorCompliance, Compliance, Geometric, MassCompliance};
+        let geometric = held(10.0, 0.0, 0.0);
+        // Block scatter ±1 over 10 blocks: standard error 1/3 (sample SD 1.054, /√10).
+        // A gain of 0.2 is 0.6 SE (not enough), 0.6 is 1.8 SE (enough), 0.9 is 2.7 SE.
+        let candidates = [Geometric, Compliance, MassCompliance, ActuatorCompliance];
+        let sets = [
+            geometric.clone(),
+            held(10.0, 0.2, 1.0),
+            held(10.0, 0.6, 1.0),
+            held(10.0, 0.9, 1.0),
+        ];
+        let (choice, reports) = choose(&candidates, &sets);
+        let beats: Vec<bool> = reports.iter().map(|r| r.beats_geometric).collect();
+        assert_eq!(beats, [false, false, true, true]);
+        // Among those that pass, the lowest held-out RMS.
+        assert_eq!(choice, ActuatorCompliance);
+        // Only a gain inside the margin: the geometric model stays.
+        let (choice, _) = choose(&candidates[..2], &sets[..2]);
+        assert_eq!(choice, Geometric);
+        // The same gain without block scatter is decisive.
+        let (choice, _) = choose(&candidates[..2], &[geometric, held(10.0, 0.2, 0.0)]);
+        assert_eq!(choice, Compliance);
+    }
+
+    #[test]
+    fn every_repeat_holds_each_row_out_once_in_contiguous_blocks() {
+        let (n, k, repeats) = (31, 5, 3);
+        for r in 0..repeats {
+            let folds: Vec<usize> = (0..n).map(|row| fold_of(row, n, k, r, repeats)).collect();
+            let mut sizes = vec![0; k];
+            for &f in &folds {
+                sizes[f] += 1;
+            }
+            // Equal blocks up to one row.
+            assert!(sizes.iter().all(|&s| s == 6 || s == 7), "{sizes:?}");
+            // Contiguous up to the circular wrap: the fold changes k times around the circle.
+            let changes = (0..n).filter(|&i| folds[i] != folds[(i + 1) % n]).count();
+            assert_eq!(changes, k, "repeat {r}: {folds:?}");
+        }
+        // Repeat 0 is plain k-fold; the others shift the boundaries.
+        assert_eq!(fold_of(0, n, k, 0, repeats), 0);
+        assert_eq!(fold_of(n - 1, n, k, 0, repeats), k - 1);
+        assert_ne!(fold_of(6, n, k, 1, repeats), fold_of(6, n, k, 0, repeats));
+    }
+
+    #[test]
+    fn blocked_standard_error_counts_blocks_not_rows() {
+        // Two blocks of 50 rows, differences −2 in one and 0 in the other: per block the mean
+        // differences are −2 and 0, so the mean is −1 with standard error 1 (two blocks, sample
+        // SD √2, /√2). Counting the 100 rows as independent would give ≈ 0.1.
+        let block: Vec<usize> = (0..100).map(|i| i / 50).collect();
+        let a = HeldOut {
+            sq_errors: (0..100).map(|i| if i < 50 { 1.0 } else { 3.0 }).collect(),
+            block: block.clone(),
+        };
+        let b = HeldOut {
+            sq_errors: vec![3.0; 100],
+            block,
+        };
+        let (mean, se) = blocked_difference(&a, &b);
+        assert!((mean + 1.0).abs() < 1e-12, "{mean}");
+        assert!((se - 1.0).abs() < 1e-12, "{se}");
+        // One block: no standard error.
+        let one = HeldOut {
+            sq_errors: vec![1.0; 4],
+            block: vec![0; 4],
+        };
+        assert_eq!(blocked_difference(&one, &one).1, f64::INFINITY);
+    }
 }

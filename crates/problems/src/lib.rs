@@ -35,11 +35,13 @@
 
 mod compliance;
 mod fleet;
+mod harmonics;
 mod model;
 mod problem;
 
 pub use compliance::{GravityCompliance, LinkMass};
 pub use fleet::{FleetDevice, FleetProblem, cable_angle, fleet_initial_guess};
+pub use harmonics::JointHarmonics;
 pub use model::CalibratedModel;
 pub use problem::{CalibrationProblem, Observations, PointDistance, Row, RowKind, Weights};
 

@@ -1,6 +1,6 @@
 //! A calibrated model: the chain with identified deviations and compliance.
 
-use crate::GravityCompliance;
+use crate::{GravityCompliance, JointHarmonics};
 use hapcal_kinematics::{Chain, Point3};
 
 /// A chain plus identified parameter deviations, ready to predict end points.
@@ -12,6 +12,9 @@ pub struct CalibratedModel {
     pub x_kin: Vec<f64>,
     /// Compliance model and its `k_j` (length `n_joints`, rad/m), if modelled.
     pub compliance: Option<(GravityCompliance, Vec<f64>)>,
+    /// Joint harmonic model and its coefficients (length [`JointHarmonics::n_params`], rad),
+    /// if modelled.
+    pub harmonics: Option<(JointHarmonics, Vec<f64>)>,
 }
 
 impl CalibratedModel {
@@ -22,15 +25,27 @@ impl CalibratedModel {
             chain,
             x_kin,
             compliance: None,
+            harmonics: None,
         }
     }
 
-    /// Joint angles the chain actually takes for readings `q` (rad): `q + k∘τ̂(q)`.
+    /// Joint angles the chain actually takes for readings `q` (rad): `q + k∘τ̂(q)` plus the
+    /// harmonic corrections ([`JointHarmonics::corrections`]).
     ///
     /// # Panics
     /// If `q.len()` differs from the chain's joint count.
     #[track_caller]
     pub fn effective_angles(&self, q: &[f64]) -> Vec<f64> {
+        let mut out = self.compliant_angles(q);
+        if let Some((h, coef)) = &self.harmonics {
+            for (o, c) in out.iter_mut().zip(h.corrections(q, coef)) {
+                *o += c;
+            }
+        }
+        out
+    }
+
+    fn compliant_angles(&self, q: &[f64]) -> Vec<f64> {
         match &self.compliance {
             None => q.to_vec(),
             Some((model, k)) => {

@@ -1,7 +1,7 @@
 //! The calibration problem: residuals and analytic Jacobian over kinematic deviations,
 //! optional compliance, and unknown points.
 
-use crate::{CalibratedModel, Error, GravityCompliance};
+use crate::{CalibratedModel, Error, GravityCompliance, JointHarmonics};
 use faer::{Col, ColMut, ColRef, MatMut};
 use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
 use hapcal_kinematics::{Chain, FkWorkspace, ParamUnit, Point3, Vector3, joint_trig};
@@ -92,8 +92,13 @@ pub struct CalibrationProblem {
     obs: Observations,
     weights: Weights,
     compliance: Option<GravityCompliance>,
-    /// Gravity torques per row and joint (empty without compliance).
-    torques: Vec<Vec<f64>>,
+    harmonics: Option<JointHarmonics>,
+    /// Joint-angle terms of the compliance and harmonic models: (joint, parameter index after
+    /// the kinematic ones). Empty for a purely geometric problem.
+    angle_terms: Vec<(usize, usize)>,
+    /// Basis value of each angle term per row (row-major, `n_rows × angle_terms.len()`):
+    /// gravity torque (m or N·m) for compliance terms, `sin`/`cos` for harmonic terms.
+    angle_basis: Vec<f64>,
     layout: ParamLayout,
     n_residuals: usize,
     /// `[sin q, cos q]` per row and joint (row-major), without compliance (which moves the
@@ -119,6 +124,22 @@ impl CalibrationProblem {
         obs: Observations,
         weights: Weights,
         compliance: Option<GravityCompliance>,
+    ) -> Result<Self, Error> {
+        Self::with_harmonics(chain, obs, weights, compliance, None)
+    }
+
+    /// Builds the problem with optional joint harmonic errors ([`JointHarmonics`]) besides the
+    /// optional compliance: `x = [kinematic | compliance | harmonics | points]`.
+    ///
+    /// # Errors
+    /// As [`Self::new`]; [`Error::NoSuchParam`] if a harmonic joint is not a joint of `chain`
+    /// (index reported as the joint) or an order is 0.
+    pub fn with_harmonics(
+        chain: Chain,
+        obs: Observations,
+        weights: Weights,
+        compliance: Option<GravityCompliance>,
+        harmonics: Option<JointHarmonics>,
     ) -> Result<Self, Error> {
         for (name, value) in [
             ("sigma_distance_m", weights.sigma_distance_m),
@@ -187,7 +208,21 @@ impl CalibrationProblem {
                 role: Role::Model,
             })
             .collect();
-        let torques = match &compliance {
+        if let Some(h) = &harmonics {
+            if let Some(&bad) = h.joints.iter().find(|&&j| j >= n_joints) {
+                return Err(Error::NoSuchParam {
+                    index: bad,
+                    n_params: n_joints,
+                });
+            }
+            if h.orders.contains(&0) {
+                return Err(Error::NoSuchParam {
+                    index: 0,
+                    n_params: n_joints,
+                });
+            }
+        }
+        let torques: Vec<Vec<f64>> = match &compliance {
             Some(model) => {
                 let names = chain.joint_names();
                 specs.extend((0..model.n_params(n_joints)).map(|g| {
@@ -208,6 +243,37 @@ impl CalibrationProblem {
             }
             None => Vec::new(),
         };
+        let n_comp = compliance.as_ref().map_or(0, |c| c.n_params(n_joints));
+        let mut angle_terms: Vec<(usize, usize)> = match &compliance {
+            Some(c) => (0..n_joints).map(|j| (j, c.group(j))).collect(),
+            None => Vec::new(),
+        };
+        if let Some(h) = &harmonics {
+            specs.extend(
+                h.names(chain.joint_names())
+                    .into_iter()
+                    .map(|name| ParamSpec {
+                        name,
+                        unit: Unit::Radian,
+                        role: Role::Model,
+                    }),
+            );
+            angle_terms.extend(
+                h.terms()
+                    .into_iter()
+                    .enumerate()
+                    .map(|(t, (j, _, _))| (j, n_comp + t)),
+            );
+        }
+        let mut angle_basis = Vec::with_capacity(obs.rows.len() * angle_terms.len());
+        for (row_idx, row) in obs.rows.iter().enumerate() {
+            if let Some(t) = torques.get(row_idx) {
+                angle_basis.extend_from_slice(t);
+            }
+            if let Some(h) = &harmonics {
+                angle_basis.extend(h.basis(&row.q));
+            }
+        }
         for point in 0..obs.n_points {
             for axis in ["x", "y", "z"] {
                 specs.push(ParamSpec {
@@ -218,7 +284,7 @@ impl CalibrationProblem {
             }
         }
         let any_distance = (obs.rows.iter()).any(|r| matches!(r.kind, RowKind::Distance { .. }));
-        let trig = if compliance.is_none() && any_distance {
+        let trig = if angle_terms.is_empty() && any_distance {
             obs.rows.iter().flat_map(|row| joint_trig(&row.q)).collect()
         } else {
             Vec::new()
@@ -248,7 +314,9 @@ impl CalibrationProblem {
             obs,
             weights,
             compliance,
-            torques,
+            harmonics,
+            angle_terms,
+            angle_basis,
             layout: ParamLayout::new(specs),
             n_residuals,
             trig,
@@ -274,13 +342,14 @@ impl CalibrationProblem {
             .map_or(0, |c| c.n_params(self.chain.n_joints()))
     }
 
-    fn group(&self, j: usize) -> usize {
-        self.compliance.as_ref().map_or(j, |c| c.group(j))
+    /// Number of harmonic parameters (0 without them, [`JointHarmonics::n_params`] otherwise).
+    pub fn n_harmonics(&self) -> usize {
+        self.harmonics.as_ref().map_or(0, JointHarmonics::n_params)
     }
 
     /// Index of the first unknown-point parameter in `x`.
     pub fn points_offset(&self) -> usize {
-        self.chain.n_params() + self.n_compliance()
+        self.chain.n_params() + self.n_compliance() + self.n_harmonics()
     }
 
     /// Start vector: zero deviations and compliance, each unknown point at the mean of the nominal
@@ -327,10 +396,18 @@ impl CalibrationProblem {
                     .collect::<Vec<_>>(),
             )
         });
+        let n_comp = self.n_compliance();
+        let harmonics = self.harmonics.as_ref().map(|h| {
+            (
+                h.clone(),
+                (0..h.n_params()).map(|t| x[n + n_comp + t]).collect(),
+            )
+        });
         CalibratedModel {
             chain: self.chain.clone(),
             x_kin,
             compliance,
+            harmonics,
         }
     }
 
@@ -356,16 +433,17 @@ impl CalibrationProblem {
         buf: &'a mut Vec<f64>,
     ) -> &'a [f64] {
         let q = &self.obs.rows[row_idx].q;
-        if self.compliance.is_none() {
+        if self.angle_terms.is_empty() {
             return q;
         }
         let n = self.chain.n_params();
+        let n_terms = self.angle_terms.len();
+        let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
         buf.clear();
-        buf.extend(
-            q.iter()
-                .enumerate()
-                .map(|(j, qj)| qj + x[n + self.group(j)] * self.torques[row_idx][j]),
-        );
+        buf.extend_from_slice(q);
+        for (&(j, param), b) in self.angle_terms.iter().zip(basis) {
+            buf[j] += x[n + param] * b;
+        }
         buf
     }
 
@@ -410,7 +488,8 @@ impl CalibrationProblem {
         mut jac: Option<MatMut<'_, f64>>,
     ) {
         let n_kin = self.chain.n_params();
-        let n_comp = self.n_compliance();
+        let n_comp = self.n_compliance() + self.n_harmonics();
+        let n_terms = self.angle_terms.len();
         let off = self.points_offset();
         let x_kin: Vec<f64> = (0..n_kin).map(|i| x[i]).collect();
         // Constant factors between joints folded once for this x (FrozenChain).
@@ -459,7 +538,8 @@ impl CalibrationProblem {
             } else {
                 frozen.end_point(q_eff)
             };
-            // ∂p/∂k_j = (∂p/∂q_j)·τ̂_j, from the geometric Jacobian's linear rows.
+            // ∂p/∂k_j = (∂p/∂q_j)·τ̂_j (and ∂p/∂a_jh = (∂p/∂q_j)·sin(h·q_j), …), from the
+            // geometric Jacobian's linear rows.
             let jq = if n_comp > 0 && jac.is_some() {
                 Some(self.chain.geometric_jacobian(&x_kin, q_eff))
             } else {
@@ -470,10 +550,11 @@ impl CalibrationProblem {
                     buf[3 * col + k]
                 } else {
                     let g = col - n_kin;
+                    let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
                     jq.as_ref().map_or(0.0, |m| {
-                        (0..self.chain.n_joints())
-                            .filter(|&j| self.group(j) == g)
-                            .map(|j| m[(k, j)] * self.torques[row_idx][j])
+                        (self.angle_terms.iter().zip(basis))
+                            .filter(|((_, param), _)| *param == g)
+                            .map(|((j, _), b)| m[(k, *j)] * b)
                             .sum()
                     })
                 }

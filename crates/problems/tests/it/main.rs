@@ -9,8 +9,8 @@ use faer::{Col, Mat};
 use hapcal_identify::Problem;
 use hapcal_kinematics::{Chain, Placement, Vector3};
 use hapcal_problems::{
-    CalibrationProblem, GravityCompliance, LinkMass, Observations, PointDistance, Row, RowKind,
-    Weights,
+    CalibrationProblem, GravityCompliance, JointHarmonics, LinkMass, Observations, PointDistance,
+    Row, RowKind, Weights,
 };
 use proptest::prelude::*;
 
@@ -69,6 +69,14 @@ fn problem_with_model(
     qs: &[Vec<f64>],
     compliance: Option<GravityCompliance>,
 ) -> CalibrationProblem {
+    problem_with_models(qs, compliance, None)
+}
+
+fn problem_with_models(
+    qs: &[Vec<f64>],
+    compliance: Option<GravityCompliance>,
+    harmonics: Option<JointHarmonics>,
+) -> CalibrationProblem {
     let mut rows = Vec::new();
     for (i, q) in qs.iter().enumerate() {
         let kind = match i % 4 {
@@ -96,7 +104,8 @@ fn problem_with_model(
         sigma_point_m: 5e-5,
         sigma_point_distance_m: 1e-4,
     };
-    CalibrationProblem::new(iiwa_like(), obs, weights, compliance).expect("valid")
+    CalibrationProblem::with_harmonics(iiwa_like(), obs, weights, compliance, harmonics)
+        .expect("valid")
 }
 
 proptest! {
@@ -105,16 +114,22 @@ proptest! {
     fn jacobian_matches_central_differences(
         qs in prop::collection::vec(prop::collection::vec(-2.0..2.0f64, 7), 8),
         dev in prop::collection::vec(-1e-2..1e-2f64, 120),
-        compliance in 0..3usize,
+        compliance in 0..5usize,
     ) {
         let model = match compliance {
-            0 => None,
-            1 => Some(GravityCompliance::default()),
+            0 | 3 => None,
+            1 | 4 => Some(GravityCompliance::default()),
             // Torques are ~10–100 N·m here: keep k·τ at the size of the lumped case.
             _ => Some(massive_grouped()),
         };
+        // 3: harmonics alone (first and second order on a subset), 4: with lumped compliance.
+        let harmonics = match compliance {
+            3 => Some(JointHarmonics { joints: vec![1, 3, 6], orders: vec![1, 2] }),
+            4 => Some(JointHarmonics::first_order(7)),
+            _ => None,
+        };
         let scale = if compliance == 2 { 0.01 } else { 1.0 };
-        let problem = problem_with_model(&qs, model);
+        let problem = problem_with_models(&qs, model, harmonics);
         let n = problem.layout().len();
         let m = problem.n_residuals();
         let mut x = problem.initial_guess();
@@ -152,6 +167,92 @@ fn residual_counts_and_names() {
     assert_eq!(p.layout().len(), 48 + 7 + 6);
     assert_eq!(p.layout().name(48), "compliance.j1");
     assert_eq!(p.layout().name(55), "point0.x");
+}
+
+#[test]
+fn harmonic_parameters_follow_the_compliance_in_the_layout() {
+    let qs = vec![vec![0.1; 7]; 8];
+    let harmonics = JointHarmonics {
+        joints: vec![0, 3],
+        orders: vec![1, 2],
+    };
+    let p = problem_with_models(&qs, Some(GravityCompliance::default()), Some(harmonics));
+    assert_eq!(p.n_harmonics(), 8);
+    // 48 kinematic, 7 compliance, 8 harmonic, 6 point coordinates.
+    assert_eq!(p.layout().len(), 48 + 7 + 8 + 6);
+    let names: Vec<&str> = (55..63).map(|i| p.layout().name(i)).collect();
+    assert_eq!(
+        names,
+        [
+            "harmonic.j1.sin1",
+            "harmonic.j1.cos1",
+            "harmonic.j1.sin2",
+            "harmonic.j1.cos2",
+            "harmonic.j4.sin1",
+            "harmonic.j4.cos1",
+            "harmonic.j4.sin2",
+            "harmonic.j4.cos2",
+        ]
+    );
+    assert_eq!(p.points_offset(), 63);
+    assert_eq!(p.layout().name(63), "point0.x");
+}
+
+#[test]
+fn harmonic_model_moves_the_joint_by_its_eccentricity() {
+    // θ_j = q_j + a·sin(q_j) + b·cos(q_j): with a = 1e-3, b = 2e-3 at q_2 = 0.5 the model's
+    // angles are the readings plus 1e-3·sin 0.5 + 2e-3·cos 0.5 on joint 2 only.
+    let qs = vec![vec![0.2, 0.5, -0.1, 0.3, 0.0, 0.4, 0.1]; 4];
+    let harmonics = JointHarmonics {
+        joints: vec![1],
+        orders: vec![1],
+    };
+    let p = problem_with_models(&qs, None, Some(harmonics));
+    let mut x = p.initial_guess();
+    let off = p.chain().n_params();
+    x[off] = 1e-3;
+    x[off + 1] = 2e-3;
+    let angles = p.model(x.as_ref()).effective_angles(&qs[0]);
+    let expected = 0.5 + 1e-3 * 0.5f64.sin() + 2e-3 * 0.5f64.cos();
+    assert!((angles[1] - expected).abs() < 1e-15, "{angles:?}");
+    for j in [0, 2, 3, 4, 5, 6] {
+        assert_eq!(angles[j], qs[0][j]);
+    }
+    // The residual the solver sees is the calibrated model's end point minus the socket point
+    // (row 2 of `problem_with_models` is a point row on point 0; sigma_point_m = 5e-5).
+    let mut r = Col::<f64>::zeros(p.n_residuals());
+    p.residuals(x.as_ref(), r.as_mut()).unwrap();
+    let tip = p.model(x.as_ref()).end_point(&qs[2]);
+    let point = p.points(x.as_ref())[0];
+    // Rows: distance (1), position (3), then the point row.
+    for k in 0..3 {
+        let expected = (tip[k] - point[k]) / 5e-5;
+        assert!(
+            (r[4 + k] - expected).abs() < 1e-9,
+            "{k}: {} vs {expected}",
+            r[4 + k]
+        );
+    }
+}
+
+#[test]
+fn harmonic_joint_outside_the_chain_is_an_error() {
+    let obs = Observations::default();
+    let err = CalibrationProblem::with_harmonics(
+        iiwa_like(),
+        obs,
+        Weights::default(),
+        None,
+        Some(JointHarmonics {
+            joints: vec![7],
+            orders: vec![1],
+        }),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(err, hapcal_problems::Error::NoSuchParam { index: 7, .. }),
+        "{err}"
+    );
 }
 
 #[test]
