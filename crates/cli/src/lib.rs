@@ -17,5 +17,7 @@ use std::path::PathBuf;
 
 /// Root of the source tree (where `fixtures/` lives), fixed at build time.
 pub fn project_root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    // Reports print paths under it: without the `crates/cli/../..` detour when it exists.
+    root.canonicalize().unwrap_or(root)
 }

@@ -30,15 +30,22 @@ pub fn render(r: &CalibrationReport) -> String {
     if !r.cross_validation.is_empty() {
         let _ = writeln!(
             s,
-            "\nmodel choice by {}-fold cross-validation on the training data (held-out RMS):",
-            r.folds
+            "\nmodel choice by {}-fold cross-validation on the training data (held-out RMS; \
+             held-out squared error minus the geometric model's, ± its standard error; a model \
+             must beat the geometric one by {} standard error(s)):",
+            r.folds,
+            crate::calibrate::CV_SIGNIFICANCE_Z
         );
         for cv in &r.cross_validation {
+            let (diff, se) = cv.difference_to_geometric_m2;
             let _ = writeln!(
                 s,
-                "  {:<20} {:>9.4} mm",
+                "  {:<20} {:>9.4} mm {:>+10.0} ± {:<8.0} µm²{}",
                 model_name(cv.model),
-                cv.heldout_rms_m * 1e3
+                cv.heldout_rms_m * 1e3,
+                diff * 1e12,
+                se * 1e12,
+                if cv.beats_geometric { "  beats" } else { "" }
             );
         }
     }
