@@ -766,7 +766,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     let priors = identify_config(plan.sigma_m).rank;
     let observability =
         crate::support::observability_report(&problem, &identified, &priors, n_configurations);
-    let warnings = crate::support::warnings(
+    let mut warnings = crate::support::warnings(
         &identified,
         &priors,
         problem.points_offset(),
@@ -787,6 +787,26 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             });
         }
     }
+    // A test placement the calibration made worse is the first thing an engineer must see.
+    let mut worse = Vec::new();
+    for p in placements.iter().filter(|p| p.role == "test") {
+        if let (Some(before), Some(after)) = (
+            p.before.mean_absolute_error_m,
+            p.after.mean_absolute_error_m,
+        ) && after > before
+        {
+            worse.push(format!(
+                "test placement {}: the calibrated model is worse than the nominal one (mean \
+                     absolute error {:.3} → {:.3} mm). The training data do not determine what \
+                     matters there (record a placement closer to it), or the robot has an effect \
+                     the model lacks (backlash, compliance): do not use this calibration there",
+                p.name,
+                before * 1e3,
+                after * 1e3
+            ));
+        }
+    }
+    warnings.splice(0..0, worse);
     let report = CalibrationReport {
         device: plan.device.display().to_string(),
         model: choice,

@@ -67,8 +67,9 @@ pub fn observability_report(
 
 /// Plain-language warnings about what the data cannot support, for the parameters whose layout
 /// index is below `n_model` (nuisance points are left out):
-/// - each pruned parameter, and why (no effect, indistinguishable from named kept parameters, or
-///   below the noise);
+/// - the pruned parameters without effect or indistinguishable from kept ones, in one line (the
+///   report's `pruned` table names each one's dependency), and each parameter pruned because
+///   the noise hides it, with the standard deviation it would have;
 /// - kept parameters whose standard deviation exceeds a quarter of their prior;
 /// - kept pairs with |correlation| above `corr_threshold`;
 /// - a condition number above 100 (Schröer's rule of thumb, see Nahvi & Hollerbach 1996).
@@ -82,6 +83,10 @@ pub fn warnings(
     let layout = &identified.layout;
     let cfg = priors.with_sigma(identified.sigma);
     let mut out = Vec::new();
+    // Redundant parameters (no effect, or the same effect as kept ones) are a property of the
+    // model and the poses together; one line names them all, the `pruned` table gives each
+    // one's dependency. Parameters the noise hides get a line each: more poses would help them.
+    let mut redundant = Vec::new();
     for p in identified
         .identifiability
         .pruned
@@ -89,27 +94,35 @@ pub fn warnings(
         .filter(|p| p.index < n_model)
     {
         let unit = layout.spec(p.index).unit.symbol();
-        let why = match &p.reason {
-            PruneReason::NearZeroColumn => "the measurements do not depend on it".to_owned(),
-            PruneReason::Dependent { on } => {
-                let names: Vec<&str> = on.iter().map(|(n, _)| n.as_str()).collect();
-                format!(
-                    "its effect on the measurements is the same as that of {}",
-                    names.join(", ")
-                )
+        match &p.reason {
+            PruneReason::NearZeroColumn | PruneReason::Dependent { .. } => {
+                redundant.push(p.name.as_str());
             }
-            PruneReason::Insensitive => format!(
-                "its effect is too small for the noise: it would be known only to ±{:.3e} {unit}, \
-                 more than its plausible range of {:.3e} {unit}",
+            PruneReason::Insensitive => out.push(format!(
+                "the data cannot support {}: its effect is too small for the noise: it would be \
+                 known only to ±{:.3e} {unit}, more than its plausible range of {:.3e} {unit}; \
+                 it keeps its nominal value",
+                p.name,
                 p.std_if_kept,
                 cfg.prior_scale(layout.spec(p.index).unit)
+            )),
+            _ => out.push(format!(
+                "the data cannot support {}: it is not determined; it keeps its nominal value",
+                p.name
+            )),
+        }
+    }
+    if !redundant.is_empty() {
+        out.insert(
+            0,
+            format!(
+                "the data cannot support {} parameter(s) separately, because their effect on the \
+                 measurements is none or (nearly) that of kept parameters (see `pruned` for \
+                 each one's dependency); they keep their nominal values: {}",
+                redundant.len(),
+                redundant.join(", ")
             ),
-            _ => "it is not determined".to_owned(),
-        };
-        out.push(format!(
-            "the data cannot support {}: {why}; it keeps its nominal value",
-            p.name
-        ));
+        );
     }
     let stds = identified.covariance.std();
     for (&j, &std) in identified.covariance.free.iter().zip(&stds) {
