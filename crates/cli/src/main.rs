@@ -45,8 +45,10 @@ enum Command {
         /// Print the report as one JSON document instead of a table.
         #[arg(long)]
         json: bool,
-        /// Model: auto (chosen by cross-validation on the training data), geometric, compliance,
-        /// mass-compliance.
+        /// Model: auto (repeated blocked cross-validation on the training data; a compliance
+        /// model must beat the geometric one by one standard error), geometric, compliance,
+        /// mass-compliance, actuator-compliance, or a joint-harmonic model (harmonic,
+        /// harmonic2, mass-compliance-harmonic, compliance-harmonic; never chosen by auto).
         #[arg(long, value_enum, default_value_t = ModelChoice::Auto)]
         model: ModelChoice,
         /// Known distance between the two sockets of a placement, m.
