@@ -98,6 +98,9 @@ fn solve(args: &[String]) -> Result<()> {
         .unwrap_or_else(|| "1".into())
         .parse()?;
     let identify_only = args.iter().any(|a| a == "--identify-only");
+    let lm_factor: f64 = arg(args, "--factor")
+        .unwrap_or_else(|| "inf".into())
+        .parse()?;
     let device = hapcal_io::read_device(&root().join("fixtures/reference-device/device.toml"))?;
     let chain = device.chain()?;
     let t0 = Instant::now();
@@ -121,7 +124,13 @@ fn solve(args: &[String]) -> Result<()> {
     // starts with the full Gauss–Newton step (factor ∞: the nominal is close to the solution)
     // and knows the noise: residuals are in units of σ_m (the paper's noise model), so σ = 1
     // and the rank decision at the nominal is the one at the estimate (one round).
-    let cfg = IdentifyConfig::default();
+    let cfg = IdentifyConfig {
+        lm: LmConfig {
+            factor: lm_factor,
+            ..LmConfig::default()
+        },
+        ..IdentifyConfig::default()
+    };
     let cfg_identify = IdentifyConfig {
         lm: LmConfig {
             factor: f64::INFINITY,
@@ -149,13 +158,18 @@ fn solve(args: &[String]) -> Result<()> {
     }
     let mut id_times = Vec::new();
     let mut id = None;
-    for _ in 0..repeat {
+    // `--lm-only` (for instruction counts of the LM alone) skips `identify`.
+    let id_repeat = if args.iter().any(|a| a == "--lm-only") {
+        0
+    } else {
+        repeat
+    };
+    for _ in 0..id_repeat {
         let t = Instant::now();
         let fit = identify(&p, p.initial_guess(), &cfg_identify)?;
         id_times.push(t.elapsed().as_secs_f64());
         id = Some(fit);
     }
-    let id = id.ok_or("--repeat must be at least 1")?;
     let stats = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         if v.is_empty() {
@@ -184,6 +198,10 @@ fn solve(args: &[String]) -> Result<()> {
         ),
         None => "null".to_owned(),
     };
+    let Some(id) = id else {
+        println!("{{\"n_poses\": {}, \"lm\": {lm_json}, \"identify\": null}}", p.n_residuals());
+        return Ok(());
+    };
     let std = id.covariance.std();
     let stds = id
         .covariance
@@ -194,13 +212,15 @@ fn solve(args: &[String]) -> Result<()> {
         .collect::<Vec<_>>()
         .join(", ");
     println!(
-        "{{\"n_poses\": {}, \"n_params\": {}, \"n_free\": {}, \"backend\": \"{}\", \"threads\": {}, \"read_s\": {read_s:e}, \"lm\": {lm_json}, \"identify\": {{\"min_s\": {id_min:e}, \"median_s\": {id_median:e}, \"termination\": \"{:?}\", \"rounds\": {}, \"pruned\": {:?}, \"x\": {{{}}}, \"std\": {{{stds}}}}}, \"free\": {:?}}}",
+        "{{\"n_poses\": {}, \"n_params\": {}, \"n_free\": {}, \"backend\": \"{}\", \"threads\": {}, \"read_s\": {read_s:e}, \"lm\": {lm_json}, \"identify\": {{\"min_s\": {id_min:e}, \"median_s\": {id_median:e}, \"termination\": \"{:?}\", \"n_evaluations\": {}, \"n_jacobians\": {}, \"rounds\": {}, \"pruned\": {:?}, \"x\": {{{}}}, \"std\": {{{stds}}}}}, \"free\": {:?}}}",
         p.n_residuals(),
         layout.len(),
         free.len(),
         if streaming { "streaming" } else { "dense" },
         rayon_threads(),
         id.fit.termination,
+        id.fit.n_evaluations,
+        id.fit.n_jacobians,
         id.rounds,
         id.identifiability.pruned_names(),
         named(&id.fit.x, &id.identifiability.kept),
