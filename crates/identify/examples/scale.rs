@@ -98,6 +98,9 @@ fn solve(args: &[String]) -> Result<()> {
         .unwrap_or_else(|| "1".into())
         .parse()?;
     let identify_only = args.iter().any(|a| a == "--identify-only");
+    let max_rounds: usize = arg(args, "--max-rounds")
+        .unwrap_or_else(|| hapcal_identify::MAX_ROUNDS.to_string())
+        .parse()?;
     let lm_factor: f64 = arg(args, "--factor")
         .unwrap_or_else(|| "inf".into())
         .parse()?;
@@ -137,6 +140,7 @@ fn solve(args: &[String]) -> Result<()> {
             ..LmConfig::default()
         },
         sigma: Some(1.0),
+        max_rounds,
         ..IdentifyConfig::default()
     };
     let streaming = p.n_residuals() * layout.len() > hapcal_identify::STREAMING_AUTO_ENTRIES;
@@ -199,7 +203,10 @@ fn solve(args: &[String]) -> Result<()> {
         None => "null".to_owned(),
     };
     let Some(id) = id else {
-        println!("{{\"n_poses\": {}, \"lm\": {lm_json}, \"identify\": null}}", p.n_residuals());
+        println!(
+            "{{\"n_poses\": {}, \"lm\": {lm_json}, \"identify\": null}}",
+            p.n_residuals()
+        );
         return Ok(());
     };
     let std = id.covariance.std();
@@ -212,7 +219,7 @@ fn solve(args: &[String]) -> Result<()> {
         .collect::<Vec<_>>()
         .join(", ");
     println!(
-        "{{\"n_poses\": {}, \"n_params\": {}, \"n_free\": {}, \"backend\": \"{}\", \"threads\": {}, \"read_s\": {read_s:e}, \"lm\": {lm_json}, \"identify\": {{\"min_s\": {id_min:e}, \"median_s\": {id_median:e}, \"termination\": \"{:?}\", \"n_evaluations\": {}, \"n_jacobians\": {}, \"rounds\": {}, \"pruned\": {:?}, \"x\": {{{}}}, \"std\": {{{stds}}}}}, \"free\": {:?}}}",
+        "{{\"n_poses\": {}, \"n_params\": {}, \"n_free\": {}, \"backend\": \"{}\", \"threads\": {}, \"read_s\": {read_s:e}, \"lm\": {lm_json}, \"identify\": {{\"min_s\": {id_min:e}, \"median_s\": {id_median:e}, \"termination\": \"{:?}\", \"n_evaluations\": {}, \"n_jacobians\": {}, \"rounds\": {}, \"pruning_converged\": {}, \"pruned\": {:?}, \"x\": {{{}}}, \"std\": {{{stds}}}}}, \"free\": {:?}}}",
         p.n_residuals(),
         layout.len(),
         free.len(),
@@ -222,6 +229,7 @@ fn solve(args: &[String]) -> Result<()> {
         id.fit.n_evaluations,
         id.fit.n_jacobians,
         id.rounds,
+        id.pruning_converged,
         id.identifiability.pruned_names(),
         named(&id.fit.x, &id.identifiability.kept),
         free.iter().map(|&i| layout.name(i)).collect::<Vec<_>>(),

@@ -92,9 +92,13 @@ fn leaf_ranges(n_blocks: usize) -> Vec<Range<usize>> {
         .collect()
 }
 
-/// Reduces the rows of `stack` (`k × (n+1)`, `k ≥ n+1`) to their R factor in place and
-/// zeroes everything below the diagonal.
-fn triangularise(mut stack: MatMut<'_, f64>, q_coeff: MatMut<'_, f64>, buf: &mut MemBuffer) {
+/// Reduces the rows of `stack` (`k × (n+1)`, `k ≥ n+1`) to their R factor in place: its top
+/// `(n+1) × (n+1)` rows then hold `R` (zeros below the diagonal); the rows below are scratch.
+pub(crate) fn triangularise(
+    mut stack: MatMut<'_, f64>,
+    q_coeff: MatMut<'_, f64>,
+    buf: &mut MemBuffer,
+) {
     qr_factor::qr_in_place(
         stack.as_mut(),
         q_coeff,
@@ -102,13 +106,20 @@ fn triangularise(mut stack: MatMut<'_, f64>, q_coeff: MatMut<'_, f64>, buf: &mut
         MemStack::new(buf),
         Default::default(),
     );
-    let n1 = stack.ncols();
+    // Only the triangle is read afterwards (rows below it are overwritten by the next rows or
+    // dropped): zero the Householder vectors stored under its diagonal.
+    let n1 = stack.ncols().min(stack.nrows());
     for j in 0..n1 {
-        for i in (j + 1)..stack.nrows() {
+        for i in (j + 1)..n1 {
             stack[(i, j)] = 0.0;
         }
     }
 }
+
+/// Rows gathered before each Householder reduction of a leaf: the QR of `[R; rows]` costs
+/// `≈ 2(n+1)²` flops per row whatever the chunk, but faer's blocked QR runs closer to the
+/// matrix-product rate on a tall chunk than on one block of a few hundred rows.
+const CHUNK_ROWS: usize = 8192;
 
 /// One leaf: its blocks reduced in sequence to an `(n+1) × (n+1)` triangle.
 fn reduce_leaf(
@@ -123,7 +134,8 @@ fn reduce_leaf(
         .map(|b| p.block_rows(b).len())
         .max()
         .unwrap_or(0);
-    let rows = n1 + max_len;
+    let chunk = CHUNK_ROWS.max(max_len);
+    let rows = n1 + chunk;
     let mut stack = Mat::<f64>::zeros(rows, n1);
     let block_size = qr_factor::recommended_block_size::<f64>(rows, n1);
     let mut q_coeff = Mat::<f64>::zeros(block_size, n1);
@@ -137,11 +149,21 @@ fn reduce_leaf(
     let mut r_block = Col::<f64>::zeros(max_len);
     let mut jac = Mat::<f64>::zeros(max_len, n);
     let mut r_norm_sq = 0.0;
+    // Rows of `stack` below the triangle filled so far.
+    let mut filled = 0;
     for b in blocks {
         let range = p.block_rows(b);
         let len = range.len();
         if len == 0 {
             continue;
+        }
+        if filled + len > chunk {
+            triangularise(
+                stack.as_mut().subrows_mut(0, n1 + filled),
+                q_coeff.as_mut(),
+                &mut buf,
+            );
+            filled = 0;
         }
         p.block_jacobian(
             x,
@@ -160,6 +182,7 @@ fn reduce_leaf(
             }
             r_norm_sq += ri * ri;
         }
+        let at = n1 + filled;
         for j in 0..n {
             for i in 0..len {
                 let v = jac[(i, j)];
@@ -169,14 +192,26 @@ fn reduce_leaf(
                         col: Some(j),
                     });
                 }
-                stack[(n1 + i, j)] = v;
             }
+            stack
+                .as_mut()
+                .col_mut(j)
+                .subrows_mut(at, len)
+                .copy_from(jac.col(j).subrows(0, len));
         }
-        for i in 0..len {
-            stack[(n1 + i, n)] = r_block[i];
-        }
-        let k = n1 + len;
-        triangularise(stack.as_mut().subrows_mut(0, k), q_coeff.as_mut(), &mut buf);
+        stack
+            .as_mut()
+            .col_mut(n)
+            .subrows_mut(at, len)
+            .copy_from(r_block.subrows(0, len));
+        filled += len;
+    }
+    if filled > 0 {
+        triangularise(
+            stack.as_mut().subrows_mut(0, n1 + filled),
+            q_coeff.as_mut(),
+            &mut buf,
+        );
     }
     Ok((stack.subrows(0, n1).to_owned(), r_norm_sq))
 }
@@ -333,7 +368,7 @@ impl Linearised for Streaming<'_> {
             .sum::<f64>()
             .abs()
     }
-    fn scaled_qr(&self, diag: &[f64]) -> ScaledQr {
+    fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr {
         let nf = self.free.len();
         let iota: Vec<usize> = (0..nf).collect();
         ScaledQr::new(

@@ -11,6 +11,7 @@
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::householder;
+use faer::linalg::qr::no_pivoting::factor as qr_factor;
 use faer::linalg::solvers::SolveLstsq;
 use faer::{Col, ColRef, Conj, Mat, MatRef, Par};
 
@@ -243,6 +244,7 @@ pub fn levenberg_marquardt(
         jac,
         r,
         r_trial: Col::<f64>::zeros(m),
+        aug: None,
     };
     let run = run(&mut dense, x0, free, cfg, f_norm);
     let cost = 0.5 * dense.r.squared_norm_l2();
@@ -270,7 +272,7 @@ pub(crate) trait Linearised {
     /// `|J_jᵀ r|` for the free columns.
     fn gradient_abs(&self, j: usize) -> f64;
     /// The column-pivoted QR of `J_f D⁻¹` and `Q₁ᵀ r`.
-    fn scaled_qr(&self, diag: &[f64]) -> ScaledQr;
+    fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr;
 }
 
 struct Dense<'a, P: Problem> {
@@ -279,6 +281,8 @@ struct Dense<'a, P: Problem> {
     jac: Mat<f64>,
     r: Col<f64>,
     r_trial: Col<f64>,
+    /// QR scratch, made at the first step.
+    aug: Option<Augmented>,
 }
 
 impl<P: Problem> Linearised for Dense<'_, P> {
@@ -309,8 +313,52 @@ impl<P: Problem> Linearised for Dense<'_, P> {
     fn gradient_abs(&self, j: usize) -> f64 {
         (self.jac.col(self.free[j]).transpose() * self.r.as_ref()).abs()
     }
-    fn scaled_qr(&self, diag: &[f64]) -> ScaledQr {
-        ScaledQr::new(self.jac.as_ref(), self.free, diag, self.r.as_ref())
+    fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr {
+        // Two stages (as the streaming back end): `[J_f r]` is reduced to its triangle `R₊` by
+        // faer's blocked Householder QR (no pivoting: matrix-product speed on the m rows), then
+        // the column-pivoted QR of the scaled `n_f × n_f` triangle gives the same `R` and
+        // `Q₁ᵀr` as the pivoted QR of `J_f D⁻¹` up to rounding, in O(n_f³).
+        let nf = self.free.len();
+        let m = self.jac.nrows();
+        let aug = self.aug.get_or_insert_with(|| Augmented::new(m, nf + 1));
+        for (c, &k) in self.free.iter().enumerate() {
+            aug.stack.col_mut(c).copy_from(self.jac.col(k));
+        }
+        aug.stack.col_mut(nf).copy_from(&self.r);
+        crate::blocks::triangularise(aug.stack.as_mut(), aug.q_coeff.as_mut(), &mut aug.buf);
+        let iota: Vec<usize> = (0..nf).collect();
+        let tri = aug.stack.as_ref().submatrix(0, 0, nf + 1, nf + 1);
+        ScaledQr::new(
+            tri.submatrix(0, 0, nf, nf),
+            &iota,
+            diag,
+            tri.col(nf).subrows(0, nf),
+        )
+    }
+}
+
+/// Scratch of the dense back end's first QR stage: `[J_f r]` (`m × (n_f+1)`) and faer's
+/// Householder coefficients and workspace, allocated once per fit.
+struct Augmented {
+    stack: Mat<f64>,
+    q_coeff: Mat<f64>,
+    buf: MemBuffer,
+}
+
+impl Augmented {
+    fn new(m: usize, ncols: usize) -> Self {
+        let block_size = qr_factor::recommended_block_size::<f64>(m, ncols);
+        Self {
+            stack: Mat::zeros(m, ncols),
+            q_coeff: Mat::zeros(block_size, ncols),
+            buf: MemBuffer::new(qr_factor::qr_in_place_scratch::<f64>(
+                m,
+                ncols,
+                block_size,
+                Par::Seq,
+                Default::default(),
+            )),
+        }
     }
 }
 

@@ -458,8 +458,19 @@ impl CalibrationProblem {
                     Some(j) => {
                         frozen.distance_gradient_lanes(trig, &mut dist, Some(&mut lane_grad));
                         for (col, g) in lane_grad.iter().enumerate() {
-                            for (l, v) in g.iter().enumerate() {
-                                j[(r + l, col)] = v / s;
+                            let dst = j.as_mut().col_mut(col).subrows_mut(r, LANES);
+                            // Contiguous rows (a column-major Jacobian): one vector store.
+                            match dst.try_as_col_major_mut() {
+                                Some(d) => {
+                                    for (o, v) in d.as_slice_mut().iter_mut().zip(g) {
+                                        *o = v / s;
+                                    }
+                                }
+                                None => {
+                                    for (l, v) in g.iter().enumerate() {
+                                        j[(r + l, col)] = v / s;
+                                    }
+                                }
                             }
                         }
                     }
