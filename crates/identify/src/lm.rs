@@ -9,13 +9,13 @@
 //! i.e. exact Gauss–Newton steps, whenever the Gauss–Newton step fits in the region: linear
 //! problems are solved in one step and small-residual problems converge quadratically.
 
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::householder;
+use faer::dyn_stack::MemBuffer;
+
 use faer::linalg::qr::no_pivoting::factor as qr_factor;
-use faer::linalg::solvers::SolveLstsq;
-use faer::{Col, ColRef, Conj, Mat, MatRef, Par};
+use faer::{Col, ColRef, Mat, MatRef, Par};
 
 use crate::error::{Error, check_config, check_factor};
+use crate::householder::{self, ColMajor};
 use crate::problem::{ParamLayout, Problem};
 
 /// Stopping tolerances of [`levenberg_marquardt`] (the MINPACK `lmder` tests).
@@ -320,13 +320,38 @@ impl<P: Problem> Linearised for Dense<'_, P> {
         // `Q₁ᵀr` as the pivoted QR of `J_f D⁻¹` up to rounding, in O(n_f³).
         let nf = self.free.len();
         let m = self.jac.nrows();
-        let aug = self.aug.get_or_insert_with(|| Augmented::new(m, nf + 1));
-        for (c, &k) in self.free.iter().enumerate() {
-            aug.stack.col_mut(c).copy_from(self.jac.col(k));
-        }
-        aug.stack.col_mut(nf).copy_from(&self.r);
-        crate::blocks::triangularise(aug.stack.as_mut(), aug.q_coeff.as_mut(), &mut aug.buf);
         let iota: Vec<usize> = (0..nf).collect();
+        // At least n_f + 1 rows: zero rows below `m` (when m ≤ n_f) leave the Gram matrix as is.
+        let rows = m.max(nf + 1);
+        if m <= BLOCKED_ROWS {
+            let mut a = ColMajor::zeros(rows, nf + 1);
+            for (c, &k) in self.free.iter().enumerate() {
+                for (dst, v) in a.col_mut(c).iter_mut().zip(self.jac.col(k).iter()) {
+                    *dst = *v;
+                }
+            }
+            for (dst, v) in a.col_mut(nf).iter_mut().zip(self.r.iter()) {
+                *dst = *v;
+            }
+            householder::qr_in_place(&mut a, 0);
+            let tri = MatRef::from_column_major_slice(&a.data, rows, nf + 1);
+            return ScaledQr::new(
+                tri.submatrix(0, 0, nf, nf),
+                &iota,
+                diag,
+                tri.col(nf).subrows(0, nf),
+            );
+        }
+        let aug = self.aug.get_or_insert_with(|| Augmented::new(rows, nf + 1));
+        for (c, &k) in self.free.iter().enumerate() {
+            aug.stack
+                .col_mut(c)
+                .subrows_mut(0, m)
+                .copy_from(self.jac.col(k));
+        }
+        aug.stack.col_mut(nf).subrows_mut(0, m).copy_from(&self.r);
+        aug.stack.as_mut().subrows_mut(m, rows - m).fill(0.0);
+        crate::blocks::triangularise(aug.stack.as_mut(), aug.q_coeff.as_mut(), &mut aug.buf);
         let tri = aug.stack.as_ref().submatrix(0, 0, nf + 1, nf + 1);
         ScaledQr::new(
             tri.submatrix(0, 0, nf, nf),
@@ -337,7 +362,13 @@ impl<P: Problem> Linearised for Dense<'_, P> {
     }
 }
 
-/// Scratch of the dense back end's first QR stage: `[J_f r]` (`m × (n_f+1)`) and faer's
+/// Above this many rows the dense back end's first QR stage is faer's blocked Householder QR
+/// (matrix-product updates, cache blocking); below, the unblocked one of
+/// [`householder`](crate::householder), whose set-up is negligible. Equal within measurement
+/// noise at 20,000 rows (`examples/scale.rs`, 28 columns).
+const BLOCKED_ROWS: usize = 4096;
+
+/// Scratch of the dense back end's first QR stage: `[J_f r]` (`max(m, n_f+1) × (n_f+1)`) and faer's
 /// Householder coefficients and workspace, allocated once per fit.
 struct Augmented {
     stack: Mat<f64>,
@@ -543,25 +574,19 @@ impl ScaledQr {
         r: ColRef<'_, f64>,
     ) -> Self {
         let (m, nf) = (jac.nrows(), free.len());
-        let scaled = Mat::from_fn(m, nf, |i, j| jac[(i, free[j])] / diag[j]);
-        let qr = scaled.col_piv_qr();
-        let perm = qr.P().arrays().0.to_vec();
-        let rmat = qr.R().get(..nf, ..nf).to_owned();
-        let mut qtr = r.to_owned();
-        let block = qr.Q_coeff().nrows();
-        let mut buf = MemBuffer::new(
-            householder::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<
-                f64,
-            >(m, block, 1),
-        );
-        householder::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
-            qr.Q_basis(),
-            qr.Q_coeff(),
-            Conj::No,
-            qtr.as_mat_mut(),
-            Par::Seq,
-            MemStack::new(&mut buf),
-        );
+        // [J_f D⁻¹ | r], reduced in place; `r` is never a pivot and becomes Qᵀr.
+        let mut a = ColMajor::zeros(m, nf + 1);
+        for (j, (&k, d)) in free.iter().zip(diag).enumerate() {
+            for (dst, v) in a.col_mut(j).iter_mut().zip(jac.col(k).iter()) {
+                *dst = v / d;
+            }
+        }
+        for (dst, v) in a.col_mut(nf).iter_mut().zip(r.iter()) {
+            *dst = *v;
+        }
+        let perm = householder::qr_in_place(&mut a, nf)[..nf].to_vec();
+        let rmat = Mat::from_fn(nf, nf, |i, j| if i <= j { a.at(i, j) } else { 0.0 });
+        let qtr: Vec<f64> = (0..nf).map(|i| a.at(i, nf)).collect();
         // Pivoting sorts |R_kk| down; below ε·max(m, n)·|R_00| a pivot is zero at working
         // precision and the Gauss–Newton step leaves its component at 0.
         let r00 = if nf > 0 { rmat[(0, 0)].abs() } else { 0.0 };
@@ -570,7 +595,7 @@ impl ScaledQr {
         Self {
             r: rmat,
             perm,
-            qtr: (0..nf).map(|i| qtr[i]).collect(),
+            qtr,
             n_sing,
         }
     }
@@ -656,24 +681,56 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
     (u, lambda)
 }
 
-/// Solves `min ‖[R; √λ·I] u + [Qᵀr; 0]‖` by Householder QR of the `2n × n` stacked matrix;
-/// returns `u` and the triangular factor `S` (`SᵀS = RᵀR + λI`).
+/// Solves `min ‖[R; √λ·I] u + [Qᵀr; 0]‖` for upper-triangular `R` (`n × n`); returns `u` and
+/// the triangular factor `S` (`SᵀS = RᵀR + λI`).
+///
+/// MINPACK `qrsolv` (Moré, Garbow, Hillstrom 1980): the rows of `√λ·I` are eliminated one at a
+/// time against `R` by Givens rotations, `O(n³)` flops in place of a Householder QR of the
+/// stacked `2n × n` matrix, and no allocation besides `S` and `u`.
 fn damped_step(rmat: MatRef<'_, f64>, qtr: &[f64], lambda: f64) -> (Vec<f64>, Mat<f64>) {
     let nf = qtr.len();
     let sqrt_lambda = lambda.sqrt();
-    let stacked = Mat::from_fn(2 * nf, nf, |i, j| {
-        if i < nf {
-            rmat[(i, j)]
-        } else if i - nf == j {
-            sqrt_lambda
-        } else {
-            0.0
+    let mut s = Mat::from_fn(nf, nf, |i, j| if i <= j { rmat[(i, j)] } else { 0.0 });
+    let mut w: Vec<f64> = qtr.iter().map(|v| -v).collect();
+    let mut row = vec![0.0; nf];
+    for j in 0..nf {
+        // Row j of √λ·I, and its right-hand side 0.
+        row[j..].iter_mut().for_each(|v| *v = 0.0);
+        row[j] = sqrt_lambda;
+        let mut rhs = 0.0;
+        for k in j..nf {
+            if row[k] == 0.0 {
+                continue;
+            }
+            let skk = s[(k, k)];
+            let (sin, cos) = if skk.abs() < row[k].abs() {
+                let cot = skk / row[k];
+                let sin = 0.5 / (0.25 + 0.25 * cot * cot).sqrt();
+                (sin, sin * cot)
+            } else {
+                let tan = row[k] / skk;
+                let cos = 0.5 / (0.25 + 0.25 * tan * tan).sqrt();
+                (cos * tan, cos)
+            };
+            s[(k, k)] = cos * skk + sin * row[k];
+            let wk = w[k];
+            w[k] = cos * wk + sin * rhs;
+            rhs = -sin * wk + cos * rhs;
+            for i in (k + 1)..nf {
+                let ski = s[(k, i)];
+                s[(k, i)] = cos * ski + sin * row[i];
+                row[i] = -sin * ski + cos * row[i];
+            }
         }
-    });
-    let qr = stacked.qr();
-    let mut rhs = Col::from_fn(2 * nf, |i| if i < nf { -qtr[i] } else { 0.0 });
-    qr.solve_lstsq_in_place(rhs.as_mut());
-    ((0..nf).map(|i| rhs[i]).collect(), qr.R().to_owned())
+    }
+    // S u = w; a zero pivot (λ = 0 with singular R) leaves the trailing components at 0.
+    let n_sing = (0..nf).find(|&k| s[(k, k)] == 0.0).unwrap_or(nf);
+    let mut u = vec![0.0; nf];
+    for i in (0..n_sing).rev() {
+        let sum: f64 = ((i + 1)..n_sing).map(|j| s[(i, j)] * u[j]).sum();
+        u[i] = (w[i] - sum) / s[(i, i)];
+    }
+    (u, s)
 }
 
 #[cfg(test)]
