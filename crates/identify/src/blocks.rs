@@ -16,7 +16,7 @@ use std::ops::Range;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::qr::no_pivoting::factor as qr_factor;
-use faer::{Col, ColMut, ColRef, Mat, MatMut, Par};
+use faer::{Col, ColMut, ColRef, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
 use crate::error::Error;
@@ -146,8 +146,6 @@ fn reduce_leaf(
         Par::Seq,
         Default::default(),
     ));
-    let mut r_block = Col::<f64>::zeros(max_len);
-    let mut jac = Mat::<f64>::zeros(max_len, n);
     let mut r_norm_sq = 0.0;
     // Rows of `stack` below the triangle filled so far.
     let mut filled = 0;
@@ -165,45 +163,17 @@ fn reduce_leaf(
             );
             filled = 0;
         }
-        p.block_jacobian(
-            x,
-            b,
-            r_block.as_mut().subrows_mut(0, len),
-            jac.as_mut().subrows_mut(0, len),
-        )
-        .map_err(StreamError::Eval)?;
-        for i in 0..len {
-            let ri = r_block[i];
-            if !ri.is_finite() {
-                return Err(StreamError::NonFinite {
-                    row: range.start + i,
-                    col: None,
-                });
-            }
-            r_norm_sq += ri * ri;
-        }
+        // The block writes its rows straight into the stack: `[J_b | r_b]`.
         let at = n1 + filled;
-        for j in 0..n {
-            for i in 0..len {
-                let v = jac[(i, j)];
-                if !v.is_finite() {
-                    return Err(StreamError::NonFinite {
-                        row: range.start + i,
-                        col: Some(j),
-                    });
-                }
-            }
-            stack
-                .as_mut()
-                .col_mut(j)
-                .subrows_mut(at, len)
-                .copy_from(jac.col(j).subrows(0, len));
+        let rows_b = stack.as_mut().subrows_mut(at, len);
+        let (jac, r_col) = rows_b.split_at_col_mut(n);
+        p.block_jacobian(x, b, r_col.col_mut(0), jac)
+            .map_err(StreamError::Eval)?;
+        let rows_b = stack.as_ref().subrows(at, len);
+        if !rows_b.is_all_finite() {
+            return Err(first_non_finite(rows_b, n, range.start));
         }
-        stack
-            .as_mut()
-            .col_mut(n)
-            .subrows_mut(at, len)
-            .copy_from(r_block.subrows(0, len));
+        r_norm_sq += rows_b.col(n).squared_norm_l2();
         filled += len;
     }
     if filled > 0 {
@@ -214,6 +184,29 @@ fn reduce_leaf(
         );
     }
     Ok((stack.subrows(0, n1).to_owned(), r_norm_sq))
+}
+
+/// The first non-finite entry of a block's `[J_b | r_b]` (residual first, row by row), as a
+/// [`StreamError::NonFinite`] with the global row index (`first_row` + local row).
+fn first_non_finite(rows: MatRef<'_, f64>, n: usize, first_row: usize) -> StreamError {
+    for i in 0..rows.nrows() {
+        if !rows[(i, n)].is_finite() {
+            return StreamError::NonFinite {
+                row: first_row + i,
+                col: None,
+            };
+        }
+        if let Some(j) = (0..n).find(|&j| !rows[(i, j)].is_finite()) {
+            return StreamError::NonFinite {
+                row: first_row + i,
+                col: Some(j),
+            };
+        }
+    }
+    StreamError::NonFinite {
+        row: first_row,
+        col: None,
+    }
 }
 
 /// Streams `[J r]` at `x` through the blocks of `p` into its R factor (`n` parameters).
