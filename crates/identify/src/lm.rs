@@ -186,9 +186,12 @@ const FACTOR: f64 = 100.0;
 /// Algorithm (MINPACK `lmder`, Moré 1978): `D` holds the column norms of `J`, as their running
 /// maximum over iterations (`mode = 1`; a zero column gets 1). In the scaled variables
 /// `u = D·p`, each trial step solves the damped problem `[J D⁻¹; √λ·I] u ≈ [−r; 0]` with the
-/// smallest `λ ≥ 0` such that `‖u‖ ≤ Δ` (within 10 %): `J D⁻¹` is factorised once per
-/// Jacobian by column-pivoted Householder QR, and `[R; √λ·I]` (size `2n_free × n_free`) by
-/// Householder QR for each `λ` tried. `Δ` starts at `100·‖D·x0‖` (100 if zero) and follows the
+/// smallest `λ ≥ 0` such that `‖u‖ ≤ Δ` (within 10 %): once per Jacobian, `[J_f r]` is reduced
+/// to its `(n_free+1)`-square triangle by Householder QR (unblocked and vectorised up to 4096
+/// rows, faer's blocked QR above), whose scaled leading block then gets the column-pivoted
+/// Householder QR of `J D⁻¹` (the same Gram matrix, so the same `R` and `Q₁ᵀr` up to rounding);
+/// for each `λ` tried, `[R; √λ·I]` is reduced by Givens rotations (MINPACK `qrsolv`). `Δ`
+/// starts at `factor·‖D·x0‖` (`factor` if zero; [`LmConfig::factor`]) and follows the
 /// gain ratio `ρ = actual / predicted reduction`: shrunk when `ρ ≤ 1/4`, set to `2‖u‖` when
 /// `ρ ≥ 3/4` or `λ = 0`; a step is accepted when `ρ ≥ 10⁻⁴`. A trial point where `r` cannot be
 /// evaluated or is not finite is rejected like a step that increases the cost tenfold (`Δ` is
