@@ -248,6 +248,7 @@ pub fn levenberg_marquardt(
         r,
         r_trial: Col::<f64>::zeros(m),
         aug: None,
+        small: None,
     };
     let run = run(&mut dense, x0, free, cfg, f_norm);
     let cost = 0.5 * dense.r.squared_norm_l2();
@@ -284,8 +285,10 @@ struct Dense<'a, P: Problem> {
     jac: Mat<f64>,
     r: Col<f64>,
     r_trial: Col<f64>,
-    /// QR scratch, made at the first step.
+    /// QR scratch, made at the first step: faer's blocked QR above [`BLOCKED_ROWS`] rows,
+    /// the unblocked one below.
     aug: Option<Augmented>,
+    small: Option<ColMajor>,
 }
 
 impl<P: Problem> Linearised for Dense<'_, P> {
@@ -327,16 +330,26 @@ impl<P: Problem> Linearised for Dense<'_, P> {
         // At least n_f + 1 rows: zero rows below `m` (when m ≤ n_f) leave the Gram matrix as is.
         let rows = m.max(nf + 1);
         if m <= BLOCKED_ROWS {
-            let mut a = ColMajor::zeros(rows, nf + 1);
-            for (c, &k) in self.free.iter().enumerate() {
-                for (dst, v) in a.col_mut(c).iter_mut().zip(self.jac.col(k).iter()) {
-                    *dst = *v;
+            let a = self
+                .small
+                .get_or_insert_with(|| ColMajor::zeros(rows, nf + 1));
+            for (c, &k) in self.free.iter().chain([&usize::MAX]).enumerate() {
+                let dst = a.col_mut(c);
+                let src = if k == usize::MAX {
+                    self.r.as_ref()
+                } else {
+                    self.jac.col(k)
+                };
+                match src.try_as_col_major() {
+                    Some(s) => dst[..m].copy_from_slice(s.as_slice()),
+                    None => dst[..m]
+                        .iter_mut()
+                        .zip(src.iter())
+                        .for_each(|(d, v)| *d = *v),
                 }
+                dst[m..].fill(0.0);
             }
-            for (dst, v) in a.col_mut(nf).iter_mut().zip(self.r.iter()) {
-                *dst = *v;
-            }
-            householder::qr_in_place(&mut a, 0);
+            householder::qr_in_place(a, 0);
             let tri = MatRef::from_column_major_slice(&a.data, rows, nf + 1);
             return ScaledQr::new(
                 tri.submatrix(0, 0, nf, nf),
