@@ -116,12 +116,9 @@ pub(crate) fn triangularise(
     }
 }
 
-/// Rows gathered before each Householder reduction of a leaf: the QR of `[R; rows]` costs
-/// `≈ 2(n+1)²` flops per row whatever the chunk, but faer's blocked QR runs closer to the
-/// matrix-product rate on a tall chunk than on one block of a few hundred rows.
-const CHUNK_ROWS: usize = 8192;
-
-/// One leaf: its blocks reduced in sequence to an `(n+1) × (n+1)` triangle.
+/// One leaf: its blocks folded in sequence into an `(n+1) × (n+1)` triangle, each block by the
+/// structured Householder update of [`fold_rows`](crate::householder::fold_rows) while its
+/// `[J_b | r_b]` is still in cache.
 fn reduce_leaf(
     p: &dyn RowBlocks,
     x: ColRef<'_, f64>,
@@ -134,56 +131,28 @@ fn reduce_leaf(
         .map(|b| p.block_rows(b).len())
         .max()
         .unwrap_or(0);
-    let chunk = CHUNK_ROWS.max(max_len);
-    let rows = n1 + chunk;
-    let mut stack = Mat::<f64>::zeros(rows, n1);
-    let block_size = qr_factor::recommended_block_size::<f64>(rows, n1);
-    let mut q_coeff = Mat::<f64>::zeros(block_size, n1);
-    let mut buf = MemBuffer::new(qr_factor::qr_in_place_scratch::<f64>(
-        rows,
-        n1,
-        block_size,
-        Par::Seq,
-        Default::default(),
-    ));
+    let mut tri = vec![0.0; n1 * n1];
+    let mut rows = vec![0.0; max_len.max(1) * n1];
     let mut r_norm_sq = 0.0;
-    // Rows of `stack` below the triangle filled so far.
-    let mut filled = 0;
     for b in blocks {
         let range = p.block_rows(b);
         let len = range.len();
         if len == 0 {
             continue;
         }
-        if filled + len > chunk {
-            triangularise(
-                stack.as_mut().subrows_mut(0, n1 + filled),
-                q_coeff.as_mut(),
-                &mut buf,
-            );
-            filled = 0;
-        }
-        // The block writes its rows straight into the stack: `[J_b | r_b]`.
-        let at = n1 + filled;
-        let rows_b = stack.as_mut().subrows_mut(at, len);
-        let (jac, r_col) = rows_b.split_at_col_mut(n);
+        // The block writes `[J_b | r_b]` (len × n1, leading dimension max_len).
+        let block = MatMut::from_column_major_slice_with_stride_mut(&mut rows, len, n1, max_len);
+        let (jac, r_col) = block.split_at_col_mut(n);
         p.block_jacobian(x, b, r_col.col_mut(0), jac)
             .map_err(StreamError::Eval)?;
-        let rows_b = stack.as_ref().subrows(at, len);
-        if !rows_b.is_all_finite() {
-            return Err(first_non_finite(rows_b, n, range.start));
+        let block = MatRef::from_column_major_slice_with_stride(&rows, len, n1, max_len);
+        if !block.is_all_finite() {
+            return Err(first_non_finite(block, n, range.start));
         }
-        r_norm_sq += rows_b.col(n).squared_norm_l2();
-        filled += len;
+        r_norm_sq += block.col(n).squared_norm_l2();
+        crate::householder::fold_rows(&mut tri, n1, &mut rows, len, max_len);
     }
-    if filled > 0 {
-        triangularise(
-            stack.as_mut().subrows_mut(0, n1 + filled),
-            q_coeff.as_mut(),
-            &mut buf,
-        );
-    }
-    Ok((stack.subrows(0, n1).to_owned(), r_norm_sq))
+    Ok((Mat::from_fn(n1, n1, |i, j| tri[j * n1 + i]), r_norm_sq))
 }
 
 /// The first non-finite entry of a block's `[J_b | r_b]` (residual first, row by row), as a
