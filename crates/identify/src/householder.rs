@@ -369,7 +369,7 @@ mod tests {
             let (i, j) = (t / n1, t % n1);
             let got = gram(i, j, &folded);
             assert!(
-                (got - *want).abs() < 1e-12 * *want.abs().max(1.0),
+                (got - *want).abs() < 1e-12 * want.abs().max(1.0),
                 "({i}, {j}): {got} vs {}",
                 *want
             );
