@@ -9,10 +9,7 @@
 //! i.e. exact Gauss–Newton steps, whenever the Gauss–Newton step fits in the region: linear
 //! problems are solved in one step and small-residual problems converge quadratically.
 
-use faer::dyn_stack::MemBuffer;
-
-use faer::linalg::qr::no_pivoting::factor as qr_factor;
-use faer::{Col, ColRef, Mat, MatRef, Par};
+use faer::{Col, ColRef, Mat, MatRef};
 
 use crate::error::{Error, check_config, check_factor};
 use crate::householder::{self, ColMajor};
@@ -247,8 +244,7 @@ pub fn levenberg_marquardt(
         jac,
         r,
         r_trial: Col::<f64>::zeros(m),
-        aug: None,
-        small: None,
+        fold_buf: None,
     };
     let run = run(&mut dense, x0, free, cfg, f_norm);
     let cost = 0.5 * dense.r.squared_norm_l2();
@@ -285,10 +281,8 @@ struct Dense<'a, P: Problem> {
     jac: Mat<f64>,
     r: Col<f64>,
     r_trial: Col<f64>,
-    /// QR scratch, made at the first step: faer's blocked QR above [`BLOCKED_ROWS`] rows,
-    /// the unblocked one below.
-    aug: Option<Augmented>,
-    small: Option<ColMajor>,
+    /// Row block of `[J_f r]` for the first QR stage, made at the first step.
+    fold_buf: Option<Vec<f64>>,
 }
 
 impl<P: Problem> Linearised for Dense<'_, P> {
@@ -320,55 +314,36 @@ impl<P: Problem> Linearised for Dense<'_, P> {
         (self.jac.col(self.free[j]).transpose() * self.r.as_ref()).abs()
     }
     fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr {
-        // Two stages (as the streaming back end): `[J_f r]` is reduced to its triangle `R₊` by
-        // faer's blocked Householder QR (no pivoting: matrix-product speed on the m rows), then
-        // the column-pivoted QR of the scaled `n_f × n_f` triangle gives the same `R` and
+        // Two stages (as the streaming back end): `[J_f r]` is folded into its triangle `R₊`
+        // block of rows by block of rows ([`householder::fold_rows`], each block in cache),
+        // then the column-pivoted QR of the scaled `n_f × n_f` triangle gives the same `R` and
         // `Q₁ᵀr` as the pivoted QR of `J_f D⁻¹` up to rounding, in O(n_f³).
         let nf = self.free.len();
+        let n1 = nf + 1;
         let m = self.jac.nrows();
-        let iota: Vec<usize> = (0..nf).collect();
-        // At least n_f + 1 rows: zero rows below `m` (when m ≤ n_f) leave the Gram matrix as is.
-        let rows = m.max(nf + 1);
-        if m <= BLOCKED_ROWS {
-            let a = self
-                .small
-                .get_or_insert_with(|| ColMajor::zeros(rows, nf + 1));
+        let mut tri = vec![0.0; n1 * n1];
+        let buf = self
+            .fold_buf
+            .get_or_insert_with(|| vec![0.0; FOLD_ROWS * n1]);
+        for start in (0..m).step_by(FOLD_ROWS) {
+            let len = FOLD_ROWS.min(m - start);
             for (c, &k) in self.free.iter().chain([&usize::MAX]).enumerate() {
-                let dst = a.col_mut(c);
                 let src = if k == usize::MAX {
                     self.r.as_ref()
                 } else {
                     self.jac.col(k)
-                };
-                match src.try_as_col_major() {
-                    Some(s) => dst[..m].copy_from_slice(s.as_slice()),
-                    None => dst[..m]
-                        .iter_mut()
-                        .zip(src.iter())
-                        .for_each(|(d, v)| *d = *v),
                 }
-                dst[m..].fill(0.0);
+                .subrows(start, len);
+                let dst = &mut buf[c * FOLD_ROWS..c * FOLD_ROWS + len];
+                match src.try_as_col_major() {
+                    Some(s) => dst.copy_from_slice(s.as_slice()),
+                    None => dst.iter_mut().zip(src.iter()).for_each(|(d, v)| *d = *v),
+                }
             }
-            householder::qr_in_place(a, 0);
-            let tri = MatRef::from_column_major_slice(&a.data, rows, nf + 1);
-            return ScaledQr::new(
-                tri.submatrix(0, 0, nf, nf),
-                &iota,
-                diag,
-                tri.col(nf).subrows(0, nf),
-            );
+            householder::fold_rows(&mut tri, n1, buf, len, FOLD_ROWS);
         }
-        let aug = self.aug.get_or_insert_with(|| Augmented::new(rows, nf + 1));
-        for (c, &k) in self.free.iter().enumerate() {
-            aug.stack
-                .col_mut(c)
-                .subrows_mut(0, m)
-                .copy_from(self.jac.col(k));
-        }
-        aug.stack.col_mut(nf).subrows_mut(0, m).copy_from(&self.r);
-        aug.stack.as_mut().subrows_mut(m, rows - m).fill(0.0);
-        crate::blocks::triangularise(aug.stack.as_mut(), aug.q_coeff.as_mut(), &mut aug.buf);
-        let tri = aug.stack.as_ref().submatrix(0, 0, nf + 1, nf + 1);
+        let tri = MatRef::from_column_major_slice(&tri, n1, n1);
+        let iota: Vec<usize> = (0..nf).collect();
         ScaledQr::new(
             tri.submatrix(0, 0, nf, nf),
             &iota,
@@ -378,36 +353,9 @@ impl<P: Problem> Linearised for Dense<'_, P> {
     }
 }
 
-/// Above this many rows the dense back end's first QR stage is faer's blocked Householder QR
-/// (matrix-product updates, cache blocking); below, the unblocked one of
-/// [`householder`](crate::householder), whose set-up is negligible. Equal within measurement
-/// noise at 20,000 rows (`examples/scale.rs`, 28 columns).
-const BLOCKED_ROWS: usize = 4096;
-
-/// Scratch of the dense back end's first QR stage: `[J_f r]` (`max(m, n_f+1) × (n_f+1)`) and faer's
-/// Householder coefficients and workspace, allocated once per fit.
-struct Augmented {
-    stack: Mat<f64>,
-    q_coeff: Mat<f64>,
-    buf: MemBuffer,
-}
-
-impl Augmented {
-    fn new(m: usize, ncols: usize) -> Self {
-        let block_size = qr_factor::recommended_block_size::<f64>(m, ncols);
-        Self {
-            stack: Mat::zeros(m, ncols),
-            q_coeff: Mat::zeros(block_size, ncols),
-            buf: MemBuffer::new(qr_factor::qr_in_place_scratch::<f64>(
-                m,
-                ncols,
-                block_size,
-                Par::Seq,
-                Default::default(),
-            )),
-        }
-    }
-}
+/// Rows of `[J_f r]` folded into the triangle at a time by the dense back end: a block of
+/// `256 × (n_f+1)` values stays in the L2 cache for the tens of columns of a calibration.
+const FOLD_ROWS: usize = 256;
 
 /// Outcome of [`run`].
 pub(crate) struct Run {
@@ -449,6 +397,8 @@ pub(crate) fn run(
     let mut f_norm = f_norm0;
     let mut first = true;
     let mut x_trial = x.clone();
+    // The last trial point and its residual norm (a rejected point may come back, see below).
+    let mut last_trial: Option<(Col<f64>, f64)> = None;
     let mut linearised_at_x = true;
 
     let termination = 'outer: loop {
@@ -496,8 +446,18 @@ pub(crate) fn run(
             for (k, &pos) in factor.perm.iter().enumerate() {
                 x_trial[free[pos]] += u[k] / diag[pos];
             }
-            n_evaluations += 1;
-            let f_norm_trial = lin.trial_norm(x_trial.as_ref());
+            // After a rejected Gauss–Newton step MINPACK sets Δ = ‖u‖, and the next `lmpar`
+            // returns the same step (λ = 0 again): the same trial point, whose residual norm
+            // (and, for `accept`, residuals) the problem has just produced. Reuse it rather
+            // than evaluate twice; the iterates are MINPACK's either way.
+            let f_norm_trial = match &last_trial {
+                Some((xt, norm)) if xt.as_ref() == x_trial.as_ref() => *norm,
+                _ => {
+                    n_evaluations += 1;
+                    lin.trial_norm(x_trial.as_ref())
+                }
+            };
+            last_trial = Some((x_trial.clone(), f_norm_trial));
             // Relative reductions of ‖r‖² (MINPACK actred, prered, dirder).
             let actual = if 0.1 * f_norm_trial < f_norm {
                 1.0 - (f_norm_trial / f_norm).powi(2)
@@ -532,6 +492,8 @@ pub(crate) fn run(
             if accepted {
                 std::mem::swap(&mut x, &mut x_trial);
                 lin.accept();
+                // `accept` took the trial residuals: the cache no longer matches them.
+                last_trial = None;
                 linearised_at_x = false;
                 f_norm = f_norm_trial;
                 x_norm = scaled_norm(&diag, &x);
@@ -706,7 +668,13 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
 fn damped_step(rmat: MatRef<'_, f64>, qtr: &[f64], lambda: f64) -> (Vec<f64>, Mat<f64>) {
     let nf = qtr.len();
     let sqrt_lambda = lambda.sqrt();
-    let mut s = Mat::from_fn(nf, nf, |i, j| if i <= j { rmat[(i, j)] } else { 0.0 });
+    // S row-major (`s[k·n + i]` = S_ki), so that a rotation sweeps a contiguous row.
+    let mut s = vec![0.0; nf * nf];
+    for k in 0..nf {
+        for i in k..nf {
+            s[k * nf + i] = rmat[(k, i)];
+        }
+    }
     let mut w: Vec<f64> = qtr.iter().map(|v| -v).collect();
     let mut row = vec![0.0; nf];
     for j in 0..nf {
@@ -718,7 +686,7 @@ fn damped_step(rmat: MatRef<'_, f64>, qtr: &[f64], lambda: f64) -> (Vec<f64>, Ma
             if row[k] == 0.0 {
                 continue;
             }
-            let skk = s[(k, k)];
+            let skk = s[k * nf + k];
             let (sin, cos) = if skk.abs() < row[k].abs() {
                 let cot = skk / row[k];
                 let sin = 0.5 / (0.25 + 0.25 * cot * cot).sqrt();
@@ -728,25 +696,26 @@ fn damped_step(rmat: MatRef<'_, f64>, qtr: &[f64], lambda: f64) -> (Vec<f64>, Ma
                 let cos = 0.5 / (0.25 + 0.25 * tan * tan).sqrt();
                 (cos * tan, cos)
             };
-            s[(k, k)] = cos * skk + sin * row[k];
+            s[k * nf + k] = cos * skk + sin * row[k];
             let wk = w[k];
             w[k] = cos * wk + sin * rhs;
             rhs = -sin * wk + cos * rhs;
-            for i in (k + 1)..nf {
-                let ski = s[(k, i)];
-                s[(k, i)] = cos * ski + sin * row[i];
-                row[i] = -sin * ski + cos * row[i];
+            let s_row = &mut s[k * nf + k + 1..(k + 1) * nf];
+            for (ski, ri) in s_row.iter_mut().zip(&mut row[k + 1..]) {
+                let v = *ski;
+                *ski = cos * v + sin * *ri;
+                *ri = -sin * v + cos * *ri;
             }
         }
     }
     // S u = w; a zero pivot (λ = 0 with singular R) leaves the trailing components at 0.
-    let n_sing = (0..nf).find(|&k| s[(k, k)] == 0.0).unwrap_or(nf);
+    let n_sing = (0..nf).find(|&k| s[k * nf + k] == 0.0).unwrap_or(nf);
     let mut u = vec![0.0; nf];
     for i in (0..n_sing).rev() {
-        let sum: f64 = ((i + 1)..n_sing).map(|j| s[(i, j)] * u[j]).sum();
-        u[i] = (w[i] - sum) / s[(i, i)];
+        let sum: f64 = ((i + 1)..n_sing).map(|j| s[i * nf + j] * u[j]).sum();
+        u[i] = (w[i] - sum) / s[i * nf + i];
     }
-    (u, s)
+    (u, Mat::from_fn(nf, nf, |i, j| s[i * nf + j]))
 }
 
 #[cfg(test)]
