@@ -5,7 +5,9 @@ use faer::{Col, Mat};
 use crate::blocks::{Linearisation, RowBlocks, StreamError, error_at_x0, linearise, streaming_fit};
 use crate::covariance::{Covariance, covariance, sigma_from_residuals};
 use crate::error::{Error, check_config};
-use crate::lm::{Fit, LmConfig, check_jacobian_finite, levenberg_marquardt};
+use crate::lm::{
+    Fit, LmConfig, check_inputs, check_jacobian_finite, levenberg_marquardt, levenberg_marquardt_at,
+};
 use crate::problem::{EvalError, ParamLayout, Problem};
 use crate::rank::{Identifiability, RankConfigBase, identifiability};
 
@@ -419,9 +421,17 @@ fn identify_dense(
     // Later rounds start from the previous estimate (warm start): the kept parameters are already
     // near their optimum, and newly pruned ones return to their x0 values.
     let mut x_start = x0.clone();
+    // The first fit starts where r and J were just evaluated: hand them over.
+    let mut at_x0 = Some((r0, jac.clone()));
     let (fit, pruning_converged) = loop {
         rounds += 1;
-        let fit = levenberg_marquardt(p, x_start.clone(), &ident.kept, &cfg.lm)?;
+        let fit = match at_x0.take() {
+            Some((r0, jac0)) => {
+                check_inputs(p, x_start.as_ref(), &ident.kept, &cfg.lm)?;
+                levenberg_marquardt_at(p, x_start.clone(), &ident.kept, &cfg.lm, r0, jac0)
+            }
+            None => levenberg_marquardt(p, x_start.clone(), &ident.kept, &cfg.lm)?,
+        };
         if sigma_source == SigmaSource::Residuals {
             sigma = sigma_from_residuals(fit.residuals.as_ref(), ident.kept.len()).ok_or(
                 Error::NoDegreesOfFreedom {

@@ -216,27 +216,52 @@ pub fn levenberg_marquardt(
     let layout = p.layout();
     let n = layout.len();
     let m = p.n_residuals();
-    let nf = free.len();
 
     let mut r = Col::<f64>::zeros(m);
     p.residuals(x0.as_ref(), r.as_mut())?;
     if let Some(index) = (0..m).find(|&i| !r[i].is_finite()) {
         return Err(Error::NonFiniteResidual { index });
     }
+    if free.is_empty() {
+        return Ok(levenberg_marquardt_at(
+            p,
+            x0,
+            free,
+            cfg,
+            r,
+            Mat::zeros(0, 0),
+        ));
+    }
+    let mut jac = Mat::<f64>::zeros(m, n);
+    p.jacobian(x0.as_ref(), jac.as_mut())?;
+    check_jacobian_finite(jac.as_ref(), layout)?;
+    Ok(levenberg_marquardt_at(p, x0, free, cfg, r, jac))
+}
+
+/// [`levenberg_marquardt`] from residuals `r` and Jacobian `jac` already evaluated (and found
+/// finite) at `x0`, with the inputs already checked ([`check_inputs`]); `jac` may be empty
+/// when `free` is. Counts the evaluations at `x0` as the caller's (1 each).
+pub(crate) fn levenberg_marquardt_at(
+    p: &impl Problem,
+    x0: Col<f64>,
+    free: &[usize],
+    cfg: &LmConfig,
+    r: Col<f64>,
+    jac: Mat<f64>,
+) -> Fit {
+    let m = p.n_residuals();
+    let nf = free.len();
     if nf == 0 {
         let cost = 0.5 * r.squared_norm_l2();
-        return Ok(Fit {
+        return Fit {
             x: x0,
             termination: Termination::GtolReached,
             n_evaluations: 1,
             n_jacobians: 0,
             cost,
             residuals: r,
-        });
+        };
     }
-    let mut jac = Mat::<f64>::zeros(m, n);
-    p.jacobian(x0.as_ref(), jac.as_mut())?;
-    check_jacobian_finite(jac.as_ref(), layout)?;
     let f_norm = r.norm_l2();
     let mut dense = Dense {
         p,
@@ -248,14 +273,14 @@ pub fn levenberg_marquardt(
     };
     let run = run(&mut dense, x0, free, cfg, f_norm);
     let cost = 0.5 * dense.r.squared_norm_l2();
-    Ok(Fit {
+    Fit {
         x: run.x,
         termination: run.termination,
         n_evaluations: run.n_evaluations,
         n_jacobians: run.n_jacobians,
         cost,
         residuals: dense.r,
-    })
+    }
 }
 
 /// What the iteration needs from the problem, dense or streamed: residual norms at trial
