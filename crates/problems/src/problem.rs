@@ -454,6 +454,9 @@ impl CalibrationProblem {
                 });
                 let mut dist = [0.0; LANES];
                 let s = self.weights.sigma_distance_m;
+                // One division per lane block, then products (the Jacobian rows differ from v / s
+                // by about an ulp; the residuals keep the division).
+                let inv_s = 1.0 / s;
                 match jac.as_mut() {
                     Some(j) => {
                         frozen.distance_gradient_lanes(trig, &mut dist, Some(&mut lane_grad));
@@ -463,12 +466,12 @@ impl CalibrationProblem {
                             match dst.try_as_col_major_mut() {
                                 Some(d) => {
                                     for (o, v) in d.as_slice_mut().iter_mut().zip(g) {
-                                        *o = v / s;
+                                        *o = v * inv_s;
                                     }
                                 }
                                 None => {
                                     for (l, v) in g.iter().enumerate() {
-                                        j[(r + l, col)] = v / s;
+                                        j[(r + l, col)] = v * inv_s;
                                     }
                                 }
                             }
