@@ -121,7 +121,7 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
     let mut md = String::new();
     md.push_str("# Speed and scale against peers\n\n");
     md.push_str(&format!(
-        "Written by `cargo xtask bench{}` on {date}: {cpu}, {cores} cores, {uname}; load average at the start {}. Problem: the reference device (DESIGN.md §2) with distance data, 32 kinematic deviations of which the 28 identifiable ones are solved from x = 0 (`dalpha0`, `dd0`, `dtheta0`, `dalpha7` held at 0); data: joint angles uniform within the limits, distances of the paper's truth + σ_m noise (`hapcal_sim::distance_samples`, seed 1), written once by hapcal to `{}`. Every solver reads the same file. Tolerances: ftol = xtol = gtol = 1e-12 (MINPACK tests) for hapcal and SciPy; SciPy gets `x_scale=\"jac\"` (MINPACK's column scaling, as hapcal) and the analytic Jacobian. Wall times: minimum over repeats, the solve only (file reading excluded for both). hapcal evaluates row blocks on all cores (rayon) from 4 blocks of 256 poses up, i.e. at 2,000 poses and more; SciPy's numpy may use several threads too.\n\n",
+        "Written by `cargo xtask bench{}` on {date}: {cpu}, {cores} cores, {uname}; load average at the start {}. Problem: the reference device (DESIGN.md §2) with distance data, 32 kinematic deviations of which the 28 identifiable ones are solved from x = 0 (`dalpha0`, `dd0`, `dtheta0`, `dalpha7` held at 0); data: joint angles uniform within the limits, distances of the paper's truth + σ_m noise (`hapcal_sim::distance_samples`, seed 1), written once by hapcal to `{}`. Every solver reads the same file. Tolerances: ftol = xtol = gtol = 1e-12 (MINPACK tests) for hapcal and SciPy; SciPy gets `x_scale=\"jac\"` (MINPACK's column scaling, as hapcal) and the analytic Jacobian. hapcal's LM starts with the full Gauss–Newton step (`LmConfig::factor = ∞`: initial trust radius = the Gauss–Newton step's length) where SciPy's MINPACK starts with radius 100·‖D·x0‖ (100 at x = 0; `least_squares` does not expose `factor`); the iteration and its stopping tests are MINPACK's in both. `identify` knows σ and decides the pruning once, at the nominal (`IdentifyConfig::max_rounds = 1`; `pruning_converged` says whether the decision at the estimate agrees). Wall times: minimum over repeats, the solve only (file reading excluded for both). hapcal evaluates distance rows 8 poses at a time (SIMD lane kernel, AVX-512 or AVX2 chosen at run time) and row blocks on all cores (rayon) from 4 blocks of 256 poses up, i.e. at 2,000 poses and more; SciPy's numpy may use several threads too.\n\n",
         if peers { " --peers" } else { "" },
         load_before.split_whitespace().take(3).collect::<Vec<_>>().join(" "),
         data_dir.display()
@@ -168,9 +168,25 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
             if lm_s.is_nan() {
                 "–".to_owned()
             } else {
-                ms(lm_s)
+                format!(
+                    "{} ({} fev, {} jev)",
+                    ms(lm_s),
+                    ours["lm"]["n_evaluations"],
+                    ours["lm"]["n_jacobians"]
+                )
             },
-            format!("{} ({})", ms(id_s), ours["backend"].as_str().unwrap_or("?")),
+            format!(
+                "{} ({}, {} fev, {} jev, pruning {})",
+                ms(id_s),
+                ours["backend"].as_str().unwrap_or("?"),
+                ours["identify"]["n_evaluations"],
+                ours["identify"]["n_jacobians"],
+                if ours["identify"]["pruning_converged"].as_bool() == Some(true) {
+                    "converged"
+                } else {
+                    "differs at the estimate"
+                }
+            ),
         ];
         for method in ["lm", "trf"] {
             match (&python, n <= PEER_MAX) {
@@ -199,7 +215,7 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
         md.push_str(&format!("| {} |\n", cells.join(" | ")));
         println!("bench: {n} poses done");
     }
-    md.push_str("\n`hapcal/peer` is the ratio of wall times (1/20 = hapcal 20 times faster). `max abs diff`: largest |hapcal − SciPy| over the 28 estimates (m or rad). Peak RSS: the whole `scale solve` process (data, problem, all repeats of both solves), from `/usr/bin/time -v`.\n\n");
+    md.push_str("\n`hapcal/peer` is the ratio of wall times (1/20 = hapcal 20 times faster). `fev`/`jev`: residual and Jacobian evaluations of the final fit; `pruning differs at the estimate`: the decision at the estimate differs from the nominal one that the fit used (`pruning_converged = false`). `max abs diff`: largest |hapcal − SciPy| over the 28 estimates (m or rad). Peak RSS: the whole `scale solve` process (data, problem, all repeats of both solves), from `/usr/bin/time -v`.\n\n");
 
     if let Some((lm_s, n_jac, n_eval)) = per_iteration {
         let gflops = f(&peak, &["gflops"]);

@@ -16,7 +16,7 @@ use std::ops::Range;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::qr::no_pivoting::factor as qr_factor;
-use faer::{Col, ColMut, ColRef, Mat, MatMut, Par};
+use faer::{Col, ColMut, ColRef, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
 use crate::error::Error;
@@ -92,9 +92,13 @@ fn leaf_ranges(n_blocks: usize) -> Vec<Range<usize>> {
         .collect()
 }
 
-/// Reduces the rows of `stack` (`k × (n+1)`, `k ≥ n+1`) to their R factor in place and
-/// zeroes everything below the diagonal.
-fn triangularise(mut stack: MatMut<'_, f64>, q_coeff: MatMut<'_, f64>, buf: &mut MemBuffer) {
+/// Reduces the rows of `stack` (`k × (n+1)`, `k ≥ n+1`) to their R factor in place: its top
+/// `(n+1) × (n+1)` rows then hold `R` (zeros below the diagonal); the rows below are scratch.
+pub(crate) fn triangularise(
+    mut stack: MatMut<'_, f64>,
+    q_coeff: MatMut<'_, f64>,
+    buf: &mut MemBuffer,
+) {
     qr_factor::qr_in_place(
         stack.as_mut(),
         q_coeff,
@@ -102,15 +106,19 @@ fn triangularise(mut stack: MatMut<'_, f64>, q_coeff: MatMut<'_, f64>, buf: &mut
         MemStack::new(buf),
         Default::default(),
     );
-    let n1 = stack.ncols();
+    // Only the triangle is read afterwards (rows below it are overwritten by the next rows or
+    // dropped): zero the Householder vectors stored under its diagonal.
+    let n1 = stack.ncols().min(stack.nrows());
     for j in 0..n1 {
-        for i in (j + 1)..stack.nrows() {
+        for i in (j + 1)..n1 {
             stack[(i, j)] = 0.0;
         }
     }
 }
 
-/// One leaf: its blocks reduced in sequence to an `(n+1) × (n+1)` triangle.
+/// One leaf: its blocks folded in sequence into an `(n+1) × (n+1)` triangle, each block by the
+/// structured Householder update of [`fold_rows`](crate::householder::fold_rows) while its
+/// `[J_b | r_b]` is still in cache.
 fn reduce_leaf(
     p: &dyn RowBlocks,
     x: ColRef<'_, f64>,
@@ -123,19 +131,8 @@ fn reduce_leaf(
         .map(|b| p.block_rows(b).len())
         .max()
         .unwrap_or(0);
-    let rows = n1 + max_len;
-    let mut stack = Mat::<f64>::zeros(rows, n1);
-    let block_size = qr_factor::recommended_block_size::<f64>(rows, n1);
-    let mut q_coeff = Mat::<f64>::zeros(block_size, n1);
-    let mut buf = MemBuffer::new(qr_factor::qr_in_place_scratch::<f64>(
-        rows,
-        n1,
-        block_size,
-        Par::Seq,
-        Default::default(),
-    ));
-    let mut r_block = Col::<f64>::zeros(max_len);
-    let mut jac = Mat::<f64>::zeros(max_len, n);
+    let mut tri = vec![0.0; n1 * n1];
+    let mut rows = vec![0.0; max_len.max(1) * n1];
     let mut r_norm_sq = 0.0;
     for b in blocks {
         let range = p.block_rows(b);
@@ -143,42 +140,42 @@ fn reduce_leaf(
         if len == 0 {
             continue;
         }
-        p.block_jacobian(
-            x,
-            b,
-            r_block.as_mut().subrows_mut(0, len),
-            jac.as_mut().subrows_mut(0, len),
-        )
-        .map_err(StreamError::Eval)?;
-        for i in 0..len {
-            let ri = r_block[i];
-            if !ri.is_finite() {
-                return Err(StreamError::NonFinite {
-                    row: range.start + i,
-                    col: None,
-                });
-            }
-            r_norm_sq += ri * ri;
+        // The block writes `[J_b | r_b]` (len × n1, leading dimension max_len).
+        let block = MatMut::from_column_major_slice_with_stride_mut(&mut rows, len, n1, max_len);
+        let (jac, r_col) = block.split_at_col_mut(n);
+        p.block_jacobian(x, b, r_col.col_mut(0), jac)
+            .map_err(StreamError::Eval)?;
+        let block = MatRef::from_column_major_slice_with_stride(&rows, len, n1, max_len);
+        if !block.is_all_finite() {
+            return Err(first_non_finite(block, n, range.start));
         }
-        for j in 0..n {
-            for i in 0..len {
-                let v = jac[(i, j)];
-                if !v.is_finite() {
-                    return Err(StreamError::NonFinite {
-                        row: range.start + i,
-                        col: Some(j),
-                    });
-                }
-                stack[(n1 + i, j)] = v;
-            }
-        }
-        for i in 0..len {
-            stack[(n1 + i, n)] = r_block[i];
-        }
-        let k = n1 + len;
-        triangularise(stack.as_mut().subrows_mut(0, k), q_coeff.as_mut(), &mut buf);
+        r_norm_sq += block.col(n).squared_norm_l2();
+        crate::householder::fold_rows(&mut tri, n1, &mut rows, len, max_len);
     }
-    Ok((stack.subrows(0, n1).to_owned(), r_norm_sq))
+    Ok((Mat::from_fn(n1, n1, |i, j| tri[j * n1 + i]), r_norm_sq))
+}
+
+/// The first non-finite entry of a block's `[J_b | r_b]` (residual first, row by row), as a
+/// [`StreamError::NonFinite`] with the global row index (`first_row` + local row).
+fn first_non_finite(rows: MatRef<'_, f64>, n: usize, first_row: usize) -> StreamError {
+    for i in 0..rows.nrows() {
+        if !rows[(i, n)].is_finite() {
+            return StreamError::NonFinite {
+                row: first_row + i,
+                col: None,
+            };
+        }
+        if let Some(j) = (0..n).find(|&j| !rows[(i, j)].is_finite()) {
+            return StreamError::NonFinite {
+                row: first_row + i,
+                col: Some(j),
+            };
+        }
+    }
+    StreamError::NonFinite {
+        row: first_row,
+        col: None,
+    }
 }
 
 /// Streams `[J r]` at `x` through the blocks of `p` into its R factor (`n` parameters).
@@ -333,7 +330,7 @@ impl Linearised for Streaming<'_> {
             .sum::<f64>()
             .abs()
     }
-    fn scaled_qr(&self, diag: &[f64]) -> ScaledQr {
+    fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr {
         let nf = self.free.len();
         let iota: Vec<usize> = (0..nf).collect();
         ScaledQr::new(

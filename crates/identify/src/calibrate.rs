@@ -5,7 +5,9 @@ use faer::{Col, Mat};
 use crate::blocks::{Linearisation, RowBlocks, StreamError, error_at_x0, linearise, streaming_fit};
 use crate::covariance::{Covariance, covariance, sigma_from_residuals};
 use crate::error::{Error, check_config};
-use crate::lm::{Fit, LmConfig, check_jacobian_finite, levenberg_marquardt};
+use crate::lm::{
+    Fit, LmConfig, check_inputs, check_jacobian_finite, levenberg_marquardt, levenberg_marquardt_at,
+};
 use crate::problem::{EvalError, ParamLayout, Problem};
 use crate::rank::{Identifiability, RankConfigBase, identifiability};
 
@@ -17,7 +19,7 @@ pub const MAX_ROUNDS: usize = 3;
 pub const SIGMA_FLOOR: f64 = 1e-12;
 
 /// Configuration of [`identify`].
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct IdentifyConfig {
     /// The solver's stopping tests.
     pub lm: LmConfig,
@@ -28,6 +30,27 @@ pub struct IdentifyConfig {
     pub sigma: Option<f64>,
     /// Which linear-algebra back end evaluates and factorises the Jacobian.
     pub backend: Backend,
+    /// Most fits to run while the decision at the estimate changes the kept set (at least 1;
+    /// default [`MAX_ROUNDS`]). `1` decides the pruning once, at `x0`, and fits once: the
+    /// decision at the estimate is still taken and reported through
+    /// [`Identified::pruning_converged`]. Near-ties between gauge parameters (Baser &
+    /// Konukseven's `d0`, `θ0`, `θ1`) can flip the decision between estimates when the data
+    /// make every direction significant (10⁶ poses), and each flip costs a refit.
+    pub max_rounds: usize,
+}
+
+impl Default for IdentifyConfig {
+    /// MINPACK tolerances ([`LmConfig::default`]), default priors, `sigma` estimated from the
+    /// residuals, [`Backend::Auto`], [`MAX_ROUNDS`] rounds.
+    fn default() -> Self {
+        Self {
+            lm: LmConfig::default(),
+            rank: RankConfigBase::default(),
+            sigma: None,
+            backend: Backend::Auto,
+            max_rounds: MAX_ROUNDS,
+        }
+    }
 }
 
 /// The linear-algebra back end of [`identify`].
@@ -87,10 +110,10 @@ pub struct Identified {
     pub sigma_source: SigmaSource,
     /// The problem's layout (for names and units).
     pub layout: ParamLayout,
-    /// Number of fits run (1 to [`MAX_ROUNDS`]).
+    /// Number of fits run (1 to [`IdentifyConfig::max_rounds`]).
     pub rounds: usize,
     /// True when the decision at the estimate reproduced the kept set of the fit; false when
-    /// [`MAX_ROUNDS`] fits did not settle it (then `identifiability` is the decision the last
+    /// [`IdentifyConfig::max_rounds`] fits did not settle it (then `identifiability` is the decision the last
     /// fit used, taken at the previous estimate).
     pub pruning_converged: bool,
 }
@@ -115,7 +138,8 @@ impl Identified {
 /// 3. Re-estimate `σ` from the fit residuals (unless given) and re-decide the pruning with the
 ///    Jacobian at the estimate: identifiability is a property of the estimate, not of the
 ///    nominal.
-/// 4. If the kept set changed, refit with the new set (at most [`MAX_ROUNDS`] fits), starting
+/// 4. If the kept set changed, refit with the new set (at most
+///    [`IdentifyConfig::max_rounds`] fits), starting
 ///    from the previous estimate for the kept parameters and from `x0` for the others.
 /// 5. Covariance of the kept parameters at the estimate ([`covariance`]).
 ///
@@ -169,6 +193,13 @@ pub fn identify(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Result<
 }
 
 fn check_identify_config(cfg: &IdentifyConfig) -> Result<(), Error> {
+    if cfg.max_rounds == 0 {
+        return Err(Error::InvalidConfig {
+            field: "max_rounds",
+            value: 0.0,
+            requirement: "at least 1",
+        });
+    }
     if let Some(sigma) = cfg.sigma {
         check_config("sigma", sigma, true)?;
     }
@@ -259,7 +290,7 @@ fn identify_streaming(
             ident = next;
             break (fit, true);
         }
-        if rounds == MAX_ROUNDS {
+        if rounds >= cfg.max_rounds {
             break (fit, false);
         }
         x_start = x0.clone();
@@ -390,9 +421,17 @@ fn identify_dense(
     // Later rounds start from the previous estimate (warm start): the kept parameters are already
     // near their optimum, and newly pruned ones return to their x0 values.
     let mut x_start = x0.clone();
+    // The first fit starts where r and J were just evaluated: hand them over.
+    let mut at_x0 = Some((r0, jac.clone()));
     let (fit, pruning_converged) = loop {
         rounds += 1;
-        let fit = levenberg_marquardt(p, x_start.clone(), &ident.kept, &cfg.lm)?;
+        let fit = match at_x0.take() {
+            Some((r0, jac0)) => {
+                check_inputs(p, x_start.as_ref(), &ident.kept, &cfg.lm)?;
+                levenberg_marquardt_at(p, x_start.clone(), &ident.kept, &cfg.lm, r0, jac0)
+            }
+            None => levenberg_marquardt(p, x_start.clone(), &ident.kept, &cfg.lm)?,
+        };
         if sigma_source == SigmaSource::Residuals {
             sigma = sigma_from_residuals(fit.residuals.as_ref(), ident.kept.len()).ok_or(
                 Error::NoDegreesOfFreedom {
@@ -413,7 +452,7 @@ fn identify_dense(
             ident = next;
             break (fit, true);
         }
-        if rounds == MAX_ROUNDS {
+        if rounds >= cfg.max_rounds {
             break (fit, false);
         }
         x_start = x0.clone();

@@ -61,6 +61,7 @@ mod calibrate;
 mod covariance;
 mod design;
 mod error;
+mod householder;
 mod lm;
 mod observability;
 mod problem;

@@ -9,12 +9,10 @@
 //! i.e. exact Gauss–Newton steps, whenever the Gauss–Newton step fits in the region: linear
 //! problems are solved in one step and small-residual problems converge quadratically.
 
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::householder;
-use faer::linalg::solvers::SolveLstsq;
-use faer::{Col, ColRef, Conj, Mat, MatRef, Par};
+use faer::{Col, ColRef, Mat, MatRef};
 
 use crate::error::{Error, check_config, check_factor};
+use crate::householder::{self, ColMajor};
 use crate::problem::{ParamLayout, Problem};
 
 /// Stopping tolerances of [`levenberg_marquardt`] (the MINPACK `lmder` tests).
@@ -185,9 +183,12 @@ const FACTOR: f64 = 100.0;
 /// Algorithm (MINPACK `lmder`, Moré 1978): `D` holds the column norms of `J`, as their running
 /// maximum over iterations (`mode = 1`; a zero column gets 1). In the scaled variables
 /// `u = D·p`, each trial step solves the damped problem `[J D⁻¹; √λ·I] u ≈ [−r; 0]` with the
-/// smallest `λ ≥ 0` such that `‖u‖ ≤ Δ` (within 10 %): `J D⁻¹` is factorised once per
-/// Jacobian by column-pivoted Householder QR, and `[R; √λ·I]` (size `2n_free × n_free`) by
-/// Householder QR for each `λ` tried. `Δ` starts at `100·‖D·x0‖` (100 if zero) and follows the
+/// smallest `λ ≥ 0` such that `‖u‖ ≤ Δ` (within 10 %): once per Jacobian, `[J_f r]` is reduced
+/// to its `(n_free+1)`-square triangle by Householder QR (unblocked and vectorised up to 4096
+/// rows, faer's blocked QR above), whose scaled leading block then gets the column-pivoted
+/// Householder QR of `J D⁻¹` (the same Gram matrix, so the same `R` and `Q₁ᵀr` up to rounding);
+/// for each `λ` tried, `[R; √λ·I]` is reduced by Givens rotations (MINPACK `qrsolv`). `Δ`
+/// starts at `factor·‖D·x0‖` (`factor` if zero; [`LmConfig::factor`]) and follows the
 /// gain ratio `ρ = actual / predicted reduction`: shrunk when `ρ ≤ 1/4`, set to `2‖u‖` when
 /// `ρ ≥ 3/4` or `λ = 0`; a step is accepted when `ρ ≥ 10⁻⁴`. A trial point where `r` cannot be
 /// evaluated or is not finite is rejected like a step that increases the cost tenfold (`Δ` is
@@ -215,27 +216,52 @@ pub fn levenberg_marquardt(
     let layout = p.layout();
     let n = layout.len();
     let m = p.n_residuals();
-    let nf = free.len();
 
     let mut r = Col::<f64>::zeros(m);
     p.residuals(x0.as_ref(), r.as_mut())?;
     if let Some(index) = (0..m).find(|&i| !r[i].is_finite()) {
         return Err(Error::NonFiniteResidual { index });
     }
+    if free.is_empty() {
+        return Ok(levenberg_marquardt_at(
+            p,
+            x0,
+            free,
+            cfg,
+            r,
+            Mat::zeros(0, 0),
+        ));
+    }
+    let mut jac = Mat::<f64>::zeros(m, n);
+    p.jacobian(x0.as_ref(), jac.as_mut())?;
+    check_jacobian_finite(jac.as_ref(), layout)?;
+    Ok(levenberg_marquardt_at(p, x0, free, cfg, r, jac))
+}
+
+/// [`levenberg_marquardt`] from residuals `r` and Jacobian `jac` already evaluated (and found
+/// finite) at `x0`, with the inputs already checked ([`check_inputs`]); `jac` may be empty
+/// when `free` is. Counts the evaluations at `x0` as the caller's (1 each).
+pub(crate) fn levenberg_marquardt_at(
+    p: &impl Problem,
+    x0: Col<f64>,
+    free: &[usize],
+    cfg: &LmConfig,
+    r: Col<f64>,
+    jac: Mat<f64>,
+) -> Fit {
+    let m = p.n_residuals();
+    let nf = free.len();
     if nf == 0 {
         let cost = 0.5 * r.squared_norm_l2();
-        return Ok(Fit {
+        return Fit {
             x: x0,
             termination: Termination::GtolReached,
             n_evaluations: 1,
             n_jacobians: 0,
             cost,
             residuals: r,
-        });
+        };
     }
-    let mut jac = Mat::<f64>::zeros(m, n);
-    p.jacobian(x0.as_ref(), jac.as_mut())?;
-    check_jacobian_finite(jac.as_ref(), layout)?;
     let f_norm = r.norm_l2();
     let mut dense = Dense {
         p,
@@ -243,17 +269,18 @@ pub fn levenberg_marquardt(
         jac,
         r,
         r_trial: Col::<f64>::zeros(m),
+        fold_buf: None,
     };
     let run = run(&mut dense, x0, free, cfg, f_norm);
     let cost = 0.5 * dense.r.squared_norm_l2();
-    Ok(Fit {
+    Fit {
         x: run.x,
         termination: run.termination,
         n_evaluations: run.n_evaluations,
         n_jacobians: run.n_jacobians,
         cost,
         residuals: dense.r,
-    })
+    }
 }
 
 /// What the iteration needs from the problem, dense or streamed: residual norms at trial
@@ -270,7 +297,7 @@ pub(crate) trait Linearised {
     /// `|J_jᵀ r|` for the free columns.
     fn gradient_abs(&self, j: usize) -> f64;
     /// The column-pivoted QR of `J_f D⁻¹` and `Q₁ᵀ r`.
-    fn scaled_qr(&self, diag: &[f64]) -> ScaledQr;
+    fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr;
 }
 
 struct Dense<'a, P: Problem> {
@@ -279,6 +306,8 @@ struct Dense<'a, P: Problem> {
     jac: Mat<f64>,
     r: Col<f64>,
     r_trial: Col<f64>,
+    /// Row block of `[J_f r]` for the first QR stage, made at the first step.
+    fold_buf: Option<Vec<f64>>,
 }
 
 impl<P: Problem> Linearised for Dense<'_, P> {
@@ -309,10 +338,49 @@ impl<P: Problem> Linearised for Dense<'_, P> {
     fn gradient_abs(&self, j: usize) -> f64 {
         (self.jac.col(self.free[j]).transpose() * self.r.as_ref()).abs()
     }
-    fn scaled_qr(&self, diag: &[f64]) -> ScaledQr {
-        ScaledQr::new(self.jac.as_ref(), self.free, diag, self.r.as_ref())
+    fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr {
+        // Two stages (as the streaming back end): `[J_f r]` is folded into its triangle `R₊`
+        // block of rows by block of rows ([`householder::fold_rows`], each block in cache),
+        // then the column-pivoted QR of the scaled `n_f × n_f` triangle gives the same `R` and
+        // `Q₁ᵀr` as the pivoted QR of `J_f D⁻¹` up to rounding, in O(n_f³).
+        let nf = self.free.len();
+        let n1 = nf + 1;
+        let m = self.jac.nrows();
+        let mut tri = vec![0.0; n1 * n1];
+        let buf = self
+            .fold_buf
+            .get_or_insert_with(|| vec![0.0; FOLD_ROWS * n1]);
+        for start in (0..m).step_by(FOLD_ROWS) {
+            let len = FOLD_ROWS.min(m - start);
+            for (c, &k) in self.free.iter().chain([&usize::MAX]).enumerate() {
+                let src = if k == usize::MAX {
+                    self.r.as_ref()
+                } else {
+                    self.jac.col(k)
+                }
+                .subrows(start, len);
+                let dst = &mut buf[c * FOLD_ROWS..c * FOLD_ROWS + len];
+                match src.try_as_col_major() {
+                    Some(s) => dst.copy_from_slice(s.as_slice()),
+                    None => dst.iter_mut().zip(src.iter()).for_each(|(d, v)| *d = *v),
+                }
+            }
+            householder::fold_rows(&mut tri, n1, buf, len, FOLD_ROWS);
+        }
+        let tri = MatRef::from_column_major_slice(&tri, n1, n1);
+        let iota: Vec<usize> = (0..nf).collect();
+        ScaledQr::new(
+            tri.submatrix(0, 0, nf, nf),
+            &iota,
+            diag,
+            tri.col(nf).subrows(0, nf),
+        )
     }
 }
+
+/// Rows of `[J_f r]` folded into the triangle at a time by the dense back end: a block of
+/// `256 × (n_f+1)` values stays in the L2 cache for the tens of columns of a calibration.
+const FOLD_ROWS: usize = 256;
 
 /// Outcome of [`run`].
 pub(crate) struct Run {
@@ -354,6 +422,8 @@ pub(crate) fn run(
     let mut f_norm = f_norm0;
     let mut first = true;
     let mut x_trial = x.clone();
+    // The last trial point and its residual norm (a rejected point may come back, see below).
+    let mut last_trial: Option<(Col<f64>, f64)> = None;
     let mut linearised_at_x = true;
 
     let termination = 'outer: loop {
@@ -401,8 +471,18 @@ pub(crate) fn run(
             for (k, &pos) in factor.perm.iter().enumerate() {
                 x_trial[free[pos]] += u[k] / diag[pos];
             }
-            n_evaluations += 1;
-            let f_norm_trial = lin.trial_norm(x_trial.as_ref());
+            // After a rejected Gauss–Newton step MINPACK sets Δ = ‖u‖, and the next `lmpar`
+            // returns the same step (λ = 0 again): the same trial point, whose residual norm
+            // (and, for `accept`, residuals) the problem has just produced. Reuse it rather
+            // than evaluate twice; the iterates are MINPACK's either way.
+            let f_norm_trial = match &last_trial {
+                Some((xt, norm)) if xt.as_ref() == x_trial.as_ref() => *norm,
+                _ => {
+                    n_evaluations += 1;
+                    lin.trial_norm(x_trial.as_ref())
+                }
+            };
+            last_trial = Some((x_trial.clone(), f_norm_trial));
             // Relative reductions of ‖r‖² (MINPACK actred, prered, dirder).
             let actual = if 0.1 * f_norm_trial < f_norm {
                 1.0 - (f_norm_trial / f_norm).powi(2)
@@ -437,6 +517,8 @@ pub(crate) fn run(
             if accepted {
                 std::mem::swap(&mut x, &mut x_trial);
                 lin.accept();
+                // `accept` took the trial residuals: the cache no longer matches them.
+                last_trial = None;
                 linearised_at_x = false;
                 f_norm = f_norm_trial;
                 x_norm = scaled_norm(&diag, &x);
@@ -495,25 +577,19 @@ impl ScaledQr {
         r: ColRef<'_, f64>,
     ) -> Self {
         let (m, nf) = (jac.nrows(), free.len());
-        let scaled = Mat::from_fn(m, nf, |i, j| jac[(i, free[j])] / diag[j]);
-        let qr = scaled.col_piv_qr();
-        let perm = qr.P().arrays().0.to_vec();
-        let rmat = qr.R().get(..nf, ..nf).to_owned();
-        let mut qtr = r.to_owned();
-        let block = qr.Q_coeff().nrows();
-        let mut buf = MemBuffer::new(
-            householder::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<
-                f64,
-            >(m, block, 1),
-        );
-        householder::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
-            qr.Q_basis(),
-            qr.Q_coeff(),
-            Conj::No,
-            qtr.as_mat_mut(),
-            Par::Seq,
-            MemStack::new(&mut buf),
-        );
+        // [J_f D⁻¹ | r], reduced in place; `r` is never a pivot and becomes Qᵀr.
+        let mut a = ColMajor::zeros(m, nf + 1);
+        for (j, (&k, d)) in free.iter().zip(diag).enumerate() {
+            for (dst, v) in a.col_mut(j).iter_mut().zip(jac.col(k).iter()) {
+                *dst = v / d;
+            }
+        }
+        for (dst, v) in a.col_mut(nf).iter_mut().zip(r.iter()) {
+            *dst = *v;
+        }
+        let perm = householder::qr_in_place(&mut a, nf)[..nf].to_vec();
+        let rmat = Mat::from_fn(nf, nf, |i, j| if i <= j { a.at(i, j) } else { 0.0 });
+        let qtr: Vec<f64> = (0..nf).map(|i| a.at(i, nf)).collect();
         // Pivoting sorts |R_kk| down; below ε·max(m, n)·|R_00| a pivot is zero at working
         // precision and the Gauss–Newton step leaves its component at 0.
         let r00 = if nf > 0 { rmat[(0, 0)].abs() } else { 0.0 };
@@ -522,7 +598,7 @@ impl ScaledQr {
         Self {
             r: rmat,
             perm,
-            qtr: (0..nf).map(|i| qtr[i]).collect(),
+            qtr,
             n_sing,
         }
     }
@@ -608,24 +684,63 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
     (u, lambda)
 }
 
-/// Solves `min ‖[R; √λ·I] u + [Qᵀr; 0]‖` by Householder QR of the `2n × n` stacked matrix;
-/// returns `u` and the triangular factor `S` (`SᵀS = RᵀR + λI`).
+/// Solves `min ‖[R; √λ·I] u + [Qᵀr; 0]‖` for upper-triangular `R` (`n × n`); returns `u` and
+/// the triangular factor `S` (`SᵀS = RᵀR + λI`).
+///
+/// MINPACK `qrsolv` (Moré, Garbow, Hillstrom 1980): the rows of `√λ·I` are eliminated one at a
+/// time against `R` by Givens rotations, `O(n³)` flops in place of a Householder QR of the
+/// stacked `2n × n` matrix, and no allocation besides `S` and `u`.
 fn damped_step(rmat: MatRef<'_, f64>, qtr: &[f64], lambda: f64) -> (Vec<f64>, Mat<f64>) {
     let nf = qtr.len();
     let sqrt_lambda = lambda.sqrt();
-    let stacked = Mat::from_fn(2 * nf, nf, |i, j| {
-        if i < nf {
-            rmat[(i, j)]
-        } else if i - nf == j {
-            sqrt_lambda
-        } else {
-            0.0
+    // S row-major (`s[k·n + i]` = S_ki), so that a rotation sweeps a contiguous row.
+    let mut s = vec![0.0; nf * nf];
+    for k in 0..nf {
+        for i in k..nf {
+            s[k * nf + i] = rmat[(k, i)];
         }
-    });
-    let qr = stacked.qr();
-    let mut rhs = Col::from_fn(2 * nf, |i| if i < nf { -qtr[i] } else { 0.0 });
-    qr.solve_lstsq_in_place(rhs.as_mut());
-    ((0..nf).map(|i| rhs[i]).collect(), qr.R().to_owned())
+    }
+    let mut w: Vec<f64> = qtr.iter().map(|v| -v).collect();
+    let mut row = vec![0.0; nf];
+    for j in 0..nf {
+        // Row j of √λ·I, and its right-hand side 0.
+        row[j..].iter_mut().for_each(|v| *v = 0.0);
+        row[j] = sqrt_lambda;
+        let mut rhs = 0.0;
+        for k in j..nf {
+            if row[k] == 0.0 {
+                continue;
+            }
+            let skk = s[k * nf + k];
+            let (sin, cos) = if skk.abs() < row[k].abs() {
+                let cot = skk / row[k];
+                let sin = 0.5 / (0.25 + 0.25 * cot * cot).sqrt();
+                (sin, sin * cot)
+            } else {
+                let tan = row[k] / skk;
+                let cos = 0.5 / (0.25 + 0.25 * tan * tan).sqrt();
+                (cos * tan, cos)
+            };
+            s[k * nf + k] = cos * skk + sin * row[k];
+            let wk = w[k];
+            w[k] = cos * wk + sin * rhs;
+            rhs = -sin * wk + cos * rhs;
+            let s_row = &mut s[k * nf + k + 1..(k + 1) * nf];
+            for (ski, ri) in s_row.iter_mut().zip(&mut row[k + 1..]) {
+                let v = *ski;
+                *ski = cos * v + sin * *ri;
+                *ri = -sin * v + cos * *ri;
+            }
+        }
+    }
+    // S u = w; a zero pivot (λ = 0 with singular R) leaves the trailing components at 0.
+    let n_sing = (0..nf).find(|&k| s[k * nf + k] == 0.0).unwrap_or(nf);
+    let mut u = vec![0.0; nf];
+    for i in (0..n_sing).rev() {
+        let sum: f64 = ((i + 1)..n_sing).map(|j| s[i * nf + j] * u[j]).sum();
+        u[i] = (w[i] - sum) / s[i * nf + i];
+    }
+    (u, Mat::from_fn(nf, nf, |i, j| s[i * nf + j]))
 }
 
 #[cfg(test)]

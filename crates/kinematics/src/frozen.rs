@@ -16,6 +16,9 @@ use nalgebra::{Matrix3, Point3, Vector3};
 
 use crate::chain::{Chain, Factor, FkWorkspace, Motion};
 
+mod lanes;
+pub use lanes::LANES;
+
 /// A rigid transform as a rotation matrix and a translation (m).
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Rigid {

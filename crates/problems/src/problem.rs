@@ -4,7 +4,7 @@
 use crate::{CalibratedModel, Error, GravityCompliance, JointHarmonics};
 use faer::{Col, ColMut, ColRef, MatMut};
 use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
-use hapcal_kinematics::{Chain, FkWorkspace, ParamUnit, Point3, Vector3, joint_trig};
+use hapcal_kinematics::{Chain, FkWorkspace, LANES, ParamUnit, Point3, Vector3, joint_trig};
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -503,11 +503,72 @@ impl CalibrationProblem {
         let mut grad = vec![0.0; n_kin];
         let n_joints = self.chain.n_joints();
         let mut r = 0usize;
+        // Runs of LANES distance rows without compliance go through the lane kernel
+        // (FrozenChain::distance_gradient_lanes), LANES poses per SIMD instruction.
+        let lanes = n_comp == 0 && !self.trig.is_empty() && frozen.supports_lanes();
+        let mut lane_grad = if lanes && jac.is_some() {
+            vec![[0.0; LANES]; n_kin]
+        } else {
+            Vec::new()
+        };
+        let mut skip = 0;
         for (row_idx, row) in self.obs.rows[rows.clone()]
             .iter()
             .enumerate()
             .map(|(i, row)| (rows.start + i, row))
         {
+            if skip > 0 {
+                skip -= 1;
+                continue;
+            }
+            if lanes
+                && row_idx + LANES <= rows.end
+                && self.obs.rows[row_idx..row_idx + LANES]
+                    .iter()
+                    .all(|row| matches!(row.kind, RowKind::Distance { .. }))
+            {
+                let trig: [&[[f64; 2]]; LANES] = std::array::from_fn(|l| {
+                    let k = row_idx + l;
+                    &self.trig[k * n_joints..(k + 1) * n_joints]
+                });
+                let mut dist = [0.0; LANES];
+                let s = self.weights.sigma_distance_m;
+                // One division per lane block, then products (the Jacobian rows differ from v / s
+                // by about an ulp; the residuals keep the division).
+                let inv_s = 1.0 / s;
+                match jac.as_mut() {
+                    Some(j) => {
+                        frozen.distance_gradient_lanes(trig, &mut dist, Some(&mut lane_grad));
+                        for (col, g) in lane_grad.iter().enumerate() {
+                            let dst = j.as_mut().col_mut(col).subrows_mut(r, LANES);
+                            // Contiguous rows (a column-major Jacobian): one vector store.
+                            match dst.try_as_col_major_mut() {
+                                Some(d) => {
+                                    for (o, v) in d.as_slice_mut().iter_mut().zip(g) {
+                                        *o = v * inv_s;
+                                    }
+                                }
+                                None => {
+                                    for (l, v) in g.iter().enumerate() {
+                                        j[(r + l, col)] = v * inv_s;
+                                    }
+                                }
+                            }
+                        }
+                    }
+                    None => frozen.distance_gradient_lanes(trig, &mut dist, None),
+                }
+                if let Some(o) = out.as_mut() {
+                    for (l, d) in dist.iter().enumerate() {
+                        if let RowKind::Distance { distance_m } = self.obs.rows[row_idx + l].kind {
+                            o[r + l] = (d - distance_m) / s;
+                        }
+                    }
+                }
+                r += LANES;
+                skip = LANES - 1;
+                continue;
+            }
             // Distance rows without compliance: the distance gradient directly, joint
             // angles by their precomputed sines and cosines (the fast path at scale).
             if n_comp == 0

@@ -3,7 +3,7 @@
 use std::f64::consts::PI;
 
 use hapcal_kinematics::{
-    Chain, DhConvention, DhRow, FkWorkspace, Isometry3, Placement, joint_trig,
+    Chain, DhConvention, DhRow, FkWorkspace, Isometry3, LANES, Placement, joint_trig,
 };
 use nalgebra::Vector3;
 use proptest::prelude::*;
@@ -229,6 +229,47 @@ proptest! {
             for (j, g) in grad.iter().enumerate() {
                 let expected = u.x * jac[3 * j] + u.y * jac[3 * j + 1] + u.z * jac[3 * j + 2];
                 prop_assert!((g - expected).abs() < 1e-12, "param {j}: {g} vs {expected}");
+            }
+        }
+    }
+
+    #[test]
+    fn lane_kernel_matches_the_scalar_path_and_central_differences(
+        (chain, x, _) in chain_x_q(),
+        qs in prop::collection::vec(prop::collection::vec(-PI..PI, MAX_JOINTS), LANES),
+    ) {
+        let frozen = chain.freeze(&x);
+        // Chains with a general or prismatic joint axis take the scalar path only.
+        prop_assume!(frozen.supports_lanes());
+        let n = chain.n_params();
+        let qs: Vec<Vec<f64>> = qs.into_iter().map(|mut q| { q.truncate(chain.n_joints()); q }).collect();
+        let trigs: Vec<_> = qs.iter().map(|q| joint_trig(q)).collect();
+        let mut dist = [0.0; LANES];
+        let mut grad = vec![[0.0; LANES]; n];
+        frozen.distance_gradient_lanes(std::array::from_fn(|l| trigs[l].as_slice()), &mut dist, Some(&mut grad));
+        let mut dist_only = [0.0; LANES];
+        frozen.distance_gradient_lanes(std::array::from_fn(|l| trigs[l].as_slice()), &mut dist_only, None);
+        let mut ws = FkWorkspace::new(&chain);
+        let mut scalar = vec![0.0; n];
+        for (l, q) in qs.iter().enumerate() {
+            let p = frozen.distance_gradient(q, Some(&trigs[l]), &mut scalar, &mut ws);
+            let d = p.coords.norm();
+            // Same operations in the same order: rounding differences only, a few ulps of
+            // the largest term (|P| ≤ ~2 m, gradient entries ≤ ~2 m/rad).
+            prop_assert!((dist[l] - d).abs() <= 1e-12 * d.max(1.0), "lane {l}: |P| {} vs {d}", dist[l]);
+            prop_assert_eq!(dist_only[l], dist[l]);
+            let scale = scalar.iter().fold(1.0_f64, |m, g| m.max(g.abs()));
+            for (j, g) in scalar.iter().enumerate() {
+                prop_assert!((grad[j][l] - g).abs() <= 1e-12 * scale, "lane {l}, param {j}: {} vs {g}", grad[j][l]);
+            }
+            // And the analytic row against central differences of |P| (step H; truncation
+            // error O(H²·|∂³|P||) ≈ 1e-12, rounding ≈ ε·|P|/H ≈ 1e-10).
+            for j in 0..n {
+                let (mut up, mut down) = (x.clone(), x.clone());
+                up[j] += H;
+                down[j] -= H;
+                let fd = (chain.end_point(&up, q).coords.norm() - chain.end_point(&down, q).coords.norm()) / (2.0 * H);
+                prop_assert!((grad[j][l] - fd).abs() <= 1e-8 + 1e-6 * fd.abs(), "lane {l}, param {j}: {} vs fd {fd}", grad[j][l]);
             }
         }
     }

@@ -108,6 +108,98 @@ fn problem_with_models(
         .expect("valid")
 }
 
+/// The reference device (DESIGN.md §2, standard D-H: every joint revolute about z, so the
+/// lane kernel applies).
+fn reference_chain() -> Chain {
+    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/reference-device/device.toml");
+    hapcal_io::read_device(&path)
+        .expect("reference device")
+        .chain()
+        .expect("valid chain")
+}
+
+/// Distance rows in runs of 17 and 8 between position rows: the lane kernel takes each run
+/// of 8 consecutive distance rows (`hapcal_kinematics::LANES`), the scalar path the rest.
+fn distance_runs_problem(qs: &[Vec<f64>]) -> CalibrationProblem {
+    let rows = qs
+        .iter()
+        .enumerate()
+        .map(|(i, q)| Row {
+            q: q.clone(),
+            kind: if matches!(i, 0 | 1 | 19) {
+                RowKind::Position {
+                    position_m: [0.1, 0.2, 0.8],
+                }
+            } else {
+                RowKind::Distance {
+                    distance_m: 0.9 + 0.001 * i as f64,
+                }
+            },
+        })
+        .collect();
+    let obs = Observations {
+        rows,
+        point_distances: vec![],
+        n_points: 0,
+    };
+    let weights = Weights {
+        sigma_distance_m: 1e-5,
+        sigma_position_m: 2e-5,
+        ..Weights::default()
+    };
+    CalibrationProblem::new(reference_chain(), obs, weights, None).expect("valid")
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(16))]
+    #[test]
+    fn lane_rows_match_the_chain_and_central_differences(
+        qs in prop::collection::vec(prop::collection::vec(-2.0..2.0f64, 7), 28),
+        dev in prop::collection::vec(-1e-2..1e-2f64, 32),
+    ) {
+        let problem = distance_runs_problem(&qs);
+        let n = problem.layout().len();
+        let m = problem.n_residuals();
+        let x = Col::from_fn(n, |i| dev[i % dev.len()]);
+        let x_kin: Vec<f64> = (0..n).map(|i| x[i]).collect();
+        prop_assert!(problem.chain().freeze(&x_kin).supports_lanes(), "the lane path must be exercised");
+        let mut r = Col::<f64>::zeros(m);
+        problem.residuals(x.as_ref(), r.as_mut()).unwrap();
+        let mut jac = Mat::<f64>::zeros(m, n);
+        problem.jacobian(x.as_ref(), jac.as_mut()).unwrap();
+        // Residuals against the chain's own forward kinematics: (|P| − δ)/σ, rounding of |P|
+        // (~1e-16 m) over σ = 1e-5 m gives ~1e-11; 1e-9 fails on any wrong lane.
+        let mut row = 0;
+        for (i, q) in qs.iter().enumerate() {
+            let p = problem.chain().end_point(&x_kin, q);
+            if matches!(i, 0 | 1 | 19) {
+                row += 3;
+                continue;
+            }
+            let expected = (p.coords.norm() - (0.9 + 0.001 * i as f64)) / 1e-5;
+            prop_assert!((r[row] - expected).abs() <= 1e-9, "row {row}: {} vs {expected}", r[row]);
+            row += 1;
+        }
+        prop_assert_eq!(row, m);
+        let h = 1e-6;
+        let (mut up, mut down) = (Col::<f64>::zeros(m), Col::<f64>::zeros(m));
+        for col in 0..n {
+            let mut xp = x.clone(); xp[col] += h;
+            let mut xm = x.clone(); xm[col] -= h;
+            problem.residuals(xp.as_ref(), up.as_mut()).unwrap();
+            problem.residuals(xm.as_ref(), down.as_mut()).unwrap();
+            for row in 0..m {
+                let fd = (up[row] - down[row]) / (2.0 * h);
+                let a = jac[(row, col)];
+                // As in `jacobian_matches_central_differences`: residuals ~1e5 per unit.
+                prop_assert!((a - fd).abs() <= 1e-3 + 1e-6 * fd.abs(),
+                    "{}: row {row}: analytic {a} vs central difference {fd}", problem.layout().name(col));
+            }
+        }
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(24))]
     #[test]
