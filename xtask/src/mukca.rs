@@ -118,6 +118,23 @@ fn ratios(v: &Value, tests: &[&str], theirs: &[Figures]) -> Result<Vec<f64>> {
     Ok(out)
 }
 
+/// Runs every split with the extra flags: the chosen model of each, and all the ours/MUKCa
+/// test-MAE ratios of the reference placements in split order.
+fn run_splits(
+    sh: &Shell,
+    units: &[Split<'_>],
+    extra: &[String],
+) -> Result<(Vec<String>, Vec<f64>)> {
+    let mut picks = Vec::new();
+    let mut all = Vec::new();
+    for (unit, urdf, train, tests, theirs) in units {
+        let v = calibrate(sh, unit, urdf, train, tests, extra)?;
+        picks.push(v["model"].as_str().unwrap_or("?").to_string());
+        all.extend(ratios(&v, tests, theirs)?);
+    }
+    Ok((picks, all))
+}
+
 /// Folds of the stability sweep (issue #2: the choice must not depend on the fold count).
 const FOLD_SWEEP: std::ops::RangeInclusive<usize> = 3..=10;
 
@@ -300,20 +317,7 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     )?;
     writeln!(md, "|---|{}---|---|", "---|".repeat(names.len()))?;
     for folds in FOLD_SWEEP {
-        let mut picks = Vec::new();
-        let mut all = Vec::new();
-        for (unit, urdf, train, tests, theirs) in &units {
-            let v = calibrate(
-                sh,
-                unit,
-                urdf,
-                train,
-                tests,
-                &["--folds".into(), folds.to_string()],
-            )?;
-            picks.push(v["model"].as_str().unwrap_or("?").to_string());
-            all.extend(ratios(&v, tests, theirs)?);
-        }
+        let (picks, all) = run_splits(sh, &units, &["--folds".into(), folds.to_string()])?;
         let worst = all.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         writeln!(
             md,
@@ -340,18 +344,11 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     writeln!(md, "| model | {} | mean |", placements.join(" | "))?;
     writeln!(md, "|---|{}---|", "---|".repeat(placements.len()))?;
     for model in FIXED_MODELS {
-        let mut all = Vec::new();
-        for (unit, urdf, train, tests, theirs) in units.iter().filter(|u| u.0 != "panda_2") {
-            let v = calibrate(
-                sh,
-                unit,
-                urdf,
-                train,
-                tests,
-                &["--model".into(), model.to_string()],
-            )?;
-            all.extend(ratios(&v, tests, theirs)?);
-        }
+        let with_reference: Vec<Split<'_>> = (units.iter())
+            .filter(|u| u.0 != "panda_2")
+            .cloned()
+            .collect();
+        let (_, all) = run_splits(sh, &with_reference, &["--model".into(), model.to_string()])?;
         let cells: Vec<String> = all.iter().map(|r| format!("{r:.2}")).collect();
         writeln!(
             md,

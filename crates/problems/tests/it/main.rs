@@ -151,6 +151,41 @@ fn distance_runs_problem(qs: &[Vec<f64>]) -> CalibrationProblem {
     CalibrationProblem::new(reference_chain(), obs, weights, None).expect("valid")
 }
 
+/// Every entry of the analytic `jac` (`m × n`, at `x`) against central differences of the
+/// residuals with step 1e-6. Residuals are divided by σ ~ 1e-5 m, so entries are ~1e5 per unit;
+/// the central difference's truncation and rounding stay below 1e-3 absolute + 1e-6 relative.
+fn jacobian_agrees_with_central_differences(
+    problem: &CalibrationProblem,
+    x: &Col<f64>,
+    jac: &Mat<f64>,
+) -> Result<(), TestCaseError> {
+    let (m, n) = (jac.nrows(), jac.ncols());
+    let h = 1e-6;
+    let (mut up, mut down) = (Col::<f64>::zeros(m), Col::<f64>::zeros(m));
+    for col in 0..n {
+        let mut xp = x.clone();
+        xp[col] += h;
+        let mut xm = x.clone();
+        xm[col] -= h;
+        problem
+            .residuals(xp.as_ref(), up.as_mut())
+            .expect("residuals at x + h");
+        problem
+            .residuals(xm.as_ref(), down.as_mut())
+            .expect("residuals at x − h");
+        for row in 0..m {
+            let fd = (up[row] - down[row]) / (2.0 * h);
+            let a = jac[(row, col)];
+            prop_assert!(
+                (a - fd).abs() <= 1e-3 + 1e-6 * fd.abs(),
+                "{}: row {row}: analytic {a} vs central difference {fd}",
+                problem.layout().name(col)
+            );
+        }
+    }
+    Ok(())
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(16))]
     #[test]
@@ -182,21 +217,7 @@ proptest! {
             row += 1;
         }
         prop_assert_eq!(row, m);
-        let h = 1e-6;
-        let (mut up, mut down) = (Col::<f64>::zeros(m), Col::<f64>::zeros(m));
-        for col in 0..n {
-            let mut xp = x.clone(); xp[col] += h;
-            let mut xm = x.clone(); xm[col] -= h;
-            problem.residuals(xp.as_ref(), up.as_mut()).unwrap();
-            problem.residuals(xm.as_ref(), down.as_mut()).unwrap();
-            for row in 0..m {
-                let fd = (up[row] - down[row]) / (2.0 * h);
-                let a = jac[(row, col)];
-                // As in `jacobian_matches_central_differences`: residuals ~1e5 per unit.
-                prop_assert!((a - fd).abs() <= 1e-3 + 1e-6 * fd.abs(),
-                    "{}: row {row}: analytic {a} vs central difference {fd}", problem.layout().name(col));
-            }
-        }
+        jacobian_agrees_with_central_differences(&problem, &x, &jac)?;
     }
 }
 
@@ -231,21 +252,7 @@ proptest! {
         }
         let mut jac = Mat::<f64>::zeros(m, n);
         problem.jacobian(x.as_ref(), jac.as_mut()).unwrap();
-        let h = 1e-6;
-        let (mut up, mut down) = (Col::<f64>::zeros(m), Col::<f64>::zeros(m));
-        for col in 0..n {
-            let mut xp = x.clone(); xp[col] += h;
-            let mut xm = x.clone(); xm[col] -= h;
-            problem.residuals(xp.as_ref(), up.as_mut()).unwrap();
-            problem.residuals(xm.as_ref(), down.as_mut()).unwrap();
-            for row in 0..m {
-                let fd = (up[row] - down[row]) / (2.0 * h);
-                let a = jac[(row, col)];
-                // Residuals are divided by sigma ~ 1e-5, so absolute values are ~1e5 per unit.
-                prop_assert!((a - fd).abs() <= 1e-3 + 1e-6 * fd.abs(),
-                    "{}: row {row}: analytic {a} vs central difference {fd}", problem.layout().name(col));
-            }
-        }
+        jacobian_agrees_with_central_differences(&problem, &x, &jac)?;
     }
 }
 
