@@ -388,7 +388,7 @@ fn trace_of_product(a: &Mat<f64>, b: &Mat<f64>) -> f64 {
 /// `row(q)` is the pose's block (`1 × n`, divided by σ; [`distance_row`]). The criterion is
 /// [`Criterion::IOptimal`] with weight `w` (`n × n`; minimise `tr(W·M⁻¹)`, `M = Σ rowᵀrow`)
 /// or [`Criterion::DOptimal`] (maximise `log det M`); a candidate row `b` for pose `i` is
-/// scored from `N_i = (M − b_iᵀb_i)⁻¹` by Sherman–Morrison:
+/// scored from `N_i = (M − b_iᵀb_i)⁻¹` (plus a tiny ridge when singular) by Sherman–Morrison:
 /// `tr(W(M_{−i} + bᵀb)⁻¹) = tr(W·N_i) − b·N_iWN_i·bᵀ/(1 + b·N_i·bᵀ)` and
 /// `log det(M_{−i} + bᵀb) = log det M_{−i} + ln(1 + b·N_i·bᵀ)`.
 ///
@@ -433,7 +433,13 @@ pub fn coordinate_exchange(
         for i in 0..poses.len() {
             let b_old = row(&poses[i]);
             let m_minus = &m - b_old.transpose() * &b_old;
-            let Ok(llt) = m_minus.llt(faer::Side::Lower) else {
+            // With N = n poses M_{−i} is singular: a ridge of 1e-9 of the mean diagonal keeps
+            // the scores finite (the direction pose i must fill then dominates them).
+            let ridge = 1e-9 * (0..n).map(|k| m[(k, k)]).sum::<f64>() / n as f64;
+            let Ok(llt) = m_minus
+                .llt(faer::Side::Lower)
+                .or_else(|_| (&m_minus + Mat::<f64>::identity(n, n) * ridge).llt(faer::Side::Lower))
+            else {
                 continue;
             };
             let n_i = llt.inverse();
@@ -1554,4 +1560,80 @@ pub fn run_bound(args: &BoundArgs, progress: &dyn Fn(&str)) -> Result<String> {
     let text = bound_markdown(&b, &cfg, &command);
     std::fs::write(&args.out, &text).with_context(|| format!("writing {}", args.out.display()))?;
     Ok(text)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reference_device() -> Device {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fixtures/reference-device/device.toml");
+        crate::calibrate::load_device(&path, "ball_link").expect("reference device")
+    }
+
+    #[test]
+    fn distance_row_matches_the_identification_jacobian() {
+        let device = reference_device();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let readings = hapcal_sim::sample_readings(&device, &mut rng, 50);
+        let c = candidate_blocks(&device, &readings, Measurement::Distance, Some(1e-5), false)
+            .expect("blocks");
+        assert_eq!(c.kept.len(), 28);
+        assert_eq!(c.undetermined, ["dalpha0", "dd0", "dtheta0", "dalpha7"]);
+        let chain = device.chain().expect("chain");
+        let res = hapcal_sim::joint_resolutions_rad(&device);
+        for (q, b) in readings.iter().zip(&c.blocks) {
+            let r = distance_row(&chain, &c.kept, q, 1e-5, RowNoise::Simulator, &res);
+            // The residual's sign convention may differ; the information does not.
+            let sign = if r[(0, 0)] * b[(0, 0)] < 0.0 { -1.0 } else { 1.0 };
+            for k in 0..c.kept.len() {
+                assert!(
+                    (sign * r[(0, k)] - b[(0, k)]).abs() <= 1e-9 * b[(0, k)].abs().max(1.0),
+                    "{}: {} vs {}",
+                    c.columns[k],
+                    r[(0, k)],
+                    b[(0, k)]
+                );
+            }
+            // Quantisation noise only adds: the quantised row is never longer.
+            let rq = distance_row(&chain, &c.kept, q, 1e-5, RowNoise::Quantised, &res);
+            assert!(rq[(0, 3)].abs() <= r[(0, 3)].abs());
+        }
+        // The base-frame weight ignores the rig → base row: da0 has no weight.
+        let da0 = c.columns.iter().position(|n| n == "da0").expect("da0 kept");
+        assert_eq!(c.weight[(da0, da0)], 0.0);
+        assert!(c.weight[(da0 + 1, da0 + 1)] > 0.0);
+    }
+
+    #[test]
+    fn coordinate_exchange_moves_a_line_design_to_the_ends_of_the_range() {
+        // Straight line (1, q) on [−1, 1]: the D- and I-optimal 2-point designs are {−1, 1}
+        // (I: W = ∫(1, q)ᵀ(1, q) dq/2 = diag(1, 1/3), tr(W M⁻¹) = (1 + 1/3)/2 there).
+        let row = |q: &[f64]| Mat::from_fn(1, 2, |_, k| if k == 0 { 1.0 } else { q[0] });
+        let w = Mat::from_fn(2, 2, |i, j| match (i, j) {
+            (0, 0) => 1.0,
+            (1, 1) => 1.0 / 3.0,
+            _ => 0.0,
+        });
+        for criterion in [Criterion::IOptimal, Criterion::DOptimal] {
+            let mut poses = vec![vec![-0.3], vec![0.5]];
+            let v = coordinate_exchange(&mut poses, &row, criterion, &w, &[(-1.0, 1.0)], 20)
+                .expect("design");
+            let mut ends: Vec<f64> = poses.iter().map(|q| q[0]).collect();
+            ends.sort_by(f64::total_cmp);
+            assert!((ends[0] + 1.0).abs() < 1e-9 && (ends[1] - 1.0).abs() < 1e-9, "{ends:?}");
+            let expected = match criterion {
+                Criterion::IOptimal => 2.0 / 3.0,
+                _ => -(4.0_f64).ln(),
+            };
+            assert!((v - expected).abs() < 1e-9, "{criterion}: {v}");
+        }
+        let err = coordinate_exchange(&mut [vec![0.0]], &row, Criterion::O3, &w, &[(-1.0, 1.0)], 1)
+            .expect_err("o3 is not supported");
+        assert_eq!(
+            err.to_string(),
+            "coordinate exchange supports i-optimal and d-optimal, not o3"
+        );
+    }
 }
