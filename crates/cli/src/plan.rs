@@ -304,6 +304,26 @@ pub fn candidate_blocks(
 /// A count of 0 or above the candidates, too few poses to determine the parameters, or the
 /// errors of [`candidate_blocks`].
 pub fn plan_poses(device: &Device, cfg: &PlanConfig) -> Result<PosePlan> {
+    plan_poses_weighted(device, cfg, None)
+}
+
+/// Per joint, the variance (rad²) of the joint angle error at a reading (rad), e.g.
+/// [`transmission_variances`].
+pub type JointVariance<'a> = dyn Fn(&[f64]) -> Vec<f64> + 'a;
+
+/// [`plan_poses`] with the distance rows weighted by the joint angle errors `joint_var(q)`
+/// (rad² per joint at reading `q`, e.g. [`transmission_variances`] of a step 1 done before
+/// planning): with [`PlanConfig::transmission_rows`] false and distance measurements, every
+/// candidate's row is [`distance_row`] with those variances (noise-weighted rows); otherwise
+/// `joint_var` must be `None`.
+///
+/// # Errors
+/// Those of [`plan_poses`]; `joint_var` with transmission rows or position measurements.
+pub fn plan_poses_weighted(
+    device: &Device,
+    cfg: &PlanConfig,
+    joint_var: Option<&JointVariance<'_>>,
+) -> Result<PosePlan> {
     if cfg.count == 0 || cfg.count > cfg.n_candidates {
         bail!(
             "--count must be between 1 and the number of candidates ({}), got {}",
@@ -316,6 +336,12 @@ pub fn plan_poses(device: &Device, cfg: &PlanConfig) -> Result<PosePlan> {
     if cfg.refine && (cfg.measurement != Measurement::Distance || cfg.transmission_rows) {
         bail!(
             "refining the poses over the joint box needs distance measurements planned without the transmission rows"
+        );
+    }
+    let kinematic_rows = cfg.measurement == Measurement::Distance && !cfg.transmission_rows;
+    if joint_var.is_some() && !kinematic_rows {
+        bail!(
+            "noise-weighted rows need distance measurements planned without the transmission rows"
         );
     }
     let Candidates {
@@ -331,6 +357,18 @@ pub fn plan_poses(device: &Device, cfg: &PlanConfig) -> Result<PosePlan> {
         cfg.sigma_m,
         cfg.transmission_rows,
     )?;
+    let chain = device.chain()?;
+    let (sigma_m, _) = sigmas(device, cfg.sigma_m);
+    let zero = vec![0.0; chain.n_joints()];
+    let row = |q: &[f64]| match joint_var {
+        Some(f) => distance_row(&chain, &kept, q, sigma_m, &f(q)),
+        None => distance_row(&chain, &kept, q, sigma_m, &zero),
+    };
+    let blocks = if kinematic_rows {
+        candidates.iter().map(|q| row(q)).collect()
+    } else {
+        blocks
+    };
     let design_cfg = DesignConfig {
         weight: Some(weight.clone()),
         ..DesignConfig::new(cfg.criterion)
@@ -345,10 +383,6 @@ pub fn plan_poses(device: &Device, cfg: &PlanConfig) -> Result<PosePlan> {
         .map(|&c| candidates[c].clone())
         .collect();
     let refined_value = if cfg.refine {
-        let chain = device.chain()?;
-        let res = hapcal_sim::joint_resolutions_rad(device);
-        let (sigma_m, _) = sigmas(device, cfg.sigma_m);
-        let row = |q: &[f64]| distance_row(&chain, &kept, q, sigma_m, RowNoise::Simulator, &res);
         Some(coordinate_exchange(
             &mut readings,
             &row,
@@ -430,16 +464,15 @@ pub fn coordinate_exchange(
     let mut value = value_of(&m)?;
     for _ in 0..max_sweeps {
         let before = value;
-        for i in 0..poses.len() {
-            let b_old = row(&poses[i]);
+        for pose in poses.iter_mut() {
+            let b_old = row(pose);
             let m_minus = &m - b_old.transpose() * &b_old;
             // With N = n poses M_{−i} is singular: a ridge of 1e-9 of the mean diagonal keeps
             // the scores finite (the direction pose i must fill then dominates them).
             let ridge = 1e-9 * (0..n).map(|k| m[(k, k)]).sum::<f64>() / n as f64;
-            let Ok(llt) = m_minus
-                .llt(faer::Side::Lower)
-                .or_else(|_| (&m_minus + Mat::<f64>::identity(n, n) * ridge).llt(faer::Side::Lower))
-            else {
+            let Ok(llt) = m_minus.llt(faer::Side::Lower).or_else(|_| {
+                (&m_minus + Mat::<f64>::identity(n, n) * ridge).llt(faer::Side::Lower)
+            }) else {
                 continue;
             };
             let n_i = llt.inverse();
@@ -461,7 +494,7 @@ pub fn coordinate_exchange(
                     _ => base - (1.0 + s).ln(),
                 }
             };
-            let mut q = poses[i].clone();
+            let mut q = pose.clone();
             let mut best = score(&q);
             for (j, &(lo, hi)) in limits.iter().enumerate().take(q.len()) {
                 let spacing = (hi - lo) / 20.0;
@@ -494,7 +527,7 @@ pub fn coordinate_exchange(
             }
             let b_new = row(&q);
             m = m_minus + b_new.transpose() * &b_new;
-            poses[i] = q;
+            *pose = q;
         }
         // Recompute from scratch: the updates accumulate rounding.
         m = info(poses);
@@ -674,6 +707,9 @@ pub struct StudyConfig {
     pub transmissions: TransmissionData,
     /// Refine each plan by [`coordinate_exchange`] over the joint box.
     pub refine: bool,
+    /// Weight each candidate's distance row by the shared step 1's transmission uncertainty at
+    /// that pose ([`transmission_variances`], [`plan_poses_weighted`]).
+    pub weight_rows: bool,
 }
 
 /// Per-count medians of the study.
@@ -736,10 +772,9 @@ pub fn pose_study(
         let reference_rows = sim(cfg.n_random)?;
         let shared = match cfg.transmissions {
             TransmissionData::SamePoses => None,
-            TransmissionData::Shared => Some(crate::paper::identify_transmissions(
-                r,
-                &reference_rows,
-            )?),
+            TransmissionData::Shared => {
+                Some(crate::paper::identify_transmissions(r, &reference_rows)?)
+            }
             TransmissionData::NoiseFree => {
                 let c = hapcal_sim::SimConfig::new(seed + 4_000_000, NOISE_FREE_EXT_POSES)
                     .with_noise(NoiseModel::new(0.0, r.noise.sigma_m_m));
@@ -752,7 +787,10 @@ pub fn pose_study(
                 .with_context(|| format!("seed {seed}: {} random poses", cfg.n_random))?;
         let mut by_count = Vec::new();
         for &count in &cfg.counts {
-            let plan = plan_poses(
+            let joint_var = shared
+                .as_ref()
+                .map(|t| move |q: &[f64]| transmission_variances(t, q));
+            let plan = plan_poses_weighted(
                 &r.device,
                 &PlanConfig {
                     measurement: Measurement::Distance,
@@ -764,6 +802,10 @@ pub fn pose_study(
                     transmission_rows: cfg.transmissions == TransmissionData::SamePoses,
                     refine: cfg.refine,
                 },
+                joint_var
+                    .as_ref()
+                    .filter(|_| cfg.weight_rows)
+                    .map(|f| f as &JointVariance<'_>),
             )?;
             let rows = simulate_at(r, &plan.readings, seed + 3_000_000)?;
             let planned = calibrate_and_validate(r, &rows, shared.as_ref(), validation_seed)
@@ -833,10 +875,17 @@ pub fn study_markdown(study: &Study, cfg: &StudyConfig, command: &str) -> String
          `crates/cli/src/plan.rs`). Seeds 0..{}.\n",
         cfg.criterion,
         cfg.n_candidates,
-        if cfg.refine {
-            ", then coordinate exchange over the joint box"
-        } else {
-            ""
+        match (cfg.refine, cfg.weight_rows) {
+            (true, true) => {
+                ", then coordinate exchange over the joint box, with each distance row weighted by \
+                 the shared step 1's transmission uncertainty at its pose"
+            }
+            (true, false) => ", then coordinate exchange over the joint box",
+            (false, true) => {
+                ", with each distance row weighted by the shared step 1's transmission \
+                 uncertainty at its pose"
+            }
+            (false, false) => "",
         },
         cfg.seeds
     );
@@ -1003,6 +1052,10 @@ pub struct StudyArgs {
     /// shared or noise-free).
     #[arg(long)]
     pub refine: bool,
+    /// Weight each candidate's distance row by the shared step 1's transmission uncertainty at
+    /// that pose (needs --transmissions shared or noise-free).
+    #[arg(long)]
+    pub weight_rows: bool,
     /// Output Markdown file.
     #[arg(long, default_value = "docs/results/pose-selection.md")]
     pub out: std::path::PathBuf,
@@ -1027,11 +1080,12 @@ pub fn run_study(args: &StudyArgs, progress: &dyn Fn(u64)) -> Result<String> {
         criterion: args.criterion,
         transmissions: args.transmissions,
         refine: args.refine,
+        weight_rows: args.weight_rows,
     };
     let study = pose_study(&r, &cfg, progress)?;
     let counts: Vec<String> = args.counts.iter().map(usize::to_string).collect();
     let command = format!(
-        "cargo run --release -p hapcal -- pose-study --seeds {} --counts {} --random {} --candidates {} --criterion {} --transmissions {}{} --out {}",
+        "cargo run --release -p hapcal -- pose-study --seeds {} --counts {} --random {} --candidates {} --criterion {} --transmissions {}{}{} --out {}",
         args.seeds,
         counts.join(","),
         args.random,
@@ -1039,6 +1093,11 @@ pub fn run_study(args: &StudyArgs, progress: &dyn Fn(u64)) -> Result<String> {
         args.criterion,
         args.transmissions.name(),
         if args.refine { " --refine" } else { "" },
+        if args.weight_rows {
+            " --weight-rows"
+        } else {
+            ""
+        },
         args.out.display()
     );
     let text = study_markdown(&study, &cfg, &command);
@@ -1069,10 +1128,68 @@ impl RowNoise {
     }
 }
 
+/// Per joint, the variance (rad²) of the joint angle error that `noise` adds at any reading:
+/// `res²/12` for [`RowNoise::Quantised`] (uniform rounding to the resolution `res`,
+/// [`hapcal_sim::joint_resolutions_rad`]), 0 for [`RowNoise::Simulator`].
+pub fn quantisation_variances(device: &Device, noise: RowNoise) -> Vec<f64> {
+    hapcal_sim::joint_resolutions_rad(device)
+        .iter()
+        .map(|res| match (noise, res) {
+            (RowNoise::Quantised, Some(res)) => res * res / 12.0,
+            _ => 0.0,
+        })
+        .collect()
+}
+
+/// Per joint, the variance (rad²) of the corrected joint angle at reading `q` (rad) that step
+/// 1's estimate leaves: `gᵀ·C·g`, `C` the covariance of the transmission's identified
+/// parameters and `g` the derivative of the corrected angle with respect to them (central
+/// differences, step 1e-7, for a capstan's eq. 1; the Chebyshev basis for the joint-4
+/// polynomial). 0 for joints without a transmission. The delta method (first order).
+pub fn transmission_variances(t: &crate::paper::TransmissionFit, q: &[f64]) -> Vec<f64> {
+    use hapcal_transmission::{CapstanProblem, JointRad};
+    let mut var = vec![0.0; q.len()];
+    let quad = |g: &[f64], cov: &hapcal_identify::Covariance| {
+        let f = &cov.free;
+        (0..f.len())
+            .flat_map(|a| (0..f.len()).map(move |b| (a, b)))
+            .map(|(a, b)| g[f[a]] * cov.matrix[(a, b)] * g[f[b]])
+            .sum::<f64>()
+    };
+    for c in &t.capstans {
+        let Some(&theta) = q.get(c.joint - 1) else {
+            continue;
+        };
+        let x = &c.identified.fit.x;
+        let g: Vec<f64> = (0..x.nrows())
+            .map(|k| {
+                let h = 1e-7;
+                let mut up = x.clone();
+                let mut down = x.clone();
+                up[k] += h;
+                down[k] -= h;
+                let out = |x: &faer::Col<f64>| {
+                    c.capstan
+                        .output_rad(&CapstanProblem::params(x.as_ref()), JointRad(theta))
+                };
+                (out(&up) - out(&down)) / (2.0 * h)
+            })
+            .collect();
+        var[c.joint - 1] = quad(&g, &c.identified.covariance);
+    }
+    if let Some(&theta) = q.get(crate::paper::PARALLELOGRAM_JOINT - 1) {
+        let g = t.poly.basis(theta);
+        var[crate::paper::PARALLELOGRAM_JOINT - 1] = quad(&g, &t.poly_identified.covariance);
+    }
+    var
+}
+
 /// One pose's distance row of the scaled identification Jacobian at the nominal model:
 /// `(∂δ/∂x_k)/σᵢ` over the chain parameters `kept` (length `kept.len()`, 1/m·m or 1/m·m/rad
-/// per column), with `δ = |P|` (paper eq. 5, `P` the end point in the rig frame) and `σᵢ` as
-/// `noise` says (m).
+/// per column), with `δ = |P|` (paper eq. 5, `P` the end point in the rig frame) and
+/// `σᵢ² = σ_m² + Σⱼ (∂δ/∂qⱼ)²·joint_var_rad2[j]` (m²): the distance noise plus the joint
+/// angle errors propagated through the Jacobian (first order; e.g.
+/// [`quantisation_variances`], [`transmission_variances`]).
 ///
 /// # Panics
 /// If `q` has the wrong length or an index of `kept` is out of range (misuse).
@@ -1082,21 +1199,18 @@ pub fn distance_row(
     kept: &[usize],
     q: &[f64],
     sigma_m: f64,
-    noise: RowNoise,
-    resolutions_rad: &[Option<f64>],
+    joint_var_rad2: &[f64],
 ) -> Mat<f64> {
     let x0 = vec![0.0; chain.n_params()];
     let p = chain.end_point(&x0, q).coords;
     let u = p / p.norm();
     let jp = chain.point_jacobian_wrt_params(&x0, q);
     let mut var = sigma_m * sigma_m;
-    if noise == RowNoise::Quantised {
+    if joint_var_rad2.iter().any(|&v| v > 0.0) {
         let jq = chain.geometric_jacobian(&x0, q);
-        for (j, res) in resolutions_rad.iter().enumerate().take(chain.n_joints()) {
-            if let Some(res) = res {
-                let dd_dq = (0..3).map(|a| u[a] * jq[(a, j)]).sum::<f64>();
-                var += dd_dq * dd_dq * res * res / 12.0;
-            }
+        for (j, v) in joint_var_rad2.iter().enumerate().take(chain.n_joints()) {
+            let dd_dq = (0..3).map(|a| u[a] * jq[(a, j)]).sum::<f64>();
+            var += dd_dq * dd_dq * v;
         }
     }
     let sigma = var.sqrt();
@@ -1287,8 +1401,8 @@ pub fn design_bound(
     let c = candidate_blocks(device, &pool, Measurement::Distance, Some(sigma_m), false)?;
     let kept = c.kept.clone();
     let chain = device.chain()?;
-    let res = hapcal_sim::joint_resolutions_rad(device);
-    let row = |q: &[f64]| distance_row(&chain, &kept, q, sigma_m, cfg.noise, &res);
+    let joint_var = quantisation_variances(device, cfg.noise);
+    let row = |q: &[f64]| distance_row(&chain, &kept, q, sigma_m, &joint_var);
     let blocks: Vec<Mat<f64>> = pool.iter().map(|q| row(q)).collect();
     let w = c.weight;
     let uniform_value = hapcal_identify::i_optimal_weights(
@@ -1306,13 +1420,17 @@ pub fn design_bound(
     let mut rounds = 0;
     let (design, sup) = loop {
         rounds += 1;
-        progress(&format!("continuous design, round {rounds}, {} candidates", pool.len()));
+        progress(&format!(
+            "continuous design, round {rounds}, {} candidates",
+            pool.len()
+        ));
         let design = hapcal_identify::i_optimal_weights(
             &blocks,
             &w,
             &hapcal_identify::ContinuousConfig::new(),
         )?;
-        let (sup, maxima) = sensitivity_maxima(&design, &pool, &limits, &row, device, &mut extra_rng);
+        let (sup, maxima) =
+            sensitivity_maxima(&design, &pool, &limits, &row, device, &mut extra_rng);
         if sup <= design.value * (1.0 + 1e-3) || rounds >= cfg.rounds {
             break (design, sup);
         }
@@ -1449,7 +1567,10 @@ pub fn bound_markdown(b: &Bound, cfg: &BoundConfig, command: &str) -> String {
             format!("{:.3}", d.value / b.uniform_value),
         ),
         (
-            format!("{} random poses, √(mean over seeds of tr(W·M⁻¹)) (mm)", cfg.n_random),
+            format!(
+                "{} random poses, √(mean over seeds of tr(W·M⁻¹)) (mm)",
+                cfg.n_random
+            ),
             format!("{:.4}", mm(b.target_ms)),
         ),
         (
@@ -1582,11 +1703,17 @@ mod tests {
         assert_eq!(c.kept.len(), 28);
         assert_eq!(c.undetermined, ["dalpha0", "dd0", "dtheta0", "dalpha7"]);
         let chain = device.chain().expect("chain");
-        let res = hapcal_sim::joint_resolutions_rad(&device);
+        let none = quantisation_variances(&device, RowNoise::Simulator);
+        let quantised = quantisation_variances(&device, RowNoise::Quantised);
+        assert!(none.iter().all(|&v| v == 0.0) && quantised.iter().all(|&v| v > 0.0));
         for (q, b) in readings.iter().zip(&c.blocks) {
-            let r = distance_row(&chain, &c.kept, q, 1e-5, RowNoise::Simulator, &res);
+            let r = distance_row(&chain, &c.kept, q, 1e-5, &none);
             // The residual's sign convention may differ; the information does not.
-            let sign = if r[(0, 0)] * b[(0, 0)] < 0.0 { -1.0 } else { 1.0 };
+            let sign = if r[(0, 0)] * b[(0, 0)] < 0.0 {
+                -1.0
+            } else {
+                1.0
+            };
             for k in 0..c.kept.len() {
                 assert!(
                     (sign * r[(0, k)] - b[(0, k)]).abs() <= 1e-9 * b[(0, k)].abs().max(1.0),
@@ -1597,7 +1724,7 @@ mod tests {
                 );
             }
             // Quantisation noise only adds: the quantised row is never longer.
-            let rq = distance_row(&chain, &c.kept, q, 1e-5, RowNoise::Quantised, &res);
+            let rq = distance_row(&chain, &c.kept, q, 1e-5, &quantised);
             assert!(rq[(0, 3)].abs() <= r[(0, 3)].abs());
         }
         // The base-frame weight ignores the rig → base row: da0 has no weight.
@@ -1622,7 +1749,10 @@ mod tests {
                 .expect("design");
             let mut ends: Vec<f64> = poses.iter().map(|q| q[0]).collect();
             ends.sort_by(f64::total_cmp);
-            assert!((ends[0] + 1.0).abs() < 1e-9 && (ends[1] - 1.0).abs() < 1e-9, "{ends:?}");
+            assert!(
+                (ends[0] + 1.0).abs() < 1e-9 && (ends[1] - 1.0).abs() < 1e-9,
+                "{ends:?}"
+            );
             let expected = match criterion {
                 Criterion::IOptimal => 2.0 / 3.0,
                 _ => -(4.0_f64).ln(),
