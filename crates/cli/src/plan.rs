@@ -1273,6 +1273,40 @@ pub struct BoundRow {
     pub planned_rms_m: f64,
     /// The same after [`coordinate_exchange`] over the joint box, m.
     pub refined_rms_m: f64,
+    /// Median validation RMS of the linear model for the refined design (200 draws of
+    /// `δx ~ N(0, M⁻¹)` with each seed's validation poses), m: the counterpart of
+    /// [`Bound::random_median_rms_m`].
+    pub refined_median_rms_m: f64,
+}
+
+/// For a design with information `m` (rows divided by σ, `n × n`): `tr(W·m⁻¹)`,
+/// `tr(W_v·m⁻¹)` (m²) and 200 draws of the validation RMS `√(δxᵀW_vδx)` (m) with
+/// `δx ~ N(0, m⁻¹)` (`ChaCha8Rng` seeded with `seed`): the linearised validation error.
+fn linear_outcomes(
+    m: &Mat<f64>,
+    w: &Mat<f64>,
+    wv: &Mat<f64>,
+    seed: u64,
+) -> Result<(f64, f64, Vec<f64>)> {
+    let llt = m
+        .llt(faer::Side::Lower)
+        .map_err(|e| anyhow::anyhow!("singular information ({e:?})"))?;
+    let minv = faer::linalg::solvers::DenseSolveCore::inverse(&llt);
+    let mut zrng = ChaCha8Rng::seed_from_u64(seed);
+    let draws = (0..200)
+        .map(|_| {
+            let mut z = Mat::from_fn(m.nrows(), 1, |_, _| zrng.sample::<f64, _>(StandardNormal));
+            llt.L()
+                .transpose()
+                .solve_upper_triangular_in_place(z.as_mut());
+            (z.transpose() * wv * &z)[(0, 0)].max(0.0).sqrt()
+        })
+        .collect();
+    Ok((
+        trace_of_product(w, &minv),
+        trace_of_product(wv, &minv),
+        draws,
+    ))
 }
 
 /// Result of [`design_bound`]. All mean squares are of the end-point position error over
@@ -1442,39 +1476,36 @@ pub fn design_bound(
     let lower_bound = design.lower_bound_given(sup);
     let support = design.weights.iter().filter(|&&x| x > 1e-4).count();
 
+    // The validation weights of the study's seeds (200 fresh poses each).
+    let validation_weights = (0..cfg.seeds)
+        .map(|seed| {
+            let mut vrng = ChaCha8Rng::seed_from_u64(seed + 1_000_000);
+            let validation: Vec<Vec<f64>> = hapcal_sim::sample_readings(device, &mut vrng, 200)
+                .iter()
+                .map(|q| hapcal_sim::quantise_readings(device, q))
+                .collect();
+            validation_weight(device, &kept, &validation)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let info_of = |poses: &[Vec<f64>]| {
+        let mut m = Mat::<f64>::zeros(kept.len(), kept.len());
+        for q in poses {
+            let b = row(&hapcal_sim::quantise_readings(device, q));
+            m += b.transpose() * &b;
+        }
+        m
+    };
     // The random reference sets of the study, seed by seed.
     progress("random reference sets");
     let (mut random_ms, mut random_ms_validation, mut draws) = (vec![], vec![], vec![]);
     for seed in 0..cfg.seeds {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let readings = hapcal_sim::sample_readings(device, &mut rng, cfg.n_random);
-        let mut m = Mat::<f64>::zeros(kept.len(), kept.len());
-        for q in &readings {
-            let b = row(&hapcal_sim::quantise_readings(device, q));
-            m += b.transpose() * &b;
-        }
-        let mut vrng = ChaCha8Rng::seed_from_u64(seed + 1_000_000);
-        let validation: Vec<Vec<f64>> = hapcal_sim::sample_readings(device, &mut vrng, 200)
-            .iter()
-            .map(|q| hapcal_sim::quantise_readings(device, q))
-            .collect();
-        let wv = validation_weight(device, &kept, &validation)?;
-        let llt = m
-            .llt(faer::Side::Lower)
-            .map_err(|e| anyhow::anyhow!("seed {seed}: singular information ({e:?})"))?;
-        let minv = faer::linalg::solvers::DenseSolveCore::inverse(&llt);
-        let tr = |a: &Mat<f64>| (0..a.nrows()).map(|i| a[(i, i)]).sum::<f64>();
-        random_ms.push(tr(&(&w * &minv)));
-        random_ms_validation.push(tr(&(&wv * &minv)));
-        let mut zrng = ChaCha8Rng::seed_from_u64(seed + 7_000_000);
-        for _ in 0..200 {
-            let mut z = Mat::from_fn(kept.len(), 1, |_, _| zrng.sample::<f64, _>(StandardNormal));
-            llt.L()
-                .transpose()
-                .solve_upper_triangular_in_place(z.as_mut());
-            let ms = (z.transpose() * &wv * &z)[(0, 0)];
-            draws.push(ms.max(0.0).sqrt());
-        }
+        let m = info_of(&hapcal_sim::sample_readings(device, &mut rng, cfg.n_random));
+        let wv = &validation_weights[seed as usize];
+        let (ms, ms_v, d) = linear_outcomes(&m, &w, wv, seed + 7_000_000)?;
+        random_ms.push(ms);
+        random_ms_validation.push(ms_v);
+        draws.extend(d);
     }
     let target_ms = random_ms.iter().sum::<f64>() / random_ms.len().max(1) as f64;
     let n_min = (lower_bound / target_ms).ceil() as usize;
@@ -1489,11 +1520,17 @@ pub fn design_bound(
         let d = select_poses(&blocks, count, &dcfg)?;
         let mut poses: Vec<Vec<f64>> = d.selected.iter().map(|&c| pool[c].clone()).collect();
         let refined = coordinate_exchange(&mut poses, &row, Criterion::IOptimal, &w, &limits, 50)?;
+        let m = info_of(&poses);
+        let mut planned_draws = Vec::new();
+        for (seed, wv) in validation_weights.iter().enumerate() {
+            planned_draws.extend(linear_outcomes(&m, &w, wv, seed as u64 + 8_000_000)?.2);
+        }
         rows.push(BoundRow {
             count,
             bound_rms_m: (lower_bound / count as f64).sqrt(),
             planned_rms_m: (-d.value).sqrt(),
             refined_rms_m: refined.sqrt(),
+            refined_median_rms_m: median(&planned_draws),
         });
     }
     Ok(Bound {
@@ -1600,18 +1637,19 @@ pub fn bound_markdown(b: &Bound, cfg: &BoundConfig, command: &str) -> String {
     }
     let _ = writeln!(
         s,
-        "\n| N | bound: √(Φ*_lb/N) (mm) | continuous design spread over N: √(Φ(ξ̂)/N) (mm) | I-optimal exact design from the final candidates: √tr(W·M⁻¹) (mm) | same, then coordinate exchange over the box (mm) | {} random: √target (mm) |\n|---|---|---|---|---|---|",
+        "\n| N | bound: √(Φ*_lb/N) (mm) | continuous design spread over N: √(Φ(ξ̂)/N) (mm) | I-optimal exact design from the final candidates: √tr(W·M⁻¹) (mm) | same, then coordinate exchange over the box (mm) | its median validation RMS, linear model (mm) | {} random: √target (mm) |\n|---|---|---|---|---|---|---|",
         cfg.n_random
     );
     for r in &b.rows {
         let _ = writeln!(
             s,
-            "| {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} |",
+            "| {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} |",
             r.count,
             r.bound_rms_m * 1e3,
             mm(d.value / r.count as f64),
             r.planned_rms_m * 1e3,
             r.refined_rms_m * 1e3,
+            r.refined_median_rms_m * 1e3,
             mm(b.target_ms)
         );
     }
