@@ -20,6 +20,19 @@
 //! The kinematic and transmission columns do not share rows, so `log det` of the information
 //! matrix is the sum of the two parts' and D-optimality does not depend on the relative weight
 //! of the two sensors, nor on the column scaling.
+//!
+//! When step 1 has its own external-encoder run (`--separate-transmission-run`; in the study
+//! `--transmissions shared|noise-free`), a block is the distance row alone ([`distance_row`]),
+//! optionally weighted by the joint angle errors that step 1 leaves at that pose
+//! ([`transmission_variances`]) or that encoder quantisation adds ([`quantisation_variances`]).
+//! `--refine` then moves the chosen poses off the candidates by coordinate exchange over the
+//! joint box ([`coordinate_exchange`]).
+//!
+//! `hapcal pose-bound` ([`design_bound`]) answers how well any `N` distance poses can do: the
+//! continuous I-optimal design (multiplicative algorithm, [`hapcal_identify::i_optimal_weights`])
+//! on uniform candidates, enlarged by column generation with the maxima of its sensitivity over
+//! the joint box, and the equivalence-theorem certificate `Φ* ≥ Φ(ξ)²/sup d` that bounds every
+//! `N`-pose design by `Φ*/N`; compared with the study's random reference sets.
 
 use anyhow::{Context, Result, bail};
 use faer::Mat;

@@ -19,6 +19,11 @@
 //! the design, the best single swap of a chosen pose for a candidate (Fedorov's exchange) is
 //! tried before stopping, so the result is swap-optimal: a local optimum, not necessarily the
 //! global one (the unit tests show both cases on small problems).
+//!
+//! [`i_optimal_weights`] solves the continuous (approximate) I-optimal design problem on the
+//! candidates by the multiplicative algorithm and returns the equivalence-theorem certificate
+//! ([`ContinuousDesign`]): a lower bound of the criterion of every design, exact designs of `N`
+//! poses included (divided by `N`).
 
 use faer::{Mat, MatRef, Side};
 
