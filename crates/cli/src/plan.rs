@@ -798,11 +798,12 @@ pub fn pose_study(
         let reference =
             calibrate_and_validate(r, &reference_rows, shared.as_ref(), validation_seed)
                 .with_context(|| format!("seed {seed}: {} random poses", cfg.n_random))?;
+        let table = shared
+            .as_ref()
+            .map(|t| VarianceTable::new(t, &r.device.joint_limits(), 2001));
+        let joint_var = table.as_ref().map(|table| move |q: &[f64]| table.eval(q));
         let mut by_count = Vec::new();
         for &count in &cfg.counts {
-            let joint_var = shared
-                .as_ref()
-                .map(|t| move |q: &[f64]| transmission_variances(t, q));
             let plan = plan_poses_weighted(
                 &r.device,
                 &PlanConfig {
@@ -1195,6 +1196,53 @@ pub fn transmission_variances(t: &crate::paper::TransmissionFit, q: &[f64]) -> V
         var[crate::paper::PARALLELOGRAM_JOINT - 1] = quad(&g, &t.poly_identified.covariance);
     }
     var
+}
+
+/// [`transmission_variances`] tabulated on a grid of each joint's range and interpolated
+/// linearly: the variance at joint `j` depends on that joint's reading alone, so a table of
+/// `n_grid` readings per joint replaces the per-pose finite differences in the planner's inner
+/// loops.
+#[derive(Clone, Debug)]
+pub struct VarianceTable {
+    /// Per joint: `(lower, upper, values)`, values (rad²) at `n_grid` evenly spaced readings.
+    joints: Vec<(f64, f64, Vec<f64>)>,
+}
+
+impl VarianceTable {
+    /// Tabulates [`transmission_variances`] of `t` over `limits` (rad) at `n_grid ≥ 2` readings
+    /// per joint.
+    pub fn new(t: &crate::paper::TransmissionFit, limits: &[(f64, f64)], n_grid: usize) -> Self {
+        let n_grid = n_grid.max(2);
+        let joints = (0..limits.len())
+            .map(|j| {
+                let (lo, hi) = limits[j];
+                let values = (0..n_grid)
+                    .map(|k| {
+                        let mut q: Vec<f64> = limits.iter().map(|l| 0.5 * (l.0 + l.1)).collect();
+                        q[j] = lo + (hi - lo) * k as f64 / (n_grid - 1) as f64;
+                        transmission_variances(t, &q)[j]
+                    })
+                    .collect();
+                (lo, hi, values)
+            })
+            .collect();
+        Self { joints }
+    }
+
+    /// Per joint, the interpolated variance (rad²) at reading `q` (rad; clamped to the range).
+    pub fn eval(&self, q: &[f64]) -> Vec<f64> {
+        self.joints
+            .iter()
+            .zip(q)
+            .map(|((lo, hi, v), &x)| {
+                let n = v.len() - 1;
+                let u = ((x - lo) / (hi - lo)).clamp(0.0, 1.0) * n as f64;
+                let k = (u.floor() as usize).min(n - 1);
+                let f = u - k as f64;
+                v[k] * (1.0 - f) + v[k + 1] * f
+            })
+            .collect()
+    }
 }
 
 /// One pose's distance row of the scaled identification Jacobian at the nominal model:
