@@ -1833,6 +1833,46 @@ mod tests {
     }
 
     #[test]
+    fn transmission_variances_are_tabulated_faithfully_and_largest_at_the_range_ends() {
+        let truth = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fixtures/reference-device/truth.toml");
+        let r = crate::paper::Reference::load(&truth).expect("reference");
+        let cfg = hapcal_sim::SimConfig::new(0, 200).with_noise(r.noise);
+        let rows = hapcal_sim::simulate(&r.device, &r.truth, &cfg).expect("log");
+        let t = crate::paper::identify_transmissions(&r, &rows).expect("step 1");
+        let limits = r.device.joint_limits();
+        let table = VarianceTable::new(&t, &limits, 2001);
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        for q in hapcal_sim::sample_readings(&r.device, &mut rng, 20) {
+            let (direct, tabulated) = (transmission_variances(&t, &q), table.eval(&q));
+            for j in 0..7 {
+                assert!(
+                    (direct[j] - tabulated[j]).abs() <= 1e-3 * direct[j] + 1e-16,
+                    "joint {}: {} vs {}",
+                    j + 1,
+                    direct[j],
+                    tabulated[j]
+                );
+                // Joints 5–7 are direct drive: step 1 leaves them exact.
+                assert_eq!(direct[j] == 0.0, j >= 4, "joint {}", j + 1);
+            }
+        }
+        // The joint-4 polynomial, fitted to uniform readings, is least known at its range ends.
+        let (lo, hi) = limits[3];
+        let at = |x: f64| {
+            let mut q: Vec<f64> = limits.iter().map(|l| 0.5 * (l.0 + l.1)).collect();
+            q[3] = x;
+            transmission_variances(&t, &q)[3]
+        };
+        assert!(
+            at(hi) > 2.0 * at(0.5 * (lo + hi)),
+            "{} vs {}",
+            at(hi),
+            at(0.5 * (lo + hi))
+        );
+    }
+
+    #[test]
     fn coordinate_exchange_moves_a_line_design_to_the_ends_of_the_range() {
         // Straight line (1, q) on [−1, 1]: the D- and I-optimal 2-point designs are {−1, 1}
         // (I: W = ∫(1, q)ᵀ(1, q) dq/2 = diag(1, 1/3), tr(W M⁻¹) = (1 + 1/3)/2 there).
