@@ -142,11 +142,13 @@ pub struct Candidates {
     pub weight: Mat<f64>,
 }
 
-/// Whether parameter `j` of `chain` belongs to a fixed first D-H row of `device` (the rig →
+/// Per parameter of `chain`: whether it belongs to a fixed first D-H row of `device` (the rig →
 /// base transform, invisible in the base frame).
-fn in_fixed_base_row(device: &Device, chain: &hapcal_kinematics::Chain, j: usize) -> bool {
+fn fixed_base_row_params(device: &Device, chain: &hapcal_kinematics::Chain) -> Vec<bool> {
     let first_fixed = device.dh_rows().first().is_some_and(|r| r.joint.is_none());
-    first_fixed && chain.params().get(j).is_some_and(|p| p.element == 0)
+    (chain.params().iter())
+        .map(|p| first_fixed && p.element == 0)
+        .collect()
 }
 
 /// Candidate blocks of the scaled Jacobian for `readings` (see the module docs); with
@@ -251,6 +253,7 @@ pub fn candidate_blocks(
     let n_rows = rows_per_pose + transmissions.len();
     let x0 = vec![0.0; chain_for_weight.n_params()];
     let mut weight = Mat::<f64>::zeros(n_cols, n_cols);
+    let in_base_row = fixed_base_row_params(device, &chain_for_weight);
     for q in readings {
         let jp = chain_for_weight.point_jacobian_wrt_params(&x0, q);
         let jq = chain_for_weight.geometric_jacobian(&x0, q);
@@ -258,9 +261,7 @@ pub fn candidate_blocks(
         for a in 0..3 {
             for (k, &j) in kept.iter().enumerate() {
                 // Kinematic parameters come first in the problem's layout.
-                if j < chain_for_weight.n_params()
-                    && !in_fixed_base_row(device, &chain_for_weight, j)
-                {
+                if j < chain_for_weight.n_params() && !in_base_row[j] {
                     g[(a, k)] = jp[(a, j)];
                 }
             }
@@ -1288,10 +1289,11 @@ fn validation_weight(device: &Device, kept: &[usize], readings: &[Vec<f64>]) -> 
     let x0 = vec![0.0; chain.n_params()];
     let k = kept.len();
     let mut w = Mat::<f64>::zeros(k, k);
+    let in_base_row = fixed_base_row_params(device, &chain);
     for q in readings {
         let jp = chain.point_jacobian_wrt_params(&x0, q);
         let g = Mat::from_fn(3, k, |a, c| {
-            if in_fixed_base_row(device, &chain, kept[c]) {
+            if in_base_row[kept[c]] {
                 0.0
             } else {
                 jp[(a, kept[c])]
