@@ -207,6 +207,9 @@ enum Command {
     /// Monte Carlo study of planned vs random poses on the reference device (distance data);
     /// writes a Markdown table. Run it in release.
     PoseStudy(hapcal::plan::StudyArgs),
+    /// The optimal-design bound of planned distance poses (continuous I-optimal design with its
+    /// equivalence-theorem certificate) against random poses; writes a Markdown table.
+    PoseBound(hapcal::plan::BoundArgs),
     /// Import a URDF chain as a hapcal device file (TOML on stdout).
     ImportUrdf {
         /// The URDF file.
@@ -303,6 +306,7 @@ fn run(cli: Cli) -> Result<()> {
                     readings,
                     hapcal::plan::Measurement::Distance,
                     Some(reference.noise.sigma_m_m),
+                    true,
                 )?;
                 let mut cfg = hapcal_identify::DesignConfig::new(criterion);
                 cfg.weight = Some(c.weight);
@@ -463,6 +467,12 @@ fn run(cli: Cli) -> Result<()> {
             let bar = indicatif::ProgressBar::new(args.seeds);
             let text = hapcal::plan::run_study(&args, &|done| bar.set_position(done))?;
             bar.finish_and_clear();
+            print!("{text}");
+            eprintln!("hapcal: wrote {}", args.out.display());
+            Ok(())
+        }
+        Command::PoseBound(args) => {
+            let text = hapcal::plan::run_bound(&args, &|stage| eprintln!("hapcal: {stage}"))?;
             print!("{text}");
             eprintln!("hapcal: wrote {}", args.out.display());
             Ok(())

@@ -19,6 +19,11 @@
 //! the design, the best single swap of a chosen pose for a candidate (Fedorov's exchange) is
 //! tried before stopping, so the result is swap-optimal: a local optimum, not necessarily the
 //! global one (the unit tests show both cases on small problems).
+//!
+//! [`i_optimal_weights`] solves the continuous (approximate) I-optimal design problem on the
+//! candidates by the multiplicative algorithm and returns the equivalence-theorem certificate
+//! ([`ContinuousDesign`]): a lower bound of the criterion of every design, exact designs of `N`
+//! poses included (divided by `N`).
 
 use faer::{Mat, MatRef, Side};
 
@@ -578,6 +583,224 @@ pub fn design_quality(
     Ok((ld, o))
 }
 
+/// Settings of [`i_optimal_weights`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContinuousConfig {
+    /// Most multiplicative updates.
+    pub max_iterations: usize,
+    /// Stop once the equivalence-theorem gap `max_c d_c / Φ(ξ) − 1` is at most this
+    /// (dimensionless; 0 at the optimum, see [`ContinuousDesign`]).
+    pub tolerance: f64,
+}
+
+impl ContinuousConfig {
+    /// `max_iterations = 20_000`, `tolerance = 1e-3` (a design within 0.1 % of the optimum
+    /// value: the certificate's bound then lies within 0.1 % of `Φ(ξ)`).
+    pub fn new() -> Self {
+        Self {
+            max_iterations: 20_000,
+            tolerance: 1e-3,
+        }
+    }
+}
+
+impl Default for ContinuousConfig {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// An approximate (continuous) I-optimal design on a finite candidate set, with the
+/// equivalence-theorem certificate of how far it is from the optimum.
+///
+/// Notation (V. V. Fedorov, *Theory of Optimal Experiments*, 1972, §2.4–2.9; A. C. Atkinson,
+/// A. N. Donev & R. D. Tobias, *Optimum Experimental Designs, with SAS*, 2007, ch. 9–10): a
+/// design `ξ` puts weight `w_c ≥ 0` (`Σ w_c = 1`) on candidate `c`, whose block `B_c`
+/// (`r_c × n`, rows divided by their σ) gives the normalised information
+/// `M(ξ) = Σ_c w_c B_cᵀB_c` (`n × n`, per pose). The I-criterion (L-optimality with weight `W`)
+/// is `Φ(ξ) = tr(W·M(ξ)⁻¹)` and the sensitivity of candidate `c` is
+/// `d_c(ξ) = tr(B_c·M⁻¹WM⁻¹·B_cᵀ)`. Always `Σ_c w_c d_c = Φ(ξ)`; the general equivalence
+/// theorem (Kiefer & Wolfowitz 1960, *Can. J. Math.* 12, for D/G; Fedorov 1972, Th. 2.9.2 for
+/// linear criteria) says `ξ` is optimal iff `max_c d_c(ξ) ≤ Φ(ξ)`.
+///
+/// The certificate used here, valid for every design `ξ` and every other design `ξ'` on the
+/// same design space: `Φ(ξ') ≥ Φ(ξ)² / sup_x d_x(ξ)`. Proof (Cauchy–Schwarz in the trace
+/// inner product, `M = M(ξ)`, `M' = M(ξ')`): with `A = W^½M'^{-½}` and
+/// `B = W^½M⁻¹M'^½`, `tr(ABᵀ) = Φ(ξ)`, `tr(AAᵀ) = Φ(ξ')` and
+/// `tr(BBᵀ) = tr(M⁻¹WM⁻¹·M') = Σ w'_x d_x(ξ) ≤ sup_x d_x(ξ)`; so
+/// `Φ(ξ)² ≤ Φ(ξ')·sup_x d_x(ξ)`. At the optimum `sup d = Φ` and the bound is tight.
+///
+/// An exact design of `N` poses `S` has `Σ_{c∈S} B_cᵀB_c = N·M(ξ_S)`, so
+/// `tr(W(Σ_{c∈S} B_cᵀB_c)⁻¹) ≥ lower_bound / N` for every `S` in the design space: the best
+/// `N`-pose design cannot beat the optimal continuous design spread over `N` poses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContinuousDesign {
+    /// Weight of each candidate (length `n_candidates`, sum 1).
+    pub weights: Vec<f64>,
+    /// `Φ(ξ) = tr(W·M(ξ)⁻¹)`: for rows divided by σ and `W` the second moment of a
+    /// prediction's gradient, the mean prediction variance of one pose's worth of
+    /// information, in units of σ² (e.g. m² per (σ = 1) for end-point positions).
+    pub value: f64,
+    /// `d_c(ξ)` per candidate (same units as `value`).
+    pub sensitivity: Vec<f64>,
+    /// `max_c d_c(ξ)` over the candidates.
+    pub max_sensitivity: f64,
+    /// `value² / max_sensitivity`: a lower bound of `Φ` of every design on the candidates.
+    pub lower_bound: f64,
+    /// `M(ξ)⁻¹·W·M(ξ)⁻¹` (`n × n`), to evaluate the sensitivity of points that are not
+    /// candidates ([`ContinuousDesign::sensitivity_of`]).
+    pub sensitivity_matrix: Mat<f64>,
+    /// Multiplicative updates done.
+    pub iterations: usize,
+    /// True when the gap fell below [`ContinuousConfig::tolerance`].
+    pub converged: bool,
+}
+
+impl ContinuousDesign {
+    /// Sensitivity `d(ξ) = tr(B·M⁻¹WM⁻¹·Bᵀ)` of a block `B` (`r × n`), e.g. of a point of the
+    /// design space outside the candidates.
+    ///
+    /// # Panics
+    /// If `block.ncols()` differs from the design's `n` (misuse).
+    #[track_caller]
+    pub fn sensitivity_of(&self, block: MatRef<'_, f64>) -> f64 {
+        assert_eq!(
+            block.ncols(),
+            self.sensitivity_matrix.nrows(),
+            "block columns"
+        );
+        let bd = block * &self.sensitivity_matrix;
+        (0..block.nrows())
+            .map(|i| {
+                (0..block.ncols())
+                    .map(|j| bd[(i, j)] * block[(i, j)])
+                    .sum::<f64>()
+            })
+            .sum()
+    }
+
+    /// The certificate's bound `Φ(ξ)² / max(sup_d, max_sensitivity)` for a design space whose
+    /// supremum of the sensitivity is `sup_d` (e.g. found by searching beyond the candidates):
+    /// a lower bound of `Φ` of every design on that space.
+    pub fn lower_bound_given(&self, sup_d: f64) -> f64 {
+        self.value * self.value / sup_d.max(self.max_sensitivity)
+    }
+}
+
+/// Approximate I-optimal design on the candidate blocks by the multiplicative algorithm
+/// (S. D. Silvey, D. M. Titterington & B. Torsney, "An algorithm for optimal designs on a
+/// finite design space", *Commun. Stat. A* 7, 1978), `w_c ← w_c·(d_c/Φ)^½`, renormalised;
+/// the exponent ½ makes each step decrease `Φ` for A- and L-type criteria (Y. Yu,
+/// "Monotonic convergence of a general algorithm for computing optimal designs", *Ann. Stat.*
+/// 38(3), 2010). Returns the design with its certificate ([`ContinuousDesign`]).
+///
+/// `blocks` as in [`select_poses`] (`r_c × n`, rows divided by σ); `weight` is `W`, `n × n`
+/// symmetric positive semi-definite. Starts from equal weights.
+///
+/// # Errors
+/// - [`Error::TooFewCandidates`] for no candidate;
+/// - [`Error::BlockShape`] for an empty, mis-sized or non-finite block;
+/// - [`Error::MissingWeight`] for a `weight` of another size or with a non-finite entry;
+/// - [`Error::NotDetermined`] if all candidates together leave `M` singular.
+pub fn i_optimal_weights(
+    blocks: &[Mat<f64>],
+    weight: &Mat<f64>,
+    cfg: &ContinuousConfig,
+) -> Result<ContinuousDesign, Error> {
+    let n_candidates = blocks.len();
+    if n_candidates == 0 {
+        return Err(Error::TooFewCandidates {
+            n_candidates,
+            n_select: 1,
+        });
+    }
+    let n = blocks[0].ncols();
+    let mut offsets = Vec::with_capacity(n_candidates + 1);
+    offsets.push(0);
+    for (index, b) in blocks.iter().enumerate() {
+        if b.nrows() == 0 || b.ncols() != n || !b.is_all_finite() {
+            return Err(Error::BlockShape {
+                index,
+                nrows: b.nrows(),
+                ncols: b.ncols(),
+                expected_ncols: n,
+            });
+        }
+        offsets.push(offsets[index] + b.nrows());
+    }
+    if weight.nrows() != n || weight.ncols() != n || !weight.is_all_finite() {
+        return Err(Error::MissingWeight { n_params: n });
+    }
+    // All rows stacked: J (R × n), block c = rows offsets[c]..offsets[c + 1].
+    let n_rows = offsets[n_candidates];
+    let mut j = Mat::<f64>::zeros(n_rows, n);
+    for (c, b) in blocks.iter().enumerate() {
+        for r in 0..b.nrows() {
+            for k in 0..n {
+                j[(offsets[c] + r, k)] = b[(r, k)];
+            }
+        }
+    }
+    let not_determined = Error::NotDetermined {
+        n_params: n,
+        n_select: n_candidates,
+    };
+    let row_candidate: Vec<usize> = (0..n_candidates)
+        .flat_map(|c| std::iter::repeat_n(c, offsets[c + 1] - offsets[c]))
+        .collect();
+    let mut w = vec![1.0 / n_candidates as f64; n_candidates];
+    // Φ, d and D for the weights w.
+    let evaluate = |w: &[f64]| -> Option<(f64, Vec<f64>, Mat<f64>)> {
+        let scaled = Mat::from_fn(n_rows, n, |i, k| j[(i, k)] * w[row_candidate[i]].sqrt());
+        let m = scaled.transpose() * &scaled;
+        let minv = spd_inverse(&m)?;
+        let d_mat = &minv * weight * &minv;
+        let value = trace_product(weight, &minv);
+        let jd = &j * &d_mat;
+        let mut d = vec![0.0; n_candidates];
+        for (c, dc) in d.iter_mut().enumerate() {
+            for i in offsets[c]..offsets[c + 1] {
+                *dc += (0..n).map(|k| jd[(i, k)] * j[(i, k)]).sum::<f64>();
+            }
+        }
+        Some((value, d, d_mat))
+    };
+    let (mut value, mut d, mut d_mat) = evaluate(&w).ok_or(not_determined.clone())?;
+    let mut iterations = 0;
+    let mut converged = false;
+    loop {
+        let max_d = d.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if max_d <= value * (1.0 + cfg.tolerance) {
+            converged = true;
+            break;
+        }
+        if iterations >= cfg.max_iterations || value <= 0.0 {
+            break;
+        }
+        for (wc, dc) in w.iter_mut().zip(&d) {
+            *wc *= (dc.max(0.0) / value).sqrt();
+        }
+        let total: f64 = w.iter().sum();
+        w.iter_mut().for_each(|wc| *wc /= total);
+        let Some(next) = evaluate(&w) else {
+            return Err(not_determined);
+        };
+        (value, d, d_mat) = next;
+        iterations += 1;
+    }
+    let max_sensitivity = d.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    Ok(ContinuousDesign {
+        weights: w,
+        value,
+        lower_bound: value * value / max_sensitivity,
+        sensitivity: d,
+        max_sensitivity,
+        sensitivity_matrix: d_mat,
+        iterations,
+        converged,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -710,6 +933,109 @@ mod tests {
         let err =
             select_poses(&blocks, 4, &DesignConfig::new(Criterion::O4)).expect_err("too many");
         assert_eq!(err.to_string(), "cannot choose 4 poses from 3 candidates");
+    }
+
+    /// Quadratic regression `(1, x, x²)` on a grid of [−1, 1] (21 points).
+    fn quadratic_blocks() -> (Vec<f64>, Vec<Mat<f64>>) {
+        let xs: Vec<f64> = (0..21).map(|i| -1.0 + 0.1 * f64::from(i)).collect();
+        let blocks = xs
+            .iter()
+            .map(|&x| Mat::from_fn(1, 3, |_, k| x.powi(k as i32)))
+            .collect();
+        (xs, blocks)
+    }
+
+    #[test]
+    fn continuous_a_optimal_design_of_quadratic_regression_is_known() {
+        // A-optimal (W = I) design for (1, x, x²) on [−1, 1]: weights ¼, ½, ¼ at −1, 0, 1 and
+        // tr M⁻¹ = 2/(m₂(1 − m₂)) = 8 at m₂ = ½ (derivation: M has m₂ = m₄ = weight on ±1).
+        let (xs, blocks) = quadratic_blocks();
+        let w = Mat::<f64>::identity(3, 3);
+        let cfg = ContinuousConfig {
+            max_iterations: 200_000,
+            tolerance: 1e-6,
+        };
+        let d = i_optimal_weights(&blocks, &w, &cfg).expect("design");
+        assert!(d.converged, "gap {}", d.max_sensitivity / d.value - 1.0);
+        assert!(
+            d.lower_bound <= 8.0 && 8.0 <= d.value,
+            "{} {}",
+            d.lower_bound,
+            d.value
+        );
+        assert!((d.value - 8.0).abs() < 1e-4, "{}", d.value);
+        let at = |x: f64| {
+            xs.iter()
+                .position(|&v| (v - x).abs() < 1e-9)
+                .map_or(0.0, |i| d.weights[i])
+        };
+        assert!((at(-1.0) - 0.25).abs() < 1e-2, "{}", at(-1.0));
+        assert!((at(0.0) - 0.5).abs() < 1e-2, "{}", at(0.0));
+        assert!((at(1.0) - 0.25).abs() < 1e-2, "{}", at(1.0));
+        // Σ w d = Φ, and the sensitivity of a block evaluated outside the candidates agrees.
+        let wd: f64 = d
+            .weights
+            .iter()
+            .zip(&d.sensitivity)
+            .map(|(a, b)| a * b)
+            .sum();
+        assert!((wd - d.value).abs() < 1e-9 * d.value);
+        assert!((d.sensitivity_of(blocks[3].as_ref()) - d.sensitivity[3]).abs() < 1e-9);
+    }
+
+    #[test]
+    fn equivalence_certificate_rejects_a_non_optimal_design_and_bounds_exact_designs() {
+        let (_, blocks) = quadratic_blocks();
+        // I-optimality: W = ∫ f fᵀ dx / 2 over [−1, 1].
+        let w = Mat::from_fn(3, 3, |i, j| {
+            let k = i + j;
+            if k % 2 == 1 {
+                0.0
+            } else {
+                1.0 / (k as f64 + 1.0)
+            }
+        });
+        // No iteration: the equal-weight design, which the theorem must reject.
+        let start = ContinuousConfig {
+            max_iterations: 0,
+            tolerance: 1e-6,
+        };
+        let d0 = i_optimal_weights(&blocks, &w, &start).expect("design");
+        assert!(!d0.converged);
+        assert!(
+            d0.max_sensitivity > 1.2 * d0.value,
+            "{}",
+            d0.max_sensitivity
+        );
+        let d = i_optimal_weights(&blocks, &w, &ContinuousConfig::new()).expect("design");
+        assert!(d.converged && d.value < d0.value);
+        // Every exact 4-point design (with repeats allowed: brute force over all multisets of
+        // 4 of the 21 points) respects tr(W (Σ BᵀB)⁻¹) ≥ bound / 4, and the best one is close.
+        let mut best = f64::INFINITY;
+        for a in 0..21 {
+            for b in a..21 {
+                for c in b..21 {
+                    for e in c..21 {
+                        let mut m = Mat::<f64>::zeros(3, 3);
+                        for &k in &[a, b, c, e] {
+                            add_info(&mut m, blocks[k].as_ref(), 1.0);
+                        }
+                        if let Some(inv) = spd_inverse(&m) {
+                            best = best.min(trace_product(&w, &inv));
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            best >= d.lower_bound / 4.0,
+            "{best} < {}",
+            d.lower_bound / 4.0
+        );
+        assert!(best <= 1.2 * d.value / 4.0, "{best} vs {}", d.value / 4.0);
+        let err = i_optimal_weights(&blocks, &Mat::<f64>::identity(2, 2), &start)
+            .expect_err("weight of the wrong size");
+        assert_eq!(err, Error::MissingWeight { n_params: 3 });
     }
 
     #[test]

@@ -74,7 +74,10 @@ pub use calibrate::{
     SPARSE_AUTO_DENSITY, STREAMING_AUTO_ENTRIES, SigmaSource, identify,
 };
 pub use covariance::{Covariance, covariance, sigma_from_residuals};
-pub use design::{Criterion, Design, DesignConfig, design_quality, select_poses};
+pub use design::{
+    ContinuousConfig, ContinuousDesign, Criterion, Design, DesignConfig, design_quality,
+    i_optimal_weights, select_poses,
+};
 pub use error::Error;
 pub use lm::{Fit, LmConfig, Termination, levenberg_marquardt};
 pub use observability::{

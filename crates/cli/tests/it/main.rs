@@ -376,6 +376,65 @@ fn transmission_sensitivity_predicts_how_step_2_moves() {
 }
 
 #[test]
+fn plan_poses_refines_the_distance_poses_of_a_separate_transmission_run() {
+    let dir = scratch("plan-refine");
+    let out = dir.join("poses.csv");
+    let device = root().join("fixtures/reference-device/device.toml");
+    let args = |extra: &[&'static str]| {
+        let mut v = vec![
+            "plan-poses".to_owned(),
+            "--device".to_owned(),
+            device.to_str().unwrap().to_owned(),
+            "--count".to_owned(),
+            "30".to_owned(),
+            "--candidates".to_owned(),
+            "60".to_owned(),
+            "--criterion".to_owned(),
+            "i-optimal".to_owned(),
+            "--out".to_owned(),
+            out.to_str().unwrap().to_owned(),
+        ];
+        v.extend(extra.iter().map(|s| (*s).to_owned()));
+        v
+    };
+    let refused = Command::new(env!("CARGO_BIN_EXE_hapcal"))
+        .args(args(&["--refine"]))
+        .output()
+        .unwrap();
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(
+        stderr(&refused).contains(
+            "refining the poses over the joint box needs distance measurements planned without the transmission rows"
+        ),
+        "{}",
+        stderr(&refused)
+    );
+    // The refinement itself takes about two minutes in a debug build.
+    if std::env::var_os("RUN_SLOW_TESTS").is_none() {
+        return;
+    }
+    let run = Command::new(env!("CARGO_BIN_EXE_hapcal"))
+        .args(args(&["--refine", "--separate-transmission-run"]))
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", stderr(&run));
+    let text = String::from_utf8_lossy(&run.stdout);
+    // Only the 28 kinematic columns; the refined criterion tr(W·M⁻¹) is a mean square in m²,
+    // positive and far below 1 mm² (1e-6 m²).
+    assert!(text.contains("; 28 columns"), "{text}");
+    let refined: f64 = text
+        .lines()
+        .find_map(|l| l.split("criterion ").nth(1))
+        .and_then(|rest| rest.split_whitespace().next())
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(refined > 0.0 && refined < 1e-6, "{refined}");
+    let csv = std::fs::read_to_string(&out).unwrap();
+    assert_eq!(csv.lines().count(), 31);
+}
+
+#[test]
 fn plan_poses_writes_the_chosen_readings_and_beats_a_random_set() {
     let dir = scratch("plan");
     let out = dir.join("poses.csv");
