@@ -1076,17 +1076,20 @@ pub struct StudyArgs {
     pub out: std::path::PathBuf,
 }
 
+/// The reference device of a study: `truth`, or the bundled reference truth.
+fn reference_from(truth: Option<&std::path::PathBuf>) -> Result<crate::paper::Reference> {
+    let truth = truth
+        .cloned()
+        .unwrap_or_else(|| crate::project_root().join("fixtures/reference-device/truth.toml"));
+    crate::paper::Reference::load(&truth)
+}
+
 /// Runs `hapcal pose-study`, writes the Markdown and returns it.
 ///
 /// # Errors
 /// Unreadable truth, a simulation or identification failure, or an unwritable output.
 pub fn run_study(args: &StudyArgs, progress: &dyn Fn(u64)) -> Result<String> {
-    let root = crate::project_root();
-    let truth = args
-        .truth
-        .clone()
-        .unwrap_or_else(|| root.join("fixtures/reference-device/truth.toml"));
-    let r = crate::paper::Reference::load(&truth)?;
+    let r = reference_from(args.truth.as_ref())?;
     let cfg = StudyConfig {
         seeds: args.seeds,
         counts: args.counts.clone(),
@@ -1753,12 +1756,7 @@ pub struct BoundArgs {
 /// # Errors
 /// Unreadable truth, a design failure, or an unwritable output.
 pub fn run_bound(args: &BoundArgs, progress: &dyn Fn(&str)) -> Result<String> {
-    let root = crate::project_root();
-    let truth = args
-        .truth
-        .clone()
-        .unwrap_or_else(|| root.join("fixtures/reference-device/truth.toml"));
-    let r = crate::paper::Reference::load(&truth)?;
+    let r = reference_from(args.truth.as_ref())?;
     let cfg = BoundConfig {
         n_candidates: args.candidates,
         seeds: args.seeds,

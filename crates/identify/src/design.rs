@@ -275,17 +275,7 @@ pub fn select_poses(
             n_select,
         });
     }
-    let n = blocks[0].ncols();
-    for (index, b) in blocks.iter().enumerate() {
-        if b.nrows() == 0 || b.ncols() != n || !b.is_all_finite() {
-            return Err(Error::BlockShape {
-                index,
-                nrows: b.nrows(),
-                ncols: b.ncols(),
-                expected_ncols: n,
-            });
-        }
-    }
+    let n = check_blocks(blocks)?;
     if cfg.criterion == Criterion::IOptimal
         && cfg
             .weight
@@ -714,18 +704,10 @@ pub fn i_optimal_weights(
             n_select: 1,
         });
     }
-    let n = blocks[0].ncols();
+    let n = check_blocks(blocks)?;
     let mut offsets = Vec::with_capacity(n_candidates + 1);
     offsets.push(0);
     for (index, b) in blocks.iter().enumerate() {
-        if b.nrows() == 0 || b.ncols() != n || !b.is_all_finite() {
-            return Err(Error::BlockShape {
-                index,
-                nrows: b.nrows(),
-                ncols: b.ncols(),
-                expected_ncols: n,
-            });
-        }
         offsets.push(offsets[index] + b.nrows());
     }
     if weight.nrows() != n || weight.ncols() != n || !weight.is_all_finite() {
@@ -799,6 +781,26 @@ pub fn i_optimal_weights(
         iterations,
         converged,
     })
+}
+
+/// Checks candidate blocks (non-empty `blocks`, each `r_c × n`, finite, at least one row) and
+/// returns their common column count `n`.
+///
+/// # Errors
+/// [`Error::BlockShape`] for the first block that is empty, of another width, or not finite.
+fn check_blocks(blocks: &[Mat<f64>]) -> Result<usize, Error> {
+    let n = blocks[0].ncols();
+    for (index, b) in blocks.iter().enumerate() {
+        if b.nrows() == 0 || b.ncols() != n || !b.is_all_finite() {
+            return Err(Error::BlockShape {
+                index,
+                nrows: b.nrows(),
+                ncols: b.ncols(),
+                expected_ncols: n,
+            });
+        }
+    }
+    Ok(n)
 }
 
 #[cfg(test)]
