@@ -344,6 +344,36 @@ impl FrozenChain {
         }
     }
 
+    /// Forward pass: clears `starts` and pushes, per segment, the world frame at its start
+    /// (rotation columns, then translation, m); returns the end point's position (m, base
+    /// frame). `trig` as in [`FrozenChain::end_point_trig`], or `None` to evaluate the sines.
+    /// Shared by [`FrozenChain::distance_gradient`] and [`FrozenChain::point_and_jacobian`].
+    fn forward_with_starts(
+        &self,
+        q: &[f64],
+        trig: Option<&[[f64; 2]]>,
+        starts: &mut Vec<[Vector3<f64>; 4]>,
+    ) -> Vector3<f64> {
+        starts.clear();
+        let mut pose = Rigid::identity();
+        for seg in &self.segments {
+            starts.push([
+                pose.rot.column(0).into(),
+                pose.rot.column(1).into(),
+                pose.rot.column(2).into(),
+                pose.trans,
+            ]);
+            pose = pose.mul(&seg.fixed);
+            if let Some(screw) = &seg.joint {
+                match trig {
+                    Some(t) => Self::apply_joint_trig(&mut pose, screw, q, t),
+                    None => Self::apply_joint(&mut pose, screw, q),
+                }
+            }
+        }
+        pose.trans
+    }
+
     /// As [`FrozenChain::apply_joint`], a revolute joint's angle given by `[sin q, cos q]`.
     #[inline]
     fn apply_joint_trig(pose: &mut Rigid, screw: &JointScrew, q: &[f64], trig: &[[f64; 2]]) {
@@ -425,24 +455,7 @@ impl FrozenChain {
             self.n_params
         );
         let starts = &mut ws.starts;
-        starts.clear();
-        let mut pose = Rigid::identity();
-        for seg in &self.segments {
-            starts.push([
-                pose.rot.column(0).into(),
-                pose.rot.column(1).into(),
-                pose.rot.column(2).into(),
-                pose.trans,
-            ]);
-            pose = pose.mul(&seg.fixed);
-            if let Some(screw) = &seg.joint {
-                match trig {
-                    Some(t) => Self::apply_joint_trig(&mut pose, screw, q, t),
-                    None => Self::apply_joint(&mut pose, screw, q),
-                }
-            }
-        }
-        let tip = pose.trans;
+        let tip = self.forward_with_starts(q, trig, starts);
         grad.fill(0.0);
         let norm = tip.norm();
         if norm == 0.0 {
@@ -515,21 +528,7 @@ impl FrozenChain {
         );
         // Per segment: world rotation columns and translation at its start, then the world
         // frame just before its joint screw is start·fixed (recomputed below).
-        starts.clear();
-        let mut pose = Rigid::identity();
-        for seg in &self.segments {
-            starts.push([
-                pose.rot.column(0).into(),
-                pose.rot.column(1).into(),
-                pose.rot.column(2).into(),
-                pose.trans,
-            ]);
-            pose = pose.mul(&seg.fixed);
-            if let Some(screw) = &seg.joint {
-                Self::apply_joint(&mut pose, screw, q);
-            }
-        }
-        let tip = pose.trans;
+        let tip = self.forward_with_starts(q, None, starts);
         jac_out.fill(0.0);
         for (seg, start) in self.segments.iter().zip(starts.iter()) {
             let rot = Matrix3::from_columns(&start[..3]);
