@@ -232,17 +232,7 @@ fn identify_streaming(
     crate::error::check_factor(cfg.lm.factor)?;
     let m = p.n_residuals();
     let mut lin = linearise(blocks, x0.as_ref(), n).map_err(|e| error_at_x0(e, &layout))?;
-    let (mut sigma, sigma_source) = match cfg.sigma {
-        Some(s) => (s, SigmaSource::Given),
-        None => {
-            let rms = if m > 0 {
-                (lin.r_norm_sq / m as f64).sqrt()
-            } else {
-                0.0
-            };
-            (rms, SigmaSource::Residuals)
-        }
-    };
+    let (mut sigma, sigma_source) = initial_sigma(cfg.sigma, lin.r_norm_sq, m);
     let candidates: Vec<usize> = (0..n).collect();
     let decide = |lin: &Linearisation, sigma: f64| {
         identifiability(
@@ -286,16 +276,13 @@ fn identify_streaming(
             })?
         };
         let next = decide(&lin, sigma);
-        if next.kept == ident.kept {
-            ident = next;
-            break (fit, true);
-        }
-        if rounds >= cfg.max_rounds {
-            break (fit, false);
-        }
-        x_start = x0.clone();
-        for &i in &next.kept {
-            x_start[i] = fit.x[i];
+        match next_round(&ident.kept, &next.kept, rounds, cfg.max_rounds, &x0, &fit.x) {
+            NextRound::Settled => {
+                ident = next;
+                break (fit, true);
+            }
+            NextRound::Spent => break (fit, false),
+            NextRound::Again(x) => x_start = x,
         }
         // The next fit starts elsewhere: linearise there.
         lin = linearise(blocks, x_start.as_ref(), n).map_err(|e| error_at_x0(e, &layout))?;
@@ -396,17 +383,7 @@ fn identify_dense(
     p.jacobian(x0.as_ref(), jac.as_mut())?;
     check_jacobian_finite(jac.as_ref(), &layout)?;
 
-    let (mut sigma, sigma_source) = match cfg.sigma {
-        Some(s) => (s, SigmaSource::Given),
-        None => {
-            let rms = if m > 0 {
-                (r0.squared_norm_l2() / m as f64).sqrt()
-            } else {
-                0.0
-            };
-            (rms, SigmaSource::Residuals)
-        }
-    };
+    let (mut sigma, sigma_source) = initial_sigma(cfg.sigma, r0.squared_norm_l2(), m);
     let candidates: Vec<usize> = (0..n).collect();
     let decide = |jac: &Mat<f64>, sigma: f64| {
         identifiability(
@@ -448,16 +425,13 @@ fn identify_dense(
             }));
         }
         let next = decide(&jac, sigma);
-        if next.kept == ident.kept {
-            ident = next;
-            break (fit, true);
-        }
-        if rounds >= cfg.max_rounds {
-            break (fit, false);
-        }
-        x_start = x0.clone();
-        for &i in &next.kept {
-            x_start[i] = fit.x[i];
+        match next_round(&ident.kept, &next.kept, rounds, cfg.max_rounds, &x0, &fit.x) {
+            NextRound::Settled => {
+                ident = next;
+                break (fit, true);
+            }
+            NextRound::Spent => break (fit, false),
+            NextRound::Again(x) => x_start = x,
         }
         ident = next;
     };
@@ -472,4 +446,54 @@ fn identify_dense(
         rounds,
         pruning_converged,
     })
+}
+
+/// Start of the noise level: `given`, or the RMS of the `m` residuals at `x0`
+/// (`√(‖r‖²/m)`, in the residuals' units; 0 without residuals).
+fn initial_sigma(given: Option<f64>, r_norm_sq: f64, m: usize) -> (f64, SigmaSource) {
+    match given {
+        Some(s) => (s, SigmaSource::Given),
+        None => {
+            let rms = if m > 0 {
+                (r_norm_sq / m as f64).sqrt()
+            } else {
+                0.0
+            };
+            (rms, SigmaSource::Residuals)
+        }
+    }
+}
+
+/// What one pruning round of [`identify`] leads to.
+enum NextRound {
+    /// The decision at the estimate keeps the same parameters: done, converged.
+    Settled,
+    /// It differs, but `max_rounds` are spent: done, not converged.
+    Spent,
+    /// Refit from this start: `x0` with the newly kept parameters at their estimates (warm
+    /// start; newly pruned ones return to their `x0` values).
+    Again(Col<f64>),
+}
+
+/// Compares the kept set a round fitted with (`kept`) to the decision at its estimate `x`
+/// (`next_kept`), after `rounds` of at most `max_rounds`.
+fn next_round(
+    kept: &[usize],
+    next_kept: &[usize],
+    rounds: usize,
+    max_rounds: usize,
+    x0: &Col<f64>,
+    x: &Col<f64>,
+) -> NextRound {
+    if next_kept == kept {
+        return NextRound::Settled;
+    }
+    if rounds >= max_rounds {
+        return NextRound::Spent;
+    }
+    let mut start = x0.clone();
+    for &i in next_kept {
+        start[i] = x[i];
+    }
+    NextRound::Again(start)
 }
