@@ -119,6 +119,25 @@ pub trait Problem {
     /// # Errors
     /// [`EvalError`] when the model cannot be evaluated at `x`.
     fn jacobian(&self, x: ColRef<'_, f64>, jac: MatMut<'_, f64>) -> Result<(), EvalError>;
+    /// Writes `r(x)` into `out` (length `m`) and `∂r/∂x` into `jac` (`m × n`) in one call.
+    ///
+    /// Levenberg–Marquardt evaluates both at a trial point when it expects the step to be
+    /// accepted (MINPACK `lmder` needs the Jacobian at every accepted point), so a problem
+    /// whose Jacobian pass computes the residuals on the way should override this and return
+    /// both for the price of the Jacobian. The default calls [`Problem::residuals`], then
+    /// [`Problem::jacobian`].
+    ///
+    /// # Errors
+    /// [`EvalError`] when the model cannot be evaluated at `x`.
+    fn residuals_and_jacobian(
+        &self,
+        x: ColRef<'_, f64>,
+        out: ColMut<'_, f64>,
+        jac: MatMut<'_, f64>,
+    ) -> Result<(), EvalError> {
+        self.residuals(x, out)?;
+        self.jacobian(x, jac)
+    }
     /// The same residuals and Jacobian as independent row blocks, when the problem can
     /// evaluate them so; enables the streaming back end ([`Backend::Streaming`](crate::Backend)),
     /// whose memory does not grow with `m`. `None` (the default) means dense only.

@@ -714,17 +714,22 @@ impl Problem for CalibrationProblem {
     }
 
     fn jacobian(&self, x: ColRef<'_, f64>, jac: MatMut<'_, f64>) -> Result<(), EvalError> {
-        check_shape(x.nrows(), self.layout.len(), jac.nrows(), self.n_residuals)?;
-        if jac.ncols() != self.layout.len() {
-            return Err(EvalError {
-                reason: format!(
-                    "jacobian has {} columns, expected {}",
-                    jac.ncols(),
-                    self.layout.len()
-                ),
-            });
-        }
+        self.check_jacobian_shape(x.nrows(), jac.nrows(), jac.ncols())?;
         self.eval(x, None, Some(jac));
+        Ok(())
+    }
+
+    /// One pass of the forward kinematics gives both (the Jacobian kernels compute the
+    /// distances on the way).
+    fn residuals_and_jacobian(
+        &self,
+        x: ColRef<'_, f64>,
+        out: ColMut<'_, f64>,
+        jac: MatMut<'_, f64>,
+    ) -> Result<(), EvalError> {
+        check_shape(x.nrows(), self.layout.len(), out.nrows(), self.n_residuals)?;
+        self.check_jacobian_shape(x.nrows(), jac.nrows(), jac.ncols())?;
+        self.eval(x, Some(out), Some(jac));
         Ok(())
     }
 
@@ -782,6 +787,17 @@ impl RowBlocks for CalibrationProblem {
 }
 
 impl CalibrationProblem {
+    /// `x` of the layout's length and a Jacobian of `n_residuals × layout` entries.
+    fn check_jacobian_shape(&self, nx: usize, nr: usize, nc: usize) -> Result<(), EvalError> {
+        check_shape(nx, self.layout.len(), nr, self.n_residuals)?;
+        if nc != self.layout.len() {
+            return Err(EvalError {
+                reason: format!("jacobian has {nc} columns, expected {}", self.layout.len()),
+            });
+        }
+        Ok(())
+    }
+
     fn block(&self, block: usize) -> Result<(Range<usize>, Range<usize>), EvalError> {
         self.blocks.get(block).cloned().ok_or_else(|| EvalError {
             reason: format!("block {block} of {}", self.blocks.len()),

@@ -138,3 +138,28 @@ fn identify_keeps_the_same_28_parameters_as_the_reference() {
         fit.identifiability.pruned_names()
     );
 }
+
+/// The fused evaluation that Levenberg–Marquardt uses at trial points returns exactly what the
+/// two separate calls return (the same kernels, in the same order), away from the nominal so
+/// that every column is nonzero.
+#[test]
+fn residuals_and_jacobian_in_one_pass_equal_the_separate_calls() {
+    let p = reference_problem();
+    let (m, n) = (p.n_residuals(), p.layout().len());
+    let x = faer::Col::from_fn(n, |i| 1e-3 * ((i as f64) * 0.7).sin());
+    let (mut r1, mut r2) = (faer::Col::<f64>::zeros(m), faer::Col::<f64>::zeros(m));
+    let (mut j1, mut j2) = (faer::Mat::<f64>::zeros(m, n), faer::Mat::<f64>::zeros(m, n));
+    p.residuals(x.as_ref(), r1.as_mut()).expect("residuals");
+    p.jacobian(x.as_ref(), j1.as_mut()).expect("jacobian");
+    p.residuals_and_jacobian(x.as_ref(), r2.as_mut(), j2.as_mut())
+        .expect("both");
+    assert!(r1.norm_l2() > 0.0 && j1.norm_l2() > 0.0);
+    assert_eq!(r1, r2);
+    assert_eq!(j1, j2);
+    // A wrong shape is an error, not a panic.
+    let mut short = faer::Mat::<f64>::zeros(m, n - 1);
+    assert!(
+        p.residuals_and_jacobian(x.as_ref(), r2.as_mut(), short.as_mut())
+            .is_err()
+    );
+}
