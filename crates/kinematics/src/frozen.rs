@@ -17,7 +17,7 @@ use nalgebra::{Matrix3, Point3, Vector3};
 use crate::chain::{Chain, Factor, FkWorkspace, Motion};
 
 mod lanes;
-pub use lanes::LANES;
+pub use lanes::{LANES, joint_trig_lanes};
 
 /// A rigid transform as a rotation matrix and a translation (m).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -142,6 +142,9 @@ struct DistanceTap {
     a: Vector3<f64>,
     /// `a × o`, `o` the screw frame's origin (m).
     c: Vector3<f64>,
+    /// Whether this is the first tap of `param` (in segment order): the lane kernel writes
+    /// its term instead of adding it.
+    first: bool,
 }
 
 /// A parameter screw inside a constant run: its frame relative to the run's start.
@@ -163,6 +166,9 @@ struct Segment {
     joint: Option<JointScrew>,
     /// All parameter screws of the run and of its joint, for the distance gradient.
     distance_taps: Vec<DistanceTap>,
+    /// `fixed` times the rotation of a revolute joint by its offset (so that the joint itself
+    /// rotates by `q` alone), for the lane kernel; `fixed` otherwise.
+    lane_fixed: Rigid,
 }
 
 impl Segment {
@@ -174,6 +180,7 @@ impl Segment {
                 rotation: t.motion == Motion::Rotation,
                 a: t.axis_local,
                 c: t.axis_local.cross(&t.origin_local),
+                first: false,
             })
             .collect();
         if let Some(JointScrew {
@@ -189,13 +196,26 @@ impl Segment {
                 rotation: *motion == Motion::Rotation,
                 a,
                 c: a.cross(&fixed.trans),
+                first: false,
             });
+        }
+        let mut lane_fixed = fixed;
+        if let Some(screw) = &joint
+            && screw.motion == Motion::Rotation
+        {
+            rotate_in_place_sc(
+                &mut lane_fixed.rot,
+                screw.axis,
+                screw.sin_off,
+                screw.cos_off,
+            );
         }
         Segment {
             fixed,
             taps,
             joint,
             distance_taps,
+            lane_fixed,
         }
     }
 }
@@ -211,6 +231,9 @@ pub struct FrozenChain {
     segments: Vec<Segment>,
     n_params: usize,
     n_joints: usize,
+    /// Whether every parameter has a distance tap (else the lane kernel zeroes the gradient
+    /// first).
+    all_params_tapped: bool,
 }
 
 /// `[sin q_j, cos q_j]` for each joint angle (rad), the form [`FrozenChain::end_point_trig`]
@@ -304,10 +327,16 @@ impl Chain {
             }
         }
         segments.push(Segment::new(run, taps, None));
+        let mut tapped = vec![false; self.n_params()];
+        for tap in segments.iter_mut().flat_map(|s| &mut s.distance_taps) {
+            tap.first = !tapped[tap.param];
+            tapped[tap.param] = true;
+        }
         FrozenChain {
             segments,
             n_params: self.n_params(),
             n_joints: self.n_joints(),
+            all_params_tapped: tapped.iter().all(|&t| t),
         }
     }
 }

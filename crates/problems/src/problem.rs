@@ -2,9 +2,11 @@
 //! optional compliance, and unknown points.
 
 use crate::{CalibratedModel, Error, GravityCompliance, JointHarmonics};
-use faer::{Col, ColMut, ColRef, MatMut};
+use faer::{Col, ColMut, ColRef, Mat, MatMut};
 use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
-use hapcal_kinematics::{Chain, FkWorkspace, LANES, ParamUnit, Point3, Vector3, joint_trig};
+use hapcal_kinematics::{
+    Chain, FkWorkspace, LANES, ParamUnit, Point3, Vector3, joint_trig, joint_trig_lanes,
+};
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -101,9 +103,19 @@ pub struct CalibrationProblem {
     angle_basis: Vec<f64>,
     layout: ParamLayout,
     n_residuals: usize,
-    /// `[sin q, cos q]` per row and joint (row-major), without compliance (which moves the
+    /// `[sin q, cos q]` per joint of the distance rows outside [`Self::lane_groups`]
+    /// (row-major over the rows outside the groups), without compliance (which moves the
     /// angles); empty otherwise.
     trig: Vec<[f64; 2]>,
+    /// First row of each run of [`LANES`] distance rows that the lane kernel evaluates
+    /// together (ascending; runs found greedily within each of [`Self::blocks`]); empty
+    /// with compliance or harmonics, or for a chain the kernel does not take.
+    lane_groups: Vec<usize>,
+    /// Joint sines and cosines of each lane group, `n_joints` entries per group, as
+    /// [`hapcal_kinematics::FrozenChain::distance_gradient_lanes`] takes them.
+    lane_trig: Vec<[[f64; LANES]; 2]>,
+    /// Measured distance of each lane group's rows, m.
+    lane_distance_m: Vec<[f64; LANES]>,
     /// Row blocks for the streaming back end: (rows, residual rows); the last block also
     /// holds the point distances.
     blocks: Vec<(Range<usize>, Range<usize>)>,
@@ -284,11 +296,6 @@ impl CalibrationProblem {
             }
         }
         let any_distance = (obs.rows.iter()).any(|r| matches!(r.kind, RowKind::Distance { .. }));
-        let trig = if angle_terms.is_empty() && any_distance {
-            obs.rows.iter().flat_map(|row| joint_trig(&row.q)).collect()
-        } else {
-            Vec::new()
-        };
         let mut blocks = Vec::new();
         let mut residual = 0;
         let n_rows = obs.rows.len();
@@ -309,6 +316,52 @@ impl CalibrationProblem {
             blocks.push((start..end, residual..residual + len + extra));
             residual += len + extra;
         }
+        let lanes = angle_terms.is_empty()
+            && any_distance
+            && chain.freeze(&vec![0.0; chain.n_params()]).supports_lanes();
+        let mut lane_groups = Vec::new();
+        let distance = |row: &Row| match row.kind {
+            RowKind::Distance { distance_m } => Some(distance_m),
+            _ => None,
+        };
+        if lanes {
+            for (rows, _) in &blocks {
+                let mut row_idx = rows.start;
+                while row_idx + LANES <= rows.end {
+                    if obs.rows[row_idx..row_idx + LANES]
+                        .iter()
+                        .all(|row| distance(row).is_some())
+                    {
+                        lane_groups.push(row_idx);
+                        row_idx += LANES;
+                    } else {
+                        row_idx += 1;
+                    }
+                }
+            }
+        }
+        let mut lane_trig = Vec::with_capacity(lane_groups.len() * n_joints);
+        let mut lane_distance_m = Vec::with_capacity(lane_groups.len());
+        for &first in &lane_groups {
+            let group = &obs.rows[first..first + LANES];
+            lane_trig.extend(joint_trig_lanes(std::array::from_fn(|l| {
+                group[l].q.as_slice()
+            })));
+            lane_distance_m.push(std::array::from_fn(|l| distance(&group[l]).unwrap_or(0.0)));
+        }
+        let mut trig = Vec::new();
+        if angle_terms.is_empty() && any_distance {
+            let mut groups = lane_groups.iter().peekable();
+            let mut row_idx = 0;
+            while row_idx < obs.rows.len() {
+                if groups.next_if_eq(&&row_idx).is_some() {
+                    row_idx += LANES;
+                    continue;
+                }
+                trig.extend(joint_trig(&obs.rows[row_idx].q));
+                row_idx += 1;
+            }
+        }
         Ok(Self {
             chain,
             obs,
@@ -320,6 +373,9 @@ impl CalibrationProblem {
             layout: ParamLayout::new(specs),
             n_residuals,
             trig,
+            lane_groups,
+            lane_trig,
+            lane_distance_m,
             blocks,
         })
     }
@@ -484,33 +540,75 @@ impl CalibrationProblem {
         x: ColRef<'_, f64>,
         rows: Range<usize>,
         with_point_distances: bool,
+        out: Option<ColMut<'_, f64>>,
+        jac: Option<MatMut<'_, f64>>,
+    ) {
+        let Some(jac) = jac else {
+            self.eval_rows_in(x, rows, with_point_distances, out, None);
+            return;
+        };
+        let mut jac = jac;
+        if let Some(j) = jac.as_mut().try_as_col_major_mut() {
+            let mut cols: Vec<&mut [f64]> = j.col_iter_mut().map(|c| c.as_slice_mut()).collect();
+            self.eval_rows_in(x, rows, with_point_distances, out, Some(&mut cols));
+            return;
+        }
+        // A Jacobian view without contiguous columns: through a column-major copy.
+        let mut tmp = Mat::<f64>::zeros(jac.nrows(), jac.ncols());
+        if let Some(t) = tmp.as_mut().try_as_col_major_mut() {
+            let mut cols: Vec<&mut [f64]> = t.col_iter_mut().map(|c| c.as_slice_mut()).collect();
+            self.eval_rows_in(x, rows, with_point_distances, out, Some(&mut cols));
+        }
+        jac.copy_from(&tmp);
+    }
+
+    /// [`Self::eval_rows`] with the Jacobian as its columns (`jac[col][row]`).
+    fn eval_rows_in(
+        &self,
+        x: ColRef<'_, f64>,
+        rows: Range<usize>,
+        with_point_distances: bool,
         mut out: Option<ColMut<'_, f64>>,
-        mut jac: Option<MatMut<'_, f64>>,
+        mut jac: Option<&mut [&mut [f64]]>,
     ) {
         let n_kin = self.chain.n_params();
         let n_comp = self.n_compliance() + self.n_harmonics();
         let n_terms = self.angle_terms.len();
         let off = self.points_offset();
+        let point_distances: &[PointDistance] = if with_point_distances {
+            &self.obs.point_distances
+        } else {
+            &[]
+        };
         let x_kin: Vec<f64> = (0..n_kin).map(|i| x[i]).collect();
         // Constant factors between joints folded once for this x (FrozenChain).
         let frozen = self.chain.freeze(&x_kin);
-        let mut ws = FkWorkspace::new(&self.chain);
-        let mut buf = vec![0.0; 3 * n_kin];
+        // Every row writes all kinematic, compliance and harmonic columns; only the columns of
+        // the unknown points and the point-distance rows need zeros first.
         if let Some(j) = jac.as_mut() {
-            j.fill(0.0);
+            let n_rows = j.first().map_or(0, |c| c.len());
+            let pd_rows = n_rows - point_distances.len()..n_rows;
+            for (col, c) in j.iter_mut().enumerate() {
+                if col >= off {
+                    c.fill(0.0);
+                } else {
+                    c[pd_rows.clone()].fill(0.0);
+                }
+            }
         }
+        // Scratch of the row-by-row paths, allocated on first use.
+        let mut ws: Option<FkWorkspace> = None;
+        let mut buf = Vec::new();
         let mut q_buf = Vec::new();
-        let mut grad = vec![0.0; n_kin];
+        let mut grad = Vec::new();
+        let mut lane_grad = Vec::new();
         let n_joints = self.chain.n_joints();
+        let s_distance = self.weights.sigma_distance_m;
+        let inv_s_distance = 1.0 / s_distance;
         let mut r = 0usize;
-        // Runs of LANES distance rows without compliance go through the lane kernel
-        // (FrozenChain::distance_gradient_lanes), LANES poses per SIMD instruction.
-        let lanes = n_comp == 0 && !self.trig.is_empty() && frozen.supports_lanes();
-        let mut lane_grad = if lanes && jac.is_some() {
-            vec![[0.0; LANES]; n_kin]
-        } else {
-            Vec::new()
-        };
+        // The next lane group (FrozenChain::distance_gradient_lanes, LANES poses per SIMD
+        // instruction) at or after the current row.
+        let mut group = self.lane_groups.partition_point(|&g| g < rows.start);
         let mut skip = 0;
         for (row_idx, row) in self.obs.rows[rows.clone()]
             .iter()
@@ -521,66 +619,56 @@ impl CalibrationProblem {
                 skip -= 1;
                 continue;
             }
-            if lanes
-                && row_idx + LANES <= rows.end
-                && self.obs.rows[row_idx..row_idx + LANES]
-                    .iter()
-                    .all(|row| matches!(row.kind, RowKind::Distance { .. }))
-            {
-                let trig: [&[[f64; 2]]; LANES] = std::array::from_fn(|l| {
-                    let k = row_idx + l;
-                    &self.trig[k * n_joints..(k + 1) * n_joints]
-                });
+            if self.lane_groups.get(group) == Some(&row_idx) && row_idx + LANES <= rows.end {
+                let trig = &self.lane_trig[group * n_joints..(group + 1) * n_joints];
                 let mut dist = [0.0; LANES];
-                let s = self.weights.sigma_distance_m;
-                // One division per lane block, then products (the Jacobian rows differ from v / s
-                // by about an ulp; the residuals keep the division).
-                let inv_s = 1.0 / s;
                 match jac.as_mut() {
                     Some(j) => {
-                        frozen.distance_gradient_lanes(trig, &mut dist, Some(&mut lane_grad));
-                        for (col, g) in lane_grad.iter().enumerate() {
-                            let dst = j.as_mut().col_mut(col).subrows_mut(r, LANES);
-                            // Contiguous rows (a column-major Jacobian): one vector store.
-                            match dst.try_as_col_major_mut() {
-                                Some(d) => {
-                                    for (o, v) in d.as_slice_mut().iter_mut().zip(g) {
-                                        *o = v * inv_s;
-                                    }
-                                }
-                                None => {
-                                    for (l, v) in g.iter().enumerate() {
-                                        j[(r + l, col)] = v * inv_s;
-                                    }
-                                }
-                            }
+                        if lane_grad.is_empty() {
+                            lane_grad = vec![[0.0; LANES]; n_kin];
+                        }
+                        // The Jacobian rows are ∂|P|/∂x / σ: 1/σ folded into the kernel
+                        // (within an ulp of the division; the residuals keep the division).
+                        frozen.distance_gradient_lanes(
+                            trig,
+                            inv_s_distance,
+                            &mut dist,
+                            Some(&mut lane_grad),
+                        );
+                        for (c, g) in j.iter_mut().zip(&lane_grad) {
+                            c[r..r + LANES].copy_from_slice(g);
                         }
                     }
-                    None => frozen.distance_gradient_lanes(trig, &mut dist, None),
+                    None => frozen.distance_gradient_lanes(trig, 1.0, &mut dist, None),
                 }
                 if let Some(o) = out.as_mut() {
-                    for (l, d) in dist.iter().enumerate() {
-                        if let RowKind::Distance { distance_m } = self.obs.rows[row_idx + l].kind {
-                            o[r + l] = (d - distance_m) / s;
-                        }
+                    let measured = &self.lane_distance_m[group];
+                    for l in 0..LANES {
+                        o[r + l] = (dist[l] - measured[l]) / s_distance;
                     }
                 }
+                group += 1;
                 r += LANES;
                 skip = LANES - 1;
                 continue;
+            }
+            if self.lane_groups.get(group) == Some(&row_idx) {
+                // A group that runs past `rows` (not with the blocks' ranges): row by row.
+                group += 1;
             }
             // Distance rows without compliance: the distance gradient directly, joint
             // angles by their precomputed sines and cosines (the fast path at scale).
             if n_comp == 0
                 && let RowKind::Distance { distance_m } = &row.kind
             {
-                let trig = self.trig.get(row_idx * n_joints..(row_idx + 1) * n_joints);
-                let s = self.weights.sigma_distance_m;
+                let trig = self.row_trig(row_idx);
                 let p = match (jac.as_mut(), trig) {
                     (Some(j), _) => {
-                        let p = frozen.distance_gradient(&row.q, trig, &mut grad, &mut ws);
-                        for (col, g) in grad.iter().enumerate() {
-                            j[(r, col)] = g / s;
+                        grad.resize(n_kin, 0.0);
+                        let ws = ws.get_or_insert_with(|| FkWorkspace::new(&self.chain));
+                        let p = frozen.distance_gradient(&row.q, trig, &mut grad, ws);
+                        for (c, g) in j.iter_mut().zip(&grad) {
+                            c[r] = g / s_distance;
                         }
                         p
                     }
@@ -588,14 +676,16 @@ impl CalibrationProblem {
                     (None, None) => frozen.end_point(&row.q),
                 };
                 if let Some(o) = out.as_mut() {
-                    o[r] = (p.coords.norm() - distance_m) / s;
+                    o[r] = (p.coords.norm() - distance_m) / s_distance;
                 }
                 r += 1;
                 continue;
             }
             let q_eff = self.effective_q(row_idx, x, &mut q_buf);
             let p = if jac.is_some() {
-                frozen.point_and_jacobian(q_eff, &mut buf, &mut ws)
+                buf.resize(3 * n_kin, 0.0);
+                let ws = ws.get_or_insert_with(|| FkWorkspace::new(&self.chain));
+                frozen.point_and_jacobian(q_eff, &mut buf, ws)
             } else {
                 frozen.end_point(q_eff)
             };
@@ -633,8 +723,8 @@ impl CalibrationProblem {
                         } else {
                             Vector3::zeros()
                         };
-                        for col in 0..n_kin + n_comp {
-                            j[(r, col)] = (0..3).map(|k| u[k] * dp(k, col)).sum::<f64>() / s;
+                        for (col, c) in j.iter_mut().enumerate().take(n_kin + n_comp) {
+                            c[r] = (0..3).map(|k| u[k] * dp(k, col)).sum::<f64>() / s;
                         }
                     }
                     r += 1;
@@ -646,8 +736,8 @@ impl CalibrationProblem {
                             o[r + k] = (p[k] - position_m[k]) / s;
                         }
                         if let Some(j) = jac.as_mut() {
-                            for col in 0..n_kin + n_comp {
-                                j[(r + k, col)] = dp(k, col) / s;
+                            for (col, c) in j.iter_mut().enumerate().take(n_kin + n_comp) {
+                                c[r + k] = dp(k, col) / s;
                             }
                         }
                     }
@@ -660,10 +750,10 @@ impl CalibrationProblem {
                             o[r + k] = (p[k] - x[off + 3 * point + k]) / s;
                         }
                         if let Some(j) = jac.as_mut() {
-                            for col in 0..n_kin + n_comp {
-                                j[(r + k, col)] = dp(k, col) / s;
+                            for (col, c) in j.iter_mut().enumerate().take(n_kin + n_comp) {
+                                c[r + k] = dp(k, col) / s;
                             }
-                            j[(r + k, off + 3 * point + k)] = -1.0 / s;
+                            j[off + 3 * point + k][r + k] = -1.0 / s;
                         }
                     }
                     r += 3;
@@ -671,11 +761,6 @@ impl CalibrationProblem {
             }
         }
         let s = self.weights.sigma_point_distance_m;
-        let point_distances: &[PointDistance] = if with_point_distances {
-            &self.obs.point_distances
-        } else {
-            &[]
-        };
         for pd in point_distances {
             let d = Vector3::from_fn(|k, _| x[off + 3 * pd.a + k] - x[off + 3 * pd.b + k]);
             let norm = d.norm();
@@ -689,12 +774,27 @@ impl CalibrationProblem {
                     Vector3::zeros()
                 };
                 for k in 0..3 {
-                    j[(r, off + 3 * pd.a + k)] = u[k] / s;
-                    j[(r, off + 3 * pd.b + k)] = -u[k] / s;
+                    j[off + 3 * pd.a + k][r] = u[k] / s;
+                    j[off + 3 * pd.b + k][r] = -u[k] / s;
                 }
             }
             r += 1;
         }
+    }
+
+    /// `[sin q, cos q]` per joint of row `row_idx` if it is precomputed (a distance row outside
+    /// the lane groups, without compliance).
+    fn row_trig(&self, row_idx: usize) -> Option<&[[f64; 2]]> {
+        if self.trig.is_empty() {
+            return None;
+        }
+        let before = self.lane_groups.partition_point(|&g| g <= row_idx);
+        if before > 0 && self.lane_groups[before - 1] + LANES > row_idx {
+            return None;
+        }
+        let n_joints = self.chain.n_joints();
+        let start = (row_idx - LANES * before) * n_joints;
+        self.trig.get(start..start + n_joints)
     }
 }
 

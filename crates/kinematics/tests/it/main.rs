@@ -4,6 +4,7 @@ use std::f64::consts::PI;
 
 use hapcal_kinematics::{
     Chain, DhConvention, DhRow, FkWorkspace, Isometry3, LANES, Placement, joint_trig,
+    joint_trig_lanes,
 };
 use nalgebra::Vector3;
 use proptest::prelude::*;
@@ -244,18 +245,29 @@ proptest! {
         let n = chain.n_params();
         let qs: Vec<Vec<f64>> = qs.into_iter().map(|mut q| { q.truncate(chain.n_joints()); q }).collect();
         let trigs: Vec<_> = qs.iter().map(|q| joint_trig(q)).collect();
+        let lane_trig = joint_trig_lanes(std::array::from_fn(|l| qs[l].as_slice()));
         let mut dist = [0.0; LANES];
         let mut grad = vec![[0.0; LANES]; n];
-        frozen.distance_gradient_lanes(std::array::from_fn(|l| trigs[l].as_slice()), &mut dist, Some(&mut grad));
+        frozen.distance_gradient_lanes(&lane_trig, 1.0, &mut dist, Some(&mut grad));
+        // The gradient scales with `grad_scale`; the distances do not depend on it.
+        let mut dist_scaled = [0.0; LANES];
+        let mut grad_scaled = vec![[0.0; LANES]; n];
+        frozen.distance_gradient_lanes(&lane_trig, 0.5, &mut dist_scaled, Some(&mut grad_scaled));
+        prop_assert_eq!(dist_scaled, dist);
+        for (g, h) in grad.iter().zip(&grad_scaled) {
+            for l in 0..LANES {
+                prop_assert!((0.5 * g[l] - h[l]).abs() <= 1e-15 * g[l].abs().max(1.0), "{} vs {}", g[l], h[l]);
+            }
+        }
         let mut dist_only = [0.0; LANES];
-        frozen.distance_gradient_lanes(std::array::from_fn(|l| trigs[l].as_slice()), &mut dist_only, None);
+        frozen.distance_gradient_lanes(&lane_trig, 1.0, &mut dist_only, None);
         let mut ws = FkWorkspace::new(&chain);
         let mut scalar = vec![0.0; n];
         for (l, q) in qs.iter().enumerate() {
             let p = frozen.distance_gradient(q, Some(&trigs[l]), &mut scalar, &mut ws);
             let d = p.coords.norm();
-            // Same operations in the same order: rounding differences only, a few ulps of
-            // the largest term (|P| ≤ ~2 m, gradient entries ≤ ~2 m/rad).
+            // The same quantities by other operations: rounding differences only, a few ulps
+            // of the largest term (|P| ≤ ~2 m, gradient entries ≤ ~2 m/rad).
             prop_assert!((dist[l] - d).abs() <= 1e-12 * d.max(1.0), "lane {l}: |P| {} vs {d}", dist[l]);
             prop_assert_eq!(dist_only[l], dist[l]);
             let scale = scalar.iter().fold(1.0_f64, |m, g| m.max(g.abs()));
