@@ -22,7 +22,7 @@
 //! operations differ from the scalar path's, so the two agree to rounding (a few ulps), not
 //! bit for bit.
 
-use super::{Axis, FrozenChain, Segment};
+use super::{Axis, FrozenChain};
 use crate::chain::Motion;
 
 /// Number of configurations evaluated together by [`FrozenChain::distance_gradient_lanes`].
@@ -62,83 +62,215 @@ pub fn joint_trig_lanes(qs: [&[f64]; LANES]) -> Vec<[[f64; LANES]; 2]> {
         .collect()
 }
 
-#[inline(always)]
-fn splat(v: f64) -> Lane {
-    [v; LANES]
-}
+/// The operations of the lane kernel on one [`Lane`] per vector value: [`Portable`] (plain
+/// loops) and, on x86-64, one AVX-512 register or two AVX2 registers (`simd`). Each kernel is
+/// stamped out by `lane_kernel!` for one of them, inside a function compiled with its
+/// instruction set, so that every operation is one instruction (or two) and the values stay in
+/// registers (LLVM's own vectorisation of the plain loops mixed coordinates across lanes).
+/// `mul_add` is `a·b + c`, fused where the instruction set has it.
+#[derive(Clone, Copy)]
+struct Portable(Lane);
 
-// Plain loops over the lanes (not `array::from_fn`, whose closures LLVM does not always
-// inline into vector code).
-
-#[inline(always)]
-fn add(a: Lane, b: Lane) -> Lane {
-    let mut o = [0.0; LANES];
-    for l in 0..LANES {
-        o[l] = a[l] + b[l];
+impl Portable {
+    #[inline(always)]
+    fn splat(v: f64) -> Self {
+        Portable([v; LANES])
     }
-    o
-}
-
-#[inline(always)]
-fn sub(a: Lane, b: Lane) -> Lane {
-    let mut o = [0.0; LANES];
-    for l in 0..LANES {
-        o[l] = a[l] - b[l];
+    #[inline(always)]
+    fn load(a: &Lane) -> Self {
+        Portable(*a)
     }
-    o
-}
-
-#[inline(always)]
-fn mul(a: Lane, b: Lane) -> Lane {
-    let mut o = [0.0; LANES];
-    for l in 0..LANES {
-        o[l] = a[l] * b[l];
+    #[inline(always)]
+    fn store(self, a: &mut Lane) {
+        *a = self.0;
     }
-    o
-}
-
-/// `(a₀s₀ + a₁s₁) + a₂s₂` for a constant vector `s`.
-#[inline(always)]
-fn dot3_s(a: &[Lane; 3], s: [f64; 3]) -> Lane {
-    let mut o = [0.0; LANES];
-    for l in 0..LANES {
-        o[l] = a[0][l] * s[0] + a[1][l] * s[1] + a[2][l] * s[2];
+    #[inline(always)]
+    fn map2(self, b: Self, f: impl Fn(f64, f64) -> f64) -> Self {
+        let mut o = [0.0; LANES];
+        for l in 0..LANES {
+            o[l] = f(self.0[l], b.0[l]);
+        }
+        Portable(o)
     }
-    o
-}
-
-/// `(a₀s₀ + a₁s₁) + a₂s₂ + t` for a constant vector `s` and constant `t`.
-#[inline(always)]
-fn dot3_s_add(a: &[Lane; 3], s: [f64; 3], t: f64) -> Lane {
-    let mut o = [0.0; LANES];
-    for l in 0..LANES {
-        o[l] = a[0][l] * s[0] + a[1][l] * s[1] + a[2][l] * s[2] + t;
+    #[inline(always)]
+    fn add(self, b: Self) -> Self {
+        self.map2(b, |x, y| x + y)
     }
-    o
-}
-
-/// `Rot(e_k, θ) · p` for the coordinate axis `e_k` (`i, j, k` cyclic: `p_i ↦ c·p_i − s·p_j`,
-/// `p_j ↦ s·p_i + c·p_j`), from `s = sin θ`, `c = cos θ`. Each axis is written out, so that
-/// the coordinates stay in registers.
-#[inline(always)]
-fn rotate(p: [Lane; 3], axis: Axis, s: Lane, c: Lane) -> [Lane; 3] {
-    let [x, y, z] = p;
-    match axis {
-        Axis::X => [x, sub(mul(c, y), mul(s, z)), add(mul(s, y), mul(c, z))],
-        Axis::Y => [add(mul(s, z), mul(c, x)), y, sub(mul(c, z), mul(s, x))],
-        // General axes are excluded by `supports_lanes`.
-        _ => [sub(mul(c, x), mul(s, y)), add(mul(s, x), mul(c, y)), z],
+    #[inline(always)]
+    fn sub(self, b: Self) -> Self {
+        self.map2(b, |x, y| x - y)
+    }
+    #[inline(always)]
+    fn mul(self, b: Self) -> Self {
+        self.map2(b, |x, y| x * y)
+    }
+    #[inline(always)]
+    fn mul_add(self, b: Self, c: Self) -> Self {
+        self.mul(b).add(c)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        Portable(self.0.map(f64::sqrt))
+    }
+    /// `num / self`, and 0 where `self` is 0.
+    #[inline(always)]
+    fn recip_scaled_or_zero(self, num: f64) -> Self {
+        Portable(self.0.map(|d| if d == 0.0 { 0.0 } else { num / d }))
     }
 }
 
-/// `Rot(e_k, θ)ᵀ · p`, as [`rotate`] by `−θ`.
-#[inline(always)]
-fn rotate_back(p: [Lane; 3], axis: Axis, s: Lane, c: Lane) -> [Lane; 3] {
-    let [x, y, z] = p;
-    match axis {
-        Axis::X => [x, add(mul(c, y), mul(s, z)), sub(mul(c, z), mul(s, y))],
-        Axis::Y => [sub(mul(c, x), mul(s, z)), y, add(mul(c, z), mul(s, x))],
-        _ => [add(mul(c, x), mul(s, y)), sub(mul(c, y), mul(s, x)), z],
+#[cfg(target_arch = "x86_64")]
+mod simd {
+    //! [`Portable`](super::Portable)'s operations in AVX-512 and AVX2 (+ FMA) registers. Each
+    //! method carries its type's target features, so it may only be called (and is inlined)
+    //! from a function compiled with them: the kernels of `lane_kernel!`,
+    //! run after `is_x86_feature_detected!`.
+
+    use super::{LANES, Lane};
+    use std::arch::x86_64::*;
+
+    /// Eight lanes in one AVX-512 register.
+    #[derive(Clone, Copy)]
+    pub(super) struct Avx512(__m512d);
+
+    impl Avx512 {
+        /// Every lane `v`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn splat(v: f64) -> Self {
+            Avx512(_mm512_set1_pd(v))
+        }
+        /// The lanes of `a`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn load(a: &Lane) -> Self {
+            // SAFETY: `a` is LANES = 8 readable f64 (an unaligned load); AVX-512F is enabled.
+            Avx512(unsafe { _mm512_loadu_pd(a.as_ptr()) })
+        }
+        /// Writes the lanes to `a`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn store(self, a: &mut Lane) {
+            // SAFETY: `a` is LANES = 8 writable f64 (an unaligned store); AVX-512F is enabled.
+            unsafe { _mm512_storeu_pd(a.as_mut_ptr(), self.0) }
+        }
+        /// `self + b`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn add(self, b: Self) -> Self {
+            Avx512(_mm512_add_pd(self.0, b.0))
+        }
+        /// `self − b`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn sub(self, b: Self) -> Self {
+            Avx512(_mm512_sub_pd(self.0, b.0))
+        }
+        /// `self · b`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn mul(self, b: Self) -> Self {
+            Avx512(_mm512_mul_pd(self.0, b.0))
+        }
+        /// `self · b + c`, fused.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn mul_add(self, b: Self, c: Self) -> Self {
+            Avx512(_mm512_fmadd_pd(self.0, b.0, c.0))
+        }
+        /// `√self`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn sqrt(self) -> Self {
+            Avx512(_mm512_sqrt_pd(self.0))
+        }
+        /// `num / self`, and 0 where `self` is 0.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn recip_scaled_or_zero(self, num: f64) -> Self {
+            let nonzero = _mm512_cmp_pd_mask::<_CMP_NEQ_OQ>(self.0, _mm512_setzero_pd());
+            Avx512(_mm512_maskz_div_pd(nonzero, _mm512_set1_pd(num), self.0))
+        }
+    }
+
+    /// Eight lanes in two AVX2 registers.
+    #[derive(Clone, Copy)]
+    pub(super) struct Avx2([__m256d; 2]);
+
+    impl Avx2 {
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        fn map2(self, b: Self, f: impl Fn(__m256d, __m256d) -> __m256d) -> Self {
+            Avx2([f(self.0[0], b.0[0]), f(self.0[1], b.0[1])])
+        }
+        /// Every lane `v`.
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        pub(super) fn splat(v: f64) -> Self {
+            Avx2([_mm256_set1_pd(v); 2])
+        }
+        /// The lanes of `a`.
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        pub(super) fn load(a: &Lane) -> Self {
+            let (lo, hi) = a.split_at(LANES / 2);
+            // SAFETY: `lo` and `hi` are 4 readable f64 each (unaligned loads); AVX is enabled.
+            Avx2(unsafe { [_mm256_loadu_pd(lo.as_ptr()), _mm256_loadu_pd(hi.as_ptr())] })
+        }
+        /// Writes the lanes to `a`.
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        pub(super) fn store(self, a: &mut Lane) {
+            let (lo, hi) = a.split_at_mut(LANES / 2);
+            // SAFETY: `lo` and `hi` are 4 writable f64 each (unaligned stores); AVX is enabled.
+            unsafe {
+                _mm256_storeu_pd(lo.as_mut_ptr(), self.0[0]);
+                _mm256_storeu_pd(hi.as_mut_ptr(), self.0[1]);
+            }
+        }
+        /// `self + b`.
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        pub(super) fn add(self, b: Self) -> Self {
+            self.map2(b, |x, y| _mm256_add_pd(x, y))
+        }
+        /// `self − b`.
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        pub(super) fn sub(self, b: Self) -> Self {
+            self.map2(b, |x, y| _mm256_sub_pd(x, y))
+        }
+        /// `self · b`.
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        pub(super) fn mul(self, b: Self) -> Self {
+            self.map2(b, |x, y| _mm256_mul_pd(x, y))
+        }
+        /// `self · b + c`, fused.
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        pub(super) fn mul_add(self, b: Self, c: Self) -> Self {
+            Avx2([
+                _mm256_fmadd_pd(self.0[0], b.0[0], c.0[0]),
+                _mm256_fmadd_pd(self.0[1], b.0[1], c.0[1]),
+            ])
+        }
+        /// `√self`.
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        pub(super) fn sqrt(self) -> Self {
+            Avx2([_mm256_sqrt_pd(self.0[0]), _mm256_sqrt_pd(self.0[1])])
+        }
+        /// `num / self`, and 0 where `self` is 0.
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        pub(super) fn recip_scaled_or_zero(self, num: f64) -> Self {
+            let f = |d: __m256d| {
+                let nonzero = _mm256_cmp_pd::<_CMP_NEQ_OQ>(d, _mm256_setzero_pd());
+                _mm256_and_pd(_mm256_div_pd(_mm256_set1_pd(num), d), nonzero)
+            };
+            Avx2([f(self.0[0]), f(self.0[1])])
+        }
     }
 }
 
@@ -207,7 +339,148 @@ impl FrozenChain {
     }
 }
 
-/// Runs [`kernel`] compiled for the best instruction set of this CPU.
+/// Defines the lane kernel `$name::<GRAD>(chain, trig, grad_scale, distance_m, grad)` on the
+/// vector type `$v` (see [`Portable`]), with the attributes given (its target features).
+/// `grad` is empty unless `GRAD`. A macro rather than a generic function: the operations of
+/// `$v` may only be called from a function compiled with its instruction set.
+macro_rules! lane_kernel {
+    ($(#[$attr:meta])* $name:ident, $v:ty) => {
+        $(#[$attr])*
+        fn $name<const GRAD: bool>(
+            chain: &FrozenChain,
+            trig: &[[Lane; 2]],
+            grad_scale: f64,
+            distance_m: &mut Lane,
+            grad: &mut [Lane],
+        ) {
+            type V = $v;
+            // `Rot(e_k, θ)·p` (or its transpose for `back`) for a coordinate axis `e_k`
+            // (`i, j, k` cyclic: `p_i ↦ c·p_i − s·p_j`, `p_j ↦ s·p_i + c·p_j`), each axis
+            // written out so that the coordinates stay in registers.
+            macro_rules! rotate {
+                ($p:expr, $axis:expr, $s:expr, $c:expr, $back:expr) => {{
+                    let [x, y, z]: [V; 3] = $p;
+                    let (s, c): (V, V) = ($s, $c);
+                    let (i, j) = match $axis {
+                        Axis::X => (y, z),
+                        Axis::Y => (z, x),
+                        // General axes are excluded by `supports_lanes`.
+                        _ => (x, y),
+                    };
+                    let (ri, rj) = if $back {
+                        (c.mul_add(i, s.mul(j)), c.mul(j).sub(s.mul(i)))
+                    } else {
+                        (c.mul(i).sub(s.mul(j)), s.mul_add(i, c.mul(j)))
+                    };
+                    match $axis {
+                        Axis::X => [x, ri, rj],
+                        Axis::Y => [rj, y, ri],
+                        _ => [ri, rj, z],
+                    }
+                }};
+            }
+            // `((a₀·s₀ + t) + a₁·s₁) + a₂·s₂` for constants `s`, `t`.
+            let dot3_s = |a: &[V; 3], s: [f64; 3], t: V| -> V {
+                a[2].mul_add(V::splat(s[2]), a[1].mul_add(V::splat(s[1]), a[0].mul_add(V::splat(s[0]), t)))
+            };
+            let zero = V::splat(0.0);
+            let segments = &chain.segments;
+            let Some((last, rest)) = segments.split_last() else {
+                zero.store(distance_m);
+                return;
+            };
+            // Backwards: T_k = F_k · J_k(q) · T_{k+1}, the end point in the start frame of run
+            // k, kept for every run when GRAD (the array starts as copies of the last run's,
+            // its last entry, rather than zeros).
+            let t = &last.lane_fixed.trans;
+            let mut p = [V::splat(t.x), V::splat(t.y), V::splat(t.z)];
+            let mut tips = [p; MAX_SEGMENTS];
+            for (k, seg) in rest.iter().enumerate().rev() {
+                if let Some(screw) = &seg.joint {
+                    let [s, c] = &trig[screw.joint];
+                    p = rotate!(p, screw.axis, V::load(s), V::load(c), false);
+                }
+                let f = &seg.lane_fixed;
+                let r = &f.rot;
+                p = [
+                    dot3_s(&p, [r[(0, 0)], r[(0, 1)], r[(0, 2)]], V::splat(f.trans.x)),
+                    dot3_s(&p, [r[(1, 0)], r[(1, 1)], r[(1, 2)]], V::splat(f.trans.y)),
+                    dot3_s(&p, [r[(2, 0)], r[(2, 1)], r[(2, 2)]], V::splat(f.trans.z)),
+                ];
+                if GRAD {
+                    tips[k] = p;
+                }
+            }
+            let norm = p[2].mul_add(p[2], p[1].mul_add(p[1], p[0].mul(p[0]))).sqrt();
+            norm.store(distance_m);
+            if !GRAD {
+                return;
+            }
+            if !chain.all_params_tapped {
+                grad.fill([0.0; LANES]);
+            }
+            // Forwards: U_0 = grad_scale · P/|P| (0 where P = 0: then every term is 0), and
+            // U_{k+1} = J_k(q)ᵀ · F_kᵀ · U_k.
+            let f = norm.recip_scaled_or_zero(grad_scale);
+            let mut ul = [p[0].mul(f), p[1].mul(f), p[2].mul(f)];
+            for (seg, tl) in segments.iter().zip(&tips) {
+                if !seg.distance_taps.is_empty() {
+                    // v = T × U, both in the run's start frame.
+                    let v = [
+                        tl[1].mul(ul[2]).sub(tl[2].mul(ul[1])),
+                        tl[2].mul(ul[0]).sub(tl[0].mul(ul[2])),
+                        tl[0].mul(ul[1]).sub(tl[1].mul(ul[0])),
+                    ];
+                    for tap in &seg.distance_taps {
+                        let a = [tap.a.x, tap.a.y, tap.a.z];
+                        let term = if tap.rotation {
+                            let c = [tap.c.x, tap.c.y, tap.c.z];
+                            dot3_s(&v, a, zero).sub(dot3_s(&ul, c, zero))
+                        } else {
+                            dot3_s(&ul, a, zero)
+                        };
+                        let g = &mut grad[tap.param];
+                        let g_new = if tap.first { term } else { V::load(g).add(term) };
+                        g_new.store(g);
+                    }
+                }
+                if let Some(screw) = &seg.joint {
+                    let r = &seg.lane_fixed.rot;
+                    let w = [
+                        dot3_s(&ul, [r[(0, 0)], r[(1, 0)], r[(2, 0)]], zero),
+                        dot3_s(&ul, [r[(0, 1)], r[(1, 1)], r[(2, 1)]], zero),
+                        dot3_s(&ul, [r[(0, 2)], r[(1, 2)], r[(2, 2)]], zero),
+                    ];
+                    let [s, c] = &trig[screw.joint];
+                    ul = rotate!(w, screw.axis, V::load(s), V::load(c), true);
+                }
+            }
+        }
+    };
+}
+lane_kernel!(
+    /// The kernel in plain loops over the lanes.
+    kernel_portable,
+    Portable
+);
+
+#[cfg(target_arch = "x86_64")]
+lane_kernel!(
+    /// The kernel in AVX-512 registers.
+    #[target_feature(enable = "avx512f")]
+    kernel_avx512,
+    simd::Avx512
+);
+
+#[cfg(target_arch = "x86_64")]
+lane_kernel!(
+    /// The kernel in AVX2 registers, with FMA.
+    #[target_feature(enable = "avx2,fma")]
+    kernel_avx2,
+    simd::Avx2
+);
+
+/// Runs the lane kernel compiled for the best instruction set of this CPU.
 #[inline(always)]
 fn dispatch<const GRAD: bool>(
     chain: &FrozenChain,
@@ -223,137 +496,12 @@ fn dispatch<const GRAD: bool>(
             unsafe { kernel_avx512::<GRAD>(chain, trig, grad_scale, distance_m, grad) };
             return;
         }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked just above).
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
             unsafe { kernel_avx2::<GRAD>(chain, trig, grad_scale, distance_m, grad) };
             return;
         }
     }
-    kernel::<GRAD>(chain, trig, grad_scale, distance_m, grad);
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2")]
-fn kernel_avx512<const GRAD: bool>(
-    chain: &FrozenChain,
-    trig: &[[Lane; 2]],
-    grad_scale: f64,
-    distance_m: &mut Lane,
-    grad: &mut [Lane],
-) {
-    kernel::<GRAD>(chain, trig, grad_scale, distance_m, grad);
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn kernel_avx2<const GRAD: bool>(
-    chain: &FrozenChain,
-    trig: &[[Lane; 2]],
-    grad_scale: f64,
-    distance_m: &mut Lane,
-    grad: &mut [Lane],
-) {
-    kernel::<GRAD>(chain, trig, grad_scale, distance_m, grad);
-}
-
-/// `F · (J(q) · p)` for the run `seg` (its joint's offset folded into `F`), or `F · 0` when
-/// `p` is `None` (the tip's own origin).
-#[inline(always)]
-fn run_times_point(seg: &Segment, trig: &[[Lane; 2]], p: Option<[Lane; 3]>) -> [Lane; 3] {
-    let f = &seg.lane_fixed;
-    let Some(mut p) = p else {
-        return [splat(f.trans.x), splat(f.trans.y), splat(f.trans.z)];
-    };
-    if let Some(screw) = &seg.joint {
-        let [s, c] = trig[screw.joint];
-        p = rotate(p, screw.axis, s, c);
-    }
-    let r = &f.rot;
-    [
-        dot3_s_add(&p, [r[(0, 0)], r[(0, 1)], r[(0, 2)]], f.trans.x),
-        dot3_s_add(&p, [r[(1, 0)], r[(1, 1)], r[(1, 2)]], f.trans.y),
-        dot3_s_add(&p, [r[(2, 0)], r[(2, 1)], r[(2, 2)]], f.trans.z),
-    ]
-}
-
-/// The lane kernel; `#[inline(always)]` so that each caller above compiles it for its
-/// instruction set. `grad` is empty unless `GRAD`.
-#[inline(always)]
-fn kernel<const GRAD: bool>(
-    chain: &FrozenChain,
-    trig: &[[Lane; 2]],
-    grad_scale: f64,
-    distance_m: &mut Lane,
-    grad: &mut [Lane],
-) {
-    let zero = splat(0.0);
-    let segments = &chain.segments;
-    // T_k, the end point in the start frame of run k (written for every run when GRAD; the
-    // array starts as copies of the last run's, which is its last entry, rather than zeros).
-    let Some((last, rest)) = segments.split_last() else {
-        *distance_m = zero;
-        return;
-    };
-    let mut p = run_times_point(last, trig, None);
-    let mut tips = [p; MAX_SEGMENTS];
-    for (k, seg) in rest.iter().enumerate().rev() {
-        p = run_times_point(seg, trig, Some(p));
-        if GRAD {
-            tips[k] = p;
-        }
-    }
-    let tip = p;
-    let mut norm = [0.0; LANES];
-    for l in 0..LANES {
-        norm[l] = (tip[0][l] * tip[0][l] + tip[1][l] * tip[1][l] + tip[2][l] * tip[2][l]).sqrt();
-    }
-    *distance_m = norm;
-    if !GRAD {
-        return;
-    }
-    if !chain.all_params_tapped {
-        grad.fill(zero);
-    }
-    // u = grad_scale · P/|P|, and 0 where P = 0 (then every term below is 0).
-    let mut f = [0.0; LANES];
-    for l in 0..LANES {
-        f[l] = if norm[l] == 0.0 {
-            0.0
-        } else {
-            grad_scale / norm[l]
-        };
-    }
-    let mut ul = [mul(tip[0], f), mul(tip[1], f), mul(tip[2], f)];
-    for (seg, tl) in segments.iter().zip(&tips) {
-        if !seg.distance_taps.is_empty() {
-            // v = T × U, both in the run's start frame.
-            let v = [
-                sub(mul(tl[1], ul[2]), mul(tl[2], ul[1])),
-                sub(mul(tl[2], ul[0]), mul(tl[0], ul[2])),
-                sub(mul(tl[0], ul[1]), mul(tl[1], ul[0])),
-            ];
-            for tap in &seg.distance_taps {
-                let a = [tap.a.x, tap.a.y, tap.a.z];
-                let term = if tap.rotation {
-                    let c = [tap.c.x, tap.c.y, tap.c.z];
-                    sub(dot3_s(&v, a), dot3_s(&ul, c))
-                } else {
-                    dot3_s(&ul, a)
-                };
-                let g = &mut grad[tap.param];
-                *g = if tap.first { term } else { add(*g, term) };
-            }
-        }
-        // U in the next run's start frame: J(q)ᵀ · Fᵀ · U.
-        if let Some(screw) = &seg.joint {
-            let r = &seg.lane_fixed.rot;
-            let w = [
-                dot3_s(&ul, [r[(0, 0)], r[(1, 0)], r[(2, 0)]]),
-                dot3_s(&ul, [r[(0, 1)], r[(1, 1)], r[(2, 1)]]),
-                dot3_s(&ul, [r[(0, 2)], r[(1, 2)], r[(2, 2)]]),
-            ];
-            let [s, c] = trig[screw.joint];
-            ul = rotate_back(w, screw.axis, s, c);
-        }
-    }
+    kernel_portable::<GRAD>(chain, trig, grad_scale, distance_m, grad);
 }
