@@ -12,6 +12,8 @@
 //! S. S. Sastry, *A Mathematical Introduction to Robotic Manipulation*, 1994, §3.2): constant
 //! factors between joints multiply out once.
 
+use std::ops::Range;
+
 use nalgebra::{Matrix3, Point3, Vector3};
 
 use crate::chain::{Chain, Factor, FkWorkspace, Motion};
@@ -162,27 +164,35 @@ struct ParamTap {
 #[derive(Clone, Debug, PartialEq)]
 struct Segment {
     fixed: Rigid,
-    taps: Vec<ParamTap>,
+    /// The run's parameter screws: a range of [`FrozenChain::taps`].
+    taps: Range<usize>,
     joint: Option<JointScrew>,
-    /// All parameter screws of the run and of its joint, for the distance gradient.
-    distance_taps: Vec<DistanceTap>,
+    /// All parameter screws of the run and of its joint, for the distance gradient: a range of
+    /// [`FrozenChain::distance_taps`].
+    distance_taps: Range<usize>,
     /// `fixed` times the rotation of a revolute joint by its offset (so that the joint itself
     /// rotates by `q` alone), for the lane kernel; `fixed` otherwise.
     lane_fixed: Rigid,
 }
 
 impl Segment {
-    fn new(fixed: Rigid, taps: Vec<ParamTap>, joint: Option<JointScrew>) -> Segment {
-        let mut distance_taps: Vec<DistanceTap> = taps
-            .iter()
-            .map(|t| DistanceTap {
-                param: t.param,
-                rotation: t.motion == Motion::Rotation,
-                a: t.axis_local,
-                c: t.axis_local.cross(&t.origin_local),
-                first: false,
-            })
-            .collect();
+    /// The segment of run `fixed` with the parameter screws `taps[first_tap..]` and `joint`;
+    /// appends its distance taps to `distance_taps`.
+    fn new(
+        fixed: Rigid,
+        taps: &[ParamTap],
+        first_tap: usize,
+        joint: Option<JointScrew>,
+        distance_taps: &mut Vec<DistanceTap>,
+    ) -> Segment {
+        let first_distance_tap = distance_taps.len();
+        distance_taps.extend(taps[first_tap..].iter().map(|t| DistanceTap {
+            param: t.param,
+            rotation: t.motion == Motion::Rotation,
+            a: t.axis_local,
+            c: t.axis_local.cross(&t.origin_local),
+            first: false,
+        }));
         if let Some(JointScrew {
             motion,
             axis,
@@ -212,9 +222,9 @@ impl Segment {
         }
         Segment {
             fixed,
-            taps,
+            taps: first_tap..taps.len(),
             joint,
-            distance_taps,
+            distance_taps: first_distance_tap..distance_taps.len(),
             lane_fixed,
         }
     }
@@ -229,6 +239,11 @@ impl Segment {
 #[derive(Clone, Debug, PartialEq)]
 pub struct FrozenChain {
     segments: Vec<Segment>,
+    /// Parameter screws of all runs, in order (each segment holds a range): one allocation
+    /// per chain, not one per run.
+    taps: Vec<ParamTap>,
+    /// Distance taps of all segments, in order (each segment holds a range).
+    distance_taps: Vec<DistanceTap>,
     n_params: usize,
     n_joints: usize,
     /// Whether every parameter has a distance tap (else the lane kernel zeroes the gradient
@@ -262,9 +277,11 @@ impl Chain {
             x.len(),
             self.n_params()
         );
-        let mut segments = Vec::new();
+        let mut segments = Vec::with_capacity(self.n_joints() + 1);
         let mut run = Rigid::identity();
-        let mut taps = Vec::new();
+        let mut taps = Vec::with_capacity(self.n_params());
+        let mut distance_taps = Vec::with_capacity(self.n_params());
+        let mut first_tap = 0;
         for factor in self.factors() {
             match factor {
                 Factor::Fixed(t) => {
@@ -311,7 +328,8 @@ impl Chain {
                     let (sin_off, cos_off) = offset.sin_cos();
                     segments.push(Segment::new(
                         run,
-                        std::mem::take(&mut taps),
+                        &taps,
+                        first_tap,
                         Some(JointScrew {
                             motion: *motion,
                             axis: Axis::new(&axis.into_inner()),
@@ -321,19 +339,29 @@ impl Chain {
                             sin_off,
                             cos_off,
                         }),
+                        &mut distance_taps,
                     ));
+                    first_tap = taps.len();
                     run = Rigid::identity();
                 }
             }
         }
-        segments.push(Segment::new(run, taps, None));
+        segments.push(Segment::new(
+            run,
+            &taps,
+            first_tap,
+            None,
+            &mut distance_taps,
+        ));
         let mut tapped = vec![false; self.n_params()];
-        for tap in segments.iter_mut().flat_map(|s| &mut s.distance_taps) {
+        for tap in &mut distance_taps {
             tap.first = !tapped[tap.param];
             tapped[tap.param] = true;
         }
         FrozenChain {
             segments,
+            taps,
+            distance_taps,
             n_params: self.n_params(),
             n_joints: self.n_joints(),
             all_params_tapped: tapped.iter().all(|&t| t),
@@ -500,7 +528,7 @@ impl FrozenChain {
             let ul = Vector3::new(start[0].dot(&u), start[1].dot(&u), start[2].dot(&u));
             let tl = Vector3::new(start[0].dot(&d), start[1].dot(&d), start[2].dot(&d));
             let v = tl.cross(&ul);
-            for tap in &seg.distance_taps {
+            for tap in &self.distance_taps[seg.distance_taps.clone()] {
                 grad[tap.param] += if tap.rotation {
                     tap.a.dot(&v) - ul.dot(&tap.c)
                 } else {
@@ -562,7 +590,7 @@ impl FrozenChain {
         for (seg, start) in self.segments.iter().zip(starts.iter()) {
             let rot = Matrix3::from_columns(&start[..3]);
             let origin = start[3];
-            for tap in &seg.taps {
+            for tap in &self.taps[seg.taps.clone()] {
                 let w = rot * tap.axis_local;
                 let col = match tap.motion {
                     Motion::Rotation => w.cross(&(tip - (origin + rot * tap.origin_local))),

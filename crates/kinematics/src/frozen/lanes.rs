@@ -431,7 +431,7 @@ macro_rules! lane_kernel {
                         tl[2].mul(ul[0]).sub(tl[0].mul(ul[2])),
                         tl[0].mul(ul[1]).sub(tl[1].mul(ul[0])),
                     ];
-                    for tap in &seg.distance_taps {
+                    for tap in &chain.distance_taps[seg.distance_taps.clone()] {
                         let a = [tap.a.x, tap.a.y, tap.a.z];
                         let term = if tap.rotation {
                             let c = [tap.c.x, tap.c.y, tap.c.z];
