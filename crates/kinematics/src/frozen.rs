@@ -19,6 +19,8 @@ use nalgebra::{Matrix3, Point3, Vector3};
 use crate::chain::{Chain, Factor, FkWorkspace, Motion};
 
 mod lanes;
+#[cfg(test)]
+pub(crate) use lanes::every_kernel;
 pub use lanes::{LANES, joint_trig_lanes};
 
 /// A rigid transform as a rotation matrix and a translation (m).

@@ -587,3 +587,50 @@ fn factor_transform_matches_hand_matrices() {
     };
     assert_pose_close(&f.transform(&[0.01], &[0.3]), &trans(0.0, 0.51, 0.0), 1e-15);
 }
+
+#[test]
+fn every_lane_kernel_agrees_with_the_scalar_distance_gradient() {
+    use crate::{LANES, frozen::every_kernel};
+    let chain = paper_chain();
+    let n = chain.n_params();
+    let x: Vec<f64> = (0..n).map(|j| 1e-3 * ((j * 7 % 11) as f64 - 5.0)).collect();
+    let frozen = chain.freeze(&x);
+    let qs: Vec<Vec<f64>> = (0..LANES)
+        .map(|l| {
+            (0..7)
+                .map(|j| ((l * 7 + j * 3) % 13) as f64 * 0.4 - 2.4)
+                .collect()
+        })
+        .collect();
+    let trig = crate::joint_trig_lanes(std::array::from_fn(|l| qs[l].as_slice()));
+    let results = every_kernel(&frozen, &trig, 2.0);
+    assert!(results.iter().any(|(name, ..)| *name == "portable"));
+    let mut ws = FkWorkspace::new(&chain);
+    let mut scalar = vec![0.0; n];
+    for (name, dist, grad) in &results {
+        for (l, q) in qs.iter().enumerate() {
+            let p = frozen.distance_gradient(q, None, &mut scalar, &mut ws);
+            // Other operations than the scalar path's (and fused where the CPU has FMA):
+            // a few ulps of |P| ≈ 1 m and of the gradient entries (≤ ~2 m/rad).
+            assert!(
+                (dist[l] - p.coords.norm()).abs() < 1e-14,
+                "{name}, lane {l}"
+            );
+            for (j, g) in scalar.iter().enumerate() {
+                assert!(
+                    (grad[j][l] - 2.0 * g).abs() < 1e-13,
+                    "{name}, lane {l}, param {j}"
+                );
+            }
+        }
+    }
+    // The SIMD kernels run the same fused operations in the same order.
+    let simd: Vec<_> = results
+        .iter()
+        .filter(|(name, ..)| *name != "portable")
+        .collect();
+    for pair in simd.windows(2) {
+        assert_eq!(pair[0].1, pair[1].1, "{} vs {}", pair[0].0, pair[1].0);
+        assert_eq!(pair[0].2, pair[1].2, "{} vs {}", pair[0].0, pair[1].0);
+    }
+}

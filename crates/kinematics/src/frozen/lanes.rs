@@ -86,9 +86,9 @@ impl Portable {
     }
     #[inline(always)]
     fn map2(self, b: Self, f: impl Fn(f64, f64) -> f64) -> Self {
-        let mut o = [0.0; LANES];
-        for l in 0..LANES {
-            o[l] = f(self.0[l], b.0[l]);
+        let mut o = self.0;
+        for (x, y) in o.iter_mut().zip(b.0) {
+            *x = f(*x, y);
         }
         Portable(o)
     }
@@ -479,6 +479,66 @@ lane_kernel!(
     kernel_avx2,
     simd::Avx2
 );
+
+/// The results `(instruction set, distances, gradient)` of every kernel this CPU runs, with
+/// the gradient (length `n_params()`), for tests; the gradient-free runs must give the same
+/// distances (checked here).
+#[cfg(test)]
+pub(crate) fn every_kernel(
+    chain: &FrozenChain,
+    trig: &[[Lane; 2]],
+    grad_scale: f64,
+) -> Vec<(&'static str, Lane, Vec<Lane>)> {
+    let mut results = Vec::new();
+    let mut run = |name, f: &dyn Fn(&mut Lane, &mut [Lane], bool)| {
+        let mut dist = [0.0; LANES];
+        let mut grad = vec![[f64::NAN; LANES]; chain.n_params];
+        f(&mut dist, &mut grad, true);
+        let mut dist_only = [0.0; LANES];
+        f(&mut dist_only, &mut [], false);
+        assert_eq!(
+            dist, dist_only,
+            "{name}: distances with and without the gradient"
+        );
+        results.push((name, dist, grad));
+    };
+    run("portable", &|d, g, with_grad| {
+        if with_grad {
+            kernel_portable::<true>(chain, trig, grad_scale, d, g)
+        } else {
+            kernel_portable::<false>(chain, trig, grad_scale, d, g)
+        }
+    });
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            run("avx2", &|d, g, with_grad| {
+                // SAFETY: the CPU has AVX2 and FMA (checked just above).
+                unsafe {
+                    if with_grad {
+                        kernel_avx2::<true>(chain, trig, grad_scale, d, g)
+                    } else {
+                        kernel_avx2::<false>(chain, trig, grad_scale, d, g)
+                    }
+                }
+            });
+        }
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            run("avx512", &|d, g, with_grad| {
+                // SAFETY: the CPU has AVX-512F (checked just above).
+                unsafe {
+                    if with_grad {
+                        kernel_avx512::<true>(chain, trig, grad_scale, d, g)
+                    } else {
+                        kernel_avx512::<false>(chain, trig, grad_scale, d, g)
+                    }
+                }
+            });
+        }
+    }
+    results
+}
 
 /// Runs the lane kernel compiled for the best instruction set of this CPU.
 #[inline(always)]
