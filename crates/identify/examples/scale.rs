@@ -274,18 +274,24 @@ fn peak() -> Result<()> {
     std::hint::black_box(&c);
     let gflops = 2.0 * (n * n * n) as f64 / best / 1e9;
     // Per pose of the reference chain (8 constant runs, 7 revolute joints, 32 parameters:
-    // 16 rotation and 16 translation screws), counting the multiplications, additions,
-    // divisions and square roots of the lane kernel (FrozenChain::distance_gradient_lanes,
-    // crates/kinematics/src/frozen/lanes.rs) and the row written by CalibrationProblem:
-    // forward kinematics 8 × 63 (pose · fixed run) + 7 × 24 (joint angle and rotation) = 672;
-    // |P| and u = P/|P|: 9; per run, U, T in its frame and T × U: 8 × 42 = 336; screws
-    // 16 × 12 (rotation) + 16 × 6 (translation) = 288; the row scaled by 1/σ and the residual:
-    // 34. Total 1339 flops per pose. (The scalar point-Jacobian path counted 2496.)
+    // 16 rotation and 16 translation screws, each the first of its parameter), counting the
+    // multiplications, additions, divisions and square roots of the lane kernel
+    // (FrozenChain::distance_gradient_lanes, crates/kinematics/src/frozen/lanes.rs; a fused
+    // multiply–add counts 2) and the residual written by CalibrationProblem:
+    // end point backwards through the runs, per joint: joint rotation 6 (4 mul, 2 add) + run
+    // F·p + t 18 = 24, × 7 = 168 (the last run's F·0 is its translation, 0);
+    // |P| 6 (3 mul, 2 add, 1 sqrt); residual (|P| − δ)/σ 2;
+    // U = P · (1/σ)/|P| 4 (1 div, 3 mul; 1/σ folded into the row here);
+    // per run with taps T × U 9, × 8 = 72; screws: rotation a·(T × U) − U·c 11 × 16 = 176,
+    // translation U·a 5 × 16 = 80; U forwards into the next run, per joint: Fᵀ·U 15 + joint
+    // rotation 6 = 21, × 7 = 147.
+    // Total 168 + 6 + 2 + 4 + 72 + 176 + 80 + 147 = 655 flops per pose. (The lane kernel that
+    // composed the world frames counted 1339, the scalar point-Jacobian path 2496.)
     let (m, nf) = (200.0, 28.0);
-    let jacobian = 1339.0 * m;
+    let jacobian = 655.0 * m;
     let qr = 2.0 * m * nf * nf - 2.0 * nf * nf * nf / 3.0;
     println!(
-        "{{\"gflops\": {gflops:.2}, \"peak_note\": \"faer matmul {n}x{n}, one thread, best of 20\", \"flops_per_iteration_200\": {:.0}, \"flops_note\": \"Jacobian {:.0} kflop (1339 per pose for the lane kernel, counted by hand in examples/scale.rs) + Householder QR 2mn^2 - 2n^3/3 = {:.0} kflop\"}}",
+        "{{\"gflops\": {gflops:.2}, \"peak_note\": \"faer matmul {n}x{n}, one thread, best of 20\", \"flops_per_iteration_200\": {:.0}, \"flops_note\": \"Jacobian {:.0} kflop (655 per pose for the lane kernel, counted by hand in examples/scale.rs) + Householder QR 2mn^2 - 2n^3/3 = {:.0} kflop\"}}",
         jacobian + qr,
         jacobian / 1e3,
         qr / 1e3

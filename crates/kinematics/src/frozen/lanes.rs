@@ -67,7 +67,8 @@ pub fn joint_trig_lanes(qs: [&[f64]; LANES]) -> Vec<[[f64; LANES]; 2]> {
 /// stamped out by `lane_kernel!` for one of them, inside a function compiled with its
 /// instruction set, so that every operation is one instruction (or two) and the values stay in
 /// registers (LLVM's own vectorisation of the plain loops mixed coordinates across lanes).
-/// `mul_add` is `a·b + c`, fused where the instruction set has it.
+/// `a.mul_add(b, c)` is `a·b + c` and `a.neg_mul_add(b, c)` is `c − a·b`, fused where the
+/// instruction set has it.
 #[derive(Clone, Copy)]
 struct Portable(Lane);
 
@@ -107,6 +108,10 @@ impl Portable {
     #[inline(always)]
     fn mul_add(self, b: Self, c: Self) -> Self {
         self.mul(b).add(c)
+    }
+    #[inline(always)]
+    fn neg_mul_add(self, b: Self, c: Self) -> Self {
+        c.sub(self.mul(b))
     }
     #[inline(always)]
     fn sqrt(self) -> Self {
@@ -177,6 +182,12 @@ mod simd {
         #[target_feature(enable = "avx512f")]
         pub(super) fn mul_add(self, b: Self, c: Self) -> Self {
             Avx512(_mm512_fmadd_pd(self.0, b.0, c.0))
+        }
+        /// `c − self · b`, fused.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn neg_mul_add(self, b: Self, c: Self) -> Self {
+            Avx512(_mm512_fnmadd_pd(self.0, b.0, c.0))
         }
         /// `√self`.
         #[inline]
@@ -253,6 +264,15 @@ mod simd {
             Avx2([
                 _mm256_fmadd_pd(self.0[0], b.0[0], c.0[0]),
                 _mm256_fmadd_pd(self.0[1], b.0[1], c.0[1]),
+            ])
+        }
+        /// `c − self · b`, fused.
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        pub(super) fn neg_mul_add(self, b: Self, c: Self) -> Self {
+            Avx2([
+                _mm256_fnmadd_pd(self.0[0], b.0[0], c.0[0]),
+                _mm256_fnmadd_pd(self.0[1], b.0[1], c.0[1]),
             ])
         }
         /// `√self`.
@@ -380,13 +400,18 @@ macro_rules! lane_kernel {
                 }};
             }
             // `((a₀·s₀ + t) + a₁·s₁) + a₂·s₂` for constants `s`, `t`.
-            let dot3_s = |a: &[V; 3], s: [f64; 3], t: V| -> V {
-                a[2].mul_add(V::splat(s[2]), a[1].mul_add(V::splat(s[1]), a[0].mul_add(V::splat(s[0]), t)))
+            let dot3_s_add = |a: &[V; 3], s: [f64; 3], t: V| -> V {
+                let d = a[0].mul_add(V::splat(s[0]), t);
+                a[2].mul_add(V::splat(s[2]), a[1].mul_add(V::splat(s[1]), d))
             };
-            let zero = V::splat(0.0);
+            // `(a₀·s₀ + a₁·s₁) + a₂·s₂` for constants `s`.
+            let dot3_s = |a: &[V; 3], s: [f64; 3]| -> V {
+                let d = a[0].mul(V::splat(s[0]));
+                a[2].mul_add(V::splat(s[2]), a[1].mul_add(V::splat(s[1]), d))
+            };
             let segments = &chain.segments;
             let Some((last, rest)) = segments.split_last() else {
-                zero.store(distance_m);
+                *distance_m = [0.0; LANES];
                 return;
             };
             // Backwards: T_k = F_k · J_k(q) · T_{k+1}, the end point in the start frame of run
@@ -403,9 +428,9 @@ macro_rules! lane_kernel {
                 let f = &seg.lane_fixed;
                 let r = &f.rot;
                 p = [
-                    dot3_s(&p, [r[(0, 0)], r[(0, 1)], r[(0, 2)]], V::splat(f.trans.x)),
-                    dot3_s(&p, [r[(1, 0)], r[(1, 1)], r[(1, 2)]], V::splat(f.trans.y)),
-                    dot3_s(&p, [r[(2, 0)], r[(2, 1)], r[(2, 2)]], V::splat(f.trans.z)),
+                    dot3_s_add(&p, [r[(0, 0)], r[(0, 1)], r[(0, 2)]], V::splat(f.trans.x)),
+                    dot3_s_add(&p, [r[(1, 0)], r[(1, 1)], r[(1, 2)]], V::splat(f.trans.y)),
+                    dot3_s_add(&p, [r[(2, 0)], r[(2, 1)], r[(2, 2)]], V::splat(f.trans.z)),
                 ];
                 if GRAD {
                     tips[k] = p;
@@ -434,10 +459,12 @@ macro_rules! lane_kernel {
                     for tap in &chain.distance_taps[seg.distance_taps.clone()] {
                         let a = [tap.a.x, tap.a.y, tap.a.z];
                         let term = if tap.rotation {
-                            let c = [tap.c.x, tap.c.y, tap.c.z];
-                            dot3_s(&v, a, zero).sub(dot3_s(&ul, c, zero))
+                            // v·a − ((U₀c₀ + U₁c₁) + U₂c₂), each product subtracted in turn.
+                            let [c0, c1, c2] = [V::splat(tap.c.x), V::splat(tap.c.y), V::splat(tap.c.z)];
+                            let va = dot3_s(&v, a);
+                            ul[2].neg_mul_add(c2, ul[1].neg_mul_add(c1, ul[0].neg_mul_add(c0, va)))
                         } else {
-                            dot3_s(&ul, a, zero)
+                            dot3_s(&ul, a)
                         };
                         let g = &mut grad[tap.param];
                         let g_new = if tap.first { term } else { V::load(g).add(term) };
@@ -447,9 +474,9 @@ macro_rules! lane_kernel {
                 if let Some(screw) = &seg.joint {
                     let r = &seg.lane_fixed.rot;
                     let w = [
-                        dot3_s(&ul, [r[(0, 0)], r[(1, 0)], r[(2, 0)]], zero),
-                        dot3_s(&ul, [r[(0, 1)], r[(1, 1)], r[(2, 1)]], zero),
-                        dot3_s(&ul, [r[(0, 2)], r[(1, 2)], r[(2, 2)]], zero),
+                        dot3_s(&ul, [r[(0, 0)], r[(1, 0)], r[(2, 0)]]),
+                        dot3_s(&ul, [r[(0, 1)], r[(1, 1)], r[(2, 1)]]),
+                        dot3_s(&ul, [r[(0, 2)], r[(1, 2)], r[(2, 2)]]),
                     ];
                     let [s, c] = &trig[screw.joint];
                     ul = rotate!(w, screw.axis, V::load(s), V::load(c), true);
