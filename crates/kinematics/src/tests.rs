@@ -595,31 +595,37 @@ fn every_lane_kernel_agrees_with_the_scalar_distance_gradient() {
     let n = chain.n_params();
     let x: Vec<f64> = (0..n).map(|j| 1e-3 * ((j * 7 % 11) as f64 - 5.0)).collect();
     let frozen = chain.freeze(&x);
-    let qs: Vec<Vec<f64>> = (0..LANES)
+    // Two groups of LANES configurations.
+    let qs: Vec<Vec<f64>> = (0..2 * LANES)
         .map(|l| {
             (0..7)
                 .map(|j| ((l * 7 + j * 3) % 13) as f64 * 0.4 - 2.4)
                 .collect()
         })
         .collect();
-    let trig = crate::joint_trig_lanes(std::array::from_fn(|l| qs[l].as_slice()));
+    let mut trig = crate::joint_trig_lanes(std::array::from_fn(|l| qs[l].as_slice()));
+    trig.extend(crate::joint_trig_lanes(std::array::from_fn(|l| {
+        qs[LANES + l].as_slice()
+    })));
     let results = every_kernel(&frozen, &trig, 2.0);
     assert!(results.iter().any(|(name, ..)| *name == "portable"));
     let mut ws = FkWorkspace::new(&chain);
     let mut scalar = vec![0.0; n];
     for (name, dist, grad) in &results {
-        for (l, q) in qs.iter().enumerate() {
+        for (k, q) in qs.iter().enumerate() {
+            let (g, l) = (k / LANES, k % LANES);
             let p = frozen.distance_gradient(q, None, &mut scalar, &mut ws);
             // Other operations than the scalar path's (and fused where the CPU has FMA):
             // a few ulps of |P| ≈ 1 m and of the gradient entries (≤ ~2 m/rad).
             assert!(
-                (dist[l] - p.coords.norm()).abs() < 1e-14,
-                "{name}, lane {l}"
+                (dist[g][l] - p.coords.norm()).abs() < 1e-14,
+                "{name}, pose {k}"
             );
-            for (j, g) in scalar.iter().enumerate() {
+            for (j, s) in scalar.iter().enumerate() {
+                let lane = grad[g * n + j][l];
                 assert!(
-                    (grad[j][l] - 2.0 * g).abs() < 1e-13,
-                    "{name}, lane {l}, param {j}"
+                    (lane - 2.0 * s).abs() < 1e-13,
+                    "{name}, pose {k}, param {j}"
                 );
             }
         }

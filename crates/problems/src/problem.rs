@@ -620,36 +620,48 @@ impl CalibrationProblem {
                 continue;
             }
             if self.lane_groups.get(group) == Some(&row_idx) && row_idx + LANES <= rows.end {
-                let trig = &self.lane_trig[group * n_joints..(group + 1) * n_joints];
-                let mut dist = [0.0; LANES];
+                // This group and the next if it follows directly: one kernel call overlaps
+                // the two groups' operations.
+                let n_groups = if self.lane_groups.get(group + 1) == Some(&(row_idx + LANES))
+                    && row_idx + 2 * LANES <= rows.end
+                {
+                    2
+                } else {
+                    1
+                };
+                let n_rows = n_groups * LANES;
+                let trig = &self.lane_trig[group * n_joints..(group + n_groups) * n_joints];
+                let mut dist = [[0.0; LANES]; 2];
+                let dist = &mut dist[..n_groups];
                 match jac.as_mut() {
                     Some(j) => {
                         if lane_grad.is_empty() {
-                            lane_grad = vec![[0.0; LANES]; n_kin];
+                            lane_grad = vec![[0.0; LANES]; 2 * n_kin];
                         }
+                        let lane_grad = &mut lane_grad[..n_groups * n_kin];
                         // The Jacobian rows are ∂|P|/∂x / σ: 1/σ folded into the kernel
                         // (within an ulp of the division; the residuals keep the division).
-                        frozen.distance_gradient_lanes(
-                            trig,
-                            inv_s_distance,
-                            &mut dist,
-                            Some(&mut lane_grad),
-                        );
-                        for (c, g) in j.iter_mut().zip(&lane_grad) {
-                            c[r..r + LANES].copy_from_slice(g);
+                        frozen.distance_gradient_lanes(trig, inv_s_distance, dist, Some(lane_grad));
+                        for (g, group_grad) in lane_grad.chunks_exact(n_kin).enumerate() {
+                            let rows = r + g * LANES..r + (g + 1) * LANES;
+                            for (c, v) in j.iter_mut().zip(group_grad) {
+                                c[rows.clone()].copy_from_slice(v);
+                            }
                         }
                     }
-                    None => frozen.distance_gradient_lanes(trig, 1.0, &mut dist, None),
+                    None => frozen.distance_gradient_lanes(trig, 1.0, dist, None),
                 }
                 if let Some(o) = out.as_mut() {
-                    let measured = &self.lane_distance_m[group];
-                    for l in 0..LANES {
-                        o[r + l] = (dist[l] - measured[l]) / s_distance;
+                    for (g, d) in dist.iter().enumerate() {
+                        let measured = &self.lane_distance_m[group + g];
+                        for l in 0..LANES {
+                            o[r + g * LANES + l] = (d[l] - measured[l]) / s_distance;
+                        }
                     }
                 }
-                group += 1;
-                r += LANES;
-                skip = LANES - 1;
+                group += n_groups;
+                r += n_rows;
+                skip = n_rows - 1;
                 continue;
             }
             if self.lane_groups.get(group) == Some(&row_idx) {

@@ -63,7 +63,10 @@ pub fn joint_trig_lanes(qs: [&[f64]; LANES]) -> Vec<[[f64; LANES]; 2]> {
 }
 
 /// The operations of the lane kernel on one [`Lane`] per vector value: [`Portable`] (plain
-/// loops) and, on x86-64, one AVX-512 register or two AVX2 registers (`simd`). Each kernel is
+/// loops) and, on x86-64, one AVX-512 register or two AVX2 registers (`simd`); `Avx512x2`
+/// holds two groups of lanes (two registers), so that two independent chains of operations
+/// fill the pipeline. `load_at(src, first, stride)` reads group `g` of the value from
+/// `src[first + g·stride]`, and `store_at` writes it there. Each kernel is
 /// stamped out by `lane_kernel!` for one of them, inside a function compiled with its
 /// instruction set, so that every operation is one instruction (or two) and the values stay in
 /// registers (LLVM's own vectorisation of the plain loops mixed coordinates across lanes).
@@ -78,12 +81,12 @@ impl Portable {
         Portable([v; LANES])
     }
     #[inline(always)]
-    fn load(a: &Lane) -> Self {
-        Portable(*a)
+    fn load_at(src: &[Lane], first: usize, _stride: usize) -> Self {
+        Portable(src[first])
     }
     #[inline(always)]
-    fn store(self, a: &mut Lane) {
-        *a = self.0;
+    fn store_at(self, dst: &mut [Lane], first: usize, _stride: usize) {
+        dst[first] = self.0;
     }
     #[inline(always)]
     fn map2(self, b: Self, f: impl Fn(f64, f64) -> f64) -> Self {
@@ -145,19 +148,17 @@ mod simd {
         pub(super) fn splat(v: f64) -> Self {
             Avx512(_mm512_set1_pd(v))
         }
-        /// The lanes of `a`.
+        /// The lanes of `src[first]`.
         #[inline]
         #[target_feature(enable = "avx512f")]
-        pub(super) fn load(a: &Lane) -> Self {
-            // SAFETY: `a` is LANES = 8 readable f64 (an unaligned load); AVX-512F is enabled.
-            Avx512(unsafe { _mm512_loadu_pd(a.as_ptr()) })
+        pub(super) fn load_at(src: &[Lane], first: usize, _stride: usize) -> Self {
+            Avx512(load512(&src[first]))
         }
-        /// Writes the lanes to `a`.
+        /// Writes the lanes to `dst[first]`.
         #[inline]
         #[target_feature(enable = "avx512f")]
-        pub(super) fn store(self, a: &mut Lane) {
-            // SAFETY: `a` is LANES = 8 writable f64 (an unaligned store); AVX-512F is enabled.
-            unsafe { _mm512_storeu_pd(a.as_mut_ptr(), self.0) }
+        pub(super) fn store_at(self, dst: &mut [Lane], first: usize, _stride: usize) {
+            store512(self.0, &mut dst[first]);
         }
         /// `self + b`.
         #[inline]
@@ -204,6 +205,103 @@ mod simd {
         }
     }
 
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn load512(a: &Lane) -> __m512d {
+        // SAFETY: `a` is LANES = 8 readable f64 (an unaligned load); AVX-512F is enabled.
+        unsafe { _mm512_loadu_pd(a.as_ptr()) }
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn store512(v: __m512d, a: &mut Lane) {
+        // SAFETY: `a` is LANES = 8 writable f64 (an unaligned store); AVX-512F is enabled.
+        unsafe { _mm512_storeu_pd(a.as_mut_ptr(), v) }
+    }
+
+    /// Two groups of eight lanes in two AVX-512 registers.
+    #[derive(Clone, Copy)]
+    pub(super) struct Avx512x2([__m512d; 2]);
+
+    impl Avx512x2 {
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        fn map2(self, b: Self, f: impl Fn(__m512d, __m512d) -> __m512d) -> Self {
+            Avx512x2([f(self.0[0], b.0[0]), f(self.0[1], b.0[1])])
+        }
+        /// Every lane `v`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn splat(v: f64) -> Self {
+            Avx512x2([_mm512_set1_pd(v); 2])
+        }
+        /// The lanes of `src[first]` and `src[first + stride]`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn load_at(src: &[Lane], first: usize, stride: usize) -> Self {
+            Avx512x2([load512(&src[first]), load512(&src[first + stride])])
+        }
+        /// Writes the lanes to `dst[first]` and `dst[first + stride]`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn store_at(self, dst: &mut [Lane], first: usize, stride: usize) {
+            store512(self.0[0], &mut dst[first]);
+            store512(self.0[1], &mut dst[first + stride]);
+        }
+        /// `self + b`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn add(self, b: Self) -> Self {
+            self.map2(b, |x, y| _mm512_add_pd(x, y))
+        }
+        /// `self − b`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn sub(self, b: Self) -> Self {
+            self.map2(b, |x, y| _mm512_sub_pd(x, y))
+        }
+        /// `self · b`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn mul(self, b: Self) -> Self {
+            self.map2(b, |x, y| _mm512_mul_pd(x, y))
+        }
+        /// `self · b + c`, fused.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn mul_add(self, b: Self, c: Self) -> Self {
+            Avx512x2([
+                _mm512_fmadd_pd(self.0[0], b.0[0], c.0[0]),
+                _mm512_fmadd_pd(self.0[1], b.0[1], c.0[1]),
+            ])
+        }
+        /// `c − self · b`, fused.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn neg_mul_add(self, b: Self, c: Self) -> Self {
+            Avx512x2([
+                _mm512_fnmadd_pd(self.0[0], b.0[0], c.0[0]),
+                _mm512_fnmadd_pd(self.0[1], b.0[1], c.0[1]),
+            ])
+        }
+        /// `√self`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn sqrt(self) -> Self {
+            Avx512x2([_mm512_sqrt_pd(self.0[0]), _mm512_sqrt_pd(self.0[1])])
+        }
+        /// `num / self`, and 0 where `self` is 0.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn recip_scaled_or_zero(self, num: f64) -> Self {
+            let f = |d: __m512d| {
+                let nonzero = _mm512_cmp_pd_mask::<_CMP_NEQ_OQ>(d, _mm512_setzero_pd());
+                _mm512_maskz_div_pd(nonzero, _mm512_set1_pd(num), d)
+            };
+            Avx512x2([f(self.0[0]), f(self.0[1])])
+        }
+    }
+
     /// Eight lanes in two AVX2 registers.
     #[derive(Clone, Copy)]
     pub(super) struct Avx2([__m256d; 2]);
@@ -220,19 +318,19 @@ mod simd {
         pub(super) fn splat(v: f64) -> Self {
             Avx2([_mm256_set1_pd(v); 2])
         }
-        /// The lanes of `a`.
+        /// The lanes of `src[first]`.
         #[inline]
         #[target_feature(enable = "avx2,fma")]
-        pub(super) fn load(a: &Lane) -> Self {
-            let (lo, hi) = a.split_at(LANES / 2);
+        pub(super) fn load_at(src: &[Lane], first: usize, _stride: usize) -> Self {
+            let (lo, hi) = src[first].split_at(LANES / 2);
             // SAFETY: `lo` and `hi` are 4 readable f64 each (unaligned loads); AVX is enabled.
             Avx2(unsafe { [_mm256_loadu_pd(lo.as_ptr()), _mm256_loadu_pd(hi.as_ptr())] })
         }
-        /// Writes the lanes to `a`.
+        /// Writes the lanes to `dst[first]`.
         #[inline]
         #[target_feature(enable = "avx2,fma")]
-        pub(super) fn store(self, a: &mut Lane) {
-            let (lo, hi) = a.split_at_mut(LANES / 2);
+        pub(super) fn store_at(self, dst: &mut [Lane], first: usize, _stride: usize) {
+            let (lo, hi) = dst[first].split_at_mut(LANES / 2);
             // SAFETY: `lo` and `hi` are 4 writable f64 each (unaligned stores); AVX is enabled.
             unsafe {
                 _mm256_storeu_pd(lo.as_mut_ptr(), self.0[0]);
@@ -308,29 +406,33 @@ impl FrozenChain {
             })
     }
 
-    /// [`FrozenChain::distance_gradient`] for [`LANES`] configurations at once: `trig[j]` holds
-    /// the sines (`[0]`) and cosines (`[1]`) of joint `j` of the configurations (see
-    /// [`joint_trig_lanes`]). Writes the distance `|P|` of each configuration to `distance_m`
-    /// (m, base frame origin to end point) and, when `grad` is given (length `n_params()`),
-    /// `grad[j][l] = grad_scale · ∂|P_l|/∂x_j` (`grad_scale` per m: m/m for lengths, m/rad for
-    /// angles, times its unit; 0 where `P = 0`). The distances are the same whether or not
-    /// `grad` is given; both agree with the scalar path to rounding.
+    /// [`FrozenChain::distance_gradient`] for groups of [`LANES`] configurations, `n_groups =
+    /// distance_m.len()` of them: `trig[g · n_joints() + j]` holds the sines (`[0]`) and
+    /// cosines (`[1]`) of joint `j` of the configurations of group `g` (see
+    /// [`joint_trig_lanes`]). Writes the distance `|P|` of each configuration to
+    /// `distance_m[g]` (m, base frame origin to end point) and, when `grad` is given (length
+    /// `n_groups · n_params()`), `grad[g · n_params() + j][l] = grad_scale · ∂|P|/∂x_j` of
+    /// configuration `l` of group `g` (`grad_scale` per m: m/m for lengths, m/rad for angles,
+    /// times its unit; 0 where `P = 0`). The results do not depend on the grouping, and the
+    /// distances not on whether `grad` is given; they agree with the scalar path to rounding.
+    /// Two or more groups per call let the CPU overlap two groups' operations.
     ///
     /// Source: the distance gradient of [`FrozenChain::distance_gradient`] (paper eq. 5), with
     /// the end point and its direction carried through the runs' frames (module docs).
     ///
     /// # Panics
     ///
-    /// If [`FrozenChain::supports_lanes`] is false, `trig.len() != n_joints()`, or
-    /// `grad.len() != n_params()`.
+    /// If [`FrozenChain::supports_lanes`] is false, `trig.len() != n_groups · n_joints()`, or
+    /// `grad.len() != n_groups · n_params()`.
     #[track_caller]
     pub fn distance_gradient_lanes(
         &self,
         trig: &[[[f64; LANES]; 2]],
         grad_scale: f64,
-        distance_m: &mut [f64; LANES],
+        distance_m: &mut [[f64; LANES]],
         grad: Option<&mut [[f64; LANES]]>,
     ) {
+        let n_groups = distance_m.len();
         assert!(
             self.supports_lanes(),
             "the lane kernel needs revolute joints about coordinate axes and at most {} joints",
@@ -338,17 +440,17 @@ impl FrozenChain {
         );
         assert_eq!(
             trig.len(),
-            self.n_joints,
-            "trig has length {}, but the chain has {} joints",
+            n_groups * self.n_joints,
+            "trig has length {}, but {n_groups} groups of the chain have {} joints",
             trig.len(),
-            self.n_joints
+            n_groups * self.n_joints
         );
         match grad {
             Some(g) => {
                 assert_eq!(
                     g.len(),
-                    self.n_params,
-                    "grad has length {}, expected {} parameters",
+                    n_groups * self.n_params,
+                    "grad has length {}, expected {n_groups} groups of {} parameters",
                     g.len(),
                     self.n_params
                 );
@@ -360,20 +462,23 @@ impl FrozenChain {
 }
 
 /// Defines the lane kernel `$name::<GRAD>(chain, trig, grad_scale, distance_m, grad)` on the
-/// vector type `$v` (see [`Portable`]), with the attributes given (its target features).
-/// `grad` is empty unless `GRAD`. A macro rather than a generic function: the operations of
-/// `$v` may only be called from a function compiled with its instruction set.
+/// vector type `$v` (see [`Portable`]), with the attributes given (its target features), for
+/// as many groups of lanes as `$v` holds: `trig` (flattened: `[g][joint][sin, cos]`),
+/// `distance_m` and `grad` (`[g][param]`, empty unless `GRAD`) as in
+/// [`FrozenChain::distance_gradient_lanes`]. A macro rather than a generic function: the
+/// operations of `$v` may only be called from a function compiled with its instruction set.
 macro_rules! lane_kernel {
     ($(#[$attr:meta])* $name:ident, $v:ty) => {
         $(#[$attr])*
         fn $name<const GRAD: bool>(
             chain: &FrozenChain,
-            trig: &[[Lane; 2]],
+            trig: &[Lane],
             grad_scale: f64,
-            distance_m: &mut Lane,
+            distance_m: &mut [Lane],
             grad: &mut [Lane],
         ) {
             type V = $v;
+            let (trig_stride, np) = (2 * chain.n_joints, chain.n_params);
             // `Rot(e_k, θ)·p` (or its transpose for `back`) for a coordinate axis `e_k`
             // (`i, j, k` cyclic: `p_i ↦ c·p_i − s·p_j`, `p_j ↦ s·p_i + c·p_j`), each axis
             // written out so that the coordinates stay in registers.
@@ -411,7 +516,7 @@ macro_rules! lane_kernel {
             };
             let segments = &chain.segments;
             let Some((last, rest)) = segments.split_last() else {
-                *distance_m = [0.0; LANES];
+                distance_m.fill([0.0; LANES]);
                 return;
             };
             // Backwards: T_k = F_k · J_k(q) · T_{k+1}, the end point in the start frame of run
@@ -422,8 +527,9 @@ macro_rules! lane_kernel {
             let mut tips = [p; MAX_SEGMENTS];
             for (k, seg) in rest.iter().enumerate().rev() {
                 if let Some(screw) = &seg.joint {
-                    let [s, c] = &trig[screw.joint];
-                    p = rotate!(p, screw.axis, V::load(s), V::load(c), false);
+                    let s = V::load_at(trig, 2 * screw.joint, trig_stride);
+                    let c = V::load_at(trig, 2 * screw.joint + 1, trig_stride);
+                    p = rotate!(p, screw.axis, s, c, false);
                 }
                 let f = &seg.lane_fixed;
                 let r = &f.rot;
@@ -437,7 +543,7 @@ macro_rules! lane_kernel {
                 }
             }
             let norm = p[2].mul_add(p[2], p[1].mul_add(p[1], p[0].mul(p[0]))).sqrt();
-            norm.store(distance_m);
+            norm.store_at(distance_m, 0, 1);
             if !GRAD {
                 return;
             }
@@ -466,9 +572,12 @@ macro_rules! lane_kernel {
                         } else {
                             dot3_s(&ul, a)
                         };
-                        let g = &mut grad[tap.param];
-                        let g_new = if tap.first { term } else { V::load(g).add(term) };
-                        g_new.store(g);
+                        let g = if tap.first {
+                            term
+                        } else {
+                            V::load_at(grad, tap.param, np).add(term)
+                        };
+                        g.store_at(grad, tap.param, np);
                     }
                 }
                 if let Some(screw) = &seg.joint {
@@ -478,8 +587,9 @@ macro_rules! lane_kernel {
                         dot3_s(&ul, [r[(0, 1)], r[(1, 1)], r[(2, 1)]]),
                         dot3_s(&ul, [r[(0, 2)], r[(1, 2)], r[(2, 2)]]),
                     ];
-                    let [s, c] = &trig[screw.joint];
-                    ul = rotate!(w, screw.axis, V::load(s), V::load(c), true);
+                    let s = V::load_at(trig, 2 * screw.joint, trig_stride);
+                    let c = V::load_at(trig, 2 * screw.joint + 1, trig_stride);
+                    ul = rotate!(w, screw.axis, s, c, true);
                 }
             }
         }
@@ -501,64 +611,98 @@ lane_kernel!(
 
 #[cfg(target_arch = "x86_64")]
 lane_kernel!(
+    /// The kernel in AVX-512 registers, two groups at once.
+    #[target_feature(enable = "avx512f")]
+    kernel_avx512x2,
+    simd::Avx512x2
+);
+
+#[cfg(target_arch = "x86_64")]
+lane_kernel!(
     /// The kernel in AVX2 registers, with FMA.
     #[target_feature(enable = "avx2,fma")]
     kernel_avx2,
     simd::Avx2
 );
 
-/// The results `(instruction set, distances, gradient)` of every kernel this CPU runs, with
-/// the gradient (length `n_params()`), for tests; the gradient-free runs must give the same
-/// distances (checked here).
+/// The results `(kernel, distances, gradient)` of every kernel this CPU runs on two groups
+/// (`trig` of `2 · n_joints()` entries), with the gradient, for tests; the gradient-free
+/// runs must give the same distances (checked here).
 #[cfg(test)]
 pub(crate) fn every_kernel(
     chain: &FrozenChain,
     trig: &[[Lane; 2]],
     grad_scale: f64,
-) -> Vec<(&'static str, Lane, Vec<Lane>)> {
+) -> Vec<(&'static str, Vec<Lane>, Vec<Lane>)> {
+    type Kernel<'a> = &'a dyn Fn(&[Lane], &mut [Lane], &mut [Lane], bool);
+    let (trig, nt, np) = (trig.as_flattened(), 2 * chain.n_joints, chain.n_params);
     let mut results = Vec::new();
-    let mut run = |name, f: &dyn Fn(&mut Lane, &mut [Lane], bool)| {
-        let mut dist = [0.0; LANES];
-        let mut grad = vec![[f64::NAN; LANES]; chain.n_params];
-        f(&mut dist, &mut grad, true);
-        let mut dist_only = [0.0; LANES];
-        f(&mut dist_only, &mut [], false);
+    // `per_group`: the kernel takes one group at a time, else both.
+    let mut run = |name, per_group: bool, f: Kernel<'_>| {
+        let mut dist = vec![[0.0; LANES]; 2];
+        let mut grad = vec![[f64::NAN; LANES]; 2 * np];
+        let mut dist_only = vec![[0.0; LANES]; 2];
+        if per_group {
+            for g in 0..2 {
+                let t = &trig[g * nt..(g + 1) * nt];
+                f(
+                    t,
+                    &mut dist[g..g + 1],
+                    &mut grad[g * np..(g + 1) * np],
+                    true,
+                );
+                f(t, &mut dist_only[g..g + 1], &mut [], false);
+            }
+        } else {
+            f(trig, &mut dist, &mut grad, true);
+            f(trig, &mut dist_only, &mut [], false);
+        }
         assert_eq!(
             dist, dist_only,
             "{name}: distances with and without the gradient"
         );
         results.push((name, dist, grad));
     };
-    run("portable", &|d, g, with_grad| {
+    run("portable", true, &|t, d, g, with_grad| {
         if with_grad {
-            kernel_portable::<true>(chain, trig, grad_scale, d, g)
+            kernel_portable::<true>(chain, t, grad_scale, d, g)
         } else {
-            kernel_portable::<false>(chain, trig, grad_scale, d, g)
+            kernel_portable::<false>(chain, t, grad_scale, d, g)
         }
     });
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
         {
-            run("avx2", &|d, g, with_grad| {
+            run("avx2", true, &|t, d, g, with_grad| {
                 // SAFETY: the CPU has AVX2 and FMA (checked just above).
                 unsafe {
                     if with_grad {
-                        kernel_avx2::<true>(chain, trig, grad_scale, d, g)
+                        kernel_avx2::<true>(chain, t, grad_scale, d, g)
                     } else {
-                        kernel_avx2::<false>(chain, trig, grad_scale, d, g)
+                        kernel_avx2::<false>(chain, t, grad_scale, d, g)
                     }
                 }
             });
         }
         if std::arch::is_x86_feature_detected!("avx512f") {
-            run("avx512", &|d, g, with_grad| {
+            run("avx512", true, &|t, d, g, with_grad| {
                 // SAFETY: the CPU has AVX-512F (checked just above).
                 unsafe {
                     if with_grad {
-                        kernel_avx512::<true>(chain, trig, grad_scale, d, g)
+                        kernel_avx512::<true>(chain, t, grad_scale, d, g)
                     } else {
-                        kernel_avx512::<false>(chain, trig, grad_scale, d, g)
+                        kernel_avx512::<false>(chain, t, grad_scale, d, g)
+                    }
+                }
+            });
+            run("avx512x2", false, &|t, d, g, with_grad| {
+                // SAFETY: the CPU has AVX-512F (checked just above).
+                unsafe {
+                    if with_grad {
+                        kernel_avx512x2::<true>(chain, t, grad_scale, d, g)
+                    } else {
+                        kernel_avx512x2::<false>(chain, t, grad_scale, d, g)
                     }
                 }
             });
@@ -567,28 +711,58 @@ pub(crate) fn every_kernel(
     results
 }
 
-/// Runs the lane kernel compiled for the best instruction set of this CPU.
+/// Runs the lane kernel compiled for the best instruction set of this CPU on every group
+/// (two at a time where the registers allow).
 #[inline(always)]
 fn dispatch<const GRAD: bool>(
     chain: &FrozenChain,
     trig: &[[Lane; 2]],
     grad_scale: f64,
-    distance_m: &mut Lane,
+    distance_m: &mut [Lane],
     grad: &mut [Lane],
 ) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU has AVX-512F (checked just above).
-            unsafe { kernel_avx512::<GRAD>(chain, trig, grad_scale, distance_m, grad) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+    let trig = trig.as_flattened();
+    let (nt, np) = (2 * chain.n_joints, if GRAD { chain.n_params } else { 0 });
+    // Groups `g..g + k` of the arguments.
+    let mut g = 0;
+    while g < distance_m.len() {
+        #[cfg(target_arch = "x86_64")]
         {
-            // SAFETY: the CPU has AVX2 and FMA (checked just above).
-            unsafe { kernel_avx2::<GRAD>(chain, trig, grad_scale, distance_m, grad) };
-            return;
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                let k = if g + 2 <= distance_m.len() { 2 } else { 1 };
+                let (t, d, gr) = (
+                    &trig[g * nt..(g + k) * nt],
+                    &mut distance_m[g..g + k],
+                    &mut grad[g * np..(g + k) * np],
+                );
+                if k == 2 {
+                    // SAFETY: the CPU has AVX-512F (checked just above).
+                    unsafe { kernel_avx512x2::<GRAD>(chain, t, grad_scale, d, gr) };
+                } else {
+                    // SAFETY: the CPU has AVX-512F (checked just above).
+                    unsafe { kernel_avx512::<GRAD>(chain, t, grad_scale, d, gr) };
+                }
+                g += k;
+                continue;
+            }
         }
+        let (t, d, gr) = (
+            &trig[g * nt..(g + 1) * nt],
+            &mut distance_m[g..g + 1],
+            &mut grad[g * np..(g + 1) * np],
+        );
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                // SAFETY: the CPU has AVX2 and FMA (checked just above).
+                unsafe { kernel_avx2::<GRAD>(chain, t, grad_scale, d, gr) };
+                g += 1;
+                continue;
+            }
+        }
+        kernel_portable::<GRAD>(chain, t, grad_scale, d, gr);
+        g += 1;
     }
-    kernel_portable::<GRAD>(chain, trig, grad_scale, distance_m, grad);
 }

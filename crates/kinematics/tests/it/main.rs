@@ -246,21 +246,34 @@ proptest! {
         let qs: Vec<Vec<f64>> = qs.into_iter().map(|mut q| { q.truncate(chain.n_joints()); q }).collect();
         let trigs: Vec<_> = qs.iter().map(|q| joint_trig(q)).collect();
         let lane_trig = joint_trig_lanes(std::array::from_fn(|l| qs[l].as_slice()));
-        let mut dist = [0.0; LANES];
+        let mut dist = [[0.0; LANES]];
         let mut grad = vec![[0.0; LANES]; n];
         frozen.distance_gradient_lanes(&lane_trig, 1.0, &mut dist, Some(&mut grad));
+        let dist = dist[0];
         // The gradient scales with `grad_scale`; the distances do not depend on it.
-        let mut dist_scaled = [0.0; LANES];
+        let mut dist_scaled = [[0.0; LANES]];
         let mut grad_scaled = vec![[0.0; LANES]; n];
         frozen.distance_gradient_lanes(&lane_trig, 0.5, &mut dist_scaled, Some(&mut grad_scaled));
+        let dist_scaled = dist_scaled[0];
         prop_assert_eq!(dist_scaled, dist);
         for (g, h) in grad.iter().zip(&grad_scaled) {
             for l in 0..LANES {
                 prop_assert!((0.5 * g[l] - h[l]).abs() <= 1e-15 * g[l].abs().max(1.0), "{} vs {}", g[l], h[l]);
             }
         }
-        let mut dist_only = [0.0; LANES];
+        let mut dist_only = [[0.0; LANES]];
         frozen.distance_gradient_lanes(&lane_trig, 1.0, &mut dist_only, None);
+        let dist_only = dist_only[0];
+        // Three groups in one call (the second and third the first again): the same results
+        // for each group as the call with one.
+        let trig3: Vec<_> = lane_trig.iter().chain(&lane_trig).chain(&lane_trig).copied().collect();
+        let mut dist3 = [[0.0; LANES]; 3];
+        let mut grad3 = vec![[0.0; LANES]; 3 * n];
+        frozen.distance_gradient_lanes(&trig3, 1.0, &mut dist3, Some(&mut grad3));
+        for g in 0..3 {
+            prop_assert_eq!(dist3[g], dist);
+            prop_assert_eq!(&grad3[g * n..(g + 1) * n], grad.as_slice());
+        }
         let mut ws = FkWorkspace::new(&chain);
         let mut scalar = vec![0.0; n];
         for (l, q) in qs.iter().enumerate() {
