@@ -251,6 +251,8 @@ pub struct FrozenChain {
     /// Whether every parameter has a distance tap (else the lane kernel zeroes the gradient
     /// first).
     all_params_tapped: bool,
+    /// [`FrozenChain::supports_lanes`], decided once per freeze.
+    lanes: bool,
 }
 
 /// `[sin q_j, cos q_j]` for each joint angle (rad), the form [`FrozenChain::end_point_trig`]
@@ -272,6 +274,27 @@ impl Chain {
     /// If `x.len() != n_params()`.
     #[track_caller]
     pub fn freeze(&self, x: &[f64]) -> FrozenChain {
+        let mut frozen = FrozenChain {
+            segments: Vec::with_capacity(self.n_joints() + 1),
+            taps: Vec::with_capacity(self.n_params()),
+            distance_taps: Vec::with_capacity(self.n_params()),
+            n_params: self.n_params(),
+            n_joints: self.n_joints(),
+            all_params_tapped: true,
+            lanes: false,
+        };
+        self.freeze_into(x, &mut frozen);
+        frozen
+    }
+
+    /// [`Chain::freeze`] into `frozen` (which may come from another `x` or another chain),
+    /// reusing its allocations: for callers that freeze at every evaluation.
+    ///
+    /// # Panics
+    ///
+    /// If `x.len() != n_params()`.
+    #[track_caller]
+    pub fn freeze_into(&self, x: &[f64], frozen: &mut FrozenChain) {
         assert_eq!(
             x.len(),
             self.n_params(),
@@ -279,10 +302,16 @@ impl Chain {
             x.len(),
             self.n_params()
         );
-        let mut segments = Vec::with_capacity(self.n_joints() + 1);
+        let FrozenChain {
+            segments,
+            taps,
+            distance_taps,
+            ..
+        } = frozen;
+        segments.clear();
+        taps.clear();
+        distance_taps.clear();
         let mut run = Rigid::identity();
-        let mut taps = Vec::with_capacity(self.n_params());
-        let mut distance_taps = Vec::with_capacity(self.n_params());
         let mut first_tap = 0;
         for factor in self.factors() {
             match factor {
@@ -330,7 +359,7 @@ impl Chain {
                     let (sin_off, cos_off) = offset.sin_cos();
                     segments.push(Segment::new(
                         run,
-                        &taps,
+                        taps,
                         first_tap,
                         Some(JointScrew {
                             motion: *motion,
@@ -341,33 +370,37 @@ impl Chain {
                             sin_off,
                             cos_off,
                         }),
-                        &mut distance_taps,
+                        distance_taps,
                     ));
                     first_tap = taps.len();
                     run = Rigid::identity();
                 }
             }
         }
-        segments.push(Segment::new(
-            run,
-            &taps,
-            first_tap,
-            None,
-            &mut distance_taps,
-        ));
-        let mut tapped = vec![false; self.n_params()];
-        for tap in &mut distance_taps {
-            tap.first = !tapped[tap.param];
-            tapped[tap.param] = true;
+        segments.push(Segment::new(run, taps, first_tap, None, distance_taps));
+        // Which parameters have a tap yet: bits of a u128 for up to 128 parameters (no
+        // allocation), a vector beyond.
+        let n_params = self.n_params();
+        let mut bits = 0u128;
+        let mut tapped = vec![false; if n_params > 128 { n_params } else { 0 }];
+        let mut n_tapped = 0;
+        for tap in distance_taps.iter_mut() {
+            let seen = match tapped.get_mut(tap.param) {
+                Some(t) => std::mem::replace(t, true),
+                None => {
+                    let bit = 1u128 << tap.param;
+                    let seen = bits & bit != 0;
+                    bits |= bit;
+                    seen
+                }
+            };
+            tap.first = !seen;
+            n_tapped += usize::from(!seen);
         }
-        FrozenChain {
-            segments,
-            taps,
-            distance_taps,
-            n_params: self.n_params(),
-            n_joints: self.n_joints(),
-            all_params_tapped: tapped.iter().all(|&t| t),
-        }
+        frozen.n_params = n_params;
+        frozen.n_joints = self.n_joints();
+        frozen.all_params_tapped = n_tapped == n_params;
+        frozen.lanes = lanes::lanes_apply(&frozen.segments);
     }
 }
 

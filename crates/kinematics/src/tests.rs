@@ -640,3 +640,21 @@ fn every_lane_kernel_agrees_with_the_scalar_distance_gradient() {
         assert_eq!(pair[0].2, pair[1].2, "{} vs {}", pair[0].0, pair[1].0);
     }
 }
+
+#[test]
+fn freeze_into_reuses_a_frozen_chain_of_any_x_or_chain() {
+    let chain = paper_chain();
+    let n = chain.n_params();
+    let x1: Vec<f64> = (0..n).map(|j| 1e-3 * (j as f64 - 16.0)).collect();
+    let x2: Vec<f64> = (0..n).map(|j| 2e-3 * ((j * 5 % 7) as f64 - 3.0)).collect();
+    let mut frozen = chain.freeze(&x1);
+    chain.freeze_into(&x2, &mut frozen);
+    assert_eq!(frozen, chain.freeze(&x2));
+    // From a frozen chain of another (shorter) chain.
+    let short = Chain::from_dh(&[row(DhConvention::Standard, 0.3, 0.0, Some(0))])
+        .expect("one revolute row");
+    let mut other = short.freeze(&vec![0.0; short.n_params()]);
+    chain.freeze_into(&x1, &mut other);
+    assert_eq!(other, chain.freeze(&x1));
+    assert!(other.supports_lanes());
+}

@@ -5,10 +5,12 @@ use crate::{CalibratedModel, Error, GravityCompliance, JointHarmonics};
 use faer::{Col, ColMut, ColRef, Mat, MatMut};
 use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
 use hapcal_kinematics::{
-    Chain, FkWorkspace, LANES, ParamUnit, Point3, Vector3, joint_trig, joint_trig_lanes,
+    Chain, FkWorkspace, FrozenChain, LANES, ParamUnit, Point3, Vector3, joint_trig,
+    joint_trig_lanes,
 };
 use rayon::prelude::*;
 use std::ops::Range;
+use std::sync::{Arc, Mutex};
 
 /// What one configuration measured.
 #[derive(Clone, Debug, PartialEq)]
@@ -116,9 +118,19 @@ pub struct CalibrationProblem {
     lane_trig: Vec<[[f64; LANES]; 2]>,
     /// Measured distance of each lane group's rows, m.
     lane_distance_m: Vec<[f64; LANES]>,
+    /// The chain frozen at the kinematic part of the last `x` evaluated
+    /// ([`Self::frozen_at`]).
+    frozen: Mutex<FrozenCache>,
     /// Row blocks for the streaming back end: (rows, residual rows); the last block also
     /// holds the point distances.
     blocks: Vec<(Range<usize>, Range<usize>)>,
+}
+
+/// The chain frozen at `x_kin` (`None` before the first evaluation).
+#[derive(Debug, Default)]
+struct FrozenCache {
+    x_kin: Vec<f64>,
+    chain: Option<Arc<FrozenChain>>,
 }
 
 /// Rows per block of the streaming back end: large enough to amortise the per-block set-up
@@ -376,6 +388,7 @@ impl CalibrationProblem {
             lane_groups,
             lane_trig,
             lane_distance_m,
+            frozen: Mutex::default(),
             blocks,
         })
     }
@@ -543,32 +556,53 @@ impl CalibrationProblem {
         out: Option<ColMut<'_, f64>>,
         jac: Option<MatMut<'_, f64>>,
     ) {
-        let Some(jac) = jac else {
-            self.eval_rows_in(x, rows, with_point_distances, out, None);
-            return;
+        // The residuals as a slice: `out` itself when its rows are contiguous (row stride 1),
+        // else a copy written back at the end.
+        let mut strided = None;
+        let mut out_copy = Vec::new();
+        let out = match out {
+            Some(o) if o.row_stride() == 1 => o.try_as_col_major_mut().map(|o| o.as_slice_mut()),
+            Some(o) => {
+                out_copy.resize(o.nrows(), 0.0);
+                strided = Some(o);
+                Some(out_copy.as_mut_slice())
+            }
+            None => None,
         };
-        let mut jac = jac;
-        if let Some(j) = jac.as_mut().try_as_col_major_mut() {
-            let mut cols: Vec<&mut [f64]> = j.col_iter_mut().map(|c| c.as_slice_mut()).collect();
-            self.eval_rows_in(x, rows, with_point_distances, out, Some(&mut cols));
-            return;
+        match jac {
+            None => self.eval_rows_in(x, rows, with_point_distances, out, None),
+            Some(mut jac) => {
+                if let Some(j) = jac.as_mut().try_as_col_major_mut() {
+                    let mut cols: Vec<&mut [f64]> =
+                        j.col_iter_mut().map(|c| c.as_slice_mut()).collect();
+                    self.eval_rows_in(x, rows, with_point_distances, out, Some(&mut cols));
+                } else {
+                    // A Jacobian view without contiguous columns: through a column-major copy.
+                    let mut tmp = Mat::<f64>::zeros(jac.nrows(), jac.ncols());
+                    if let Some(t) = tmp.as_mut().try_as_col_major_mut() {
+                        let mut cols: Vec<&mut [f64]> =
+                            t.col_iter_mut().map(|c| c.as_slice_mut()).collect();
+                        self.eval_rows_in(x, rows, with_point_distances, out, Some(&mut cols));
+                    }
+                    jac.copy_from(&tmp);
+                }
+            }
         }
-        // A Jacobian view without contiguous columns: through a column-major copy.
-        let mut tmp = Mat::<f64>::zeros(jac.nrows(), jac.ncols());
-        if let Some(t) = tmp.as_mut().try_as_col_major_mut() {
-            let mut cols: Vec<&mut [f64]> = t.col_iter_mut().map(|c| c.as_slice_mut()).collect();
-            self.eval_rows_in(x, rows, with_point_distances, out, Some(&mut cols));
+        if let Some(mut o) = strided {
+            for (i, v) in out_copy.iter().enumerate() {
+                o[i] = *v;
+            }
         }
-        jac.copy_from(&tmp);
     }
 
-    /// [`Self::eval_rows`] with the Jacobian as its columns (`jac[col][row]`).
+    /// [`Self::eval_rows`] with the residuals as a slice and the Jacobian as its columns
+    /// (`jac[col][row]`).
     fn eval_rows_in(
         &self,
         x: ColRef<'_, f64>,
         rows: Range<usize>,
         with_point_distances: bool,
-        mut out: Option<ColMut<'_, f64>>,
+        mut out: Option<&mut [f64]>,
         mut jac: Option<&mut [&mut [f64]]>,
     ) {
         let n_kin = self.chain.n_params();
@@ -580,9 +614,8 @@ impl CalibrationProblem {
         } else {
             &[]
         };
-        let x_kin: Vec<f64> = (0..n_kin).map(|i| x[i]).collect();
         // Constant factors between joints folded once for this x (FrozenChain).
-        let frozen = self.chain.freeze(&x_kin);
+        let frozen = self.frozen_at(x);
         // Every row writes all kinematic, compliance and harmonic columns; only the columns of
         // the unknown points and the point-distance rows need zeros first.
         if let Some(j) = jac.as_mut() {
@@ -652,10 +685,10 @@ impl CalibrationProblem {
                     None => frozen.distance_gradient_lanes(trig, 1.0, dist, None),
                 }
                 if let Some(o) = out.as_mut() {
-                    for (g, d) in dist.iter().enumerate() {
-                        let measured = &self.lane_distance_m[group + g];
+                    let o = o[r..r + n_rows].chunks_exact_mut(LANES);
+                    for ((o, d), measured) in o.zip(&*dist).zip(&self.lane_distance_m[group..]) {
                         for l in 0..LANES {
-                            o[r + g * LANES + l] = (d[l] - measured[l]) / s_distance;
+                            o[l] = (d[l] - measured[l]) / s_distance;
                         }
                     }
                 }
@@ -704,6 +737,7 @@ impl CalibrationProblem {
             // ∂p/∂k_j = (∂p/∂q_j)·τ̂_j (and ∂p/∂a_jh = (∂p/∂q_j)·sin(h·q_j), …), from the
             // geometric Jacobian's linear rows.
             let jq = if n_comp > 0 && jac.is_some() {
+                let x_kin: Vec<f64> = (0..n_kin).map(|i| x[i]).collect();
                 Some(self.chain.geometric_jacobian(&x_kin, q_eff))
             } else {
                 None
@@ -791,6 +825,41 @@ impl CalibrationProblem {
                 }
             }
             r += 1;
+        }
+    }
+
+    /// The chain frozen at the kinematic part of `x`: the cached one while `x` does not change
+    /// (LM evaluates the Jacobian at the point whose residuals it accepted; the row blocks of
+    /// one evaluation, in parallel or streamed, share it), else frozen again into the cached
+    /// one's allocations when no evaluation still holds it. Bit-for-bit the chain
+    /// [`Chain::freeze`] gives.
+    fn frozen_at(&self, x: ColRef<'_, f64>) -> Arc<FrozenChain> {
+        let n_kin = self.chain.n_params();
+        let x_kin = (0..n_kin).map(|i| x[i]);
+        let Ok(mut cache) = self.frozen.lock() else {
+            // A thread panicked while freezing: leave the cache alone.
+            return Arc::new(self.chain.freeze(&x_kin.collect::<Vec<_>>()));
+        };
+        let cache = &mut *cache;
+        if let Some(frozen) = &cache.chain
+            && cache.x_kin.len() == n_kin
+            && cache
+                .x_kin
+                .iter()
+                .zip(x_kin.clone())
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        {
+            return Arc::clone(frozen);
+        }
+        cache.x_kin.clear();
+        cache.x_kin.extend(x_kin);
+        match cache.chain.as_mut().and_then(Arc::get_mut) {
+            Some(frozen) => self.chain.freeze_into(&cache.x_kin, frozen),
+            None => cache.chain = Some(Arc::new(self.chain.freeze(&cache.x_kin))),
+        }
+        match &cache.chain {
+            Some(frozen) => Arc::clone(frozen),
+            None => Arc::new(self.chain.freeze(&cache.x_kin)),
         }
     }
 

@@ -22,7 +22,7 @@
 //! operations differ from the scalar path's, so the two agree to rounding (a few ulps), not
 //! bit for bit.
 
-use super::{Axis, FrozenChain};
+use super::{Axis, FrozenChain, Segment};
 use crate::chain::Motion;
 
 /// Number of configurations evaluated together by [`FrozenChain::distance_gradient_lanes`].
@@ -392,18 +392,23 @@ mod simd {
     }
 }
 
+/// [`FrozenChain::supports_lanes`] for the runs `segments`.
+pub(super) fn lanes_apply(segments: &[Segment]) -> bool {
+    segments.len() <= MAX_SEGMENTS
+        && segments.iter().all(|s| {
+            s.joint
+                .as_ref()
+                .is_none_or(|j| j.motion == Motion::Rotation && !matches!(j.axis, Axis::General(_)))
+        })
+}
+
 impl FrozenChain {
     /// Whether [`FrozenChain::distance_gradient_lanes`] applies: every joint is revolute about a
     /// coordinate axis of its frame (all D-H chains; URDF joints with a general axis and
     /// prismatic joints take the scalar path) and the chain has at most 15 joints. It depends
     /// on the chain's structure only, not on the frozen `x`.
     pub fn supports_lanes(&self) -> bool {
-        self.segments.len() <= MAX_SEGMENTS
-            && self.segments.iter().all(|s| {
-                s.joint.as_ref().is_none_or(|j| {
-                    j.motion == Motion::Rotation && !matches!(j.axis, Axis::General(_))
-                })
-            })
+        self.lanes
     }
 
     /// [`FrozenChain::distance_gradient`] for groups of [`LANES`] configurations, `n_groups =
