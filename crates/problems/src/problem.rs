@@ -634,7 +634,6 @@ impl CalibrationProblem {
         let mut buf = Vec::new();
         let mut q_buf = Vec::new();
         let mut grad = Vec::new();
-        let mut lane_grad = Vec::new();
         let n_joints = self.chain.n_joints();
         let s_distance = self.weights.sigma_distance_m;
         let inv_s_distance = 1.0 / s_distance;
@@ -667,20 +666,11 @@ impl CalibrationProblem {
                 let mut dist = [[0.0; LANES]; 2];
                 let dist = &mut dist[..n_groups];
                 match jac.as_mut() {
+                    // The Jacobian rows are ∂|P|/∂x / σ: 1/σ folded into the kernel (within
+                    // an ulp of the division; the residuals keep the division), written
+                    // straight into the kinematic columns.
                     Some(j) => {
-                        if lane_grad.is_empty() {
-                            lane_grad = vec![[0.0; LANES]; 2 * n_kin];
-                        }
-                        let lane_grad = &mut lane_grad[..n_groups * n_kin];
-                        // The Jacobian rows are ∂|P|/∂x / σ: 1/σ folded into the kernel
-                        // (within an ulp of the division; the residuals keep the division).
-                        frozen.distance_gradient_lanes(trig, inv_s_distance, dist, Some(lane_grad));
-                        for (g, group_grad) in lane_grad.chunks_exact(n_kin).enumerate() {
-                            let rows = r + g * LANES..r + (g + 1) * LANES;
-                            for (c, v) in j.iter_mut().zip(group_grad) {
-                                c[rows.clone()].copy_from_slice(v);
-                            }
-                        }
+                        frozen.distance_gradient_lanes_into(trig, inv_s_distance, dist, j, r)
                     }
                     None => frozen.distance_gradient_lanes(trig, 1.0, dist, None),
                 }

@@ -66,7 +66,9 @@ pub fn joint_trig_lanes(qs: [&[f64]; LANES]) -> Vec<[[f64; LANES]; 2]> {
 /// loops) and, on x86-64, one AVX-512 register or two AVX2 registers (`simd`); `Avx512x2`
 /// holds two groups of lanes (two registers), so that two independent chains of operations
 /// fill the pipeline. `load_at(src, first, stride)` reads group `g` of the value from
-/// `src[first + g·stride]`, and `store_at` writes it there. Each kernel is
+/// `src[first + g·stride]`, and `store_at` writes it there; `store_group(g, dst)` writes
+/// group `g` to `dst`, and `from_groups(f)` builds a value from its groups `f(g)`, `g <
+/// GROUPS`. Each kernel is
 /// stamped out by `lane_kernel!` for one of them, inside a function compiled with its
 /// instruction set, so that every operation is one instruction (or two) and the values stay in
 /// registers (LLVM's own vectorisation of the plain loops mixed coordinates across lanes).
@@ -87,6 +89,15 @@ impl Portable {
     #[inline(always)]
     fn store_at(self, dst: &mut [Lane], first: usize, _stride: usize) {
         dst[first] = self.0;
+    }
+    const GROUPS: usize = 1;
+    #[inline(always)]
+    fn store_group(self, _group: usize, dst: &mut Lane) {
+        *dst = self.0;
+    }
+    #[inline(always)]
+    fn from_groups(mut f: impl FnMut(usize) -> Lane) -> Self {
+        Portable(f(0))
     }
     #[inline(always)]
     fn map2(self, b: Self, f: impl Fn(f64, f64) -> f64) -> Self {
@@ -159,6 +170,20 @@ mod simd {
         #[target_feature(enable = "avx512f")]
         pub(super) fn store_at(self, dst: &mut [Lane], first: usize, _stride: usize) {
             store512(self.0, &mut dst[first]);
+        }
+        /// Groups of lanes per value.
+        pub(super) const GROUPS: usize = 1;
+        /// Writes group `group` (0) of the lanes to `dst`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn store_group(self, _group: usize, dst: &mut Lane) {
+            store512(self.0, dst);
+        }
+        /// The value whose group `g` is `f(g)`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn from_groups(mut f: impl FnMut(usize) -> Lane) -> Self {
+            Avx512(load512(&f(0)))
         }
         /// `self + b`.
         #[inline]
@@ -248,6 +273,20 @@ mod simd {
             store512(self.0[0], &mut dst[first]);
             store512(self.0[1], &mut dst[first + stride]);
         }
+        /// Groups of lanes per value.
+        pub(super) const GROUPS: usize = 2;
+        /// Writes group `group` (0 or 1) of the lanes to `dst`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn store_group(self, group: usize, dst: &mut Lane) {
+            store512(self.0[group], dst);
+        }
+        /// The value whose group `g` is `f(g)`.
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        pub(super) fn from_groups(mut f: impl FnMut(usize) -> Lane) -> Self {
+            Avx512x2([load512(&f(0)), load512(&f(1))])
+        }
         /// `self + b`.
         #[inline]
         #[target_feature(enable = "avx512f")]
@@ -330,12 +369,26 @@ mod simd {
         #[inline]
         #[target_feature(enable = "avx2,fma")]
         pub(super) fn store_at(self, dst: &mut [Lane], first: usize, _stride: usize) {
-            let (lo, hi) = dst[first].split_at_mut(LANES / 2);
+            self.store_group(0, &mut dst[first]);
+        }
+        /// Groups of lanes per value.
+        pub(super) const GROUPS: usize = 1;
+        /// Writes group `group` (0) of the lanes to `dst`.
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        pub(super) fn store_group(self, _group: usize, dst: &mut Lane) {
+            let (lo, hi) = dst.split_at_mut(LANES / 2);
             // SAFETY: `lo` and `hi` are 4 writable f64 each (unaligned stores); AVX is enabled.
             unsafe {
                 _mm256_storeu_pd(lo.as_mut_ptr(), self.0[0]);
                 _mm256_storeu_pd(hi.as_mut_ptr(), self.0[1]);
             }
+        }
+        /// The value whose group `g` is `f(g)`.
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        pub(super) fn from_groups(mut f: impl FnMut(usize) -> Lane) -> Self {
+            Self::load_at(&[f(0)], 0, 0)
         }
         /// `self + b`.
         #[inline]
@@ -402,6 +455,40 @@ pub(super) fn lanes_apply(segments: &[Segment]) -> bool {
         })
 }
 
+/// Where the lane kernel writes the gradient: the lanes of parameter `param`, group `group`.
+trait GradSink {
+    fn lanes(&mut self, param: usize, group: usize) -> &mut Lane;
+}
+
+/// `buf[group · n_params + param]`.
+struct LaneBuf<'a> {
+    buf: &'a mut [Lane],
+    n_params: usize,
+}
+
+impl GradSink for LaneBuf<'_> {
+    #[inline(always)]
+    fn lanes(&mut self, param: usize, group: usize) -> &mut Lane {
+        &mut self.buf[group * self.n_params + param]
+    }
+}
+
+/// `columns[param][first_row + group · LANES..][..LANES]`.
+struct Columns<'a, 'b> {
+    columns: &'a mut [&'b mut [f64]],
+    first_row: usize,
+}
+
+impl GradSink for Columns<'_, '_> {
+    #[inline(always)]
+    #[track_caller]
+    fn lanes(&mut self, param: usize, group: usize) -> &mut Lane {
+        self.columns[param][self.first_row + group * LANES..]
+            .first_chunk_mut()
+            .expect("every column holds the rows of the groups")
+    }
+}
+
 impl FrozenChain {
     /// Whether [`FrozenChain::distance_gradient_lanes`] applies: every joint is revolute about a
     /// coordinate axis of its frame (all D-H chains; URDF joints with a general axis and
@@ -438,6 +525,64 @@ impl FrozenChain {
         grad: Option<&mut [[f64; LANES]]>,
     ) {
         let n_groups = distance_m.len();
+        self.check_lanes(trig, n_groups);
+        let n_params = self.n_params;
+        match grad {
+            Some(g) => {
+                assert_eq!(
+                    g.len(),
+                    n_groups * n_params,
+                    "grad has length {}, expected {n_groups} groups of {n_params} parameters",
+                    g.len(),
+                );
+                let mut sink = LaneBuf { buf: g, n_params };
+                dispatch::<true, _>(self, trig, grad_scale, distance_m, &mut sink);
+            }
+            None => {
+                let mut sink = LaneBuf {
+                    buf: &mut [],
+                    n_params,
+                };
+                dispatch::<false, _>(self, trig, grad_scale, distance_m, &mut sink);
+            }
+        }
+    }
+
+    /// [`FrozenChain::distance_gradient_lanes`] with the gradient written into the columns of
+    /// a column-major Jacobian: `columns[j][first_row + g · LANES + l] = grad_scale ·
+    /// ∂|P|/∂x_j` of configuration `l` of group `g` (`columns` may be longer than
+    /// `n_params()`; the rest is left alone). The same numbers, without a copy.
+    ///
+    /// # Panics
+    ///
+    /// As [`FrozenChain::distance_gradient_lanes`], or if there are fewer than `n_params()`
+    /// columns or one is shorter than `first_row + n_groups · LANES`.
+    #[track_caller]
+    pub fn distance_gradient_lanes_into(
+        &self,
+        trig: &[[[f64; LANES]; 2]],
+        grad_scale: f64,
+        distance_m: &mut [[f64; LANES]],
+        columns: &mut [&mut [f64]],
+        first_row: usize,
+    ) {
+        let n_groups = distance_m.len();
+        self.check_lanes(trig, n_groups);
+        let end = first_row + n_groups * LANES;
+        assert!(
+            columns.len() >= self.n_params && columns.iter().all(|c| c.len() >= end),
+            "the gradient needs {} columns of at least {end} rows",
+            self.n_params
+        );
+        let mut sink = Columns {
+            columns: &mut columns[..self.n_params],
+            first_row,
+        };
+        dispatch::<true, _>(self, trig, grad_scale, distance_m, &mut sink);
+    }
+
+    #[track_caller]
+    fn check_lanes(&self, trig: &[[Lane; 2]], n_groups: usize) {
         assert!(
             self.supports_lanes(),
             "the lane kernel needs revolute joints about coordinate axes and at most {} joints",
@@ -450,40 +595,28 @@ impl FrozenChain {
             trig.len(),
             n_groups * self.n_joints
         );
-        match grad {
-            Some(g) => {
-                assert_eq!(
-                    g.len(),
-                    n_groups * self.n_params,
-                    "grad has length {}, expected {n_groups} groups of {} parameters",
-                    g.len(),
-                    self.n_params
-                );
-                dispatch::<true>(self, trig, grad_scale, distance_m, g);
-            }
-            None => dispatch::<false>(self, trig, grad_scale, distance_m, &mut []),
-        }
     }
 }
 
-/// Defines the lane kernel `$name::<GRAD>(chain, trig, grad_scale, distance_m, grad)` on the
-/// vector type `$v` (see [`Portable`]), with the attributes given (its target features), for
-/// as many groups of lanes as `$v` holds: `trig` (flattened: `[g][joint][sin, cos]`),
-/// `distance_m` and `grad` (`[g][param]`, empty unless `GRAD`) as in
-/// [`FrozenChain::distance_gradient_lanes`]. A macro rather than a generic function: the
+/// Defines the lane kernel `$name::<GRAD, _>(chain, trig, grad_scale, distance_m, grad,
+/// first_group)` on the vector type `$v` (see [`Portable`]), with the attributes given (its
+/// target features), for as many groups of lanes as `$v` holds: `trig` (flattened:
+/// `[g][joint][sin, cos]`) and `distance_m` as in [`FrozenChain::distance_gradient_lanes`],
+/// the gradient (when `GRAD`) to groups `first_group + g` of `grad`. A macro rather than a generic function: the
 /// operations of `$v` may only be called from a function compiled with its instruction set.
 macro_rules! lane_kernel {
     ($(#[$attr:meta])* $name:ident, $v:ty) => {
         $(#[$attr])*
-        fn $name<const GRAD: bool>(
+        fn $name<const GRAD: bool, S: GradSink>(
             chain: &FrozenChain,
             trig: &[Lane],
             grad_scale: f64,
             distance_m: &mut [Lane],
-            grad: &mut [Lane],
+            grad: &mut S,
+            first_group: usize,
         ) {
             type V = $v;
-            let (trig_stride, np) = (2 * chain.n_joints, chain.n_params);
+            let trig_stride = 2 * chain.n_joints;
             // `Rot(e_k, θ)·p` (or its transpose for `back`) for a coordinate axis `e_k`
             // (`i, j, k` cyclic: `p_i ↦ c·p_i − s·p_j`, `p_j ↦ s·p_i + c·p_j`), each axis
             // written out so that the coordinates stay in registers.
@@ -553,7 +686,11 @@ macro_rules! lane_kernel {
                 return;
             }
             if !chain.all_params_tapped {
-                grad.fill([0.0; LANES]);
+                for param in 0..chain.n_params {
+                    for g in 0..V::GROUPS {
+                        *grad.lanes(param, first_group + g) = [0.0; LANES];
+                    }
+                }
             }
             // Forwards: U_0 = grad_scale · P/|P| (0 where P = 0: then every term is 0), and
             // U_{k+1} = J_k(q)ᵀ · F_kᵀ · U_k.
@@ -577,12 +714,14 @@ macro_rules! lane_kernel {
                         } else {
                             dot3_s(&ul, a)
                         };
-                        let g = if tap.first {
+                        let sum = if tap.first {
                             term
                         } else {
-                            V::load_at(grad, tap.param, np).add(term)
+                            V::from_groups(|g| *grad.lanes(tap.param, first_group + g)).add(term)
                         };
-                        g.store_at(grad, tap.param, np);
+                        for g in 0..V::GROUPS {
+                            sum.store_group(g, grad.lanes(tap.param, first_group + g));
+                        }
                     }
                 }
                 if let Some(screw) = &seg.joint {
@@ -639,7 +778,7 @@ pub(crate) fn every_kernel(
     trig: &[[Lane; 2]],
     grad_scale: f64,
 ) -> Vec<(&'static str, Vec<Lane>, Vec<Lane>)> {
-    type Kernel<'a> = &'a dyn Fn(&[Lane], &mut [Lane], &mut [Lane], bool);
+    type Kernel<'a> = &'a dyn Fn(&[Lane], &mut [Lane], &mut LaneBuf<'_>, bool);
     let (trig, nt, np) = (trig.as_flattened(), 2 * chain.n_joints, chain.n_params);
     let mut results = Vec::new();
     // `per_group`: the kernel takes one group at a time, else both.
@@ -647,20 +786,19 @@ pub(crate) fn every_kernel(
         let mut dist = vec![[0.0; LANES]; 2];
         let mut grad = vec![[f64::NAN; LANES]; 2 * np];
         let mut dist_only = vec![[0.0; LANES]; 2];
+        fn sink(buf: &mut [Lane], n_params: usize) -> LaneBuf<'_> {
+            LaneBuf { buf, n_params }
+        }
         if per_group {
             for g in 0..2 {
                 let t = &trig[g * nt..(g + 1) * nt];
-                f(
-                    t,
-                    &mut dist[g..g + 1],
-                    &mut grad[g * np..(g + 1) * np],
-                    true,
-                );
-                f(t, &mut dist_only[g..g + 1], &mut [], false);
+                let group_grad = &mut grad[g * np..(g + 1) * np];
+                f(t, &mut dist[g..g + 1], &mut sink(group_grad, np), true);
+                f(t, &mut dist_only[g..g + 1], &mut sink(&mut [], np), false);
             }
         } else {
-            f(trig, &mut dist, &mut grad, true);
-            f(trig, &mut dist_only, &mut [], false);
+            f(trig, &mut dist, &mut sink(&mut grad, np), true);
+            f(trig, &mut dist_only, &mut sink(&mut [], np), false);
         }
         assert_eq!(
             dist, dist_only,
@@ -670,9 +808,9 @@ pub(crate) fn every_kernel(
     };
     run("portable", true, &|t, d, g, with_grad| {
         if with_grad {
-            kernel_portable::<true>(chain, t, grad_scale, d, g)
+            kernel_portable::<true, _>(chain, t, grad_scale, d, g, 0)
         } else {
-            kernel_portable::<false>(chain, t, grad_scale, d, g)
+            kernel_portable::<false, _>(chain, t, grad_scale, d, g, 0)
         }
     });
     #[cfg(target_arch = "x86_64")]
@@ -683,9 +821,9 @@ pub(crate) fn every_kernel(
                 // SAFETY: the CPU has AVX2 and FMA (checked just above).
                 unsafe {
                     if with_grad {
-                        kernel_avx2::<true>(chain, t, grad_scale, d, g)
+                        kernel_avx2::<true, _>(chain, t, grad_scale, d, g, 0)
                     } else {
-                        kernel_avx2::<false>(chain, t, grad_scale, d, g)
+                        kernel_avx2::<false, _>(chain, t, grad_scale, d, g, 0)
                     }
                 }
             });
@@ -695,9 +833,9 @@ pub(crate) fn every_kernel(
                 // SAFETY: the CPU has AVX-512F (checked just above).
                 unsafe {
                     if with_grad {
-                        kernel_avx512::<true>(chain, t, grad_scale, d, g)
+                        kernel_avx512::<true, _>(chain, t, grad_scale, d, g, 0)
                     } else {
-                        kernel_avx512::<false>(chain, t, grad_scale, d, g)
+                        kernel_avx512::<false, _>(chain, t, grad_scale, d, g, 0)
                     }
                 }
             });
@@ -705,9 +843,9 @@ pub(crate) fn every_kernel(
                 // SAFETY: the CPU has AVX-512F (checked just above).
                 unsafe {
                     if with_grad {
-                        kernel_avx512x2::<true>(chain, t, grad_scale, d, g)
+                        kernel_avx512x2::<true, _>(chain, t, grad_scale, d, g, 0)
                     } else {
-                        kernel_avx512x2::<false>(chain, t, grad_scale, d, g)
+                        kernel_avx512x2::<false, _>(chain, t, grad_scale, d, g, 0)
                     }
                 }
             });
@@ -719,15 +857,15 @@ pub(crate) fn every_kernel(
 /// Runs the lane kernel compiled for the best instruction set of this CPU on every group
 /// (two at a time where the registers allow).
 #[inline(always)]
-fn dispatch<const GRAD: bool>(
+fn dispatch<const GRAD: bool, S: GradSink>(
     chain: &FrozenChain,
     trig: &[[Lane; 2]],
     grad_scale: f64,
     distance_m: &mut [Lane],
-    grad: &mut [Lane],
+    grad: &mut S,
 ) {
     let trig = trig.as_flattened();
-    let (nt, np) = (2 * chain.n_joints, if GRAD { chain.n_params } else { 0 });
+    let nt = 2 * chain.n_joints;
     // Groups `g..g + k` of the arguments.
     let mut g = 0;
     while g < distance_m.len() {
@@ -735,39 +873,31 @@ fn dispatch<const GRAD: bool>(
         {
             if std::arch::is_x86_feature_detected!("avx512f") {
                 let k = if g + 2 <= distance_m.len() { 2 } else { 1 };
-                let (t, d, gr) = (
-                    &trig[g * nt..(g + k) * nt],
-                    &mut distance_m[g..g + k],
-                    &mut grad[g * np..(g + k) * np],
-                );
+                let (t, d) = (&trig[g * nt..(g + k) * nt], &mut distance_m[g..g + k]);
                 if k == 2 {
                     // SAFETY: the CPU has AVX-512F (checked just above).
-                    unsafe { kernel_avx512x2::<GRAD>(chain, t, grad_scale, d, gr) };
+                    unsafe { kernel_avx512x2::<GRAD, S>(chain, t, grad_scale, d, grad, g) };
                 } else {
                     // SAFETY: the CPU has AVX-512F (checked just above).
-                    unsafe { kernel_avx512::<GRAD>(chain, t, grad_scale, d, gr) };
+                    unsafe { kernel_avx512::<GRAD, S>(chain, t, grad_scale, d, grad, g) };
                 }
                 g += k;
                 continue;
             }
         }
-        let (t, d, gr) = (
-            &trig[g * nt..(g + 1) * nt],
-            &mut distance_m[g..g + 1],
-            &mut grad[g * np..(g + 1) * np],
-        );
+        let (t, d) = (&trig[g * nt..(g + 1) * nt], &mut distance_m[g..g + 1]);
         #[cfg(target_arch = "x86_64")]
         {
             if std::arch::is_x86_feature_detected!("avx2")
                 && std::arch::is_x86_feature_detected!("fma")
             {
                 // SAFETY: the CPU has AVX2 and FMA (checked just above).
-                unsafe { kernel_avx2::<GRAD>(chain, t, grad_scale, d, gr) };
+                unsafe { kernel_avx2::<GRAD, S>(chain, t, grad_scale, d, grad, g) };
                 g += 1;
                 continue;
             }
         }
-        kernel_portable::<GRAD>(chain, t, grad_scale, d, gr);
+        kernel_portable::<GRAD, S>(chain, t, grad_scale, d, grad, g);
         g += 1;
     }
 }

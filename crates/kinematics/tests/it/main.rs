@@ -274,6 +274,21 @@ proptest! {
             prop_assert_eq!(dist3[g], dist);
             prop_assert_eq!(&grad3[g * n..(g + 1) * n], grad.as_slice());
         }
+        // Into the columns of a Jacobian, from row 5, one extra column left alone.
+        let mut columns = vec![vec![-1.0; 5 + 3 * LANES + 2]; n + 1];
+        let mut col_refs: Vec<&mut [f64]> = columns.iter_mut().map(|c| c.as_mut_slice()).collect();
+        let mut dist_cols = [[0.0; LANES]; 3];
+        frozen.distance_gradient_lanes_into(&trig3, 1.0, &mut dist_cols, &mut col_refs, 5);
+        prop_assert_eq!(dist_cols, dist3);
+        for (j, column) in columns.iter().enumerate() {
+            for (row, v) in column.iter().enumerate() {
+                let expected = match row.checked_sub(5) {
+                    Some(k) if j < n && k < 3 * LANES => grad3[(k / LANES) * n + j][k % LANES],
+                    _ => -1.0,
+                };
+                prop_assert_eq!(*v, expected, "column {}, row {}", j, row);
+            }
+        }
         let mut ws = FkWorkspace::new(&chain);
         let mut scalar = vec![0.0; n];
         for (l, q) in qs.iter().enumerate() {
