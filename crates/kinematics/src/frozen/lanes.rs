@@ -35,6 +35,10 @@ type Lane = [f64; LANES];
 /// run's frame lives on the stack.
 const MAX_SEGMENTS: usize = 16;
 
+/// Chains of at most this many runs (7 joints) take a kernel with a shorter array of end
+/// points, which it fills at every call.
+const SHORT_SEGMENTS: usize = 8;
+
 /// `[sin q_j, cos q_j]` of [`LANES`] configurations in the layout that
 /// [`FrozenChain::distance_gradient_lanes`] takes: entry `j` holds joint `j`, its `[0][l]` the
 /// sine and `[1][l]` the cosine of configuration `l` (angles in rad).
@@ -598,16 +602,17 @@ impl FrozenChain {
     }
 }
 
-/// Defines the lane kernel `$name::<GRAD, _>(chain, trig, grad_scale, distance_m, grad,
+/// Defines the lane kernel `$name::<GRAD, _, N>(chain, trig, grad_scale, distance_m, grad,
 /// first_group)` on the vector type `$v` (see [`Portable`]), with the attributes given (its
-/// target features), for as many groups of lanes as `$v` holds: `trig` (flattened:
-/// `[g][joint][sin, cos]`) and `distance_m` as in [`FrozenChain::distance_gradient_lanes`],
-/// the gradient (when `GRAD`) to groups `first_group + g` of `grad`. A macro rather than a generic function: the
+/// target features), for as many groups of lanes as `$v` holds and chains of at most `N`
+/// runs: `trig` (flattened: `[g][joint][sin, cos]`) and `distance_m` as in
+/// [`FrozenChain::distance_gradient_lanes`], the gradient (when `GRAD`) to groups
+/// `first_group + g` of `grad`. A macro rather than a generic function: the
 /// operations of `$v` may only be called from a function compiled with its instruction set.
 macro_rules! lane_kernel {
     ($(#[$attr:meta])* $name:ident, $v:ty) => {
         $(#[$attr])*
-        fn $name<const GRAD: bool, S: GradSink>(
+        fn $name<const GRAD: bool, S: GradSink, const N: usize>(
             chain: &FrozenChain,
             trig: &[Lane],
             grad_scale: f64,
@@ -662,7 +667,7 @@ macro_rules! lane_kernel {
             // its last entry, rather than zeros).
             let t = &last.lane_fixed.trans;
             let mut p = [V::splat(t.x), V::splat(t.y), V::splat(t.z)];
-            let mut tips = [p; MAX_SEGMENTS];
+            let mut tips = [p; N];
             for (k, seg) in rest.iter().enumerate().rev() {
                 if let Some(screw) = &seg.joint {
                     let s = V::load_at(trig, 2 * screw.joint, trig_stride);
@@ -808,9 +813,9 @@ pub(crate) fn every_kernel(
     };
     run("portable", true, &|t, d, g, with_grad| {
         if with_grad {
-            kernel_portable::<true, _>(chain, t, grad_scale, d, g, 0)
+            kernel_portable::<true, _, MAX_SEGMENTS>(chain, t, grad_scale, d, g, 0)
         } else {
-            kernel_portable::<false, _>(chain, t, grad_scale, d, g, 0)
+            kernel_portable::<false, _, MAX_SEGMENTS>(chain, t, grad_scale, d, g, 0)
         }
     });
     #[cfg(target_arch = "x86_64")]
@@ -821,9 +826,9 @@ pub(crate) fn every_kernel(
                 // SAFETY: the CPU has AVX2 and FMA (checked just above).
                 unsafe {
                     if with_grad {
-                        kernel_avx2::<true, _>(chain, t, grad_scale, d, g, 0)
+                        kernel_avx2::<true, _, MAX_SEGMENTS>(chain, t, grad_scale, d, g, 0)
                     } else {
-                        kernel_avx2::<false, _>(chain, t, grad_scale, d, g, 0)
+                        kernel_avx2::<false, _, MAX_SEGMENTS>(chain, t, grad_scale, d, g, 0)
                     }
                 }
             });
@@ -833,9 +838,9 @@ pub(crate) fn every_kernel(
                 // SAFETY: the CPU has AVX-512F (checked just above).
                 unsafe {
                     if with_grad {
-                        kernel_avx512::<true, _>(chain, t, grad_scale, d, g, 0)
+                        kernel_avx512::<true, _, MAX_SEGMENTS>(chain, t, grad_scale, d, g, 0)
                     } else {
-                        kernel_avx512::<false, _>(chain, t, grad_scale, d, g, 0)
+                        kernel_avx512::<false, _, MAX_SEGMENTS>(chain, t, grad_scale, d, g, 0)
                     }
                 }
             });
@@ -843,9 +848,9 @@ pub(crate) fn every_kernel(
                 // SAFETY: the CPU has AVX-512F (checked just above).
                 unsafe {
                     if with_grad {
-                        kernel_avx512x2::<true, _>(chain, t, grad_scale, d, g, 0)
+                        kernel_avx512x2::<true, _, MAX_SEGMENTS>(chain, t, grad_scale, d, g, 0)
                     } else {
-                        kernel_avx512x2::<false, _>(chain, t, grad_scale, d, g, 0)
+                        kernel_avx512x2::<false, _, MAX_SEGMENTS>(chain, t, grad_scale, d, g, 0)
                     }
                 }
             });
@@ -864,6 +869,22 @@ fn dispatch<const GRAD: bool, S: GradSink>(
     distance_m: &mut [Lane],
     grad: &mut S,
 ) {
+    if chain.segments.len() <= SHORT_SEGMENTS {
+        dispatch_n::<GRAD, S, SHORT_SEGMENTS>(chain, trig, grad_scale, distance_m, grad);
+    } else {
+        dispatch_n::<GRAD, S, MAX_SEGMENTS>(chain, trig, grad_scale, distance_m, grad);
+    }
+}
+
+/// [`dispatch`] for chains of at most `N` runs.
+#[inline(always)]
+fn dispatch_n<const GRAD: bool, S: GradSink, const N: usize>(
+    chain: &FrozenChain,
+    trig: &[[Lane; 2]],
+    grad_scale: f64,
+    distance_m: &mut [Lane],
+    grad: &mut S,
+) {
     let trig = trig.as_flattened();
     let nt = 2 * chain.n_joints;
     // Groups `g..g + k` of the arguments.
@@ -876,10 +897,10 @@ fn dispatch<const GRAD: bool, S: GradSink>(
                 let (t, d) = (&trig[g * nt..(g + k) * nt], &mut distance_m[g..g + k]);
                 if k == 2 {
                     // SAFETY: the CPU has AVX-512F (checked just above).
-                    unsafe { kernel_avx512x2::<GRAD, S>(chain, t, grad_scale, d, grad, g) };
+                    unsafe { kernel_avx512x2::<GRAD, S, N>(chain, t, grad_scale, d, grad, g) };
                 } else {
                     // SAFETY: the CPU has AVX-512F (checked just above).
-                    unsafe { kernel_avx512::<GRAD, S>(chain, t, grad_scale, d, grad, g) };
+                    unsafe { kernel_avx512::<GRAD, S, N>(chain, t, grad_scale, d, grad, g) };
                 }
                 g += k;
                 continue;
@@ -892,12 +913,12 @@ fn dispatch<const GRAD: bool, S: GradSink>(
                 && std::arch::is_x86_feature_detected!("fma")
             {
                 // SAFETY: the CPU has AVX2 and FMA (checked just above).
-                unsafe { kernel_avx2::<GRAD, S>(chain, t, grad_scale, d, grad, g) };
+                unsafe { kernel_avx2::<GRAD, S, N>(chain, t, grad_scale, d, grad, g) };
                 g += 1;
                 continue;
             }
         }
-        kernel_portable::<GRAD, S>(chain, t, grad_scale, d, grad, g);
+        kernel_portable::<GRAD, S, N>(chain, t, grad_scale, d, grad, g);
         g += 1;
     }
 }
