@@ -2,11 +2,11 @@
 //!
 //! The same quantities as [`FrozenChain::distance_gradient`], on structure-of-arrays data:
 //! every scalar (a coordinate of a point or direction, a joint sine or cosine) becomes a
-//! `[f64; LANES]`, one entry per configuration, so that each arithmetic operation is one loop
-//! over the lanes, which LLVM turns into SIMD instructions (8 lanes = one AVX-512 register or
-//! two AVX2 registers). The instruction set is chosen at run time (`is_x86_feature_detected!`);
-//! without AVX2 the same code runs as plain loops. No fused multiply–add is introduced (Rust
-//! does not contract `a·b + c`).
+//! `[f64; LANES]`, one entry per configuration, held in one AVX-512 register (two groups of
+//! lanes at a time, to overlap two independent chains of operations) or two AVX2 registers,
+//! with fused multiply–adds; the instruction set is chosen at run time
+//! (`is_x86_feature_detected!`), and without AVX2 the same kernel runs as plain loops
+//! (unfused). One kernel body is stamped out per instruction set by `lane_kernel!`.
 //!
 //! The kernel moves 3-vectors, not frames, along the chain (about a third of the operations of
 //! composing the world frames):
@@ -459,8 +459,9 @@ pub(super) fn lanes_apply(segments: &[Segment]) -> bool {
         })
 }
 
-/// Where the lane kernel writes the gradient: the lanes of parameter `param`, group `group`.
+/// Where the lane kernel writes the gradient.
 trait GradSink {
+    /// The lanes of parameter `param` of group `group`.
     fn lanes(&mut self, param: usize, group: usize) -> &mut Lane;
 }
 
