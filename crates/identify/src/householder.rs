@@ -56,19 +56,260 @@ pub(crate) fn qr_in_place(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
             return unsafe { qr_avx2(a, n_pivot) };
         }
     }
-    qr_impl(a, n_pivot, dot)
+    qr_impl(a, n_pivot, Scalar)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2")]
 fn qr_avx512(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
-    qr_impl(a, n_pivot, |x, y| dot_avx512(x, y))
+    qr_impl(a, n_pivot, Avx512(()))
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn qr_avx2(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
-    qr_impl(a, n_pivot, |x, y| dot_avx2(x, y))
+    qr_impl(a, n_pivot, Avx2(()))
+}
+
+/// The vector kernels of a reflection, for one instruction set. Each rounds exactly as the
+/// one-column loops it replaces (its `dot`, then `y ← y − f·v` entry by entry, a product then
+/// a difference), so the factorisations do not depend on how many columns a call handles.
+trait Kernels: Copy {
+    /// `Σ xᵢyᵢ` over `x.len()` entries.
+    fn dot(self, x: &[f64], y: &[f64]) -> f64;
+    /// `[x·y₀, x·y₁, x·y₂, x·y₃]`, each rounded as [`Kernels::dot`]; `x` is read once.
+    fn dot4(self, x: &[f64], y: [&[f64]; 4]) -> [f64; 4];
+    /// `y_c ← y_c − f_c·x` for the four columns `y_c` (`x.len()` entries each).
+    fn axpy4(self, f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]);
+}
+
+/// The portable kernels (the reference for the vectorised ones).
+#[derive(Clone, Copy)]
+struct Scalar;
+
+impl Kernels for Scalar {
+    #[inline(always)]
+    fn dot(self, x: &[f64], y: &[f64]) -> f64 {
+        dot(x, y)
+    }
+    #[inline(always)]
+    fn dot4(self, x: &[f64], y: [&[f64]; 4]) -> [f64; 4] {
+        y.map(|y| dot(x, y))
+    }
+    #[inline(always)]
+    fn axpy4(self, f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
+        for (f, y) in f.into_iter().zip(y) {
+            axpy(f, x, y);
+        }
+    }
+}
+
+/// AVX2 kernels; a value exists only where the CPU has AVX2 (made in `#[target_feature]`
+/// functions that are called after detection).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct Avx2(());
+
+#[cfg(target_arch = "x86_64")]
+impl Kernels for Avx2 {
+    #[inline(always)]
+    fn dot(self, x: &[f64], y: &[f64]) -> f64 {
+        // SAFETY: an `Avx2` exists only where the CPU has AVX2 (see the type).
+        unsafe { dot_avx2(x, y) }
+    }
+    #[inline(always)]
+    fn dot4(self, x: &[f64], y: [&[f64]; 4]) -> [f64; 4] {
+        // SAFETY: as above.
+        unsafe { dot4_avx2(x, y) }
+    }
+    #[inline(always)]
+    fn axpy4(self, f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
+        // SAFETY: as above.
+        unsafe { axpy4_avx2(f, x, y) }
+    }
+}
+
+/// AVX-512 kernels; a value exists only where the CPU has AVX-512F (made in
+/// `#[target_feature]` functions that are called after detection).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct Avx512(());
+
+#[cfg(target_arch = "x86_64")]
+impl Kernels for Avx512 {
+    #[inline(always)]
+    fn dot(self, x: &[f64], y: &[f64]) -> f64 {
+        // SAFETY: an `Avx512` exists only where the CPU has AVX-512F (see the type), and
+        // every AVX-512F CPU has AVX2.
+        unsafe { dot_avx512(x, y) }
+    }
+    #[inline(always)]
+    fn dot4(self, x: &[f64], y: [&[f64]; 4]) -> [f64; 4] {
+        // SAFETY: as above.
+        unsafe { dot4_avx512(x, y) }
+    }
+    #[inline(always)]
+    fn axpy4(self, f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
+        // SAFETY: as above.
+        unsafe { axpy4_avx512(f, x, y) }
+    }
+}
+
+/// [`dot_avx512`] of `x` with four columns at once (8 accumulators, `x` loaded once), each
+/// sum rounded exactly as `dot_avx512(x, y_c)`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2")]
+#[inline]
+fn dot4_avx512(x: &[f64], y: [&[f64]; 4]) -> [f64; 4] {
+    use std::arch::x86_64::{
+        __m512d, _mm512_add_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_reduce_add_pd,
+        _mm512_setzero_pd,
+    };
+    let n = x.len();
+    let y = y.map(|c| &c[..n]);
+    let (xc, xt) = x.as_chunks::<16>();
+    let mut a0: [__m512d; 4] = [_mm512_setzero_pd(); 4];
+    let mut a1: [__m512d; 4] = [_mm512_setzero_pd(); 4];
+    for (i, xi) in xc.iter().enumerate() {
+        // SAFETY: `xi` holds 16 f64, and so does every `y_c` from `16·i` (`y_c.len() = n`,
+        // `16·(i + 1) ≤ n`); unaligned loads.
+        unsafe {
+            let x0 = _mm512_loadu_pd(xi.as_ptr());
+            let x1 = _mm512_loadu_pd(xi.as_ptr().add(8));
+            for c in 0..4 {
+                let q = y[c].as_ptr().add(16 * i);
+                a0[c] = _mm512_add_pd(a0[c], _mm512_mul_pd(x0, _mm512_loadu_pd(q)));
+                a1[c] = _mm512_add_pd(a1[c], _mm512_mul_pd(x1, _mm512_loadu_pd(q.add(8))));
+            }
+        }
+    }
+    let split = 16 * xc.len();
+    let mut out = [0.0; 4];
+    for c in 0..4 {
+        out[c] = _mm512_reduce_add_pd(_mm512_add_pd(a0[c], a1[c])) + dot_avx2(xt, &y[c][split..]);
+    }
+    out
+}
+
+/// [`dot_avx2`] of `x` with four columns at once (8 accumulators, `x` loaded once), each sum
+/// rounded exactly as `dot_avx2(x, y_c)`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn dot4_avx2(x: &[f64], y: [&[f64]; 4]) -> [f64; 4] {
+    use std::arch::x86_64::{
+        __m256d, _mm256_add_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+    };
+    let n = x.len();
+    let y = y.map(|c| &c[..n]);
+    let (xc, xt) = x.as_chunks::<8>();
+    let mut a0: [__m256d; 4] = [_mm256_setzero_pd(); 4];
+    let mut a1: [__m256d; 4] = [_mm256_setzero_pd(); 4];
+    for (i, xi) in xc.iter().enumerate() {
+        // SAFETY: `xi` holds 8 f64, and so does every `y_c` from `8·i` (`y_c.len() = n`,
+        // `8·(i + 1) ≤ n`); unaligned loads.
+        unsafe {
+            let x0 = _mm256_loadu_pd(xi.as_ptr());
+            let x1 = _mm256_loadu_pd(xi.as_ptr().add(4));
+            for c in 0..4 {
+                let q = y[c].as_ptr().add(8 * i);
+                a0[c] = _mm256_add_pd(a0[c], _mm256_mul_pd(x0, _mm256_loadu_pd(q)));
+                a1[c] = _mm256_add_pd(a1[c], _mm256_mul_pd(x1, _mm256_loadu_pd(q.add(4))));
+            }
+        }
+    }
+    let split = 8 * xc.len();
+    let mut out = [0.0; 4];
+    for c in 0..4 {
+        let mut lanes = [0.0; 4];
+        // SAFETY: `lanes` holds 4 f64.
+        unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), _mm256_add_pd(a0[c], a1[c])) };
+        let mut tail = 0.0;
+        for (a, b) in xt.iter().zip(&y[c][split..]) {
+            tail += a * b;
+        }
+        out[c] = ((lanes[0] + lanes[2]) + (lanes[1] + lanes[3])) + tail;
+    }
+    out
+}
+
+/// `y_c ← y_c − f_c·x` for four columns, 8 lanes at a time (`x` loaded once), entry by entry
+/// as [`axpy`] (a product, then a difference).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+fn axpy4_avx512(f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
+    use std::arch::x86_64::{
+        _mm512_loadu_pd, _mm512_mul_pd, _mm512_set1_pd, _mm512_storeu_pd, _mm512_sub_pd,
+    };
+    let n = x.len();
+    let y = y.map(|c| &mut c[..n]);
+    let fv = f.map(|f| _mm512_set1_pd(f));
+    let (xc, xt) = x.as_chunks::<8>();
+    for (i, xi) in xc.iter().enumerate() {
+        // SAFETY: `xi` holds 8 f64, and so does every `y_c` from `8·i` (`y_c.len() = n`);
+        // unaligned loads and stores, the four columns disjoint (distinct `&mut`).
+        unsafe {
+            let xv = _mm512_loadu_pd(xi.as_ptr());
+            for c in 0..4 {
+                let q = y[c].as_mut_ptr().add(8 * i);
+                _mm512_storeu_pd(
+                    q,
+                    _mm512_sub_pd(_mm512_loadu_pd(q), _mm512_mul_pd(fv[c], xv)),
+                );
+            }
+        }
+    }
+    let split = 8 * xc.len();
+    for c in 0..4 {
+        axpy(f[c], xt, &mut y[c][split..]);
+    }
+}
+
+/// As [`axpy4_avx512`], 4 lanes at a time.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn axpy4_avx2(f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
+    use std::arch::x86_64::{
+        _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_storeu_pd, _mm256_sub_pd,
+    };
+    let n = x.len();
+    let y = y.map(|c| &mut c[..n]);
+    let fv = f.map(|f| _mm256_set1_pd(f));
+    let (xc, xt) = x.as_chunks::<4>();
+    for (i, xi) in xc.iter().enumerate() {
+        // SAFETY: `xi` holds 4 f64, and so does every `y_c` from `4·i` (`y_c.len() = n`);
+        // unaligned loads and stores, the four columns disjoint (distinct `&mut`).
+        unsafe {
+            let xv = _mm256_loadu_pd(xi.as_ptr());
+            for c in 0..4 {
+                let q = y[c].as_mut_ptr().add(4 * i);
+                _mm256_storeu_pd(
+                    q,
+                    _mm256_sub_pd(_mm256_loadu_pd(q), _mm256_mul_pd(fv[c], xv)),
+                );
+            }
+        }
+    }
+    let split = 4 * xc.len();
+    for c in 0..4 {
+        axpy(f[c], xt, &mut y[c][split..]);
+    }
+}
+
+/// Splits the next four columns off `rest` (column-major, leading dimension `ld`), rows
+/// `offset..offset + len` of each; `rest` then starts at the fifth column. The last column may
+/// end early (at `offset + len`).
+#[inline(always)]
+fn take4<'a>(rest: &mut &'a mut [f64], ld: usize, offset: usize, len: usize) -> [&'a mut [f64]; 4] {
+    let all = std::mem::take(rest);
+    let (c0, all) = all.split_at_mut(ld);
+    let (c1, all) = all.split_at_mut(ld);
+    let (c2, all) = all.split_at_mut(ld);
+    let (c3, all) = all.split_at_mut(ld.min(all.len()));
+    *rest = all;
+    [c0, c1, c2, c3].map(|c| &mut c[offset..offset + len])
 }
 
 /// As [`dot_avx2`] with one 8-wide AVX-512 accumulator per 8 entries (two per 16).
@@ -191,11 +432,8 @@ fn norm(x: &[f64], dot: impl Fn(&[f64], &[f64]) -> f64) -> f64 {
 }
 
 #[inline(always)]
-fn qr_impl(
-    a: &mut ColMajor,
-    n_pivot: usize,
-    dot: impl Fn(&[f64], &[f64]) -> f64 + Copy,
-) -> Vec<usize> {
+fn qr_impl(a: &mut ColMajor, n_pivot: usize, kern: impl Kernels) -> Vec<usize> {
+    let dot = |x: &[f64], y: &[f64]| kern.dot(x, y);
     let (m, n) = (a.nrows, a.ncols);
     let n_pivot = n_pivot.min(n);
     let mut perm: Vec<usize> = (0..n).collect();
@@ -227,10 +465,20 @@ fn qr_impl(
         v[0] = x0 - alpha;
         // vᵀv = 2‖x‖(‖x‖ + |x₀|) for v = x − αe₁.
         let vtv = 2.0 * x_norm * (x_norm + x0.abs());
-        for col in tail.chunks_exact_mut(m) {
-            let y = &mut col[k..];
-            let f = 2.0 * dot(v, y) / vtv;
-            axpy(f, v, y);
+        {
+            let v = &*v;
+            // The columns after k, four at a time, then one at a time.
+            let mut rest = tail;
+            for _ in 0..(n - k - 1) / 4 {
+                let y = take4(&mut rest, m, k, m - k);
+                let d = kern.dot4(v, [&*y[0], &*y[1], &*y[2], &*y[3]]);
+                kern.axpy4(d.map(|d| 2.0 * d / vtv), v, y);
+            }
+            for col in rest.chunks_exact_mut(m) {
+                let y = &mut col[k..];
+                let f = 2.0 * kern.dot(v, y) / vtv;
+                axpy(f, v, y);
+            }
         }
         v[0] = alpha;
         v[1..].iter_mut().for_each(|e| *e = 0.0);
@@ -262,33 +510,27 @@ pub(crate) fn fold_rows(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb
             return unsafe { fold_avx2(r, n1, b, len, ldb) };
         }
     }
-    fold_impl(r, n1, b, len, ldb, dot);
+    fold_impl(r, n1, b, len, ldb, Scalar);
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2")]
 fn fold_avx512(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize) {
-    fold_impl(r, n1, b, len, ldb, |x, y| dot_avx512(x, y));
+    fold_impl(r, n1, b, len, ldb, Avx512(()));
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn fold_avx2(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize) {
-    fold_impl(r, n1, b, len, ldb, |x, y| dot_avx2(x, y));
+    fold_impl(r, n1, b, len, ldb, Avx2(()));
 }
 
 #[inline(always)]
-fn fold_impl(
-    r: &mut [f64],
-    n1: usize,
-    b: &mut [f64],
-    len: usize,
-    ldb: usize,
-    dot: impl Fn(&[f64], &[f64]) -> f64 + Copy,
-) {
+fn fold_impl(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize, kern: impl Kernels) {
     if len == 0 {
         return;
     }
+    let dot = |x: &[f64], y: &[f64]| kern.dot(x, y);
     for k in 0..n1 {
         // x = [R_kk; B[:, k]].
         let (b_head, b_tail) = b.split_at_mut((k + 1) * ldb);
@@ -302,18 +544,28 @@ fn fold_impl(
         let alpha = if rkk > 0.0 { -x_norm } else { x_norm };
         let v0 = rkk - alpha;
         let vtv = 2.0 * x_norm * (x_norm + rkk.abs());
-        for (j, bj) in b_tail.chunks_mut(ldb).enumerate() {
-            let j = k + 1 + j;
-            if j >= n1 {
-                break;
+        // Column j of [R; B] gets f = 2·vᵀx_j / vᵀv: four columns at a time, then one at a time.
+        let mut rest = b_tail;
+        let mut j = k + 1;
+        for _ in 0..(n1 - j) / 4 {
+            let y = take4(&mut rest, ldb, 0, len);
+            let d = kern.dot4(bk, [&*y[0], &*y[1], &*y[2], &*y[3]]);
+            let mut f = [0.0; 4];
+            for (c, (f, d)) in f.iter_mut().zip(d).enumerate() {
+                let rkj = r[(j + c) * n1 + k];
+                *f = 2.0 * (v0 * rkj + d) / vtv;
+                r[(j + c) * n1 + k] = rkj - *f * v0;
             }
+            kern.axpy4(f, bk, y);
+            j += 4;
+        }
+        for bj in rest.chunks_mut(ldb).take(n1 - j) {
             let bj = &mut bj[..len];
             let rkj = r[j * n1 + k];
-            let f = 2.0 * (v0 * rkj + dot(bk, bj)) / vtv;
+            let f = 2.0 * (v0 * rkj + kern.dot(bk, bj)) / vtv;
             r[j * n1 + k] = rkj - f * v0;
-            for (y, v) in bj.iter_mut().zip(bk) {
-                *y -= f * v;
-            }
+            axpy(f, bk, bj);
+            j += 1;
         }
         r[k * n1 + k] = alpha;
     }
