@@ -94,7 +94,7 @@ impl Kernels for Scalar {
     }
     #[inline(always)]
     fn dot4(self, x: &[f64], y: [&[f64]; 4]) -> [f64; 4] {
-        y.map(|y| dot(x, y))
+        [dot(x, y[0]), dot(x, y[1]), dot(x, y[2]), dot(x, y[3])]
     }
     #[inline(always)]
     fn axpy4(self, f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
@@ -162,33 +162,41 @@ impl Kernels for Avx512 {
 #[inline]
 fn dot4_avx512(x: &[f64], y: [&[f64]; 4]) -> [f64; 4] {
     use std::arch::x86_64::{
-        __m512d, _mm512_add_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_reduce_add_pd,
-        _mm512_setzero_pd,
+        _mm512_add_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_reduce_add_pd, _mm512_setzero_pd,
     };
     let n = x.len();
-    let y = y.map(|c| &c[..n]);
+    let [y0, y1, y2, y3] = y;
+    let (y0, y1, y2, y3) = (&y0[..n], &y1[..n], &y2[..n], &y3[..n]);
     let (xc, xt) = x.as_chunks::<16>();
-    let mut a0: [__m512d; 4] = [_mm512_setzero_pd(); 4];
-    let mut a1: [__m512d; 4] = [_mm512_setzero_pd(); 4];
+    let (mut a00, mut a01) = (_mm512_setzero_pd(), _mm512_setzero_pd());
+    let (mut a10, mut a11) = (_mm512_setzero_pd(), _mm512_setzero_pd());
+    let (mut a20, mut a21) = (_mm512_setzero_pd(), _mm512_setzero_pd());
+    let (mut a30, mut a31) = (_mm512_setzero_pd(), _mm512_setzero_pd());
     for (i, xi) in xc.iter().enumerate() {
         // SAFETY: `xi` holds 16 f64, and so does every `y_c` from `16·i` (`y_c.len() = n`,
         // `16·(i + 1) ≤ n`); unaligned loads.
         unsafe {
             let x0 = _mm512_loadu_pd(xi.as_ptr());
             let x1 = _mm512_loadu_pd(xi.as_ptr().add(8));
-            for c in 0..4 {
-                let q = y[c].as_ptr().add(16 * i);
-                a0[c] = _mm512_add_pd(a0[c], _mm512_mul_pd(x0, _mm512_loadu_pd(q)));
-                a1[c] = _mm512_add_pd(a1[c], _mm512_mul_pd(x1, _mm512_loadu_pd(q.add(8))));
-            }
+            let (p0, p1) = (y0.as_ptr().add(16 * i), y1.as_ptr().add(16 * i));
+            let (p2, p3) = (y2.as_ptr().add(16 * i), y3.as_ptr().add(16 * i));
+            a00 = _mm512_add_pd(a00, _mm512_mul_pd(x0, _mm512_loadu_pd(p0)));
+            a01 = _mm512_add_pd(a01, _mm512_mul_pd(x1, _mm512_loadu_pd(p0.add(8))));
+            a10 = _mm512_add_pd(a10, _mm512_mul_pd(x0, _mm512_loadu_pd(p1)));
+            a11 = _mm512_add_pd(a11, _mm512_mul_pd(x1, _mm512_loadu_pd(p1.add(8))));
+            a20 = _mm512_add_pd(a20, _mm512_mul_pd(x0, _mm512_loadu_pd(p2)));
+            a21 = _mm512_add_pd(a21, _mm512_mul_pd(x1, _mm512_loadu_pd(p2.add(8))));
+            a30 = _mm512_add_pd(a30, _mm512_mul_pd(x0, _mm512_loadu_pd(p3)));
+            a31 = _mm512_add_pd(a31, _mm512_mul_pd(x1, _mm512_loadu_pd(p3.add(8))));
         }
     }
-    let split = 16 * xc.len();
-    let mut out = [0.0; 4];
-    for c in 0..4 {
-        out[c] = _mm512_reduce_add_pd(_mm512_add_pd(a0[c], a1[c])) + dot_avx2(xt, &y[c][split..]);
-    }
-    out
+    let s = 16 * xc.len();
+    [
+        _mm512_reduce_add_pd(_mm512_add_pd(a00, a01)) + dot_avx2(xt, &y0[s..]),
+        _mm512_reduce_add_pd(_mm512_add_pd(a10, a11)) + dot_avx2(xt, &y1[s..]),
+        _mm512_reduce_add_pd(_mm512_add_pd(a20, a21)) + dot_avx2(xt, &y2[s..]),
+        _mm512_reduce_add_pd(_mm512_add_pd(a30, a31)) + dot_avx2(xt, &y3[s..]),
+    ]
 }
 
 /// [`dot_avx2`] of `x` with four columns at once (8 accumulators, `x` loaded once), each sum
@@ -201,36 +209,49 @@ fn dot4_avx2(x: &[f64], y: [&[f64]; 4]) -> [f64; 4] {
         __m256d, _mm256_add_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_setzero_pd, _mm256_storeu_pd,
     };
     let n = x.len();
-    let y = y.map(|c| &c[..n]);
+    let [y0, y1, y2, y3] = y;
+    let (y0, y1, y2, y3) = (&y0[..n], &y1[..n], &y2[..n], &y3[..n]);
     let (xc, xt) = x.as_chunks::<8>();
-    let mut a0: [__m256d; 4] = [_mm256_setzero_pd(); 4];
-    let mut a1: [__m256d; 4] = [_mm256_setzero_pd(); 4];
+    let (mut a00, mut a01) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+    let (mut a10, mut a11) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+    let (mut a20, mut a21) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+    let (mut a30, mut a31) = (_mm256_setzero_pd(), _mm256_setzero_pd());
     for (i, xi) in xc.iter().enumerate() {
         // SAFETY: `xi` holds 8 f64, and so does every `y_c` from `8·i` (`y_c.len() = n`,
         // `8·(i + 1) ≤ n`); unaligned loads.
         unsafe {
             let x0 = _mm256_loadu_pd(xi.as_ptr());
             let x1 = _mm256_loadu_pd(xi.as_ptr().add(4));
-            for c in 0..4 {
-                let q = y[c].as_ptr().add(8 * i);
-                a0[c] = _mm256_add_pd(a0[c], _mm256_mul_pd(x0, _mm256_loadu_pd(q)));
-                a1[c] = _mm256_add_pd(a1[c], _mm256_mul_pd(x1, _mm256_loadu_pd(q.add(4))));
-            }
+            let (p0, p1) = (y0.as_ptr().add(8 * i), y1.as_ptr().add(8 * i));
+            let (p2, p3) = (y2.as_ptr().add(8 * i), y3.as_ptr().add(8 * i));
+            a00 = _mm256_add_pd(a00, _mm256_mul_pd(x0, _mm256_loadu_pd(p0)));
+            a01 = _mm256_add_pd(a01, _mm256_mul_pd(x1, _mm256_loadu_pd(p0.add(4))));
+            a10 = _mm256_add_pd(a10, _mm256_mul_pd(x0, _mm256_loadu_pd(p1)));
+            a11 = _mm256_add_pd(a11, _mm256_mul_pd(x1, _mm256_loadu_pd(p1.add(4))));
+            a20 = _mm256_add_pd(a20, _mm256_mul_pd(x0, _mm256_loadu_pd(p2)));
+            a21 = _mm256_add_pd(a21, _mm256_mul_pd(x1, _mm256_loadu_pd(p2.add(4))));
+            a30 = _mm256_add_pd(a30, _mm256_mul_pd(x0, _mm256_loadu_pd(p3)));
+            a31 = _mm256_add_pd(a31, _mm256_mul_pd(x1, _mm256_loadu_pd(p3.add(4))));
         }
     }
-    let split = 8 * xc.len();
-    let mut out = [0.0; 4];
-    for c in 0..4 {
+    let s = 8 * xc.len();
+    // As the end of `dot_avx2`: the lanes of a0 + a1 paired, then the scalar tail.
+    let finish = |a: __m256d, b: __m256d, y: &[f64]| {
         let mut lanes = [0.0; 4];
         // SAFETY: `lanes` holds 4 f64.
-        unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), _mm256_add_pd(a0[c], a1[c])) };
+        unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), _mm256_add_pd(a, b)) };
         let mut tail = 0.0;
-        for (a, b) in xt.iter().zip(&y[c][split..]) {
+        for (a, b) in xt.iter().zip(y) {
             tail += a * b;
         }
-        out[c] = ((lanes[0] + lanes[2]) + (lanes[1] + lanes[3])) + tail;
-    }
-    out
+        ((lanes[0] + lanes[2]) + (lanes[1] + lanes[3])) + tail
+    };
+    [
+        finish(a00, a01, &y0[s..]),
+        finish(a10, a11, &y1[s..]),
+        finish(a20, a21, &y2[s..]),
+        finish(a30, a31, &y3[s..]),
+    ]
 }
 
 /// `y_c ← y_c − f_c·x` for four columns, 8 lanes at a time (`x` loaded once), entry by entry
@@ -243,27 +264,41 @@ fn axpy4_avx512(f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
         _mm512_loadu_pd, _mm512_mul_pd, _mm512_set1_pd, _mm512_storeu_pd, _mm512_sub_pd,
     };
     let n = x.len();
-    let y = y.map(|c| &mut c[..n]);
-    let fv = f.map(|f| _mm512_set1_pd(f));
+    let [y0, y1, y2, y3] = y;
+    let (y0, y1, y2, y3) = (&mut y0[..n], &mut y1[..n], &mut y2[..n], &mut y3[..n]);
+    let (f0, f1) = (_mm512_set1_pd(f[0]), _mm512_set1_pd(f[1]));
+    let (f2, f3) = (_mm512_set1_pd(f[2]), _mm512_set1_pd(f[3]));
     let (xc, xt) = x.as_chunks::<8>();
     for (i, xi) in xc.iter().enumerate() {
         // SAFETY: `xi` holds 8 f64, and so does every `y_c` from `8·i` (`y_c.len() = n`);
         // unaligned loads and stores, the four columns disjoint (distinct `&mut`).
         unsafe {
             let xv = _mm512_loadu_pd(xi.as_ptr());
-            for c in 0..4 {
-                let q = y[c].as_mut_ptr().add(8 * i);
-                _mm512_storeu_pd(
-                    q,
-                    _mm512_sub_pd(_mm512_loadu_pd(q), _mm512_mul_pd(fv[c], xv)),
-                );
-            }
+            let (p0, p1) = (y0.as_mut_ptr().add(8 * i), y1.as_mut_ptr().add(8 * i));
+            let (p2, p3) = (y2.as_mut_ptr().add(8 * i), y3.as_mut_ptr().add(8 * i));
+            _mm512_storeu_pd(
+                p0,
+                _mm512_sub_pd(_mm512_loadu_pd(p0), _mm512_mul_pd(f0, xv)),
+            );
+            _mm512_storeu_pd(
+                p1,
+                _mm512_sub_pd(_mm512_loadu_pd(p1), _mm512_mul_pd(f1, xv)),
+            );
+            _mm512_storeu_pd(
+                p2,
+                _mm512_sub_pd(_mm512_loadu_pd(p2), _mm512_mul_pd(f2, xv)),
+            );
+            _mm512_storeu_pd(
+                p3,
+                _mm512_sub_pd(_mm512_loadu_pd(p3), _mm512_mul_pd(f3, xv)),
+            );
         }
     }
-    let split = 8 * xc.len();
-    for c in 0..4 {
-        axpy(f[c], xt, &mut y[c][split..]);
-    }
+    let s = 8 * xc.len();
+    axpy(f[0], xt, &mut y0[s..]);
+    axpy(f[1], xt, &mut y1[s..]);
+    axpy(f[2], xt, &mut y2[s..]);
+    axpy(f[3], xt, &mut y3[s..]);
 }
 
 /// As [`axpy4_avx512`], 4 lanes at a time.
@@ -275,27 +310,41 @@ fn axpy4_avx2(f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
         _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_storeu_pd, _mm256_sub_pd,
     };
     let n = x.len();
-    let y = y.map(|c| &mut c[..n]);
-    let fv = f.map(|f| _mm256_set1_pd(f));
+    let [y0, y1, y2, y3] = y;
+    let (y0, y1, y2, y3) = (&mut y0[..n], &mut y1[..n], &mut y2[..n], &mut y3[..n]);
+    let (f0, f1) = (_mm256_set1_pd(f[0]), _mm256_set1_pd(f[1]));
+    let (f2, f3) = (_mm256_set1_pd(f[2]), _mm256_set1_pd(f[3]));
     let (xc, xt) = x.as_chunks::<4>();
     for (i, xi) in xc.iter().enumerate() {
         // SAFETY: `xi` holds 4 f64, and so does every `y_c` from `4·i` (`y_c.len() = n`);
         // unaligned loads and stores, the four columns disjoint (distinct `&mut`).
         unsafe {
             let xv = _mm256_loadu_pd(xi.as_ptr());
-            for c in 0..4 {
-                let q = y[c].as_mut_ptr().add(4 * i);
-                _mm256_storeu_pd(
-                    q,
-                    _mm256_sub_pd(_mm256_loadu_pd(q), _mm256_mul_pd(fv[c], xv)),
-                );
-            }
+            let (p0, p1) = (y0.as_mut_ptr().add(4 * i), y1.as_mut_ptr().add(4 * i));
+            let (p2, p3) = (y2.as_mut_ptr().add(4 * i), y3.as_mut_ptr().add(4 * i));
+            _mm256_storeu_pd(
+                p0,
+                _mm256_sub_pd(_mm256_loadu_pd(p0), _mm256_mul_pd(f0, xv)),
+            );
+            _mm256_storeu_pd(
+                p1,
+                _mm256_sub_pd(_mm256_loadu_pd(p1), _mm256_mul_pd(f1, xv)),
+            );
+            _mm256_storeu_pd(
+                p2,
+                _mm256_sub_pd(_mm256_loadu_pd(p2), _mm256_mul_pd(f2, xv)),
+            );
+            _mm256_storeu_pd(
+                p3,
+                _mm256_sub_pd(_mm256_loadu_pd(p3), _mm256_mul_pd(f3, xv)),
+            );
         }
     }
-    let split = 4 * xc.len();
-    for c in 0..4 {
-        axpy(f[c], xt, &mut y[c][split..]);
-    }
+    let s = 4 * xc.len();
+    axpy(f[0], xt, &mut y0[s..]);
+    axpy(f[1], xt, &mut y1[s..]);
+    axpy(f[2], xt, &mut y2[s..]);
+    axpy(f[3], xt, &mut y3[s..]);
 }
 
 /// Splits the next four columns off `rest` (column-major, leading dimension `ld`), rows
@@ -309,7 +358,13 @@ fn take4<'a>(rest: &mut &'a mut [f64], ld: usize, offset: usize, len: usize) -> 
     let (c2, all) = all.split_at_mut(ld);
     let (c3, all) = all.split_at_mut(ld.min(all.len()));
     *rest = all;
-    [c0, c1, c2, c3].map(|c| &mut c[offset..offset + len])
+    let rows = offset..offset + len;
+    [
+        &mut c0[rows.clone()],
+        &mut c1[rows.clone()],
+        &mut c2[rows.clone()],
+        &mut c3[rows],
+    ]
 }
 
 /// As [`dot_avx2`] with one 8-wide AVX-512 accumulator per 8 entries (two per 16).
@@ -472,7 +527,13 @@ fn qr_impl(a: &mut ColMajor, n_pivot: usize, kern: impl Kernels) -> Vec<usize> {
             for _ in 0..(n - k - 1) / 4 {
                 let y = take4(&mut rest, m, k, m - k);
                 let d = kern.dot4(v, [&*y[0], &*y[1], &*y[2], &*y[3]]);
-                kern.axpy4(d.map(|d| 2.0 * d / vtv), v, y);
+                let f = [
+                    2.0 * d[0] / vtv,
+                    2.0 * d[1] / vtv,
+                    2.0 * d[2] / vtv,
+                    2.0 * d[3] / vtv,
+                ];
+                kern.axpy4(f, v, y);
             }
             for col in rest.chunks_exact_mut(m) {
                 let y = &mut col[k..];
