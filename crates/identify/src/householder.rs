@@ -47,12 +47,16 @@ impl ColMajor {
 pub(crate) fn qr_in_place(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
     #[cfg(target_arch = "x86_64")]
     {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU has AVX-512F (checked just above).
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has AVX-512F, AVX2 and FMA (checked just above).
             return unsafe { qr_avx512(a, n_pivot) };
         }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked just above).
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
             return unsafe { qr_avx2(a, n_pivot) };
         }
     }
@@ -60,13 +64,13 @@ pub(crate) fn qr_in_place(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2")]
+#[target_feature(enable = "avx512f,avx2,fma")]
 fn qr_avx512(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
     qr_impl(a, n_pivot, Avx512(()))
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 fn qr_avx2(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
     qr_impl(a, n_pivot, Avx2(()))
 }
@@ -81,6 +85,21 @@ trait Kernels: Copy {
     fn dot4(self, x: &[f64], y: [&[f64]; 4]) -> [f64; 4];
     /// `y_c ← y_c − f_c·x` for the four columns `y_c` (`x.len()` entries each).
     fn axpy4(self, f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]);
+    /// `w[i][c] = v_i·y_c` for `NB` vectors and `C` columns, all of one length: one pass
+    /// over the data, fused multiply–adds where the instruction set has them.
+    fn dots<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        y: [&[f64]; C],
+    ) -> [[f64; C]; NB];
+    /// `y_c ← y_c − Σᵢ w[i][c]·v_i` (`i` in order), all of one length: one pass over the
+    /// data, fused multiply–adds where the instruction set has them.
+    fn update<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        w: [[f64; C]; NB],
+        y: [&mut [f64]; C],
+    );
 }
 
 /// The portable kernels (the reference for the vectorised ones).
@@ -102,10 +121,37 @@ impl Kernels for Scalar {
             axpy(f, x, y);
         }
     }
+    #[inline(always)]
+    fn dots<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        y: [&[f64]; C],
+    ) -> [[f64; C]; NB] {
+        let mut w = [[0.0; C]; NB];
+        for (wi, vi) in w.iter_mut().zip(v) {
+            for (wic, yc) in wi.iter_mut().zip(y) {
+                *wic = dot(vi, yc);
+            }
+        }
+        w
+    }
+    #[inline(always)]
+    fn update<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        w: [[f64; C]; NB],
+        y: [&mut [f64]; C],
+    ) {
+        for (c, yc) in y.into_iter().enumerate() {
+            for (wi, vi) in w.iter().zip(v) {
+                axpy(wi[c], vi, yc);
+            }
+        }
+    }
 }
 
-/// AVX2 kernels; a value exists only where the CPU has AVX2 (made in `#[target_feature]`
-/// functions that are called after detection).
+/// AVX2 kernels; a value exists only where the CPU has AVX2 and FMA (made in
+/// `#[target_feature]` functions that are called after detection).
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy)]
 struct Avx2(());
@@ -114,7 +160,7 @@ struct Avx2(());
 impl Kernels for Avx2 {
     #[inline(always)]
     fn dot(self, x: &[f64], y: &[f64]) -> f64 {
-        // SAFETY: an `Avx2` exists only where the CPU has AVX2 (see the type).
+        // SAFETY: an `Avx2` exists only where the CPU has AVX2 and FMA (see the type).
         unsafe { dot_avx2(x, y) }
     }
     #[inline(always)]
@@ -127,9 +173,28 @@ impl Kernels for Avx2 {
         // SAFETY: as above.
         unsafe { axpy4_avx2(f, x, y) }
     }
+    #[inline(always)]
+    fn dots<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        y: [&[f64]; C],
+    ) -> [[f64; C]; NB] {
+        // SAFETY: as above.
+        unsafe { dots_avx2(v, y) }
+    }
+    #[inline(always)]
+    fn update<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        w: [[f64; C]; NB],
+        y: [&mut [f64]; C],
+    ) {
+        // SAFETY: as above.
+        unsafe { update_avx2(v, w, y) }
+    }
 }
 
-/// AVX-512 kernels; a value exists only where the CPU has AVX-512F (made in
+/// AVX-512 kernels; a value exists only where the CPU has AVX-512F (with AVX2 and FMA; made in
 /// `#[target_feature]` functions that are called after detection).
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy)]
@@ -139,8 +204,8 @@ struct Avx512(());
 impl Kernels for Avx512 {
     #[inline(always)]
     fn dot(self, x: &[f64], y: &[f64]) -> f64 {
-        // SAFETY: an `Avx512` exists only where the CPU has AVX-512F (see the type), and
-        // every AVX-512F CPU has AVX2.
+        // SAFETY: an `Avx512` exists only where the CPU has AVX-512F, AVX2 and FMA (see the
+        // type).
         unsafe { dot_avx512(x, y) }
     }
     #[inline(always)]
@@ -152,6 +217,253 @@ impl Kernels for Avx512 {
     fn axpy4(self, f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
         // SAFETY: as above.
         unsafe { axpy4_avx512(f, x, y) }
+    }
+    #[inline(always)]
+    fn dots<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        y: [&[f64]; C],
+    ) -> [[f64; C]; NB] {
+        // SAFETY: as above.
+        unsafe { dots_avx512(v, y) }
+    }
+    #[inline(always)]
+    fn update<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        w: [[f64; C]; NB],
+        y: [&mut [f64]; C],
+    ) {
+        // SAFETY: as above.
+        unsafe { update_avx512(v, w, y) }
+    }
+}
+
+/// The common length of the slices of `v` and `y`.
+///
+/// # Panics
+/// If they differ.
+#[track_caller]
+fn common_len(v: &[&[f64]], y: &[&[f64]]) -> usize {
+    let n = v.first().or(y.first()).map_or(0, |s| s.len());
+    assert!(
+        v.iter().chain(y).all(|s| s.len() == n),
+        "slices of different lengths"
+    );
+    n
+}
+
+/// [`Kernels::dots`] with AVX-512: one 8-lane accumulator per pair, a masked tail.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[inline]
+fn dots_avx512<const NB: usize, const C: usize>(v: [&[f64]; NB], y: [&[f64]; C]) -> [[f64; C]; NB] {
+    use std::arch::x86_64::{
+        _mm512_fmadd_pd, _mm512_loadu_pd, _mm512_maskz_loadu_pd, _mm512_reduce_add_pd,
+        _mm512_setzero_pd,
+    };
+    let n = common_len(&v, &y);
+    let mut acc = [[_mm512_setzero_pd(); C]; NB];
+    let mut o = 0;
+    while o + 8 <= n {
+        // SAFETY: entries `o..o + 8` of every slice are in bounds (`o + 8 ≤ n`).
+        unsafe {
+            let mut yv = [_mm512_setzero_pd(); C];
+            for c in 0..C {
+                yv[c] = _mm512_loadu_pd(y[c].as_ptr().add(o));
+            }
+            for i in 0..NB {
+                let vv = _mm512_loadu_pd(v[i].as_ptr().add(o));
+                for c in 0..C {
+                    acc[i][c] = _mm512_fmadd_pd(vv, yv[c], acc[i][c]);
+                }
+            }
+        }
+        o += 8;
+    }
+    if o < n {
+        let mask = 0xff_u8 >> (8 - (n - o));
+        // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes (`n..o + 8`)
+        // are not read.
+        unsafe {
+            let mut yv = [_mm512_setzero_pd(); C];
+            for c in 0..C {
+                yv[c] = _mm512_maskz_loadu_pd(mask, y[c].as_ptr().add(o));
+            }
+            for i in 0..NB {
+                let vv = _mm512_maskz_loadu_pd(mask, v[i].as_ptr().add(o));
+                for c in 0..C {
+                    acc[i][c] = _mm512_fmadd_pd(vv, yv[c], acc[i][c]);
+                }
+            }
+        }
+    }
+    let mut w = [[0.0; C]; NB];
+    for i in 0..NB {
+        for c in 0..C {
+            w[i][c] = _mm512_reduce_add_pd(acc[i][c]);
+        }
+    }
+    w
+}
+
+/// [`Kernels::update`] with AVX-512: each `v_i` loaded once per 8 rows, a masked tail.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[inline]
+fn update_avx512<const NB: usize, const C: usize>(
+    v: [&[f64]; NB],
+    w: [[f64; C]; NB],
+    y: [&mut [f64]; C],
+) {
+    use std::arch::x86_64::{
+        _mm512_fnmadd_pd, _mm512_loadu_pd, _mm512_mask_storeu_pd, _mm512_maskz_loadu_pd,
+        _mm512_set1_pd, _mm512_setzero_pd, _mm512_storeu_pd,
+    };
+    let n = {
+        let yr: [&[f64]; C] = std::array::from_fn(|c| &*y[c]);
+        common_len(&v, &yr)
+    };
+    let mut wv = [[_mm512_setzero_pd(); C]; NB];
+    for i in 0..NB {
+        for c in 0..C {
+            wv[i][c] = _mm512_set1_pd(w[i][c]);
+        }
+    }
+    let mut o = 0;
+    while o + 8 <= n {
+        // SAFETY: entries `o..o + 8` of every slice are in bounds (`o + 8 ≤ n`); the `y_c` are
+        // distinct `&mut`, so the stores do not overlap the loads of `v`.
+        unsafe {
+            let mut vv = [_mm512_setzero_pd(); NB];
+            for i in 0..NB {
+                vv[i] = _mm512_loadu_pd(v[i].as_ptr().add(o));
+            }
+            for c in 0..C {
+                let p = y[c].as_mut_ptr().add(o);
+                let mut a = _mm512_loadu_pd(p);
+                for i in 0..NB {
+                    a = _mm512_fnmadd_pd(vv[i], wv[i][c], a);
+                }
+                _mm512_storeu_pd(p, a);
+            }
+        }
+        o += 8;
+    }
+    if o < n {
+        let mask = 0xff_u8 >> (8 - (n - o));
+        // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes are neither
+        // read nor written.
+        unsafe {
+            let mut vv = [_mm512_setzero_pd(); NB];
+            for i in 0..NB {
+                vv[i] = _mm512_maskz_loadu_pd(mask, v[i].as_ptr().add(o));
+            }
+            for c in 0..C {
+                let p = y[c].as_mut_ptr().add(o);
+                let mut a = _mm512_maskz_loadu_pd(mask, p);
+                for i in 0..NB {
+                    a = _mm512_fnmadd_pd(vv[i], wv[i][c], a);
+                }
+                _mm512_mask_storeu_pd(p, mask, a);
+            }
+        }
+    }
+}
+
+/// [`Kernels::dots`] with AVX2 and FMA: one 4-lane accumulator per pair, a scalar tail.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn dots_avx2<const NB: usize, const C: usize>(v: [&[f64]; NB], y: [&[f64]; C]) -> [[f64; C]; NB] {
+    use std::arch::x86_64::{
+        _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+    };
+    let n = common_len(&v, &y);
+    let mut acc = [[_mm256_setzero_pd(); C]; NB];
+    let mut o = 0;
+    while o + 4 <= n {
+        // SAFETY: entries `o..o + 4` of every slice are in bounds (`o + 4 ≤ n`).
+        unsafe {
+            let mut yv = [_mm256_setzero_pd(); C];
+            for c in 0..C {
+                yv[c] = _mm256_loadu_pd(y[c].as_ptr().add(o));
+            }
+            for i in 0..NB {
+                let vv = _mm256_loadu_pd(v[i].as_ptr().add(o));
+                for c in 0..C {
+                    acc[i][c] = _mm256_fmadd_pd(vv, yv[c], acc[i][c]);
+                }
+            }
+        }
+        o += 4;
+    }
+    let mut w = [[0.0; C]; NB];
+    for i in 0..NB {
+        for c in 0..C {
+            let mut lanes = [0.0; 4];
+            // SAFETY: `lanes` holds 4 f64.
+            unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), acc[i][c]) };
+            let mut tail = 0.0;
+            for r in o..n {
+                tail = v[i][r].mul_add(y[c][r], tail);
+            }
+            w[i][c] = ((lanes[0] + lanes[2]) + (lanes[1] + lanes[3])) + tail;
+        }
+    }
+    w
+}
+
+/// [`Kernels::update`] with AVX2 and FMA: each `v_i` loaded once per 4 rows, a scalar tail.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn update_avx2<const NB: usize, const C: usize>(
+    v: [&[f64]; NB],
+    w: [[f64; C]; NB],
+    y: [&mut [f64]; C],
+) {
+    use std::arch::x86_64::{
+        _mm256_fnmadd_pd, _mm256_loadu_pd, _mm256_set1_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+    };
+    let n = {
+        let yr: [&[f64]; C] = std::array::from_fn(|c| &*y[c]);
+        common_len(&v, &yr)
+    };
+    let mut wv = [[_mm256_setzero_pd(); C]; NB];
+    for i in 0..NB {
+        for c in 0..C {
+            wv[i][c] = _mm256_set1_pd(w[i][c]);
+        }
+    }
+    let mut o = 0;
+    while o + 4 <= n {
+        // SAFETY: entries `o..o + 4` of every slice are in bounds (`o + 4 ≤ n`); the `y_c` are
+        // distinct `&mut`, so the stores do not overlap the loads of `v`.
+        unsafe {
+            let mut vv = [_mm256_setzero_pd(); NB];
+            for i in 0..NB {
+                vv[i] = _mm256_loadu_pd(v[i].as_ptr().add(o));
+            }
+            for c in 0..C {
+                let p = y[c].as_mut_ptr().add(o);
+                let mut a = _mm256_loadu_pd(p);
+                for i in 0..NB {
+                    a = _mm256_fnmadd_pd(vv[i], wv[i][c], a);
+                }
+                _mm256_storeu_pd(p, a);
+            }
+        }
+        o += 4;
+    }
+    for c in 0..C {
+        for r in o..n {
+            let mut a = y[c][r];
+            for i in 0..NB {
+                a = (-w[i][c]).mul_add(v[i][r], a);
+            }
+            y[c][r] = a;
+        }
     }
 }
 
@@ -347,24 +659,22 @@ fn axpy4_avx2(f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
     axpy(f[3], xt, &mut y3[s..]);
 }
 
-/// Splits the next four columns off `rest` (column-major, leading dimension `ld`), rows
-/// `offset..offset + len` of each; `rest` then starts at the fifth column. The last column may
-/// end early (at `offset + len`).
+/// Splits the next `C` columns off `rest` (column-major, leading dimension `ld`), rows
+/// `offset..offset + len` of each; `rest` then starts at the column after them. The last
+/// column of `rest` may end early (at `offset + len`).
 #[inline(always)]
-fn take4<'a>(rest: &mut &'a mut [f64], ld: usize, offset: usize, len: usize) -> [&'a mut [f64]; 4] {
-    let all = std::mem::take(rest);
-    let (c0, all) = all.split_at_mut(ld);
-    let (c1, all) = all.split_at_mut(ld);
-    let (c2, all) = all.split_at_mut(ld);
-    let (c3, all) = all.split_at_mut(ld.min(all.len()));
-    *rest = all;
-    let rows = offset..offset + len;
-    [
-        &mut c0[rows.clone()],
-        &mut c1[rows.clone()],
-        &mut c2[rows.clone()],
-        &mut c3[rows],
-    ]
+fn take_cols<'a, const C: usize>(
+    rest: &mut &'a mut [f64],
+    ld: usize,
+    offset: usize,
+    len: usize,
+) -> [&'a mut [f64]; C] {
+    std::array::from_fn(|_| {
+        let all = std::mem::take(rest);
+        let (col, tail) = all.split_at_mut(ld.min(all.len()));
+        *rest = tail;
+        &mut col[offset..offset + len]
+    })
 }
 
 /// As [`dot_avx2`] with one 8-wide AVX-512 accumulator per 8 entries (two per 16).
@@ -525,7 +835,7 @@ fn qr_impl(a: &mut ColMajor, n_pivot: usize, kern: impl Kernels) -> Vec<usize> {
             // The columns after k, four at a time, then one at a time.
             let mut rest = tail;
             for _ in 0..(n - k - 1) / 4 {
-                let y = take4(&mut rest, m, k, m - k);
+                let y = take_cols::<4>(&mut rest, m, k, m - k);
                 let d = kern.dot4(v, [&*y[0], &*y[1], &*y[2], &*y[3]]);
                 let f = [
                     2.0 * d[0] / vtv,
@@ -562,12 +872,16 @@ pub(crate) fn fold_rows(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb
     assert!(r.len() >= n1 * n1 && ldb >= len && (n1 == 0 || b.len() >= (n1 - 1) * ldb + len));
     #[cfg(target_arch = "x86_64")]
     {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU has AVX-512F (checked just above).
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has AVX-512F, AVX2 and FMA (checked just above).
             return unsafe { fold_avx512(r, n1, b, len, ldb) };
         }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked just above).
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
             return unsafe { fold_avx2(r, n1, b, len, ldb) };
         }
     }
@@ -575,16 +889,19 @@ pub(crate) fn fold_rows(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2")]
+#[target_feature(enable = "avx512f,avx2,fma")]
 fn fold_avx512(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize) {
     fold_impl(r, n1, b, len, ldb, Avx512(()));
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 fn fold_avx2(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize) {
     fold_impl(r, n1, b, len, ldb, Avx2(()));
 }
+
+/// Reflections per block of the compact-WY update of [`fold_rows`].
+const NB: usize = 4;
 
 #[inline(always)]
 fn fold_impl(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize, kern: impl Kernels) {
@@ -592,44 +909,133 @@ fn fold_impl(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize, ke
         return;
     }
     let dot = |x: &[f64], y: &[f64]| kern.dot(x, y);
-    for k in 0..n1 {
-        // x = [R_kk; B[:, k]].
-        let (b_head, b_tail) = b.split_at_mut((k + 1) * ldb);
-        let bk = &b_head[k * ldb..k * ldb + len];
-        let bk_norm = norm(bk, dot);
-        if bk_norm == 0.0 {
-            continue;
-        }
-        let rkk = r[k * n1 + k];
-        let x_norm = rkk.hypot(bk_norm);
-        let alpha = if rkk > 0.0 { -x_norm } else { x_norm };
-        let v0 = rkk - alpha;
-        let vtv = 2.0 * x_norm * (x_norm + rkk.abs());
-        // Column j of [R; B] gets f = 2·vᵀx_j / vᵀv: four columns at a time, then one at a time.
-        let mut rest = b_tail;
-        let mut j = k + 1;
-        for _ in 0..(n1 - j) / 4 {
-            let y = take4(&mut rest, ldb, 0, len);
-            let d = kern.dot4(bk, [&*y[0], &*y[1], &*y[2], &*y[3]]);
-            let mut f = [0.0; 4];
-            for (c, (f, d)) in f.iter_mut().zip(d).enumerate() {
-                let rkj = r[(j + c) * n1 + k];
-                *f = 2.0 * (v0 * rkj + d) / vtv;
-                r[(j + c) * n1 + k] = rkj - *f * v0;
+    let mut k0 = 0;
+    while k0 < n1 {
+        // Reflections k0..k1: each first applied to the later columns of its block only (all
+        // later columns in a last, short block), then together to the columns after the block.
+        let k1 = (k0 + NB).min(n1);
+        let blocked = k1 - k0 == NB && k1 < n1;
+        let j_end = if blocked { k1 } else { n1 };
+        // H_k = I − τ_k v_k v_kᵀ, v_k = [v0_k at row k of R; B[:, k]] (τ_k = 0: no reflection).
+        let mut tau = [0.0; NB];
+        let mut v0 = [0.0; NB];
+        for k in k0..k1 {
+            // x = [R_kk; B[:, k]].
+            let (b_head, b_tail) = b.split_at_mut((k + 1) * ldb);
+            let bk = &b_head[k * ldb..k * ldb + len];
+            let bk_norm = norm(bk, dot);
+            if bk_norm == 0.0 {
+                continue;
             }
-            kern.axpy4(f, bk, y);
-            j += 4;
+            let rkk = r[k * n1 + k];
+            let x_norm = rkk.hypot(bk_norm);
+            let alpha = if rkk > 0.0 { -x_norm } else { x_norm };
+            let vk0 = rkk - alpha;
+            let vtv = 2.0 * x_norm * (x_norm + rkk.abs());
+            for (j, bj) in (k + 1..j_end).zip(b_tail.chunks_mut(ldb)) {
+                let bj = &mut bj[..len];
+                let rkj = r[j * n1 + k];
+                let f = 2.0 * (vk0 * rkj + kern.dot(bk, bj)) / vtv;
+                r[j * n1 + k] = rkj - f * vk0;
+                axpy(f, bk, bj);
+            }
+            r[k * n1 + k] = alpha;
+            tau[k - k0] = 2.0 / vtv;
+            v0[k - k0] = vk0;
         }
-        for bj in rest.chunks_mut(ldb).take(n1 - j) {
-            let bj = &mut bj[..len];
-            let rkj = r[j * n1 + k];
-            let f = 2.0 * (v0 * rkj + kern.dot(bk, bj)) / vtv;
-            r[j * n1 + k] = rkj - f * v0;
-            axpy(f, bk, bj);
-            j += 1;
+        if blocked {
+            apply_block(r, n1, b, len, ldb, k0, &tau, &v0, kern);
         }
-        r[k * n1 + k] = alpha;
+        k0 = k1;
     }
+}
+
+/// Applies the block of reflections `k0..k0 + NB` of [`fold_impl`] (`τ`, `v0`, and their
+/// `B` parts in the columns `k0..k0 + NB` of `b`) to the columns `k0 + NB..n1` of `[R; B]`.
+///
+/// Compact WY (Schreiber and Van Loan 1989; LAPACK `dlarft`, forward, columnwise):
+/// `H_0⋯H_{NB−1} = I − V T Vᵀ` with `T` upper triangular, `T_ii = τ_i` and
+/// `T[..i, i] = −τ_i T[..i, ..i] Vᵀv_i`, so `Qᵀx = x − V Tᵀ (Vᵀx)`: one pass over a column
+/// for the `NB` dot products and one for the update, in place of `NB` of each. The `R` parts
+/// of the `v_i` lie in different rows (`v0_i` at row `k0 + i`), so `v_lᵀv_i = B_lᵀB_i`.
+#[allow(clippy::too_many_arguments)] // the shapes of `fold_rows` plus the block's reflections
+#[inline(always)]
+fn apply_block(
+    r: &mut [f64],
+    n1: usize,
+    b: &mut [f64],
+    len: usize,
+    ldb: usize,
+    k0: usize,
+    tau: &[f64; NB],
+    v0: &[f64; NB],
+    kern: impl Kernels,
+) {
+    let (head, tail) = b.split_at_mut((k0 + NB) * ldb);
+    let v: [&[f64]; NB] = std::array::from_fn(|i| &head[(k0 + i) * ldb..(k0 + i) * ldb + len]);
+    let mut t = [[0.0; NB]; NB]; // t[l][i] = T_li
+    for i in 0..NB {
+        t[i][i] = tau[i];
+        let mut g = [0.0; NB];
+        for l in 0..i {
+            g[l] = kern.dot(v[l], v[i]);
+        }
+        for l in 0..i {
+            let s: f64 = (l..i).map(|m| t[l][m] * g[m]).sum();
+            t[l][i] = -tau[i] * s;
+        }
+    }
+    // Columns k0 + NB.., two at a time, then the last one alone.
+    let mut rest = tail;
+    let mut j = k0 + NB;
+    while j + 2 <= n1 {
+        let y = take_cols::<2>(&mut rest, ldb, 0, len);
+        apply_block_to::<2>(r, n1, k0, j, &v, &t, v0, y, kern);
+        j += 2;
+    }
+    if j < n1 {
+        let y = take_cols::<1>(&mut rest, ldb, 0, len);
+        apply_block_to::<1>(r, n1, k0, j, &v, &t, v0, y, kern);
+    }
+}
+
+/// `x_c ← x_c − V Tᵀ Vᵀ x_c` for the `C` columns `x_c = [R[k0.., j + c]; y_c]` (see
+/// [`apply_block`]).
+#[allow(clippy::too_many_arguments)] // the block and the columns it acts on
+#[inline(always)]
+fn apply_block_to<const C: usize>(
+    r: &mut [f64],
+    n1: usize,
+    k0: usize,
+    j: usize,
+    v: &[&[f64]; NB],
+    t: &[[f64; NB]; NB],
+    v0: &[f64; NB],
+    y: [&mut [f64]; C],
+    kern: impl Kernels,
+) {
+    let mut w = {
+        let yr: [&[f64]; C] = std::array::from_fn(|c| &*y[c]);
+        kern.dots::<NB, C>(*v, yr)
+    };
+    for c in 0..C {
+        for l in 0..NB {
+            w[l][c] += v0[l] * r[(j + c) * n1 + k0 + l];
+        }
+    }
+    // Tᵀw: (Tᵀw)_i = Σ_{l ≤ i} T_li w_l.
+    let mut tw = [[0.0; C]; NB];
+    for i in 0..NB {
+        for c in 0..C {
+            tw[i][c] = (0..=i).map(|l| t[l][i] * w[l][c]).sum();
+        }
+    }
+    for c in 0..C {
+        for l in 0..NB {
+            r[(j + c) * n1 + k0 + l] -= v0[l] * tw[l][c];
+        }
+    }
+    kern.update::<NB, C>(*v, tw, y);
 }
 
 #[cfg(test)]
