@@ -3,10 +3,13 @@
 //!
 //! Source: G. H. Golub, C. F. Van Loan, *Matrix Computations*, 4th ed., 2013, Alg. 5.2.1
 //! (Householder QR) and §5.4.2 (column pivoting, as MINPACK `qrfac`: the pivot is the
-//! remaining column of largest norm). Unblocked: for the narrow matrices of a calibration
-//! (tens of columns) each reflection is one dot product and one update per column, vectorised
-//! here (8 accumulators; AVX-512 or AVX2 chosen at run time), with none of the set-up of a
-//! blocked factorisation, which only pays beyond a few thousand rows.
+//! remaining column of largest norm, the norms downdated after each step). The pivoted QR of
+//! a small triangle ([`qr_in_place`]) is unblocked: each reflection is one pass of dot
+//! products and one of updates over four columns at a time. Folding rows into a triangle
+//! ([`fold_rows`], the bulk of an LM step's flops) applies its reflections in blocks of four
+//! (compact WY, Golub–Van Loan §5.2.3), so that each column of the block of rows is read
+//! twice per four reflections rather than twice per reflection. The vector kernels use fused
+//! multiply–adds, AVX-512 or AVX2 chosen at run time, with a portable reference.
 
 /// A column-major `nrows × ncols` matrix (leading dimension `nrows`).
 pub(crate) struct ColMajor {
@@ -75,16 +78,11 @@ fn qr_avx2(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
     qr_impl(a, n_pivot, Avx2(()))
 }
 
-/// The vector kernels of a reflection, for one instruction set. Each rounds exactly as the
-/// one-column loops it replaces (its `dot`, then `y ← y − f·v` entry by entry, a product then
-/// a difference), so the factorisations do not depend on how many columns a call handles.
+/// The vector kernels of the reflections, for one instruction set ([`Scalar`] is the
+/// reference; the vectorised ones agree with it up to rounding).
 trait Kernels: Copy {
     /// `Σ xᵢyᵢ` over `x.len()` entries.
     fn dot(self, x: &[f64], y: &[f64]) -> f64;
-    /// `[x·y₀, x·y₁, x·y₂, x·y₃]`, each rounded as [`Kernels::dot`]; `x` is read once.
-    fn dot4(self, x: &[f64], y: [&[f64]; 4]) -> [f64; 4];
-    /// `y_c ← y_c − f_c·x` for the four columns `y_c` (`x.len()` entries each).
-    fn axpy4(self, f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]);
     /// `w[i][c] = v_i·y_c` for `NB` vectors and `C` columns, all of one length: one pass
     /// over the data, fused multiply–adds where the instruction set has them.
     fn dots<const NB: usize, const C: usize>(
@@ -110,16 +108,6 @@ impl Kernels for Scalar {
     #[inline(always)]
     fn dot(self, x: &[f64], y: &[f64]) -> f64 {
         dot(x, y)
-    }
-    #[inline(always)]
-    fn dot4(self, x: &[f64], y: [&[f64]; 4]) -> [f64; 4] {
-        [dot(x, y[0]), dot(x, y[1]), dot(x, y[2]), dot(x, y[3])]
-    }
-    #[inline(always)]
-    fn axpy4(self, f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
-        for (f, y) in f.into_iter().zip(y) {
-            axpy(f, x, y);
-        }
     }
     #[inline(always)]
     fn dots<const NB: usize, const C: usize>(
@@ -164,16 +152,6 @@ impl Kernels for Avx2 {
         unsafe { dot_avx2(x, y) }
     }
     #[inline(always)]
-    fn dot4(self, x: &[f64], y: [&[f64]; 4]) -> [f64; 4] {
-        // SAFETY: as above.
-        unsafe { dot4_avx2(x, y) }
-    }
-    #[inline(always)]
-    fn axpy4(self, f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
-        // SAFETY: as above.
-        unsafe { axpy4_avx2(f, x, y) }
-    }
-    #[inline(always)]
     fn dots<const NB: usize, const C: usize>(
         self,
         v: [&[f64]; NB],
@@ -207,16 +185,6 @@ impl Kernels for Avx512 {
         // SAFETY: an `Avx512` exists only where the CPU has AVX-512F, AVX2 and FMA (see the
         // type).
         unsafe { dot_avx512(x, y) }
-    }
-    #[inline(always)]
-    fn dot4(self, x: &[f64], y: [&[f64]; 4]) -> [f64; 4] {
-        // SAFETY: as above.
-        unsafe { dot4_avx512(x, y) }
-    }
-    #[inline(always)]
-    fn axpy4(self, f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
-        // SAFETY: as above.
-        unsafe { axpy4_avx512(f, x, y) }
     }
     #[inline(always)]
     fn dots<const NB: usize, const C: usize>(
@@ -467,198 +435,6 @@ fn update_avx2<const NB: usize, const C: usize>(
     }
 }
 
-/// [`dot_avx512`] of `x` with four columns at once (8 accumulators, `x` loaded once), each
-/// sum rounded exactly as `dot_avx512(x, y_c)`.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2")]
-#[inline]
-fn dot4_avx512(x: &[f64], y: [&[f64]; 4]) -> [f64; 4] {
-    use std::arch::x86_64::{
-        _mm512_add_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_reduce_add_pd, _mm512_setzero_pd,
-    };
-    let n = x.len();
-    let [y0, y1, y2, y3] = y;
-    let (y0, y1, y2, y3) = (&y0[..n], &y1[..n], &y2[..n], &y3[..n]);
-    let (xc, xt) = x.as_chunks::<16>();
-    let (mut a00, mut a01) = (_mm512_setzero_pd(), _mm512_setzero_pd());
-    let (mut a10, mut a11) = (_mm512_setzero_pd(), _mm512_setzero_pd());
-    let (mut a20, mut a21) = (_mm512_setzero_pd(), _mm512_setzero_pd());
-    let (mut a30, mut a31) = (_mm512_setzero_pd(), _mm512_setzero_pd());
-    for (i, xi) in xc.iter().enumerate() {
-        // SAFETY: `xi` holds 16 f64, and so does every `y_c` from `16·i` (`y_c.len() = n`,
-        // `16·(i + 1) ≤ n`); unaligned loads.
-        unsafe {
-            let x0 = _mm512_loadu_pd(xi.as_ptr());
-            let x1 = _mm512_loadu_pd(xi.as_ptr().add(8));
-            let (p0, p1) = (y0.as_ptr().add(16 * i), y1.as_ptr().add(16 * i));
-            let (p2, p3) = (y2.as_ptr().add(16 * i), y3.as_ptr().add(16 * i));
-            a00 = _mm512_add_pd(a00, _mm512_mul_pd(x0, _mm512_loadu_pd(p0)));
-            a01 = _mm512_add_pd(a01, _mm512_mul_pd(x1, _mm512_loadu_pd(p0.add(8))));
-            a10 = _mm512_add_pd(a10, _mm512_mul_pd(x0, _mm512_loadu_pd(p1)));
-            a11 = _mm512_add_pd(a11, _mm512_mul_pd(x1, _mm512_loadu_pd(p1.add(8))));
-            a20 = _mm512_add_pd(a20, _mm512_mul_pd(x0, _mm512_loadu_pd(p2)));
-            a21 = _mm512_add_pd(a21, _mm512_mul_pd(x1, _mm512_loadu_pd(p2.add(8))));
-            a30 = _mm512_add_pd(a30, _mm512_mul_pd(x0, _mm512_loadu_pd(p3)));
-            a31 = _mm512_add_pd(a31, _mm512_mul_pd(x1, _mm512_loadu_pd(p3.add(8))));
-        }
-    }
-    let s = 16 * xc.len();
-    [
-        _mm512_reduce_add_pd(_mm512_add_pd(a00, a01)) + dot_avx2(xt, &y0[s..]),
-        _mm512_reduce_add_pd(_mm512_add_pd(a10, a11)) + dot_avx2(xt, &y1[s..]),
-        _mm512_reduce_add_pd(_mm512_add_pd(a20, a21)) + dot_avx2(xt, &y2[s..]),
-        _mm512_reduce_add_pd(_mm512_add_pd(a30, a31)) + dot_avx2(xt, &y3[s..]),
-    ]
-}
-
-/// [`dot_avx2`] of `x` with four columns at once (8 accumulators, `x` loaded once), each sum
-/// rounded exactly as `dot_avx2(x, y_c)`.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn dot4_avx2(x: &[f64], y: [&[f64]; 4]) -> [f64; 4] {
-    use std::arch::x86_64::{
-        __m256d, _mm256_add_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_setzero_pd, _mm256_storeu_pd,
-    };
-    let n = x.len();
-    let [y0, y1, y2, y3] = y;
-    let (y0, y1, y2, y3) = (&y0[..n], &y1[..n], &y2[..n], &y3[..n]);
-    let (xc, xt) = x.as_chunks::<8>();
-    let (mut a00, mut a01) = (_mm256_setzero_pd(), _mm256_setzero_pd());
-    let (mut a10, mut a11) = (_mm256_setzero_pd(), _mm256_setzero_pd());
-    let (mut a20, mut a21) = (_mm256_setzero_pd(), _mm256_setzero_pd());
-    let (mut a30, mut a31) = (_mm256_setzero_pd(), _mm256_setzero_pd());
-    for (i, xi) in xc.iter().enumerate() {
-        // SAFETY: `xi` holds 8 f64, and so does every `y_c` from `8·i` (`y_c.len() = n`,
-        // `8·(i + 1) ≤ n`); unaligned loads.
-        unsafe {
-            let x0 = _mm256_loadu_pd(xi.as_ptr());
-            let x1 = _mm256_loadu_pd(xi.as_ptr().add(4));
-            let (p0, p1) = (y0.as_ptr().add(8 * i), y1.as_ptr().add(8 * i));
-            let (p2, p3) = (y2.as_ptr().add(8 * i), y3.as_ptr().add(8 * i));
-            a00 = _mm256_add_pd(a00, _mm256_mul_pd(x0, _mm256_loadu_pd(p0)));
-            a01 = _mm256_add_pd(a01, _mm256_mul_pd(x1, _mm256_loadu_pd(p0.add(4))));
-            a10 = _mm256_add_pd(a10, _mm256_mul_pd(x0, _mm256_loadu_pd(p1)));
-            a11 = _mm256_add_pd(a11, _mm256_mul_pd(x1, _mm256_loadu_pd(p1.add(4))));
-            a20 = _mm256_add_pd(a20, _mm256_mul_pd(x0, _mm256_loadu_pd(p2)));
-            a21 = _mm256_add_pd(a21, _mm256_mul_pd(x1, _mm256_loadu_pd(p2.add(4))));
-            a30 = _mm256_add_pd(a30, _mm256_mul_pd(x0, _mm256_loadu_pd(p3)));
-            a31 = _mm256_add_pd(a31, _mm256_mul_pd(x1, _mm256_loadu_pd(p3.add(4))));
-        }
-    }
-    let s = 8 * xc.len();
-    // As the end of `dot_avx2`: the lanes of a0 + a1 paired, then the scalar tail.
-    let finish = |a: __m256d, b: __m256d, y: &[f64]| {
-        let mut lanes = [0.0; 4];
-        // SAFETY: `lanes` holds 4 f64.
-        unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), _mm256_add_pd(a, b)) };
-        let mut tail = 0.0;
-        for (a, b) in xt.iter().zip(y) {
-            tail += a * b;
-        }
-        ((lanes[0] + lanes[2]) + (lanes[1] + lanes[3])) + tail
-    };
-    [
-        finish(a00, a01, &y0[s..]),
-        finish(a10, a11, &y1[s..]),
-        finish(a20, a21, &y2[s..]),
-        finish(a30, a31, &y3[s..]),
-    ]
-}
-
-/// `y_c ← y_c − f_c·x` for four columns, 8 lanes at a time (`x` loaded once), entry by entry
-/// as [`axpy`] (a product, then a difference).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-#[inline]
-fn axpy4_avx512(f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
-    use std::arch::x86_64::{
-        _mm512_loadu_pd, _mm512_mul_pd, _mm512_set1_pd, _mm512_storeu_pd, _mm512_sub_pd,
-    };
-    let n = x.len();
-    let [y0, y1, y2, y3] = y;
-    let (y0, y1, y2, y3) = (&mut y0[..n], &mut y1[..n], &mut y2[..n], &mut y3[..n]);
-    let (f0, f1) = (_mm512_set1_pd(f[0]), _mm512_set1_pd(f[1]));
-    let (f2, f3) = (_mm512_set1_pd(f[2]), _mm512_set1_pd(f[3]));
-    let (xc, xt) = x.as_chunks::<8>();
-    for (i, xi) in xc.iter().enumerate() {
-        // SAFETY: `xi` holds 8 f64, and so does every `y_c` from `8·i` (`y_c.len() = n`);
-        // unaligned loads and stores, the four columns disjoint (distinct `&mut`).
-        unsafe {
-            let xv = _mm512_loadu_pd(xi.as_ptr());
-            let (p0, p1) = (y0.as_mut_ptr().add(8 * i), y1.as_mut_ptr().add(8 * i));
-            let (p2, p3) = (y2.as_mut_ptr().add(8 * i), y3.as_mut_ptr().add(8 * i));
-            _mm512_storeu_pd(
-                p0,
-                _mm512_sub_pd(_mm512_loadu_pd(p0), _mm512_mul_pd(f0, xv)),
-            );
-            _mm512_storeu_pd(
-                p1,
-                _mm512_sub_pd(_mm512_loadu_pd(p1), _mm512_mul_pd(f1, xv)),
-            );
-            _mm512_storeu_pd(
-                p2,
-                _mm512_sub_pd(_mm512_loadu_pd(p2), _mm512_mul_pd(f2, xv)),
-            );
-            _mm512_storeu_pd(
-                p3,
-                _mm512_sub_pd(_mm512_loadu_pd(p3), _mm512_mul_pd(f3, xv)),
-            );
-        }
-    }
-    let s = 8 * xc.len();
-    axpy(f[0], xt, &mut y0[s..]);
-    axpy(f[1], xt, &mut y1[s..]);
-    axpy(f[2], xt, &mut y2[s..]);
-    axpy(f[3], xt, &mut y3[s..]);
-}
-
-/// As [`axpy4_avx512`], 4 lanes at a time.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn axpy4_avx2(f: [f64; 4], x: &[f64], y: [&mut [f64]; 4]) {
-    use std::arch::x86_64::{
-        _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_storeu_pd, _mm256_sub_pd,
-    };
-    let n = x.len();
-    let [y0, y1, y2, y3] = y;
-    let (y0, y1, y2, y3) = (&mut y0[..n], &mut y1[..n], &mut y2[..n], &mut y3[..n]);
-    let (f0, f1) = (_mm256_set1_pd(f[0]), _mm256_set1_pd(f[1]));
-    let (f2, f3) = (_mm256_set1_pd(f[2]), _mm256_set1_pd(f[3]));
-    let (xc, xt) = x.as_chunks::<4>();
-    for (i, xi) in xc.iter().enumerate() {
-        // SAFETY: `xi` holds 4 f64, and so does every `y_c` from `4·i` (`y_c.len() = n`);
-        // unaligned loads and stores, the four columns disjoint (distinct `&mut`).
-        unsafe {
-            let xv = _mm256_loadu_pd(xi.as_ptr());
-            let (p0, p1) = (y0.as_mut_ptr().add(4 * i), y1.as_mut_ptr().add(4 * i));
-            let (p2, p3) = (y2.as_mut_ptr().add(4 * i), y3.as_mut_ptr().add(4 * i));
-            _mm256_storeu_pd(
-                p0,
-                _mm256_sub_pd(_mm256_loadu_pd(p0), _mm256_mul_pd(f0, xv)),
-            );
-            _mm256_storeu_pd(
-                p1,
-                _mm256_sub_pd(_mm256_loadu_pd(p1), _mm256_mul_pd(f1, xv)),
-            );
-            _mm256_storeu_pd(
-                p2,
-                _mm256_sub_pd(_mm256_loadu_pd(p2), _mm256_mul_pd(f2, xv)),
-            );
-            _mm256_storeu_pd(
-                p3,
-                _mm256_sub_pd(_mm256_loadu_pd(p3), _mm256_mul_pd(f3, xv)),
-            );
-        }
-    }
-    let s = 4 * xc.len();
-    axpy(f[0], xt, &mut y0[s..]);
-    axpy(f[1], xt, &mut y1[s..]);
-    axpy(f[2], xt, &mut y2[s..]);
-    axpy(f[3], xt, &mut y3[s..]);
-}
-
 /// Splits the next `C` columns off `rest` (column-major, leading dimension `ld`), rows
 /// `offset..offset + len` of each; `rest` then starts at the column after them. The last
 /// column of `rest` may end early (at `offset + len`).
@@ -802,57 +578,68 @@ fn qr_impl(a: &mut ColMajor, n_pivot: usize, kern: impl Kernels) -> Vec<usize> {
     let (m, n) = (a.nrows, a.ncols);
     let n_pivot = n_pivot.min(n);
     let mut perm: Vec<usize> = (0..n).collect();
+    // Norms of the pivot candidates over rows k.., downdated after each reflection and
+    // recomputed once cancellation has cost them half their digits (MINPACK `qrfac`).
+    let mut cand: Vec<f64> = (0..n_pivot).map(|j| norm(a.col(j), dot)).collect();
+    let mut cand_ref = cand.clone();
     for k in 0..m.min(n) {
         if k < n_pivot {
             let mut best = k;
-            let mut best_norm = -1.0;
-            for j in k..n_pivot {
-                let c = norm(&a.col(j)[k..], dot);
-                if c > best_norm {
+            for j in k + 1..n_pivot {
+                if cand[j] > cand[best] {
                     best = j;
-                    best_norm = c;
                 }
             }
             if best != k {
                 let (lo, hi) = a.data.split_at_mut(best * m);
                 lo[k * m..(k + 1) * m].swap_with_slice(&mut hi[..m]);
                 perm.swap(k, best);
+                cand.swap(k, best);
+                cand_ref.swap(k, best);
             }
         }
         let (head, tail) = a.data.split_at_mut((k + 1) * m);
         let v = &mut head[k * m + k..(k + 1) * m];
         let x_norm = norm(v, dot);
-        if x_norm == 0.0 {
-            continue;
-        }
-        let x0 = v[0];
-        let alpha = if x0 > 0.0 { -x_norm } else { x_norm };
-        v[0] = x0 - alpha;
-        // vᵀv = 2‖x‖(‖x‖ + |x₀|) for v = x − αe₁.
-        let vtv = 2.0 * x_norm * (x_norm + x0.abs());
-        {
-            let v = &*v;
-            // The columns after k, four at a time, then one at a time.
-            let mut rest = tail;
-            for _ in 0..(n - k - 1) / 4 {
-                let y = take_cols::<4>(&mut rest, m, k, m - k);
-                let d = kern.dot4(v, [&*y[0], &*y[1], &*y[2], &*y[3]]);
-                let f = [
-                    2.0 * d[0] / vtv,
-                    2.0 * d[1] / vtv,
-                    2.0 * d[2] / vtv,
-                    2.0 * d[3] / vtv,
-                ];
-                kern.axpy4(f, v, y);
+        if x_norm != 0.0 {
+            let x0 = v[0];
+            let alpha = if x0 > 0.0 { -x_norm } else { x_norm };
+            v[0] = x0 - alpha;
+            // vᵀv = 2‖x‖(‖x‖ + |x₀|) for v = x − αe₁; column j gets y ← y − (2vᵀy/vᵀv)·v.
+            let vtv = 2.0 * x_norm * (x_norm + x0.abs());
+            {
+                let v = &*v;
+                let mut rest = &mut tail[..];
+                for _ in 0..(n - k - 1) / 4 {
+                    let y = take_cols::<4>(&mut rest, m, k, m - k);
+                    let [d] = kern.dots::<1, 4>([v], [&*y[0], &*y[1], &*y[2], &*y[3]]);
+                    let f = [
+                        2.0 * d[0] / vtv,
+                        2.0 * d[1] / vtv,
+                        2.0 * d[2] / vtv,
+                        2.0 * d[3] / vtv,
+                    ];
+                    kern.update::<1, 4>([v], [f], y);
+                }
+                for _ in 0..(n - k - 1) % 4 {
+                    let y = take_cols::<1>(&mut rest, m, k, m - k);
+                    let [[d]] = kern.dots::<1, 1>([v], [&*y[0]]);
+                    kern.update::<1, 1>([v], [[2.0 * d / vtv]], y);
+                }
             }
-            for col in rest.chunks_exact_mut(m) {
-                let y = &mut col[k..];
-                let f = 2.0 * kern.dot(v, y) / vtv;
-                axpy(f, v, y);
+            v[0] = alpha;
+            v[1..].iter_mut().for_each(|e| *e = 0.0);
+        }
+        for j in k + 1..n_pivot {
+            if cand[j] != 0.0 {
+                let t = a.at(k, j) / cand[j];
+                cand[j] *= (1.0 - t * t).max(0.0).sqrt();
+                if 0.05 * (cand[j] / cand_ref[j]).powi(2) <= f64::EPSILON {
+                    cand[j] = norm(&a.col(j)[k + 1..], dot);
+                    cand_ref[j] = cand[j];
+                }
             }
         }
-        v[0] = alpha;
-        v[1..].iter_mut().for_each(|e| *e = 0.0);
     }
     perm
 }
@@ -980,9 +767,9 @@ fn apply_block(
         for l in 0..i {
             g[l] = kern.dot(v[l], v[i]);
         }
-        for l in 0..i {
-            let s: f64 = (l..i).map(|m| t[l][m] * g[m]).sum();
-            t[l][i] = -tau[i] * s;
+        for (l, tl) in t.iter_mut().enumerate().take(i) {
+            let s: f64 = (l..i).map(|m| tl[m] * g[m]).sum();
+            tl[i] = -tau[i] * s;
         }
     }
     // Columns k0 + NB.., two at a time, then the last one alone.

@@ -606,12 +606,6 @@ pub(crate) fn run(
                 lambda *= 0.5;
             }
             let accepted = ratio >= 1e-4;
-            if std::env::var_os("HAPCAL_TRACE").is_some() {
-                eprintln!(
-                    "TRACE f={f_norm:.17e} ft={f_norm_trial:.17e} d={delta:.6e} l={lambda:.6e} ratio={ratio:.6e} pred={predicted:.6e} diag0={:.17e} qtr0={:.17e}",
-                    diag[0], u[0]
-                );
-            }
             if accepted {
                 std::mem::swap(&mut x, &mut x_trial);
                 lin.accept();
