@@ -918,4 +918,159 @@ mod tests {
             }
         }
     }
+
+    /// Deterministic entries in [−1, 1) (a 64-bit LCG, Knuth's MMIX constants).
+    fn lcg(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*state >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    }
+
+    /// `|a − b| ≤ 1e-12·scale`: the vectorised kernels sum in another order than the
+    /// reference, so they agree to rounding (≈ 1e-15 relative for these sizes), not bit for bit.
+    #[track_caller]
+    fn assert_close(a: f64, b: f64, scale: f64, what: &str) {
+        assert!(
+            (a - b).abs() <= 1e-12 * scale.max(1.0),
+            "{what}: {a} vs {b}"
+        );
+    }
+
+    /// The kernels of the instruction set `fold_rows` picks on this CPU against [`Scalar`],
+    /// for every length up to 40 (all tails of the 8- and 4-lane loops) and 200.
+    fn kernels_agree_with_the_reference(kern: impl Kernels) {
+        let mut state = 7;
+        for n in (0..=40).chain([200]) {
+            let v: Vec<Vec<f64>> = (0..4)
+                .map(|_| (0..n).map(|_| lcg(&mut state)).collect())
+                .collect();
+            let y: Vec<Vec<f64>> = (0..2)
+                .map(|_| (0..n).map(|_| lcg(&mut state)).collect())
+                .collect();
+            let vr = [&v[0][..], &v[1][..], &v[2][..], &v[3][..]];
+            let yr = [&y[0][..], &y[1][..]];
+            let got = kern.dots::<4, 2>(vr, yr);
+            let want = Scalar.dots::<4, 2>(vr, yr);
+            for i in 0..4 {
+                for c in 0..2 {
+                    assert_close(got[i][c], want[i][c], n as f64, &format!("dots n={n}"));
+                }
+                assert_close(kern.dot(vr[i], yr[0]), dot(vr[i], yr[0]), n as f64, "dot");
+            }
+            let w = [[0.5, -1.5], [2.0, 0.25], [-0.75, 1.0], [1.25, -2.0]];
+            let (mut got0, mut got1) = (y[0].clone(), y[1].clone());
+            kern.update::<4, 2>(vr, w, [&mut got0[..], &mut got1[..]]);
+            let (mut want0, mut want1) = (y[0].clone(), y[1].clone());
+            Scalar.update::<4, 2>(vr, w, [&mut want0[..], &mut want1[..]]);
+            for r in 0..n {
+                assert_close(got0[r], want0[r], 10.0, &format!("update n={n}"));
+                assert_close(got1[r], want1[r], 10.0, &format!("update n={n}"));
+            }
+        }
+    }
+
+    #[test]
+    fn vector_kernels_agree_with_the_scalar_reference() {
+        kernels_agree_with_the_reference(Scalar);
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                kernels_agree_with_the_reference(Avx2(()));
+            }
+            if std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                kernels_agree_with_the_reference(Avx512(()));
+            }
+        }
+    }
+
+    /// The blocked fold (compact WY) at the shapes that exercise it: fewer and more rows than
+    /// columns, column counts below, at and across the block size, the LM's 200 × 29 in a
+    /// 256-row buffer. Its `R'ᵀR'` must equal `RᵀR + BᵀB` (as above), and the vectorised
+    /// path must agree with the scalar one.
+    #[test]
+    fn blocked_fold_keeps_the_gram_matrix_and_matches_the_scalar_path() {
+        let mut state = 11;
+        for (n1, len, ldb) in [
+            (1, 5, 5),
+            (4, 9, 9),
+            (5, 3, 4),
+            (9, 40, 41),
+            (13, 17, 24),
+            (29, 200, 256),
+        ] {
+            let mut r = vec![0.0; n1 * n1];
+            for j in 0..n1 {
+                for i in 0..=j {
+                    r[j * n1 + i] = lcg(&mut state) + if i == j { 3.0 } else { 0.0 };
+                }
+            }
+            let b: Vec<f64> = (0..n1 * ldb).map(|_| lcg(&mut state)).collect();
+            let gram = |i: usize, j: usize, r: &[f64]| -> f64 {
+                (0..n1).map(|k| r[i * n1 + k] * r[j * n1 + k]).sum()
+            };
+            let mut folded = r.clone();
+            fold_rows(&mut folded, n1, &mut b.clone(), len, ldb);
+            let mut reference = r.clone();
+            fold_impl(&mut reference, n1, &mut b.clone(), len, ldb, Scalar);
+            let scale = len as f64 + n1 as f64 * 9.0;
+            for i in 0..n1 {
+                for j in 0..n1 {
+                    let want = gram(i, j, &r)
+                        + dot(&b[i * ldb..i * ldb + len], &b[j * ldb..j * ldb + len]);
+                    let what = format!("{n1}×{len}: ({i}, {j})");
+                    assert_close(gram(i, j, &folded), want, scale, &what);
+                    assert_close(folded[j * n1 + i], reference[j * n1 + i], scale, &what);
+                    if i > j {
+                        assert_eq!(folded[j * n1 + i], 0.0, "below the diagonal, {what}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// Rank deficiency: a zero column and a column equal to the sum of two others. The
+    /// pivoted `R` (norms downdated) ends with two zero pivots at working precision, the
+    /// others sorted down, and reproduces the Gram matrix of the pivoted columns.
+    #[test]
+    fn pivoting_puts_the_dependent_columns_last() {
+        let (m, n) = (12, 6);
+        let mut state = 3;
+        let mut a = ColMajor::zeros(m, n);
+        for j in [0, 2, 3, 5] {
+            for i in 0..m {
+                a.data[j * m + i] = lcg(&mut state);
+            }
+        }
+        for i in 0..m {
+            a.data[4 * m + i] = a.at(i, 0) + a.at(i, 3); // column 1 stays zero
+        }
+        let original = a.data.clone();
+        let perm = qr_in_place(&mut a, n);
+        let r00 = a.at(0, 0).abs();
+        for k in 0..n {
+            if k < 4 {
+                assert!(a.at(k, k).abs() > 1e-3 * r00, "pivot {k}: {}", a.at(k, k));
+            } else {
+                assert!(a.at(k, k).abs() <= 1e-13 * r00, "pivot {k}: {}", a.at(k, k));
+            }
+            if k > 0 {
+                assert!(a.at(k, k).abs() <= a.at(k - 1, k - 1).abs() * (1.0 + 1e-12));
+            }
+        }
+        assert_eq!(perm[5], 1, "the zero column is the last pivot");
+        for i in 0..n {
+            for j in 0..n {
+                let col = |c: usize| &original[perm[c] * m..(perm[c] + 1) * m];
+                let want = dot(col(i), col(j));
+                let got: f64 = (0..=i.min(j)).map(|k| a.at(k, i) * a.at(k, j)).sum();
+                assert_close(got, want, 10.0, &format!("({i}, {j})"));
+            }
+        }
+    }
 }
