@@ -578,9 +578,11 @@ fn qr_impl(a: &mut ColMajor, n_pivot: usize, kern: impl Kernels) -> Vec<usize> {
     let (m, n) = (a.nrows, a.ncols);
     let n_pivot = n_pivot.min(n);
     let mut perm: Vec<usize> = (0..n).collect();
-    // Norms of the pivot candidates over rows k.., downdated after each reflection and
-    // recomputed once cancellation has cost them half their digits (MINPACK `qrfac`).
-    let mut cand: Vec<f64> = (0..n_pivot).map(|j| norm(a.col(j), dot)).collect();
+    // Squared norms of the pivot candidates over rows k.., downdated after each reflection
+    // (`‖x‖² − x_k²`, MINPACK `qrfac`'s `‖x‖·√(1 − (x_k/‖x‖)²)` without its division and
+    // square root) and recomputed once cancellation has cost them half their digits (MINPACK's
+    // test `0.05·(‖x‖/‖x‖_ref)² ≤ ε`).
+    let mut cand: Vec<f64> = (0..n_pivot).map(|j| norm(a.col(j), dot).powi(2)).collect();
     let mut cand_ref = cand.clone();
     for k in 0..m.min(n) {
         if k < n_pivot {
@@ -605,39 +607,32 @@ fn qr_impl(a: &mut ColMajor, n_pivot: usize, kern: impl Kernels) -> Vec<usize> {
             let x0 = v[0];
             let alpha = if x0 > 0.0 { -x_norm } else { x_norm };
             v[0] = x0 - alpha;
-            // vᵀv = 2‖x‖(‖x‖ + |x₀|) for v = x − αe₁; column j gets y ← y − (2vᵀy/vᵀv)·v.
+            // vᵀv = 2‖x‖(‖x‖ + |x₀|) for v = x − αe₁; column j gets y ← y − τ(vᵀy)·v, τ = 2/vᵀv.
             let vtv = 2.0 * x_norm * (x_norm + x0.abs());
+            let tau = 2.0 / vtv;
             {
                 let v = &*v;
                 let mut rest = &mut tail[..];
                 for _ in 0..(n - k - 1) / 4 {
                     let y = take_cols::<4>(&mut rest, m, k, m - k);
                     let [d] = kern.dots::<1, 4>([v], [&*y[0], &*y[1], &*y[2], &*y[3]]);
-                    let f = [
-                        2.0 * d[0] / vtv,
-                        2.0 * d[1] / vtv,
-                        2.0 * d[2] / vtv,
-                        2.0 * d[3] / vtv,
-                    ];
+                    let f = [tau * d[0], tau * d[1], tau * d[2], tau * d[3]];
                     kern.update::<1, 4>([v], [f], y);
                 }
                 for _ in 0..(n - k - 1) % 4 {
                     let y = take_cols::<1>(&mut rest, m, k, m - k);
                     let [[d]] = kern.dots::<1, 1>([v], [&*y[0]]);
-                    kern.update::<1, 1>([v], [[2.0 * d / vtv]], y);
+                    kern.update::<1, 1>([v], [[tau * d]], y);
                 }
             }
             v[0] = alpha;
             v[1..].iter_mut().for_each(|e| *e = 0.0);
         }
         for j in k + 1..n_pivot {
-            if cand[j] != 0.0 {
-                let t = a.at(k, j) / cand[j];
-                cand[j] *= (1.0 - t * t).max(0.0).sqrt();
-                if 0.05 * (cand[j] / cand_ref[j]).powi(2) <= f64::EPSILON {
-                    cand[j] = norm(&a.col(j)[k + 1..], dot);
-                    cand_ref[j] = cand[j];
-                }
+            cand[j] = (cand[j] - a.at(k, j).powi(2)).max(0.0);
+            if cand[j] <= 20.0 * f64::EPSILON * cand_ref[j] && cand_ref[j] != 0.0 {
+                cand[j] = norm(&a.col(j)[k + 1..], dot).powi(2);
+                cand_ref[j] = cand[j];
             }
         }
     }
