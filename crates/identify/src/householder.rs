@@ -78,6 +78,34 @@ fn qr_avx2(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
     qr_impl(a, n_pivot, Avx2(()))
 }
 
+/// `‖x‖` (vectorised, rescaled when the sum of squares under- or overflows).
+pub(crate) fn norm2(x: &[f64]) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F (checked just above).
+            return norm(x, |a, b| unsafe { dot_avx512(a, b) });
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return norm(x, |a, b| unsafe { dot_avx2(a, b) });
+        }
+    }
+    norm(x, dot)
+}
+
+/// Whether every entry of `x` is finite, by an integer test of the exponent bits over
+/// blocks of 8 entries (which vectorises, where `f64::is_finite` entry by entry does not).
+pub(crate) fn all_finite(x: &[f64]) -> bool {
+    const EXP: u64 = 0x7ff0_0000_0000_0000;
+    let not_finite = |v: &f64| u8::from(v.to_bits() & EXP == EXP);
+    let (chunks, tail) = x.as_chunks::<8>();
+    chunks
+        .iter()
+        .all(|c| c.iter().map(not_finite).fold(0, |a, b| a | b) == 0)
+        && tail.iter().all(|v| v.is_finite())
+}
+
 /// The vector kernels of the reflections, for one instruction set ([`Scalar`] is the
 /// reference; the vectorised ones agree with it up to rounding).
 trait Kernels: Copy {

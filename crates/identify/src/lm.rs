@@ -157,11 +157,22 @@ pub(crate) fn check_free(free: &[usize], layout: &ParamLayout) -> Result<(), Err
     Ok(())
 }
 
+/// Whether every entry of `m` is finite (column by column, vectorised).
+pub(crate) fn mat_all_finite(m: MatRef<'_, f64>) -> bool {
+    (0..m.ncols()).all(|j| match m.col(j).try_as_col_major() {
+        Some(c) => householder::all_finite(c.as_slice()),
+        None => m.col(j).iter().all(|v| v.is_finite()),
+    })
+}
+
 /// Returns `Err(NonFiniteJacobian)` naming the first non-finite entry of `jac`.
 pub(crate) fn check_jacobian_finite(
     jac: MatRef<'_, f64>,
     layout: &ParamLayout,
 ) -> Result<(), Error> {
+    if mat_all_finite(jac) {
+        return Ok(());
+    }
     for j in 0..jac.ncols() {
         if let Some(row) = (0..jac.nrows()).find(|&i| !jac[(i, j)].is_finite()) {
             return Err(Error::NonFiniteJacobian {
@@ -414,7 +425,7 @@ impl<P: Problem> Linearised for Dense<'_, P> {
             self.p.residuals(x_trial, self.r_trial.as_mut())
         };
         match evaluated {
-            Ok(()) if self.r_trial.is_all_finite() => self.r_trial.norm_l2(),
+            Ok(()) if mat_all_finite(self.r_trial.as_ref().as_mat()) => self.r_trial.norm_l2(),
             _ => f64::INFINITY,
         }
     }
@@ -433,18 +444,21 @@ impl<P: Problem> Linearised for Dense<'_, P> {
                 .map_err(Termination::EvalFailed)?;
             self.n_jacobians += 1;
         }
-        if !self.jac.is_all_finite() {
+        if !mat_all_finite(self.jac.as_ref()) {
             return Err(Termination::Numerical);
         }
         self.fold();
         Ok(())
     }
     fn col_norms(&self) -> Vec<f64> {
-        // From `J` itself rather than from `R₊` (equal up to rounding): the scaling `D`, and so
-        // the iterates, stay bit for bit those of the direct computation.
+        // From `J` itself (as MINPACK), not from `R₊`, which has the same column norms up to
+        // rounding.
         self.free
             .iter()
-            .map(|&k| self.jac.col(k).norm_l2())
+            .map(|&k| match self.jac.col(k).try_as_col_major() {
+                Some(c) => householder::norm2(c.as_slice()),
+                None => self.jac.col(k).norm_l2(),
+            })
             .collect()
     }
     fn gradient_abs(&self, j: usize) -> f64 {
