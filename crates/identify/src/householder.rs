@@ -255,12 +255,38 @@ fn common_len(v: &[&[f64]], y: &[&[f64]]) -> usize {
 #[inline]
 fn dots_avx512<const NB: usize, const C: usize>(v: [&[f64]; NB], y: [&[f64]; C]) -> [[f64; C]; NB] {
     use std::arch::x86_64::{
-        _mm512_fmadd_pd, _mm512_loadu_pd, _mm512_maskz_loadu_pd, _mm512_reduce_add_pd,
-        _mm512_setzero_pd,
+        _mm512_add_pd, _mm512_fmadd_pd, _mm512_loadu_pd, _mm512_maskz_loadu_pd,
+        _mm512_reduce_add_pd, _mm512_setzero_pd,
     };
     let n = common_len(&v, &y);
     let mut acc = [[_mm512_setzero_pd(); C]; NB];
     let mut o = 0;
+    if NB * C <= 2 {
+        // Few pairs: a second set of accumulators for the odd blocks of 8, so that at least
+        // 2 FMA chains run per pair (the FMA latency is several cycles).
+        let mut acc1 = [[_mm512_setzero_pd(); C]; NB];
+        while o + 16 <= n {
+            // SAFETY: entries `o..o + 16` of every slice are in bounds (`o + 16 ≤ n`).
+            unsafe {
+                for i in 0..NB {
+                    let v0 = _mm512_loadu_pd(v[i].as_ptr().add(o));
+                    let v1 = _mm512_loadu_pd(v[i].as_ptr().add(o + 8));
+                    for c in 0..C {
+                        let y0 = _mm512_loadu_pd(y[c].as_ptr().add(o));
+                        let y1 = _mm512_loadu_pd(y[c].as_ptr().add(o + 8));
+                        acc[i][c] = _mm512_fmadd_pd(v0, y0, acc[i][c]);
+                        acc1[i][c] = _mm512_fmadd_pd(v1, y1, acc1[i][c]);
+                    }
+                }
+            }
+            o += 16;
+        }
+        for i in 0..NB {
+            for c in 0..C {
+                acc[i][c] = _mm512_add_pd(acc[i][c], acc1[i][c]);
+            }
+        }
+    }
     while o + 8 <= n {
         // SAFETY: entries `o..o + 8` of every slice are in bounds (`o + 8 ≤ n`).
         unsafe {
@@ -742,15 +768,44 @@ fn fold_impl(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize, ke
             let alpha = if rkk > 0.0 { -x_norm } else { x_norm };
             let vk0 = rkk - alpha;
             let vtv = 2.0 * x_norm * (x_norm + rkk.abs());
-            for (j, bj) in (k + 1..j_end).zip(b_tail.chunks_mut(ldb)) {
-                let bj = &mut bj[..len];
-                let rkj = r[j * n1 + k];
-                let f = 2.0 * (vk0 * rkj + kern.dot(bk, bj)) / vtv;
-                r[j * n1 + k] = rkj - f * vk0;
-                axpy(f, bk, bj);
+            let tau_k = 2.0 / vtv;
+            // Column j of [R; B] gets f = τ_k·(v0_k·R_kj + B_kᵀB_j), four columns at a time.
+            let mut rest = &mut b_tail[..];
+            let mut j = k + 1;
+            while j < j_end {
+                let reflect = |r: &mut [f64], d: f64, j: usize| {
+                    let rkj = r[j * n1 + k];
+                    let f = tau_k * (vk0 * rkj + d);
+                    r[j * n1 + k] = rkj - f * vk0;
+                    f
+                };
+                if j + 4 <= j_end {
+                    let y = take_cols::<4>(&mut rest, ldb, 0, len);
+                    let [d] = kern.dots::<1, 4>([bk], [&*y[0], &*y[1], &*y[2], &*y[3]]);
+                    let f = [
+                        reflect(r, d[0], j),
+                        reflect(r, d[1], j + 1),
+                        reflect(r, d[2], j + 2),
+                        reflect(r, d[3], j + 3),
+                    ];
+                    kern.update::<1, 4>([bk], [f], y);
+                    j += 4;
+                } else if j + 2 <= j_end {
+                    let y = take_cols::<2>(&mut rest, ldb, 0, len);
+                    let [d] = kern.dots::<1, 2>([bk], [&*y[0], &*y[1]]);
+                    let f = [reflect(r, d[0], j), reflect(r, d[1], j + 1)];
+                    kern.update::<1, 2>([bk], [f], y);
+                    j += 2;
+                } else {
+                    let y = take_cols::<1>(&mut rest, ldb, 0, len);
+                    let [[d]] = kern.dots::<1, 1>([bk], [&*y[0]]);
+                    let f = reflect(r, d, j);
+                    kern.update::<1, 1>([bk], [[f]], y);
+                    j += 1;
+                }
             }
             r[k * n1 + k] = alpha;
-            tau[k - k0] = 2.0 / vtv;
+            tau[k - k0] = tau_k;
             v0[k - k0] = vk0;
         }
         if blocked {
