@@ -94,16 +94,17 @@ pub(crate) fn norm2(x: &[f64]) -> f64 {
     norm(x, dot)
 }
 
-/// Whether every entry of `x` is finite, by an integer test of the exponent bits over
-/// blocks of 8 entries (which vectorises, where `f64::is_finite` entry by entry does not).
+/// Whether every entry of `x` is finite: `Σ 0·xᵢ` is 0 unless some `xᵢ` is ±∞ or NaN, summed
+/// with 8 partial sums (which vectorises, where `f64::is_finite` entry by entry does not).
 pub(crate) fn all_finite(x: &[f64]) -> bool {
-    const EXP: u64 = 0x7ff0_0000_0000_0000;
-    let not_finite = |v: &f64| u8::from(v.to_bits() & EXP == EXP);
     let (chunks, tail) = x.as_chunks::<8>();
-    chunks
-        .iter()
-        .all(|c| c.iter().map(not_finite).fold(0, |a, b| a | b) == 0)
-        && tail.iter().all(|v| v.is_finite())
+    let mut acc = [0.0_f64; 8];
+    for c in chunks {
+        for l in 0..8 {
+            acc[l] += c[l] * 0.0;
+        }
+    }
+    acc.iter().all(|a| *a == 0.0) && tail.iter().all(|v| v.is_finite())
 }
 
 /// The vector kernels of the reflections, for one instruction set ([`Scalar`] is the
@@ -1150,5 +1151,30 @@ mod tests {
                 assert_close(got, want, 10.0, &format!("({i}, {j})"));
             }
         }
+    }
+
+    #[test]
+    fn all_finite_finds_every_kind_of_non_finite_entry_anywhere() {
+        for n in [0, 1, 7, 8, 9, 31, 200] {
+            let x: Vec<f64> = (0..n).map(|i| i as f64 - 3.5).collect();
+            assert!(all_finite(&x), "n={n}");
+            for bad in [f64::INFINITY, f64::NEG_INFINITY, f64::NAN] {
+                for at in 0..n {
+                    let mut y = x.clone();
+                    y[at] = bad;
+                    assert!(!all_finite(&y), "n={n}, {bad} at {at}");
+                }
+            }
+        }
+        assert!(all_finite(&[
+            f64::MAX,
+            -f64::MAX,
+            f64::MIN_POSITIVE,
+            0.0,
+            -0.0,
+            1e-310,
+            1.0,
+            2.0
+        ]));
     }
 }
