@@ -696,7 +696,22 @@ fn qr_impl(a: &mut ColMajor, n_pivot: usize, kern: impl Kernels) -> Vec<usize> {
 
 /// Folds the rows `b` (`len × n1`, column-major with leading dimension `ldb ≥ len`) into the
 /// upper-triangular `r` (`n1 × n1`, column-major): afterwards `r` is the R factor of `[r; b]`
-/// (`RᵀR` grows by `bᵀb`), and `b` is scratch.
+/// (`RᵀR` grows by `bᵀb`), and `b` is scratch. See [`fold_cols`].
+///
+/// # Panics
+/// If the slices are shorter than the shapes say.
+pub(crate) fn fold_rows(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize) {
+    assert!(ldb >= len && (n1 == 0 || b.len() >= (n1 - 1) * ldb + len));
+    if n1 == 0 || len == 0 {
+        return;
+    }
+    let mut cols: Vec<&mut [f64]> = b.chunks_mut(ldb).take(n1).map(|c| &mut c[..len]).collect();
+    fold_cols(r, &mut cols);
+}
+
+/// [`fold_rows`] with the columns of `B` given one by one (`n1 = cols.len()` slices of one
+/// length, anywhere in memory): afterwards `r` is the R factor of `[r; B]`, and the columns
+/// are scratch.
 ///
 /// The Householder QR of `[R; B]` with its structure used (Golub–Van Loan §5.2.2 for the
 /// update, the TSQR step of Demmel et al. 2012): reflection `k` touches row `k` of `R` and the
@@ -704,9 +719,15 @@ fn qr_impl(a: &mut ColMajor, n_pivot: usize, kern: impl Kernels) -> Vec<usize> {
 /// set of one block, which stays in cache.
 ///
 /// # Panics
-/// If the slices are shorter than the shapes say.
-pub(crate) fn fold_rows(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize) {
-    assert!(r.len() >= n1 * n1 && ldb >= len && (n1 == 0 || b.len() >= (n1 - 1) * ldb + len));
+/// If `r` is shorter than `n1²` or the columns differ in length.
+pub(crate) fn fold_cols(r: &mut [f64], cols: &mut [&mut [f64]]) {
+    let n1 = cols.len();
+    assert!(r.len() >= n1 * n1, "r shorter than n1²");
+    let len = cols.first().map_or(0, |c| c.len());
+    assert!(
+        cols.iter().all(|c| c.len() == len),
+        "columns of different lengths"
+    );
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx512f")
@@ -714,35 +735,51 @@ pub(crate) fn fold_rows(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb
             && std::arch::is_x86_feature_detected!("fma")
         {
             // SAFETY: the CPU has AVX-512F, AVX2 and FMA (checked just above).
-            return unsafe { fold_avx512(r, n1, b, len, ldb) };
+            return unsafe { fold_avx512(r, cols) };
         }
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
         {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
-            return unsafe { fold_avx2(r, n1, b, len, ldb) };
+            return unsafe { fold_avx2(r, cols) };
         }
     }
-    fold_impl(r, n1, b, len, ldb, Scalar);
+    fold_impl(r, cols, Scalar);
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2,fma")]
-fn fold_avx512(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize) {
-    fold_impl(r, n1, b, len, ldb, Avx512(()));
+fn fold_avx512(r: &mut [f64], cols: &mut [&mut [f64]]) {
+    fold_impl(r, cols, Avx512(()));
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn fold_avx2(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize) {
-    fold_impl(r, n1, b, len, ldb, Avx2(()));
+fn fold_avx2(r: &mut [f64], cols: &mut [&mut [f64]]) {
+    fold_impl(r, cols, Avx2(()));
+}
+
+/// Splits the next `C` columns off `rest`.
+///
+/// # Panics
+/// If `rest` holds fewer than `C` columns.
+#[inline(always)]
+fn take_group<'a, const C: usize>(rest: &mut &'a mut [&mut [f64]]) -> [&'a mut [f64]; C] {
+    let (group, tail) = std::mem::take(rest).split_at_mut(C);
+    *rest = tail;
+    let mut group = group.iter_mut();
+    std::array::from_fn(|_| match group.next() {
+        Some(c) => &mut **c,
+        None => unreachable!("split_at_mut(C) gave C columns"),
+    })
 }
 
 /// Reflections per block of the compact-WY update of [`fold_rows`].
 const NB: usize = 4;
 
 #[inline(always)]
-fn fold_impl(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize, kern: impl Kernels) {
-    if len == 0 {
+fn fold_impl(r: &mut [f64], cols: &mut [&mut [f64]], kern: impl Kernels) {
+    let n1 = cols.len();
+    if cols.first().is_none_or(|c| c.is_empty()) {
         return;
     }
     let dot = |x: &[f64], y: &[f64]| kern.dot(x, y);
@@ -758,8 +795,8 @@ fn fold_impl(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize, ke
         let mut v0 = [0.0; NB];
         for k in k0..k1 {
             // x = [R_kk; B[:, k]].
-            let (b_head, b_tail) = b.split_at_mut((k + 1) * ldb);
-            let bk = &b_head[k * ldb..k * ldb + len];
+            let (head, tail) = cols.split_at_mut(k + 1);
+            let bk = &*head[k];
             let bk_norm = norm(bk, dot);
             if bk_norm == 0.0 {
                 continue;
@@ -771,7 +808,7 @@ fn fold_impl(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize, ke
             let vtv = 2.0 * x_norm * (x_norm + rkk.abs());
             let tau_k = 2.0 / vtv;
             // Column j of [R; B] gets f = τ_k·(v0_k·R_kj + B_kᵀB_j), four columns at a time.
-            let mut rest = &mut b_tail[..];
+            let mut rest = &mut tail[..j_end - k - 1];
             let mut j = k + 1;
             while j < j_end {
                 let reflect = |r: &mut [f64], d: f64, j: usize| {
@@ -781,7 +818,7 @@ fn fold_impl(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize, ke
                     f
                 };
                 if j + 4 <= j_end {
-                    let y = take_cols::<4>(&mut rest, ldb, 0, len);
+                    let y = take_group::<4>(&mut rest);
                     let [d] = kern.dots::<1, 4>([bk], [&*y[0], &*y[1], &*y[2], &*y[3]]);
                     let f = [
                         reflect(r, d[0], j),
@@ -792,13 +829,13 @@ fn fold_impl(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize, ke
                     kern.update::<1, 4>([bk], [f], y);
                     j += 4;
                 } else if j + 2 <= j_end {
-                    let y = take_cols::<2>(&mut rest, ldb, 0, len);
+                    let y = take_group::<2>(&mut rest);
                     let [d] = kern.dots::<1, 2>([bk], [&*y[0], &*y[1]]);
                     let f = [reflect(r, d[0], j), reflect(r, d[1], j + 1)];
                     kern.update::<1, 2>([bk], [f], y);
                     j += 2;
                 } else {
-                    let y = take_cols::<1>(&mut rest, ldb, 0, len);
+                    let y = take_group::<1>(&mut rest);
                     let [[d]] = kern.dots::<1, 1>([bk], [&*y[0]]);
                     let f = reflect(r, d, j);
                     kern.update::<1, 1>([bk], [[f]], y);
@@ -810,35 +847,32 @@ fn fold_impl(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize, ke
             v0[k - k0] = vk0;
         }
         if blocked {
-            apply_block(r, n1, b, len, ldb, k0, &tau, &v0, kern);
+            apply_block(r, cols, k0, &tau, &v0, kern);
         }
         k0 = k1;
     }
 }
 
 /// Applies the block of reflections `k0..k0 + NB` of [`fold_impl`] (`τ`, `v0`, and their
-/// `B` parts in the columns `k0..k0 + NB` of `b`) to the columns `k0 + NB..n1` of `[R; B]`.
+/// `B` parts in the columns `k0..k0 + NB` of `cols`) to the columns `k0 + NB..n1` of `[R; B]`.
 ///
 /// Compact WY (Schreiber and Van Loan 1989; LAPACK `dlarft`, forward, columnwise):
 /// `H_0⋯H_{NB−1} = I − V T Vᵀ` with `T` upper triangular, `T_ii = τ_i` and
 /// `T[..i, i] = −τ_i T[..i, ..i] Vᵀv_i`, so `Qᵀx = x − V Tᵀ (Vᵀx)`: one pass over a column
 /// for the `NB` dot products and one for the update, in place of `NB` of each. The `R` parts
 /// of the `v_i` lie in different rows (`v0_i` at row `k0 + i`), so `v_lᵀv_i = B_lᵀB_i`.
-#[allow(clippy::too_many_arguments)] // the shapes of `fold_rows` plus the block's reflections
 #[inline(always)]
 fn apply_block(
     r: &mut [f64],
-    n1: usize,
-    b: &mut [f64],
-    len: usize,
-    ldb: usize,
+    cols: &mut [&mut [f64]],
     k0: usize,
     tau: &[f64; NB],
     v0: &[f64; NB],
     kern: impl Kernels,
 ) {
-    let (head, tail) = b.split_at_mut((k0 + NB) * ldb);
-    let v: [&[f64]; NB] = std::array::from_fn(|i| &head[(k0 + i) * ldb..(k0 + i) * ldb + len]);
+    let n1 = cols.len();
+    let (head, tail) = cols.split_at_mut(k0 + NB);
+    let v: [&[f64]; NB] = std::array::from_fn(|i| &*head[k0 + i]);
     let mut t = [[0.0; NB]; NB]; // t[l][i] = T_li
     for i in 0..NB {
         t[i][i] = tau[i];
@@ -855,12 +889,12 @@ fn apply_block(
     let mut rest = tail;
     let mut j = k0 + NB;
     while j + 2 <= n1 {
-        let y = take_cols::<2>(&mut rest, ldb, 0, len);
+        let y = take_group::<2>(&mut rest);
         apply_block_to::<2>(r, n1, k0, j, &v, &t, v0, y, kern);
         j += 2;
     }
     if j < n1 {
-        let y = take_cols::<1>(&mut rest, ldb, 0, len);
+        let y = take_group::<1>(&mut rest);
         apply_block_to::<1>(r, n1, k0, j, &v, &t, v0, y, kern);
     }
 }
@@ -1096,7 +1130,10 @@ mod tests {
             let mut folded = r.clone();
             fold_rows(&mut folded, n1, &mut b.clone(), len, ldb);
             let mut reference = r.clone();
-            fold_impl(&mut reference, n1, &mut b.clone(), len, ldb, Scalar);
+            let mut scratch = b.clone();
+            let mut cols: Vec<&mut [f64]> =
+                scratch.chunks_mut(ldb).map(|c| &mut c[..len]).collect();
+            fold_impl(&mut reference, &mut cols, Scalar);
             let scale = len as f64 + n1 as f64 * 9.0;
             for i in 0..n1 {
                 for j in 0..n1 {

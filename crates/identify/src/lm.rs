@@ -353,8 +353,11 @@ struct Dense<'a, P: Problem> {
     n_jacobians: usize,
     /// `R₊`, `(n_f+1) × (n_f+1)` column-major, at the current linearisation.
     tri: Vec<f64>,
-    /// Row block of `[J_f r]` for the first QR stage.
-    fold_buf: Vec<f64>,
+    /// `‖J_j‖` for the free columns at the current linearisation (taken before the fold,
+    /// which uses the columns of `jac` as scratch).
+    col_norms: Vec<f64>,
+    /// Copy of `r` folded as the last column of `[J_f r]`.
+    r_scratch: Vec<f64>,
 }
 
 impl<'a, P: Problem> Dense<'a, P> {
@@ -374,35 +377,55 @@ impl<'a, P: Problem> Dense<'a, P> {
             jac_at_next_trial: true,
             n_jacobians: 1,
             tri: vec![0.0; n1 * n1],
-            fold_buf: vec![0.0; FOLD_ROWS.min(m) * n1],
+            col_norms: Vec::new(),
+            r_scratch: vec![0.0; m],
         };
         dense.fold();
         dense
     }
 
-    /// `tri ← R₊` of `[J_f r]`, folded block of rows by block of rows
-    /// ([`householder::fold_rows`], each block in cache).
+    /// `tri ← R₊` of `[J_f r]`, folded in place block of rows by block of rows
+    /// ([`householder::fold_cols`], each block in cache), after `col_norms ← ‖J_j‖`. The
+    /// columns of `jac` are scratch afterwards (only a new evaluation writes `jac` again).
     fn fold(&mut self) {
-        let n1 = self.free.len() + 1;
-        let m = self.jac.nrows();
-        let ldb = FOLD_ROWS.min(m);
+        self.col_norms = self
+            .free
+            .iter()
+            .map(|&k| match self.jac.col(k).try_as_col_major() {
+                Some(c) => householder::norm2(c.as_slice()),
+                None => self.jac.col(k).norm_l2(),
+            })
+            .collect();
         self.tri.iter_mut().for_each(|v| *v = 0.0);
-        for start in (0..m).step_by(ldb) {
-            let len = ldb.min(m - start);
-            for (c, &k) in self.free.iter().chain([&usize::MAX]).enumerate() {
-                let src = if k == usize::MAX {
-                    self.r.as_ref()
-                } else {
-                    self.jac.col(k)
-                }
-                .subrows(start, len);
-                let dst = &mut self.fold_buf[c * ldb..c * ldb + len];
-                match src.try_as_col_major() {
-                    Some(s) => dst.copy_from_slice(s.as_slice()),
-                    None => dst.iter_mut().zip(src.iter()).for_each(|(d, v)| *d = *v),
-                }
+        for (d, v) in self.r_scratch.iter_mut().zip(self.r.iter()) {
+            *d = *v;
+        }
+        // The columns of an owned `Mat` are contiguous, and `free` holds distinct indices
+        // (`check_free`), so each free column is taken once.
+        let mut all: Vec<Option<&mut [f64]>> = self
+            .jac
+            .as_mut()
+            .col_iter_mut()
+            .map(|c| c.try_as_col_major_mut().map(|c| c.as_slice_mut()))
+            .collect();
+        let mut cols: Vec<&mut [f64]> = Vec::with_capacity(self.free.len() + 1);
+        for &k in self.free {
+            match all.get_mut(k).and_then(Option::take) {
+                Some(c) => cols.push(c),
+                None => unreachable!("free column {k} missing or taken twice"),
             }
-            householder::fold_rows(&mut self.tri, n1, &mut self.fold_buf, len, ldb);
+        }
+        let m = self.r_scratch.len();
+        cols.push(&mut self.r_scratch);
+        if m <= FOLD_ROWS {
+            householder::fold_cols(&mut self.tri, &mut cols);
+            return;
+        }
+        for start in (0..m).step_by(FOLD_ROWS) {
+            let rows = start..m.min(start + FOLD_ROWS);
+            let mut block: Vec<&mut [f64]> =
+                cols.iter_mut().map(|c| &mut c[rows.clone()]).collect();
+            householder::fold_cols(&mut self.tri, &mut block);
         }
     }
 }
@@ -452,14 +475,8 @@ impl<P: Problem> Linearised for Dense<'_, P> {
     }
     fn col_norms(&self) -> Vec<f64> {
         // From `J` itself (as MINPACK), not from `R₊`, which has the same column norms up to
-        // rounding.
-        self.free
-            .iter()
-            .map(|&k| match self.jac.col(k).try_as_col_major() {
-                Some(c) => householder::norm2(c.as_slice()),
-                None => self.jac.col(k).norm_l2(),
-            })
-            .collect()
+        // rounding; taken by `fold`.
+        self.col_norms.clone()
     }
     fn gradient_abs(&self, j: usize) -> f64 {
         // `J_jᵀr = Σᵢ R₊[i, j]·R₊[i, n_f]` (`R₊ᵀR₊ = [J_f r]ᵀ[J_f r]`), in O(n_f).
