@@ -97,6 +97,24 @@ pub(crate) fn norm2(x: &[f64]) -> f64 {
 /// Whether every entry of `x` is finite: `Σ 0·xᵢ` is 0 unless some `xᵢ` is ±∞ or NaN, summed
 /// with 8 partial sums (which vectorises, where `f64::is_finite` entry by entry does not).
 pub(crate) fn all_finite(x: &[f64]) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F (checked just above).
+            return unsafe { all_finite_avx512(x) };
+        }
+    }
+    all_finite_impl(x)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn all_finite_avx512(x: &[f64]) -> bool {
+    all_finite_impl(x)
+}
+
+#[inline(always)]
+fn all_finite_impl(x: &[f64]) -> bool {
     let (chunks, tail) = x.as_chunks::<8>();
     let mut acc = [0.0_f64; 8];
     for c in chunks {
