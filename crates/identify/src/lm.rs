@@ -196,9 +196,11 @@ const FACTOR: f64 = 100.0;
 /// maximum over iterations (`mode = 1`; a zero column gets 1). In the scaled variables
 /// `u = D·p`, each trial step solves the damped problem `[J D⁻¹; √λ·I] u ≈ [−r; 0]` with the
 /// smallest `λ ≥ 0` such that `‖u‖ ≤ Δ` (within 10 %): once per Jacobian, `[J_f r]` is reduced
-/// to its `(n_free+1)`-square triangle by Householder QR (unblocked and vectorised up to 4096
-/// rows, faer's blocked QR above), whose scaled leading block then gets the column-pivoted
-/// Householder QR of `J D⁻¹` (the same Gram matrix, so the same `R` and `Q₁ᵀr` up to rounding);
+/// to its `(n_free+1)`-square triangle by Householder QR (256 rows at a time, in place in
+/// `J`'s columns, the reflections applied in blocks of four),
+/// whose scaled leading block then gets the column-pivoted Householder QR (MINPACK `qrfac`,
+/// norms downdated) that stands for that of `J D⁻¹` (the same Gram matrix, so the same `R` and
+/// `Q₁ᵀr` up to rounding);
 /// for each `λ` tried, `[R; √λ·I]` is reduced by Givens rotations (MINPACK `qrsolv`). `Δ`
 /// starts at `factor·‖D·x0‖` (`factor` if zero; [`LmConfig::factor`]) and follows the
 /// gain ratio `ρ = actual / predicted reduction`: shrunk when `ρ ≤ 1/4`, set to `2‖u‖` when
