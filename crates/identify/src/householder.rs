@@ -412,13 +412,22 @@ fn update_avx512<const NB: usize, const C: usize>(
     }
 }
 
-/// [`Kernels::dots`] with AVX2 and FMA: one 4-lane accumulator per pair, a scalar tail.
+/// The lanes `0..len` (`len < 4`) of a masked 4-lane load or store.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn mask4(len: usize) -> std::arch::x86_64::__m256i {
+    let lane = |l: usize| if l < len { -1 } else { 0 };
+    std::arch::x86_64::_mm256_setr_epi64x(lane(0), lane(1), lane(2), lane(3))
+}
+
+/// [`Kernels::dots`] with AVX2 and FMA: one 4-lane accumulator per pair, a masked tail.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
 fn dots_avx2<const NB: usize, const C: usize>(v: [&[f64]; NB], y: [&[f64]; C]) -> [[f64; C]; NB] {
     use std::arch::x86_64::{
-        _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+        _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_maskload_pd, _mm256_setzero_pd, _mm256_storeu_pd,
     };
     let n = common_len(&v, &y);
     let mut acc = [[_mm256_setzero_pd(); C]; NB];
@@ -439,23 +448,36 @@ fn dots_avx2<const NB: usize, const C: usize>(v: [&[f64]; NB], y: [&[f64]; C]) -
         }
         o += 4;
     }
+    if o < n {
+        let mask = mask4(n - o);
+        // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes (`n..o + 4`)
+        // are not read.
+        unsafe {
+            let mut yv = [_mm256_setzero_pd(); C];
+            for c in 0..C {
+                yv[c] = _mm256_maskload_pd(y[c].as_ptr().add(o), mask);
+            }
+            for i in 0..NB {
+                let vv = _mm256_maskload_pd(v[i].as_ptr().add(o), mask);
+                for c in 0..C {
+                    acc[i][c] = _mm256_fmadd_pd(vv, yv[c], acc[i][c]);
+                }
+            }
+        }
+    }
     let mut w = [[0.0; C]; NB];
     for i in 0..NB {
         for c in 0..C {
             let mut lanes = [0.0; 4];
             // SAFETY: `lanes` holds 4 f64.
             unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), acc[i][c]) };
-            let mut tail = 0.0;
-            for r in o..n {
-                tail = v[i][r].mul_add(y[c][r], tail);
-            }
-            w[i][c] = ((lanes[0] + lanes[2]) + (lanes[1] + lanes[3])) + tail;
+            w[i][c] = (lanes[0] + lanes[2]) + (lanes[1] + lanes[3]);
         }
     }
     w
 }
 
-/// [`Kernels::update`] with AVX2 and FMA: each `v_i` loaded once per 4 rows, a scalar tail.
+/// [`Kernels::update`] with AVX2 and FMA: each `v_i` loaded once per 4 rows, a masked tail.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
@@ -465,7 +487,8 @@ fn update_avx2<const NB: usize, const C: usize>(
     y: [&mut [f64]; C],
 ) {
     use std::arch::x86_64::{
-        _mm256_fnmadd_pd, _mm256_loadu_pd, _mm256_set1_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+        _mm256_fnmadd_pd, _mm256_loadu_pd, _mm256_maskload_pd, _mm256_maskstore_pd, _mm256_set1_pd,
+        _mm256_setzero_pd, _mm256_storeu_pd,
     };
     let n = {
         let yr: [&[f64]; C] = std::array::from_fn(|c| &*y[c]);
@@ -497,13 +520,23 @@ fn update_avx2<const NB: usize, const C: usize>(
         }
         o += 4;
     }
-    for c in 0..C {
-        for r in o..n {
-            let mut a = y[c][r];
+    if o < n {
+        let mask = mask4(n - o);
+        // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes are neither
+        // read nor written.
+        unsafe {
+            let mut vv = [_mm256_setzero_pd(); NB];
             for i in 0..NB {
-                a = (-w[i][c]).mul_add(v[i][r], a);
+                vv[i] = _mm256_maskload_pd(v[i].as_ptr().add(o), mask);
             }
-            y[c][r] = a;
+            for c in 0..C {
+                let p = y[c].as_mut_ptr().add(o);
+                let mut a = _mm256_maskload_pd(p, mask);
+                for i in 0..NB {
+                    a = _mm256_fnmadd_pd(vv[i], wv[i][c], a);
+                }
+                _mm256_maskstore_pd(p, mask, a);
+            }
         }
     }
 }
