@@ -13,12 +13,16 @@
 
 /// A column-major `nrows × ncols` matrix (leading dimension `nrows`).
 pub(crate) struct ColMajor {
+    /// The entries, column after column (`nrows · ncols`).
     pub(crate) data: Vec<f64>,
+    /// Number of rows.
     pub(crate) nrows: usize,
+    /// Number of columns.
     pub(crate) ncols: usize,
 }
 
 impl ColMajor {
+    /// The zero `nrows × ncols` matrix.
     pub(crate) fn zeros(nrows: usize, ncols: usize) -> Self {
         Self {
             data: vec![0.0; nrows * ncols],
@@ -27,14 +31,26 @@ impl ColMajor {
         }
     }
 
+    /// Column `j`.
+    ///
+    /// # Panics
+    /// If `j >= ncols`.
     pub(crate) fn col(&self, j: usize) -> &[f64] {
         &self.data[j * self.nrows..(j + 1) * self.nrows]
     }
 
+    /// Column `j`, mutable.
+    ///
+    /// # Panics
+    /// If `j >= ncols`.
     pub(crate) fn col_mut(&mut self, j: usize) -> &mut [f64] {
         &mut self.data[j * self.nrows..(j + 1) * self.nrows]
     }
 
+    /// Entry `(i, j)`.
+    ///
+    /// # Panics
+    /// If `(i, j)` is outside the matrix.
     pub(crate) fn at(&self, i: usize, j: usize) -> f64 {
         self.data[j * self.nrows + i]
     }

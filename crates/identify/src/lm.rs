@@ -107,7 +107,6 @@ pub struct Fit {
     pub residuals: Col<f64>,
 }
 
-/// Checks that `free` holds distinct indices of `layout`.
 /// The input checks of the dense and streaming LM: `x0` has one entry per layout parameter,
 /// `free` is valid ([`check_free`]), the tolerances and the trust-region factor are valid, and
 /// the problem has at least as many residuals as free parameters.
@@ -140,6 +139,7 @@ pub(crate) fn check_inputs(
     Ok(())
 }
 
+/// Checks that `free` holds distinct indices of `layout`.
 pub(crate) fn check_free(free: &[usize], layout: &ParamLayout) -> Result<(), Error> {
     let n_params = layout.len();
     let mut seen = vec![false; n_params];
@@ -695,6 +695,9 @@ pub(crate) struct ScaledQr {
 }
 
 impl ScaledQr {
+    /// The factorisation for the columns `free` of `jac` (`m × n`, `m ≥ n_free`) scaled by
+    /// `1/diag` (one entry per free column), and `r` (length `m`): the column-pivoted
+    /// Householder QR of `[J_f D⁻¹ | r]` with `r` never a pivot.
     pub(crate) fn new(
         jac: MatRef<'_, f64>,
         free: &[usize],
@@ -713,7 +716,13 @@ impl ScaledQr {
             *dst = *v;
         }
         let perm = householder::qr_in_place(&mut a, nf)[..nf].to_vec();
-        let rmat = Mat::from_fn(nf, nf, |i, j| if i <= j { a.at(i, j) } else { 0.0 });
+        let mut rmat = Mat::<f64>::zeros(nf, nf);
+        for j in 0..nf {
+            let src = &a.data[j * m..j * m + (j + 1).min(m)];
+            for (i, v) in src.iter().enumerate() {
+                rmat[(i, j)] = *v;
+            }
+        }
         let qtr: Vec<f64> = (0..nf).map(|i| a.at(i, nf)).collect();
         // Pivoting sorts |R_kk| down; below ε·max(m, n)·|R_00| a pivot is zero at working
         // precision and the Gauss–Newton step leaves its component at 0.
