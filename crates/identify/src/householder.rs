@@ -3,19 +3,26 @@
 //!
 //! Source: G. H. Golub, C. F. Van Loan, *Matrix Computations*, 4th ed., 2013, Alg. 5.2.1
 //! (Householder QR) and §5.4.2 (column pivoting, as MINPACK `qrfac`: the pivot is the
-//! remaining column of largest norm). Unblocked: for the narrow matrices of a calibration
-//! (tens of columns) each reflection is one dot product and one update per column, vectorised
-//! here (8 accumulators; AVX-512 or AVX2 chosen at run time), with none of the set-up of a
-//! blocked factorisation, which only pays beyond a few thousand rows.
+//! remaining column of largest norm, the norms downdated after each step). The pivoted QR of
+//! a small triangle ([`qr_in_place`]) is unblocked: each reflection is one pass of dot
+//! products and one of updates over four columns at a time. Folding rows into a triangle
+//! ([`fold_rows`], the bulk of an LM step's flops) applies its reflections in blocks of four
+//! (compact WY, Golub–Van Loan §5.2.3), so that each column of the block of rows is read
+//! twice per four reflections rather than twice per reflection. The vector kernels use fused
+//! multiply–adds, AVX-512 or AVX2 chosen at run time, with a portable reference.
 
 /// A column-major `nrows × ncols` matrix (leading dimension `nrows`).
 pub(crate) struct ColMajor {
+    /// The entries, column after column (`nrows · ncols`).
     pub(crate) data: Vec<f64>,
+    /// Number of rows.
     pub(crate) nrows: usize,
+    /// Number of columns.
     pub(crate) ncols: usize,
 }
 
 impl ColMajor {
+    /// The zero `nrows × ncols` matrix.
     pub(crate) fn zeros(nrows: usize, ncols: usize) -> Self {
         Self {
             data: vec![0.0; nrows * ncols],
@@ -24,14 +31,26 @@ impl ColMajor {
         }
     }
 
+    /// Column `j`.
+    ///
+    /// # Panics
+    /// If `j >= ncols`.
     pub(crate) fn col(&self, j: usize) -> &[f64] {
         &self.data[j * self.nrows..(j + 1) * self.nrows]
     }
 
+    /// Column `j`, mutable.
+    ///
+    /// # Panics
+    /// If `j >= ncols`.
     pub(crate) fn col_mut(&mut self, j: usize) -> &mut [f64] {
         &mut self.data[j * self.nrows..(j + 1) * self.nrows]
     }
 
+    /// Entry `(i, j)`.
+    ///
+    /// # Panics
+    /// If `(i, j)` is outside the matrix.
     pub(crate) fn at(&self, i: usize, j: usize) -> f64 {
         self.data[j * self.nrows + i]
     }
@@ -47,28 +66,513 @@ impl ColMajor {
 pub(crate) fn qr_in_place(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
     #[cfg(target_arch = "x86_64")]
     {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU has AVX-512F (checked just above).
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has AVX-512F, AVX2 and FMA (checked just above).
             return unsafe { qr_avx512(a, n_pivot) };
         }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked just above).
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
             return unsafe { qr_avx2(a, n_pivot) };
         }
     }
-    qr_impl(a, n_pivot, dot)
+    qr_impl(a, n_pivot, Scalar)
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2")]
+#[target_feature(enable = "avx512f,avx2,fma")]
 fn qr_avx512(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
-    qr_impl(a, n_pivot, |x, y| dot_avx512(x, y))
+    qr_impl(a, n_pivot, Avx512(()))
 }
 
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn qr_avx2(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
+    qr_impl(a, n_pivot, Avx2(()))
+}
+
+/// `‖x‖` (vectorised, rescaled when the sum of squares under- or overflows).
+pub(crate) fn norm2(x: &[f64]) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F (checked just above).
+            return norm(x, |a, b| unsafe { dot_avx512(a, b) });
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return norm(x, |a, b| unsafe { dot_avx2(a, b) });
+        }
+    }
+    norm(x, dot)
+}
+
+/// Whether every entry of `x` is finite: `Σ 0·xᵢ` is 0 unless some `xᵢ` is ±∞ or NaN, summed
+/// with 8 partial sums (which vectorises, where `f64::is_finite` entry by entry does not).
+pub(crate) fn all_finite(x: &[f64]) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F (checked just above).
+            return unsafe { all_finite_avx512(x) };
+        }
+    }
+    all_finite_impl(x)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn all_finite_avx512(x: &[f64]) -> bool {
+    all_finite_impl(x)
+}
+
+#[inline(always)]
+fn all_finite_impl(x: &[f64]) -> bool {
+    let (chunks, tail) = x.as_chunks::<8>();
+    let mut acc = [0.0_f64; 8];
+    for c in chunks {
+        for l in 0..8 {
+            acc[l] += c[l] * 0.0;
+        }
+    }
+    acc.iter().all(|a| *a == 0.0) && tail.iter().all(|v| v.is_finite())
+}
+
+/// The vector kernels of the reflections, for one instruction set ([`Scalar`] is the
+/// reference; the vectorised ones agree with it up to rounding).
+trait Kernels: Copy {
+    /// `Σ xᵢyᵢ` over `x.len()` entries.
+    fn dot(self, x: &[f64], y: &[f64]) -> f64;
+    /// `w[i][c] = v_i·y_c` for `NB` vectors and `C` columns, all of one length: one pass
+    /// over the data, fused multiply–adds where the instruction set has them.
+    fn dots<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        y: [&[f64]; C],
+    ) -> [[f64; C]; NB];
+    /// `y_c ← y_c − Σᵢ w[i][c]·v_i` (`i` in order), all of one length: one pass over the
+    /// data, fused multiply–adds where the instruction set has them.
+    fn update<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        w: [[f64; C]; NB],
+        y: [&mut [f64]; C],
+    );
+}
+
+/// The portable kernels (the reference for the vectorised ones).
+#[derive(Clone, Copy)]
+struct Scalar;
+
+impl Kernels for Scalar {
+    #[inline(always)]
+    fn dot(self, x: &[f64], y: &[f64]) -> f64 {
+        dot(x, y)
+    }
+    #[inline(always)]
+    fn dots<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        y: [&[f64]; C],
+    ) -> [[f64; C]; NB] {
+        let mut w = [[0.0; C]; NB];
+        for (wi, vi) in w.iter_mut().zip(v) {
+            for (wic, yc) in wi.iter_mut().zip(y) {
+                *wic = dot(vi, yc);
+            }
+        }
+        w
+    }
+    #[inline(always)]
+    fn update<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        w: [[f64; C]; NB],
+        y: [&mut [f64]; C],
+    ) {
+        for (c, yc) in y.into_iter().enumerate() {
+            for (wi, vi) in w.iter().zip(v) {
+                axpy(wi[c], vi, yc);
+            }
+        }
+    }
+}
+
+/// AVX2 kernels; a value exists only where the CPU has AVX2 and FMA (made in
+/// `#[target_feature]` functions that are called after detection).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct Avx2(());
+
+#[cfg(target_arch = "x86_64")]
+impl Kernels for Avx2 {
+    #[inline(always)]
+    fn dot(self, x: &[f64], y: &[f64]) -> f64 {
+        // SAFETY: an `Avx2` exists only where the CPU has AVX2 and FMA (see the type).
+        unsafe { dot_avx2(x, y) }
+    }
+    #[inline(always)]
+    fn dots<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        y: [&[f64]; C],
+    ) -> [[f64; C]; NB] {
+        // SAFETY: as above.
+        unsafe { dots_avx2(v, y) }
+    }
+    #[inline(always)]
+    fn update<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        w: [[f64; C]; NB],
+        y: [&mut [f64]; C],
+    ) {
+        // SAFETY: as above.
+        unsafe { update_avx2(v, w, y) }
+    }
+}
+
+/// AVX-512 kernels; a value exists only where the CPU has AVX-512F (with AVX2 and FMA; made in
+/// `#[target_feature]` functions that are called after detection).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct Avx512(());
+
+#[cfg(target_arch = "x86_64")]
+impl Kernels for Avx512 {
+    #[inline(always)]
+    fn dot(self, x: &[f64], y: &[f64]) -> f64 {
+        // SAFETY: an `Avx512` exists only where the CPU has AVX-512F, AVX2 and FMA (see the
+        // type).
+        unsafe { dot_avx512(x, y) }
+    }
+    #[inline(always)]
+    fn dots<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        y: [&[f64]; C],
+    ) -> [[f64; C]; NB] {
+        // SAFETY: as above.
+        unsafe { dots_avx512(v, y) }
+    }
+    #[inline(always)]
+    fn update<const NB: usize, const C: usize>(
+        self,
+        v: [&[f64]; NB],
+        w: [[f64; C]; NB],
+        y: [&mut [f64]; C],
+    ) {
+        // SAFETY: as above.
+        unsafe { update_avx512(v, w, y) }
+    }
+}
+
+/// The common length of the slices of `v` and `y`.
+///
+/// # Panics
+/// If they differ.
+#[track_caller]
+fn common_len(v: &[&[f64]], y: &[&[f64]]) -> usize {
+    let n = v.first().or(y.first()).map_or(0, |s| s.len());
+    assert!(
+        v.iter().chain(y).all(|s| s.len() == n),
+        "slices of different lengths"
+    );
+    n
+}
+
+/// [`Kernels::dots`] with AVX-512: one 8-lane accumulator per pair, a masked tail.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[inline]
+fn dots_avx512<const NB: usize, const C: usize>(v: [&[f64]; NB], y: [&[f64]; C]) -> [[f64; C]; NB] {
+    use std::arch::x86_64::{
+        _mm512_add_pd, _mm512_fmadd_pd, _mm512_loadu_pd, _mm512_maskz_loadu_pd,
+        _mm512_reduce_add_pd, _mm512_setzero_pd,
+    };
+    let n = common_len(&v, &y);
+    let mut acc = [[_mm512_setzero_pd(); C]; NB];
+    let mut o = 0;
+    if NB * C <= 2 {
+        // Few pairs: a second set of accumulators for the odd blocks of 8, so that at least
+        // 2 FMA chains run per pair (the FMA latency is several cycles).
+        let mut acc1 = [[_mm512_setzero_pd(); C]; NB];
+        while o + 16 <= n {
+            // SAFETY: entries `o..o + 16` of every slice are in bounds (`o + 16 ≤ n`).
+            unsafe {
+                for i in 0..NB {
+                    let v0 = _mm512_loadu_pd(v[i].as_ptr().add(o));
+                    let v1 = _mm512_loadu_pd(v[i].as_ptr().add(o + 8));
+                    for c in 0..C {
+                        let y0 = _mm512_loadu_pd(y[c].as_ptr().add(o));
+                        let y1 = _mm512_loadu_pd(y[c].as_ptr().add(o + 8));
+                        acc[i][c] = _mm512_fmadd_pd(v0, y0, acc[i][c]);
+                        acc1[i][c] = _mm512_fmadd_pd(v1, y1, acc1[i][c]);
+                    }
+                }
+            }
+            o += 16;
+        }
+        for i in 0..NB {
+            for c in 0..C {
+                acc[i][c] = _mm512_add_pd(acc[i][c], acc1[i][c]);
+            }
+        }
+    }
+    while o + 8 <= n {
+        // SAFETY: entries `o..o + 8` of every slice are in bounds (`o + 8 ≤ n`).
+        unsafe {
+            let mut yv = [_mm512_setzero_pd(); C];
+            for c in 0..C {
+                yv[c] = _mm512_loadu_pd(y[c].as_ptr().add(o));
+            }
+            for i in 0..NB {
+                let vv = _mm512_loadu_pd(v[i].as_ptr().add(o));
+                for c in 0..C {
+                    acc[i][c] = _mm512_fmadd_pd(vv, yv[c], acc[i][c]);
+                }
+            }
+        }
+        o += 8;
+    }
+    if o < n {
+        let mask = 0xff_u8 >> (8 - (n - o));
+        // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes (`n..o + 8`)
+        // are not read.
+        unsafe {
+            let mut yv = [_mm512_setzero_pd(); C];
+            for c in 0..C {
+                yv[c] = _mm512_maskz_loadu_pd(mask, y[c].as_ptr().add(o));
+            }
+            for i in 0..NB {
+                let vv = _mm512_maskz_loadu_pd(mask, v[i].as_ptr().add(o));
+                for c in 0..C {
+                    acc[i][c] = _mm512_fmadd_pd(vv, yv[c], acc[i][c]);
+                }
+            }
+        }
+    }
+    let mut w = [[0.0; C]; NB];
+    for i in 0..NB {
+        for c in 0..C {
+            w[i][c] = _mm512_reduce_add_pd(acc[i][c]);
+        }
+    }
+    w
+}
+
+/// [`Kernels::update`] with AVX-512: each `v_i` loaded once per 8 rows, a masked tail.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[inline]
+fn update_avx512<const NB: usize, const C: usize>(
+    v: [&[f64]; NB],
+    w: [[f64; C]; NB],
+    y: [&mut [f64]; C],
+) {
+    use std::arch::x86_64::{
+        _mm512_fnmadd_pd, _mm512_loadu_pd, _mm512_mask_storeu_pd, _mm512_maskz_loadu_pd,
+        _mm512_set1_pd, _mm512_setzero_pd, _mm512_storeu_pd,
+    };
+    let n = {
+        let yr: [&[f64]; C] = std::array::from_fn(|c| &*y[c]);
+        common_len(&v, &yr)
+    };
+    let mut wv = [[_mm512_setzero_pd(); C]; NB];
+    for i in 0..NB {
+        for c in 0..C {
+            wv[i][c] = _mm512_set1_pd(w[i][c]);
+        }
+    }
+    let mut o = 0;
+    while o + 8 <= n {
+        // SAFETY: entries `o..o + 8` of every slice are in bounds (`o + 8 ≤ n`); the `y_c` are
+        // distinct `&mut`, so the stores do not overlap the loads of `v`.
+        unsafe {
+            let mut vv = [_mm512_setzero_pd(); NB];
+            for i in 0..NB {
+                vv[i] = _mm512_loadu_pd(v[i].as_ptr().add(o));
+            }
+            for c in 0..C {
+                let p = y[c].as_mut_ptr().add(o);
+                let mut a = _mm512_loadu_pd(p);
+                for i in 0..NB {
+                    a = _mm512_fnmadd_pd(vv[i], wv[i][c], a);
+                }
+                _mm512_storeu_pd(p, a);
+            }
+        }
+        o += 8;
+    }
+    if o < n {
+        let mask = 0xff_u8 >> (8 - (n - o));
+        // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes are neither
+        // read nor written.
+        unsafe {
+            let mut vv = [_mm512_setzero_pd(); NB];
+            for i in 0..NB {
+                vv[i] = _mm512_maskz_loadu_pd(mask, v[i].as_ptr().add(o));
+            }
+            for c in 0..C {
+                let p = y[c].as_mut_ptr().add(o);
+                let mut a = _mm512_maskz_loadu_pd(mask, p);
+                for i in 0..NB {
+                    a = _mm512_fnmadd_pd(vv[i], wv[i][c], a);
+                }
+                _mm512_mask_storeu_pd(p, mask, a);
+            }
+        }
+    }
+}
+
+/// The lanes `0..len` (`len < 4`) of a masked 4-lane load or store.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn qr_avx2(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
-    qr_impl(a, n_pivot, |x, y| dot_avx2(x, y))
+#[inline]
+fn mask4(len: usize) -> std::arch::x86_64::__m256i {
+    let lane = |l: usize| if l < len { -1 } else { 0 };
+    std::arch::x86_64::_mm256_setr_epi64x(lane(0), lane(1), lane(2), lane(3))
+}
+
+/// [`Kernels::dots`] with AVX2 and FMA: one 4-lane accumulator per pair, a masked tail.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn dots_avx2<const NB: usize, const C: usize>(v: [&[f64]; NB], y: [&[f64]; C]) -> [[f64; C]; NB] {
+    use std::arch::x86_64::{
+        _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_maskload_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+    };
+    let n = common_len(&v, &y);
+    let mut acc = [[_mm256_setzero_pd(); C]; NB];
+    let mut o = 0;
+    while o + 4 <= n {
+        // SAFETY: entries `o..o + 4` of every slice are in bounds (`o + 4 ≤ n`).
+        unsafe {
+            let mut yv = [_mm256_setzero_pd(); C];
+            for c in 0..C {
+                yv[c] = _mm256_loadu_pd(y[c].as_ptr().add(o));
+            }
+            for i in 0..NB {
+                let vv = _mm256_loadu_pd(v[i].as_ptr().add(o));
+                for c in 0..C {
+                    acc[i][c] = _mm256_fmadd_pd(vv, yv[c], acc[i][c]);
+                }
+            }
+        }
+        o += 4;
+    }
+    if o < n {
+        let mask = mask4(n - o);
+        // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes (`n..o + 4`)
+        // are not read.
+        unsafe {
+            let mut yv = [_mm256_setzero_pd(); C];
+            for c in 0..C {
+                yv[c] = _mm256_maskload_pd(y[c].as_ptr().add(o), mask);
+            }
+            for i in 0..NB {
+                let vv = _mm256_maskload_pd(v[i].as_ptr().add(o), mask);
+                for c in 0..C {
+                    acc[i][c] = _mm256_fmadd_pd(vv, yv[c], acc[i][c]);
+                }
+            }
+        }
+    }
+    let mut w = [[0.0; C]; NB];
+    for i in 0..NB {
+        for c in 0..C {
+            let mut lanes = [0.0; 4];
+            // SAFETY: `lanes` holds 4 f64.
+            unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), acc[i][c]) };
+            w[i][c] = (lanes[0] + lanes[2]) + (lanes[1] + lanes[3]);
+        }
+    }
+    w
+}
+
+/// [`Kernels::update`] with AVX2 and FMA: each `v_i` loaded once per 4 rows, a masked tail.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn update_avx2<const NB: usize, const C: usize>(
+    v: [&[f64]; NB],
+    w: [[f64; C]; NB],
+    y: [&mut [f64]; C],
+) {
+    use std::arch::x86_64::{
+        _mm256_fnmadd_pd, _mm256_loadu_pd, _mm256_maskload_pd, _mm256_maskstore_pd, _mm256_set1_pd,
+        _mm256_setzero_pd, _mm256_storeu_pd,
+    };
+    let n = {
+        let yr: [&[f64]; C] = std::array::from_fn(|c| &*y[c]);
+        common_len(&v, &yr)
+    };
+    let mut wv = [[_mm256_setzero_pd(); C]; NB];
+    for i in 0..NB {
+        for c in 0..C {
+            wv[i][c] = _mm256_set1_pd(w[i][c]);
+        }
+    }
+    let mut o = 0;
+    while o + 4 <= n {
+        // SAFETY: entries `o..o + 4` of every slice are in bounds (`o + 4 ≤ n`); the `y_c` are
+        // distinct `&mut`, so the stores do not overlap the loads of `v`.
+        unsafe {
+            let mut vv = [_mm256_setzero_pd(); NB];
+            for i in 0..NB {
+                vv[i] = _mm256_loadu_pd(v[i].as_ptr().add(o));
+            }
+            for c in 0..C {
+                let p = y[c].as_mut_ptr().add(o);
+                let mut a = _mm256_loadu_pd(p);
+                for i in 0..NB {
+                    a = _mm256_fnmadd_pd(vv[i], wv[i][c], a);
+                }
+                _mm256_storeu_pd(p, a);
+            }
+        }
+        o += 4;
+    }
+    if o < n {
+        let mask = mask4(n - o);
+        // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes are neither
+        // read nor written.
+        unsafe {
+            let mut vv = [_mm256_setzero_pd(); NB];
+            for i in 0..NB {
+                vv[i] = _mm256_maskload_pd(v[i].as_ptr().add(o), mask);
+            }
+            for c in 0..C {
+                let p = y[c].as_mut_ptr().add(o);
+                let mut a = _mm256_maskload_pd(p, mask);
+                for i in 0..NB {
+                    a = _mm256_fnmadd_pd(vv[i], wv[i][c], a);
+                }
+                _mm256_maskstore_pd(p, mask, a);
+            }
+        }
+    }
+}
+
+/// Splits the next `C` columns off `rest` (column-major, leading dimension `ld`), rows
+/// `offset..offset + len` of each; `rest` then starts at the column after them. The last
+/// column of `rest` may end early (at `offset + len`).
+#[inline(always)]
+fn take_cols<'a, const C: usize>(
+    rest: &mut &'a mut [f64],
+    ld: usize,
+    offset: usize,
+    len: usize,
+) -> [&'a mut [f64]; C] {
+    std::array::from_fn(|_| {
+        let all = std::mem::take(rest);
+        let (col, tail) = all.split_at_mut(ld.min(all.len()));
+        *rest = tail;
+        &mut col[offset..offset + len]
+    })
 }
 
 /// As [`dot_avx2`] with one 8-wide AVX-512 accumulator per 8 entries (two per 16).
@@ -191,56 +695,90 @@ fn norm(x: &[f64], dot: impl Fn(&[f64], &[f64]) -> f64) -> f64 {
 }
 
 #[inline(always)]
-fn qr_impl(
-    a: &mut ColMajor,
-    n_pivot: usize,
-    dot: impl Fn(&[f64], &[f64]) -> f64 + Copy,
-) -> Vec<usize> {
+fn qr_impl(a: &mut ColMajor, n_pivot: usize, kern: impl Kernels) -> Vec<usize> {
+    let dot = |x: &[f64], y: &[f64]| kern.dot(x, y);
     let (m, n) = (a.nrows, a.ncols);
     let n_pivot = n_pivot.min(n);
     let mut perm: Vec<usize> = (0..n).collect();
+    // Squared norms of the pivot candidates over rows k.., downdated after each reflection
+    // (`‖x‖² − x_k²`, MINPACK `qrfac`'s `‖x‖·√(1 − (x_k/‖x‖)²)` without its division and
+    // square root) and recomputed once cancellation has cost them half their digits (MINPACK's
+    // test `0.05·(‖x‖/‖x‖_ref)² ≤ ε`).
+    let mut cand: Vec<f64> = (0..n_pivot).map(|j| norm(a.col(j), dot).powi(2)).collect();
+    let mut cand_ref = cand.clone();
     for k in 0..m.min(n) {
         if k < n_pivot {
             let mut best = k;
-            let mut best_norm = -1.0;
-            for j in k..n_pivot {
-                let c = norm(&a.col(j)[k..], dot);
-                if c > best_norm {
+            for j in k + 1..n_pivot {
+                if cand[j] > cand[best] {
                     best = j;
-                    best_norm = c;
                 }
             }
             if best != k {
                 let (lo, hi) = a.data.split_at_mut(best * m);
                 lo[k * m..(k + 1) * m].swap_with_slice(&mut hi[..m]);
                 perm.swap(k, best);
+                cand.swap(k, best);
+                cand_ref.swap(k, best);
             }
         }
         let (head, tail) = a.data.split_at_mut((k + 1) * m);
         let v = &mut head[k * m + k..(k + 1) * m];
         let x_norm = norm(v, dot);
-        if x_norm == 0.0 {
-            continue;
+        if x_norm != 0.0 {
+            let x0 = v[0];
+            let alpha = if x0 > 0.0 { -x_norm } else { x_norm };
+            v[0] = x0 - alpha;
+            // vᵀv = 2‖x‖(‖x‖ + |x₀|) for v = x − αe₁; column j gets y ← y − τ(vᵀy)·v, τ = 2/vᵀv.
+            let vtv = 2.0 * x_norm * (x_norm + x0.abs());
+            let tau = 2.0 / vtv;
+            {
+                let v = &*v;
+                let mut rest = &mut tail[..];
+                for _ in 0..(n - k - 1) / 4 {
+                    let y = take_cols::<4>(&mut rest, m, k, m - k);
+                    let [d] = kern.dots::<1, 4>([v], [&*y[0], &*y[1], &*y[2], &*y[3]]);
+                    let f = [tau * d[0], tau * d[1], tau * d[2], tau * d[3]];
+                    kern.update::<1, 4>([v], [f], y);
+                }
+                for _ in 0..(n - k - 1) % 4 {
+                    let y = take_cols::<1>(&mut rest, m, k, m - k);
+                    let [[d]] = kern.dots::<1, 1>([v], [&*y[0]]);
+                    kern.update::<1, 1>([v], [[tau * d]], y);
+                }
+            }
+            v[0] = alpha;
+            v[1..].iter_mut().for_each(|e| *e = 0.0);
         }
-        let x0 = v[0];
-        let alpha = if x0 > 0.0 { -x_norm } else { x_norm };
-        v[0] = x0 - alpha;
-        // vᵀv = 2‖x‖(‖x‖ + |x₀|) for v = x − αe₁.
-        let vtv = 2.0 * x_norm * (x_norm + x0.abs());
-        for col in tail.chunks_exact_mut(m) {
-            let y = &mut col[k..];
-            let f = 2.0 * dot(v, y) / vtv;
-            axpy(f, v, y);
+        for j in k + 1..n_pivot {
+            cand[j] = (cand[j] - a.at(k, j).powi(2)).max(0.0);
+            if cand[j] <= 20.0 * f64::EPSILON * cand_ref[j] && cand_ref[j] != 0.0 {
+                cand[j] = norm(&a.col(j)[k + 1..], dot).powi(2);
+                cand_ref[j] = cand[j];
+            }
         }
-        v[0] = alpha;
-        v[1..].iter_mut().for_each(|e| *e = 0.0);
     }
     perm
 }
 
 /// Folds the rows `b` (`len × n1`, column-major with leading dimension `ldb ≥ len`) into the
 /// upper-triangular `r` (`n1 × n1`, column-major): afterwards `r` is the R factor of `[r; b]`
-/// (`RᵀR` grows by `bᵀb`), and `b` is scratch.
+/// (`RᵀR` grows by `bᵀb`), and `b` is scratch. See [`fold_cols`].
+///
+/// # Panics
+/// If the slices are shorter than the shapes say.
+pub(crate) fn fold_rows(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize) {
+    assert!(ldb >= len && (n1 == 0 || b.len() >= (n1 - 1) * ldb + len));
+    if n1 == 0 || len == 0 {
+        return;
+    }
+    let mut cols: Vec<&mut [f64]> = b.chunks_mut(ldb).take(n1).map(|c| &mut c[..len]).collect();
+    fold_cols(r, &mut cols);
+}
+
+/// [`fold_rows`] with the columns of `B` given one by one (`n1 = cols.len()` slices of one
+/// length, anywhere in memory): afterwards `r` is the R factor of `[r; B]`, and the columns
+/// are scratch.
 ///
 /// The Householder QR of `[R; B]` with its structure used (Golub–Van Loan §5.2.2 for the
 /// update, the TSQR step of Demmel et al. 2012): reflection `k` touches row `k` of `R` and the
@@ -248,75 +786,223 @@ fn qr_impl(
 /// set of one block, which stays in cache.
 ///
 /// # Panics
-/// If the slices are shorter than the shapes say.
-pub(crate) fn fold_rows(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize) {
-    assert!(r.len() >= n1 * n1 && ldb >= len && (n1 == 0 || b.len() >= (n1 - 1) * ldb + len));
+/// If `r` is shorter than `n1²` or the columns differ in length.
+pub(crate) fn fold_cols(r: &mut [f64], cols: &mut [&mut [f64]]) {
+    let n1 = cols.len();
+    assert!(r.len() >= n1 * n1, "r shorter than n1²");
+    let len = cols.first().map_or(0, |c| c.len());
+    assert!(
+        cols.iter().all(|c| c.len() == len),
+        "columns of different lengths"
+    );
     #[cfg(target_arch = "x86_64")]
     {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU has AVX-512F (checked just above).
-            return unsafe { fold_avx512(r, n1, b, len, ldb) };
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has AVX-512F, AVX2 and FMA (checked just above).
+            return unsafe { fold_avx512(r, cols) };
         }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked just above).
-            return unsafe { fold_avx2(r, n1, b, len, ldb) };
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
+            return unsafe { fold_avx2(r, cols) };
         }
     }
-    fold_impl(r, n1, b, len, ldb, dot);
+    fold_impl(r, cols, Scalar);
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2")]
-fn fold_avx512(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize) {
-    fold_impl(r, n1, b, len, ldb, |x, y| dot_avx512(x, y));
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn fold_avx512(r: &mut [f64], cols: &mut [&mut [f64]]) {
+    fold_impl(r, cols, Avx512(()));
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn fold_avx2(r: &mut [f64], n1: usize, b: &mut [f64], len: usize, ldb: usize) {
-    fold_impl(r, n1, b, len, ldb, |x, y| dot_avx2(x, y));
+#[target_feature(enable = "avx2,fma")]
+fn fold_avx2(r: &mut [f64], cols: &mut [&mut [f64]]) {
+    fold_impl(r, cols, Avx2(()));
 }
+
+/// Splits the next `C` columns off `rest`.
+///
+/// # Panics
+/// If `rest` holds fewer than `C` columns.
+#[inline(always)]
+fn take_group<'a, const C: usize>(rest: &mut &'a mut [&mut [f64]]) -> [&'a mut [f64]; C] {
+    let (group, tail) = std::mem::take(rest).split_at_mut(C);
+    *rest = tail;
+    let mut group = group.iter_mut();
+    std::array::from_fn(|_| match group.next() {
+        Some(c) => &mut **c,
+        None => unreachable!("split_at_mut(C) gave C columns"),
+    })
+}
+
+/// Reflections per block of the compact-WY update of [`fold_rows`].
+const NB: usize = 4;
 
 #[inline(always)]
-fn fold_impl(
-    r: &mut [f64],
-    n1: usize,
-    b: &mut [f64],
-    len: usize,
-    ldb: usize,
-    dot: impl Fn(&[f64], &[f64]) -> f64 + Copy,
-) {
-    if len == 0 {
+fn fold_impl(r: &mut [f64], cols: &mut [&mut [f64]], kern: impl Kernels) {
+    let n1 = cols.len();
+    if cols.first().is_none_or(|c| c.is_empty()) {
         return;
     }
-    for k in 0..n1 {
-        // x = [R_kk; B[:, k]].
-        let (b_head, b_tail) = b.split_at_mut((k + 1) * ldb);
-        let bk = &b_head[k * ldb..k * ldb + len];
-        let bk_norm = norm(bk, dot);
-        if bk_norm == 0.0 {
-            continue;
-        }
-        let rkk = r[k * n1 + k];
-        let x_norm = rkk.hypot(bk_norm);
-        let alpha = if rkk > 0.0 { -x_norm } else { x_norm };
-        let v0 = rkk - alpha;
-        let vtv = 2.0 * x_norm * (x_norm + rkk.abs());
-        for (j, bj) in b_tail.chunks_mut(ldb).enumerate() {
-            let j = k + 1 + j;
-            if j >= n1 {
-                break;
+    let dot = |x: &[f64], y: &[f64]| kern.dot(x, y);
+    let mut k0 = 0;
+    while k0 < n1 {
+        // Reflections k0..k1: each first applied to the later columns of its block only (all
+        // later columns in a last, short block), then together to the columns after the block.
+        let k1 = (k0 + NB).min(n1);
+        let blocked = k1 - k0 == NB && k1 < n1;
+        let j_end = if blocked { k1 } else { n1 };
+        // H_k = I − τ_k v_k v_kᵀ, v_k = [v0_k at row k of R; B[:, k]] (τ_k = 0: no reflection).
+        let mut tau = [0.0; NB];
+        let mut v0 = [0.0; NB];
+        for k in k0..k1 {
+            // x = [R_kk; B[:, k]].
+            let (head, tail) = cols.split_at_mut(k + 1);
+            let bk = &*head[k];
+            let bk_norm = norm(bk, dot);
+            if bk_norm == 0.0 {
+                continue;
             }
-            let bj = &mut bj[..len];
-            let rkj = r[j * n1 + k];
-            let f = 2.0 * (v0 * rkj + dot(bk, bj)) / vtv;
-            r[j * n1 + k] = rkj - f * v0;
-            for (y, v) in bj.iter_mut().zip(bk) {
-                *y -= f * v;
+            let rkk = r[k * n1 + k];
+            let x_norm = rkk.hypot(bk_norm);
+            let alpha = if rkk > 0.0 { -x_norm } else { x_norm };
+            let vk0 = rkk - alpha;
+            let vtv = 2.0 * x_norm * (x_norm + rkk.abs());
+            let tau_k = 2.0 / vtv;
+            // Column j of [R; B] gets f = τ_k·(v0_k·R_kj + B_kᵀB_j), four columns at a time.
+            let mut rest = &mut tail[..j_end - k - 1];
+            let mut j = k + 1;
+            while j < j_end {
+                let reflect = |r: &mut [f64], d: f64, j: usize| {
+                    let rkj = r[j * n1 + k];
+                    let f = tau_k * (vk0 * rkj + d);
+                    r[j * n1 + k] = rkj - f * vk0;
+                    f
+                };
+                if j + 4 <= j_end {
+                    let y = take_group::<4>(&mut rest);
+                    let [d] = kern.dots::<1, 4>([bk], [&*y[0], &*y[1], &*y[2], &*y[3]]);
+                    let f = [
+                        reflect(r, d[0], j),
+                        reflect(r, d[1], j + 1),
+                        reflect(r, d[2], j + 2),
+                        reflect(r, d[3], j + 3),
+                    ];
+                    kern.update::<1, 4>([bk], [f], y);
+                    j += 4;
+                } else if j + 2 <= j_end {
+                    let y = take_group::<2>(&mut rest);
+                    let [d] = kern.dots::<1, 2>([bk], [&*y[0], &*y[1]]);
+                    let f = [reflect(r, d[0], j), reflect(r, d[1], j + 1)];
+                    kern.update::<1, 2>([bk], [f], y);
+                    j += 2;
+                } else {
+                    let y = take_group::<1>(&mut rest);
+                    let [[d]] = kern.dots::<1, 1>([bk], [&*y[0]]);
+                    let f = reflect(r, d, j);
+                    kern.update::<1, 1>([bk], [[f]], y);
+                    j += 1;
+                }
             }
+            r[k * n1 + k] = alpha;
+            tau[k - k0] = tau_k;
+            v0[k - k0] = vk0;
         }
-        r[k * n1 + k] = alpha;
+        if blocked {
+            apply_block(r, cols, k0, &tau, &v0, kern);
+        }
+        k0 = k1;
     }
+}
+
+/// Applies the block of reflections `k0..k0 + NB` of [`fold_impl`] (`τ`, `v0`, and their
+/// `B` parts in the columns `k0..k0 + NB` of `cols`) to the columns `k0 + NB..n1` of `[R; B]`.
+///
+/// Compact WY (Schreiber and Van Loan 1989; LAPACK `dlarft`, forward, columnwise):
+/// `H_0⋯H_{NB−1} = I − V T Vᵀ` with `T` upper triangular, `T_ii = τ_i` and
+/// `T[..i, i] = −τ_i T[..i, ..i] Vᵀv_i`, so `Qᵀx = x − V Tᵀ (Vᵀx)`: one pass over a column
+/// for the `NB` dot products and one for the update, in place of `NB` of each. The `R` parts
+/// of the `v_i` lie in different rows (`v0_i` at row `k0 + i`), so `v_lᵀv_i = B_lᵀB_i`.
+#[inline(always)]
+fn apply_block(
+    r: &mut [f64],
+    cols: &mut [&mut [f64]],
+    k0: usize,
+    tau: &[f64; NB],
+    v0: &[f64; NB],
+    kern: impl Kernels,
+) {
+    let n1 = cols.len();
+    let (head, tail) = cols.split_at_mut(k0 + NB);
+    let v: [&[f64]; NB] = std::array::from_fn(|i| &*head[k0 + i]);
+    let mut t = [[0.0; NB]; NB]; // t[l][i] = T_li
+    for i in 0..NB {
+        t[i][i] = tau[i];
+        let mut g = [0.0; NB];
+        for l in 0..i {
+            g[l] = kern.dot(v[l], v[i]);
+        }
+        for (l, tl) in t.iter_mut().enumerate().take(i) {
+            let s: f64 = (l..i).map(|m| tl[m] * g[m]).sum();
+            tl[i] = -tau[i] * s;
+        }
+    }
+    // Columns k0 + NB.., two at a time, then the last one alone.
+    let mut rest = tail;
+    let mut j = k0 + NB;
+    while j + 2 <= n1 {
+        let y = take_group::<2>(&mut rest);
+        apply_block_to::<2>(r, n1, k0, j, &v, &t, v0, y, kern);
+        j += 2;
+    }
+    if j < n1 {
+        let y = take_group::<1>(&mut rest);
+        apply_block_to::<1>(r, n1, k0, j, &v, &t, v0, y, kern);
+    }
+}
+
+/// `x_c ← x_c − V Tᵀ Vᵀ x_c` for the `C` columns `x_c = [R[k0.., j + c]; y_c]` (see
+/// [`apply_block`]).
+#[allow(clippy::too_many_arguments)] // the block and the columns it acts on
+#[inline(always)]
+fn apply_block_to<const C: usize>(
+    r: &mut [f64],
+    n1: usize,
+    k0: usize,
+    j: usize,
+    v: &[&[f64]; NB],
+    t: &[[f64; NB]; NB],
+    v0: &[f64; NB],
+    y: [&mut [f64]; C],
+    kern: impl Kernels,
+) {
+    let mut w = {
+        let yr: [&[f64]; C] = std::array::from_fn(|c| &*y[c]);
+        kern.dots::<NB, C>(*v, yr)
+    };
+    for c in 0..C {
+        for l in 0..NB {
+            w[l][c] += v0[l] * r[(j + c) * n1 + k0 + l];
+        }
+    }
+    // Tᵀw: (Tᵀw)_i = Σ_{l ≤ i} T_li w_l.
+    let mut tw = [[0.0; C]; NB];
+    for i in 0..NB {
+        for c in 0..C {
+            tw[i][c] = (0..=i).map(|l| t[l][i] * w[l][c]).sum();
+        }
+    }
+    for c in 0..C {
+        for l in 0..NB {
+            r[(j + c) * n1 + k0 + l] -= v0[l] * tw[l][c];
+        }
+    }
+    kern.update::<NB, C>(*v, tw, y);
 }
 
 #[cfg(test)]
@@ -411,5 +1097,188 @@ mod tests {
                 assert_eq!(folded[i * n1 + j], 0.0, "below the diagonal");
             }
         }
+    }
+
+    /// Deterministic entries in [−1, 1) (a 64-bit LCG, Knuth's MMIX constants).
+    fn lcg(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*state >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    }
+
+    /// `|a − b| ≤ 1e-12·scale`: the vectorised kernels sum in another order than the
+    /// reference, so they agree to rounding (≈ 1e-15 relative for these sizes), not bit for bit.
+    #[track_caller]
+    fn assert_close(a: f64, b: f64, scale: f64, what: &str) {
+        assert!(
+            (a - b).abs() <= 1e-12 * scale.max(1.0),
+            "{what}: {a} vs {b}"
+        );
+    }
+
+    /// The kernels of the instruction set `fold_rows` picks on this CPU against [`Scalar`],
+    /// for every length up to 40 (all tails of the 8- and 4-lane loops) and 200.
+    fn kernels_agree_with_the_reference(kern: impl Kernels) {
+        let mut state = 7;
+        for n in (0..=40).chain([200]) {
+            let v: Vec<Vec<f64>> = (0..4)
+                .map(|_| (0..n).map(|_| lcg(&mut state)).collect())
+                .collect();
+            let y: Vec<Vec<f64>> = (0..2)
+                .map(|_| (0..n).map(|_| lcg(&mut state)).collect())
+                .collect();
+            let vr = [&v[0][..], &v[1][..], &v[2][..], &v[3][..]];
+            let yr = [&y[0][..], &y[1][..]];
+            let got = kern.dots::<4, 2>(vr, yr);
+            let want = Scalar.dots::<4, 2>(vr, yr);
+            for i in 0..4 {
+                for c in 0..2 {
+                    assert_close(got[i][c], want[i][c], n as f64, &format!("dots n={n}"));
+                }
+                assert_close(kern.dot(vr[i], yr[0]), dot(vr[i], yr[0]), n as f64, "dot");
+            }
+            let w = [[0.5, -1.5], [2.0, 0.25], [-0.75, 1.0], [1.25, -2.0]];
+            let (mut got0, mut got1) = (y[0].clone(), y[1].clone());
+            kern.update::<4, 2>(vr, w, [&mut got0[..], &mut got1[..]]);
+            let (mut want0, mut want1) = (y[0].clone(), y[1].clone());
+            Scalar.update::<4, 2>(vr, w, [&mut want0[..], &mut want1[..]]);
+            for r in 0..n {
+                assert_close(got0[r], want0[r], 10.0, &format!("update n={n}"));
+                assert_close(got1[r], want1[r], 10.0, &format!("update n={n}"));
+            }
+        }
+    }
+
+    #[test]
+    fn vector_kernels_agree_with_the_scalar_reference() {
+        kernels_agree_with_the_reference(Scalar);
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                kernels_agree_with_the_reference(Avx2(()));
+            }
+            if std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                kernels_agree_with_the_reference(Avx512(()));
+            }
+        }
+    }
+
+    /// The blocked fold (compact WY) at the shapes that exercise it: fewer and more rows than
+    /// columns, column counts below, at and across the block size, the LM's 200 × 29 in a
+    /// 256-row buffer. Its `R'ᵀR'` must equal `RᵀR + BᵀB` (as above), and the vectorised
+    /// path must agree with the scalar one.
+    #[test]
+    fn blocked_fold_keeps_the_gram_matrix_and_matches_the_scalar_path() {
+        let mut state = 11;
+        for (n1, len, ldb) in [
+            (1, 5, 5),
+            (4, 9, 9),
+            (5, 3, 4),
+            (9, 40, 41),
+            (13, 17, 24),
+            (29, 200, 256),
+        ] {
+            let mut r = vec![0.0; n1 * n1];
+            for j in 0..n1 {
+                for i in 0..=j {
+                    r[j * n1 + i] = lcg(&mut state) + if i == j { 3.0 } else { 0.0 };
+                }
+            }
+            let b: Vec<f64> = (0..n1 * ldb).map(|_| lcg(&mut state)).collect();
+            let gram = |i: usize, j: usize, r: &[f64]| -> f64 {
+                (0..n1).map(|k| r[i * n1 + k] * r[j * n1 + k]).sum()
+            };
+            let mut folded = r.clone();
+            fold_rows(&mut folded, n1, &mut b.clone(), len, ldb);
+            let mut reference = r.clone();
+            let mut scratch = b.clone();
+            let mut cols: Vec<&mut [f64]> =
+                scratch.chunks_mut(ldb).map(|c| &mut c[..len]).collect();
+            fold_impl(&mut reference, &mut cols, Scalar);
+            let scale = len as f64 + n1 as f64 * 9.0;
+            for i in 0..n1 {
+                for j in 0..n1 {
+                    let want = gram(i, j, &r)
+                        + dot(&b[i * ldb..i * ldb + len], &b[j * ldb..j * ldb + len]);
+                    let what = format!("{n1}×{len}: ({i}, {j})");
+                    assert_close(gram(i, j, &folded), want, scale, &what);
+                    assert_close(folded[j * n1 + i], reference[j * n1 + i], scale, &what);
+                    if i > j {
+                        assert_eq!(folded[j * n1 + i], 0.0, "below the diagonal, {what}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// Rank deficiency: a zero column and a column equal to the sum of two others. The
+    /// pivoted `R` (norms downdated) ends with two zero pivots at working precision, the
+    /// others sorted down, and reproduces the Gram matrix of the pivoted columns.
+    #[test]
+    fn pivoting_puts_the_dependent_columns_last() {
+        let (m, n) = (12, 6);
+        let mut state = 3;
+        let mut a = ColMajor::zeros(m, n);
+        for j in [0, 2, 3, 5] {
+            for i in 0..m {
+                a.data[j * m + i] = lcg(&mut state);
+            }
+        }
+        for i in 0..m {
+            a.data[4 * m + i] = a.at(i, 0) + a.at(i, 3); // column 1 stays zero
+        }
+        let original = a.data.clone();
+        let perm = qr_in_place(&mut a, n);
+        let r00 = a.at(0, 0).abs();
+        for k in 0..n {
+            if k < 4 {
+                assert!(a.at(k, k).abs() > 1e-3 * r00, "pivot {k}: {}", a.at(k, k));
+            } else {
+                assert!(a.at(k, k).abs() <= 1e-13 * r00, "pivot {k}: {}", a.at(k, k));
+            }
+            if k > 0 {
+                assert!(a.at(k, k).abs() <= a.at(k - 1, k - 1).abs() * (1.0 + 1e-12));
+            }
+        }
+        assert_eq!(perm[5], 1, "the zero column is the last pivot");
+        for i in 0..n {
+            for j in 0..n {
+                let col = |c: usize| &original[perm[c] * m..(perm[c] + 1) * m];
+                let want = dot(col(i), col(j));
+                let got: f64 = (0..=i.min(j)).map(|k| a.at(k, i) * a.at(k, j)).sum();
+                assert_close(got, want, 10.0, &format!("({i}, {j})"));
+            }
+        }
+    }
+
+    #[test]
+    fn all_finite_finds_every_kind_of_non_finite_entry_anywhere() {
+        for n in [0, 1, 7, 8, 9, 31, 200] {
+            let x: Vec<f64> = (0..n).map(|i| i as f64 - 3.5).collect();
+            assert!(all_finite(&x), "n={n}");
+            for bad in [f64::INFINITY, f64::NEG_INFINITY, f64::NAN] {
+                for at in 0..n {
+                    let mut y = x.clone();
+                    y[at] = bad;
+                    assert!(!all_finite(&y), "n={n}, {bad} at {at}");
+                }
+            }
+        }
+        assert!(all_finite(&[
+            f64::MAX,
+            -f64::MAX,
+            f64::MIN_POSITIVE,
+            0.0,
+            -0.0,
+            1e-310,
+            1.0,
+            2.0
+        ]));
     }
 }

@@ -98,7 +98,8 @@ pub struct Fit {
     pub termination: Termination,
     /// Number of evaluations of `r` (the one at `x0` included).
     pub n_evaluations: usize,
-    /// Number of evaluations of `J`.
+    /// Number of evaluations of `J`: every one, including those at trial points that were
+    /// then rejected (the dense back end evaluates `J` with `r` after an accepted step).
     pub n_jacobians: usize,
     /// `½‖r(x)‖²` at [`Fit::x`], in squared residual units.
     pub cost: f64,
@@ -106,7 +107,6 @@ pub struct Fit {
     pub residuals: Col<f64>,
 }
 
-/// Checks that `free` holds distinct indices of `layout`.
 /// The input checks of the dense and streaming LM: `x0` has one entry per layout parameter,
 /// `free` is valid ([`check_free`]), the tolerances and the trust-region factor are valid, and
 /// the problem has at least as many residuals as free parameters.
@@ -139,6 +139,7 @@ pub(crate) fn check_inputs(
     Ok(())
 }
 
+/// Checks that `free` holds distinct indices of `layout`.
 pub(crate) fn check_free(free: &[usize], layout: &ParamLayout) -> Result<(), Error> {
     let n_params = layout.len();
     let mut seen = vec![false; n_params];
@@ -156,11 +157,22 @@ pub(crate) fn check_free(free: &[usize], layout: &ParamLayout) -> Result<(), Err
     Ok(())
 }
 
+/// Whether every entry of `m` is finite (column by column, vectorised).
+pub(crate) fn mat_all_finite(m: MatRef<'_, f64>) -> bool {
+    (0..m.ncols()).all(|j| match m.col(j).try_as_col_major() {
+        Some(c) => householder::all_finite(c.as_slice()),
+        None => m.col(j).iter().all(|v| v.is_finite()),
+    })
+}
+
 /// Returns `Err(NonFiniteJacobian)` naming the first non-finite entry of `jac`.
 pub(crate) fn check_jacobian_finite(
     jac: MatRef<'_, f64>,
     layout: &ParamLayout,
 ) -> Result<(), Error> {
+    if mat_all_finite(jac) {
+        return Ok(());
+    }
     for j in 0..jac.ncols() {
         if let Some(row) = (0..jac.nrows()).find(|&i| !jac[(i, j)].is_finite()) {
             return Err(Error::NonFiniteJacobian {
@@ -184,15 +196,23 @@ const FACTOR: f64 = 100.0;
 /// maximum over iterations (`mode = 1`; a zero column gets 1). In the scaled variables
 /// `u = D·p`, each trial step solves the damped problem `[J D⁻¹; √λ·I] u ≈ [−r; 0]` with the
 /// smallest `λ ≥ 0` such that `‖u‖ ≤ Δ` (within 10 %): once per Jacobian, `[J_f r]` is reduced
-/// to its `(n_free+1)`-square triangle by Householder QR (unblocked and vectorised up to 4096
-/// rows, faer's blocked QR above), whose scaled leading block then gets the column-pivoted
-/// Householder QR of `J D⁻¹` (the same Gram matrix, so the same `R` and `Q₁ᵀr` up to rounding);
+/// to its `(n_free+1)`-square triangle by Householder QR (256 rows at a time, in place in
+/// `J`'s columns, the reflections applied in blocks of four),
+/// whose scaled leading block then gets the column-pivoted Householder QR (MINPACK `qrfac`,
+/// norms downdated) that stands for that of `J D⁻¹` (the same Gram matrix, so the same `R` and
+/// `Q₁ᵀr` up to rounding);
 /// for each `λ` tried, `[R; √λ·I]` is reduced by Givens rotations (MINPACK `qrsolv`). `Δ`
 /// starts at `factor·‖D·x0‖` (`factor` if zero; [`LmConfig::factor`]) and follows the
 /// gain ratio `ρ = actual / predicted reduction`: shrunk when `ρ ≤ 1/4`, set to `2‖u‖` when
 /// `ρ ≥ 3/4` or `λ = 0`; a step is accepted when `ρ ≥ 10⁻⁴`. A trial point where `r` cannot be
 /// evaluated or is not finite is rejected like a step that increases the cost tenfold (`Δ` is
 /// divided by 10). See [`LmConfig`] for the stopping tests.
+///
+/// Evaluations: `r` and `J` at `x0` come from one [`Problem::residuals_and_jacobian`] call,
+/// and so do `r` and `J` at a trial point that follows an accepted step (such steps are
+/// usually accepted, and the Jacobian at an accepted point is then already there); after a
+/// rejected step only `r` is evaluated. [`Fit::n_jacobians`] counts every Jacobian
+/// evaluated, including those at trial points that were then rejected.
 ///
 /// Non-convergence is a result: check `fit.termination.is_success()`.
 ///
@@ -218,11 +238,12 @@ pub fn levenberg_marquardt(
     let m = p.n_residuals();
 
     let mut r = Col::<f64>::zeros(m);
-    p.residuals(x0.as_ref(), r.as_mut())?;
-    if let Some(index) = (0..m).find(|&i| !r[i].is_finite()) {
-        return Err(Error::NonFiniteResidual { index });
-    }
+    let non_finite_residual = |r: &Col<f64>| (0..m).find(|&i| !r[i].is_finite());
     if free.is_empty() {
+        p.residuals(x0.as_ref(), r.as_mut())?;
+        if let Some(index) = non_finite_residual(&r) {
+            return Err(Error::NonFiniteResidual { index });
+        }
         return Ok(levenberg_marquardt_at(
             p,
             x0,
@@ -233,7 +254,20 @@ pub fn levenberg_marquardt(
         ));
     }
     let mut jac = Mat::<f64>::zeros(m, n);
-    p.jacobian(x0.as_ref(), jac.as_mut())?;
+    // Both in one pass; when that fails, apart, so that the error is the one of the
+    // evaluation that failed (residuals first).
+    if p.residuals_and_jacobian(x0.as_ref(), r.as_mut(), jac.as_mut())
+        .is_err()
+    {
+        p.residuals(x0.as_ref(), r.as_mut())?;
+        if let Some(index) = non_finite_residual(&r) {
+            return Err(Error::NonFiniteResidual { index });
+        }
+        p.jacobian(x0.as_ref(), jac.as_mut())?;
+    }
+    if let Some(index) = non_finite_residual(&r) {
+        return Err(Error::NonFiniteResidual { index });
+    }
     check_jacobian_finite(jac.as_ref(), layout)?;
     Ok(levenberg_marquardt_at(p, x0, free, cfg, r, jac))
 }
@@ -249,7 +283,6 @@ pub(crate) fn levenberg_marquardt_at(
     r: Col<f64>,
     jac: Mat<f64>,
 ) -> Fit {
-    let m = p.n_residuals();
     let nf = free.len();
     if nf == 0 {
         let cost = 0.5 * r.squared_norm_l2();
@@ -263,21 +296,14 @@ pub(crate) fn levenberg_marquardt_at(
         };
     }
     let f_norm = r.norm_l2();
-    let mut dense = Dense {
-        p,
-        free,
-        jac,
-        r,
-        r_trial: Col::<f64>::zeros(m),
-        fold_buf: None,
-    };
+    let mut dense = Dense::new(p, free, r, jac);
     let run = run(&mut dense, x0, free, cfg, f_norm);
     let cost = 0.5 * dense.r.squared_norm_l2();
     Fit {
         x: run.x,
         termination: run.termination,
         n_evaluations: run.n_evaluations,
-        n_jacobians: run.n_jacobians,
+        n_jacobians: dense.n_jacobians,
         cost,
         residuals: dense.r,
     }
@@ -300,74 +326,173 @@ pub(crate) trait Linearised {
     fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr;
 }
 
+/// The dense back end: `J` stored `m × n`, and reduced at each linearisation to the triangle
+/// `R₊` of `[J_f r]` (`R₊ᵀR₊ = [J_f r]ᵀ[J_f r]`), from which the gradient and the scaled QR
+/// are taken in `O(n_f²)` and `O(n_f³)`, as the streaming back end does.
+///
+/// At a trial point that follows an accepted step (or the linearisation at `x0`), the
+/// residuals and the Jacobian are evaluated together ([`Problem::residuals_and_jacobian`]):
+/// such steps are usually accepted (MINPACK accepts any step with `ρ ≥ 10⁻⁴`), and an accepted
+/// point then needs no Jacobian pass of its own. After a rejected step the next trial
+/// evaluates the residuals only. The iterates are MINPACK's either way; only the evaluation
+/// count changes ([`Fit::n_jacobians`] counts every Jacobian evaluated, used or not).
 struct Dense<'a, P: Problem> {
     p: &'a P,
     free: &'a [usize],
+    /// `J` at `x` (after [`Linearised::relinearise`]) or at the accepted trial point.
     jac: Mat<f64>,
     r: Col<f64>,
+    /// `J` at the last trial point, when `trial_has_jac`.
+    jac_trial: Mat<f64>,
     r_trial: Col<f64>,
-    /// Row block of `[J_f r]` for the first QR stage, made at the first step.
-    fold_buf: Option<Vec<f64>>,
+    /// Whether `jac_trial` holds `J` at the last trial point.
+    trial_has_jac: bool,
+    /// Whether `jac` holds `J` at the current point, taken over from the trial point.
+    jac_is_current: bool,
+    /// Whether the next trial point gets its Jacobian too (the last step was accepted).
+    jac_at_next_trial: bool,
+    /// Successful Jacobian evaluations, at `x0` included.
+    n_jacobians: usize,
+    /// `R₊`, `(n_f+1) × (n_f+1)` column-major, at the current linearisation.
+    tri: Vec<f64>,
+    /// `‖J_j‖` for the free columns at the current linearisation (taken before the fold,
+    /// which uses the columns of `jac` as scratch).
+    col_norms: Vec<f64>,
+    /// Copy of `r` folded as the last column of `[J_f r]`.
+    r_scratch: Vec<f64>,
+}
+
+impl<'a, P: Problem> Dense<'a, P> {
+    /// Linearised at `x0`, where `r` and `jac` were evaluated (and found finite).
+    fn new(p: &'a P, free: &'a [usize], r: Col<f64>, jac: Mat<f64>) -> Self {
+        let (m, n) = (jac.nrows(), jac.ncols());
+        let n1 = free.len() + 1;
+        let mut dense = Self {
+            p,
+            free,
+            jac,
+            r,
+            jac_trial: Mat::zeros(m, n),
+            r_trial: Col::zeros(m),
+            trial_has_jac: false,
+            jac_is_current: false,
+            jac_at_next_trial: true,
+            n_jacobians: 1,
+            tri: vec![0.0; n1 * n1],
+            col_norms: Vec::new(),
+            r_scratch: vec![0.0; m],
+        };
+        dense.fold();
+        dense
+    }
+
+    /// `tri ← R₊` of `[J_f r]`, folded in place block of rows by block of rows
+    /// ([`householder::fold_cols`], each block in cache), after `col_norms ← ‖J_j‖`. The
+    /// columns of `jac` are scratch afterwards (only a new evaluation writes `jac` again).
+    fn fold(&mut self) {
+        self.col_norms = self
+            .free
+            .iter()
+            .map(|&k| match self.jac.col(k).try_as_col_major() {
+                Some(c) => householder::norm2(c.as_slice()),
+                None => self.jac.col(k).norm_l2(),
+            })
+            .collect();
+        self.tri.iter_mut().for_each(|v| *v = 0.0);
+        for (d, v) in self.r_scratch.iter_mut().zip(self.r.iter()) {
+            *d = *v;
+        }
+        // The columns of an owned `Mat` are contiguous, and `free` holds distinct indices
+        // (`check_free`), so each free column is taken once.
+        let mut all: Vec<Option<&mut [f64]>> = self
+            .jac
+            .as_mut()
+            .col_iter_mut()
+            .map(|c| c.try_as_col_major_mut().map(|c| c.as_slice_mut()))
+            .collect();
+        let mut cols: Vec<&mut [f64]> = Vec::with_capacity(self.free.len() + 1);
+        for &k in self.free {
+            match all.get_mut(k).and_then(Option::take) {
+                Some(c) => cols.push(c),
+                None => unreachable!("free column {k} missing or taken twice"),
+            }
+        }
+        let m = self.r_scratch.len();
+        cols.push(&mut self.r_scratch);
+        if m <= FOLD_ROWS {
+            householder::fold_cols(&mut self.tri, &mut cols);
+            return;
+        }
+        for start in (0..m).step_by(FOLD_ROWS) {
+            let rows = start..m.min(start + FOLD_ROWS);
+            let mut block: Vec<&mut [f64]> =
+                cols.iter_mut().map(|c| &mut c[rows.clone()]).collect();
+            householder::fold_cols(&mut self.tri, &mut block);
+        }
+    }
 }
 
 impl<P: Problem> Linearised for Dense<'_, P> {
     fn trial_norm(&mut self, x_trial: ColRef<'_, f64>) -> f64 {
-        match self.p.residuals(x_trial, self.r_trial.as_mut()) {
-            Ok(()) if self.r_trial.is_all_finite() => self.r_trial.norm_l2(),
+        let with_jac = std::mem::take(&mut self.jac_at_next_trial);
+        self.trial_has_jac = with_jac
+            && self
+                .p
+                .residuals_and_jacobian(x_trial, self.r_trial.as_mut(), self.jac_trial.as_mut())
+                .is_ok();
+        let evaluated = if self.trial_has_jac {
+            self.n_jacobians += 1;
+            Ok(())
+        } else {
+            // Without the Jacobian, or again alone when the joint evaluation failed (the
+            // residuals may still be evaluable; `relinearise` then reports the Jacobian's
+            // failure, as when the two are evaluated apart).
+            self.p.residuals(x_trial, self.r_trial.as_mut())
+        };
+        match evaluated {
+            Ok(()) if mat_all_finite(self.r_trial.as_ref().as_mat()) => self.r_trial.norm_l2(),
             _ => f64::INFINITY,
         }
     }
     fn accept(&mut self) {
         std::mem::swap(&mut self.r, &mut self.r_trial);
+        if std::mem::take(&mut self.trial_has_jac) {
+            std::mem::swap(&mut self.jac, &mut self.jac_trial);
+            self.jac_is_current = true;
+        }
+        self.jac_at_next_trial = true;
     }
     fn relinearise(&mut self, x: ColRef<'_, f64>) -> Result<(), Termination> {
-        self.p
-            .jacobian(x, self.jac.as_mut())
-            .map_err(Termination::EvalFailed)?;
-        if !self.jac.is_all_finite() {
+        if !std::mem::take(&mut self.jac_is_current) {
+            self.p
+                .jacobian(x, self.jac.as_mut())
+                .map_err(Termination::EvalFailed)?;
+            self.n_jacobians += 1;
+        }
+        if !mat_all_finite(self.jac.as_ref()) {
             return Err(Termination::Numerical);
         }
+        self.fold();
         Ok(())
     }
     fn col_norms(&self) -> Vec<f64> {
-        self.free
-            .iter()
-            .map(|&k| self.jac.col(k).norm_l2())
-            .collect()
+        // From `J` itself (as MINPACK), not from `R₊`, which has the same column norms up to
+        // rounding; taken by `fold`.
+        self.col_norms.clone()
     }
     fn gradient_abs(&self, j: usize) -> f64 {
-        (self.jac.col(self.free[j]).transpose() * self.r.as_ref()).abs()
+        // `J_jᵀr = Σᵢ R₊[i, j]·R₊[i, n_f]` (`R₊ᵀR₊ = [J_f r]ᵀ[J_f r]`), in O(n_f).
+
+        let n1 = self.free.len() + 1;
+        let col = &self.tri[j * n1..j * n1 + j + 1];
+        let qtr = &self.tri[(n1 - 1) * n1..];
+        col.iter().zip(qtr).map(|(a, b)| a * b).sum::<f64>().abs()
     }
     fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr {
-        // Two stages (as the streaming back end): `[J_f r]` is folded into its triangle `R₊`
-        // block of rows by block of rows ([`householder::fold_rows`], each block in cache),
-        // then the column-pivoted QR of the scaled `n_f × n_f` triangle gives the same `R` and
+        // The column-pivoted QR of the scaled `n_f × n_f` triangle gives the same `R` and
         // `Q₁ᵀr` as the pivoted QR of `J_f D⁻¹` up to rounding, in O(n_f³).
         let nf = self.free.len();
-        let n1 = nf + 1;
-        let m = self.jac.nrows();
-        let mut tri = vec![0.0; n1 * n1];
-        let buf = self
-            .fold_buf
-            .get_or_insert_with(|| vec![0.0; FOLD_ROWS * n1]);
-        for start in (0..m).step_by(FOLD_ROWS) {
-            let len = FOLD_ROWS.min(m - start);
-            for (c, &k) in self.free.iter().chain([&usize::MAX]).enumerate() {
-                let src = if k == usize::MAX {
-                    self.r.as_ref()
-                } else {
-                    self.jac.col(k)
-                }
-                .subrows(start, len);
-                let dst = &mut buf[c * FOLD_ROWS..c * FOLD_ROWS + len];
-                match src.try_as_col_major() {
-                    Some(s) => dst.copy_from_slice(s.as_slice()),
-                    None => dst.iter_mut().zip(src.iter()).for_each(|(d, v)| *d = *v),
-                }
-            }
-            householder::fold_rows(&mut tri, n1, buf, len, FOLD_ROWS);
-        }
-        let tri = MatRef::from_column_major_slice(&tri, n1, n1);
+        let tri = MatRef::from_column_major_slice(&self.tri, nf + 1, nf + 1);
         let iota: Vec<usize> = (0..nf).collect();
         ScaledQr::new(
             tri.submatrix(0, 0, nf, nf),
@@ -570,6 +695,9 @@ pub(crate) struct ScaledQr {
 }
 
 impl ScaledQr {
+    /// The factorisation for the columns `free` of `jac` (`m × n`, `m ≥ n_free`) scaled by
+    /// `1/diag` (one entry per free column), and `r` (length `m`): the column-pivoted
+    /// Householder QR of `[J_f D⁻¹ | r]` with `r` never a pivot.
     pub(crate) fn new(
         jac: MatRef<'_, f64>,
         free: &[usize],
@@ -588,7 +716,13 @@ impl ScaledQr {
             *dst = *v;
         }
         let perm = householder::qr_in_place(&mut a, nf)[..nf].to_vec();
-        let rmat = Mat::from_fn(nf, nf, |i, j| if i <= j { a.at(i, j) } else { 0.0 });
+        let mut rmat = Mat::<f64>::zeros(nf, nf);
+        for j in 0..nf {
+            let src = &a.data[j * m..j * m + (j + 1).min(m)];
+            for (i, v) in src.iter().enumerate() {
+                rmat[(i, j)] = *v;
+            }
+        }
         let qtr: Vec<f64> = (0..nf).map(|i| a.at(i, nf)).collect();
         // Pivoting sorts |R_kk| down; below ε·max(m, n)·|R_00| a pivot is zero at working
         // precision and the Gauss–Newton step leaves its component at 0.
