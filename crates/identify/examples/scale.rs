@@ -206,10 +206,11 @@ fn solve(args: &[String]) -> Result<()> {
     };
     let lm_json = match &lm_fit {
         Some(f) => format!(
-            "{{\"min_s\": {lm_min:e}, \"median_s\": {lm_median:e}, \"termination\": \"{:?}\", \"n_evaluations\": {}, \"n_jacobians\": {}, \"cost\": {:e}, \"x\": {{{}}}}}",
+            "{{\"min_s\": {lm_min:e}, \"median_s\": {lm_median:e}, \"termination\": \"{:?}\", \"n_evaluations\": {}, \"n_jacobians\": {}, \"n_iterations\": {}, \"cost\": {:e}, \"x\": {{{}}}}}",
             f.termination,
             f.n_evaluations,
             f.n_jacobians,
+            f.n_iterations,
             f.cost,
             named(&f.x, &free)
         ),

@@ -331,14 +331,7 @@ impl Linearised for Streaming<'_> {
             .abs()
     }
     fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr {
-        let nf = self.free.len();
-        let iota: Vec<usize> = (0..nf).collect();
-        ScaledQr::new(
-            self.r_f.as_ref().submatrix(0, 0, nf, nf),
-            &iota,
-            diag,
-            self.r_f.col(nf).subrows(0, nf),
-        )
+        ScaledQr::from_triangle(self.r_f.as_ref(), diag)
     }
 }
 
@@ -403,6 +396,7 @@ pub(crate) fn streaming_fit(
                 termination: Termination::GtolReached,
                 n_evaluations: 1,
                 n_jacobians: 0,
+                n_iterations: 0,
                 cost,
                 residuals: Col::zeros(0),
             },
@@ -420,6 +414,7 @@ pub(crate) fn streaming_fit(
             termination: run.termination,
             n_evaluations: run.n_evaluations,
             n_jacobians: run.n_jacobians,
+            n_iterations: run.n_iterations,
             cost,
             residuals: Col::zeros(0),
         },

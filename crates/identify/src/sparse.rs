@@ -222,6 +222,7 @@ pub fn levenberg_marquardt_sparse(
     let mut nu = 2.0_f64;
     let mut n_evaluations = 1;
     let mut n_jacobians = 1;
+    let mut n_iterations = 0;
     let mut r_trial = vec![0.0; m];
     let mut values_trial = vec![0.0; nnz];
     let termination = 'outer: loop {
@@ -249,6 +250,7 @@ pub fn levenberg_marquardt_sparse(
         if g_cos <= gtol {
             break Termination::GtolReached;
         }
+        n_iterations += 1;
         loop {
             if n_evaluations >= cfg.max_evaluations {
                 break 'outer Termination::MaxEvaluations;
@@ -335,6 +337,7 @@ pub fn levenberg_marquardt_sparse(
             termination,
             n_evaluations,
             n_jacobians,
+            n_iterations,
             cost,
             residuals: Col::from_fn(m, |i| r[i]),
         },
