@@ -364,70 +364,6 @@ fn dots_avx512<const NB: usize, const C: usize>(v: [&[f64]; NB], y: [&[f64]; C])
     w
 }
 
-/// [`Kernels::update`] with AVX-512: each `v_i` loaded once per 8 rows, a masked tail.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2,fma")]
-#[inline]
-fn update_avx512<const NB: usize, const C: usize>(
-    v: [&[f64]; NB],
-    w: [[f64; C]; NB],
-    y: [&mut [f64]; C],
-) {
-    use std::arch::x86_64::{
-        _mm512_fnmadd_pd, _mm512_loadu_pd, _mm512_mask_storeu_pd, _mm512_maskz_loadu_pd,
-        _mm512_set1_pd, _mm512_setzero_pd, _mm512_storeu_pd,
-    };
-    let n = {
-        let yr: [&[f64]; C] = std::array::from_fn(|c| &*y[c]);
-        common_len(&v, &yr)
-    };
-    let mut wv = [[_mm512_setzero_pd(); C]; NB];
-    for i in 0..NB {
-        for c in 0..C {
-            wv[i][c] = _mm512_set1_pd(w[i][c]);
-        }
-    }
-    let mut o = 0;
-    while o + 8 <= n {
-        // SAFETY: entries `o..o + 8` of every slice are in bounds (`o + 8 ≤ n`); the `y_c` are
-        // distinct `&mut`, so the stores do not overlap the loads of `v`.
-        unsafe {
-            let mut vv = [_mm512_setzero_pd(); NB];
-            for i in 0..NB {
-                vv[i] = _mm512_loadu_pd(v[i].as_ptr().add(o));
-            }
-            for c in 0..C {
-                let p = y[c].as_mut_ptr().add(o);
-                let mut a = _mm512_loadu_pd(p);
-                for i in 0..NB {
-                    a = _mm512_fnmadd_pd(vv[i], wv[i][c], a);
-                }
-                _mm512_storeu_pd(p, a);
-            }
-        }
-        o += 8;
-    }
-    if o < n {
-        let mask = 0xff_u8 >> (8 - (n - o));
-        // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes are neither
-        // read nor written.
-        unsafe {
-            let mut vv = [_mm512_setzero_pd(); NB];
-            for i in 0..NB {
-                vv[i] = _mm512_maskz_loadu_pd(mask, v[i].as_ptr().add(o));
-            }
-            for c in 0..C {
-                let p = y[c].as_mut_ptr().add(o);
-                let mut a = _mm512_maskz_loadu_pd(mask, p);
-                for i in 0..NB {
-                    a = _mm512_fnmadd_pd(vv[i], wv[i][c], a);
-                }
-                _mm512_mask_storeu_pd(p, mask, a);
-            }
-        }
-    }
-}
-
 /// The lanes `0..len` (`len < 4`) of a masked 4-lane load or store.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
@@ -493,68 +429,110 @@ fn dots_avx2<const NB: usize, const C: usize>(v: [&[f64]; NB], y: [&[f64]; C]) -
     w
 }
 
-/// [`Kernels::update`] with AVX2 and FMA: each `v_i` loaded once per 4 rows, a masked tail.
+/// Stamps [`Kernels::update`] for one instruction set from one body: `y_c ← y_c − Σ_i w_ic·v_i`,
+/// each `v_i` loaded once per vector of rows, a masked tail. The arguments name the vector
+/// intrinsics (`zero`, `splat`, `load`, `store`, `fnmadd`), the lane count, and how the tail's
+/// mask is built from the number of remaining rows and used by a masked load and store.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-fn update_avx2<const NB: usize, const C: usize>(
-    v: [&[f64]; NB],
-    w: [[f64; C]; NB],
-    y: [&mut [f64]; C],
-) {
-    use std::arch::x86_64::{
-        _mm256_fnmadd_pd, _mm256_loadu_pd, _mm256_maskload_pd, _mm256_maskstore_pd, _mm256_set1_pd,
-        _mm256_setzero_pd, _mm256_storeu_pd,
-    };
-    let n = {
-        let yr: [&[f64]; C] = std::array::from_fn(|c| &*y[c]);
-        common_len(&v, &yr)
-    };
-    let mut wv = [[_mm256_setzero_pd(); C]; NB];
-    for i in 0..NB {
-        for c in 0..C {
-            wv[i][c] = _mm256_set1_pd(w[i][c]);
-        }
-    }
-    let mut o = 0;
-    while o + 4 <= n {
-        // SAFETY: entries `o..o + 4` of every slice are in bounds (`o + 4 ≤ n`); the `y_c` are
-        // distinct `&mut`, so the stores do not overlap the loads of `v`.
-        unsafe {
-            let mut vv = [_mm256_setzero_pd(); NB];
+macro_rules! update_kernel {
+    (
+        $(#[$attr:meta])*
+        fn $name:ident, lanes $w:literal,
+        [$zero:ident, $splat:ident, $load:ident, $store:ident, $fnmadd:ident],
+        mask($rem:ident) = $mask:expr,
+        masked_load($lp:ident, $lk:ident) = $mload:expr,
+        masked_store($sp:ident, $sk:ident, $sv:ident) = $mstore:expr $(,)?
+    ) => {
+        $(#[$attr])*
+        fn $name<const NB: usize, const C: usize>(
+            v: [&[f64]; NB],
+            w: [[f64; C]; NB],
+            y: [&mut [f64]; C],
+        ) {
+            #[allow(clippy::wildcard_imports)]
+            use std::arch::x86_64::*;
+            let n = {
+                let yr: [&[f64]; C] = std::array::from_fn(|c| &*y[c]);
+                common_len(&v, &yr)
+            };
+            let mut wv = [[$zero(); C]; NB];
             for i in 0..NB {
-                vv[i] = _mm256_loadu_pd(v[i].as_ptr().add(o));
-            }
-            for c in 0..C {
-                let p = y[c].as_mut_ptr().add(o);
-                let mut a = _mm256_loadu_pd(p);
-                for i in 0..NB {
-                    a = _mm256_fnmadd_pd(vv[i], wv[i][c], a);
+                for c in 0..C {
+                    wv[i][c] = $splat(w[i][c]);
                 }
-                _mm256_storeu_pd(p, a);
+            }
+            let mut o = 0;
+            while o + $w <= n {
+                // SAFETY: entries `o..o + lanes` of every slice are in bounds (`o + lanes ≤
+                // n`); the `y_c` are distinct `&mut`, so the stores do not overlap the loads of
+                // `v`.
+                unsafe {
+                    let mut vv = [$zero(); NB];
+                    for i in 0..NB {
+                        vv[i] = $load(v[i].as_ptr().add(o));
+                    }
+                    for c in 0..C {
+                        let p = y[c].as_mut_ptr().add(o);
+                        let mut a = $load(p);
+                        for i in 0..NB {
+                            a = $fnmadd(vv[i], wv[i][c], a);
+                        }
+                        $store(p, a);
+                    }
+                }
+                o += $w;
+            }
+            if o < n {
+                let $rem = n - o;
+                let mask = $mask;
+                // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes are
+                // neither read nor written.
+                unsafe {
+                    let mut vv = [$zero(); NB];
+                    for i in 0..NB {
+                        let ($lp, $lk) = (v[i].as_ptr().add(o), mask);
+                        vv[i] = $mload;
+                    }
+                    for c in 0..C {
+                        let p = y[c].as_mut_ptr().add(o);
+                        let mut a = {
+                            let ($lp, $lk) = (p.cast_const(), mask);
+                            $mload
+                        };
+                        for i in 0..NB {
+                            a = $fnmadd(vv[i], wv[i][c], a);
+                        }
+                        let ($sp, $sk, $sv) = (p, mask, a);
+                        $mstore;
+                    }
+                }
             }
         }
-        o += 4;
-    }
-    if o < n {
-        let mask = mask4(n - o);
-        // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes are neither
-        // read nor written.
-        unsafe {
-            let mut vv = [_mm256_setzero_pd(); NB];
-            for i in 0..NB {
-                vv[i] = _mm256_maskload_pd(v[i].as_ptr().add(o), mask);
-            }
-            for c in 0..C {
-                let p = y[c].as_mut_ptr().add(o);
-                let mut a = _mm256_maskload_pd(p, mask);
-                for i in 0..NB {
-                    a = _mm256_fnmadd_pd(vv[i], wv[i][c], a);
-                }
-                _mm256_maskstore_pd(p, mask, a);
-            }
-        }
-    }
+    };
+}
+
+#[cfg(target_arch = "x86_64")]
+update_kernel! {
+    /// [`Kernels::update`] with AVX-512: each `v_i` loaded once per 8 rows, a masked tail.
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    #[inline]
+    fn update_avx512, lanes 8,
+    [_mm512_setzero_pd, _mm512_set1_pd, _mm512_loadu_pd, _mm512_storeu_pd, _mm512_fnmadd_pd],
+    mask(rem) = 0xff_u8 >> (8 - rem),
+    masked_load(p, k) = _mm512_maskz_loadu_pd(k, p),
+    masked_store(p, k, a) = _mm512_mask_storeu_pd(p, k, a),
+}
+
+#[cfg(target_arch = "x86_64")]
+update_kernel! {
+    /// [`Kernels::update`] with AVX2 and FMA: each `v_i` loaded once per 4 rows, a masked tail.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn update_avx2, lanes 4,
+    [_mm256_setzero_pd, _mm256_set1_pd, _mm256_loadu_pd, _mm256_storeu_pd, _mm256_fnmadd_pd],
+    mask(rem) = mask4(rem),
+    masked_load(p, k) = _mm256_maskload_pd(p, k),
+    masked_store(p, k, a) = _mm256_maskstore_pd(p, k, a),
 }
 
 /// Splits the next `C` columns off `rest` (column-major, leading dimension `ld`), rows
