@@ -201,73 +201,56 @@ impl Kernels for Scalar {
     }
 }
 
-/// AVX2 kernels; a value exists only where the CPU has AVX2 and FMA (made in
-/// `#[target_feature]` functions that are called after detection).
+/// Declares a zero-sized kernel set for one instruction set and implements [`Kernels`] by
+/// forwarding to its `#[target_feature]` functions; a value exists only where the CPU has the
+/// features (it is made in `#[target_feature]` functions that are called after detection).
 #[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy)]
-struct Avx2(());
+macro_rules! simd_kernels {
+    ($(#[$attr:meta])* $ty:ident: $dot:ident, $dots:ident, $update:ident) => {
+        $(#[$attr])*
+        #[derive(Clone, Copy)]
+        struct $ty(());
 
-#[cfg(target_arch = "x86_64")]
-impl Kernels for Avx2 {
-    #[inline(always)]
-    fn dot(self, x: &[f64], y: &[f64]) -> f64 {
-        // SAFETY: an `Avx2` exists only where the CPU has AVX2 and FMA (see the type).
-        unsafe { dot_avx2(x, y) }
-    }
-    #[inline(always)]
-    fn dots<const NB: usize, const C: usize>(
-        self,
-        v: [&[f64]; NB],
-        y: [&[f64]; C],
-    ) -> [[f64; C]; NB] {
-        // SAFETY: as above.
-        unsafe { dots_avx2(v, y) }
-    }
-    #[inline(always)]
-    fn update<const NB: usize, const C: usize>(
-        self,
-        v: [&[f64]; NB],
-        w: [[f64; C]; NB],
-        y: [&mut [f64]; C],
-    ) {
-        // SAFETY: as above.
-        unsafe { update_avx2(v, w, y) }
-    }
+        impl Kernels for $ty {
+            #[inline(always)]
+            fn dot(self, x: &[f64], y: &[f64]) -> f64 {
+                // SAFETY: a value of this type exists only where the CPU has the features of
+                // the kernel (see the type).
+                unsafe { $dot(x, y) }
+            }
+            #[inline(always)]
+            fn dots<const NB: usize, const C: usize>(
+                self,
+                v: [&[f64]; NB],
+                y: [&[f64]; C],
+            ) -> [[f64; C]; NB] {
+                // SAFETY: as above.
+                unsafe { $dots(v, y) }
+            }
+            #[inline(always)]
+            fn update<const NB: usize, const C: usize>(
+                self,
+                v: [&[f64]; NB],
+                w: [[f64; C]; NB],
+                y: [&mut [f64]; C],
+            ) {
+                // SAFETY: as above.
+                unsafe { $update(v, w, y) }
+            }
+        }
+    };
 }
 
-/// AVX-512 kernels; a value exists only where the CPU has AVX-512F (with AVX2 and FMA; made in
-/// `#[target_feature]` functions that are called after detection).
 #[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy)]
-struct Avx512(());
+simd_kernels! {
+    /// AVX2 kernels; a value exists only where the CPU has AVX2 and FMA.
+    Avx2: dot_avx2, dots_avx2, update_avx2
+}
 
 #[cfg(target_arch = "x86_64")]
-impl Kernels for Avx512 {
-    #[inline(always)]
-    fn dot(self, x: &[f64], y: &[f64]) -> f64 {
-        // SAFETY: an `Avx512` exists only where the CPU has AVX-512F, AVX2 and FMA (see the
-        // type).
-        unsafe { dot_avx512(x, y) }
-    }
-    #[inline(always)]
-    fn dots<const NB: usize, const C: usize>(
-        self,
-        v: [&[f64]; NB],
-        y: [&[f64]; C],
-    ) -> [[f64; C]; NB] {
-        // SAFETY: as above.
-        unsafe { dots_avx512(v, y) }
-    }
-    #[inline(always)]
-    fn update<const NB: usize, const C: usize>(
-        self,
-        v: [&[f64]; NB],
-        w: [[f64; C]; NB],
-        y: [&mut [f64]; C],
-    ) {
-        // SAFETY: as above.
-        unsafe { update_avx512(v, w, y) }
-    }
+simd_kernels! {
+    /// AVX-512 kernels; a value exists only where the CPU has AVX-512F, AVX2 and FMA.
+    Avx512: dot_avx512, dots_avx512, update_avx512
 }
 
 /// The common length of the slices of `v` and `y`.
