@@ -267,86 +267,6 @@ fn common_len(v: &[&[f64]], y: &[&[f64]]) -> usize {
     n
 }
 
-/// [`Kernels::dots`] with AVX-512: one 8-lane accumulator per pair, a masked tail.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2,fma")]
-#[inline]
-fn dots_avx512<const NB: usize, const C: usize>(v: [&[f64]; NB], y: [&[f64]; C]) -> [[f64; C]; NB] {
-    use std::arch::x86_64::{
-        _mm512_add_pd, _mm512_fmadd_pd, _mm512_loadu_pd, _mm512_maskz_loadu_pd,
-        _mm512_reduce_add_pd, _mm512_setzero_pd,
-    };
-    let n = common_len(&v, &y);
-    let mut acc = [[_mm512_setzero_pd(); C]; NB];
-    let mut o = 0;
-    if NB * C <= 2 {
-        // Few pairs: a second set of accumulators for the odd blocks of 8, so that at least
-        // 2 FMA chains run per pair (the FMA latency is several cycles).
-        let mut acc1 = [[_mm512_setzero_pd(); C]; NB];
-        while o + 16 <= n {
-            // SAFETY: entries `o..o + 16` of every slice are in bounds (`o + 16 ≤ n`).
-            unsafe {
-                for i in 0..NB {
-                    let v0 = _mm512_loadu_pd(v[i].as_ptr().add(o));
-                    let v1 = _mm512_loadu_pd(v[i].as_ptr().add(o + 8));
-                    for c in 0..C {
-                        let y0 = _mm512_loadu_pd(y[c].as_ptr().add(o));
-                        let y1 = _mm512_loadu_pd(y[c].as_ptr().add(o + 8));
-                        acc[i][c] = _mm512_fmadd_pd(v0, y0, acc[i][c]);
-                        acc1[i][c] = _mm512_fmadd_pd(v1, y1, acc1[i][c]);
-                    }
-                }
-            }
-            o += 16;
-        }
-        for i in 0..NB {
-            for c in 0..C {
-                acc[i][c] = _mm512_add_pd(acc[i][c], acc1[i][c]);
-            }
-        }
-    }
-    while o + 8 <= n {
-        // SAFETY: entries `o..o + 8` of every slice are in bounds (`o + 8 ≤ n`).
-        unsafe {
-            let mut yv = [_mm512_setzero_pd(); C];
-            for c in 0..C {
-                yv[c] = _mm512_loadu_pd(y[c].as_ptr().add(o));
-            }
-            for i in 0..NB {
-                let vv = _mm512_loadu_pd(v[i].as_ptr().add(o));
-                for c in 0..C {
-                    acc[i][c] = _mm512_fmadd_pd(vv, yv[c], acc[i][c]);
-                }
-            }
-        }
-        o += 8;
-    }
-    if o < n {
-        let mask = 0xff_u8 >> (8 - (n - o));
-        // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes (`n..o + 8`)
-        // are not read.
-        unsafe {
-            let mut yv = [_mm512_setzero_pd(); C];
-            for c in 0..C {
-                yv[c] = _mm512_maskz_loadu_pd(mask, y[c].as_ptr().add(o));
-            }
-            for i in 0..NB {
-                let vv = _mm512_maskz_loadu_pd(mask, v[i].as_ptr().add(o));
-                for c in 0..C {
-                    acc[i][c] = _mm512_fmadd_pd(vv, yv[c], acc[i][c]);
-                }
-            }
-        }
-    }
-    let mut w = [[0.0; C]; NB];
-    for i in 0..NB {
-        for c in 0..C {
-            w[i][c] = _mm512_reduce_add_pd(acc[i][c]);
-        }
-    }
-    w
-}
-
 /// The lanes `0..len` (`len < 4`) of a masked 4-lane load or store.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
@@ -356,60 +276,131 @@ fn mask4(len: usize) -> std::arch::x86_64::__m256i {
     std::arch::x86_64::_mm256_setr_epi64x(lane(0), lane(1), lane(2), lane(3))
 }
 
-/// [`Kernels::dots`] with AVX2 and FMA: one 4-lane accumulator per pair, a masked tail.
+/// Stamps [`Kernels::dots`] for one instruction set from one body: `w_ic = v_iᵀy_c`, one
+/// accumulator per pair, a masked tail. The arguments name the vector intrinsics (`zero`,
+/// `load`, `fmadd`, `add`), the lane count, whether few pairs (`NB·C ≤ 2`) get a second set of
+/// accumulators for the odd vectors (two FMA chains per pair hide the FMA latency), how the
+/// tail's mask is built and used by a masked load, and how an accumulator is summed.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-fn dots_avx2<const NB: usize, const C: usize>(v: [&[f64]; NB], y: [&[f64]; C]) -> [[f64; C]; NB] {
-    use std::arch::x86_64::{
-        _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_maskload_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+macro_rules! dots_kernel {
+    (
+        $(#[$attr:meta])*
+        fn $name:ident, lanes $w:literal, two_chains $two:literal,
+        [$zero:ident, $load:ident, $fmadd:ident, $add:ident],
+        mask($rem:ident) = $mask:expr,
+        masked_load($lp:ident, $lk:ident) = $mload:expr,
+        sum($acc:ident) = $sum:expr $(,)?
+    ) => {
+        $(#[$attr])*
+        fn $name<const NB: usize, const C: usize>(
+            v: [&[f64]; NB],
+            y: [&[f64]; C],
+        ) -> [[f64; C]; NB] {
+            #[allow(clippy::wildcard_imports)]
+            use std::arch::x86_64::*;
+            let n = common_len(&v, &y);
+            let mut acc = [[$zero(); C]; NB];
+            let mut o = 0;
+            if $two && NB * C <= 2 {
+                let mut acc1 = [[$zero(); C]; NB];
+                while o + 2 * $w <= n {
+                    // SAFETY: entries `o..o + 2·lanes` of every slice are in bounds.
+                    unsafe {
+                        for i in 0..NB {
+                            let v0 = $load(v[i].as_ptr().add(o));
+                            let v1 = $load(v[i].as_ptr().add(o + $w));
+                            for c in 0..C {
+                                let y0 = $load(y[c].as_ptr().add(o));
+                                let y1 = $load(y[c].as_ptr().add(o + $w));
+                                acc[i][c] = $fmadd(v0, y0, acc[i][c]);
+                                acc1[i][c] = $fmadd(v1, y1, acc1[i][c]);
+                            }
+                        }
+                    }
+                    o += 2 * $w;
+                }
+                for i in 0..NB {
+                    for c in 0..C {
+                        acc[i][c] = $add(acc[i][c], acc1[i][c]);
+                    }
+                }
+            }
+            while o + $w <= n {
+                // SAFETY: entries `o..o + lanes` of every slice are in bounds (`o + lanes ≤ n`).
+                unsafe {
+                    let mut yv = [$zero(); C];
+                    for c in 0..C {
+                        yv[c] = $load(y[c].as_ptr().add(o));
+                    }
+                    for i in 0..NB {
+                        let vv = $load(v[i].as_ptr().add(o));
+                        for c in 0..C {
+                            acc[i][c] = $fmadd(vv, yv[c], acc[i][c]);
+                        }
+                    }
+                }
+                o += $w;
+            }
+            if o < n {
+                let $rem = n - o;
+                let mask = $mask;
+                // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes are
+                // not read.
+                unsafe {
+                    let mut yv = [$zero(); C];
+                    for c in 0..C {
+                        let ($lp, $lk) = (y[c].as_ptr().add(o), mask);
+                        yv[c] = $mload;
+                    }
+                    for i in 0..NB {
+                        let ($lp, $lk) = (v[i].as_ptr().add(o), mask);
+                        let vv = $mload;
+                        for c in 0..C {
+                            acc[i][c] = $fmadd(vv, yv[c], acc[i][c]);
+                        }
+                    }
+                }
+            }
+            let mut w = [[0.0; C]; NB];
+            for i in 0..NB {
+                for c in 0..C {
+                    let $acc = acc[i][c];
+                    w[i][c] = $sum;
+                }
+            }
+            w
+        }
     };
-    let n = common_len(&v, &y);
-    let mut acc = [[_mm256_setzero_pd(); C]; NB];
-    let mut o = 0;
-    while o + 4 <= n {
-        // SAFETY: entries `o..o + 4` of every slice are in bounds (`o + 4 ≤ n`).
-        unsafe {
-            let mut yv = [_mm256_setzero_pd(); C];
-            for c in 0..C {
-                yv[c] = _mm256_loadu_pd(y[c].as_ptr().add(o));
-            }
-            for i in 0..NB {
-                let vv = _mm256_loadu_pd(v[i].as_ptr().add(o));
-                for c in 0..C {
-                    acc[i][c] = _mm256_fmadd_pd(vv, yv[c], acc[i][c]);
-                }
-            }
-        }
-        o += 4;
-    }
-    if o < n {
-        let mask = mask4(n - o);
-        // SAFETY: entries `o..n` of every slice are in bounds; the masked-off lanes (`n..o + 4`)
-        // are not read.
-        unsafe {
-            let mut yv = [_mm256_setzero_pd(); C];
-            for c in 0..C {
-                yv[c] = _mm256_maskload_pd(y[c].as_ptr().add(o), mask);
-            }
-            for i in 0..NB {
-                let vv = _mm256_maskload_pd(v[i].as_ptr().add(o), mask);
-                for c in 0..C {
-                    acc[i][c] = _mm256_fmadd_pd(vv, yv[c], acc[i][c]);
-                }
-            }
-        }
-    }
-    let mut w = [[0.0; C]; NB];
-    for i in 0..NB {
-        for c in 0..C {
-            let mut lanes = [0.0; 4];
-            // SAFETY: `lanes` holds 4 f64.
-            unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), acc[i][c]) };
-            w[i][c] = (lanes[0] + lanes[2]) + (lanes[1] + lanes[3]);
-        }
-    }
-    w
+}
+
+#[cfg(target_arch = "x86_64")]
+dots_kernel! {
+    /// [`Kernels::dots`] with AVX-512: one 8-lane accumulator per pair (two for one or two
+    /// pairs), a masked tail.
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    #[inline]
+    fn dots_avx512, lanes 8, two_chains true,
+    [_mm512_setzero_pd, _mm512_loadu_pd, _mm512_fmadd_pd, _mm512_add_pd],
+    mask(rem) = 0xff_u8 >> (8 - rem),
+    masked_load(p, k) = _mm512_maskz_loadu_pd(k, p),
+    sum(a) = _mm512_reduce_add_pd(a),
+}
+
+#[cfg(target_arch = "x86_64")]
+dots_kernel! {
+    /// [`Kernels::dots`] with AVX2 and FMA: one 4-lane accumulator per pair, a masked tail.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn dots_avx2, lanes 4, two_chains false,
+    [_mm256_setzero_pd, _mm256_loadu_pd, _mm256_fmadd_pd, _mm256_add_pd],
+    mask(rem) = mask4(rem),
+    masked_load(p, k) = _mm256_maskload_pd(p, k),
+    sum(a) = {
+        let mut lanes = [0.0; 4];
+        // SAFETY: `lanes` holds 4 f64.
+        unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), a) };
+        (lanes[0] + lanes[2]) + (lanes[1] + lanes[3])
+    },
 }
 
 /// Stamps [`Kernels::update`] for one instruction set from one body: `y_c ← y_c − Σ_i w_ic·v_i`,
