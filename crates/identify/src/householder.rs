@@ -56,6 +56,40 @@ impl ColMajor {
     }
 }
 
+/// The body of a function that runs `$f(args…, kernels)` with the widest kernel set the CPU
+/// has: AVX-512 (with AVX2 and FMA), AVX2 with FMA, or scalar. `$f` is generic over
+/// [`Kernels`], so its body is compiled once per instruction set, inside a
+/// `#[target_feature]` function called only after the features were detected.
+macro_rules! with_kernels {
+    ($f:ident($($arg:ident: $ty:ty),*) -> $ret:ty) => {{
+        #[cfg(target_arch = "x86_64")]
+        {
+            #[target_feature(enable = "avx512f,avx2,fma")]
+            fn wide($($arg: $ty),*) -> $ret {
+                $f($($arg,)* Avx512(()))
+            }
+            #[target_feature(enable = "avx2,fma")]
+            fn narrow($($arg: $ty),*) -> $ret {
+                $f($($arg,)* Avx2(()))
+            }
+            if std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                // SAFETY: the CPU has AVX-512F, AVX2 and FMA (checked just above).
+                return unsafe { wide($($arg),*) };
+            }
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                // SAFETY: the CPU has AVX2 and FMA (checked just above).
+                return unsafe { narrow($($arg),*) };
+            }
+        }
+        $f($($arg,)* Scalar)
+    }};
+}
+
 /// Reduces `a` to `R` in place: afterwards the upper triangle of its first `min(m, n)` rows
 /// holds `R` with `A·Π = Q·R` (zeros below the diagonal), where `Π` permutes the first
 /// `n_pivot` columns (the others keep their place and only receive the reflections).
@@ -64,34 +98,7 @@ impl ColMajor {
 /// Pivot `k` is the remaining pivot candidate of largest norm over rows `k..` (the first in
 /// column order among equal norms). A zero column gets no reflection (`R_kk = 0`).
 pub(crate) fn qr_in_place(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("fma")
-        {
-            // SAFETY: the CPU has AVX-512F, AVX2 and FMA (checked just above).
-            return unsafe { qr_avx512(a, n_pivot) };
-        }
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
-            // SAFETY: the CPU has AVX2 and FMA (checked just above).
-            return unsafe { qr_avx2(a, n_pivot) };
-        }
-    }
-    qr_impl(a, n_pivot, Scalar)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2,fma")]
-fn qr_avx512(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
-    qr_impl(a, n_pivot, Avx512(()))
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn qr_avx2(a: &mut ColMajor, n_pivot: usize) -> Vec<usize> {
-    qr_impl(a, n_pivot, Avx2(()))
+    with_kernels!(qr_impl(a: &mut ColMajor, n_pivot: usize) -> Vec<usize>)
 }
 
 /// `‖x‖` (vectorised, rescaled when the sum of squares under- or overflows).
@@ -747,34 +754,7 @@ pub(crate) fn fold_cols(r: &mut [f64], cols: &mut [&mut [f64]]) {
         cols.iter().all(|c| c.len() == len),
         "columns of different lengths"
     );
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("fma")
-        {
-            // SAFETY: the CPU has AVX-512F, AVX2 and FMA (checked just above).
-            return unsafe { fold_avx512(r, cols) };
-        }
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
-            // SAFETY: the CPU has AVX2 and FMA (checked just above).
-            return unsafe { fold_avx2(r, cols) };
-        }
-    }
-    fold_impl(r, cols, Scalar);
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2,fma")]
-fn fold_avx512(r: &mut [f64], cols: &mut [&mut [f64]]) {
-    fold_impl(r, cols, Avx512(()));
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn fold_avx2(r: &mut [f64], cols: &mut [&mut [f64]]) {
-    fold_impl(r, cols, Avx2(()));
+    with_kernels!(fold_impl(r: &mut [f64], cols: &mut [&mut [f64]]) -> ())
 }
 
 /// Splits the next `C` columns off `rest`.
