@@ -534,79 +534,77 @@ fn take_cols<'a, const C: usize>(
     })
 }
 
-/// As [`dot_avx2`] with one 8-wide AVX-512 accumulator per 8 entries (two per 16).
+/// Stamps a two-accumulator dot product `Σ xᵢyᵢ` over `min(len)` entries for one instruction
+/// set (LLVM does not vectorise a loop-carried partial-sum array by itself): blocks of two
+/// vectors of `lanes` entries, each vector into its own accumulator (a product, then a sum),
+/// then `sum(acc)` of the two accumulators' sum plus `tail(x, y)` of the remaining entries.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-#[inline]
-fn dot_avx512(x: &[f64], y: &[f64]) -> f64 {
-    use std::arch::x86_64::{
-        _mm512_add_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_reduce_add_pd, _mm512_setzero_pd,
-    };
-    let n = x.len().min(y.len());
-    let (x, y) = (&x[..n], &y[..n]);
-    let (xc, xt) = x.as_chunks::<16>();
-    let (yc, yt) = y.as_chunks::<16>();
-    let mut a0 = _mm512_setzero_pd();
-    let mut a1 = _mm512_setzero_pd();
-    for (a, b) in xc.iter().zip(yc) {
-        // SAFETY: each chunk holds 16 f64, read as two unaligned 8-lane loads.
-        unsafe {
-            a0 = _mm512_add_pd(
-                a0,
-                _mm512_mul_pd(_mm512_loadu_pd(a.as_ptr()), _mm512_loadu_pd(b.as_ptr())),
-            );
-            a1 = _mm512_add_pd(
-                a1,
-                _mm512_mul_pd(
-                    _mm512_loadu_pd(a.as_ptr().add(8)),
-                    _mm512_loadu_pd(b.as_ptr().add(8)),
-                ),
-            );
+macro_rules! dot_kernel {
+    (
+        $(#[$attr:meta])*
+        fn $name:ident, lanes $w:literal, [$zero:ident, $load:ident, $mul:ident, $add:ident],
+        sum($acc:ident) = $sum:expr,
+        tail($tx:ident, $ty:ident) = $tail:expr $(,)?
+    ) => {
+        $(#[$attr])*
+        fn $name(x: &[f64], y: &[f64]) -> f64 {
+            #[allow(clippy::wildcard_imports)]
+            use std::arch::x86_64::*;
+            let n = x.len().min(y.len());
+            let (x, y) = (&x[..n], &y[..n]);
+            let (xc, $tx) = x.as_chunks::<{ 2 * $w }>();
+            let (yc, $ty) = y.as_chunks::<{ 2 * $w }>();
+            let mut a0 = $zero();
+            let mut a1 = $zero();
+            for (a, b) in xc.iter().zip(yc) {
+                // SAFETY: each chunk holds 2·lanes f64, read as two unaligned loads.
+                unsafe {
+                    a0 = $add(a0, $mul($load(a.as_ptr()), $load(b.as_ptr())));
+                    a1 = $add(
+                        a1,
+                        $mul($load(a.as_ptr().add($w)), $load(b.as_ptr().add($w))),
+                    );
+                }
+            }
+            let $acc = $add(a0, a1);
+            let sum: f64 = $sum;
+            let tail: f64 = $tail;
+            sum + tail
         }
-    }
-    // The tail (< 16 entries) by the AVX2 dot product.
-    _mm512_reduce_add_pd(_mm512_add_pd(a0, a1)) + dot_avx2(xt, yt)
+    };
 }
 
-/// `Σ xᵢyᵢ` over `min(len)` entries with two 4-wide AVX accumulators (LLVM does not vectorise
-/// a loop-carried partial-sum array by itself).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn dot_avx2(x: &[f64], y: &[f64]) -> f64 {
-    use std::arch::x86_64::{
-        _mm256_add_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_setzero_pd, _mm256_storeu_pd,
-    };
-    let n = x.len().min(y.len());
-    let (x, y) = (&x[..n], &y[..n]);
-    let (xc, xt) = x.as_chunks::<8>();
-    let (yc, yt) = y.as_chunks::<8>();
-    let mut a0 = _mm256_setzero_pd();
-    let mut a1 = _mm256_setzero_pd();
-    for (a, b) in xc.iter().zip(yc) {
-        // SAFETY: each chunk holds 8 f64, read as two unaligned 4-lane loads.
-        unsafe {
-            a0 = _mm256_add_pd(
-                a0,
-                _mm256_mul_pd(_mm256_loadu_pd(a.as_ptr()), _mm256_loadu_pd(b.as_ptr())),
-            );
-            a1 = _mm256_add_pd(
-                a1,
-                _mm256_mul_pd(
-                    _mm256_loadu_pd(a.as_ptr().add(4)),
-                    _mm256_loadu_pd(b.as_ptr().add(4)),
-                ),
-            );
+dot_kernel! {
+    /// As [`dot_avx2`] with one 8-wide AVX-512 accumulator per 8 entries (two per 16); the
+    /// tail (< 16 entries) by the AVX2 dot product.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    fn dot_avx512, lanes 8, [_mm512_setzero_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_add_pd],
+    sum(acc) = _mm512_reduce_add_pd(acc),
+    tail(xt, yt) = dot_avx2(xt, yt),
+}
+
+#[cfg(target_arch = "x86_64")]
+dot_kernel! {
+    /// `Σ xᵢyᵢ` over `min(len)` entries with two 4-wide AVX accumulators, the tail (< 8
+    /// entries) in scalar.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn dot_avx2, lanes 4, [_mm256_setzero_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_add_pd],
+    sum(acc) = {
+        let mut lanes = [0.0; 4];
+        // SAFETY: `lanes` holds 4 f64.
+        unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), acc) };
+        (lanes[0] + lanes[2]) + (lanes[1] + lanes[3])
+    },
+    tail(xt, yt) = {
+        let mut tail = 0.0;
+        for (a, b) in xt.iter().zip(yt) {
+            tail += a * b;
         }
-    }
-    let mut lanes = [0.0; 4];
-    // SAFETY: `lanes` holds 4 f64.
-    unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), _mm256_add_pd(a0, a1)) };
-    let mut tail = 0.0;
-    for (a, b) in xt.iter().zip(yt) {
-        tail += a * b;
-    }
-    ((lanes[0] + lanes[2]) + (lanes[1] + lanes[3])) + tail
+        tail
+    },
 }
 
 /// `Σ xᵢyᵢ` with 8 partial sums (vectorisable without reassociating a single sum).
