@@ -71,8 +71,7 @@ fn case(n_poses: usize) -> Case {
         .collect();
     let obs = Observations {
         rows,
-        point_distances: vec![],
-        n_points: 0,
+        ..Observations::default()
     };
     let weights = Weights {
         sigma_distance_m: sigma_m(),

@@ -117,8 +117,7 @@ fn solve(args: &[String]) -> Result<()> {
     let rows = read(&data, chain.n_joints())?;
     let obs = Observations {
         rows,
-        point_distances: vec![],
-        n_points: 0,
+        ..Observations::default()
     };
     let weights = Weights {
         sigma_distance_m: sigma_m(),

@@ -24,8 +24,7 @@
 //! let chain = Chain::from_dh(&[row(0.3, 0), row(0.2, 1)])?;
 //! let obs = Observations {
 //!     rows: vec![Row { q: vec![0.1, 0.2], kind: RowKind::Distance { distance_m: 0.49 } }],
-//!     point_distances: vec![],
-//!     n_points: 0,
+//!     ..Observations::default()
 //! };
 //! let problem = CalibrationProblem::new(chain, obs, Weights::default(), None)?;
 //! assert_eq!(problem.n_residuals(), 1);

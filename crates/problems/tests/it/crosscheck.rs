@@ -58,8 +58,7 @@ fn reference_problem() -> CalibrationProblem {
                 },
             })
             .collect(),
-        point_distances: vec![],
-        n_points: 0,
+        ..Observations::default()
     };
     let weights = Weights {
         sigma_distance_m: sigma_m(),

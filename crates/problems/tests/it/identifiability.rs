@@ -308,8 +308,7 @@ fn jacobian(chain: &Chain, measurement: Measurement, seed: u64) -> (Mat<f64>, Pa
                 .collect();
             let obs = Observations {
                 rows,
-                point_distances: vec![],
-                n_points: 0,
+                ..Observations::default()
             };
             let problem = CalibrationProblem::new(chain.clone(), obs, Weights::default(), None)
                 .expect("valid problem");
@@ -554,8 +553,7 @@ proptest! {
                 let noise = [0; 3].map(|_| sigma * rng.sample::<f64, _>(rand_distr::StandardNormal));
                 Row { kind: RowKind::Position { position_m: [p.x + noise[0], p.y + noise[1], p.z + noise[2]] }, q }
             }).collect(),
-            point_distances: vec![],
-            n_points: 0,
+            ..Observations::default()
         };
         let weights = Weights { sigma_position_m: sigma, ..Weights::default() };
         let problem = CalibrationProblem::new(chain, obs, weights, None).expect("valid");

@@ -140,8 +140,7 @@ fn distance_runs_problem(qs: &[Vec<f64>]) -> CalibrationProblem {
         .collect();
     let obs = Observations {
         rows,
-        point_distances: vec![],
-        n_points: 0,
+        ..Observations::default()
     };
     let weights = Weights {
         sigma_distance_m: 1e-5,

@@ -59,8 +59,7 @@ fn reference_distance_problem(n_rows: usize) -> CalibrationProblem {
         .collect();
     let obs = Observations {
         rows,
-        point_distances: vec![],
-        n_points: 0,
+        ..Observations::default()
     };
     let weights = Weights {
         sigma_distance_m: 1e-5,
@@ -148,8 +147,7 @@ fn streaming_identify_matches_dense_on_points_and_positions() {
     }
     let obs = Observations {
         rows,
-        point_distances: vec![],
-        n_points: 0,
+        ..Observations::default()
     };
     let weights = Weights {
         sigma_distance_m: 1e-5,
