@@ -305,7 +305,7 @@ impl<'a> Streaming<'a> {
 }
 
 impl Linearised for Streaming<'_> {
-    fn trial_norm(&mut self, x_trial: ColRef<'_, f64>) -> f64 {
+    fn trial_norm(&mut self, x_trial: ColRef<'_, f64>, _may_continue: bool) -> f64 {
         residual_norm_sq(self.p, x_trial).map_or(f64::INFINITY, f64::sqrt)
     }
     fn accept(&mut self) {}

@@ -169,6 +169,15 @@ pub(crate) fn mat_all_finite(m: MatRef<'_, f64>) -> bool {
     })
 }
 
+/// `‖c‖`: [`householder::norm2`] (vectorised, rescaled when the sum of squares under- or
+/// overflows; non-finite exactly when an entry is) for a contiguous column.
+pub(crate) fn col_norm(c: ColRef<'_, f64>) -> f64 {
+    match c.try_as_col_major() {
+        Some(c) => householder::norm2(c.as_slice()),
+        None => c.norm_l2(),
+    }
+}
+
 /// Returns `Err(NonFiniteJacobian)` naming the first non-finite entry of `jac`.
 pub(crate) fn check_jacobian_finite(
     jac: MatRef<'_, f64>,
@@ -300,7 +309,7 @@ pub(crate) fn levenberg_marquardt_at(
             residuals: r,
         };
     }
-    let f_norm = r.norm_l2();
+    let f_norm = col_norm(r.as_ref());
     let mut dense = Dense::new(p, free, r, jac);
     let run = run(&mut dense, x0, free, cfg, f_norm);
     let cost = 0.5 * dense.r.squared_norm_l2();
@@ -319,7 +328,11 @@ pub(crate) fn levenberg_marquardt_at(
 /// points and the linearisation at the current point.
 pub(crate) trait Linearised {
     /// `‖r(x_trial)‖`, or `∞` when `r` cannot be evaluated or is not finite there.
-    fn trial_norm(&mut self, x_trial: ColRef<'_, f64>) -> f64;
+    /// `may_continue` is false when the step's predicted reduction already meets the `ftol`
+    /// test, so that the iteration most likely stops at this point: a back end that evaluates
+    /// `J` with `r` can then leave `J` out (it is evaluated by [`Linearised::relinearise`] if
+    /// the iteration goes on after all).
+    fn trial_norm(&mut self, x_trial: ColRef<'_, f64>, may_continue: bool) -> f64;
     /// Makes the last trial point the current one.
     fn accept(&mut self);
     /// Evaluates the Jacobian at the current point `x`.
@@ -345,13 +358,12 @@ pub(crate) trait Linearised {
 struct Dense<'a, P: Problem> {
     p: &'a P,
     free: &'a [usize],
-    /// `J` at `x` (after [`Linearised::relinearise`]) or at the accepted trial point.
+    /// `J` at `x` until [`Dense::fold`] has reduced it; afterwards scratch, into which a trial
+    /// point's Jacobian is evaluated (it becomes `J` at `x` if the step is accepted).
     jac: Mat<f64>,
     r: Col<f64>,
-    /// `J` at the last trial point, when `trial_has_jac`.
-    jac_trial: Mat<f64>,
     r_trial: Col<f64>,
-    /// Whether `jac_trial` holds `J` at the last trial point.
+    /// Whether `jac` holds `J` at the last trial point.
     trial_has_jac: bool,
     /// Whether `jac` holds `J` at the current point, taken over from the trial point.
     jac_is_current: bool,
@@ -371,14 +383,13 @@ struct Dense<'a, P: Problem> {
 impl<'a, P: Problem> Dense<'a, P> {
     /// Linearised at `x0`, where `r` and `jac` were evaluated (and found finite).
     fn new(p: &'a P, free: &'a [usize], r: Col<f64>, jac: Mat<f64>) -> Self {
-        let (m, n) = (jac.nrows(), jac.ncols());
+        let m = jac.nrows();
         let n1 = free.len() + 1;
         let mut dense = Self {
             p,
             free,
             jac,
             r,
-            jac_trial: Mat::zeros(m, n),
             r_trial: Col::zeros(m),
             trial_has_jac: false,
             jac_is_current: false,
@@ -399,10 +410,7 @@ impl<'a, P: Problem> Dense<'a, P> {
         self.col_norms = self
             .free
             .iter()
-            .map(|&k| match self.jac.col(k).try_as_col_major() {
-                Some(c) => householder::norm2(c.as_slice()),
-                None => self.jac.col(k).norm_l2(),
-            })
+            .map(|&k| col_norm(self.jac.col(k)))
             .collect();
         self.tri.iter_mut().for_each(|v| *v = 0.0);
         for (d, v) in self.r_scratch.iter_mut().zip(self.r.iter()) {
@@ -439,12 +447,12 @@ impl<'a, P: Problem> Dense<'a, P> {
 }
 
 impl<P: Problem> Linearised for Dense<'_, P> {
-    fn trial_norm(&mut self, x_trial: ColRef<'_, f64>) -> f64 {
-        let with_jac = std::mem::take(&mut self.jac_at_next_trial);
+    fn trial_norm(&mut self, x_trial: ColRef<'_, f64>, may_continue: bool) -> f64 {
+        let with_jac = std::mem::take(&mut self.jac_at_next_trial) && may_continue;
         self.trial_has_jac = with_jac
             && self
                 .p
-                .residuals_and_jacobian(x_trial, self.r_trial.as_mut(), self.jac_trial.as_mut())
+                .residuals_and_jacobian(x_trial, self.r_trial.as_mut(), self.jac.as_mut())
                 .is_ok();
         let evaluated = if self.trial_has_jac {
             self.n_jacobians += 1;
@@ -455,17 +463,17 @@ impl<P: Problem> Linearised for Dense<'_, P> {
             // failure, as when the two are evaluated apart).
             self.p.residuals(x_trial, self.r_trial.as_mut())
         };
-        match evaluated {
-            Ok(()) if mat_all_finite(self.r_trial.as_ref().as_mat()) => self.r_trial.norm_l2(),
+        // The norm is finite exactly when every residual is (an overflowing sum of squares is
+        // rescaled, see `householder::norm2`).
+        match evaluated.map(|()| col_norm(self.r_trial.as_ref())) {
+            Ok(n) if n.is_finite() => n,
             _ => f64::INFINITY,
         }
     }
     fn accept(&mut self) {
         std::mem::swap(&mut self.r, &mut self.r_trial);
-        if std::mem::take(&mut self.trial_has_jac) {
-            std::mem::swap(&mut self.jac, &mut self.jac_trial);
-            self.jac_is_current = true;
-        }
+        // `jac` holds `J` at the trial point, now the current one.
+        self.jac_is_current = std::mem::take(&mut self.trial_has_jac);
         self.jac_at_next_trial = true;
     }
     fn relinearise(&mut self, x: ColRef<'_, f64>) -> Result<(), Termination> {
@@ -475,11 +483,14 @@ impl<P: Problem> Linearised for Dense<'_, P> {
                 .map_err(Termination::EvalFailed)?;
             self.n_jacobians += 1;
         }
-        if !mat_all_finite(self.jac.as_ref()) {
-            return Err(Termination::Numerical);
-        }
         self.fold();
-        Ok(())
+        // A column norm is finite exactly when the column is (`col_norm`); the columns that
+        // are not free do not enter the step.
+        if self.col_norms.iter().all(|c| c.is_finite()) {
+            Ok(())
+        } else {
+            Err(Termination::Numerical)
+        }
     }
     fn col_norms(&self) -> Vec<f64> {
         // From `J` itself (as MINPACK), not from `R₊`, which has the same column norms up to
@@ -600,6 +611,12 @@ pub(crate) fn run(
             for (k, &pos) in factor.perm.iter().enumerate() {
                 x_trial[free[pos]] += u[k] / diag[pos];
             }
+            // Predicted relative reduction of ‖r‖² and directional derivative (MINPACK
+            // prered, dirder).
+            let t1 = norm(&factor.r_times(&u)) / f_norm;
+            let t2 = lambda.sqrt() * u_norm / f_norm;
+            let predicted = t1 * t1 + 2.0 * t2 * t2;
+            let directional = -(t1 * t1 + t2 * t2);
             // After a rejected Gauss–Newton step MINPACK sets Δ = ‖u‖, and the next `lmpar`
             // returns the same step (λ = 0 again): the same trial point, whose residual norm
             // (and, for `accept`, residuals) the problem has just produced. Reuse it rather
@@ -608,20 +625,18 @@ pub(crate) fn run(
                 Some((xt, norm)) if xt.as_ref() == x_trial.as_ref() => *norm,
                 _ => {
                     n_evaluations += 1;
-                    lin.trial_norm(x_trial.as_ref())
+                    // A predicted reduction within `ftol` usually ends the iteration here
+                    // (the `ftol` test below), and the Jacobian there would go unused.
+                    lin.trial_norm(x_trial.as_ref(), predicted > ftol)
                 }
             };
             last_trial = Some((x_trial.clone(), f_norm_trial));
-            // Relative reductions of ‖r‖² (MINPACK actred, prered, dirder).
+            // Actual relative reduction of ‖r‖² (MINPACK actred).
             let actual = if 0.1 * f_norm_trial < f_norm {
                 1.0 - (f_norm_trial / f_norm).powi(2)
             } else {
                 -1.0
             };
-            let t1 = norm(&factor.r_times(&u)) / f_norm;
-            let t2 = lambda.sqrt() * u_norm / f_norm;
-            let predicted = t1 * t1 + 2.0 * t2 * t2;
-            let directional = -(t1 * t1 + t2 * t2);
             let ratio = if predicted != 0.0 {
                 actual / predicted
             } else {
