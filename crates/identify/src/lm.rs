@@ -702,10 +702,75 @@ fn norm(v: &[f64]) -> f64 {
     v.iter().map(|a| a * a).sum::<f64>().sqrt()
 }
 
+/// An upper-triangular `n × n` matrix, column-major (`data[j·n + i] = T_ij`, zeros below the
+/// diagonal), with the products and triangular solves of [`lmpar`] written out for the small
+/// `n` of a calibration (tens): no allocation beyond the result, no dispatch.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Upper {
+    data: Vec<f64>,
+    n: usize,
+}
+
+impl Upper {
+    /// `T_ij`.
+    ///
+    /// # Panics
+    /// If `i` or `j` is out of range.
+    pub(crate) fn at(&self, i: usize, j: usize) -> f64 {
+        assert!(
+            i < self.n && j < self.n,
+            "({i}, {j}) outside {0} × {0}",
+            self.n
+        );
+        self.data[j * self.n + i]
+    }
+
+    /// `T[..=j, j]`, the nonzero part of column `j`.
+    fn col(&self, j: usize) -> &[f64] {
+        &self.data[j * self.n..j * self.n + j + 1]
+    }
+
+    /// `T·u` (`u` of length `n`), each entry summed along its row from the diagonal.
+    fn times(&self, u: &[f64]) -> Vec<f64> {
+        (0..self.n)
+            .map(|i| (i..self.n).map(|j| self.data[j * self.n + i] * u[j]).sum())
+            .collect()
+    }
+
+    /// `Tᵀ·v` (`v` of length `n`): entry `j` is `T[..=j, j]ᵀ v[..=j]`.
+    fn transposed_times(&self, v: &[f64]) -> Vec<f64> {
+        (0..self.n)
+            .map(|j| self.col(j).iter().zip(v).map(|(a, b)| a * b).sum())
+            .collect()
+    }
+
+    /// Solves `T[..k, ..k] y = b` in place (`b` of length `k ≤ n`, nonzero diagonal): back
+    /// substitution by columns, each a contiguous update.
+    fn solve_in_place(&self, b: &mut [f64]) {
+        for j in (0..b.len()).rev() {
+            b[j] /= self.data[j * self.n + j];
+            let bj = b[j];
+            for (bi, t) in b[..j].iter_mut().zip(&self.data[j * self.n..]) {
+                *bi -= t * bj;
+            }
+        }
+    }
+
+    /// Solves `Tᵀ y = b` in place (`b` of length `n`, nonzero diagonal): forward substitution,
+    /// each entry a contiguous dot product with a column of `T`.
+    fn solve_transposed_in_place(&self, b: &mut [f64]) {
+        for j in 0..b.len() {
+            let col = self.col(j);
+            let sum: f64 = col[..j].iter().zip(&b[..j]).map(|(t, y)| t * y).sum();
+            b[j] = (b[j] - sum) / col[j];
+        }
+    }
+}
+
 /// Column-pivoted QR of the scaled free Jacobian, `J D⁻¹ Π = Q R`, and `Q₁ᵀ r`.
 pub(crate) struct ScaledQr {
     /// `R`, `n_free × n_free` upper triangular.
-    r: Mat<f64>,
+    r: Upper,
     /// `perm[k]`: position in `free` of pivot column `k`.
     perm: Vec<usize>,
     /// First `n_free` entries of `Qᵀ r`.
@@ -716,9 +781,11 @@ pub(crate) struct ScaledQr {
 
 impl ScaledQr {
     /// The factorisation from the triangle `R₊` (`(n_f+1) × (n_f+1)`, upper triangular) of
-    /// `[J_f r]`, for the scaling `diag` (one entry per free column): the column-pivoted QR of
-    /// the scaled `n_f × n_f` triangle gives the same `R` and `Q₁ᵀr` as the pivoted QR of
-    /// `J_f D⁻¹` up to rounding, in `O(n_f³)` (shared by the dense and streaming back ends).
+    /// `[J_f r]`, for the scaling `diag` (one entry per free column): the column-pivoted
+    /// Householder QR (MINPACK `qrfac`) of `[T D⁻¹ | t]`, where `T` is the leading `n_f × n_f`
+    /// block and `t` the first `n_f` entries of the last column, with `t` never a pivot. It
+    /// gives the same `R` and `Q₁ᵀr` as the pivoted QR of `[J_f D⁻¹ | r]` up to rounding (the
+    /// same Gram matrix), in `O(n_f³)` (shared by the dense and streaming back ends).
     ///
     /// Skipping the pivoting when the triangle is far from singular (the step does not depend
     /// on the column order in exact arithmetic) saves about a sixth of an iteration at 200
@@ -726,51 +793,43 @@ impl ScaledQr {
     pub(crate) fn from_triangle(tri: MatRef<'_, f64>, diag: &[f64]) -> Self {
         let nf = diag.len();
         debug_assert!(tri.nrows() == nf + 1 && tri.ncols() == nf + 1);
-        let iota: Vec<usize> = (0..nf).collect();
-        Self::new(
-            tri.submatrix(0, 0, nf, nf),
-            &iota,
-            diag,
-            tri.col(nf).subrows(0, nf),
-        )
-    }
-
-    /// The factorisation for the columns `free` of `jac` (`m × n`, `m ≥ n_free`) scaled by
-    /// `1/diag` (one entry per free column), and `r` (length `m`): the column-pivoted
-    /// Householder QR of `[J_f D⁻¹ | r]` with `r` never a pivot.
-    pub(crate) fn new(
-        jac: MatRef<'_, f64>,
-        free: &[usize],
-        diag: &[f64],
-        r: ColRef<'_, f64>,
-    ) -> Self {
-        let (m, nf) = (jac.nrows(), free.len());
-        // [J_f D⁻¹ | r], reduced in place; `r` is never a pivot and becomes Qᵀr.
-        let mut a = ColMajor::zeros(m, nf + 1);
-        for (j, (&k, d)) in free.iter().zip(diag).enumerate() {
-            for (dst, v) in a.col_mut(j).iter_mut().zip(jac.col(k).iter()) {
-                *dst = v / d;
+        let mut a = ColMajor::zeros(nf, nf + 1);
+        for (j, &d) in diag.iter().enumerate() {
+            // Rows ..=j (zeros below); divisions, not products by `1/d` (which round
+            // differently), in a loop that vectorises.
+            let dst = &mut a.col_mut(j)[..=j];
+            match tri.col(j).subrows(0, j + 1).try_as_col_major() {
+                Some(src) => {
+                    for (dst, v) in dst.iter_mut().zip(src.as_slice()) {
+                        *dst = v / d;
+                    }
+                }
+                None => {
+                    for (dst, v) in dst.iter_mut().zip(tri.col(j).iter()) {
+                        *dst = v / d;
+                    }
+                }
             }
         }
-        for (dst, v) in a.col_mut(nf).iter_mut().zip(r.iter()) {
+        for (dst, v) in a.col_mut(nf).iter_mut().zip(tri.col(nf).iter()) {
             *dst = *v;
         }
-        let perm = householder::qr_in_place(&mut a, nf)[..nf].to_vec();
-        let mut rmat = Mat::<f64>::zeros(nf, nf);
-        for j in 0..nf {
-            let src = &a.data[j * m..j * m + (j + 1).min(m)];
-            for (i, v) in src.iter().enumerate() {
-                rmat[(i, j)] = *v;
-            }
-        }
-        let qtr: Vec<f64> = (0..nf).map(|i| a.at(i, nf)).collect();
-        // Pivoting sorts |R_kk| down; below ε·max(m, n)·|R_00| a pivot is zero at working
-        // precision and the Gauss–Newton step leaves its component at 0.
-        let r00 = if nf > 0 { rmat[(0, 0)].abs() } else { 0.0 };
-        let tiny = f64::EPSILON * m.max(nf) as f64 * r00;
-        let n_sing = (0..nf).find(|&k| rmat[(k, k)].abs() <= tiny).unwrap_or(nf);
+        let mut perm = householder::qr_in_place(&mut a, nf);
+        perm.truncate(nf);
+        let qtr = a.col(nf).to_vec();
+        // `a` holds R in its first n_f columns (zeros below the diagonal).
+        a.data.truncate(nf * nf);
+        let r = Upper {
+            data: a.data,
+            n: nf,
+        };
+        // Pivoting sorts |R_kk| down; below ε·n·|R_00| a pivot is zero at working precision
+        // and the Gauss–Newton step leaves its component at 0.
+        let r00 = if nf > 0 { r.at(0, 0).abs() } else { 0.0 };
+        let tiny = f64::EPSILON * nf as f64 * r00;
+        let n_sing = (0..nf).find(|&k| r.at(k, k).abs() <= tiny).unwrap_or(nf);
         Self {
-            r: rmat,
+            r,
             perm,
             qtr,
             n_sing,
@@ -779,10 +838,7 @@ impl ScaledQr {
 
     /// `R·u` (the scaled `J·p` up to `Q`).
     fn r_times(&self, u: &[f64]) -> Vec<f64> {
-        let nf = u.len();
-        (0..nf)
-            .map(|i| (i..nf).map(|j| self.r[(i, j)] * u[j]).sum())
-            .collect()
+        self.r.times(u)
     }
 }
 
@@ -794,36 +850,28 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
     // Gauss–Newton step: R₁₁ u₁ = −(Qᵀr)₁, zero in the singular part.
     let mut u = vec![0.0; nf];
     let ns = f.n_sing;
-    if ns > 0 {
-        let mut rhs = Col::from_fn(ns, |i| -f.qtr[i]);
-        f.r.get(..ns, ..ns)
-            .solve_upper_triangular_in_place(rhs.as_mut());
-        u[..ns]
-            .iter_mut()
-            .enumerate()
-            .for_each(|(i, v)| *v = rhs[i]);
+    for (ui, q) in u[..ns].iter_mut().zip(&f.qtr) {
+        *ui = -q;
     }
+    f.r.solve_in_place(&mut u[..ns]);
     let mut u_norm = norm(&u);
     let mut fp = u_norm - delta;
     if fp <= 0.1 * delta {
         return (u, 0.0);
     }
-    // Lower bound from the Newton step at λ = 0 (full rank only).
-    let newton_denominator = |r: MatRef<'_, f64>, u: &[f64], u_norm: f64| {
-        let mut y = Col::from_fn(nf, |i| u[i] / u_norm);
-        r.transpose().solve_lower_triangular_in_place(y.as_mut());
-        y.squared_norm_l2()
+    // Lower bound from the Newton step at λ = 0 (full rank only): ‖T⁻ᵀ u/‖u‖‖².
+    let newton_denominator = |t: &Upper, u: &[f64], u_norm: f64| {
+        let mut y: Vec<f64> = u.iter().map(|v| v / u_norm).collect();
+        t.solve_transposed_in_place(&mut y);
+        y.iter().map(|v| v * v).sum::<f64>()
     };
     let mut lower = if ns == nf {
-        (fp / delta) / newton_denominator(f.r.as_ref(), &u, u_norm)
+        (fp / delta) / newton_denominator(&f.r, &u, u_norm)
     } else {
         0.0
     };
     // Upper bound: ‖Rᵀ Qᵀr‖ / Δ.
-    let gradient: Vec<f64> = (0..nf)
-        .map(|j| (0..=j).map(|i| f.r[(i, j)] * f.qtr[i]).sum())
-        .collect();
-    let g_norm = norm(&gradient);
+    let g_norm = norm(&f.r.transposed_times(&f.qtr));
     let mut upper = g_norm / delta;
     if upper == 0.0 {
         upper = f64::MIN_POSITIVE / delta.min(0.1);
@@ -836,7 +884,7 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
         if lambda == 0.0 {
             lambda = f64::MIN_POSITIVE.max(0.001 * upper);
         }
-        let (step, s) = damped_step(f.r.as_ref(), &f.qtr, lambda);
+        let (step, s) = damped_step(&f.r, &f.qtr, lambda);
         u = step;
         u_norm = norm(&u);
         let fp_old = fp;
@@ -847,7 +895,7 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
         {
             break;
         }
-        let correction = (fp / delta) / newton_denominator(s.as_ref(), &u, u_norm);
+        let correction = (fp / delta) / newton_denominator(&s, &u, u_norm);
         if fp > 0.0 {
             lower = lower.max(lambda);
         } else if fp < 0.0 {
@@ -864,14 +912,14 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
 /// MINPACK `qrsolv` (Moré, Garbow, Hillstrom 1980): the rows of `√λ·I` are eliminated one at a
 /// time against `R` by Givens rotations, `O(n³)` flops in place of a Householder QR of the
 /// stacked `2n × n` matrix, and no allocation besides `S` and `u`.
-fn damped_step(rmat: MatRef<'_, f64>, qtr: &[f64], lambda: f64) -> (Vec<f64>, Mat<f64>) {
+fn damped_step(rmat: &Upper, qtr: &[f64], lambda: f64) -> (Vec<f64>, Upper) {
     let nf = qtr.len();
     let sqrt_lambda = lambda.sqrt();
     // S row-major (`s[k·n + i]` = S_ki), so that a rotation sweeps a contiguous row.
     let mut s = vec![0.0; nf * nf];
     for k in 0..nf {
         for i in k..nf {
-            s[k * nf + i] = rmat[(k, i)];
+            s[k * nf + i] = rmat.at(k, i);
         }
     }
     let mut w: Vec<f64> = qtr.iter().map(|v| -v).collect();
@@ -914,7 +962,14 @@ fn damped_step(rmat: MatRef<'_, f64>, qtr: &[f64], lambda: f64) -> (Vec<f64>, Ma
         let sum: f64 = ((i + 1)..n_sing).map(|j| s[i * nf + j] * u[j]).sum();
         u[i] = (w[i] - sum) / s[i * nf + i];
     }
-    (u, Mat::from_fn(nf, nf, |i, j| s[i * nf + j]))
+    // S column-major: the transpose of the row-major `s`.
+    let mut data = vec![0.0; nf * nf];
+    for k in 0..nf {
+        for i in k..nf {
+            data[i * nf + k] = s[k * nf + i];
+        }
+    }
+    (u, Upper { data, n: nf })
 }
 
 #[cfg(test)]

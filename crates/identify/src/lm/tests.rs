@@ -240,8 +240,13 @@ fn damped_step_solves_the_damped_normal_equations() {
         }
     });
     let qtr: Vec<f64> = (0..n).map(|i| (i as f64 - 2.5) / 3.0).collect();
+    let upper = Upper {
+        data: (0..n * n).map(|t| r[(t % n, t / n)]).collect(),
+        n,
+    };
     for lambda in [0.0, 1e-3, 0.7, 50.0] {
-        let (u, s) = damped_step(r.as_ref(), &qtr, lambda);
+        let (u, s) = damped_step(&upper, &qtr, lambda);
+        let s = Mat::from_fn(n, n, |i, j| s.at(i, j));
         let gram = r.transpose() * &r;
         let sts = s.transpose() * &s;
         for i in 0..n {
@@ -263,5 +268,44 @@ fn damped_step_solves_the_damped_normal_equations() {
                 "λ = {lambda}: row {i}: {lhs} vs {rhs}"
             );
         }
+    }
+}
+
+/// The triangle's products and solves invert each other: `T·(T⁻¹b) = b` (also for a leading
+/// block) and `Tᵀ·(T⁻ᵀb) = b`, for a triangle with O(1) entries and diagonal ≥ 1, where rounding
+/// stays within a few ulps of the O(1) results (1e-13 fails only on a wrong index or order).
+#[test]
+fn triangle_solves_invert_its_products() {
+    let n = 7;
+    let t = Upper {
+        data: (0..n * n)
+            .map(|k| {
+                let (i, j) = (k % n, k / n);
+                match i.cmp(&j) {
+                    std::cmp::Ordering::Equal => 1.0 + 0.5 * i as f64,
+                    std::cmp::Ordering::Less => ((i * 5 + j * 11) % 7) as f64 / 7.0 - 0.5,
+                    std::cmp::Ordering::Greater => 0.0,
+                }
+            })
+            .collect(),
+        n,
+    };
+    let b: Vec<f64> = (0..n).map(|i| (i as f64 - 3.0) / 2.0).collect();
+    let mut y = b.clone();
+    t.solve_in_place(&mut y);
+    for (got, want) in t.times(&y).iter().zip(&b) {
+        assert!((got - want).abs() < 1e-13, "T·T⁻¹b: {got} vs {want}");
+    }
+    let mut y = b.clone();
+    t.solve_transposed_in_place(&mut y);
+    for (got, want) in t.transposed_times(&y).iter().zip(&b) {
+        assert!((got - want).abs() < 1e-13, "Tᵀ·T⁻ᵀb: {got} vs {want}");
+    }
+    // The leading 4 × 4 block: row i of T·y with y zero beyond 4 is the block's product.
+    let mut y = b[..4].to_vec();
+    t.solve_in_place(&mut y);
+    y.resize(n, 0.0);
+    for (got, want) in t.times(&y).iter().zip(&b[..4]) {
+        assert!((got - want).abs() < 1e-13, "block: {got} vs {want}");
     }
 }
