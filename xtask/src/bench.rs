@@ -254,7 +254,7 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
         let iteration_s = lm_s / n_iter;
         let bound_s = flops / (gflops * 1e9);
         md.push_str(&format!(
-            "## Per-iteration cost at 200 poses\n\nhapcal's LM at 200 poses: {} for {n_iter} iterations ({n_eval} residual evaluations, {n_jac} of them with the Jacobian), i.e. {} per iteration: the whole solve divided by the iterations, so the evaluation at x0, the Jacobian evaluated with the residuals at the last (accepted) point and never used, and any rejected trial are included. FLOP count of one Jacobian evaluation plus one QR: {:.0} kflop ({}); at the measured peak of {gflops:.1} GFLOP/s (one core, {}; the largest of {PEAK_PROCESSES} processes' readings {}) that is {}. The solve time is the fastest of {LM_PROCESSES} processes. Ratio: {:.1}×.\n\n",
+            "## Per-iteration cost at 200 poses\n\nhapcal's LM at 200 poses: {} for {n_iter} iterations ({n_eval} residual evaluations, {n_jac} of them with the Jacobian), i.e. {} per iteration: the whole solve divided by the iterations, so the evaluation at x0 and any rejected trial are included (the solver leaves the Jacobian out at a trial point whose predicted reduction already meets ftol, where the iteration usually stops, and evaluates it afterwards if it goes on). FLOP count of one Jacobian evaluation plus one QR: {:.0} kflop ({}); at the measured peak of {gflops:.1} GFLOP/s (one core, {}; the largest of {PEAK_PROCESSES} processes' readings {}) that is {}. The solve time is the fastest of {LM_PROCESSES} processes. Ratio: {:.1}×.\n\n",
             ms(lm_s),
             ms(iteration_s),
             flops / 1e3,

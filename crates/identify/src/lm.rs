@@ -224,8 +224,10 @@ const FACTOR: f64 = 100.0;
 /// Evaluations: `r` and `J` at `x0` come from one [`Problem::residuals_and_jacobian`] call,
 /// and so do `r` and `J` at a trial point that follows an accepted step (such steps are
 /// usually accepted, and the Jacobian at an accepted point is then already there); after a
-/// rejected step only `r` is evaluated. [`Fit::n_jacobians`] counts every Jacobian
-/// evaluated, including those at trial points that were then rejected.
+/// rejected step, and at a trial point whose predicted reduction already meets the `ftol`
+/// test (where the iteration usually stops), only `r` is evaluated, and `J` follows if the
+/// iteration goes on. [`Fit::n_jacobians`] counts every Jacobian evaluated, including those
+/// at trial points that were then rejected.
 ///
 /// Non-convergence is a result: check `fit.termination.is_success()`.
 ///
@@ -352,8 +354,8 @@ pub(crate) trait Linearised {
 /// At a trial point that follows an accepted step (or the linearisation at `x0`), the
 /// residuals and the Jacobian are evaluated together ([`Problem::residuals_and_jacobian`]):
 /// such steps are usually accepted (MINPACK accepts any step with `ρ ≥ 10⁻⁴`), and an accepted
-/// point then needs no Jacobian pass of its own. After a rejected step the next trial
-/// evaluates the residuals only. The iterates are MINPACK's either way; only the evaluation
+/// point then needs no Jacobian pass of its own. After a rejected step, and when the step's
+/// predicted reduction meets `ftol`, the trial evaluates the residuals only. The iterates are MINPACK's either way; only the evaluation
 /// count changes ([`Fit::n_jacobians`] counts every Jacobian evaluated, used or not).
 struct Dense<'a, P: Problem> {
     p: &'a P,
