@@ -758,6 +758,35 @@ impl Upper {
         }
     }
 
+    /// An estimate of the condition number `κ∞ = ‖T‖∞·‖T⁻¹‖∞` (LINPACK `dtrco`, Cline, Moler,
+    /// Stewart and Wilkinson 1979): `Tᵀz = e` with the signs of `e = (±1)` chosen one by one to
+    /// make `z` grow, then `T y = z`, and `‖T⁻¹‖∞ ≈ ‖y‖∞/‖z‖∞`, a lower bound that is rarely
+    /// short by more than a small factor. `O(n²)`; `∞` (or NaN) for a zero diagonal entry.
+    fn condition_estimate(&self) -> f64 {
+        let n = self.n;
+        let mut z = vec![0.0; n];
+        for j in 0..n {
+            let col = self.col(j);
+            let s: f64 = col[..j].iter().zip(&z[..j]).map(|(t, y)| t * y).sum();
+            let e = if s > 0.0 { -1.0 } else { 1.0 };
+            z[j] = (e - s) / col[j];
+        }
+        let max_abs = |v: &[f64]| v.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+        let z_max = max_abs(&z);
+        self.solve_in_place(&mut z);
+        let t_norm = (0..n)
+            .map(|i| (i..n).map(|j| self.data[j * n + i].abs()).sum::<f64>())
+            .fold(0.0_f64, f64::max);
+        if n == 0 {
+            return 0.0;
+        }
+        // `f64::max` passes over NaN: a zero pivot (z = ±∞, then NaN) must not slip through.
+        if z_max == 0.0 || !z_max.is_finite() || !z.iter().all(|v| v.is_finite()) {
+            return f64::INFINITY;
+        }
+        t_norm * max_abs(&z) / z_max
+    }
+
     /// Solves `Tᵀ y = b` in place (`b` of length `n`, nonzero diagonal): forward substitution,
     /// each entry a contiguous dot product with a column of `T`.
     fn solve_transposed_in_place(&self, b: &mut [f64]) {
@@ -768,6 +797,12 @@ impl Upper {
         }
     }
 }
+
+/// Largest condition estimate ([`Upper::condition_estimate`]) of the scaled triangle `T D⁻¹`
+/// that [`ScaledQr::from_triangle`] uses without pivoting: `√(1/ε) ≈ 6.7e7`, six orders of
+/// magnitude below the condition (`≈ 1/(n·ε)`) at which a pivot would be declared zero, so an
+/// estimate short by even a factor of 10⁵ keeps the rank decision the pivoted QR's.
+const UNPIVOTED_COND: f64 = 6.7e7;
 
 /// Column-pivoted QR of the scaled free Jacobian, `J D⁻¹ Π = Q R`, and `Q₁ᵀ r`.
 pub(crate) struct ScaledQr {
@@ -783,23 +818,26 @@ pub(crate) struct ScaledQr {
 
 impl ScaledQr {
     /// The factorisation from the triangle `R₊` (`(n_f+1) × (n_f+1)`, upper triangular) of
-    /// `[J_f r]`, for the scaling `diag` (one entry per free column): the column-pivoted
-    /// Householder QR (MINPACK `qrfac`) of `[T D⁻¹ | t]`, where `T` is the leading `n_f × n_f`
-    /// block and `t` the first `n_f` entries of the last column, with `t` never a pivot. It
-    /// gives the same `R` and `Q₁ᵀr` as the pivoted QR of `[J_f D⁻¹ | r]` up to rounding (the
-    /// same Gram matrix), in `O(n_f³)` (shared by the dense and streaming back ends).
+    /// `[J_f r]`, for the scaling `diag` (one entry per free column), in `O(n_f³)` (shared by
+    /// the dense and streaming back ends). With `T` the leading `n_f × n_f` block and `t` the
+    /// first `n_f` entries of the last column, `T D⁻¹` is itself an `R` of `J_f D⁻¹` (the same
+    /// Gram matrix) with `Q₁ᵀr = t`:
     ///
-    /// Skipping the pivoting when the triangle is far from singular (the step does not depend
-    /// on the column order in exact arithmetic) saves about a sixth of an iteration at 200
-    /// poses, but moves the iterates by rounding; it was tried and left out for now.
+    /// - when `T D⁻¹` is far from singular (condition estimate below [`UNPIVOTED_COND`]), it
+    ///   is used as it stands, in the original column order: every pivot is then well above
+    ///   the rank threshold below, so the pivoted QR would find no singular pivot either, and
+    ///   the step `u` (which does not depend on the column order in exact arithmetic) differs
+    ///   from the pivoted one by rounding only (relative `O(κ·ε)`);
+    /// - otherwise, the column-pivoted Householder QR (MINPACK `qrfac`) of `[T D⁻¹ | t]` with
+    ///   `t` never a pivot, which sorts `|R_kk|` down and so reveals the numerical rank.
     pub(crate) fn from_triangle(tri: MatRef<'_, f64>, diag: &[f64]) -> Self {
         let nf = diag.len();
         debug_assert!(tri.nrows() == nf + 1 && tri.ncols() == nf + 1);
-        let mut a = ColMajor::zeros(nf, nf + 1);
+        let mut data = vec![0.0; nf * nf];
         for (j, &d) in diag.iter().enumerate() {
             // Rows ..=j (zeros below); divisions, not products by `1/d` (which round
             // differently), in a loop that vectorises.
-            let dst = &mut a.col_mut(j)[..=j];
+            let dst = &mut data[j * nf..j * nf + j + 1];
             match tri.col(j).subrows(0, j + 1).try_as_col_major() {
                 Some(src) => {
                     for (dst, v) in dst.iter_mut().zip(src.as_slice()) {
@@ -813,7 +851,26 @@ impl ScaledQr {
                 }
             }
         }
-        for (dst, v) in a.col_mut(nf).iter_mut().zip(tri.col(nf).iter()) {
+        let scaled = Upper { data, n: nf };
+        if scaled.condition_estimate() <= UNPIVOTED_COND {
+            return Self {
+                r: scaled,
+                perm: (0..nf).collect(),
+                qtr: tri.col(nf).iter().take(nf).copied().collect(),
+                n_sing: nf,
+            };
+        }
+        Self::pivoted(&scaled, tri.col(nf).subrows(0, nf))
+    }
+
+    /// The column-pivoted Householder QR (MINPACK `qrfac`) of `[T | t]` (`T` upper triangular
+    /// `n_f × n_f`, `t` of length `n_f` and never a pivot), with the rank decision on the
+    /// sorted diagonal (see [`ScaledQr::from_triangle`]).
+    pub(crate) fn pivoted(scaled: &Upper, t: ColRef<'_, f64>) -> Self {
+        let nf = scaled.n;
+        let mut a = ColMajor::zeros(nf, nf + 1);
+        a.data[..nf * nf].copy_from_slice(&scaled.data);
+        for (dst, v) in a.col_mut(nf).iter_mut().zip(t.iter()) {
             *dst = *v;
         }
         let mut perm = householder::qr_in_place(&mut a, nf);
@@ -911,67 +968,87 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
 /// Solves `min ‖[R; √λ·I] u + [Qᵀr; 0]‖` for upper-triangular `R` (`n × n`); returns `u` and
 /// the triangular factor `S` (`SᵀS = RᵀR + λI`).
 ///
-/// MINPACK `qrsolv` (Moré, Garbow, Hillstrom 1980): the rows of `√λ·I` are eliminated one at a
-/// time against `R` by Givens rotations, `O(n³)` flops in place of a Householder QR of the
-/// stacked `2n × n` matrix, and no allocation besides `S` and `u`.
+/// The QR of the stacked `[R | −Qᵀr; √λ·I | 0]` by Householder reflections with its structure
+/// used: reflection `k` acts on row `k` of `R` (the rows below it are not reached yet) and on
+/// rows `0..=k` of the lower block (`√λ·I` fills in above its diagonal as the reflections
+/// pass), so it costs `≈ 4(k+1)(n−k)` flops and one square root; `≈ 2n³/3` flops in all, with
+/// every update a contiguous row operation. MINPACK `qrsolv` eliminates the same rows by
+/// `n²/2` Givens rotations instead, each with a square root and a division on the critical
+/// path; the results agree up to rounding (and the signs of `S`'s rows, which `SᵀS` and `u`
+/// do not see).
 fn damped_step(rmat: &Upper, qtr: &[f64], lambda: f64) -> (Vec<f64>, Upper) {
-    let nf = qtr.len();
+    let n = qtr.len();
+    let n1 = n + 1;
     let sqrt_lambda = lambda.sqrt();
-    // S row-major (`s[k·n + i]` = S_ki), so that a rotation sweeps a contiguous row.
-    let mut s = vec![0.0; nf * nf];
-    for k in 0..nf {
-        for i in k..nf {
-            s[k * nf + i] = rmat.at(k, i);
+    // [R | −Qᵀr] and [√λ·I | 0], row-major (row k at k·(n+1)).
+    let mut a = vec![0.0; n * n1];
+    let mut low = vec![0.0; n * n1];
+    for k in 0..n {
+        for (j, v) in a[k * n1..(k + 1) * n1]
+            .iter_mut()
+            .enumerate()
+            .take(n)
+            .skip(k)
+        {
+            *v = rmat.data[j * n + k];
         }
+        a[k * n1 + n] = -qtr[k];
+        low[k * n1 + k] = sqrt_lambda;
     }
-    let mut w: Vec<f64> = qtr.iter().map(|v| -v).collect();
-    let mut row = vec![0.0; nf];
-    for j in 0..nf {
-        // Row j of √λ·I, and its right-hand side 0.
-        row[j..].iter_mut().for_each(|v| *v = 0.0);
-        row[j] = sqrt_lambda;
-        let mut rhs = 0.0;
-        for k in j..nf {
-            if row[k] == 0.0 {
-                continue;
-            }
-            let skk = s[k * nf + k];
-            let (sin, cos) = if skk.abs() < row[k].abs() {
-                let cot = skk / row[k];
-                let sin = 0.5 / (0.25 + 0.25 * cot * cot).sqrt();
-                (sin, sin * cot)
-            } else {
-                let tan = row[k] / skk;
-                let cos = 0.5 / (0.25 + 0.25 * tan * tan).sqrt();
-                (cos * tan, cos)
-            };
-            s[k * nf + k] = cos * skk + sin * row[k];
-            let wk = w[k];
-            w[k] = cos * wk + sin * rhs;
-            rhs = -sin * wk + cos * rhs;
-            let s_row = &mut s[k * nf + k + 1..(k + 1) * nf];
-            for (ski, ri) in s_row.iter_mut().zip(&mut row[k + 1..]) {
-                let v = *ski;
-                *ski = cos * v + sin * *ri;
-                *ri = -sin * v + cos * *ri;
+    let mut x = vec![0.0; n];
+    let mut f = vec![0.0; n1];
+    for k in 0..n {
+        // x = the lower block's column k (rows 0..=k; zero below).
+        for (i, xi) in x[..=k].iter_mut().enumerate() {
+            *xi = low[i * n1 + k];
+        }
+        let x_tail = norm(&x[..=k]);
+        if x_tail == 0.0 {
+            continue;
+        }
+        let rkk = a[k * n1 + k];
+        let x_norm = rkk.hypot(x_tail);
+        let alpha = if rkk > 0.0 { -x_norm } else { x_norm };
+        let v0 = rkk - alpha;
+        // τ = 2/vᵀv with vᵀv = 2‖x‖(‖x‖ + |R_kk|).
+        let tau = 1.0 / (x_norm * (x_norm + rkk.abs()));
+        // f_j = τ·(v0·A_kj + Σ_i x_i·L_ij) for the columns j > k (and the right-hand side).
+        let fk = &mut f[k + 1..];
+        let a_row = &mut a[k * n1 + k + 1..(k + 1) * n1];
+        for (fj, akj) in fk.iter_mut().zip(a_row.iter()) {
+            *fj = v0 * akj;
+        }
+        for (i, &xi) in x[..=k].iter().enumerate() {
+            for (fj, lij) in fk.iter_mut().zip(&low[i * n1 + k + 1..(i + 1) * n1]) {
+                *fj += xi * lij;
             }
         }
+        fk.iter_mut().for_each(|fj| *fj *= tau);
+        for (akj, fj) in a_row.iter_mut().zip(fk.iter()) {
+            *akj -= v0 * fj;
+        }
+        for (i, &xi) in x[..=k].iter().enumerate() {
+            for (lij, fj) in low[i * n1 + k + 1..(i + 1) * n1].iter_mut().zip(fk.iter()) {
+                *lij -= xi * fj;
+            }
+        }
+        a[k * n1 + k] = alpha;
     }
     // S u = w; a zero pivot (λ = 0 with singular R) leaves the trailing components at 0.
-    let n_sing = (0..nf).find(|&k| s[k * nf + k] == 0.0).unwrap_or(nf);
-    let mut u = vec![0.0; nf];
+    let n_sing = (0..n).find(|&k| a[k * n1 + k] == 0.0).unwrap_or(n);
+    let mut u = vec![0.0; n];
     for i in (0..n_sing).rev() {
-        let sum: f64 = ((i + 1)..n_sing).map(|j| s[i * nf + j] * u[j]).sum();
-        u[i] = (w[i] - sum) / s[i * nf + i];
+        let sum: f64 = ((i + 1)..n_sing).map(|j| a[i * n1 + j] * u[j]).sum();
+        u[i] = (a[i * n1 + n] - sum) / a[i * n1 + i];
     }
-    // S column-major: the transpose of the row-major `s`.
-    let mut data = vec![0.0; nf * nf];
-    for k in 0..nf {
-        for i in k..nf {
-            data[i * nf + k] = s[k * nf + i];
+    // S column-major: the transpose of the row-major `a`.
+    let mut data = vec![0.0; n * n];
+    for k in 0..n {
+        for j in k..n {
+            data[j * n + k] = a[k * n1 + j];
         }
     }
-    (u, Upper { data, n: nf })
+    (u, Upper { data, n })
 }
 
 #[cfg(test)]

@@ -223,7 +223,8 @@ fn trial_points_that_fail_to_evaluate_are_rejected() {
     assert!(fit.termination.is_success(), "{:?}", fit.termination);
 }
 
-/// The Givens `qrsolv` step solves the damped normal equations `(RᵀR + λI) u = −Rᵀ·qtr` and
+/// The damped step (Householder QR of `[R; √λ·I]`) solves the damped normal equations
+/// `(RᵀR + λI) u = −Rᵀ·qtr` and
 /// its `S` factors `RᵀR + λI`, for a well-conditioned `R` (entries O(1), diagonal ≥ 1): both
 /// hold to a few hundred ulps of the O(10) entries, so 1e-12 absolute can only fail on a
 /// wrong rotation or back substitution.
@@ -308,4 +309,68 @@ fn triangle_solves_invert_its_products() {
     for (got, want) in t.times(&y).iter().zip(&b[..4]) {
         assert!((got - want).abs() < 1e-13, "block: {got} vs {want}");
     }
+}
+
+/// `R₊` (`(n+1) × (n+1)`, column-major) with O(1) entries, a diagonal ≥ 1, and the columns
+/// `dependent` replaced by copies of column 0 (rank deficient when not empty).
+fn triangle(n: usize, dependent: &[usize]) -> Mat<f64> {
+    let mut t = Mat::from_fn(n + 1, n + 1, |i, j| match i.cmp(&j) {
+        std::cmp::Ordering::Equal => 1.0 + 0.3 * i as f64,
+        std::cmp::Ordering::Less => ((i * 7 + j * 5) % 9) as f64 / 9.0 - 0.45,
+        std::cmp::Ordering::Greater => 0.0,
+    });
+    for &j in dependent {
+        let c0 = t.col(0).to_owned();
+        t.col_mut(j).copy_from(&c0);
+    }
+    t
+}
+
+/// A well-conditioned scaled triangle is used in its own column order, and its Gauss–Newton
+/// step is the pivoted QR's (put back in column order) to rounding: the steps are O(1) and
+/// the condition small, so 1e-12 fails only on a wrong scaling, permutation or right-hand
+/// side.
+#[test]
+fn unpivoted_triangle_gives_the_pivoted_step() {
+    let n = 9;
+    let tri = triangle(n, &[]);
+    // Later columns scaled up: the pivoted QR takes them first.
+    let diag: Vec<f64> = (0..n).map(|j| 1.0 / (1.0 + 0.25 * j as f64)).collect();
+    let fast = ScaledQr::from_triangle(tri.as_ref(), &diag);
+    assert_eq!(fast.perm, (0..n).collect::<Vec<_>>(), "no pivoting");
+    let scaled = Upper {
+        data: (0..n * n)
+            .map(|k| tri[(k % n, k / n)] / diag[k / n])
+            .collect(),
+        n,
+    };
+    let pivoted = ScaledQr::pivoted(&scaled, tri.col(n).subrows(0, n));
+    assert_ne!(
+        pivoted.perm, fast.perm,
+        "the pivoted QR reorders this triangle"
+    );
+    let (u_fast, l_fast) = lmpar(&fast, f64::INFINITY, 0.0);
+    let (u_piv, l_piv) = lmpar(&pivoted, f64::INFINITY, 0.0);
+    assert_eq!((l_fast, l_piv), (0.0, 0.0), "Gauss–Newton steps");
+    for (k, &pos) in pivoted.perm.iter().enumerate() {
+        assert!(
+            (u_piv[k] - u_fast[pos]).abs() < 1e-12,
+            "column {pos}: {} vs {}",
+            u_piv[k],
+            u_fast[pos]
+        );
+    }
+}
+
+/// A rank-deficient triangle (two columns equal to the first) goes through the pivoted QR,
+/// which finds two zero pivots and leaves their step components at 0.
+#[test]
+fn rank_deficient_triangle_is_pivoted() {
+    let n = 9;
+    let tri = triangle(n, &[3, 6]);
+    let diag = vec![1.0; n];
+    let qr = ScaledQr::from_triangle(tri.as_ref(), &diag);
+    assert_eq!(qr.n_sing, n - 2, "numerical rank");
+    let (u, _) = lmpar(&qr, f64::INFINITY, 0.0);
+    assert!(u[n - 2..].iter().all(|&v| v == 0.0), "{u:?}");
 }
