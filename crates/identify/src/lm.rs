@@ -700,6 +700,20 @@ pub(crate) fn run(
     }
 }
 
+/// `Σ aᵢbᵢ` with four partial sums (reassociated, so that it vectorises).
+fn dot4(a: &[f64], b: &[f64]) -> f64 {
+    let (ac, at) = a.as_chunks::<4>();
+    let (bc, bt) = b.as_chunks::<4>();
+    let mut acc = [0.0; 4];
+    for (x, y) in ac.iter().zip(bc) {
+        for l in 0..4 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    let tail: f64 = at.iter().zip(bt).map(|(x, y)| x * y).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
 fn norm(v: &[f64]) -> f64 {
     v.iter().map(|a| a * a).sum::<f64>().sqrt()
 }
@@ -764,27 +778,42 @@ impl Upper {
     /// short by more than a small factor. `O(n²)`; `∞` (or NaN) for a zero diagonal entry.
     fn condition_estimate(&self) -> f64 {
         let n = self.n;
-        let mut z = vec![0.0; n];
-        for j in 0..n {
-            let col = self.col(j);
-            let s: f64 = col[..j].iter().zip(&z[..j]).map(|(t, y)| t * y).sum();
-            let e = if s > 0.0 { -1.0 } else { 1.0 };
-            z[j] = (e - s) / col[j];
-        }
-        let max_abs = |v: &[f64]| v.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
-        let z_max = max_abs(&z);
-        self.solve_in_place(&mut z);
-        let t_norm = (0..n)
-            .map(|i| (i..n).map(|j| self.data[j * n + i].abs()).sum::<f64>())
-            .fold(0.0_f64, f64::max);
         if n == 0 {
             return 0.0;
         }
-        // `f64::max` passes over NaN: a zero pivot (z = ±∞, then NaN) must not slip through.
+        // Only the decision depends on this estimate, not the iterates: products by the
+        // reciprocal pivots and reassociated sums (which vectorise) are good enough.
+        let inv: Vec<f64> = (0..n).map(|j| 1.0 / self.data[j * n + j]).collect();
+        if !inv.iter().all(|v| v.is_finite()) {
+            return f64::INFINITY;
+        }
+        let mut z = vec![0.0; n];
+        for j in 0..n {
+            let s = dot4(&self.col(j)[..j], &z[..j]);
+            let e = if s > 0.0 { -1.0 } else { 1.0 };
+            z[j] = (e - s) * inv[j];
+        }
+        let max_abs = |v: &[f64]| v.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+        let z_max = max_abs(&z);
+        for j in (0..n).rev() {
+            z[j] *= inv[j];
+            let zj = z[j];
+            for (zi, t) in z[..j].iter_mut().zip(self.col(j)) {
+                *zi -= t * zj;
+            }
+        }
+        // ‖T‖∞: the row sums of |T|, accumulated column by column.
+        let mut row_sums = vec![0.0; n];
+        for j in 0..n {
+            for (s, t) in row_sums.iter_mut().zip(self.col(j)) {
+                *s += t.abs();
+            }
+        }
+        // `f64::max` passes over NaN: a non-finite z (overflow) must not slip through.
         if z_max == 0.0 || !z_max.is_finite() || !z.iter().all(|v| v.is_finite()) {
             return f64::INFINITY;
         }
-        t_norm * max_abs(&z) / z_max
+        max_abs(&row_sums) * max_abs(&z) / z_max
     }
 
     /// Solves `Tᵀ y = b` in place (`b` of length `n`, nonzero diagonal): forward substitution,
