@@ -641,16 +641,12 @@ impl CalibrationProblem {
         // The next lane group (FrozenChain::distance_gradient_lanes, LANES poses per SIMD
         // instruction) at or after the current row.
         let mut group = self.lane_groups.partition_point(|&g| g < rows.start);
-        let mut skip = 0;
-        for (row_idx, row) in self.obs.rows[rows.clone()]
-            .iter()
-            .enumerate()
-            .map(|(i, row)| (rows.start + i, row))
-        {
-            if skip > 0 {
-                skip -= 1;
-                continue;
-            }
+        let mut next_row = rows.start;
+        while next_row < rows.end {
+            // A lane group moves `next_row` past all its rows.
+            let row_idx = next_row;
+            next_row += 1;
+            let row = &self.obs.rows[row_idx];
             if self.lane_groups.get(group) == Some(&row_idx) && row_idx + LANES <= rows.end {
                 // This group and the next if it follows directly: one kernel call overlaps
                 // the two groups' operations.
@@ -684,7 +680,7 @@ impl CalibrationProblem {
                 }
                 group += n_groups;
                 r += n_rows;
-                skip = n_rows - 1;
+                next_row = row_idx + n_rows;
                 continue;
             }
             if self.lane_groups.get(group) == Some(&row_idx) {
