@@ -350,9 +350,9 @@ pub(crate) fn error_at_x0(e: StreamError, layout: &ParamLayout) -> Error {
 /// [`levenberg_marquardt`](crate::levenberg_marquardt) on the streaming back end: the same
 /// iteration (MINPACK `lmder`, Moré 1978), with `J` never stored: each linearisation streams
 /// `[J r]` block by block into its `(n+1) × (n+1)` R factor (TSQR, see the module source),
-/// and each trial point streams `‖r‖`. The column-pivoted QR of the scaled free columns is
-/// then taken of that triangle, which has the same Gram matrix as `J_f`, so the steps equal
-/// the dense path's up to rounding.
+/// and each trial point streams `‖r‖`. The QR of the scaled free columns is then taken from
+/// that triangle, which has the same Gram matrix as `J_f`, as on the dense path
+/// ([`ScaledQr::from_triangle`]), so the steps equal the dense path's up to rounding.
 ///
 /// Memory: `O(n²)` per leaf ([`N_LEAVES`] leaves) plus one block per thread, independent of
 /// `m`. [`Fit::residuals`] is empty (length 0); [`Fit::cost`] is `½‖r‖²` at the estimate.

@@ -61,7 +61,8 @@ pub enum Backend {
     /// Jacobian would exceed [`STREAMING_AUTO_ENTRIES`] entries; dense otherwise (the default).
     #[default]
     Auto,
-    /// The whole `m × n` Jacobian in memory, column-pivoted QR (Moré's `lmder`).
+    /// The whole `m × n` Jacobian in memory, reduced by Householder QR at each iteration
+    /// (Moré's `lmder`).
     Dense,
     /// The Jacobian streamed block by block into its R factor (TSQR): memory independent of
     /// `m`, results equal to the dense path's up to rounding.

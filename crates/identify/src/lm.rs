@@ -211,10 +211,12 @@ const FACTOR: f64 = 100.0;
 /// smallest `λ ≥ 0` such that `‖u‖ ≤ Δ` (within 10 %): once per Jacobian, `[J_f r]` is reduced
 /// to its `(n_free+1)`-square triangle by Householder QR (256 rows at a time, in place in
 /// `J`'s columns, the reflections applied in blocks of four),
-/// whose scaled leading block then gets the column-pivoted Householder QR (MINPACK `qrfac`,
-/// norms downdated) that stands for that of `J D⁻¹` (the same Gram matrix, so the same `R` and
-/// `Q₁ᵀr` up to rounding);
-/// for each `λ` tried, `[R; √λ·I]` is reduced by Givens rotations (MINPACK `qrsolv`). `Δ`
+/// whose scaled leading block stands for the QR of `J D⁻¹` (the same Gram matrix, so the
+/// same `R` and `Q₁ᵀr` up to rounding): as it is when its condition estimate is far from
+/// singular, else after a column-pivoted Householder QR (MINPACK `qrfac`, norms downdated) that
+/// reveals the numerical rank ([`ScaledQr::from_triangle`]);
+/// for each `λ` tried, `[R; √λ·I]` is reduced by a Householder QR that uses its structure
+/// (in place of MINPACK `qrsolv`'s Givens rotations; the same `S` up to rounding). `Δ`
 /// starts at `factor·‖D·x0‖` (`factor` if zero; [`LmConfig::factor`]) and follows the
 /// gain ratio `ρ = actual / predicted reduction`: shrunk when `ρ ≤ 1/4`, set to `2‖u‖` when
 /// `ρ ≥ 3/4` or `λ = 0`; a step is accepted when `ρ ≥ 10⁻⁴`. A trial point where `r` cannot be
@@ -343,7 +345,7 @@ pub(crate) trait Linearised {
     fn col_norms(&self) -> Vec<f64>;
     /// `|J_jᵀ r|` for the free columns.
     fn gradient_abs(&self, j: usize) -> f64;
-    /// The column-pivoted QR of `J_f D⁻¹` and `Q₁ᵀ r`.
+    /// The QR of `J_f D⁻¹` (column-pivoted where it is near singular) and `Q₁ᵀ r`.
     fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr;
 }
 
@@ -833,7 +835,8 @@ impl Upper {
 /// estimate short by even a factor of 10⁵ keeps the rank decision the pivoted QR's.
 const UNPIVOTED_COND: f64 = 6.7e7;
 
-/// Column-pivoted QR of the scaled free Jacobian, `J D⁻¹ Π = Q R`, and `Q₁ᵀ r`.
+/// QR of the scaled free Jacobian, `J D⁻¹ Π = Q R`, and `Q₁ᵀ r` (`Π` the identity unless the
+/// triangle was near singular, see [`ScaledQr::from_triangle`]).
 pub(crate) struct ScaledQr {
     /// `R`, `n_free × n_free` upper triangular.
     r: Upper,
