@@ -352,7 +352,7 @@ pub(crate) fn error_at_x0(e: StreamError, layout: &ParamLayout) -> Error {
 /// `[J r]` block by block into its `(n+1) × (n+1)` R factor (TSQR, see the module source),
 /// and each trial point streams `‖r‖`. The QR of the scaled free columns is then taken from
 /// that triangle, which has the same Gram matrix as `J_f`, as on the dense path
-/// ([`ScaledQr::from_triangle`]), so the steps equal the dense path's up to rounding.
+/// (unpivoted unless near singular), so the steps equal the dense path's up to rounding.
 ///
 /// Memory: `O(n²)` per leaf ([`N_LEAVES`] leaves) plus one block per thread, independent of
 /// `m`. [`Fit::residuals`] is empty (length 0); [`Fit::cost`] is `½‖r‖²` at the estimate.

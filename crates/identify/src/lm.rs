@@ -214,7 +214,7 @@ const FACTOR: f64 = 100.0;
 /// whose scaled leading block stands for the QR of `J D⁻¹` (the same Gram matrix, so the
 /// same `R` and `Q₁ᵀr` up to rounding): as it is when its condition estimate is far from
 /// singular, else after a column-pivoted Householder QR (MINPACK `qrfac`, norms downdated) that
-/// reveals the numerical rank ([`ScaledQr::from_triangle`]);
+/// reveals the numerical rank;
 /// for each `λ` tried, `[R; √λ·I]` is reduced by a Householder QR that uses its structure
 /// (in place of MINPACK `qrsolv`'s Givens rotations; the same `S` up to rounding). `Δ`
 /// starts at `factor·‖D·x0‖` (`factor` if zero; [`LmConfig::factor`]) and follows the
