@@ -609,7 +609,7 @@ dot_kernel! {
 
 /// `Σ xᵢyᵢ` with 8 partial sums (vectorisable without reassociating a single sum).
 #[inline(always)]
-fn dot(x: &[f64], y: &[f64]) -> f64 {
+pub(crate) fn dot(x: &[f64], y: &[f64]) -> f64 {
     let n = x.len().min(y.len());
     let (x, y) = (&x[..n], &y[..n]);
     let (xc, xt) = x.as_chunks::<8>();
@@ -755,6 +755,17 @@ pub(crate) fn fold_cols(r: &mut [f64], cols: &mut [&mut [f64]]) {
     with_kernels!(fold_impl(r: &mut [f64], cols: &mut [&mut [f64]]) -> ())
 }
 
+/// The Householder reflection `H = I − τ·v vᵀ` that maps `x = [x0; t]` (`‖t‖ = tail_norm`)
+/// to `[α; 0]`: `α = −sign(x0)·‖x‖` (no cancellation in `v0`), `v = [x0 − α; t]`, `τ = 2/vᵀv`
+/// with `vᵀv = 2‖x‖(‖x‖ + |x0|)` (Golub and Van Loan, Matrix Computations, §5.1.2). Returns
+/// `(α, v0, τ)`; `tail_norm > 0` (else there is nothing to reflect).
+pub(crate) fn reflector(x0: f64, tail_norm: f64) -> (f64, f64, f64) {
+    let x_norm = x0.hypot(tail_norm);
+    let alpha = if x0 > 0.0 { -x_norm } else { x_norm };
+    let vtv = 2.0 * x_norm * (x_norm + x0.abs());
+    (alpha, x0 - alpha, 2.0 / vtv)
+}
+
 /// Splits the next `C` columns off `rest`.
 ///
 /// # Panics
@@ -799,11 +810,7 @@ fn fold_impl(r: &mut [f64], cols: &mut [&mut [f64]], kern: impl Kernels) {
                 continue;
             }
             let rkk = r[k * n1 + k];
-            let x_norm = rkk.hypot(bk_norm);
-            let alpha = if rkk > 0.0 { -x_norm } else { x_norm };
-            let vk0 = rkk - alpha;
-            let vtv = 2.0 * x_norm * (x_norm + rkk.abs());
-            let tau_k = 2.0 / vtv;
+            let (alpha, vk0, tau_k) = reflector(rkk, bk_norm);
             // Column j of [R; B] gets f = τ_k·(v0_k·R_kj + B_kᵀB_j), four columns at a time.
             let mut rest = &mut tail[..j_end - k - 1];
             let mut j = k + 1;

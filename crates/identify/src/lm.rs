@@ -702,20 +702,6 @@ pub(crate) fn run(
     }
 }
 
-/// `Σ aᵢbᵢ` with four partial sums (reassociated, so that it vectorises).
-fn dot4(a: &[f64], b: &[f64]) -> f64 {
-    let (ac, at) = a.as_chunks::<4>();
-    let (bc, bt) = b.as_chunks::<4>();
-    let mut acc = [0.0; 4];
-    for (x, y) in ac.iter().zip(bc) {
-        for l in 0..4 {
-            acc[l] += x[l] * y[l];
-        }
-    }
-    let tail: f64 = at.iter().zip(bt).map(|(x, y)| x * y).sum();
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
-}
-
 fn norm(v: &[f64]) -> f64 {
     v.iter().map(|a| a * a).sum::<f64>().sqrt()
 }
@@ -791,7 +777,7 @@ impl Upper {
         }
         let mut z = vec![0.0; n];
         for j in 0..n {
-            let s = dot4(&self.col(j)[..j], &z[..j]);
+            let s = householder::dot(&self.col(j)[..j], &z[..j]);
             let e = if s > 0.0 { -1.0 } else { 1.0 };
             z[j] = (e - s) * inv[j];
         }
@@ -1038,12 +1024,7 @@ fn damped_step(rmat: &Upper, qtr: &[f64], lambda: f64) -> (Vec<f64>, Upper) {
         if x_tail == 0.0 {
             continue;
         }
-        let rkk = a[k * n1 + k];
-        let x_norm = rkk.hypot(x_tail);
-        let alpha = if rkk > 0.0 { -x_norm } else { x_norm };
-        let v0 = rkk - alpha;
-        // τ = 2/vᵀv with vᵀv = 2‖x‖(‖x‖ + |R_kk|).
-        let tau = 1.0 / (x_norm * (x_norm + rkk.abs()));
+        let (alpha, v0, tau) = householder::reflector(a[k * n1 + k], x_tail);
         // f_j = τ·(v0·A_kj + Σ_i x_i·L_ij) for the columns j > k (and the right-hand side).
         let fk = &mut f[k + 1..];
         let a_row = &mut a[k * n1 + k + 1..(k + 1) * n1];
