@@ -357,8 +357,9 @@ pub(crate) trait Linearised {
 /// residuals and the Jacobian are evaluated together ([`Problem::residuals_and_jacobian`]):
 /// such steps are usually accepted (MINPACK accepts any step with `ρ ≥ 10⁻⁴`), and an accepted
 /// point then needs no Jacobian pass of its own. After a rejected step, and when the step's
-/// predicted reduction meets `ftol`, the trial evaluates the residuals only. The iterates are MINPACK's either way; only the evaluation
-/// count changes ([`Fit::n_jacobians`] counts every Jacobian evaluated, used or not).
+/// predicted reduction meets `ftol`, the trial evaluates the residuals only. The iterates are
+/// MINPACK's either way; only the evaluation count changes ([`Fit::n_jacobians`] counts every
+/// Jacobian evaluated, used or not).
 struct Dense<'a, P: Problem> {
     p: &'a P,
     free: &'a [usize],
