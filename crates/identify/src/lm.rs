@@ -1048,13 +1048,6 @@ fn damped_step(rmat: &Upper, qtr: &[f64], lambda: f64) -> (Vec<f64>, Upper) {
         }
         a[k * n1 + k] = alpha;
     }
-    // S u = w; a zero pivot (λ = 0 with singular R) leaves the trailing components at 0.
-    let n_sing = (0..n).find(|&k| a[k * n1 + k] == 0.0).unwrap_or(n);
-    let mut u = vec![0.0; n];
-    for i in (0..n_sing).rev() {
-        let sum: f64 = ((i + 1)..n_sing).map(|j| a[i * n1 + j] * u[j]).sum();
-        u[i] = (a[i * n1 + n] - sum) / a[i * n1 + i];
-    }
     // S column-major: the transpose of the row-major `a`.
     let mut data = vec![0.0; n * n];
     for k in 0..n {
@@ -1062,7 +1055,15 @@ fn damped_step(rmat: &Upper, qtr: &[f64], lambda: f64) -> (Vec<f64>, Upper) {
             data[j * n + k] = a[k * n1 + j];
         }
     }
-    (u, Upper { data, n })
+    let s = Upper { data, n };
+    // S u = w; a zero pivot (λ = 0 with singular R) leaves the trailing components at 0.
+    let n_sing = (0..n).find(|&k| s.at(k, k) == 0.0).unwrap_or(n);
+    let mut u = vec![0.0; n];
+    for (ui, k) in u[..n_sing].iter_mut().zip(0..) {
+        *ui = a[k * n1 + n];
+    }
+    s.solve_in_place(&mut u[..n_sing]);
+    (u, s)
 }
 
 #[cfg(test)]
