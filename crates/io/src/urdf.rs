@@ -121,6 +121,7 @@ pub fn import_urdf(path: &Path, tip: &str) -> Result<Device, Error> {
             xyz_m: xyz,
             rpy_rad: rpy,
             axis,
+            prismatic: false,
         });
     }
     if joints.is_empty() {
@@ -487,6 +488,7 @@ mod tests {
             xyz_m: xyz,
             rpy_rad: rpy,
             axis: None,
+            prismatic: false,
         }
     }
 

@@ -4,8 +4,8 @@ use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 
 use crate::{Chain, Error, Factor, Motion, ParamInfo, ParamUnit};
 
-/// One URDF joint: its origin in the parent link frame and, for a revolute joint, its
-/// axis (ROS URDF specification, `<joint>`: `<origin xyz rpy>`, `<axis xyz>`).
+/// One URDF joint: its origin in the parent link frame and, for a moving joint, its axis
+/// (ROS URDF specification, `<joint>`: `<origin xyz rpy>`, `<axis xyz>`, `type`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Placement {
     /// Joint name; becomes the joint / element name and the parameter prefix.
@@ -15,9 +15,11 @@ pub struct Placement {
     /// Origin rotation `rpy` = (roll, pitch, yaw), rad, fixed axes:
     /// `R = Rz(yaw) · Ry(pitch) · Rx(roll)`.
     pub rpy_rad: [f64; 3],
-    /// Revolute joint axis in the joint frame (any non-zero length; normalised);
-    /// `None` = fixed joint.
+    /// Joint axis in the joint frame (any non-zero length; normalised); `None` = fixed joint.
     pub axis: Option<[f64; 3]>,
+    /// True for a prismatic joint (translation along `axis` by `q`, m); false for a revolute
+    /// or continuous one (rotation about `axis` by `q`, rad). Ignored for a fixed joint.
+    pub prismatic: bool,
 }
 
 impl Placement {
@@ -63,10 +65,11 @@ fn push_deviation(
 }
 
 impl Chain {
-    /// A chain from URDF joint placements, root to tip (revolute and fixed joints).
+    /// A chain from URDF joint placements, root to tip (revolute, continuous, prismatic and
+    /// fixed joints).
     ///
     /// A revolute joint's transform is `Trans(xyz) · Rz(yaw)Ry(pitch)Rx(roll) · Δ ·
-    /// Rot(axis, q)` with the deviation `Δ = Tx(x)·Ty(y)·Tz(z)·Rx(rx)·Ry(ry)·Rz(rz)` and
+    /// Rot(axis, q)` (a prismatic joint's ends in `Trans(axis · q)`, q in m) with the deviation `Δ = Tx(x)·Ty(y)·Tz(z)·Rx(rx)·Ry(ry)·Rz(rz)` and
     /// parameters `{name}.x`, `{name}.y`, `{name}.z` (m), `{name}.rx`, `{name}.ry`,
     /// `{name}.rz` (rad). Fixed placements are folded into the next revolute joint's
     /// origin (no parameters of their own). Trailing fixed placements after the last
@@ -121,7 +124,11 @@ impl Chain {
             factors.push(Factor::Fixed(origin));
             push_deviation(&mut factors, &mut params, &p.name, element_names.len());
             factors.push(Factor::Screw {
-                motion: Motion::Rotation,
+                motion: if p.prismatic {
+                    Motion::Translation
+                } else {
+                    Motion::Rotation
+                },
                 axis: Unit::new_normalize(Vector3::from(axis)),
                 nominal: 0.0,
                 param: None,

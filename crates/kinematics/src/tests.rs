@@ -308,6 +308,7 @@ fn placement(name: &str, xyz_m: [f64; 3], rpy_rad: [f64; 3], axis: Option<[f64; 
         xyz_m,
         rpy_rad,
         axis,
+        prismatic: false,
     }
 }
 

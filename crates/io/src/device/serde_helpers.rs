@@ -59,6 +59,8 @@ pub(super) mod placements {
         rpy_rad: [f64; 3],
         #[serde(default, skip_serializing_if = "Option::is_none")]
         axis: Option<[f64; 3]>,
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        prismatic: bool,
     }
 
     pub(in crate::device) fn serialize<S: Serializer>(
@@ -70,6 +72,7 @@ pub(super) mod placements {
             xyz_m: p.xyz_m,
             rpy_rad: p.rpy_rad,
             axis: p.axis,
+            prismatic: p.prismatic,
         }))
     }
 
@@ -84,6 +87,7 @@ pub(super) mod placements {
                 xyz_m: r.xyz_m,
                 rpy_rad: r.rpy_rad,
                 axis: r.axis,
+                prismatic: r.prismatic,
             })
             .collect())
     }

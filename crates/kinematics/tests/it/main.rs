@@ -80,6 +80,7 @@ fn placement_chain() -> impl Strategy<Value = Chain> {
                 xyz_m,
                 rpy_rad,
                 axis: None,
+                prismatic: false,
             };
             let mut placements = Vec::new();
             for (j, (before, (xyz_m, rpy_rad), axis)) in joints.into_iter().enumerate() {
@@ -92,6 +93,7 @@ fn placement_chain() -> impl Strategy<Value = Chain> {
                     xyz_m,
                     rpy_rad,
                     axis: Some(axis),
+                    prismatic: false,
                 });
             }
             for o in trailing {

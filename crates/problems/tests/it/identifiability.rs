@@ -223,6 +223,7 @@ fn build_chain(case: &Case) -> Chain {
                         xyz_m: [0; 3].map(|_| rng.random_range(-0.3..0.3)),
                         rpy_rad: [0; 3].map(|_| rng.random_range(-PI..PI)),
                         axis: Some([axis.x, axis.y, axis.z]),
+                        prismatic: false,
                     }
                 })
                 .collect();
@@ -231,6 +232,7 @@ fn build_chain(case: &Case) -> Chain {
                 xyz_m: [0; 3].map(|_| signed(rng, 0.05, 0.2)),
                 rpy_rad: [0; 3].map(|_| rng.random_range(-PI..PI)),
                 axis: None,
+                prismatic: false,
             });
             Chain::from_placements(&placements).expect("valid placements")
         }

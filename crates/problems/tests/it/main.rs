@@ -21,6 +21,7 @@ fn iiwa_like() -> Chain {
         xyz_m: xyz,
         rpy_rad: [0.0; 3],
         axis: Some(axis),
+        prismatic: false,
     };
     Chain::from_placements(&[
         rev("j1", [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
@@ -35,12 +36,14 @@ fn iiwa_like() -> Chain {
             xyz_m: [0.0, 0.0, 0.126],
             rpy_rad: [0.0; 3],
             axis: None,
+            prismatic: false,
         },
         Placement {
             name: "ball".into(),
             xyz_m: [0.0, 0.0, 0.04],
             rpy_rad: [0.0; 3],
             axis: None,
+            prismatic: false,
         },
     ])
     .expect("valid chain")

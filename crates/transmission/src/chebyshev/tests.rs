@@ -53,6 +53,36 @@ fn invalid_polynomials_are_rejected() {
     assert!(Chebyshev::from_monomial(0.0, f64::INFINITY, &[1.0]).is_err());
 }
 
+/// Monomial coefficients of `p` with every term of the Clenshaw recurrence taken in absolute
+/// value (`|c_k|`, `|a|`, `|b|`, and `+ b_{k+2}` for `− b_{k+2}`): an entrywise upper bound of
+/// the magnitudes that [`Chebyshev::to_monomial`] adds up, hence a scale for its rounding.
+fn absolute_monomial(p: &Chebyshev) -> Vec<f64> {
+    let n = p.degree();
+    let w = p.hi - p.lo;
+    let (a, b) = ((2.0 / w).abs(), ((p.lo + p.hi) / w).abs());
+    let mut b1 = vec![0.0; n + 2];
+    let mut b2 = vec![0.0; n + 2];
+    for &c in p.coeffs.iter().skip(1).rev() {
+        let mut b0 = vec![0.0; n + 2];
+        for i in 0..=n {
+            b0[i] += 2.0 * b * b1[i] + b2[i];
+            b0[i + 1] += 2.0 * a * b1[i];
+        }
+        b0[0] += c.abs();
+        b2 = b1;
+        b1 = b0;
+    }
+    let mut out = vec![0.0; n + 1];
+    for i in 0..=n {
+        out[i] += b * b1[i] + b2[i];
+        if i < n {
+            out[i + 1] += a * b1[i];
+        }
+    }
+    out[0] += p.coeffs.first().map_or(0.0, |c| c.abs());
+    out
+}
+
 /// A joint range of DESIGN.md §2 (rad).
 fn joint_range() -> impl Strategy<Value = (f64, f64)> {
     prop::sample::select(vec![
@@ -109,7 +139,16 @@ proptest! {
         let k = p.to_monomial();
         prop_assert_eq!(k.len(), p.degree() + 1);
         let horner = k.iter().rev().fold(0.0, |acc, &ki| acc * theta + ki);
-        prop_assert!((horner - p.eval(theta)).abs() < 1e-9, "{horner} vs {}", p.eval(theta));
+        // Rounding in the conversion and in Horner's rule is bounded by a few ulps per
+        // operation of the same sums taken in absolute value (Higham, "Accuracy and Stability
+        // of Numerical Algorithms", 2nd ed., §5.1): the scale is the polynomial with every
+        // recurrence term added in absolute value, evaluated at |θ|.
+        let scale = absolute_monomial(&p).iter().rev().fold(0.0, |acc, &ki| acc * theta.abs() + ki);
+        let tol = 8.0 * (2.0 * k.len() as f64 + 2.0) * f64::EPSILON * scale;
+        prop_assert!(
+            (horner - p.eval(theta)).abs() <= tol,
+            "{horner} vs {} (tolerance {tol})", p.eval(theta)
+        );
     }
 
     #[test]
