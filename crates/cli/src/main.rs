@@ -203,13 +203,13 @@ enum Command {
     /// Choose the poses to measure: from candidates sampled within the joint limits, the ones
     /// that maximise an observability criterion of the identification Jacobian at the nominal
     /// model (greedy start + DETMAX exchange). Writes the readings as CSV.
-    PlanPoses(hapcal::plan::PlanArgs),
+    PlanPoses(hapcal::plan_args::PlanArgs),
     /// Monte Carlo study of planned vs random poses on the reference device (distance data);
     /// writes a Markdown table. Run it in release.
-    PoseStudy(hapcal::plan::StudyArgs),
+    PoseStudy(hapcal::pose_study::StudyArgs),
     /// The optimal-design bound of planned distance poses (continuous I-optimal design with its
     /// equivalence-theorem certificate) against random poses; writes a Markdown table.
-    PoseBound(hapcal::plan::BoundArgs),
+    PoseBound(hapcal::pose_study::BoundArgs),
     /// Import a URDF chain as a hapcal device file (TOML on stdout).
     ImportUrdf {
         /// The URDF file.
@@ -458,21 +458,21 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::PlanPoses(args) => {
-            let (summary, out) = hapcal::plan::run_plan(&args)?;
+            let (summary, out) = hapcal::plan_args::run_plan(&args)?;
             print!("{summary}");
             eprintln!("hapcal: wrote {}", out.display());
             Ok(())
         }
         Command::PoseStudy(args) => {
             let bar = indicatif::ProgressBar::new(args.seeds);
-            let text = hapcal::plan::run_study(&args, &|done| bar.set_position(done))?;
+            let text = hapcal::pose_study::run_study(&args, &|done| bar.set_position(done))?;
             bar.finish_and_clear();
             print!("{text}");
             eprintln!("hapcal: wrote {}", args.out.display());
             Ok(())
         }
         Command::PoseBound(args) => {
-            let text = hapcal::plan::run_bound(&args, &|stage| eprintln!("hapcal: {stage}"))?;
+            let text = hapcal::pose_study::run_bound(&args, &|stage| eprintln!("hapcal: {stage}"))?;
             print!("{text}");
             eprintln!("hapcal: wrote {}", args.out.display());
             Ok(())

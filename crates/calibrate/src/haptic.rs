@@ -1,70 +1,61 @@
-//! The paper's pipeline on the simulated reference device (Baser & Konukseven, Fig. 6):
-//! step 1 identifies each transmission from external-encoder data, step 2 corrects the joint
-//! readings and identifies the kinematic deviations from cable distances; validation on fresh
-//! poses (Fig. 8) and a Monte Carlo over seeds.
+//! The paper's two-step calibration of a capstan-driven haptic device (Baser & Konukseven,
+//! Fig. 6), on a measured log and nothing else: step 1 identifies each transmission from its
+//! external encoder (capstan eq. 1, the parallelogram's polynomial), step 2 corrects the joint
+//! readings and identifies the kinematic deviations from the cable distances; or both at once
+//! ([`identify_jointly`]). [`calibrated_device`] writes the result as a device file.
 
 use anyhow::{Context, Result, bail};
 use faer::Col;
 use hapcal_identify::{Identified, IdentifyConfig, Problem, identify};
-use hapcal_io::{Device, LogRow};
+use hapcal_io::{CalibratedValue, CalibrationMeta, Device, LogRow};
 use hapcal_kinematics::{Chain, DhRow};
-use hapcal_metrics::{pose_error, rms};
 use hapcal_problems::{CalibrationProblem, Observations, Row, RowKind, Weights};
-use hapcal_sim::{NoiseModel, SimConfig, Truth};
+use hapcal_sim::NoiseModel;
 use hapcal_transmission::{
     Capstan, CapstanParams, CapstanProblem, Chebyshev, JointRad, PolynomialProblem,
 };
-use rand::SeedableRng;
-use std::path::Path;
 
 /// Degree of the joint-4 polynomial (paper: tenth order).
 pub const POLY_DEGREE: usize = 10;
 /// The joint whose capstan feeds the parallelogram (1-based).
 pub const PARALLELOGRAM_JOINT: usize = 4;
 
-/// The reference device, its truth, and the noise model of the simulation.
+/// A capstan-driven haptic device as its device file describes it: the chain, the chain seen
+/// from its base, and the noise of its sensors (paper section 4: encoder quantisation σ_e from
+/// the counts per revolution, cable-encoder noise σ_m).
 #[derive(Clone, Debug)]
-pub struct Reference {
+pub struct HapticDevice {
     /// Nominal device.
     pub device: Device,
-    /// Truth (deviations and transmission parameters).
-    pub truth: Truth,
-    /// Nominal chain (D-H rows 0..7).
+    /// Nominal chain (D-H rows 0..n, row 0 the rig → base transform).
     pub chain: Chain,
-    /// Chain of rows 1..7 (base frame → end effector), for validation in the base frame.
+    /// Chain of rows 1..n (base frame → end effector), for validation in the base frame.
     pub base_chain: Chain,
-    /// Truth deviation vector of `chain`.
-    pub x_truth: Vec<f64>,
-    /// Noise model (paper's by default).
+    /// Noise model of the joint encoders and the cable encoder (the paper's).
     pub noise: NoiseModel,
 }
 
-impl Reference {
-    /// Reads the device and truth files.
+impl HapticDevice {
+    /// The haptic device of a device file.
     ///
     /// # Errors
-    /// Unreadable or inconsistent files.
-    pub fn load(truth_path: &Path) -> Result<Self> {
-        let truth = hapcal_sim::read_truth(truth_path)
-            .with_context(|| format!("reading truth {}", truth_path.display()))?;
-        let device = truth.read_device(truth_path)?;
+    /// A device that is not a standard D-H chain without β with a fixed row 0, or has no
+    /// `[cable_encoder]`.
+    pub fn new(device: Device) -> Result<Self> {
         let chain = device.chain()?;
         let rows: Vec<DhRow> = device.dh_rows();
         if rows.len() < 2 || rows.iter().any(|r| r.beta_rad.is_some()) {
-            bail!("the reference pipeline expects standard D-H rows without beta, row 0 fixed");
+            bail!("the paper's pipeline expects standard D-H rows without beta, row 0 fixed");
         }
         let base_chain = Chain::from_dh(&rows[1..])?;
-        let x_truth = hapcal_sim::truth_deviations(&chain, &truth)?;
         let Some(cable) = device.cable_encoder.as_ref() else {
             bail!("the device has no [cable_encoder]")
         };
         let noise = NoiseModel::paper(cable);
         Ok(Self {
             device,
-            truth,
             chain,
             base_chain,
-            x_truth,
             noise,
         })
     }
@@ -163,7 +154,7 @@ pub fn transmission_config() -> IdentifyConfig {
 ///
 /// # Errors
 /// Missing ext columns, or an identification failure.
-pub fn identify_transmissions(r: &Reference, rows: &[LogRow]) -> Result<TransmissionFit> {
+pub fn identify_transmissions(r: &HapticDevice, rows: &[LogRow]) -> Result<TransmissionFit> {
     let sigma = r.noise.sigma_e_rad;
     let cfg = transmission_config();
     let mut capstans = Vec::new();
@@ -211,7 +202,7 @@ pub fn identify_transmissions(r: &Reference, rows: &[LogRow]) -> Result<Transmis
 /// # Errors
 /// Inconsistent data or an identification failure.
 pub fn identify_kinematics(
-    r: &Reference,
+    r: &HapticDevice,
     rows: &[LogRow],
     transmissions: Option<&TransmissionFit>,
 ) -> Result<(CalibrationProblem, Identified)> {
@@ -262,7 +253,7 @@ pub fn identify_kinematics(
 /// # Errors
 /// Missing ext columns, or an evaluation failure of the joint problem.
 pub fn propagate_transmission_covariance(
-    r: &Reference,
+    r: &HapticDevice,
     rows: &[LogRow],
     t: &TransmissionFit,
     kin: &Identified,
@@ -327,7 +318,7 @@ impl Sensitivity {
     /// # Errors
     /// Missing ext columns, or an evaluation failure of the joint problem.
     pub fn at(
-        r: &Reference,
+        r: &HapticDevice,
         rows: &[LogRow],
         t: &TransmissionFit,
         kin: &Identified,
@@ -357,247 +348,6 @@ impl Sensitivity {
     }
 }
 
-/// Accuracy on fresh poses (paper Fig. 8 and the distance RMS of eq. 9).
-#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
-pub struct Validation {
-    /// End-effector position RMS in the base frame, nominal model, m.
-    pub position_rms_before_m: f64,
-    /// Same, calibrated model, m.
-    pub position_rms_after_m: f64,
-    /// Orientation RMS (angle of the relative rotation), nominal model, rad.
-    pub orientation_rms_before_rad: f64,
-    /// Same, calibrated model, rad.
-    pub orientation_rms_after_rad: f64,
-    /// Orientation RMS of the calibrated model once the unidentifiable parameters (α7 in the
-    /// base frame) take their true values: what they alone leave, rad.
-    pub orientation_rms_after_true_unidentifiable_rad: f64,
-    /// Cable-distance RMS, nominal model, m.
-    pub distance_rms_before_m: f64,
-    /// Cable-distance RMS, full calibration (transmissions + kinematics), m.
-    pub distance_rms_after_m: f64,
-    /// Cable-distance RMS, kinematics calibrated on raw readings (transmissions left out), m.
-    pub distance_rms_kinematics_only_m: f64,
-}
-
-/// Everything one seed produced.
-#[derive(Clone, Debug)]
-pub struct SeedResult {
-    /// Step 1.
-    pub transmissions: TransmissionFit,
-    /// Step 2 (full calibration).
-    pub kinematics: Identified,
-    /// Step 2 without transmissions.
-    pub kinematics_only: Identified,
-    /// Joint identification of both steps; kinematic parameters start at `joint_offset`.
-    pub joint: Identified,
-    /// Index of the first kinematic parameter in `joint`'s layout.
-    pub joint_offset: usize,
-    /// Fresh-pose accuracy.
-    pub validation: Validation,
-    /// Per fresh pose: position error before/after (m), orientation error before/after (rad).
-    pub pose_errors: [Vec<f64>; 4],
-}
-
-/// Runs the pipeline for one seed: simulate `n_poses` (seed), identify, validate on `n_poses`
-/// fresh poses (seed + 1_000_000).
-///
-/// # Errors
-/// Simulation or identification failures.
-pub fn run_seed(r: &Reference, seed: u64, n_poses: usize) -> Result<SeedResult> {
-    run_seed_with(r, seed, n_poses, &PoseChoice::Random)
-}
-
-/// Selects `n_select` of the candidate joint readings (rad, one `Vec` per candidate) of the
-/// reference device; returns their indices.
-pub type PoseSelector<'a> =
-    dyn Fn(&Reference, &[Vec<f64>], usize) -> Result<Vec<usize>> + Sync + 'a;
-
-/// How the identification poses of one seed are chosen.
-pub enum PoseChoice<'a> {
-    /// `n_poses` poses uniform in the joint limits: the paper's "200 random pose
-    /// measurements".
-    Random,
-    /// `n_poses` of `n_candidates` random poses, chosen by `select` from their joint readings
-    /// alone (as a planner does before measuring; the measurements of the others are discarded).
-    Planned {
-        /// Candidate poses drawn per seed.
-        n_candidates: usize,
-        /// Name of the design, for reports (`d-optimal`).
-        name: String,
-        /// The selection.
-        select: &'a PoseSelector<'a>,
-    },
-}
-
-/// [`run_seed`] with the identification poses chosen by `choice`.
-///
-/// # Errors
-/// Simulation, selection or identification failures.
-pub fn run_seed_with(
-    r: &Reference,
-    seed: u64,
-    n_poses: usize,
-    choice: &PoseChoice<'_>,
-) -> Result<SeedResult> {
-    let rows = match choice {
-        PoseChoice::Random => {
-            let cfg = SimConfig::new(seed, n_poses).with_noise(r.noise);
-            hapcal_sim::simulate(&r.device, &r.truth, &cfg)?
-        }
-        PoseChoice::Planned {
-            n_candidates,
-            select,
-            ..
-        } => {
-            let cfg = SimConfig::new(seed, *n_candidates).with_noise(r.noise);
-            let candidates = hapcal_sim::simulate(&r.device, &r.truth, &cfg)?;
-            let readings: Vec<Vec<f64>> = candidates.iter().map(|row| row.q.clone()).collect();
-            let chosen = select(r, &readings, n_poses)?;
-            chosen
-                .iter()
-                .map(|&i| {
-                    candidates.get(i).cloned().with_context(|| {
-                        format!("pose selection returned {i} of {n_candidates} candidates")
-                    })
-                })
-                .collect::<Result<Vec<_>>>()?
-        }
-    };
-    let transmissions = identify_transmissions(r, &rows)?;
-    let (_, mut kinematics) = identify_kinematics(r, &rows, Some(&transmissions))?;
-    kinematics.covariance.matrix =
-        propagate_transmission_covariance(r, &rows, &transmissions, &kinematics)?;
-    let (_, kinematics_only) = identify_kinematics(r, &rows, None)?;
-    let (validation, pose_errors) = validate(
-        r,
-        seed + 1_000_000,
-        n_poses,
-        &transmissions,
-        &kinematics,
-        &kinematics_only,
-    )?;
-    let (joint_problem, joint) = identify_jointly(r, &rows, &transmissions, &kinematics)?;
-    let joint_offset = joint_problem.n_trans();
-    Ok(SeedResult {
-        transmissions,
-        kinematics,
-        kinematics_only,
-        joint,
-        joint_offset,
-        validation,
-        pose_errors,
-    })
-}
-
-fn x_of(id: &Identified, n: usize) -> Vec<f64> {
-    (0..n).map(|i| id.fit.x[i]).collect()
-}
-
-/// Validation on fresh poses drawn with `seed`.
-///
-/// # Errors
-/// Simulation failures.
-pub fn validate(
-    r: &Reference,
-    seed: u64,
-    n_poses: usize,
-    t: &TransmissionFit,
-    kin: &Identified,
-    kin_only: &Identified,
-) -> Result<(Validation, [Vec<f64>; 4])> {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let readings = hapcal_sim::sample_readings(&r.device, &mut rng, n_poses);
-    let n = r.chain.n_params();
-    let x_cal = x_of(kin, n);
-    let x_only = x_of(kin_only, n);
-    let zero = vec![0.0; n];
-    let (xb_truth, xb_cal, xb_zero) = (r.base_x(&r.x_truth), r.base_x(&x_cal), r.base_x(&zero));
-    // The calibrated model with the parameters the data cannot see set to their truth.
-    let mut x_cal_true_unid = x_cal.clone();
-    for pruned in &kin.identifiability.pruned {
-        if pruned.index < n {
-            x_cal_true_unid[pruned.index] = r.x_truth[pruned.index];
-        }
-    }
-    let xb_cal_true_unid = r.base_x(&x_cal_true_unid);
-    let (mut pb, mut pa, mut ob, mut oa, mut oau, mut db, mut da, mut dk) = (
-        vec![],
-        vec![],
-        vec![],
-        vec![],
-        vec![],
-        vec![],
-        vec![],
-        vec![],
-    );
-    for theta in &readings {
-        let theta = hapcal_sim::quantise_readings(&r.device, theta);
-        let q_true = hapcal_sim::true_joint_angles(&r.device, &r.truth, &theta)?;
-        let q_cor = t.corrected(&theta);
-        let truth = r.base_chain.end_pose(&xb_truth, &q_true);
-        let before = pose_error(&truth, &r.base_chain.end_pose(&xb_zero, &theta));
-        let after = pose_error(&truth, &r.base_chain.end_pose(&xb_cal, &q_cor));
-        let after_u = pose_error(&truth, &r.base_chain.end_pose(&xb_cal_true_unid, &q_cor));
-        pb.push(before.position_m);
-        pa.push(after.position_m);
-        ob.push(before.orientation_rad);
-        oa.push(after.orientation_rad);
-        oau.push(after_u.orientation_rad);
-        let d_true = r.chain.end_point(&r.x_truth, &q_true).coords.norm();
-        db.push(r.chain.end_point(&zero, &theta).coords.norm() - d_true);
-        da.push(r.chain.end_point(&x_cal, &q_cor).coords.norm() - d_true);
-        dk.push(r.chain.end_point(&x_only, &theta).coords.norm() - d_true);
-    }
-    let v = Validation {
-        position_rms_before_m: rms(&pb),
-        position_rms_after_m: rms(&pa),
-        orientation_rms_before_rad: rms(&ob),
-        orientation_rms_after_rad: rms(&oa),
-        orientation_rms_after_true_unidentifiable_rad: rms(&oau),
-        distance_rms_before_m: rms(&db),
-        distance_rms_after_m: rms(&da),
-        distance_rms_kinematics_only_m: rms(&dk),
-    };
-    Ok((v, [pb, pa, ob, oa]))
-}
-
-/// A kinematic parameter's outcome in one seed.
-#[derive(Clone, Debug)]
-pub struct ParamOutcome {
-    /// Name (`da0`, `dtheta3`, …).
-    pub name: String,
-    /// Assigned (truth) deviation.
-    pub assigned: f64,
-    /// Identified deviation, `None` when pruned.
-    pub identified: Option<f64>,
-    /// Its standard deviation.
-    pub std: Option<f64>,
-}
-
-/// Per-parameter outcomes of step 2 in one seed.
-pub fn kinematic_outcomes(r: &Reference, kin: &Identified) -> Vec<ParamOutcome> {
-    kinematic_outcomes_at(r, kin, 0)
-}
-
-/// Per-parameter outcomes of an identification whose kinematic parameters start at `offset`.
-pub fn kinematic_outcomes_at(r: &Reference, kin: &Identified, offset: usize) -> Vec<ParamOutcome> {
-    let stds = kin.covariance.std();
-    r.chain
-        .params()
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let pos = kin.covariance.free.iter().position(|&f| f == offset + i);
-            ParamOutcome {
-                name: p.name.clone(),
-                assigned: r.x_truth[i],
-                identified: pos.map(|_| kin.fit.x[offset + i]),
-                std: pos.map(|k| stds[k]),
-            }
-        })
-        .collect()
-}
-
 /// Names of the kinematic layout (for reports).
 pub fn layout_names(p: &CalibrationProblem) -> Vec<String> {
     (0..p.layout().len())
@@ -611,7 +361,7 @@ pub fn layout_names(p: &CalibrationProblem) -> Vec<String> {
 /// the kinematic covariance. `x = [capstan 1–3 (6 each) | joint-4 Chebyshev (degree+1) |
 /// kinematic deviations]`.
 pub struct JointProblem<'a> {
-    r: &'a Reference,
+    r: &'a HapticDevice,
     capstans: Vec<(usize, Capstan)>,
     lo: f64,
     hi: f64,
@@ -630,7 +380,7 @@ impl<'a> JointProblem<'a> {
     ///
     /// # Errors
     /// Missing ext columns or capstans.
-    pub fn new(r: &'a Reference, rows: &[LogRow]) -> Result<Self> {
+    pub fn new(r: &'a HapticDevice, rows: &[LogRow]) -> Result<Self> {
         use hapcal_identify::{ParamSpec, Role, Unit};
         let mut specs = Vec::new();
         let mut capstans = Vec::new();
@@ -688,7 +438,8 @@ impl<'a> JointProblem<'a> {
         })
     }
 
-    fn n_trans(&self) -> usize {
+    /// Number of transmission parameters (the first entries of `x`).
+    pub fn n_trans(&self) -> usize {
         6 * self.capstans.len() + POLY_DEGREE + 1
     }
 
@@ -856,7 +607,7 @@ pub fn joint_config() -> IdentifyConfig {
 /// # Errors
 /// An identification failure.
 pub fn identify_jointly<'a>(
-    r: &'a Reference,
+    r: &'a HapticDevice,
     rows: &[LogRow],
     t: &TransmissionFit,
     kin: &Identified,
@@ -902,4 +653,45 @@ pub fn identify_jointly<'a>(
     let second = identify(&problem, first.fit.x.clone(), &joint_config())
         .context("joint identification (reweighted)")?;
     Ok((problem, second))
+}
+
+/// The calibrated device file of the paper's pipeline: `r`'s nominal device with the kept
+/// kinematic deviations of `kin` applied to its D-H rows ([`Device::with_calibration`]) and
+/// `[calibration.values]` holding those deviations (m, rad) and every identified transmission
+/// parameter of `t` (capstans 1–3: `capstan{j}.c` rad, `.re` 1, `.r_o` m, `.beta_o` rad,
+/// `.r_i` m, `.beta_i` rad; joint 4: `joint4.cheb0..10`, rad, Chebyshev basis on q4's range),
+/// each with its standard deviation. Pruned (unidentifiable) parameters are left out, i.e. at
+/// their nominal value.
+///
+/// # Errors
+/// A value the device file rejects (non-finite, wrong unit).
+pub fn calibrated_device(
+    r: &HapticDevice,
+    t: &TransmissionFit,
+    kin: &Identified,
+    notes: String,
+) -> Result<Device> {
+    let mut values = Vec::new();
+    let mut push_kept = |id: &Identified| {
+        for &i in &id.identifiability.kept {
+            let spec = id.layout.spec(i);
+            values.push(CalibratedValue {
+                name: spec.name.clone(),
+                value: id.fit.x[i],
+                std: id.std(&spec.name).unwrap_or(0.0),
+                unit: spec.unit.symbol().to_owned(),
+            });
+        }
+    };
+    for c in &t.capstans {
+        push_kept(&c.identified);
+    }
+    push_kept(&t.poly_identified);
+    push_kept(kin);
+    let meta = CalibrationMeta {
+        date: None,
+        data_hash: None,
+        notes: Some(notes),
+    };
+    Ok(r.device.with_calibration(&values, meta)?)
 }

@@ -8,7 +8,7 @@
 //! parameters (`capstan{j}.c/re/r_o/beta_o/r_i/beta_i`, `joint4.cheb0..10`), which
 //! [`ForceModel::calibrated`] reads back.
 
-use crate::paper::{self, Reference, TransmissionFit};
+use crate::paper::{self, Reference, TransmissionFit, calibrated_device};
 use anyhow::{Context, Result};
 use hapcal_force::{
     Direction, ForceModel, SweepConfig, SweepErrors, WallConfig, WallSample, home_readings,
@@ -19,47 +19,6 @@ use hapcal_io::{CalibratedValue, CalibrationMeta, Device};
 use plotters::prelude::*;
 use std::fmt::Write;
 use std::path::Path;
-
-/// The calibrated device file of the paper's pipeline: `r`'s nominal device with the kept
-/// kinematic deviations of `kin` applied to its D-H rows ([`Device::with_calibration`]) and
-/// `[calibration.values]` holding those deviations (m, rad) and every identified transmission
-/// parameter of `t` (capstans 1–3: `capstan{j}.c` rad, `.re` 1, `.r_o` m, `.beta_o` rad,
-/// `.r_i` m, `.beta_i` rad; joint 4: `joint4.cheb0..10`, rad, Chebyshev basis on q4's range),
-/// each with its standard deviation. Pruned (unidentifiable) parameters are left out, i.e. at
-/// their nominal value.
-///
-/// # Errors
-/// A value the device file rejects (non-finite, wrong unit).
-pub fn calibrated_device(
-    r: &Reference,
-    t: &TransmissionFit,
-    kin: &Identified,
-    notes: String,
-) -> Result<Device> {
-    let mut values = Vec::new();
-    let mut push_kept = |id: &Identified| {
-        for &i in &id.identifiability.kept {
-            let spec = id.layout.spec(i);
-            values.push(CalibratedValue {
-                name: spec.name.clone(),
-                value: id.fit.x[i],
-                std: id.std(&spec.name).unwrap_or(0.0),
-                unit: spec.unit.symbol().to_owned(),
-            });
-        }
-    };
-    for c in &t.capstans {
-        push_kept(&c.identified);
-    }
-    push_kept(&t.poly_identified);
-    push_kept(kin);
-    let meta = CalibrationMeta {
-        date: None,
-        data_hash: None,
-        notes: Some(notes),
-    };
-    Ok(r.device.with_calibration(&values, meta)?)
-}
 
 /// Runs the paper's pipeline (steps 1 and 2) on the log `log` of the device named in `truth`
 /// (whose noise model sets the weights) and returns the calibrated device file text

@@ -1,0 +1,79 @@
+//! Flags of `hapcal plan-poses` and the glue that runs it.
+
+use anyhow::{Context, Result, bail};
+use hapcal_calibrate::plan::{Measurement, PlanConfig, plan_poses, poses_csv, summary};
+use hapcal_identify::Criterion;
+
+/// Flags of `hapcal plan-poses`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct PlanArgs {
+    /// Device file (.toml) or URDF (.urdf, with --tip).
+    #[arg(long)]
+    pub device: std::path::PathBuf,
+    /// Tip link when the device is a URDF.
+    #[arg(long, default_value = "ball_link")]
+    pub tip: String,
+    /// What the rig measures.
+    #[arg(long, value_enum, default_value_t = Measurement::Distance)]
+    pub measurement: Measurement,
+    /// Number of poses to choose.
+    #[arg(long, default_value_t = 30)]
+    pub count: usize,
+    /// Candidate poses sampled uniformly within the joint limits.
+    #[arg(long, default_value_t = 1000)]
+    pub candidates: usize,
+    /// Seed of the candidate sampling.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Criterion: d-optimal (= o1 for a fixed count), o3, o4 or o5.
+    #[arg(long, default_value = "d-optimal")]
+    pub criterion: Criterion,
+    /// Measurement noise σ, m (default: the paper's σ_m of the cable encoder, else 10 µm).
+    #[arg(long)]
+    pub sigma_m: Option<f64>,
+    /// The transmissions are identified from a separate external-encoder run: plan the
+    /// measurement poses alone (without the external-encoder rows).
+    #[arg(long)]
+    pub separate_transmission_run: bool,
+    /// Refine the chosen poses by coordinate exchange over the joint box (distance, with
+    /// --separate-transmission-run; i-optimal or d-optimal).
+    #[arg(long)]
+    pub refine: bool,
+    /// Output CSV (joint readings, rad, one pose per row).
+    #[arg(long)]
+    pub out: std::path::PathBuf,
+}
+
+/// Runs `hapcal plan-poses`: returns the summary to print and the path written.
+///
+/// # Errors
+/// Unreadable device, invalid flags, a design failure, or an unwritable output.
+pub fn run_plan(args: &PlanArgs) -> Result<(String, std::path::PathBuf)> {
+    if let Some(s) = args.sigma_m
+        && !(s.is_finite() && s > 0.0)
+    {
+        bail!("--sigma-m must be a positive length, got {s}");
+    }
+    let device = crate::calibrate::load_device(&args.device, &args.tip)?;
+    let cfg = PlanConfig {
+        measurement: args.measurement,
+        count: args.count,
+        n_candidates: args.candidates,
+        seed: args.seed,
+        criterion: args.criterion,
+        sigma_m: args.sigma_m,
+        transmission_rows: !args.separate_transmission_run,
+        refine: args.refine,
+    };
+    let plan = plan_poses(&device, &cfg)?;
+    let names: Vec<String> = device
+        .chain()?
+        .joint_names()
+        .iter()
+        .map(|n| n.to_owned())
+        .collect();
+    std::fs::write(&args.out, poses_csv(&names, &plan.readings))
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    Ok((summary(&plan, &cfg), args.out.clone()))
+}
+
