@@ -42,6 +42,11 @@ pub enum ModelChoice {
     MassComplianceHarmonic,
     /// [`ModelChoice::Compliance`] plus [`ModelChoice::Harmonic`].
     ComplianceHarmonic,
+    /// A haptic device's transmissions (capstan eq. 1, the parallelogram's polynomial, from the
+    /// external encoders) and its kinematic deviations (from the cable distances): the paper's
+    /// calibration ([`crate::haptic::calibrate_logs`]); the choice of `auto` for a device file
+    /// with transmissions and logs with external-encoder columns.
+    Transmissions,
 }
 
 impl ModelChoice {
@@ -49,7 +54,7 @@ impl ModelChoice {
     /// [`ModelChoice::MassCompliance`] on a robot without published masses.
     fn compliance(self, chain: &Chain) -> Result<Option<GravityCompliance>> {
         Ok(match self {
-            ModelChoice::Auto | ModelChoice::Geometric => None,
+            ModelChoice::Auto | ModelChoice::Geometric | ModelChoice::Transmissions => None,
             ModelChoice::Harmonic | ModelChoice::Harmonic2 => None,
             ModelChoice::Compliance | ModelChoice::ComplianceHarmonic => {
                 Some(GravityCompliance::default())
@@ -102,6 +107,9 @@ pub struct Plan {
     pub folds: usize,
     /// Measurement noise (m) if known; otherwise estimated from the residuals.
     pub sigma_m: Option<f64>,
+    /// For a haptic device: identify the transmissions and the kinematics in one problem
+    /// ([`crate::haptic::identify_jointly`]) instead of the paper's two steps.
+    pub joint: bool,
 }
 
 impl Plan {
@@ -121,6 +129,7 @@ impl Plan {
             model: ModelChoice::Auto,
             folds: 5,
             sigma_m: None,
+            joint: false,
         }
     }
 }
@@ -271,8 +280,12 @@ pub struct Outcome {
     pub device: Device,
     /// Path of the device file.
     pub device_path: PathBuf,
-    /// The calibrated model.
+    /// The calibrated kinematic model.
     pub model: CalibratedModel,
+    /// The calibrated device file when the workflow writes more than kinematic deviations (a
+    /// haptic device's transmissions); `None`: [`write_outputs`] applies the report's
+    /// parameters to `device`.
+    pub calibrated: Option<Device>,
 }
 
 /// Reads the device: a TOML device file, or a URDF imported with `tip`.
@@ -663,6 +676,21 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         );
     }
     let device = load_device(&plan.device, &plan.tip)?;
+    if !device.capstans.is_empty() || device.parallelogram.is_some() {
+        if !matches!(
+            plan.model,
+            ModelChoice::Auto | ModelChoice::Transmissions | ModelChoice::Geometric
+        ) {
+            bail!(
+                "--model {:?}: a haptic device with transmissions is calibrated with the model auto, transmissions or geometric",
+                plan.model
+            );
+        }
+        return crate::haptic::calibrate_logs(plan, device, start);
+    }
+    if plan.joint {
+        bail!("--joint applies to a haptic device with transmissions (capstans, parallelogram)");
+    }
     let chain = device
         .chain()
         .with_context(|| format!("building the kinematic chain of {}", plan.device.display()))?;
@@ -737,24 +765,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             unit: layout.spec(i).unit.symbol(),
         })
         .collect();
-    let pruned = identified
-        .identifiability
-        .pruned
-        .iter()
-        .map(|p| {
-            let (reason, depends_on) = match &p.reason {
-                PruneReason::NearZeroColumn => ("near_zero_column", Vec::new()),
-                PruneReason::Dependent { on } => ("dependent", on.clone()),
-                _ => ("other", Vec::new()),
-            };
-            PrunedReport {
-                name: p.name.clone(),
-                reason,
-                depends_on,
-                std_if_kept: p.std_if_kept,
-            }
-        })
-        .collect();
+    let pruned = pruned_report(&identified);
     let correlated = identified
         .covariance
         .correlated_pairs(0.95)
@@ -834,7 +845,30 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         device,
         device_path: plan.device.clone(),
         model,
+        calibrated: None,
     })
+}
+
+/// The pruned parameters of `identified`, each with why.
+pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
+    identified
+        .identifiability
+        .pruned
+        .iter()
+        .map(|p| {
+            let (reason, depends_on) = match &p.reason {
+                PruneReason::NearZeroColumn => ("near_zero_column", Vec::new()),
+                PruneReason::Dependent { on } => ("dependent", on.clone()),
+                _ => ("other", Vec::new()),
+            };
+            PrunedReport {
+                name: p.name.clone(),
+                reason,
+                depends_on,
+                std_if_kept: p.std_if_kept,
+            }
+        })
+        .collect()
 }
 
 /// Writes the calibrated device: a `.urdf` path gets a copy of the source URDF with the
@@ -843,6 +877,20 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
 /// # Errors
 /// A `.urdf` output for a device that did not come from a URDF, or an I/O error.
 pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<()> {
+    if let Some(calibrated) = &outcome.calibrated {
+        if !out
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
+        {
+            bail!(
+                "{}: the calibrated haptic device is written as a device file (.toml)",
+                out.display()
+            );
+        }
+        let text = hapcal_io::write_device(calibrated);
+        std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
+        return Ok(());
+    }
     let values: Vec<hapcal_io::CalibratedValue> = outcome
         .report
         .parameters

@@ -695,3 +695,272 @@ pub fn calibrated_device(
     };
     Ok(r.device.with_calibration(&values, meta)?)
 }
+
+/// The paper's calibration of a haptic device from its own logs, as `hapcal calibrate` runs it
+/// on a device file with transmissions: step 1 (each capstan's eq. 1 and the parallelogram's
+/// polynomial from the external encoders `ext1..ext4`) and step 2 (kinematic deviations from
+/// the cable distances of the corrected readings), or both in one problem when `plan.joint`
+/// ([`identify_jointly`]). A log without external-encoder columns gets the kinematics alone,
+/// with a warning. Figures: distance RMS of every training and test log, nominal model on the
+/// raw readings against the calibrated model on the corrected ones.
+///
+/// # Errors
+/// A device that is not the paper's kind ([`HapticDevice::new`]), unreadable logs (file,
+/// line, column), a folder among the data, too few rows, or a failed identification.
+pub fn calibrate_logs(
+    plan: &crate::calibrate::Plan,
+    device: Device,
+    start: std::time::Instant,
+) -> Result<crate::calibrate::Outcome> {
+    use crate::calibrate::{CalibrationReport, Figures, ModelChoice, ParamReport, SetReport};
+    let haptic = HapticDevice::new(device)?;
+    let read = |paths: &[std::path::PathBuf]| -> Result<Vec<(String, Vec<LogRow>, Vec<String>)>> {
+        paths
+            .iter()
+            .map(|path| {
+                if !path.is_file() {
+                    bail!(
+                        "{}: a haptic device is calibrated from log files (CSV with q1..q{}, distance_m, ext1..ext4), not a folder",
+                        path.display(),
+                        haptic.device.n_joints()
+                    );
+                }
+                let log = hapcal_io::read_log(path, &haptic.device)
+                    .with_context(|| format!("reading log {}", path.display()))?;
+                let name = path.file_stem().map_or_else(
+                    || path.display().to_string(),
+                    |s| s.to_string_lossy().into_owned(),
+                );
+                Ok((name, log.rows, log.warnings))
+            })
+            .collect()
+    };
+    let train = read(&plan.data)?;
+    let test = read(&plan.test)?;
+    let mut warnings: Vec<String> = (train.iter().chain(&test))
+        .flat_map(|(_, _, w)| w.iter().cloned())
+        .collect();
+    let rows: Vec<LogRow> = train
+        .iter()
+        .flat_map(|(_, r, _)| r.iter().cloned())
+        .collect();
+    if rows.is_empty() {
+        bail!("the training logs have no row");
+    }
+    let has_ext = (1..=PARALLELOGRAM_JOINT).all(|j| {
+        let needed =
+            j == PARALLELOGRAM_JOINT || haptic.device.capstans.iter().any(|c| c.joint == j);
+        !needed
+            || rows
+                .iter()
+                .all(|r| r.ext.get(j - 1).copied().flatten().is_some())
+    });
+    let mut parameters = Vec::new();
+    let push_kept = |parameters: &mut Vec<ParamReport>, id: &Identified| {
+        for (&i, &std) in id.covariance.free.iter().zip(id.covariance.std().iter()) {
+            let spec = id.layout.spec(i);
+            parameters.push(ParamReport {
+                name: spec.name.clone(),
+                value: id.fit.x[i],
+                std,
+                unit: spec.unit.symbol(),
+            });
+        }
+    };
+    let (transmissions, kin, model, calibrated) = if has_ext {
+        let t = identify_transmissions(&haptic, &rows).context("step 1 (transmissions)")?;
+        let (_, kin) =
+            identify_kinematics(&haptic, &rows, Some(&t)).context("step 2 (kinematics)")?;
+        let (t, kin) = if plan.joint {
+            let (problem, joint) = identify_jointly(&haptic, &rows, &t, &kin)?;
+            // The joint covariance carries both steps' uncertainty: report it.
+            push_kept(&mut parameters, &joint);
+            split_joint(&problem, &joint, t, kin)?
+        } else {
+            for c in &t.capstans {
+                push_kept(&mut parameters, &c.identified);
+            }
+            push_kept(&mut parameters, &t.poly_identified);
+            push_kept(&mut parameters, &kin);
+            (t, kin)
+        };
+        let notes = format!(
+            "the paper's {} on {} rows; written by `hapcal calibrate`",
+            if plan.joint {
+                "joint identification"
+            } else {
+                "two steps"
+            },
+            rows.len()
+        );
+        let calibrated = calibrated_device(&haptic, &t, &kin, notes)?;
+        (Some(t), kin, ModelChoice::Transmissions, calibrated)
+    } else {
+        warnings.push(format!(
+            "the training logs have no external-encoder columns (ext1..ext{PARALLELOGRAM_JOINT}): \
+             the transmissions are not identified and the kinematic deviations absorb their errors \
+             (the paper's \"transmission errors left out\"); record the external encoders to \
+             calibrate the transmissions"
+        ));
+        let (_, kin) = identify_kinematics(&haptic, &rows, None).context("kinematics")?;
+        push_kept(&mut parameters, &kin);
+        let values: Vec<CalibratedValue> = parameters
+            .iter()
+            .map(|p| CalibratedValue {
+                name: p.name.clone(),
+                value: p.value,
+                std: p.std,
+                unit: p.unit.to_owned(),
+            })
+            .collect();
+        let meta = CalibrationMeta {
+            date: None,
+            data_hash: None,
+            notes: Some(format!(
+                "kinematics only (no external encoders) on {} rows; written by `hapcal calibrate`",
+                rows.len()
+            )),
+        };
+        let calibrated = haptic.device.with_calibration(&values, meta)?;
+        (None, kin, ModelChoice::Geometric, calibrated)
+    };
+    let x_kin: Vec<f64> = kin.fit.x.iter().copied().collect();
+    let zero = vec![0.0; haptic.chain.n_params()];
+    let distance_rms = |rows: &[LogRow], x: &[f64], t: Option<&TransmissionFit>| {
+        let r: Vec<f64> = rows
+            .iter()
+            .map(|row| {
+                let q = t.map_or_else(|| row.q.clone(), |t| t.corrected(&row.q));
+                haptic.chain.end_point(x, &q).coords.norm() - row.distance_m
+            })
+            .collect();
+        Figures {
+            mean_absolute_error_m: None,
+            distance_error_m: None,
+            distance_rms_m: Some(hapcal_metrics::rms(&r)),
+        }
+    };
+    let mut placements = Vec::new();
+    for (role, sets) in [("train", &train), ("test", &test)] {
+        for (name, rows, _) in sets {
+            placements.push(SetReport {
+                name: name.clone(),
+                role,
+                n_rows: rows.len(),
+                before: distance_rms(rows, &zero, None),
+                after: distance_rms(rows, &x_kin, transmissions.as_ref()),
+            });
+        }
+    }
+    for p in placements.iter().filter(|p| p.role == "test") {
+        if let (Some(before), Some(after)) = (p.before.distance_rms_m, p.after.distance_rms_m)
+            && after > before
+        {
+            warnings.insert(
+                0,
+                format!(
+                    "test log {}: the calibrated model is worse than the nominal one (distance RMS \
+                     {:.1} → {:.1} µm): do not use this calibration there",
+                    p.name,
+                    before * 1e6,
+                    after * 1e6
+                ),
+            );
+        }
+    }
+    let pruned = crate::calibrate::pruned_report(&kin);
+    let correlated = (kin.covariance.correlated_pairs(0.95).into_iter())
+        .map(|(a, b, c)| {
+            (
+                kin.layout.name(a).to_string(),
+                kin.layout.name(b).to_string(),
+                c,
+            )
+        })
+        .collect();
+    // Step 2's residuals are divided by the cable encoder's σ_m: its σ is a multiple of it.
+    let floor_m = haptic.noise.sigma_m_m;
+    let sigma_m = kin.sigma * floor_m;
+    if kin.sigma > 3.0 {
+        warnings.push(format!(
+            "the cable-distance residual σ = {:.1} µm is {:.0}× the cable encoder's noise \
+             (σ_m = {:.1} µm): an effect the model lacks, or a wrong nominal model",
+            sigma_m * 1e6,
+            kin.sigma,
+            floor_m * 1e6
+        ));
+    }
+    let report = CalibrationReport {
+        device: plan.device.display().to_string(),
+        model,
+        folds: plan.folds,
+        cross_validation: Vec::new(),
+        sigma_m,
+        sigma_source: match kin.sigma_source {
+            hapcal_identify::SigmaSource::Given => "given",
+            _ => "residuals",
+        },
+        parameters,
+        pruned,
+        correlated,
+        observability: None,
+        warnings,
+        termination: format!("{:?}", kin.fit.termination),
+        n_evaluations: kin.fit.n_evaluations,
+        n_jacobians: kin.fit.n_jacobians,
+        rounds: kin.rounds,
+        placements,
+        elapsed_s: start.elapsed().as_secs_f64(),
+    };
+    let kin_model = hapcal_problems::CalibratedModel {
+        x_kin: x_kin.clone(),
+        ..hapcal_problems::CalibratedModel::nominal(haptic.chain.clone())
+    };
+    Ok(crate::calibrate::Outcome {
+        report,
+        device: haptic.device.clone(),
+        device_path: plan.device.clone(),
+        model: kin_model,
+        calibrated: Some(calibrated),
+    })
+}
+
+/// The transmissions and kinematics of a joint identification, in the two steps' types (so the
+/// report and the device file are written the same way): each capstan's and the polynomial's
+/// parameters take the joint estimate; their covariances stay step 1's (the joint covariance of
+/// the kinematic parameters is `joint`'s, through `kin`'s layout).
+fn split_joint(
+    problem: &JointProblem<'_>,
+    joint: &Identified,
+    mut t: TransmissionFit,
+    mut kin: Identified,
+) -> Result<(TransmissionFit, Identified)> {
+    let nt = problem.n_trans();
+    let x = &joint.fit.x;
+    let mut offset = 0;
+    for c in &mut t.capstans {
+        let n = c.identified.fit.x.nrows();
+        for k in 0..n {
+            c.identified.fit.x[k] = x[offset + k];
+        }
+        c.params = CapstanProblem::params(c.identified.fit.x.as_ref());
+        offset += n;
+    }
+    let n_poly = t.poly_identified.fit.x.nrows();
+    for k in 0..n_poly {
+        t.poly_identified.fit.x[k] = x[offset + k];
+    }
+    t.poly = Chebyshev::try_new(
+        t.poly.lo,
+        t.poly.hi,
+        (0..n_poly).map(|k| x[offset + k]).collect(),
+    )?;
+    offset += n_poly;
+    if offset != nt {
+        bail!("joint problem layout: {offset} transmission parameters, expected {nt}");
+    }
+    for k in 0..kin.fit.x.nrows() {
+        kin.fit.x[k] = x[nt + k];
+    }
+    Ok((t, kin))
+}

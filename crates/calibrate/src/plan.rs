@@ -769,7 +769,6 @@ pub fn distance_row(
     })
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

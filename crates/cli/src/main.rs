@@ -60,6 +60,10 @@ enum Command {
         /// Measurement noise standard deviation, m (default: estimated from the residuals).
         #[arg(long)]
         sigma_m: Option<f64>,
+        /// Haptic device with transmissions: identify the transmissions and the kinematics in
+        /// one problem instead of the paper's two steps.
+        #[arg(long)]
+        joint: bool,
     },
     /// Reproduce the paper's tables on the simulated reference device (Tables 2, 3, Figs. 7, 8)
     /// and write them to --out; with --check, compare with fixtures/golden/ours/paper.csv.
@@ -170,7 +174,7 @@ enum Command {
         /// Truth file (the simulated device).
         #[arg(long)]
         truth: PathBuf,
-        /// Calibrated device file (from `hapcal calibrate-reference`).
+        /// Calibrated device file (from `hapcal calibrate --out calibrated.toml`).
         #[arg(long)]
         calibrated: PathBuf,
         /// Force-feedback gain G of the closed-loop rows.
@@ -185,20 +189,6 @@ enum Command {
         /// Where to write the SVG.
         #[arg(long, default_value = "fig12_force.svg")]
         svg: PathBuf,
-    },
-    /// Run the paper's pipeline (step 1 transmissions, step 2 kinematics) on a log of the
-    /// reference device and write the calibrated device file (kinematics in the D-H rows,
-    /// transmissions in [calibration.values]) that `hapcal force --calibrated` reads.
-    CalibrateReference {
-        /// Truth file (names the device; sets the noise model).
-        #[arg(long)]
-        truth: PathBuf,
-        /// Measurement log (CSV with ext1..ext4).
-        #[arg(long)]
-        log: PathBuf,
-        /// Output device file (.toml).
-        #[arg(long)]
-        out: PathBuf,
     },
     /// Choose the poses to measure: from candidates sampled within the joint limits, the ones
     /// that maximise an observability criterion of the identification Jacobian at the nominal
@@ -243,6 +233,7 @@ fn run(cli: Cli) -> Result<()> {
             socket_distance_m,
             folds,
             sigma_m,
+            joint,
         } => {
             let default = Plan::bundled_default();
             let plan = if device.is_none() && data.is_empty() && test.is_empty() {
@@ -251,6 +242,7 @@ fn run(cli: Cli) -> Result<()> {
                     socket_distance_m,
                     folds,
                     sigma_m,
+                    joint,
                     ..default
                 }
             } else {
@@ -263,6 +255,7 @@ fn run(cli: Cli) -> Result<()> {
                     model,
                     folds,
                     sigma_m,
+                    joint,
                 }
             };
             let outcome = calibrate::run(&plan)?;
@@ -449,12 +442,6 @@ fn run(cli: Cli) -> Result<()> {
                 std::fs::write(&svg, text).with_context(|| format!("writing {}", svg.display()))?;
                 eprintln!("hapcal: wrote {}", svg.display());
             }
-            Ok(())
-        }
-        Command::CalibrateReference { truth, log, out } => {
-            let text = hapcal::force::calibrate_reference(&truth, &log)?;
-            std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
-            eprintln!("hapcal: wrote {}", out.display());
             Ok(())
         }
         Command::PlanPoses(args) => {

@@ -76,4 +76,3 @@ pub fn run_plan(args: &PlanArgs) -> Result<(String, std::path::PathBuf)> {
         .with_context(|| format!("writing {}", args.out.display()))?;
     Ok((summary(&plan, &cfg), args.out.clone()))
 }
-

@@ -1,5 +1,5 @@
-//! `hapcal force`: what calibration does to rendered forces (paper Figs. 11–12, issue #4), and
-//! `hapcal calibrate-reference`, which writes the calibrated reference-device file it reads.
+//! `hapcal force`: what calibration does to rendered forces (paper Figs. 11–12), with the
+//! calibrated device file that `hapcal calibrate` writes from a log of the device.
 //!
 //! The calibrated model comes from the paper's pipeline ([`crate::paper`]): step 1 identifies
 //! the transmissions from the external encoders, step 2 the kinematic deviations from the cable
@@ -8,7 +8,7 @@
 //! parameters (`capstan{j}.c/re/r_o/beta_o/r_i/beta_i`, `joint4.cheb0..10`), which
 //! [`ForceModel::calibrated`] reads back.
 
-use crate::paper::{self, Reference, TransmissionFit, calibrated_device};
+use crate::paper::{Reference, TransmissionFit, calibrated_device};
 use anyhow::{Context, Result};
 use hapcal_force::{
     Direction, ForceModel, SweepConfig, SweepErrors, WallConfig, WallSample, home_readings,
@@ -18,35 +18,6 @@ use hapcal_identify::Identified;
 use hapcal_io::{CalibratedValue, CalibrationMeta, Device};
 use plotters::prelude::*;
 use std::fmt::Write;
-use std::path::Path;
-
-/// Runs the paper's pipeline (steps 1 and 2) on the log `log` of the device named in `truth`
-/// (whose noise model sets the weights) and returns the calibrated device file text
-/// ([`calibrated_device`], written by [`hapcal_io::write_device`]).
-///
-/// # Errors
-/// Unreadable files (the message names them) or a failed identification.
-pub fn calibrate_reference(truth: &Path, log: &Path) -> Result<String> {
-    let r = Reference::load(truth)?;
-    let rows = hapcal_io::read_log(log, &r.device)
-        .with_context(|| format!("reading log {}", log.display()))?
-        .rows;
-    let t = paper::identify_transmissions(&r, &rows)
-        .with_context(|| format!("step 1 on {}", log.display()))?;
-    let (_, kin) = paper::identify_kinematics(&r, &rows, Some(&t))
-        .with_context(|| format!("step 2 on {}", log.display()))?;
-    let notes = format!(
-        "paper pipeline (steps 1 and 2) on {} ({} poses); written by `hapcal calibrate-reference`",
-        log.file_name().map_or_else(
-            || log.display().to_string(),
-            |n| n.to_string_lossy().into_owned()
-        ),
-        rows.len()
-    );
-    Ok(hapcal_io::write_device(&calibrated_device(
-        &r, &t, &kin, notes,
-    )?))
-}
 
 /// Settings of [`run`].
 #[derive(Clone, Copy, Debug)]

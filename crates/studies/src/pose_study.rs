@@ -10,8 +10,8 @@ use hapcal_identify::{Criterion, DesignConfig, select_poses};
 use hapcal_io::{Device, LogRow, N_EXT};
 use hapcal_sim::NoiseModel;
 use rand::{Rng, SeedableRng};
-use rand_distr::StandardNormal;
 use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
 
 /// Simulates the truth device at given readings: the planned-pose counterpart of
 /// [`hapcal_sim::simulate`], with the same noise and quantisation (per pose, one standard normal
@@ -928,7 +928,6 @@ pub fn run_bound(args: &BoundArgs, progress: &dyn Fn(&str)) -> Result<String> {
     Ok(text)
 }
 
-
 /// `W_S = mean over readings of G_qᵀG_q`, `G_q` the 3 × `kept.len()` end-point Jacobian (m per
 /// unit parameter) in the base frame (columns of a fixed rig → base row are zero): the weight
 /// of the validation position mean square, [`Candidates::weight`] without transmissions.
@@ -996,5 +995,4 @@ mod tests {
             at(0.5 * (lo + hi))
         );
     }
-
 }

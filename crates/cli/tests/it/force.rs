@@ -1,9 +1,9 @@
-//! `hapcal force` and `hapcal calibrate-reference` end to end.
+//! `hapcal calibrate` on a haptic device's log and `hapcal force` end to end.
 
 use super::{hapcal, root, scratch, stderr};
 
-/// The committed calibrated reference device is exactly what `calibrate-reference` writes from
-/// the committed log, and `hapcal force` prints the Fig. 12 table, the distributions and writes
+/// The committed calibrated reference device is exactly what `hapcal calibrate` writes from
+/// the committed log (no truth file), and `hapcal force` prints the Fig. 12 table, the distributions and writes
 /// the SVG.
 #[test]
 fn force_reports_fig12_and_distributions() {
@@ -11,10 +11,10 @@ fn force_reports_fig12_and_distributions() {
     let out = scratch("force");
     let calibrated = out.join("calibrated.toml");
     let run = hapcal(&[
-        "calibrate-reference",
-        "--truth",
-        &dir.join("truth.toml").display().to_string(),
-        "--log",
+        "calibrate",
+        "--device",
+        &dir.join("device.toml").display().to_string(),
+        "--data",
         &dir.join("log.csv").display().to_string(),
         "--out",
         &calibrated.display().to_string(),
