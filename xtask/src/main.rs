@@ -3,6 +3,7 @@
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a task runner reports on the terminal
 
 mod bench;
+mod haptic;
 mod mukca;
 
 use anyhow::Result;
@@ -39,6 +40,14 @@ enum Task {
         #[arg(long)]
         check: bool,
     },
+    /// The reference haptic device calibrated from its own time-ordered logs (no truth file),
+    /// first 70 % of the rows train, the rest test, into docs/results/haptic-heldout.md;
+    /// `--check` only verifies the held-out limit.
+    HapticHeldout {
+        /// Verify instead of writing.
+        #[arg(long)]
+        check: bool,
+    },
     /// Scale benchmarks (reference device at 200 to 1,000,000 poses, the 1,000-device fleet)
     /// into docs/results/bench.md; `--peers` adds SciPy least_squares (lm, trf) on the same
     /// data files, in a virtual environment under the target directory.
@@ -62,6 +71,7 @@ fn main() -> Result<()> {
     match Task::parse() {
         Task::Ci => ci(&sh),
         Task::Mukca { check } => mukca::run(&sh, check),
+        Task::HapticHeldout { check } => haptic::run(&sh, check),
         Task::Bench { peers, criterion } => bench::run(&sh, peers, criterion),
         Task::BlindTest { cases } => blind_test(&sh, cases),
         Task::ReproduceTables { check } => reproduce_tables(&sh, check),
