@@ -51,7 +51,7 @@ fn split(text: &str) -> Result<(String, String)> {
 }
 
 /// Runs the study; with `check`, only verifies the limit.
-pub fn run(sh: &Shell, check: bool) -> Result<()> {
+pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     cmd!(sh, "cargo build --release --quiet -p hapcal").run()?;
     let dir = sh.current_dir().join("target/haptic-heldout");
     sh.create_dir(&dir)?;
@@ -117,15 +117,15 @@ pub fn run(sh: &Shell, check: bool) -> Result<()> {
             joint * 1e6
         );
     }
-    let mean = |f: &dyn Fn(&(u64, f64, f64, f64)) -> f64| {
-        rows.iter().map(f).sum::<f64>() / rows.len() as f64
+    let mean = |column: fn(&(u64, f64, f64, f64)) -> f64| {
+        rows.iter().map(column).sum::<f64>() / rows.len() as f64
     };
     let _ = writeln!(
         md,
         "| mean | {:.1} | {:.1} | {:.1} |\n\nWorst held-out RMS: {:.1} µm (limit {:.0} µm). These are measured against the logged (noisy) cable distances. The paper pipeline's study on independent random poses (docs/results/paper/README.md, seed 0) gives 5.4 µm on fresh poses measured against the true, noise-free distance; with the cable noise of about 10 µm added in quadrature that is about 11 µm, the level seen here.",
-        mean(&|r| r.1) * 1e6,
-        mean(&|r| r.2) * 1e6,
-        mean(&|r| r.3) * 1e6,
+        mean(|r| r.1) * 1e6,
+        mean(|r| r.2) * 1e6,
+        mean(|r| r.3) * 1e6,
         worst * 1e6,
         LIMIT_M * 1e6
     );

@@ -713,8 +713,10 @@ pub fn calibrate_logs(
     start: std::time::Instant,
 ) -> Result<crate::calibrate::Outcome> {
     use crate::calibrate::{CalibrationReport, Figures, ModelChoice, ParamReport, SetReport};
+    /// One log: its name, its rows and the reader's warnings.
+    type NamedLog = (String, Vec<LogRow>, Vec<String>);
     let haptic = HapticDevice::new(device)?;
-    let read = |paths: &[std::path::PathBuf]| -> Result<Vec<(String, Vec<LogRow>, Vec<String>)>> {
+    let read = |paths: &[std::path::PathBuf]| -> Result<Vec<NamedLog>> {
         paths
             .iter()
             .map(|path| {
