@@ -67,6 +67,7 @@ mod observability;
 mod problem;
 mod rank;
 mod sparse;
+mod subset;
 
 pub use blocks::{N_LEAVES, RowBlocks, levenberg_marquardt_streaming};
 pub use calibrate::{
@@ -88,3 +89,4 @@ pub use rank::{
     Identifiability, PruneReason, Pruned, RankConfig, RankConfigBase, TieBreak, identifiability,
 };
 pub use sparse::{SparseFit, SparseJacobian, levenberg_marquardt_sparse};
+pub use subset::Subset;

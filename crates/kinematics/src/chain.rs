@@ -119,10 +119,10 @@ fn apply(pose: &mut Isometry3<f64>, factor: &Factor, x: &[f64], q: &[f64]) {
 /// the frame after the last factor.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Chain {
-    factors: Vec<Factor>,
-    params: Vec<ParamInfo>,
-    joint_names: Vec<String>,
-    element_names: Vec<String>,
+    pub(crate) factors: Vec<Factor>,
+    pub(crate) params: Vec<ParamInfo>,
+    pub(crate) joint_names: Vec<String>,
+    pub(crate) element_names: Vec<String>,
 }
 
 /// Reusable buffers for [`Chain::point_and_jacobian_in`], so the hot path allocates
@@ -408,6 +408,61 @@ impl Chain {
             }
         }
         Point3::from(tip)
+    }
+
+    /// Tip pose (base frame, m) and its Jacobian with respect to `x`, without allocating
+    /// once `ws` has grown to the chain.
+    ///
+    /// `jac_out` has length `6 · n_params()`, column-major 6 × `n_params()`: rows 0–2 are
+    /// `∂p/∂x_j` as in [`Chain::point_and_jacobian_in`], rows 3–5 the rotation vector `ω`
+    /// with `δR = [ω]× R` per unit parameter (base frame), as in
+    /// [`Chain::pose_jacobian_wrt_params`].
+    ///
+    /// # Panics
+    ///
+    /// If `x.len() != n_params()`, `q.len() != n_joints()` or
+    /// `jac_out.len() != 6 * n_params()`.
+    #[track_caller]
+    pub fn pose_and_jacobian_in(
+        &self,
+        x: &[f64],
+        q: &[f64],
+        ws: &mut FkWorkspace,
+        jac_out: &mut [f64],
+    ) -> Isometry3<f64> {
+        self.check_shapes(x, q);
+        assert_eq!(
+            jac_out.len(),
+            6 * self.n_params(),
+            "jac_out has length {}, expected 6 × {} parameters",
+            jac_out.len(),
+            self.n_params()
+        );
+        self.fill_poses(x, q, &mut ws.poses);
+        let end = ws.poses.last().copied().unwrap_or_else(Isometry3::identity);
+        let tip = end.translation.vector;
+        jac_out.fill(0.0);
+        for (factor, pose) in self.factors.iter().zip(&ws.poses) {
+            if let Factor::Screw {
+                motion,
+                axis,
+                param: Some(j),
+                ..
+            } = factor
+            {
+                let w = pose.rotation * axis.into_inner();
+                let (linear, angular) = match motion {
+                    Motion::Rotation => (w.cross(&(tip - pose.translation.vector)), w),
+                    Motion::Translation => (w, Vector3::zeros()),
+                };
+                let col = &mut jac_out[6 * j..6 * j + 6];
+                for k in 0..3 {
+                    col[k] += linear[k];
+                    col[3 + k] += angular[k];
+                }
+            }
+        }
+        end
     }
 
     /// Jacobian of the end point with respect to `x`: 3 × `n_params()`, base frame,

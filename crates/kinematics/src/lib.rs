@@ -53,13 +53,15 @@ mod dh;
 mod error;
 mod frozen;
 mod placement;
+mod tree;
 
 pub use chain::{Chain, Factor, FkWorkspace, Motion, ParamInfo, ParamUnit};
 pub use dh::{DhConvention, DhRow};
 pub use error::Error;
 pub use frozen::{FrozenChain, LANES, joint_trig, joint_trig_lanes};
-pub use nalgebra::{Isometry3, Matrix3xX, Matrix6xX, Point3, Unit, Vector3};
+pub use nalgebra::{Isometry3, Matrix3xX, Matrix6xX, Point3, Unit, UnitQuaternion, Vector3};
 pub use placement::Placement;
+pub use tree::{FrameSpec, Tree};
 
 #[cfg(test)]
 mod tests;

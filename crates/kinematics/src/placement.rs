@@ -36,7 +36,7 @@ impl Placement {
 }
 
 /// Pushes the six deviation factors `Tx(x)·Ty(y)·Tz(z)·Rx(rx)·Ry(ry)·Rz(rz)` of `name`.
-fn push_deviation(
+pub(crate) fn push_deviation(
     factors: &mut Vec<Factor>,
     params: &mut Vec<ParamInfo>,
     name: &str,

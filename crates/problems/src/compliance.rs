@@ -137,6 +137,22 @@ impl GravityCompliance {
         })
     }
 
+    /// Link masses from a robot description (a URDF's `<inertial>` tags), one compliance per
+    /// joint, gravity along `gravity_dir` (normalised; `−z` if it has no length) in the
+    /// chain's base frame. Torques in N·m, `k_j` in rad/(N·m).
+    pub fn from_link_masses(masses: Vec<LinkMass>, gravity_dir: Vector3<f64>) -> Self {
+        let norm = gravity_dir.norm();
+        Self {
+            gravity_dir: if norm > 0.0 && norm.is_finite() {
+                gravity_dir / norm
+            } else {
+                -Vector3::z()
+            },
+            masses,
+            groups: Vec::new(),
+        }
+    }
+
     /// [`Self::published`] with one compliance per actuator size instead of per joint (fewer
     /// parameters, the same torque shapes): the Panda's joints 1–4 and 5–7 (rated 87 and
     /// 12 N·m, Franka Emika datasheet), the iiwa 14's A1–A2, A3–A4, A5 and A6–A7 (rated 320,
@@ -180,15 +196,18 @@ impl GravityCompliance {
         let mut link = vec![hapcal_kinematics::Isometry3::identity(); n];
         for (factor, pose) in chain.factors().iter().zip(&poses) {
             if let Factor::Screw {
-                motion: Motion::Rotation,
+                motion,
                 axis: a,
                 joint: Some(j),
                 ..
             } = factor
             {
-                origin[*j] = pose.translation.vector;
-                axis[*j] = pose.rotation * a.into_inner();
+                // A prismatic joint carries its link (and its masses) but no torque.
                 link[*j] = *pose;
+                if *motion == Motion::Rotation {
+                    origin[*j] = pose.translation.vector;
+                    axis[*j] = pose.rotation * a.into_inner();
+                }
             }
         }
         let g = self.gravity_dir;

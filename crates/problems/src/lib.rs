@@ -42,7 +42,9 @@ pub use compliance::{GravityCompliance, LinkMass};
 pub use fleet::{FleetDevice, FleetProblem, cable_angle, fleet_initial_guess};
 pub use harmonics::JointHarmonics;
 pub use model::CalibratedModel;
-pub use problem::{CalibrationProblem, Observations, PointDistance, Row, RowKind, Weights};
+pub use problem::{
+    CalibrationProblem, ModelTerms, Observations, PointDistance, Row, RowKind, Weights,
+};
 
 /// Errors of problem construction: inconsistent observations.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

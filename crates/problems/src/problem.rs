@@ -5,9 +5,10 @@ use crate::{CalibratedModel, Error, GravityCompliance, JointHarmonics};
 use faer::{Col, ColMut, ColRef, Mat, MatMut};
 use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
 use hapcal_kinematics::{
-    Chain, FkWorkspace, FrozenChain, LANES, ParamUnit, Point3, Vector3, joint_trig,
+    Chain, FkWorkspace, FrozenChain, LANES, ParamUnit, Point3, UnitQuaternion, Vector3, joint_trig,
     joint_trig_lanes,
 };
+use nalgebra::Quaternion;
 use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::{Arc, Mutex};
@@ -30,6 +31,49 @@ pub enum RowKind {
         /// Index of the unknown point, `0..n_points`.
         point: usize,
     },
+    /// Origin of tip `tip`'s frame measured in the instrument frame, m (a laser tracker's
+    /// or motion capture's marker; the tip chain carries the instrument and marker frames,
+    /// [`hapcal_kinematics::Tree::with_frames`]); 3 residuals `(p − p_meas)/σ_position`.
+    Marker {
+        /// Index into the problem's tips ([`CalibrationProblem::on_tree`]).
+        tip: usize,
+        /// Measured position, m.
+        position_m: [f64; 3],
+    },
+    /// Pose of tip `tip`'s frame measured in the instrument frame (a camera seeing a target);
+    /// 6 residuals: `(p − p_meas)/σ_position` and `log(R_measᵀ·R)/σ_orientation` (the
+    /// rotation vector of the relative rotation, tip frame, rad).
+    Pose {
+        /// Index into the problem's tips.
+        tip: usize,
+        /// Measured position, m.
+        position_m: [f64; 3],
+        /// Measured orientation, unit quaternion `[w, x, y, z]`.
+        rotation: [f64; 4],
+    },
+}
+
+impl RowKind {
+    /// Number of residuals a row of this kind contributes.
+    pub fn n_residuals(&self) -> usize {
+        match self {
+            RowKind::Distance { .. } => 1,
+            RowKind::Position { .. } | RowKind::Point { .. } | RowKind::Marker { .. } => 3,
+            RowKind::Pose { .. } => 6,
+        }
+    }
+}
+
+/// Model terms besides the kinematic deviations.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ModelTerms {
+    /// Gravity compliance, if modelled.
+    pub compliance: Option<GravityCompliance>,
+    /// Joint angle harmonics, if modelled.
+    pub harmonics: Option<JointHarmonics>,
+    /// The chain whose base frame gravity is expressed in, for the compliance torques (the
+    /// robot without the instrument frame); `None` = the problem's first tip.
+    pub torque_chain: Option<Chain>,
 }
 
 /// One measured configuration.
@@ -74,6 +118,8 @@ pub struct Weights {
     pub sigma_point_m: f64,
     /// Known distance between points (tool manufacturing tolerance), m.
     pub sigma_point_distance_m: f64,
+    /// Measured orientation (pose rows), per axis of the rotation vector, rad.
+    pub sigma_orientation_rad: f64,
 }
 
 impl Default for Weights {
@@ -85,6 +131,7 @@ impl Default for Weights {
             sigma_position_m: 1.0,
             sigma_point_m: 1.0,
             sigma_point_distance_m: 1.0,
+            sigma_orientation_rad: 1.0,
         }
     }
 }
@@ -93,6 +140,10 @@ impl Default for Weights {
 #[derive(Debug)]
 pub struct CalibrationProblem {
     chain: Chain,
+    /// The chain of each tip (marker and pose rows); `[chain]` unless built on a tree.
+    tips: Vec<Chain>,
+    /// The chain of the compliance torques, if not `chain`.
+    torque_chain: Option<Chain>,
     obs: Observations,
     weights: Weights,
     compliance: Option<GravityCompliance>,
@@ -165,11 +216,66 @@ impl CalibrationProblem {
         compliance: Option<GravityCompliance>,
         harmonics: Option<JointHarmonics>,
     ) -> Result<Self, Error> {
+        Self::build(
+            vec![chain],
+            obs,
+            weights,
+            ModelTerms {
+                compliance,
+                harmonics,
+                torque_chain: None,
+            },
+        )
+    }
+
+    /// Builds the problem on a kinematic tree: rows of kind [`RowKind::Marker`] and
+    /// [`RowKind::Pose`] name the tip they measure, every other row measures the first tip.
+    /// `x = [tree parameters | compliance | harmonics | points]`.
+    ///
+    /// # Errors
+    /// As [`Self::with_harmonics`]; [`Error::NoSuchParam`] for a row naming a tip the tree
+    /// does not have (index reported as the tip), or a torque chain whose joint count differs
+    /// from the tree's.
+    pub fn on_tree(
+        tree: hapcal_kinematics::Tree,
+        obs: Observations,
+        weights: Weights,
+        terms: ModelTerms,
+    ) -> Result<Self, Error> {
+        Self::build(tree.tips().to_vec(), obs, weights, terms)
+    }
+
+    fn build(
+        tips: Vec<Chain>,
+        obs: Observations,
+        weights: Weights,
+        terms: ModelTerms,
+    ) -> Result<Self, Error> {
+        let ModelTerms {
+            compliance,
+            harmonics,
+            torque_chain,
+        } = terms;
+        let Some(chain) = tips.first().cloned() else {
+            return Err(Error::NoSuchParam {
+                index: 0,
+                n_params: 0,
+            });
+        };
+        if let Some(t) = &torque_chain
+            && t.n_joints() != chain.n_joints()
+        {
+            return Err(Error::NoSuchParam {
+                index: t.n_joints(),
+                n_params: chain.n_joints(),
+            });
+        }
         for (name, value) in [
             ("sigma_distance_m", weights.sigma_distance_m),
             ("sigma_position_m", weights.sigma_position_m),
             ("sigma_point_m", weights.sigma_point_m),
             ("sigma_point_distance_m", weights.sigma_point_distance_m),
+            ("sigma_orientation_rad", weights.sigma_orientation_rad),
         ] {
             if !(value.is_finite() && value > 0.0) {
                 return Err(Error::BadSigma { name, value });
@@ -190,6 +296,15 @@ impl CalibrationProblem {
                     RowKind::Distance { distance_m } => distance_m.is_finite(),
                     RowKind::Position { position_m } => position_m.iter().all(|v| v.is_finite()),
                     RowKind::Point { .. } => true,
+                    RowKind::Marker { position_m, .. } => position_m.iter().all(|v| v.is_finite()),
+                    RowKind::Pose {
+                        position_m,
+                        rotation,
+                        ..
+                    } => {
+                        position_m.iter().chain(rotation).all(|v| v.is_finite())
+                            && rotation.iter().map(|v| v * v).sum::<f64>() > 0.0
+                    }
                 };
             if !finite {
                 return Err(Error::NotFinite { row: row_idx });
@@ -197,6 +312,14 @@ impl CalibrationProblem {
             n_residuals += match row.kind {
                 RowKind::Distance { .. } => 1,
                 RowKind::Position { .. } => 3,
+                RowKind::Marker { tip, .. } | RowKind::Pose { tip, .. } if tip >= tips.len() => {
+                    return Err(Error::NoSuchParam {
+                        index: tip,
+                        n_params: tips.len(),
+                    });
+                }
+                RowKind::Marker { .. } => 3,
+                RowKind::Pose { .. } => 6,
                 RowKind::Point { point } => {
                     if point >= obs.n_points {
                         return Err(Error::NoSuchPoint {
@@ -262,7 +385,9 @@ impl CalibrationProblem {
                 }));
                 obs.rows
                     .iter()
-                    .map(|row| model.lumped_torques(&chain, &row.q))
+                    .map(|row| {
+                        model.lumped_torques(torque_chain.as_ref().unwrap_or(&chain), &row.q)
+                    })
                     .collect()
             }
             None => Vec::new(),
@@ -315,10 +440,7 @@ impl CalibrationProblem {
             let end = (start + ROWS_PER_BLOCK).min(n_rows);
             let len: usize = obs.rows[start..end]
                 .iter()
-                .map(|row| match row.kind {
-                    RowKind::Distance { .. } => 1,
-                    _ => 3,
-                })
+                .map(|row| row.kind.n_residuals())
                 .sum();
             let extra = if end == n_rows {
                 obs.point_distances.len()
@@ -376,6 +498,8 @@ impl CalibrationProblem {
         }
         Ok(Self {
             chain,
+            tips,
+            torque_chain,
             obs,
             weights,
             compliance,
@@ -393,9 +517,14 @@ impl CalibrationProblem {
         })
     }
 
-    /// The chain.
+    /// The chain (the first tip's).
     pub fn chain(&self) -> &Chain {
         &self.chain
+    }
+
+    /// The chain of every tip (`[chain]` unless built by [`Self::on_tree`]).
+    pub fn tips(&self) -> &[Chain] {
+        &self.tips
     }
 
     /// The observations.
@@ -474,6 +603,12 @@ impl CalibrationProblem {
         });
         CalibratedModel {
             chain: self.chain.clone(),
+            tips: if self.tips.len() > 1 || self.torque_chain.is_some() {
+                self.tips.clone()
+            } else {
+                Vec::new()
+            },
+            torque_chain: self.torque_chain.clone(),
             x_kin,
             compliance,
             harmonics,
@@ -634,6 +769,7 @@ impl CalibrationProblem {
         let mut buf = Vec::new();
         let mut q_buf = Vec::new();
         let mut grad = Vec::new();
+        let mut x_kin: Vec<f64> = Vec::new();
         let n_joints = self.chain.n_joints();
         let s_distance = self.weights.sigma_distance_m;
         let inv_s_distance = 1.0 / s_distance;
@@ -710,6 +846,79 @@ impl CalibrationProblem {
                     o[r] = (p.coords.norm() - distance_m) / s_distance;
                 }
                 r += 1;
+                continue;
+            }
+            if let RowKind::Marker { tip, position_m }
+            | RowKind::Pose {
+                tip, position_m, ..
+            } = &row.kind
+            {
+                let q_eff = self.effective_q(row_idx, x, &mut q_buf);
+                let chain = &self.tips[*tip];
+                if x_kin.is_empty() {
+                    x_kin.extend((0..n_kin).map(|i| x[i]));
+                }
+                let pose = if jac.is_some() {
+                    buf.resize(6 * n_kin, 0.0);
+                    let ws = ws.get_or_insert_with(|| FkWorkspace::new(chain));
+                    chain.pose_and_jacobian_in(&x_kin, q_eff, ws, &mut buf)
+                } else {
+                    chain.end_pose(&x_kin, q_eff)
+                };
+                let jq =
+                    (n_comp > 0 && jac.is_some()).then(|| chain.geometric_jacobian(&x_kin, q_eff));
+                let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
+                // Row k of the pose Jacobian (0–2 position, 3–5 rotation vector) at column col.
+                let dpose = |k: usize, col: usize| -> f64 {
+                    if col < n_kin {
+                        buf[6 * col + k]
+                    } else {
+                        let g = col - n_kin;
+                        jq.as_ref().map_or(0.0, |m| {
+                            (self.angle_terms.iter().zip(basis))
+                                .filter(|((_, param), _)| *param == g)
+                                .map(|((j, _), b)| m[(k, *j)] * b)
+                                .sum()
+                        })
+                    }
+                };
+                let s = self.weights.sigma_position_m;
+                let p = pose.translation.vector;
+                for k in 0..3 {
+                    if let Some(o) = out.as_mut() {
+                        o[r + k] = (p[k] - position_m[k]) / s;
+                    }
+                    if let Some(j) = jac.as_mut() {
+                        for (col, c) in j.iter_mut().enumerate().take(n_kin + n_comp) {
+                            c[r + k] = dpose(k, col) / s;
+                        }
+                    }
+                }
+                r += 3;
+                if let RowKind::Pose { rotation, .. } = &row.kind {
+                    let s = self.weights.sigma_orientation_rad;
+                    let [w, qx, qy, qz] = *rotation;
+                    let measured = UnitQuaternion::from_quaternion(Quaternion::new(w, qx, qy, qz));
+                    let phi = (measured.inverse() * pose.rotation).scaled_axis();
+                    // dφ = J_r⁻¹(φ)·Rᵀ·ω for a base-frame rotation ω of the tip.
+                    let to_phi = right_jacobian_inverse(&phi)
+                        * pose.rotation.inverse().to_rotation_matrix().matrix();
+                    if let Some(o) = out.as_mut() {
+                        for k in 0..3 {
+                            o[r + k] = phi[k] / s;
+                        }
+                    }
+                    if let Some(j) = jac.as_mut() {
+                        for (col, c) in j.iter_mut().enumerate().take(n_kin + n_comp) {
+                            let omega = Vector3::new(dpose(3, col), dpose(4, col), dpose(5, col));
+                            let d = to_phi * omega;
+                            for k in 0..3 {
+                                c[r + k] = d[k] / s;
+                            }
+                        }
+                    }
+                    r += 3;
+                }
                 continue;
             }
             let q_eff = self.effective_q(row_idx, x, &mut q_buf);
@@ -790,6 +999,8 @@ impl CalibrationProblem {
                     }
                     r += 3;
                 }
+                // Evaluated on their tip's chain above.
+                RowKind::Marker { .. } | RowKind::Pose { .. } => {}
             }
         }
         let s = self.weights.sigma_point_distance_m;
@@ -970,6 +1181,21 @@ impl CalibrationProblem {
             reason: format!("block {block} of {}", self.blocks.len()),
         })
     }
+}
+
+/// The inverse right Jacobian of SO(3) at the rotation vector `phi`:
+/// `log(exp([φ]×)·exp([δ]×)) ≈ φ + J_r⁻¹(φ)·δ`,
+/// `J_r⁻¹(φ) = I + ½[φ]× + (1/θ² − (1 + cos θ)/(2θ sin θ))·[φ]×²`, θ = |φ| (Barfoot,
+/// *State Estimation for Robotics*, 2017, eq. 7.95); the series `1/12 + θ²/720` below 1e-4.
+fn right_jacobian_inverse(phi: &Vector3<f64>) -> nalgebra::Matrix3<f64> {
+    let theta = phi.norm();
+    let k = phi.cross_matrix();
+    let c = if theta < 1e-4 {
+        1.0 / 12.0 + theta * theta / 720.0
+    } else {
+        1.0 / (theta * theta) - (1.0 + theta.cos()) / (2.0 * theta * theta.sin())
+    };
+    nalgebra::Matrix3::identity() + 0.5 * k + c * k * k
 }
 
 fn check_shape(nx: usize, n: usize, nr: usize, m: usize) -> Result<(), EvalError> {

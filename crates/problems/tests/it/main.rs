@@ -4,6 +4,7 @@ mod crosscheck;
 mod fleet;
 mod identifiability;
 mod streaming;
+mod tree;
 
 use faer::{Col, Mat};
 use hapcal_identify::Problem;
@@ -106,6 +107,7 @@ fn problem_with_models(
         sigma_position_m: 2e-5,
         sigma_point_m: 5e-5,
         sigma_point_distance_m: 1e-4,
+        sigma_orientation_rad: 1.0,
     };
     CalibrationProblem::with_harmonics(iiwa_like(), obs, weights, compliance, harmonics)
         .expect("valid")

@@ -1,0 +1,120 @@
+//! A problem with some parameters held at fixed values: the model ladder's rungs (frames
+//! only, joint offsets, …) fit subsets of one problem's parameters.
+
+use faer::{Col, ColMut, ColRef, Mat, MatMut};
+
+use crate::{EvalError, ParamLayout, Problem};
+
+/// `problem` restricted to the parameters `free`; the others stay at their values in `x_full`.
+///
+/// Its layout is the free parameters' specs in ascending index order; residuals are the
+/// problem's; the Jacobian is the problem's free columns.
+#[derive(Debug)]
+pub struct Subset<'a, P: Problem + ?Sized> {
+    problem: &'a P,
+    free: Vec<usize>,
+    x_full: Col<f64>,
+    layout: ParamLayout,
+}
+
+impl<'a, P: Problem + ?Sized> Subset<'a, P> {
+    /// The subset of `problem` whose free parameters are `free` (indices into its layout;
+    /// sorted, duplicates and indices past the layout dropped), the others fixed at
+    /// `x_full` (length `problem.layout().len()`; shorter is padded with zeros).
+    pub fn new(problem: &'a P, mut free: Vec<usize>, x_full: Col<f64>) -> Self {
+        let n = problem.layout().len();
+        free.retain(|&i| i < n);
+        free.sort_unstable();
+        free.dedup();
+        let x_full = Col::from_fn(n, |i| if i < x_full.nrows() { x_full[i] } else { 0.0 });
+        let layout = ParamLayout::new(
+            free.iter()
+                .map(|&i| problem.layout().spec(i).clone())
+                .collect(),
+        );
+        Self {
+            problem,
+            free,
+            x_full,
+            layout,
+        }
+    }
+
+    /// Indices of the free parameters in the full layout.
+    pub fn free(&self) -> &[usize] {
+        &self.free
+    }
+
+    /// The free parameters' values in `x_full` (the start of a fit).
+    pub fn initial_free(&self) -> Col<f64> {
+        Col::from_fn(self.free.len(), |k| self.x_full[self.free[k]])
+    }
+
+    /// The full parameter vector with the free entries set to `x_free`.
+    ///
+    /// # Panics
+    /// If `x_free.nrows() != free().len()`.
+    #[track_caller]
+    pub fn full_x(&self, x_free: ColRef<'_, f64>) -> Col<f64> {
+        assert_eq!(x_free.nrows(), self.free.len(), "free parameter count");
+        let mut x = self.x_full.clone();
+        for (k, &i) in self.free.iter().enumerate() {
+            x[i] = x_free[k];
+        }
+        x
+    }
+
+    fn full_checked(&self, x_free: ColRef<'_, f64>) -> Result<Col<f64>, EvalError> {
+        if x_free.nrows() != self.free.len() {
+            return Err(EvalError {
+                reason: format!(
+                    "x has {} entries, expected {} free parameters",
+                    x_free.nrows(),
+                    self.free.len()
+                ),
+            });
+        }
+        Ok(self.full_x(x_free))
+    }
+}
+
+impl<P: Problem + ?Sized> Problem for Subset<'_, P> {
+    fn layout(&self) -> &ParamLayout {
+        &self.layout
+    }
+
+    fn n_residuals(&self) -> usize {
+        self.problem.n_residuals()
+    }
+
+    fn residuals(&self, x: ColRef<'_, f64>, out: ColMut<'_, f64>) -> Result<(), EvalError> {
+        let x = self.full_checked(x)?;
+        self.problem.residuals(x.as_ref(), out)
+    }
+
+    fn jacobian(&self, x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+        let x = self.full_checked(x)?;
+        let mut full = Mat::<f64>::zeros(self.problem.n_residuals(), x.nrows());
+        self.problem.jacobian(x.as_ref(), full.as_mut())?;
+        for (k, &i) in self.free.iter().enumerate() {
+            jac.as_mut().col_mut(k).copy_from(full.col(i));
+        }
+        Ok(())
+    }
+
+    fn residuals_and_jacobian(
+        &self,
+        x: ColRef<'_, f64>,
+        out: ColMut<'_, f64>,
+        mut jac: MatMut<'_, f64>,
+    ) -> Result<(), EvalError> {
+        let x = self.full_checked(x)?;
+        let mut full = Mat::<f64>::zeros(self.problem.n_residuals(), x.nrows());
+        self.problem
+            .residuals_and_jacobian(x.as_ref(), out, full.as_mut())?;
+        for (k, &i) in self.free.iter().enumerate() {
+            jac.as_mut().col_mut(k).copy_from(full.col(i));
+        }
+        Ok(())
+    }
+}
