@@ -18,8 +18,13 @@ use std::time::Instant;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum ModelChoice {
-    /// Choose by k-fold cross-validation on the training data only.
+    /// Choose by k-fold cross-validation on the training data only (for marker data: the
+    /// ladder frames only → joint offsets → geometric → compliance, [`crate::measured`]).
     Auto,
+    /// Marker data: the nominal kinematics, only the instrument and marker frames fitted.
+    FramesOnly,
+    /// Marker data: the frames plus one offset per joint.
+    JointOffsets,
     /// Kinematic parameters only.
     Geometric,
     /// Kinematic parameters plus lumped gravity compliance per joint.
@@ -54,7 +59,11 @@ impl ModelChoice {
     /// [`ModelChoice::MassCompliance`] on a robot without published masses.
     fn compliance(self, chain: &Chain) -> Result<Option<GravityCompliance>> {
         Ok(match self {
-            ModelChoice::Auto | ModelChoice::Geometric | ModelChoice::Transmissions => None,
+            ModelChoice::Auto
+            | ModelChoice::Geometric
+            | ModelChoice::Transmissions
+            | ModelChoice::FramesOnly
+            | ModelChoice::JointOffsets => None,
             ModelChoice::Harmonic | ModelChoice::Harmonic2 => None,
             ModelChoice::Compliance | ModelChoice::ComplianceHarmonic => {
                 Some(GravityCompliance::default())
@@ -95,6 +104,16 @@ pub struct Plan {
     pub device: PathBuf,
     /// Tip link for a URDF device.
     pub tip: String,
+    /// Further tip links of a URDF tree (marker `k + 1` sits on tip `k` of `[tip, tips…]`;
+    /// markers past the last tip sit on it).
+    pub tips: Vec<String>,
+    /// Units of lengths and angles in the measurement files.
+    pub units: hapcal_io::Units,
+    /// Orientation noise σ, rad, of pose data, if known.
+    pub sigma_rad: Option<f64>,
+    /// Marker data: hold out this fraction of each training file's rows, the last ones in
+    /// file order, as a test set (`round((1 − f)·n)` rows train); `None` holds out nothing.
+    pub test_last: Option<f64>,
     /// Training data: MUKCa placement or run folders, or hapcal log CSVs.
     pub data: Vec<PathBuf>,
     /// Test data (same kinds); never used to fit or to choose settings.
@@ -120,6 +139,10 @@ impl Plan {
         Self {
             device: root.join("urdf/iiwa14.urdf"),
             tip: "ball_link".into(),
+            tips: Vec::new(),
+            units: hapcal_io::Units::default(),
+            sigma_rad: None,
+            test_last: None,
             data: vec![root.join("data/kuka_14/front")],
             test: vec![
                 root.join("data/kuka_14/left_back"),
@@ -171,6 +194,9 @@ pub struct Figures {
     /// RMS of the distance residual, m; distance logs only.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub distance_rms_m: Option<f64>,
+    /// Position and orientation errors of marker data.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose: Option<crate::measured::PoseFigures>,
 }
 
 /// Figures of one data set before and after calibration.
@@ -243,6 +269,12 @@ pub struct CalibrationReport {
     pub folds: usize,
     /// Cross-validation scores (empty when the model was given).
     pub cross_validation: Vec<CvReport>,
+    /// Marker data: held-out score of each rung of the model ladder (empty otherwise).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub ladder: Vec<crate::measured::RungReport>,
+    /// Marker data: the identified instrument and marker frames.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub frames: Vec<crate::measured::FrameReport>,
     /// Residual noise used for the rank decision and the covariance, m.
     pub sigma_m: f64,
     /// `given` or `residuals`.
@@ -428,18 +460,18 @@ pub const CV_SIGNIFICANCE_Z: f64 = 1.0;
 
 /// Held-out errors of one candidate: one entry per training row, in a fixed order.
 #[derive(Clone, Debug, Default)]
-struct HeldOut {
+pub(crate) struct HeldOut {
     /// Squared held-out error per row, m² (3-D point or distance), averaged over the repeats.
-    sq_errors: Vec<f64>,
+    pub(crate) sq_errors: Vec<f64>,
     /// Block of each row: `(data set, socket, fold)` of the first repeat, numbered in that
     /// order (a block with no row, for a socket shorter than the folds, stays empty).
-    block: Vec<usize>,
+    pub(crate) block: Vec<usize>,
 }
 
 /// Fold (`0..k`) of row `row` of `n` in repeat `r` of `repeats`: the rows, circularly shifted
 /// by `r·n/(k·repeats)`, cut into `k` contiguous blocks of (nearly) equal length. Repeat 0 is
 /// plain contiguous k-fold.
-fn fold_of(row: usize, n: usize, k: usize, r: usize, repeats: usize) -> usize {
+pub(crate) fn fold_of(row: usize, n: usize, k: usize, r: usize, repeats: usize) -> usize {
     let n = n.max(1);
     let shifted = (row * k * repeats + r * n) % (n * k * repeats);
     shifted / (n * repeats)
@@ -531,7 +563,7 @@ fn cross_validate(
 /// contiguous block are correlated, so the blocks, not the rows, are the independent units:
 /// Roberts et al. 2017, "Cross-validation strategies for data with temporal, spatial,
 /// hierarchical, or phylogenetic structure", Ecography 40(8)). `(0, ∞)` with fewer than 2 blocks.
-fn blocked_difference(a: &HeldOut, b: &HeldOut) -> (f64, f64) {
+pub(crate) fn blocked_difference(a: &HeldOut, b: &HeldOut) -> (f64, f64) {
     let n = a.sq_errors.len().min(b.sq_errors.len());
     let n_blocks = a.block.iter().max().map_or(0, |m| m + 1);
     let mut sum = vec![0.0; n_blocks];
@@ -635,6 +667,7 @@ pub fn figures(set: &DataSet, model: &CalibratedModel, socket_distance_m: f64) -
                 mean_absolute_error_m: Some(f.mean_absolute_error_m),
                 distance_error_m: f.distance_error_m,
                 distance_rms_m: None,
+                pose: None,
             }
         }
         DataSet::Distances { q, distance_m, .. } => {
@@ -647,6 +680,7 @@ pub fn figures(set: &DataSet, model: &CalibratedModel, socket_distance_m: f64) -
                 mean_absolute_error_m: None,
                 distance_error_m: None,
                 distance_rms_m: Some(hapcal_metrics::rms(&r)),
+                pose: None,
             }
         }
     })
@@ -690,6 +724,9 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     }
     if plan.joint {
         bail!("--joint applies to a haptic device with transmissions (capstans, parallelogram)");
+    }
+    if plan.data.iter().any(|p| crate::measured::is_marker_file(p)) {
+        return crate::measured::run(plan, &device, start);
     }
     let chain = device
         .chain()
@@ -823,6 +860,8 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         model: choice,
         folds: plan.folds,
         cross_validation,
+        ladder: Vec::new(),
+        frames: Vec::new(),
         sigma_m: identified.sigma,
         sigma_source: match identified.sigma_source {
             hapcal_identify::SigmaSource::Given => "given",
@@ -876,7 +915,7 @@ pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
 ///
 /// # Errors
 /// A `.urdf` output for a device that did not come from a URDF, or an I/O error.
-pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<()> {
+pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<Vec<PathBuf>> {
     if let Some(calibrated) = &outcome.calibrated {
         if !out
             .extension()
@@ -889,13 +928,9 @@ pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<()> {
         }
         let text = hapcal_io::write_device(calibrated);
         std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
-        return Ok(());
+        return Ok(vec![out.to_path_buf()]);
     }
-    let values: Vec<hapcal_io::CalibratedValue> = outcome
-        .report
-        .parameters
-        .iter()
-        .filter(|p| outcome.model.chain.param_index(&p.name).is_some())
+    let all: Vec<hapcal_io::CalibratedValue> = (outcome.report.parameters.iter())
         .map(|p| hapcal_io::CalibratedValue {
             name: p.name.clone(),
             value: p.value,
@@ -903,6 +938,13 @@ pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<()> {
             unit: p.unit.to_string(),
         })
         .collect();
+    let device_chain = outcome.device.chain()?;
+    let (values, leftover): (Vec<_>, Vec<_>) = if outcome.report.frames.is_empty() {
+        (all.into_iter()).partition(|v| outcome.model.chain.param_index(&v.name).is_some())
+    } else {
+        (crate::measured::fold_joint_offsets(&outcome.device, &all)?.into_iter())
+            .partition(|v| device_chain.param_index(&v.name).is_some())
+    };
     let meta = hapcal_io::CalibrationMeta {
         date: None,
         data_hash: None,
@@ -950,7 +992,17 @@ pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<()> {
         hapcal_io::write_device(&calibrated)
     };
     std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
-    Ok(())
+    let mut written = vec![out.to_path_buf()];
+    if !outcome.report.frames.is_empty() || !leftover.is_empty() {
+        let sidecar = out.with_extension("calibration.toml");
+        std::fs::write(
+            &sidecar,
+            crate::measured::sidecar_toml(&outcome.report.frames, &leftover),
+        )
+        .with_context(|| format!("writing {}", sidecar.display()))?;
+        written.push(sidecar);
+    }
+    Ok(written)
 }
 
 #[cfg(test)]

@@ -840,6 +840,7 @@ pub fn calibrate_logs(
             mean_absolute_error_m: None,
             distance_error_m: None,
             distance_rms_m: Some(hapcal_metrics::rms(&r)),
+            pose: None,
         }
     };
     let mut placements = Vec::new();
@@ -897,6 +898,8 @@ pub fn calibrate_logs(
         model,
         folds: plan.folds,
         cross_validation: Vec::new(),
+        ladder: Vec::new(),
+        frames: Vec::new(),
         sigma_m,
         sigma_source: match kin.sigma_source {
             hapcal_identify::SigmaSource::Given => "given",

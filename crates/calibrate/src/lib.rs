@@ -8,6 +8,7 @@
 
 pub mod calibrate;
 pub mod haptic;
+pub mod measured;
 pub mod plan;
 pub mod support;
 

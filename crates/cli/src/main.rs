@@ -28,11 +28,19 @@ enum Command {
         /// Device file (.toml) or URDF (.urdf, with --tip).
         #[arg(long)]
         device: Option<PathBuf>,
-        /// Tip link when the device is a URDF.
-        #[arg(long, default_value = "ball_link")]
-        tip: String,
+        /// Tip link when the device is a URDF; repeat it for a tree with several tips (marker
+        /// k sits on the k-th tip given, markers past the last on the last).
+        #[arg(long = "tip", default_values_t = ["ball_link".to_owned()])]
+        tips: Vec<String>,
         /// Training data: MUKCa placement folders (hole_0.csv, hole_1.csv), run folders of
-        /// placements, or hapcal log CSV files.
+        /// placements, hapcal log CSV files, or measurement files.
+        ///
+        /// Measurement CSV columns: joints as q1..qn (chain order) or by the device's joint
+        /// names in any order; markers x,y,z or x1,y1,z1,x2,… in the instrument's frame;
+        /// orientation per marker as qw,qx,qy,qz (qw1,…) or figaroh's phix,phiy,phiz (roll,
+        /// pitch, yaw: R = Rz·Ry·Rx); t or t_s for time; other columns are reported once and
+        /// ignored. industrial_calibration's measurements.yaml is read as it is. The
+        /// instrument frame and each marker's frame on its link are identified.
         #[arg(long, num_args = 1..)]
         data: Vec<PathBuf>,
         /// Test data, same kinds; only evaluated, never fitted.
@@ -60,6 +68,19 @@ enum Command {
         /// Measurement noise standard deviation, m (default: estimated from the residuals).
         #[arg(long)]
         sigma_m: Option<f64>,
+        /// Orientation noise standard deviation of pose data, rad (default: estimated).
+        #[arg(long)]
+        sigma_rad: Option<f64>,
+        /// Measurement files: hold out this fraction of each training file's rows, the last
+        /// ones in file order, as a test set (0.3: the first 70 % train).
+        #[arg(long)]
+        test_last: Option<f64>,
+        /// Unit of lengths in measurement files: m or mm.
+        #[arg(long, default_value = "m")]
+        length_unit: hapcal_io::LengthUnit,
+        /// Unit of angles in measurement files: rad or deg.
+        #[arg(long, default_value = "rad")]
+        angle_unit: hapcal_io::AngleUnit,
         /// Haptic device with transmissions: identify the transmissions and the kinematics in
         /// one problem instead of the paper's two steps.
         #[arg(long)]
@@ -224,7 +245,7 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Calibrate {
             device,
-            tip,
+            tips,
             data,
             test,
             out,
@@ -233,8 +254,17 @@ fn run(cli: Cli) -> Result<()> {
             socket_distance_m,
             folds,
             sigma_m,
+            sigma_rad,
+            test_last,
+            length_unit,
+            angle_unit,
             joint,
         } => {
+            let units = hapcal_io::Units::new(length_unit, angle_unit);
+            let (tip, more_tips) = match tips.split_first() {
+                Some((first, rest)) => (first.clone(), rest.to_vec()),
+                None => ("ball_link".to_owned(), Vec::new()),
+            };
             let default = Plan::bundled_default();
             let plan = if device.is_none() && data.is_empty() && test.is_empty() {
                 Plan {
@@ -243,12 +273,19 @@ fn run(cli: Cli) -> Result<()> {
                     folds,
                     sigma_m,
                     joint,
+                    sigma_rad,
+                    units,
+                    test_last,
                     ..default
                 }
             } else {
                 Plan {
                     device: device.unwrap_or(default.device),
                     tip,
+                    tips: more_tips,
+                    units,
+                    sigma_rad,
+                    test_last,
                     data,
                     test,
                     socket_distance_m,
@@ -265,8 +302,9 @@ fn run(cli: Cli) -> Result<()> {
                 print!("{}", hapcal::report::render(&outcome.report));
             }
             if let Some(out) = out {
-                calibrate::write_outputs(&outcome, &out)?;
-                eprintln!("hapcal: wrote {}", out.display());
+                for path in calibrate::write_outputs(&outcome, &out)? {
+                    eprintln!("hapcal: wrote {}", path.display());
+                }
             }
             Ok(())
         }

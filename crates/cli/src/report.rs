@@ -49,6 +49,28 @@ pub fn render(r: &CalibrationReport) -> String {
             );
         }
     }
+    if !r.ladder.is_empty() {
+        let _ = writeln!(
+            s,
+            "\nmodel ladder by {}-fold blocked cross-validation on the training rows (held-out \
+             position RMS; held-out weighted squared error per row, Σ e²/σ², minus frames \
+             only's, ± its standard error; a rung is taken only if it beats the one chosen \
+             below it by {} standard errors):",
+            r.folds,
+            hapcal_calibrate::measured::LADDER_SIGNIFICANCE_Z
+        );
+        for l in &r.ladder {
+            let (diff, se) = l.score_difference_to_frames;
+            let _ = writeln!(
+                s,
+                "  {:<20} {:>9.4} mm {:>+9.2} ± {:<7.2}",
+                l.rung.to_string(),
+                l.heldout_rms_m * 1e3,
+                diff,
+                se
+            );
+        }
+    }
     let _ = writeln!(
         s,
         "\nmodel: {}; sigma = {:.4} mm (from {}); LM: {}",
@@ -87,6 +109,24 @@ pub fn render(r: &CalibrationReport) -> String {
         };
         let _ = writeln!(s, "  {:<28} {why}", p.name);
     }
+    if !r.frames.is_empty() {
+        let _ = writeln!(s, "\nframes (xyz mm; roll, pitch, yaw deg):");
+        for f in &r.frames {
+            let [x, y, z] = f.xyz_m;
+            let [a, b, c] = f.rpy_rad;
+            let _ = writeln!(
+                s,
+                "  {:<12} {:>10.3} {:>10.3} {:>10.3}   {:>9.4} {:>9.4} {:>9.4}",
+                f.name,
+                x * 1e3,
+                y * 1e3,
+                z * 1e3,
+                a.to_degrees(),
+                b.to_degrees(),
+                c.to_degrees()
+            );
+        }
+    }
     if !r.correlated.is_empty() {
         let _ = writeln!(s, "\nstrongly correlated pairs (|corr| > 0.95):");
         for (a, b, c) in &r.correlated {
@@ -106,31 +146,78 @@ pub fn render(r: &CalibrationReport) -> String {
             let _ = writeln!(s, "  - {w}");
         }
     }
-    let _ = writeln!(
-        s,
-        "\nfigures of merit (mm): MAE = mean absolute error to the socket mean, dist = socket distance error"
-    );
-    let _ = writeln!(
-        s,
-        "  {:<16} {:<5} {:>4}  {:>10} {:>10} {:>10}  {:>10} {:>10} {:>10}",
-        "placement",
-        "role",
-        "rows",
-        "MAE before",
-        "dist bef.",
-        "rms before",
-        "MAE after",
-        "dist after",
-        "rms after"
-    );
-    for p in &r.placements {
-        let b = figures_cells(&p.before);
-        let a = figures_cells(&p.after);
+    if r.placements.iter().any(|p| p.before.pose.is_some()) {
+        let _ = writeln!(
+            s,
+            "\nposition error (mm) and orientation error (deg): mean / RMS / max, frames only → calibrated"
+        );
+        for p in &r.placements {
+            let (Some(b), Some(a)) = (p.before.pose, p.after.pose) else {
+                continue;
+            };
+            let _ = writeln!(
+                s,
+                "  {:<24} {:<5} {:>4}  position {:.3} / {:.3} / {:.3} → {:.3} / {:.3} / {:.3}",
+                p.name,
+                p.role,
+                p.n_rows,
+                b.position_mean_m * 1e3,
+                b.position_rms_m * 1e3,
+                b.position_max_m * 1e3,
+                a.position_mean_m * 1e3,
+                a.position_rms_m * 1e3,
+                a.position_max_m * 1e3
+            );
+            if let (Some(bm), Some(br), Some(bx), Some(am), Some(ar), Some(ax)) = (
+                b.orientation_mean_rad,
+                b.orientation_rms_rad,
+                b.orientation_max_rad,
+                a.orientation_mean_rad,
+                a.orientation_rms_rad,
+                a.orientation_max_rad,
+            ) {
+                let _ = writeln!(
+                    s,
+                    "  {:<24} {:<5} {:>4}  orientation {:.3} / {:.3} / {:.3} → {:.3} / {:.3} / {:.3}",
+                    "",
+                    "",
+                    "",
+                    bm.to_degrees(),
+                    br.to_degrees(),
+                    bx.to_degrees(),
+                    am.to_degrees(),
+                    ar.to_degrees(),
+                    ax.to_degrees()
+                );
+            }
+        }
+    } else {
+        let _ = writeln!(
+            s,
+            "\nfigures of merit (mm): MAE = mean absolute error to the socket mean, dist = socket distance error"
+        );
         let _ = writeln!(
             s,
             "  {:<16} {:<5} {:>4}  {:>10} {:>10} {:>10}  {:>10} {:>10} {:>10}",
-            p.name, p.role, p.n_rows, b[0], b[1], b[2], a[0], a[1], a[2]
+            "placement",
+            "role",
+            "rows",
+            "MAE before",
+            "dist bef.",
+            "rms before",
+            "MAE after",
+            "dist after",
+            "rms after"
         );
+        for p in &r.placements {
+            let b = figures_cells(&p.before);
+            let a = figures_cells(&p.after);
+            let _ = writeln!(
+                s,
+                "  {:<16} {:<5} {:>4}  {:>10} {:>10} {:>10}  {:>10} {:>10} {:>10}",
+                p.name, p.role, p.n_rows, b[0], b[1], b[2], a[0], a[1], a[2]
+            );
+        }
     }
     let _ = writeln!(s, "\nelapsed: {:.1} ms", r.elapsed_s * 1e3);
     s

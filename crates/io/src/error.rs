@@ -172,9 +172,9 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
-    /// A URDF joint type other than revolute, continuous or fixed lies on the chain.
+    /// A URDF joint type other than revolute, continuous, prismatic or fixed lies on the chain.
     #[error(
-        "{path}: joint {joint:?} is {kind}; only revolute, continuous and fixed joints are supported"
+        "{path}: joint {joint:?} is {kind}; only revolute, continuous, prismatic and fixed joints are supported"
     )]
     UnsupportedJoint {
         /// The URDF file.
@@ -183,6 +183,75 @@ pub enum Error {
         joint: String,
         /// Its type (`prismatic`, `floating`, …).
         kind: String,
+    },
+    /// The joint columns of a measurement file match no joint of the device.
+    #[error(
+        "{path}:{line}: expected a column per joint, named q1..q{n} or {}; missing {}; the file's columns are {}",
+        expected.join(", "), missing.join(", "), found.join(", ")
+    )]
+    JointColumns {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line of the header.
+        line: u64,
+        /// Number of joints of the device.
+        n: usize,
+        /// The device's joint names, in chain order.
+        expected: Vec<String>,
+        /// The joints (by name) without a column.
+        missing: Vec<String>,
+        /// Every column of the file's header, in file order.
+        found: Vec<String>,
+    },
+    /// A marker's coordinate or orientation column set lacks a column.
+    #[error("{path}:{line}:{column}: column {name:?} of marker {marker} is {what}")]
+    IncompleteMarker {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line (1 = the header).
+        line: u64,
+        /// 1-based column: the missing cell's, or for a header the column after the last.
+        column: u64,
+        /// The missing column's name (`y2`, `qw`, …).
+        name: String,
+        /// The marker's number, 1-based.
+        marker: usize,
+        /// What is wrong (`missing from the header`, `empty while x2, z2 are given`, …).
+        what: String,
+    },
+    /// A joint reading lies outside the joint's range (bounds inclusive).
+    #[error(
+        "{path}:{line}:{column}: joint {joint:?} = {value} {unit} is outside [{min}, {max}] {unit}"
+    )]
+    OutsideJointRange {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// 1-based column.
+        column: u64,
+        /// The joint's name.
+        joint: String,
+        /// The reading, in `unit`.
+        value: f64,
+        /// Lower limit.
+        min: f64,
+        /// Upper limit.
+        max: f64,
+        /// `rad` or `m`.
+        unit: &'static str,
+    },
+    /// A YAML syntax or structure error.
+    #[error("{path}:{line}:{column}: {message}")]
+    Yaml {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line (0 if unknown).
+        line: u64,
+        /// 1-based column (0 if unknown).
+        column: u64,
+        /// What is wrong.
+        message: String,
     },
     /// The requested tip link is not in the URDF.
     #[error("{path}: no link named {tip:?}; the links are: {}", available.join(", "))]

@@ -60,6 +60,7 @@
 mod device;
 mod error;
 mod log;
+mod measure;
 mod mukca;
 mod table;
 mod urdf;
@@ -71,5 +72,9 @@ pub use device::{
 pub use error::{Error, line_column};
 pub use hapcal_kinematics::{DhConvention, DhRow, Placement};
 pub use log::{Log, LogRow, N_EXT, read_log, write_log};
+pub use measure::{
+    AngleUnit, JOINT_LIMIT_SLACK, JointSchema, LengthUnit, MarkerSample, MeasuredRow,
+    MeasurementTable, Units, read_industrial_yaml, read_measurement_file,
+};
 pub use mukca::{SocketPlacement, SocketSamples, read_mukca_paths, read_mukca_placement};
-pub use urdf::{import_urdf, write_calibrated_urdf};
+pub use urdf::{LinkInertial, UrdfTree, import_urdf, import_urdf_tips, write_calibrated_urdf};

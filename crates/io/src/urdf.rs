@@ -5,6 +5,7 @@ use std::ops::Range;
 use std::path::Path;
 
 use hapcal_kinematics::Placement;
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use quick_xml::XmlVersion;
 use quick_xml::events::{BytesStart, Event};
 use quick_xml::reader::Reader;
@@ -17,117 +18,36 @@ use crate::error::line_column;
 ///
 /// The chain is found by walking from `tip` to its parent link until a link without a
 /// parent joint (the root). Each joint becomes a [`Placement`] (its `<origin xyz rpy>`;
-/// its `<axis>` for revolute and continuous joints, none for fixed ones) and each moving
-/// joint a `[[joint]]` entry named after it, with the URDF's `<limit lower upper>` for a
-/// revolute joint and [−π, π] for a continuous one (hapcal needs finite limits to check
-/// and sample joint readings; widen them in the device file if the joint turns further).
-/// `[urdf]` records `path` (as given) and `tip`, for
+/// its `<axis>` for revolute, continuous and prismatic joints, none for fixed ones) and each
+/// moving joint a `[[joint]]` entry named after it, with the URDF's `<limit lower upper>`
+/// (rad; m for a prismatic joint) and [−π, π] for a continuous joint (hapcal needs finite
+/// limits to check and sample joint readings; widen them in the device file if the joint
+/// turns further). `[urdf]` records `path` (as given) and `tip`, for
 /// [`write_calibrated_urdf`]. Transmissions, rig and handle are left empty.
 ///
 /// # Errors
 ///
 /// [`Error::Io`] if the file cannot be read; [`Error::Xml`] (file:line:column) for
 /// malformed XML; [`Error::Urdf`] if urdf-rs cannot parse it, a link has two parent joints, the joints form a loop, the chain has no moving joint,
-/// or a number is not finite or a revolute joint lacks finite `lower < upper` limits;
-/// [`Error::TipNotFound`] (listing every link) if there is no link `tip`;
-/// [`Error::UnsupportedJoint`] for a prismatic, floating or planar joint on the chain.
+/// or a number is not finite or a revolute or prismatic joint lacks finite `lower < upper`
+/// limits; [`Error::TipNotFound`] (listing every link) if there is no link `tip`;
+/// [`Error::UnsupportedJoint`] for a floating or planar joint on the chain.
 pub fn import_urdf(path: &Path, tip: &str) -> Result<Device, Error> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    let urdf_err = |message: String| Error::Urdf {
-        path: path.to_path_buf(),
-        message,
-    };
-    check_xml(&text, path)?;
-    let robot =
-        urdf_rs::read_from_string(&text).map_err(|e| urdf_err(format!("not a valid URDF: {e}")))?;
-    if !robot.links.iter().any(|l| l.name == tip) {
-        return Err(Error::TipNotFound {
-            path: path.to_path_buf(),
-            tip: tip.to_owned(),
-            available: robot.links.iter().map(|l| l.name.clone()).collect(),
-        });
-    }
-
-    let mut chain = Vec::new();
-    let mut link = tip;
-    loop {
-        let mut parents = robot.joints.iter().filter(|j| j.child.link == link);
-        let Some(joint) = parents.next() else { break };
-        if let Some(other) = parents.next() {
-            return Err(urdf_err(format!(
-                "link {link:?} has two parent joints, {:?} and {:?}",
-                joint.name, other.name
-            )));
-        }
-        if chain.len() >= robot.joints.len() {
-            return Err(urdf_err(format!(
-                "the joints above link {tip:?} form a loop"
-            )));
-        }
-        chain.push(joint);
-        link = &joint.parent.link;
-    }
-    chain.reverse();
-
+    let robot = read_robot(path)?;
+    let chain = chain_to(&robot, tip, path)?;
     let mut placements = Vec::with_capacity(chain.len());
     let mut joints = Vec::new();
-    for joint in chain {
-        let name = &joint.name;
-        let (xyz, rpy) = (joint.origin.xyz.0, joint.origin.rpy.0);
-        if xyz.iter().chain(&rpy).any(|v| !v.is_finite()) {
-            return Err(urdf_err(format!(
-                "joint {name:?}: origin xyz {xyz:?} rpy {rpy:?} is not finite"
-            )));
-        }
-        let axis = match joint.joint_type {
-            urdf_rs::JointType::Fixed => None,
-            urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => {
-                let axis = joint.axis.xyz.0;
-                let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
-                if !norm.is_finite() || norm < 1e-12 {
-                    return Err(urdf_err(format!(
-                        "joint {name:?}: axis {axis:?} has no direction"
-                    )));
-                }
-                Some(axis)
-            }
-            ref other => {
-                return Err(Error::UnsupportedJoint {
-                    path: path.to_path_buf(),
-                    joint: name.clone(),
-                    kind: format!("{other:?}").to_lowercase(),
-                });
-            }
-        };
-        if axis.is_some() {
-            let (lower_rad, upper_rad) = match joint.joint_type {
-                urdf_rs::JointType::Continuous => (-std::f64::consts::PI, std::f64::consts::PI),
-                _ => (joint.limit.lower, joint.limit.upper),
-            };
-            if !(lower_rad.is_finite() && upper_rad.is_finite() && lower_rad < upper_rad) {
-                return Err(urdf_err(format!(
-                    "joint {name:?}: limits [{lower_rad}, {upper_rad}] rad are not finite with lower < upper"
-                )));
-            }
-            joints.push(JointSpec {
-                name: name.clone(),
-                lower_rad,
-                upper_rad,
-                counts_per_rev: None,
-            });
-        }
-        placements.push(Placement {
-            name: name.clone(),
-            xyz_m: xyz,
-            rpy_rad: rpy,
-            axis,
-            prismatic: false,
-        });
+    for joint in &chain {
+        let (placement, spec) = placement_of(joint, path, Limits::Continuous1Turn)?;
+        placements.push(placement);
+        joints.extend(spec);
     }
     if joints.is_empty() {
-        return Err(urdf_err(format!(
-            "no revolute or continuous joint between the root link {link:?} and {tip:?}"
-        )));
+        let root = chain.first().map_or(tip, |j| j.parent.link.as_str());
+        return Err(urdf_error(
+            path,
+            format!("no moving joint between the root link {root:?} and {tip:?}"),
+        ));
     }
 
     let device = Device {
@@ -148,6 +68,307 @@ pub fn import_urdf(path: &Path, tip: &str) -> Result<Device, Error> {
     };
     device.chain()?;
     Ok(device)
+}
+
+/// A URDF robot with one or more tips: the root-to-tip paths, the moving joints and the
+/// links' masses ([`import_urdf_tips`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct UrdfTree {
+    /// One root-to-tip path of placements per tip, in the order the tips were asked for
+    /// (shared joints appear on each path that passes through them).
+    pub paths: Vec<Vec<Placement>>,
+    /// The moving joints in order of first appearance, path by path (the joint numbering of
+    /// `hapcal_kinematics::Tree::from_placement_paths`); limits in rad, m for prismatic
+    /// joints.
+    pub joints: Vec<JointSpec>,
+    /// Whether each joint of `joints` is prismatic.
+    pub prismatic: Vec<bool>,
+    /// The `<inertial>` of every link on the paths below the first moving joint.
+    pub inertials: Vec<LinkInertial>,
+}
+
+/// A link's `<inertial>` mass and centre of mass, expressed in the frame of the nearest
+/// moving joint above it (the frame just after that joint's motion).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinkInertial {
+    /// Index of that joint in [`UrdfTree::joints`] (0-based).
+    pub joint: usize,
+    /// The link's name.
+    pub link: String,
+    /// Mass, kg (≥ 0).
+    pub mass_kg: f64,
+    /// Centre of mass in the joint's frame, m (through the fixed joints between them).
+    pub com_m: [f64; 3],
+}
+
+/// The URDF's robot as a tree with the links `tips` as tips: several arms on one torso,
+/// several markers on one hand. Joint limits as in [`import_urdf`], except that a continuous
+/// joint gets ±1000 rad (a readout of a continuous joint may have turned many times).
+///
+/// # Errors
+///
+/// As [`import_urdf`], per tip; [`Error::Urdf`] without tips, for a tip named twice, for
+/// tips under different root links, for a link mass or centre of mass that is not finite or
+/// a negative mass.
+pub fn import_urdf_tips(path: &Path, tips: &[String]) -> Result<UrdfTree, Error> {
+    let robot = read_robot(path)?;
+    if tips.is_empty() {
+        return Err(urdf_error(path, "no tip link given".into()));
+    }
+    let mut chains = Vec::with_capacity(tips.len());
+    for (i, tip) in tips.iter().enumerate() {
+        if tips[..i].contains(tip) {
+            return Err(urdf_error(path, format!("tip link {tip:?} is given twice")));
+        }
+        chains.push(chain_to(&robot, tip, path)?);
+    }
+    let root_of = |chain: &[&urdf_rs::Joint], tip: &str| {
+        chain
+            .first()
+            .map_or(tip.to_owned(), |j| j.parent.link.clone())
+    };
+    let root = root_of(&chains[0], &tips[0]);
+    for (chain, tip) in chains.iter().zip(tips).skip(1) {
+        let other = root_of(chain, tip);
+        if other != root {
+            return Err(urdf_error(
+                path,
+                format!(
+                    "tip {tip:?} hangs from the root link {other:?}, tip {:?} from {root:?}: the tips must share one root",
+                    tips[0]
+                ),
+            ));
+        }
+    }
+    let mut paths = Vec::with_capacity(chains.len());
+    let mut joints: Vec<JointSpec> = Vec::new();
+    let mut prismatic = Vec::new();
+    for chain in &chains {
+        let mut placements = Vec::with_capacity(chain.len());
+        for joint in chain {
+            let (placement, spec) = placement_of(joint, path, Limits::Continuous1000)?;
+            if let Some(spec) = spec
+                && !joints.iter().any(|j| j.name == spec.name)
+            {
+                prismatic.push(placement.prismatic);
+                joints.push(spec);
+            }
+            placements.push(placement);
+        }
+        paths.push(placements);
+    }
+    if joints.is_empty() {
+        return Err(urdf_error(
+            path,
+            format!("no moving joint between the root link {root:?} and the tips"),
+        ));
+    }
+    let inertials = inertials(&robot, &chains, &joints, path)?;
+    Ok(UrdfTree {
+        paths,
+        joints,
+        prismatic,
+        inertials,
+    })
+}
+
+/// The inertials of the links on `chains` below a moving joint, in that joint's frame.
+fn inertials(
+    robot: &urdf_rs::Robot,
+    chains: &[Vec<&urdf_rs::Joint>],
+    joints: &[JointSpec],
+    path: &Path,
+) -> Result<Vec<LinkInertial>, Error> {
+    let mut out: Vec<LinkInertial> = Vec::new();
+    for chain in chains {
+        // Transform from the nearest moving joint's frame to the current link's frame.
+        let mut above: Option<(usize, Isometry3<f64>)> = None;
+        for joint in chain {
+            let origin = origin_of(joint);
+            above = match joint.joint_type {
+                urdf_rs::JointType::Fixed => above.map(|(j, t)| (j, t * origin)),
+                _ => joints
+                    .iter()
+                    .position(|s| s.name == joint.name)
+                    .map(|j| (j, Isometry3::identity())),
+            };
+            let Some((j, frame)) = above else { continue };
+            let link = &joint.child.link;
+            if out.iter().any(|l| &l.link == link) {
+                continue;
+            }
+            let Some(l) = robot.links.iter().find(|l| &l.name == link) else {
+                continue;
+            };
+            let mass_kg = l.inertial.mass.value;
+            let xyz = l.inertial.origin.xyz.0;
+            if !(mass_kg.is_finite() && mass_kg >= 0.0) || xyz.iter().any(|v| !v.is_finite()) {
+                return Err(urdf_error(
+                    path,
+                    format!(
+                        "link {link:?}: inertial mass {mass_kg} kg at {xyz:?} m is not a finite, non-negative mass at a finite point"
+                    ),
+                ));
+            }
+            let com = frame * Point3::from(xyz);
+            out.push(LinkInertial {
+                joint: j,
+                link: link.clone(),
+                mass_kg,
+                com_m: [com.x, com.y, com.z],
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// Reads and parses a URDF, with XML errors located.
+fn read_robot(path: &Path) -> Result<urdf_rs::Robot, Error> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    check_xml(&text, path)?;
+    urdf_rs::read_from_string(&text).map_err(|e| urdf_error(path, format!("not a valid URDF: {e}")))
+}
+
+fn urdf_error(path: &Path, message: String) -> Error {
+    Error::Urdf {
+        path: path.to_path_buf(),
+        message,
+    }
+}
+
+/// The joints from the root link down to `tip`, root first.
+fn chain_to<'r>(
+    robot: &'r urdf_rs::Robot,
+    tip: &str,
+    path: &Path,
+) -> Result<Vec<&'r urdf_rs::Joint>, Error> {
+    if !robot.links.iter().any(|l| l.name == tip) {
+        return Err(Error::TipNotFound {
+            path: path.to_path_buf(),
+            tip: tip.to_owned(),
+            available: robot.links.iter().map(|l| l.name.clone()).collect(),
+        });
+    }
+    let mut chain = Vec::new();
+    let mut link = tip;
+    loop {
+        let mut parents = robot.joints.iter().filter(|j| j.child.link == link);
+        let Some(joint) = parents.next() else { break };
+        if let Some(other) = parents.next() {
+            return Err(urdf_error(
+                path,
+                format!(
+                    "link {link:?} has two parent joints, {:?} and {:?}",
+                    joint.name, other.name
+                ),
+            ));
+        }
+        if chain.len() >= robot.joints.len() {
+            return Err(urdf_error(
+                path,
+                format!("the joints above link {tip:?} form a loop"),
+            ));
+        }
+        chain.push(joint);
+        link = &joint.parent.link;
+    }
+    chain.reverse();
+    Ok(chain)
+}
+
+/// How wide a continuous joint's limits are.
+#[derive(Clone, Copy)]
+enum Limits {
+    /// [−π, π] (a device file's joint).
+    Continuous1Turn,
+    /// [−1000, 1000] rad (a tree's joint, read from a measurement file).
+    Continuous1000,
+}
+
+/// The joint's origin as an isometry (m).
+fn origin_of(joint: &urdf_rs::Joint) -> Isometry3<f64> {
+    let [x, y, z] = joint.origin.xyz.0;
+    let [roll, pitch, yaw] = joint.origin.rpy.0;
+    Isometry3::from_parts(
+        Translation3::new(x, y, z),
+        UnitQuaternion::from_euler_angles(roll, pitch, yaw),
+    )
+}
+
+/// A URDF joint as a placement, with its joint entry if it moves.
+fn placement_of(
+    joint: &urdf_rs::Joint,
+    path: &Path,
+    limits: Limits,
+) -> Result<(Placement, Option<JointSpec>), Error> {
+    let name = &joint.name;
+    let (xyz, rpy) = (joint.origin.xyz.0, joint.origin.rpy.0);
+    if xyz.iter().chain(&rpy).any(|v| !v.is_finite()) {
+        return Err(urdf_error(
+            path,
+            format!("joint {name:?}: origin xyz {xyz:?} rpy {rpy:?} is not finite"),
+        ));
+    }
+    let prismatic = joint.joint_type == urdf_rs::JointType::Prismatic;
+    let axis = match joint.joint_type {
+        urdf_rs::JointType::Fixed => None,
+        urdf_rs::JointType::Revolute
+        | urdf_rs::JointType::Continuous
+        | urdf_rs::JointType::Prismatic => {
+            let axis = joint.axis.xyz.0;
+            let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
+            if !norm.is_finite() || norm < 1e-12 {
+                return Err(urdf_error(
+                    path,
+                    format!("joint {name:?}: axis {axis:?} has no direction"),
+                ));
+            }
+            Some(axis)
+        }
+        ref other => {
+            return Err(Error::UnsupportedJoint {
+                path: path.to_path_buf(),
+                joint: name.clone(),
+                kind: format!("{other:?}").to_lowercase(),
+            });
+        }
+    };
+    let spec = if axis.is_some() {
+        let (lower, upper) = match (&joint.joint_type, limits) {
+            (urdf_rs::JointType::Continuous, Limits::Continuous1Turn) => {
+                (-std::f64::consts::PI, std::f64::consts::PI)
+            }
+            (urdf_rs::JointType::Continuous, Limits::Continuous1000) => (-1e3, 1e3),
+            _ => (joint.limit.lower, joint.limit.upper),
+        };
+        let unit = if prismatic { "m" } else { "rad" };
+        if !(lower.is_finite() && upper.is_finite() && lower < upper) {
+            return Err(urdf_error(
+                path,
+                format!(
+                    "joint {name:?}: limits [{lower}, {upper}] {unit} are not finite with lower < upper"
+                ),
+            ));
+        }
+        Some(JointSpec {
+            name: name.clone(),
+            lower_rad: lower,
+            upper_rad: upper,
+            counts_per_rev: None,
+        })
+    } else {
+        None
+    };
+    Ok((
+        Placement {
+            name: name.clone(),
+            xyz_m: xyz,
+            rpy_rad: rpy,
+            axis,
+            prismatic,
+        },
+        spec,
+    ))
 }
 
 /// The text of `source_urdf` with the `<origin xyz rpy>` of each joint named in

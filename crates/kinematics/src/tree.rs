@@ -30,12 +30,17 @@ pub struct FrameSpec {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tree {
     tips: Vec<Chain>,
+    /// Indices of the instrument and marker frame parameters ([`Tree::with_frames`]).
+    frames: Vec<usize>,
 }
 
 impl Tree {
     /// The tree of one chain (one tip).
     pub fn single(chain: Chain) -> Tree {
-        Tree { tips: vec![chain] }
+        Tree {
+            tips: vec![chain],
+            frames: Vec::new(),
+        }
     }
 
     /// A tree from root-to-tip URDF placement paths, one per tip ([`Chain::from_placements`]
@@ -122,7 +127,16 @@ impl Tree {
                 Chain::from_factors(factors, params.clone(), joints.clone(), elements.clone())
             })
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Tree { tips })
+        Ok(Tree {
+            tips,
+            frames: Vec::new(),
+        })
+    }
+
+    /// Indices (into [`Tree::params`]) of the instrument and marker frame parameters, the
+    /// nuisance parameters of a tree built by [`Tree::with_frames`]; empty otherwise.
+    pub fn frame_params(&self) -> &[usize] {
+        &self.frames
     }
 
     /// The chain of each tip, in the order given; every one has [`Tree::n_params`]
@@ -238,7 +252,11 @@ impl Tree {
                 }
             })
             .collect();
-        Tree { tips }
+        // Appended offsets leave the indices of existing parameters unchanged.
+        Tree {
+            tips,
+            frames: self.frames.clone(),
+        }
     }
 
     /// The tree seen by an instrument: `x = [instrument (6) | this tree's parameters |
@@ -264,6 +282,7 @@ impl Tree {
         let mut factors_base = vec![Factor::Fixed(base.nominal)];
         let mut elements = vec![base.name.clone()];
         push_deviation(&mut factors_base, &mut params, &base.name, 0);
+        let mut frames: Vec<usize> = (0..params.len()).collect();
         let shift = params.len();
         elements.extend(self.tips[0].element_names().iter().cloned());
         params.extend(self.params().iter().map(|p| ParamInfo {
@@ -283,7 +302,9 @@ impl Tree {
             let mut f = vec![Factor::Fixed(frame.nominal)];
             let element = elements.len();
             elements.push(frame.name.clone());
+            let first = params.len();
             push_deviation(&mut f, &mut params, &frame.name, element);
+            frames.extend(first..params.len());
             ends.push((*tip, f));
         }
         if ends.is_empty() {
@@ -308,7 +329,7 @@ impl Tree {
                 )
             })
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Tree { tips })
+        Ok(Tree { tips, frames })
     }
 }
 

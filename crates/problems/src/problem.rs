@@ -230,7 +230,8 @@ impl CalibrationProblem {
 
     /// Builds the problem on a kinematic tree: rows of kind [`RowKind::Marker`] and
     /// [`RowKind::Pose`] name the tip they measure, every other row measures the first tip.
-    /// `x = [tree parameters | compliance | harmonics | points]`.
+    /// `x = [tree parameters | compliance | harmonics | points]`; the tree's frame parameters
+    /// ([`hapcal_kinematics::Tree::frame_params`]) are nuisance parameters.
     ///
     /// # Errors
     /// As [`Self::with_harmonics`]; [`Error::NoSuchParam`] for a row naming a tip the tree
@@ -242,7 +243,22 @@ impl CalibrationProblem {
         weights: Weights,
         terms: ModelTerms,
     ) -> Result<Self, Error> {
-        Self::build(tree.tips().to_vec(), obs, weights, terms)
+        let mut problem = Self::build(tree.tips().to_vec(), obs, weights, terms)?;
+        // The instrument and marker frames are nuisance parameters: identified, never pruned
+        // as too uncertain (they start wherever the initial guess put them).
+        let frames = tree.frame_params();
+        let specs = (problem.layout.specs().iter().enumerate())
+            .map(|(i, spec)| ParamSpec {
+                role: if frames.contains(&i) {
+                    Role::Nuisance
+                } else {
+                    spec.role
+                },
+                ..spec.clone()
+            })
+            .collect();
+        problem.layout = ParamLayout::new(specs);
+        Ok(problem)
     }
 
     fn build(

@@ -1,0 +1,136 @@
+//! One calibration of about 200 rows on the KUKA LBR iiwa 14 (7 joints, MUKCa's URDF), end to
+//! end in-process, for each measurement kind:
+//! - `sockets_186`: the three bundled MUKCa kuka_14 placements in one problem (6 sockets × 31
+//!   configurations, 48 placement parameters + 6 socket points, geometric model);
+//! - `positions_200`: 200 simulated marker positions (0.1 mm noise) in a tracker frame, the
+//!   instrument frame, the marker offset and the geometric model fitted
+//!   ([`hapcal_calibrate::measured::calibrate_measured`], model given, no cross-validation);
+//! - `positions_200_auto`: the same with the model chosen on the ladder by cross-validation.
+#![allow(missing_docs, clippy::unwrap_used)] // criterion's macros generate undocumented items
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use hapcal_calibrate::measured::{
+    MeasuredConfig, Robot, Rung, calibrate_measured, robot_from_urdf,
+};
+use hapcal_identify::{IdentifyConfig, identify};
+use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
+use hapcal_kinematics::{FrameSpec, Isometry3, Vector3};
+use hapcal_problems::{CalibrationProblem, Observations, PointDistance, Row, RowKind, Weights};
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use std::hint::black_box;
+use std::path::PathBuf;
+
+fn fixtures() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/mukca")
+}
+
+fn sockets() -> CalibrationProblem {
+    let urdf = fixtures().join("urdf/iiwa14.urdf");
+    let device = hapcal_io::import_urdf(&urdf, "ball_link").unwrap();
+    let chain = device.chain().unwrap();
+    let mut obs = Observations::default();
+    for placement in ["front", "left_back", "raised_left"] {
+        let dir = fixtures().join("data/kuka_14").join(placement);
+        let p = hapcal_io::read_mukca_placement(&dir, chain.n_joints()).unwrap();
+        let first = obs.n_points;
+        for (k, socket) in p.sockets.iter().enumerate() {
+            obs.rows.extend(socket.q.iter().map(|q| Row {
+                q: q.clone(),
+                kind: RowKind::Point { point: first + k },
+            }));
+        }
+        obs.n_points += p.sockets.len();
+        obs.point_distances.push(PointDistance {
+            a: first,
+            b: first + 1,
+            distance_m: 0.05,
+        });
+    }
+    CalibrationProblem::new(chain, obs, Weights::default(), None).unwrap()
+}
+
+/// 200 marker positions of a perturbed iiwa 14 seen by a tracker 2 m away.
+fn positions(robot: &Robot) -> MeasurementTable {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let base = FrameSpec {
+        name: "instrument".into(),
+        nominal: Isometry3::new(Vector3::new(2.0, 0.3, -0.5), Vector3::new(0.0, 0.0, 2.9)),
+    };
+    let marker = FrameSpec {
+        name: "marker1".into(),
+        nominal: Isometry3::translation(0.03, -0.02, 0.05),
+    };
+    let truth_tree = robot.tree.with_frames(&base, &[(0, marker)]).unwrap();
+    let n = truth_tree.n_params();
+    let dev = Normal::new(0.0, 5e-4).unwrap();
+    let x: Vec<f64> = (0..n).map(|_| dev.sample(&mut rng)).collect();
+    let noise = Normal::new(0.0, 1e-4).unwrap();
+    let rows = (0..200)
+        .map(|i| {
+            let q: Vec<f64> = robot
+                .limits
+                .iter()
+                .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
+                .collect();
+            let p = truth_tree.tips()[0].end_point(&x, &q);
+            MeasuredRow {
+                line: i + 2,
+                q,
+                t_s: None,
+                markers: vec![MarkerSample {
+                    marker: 0,
+                    position_m: std::array::from_fn(|k| p[k] + noise.sample(&mut rng)),
+                    rotation: None,
+                }],
+                distance_m: None,
+            }
+        })
+        .collect();
+    MeasurementTable {
+        name: "tracker".into(),
+        path: PathBuf::from("tracker.csv"),
+        rows,
+        n_markers: 1,
+        has_orientation: false,
+        has_distance: false,
+        ignored_columns: Vec::new(),
+        warnings: Vec::new(),
+    }
+}
+
+fn bench(c: &mut Criterion) {
+    let mut group = c.benchmark_group("iiwa14_200_rows");
+    group.sample_size(10);
+    group.bench_function("sockets_186", |b| {
+        b.iter(|| {
+            let p = sockets();
+            identify(black_box(&p), p.initial_guess(), &IdentifyConfig::default()).unwrap()
+        })
+    });
+    let urdf = fixtures().join("urdf/iiwa14.urdf");
+    let robot = robot_from_urdf(&urdf, &["ball_link".to_owned()]).unwrap();
+    let table = positions(&robot);
+    for (name, rung) in [
+        ("positions_200", Some(Rung::Geometric)),
+        ("positions_200_auto", None),
+    ] {
+        let cfg = MeasuredConfig {
+            rung,
+            folds: 5,
+            sigma_m: Some(1e-4),
+            sigma_rad: None,
+            marker_tips: Vec::new(),
+        };
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let robot = robot_from_urdf(black_box(&urdf), &["ball_link".to_owned()]).unwrap();
+                calibrate_measured(&robot, std::slice::from_ref(&table), &[], &cfg).unwrap()
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

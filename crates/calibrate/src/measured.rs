@@ -1,0 +1,1434 @@
+//! Calibration from what users measure: marker positions (laser tracker, motion capture) and
+//! marker poses (a camera seeing a target), in the instrument's own frame, of one or more
+//! markers on one or more tips of a URDF tree or a D-H chain.
+//!
+//! The instrument-to-base transform and each marker's frame on its link are unknown and
+//! identified with the kinematics ([`Tree::with_frames`]). The model is chosen on a ladder, as
+//! published calibrations report it (Nubiola & Bonev 2013, "Absolute calibration of an ABB IRB
+//! 1600 robot using a laser tracker", RCIM 29(1); figaroh's `calib_level`):
+//!
+//! 1. **frames only**: the nominal kinematics, only the instrument and marker frames fitted;
+//! 2. **joint offsets**: plus one offset per joint;
+//! 3. **geometric**: every kinematic parameter the data determine (identifiability pruning);
+//! 4. **compliance**: plus a gravity compliance per joint (torques from the URDF's
+//!    `<inertial>` masses when it has them, lumped weights otherwise).
+//!
+//! Blocked cross-validation on the training rows (contiguous blocks in file order, the
+//! blocked standard error of the socket workflow) scores each rung by its held-out weighted
+//! squared error, `|e_p|²/σ_p² + θ²/σ_θ²` per marker (the fit's own objective, so that pose
+//! data are judged on orientation too), and climbs the ladder only while a rung beats the one
+//! chosen so far by [`LADDER_SIGNIFICANCE_Z`] standard errors of the held-out difference; a
+//! calibration that does not beat frames only on held-out rows keeps the nominal kinematics,
+//! and the report says so.
+
+use anyhow::{Context, Result, bail};
+use faer::Col;
+use hapcal_identify::{Identified, Problem, Subset, identify};
+use hapcal_io::{JointSchema, MeasurementTable, Units};
+use hapcal_kinematics::{FrameSpec, Isometry3, Point3, Tree, UnitQuaternion, Vector3};
+use hapcal_problems::{
+    CalibratedModel, CalibrationProblem, GravityCompliance, LinkMass, ModelTerms, Observations,
+    Row, RowKind, Weights,
+};
+use serde::Serialize;
+
+use crate::calibrate::{CV_REPEATS, HeldOut, blocked_difference, fold_of};
+
+/// Standard errors by which a rung's held-out score must beat the rung chosen so far.
+///
+/// The ladder makes up to three sequential one-sided comparisons, each of which can climb by
+/// chance. At one standard error a useless rung wins a comparison with probability ≈ 0.16
+/// (normal tail), ≈ 0.4 over three; at two, ≈ 0.023 and ≈ 0.07. A calibration that is worse
+/// than doing nothing costs more than one that leaves a small gain unclaimed, so the ladder
+/// uses two.
+pub const LADDER_SIGNIFICANCE_Z: f64 = 2.0;
+
+/// A rung of the model ladder, simplest first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Rung {
+    /// Nominal kinematics; instrument and marker frames fitted.
+    FramesOnly,
+    /// Frames plus one offset per joint.
+    JointOffsets,
+    /// Frames plus every kinematic parameter the data determine.
+    Geometric,
+    /// Geometric plus a gravity compliance per joint.
+    Compliance,
+}
+
+impl Rung {
+    /// Every rung, simplest first.
+    pub const ALL: [Rung; 4] = [
+        Rung::FramesOnly,
+        Rung::JointOffsets,
+        Rung::Geometric,
+        Rung::Compliance,
+    ];
+}
+
+impl std::fmt::Display for Rung {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Rung::FramesOnly => "frames only",
+            Rung::JointOffsets => "joint offsets",
+            Rung::Geometric => "geometric",
+            Rung::Compliance => "compliance",
+        })
+    }
+}
+
+/// The robot as the measured workflow needs it: its tree (one chain per tip, sharing one
+/// parameter vector), its joints and, from a URDF, its link masses.
+#[derive(Clone, Debug)]
+pub struct Robot {
+    /// The kinematic tree, root to each tip.
+    pub tree: Tree,
+    /// Joint names, chain order (the columns of the measurement files).
+    pub joint_names: Vec<String>,
+    /// Prismatic flag per joint.
+    pub prismatic: Vec<bool>,
+    /// Joint limits per joint, rad or m.
+    pub limits: Vec<(f64, f64)>,
+    /// Link masses from the URDF's `<inertial>` tags (empty for a D-H device).
+    pub masses: Vec<LinkMass>,
+}
+
+/// Settings of [`calibrate_measured`].
+#[derive(Clone, Debug)]
+pub struct MeasuredConfig {
+    /// The rung to fit, or `None` to choose by cross-validation.
+    pub rung: Option<Rung>,
+    /// Cross-validation folds (contiguous blocks of rows in file order).
+    pub folds: usize,
+    /// Position noise σ, m, if known; else estimated from the frames-only residuals.
+    pub sigma_m: Option<f64>,
+    /// Orientation noise σ, rad, if known; else estimated from the frames-only residuals.
+    pub sigma_rad: Option<f64>,
+    /// Tip (index into the tree's tips) of each marker; markers past its end sit on the last
+    /// tip.
+    pub marker_tips: Vec<usize>,
+}
+
+/// Position and orientation errors of one data set under one model.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct PoseFigures {
+    /// Mean 3-D position error over every marker sample, m.
+    pub position_mean_m: f64,
+    /// RMS of the 3-D position error, m.
+    pub position_rms_m: f64,
+    /// Largest 3-D position error, m.
+    pub position_max_m: f64,
+    /// Mean orientation error (angle of the relative rotation), rad; pose data only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orientation_mean_rad: Option<f64>,
+    /// RMS orientation error, rad.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orientation_rms_rad: Option<f64>,
+    /// Largest orientation error, rad.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orientation_max_rad: Option<f64>,
+}
+
+/// One rung's cross-validation score.
+#[derive(Clone, Debug, Serialize)]
+pub struct RungReport {
+    /// The rung.
+    pub rung: Rung,
+    /// Held-out RMS of the 3-D position error over all folds, m.
+    pub heldout_rms_m: f64,
+    /// Mean held-out weighted squared error per row (`Σ |e_p|²/σ_p² + θ²/σ_θ²` over the row's
+    /// markers, dimensionless) minus the frames-only rung's, and its blocked standard error.
+    pub score_difference_to_frames: (f64, f64),
+    /// Kept model parameters (kinematic and compliance) on the full training data.
+    pub n_kept: usize,
+}
+
+/// An identified frame: the instrument-to-base transform or a marker on its link.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameReport {
+    /// `instrument` or `marker1`, `marker2`, ….
+    pub name: String,
+    /// Translation, m.
+    pub xyz_m: [f64; 3],
+    /// Rotation as roll, pitch, yaw (R = Rz(yaw)·Ry(pitch)·Rx(roll)), rad.
+    pub rpy_rad: [f64; 3],
+}
+
+/// Everything the measured workflow found.
+#[derive(Clone, Debug)]
+pub struct MeasuredOutcome {
+    /// The chosen rung.
+    pub rung: Rung,
+    /// Cross-validation scores, simplest rung first (empty when the rung was given).
+    pub ladder: Vec<RungReport>,
+    /// Final identification of the chosen rung on all training rows.
+    pub fitted: Fitted,
+    /// The frames-only identification on all training rows (the reference of every figure).
+    pub frames_only: Fitted,
+    /// The calibrated model (tree with frames, compliance if chosen).
+    pub model: CalibratedModel,
+    /// Identified frames.
+    pub frames: Vec<FrameReport>,
+    /// Per data set (training first): name, role, rows, frames-only and calibrated figures.
+    pub sets: Vec<(String, &'static str, usize, PoseFigures, PoseFigures)>,
+    /// Position σ (m) and orientation σ (rad) that weight the rows.
+    pub weights: Weights,
+    /// Plain-language warnings.
+    pub warnings: Vec<String>,
+}
+
+/// Robot of a URDF with one or more tips.
+///
+/// # Errors
+/// Whatever the URDF reader reports, with the path as context.
+pub fn robot_from_urdf(path: &std::path::Path, tips: &[String]) -> Result<Robot> {
+    let urdf = hapcal_io::import_urdf_tips(path, tips)
+        .with_context(|| format!("importing {}", path.display()))?;
+    let tree = Tree::from_placement_paths(&urdf.paths)
+        .with_context(|| format!("building the kinematic tree of {}", path.display()))?;
+    let masses = urdf
+        .inertials
+        .iter()
+        .filter(|l| l.mass_kg > 0.0)
+        .map(|l| LinkMass {
+            joint: l.joint,
+            mass_kg: l.mass_kg,
+            com_m: Vector3::from(l.com_m),
+        })
+        .collect();
+    Ok(Robot {
+        joint_names: tree.joint_names().to_vec(),
+        prismatic: prismatic_joints(&tree),
+        limits: urdf
+            .joints
+            .iter()
+            .map(|j| (j.lower_rad, j.upper_rad))
+            .collect(),
+        masses,
+        tree,
+    })
+}
+
+/// Per joint of `tree`: whether its screw is a translation (a prismatic joint).
+fn prismatic_joints(tree: &Tree) -> Vec<bool> {
+    let mut prismatic = vec![false; tree.joint_names().len()];
+    for chain in tree.tips() {
+        for f in chain.factors() {
+            if let hapcal_kinematics::Factor::Screw {
+                motion,
+                joint: Some(j),
+                ..
+            } = f
+                && let Some(p) = prismatic.get_mut(*j)
+            {
+                *p = *motion == hapcal_kinematics::Motion::Translation;
+            }
+        }
+    }
+    prismatic
+}
+
+/// Robot of a device file (a D-H, modified D-H or placement chain; one tip).
+///
+/// # Errors
+/// A device whose chain does not compile.
+pub fn robot_from_device(device: &hapcal_io::Device) -> Result<Robot> {
+    let chain = device.chain()?;
+    let n = chain.n_joints();
+    Ok(Robot {
+        joint_names: chain.joint_names().to_vec(),
+        prismatic: vec![false; n],
+        limits: device.joint_limits(),
+        masses: Vec::new(),
+        tree: Tree::single(chain),
+    })
+}
+
+/// Reads the measurement files of `robot` ([`hapcal_io::read_measurement_file`]).
+///
+/// # Errors
+/// Unreadable files (file, line, column), a file without markers.
+pub fn load_tables(
+    paths: &[std::path::PathBuf],
+    robot: &Robot,
+    units: &Units,
+) -> Result<Vec<MeasurementTable>> {
+    let schema = JointSchema {
+        names: &robot.joint_names,
+        prismatic: &robot.prismatic,
+        limits: &robot.limits,
+    };
+    paths
+        .iter()
+        .map(|p| {
+            let t = hapcal_io::read_measurement_file(p, &schema, units)
+                .with_context(|| format!("reading measurements {}", p.display()))?;
+            if t.n_markers == 0 {
+                bail!(
+                    "{}: no marker columns (x,y,z or x1,y1,z1,…); distance logs go through the \
+                     cable-distance workflow (columns q1..qn, distance_m)",
+                    p.display()
+                );
+            }
+            Ok(t)
+        })
+        .collect()
+}
+
+/// The rigid transform `T` minimising `Σ |T·a_i − b_i|²` (Kabsch 1976; Horn 1987, "Closed-form
+/// solution of absolute orientation using unit quaternions", JOSA A 4(4)), by the SVD of the
+/// cross-covariance; identity for fewer than 3 points.
+pub fn kabsch(a: &[Point3<f64>], b: &[Point3<f64>]) -> Isometry3<f64> {
+    let n = a.len().min(b.len());
+    if n < 3 {
+        return Isometry3::identity();
+    }
+    let ca = a.iter().take(n).fold(Vector3::zeros(), |s, p| s + p.coords) / n as f64;
+    let cb = b.iter().take(n).fold(Vector3::zeros(), |s, p| s + p.coords) / n as f64;
+    let mut h = nalgebra::Matrix3::zeros();
+    for (p, q) in a.iter().zip(b).take(n) {
+        h += (p.coords - ca) * (q.coords - cb).transpose();
+    }
+    let svd = h.svd(true, true);
+    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+        return Isometry3::identity();
+    };
+    let mut d = nalgebra::Matrix3::identity();
+    if (v_t.transpose() * u.transpose()).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    let r = v_t.transpose() * d * u.transpose();
+    let rotation = UnitQuaternion::from_matrix(&r);
+    let t = cb - rotation * ca;
+    Isometry3::from_parts(t.into(), rotation)
+}
+
+/// The tip of marker `k`.
+fn tip_of(cfg: &MeasuredConfig, tree: &Tree, k: usize) -> usize {
+    let last = tree.tips().len().saturating_sub(1);
+    cfg.marker_tips.get(k).copied().unwrap_or(last).min(last)
+}
+
+/// Number of markers over the tables.
+fn n_markers(tables: &[MeasurementTable]) -> usize {
+    tables.iter().map(|t| t.n_markers).max().unwrap_or(0)
+}
+
+/// One marker sample with the nominal pose of its tip in the robot's base frame.
+struct Sample {
+    marker: usize,
+    tip: Isometry3<f64>,
+    measured: Point3<f64>,
+    rotation: Option<UnitQuaternion<f64>>,
+}
+
+/// The samples of `tables` at the nominal kinematics.
+fn samples(robot: &Robot, tables: &[MeasurementTable], cfg: &MeasuredConfig) -> Vec<Sample> {
+    let zero = vec![0.0; robot.tree.n_params()];
+    let mut out = Vec::new();
+    for t in tables {
+        for row in &t.rows {
+            for m in &row.markers {
+                let tip = tip_of(cfg, &robot.tree, m.marker);
+                out.push(Sample {
+                    marker: m.marker,
+                    tip: robot.tree.tips()[tip].end_pose(&zero, &row.q),
+                    measured: Point3::from(m.position_m),
+                    rotation: m.rotation.map(|[w, x, y, z]| {
+                        UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z))
+                    }),
+                });
+            }
+        }
+    }
+    out
+}
+
+/// The instrument rotation, translation and marker offsets (m, in the tip frames) in closed
+/// form from marker positions at the nominal kinematics: `p_meas = R·(p_tip + R_tip·m_k) + t` is
+/// linear in `R` (9 entries, unconstrained), `t` and the 9 products `R[:, j]·m_k[l]` per marker;
+/// its least-squares solution's `R` is projected onto SO(3) (the nearest rotation, by SVD),
+/// then `t` and the `m_k` solved again with that `R` (the linear relaxation of the hand-eye and
+/// robot-world problem, Zhuang, Roth & Sudhakar 1994, "Simultaneous robot/world and tool/flange
+/// calibration by solving homogeneous transformation equations of the form AX = YB", IEEE
+/// T-RA 10(4)). `None` when the samples do not determine it (too few, or too little rotation
+/// of the tips).
+fn linear_frames(
+    samples: &[Sample],
+    n_markers: usize,
+) -> Option<(Isometry3<f64>, Vec<Vector3<f64>>)> {
+    let n_unknowns = 12 + 27 * n_markers;
+    if samples.len() * 3 < n_unknowns + 3 {
+        return None;
+    }
+    let mut a = nalgebra::DMatrix::<f64>::zeros(3 * samples.len(), n_unknowns);
+    let mut b = nalgebra::DVector::<f64>::zeros(3 * samples.len());
+    for (i, s) in samples.iter().enumerate() {
+        let p = s.tip.translation.vector;
+        let rt = s.tip.rotation.to_rotation_matrix();
+        for r in 0..3 {
+            let row = 3 * i + r;
+            // R[r, c]·p[c]: unknown R stored row-major at 0..9.
+            for c in 0..3 {
+                a[(row, 3 * r + c)] = p[c];
+            }
+            a[(row, 9 + r)] = 1.0;
+            // Σ_{j,l} R_tip[j, l]·N_{k,j,l}[r], N_{k,j,l} = R[:, j]·m_k[l].
+            for j in 0..3 {
+                for l in 0..3 {
+                    a[(row, 12 + 27 * s.marker + 9 * j + 3 * l + r)] = rt[(j, l)];
+                }
+            }
+            b[row] = s.measured[r];
+        }
+    }
+    let svd = a.clone().svd(true, true);
+    let smax = svd.singular_values.max();
+    if !(smax > 0.0) || svd.singular_values.min() < 1e-9 * smax {
+        return None;
+    }
+    let x = svd.solve(&b, 1e-12 * smax).ok()?;
+    let r_free = nalgebra::Matrix3::from_row_slice(&x.as_slice()[0..9]);
+    let rsvd = r_free.svd(true, true);
+    let (u, v_t) = (rsvd.u?, rsvd.v_t?);
+    let mut d = nalgebra::Matrix3::identity();
+    if (u * v_t).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    let rotation = nalgebra::Rotation3::from_matrix_unchecked(u * d * v_t);
+    // With R fixed: p_meas − R·p_tip = t + R·R_tip·m_k, linear in t and the m_k.
+    let mut a2 = nalgebra::DMatrix::<f64>::zeros(3 * samples.len(), 3 + 3 * n_markers);
+    let mut b2 = nalgebra::DVector::<f64>::zeros(3 * samples.len());
+    for (i, s) in samples.iter().enumerate() {
+        let rr = rotation.matrix() * s.tip.rotation.to_rotation_matrix().matrix();
+        let rhs = s.measured.coords - rotation * s.tip.translation.vector;
+        for r in 0..3 {
+            a2[(3 * i + r, r)] = 1.0;
+            for c in 0..3 {
+                a2[(3 * i + r, 3 + 3 * s.marker + c)] = rr[(r, c)];
+            }
+            b2[3 * i + r] = rhs[r];
+        }
+    }
+    let y = a2.svd(true, true).solve(&b2, 1e-12).ok()?;
+    let t = Vector3::new(y[0], y[1], y[2]);
+    let offsets: Vec<Vector3<f64>> = (0..n_markers)
+        .map(|k| Vector3::new(y[3 + 3 * k], y[4 + 3 * k], y[5 + 3 * k]))
+        .collect();
+    let base = Isometry3::from_parts(t.into(), UnitQuaternion::from_rotation_matrix(&rotation));
+    offsets_finite(&base, &offsets).then_some((base, offsets))
+}
+
+/// Whether a closed-form solution is finite (a degenerate system can yield NaN).
+fn offsets_finite(base: &Isometry3<f64>, offsets: &[Vector3<f64>]) -> bool {
+    base.translation.vector.iter().all(|v| v.is_finite())
+        && base.rotation.coords.iter().all(|v| v.is_finite())
+        && offsets.iter().all(|o| o.iter().all(|v| v.is_finite()))
+}
+
+/// The instrument frame and the marker's frame on its tip in closed form from pose samples of
+/// one marker, `M_i = B · T_i · X`: the rotation of `B` aligns the rotation vectors of the
+/// relative motions `T_i T_jᵀ` with those of `M_i M_jᵀ` (`A = R_B · B · R_Bᵀ`, Park & Martin
+/// 1994, "Robot sensor calibration: solving AX = XB on the Euclidean group", IEEE T-RA 10(5)),
+/// the rotation of `X` is the chordal mean of `R_Tᵢᵀ R_Bᵀ R_Mᵢ`, and both translations are
+/// linear least squares. `None` without pose samples or without rotation between them.
+fn pose_frames(samples: &[Sample], marker: usize) -> Option<(Isometry3<f64>, Isometry3<f64>)> {
+    let poses: Vec<(&Sample, UnitQuaternion<f64>)> = samples
+        .iter()
+        .filter(|s| s.marker == marker)
+        .filter_map(|s| s.rotation.map(|r| (s, r)))
+        .collect();
+    let n = poses.len();
+    if n < 3 {
+        return None;
+    }
+    let stride = n.div_ceil(200).max(1);
+    let (mut from, mut to) = (Vec::new(), Vec::new());
+    for i in (0..n).step_by(stride) {
+        for j in (i + 1..n).step_by(stride) {
+            let a = poses[i].1 * poses[j].1.inverse();
+            let b = poses[i].0.tip.rotation * poses[j].0.tip.rotation.inverse();
+            if a.angle() < 1e-3 || b.angle() < 1e-3 {
+                continue;
+            }
+            // Each vector and its negative: a centred set, so Kabsch finds a pure rotation.
+            for sign in [1.0, -1.0] {
+                from.push(Point3::from(sign * b.scaled_axis()));
+                to.push(Point3::from(sign * a.scaled_axis()));
+            }
+        }
+    }
+    if from.len() < 4 {
+        return None;
+    }
+    let r_b = kabsch(&from, &to).rotation;
+    let mut sum = nalgebra::Vector4::zeros();
+    let mut reference: Option<UnitQuaternion<f64>> = None;
+    for (s, m) in &poses {
+        let rel = (r_b * s.tip.rotation).inverse() * m;
+        let r = *reference.get_or_insert(rel);
+        sum += if rel.coords.dot(&r.coords) < 0.0 {
+            -rel.coords
+        } else {
+            rel.coords
+        };
+    }
+    let r_x = UnitQuaternion::from_quaternion(nalgebra::Quaternion::from(sum.normalize()));
+    // p_M = R_B·(p_T + R_T·t_X) + t_B, linear in (t_B, t_X).
+    let mut a = nalgebra::DMatrix::<f64>::zeros(3 * n, 6);
+    let mut rhs = nalgebra::DVector::<f64>::zeros(3 * n);
+    for (i, (s, _)) in poses.iter().enumerate() {
+        let rr = r_b.to_rotation_matrix().matrix() * s.tip.rotation.to_rotation_matrix().matrix();
+        let b = s.measured.coords - r_b * s.tip.translation.vector;
+        for r in 0..3 {
+            a[(3 * i + r, r)] = 1.0;
+            for c in 0..3 {
+                a[(3 * i + r, 3 + c)] = rr[(r, c)];
+            }
+            rhs[3 * i + r] = b[r];
+        }
+    }
+    let t = a.svd(true, true).solve(&rhs, 1e-12).ok()?;
+    let base = Isometry3::from_parts(Vector3::new(t[0], t[1], t[2]).into(), r_b);
+    let frame = Isometry3::from_parts(Vector3::new(t[3], t[4], t[5]).into(), r_x);
+    offsets_finite(&base, &[frame.translation.vector]).then_some((base, frame))
+}
+
+/// Candidate initial frames: the instrument frame and marker offsets in closed form
+/// ([`linear_frames`]) when the samples determine it, and the instrument frame by Kabsch from
+/// the nominal tip origins to the measured positions (markers at their tips' origins); each
+/// with each marker's rotation by the chordal mean of its measured orientations relative to the
+/// nominal tip (pose data). With few rows the closed form follows the noise far from the
+/// optimum, so both are fitted and the better kept ([`calibrate_measured`]).
+fn initial_frames(
+    robot: &Robot,
+    tables: &[MeasurementTable],
+    cfg: &MeasuredConfig,
+) -> Vec<(FrameSpec, Vec<(usize, FrameSpec)>)> {
+    let samples = samples(robot, tables, cfg);
+    let n = n_markers(tables);
+    let a: Vec<Point3<f64>> = samples
+        .iter()
+        .map(|s| Point3::from(s.tip.translation.vector))
+        .collect();
+    let b: Vec<Point3<f64>> = samples.iter().map(|s| s.measured).collect();
+    let mut starts = Vec::new();
+    if let Some(linear) = linear_frames(&samples, n) {
+        starts.push(linear);
+    }
+    starts.push((kabsch(&a, &b), vec![Vector3::zeros(); n]));
+    // Pose data: the instrument frame from the first marker's poses, every marker's frame from
+    // its own poses seen through it.
+    let mut rotations: Vec<Option<UnitQuaternion<f64>>> = vec![None; n];
+    if let Some((base, _)) = pose_frames(&samples, 0) {
+        let offsets = (0..n)
+            .map(|k| {
+                let frame = pose_frames(&samples, k).map(|(_, f)| f);
+                rotations[k] = frame.map(|f| f.rotation);
+                frame.map_or_else(Vector3::zeros, |f| f.translation.vector)
+            })
+            .collect();
+        starts.push((base, offsets));
+    }
+    let n_starts = starts.len();
+    starts
+        .into_iter()
+        .enumerate()
+        .map(|(i, (base, offsets))| {
+            let markers = (0..n)
+                .map(|k| {
+                    let rotation = rotations[k]
+                        .filter(|_| i + 1 == n_starts)
+                        .unwrap_or_else(|| mean_marker_rotation(&samples, k, &base));
+                    (
+                        tip_of(cfg, &robot.tree, k),
+                        FrameSpec {
+                            name: format!("marker{}", k + 1),
+                            nominal: Isometry3::from_parts(offsets[k].into(), rotation),
+                        },
+                    )
+                })
+                .collect();
+            let instrument = FrameSpec {
+                name: "instrument".into(),
+                nominal: base,
+            };
+            (instrument, markers)
+        })
+        .collect()
+}
+
+/// Marker `k`'s rotation on its tip: the chordal mean of its measured orientations relative to
+/// the nominal tip seen through `base` (identity without orientation data).
+fn mean_marker_rotation(
+    samples: &[Sample],
+    k: usize,
+    base: &Isometry3<f64>,
+) -> UnitQuaternion<f64> {
+    let mut sum = nalgebra::Vector4::zeros();
+    let mut reference: Option<UnitQuaternion<f64>> = None;
+    for s in samples.iter().filter(|s| s.marker == k) {
+        let Some(meas) = s.rotation else { continue };
+        let rel = (base.rotation * s.tip.rotation).inverse() * meas;
+        // Sign-align quaternions before averaging (q and −q are one rotation).
+        let r = *reference.get_or_insert(rel);
+        let c = rel.coords;
+        sum += if c.dot(&r.coords) < 0.0 { -c } else { c };
+    }
+    if sum.norm() > 0.0 {
+        UnitQuaternion::from_quaternion(nalgebra::Quaternion::from(sum / sum.norm()))
+    } else {
+        UnitQuaternion::identity()
+    }
+}
+
+/// Observations of the tables' rows for which `keep(table, row)` holds.
+fn observations(
+    tables: &[MeasurementTable],
+    cfg: &MeasuredConfig,
+    n_tips_robot: usize,
+    keep: &dyn Fn(usize, usize) -> bool,
+) -> Observations {
+    let _ = n_tips_robot;
+    let _ = cfg;
+    let mut obs = Observations::default();
+    for (ti, t) in tables.iter().enumerate() {
+        for (ri, row) in t.rows.iter().enumerate() {
+            if !keep(ti, ri) {
+                continue;
+            }
+            for m in &row.markers {
+                // Tip k of the framed tree is marker k.
+                let kind = match m.rotation {
+                    Some(rotation) => RowKind::Pose {
+                        tip: m.marker,
+                        position_m: m.position_m,
+                        rotation,
+                    },
+                    None => RowKind::Marker {
+                        tip: m.marker,
+                        position_m: m.position_m,
+                    },
+                };
+                obs.rows.push(Row {
+                    q: row.q.clone(),
+                    kind,
+                });
+            }
+        }
+    }
+    obs
+}
+
+/// The problem's model terms for `rung`.
+fn terms(rung: Rung, robot: &Robot) -> ModelTerms {
+    let compliance = (rung == Rung::Compliance).then(|| {
+        if robot.masses.is_empty() {
+            GravityCompliance::default()
+        } else {
+            GravityCompliance::from_link_masses(robot.masses.clone(), -Vector3::z())
+        }
+    });
+    ModelTerms {
+        compliance,
+        harmonics: None,
+        torque_chain: Some(robot.tree.tips()[0].clone()),
+    }
+}
+
+/// Free parameters of `rung` in the layout of a problem on `framed` (the tree with joint
+/// offsets and frames; `offsets` its joint-offset parameters; `n_robot` the robot's own
+/// parameter count, after the 6 of the instrument frame); `orientation`: whether marker
+/// rotations are observed.
+fn free_of(
+    rung: Rung,
+    framed: &Tree,
+    offsets: &[Option<usize>],
+    n_robot: usize,
+    orientation: bool,
+    n_layout: usize,
+) -> Vec<usize> {
+    let n_kin = framed.n_params();
+    let mut free: Vec<usize> = (0..6).collect();
+    // Marker frames: 6 each after the robot's parameters; rotations only with orientation data.
+    let mut k = 6 + n_robot;
+    while k + 6 <= n_kin {
+        free.extend(k..k + 3);
+        if orientation {
+            free.extend(k + 3..k + 6);
+        }
+        k += 6;
+    }
+    match rung {
+        Rung::FramesOnly => {}
+        Rung::JointOffsets => free.extend(offsets.iter().flatten().map(|&i| i + 6)),
+        Rung::Geometric | Rung::Compliance => free.extend(6..6 + n_robot),
+    }
+    // Compliance (and any other model term) after the kinematic parameters.
+    free.extend(n_kin..n_layout);
+    free.sort_unstable();
+    free.dedup();
+    free
+}
+
+/// Fits `rung` on the rows `keep` selects: the problem and its identification (estimates
+/// mapped back to the full layout).
+fn fit(
+    rung: Rung,
+    robot: &Robot,
+    framed: &Tree,
+    offsets: &[Option<usize>],
+    tables: &[MeasurementTable],
+    cfg: &MeasuredConfig,
+    weights: Weights,
+    keep: &dyn Fn(usize, usize) -> bool,
+) -> Result<(CalibratedModel, Fitted)> {
+    let obs = observations(tables, cfg, robot.tree.tips().len(), keep);
+    let n_rows = obs.rows.len();
+    let problem = CalibrationProblem::on_tree(framed.clone(), obs, weights, terms(rung, robot))
+        .context("building the calibration problem")?;
+    let orientation = tables.iter().any(|t| t.has_orientation);
+    let n_layout = problem.layout().len();
+    let free = free_of(
+        rung,
+        framed,
+        offsets,
+        robot.tree.n_params(),
+        orientation,
+        n_layout,
+    );
+    let x_full = problem.initial_guess();
+    let subset = Subset::new(&problem, free, x_full);
+    let x0 = subset.initial_free();
+    let id = identify(&subset, x0, &crate::calibrate::identify_config(None))
+        .with_context(|| format!("identifying the {rung} model from {n_rows} marker samples"))?;
+    let x = subset.full_x(id.fit.x.as_ref());
+    let model = problem.model(x.as_ref());
+    let names: Vec<String> = (0..problem.layout().len())
+        .map(|i| problem.layout().name(i).to_owned())
+        .collect();
+    Ok((
+        model,
+        Fitted {
+            x,
+            identified: id,
+            names,
+        },
+    ))
+}
+
+/// One identification of a rung: the full parameter vector, the identification over the free
+/// parameters, and the full layout's names.
+#[derive(Clone, Debug)]
+pub struct Fitted {
+    /// Every parameter of the problem (fixed ones at their nominal values).
+    pub x: Col<f64>,
+    /// The identification over the rung's free parameters (its layout names them).
+    pub identified: Identified,
+    /// Names of the full layout.
+    pub names: Vec<String>,
+}
+
+/// Per row of the tables (in order), the squared 3-D position error summed over its markers,
+/// m², and per marker sample the position error (m) and the orientation error (rad, pose data).
+fn errors(
+    model: &CalibratedModel,
+    tables: &[MeasurementTable],
+    table: usize,
+) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let (per_row, pos, rot, _) = scored_errors(model, tables, table, None);
+    (per_row, pos, rot)
+}
+
+/// As [`errors`], plus per row the weighted squared error `Σ |e_p|²/σ_p² + θ²/σ_θ²` over its
+/// markers (the fit's own objective; zeros without `weights`).
+fn scored_errors(
+    model: &CalibratedModel,
+    tables: &[MeasurementTable],
+    table: usize,
+    weights: Option<&Weights>,
+) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
+    let (mut per_row, mut pos, mut rot, mut scores) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for row in &tables[table].rows {
+        let (mut sq, mut score) = (0.0, 0.0);
+        for m in &row.markers {
+            let pose = model.end_pose_of(m.marker, &row.q);
+            let e = (pose.translation.vector - Vector3::from(m.position_m)).norm();
+            sq += e * e;
+            pos.push(e);
+            if let Some(w) = weights {
+                score += (e / w.sigma_position_m).powi(2);
+            }
+            if let Some([w, xq, y, z]) = m.rotation {
+                let meas = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, xq, y, z));
+                let theta = meas.angle_to(&pose.rotation);
+                rot.push(theta);
+                if let Some(w) = weights {
+                    score += (theta / w.sigma_orientation_rad).powi(2);
+                }
+            }
+        }
+        per_row.push(sq);
+        scores.push(score);
+    }
+    (per_row, pos, rot, scores)
+}
+
+/// Mean, RMS and maximum of `v` (zeros when empty).
+fn stats(v: &[f64]) -> (f64, f64, f64) {
+    if v.is_empty() {
+        return (0.0, 0.0, 0.0);
+    }
+    let n = v.len() as f64;
+    (
+        v.iter().sum::<f64>() / n,
+        (v.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
+        v.iter().copied().fold(0.0, f64::max),
+    )
+}
+
+fn figures(model: &CalibratedModel, tables: &[MeasurementTable], table: usize) -> PoseFigures {
+    let (_, pos, rot) = errors(model, tables, table);
+    let (pm, pr, px) = stats(&pos);
+    let (om, or, ox) = stats(&rot);
+    let has_rot = !rot.is_empty();
+    PoseFigures {
+        position_mean_m: pm,
+        position_rms_m: pr,
+        position_max_m: px,
+        orientation_mean_rad: has_rot.then_some(om),
+        orientation_rms_rad: has_rot.then_some(or),
+        orientation_max_rad: has_rot.then_some(ox),
+    }
+}
+
+/// Held-out squared position errors of `rung` by repeated blocked k-fold cross-validation over
+/// the training tables (blocks contiguous in file order within each table).
+fn cross_validate(
+    rung: Rung,
+    robot: &Robot,
+    framed: &Tree,
+    offsets: &[Option<usize>],
+    tables: &[MeasurementTable],
+    cfg: &MeasuredConfig,
+    weights: Weights,
+) -> Result<(HeldOut, HeldOut)> {
+    let k = cfg.folds;
+    let lens: Vec<usize> = tables.iter().map(|t| t.rows.len()).collect();
+    let mut sq_sum = Vec::new();
+    let mut score_sum = Vec::new();
+    let mut block = Vec::new();
+    for (ti, &n) in lens.iter().enumerate() {
+        for r in 0..n {
+            block.push(ti * k + fold_of(r, n, k, 0, CV_REPEATS));
+            sq_sum.push(0.0);
+            score_sum.push(0.0);
+        }
+    }
+    for rep in 0..CV_REPEATS {
+        for fold in 0..k {
+            let (model, _) = fit(
+                rung,
+                robot,
+                framed,
+                offsets,
+                tables,
+                cfg,
+                weights,
+                &|ti, r| fold_of(r, lens[ti], k, rep, CV_REPEATS) != fold,
+            )?;
+            let mut idx = 0;
+            for (ti, &n) in lens.iter().enumerate() {
+                let (per_row, _, _, scores) = scored_errors(&model, tables, ti, Some(&weights));
+                for r in 0..n {
+                    if fold_of(r, n, k, rep, CV_REPEATS) == fold {
+                        sq_sum[idx + r] += per_row[r];
+                        score_sum[idx + r] += scores[r];
+                    }
+                }
+                idx += n;
+            }
+        }
+    }
+    let mean = |v: &[f64]| v.iter().map(|v| v / CV_REPEATS as f64).collect();
+    Ok((
+        HeldOut {
+            sq_errors: mean(&sq_sum),
+            block: block.clone(),
+        },
+        HeldOut {
+            sq_errors: mean(&score_sum),
+            block,
+        },
+    ))
+}
+
+/// Calibrates `robot` from marker tables: frames fitted, the rung chosen on the ladder (or
+/// given), figures of every training and test table for frames only and the chosen rung.
+///
+/// # Errors
+/// No training row, fewer rows than the kept parameters, or a failed identification.
+pub fn calibrate_measured(
+    robot: &Robot,
+    train: &[MeasurementTable],
+    test: &[MeasurementTable],
+    cfg: &MeasuredConfig,
+) -> Result<MeasuredOutcome> {
+    let n_rows: usize = train.iter().map(|t| t.rows.len()).sum();
+    if n_rows == 0 {
+        bail!("the training files have no row");
+    }
+    if cfg.folds < 2 || cfg.folds > n_rows {
+        bail!(
+            "--folds {} is not possible with {n_rows} training rows (2 to {n_rows})",
+            cfg.folds
+        );
+    }
+    let with_offsets = robot.tree.with_joint_offsets();
+    let offsets = with_offsets.joint_offset_params();
+    // Weights: given, or the RMS of each residual group after a frames-only fit at unit weights.
+    let mut weights = Weights {
+        sigma_position_m: cfg.sigma_m.unwrap_or(1e-3),
+        sigma_orientation_rad: cfg.sigma_rad.unwrap_or(1e-2),
+        ..Weights::default()
+    };
+    let all = |_: usize, _: usize| true;
+    // Frames-only fits from every initial guess; the framed tree of the lowest cost is kept,
+    // with its fitted frames as the nominal ones.
+    let mut best: Option<(
+        f64,
+        Tree,
+        CalibratedModel,
+        FrameSpec,
+        Vec<(usize, FrameSpec)>,
+    )> = None;
+    for (base, markers) in initial_frames(robot, train, cfg) {
+        let framed = with_offsets
+            .with_frames(&base, &markers)
+            .context("attaching the instrument and marker frames")?;
+        let candidate = Robot {
+            tree: with_offsets.clone(),
+            ..robot.clone()
+        };
+        let (m, f) = fit(
+            Rung::FramesOnly,
+            &candidate,
+            &framed,
+            &offsets,
+            train,
+            cfg,
+            weights,
+            &all,
+        )?;
+        let cost = f.identified.fit.cost;
+        if best.as_ref().is_none_or(|(c, ..)| cost < *c) {
+            let (base, markers) = fitted_frames(&framed, &f.x, &base, &markers);
+            let framed = with_offsets
+                .with_frames(&base, &markers)
+                .context("attaching the fitted instrument and marker frames")?;
+            best = Some((cost, framed, m, base, markers));
+        }
+    }
+    let Some((_, framed, m0, base, markers)) = best else {
+        bail!("no initial guess of the instrument frame");
+    };
+    let robot = &Robot {
+        tree: with_offsets,
+        ..robot.clone()
+    };
+    if cfg.sigma_m.is_none() || cfg.sigma_rad.is_none() {
+        let (mut pos, mut rot) = (Vec::new(), Vec::new());
+        for ti in 0..train.len() {
+            let (_, p, r) = errors(&m0, train, ti);
+            pos.extend(p);
+            rot.extend(r);
+        }
+        // Per axis: a 3-D error of RMS e has about e/√3 per axis.
+        let (_, pos_rms, _) = stats(&pos);
+        let (_, rot_rms, _) = stats(&rot);
+        if cfg.sigma_m.is_none() && pos_rms > 0.0 {
+            weights.sigma_position_m = pos_rms / 3f64.sqrt();
+        }
+        if cfg.sigma_rad.is_none() && rot_rms > 0.0 {
+            weights.sigma_orientation_rad = rot_rms / 3f64.sqrt();
+        }
+    }
+    let (frames_model, frames_only) = fit(
+        Rung::FramesOnly,
+        robot,
+        &framed,
+        &offsets,
+        train,
+        cfg,
+        weights,
+        &all,
+    )?;
+
+    let mut ladder = Vec::new();
+    let rung = match cfg.rung {
+        Some(r) => r,
+        None => {
+            let mut held = Vec::new();
+            let mut scored = Vec::new();
+            for r in Rung::ALL {
+                let (h, s) = cross_validate(r, robot, &framed, &offsets, train, cfg, weights)?;
+                held.push(h);
+                scored.push(s);
+            }
+            let rms = |h: &HeldOut| {
+                (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt()
+            };
+            let mut chosen = 0;
+            for (i, r) in Rung::ALL.iter().enumerate() {
+                let to_frames = blocked_difference(&scored[i], &scored[0]);
+                ladder.push(RungReport {
+                    rung: *r,
+                    heldout_rms_m: rms(&held[i]),
+                    score_difference_to_frames: if i == 0 { (0.0, 0.0) } else { to_frames },
+                    n_kept: 0,
+                });
+                let (d, se) = blocked_difference(&scored[i], &scored[chosen]);
+                if i > chosen && d + LADDER_SIGNIFICANCE_Z * se < 0.0 {
+                    chosen = i;
+                }
+            }
+            Rung::ALL[chosen]
+        }
+    };
+    let (model, fitted) = if rung == Rung::FramesOnly {
+        (frames_model.clone(), frames_only.clone())
+    } else {
+        fit(rung, robot, &framed, &offsets, train, cfg, weights, &all)?
+    };
+    let is_frame = |name: &str| name.starts_with("instrument.") || name.starts_with("marker");
+    let n_kept = (fitted.identified.identifiability.kept.iter())
+        .filter(|&&i| !is_frame(fitted.identified.layout.name(i)))
+        .count();
+    if let Some(r) = ladder.iter_mut().find(|r| r.rung == rung) {
+        r.n_kept = n_kept;
+    }
+    let mut warnings = Vec::new();
+    if cfg.rung.is_none() && rung == Rung::FramesOnly {
+        warnings.push(
+            "no calibrated model beat frames only on held-out training rows: the nominal \
+             kinematics are kept (only the instrument and marker frames are fitted)"
+                .to_owned(),
+        );
+    }
+    let n_samples: usize = fitted.identified.fit.residuals.nrows();
+    let n_free = fitted.identified.identifiability.kept.len();
+    if 3 * n_free > n_samples {
+        warnings.push(format!(
+            "{n_free} parameters are kept from {n_samples} residuals: fewer than 3 residuals per \
+             parameter; the estimate follows the noise (record more configurations)"
+        ));
+    }
+    let frame_sigma_ratio = frames_only.identified.sigma;
+    if cfg.sigma_m.is_some() && frame_sigma_ratio > 10.0 {
+        warnings.push(format!(
+            "the frames-only residual is {frame_sigma_ratio:.0}× the stated σ: the nominal model \
+             may be wrong (joint order, units, tip link, marker on the wrong link)"
+        ));
+    }
+
+    let mut sets = Vec::new();
+    for (role, tables) in [("train", train), ("test", test)] {
+        for ti in 0..tables.len() {
+            let before = figures(&frames_model, tables, ti);
+            let after = figures(&model, tables, ti);
+            if role == "test" && after.position_rms_m > before.position_rms_m {
+                warnings.insert(
+                    0,
+                    format!(
+                        "test set {}: the {rung} model is worse than frames only (position RMS \
+                         {:.3} → {:.3} mm): do not use this calibration there",
+                        tables[ti].name,
+                        before.position_rms_m * 1e3,
+                        after.position_rms_m * 1e3
+                    ),
+                );
+            }
+            sets.push((
+                tables[ti].name.clone(),
+                role,
+                tables[ti].rows.len(),
+                before,
+                after,
+            ));
+        }
+    }
+    let frames = frame_reports(&base, &markers, &fitted.x, robot.tree.n_params());
+    Ok(MeasuredOutcome {
+        rung,
+        ladder,
+        fitted,
+        frames_only,
+        model,
+        frames,
+        sets,
+        weights,
+        warnings,
+    })
+}
+
+/// `Tx(x)·Ty(y)·Tz(z)·Rx(rx)·Ry(ry)·Rz(rz)` of six deviations (m, rad), as the frames apply
+/// them ([`Tree::with_frames`]).
+fn deviation(d: &[f64]) -> Isometry3<f64> {
+    let r = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), d[3])
+        * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), d[4])
+        * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), d[5]);
+    Isometry3::from_parts(Vector3::new(d[0], d[1], d[2]).into(), r)
+}
+
+/// The frames of a fit on `framed` (x in its layout) as new nominal frames.
+fn fitted_frames(
+    framed: &Tree,
+    x: &Col<f64>,
+    base: &FrameSpec,
+    markers: &[(usize, FrameSpec)],
+) -> (FrameSpec, Vec<(usize, FrameSpec)>) {
+    let n_robot = framed.n_params() - 6 - 6 * markers.len();
+    let at = |k: usize| -> Vec<f64> { (k..k + 6).map(|i| x[i]).collect() };
+    let base = FrameSpec {
+        name: base.name.clone(),
+        nominal: base.nominal * deviation(&at(0)),
+    };
+    let markers = (markers.iter().enumerate())
+        .map(|(k, (tip, m))| {
+            (
+                *tip,
+                FrameSpec {
+                    name: m.name.clone(),
+                    nominal: m.nominal * deviation(&at(6 + n_robot + 6 * k)),
+                },
+            )
+        })
+        .collect();
+    (base, markers)
+}
+
+/// The identified instrument and marker frames: each nominal frame times its deviation.
+fn frame_reports(
+    base: &FrameSpec,
+    markers: &[(usize, FrameSpec)],
+    x: &Col<f64>,
+    n_robot: usize,
+) -> Vec<FrameReport> {
+    let at = |k: usize| -> Vec<f64> { (k..k + 6).map(|i| x[i]).collect() };
+    let report = |name: &str, pose: Isometry3<f64>| {
+        let (roll, pitch, yaw) = pose.rotation.euler_angles();
+        FrameReport {
+            name: name.to_owned(),
+            xyz_m: pose.translation.vector.into(),
+            rpy_rad: [roll, pitch, yaw],
+        }
+    };
+    let mut out = vec![report(&base.name, base.nominal * deviation(&at(0)))];
+    for (k, (_, m)) in markers.iter().enumerate() {
+        out.push(report(
+            &m.name,
+            m.nominal * deviation(&at(6 + n_robot + 6 * k)),
+        ));
+    }
+    out
+}
+
+/// Whether `path` holds marker measurements: an industrial_calibration YAML, or a CSV whose
+/// header has marker columns (`x`, `x1`, …).
+pub fn is_marker_file(path: &std::path::Path) -> bool {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("yaml" | "yml") => true,
+        Some("csv") => std::fs::read_to_string(path).is_ok_and(|text| {
+            text.lines()
+                .next()
+                .is_some_and(|header| header.split(',').any(|c| matches!(c.trim(), "x" | "x1")))
+        }),
+        _ => false,
+    }
+}
+
+/// The rung a fixed `--model` asks for, or `None` for `auto`.
+///
+/// # Errors
+/// A model the marker workflow does not fit (harmonics, transmissions).
+fn rung_of(model: crate::calibrate::ModelChoice) -> Result<Option<Rung>> {
+    use crate::calibrate::ModelChoice as M;
+    Ok(match model {
+        M::Auto => None,
+        M::FramesOnly => Some(Rung::FramesOnly),
+        M::JointOffsets => Some(Rung::JointOffsets),
+        M::Geometric => Some(Rung::Geometric),
+        M::Compliance | M::MassCompliance => Some(Rung::Compliance),
+        other => bail!(
+            "--model {other:?} is not fitted to marker data: use auto, frames-only, joint-offsets, geometric or compliance"
+        ),
+    })
+}
+
+/// The command-line model of a rung.
+fn model_of(rung: Rung) -> crate::calibrate::ModelChoice {
+    use crate::calibrate::ModelChoice as M;
+    match rung {
+        Rung::FramesOnly => M::FramesOnly,
+        Rung::JointOffsets => M::JointOffsets,
+        Rung::Geometric => M::Geometric,
+        Rung::Compliance => M::Compliance,
+    }
+}
+
+/// `hapcal calibrate` on marker files: [`calibrate_measured`] with the plan's settings, as a
+/// [`crate::calibrate::Outcome`].
+///
+/// # Errors
+/// As [`calibrate_measured`], and unreadable files.
+pub fn run(
+    plan: &crate::calibrate::Plan,
+    device: &hapcal_io::Device,
+    start: std::time::Instant,
+) -> Result<crate::calibrate::Outcome> {
+    use crate::calibrate::{CalibrationReport, Figures, ParamReport, SetReport};
+    let is_urdf = plan
+        .device
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    let tips: Vec<String> = std::iter::once(plan.tip.clone())
+        .chain(plan.tips.iter().cloned())
+        .collect();
+    let robot = if is_urdf {
+        robot_from_urdf(&plan.device, &tips)?
+    } else {
+        robot_from_device(device)?
+    };
+    let mut train = load_tables(&plan.data, &robot, &plan.units)?;
+    let mut test = load_tables(&plan.test, &robot, &plan.units)?;
+    if let Some(f) = plan.test_last {
+        if !(f > 0.0 && f < 1.0) {
+            bail!("--test-last must be a fraction in (0, 1), got {f}");
+        }
+        for t in &mut train {
+            let n = t.rows.len();
+            let k = ((1.0 - f) * n as f64).round() as usize;
+            if k == 0 || k == n {
+                bail!(
+                    "{}: --test-last {f} leaves {k} of {n} rows to train on",
+                    t.path.display()
+                );
+            }
+            let mut held = t.clone();
+            held.rows = t.rows.split_off(k);
+            held.name = format!("{} (last {})", t.name, n - k);
+            t.name = format!("{} (first {k})", t.name);
+            test.push(held);
+        }
+    }
+    let mut warnings: Vec<String> = Vec::new();
+    let mut ignored: Vec<String> = (train.iter().chain(&test))
+        .flat_map(|t| t.ignored_columns.iter().cloned())
+        .collect();
+    ignored.sort();
+    ignored.dedup();
+    if !ignored.is_empty() {
+        warnings.push(format!("columns ignored: {}", ignored.join(", ")));
+    }
+    for w in (train.iter().chain(&test)).flat_map(|t| &t.warnings) {
+        if !warnings.contains(w) {
+            warnings.push(w.clone());
+        }
+    }
+    let cfg = MeasuredConfig {
+        rung: rung_of(plan.model)?,
+        folds: plan.folds,
+        sigma_m: plan.sigma_m,
+        sigma_rad: plan.sigma_rad,
+        marker_tips: (0..tips.len()).collect(),
+    };
+    let out = calibrate_measured(&robot, &train, &test, &cfg)?;
+    warnings.extend(out.warnings.iter().cloned());
+    let id = &out.fitted.identified;
+    let is_frame = |name: &str| name.starts_with("instrument.") || name.starts_with("marker");
+    let parameters = (id.covariance.free.iter())
+        .zip(id.covariance.std())
+        .filter(|(i, _)| !is_frame(id.layout.name(**i)))
+        .map(|(&i, std)| ParamReport {
+            name: id.layout.name(i).to_owned(),
+            value: id.fit.x[i],
+            std,
+            unit: id.layout.spec(i).unit.symbol(),
+        })
+        .collect();
+    let pruned = crate::calibrate::pruned_report(id)
+        .into_iter()
+        .filter(|p| !is_frame(&p.name))
+        .collect();
+    let correlated = (id.covariance.correlated_pairs(0.95).into_iter())
+        .map(|(a, b, c)| {
+            (
+                id.layout.name(a).to_owned(),
+                id.layout.name(b).to_owned(),
+                c,
+            )
+        })
+        .filter(|(a, b, _)| !is_frame(a) && !is_frame(b))
+        .collect();
+    let placements = (out.sets.iter())
+        .map(|(name, role, n_rows, before, after)| {
+            let f = |p: &PoseFigures| Figures {
+                mean_absolute_error_m: None,
+                distance_error_m: None,
+                distance_rms_m: None,
+                pose: Some(*p),
+            };
+            SetReport {
+                name: name.clone(),
+                role,
+                n_rows: *n_rows,
+                before: f(before),
+                after: f(after),
+            }
+        })
+        .collect();
+    let report = CalibrationReport {
+        device: plan.device.display().to_string(),
+        model: model_of(out.rung),
+        folds: plan.folds,
+        cross_validation: Vec::new(),
+        ladder: out.ladder.clone(),
+        frames: out.frames.clone(),
+        sigma_m: out.weights.sigma_position_m * id.sigma,
+        sigma_source: match id.sigma_source {
+            hapcal_identify::SigmaSource::Given => "given",
+            _ => "residuals",
+        },
+        parameters,
+        pruned,
+        correlated,
+        observability: None,
+        warnings,
+        termination: format!("{:?}", id.fit.termination),
+        n_evaluations: id.fit.n_evaluations,
+        n_jacobians: id.fit.n_jacobians,
+        rounds: id.rounds,
+        placements,
+        elapsed_s: start.elapsed().as_secs_f64(),
+    };
+    Ok(crate::calibrate::Outcome {
+        report,
+        device: device.clone(),
+        device_path: plan.device.clone(),
+        model: out.model,
+        calibrated: None,
+    })
+}
+
+/// The kinematic values of a measured calibration as a placement device applies them
+/// ([`hapcal_io::Device::with_calibration`]): a joint's offset `{joint}.offset` (rotation about,
+/// or translation along, its axis just before the joint's motion) is folded into that joint's
+/// six deviations, `Δ' = Δ · Rot(axis, offset)` (or `· Trans(axis·offset)`), decomposed back
+/// into `Tx·Ty·Tz·Rx·Ry·Rz`; the standard deviation of each rotation it changes becomes the
+/// root sum of squares of the two. Values of D-H devices pass unchanged.
+///
+/// # Errors
+/// An offset of a joint the device has no placement for.
+pub fn fold_joint_offsets(
+    device: &hapcal_io::Device,
+    values: &[hapcal_io::CalibratedValue],
+) -> Result<Vec<hapcal_io::CalibratedValue>> {
+    use hapcal_io::CalibratedValue;
+    let mut out: Vec<CalibratedValue> = values
+        .iter()
+        .filter(|v| !v.name.ends_with(".offset"))
+        .cloned()
+        .collect();
+    for v in values.iter().filter(|v| v.name.ends_with(".offset")) {
+        let joint = v.name.trim_end_matches(".offset");
+        let Some(p) = device.placements.iter().find(|p| p.name == joint) else {
+            bail!(
+                "{}: the device has no placement {joint:?} to fold it into",
+                v.name
+            );
+        };
+        let Some(axis) = p.axis else {
+            bail!("{}: {joint:?} is a fixed joint", v.name);
+        };
+        let axis = nalgebra::Unit::new_normalize(Vector3::from(axis));
+        let suffixes = ["x", "y", "z", "rx", "ry", "rz"];
+        let get = |s: &str| {
+            out.iter()
+                .find(|w| w.name == format!("{joint}.{s}"))
+                .map_or((0.0, 0.0), |w| (w.value, w.std))
+        };
+        let d: Vec<(f64, f64)> = suffixes.iter().map(|s| get(s)).collect();
+        let delta = deviation(&d.iter().map(|(v, _)| *v).collect::<Vec<_>>());
+        let motion = if p.prismatic {
+            Isometry3::from_parts(
+                (axis.into_inner() * v.value).into(),
+                UnitQuaternion::identity(),
+            )
+        } else {
+            Isometry3::from_parts(
+                Vector3::zeros().into(),
+                UnitQuaternion::from_axis_angle(&axis, v.value),
+            )
+        };
+        let folded = delta * motion;
+        let r = folded.rotation.to_rotation_matrix();
+        let b = r[(0, 2)].clamp(-1.0, 1.0).asin();
+        let a = (-r[(1, 2)]).atan2(r[(2, 2)]);
+        let c = (-r[(0, 1)]).atan2(r[(0, 0)]);
+        let t = folded.translation.vector;
+        let new = [t.x, t.y, t.z, a, b, c];
+        for (k, s) in suffixes.iter().enumerate() {
+            let name = format!("{joint}.{s}");
+            let changed = (new[k] - d[k].0).abs() > 0.0;
+            let std = if changed { d[k].1.hypot(v.std) } else { d[k].1 };
+            let unit = if k < 3 { "m" } else { "rad" };
+            match out.iter_mut().find(|w| w.name == name) {
+                Some(w) => {
+                    w.value = new[k];
+                    w.std = std;
+                }
+                None if new[k] != 0.0 => out.push(CalibratedValue {
+                    name,
+                    value: new[k],
+                    std,
+                    unit: unit.to_owned(),
+                }),
+                None => {}
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The sidecar of a measured calibration (TOML): the identified instrument and marker frames
+/// and every identified value the device description cannot carry (compliance, offsets of a
+/// tree's other tips), so that nothing identified is dropped.
+pub fn sidecar_toml(frames: &[FrameReport], leftover: &[hapcal_io::CalibratedValue]) -> String {
+    use std::fmt::Write;
+    let mut s = String::from(
+        "# Identified by `hapcal calibrate` with the kinematics, not part of the robot description.\n",
+    );
+    for f in frames {
+        let _ = writeln!(
+            s,
+            "\n[frames.{}]\nxyz_m = [{:?}, {:?}, {:?}]\nrpy_rad = [{:?}, {:?}, {:?}]",
+            f.name, f.xyz_m[0], f.xyz_m[1], f.xyz_m[2], f.rpy_rad[0], f.rpy_rad[1], f.rpy_rad[2]
+        );
+    }
+    if !leftover.is_empty() {
+        let _ = writeln!(s, "\n[values]");
+        for v in leftover {
+            let _ = writeln!(
+                s,
+                "{:?} = {{ value = {:?}, std = {:?}, unit = {:?} }}",
+                v.name, v.value, v.std, v.unit
+            );
+        }
+    }
+    s
+}

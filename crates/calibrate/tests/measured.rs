@@ -1,0 +1,125 @@
+//! The marker workflow on simulated tracker data of the KUKA LBR iiwa 14 (MUKCa's URDF): the
+//! ladder climbs as far as the simulated deviations ask, and no further.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use hapcal_calibrate::measured::{
+    MeasuredConfig, Robot, Rung, calibrate_measured, robot_from_urdf,
+};
+use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
+use hapcal_kinematics::{FrameSpec, Isometry3, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use std::path::PathBuf;
+
+fn robot() -> Robot {
+    let urdf =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/mukca/urdf/iiwa14.urdf");
+    robot_from_urdf(&urdf, &["ball_link".to_owned()]).unwrap()
+}
+
+const NOISE_M: f64 = 1e-4;
+
+/// `n` marker positions in a tracker frame; joint offsets of `offset_rad` (alternating sign).
+fn table(robot: &Robot, n: usize, offset_rad: f64, seed: u64) -> MeasurementTable {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let base = FrameSpec {
+        name: "instrument".into(),
+        nominal: Isometry3::new(Vector3::new(2.0, 0.3, -0.5), Vector3::new(0.1, -0.05, 2.9)),
+    };
+    let marker = FrameSpec {
+        name: "marker1".into(),
+        nominal: Isometry3::translation(0.03, -0.02, 0.05),
+    };
+    let tree = robot.tree.with_joint_offsets();
+    let offsets = tree.joint_offset_params();
+    let framed = tree.with_frames(&base, &[(0, marker)]).unwrap();
+    let mut x = vec![0.0; framed.n_params()];
+    for (j, p) in offsets.iter().enumerate() {
+        x[6 + p.unwrap()] = if j % 2 == 0 { offset_rad } else { -offset_rad };
+    }
+    let noise = Normal::new(0.0, NOISE_M).unwrap();
+    let rows = (0..n)
+        .map(|i| {
+            let q: Vec<f64> = (robot.limits.iter())
+                .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
+                .collect();
+            let p = framed.tips()[0].end_point(&x, &q);
+            MeasuredRow {
+                line: i as u64 + 2,
+                q,
+                t_s: None,
+                markers: vec![MarkerSample {
+                    marker: 0,
+                    position_m: std::array::from_fn(|k| p[k] + noise.sample(&mut rng)),
+                    rotation: None,
+                }],
+                distance_m: None,
+            }
+        })
+        .collect();
+    MeasurementTable {
+        name: format!("seed{seed}"),
+        path: PathBuf::from("tracker.csv"),
+        rows,
+        n_markers: 1,
+        has_orientation: false,
+        has_distance: false,
+        ignored_columns: Vec::new(),
+        warnings: Vec::new(),
+    }
+}
+
+fn config() -> MeasuredConfig {
+    MeasuredConfig {
+        rung: None,
+        folds: 5,
+        sigma_m: None,
+        sigma_rad: None,
+        marker_tips: Vec::new(),
+    }
+}
+
+#[test]
+fn joint_offsets_are_found_and_the_test_error_reaches_the_noise() {
+    let robot = robot();
+    // 1 mrad per joint moves the marker by about 1 mm, ten times the noise.
+    let train = table(&robot, 120, 1e-3, 1);
+    let test = table(&robot, 60, 1e-3, 2);
+    let out = calibrate_measured(&robot, &[train], &[test], &config()).unwrap();
+    assert!(out.rung >= Rung::JointOffsets, "chose {}", out.rung);
+    let (_, _, _, before, after) = &out.sets[1];
+    // 3-D RMS of noise σ per axis is √3·σ; allow 50 % for the estimation error of ~60
+    // parameters from 360 residuals.
+    let floor = 3f64.sqrt() * NOISE_M;
+    assert!(
+        after.position_rms_m < 1.5 * floor,
+        "test RMS {} m",
+        after.position_rms_m
+    );
+    assert!(
+        before.position_rms_m > 5.0 * floor,
+        "frames only {} m",
+        before.position_rms_m
+    );
+}
+
+#[test]
+fn nominal_robot_keeps_frames_only() {
+    let robot = robot();
+    let train = table(&robot, 60, 0.0, 3);
+    let test = table(&robot, 30, 0.0, 4);
+    let out = calibrate_measured(&robot, &[train], &[test], &config()).unwrap();
+    let (_, _, _, before, after) = &out.sets[1];
+    // Whatever the rung, the test error stays at the noise: nothing to gain, little to lose.
+    let floor = 3f64.sqrt() * NOISE_M;
+    assert!(
+        before.position_rms_m < 1.3 * floor,
+        "frames only {} m",
+        before.position_rms_m
+    );
+    assert!(
+        after.position_rms_m < 1.3 * floor,
+        "calibrated {} m",
+        after.position_rms_m
+    );
+}

@@ -1,0 +1,750 @@
+//! Measurement files of external instruments: marker positions, full poses and distances
+//! against joint readings (CSV), and the observations of ROS-Industrial `industrial_calibration`
+//! (YAML).
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Quaternion, UnitQuaternion};
+use serde::Deserialize;
+
+use crate::Error;
+use crate::table::{Table, number};
+
+/// Unit of the length columns of a measurement file (positions, distances, prismatic joints).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LengthUnit {
+    /// Metres (the default).
+    #[default]
+    M,
+    /// Millimetres.
+    Mm,
+}
+
+impl LengthUnit {
+    /// Metres per unit.
+    pub fn to_m(self) -> f64 {
+        match self {
+            LengthUnit::M => 1.0,
+            LengthUnit::Mm => 1e-3,
+        }
+    }
+}
+
+/// Unit of the angle columns of a measurement file (revolute joints, `phix, phiy, phiz`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum AngleUnit {
+    /// Radians (the default).
+    #[default]
+    Rad,
+    /// Degrees.
+    Deg,
+}
+
+impl AngleUnit {
+    /// Radians per unit.
+    pub fn to_rad(self) -> f64 {
+        match self {
+            AngleUnit::Rad => 1.0,
+            AngleUnit::Deg => std::f64::consts::PI / 180.0,
+        }
+    }
+}
+
+impl std::str::FromStr for LengthUnit {
+    type Err = String;
+    /// `m` or `mm`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "m" => Ok(Self::M),
+            "mm" => Ok(Self::Mm),
+            _ => Err(format!("expected a length unit, m or mm, found {s:?}")),
+        }
+    }
+}
+
+impl std::str::FromStr for AngleUnit {
+    type Err = String;
+    /// `rad` or `deg`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "rad" => Ok(Self::Rad),
+            "deg" => Ok(Self::Deg),
+            _ => Err(format!("expected an angle unit, rad or deg, found {s:?}")),
+        }
+    }
+}
+
+/// The units of a measurement file's columns (SI by default).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Units {
+    /// Positions, distances and prismatic joints.
+    pub length: LengthUnit,
+    /// Revolute joints and `phix, phiy, phiz`.
+    pub angle: AngleUnit,
+}
+
+impl Units {
+    /// Units from their parts.
+    pub fn new(length: LengthUnit, angle: AngleUnit) -> Self {
+        Self { length, angle }
+    }
+}
+
+/// What a measurement file's joint columns must match: the device's joints in chain order.
+#[derive(Clone, Copy, Debug)]
+pub struct JointSchema<'a> {
+    /// Joint names (`n` entries).
+    pub names: &'a [String],
+    /// Whether each joint is prismatic (its reading a length); `n` entries.
+    pub prismatic: &'a [bool],
+    /// Each joint's range (rad, m for a prismatic joint), inclusive; `n` entries.
+    pub limits: &'a [(f64, f64)],
+}
+
+/// One marker seen in one row.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MarkerSample {
+    /// The marker's index, 0-based (`x1,y1,z1` is marker 0).
+    pub marker: usize,
+    /// Its position in the instrument frame, m.
+    pub position_m: [f64; 3],
+    /// Its orientation in the instrument frame, unit quaternion `[w, x, y, z]`, if the file
+    /// has orientation columns for it.
+    pub rotation: Option<[f64; 4]>,
+}
+
+/// One row of a measurement file, in SI units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeasuredRow {
+    /// 1-based line in the file (for YAML, the line of the observation's key).
+    pub line: u64,
+    /// Joint readings in chain order, rad (m for a prismatic joint).
+    pub q: Vec<f64>,
+    /// Time, s, if the file has a `t` or `t_s` column.
+    pub t_s: Option<f64>,
+    /// The markers seen in this row (a marker whose cells are all empty is not seen).
+    pub markers: Vec<MarkerSample>,
+    /// Distance from the anchor, m, if the file has a distance column and the cell is not
+    /// empty.
+    pub distance_m: Option<f64>,
+}
+
+/// A measurement file, read and converted to SI units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeasurementTable {
+    /// The file's stem (`calibration` for `calibration.csv`).
+    pub name: String,
+    /// The file.
+    pub path: PathBuf,
+    /// The data rows, in file order.
+    pub rows: Vec<MeasuredRow>,
+    /// Things worth telling the user that did not stop the reading (joint readings slightly
+    /// outside their limits), each starting with `file:line:column:`.
+    pub warnings: Vec<String>,
+    /// Number of markers (the highest marker number in the header).
+    pub n_markers: usize,
+    /// Whether any marker has orientation columns.
+    pub has_orientation: bool,
+    /// Whether the file has a distance column.
+    pub has_distance: bool,
+    /// Header columns that mean nothing to hapcal and were ignored, in file order.
+    pub ignored_columns: Vec<String>,
+}
+
+/// How far past its limits a joint reading may lie, as a fraction of the joint's range, and
+/// still be used (with a warning): real encoders read a little past a description's nominal
+/// limits; a reading further out is more likely a wrong unit or column.
+pub const JOINT_LIMIT_SLACK: f64 = 0.1;
+
+/// What a header column holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Column {
+    Joint(usize),
+    /// Marker (0-based), coordinate 0..3.
+    Position(usize, usize),
+    /// Marker, quaternion component w, x, y, z.
+    Quaternion(usize, usize),
+    /// Marker, figaroh roll / pitch / yaw.
+    Rpy(usize, usize),
+    Distance,
+    Time,
+    Ignored,
+}
+
+/// `name` split into a known stem and a marker number: `x` → (`x`, 0), `x3` → (`x`, 2).
+fn marker_column(name: &str, stems: &[&str]) -> Option<(usize, usize)> {
+    for (i, stem) in stems.iter().enumerate() {
+        let Some(rest) = name.strip_prefix(stem) else {
+            continue;
+        };
+        if rest.is_empty() {
+            return Some((i, 0));
+        }
+        if rest.bytes().all(|b| b.is_ascii_digit()) && !rest.starts_with('0') {
+            let k: usize = rest.parse().ok()?;
+            return Some((i, k - 1));
+        }
+    }
+    None
+}
+
+fn classify(name: &str, schema: &JointSchema<'_>) -> Column {
+    if let Some(j) = schema.names.iter().position(|n| n == name) {
+        return Column::Joint(j);
+    }
+    if let Some(digits) = name.strip_prefix('q')
+        && !digits.is_empty()
+        && digits.bytes().all(|b| b.is_ascii_digit())
+        && !digits.starts_with('0')
+        && let Ok(k) = digits.parse::<usize>()
+        && k <= schema.names.len()
+    {
+        return Column::Joint(k - 1);
+    }
+    match name {
+        "distance_m" | "distance" | "d" => return Column::Distance,
+        "t" | "t_s" => return Column::Time,
+        _ => {}
+    }
+    if let Some((c, k)) = marker_column(name, &["qw", "qx", "qy", "qz"]) {
+        return Column::Quaternion(k, c);
+    }
+    if let Some((c, k)) = marker_column(name, &["phix", "phiy", "phiz"]) {
+        return Column::Rpy(k, c);
+    }
+    if let Some((c, k)) = marker_column(name, &["x", "y", "z"]) {
+        return Column::Position(k, c);
+    }
+    Column::Ignored
+}
+
+/// Column indices (0-based) of one marker's cells.
+#[derive(Clone, Debug, Default)]
+struct MarkerColumns {
+    position: [Option<usize>; 3],
+    quaternion: [Option<usize>; 4],
+    rpy: [Option<usize>; 3],
+}
+
+/// The column name of marker `k`'s component `stem` as the file spells it.
+fn spelled(stem: &str, k: usize, unnumbered: bool) -> String {
+    if unnumbered {
+        stem.to_owned()
+    } else {
+        format!("{stem}{}", k + 1)
+    }
+}
+
+/// Reads a measurement file: CSV (below) or, for `.yaml` / `.yml`, the observations of
+/// ROS-Industrial `industrial_calibration` ([`read_industrial_yaml`]).
+///
+/// CSV: a header row names the columns, in any order.
+///
+/// - Joints: `q1..qn` (chain order) or the device's joint names; every joint needs a column.
+///   Readings in rad (m for a prismatic joint), or in `units`.
+/// - Marker positions in the instrument frame: `x,y,z` (one marker) or `x1,y1,z1,x2,…`.
+/// - Marker orientations (optional): a unit quaternion `qw,qx,qy,qz` (or `qw1,…`), or
+///   figaroh's `phix,phiy,phiz` (or `phix1,…`): roll, pitch, yaw with
+///   `R = Rz(phiz) · Ry(phiy) · Rx(phix)`.
+/// - Distance from an anchor (cable encoder, ballbar): `distance_m`, `distance` or `d`, ≥ 0.
+/// - Time: `t` or `t_s`, s, non-decreasing.
+///
+/// Other columns are listed in [`MeasurementTable::ignored_columns`]. A row whose cells of a
+/// marker are all empty did not see that marker; an empty distance cell is no distance.
+///
+/// # Errors
+///
+/// [`Error::Io`]; [`Error::TooFewRows`] without a header and a data row;
+/// [`Error::DuplicateColumn`]; [`Error::JointColumns`] (the columns expected and found)
+/// unless every joint has a column; [`Error::IncompleteMarker`] for a marker whose header
+/// lacks a coordinate, or a row that gives some of a marker's cells but not all (file, line,
+/// column of the empty cell); [`Error::Ragged`]; [`Error::NotANumber`], [`Error::NotFinite`],
+/// [`Error::OutsideJointRange`] for a reading more than [`JOINT_LIMIT_SLACK`] of its joint's
+/// range past the limits (a reading closer than that is kept, with one warning in
+/// [`MeasurementTable::warnings`]) and [`Error::TimeOrder`], with file:line:column; [`Error::Csv`]
+/// (file, line, column named in the message) for a negative distance, a quaternion whose norm
+/// is not 1 within 10⁻³, or invalid UTF-8.
+pub fn read_measurement_file(
+    path: &Path,
+    schema: &JointSchema<'_>,
+    units: &Units,
+) -> Result<MeasurementTable, Error> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if matches!(ext.as_deref(), Some("yaml" | "yml")) {
+        return read_industrial_yaml(path, schema);
+    }
+    let n = schema.names.len();
+    let mut table = Table::open(path)?;
+    let Some((header_line, header)) = table.next_record()? else {
+        return Err(Error::TooFewRows {
+            path: path.to_path_buf(),
+            min: 1,
+            found: 0,
+        });
+    };
+    let names: Vec<String> = header.iter().map(str::to_owned).collect();
+    let columns: Vec<Column> = names.iter().map(|c| classify(c, schema)).collect();
+    for (c, name) in names.iter().enumerate() {
+        if names[..c].contains(name) {
+            return Err(Error::DuplicateColumn {
+                path: path.to_path_buf(),
+                column: c as u64 + 1,
+                name: name.clone(),
+            });
+        }
+    }
+    // Joints: each exactly once (a joint named both `q2` and by name is a duplicate).
+    let mut joint_column = vec![None; n];
+    for (c, column) in columns.iter().enumerate() {
+        if let Column::Joint(j) = *column {
+            if joint_column[j].is_some() {
+                return Err(Error::DuplicateColumn {
+                    path: path.to_path_buf(),
+                    column: c as u64 + 1,
+                    name: names[c].clone(),
+                });
+            }
+            joint_column[j] = Some(c);
+        }
+    }
+    let missing: Vec<String> = (0..n)
+        .filter(|&j| joint_column[j].is_none())
+        .map(|j| schema.names[j].clone())
+        .collect();
+    if !missing.is_empty() {
+        return Err(Error::JointColumns {
+            path: path.to_path_buf(),
+            line: header_line,
+            n,
+            expected: schema.names.to_vec(),
+            missing,
+            found: names.clone(),
+        });
+    }
+    let joint_column: Vec<usize> = joint_column.into_iter().flatten().collect();
+
+    // Markers.
+    let n_markers = columns
+        .iter()
+        .filter_map(|c| match *c {
+            Column::Position(k, _) | Column::Quaternion(k, _) | Column::Rpy(k, _) => Some(k + 1),
+            _ => None,
+        })
+        .max()
+        .unwrap_or(0);
+    let mut markers = vec![MarkerColumns::default(); n_markers];
+    for (c, column) in columns.iter().enumerate() {
+        match *column {
+            Column::Position(k, i) => markers[k].position[i] = Some(c),
+            Column::Quaternion(k, i) => markers[k].quaternion[i] = Some(c),
+            Column::Rpy(k, i) => markers[k].rpy[i] = Some(c),
+            _ => {}
+        }
+    }
+    let unnumbered = names.iter().any(|c| c == "x" || c == "y" || c == "z");
+    let incomplete = |k: usize, stem: &str, what: &str| Error::IncompleteMarker {
+        path: path.to_path_buf(),
+        line: header_line,
+        column: names.len() as u64 + 1,
+        name: spelled(stem, k, unnumbered),
+        marker: k + 1,
+        what: what.to_owned(),
+    };
+    for (k, m) in markers.iter().enumerate() {
+        let sets: [(&[Option<usize>], &[&str]); 3] = [
+            (&m.position, &["x", "y", "z"]),
+            (&m.quaternion, &["qw", "qx", "qy", "qz"]),
+            (&m.rpy, &["phix", "phiy", "phiz"]),
+        ];
+        for (i, (set, stems)) in sets.iter().enumerate() {
+            let given = set.iter().filter(|c| c.is_some()).count();
+            if (i == 0 || given > 0)
+                && given < set.len()
+                && let Some(stem) = set.iter().zip(*stems).find(|(c, _)| c.is_none())
+            {
+                return Err(incomplete(k, stem.1, "missing from the header"));
+            }
+        }
+        if m.quaternion[0].is_some() && m.rpy[0].is_some() {
+            return Err(incomplete(
+                k,
+                "phix",
+                "given beside a quaternion: give one orientation, qw,qx,qy,qz or phix,phiy,phiz",
+            ));
+        }
+    }
+    let distance_column = columns.iter().position(|c| *c == Column::Distance);
+    let time_column = columns.iter().position(|c| *c == Column::Time);
+    if columns.iter().filter(|c| **c == Column::Distance).count() > 1
+        || columns.iter().filter(|c| **c == Column::Time).count() > 1
+    {
+        let (c, _) = (columns.iter().enumerate())
+            .filter(|(_, c)| matches!(c, Column::Distance | Column::Time))
+            .nth(1)
+            .unwrap_or((0, &Column::Ignored));
+        return Err(Error::DuplicateColumn {
+            path: path.to_path_buf(),
+            column: c as u64 + 1,
+            name: names[c].clone(),
+        });
+    }
+    let ignored_columns: Vec<String> = (names.iter().zip(&columns))
+        .filter(|(_, c)| **c == Column::Ignored)
+        .map(|(n, _)| n.clone())
+        .collect();
+
+    let length = units.length.to_m();
+    let angle = units.angle.to_rad();
+    let mut rows = Vec::new();
+    let mut previous_t: Option<f64> = None;
+    let mut outside = Vec::new();
+    let mut first_outside = String::new();
+    while let Some((line, record)) = table.next_record()? {
+        if record.len() != names.len() {
+            return Err(Error::Ragged {
+                path: path.to_path_buf(),
+                line,
+                expected: names.len(),
+                found: record.len(),
+            });
+        }
+        let cell = |c: usize| record.get(c).unwrap_or("");
+        let value = |c: usize| number(path, line, c as u64 + 1, &names[c], cell(c));
+        let mut q = Vec::with_capacity(n);
+        for (j, &c) in joint_column.iter().enumerate() {
+            let prismatic = schema.prismatic.get(j).copied().unwrap_or(false);
+            let v = value(c)? * if prismatic { length } else { angle };
+            let (min, max) = schema
+                .limits
+                .get(j)
+                .copied()
+                .unwrap_or((f64::MIN, f64::MAX));
+            let slack = JOINT_LIMIT_SLACK * (max - min);
+            if (min..=max).contains(&v) {
+            } else if (min - slack..=max + slack).contains(&v) {
+                let unit = if prismatic { "m" } else { "rad" };
+                outside.push((line, c, j, v));
+                if outside.len() == 1 {
+                    first_outside = format!(
+                        "{}:{line}:{}: joint {:?} = {v} {unit} is outside its limits [{min}, {max}] {unit}",
+                        path.display(),
+                        c + 1,
+                        schema.names[j]
+                    );
+                }
+            } else {
+                return Err(Error::OutsideJointRange {
+                    path: path.to_path_buf(),
+                    line,
+                    column: c as u64 + 1,
+                    joint: schema.names[j].clone(),
+                    value: v,
+                    min,
+                    max,
+                    unit: if prismatic { "m" } else { "rad" },
+                });
+            }
+            q.push(v);
+        }
+        let t_s = time_column.map(value).transpose()?;
+        if let (Some(t), Some(before)) = (t_s, previous_t)
+            && t < before
+        {
+            return Err(Error::TimeOrder {
+                path: path.to_path_buf(),
+                line,
+                t_s: t,
+                previous_t_s: before,
+            });
+        }
+        previous_t = t_s.or(previous_t);
+        let distance_m = match distance_column {
+            Some(c) if !cell(c).is_empty() => {
+                let d = value(c)? * length;
+                if d < 0.0 {
+                    return Err(Error::Csv {
+                        path: path.to_path_buf(),
+                        line,
+                        message: format!(
+                            "column {} ({:?}): expected a distance ≥ 0, found {}",
+                            c + 1,
+                            names[c],
+                            cell(c)
+                        ),
+                    });
+                }
+                Some(d)
+            }
+            _ => None,
+        };
+        let mut seen = Vec::new();
+        for (k, m) in markers.iter().enumerate() {
+            let all: Vec<usize> = (m.position.iter().chain(&m.quaternion).chain(&m.rpy))
+                .flatten()
+                .copied()
+                .collect();
+            let empty: Vec<usize> = all
+                .iter()
+                .copied()
+                .filter(|&c| cell(c).is_empty())
+                .collect();
+            if empty.len() == all.len() {
+                continue;
+            }
+            if let Some(&c) = empty.first() {
+                let given: Vec<&str> = (all.iter())
+                    .filter(|c| !empty.contains(c))
+                    .map(|&c| names[c].as_str())
+                    .collect();
+                return Err(Error::IncompleteMarker {
+                    path: path.to_path_buf(),
+                    line,
+                    column: c as u64 + 1,
+                    name: names[c].clone(),
+                    marker: k + 1,
+                    what: format!("empty while {} are given", given.join(", ")),
+                });
+            }
+            let mut position_m = [0.0; 3];
+            for (p, c) in position_m.iter_mut().zip(m.position.iter().flatten()) {
+                *p = value(*c)? * length;
+            }
+            let rotation = if let [Some(w), Some(x), Some(y), Some(z)] = m.quaternion {
+                let quaternion = [value(w)?, value(x)?, value(y)?, value(z)?];
+                let norm = quaternion.iter().map(|v| v * v).sum::<f64>().sqrt();
+                if (norm - 1.0).abs() > 1e-3 {
+                    return Err(Error::Csv {
+                        path: path.to_path_buf(),
+                        line,
+                        message: format!(
+                            "columns {}..{}: expected a unit quaternion qw,qx,qy,qz, found one of norm {norm}",
+                            w + 1,
+                            z + 1
+                        ),
+                    });
+                }
+                Some(quaternion.map(|v| v / norm))
+            } else if let [Some(r), Some(p), Some(y)] = m.rpy {
+                let rotation = UnitQuaternion::from_euler_angles(
+                    value(r)? * angle,
+                    value(p)? * angle,
+                    value(y)? * angle,
+                );
+                Some([rotation.w, rotation.i, rotation.j, rotation.k])
+            } else {
+                None
+            };
+            seen.push(MarkerSample {
+                marker: k,
+                position_m,
+                rotation,
+            });
+        }
+        rows.push(MeasuredRow {
+            line,
+            q,
+            t_s,
+            markers: seen,
+            distance_m,
+        });
+    }
+    if rows.is_empty() {
+        return Err(Error::TooFewRows {
+            path: path.to_path_buf(),
+            min: 1,
+            found: 0,
+        });
+    }
+    let mut warnings = Vec::new();
+    if !outside.is_empty() {
+        warnings.push(format!(
+            "{first_outside}{}; such readings are used as they are",
+            match outside.len() {
+                1 => String::new(),
+                n => format!(
+                    " (and {} more readings outside their joint's limits)",
+                    n - 1
+                ),
+            }
+        ));
+    }
+    Ok(MeasurementTable {
+        name: stem(path),
+        path: path.to_path_buf(),
+        rows,
+        warnings,
+        n_markers,
+        has_orientation: markers
+            .iter()
+            .any(|m| m.quaternion[0].is_some() || m.rpy[0].is_some()),
+        has_distance: distance_column.is_some(),
+        ignored_columns,
+    })
+}
+
+fn stem(path: &Path) -> String {
+    path.file_stem()
+        .map_or_else(|| "data".to_owned(), |s| s.to_string_lossy().into_owned())
+}
+
+/// One observation of `industrial_calibration`'s kinematic calibration.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Observation {
+    camera_joints: Vec<f64>,
+    pose: Pose,
+    target_joints: Vec<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Pose {
+    qw: f64,
+    qx: f64,
+    qy: f64,
+    qz: f64,
+    x: f64,
+    y: f64,
+    z: f64,
+}
+
+/// Reads the observations of ROS-Industrial `industrial_calibration`'s kinematic calibration:
+/// a map from an observation key to `{camera_joints, pose: {x, y, z, qw, qx, qy, qz},
+/// target_joints}`, the pose (m, unit quaternion) of a target on the robot's tip as the
+/// static camera measures it. Rows come in file order; each has one marker with a rotation.
+///
+/// # Errors
+///
+/// [`Error::Io`]; [`Error::Yaml`] (file:line:column) for malformed YAML, a missing or unknown
+/// field, a non-empty `camera_joints` (a moving camera is not supported), a joint count other
+/// than the device's, a non-finite number, a joint outside its range or a quaternion that is
+/// not of unit norm; [`Error::TooFewRows`] without observations.
+pub fn read_industrial_yaml(
+    path: &Path,
+    schema: &JointSchema<'_>,
+) -> Result<MeasurementTable, Error> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let observations: serde_yaml_ng::Mapping =
+        serde_yaml_ng::from_str(&text).map_err(|e| yaml_error(path, &e))?;
+    // Lines of the top-level keys, in file order, to locate each observation.
+    let key_lines: Vec<(String, u64)> = (text.lines().enumerate())
+        .filter(|(_, l)| !l.starts_with([' ', '\t', '#', '-']) && l.contains(':'))
+        .map(|(i, l)| {
+            let key = l.split(':').next().unwrap_or("").trim();
+            (key.trim_matches(['\'', '"']).to_owned(), i as u64 + 1)
+        })
+        .collect();
+    let at = |key: &str| {
+        key_lines
+            .iter()
+            .find(|(k, _)| k == key)
+            .map_or(0, |(_, l)| *l)
+    };
+    let bad = |line: u64, message: String| Error::Yaml {
+        path: path.to_path_buf(),
+        line,
+        column: 1,
+        message,
+    };
+    let mut rows = Vec::with_capacity(observations.len());
+    for (key, value) in observations {
+        let key = match key {
+            serde_yaml_ng::Value::String(s) => s,
+            other => serde_yaml_ng::to_string(&other)
+                .unwrap_or_default()
+                .trim()
+                .to_owned(),
+        };
+        let line = at(&key);
+        let o: Observation = serde_yaml_ng::from_value(value)
+            .map_err(|e| bad(line, format!("observation {key:?}: {e}")))?;
+        if !o.camera_joints.is_empty() {
+            return Err(bad(
+                line,
+                format!(
+                    "observation {key:?}: camera_joints is not empty: a camera on a moving chain is not supported"
+                ),
+            ));
+        }
+        if o.target_joints.len() != schema.names.len() {
+            return Err(bad(
+                line,
+                format!(
+                    "observation {key:?}: expected {} target_joints (as the device has), found {}",
+                    schema.names.len(),
+                    o.target_joints.len()
+                ),
+            ));
+        }
+        for (j, &v) in o.target_joints.iter().enumerate() {
+            let (min, max) = schema
+                .limits
+                .get(j)
+                .copied()
+                .unwrap_or((f64::MIN, f64::MAX));
+            if !(v.is_finite() && (min..=max).contains(&v)) {
+                return Err(bad(
+                    line,
+                    format!(
+                        "observation {key:?}: joint {:?} = {v} is outside [{min}, {max}]",
+                        schema.names[j]
+                    ),
+                ));
+            }
+        }
+        let p = &o.pose;
+        let quaternion = [p.qw, p.qx, p.qy, p.qz];
+        let norm = quaternion.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if ![p.x, p.y, p.z].iter().all(|v| v.is_finite()) || (norm - 1.0).abs() > 1e-3 {
+            return Err(bad(
+                line,
+                format!(
+                    "observation {key:?}: expected a finite position and a unit quaternion, found quaternion norm {norm}"
+                ),
+            ));
+        }
+        let q = UnitQuaternion::from_quaternion(Quaternion::new(p.qw, p.qx, p.qy, p.qz));
+        rows.push(MeasuredRow {
+            line,
+            q: o.target_joints,
+            t_s: None,
+            markers: vec![MarkerSample {
+                marker: 0,
+                position_m: [p.x, p.y, p.z],
+                rotation: Some([q.w, q.i, q.j, q.k]),
+            }],
+            distance_m: None,
+        });
+    }
+    if rows.is_empty() {
+        return Err(Error::TooFewRows {
+            path: path.to_path_buf(),
+            min: 1,
+            found: 0,
+        });
+    }
+    Ok(MeasurementTable {
+        name: stem(path),
+        path: path.to_path_buf(),
+        rows,
+        warnings: Vec::new(),
+        n_markers: 1,
+        has_orientation: true,
+        has_distance: false,
+        ignored_columns: Vec::new(),
+    })
+}
+
+fn yaml_error(path: &Path, e: &serde_yaml_ng::Error) -> Error {
+    let (line, column) = e
+        .location()
+        .map_or((0, 0), |l| (l.line() as u64, l.column() as u64));
+    Error::Yaml {
+        path: path.to_path_buf(),
+        line,
+        column,
+        message: e.to_string(),
+    }
+}
