@@ -100,10 +100,30 @@ fn deg(v: Option<[f64; 3]>) -> String {
     )
 }
 
+/// The test rows' figures of `d` with the model forced to `rung` (`--model`), as
+/// `position mean / RMS / max, orientation mean / RMS / max`.
+fn forced_test_figures(sh: &Shell, d: &Dataset, rung: &str) -> Result<String> {
+    let args: Vec<&str> = d.args.to_vec();
+    let model = rung.replace('_', "-");
+    let json = cmd!(
+        sh,
+        "cargo run --release --quiet -p hapcal -- calibrate {args...} --test-last {TEST_LAST} --model {model} --json"
+    )
+    .read()
+    .with_context(|| format!("calibrating {} with {rung}", d.name))?;
+    let report: Value = serde_json::from_str(&json).context("parsing the JSON report")?;
+    let test = (report["placements"].as_array().into_iter().flatten())
+        .find(|s| s["role"] == "test")
+        .and_then(|s| pose(&s["after"]));
+    Ok(test.map_or_else(
+        || "–".to_owned(),
+        |(p, o)| format!("{}, {}", mm(p), deg(o)),
+    ))
+}
+
 /// Runs every recording; with `check`, only verifies that no calibrated model is worse than
 /// frames only on its held-out rows.
 pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
-    cmd!(sh, "cargo build --release --quiet -p hapcal").run()?;
     let mut md = String::from(
         "# Real recordings, held out\n\nWritten by `cargo xtask real-data` (release build). Each \
          recording is calibrated with the one `hapcal calibrate` command shown, on the files as \
@@ -114,12 +134,29 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
          3-D position error of every marker sample (mean / RMS / max, mm) and, for pose data, \
          the angle of the relative rotation (mean / RMS / max, °).\n",
     );
+    let machine = cmd!(sh, "uname -srm").read().unwrap_or_default();
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_owned())
+        })
+        .unwrap_or_default();
+    let _ = writeln!(
+        md,
+        "\nMachine: {cpu}, {} logical cores, {machine}. The ladder table gives, per rung, the \
+         cross-validation that chose the model and, for comparison only, the test rows' errors \
+         had that rung been forced with `--model`.",
+        std::thread::available_parallelism().map_or(0, |n| n.get())
+    );
     let mut worse = Vec::new();
     for d in DATASETS {
         let args: Vec<&str> = d.args.to_vec();
         let json = cmd!(
             sh,
-            "target/release/hapcal calibrate {args...} --test-last {TEST_LAST} --json"
+            "cargo run --release --quiet -p hapcal -- calibrate {args...} --test-last {TEST_LAST} --json"
         )
         .read()
         .with_context(|| format!("calibrating {}", d.name))?;
@@ -135,14 +172,20 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
         if let Some(ladder) = report["ladder"].as_array() {
             let _ = writeln!(
                 md,
-                "| rung | cross-validated RMS on the training rows (mm) |\n|---|---|"
+                "| rung | cross-validated position RMS on the training rows (mm) | held-out score minus frames only's (Σ e²/σ² per row, ± standard error) | test rows with this rung forced: position (mm), orientation (°) |\n|---|---|---|---|"
             );
             for r in ladder {
+                let rung = r["rung"].as_str().unwrap_or("?");
+                let diff = &r["score_difference_to_frames"];
+                let forced = forced_test_figures(sh, d, rung)?;
                 let _ = writeln!(
                     md,
-                    "| {} | {:.2} |",
-                    r["rung"].as_str().unwrap_or("?").replace('_', " "),
-                    r["heldout_rms_m"].as_f64().unwrap_or(f64::NAN) * 1e3
+                    "| {} | {:.2} | {:+.2} ± {:.2} | {} |",
+                    rung.replace('_', " "),
+                    r["heldout_rms_m"].as_f64().unwrap_or(f64::NAN) * 1e3,
+                    diff[0].as_f64().unwrap_or(f64::NAN),
+                    diff[1].as_f64().unwrap_or(f64::NAN),
+                    forced
                 );
             }
         }

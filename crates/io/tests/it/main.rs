@@ -2,6 +2,7 @@
 
 mod device;
 mod log;
+mod measure;
 mod mukca;
 mod urdf;
 

@@ -1,0 +1,369 @@
+//! The measurement-file reader: CSV columns, units, markers, orientations, joint ranges and
+//! `industrial_calibration` YAML.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::f64::consts::{PI, TAU};
+use std::path::PathBuf;
+
+use hapcal_io::{
+    AngleUnit, Error, JointSchema, LengthUnit, MeasurementTable, Units, read_industrial_yaml,
+    read_measurement_file,
+};
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+
+use crate::{assert_contains, message};
+
+/// Writes `text` to a fresh temporary file named `name` (unique per test and process).
+fn temp_file(name: &str, text: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("hapcal-io-measure-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Owned parts of a [`JointSchema`].
+struct Schema {
+    names: Vec<String>,
+    prismatic: Vec<bool>,
+    limits: Vec<(f64, f64)>,
+}
+
+impl Schema {
+    fn new(names: &[&str], prismatic: &[bool], limits: &[(f64, f64)]) -> Self {
+        Self {
+            names: names.iter().map(|s| (*s).to_owned()).collect(),
+            prismatic: prismatic.to_vec(),
+            limits: limits.to_vec(),
+        }
+    }
+
+    /// `n` revolute joints named `names`, limits ±2π.
+    fn revolute(names: &[&str]) -> Self {
+        Self::new(
+            names,
+            &vec![false; names.len()],
+            &vec![(-TAU, TAU); names.len()],
+        )
+    }
+
+    fn get(&self) -> JointSchema<'_> {
+        JointSchema {
+            names: &self.names,
+            prismatic: &self.prismatic,
+            limits: &self.limits,
+        }
+    }
+}
+
+fn read(name: &str, text: &str, schema: &Schema, units: Units) -> Result<MeasurementTable, Error> {
+    let path = temp_file(name, text);
+    let result = read_measurement_file(&path, &schema.get(), &units);
+    std::fs::remove_file(&path).unwrap();
+    result
+}
+
+fn fixture(relative: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures")
+        .join(relative)
+}
+
+#[track_caller]
+fn assert_close(a: f64, b: f64, tol: f64) {
+    assert!((a - b).abs() <= tol, "{a} != {b} (tolerance {tol})");
+}
+
+#[test]
+fn joint_columns_by_name_in_any_order_with_markers_and_an_unknown_column() {
+    let schema = Schema::revolute(&["a", "b", "c"]);
+    let text = "c,x1,foo,y1,a,z1,x2,y2,z2,b\n\
+                0.3,1,hello,2,0.1,3,4,5,6,0.2\n\
+                -0.3,-1,x,-2,-0.1,-3,-4,-5,-6,-0.2\n";
+    let table = read("by_name.csv", text, &schema, Units::default()).unwrap();
+    assert_eq!(table.name, "by_name");
+    assert_eq!(table.ignored_columns, ["foo"]);
+    assert_eq!(table.n_markers, 2);
+    assert!(!table.has_orientation);
+    assert!(!table.has_distance);
+    assert!(table.warnings.is_empty());
+    assert_eq!(table.rows.len(), 2);
+    let [r0, r1] = &table.rows[..] else {
+        unreachable!()
+    };
+    assert_eq!((r0.line, r1.line), (2, 3));
+    assert_eq!(r0.q, [0.1, 0.2, 0.3]);
+    assert_eq!(r1.q, [-0.1, -0.2, -0.3]);
+    assert_eq!(r0.markers.len(), 2);
+    assert_eq!(r0.markers[0].marker, 0);
+    assert_eq!(r0.markers[0].position_m, [1.0, 2.0, 3.0]);
+    assert_eq!(r0.markers[0].rotation, None);
+    assert_eq!(r0.markers[1].marker, 1);
+    assert_eq!(r0.markers[1].position_m, [4.0, 5.0, 6.0]);
+    assert_eq!(r1.markers[1].position_m, [-4.0, -5.0, -6.0]);
+    assert_eq!(r0.t_s, None);
+    assert_eq!(r0.distance_m, None);
+}
+
+#[test]
+fn q_numbered_columns_and_units_scale_lengths_and_angles() {
+    // Joint 1 prismatic (m), joint 2 revolute (rad).
+    let schema = Schema::new(&["slide", "turn"], &[true, false], &[(0.0, 1.0), (-PI, PI)]);
+    let mm = Units::new(LengthUnit::Mm, AngleUnit::Rad);
+    let table = read("mm.csv", "q2,q1,x,y,z\n0.5,500,100,-200,300\n", &schema, mm).unwrap();
+    let row = &table.rows[0];
+    assert_close(row.q[0], 0.5, 1e-15);
+    assert_eq!(row.q[1], 0.5, "a revolute joint is not a length");
+    let p = row.markers[0].position_m;
+    assert_close(p[0], 0.1, 1e-15);
+    assert_close(p[1], -0.2, 1e-15);
+    assert_close(p[2], 0.3, 1e-15);
+
+    let deg = Units {
+        angle: AngleUnit::Deg,
+        ..Units::default()
+    };
+    let table = read("deg.csv", "q1,q2,x,y,z\n0.5,90,1,2,3\n", &schema, deg).unwrap();
+    let row = &table.rows[0];
+    assert_eq!(row.q[0], 0.5, "a prismatic joint is not an angle");
+    assert_close(row.q[1], PI / 2.0, 1e-15);
+    assert_eq!(row.markers[0].position_m, [1.0, 2.0, 3.0]);
+}
+
+#[test]
+fn columns_matching_no_joint_name_the_expected_and_found_columns() {
+    let schema = Schema::revolute(&["shoulder", "elbow"]);
+    let e = read(
+        "nojoints.csv",
+        "j1,j2,x,y,z\n0,0,1,2,3\n",
+        &schema,
+        Units::default(),
+    );
+    assert!(matches!(e, Err(Error::JointColumns { .. })), "{e:?}");
+    let text = message(e);
+    assert_contains(
+        &text,
+        &["nojoints.csv:1:", "shoulder, elbow", "j1, j2, x, y, z"],
+    );
+}
+
+#[test]
+fn incomplete_markers_in_header_and_rows() {
+    let schema = Schema::revolute(&["a"]);
+    // Header without z.
+    let e = read("noz.csv", "a,x,y\n0,1,2\n", &schema, Units::default());
+    match &e {
+        Err(Error::IncompleteMarker { name, .. }) => assert_eq!(name, "z"),
+        other => panic!("expected IncompleteMarker, got {other:?}"),
+    }
+    assert_contains(
+        &message(e),
+        &["noz.csv:1:", "\"z\"", "missing from the header"],
+    );
+
+    // y1 empty while x1, z1 are given: line 3, field 3.
+    let text = "a,x1,y1,z1\n0,1,2,3\n0,1,,3\n";
+    let e = read("noy.csv", text, &schema, Units::default());
+    match &e {
+        Err(Error::IncompleteMarker {
+            line, column, name, ..
+        }) => assert_eq!((*line, *column, name.as_str()), (3, 3, "y1")),
+        other => panic!("expected IncompleteMarker, got {other:?}"),
+    }
+    assert_contains(&message(e), &["noy.csv:3:3:"]);
+
+    // All cells of marker 2 empty: unseen, no error.
+    let text = "a,x1,y1,z1,x2,y2,z2\n0,1,2,3,,,\n0.1,,,,4,5,6\n";
+    let table = read("unseen.csv", text, &schema, Units::default()).unwrap();
+    assert_eq!(table.n_markers, 2);
+    let seen =
+        |r: usize| -> Vec<usize> { table.rows[r].markers.iter().map(|m| m.marker).collect() };
+    assert_eq!(seen(0), [0]);
+    assert_eq!(seen(1), [1]);
+    assert_eq!(table.rows[1].markers[0].position_m, [4.0, 5.0, 6.0]);
+}
+
+#[test]
+fn figaroh_rpy_is_rz_ry_rx_and_quaternions_must_be_unit() {
+    let schema = Schema::revolute(&["a"]);
+    let (roll, pitch, yaw) = (0.1, -0.2, 0.3);
+    let text = format!("a,x,y,z,phix,phiy,phiz\n0,1,2,3,{roll},{pitch},{yaw}\n");
+    let table = read("rpy.csv", &text, &schema, Units::default()).unwrap();
+    assert!(table.has_orientation);
+    let got = table.rows[0].markers[0].rotation.expect("a rotation");
+    let r = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw)
+        * Rotation3::from_axis_angle(&Vector3::y_axis(), pitch)
+        * Rotation3::from_axis_angle(&Vector3::x_axis(), roll);
+    let e = UnitQuaternion::from_rotation_matrix(&r);
+    let expected = [e.w, e.i, e.j, e.k];
+    let sign = if got[0] * expected[0] < 0.0 {
+        -1.0
+    } else {
+        1.0
+    };
+    for (g, x) in got.iter().zip(expected) {
+        assert_close(*g, sign * x, 1e-12);
+    }
+
+    // Degrees apply to phix..phiz too.
+    let text = format!(
+        "a,x,y,z,phix,phiy,phiz\n0,1,2,3,{},{},{}\n",
+        roll.to_degrees(),
+        pitch.to_degrees(),
+        yaw.to_degrees()
+    );
+    let deg = Units::new(LengthUnit::M, AngleUnit::Deg);
+    let table = read("rpy_deg.csv", &text, &schema, deg).unwrap();
+    let got = table.rows[0].markers[0].rotation.expect("a rotation");
+    for (g, x) in got.iter().zip(expected) {
+        assert_close(*g, sign * x, 1e-12);
+    }
+
+    // A quaternion of norm 1.5.
+    let text = "a,x,y,z,qw,qx,qy,qz\n0,1,2,3,1.5,0,0,0\n";
+    let e = read("badquat.csv", text, &schema, Units::default());
+    assert!(matches!(e, Err(Error::Csv { line: 2, .. })), "{e:?}");
+    assert_contains(&message(e), &["badquat.csv:2:", "unit quaternion", "1.5"]);
+
+    // A unit quaternion is accepted as is.
+    let text = "a,x,y,z,qw,qx,qy,qz\n0,1,2,3,0,0,0.6,0.8\n";
+    let table = read("goodquat.csv", text, &schema, Units::default()).unwrap();
+    assert_eq!(
+        table.rows[0].markers[0].rotation,
+        Some([0.0, 0.0, 0.6, 0.8])
+    );
+}
+
+#[test]
+fn readings_slightly_outside_the_limits_warn_and_far_outside_fail() {
+    // Range 2, slack 0.2.
+    let schema = Schema::new(&["a", "b"], &[false, false], &[(-1.0, 1.0), (-1.0, 1.0)]);
+    let text = "a,b\n0,0\n1.1,0.5\n";
+    let table = read("slack.csv", text, &schema, Units::default()).unwrap();
+    assert_eq!(table.rows.len(), 2);
+    assert_eq!(table.rows[1].q, [1.1, 0.5]);
+    assert_eq!(table.warnings.len(), 1, "{:?}", table.warnings);
+    assert_contains(&table.warnings[0], &["slack.csv:3:1:", "\"a\"", "1.1"]);
+
+    let text = "a,b\n0,0\n0,-1.5\n";
+    let e = read("far.csv", text, &schema, Units::default());
+    match &e {
+        Err(Error::OutsideJointRange {
+            line,
+            column,
+            joint,
+            ..
+        }) => assert_eq!((*line, *column, joint.as_str()), (3, 2, "b")),
+        other => panic!("expected OutsideJointRange, got {other:?}"),
+    }
+    assert_contains(&message(e), &["far.csv:3:2:"]);
+}
+
+const YAML: &str = "'1593701755':
+  camera_joints: []
+  pose:
+    qw: 1.0
+    qx: 0.0
+    qy: 0.0
+    qz: 0.0
+    x: 0.1
+    y: 0.2
+    z: 0.3
+  target_joints:
+  - 0.5
+  - 0.25
+'1593701700':
+  camera_joints: []
+  pose:
+    qw: 0.0
+    qx: 0.0
+    qy: 0.6
+    qz: 0.8
+    x: -1.0
+    y: -2.0
+    z: -3.0
+  target_joints:
+  - -0.5
+  - 1.5
+";
+
+#[test]
+fn industrial_yaml_observations_in_file_order() {
+    let schema = Schema::revolute(&["j1", "j2"]);
+    let path = temp_file("observations.yaml", YAML);
+    let table = read_industrial_yaml(&path, &schema.get()).unwrap();
+    let via_ext = read_measurement_file(&path, &schema.get(), &Units::default()).unwrap();
+    std::fs::remove_file(&path).unwrap();
+    assert_eq!(table, via_ext);
+    assert_eq!(table.n_markers, 1);
+    assert!(table.has_orientation);
+    assert_eq!(table.rows.len(), 2);
+    let [r0, r1] = &table.rows[..] else {
+        unreachable!()
+    };
+    assert_eq!((r0.line, r1.line), (1, 14));
+    assert_eq!(r0.q, [0.5, 0.25]);
+    assert_eq!(r1.q, [-0.5, 1.5]);
+    assert_eq!(r0.markers[0].position_m, [0.1, 0.2, 0.3]);
+    assert_eq!(r1.markers[0].position_m, [-1.0, -2.0, -3.0]);
+    let close = |got: [f64; 4], want: [f64; 4]| {
+        for (g, w) in got.iter().zip(want) {
+            assert_close(*g, w, 1e-12);
+        }
+    };
+    close(r0.markers[0].rotation.unwrap(), [1.0, 0.0, 0.0, 0.0]);
+    close(r1.markers[0].rotation.unwrap(), [0.0, 0.0, 0.6, 0.8]);
+
+    let moving = YAML.replacen("camera_joints: []", "camera_joints: [1.0]", 1);
+    let path = temp_file("moving.yaml", &moving);
+    let e = read_industrial_yaml(&path, &schema.get());
+    std::fs::remove_file(&path).unwrap();
+    assert_contains(&message(e), &["moving.yaml:1:", "camera_joints"]);
+}
+
+#[test]
+fn bundled_industrial_calibration_fixture() {
+    let schema = Schema::revolute(&["j1", "j2"]);
+    let path = fixture("industrial-calibration/measurements.yaml");
+    let table = read_measurement_file(&path, &schema.get(), &Units::default()).unwrap();
+    assert_eq!(table.rows.len(), 205);
+    let first = &table.rows[0];
+    assert_eq!(first.line, 1);
+    assert_eq!(first.q, [-0.5229825973510742, 0.0002200359886046499]);
+    assert_eq!(
+        first.markers[0].position_m,
+        [-0.5325496958762886, -0.7712137113402057, 0.935626211340206]
+    );
+}
+
+#[test]
+fn bundled_figaroh_ur10_fixture() {
+    let schema = Schema::revolute(&[
+        "shoulder_pan_joint",
+        "shoulder_lift_joint",
+        "elbow_joint",
+        "wrist_1_joint",
+        "wrist_2_joint",
+        "wrist_3_joint",
+    ]);
+    let path = fixture("figaroh/ur10/calibration.csv");
+    let table = read_measurement_file(&path, &schema.get(), &Units::default()).unwrap();
+    assert_eq!(table.rows.len(), 23);
+    assert_eq!(table.n_markers, 1);
+    assert!(
+        table.ignored_columns.is_empty(),
+        "{:?}",
+        table.ignored_columns
+    );
+    for row in &table.rows {
+        assert_eq!(row.q.len(), 6);
+        assert_eq!(row.markers.len(), 1, "line {}", row.line);
+        assert!(row.markers[0].rotation.is_some(), "line {}", row.line);
+    }
+    assert_eq!(table.rows[0].q[0], 1.589200496673584);
+    assert_eq!(
+        table.rows[0].markers[0].position_m,
+        [0.9088284523365023, 0.34156959335807885, 1.2526995668918641]
+    );
+}
