@@ -115,10 +115,7 @@ fn forced_test_figures(sh: &Shell, d: &Dataset, rung: &str) -> Result<String> {
     let test = (report["placements"].as_array().into_iter().flatten())
         .find(|s| s["role"] == "test")
         .and_then(|s| pose(&s["after"]));
-    Ok(test.map_or_else(
-        || "–".to_owned(),
-        |(p, o)| format!("{}, {}", mm(p), deg(o)),
-    ))
+    Ok(test.map_or_else(|| "–".to_owned(), |(p, o)| format!("{}, {}", mm(p), deg(o))))
 }
 
 /// Runs every recording; with `check`, only verifies that no calibrated model is worse than

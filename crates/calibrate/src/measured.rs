@@ -34,6 +34,9 @@ use serde::Serialize;
 
 use crate::calibrate::{CV_REPEATS, HeldOut, blocked_difference, fold_of};
 
+/// The instrument frame and the markers' frames with their tips.
+type Frames = (FrameSpec, Vec<(usize, FrameSpec)>);
+
 /// Standard errors by which a rung's held-out score must beat the rung chosen so far.
 ///
 /// The ladder makes up to three sequential one-sided comparisons, each of which can climb by
@@ -385,7 +388,7 @@ fn linear_frames(
     }
     let svd = a.clone().svd(true, true);
     let smax = svd.singular_values.max();
-    if !(smax > 0.0) || svd.singular_values.min() < 1e-9 * smax {
+    if smax.is_nan() || smax <= 0.0 || svd.singular_values.min() < 1e-9 * smax {
         return None;
     }
     let x = svd.solve(&b, 1e-12 * smax).ok()?;
@@ -584,14 +587,7 @@ fn mean_marker_rotation(
 }
 
 /// Observations of the tables' rows for which `keep(table, row)` holds.
-fn observations(
-    tables: &[MeasurementTable],
-    cfg: &MeasuredConfig,
-    n_tips_robot: usize,
-    keep: &dyn Fn(usize, usize) -> bool,
-) -> Observations {
-    let _ = n_tips_robot;
-    let _ = cfg;
+fn observations(tables: &[MeasurementTable], keep: &dyn Fn(usize, usize) -> bool) -> Observations {
     let mut obs = Observations::default();
     for (ti, t) in tables.iter().enumerate() {
         for (ri, row) in t.rows.iter().enumerate() {
@@ -680,11 +676,10 @@ fn fit(
     framed: &Tree,
     offsets: &[Option<usize>],
     tables: &[MeasurementTable],
-    cfg: &MeasuredConfig,
     weights: Weights,
     keep: &dyn Fn(usize, usize) -> bool,
 ) -> Result<(CalibratedModel, Fitted)> {
-    let obs = observations(tables, cfg, robot.tree.tips().len(), keep);
+    let obs = observations(tables, keep);
     let n_rows = obs.rows.len();
     let problem = CalibrationProblem::on_tree(framed.clone(), obs, weights, terms(rung, robot))
         .context("building the calibration problem")?;
@@ -829,16 +824,9 @@ fn cross_validate(
     }
     for rep in 0..CV_REPEATS {
         for fold in 0..k {
-            let (model, _) = fit(
-                rung,
-                robot,
-                framed,
-                offsets,
-                tables,
-                cfg,
-                weights,
-                &|ti, r| fold_of(r, lens[ti], k, rep, CV_REPEATS) != fold,
-            )?;
+            let (model, _) = fit(rung, robot, framed, offsets, tables, weights, &|ti, r| {
+                fold_of(r, lens[ti], k, rep, CV_REPEATS) != fold
+            })?;
             let mut idx = 0;
             for (ti, &n) in lens.iter().enumerate() {
                 let (per_row, _, _, scores) = scored_errors(&model, tables, ti, Some(&weights));
@@ -897,13 +885,7 @@ pub fn calibrate_measured(
     let all = |_: usize, _: usize| true;
     // Frames-only fits from every initial guess; the framed tree of the lowest cost is kept,
     // with its fitted frames as the nominal ones.
-    let mut best: Option<(
-        f64,
-        Tree,
-        CalibratedModel,
-        FrameSpec,
-        Vec<(usize, FrameSpec)>,
-    )> = None;
+    let mut best: Option<(f64, Tree, CalibratedModel, Frames)> = None;
     for (base, markers) in initial_frames(robot, train, cfg) {
         let framed = with_offsets
             .with_frames(&base, &markers)
@@ -918,7 +900,6 @@ pub fn calibrate_measured(
             &framed,
             &offsets,
             train,
-            cfg,
             weights,
             &all,
         )?;
@@ -928,10 +909,10 @@ pub fn calibrate_measured(
             let framed = with_offsets
                 .with_frames(&base, &markers)
                 .context("attaching the fitted instrument and marker frames")?;
-            best = Some((cost, framed, m, base, markers));
+            best = Some((cost, framed, m, (base, markers)));
         }
     }
-    let Some((_, framed, m0, base, markers)) = best else {
+    let Some((_, framed, m0, (base, markers))) = best else {
         bail!("no initial guess of the instrument frame");
     };
     let robot = &Robot {
@@ -961,7 +942,6 @@ pub fn calibrate_measured(
         &framed,
         &offsets,
         train,
-        cfg,
         weights,
         &all,
     )?;
@@ -1000,7 +980,7 @@ pub fn calibrate_measured(
     let (model, fitted) = if rung == Rung::FramesOnly {
         (frames_model.clone(), frames_only.clone())
     } else {
-        fit(rung, robot, &framed, &offsets, train, cfg, weights, &all)?
+        fit(rung, robot, &framed, &offsets, train, weights, &all)?
     };
     let is_frame = |name: &str| name.starts_with("instrument.") || name.starts_with("marker");
     let n_kept = (fitted.identified.identifiability.kept.iter())

@@ -336,12 +336,21 @@ pub fn read_measurement_file(
         .unwrap_or(0);
     let mut markers = vec![MarkerColumns::default(); n_markers];
     for (c, column) in columns.iter().enumerate() {
-        match *column {
-            Column::Position(k, i) => markers[k].position[i] = Some(c),
-            Column::Quaternion(k, i) => markers[k].quaternion[i] = Some(c),
-            Column::Rpy(k, i) => markers[k].rpy[i] = Some(c),
-            _ => {}
+        let slot = match *column {
+            Column::Position(k, i) => &mut markers[k].position[i],
+            Column::Quaternion(k, i) => &mut markers[k].quaternion[i],
+            Column::Rpy(k, i) => &mut markers[k].rpy[i],
+            _ => continue,
+        };
+        // `x` and `x1` both name marker 1's x.
+        if slot.is_some() {
+            return Err(Error::DuplicateColumn {
+                path: path.to_path_buf(),
+                column: c as u64 + 1,
+                name: names[c].clone(),
+            });
         }
+        *slot = Some(c);
     }
     let unnumbered = names.iter().any(|c| c == "x" || c == "y" || c == "z");
     let incomplete = |k: usize, stem: &str, what: &str| Error::IncompleteMarker {
@@ -614,6 +623,8 @@ struct Pose {
 /// a map from an observation key to `{camera_joints, pose: {x, y, z, qw, qx, qy, qz},
 /// target_joints}`, the pose (m, unit quaternion) of a target on the robot's tip as the
 /// static camera measures it. Rows come in file order; each has one marker with a rotation.
+/// Units are those of `industrial_calibration` (m, rad); joint readings within
+/// [`JOINT_LIMIT_SLACK`] past their limits are kept with a warning, as in CSV files.
 ///
 /// # Errors
 ///
@@ -649,6 +660,7 @@ pub fn read_industrial_yaml(
         message,
     };
     let mut rows = Vec::with_capacity(observations.len());
+    let (mut n_outside, mut first_outside) = (0usize, String::new());
     for (key, value) in observations {
         let key = match key {
             serde_yaml_ng::Value::String(s) => s,
@@ -684,7 +696,20 @@ pub fn read_industrial_yaml(
                 .get(j)
                 .copied()
                 .unwrap_or((f64::MIN, f64::MAX));
-            if !(v.is_finite() && (min..=max).contains(&v)) {
+            let slack = JOINT_LIMIT_SLACK * (max - min);
+            if v.is_finite()
+                && !(min..=max).contains(&v)
+                && (min - slack..=max + slack).contains(&v)
+            {
+                n_outside += 1;
+                if n_outside == 1 {
+                    first_outside = format!(
+                        "{}:{line}: observation {key:?}: joint {:?} = {v} is outside its limits [{min}, {max}]",
+                        path.display(),
+                        schema.names[j]
+                    );
+                }
+            } else if !(v.is_finite() && (min..=max).contains(&v)) {
                 return Err(bad(
                     line,
                     format!(
@@ -729,7 +754,16 @@ pub fn read_industrial_yaml(
         name: stem(path),
         path: path.to_path_buf(),
         rows,
-        warnings: Vec::new(),
+        warnings: match n_outside {
+            0 => Vec::new(),
+            1 => vec![format!(
+                "{first_outside}; such readings are used as they are"
+            )],
+            n => vec![format!(
+                "{first_outside} (and {} more readings outside their joint's limits); such readings are used as they are",
+                n - 1
+            )],
+        },
         n_markers: 1,
         has_orientation: true,
         has_distance: false,

@@ -1,8 +1,8 @@
 use std::path::Path;
 
 use hapcal_io::{
-    CalibratedValue, CalibrationMeta, Error, import_urdf, parse_device, write_calibrated_urdf,
-    write_device,
+    CalibratedValue, CalibrationMeta, Error, import_urdf, import_urdf_tips, parse_device,
+    write_calibrated_urdf, write_device,
 };
 
 use crate::{assert_contains, data, message};
@@ -115,17 +115,71 @@ fn tiny_urdf_imports_continuous_and_missing_origins() {
 }
 
 #[test]
+fn prismatic_joints_and_trees_of_several_tips_import() {
+    let device = import_urdf(&data("tiny.urdf"), "slider").unwrap();
+    let p = &device.placements;
+    assert_eq!(p.len(), 3);
+    assert!(p[2].prismatic && !p[1].prismatic);
+    assert_eq!(p[2].axis, Some([1.0, 0.0, 0.0]));
+    let pi = std::f64::consts::PI;
+    assert_eq!(device.joint_limits(), [(-1.5, 1.5), (-pi, pi), (0.0, 0.1)]);
+
+    let tree = import_urdf_tips(
+        &data("tiny.urdf"),
+        &["tool".to_owned(), "slider".to_owned()],
+    )
+    .unwrap();
+    let names: Vec<&str> = tree.joints.iter().map(|j| j.name.as_str()).collect();
+    assert_eq!(names, ["shoulder", "elbow", "slide"]);
+    assert_eq!(tree.prismatic, [false, false, true]);
+    let path_names =
+        |k: usize| -> Vec<String> { tree.paths[k].iter().map(|p| p.name.clone()).collect() };
+    assert_eq!(path_names(0), ["shoulder", "elbow", "tool_joint"]);
+    assert_eq!(path_names(1), ["shoulder", "elbow", "slide"]);
+    // A continuous joint of a tree may have turned many times.
+    assert_eq!(
+        (tree.joints[1].lower_rad, tree.joints[1].upper_rad),
+        (-1e3, 1e3)
+    );
+}
+
+#[test]
+fn link_masses_are_carried_to_the_nearest_moving_joint() {
+    // The tool hangs from the arm by a fixed joint (0.2 m along x, then 90° about z): its
+    // centre of mass, 0.01 m along the tool's x, is (0.2, 0.01, 0) in the joint's frame.
+    let tree = import_urdf_tips(&data("inertial.urdf"), &["tool".to_owned()]).unwrap();
+    assert_eq!(
+        tree.inertials.len(),
+        2,
+        "the base link is not carried by a joint"
+    );
+    let arm = &tree.inertials[0];
+    assert_eq!((arm.link.as_str(), arm.joint, arm.mass_kg), ("arm", 0, 2.0));
+    assert_eq!(arm.com_m, [0.0, 0.0, 0.05]);
+    let tool = &tree.inertials[1];
+    assert_eq!(
+        (tool.link.as_str(), tool.joint, tool.mass_kg),
+        ("tool", 0, 1.0)
+    );
+    let expected = [0.2, 0.01, 0.0];
+    for (got, want) in tool.com_m.iter().zip(expected) {
+        assert!(
+            (got - want).abs() < 1e-15,
+            "{:?} against {expected:?}",
+            tool.com_m
+        );
+    }
+}
+
+#[test]
 fn unsupported_and_malformed_urdfs_are_errors() {
-    let msg = message(import_urdf(&data("tiny.urdf"), "slider"));
-    assert_contains(
-        &msg,
-        &["tiny.urdf: joint \"slide\" is prismatic; only revolute, continuous and fixed"],
-    );
     let msg = message(import_urdf(&data("tiny.urdf"), "base"));
-    assert_contains(
-        &msg,
-        &["no revolute or continuous joint between the root link \"base\""],
-    );
+    assert_contains(&msg, &["no moving joint between the root link \"base\""]);
+    let msg = message(import_urdf_tips(
+        &data("tiny.urdf"),
+        &["tool".to_owned(), "tool".to_owned()],
+    ));
+    assert_contains(&msg, &["tip link \"tool\" is given twice"]);
     let msg = message(import_urdf(&data("broken.urdf"), "a"));
     assert_contains(&msg, &["broken.urdf:3:3: "]);
     let msg = message(import_urdf(&data("no_such.urdf"), "a"));
