@@ -14,7 +14,8 @@ use xshell::{Shell, cmd};
 
 #[derive(Parser)]
 enum Task {
-    /// fmt, clippy, tests, docs, one release `reproduce-tables --check`: what CI runs.
+    /// fmt, clippy, tests, the library example, docs, `reproduce-tables --check` and
+    /// `real-data --check` (release): what CI runs.
     Ci,
     /// Reproduce the paper's tables (release build) into docs/results/paper (100 seeds) and
     /// docs/results/paper/seeds-1000 (1000 seeds) and docs/results/paper/planned-d-optimal
@@ -119,7 +120,9 @@ fn ci(sh: &Shell) -> Result<()> {
     cmd!(sh, "cargo doc --workspace --no-deps --quiet")
         .env("RUSTDOCFLAGS", "-D warnings")
         .run()?;
-    reproduce_tables(sh, true)
+    reproduce_tables(sh, true)?;
+    // The published recordings: no calibrated model worse than frames only held out.
+    real_data::run(sh, true)
 }
 
 fn blind_test(sh: &Shell, cases: usize) -> Result<()> {

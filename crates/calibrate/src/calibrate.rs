@@ -910,11 +910,39 @@ pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
         .collect()
 }
 
+/// Writes `text` to `path` atomically (a sibling temporary file renamed over it, so a reader
+/// never sees half a file and a failed write leaves any earlier file intact), refusing to
+/// replace one of `inputs`.
+fn write_new(path: &Path, text: &str, inputs: &[&Path]) -> Result<()> {
+    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if let Some(input) = inputs.iter().find(|i| same(path, i)) {
+        bail!(
+            "{}: this is an input ({}); write the calibrated file elsewhere",
+            path.display(),
+            input.display()
+        );
+    }
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(format!(".tmp{}", std::process::id()));
+    let tmp = PathBuf::from(tmp);
+    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        anyhow::anyhow!("moving {} to {}: {e}", tmp.display(), path.display())
+    })
+}
+
 /// Writes the calibrated device: a `.urdf` path gets a copy of the source URDF with the
-/// calibrated joint origins; any other path a device TOML with a `[calibration]` table.
+/// calibrated joint origins; any other path a device TOML with a `[calibration]` table. With
+/// marker frames or values a URDF cannot hold (compliance, harmonics), `<out>.calibration.toml`
+/// beside it. Files are written atomically. Returns the paths written.
 ///
 /// # Errors
-/// A `.urdf` output for a device that did not come from a URDF, or an I/O error.
+/// A `.urdf` output for a device that did not come from a URDF, an output path that is the
+/// source URDF, or an I/O error.
 pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<Vec<PathBuf>> {
     if let Some(calibrated) = &outcome.calibrated {
         if !out
@@ -927,7 +955,7 @@ pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<Vec<PathBuf>> {
             );
         }
         let text = hapcal_io::write_device(calibrated);
-        std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
+        write_new(out, &text, &[])?;
         return Ok(vec![out.to_path_buf()]);
     }
     let all: Vec<hapcal_io::CalibratedValue> = (outcome.report.parameters.iter())
@@ -991,15 +1019,17 @@ pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<Vec<PathBuf>> {
     } else {
         hapcal_io::write_device(&calibrated)
     };
-    std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
+    let source = outcome.device.urdf.as_ref().map(|u| u.path.as_path());
+    let inputs: Vec<&Path> = source.into_iter().collect();
+    write_new(out, &text, &inputs)?;
     let mut written = vec![out.to_path_buf()];
     if !outcome.report.frames.is_empty() || !leftover.is_empty() {
         let sidecar = out.with_extension("calibration.toml");
-        std::fs::write(
+        write_new(
             &sidecar,
-            crate::measured::sidecar_toml(&outcome.report.frames, &leftover),
-        )
-        .with_context(|| format!("writing {}", sidecar.display()))?;
+            &crate::measured::sidecar_toml(&outcome.report.frames, &leftover),
+            &inputs,
+        )?;
         written.push(sidecar);
     }
     Ok(written)

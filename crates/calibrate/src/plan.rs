@@ -28,7 +28,7 @@
 //! `--refine` then moves the chosen poses off the candidates by coordinate exchange over the
 //! joint box ([`coordinate_exchange`]).
 //!
-//! `hapcal pose-bound` ([`design_bound`]) answers how well any `N` distance poses can do: the
+//! `hapcal pose-bound` (`hapcal_studies::pose_study::design_bound`) answers how well any `N` distance poses can do: the
 //! continuous I-optimal design (multiplicative algorithm, [`hapcal_identify::i_optimal_weights`])
 //! on uniform candidates, enlarged by column generation with the maxima of its sensitivity over
 //! the joint box, and the equivalence-theorem certificate `Φ* ≥ Φ(ξ)²/sup d` that bounds every
