@@ -386,12 +386,17 @@ fn linear_frames(
             b[row] = s.measured[r];
         }
     }
-    let svd = a.clone().svd(true, true);
-    let smax = svd.singular_values.max();
-    if smax.is_nan() || smax <= 0.0 || svd.singular_values.min() < 1e-9 * smax {
+    // Normal equations: the system is small (12 + 27 per marker unknowns) and tall; an initial
+    // guess needs no better than their precision. Singular values of A are the square roots of
+    // AᵀA's eigenvalues; a ratio below 1e-6 means the samples do not determine the unknowns.
+    let ata = a.tr_mul(&a);
+    let atb = a.tr_mul(&b);
+    let eig = ata.clone().symmetric_eigen();
+    let (emin, emax) = (eig.eigenvalues.min(), eig.eigenvalues.max());
+    if emax.is_nan() || emax <= 0.0 || emin < 1e-12 * emax {
         return None;
     }
-    let x = svd.solve(&b, 1e-12 * smax).ok()?;
+    let x = ata.cholesky()?.solve(&atb);
     let r_free = nalgebra::Matrix3::from_row_slice(&x.as_slice()[0..9]);
     let rsvd = r_free.svd(true, true);
     let (u, v_t) = (rsvd.u?, rsvd.v_t?);
@@ -414,7 +419,7 @@ fn linear_frames(
             b2[3 * i + r] = rhs[r];
         }
     }
-    let y = a2.svd(true, true).solve(&b2, 1e-12).ok()?;
+    let y = a2.tr_mul(&a2).cholesky()?.solve(&a2.tr_mul(&b2));
     let t = Vector3::new(y[0], y[1], y[2]);
     let offsets: Vec<Vector3<f64>> = (0..n_markers)
         .map(|k| Vector3::new(y[3 + 3 * k], y[4 + 3 * k], y[5 + 3 * k]))
@@ -503,31 +508,30 @@ fn pose_frames(samples: &[Sample], marker: usize) -> Option<(Isometry3<f64>, Iso
 /// the nominal tip origins to the measured positions (markers at their tips' origins); each
 /// with each marker's rotation by the chordal mean of its measured orientations relative to the
 /// nominal tip (pose data). With few rows the closed form follows the noise far from the
-/// optimum, so both are fitted and the better kept ([`calibrate_measured`]).
+/// optimum; [`calibrate_measured`] fits the start with the smallest residual.
 fn initial_frames(
     robot: &Robot,
-    tables: &[MeasurementTable],
+    samples: &[Sample],
+    n: usize,
     cfg: &MeasuredConfig,
-) -> Vec<(FrameSpec, Vec<(usize, FrameSpec)>)> {
-    let samples = samples(robot, tables, cfg);
-    let n = n_markers(tables);
+) -> Vec<Frames> {
     let a: Vec<Point3<f64>> = samples
         .iter()
         .map(|s| Point3::from(s.tip.translation.vector))
         .collect();
     let b: Vec<Point3<f64>> = samples.iter().map(|s| s.measured).collect();
     let mut starts = Vec::new();
-    if let Some(linear) = linear_frames(&samples, n) {
+    if let Some(linear) = linear_frames(samples, n) {
         starts.push(linear);
     }
     starts.push((kabsch(&a, &b), vec![Vector3::zeros(); n]));
     // Pose data: the instrument frame from the first marker's poses, every marker's frame from
     // its own poses seen through it.
     let mut rotations: Vec<Option<UnitQuaternion<f64>>> = vec![None; n];
-    if let Some((base, _)) = pose_frames(&samples, 0) {
+    if let Some((base, _)) = pose_frames(samples, 0) {
         let offsets = (0..n)
             .map(|k| {
-                let frame = pose_frames(&samples, k).map(|(_, f)| f);
+                let frame = pose_frames(samples, k).map(|(_, f)| f);
                 rotations[k] = frame.map(|f| f.rotation);
                 frame.map_or_else(Vector3::zeros, |f| f.translation.vector)
             })
@@ -543,7 +547,7 @@ fn initial_frames(
                 .map(|k| {
                     let rotation = rotations[k]
                         .filter(|_| i + 1 == n_starts)
-                        .unwrap_or_else(|| mean_marker_rotation(&samples, k, &base));
+                        .unwrap_or_else(|| mean_marker_rotation(samples, k, &base));
                     (
                         tip_of(cfg, &robot.tree, k),
                         FrameSpec {
@@ -668,17 +672,25 @@ fn free_of(
     free
 }
 
+/// Where every fit starts: the framed tree and a parameter vector in its layout (the frames-only
+/// estimate; entries past it, such as compliance, at the problem's initial guess).
+struct Start<'a> {
+    tree: &'a Tree,
+    x: &'a Col<f64>,
+}
+
 /// Fits `rung` on the rows `keep` selects: the problem and its identification (estimates
 /// mapped back to the full layout).
 fn fit(
     rung: Rung,
     robot: &Robot,
-    framed: &Tree,
+    start: &Start<'_>,
     offsets: &[Option<usize>],
     tables: &[MeasurementTable],
     weights: Weights,
     keep: &dyn Fn(usize, usize) -> bool,
 ) -> Result<(CalibratedModel, Fitted)> {
+    let framed = start.tree;
     let obs = observations(tables, keep);
     let n_rows = obs.rows.len();
     let problem = CalibrationProblem::on_tree(framed.clone(), obs, weights, terms(rung, robot))
@@ -693,7 +705,10 @@ fn fit(
         orientation,
         n_layout,
     );
-    let x_full = problem.initial_guess();
+    let mut x_full = problem.initial_guess();
+    for i in 0..start.x.nrows().min(x_full.nrows()) {
+        x_full[i] = start.x[i];
+    }
     let subset = Subset::new(&problem, free, x_full);
     let x0 = subset.initial_free();
     let id = identify(&subset, x0, &crate::calibrate::identify_config(None))
@@ -804,7 +819,7 @@ fn figures(model: &CalibratedModel, tables: &[MeasurementTable], table: usize) -
 fn cross_validate(
     rung: Rung,
     robot: &Robot,
-    framed: &Tree,
+    start: &Start<'_>,
     offsets: &[Option<usize>],
     tables: &[MeasurementTable],
     cfg: &MeasuredConfig,
@@ -824,7 +839,7 @@ fn cross_validate(
     }
     for rep in 0..CV_REPEATS {
         for fold in 0..k {
-            let (model, _) = fit(rung, robot, framed, offsets, tables, weights, &|ti, r| {
+            let (model, _) = fit(rung, robot, start, offsets, tables, weights, &|ti, r| {
                 fold_of(r, lens[ti], k, rep, CV_REPEATS) != fold
             })?;
             let mut idx = 0;
@@ -883,42 +898,40 @@ pub fn calibrate_measured(
         ..Weights::default()
     };
     let all = |_: usize, _: usize| true;
-    // Frames-only fits from every initial guess; the framed tree of the lowest cost is kept,
-    // with its fitted frames as the nominal ones.
-    let mut best: Option<(f64, Tree, CalibratedModel, Frames)> = None;
-    for (base, markers) in initial_frames(robot, train, cfg) {
-        let framed = with_offsets
-            .with_frames(&base, &markers)
-            .context("attaching the instrument and marker frames")?;
-        let candidate = Robot {
-            tree: with_offsets.clone(),
-            ..robot.clone()
-        };
-        let (m, f) = fit(
-            Rung::FramesOnly,
-            &candidate,
-            &framed,
-            &offsets,
-            train,
-            weights,
-            &all,
-        )?;
-        let cost = f.identified.fit.cost;
-        if best.as_ref().is_none_or(|(c, ..)| cost < *c) {
-            let (base, markers) = fitted_frames(&framed, &f.x, &base, &markers);
-            let framed = with_offsets
-                .with_frames(&base, &markers)
-                .context("attaching the fitted instrument and marker frames")?;
-            best = Some((cost, framed, m, (base, markers)));
-        }
-    }
-    let Some((_, framed, m0, (base, markers))) = best else {
-        bail!("no initial guess of the instrument frame");
-    };
     let robot = &Robot {
-        tree: with_offsets,
+        tree: with_offsets.clone(),
         ..robot.clone()
     };
+    // Of the closed-form starts, the one whose residual is smallest is fitted, frames only; every
+    // rung starts from its estimate.
+    let samples = samples(robot, train, cfg);
+    let mut best: Option<(f64, Frames)> = None;
+    for (base, markers) in initial_frames(robot, &samples, n_markers(train), cfg) {
+        let cost = start_cost(&samples, &base, &markers, &weights);
+        if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+            best = Some((cost, (base, markers)));
+        }
+    }
+    let Some((_, (base, markers))) = best else {
+        bail!("no initial guess of the instrument frame");
+    };
+    let framed = with_offsets
+        .with_frames(&base, &markers)
+        .context("attaching the instrument and marker frames")?;
+    let nominal = Col::<f64>::zeros(framed.n_params());
+    let (m0, f0) = fit(
+        Rung::FramesOnly,
+        robot,
+        &Start {
+            tree: &framed,
+            x: &nominal,
+        },
+        &offsets,
+        train,
+        weights,
+        &all,
+    )?;
+    let mut reweighted = false;
     if cfg.sigma_m.is_none() || cfg.sigma_rad.is_none() {
         let (mut pos, mut rot) = (Vec::new(), Vec::new());
         for ti in 0..train.len() {
@@ -934,17 +947,32 @@ pub fn calibrate_measured(
         }
         if cfg.sigma_rad.is_none() && rot_rms > 0.0 {
             weights.sigma_orientation_rad = rot_rms / 3f64.sqrt();
+            reweighted = true;
         }
     }
-    let (frames_model, frames_only) = fit(
-        Rung::FramesOnly,
-        robot,
-        &framed,
-        &offsets,
-        train,
-        weights,
-        &all,
-    )?;
+    // Position weights alone do not move a frames-only estimate; the balance of position and
+    // orientation does.
+    let (frames_model, frames_only) = if reweighted {
+        fit(
+            Rung::FramesOnly,
+            robot,
+            &Start {
+                tree: &framed,
+                x: &f0.x,
+            },
+            &offsets,
+            train,
+            weights,
+            &all,
+        )?
+    } else {
+        (m0, f0)
+    };
+    let start_x = frames_only.x.clone();
+    let start = Start {
+        tree: &framed,
+        x: &start_x,
+    };
 
     let mut ladder = Vec::new();
     let rung = match cfg.rung {
@@ -953,7 +981,7 @@ pub fn calibrate_measured(
             let mut held = Vec::new();
             let mut scored = Vec::new();
             for r in Rung::ALL {
-                let (h, s) = cross_validate(r, robot, &framed, &offsets, train, cfg, weights)?;
+                let (h, s) = cross_validate(r, robot, &start, &offsets, train, cfg, weights)?;
                 held.push(h);
                 scored.push(s);
             }
@@ -980,7 +1008,7 @@ pub fn calibrate_measured(
     let (model, fitted) = if rung == Rung::FramesOnly {
         (frames_model.clone(), frames_only.clone())
     } else {
-        fit(rung, robot, &framed, &offsets, train, weights, &all)?
+        fit(rung, robot, &start, &offsets, train, weights, &all)?
     };
     let is_frame = |name: &str| name.starts_with("instrument.") || name.starts_with("marker");
     let n_kept = (fitted.identified.identifiability.kept.iter())
@@ -1062,31 +1090,32 @@ fn deviation(d: &[f64]) -> Isometry3<f64> {
     Isometry3::from_parts(Vector3::new(d[0], d[1], d[2]).into(), r)
 }
 
-/// The frames of a fit on `framed` (x in its layout) as new nominal frames.
-fn fitted_frames(
-    framed: &Tree,
-    x: &Col<f64>,
+/// Half the weighted squared residual of the samples (nominal tip poses) seen through the
+/// frames `base` and `markers`: the cost a frames-only fit would start from.
+fn start_cost(
+    samples: &[Sample],
     base: &FrameSpec,
     markers: &[(usize, FrameSpec)],
-) -> (FrameSpec, Vec<(usize, FrameSpec)>) {
-    let n_robot = framed.n_params() - 6 - 6 * markers.len();
-    let at = |k: usize| -> Vec<f64> { (k..k + 6).map(|i| x[i]).collect() };
-    let base = FrameSpec {
-        name: base.name.clone(),
-        nominal: base.nominal * deviation(&at(0)),
-    };
-    let markers = (markers.iter().enumerate())
-        .map(|(k, (tip, m))| {
-            (
-                *tip,
-                FrameSpec {
-                    name: m.name.clone(),
-                    nominal: m.nominal * deviation(&at(6 + n_robot + 6 * k)),
-                },
-            )
-        })
-        .collect();
-    (base, markers)
+    weights: &Weights,
+) -> f64 {
+    let mut cost = 0.0;
+    for s in samples {
+        let Some((_, marker)) = markers.get(s.marker) else {
+            continue;
+        };
+        let pose = base.nominal * s.tip * marker.nominal;
+        let e = (pose.translation.vector - s.measured.coords).norm() / weights.sigma_position_m;
+        cost += e * e;
+        if let Some(r) = s.rotation {
+            let theta = r.angle_to(&pose.rotation) / weights.sigma_orientation_rad;
+            cost += theta * theta;
+        }
+    }
+    if cost.is_finite() {
+        0.5 * cost
+    } else {
+        f64::INFINITY
+    }
 }
 
 /// The identified instrument and marker frames: each nominal frame times its deviation.
