@@ -8,7 +8,7 @@ table of fixtures/reference-device/device.toml and the CSV that hapcal wrote.
 
     python scipy_peer.py --data poses-200.csv --method lm --free da0,da1,... --repeat 10
 
-Problem (DESIGN.md §2): standard D-H chain A_i = Rz(theta_i + dtheta_i + q_i) Tz(d_i + dd_i)
+Problem (docs/design.md §2): standard D-H chain A_i = Rz(theta_i + dtheta_i + q_i) Tz(d_i + dd_i)
 Tx(a_i + da_i) Rx(alpha_i + dalpha_i), rows 0..7 (row 0 fixed), residual per pose
 r = (|P| - distance_m) / sigma_m with sigma_m = 2 pi 0.015 (2 pi / 20000 / 3) m; unknowns: the
 deviations named by --free (the others held at 0); start x = 0.

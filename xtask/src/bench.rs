@@ -143,10 +143,9 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
     let mut md = String::new();
     md.push_str("# Speed and scale against peers\n\n");
     md.push_str(&format!(
-        "Written by `cargo xtask bench{}` on {date}: {cpu}, {cores} cores, {uname}; load average at the start {}. Problem: the reference device (DESIGN.md §2) with distance data, 32 kinematic deviations of which the 28 identifiable ones are solved from x = 0 (`dalpha0`, `dd0`, `dtheta0`, `dalpha7` held at 0); data: joint angles uniform within the limits, distances of the paper's truth + σ_m noise (`hapcal_sim::distance_samples`, seed 1), written once by hapcal to `{}`. Every solver reads the same file. Tolerances: ftol = xtol = gtol = 1e-12 (MINPACK tests) for hapcal and SciPy; SciPy gets `x_scale=\"jac\"` (MINPACK's column scaling, as hapcal) and the analytic Jacobian. hapcal's LM starts with the full Gauss–Newton step (`LmConfig::factor = ∞`: initial trust radius = the Gauss–Newton step's length) where SciPy's MINPACK starts with radius 100·‖D·x0‖ (100 at x = 0; `least_squares` does not expose `factor`); the iteration and its stopping tests are MINPACK's in both. `identify` knows σ and decides the pruning once, at the nominal (`IdentifyConfig::max_rounds = 1`; `pruning_converged` says whether the decision at the estimate agrees). Wall times: minimum over repeats, the solve only (file reading excluded for both). hapcal evaluates distance rows 8 poses at a time (SIMD lane kernel, AVX-512 or AVX2 chosen at run time) and row blocks on all cores (rayon) from 4 blocks of 256 poses up, i.e. at 2,000 poses and more; SciPy's numpy may use several threads too.\n\n",
+        "Written by `cargo xtask bench{}` on {date}: {cpu}, {cores} cores, {uname}; load average at the start {}. Problem: the reference device (docs/design.md §2) with distance data, 32 kinematic deviations of which the 28 identifiable ones are solved from x = 0 (`dalpha0`, `dd0`, `dtheta0`, `dalpha7` held at 0); data: joint angles uniform within the limits, distances of the paper's truth + σ_m noise (`hapcal_sim::distance_samples`, seed 1), written once by hapcal to `bench-data/` in the cargo target directory. Every solver reads the same file. Tolerances: ftol = xtol = gtol = 1e-12 (MINPACK tests) for hapcal and SciPy; SciPy gets `x_scale=\"jac\"` (MINPACK's column scaling, as hapcal) and the analytic Jacobian. hapcal's LM starts with the full Gauss–Newton step (`LmConfig::factor = ∞`: initial trust radius = the Gauss–Newton step's length) where SciPy's MINPACK starts with radius 100·‖D·x0‖ (100 at x = 0; `least_squares` does not expose `factor`); the iteration and its stopping tests are MINPACK's in both. `identify` knows σ and decides the pruning once, at the nominal (`IdentifyConfig::max_rounds = 1`; `pruning_converged` says whether the decision at the estimate agrees). Wall times: minimum over repeats, the solve only (file reading excluded for both). hapcal evaluates distance rows 8 poses at a time (SIMD lane kernel, AVX-512 or AVX2 chosen at run time) and row blocks on all cores (rayon) from 4 blocks of 256 poses up, i.e. at 2,000 poses and more; SciPy's numpy may use several threads too.\n\n",
         if peers { " --peers" } else { "" },
         load_before.split_whitespace().take(3).collect::<Vec<_>>().join(" "),
-        data_dir.display()
     ));
     md.push_str("| poses | hapcal LM (28 params) | hapcal identify (prune + LM + covariance, σ known) | SciPy lm | hapcal/lm | max abs diff lm | SciPy trf | hapcal/trf | max abs diff trf | peak RSS hapcal |\n|---|---|---|---|---|---|---|---|---|---|\n");
 
@@ -274,7 +273,7 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
     let (out, rss_mb) = timed(sh, &fleet, &[])?;
     let fl: Value = serde_json::from_str(&out).context("fleet output")?;
     md.push_str(&format!(
-        "## Fleet: {} devices on one rig (sparse back end)\n\n{} residuals, {} parameters ({} per device + 2 shared). The dense back end refuses: \"{}\". The sparse back end (chosen by `identify` from the Jacobian's structure) solves it in {} ({}, {} residual evaluations), peak RSS {rss_mb:.0} MB (whole process, simulation included). Shared rig parameters:\n\n| parameter | truth | estimate ± std | (estimate − truth)/std |\n|---|---|---|---|\n| cable zero offset (m) | {:.3e} | {:.4e} ± {:.1e} | {:.2} |\n| cable-angle coefficient (m/rad) | {:.3e} | {:.4e} ± {:.1e} | {:.2} |\n\nRMS error of the 28,000 per-device deviations: {:.2e} (m or rad). Command: `{} --devices 1000 --poses 200 --seed 1`.\n\n",
+        "## Fleet: {} devices on one rig (sparse back end)\n\n{} residuals, {} parameters ({} per device + 2 shared). The dense back end refuses: \"{}\". The sparse back end (chosen by `identify` from the Jacobian's structure) solves it in {} ({}, {} residual evaluations), peak RSS {rss_mb:.0} MB (whole process, simulation included). Shared rig parameters:\n\n| parameter | truth | estimate ± std | (estimate − truth)/std |\n|---|---|---|---|\n| cable zero offset (m) | {:.3e} | {:.4e} ± {:.1e} | {:.2} |\n| cable-angle coefficient (m/rad) | {:.3e} | {:.4e} ± {:.1e} | {:.2} |\n\nRMS error of the 28,000 per-device deviations: {:.2e} (m or rad). Command: `cargo run --release -p hapcal-identify --example fleet -- --devices 1000 --poses 200 --seed 1`.\n\n",
         fl["n_devices"],
         fl["n_residuals"],
         fl["n_params"],
@@ -292,7 +291,6 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
         f(&fl, &["cable_angle", "std"]),
         f(&fl, &["cable_angle", "z"]),
         f(&fl, &["device_deviation_rms_error"]),
-        fleet.display(),
     ));
 
     if criterion {

@@ -6,6 +6,7 @@ mod bench;
 mod haptic;
 mod mukca;
 mod real_data;
+mod tidy;
 
 use anyhow::Result;
 use clap::Parser;
@@ -14,7 +15,7 @@ use xshell::{Shell, cmd};
 
 #[derive(Parser)]
 enum Task {
-    /// fmt, clippy, tests, the library example, docs, `reproduce-tables --check` and
+    /// fmt, tidy, clippy, tests, the library example, docs, `reproduce-tables --check` and
     /// `real-data --check` (release): what CI runs.
     Ci,
     /// Reproduce the paper's tables (release build) into docs/results/paper (100 seeds) and
@@ -60,6 +61,10 @@ enum Task {
     /// The property tests with fresh random seeds (CI pins the seed): run it to look for
     /// failures CI cannot find; each failure is saved in its crate's proptest-regressions/.
     ProptestFresh,
+    /// Checks over the tracked files: no absolute paths of the build machine, no development
+    /// history (issue numbers and the like), real crate descriptions, relative
+    /// Markdown links that resolve, no duplicated fixture or test data (see xtask/src/tidy.rs).
+    Tidy,
     /// Scale benchmarks (reference device at 200 to 1,000,000 poses, the 1,000-device fleet)
     /// into docs/results/bench.md; `--peers` adds SciPy least_squares (lm, trf) on the same
     /// data files, in a virtual environment under the target directory.
@@ -94,6 +99,7 @@ fn main() -> Result<()> {
                 .run()?;
             Ok(())
         }
+        Task::Tidy => tidy::run(&sh),
         Task::Bench { peers, criterion } => bench::run(&sh, peers, criterion),
         Task::BlindTest { cases } => blind_test(&sh, cases),
         Task::ReproduceTables { check } => reproduce_tables(&sh, check),
@@ -102,6 +108,7 @@ fn main() -> Result<()> {
 
 fn ci(sh: &Shell) -> Result<()> {
     cmd!(sh, "cargo fmt --all --check").run()?;
+    tidy::run(sh)?;
     cmd!(
         sh,
         "cargo clippy --workspace --all-targets --quiet -- -D warnings"

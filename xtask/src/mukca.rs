@@ -5,8 +5,8 @@ use serde_json::Value;
 use std::fmt::Write;
 use xshell::{Shell, cmd};
 
-/// MUKCa's own optimiser on the same splits (issue #2; run by the project lead with their full
-/// objective, 48 URDF-placement parameters, IPOPT): (unit, urdf, train, test, MAE before, MAE
+/// MUKCa's own optimiser on the same splits (run with MUKCa's full objective, 48
+/// URDF-placement parameters, IPOPT): (unit, urdf, train, test, MAE before, MAE
 /// after, distance error after), mm. `None` where only a range over placements was given.
 /// MAE before, MAE after, distance error after (mm).
 type Figures = Option<[f64; 3]>;
@@ -135,7 +135,7 @@ fn run_splits(
     Ok((picks, all))
 }
 
-/// Folds of the stability sweep (issue #2: the choice must not depend on the fold count).
+/// Folds of the stability sweep (the choice must not depend on the fold count).
 const FOLD_SWEEP: std::ops::RangeInclusive<usize> = 3..=10;
 
 /// Fixed models of the diagnostic table (every candidate of `--model auto`, plus the joint
@@ -282,7 +282,7 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     writeln!(md)?;
     writeln!(
         md,
-        "The issue's target, −20 % on average, is not met (see \"What was tried\" below)."
+        "The target, −20 % on average, is not met (see \"What was tried\" below)."
     )?;
 
     // How the choice was made: the cross-validation of each split at the default 5 folds.
@@ -394,7 +394,7 @@ at every fold count from 3 to 10 (mean 0.883–0.893, worst 1.06–1.09, measure
 task with `CV_SIGNIFICANCE_Z` in crates/cli/src/calibrate.rs set to 1.5), and z = 2 would also \
 drop compliance on panda_2 and on panda_3 of the shared MUKCa dataset, where mass compliance \
 lowers the test MAE of most placements. Those margins were found by looking at test \
-placements, which issue #2 rules out for choosing a setting, so the default stays at the \
+placements, which must not be used to choose a setting, so the default stays at the \
 textbook z = 1; the default fold count (5) is checked, the sweep is reported.
 - **Other partitions** (measured with the 1.5 margin). With 15 folds, and with 30 folds, which leaves out about one \
 configuration per socket, `hapcal calibrate … --folds 15` and `--folds 30` pick the same models \
@@ -422,7 +422,7 @@ command with `--data fixtures/mukca/data/panda_6`), the geometric model reaches 
 outside the training placement's configurations, not a model term we could name. On \
 panda_6 and panda_7 no non-geometric model we tried (lumped, mass and actuator compliance, \
 harmonics) does better than the geometric one by more than 5 % (the fixed table).
-- Earlier sessions (no new numbers here): ridge prior toward the nominal URDF (it reproduces \
+- Also tried (not measured by this task): ridge prior toward the nominal URDF (it reproduces \
 MUKCa's own figures), forced compliance models, gear-ratio scale, socket-distance weight, \
 outlier rejection, link bending.
 ";

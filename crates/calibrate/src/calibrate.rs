@@ -162,7 +162,7 @@ impl Plan {
 pub enum DataSet {
     /// MUKCa-style placement: rows per socket.
     Sockets(SocketPlacement),
-    /// Distance log (DESIGN.md §5): joint readings and cable distance per row.
+    /// Distance log (docs/design.md §5): joint readings and cable distance per row.
     Distances {
         /// Name (file stem).
         name: String,
@@ -725,7 +725,10 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     if plan.joint {
         bail!("--joint applies to a haptic device with transmissions (capstans, parallelogram)");
     }
-    if plan.data.iter().any(|p| crate::measured::is_marker_file(p)) {
+    // A device without a cable encoder of its own: a distance comes from an anchor whose
+    // position the data must determine, as a tracker's frame.
+    let distances = device.cable_encoder.is_none();
+    if (plan.data.iter()).any(|p| crate::measured::is_marker_file(p, distances)) {
         return crate::measured::run(plan, &device, start);
     }
     let chain = device

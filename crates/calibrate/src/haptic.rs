@@ -9,11 +9,12 @@ use faer::Col;
 use hapcal_identify::{Identified, IdentifyConfig, Problem, identify};
 use hapcal_io::{CalibratedValue, CalibrationMeta, Device, LogRow};
 use hapcal_kinematics::{Chain, DhRow};
-use hapcal_problems::{CalibrationProblem, Observations, Row, RowKind, Weights};
-use hapcal_sim::NoiseModel;
-use hapcal_transmission::{
-    Capstan, CapstanParams, CapstanProblem, Chebyshev, JointRad, PolynomialProblem,
+use hapcal_problems::{
+    CalibrationProblem, CapstanProblem, JointData, JointProblem, JointTransmissions, Observations,
+    PolynomialProblem, Row, RowKind, Weights,
 };
+use hapcal_sim::NoiseModel;
+use hapcal_transmission::{Capstan, CapstanParams, Chebyshev, JointRad};
 
 /// Degree of the joint-4 polynomial (paper: tenth order).
 pub const POLY_DEGREE: usize = 10;
@@ -122,7 +123,7 @@ impl TransmissionFit {
 #[derive(Clone, Copy, Debug)]
 pub struct Step1Options {
     /// Run the external-encoder identification over a full output revolution (±π) instead of
-    /// the joint range (the documented option of issue #3: it decorrelates Re and r_o).
+    /// the joint range (it decorrelates Re and r_o, which the joint range alone leaves correlated).
     pub full_revolution: bool,
 }
 
@@ -325,8 +326,8 @@ impl Sensitivity {
     ) -> Result<Self> {
         use faer::linalg::solvers::SolveLstsq;
         use hapcal_identify::Problem;
-        let problem = JointProblem::new(r, rows)?;
-        let x = problem.start_from(t, kin);
+        let problem = joint_problem(r, rows)?;
+        let x = joint_start(&problem, t, kin);
         let (n, nt) = (rows.len(), problem.n_trans());
         let mut jac = faer::Mat::zeros(problem.n_residuals(), problem.layout().len());
         problem
@@ -337,7 +338,7 @@ impl Sensitivity {
             .residuals(x.as_ref(), res.as_mut())
             .map_err(|e| anyhow::anyhow!("joint problem residuals: {}", e.reason))?;
         // Distance rows, back in metres.
-        let d0 = PARALLELOGRAM_JOINT * n;
+        let d0 = problem.distance_offset();
         let scale = problem.sigma_distance_m;
         let free = &kin.covariance.free;
         let a = faer::Mat::from_fn(n, free.len(), |i, k| jac[(d0 + i, nt + free[k])] * scale);
@@ -355,239 +356,48 @@ pub fn layout_names(p: &CalibrationProblem) -> Vec<String> {
         .collect()
 }
 
-/// Both steps in one least-squares problem (DESIGN.md §3, "one joint identification"): the
-/// external-encoder residuals of every transmission and the cable-distance residuals of the
-/// corrected chain share the transmission parameters, so the transmission uncertainty reaches
-/// the kinematic covariance. `x = [capstan 1–3 (6 each) | joint-4 Chebyshev (degree+1) |
-/// kinematic deviations]`.
-pub struct JointProblem<'a> {
-    r: &'a HapticDevice,
-    capstans: Vec<(usize, Capstan)>,
-    lo: f64,
-    hi: f64,
-    theta: Vec<Vec<f64>>,
-    ext: Vec<Vec<f64>>,
-    distance_m: Vec<f64>,
-    /// Standard deviation of the external-encoder residuals, rad.
-    pub sigma_ext_rad: f64,
-    /// Standard deviation of the distance residuals, m.
-    pub sigma_distance_m: f64,
-    layout: hapcal_identify::ParamLayout,
+/// Both steps in one least-squares problem (docs/design.md §3, "one joint identification") on the
+/// log `rows` with ext1..ext4: [`JointProblem`] with capstans 1–3 and the joint-4 polynomial of
+/// degree [`POLY_DEGREE`] on q4's range, the device's nominal chain, and its sensor noise
+/// (σ_e rad, σ_m m). `x = [capstan 1–3 (6 each) | joint-4 Chebyshev (degree+1) | kinematic
+/// deviations]`.
+///
+/// # Errors
+/// Missing ext columns or capstans, or data the problem rejects.
+pub fn joint_problem(r: &HapticDevice, rows: &[LogRow]) -> Result<JointProblem> {
+    let capstans = (1..PARALLELOGRAM_JOINT)
+        .map(|joint| Ok((joint, r.capstan(joint)?)))
+        .collect::<Result<Vec<_>>>()?;
+    let ext = (1..=PARALLELOGRAM_JOINT)
+        .map(|j| ext(rows, j))
+        .collect::<Result<Vec<_>>>()?;
+    let (lo, hi) = r.device.joint_limits()[PARALLELOGRAM_JOINT - 1];
+    let transmissions = JointTransmissions {
+        capstans,
+        poly_joint: PARALLELOGRAM_JOINT,
+        poly_degree: POLY_DEGREE,
+        poly_lo_rad: lo,
+        poly_hi_rad: hi,
+    };
+    let data = JointData {
+        q: rows.iter().map(|row| row.q.clone()).collect(),
+        ext,
+        distance_m: rows.iter().map(|row| row.distance_m).collect(),
+    };
+    Ok(JointProblem::new(
+        r.chain.clone(),
+        transmissions,
+        data,
+        r.noise.sigma_e_rad,
+        r.noise.sigma_m_m,
+    )?)
 }
 
-impl<'a> JointProblem<'a> {
-    /// Builds the problem from a log with ext1..ext4.
-    ///
-    /// # Errors
-    /// Missing ext columns or capstans.
-    pub fn new(r: &'a HapticDevice, rows: &[LogRow]) -> Result<Self> {
-        use hapcal_identify::{ParamSpec, Role, Unit};
-        let mut specs = Vec::new();
-        let mut capstans = Vec::new();
-        let names = [
-            ("c", Unit::Radian),
-            ("re", Unit::Dimensionless),
-            ("r_o", Unit::Meter),
-            ("beta_o", Unit::Radian),
-            ("r_i", Unit::Meter),
-            ("beta_i", Unit::Radian),
-        ];
-        for joint in 1..PARALLELOGRAM_JOINT {
-            capstans.push((joint, r.capstan(joint)?));
-            for (n, unit) in names {
-                specs.push(ParamSpec {
-                    name: format!("capstan{joint}.{n}"),
-                    unit,
-                    role: Role::Model,
-                });
-            }
-        }
-        for k in 0..=POLY_DEGREE {
-            specs.push(ParamSpec {
-                name: format!("joint{PARALLELOGRAM_JOINT}.cheb{k}"),
-                unit: Unit::Radian,
-                role: Role::Model,
-            });
-        }
-        for p in r.chain.params() {
-            let unit = match p.unit {
-                hapcal_kinematics::ParamUnit::Meter => Unit::Meter,
-                hapcal_kinematics::ParamUnit::Radian => Unit::Radian,
-            };
-            specs.push(ParamSpec {
-                name: p.name.clone(),
-                unit,
-                role: Role::Model,
-            });
-        }
-        let ext = (1..=PARALLELOGRAM_JOINT)
-            .map(|j| ext(rows, j))
-            .collect::<Result<Vec<_>>>()?;
-        let (lo, hi) = r.device.joint_limits()[PARALLELOGRAM_JOINT - 1];
-        Ok(Self {
-            r,
-            capstans,
-            lo,
-            hi,
-            theta: rows.iter().map(|row| row.q.clone()).collect(),
-            ext,
-            distance_m: rows.iter().map(|row| row.distance_m).collect(),
-            sigma_ext_rad: r.noise.sigma_e_rad,
-            sigma_distance_m: r.noise.sigma_m_m,
-            layout: hapcal_identify::ParamLayout::new(specs),
-        })
-    }
-
-    /// Number of transmission parameters (the first entries of `x`).
-    pub fn n_trans(&self) -> usize {
-        6 * self.capstans.len() + POLY_DEGREE + 1
-    }
-
-    /// The transmissions that `x` describes.
-    ///
-    /// # Errors
-    /// An invalid polynomial domain (not possible for a device read from a file).
-    pub fn transmissions(
-        &self,
-        x: faer::ColRef<'_, f64>,
-    ) -> Result<(Vec<CapstanParams>, Chebyshev)> {
-        let caps = (0..self.capstans.len())
-            .map(|c| CapstanProblem::params(x.subrows(6 * c, 6)))
-            .collect();
-        let off = 6 * self.capstans.len();
-        let poly = Chebyshev::try_new(
-            self.lo,
-            self.hi,
-            (0..=POLY_DEGREE).map(|k| x[off + k]).collect(),
-        )?;
-        Ok((caps, poly))
-    }
-
-    /// Start vector from a two-step solution.
-    pub fn start_from(&self, t: &TransmissionFit, kin: &Identified) -> Col<f64> {
-        let mut x = Col::zeros(self.layout.len());
-        for (c, fit) in t.capstans.iter().enumerate() {
-            x.subrows_mut(6 * c, 6)
-                .copy_from(CapstanProblem::col(&fit.params));
-        }
-        let off = 6 * self.capstans.len();
-        for (k, v) in t.poly.coeffs.iter().enumerate() {
-            x[off + k] = *v;
-        }
-        for i in 0..self.r.chain.n_params() {
-            x[self.n_trans() + i] = kin.fit.x[i];
-        }
-        x
-    }
-
-    fn eval(
-        &self,
-        x: faer::ColRef<'_, f64>,
-        mut out: Option<faer::ColMut<'_, f64>>,
-        mut jac: Option<faer::MatMut<'_, f64>>,
-    ) -> Result<(), hapcal_identify::EvalError> {
-        let bad = |e: &dyn std::fmt::Display| hapcal_identify::EvalError {
-            reason: e.to_string(),
-        };
-        let (caps, poly) = self.transmissions(x).map_err(|e| bad(&e))?;
-        let nt = self.n_trans();
-        let n_kin = self.r.chain.n_params();
-        let x_kin: Vec<f64> = (0..n_kin).map(|i| x[nt + i]).collect();
-        let n_rows = self.theta.len();
-        if let Some(j) = jac.as_mut() {
-            j.fill(0.0);
-        }
-        let off_poly = 6 * self.capstans.len();
-        let mut buf = vec![0.0; 3 * n_kin];
-        let mut ws = hapcal_kinematics::FkWorkspace::new(&self.r.chain);
-        for k in 0..n_rows {
-            let theta = &self.theta[k];
-            let mut q = theta.clone();
-            // dq_j/d(transmission parameter) for the corrected joints.
-            let mut dq: Vec<(usize, usize, f64)> = Vec::new();
-            for (c, (joint, capstan)) in self.capstans.iter().enumerate() {
-                let t = JointRad(theta[joint - 1]);
-                q[joint - 1] = capstan.output_rad(&caps[c], t);
-                let g = capstan.error_grad(&caps[c], t);
-                let row = (joint - 1) * n_rows + k;
-                if let Some(o) = out.as_mut() {
-                    o[row] = (q[joint - 1] - self.ext[joint - 1][k]) / self.sigma_ext_rad;
-                }
-                for (p, gp) in g.iter().enumerate() {
-                    dq.push((joint - 1, 6 * c + p, *gp));
-                    if let Some(jm) = jac.as_mut() {
-                        jm[(row, 6 * c + p)] = gp / self.sigma_ext_rad;
-                    }
-                }
-            }
-            let j4 = PARALLELOGRAM_JOINT - 1;
-            q[j4] = theta[j4] + poly.eval(theta[j4]);
-            let basis = poly.basis(theta[j4]);
-            let row = j4 * n_rows + k;
-            if let Some(o) = out.as_mut() {
-                o[row] = (q[j4] - self.ext[j4][k]) / self.sigma_ext_rad;
-            }
-            for (b, v) in basis.iter().enumerate() {
-                dq.push((j4, off_poly + b, *v));
-                if let Some(jm) = jac.as_mut() {
-                    jm[(row, off_poly + b)] = v / self.sigma_ext_rad;
-                }
-            }
-            let drow = PARALLELOGRAM_JOINT * n_rows + k;
-            let p = if jac.is_some() {
-                self.r
-                    .chain
-                    .point_and_jacobian_in(&x_kin, &q, &mut ws, &mut buf)
-            } else {
-                self.r.chain.end_point(&x_kin, &q)
-            };
-            let norm = p.coords.norm();
-            if let Some(o) = out.as_mut() {
-                o[drow] = (norm - self.distance_m[k]) / self.sigma_distance_m;
-            }
-            if let Some(jm) = jac.as_mut() {
-                let u = if norm > 0.0 {
-                    p.coords / norm
-                } else {
-                    hapcal_kinematics::Vector3::zeros()
-                };
-                for i in 0..n_kin {
-                    jm[(drow, nt + i)] =
-                        (u[0] * buf[3 * i] + u[1] * buf[3 * i + 1] + u[2] * buf[3 * i + 2])
-                            / self.sigma_distance_m;
-                }
-                let jq = self.r.chain.geometric_jacobian(&x_kin, &q);
-                for (joint, col, dqdp) in dq {
-                    let dd = (0..3).map(|a| u[a] * jq[(a, joint)]).sum::<f64>();
-                    jm[(drow, col)] += dd * dqdp / self.sigma_distance_m;
-                }
-            }
-        }
-        Ok(())
-    }
-}
-
-impl hapcal_identify::Problem for JointProblem<'_> {
-    fn layout(&self) -> &hapcal_identify::ParamLayout {
-        &self.layout
-    }
-    fn n_residuals(&self) -> usize {
-        (PARALLELOGRAM_JOINT + 1) * self.theta.len()
-    }
-    fn residuals(
-        &self,
-        x: faer::ColRef<'_, f64>,
-        out: faer::ColMut<'_, f64>,
-    ) -> Result<(), hapcal_identify::EvalError> {
-        self.eval(x, Some(out), None)
-    }
-    fn jacobian(
-        &self,
-        x: faer::ColRef<'_, f64>,
-        jac: faer::MatMut<'_, f64>,
-    ) -> Result<(), hapcal_identify::EvalError> {
-        self.eval(x, None, Some(jac))
-    }
+/// Start vector of `problem` from a two-step solution: step 1's transmissions `t`, step 2's
+/// kinematic deviations `kin`.
+pub fn joint_start(problem: &JointProblem, t: &TransmissionFit, kin: &Identified) -> Col<f64> {
+    let caps: Vec<CapstanParams> = t.capstans.iter().map(|c| c.params).collect();
+    problem.start(&caps, &t.poly.coeffs, kin.fit.x.as_ref())
 }
 
 /// Settings of the joint identification: transmission priors (phases anywhere), distal
@@ -606,19 +416,19 @@ pub fn joint_config() -> IdentifyConfig {
 ///
 /// # Errors
 /// An identification failure.
-pub fn identify_jointly<'a>(
-    r: &'a HapticDevice,
+pub fn identify_jointly(
+    r: &HapticDevice,
     rows: &[LogRow],
     t: &TransmissionFit,
     kin: &Identified,
-) -> Result<(JointProblem<'a>, Identified)> {
-    let mut problem = JointProblem::new(r, rows)?;
-    let mut x0 = problem.start_from(t, kin);
+) -> Result<(JointProblem, Identified)> {
+    let mut problem = joint_problem(r, rows)?;
+    let mut x0 = joint_start(&problem, t, kin);
     let mut first =
         identify(&problem, x0.clone(), &joint_config()).context("joint identification")?;
     // A kinematic parameter the joint problem prunes is held where it starts. When the two-step
     // solution chose the other member of a gauge pair (d0 instead of θ1), that start is not the
-    // nominal: restart with it at 0, the gauge of the frames (DESIGN.md §2, d0 = 0), so the
+    // nominal: restart with it at 0, the gauge of the frames (docs/design.md §2, d0 = 0), so the
     // kept member carries the deviation.
     let nt = problem.n_trans();
     let stale: Vec<usize> = (first.identifiability.pruned.iter())
@@ -935,7 +745,7 @@ pub fn calibrate_logs(
 /// parameters take the joint estimate; their covariances stay step 1's (the joint covariance of
 /// the kinematic parameters is `joint`'s, through `kin`'s layout).
 fn split_joint(
-    problem: &JointProblem<'_>,
+    problem: &JointProblem,
     joint: &Identified,
     mut t: TransmissionFit,
     mut kin: Identified,

@@ -131,6 +131,15 @@ pub struct PoseFigures {
     /// Largest orientation error, rad.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub orientation_max_rad: Option<f64>,
+    /// Mean absolute distance error over the distance rows, m; distance data only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distance_mean_m: Option<f64>,
+    /// RMS distance error, m.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distance_rms_m: Option<f64>,
+    /// Largest absolute distance error, m.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distance_max_m: Option<f64>,
 }
 
 /// One rung's cross-validation score.
@@ -267,11 +276,12 @@ pub fn load_tables(
         .map(|p| {
             let t = hapcal_io::read_measurement_file(p, &schema, units)
                 .with_context(|| format!("reading measurements {}", p.display()))?;
-            if t.n_markers == 0 {
+            if t.n_markers == 0 && !t.has_distance {
                 bail!(
-                    "{}: no marker columns (x,y,z or x1,y1,z1,…); distance logs go through the \
-                     cable-distance workflow (columns q1..qn, distance_m)",
-                    p.display()
+                    "{}: no measurement columns: expected marker positions (x,y,z or \
+                     x1,y1,z1,…) or a distance (distance_m, distance or d); the columns are {}",
+                    p.display(),
+                    t.ignored_columns.join(", ")
                 );
             }
             Ok(t)
@@ -315,7 +325,50 @@ fn tip_of(cfg: &MeasuredConfig, tree: &Tree, k: usize) -> usize {
 
 /// Number of markers over the tables.
 fn n_markers(tables: &[MeasurementTable]) -> usize {
-    tables.iter().map(|t| t.n_markers).max().unwrap_or(0)
+    let distances = tables.iter().any(|t| t.has_distance);
+    (tables.iter().map(|t| t.n_markers).max().unwrap_or(0)).max(usize::from(distances))
+}
+
+/// The anchor of the distance rows in the robot's base frame, m, by linear multilateration on
+/// the nominal tip origins: `|p_i − a|² = d_i²` is linear in `(a, |a|²)` (Manolakis 1996,
+/// "Efficient solution and performance analysis of 3-D position estimation by
+/// trilateration", IEEE T-AES 32(4)). `None` with fewer than 5 distances or tip origins that
+/// do not span the space.
+fn anchor(robot: &Robot, tables: &[MeasurementTable]) -> Option<Vector3<f64>> {
+    let zero = vec![0.0; robot.tree.n_params()];
+    let rows: Vec<(Vector3<f64>, f64)> = (tables.iter().flat_map(|t| &t.rows))
+        .filter_map(|r| {
+            let d = r.distance_m?;
+            Some((
+                robot.tree.tips()[0]
+                    .end_pose(&zero, &r.q)
+                    .translation
+                    .vector,
+                d,
+            ))
+        })
+        .collect();
+    if rows.len() < 5 {
+        return None;
+    }
+    let mut a = nalgebra::DMatrix::<f64>::zeros(rows.len(), 4);
+    let mut b = nalgebra::DVector::<f64>::zeros(rows.len());
+    for (i, (p, d)) in rows.iter().enumerate() {
+        for k in 0..3 {
+            a[(i, k)] = 2.0 * p[k];
+        }
+        a[(i, 3)] = -1.0;
+        b[i] = p.norm_squared() - d * d;
+    }
+    let ata = a.tr_mul(&a);
+    let eig = ata.clone().symmetric_eigen();
+    let (emin, emax) = (eig.eigenvalues.min(), eig.eigenvalues.max());
+    if emax.is_nan() || emax <= 0.0 || emin < 1e-12 * emax {
+        return None;
+    }
+    let x = ata.cholesky()?.solve(&a.tr_mul(&b));
+    let anchor = Vector3::new(x[0], x[1], x[2]);
+    anchor.iter().all(|v| v.is_finite()).then_some(anchor)
 }
 
 /// One marker sample with the nominal pose of its tip in the robot's base frame.
@@ -511,6 +564,7 @@ fn pose_frames(samples: &[Sample], marker: usize) -> Option<(Isometry3<f64>, Iso
 /// optimum; [`calibrate_measured`] fits the start with the smallest residual.
 fn initial_frames(
     robot: &Robot,
+    tables: &[MeasurementTable],
     samples: &[Sample],
     n: usize,
     cfg: &MeasuredConfig,
@@ -525,6 +579,15 @@ fn initial_frames(
         starts.push(linear);
     }
     starts.push((kabsch(&a, &b), vec![Vector3::zeros(); n]));
+    // Distances alone: the instrument frame's origin at the multilaterated anchor.
+    if samples.is_empty()
+        && let Some(anchor) = anchor(robot, tables)
+    {
+        starts.push((
+            Isometry3::translation(-anchor.x, -anchor.y, -anchor.z),
+            vec![Vector3::zeros(); n],
+        ));
+    }
     // Pose data: the instrument frame from the first marker's poses, every marker's frame from
     // its own poses seen through it.
     let mut rotations: Vec<Option<UnitQuaternion<f64>>> = vec![None; n];
@@ -597,6 +660,13 @@ fn observations(tables: &[MeasurementTable], keep: &dyn Fn(usize, usize) -> bool
         for (ri, row) in t.rows.iter().enumerate() {
             if !keep(ti, ri) {
                 continue;
+            }
+            if let Some(distance_m) = row.distance_m {
+                // From the instrument origin (the anchor) to marker 1's frame.
+                obs.rows.push(Row {
+                    q: row.q.clone(),
+                    kind: RowKind::Distance { distance_m },
+                });
             }
             for m in &row.markers {
                 // Tip k of the framed tree is marker k.
@@ -740,50 +810,61 @@ pub struct Fitted {
     pub names: Vec<String>,
 }
 
-/// Per row of the tables (in order), the squared 3-D position error summed over its markers,
-/// m², and per marker sample the position error (m) and the orientation error (rad, pose data).
+/// Errors of one table under one model.
+#[derive(Default)]
+struct Errors {
+    /// Per row, the squared errors summed over its markers and distance, m².
+    per_row: Vec<f64>,
+    /// Per marker sample, the 3-D position error, m.
+    position: Vec<f64>,
+    /// Per pose sample, the orientation error (angle of the relative rotation), rad.
+    orientation: Vec<f64>,
+    /// Per distance row, the distance error (model − measured), m.
+    distance: Vec<f64>,
+    /// Per row, the weighted squared error `Σ |e_p|²/σ_p² + θ²/σ_θ² + e_d²/σ_d²` (the fit's
+    /// own objective; zeros without weights).
+    score: Vec<f64>,
+}
+
+/// The errors of table `table` under `model`; scores with `weights`.
 fn errors(
     model: &CalibratedModel,
     tables: &[MeasurementTable],
     table: usize,
-) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
-    let (per_row, pos, rot, _) = scored_errors(model, tables, table, None);
-    (per_row, pos, rot)
-}
-
-/// As [`errors`], plus per row the weighted squared error `Σ |e_p|²/σ_p² + θ²/σ_θ²` over its
-/// markers (the fit's own objective; zeros without `weights`).
-fn scored_errors(
-    model: &CalibratedModel,
-    tables: &[MeasurementTable],
-    table: usize,
     weights: Option<&Weights>,
-) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
-    let (mut per_row, mut pos, mut rot, mut scores) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+) -> Errors {
+    let mut out = Errors::default();
     for row in &tables[table].rows {
         let (mut sq, mut score) = (0.0, 0.0);
+        if let Some(d) = row.distance_m {
+            let e = model.end_pose_of(0, &row.q).translation.vector.norm() - d;
+            sq += e * e;
+            out.distance.push(e);
+            if let Some(w) = weights {
+                score += (e / w.sigma_distance_m).powi(2);
+            }
+        }
         for m in &row.markers {
             let pose = model.end_pose_of(m.marker, &row.q);
             let e = (pose.translation.vector - Vector3::from(m.position_m)).norm();
             sq += e * e;
-            pos.push(e);
+            out.position.push(e);
             if let Some(w) = weights {
                 score += (e / w.sigma_position_m).powi(2);
             }
             if let Some([w, xq, y, z]) = m.rotation {
                 let meas = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, xq, y, z));
                 let theta = meas.angle_to(&pose.rotation);
-                rot.push(theta);
+                out.orientation.push(theta);
                 if let Some(w) = weights {
                     score += (theta / w.sigma_orientation_rad).powi(2);
                 }
             }
         }
-        per_row.push(sq);
-        scores.push(score);
+        out.per_row.push(sq);
+        out.score.push(score);
     }
-    (per_row, pos, rot, scores)
+    out
 }
 
 /// Mean, RMS and maximum of `v` (zeros when empty).
@@ -800,10 +881,13 @@ fn stats(v: &[f64]) -> (f64, f64, f64) {
 }
 
 fn figures(model: &CalibratedModel, tables: &[MeasurementTable], table: usize) -> PoseFigures {
-    let (_, pos, rot) = errors(model, tables, table);
-    let (pm, pr, px) = stats(&pos);
-    let (om, or, ox) = stats(&rot);
-    let has_rot = !rot.is_empty();
+    let e = errors(model, tables, table, None);
+    let (pm, pr, px) = stats(&e.position);
+    let (om, or, ox) = stats(&e.orientation);
+    let abs: Vec<f64> = e.distance.iter().map(|d| d.abs()).collect();
+    let (dm, dr, dx) = stats(&abs);
+    let has_rot = !e.orientation.is_empty();
+    let has_dist = !e.distance.is_empty();
     PoseFigures {
         position_mean_m: pm,
         position_rms_m: pr,
@@ -811,6 +895,9 @@ fn figures(model: &CalibratedModel, tables: &[MeasurementTable], table: usize) -
         orientation_mean_rad: has_rot.then_some(om),
         orientation_rms_rad: has_rot.then_some(or),
         orientation_max_rad: has_rot.then_some(ox),
+        distance_mean_m: has_dist.then_some(dm),
+        distance_rms_m: has_dist.then_some(dr),
+        distance_max_m: has_dist.then_some(dx),
     }
 }
 
@@ -844,7 +931,11 @@ fn cross_validate(
             })?;
             let mut idx = 0;
             for (ti, &n) in lens.iter().enumerate() {
-                let (per_row, _, _, scores) = scored_errors(&model, tables, ti, Some(&weights));
+                let Errors {
+                    per_row,
+                    score: scores,
+                    ..
+                } = errors(&model, tables, ti, Some(&weights));
                 for r in 0..n {
                     if fold_of(r, n, k, rep, CV_REPEATS) == fold {
                         sq_sum[idx + r] += per_row[r];
@@ -894,6 +985,7 @@ pub fn calibrate_measured(
     // Weights: given, or the RMS of each residual group after a frames-only fit at unit weights.
     let mut weights = Weights {
         sigma_position_m: cfg.sigma_m.unwrap_or(1e-3),
+        sigma_distance_m: cfg.sigma_m.unwrap_or(1e-3),
         sigma_orientation_rad: cfg.sigma_rad.unwrap_or(1e-2),
         ..Weights::default()
     };
@@ -905,9 +997,16 @@ pub fn calibrate_measured(
     // Of the closed-form starts, the one whose residual is smallest is fitted, frames only; every
     // rung starts from its estimate.
     let samples = samples(robot, train, cfg);
+    let distances: Vec<(Isometry3<f64>, f64)> = {
+        let zero = vec![0.0; robot.tree.n_params()];
+        let tip = &robot.tree.tips()[tip_of(cfg, &robot.tree, 0)];
+        (train.iter().flat_map(|t| &t.rows))
+            .filter_map(|r| Some((tip.end_pose(&zero, &r.q), r.distance_m?)))
+            .collect()
+    };
     let mut best: Option<(f64, Frames)> = None;
-    for (base, markers) in initial_frames(robot, &samples, n_markers(train), cfg) {
-        let cost = start_cost(&samples, &base, &markers, &weights);
+    for (base, markers) in initial_frames(robot, train, &samples, n_markers(train), cfg) {
+        let cost = start_cost(&samples, &distances, &base, &markers, &weights);
         if best.as_ref().is_none_or(|(c, _)| cost < *c) {
             best = Some((cost, (base, markers)));
         }
@@ -933,25 +1032,31 @@ pub fn calibrate_measured(
     )?;
     let mut reweighted = false;
     if cfg.sigma_m.is_none() || cfg.sigma_rad.is_none() {
-        let (mut pos, mut rot) = (Vec::new(), Vec::new());
+        let (mut pos, mut rot, mut dist) = (Vec::new(), Vec::new(), Vec::new());
         for ti in 0..train.len() {
-            let (_, p, r) = errors(&m0, train, ti);
-            pos.extend(p);
-            rot.extend(r);
+            let e = errors(&m0, train, ti, None);
+            pos.extend(e.position);
+            rot.extend(e.orientation);
+            dist.extend(e.distance);
         }
         // Per axis: a 3-D error of RMS e has about e/√3 per axis.
         let (_, pos_rms, _) = stats(&pos);
         let (_, rot_rms, _) = stats(&rot);
+        let (_, dist_rms, _) = stats(&dist);
         if cfg.sigma_m.is_none() && pos_rms > 0.0 {
             weights.sigma_position_m = pos_rms / 3f64.sqrt();
         }
+        if cfg.sigma_m.is_none() && dist_rms > 0.0 {
+            weights.sigma_distance_m = dist_rms;
+        }
         if cfg.sigma_rad.is_none() && rot_rms > 0.0 {
             weights.sigma_orientation_rad = rot_rms / 3f64.sqrt();
-            reweighted = true;
         }
+        // Weights move a frames-only estimate only when they balance residuals of two kinds.
+        let kinds =
+            [&pos, &dist].iter().filter(|v| !v.is_empty()).count() + usize::from(!rot.is_empty());
+        reweighted = kinds > 1;
     }
-    // Position weights alone do not move a frames-only estimate; the balance of position and
-    // orientation does.
     let (frames_model, frames_only) = if reweighted {
         fit(
             Rung::FramesOnly,
@@ -1046,17 +1151,24 @@ pub fn calibrate_measured(
         for ti in 0..tables.len() {
             let before = figures(&frames_model, tables, ti);
             let after = figures(&model, tables, ti);
+            let worse = |kind: &str, b: f64, a: f64| {
+                format!(
+                    "test set {}: the {rung} model is worse than frames only ({kind} RMS {:.3} → \
+                     {:.3} mm): do not use this calibration there",
+                    tables[ti].name,
+                    b * 1e3,
+                    a * 1e3
+                )
+            };
             if role == "test" && after.position_rms_m > before.position_rms_m {
-                warnings.insert(
-                    0,
-                    format!(
-                        "test set {}: the {rung} model is worse than frames only (position RMS \
-                         {:.3} → {:.3} mm): do not use this calibration there",
-                        tables[ti].name,
-                        before.position_rms_m * 1e3,
-                        after.position_rms_m * 1e3
-                    ),
-                );
+                let w = worse("position", before.position_rms_m, after.position_rms_m);
+                warnings.insert(0, w);
+            }
+            if role == "test"
+                && let (Some(b), Some(a)) = (before.distance_rms_m, after.distance_rms_m)
+                && a > b
+            {
+                warnings.insert(0, worse("distance", b, a));
             }
             sets.push((
                 tables[ti].name.clone(),
@@ -1090,15 +1202,23 @@ fn deviation(d: &[f64]) -> Isometry3<f64> {
     Isometry3::from_parts(Vector3::new(d[0], d[1], d[2]).into(), r)
 }
 
-/// Half the weighted squared residual of the samples (nominal tip poses) seen through the
-/// frames `base` and `markers`: the cost a frames-only fit would start from.
+/// Half the weighted squared residual of the samples and of the `distances` (nominal pose of
+/// marker 1's tip, measured distance) seen through the frames `base` and `markers`: the cost a
+/// frames-only fit would start from.
 fn start_cost(
     samples: &[Sample],
+    distances: &[(Isometry3<f64>, f64)],
     base: &FrameSpec,
     markers: &[(usize, FrameSpec)],
     weights: &Weights,
 ) -> f64 {
     let mut cost = 0.0;
+    if let Some((_, marker)) = markers.first() {
+        for (tip, d) in distances {
+            let p = base.nominal * tip * marker.nominal;
+            cost += ((p.translation.vector.norm() - d) / weights.sigma_distance_m).powi(2);
+        }
+    }
     for s in samples {
         let Some((_, marker)) = markers.get(s.marker) else {
             continue;
@@ -1144,18 +1264,24 @@ fn frame_reports(
     out
 }
 
-/// Whether `path` holds marker measurements: an industrial_calibration YAML, or a CSV whose
-/// header has marker columns (`x`, `x1`, …).
-pub fn is_marker_file(path: &std::path::Path) -> bool {
+/// Whether `path` holds measurements of an external instrument for the marker workflow: an
+/// industrial_calibration YAML, or a CSV whose header has marker columns (`x`, `x1`), or, with
+/// `distances` (a device without a cable encoder of its own, so the anchor is unknown), a
+/// distance column (`distance_m`, `distance`, `d`).
+pub fn is_marker_file(path: &std::path::Path, distances: bool) -> bool {
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
     match ext.as_deref() {
         Some("yaml" | "yml") => true,
         Some("csv") => std::fs::read_to_string(path).is_ok_and(|text| {
-            text.lines()
-                .next()
-                .is_some_and(|header| header.split(',').any(|c| matches!(c.trim(), "x" | "x1")))
+            text.lines().next().is_some_and(|header| {
+                header.split(',').any(|c| match c.trim() {
+                    "x" | "x1" => true,
+                    "distance_m" | "distance" | "d" => distances,
+                    _ => false,
+                })
+            })
         }),
         _ => false,
     }
@@ -1200,7 +1326,6 @@ pub fn run(
     device: &hapcal_io::Device,
     start: std::time::Instant,
 ) -> Result<crate::calibrate::Outcome> {
-    use crate::calibrate::{CalibrationReport, Figures, ParamReport, SetReport};
     let is_urdf = plan
         .device
         .extension()
@@ -1213,8 +1338,30 @@ pub fn run(
     } else {
         robot_from_device(device)?
     };
-    let mut train = load_tables(&plan.data, &robot, &plan.units)?;
-    let mut test = load_tables(&plan.test, &robot, &plan.units)?;
+    let train = load_tables(&plan.data, &robot, &plan.units)?;
+    let test = load_tables(&plan.test, &robot, &plan.units)?;
+    run_tables(plan, device, &robot, train, test, start)
+}
+
+/// As [`run`], on measurement tables already in memory (read by
+/// [`hapcal_io::read_measurement_file`] or built from arrays) for `robot`; `plan.data` and
+/// `plan.test` are not read, `plan.test_last` splits `train`.
+///
+/// # Errors
+/// As [`run`].
+pub fn run_tables(
+    plan: &crate::calibrate::Plan,
+    device: &hapcal_io::Device,
+    robot: &Robot,
+    mut train: Vec<MeasurementTable>,
+    mut test: Vec<MeasurementTable>,
+    start: std::time::Instant,
+) -> Result<crate::calibrate::Outcome> {
+    use crate::calibrate::{CalibrationReport, Figures, ParamReport, SetReport};
+    let tips: Vec<String> = std::iter::once(plan.tip.clone())
+        .chain(plan.tips.iter().cloned())
+        .collect();
+    let robot = robot.clone();
     if let Some(f) = plan.test_last {
         if !(f > 0.0 && f < 1.0) {
             bail!("--test-last must be a fraction in (0, 1), got {f}");

@@ -650,7 +650,8 @@ pub fn quantisation_variances(device: &Device, noise: RowNoise) -> Vec<f64> {
 /// differences, step 1e-7, for a capstan's eq. 1; the Chebyshev basis for the joint-4
 /// polynomial). 0 for joints without a transmission. The delta method (first order).
 pub fn transmission_variances(t: &crate::haptic::TransmissionFit, q: &[f64]) -> Vec<f64> {
-    use hapcal_transmission::{CapstanProblem, JointRad};
+    use hapcal_problems::CapstanProblem;
+    use hapcal_transmission::JointRad;
     let mut var = vec![0.0; q.len()];
     let quad = |g: &[f64], cov: &hapcal_identify::Covariance| {
         let f = &cov.free;

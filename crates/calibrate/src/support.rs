@@ -1,5 +1,5 @@
 //! What the data support: observability indices of the calibration and plain-language
-//! warnings about parameters the data cannot determine (issue #5), for `hapcal calibrate`.
+//! warnings about parameters the data cannot determine, for `hapcal calibrate`.
 
 use faer::Mat;
 use hapcal_identify::{

@@ -123,3 +123,59 @@ fn nominal_robot_keeps_frames_only() {
         after.position_rms_m
     );
 }
+
+/// A cable encoder (or ballbar) anchored at an unknown point: `n` distances from it to the
+/// tip, with joint offsets of `offset_rad` (alternating sign) and noise `NOISE_M`.
+fn distances(robot: &Robot, n: usize, offset_rad: f64, seed: u64) -> MeasurementTable {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let anchor = Vector3::new(1.0, 0.5, 0.3);
+    let tree = robot.tree.with_joint_offsets();
+    let offsets = tree.joint_offset_params();
+    let mut x = vec![0.0; tree.n_params()];
+    for (j, p) in offsets.iter().enumerate() {
+        x[p.unwrap()] = if j % 2 == 0 { offset_rad } else { -offset_rad };
+    }
+    let noise = Normal::new(0.0, NOISE_M).unwrap();
+    let rows = (0..n)
+        .map(|i| {
+            let q: Vec<f64> = (robot.limits.iter())
+                .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
+                .collect();
+            let p = tree.tips()[0].end_point(&x, &q);
+            MeasuredRow {
+                line: i as u64 + 2,
+                q,
+                t_s: None,
+                markers: Vec::new(),
+                distance_m: Some((p.coords - anchor).norm() + noise.sample(&mut rng)),
+            }
+        })
+        .collect();
+    MeasurementTable {
+        name: format!("cable{seed}"),
+        path: PathBuf::from("cable.csv"),
+        rows,
+        n_markers: 0,
+        has_orientation: false,
+        has_distance: true,
+        ignored_columns: Vec::new(),
+        warnings: Vec::new(),
+    }
+}
+
+#[test]
+fn distances_from_an_unknown_anchor_find_the_joint_offsets() {
+    let robot = robot();
+    let train = distances(&robot, 200, 2e-3, 5);
+    let test = distances(&robot, 80, 2e-3, 6);
+    let out = calibrate_measured(&robot, &[train], &[test], &config()).unwrap();
+    assert!(out.rung >= Rung::JointOffsets, "chose {}", out.rung);
+    let (_, _, _, before, after) = &out.sets[1];
+    let (before, after) = (
+        before.distance_rms_m.unwrap(),
+        after.distance_rms_m.unwrap(),
+    );
+    // A distance has one noise component: the floor is σ; 50 % for the estimation error.
+    assert!(after < 1.5 * NOISE_M, "test distance RMS {after} m");
+    assert!(before > 5.0 * NOISE_M, "frames only {before} m");
+}

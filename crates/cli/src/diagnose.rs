@@ -12,7 +12,7 @@ use hapcal_diagnose::{Baseline, DiagnoseConfig, Diagnosis, diagnose};
 pub struct DiagnosePlan {
     /// Device file (TOML).
     pub device: PathBuf,
-    /// Log (CSV, DESIGN.md §5).
+    /// Log (CSV, docs/design.md §5).
     pub data: PathBuf,
     /// Diagnosis settings.
     pub config: DiagnoseConfig,

@@ -1,5 +1,5 @@
 //! `hapcal`: kinematic calibration of haptic devices and serial robots.
-#![allow(clippy::print_stdout, clippy::print_stderr)] // a binary prints its results (STYLE.md §12)
+#![allow(clippy::print_stdout, clippy::print_stderr)] // a binary prints its results
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
@@ -38,9 +38,11 @@ enum Command {
         /// Measurement CSV columns: joints as q1..qn (chain order) or by the device's joint
         /// names in any order; markers x,y,z or x1,y1,z1,x2,… in the instrument's frame;
         /// orientation per marker as qw,qx,qy,qz (qw1,…) or figaroh's phix,phiy,phiz (roll,
-        /// pitch, yaw: R = Rz·Ry·Rx); t or t_s for time; other columns are reported once and
+        /// pitch, yaw: R = Rz·Ry·Rx); distance_m, distance or d for a distance from an anchor
+        /// (cable encoder, ballbar) to the first marker's frame, on a device without a
+        /// [cable_encoder] of its own; t or t_s for time; other columns are reported once and
         /// ignored. industrial_calibration's measurements.yaml is read as it is. The
-        /// instrument frame and each marker's frame on its link are identified.
+        /// instrument frame (the anchor) and each marker's frame on its link are identified.
         #[arg(long, num_args = 1..)]
         data: Vec<PathBuf>,
         /// Test data, same kinds; only evaluated, never fitted.
@@ -113,7 +115,7 @@ enum Command {
         #[arg(long, default_value_t = 2000)]
         candidates: usize,
     },
-    /// Simulate a measurement log (DESIGN.md §5) from a truth device: joint readings quantised
+    /// Simulate a measurement log (docs/design.md §5) from a truth device: joint readings quantised
     /// to the encoders, true transmissions and deviations, Gaussian encoder and cable noise.
     Simulate {
         /// Nominal device file (TOML); defaults to the truth's device, or the reference device.
@@ -134,7 +136,7 @@ enum Command {
         /// Output log CSV.
         #[arg(long)]
         out: PathBuf,
-        /// Inject an unmodelled effect (DESIGN.md §6), e.g. `backlash:j2=1e-3` or
+        /// Inject an unmodelled effect (docs/design.md §6), e.g. `backlash:j2=1e-3` or
         /// `cable_angle:k=2e-4`; repeatable. Implies --motion.
         #[arg(long = "effect")]
         effects: Vec<String>,
@@ -154,7 +156,7 @@ enum Command {
         /// Device file (TOML).
         #[arg(long)]
         device: PathBuf,
-        /// Measurement log (CSV, DESIGN.md §5).
+        /// Measurement log (CSV, docs/design.md §5).
         #[arg(long)]
         data: PathBuf,
         /// Baseline: `full` (transmissions + kinematics) or `kinematics` (the transmission
@@ -462,7 +464,7 @@ fn run(cli: Cli) -> Result<()> {
             let cal = read_device(&calibrated)?;
             let truth_file = hapcal_sim::read_truth(&truth)
                 .with_context(|| format!("reading {}", truth.display()))?;
-            let mut plan = hapcal::force::ForcePlan::issue4();
+            let mut plan = hapcal::force::ForcePlan::reference_device();
             plan.gain = gain;
             plan.sweep.n_poses = poses;
             plan.sweep.seed = seed;

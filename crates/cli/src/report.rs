@@ -149,25 +149,52 @@ pub fn render(r: &CalibrationReport) -> String {
     if r.placements.iter().any(|p| p.before.pose.is_some()) {
         let _ = writeln!(
             s,
-            "\nposition error (mm) and orientation error (deg): mean / RMS / max, frames only → calibrated"
+            "\nposition error (mm), orientation error (deg), distance error (mm): mean / RMS / max, frames only → calibrated"
         );
         for p in &r.placements {
             let (Some(b), Some(a)) = (p.before.pose, p.after.pose) else {
                 continue;
             };
-            let _ = writeln!(
-                s,
-                "  {:<24} {:<5} {:>4}  position {:.3} / {:.3} / {:.3} → {:.3} / {:.3} / {:.3}",
-                p.name,
-                p.role,
-                p.n_rows,
-                b.position_mean_m * 1e3,
-                b.position_rms_m * 1e3,
-                b.position_max_m * 1e3,
-                a.position_mean_m * 1e3,
-                a.position_rms_m * 1e3,
-                a.position_max_m * 1e3
-            );
+            let distance_only = b.distance_rms_m.is_some() && b.position_rms_m == 0.0;
+            if !distance_only {
+                let _ = writeln!(
+                    s,
+                    "  {:<24} {:<5} {:>4}  position {:.3} / {:.3} / {:.3} → {:.3} / {:.3} / {:.3}",
+                    p.name,
+                    p.role,
+                    p.n_rows,
+                    b.position_mean_m * 1e3,
+                    b.position_rms_m * 1e3,
+                    b.position_max_m * 1e3,
+                    a.position_mean_m * 1e3,
+                    a.position_rms_m * 1e3,
+                    a.position_max_m * 1e3
+                );
+            }
+            if let (Some(bm), Some(br), Some(bx), Some(am), Some(ar), Some(ax)) = (
+                b.distance_mean_m,
+                b.distance_rms_m,
+                b.distance_max_m,
+                a.distance_mean_m,
+                a.distance_rms_m,
+                a.distance_max_m,
+            ) {
+                let (name, role, n) = if distance_only {
+                    (p.name.as_str(), p.role, p.n_rows.to_string())
+                } else {
+                    ("", "", String::new())
+                };
+                let _ = writeln!(
+                    s,
+                    "  {name:<24} {role:<5} {n:>4}  distance {:.3} / {:.3} / {:.3} → {:.3} / {:.3} / {:.3}",
+                    bm * 1e3,
+                    br * 1e3,
+                    bx * 1e3,
+                    am * 1e3,
+                    ar * 1e3,
+                    ax * 1e3
+                );
+            }
             if let (Some(bm), Some(br), Some(bx), Some(am), Some(ar), Some(ax)) = (
                 b.orientation_mean_rad,
                 b.orientation_rms_rad,

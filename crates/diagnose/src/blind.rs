@@ -2,7 +2,7 @@
 //! library, or two library effects) with its size and a seed, simulate the log without
 //! telling [`crate::diagnose`] which, and score the verdict.
 //!
-//! **Sizing** (DIAGNOSIS.md §5, issue #7): an effect's size is the ratio `s` of the
+//! **Sizing** (docs/diagnosis.md §5): an effect's size is the ratio `s` of the
 //! baseline's residual RMS to the noise floor it would produce alone, drawn log-uniformly
 //! in `[2, 20]` ("just detectable" to "dominant"). The visible RMS `σ·sqrt(s² − 1)` is set by
 //! simulating the same seed with and without a reference-size effect, fitting the baseline

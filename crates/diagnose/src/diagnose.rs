@@ -4,8 +4,9 @@ use std::f64::consts::TAU;
 
 use hapcal_identify::{IdentifyConfig, identify};
 use hapcal_io::{Device, LogRow};
+use hapcal_problems::{CapstanProblem, PolynomialProblem};
 use hapcal_sim::EffectKind;
-use hapcal_transmission::{Capstan, CapstanProblem, Chebyshev, PolynomialProblem};
+use hapcal_transmission::{Capstan, Chebyshev};
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
@@ -79,7 +80,7 @@ impl Default for DiagnoseConfig {
     /// Full baseline, 5 folds, α = 0.01, up to 2 effects, each winner closes ≥ 20 % of the
     /// remaining gap (so that two effects of similar size can be found one after the other);
     /// together the accepted effects must close ≥ 80 % of the gap or leave a residual
-    /// consistent with the floor, else the verdict is `none` (DIAGNOSIS.md §3 (d)).
+    /// consistent with the floor, else the verdict is `none` (docs/diagnosis.md §3 (d)).
     fn default() -> DiagnoseConfig {
         DiagnoseConfig {
             baseline: Baseline::Full,
@@ -107,7 +108,7 @@ pub struct ParamValue {
 /// One candidate effect, tested against the current baseline.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Candidate {
-    /// Stable name (DESIGN.md §6), or `capstan`/`parallelogram` with the kinematics baseline.
+    /// Stable name (docs/design.md §6), or `capstan`/`parallelogram` with the kinematics baseline.
     pub effect: String,
     /// Greedy round (1 = against the baseline; 2 = after the first winner was added).
     pub round: usize,
@@ -898,7 +899,7 @@ fn residual_map(
 /// `rows`) after fitting `cfg.baseline` (with the same fallbacks as [`diagnose`]). The blind
 /// test sizes effects with it: the difference between the residuals of a log with and
 /// without an effect (same seed, same noise) is the part of the effect the baseline cannot
-/// absorb, `P⊥·effect` (DIAGNOSIS.md §5).
+/// absorb, `P⊥·effect` (docs/diagnosis.md §5).
 ///
 /// # Errors
 /// As [`diagnose`].
@@ -939,16 +940,16 @@ pub fn baseline_residuals_m(
 }
 
 /// Diagnoses a log: the gap between the calibrated model and the floor, where it lies,
-/// which library effect explains it, and how far it shrinks (DESIGN.md §6, DIAGNOSIS.md).
+/// which library effect explains it, and how far it shrinks (docs/design.md §6, docs/diagnosis.md).
 ///
-/// `device` is the nominal device file; `rows` a log in DESIGN.md §5 format (time order
+/// `device` is the nominal device file; `rows` a log in docs/design.md §5 format (time order
 /// when `t_s` is given). No truth is used.
 ///
-/// **Floor.** From the encoder specification: the paper's noise model (DESIGN.md §3) with
+/// **Floor.** From the encoder specification: the paper's noise model (docs/design.md §3) with
 /// the cable encoder's counts and drum radius, `σ_e = 2π/counts/3`, `σ_m = 2π·R_d·σ_e`, plus
 /// each joint reading's quantisation `ρ_j²/12` (`ρ_j = 2π/(counts·R_j)`) propagated through
 /// `∂d/∂q_j`; the held-out floor adds each prediction's variance (`σ²·(1 + h)`,
-/// DIAGNOSIS.md §1). If the baseline's residuals are significantly *below* that floor (as
+/// docs/diagnosis.md §1). If the baseline's residuals are significantly *below* that floor (as
 /// in logs simulated with the truth computed from the quantised reading), the quantisation
 /// term is dropped, and [`Diagnosis::floor_method`] says so.
 ///

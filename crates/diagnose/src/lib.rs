@@ -1,4 +1,4 @@
-//! Diagnosis of the sim-to-real gap (DESIGN.md §6, DIAGNOSIS.md): where the calibrated model
+//! Diagnosis of the sim-to-real gap (docs/design.md §6, docs/diagnosis.md): where the calibrated model
 //! still misses, which unmodelled effect causes it, and how far the residual shrinks once
 //! that effect is modelled.
 //!

@@ -238,7 +238,7 @@ impl Setup {
         let cable = device.cable_encoder;
         let counts = cable.map_or(20_000, |c| c.counts_per_rev);
         let drum = cable.map_or(0.015, |c| c.drum_radius_m);
-        // The paper's noise model (DESIGN.md §3): σ_e a third of an encoder count, σ_m = 2π·R_d·σ_e.
+        // The paper's noise model (docs/design.md §3): σ_e a third of an encoder count, σ_m = 2π·R_d·σ_e.
         let sigma_e_rad = TAU / f64::from(counts.max(1)) / 3.0;
         Setup {
             n_joints: chain.n_joints(),

@@ -74,7 +74,7 @@ impl WallConfig {
     }
 }
 
-/// The home readings of `device`: the mid-range of each joint (DESIGN.md §2), rad.
+/// The home readings of `device`: the mid-range of each joint (docs/design.md §2), rad.
 pub fn home_readings(device: &Device) -> Vec<f64> {
     (device.joint_limits().iter())
         .map(|(lo, hi)| 0.5 * (lo + hi))
@@ -145,7 +145,7 @@ pub fn virtual_wall(
 /// Settings of the random-pose sweep.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SweepConfig {
-    /// Number of accepted poses. Issue #4: 200.
+    /// Number of accepted poses.
     pub n_poses: usize,
     /// Seed of `ChaCha8Rng`.
     pub seed: u64,
@@ -158,9 +158,10 @@ pub struct SweepConfig {
 }
 
 impl SweepConfig {
-    /// 200 poses, seed 4, condition number ≤ 100 with a 0.21 m length scale (the
-    /// reference device's upper arm and forearm, DESIGN.md §2).
-    pub fn issue4() -> SweepConfig {
+    /// The sweep of the reference device's force report: 200 poses, seed 4, condition
+    /// number ≤ 100 with a 0.21 m length scale (the reference device's upper arm and forearm,
+    /// docs/design.md §2).
+    pub fn reference_device() -> SweepConfig {
         SweepConfig {
             n_poses: 200,
             seed: 4,

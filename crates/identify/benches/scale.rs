@@ -1,4 +1,4 @@
-//! Scale benchmarks on the reference device (DESIGN.md §2) with distance data: 32 kinematic
+//! Scale benchmarks on the reference device (docs/design.md §2) with distance data: 32 kinematic
 //! deviations, of which identification keeps the 28 identifiable ones. Data: joint angles
 //! uniform within the limits, distances of the paper's truth plus σ_m noise
 //! (`hapcal_sim::distance_samples`, seed 1). Sizes: 200, 2,000, 20,000 and 1,000,000 poses

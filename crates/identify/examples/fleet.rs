@@ -1,4 +1,4 @@
-//! A fleet of simulated reference devices (DESIGN.md §2) measured on one rig: each device has
+//! A fleet of simulated reference devices (docs/design.md §2) measured on one rig: each device has
 //! its own 28 identifiable kinematic deviations, the rig's cable encoder a zero offset and a
 //! cable-angle error coefficient shared by all. Identifies everything at once (the sparse back
 //! end, chosen by `identify` from the Jacobian's structure) and prints one JSON object:
@@ -22,7 +22,7 @@ use rand_distr::StandardNormal;
 
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
-/// The 4 deviations that distance data cannot determine (DESIGN.md §2).
+/// The 4 deviations that distance data cannot determine (docs/design.md §2).
 const HELD: [&str; 4] = ["dalpha0", "dd0", "dtheta0", "dalpha7"];
 /// Truth of the rig: zero offset (m) and cable-angle coefficient (m/rad).
 const CABLE_OFFSET_M: f64 = 2.0e-4;

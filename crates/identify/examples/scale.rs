@@ -1,4 +1,4 @@
-//! The reference device (DESIGN.md §2) with distance data at any size: writes a data file, or
+//! The reference device (docs/design.md §2) with distance data at any size: writes a data file, or
 //! reads one and calibrates it, printing timings and estimates as JSON. `cargo xtask bench`
 //! drives it (and SciPy on the same files); `/usr/bin/time -v` around `solve` gives the peak
 //! memory.
@@ -39,13 +39,13 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-/// σ_m = 2π·R_d·σ_e, σ_e = 2π/20000/3 rad, R_d = 0.015 m (DESIGN.md §3), m.
+/// σ_m = 2π·R_d·σ_e, σ_e = 2π/20000/3 rad, R_d = 0.015 m (docs/design.md §3), m.
 fn sigma_m() -> f64 {
     let sigma_e = std::f64::consts::TAU / 20000.0 / 3.0;
     std::f64::consts::TAU * 0.015 * sigma_e
 }
 
-/// The 4 deviations that distance data cannot determine (DESIGN.md §2), held at 0.
+/// The 4 deviations that distance data cannot determine (docs/design.md §2), held at 0.
 const HELD: [&str; 4] = ["dalpha0", "dd0", "dtheta0", "dalpha7"];
 
 fn arg(args: &[String], name: &str) -> Option<String> {

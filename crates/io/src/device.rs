@@ -1,4 +1,4 @@
-//! The device file (TOML, DESIGN.md §5): kinematic chain, joint limits, transmissions,
+//! The device file (TOML, docs/design.md §5): kinematic chain, joint limits, transmissions,
 //! measurement rig and, once calibrated, the identified values.
 
 use std::path::{Path, PathBuf};
@@ -17,7 +17,7 @@ mod tests;
 
 pub use write::write_device;
 
-/// A device as described by its TOML file (DESIGN.md §5), lengths in m, angles in rad.
+/// A device as described by its TOML file (docs/design.md §5), lengths in m, angles in rad.
 ///
 /// The kinematic chain is either a D-H table (`[[dh]]` rows) or URDF-style joint placements
 /// (`[[placement]]` rows, usually imported with [`import_urdf`](crate::import_urdf), with
@@ -74,7 +74,7 @@ pub struct Device {
     pub calibration: Option<Calibration>,
 }
 
-/// One `[[dh]]` row as written in the device file (DESIGN.md §2, paper eq. 3).
+/// One `[[dh]]` row as written in the device file (docs/design.md §2, paper eq. 3).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DhEntry {
@@ -137,7 +137,7 @@ pub struct JointSpec {
     /// Upper joint limit, rad (> `lower_rad`).
     pub upper_rad: f64,
     /// Encoder counts per revolution of the encoder shaft (the motor, for a capstan joint:
-    /// DESIGN.md §2), if known.
+    /// docs/design.md §2), if known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub counts_per_rev: Option<u32>,
 }

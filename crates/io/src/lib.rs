@@ -1,5 +1,5 @@
 //! File formats of hapcal: device files (TOML), URDF import and write-back, measurement
-//! logs (CSV) and the MUKCa real-robot recordings (DESIGN.md §5).
+//! logs (CSV) and the MUKCa real-robot recordings (docs/design.md §5).
 //!
 //! **Invariant:** `io` turns files into validated domain values and back; nothing past it
 //! sees a raw string.

@@ -1,4 +1,4 @@
-//! The hapcal measurement log (CSV, DESIGN.md §5).
+//! The hapcal measurement log (CSV, docs/design.md §5).
 
 use std::fmt::Write as _;
 use std::path::Path;

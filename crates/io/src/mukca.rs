@@ -1,6 +1,6 @@
 //! MUKCa real-robot recordings: `hole_0.csv`, `hole_1.csv`, … per tool placement.
 //!
-//! Layout (Franzese et al., "MUKCa", arXiv:2503.12584; `datasets/mukca/README.md`): a
+//! Layout (Franzese et al., "MUKCa", arXiv:2503.12584; `fixtures/mukca/README.md`): a
 //! placement folder holds one file per socket, `hole_{k}.csv`, no header, one row per
 //! configuration, one column per joint angle in rad. A run folder holds placement folders.
 

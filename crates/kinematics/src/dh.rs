@@ -59,7 +59,7 @@ impl Chain {
     ///
     /// Row `i` becomes the factors of its convention (see [`DhConvention`]) and the
     /// parameters `da{i}`, `dalpha{i}`, `dd{i}`, `dtheta{i}` [, `dbeta{i}`], in that order,
-    /// row by row: the paper's reference device (DESIGN.md §2) has 8 rows, 32 parameters
+    /// row by row: the paper's reference device (docs/design.md §2) has 8 rows, 32 parameters
     /// and 7 joints. Element `i` is `row{i}`; joint `j` is named `q{j+1}`. The tip is the
     /// origin of the last row's frame.
     ///

@@ -102,7 +102,7 @@ fn assert_pose_close(a: &Isometry3<f64>, b: &Matrix4<f64>, tol: f64) {
 
 // ---- the paper's reference device ------------------------------------------------------
 
-/// (a_m, alpha_rad, d_m, joint) of DESIGN.md §2 (paper Table 1); theta offsets are 0.
+/// (a_m, alpha_rad, d_m, joint) of docs/design.md §2 (paper Table 1); theta offsets are 0.
 const PAPER_TABLE: [(f64, f64, f64, Option<usize>); 8] = [
     (0.35, -FRAC_PI_2, 0.0, None),
     (0.0, -FRAC_PI_2, 0.10, Some(0)),

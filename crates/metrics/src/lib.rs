@@ -86,7 +86,7 @@ pub struct PoseError {
     pub orientation_rad: f64,
 }
 
-/// Pose error between `truth` and `model` (both base_T_frame), DESIGN.md §3 "Metrics".
+/// Pose error between `truth` and `model` (both base_T_frame), docs/design.md §3 "Metrics".
 pub fn pose_error(truth: &Isometry3<f64>, model: &Isometry3<f64>) -> PoseError {
     let rel = truth.rotation.inverse() * model.rotation;
     PoseError {

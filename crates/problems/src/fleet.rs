@@ -17,7 +17,7 @@ pub struct FleetDevice {
 }
 
 /// Angle of the cable from the rig's z axis, rad: `φ(P) = atan2(√(Px² + Py²), Pz)`, and its
-/// gradient with respect to `P` (rad/m). The `cable_angle` effect of DESIGN.md §6 is an error
+/// gradient with respect to `P` (rad/m). The `cable_angle` effect of docs/design.md §6 is an error
 /// `k·φ` of the measured distance.
 pub fn cable_angle(p: &Point3<f64>) -> (f64, Vector3<f64>) {
     let rho2 = p.x * p.x + p.y * p.y;
@@ -31,7 +31,7 @@ pub fn cable_angle(p: &Point3<f64>) -> (f64, Vector3<f64>) {
     (phi, grad)
 }
 
-/// The fleet calibration problem (DESIGN.md §4, sparse back end):
+/// The fleet calibration problem (docs/design.md §4, sparse back end):
 /// `x = [device 0's deviations | device 1's | … | rig.cable_offset | rig.cable_angle]`.
 ///
 /// Residual of pose `i` of device `d`: `(|P_d(q_i)| + c + k·φ(P_d) − δ_i)/σ_m` (paper eq. 5 plus

@@ -1,6 +1,18 @@
-//! Calibration problems: measurement residuals with analytic Jacobians, on a kinematic chain.
+//! Calibration problems: measurement residuals with analytic Jacobians, on a kinematic chain
+//! and on the transmissions that drive it. Every [`hapcal_identify::Problem`] of hapcal lives
+//! here, one measurement model:
+//! - [`CalibrationProblem`]: the kinematic residuals of one chain (the measurement types below),
+//!   optionally with gravity compliance and joint harmonics;
+//! - [`FleetProblem`]: the cable distances of a fleet of devices, each with its own deviations,
+//!   sharing the rig's cable-encoder offset and cable-angle coefficient;
+//! - [`CapstanProblem`]: step 1 of the paper's procedure (Fig. 6) for a capstan drive, eq. 1
+//!   from external-encoder data;
+//! - [`PolynomialProblem`]: step 1 for the parallelogram joint, its transmission error as a
+//!   Chebyshev polynomial of the reading;
+//! - [`JointProblem`]: both steps at once, the transmissions' external-encoder residuals and
+//!   the cable distances of the corrected chain sharing the transmission parameters.
 //!
-//! Architecture invariant: *`problems` turns a chain and observations into an
+//! Architecture invariant: *`problems` turns a chain, transmissions and observations into an
 //! [`hapcal_identify::Problem`]; it never reads files and never solves.*
 //!
 //! Measurement types (each a residual with its analytic Jacobian):
@@ -35,16 +47,20 @@
 mod compliance;
 mod fleet;
 mod harmonics;
+mod joint;
 mod model;
 mod problem;
+mod transmission;
 
 pub use compliance::{GravityCompliance, LinkMass};
 pub use fleet::{FleetDevice, FleetProblem, cable_angle, fleet_initial_guess};
 pub use harmonics::JointHarmonics;
+pub use joint::{JointData, JointProblem, JointTransmissions};
 pub use model::CalibratedModel;
 pub use problem::{
     CalibrationProblem, ModelTerms, Observations, PointDistance, Row, RowKind, Weights,
 };
+pub use transmission::{CapstanProblem, PolynomialProblem};
 
 /// Errors of problem construction: inconsistent observations.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -92,4 +108,26 @@ pub enum Error {
         /// Index of the observation.
         row: usize,
     },
+    /// A transmission sits on a joint the chain does not have.
+    #[error("joint {joint} (1-based) is not a joint of a chain of {n_joints} joints")]
+    NoSuchJoint {
+        /// The joint, 1-based.
+        joint: usize,
+        /// Joints of the chain.
+        n_joints: usize,
+    },
+    /// Sequences that must pair up (measurement columns, rows) differ in length.
+    #[error("{name} has {found} entries, expected {expected}")]
+    LengthMismatch {
+        /// The sequence with the unexpected length, e.g. `ext` (number of columns).
+        name: &'static str,
+        /// Required length.
+        expected: usize,
+        /// Actual length.
+        found: usize,
+    },
+    /// A transmission model rejects its input (e.g. a polynomial domain that is not a finite
+    /// interval).
+    #[error(transparent)]
+    Transmission(#[from] hapcal_transmission::Error),
 }

@@ -124,7 +124,7 @@ pub struct Weights {
 
 impl Default for Weights {
     /// All sigmas 1 m: residuals stay in metres, every measurement weighs the same per metre.
-    /// Callers with a noise model (the simulator, DESIGN.md §3) should pass it instead.
+    /// Callers with a noise model (the simulator, docs/design.md §3) should pass it instead.
     fn default() -> Self {
         Self {
             sigma_distance_m: 1.0,

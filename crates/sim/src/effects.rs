@@ -1,4 +1,4 @@
-//! Unmodelled effects (DESIGN.md §6) and the time-ordered motion that reveals them.
+//! Unmodelled effects (docs/design.md §6) and the time-ordered motion that reveals them.
 //!
 //! [`simulate_motion`] moves the truth device along a smooth multi-sine trajectory
 //! (every joint in both directions, several cycles per log), samples it every
@@ -22,10 +22,10 @@ use crate::{Error, SimConfig, Truth, quantise_readings, true_joint_angles, truth
 /// Standard gravity, m/s² (used with the handle mass for [`EffectKind::JointCompliance`]).
 pub const GRAVITY_M_S2: f64 = 9.81;
 
-/// Handle mass used when the device file has no `[handle]`, kg (DESIGN.md §2: 0.2 kg).
+/// Handle mass used when the device file has no `[handle]`, kg (docs/design.md §2: 0.2 kg).
 pub const DEFAULT_HANDLE_MASS_KG: f64 = 0.2;
 
-/// The unmodelled effects the simulator can inject, by stable name (DESIGN.md §6).
+/// The unmodelled effects the simulator can inject, by stable name (docs/design.md §6).
 ///
 /// The first eight ([`EffectKind::LIBRARY`]) form the diagnosis library; the last two
 /// ([`EffectKind::OUTSIDE`]) exist only to test that `diagnose` answers `none` honestly
@@ -84,7 +84,7 @@ pub enum EffectKind {
 }
 
 impl EffectKind {
-    /// The diagnosis library, in DESIGN.md §6 order.
+    /// The diagnosis library, in docs/design.md §6 order.
     pub const LIBRARY: [EffectKind; 8] = [
         EffectKind::CableAngle,
         EffectKind::JointCompliance,
@@ -327,7 +327,7 @@ impl JointPath {
 }
 
 /// Gravity torques of the handle about each joint, N·m (length `n_joints`): `τ = J_vᵀ·F`
-/// with `F = −m·g·ẑ_0`, `ẑ_0` the axis of joint 1 (vertical, DESIGN.md §2) and `J_v` the
+/// with `F = −m·g·ẑ_0`, `ẑ_0` the axis of joint 1 (vertical, docs/design.md §2) and `J_v` the
 /// linear part of the geometric Jacobian at `q` (Siciliano et al. 2009, §3.8.1).
 ///
 /// # Panics

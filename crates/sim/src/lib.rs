@@ -1,7 +1,7 @@
 //! Synthetic measurement logs from a "truth" device: the nominal device plus known kinematic
 //! deviations and transmission errors, sampled within the joint limits, with encoder
 //! quantisation and Gaussian measurement noise (paper, simulation section, Tables 2 and 3;
-//! DESIGN.md §3).
+//! docs/design.md §3).
 //!
 //! **Invariant:** `sim` is the only place that knows the truth; everything it returns is what
 //! a real rig would record.
@@ -16,7 +16,7 @@
 //!   angles of joints 1–4 `+ N(0, σ_e)`).
 //!
 //! - [`simulate_motion`] moves the device along a time-ordered trajectory and injects the
-//!   unmodelled effects of DESIGN.md §6 ([`Effect`], [`EffectKind`]).
+//!   unmodelled effects of docs/design.md §6 ([`Effect`], [`EffectKind`]).
 //!
 //! The paper's truth and a 200-pose log (seed 1, paper noise) are in
 //! `fixtures/reference-device/` (`truth.toml`, `device.toml`, `log.csv`; the log is written by

@@ -12,11 +12,11 @@ use rand_distr::StandardNormal;
 use crate::{Error, Truth};
 
 /// The joint (1-based) that the device's `[parallelogram]` drives, fed by that joint's
-/// capstan (DESIGN.md §2: joint 4, capstan 4).
+/// capstan (docs/design.md §2: joint 4, capstan 4).
 pub const PARALLELOGRAM_JOINT: usize = 4;
 
 /// Standard deviations of the simulated measurement noise (paper, simulation section;
-/// DESIGN.md §3). Both are zero-mean Gaussian.
+/// docs/design.md §3). Both are zero-mean Gaussian.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NoiseModel {
     /// External encoders (`ext1..ext4`), rad.
@@ -45,7 +45,7 @@ impl NoiseModel {
     /// encoder drum circumference"), ≈ 9.87 µm for `R_d = 0.015` m and 20000 counts/rev.
     ///
     /// The external encoders are taken to have the cable encoder's `counts_per_rev`
-    /// (DESIGN.md §2: 20000 on every encoder; the device file lists no external encoders).
+    /// (docs/design.md §2: 20000 on every encoder; the device file lists no external encoders).
     pub fn paper(cable: &CableEncoder) -> NoiseModel {
         let sigma_e_rad = encoder_sigma_rad(cable.counts_per_rev);
         NoiseModel::new(sigma_e_rad, TAU * cable.drum_radius_m * sigma_e_rad)
@@ -276,7 +276,7 @@ pub fn sample_readings<R: Rng + ?Sized>(device: &Device, rng: &mut R, n: usize) 
 
 /// Resolution of each joint's reading at the joint side, rad (one entry per
 /// `[[joint]]`): `2π/(counts·R)` for a joint with a capstan of ratio `R`, `2π/counts` for a
-/// direct-drive joint (encoder on the motor, DESIGN.md §2); `None` where the device file
+/// direct-drive joint (encoder on the motor, docs/design.md §2); `None` where the device file
 /// gives no `counts_per_rev`.
 pub fn joint_resolutions_rad(device: &Device) -> Vec<Option<f64>> {
     (device.joints.iter().enumerate())
@@ -315,7 +315,7 @@ pub fn quantise_readings(device: &Device, theta: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// Simulates a measurement log of the truth device (paper, simulation section; DESIGN.md §3).
+/// Simulates a measurement log of the truth device (paper, simulation section; docs/design.md §3).
 ///
 /// `device` is the nominal device ([`Truth::read_device`]). With a
 /// `ChaCha8Rng::seed_from_u64(cfg.seed)`, it first draws the readings of all

@@ -29,11 +29,12 @@ pub struct ForcePlan {
 }
 
 impl ForcePlan {
-    /// Issue #4's sweep (200 poses, seed 4) and G = 10.
-    pub fn issue4() -> ForcePlan {
+    /// The force report of the reference device (`hapcal force`'s defaults):
+    /// [`SweepConfig::reference_device`] (200 poses, seed 4) and G = 10.
+    pub fn reference_device() -> ForcePlan {
         ForcePlan {
             gain: 10.0,
-            sweep: SweepConfig::issue4(),
+            sweep: SweepConfig::reference_device(),
         }
     }
 }
@@ -478,7 +479,12 @@ pub fn append_to_reproduction(
     md: &mut String,
 ) -> Result<()> {
     let calibrated = calibrated_device(r, t, kin, "reproduction seed 0".into())?;
-    let report = run(&r.device, &r.truth, &calibrated, &ForcePlan::issue4())?;
+    let report = run(
+        &r.device,
+        &r.truth,
+        &calibrated,
+        &ForcePlan::reference_device(),
+    )?;
     md.push_str(&report.markdown);
     files.extend(report.files);
     Ok(())

@@ -80,7 +80,8 @@ fn calibrate_and_validate(
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum TransmissionData {
     /// Each calibration's own poses: planning `N` poses also decides the `N` external-encoder
-    /// readings of step 1 (the study before issue #5's decomposition).
+    /// readings of step 1 (the study's original form, before step 1 was shared by the arms of a
+    /// seed).
     SamePoses,
     /// One external-encoder run shared by every arm of a seed: the seed's `n_random`-pose
     /// random log (the reference's own step 1). Only the distance poses of step 2 are planned
@@ -168,7 +169,7 @@ fn median(v: &[f64]) -> f64 {
 }
 
 /// Monte Carlo comparison of planned and random poses on the reference device with distance
-/// data (issue #5): per seed `s`, the paper's two-step calibration from `n_random` random poses
+/// data: per seed `s`, the paper's two-step calibration from `n_random` random poses
 /// (`hapcal_sim::simulate`, seed `s`) and, for each count `N`, from `N` planned poses (candidates
 /// from seed `s + 2_000_000`, noise from seed `s + 3_000_000`) and from `N` random poses (seed
 /// `s`); every calibration is validated on the same 200 fresh poses (seed `s + 1_000_000`).
@@ -623,7 +624,7 @@ fn sensitivity_maxima(
     (sup, maxima)
 }
 
-/// The optimal-design bound of issue #5 (see `docs/results/pose-selection-bound.md`): how well
+/// The optimal-design bound on planned poses (see `docs/results/pose-selection-bound.md`): how well
 /// any `N` distance poses can do, against `n_random` random poses, with the transmissions
 /// known.
 ///

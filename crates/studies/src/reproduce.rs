@@ -5,7 +5,8 @@ use crate::paper::{self, Reference, SeedResult};
 use anyhow::{Context, Result, bail};
 use hapcal_identify::identify;
 use hapcal_metrics::{accuracy_improvement_pct, parameter_improvement_pct};
-use hapcal_transmission::{CapstanProblem, JointRad};
+use hapcal_problems::CapstanProblem;
+use hapcal_transmission::JointRad;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
@@ -678,7 +679,7 @@ pub fn run(
         0.05,
         "%",
     ));
-    // ---- Force control (issue #4, paper Figs. 11–12) with seed 0's calibrated model.
+    // ---- Force control (paper Figs. 11–12) with seed 0's calibrated model.
     let s0 = &seeds[0];
     crate::force::append_to_reproduction(
         &r,

@@ -31,7 +31,7 @@ pub struct CapstanParams {
 
 /// A capstan drive: nominal ratio `R` (> 0) and drum centre distance `D` (> 0, m).
 ///
-/// Source: paper, "Capstan drive" section and eq. 1; DESIGN.md §3.
+/// Source: paper, "Capstan drive" section and eq. 1; docs/design.md §3.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Capstan {
     ratio: f64,
@@ -116,7 +116,7 @@ impl Capstan {
         Ok(())
     }
 
-    /// Capstan transmission error Δθ_caps(θ), rad (paper eq. 1, as written in DESIGN.md §3):
+    /// Capstan transmission error Δθ_caps(θ), rad (paper eq. 1, as written in docs/design.md §3):
     ///
     /// ```text
     /// Δθ = c − Re/(Re+R)·θ
@@ -144,7 +144,7 @@ impl Capstan {
     /// Gradient of Δθ (paper eq. 1) with respect to `(c, re, r_o, beta_o, r_i, beta_i)`, analytic.
     ///
     /// Units: rad/rad, rad (per unit `Re`), rad/m, rad/rad, rad/m, rad/rad — the order and units
-    /// of [`CapstanProblem`](crate::CapstanProblem)'s layout.
+    /// of `hapcal_problems::CapstanProblem`'s layout.
     pub fn error_grad(&self, p: &CapstanParams, theta: JointRad) -> [f64; 6] {
         let (r, d, t) = (self.ratio, self.drum_distance_m, theta.0);
         let (dro_t, dbo_t) = ecc_grad(p.r_o_m, d, t + p.beta_o_rad);

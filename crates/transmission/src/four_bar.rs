@@ -11,11 +11,11 @@ use crate::error::{Error, positive};
 /// are measured from the ground link's direction A→B, counter-clockwise, so an ideal
 /// parallelogram (`l1 = l3`, `l2 = l4`) has `ψ = φ`.
 ///
-/// Source: paper eq. 2 (whose printed form lost the arccos and the square root; DESIGN.md §3
+/// Source: paper eq. 2 (whose printed form lost the arccos and the square root; docs/design.md §3
 /// asks for the law-of-cosines closure instead). Identifiability of the link deviations:
 /// Schroer et al. 1997 (only one length of a planar parallelogram is identifiable from its
 /// input–output angles), which is why joint 4 is identified as a polynomial
-/// ([`PolynomialProblem`](crate::PolynomialProblem)).
+/// (`hapcal_problems::PolynomialProblem`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FourBar {
     /// Crank length `L1` (driven link, pivot A), m.
@@ -94,7 +94,7 @@ impl FourBar {
 
     /// Output (rocker) angle ψ, rad, for input crank angle `phi`, rad, both measured from the
     /// ground link the same way (see [`FourBar`]); open branch, law of cosines (paper eq. 2 as
-    /// corrected in DESIGN.md §3).
+    /// corrected in docs/design.md §3).
     ///
     /// An ideal parallelogram (`l1 = l3`, `l2 = l4`) gives `ψ = φ` (to 1e-12) for `φ ∈ (0, π)`;
     /// at `φ = 0` and `φ = π` it folds flat and its branches meet. The result is not wrapped:
@@ -163,7 +163,7 @@ impl FourBar {
 /// stay inside `(0, π)` over the whole joint range, with margin (a real four-bar with
 /// `l1 + l4 > l2 + l3` cannot even close near π). [`Joint4Transmission::phi0_mid_range_rad`]
 /// puts the crank perpendicular to the ground link at the middle of the joint range,
-/// `φ0 = π/2 − (lo + hi)/2`; for DESIGN.md's q4 ∈ [0.3, 1.8] rad that is φ0 ≈ 0.5208 rad and
+/// `φ0 = π/2 − (lo + hi)/2`; for docs/design.md's q4 ∈ [0.3, 1.8] rad that is φ0 ≈ 0.5208 rad and
 /// φ ∈ [0.82, 2.32] rad. Then the diagonal `s² = l1² + l4² − 2 l1 l4 cos(π/2 + θ_a)` with
 /// `θ_a = θ − (lo + hi)/2`, the paper's `s` (eq. 2, written with `cos(π/2 − θ_a)`) up to the
 /// sense in which θ_a is counted; the paper's own choice, φ0 = π/2 with θ_a = θ, would reach

@@ -66,7 +66,7 @@ fn figure(v: &Value, name: &str, when: &str, key: &str) -> f64 {
 #[test]
 fn bundled_default_reproduces_mukca_before_figures_and_improves_on_test_data() {
     let v = json(&hapcal(&["calibrate", "--model", "geometric", "--json"]));
-    // MUKCa's own figures for the nominal iiwa URDF (issue #2 table), to 0.001 mm: a check of
+    // MUKCa's own figures for the nominal iiwa URDF, to 0.001 mm: a check of
     // our forward kinematics and of the metric.
     assert!((figure(&v, "left_back", "before", "mean_absolute_error_m") - 0.808e-3).abs() < 0.5e-6);
     assert!(
@@ -343,7 +343,7 @@ fn simulated_log_calibrates_with_the_distance_model() {
 #[test]
 fn transmission_sensitivity_predicts_how_step_2_moves() {
     use hapcal::paper::{Reference, Sensitivity, identify_kinematics, identify_transmissions};
-    use hapcal_transmission::CapstanProblem;
+    use hapcal_problems::CapstanProblem;
     let r = Reference::load(&root().join("fixtures/reference-device/truth.toml")).unwrap();
     let cfg = hapcal_sim::SimConfig::new(3, 120).with_noise(r.noise);
     let rows = hapcal_sim::simulate(&r.device, &r.truth, &cfg).unwrap();
@@ -460,7 +460,7 @@ fn plan_poses_writes_the_chosen_readings_and_beats_a_random_set() {
         .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
         .collect();
     assert_eq!(rows.len(), 30);
-    // Every reading lies within the device's joint limits (DESIGN.md §2).
+    // Every reading lies within the device's joint limits (docs/design.md §2).
     let limits = [
         (-1.0, 1.0),
         (-0.3, 1.2),

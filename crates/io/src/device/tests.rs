@@ -7,18 +7,19 @@ use proptest::prelude::*;
 use super::*;
 use crate::{import_urdf, parse_device, write_device};
 
+/// A file of the repository's `fixtures/`.
 fn fixture(relative: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("test_data")
+        .join("../../fixtures")
         .join(relative)
 }
 
 fn reference() -> Device {
-    read_device(&fixture("reference.toml")).expect("reference.toml is valid")
+    read_device(&fixture("reference-device/device.toml")).expect("the reference device is valid")
 }
 
 fn iiwa() -> Device {
-    import_urdf(&fixture("mukca/iiwa14.urdf"), "ball_link").expect("iiwa14.urdf imports")
+    import_urdf(&fixture("mukca/urdf/iiwa14.urdf"), "ball_link").expect("iiwa14.urdf imports")
 }
 
 fn value(name: &str, value: f64, unit: &str) -> CalibratedValue {

@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use super::serde_helpers::convention;
 use super::{Device, JointRef};
 
-/// The device file text of `device` (DESIGN.md §5); [`parse_device`](crate::parse_device)
+/// The device file text of `device` (docs/design.md §5); [`parse_device`](crate::parse_device)
 /// reads it back to an equal [`Device`].
 ///
 /// Numbers are written in Rust's shortest form that parses back to the same `f64`
@@ -16,7 +16,7 @@ pub fn write_device(device: &Device) -> String {
         out.push_str(&text);
         out.push('\n');
     };
-    line("# hapcal device file (DESIGN.md §5); lengths in m, angles in rad".into());
+    line("# hapcal device file (docs/design.md §5); lengths in m, angles in rad".into());
     if let Some(name) = &device.name {
         line(format!("name = {}", string(name)));
     }

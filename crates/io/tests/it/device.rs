@@ -5,7 +5,7 @@ use hapcal_io::{
     write_device,
 };
 
-use crate::{assert_contains, data, message};
+use crate::{assert_contains, data, message, reference_device};
 
 fn value(name: &str, value: f64, unit: &str) -> CalibratedValue {
     CalibratedValue {
@@ -18,7 +18,7 @@ fn value(name: &str, value: f64, unit: &str) -> CalibratedValue {
 
 #[test]
 fn reference_device_reads() {
-    let device = read_device(&data("reference.toml")).unwrap();
+    let device = read_device(&reference_device()).unwrap();
     assert_eq!(
         device.name.as_deref(),
         Some("reference 7-DOF haptic device")
@@ -59,7 +59,7 @@ fn reference_device_reads() {
 
 #[test]
 fn device_file_round_trips() {
-    let device = read_device(&data("reference.toml")).unwrap();
+    let device = read_device(&reference_device()).unwrap();
     let text = write_device(&device);
     let again = parse_device(&text, Path::new("written.toml")).unwrap();
     assert_eq!(again, device);
@@ -68,7 +68,7 @@ fn device_file_round_trips() {
 
 #[test]
 fn calibrated_device_round_trips_and_applies_deviations() {
-    let device = read_device(&data("reference.toml")).unwrap();
+    let device = read_device(&reference_device()).unwrap();
     let values = [
         value("da0", 1e-3, "m"),
         value("dalpha1", -2e-3, "rad"),
@@ -112,7 +112,7 @@ fn calibrated_device_round_trips_and_applies_deviations() {
 
 #[test]
 fn calibration_rejects_what_it_cannot_apply() {
-    let device = read_device(&data("reference.toml")).unwrap();
+    let device = read_device(&reference_device()).unwrap();
     let meta = CalibrationMeta::default();
     let cases = [
         (

@@ -15,6 +15,18 @@ fn data(relative: &str) -> PathBuf {
         .join(relative)
 }
 
+/// The reference device's file, `fixtures/reference-device/device.toml`.
+fn reference_device() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/reference-device/device.toml")
+}
+
+/// A path in the MUKCa recordings, `fixtures/mukca/`.
+fn mukca(relative: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/mukca")
+        .join(relative)
+}
+
 /// The error's message, failing the test if `result` is `Ok`.
 #[track_caller]
 fn message<T: std::fmt::Debug>(result: Result<T, hapcal_io::Error>) -> String {

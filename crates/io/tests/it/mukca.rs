@@ -1,10 +1,10 @@
 use hapcal_io::{Error, read_mukca_paths, read_mukca_placement};
 
-use crate::{assert_contains, data, message};
+use crate::{assert_contains, data, message, mukca};
 
 #[test]
 fn kuka_front_has_two_sockets_of_31_rows_of_7_joints() {
-    let placement = read_mukca_placement(&data("mukca/kuka_14/front"), 7).unwrap();
+    let placement = read_mukca_placement(&mukca("data/kuka_14/front"), 7).unwrap();
     assert_eq!(placement.name, "front");
     assert_eq!(placement.sockets.len(), 2);
     for (k, socket) in placement.sockets.iter().enumerate() {
@@ -21,20 +21,20 @@ fn kuka_front_has_two_sockets_of_31_rows_of_7_joints() {
 
 #[test]
 fn run_folder_lists_its_placements_in_name_order() {
-    let placements = read_mukca_paths(&[data("mukca/kuka_14")], 7).unwrap();
+    let placements = read_mukca_paths(&[mukca("data/kuka_14")], 7).unwrap();
     let names: Vec<&str> = placements.iter().map(|p| p.name.as_str()).collect();
-    assert_eq!(names, ["front", "left_back"]);
+    assert_eq!(names, ["front", "left_back", "raised_left"]);
 
     // A placement folder and a run folder can be mixed.
     let mixed =
-        read_mukca_paths(&[data("mukca/kuka_14/left_back"), data("mukca/kuka_14")], 7).unwrap();
+        read_mukca_paths(&[mukca("data/kuka_14/left_back"), mukca("data/kuka_14")], 7).unwrap();
     let names: Vec<&str> = mixed.iter().map(|p| p.name.as_str()).collect();
-    assert_eq!(names, ["left_back", "front", "left_back"]);
+    assert_eq!(names, ["left_back", "front", "left_back", "raised_left"]);
 }
 
 #[test]
 fn wrong_joint_count_names_the_first_line() {
-    let msg = message(read_mukca_placement(&data("mukca/kuka_14/front"), 6));
+    let msg = message(read_mukca_placement(&mukca("data/kuka_14/front"), 6));
     assert_contains(&msg, &["hole_0.csv:1:", "expected 6 joints", "found 7"]);
     let msg = message(read_mukca_placement(&data("mukca_bad/joint_count"), 3));
     assert_contains(&msg, &["joint_count/hole_0.csv:1: ", "found 4"]);
@@ -98,7 +98,7 @@ fn socket_files_must_be_contiguous_and_present() {
 
 #[test]
 fn missing_folder_is_an_io_error() {
-    let err = read_mukca_placement(&data("mukca/no_such_robot"), 7).unwrap_err();
+    let err = read_mukca_placement(&mukca("data/no_such_robot"), 7).unwrap_err();
     assert!(matches!(err, Error::Io { .. }), "{err:?}");
     assert_contains(&err.to_string(), &["cannot read ", "no_such_robot: "]);
 }

@@ -5,7 +5,7 @@ use hapcal_io::{
     write_calibrated_urdf, write_device,
 };
 
-use crate::{assert_contains, data, message};
+use crate::{assert_contains, data, message, mukca};
 
 fn value(name: &str, value: f64) -> CalibratedValue {
     let unit = if name.ends_with(".x") || name.ends_with(".y") || name.ends_with(".z") {
@@ -40,7 +40,7 @@ impl Drop for TempDir {
 
 #[test]
 fn iiwa_imports_seven_revolute_joints_and_two_fixed_ones() {
-    let path = data("mukca/iiwa14.urdf");
+    let path = mukca("urdf/iiwa14.urdf");
     let device = import_urdf(&path, "ball_link").unwrap();
     let names: Vec<&str> = device.placements.iter().map(|p| p.name.as_str()).collect();
     assert_eq!(
@@ -87,7 +87,7 @@ fn iiwa_imports_seven_revolute_joints_and_two_fixed_ones() {
 
 #[test]
 fn missing_tip_lists_the_links() {
-    let err = import_urdf(&data("mukca/iiwa14.urdf"), "ball").unwrap_err();
+    let err = import_urdf(&mukca("urdf/iiwa14.urdf"), "ball").unwrap_err();
     match &err {
         Error::TipNotFound { tip, available, .. } => {
             assert_eq!(tip, "ball");
@@ -188,7 +188,7 @@ fn unsupported_and_malformed_urdfs_are_errors() {
 
 #[test]
 fn calibrated_urdf_reads_back_with_exactly_the_new_origins() {
-    let source = data("mukca/iiwa14.urdf");
+    let source = mukca("urdf/iiwa14.urdf");
     let device = import_urdf(&source, "ball_link").unwrap();
     let values = [
         value("joint_a2.x", 1.25e-4),
@@ -239,7 +239,7 @@ fn calibrated_urdf_reads_back_with_exactly_the_new_origins() {
 
 #[test]
 fn calibrated_chain_at_zero_equals_nominal_chain_at_the_deviations() {
-    let device = import_urdf(&data("mukca/iiwa14.urdf"), "ball_link").unwrap();
+    let device = import_urdf(&mukca("urdf/iiwa14.urdf"), "ball_link").unwrap();
     let nominal = device.chain().unwrap();
     let values: Vec<CalibratedValue> = (nominal.params().iter().enumerate())
         .map(|(k, p)| value(&p.name, 1e-3 * ((k as f64 * 0.7).sin())))

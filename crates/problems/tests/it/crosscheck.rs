@@ -1,4 +1,4 @@
-//! Cross-check of the kinematic least-squares step (DESIGN.md §2, step 2) against an independent
+//! Cross-check of the kinematic least-squares step (docs/design.md §2, step 2) against an independent
 //! implementation: `fixtures/golden/crosscheck/solve.py` (numpy forward kinematics, SciPy MINPACK
 //! Levenberg–Marquardt, Gauss–Newton polish) solved the same problem once and committed its
 //! solution as `fixtures/golden/crosscheck/deviations.csv`. This test only reads that file.
@@ -16,7 +16,7 @@ use hapcal_problems::{CalibrationProblem, Observations, Row, RowKind, Weights};
 /// (~1e-3) and < 1e-3 of their smallest standard deviation (1.7e-6 even at the noise level σ_m).
 const TOLERANCE: f64 = 1e-9;
 
-/// σ_m = 2π·R_d·σ_e with σ_e = 2π/20000/3 rad, R_d = 0.015 m (DESIGN.md §3).
+/// σ_m = 2π·R_d·σ_e with σ_e = 2π/20000/3 rad, R_d = 0.015 m (docs/design.md §3).
 fn sigma_m() -> f64 {
     let sigma_e = 2.0 * std::f64::consts::PI / 20000.0 / 3.0;
     2.0 * std::f64::consts::PI * 0.015 * sigma_e
@@ -111,7 +111,7 @@ fn kinematic_solution_matches_the_independent_scipy_reference() {
     }
 }
 
-/// The reference keeps θ1 and fixes d0 (DESIGN.md §2: "d0, fixed at 0 by choice of frames"),
+/// The reference keeps θ1 and fixes d0 (docs/design.md §2: "d0, fixed at 0 by choice of frames"),
 /// the gauge of the exactly collinear pair going to the base side: the tie-break of a
 /// kinematic calibration ([`TieBreak::LaterInLayout`]).
 #[test]

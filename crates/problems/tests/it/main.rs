@@ -1,9 +1,11 @@
-//! Integration tests of hapcal-problems: analytic Jacobians against central differences.
+//! Integration tests of hapcal-problems: analytic Jacobians against central differences, and
+//! the step-1 transmission problems' identification round trips (`transmission`).
 
 mod crosscheck;
 mod fleet;
 mod identifiability;
 mod streaming;
+mod transmission;
 mod tree;
 
 use faer::{Col, Mat};
@@ -113,7 +115,7 @@ fn problem_with_models(
         .expect("valid")
 }
 
-/// The reference device (DESIGN.md §2, standard D-H: every joint revolute about z, so the
+/// The reference device (docs/design.md §2, standard D-H: every joint revolute about z, so the
 /// lane kernel applies).
 fn reference_chain() -> Chain {
     let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -24,7 +24,7 @@ fn reference_distance_problem(n_rows: usize) -> CalibrationProblem {
     let log = hapcal_io::read_log(&dir.join("log.csv"), &device).expect("log");
     let chain = device.chain().expect("chain");
     let mut state = 7;
-    // Deviations on the 28 identifiable parameters only (DESIGN.md §2): the other 4 only
+    // Deviations on the 28 identifiable parameters only (docs/design.md §2): the other 4 only
     // move the gauge, which would leave the pruning a near-tie to decide.
     let held = ["dalpha0", "dd0", "dtheta0", "dalpha7"];
     let x_truth: Vec<f64> = chain

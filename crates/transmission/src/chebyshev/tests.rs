@@ -83,7 +83,7 @@ fn absolute_monomial(p: &Chebyshev) -> Vec<f64> {
     out
 }
 
-/// A joint range of DESIGN.md §2 (rad).
+/// A joint range of docs/design.md §2 (rad).
 fn joint_range() -> impl Strategy<Value = (f64, f64)> {
     prop::sample::select(vec![
         (-1.0, 1.0),

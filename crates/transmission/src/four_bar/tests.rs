@@ -4,7 +4,7 @@ use proptest::prelude::*;
 
 use super::*;
 
-/// DESIGN.md §2 parallelogram with the paper's Table 2 deviations read as mm.
+/// docs/design.md §2 parallelogram with the paper's Table 2 deviations read as mm.
 fn paper_bar() -> FourBar {
     FourBar::try_new(0.05 - 0.0005, 0.21 - 0.0007, 0.05, 0.21).unwrap()
 }
@@ -108,7 +108,7 @@ fn joint4_composes_capstan_then_four_bar() {
     assert_eq!(t.output_rad(JointRad(th)).unwrap(), want + th);
 }
 
-/// Four-bars near the parallelogram of DESIGN.md §2 (±3 mm on every link).
+/// Four-bars near the parallelogram of docs/design.md §2 (±3 mm on every link).
 fn near_parallelogram() -> impl Strategy<Value = FourBar> {
     (
         0.02..0.1f64,

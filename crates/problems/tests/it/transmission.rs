@@ -1,5 +1,6 @@
-//! Integration tests of `hapcal-transmission`: identification round trips with the paper's
-//! Table 2 values and seeded encoder noise (step 1 of the paper's procedure, Fig. 6).
+//! The step-1 problems ([`hapcal_problems::CapstanProblem`], [`hapcal_problems::PolynomialProblem`]):
+//! identification round trips with the paper's Table 2 values and seeded encoder noise (step 1
+//! of the paper's procedure, Fig. 6).
 
 mod capstan;
 mod polynomial;

@@ -3,11 +3,12 @@
 use std::f64::consts::PI;
 
 use hapcal_identify::{Identified, IdentifyConfig, identify};
-use hapcal_transmission::{Capstan, CapstanParams, CapstanProblem, JointRad};
+use hapcal_problems::CapstanProblem;
+use hapcal_transmission::{Capstan, CapstanParams, JointRad};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::{SIGMA_E, noisy, uniform_readings};
+use super::{SIGMA_E, noisy, uniform_readings};
 
 /// Table 2, joint 1 (c is not listed: 0).
 fn table2_joint1() -> CapstanParams {

@@ -1,22 +1,49 @@
 //! Step 1 of the paper's procedure (Fig. 6): identification problems for the transmissions from
-//! external-encoder data, implementing [`hapcal_identify::Problem`].
+//! external-encoder data, implementing [`hapcal_identify::Problem`]. The models themselves
+//! (paper eqs. 1 and 2, the Chebyshev polynomial) are `hapcal_transmission`'s.
 
 use faer::{Col, ColMut, ColRef, Mat, MatMut};
 use hapcal_identify::{
     EvalError, IdentifyConfig, ParamLayout, ParamSpec, Problem, RankConfigBase, Role, Unit,
 };
+use hapcal_transmission::{
+    Capstan, CapstanParams, Chebyshev, Error as TransmissionError, JointRad,
+};
 
-use crate::capstan::{Capstan, CapstanParams, JointRad};
-use crate::chebyshev::{Chebyshev, chebyshev_basis, check_domain};
-use crate::error::{Error, all_finite, positive};
+/// `Ok(value)` if finite and `> 0`, else [`TransmissionError::NotFinite`] or
+/// [`TransmissionError::NonPositive`].
+fn positive(name: &'static str, value: f64) -> Result<f64, TransmissionError> {
+    if !value.is_finite() {
+        return Err(TransmissionError::NotFinite {
+            name: name.to_owned(),
+            value,
+        });
+    }
+    if value <= 0.0 {
+        return Err(TransmissionError::NonPositive { name, value });
+    }
+    Ok(value)
+}
+
+/// `Ok(())` if every entry of `values` is finite, else [`TransmissionError::NotFinite`] naming
+/// `name[i]`.
+fn all_finite(name: &'static str, values: &[f64]) -> Result<(), TransmissionError> {
+    match values.iter().position(|v| !v.is_finite()) {
+        Some(i) => Err(TransmissionError::NotFinite {
+            name: format!("{name}[{i}]"),
+            value: values[i],
+        }),
+        None => Ok(()),
+    }
+}
 
 /// Checks paired readings/measurements: non-empty, equal lengths, finite; and `sigma_rad > 0`.
-fn check_data(theta: &[f64], ext: &[f64], sigma_rad: f64) -> Result<(), Error> {
+fn check_data(theta: &[f64], ext: &[f64], sigma_rad: f64) -> Result<(), TransmissionError> {
     if theta.is_empty() {
-        return Err(Error::Empty { name: "theta" });
+        return Err(TransmissionError::Empty { name: "theta" });
     }
     if ext.len() != theta.len() {
-        return Err(Error::LengthMismatch {
+        return Err(TransmissionError::LengthMismatch {
             name: "ext",
             expected: theta.len(),
             found: ext.len(),
@@ -28,7 +55,8 @@ fn check_data(theta: &[f64], ext: &[f64], sigma_rad: f64) -> Result<(), Error> {
     Ok(())
 }
 
-fn spec(name: String, unit: Unit) -> ParamSpec {
+/// A model parameter's spec.
+pub(crate) fn spec(name: String, unit: Unit) -> ParamSpec {
     ParamSpec {
         name,
         unit,
@@ -48,6 +76,36 @@ fn spec(name: String, unit: Unit) -> ParamSpec {
 /// `.re` (dimensionless), `.r_o` (m), `.beta_o` (rad), `.r_i` (m), `.beta_i` (rad).
 ///
 /// Source: paper eq. 1 and Fig. 6, step 1.
+///
+/// ```
+/// use hapcal_identify::identify;
+/// use hapcal_problems::CapstanProblem;
+/// use hapcal_transmission::{Capstan, CapstanParams, JointRad};
+///
+/// // Capstan 1 of the paper's Table 2 (R = 10, D = 60 mm).
+/// let capstan = Capstan::try_new(10.0, 0.06)?;
+/// let truth = CapstanParams {
+///     c_rad: 0.0,
+///     re: -0.025,
+///     r_o_m: 0.2e-3,
+///     beta_o_rad: (-105.0f64).to_radians(),
+///     r_i_m: 0.005e-3,
+///     beta_i_rad: (-15.0f64).to_radians(),
+/// };
+/// // Noise-free external-encoder readings over a full output turn.
+/// let theta: Vec<f64> = (0..200).map(|i| -3.1 + 6.2 * i as f64 / 199.0).collect();
+/// let ext = theta.iter().map(|&t| capstan.output_rad(&truth, JointRad(t))).collect();
+/// let sigma_e = 2.0 * std::f64::consts::PI / 20000.0 / 3.0;
+/// let problem = CapstanProblem::new(capstan, 1, theta, ext, sigma_e)?;
+///
+/// // σ = 1 (residuals are already divided by σ_e) and phases without a nominal value.
+/// let id = identify(&problem, problem.initial_guess(), &CapstanProblem::identify_config())?;
+/// assert!(id.identifiability.pruned.is_empty());
+/// let p = CapstanProblem::params(id.fit.x.as_ref());
+/// assert!((p.r_o_m - 0.2e-3).abs() < 1e-9);
+/// assert!((p.re + 0.025).abs() < 1e-9);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Clone, Debug)]
 pub struct CapstanProblem {
     capstan: Capstan,
@@ -63,16 +121,16 @@ impl CapstanProblem {
     /// encoder noise `sigma_rad` (rad, > 0; the paper's `σ_e = 2π/20000/3`).
     ///
     /// # Errors
-    /// [`Error::Empty`] for no reading, [`Error::LengthMismatch`] if `ext.len() != theta.len()`,
-    /// [`Error::NotFinite`] naming `theta[i]`/`ext[i]`/`sigma_rad`, [`Error::NonPositive`] for
-    /// `sigma_rad ≤ 0`.
+    /// [`TransmissionError::Empty`] for no reading, [`TransmissionError::LengthMismatch`] if
+    /// `ext.len() != theta.len()`, [`TransmissionError::NotFinite`] naming
+    /// `theta[i]`/`ext[i]`/`sigma_rad`, [`TransmissionError::NonPositive`] for `sigma_rad ≤ 0`.
     pub fn new(
         capstan: Capstan,
         joint: usize,
         theta: Vec<f64>,
         ext: Vec<f64>,
         sigma_rad: f64,
-    ) -> Result<CapstanProblem, Error> {
+    ) -> Result<CapstanProblem, TransmissionError> {
         check_data(&theta, &ext, sigma_rad)?;
         let name = |p: &str| format!("capstan{joint}.{p}");
         let layout = ParamLayout::new(vec![
@@ -120,7 +178,8 @@ impl CapstanProblem {
     /// kept parameters beyond their covariance: for Table 2's capstan 1 over q1 ∈ [−1, 1] rad,
     /// `β_o` is pruned in 71 of 100 seeded simulations and `Re` then misses the truth by up to
     /// 44 standard deviations; with `prior_rad = π` nothing is pruned and every parameter stays
-    /// within 3.6 standard deviations (tests/it/capstan.rs, `RUN_SLOW_TESTS=1`).
+    /// within 3.6 standard deviations (tests/it/transmission/capstan.rs,
+    /// `RUN_SLOW_TESTS=1`).
     pub fn identify_config() -> IdentifyConfig {
         IdentifyConfig {
             rank: RankConfigBase {
@@ -298,7 +357,8 @@ impl PolynomialProblem {
     /// (rad, > 0). Readings outside `[lo, hi]` are allowed (the polynomial extrapolates).
     ///
     /// # Errors
-    /// [`Error::Domain`] unless `lo < hi` are finite; otherwise as [`CapstanProblem::new`].
+    /// [`TransmissionError::Domain`] unless `lo < hi` are finite; otherwise as
+    /// [`CapstanProblem::new`].
     pub fn new(
         joint: usize,
         degree: usize,
@@ -307,18 +367,16 @@ impl PolynomialProblem {
         theta: Vec<f64>,
         ext: Vec<f64>,
         sigma_rad: f64,
-    ) -> Result<PolynomialProblem, Error> {
-        check_domain(lo, hi)?;
+    ) -> Result<PolynomialProblem, TransmissionError> {
+        // The zero polynomial of this degree on [lo, hi]: checks the domain, gives the basis.
+        let zero = Chebyshev::try_new(lo, hi, vec![0.0; degree + 1])?;
         check_data(&theta, &ext, sigma_rad)?;
         let layout = ParamLayout::new(
             (0..=degree)
                 .map(|k| spec(format!("joint{joint}.cheb{k}"), Unit::Radian))
                 .collect(),
         );
-        let basis = theta
-            .iter()
-            .flat_map(|&t| chebyshev_basis((2.0 * t - lo - hi) / (hi - lo), degree + 1))
-            .collect();
+        let basis = theta.iter().flat_map(|&t| zero.basis(t)).collect();
         Ok(PolynomialProblem {
             lo,
             hi,

@@ -1,13 +1,12 @@
 //! Joint 4 (capstan 4 + parallelogram, paper Table 2) identified as a tenth-order polynomial.
 
 use hapcal_identify::{IdentifyConfig, identify};
-use hapcal_transmission::{
-    Capstan, CapstanParams, FourBar, Joint4Transmission, JointRad, PolynomialProblem,
-};
+use hapcal_problems::PolynomialProblem;
+use hapcal_transmission::{Capstan, CapstanParams, FourBar, Joint4Transmission, JointRad};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::{SIGMA_E, noisy, uniform_readings};
+use super::{SIGMA_E, noisy, uniform_readings};
 
 /// q4's range, rad (DESIGN.md §2).
 const LO: f64 = 0.3;

@@ -128,7 +128,7 @@ fn capstan_problem_validates_its_data() {
     );
     assert_eq!(
         new(vec![], vec![], SIGMA).unwrap_err(),
-        Error::Empty { name: "theta" }
+        TransmissionError::Empty { name: "theta" }
     );
     assert_eq!(
         new(vec![0.0, 1.0], vec![0.0, f64::NAN], SIGMA)
@@ -175,11 +175,11 @@ fn polynomial_problem_layout_residuals_and_jacobian() {
 #[test]
 fn polynomial_problem_validates_its_domain_and_data() {
     let err = PolynomialProblem::new(4, 3, 1.8, 0.3, vec![1.0], vec![1.0], SIGMA).unwrap_err();
-    assert_eq!(err, Error::Domain { lo: 1.8, hi: 0.3 });
+    assert_eq!(err, TransmissionError::Domain { lo: 1.8, hi: 0.3 });
     let err = PolynomialProblem::new(4, 3, 0.3, 1.8, vec![1.0], vec![], SIGMA).unwrap_err();
     assert_eq!(
         err,
-        Error::LengthMismatch {
+        TransmissionError::LengthMismatch {
             name: "ext",
             expected: 1,
             found: 0
