@@ -755,6 +755,14 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         n_kept(&geometric.0, &geometric.1),
         geometric.0.points_offset(),
     )?;
+    // Cross-validation splits the training configurations into `folds` blocks: more folds than
+    // configurations would leave folds without a row to hold out.
+    if n_configurations > 0 && plan.folds > n_configurations {
+        bail!(
+            "--folds {} is not possible with {n_configurations} training configurations (2 to {n_configurations})",
+            plan.folds
+        );
+    }
     let mut cross_validation = Vec::new();
     let choice = match plan.model {
         ModelChoice::Auto => {
@@ -913,40 +921,158 @@ pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
         .collect()
 }
 
-/// Writes `text` to `path` atomically (a sibling temporary file renamed over it, so a reader
-/// never sees half a file and a failed write leaves any earlier file intact), refusing to
-/// replace one of `inputs`.
-fn write_new(path: &Path, text: &str, inputs: &[&Path]) -> Result<()> {
-    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => false,
+/// Extensions of the formats hapcal reads or writes: an output whose extension names one of
+/// them but not the format written is refused by [`check_extension`].
+const KNOWN_EXTENSIONS: [&str; 9] = [
+    "toml", "urdf", "csv", "svg", "json", "yaml", "yml", "md", "xml",
+];
+
+/// Checks that `path` can take an output of a command that read `inputs`: its folder exists,
+/// it is not a folder itself, and it is none of the inputs (compared canonicalized, so a link,
+/// `./` or `..` does not hide an input). Commands call it before their work, so a bad output
+/// path fails in a second rather than after the computation; [`write_new`] calls it again.
+///
+/// # Errors
+/// Each refusal names the path: `cannot write <path>: <folder> does not exist`, `… is a
+/// folder`, `… is an input of this command (<input>)`.
+pub fn check_output(path: &Path, inputs: &[&Path]) -> Result<()> {
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
     };
-    if let Some(input) = inputs.iter().find(|i| same(path, i)) {
+    if !folder.exists() {
         bail!(
-            "{}: this is an input ({}); write the calibrated file elsewhere",
+            "cannot write {}: {} does not exist",
+            path.display(),
+            folder.display()
+        );
+    }
+    if !folder.is_dir() {
+        bail!(
+            "cannot write {}: {} is not a folder",
+            path.display(),
+            folder.display()
+        );
+    }
+    if path.is_dir() {
+        bail!("cannot write {}: it is a folder", path.display());
+    }
+    if let Ok(target) = path.canonicalize()
+        && let Some(input) = (inputs.iter()).find(|i| i.canonicalize().is_ok_and(|i| i == target))
+    {
+        bail!(
+            "cannot write {}: it is an input of this command ({}); write the output elsewhere",
             path.display(),
             input.display()
         );
     }
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(format!(".tmp{}", std::process::id()));
-    let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
+    Ok(())
+}
+
+/// Checks the extension of an output that is written as `what` in one of the formats
+/// `allowed` (lowercase, without the dot). With `strict` (the format follows the extension),
+/// any other extension, or none, is refused; otherwise only an extension naming another format
+/// hapcal reads or writes (`log.toml` for a CSV log) is refused, and `.txt` or none passes.
+///
+/// # Errors
+/// A mismatched extension, naming the path and the formats allowed.
+pub fn check_extension(path: &Path, allowed: &[&str], what: &str, strict: bool) -> Result<()> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let ok = match &ext {
+        Some(e) if allowed.contains(&e.as_str()) => true,
+        Some(e) => !strict && !KNOWN_EXTENSIONS.contains(&e.as_str()),
+        None => !strict,
+    };
+    if ok {
+        return Ok(());
+    }
+    let allowed: Vec<String> = allowed.iter().map(|a| format!(".{a}")).collect();
+    bail!(
+        "cannot write {}: {what} is written as {}, not as {}",
+        path.display(),
+        allowed.join(" or "),
+        ext.map_or_else(
+            || "a file without extension".to_owned(),
+            |e| format!(".{e}")
+        )
+    )
+}
+
+/// Writes `text` to `path` atomically (a sibling temporary file renamed over it, so a reader
+/// never sees half a file and a failed write leaves any earlier file intact), after
+/// [`check_output`]: never over one of `inputs`, every error naming `path`.
+///
+/// # Errors
+/// What [`check_output`] refuses, or an I/O error (`cannot write <path>: …`).
+pub fn write_new(path: &Path, text: &str, inputs: &[&Path]) -> Result<()> {
+    check_output(path, inputs)?;
+    let name = path.file_name().map_or_else(
+        || std::ffi::OsString::from("output"),
+        std::ffi::OsStr::to_os_string,
+    );
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(&name);
+    tmp_name.push(format!(".tmp{}", std::process::id()));
+    let tmp = path.with_file_name(tmp_name);
+    if let Err(e) = std::fs::write(&tmp, text) {
+        let _ = std::fs::remove_file(&tmp);
+        bail!("cannot write {}: {e}", path.display());
+    }
     std::fs::rename(&tmp, path).map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
-        anyhow::anyhow!("moving {} to {}: {e}", tmp.display(), path.display())
+        anyhow::anyhow!("cannot write {}: {e}", path.display())
     })
 }
 
 /// Writes the calibrated device: a `.urdf` path gets a copy of the source URDF with the
-/// calibrated joint origins; any other path a device TOML with a `[calibration]` table. With
+/// calibrated joint origins; a `.toml` path a device TOML with a `[calibration]` table (any
+/// other extension is refused). With
 /// marker frames or values a URDF cannot hold (compliance, harmonics), `<out>.calibration.toml`
 /// beside it. Files are written atomically. Returns the paths written.
 ///
 /// # Errors
-/// A `.urdf` output for a device that did not come from a URDF, an output path that is the
-/// source URDF, or an I/O error.
+/// A `.urdf` output for a device that did not come from a URDF, an output that is neither
+/// `.toml` nor `.urdf`, an output path that is the device file or its source URDF, or an I/O
+/// error.
 pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<Vec<PathBuf>> {
+    write_outputs_beside(outcome, out, &[])
+}
+
+/// Checks the outputs of a calibration before it runs: `out` must end in `.toml` or `.urdf`
+/// (the format follows the extension), and neither it nor its `<out>.calibration.toml`
+/// sidecar may be the `device` or one of `inputs` (data and test files), or sit in a missing
+/// folder.
+///
+/// # Errors
+/// The first refusal, naming the path.
+pub fn check_outputs(device: &Path, out: &Path, inputs: &[&Path]) -> Result<()> {
+    check_extension(out, &["toml", "urdf"], "the calibrated device", true)?;
+    let mut all: Vec<&Path> = vec![device];
+    all.extend_from_slice(inputs);
+    check_output(out, &all)?;
+    check_output(&out.with_extension("calibration.toml"), &all)
+}
+
+/// [`write_outputs`], refusing also to write over one of `inputs` (the data and test files
+/// the calibration read; the device and its source URDF are always refused).
+///
+/// # Errors
+/// As [`write_outputs`], and an output path that is one of `inputs`.
+pub fn write_outputs_beside(
+    outcome: &Outcome,
+    out: &Path,
+    inputs: &[&Path],
+) -> Result<Vec<PathBuf>> {
+    check_outputs(&outcome.device_path, out, inputs)?;
+    let urdf_source = (outcome.device.urdf.as_ref()).map(|u| u.resolve(&outcome.device_path));
+    let mut inputs: Vec<&Path> = inputs.to_vec();
+    inputs.push(&outcome.device_path);
+    if let Some(u) = &urdf_source {
+        inputs.push(u);
+    }
+    let inputs = &inputs[..];
     if let Some(calibrated) = &outcome.calibrated {
         if !out
             .extension()
@@ -958,7 +1084,7 @@ pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<Vec<PathBuf>> {
             );
         }
         let text = hapcal_io::write_device(calibrated);
-        write_new(out, &text, &[])?;
+        write_new(out, &text, inputs)?;
         return Ok(vec![out.to_path_buf()]);
     }
     let all: Vec<hapcal_io::CalibratedValue> = (outcome.report.parameters.iter())
@@ -1022,16 +1148,14 @@ pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<Vec<PathBuf>> {
     } else {
         hapcal_io::write_device(&calibrated)
     };
-    let source = outcome.device.urdf.as_ref().map(|u| u.path.as_path());
-    let inputs: Vec<&Path> = source.into_iter().collect();
-    write_new(out, &text, &inputs)?;
+    write_new(out, &text, inputs)?;
     let mut written = vec![out.to_path_buf()];
     if !outcome.report.frames.is_empty() || !leftover.is_empty() {
         let sidecar = out.with_extension("calibration.toml");
         write_new(
             &sidecar,
             &crate::measured::sidecar_toml(&outcome.report.frames, &leftover),
-            &inputs,
+            inputs,
         )?;
         written.push(sidecar);
     }

@@ -1,11 +1,48 @@
 //! `hapcal`: kinematic calibration of haptic devices and serial robots.
-#![allow(clippy::print_stdout, clippy::print_stderr)] // a binary prints its results
+//!
+//! All standard output goes through [`emit`], all messages through [`note!`]: a closed or full
+//! standard output never panics.
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use hapcal::calibrate::{self, ModelChoice, Plan};
+use std::io::{ErrorKind, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
+
+/// A message on standard error, `format!`-style; a failed write is ignored (there is nowhere
+/// left to report it).
+macro_rules! note {
+    ($($arg:tt)*) => {{
+        let mut err = std::io::stderr().lock();
+        let _ = writeln!(err, $($arg)*);
+    }};
+}
+
+/// Writes `text` to standard output and flushes it. A reader that went away (`hapcal … | head`,
+/// a broken pipe) ends the program quietly with exit code 0, as a Unix filter does; any other
+/// write error (a full disk, a closed descriptor) is reported on standard error with exit
+/// code 2. Never panics.
+fn emit(text: &str) {
+    let written = {
+        let mut stdout = std::io::stdout().lock();
+        stdout
+            .write_all(text.as_bytes())
+            .and_then(|()| stdout.flush())
+    };
+    if let Err(e) = written {
+        exit_on_stdout_error(&e);
+    }
+}
+
+/// Ends the program after a failed write to standard output: see [`emit`].
+fn exit_on_stdout_error(e: &std::io::Error) -> ! {
+    if e.kind() == ErrorKind::BrokenPipe {
+        std::process::exit(0);
+    }
+    note!("hapcal: error: cannot write to standard output: {e}");
+    std::process::exit(2);
+}
 
 /// Kinematic calibration of capstan-driven haptic devices and serial robots.
 ///
@@ -297,15 +334,24 @@ fn run(cli: Cli) -> Result<()> {
                     joint,
                 }
             };
+            let inputs: Vec<&std::path::Path> = (plan.data.iter().chain(&plan.test))
+                .map(PathBuf::as_path)
+                .collect();
+            if let Some(out) = &out {
+                calibrate::check_outputs(&plan.device, out, &inputs)?;
+            }
             let outcome = calibrate::run(&plan)?;
             if json {
-                println!("{}", serde_json::to_string_pretty(&outcome.report)?);
+                emit(&format!(
+                    "{}\n",
+                    serde_json::to_string_pretty(&outcome.report)?
+                ));
             } else {
-                print!("{}", hapcal::report::render(&outcome.report));
+                emit(&hapcal::report::render(&outcome.report));
             }
             if let Some(out) = out {
-                for path in calibrate::write_outputs(&outcome, &out)? {
-                    eprintln!("hapcal: wrote {}", path.display());
+                for path in calibrate::write_outputs_beside(&outcome, &out, &inputs)? {
+                    note!("hapcal: wrote {}", path.display());
                 }
             }
             Ok(())
@@ -321,6 +367,25 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             let root = hapcal::project_root();
             let truth = truth.unwrap_or_else(|| root.join("fixtures/reference-device/truth.toml"));
+            let golden_path = root.join("fixtures/golden/ours/paper.csv");
+            // The truth's device file is an input too; an unreadable truth fails in `run` below.
+            let truth_device = hapcal_sim::read_truth(&truth)
+                .ok()
+                .map(|t| t.device_path(&truth));
+            let mut inputs: Vec<&std::path::Path> = vec![&truth];
+            inputs.extend(truth_device.as_deref());
+            if !check {
+                if out.exists() && !out.is_dir() {
+                    anyhow::bail!(
+                        "cannot write {}: --out is an output folder, and this is a file",
+                        out.display()
+                    );
+                }
+                if !out.exists() {
+                    std::fs::create_dir_all(&out)
+                        .with_context(|| format!("cannot create the folder {}", out.display()))?;
+                }
+            }
             let bar = indicatif::ProgressBar::new(seeds as u64);
             bar.set_style(
                 indicatif::ProgressStyle::with_template(
@@ -357,10 +422,13 @@ fn run(cli: Cli) -> Result<()> {
                 bar.set_position(done as u64)
             })?;
             bar.finish_and_clear();
-            let golden_path = root.join("fixtures/golden/ours/paper.csv");
             if check {
                 if std::env::var_os("UPDATE_GOLDEN").is_some() {
-                    std::fs::write(&golden_path, hapcal::reproduce::golden_csv(&result.golden))?;
+                    calibrate::write_new(
+                        &golden_path,
+                        &hapcal::reproduce::golden_csv(&result.golden),
+                        &inputs,
+                    )?;
                     anyhow::bail!(
                         "UPDATE_GOLDEN: rewrote {}; review the diff and run again without it",
                         golden_path.display()
@@ -374,18 +442,17 @@ fn run(cli: Cli) -> Result<()> {
                         bad.join("\n")
                     );
                 }
-                println!(
-                    "reproduce --check: {} values within tolerance of {}",
+                emit(&format!(
+                    "reproduce --check: {} values within tolerance of {}\n",
                     result.golden.len(),
                     golden_path.display()
-                );
+                ));
             } else {
-                std::fs::create_dir_all(&out)?;
                 for (name, text) in &result.files {
-                    std::fs::write(out.join(name), text)?;
+                    calibrate::write_new(&out.join(name), text, &inputs)?;
                 }
-                print!("{}", result.summary);
-                eprintln!(
+                emit(&result.summary);
+                note!(
                     "hapcal: wrote {} files to {}",
                     result.files.len(),
                     out.display()
@@ -405,6 +472,15 @@ fn run(cli: Cli) -> Result<()> {
             period_s,
         } => {
             let root = hapcal::project_root();
+            calibrate::check_extension(&out, &["csv"], "the simulated log", false)?;
+            let mut inputs: Vec<PathBuf> = device.iter().chain(&truth).cloned().collect();
+            if let Some(t) =
+                (truth.as_ref()).and_then(|t| Some((t, hapcal_sim::read_truth(t).ok()?)))
+            {
+                inputs.push(t.1.device_path(t.0));
+            }
+            let inputs: Vec<&std::path::Path> = inputs.iter().map(PathBuf::as_path).collect();
+            calibrate::check_output(&out, &inputs)?;
             let (device, truth) = match (device, truth) {
                 (device, Some(truth_path)) => {
                     let truth = hapcal_sim::read_truth(&truth_path)?;
@@ -444,8 +520,8 @@ fn run(cli: Cli) -> Result<()> {
             } else {
                 hapcal_sim::simulate(&device, &truth, &cfg)?
             };
-            std::fs::write(&out, hapcal_io::write_log(&rows))?;
-            eprintln!("hapcal: wrote {} poses to {}", rows.len(), out.display());
+            calibrate::write_new(&out, &hapcal_io::write_log(&rows), &inputs)?;
+            note!("hapcal: wrote {} poses to {}", rows.len(), out.display());
             Ok(())
         }
         Command::Force {
@@ -457,6 +533,9 @@ fn run(cli: Cli) -> Result<()> {
             seed,
             svg,
         } => {
+            calibrate::check_extension(&svg, &["svg"], "the Fig. 12 plot", false)?;
+            let inputs = [device.as_path(), truth.as_path(), calibrated.as_path()];
+            calibrate::check_output(&svg, &inputs)?;
             let read_device = |p: &PathBuf| {
                 hapcal_io::read_device(p).with_context(|| format!("reading {}", p.display()))
             };
@@ -477,31 +556,31 @@ fn run(cli: Cli) -> Result<()> {
                         calibrated.display()
                     )
                 })?;
-            print!("{}", report.markdown);
+            emit(&report.markdown);
             if let Some((_, text)) = report.files.iter().find(|(n, _)| n.ends_with(".svg")) {
-                std::fs::write(&svg, text).with_context(|| format!("writing {}", svg.display()))?;
-                eprintln!("hapcal: wrote {}", svg.display());
+                calibrate::write_new(&svg, text, &inputs)?;
+                note!("hapcal: wrote {}", svg.display());
             }
             Ok(())
         }
         Command::PlanPoses(args) => {
             let (summary, out) = hapcal::plan_args::run_plan(&args)?;
-            print!("{summary}");
-            eprintln!("hapcal: wrote {}", out.display());
+            emit(&summary);
+            note!("hapcal: wrote {}", out.display());
             Ok(())
         }
         Command::PoseStudy(args) => {
             let bar = indicatif::ProgressBar::new(args.seeds);
             let text = hapcal::pose_study::run_study(&args, &|done| bar.set_position(done))?;
             bar.finish_and_clear();
-            print!("{text}");
-            eprintln!("hapcal: wrote {}", args.out.display());
+            emit(&text);
+            note!("hapcal: wrote {}", args.out.display());
             Ok(())
         }
         Command::PoseBound(args) => {
-            let text = hapcal::pose_study::run_bound(&args, &|stage| eprintln!("hapcal: {stage}"))?;
-            print!("{text}");
-            eprintln!("hapcal: wrote {}", args.out.display());
+            let text = hapcal::pose_study::run_bound(&args, &|stage| note!("hapcal: {stage}"))?;
+            emit(&text);
+            note!("hapcal: wrote {}", args.out.display());
             Ok(())
         }
         Command::Diagnose {
@@ -512,19 +591,23 @@ fn run(cli: Cli) -> Result<()> {
             json,
             svg,
         } => {
+            calibrate::check_extension(&svg, &["svg"], "the residual maps", false)?;
+            let inputs = [device.clone(), data.clone()];
+            let inputs = inputs.each_ref().map(PathBuf::as_path);
+            calibrate::check_output(&svg, &inputs)?;
             let plan = hapcal::diagnose::DiagnosePlan::new(device, data, &baseline, folds)?;
             let (d, warnings) = hapcal::diagnose::run(&plan)?;
             for w in warnings {
-                eprintln!("hapcal: warning: {w}");
+                note!("hapcal: warning: {w}");
             }
             if json {
-                println!("{}", serde_json::to_string_pretty(&d)?);
+                emit(&format!("{}\n", serde_json::to_string_pretty(&d)?));
             } else {
-                print!("{}", hapcal::diagnose::render(&d));
+                emit(&hapcal::diagnose::render(&d));
             }
-            match std::fs::write(&svg, hapcal::diagnose::residual_map_svg(&d)) {
-                Ok(()) => eprintln!("hapcal: wrote residual maps to {}", svg.display()),
-                Err(e) => eprintln!("hapcal: warning: cannot write {}: {e}", svg.display()),
+            match calibrate::write_new(&svg, &hapcal::diagnose::residual_map_svg(&d), &inputs) {
+                Ok(()) => note!("hapcal: wrote residual maps to {}", svg.display()),
+                Err(e) => note!("hapcal: warning: {e:#}"),
             }
             Ok(())
         }
@@ -538,22 +621,36 @@ fn run(cli: Cli) -> Result<()> {
                 bar.set_position(done as u64)
             })?;
             bar.finish_and_clear();
-            print!("{md}");
+            emit(&md);
             Ok(())
         }
         Command::ImportUrdf { urdf, tip } => {
             let device = hapcal_io::import_urdf(&urdf, &tip)?;
-            print!("{}", hapcal_io::write_device(&device));
+            emit(&hapcal_io::write_device(&device));
             Ok(())
         }
     }
 }
 
 fn main() -> ExitCode {
-    match run(Cli::parse()) {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            // Help and version go to standard output, usage errors to standard error (where a
+            // failed write has nowhere left to be reported).
+            let printed = e.print().and_then(|()| std::io::stdout().flush());
+            if let Err(io) = printed
+                && !e.use_stderr()
+            {
+                exit_on_stdout_error(&io);
+            }
+            return ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(2));
+        }
+    };
+    match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("hapcal: error: {err:#}");
+            note!("hapcal: error: {err:#}");
             ExitCode::from(2)
         }
     }

@@ -1,6 +1,6 @@
 //! Flags of `hapcal plan-poses` and the glue that runs it.
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use hapcal_calibrate::plan::{Measurement, PlanConfig, plan_poses, poses_csv, summary};
 use hapcal_identify::Criterion;
 
@@ -54,6 +54,8 @@ pub fn run_plan(args: &PlanArgs) -> Result<(String, std::path::PathBuf)> {
     {
         bail!("--sigma-m must be a positive length, got {s}");
     }
+    crate::calibrate::check_extension(&args.out, &["csv"], "the planned poses", false)?;
+    crate::calibrate::check_output(&args.out, &[&args.device])?;
     let device = crate::calibrate::load_device(&args.device, &args.tip)?;
     let cfg = PlanConfig {
         measurement: args.measurement,
@@ -72,7 +74,10 @@ pub fn run_plan(args: &PlanArgs) -> Result<(String, std::path::PathBuf)> {
         .iter()
         .map(|n| n.to_owned())
         .collect();
-    std::fs::write(&args.out, poses_csv(&names, &plan.readings))
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    crate::calibrate::write_new(
+        &args.out,
+        &poses_csv(&names, &plan.readings),
+        &[&args.device],
+    )?;
     Ok((summary(&plan, &cfg), args.out.clone()))
 }

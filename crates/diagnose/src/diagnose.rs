@@ -29,7 +29,8 @@ const SUFFICIENT_SHARE_IN_SAMPLE: f64 = 0.9;
 use crate::model::{
     Data, Linear, POLY_DEGREE, RANK_TOL, Setup, State, Term, TermKind, Trans, ext_available,
 };
-use crate::stats::{chi2_sf, f_sf, holm, lstsq, pivoted_basis};
+use crate::solve::lstsq;
+use crate::stats::{chi2_sf, f_sf, holm, pivoted_basis};
 
 /// Which model the gap is measured against.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -958,8 +959,8 @@ pub fn baseline_residuals_m(
 /// with the baseline parameters that absorb them); an F-test (Holm–Bonferroni over the
 /// library), a BIC penalty, k-fold cross-validation over time-contiguous blocks (held-out
 /// improvement > 1 standard error) and a share of the gap ≥ `min_gap_share` decide. The
-/// best accepted candidate is refitted with the baseline (Gauss–Newton) and the next round
-/// starts from there, up to `max_effects`.
+/// best accepted candidate is refitted with the baseline (Levenberg–Marquardt) and the next
+/// round starts from there, up to `max_effects`.
 ///
 /// # Errors
 /// [`Error::Config`] for bad settings; [`Error::Data`] for a log with fewer than 20 rows or

@@ -37,6 +37,7 @@ pub mod blind;
 mod diagnose;
 mod error;
 mod model;
+mod solve;
 mod stats;
 
 pub use diagnose::{

@@ -9,8 +9,6 @@ use hapcal_kinematics::{Chain, FkWorkspace, Vector3};
 use hapcal_transmission::{Capstan, CapstanParams, Chebyshev, JointRad};
 use nalgebra::{DMatrix, DVector};
 
-use crate::stats::{lstsq, pivoted_basis};
-
 /// Relative tolerance below which a scaled column counts as dependent on the others.
 pub(crate) const RANK_TOL: f64 = 1e-6;
 
@@ -199,7 +197,7 @@ pub(crate) struct State {
 
 impl State {
     /// Adds `delta` (in the column order of [`Setup::linearise`]) to the parameters.
-    fn apply(&mut self, delta: &[f64]) {
+    pub(crate) fn apply(&mut self, delta: &[f64]) {
         let mut off = 0;
         for tr in &mut self.trans {
             let np = tr.n_params();
@@ -451,40 +449,12 @@ impl Setup {
         }
     }
 
-    /// Gauss–Newton on the identifiable columns (picked at the current estimate), `iters`
-    /// times; returns the refined state and the last linearisation (at the refined state).
-    pub(crate) fn refine(&self, data: &Data, mut s: State, iters: usize) -> (State, Linear) {
-        for _ in 0..iters {
-            let lin = self.linearise(data, &s);
-            let rss0 = lin.r.norm_squared();
-            let (_, picked) = pivoted_basis(&lin.j, &DMatrix::zeros(lin.j.nrows(), 0), RANK_TOL);
-            let kept: Vec<usize> = (0..picked.len()).filter(|&c| picked[c].is_some()).collect();
-            let a = lin.j.select_columns(&kept);
-            let (dx, _) = lstsq(&a, &lin.r);
-            let mut delta = vec![0.0; lin.j.ncols()];
-            for (k, &c) in kept.iter().enumerate() {
-                delta[c] = dx[k];
-            }
-            // Gauss–Newton step, halved while it increases the cost (Armijo-style backtracking).
-            let mut scale = 1.0;
-            let mut next = s.clone();
-            for _ in 0..8 {
-                next = s.clone();
-                let scaled: Vec<f64> = delta.iter().map(|d| d * scale).collect();
-                next.apply(&scaled);
-                if self.linearise(data, &next).r.norm_squared() <= rss0 * (1.0 + 1e-12) {
-                    break;
-                }
-                scale *= 0.5;
-            }
-            s = next;
-            let step: f64 = delta.iter().map(|d| (d * scale).abs()).fold(0.0, f64::max);
-            if step < 1e-12 {
-                break;
-            }
-        }
-        let lin = self.linearise(data, &s);
-        (s, lin)
+    /// Fits the model from `s` by `hapcal-identify`'s Levenberg–Marquardt
+    /// ([`crate::solve::fit_model`]) on the identifiable columns ([`RANK_TOL`], re-picked when
+    /// they change at the estimate), within a budget of `iters` Gauss–Newton iterations;
+    /// returns the refined state and the linearisation there.
+    pub(crate) fn refine(&self, data: &Data, s: State, iters: usize) -> (State, Linear) {
+        crate::solve::fit_model(self, data, s, iters, RANK_TOL)
     }
 }
 

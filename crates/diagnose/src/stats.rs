@@ -1,5 +1,6 @@
 //! Tail probabilities of the χ² and F distributions, Holm–Bonferroni, and the small dense
-//! least-squares tools the tests use (column-pivoted Gram–Schmidt, SVD solves).
+//! column selection the tests use (column-pivoted Gram–Schmidt); the solves are in
+//! [`crate::solve`].
 //!
 //! Special functions: Press et al., *Numerical Recipes*, 3rd ed., 2007, §6.1 (Lanczos
 //! log-gamma), §6.2 (incomplete gamma, series and continued fraction), §6.4 (incomplete
@@ -209,47 +210,6 @@ pub(crate) fn pivoted_basis(
         q.set_column(j, v);
     }
     (q, picked)
-}
-
-/// Least squares `min |a·x − b|` with columns scaled to unit norm and singular values below
-/// `1e-9·s_max` dropped. Returns `x` and `(aᵀa)⁺` (the unscaled covariance for σ = 1).
-pub(crate) fn lstsq(a: &DMatrix<f64>, b: &DVector<f64>) -> (DVector<f64>, DMatrix<f64>) {
-    let k = a.ncols();
-    if k == 0 || a.nrows() == 0 {
-        return (DVector::zeros(k), DMatrix::zeros(k, k));
-    }
-    let scale: Vec<f64> = (0..k)
-        .map(|j| {
-            let n = a.column(j).norm();
-            if n > 0.0 { 1.0 / n } else { 0.0 }
-        })
-        .collect();
-    let mut s = a.clone();
-    for (j, sc) in scale.iter().enumerate() {
-        s.column_mut(j).scale_mut(*sc);
-    }
-    let svd = s.svd(true, true);
-    let (Some(u), Some(vt)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
-        return (DVector::zeros(k), DMatrix::zeros(k, k));
-    };
-    let smax = svd.singular_values.max();
-    let utb = u.transpose() * b;
-    let mut x = DVector::zeros(k);
-    let mut cov = DMatrix::zeros(k, k);
-    for (i, &sv) in svd.singular_values.iter().enumerate() {
-        if sv > 1e-9 * smax && sv > 0.0 {
-            let v = vt.row(i).transpose();
-            x.axpy(utb[i] / sv, &v, 1.0);
-            cov += (&v * v.transpose()) / (sv * sv);
-        }
-    }
-    for i in 0..k {
-        x[i] *= scale[i];
-        for j in 0..k {
-            cov[(i, j)] *= scale[i] * scale[j];
-        }
-    }
-    (x, cov)
 }
 
 #[cfg(test)]

@@ -234,6 +234,7 @@ fn identify_streaming(
     let m = p.n_residuals();
     let mut lin = linearise(blocks, x0.as_ref(), n).map_err(|e| error_at_x0(e, &layout))?;
     let (mut sigma, sigma_source) = initial_sigma(cfg.sigma, lin.r_norm_sq, m);
+    finite_sigma(sigma, true)?;
     let candidates: Vec<usize> = (0..n).collect();
     let decide = |lin: &Linearisation, sigma: f64| {
         identifiability(
@@ -264,7 +265,7 @@ fn identify_streaming(
                     n_free: k,
                 });
             }
-            sigma = (2.0 * fit.cost / (m - k) as f64).sqrt();
+            sigma = finite_sigma((2.0 * fit.cost / (m - k) as f64).sqrt(), false)?;
         }
         lin = if current {
             last
@@ -385,6 +386,7 @@ fn identify_dense(
     check_jacobian_finite(jac.as_ref(), &layout)?;
 
     let (mut sigma, sigma_source) = initial_sigma(cfg.sigma, r0.squared_norm_l2(), m);
+    finite_sigma(sigma, true)?;
     let candidates: Vec<usize> = (0..n).collect();
     let decide = |jac: &Mat<f64>, sigma: f64| {
         identifiability(
@@ -417,6 +419,7 @@ fn identify_dense(
                     n_free: ident.kept.len(),
                 },
             )?;
+            sigma = finite_sigma(sigma, false)?;
         }
         p.jacobian(fit.x.as_ref(), jac.as_mut())
             .map_err(Error::EvalAtEstimate)?;
@@ -446,6 +449,26 @@ fn identify_dense(
         layout,
         rounds,
         pruning_converged,
+    })
+}
+
+/// `sigma` if it is finite and not negative, as the rank decision needs it; otherwise an
+/// evaluation error (at `x0` or at the estimate). Residuals that are each finite can still
+/// overflow their sum of squares (a measured length of 1e200 m), which makes the RMS infinite.
+fn finite_sigma(sigma: f64, at_x0: bool) -> Result<f64, Error> {
+    if sigma.is_finite() && sigma >= 0.0 {
+        return Ok(sigma);
+    }
+    let e = EvalError {
+        reason: format!(
+            "the residuals' RMS is {sigma}: a measurement or a nominal length is far out of \
+             range (the sum of squared residuals overflows)"
+        ),
+    };
+    Err(if at_x0 {
+        Error::Eval(e)
+    } else {
+        Error::EvalAtEstimate(e)
     })
 }
 

@@ -303,6 +303,24 @@ pub enum Error {
         /// Why.
         source: hapcal_kinematics::Error,
     },
+    /// A length is finite but its magnitude exceeds [`MAX_LENGTH_M`](crate::MAX_LENGTH_M).
+    #[error(
+        "{path}:{line}:{column}: {name} = {value_m:e} m is out of range: a length must lie within ±{limit_m} m"
+    )]
+    LengthOutOfRange {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// 1-based column.
+        column: u64,
+        /// Column, key or attribute name (`distance_m`, `dh[2].a_m`, …).
+        name: String,
+        /// The value found, m.
+        value_m: f64,
+        /// [`MAX_LENGTH_M`](crate::MAX_LENGTH_M).
+        limit_m: f64,
+    },
     /// A calibrated value cannot be applied to the device.
     #[error("parameter {name:?}: {message}")]
     Parameter {
@@ -314,6 +332,28 @@ pub enum Error {
 }
 
 impl Error {
+    /// `Ok` if `value_m` is a length within ±[`MAX_LENGTH_M`](crate::MAX_LENGTH_M) (NaN and
+    /// infinities are left to the finiteness checks), else [`Error::LengthOutOfRange`].
+    pub(crate) fn check_length(
+        path: &std::path::Path,
+        line: u64,
+        column: u64,
+        name: &str,
+        value_m: f64,
+    ) -> Result<(), Error> {
+        if value_m.abs() > crate::MAX_LENGTH_M && value_m.is_finite() {
+            return Err(Error::LengthOutOfRange {
+                path: path.to_path_buf(),
+                line,
+                column,
+                name: name.to_owned(),
+                value_m,
+                limit_m: crate::MAX_LENGTH_M,
+            });
+        }
+        Ok(())
+    }
+
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.into(),

@@ -57,6 +57,18 @@
 //! # Ok::<(), hapcal_io::Error>(())
 //! ```
 
+/// Largest magnitude of a length, m, that the loaders accept from a file: a log's
+/// `distance_m`, a URDF `<origin xyz>`, a device file's D-H `a_m`/`d_m`, placement `xyz_m`
+/// and other lengths.
+///
+/// Why 1 km: haptic devices and robot arms measure well under 10 m, so a length past
+/// 1000 m is a typo or a unit mistake (micrometres read as metres), never a measurement. Lengths
+/// of that kind used to reach the identification as finite numbers whose squares overflow
+/// (1e200 m → 1e400 = ∞): a panic in the rank decision, or a report of NaN with exit code 0.
+/// The bound leaves three orders of magnitude above any real device and keeps every square
+/// and sum of squares of a residual far from overflow.
+pub const MAX_LENGTH_M: f64 = 1e3;
+
 mod device;
 mod error;
 mod log;

@@ -178,7 +178,11 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
                         *q = value;
                     }
                 }
-                Column::Distance => row.distance_m = parse()?,
+                Column::Distance => {
+                    let value = parse()?;
+                    Error::check_length(path, line, col, name, value)?;
+                    row.distance_m = value;
+                }
                 Column::Ext(k) if !cell.is_empty() => {
                     if let Some(ext) = row.ext.get_mut(k) {
                         *ext = Some(parse()?);

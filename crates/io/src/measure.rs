@@ -425,6 +425,9 @@ pub fn read_measurement_file(
         for (j, &c) in joint_column.iter().enumerate() {
             let prismatic = schema.prismatic.get(j).copied().unwrap_or(false);
             let v = value(c)? * if prismatic { length } else { angle };
+            if prismatic {
+                Error::check_length(path, line, c as u64 + 1, &names[c], v)?;
+            }
             let (min, max) = schema
                 .limits
                 .get(j)
@@ -472,6 +475,7 @@ pub fn read_measurement_file(
         let distance_m = match distance_column {
             Some(c) if !cell(c).is_empty() => {
                 let d = value(c)? * length;
+                Error::check_length(path, line, c as u64 + 1, &names[c], d)?;
                 if d < 0.0 {
                     return Err(Error::Csv {
                         path: path.to_path_buf(),
@@ -519,6 +523,7 @@ pub fn read_measurement_file(
             let mut position_m = [0.0; 3];
             for (p, c) in position_m.iter_mut().zip(m.position.iter().flatten()) {
                 *p = value(*c)? * length;
+                Error::check_length(path, line, *c as u64 + 1, &names[*c], *p)?;
             }
             let rotation = if let [Some(w), Some(x), Some(y), Some(z)] = m.quaternion {
                 let quaternion = [value(w)?, value(x)?, value(y)?, value(z)?];

@@ -493,6 +493,8 @@ fn plan_edits(
     };
     let mut depth = 0usize;
     let mut open: Option<OpenJoint<'_>> = None;
+    // The top-level element being read (`joint "j2"`, `link "base"`), to name an origin.
+    let mut parent = String::new();
     loop {
         let start = reader.buffer_position() as usize;
         let event = match reader.read_event() {
@@ -504,6 +506,20 @@ fn plan_edits(
             Event::Start(ref e) | Event::Empty(ref e) => {
                 let is_empty = matches!(event, Event::Empty(_));
                 let name = e.name();
+                if depth == 1 {
+                    let own = attribute(e, "name").ok().flatten().unwrap_or_default();
+                    parent = format!("{} {own:?}", name.as_ref());
+                }
+                if name.as_ref() == "origin"
+                    && let Ok(Some(xyz)) = attribute(e, "xyz")
+                    && let Some(xyz) = parse_triple(&xyz)
+                {
+                    for v in xyz {
+                        let (line, column) = line_column(text, start);
+                        let what = format!("{parent} <origin xyz>");
+                        Error::check_length(path, line, column, what.trim_start(), v)?;
+                    }
+                }
                 if depth == 1 && name.as_ref() == "joint" {
                     let joint_name = attribute(e, "name")
                         .map_err(|m| xml_err(&reader, m))?

@@ -416,11 +416,45 @@ fn reference_from(truth: Option<&std::path::PathBuf>) -> Result<crate::paper::Re
     crate::paper::Reference::load(&truth)
 }
 
+/// The files a study reads, which its report must not replace: the truth file (given or the
+/// bundled one) and the device file it names.
+fn study_inputs(truth: Option<&std::path::PathBuf>) -> Vec<std::path::PathBuf> {
+    let truth = truth
+        .cloned()
+        .unwrap_or_else(|| crate::project_root().join("fixtures/reference-device/truth.toml"));
+    let device = hapcal_sim::read_truth(&truth)
+        .ok()
+        .map(|t| t.device_path(&truth));
+    std::iter::once(truth).chain(device).collect()
+}
+
+/// Checks before a study runs that its Markdown report `out` can be written: see
+/// [`hapcal_calibrate::calibrate::check_output`].
+fn check_report(out: &std::path::Path, truth: Option<&std::path::PathBuf>) -> Result<()> {
+    use hapcal_calibrate::calibrate::{check_extension, check_output};
+    check_extension(out, &["md"], "the study's report", false)?;
+    let inputs = study_inputs(truth);
+    let inputs: Vec<&std::path::Path> = inputs.iter().map(|p| p.as_path()).collect();
+    check_output(out, &inputs)
+}
+
+/// Writes a study's Markdown report atomically, never over one of its inputs.
+fn write_report(
+    out: &std::path::Path,
+    text: &str,
+    truth: Option<&std::path::PathBuf>,
+) -> Result<()> {
+    let inputs = study_inputs(truth);
+    let inputs: Vec<&std::path::Path> = inputs.iter().map(|p| p.as_path()).collect();
+    hapcal_calibrate::calibrate::write_new(out, text, &inputs)
+}
+
 /// Runs `hapcal pose-study`, writes the Markdown and returns it.
 ///
 /// # Errors
 /// Unreadable truth, a simulation or identification failure, or an unwritable output.
 pub fn run_study(args: &StudyArgs, progress: &dyn Fn(u64)) -> Result<String> {
+    check_report(&args.out, args.truth.as_ref())?;
     let r = reference_from(args.truth.as_ref())?;
     let cfg = StudyConfig {
         seeds: args.seeds,
@@ -451,7 +485,7 @@ pub fn run_study(args: &StudyArgs, progress: &dyn Fn(u64)) -> Result<String> {
         args.out.display()
     );
     let text = study_markdown(&study, &cfg, &command);
-    std::fs::write(&args.out, &text).with_context(|| format!("writing {}", args.out.display()))?;
+    write_report(&args.out, &text, args.truth.as_ref())?;
     Ok(text)
 }
 
@@ -903,6 +937,7 @@ pub struct BoundArgs {
 /// # Errors
 /// Unreadable truth, a design failure, or an unwritable output.
 pub fn run_bound(args: &BoundArgs, progress: &dyn Fn(&str)) -> Result<String> {
+    check_report(&args.out, args.truth.as_ref())?;
     let r = reference_from(args.truth.as_ref())?;
     let cfg = BoundConfig {
         n_candidates: args.candidates,
@@ -925,7 +960,7 @@ pub fn run_bound(args: &BoundArgs, progress: &dyn Fn(&str)) -> Result<String> {
         args.out.display()
     );
     let text = bound_markdown(&b, &cfg, &command);
-    std::fs::write(&args.out, &text).with_context(|| format!("writing {}", args.out.display()))?;
+    write_report(&args.out, &text, args.truth.as_ref())?;
     Ok(text)
 }
 

@@ -4,6 +4,7 @@
 #![allow(clippy::unwrap_used)] // test helpers fail loudly on a malformed report; that is the test
 
 mod force;
+mod hostile;
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};

@@ -93,6 +93,20 @@ impl<'a> Locator<'a> {
         })
     }
 
+    /// Checks `value` is a finite length within ±[`MAX_LENGTH_M`](crate::MAX_LENGTH_M).
+    fn length(&self, keys: &[Key<'_>], value: f64) -> Result<(), Error> {
+        self.finite(keys, value)?;
+        let (line, column) = self.at(keys);
+        let name = keys
+            .iter()
+            .map(|k| match k {
+                N(n) => format!(".{n}"),
+                I(i) => format!("[{i}]"),
+            })
+            .collect::<String>();
+        Error::check_length(self.path, line, column, name.trim_start_matches('.'), value)
+    }
+
     /// Checks `value` is finite and `ok(value)`, else reports `requirement` at `keys`.
     fn check(
         &self,
@@ -169,6 +183,9 @@ fn check_chain(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
         ] {
             loc.finite(&[N("dh"), I(i), N(field)], value)?;
         }
+        for (field, value) in [("a_m", row.a_m), ("d_m", row.d_m)] {
+            loc.length(&[N("dh"), I(i), N(field)], value)?;
+        }
         if let JointRef::Joint(j) = row.joint {
             if j != previous + 1 {
                 return Err(loc.invalid(
@@ -202,6 +219,9 @@ fn check_chain(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
             for (k, v) in values.into_iter().enumerate() {
                 loc.finite(&[N("placement"), I(i), N(field), I(k)], v)?;
             }
+        }
+        for (k, v) in p.xyz_m.into_iter().enumerate() {
+            loc.length(&[N("placement"), I(i), N("xyz_m"), I(k)], v)?;
         }
         if let Some(axis) = p.axis
             && axis.iter().map(|a| a * a).sum::<f64>().sqrt() < 1e-12
@@ -283,6 +303,7 @@ fn check_transmissions(device: &Device, loc: &Locator<'_>) -> Result<(), Error> 
             positive,
             "must be positive",
         )?;
+        loc.length(&at("drum_distance_m"), c.drum_distance_m)?;
     }
     if let Some(p) = &device.parallelogram {
         for (field, value) in [
@@ -297,6 +318,7 @@ fn check_transmissions(device: &Device, loc: &Locator<'_>) -> Result<(), Error> 
                 positive,
                 "must be positive",
             )?;
+            loc.length(&[N("parallelogram"), N(field)], value)?;
         }
     }
     if let Some(c) = &device.cable_encoder {
@@ -307,6 +329,7 @@ fn check_transmissions(device: &Device, loc: &Locator<'_>) -> Result<(), Error> 
             positive,
             "must be positive",
         )?;
+        loc.length(&at("drum_radius_m"), c.drum_radius_m)?;
         if c.counts_per_rev == 0 {
             return Err(loc.invalid(&at("counts_per_rev"), "counts_per_rev must be positive"));
         }
@@ -330,6 +353,9 @@ fn check_calibration(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
         let at = |field| [N("calibration"), N("values"), N(&v.name), N(field)];
         loc.check(&at("value"), v.value, any, "")?;
         loc.check(&at("std"), v.std, |s| s >= 0.0, "must not be negative")?;
+        if v.unit == "m" {
+            loc.length(&at("value"), v.value)?;
+        }
     }
     Ok(())
 }

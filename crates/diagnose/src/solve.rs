@@ -1,0 +1,259 @@
+//! Every least-squares solve of the diagnosis, through `hapcal-identify` (its Levenberg–Marquardt,
+//! QR-based, and its covariance), so that the project has one numerical engine.
+//!
+//! - [`lstsq`]: the linear problem `min ‖a·x − b‖` as a [`Problem`] with residual `a·x − b` and
+//!   Jacobian `a`, solved by one Gauss–Newton step of [`levenberg_marquardt`] from `x = 0`, with
+//!   `(aᵀa)⁻¹` from [`covariance`].
+//! - [`fit_model`]: the nonlinear fit of the diagnosis model ([`Setup::linearise`]) by
+//!   [`levenberg_marquardt`].
+//!
+//! Dependent columns are dropped before either solve ([`pivoted_basis`]): the identify solvers
+//! expect a free set the data determine.
+
+use std::cell::RefCell;
+
+use faer::{Col, ColMut, ColRef, Mat, MatMut};
+use hapcal_identify::{
+    EvalError, LmConfig, ParamLayout, ParamSpec, Problem, Role, Unit, covariance,
+    levenberg_marquardt,
+};
+use nalgebra::{DMatrix, DVector};
+
+use crate::model::{Data, Linear, Setup, State};
+use crate::stats::pivoted_basis;
+
+/// Relative remaining norm below which [`lstsq`] drops a column as dependent on the columns
+/// picked before it (the scaled problem's numerical rank; the SVD solve it replaces cut
+/// singular values below `1e-9·s_max`).
+const LSTSQ_RANK_TOL: f64 = 1e-9;
+
+/// A layout of `k` dimensionless parameters `x0 … x{k−1}`.
+fn dimensionless_layout(k: usize) -> ParamLayout {
+    ParamLayout::new(
+        (0..k)
+            .map(|j| ParamSpec {
+                name: format!("x{j}"),
+                unit: Unit::Dimensionless,
+                role: Role::Model,
+            })
+            .collect(),
+    )
+}
+
+/// `min_x ½‖a·x − b‖²`.
+struct LinearProblem {
+    layout: ParamLayout,
+    a: Mat<f64>,
+    b: Col<f64>,
+}
+
+impl Problem for LinearProblem {
+    fn layout(&self) -> &ParamLayout {
+        &self.layout
+    }
+    fn n_residuals(&self) -> usize {
+        self.a.nrows()
+    }
+    fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
+        let ax = &self.a * x;
+        for i in 0..self.a.nrows() {
+            out[i] = ax[i] - self.b[i];
+        }
+        Ok(())
+    }
+    fn jacobian(&self, _x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+        jac.copy_from(&self.a);
+        Ok(())
+    }
+}
+
+/// Linear least squares `min ‖a·x − b‖` on the columns of `a` that are independent at
+/// [`LSTSQ_RANK_TOL`] (the others get `x = 0`, and zero rows and columns in the covariance).
+/// Returns `x` and `(aᵀa)⁻¹` on the kept columns (the unscaled covariance for σ = 1).
+///
+/// The solve is [`levenberg_marquardt`] from `x = 0`, stopped after its first step: with the
+/// trust region unbounded (`factor = ∞`) that step is the Gauss–Newton step, i.e. the
+/// least-squares solution, from the QR of the column-scaled `a`. The covariance is
+/// [`covariance`] (QR of the column-scaled kept columns).
+pub(crate) fn lstsq(a: &DMatrix<f64>, b: &DVector<f64>) -> (DVector<f64>, DMatrix<f64>) {
+    let (m, k) = a.shape();
+    let mut x = DVector::zeros(k);
+    let mut cov = DMatrix::zeros(k, k);
+    if k == 0 || m == 0 {
+        return (x, cov);
+    }
+    let (_, picked) = pivoted_basis(a, &DMatrix::zeros(m, 0), LSTSQ_RANK_TOL);
+    let free: Vec<usize> = (0..k).filter(|&c| picked[c].is_some()).collect();
+    if free.is_empty() {
+        return (x, cov);
+    }
+    let problem = LinearProblem {
+        layout: dimensionless_layout(k),
+        a: Mat::from_fn(m, k, |i, j| a[(i, j)]),
+        b: Col::from_fn(m, |i| b[i]),
+    };
+    let cfg = LmConfig {
+        // The initial evaluation and the one trial point of the Gauss–Newton step.
+        max_evaluations: 2,
+        factor: f64::INFINITY,
+        ..LmConfig::default()
+    };
+    if let Ok(fit) = levenberg_marquardt(&problem, Col::zeros(k), &free, &cfg) {
+        for &c in &free {
+            x[c] = fit.x[c];
+        }
+    }
+    if let Ok(c) = covariance(problem.a.as_ref(), &problem.layout, &free, 1.0) {
+        for (p, &i) in free.iter().enumerate() {
+            for (q, &j) in free.iter().enumerate() {
+                cov[(i, j)] = c.matrix[(p, q)];
+            }
+        }
+    }
+    (x, cov)
+}
+
+/// The diagnosis model as a [`Problem`]: `x` is the change of the parameters from `start`
+/// ([`State::apply`], in the column order of [`Setup::linearise`]), the residuals are
+/// `(model − measured)/σ` (the negated [`Linear::r`]) and the Jacobian is [`Linear::j`].
+struct ModelProblem<'a> {
+    setup: &'a Setup,
+    data: &'a Data,
+    start: &'a State,
+    layout: &'a ParamLayout,
+    n_residuals: usize,
+    /// The last linearisation and the `x` it was taken at: the solver asks for the residuals
+    /// and the Jacobian of one point together, and the caller for the linearisation at the
+    /// estimate.
+    last: RefCell<Option<(Vec<f64>, Linear)>>,
+}
+
+impl ModelProblem<'_> {
+    fn state_at(&self, x: &[f64]) -> State {
+        let mut s = self.start.clone();
+        s.apply(x);
+        s
+    }
+    /// Evaluates the linearisation at `x` (or reuses the last one) and passes it to `f`.
+    fn with_linear<T>(&self, x: ColRef<'_, f64>, f: impl FnOnce(&Linear) -> T) -> T {
+        let x: Vec<f64> = x.iter().copied().collect();
+        let mut last = self.last.borrow_mut();
+        if last.as_ref().is_none_or(|(at, _)| *at != x) {
+            let lin = self.setup.linearise(self.data, &self.state_at(&x));
+            *last = Some((x, lin));
+        }
+        match last.as_ref() {
+            Some((_, lin)) => f(lin),
+            None => unreachable!("linearisation stored above"),
+        }
+    }
+    fn write(lin: &Linear, out: Option<ColMut<'_, f64>>, jac: Option<MatMut<'_, f64>>) {
+        if let Some(mut out) = out {
+            for (i, r) in lin.r.iter().enumerate() {
+                out[i] = -r;
+            }
+        }
+        if let Some(mut jac) = jac {
+            for c in 0..lin.j.ncols() {
+                for i in 0..lin.j.nrows() {
+                    jac[(i, c)] = lin.j[(i, c)];
+                }
+            }
+        }
+    }
+}
+
+impl Problem for ModelProblem<'_> {
+    fn layout(&self) -> &ParamLayout {
+        self.layout
+    }
+    fn n_residuals(&self) -> usize {
+        self.n_residuals
+    }
+    fn residuals(&self, x: ColRef<'_, f64>, out: ColMut<'_, f64>) -> Result<(), EvalError> {
+        self.with_linear(x, |lin| Self::write(lin, Some(out), None));
+        Ok(())
+    }
+    fn jacobian(&self, x: ColRef<'_, f64>, jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+        self.with_linear(x, |lin| Self::write(lin, None, Some(jac)));
+        Ok(())
+    }
+    fn residuals_and_jacobian(
+        &self,
+        x: ColRef<'_, f64>,
+        out: ColMut<'_, f64>,
+        jac: MatMut<'_, f64>,
+    ) -> Result<(), EvalError> {
+        self.with_linear(x, |lin| Self::write(lin, Some(out), Some(jac)));
+        Ok(())
+    }
+}
+
+/// Trial points per iteration of [`fit_model`]'s budget: the Gauss–Newton it replaces tried
+/// up to 8 step lengths per iteration.
+const TRIALS_PER_ITERATION: usize = 8;
+
+/// The columns of `lin.j` independent at `rank_tol` ([`pivoted_basis`]).
+fn independent_columns(lin: &Linear, rank_tol: f64) -> Vec<usize> {
+    let (_, picked) = pivoted_basis(&lin.j, &DMatrix::zeros(lin.j.nrows(), 0), rank_tol);
+    (0..picked.len()).filter(|&c| picked[c].is_some()).collect()
+}
+
+/// Fits the model from `s` by [`levenberg_marquardt`] on the columns of [`Setup::linearise`]
+/// that are independent at `rank_tol` ([`pivoted_basis`]), with the budget of `iters`
+/// Gauss–Newton iterations with step halving: at most `iters·`[`TRIALS_PER_ITERATION`] trial
+/// points (model evaluations besides the one at `s`); returns the fitted state and its
+/// linearisation. Which columns the data determine can change as the estimate moves (a
+/// near-dependency at the nominal becomes a dependency at the estimate): when the solver
+/// stops on a set that is no longer the independent one at its estimate, it goes on from
+/// there on the new set, with what is left of the budget. `iters = 0` leaves `s` as it is.
+pub(crate) fn fit_model(
+    setup: &Setup,
+    data: &Data,
+    mut s: State,
+    iters: usize,
+    rank_tol: f64,
+) -> (State, Linear) {
+    let mut lin = setup.linearise(data, &s);
+    let (m, n) = lin.j.shape();
+    let layout = dimensionless_layout(n);
+    let mut free = independent_columns(&lin, rank_tol);
+    let budget = iters * TRIALS_PER_ITERATION;
+    let mut used = 0;
+    while used < budget && !free.is_empty() {
+        let cfg = LmConfig {
+            max_evaluations: budget - used + 1,
+            // The model is close to linear about the calibrated baseline: try the
+            // Gauss–Newton step first.
+            factor: f64::INFINITY,
+            ..LmConfig::default()
+        };
+        let problem = ModelProblem {
+            setup,
+            data,
+            start: &s,
+            layout: &layout,
+            n_residuals: m,
+            last: RefCell::new(Some((vec![0.0; n], lin))),
+        };
+        let fit = levenberg_marquardt(&problem, Col::zeros(n), &free, &cfg);
+        let x: Vec<f64> = match &fit {
+            Ok(fit) => fit.x.iter().copied().collect(),
+            Err(_) => vec![0.0; n],
+        };
+        let next = problem.state_at(&x);
+        lin = match problem.last.into_inner() {
+            Some((at, lin)) if at == x => lin,
+            _ => setup.linearise(data, &next),
+        };
+        s = next;
+        let Ok(fit) = fit else { break };
+        used += fit.n_evaluations.saturating_sub(1).max(1);
+        let now = independent_columns(&lin, rank_tol);
+        if now == free {
+            break;
+        }
+        free = now;
+    }
+    (s, lin)
+}

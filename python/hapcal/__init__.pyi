@@ -1,0 +1,192 @@
+"""Type stubs of hapcal (Python bindings of the hapcal Rust crates). Units: m, rad, s."""
+
+import os
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+PathLike = Union[str, os.PathLike[str]]
+ArrayLike = npt.ArrayLike
+
+__version__: str
+MODELS: Tuple[str, ...]
+
+class HapcalError(ValueError):
+    """Any error reported by hapcal; the message is the whole chain of causes, with
+    file:line:column where there is one."""
+
+class Device:
+    """A robot or haptic device: a serial URDF with tip link(s), or a hapcal device file."""
+
+    @staticmethod
+    def from_urdf(path: PathLike, tip: str, tips: Optional[Sequence[str]] = None) -> Device:
+        """URDF with the tool on link ``tip``; ``tips``: further tip links of a tree (marker
+        k+1 on the k-th of ``[tip, *tips]``)."""
+    @staticmethod
+    def from_toml(path: PathLike) -> Device:
+        """hapcal device file: D-H / modified D-H table, URDF placements, or a haptic device."""
+    @property
+    def joint_names(self) -> List[str]:
+        """Joint names, chain order (the columns ``q1..qn`` in order)."""
+    @property
+    def n_joints(self) -> int: ...
+    @property
+    def joint_limits(self) -> List[Tuple[float, float]]:
+        """``(lower, upper)`` per joint, rad (m for a prismatic joint)."""
+    @property
+    def path(self) -> str: ...
+    @property
+    def tips(self) -> List[str]: ...
+
+class Measurements:
+    """One data set of joint readings with marker poses or distances."""
+
+    @classmethod
+    def from_csv(
+        cls, path: PathLike, length_unit: str = "m", angle_unit: str = "rad"
+    ) -> Measurements:
+        """Measurement CSV / industrial_calibration YAML / hapcal log / MUKCa folder, read when
+        calibrating. ``length_unit``: "m" | "mm"; ``angle_unit``: "rad" | "deg"."""
+    @classmethod
+    def from_arrays(
+        cls,
+        q: ArrayLike,
+        positions: Optional[ArrayLike] = None,
+        quaternions: Optional[ArrayLike] = None,
+        distances: Optional[ArrayLike] = None,
+        joint_names: Optional[Sequence[str]] = None,
+        *,
+        rpy: Optional[ArrayLike] = None,
+        t: Optional[ArrayLike] = None,
+        name: str = "arrays",
+        length_unit: str = "m",
+        angle_unit: str = "rad",
+        ignored_columns: Optional[Sequence[str]] = None,
+        ignore_unknown_joints: bool = False,
+    ) -> Measurements:
+        """``q`` (n, n_joints) rad/m; ``positions`` (n, 3) | (n, k, 3) m, all-NaN marker: not
+        seen; ``quaternions`` (n, 4) | (n, k, 4) w, x, y, z, or ``rpy`` (n, 3) | (n, k, 3)
+        R = Rz·Ry·Rx, rad; ``distances`` (n,) m, NaN: none; ``t`` (n,) s."""
+    @classmethod
+    def from_dataframe(
+        cls,
+        df: Any,
+        joint_names: Optional[Sequence[str]] = None,
+        *,
+        name: str = "dataframe",
+        length_unit: str = "m",
+        angle_unit: str = "rad",
+    ) -> Measurements:
+        """pandas DataFrame with the measurement CSV's column names."""
+    @property
+    def n_rows(self) -> Optional[int]: ...
+    @property
+    def path(self) -> Optional[str]: ...
+    @property
+    def name(self) -> str: ...
+
+class Calibration:
+    """Result of :func:`calibrate`."""
+
+    @property
+    def report(self) -> Dict[str, Any]:
+        """``hapcal calibrate --json``'s document as a dict."""
+    def to_json(self) -> str:
+        """``hapcal calibrate --json``'s document, byte for byte (no final newline)."""
+    @property
+    def model(self) -> str: ...
+    @property
+    def parameters(self) -> Any:
+        """name, value, std, unit per identified parameter: a pandas DataFrame, or a list of
+        dicts without pandas."""
+    @property
+    def figures(self) -> List[Dict[str, Any]]:
+        """Per data set: name, role, n_rows, before / after figures (m, rad)."""
+    @property
+    def frames(self) -> List[Dict[str, Any]]: ...
+    @property
+    def warnings(self) -> List[str]: ...
+    def to_urdf(self, path: PathLike) -> List[str]:
+        """Calibrated copy of the source URDF (+ ``<path>.calibration.toml``); paths written."""
+    def to_toml(self, path: PathLike) -> List[str]:
+        """Device file with a ``[calibration]`` table; paths written."""
+
+MeasurementsLike = Union[Measurements, Sequence[Union[Measurements, PathLike]], PathLike]
+
+def calibrate(
+    device: Device,
+    train: MeasurementsLike,
+    test: Optional[MeasurementsLike] = None,
+    model: str = "auto",
+    sigma_m: Optional[float] = None,
+    sigma_rad: Optional[float] = None,
+    test_last: Optional[float] = None,
+    folds: int = 5,
+    *,
+    socket_distance_m: float = 0.05,
+    joint: bool = False,
+) -> Calibration:
+    """Identify the model (``model="auto"``: chosen by blocked cross-validation on ``train``)
+    and report figures before / after on ``train`` and ``test``. Raises HapcalError."""
+
+CRITERIA: Tuple[str, ...]
+
+def simulate(
+    truth: Optional[PathLike] = None,
+    seed: int = 1,
+    poses: int = 200,
+    motion: bool = False,
+    noise: str = "paper",
+    effects: Optional[Sequence[str]] = None,
+    *,
+    device: Optional[PathLike] = None,
+    period_s: float = 0.5,
+    path: Optional[PathLike] = None,
+) -> Dict[str, npt.NDArray[np.float64]]:
+    """``hapcal simulate``: the log's columns in CSV order, each ``(poses,)``: ``q1..qn`` rad
+    (m prismatic), ``distance_m`` m, ``ext1..ext4`` rad (NaN: none), ``t_s`` s (motion).
+    ``noise``: "paper" | "arc-length"; ``effects``: e.g. ``"backlash:j2=1e-3"`` (implies
+    motion); ``path``: also write the CSV (atomically). Raises HapcalError."""
+
+def plan_poses(
+    device: Device,
+    measurement: str = "distance",
+    count: int = 30,
+    criterion: str = "d-optimal",
+    seed: int = 1,
+    candidates: int = 1000,
+    *,
+    sigma_m: Optional[float] = None,
+    separate_transmission_run: bool = False,
+    refine: bool = False,
+    path: Optional[PathLike] = None,
+) -> npt.NDArray[np.float64]:
+    """``hapcal plan-poses``: joint readings ``(count, n_joints)``, rad (m prismatic), chain
+    order, full precision. ``measurement``: "distance" | "position"; ``criterion``: one of
+    :data:`CRITERIA`; ``sigma_m`` m; ``path``: also write the CSV (9 decimals, atomically).
+    Raises HapcalError."""
+
+class Diagnosis:
+    """Result of :func:`diagnose`."""
+
+    @property
+    def report(self) -> Dict[str, Any]:
+        """``hapcal diagnose --json``'s document as a dict (m, rad)."""
+    def to_json(self) -> str:
+        """``hapcal diagnose --json``'s document, byte for byte (no final newline)."""
+    @property
+    def verdict(self) -> str:
+        """Accepted effects joined by ``+``, or ``"none"``."""
+    @property
+    def warnings(self) -> List[str]:
+        """The log's warnings (``file:line:column: …``)."""
+
+def diagnose(
+    device: Device,
+    data: Union[Measurements, PathLike],
+    baseline: str = "full",
+    folds: int = 5,
+) -> Diagnosis:
+    """``hapcal diagnose``: ``data`` a log CSV path or ``Measurements.from_csv`` of one;
+    ``baseline``: "full" | "kinematics"; ``folds`` ≥ 2. Raises HapcalError."""

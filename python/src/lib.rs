@@ -1,0 +1,927 @@
+//! Python bindings of hapcal (`hapcal._hapcal`): devices, measurements (files or arrays), the
+//! calibration of `hapcal-calibrate`, and the `simulate`, `plan-poses` and `diagnose` workflows
+//! (`hapcal-sim`, `hapcal_calibrate::plan`, `hapcal-diagnose`). The Python package `hapcal`
+//! (python/hapcal) wraps this module with NumPy / pandas conveniences; everything numeric
+//! happens here, in the same library functions the `hapcal` command line calls.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, anyhow, bail};
+use hapcal_calibrate::calibrate::{self, ModelChoice, Outcome, Plan};
+use hapcal_calibrate::measured::{self, Robot};
+use hapcal_io::{
+    AngleUnit, JOINT_LIMIT_SLACK, LengthUnit, MarkerSample, MeasuredRow, MeasurementTable, Units,
+};
+use nalgebra::UnitQuaternion;
+use pyo3::create_exception;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+create_exception!(
+    hapcal,
+    HapcalError,
+    PyValueError,
+    "An error reported by hapcal: unreadable or inconsistent input, or data that cannot determine the model. The message is the whole chain of causes (file:line:column where there is one)."
+);
+
+/// The anyhow chain as one message (`outer: inner: …`), as the command line prints it.
+fn py_err(e: anyhow::Error) -> PyErr {
+    HapcalError::new_err(format!("{e:#}"))
+}
+
+fn units(length_unit: &str, angle_unit: &str) -> Result<Units> {
+    let length: LengthUnit = length_unit
+        .parse()
+        .map_err(|e: String| anyhow!("length_unit: {e}"))?;
+    let angle: AngleUnit = angle_unit
+        .parse()
+        .map_err(|e: String| anyhow!("angle_unit: {e}"))?;
+    Ok(Units::new(length, angle))
+}
+
+/// A device: a URDF with one or more tip links, or a hapcal device file (TOML).
+#[pyclass(module = "hapcal", name = "Device", frozen)]
+struct PyDevice {
+    path: PathBuf,
+    tip: String,
+    tips: Vec<String>,
+    device: hapcal_io::Device,
+    /// The robot of the marker workflow, or why there is none (a haptic device's chain).
+    robot: std::result::Result<Robot, String>,
+}
+
+impl PyDevice {
+    fn is_urdf(path: &Path) -> bool {
+        path.extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
+    }
+}
+
+#[pymethods]
+impl PyDevice {
+    /// Reads a serial URDF whose tool sits on link `tip`; `tips` names further tip links of a
+    /// tree (marker k+1 sits on the k-th of `[tip, *tips]`; markers past the last on the last).
+    ///
+    /// Raises HapcalError for an unreadable URDF or an unknown link.
+    #[staticmethod]
+    #[pyo3(signature = (path, tip, tips = None))]
+    fn from_urdf(path: PathBuf, tip: String, tips: Option<Vec<String>>) -> PyResult<Self> {
+        let tips = tips.unwrap_or_default();
+        let device = calibrate::load_device(&path, &tip).map_err(py_err)?;
+        let all: Vec<String> = std::iter::once(tip.clone())
+            .chain(tips.iter().cloned())
+            .collect();
+        let robot = measured::robot_from_urdf(&path, &all).map_err(py_err)?;
+        Ok(Self {
+            path,
+            tip,
+            tips,
+            device,
+            robot: Ok(robot),
+        })
+    }
+
+    /// Reads a hapcal device file (TOML): a D-H / modified D-H table, URDF placements, or a
+    /// capstan-driven haptic device with its transmissions.
+    ///
+    /// Raises HapcalError for an unreadable or invalid file (file:line:column).
+    #[staticmethod]
+    fn from_toml(path: PathBuf) -> PyResult<Self> {
+        if Self::is_urdf(&path) {
+            return Err(py_err(anyhow!(
+                "{}: a URDF: use Device.from_urdf(path, tip=...)",
+                path.display()
+            )));
+        }
+        let device = calibrate::load_device(&path, "").map_err(py_err)?;
+        let robot = measured::robot_from_device(&device).map_err(|e| format!("{e:#}"));
+        Ok(Self {
+            path,
+            tip: String::new(),
+            tips: Vec::new(),
+            device,
+            robot,
+        })
+    }
+
+    /// Joint names in chain order: the columns `q1..qn` of a measurement table, in order.
+    #[getter]
+    fn joint_names(&self) -> Vec<String> {
+        match &self.robot {
+            Ok(r) => r.joint_names.clone(),
+            Err(_) => self.device.joints.iter().map(|j| j.name.clone()).collect(),
+        }
+    }
+
+    /// Number of joints.
+    #[getter]
+    fn n_joints(&self) -> usize {
+        self.joint_names().len()
+    }
+
+    /// Joint limits `(lower, upper)` per joint, rad (m for a prismatic joint).
+    #[getter]
+    fn joint_limits(&self) -> Vec<(f64, f64)> {
+        match &self.robot {
+            Ok(r) => r.limits.clone(),
+            Err(_) => self.device.joint_limits(),
+        }
+    }
+
+    /// The file the device was read from.
+    #[getter]
+    fn path(&self) -> String {
+        self.path.display().to_string()
+    }
+
+    /// Tip links (`[tip, *tips]`; empty for a device file).
+    #[getter]
+    fn tips(&self) -> Vec<String> {
+        if self.tip.is_empty() {
+            return Vec::new();
+        }
+        std::iter::once(self.tip.clone())
+            .chain(self.tips.iter().cloned())
+            .collect()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Device({:?}, joints={:?})",
+            self.path.display().to_string(),
+            self.joint_names()
+        )
+    }
+}
+
+/// Measurements given as arrays, in SI units but for the joints (converted when the device,
+/// and so which joints are prismatic, is known).
+#[derive(Clone, Debug)]
+struct Arrays {
+    name: String,
+    /// Joint readings per row, in the columns' order and `units`.
+    q: Vec<Vec<f64>>,
+    /// Column names of `q` (device joint names or `q1..qn`), or chain order.
+    joint_names: Option<Vec<String>>,
+    markers: Vec<Vec<MarkerSample>>,
+    n_markers: usize,
+    has_orientation: bool,
+    distances: Option<Vec<Option<f64>>>,
+    t_s: Option<Vec<f64>>,
+    units: Units,
+    ignored_columns: Vec<String>,
+    /// Columns of `q` named in `joint_names` that are no joint of the device are ignored (and
+    /// reported) rather than an error: a data frame's columns, as a CSV header's.
+    ignore_unknown_joints: bool,
+}
+
+#[derive(Clone, Debug)]
+enum Source {
+    /// A measurement file (CSV, YAML), a MUKCa placement or run folder, or a hapcal log.
+    Path {
+        path: PathBuf,
+        units: Units,
+    },
+    Arrays(Box<Arrays>),
+}
+
+/// Measurements: a file or folder read at calibration time, or arrays.
+#[pyclass(module = "hapcal._hapcal", name = "_Measurements", frozen)]
+struct PyMeasurements {
+    source: Source,
+}
+
+fn check_len(what: &str, got: usize, want: usize) -> Result<()> {
+    if got != want {
+        bail!("{what}: expected {want} values, found {got}");
+    }
+    Ok(())
+}
+
+#[pymethods]
+impl PyMeasurements {
+    #[staticmethod]
+    fn from_path(path: PathBuf, length_unit: &str, angle_unit: &str) -> PyResult<Self> {
+        let units = units(length_unit, angle_unit).map_err(py_err)?;
+        std::fs::metadata(&path)
+            .with_context(|| format!("reading measurements {}", path.display()))
+            .map_err(py_err)?;
+        Ok(Self {
+            source: Source::Path { path, units },
+        })
+    }
+
+    /// Flat row-major arrays (shapes checked by the Python wrapper, again here).
+    #[staticmethod]
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (name, n_rows, n_joints, q, n_markers, positions, quaternions, rpy, distances, t_s, joint_names, length_unit, angle_unit, ignored_columns, ignore_unknown_joints))]
+    fn from_flat(
+        name: String,
+        n_rows: usize,
+        n_joints: usize,
+        q: Vec<f64>,
+        n_markers: usize,
+        positions: Option<Vec<f64>>,
+        quaternions: Option<Vec<f64>>,
+        rpy: Option<Vec<f64>>,
+        distances: Option<Vec<f64>>,
+        t_s: Option<Vec<f64>>,
+        joint_names: Option<Vec<String>>,
+        length_unit: &str,
+        angle_unit: &str,
+        ignored_columns: Vec<String>,
+        ignore_unknown_joints: bool,
+    ) -> PyResult<Self> {
+        let arrays = (|| -> Result<Arrays> {
+            let units = units(length_unit, angle_unit)?;
+            if n_rows == 0 {
+                bail!("{name}: no rows");
+            }
+            if n_joints == 0 {
+                bail!("{name}: q has no joint columns");
+            }
+            check_len("q", q.len(), n_rows * n_joints)?;
+            if let Some(names) = &joint_names {
+                check_len("joint_names", names.len(), n_joints)?;
+            }
+            if positions.is_none() && distances.is_none() {
+                bail!(
+                    "{name}: no measurements: give marker positions (n, 3) or (n, k, 3), or distances (n,)"
+                );
+            }
+            if quaternions.is_some() && rpy.is_some() {
+                bail!("{name}: give one orientation, quaternions or rpy, not both");
+            }
+            if (quaternions.is_some() || rpy.is_some()) && positions.is_none() {
+                bail!("{name}: orientations need marker positions");
+            }
+            if let Some(p) = &positions {
+                check_len("positions", p.len(), n_rows * n_markers * 3)?;
+            }
+            if let Some(r) = &quaternions {
+                check_len("quaternions", r.len(), n_rows * n_markers * 4)?;
+            }
+            if let Some(r) = &rpy {
+                check_len("rpy", r.len(), n_rows * n_markers * 3)?;
+            }
+            if let Some(d) = &distances {
+                check_len("distances", d.len(), n_rows)?;
+            }
+            if let Some(t) = &t_s {
+                check_len("t", t.len(), n_rows)?;
+            }
+            let length = units.length.to_m();
+            let angle = units.angle.to_rad();
+            let q: Vec<Vec<f64>> = q.chunks(n_joints).map(<[f64]>::to_vec).collect();
+            for (i, row) in q.iter().enumerate() {
+                if let Some((j, v)) = row.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                    bail!(
+                        "{name}: row {}: q[{i}, {j}] = {v}: joint readings must be finite",
+                        i + 1
+                    );
+                }
+            }
+            let mut markers = Vec::with_capacity(n_rows);
+            for i in 0..n_rows {
+                let mut seen = Vec::new();
+                if let Some(p) = &positions {
+                    for k in 0..n_markers {
+                        let pos = &p[(i * n_markers + k) * 3..][..3];
+                        let rot: Option<(&[f64], bool)> = match (&quaternions, &rpy) {
+                            (Some(r), _) => Some((&r[(i * n_markers + k) * 4..][..4], true)),
+                            (_, Some(r)) => Some((&r[(i * n_markers + k) * 3..][..3], false)),
+                            _ => None,
+                        };
+                        let cells: Vec<f64> = pos
+                            .iter()
+                            .chain(rot.map_or(&[][..], |r| r.0))
+                            .copied()
+                            .collect();
+                        let nan = cells.iter().filter(|v| v.is_nan()).count();
+                        if nan == cells.len() {
+                            continue; // not seen in this row
+                        }
+                        if nan > 0 {
+                            bail!(
+                                "{name}: row {}, marker {}: NaN beside values ({cells:?}): a marker not seen has all its cells NaN",
+                                i + 1,
+                                k + 1
+                            );
+                        }
+                        if cells.iter().any(|v| !v.is_finite()) {
+                            bail!(
+                                "{name}: row {}, marker {}: not finite: {cells:?}",
+                                i + 1,
+                                k + 1
+                            );
+                        }
+                        let position_m = [pos[0] * length, pos[1] * length, pos[2] * length];
+                        let rotation = match rot {
+                            Some((r, true)) => {
+                                let norm = r.iter().map(|v| v * v).sum::<f64>().sqrt();
+                                if (norm - 1.0).abs() > 1e-3 {
+                                    bail!(
+                                        "{name}: row {}, marker {}: expected a unit quaternion (w, x, y, z), found one of norm {norm}",
+                                        i + 1,
+                                        k + 1
+                                    );
+                                }
+                                Some([r[0] / norm, r[1] / norm, r[2] / norm, r[3] / norm])
+                            }
+                            Some((r, false)) => {
+                                let rotation = UnitQuaternion::from_euler_angles(
+                                    r[0] * angle,
+                                    r[1] * angle,
+                                    r[2] * angle,
+                                );
+                                Some([rotation.w, rotation.i, rotation.j, rotation.k])
+                            }
+                            None => None,
+                        };
+                        seen.push(MarkerSample {
+                            marker: k,
+                            position_m,
+                            rotation,
+                        });
+                    }
+                }
+                markers.push(seen);
+            }
+            let distances = match distances {
+                Some(d) => Some(
+                    d.iter()
+                        .enumerate()
+                        .map(|(i, &v)| {
+                            if v.is_nan() {
+                                Ok(None)
+                            } else if !(v.is_finite() && v >= 0.0) {
+                                bail!(
+                                    "{name}: row {}: expected a distance ≥ 0, found {v}",
+                                    i + 1
+                                )
+                            } else {
+                                Ok(Some(v * length))
+                            }
+                        })
+                        .collect::<Result<Vec<_>>>()?,
+                ),
+                None => None,
+            };
+            if let Some(t) = &t_s {
+                for i in 1..t.len() {
+                    if !(t[i].is_finite()) || t[i] < t[i - 1] {
+                        bail!(
+                            "{name}: row {}: time {} s is before the previous row's {} s (or not finite)",
+                            i + 1,
+                            t[i],
+                            t[i - 1]
+                        );
+                    }
+                }
+            }
+            Ok(Arrays {
+                name: name.clone(),
+                q,
+                joint_names,
+                markers,
+                n_markers: if positions.is_some() { n_markers } else { 0 },
+                has_orientation: quaternions.is_some() || rpy.is_some(),
+                distances,
+                t_s,
+                units,
+                ignored_columns,
+                ignore_unknown_joints,
+            })
+        })()
+        .map_err(py_err)?;
+        Ok(Self {
+            source: Source::Arrays(Box::new(arrays)),
+        })
+    }
+
+    /// Number of rows (`None` for a file, read at calibration time).
+    #[getter]
+    fn n_rows(&self) -> Option<usize> {
+        match &self.source {
+            Source::Path { .. } => None,
+            Source::Arrays(a) => Some(a.q.len()),
+        }
+    }
+
+    /// The file or folder, for measurements read from one.
+    #[getter]
+    fn path(&self) -> Option<PathBuf> {
+        match &self.source {
+            Source::Path { path, .. } => Some(path.clone()),
+            Source::Arrays(_) => None,
+        }
+    }
+
+    /// Whether the values are read (or were given) in m and rad.
+    #[getter]
+    fn si_units(&self) -> bool {
+        match &self.source {
+            Source::Path { units, .. } => *units == Units::default(),
+            Source::Arrays(a) => a.units == Units::default(),
+        }
+    }
+
+    /// Name of the data set in the report.
+    #[getter]
+    fn name(&self) -> String {
+        match &self.source {
+            Source::Path { path, .. } => path.file_stem().map_or_else(
+                || path.display().to_string(),
+                |s| s.to_string_lossy().into_owned(),
+            ),
+            Source::Arrays(a) => a.name.clone(),
+        }
+    }
+}
+
+/// The column of each device joint in `names` (a joint name or `q1..qn`), as a CSV header.
+fn joint_columns(a: &Arrays, robot: &Robot) -> Result<(Vec<usize>, Vec<String>)> {
+    let n = robot.joint_names.len();
+    let width = a.q.first().map_or(0, Vec::len);
+    let Some(names) = &a.joint_names else {
+        if width != n {
+            bail!(
+                "{}: q has {width} columns, the device has {n} joints ({}); give q as (n, {n}) in chain order, or name the columns with joint_names",
+                a.name,
+                robot.joint_names.join(", ")
+            );
+        }
+        return Ok(((0..n).collect(), Vec::new()));
+    };
+    let mut column = vec![None; n];
+    let mut unknown = Vec::new();
+    for (c, name) in names.iter().enumerate() {
+        let j = robot
+            .joint_names
+            .iter()
+            .position(|j| j == name)
+            .or_else(|| {
+                name.strip_prefix('q')
+                    .filter(|d| !d.is_empty() && !d.starts_with('0'))
+                    .and_then(|d| d.parse::<usize>().ok())
+                    .filter(|&k| (1..=n).contains(&k))
+                    .map(|k| k - 1)
+            });
+        match j {
+            Some(j) if column[j].is_some() => {
+                bail!(
+                    "{}: joint {:?} has two columns in joint_names ({name:?})",
+                    a.name,
+                    robot.joint_names[j]
+                )
+            }
+            Some(j) => column[j] = Some(c),
+            None => unknown.push(name.clone()),
+        }
+    }
+    let missing: Vec<&str> = (0..n)
+        .filter(|&j| column[j].is_none())
+        .map(|j| robot.joint_names[j].as_str())
+        .collect();
+    if !missing.is_empty() || !(unknown.is_empty() || a.ignore_unknown_joints) {
+        bail!(
+            "{}: expected one column per joint of the device, named {} (or q1..q{n}); found columns {}; missing {}{}",
+            a.name,
+            robot.joint_names.join(", "),
+            names.join(", "),
+            if missing.is_empty() {
+                "none".to_owned()
+            } else {
+                missing.join(", ")
+            },
+            if unknown.is_empty() {
+                String::new()
+            } else {
+                format!("; not joints of the device: {}", unknown.join(", "))
+            }
+        );
+    }
+    Ok((column.into_iter().flatten().collect(), unknown))
+}
+
+/// The measurement table of `a` for `robot`: joints in chain order and SI units, checked
+/// against the joint limits as a measurement file is ([`JOINT_LIMIT_SLACK`]).
+fn table(a: &Arrays, robot: &Robot) -> Result<MeasurementTable> {
+    let (columns, unknown) = joint_columns(a, robot)?;
+    let length = a.units.length.to_m();
+    let angle = a.units.angle.to_rad();
+    let mut warnings = Vec::new();
+    let mut n_outside = 0usize;
+    let mut rows = Vec::with_capacity(a.q.len());
+    for (i, raw) in a.q.iter().enumerate() {
+        let mut q = Vec::with_capacity(columns.len());
+        for (j, &c) in columns.iter().enumerate() {
+            let prismatic = robot.prismatic.get(j).copied().unwrap_or(false);
+            let v = raw[c] * if prismatic { length } else { angle };
+            let (min, max) = robot.limits.get(j).copied().unwrap_or((f64::MIN, f64::MAX));
+            let slack = JOINT_LIMIT_SLACK * (max - min);
+            let unit = if prismatic { "m" } else { "rad" };
+            if (min..=max).contains(&v) {
+            } else if (min - slack..=max + slack).contains(&v) {
+                n_outside += 1;
+                if n_outside == 1 {
+                    warnings.push(format!(
+                        "{}: row {}: joint {:?} = {v} {unit} is outside its limits [{min}, {max}] {unit}",
+                        a.name,
+                        i + 1,
+                        robot.joint_names[j]
+                    ));
+                }
+            } else {
+                bail!(
+                    "{}: row {}, column {}: joint {:?} = {v} {unit} is outside its range [{min}, {max}] {unit} (by more than {JOINT_LIMIT_SLACK} of the range): wrong unit or column?",
+                    a.name,
+                    i + 1,
+                    c + 1,
+                    robot.joint_names[j]
+                );
+            }
+            q.push(v);
+        }
+        rows.push(MeasuredRow {
+            line: i as u64 + 1,
+            q,
+            t_s: a.t_s.as_ref().map(|t| t[i]),
+            markers: a.markers[i].clone(),
+            distance_m: a.distances.as_ref().and_then(|d| d[i]),
+        });
+    }
+    if let Some(w) = warnings.first_mut() {
+        w.push_str(&match n_outside {
+            1 => String::new(),
+            n => format!(
+                " (and {} more readings outside their joint's limits)",
+                n - 1
+            ),
+        });
+        w.push_str("; such readings are used as they are");
+    }
+    Ok(MeasurementTable {
+        name: a.name.clone(),
+        path: PathBuf::from(&a.name),
+        rows,
+        warnings,
+        n_markers: a.n_markers,
+        has_orientation: a.has_orientation,
+        has_distance: a.distances.is_some(),
+        ignored_columns: (a.ignored_columns.iter().chain(&unknown))
+            .cloned()
+            .collect(),
+    })
+}
+
+/// The result of one calibration.
+#[pyclass(module = "hapcal._hapcal", name = "_Calibration", frozen)]
+struct PyCalibration {
+    outcome: Outcome,
+    json: String,
+}
+
+#[pymethods]
+impl PyCalibration {
+    /// The report as the command line prints it with `--json`.
+    fn to_json(&self) -> String {
+        self.json.clone()
+    }
+
+    /// Writes the calibrated device (`write_outputs`); returns the paths written.
+    fn write_outputs(&self, py: Python<'_>, path: PathBuf) -> PyResult<Vec<PathBuf>> {
+        let outcome = &self.outcome;
+        py.detach(|| calibrate::write_outputs(outcome, &path))
+            .map_err(py_err)
+    }
+}
+
+fn model_choice(model: &str) -> Result<ModelChoice> {
+    use clap::ValueEnum;
+    let wanted = model.trim().replace('_', "-");
+    ModelChoice::from_str(&wanted, true).map_err(|_| {
+        let names: Vec<String> = ModelChoice::value_variants()
+            .iter()
+            .filter_map(|v| v.to_possible_value().map(|p| p.get_name().to_owned()))
+            .collect();
+        anyhow!(
+            "model: expected one of {}, found {model:?}",
+            names.join(", ")
+        )
+    })
+}
+
+/// Calibrates `device` from `train` (`test` only evaluated). See `hapcal.calibrate`.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (device, train, test, model, sigma_m, sigma_rad, test_last, folds, socket_distance_m, joint))]
+fn _calibrate(
+    py: Python<'_>,
+    device: &PyDevice,
+    train: Vec<PyRef<'_, PyMeasurements>>,
+    test: Vec<PyRef<'_, PyMeasurements>>,
+    model: &str,
+    sigma_m: Option<f64>,
+    sigma_rad: Option<f64>,
+    test_last: Option<f64>,
+    folds: usize,
+    socket_distance_m: f64,
+    joint: bool,
+) -> PyResult<PyCalibration> {
+    let model = model_choice(model).map_err(py_err)?;
+    if train.is_empty() {
+        return Err(py_err(anyhow!("no training measurements")));
+    }
+    let train: Vec<Source> = train.iter().map(|m| m.source.clone()).collect();
+    let test: Vec<Source> = test.iter().map(|m| m.source.clone()).collect();
+    let mut plan = Plan {
+        device: device.path.clone(),
+        tip: device.tip.clone(),
+        tips: device.tips.clone(),
+        units: Units::default(),
+        sigma_rad,
+        test_last,
+        data: Vec::new(),
+        test: Vec::new(),
+        socket_distance_m,
+        model,
+        folds,
+        sigma_m,
+        joint,
+    };
+    // Files that share their units go through `calibrate::run`, exactly as the command line.
+    let paths = |sources: &[Source]| -> Option<Vec<(PathBuf, Units)>> {
+        sources
+            .iter()
+            .map(|s| match s {
+                Source::Path { path, units } => Some((path.clone(), *units)),
+                Source::Arrays(_) => None,
+            })
+            .collect()
+    };
+    let files = paths(&train).zip(paths(&test));
+    let outcome = match files {
+        Some((tr, te)) if tr.iter().chain(&te).all(|(_, u)| *u == tr[0].1) => {
+            plan.units = tr[0].1;
+            plan.data = tr.into_iter().map(|(p, _)| p).collect();
+            plan.test = te.into_iter().map(|(p, _)| p).collect();
+            py.detach(|| calibrate::run(&plan))
+        }
+        _ => {
+            let hapcal_device = &device.device;
+            let robot = device.robot.as_ref();
+            py.detach(|| -> Result<Outcome> {
+                let start = Instant::now();
+                if !hapcal_device.capstans.is_empty() || hapcal_device.parallelogram.is_some() {
+                    bail!(
+                        "{}: a haptic device with transmissions is calibrated from its log files (Measurements.from_csv); arrays hold marker or distance measurements of an external instrument",
+                        plan.device.display()
+                    );
+                }
+                let robot = robot.map_err(|e| anyhow!("{e}"))?;
+                let tables = |sources: &[Source]| -> Result<Vec<MeasurementTable>> {
+                    let mut out = Vec::new();
+                    for s in sources {
+                        match s {
+                            Source::Path { path, units } => out.extend(measured::load_tables(
+                                std::slice::from_ref(path),
+                                robot,
+                                units,
+                            )?),
+                            Source::Arrays(a) => out.push(table(a, robot)?),
+                        }
+                    }
+                    Ok(out)
+                };
+                let train = tables(&train)?;
+                let test = tables(&test)?;
+                measured::run_tables(&plan, hapcal_device, robot, train, test, start)
+            })
+        }
+    }
+    .map_err(py_err)?;
+    let json = serde_json::to_string_pretty(&outcome.report)
+        .context("serialising the report")
+        .map_err(py_err)?;
+    Ok(PyCalibration { outcome, json })
+}
+
+/// The log columns of `rows` as `hapcal_io::write_log` writes them: `q1..qn`, `distance_m`,
+/// the `ext1..ext4` present in any row (NaN where a row has none), `t_s` if any row has one.
+/// Returns the column names and the values, column-major.
+fn log_columns(rows: &[hapcal_io::LogRow]) -> (Vec<String>, Vec<Vec<f64>>) {
+    let n_joints = rows.first().map_or(0, |r| r.q.len());
+    let mut names: Vec<String> = (1..=n_joints).map(|j| format!("q{j}")).collect();
+    let mut columns: Vec<Vec<f64>> = (0..n_joints)
+        .map(|j| rows.iter().map(|r| r.q[j]).collect())
+        .collect();
+    names.push("distance_m".to_owned());
+    columns.push(rows.iter().map(|r| r.distance_m).collect());
+    for k in 0..hapcal_io::N_EXT {
+        let cell = |r: &hapcal_io::LogRow| r.ext.get(k).copied().flatten();
+        if rows.iter().any(|r| cell(r).is_some()) {
+            names.push(format!("ext{}", k + 1));
+            columns.push(rows.iter().map(|r| cell(r).unwrap_or(f64::NAN)).collect());
+        }
+    }
+    if rows.iter().any(|r| r.t_s.is_some()) {
+        names.push("t_s".to_owned());
+        columns.push(rows.iter().map(|r| r.t_s.unwrap_or(f64::NAN)).collect());
+    }
+    (names, columns)
+}
+
+/// Simulates a log from a truth device, as `hapcal simulate` does (the same `hapcal_sim`
+/// calls); writes it to `path` (atomically, never over an input) when given. Returns the log's
+/// columns. See `hapcal.simulate`.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (truth, device, seed, poses, noise, effects, motion, period_s, path))]
+fn _simulate(
+    py: Python<'_>,
+    truth: Option<PathBuf>,
+    device: Option<PathBuf>,
+    seed: u64,
+    poses: usize,
+    noise: String,
+    effects: Vec<String>,
+    motion: bool,
+    period_s: f64,
+    path: Option<PathBuf>,
+) -> PyResult<(Vec<String>, Vec<Vec<f64>>)> {
+    py.detach(move || -> Result<(Vec<String>, Vec<Vec<f64>>)> {
+        if poses < 1 {
+            bail!("poses: must be at least 1, got {poses}");
+        }
+        let mut inputs: Vec<PathBuf> = device.iter().chain(&truth).cloned().collect();
+        if let Some(t) = (truth.as_ref()).and_then(|t| Some((t, hapcal_sim::read_truth(t).ok()?))) {
+            inputs.push(t.1.device_path(t.0));
+        }
+        let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+        if let Some(out) = &path {
+            calibrate::check_extension(out, &["csv"], "the simulated log", false)?;
+            calibrate::check_output(out, &inputs)?;
+        }
+        let (device, truth) = match (device, truth) {
+            (device, Some(truth_path)) => {
+                let truth = hapcal_sim::read_truth(&truth_path)?;
+                let device = match device {
+                    Some(d) => hapcal_io::read_device(&d)?,
+                    None => truth.read_device(&truth_path)?,
+                };
+                (device, truth)
+            }
+            (device, None) => {
+                let path = device.unwrap_or_else(|| {
+                    hapcal_calibrate::project_root().join("fixtures/reference-device/device.toml")
+                });
+                let device = hapcal_io::read_device(&path)?;
+                let truth = hapcal_sim::Truth::nominal(path, &device);
+                (device, truth)
+            }
+        };
+        let Some(cable) = device.cable_encoder.as_ref() else {
+            bail!("the device has no [cable_encoder]: nothing to simulate the distance with");
+        };
+        let noise = match noise.as_str() {
+            "paper" => hapcal_sim::NoiseModel::paper(cable),
+            "arc-length" => hapcal_sim::NoiseModel::arc_length(cable),
+            other => bail!("noise must be `paper` or `arc-length`, got {other:?}"),
+        };
+        let cfg = hapcal_sim::SimConfig::new(seed, poses).with_noise(noise);
+        let effects = (effects.iter())
+            .map(|e| e.parse::<hapcal_sim::Effect>())
+            .collect::<Result<Vec<_>, _>>()?;
+        let rows = if motion || !effects.is_empty() {
+            let motion = hapcal_sim::MotionConfig {
+                sample_period_s: period_s,
+            };
+            hapcal_sim::simulate_motion(&device, &truth, &cfg, &motion, &effects)?
+        } else {
+            hapcal_sim::simulate(&device, &truth, &cfg)?
+        };
+        if let Some(out) = &path {
+            calibrate::write_new(out, &hapcal_io::write_log(&rows), &inputs)?;
+        }
+        Ok(log_columns(&rows))
+    })
+    .map_err(py_err)
+}
+
+/// Chooses the poses to measure, as `hapcal plan-poses` does (`plan::plan_poses`); writes
+/// them to `path` (`plan::poses_csv`, atomically) when given. Returns the joint names and the
+/// readings (rad, one row per pose). See `hapcal.plan_poses`.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (device, measurement, count, candidates, seed, criterion, sigma_m, separate_transmission_run, refine, path))]
+fn _plan_poses(
+    py: Python<'_>,
+    device: &PyDevice,
+    measurement: &str,
+    count: usize,
+    candidates: usize,
+    seed: u64,
+    criterion: &str,
+    sigma_m: Option<f64>,
+    separate_transmission_run: bool,
+    refine: bool,
+    path: Option<PathBuf>,
+) -> PyResult<(Vec<String>, Vec<Vec<f64>>)> {
+    use clap::ValueEnum;
+    use hapcal_calibrate::plan::{self, Measurement, PlanConfig};
+    let hapcal_device = &device.device;
+    let device_path = device.path.as_path();
+    py.detach(move || -> Result<(Vec<String>, Vec<Vec<f64>>)> {
+        let measurement = Measurement::from_str(measurement, false).map_err(|_| {
+            anyhow!("measurement: expected distance or position, found {measurement:?}")
+        })?;
+        let criterion: hapcal_identify::Criterion = criterion
+            .parse()
+            .map_err(|e: String| anyhow!("criterion: {e}"))?;
+        if let Some(s) = sigma_m
+            && !(s.is_finite() && s > 0.0)
+        {
+            bail!("sigma_m must be a positive length, got {s}");
+        }
+        if let Some(out) = &path {
+            calibrate::check_extension(out, &["csv"], "the planned poses", false)?;
+            calibrate::check_output(out, &[device_path])?;
+        }
+        let cfg = PlanConfig {
+            measurement,
+            count,
+            n_candidates: candidates,
+            seed,
+            criterion,
+            sigma_m,
+            transmission_rows: !separate_transmission_run,
+            refine,
+        };
+        let planned = plan::plan_poses(hapcal_device, &cfg)?;
+        let names: Vec<String> = hapcal_device
+            .chain()?
+            .joint_names()
+            .iter()
+            .map(|n| n.to_string())
+            .collect();
+        if let Some(out) = &path {
+            calibrate::write_new(
+                out,
+                &plan::poses_csv(&names, &planned.readings),
+                &[device_path],
+            )?;
+        }
+        Ok((names, planned.readings))
+    })
+    .map_err(py_err)
+}
+
+/// Diagnoses the sim-to-real gap of a log, as `hapcal diagnose` does
+/// (`hapcal_diagnose::diagnose`). Returns the report as `hapcal diagnose --json` prints it
+/// (without the final newline) and the log's warnings. See `hapcal.diagnose`.
+#[pyfunction]
+#[pyo3(signature = (device, data, baseline, folds))]
+fn _diagnose(
+    py: Python<'_>,
+    device: &PyDevice,
+    data: PathBuf,
+    baseline: &str,
+    folds: usize,
+) -> PyResult<(String, Vec<String>)> {
+    let hapcal_device = &device.device;
+    py.detach(move || -> Result<(String, Vec<String>)> {
+        let baseline: hapcal_diagnose::Baseline = baseline.parse()?;
+        if folds < 2 {
+            bail!("folds must be at least 2, got {folds}");
+        }
+        let config = hapcal_diagnose::DiagnoseConfig {
+            baseline,
+            folds,
+            ..hapcal_diagnose::DiagnoseConfig::default()
+        };
+        let log = hapcal_io::read_log(&data, hapcal_device)
+            .with_context(|| format!("reading log {}", data.display()))?;
+        let d = hapcal_diagnose::diagnose(hapcal_device, &log.rows, &config)
+            .with_context(|| format!("diagnosing {}", data.display()))?;
+        let json = serde_json::to_string_pretty(&d).context("serialising the diagnosis")?;
+        Ok((json, log.warnings))
+    })
+    .map_err(py_err)
+}
+
+/// hapcal's compiled core; use the `hapcal` package.
+#[pymodule]
+fn _hapcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("HapcalError", m.py().get_type::<HapcalError>())?;
+    m.add_class::<PyDevice>()?;
+    m.add_class::<PyMeasurements>()?;
+    m.add_class::<PyCalibration>()?;
+    m.add_function(wrap_pyfunction!(_calibrate, m)?)?;
+    m.add_function(wrap_pyfunction!(_simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(_plan_poses, m)?)?;
+    m.add_function(wrap_pyfunction!(_diagnose, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,254 @@
+"""hapcal from Python gives the command line's report, whatever the input's form."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import hapcal
+from conftest import (
+    POSITIONER,
+    POSITIONER_YAML,
+    UR10_CSV,
+    UR10_TIP,
+    UR10_URDF,
+    assert_close,
+    cli_json,
+    without_elapsed,
+)
+
+
+@pytest.fixture(scope="module")
+def ur10() -> hapcal.Device:
+    from conftest import ROOT
+
+    return hapcal.Device.from_urdf(str(ROOT / UR10_URDF), tip=UR10_TIP)
+
+
+def ur10_device() -> hapcal.Device:
+    # Relative path, as the CLI is given it, so that the reports' `device` fields agree.
+    return hapcal.Device.from_urdf(UR10_URDF, tip=UR10_TIP)
+
+
+def test_device(ur10: hapcal.Device) -> None:
+    assert ur10.joint_names == [
+        "shoulder_pan_joint",
+        "shoulder_lift_joint",
+        "elbow_joint",
+        "wrist_1_joint",
+        "wrist_2_joint",
+        "wrist_3_joint",
+    ]
+    assert ur10.n_joints == 6
+    assert ur10.tips == [UR10_TIP]
+    assert len(ur10.joint_limits) == 6
+    assert issubclass(hapcal.HapcalError, ValueError)
+
+
+@pytest.mark.parametrize("model", ["auto", "geometric"])
+def test_ur10_report_equals_cli(model: str) -> None:
+    cal = hapcal.calibrate(
+        ur10_device(), hapcal.Measurements.from_csv(UR10_CSV), test_last=0.3, model=model
+    )
+    cli = cli_json(
+        "--device", UR10_URDF, "--tip", UR10_TIP, "--data", UR10_CSV,
+        "--test-last", "0.3", "--model", model,
+    )
+    assert_close(cal.report, json.loads(cli), ignore={"elapsed_s"})
+    # The same bytes as the CLI prints, but for the wall time.
+    assert without_elapsed(cal.to_json()) == without_elapsed(cli)
+    assert json.loads(cal.to_json()) == cal.report
+    assert cal.model == json.loads(cli)["model"]
+    assert cal.figures == cal.report["placements"]
+    assert cal.warnings == cal.report["warnings"]
+    if model == "geometric":
+        assert len(cal.report["parameters"]) > 0
+
+
+def test_positioner_yaml_equals_cli() -> None:
+    dev = hapcal.Device.from_toml(POSITIONER)
+    assert dev.joint_names == ["q1", "q2"]
+    cal = hapcal.calibrate(dev, hapcal.Measurements.from_csv(POSITIONER_YAML), test_last=0.3)
+    cli = cli_json("--device", POSITIONER, "--data", POSITIONER_YAML, "--test-last", "0.3")
+    assert_close(cal.report, json.loads(cli), ignore={"elapsed_s"})
+
+
+def _arrays_from_csv(path: str):
+    """The UR10 file's columns as arrays, read with the standard library's csv module."""
+    import csv
+
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    joints = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
+              "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
+    col = lambda c: np.array([float(r[c]) for r in rows])  # noqa: E731
+    q = np.stack([col(j) for j in joints], axis=1)
+    pos = np.stack([col(c) for c in ("x1", "y1", "z1")], axis=1)
+    rpy = np.stack([col(c) for c in ("phix1", "phiy1", "phiz1")], axis=1)
+    return q, pos, rpy, joints
+
+
+def _rpy_to_quaternion(rpy: np.ndarray) -> np.ndarray:
+    """figaroh's roll, pitch, yaw (R = Rz·Ry·Rx) as unit quaternions (w, x, y, z)."""
+    r, p, y = (rpy[:, i] / 2 for i in range(3))
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    return np.stack(
+        [
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        ],
+        axis=1,
+    )
+
+
+@pytest.mark.parametrize("model", ["auto", "geometric"])
+def test_arrays_equal_csv(ur10: hapcal.Device, model: str) -> None:
+    from conftest import ROOT
+
+    csv_cal = hapcal.calibrate(
+        ur10, hapcal.Measurements.from_csv(ROOT / UR10_CSV), test_last=0.3, model=model
+    )
+    q, pos, rpy, joints = _arrays_from_csv(str(ROOT / UR10_CSV))
+    ignore = {"elapsed_s", "name"}
+    # Chain order, positions (n, 3), orientations as figaroh's roll, pitch, yaw.
+    m = hapcal.Measurements.from_arrays(q, positions=pos, rpy=rpy, name="calibration")
+    assert m.n_rows == 23
+    cal = hapcal.calibrate(ur10, m, test_last=0.3, model=model)
+    assert_close(cal.report, csv_cal.report, ignore={"elapsed_s"})
+    # Named columns in another order, (n, k, 3) markers, quaternions (w, x, y, z).
+    order = [5, 0, 3, 1, 4, 2]
+    cal = hapcal.calibrate(
+        ur10,
+        hapcal.Measurements.from_arrays(
+            q[:, order],
+            positions=pos[:, None, :],
+            quaternions=_rpy_to_quaternion(rpy)[:, None, :],
+            joint_names=[joints[i] for i in order],
+        ),
+        test_last=0.3,
+        model=model,
+    )
+    assert_close(cal.figures, csv_cal.figures, tol=1e-9, ignore=ignore)
+    assert_close(cal.report["parameters"], csv_cal.report["parameters"], tol=1e-9)
+
+
+@pytest.mark.parametrize("model", ["auto", "geometric"])
+def test_dataframe_equals_csv(ur10: hapcal.Device, model: str) -> None:
+    pd = pytest.importorskip("pandas")
+    from conftest import ROOT
+
+    csv_cal = hapcal.calibrate(
+        ur10, hapcal.Measurements.from_csv(ROOT / UR10_CSV), test_last=0.3, model=model
+    )
+    df = pd.read_csv(ROOT / UR10_CSV)
+    df["operator"] = "lab"  # a column hapcal ignores, as in a CSV file
+    cal = hapcal.calibrate(
+        ur10, hapcal.Measurements.from_dataframe(df, name="calibration"), test_last=0.3,
+        model=model,
+    )
+    assert_close(cal.figures, csv_cal.figures)
+    assert_close(cal.report["parameters"], csv_cal.report["parameters"])
+    assert "columns ignored: operator" in cal.warnings
+    assert_close(
+        cal.report, csv_cal.report, ignore={"elapsed_s", "warnings"}
+    )
+    # q1..qn columns and an (n, k, 3)-style numbered marker work too.
+    renamed = df.rename(columns={j: f"q{i + 1}" for i, j in enumerate(ur10.joint_names)})
+    cal = hapcal.calibrate(ur10, hapcal.Measurements.from_dataframe(renamed), test_last=0.3,
+                           model=model)
+    assert_close(cal.figures, csv_cal.figures, ignore={"name"})
+    params = cal.parameters
+    assert list(params.columns) == ["name", "value", "std", "unit"]
+    assert len(params) == len(csv_cal.report["parameters"])
+
+
+def test_write_outputs(tmp_path, ur10: hapcal.Device) -> None:
+    from conftest import ROOT
+
+    cal = hapcal.calibrate(
+        ur10, hapcal.Measurements.from_csv(ROOT / UR10_CSV), test_last=0.3, model="geometric"
+    )
+    written = cal.to_urdf(tmp_path / "ur10_calibrated.urdf")
+    assert str(tmp_path / "ur10_calibrated.urdf") in written
+    assert "<robot" in (tmp_path / "ur10_calibrated.urdf").read_text()
+    written = cal.to_toml(tmp_path / "ur10_calibrated.toml")
+    assert "[calibration" in (tmp_path / "ur10_calibrated.toml").read_text()
+    # A calibrated URDF reads back as a device.
+    again = hapcal.Device.from_urdf(tmp_path / "ur10_calibrated.urdf", tip=UR10_TIP)
+    assert again.joint_names == ur10.joint_names
+
+
+def test_unseen_marker_nan_equals_empty_cells(tmp_path, ur10: hapcal.Device) -> None:
+    """Empty CSV cells (marker not seen) and NaN in arrays mean the same."""
+    from conftest import ROOT
+
+    lines = (ROOT / UR10_CSV).read_text().splitlines()
+    cells = lines[5].split(",")
+    lines[5] = ",".join([""] * 6 + cells[6:])  # x1..phiz1 of data row 5 empty
+    path = tmp_path / "calibration.csv"
+    path.write_text("\n".join(lines) + "\n")
+    csv_cal = hapcal.calibrate(ur10, hapcal.Measurements.from_csv(path), test_last=0.3,
+                               model="geometric")
+    q, pos, rpy, _ = _arrays_from_csv(str(ROOT / UR10_CSV))
+    pos[4] = np.nan
+    rpy[4] = np.nan
+    cal = hapcal.calibrate(
+        ur10, hapcal.Measurements.from_arrays(q, positions=pos, rpy=rpy, name="calibration"),
+        test_last=0.3, model="geometric",
+    )
+    assert_close(cal.report, csv_cal.report, ignore={"elapsed_s"})
+
+
+def test_threads(ur10: hapcal.Device) -> None:
+    """The solve releases the GIL: calibrations in threads agree with one another."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from conftest import ROOT
+
+    m = hapcal.Measurements.from_csv(ROOT / UR10_CSV)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        reports = list(
+            pool.map(lambda _: hapcal.calibrate(ur10, m, test_last=0.3).report, range(4))
+        )
+    for r in reports[1:]:
+        assert_close(r, reports[0], tol=0.0, ignore={"elapsed_s"})
+
+
+def test_mukca_folders_equal_cli() -> None:
+    """Socket recordings (MUKCa placement folders): the CLI's workflow, cross-validated."""
+    dev = hapcal.Device.from_urdf("fixtures/mukca/urdf/iiwa14.urdf", tip="ball_link")
+    front, left_back = ("fixtures/mukca/data/kuka_14/" + p for p in ("front", "left_back"))
+    cal = hapcal.calibrate(dev, hapcal.Measurements.from_csv(front), test=[left_back])
+    cli = cli_json(
+        "--device", "fixtures/mukca/urdf/iiwa14.urdf", "--tip", "ball_link",
+        "--data", front, "--test", left_back,
+    )
+    assert without_elapsed(cal.to_json()) == without_elapsed(cli)
+    assert cal.report["cross_validation"], "model auto cross-validates"
+
+
+def test_haptic_log_equals_cli(tmp_path) -> None:
+    """A haptic device's own log (transmissions, then kinematics): the CLI's workflow."""
+    from conftest import cli
+
+    log = tmp_path / "log.csv"
+    cli("simulate", "--truth", "fixtures/reference-device/truth.toml", "--seed", "1",
+        "--poses", "200", "--out", str(log))
+    dev = hapcal.Device.from_toml("fixtures/reference-device/device.toml")
+    cal = hapcal.calibrate(dev, hapcal.Measurements.from_csv(log))
+    cli_out = cli_json("--device", "fixtures/reference-device/device.toml", "--data", str(log))
+    assert_close(cal.report, json.loads(cli_out), ignore={"elapsed_s"})
+    assert cal.model == "transmissions"
+    out = tmp_path / "calibrated.toml"
+    assert cal.to_toml(out) == [str(out)]
+    assert hapcal.Device.from_toml(out).joint_names == dev.joint_names
+    # Arrays carry an external instrument's measurements, not a haptic device's log.
+    with pytest.raises(hapcal.HapcalError, match="haptic device"):
+        hapcal.calibrate(
+            dev, hapcal.Measurements.from_arrays(np.zeros((3, dev.n_joints)),
+                                                 distances=np.ones(3)),
+        )
