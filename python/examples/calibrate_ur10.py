@@ -1,8 +1,9 @@
 """Calibrate figaroh's UR10 recording (camera + checkerboard poses) from Python and plot the
-held-out errors of every rung of the model ladder against frames only.
+residuals of every pose before and after calibration, and the held-out errors of every rung of
+the model ladder against frames only.
 
     pip install ./python matplotlib pandas
-    python python/examples/calibrate_ur10.py            # writes ur10_ladder.png
+    python python/examples/calibrate_ur10.py    # writes ur10_residuals.png, ur10_ladder.png
 
 The first 70 % of the rows train, the last 30 % test (``test_last=0.3``), as in
 docs/results/real-data.md. ``model="auto"`` lets cross-validation choose the rung; the plot also
@@ -51,6 +52,26 @@ def main():
     except ImportError:
         print("matplotlib is not installed: no plot")
         return
+    # Residuals of every pose, frames only and the geometric model (forced), train then test.
+    geometric = hapcal.calibrate(robot, data, test_last=0.3, model="geometric")
+    fig, ax = plt.subplots(figsize=(9, 3.5))
+    start = 0
+    for s in geometric.figures:
+        before = [e * 1e3 for e in s["errors"]["position_before_m"]]
+        after = [e * 1e3 for e in s["errors"]["position_after_m"]]
+        x = range(start, start + len(before))
+        ax.plot(x, before, "o", color="tab:gray", label="frames only" if start == 0 else None)
+        ax.plot(x, after, "o", color="tab:blue", label="geometric" if start == 0 else None)
+        start += len(before)
+        if s["role"] == "train":
+            ax.axvline(start - 0.5, color="k", lw=0.8, ls=":")
+    ax.set_xlabel("pose (file order; dotted line: end of the training rows)")
+    ax.set_ylabel("3-D position error (mm)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig("ur10_residuals.png", dpi=120)
+    print("wrote ur10_residuals.png")
+
     fig, (ax_p, ax_o) = plt.subplots(1, 2, figsize=(9, 3.5))
     names = [r[0] for r in rows]
     ax_p.bar(names, [r[1] for r in rows], color="tab:blue")

@@ -212,6 +212,9 @@ pub struct SetReport {
     pub before: Figures,
     /// With the calibrated model.
     pub after: Figures,
+    /// Marker and distance data: the error of every sample, frames only and calibrated.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub errors: Option<crate::measured::SampleErrors>,
 }
 
 /// One identified parameter.
@@ -843,6 +846,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
                 n_rows: n_rows(set),
                 before: figures(set, &nominal, plan.socket_distance_m)?,
                 after: figures(set, &model, plan.socket_distance_m)?,
+                errors: None,
             });
         }
     }

@@ -662,6 +662,7 @@ pub fn calibrate_logs(
                 n_rows: rows.len(),
                 before: distance_rms(rows, &zero, None),
                 after: distance_rms(rows, &x_kin, transmissions.as_ref()),
+                errors: None,
             });
         }
     }

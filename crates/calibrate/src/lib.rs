@@ -12,11 +12,37 @@ pub mod measured;
 pub mod plan;
 pub mod support;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-/// Root of the source tree (where `fixtures/` lives), fixed at build time.
+/// The folder that holds `fixtures/` (the bundled data: MUKCa, the reference device, the
+/// paper's tables), found in this order:
+///
+/// 1. `$HAPCAL_DATA`, if it holds `fixtures/`;
+/// 2. the current folder or one of its parents (a clone of the repository), as a relative path
+///    (`""`, `".."`, …), so that reports and written files carry no absolute path;
+/// 3. the folder of the running executable or one of its parents (an install that copied
+///    `fixtures/` beside the binary);
+/// 4. the source tree the binary was built from (a `cargo run` from elsewhere).
+///
+/// Never fails: when none holds the data, it returns the source tree's path and the caller's
+/// read fails with that path in its message.
 pub fn project_root() -> PathBuf {
+    let has_data = |d: &Path| d.join("fixtures").join("mukca").is_dir();
+    if let Some(dir) = std::env::var_os("HAPCAL_DATA").map(PathBuf::from)
+        && has_data(&dir)
+    {
+        return dir;
+    }
+    if let Ok(cwd) = std::env::current_dir()
+        && let Some(up) = cwd.ancestors().position(has_data)
+    {
+        return std::iter::repeat_n("..", up).collect();
+    }
+    if let Ok(exe) = std::env::current_exe()
+        && let Some(dir) = exe.ancestors().skip(1).find(|d| has_data(d))
+    {
+        return dir.to_path_buf();
+    }
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-    // Reports print paths under it: without the `crates/calibrate/../..` detour when it exists.
     root.canonicalize().unwrap_or(root)
 }

@@ -142,6 +142,24 @@ pub struct PoseFigures {
     pub distance_max_m: Option<f64>,
 }
 
+/// Per-sample errors of one data set, frames only and calibrated, in file order: what a
+/// residual plot shows.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct SampleErrors {
+    /// 3-D position error of every marker sample with frames only, m.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub position_before_m: Vec<f64>,
+    /// The same with the calibrated model, m.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub position_after_m: Vec<f64>,
+    /// Distance error (model − measured) of every distance row with frames only, m.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub distance_before_m: Vec<f64>,
+    /// The same with the calibrated model, m.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub distance_after_m: Vec<f64>,
+}
+
 /// One rung's cross-validation score.
 #[derive(Clone, Debug, Serialize)]
 pub struct RungReport {
@@ -184,6 +202,8 @@ pub struct MeasuredOutcome {
     pub frames: Vec<FrameReport>,
     /// Per data set (training first): name, role, rows, frames-only and calibrated figures.
     pub sets: Vec<(String, &'static str, usize, PoseFigures, PoseFigures)>,
+    /// Per data set (the order of `sets`), the errors of every sample.
+    pub sample_errors: Vec<SampleErrors>,
     /// Position σ (m) and orientation σ (rad) that weight the rows.
     pub weights: Weights,
     /// Plain-language warnings.
@@ -1147,8 +1167,19 @@ pub fn calibrate_measured(
     }
 
     let mut sets = Vec::new();
+    let mut sample_errors = Vec::new();
     for (role, tables) in [("train", train), ("test", test)] {
         for ti in 0..tables.len() {
+            let (e0, e1) = (
+                errors(&frames_model, tables, ti, None),
+                errors(&model, tables, ti, None),
+            );
+            sample_errors.push(SampleErrors {
+                position_before_m: e0.position,
+                position_after_m: e1.position,
+                distance_before_m: e0.distance,
+                distance_after_m: e1.distance,
+            });
             let before = figures(&frames_model, tables, ti);
             let after = figures(&model, tables, ti);
             let worse = |kind: &str, b: f64, a: f64| {
@@ -1188,6 +1219,7 @@ pub fn calibrate_measured(
         model,
         frames,
         sets,
+        sample_errors,
         weights,
         warnings,
     })
@@ -1431,8 +1463,8 @@ pub fn run_tables(
         })
         .filter(|(a, b, _)| !is_frame(a) && !is_frame(b))
         .collect();
-    let placements = (out.sets.iter())
-        .map(|(name, role, n_rows, before, after)| {
+    let placements = (out.sets.iter().zip(&out.sample_errors))
+        .map(|((name, role, n_rows, before, after), errors)| {
             let f = |p: &PoseFigures| Figures {
                 mean_absolute_error_m: None,
                 distance_error_m: None,
@@ -1445,6 +1477,7 @@ pub fn run_tables(
                 n_rows: *n_rows,
                 before: f(before),
                 after: f(after),
+                errors: Some(errors.clone()),
             }
         })
         .collect();
