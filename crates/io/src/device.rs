@@ -249,7 +249,12 @@ pub struct CalibrationMeta {
 /// joints; [`Error::InvalidDevice`] for any other failed check. All name the file, line and
 /// column.
 pub fn read_device(path: &Path) -> Result<Device, Error> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = Error::read_text(path, |line, column, message| Error::Toml {
+        path: path.to_path_buf(),
+        line,
+        column,
+        message,
+    })?;
     parse_device(&text, path)
 }
 

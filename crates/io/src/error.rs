@@ -354,6 +354,23 @@ impl Error {
         Ok(())
     }
 
+    /// Reads `path` as UTF-8 text. Invalid UTF-8 is not an [`Error::Io`] but the error that
+    /// `located` makes from the 1-based line and column of the first invalid byte and a
+    /// message, so that it names file:line:column like every other parse error.
+    pub(crate) fn read_text(
+        path: &std::path::Path,
+        located: impl FnOnce(u64, u64, String) -> Error,
+    ) -> Result<String, Error> {
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        String::from_utf8(bytes).map_err(|e| {
+            let valid = e.utf8_error().valid_up_to();
+            let prefix = std::str::from_utf8(e.as_bytes().get(..valid).unwrap_or_default())
+                .unwrap_or_default();
+            let (line, column) = line_column(prefix, valid);
+            located(line, column, "invalid UTF-8".to_owned())
+        })
+    }
+
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.into(),

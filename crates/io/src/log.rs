@@ -5,7 +5,7 @@ use std::path::Path;
 
 use crate::Error;
 use crate::device::Device;
-use crate::table::{Table, number};
+use crate::table::{Repeats, Table, number};
 
 /// Number of external encoder columns (`ext1..ext4`, one per transmission output shaft).
 pub const N_EXT: usize = 4;
@@ -71,7 +71,8 @@ fn classify(name: &str) -> Column {
 /// of joints) and `distance_m` (m) are required; `ext1..ext4` (rad; an empty cell means no
 /// reading) and `t_s` (s, non-decreasing) are optional. Unknown columns are ignored with a
 /// warning in [`Log::warnings`]. Joint readings must lie within the device's limits
-/// (inclusive).
+/// (inclusive). Rows that repeat an earlier row's joint readings, distance and external
+/// readings are kept, with one warning naming the first and how many there are.
 ///
 /// # Errors
 ///
@@ -135,6 +136,7 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
 
     let mut rows = Vec::new();
     let mut previous_t: Option<f64> = None;
+    let mut repeats = Repeats::default();
     while let Some((line, record)) = table.next_record()? {
         if record.len() != columns.len() {
             return Err(Error::Ragged {
@@ -203,6 +205,12 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
             });
         }
         previous_t = row.t_s;
+        // Joint readings and measurements; the time of a repeated pose differs.
+        let ext = row.ext.iter().map(|e| e.unwrap_or(f64::NAN));
+        repeats.see(
+            row.q.iter().copied().chain([row.distance_m]).chain(ext),
+            line,
+        );
         rows.push(row);
     }
     if rows.is_empty() {
@@ -212,6 +220,7 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
             found: 0,
         });
     }
+    warnings.extend(repeats.warning(path));
     Ok(Log { rows, warnings })
 }
 

@@ -8,7 +8,7 @@ use nalgebra::{Quaternion, UnitQuaternion};
 use serde::Deserialize;
 
 use crate::Error;
-use crate::table::{Table, number};
+use crate::table::{Repeats, Table, number};
 
 /// Unit of the length columns of a measurement file (positions, distances, prismatic joints).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -251,6 +251,8 @@ fn spelled(stem: &str, k: usize, unnumbered: bool) -> String {
 ///
 /// Other columns are listed in [`MeasurementTable::ignored_columns`]. A row whose cells of a
 /// marker are all empty did not see that marker; an empty distance cell is no distance.
+/// Rows that repeat an earlier row's joint readings and measurements (CSV or YAML) are kept,
+/// with one warning in [`MeasurementTable::warnings`] naming the first and how many there are.
 ///
 /// # Errors
 ///
@@ -334,6 +336,27 @@ pub fn read_measurement_file(
         })
         .max()
         .unwrap_or(0);
+    let unnumbered = names.iter().any(|c| c == "x" || c == "y" || c == "z");
+    let incomplete = |k: usize, stem: &str, what: &str| Error::IncompleteMarker {
+        path: path.to_path_buf(),
+        line: header_line,
+        column: names.len() as u64 + 1,
+        name: spelled(stem, k, unnumbered),
+        marker: k + 1,
+        what: what.to_owned(),
+    };
+    let marker_of = |c: &Column| match *c {
+        Column::Position(k, _) | Column::Quaternion(k, _) | Column::Rpy(k, _) => Some(k),
+        _ => None,
+    };
+    if n_markers > names.len() {
+        // A marker number past the number of columns (`x123456789012`): some marker below
+        // it has no column at all, and a table of that many markers must not be allocated.
+        let k = (0..=names.len())
+            .find(|k| !columns.iter().any(|c| marker_of(c) == Some(*k)))
+            .unwrap_or(0);
+        return Err(incomplete(k, "x", "missing from the header"));
+    }
     let mut markers = vec![MarkerColumns::default(); n_markers];
     for (c, column) in columns.iter().enumerate() {
         let slot = match *column {
@@ -352,15 +375,6 @@ pub fn read_measurement_file(
         }
         *slot = Some(c);
     }
-    let unnumbered = names.iter().any(|c| c == "x" || c == "y" || c == "z");
-    let incomplete = |k: usize, stem: &str, what: &str| Error::IncompleteMarker {
-        path: path.to_path_buf(),
-        line: header_line,
-        column: names.len() as u64 + 1,
-        name: spelled(stem, k, unnumbered),
-        marker: k + 1,
-        what: what.to_owned(),
-    };
     for (k, m) in markers.iter().enumerate() {
         let sets: [(&[Option<usize>], &[&str]); 3] = [
             (&m.position, &["x", "y", "z"]),
@@ -410,6 +424,7 @@ pub fn read_measurement_file(
     let mut previous_t: Option<f64> = None;
     let mut outside = Vec::new();
     let mut first_outside = String::new();
+    let mut repeats = Repeats::default();
     while let Some((line, record)) = table.next_record()? {
         if record.len() != names.len() {
             return Err(Error::Ragged {
@@ -556,13 +571,15 @@ pub fn read_measurement_file(
                 rotation,
             });
         }
-        rows.push(MeasuredRow {
+        let row = MeasuredRow {
             line,
             q,
             t_s,
             markers: seen,
             distance_m,
-        });
+        };
+        repeats.see(measured_values(&row), line);
+        rows.push(row);
     }
     if rows.is_empty() {
         return Err(Error::TooFewRows {
@@ -584,6 +601,7 @@ pub fn read_measurement_file(
             }
         ));
     }
+    warnings.extend(repeats.warning(path));
     Ok(MeasurementTable {
         name: stem(path),
         path: path.to_path_buf(),
@@ -596,6 +614,19 @@ pub fn read_measurement_file(
         has_distance: distance_column.is_some(),
         ignored_columns,
     })
+}
+
+/// A row's joint readings and measurements (not its time or line), to find repeated rows;
+/// an absent value is NaN.
+fn measured_values(row: &MeasuredRow) -> Vec<f64> {
+    let mut values = row.q.clone();
+    values.push(row.distance_m.unwrap_or(f64::NAN));
+    for m in &row.markers {
+        values.push(m.marker as f64);
+        values.extend(m.position_m);
+        values.extend(m.rotation.unwrap_or([f64::NAN; 4]));
+    }
+    values
 }
 
 fn stem(path: &Path) -> String {
@@ -641,7 +672,12 @@ pub fn read_industrial_yaml(
     path: &Path,
     schema: &JointSchema<'_>,
 ) -> Result<MeasurementTable, Error> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = Error::read_text(path, |line, column, message| Error::Yaml {
+        path: path.to_path_buf(),
+        line,
+        column,
+        message,
+    })?;
     let observations: serde_yaml_ng::Mapping =
         serde_yaml_ng::from_str(&text).map_err(|e| yaml_error(path, &e))?;
     // Lines of the top-level keys, in file order, to locate each observation.
@@ -666,6 +702,7 @@ pub fn read_industrial_yaml(
     };
     let mut rows = Vec::with_capacity(observations.len());
     let (mut n_outside, mut first_outside) = (0usize, String::new());
+    let mut repeats = Repeats::default();
     for (key, value) in observations {
         let key = match key {
             serde_yaml_ng::Value::String(s) => s,
@@ -736,7 +773,7 @@ pub fn read_industrial_yaml(
             ));
         }
         let q = UnitQuaternion::from_quaternion(Quaternion::new(p.qw, p.qx, p.qy, p.qz));
-        rows.push(MeasuredRow {
+        let row = MeasuredRow {
             line,
             q: o.target_joints,
             t_s: None,
@@ -746,7 +783,9 @@ pub fn read_industrial_yaml(
                 rotation: Some([q.w, q.i, q.j, q.k]),
             }],
             distance_m: None,
-        });
+        };
+        repeats.see(measured_values(&row), line);
+        rows.push(row);
     }
     if rows.is_empty() {
         return Err(Error::TooFewRows {
@@ -768,7 +807,10 @@ pub fn read_industrial_yaml(
                 "{first_outside} (and {} more readings outside their joint's limits); such readings are used as they are",
                 n - 1
             )],
-        },
+        }
+        .into_iter()
+        .chain(repeats.warning(path))
+        .collect(),
         n_markers: 1,
         has_orientation: true,
         has_distance: false,

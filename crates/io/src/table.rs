@@ -116,3 +116,47 @@ pub(crate) fn number(
         })
     }
 }
+
+/// Rows whose joint readings and measurements repeat an earlier row's: kept (poses may be
+/// repeated on purpose), but reported once, since each copy counts as an independent sample
+/// and shrinks the σ reported for the fit.
+#[derive(Default)]
+pub(crate) struct Repeats {
+    /// Each distinct row's values (bit patterns, −0 as +0) → its line.
+    seen: std::collections::HashMap<Vec<u64>, u64>,
+    /// The first repeated row's line and the line it repeats.
+    first: Option<(u64, u64)>,
+    /// How many rows repeat an earlier one.
+    count: usize,
+}
+
+impl Repeats {
+    /// Records the row at `line` holding `values`.
+    pub(crate) fn see(&mut self, values: impl IntoIterator<Item = f64>, line: u64) {
+        let key: Vec<u64> = values.into_iter().map(|v| (v + 0.0).to_bits()).collect();
+        match self.seen.entry(key) {
+            std::collections::hash_map::Entry::Occupied(earlier) => {
+                self.count += 1;
+                self.first.get_or_insert((line, *earlier.get()));
+            }
+            std::collections::hash_map::Entry::Vacant(slot) => {
+                slot.insert(line);
+            }
+        }
+    }
+
+    /// The one warning about repeated rows, if any, starting with `file:line:`.
+    pub(crate) fn warning(&self, path: &Path) -> Option<String> {
+        let (line, earlier) = self.first?;
+        let more = match self.count {
+            1 => String::new(),
+            n => format!(" ({n} rows in all repeat an earlier row)"),
+        };
+        Some(format!(
+            "{}:{line}: the joint readings and measurements repeat those of line {earlier}{more}; \
+             repeated rows are kept, but each counts as an independent sample and shrinks the \
+             reported σ",
+            path.display()
+        ))
+    }
+}

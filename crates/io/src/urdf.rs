@@ -224,7 +224,12 @@ fn inertials(
 
 /// Reads and parses a URDF, with XML errors located.
 fn read_robot(path: &Path) -> Result<urdf_rs::Robot, Error> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = Error::read_text(path, |line, column, message| Error::Xml {
+        path: path.to_path_buf(),
+        line,
+        column,
+        message,
+    })?;
     check_xml(&text, path)?;
     urdf_rs::read_from_string(&text).map_err(|e| urdf_error(path, format!("not a valid URDF: {e}")))
 }
@@ -392,7 +397,12 @@ pub fn write_calibrated_urdf(
     placements: &[Placement],
 ) -> Result<String, Error> {
     let path = source_urdf;
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = Error::read_text(path, |line, column, message| Error::Xml {
+        path: path.to_path_buf(),
+        line,
+        column,
+        message,
+    })?;
     let urdf_err = |message: String| Error::Urdf {
         path: path.to_path_buf(),
         message,
@@ -472,6 +482,11 @@ struct OpenJoint<'p> {
     has_origin: bool,
 }
 
+/// How deep elements may nest: a URDF needs 5 or 6 levels (robot, link, visual, geometry,
+/// mesh), vendor extensions a few more. Deeper nesting is refused before urdf-rs, whose
+/// recursive descent overflows the stack on some 10⁴ levels.
+const MAX_XML_DEPTH: usize = 64;
+
 fn plan_edits(
     text: &str,
     path: &Path,
@@ -550,6 +565,17 @@ fn plan_edits(
                 }
                 if !is_empty {
                     depth += 1;
+                    if depth > MAX_XML_DEPTH {
+                        let (line, column) = line_column(text, start);
+                        return Err(Error::Xml {
+                            path: path.to_path_buf(),
+                            line,
+                            column,
+                            message: format!(
+                                "elements nested more than {MAX_XML_DEPTH} deep (a URDF needs a handful)"
+                            ),
+                        });
+                    }
                 }
             }
             Event::End(_) => {

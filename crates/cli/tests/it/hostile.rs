@@ -314,3 +314,36 @@ fn absurd_finite_lengths_are_refused_where_they_are_read() {
     );
     assert!(out.stdout.is_empty());
 }
+
+#[test]
+fn folds_on_the_haptic_path_is_a_warning_that_it_is_unused() {
+    let dir = scratch("hostile-haptic-folds");
+    let log = simulated_log(&dir, 40);
+    let out = hapcal(&[
+        "calibrate",
+        "--device",
+        &reference("device.toml"),
+        "--data",
+        &show(&log),
+        "--folds",
+        "7",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    // The report's warnings (on standard output).
+    let report = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        report.contains("--folds 7 is not used") && report.contains("without cross-validation"),
+        "{report}"
+    );
+    // The default says nothing.
+    let out = hapcal(&[
+        "calibrate",
+        "--device",
+        &reference("device.toml"),
+        "--data",
+        &show(&log),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let report = String::from_utf8_lossy(&out.stdout);
+    assert!(!report.contains("--folds"), "{report}");
+}

@@ -124,3 +124,27 @@ fn missing_log_is_an_io_error() {
     let msg = message(read_log(&data("logs/no_such_log.csv"), &planar()));
     assert_contains(&msg, &["cannot read ", "no_such_log.csv: "]);
 }
+
+#[test]
+fn repeated_rows_are_kept_with_one_warning() {
+    let dir = std::env::temp_dir().join(format!("hapcal-io-log-repeats-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("repeats.csv");
+    // Line 4 repeats line 2 (the time differs), line 6 line 2 again, line 5 line 3; line 7
+    // differs from line 2 only by -0 for 0 in q1 and is a repeat too.
+    let text = "q1,q2,distance_m,t_s\n0.0,0.5,0.4,0\n0.1,0.5,0.4,1\n0.0,0.5,0.4,2\n0.1,0.5,0.4,3\n0.0,0.5,0.4,4\n-0.0,0.5,0.4,5\n0.0,0.5,0.41,6\n";
+    std::fs::write(&path, text).unwrap();
+    let log = read_log(&path, &planar()).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert_eq!(log.rows.len(), 7, "repeated rows are kept");
+    assert_eq!(log.warnings.len(), 1, "{:?}", log.warnings);
+    assert_contains(
+        &log.warnings[0],
+        &[
+            "repeats.csv:4: ",
+            "repeat those of line 2",
+            "(4 rows in all repeat an earlier row)",
+            "σ",
+        ],
+    );
+}

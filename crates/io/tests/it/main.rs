@@ -1,6 +1,7 @@
 //! Integration tests of hapcal-io against the fixtures in `test_data/`.
 
 mod device;
+mod fuzz;
 mod log;
 mod measure;
 mod mukca;

@@ -367,3 +367,22 @@ fn bundled_figaroh_ur10_fixture() {
         [0.9088284523365023, 0.34156959335807885, 1.2526995668918641]
     );
 }
+
+#[test]
+fn repeated_rows_are_kept_with_one_warning() {
+    let schema = Schema::revolute(&["a", "b"]);
+    // Line 4 repeats line 2 (the time differs); line 5 differs in a marker coordinate.
+    let text =
+        "a,b,x,y,z,t\n0.1,0.2,1,2,3,0\n0.3,0.2,1,2,3,1\n0.1,0.2,1,2,3,2\n0.1,0.2,1,2,3.5,3\n";
+    let table = read("repeats.csv", text, &schema, Units::default()).unwrap();
+    assert_eq!(table.rows.len(), 4, "repeated rows are kept");
+    assert_eq!(table.warnings.len(), 1, "{:?}", table.warnings);
+    assert_contains(
+        &table.warnings[0],
+        &["repeats.csv:4: ", "repeat those of line 2; "],
+    );
+    // A marker not seen in one row and seen in another is no repeat.
+    let text = "a,b,x,y,z\n0.1,0.2,1,2,3\n0.1,0.2,,,\n";
+    let table = read("seen.csv", text, &schema, Units::default()).unwrap();
+    assert!(table.warnings.is_empty(), "{:?}", table.warnings);
+}
