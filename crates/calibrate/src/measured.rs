@@ -1050,6 +1050,26 @@ pub fn calibrate_measured(
         weights,
         &all,
     )?;
+    // Repeated configurations add residuals but no information: the distinct ones must
+    // determine the frames with some redundancy, or σ (and every standard deviation) is zero.
+    let mut distinct: Vec<&[f64]> = Vec::new();
+    for row in train.iter().flat_map(|t| &t.rows) {
+        if !distinct.contains(&row.q.as_slice()) {
+            distinct.push(&row.q);
+        }
+    }
+    let n_residuals = f0.identified.fit.residuals.nrows();
+    let per_configuration = n_residuals as f64 / n_rows as f64;
+    let n_kept = f0.identified.identifiability.kept.len();
+    if (distinct.len() as f64) * per_configuration <= n_kept as f64 {
+        bail!(
+            "the training data hold {} distinct joint configurations ({n_rows} rows), about {:.0} \
+             independent residuals, not more than the {n_kept} frame parameters: record the \
+             markers in more configurations",
+            distinct.len(),
+            distinct.len() as f64 * per_configuration
+        );
+    }
     let mut reweighted = false;
     if cfg.sigma_m.is_none() || cfg.sigma_rad.is_none() {
         let (mut pos, mut rot, mut dist) = (Vec::new(), Vec::new(), Vec::new());

@@ -179,3 +179,18 @@ fn distances_from_an_unknown_anchor_find_the_joint_offsets() {
     assert!(after < 1.5 * NOISE_M, "test distance RMS {after} m");
     assert!(before > 5.0 * NOISE_M, "frames only {before} m");
 }
+
+#[test]
+fn one_configuration_repeated_is_an_error_not_a_zero_sigma() {
+    let robot = robot();
+    let mut train = table(&robot, 40, 1e-3, 7);
+    let first = train.rows[0].clone();
+    for row in &mut train.rows {
+        *row = first.clone();
+    }
+    let err = calibrate_measured(&robot, &[train], &[], &config()).unwrap_err();
+    assert!(
+        format!("{err:#}").contains("1 distinct joint configurations (40 rows)"),
+        "{err:#}"
+    );
+}

@@ -602,6 +602,7 @@ pub fn read_measurement_file(
         ));
     }
     warnings.extend(repeats.warning(path));
+    warnings.extend(identical_markers(path, &rows, n_markers));
     Ok(MeasurementTable {
         name: stem(path),
         path: path.to_path_buf(),
@@ -614,6 +615,37 @@ pub fn read_measurement_file(
         has_distance: distance_column.is_some(),
         ignored_columns,
     })
+}
+
+/// A warning for each pair of markers whose positions are identical in every row where both
+/// are seen (a column set copied twice: the same point would count twice in the fit).
+fn identical_markers(path: &Path, rows: &[MeasuredRow], n_markers: usize) -> Vec<String> {
+    let mut out = Vec::new();
+    for a in 0..n_markers {
+        for b in a + 1..n_markers {
+            let mut both = 0usize;
+            let same = rows.iter().all(|r| {
+                let find = |k: usize| r.markers.iter().find(|m| m.marker == k);
+                match (find(a), find(b)) {
+                    (Some(ma), Some(mb)) => {
+                        both += 1;
+                        ma.position_m == mb.position_m
+                    }
+                    _ => true,
+                }
+            });
+            if same && both > 0 {
+                out.push(format!(
+                    "{}: markers {} and {} have the same position in all {both} rows where both are \
+                     seen: one point counted twice (drop one column set if it was copied)",
+                    path.display(),
+                    a + 1,
+                    b + 1
+                ));
+            }
+        }
+    }
+    out
 }
 
 /// A row's joint readings and measurements (not its time or line), to find repeated rows;

@@ -386,3 +386,37 @@ fn repeated_rows_are_kept_with_one_warning() {
     let table = read("seen.csv", text, &schema, Units::default()).unwrap();
     assert!(table.warnings.is_empty(), "{:?}", table.warnings);
 }
+
+#[test]
+fn identical_marker_columns_are_reported() {
+    // figaroh's TIAGo recording has markers 3 and 4 as identical columns.
+    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/figaroh/tiago/qualysis_base_hand_calibration.csv");
+    let names: Vec<String> = [
+        "torso_lift_joint",
+        "arm_1_joint",
+        "arm_2_joint",
+        "arm_3_joint",
+        "arm_4_joint",
+        "arm_5_joint",
+        "arm_6_joint",
+        "arm_7_joint",
+    ]
+    .map(String::from)
+    .to_vec();
+    let mut prismatic = vec![false; 8];
+    prismatic[0] = true;
+    let limits = vec![(-10.0, 10.0); 8];
+    let schema = hapcal_io::JointSchema {
+        names: &names,
+        prismatic: &prismatic,
+        limits: &limits,
+    };
+    let table =
+        hapcal_io::read_measurement_file(&path, &schema, &hapcal_io::Units::default()).unwrap();
+    let identical: Vec<&String> = (table.warnings.iter())
+        .filter(|w| w.contains("same position"))
+        .collect();
+    assert_eq!(identical.len(), 1, "{:?}", table.warnings);
+    assert!(identical[0].contains("markers 3 and 4"), "{}", identical[0]);
+}
