@@ -878,10 +878,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         ladder: Vec::new(),
         frames: Vec::new(),
         sigma_m: identified.sigma,
-        sigma_source: match identified.sigma_source {
-            hapcal_identify::SigmaSource::Given => "given",
-            _ => "residuals",
-        },
+        sigma_source: identified.sigma_source.name(),
         parameters,
         pruned,
         correlated,

@@ -720,10 +720,7 @@ pub fn calibrate_logs(
         ladder: Vec::new(),
         frames: Vec::new(),
         sigma_m,
-        sigma_source: match kin.sigma_source {
-            hapcal_identify::SigmaSource::Given => "given",
-            _ => "residuals",
-        },
+        sigma_source: kin.sigma_source.name(),
         parameters,
         pruned,
         correlated,

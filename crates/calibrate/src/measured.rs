@@ -1326,15 +1326,19 @@ pub fn is_marker_file(path: &std::path::Path, distances: bool) -> bool {
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
     match ext.as_deref() {
         Some("yaml" | "yml") => true,
-        Some("csv") => std::fs::read_to_string(path).is_ok_and(|text| {
-            text.lines().next().is_some_and(|header| {
-                header.split(',').any(|c| match c.trim() {
+        Some("csv") => {
+            // The header alone decides; the file is read in full once, by its reader.
+            let mut header = String::new();
+            let read = std::fs::File::open(path).and_then(|f| {
+                std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut header)
+            });
+            read.is_ok()
+                && header.split(',').any(|c| match c.trim() {
                     "x" | "x1" => true,
                     "distance_m" | "distance" | "d" => distances,
                     _ => false,
                 })
-            })
-        }),
+        }
         _ => false,
     }
 }
@@ -1413,7 +1417,6 @@ pub fn run_tables(
     let tips: Vec<String> = std::iter::once(plan.tip.clone())
         .chain(plan.tips.iter().cloned())
         .collect();
-    let robot = robot.clone();
     if let Some(f) = plan.test_last {
         if !(f > 0.0 && f < 1.0) {
             bail!("--test-last must be a fraction in (0, 1), got {f}");
@@ -1455,7 +1458,7 @@ pub fn run_tables(
         sigma_rad: plan.sigma_rad,
         marker_tips: (0..tips.len()).collect(),
     };
-    let out = calibrate_measured(&robot, &train, &test, &cfg)?;
+    let out = calibrate_measured(robot, &train, &test, &cfg)?;
     warnings.extend(out.warnings.iter().cloned());
     let id = &out.fitted.identified;
     let is_frame = |name: &str| name.starts_with("instrument.") || name.starts_with("marker");
@@ -1509,10 +1512,7 @@ pub fn run_tables(
         ladder: out.ladder.clone(),
         frames: out.frames.clone(),
         sigma_m: out.weights.sigma_position_m * id.sigma,
-        sigma_source: match id.sigma_source {
-            hapcal_identify::SigmaSource::Given => "given",
-            _ => "residuals",
-        },
+        sigma_source: id.sigma_source.name(),
         parameters,
         pruned,
         correlated,

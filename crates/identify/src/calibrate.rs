@@ -96,6 +96,16 @@ pub enum SigmaSource {
     Residuals,
 }
 
+impl SigmaSource {
+    /// `"given"` or `"residuals"`, as reports name the source.
+    pub fn name(self) -> &'static str {
+        match self {
+            SigmaSource::Given => "given",
+            SigmaSource::Residuals => "residuals",
+        }
+    }
+}
+
 /// Result of [`identify`].
 #[derive(Clone, Debug)]
 pub struct Identified {
