@@ -174,7 +174,7 @@ pub enum DataSet {
 }
 
 impl DataSet {
-    fn name(&self) -> &str {
+    pub(crate) fn name(&self) -> &str {
         match self {
             DataSet::Sockets(p) => &p.name,
             DataSet::Distances { name, .. } => name,
@@ -368,7 +368,7 @@ pub fn load_data(paths: &[PathBuf], device: &Device) -> Result<Vec<DataSet>> {
 }
 
 /// Observations of `sets`; `keep(set, socket, row)` selects rows (for cross-validation).
-fn observations(
+pub(crate) fn observations(
     sets: &[DataSet],
     socket_distance_m: f64,
     keep: &dyn Fn(usize, usize, usize) -> bool,
@@ -424,7 +424,8 @@ pub fn identify_config(sigma_m: Option<f64>) -> IdentifyConfig {
     cfg
 }
 
-fn solve(
+/// Identifies `choice` from `obs` on `chain` at unit weights (residuals in metres).
+pub(crate) fn solve(
     chain: &Chain,
     obs: Observations,
     choice: ModelChoice,
@@ -483,7 +484,7 @@ pub(crate) fn fold_of(row: usize, n: usize, k: usize, r: usize, repeats: usize) 
 /// Repeated k-fold cross-validation with time-contiguous blocks per socket: repeat `r` of
 /// `repeats` shifts every block boundary by `r/repeats` of a block (a circular shift of the
 /// rows), so that each row is held out once per repeat with different neighbours.
-fn cross_validate(
+pub(crate) fn cross_validate(
     chain: &Chain,
     sets: &[DataSet],
     plan: &Plan,

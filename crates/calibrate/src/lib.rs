@@ -6,6 +6,7 @@
 //! Architecture invariant: *`calibrate` never prints and never needs a truth: everything it
 //! does, a user with a real device and real measurements can do.*
 
+pub mod baseline;
 pub mod calibrate;
 pub mod haptic;
 pub mod measured;

@@ -200,6 +200,10 @@ pub struct MeasuredOutcome {
     pub model: CalibratedModel,
     /// Identified frames.
     pub frames: Vec<FrameReport>,
+    /// The tree the problems are built on: the robot with joint offsets, behind the instrument
+    /// frame, with a marker frame on each tip ([`Tree::with_frames`]); `fitted.x` is in its
+    /// layout.
+    pub tree: Tree,
     /// Per data set (training first): name, role, rows, frames-only and calibrated figures.
     pub sets: Vec<(String, &'static str, usize, PoseFigures, PoseFigures)>,
     /// Per data set (the order of `sets`), the errors of every sample.
@@ -673,8 +677,12 @@ fn mean_marker_rotation(
     }
 }
 
-/// Observations of the tables' rows for which `keep(table, row)` holds.
-fn observations(tables: &[MeasurementTable], keep: &dyn Fn(usize, usize) -> bool) -> Observations {
+/// Observations of the tables' rows for which `keep(table, row)` holds: per row its distance
+/// (if any), then each marker sample, in file order.
+pub(crate) fn observations(
+    tables: &[MeasurementTable],
+    keep: &dyn Fn(usize, usize) -> bool,
+) -> Observations {
     let mut obs = Observations::default();
     for (ti, t) in tables.iter().enumerate() {
         for (ri, row) in t.rows.iter().enumerate() {
@@ -1238,6 +1246,7 @@ pub fn calibrate_measured(
         frames_only,
         model,
         frames,
+        tree: framed,
         sets,
         sample_errors,
         weights,

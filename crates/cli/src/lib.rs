@@ -4,6 +4,7 @@
 //! Architecture invariant: *the library part never prints; `main.rs` prints what it returns.*
 
 pub mod diagnose;
+pub mod diagnose_arm;
 pub mod plan_args;
 pub mod report;
 

@@ -185,18 +185,47 @@ enum Command {
         #[arg(long, default_value_t = 0.5)]
         period_s: f64,
     },
-    /// Diagnose the sim-to-real gap of a log: how far the calibrated model's held-out residual
-    /// lies above the noise floor, where (residual maps), which unmodelled effect explains it
-    /// and how far it shrinks. Prints a table (or one JSON document with --json) and writes the
-    /// residual maps as SVG.
+    /// Diagnose the sim-to-real gap: how far the calibrated model's held-out residual lies
+    /// above the noise floor, where (residual maps), which unmodelled effect explains it and
+    /// how far it shrinks. A haptic device's TOML with its log: the reference device's
+    /// diagnosis (transmissions and kinematics). A URDF or D-H device with anything `hapcal
+    /// calibrate` reads (MUKCa socket folders, distance logs, marker / pose / distance files):
+    /// the serial-arm diagnosis on the geometric calibration, with the model ladder. Prints a
+    /// table (or one JSON document with --json) and writes the residual maps as SVG.
     Diagnose {
-        /// Device file (TOML).
+        /// Device: a haptic device's TOML, a URDF (with --tip) or a D-H device file.
         #[arg(long)]
         device: PathBuf,
-        /// Measurement log (CSV, docs/design.md §5).
+        /// Tip link of a URDF; repeat for a tree (marker k sits on the k-th tip).
+        #[arg(long = "tip", default_values_t = ["ball_link".to_owned()])]
+        tips: Vec<String>,
+        /// Data: the haptic device's log (CSV, docs/design.md §5), or the training data of an
+        /// arm as `hapcal calibrate --data` takes them.
+        #[arg(long, num_args = 1..)]
+        data: Vec<PathBuf>,
+        /// Held-out data of an arm (never used to fit or to choose): its error at each rung.
+        #[arg(long, num_args = 1..)]
+        test: Vec<PathBuf>,
+        /// Measurement files: hold out this fraction of each training file's last rows.
         #[arg(long)]
-        data: PathBuf,
-        /// Baseline: `full` (transmissions + kinematics) or `kinematics` (the transmission
+        test_last: Option<f64>,
+        /// Instrument position σ, m per axis: the noise floor (default: repeated poses, socket
+        /// replicates, or no floor).
+        #[arg(long)]
+        sigma_m: Option<f64>,
+        /// Orientation σ of pose data, rad (default: estimated).
+        #[arg(long)]
+        sigma_rad: Option<f64>,
+        /// Known distance between the two sockets of a placement, m.
+        #[arg(long, default_value_t = 0.05)]
+        socket_distance_m: f64,
+        /// Unit of lengths in measurement files: m or mm.
+        #[arg(long, default_value = "m")]
+        length_unit: hapcal_io::LengthUnit,
+        /// Unit of angles in measurement files: rad or deg.
+        #[arg(long, default_value = "rad")]
+        angle_unit: hapcal_io::AngleUnit,
+        /// Haptic device: `full` (transmissions + kinematics) or `kinematics` (the transmission
         /// models then join the candidates).
         #[arg(long, default_value = "full")]
         baseline: String,
@@ -585,27 +614,91 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Diagnose {
             device,
+            tips,
             data,
+            test,
+            test_last,
+            sigma_m,
+            sigma_rad,
+            socket_distance_m,
+            length_unit,
+            angle_unit,
             baseline,
             folds,
             json,
             svg,
         } => {
             calibrate::check_extension(&svg, &["svg"], "the residual maps", false)?;
-            let inputs = [device.clone(), data.clone()];
-            let inputs = inputs.each_ref().map(PathBuf::as_path);
+            let mut inputs: Vec<&std::path::Path> = vec![device.as_path()];
+            inputs.extend(data.iter().chain(&test).map(PathBuf::as_path));
             calibrate::check_output(&svg, &inputs)?;
-            let plan = hapcal::diagnose::DiagnosePlan::new(device, data, &baseline, folds)?;
-            let (d, warnings) = hapcal::diagnose::run(&plan)?;
-            for w in warnings {
-                note!("hapcal: warning: {w}");
+            if data.is_empty() {
+                anyhow::bail!("--data: give the log or the measurements to diagnose");
             }
-            if json {
-                emit(&format!("{}\n", serde_json::to_string_pretty(&d)?));
+            let haptic = !device
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
+                && hapcal_io::read_device(&device)
+                    .is_ok_and(|d| !d.capstans.is_empty() || d.parallelogram.is_some());
+            let (text, json_text, svg_text) = if haptic {
+                if data.len() != 1 || !test.is_empty() {
+                    anyhow::bail!("a haptic device is diagnosed from one log: --data <log.csv>");
+                }
+                let plan = hapcal::diagnose::DiagnosePlan::new(
+                    device.clone(),
+                    data[0].clone(),
+                    &baseline,
+                    folds,
+                )?;
+                let (d, warnings) = hapcal::diagnose::run(&plan)?;
+                for w in warnings {
+                    note!("hapcal: warning: {w}");
+                }
+                (
+                    hapcal::diagnose::render(&d),
+                    serde_json::to_string_pretty(&d)?,
+                    hapcal::diagnose::residual_map_svg(&d),
+                )
             } else {
-                emit(&hapcal::diagnose::render(&d));
+                let (tip, more_tips) = match tips.split_first() {
+                    Some((first, rest)) => (first.clone(), rest.to_vec()),
+                    None => ("ball_link".to_owned(), Vec::new()),
+                };
+                let plan = Plan {
+                    device: device.clone(),
+                    tip,
+                    tips: more_tips,
+                    units: hapcal_io::Units::new(length_unit, angle_unit),
+                    sigma_rad,
+                    test_last,
+                    data: data.clone(),
+                    test: test.clone(),
+                    socket_distance_m,
+                    model: calibrate::ModelChoice::Geometric,
+                    folds,
+                    sigma_m,
+                    joint: false,
+                };
+                let cfg = hapcal_diagnose::arm::ArmConfig {
+                    folds,
+                    ..Default::default()
+                };
+                let (d, warnings) = hapcal::diagnose_arm::run_arm(&plan, &cfg)?;
+                for w in warnings {
+                    note!("hapcal: warning: {w}");
+                }
+                (
+                    hapcal::diagnose_arm::render_arm(&d),
+                    serde_json::to_string_pretty(&d)?,
+                    hapcal::diagnose_arm::arm_map_svg(&d),
+                )
+            };
+            if json {
+                emit(&format!("{json_text}\n"));
+            } else {
+                emit(&text);
             }
-            match calibrate::write_new(&svg, &hapcal::diagnose::residual_map_svg(&d), &inputs) {
+            match calibrate::write_new(&svg, &svg_text, &inputs) {
                 Ok(()) => note!("hapcal: wrote residual maps to {}", svg.display()),
                 Err(e) => note!("hapcal: warning: {e:#}"),
             }

@@ -33,6 +33,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod arm;
 pub mod blind;
 mod diagnose;
 mod error;

@@ -1,0 +1,468 @@
+//! The geometric baseline that a diagnosis of the sim-to-real gap starts from
+//! (docs/diagnosis.md, "Real robots"): any robot and measurement kind that `hapcal calibrate`
+//! reads (URDF or D-H device; MUKCa socket folders, distance logs, marker / pose / distance
+//! files), as calibration problems on the training and held-out rows, with the geometric
+//! estimate on the training rows and the held-out error of each kinematic rung.
+//!
+//! Everything here is the calibration's own model ([`CalibrationProblem`]) and loaders: the
+//! diagnosis adds effect terms to this baseline, it holds no model of its own.
+
+use anyhow::{Context, Result, bail};
+use faer::Col;
+use hapcal_identify::Problem;
+use hapcal_io::MeasurementTable;
+use hapcal_kinematics::{Chain, Vector3};
+use hapcal_problems::{CalibrationProblem, Observations, Weights};
+use nalgebra::Rotation3;
+use serde::Serialize;
+
+use crate::calibrate::{CV_REPEATS, DataSet, ModelChoice, Plan, load_data, load_device};
+use crate::measured::{
+    MeasuredConfig, Robot, Rung, calibrate_measured, is_marker_file, load_tables,
+    robot_from_device, robot_from_urdf,
+};
+
+/// What the training rows measured.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DataKind {
+    /// A ball in sockets at unknown points (MUKCa); residuals in the robot's base frame.
+    Sockets,
+    /// Distances from the base origin (a cable encoder of the device's own).
+    Distances,
+    /// Marker positions, poses or anchor distances in an external instrument's frame.
+    Markers,
+}
+
+/// A held-out data set as a problem whose first [`GeometricBaseline::n_shared`] parameters are
+/// the training problem's.
+#[derive(Debug)]
+pub struct HeldOutSet {
+    /// Set name (placement folder, file stem, `… (last k)` for a `--test-last` split).
+    pub name: String,
+    /// The problem on its rows (its own unknown points, if any, after the shared parameters).
+    pub problem: CalibrationProblem,
+    /// Parameters: the training estimate, then its own nuisance parameters (socket points at
+    /// the mean of the estimate's end points).
+    pub x: Col<f64>,
+    /// Configuration (0-based, in file order) of each problem row.
+    pub configuration: Vec<usize>,
+}
+
+/// One rung of the kinematic ladder.
+#[derive(Clone, Debug, Serialize)]
+pub struct KinematicRung {
+    /// `nominal`, `frames only`, `joint offsets`, `geometric`.
+    pub rung: String,
+    /// Held-out RMS of the 3-D position (or distance) error by blocked cross-validation on the
+    /// training rows, m; for `nominal`, the training RMS (no parameter but the sockets).
+    pub cv_rms_m: f64,
+    /// RMS of the same error on each held-out set (order of [`GeometricBaseline::tests`]), m.
+    pub test_rms_m: Vec<f64>,
+}
+
+/// The geometric calibration of the training rows and everything a diagnosis needs around it.
+#[derive(Debug)]
+pub struct GeometricBaseline {
+    /// What was measured.
+    pub kind: DataKind,
+    /// The robot (joint names, limits, prismatic flags, URDF link masses).
+    pub robot: Robot,
+    /// The robot from its base to the first tip, without instrument or marker frames: the
+    /// chain of gravity torques (base frame: gravity along −z).
+    pub torque_chain: Chain,
+    /// The geometric problem on the training rows.
+    pub train: CalibrationProblem,
+    /// The geometric estimate, in `train`'s layout.
+    pub x: Col<f64>,
+    /// Parameters (indices into `train`'s layout) the identification kept: free, and
+    /// determined by the data.
+    pub kept: Vec<usize>,
+    /// Leading parameters shared by the training and held-out problems.
+    pub n_shared: usize,
+    /// Configuration (0-based) of each training problem row.
+    pub configuration: Vec<usize>,
+    /// Per configuration: its group (socket, or file), the unit of time-contiguous blocks.
+    pub group: Vec<usize>,
+    /// Per configuration: its time, s (`t` column), or its position in the file.
+    pub time: Vec<f64>,
+    /// Whether `time` comes from a time column (else it is the row order).
+    pub time_from_data: bool,
+    /// Per configuration: the joint readings, rad (m for a prismatic joint).
+    pub q: Vec<Vec<f64>>,
+    /// Held-out sets.
+    pub tests: Vec<HeldOutSet>,
+    /// Weights of the residuals (σ per measurement type).
+    pub weights: Weights,
+    /// The position σ the user stated (`--sigma-m`), m per axis.
+    pub stated_sigma_m: Option<f64>,
+    /// Rotation from the robot's base frame into the frame the position residuals are
+    /// expressed in (the instrument's for marker data; identity otherwise).
+    pub base_to_measurement: Rotation3<f64>,
+    /// Held-out error of each kinematic rung (empty unless asked for).
+    pub ladder: Vec<KinematicRung>,
+    /// Plain-language warnings of the loaders and the fits.
+    pub warnings: Vec<String>,
+}
+
+/// Loads `plan`'s device and data as [`crate::calibrate::run`] does, and fits the geometric
+/// baseline on the training data; `ladder`: also cross-validate the simpler kinematic rungs.
+///
+/// # Errors
+/// Unreadable or inconsistent input; a haptic device with transmissions (its diagnosis is
+/// the reference device's); too few configurations for the geometric model.
+pub fn geometric_baseline(plan: &Plan, ladder: bool) -> Result<GeometricBaseline> {
+    let device = load_device(&plan.device, &plan.tip)?;
+    if !device.capstans.is_empty() || device.parallelogram.is_some() {
+        bail!(
+            "{}: a haptic device with transmissions is diagnosed from its own log (the reference \
+             device's diagnosis), not as a serial arm",
+            plan.device.display()
+        );
+    }
+    let is_urdf = (plan.device.extension()).is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    let tips: Vec<String> = std::iter::once(plan.tip.clone())
+        .chain(plan.tips.iter().cloned())
+        .collect();
+    let robot = if is_urdf {
+        robot_from_urdf(&plan.device, &tips)?
+    } else {
+        robot_from_device(&device)?
+    };
+    let distances = device.cable_encoder.is_none();
+    if (plan.data.iter()).any(|p| is_marker_file(p, distances)) {
+        let train = load_tables(&plan.data, &robot, &plan.units)?;
+        let test = load_tables(&plan.test, &robot, &plan.units)?;
+        return baseline_from_tables(&robot, train, test, plan, ladder);
+    }
+    let chain = device
+        .chain()
+        .with_context(|| format!("building the kinematic chain of {}", plan.device.display()))?;
+    let train = load_data(&plan.data, &device)?;
+    let test = load_data(&plan.test, &device)?;
+    baseline_from_sets(&robot, &chain, &train, &test, plan, ladder)
+}
+
+/// [`geometric_baseline`] on marker tables in memory (`plan.test_last` splits `train`).
+///
+/// # Errors
+/// As [`calibrate_measured`].
+pub fn baseline_from_tables(
+    robot: &Robot,
+    mut train: Vec<MeasurementTable>,
+    mut test: Vec<MeasurementTable>,
+    plan: &Plan,
+    ladder: bool,
+) -> Result<GeometricBaseline> {
+    if let Some(f) = plan.test_last {
+        if !(f > 0.0 && f < 1.0) {
+            bail!("--test-last must be a fraction in (0, 1), got {f}");
+        }
+        for t in &mut train {
+            let n = t.rows.len();
+            let k = ((1.0 - f) * n as f64).round() as usize;
+            if k == 0 || k == n {
+                bail!(
+                    "{}: --test-last {f} leaves {k} of {n} rows to train on",
+                    t.path.display()
+                );
+            }
+            let mut held = t.clone();
+            held.rows = t.rows.split_off(k);
+            held.name = format!("{} (last {})", t.name, n - k);
+            t.name = format!("{} (first {k})", t.name);
+            test.push(held);
+        }
+    }
+    let n_tips = 1 + plan.tips.len();
+    let cfg = |rung: Option<Rung>| MeasuredConfig {
+        rung,
+        folds: plan.folds,
+        sigma_m: plan.sigma_m,
+        sigma_rad: plan.sigma_rad,
+        marker_tips: (0..n_tips).collect(),
+    };
+    let out = calibrate_measured(robot, &train, &test, &cfg(Some(Rung::Geometric)))?;
+    let mut warnings: Vec<String> = (train.iter().chain(&test))
+        .flat_map(|t| t.warnings.iter().cloned())
+        .collect();
+    warnings.extend(out.warnings.iter().cloned());
+    let weights = out.weights;
+    let (obs, configuration) = table_observations(&train);
+    let train_problem =
+        CalibrationProblem::on_tree(out.tree.clone(), obs, weights, Default::default())
+            .context("building the calibration problem")?;
+    let x = out.fitted.x.clone();
+    let kept = kept_in_full_layout(&out.fitted.identified, &out.fitted.names);
+    let mut tests = Vec::new();
+    for t in &test {
+        let (obs, configuration) = table_observations(std::slice::from_ref(t));
+        let problem =
+            CalibrationProblem::on_tree(out.tree.clone(), obs, weights, Default::default())
+                .context("building the held-out problem")?;
+        tests.push(HeldOutSet {
+            name: t.name.clone(),
+            problem,
+            x: x.clone(),
+            configuration,
+        });
+    }
+    let (mut group, mut time, mut q) = (Vec::new(), Vec::new(), Vec::new());
+    let time_from_data = train.iter().all(|t| t.rows.iter().all(|r| r.t_s.is_some()));
+    let mut offset = 0.0;
+    for (ti, t) in train.iter().enumerate() {
+        for (ri, row) in t.rows.iter().enumerate() {
+            group.push(ti);
+            time.push(match (time_from_data, row.t_s) {
+                (true, Some(t)) => t,
+                _ => offset + ri as f64,
+            });
+            q.push(row.q.clone());
+        }
+        offset += t.rows.len() as f64;
+    }
+    let base_to_measurement = out.frames.first().map_or_else(Rotation3::identity, |f| {
+        Rotation3::from_euler_angles(f.rpy_rad[0], f.rpy_rad[1], f.rpy_rad[2])
+    });
+    let mut rungs = Vec::new();
+    if ladder {
+        let auto = calibrate_measured(robot, &train, &test, &cfg(None))?;
+        for rung in [Rung::FramesOnly, Rung::JointOffsets, Rung::Geometric] {
+            let fitted = if rung == Rung::Geometric {
+                None
+            } else {
+                Some(calibrate_measured(robot, &train, &test, &cfg(Some(rung)))?)
+            };
+            let o = fitted.as_ref().unwrap_or(&out);
+            let rms = |p: &crate::measured::PoseFigures| {
+                p.distance_rms_m
+                    .filter(|_| p.position_rms_m == 0.0)
+                    .unwrap_or(p.position_rms_m)
+            };
+            rungs.push(KinematicRung {
+                rung: rung.to_string(),
+                cv_rms_m: (auto.ladder.iter())
+                    .find(|r| r.rung == rung)
+                    .map_or(f64::NAN, |r| r.heldout_rms_m),
+                test_rms_m: (o.sets.iter())
+                    .filter(|s| s.1 == "test")
+                    .map(|s| rms(&s.4))
+                    .collect(),
+            });
+        }
+    }
+    Ok(GeometricBaseline {
+        kind: DataKind::Markers,
+        robot: Robot {
+            tree: robot.tree.clone(),
+            ..robot.clone()
+        },
+        torque_chain: robot.tree.tips()[0].clone(),
+        n_shared: x.nrows(),
+        train: train_problem,
+        x,
+        kept,
+        configuration,
+        group,
+        time,
+        time_from_data,
+        q,
+        tests,
+        weights,
+        stated_sigma_m: plan.sigma_m,
+        base_to_measurement,
+        ladder: rungs,
+        warnings,
+    })
+}
+
+/// Observations of every row of `tables` ([`crate::measured::observations`]) and the
+/// configuration of each problem row.
+fn table_observations(tables: &[MeasurementTable]) -> (Observations, Vec<usize>) {
+    let obs = crate::measured::observations(tables, &|_, _| true);
+    let mut configuration = Vec::with_capacity(obs.rows.len());
+    let mut c = 0;
+    for t in tables {
+        for row in &t.rows {
+            let n = usize::from(row.distance_m.is_some()) + row.markers.len();
+            configuration.extend(std::iter::repeat_n(c, n));
+            c += 1;
+        }
+    }
+    (obs, configuration)
+}
+
+/// The kept parameters of an identification over a subset, as indices of the full layout
+/// whose names are `names`.
+fn kept_in_full_layout(id: &hapcal_identify::Identified, names: &[String]) -> Vec<usize> {
+    let mut kept: Vec<usize> = (id.identifiability.kept.iter())
+        .filter_map(|&i| names.iter().position(|n| n == id.layout.name(i)))
+        .collect();
+    kept.sort_unstable();
+    kept
+}
+
+/// [`geometric_baseline`] on socket placements or distance logs in memory, for `chain` (the
+/// calibration chain of the device file) and `robot` (its link masses and joints).
+///
+/// # Errors
+/// No training configuration; fewer configurations than the geometric model keeps; a failed
+/// identification.
+pub fn baseline_from_sets(
+    robot: &Robot,
+    chain: &Chain,
+    train: &[DataSet],
+    test: &[DataSet],
+    plan: &Plan,
+    ladder: bool,
+) -> Result<GeometricBaseline> {
+    let all = |_: usize, _: usize, _: usize| true;
+    let obs = crate::calibrate::observations(train, plan.socket_distance_m, &all);
+    if obs.rows.is_empty() {
+        bail!("the training data have no configuration");
+    }
+    let kind = if train.iter().all(|s| matches!(s, DataSet::Sockets(_))) {
+        DataKind::Sockets
+    } else {
+        DataKind::Distances
+    };
+    let (problem, identified) =
+        crate::calibrate::solve(chain, obs, ModelChoice::Geometric, plan.sigma_m)?;
+    let n_shared = problem.points_offset();
+    let n_kept = (identified.identifiability.kept.iter())
+        .filter(|&&i| i < n_shared)
+        .count();
+    let n_rows = problem.observations().rows.len();
+    if n_kept == 0 || n_rows < n_kept {
+        bail!(
+            "{n_rows} configurations cannot determine the {n_kept} parameters of the geometric \
+             model: record more configurations, spread over the joint ranges"
+        );
+    }
+    let x = identified.fit.x.clone();
+    let kept = identified.identifiability.kept.clone();
+    let (mut group, mut time, mut q) = (Vec::new(), Vec::new(), Vec::new());
+    let mut g = 0;
+    for set in train {
+        match set {
+            DataSet::Sockets(p) => {
+                for socket in &p.sockets {
+                    for row in &socket.q {
+                        group.push(g);
+                        time.push(time.len() as f64);
+                        q.push(row.clone());
+                    }
+                    g += 1;
+                }
+            }
+            DataSet::Distances { q: rows, .. } => {
+                for row in rows {
+                    group.push(g);
+                    time.push(time.len() as f64);
+                    q.push(row.clone());
+                }
+                g += 1;
+            }
+        }
+    }
+    let configuration = (0..n_rows).collect();
+    let model = problem.model(x.as_ref());
+    let mut tests = Vec::new();
+    for set in test {
+        let obs =
+            crate::calibrate::observations(std::slice::from_ref(set), plan.socket_distance_m, &all);
+        let n = obs.rows.len();
+        let held = CalibrationProblem::new(chain.clone(), obs, Weights::default(), None)
+            .context("building the held-out problem")?;
+        let mut xt = held.initial_guess();
+        for i in 0..n_shared {
+            xt[i] = x[i];
+        }
+        // Each socket at the mean of the estimate's end points of its configurations.
+        let mut sums = vec![(Vector3::zeros(), 0usize); held.observations().n_points];
+        for row in &held.observations().rows {
+            if let hapcal_problems::RowKind::Point { point } = row.kind {
+                sums[point].0 += model.end_point(&row.q).coords;
+                sums[point].1 += 1;
+            }
+        }
+        let off = held.points_offset();
+        for (p, (sum, k)) in sums.iter().enumerate() {
+            let mean = sum / (*k).max(1) as f64;
+            for a in 0..3 {
+                xt[off + 3 * p + a] = mean[a];
+            }
+        }
+        tests.push(HeldOutSet {
+            name: set.name().to_owned(),
+            problem: held,
+            x: xt,
+            configuration: (0..n).collect(),
+        });
+    }
+    let mut rungs = Vec::new();
+    if ladder {
+        let point_rms = |p: &CalibrationProblem, x: &Col<f64>| -> Result<f64> {
+            let mut r = Col::<f64>::zeros(p.n_residuals());
+            p.residuals(x.as_ref(), r.as_mut())
+                .map_err(|e| anyhow::anyhow!("evaluating the residuals: {e}"))?;
+            let n_rows = p.observations().rows.len().max(1);
+            // Rows first (3 residuals each for sockets, 1 for distances), point distances last.
+            let per_row = if kind == DataKind::Sockets { 3 } else { 1 };
+            let n = n_rows * per_row;
+            let ss: f64 = (0..n.min(r.nrows())).map(|i| r[i] * r[i]).sum();
+            Ok((ss / n_rows as f64).sqrt())
+        };
+        // Nominal: the sockets at the mean of the nominal end points, nothing else fitted.
+        let mut nominal_x = problem.initial_guess();
+        let nominal_test: Vec<f64> = (tests.iter())
+            .map(|t| {
+                let x0 = t.problem.initial_guess();
+                point_rms(&t.problem, &x0)
+            })
+            .collect::<Result<_>>()?;
+        for i in 0..n_shared {
+            nominal_x[i] = 0.0;
+        }
+        rungs.push(KinematicRung {
+            rung: "nominal".into(),
+            cv_rms_m: point_rms(&problem, &nominal_x)?,
+            test_rms_m: nominal_test,
+        });
+        let held = crate::calibrate::cross_validate(
+            chain,
+            train,
+            plan,
+            ModelChoice::Geometric,
+            CV_REPEATS,
+        )?;
+        let cv = (held.sq_errors.iter().sum::<f64>() / held.sq_errors.len().max(1) as f64).sqrt();
+        rungs.push(KinematicRung {
+            rung: "geometric".into(),
+            cv_rms_m: cv,
+            test_rms_m: (tests.iter())
+                .map(|t| point_rms(&t.problem, &t.x))
+                .collect::<Result<_>>()?,
+        });
+    }
+    Ok(GeometricBaseline {
+        kind,
+        robot: robot.clone(),
+        torque_chain: robot.tree.tips()[0].clone(),
+        train: problem,
+        x,
+        kept,
+        n_shared,
+        configuration,
+        group,
+        time,
+        time_from_data: false,
+        q,
+        tests,
+        weights: Weights::default(),
+        stated_sigma_m: plan.sigma_m,
+        base_to_measurement: Rotation3::identity(),
+        ladder: rungs,
+        warnings: Vec::new(),
+    })
+}

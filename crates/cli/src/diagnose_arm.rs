@@ -1,0 +1,240 @@
+//! `hapcal diagnose` on a serial arm (a URDF or D-H device and what `hapcal calibrate` reads):
+//! the geometric baseline of [`hapcal_calibrate::baseline`], the diagnosis of
+//! [`hapcal_diagnose::arm`], rendered as a text report and residual maps (SVG).
+
+use std::fmt::Write as _;
+
+use anyhow::{Context, Result};
+use hapcal_calibrate::baseline::geometric_baseline;
+use hapcal_calibrate::calibrate::Plan;
+use hapcal_diagnose::arm::{ArmConfig, ArmDiagnosis, diagnose_arm};
+
+/// Loads `plan`'s device and data, fits the geometric baseline (with the kinematic ladder)
+/// and diagnoses it; returns the diagnosis and the loaders' warnings.
+///
+/// # Errors
+/// Unreadable or invalid files (named with line and column), too few configurations, a failed
+/// baseline fit.
+pub fn run_arm(plan: &Plan, cfg: &ArmConfig) -> Result<(ArmDiagnosis, Vec<String>)> {
+    let baseline = geometric_baseline(plan, true)?;
+    let d = diagnose_arm(&baseline, cfg).context("diagnosing the geometric baseline")?;
+    Ok((d, baseline.warnings))
+}
+
+fn mm(m: f64) -> String {
+    format!("{:.3}", m * 1e3)
+}
+
+/// The diagnosis as a text report: floor and gap, where (flagged bins), which (every
+/// candidate), how far (accepted effects with their parameters), the ladder, the verdict.
+pub fn render_arm(d: &ArmDiagnosis) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "geometric baseline: {:?} data, {} training configurations, {} parameters kept",
+        d.kind, d.n_configurations, d.n_baseline_params
+    );
+    let _ = writeln!(s, "floor: {}", d.floor_method);
+    match d.floor_rms_m {
+        Some(f) => {
+            let _ = writeln!(
+                s,
+                "held-out RMS {} mm, floor {} mm, gap {} mm (p = {:.1e}, {})",
+                mm(d.heldout_rms_m),
+                mm(f),
+                mm(d.gap_rms_m),
+                d.gap_p_value,
+                if d.gap_significant {
+                    "significant"
+                } else {
+                    "not significant"
+                }
+            );
+        }
+        None => {
+            let _ = writeln!(
+                s,
+                "held-out RMS {} mm; no floor: gap to the best model found {} mm",
+                mm(d.heldout_rms_m),
+                mm(d.gap_rms_m)
+            );
+        }
+    }
+    let _ = writeln!(s, "\nWHERE (bins significantly above the floor, Holm)");
+    let flagged: Vec<_> = d.where_.iter().filter(|b| b.flagged).collect();
+    for b in &flagged {
+        let _ = writeln!(
+            s,
+            "  {:10} [{:.3}, {:.3}]  {} mm over {} mm, n {}",
+            b.signal,
+            b.lo,
+            b.hi,
+            mm(b.rms_m),
+            mm(b.floor_rms_m),
+            b.n
+        );
+    }
+    let _ = writeln!(s, "  {} of {} bins flagged", flagged.len(), d.where_.len());
+    let _ = writeln!(
+        s,
+        "\nWHICH (held-out RMS before → after; improvement ± blocked SE; Holm p)"
+    );
+    let _ = writeln!(
+        s,
+        "  {:>2} {:20} {:>4} {:>9} {:>9} {:>7} {:>9} {:>9}  decision",
+        "rd", "effect", "k", "before mm", "after mm", "gap %", "p (cv)", "p (F)"
+    );
+    for c in &d.candidates {
+        let _ = writeln!(
+            s,
+            "  {:>2} {:20} {:>4} {:>9} {:>9} {:>7.0} {:>9.1e} {:>9.1e}  {}{}",
+            c.round,
+            c.effect,
+            c.n_visible,
+            mm(c.heldout_rms_before_m),
+            mm(c.heldout_rms_after_m),
+            c.gap_closed_pct,
+            c.heldout_p_value,
+            c.f_p_value,
+            if c.accepted { "NAMED: " } else { "" },
+            c.reason
+        );
+    }
+    let _ = writeln!(s, "\nHOW FAR");
+    for st in &d.steps {
+        let _ = writeln!(
+            s,
+            "  + {}: held-out RMS {} → {} mm, closes {:.0} % of the gap",
+            st.effect,
+            mm(st.heldout_rms_before_m),
+            mm(st.heldout_rms_after_m),
+            st.gap_closed_pct
+        );
+        for p in &st.parameters {
+            let _ = writeln!(
+                s,
+                "      {:40} {:>12.4e} ± {:.1e} {}",
+                p.name, p.value, p.std, p.unit
+            );
+        }
+        for (other, how) in &st.confusable_with {
+            let _ = writeln!(
+                s,
+                "      confusable with {other} on these data; to separate them record {how}"
+            );
+        }
+    }
+    let _ = writeln!(
+        s,
+        "  final held-out RMS {} mm; gap closed {:.0} %",
+        mm(d.heldout_rms_final_m),
+        d.gap_closed_pct
+    );
+    let _ = writeln!(s, "\nLADDER (RMS of the 3-D error, mm)");
+    let _ = writeln!(
+        s,
+        "  {:40} {:>9}  {}",
+        "rung",
+        "CV train",
+        d.test_sets.join("  ")
+    );
+    for r in &d.ladder {
+        let tests: Vec<String> = r.test_rms_m.iter().map(|v| mm(*v)).collect();
+        let _ = writeln!(
+            s,
+            "  {:40} {:>9}  {}",
+            r.rung,
+            mm(r.cv_rms_m),
+            tests.join("  ")
+        );
+    }
+    for n in &d.notes {
+        let _ = writeln!(s, "note: {n}");
+    }
+    let _ = writeln!(s, "\nverdict: {}", d.verdict);
+    s
+}
+
+/// The residual maps as one SVG document: per signal (each joint reading, time, each joint's
+/// gravity torque, the tip's reach, height and azimuth), each bin's held-out 3-D RMS (bar, mm;
+/// red when significantly above the floor, Holm) and the floor (black tick). Hand-written SVG,
+/// a grid of small panels on one common scale.
+pub fn arm_map_svg(d: &ArmDiagnosis) -> String {
+    let mut signals: Vec<&str> = Vec::new();
+    for b in &d.where_ {
+        if !signals.contains(&b.signal.as_str()) {
+            signals.push(&b.signal);
+        }
+    }
+    let (pw, ph, cols) = (220.0, 140.0, 5usize);
+    let rows = signals.len().div_ceil(cols).max(1);
+    let (w, h) = (pw * cols as f64, ph * rows as f64 + 40.0);
+    let ymax = (d.where_.iter())
+        .map(|b| b.rms_m.max(b.floor_rms_m))
+        .fold(0.0, f64::max)
+        .max(1e-12);
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="10">"#
+    );
+    let _ = writeln!(
+        s,
+        r#"<text x="10" y="20" font-size="14">Held-out 3-D residual RMS per bin (common scale to {:.3} mm); red: above the floor (Holm); tick: {}. Verdict: {}</text>"#,
+        ymax * 1e3,
+        if d.floor_rms_m.is_some() {
+            "floor"
+        } else {
+            "overall RMS (no floor)"
+        },
+        d.verdict
+    );
+    for (k, sig) in signals.iter().enumerate() {
+        let (x0, y0) = (pw * (k % cols) as f64, 40.0 + ph * (k / cols) as f64);
+        let bins: Vec<_> = d.where_.iter().filter(|b| b.signal == *sig).collect();
+        let any_flag = bins.iter().any(|b| b.flagged);
+        let _ = writeln!(
+            s,
+            r#"<text x="{}" y="{}"{}>{}</text>"#,
+            x0 + 10.0,
+            y0 + 12.0,
+            if any_flag {
+                r#" font-weight="bold""#
+            } else {
+                ""
+            },
+            sig
+        );
+        let (bx, by, bw, bh) = (x0 + 10.0, y0 + 18.0, pw - 30.0, ph - 40.0);
+        let _ = writeln!(
+            s,
+            r##"<rect x="{bx}" y="{by}" width="{bw}" height="{bh}" fill="none" stroke="#999"/>"##
+        );
+        let n = bins.len().max(1) as f64;
+        for (i, b) in bins.iter().enumerate() {
+            let bar_h = bh * (b.rms_m / ymax).min(1.0);
+            let floor_y = by + bh - bh * (b.floor_rms_m / ymax).min(1.0);
+            let x = bx + bw * i as f64 / n + 2.0;
+            let width = bw / n - 4.0;
+            let color = if b.flagged { "#d62728" } else { "#1f77b4" };
+            let _ = writeln!(
+                s,
+                r#"<rect x="{x:.1}" y="{:.1}" width="{width:.1}" height="{bar_h:.1}" fill="{color}"><title>[{:.3}, {:.3}] rms {:.4} mm, floor {:.4} mm, n {}, p {:.1e}</title></rect>"#,
+                by + bh - bar_h,
+                b.lo,
+                b.hi,
+                b.rms_m * 1e3,
+                b.floor_rms_m * 1e3,
+                b.n,
+                b.p_value
+            );
+            let _ = writeln!(
+                s,
+                r#"<line x1="{x:.1}" x2="{:.1}" y1="{floor_y:.1}" y2="{floor_y:.1}" stroke="black" stroke-width="2"/>"#,
+                x + width
+            );
+        }
+    }
+    s.push_str("</svg>\n");
+    s
+}

@@ -1,0 +1,1620 @@
+//! Diagnosis of a serial arm's sim-to-real gap (docs/diagnosis.md, "Real robots"): after the
+//! geometric calibration of [`GeometricBaseline`], how far the held-out residual lies above
+//! the noise floor, where it lies, which effect of the serial-arm library explains it, how
+//! far it shrinks once that effect is modelled, and what each model step buys.
+//!
+//! Every effect is a small parametric term on top of the calibration's own problem
+//! ([`hapcal_problems::CalibrationProblem`]): a joint-angle error `Δq_j = c·b_j(row)` enters
+//! through the problem's derivative with respect to the readings (central differences of its
+//! residuals), a displacement `Δp = c·v(row)` of the measured point through the position
+//! residuals. The tests are linear about the geometric estimate (one Gauss–Newton step from a
+//! converged fit, the reference device's scheme), so that each candidate costs a few small
+//! least-squares solves ([`crate::solve::lstsq`], the identify engine), not a nonlinear fit.
+//!
+//! Statistics: blocked k-fold cross-validation (contiguous configurations of one socket or
+//! file per block), the held-out improvement of each candidate tested one-sided with a
+//! Student t over the blocks, Holm–Bonferroni over the candidates of a round, and the
+//! in-sample F-test (Holm) as a second gate; an effect is named only when both hold at `alpha`
+//! and it closes at least `min_gap_share` of the gap above the floor.
+
+use hapcal_calibrate::baseline::{DataKind, GeometricBaseline, HeldOutSet};
+use hapcal_identify::Problem;
+use hapcal_problems::{CalibrationProblem, GravityCompliance, Observations, RowKind};
+use nalgebra::{DMatrix, DVector, Vector3};
+use serde::Serialize;
+
+use crate::Error;
+use crate::solve::lstsq;
+use crate::stats::{chi2_sf, f_sf, holm, pivoted_basis};
+
+/// Remaining fraction of a candidate column's norm, after projecting out the baseline, below
+/// which the column is absorbed by the baseline (invisible in these data).
+const VISIBLE_TOL: f64 = 0.02;
+
+/// Step of the central differences with respect to a joint reading, rad (m for a prismatic
+/// joint): truncation error ~h² relative, rounding ~ε/h; both far below the noise.
+const READING_STEP: f64 = 1e-6;
+
+/// The tip's reach or height must span more than this (m) for the workspace maps: at sockets
+/// it does not move.
+const WORKSPACE_SPREAD_M: f64 = 0.01;
+
+/// A joint's basis below this fraction of the effect's largest is left out (numerical zero).
+const NEGLIGIBLE_BASIS: f64 = 1e-6;
+
+/// Repeats of the cross-validation, each with the block boundaries shifted by a fraction of a
+/// block (as the calibration's own, [`hapcal_calibrate::calibrate::CV_REPEATS`]).
+const CV_REPEATS: usize = hapcal_calibrate::calibrate::CV_REPEATS;
+
+/// Cosine of two candidates' fitted corrections above which the data confuse them.
+const CONFUSABLE_COSINE: f64 = 0.8;
+
+/// Joint readings agreeing to this (rad, or m for a prismatic joint) on every joint are a
+/// repeated pose (a floor from repeatability).
+pub const REPEAT_TOLERANCE: f64 = 1e-4;
+
+/// An effect of the serial-arm library.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ArmEffect {
+    /// Joint compliance under the links' own weight: `Δq_j = k_j·τ_j(q)`, `τ_j` the gravity
+    /// torque of the URDF `<inertial>` masses (or the published masses of a known robot),
+    /// N·m; `k_j` rad/(N·m) (Zhou, Kang & Ryu 2014; Nubiola & Bonev 2013).
+    GravityCompliance,
+    /// Lumped compliance: `Δq_j = k_j·τ̂_j(q)`, `τ̂_j` the torque of a unit weight at the tip
+    /// (m); the model when no link masses are known, or a payload dominates.
+    LumpedCompliance,
+    /// Once-per-revolution angle error of each revolute joint, `a_j sin q_j + b_j cos q_j`:
+    /// encoder or gear eccentricity (Renders et al. 1991).
+    Harmonic1,
+    /// Twice-per-revolution angle error, `a_j sin 2q_j + b_j cos 2q_j`: elliptic gear or
+    /// encoder disc.
+    Harmonic2,
+    /// Backlash: `Δq_j = b_j·s_j`, `s_j` the sign of the joint's last motion (from the
+    /// previous configuration of the same socket or file, in time order), 0 for the first.
+    Backlash,
+    /// Gear-ratio (scale) error: `Δq_j = s_j·q_j`.
+    GearRatio,
+    /// Thermal drift: the measured point moves linearly in time, `Δp = v·(t − t̄)/T` (three
+    /// components in the measurement frame, m over the recording's span `T`; one for
+    /// distances).
+    ThermalDrift,
+    /// Link deflection under gravity: the tip sags by `c·(ρ/ρ_max)³` along gravity, `ρ` its
+    /// horizontal reach from the base axis (a cantilever under an end load, δ ∝ L³).
+    LinkDeflection,
+    /// Scale error of the instrument: `Δp = s·p` (positions in the instrument frame) or
+    /// `Δd = s·d`.
+    InstrumentScale,
+}
+
+impl ArmEffect {
+    /// Every effect, in report order.
+    pub const LIBRARY: [ArmEffect; 9] = [
+        ArmEffect::GravityCompliance,
+        ArmEffect::LumpedCompliance,
+        ArmEffect::Harmonic1,
+        ArmEffect::Harmonic2,
+        ArmEffect::Backlash,
+        ArmEffect::GearRatio,
+        ArmEffect::ThermalDrift,
+        ArmEffect::LinkDeflection,
+        ArmEffect::InstrumentScale,
+    ];
+
+    /// Stable name (`gravity_compliance`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            ArmEffect::GravityCompliance => "gravity_compliance",
+            ArmEffect::LumpedCompliance => "lumped_compliance",
+            ArmEffect::Harmonic1 => "harmonic1",
+            ArmEffect::Harmonic2 => "harmonic2",
+            ArmEffect::Backlash => "backlash",
+            ArmEffect::GearRatio => "gear_ratio",
+            ArmEffect::ThermalDrift => "thermal_drift",
+            ArmEffect::LinkDeflection => "link_deflection",
+            ArmEffect::InstrumentScale => "instrument_scale",
+        }
+    }
+
+    /// The effect named `name`.
+    pub fn from_name(name: &str) -> Option<ArmEffect> {
+        Self::LIBRARY.into_iter().find(|e| e.name() == name)
+    }
+
+    /// The measurement that separates this effect from `other` when the data confuse them.
+    pub fn separating_measurement(self, other: ArmEffect) -> &'static str {
+        use ArmEffect::*;
+        let pair = |a, b| (self == a && other == b) || (self == b && other == a);
+        if pair(GravityCompliance, LumpedCompliance) {
+            "the same poses with and without a known payload"
+        } else if pair(GravityCompliance, LinkDeflection) || pair(LumpedCompliance, LinkDeflection)
+        {
+            "poses of equal joint torque at different reach (elbow up and down)"
+        } else if self == Backlash || other == Backlash {
+            "each pose approached from both sides of every joint"
+        } else if self == ThermalDrift || other == ThermalDrift {
+            "one reference pose repeated at the start, middle and end of the recording"
+        } else if self == InstrumentScale || other == InstrumentScale {
+            "a calibrated length (scale bar) measured by the instrument"
+        } else if pair(Harmonic1, GearRatio) || pair(Harmonic2, GearRatio) {
+            "poses covering each joint's full range"
+        } else {
+            "poses spread over every joint's range and the workspace"
+        }
+    }
+}
+
+/// Settings of [`diagnose_arm`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ArmConfig {
+    /// Cross-validation folds (contiguous blocks of configurations per socket or file), ≥ 2.
+    pub folds: usize,
+    /// Family-wise significance level (Holm) of the candidate tests and of the map's bins.
+    pub alpha: f64,
+    /// Largest number of effects added one after the other.
+    pub max_effects: usize,
+    /// Smallest share of the gap above the floor a named effect must close, 0–1 (not used
+    /// without a floor).
+    pub min_gap_share: f64,
+    /// Quantile bins per signal of the residual map.
+    pub bins: usize,
+}
+
+impl Default for ArmConfig {
+    /// 5 folds, α = 0.01, up to 2 effects, each closing ≥ 20 % of the gap, 6 bins: the
+    /// reference device's settings (docs/diagnosis.md).
+    fn default() -> Self {
+        Self {
+            folds: 5,
+            alpha: 0.01,
+            max_effects: 2,
+            min_gap_share: 0.2,
+            bins: 6,
+        }
+    }
+}
+
+/// Where the floor came from.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FloorSource {
+    /// The instrument σ the user stated (`--sigma-m`).
+    Stated,
+    /// Repeated poses in the data (repeatability): pooled within-pose scatter of the residuals.
+    RepeatedPoses {
+        /// Degrees of freedom of the pooled variance.
+        dof: usize,
+    },
+    /// The sockets' replicates: half the mean squared difference of the residuals of each
+    /// configuration and its nearest configuration at the same socket (Rice 1984). An upper
+    /// bound: model error that changes between neighbours adds to it.
+    SocketReplicates {
+        /// Pairs used.
+        pairs: usize,
+    },
+    /// No floor: gaps are relative to the best model found.
+    None,
+}
+
+/// One identified effect parameter.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct EffectParam {
+    /// `effect.joint` (`gravity_compliance.joint_a2`) or `effect.axis`.
+    pub name: String,
+    /// Value, in `unit`.
+    pub value: f64,
+    /// Standard deviation (σ from the residuals).
+    pub std: f64,
+    /// Unit (`rad/(N·m)`, `rad/m`, `rad`, `m`, `1`).
+    pub unit: String,
+}
+
+/// One candidate tested in one round.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ArmCandidate {
+    /// Effect name.
+    pub effect: String,
+    /// Round (1 = against the geometric baseline).
+    pub round: usize,
+    /// Parameters visible in these data (not absorbed by the baseline).
+    pub n_visible: usize,
+    /// Held-out position RMS of the round's baseline, m.
+    pub heldout_rms_before_m: f64,
+    /// Held-out position RMS with the candidate, m.
+    pub heldout_rms_after_m: f64,
+    /// Mean held-out weighted squared error per configuration, baseline minus candidate, and
+    /// its blocked standard error (> 0: the candidate predicts better).
+    pub heldout_improvement: (f64, f64),
+    /// One-sided Student-t p-value of the held-out improvement, Holm-adjusted over the round.
+    pub heldout_p_value: f64,
+    /// F-test p-value of the in-sample improvement, Holm-adjusted over the round.
+    pub f_p_value: f64,
+    /// Share of the gap above the floor it closes, % (relative to the best model without a
+    /// floor).
+    pub gap_closed_pct: f64,
+    /// Whether it was named.
+    pub accepted: bool,
+    /// Why it was, or was not.
+    pub reason: String,
+    /// Its parameters fitted with the baseline on all training rows.
+    pub parameters: Vec<EffectParam>,
+}
+
+/// One bin of the residual map.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ArmBin {
+    /// Signal (`q2`, `time`, `torque2`, `reach`, `height`, `azimuth`).
+    pub signal: String,
+    /// Lower edge, in the signal's unit (rad, m, s, N·m).
+    pub lo: f64,
+    /// Upper edge.
+    pub hi: f64,
+    /// Configurations in the bin.
+    pub n: usize,
+    /// Held-out 3-D position RMS in the bin, m.
+    pub rms_m: f64,
+    /// The floor's RMS in the bin (the overall held-out RMS without a floor), m.
+    pub floor_rms_m: f64,
+    /// `P(χ² > Σe²/var)`, Holm-adjusted over every bin.
+    pub p_value: f64,
+    /// Significantly above the floor at `alpha`.
+    pub flagged: bool,
+}
+
+/// One rung of the ladder.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ArmRung {
+    /// `frames only`, `joint offsets`, `geometric`, `+ gravity_compliance`, ….
+    pub rung: String,
+    /// Held-out RMS of the 3-D position error on the training rows (blocked CV), m.
+    pub cv_rms_m: f64,
+    /// RMS on each held-out set, m (order of [`ArmDiagnosis::test_sets`]).
+    pub test_rms_m: Vec<f64>,
+}
+
+/// One accepted effect.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ArmStep {
+    /// Effect name.
+    pub effect: String,
+    /// Held-out position RMS before and after, m.
+    pub heldout_rms_before_m: f64,
+    /// After.
+    pub heldout_rms_after_m: f64,
+    /// Share of the original gap it closes, %.
+    pub gap_closed_pct: f64,
+    /// Its parameters ± std.
+    pub parameters: Vec<EffectParam>,
+    /// Candidates the data confuse with it, each with the measurement that would separate them.
+    pub confusable_with: Vec<(String, String)>,
+}
+
+/// The diagnosis of a serial arm's data.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ArmDiagnosis {
+    /// What was measured.
+    pub kind: DataKind,
+    /// Training configurations.
+    pub n_configurations: usize,
+    /// Geometric parameters the baseline keeps.
+    pub n_baseline_params: usize,
+    /// How the floor was found, in words.
+    pub floor_method: String,
+    /// Where the floor came from.
+    pub floor_source: FloorSource,
+    /// Per-axis position σ of the floor, m (`None` without a floor).
+    pub floor_sigma_m: Option<f64>,
+    /// Floor of the held-out 3-D position RMS, m (`None` without a floor).
+    pub floor_rms_m: Option<f64>,
+    /// Held-out 3-D position RMS of the geometric baseline, m.
+    pub heldout_rms_m: f64,
+    /// `sqrt(max(0, MSE − floor²))`, m; without a floor, relative to the best model found.
+    pub gap_rms_m: f64,
+    /// `P(χ² > Σe²/var)` of the held-out residuals under the floor (1 without a floor).
+    pub gap_p_value: f64,
+    /// Whether the gap is significant at `alpha`.
+    pub gap_significant: bool,
+    /// The residual map of the baseline's held-out residuals.
+    #[serde(rename = "where")]
+    pub where_: Vec<ArmBin>,
+    /// Every candidate of every round.
+    pub candidates: Vec<ArmCandidate>,
+    /// Accepted effects in order.
+    pub steps: Vec<ArmStep>,
+    /// Accepted effects joined by `+`, or `none`.
+    pub verdict: String,
+    /// Held-out position RMS after the accepted effects, m.
+    pub heldout_rms_final_m: f64,
+    /// Share of the gap closed by the accepted effects, %.
+    pub gap_closed_pct: f64,
+    /// Held-out sets' names.
+    pub test_sets: Vec<String>,
+    /// The ladder: kinematic rungs, then each accepted effect.
+    pub ladder: Vec<ArmRung>,
+    /// Things the user should know.
+    pub notes: Vec<String>,
+}
+
+/// What one residual measures.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Res {
+    /// Axis `axis` of a position (marker, position or socket), σ of its weight, m.
+    Position { axis: usize, sigma: f64 },
+    /// An orientation component, σ rad.
+    Orientation,
+    /// A distance, σ m.
+    Distance { sigma: f64 },
+    /// A constraint between unknown points (never held out, never scored).
+    Constraint,
+}
+
+/// The rows of one problem, described for the effects.
+struct Rows {
+    /// Per residual: its kind and configuration (`usize::MAX` for constraints).
+    res: Vec<(Res, usize)>,
+    /// Per residual: the measured position of its row in the measurement frame (m), if any.
+    measured: Vec<Option<[f64; 3]>>,
+    /// Per configuration: readings.
+    q: Vec<Vec<f64>>,
+    /// Per configuration: group.
+    group: Vec<usize>,
+    /// Per configuration: time.
+    time: Vec<f64>,
+}
+
+impl Rows {
+    fn new(
+        problem: &CalibrationProblem,
+        configuration: &[usize],
+        q: Vec<Vec<f64>>,
+        group: Vec<usize>,
+        time: Vec<f64>,
+    ) -> Rows {
+        let w = problem.weights();
+        let obs = problem.observations();
+        let mut res = Vec::new();
+        let mut measured = Vec::new();
+        for (row, &c) in obs.rows.iter().zip(configuration) {
+            match &row.kind {
+                RowKind::Distance { distance_m } => {
+                    res.push((
+                        Res::Distance {
+                            sigma: w.sigma_distance_m,
+                        },
+                        c,
+                    ));
+                    measured.push(Some([*distance_m, 0.0, 0.0]));
+                }
+                RowKind::Position { position_m } | RowKind::Marker { position_m, .. } => {
+                    for axis in 0..3 {
+                        res.push((
+                            Res::Position {
+                                axis,
+                                sigma: w.sigma_position_m,
+                            },
+                            c,
+                        ));
+                        measured.push(Some(*position_m));
+                    }
+                }
+                RowKind::Pose { position_m, .. } => {
+                    for axis in 0..3 {
+                        res.push((
+                            Res::Position {
+                                axis,
+                                sigma: w.sigma_position_m,
+                            },
+                            c,
+                        ));
+                        measured.push(Some(*position_m));
+                    }
+                    for _ in 0..3 {
+                        res.push((Res::Orientation, c));
+                        measured.push(None);
+                    }
+                }
+                RowKind::Point { .. } => {
+                    for axis in 0..3 {
+                        res.push((
+                            Res::Position {
+                                axis,
+                                sigma: w.sigma_point_m,
+                            },
+                            c,
+                        ));
+                        measured.push(None);
+                    }
+                }
+            }
+        }
+        for _ in 0..obs.point_distances.len() {
+            res.push((Res::Constraint, usize::MAX));
+            measured.push(None);
+        }
+        Rows {
+            res,
+            measured,
+            q,
+            group,
+            time,
+        }
+    }
+
+    fn n_configurations(&self) -> usize {
+        self.q.len()
+    }
+}
+
+/// Residuals of `problem` at `x`, as a vector.
+fn residuals(problem: &CalibrationProblem, x: &faer::Col<f64>) -> Result<DVector<f64>, Error> {
+    let mut r = faer::Col::<f64>::zeros(problem.n_residuals());
+    problem
+        .residuals(x.as_ref(), r.as_mut())
+        .map_err(|e| Error::Baseline {
+            message: format!("evaluating the residuals: {e}"),
+        })?;
+    Ok(DVector::from_iterator(r.nrows(), r.iter().copied()))
+}
+
+/// Jacobian columns `cols` of `problem` at `x`.
+fn jacobian(
+    problem: &CalibrationProblem,
+    x: &faer::Col<f64>,
+    cols: &[usize],
+) -> Result<DMatrix<f64>, Error> {
+    let mut j = faer::Mat::<f64>::zeros(problem.n_residuals(), problem.layout().len());
+    problem
+        .jacobian(x.as_ref(), j.as_mut())
+        .map_err(|e| Error::Baseline {
+            message: format!("evaluating the Jacobian: {e}"),
+        })?;
+    Ok(DMatrix::from_fn(j.nrows(), cols.len(), |i, k| {
+        j[(i, cols[k])]
+    }))
+}
+
+/// `∂r/∂q_j` for every joint (n_residuals × n_joints), by central differences of the problem
+/// with every row's reading of joint `j` moved by ±[`READING_STEP`].
+fn reading_derivatives(
+    problem: &CalibrationProblem,
+    x: &faer::Col<f64>,
+    n_joints: usize,
+) -> Result<DMatrix<f64>, Error> {
+    let obs = problem.observations();
+    let mut d = DMatrix::zeros(problem.n_residuals(), n_joints);
+    for j in 0..n_joints {
+        let moved = |h: f64| -> Result<DVector<f64>, Error> {
+            let mut o: Observations = obs.clone();
+            for row in &mut o.rows {
+                row.q[j] += h;
+            }
+            let p = problem.with_observations(o).map_err(|e| Error::Baseline {
+                message: e.to_string(),
+            })?;
+            residuals(&p, x)
+        };
+        let plus = moved(READING_STEP)?;
+        let minus = moved(-READING_STEP)?;
+        d.set_column(j, &((plus - minus) / (2.0 * READING_STEP)));
+    }
+    Ok(d)
+}
+
+/// What the effects need to know about the robot.
+struct Context<'a> {
+    baseline: &'a GeometricBaseline,
+    /// Gravity-torque model of the link masses, if any are known.
+    masses: Option<GravityCompliance>,
+    /// Gravity direction in the measurement frame.
+    gravity: Vector3<f64>,
+    /// Largest horizontal reach over the training configurations, m.
+    reach_max: f64,
+    /// Mean and span of the training times.
+    time_mean: f64,
+    time_span: f64,
+}
+
+impl Context<'_> {
+    fn n_joints(&self) -> usize {
+        self.baseline.robot.joint_names.len()
+    }
+
+    /// Tip position on the nominal robot, base frame, m.
+    fn tip(&self, q: &[f64]) -> Vector3<f64> {
+        let chain = &self.baseline.torque_chain;
+        chain.end_point(&vec![0.0; chain.n_params()], q).coords
+    }
+
+    fn reach(&self, q: &[f64]) -> f64 {
+        let p = self.tip(q);
+        (p.x * p.x + p.y * p.y).sqrt()
+    }
+}
+
+/// The joint-angle basis of `effect` at every configuration: per parameter, its name, unit,
+/// joint and per-configuration value; `Err` with the reason when the data cannot test it.
+#[allow(clippy::type_complexity)]
+fn joint_terms(
+    effect: ArmEffect,
+    ctx: &Context<'_>,
+    rows: &Rows,
+) -> Result<Vec<(String, &'static str, usize, Vec<f64>)>, String> {
+    let names = &ctx.baseline.robot.joint_names;
+    let prismatic = &ctx.baseline.robot.prismatic;
+    let n = ctx.n_joints();
+    // A joint whose basis is negligible beside the effect's largest (a torque that gravity
+    // never loads, on a joint whose axis is vertical or carries the tip on its axis) is left
+    // out: its column would be numerical noise.
+    let per_joint = |unit: &'static str, f: &dyn Fn(usize, usize) -> f64, revolute_only: bool| {
+        let all: Vec<(usize, Vec<f64>)> = (0..n)
+            .filter(|&j| !(revolute_only && prismatic[j]))
+            .map(|j| (j, (0..rows.n_configurations()).map(|c| f(c, j)).collect()))
+            .collect();
+        let size = |b: &Vec<f64>| b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let largest = all.iter().map(|(_, b)| size(b)).fold(0.0, f64::max);
+        all.into_iter()
+            .filter(|(_, b)| size(b) > NEGLIGIBLE_BASIS * largest)
+            .map(|(j, b)| (format!("{}.{}", effect.name(), names[j]), unit, j, b))
+            .collect::<Vec<_>>()
+    };
+    Ok(match effect {
+        ArmEffect::GravityCompliance | ArmEffect::LumpedCompliance => {
+            let model = if effect == ArmEffect::GravityCompliance {
+                ctx.masses.clone().ok_or(
+                    "no link masses: the URDF has no <inertial> and the robot's published masses are unknown",
+                )?
+            } else {
+                GravityCompliance::default()
+            };
+            let chain = &ctx.baseline.torque_chain;
+            let torques: Vec<Vec<f64>> = (rows.q.iter())
+                .map(|q| model.lumped_torques(chain, q))
+                .collect();
+            let unit = if effect == ArmEffect::GravityCompliance {
+                "rad/(N·m)"
+            } else {
+                "rad/m"
+            };
+            per_joint(unit, &|c, j| torques[c][j], false)
+        }
+        ArmEffect::Harmonic1 | ArmEffect::Harmonic2 => {
+            let h = if effect == ArmEffect::Harmonic1 {
+                1.0
+            } else {
+                2.0
+            };
+            let mut out = Vec::new();
+            for (label, f) in [("sin", f64::sin as fn(f64) -> f64), ("cos", f64::cos)] {
+                for mut t in per_joint("rad", &|c, j| f(h * rows.q[c][j]), true) {
+                    t.0 = format!("{}_{label}", t.0);
+                    out.push(t);
+                }
+            }
+            out
+        }
+        ArmEffect::Backlash => {
+            let sign = |c: usize, j: usize| -> f64 {
+                match c.checked_sub(1) {
+                    Some(p) if rows.group[p] == rows.group[c] => {
+                        let d = rows.q[c][j] - rows.q[p][j];
+                        if d.abs() < REPEAT_TOLERANCE {
+                            0.0
+                        } else {
+                            d.signum()
+                        }
+                    }
+                    _ => 0.0,
+                }
+            };
+            per_joint("rad", &sign, false)
+        }
+        ArmEffect::GearRatio => per_joint("1", &|c, j| rows.q[c][j], false),
+        _ => return Err("not a joint-angle effect".into()),
+    })
+}
+
+/// The columns (weighted residual per unit parameter) of `effect` on `rows`, and their names
+/// and units; `Err` with the reason when these data cannot test it.
+#[allow(clippy::type_complexity)]
+fn effect_columns(
+    effect: ArmEffect,
+    ctx: &Context<'_>,
+    rows: &Rows,
+    dq: &DMatrix<f64>,
+) -> Result<(DMatrix<f64>, Vec<(String, &'static str)>), String> {
+    let n_res = rows.res.len();
+    let positional = |basis: &dyn Fn(usize, usize, Option<[f64; 3]>) -> Vec<[f64; 3]>,
+                      names: Vec<(String, &'static str)>|
+     -> DMatrix<f64> {
+        let k = names.len();
+        let mut m = DMatrix::zeros(n_res, k);
+        for (i, ((kind, c), meas)) in rows.res.iter().zip(&rows.measured).enumerate() {
+            let (axis, sigma) = match kind {
+                Res::Position { axis, sigma } => (*axis, *sigma),
+                Res::Distance { sigma } => (usize::MAX, *sigma),
+                _ => continue,
+            };
+            let v = basis(*c, axis, *meas);
+            for (p, v) in v.iter().enumerate().take(k) {
+                m[(i, p)] = (if axis == usize::MAX { v[0] } else { v[axis] }) / sigma;
+            }
+        }
+        m
+    };
+    let has_distance = rows.res.iter().any(|r| matches!(r.0, Res::Distance { .. }));
+    let has_position = rows.res.iter().any(|r| matches!(r.0, Res::Position { .. }));
+    match effect {
+        ArmEffect::ThermalDrift => {
+            if ctx.time_span <= 0.0 {
+                return Err("all configurations at one time".into());
+            }
+            let s = |c: usize| (ctx.time_of(rows, c) - ctx.time_mean) / ctx.time_span;
+            let mut names = Vec::new();
+            if has_position {
+                names.extend(["x", "y", "z"].map(|a| (format!("thermal_drift.{a}"), "m")));
+            }
+            if has_distance {
+                names.push(("thermal_drift.d".into(), "m"));
+            }
+            let n_pos = if has_position { 3 } else { 0 };
+            let m = positional(
+                &|c, axis, _| {
+                    let t = s(c);
+                    if axis == usize::MAX {
+                        let mut v = vec![[0.0; 3]; n_pos + 1];
+                        v[n_pos] = [t, 0.0, 0.0];
+                        v
+                    } else {
+                        vec![[t, 0.0, 0.0], [0.0, t, 0.0], [0.0, 0.0, t]]
+                    }
+                },
+                names.clone(),
+            );
+            Ok((m, names))
+        }
+        ArmEffect::LinkDeflection => {
+            if !has_position {
+                return Err("no position measured".into());
+            }
+            let g = ctx.gravity;
+            let m = positional(
+                &|c, axis, _| {
+                    if axis == usize::MAX {
+                        return vec![[0.0; 3]];
+                    }
+                    let s = (ctx.reach(&rows.q[c]) / ctx.reach_max).powi(3);
+                    vec![(g * s).into()]
+                },
+                vec![("link_deflection.sag".into(), "m")],
+            );
+            Ok((m, vec![("link_deflection.sag".into(), "m")]))
+        }
+        ArmEffect::InstrumentScale => {
+            if ctx.baseline.kind == DataKind::Sockets {
+                return Err("socket data have no instrument".into());
+            }
+            let m = positional(
+                &|_, _, meas| vec![meas.unwrap_or([0.0; 3])],
+                vec![("instrument_scale.s".into(), "1")],
+            );
+            Ok((m, vec![("instrument_scale.s".into(), "1")]))
+        }
+        _ => {
+            let terms = joint_terms(effect, ctx, rows)?;
+            let mut m = DMatrix::zeros(n_res, terms.len());
+            for (i, (_, c)) in rows.res.iter().enumerate() {
+                if *c == usize::MAX {
+                    continue;
+                }
+                for (p, (_, _, j, basis)) in terms.iter().enumerate() {
+                    m[(i, p)] = dq[(i, *j)] * basis[*c];
+                }
+            }
+            let norms_zero = (0..m.ncols()).all(|k| m.column(k).norm() == 0.0);
+            if norms_zero {
+                return Err("no variation in these data".into());
+            }
+            Ok((m, terms.into_iter().map(|t| (t.0, t.1)).collect()))
+        }
+    }
+}
+
+impl Context<'_> {
+    /// Time of configuration `c` of `rows` (the training times; a held-out set at the mean).
+    fn time_of(&self, rows: &Rows, c: usize) -> f64 {
+        rows.time.get(c).copied().unwrap_or(self.time_mean)
+    }
+}
+
+/// The fold of each configuration in each of [`CV_REPEATS`] repeats (contiguous blocks within
+/// each group, repeat `r` shifting the boundaries by `r/CV_REPEATS` of a block,
+/// [`hapcal_calibrate::calibrate`]'s scheme), and each configuration's block (group, fold) in
+/// the first repeat: the independent units of the standard errors.
+fn folds_of(group: &[usize], k: usize) -> (Vec<Vec<usize>>, Vec<usize>) {
+    let n_groups = group.iter().max().map_or(0, |g| g + 1);
+    let mut size = vec![0usize; n_groups];
+    for &g in group {
+        size[g] += 1;
+    }
+    let mut folds = vec![Vec::with_capacity(group.len()); CV_REPEATS];
+    let mut block = Vec::with_capacity(group.len());
+    let mut seen = vec![0usize; n_groups];
+    for &g in group {
+        let (pos, n) = (seen[g], size[g].max(1));
+        seen[g] += 1;
+        for (r, f) in folds.iter_mut().enumerate() {
+            let shifted = (pos * k * CV_REPEATS + r * n) % (n * k * CV_REPEATS);
+            f.push(shifted / (n * CV_REPEATS));
+        }
+        block.push(g * k + folds[0][folds[0].len() - 1]);
+    }
+    (folds, block)
+}
+
+/// Held-out results of one linear model, averaged over the repeats.
+#[derive(Clone)]
+struct HeldOut {
+    /// Per configuration: weighted squared held-out error (every residual kind).
+    score: Vec<f64>,
+    /// Per configuration: squared 3-D position error, m².
+    position_m2: Vec<f64>,
+    /// Per configuration: the floor of `position_m2` (σ²(1 + h) summed), m².
+    floor_m2: Vec<f64>,
+}
+
+impl HeldOut {
+    fn mse(&self) -> f64 {
+        mean(&self.position_m2)
+    }
+}
+
+fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        0.0
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+/// Repeated blocked k-fold cross-validation of the linear model `a·δ ≈ r` (weighted
+/// residuals); `folds[r][c]` is configuration `c`'s fold in repeat `r`.
+fn cross_validate(
+    a: &DMatrix<f64>,
+    r: &DVector<f64>,
+    rows: &Rows,
+    folds: &[Vec<usize>],
+    k: usize,
+    floor_var: Option<f64>,
+) -> HeldOut {
+    let n_c = rows.n_configurations();
+    let mut out = HeldOut {
+        score: vec![0.0; n_c],
+        position_m2: vec![0.0; n_c],
+        floor_m2: vec![0.0; n_c],
+    };
+    let w = 1.0 / folds.len().max(1) as f64;
+    for fold in folds {
+        for f in 0..k {
+            let held = |i: usize| {
+                let c = rows.res[i].1;
+                c != usize::MAX && fold[c] == f
+            };
+            let train: Vec<usize> = (0..r.len()).filter(|&i| !held(i)).collect();
+            let test: Vec<usize> = (0..r.len()).filter(|&i| held(i)).collect();
+            if test.is_empty() || train.is_empty() {
+                continue;
+            }
+            let at = a.select_rows(&train);
+            let bt = DVector::from_iterator(train.len(), train.iter().map(|&i| r[i]));
+            let (x, cov) = lstsq(&at, &bt);
+            for &i in &test {
+                let row = a.row(i);
+                let e = r[i] - (row * &x)[0];
+                let c = rows.res[i].1;
+                out.score[c] += w * e * e;
+                if let Res::Position { sigma, .. } = rows.res[i].0 {
+                    out.position_m2[c] += w * (e * sigma).powi(2);
+                    if let Some(v) = floor_var {
+                        let h = (row * &cov * row.transpose())[0];
+                        out.floor_m2[c] += w * v * (1.0 + h.max(0.0));
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Mean over configurations of `a − b` and its blocked standard error (clusters of unequal
+/// size: Cochran 1977, §6.4), and the number of non-empty blocks.
+fn blocked(a: &[f64], b: &[f64], block: &[usize]) -> (f64, f64, usize) {
+    let n = a.len();
+    let n_blocks = block.iter().max().map_or(0, |m| m + 1);
+    let mut sum = vec![0.0; n_blocks];
+    let mut count = vec![0usize; n_blocks];
+    for i in 0..n {
+        sum[block[i]] += a[i] - b[i];
+        count[block[i]] += 1;
+    }
+    let filled = count.iter().filter(|&&c| c > 0).count();
+    let m = sum.iter().sum::<f64>() / n.max(1) as f64;
+    if filled < 2 {
+        return (m, f64::INFINITY, filled);
+    }
+    let nb = filled as f64;
+    let m_bar = n as f64 / nb;
+    let var = (sum.iter().zip(&count))
+        .map(|(s, &c)| (s - m * c as f64).powi(2))
+        .sum::<f64>()
+        / (nb - 1.0)
+        / (nb * m_bar * m_bar);
+    (m, var.sqrt(), filled)
+}
+
+/// One-sided p-value of a mean `m` with standard error `se` being ≤ 0, Student t with `dof`.
+fn one_sided_p(m: f64, se: f64, dof: f64) -> f64 {
+    if !(se.is_finite() && se > 0.0) {
+        return if m > 0.0 && se == 0.0 { 0.0 } else { 1.0 };
+    }
+    let t = m / se;
+    let two = f_sf(t * t, 1.0, dof.max(1.0));
+    if t > 0.0 { 0.5 * two } else { 1.0 - 0.5 * two }
+}
+
+/// The floor: per-axis position variance (m²) and its source.
+fn floor(
+    baseline: &GeometricBaseline,
+    rows: &Rows,
+    r: &DVector<f64>,
+) -> (Option<f64>, FloorSource, String) {
+    if let Some(s) = baseline.stated_sigma_m {
+        return (
+            Some(s * s),
+            FloorSource::Stated,
+            format!("stated instrument σ = {:.4} mm per axis", s * 1e3),
+        );
+    }
+    // Residuals (m) of the position residuals per configuration, axis order.
+    let n_c = rows.n_configurations();
+    let mut pos: Vec<Vec<f64>> = vec![Vec::new(); n_c];
+    for (i, (kind, c)) in rows.res.iter().enumerate() {
+        if let Res::Position { sigma, .. } = kind {
+            pos[*c].push(r[i] * sigma);
+        }
+    }
+    // Repeated poses.
+    let q = &rows.q;
+    let same = |a: usize, b: usize| {
+        q[a].iter()
+            .zip(&q[b])
+            .all(|(x, y)| (x - y).abs() < REPEAT_TOLERANCE)
+    };
+    let mut label = vec![usize::MAX; n_c];
+    let mut n_labels = 0;
+    for a in 0..n_c {
+        if label[a] != usize::MAX {
+            continue;
+        }
+        label[a] = n_labels;
+        for b in a + 1..n_c {
+            if label[b] == usize::MAX && same(a, b) && pos[a].len() == pos[b].len() {
+                label[b] = n_labels;
+            }
+        }
+        n_labels += 1;
+    }
+    let mut ss = 0.0;
+    let mut dof = 0usize;
+    for l in 0..n_labels {
+        let members: Vec<usize> = (0..n_c).filter(|&c| label[c] == l).collect();
+        if members.len() < 2 || pos[members[0]].is_empty() {
+            continue;
+        }
+        for k in 0..pos[members[0]].len() {
+            let m = members.iter().map(|&c| pos[c][k]).sum::<f64>() / members.len() as f64;
+            ss += members
+                .iter()
+                .map(|&c| (pos[c][k] - m).powi(2))
+                .sum::<f64>();
+            dof += members.len() - 1;
+        }
+    }
+    if dof >= 10 {
+        return (
+            Some(ss / dof as f64),
+            FloorSource::RepeatedPoses { dof },
+            format!(
+                "repeatability: pooled scatter of the residuals of repeated poses (readings within \
+                 {REPEAT_TOLERANCE} of each other), {dof} degrees of freedom"
+            ),
+        );
+    }
+    if baseline.kind == DataKind::Sockets {
+        let mut ss = 0.0;
+        let mut pairs: Vec<(usize, usize)> = Vec::new();
+        for a in 0..n_c {
+            let nearest = (0..n_c)
+                .filter(|&b| b != a && rows.group[b] == rows.group[a])
+                .min_by(|&b, &c| {
+                    let d = |x: usize| -> f64 {
+                        q[a].iter().zip(&q[x]).map(|(u, v)| (u - v).powi(2)).sum()
+                    };
+                    d(b).total_cmp(&d(c))
+                });
+            if let Some(b) = nearest {
+                let pair = (a.min(b), a.max(b));
+                if !pairs.contains(&pair) {
+                    pairs.push(pair);
+                    ss += (pos[a].iter().zip(&pos[b]))
+                        .map(|(x, y)| (x - y).powi(2))
+                        .sum::<f64>();
+                }
+            }
+        }
+        if pairs.len() >= 5 {
+            let var = ss / (2.0 * 3.0 * pairs.len() as f64);
+            return (
+                Some(var),
+                FloorSource::SocketReplicates { pairs: pairs.len() },
+                format!(
+                    "socket replicates: half the mean squared residual difference of each \
+                     configuration and its nearest configuration at the same socket ({} pairs); \
+                     an upper bound of the seating noise (model error that changes between \
+                     neighbours adds to it), so the gap is a lower bound",
+                    pairs.len()
+                ),
+            );
+        }
+    }
+    (
+        None,
+        FloorSource::None,
+        "no floor: no stated σ, no repeated pose, no socket replicates; gaps are relative to the \
+         best model found"
+            .to_owned(),
+    )
+}
+
+/// The fitted parameters of `names` (columns `from..` of `a`) on all rows, ± std with σ² from
+/// the residuals (`RSS/(n − p)`).
+fn parameters(
+    a: &DMatrix<f64>,
+    r: &DVector<f64>,
+    from: usize,
+    names: &[(String, &'static str)],
+    visible: &[usize],
+) -> (Vec<EffectParam>, DVector<f64>) {
+    let (x, cov) = lstsq(a, r);
+    let dof = (r.len() as f64 - a.ncols() as f64).max(1.0);
+    let s2 = (r - a * &x).norm_squared() / dof;
+    let params = (visible.iter().enumerate())
+        .map(|(k, &c)| EffectParam {
+            name: names[c].0.clone(),
+            value: x[from + k],
+            std: (cov[(from + k, from + k)] * s2).sqrt(),
+            unit: names[c].1.to_owned(),
+        })
+        .collect();
+    (params, x)
+}
+
+/// One candidate's evaluation in a round.
+struct Tested {
+    effect: ArmEffect,
+    cand: ArmCandidate,
+    /// Its visible columns on the training rows.
+    columns: DMatrix<f64>,
+    names: Vec<(String, &'static str)>,
+    visible: Vec<usize>,
+    held: Option<HeldOut>,
+    fitted: DVector<f64>,
+    p_cv: f64,
+    p_f: f64,
+    improvement: f64,
+}
+
+/// Diagnoses `baseline` (see the module documentation).
+///
+/// # Errors
+/// [`Error::Config`] for settings out of range; [`Error::Data`] for fewer than 2 folds'
+/// worth of configurations; [`Error::Baseline`] if the problem cannot be evaluated.
+pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<ArmDiagnosis, Error> {
+    if cfg.folds < 2 || !(cfg.alpha > 0.0 && cfg.alpha < 1.0) || cfg.max_effects == 0 {
+        return Err(Error::Config {
+            message: format!(
+                "need folds ≥ 2 (got {}), 0 < alpha < 1 (got {}), max_effects ≥ 1",
+                cfg.folds, cfg.alpha
+            ),
+        });
+    }
+    let problem = &baseline.train;
+    let n_c = baseline.q.len();
+    if n_c < 2 * cfg.folds {
+        return Err(Error::Data {
+            message: format!(
+                "{n_c} training configurations; the diagnosis needs at least {} for {} folds",
+                2 * cfg.folds,
+                cfg.folds
+            ),
+        });
+    }
+    let n_joints = baseline.robot.joint_names.len();
+    let rows = Rows::new(
+        problem,
+        &baseline.configuration,
+        baseline.q.clone(),
+        baseline.group.clone(),
+        baseline.time.clone(),
+    );
+    let r = -residuals(problem, &baseline.x)?;
+    let jb = jacobian(problem, &baseline.x, &baseline.kept)?;
+    let dq = reading_derivatives(problem, &baseline.x, n_joints)?;
+    let masses = if baseline.robot.masses.is_empty() {
+        GravityCompliance::published(&baseline.robot.joint_names)
+    } else {
+        Some(GravityCompliance::from_link_masses(
+            baseline.robot.masses.clone(),
+            -Vector3::z(),
+        ))
+    };
+    let t_min = baseline.time.iter().copied().fold(f64::INFINITY, f64::min);
+    let t_max = (baseline.time.iter().copied()).fold(f64::NEG_INFINITY, f64::max);
+    let mut ctx = Context {
+        baseline,
+        masses,
+        gravity: baseline.base_to_measurement * -Vector3::z(),
+        reach_max: 1.0,
+        time_mean: mean(&baseline.time),
+        time_span: (t_max - t_min).max(0.0),
+    };
+    ctx.reach_max = (baseline.q.iter())
+        .map(|q| ctx.reach(q))
+        .fold(0.0, f64::max)
+        .max(1e-3);
+    let (floor_var, floor_source, floor_method) = floor(baseline, &rows, &r);
+    let (folds, block) = folds_of(&rows.group, cfg.folds);
+    let mut notes = Vec::new();
+    if !baseline.time_from_data {
+        notes.push(
+            "no time column: time is the row order (thermal drift and backlash assume the rows \
+             were recorded in file order)"
+                .to_owned(),
+        );
+    }
+
+    // Round 0: the geometric baseline.
+    let mut a = jb.clone();
+    let mut base = cross_validate(&a, &r, &rows, &folds, cfg.folds, floor_var);
+    let mse0 = base.mse();
+    let floor0 = floor_var.map(|_| mean(&base.floor_m2));
+    let (gap_p, chi_known) = match floor_var {
+        Some(_) => (gap_p_value(&rows, &base), true),
+        None => (1.0, false),
+    };
+    let where_ = residual_map(&ctx, &rows, &base, floor_var, cfg);
+
+    let mut candidates = Vec::new();
+    let mut steps: Vec<ArmStep> = Vec::new();
+    let mut accepted: Vec<ArmEffect> = Vec::new();
+    // Accepted effects' columns on the training rows and their names (for the ladder).
+    let mut effect_cols: Vec<(ArmEffect, DMatrix<f64>, Vec<usize>)> = Vec::new();
+    let mut untestable = Vec::new();
+    for round in 1..=cfg.max_effects {
+        let (qb, _) = pivoted_basis(&a, &DMatrix::zeros(a.nrows(), 0), 1e-9);
+        let r_perp = &r - &qb * (qb.transpose() * &r);
+        let rss_b = r_perp.norm_squared();
+        let dof_b = (r.len() as f64 - qb.ncols() as f64).max(1.0);
+        let mut tested: Vec<Tested> = Vec::new();
+        for effect in ArmEffect::LIBRARY {
+            if accepted.contains(&effect) {
+                continue;
+            }
+            let (cols, names) = match effect_columns(effect, &ctx, &rows, &dq) {
+                Ok(c) => c,
+                Err(reason) => {
+                    if round == 1 {
+                        untestable.push(format!("{}: {reason}", effect.name()));
+                    }
+                    continue;
+                }
+            };
+            let (qc, picked) = pivoted_basis(&cols, &qb, VISIBLE_TOL);
+            let visible: Vec<usize> = (0..cols.ncols()).filter(|&c| picked[c].is_some()).collect();
+            let mut cand = ArmCandidate {
+                effect: effect.name().to_owned(),
+                round,
+                n_visible: visible.len(),
+                heldout_rms_before_m: base.mse().sqrt(),
+                heldout_rms_after_m: base.mse().sqrt(),
+                heldout_improvement: (0.0, 0.0),
+                heldout_p_value: 1.0,
+                f_p_value: 1.0,
+                gap_closed_pct: 0.0,
+                accepted: false,
+                reason: String::new(),
+                parameters: Vec::new(),
+            };
+            if visible.is_empty() {
+                cand.reason = "absorbed by the geometric parameters in these data".into();
+                tested.push(Tested {
+                    effect,
+                    cand,
+                    columns: DMatrix::zeros(r.len(), 0),
+                    names,
+                    visible,
+                    held: None,
+                    fitted: DVector::zeros(r.len()),
+                    p_cv: 1.0,
+                    p_f: 1.0,
+                    improvement: 0.0,
+                });
+                continue;
+            }
+            let c_vis = cols.select_columns(&visible);
+            let proj = qc.transpose() * &r_perp;
+            let drss = proj.norm_squared();
+            let k = visible.len() as f64;
+            let dof = (dof_b - k).max(1.0);
+            let p_f = f_sf((drss / k) / ((rss_b - drss).max(1e-300) / dof), k, dof);
+            let mut ac = DMatrix::zeros(a.nrows(), a.ncols() + c_vis.ncols());
+            ac.columns_mut(0, a.ncols()).copy_from(&a);
+            ac.columns_mut(a.ncols(), c_vis.ncols()).copy_from(&c_vis);
+            let held = cross_validate(&ac, &r, &rows, &folds, cfg.folds, floor_var);
+            let (m, se, filled) = blocked(&base.score, &held.score, &block);
+            let p_cv = one_sided_p(m, se, filled.saturating_sub(1) as f64);
+            let (params, _) = parameters(&ac, &r, a.ncols(), &names, &visible);
+            cand.heldout_rms_after_m = held.mse().sqrt();
+            cand.heldout_improvement = (m, se);
+            cand.parameters = params;
+            tested.push(Tested {
+                effect,
+                cand,
+                columns: c_vis,
+                names,
+                visible,
+                held: Some(held),
+                fitted: &qc * proj,
+                p_cv,
+                p_f,
+                improvement: m,
+            });
+        }
+        let adj_cv = holm(&tested.iter().map(|t| t.p_cv).collect::<Vec<_>>());
+        let adj_f = holm(&tested.iter().map(|t| t.p_f).collect::<Vec<_>>());
+        // The gap of this round: above the floor, or (no floor) above the best candidate.
+        let best_mse = (tested.iter())
+            .filter_map(|t| t.held.as_ref().map(HeldOut::mse))
+            .fold(base.mse(), f64::min);
+        let gap2 = match floor0 {
+            Some(f) => mse0 - f,
+            None => mse0 - best_mse,
+        };
+        for (t, (pc, pf)) in tested.iter_mut().zip(adj_cv.iter().zip(&adj_f)) {
+            t.cand.heldout_p_value = *pc;
+            t.cand.f_p_value = *pf;
+            let Some(h) = &t.held else { continue };
+            let share = if gap2 > 0.0 {
+                (base.mse() - h.mse()) / gap2
+            } else {
+                0.0
+            };
+            t.cand.gap_closed_pct = 100.0 * share.clamp(-9.99, 9.99);
+            let reason = if *pc >= cfg.alpha {
+                format!("held-out improvement not significant (Holm-adjusted p = {pc:.2e})")
+            } else if *pf >= cfg.alpha {
+                format!("in-sample F-test not significant (Holm-adjusted p = {pf:.2e})")
+            } else if floor0.is_some() && share < cfg.min_gap_share {
+                format!(
+                    "closes only {:.0} % of the gap above the floor",
+                    100.0 * share
+                )
+            } else {
+                String::new()
+            };
+            t.cand.accepted = reason.is_empty();
+            t.cand.reason = if reason.is_empty() {
+                format!(
+                    "held-out better by {:.1} standard errors (Holm p = {pc:.1e}), F-test p = \
+                     {pf:.1e}, closes {:.0} % of the gap",
+                    t.cand.heldout_improvement.0 / t.cand.heldout_improvement.1.max(1e-300),
+                    100.0 * share
+                )
+            } else {
+                reason
+            };
+        }
+        // The best held-out improvement wins; among the named candidates that predict as well
+        // within one blocked standard error (the one-standard-error rule), the one with fewer
+        // parameters, then the earlier in the library (which uses more of what is known about
+        // the robot: its link masses before a unit weight).
+        let best = (tested.iter().enumerate())
+            .filter(|(_, t)| t.cand.accepted)
+            .max_by(|a, b| a.1.improvement.total_cmp(&b.1.improvement))
+            .map(|(i, _)| i);
+        let winner = best.map(|b| {
+            let best_score = tested[b]
+                .held
+                .as_ref()
+                .map(|h| h.score.clone())
+                .unwrap_or_default();
+            (tested.iter().enumerate())
+                .filter(|(_, t)| t.cand.accepted)
+                .filter(|(_, t)| {
+                    let Some(h) = &t.held else { return false };
+                    let (d, se, _) = blocked(&h.score, &best_score, &block);
+                    d <= se
+                })
+                .min_by_key(|(i, t)| (t.cand.n_visible, *i))
+                .map_or(b, |(i, _)| i)
+        });
+        for (i, t) in tested.iter_mut().enumerate() {
+            if Some(i) != winner && t.cand.accepted {
+                t.cand.accepted = false;
+                t.cand.reason = format!(
+                    "passes, but predicts less well than the winner ({})",
+                    t.cand.reason
+                );
+            }
+        }
+        let Some(w) = winner else {
+            candidates.extend(tested.into_iter().map(|t| t.cand));
+            break;
+        };
+        let win_fit = tested[w].fitted.clone();
+        let win_effect = tested[w].effect;
+        let confusable: Vec<(String, String)> = (tested.iter().enumerate())
+            .filter(|(i, t)| {
+                *i != w && t.cand.n_visible > 0 && cosine(&t.fitted, &win_fit) > CONFUSABLE_COSINE
+            })
+            .map(|(_, t)| {
+                (
+                    t.cand.effect.clone(),
+                    win_effect.separating_measurement(t.effect).to_owned(),
+                )
+            })
+            .collect();
+        let win = &tested[w];
+        let held = win.held.clone().unwrap_or_else(|| base.clone());
+        let before = base.mse().sqrt();
+        let after = held.mse().sqrt();
+        let gap_orig = match floor0 {
+            Some(f) => mse0 - f,
+            None => mse0 - held.mse(),
+        };
+        steps.push(ArmStep {
+            effect: win.cand.effect.clone(),
+            heldout_rms_before_m: before,
+            heldout_rms_after_m: after,
+            gap_closed_pct: if gap_orig > 0.0 {
+                100.0 * (before * before - after * after) / gap_orig
+            } else {
+                0.0
+            },
+            parameters: win.cand.parameters.clone(),
+            confusable_with: confusable,
+        });
+        let mut grown = DMatrix::zeros(a.nrows(), a.ncols() + win.columns.ncols());
+        grown.columns_mut(0, a.ncols()).copy_from(&a);
+        grown
+            .columns_mut(a.ncols(), win.columns.ncols())
+            .copy_from(&win.columns);
+        effect_cols.push((win.effect, win.columns.clone(), win.visible.clone()));
+        let _ = &win.names;
+        accepted.push(win.effect);
+        a = grown;
+        base = held;
+        candidates.extend(tested.into_iter().map(|t| t.cand));
+        // Stop when what is left is consistent with the floor.
+        if floor_var.is_some() && gap_p_value(&rows, &base) >= cfg.alpha {
+            break;
+        }
+    }
+    for u in untestable {
+        notes.push(format!("not testable: {u}"));
+    }
+    let final_mse = base.mse();
+    let gap2 = match floor0 {
+        Some(f) => mse0 - f,
+        None => mse0 - final_mse,
+    };
+    let verdict = if accepted.is_empty() {
+        "none".to_owned()
+    } else {
+        (accepted.iter().map(|e| e.name()).collect::<Vec<_>>()).join("+")
+    };
+    if let Some(step) = steps.first()
+        && step.heldout_rms_after_m > 0.95 * step.heldout_rms_before_m
+    {
+        notes.push(format!(
+            "{} is significant but buys little: held-out RMS {:.3} → {:.3} mm ({:+.1} %)",
+            step.effect,
+            step.heldout_rms_before_m * 1e3,
+            step.heldout_rms_after_m * 1e3,
+            100.0 * (step.heldout_rms_after_m / step.heldout_rms_before_m - 1.0)
+        ));
+    }
+    let ladder = ladder(baseline, &ctx, &rows, &r, &jb, &effect_cols, &folds, cfg)?;
+    Ok(ArmDiagnosis {
+        kind: baseline.kind,
+        n_configurations: n_c,
+        n_baseline_params: jb.ncols(),
+        floor_method,
+        floor_source,
+        floor_sigma_m: floor_var.map(f64::sqrt),
+        floor_rms_m: floor0.map(f64::sqrt),
+        heldout_rms_m: mse0.sqrt(),
+        gap_rms_m: gap2.max(0.0).sqrt(),
+        gap_p_value: gap_p,
+        gap_significant: chi_known && gap_p < cfg.alpha,
+        where_,
+        candidates,
+        steps,
+        verdict,
+        heldout_rms_final_m: final_mse.sqrt(),
+        gap_closed_pct: if gap2 > 0.0 {
+            100.0 * (mse0 - final_mse) / gap2
+        } else {
+            0.0
+        },
+        test_sets: baseline.tests.iter().map(|t| t.name.clone()).collect(),
+        ladder,
+        notes,
+    })
+}
+
+/// `P(χ²_k > Σ e²/var)` of the held-out position residuals under the floor (pooled variance
+/// `Σ floor / k`, k position residuals).
+fn gap_p_value(rows: &Rows, held: &HeldOut) -> f64 {
+    let k = (rows.res.iter())
+        .filter(|(kind, c)| matches!(kind, Res::Position { .. }) && *c != usize::MAX)
+        .count() as f64;
+    let floor: f64 = held.floor_m2.iter().sum();
+    let ss: f64 = held.position_m2.iter().sum();
+    if floor > 0.0 && k > 0.0 {
+        chi2_sf(ss / (floor / k), k)
+    } else {
+        1.0
+    }
+}
+
+fn cosine(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
+    let d = a.norm() * b.norm();
+    if d > 0.0 { (a.dot(b) / d).abs() } else { 0.0 }
+}
+
+/// The ladder: the baseline's kinematic rungs, then each accepted effect with its held-out
+/// error on the training rows (CV) and on every held-out set.
+#[allow(clippy::too_many_arguments)] // the pieces of one diagnosis
+fn ladder(
+    baseline: &GeometricBaseline,
+    ctx: &Context<'_>,
+    rows: &Rows,
+    r: &DVector<f64>,
+    jb: &DMatrix<f64>,
+    effects: &[(ArmEffect, DMatrix<f64>, Vec<usize>)],
+    folds: &[Vec<usize>],
+    cfg: &ArmConfig,
+) -> Result<Vec<ArmRung>, Error> {
+    let mut out: Vec<ArmRung> = (baseline.ladder.iter())
+        .map(|k| ArmRung {
+            rung: k.rung.clone(),
+            cv_rms_m: k.cv_rms_m,
+            test_rms_m: k.test_rms_m.clone(),
+        })
+        .collect();
+    // Held-out sets: their residuals, shared-parameter columns, own nuisance columns and
+    // reading derivatives at the training estimate.
+    struct Test {
+        rows: Rows,
+        r: DVector<f64>,
+        shared: DMatrix<f64>,
+        own: DMatrix<f64>,
+        dq: DMatrix<f64>,
+    }
+    let n_joints = ctx.n_joints();
+    let shared_kept: Vec<usize> = (baseline.kept.iter().enumerate())
+        .filter(|(_, i)| **i < baseline.n_shared)
+        .map(|(k, _)| k)
+        .collect();
+    let mut tests = Vec::new();
+    for t in &baseline.tests {
+        tests.push(test_of(t, baseline, n_joints)?);
+    }
+    fn test_of(t: &HeldOutSet, b: &GeometricBaseline, n_joints: usize) -> Result<Test, Error> {
+        let n_c = t.configuration.iter().max().map_or(0, |m| m + 1);
+        let q: Vec<Vec<f64>> = {
+            let mut q = vec![Vec::new(); n_c];
+            for (row, &c) in t.problem.observations().rows.iter().zip(&t.configuration) {
+                q[c] = row.q.clone();
+            }
+            q
+        };
+        let rows = Rows::new(&t.problem, &t.configuration, q, vec![0; n_c], Vec::new());
+        let r = -residuals(&t.problem, &t.x)?;
+        let shared_idx: Vec<usize> = b.kept.iter().copied().filter(|&i| i < b.n_shared).collect();
+        let shared = jacobian(&t.problem, &t.x, &shared_idx)?;
+        let own_idx: Vec<usize> = (b.n_shared..t.problem.layout().len()).collect();
+        let own = jacobian(&t.problem, &t.x, &own_idx)?;
+        let dq = reading_derivatives(&t.problem, &t.x, n_joints)?;
+        Ok(Test {
+            rows,
+            r,
+            shared,
+            own,
+            dq,
+        })
+    }
+    // The geometric rung's test figures at the linearisation point, for the step-by-step rows.
+    let mut a = jb.clone();
+    let mut test_cols: Vec<DMatrix<f64>> = tests.iter().map(|t| t.shared.clone()).collect();
+    let mut names_so_far = String::new();
+    for (effect, cols, visible) in effects {
+        let mut grown = DMatrix::zeros(a.nrows(), a.ncols() + cols.ncols());
+        grown.columns_mut(0, a.ncols()).copy_from(&a);
+        grown.columns_mut(a.ncols(), cols.ncols()).copy_from(cols);
+        a = grown;
+        let held = cross_validate(&a, r, rows, folds, cfg.folds, None);
+        let (x, _) = lstsq(&a, r);
+        let mut test_rms = Vec::new();
+        for (t, tc) in tests.iter().zip(&mut test_cols) {
+            let (c, _) = effect_columns(*effect, ctx, &t.rows, &t.dq)
+                .unwrap_or_else(|_| (DMatrix::zeros(t.r.len(), visible.len().max(1)), Vec::new()));
+            let c_vis = if c.ncols() >= visible.iter().max().map_or(0, |m| m + 1) {
+                c.select_columns(visible)
+            } else {
+                DMatrix::zeros(t.r.len(), visible.len())
+            };
+            let mut grown = DMatrix::zeros(tc.nrows(), tc.ncols() + c_vis.ncols());
+            grown.columns_mut(0, tc.ncols()).copy_from(tc);
+            grown
+                .columns_mut(tc.ncols(), c_vis.ncols())
+                .copy_from(&c_vis);
+            *tc = grown;
+            // The training coefficients of the shared and effect columns, then the set's own
+            // nuisance parameters (socket points) re-fitted.
+            let coef: Vec<f64> = shared_kept
+                .iter()
+                .copied()
+                .chain(jb.ncols()..a.ncols())
+                .map(|k| x[k])
+                .collect();
+            let pred = &*tc * DVector::from_vec(coef);
+            let mut e = &t.r - pred;
+            if t.own.ncols() > 0 {
+                let (y, _) = lstsq(&t.own, &e);
+                e -= &t.own * y;
+            }
+            test_rms.push(position_rms(&t.rows, &e));
+        }
+        names_so_far.push_str(&format!("+ {}", effect.name()));
+        out.push(ArmRung {
+            rung: names_so_far.clone(),
+            cv_rms_m: held.mse().sqrt(),
+            test_rms_m: test_rms,
+        });
+        names_so_far.push(' ');
+    }
+    Ok(out)
+}
+
+/// RMS of the 3-D position error per configuration, m, of weighted residuals `e`.
+fn position_rms(rows: &Rows, e: &DVector<f64>) -> f64 {
+    let mut per = vec![0.0; rows.n_configurations()];
+    for (i, (kind, c)) in rows.res.iter().enumerate() {
+        if let Res::Position { sigma, .. } = kind
+            && *c != usize::MAX
+        {
+            per[*c] += (e[i] * sigma).powi(2);
+        }
+    }
+    mean(&per).sqrt()
+}
+
+/// The residual map: held-out position RMS in quantile bins of each signal (joint readings,
+/// time, gravity torques, reach, height, azimuth), against the floor (or the overall RMS
+/// without one), Holm over every bin.
+fn residual_map(
+    ctx: &Context<'_>,
+    rows: &Rows,
+    held: &HeldOut,
+    floor_var: Option<f64>,
+    cfg: &ArmConfig,
+) -> Vec<ArmBin> {
+    let n_c = rows.n_configurations();
+    let names = &ctx.baseline.robot.joint_names;
+    let mut signals: Vec<(String, Vec<f64>)> = Vec::new();
+    for (j, _) in names.iter().enumerate() {
+        signals.push((format!("q{}", j + 1), rows.q.iter().map(|q| q[j]).collect()));
+    }
+    signals.push(("time".into(), rows.time.clone()));
+    if let Some(m) = &ctx.masses {
+        let t: Vec<Vec<f64>> = (rows.q.iter())
+            .map(|q| m.lumped_torques(&ctx.baseline.torque_chain, q))
+            .collect();
+        for j in 0..names.len() {
+            let v: Vec<f64> = t.iter().map(|t| t[j]).collect();
+            if v.iter().any(|x| x.abs() > 1e-9) {
+                signals.push((format!("torque{}", j + 1), v));
+            }
+        }
+    }
+    // The workspace, when the tip moves through it (not at sockets).
+    let tips: Vec<Vector3<f64>> = rows.q.iter().map(|q| ctx.tip(q)).collect();
+    let spread = |f: &dyn Fn(&Vector3<f64>) -> f64| {
+        let v: Vec<f64> = tips.iter().map(f).collect();
+        let (lo, hi) = v
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+                (l.min(*x), h.max(*x))
+            });
+        (v, hi - lo)
+    };
+    let (reach, reach_spread) = spread(&|p| (p.x * p.x + p.y * p.y).sqrt());
+    let (height, height_spread) = spread(&|p| p.z);
+    if reach_spread.max(height_spread) > WORKSPACE_SPREAD_M {
+        signals.push(("reach".into(), reach));
+        signals.push(("height".into(), height));
+        signals.push((
+            "azimuth".into(),
+            tips.iter().map(|p| p.y.atan2(p.x)).collect(),
+        ));
+    }
+    // Per configuration: number of position residuals.
+    let mut n_pos = vec![0usize; n_c];
+    for (kind, c) in &rows.res {
+        if matches!(kind, Res::Position { .. }) && *c != usize::MAX {
+            n_pos[*c] += 1;
+        }
+    }
+    let overall = held.mse();
+    let mut bins = Vec::new();
+    let mut p_raw = Vec::new();
+    for (name, v) in &signals {
+        let mut order: Vec<usize> = (0..n_c).collect();
+        order.sort_by(|&a, &b| v[a].total_cmp(&v[b]));
+        let lo_all = v[order[0]];
+        let hi_all = v[order[n_c - 1]];
+        if !(hi_all > lo_all) {
+            continue;
+        }
+        let k = cfg.bins.min(n_c).max(1);
+        for b in 0..k {
+            let members = &order[b * n_c / k..(b + 1) * n_c / k];
+            if members.is_empty() {
+                continue;
+            }
+            let ss: f64 = members.iter().map(|&c| held.position_m2[c]).sum();
+            let floor_ss: f64 = match floor_var {
+                Some(_) => members.iter().map(|&c| held.floor_m2[c]).sum(),
+                None => overall * members.len() as f64,
+            };
+            let dof: f64 = match floor_var {
+                Some(_) => members.iter().map(|&c| n_pos[c] as f64).sum(),
+                None => members.len() as f64 * 3.0,
+            };
+            let per_axis = floor_ss / dof.max(1.0);
+            let p = if per_axis > 0.0 {
+                chi2_sf(ss / per_axis, dof)
+            } else {
+                1.0
+            };
+            p_raw.push(p);
+            bins.push(ArmBin {
+                signal: name.clone(),
+                lo: v[members[0]],
+                hi: v[*members.last().unwrap_or(&members[0])],
+                n: members.len(),
+                rms_m: (ss / members.len() as f64).sqrt(),
+                floor_rms_m: (floor_ss / members.len() as f64).sqrt(),
+                p_value: p,
+                flagged: false,
+            });
+        }
+    }
+    let adj = holm(&p_raw);
+    for (b, p) in bins.iter_mut().zip(adj) {
+        b.p_value = p;
+        b.flagged = p < cfg.alpha;
+    }
+    bins
+}
