@@ -3,6 +3,7 @@
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a task runner reports on the terminal
 
 mod bench;
+mod diagnose_real;
 mod haptic;
 mod mukca;
 mod real_data;
@@ -58,6 +59,14 @@ enum Task {
         #[arg(long)]
         check: bool,
     },
+    /// `hapcal diagnose` on the real recordings in fixtures/ (MUKCa units, UR10, TIAGo, the
+    /// positioner) into docs/results/diagnose-real.md and the residual maps beside it;
+    /// `--check` verifies the required verdicts (kuka_14: gravity compliance; panda_6,
+    /// panda_7: none) without writing.
+    DiagnoseReal {
+        #[arg(long)]
+        check: bool,
+    },
     /// The property tests with fresh random seeds (CI pins the seed): run it to look for
     /// failures CI cannot find; each failure is saved in its crate's proptest-regressions/.
     ProptestFresh,
@@ -100,6 +109,7 @@ fn main() -> Result<()> {
             Ok(())
         }
         Task::Tidy => tidy::run(&sh),
+        Task::DiagnoseReal { check } => diagnose_real::run(&sh, check),
         Task::Bench { peers, criterion } => bench::run(&sh, peers, criterion),
         Task::BlindTest { cases } => blind_test(&sh, cases),
         Task::ReproduceTables { check } => reproduce_tables(&sh, check),
@@ -129,7 +139,9 @@ fn ci(sh: &Shell) -> Result<()> {
         .run()?;
     reproduce_tables(sh, true)?;
     // The published recordings: no calibrated model worse than frames only held out.
-    real_data::run(sh, true)
+    real_data::run(sh, true)?;
+    // The diagnosis of the real robots keeps its verdicts.
+    diagnose_real::run(sh, true)
 }
 
 fn blind_test(sh: &Shell, cases: usize) -> Result<()> {
@@ -139,8 +151,8 @@ fn blind_test(sh: &Shell, cases: usize) -> Result<()> {
         "cargo run --release --quiet -p hapcal -- blind-test --cases {cases}"
     )
     .read()?;
-    let mukca = "\n## Real data (MUKCa)\n\nSee docs/results/diagnose-mukca.md (hand-written: \
-                 what `diagnose` can and cannot tell from static socket data).\n";
+    let mukca = "\n## Real robots\n\nSee docs/results/diagnose-real.md (`cargo xtask \
+                 diagnose-real`: the MUKCa units and the published marker and pose data).\n";
     sh.write_file("docs/results/diagnose.md", format!("{md}{mukca}"))?;
     println!("wrote docs/results/diagnose.md");
     Ok(())

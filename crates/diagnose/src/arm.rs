@@ -39,6 +39,11 @@ const READING_STEP: f64 = 1e-6;
 /// it does not move.
 const WORKSPACE_SPREAD_M: f64 = 0.01;
 
+/// Share of the gap above the floor the named effects must close together, unless what is
+/// left is consistent with the floor; below it the verdict is `none` (the reference device's
+/// rule, docs/diagnosis.md).
+const SUFFICIENT_SHARE: f64 = 0.8;
+
 /// A joint's basis below this fraction of the effect's largest is left out (numerical zero).
 const NEGLIGIBLE_BASIS: f64 = 1e-6;
 
@@ -1317,11 +1322,28 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
         Some(f) => mse0 - f,
         None => mse0 - final_mse,
     };
-    let verdict = if accepted.is_empty() {
+    let mut verdict = if accepted.is_empty() {
         "none".to_owned()
     } else {
         (accepted.iter().map(|e| e.name()).collect::<Vec<_>>()).join("+")
     };
+    let closed = if gap2 > 0.0 {
+        (mse0 - final_mse) / gap2
+    } else {
+        0.0
+    };
+    if !accepted.is_empty()
+        && floor0.is_some()
+        && closed < SUFFICIENT_SHARE
+        && gap_p_value(&rows, &base) < cfg.alpha
+    {
+        notes.push(format!(
+            "{verdict} closes {:.0} % of the gap above the floor and a significant residual \
+             remains: not enough to name it (the effect at work is likely outside the library)",
+            100.0 * closed
+        ));
+        verdict = "none".to_owned();
+    }
     if let Some(step) = steps.first()
         && step.heldout_rms_after_m > 0.95 * step.heldout_rms_before_m
     {
@@ -1351,11 +1373,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
         steps,
         verdict,
         heldout_rms_final_m: final_mse.sqrt(),
-        gap_closed_pct: if gap2 > 0.0 {
-            100.0 * (mse0 - final_mse) / gap2
-        } else {
-            0.0
-        },
+        gap_closed_pct: 100.0 * closed,
         test_sets: baseline.tests.iter().map(|t| t.name.clone()).collect(),
         ladder,
         notes,

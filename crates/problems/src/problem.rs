@@ -533,6 +533,34 @@ impl CalibrationProblem {
         })
     }
 
+    /// The same problem (tips, weights, model terms, parameter roles) on other observations:
+    /// the rows of a held-out set, or the rows with perturbed joint readings (a derivative with
+    /// respect to the readings).
+    ///
+    /// # Errors
+    /// As [`Self::new`] for the new observations.
+    pub fn with_observations(&self, obs: Observations) -> Result<Self, Error> {
+        let mut problem = Self::build(
+            self.tips.clone(),
+            obs,
+            self.weights,
+            ModelTerms {
+                compliance: self.compliance.clone(),
+                harmonics: self.harmonics.clone(),
+                torque_chain: self.torque_chain.clone(),
+            },
+        )?;
+        if problem.layout.len() == self.layout.len() {
+            problem.layout = self.layout.clone();
+        }
+        Ok(problem)
+    }
+
+    /// The weights of the residuals.
+    pub fn weights(&self) -> &Weights {
+        &self.weights
+    }
+
     /// The chain (the first tip's).
     pub fn chain(&self) -> &Chain {
         &self.chain
