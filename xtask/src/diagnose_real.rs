@@ -175,10 +175,10 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
          The diagnosis starts from the geometric calibration of the training rows; its floor is \
          the stated instrument σ, else the repeatability of repeated poses, else the sockets' \
          replicates (an upper bound of the seating noise), else none (the gaps are then relative \
-         to the best model found). An effect is named only when its held-out improvement over \
-         the blocked cross-validation folds is significant after Holm's correction over the \
-         candidates (α = 0.01), its in-sample F-test is too, and it closes at least 20 % of the \
-         gap above the floor (docs/diagnosis.md). The ladder gives the RMS of the 3-D error \
+         to the best model found). An effect is named only when its in-sample F-test is \
+         significant after Holm's correction over the candidates (α = 0.01), its held-out error \
+         over the blocked cross-validation folds undercuts the baseline's by two standard \
+         errors, and it closes at least 20 % of the gap above the floor (docs/diagnosis.md §7). The ladder gives the RMS of the 3-D error \
          (mm): cross-validated on the training rows, and on each held-out set. Residual maps: \
          docs/results/diagnose-real/*.svg.\n\nMachine: 2 cores.\n",
     );
@@ -281,17 +281,19 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
             f(a).total_cmp(&f(b))
         });
         md.push_str(
-            "\n| candidate (round 1) | k | held-out RMS after, mm | improvement ± SE | p (held-out, Holm) | p (F, Holm) | decision |\n|---|---|---|---|---|---|---|\n",
+            "\n| candidate (round 1) | k | held-out RMS after, mm | held-out improvement, standard errors | p (held-out, one-sided) | p (F, Holm) | decision |\n|---|---|---|---|---|---|---|\n",
         );
         for c in cands {
             let imp = &c["heldout_improvement"];
             md.push_str(&format!(
-                "| {} | {} | {} | {:.3} ± {:.3} | {:.1e} | {:.1e} | {} |\n",
+                "| {} | {} | {} | {} | {:.1e} | {:.1e} | {} |\n",
                 c["effect"].as_str().unwrap_or("?"),
                 c["n_visible"],
                 mm(&c["heldout_rms_after_m"]),
-                imp[0].as_f64().unwrap_or(f64::NAN),
-                imp[1].as_f64().unwrap_or(f64::NAN),
+                match (imp[0].as_f64(), imp[1].as_f64()) {
+                    (Some(m), Some(se)) if se > 0.0 => format!("{:+.1}", m / se),
+                    _ => "–".to_owned(),
+                },
                 c["heldout_p_value"].as_f64().unwrap_or(f64::NAN),
                 c["f_p_value"].as_f64().unwrap_or(f64::NAN),
                 c["reason"].as_str().unwrap_or("").replace('|', "/")

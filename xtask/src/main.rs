@@ -2,7 +2,9 @@
 //! reproduction runs that write `docs/results/`.
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a task runner reports on the terminal
 
+mod arm_blind;
 mod bench;
+mod deny;
 mod diagnose_real;
 mod haptic;
 mod mukca;
@@ -36,6 +38,14 @@ enum Task {
         #[arg(long, default_value_t = 240)]
         cases: usize,
     },
+    /// Blind test of the serial-arm diagnosis (release build): `--cases` simulated iiwa 14
+    /// and Panda data sets (positions and sockets) with a withheld effect (or none), into
+    /// docs/results/diagnose-arm-blind.md.
+    BlindTestArm {
+        /// Number of cases (≥ 100 for the report).
+        #[arg(long, default_value_t = 256)]
+        cases: usize,
+    },
     /// Calibrate every MUKCa split of docs/results/mukca.md with the release binary and write
     /// the table (ours beside MUKCa's own optimiser); `--check` only verifies the acceptance
     /// criteria against the committed reference figures.
@@ -67,6 +77,9 @@ enum Task {
         #[arg(long)]
         check: bool,
     },
+    /// `cargo deny check` (deny.toml): licences, sources, duplicate versions and, with network
+    /// access, the RustSec advisories; installs cargo-deny on first use.
+    Deny,
     /// The property tests with fresh random seeds (CI pins the seed): run it to look for
     /// failures CI cannot find; each failure is saved in its crate's proptest-regressions/.
     ProptestFresh,
@@ -109,9 +122,11 @@ fn main() -> Result<()> {
             Ok(())
         }
         Task::Tidy => tidy::run(&sh),
+        Task::Deny => deny::run(&sh),
         Task::DiagnoseReal { check } => diagnose_real::run(&sh, check),
         Task::Bench { peers, criterion } => bench::run(&sh, peers, criterion),
         Task::BlindTest { cases } => blind_test(&sh, cases),
+        Task::BlindTestArm { cases } => arm_blind::run(&sh, cases),
         Task::ReproduceTables { check } => reproduce_tables(&sh, check),
     }
 }
@@ -129,6 +144,15 @@ fn ci(sh: &Shell) -> Result<()> {
     cmd!(sh, "cargo test --workspace --quiet")
         .env("PROPTEST_RNG_SEED", PROPTEST_CI_SEED)
         .run()?;
+    // The same crates on scalar code (the vector kernels give the same bits; this runs the
+    // scalar instantiation that machines without AVX2 or NEON take).
+    cmd!(
+        sh,
+        "cargo test -p hapcal-identify -p hapcal-kinematics -p hapcal-problems --quiet"
+    )
+    .env("PROPTEST_RNG_SEED", PROPTEST_CI_SEED)
+    .env("HAPCAL_SIMD", "off")
+    .run()?;
     cmd!(
         sh,
         "cargo run --release --quiet -p hapcal-calibrate --example calibrate_urdf"

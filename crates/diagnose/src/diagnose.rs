@@ -8,6 +8,7 @@ use hapcal_problems::{CapstanProblem, PolynomialProblem};
 use hapcal_sim::EffectKind;
 use hapcal_transmission::{Capstan, Chebyshev};
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::Error;
@@ -1047,13 +1048,10 @@ pub fn diagnose(
     let gap_significant = gap_p < cfg.alpha;
     let (where_, signals) = residual_map(device, &data, &base.lin, &base.cv, cfg.alpha);
 
-    // Which joint's angle the residual lives on.
-    let mut joints = Vec::new();
-    for j in 0..n_joints {
+    // Which joint's angle the residual lives on (the joints in parallel, collected in order).
+    let probe_joint = |j: usize| -> Option<JointProbe> {
         let (lo, hi) = device.joint_limits().get(j).copied().unwrap_or((-1.0, 1.0));
-        let Ok(probe) = Chebyshev::try_new(lo, hi, vec![0.0; 7]) else {
-            continue;
-        };
+        let probe = Chebyshev::try_new(lo, hi, vec![0.0; 7]).ok()?;
         let terms: Vec<Term> = (1..=6)
             .map(|k| Term {
                 name: format!("probe.j{}_cheb{k}", j + 1),
@@ -1085,7 +1083,7 @@ pub fn diagnose(
         } else {
             1.0
         };
-        joints.push(JointProbe {
+        Some(JointProbe {
             joint: j + 1,
             explained_pct: if excess > 0.0 {
                 100.0 * ((drss - k) / excess).clamp(0.0, 1.0)
@@ -1093,8 +1091,15 @@ pub fn diagnose(
                 0.0
             },
             p_value: p,
-        });
-    }
+        })
+    };
+    let joints: Vec<JointProbe> = (0..n_joints)
+        .into_par_iter()
+        .map(probe_joint)
+        .collect::<Vec<_>>()
+        .into_iter()
+        .flatten()
+        .collect();
 
     let mut library: Vec<String> = EffectKind::LIBRARY
         .iter()
@@ -1111,12 +1116,24 @@ pub fn diagnose(
     let mut accepted_names: Vec<String> = Vec::new();
     let mut round_gap_significant = gap_significant;
     for round in 1..=cfg.max_effects {
+        // The candidates of a round are independent: tested in parallel (rayon), collected in
+        // library order, so the result does not depend on the number of threads.
+        let outcomes: Vec<(&String, Result<Tested, String>)> = library
+            .par_iter()
+            .filter(|e| !accepted_names.contains(e))
+            .map(|effect| {
+                let tested = candidate_terms(effect, device, &data, n_joints).map(|terms| {
+                    test_candidate(
+                        &setup, &data, &state, &base, effect, terms, round, cfg.folds,
+                    )
+                });
+                (effect, tested)
+            })
+            .collect();
         let mut tested: Vec<Tested> = Vec::new();
-        for effect in library.iter().filter(|e| !accepted_names.contains(e)) {
-            match candidate_terms(effect, device, &data, n_joints) {
-                Ok(terms) => tested.push(test_candidate(
-                    &setup, &data, &state, &base, effect, terms, round, cfg.folds,
-                )),
+        for (effect, outcome) in outcomes {
+            match outcome {
+                Ok(t) => tested.push(t),
                 Err(reason) => {
                     if round == 1 {
                         notes.push(format!("{effect}: {reason}"));

@@ -182,25 +182,47 @@ pub(crate) fn pivoted_basis(
     }
     let mut picked: Vec<Option<f64>> = vec![None; k];
     let mut basis: Vec<DVector<f64>> = Vec::new();
+    // Remaining squared norms, downdated after each projection (`|w|² − (v·w)²`) and
+    // recomputed when the downdate has cancelled most of the last exact value (LAPACK's
+    // xGEQP3 rule), so that the pivot search costs O(k) per pick instead of O(n·k).
+    let mut rem2: Vec<f64> = (0..k).map(|j| work.column(j).norm_squared()).collect();
+    let mut exact2 = rem2.clone();
     loop {
         let mut best: Option<(usize, f64)> = None;
         for j in 0..k {
             if picked[j].is_some() || norms[j].is_nan() || norms[j] <= 0.0 {
                 continue;
             }
-            let frac = work.column(j).norm() / norms[j];
+            let frac = rem2[j].max(0.0).sqrt() / norms[j];
             if frac >= rel_tol && best.is_none_or(|(_, f)| frac > f) {
                 best = Some((j, frac));
             }
         }
-        let Some((j, frac)) = best else { break };
+        let Some((j, _)) = best else { break };
+        let nrm = work.column(j).norm();
+        let frac = nrm / norms[j];
+        if frac < rel_tol || nrm == 0.0 {
+            // The downdated norm overstated it: exact now, and below the tolerance.
+            rem2[j] = nrm * nrm;
+            exact2[j] = rem2[j];
+            if rem2[j] == 0.0 || frac < rel_tol {
+                picked[j] = None;
+                norms_skip(&mut rem2, j);
+                continue;
+            }
+        }
         picked[j] = Some(frac);
-        let v: DVector<f64> = work.column(j) / work.column(j).norm();
-        for (c, p) in picked.iter().enumerate() {
-            if p.is_none() {
+        let v: DVector<f64> = work.column(j) / nrm;
+        for c in 0..k {
+            if picked[c].is_none() && rem2[c] >= 0.0 {
                 let dot = v.dot(&work.column(c));
                 let mut col = work.column_mut(c);
                 col.axpy(-dot, &v, 1.0);
+                rem2[c] -= dot * dot;
+                if rem2[c] <= 1e-2 * exact2[c] {
+                    rem2[c] = work.column(c).norm_squared();
+                    exact2[c] = rem2[c];
+                }
             }
         }
         basis.push(v);
@@ -210,6 +232,11 @@ pub(crate) fn pivoted_basis(
         q.set_column(j, v);
     }
     (q, picked)
+}
+
+/// Marks column `j` as never to be picked (its remaining norm is below the tolerance).
+fn norms_skip(rem2: &mut [f64], j: usize) {
+    rem2[j] = -1.0;
 }
 
 #[cfg(test)]

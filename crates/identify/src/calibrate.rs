@@ -127,6 +127,18 @@ pub struct Identified {
     /// [`IdentifyConfig::max_rounds`] fits did not settle it (then `identifiability` is the decision the last
     /// fit used, taken at the previous estimate).
     pub pruning_converged: bool,
+    /// The back end that ran the fit (`dense`, `streaming` or `sparse`) and why
+    /// ([`IdentifyConfig::backend`], or [`Backend::Auto`]'s rule with the sizes it saw).
+    pub backend: BackendChoice,
+}
+
+/// Which back end [`identify`] used and why.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BackendChoice {
+    /// `dense`, `streaming` or `sparse`.
+    pub name: &'static str,
+    /// Why: the configured back end, or the sizes that made [`Backend::Auto`] choose it.
+    pub reason: String,
 }
 
 impl Identified {
@@ -179,8 +191,25 @@ pub fn identify(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Result<
         }),
         _ => false,
     };
+    let auto = cfg.backend == Backend::Auto;
+    let choice = |name: &'static str, why: String| BackendChoice {
+        name,
+        reason: if auto {
+            format!("auto: {why}")
+        } else {
+            "configured".to_owned()
+        },
+    };
     if sparse {
-        return identify_sparse(p, x0, cfg);
+        let mut id = identify_sparse(p, x0, cfg)?;
+        id.backend = choice(
+            "sparse",
+            format!(
+                "a {m} × {n} Jacobian (more than {STREAMING_AUTO_ENTRIES} entries) with a sparse \
+                 pattern below {SPARSE_AUTO_DENSITY} density"
+            ),
+        );
+        return Ok(id);
     }
     let streaming = match cfg.backend {
         Backend::Dense | Backend::Sparse => false,
@@ -189,7 +218,14 @@ pub fn identify(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Result<
     };
     if streaming {
         let blocks = p.row_blocks().ok_or(Error::NoRowBlocks)?;
-        return identify_streaming(p, blocks, x0, cfg);
+        let mut id = identify_streaming(p, blocks, x0, cfg)?;
+        id.backend = choice(
+            "streaming",
+            format!(
+                "a {m} × {n} Jacobian, more than {STREAMING_AUTO_ENTRIES} entries, in row blocks"
+            ),
+        );
+        return Ok(id);
     }
     let bytes = 8 * m as u128 * n as u128;
     if bytes > DENSE_LIMIT_BYTES {
@@ -200,7 +236,12 @@ pub fn identify(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Result<
             limit: DENSE_LIMIT_BYTES,
         });
     }
-    identify_dense(p, x0, cfg)
+    let mut id = identify_dense(p, x0, cfg)?;
+    id.backend = choice(
+        "dense",
+        format!("a {m} × {n} Jacobian, at most {STREAMING_AUTO_ENTRIES} entries or no row blocks"),
+    );
+    Ok(id)
 }
 
 fn check_identify_config(cfg: &IdentifyConfig) -> Result<(), Error> {
@@ -315,6 +356,10 @@ fn identify_streaming(
         layout,
         rounds,
         pruning_converged,
+        backend: BackendChoice {
+            name: "dense",
+            reason: String::new(),
+        },
     })
 }
 
@@ -361,6 +406,10 @@ fn identify_sparse(
         layout,
         rounds: 1,
         pruning_converged: true,
+        backend: BackendChoice {
+            name: "sparse",
+            reason: String::new(),
+        },
     })
 }
 
@@ -459,6 +508,10 @@ fn identify_dense(
         layout,
         rounds,
         pruning_converged,
+        backend: BackendChoice {
+            name: "dense",
+            reason: String::new(),
+        },
     })
 }
 

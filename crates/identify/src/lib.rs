@@ -71,7 +71,7 @@ mod subset;
 
 pub use blocks::{N_LEAVES, RowBlocks, levenberg_marquardt_streaming};
 pub use calibrate::{
-    Backend, DENSE_LIMIT_BYTES, Identified, IdentifyConfig, MAX_ROUNDS, SIGMA_FLOOR,
+    Backend, BackendChoice, DENSE_LIMIT_BYTES, Identified, IdentifyConfig, MAX_ROUNDS, SIGMA_FLOOR,
     SPARSE_AUTO_DENSITY, STREAMING_AUTO_ENTRIES, SigmaSource, identify,
 };
 pub use covariance::{Covariance, covariance, sigma_from_residuals};

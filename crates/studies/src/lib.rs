@@ -5,6 +5,7 @@
 //! Architecture invariant: *`studies` only reads the truth; what it calibrates, it calibrates
 //! through [`hapcal_calibrate`].*
 
+pub mod arm_blind;
 pub mod figures;
 pub mod force;
 pub mod paper;

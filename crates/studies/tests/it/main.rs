@@ -1,0 +1,3 @@
+//! Integration tests of hapcal-studies.
+
+mod arm_blind;
