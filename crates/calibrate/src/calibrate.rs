@@ -294,6 +294,9 @@ pub struct CalibrationReport {
     pub warnings: Vec<String>,
     /// LM termination.
     pub termination: String,
+    /// The least-squares back end of the final fit and why (`dense: auto: a 372 × 47
+    /// Jacobian, …`).
+    pub backend: String,
     /// Residual evaluations of the final fit.
     pub n_evaluations: usize,
     /// Jacobian evaluations of the final fit.
@@ -321,6 +324,11 @@ pub struct Outcome {
     /// haptic device's transmissions); `None`: [`write_outputs`] applies the report's
     /// parameters to `device`.
     pub calibrated: Option<Device>,
+}
+
+/// The back end of an identification and why, for the report.
+pub(crate) fn backend_of(id: &Identified) -> String {
+    format!("{}: {}", id.backend.name, id.backend.reason)
 }
 
 /// Reads the device: a TOML device file, or a URDF imported with `tip`.
@@ -358,9 +366,8 @@ pub fn load_data(paths: &[PathBuf], device: &Device) -> Result<Vec<DataSet>> {
                 distance_m: log.rows.iter().map(|r| r.distance_m).collect(),
             });
         } else {
-            let placements =
-                hapcal_io::read_mukca_paths(std::slice::from_ref(path), device.n_joints())
-                    .with_context(|| format!("reading measurements in {}", path.display()))?;
+            let placements = hapcal_io::read_mukca_paths_for(std::slice::from_ref(path), device)
+                .with_context(|| format!("reading measurements in {}", path.display()))?;
             sets.extend(placements.into_iter().map(DataSet::Sockets));
         }
     }
@@ -745,7 +752,18 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     // the model before any time goes into cross-validation, and it is the answer whenever the
     // geometric model is chosen.
     let obs = observations(&train, plan.socket_distance_m, &|_, _, _| true);
-    let n_configurations = obs.rows.len();
+    // Copies of a configuration add residuals but no information: count distinct ones.
+    let n_configurations = (obs.rows.iter())
+        .map(|row| {
+            let point = match row.kind {
+                RowKind::Point { point } => point,
+                _ => usize::MAX,
+            };
+            let q: Vec<u64> = row.q.iter().map(|v| (v + 0.0).to_bits()).collect();
+            (point, q)
+        })
+        .collect::<std::collections::HashSet<_>>()
+        .len();
     let geometric = solve(&chain, obs.clone(), ModelChoice::Geometric, plan.sigma_m)?;
     let n_kept = |p: &CalibrationProblem, id: &Identified| {
         id.identifiability
@@ -886,6 +904,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         observability,
         warnings,
         termination: format!("{:?}", identified.fit.termination),
+        backend: backend_of(&identified),
         n_evaluations: identified.fit.n_evaluations,
         n_jacobians: identified.fit.n_jacobians,
         rounds: identified.rounds,

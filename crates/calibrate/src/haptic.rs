@@ -516,7 +516,8 @@ pub fn calibrated_device(
 ///
 /// # Errors
 /// A device that is not the paper's kind ([`HapticDevice::new`]), unreadable logs (file,
-/// line, column), a folder among the data, too few rows, or a failed identification.
+/// line, column), a folder among the data, too few rows, no more distinct joint configurations
+/// than kept parameters ([`check_distinct_configurations`]), or a failed identification.
 pub fn calibrate_logs(
     plan: &crate::calibrate::Plan,
     device: Device,
@@ -644,6 +645,7 @@ pub fn calibrate_logs(
         let calibrated = haptic.device.with_calibration(&values, meta)?;
         (None, kin, ModelChoice::Geometric, calibrated)
     };
+    check_distinct_configurations(&rows, transmissions.as_ref(), &kin)?;
     let x_kin: Vec<f64> = kin.fit.x.iter().copied().collect();
     let zero = vec![0.0; haptic.chain.n_params()];
     let distance_rms = |rows: &[LogRow], x: &[f64], t: Option<&TransmissionFit>| {
@@ -727,6 +729,7 @@ pub fn calibrate_logs(
         observability: None,
         warnings,
         termination: format!("{:?}", kin.fit.termination),
+        backend: crate::calibrate::backend_of(&kin),
         n_evaluations: kin.fit.n_evaluations,
         n_jacobians: kin.fit.n_jacobians,
         rounds: kin.rounds,
@@ -744,6 +747,73 @@ pub fn calibrate_logs(
         model: kin_model,
         calibrated: Some(calibrated),
     })
+}
+
+/// Number of distinct joint-reading vectors among `rows`, or of distinct readings of joint
+/// `joint` (1-based) alone (bit patterns, −0 counted as +0).
+pub fn distinct_configurations(rows: &[LogRow], joint: Option<usize>) -> usize {
+    let mut seen = std::collections::HashSet::new();
+    for row in rows {
+        let q = match joint {
+            Some(j) => row.q.get(j - 1..j).unwrap_or(&[]),
+            None => &row.q[..],
+        };
+        seen.insert(q.iter().map(|v| (v + 0.0).to_bits()).collect::<Vec<u64>>());
+    }
+    seen.len()
+}
+
+/// `Err` unless the rows an identification used hold more distinct configurations than the
+/// parameters it kept: for each capstan and the joint-4 polynomial (step 1) the distinct
+/// readings of its joint, for the kinematics (step 2) the distinct joint-reading vectors.
+///
+/// A copied row adds a residual but no information: 200 copies of one pose fit one parameter
+/// per step exactly, and the residual-based σ (residuals / (rows − kept)) comes out 0, a
+/// confident report of nothing. Each kept parameter needs a configuration of its own, and σ
+/// one more (a degree of freedom).
+///
+/// # Errors
+/// Naming the step, both counts and the number of rows when `distinct ≤ kept`.
+pub fn check_distinct_configurations(
+    rows: &[LogRow],
+    transmissions: Option<&TransmissionFit>,
+    kin: &Identified,
+) -> Result<()> {
+    let mut steps: Vec<(String, Option<usize>, usize)> = Vec::new();
+    if let Some(t) = transmissions {
+        for c in &t.capstans {
+            let kept = c.identified.identifiability.kept.len();
+            steps.push((format!("capstan {}", c.joint), Some(c.joint), kept));
+        }
+        let kept = t.poly_identified.identifiability.kept.len();
+        steps.push((
+            format!("the joint-{PARALLELOGRAM_JOINT} polynomial"),
+            Some(PARALLELOGRAM_JOINT),
+            kept,
+        ));
+    }
+    steps.push((
+        "the kinematics".to_owned(),
+        None,
+        kin.identifiability.kept.len(),
+    ));
+    for (what, joint, n_kept) in steps {
+        let n_distinct = distinct_configurations(rows, joint);
+        if n_distinct <= n_kept {
+            let of = joint.map_or_else(
+                || "distinct joint configurations".to_owned(),
+                |j| format!("distinct readings of joint {j}"),
+            );
+            bail!(
+                "{what}: the training logs hold {n_distinct} {of} (in {} rows) for {n_kept} kept \
+                 parameters: at least {} are needed (one per parameter and one to estimate σ); \
+                 repeated rows add no information, measure more distinct poses",
+                rows.len(),
+                n_kept + 1
+            );
+        }
+    }
+    Ok(())
 }
 
 /// The transmissions and kinematics of a joint identification, in the two steps' types (so the

@@ -1528,6 +1528,7 @@ pub fn run_tables(
         observability: None,
         warnings,
         termination: format!("{:?}", id.fit.termination),
+        backend: crate::calibrate::backend_of(id),
         n_evaluations: id.fit.n_evaluations,
         n_jacobians: id.fit.n_jacobians,
         rounds: id.rounds,

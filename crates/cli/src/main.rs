@@ -61,6 +61,7 @@ enum Command {
     ///
     /// With no arguments: MUKCa kuka_14, training on `front`, testing on `left_back` and
     /// `raised_left` (bundled in fixtures/mukca).
+    #[command(allow_negative_numbers = true)]
     Calibrate {
         /// Device file (.toml) or URDF (.urdf, with --tip).
         #[arg(long)]
@@ -99,20 +100,20 @@ enum Command {
         #[arg(long, value_enum, default_value_t = ModelChoice::Auto)]
         model: ModelChoice,
         /// Known distance between the two sockets of a placement, m.
-        #[arg(long, default_value_t = 0.05)]
+        #[arg(long, default_value_t = 0.05, allow_hyphen_values = true)]
         socket_distance_m: f64,
         /// Cross-validation folds (time-contiguous blocks, at least 2).
         #[arg(long, default_value_t = 5, value_parser = count_at_least::<2>)]
         folds: usize,
         /// Measurement noise standard deviation, m (default: estimated from the residuals).
-        #[arg(long)]
+        #[arg(long, allow_hyphen_values = true)]
         sigma_m: Option<f64>,
         /// Orientation noise standard deviation of pose data, rad (default: estimated).
-        #[arg(long)]
+        #[arg(long, allow_hyphen_values = true)]
         sigma_rad: Option<f64>,
         /// Measurement files: hold out this fraction of each training file's rows, the last
         /// ones in file order, as a test set (0.3: the first 70 % train).
-        #[arg(long)]
+        #[arg(long, allow_hyphen_values = true)]
         test_last: Option<f64>,
         /// Unit of lengths in measurement files: m or mm.
         #[arg(long, default_value = "m")]
@@ -154,6 +155,7 @@ enum Command {
     },
     /// Simulate a measurement log (docs/design.md §5) from a truth device: joint readings quantised
     /// to the encoders, true transmissions and deviations, Gaussian encoder and cable noise.
+    #[command(allow_negative_numbers = true)]
     Simulate {
         /// Nominal device file (TOML); defaults to the truth's device, or the reference device.
         #[arg(long)]
@@ -182,7 +184,7 @@ enum Command {
         #[arg(long)]
         motion: bool,
         /// Time between samples of the time-ordered motion, s.
-        #[arg(long, default_value_t = 0.5)]
+        #[arg(long, default_value_t = 0.5, allow_hyphen_values = true)]
         period_s: f64,
     },
     /// Diagnose the sim-to-real gap: how far the calibrated model's held-out residual lies
@@ -256,6 +258,7 @@ enum Command {
     /// Force rendering before and after calibration (paper Figs. 11–12): the virtual-wall
     /// experiment at the home pose and the errors over random poses, printed as Markdown; writes
     /// the Fig. 12 SVG (Fx, Fy, Fz − Fd against the wall travel).
+    #[command(allow_negative_numbers = true)]
     Force {
         /// Nominal device file (the uncalibrated model).
         #[arg(long)]
@@ -267,7 +270,7 @@ enum Command {
         #[arg(long)]
         calibrated: PathBuf,
         /// Force-feedback gain G of the closed-loop rows.
-        #[arg(long, default_value_t = 10.0)]
+        #[arg(long, default_value_t = 10.0, allow_hyphen_values = true)]
         gain: f64,
         /// Random poses (at least 1).
         #[arg(long, default_value_t = 200, value_parser = count_at_least::<1>)]
@@ -307,6 +310,62 @@ fn count_at_least<const MIN: usize>(text: &str) -> std::result::Result<usize, St
         Ok(n) => Err(format!("must be at least {MIN}, got {n}")),
         Err(_) => Err(format!("expected a whole number, got {text:?}")),
     }
+}
+
+/// `Err` naming `option` and its value unless `value` (if given) is finite and positive.
+fn check_positive(option: &str, value: Option<f64>, unit: &str) -> Result<()> {
+    match value {
+        Some(v) if !(v.is_finite() && v > 0.0) => {
+            anyhow::bail!("{option} must be a finite, positive {unit}, got {v}")
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Reads the MUKCa socket folders among `plan`'s data with the device's joint limits, so that
+/// a reading past a limit by more than [`hapcal_io::JOINT_LIMIT_SLACK`] of the joint's range
+/// is an error naming file:line:column (and one slightly past it a warning on standard
+/// error). Only for a single-tip arm whose device file reads; anything else is left to
+/// [`calibrate::run`], which reports it. (`calibrate::load_data` checks the same limits; this
+/// check also prints the readers' warnings and refuses a socket whose rows are all one
+/// configuration before any fit.)
+fn check_socket_folders(plan: &Plan) -> Result<()> {
+    let folders: Vec<&PathBuf> = (plan.data.iter().chain(&plan.test))
+        .filter(|p| p.is_dir())
+        .collect();
+    if folders.is_empty() || !plan.tips.is_empty() {
+        return Ok(());
+    }
+    let Ok(device) = calibrate::load_device(&plan.device, &plan.tip) else {
+        return Ok(());
+    };
+    if !device.capstans.is_empty() || device.parallelogram.is_some() {
+        return Ok(());
+    }
+    for folder in folders {
+        let placements = hapcal_io::read_mukca_paths_for(std::slice::from_ref(folder), &device)
+            .with_context(|| format!("reading measurements in {}", folder.display()))?;
+        for warning in placements.iter().flat_map(|p| &p.warnings) {
+            note!("hapcal: warning: {warning}");
+        }
+        // A socket's position takes one configuration; copies of it add residuals but no
+        // information, and fit exactly: the reported σ would shrink towards 0.
+        for socket in placements.iter().flat_map(|p| &p.sockets) {
+            let distinct: std::collections::HashSet<Vec<u64>> = (socket.q.iter())
+                .map(|q| q.iter().map(|v| (v + 0.0).to_bits()).collect())
+                .collect();
+            if socket.q.len() > 1 && distinct.len() == 1 {
+                anyhow::bail!(
+                    "{}: the {} rows are copies of one joint configuration: a socket's position \
+                     (3 coordinates) takes that one, and the copies add no information; measure \
+                     at least 2 distinct configurations per socket",
+                    socket.file.display(),
+                    socket.q.len()
+                );
+            }
+        }
+    }
+    Ok(())
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -369,6 +428,16 @@ fn run(cli: Cli) -> Result<()> {
             if let Some(out) = &out {
                 calibrate::check_outputs(&plan.device, out, &inputs)?;
             }
+            check_positive("--sigma-m", plan.sigma_m, "length, m")?;
+            check_positive("--sigma-rad", plan.sigma_rad, "angle, rad")?;
+            if let Some(f) = plan.test_last
+                && !(f > 0.0 && f < 1.0)
+            {
+                anyhow::bail!(
+                    "--test-last must lie strictly between 0 and 1 (the fraction of each file's rows held out), got {f}"
+                );
+            }
+            check_socket_folders(&plan)?;
             let outcome = calibrate::run(&plan)?;
             if json {
                 emit(&format!(
@@ -502,6 +571,7 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             let root = hapcal::project_root();
             calibrate::check_extension(&out, &["csv"], "the simulated log", false)?;
+            check_positive("--period-s", Some(period_s), "time, s")?;
             let mut inputs: Vec<PathBuf> = device.iter().chain(&truth).cloned().collect();
             if let Some(t) =
                 (truth.as_ref()).and_then(|t| Some((t, hapcal_sim::read_truth(t).ok()?)))
@@ -562,7 +632,10 @@ fn run(cli: Cli) -> Result<()> {
             seed,
             svg,
         } => {
-            calibrate::check_extension(&svg, &["svg"], "the Fig. 12 plot", false)?;
+            calibrate::check_extension(&svg, &["svg"], "the Fig. 12 plot", true)?;
+            if !(gain.is_finite() && gain >= 0.0) {
+                anyhow::bail!("--gain must be a finite number ≥ 0, got {gain}");
+            }
             let inputs = [device.as_path(), truth.as_path(), calibrated.as_path()];
             calibrate::check_output(&svg, &inputs)?;
             let read_device = |p: &PathBuf| {

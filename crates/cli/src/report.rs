@@ -73,11 +73,12 @@ pub fn render(r: &CalibrationReport) -> String {
     }
     let _ = writeln!(
         s,
-        "\nmodel: {}; sigma = {:.4} mm (from {}); LM: {}",
+        "\nmodel: {}; sigma = {:.4} mm (from {}); LM: {}; back end {}",
         model_name(r.model),
         r.sigma_m * 1e3,
         r.sigma_source,
-        r.termination
+        r.termination,
+        r.backend
     );
     let _ = writeln!(
         s,

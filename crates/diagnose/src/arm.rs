@@ -9,14 +9,14 @@
 //! residuals), a displacement `Δp = c·v(row)` of the measured point through the position
 //! residuals. The tests are linear about the geometric estimate (one Gauss–Newton step from a
 //! converged fit, the reference device's scheme), so that each candidate costs a few small
-//! least-squares solves ([`crate::solve::lstsq`], the identify engine), not a nonlinear fit.
+//! least-squares solves (`solve::lstsq`, the identify engine), not a nonlinear fit.
 //!
 //! Statistics, as on the reference device: the in-sample F-test of each candidate's added
 //! parameters with Holm–Bonferroni over the candidates of a round (the family-wise control at
 //! `alpha`), and blocked k-fold cross-validation (contiguous configurations of one socket or
 //! file per block, three shifted repeats): the held-out error must undercut the round's
-//! baseline by [`HELDOUT_SIGNIFICANCE_Z`] blocked standard errors. An effect is named only
-//! when both hold and it closes at least `min_gap_share` of the gap above the floor.
+//! baseline by two blocked standard errors (the calibration ladder's margin). An effect is
+//! named only when both hold and it closes at least `min_gap_share` of the gap above the floor.
 
 use hapcal_calibrate::baseline::{DataKind, GeometricBaseline, HeldOutSet};
 use hapcal_identify::Problem;

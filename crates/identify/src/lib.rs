@@ -3,6 +3,10 @@
 //! indices O1–O5 of the scaled Jacobian ([`observability`]) and pose selection from candidate
 //! Jacobian blocks ([`select_poses`]).
 //!
+//! Vector kernels ([`pulp`]): one kernel body for AVX-512, AVX2, NEON and scalar code, chosen
+//! at run time, with the same bits on each; `HAPCAL_SIMD=off` in the environment forces the
+//! scalar instantiation for the whole process (docs/engine.md, "Vector kernels").
+//!
 //! **Architecture invariant:** *`identify` knows nothing about robots.* It sees residuals, a
 //! Jacobian and parameter names, units and roles; kinematics, devices and logs live in the
 //! crates that implement [`Problem`].

@@ -321,6 +321,51 @@ pub enum Error {
         /// [`MAX_LENGTH_M`](crate::MAX_LENGTH_M).
         limit_m: f64,
     },
+    /// A distance (cable encoder, ballbar) is negative.
+    #[error(
+        "{path}:{line}:{column}: {name} = {value_m} m is negative: a distance must lie within [0, {limit_m}] m"
+    )]
+    NegativeDistance {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// 1-based column.
+        column: u64,
+        /// The column's name.
+        name: String,
+        /// The value found, m.
+        value_m: f64,
+        /// [`MAX_LENGTH_M`](crate::MAX_LENGTH_M).
+        limit_m: f64,
+    },
+    /// A CSV row is one field holding another separator: the file is not comma-separated.
+    #[error(
+        "{path}:{line}:1: expected comma-separated columns, found one field {found:?}; the columns look separated by {separator}"
+    )]
+    Separator {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// The field (cut to 60 characters).
+        found: String,
+        /// The separator seen (`';'`, a tab, …), described.
+        separator: &'static str,
+    },
+    /// A URDF's links and joints do not form one tree (a joint names an undefined link, a link
+    /// has two parent joints, several roots, lengths that are not in metres).
+    #[error("{path}:{line}:{column}: {message}")]
+    UrdfStructure {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line of the element at fault (0 if it cannot be located).
+        line: u64,
+        /// 1-based column.
+        column: u64,
+        /// What is wrong, naming the joint or link.
+        message: String,
+    },
     /// A calibrated value cannot be applied to the device.
     #[error("parameter {name:?}: {message}")]
     Parameter {

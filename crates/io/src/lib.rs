@@ -85,8 +85,14 @@ pub use error::{Error, line_column};
 pub use hapcal_kinematics::{DhConvention, DhRow, Placement};
 pub use log::{Log, LogRow, N_EXT, read_log, write_log};
 pub use measure::{
-    AngleUnit, JOINT_LIMIT_SLACK, JointSchema, LengthUnit, MarkerSample, MeasuredRow,
-    MeasurementTable, Units, read_industrial_yaml, read_measurement_file,
+    AngleUnit, JOINT_LIMIT_SLACK, JointSchema, LengthUnit, MAX_YAML_DEPTH, MarkerSample,
+    MeasuredRow, MeasurementTable, Units, read_industrial_yaml, read_measurement_file,
 };
-pub use mukca::{SocketPlacement, SocketSamples, read_mukca_paths, read_mukca_placement};
-pub use urdf::{LinkInertial, UrdfTree, import_urdf, import_urdf_tips, write_calibrated_urdf};
+pub use mukca::{
+    SocketPlacement, SocketSamples, read_mukca_paths, read_mukca_paths_for, read_mukca_placement,
+    read_mukca_placement_for,
+};
+pub use urdf::{
+    LinkInertial, MAX_CHAIN_LENGTH_M, UrdfTree, import_urdf, import_urdf_tips,
+    write_calibrated_urdf,
+};

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use crate::Error;
 use crate::device::Device;
-use crate::table::{Repeats, Table, number};
+use crate::table::{Repeats, Table, check_separator, number};
 
 /// Number of external encoder columns (`ext1..ext4`, one per transmission output shaft).
 pub const N_EXT: usize = 4;
@@ -80,8 +80,9 @@ fn classify(name: &str) -> Column {
 /// data row; [`Error::DuplicateColumn`]; [`Error::JointCount`] if the header has another
 /// number of `q` columns than the device has joints; [`Error::MissingColumn`];
 /// [`Error::Ragged`] for a row with another number of fields than the header;
-/// [`Error::NotANumber`], [`Error::NotFinite`], [`Error::OutsideJointLimits`] for a bad
-/// cell and [`Error::TimeOrder`] if `t_s` decreases (all with file:line:column, column =
+/// [`Error::Separator`] for a file separated by semicolons, tabs or spaces;
+/// [`Error::NotANumber`], [`Error::NotFinite`], [`Error::OutsideJointLimits`],
+/// [`Error::LengthOutOfRange`] and [`Error::NegativeDistance`] for a bad cell and [`Error::TimeOrder`] if `t_s` decreases (all with file:line:column, column =
 /// field number); [`Error::Csv`] for invalid UTF-8.
 pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
     let n_joints = device.n_joints();
@@ -94,6 +95,7 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
             found: 0,
         });
     };
+    check_separator(path, header_line, header, n_joints + 1)?;
     let names: Vec<String> = header.iter().map(str::to_owned).collect();
     let columns: Vec<Column> = names.iter().map(|n| classify(n)).collect();
     let mut warnings = Vec::new();
@@ -139,6 +141,7 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
     let mut repeats = Repeats::default();
     while let Some((line, record)) = table.next_record()? {
         if record.len() != columns.len() {
+            check_separator(path, line, record, columns.len())?;
             return Err(Error::Ragged {
                 path: path.to_path_buf(),
                 line,
@@ -183,6 +186,16 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
                 Column::Distance => {
                     let value = parse()?;
                     Error::check_length(path, line, col, name, value)?;
+                    if value < 0.0 {
+                        return Err(Error::NegativeDistance {
+                            path: path.to_path_buf(),
+                            line,
+                            column: col,
+                            name: name.clone(),
+                            value_m: value,
+                            limit_m: crate::MAX_LENGTH_M,
+                        });
+                    }
                     row.distance_m = value;
                 }
                 Column::Ext(k) if !cell.is_empty() => {

@@ -8,7 +8,7 @@ use nalgebra::{Quaternion, UnitQuaternion};
 use serde::Deserialize;
 
 use crate::Error;
-use crate::table::{Repeats, Table, number};
+use crate::table::{Repeats, Table, check_separator, number};
 
 /// Unit of the length columns of a measurement file (positions, distances, prismatic joints).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -156,6 +156,30 @@ pub struct MeasurementTable {
 /// limits; a reading further out is more likely a wrong unit or column.
 pub const JOINT_LIMIT_SLACK: f64 = 0.1;
 
+/// Where a joint reading lies against its limits, by the rule of [`JOINT_LIMIT_SLACK`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Reach {
+    /// Within `[min, max]`.
+    Within,
+    /// Past a limit by at most [`JOINT_LIMIT_SLACK`] of the range: used, with a warning.
+    Slack,
+    /// Further out (or not a number): an error.
+    Outside,
+}
+
+/// Where `v` lies against `(min, max)`: the one rule of every reader that checks joint
+/// readings (measurement CSV and YAML files, MUKCa socket files).
+pub(crate) fn reach(v: f64, (min, max): (f64, f64)) -> Reach {
+    let slack = JOINT_LIMIT_SLACK * (max - min);
+    if (min..=max).contains(&v) {
+        Reach::Within
+    } else if (min - slack..=max + slack).contains(&v) {
+        Reach::Slack
+    } else {
+        Reach::Outside
+    }
+}
+
 /// What a header column holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Column {
@@ -286,6 +310,7 @@ pub fn read_measurement_file(
             found: 0,
         });
     };
+    check_separator(path, header_line, header, n + 1)?;
     let names: Vec<String> = header.iter().map(str::to_owned).collect();
     let columns: Vec<Column> = names.iter().map(|c| classify(c, schema)).collect();
     for (c, name) in names.iter().enumerate() {
@@ -427,6 +452,7 @@ pub fn read_measurement_file(
     let mut repeats = Repeats::default();
     while let Some((line, record)) = table.next_record()? {
         if record.len() != names.len() {
+            check_separator(path, line, record, names.len())?;
             return Err(Error::Ragged {
                 path: path.to_path_buf(),
                 line,
@@ -448,30 +474,32 @@ pub fn read_measurement_file(
                 .get(j)
                 .copied()
                 .unwrap_or((f64::MIN, f64::MAX));
-            let slack = JOINT_LIMIT_SLACK * (max - min);
-            if (min..=max).contains(&v) {
-            } else if (min - slack..=max + slack).contains(&v) {
-                let unit = if prismatic { "m" } else { "rad" };
-                outside.push((line, c, j, v));
-                if outside.len() == 1 {
-                    first_outside = format!(
-                        "{}:{line}:{}: joint {:?} = {v} {unit} is outside its limits [{min}, {max}] {unit}",
-                        path.display(),
-                        c + 1,
-                        schema.names[j]
-                    );
+            match reach(v, (min, max)) {
+                Reach::Within => {}
+                Reach::Slack => {
+                    let unit = if prismatic { "m" } else { "rad" };
+                    outside.push((line, c, j, v));
+                    if outside.len() == 1 {
+                        first_outside = format!(
+                            "{}:{line}:{}: joint {:?} = {v} {unit} is outside its limits [{min}, {max}] {unit}",
+                            path.display(),
+                            c + 1,
+                            schema.names[j]
+                        );
+                    }
                 }
-            } else {
-                return Err(Error::OutsideJointRange {
-                    path: path.to_path_buf(),
-                    line,
-                    column: c as u64 + 1,
-                    joint: schema.names[j].clone(),
-                    value: v,
-                    min,
-                    max,
-                    unit: if prismatic { "m" } else { "rad" },
-                });
+                Reach::Outside => {
+                    return Err(Error::OutsideJointRange {
+                        path: path.to_path_buf(),
+                        line,
+                        column: c as u64 + 1,
+                        joint: schema.names[j].clone(),
+                        value: v,
+                        min,
+                        max,
+                        unit: if prismatic { "m" } else { "rad" },
+                    });
+                }
             }
             q.push(v);
         }
@@ -699,7 +727,9 @@ struct Pose {
 /// [`Error::Io`]; [`Error::Yaml`] (file:line:column) for malformed YAML, a missing or unknown
 /// field, a non-empty `camera_joints` (a moving camera is not supported), a joint count other
 /// than the device's, a non-finite number, a joint outside its range or a quaternion that is
-/// not of unit norm; [`Error::TooFewRows`] without observations.
+/// not of unit norm, or collections nested deeper than [`MAX_YAML_DEPTH`] (at the line and
+/// column where the limit is passed, found in one linear pass before parsing);
+/// [`Error::TooFewRows`] without observations.
 pub fn read_industrial_yaml(
     path: &Path,
     schema: &JointSchema<'_>,
@@ -710,22 +740,20 @@ pub fn read_industrial_yaml(
         column,
         message,
     })?;
+    check_yaml_depth(path, &text)?;
     let observations: serde_yaml_ng::Mapping =
         serde_yaml_ng::from_str(&text).map_err(|e| yaml_error(path, &e))?;
-    // Lines of the top-level keys, in file order, to locate each observation.
-    let key_lines: Vec<(String, u64)> = (text.lines().enumerate())
-        .filter(|(_, l)| !l.starts_with([' ', '\t', '#', '-']) && l.contains(':'))
-        .map(|(i, l)| {
+    // Lines of the top-level keys (the first of each), to locate each observation.
+    let mut key_lines: std::collections::HashMap<String, u64> = std::collections::HashMap::new();
+    for (i, l) in text.lines().enumerate() {
+        if !l.starts_with([' ', '\t', '#', '-']) && l.contains(':') {
             let key = l.split(':').next().unwrap_or("").trim();
-            (key.trim_matches(['\'', '"']).to_owned(), i as u64 + 1)
-        })
-        .collect();
-    let at = |key: &str| {
-        key_lines
-            .iter()
-            .find(|(k, _)| k == key)
-            .map_or(0, |(_, l)| *l)
-    };
+            key_lines
+                .entry(key.trim_matches(['\'', '"']).to_owned())
+                .or_insert(i as u64 + 1);
+        }
+    }
+    let at = |key: &str| key_lines.get(key).copied().unwrap_or(0);
     let bad = |line: u64, message: String| Error::Yaml {
         path: path.to_path_buf(),
         line,
@@ -770,11 +798,8 @@ pub fn read_industrial_yaml(
                 .get(j)
                 .copied()
                 .unwrap_or((f64::MIN, f64::MAX));
-            let slack = JOINT_LIMIT_SLACK * (max - min);
-            if v.is_finite()
-                && !(min..=max).contains(&v)
-                && (min - slack..=max + slack).contains(&v)
-            {
+            let within = reach(v, (min, max));
+            if v.is_finite() && within == Reach::Slack {
                 n_outside += 1;
                 if n_outside == 1 {
                     first_outside = format!(
@@ -783,7 +808,7 @@ pub fn read_industrial_yaml(
                         schema.names[j]
                     );
                 }
-            } else if !(v.is_finite() && (min..=max).contains(&v)) {
+            } else if !(v.is_finite() && within == Reach::Within) {
                 return Err(bad(
                     line,
                     format!(
@@ -848,6 +873,84 @@ pub fn read_industrial_yaml(
         has_distance: false,
         ignored_columns: Vec::new(),
     })
+}
+
+/// Deepest nesting of YAML collections (mappings and sequences, block or flow) that
+/// [`read_industrial_yaml`] reads. industrial_calibration's observations nest three deep
+/// (observations → observation → pose or joint list); 32 leaves room for comments of any
+/// layout and refuses in linear time the deeply nested files whose parsing time grows with the
+/// square of the depth (the YAML parser re-scans its stack of open keys at every token).
+pub const MAX_YAML_DEPTH: usize = 32;
+
+/// `Err(`[`Error::Yaml`]`)` at the first place (line, column) where `text` nests collections
+/// deeper than [`MAX_YAML_DEPTH`]. One pass over the text: block nesting from the indentation
+/// (a stack of open indents) and `- ` / `? ` entry markers, flow nesting from brackets and
+/// braces outside quotes and comments. It may count a level too many (a block scalar holding
+/// brackets), never one too few where it matters: a collection is always opened by an indent,
+/// a marker or a bracket.
+fn check_yaml_depth(path: &Path, text: &str) -> Result<(), Error> {
+    let too_deep = |line: usize, column: usize| Error::Yaml {
+        path: path.to_path_buf(),
+        line: line as u64 + 1,
+        column: column as u64 + 1,
+        message: format!(
+            "collections nest deeper than {MAX_YAML_DEPTH} levels (industrial_calibration's observations nest 3 deep)"
+        ),
+    };
+    let mut indents: Vec<usize> = Vec::new();
+    let mut flow = 0usize;
+    // An open quoted scalar, which may span lines: its quote character.
+    let mut quote: Option<char> = None;
+    for (i, line) in text.lines().enumerate() {
+        let content = line.trim_start_matches([' ', '\t']);
+        let mut block = indents.len();
+        if flow == 0 && quote.is_none() && !content.is_empty() && !content.starts_with('#') {
+            let indent = line.len() - content.len();
+            while indents.last().is_some_and(|&open| open >= indent) {
+                indents.pop();
+            }
+            indents.push(indent);
+            // `- - - x`: each entry marker opens one more collection on the same line.
+            let mut rest = content;
+            let mut markers = 0;
+            while let Some(after) = rest.strip_prefix("- ").or_else(|| rest.strip_prefix("? ")) {
+                markers += 1;
+                rest = after.trim_start_matches(' ');
+            }
+            block = indents.len() + markers;
+            if block > MAX_YAML_DEPTH {
+                return Err(too_deep(i, indent));
+            }
+        }
+        let mut previous = ' ';
+        for (column, c) in line.chars().enumerate() {
+            match (quote, c) {
+                (Some('"'), '"') if previous != '\\' => quote = None,
+                (Some('\''), '\'') => quote = None,
+                (Some(_), _) => {}
+                (None, '#') if previous == ' ' || previous == '\t' || column == 0 => break,
+                (None, '"' | '\'')
+                    if matches!(previous, ' ' | '\t' | '[' | '{' | ',' | ':') || column == 0 =>
+                {
+                    quote = Some(c);
+                }
+                (None, '[' | '{') => {
+                    flow += 1;
+                    if block + flow > MAX_YAML_DEPTH {
+                        return Err(too_deep(i, column));
+                    }
+                }
+                (None, ']' | '}') => flow = flow.saturating_sub(1),
+                (None, _) => {}
+            }
+            previous = if previous == '\\' && c == '\\' {
+                ' '
+            } else {
+                c
+            };
+        }
+    }
+    Ok(())
 }
 
 fn yaml_error(path: &Path, e: &serde_yaml_ng::Error) -> Error {

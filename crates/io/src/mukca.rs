@@ -7,7 +7,9 @@
 use std::path::{Path, PathBuf};
 
 use crate::Error;
-use crate::table::{Table, number};
+use crate::device::{Device, JointSpec};
+use crate::measure::{Reach, reach};
+use crate::table::{Repeats, Table, check_separator, number};
 
 /// One tool placement: the socket recordings of one folder.
 #[derive(Clone, Debug, PartialEq)]
@@ -16,6 +18,9 @@ pub struct SocketPlacement {
     pub name: String,
     /// Socket `k` is `sockets[k]`, read from `hole_{k}.csv`.
     pub sockets: Vec<SocketSamples>,
+    /// Things worth telling the user that did not stop the reading (readings slightly past a
+    /// joint's limits, repeated rows), each starting with `file:line:`.
+    pub warnings: Vec<String>,
 }
 
 /// The configurations recorded with the ball in one socket.
@@ -31,18 +36,101 @@ pub struct SocketSamples {
 
 /// Reads the socket files `hole_0.csv` … `hole_k.csv` of one placement folder.
 ///
-/// Each row must hold `n_joints` finite numbers. Joint limits are *not* checked: real
-/// recordings may exceed a URDF's limits slightly.
+/// Each row must hold `n_joints` finite numbers. Joint limits are *not* checked here (use
+/// [`read_mukca_placement_for`] with the device to check them).
 ///
 /// # Errors
 ///
 /// [`Error::Io`] if the folder or a file cannot be read; [`Error::NoSockets`] if there is
 /// no `hole_*.csv`; [`Error::SocketGap`] if the numbers are not 0, 1, … without gaps;
 /// [`Error::JointCount`] if the first row of a file does not have `n_joints` fields,
-/// [`Error::Ragged`] if a later one does not; [`Error::NotANumber`], [`Error::NotFinite`]
-/// for a bad cell (file:line:column, column = field number); [`Error::TooFewRows`] for a
-/// file without rows; [`Error::Csv`] for invalid UTF-8.
+/// [`Error::Ragged`] if a later one does not; [`Error::Separator`] for a file separated by
+/// semicolons, tabs or spaces; [`Error::NotANumber`], [`Error::NotFinite`] for a bad cell
+/// (file:line:column, column = field number); [`Error::TooFewRows`] for a file without rows;
+/// [`Error::Csv`] for invalid UTF-8.
 pub fn read_mukca_placement(dir: &Path, n_joints: usize) -> Result<SocketPlacement, Error> {
+    read_placement(dir, n_joints, &[])
+}
+
+/// Reads one placement folder as [`read_mukca_placement`] does for `device`'s joints, and
+/// checks every reading against the device's joint limits by the rule of measurement files
+/// ([`JOINT_LIMIT_SLACK`](crate::JOINT_LIMIT_SLACK)): a reading past a limit by less than
+/// that fraction of the joint's range is kept, with one warning per file in
+/// [`SocketPlacement::warnings`] (real recordings may exceed a URDF's limits slightly); a
+/// reading further out is an error. Rows that repeat an earlier row of the same file are kept,
+/// with one warning naming the first and how many there are.
+///
+/// # Errors
+///
+/// As [`read_mukca_placement`]; [`Error::OutsideJointRange`] (file:line:column, the reading
+/// and the limits) for a reading further past its limits.
+pub fn read_mukca_placement_for(dir: &Path, device: &Device) -> Result<SocketPlacement, Error> {
+    read_placement(dir, device.n_joints(), &device.joints)
+}
+
+/// Reads MUKCa placements from `paths`, each a placement folder (it holds `hole_*.csv`)
+/// or a run folder whose subfolders holding `hole_*.csv` are placements, taken in name
+/// order (other subfolders are skipped). Joint limits are not checked (see
+/// [`read_mukca_paths_for`]).
+///
+/// # Errors
+///
+/// As [`read_mukca_placement`]; [`Error::NoSockets`] for a run folder without any placement.
+pub fn read_mukca_paths(paths: &[PathBuf], n_joints: usize) -> Result<Vec<SocketPlacement>, Error> {
+    read_paths(paths, n_joints, &[])
+}
+
+/// Reads MUKCa placements from `paths` as [`read_mukca_paths`] does, with every reading checked
+/// against `device`'s joint limits as [`read_mukca_placement_for`] checks them.
+///
+/// # Errors
+///
+/// As [`read_mukca_placement_for`]; [`Error::NoSockets`] for a run folder without any
+/// placement.
+pub fn read_mukca_paths_for(
+    paths: &[PathBuf],
+    device: &Device,
+) -> Result<Vec<SocketPlacement>, Error> {
+    read_paths(paths, device.n_joints(), &device.joints)
+}
+
+/// [`read_mukca_paths`] with the limits of `joints` checked (none if `joints` is empty).
+fn read_paths(
+    paths: &[PathBuf],
+    n_joints: usize,
+    joints: &[JointSpec],
+) -> Result<Vec<SocketPlacement>, Error> {
+    let mut placements = Vec::new();
+    for path in paths {
+        if !socket_numbers(path)?.is_empty() {
+            placements.push(read_placement(path, n_joints, joints)?);
+            continue;
+        }
+        let mut subdirs = Vec::new();
+        for entry in std::fs::read_dir(path).map_err(|e| Error::io(path, e))? {
+            let entry = entry.map_err(|e| Error::io(path, e))?;
+            let sub = entry.path();
+            if sub.is_dir() && !socket_numbers(&sub)?.is_empty() {
+                subdirs.push(sub);
+            }
+        }
+        if subdirs.is_empty() {
+            return Err(Error::NoSockets { dir: path.clone() });
+        }
+        subdirs.sort();
+        for sub in subdirs {
+            placements.push(read_placement(&sub, n_joints, joints)?);
+        }
+    }
+    Ok(placements)
+}
+
+/// [`read_mukca_placement`] with the limits of `joints` checked (none if `joints` is empty).
+fn read_placement(
+    dir: &Path,
+    n_joints: usize,
+    joints: &[JointSpec],
+) -> Result<SocketPlacement, Error> {
     let mut numbers = socket_numbers(dir)?;
     if numbers.is_empty() {
         return Err(Error::NoSockets {
@@ -59,48 +147,22 @@ pub fn read_mukca_placement(dir: &Path, n_joints: usize) -> Result<SocketPlaceme
             missing: format!("hole_{missing}.csv"),
         });
     }
-    let sockets = numbers
-        .iter()
-        .map(|k| read_socket(&dir.join(format!("hole_{k}.csv")), n_joints))
-        .collect::<Result<_, _>>()?;
+    let mut sockets = Vec::with_capacity(numbers.len());
+    let mut warnings = Vec::new();
+    for k in &numbers {
+        let (socket, mut w) = read_socket(&dir.join(format!("hole_{k}.csv")), n_joints, joints)?;
+        sockets.push(socket);
+        warnings.append(&mut w);
+    }
     let name = dir.file_name().map_or_else(
         || dir.to_string_lossy().into_owned(),
         |n| n.to_string_lossy().into_owned(),
     );
-    Ok(SocketPlacement { name, sockets })
-}
-
-/// Reads MUKCa placements from `paths`, each a placement folder (it holds `hole_*.csv`)
-/// or a run folder whose subfolders holding `hole_*.csv` are placements, taken in name
-/// order (other subfolders are skipped).
-///
-/// # Errors
-///
-/// As [`read_mukca_placement`]; [`Error::NoSockets`] for a run folder without any placement.
-pub fn read_mukca_paths(paths: &[PathBuf], n_joints: usize) -> Result<Vec<SocketPlacement>, Error> {
-    let mut placements = Vec::new();
-    for path in paths {
-        if !socket_numbers(path)?.is_empty() {
-            placements.push(read_mukca_placement(path, n_joints)?);
-            continue;
-        }
-        let mut subdirs = Vec::new();
-        for entry in std::fs::read_dir(path).map_err(|e| Error::io(path, e))? {
-            let entry = entry.map_err(|e| Error::io(path, e))?;
-            let sub = entry.path();
-            if sub.is_dir() && !socket_numbers(&sub)?.is_empty() {
-                subdirs.push(sub);
-            }
-        }
-        if subdirs.is_empty() {
-            return Err(Error::NoSockets { dir: path.clone() });
-        }
-        subdirs.sort();
-        for sub in subdirs {
-            placements.push(read_mukca_placement(&sub, n_joints)?);
-        }
-    }
-    Ok(placements)
+    Ok(SocketPlacement {
+        name,
+        sockets,
+        warnings,
+    })
 }
 
 /// The `k` of every `hole_{k}.csv` in `dir` (not `hole_0_pose.csv`), unsorted.
@@ -126,12 +188,23 @@ fn socket_numbers(dir: &Path) -> Result<Vec<usize>, Error> {
     Ok(numbers)
 }
 
-fn read_socket(path: &Path, n_joints: usize) -> Result<SocketSamples, Error> {
+/// One socket file and its warnings; readings checked against `joints`' limits unless
+/// `joints` is empty.
+fn read_socket(
+    path: &Path,
+    n_joints: usize,
+    joints: &[JointSpec],
+) -> Result<(SocketSamples, Vec<String>), Error> {
     let mut table = Table::open(path)?;
     let mut q = Vec::new();
     let mut line_numbers = Vec::new();
+    let mut repeats = Repeats::default();
+    // The first reading past its limits within the slack, and how many there are.
+    let mut outside: Option<String> = None;
+    let mut n_outside = 0usize;
     while let Some((line, record)) = table.next_record()? {
         if record.len() != n_joints {
+            check_separator(path, line, record, n_joints)?;
             return Err(if q.is_empty() {
                 Error::JointCount {
                     path: path.to_path_buf(),
@@ -151,6 +224,38 @@ fn read_socket(path: &Path, n_joints: usize) -> Result<SocketSamples, Error> {
         let row = (record.iter().enumerate())
             .map(|(c, cell)| number(path, line, c as u64 + 1, &format!("q{}", c + 1), cell))
             .collect::<Result<Vec<f64>, _>>()?;
+        for (j, (&v, spec)) in row.iter().zip(joints).enumerate() {
+            let limits = (spec.lower_rad, spec.upper_rad);
+            match reach(v, limits) {
+                Reach::Within => {}
+                Reach::Slack => {
+                    n_outside += 1;
+                    outside.get_or_insert_with(|| {
+                        format!(
+                            "{}:{line}:{}: joint {:?} = {v} rad is outside its limits [{}, {}] rad",
+                            path.display(),
+                            j + 1,
+                            spec.name,
+                            limits.0,
+                            limits.1
+                        )
+                    });
+                }
+                Reach::Outside => {
+                    return Err(Error::OutsideJointRange {
+                        path: path.to_path_buf(),
+                        line,
+                        column: j as u64 + 1,
+                        joint: spec.name.clone(),
+                        value: v,
+                        min: limits.0,
+                        max: limits.1,
+                        unit: "rad",
+                    });
+                }
+            }
+        }
+        repeats.see(row.iter().copied(), line);
         q.push(row);
         line_numbers.push(line);
     }
@@ -161,9 +266,23 @@ fn read_socket(path: &Path, n_joints: usize) -> Result<SocketSamples, Error> {
             found: 0,
         });
     }
-    Ok(SocketSamples {
-        file: path.to_path_buf(),
-        q,
-        line_numbers,
-    })
+    let mut warnings: Vec<String> = outside
+        .map(|first| match n_outside {
+            1 => format!("{first}; such readings are used as they are"),
+            n => format!(
+                "{first} (and {} more readings outside their joint's limits); such readings are used as they are",
+                n - 1
+            ),
+        })
+        .into_iter()
+        .collect();
+    warnings.extend(repeats.warning(path));
+    Ok((
+        SocketSamples {
+            file: path.to_path_buf(),
+            q,
+            line_numbers,
+        },
+        warnings,
+    ))
 }

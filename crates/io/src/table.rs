@@ -160,3 +160,35 @@ impl Repeats {
         ))
     }
 }
+
+/// `Err(`[`Error::Separator`]`)` if `record` (at `line`) is one field although `expected`
+/// (more than one) fields were expected and the field holds a semicolon, a tab, a bar or
+/// white space: a file written with another separator than the comma.
+pub(crate) fn check_separator(
+    path: &Path,
+    line: u64,
+    record: &csv::StringRecord,
+    expected: usize,
+) -> Result<(), Error> {
+    if expected < 2 || record.len() != 1 {
+        return Ok(());
+    }
+    let field = record.get(0).unwrap_or("");
+    let separator = [
+        (';', "semicolons"),
+        ('\t', "tabs"),
+        ('|', "bars"),
+        (' ', "spaces"),
+    ]
+    .into_iter()
+    .find_map(|(c, name)| field.contains(c).then_some(name));
+    match separator {
+        Some(separator) => Err(Error::Separator {
+            path: path.to_path_buf(),
+            line,
+            found: field.chars().take(60).collect(),
+            separator,
+        }),
+        None => Ok(()),
+    }
+}

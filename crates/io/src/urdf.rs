@@ -28,13 +28,17 @@ use crate::error::line_column;
 /// # Errors
 ///
 /// [`Error::Io`] if the file cannot be read; [`Error::Xml`] (file:line:column) for
-/// malformed XML; [`Error::Urdf`] if urdf-rs cannot parse it, a link has two parent joints, the joints form a loop, the chain has no moving joint,
+/// malformed XML; [`Error::UrdfStructure`] (file:line:column of the joint or link) if a
+/// joint names an undefined link, a link has two parent joints, several links have none or
+/// the joints form a loop, or the chain to `tip` is longer than [`MAX_CHAIN_LENGTH_M`]
+/// (lengths in mm); [`Error::Urdf`] if urdf-rs cannot parse it, the chain has no moving joint,
 /// or a number is not finite or a revolute or prismatic joint lacks finite `lower < upper`
 /// limits; [`Error::TipNotFound`] (listing every link) if there is no link `tip`;
 /// [`Error::UnsupportedJoint`] for a floating or planar joint on the chain.
 pub fn import_urdf(path: &Path, tip: &str) -> Result<Device, Error> {
     let robot = read_robot(path)?;
     let chain = chain_to(&robot, tip, path)?;
+    check_chain_length(&chain, tip, path)?;
     let mut placements = Vec::with_capacity(chain.len());
     let mut joints = Vec::new();
     for joint in &chain {
@@ -120,7 +124,9 @@ pub fn import_urdf_tips(path: &Path, tips: &[String]) -> Result<UrdfTree, Error>
         if tips[..i].contains(tip) {
             return Err(urdf_error(path, format!("tip link {tip:?} is given twice")));
         }
-        chains.push(chain_to(&robot, tip, path)?);
+        let chain = chain_to(&robot, tip, path)?;
+        check_chain_length(&chain, tip, path)?;
+        chains.push(chain);
     }
     let root_of = |chain: &[&urdf_rs::Joint], tip: &str| {
         chain
@@ -231,7 +237,133 @@ fn read_robot(path: &Path) -> Result<urdf_rs::Robot, Error> {
         message,
     })?;
     check_xml(&text, path)?;
-    urdf_rs::read_from_string(&text).map_err(|e| urdf_error(path, format!("not a valid URDF: {e}")))
+    let robot = urdf_rs::read_from_string(&text)
+        .map_err(|e| urdf_error(path, format!("not a valid URDF: {e}")))?;
+    check_tree(&robot, &text, path)?;
+    Ok(robot)
+}
+
+/// Longest chain, m (the sum of the `<origin xyz>` lengths from the root link to a tip), that
+/// [`import_urdf`] accepts. The largest serial arms reach about 4 m and a mobile base adds a
+/// few metres; a chain of 50 m or more is a URDF written in millimetres (URDF lengths are in
+/// metres), whose calibration would fit millimetre-sized deviations to metre-sized links.
+pub const MAX_CHAIN_LENGTH_M: f64 = 50.0;
+
+/// `Ok` if the links and joints of `robot` form one tree: every joint's parent and child
+/// link is defined, no link has two parent joints, and exactly one link has none (the root;
+/// with none, the joints form a loop). Errors name the joint or link and its line in `text`.
+fn check_tree(robot: &urdf_rs::Robot, text: &str, path: &Path) -> Result<(), Error> {
+    let at = |element: &str, name: &str, message: String| {
+        let (line, column) = element_position(text, element, name);
+        Error::UrdfStructure {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message,
+        }
+    };
+    let links: std::collections::HashSet<&str> =
+        robot.links.iter().map(|l| l.name.as_str()).collect();
+    let mut parent_of: std::collections::HashMap<&str, &str> = std::collections::HashMap::new();
+    for joint in &robot.joints {
+        for (role, link) in [("parent", &joint.parent.link), ("child", &joint.child.link)] {
+            if !links.contains(link.as_str()) {
+                return Err(at(
+                    "joint",
+                    &joint.name,
+                    format!(
+                        "joint {:?}: {role} link {link:?} is not defined by any <link>",
+                        joint.name
+                    ),
+                ));
+            }
+        }
+        if let Some(first) = parent_of.insert(joint.child.link.as_str(), joint.name.as_str()) {
+            return Err(at(
+                "joint",
+                &joint.name,
+                format!(
+                    "link {:?} has two parent joints, {first:?} and {:?}: a URDF is a tree",
+                    joint.child.link, joint.name
+                ),
+            ));
+        }
+    }
+    let roots: Vec<&str> = (robot.links.iter())
+        .map(|l| l.name.as_str())
+        .filter(|l| !parent_of.contains_key(l))
+        .collect();
+    match roots.as_slice() {
+        [_] => Ok(()),
+        [] => Err(at(
+            "robot",
+            &robot.name,
+            "every link has a parent joint: the joints form a loop".to_owned(),
+        )),
+        [first, second, ..] => Err(at(
+            "link",
+            second,
+            format!(
+                "{} links have no parent joint ({}): a URDF is one tree with one root; link {second:?} is not connected to {first:?}",
+                roots.len(),
+                roots.join(", ")
+            ),
+        )),
+    }
+}
+
+/// 1-based line and column of the `<{element} name="{name}"` tag in `text`, or (0, 0).
+fn element_position(text: &str, element: &str, name: &str) -> (u64, u64) {
+    let open = format!("<{element}");
+    let mut from = 0;
+    while let Some(found) = text.get(from..).and_then(|t| t.find(&open)) {
+        let start = from + found;
+        let end = text
+            .get(start..)
+            .and_then(|t| t.find('>'))
+            .map_or(text.len(), |e| start + e);
+        let tag = text.get(start..end).unwrap_or("");
+        let after = tag.get(open.len()..).unwrap_or("");
+        if after.starts_with(char::is_whitespace)
+            && (tag.contains(&format!("name=\"{name}\""))
+                || tag.contains(&format!("name='{name}'")))
+        {
+            return crate::line_column(text, start);
+        }
+        from = start + open.len();
+    }
+    (0, 0)
+}
+
+/// `Err(`[`Error::UrdfStructure`]`)` if the `<origin xyz>` lengths of `chain` (root to tip)
+/// add up to more than [`MAX_CHAIN_LENGTH_M`]: lengths in millimetres. The error points at the
+/// longest origin's joint in the file at `text_path`.
+fn check_chain_length(chain: &[&urdf_rs::Joint], tip: &str, text_path: &Path) -> Result<(), Error> {
+    let length = |j: &urdf_rs::Joint| {
+        let [x, y, z] = j.origin.xyz.0;
+        (x * x + y * y + z * z).sqrt()
+    };
+    let total: f64 = chain.iter().map(|j| length(j)).sum();
+    if total > MAX_CHAIN_LENGTH_M {
+        let longest = chain.iter().max_by(|a, b| length(a).total_cmp(&length(b)));
+        let text = std::fs::read_to_string(text_path).unwrap_or_default();
+        let (name, (line, column), l) = longest.map_or((String::new(), (0, 0), 0.0), |j| {
+            (
+                j.name.clone(),
+                element_position(&text, "joint", &j.name),
+                length(j),
+            )
+        });
+        return Err(Error::UrdfStructure {
+            path: text_path.to_path_buf(),
+            line,
+            column,
+            message: format!(
+                "the chain to {tip:?} is {total:.1} m long (joint {name:?} alone {l:.1} m), more than {MAX_CHAIN_LENGTH_M} m: URDF lengths are in metres, these look like millimetres"
+            ),
+        });
+    }
+    Ok(())
 }
 
 fn urdf_error(path: &Path, message: String) -> Error {

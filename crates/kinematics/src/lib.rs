@@ -1,6 +1,10 @@
 //! Serial kinematic chains: forward kinematics and analytic Jacobians with respect to the
 //! joint angles and to the kinematic parameter deviations.
 //!
+//! Vector kernels ([`pulp`]): one kernel body for AVX-512, AVX2, NEON and scalar code, chosen
+//! at run time, with the same bits on each; `HAPCAL_SIMD=off` in the environment forces the
+//! scalar instantiation for the whole process (docs/engine.md, "Vector kernels").
+//!
 //! **Invariant:** `kinematics` knows chains, not measurements.
 //!
 //! A [`Chain`] is a sequence of elementary [`Factor`]s — constant transforms and screws

@@ -5,6 +5,7 @@
 
 mod force;
 mod hostile;
+mod hostile_cases;
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};

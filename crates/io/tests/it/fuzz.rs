@@ -2,7 +2,8 @@
 //! toolchain and sanitizers this project does not have).
 //!
 //! For each reader — [`read_log`], [`read_measurement_file`] (CSV and the
-//! `industrial_calibration` YAML), [`read_mukca_placement`], [`parse_device`] and
+//! `industrial_calibration` YAML), [`read_mukca_placement`] (and, on 7 columns,
+//! `read_mukca_placement_for` with the iiwa's joint limits), [`parse_device`] and
 //! [`import_urdf`] — two properties run:
 //!
 //! - **arbitrary bytes**: random byte strings, biased towards the characters the format is
@@ -313,7 +314,16 @@ fn fuzz_mukca(files: &[Vec<u8>], n_joints: usize) -> Result<(), TestCaseError> {
     for (k, bytes) in files.iter().enumerate() {
         std::fs::write(placement.join(format!("hole_{k}.csv")), bytes).unwrap();
     }
-    check(&placement, read_mukca_placement(&placement, n_joints))
+    check(&placement, read_mukca_placement(&placement, n_joints))?;
+    // The reader that checks the readings against the iiwa's joint limits, on 7 columns.
+    if n_joints == 7 {
+        let iiwa = import_urdf(&fixture("mukca/urdf/iiwa14.urdf"), "ball_link").unwrap();
+        check(
+            &placement,
+            hapcal_io::read_mukca_placement_for(&placement, &iiwa),
+        )?;
+    }
+    Ok(())
 }
 
 fn fuzz_device(bytes: &[u8]) -> Result<(), TestCaseError> {
@@ -445,8 +455,9 @@ fn deep_toml_inline_table() {
 
 #[test]
 fn deep_yaml_flow() {
-    // 10⁴, not 10⁵: the YAML scanner takes time quadratic in the depth (13 s for 10⁵).
-    let yaml = format!("a: {}", "[".repeat(DEPTH / 10));
+    // The YAML scanner takes time quadratic in the depth (13 s for 10⁵); the reader refuses
+    // nesting past MAX_YAML_DEPTH in one linear pass before it.
+    let yaml = format!("a: {}", "[".repeat(DEPTH));
     fuzz_measurement(yaml.as_bytes(), &positioner(), "measurements.yaml").unwrap();
 }
 

@@ -148,3 +148,52 @@ fn repeated_rows_are_kept_with_one_warning() {
         ],
     );
 }
+
+#[test]
+fn negative_distances_and_other_separators_name_the_line_and_the_value() {
+    let dir = std::env::temp_dir().join(format!("hapcal-io-log-hostile-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cases = [
+        (
+            "negative.csv",
+            "q1,q2,distance_m\n0.0,0.5,0.4\n0.1,0.5,-0.25\n",
+            vec![
+                "negative.csv:3:3: distance_m = -0.25 m is negative",
+                "[0, 1000] m",
+            ],
+        ),
+        (
+            "semicolons.csv",
+            "q1;q2;distance_m\n0.0;0.5;0.4\n",
+            vec![
+                "semicolons.csv:1:1: expected comma-separated columns",
+                "\"q1;q2;distance_m\"",
+                "semicolons",
+            ],
+        ),
+        (
+            "tabs.csv",
+            "q1\tq2\tdistance_m\n0.0\t0.5\t0.4\n",
+            vec!["tabs.csv:1:1: expected comma-separated columns", "tabs"],
+        ),
+        (
+            "row_semicolons.csv",
+            "q1,q2,distance_m\n0.0,0.5,0.4\n0.1;0.5;0.4\n",
+            vec![
+                "row_semicolons.csv:3:1: expected comma-separated",
+                "semicolons",
+            ],
+        ),
+    ];
+    for (name, text, parts) in cases {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        let msg = message(read_log(&path, &planar()));
+        assert_contains(&msg, &parts);
+    }
+    // Zero is a distance; −0 too.
+    let path = dir.join("zero.csv");
+    std::fs::write(&path, "q1,q2,distance_m\n0.0,0.5,0\n0.1,0.5,-0.0\n").unwrap();
+    assert_eq!(read_log(&path, &planar()).unwrap().rows.len(), 2);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -420,3 +420,49 @@ fn identical_marker_columns_are_reported() {
     assert_eq!(identical.len(), 1, "{:?}", table.warnings);
     assert!(identical[0].contains("markers 3 and 4"), "{}", identical[0]);
 }
+
+#[test]
+fn yaml_nested_past_the_limit_is_refused_at_its_line_and_column() {
+    let schema = Schema::revolute(&["j1", "j2"]);
+    // Flow nesting 10⁵ deep: refused by one linear scan before parsing.
+    let deep = read_industrial_yaml(
+        &temp_file("deep_flow.yaml", &format!("a: {}", "[".repeat(100_000))),
+        &schema.get(),
+    );
+    assert_contains(
+        &message(deep),
+        &["deep_flow.yaml:1:", "deeper than 32 levels"],
+    );
+    // Block nesting: 40 nested mappings, the 33rd level at line 33.
+    let block: String = (0..40)
+        .map(|i| format!("{}k{i}:\n", "  ".repeat(i)))
+        .collect();
+    let msg = message(read_industrial_yaml(
+        &temp_file("deep_block.yaml", &block),
+        &schema.get(),
+    ));
+    assert_contains(&msg, &["deep_block.yaml:33:65: ", "deeper than 32 levels"]);
+    // Compact sequences count one level per marker.
+    let msg = message(read_industrial_yaml(
+        &temp_file("deep_dash.yaml", &format!("a:\n  {}x\n", "- ".repeat(40))),
+        &schema.get(),
+    ));
+    assert_contains(&msg, &["deep_dash.yaml:2:", "deeper than 32 levels"]);
+    // 30 levels pass the depth check and fail as what they are: not observations.
+    let msg = message(read_industrial_yaml(
+        &temp_file(
+            "shallow.yaml",
+            &format!("a: {}{}\n", "[".repeat(29), "]".repeat(29)),
+        ),
+        &schema.get(),
+    ));
+    assert!(!msg.contains("deeper"), "{msg}");
+    assert_contains(&msg, &["shallow.yaml:"]);
+    // Brackets inside quotes and comments do not count.
+    let quoted = format!("# {}\n'k': \"{}\"\n", "[".repeat(50), "{".repeat(50));
+    let msg = message(read_industrial_yaml(
+        &temp_file("quoted.yaml", &quoted),
+        &schema.get(),
+    ));
+    assert!(!msg.contains("deeper"), "{msg}");
+}

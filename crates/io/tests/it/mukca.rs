@@ -102,3 +102,59 @@ fn missing_folder_is_an_io_error() {
     assert!(matches!(err, Error::Io { .. }), "{err:?}");
     assert_contains(&err.to_string(), &["cannot read ", "no_such_robot: "]);
 }
+
+/// A copy of kuka_14/front whose `hole_0.csv` has `value` at line 2, column `column`.
+fn front_with(name: &str, column: usize, value: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("hapcal-io-mukca-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    let front = mukca("data/kuka_14/front");
+    let text = std::fs::read_to_string(front.join("hole_0.csv")).expect("fixture");
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let mut cells: Vec<String> = lines[1].split(',').map(str::to_owned).collect();
+    cells[column - 1] = value.to_owned();
+    lines[1] = cells.join(",");
+    std::fs::write(dir.join("hole_0.csv"), lines.join("\n") + "\n").expect("write");
+    std::fs::copy(front.join("hole_1.csv"), dir.join("hole_1.csv")).expect("copy");
+    dir
+}
+
+#[test]
+fn readings_past_the_limits_by_the_measurement_file_rule() {
+    let iiwa = hapcal_io::import_urdf(&mukca("urdf/iiwa14.urdf"), "ball_link").unwrap();
+    // joint_a2's limits are ±2.0942 rad: the slack is 10 % of the range, 0.41884 rad.
+    let (lo, hi) = iiwa.joint_limits()[1];
+    assert_eq!((lo, hi), (-2.0942, 2.0942));
+    // Within the limits: read as the unchecked reader reads it, no warning.
+    let front = mukca("data/kuka_14/front");
+    let checked = hapcal_io::read_mukca_placement_for(&front, &iiwa).unwrap();
+    assert_eq!(
+        checked.sockets,
+        read_mukca_placement(&front, 7).unwrap().sockets
+    );
+    assert!(checked.warnings.is_empty(), "{:?}", checked.warnings);
+    // Past the limit within the slack: kept, one warning naming file:line:column.
+    let slight = front_with("slight", 2, "2.39");
+    let p = hapcal_io::read_mukca_paths_for(std::slice::from_ref(&slight), &iiwa).unwrap();
+    assert_eq!(p[0].sockets[0].q[1][1], 2.39);
+    assert_eq!(p[0].warnings.len(), 1, "{:?}", p[0].warnings);
+    assert_contains(
+        &p[0].warnings[0],
+        &[
+            "hole_0.csv:2:2: joint \"joint_a2\" = 2.39 rad is outside its limits",
+            "[-2.0942, 2.0942]",
+        ],
+    );
+    // Further out: an error with file:line:column, the value and the limits.
+    let far = front_with("far", 2, "2.6");
+    let msg = message(hapcal_io::read_mukca_placement_for(&far, &iiwa));
+    assert_contains(
+        &msg,
+        &["hole_0.csv:2:2: joint \"joint_a2\" = 2.6 rad is outside [-2.0942, 2.0942] rad"],
+    );
+    // The unchecked reader still reads it (the caller checks nothing there).
+    assert!(read_mukca_placement(&far, 7).is_ok());
+    for dir in [slight, far] {
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+}

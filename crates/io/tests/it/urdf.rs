@@ -311,3 +311,64 @@ fn write_back_of_an_unknown_joint_is_an_error() {
     ));
     assert_contains(&msg, &["tiny.urdf: no joint named \"wrist\" to write back"]);
 }
+
+#[test]
+fn links_and_joints_that_are_not_one_tree_name_the_element_and_its_line() {
+    let text = std::fs::read_to_string(mukca("urdf/iiwa14.urdf")).expect("fixture");
+    let dir = std::env::temp_dir().join(format!("hapcal-io-urdf-tree-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    let mm: String = {
+        // Every origin length ×1000: the iiwa in millimetres.
+        let mut out = String::new();
+        let mut rest = text.as_str();
+        while let Some(i) = rest.find("xyz=\"") {
+            out.push_str(&rest[..i + 5]);
+            rest = &rest[i + 5..];
+            let end = rest.find('"').expect("closing quote");
+            let scaled: Vec<String> = (rest[..end].split_whitespace())
+                .map(|v| format!("{}", v.parse::<f64>().expect("number") * 1000.0))
+                .collect();
+            out.push_str(&scaled.join(" "));
+            rest = &rest[end..];
+        }
+        out + rest
+    };
+    let cases = [
+        (
+            "no_parent.urdf",
+            text.replacen("<parent link=\"link_2\"/>", "<parent link=\"nowhere\"/>", 1),
+            "ball_link",
+            "no_parent.urdf:89:3: joint \"joint_a3\": parent link \"nowhere\" is not defined by any <link>",
+        ),
+        (
+            "two_parents.urdf",
+            text.replacen("<child link=\"link_3\"/>", "<child link=\"link_2\"/>", 1),
+            "ball_link",
+            "two_parents.urdf:89:3: link \"link_2\" has two parent joints, \"joint_a2\" and \"joint_a3\"",
+        ),
+        (
+            "two_roots.urdf",
+            text.replacen(
+                "<link name=\"ball_link\">",
+                "<link name=\"lost\"/>\n  <link name=\"ball_link\">",
+                1,
+            ),
+            "ball_link",
+            "two_roots.urdf:138:3: 2 links have no parent joint (base_link, lost): a URDF is one tree with one root",
+        ),
+        (
+            "mm.urdf",
+            mm,
+            "ball_link",
+            "mm.urdf:96:3: the chain to \"ball_link\" is 1346.0 m long (joint \"joint_a4\" alone 420.0 m), more than 50 m",
+        ),
+    ];
+    for (name, body, tip, expected) in cases {
+        let path = dir.join(name);
+        std::fs::write(&path, body).expect("write");
+        assert_contains(&message(hapcal_io::import_urdf(&path, tip)), &[expected]);
+    }
+    // The fixture itself is one tree of 1.3 m.
+    assert!(hapcal_io::import_urdf(&mukca("urdf/iiwa14.urdf"), "ball_link").is_ok());
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
