@@ -90,7 +90,8 @@ pub enum Error {
     },
     /// A joint reading lies outside the device's joint limits (bounds inclusive).
     #[error(
-        "{path}:{line}:{column}: joint {joint:?} = {value_rad} rad is outside [{min_rad}, {max_rad}] rad"
+        "{path}:{line}:{column}: joint {joint:?} = {v} rad is outside [{min_rad}, {max_rad}] rad",
+        v = readable(*.value_rad)
     )]
     OutsideJointLimits {
         /// The file.
@@ -221,7 +222,8 @@ pub enum Error {
     },
     /// A joint reading lies outside the joint's range (bounds inclusive).
     #[error(
-        "{path}:{line}:{column}: joint {joint:?} = {value} {unit} is outside [{min}, {max}] {unit}"
+        "{path}:{line}:{column}: joint {joint:?} = {v} {unit} is outside [{min}, {max}] {unit}",
+        v = readable(*.value)
     )]
     OutsideJointRange {
         /// The file.
@@ -454,5 +456,15 @@ mod tests {
         assert_eq!(line_column(text, 7), (2, 4)); // after 'é' (2 bytes)
         assert_eq!(line_column(text, 8), (3, 1));
         assert_eq!(line_column(text, 100), (3, 2));
+    }
+}
+
+/// `value` as a user reads it: scientific notation for magnitudes of a million and more (a
+/// 1e308 in a file is printed as `1e308`, not as 309 digits), plain otherwise.
+pub(crate) fn readable(value: f64) -> String {
+    if value.abs() >= 1e6 {
+        format!("{value:e}")
+    } else {
+        format!("{value}")
     }
 }

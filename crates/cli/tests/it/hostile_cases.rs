@@ -317,7 +317,7 @@ fn log_cases(t: &mut Table) {
             8,
             2,
             "1e308",
-            "@:8:2: joint \"q2\" = 100000000",
+            "@:8:2: joint \"q2\" = 1e308 rad is outside",
         ),
         (
             "negative distance",
@@ -797,6 +797,12 @@ fn device_cases(t: &mut Table) {
     );
     simulate(
         t,
+        "1e308 limit",
+        edit("upper_rad = 1.0\n", "upper_rad = 1e308\n"),
+        &["@:66:13: upper_rad = 1e308 is outside ±1000 rad"],
+    );
+    simulate(
+        t,
         "1e308 length",
         edit("a_m = 0.35", "a_m = 1e308"),
         &["@:", "a_m = 1e308 m is out of range"],
@@ -1145,7 +1151,7 @@ fn mukca_cases(t: &mut Table) {
             4,
             1,
             "1e308",
-            "@:4:1: joint \"joint_a1\" = 1000000000",
+            "@:4:1: joint \"joint_a1\" = 1e308 rad is outside",
         ),
         (
             "far outside the limits",

@@ -123,10 +123,18 @@ impl<'a> Locator<'a> {
                 Some(N(n)) => (*n).to_owned(),
                 _ => "value".to_owned(),
             };
-            Err(self.invalid(keys, format!("{field} = {value} {requirement}")))
+            Err(self.invalid(
+                keys,
+                format!("{field} = {} {requirement}", crate::error::readable(value)),
+            ))
         }
     }
 }
+
+/// Largest magnitude of a joint limit in a device file, rad: a thousand radians (about 159
+/// turns) is far beyond any device's travel and keeps every angle's sine and square well
+/// conditioned.
+pub(crate) const MAX_JOINT_LIMIT_RAD: f64 = 1e3;
 
 fn any(_: f64) -> bool {
     true
@@ -261,8 +269,12 @@ fn check_joints(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
                 format!("joint name {:?} is used twice", joint.name),
             ));
         }
-        loc.finite(&at("lower_rad"), joint.lower_rad)?;
-        loc.finite(&at("upper_rad"), joint.upper_rad)?;
+        // A limit beyond ±MAX_JOINT_LIMIT_RAD (about 159 turns) is a wrong unit or a
+        // placeholder, and would let any reading pass the limit checks of the readers.
+        let within = |v: f64| v.abs() <= MAX_JOINT_LIMIT_RAD;
+        let requirement = format!("is outside ±{MAX_JOINT_LIMIT_RAD} rad");
+        loc.check(&at("lower_rad"), joint.lower_rad, within, &requirement)?;
+        loc.check(&at("upper_rad"), joint.upper_rad, within, &requirement)?;
         if joint.lower_rad >= joint.upper_rad {
             return Err(loc.invalid(
                 &at("lower_rad"),
