@@ -443,6 +443,16 @@ pub fn line_column(text: &str, offset: usize) -> (u64, u64) {
     (line, column)
 }
 
+/// `value` as a user reads it: scientific notation for magnitudes of a million and more (a
+/// 1e308 in a file is printed as `1e308`, not as 309 digits), plain otherwise.
+pub(crate) fn readable(value: f64) -> String {
+    if value.abs() >= 1e6 {
+        format!("{value:e}")
+    } else {
+        format!("{value}")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::line_column;
@@ -456,15 +466,5 @@ mod tests {
         assert_eq!(line_column(text, 7), (2, 4)); // after 'é' (2 bytes)
         assert_eq!(line_column(text, 8), (3, 1));
         assert_eq!(line_column(text, 100), (3, 2));
-    }
-}
-
-/// `value` as a user reads it: scientific notation for magnitudes of a million and more (a
-/// 1e308 in a file is printed as `1e308`, not as 309 digits), plain otherwise.
-pub(crate) fn readable(value: f64) -> String {
-    if value.abs() >= 1e6 {
-        format!("{value:e}")
-    } else {
-        format!("{value}")
     }
 }
