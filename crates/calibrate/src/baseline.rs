@@ -154,26 +154,7 @@ pub fn baseline_from_tables(
     plan: &Plan,
     ladder: bool,
 ) -> Result<GeometricBaseline> {
-    if let Some(f) = plan.test_last {
-        if !(f > 0.0 && f < 1.0) {
-            bail!("--test-last must be a fraction in (0, 1), got {f}");
-        }
-        for t in &mut train {
-            let n = t.rows.len();
-            let k = ((1.0 - f) * n as f64).round() as usize;
-            if k == 0 || k == n {
-                bail!(
-                    "{}: --test-last {f} leaves {k} of {n} rows to train on",
-                    t.path.display()
-                );
-            }
-            let mut held = t.clone();
-            held.rows = t.rows.split_off(k);
-            held.name = format!("{} (last {})", t.name, n - k);
-            t.name = format!("{} (first {k})", t.name);
-            test.push(held);
-        }
-    }
+    crate::measured::split_test_last(&mut train, &mut test, plan.test_last)?;
     let n_tips = 1 + plan.tips.len();
     let cfg = |rung: Option<Rung>| MeasuredConfig {
         rung,

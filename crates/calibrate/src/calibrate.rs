@@ -575,31 +575,43 @@ pub(crate) fn cross_validate(
 /// Roberts et al. 2017, "Cross-validation strategies for data with temporal, spatial,
 /// hierarchical, or phylogenetic structure", Ecography 40(8)). `(0, ∞)` with fewer than 2 blocks.
 pub(crate) fn blocked_difference(a: &HeldOut, b: &HeldOut) -> (f64, f64) {
-    let n = a.sq_errors.len().min(b.sq_errors.len());
-    let n_blocks = a.block.iter().max().map_or(0, |m| m + 1);
+    match blocked_mean_difference(&a.sq_errors, &b.sq_errors, &a.block) {
+        (_, _, filled) if filled < 2 => (0.0, f64::INFINITY),
+        (mean, se, _) => (mean, se),
+    }
+}
+
+/// Mean over rows of `a − b` (the first `min(a.len(), b.len())` rows), its standard error from
+/// the blocks `block[row]` (the independent units of correlated rows), and the number of
+/// non-empty blocks; the standard error is `∞` with fewer than 2 blocks. The variance is the
+/// ratio estimator of a mean over clusters of unequal size (Cochran, "Sampling Techniques",
+/// 3rd ed., 1977, §6.4): `v = Σ (y_b − ȳ·m_b)² / ((n_b − 1)·n_b·m̄²)`.
+///
+/// # Panics
+/// If `block` is shorter than the rows compared.
+#[track_caller]
+pub fn blocked_mean_difference(a: &[f64], b: &[f64], block: &[usize]) -> (f64, f64, usize) {
+    let n = a.len().min(b.len());
+    let n_blocks = block[..n].iter().max().map_or(0, |m| m + 1);
     let mut sum = vec![0.0; n_blocks];
     let mut count = vec![0usize; n_blocks];
     for i in 0..n {
-        sum[a.block[i]] += a.sq_errors[i] - b.sq_errors[i];
-        count[a.block[i]] += 1;
+        sum[block[i]] += a[i] - b[i];
+        count[block[i]] += 1;
     }
     let filled = count.iter().filter(|&&c| c > 0).count();
+    let mean = sum.iter().sum::<f64>() / n.max(1) as f64;
     if filled < 2 {
-        return (0.0, f64::INFINITY);
+        return (mean, f64::INFINITY, filled);
     }
-    let mean = sum.iter().sum::<f64>() / n as f64;
-    // Ratio estimator of the mean over clusters of unequal size (Cochran, "Sampling
-    // Techniques", 3rd ed., 1977, §6.4): v = Σ (y_b − ȳ·m_b)² / ((n_b − 1)·n_b·m̄²).
     let nb = filled as f64;
     let m_bar = n as f64 / nb;
-    let var = sum
-        .iter()
-        .zip(&count)
+    let var = (sum.iter().zip(&count))
         .map(|(s, &c)| (s - mean * c as f64).powi(2))
         .sum::<f64>()
         / (nb - 1.0)
         / (nb * m_bar * m_bar);
-    (mean, var.sqrt())
+    (mean, var.sqrt(), filled)
 }
 
 /// The model choice of `--model auto` from the held-out errors of each candidate

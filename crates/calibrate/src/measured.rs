@@ -1426,26 +1426,7 @@ pub fn run_tables(
     let tips: Vec<String> = std::iter::once(plan.tip.clone())
         .chain(plan.tips.iter().cloned())
         .collect();
-    if let Some(f) = plan.test_last {
-        if !(f > 0.0 && f < 1.0) {
-            bail!("--test-last must be a fraction in (0, 1), got {f}");
-        }
-        for t in &mut train {
-            let n = t.rows.len();
-            let k = ((1.0 - f) * n as f64).round() as usize;
-            if k == 0 || k == n {
-                bail!(
-                    "{}: --test-last {f} leaves {k} of {n} rows to train on",
-                    t.path.display()
-                );
-            }
-            let mut held = t.clone();
-            held.rows = t.rows.split_off(k);
-            held.name = format!("{} (last {})", t.name, n - k);
-            t.name = format!("{} (first {k})", t.name);
-            test.push(held);
-        }
-    }
+    split_test_last(&mut train, &mut test, plan.test_last)?;
     let mut warnings: Vec<String> = Vec::new();
     let mut ignored: Vec<String> = (train.iter().chain(&test))
         .flat_map(|t| t.ignored_columns.iter().cloned())
@@ -1542,6 +1523,40 @@ pub fn run_tables(
         model: out.model,
         calibrated: None,
     })
+}
+
+/// Holds out the last fraction `test_last` of each training table's rows (file order) as a
+/// test table (`round((1 − f)·n)` rows stay to train); nothing without a fraction.
+///
+/// # Errors
+/// A fraction outside (0, 1), or one that leaves a table no training or no test row.
+pub(crate) fn split_test_last(
+    train: &mut [MeasurementTable],
+    test: &mut Vec<MeasurementTable>,
+    test_last: Option<f64>,
+) -> Result<()> {
+    let Some(f) = test_last else {
+        return Ok(());
+    };
+    if !(f > 0.0 && f < 1.0) {
+        bail!("--test-last must be a fraction in (0, 1), got {f}");
+    }
+    for t in train {
+        let n = t.rows.len();
+        let k = ((1.0 - f) * n as f64).round() as usize;
+        if k == 0 || k == n {
+            bail!(
+                "{}: --test-last {f} leaves {k} of {n} rows to train on",
+                t.path.display()
+            );
+        }
+        let mut held = t.clone();
+        held.rows = t.rows.split_off(k);
+        held.name = format!("{} (last {})", t.name, n - k);
+        t.name = format!("{} (first {k})", t.name);
+        test.push(held);
+    }
+    Ok(())
 }
 
 /// The kinematic values of a measured calibration as a placement device applies them

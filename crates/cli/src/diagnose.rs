@@ -167,70 +167,118 @@ pub fn render(d: &Diagnosis) -> String {
 }
 
 /// The residual maps as one SVG document: per signal, each bin's held-out RMS (bar, µm; red
-/// when flagged above the floor) and the floor (black tick). Hand-written SVG (no fonts
-/// read), a grid of small panels.
+/// when flagged above the floor) and the floor (black tick) ([`bar_panels_svg`]).
 pub fn residual_map_svg(d: &Diagnosis) -> String {
-    let mut signals: Vec<&str> = Vec::new();
+    let mut panels: Vec<Panel> = Vec::new();
     for b in &d.where_ {
-        if !signals.contains(&b.signal.as_str()) {
-            signals.push(&b.signal);
+        if !panels.iter().any(|p| p.name == b.signal) {
+            panels.push(Panel {
+                name: b.signal.clone(),
+                bold: d
+                    .signals
+                    .iter()
+                    .any(|t| t.signal == b.signal && t.significant),
+                bars: Vec::new(),
+            });
+        }
+        let panel = panels.iter_mut().find(|p| p.name == b.signal);
+        if let Some(p) = panel {
+            p.bars.push(Bar {
+                value_m: b.rms_m,
+                floor_m: b.floor_rms_m,
+                flagged: b.flagged,
+                title: format!(
+                    "[{:.3}, {:.3}) rms {:.1} µm, floor {:.1} µm, n {}",
+                    b.lo,
+                    b.hi,
+                    b.rms_m * 1e6,
+                    b.floor_rms_m * 1e6,
+                    b.n
+                ),
+            });
         }
     }
-    let (pw, ph, cols) = (220.0, 140.0, 5usize);
-    let rows = signals.len().div_ceil(cols).max(1);
-    let (w, h) = (pw * cols as f64, ph * rows as f64 + 40.0);
     let ymax = (d.where_.iter())
         .map(|b| b.rms_m.max(b.floor_rms_m))
         .fold(0.0, f64::max)
         .max(1e-9);
+    bar_panels_svg(
+        &format!(
+            "Held-out residual RMS per bin (µm, common scale to {:.0} µm); red: above the floor; tick: floor. Verdict: {}",
+            ymax * 1e6,
+            d.verdict
+        ),
+        &panels,
+        ymax,
+    )
+}
+
+/// One bar of a residual map: the held-out RMS of a bin and its floor.
+pub struct Bar {
+    /// Held-out RMS, m.
+    pub value_m: f64,
+    /// Floor (or reference) RMS, m: a black tick.
+    pub floor_m: f64,
+    /// Drawn red: significantly above the floor.
+    pub flagged: bool,
+    /// Tooltip.
+    pub title: String,
+}
+
+/// One panel of a residual map: a signal and its bins.
+pub struct Panel {
+    /// Signal name, the panel's label.
+    pub name: String,
+    /// Label in bold (the residual depends on the signal).
+    pub bold: bool,
+    /// The bins, in the signal's order.
+    pub bars: Vec<Bar>,
+}
+
+/// Residual maps as one SVG document: a grid of small panels (5 per row), each a bar per bin
+/// on the common scale `0..ymax` (m), red when flagged, a black tick at the floor, `title` on
+/// top. Hand-written SVG (no fonts read).
+pub fn bar_panels_svg(title: &str, panels: &[Panel], ymax: f64) -> String {
+    let (pw, ph, cols) = (220.0, 140.0, 5usize);
+    let rows = panels.len().div_ceil(cols).max(1);
+    let (w, h) = (pw * cols as f64, ph * rows as f64 + 40.0);
     let mut s = String::new();
     let _ = writeln!(
         s,
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="10">"#
     );
-    let _ = writeln!(
-        s,
-        r#"<text x="10" y="20" font-size="14">Held-out residual RMS per bin (µm, common scale to {:.0} µm); red: above the floor; tick: floor. Verdict: {}</text>"#,
-        ymax * 1e6,
-        d.verdict
-    );
-    for (k, sig) in signals.iter().enumerate() {
+    let _ = writeln!(s, r#"<text x="10" y="20" font-size="14">{title}</text>"#);
+    for (k, panel) in panels.iter().enumerate() {
         let (x0, y0) = (pw * (k % cols) as f64, 40.0 + ph * (k / cols) as f64);
-        let bins: Vec<_> = d.where_.iter().filter(|b| b.signal == *sig).collect();
-        let sig_flag = d.signals.iter().any(|t| t.signal == *sig && t.significant);
         let _ = writeln!(
             s,
             r#"<text x="{}" y="{}"{}>{}</text>"#,
             x0 + 10.0,
             y0 + 12.0,
-            if sig_flag {
+            if panel.bold {
                 r#" font-weight="bold""#
             } else {
                 ""
             },
-            sig
+            panel.name
         );
         let (bx, by, bw, bh) = (x0 + 10.0, y0 + 18.0, pw - 30.0, ph - 40.0);
         let _ = writeln!(
             s,
             r##"<rect x="{bx}" y="{by}" width="{bw}" height="{bh}" fill="none" stroke="#999"/>"##
         );
-        let n = bins.len().max(1) as f64;
-        for (i, b) in bins.iter().enumerate() {
-            let bar_h = bh * (b.rms_m / ymax).min(1.0);
-            let floor_y = by + bh - bh * (b.floor_rms_m / ymax).min(1.0);
+        let n = panel.bars.len().max(1) as f64;
+        for (i, b) in panel.bars.iter().enumerate() {
+            let bar_h = bh * (b.value_m / ymax).min(1.0);
+            let floor_y = by + bh - bh * (b.floor_m / ymax).min(1.0);
             let x = bx + bw * i as f64 / n + 2.0;
             let width = bw / n - 4.0;
             let color = if b.flagged { "#d62728" } else { "#1f77b4" };
             let _ = writeln!(
                 s,
-                r#"<rect x="{x:.1}" y="{:.1}" width="{width:.1}" height="{bar_h:.1}" fill="{color}"><title>[{:.3}, {:.3}) rms {:.1} µm, floor {:.1} µm, n {}</title></rect>"#,
+                r#"<rect x="{x:.1}" y="{:.1}" width="{width:.1}" height="{bar_h:.1}" fill="{color}"><title>{}</title></rect>"#,
                 by + bh - bar_h,
-                b.lo,
-                b.hi,
-                b.rms_m * 1e6,
-                b.floor_rms_m * 1e6,
-                b.n
+                b.title
             );
             let _ = writeln!(
                 s,

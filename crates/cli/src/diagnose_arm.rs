@@ -157,84 +157,53 @@ pub fn render_arm(d: &ArmDiagnosis) -> String {
 
 /// The residual maps as one SVG document: per signal (each joint reading, time, each joint's
 /// gravity torque, the tip's reach, height and azimuth), each bin's held-out 3-D RMS (bar, mm;
-/// red when significantly above the floor, Holm) and the floor (black tick). Hand-written SVG,
-/// a grid of small panels on one common scale.
+/// red when significantly above the floor, Holm) and the floor (black tick), on one common
+/// scale ([`crate::diagnose::bar_panels_svg`]).
 pub fn arm_map_svg(d: &ArmDiagnosis) -> String {
-    let mut signals: Vec<&str> = Vec::new();
+    use crate::diagnose::{Bar, Panel, bar_panels_svg};
+    let mut panels: Vec<Panel> = Vec::new();
     for b in &d.where_ {
-        if !signals.contains(&b.signal.as_str()) {
-            signals.push(&b.signal);
+        if !panels.iter().any(|p| p.name == b.signal) {
+            panels.push(Panel {
+                name: b.signal.clone(),
+                bold: false,
+                bars: Vec::new(),
+            });
+        }
+        if let Some(p) = panels.iter_mut().find(|p| p.name == b.signal) {
+            p.bold |= b.flagged;
+            p.bars.push(Bar {
+                value_m: b.rms_m,
+                floor_m: b.floor_rms_m,
+                flagged: b.flagged,
+                title: format!(
+                    "[{:.3}, {:.3}] rms {:.4} mm, floor {:.4} mm, n {}, p {:.1e}",
+                    b.lo,
+                    b.hi,
+                    b.rms_m * 1e3,
+                    b.floor_rms_m * 1e3,
+                    b.n,
+                    b.p_value
+                ),
+            });
         }
     }
-    let (pw, ph, cols) = (220.0, 140.0, 5usize);
-    let rows = signals.len().div_ceil(cols).max(1);
-    let (w, h) = (pw * cols as f64, ph * rows as f64 + 40.0);
     let ymax = (d.where_.iter())
         .map(|b| b.rms_m.max(b.floor_rms_m))
         .fold(0.0, f64::max)
         .max(1e-12);
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="10">"#
-    );
-    let _ = writeln!(
-        s,
-        r#"<text x="10" y="20" font-size="14">Held-out 3-D residual RMS per bin (common scale to {:.3} mm); red: above the floor (Holm); tick: {}. Verdict: {}</text>"#,
-        ymax * 1e3,
-        if d.floor_rms_m.is_some() {
-            "floor"
-        } else {
-            "overall RMS (no floor)"
-        },
-        d.verdict
-    );
-    for (k, sig) in signals.iter().enumerate() {
-        let (x0, y0) = (pw * (k % cols) as f64, 40.0 + ph * (k / cols) as f64);
-        let bins: Vec<_> = d.where_.iter().filter(|b| b.signal == *sig).collect();
-        let any_flag = bins.iter().any(|b| b.flagged);
-        let _ = writeln!(
-            s,
-            r#"<text x="{}" y="{}"{}>{}</text>"#,
-            x0 + 10.0,
-            y0 + 12.0,
-            if any_flag {
-                r#" font-weight="bold""#
+    bar_panels_svg(
+        &format!(
+            "Held-out 3-D residual RMS per bin (common scale to {:.3} mm); red: above the floor (Holm); tick: {}. Verdict: {}",
+            ymax * 1e3,
+            if d.floor_rms_m.is_some() {
+                "floor"
             } else {
-                ""
+                "overall RMS (no floor)"
             },
-            sig
-        );
-        let (bx, by, bw, bh) = (x0 + 10.0, y0 + 18.0, pw - 30.0, ph - 40.0);
-        let _ = writeln!(
-            s,
-            r##"<rect x="{bx}" y="{by}" width="{bw}" height="{bh}" fill="none" stroke="#999"/>"##
-        );
-        let n = bins.len().max(1) as f64;
-        for (i, b) in bins.iter().enumerate() {
-            let bar_h = bh * (b.rms_m / ymax).min(1.0);
-            let floor_y = by + bh - bh * (b.floor_rms_m / ymax).min(1.0);
-            let x = bx + bw * i as f64 / n + 2.0;
-            let width = bw / n - 4.0;
-            let color = if b.flagged { "#d62728" } else { "#1f77b4" };
-            let _ = writeln!(
-                s,
-                r#"<rect x="{x:.1}" y="{:.1}" width="{width:.1}" height="{bar_h:.1}" fill="{color}"><title>[{:.3}, {:.3}] rms {:.4} mm, floor {:.4} mm, n {}, p {:.1e}</title></rect>"#,
-                by + bh - bar_h,
-                b.lo,
-                b.hi,
-                b.rms_m * 1e3,
-                b.floor_rms_m * 1e3,
-                b.n,
-                b.p_value
-            );
-            let _ = writeln!(
-                s,
-                r#"<line x1="{x:.1}" x2="{:.1}" y1="{floor_y:.1}" y2="{floor_y:.1}" stroke="black" stroke-width="2"/>"#,
-                x + width
-            );
-        }
-    }
-    s.push_str("</svg>\n");
-    s
+            d.verdict
+        ),
+        &panels,
+        ymax,
+    )
 }

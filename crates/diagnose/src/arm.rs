@@ -19,6 +19,7 @@
 //! named only when both hold and it closes at least `min_gap_share` of the gap above the floor.
 
 use hapcal_calibrate::baseline::{DataKind, GeometricBaseline, HeldOutSet};
+use hapcal_calibrate::calibrate::blocked_mean_difference;
 use hapcal_identify::Problem;
 use hapcal_problems::{CalibrationProblem, GravityCompliance, Observations, RowKind};
 use nalgebra::{DMatrix, DVector, Vector3};
@@ -856,32 +857,6 @@ fn cross_validate(
     out
 }
 
-/// Mean over configurations of `a − b` and its blocked standard error (clusters of unequal
-/// size: Cochran 1977, §6.4), and the number of non-empty blocks.
-fn blocked(a: &[f64], b: &[f64], block: &[usize]) -> (f64, f64, usize) {
-    let n = a.len();
-    let n_blocks = block.iter().max().map_or(0, |m| m + 1);
-    let mut sum = vec![0.0; n_blocks];
-    let mut count = vec![0usize; n_blocks];
-    for i in 0..n {
-        sum[block[i]] += a[i] - b[i];
-        count[block[i]] += 1;
-    }
-    let filled = count.iter().filter(|&&c| c > 0).count();
-    let m = sum.iter().sum::<f64>() / n.max(1) as f64;
-    if filled < 2 {
-        return (m, f64::INFINITY, filled);
-    }
-    let nb = filled as f64;
-    let m_bar = n as f64 / nb;
-    let var = (sum.iter().zip(&count))
-        .map(|(s, &c)| (s - m * c as f64).powi(2))
-        .sum::<f64>()
-        / (nb - 1.0)
-        / (nb * m_bar * m_bar);
-    (m, var.sqrt(), filled)
-}
-
 /// One-sided p-value of a mean `m` with standard error `se` being ≤ 0, Student t with `dof`.
 fn one_sided_p(m: f64, se: f64, dof: f64) -> f64 {
     if !(se.is_finite() && se > 0.0) {
@@ -1192,7 +1167,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             ac.columns_mut(0, a.ncols()).copy_from(&a);
             ac.columns_mut(a.ncols(), c_vis.ncols()).copy_from(&c_vis);
             let held = cross_validate(&ac, &r, &rows, &folds, cfg.folds, floor_var);
-            let (m, se, filled) = blocked(&base.score, &held.score, &block);
+            let (m, se, filled) = blocked_mean_difference(&base.score, &held.score, &block);
             let p_cv = one_sided_p(m, se, filled.saturating_sub(1) as f64);
             let (params, _) = parameters(&ac, &r, a.ncols(), &names, &visible);
             cand.heldout_rms_after_m = held.mse().sqrt();
@@ -1277,7 +1252,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                 .filter(|(_, t)| t.cand.accepted)
                 .filter(|(_, t)| {
                     let Some(h) = &t.held else { return false };
-                    let (d, se, _) = blocked(&h.score, &best_score, &block);
+                    let (d, se, _) = blocked_mean_difference(&h.score, &best_score, &block);
                     d <= se
                 })
                 .min_by_key(|(i, t)| (t.cand.n_visible, *i))
