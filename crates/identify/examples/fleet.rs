@@ -14,7 +14,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use hapcal_identify::{Backend, IdentifyConfig, Problem, identify};
+use hapcal_identify::{Backend, IdentifyConfig, LmConfig, Problem, identify};
 use hapcal_problems::{FleetDevice, FleetProblem, cable_angle, fleet_initial_guess};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -101,7 +101,16 @@ fn main() -> Result<()> {
     let id = identify(
         &problem,
         fleet_initial_guess(&problem),
-        &IdentifyConfig::default(),
+        &IdentifyConfig {
+            // Started at the nominal, near the solution: the first step is the full
+            // Gauss–Newton step (MINPACK's default radius, 100·‖D·x0‖, would take one
+            // doubling per iteration to reach it; see `LmConfig::factor`).
+            lm: LmConfig {
+                factor: f64::INFINITY,
+                ..LmConfig::default()
+            },
+            ..IdentifyConfig::default()
+        },
     )?;
     let solve_s = t1.elapsed().as_secs_f64();
     let [ci, ki] = problem.shared();
@@ -122,10 +131,11 @@ fn main() -> Result<()> {
         }
     }
     println!(
-        "{{\"n_devices\": {n_devices}, \"poses_per_device\": {n_poses}, \"n_residuals\": {m}, \"n_params\": {n}, \"dense_jacobian_bytes\": {}, \"dense\": {dense_message:?}, \"simulate_s\": {simulate_s:.3}, \"solve_s\": {solve_s:.3}, \"termination\": \"{:?}\", \"n_evaluations\": {}, \"sigma_m\": {:e}, \"cable_offset\": {{\"truth\": {CABLE_OFFSET_M:e}, \"estimate\": {c:e}, \"std\": {c_std:e}, \"z\": {c_z:.3}}}, \"cable_angle\": {{\"truth\": {CABLE_ANGLE_M_PER_RAD:e}, \"estimate\": {k:e}, \"std\": {k_std:e}, \"z\": {k_z:.3}}}, \"device_deviation_rms_error\": {:e}}}",
+        "{{\"n_devices\": {n_devices}, \"poses_per_device\": {n_poses}, \"n_residuals\": {m}, \"n_params\": {n}, \"dense_jacobian_bytes\": {}, \"dense\": {dense_message:?}, \"simulate_s\": {simulate_s:.3}, \"solve_s\": {solve_s:.3}, \"termination\": \"{:?}\", \"n_evaluations\": {}, \"n_iterations\": {}, \"sigma_m\": {:e}, \"cable_offset\": {{\"truth\": {CABLE_OFFSET_M:e}, \"estimate\": {c:e}, \"std\": {c_std:e}, \"z\": {c_z:.3}}}, \"cable_angle\": {{\"truth\": {CABLE_ANGLE_M_PER_RAD:e}, \"estimate\": {k:e}, \"std\": {k_std:e}, \"z\": {k_z:.3}}}, \"device_deviation_rms_error\": {:e}}}",
         8 * m as u128 * n as u128,
         id.fit.termination,
         id.fit.n_evaluations,
+        id.fit.n_iterations,
         id.sigma,
         (sq / count as f64).sqrt(),
     );

@@ -330,7 +330,8 @@ impl Linearised for Streaming<'_> {
             .sum::<f64>()
             .abs()
     }
-    fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr {
+    type Subproblem = ScaledQr;
+    fn subproblem(&mut self, diag: &[f64]) -> ScaledQr {
         ScaledQr::from_triangle(self.r_f.as_ref(), diag)
     }
 }

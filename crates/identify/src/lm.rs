@@ -8,6 +8,12 @@
 //! `λ` from the trust region (rather than a direct `λ` update such as Nielsen's) gives `λ = 0`,
 //! i.e. exact Gauss–Newton steps, whenever the Gauss–Newton step fits in the region: linear
 //! problems are solved in one step and small-residual problems converge quadratically.
+//!
+//! The iteration ([`run`]) is written once for every back end: it sees the problem through
+//! [`Linearised`] (residual norms at trial points, column norms and gradient at the current
+//! point) and the trust-region [`Subproblem`] of each linearisation, which the dense and
+//! streaming back ends solve from the triangle of `[J r]` ([`ScaledQr`]) and the sparse one by
+//! sparse QR factorisations ([`crate::sparse`]).
 
 use faer::{Col, ColRef, Mat, MatRef};
 
@@ -345,8 +351,38 @@ pub(crate) trait Linearised {
     fn col_norms(&self) -> Vec<f64>;
     /// `|J_jᵀ r|` for the free columns.
     fn gradient_abs(&self, j: usize) -> f64;
-    /// The QR of `J_f D⁻¹` (column-pivoted where it is near singular) and `Q₁ᵀ r`.
-    fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr;
+    /// The trust-region subproblem of the current linearisation, in the variables scaled by
+    /// `diag` (one entry per free column).
+    type Subproblem: Subproblem;
+    /// The subproblem of the current linearisation for the scaling `diag`: for the dense and
+    /// streaming back ends the QR of `J_f D⁻¹` (column-pivoted where it is near singular) and
+    /// `Q₁ᵀ r`; for the sparse one the scaled sparse Jacobian and `r`.
+    fn subproblem(&mut self, diag: &[f64]) -> Self::Subproblem;
+}
+
+/// The trust-region subproblem `min ‖J̃ u + r‖` subject to `‖u‖ ≤ Δ` in the scaled variables
+/// `u = D·p` (`J̃ = J_f D⁻¹`), solved as Moré's `lmpar` does: the damping `λ ≥ 0` with `‖u(λ)‖`
+/// within 10 % of `Δ`, or `λ = 0` when the Gauss–Newton step is shorter than `1.1·Δ`, where
+/// `u(λ)` solves `[J̃; √λ·I] u ≈ [−r; 0]`.
+pub(crate) trait Subproblem {
+    /// The step for trust radius `delta`, starting the `λ` search at `lambda0` (the previous
+    /// iteration's `λ`).
+    ///
+    /// # Errors
+    /// [`Error::Sparse`] when a sparse factorisation fails (the dense ones cannot).
+    fn step(&mut self, delta: f64, lambda0: f64) -> Result<Step, Error>;
+}
+
+/// A step of [`Subproblem::step`].
+pub(crate) struct Step {
+    /// `u = D·p`, one entry per free column, in the order of `free`.
+    pub(crate) u: Vec<f64>,
+    /// `‖u‖`.
+    pub(crate) u_norm: f64,
+    /// The damping `λ` of the step (0: Gauss–Newton).
+    pub(crate) lambda: f64,
+    /// `‖J̃ u‖` (MINPACK's `‖R u‖`), for the predicted reduction.
+    pub(crate) jp_norm: f64,
 }
 
 /// The dense back end: `J` stored `m × n`, and reduced at each linearisation to the triangle
@@ -510,7 +546,8 @@ impl<P: Problem> Linearised for Dense<'_, P> {
         let qtr = &self.tri[(n1 - 1) * n1..];
         col.iter().zip(qtr).map(|(a, b)| a * b).sum::<f64>().abs()
     }
-    fn scaled_qr(&mut self, diag: &[f64]) -> ScaledQr {
+    type Subproblem = ScaledQr;
+    fn subproblem(&mut self, diag: &[f64]) -> ScaledQr {
         let nf = self.free.len();
         ScaledQr::from_triangle(
             MatRef::from_column_major_slice(&self.tri, nf + 1, nf + 1),
@@ -534,6 +571,9 @@ pub(crate) struct Run {
     pub(crate) f_norm: f64,
     /// Whether the last linearisation was taken at `x` (no step accepted since).
     pub(crate) linearised_at_x: bool,
+    /// The error of a subproblem that could not be solved (the run then ends with
+    /// [`Termination::Numerical`]).
+    pub(crate) error: Option<Error>,
 }
 
 /// The MINPACK `lmder` iteration from `x0`, where `lin` is linearised and `f_norm = ‖r(x0)‖`.
@@ -569,6 +609,7 @@ pub(crate) fn run(
     // The last trial point and its residual norm (a rejected point may come back, see below).
     let mut last_trial: Option<(Col<f64>, f64)> = None;
     let mut linearised_at_x = true;
+    let mut error = None;
 
     let termination = 'outer: loop {
         let col_norms = lin.col_norms();
@@ -597,28 +638,34 @@ pub(crate) fn run(
             break Termination::GtolReached;
         }
         n_iterations += 1;
-        let factor = lin.scaled_qr(&diag);
+        let mut subproblem = lin.subproblem(&diag);
 
         loop {
             if n_evaluations >= cfg.max_evaluations {
                 break 'outer Termination::MaxEvaluations;
             }
-            let (u, new_lambda) = lmpar(&factor, delta, lambda);
-            lambda = new_lambda;
-            if !u.iter().all(|v| v.is_finite()) || !lambda.is_finite() {
+            let step = match subproblem.step(delta, lambda) {
+                Ok(step) => step,
+                Err(e) => {
+                    error = Some(e);
+                    break 'outer Termination::Numerical;
+                }
+            };
+            lambda = step.lambda;
+            let u_norm = step.u_norm;
+            if !u_norm.is_finite() || !lambda.is_finite() {
                 break 'outer Termination::Numerical;
             }
-            let u_norm = norm(&u);
             if first {
                 delta = delta.min(u_norm);
             }
             x_trial.copy_from(&x);
-            for (k, &pos) in factor.perm.iter().enumerate() {
-                x_trial[free[pos]] += u[k] / diag[pos];
+            for ((&k, u), d) in free.iter().zip(&step.u).zip(&diag) {
+                x_trial[k] += u / d;
             }
             // Predicted relative reduction of ‖r‖² and directional derivative (MINPACK
             // prered, dirder).
-            let t1 = norm(&factor.r_times(&u)) / f_norm;
+            let t1 = step.jp_norm / f_norm;
             let t2 = lambda.sqrt() * u_norm / f_norm;
             let predicted = t1 * t1 + 2.0 * t2 * t2;
             let directional = -(t1 * t1 + t2 * t2);
@@ -700,6 +747,7 @@ pub(crate) fn run(
         n_iterations,
         f_norm,
         linearised_at_x,
+        error,
     }
 }
 
@@ -917,6 +965,29 @@ impl ScaledQr {
     /// `R·u` (the scaled `J·p` up to `Q`).
     fn r_times(&self, u: &[f64]) -> Vec<f64> {
         self.r.times(u)
+    }
+}
+
+impl Subproblem for ScaledQr {
+    fn step(&mut self, delta: f64, lambda0: f64) -> Result<Step, Error> {
+        let (u, lambda) = lmpar(self, delta, lambda0);
+        // Norms in pivot order, the step back in the order of `free`.
+        let u_norm = if u.iter().all(|v| v.is_finite()) {
+            norm(&u)
+        } else {
+            f64::NAN
+        };
+        let jp_norm = norm(&self.r_times(&u));
+        let mut unpivoted = vec![0.0; u.len()];
+        for (&pos, v) in self.perm.iter().zip(&u) {
+            unpivoted[pos] = *v;
+        }
+        Ok(Step {
+            u: unpivoted,
+            u_norm,
+            lambda,
+            jp_norm,
+        })
     }
 }
 

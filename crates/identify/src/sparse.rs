@@ -1,16 +1,19 @@
 //! Sparse back end: block-structured problems (many nuisance or per-unit parameters, a few
 //! shared ones) whose dense Jacobian would not fit in memory, on faer's sparse QR.
 //!
-//! Sources: Levenberg–Marquardt with the damping update of H. B. Nielsen, "Damping parameter in
-//! Marquardt's method", IMM-REP-1999-05, DTU (λ scaled by `max(1/3, 1 − (2ρ − 1)³)` on success,
-//! doubled-then-doubling on failure), on the column-scaled problem of Moré (1978); each step
-//! solves the damped system `[J D⁻¹; √λ·I] u ≈ [−r; 0]` by a sparse Householder QR (faer's
+//! The iteration is the dense back end's (Moré 1978, MINPACK `lmder`: column scaling, trust
+//! region, gain ratio, stopping tests; [`crate::lm`]); only the trust-region subproblem is
+//! solved differently. For each damping `λ` that Moré's `lmpar` tries, the damped, column-scaled
+//! system `[J D⁻¹; √λ·I] u ≈ [−r; 0]` is factorised by a sparse Householder QR (faer's
 //! supernodal/simplicial multifrontal QR with a COLAMD fill-reducing column ordering; T. A.
-//! Davis, "Algorithm 915, SuiteSparseQR", ACM TOMS 38, 2011). The symbolic analysis is done
-//! once, the numeric factorisation once per trial step. Marginal standard deviations come from
-//! the distance of a column to the span of the others (Björck 1996, §1.1.4):
-//! `Var(x_j) = σ² / ‖(I − P₋ⱼ) J_j‖²`, with `P₋ⱼ` the projector onto the other columns, one
-//! extra sparse least-squares solve per parameter asked for.
+//! Davis, "Algorithm 915, SuiteSparseQR", ACM TOMS 38, 2011); the symbolic analysis is done
+//! once. The Newton correction of `λ` needs `‖S⁻ᵀ w‖²` with `SᵀS = D⁻¹JᵀJD⁻¹ + λI`: it is
+//! `wᵀ z` with `z = (SᵀS)⁻¹ w`, one more solve with the same factors (the least-squares solution
+//! of `[J D⁻¹; √λ·I] z ≈ [0; w/√λ]`). Marginal standard deviations come from the distance of a
+//! column to the span of the others (Björck 1996, §1.1.4):
+//! `Var(x_j) = σ² / ‖(I − P₋ⱼ) J_j‖²`, with `P₋ⱼ` the projector onto the other columns.
+
+use std::sync::Arc;
 
 use faer::linalg::solvers::SolveLstsqCore;
 use faer::sparse::linalg::solvers::{Qr, SymbolicQr};
@@ -18,8 +21,8 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Col, ColRef, Conj, Mat};
 
 use crate::covariance::Covariance;
-use crate::error::{Error, check_config};
-use crate::lm::{Fit, LmConfig, Termination};
+use crate::error::Error;
+use crate::lm::{Fit, Linearised, LmConfig, Step, Subproblem, Termination, check_inputs, run};
 use crate::problem::{EvalError, Problem};
 
 /// A Jacobian with a fixed sparsity pattern, evaluated straight into compressed-column form.
@@ -61,26 +64,32 @@ pub struct SparseFit {
     pub nnz: usize,
 }
 
-fn eval_err(e: EvalError) -> Error {
-    Error::Eval(e)
+fn sparse_error(e: impl std::fmt::Debug) -> Error {
+    Error::Sparse {
+        reason: format!("{e:?}"),
+    }
 }
 
-/// Column-scaled, damped Gauss–Newton step: `min ‖[J D⁻¹; √λ·I] u + [r; 0]‖`.
-struct DampedSystem {
+/// The pattern of the Jacobian and of the damped system `[J D⁻¹; √λ·I]` (J's pattern with one
+/// extra row entry per column), with its symbolic QR: fixed for the whole fit.
+struct Pattern {
     m: usize,
     n: usize,
-    /// Pattern of `[J; I]` (J's pattern with one extra row entry per column).
-    symbolic: SymbolicSparseColMat<usize>,
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    /// Column of each Jacobian value.
+    col_of: Vec<usize>,
+    /// Pattern of `[J; I]`.
+    augmented: SymbolicSparseColMat<usize>,
     /// Position of each Jacobian value in the augmented values.
     jac_pos: Vec<usize>,
     /// Position of each diagonal entry of the `√λ·I` block.
     diag_pos: Vec<usize>,
-    values: Vec<f64>,
     qr_symbolic: SymbolicQr<usize>,
 }
 
-impl DampedSystem {
-    fn new(m: usize, col_ptr: &[usize], row_idx: &[usize]) -> Result<Self, Error> {
+impl Pattern {
+    fn new(m: usize, col_ptr: Vec<usize>, row_idx: Vec<usize>) -> Result<Self, Error> {
         let n = col_ptr.len() - 1;
         let mut aug_ptr = Vec::with_capacity(n + 1);
         let mut aug_idx = Vec::with_capacity(row_idx.len() + n);
@@ -96,73 +105,273 @@ impl DampedSystem {
             aug_idx.push(m + j);
             aug_ptr.push(aug_idx.len());
         }
-        let symbolic = SymbolicSparseColMat::new_checked(m + n, n, aug_ptr, None, aug_idx);
-        let qr_symbolic = SymbolicQr::try_new(symbolic.as_ref()).map_err(|e| Error::Sparse {
-            reason: format!("{e:?}"),
-        })?;
-        let values = vec![0.0; symbolic.row_idx().len()];
+        let augmented = SymbolicSparseColMat::new_checked(m + n, n, aug_ptr, None, aug_idx);
+        let qr_symbolic = SymbolicQr::try_new(augmented.as_ref()).map_err(sparse_error)?;
+        let col_of = (0..n)
+            .flat_map(|j| std::iter::repeat_n(j, col_ptr[j + 1] - col_ptr[j]))
+            .collect();
         Ok(Self {
             m,
             n,
-            symbolic,
+            col_ptr,
+            row_idx,
+            col_of,
+            augmented,
             jac_pos,
             diag_pos,
-            values,
             qr_symbolic,
         })
     }
+}
 
-    /// The step `p = D⁻¹ u` (unscaled) and `‖J p‖` for damping `lambda`.
-    fn step(
-        &mut self,
-        jac_values: &[f64],
-        col_of: &[usize],
-        diag: &[f64],
-        r: &[f64],
-        lambda: f64,
-    ) -> Result<(Vec<f64>, Vec<f64>), Error> {
-        for (k, &pos) in self.jac_pos.iter().enumerate() {
-            self.values[pos] = jac_values[k] / diag[col_of[k]];
+/// The sparse linearisation at the current point: `r` and the Jacobian values, and the same at
+/// the last trial point (every evaluation gives both).
+struct SparseLinearised<'a> {
+    sj: &'a dyn SparseJacobian,
+    pattern: Arc<Pattern>,
+    r: Vec<f64>,
+    values: Vec<f64>,
+    r_trial: Vec<f64>,
+    values_trial: Vec<f64>,
+    /// `‖J_j‖` and `J_jᵀ r` at the current point.
+    col_norms: Vec<f64>,
+    gradient: Vec<f64>,
+}
+
+impl SparseLinearised<'_> {
+    /// `col_norms` and `gradient` from the current values.
+    fn summarise(&mut self) {
+        let n = self.pattern.n;
+        self.col_norms = vec![0.0; n];
+        self.gradient = vec![0.0; n];
+        for ((&j, &i), &v) in self
+            .pattern
+            .col_of
+            .iter()
+            .zip(&self.pattern.row_idx)
+            .zip(&self.values)
+        {
+            self.col_norms[j] += v * v;
+            self.gradient[j] += v * self.r[i];
+        }
+        self.col_norms.iter_mut().for_each(|c| *c = c.sqrt());
+    }
+}
+
+impl Linearised for SparseLinearised<'_> {
+    fn trial_norm(&mut self, x_trial: ColRef<'_, f64>, _may_continue: bool) -> f64 {
+        match self
+            .sj
+            .residuals_and_values(x_trial, &mut self.r_trial, &mut self.values_trial)
+        {
+            Ok(()) if self.r_trial.iter().all(|v| v.is_finite()) => norm(&self.r_trial),
+            _ => f64::INFINITY,
+        }
+    }
+    fn accept(&mut self) {
+        std::mem::swap(&mut self.r, &mut self.r_trial);
+        std::mem::swap(&mut self.values, &mut self.values_trial);
+    }
+    fn relinearise(&mut self, _x: ColRef<'_, f64>) -> Result<(), Termination> {
+        // The Jacobian was evaluated with the residuals at the accepted point.
+        if !self.values.iter().all(|v| v.is_finite()) {
+            return Err(Termination::Numerical);
+        }
+        self.summarise();
+        Ok(())
+    }
+    fn col_norms(&self) -> Vec<f64> {
+        self.col_norms.clone()
+    }
+    fn gradient_abs(&self, j: usize) -> f64 {
+        self.gradient[j].abs()
+    }
+    type Subproblem = SparseSubproblem;
+    fn subproblem(&mut self, diag: &[f64]) -> SparseSubproblem {
+        let scaled = self
+            .values
+            .iter()
+            .zip(&self.pattern.col_of)
+            .map(|(v, &j)| v / diag[j])
+            .collect();
+        let gradient = self.gradient.iter().zip(diag).map(|(g, d)| g / d).collect();
+        SparseSubproblem {
+            pattern: Arc::clone(&self.pattern),
+            scaled,
+            r: self.r.clone(),
+            gradient,
+            augmented: vec![0.0; self.pattern.augmented.row_idx().len()],
+            gauss_newton: None,
+        }
+    }
+}
+
+/// The trust-region subproblem of the sparse back end: Moré's `lmpar` with each `λ` tried
+/// factorised by sparse QR (see the module documentation).
+pub(crate) struct SparseSubproblem {
+    pattern: Arc<Pattern>,
+    /// `J D⁻¹` in pattern order.
+    scaled: Vec<f64>,
+    r: Vec<f64>,
+    /// `D⁻¹ Jᵀ r`.
+    gradient: Vec<f64>,
+    /// Values of `[J D⁻¹; √λ·I]` (scratch).
+    augmented: Vec<f64>,
+    /// The Gauss–Newton step and its norm, once computed.
+    gauss_newton: Option<(Vec<f64>, f64)>,
+}
+
+impl SparseSubproblem {
+    /// The sparse QR of `[J D⁻¹; √λ·I]`.
+    fn factorise(&mut self, lambda: f64) -> Result<Qr<usize, f64>, Error> {
+        let pattern = &*self.pattern;
+        for (&pos, &v) in pattern.jac_pos.iter().zip(&self.scaled) {
+            self.augmented[pos] = v;
         }
         let s = lambda.sqrt();
-        for &pos in &self.diag_pos {
-            self.values[pos] = s;
+        for &pos in &pattern.diag_pos {
+            self.augmented[pos] = s;
         }
-        let mat = SparseColMatRef::new(self.symbolic.as_ref(), &self.values);
-        let qr = Qr::try_new_with_symbolic(self.qr_symbolic.clone(), mat).map_err(|e| {
-            Error::Sparse {
-                reason: format!("{e:?}"),
-            }
-        })?;
-        let mut rhs = Mat::<f64>::zeros(self.m + self.n, 1);
-        for i in 0..self.m {
-            rhs[(i, 0)] = -r[i];
+        let mat = SparseColMatRef::new(pattern.augmented.as_ref(), &self.augmented);
+        Qr::try_new_with_symbolic(pattern.qr_symbolic.clone(), mat).map_err(sparse_error)
+    }
+
+    /// The least-squares solution of `[J D⁻¹; √λ·I] z ≈ [top; bottom]` (`top` of length `m`
+    /// or empty for zeros, `bottom` of length `n` or empty for zeros).
+    fn solve(&self, qr: &Qr<usize, f64>, top: &[f64], bottom: &[f64]) -> Vec<f64> {
+        let (m, n) = (self.pattern.m, self.pattern.n);
+        let mut rhs = Mat::<f64>::zeros(m + n, 1);
+        for (i, v) in top.iter().enumerate() {
+            rhs[(i, 0)] = *v;
+        }
+        for (j, v) in bottom.iter().enumerate() {
+            rhs[(m + j, 0)] = *v;
         }
         qr.solve_lstsq_in_place_with_conj(Conj::No, rhs.as_mut());
-        let u: Vec<f64> = (0..self.n).map(|j| rhs[(j, 0)]).collect();
-        let p = u.iter().zip(diag).map(|(u, d)| u / d).collect();
-        Ok((p, u))
+        (0..n).map(|j| rhs[(j, 0)]).collect()
     }
+
+    /// `u(λ)`: the damped step.
+    fn damped_step(&self, qr: &Qr<usize, f64>) -> Vec<f64> {
+        let minus_r: Vec<f64> = self.r.iter().map(|v| -v).collect();
+        self.solve(qr, &minus_r, &[])
+    }
+
+    /// `‖J D⁻¹ u‖`.
+    fn jacobian_times_norm(&self, u: &[f64]) -> f64 {
+        let mut ju = vec![0.0; self.pattern.m];
+        for ((&i, &j), v) in self
+            .pattern
+            .row_idx
+            .iter()
+            .zip(&self.pattern.col_of)
+            .zip(&self.scaled)
+        {
+            ju[i] += v * u[j];
+        }
+        norm(&ju)
+    }
+}
+
+impl Subproblem for SparseSubproblem {
+    /// Moré's `lmpar` (as the dense [`crate::lm`]) with one sparse factorisation per `λ` tried.
+    /// The lower bound of `λ` is 0 (MINPACK's bound for a rank-deficient `J`: the bound for a
+    /// full-rank one needs `R⁻ᵀ` at `λ = 0`, which the sparse factors do not expose); the
+    /// safeguarded Newton iteration converges from either.
+    fn step(&mut self, delta: f64, lambda0: f64) -> Result<Step, Error> {
+        let finish = |this: &Self, u: Vec<f64>, u_norm: f64, lambda: f64| Step {
+            jp_norm: this.jacobian_times_norm(&u),
+            u,
+            u_norm,
+            lambda,
+        };
+        // Gauss–Newton step, once per linearisation (a rejected step tries again with a
+        // smaller Δ); a singular J (not finite) makes it infinitely long.
+        let (mut u, mut u_norm) = match &self.gauss_newton {
+            Some(gn) => gn.clone(),
+            None => {
+                let qr = self.factorise(0.0)?;
+                let u = self.damped_step(&qr);
+                let u_norm = if u.iter().all(|v| v.is_finite()) {
+                    norm(&u)
+                } else {
+                    f64::INFINITY
+                };
+                self.gauss_newton = Some((u.clone(), u_norm));
+                (u, u_norm)
+            }
+        };
+        let mut fp = u_norm - delta;
+        if fp <= 0.1 * delta {
+            return Ok(finish(self, u, u_norm, 0.0));
+        }
+        let mut lower = 0.0_f64;
+        // Upper bound: ‖D⁻¹Jᵀr‖ / Δ.
+        let g_norm = norm(&self.gradient);
+        let mut upper = g_norm / delta;
+        if upper == 0.0 {
+            upper = f64::MIN_POSITIVE / delta.min(0.1);
+        }
+        let mut lambda = lambda0.max(lower).min(upper);
+        if lambda == 0.0 {
+            lambda = g_norm / u_norm;
+        }
+        for iteration in 1..=10 {
+            if lambda == 0.0 {
+                lambda = f64::MIN_POSITIVE.max(0.001 * upper);
+            }
+            let qr = self.factorise(lambda)?;
+            u = self.damped_step(&qr);
+            u_norm = norm(&u);
+            let fp_old = fp;
+            fp = u_norm - delta;
+            if !u_norm.is_finite()
+                || fp.abs() <= 0.1 * delta
+                || (lower == 0.0 && fp <= fp_old && fp_old < 0.0)
+                || iteration == 10
+            {
+                break;
+            }
+            // ‖S⁻ᵀ w‖² = wᵀ (SᵀS)⁻¹ w with w = u/‖u‖.
+            let w: Vec<f64> = u.iter().map(|v| v / u_norm).collect();
+            let bottom: Vec<f64> = w.iter().map(|v| v / lambda.sqrt()).collect();
+            let z = self.solve(&qr, &[], &bottom);
+            let denominator: f64 = w.iter().zip(&z).map(|(a, b)| a * b).sum();
+            let correction = (fp / delta) / denominator;
+            if fp > 0.0 {
+                lower = lower.max(lambda);
+            } else if fp < 0.0 {
+                upper = upper.min(lambda);
+            }
+            lambda = lower.max(lambda + correction);
+        }
+        Ok(finish(self, u, u_norm, lambda))
+    }
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|a| a * a).sum::<f64>().sqrt()
 }
 
 /// Levenberg–Marquardt on the sparse back end, over all parameters of `p` (no pruning: the
 /// layout must be identifiable), then the covariance of the parameters `std_of` (layout
 /// indices).
 ///
-/// Each iteration evaluates `r` and the sparse Jacobian once, and factorises the damped,
-/// column-scaled system by sparse QR (once per trial step). `D` holds the Jacobian column
-/// norms (running maximum, Moré 1978); `λ` starts at 0 (a Gauss–Newton step) and follows
-/// Nielsen's update. Stopping tests as [`LmConfig`]: relative cost reduction (actual and
-/// predicted) at most `ftol`, scaled step at most `xtol·(‖D·x‖ + xtol)`, largest gradient
-/// cosine at most `gtol`, or `max_evaluations` evaluations of `r`.
+/// The iteration is [`levenberg_marquardt`](crate::levenberg_marquardt)'s (Moré 1978: `D` the
+/// running maximum of the Jacobian column norms, trust radius `Δ` from
+/// [`LmConfig::factor`], the MINPACK stopping tests of [`LmConfig`]); each trial step solves
+/// the trust-region subproblem by sparse QR factorisations of `[J D⁻¹; √λ·I]`, one per `λ`
+/// tried (module documentation). Every evaluation gives `r` and the Jacobian values together,
+/// so [`Fit::n_jacobians`] equals [`Fit::n_evaluations`].
 ///
 /// Memory: the pattern, its values, and the sparse QR factors; never `m × n`.
 ///
 /// # Errors
 /// [`Error::NoSparseJacobian`] if `p` has no [`Problem::sparse_jacobian`];
 /// [`Error::WrongLength`], [`Error::TooFewResiduals`], [`Error::InvalidConfig`],
-/// [`Error::Eval`], [`Error::NonFiniteResidual`] as the dense solver; [`Error::Sparse`] if the
-/// sparse factorisation fails; [`Error::Singular`] if a parameter of `std_of` is not determined.
+/// [`Error::Eval`], [`Error::NonFiniteResidual`], [`Error::NonFiniteJacobian`] as the dense
+/// solver; [`Error::Sparse`] if a sparse factorisation fails; [`Error::Singular`] if a
+/// parameter of `std_of` is not determined.
 pub fn levenberg_marquardt_sparse(
     p: &impl Problem,
     x0: Col<f64>,
@@ -172,174 +381,66 @@ pub fn levenberg_marquardt_sparse(
     let sj = p.sparse_jacobian().ok_or(Error::NoSparseJacobian)?;
     let layout = p.layout();
     let n = layout.len();
-    if x0.nrows() != n {
-        return Err(Error::WrongLength {
-            expected: n,
-            found: x0.nrows(),
-        });
-    }
-    check_config("ftol", cfg.ftol, false)?;
-    check_config("xtol", cfg.xtol, false)?;
-    check_config("gtol", cfg.gtol, false)?;
+    let free: Vec<usize> = (0..n).collect();
+    check_inputs(p, x0.as_ref(), &free, cfg)?;
     let m = p.n_residuals();
-    if m < n {
-        return Err(Error::TooFewResiduals {
-            n_residuals: m,
-            n_free: n,
-        });
-    }
     let (col_ptr, row_idx) = sj.pattern();
     let nnz = row_idx.len();
-    let col_of: Vec<usize> = (0..n)
-        .flat_map(|j| std::iter::repeat_n(j, col_ptr[j + 1] - col_ptr[j]))
-        .collect();
-    let mut system = DampedSystem::new(m, &col_ptr, &row_idx)?;
+    let pattern = Arc::new(Pattern::new(m, col_ptr, row_idx)?);
 
-    let mut x = x0;
     let mut r = vec![0.0; m];
     let mut values = vec![0.0; nnz];
-    sj.residuals_and_values(x.as_ref(), &mut r, &mut values)
-        .map_err(eval_err)?;
+    sj.residuals_and_values(x0.as_ref(), &mut r, &mut values)
+        .map_err(Error::Eval)?;
     if let Some(index) = r.iter().position(|v| !v.is_finite()) {
         return Err(Error::NonFiniteResidual { index });
     }
     if let Some(k) = values.iter().position(|v| !v.is_finite()) {
-        let row = row_idx[k];
         return Err(Error::NonFiniteJacobian {
-            row,
-            name: layout.name(col_of[k]).to_owned(),
+            row: pattern.row_idx[k],
+            name: layout.name(pattern.col_of[k]).to_owned(),
         });
     }
-    let norm = |v: &[f64]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
-    let mut f_norm = norm(&r);
-    let (ftol, xtol, gtol) = (
-        cfg.ftol.max(f64::EPSILON),
-        cfg.xtol.max(f64::EPSILON),
-        cfg.gtol.max(f64::EPSILON),
-    );
-    let mut diag = vec![0.0_f64; n];
-    let mut lambda = 0.0_f64;
-    let mut nu = 2.0_f64;
-    let mut n_evaluations = 1;
-    let mut n_jacobians = 1;
-    let mut n_iterations = 0;
-    let mut r_trial = vec![0.0; m];
-    let mut values_trial = vec![0.0; nnz];
-    let termination = 'outer: loop {
-        let mut col_norm = vec![0.0; n];
-        let mut grad = vec![0.0; n];
-        for k in 0..nnz {
-            let j = col_of[k];
-            col_norm[j] += values[k] * values[k];
-            grad[j] += values[k] * r[row_idx[k]];
-        }
-        for j in 0..n {
-            col_norm[j] = col_norm[j].sqrt();
-            diag[j] = diag[j].max(col_norm[j]);
-            if diag[j] == 0.0 {
-                diag[j] = 1.0;
-            }
-        }
-        if f_norm == 0.0 {
-            break Termination::GtolReached;
-        }
-        let g_cos = (0..n)
-            .filter(|&j| col_norm[j] > 0.0)
-            .map(|j| grad[j].abs() / (col_norm[j] * f_norm))
-            .fold(0.0_f64, f64::max);
-        if g_cos <= gtol {
-            break Termination::GtolReached;
-        }
-        n_iterations += 1;
-        loop {
-            if n_evaluations >= cfg.max_evaluations {
-                break 'outer Termination::MaxEvaluations;
-            }
-            let (step, u) = system.step(&values, &col_of, &diag, &r, lambda)?;
-            if !step.iter().all(|v| v.is_finite()) {
-                break 'outer Termination::Numerical;
-            }
-            // Predicted reduction: ‖r‖² − ‖r + J p‖² (MINPACK's prered, relative).
-            let mut jp = vec![0.0; m];
-            for k in 0..nnz {
-                jp[row_idx[k]] += values[k] * step[col_of[k]];
-            }
-            let jp_norm = norm(&jp);
-            let u_norm = norm(&u);
-            let t1 = jp_norm / f_norm;
-            let t2 = lambda.sqrt() * u_norm / f_norm;
-            let predicted = t1 * t1 + 2.0 * t2 * t2;
-            let mut x_trial = x.clone();
-            for j in 0..n {
-                x_trial[j] += step[j];
-            }
-            n_evaluations += 1;
-            let f_trial =
-                match sj.residuals_and_values(x_trial.as_ref(), &mut r_trial, &mut values_trial) {
-                    Ok(()) if r_trial.iter().all(|v| v.is_finite()) => norm(&r_trial),
-                    _ => f64::INFINITY,
-                };
-            let actual = if 0.1 * f_trial < f_norm {
-                1.0 - (f_trial / f_norm).powi(2)
-            } else {
-                -1.0
-            };
-            let ratio = if predicted != 0.0 {
-                actual / predicted
-            } else {
-                0.0
-            };
-            let accepted = ratio >= 1e-4;
-            if accepted {
-                x = x_trial;
-                std::mem::swap(&mut r, &mut r_trial);
-                std::mem::swap(&mut values, &mut values_trial);
-                f_norm = f_trial;
-                n_jacobians += 1;
-                if !values.iter().all(|v| v.is_finite()) {
-                    break 'outer Termination::Numerical;
-                }
-                lambda *= (1.0_f64 / 3.0).max(1.0 - (2.0 * ratio - 1.0).powi(3));
-                if lambda < 1e-12 {
-                    lambda = 0.0;
-                }
-                nu = 2.0;
-            } else {
-                // The columns are scaled to unit norm, so λ is relative to 1.
-                lambda = if lambda == 0.0 { 1e-6 } else { lambda * nu };
-                nu *= 2.0;
-            }
-            let x_norm = (0..n).map(|j| (diag[j] * x[j]).powi(2)).sum::<f64>().sqrt();
-            if actual.abs() <= ftol && predicted <= ftol && 0.5 * ratio <= 1.0 {
-                break 'outer Termination::FtolReached;
-            }
-            if u_norm <= xtol * (x_norm + xtol) {
-                break 'outer Termination::XtolReached;
-            }
-            if accepted {
-                break;
-            }
-            if lambda > 1e16 {
-                break 'outer Termination::Numerical;
-            }
-        }
+    let f_norm = norm(&r);
+    let mut lin = SparseLinearised {
+        sj,
+        pattern: Arc::clone(&pattern),
+        r,
+        values,
+        r_trial: vec![0.0; m],
+        values_trial: vec![0.0; nnz],
+        col_norms: Vec::new(),
+        gradient: Vec::new(),
     };
-    let cost = 0.5 * f_norm * f_norm;
+    lin.summarise();
+    let run = run(&mut lin, x0, &free, cfg, f_norm);
+    if let Some(e) = run.error {
+        return Err(e);
+    }
+    let cost = 0.5 * run.f_norm * run.f_norm;
     let sigma = if m > n {
         (2.0 * cost / (m - n) as f64).sqrt()
     } else {
         0.0
     };
-    let covariance = covariance_block(m, &col_ptr, &row_idx, &values, std_of, sigma, layout)?;
+    let covariance = covariance_block(
+        m,
+        &pattern.col_ptr,
+        &pattern.row_idx,
+        &lin.values,
+        std_of,
+        sigma,
+        layout,
+    )?;
     Ok(SparseFit {
         fit: Fit {
-            x,
-            termination,
-            n_evaluations,
-            n_jacobians,
-            n_iterations,
+            x: run.x,
+            termination: run.termination,
+            n_evaluations: run.n_evaluations,
+            n_jacobians: run.n_evaluations,
+            n_iterations: run.n_iterations,
             cost,
-            residuals: Col::from_fn(m, |i| r[i]),
+            residuals: Col::from_fn(m, |i| lin.r[i]),
         },
         sigma,
         covariance,
@@ -414,3 +515,6 @@ pub(crate) fn covariance_block(
     cov.free = which.to_vec();
     Ok(cov)
 }
+
+#[cfg(test)]
+mod tests;
