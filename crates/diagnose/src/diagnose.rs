@@ -1039,6 +1039,20 @@ pub fn diagnose(
         floor_method = "spec without quantisation: sigma_m = 2*pi*R_d*sigma_e, sigma_e = 2*pi/counts/3 (paper noise model); the residuals were significantly below the floor with reading quantisation, so the readings are not the quantisation-limited measurement here; held-out floor sigma^2*(1+h)".to_owned();
     }
     let n_params = base.cols.len();
+    // Copied rows add residuals but no information: the baseline needs a configuration per
+    // parameter and one more for σ, or its held-out residual is a confident report of nothing.
+    let n_distinct = hapcal_calibrate::haptic::distinct_configurations(rows, None);
+    if n_distinct <= n_params {
+        return Err(Error::Data {
+            message: format!(
+                "the log holds {n_distinct} distinct joint configurations (in {} rows) for the \
+                 baseline's {n_params} identifiable parameters: at least {} are needed; repeated \
+                 rows add no information, measure more distinct poses",
+                rows.len(),
+                n_params + 1
+            ),
+        });
+    }
     let excess0 = base_rss_excess(&base);
     let mse0 = base.cv.mse();
     let floor0 = base.cv.floor();

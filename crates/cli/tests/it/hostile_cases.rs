@@ -599,6 +599,35 @@ fn log_cases(t: &mut Table) {
         2,
         &["the training logs hold 10 distinct", "(in 210 rows)"],
     );
+    // The diagnosis of the same copies: an error, not a held-out RMS of 0.
+    let device_arg = device.clone();
+    for (name, file, rows, needle) in [
+        (
+            "diagnose: 200 copies of one pose",
+            "diagnose-copies.csv",
+            &copies,
+            "the log holds 1 distinct joint configurations (in 200 rows)",
+        ),
+        (
+            "diagnose: two poses 100 times each",
+            "diagnose-two.csv",
+            &two,
+            "the log holds 2 distinct joint configurations (in 200 rows)",
+        ),
+    ] {
+        let path = t.file(&format!("log/{file}"), csv(rows).as_bytes());
+        t.add(
+            C,
+            name,
+            &["diagnose", "--device", &device_arg, "--data", &path],
+            2,
+            &[
+                &format!("diagnosing {path}"),
+                needle,
+                "identifiable parameters",
+            ],
+        );
+    }
     let mut repeated = log.clone();
     for k in 0..5 {
         repeated.push(log[1 + k].clone());
