@@ -18,6 +18,13 @@ const PEAK_PROCESSES: usize = 5;
 /// Processes that time the 200-pose LM for the per-iteration cost (the fastest is used; as
 /// many as read the peak, since both readings share the machine's process-level modes).
 const LM_PROCESSES: usize = 5;
+/// The last `cargo xtask bench --peers` with the hand-written AVX-512/AVX2 kernels, for the
+/// comparison printed beside this run's figures (docs/results/simd.md).
+const HAND_WRITTEN_RUN: &str = "commit 8c9fd35, 2026-11-22, Intel Xeon, 2 cores";
+const HAND_WRITTEN_ITERATION_MS: f64 = 0.022;
+const HAND_WRITTEN_LM_MS: f64 = 0.151;
+const HAND_WRITTEN_SCIPY_LM_MS: f64 = 32.181;
+const HAND_WRITTEN_SCIPY_TRF_MS: f64 = 74.207;
 /// Pose counts of the table.
 const SIZES: [usize; 4] = [200, 2_000, 20_000, 1_000_000];
 /// Largest size the peers run at (their dense Jacobian at 1,000,000 poses is 224 MB per copy
@@ -150,6 +157,7 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
     md.push_str("| poses | hapcal LM (28 params) | hapcal identify (prune + LM + covariance, σ known) | SciPy lm | hapcal/lm | max abs diff lm | SciPy trf | hapcal/trf | max abs diff trf | peak RSS hapcal |\n|---|---|---|---|---|---|---|---|---|---|\n");
 
     let mut per_iteration = None;
+    let mut row_200 = ("–".to_owned(), "–".to_owned(), "–".to_owned());
     for n in SIZES {
         let data = data_dir.join(format!("poses-{n}.csv"));
         if !data.exists() {
@@ -185,6 +193,7 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
             let n_eval = f(&ours, &["lm", "n_evaluations"]);
             let n_iter = f(&ours, &["lm", "n_iterations"]);
             per_iteration = Some((lm_best, n_iter, n_jac, n_eval));
+            row_200.0 = ms(lm_s);
         }
         let free: Vec<String> = ours["free"]
             .as_array()
@@ -235,6 +244,14 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
                     let peer: Value = serde_json::from_str(&out).context("peer output")?;
                     let peer_s = f(&peer, &["min_s"]);
                     let diff = max_diff(&ours["lm"]["x"], &peer["x"]);
+                    if n == 200 {
+                        let figure = ms(peer_s);
+                        if method == "lm" {
+                            row_200.1 = figure;
+                        } else {
+                            row_200.2 = figure;
+                        }
+                    }
                     cells.push(format!("{} ({} fev)", ms(peer_s), peer["nfev"]));
                     cells.push(format!("1/{:.1}", peer_s / lm_s));
                     cells.push(format!("{diff:.1e}"));
@@ -267,6 +284,14 @@ pub(crate) fn run(sh: &Shell, peers: bool, criterion: bool) -> Result<()> {
                 .join(", "),
             ms(bound_s),
             iteration_s / bound_s
+        ));
+        let (lm200, scipy_lm200, scipy_trf200) = &row_200;
+        md.push_str(&format!(
+            "### Beside the hand-written kernels
+
+The last run with hand-written AVX-512/AVX2 kernels ({HAND_WRITTEN_RUN}): {HAND_WRITTEN_ITERATION_MS} ms per iteration, LM at 200 poses {HAND_WRITTEN_LM_MS} ms, SciPy lm {HAND_WRITTEN_SCIPY_LM_MS} ms, SciPy trf {HAND_WRITTEN_SCIPY_TRF_MS} ms. This run ({cpu}): {} per iteration ({:.2}× that figure, on another machine), LM at 200 poses {lm200}, SciPy lm {scipy_lm200}, SciPy trf {scipy_trf200}. docs/results/simd.md compares the two kernels on one machine, interleaved.\n\n",
+            ms(iteration_s),
+            iteration_s * 1e3 / HAND_WRITTEN_ITERATION_MS,
         ));
     }
 
