@@ -732,8 +732,14 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             plan.socket_distance_m
         );
     }
+    check_distinct_inputs(plan)?;
     let device = load_device(&plan.device, &plan.tip)?;
     if !device.capstans.is_empty() || device.parallelogram.is_some() {
+        refuse_options(
+            plan,
+            "a haptic device's log (the cable-encoder σ comes from the residuals, the \
+             held-out data from --test)",
+        )?;
         if !matches!(
             plan.model,
             ModelChoice::Auto | ModelChoice::Transmissions | ModelChoice::Geometric
@@ -753,6 +759,12 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     let distances = device.cable_encoder.is_none();
     if (plan.data.iter()).any(|p| crate::measured::is_marker_file(p, distances)) {
         return crate::measured::run(plan, &device, start);
+    }
+    if plan.test_last.is_some() {
+        bail!(
+            "--test-last applies to measurement files (positions, poses, distances); hold out \
+             MUKCa socket folders or distance logs with --test"
+        );
     }
     let chain = device
         .chain()
@@ -1033,14 +1045,100 @@ pub fn check_extension(path: &Path, allowed: &[&str], what: &str, strict: bool) 
     )
 }
 
-/// Writes `text` to `path` atomically (a sibling temporary file renamed over it, so a reader
-/// never sees half a file and a failed write leaves any earlier file intact), after
-/// [`check_output`]: never over one of `inputs`, every error naming `path`.
+/// `Err` when one file or folder is given twice among `plan`'s training and test data (by
+/// path, or as byte-identical files): held-out data that are the training data measure
+/// nothing, and a training file given twice counts every row twice (every σ shrinks by √2).
 ///
 /// # Errors
-/// What [`check_output`] refuses, or an I/O error (`cannot write <path>: …`).
+/// Naming both arguments.
+pub fn check_distinct_inputs(plan: &Plan) -> Result<()> {
+    let named: Vec<(&str, &PathBuf)> = (plan.data.iter().map(|p| ("--data", p)))
+        .chain(plan.test.iter().map(|p| ("--test", p)))
+        .collect();
+    let key = |p: &Path| -> Option<(PathBuf, Option<Vec<u8>>)> {
+        let canonical = p.canonicalize().ok()?;
+        let bytes = if canonical.is_file() {
+            std::fs::read(&canonical).ok()
+        } else {
+            None
+        };
+        Some((canonical, bytes))
+    };
+    let keys: Vec<_> = named.iter().map(|(_, p)| key(p)).collect();
+    for b in 0..named.len() {
+        for a in 0..b {
+            let (Some((pa, ba)), Some((pb, bb))) = (&keys[a], &keys[b]) else {
+                continue;
+            };
+            let same_file = pa == pb;
+            let same_bytes = ba.is_some() && ba == bb;
+            if same_file || same_bytes {
+                let how = if same_file {
+                    "the same file"
+                } else {
+                    "byte-identical files"
+                };
+                bail!(
+                    "{} {} and {} {} are {how}: {}",
+                    named[a].0,
+                    named[a].1.display(),
+                    named[b].0,
+                    named[b].1.display(),
+                    match (named[a].0, named[b].0) {
+                        ("--data", "--data") => {
+                            "every row would count twice and every σ shrink by √2"
+                        }
+                        ("--test", "--test") => "the held-out rows would count twice",
+                        _ => "held-out data must not be training data",
+                    }
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `Err` naming the first of `plan`'s measurement-file options that was given, for a kind of
+/// data (`what`) that does not use them.
+fn refuse_options(plan: &Plan, what: &str) -> Result<()> {
+    for (option, given) in [
+        ("--sigma-m", plan.sigma_m.is_some()),
+        ("--sigma-rad", plan.sigma_rad.is_some()),
+        ("--test-last", plan.test_last.is_some()),
+        (
+            "--length-unit / --angle-unit",
+            plan.units != hapcal_io::Units::default(),
+        ),
+    ] {
+        if given {
+            bail!("{option} does not apply to {what}");
+        }
+    }
+    Ok(())
+}
+
+/// Writes `text` to `path` atomically (a sibling temporary file renamed over it, so a reader
+/// never sees half a file and a failed write leaves any earlier file intact), after
+/// [`check_output`]: never over one of `inputs`, every error naming `path`. A path that is not
+/// a regular file (`/dev/null`, `/dev/stdout`, a named pipe) is written through, never
+/// replaced: a rename would put a regular file in the device's place.
+///
+/// # Errors
+/// What [`check_output`] refuses, or an I/O error (`cannot write <path>: …`, e.g. `No space
+/// left on device` for `/dev/full`).
 pub fn write_new(path: &Path, text: &str, inputs: &[&Path]) -> Result<()> {
     check_output(path, inputs)?;
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+        use std::io::Write;
+        return std::fs::OpenOptions::new()
+            .write(true)
+            .open(path)
+            .and_then(|mut f| {
+                f.write_all(text.as_bytes())?;
+                f.flush()
+            })
+            .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()));
+    }
     let name = path.file_name().map_or_else(
         || std::ffi::OsString::from("output"),
         std::ffi::OsStr::to_os_string,

@@ -1002,6 +1002,12 @@ pub fn calibrate_measured(
     if n_rows == 0 {
         bail!("the training files have no row");
     }
+    if n_rows < 2 {
+        bail!(
+            "the training files have 1 row: cross-validation needs at least 2 (with --test-last, \
+             hold out a smaller share)"
+        );
+    }
     if cfg.folds < 2 || cfg.folds > n_rows {
         bail!(
             "--folds {} is not possible with {n_rows} training rows (2 to {n_rows})",
@@ -1184,6 +1190,15 @@ pub fn calibrate_measured(
         warnings.push(format!(
             "{n_free} parameters are kept from {n_samples} residuals: fewer than 3 residuals per \
              parameter; the estimate follows the noise (record more configurations)"
+        ));
+    }
+    let termination = &fitted.identified.fit.termination;
+    if !termination.is_success() {
+        warnings.push(format!(
+            "the least-squares fit did not converge ({termination:?} after {} evaluations): the \
+             estimate is the last iterate, not a minimum (a --sigma-m far below the residual keeps \
+             parameters the data do not determine)",
+            fitted.identified.fit.n_evaluations
         ));
     }
     let frame_sigma_ratio = frames_only.identified.sigma;

@@ -132,11 +132,11 @@ enum Command {
         /// Truth file (its device file is named inside).
         #[arg(long)]
         truth: Option<PathBuf>,
-        /// Monte Carlo seeds (seed 0 is the single-seed run).
-        #[arg(long, default_value_t = 100)]
+        /// Monte Carlo seeds (seed 0 is the single-seed run; at most 10,000).
+        #[arg(long, default_value_t = 100, value_parser = hapcal::count_in::<0, 10_000>)]
         seeds: usize,
-        /// Poses per identification and per validation.
-        #[arg(long, default_value_t = 200)]
+        /// Poses per identification and per validation (1 to 100,000).
+        #[arg(long, default_value_t = 200, value_parser = hapcal::count_in::<1, 100_000>)]
         poses: usize,
         /// Output folder.
         #[arg(long, default_value = "docs/results/paper")]
@@ -149,8 +149,8 @@ enum Command {
         /// instead of taking random poses as the paper does.
         #[arg(long)]
         design: Option<hapcal_identify::Criterion>,
-        /// Random candidates per seed for `--design`.
-        #[arg(long, default_value_t = 2000)]
+        /// Random candidates per seed for `--design` (1 to 100,000).
+        #[arg(long, default_value_t = 2000, value_parser = hapcal::count_in::<1, 100_000>)]
         candidates: usize,
     },
     /// Simulate a measurement log (docs/design.md §5) from a truth device: joint readings quantised
@@ -166,8 +166,8 @@ enum Command {
         /// Random seed (the log is the same for the same seed).
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// Number of poses (at least 1).
-        #[arg(long, default_value_t = 200, value_parser = count_at_least::<1>)]
+        /// Number of poses (1 to 1,000,000).
+        #[arg(long, default_value_t = 200, value_parser = hapcal::count_in::<1, 1_000_000>)]
         poses: usize,
         /// Cable noise: `paper` (σ_m = 2π·R_d·σ_e, the paper's formula) or `arc-length` (R_d·σ_e).
         #[arg(long, default_value = "paper")]
@@ -246,7 +246,7 @@ enum Command {
     /// docs/results/diagnose.md.
     BlindTest {
         /// Number of cases (kinds stratified: 1/8 none, 1/8 outside, 1/8 two, 5/8 one effect).
-        #[arg(long, default_value_t = 240, value_parser = count_at_least::<1>)]
+        #[arg(long, default_value_t = 240, value_parser = hapcal::count_in::<1, 100_000>)]
         cases: usize,
         /// First seed.
         #[arg(long, default_value_t = 0)]
@@ -272,8 +272,8 @@ enum Command {
         /// Force-feedback gain G of the closed-loop rows.
         #[arg(long, default_value_t = 10.0, allow_hyphen_values = true)]
         gain: f64,
-        /// Random poses (at least 1).
-        #[arg(long, default_value_t = 200, value_parser = count_at_least::<1>)]
+        /// Random poses (1 to 100,000).
+        #[arg(long, default_value_t = 200, value_parser = hapcal::count_in::<1, 100_000>)]
         poses: usize,
         /// Seed of the random poses.
         #[arg(long, default_value_t = 4)]
@@ -301,6 +301,11 @@ enum Command {
         tip: String,
     },
 }
+
+/// Largest `force --gain` (dimensionless): a hundred times the default of 10. Far above it the
+/// closed loop renders the desired wrench to rounding whatever the model, and the comparison
+/// of models says nothing.
+const MAX_FORCE_GAIN: f64 = 1000.0;
 
 /// Parses a whole number that must be at least `MIN` (poses, cases, folds); clap reports a
 /// smaller or non-numeric value as a usage error naming the argument.
@@ -633,8 +638,11 @@ fn run(cli: Cli) -> Result<()> {
             svg,
         } => {
             calibrate::check_extension(&svg, &["svg"], "the Fig. 12 plot", true)?;
-            if !(gain.is_finite() && gain >= 0.0) {
-                anyhow::bail!("--gain must be a finite number ≥ 0, got {gain}");
+            if !(gain.is_finite() && (0.0..=MAX_FORCE_GAIN).contains(&gain)) {
+                anyhow::bail!(
+                    "--gain must lie between 0 and {MAX_FORCE_GAIN} (a force-feedback gain, \
+                     dimensionless), got {gain:e}"
+                );
             }
             let inputs = [device.as_path(), truth.as_path(), calibrated.as_path()];
             calibrate::check_output(&svg, &inputs)?;
@@ -716,6 +724,21 @@ fn run(cli: Cli) -> Result<()> {
             let (text, json_text, svg_text) = if haptic {
                 if data.len() != 1 || !test.is_empty() {
                     anyhow::bail!("a haptic device is diagnosed from one log: --data <log.csv>");
+                }
+                // The floor comes from the encoders' specification, the held-out rows from
+                // cross-validation: these options would be silently ignored.
+                for (option, given) in [
+                    ("--sigma-m", sigma_m.is_some()),
+                    ("--sigma-rad", sigma_rad.is_some()),
+                    ("--test-last", test_last.is_some()),
+                ] {
+                    if given {
+                        anyhow::bail!(
+                            "{option} does not apply to a haptic device's diagnosis (the floor \
+                             comes from the encoders' specification, the held-out rows from \
+                             --folds)"
+                        );
+                    }
                 }
                 let plan = hapcal::diagnose::DiagnosePlan::new(
                     device.clone(),

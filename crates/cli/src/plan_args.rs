@@ -16,11 +16,11 @@ pub struct PlanArgs {
     /// What the rig measures.
     #[arg(long, value_enum, default_value_t = Measurement::Distance)]
     pub measurement: Measurement,
-    /// Number of poses to choose.
-    #[arg(long, default_value_t = 30)]
+    /// Number of poses to choose (1 to 10,000).
+    #[arg(long, default_value_t = 30, value_parser = crate::count_in::<1, 10_000>)]
     pub count: usize,
-    /// Candidate poses sampled uniformly within the joint limits.
-    #[arg(long, default_value_t = 1000)]
+    /// Candidate poses sampled uniformly within the joint limits (1 to 100,000).
+    #[arg(long, default_value_t = 1000, value_parser = crate::count_in::<1, 100_000>)]
     pub candidates: usize,
     /// Seed of the candidate sampling.
     #[arg(long, default_value_t = 1)]

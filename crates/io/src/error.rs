@@ -109,6 +109,58 @@ pub enum Error {
         /// Upper limit in rad.
         max_rad: f64,
     },
+    /// An external-encoder reading (`ext1..ext4`, the output angle of joint k) lies further
+    /// past the joint's limits than [`JOINT_LIMIT_SLACK`](crate::JOINT_LIMIT_SLACK) of the
+    /// joint's range.
+    #[error(
+        "{path}:{line}:{column}: {name} = {v} rad (the external encoder of joint {joint:?}) is outside [{lo}, {hi}] rad: the joint's limits [{min_rad}, {max_rad}] rad widened by {pct}% of its range",
+        v = readable(*.value_rad),
+        lo = tidy(*.min_rad - *.slack_rad),
+        hi = tidy(*.max_rad + *.slack_rad),
+        pct = crate::JOINT_LIMIT_SLACK * 100.0
+    )]
+    ExtOutsideJointLimits {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// 1-based column.
+        column: u64,
+        /// The column's name (`ext1` … `ext4`).
+        name: String,
+        /// The joint's name in the device file.
+        joint: String,
+        /// The reading in rad.
+        value_rad: f64,
+        /// The joint's lower limit in rad.
+        min_rad: f64,
+        /// The joint's upper limit in rad.
+        max_rad: f64,
+        /// How far past a limit a reading is accepted, rad.
+        slack_rad: f64,
+    },
+    /// A measured quantity (a log's `distance_m`, a marker's position, an observed pose's
+    /// translation) has bit-identical values in every one of at least two rows: a frozen or
+    /// disconnected sensor, whose data would fit any model with a residual of 0.
+    #[error(
+        "{path}:{line}:{column}: {name} is {value} in all {rows} {what}: the measurement does not change (a frozen or disconnected sensor?)"
+    )]
+    FrozenMeasurement {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line of the header (of the first observation for YAML).
+        line: u64,
+        /// 1-based column of the (first) column.
+        column: u64,
+        /// The column name or names as the file spells them (`distance_m`, `x, y, z`).
+        name: String,
+        /// The constant value with its unit (`0.512 m`, `(0.1, 0.2, 0.3) m`).
+        value: String,
+        /// The number of rows (observations) holding it.
+        rows: usize,
+        /// `rows` or `observations`.
+        what: &'static str,
+    },
     /// `t_s` decreases from one row to the next.
     #[error("{path}:{line}: t_s = {t_s} s is before the previous row's {previous_t_s} s")]
     TimeOrder {
@@ -453,9 +505,22 @@ pub(crate) fn readable(value: f64) -> String {
     }
 }
 
+/// A computed bound as a user reads it: rounded to 12 significant digits (−1.5 − 0.3 is
+/// shown as `-1.8`, not `-1.8000000000000003`), then as [`readable`].
+fn tidy(value: f64) -> String {
+    readable(format!("{value:.11e}").parse().unwrap_or(value))
+}
+
 #[cfg(test)]
 mod tests {
-    use super::line_column;
+    use super::{line_column, tidy};
+
+    #[test]
+    fn tidy_rounds_sums_of_limits() {
+        assert_eq!(tidy(-1.5 - 0.1 * 3.0), "-1.8");
+        assert_eq!(tidy(2e7), "2e7");
+        assert_eq!(tidy(0.125), "0.125");
+    }
 
     #[test]
     fn line_column_is_one_based() {

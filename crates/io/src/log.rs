@@ -5,10 +5,14 @@ use std::path::Path;
 
 use crate::Error;
 use crate::device::Device;
-use crate::table::{Repeats, Table, check_separator, number};
+use crate::measure::{Reach, reach};
+use crate::table::{Frozen, Repeats, Table, check_separator, first_duplicate, metres, number};
 
 /// Number of external encoder columns (`ext1..ext4`, one per transmission output shaft).
 pub const N_EXT: usize = 4;
+
+/// Unknown columns warned about one by one; more are summed up in one further warning.
+const MAX_UNKNOWN_WARNINGS: usize = 10;
 
 /// A measurement log: one row per sample, in file order.
 #[derive(Clone, Debug, PartialEq)]
@@ -28,7 +32,9 @@ pub struct LogRow {
     /// Cable-encoder distance, m.
     pub distance_m: f64,
     /// External encoder output angles `ext1..ext4`, rad; always length [`N_EXT`], `None`
-    /// where the column is absent or the cell empty.
+    /// where the column is absent or the cell empty. `ext[k]` of a joint the device has lies
+    /// within that joint's limits widened by [`JOINT_LIMIT_SLACK`](crate::JOINT_LIMIT_SLACK)
+    /// of its range ([`read_log`]).
     pub ext: Vec<Option<f64>>,
     /// Time, s, if the log has a `t_s` column.
     pub t_s: Option<f64>,
@@ -37,7 +43,7 @@ pub struct LogRow {
 }
 
 /// What a header column holds.
-#[derive(Clone, Copy, PartialEq, Eq)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
 enum Column {
     Q(usize),
     Distance,
@@ -70,9 +76,15 @@ fn classify(name: &str) -> Column {
 /// The header row names the columns, in any order: `q1..qn` (rad; n = the device's number
 /// of joints) and `distance_m` (m) are required; `ext1..ext4` (rad; an empty cell means no
 /// reading) and `t_s` (s, non-decreasing) are optional. Unknown columns are ignored with a
-/// warning in [`Log::warnings`]. Joint readings must lie within the device's limits
-/// (inclusive). Rows that repeat an earlier row's joint readings, distance and external
-/// readings are kept, with one warning naming the first and how many there are.
+/// warning in [`Log::warnings`] (one per column for the first ten, then one for the rest).
+/// Joint readings must lie within the device's limits (inclusive). An external-encoder
+/// reading `ext{k}` measures the output angle of joint k, which differs from the reading
+/// `q{k}` by the transmission's error, so it may lie up to
+/// [`JOINT_LIMIT_SLACK`](crate::JOINT_LIMIT_SLACK) of joint k's range past its limits (as
+/// the readings of a measurement file may); an `ext{k}` column of a joint the device does not
+/// have is only checked to be a finite number. Rows that repeat an earlier row's joint
+/// readings, distance and external readings are kept, with one warning naming the first and
+/// how many there are. The header is checked in time linear in its number of columns.
 ///
 /// # Errors
 ///
@@ -82,8 +94,12 @@ fn classify(name: &str) -> Column {
 /// [`Error::Ragged`] for a row with another number of fields than the header;
 /// [`Error::Separator`] for a file separated by semicolons, tabs or spaces;
 /// [`Error::NotANumber`], [`Error::NotFinite`], [`Error::OutsideJointLimits`],
-/// [`Error::LengthOutOfRange`] and [`Error::NegativeDistance`] for a bad cell and [`Error::TimeOrder`] if `t_s` decreases (all with file:line:column, column =
-/// field number); [`Error::Csv`] for invalid UTF-8.
+/// [`Error::ExtOutsideJointLimits`], [`Error::LengthOutOfRange`] and
+/// [`Error::NegativeDistance`] for a bad cell and [`Error::TimeOrder`] if `t_s` decreases
+/// (all with file:line:column, column = field number); [`Error::FrozenMeasurement`] (file,
+/// header line and `distance_m`'s column) if `distance_m` holds the same value in every one
+/// of two or more rows (a frozen or disconnected cable encoder; joint columns may be
+/// constant); [`Error::Csv`] for invalid UTF-8.
 pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
     let n_joints = device.n_joints();
     let limits = device.joint_limits();
@@ -98,22 +114,33 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
     check_separator(path, header_line, header, n_joints + 1)?;
     let names: Vec<String> = header.iter().map(str::to_owned).collect();
     let columns: Vec<Column> = names.iter().map(|n| classify(n)).collect();
+    if let Some(c) = first_duplicate(&names) {
+        return Err(Error::DuplicateColumn {
+            path: path.to_path_buf(),
+            column: c as u64 + 1,
+            name: names.get(c).cloned().unwrap_or_default(),
+        });
+    }
     let mut warnings = Vec::new();
-    for (c, (name, column)) in names.iter().zip(&columns).enumerate() {
-        if names.iter().take(c).any(|earlier| earlier == name) {
-            return Err(Error::DuplicateColumn {
-                path: path.to_path_buf(),
-                column: c as u64 + 1,
-                name: name.clone(),
-            });
-        }
-        if *column == Column::Unknown {
-            warnings.push(format!(
-                "{}:{header_line}:{}: unknown column {name:?} ignored",
-                path.display(),
-                c + 1
-            ));
-        }
+    let unknown: Vec<usize> = (columns.iter().enumerate())
+        .filter(|(_, column)| **column == Column::Unknown)
+        .map(|(c, _)| c)
+        .collect();
+    for &c in unknown.iter().take(MAX_UNKNOWN_WARNINGS) {
+        warnings.push(format!(
+            "{}:{header_line}:{}: unknown column {:?} ignored",
+            path.display(),
+            c + 1,
+            names.get(c).map_or("", String::as_str)
+        ));
+    }
+    if unknown.len() > MAX_UNKNOWN_WARNINGS {
+        warnings.push(format!(
+            "{}:{header_line}: {} more unknown columns ignored ({} in all)",
+            path.display(),
+            unknown.len() - MAX_UNKNOWN_WARNINGS,
+            unknown.len()
+        ));
     }
     let n_q = columns.iter().filter(|c| matches!(c, Column::Q(_))).count();
     if n_q != n_joints {
@@ -127,8 +154,9 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
     let required = (0..n_joints)
         .map(|j| (Column::Q(j), format!("q{}", j + 1)))
         .chain([(Column::Distance, "distance_m".to_owned())]);
+    let present: std::collections::HashSet<Column> = columns.iter().copied().collect();
     for (column, name) in required {
-        if !columns.contains(&column) {
+        if !present.contains(&column) {
             return Err(Error::MissingColumn {
                 path: path.to_path_buf(),
                 name,
@@ -139,6 +167,7 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
     let mut rows = Vec::new();
     let mut previous_t: Option<f64> = None;
     let mut repeats = Repeats::default();
+    let mut distances = Frozen::default();
     while let Some((line, record)) = table.next_record()? {
         if record.len() != columns.len() {
             check_separator(path, line, record, columns.len())?;
@@ -199,8 +228,26 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
                     row.distance_m = value;
                 }
                 Column::Ext(k) if !cell.is_empty() => {
+                    let value = parse()?;
+                    if let Some(&(min_rad, max_rad)) = limits.get(k)
+                        && reach(value, (min_rad, max_rad)) == Reach::Outside
+                    {
+                        let joint =
+                            (device.joints.get(k)).map_or_else(|| name.clone(), |s| s.name.clone());
+                        return Err(Error::ExtOutsideJointLimits {
+                            path: path.to_path_buf(),
+                            line,
+                            column: col,
+                            name: name.clone(),
+                            joint,
+                            value_rad: value,
+                            min_rad,
+                            max_rad,
+                            slack_rad: crate::JOINT_LIMIT_SLACK * (max_rad - min_rad),
+                        });
+                    }
                     if let Some(ext) = row.ext.get_mut(k) {
-                        *ext = Some(parse()?);
+                        *ext = Some(value);
                     }
                 }
                 Column::Time => row.t_s = Some(parse()?),
@@ -218,6 +265,7 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
             });
         }
         previous_t = row.t_s;
+        distances.see(&[row.distance_m]);
         // Joint readings and measurements; the time of a repeated pose differs.
         let ext = row.ext.iter().map(|e| e.unwrap_or(f64::NAN));
         repeats.see(
@@ -231,6 +279,18 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
             path: path.to_path_buf(),
             min: 1,
             found: 0,
+        });
+    }
+    if let Some((value, rows)) = distances.frozen() {
+        let column = columns.iter().position(|c| *c == Column::Distance);
+        return Err(Error::FrozenMeasurement {
+            path: path.to_path_buf(),
+            line: header_line,
+            column: column.map_or(0, |c| c as u64 + 1),
+            name: "distance_m".to_owned(),
+            value: metres(value),
+            rows,
+            what: "rows",
         });
     }
     warnings.extend(repeats.warning(path));

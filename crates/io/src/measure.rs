@@ -8,7 +8,7 @@ use nalgebra::{Quaternion, UnitQuaternion};
 use serde::Deserialize;
 
 use crate::Error;
-use crate::table::{Repeats, Table, check_separator, number};
+use crate::table::{Frozen, Repeats, Table, check_separator, first_duplicate, metres, number};
 
 /// Unit of the length columns of a measurement file (positions, distances, prismatic joints).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -289,7 +289,12 @@ fn spelled(stem: &str, k: usize, unnumbered: bool) -> String {
 /// range past the limits (a reading closer than that is kept, with one warning in
 /// [`MeasurementTable::warnings`]) and [`Error::TimeOrder`], with file:line:column; [`Error::Csv`]
 /// (file, line, column named in the message) for a negative distance, a quaternion whose norm
-/// is not 1 within 10⁻³, or invalid UTF-8.
+/// is not 1 within 10⁻³, or invalid UTF-8; [`Error::FrozenMeasurement`] (file, header line,
+/// column) if the distance column holds the same value (m) in every one of two or more rows,
+/// or a marker's `x, y, z` the same position (m) in every one of two or more rows where it is
+/// seen: a frozen or disconnected instrument (joint columns may be constant).
+///
+/// The header is handled in time linear in its number of columns.
 pub fn read_measurement_file(
     path: &Path,
     schema: &JointSchema<'_>,
@@ -313,14 +318,12 @@ pub fn read_measurement_file(
     check_separator(path, header_line, header, n + 1)?;
     let names: Vec<String> = header.iter().map(str::to_owned).collect();
     let columns: Vec<Column> = names.iter().map(|c| classify(c, schema)).collect();
-    for (c, name) in names.iter().enumerate() {
-        if names[..c].contains(name) {
-            return Err(Error::DuplicateColumn {
-                path: path.to_path_buf(),
-                column: c as u64 + 1,
-                name: name.clone(),
-            });
-        }
+    if let Some(c) = first_duplicate(&names) {
+        return Err(Error::DuplicateColumn {
+            path: path.to_path_buf(),
+            column: c as u64 + 1,
+            name: names[c].clone(),
+        });
     }
     // Joints: each exactly once (a joint named both `q2` and by name is a duplicate).
     let mut joint_column = vec![None; n];
@@ -377,8 +380,10 @@ pub fn read_measurement_file(
     if n_markers > names.len() {
         // A marker number past the number of columns (`x123456789012`): some marker below
         // it has no column at all, and a table of that many markers must not be allocated.
+        let present: std::collections::HashSet<usize> =
+            columns.iter().filter_map(marker_of).collect();
         let k = (0..=names.len())
-            .find(|k| !columns.iter().any(|c| marker_of(c) == Some(*k)))
+            .find(|k| !present.contains(k))
             .unwrap_or(0);
         return Err(incomplete(k, "x", "missing from the header"));
     }
@@ -450,6 +455,8 @@ pub fn read_measurement_file(
     let mut outside = Vec::new();
     let mut first_outside = String::new();
     let mut repeats = Repeats::default();
+    let mut frozen_distance = Frozen::default();
+    let mut frozen_position: Vec<Frozen> = (0..n_markers).map(|_| Frozen::default()).collect();
     while let Some((line, record)) = table.next_record()? {
         if record.len() != names.len() {
             check_separator(path, line, record, names.len())?;
@@ -531,6 +538,7 @@ pub fn read_measurement_file(
                         ),
                     });
                 }
+                frozen_distance.see(&[d]);
                 Some(d)
             }
             _ => None,
@@ -567,6 +575,9 @@ pub fn read_measurement_file(
             for (p, c) in position_m.iter_mut().zip(m.position.iter().flatten()) {
                 *p = value(*c)? * length;
                 Error::check_length(path, line, *c as u64 + 1, &names[*c], *p)?;
+            }
+            if let Some(frozen) = frozen_position.get_mut(k) {
+                frozen.see(&position_m);
             }
             let rotation = if let [Some(w), Some(x), Some(y), Some(z)] = m.quaternion {
                 let quaternion = [value(w)?, value(x)?, value(y)?, value(z)?];
@@ -616,6 +627,33 @@ pub fn read_measurement_file(
             found: 0,
         });
     }
+    if let (Some(c), Some((value, rows))) = (distance_column, frozen_distance.frozen()) {
+        return Err(Error::FrozenMeasurement {
+            path: path.to_path_buf(),
+            line: header_line,
+            column: c as u64 + 1,
+            name: names[c].clone(),
+            value: metres(value),
+            rows,
+            what: "rows",
+        });
+    }
+    for (m, frozen) in markers.iter().zip(&frozen_position) {
+        if let Some((value, rows)) = frozen.frozen() {
+            let position: Vec<usize> = m.position.iter().flatten().copied().collect();
+            return Err(Error::FrozenMeasurement {
+                path: path.to_path_buf(),
+                line: header_line,
+                column: position.first().map_or(0, |c| *c as u64 + 1),
+                name: (position.iter().map(|c| names[*c].as_str()))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                value: metres(value),
+                rows,
+                what: "rows where the marker is seen",
+            });
+        }
+    }
     let mut warnings = Vec::new();
     if !outside.is_empty() {
         warnings.push(format!(
@@ -645,35 +683,53 @@ pub fn read_measurement_file(
     })
 }
 
-/// A warning for each pair of markers whose positions are identical in every row where both
-/// are seen (a column set copied twice: the same point would count twice in the fit).
+/// A warning for each set of markers seen in the same rows at the same positions (a column
+/// set copied twice: the same point would count twice in the fit). Linear in the number of
+/// cells: markers are grouped by the sequence of their (row, position) pairs.
 fn identical_markers(path: &Path, rows: &[MeasuredRow], n_markers: usize) -> Vec<String> {
-    let mut out = Vec::new();
-    for a in 0..n_markers {
-        for b in a + 1..n_markers {
-            let mut both = 0usize;
-            let same = rows.iter().all(|r| {
-                let find = |k: usize| r.markers.iter().find(|m| m.marker == k);
-                match (find(a), find(b)) {
-                    (Some(ma), Some(mb)) => {
-                        both += 1;
-                        ma.position_m == mb.position_m
-                    }
-                    _ => true,
-                }
-            });
-            if same && both > 0 {
-                out.push(format!(
-                    "{}: markers {} and {} have the same position in all {both} rows where both are \
-                     seen: one point counted twice (drop one column set if it was copied)",
-                    path.display(),
-                    a + 1,
-                    b + 1
-                ));
+    let mut seen: Vec<Vec<(usize, [u64; 3])>> = vec![Vec::new(); n_markers];
+    for (i, row) in rows.iter().enumerate() {
+        for m in &row.markers {
+            if let Some(list) = seen.get_mut(m.marker) {
+                list.push((i, m.position_m.map(|v| (v + 0.0).to_bits())));
             }
         }
     }
-    out
+    let mut groups: std::collections::HashMap<&[(usize, [u64; 3])], Vec<usize>> =
+        std::collections::HashMap::new();
+    for (k, list) in seen.iter().enumerate() {
+        if !list.is_empty() {
+            groups.entry(list.as_slice()).or_default().push(k);
+        }
+    }
+    let mut groups: Vec<(usize, Vec<usize>)> = (groups.into_iter())
+        .filter(|(_, markers)| markers.len() > 1)
+        .map(|(list, markers)| (list.len(), markers))
+        .collect();
+    groups.sort_by_key(|(_, markers)| markers.first().copied());
+    groups
+        .into_iter()
+        .filter_map(|(both, markers)| {
+            let numbers: Vec<String> = markers.iter().map(|k| (k + 1).to_string()).collect();
+            let (last, others) = numbers.split_last()?;
+            Some(format!(
+                "{}: markers {} and {last} have the same position in all {both} rows where {} \
+                 seen: one point counted {} (drop the copied column sets)",
+                path.display(),
+                others.join(", "),
+                if numbers.len() == 2 {
+                    "both are"
+                } else {
+                    "they are"
+                },
+                if numbers.len() == 2 {
+                    "twice".to_owned()
+                } else {
+                    format!("{} times", numbers.len())
+                },
+            ))
+        })
+        .collect()
 }
 
 /// A row's joint readings and measurements (not its time or line), to find repeated rows;
@@ -729,7 +785,9 @@ struct Pose {
 /// than the device's, a non-finite number, a joint outside its range or a quaternion that is
 /// not of unit norm, or collections nested deeper than [`MAX_YAML_DEPTH`] (at the line and
 /// column where the limit is passed, found in one linear pass before parsing);
-/// [`Error::TooFewRows`] without observations.
+/// [`Error::TooFewRows`] without observations; [`Error::FrozenMeasurement`] (file, line of
+/// the first observation) if two or more observations all have the same pose translation
+/// `x, y, z` (m): a frozen camera or target detection.
 pub fn read_industrial_yaml(
     path: &Path,
     schema: &JointSchema<'_>,
@@ -763,6 +821,7 @@ pub fn read_industrial_yaml(
     let mut rows = Vec::with_capacity(observations.len());
     let (mut n_outside, mut first_outside) = (0usize, String::new());
     let mut repeats = Repeats::default();
+    let mut frozen = Frozen::default();
     for (key, value) in observations {
         let key = match key {
             serde_yaml_ng::Value::String(s) => s,
@@ -829,6 +888,7 @@ pub fn read_industrial_yaml(
                 ),
             ));
         }
+        frozen.see(&[p.x, p.y, p.z]);
         let q = UnitQuaternion::from_quaternion(Quaternion::new(p.qw, p.qx, p.qy, p.qz));
         let row = MeasuredRow {
             line,
@@ -849,6 +909,18 @@ pub fn read_industrial_yaml(
             path: path.to_path_buf(),
             min: 1,
             found: 0,
+        });
+    }
+    if let Some((value, n_rows)) = frozen.frozen() {
+        let first = rows.first().map_or(0, |r| r.line);
+        return Err(Error::FrozenMeasurement {
+            path: path.to_path_buf(),
+            line: first,
+            column: 1,
+            name: "pose x, y, z".to_owned(),
+            value: metres(value),
+            rows: n_rows,
+            what: "observations",
         });
     }
     Ok(MeasurementTable {

@@ -192,3 +192,77 @@ pub(crate) fn check_separator(
         None => Ok(()),
     }
 }
+
+/// 0-based index of the first name that repeats an earlier one, found in linear time (a
+/// header of a million columns is checked as fast as it is read).
+pub(crate) fn first_duplicate(names: &[String]) -> Option<usize> {
+    let mut seen = std::collections::HashSet::with_capacity(names.len());
+    names.iter().position(|name| !seen.insert(name.as_str()))
+}
+
+/// Watches one measured quantity (a distance, a position) over the rows of a file, to refuse
+/// a frozen or disconnected sensor: a quantity bit-identical (−0 counted as +0) in every one
+/// of at least two rows.
+#[derive(Default)]
+pub(crate) struct Frozen {
+    /// The first row's values.
+    first: Vec<f64>,
+    /// The rows seen.
+    rows: usize,
+    /// Whether some row differs from the first.
+    changed: bool,
+}
+
+impl Frozen {
+    /// Records one row's values of the quantity (the same number of values each time).
+    pub(crate) fn see(&mut self, values: &[f64]) {
+        if self.rows == 0 {
+            self.first = values.to_vec();
+        } else if !self.changed {
+            let bits = |v: &f64| (v + 0.0).to_bits();
+            self.changed = !(self.first.iter().map(bits)).eq(values.iter().map(bits));
+        }
+        self.rows += 1;
+    }
+
+    /// The constant values and the number of rows, if at least two rows were seen and all
+    /// hold the same values.
+    pub(crate) fn frozen(&self) -> Option<(&[f64], usize)> {
+        (self.rows >= 2 && !self.changed).then_some((&self.first, self.rows))
+    }
+}
+
+/// `values` in metres as a message shows them: `0.512 m`, or `(0.1, 0.2, 0.3) m` for more
+/// than one value, each in [`readable`](crate::error::readable) form.
+pub(crate) fn metres(values: &[f64]) -> String {
+    let cells: Vec<String> = values.iter().map(|v| crate::error::readable(*v)).collect();
+    match cells.as_slice() {
+        [one] => format!("{one} m"),
+        _ => format!("({}) m", cells.join(", ")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Frozen, first_duplicate, metres};
+
+    #[test]
+    fn first_duplicate_is_the_second_occurrence() {
+        let names: Vec<String> = ["a", "b", "c", "b", "a"].map(String::from).to_vec();
+        assert_eq!(first_duplicate(&names), Some(3));
+        assert_eq!(first_duplicate(&names[..3]), None);
+    }
+
+    #[test]
+    fn frozen_needs_two_identical_rows_and_counts_minus_zero_as_zero() {
+        let mut f = Frozen::default();
+        f.see(&[0.0]);
+        assert_eq!(f.frozen(), None, "one row is no evidence");
+        f.see(&[-0.0]);
+        assert_eq!(f.frozen(), Some((&[0.0][..], 2)));
+        f.see(&[1e-300]);
+        assert_eq!(f.frozen(), None);
+        assert_eq!(metres(&[0.512]), "0.512 m");
+        assert_eq!(metres(&[1.0, 2e7, 3.5]), "(1, 2e7, 3.5) m");
+    }
+}

@@ -144,6 +144,22 @@ impl EffectKind {
         }
     }
 
+    /// The values a parameter may take: phases and bump positions within ±2π rad, a bump width
+    /// within [10⁻⁶, 2π] rad, a latency within [0, 1] s, a backlash half-width within
+    /// [0, 0.1] rad, every other amplitude or coefficient within ±1 (in its SI unit: rad, m,
+    /// m/rad, rad/(N·m), m/s). Wider values are not a perturbation of a haptic device: a
+    /// `cable_angle:k=1e300` writes distances of 1e299 m.
+    fn range(self, key: &str) -> (f64, f64) {
+        use std::f64::consts::TAU;
+        match self {
+            _ if key.starts_with("phase") || key.starts_with("at") => (-TAU, TAU),
+            EffectKind::JointBump if key == "width" => (1e-6, TAU),
+            EffectKind::Latency => (0.0, 1.0),
+            EffectKind::Backlash => (0.0, 0.1),
+            _ => (-1.0, 1.0),
+        }
+    }
+
     /// Keys this effect accepts, for messages.
     fn keys_help(self) -> &'static str {
         match self {
@@ -220,6 +236,13 @@ impl Effect {
             }
             if params[..i].iter().any(|(k, _)| k == key) {
                 return Err(bad(format!("{key} is given twice")));
+            }
+            let (lo, hi) = kind.range(key);
+            if !(lo..=hi).contains(value) {
+                return Err(bad(format!(
+                    "{key} = {value:e} is outside [{lo}, {hi}]: an unmodelled effect is a small \
+                     perturbation of the device (rad, m, s, or per rad, per N·m)"
+                )));
             }
         }
         Ok(Effect { kind, params })

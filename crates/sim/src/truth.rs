@@ -212,7 +212,10 @@ impl Truth {
 /// Reads and checks a truth file.
 ///
 /// Checks, beyond the TOML syntax and types (unknown keys are errors): every number is
-/// finite; every `[deviations]` name has the form of a chain parameter (`da`, `dalpha`,
+/// finite and within its plausible range (length deviations and the parallelogram's
+/// `dl1_m..dl4_m` within ±0.1 m, angle deviations within ±π/4 rad, phases and offsets within
+/// ±2π rad, eccentricities within ±0.01 m, the ratio error within ±1); every `[deviations]`
+/// name has the form of a chain parameter (`da`, `dalpha`,
 /// `dd`, `dtheta` or `dbeta` followed by a row number); capstan joints are ≥ 1 and unique;
 /// the device path is not empty. Whether the names and joints exist on the device is
 /// checked by [`simulate`](crate::simulate) and [`truth_deviations`](crate::truth_deviations).
@@ -268,6 +271,34 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
         }
     };
 
+    // Plausible ranges: a truth is a small correction of the nominal device (its lengths are
+    // tenths of a metre, its deviations millimetres and milliradians), so a value outside these
+    // is a typo, not a device: `da1 = 1e10` would put the tool 10⁷ km away.
+    let bounded = |name: &str, value: &Spanned<f64>, limit: f64, unit: &str| {
+        let v = finite(name, value)?;
+        if v.abs() <= limit {
+            Ok(v)
+        } else {
+            let unit = if unit.is_empty() {
+                String::new()
+            } else {
+                format!(" {unit}")
+            };
+            Err(invalid(
+                value.span().start,
+                format!(
+                    "{name} = {v:e}{unit} is outside ±{limit}{unit}: a truth deviates from the \
+                     nominal device by a small correction"
+                ),
+            ))
+        }
+    };
+    const LENGTH_DEVIATION_M: f64 = 0.1;
+    const ANGLE_DEVIATION_RAD: f64 = std::f64::consts::FRAC_PI_4;
+    const PHASE_RAD: f64 = std::f64::consts::TAU;
+    const ECCENTRICITY_M: f64 = 0.01;
+    const RATIO_ERROR: f64 = 1.0;
+
     if raw.device.get_ref().as_os_str().is_empty() {
         return Err(invalid(
             raw.device.span().start,
@@ -289,7 +320,16 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
                 ),
             ));
         }
-        deviations.push((name.get_ref().clone(), finite(name.get_ref(), value)?));
+        let n = name.get_ref();
+        let angle = ["dalpha", "dtheta", "dbeta"]
+            .iter()
+            .any(|p| n.starts_with(p));
+        let v = if angle {
+            bounded(n, value, ANGLE_DEVIATION_RAD, "rad")?
+        } else {
+            bounded(n, value, LENGTH_DEVIATION_M, "m")?
+        };
+        deviations.push((n.clone(), v));
     }
 
     let mut capstans: Vec<CapstanTruth> = Vec::with_capacity(raw.capstans.len());
@@ -309,23 +349,23 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
         }
         capstans.push(CapstanTruth {
             joint,
-            c_rad: finite("c_rad", &c.c_rad)?,
-            re: finite("re", &c.re)?,
-            r_o_m: finite("r_o_m", &c.r_o_m)?,
-            beta_o_rad: finite("beta_o_rad", &c.beta_o_rad)?,
-            r_i_m: finite("r_i_m", &c.r_i_m)?,
-            beta_i_rad: finite("beta_i_rad", &c.beta_i_rad)?,
+            c_rad: bounded("c_rad", &c.c_rad, PHASE_RAD, "rad")?,
+            re: bounded("re", &c.re, RATIO_ERROR, "")?,
+            r_o_m: bounded("r_o_m", &c.r_o_m, ECCENTRICITY_M, "m")?,
+            beta_o_rad: bounded("beta_o_rad", &c.beta_o_rad, PHASE_RAD, "rad")?,
+            r_i_m: bounded("r_i_m", &c.r_i_m, ECCENTRICITY_M, "m")?,
+            beta_i_rad: bounded("beta_i_rad", &c.beta_i_rad, PHASE_RAD, "rad")?,
         });
     }
 
     let parallelogram = match &raw.parallelogram {
         None => None,
         Some(p) => Some(ParallelogramTruth {
-            dl1_m: finite("dl1_m", &p.dl1_m)?,
-            dl2_m: finite("dl2_m", &p.dl2_m)?,
-            dl3_m: finite("dl3_m", &p.dl3_m)?,
-            dl4_m: finite("dl4_m", &p.dl4_m)?,
-            phi0_rad: finite("phi0_rad", &p.phi0_rad)?,
+            dl1_m: bounded("dl1_m", &p.dl1_m, LENGTH_DEVIATION_M, "m")?,
+            dl2_m: bounded("dl2_m", &p.dl2_m, LENGTH_DEVIATION_M, "m")?,
+            dl3_m: bounded("dl3_m", &p.dl3_m, LENGTH_DEVIATION_M, "m")?,
+            dl4_m: bounded("dl4_m", &p.dl4_m, LENGTH_DEVIATION_M, "m")?,
+            phi0_rad: bounded("phi0_rad", &p.phi0_rad, PHASE_RAD, "rad")?,
         }),
     };
 

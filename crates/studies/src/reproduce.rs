@@ -25,6 +25,16 @@ fn sample_sd(v: &[f64]) -> f64 {
     (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
 }
 
+/// A CSV cell: empty for a value that is not defined (NaN, e.g. a standard deviation over one
+/// seed).
+fn csv_number(v: f64) -> String {
+    if v.is_nan() {
+        String::new()
+    } else {
+        v.to_string()
+    }
+}
+
 fn quantile(v: &mut [f64], p: f64) -> f64 {
     v.sort_by(f64::total_cmp);
     if v.is_empty() {
@@ -199,12 +209,13 @@ pub fn run(
         });
         writeln!(
             t3,
-            "{name},{},{},{},{},{},{csv_med},{coverage},{z_sd},{csv_bound},{kept_pct},{},{unit}",
+            "{name},{},{},{},{},{},{csv_med},{coverage},{},{csv_bound},{kept_pct},{},{unit}",
             assigned * f,
             v0 * f,
             sd0 * f,
             (v0 - Z95 * sd0) * f,
             (v0 + Z95 * sd0) * f,
+            csv_number(z_sd),
             paper_imp.map_or(String::new(), |v| v.to_string())
         )?;
         let (md_improvement, md_bound) = improvement.map_or(
@@ -315,12 +326,18 @@ pub fn run(
         let z_sd = sample_sd(&z);
         writeln!(
             t3j,
-            "{name},{},{med},{p5},{p95},{coverage},{z_sd},{kept_pct},{unit}",
-            assigned
+            "{name},{},{med},{p5},{p95},{coverage},{},{kept_pct},{unit}",
+            assigned,
+            csv_number(z_sd)
         )?;
         writeln!(
             md,
-            "| {name} | {med:.2} ({p5:.2}–{p95:.2}) | {med2:.2} | {coverage:.0} % | {z_sd:.2} | {kept_pct:.0} % |"
+            "| {name} | {med:.2} ({p5:.2}–{p95:.2}) | {med2:.2} | {coverage:.0} % | {} | {kept_pct:.0} % |",
+            if z_sd.is_nan() {
+                "–".to_owned()
+            } else {
+                format!("{z_sd:.2}")
+            }
         )?;
         golden.push((
             format!("table3_joint.{name}.median_improvement_pct"),

@@ -564,8 +564,8 @@ fn log_cases(t: &mut Table) {
         csv(&copies).as_bytes(),
         2,
         &[
-            "capstan 1: the training logs hold 1 distinct readings of joint 1 (in 200 rows) for 1 kept parameters",
-            "at least 2 are needed",
+            "@:1:8: distance_m is 0.6815299767718371 m in all 200 rows",
+            "the measurement does not change",
         ],
     );
     let two: Vec<Vec<String>> = std::iter::once(log[0].clone())
@@ -599,35 +599,19 @@ fn log_cases(t: &mut Table) {
         2,
         &["the training logs hold 10 distinct", "(in 210 rows)"],
     );
-    // The diagnosis of the same copies: an error, not a held-out RMS of 0.
-    let device_arg = device.clone();
-    for (name, file, rows, needle) in [
-        (
-            "diagnose: 200 copies of one pose",
-            "diagnose-copies.csv",
-            &copies,
-            "the log holds 1 distinct joint configurations (in 200 rows)",
-        ),
-        (
-            "diagnose: two poses 100 times each",
-            "diagnose-two.csv",
-            &two,
+    // The diagnosis of two poses repeated: an error, not a held-out RMS of 0.
+    let path = t.file("log/diagnose-two.csv", csv(&two).as_bytes());
+    t.add(
+        C,
+        "diagnose: two poses 100 times each",
+        &["diagnose", "--device", &device, "--data", &path],
+        2,
+        &[
+            &format!("diagnosing {path}"),
             "the log holds 2 distinct joint configurations (in 200 rows)",
-        ),
-    ] {
-        let path = t.file(&format!("log/{file}"), csv(rows).as_bytes());
-        t.add(
-            C,
-            name,
-            &["diagnose", "--device", &device_arg, "--data", &path],
-            2,
-            &[
-                &format!("diagnosing {path}"),
-                needle,
-                "identifiable parameters",
-            ],
-        );
-    }
+            "identifiable parameters",
+        ],
+    );
     let mut repeated = log.clone();
     for k in 0..5 {
         repeated.push(log[1 + k].clone());
@@ -1686,7 +1670,7 @@ fn option_cases(t: &mut Table) {
         (
             "simulate --poses 0",
             vec!["simulate", "--poses", "0", "--out", &out_csv],
-            vec!["--poses", "must be at least 1, got 0"],
+            vec!["--poses", "must lie between 1 and"],
         ),
         (
             "simulate --poses -1",
@@ -1790,7 +1774,7 @@ fn option_cases(t: &mut Table) {
                 "--svg",
                 "unused.svg",
             ],
-            vec!["--gain must be a finite number ≥ 0, got -5"],
+            vec!["--gain must lie between 0 and 1000", "got -5e0"],
         ),
         (
             "force --gain NaN",
@@ -1807,7 +1791,7 @@ fn option_cases(t: &mut Table) {
                 "--svg",
                 "unused.svg",
             ],
-            vec!["--gain must be a finite number ≥ 0, got NaN"],
+            vec!["--gain must lie between 0 and 1000", "got NaN"],
         ),
         (
             "force --poses 0",
@@ -1822,7 +1806,7 @@ fn option_cases(t: &mut Table) {
                 "--poses",
                 "0",
             ],
-            vec!["--poses", "must be at least 1, got 0"],
+            vec!["--poses", "must lie between 1 and"],
         ),
         (
             "force missing --truth",
@@ -1842,7 +1826,7 @@ fn option_cases(t: &mut Table) {
                 "--out",
                 &out_csv,
             ],
-            vec!["--count must be between 1 and the number of candidates (10), got 0"],
+            vec!["--count", "must lie between 1 and 10000, got 0"],
         ),
         (
             "plan-poses --count above --candidates",
@@ -1888,7 +1872,7 @@ fn option_cases(t: &mut Table) {
         (
             "blind-test --cases 0",
             vec!["blind-test", "--cases", "0"],
-            vec!["--cases", "must be at least 1, got 0"],
+            vec!["--cases", "must lie between 1 and 100000, got 0"],
         ),
         (
             "reproduce --design unknown",
@@ -2210,6 +2194,277 @@ fn output_cases(t: &mut Table) {
     }
 }
 
+/// Special output files, counts that would not fit in memory, absurd option values, options
+/// that do not apply, and data given twice.
+///
+/// Returns the links to `/dev/null` and `/dev/full` that two cases write through: they must
+/// still be links afterwards (a rename over them would have replaced the link, never the
+/// device).
+fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
+    const C: &str = "limits and misuse";
+    let null = t.path("limits/null.csv");
+    let full = t.path("limits/full.csv");
+    for (link, device) in [(&null, "/dev/null"), (&full, "/dev/full")] {
+        let folder = Path::new(link).parent().expect("in the scratch folder");
+        std::fs::create_dir_all(folder).expect("scratch folder is writable");
+        std::os::unix::fs::symlink(device, link).expect("scratch folder is writable");
+    }
+    let scratch_out = t.path("limits/x.csv");
+    let truth_text = std::fs::read_to_string(root().join("fixtures/reference-device/truth.toml"))
+        .expect("truth fixture");
+    let far_truth = t.file(
+        "limits/far-truth.toml",
+        truth_text.replace("da1 = -1.1e-3", "da1 = 1e10"),
+    );
+    let ratio_truth = t.file(
+        "limits/ratio-truth.toml",
+        truth_text.replacen("re = -0.025", "re = 1e6", 1),
+    );
+    let ext_typo = t.file(
+        "limits/ext-typo.csv",
+        with_cell(&reference_log(60), 6, 10, "1e10"),
+    );
+    let device = fixture("reference-device/device.toml");
+    let truth = fixture("reference-device/truth.toml");
+    let calibrated = fixture("reference-device/calibrated.toml");
+    let log = t.file("limits/log.csv", csv(&reference_log(60)));
+    let log_copy = t.file("limits/log-copy.csv", csv(&reference_log(60)));
+    let iiwa = fixture("mukca/urdf/iiwa14.urdf");
+    let front = fixture("mukca/data/kuka_14/front");
+    let calibrate = |extra: &[&str]| -> Vec<String> {
+        [
+            "calibrate",
+            "--device",
+            device.as_str(),
+            "--data",
+            log.as_str(),
+        ]
+        .iter()
+        .chain(extra)
+        .map(|s| (*s).to_owned())
+        .collect()
+    };
+    let args = |a: &[&str]| -> Vec<String> { a.iter().map(|s| (*s).to_owned()).collect() };
+    let cases: Vec<(&str, Vec<String>, i32, Vec<String>)> = vec![
+        (
+            "simulate --out a link to /dev/full",
+            args(&["simulate", "--poses", "10", "--out", &full]),
+            2,
+            vec![format!("cannot write {full}: No space left on device")],
+        ),
+        (
+            "simulate --out a link to /dev/null",
+            args(&["simulate", "--poses", "10", "--out", &null]),
+            0,
+            vec![],
+        ),
+        (
+            "simulate --poses 10⁸",
+            args(&["simulate", "--poses", "100000000", "--out", &scratch_out]),
+            2,
+            vec![
+                "--poses".to_owned(),
+                "must lie between 1 and 1000000, got 100000000".to_owned(),
+            ],
+        ),
+        (
+            "force --poses 10⁸",
+            args(&[
+                "force",
+                "--device",
+                &device,
+                "--truth",
+                &truth,
+                "--calibrated",
+                &calibrated,
+                "--poses",
+                "100000000",
+            ]),
+            2,
+            vec![
+                "--poses".to_owned(),
+                "must lie between 1 and 100000".to_owned(),
+            ],
+        ),
+        (
+            "plan-poses --candidates 10⁶",
+            args(&[
+                "plan-poses",
+                "--device",
+                &device,
+                "--candidates",
+                "1000000",
+                "--out",
+                &scratch_out,
+            ]),
+            2,
+            vec![
+                "--candidates".to_owned(),
+                "must lie between 1 and 100000".to_owned(),
+            ],
+        ),
+        (
+            "force --gain 1e300",
+            args(&[
+                "force",
+                "--device",
+                &device,
+                "--truth",
+                &truth,
+                "--calibrated",
+                &calibrated,
+                "--gain",
+                "1e300",
+            ]),
+            2,
+            vec![
+                "--gain must lie between 0 and 1000".to_owned(),
+                "got 1e300".to_owned(),
+            ],
+        ),
+        (
+            "simulate --effect backlash:j2=1e10",
+            args(&[
+                "simulate",
+                "--effect",
+                "backlash:j2=1e10",
+                "--out",
+                &scratch_out,
+            ]),
+            2,
+            vec!["j2 = 1e10 is outside [0, 0.1]".to_owned()],
+        ),
+        (
+            "simulate --effect cable_angle:k=1e300",
+            args(&[
+                "simulate",
+                "--effect",
+                "cable_angle:k=1e300",
+                "--out",
+                &scratch_out,
+            ]),
+            2,
+            vec!["k = 1e300 is outside [-1, 1]".to_owned()],
+        ),
+        (
+            "simulate a truth with da1 = 1e10",
+            args(&["simulate", "--truth", &far_truth, "--out", &scratch_out]),
+            2,
+            vec![format!("{far_truth}:22:7: da1 = 1e10 m is outside ±0.1 m")],
+        ),
+        (
+            "force with a truth whose capstan ratio error is 1e6",
+            args(&[
+                "force",
+                "--device",
+                &device,
+                "--truth",
+                &ratio_truth,
+                "--calibrated",
+                &calibrated,
+            ]),
+            2,
+            vec![format!("{ratio_truth}:52:6: re = 1e6 is outside ±1")],
+        ),
+        (
+            "calibrate a log with ext2 = 1e10 on one row",
+            args(&["calibrate", "--device", &device, "--data", &ext_typo]),
+            2,
+            vec![
+                format!("{ext_typo}:6:10: ext2 = 1e10 rad"),
+                "is outside".to_owned(),
+            ],
+        ),
+        (
+            "calibrate a haptic log with --sigma-m",
+            calibrate(&["--sigma-m", "1e-5"]),
+            2,
+            vec!["--sigma-m does not apply to a haptic device's log".to_owned()],
+        ),
+        (
+            "calibrate a haptic log with --test-last",
+            calibrate(&["--test-last", "0.3"]),
+            2,
+            vec!["--test-last does not apply to a haptic device's log".to_owned()],
+        ),
+        (
+            "calibrate a haptic log with --length-unit mm",
+            calibrate(&["--length-unit", "mm"]),
+            2,
+            vec!["--length-unit / --angle-unit does not apply".to_owned()],
+        ),
+        (
+            "calibrate --test = --data",
+            calibrate(&["--test", &log]),
+            2,
+            vec![format!(
+                "--data {log} and --test {log} are the same file: held-out data must not be \
+                 training data"
+            )],
+        ),
+        (
+            "calibrate --test a byte-identical copy of --data",
+            calibrate(&["--test", &log_copy]),
+            2,
+            vec!["are byte-identical files".to_owned()],
+        ),
+        (
+            "calibrate --data twice",
+            args(&["calibrate", "--device", &device, "--data", &log, &log]),
+            2,
+            vec!["every row would count twice".to_owned()],
+        ),
+        (
+            "calibrate MUKCa sockets with --test-last",
+            args(&[
+                "calibrate",
+                "--device",
+                &iiwa,
+                "--data",
+                &front,
+                "--test-last",
+                "0.5",
+            ]),
+            2,
+            vec!["--test-last applies to measurement files".to_owned()],
+        ),
+        (
+            "diagnose a haptic log with --sigma-m",
+            args(&[
+                "diagnose",
+                "--device",
+                &device,
+                "--data",
+                &log,
+                "--sigma-m",
+                "1e-300",
+            ]),
+            2,
+            vec!["--sigma-m does not apply to a haptic device's diagnosis".to_owned()],
+        ),
+        (
+            "diagnose a haptic log with --test-last",
+            args(&[
+                "diagnose",
+                "--device",
+                &device,
+                "--data",
+                &log,
+                "--test-last",
+                "0.99",
+            ]),
+            2,
+            vec!["--test-last does not apply to a haptic device's diagnosis".to_owned()],
+        ),
+    ];
+    for (name, args, code, needles) in &cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let needles: Vec<&str> = needles.iter().map(String::as_str).collect();
+        t.add(C, name, &args, *code, &needles);
+    }
+    vec![PathBuf::from(null), PathBuf::from(full)]
+}
+
 #[test]
 fn every_hostile_input_ends_with_its_exit_code_and_a_located_message() {
     let mut t = Table {
@@ -2223,6 +2478,7 @@ fn every_hostile_input_ends_with_its_exit_code_and_a_located_message() {
     measurement_cases(&mut t);
     option_cases(&mut t);
     output_cases(&mut t);
+    let device_links = limit_cases(&mut t);
     let cases = &t.cases;
     assert!(cases.len() >= 150, "{} cases", cases.len());
     // Two workers: the cases are independent processes.
@@ -2262,6 +2518,16 @@ fn every_hostile_input_ends_with_its_exit_code_and_a_located_message() {
         cases.len(),
         failures.join("\n")
     );
+    // Written through, not replaced.
+    for link in &device_links {
+        let kind = std::fs::symlink_metadata(link).map(|m| m.file_type().is_symlink());
+        assert!(
+            matches!(kind, Ok(true)),
+            "{} is no longer a link",
+            link.display()
+        );
+    }
+    assert!(!t.dir.join("limits/x.csv").exists());
     // Nothing but the fixtures was written: no output of a refused command.
     assert!(!t.dir.join("outputs/no-such-folder").exists());
     assert!(!t.dir.join("outputs/c.csv").exists());

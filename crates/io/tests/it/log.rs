@@ -193,7 +193,127 @@ fn negative_distances_and_other_separators_name_the_line_and_the_value() {
     }
     // Zero is a distance; −0 too.
     let path = dir.join("zero.csv");
-    std::fs::write(&path, "q1,q2,distance_m\n0.0,0.5,0\n0.1,0.5,-0.0\n").unwrap();
-    assert_eq!(read_log(&path, &planar()).unwrap().rows.len(), 2);
+    std::fs::write(
+        &path,
+        "q1,q2,distance_m\n0.0,0.5,0\n0.1,0.5,-0.0\n0.2,0.5,0.3\n",
+    )
+    .unwrap();
+    assert_eq!(read_log(&path, &planar()).unwrap().rows.len(), 3);
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Writes `text` to `name` in a fresh folder for `test`, reads it as a log of the planar
+/// device and removes the folder.
+fn read_text(test: &str, name: &str, text: &str) -> Result<hapcal_io::Log, Error> {
+    let dir = std::env::temp_dir().join(format!("hapcal-io-log-{test}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("the temporary folder can be made");
+    let path = dir.join(name);
+    std::fs::write(&path, text).expect("the temporary file can be written");
+    let result = read_log(&path, &planar());
+    std::fs::remove_dir_all(&dir).expect("the temporary folder can be removed");
+    result
+}
+
+#[test]
+fn a_header_of_200000_unknown_columns_is_read_with_a_bounded_number_of_warnings() {
+    // Duplicates used to be found by comparing each column with every earlier one: 40,000
+    // columns took 2 s, a million never finished.
+    let n = 200_000;
+    let unknown: Vec<String> = (0..n).map(|i| format!("u{i}")).collect();
+    let header = format!("q1,q2,distance_m,{}\n", unknown.join(","));
+    let cells = vec!["1"; n].join(",");
+    let text = format!("{header}0.1,0.2,0.4,{cells}\n0.2,0.3,0.5,{cells}\n");
+    let log = read_text("wide", "wide.csv", &text).unwrap();
+    assert_eq!(log.rows.len(), 2);
+    assert_eq!(log.rows[1].q, [0.2, 0.3]);
+    assert_eq!(log.warnings.len(), 11, "{:?}", &log.warnings[..3]);
+    assert_contains(
+        &log.warnings[0],
+        &["wide.csv:1:4: unknown column \"u0\" ignored"],
+    );
+    assert_contains(
+        &log.warnings[10],
+        &["wide.csv:1: 199990 more unknown columns ignored (200000 in all)"],
+    );
+    // A duplicate at the very end is found, and named at its column.
+    let text = format!("{}u7\n", header.trim_end().to_owned() + ",");
+    let msg = message(read_text("wide", "duplicate.csv", &text));
+    assert_contains(
+        &msg,
+        &["duplicate.csv:1:200004: column \"u7\" appears twice"],
+    );
+}
+
+#[test]
+fn external_encoder_readings_are_checked_against_their_joint_limits() {
+    // Shoulder limits [-1.5, 1.5] rad, range 3 rad: ext1 may lie 0.3 rad past them (the
+    // output angle differs from q1 by the transmission's error).
+    let header = "q1,q2,distance_m,ext1,ext2\n";
+    let msg = message(read_text(
+        "ext",
+        "typo.csv",
+        &format!("{header}0.1,0.2,0.4,0.1,0.2\n0.2,0.3,0.5,1e10,0.3\n"),
+    ));
+    assert_eq!(
+        msg.split_once("typo.csv").unwrap().1,
+        ":3:4: ext1 = 1e10 rad (the external encoder of joint \"shoulder\") is outside \
+         [-1.8, 1.8] rad: the joint's limits [-1.5, 1.5] rad widened by 10% of its range"
+    );
+    let msg = message(read_text(
+        "ext",
+        "elbow.csv",
+        &format!("{header}0.1,0.2,0.4,0.1,-2.5\n"),
+    ));
+    assert_contains(
+        &msg,
+        &[
+            "elbow.csv:2:5: ext2 = -2.5 rad",
+            "\"elbow\"",
+            "[-2.4, 2.4] rad",
+        ],
+    );
+    // Within the slack: kept as read; an ext column of a joint the planar arm lacks is only
+    // checked to be a number.
+    let log = read_text(
+        "ext",
+        "slack.csv",
+        "q1,q2,distance_m,ext1,ext3\n1.5,0.2,0.4,1.79,7\n1.4,0.3,0.5,,\n",
+    )
+    .unwrap();
+    assert_eq!(log.rows[0].ext, [Some(1.79), None, Some(7.0), None]);
+    assert!(log.warnings.is_empty(), "{:?}", log.warnings);
+}
+
+#[test]
+fn a_frozen_distance_is_refused_but_a_constant_joint_is_not() {
+    let rows: String = (0..200)
+        .map(|i| format!("{},0.5,0.512\n", f64::from(i) * 0.001))
+        .collect();
+    let msg = message(read_text(
+        "frozen",
+        "log.csv",
+        &format!("q1,q2,distance_m\n{rows}"),
+    ));
+    assert_eq!(
+        msg.split_once("log.csv").unwrap().1,
+        ":1:3: distance_m is 0.512 m in all 200 rows: the measurement does not change \
+         (a frozen or disconnected sensor?)"
+    );
+    // Zero in every row (a disconnected encoder), −0 counted as 0.
+    let msg = message(read_text(
+        "frozen",
+        "zero.csv",
+        "distance_m,q2,q1\n0,0.5,0.1\n-0.0,0.5,0.2\n",
+    ));
+    assert_contains(&msg, &["zero.csv:1:1: distance_m is 0 m in all 2 rows"]);
+    // Constant joints and a single row are fine.
+    let log = read_text(
+        "frozen",
+        "moving.csv",
+        "q1,q2,distance_m\n0.1,0.5,0.4\n0.1,0.5,0.41\n",
+    )
+    .unwrap();
+    assert_eq!(log.rows.len(), 2);
+    let log = read_text("frozen", "one.csv", "q1,q2,distance_m\n0.1,0.5,0.4\n").unwrap();
+    assert_eq!(log.rows.len(), 1);
 }

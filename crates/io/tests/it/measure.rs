@@ -466,3 +466,134 @@ fn yaml_nested_past_the_limit_is_refused_at_its_line_and_column() {
     ));
     assert!(!msg.contains("deeper"), "{msg}");
 }
+
+#[test]
+fn a_header_of_200000_ignored_columns_and_20000_markers_is_read() {
+    // Duplicates used to be found by comparing each column with every earlier one, and
+    // identical markers by comparing every pair of markers: quadratic in the header's width.
+    let schema = Schema::revolute(&["a", "b"]);
+    let n = 200_000;
+    let ignored: Vec<String> = (0..n).map(|i| format!("u{i}")).collect();
+    let cells = vec!["1"; n].join(",");
+    let text = format!(
+        "a,b,x,y,z,{}\n0.1,0.2,1,2,3,{cells}\n0.2,0.3,1,2,4,{cells}\n",
+        ignored.join(",")
+    );
+    let table = read("wide.csv", &text, &schema, Units::default()).unwrap();
+    assert_eq!(table.rows.len(), 2);
+    assert_eq!(table.ignored_columns.len(), n);
+    assert_eq!(table.ignored_columns[n - 1], format!("u{}", n - 1));
+    // The same header with its first ignored column again at the end.
+    let text = format!("a,b,x,y,z,{},u0\n", ignored.join(","));
+    let msg = message(read("wide_duplicate.csv", &text, &schema, Units::default()));
+    assert_contains(
+        &msg,
+        &["wide_duplicate.csv:1:200006: column \"u0\" appears twice"],
+    );
+
+    let m = 20_000;
+    let header: Vec<String> = (1..=m)
+        .flat_map(|k| [format!("x{k}"), format!("y{k}"), format!("z{k}")])
+        .collect();
+    let row = |shift: usize| -> String {
+        (0..3 * m)
+            .map(|c| format!("{}.{:02}", (c + shift) / 100, (c + shift) % 100))
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let text = format!(
+        "a,b,{}\n0.1,0.2,{}\n0.2,0.3,{}\n",
+        header.join(","),
+        row(0),
+        row(7)
+    );
+    let table = read("markers.csv", &text, &schema, Units::default()).unwrap();
+    assert_eq!(table.n_markers, m);
+    // Cells 60004..60006 of the second row (shifted by 7) are 600.04 m to 600.06 m.
+    assert_eq!(
+        table.rows[1].markers[m - 1].position_m,
+        [600.04, 600.05, 600.06]
+    );
+    assert!(table.warnings.is_empty(), "{:?}", table.warnings);
+}
+
+#[test]
+fn copied_marker_column_sets_are_reported_once_per_set() {
+    let schema = Schema::revolute(&["a", "b"]);
+    // Markers 1, 2 and 4 are one column set copied three times; marker 3 differs.
+    let text = "a,b,x1,y1,z1,x2,y2,z2,x3,y3,z3,x4,y4,z4\n\
+                0.1,0.2,1,2,3,1,2,3,1,2,3,1,2,3\n\
+                0.2,0.3,1,2,4,1,2,4,1,2,5,1,2,4\n";
+    let table = read("copies.csv", text, &schema, Units::default()).unwrap();
+    assert_eq!(table.warnings.len(), 1, "{:?}", table.warnings);
+    assert_contains(
+        &table.warnings[0],
+        &[
+            "copies.csv: markers 1, 2 and 4 have the same position in all 2 rows",
+            "counted 3 times",
+        ],
+    );
+}
+
+#[test]
+fn a_frozen_position_or_distance_is_refused_but_a_constant_joint_is_not() {
+    let schema = Schema::revolute(&["a", "b"]);
+    let msg = message(read(
+        "frozen.csv",
+        "a,b,x,y,z\n0.1,0.2,0.5,0.25,1.5e5\n0.3,0.4,0.5,0.25,1.5e5\n0.5,0.6,0.5,0.25,1.5e5\n",
+        &schema,
+        Units::new(LengthUnit::Mm, AngleUnit::Rad),
+    ));
+    assert_eq!(
+        msg.split_once("frozen.csv").unwrap().1,
+        ":1:3: x, y, z is (0.0005, 0.00025, 150) m in all 3 rows where the marker is seen: \
+         the measurement does not change (a frozen or disconnected sensor?)"
+    );
+    // The second marker frozen, seen in two rows; the first moves.
+    let msg = message(read(
+        "frozen2.csv",
+        "a,b,x1,y1,z1,x2,y2,z2\n0.1,0.2,1,2,3,4,5,6\n0.1,0.2,1,2,3.5,,,\n0.1,0.2,1,2,4,4,5,6\n",
+        &schema,
+        Units::default(),
+    ));
+    assert_contains(
+        &msg,
+        &["frozen2.csv:1:6: x2, y2, z2 is (4, 5, 6) m in all 2 rows where the marker is seen"],
+    );
+    let msg = message(read(
+        "distance.csv",
+        "a,b,distance\n0.1,0.2,0.75\n0.3,0.4,0.75\n",
+        &schema,
+        Units::default(),
+    ));
+    assert_contains(
+        &msg,
+        &["distance.csv:1:3: distance is 0.75 m in all 2 rows: the measurement does not change"],
+    );
+    // Constant joints, a marker seen once and a distance given once are fine.
+    let table = read(
+        "moving.csv",
+        "a,b,x,y,z,d\n0.1,0.2,1,2,3,0.5\n0.1,0.2,1,2,3.5,\n0.1,0.2,,,,0.6\n",
+        &schema,
+        Units::default(),
+    )
+    .unwrap();
+    assert_eq!(table.rows.len(), 3);
+}
+
+#[test]
+fn frozen_industrial_yaml_poses_are_refused() {
+    let schema = Schema::revolute(&["j1", "j2"]);
+    let frozen = YAML
+        .replace("x: -1.0", "x: 0.1")
+        .replace("y: -2.0", "y: 0.2")
+        .replace("z: -3.0", "z: 0.3");
+    let path = temp_file("frozen.yaml", &frozen);
+    let e = read_industrial_yaml(&path, &schema.get());
+    std::fs::remove_file(&path).unwrap();
+    assert_eq!(
+        message(e).split_once("frozen.yaml").unwrap().1,
+        ":1:1: pose x, y, z is (0.1, 0.2, 0.3) m in all 2 observations: the measurement does \
+         not change (a frozen or disconnected sensor?)"
+    );
+}
