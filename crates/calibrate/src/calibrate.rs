@@ -661,7 +661,8 @@ fn check_determined(n_configurations: usize, n_kept: usize, n_model_params: usiz
     if n_kept == 0 {
         bail!(
             "{n_configurations} configurations determine none of the {n_model_params} model parameters: \
-             record more configurations, spread over the joint ranges"
+             record more configurations, spread over the joint ranges (or, with --sigma-m, give \
+             the instrument's σ: a σ far above the residual keeps nothing)"
         );
     }
     if n_configurations < n_kept {

@@ -1418,6 +1418,20 @@ pub fn run(
     } else {
         robot_from_device(device)?
     };
+    // Measurement files and MUKCa socket folders are two calibrations (a marker's positions
+    // against sockets' unknown points): one kind per run.
+    let files: Vec<&std::path::PathBuf> = plan.data.iter().chain(&plan.test).collect();
+    if let (Some(folder), Some(file)) = (
+        files.iter().find(|p| p.is_dir()),
+        files.iter().find(|p| !p.is_dir()),
+    ) {
+        bail!(
+            "{} is a folder (MUKCa sockets) and {} a measurement file: calibrate from one kind \
+             of data at a time",
+            folder.display(),
+            file.display()
+        );
+    }
     let train = load_tables(&plan.data, &robot, &plan.units)?;
     let test = load_tables(&plan.test, &robot, &plan.units)?;
     run_tables(plan, device, &robot, train, test, start)

@@ -369,6 +369,19 @@ fn check_socket_folders(plan: &Plan) -> Result<()> {
                 );
             }
         }
+        // Two sockets are two points: the same readings row for row are a copied file.
+        for placement in &placements {
+            for (b, later) in placement.sockets.iter().enumerate() {
+                if let Some(earlier) = placement.sockets[..b].iter().find(|s| s.q == later.q) {
+                    anyhow::bail!(
+                        "{} repeats {} row for row: two sockets are two points and cannot give the \
+                         same joint readings (a copied file?)",
+                        later.file.display(),
+                        earlier.file.display()
+                    );
+                }
+            }
+        }
     }
     Ok(())
 }

@@ -2220,6 +2220,10 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
         "limits/ratio-truth.toml",
         truth_text.replacen("re = -0.025", "re = 1e6", 1),
     );
+    let hole_1 =
+        std::fs::read_to_string(root().join("fixtures/mukca/data/kuka_14/front/hole_1.csv"))
+            .expect("hole_1");
+    let copied = placement(t, "copied-socket", &hole_1);
     let ext_typo = t.file(
         "limits/ext-typo.csv",
         with_cell(&reference_log(60), 6, 10, "1e10"),
@@ -2374,6 +2378,24 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
                 format!("{ext_typo}:6:10: ext2 = 1e10 rad"),
                 "is outside".to_owned(),
             ],
+        ),
+        (
+            "calibrate MUKCa sockets whose hole_1.csv is a copy of hole_0.csv",
+            args(&["calibrate", "--device", &iiwa, "--data", &copied]),
+            2,
+            vec![format!(
+                "{copied}/hole_1.csv repeats {copied}/hole_0.csv row for row: two sockets are two \
+                 points"
+            )],
+        ),
+        (
+            "calibrate a MUKCa folder and a measurement file together",
+            args(&["calibrate", "--device", &iiwa, "--data", &front, &log]),
+            2,
+            vec![format!(
+                "{front} is a folder (MUKCa sockets) and {log} a measurement file: calibrate \
+                 from one kind of data at a time"
+            )],
         ),
         (
             "calibrate a haptic log with --sigma-m",
