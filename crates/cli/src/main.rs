@@ -317,6 +317,26 @@ fn count_at_least<const MIN: usize>(text: &str) -> std::result::Result<usize, St
     }
 }
 
+/// Instrument position σ accepted by `--sigma-m`, m: from an interferometer's nanometre to a
+/// decimetre. Outside it the value is a unit slip (mm for m) or a typo, and a σ far from the
+/// residual decides the pruning wrongly (1e-300 keeps every parameter, 1 none).
+const SIGMA_M_RANGE: (f64, f64) = (1e-9, 0.1);
+/// Orientation σ accepted by `--sigma-rad`, rad (a nanoradian to about 30°).
+const SIGMA_RAD_RANGE: (f64, f64) = (1e-9, 0.5);
+
+/// `Err` naming `option`, its value and the range unless `value` (if given) lies in
+/// `range` (inclusive).
+fn check_sigma(option: &str, value: Option<f64>, range: (f64, f64), unit: &str) -> Result<()> {
+    match value {
+        Some(v) if !(v >= range.0 && v <= range.1) => anyhow::bail!(
+            "{option} must lie between {:e} and {} {unit}, got {v:e}",
+            range.0,
+            range.1
+        ),
+        _ => Ok(()),
+    }
+}
+
 /// `Err` naming `option` and its value unless `value` (if given) is finite and positive.
 fn check_positive(option: &str, value: Option<f64>, unit: &str) -> Result<()> {
     match value {
@@ -446,8 +466,8 @@ fn run(cli: Cli) -> Result<()> {
             if let Some(out) = &out {
                 calibrate::check_outputs(&plan.device, out, &inputs)?;
             }
-            check_positive("--sigma-m", plan.sigma_m, "length, m")?;
-            check_positive("--sigma-rad", plan.sigma_rad, "angle, rad")?;
+            check_sigma("--sigma-m", plan.sigma_m, SIGMA_M_RANGE, "m")?;
+            check_sigma("--sigma-rad", plan.sigma_rad, SIGMA_RAD_RANGE, "rad")?;
             if let Some(f) = plan.test_last
                 && !(f > 0.0 && f < 1.0)
             {
@@ -769,6 +789,8 @@ fn run(cli: Cli) -> Result<()> {
                     hapcal::diagnose::residual_map_svg(&d),
                 )
             } else {
+                check_sigma("--sigma-m", sigma_m, SIGMA_M_RANGE, "m")?;
+                check_sigma("--sigma-rad", sigma_rad, SIGMA_RAD_RANGE, "rad")?;
                 let (tip, more_tips) = match tips.split_first() {
                     Some((first, rest)) => (first.clone(), rest.to_vec()),
                     None => ("ball_link".to_owned(), Vec::new()),

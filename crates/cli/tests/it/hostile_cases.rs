@@ -1589,22 +1589,32 @@ fn option_cases(t: &mut Table) {
         (
             "--sigma-m negative",
             &["--sigma-m", "-1e-4"],
-            &["--sigma-m must be a finite, positive length, m, got -0.0001"],
+            &["--sigma-m must lie between 1e-9 and 0.1 m, got -1e-4"],
         ),
         (
             "--sigma-m zero",
             &["--sigma-m", "0"],
-            &["--sigma-m must be a finite, positive length, m, got 0"],
+            &["--sigma-m must lie between 1e-9 and 0.1 m, got 0e0"],
         ),
         (
             "--sigma-m NaN",
             &["--sigma-m", "nan"],
-            &["--sigma-m must be a finite, positive length, m, got NaN"],
+            &["--sigma-m must lie between 1e-9 and 0.1 m, got NaN"],
+        ),
+        (
+            "--sigma-m 1e-300",
+            &["--sigma-m", "1e-300"],
+            &["--sigma-m must lie between 1e-9 and 0.1 m, got 1e-300"],
+        ),
+        (
+            "--sigma-m 1 (a metre)",
+            &["--sigma-m", "1"],
+            &["--sigma-m must lie between 1e-9 and 0.1 m, got 1e0"],
         ),
         (
             "--sigma-rad negative",
             &["--sigma-rad", "-1"],
-            &["--sigma-rad must be a finite, positive angle, rad, got -1"],
+            &["--sigma-rad must lie between 1e-9 and 0.5 rad, got -1e0"],
         ),
         (
             "--test-last above 1",
