@@ -1184,6 +1184,13 @@ pub fn calibrate_measured(
                 .to_owned(),
         );
     }
+    if rung != Rung::FramesOnly && n_kept == 0 {
+        warnings.push(format!(
+            "the data determine none of the {} model's kinematic parameters: only the \
+             instrument and marker frames are fitted; move every joint over its range",
+            format!("{rung:?}").to_lowercase()
+        ));
+    }
     let n_samples: usize = fitted.identified.fit.residuals.nrows();
     let n_free = fitted.identified.identifiability.kept.len();
     if 3 * n_free > n_samples {

@@ -618,6 +618,7 @@ fn run(cli: Cli) -> Result<()> {
             }
             let inputs: Vec<&std::path::Path> = inputs.iter().map(PathBuf::as_path).collect();
             calibrate::check_output(&out, &inputs)?;
+            let truth_file = truth.clone();
             let (device, truth) = match (device, truth) {
                 (device, Some(truth_path)) => {
                     let truth = hapcal_sim::read_truth(&truth_path)?;
@@ -653,10 +654,14 @@ fn run(cli: Cli) -> Result<()> {
                 let motion = hapcal_sim::MotionConfig {
                     sample_period_s: period_s,
                 };
-                hapcal_sim::simulate_motion(&device, &truth, &cfg, &motion, &effects)?
+                hapcal_sim::simulate_motion(&device, &truth, &cfg, &motion, &effects)
             } else {
-                hapcal_sim::simulate(&device, &truth, &cfg)?
-            };
+                hapcal_sim::simulate(&device, &truth, &cfg)
+            }
+            .with_context(|| match &truth_file {
+                Some(t) => format!("simulating the truth {}", t.display()),
+                None => "simulating the nominal device".to_owned(),
+            })?;
             calibrate::write_new(&out, &hapcal_io::write_log(&rows), &inputs)?;
             note!("hapcal: wrote {} poses to {}", rows.len(), out.display());
             Ok(())
@@ -874,8 +879,25 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            note!("hapcal: error: {err:#}");
+            note!("hapcal: error: {}", error_chain(&err));
             ExitCode::from(2)
         }
     }
+}
+
+/// The error and its causes joined by `: `, as `{:#}` prints them, but without a cause whose
+/// text the message before it already ends with: an error type that prints its source in its
+/// own message (`cannot read <path>: <io error>`) would otherwise show it twice.
+fn error_chain(err: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in err.chain() {
+        let part = cause.to_string();
+        if text.is_empty() {
+            text = part;
+        } else if !text.ends_with(&part) {
+            text.push_str(": ");
+            text.push_str(&part);
+        }
+    }
+    text
 }
