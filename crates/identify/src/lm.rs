@@ -751,7 +751,8 @@ pub(crate) fn run(
     }
 }
 
-fn norm(v: &[f64]) -> f64 {
+/// `‖v‖` (plain sum of squares; the iterates depend on this exact summation order).
+pub(crate) fn norm(v: &[f64]) -> f64 {
     v.iter().map(|a| a * a).sum::<f64>().sqrt()
 }
 
@@ -1003,24 +1004,85 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
         *ui = -q;
     }
     f.r.solve_in_place(&mut u[..ns]);
-    let mut u_norm = norm(&u);
-    let mut fp = u_norm - delta;
+    let u_norm = norm(&u);
+    let fp = u_norm - delta;
     if fp <= 0.1 * delta {
         return (u, 0.0);
     }
     // Lower bound from the Newton step at λ = 0 (full rank only): ‖T⁻ᵀ u/‖u‖‖².
-    let newton_denominator = |t: &Upper, u: &[f64], u_norm: f64| {
-        let mut y: Vec<f64> = u.iter().map(|v| v / u_norm).collect();
-        t.solve_transposed_in_place(&mut y);
-        y.iter().map(|v| v * v).sum::<f64>()
-    };
-    let mut lower = if ns == nf {
-        (fp / delta) / newton_denominator(&f.r, &u, u_norm)
+    let lower = if ns == nf {
+        let w: Vec<f64> = u.iter().map(|v| v / u_norm).collect();
+        (fp / delta) / transposed_solve_norm_sq(&f.r, w)
     } else {
         0.0
     };
     // Upper bound: ‖Rᵀ Qᵀr‖ / Δ.
     let g_norm = norm(&f.r.transposed_times(&f.qtr));
+    let mut damped = DenseDamped { f, s: None };
+    match lambda_search(&mut damped, delta, lambda0, (u, u_norm), lower, g_norm) {
+        Ok(step) => step,
+        Err(never) => match never {},
+    }
+}
+
+/// `‖T⁻ᵀ w‖²`.
+fn transposed_solve_norm_sq(t: &Upper, mut w: Vec<f64>) -> f64 {
+    t.solve_transposed_in_place(&mut w);
+    w.iter().map(|v| v * v).sum::<f64>()
+}
+
+/// The damped steps of one trust-region subproblem, for [`lambda_search`]: `u(λ)` solving
+/// `[J̃; √λ·I] u ≈ [−r; 0]`, and for the last `λ` solved `‖S⁻ᵀ w‖²` with `SᵀS = J̃ᵀJ̃ + λI`
+/// (the derivative of `‖u(λ)‖` that Moré's Newton step needs).
+pub(crate) trait DampedSteps {
+    /// Why a step cannot be computed (`Infallible` for the dense back ends).
+    type Error;
+    /// `u(λ)` for `λ > 0`.
+    fn damped(&mut self, lambda: f64) -> Result<Vec<f64>, Self::Error>;
+    /// `‖S⁻ᵀ w‖²` at the `λ` of the last [`DampedSteps::damped`].
+    fn newton_denominator(&mut self, w: Vec<f64>) -> Result<f64, Self::Error>;
+}
+
+/// The dense damped steps: [`damped_step`] on the triangle of [`ScaledQr`].
+struct DenseDamped<'a> {
+    f: &'a ScaledQr,
+    /// `S` of the last damped step.
+    s: Option<Upper>,
+}
+
+impl DampedSteps for DenseDamped<'_> {
+    type Error = std::convert::Infallible;
+    fn damped(&mut self, lambda: f64) -> Result<Vec<f64>, Self::Error> {
+        let (u, s) = damped_step(&self.f.r, &self.f.qtr, lambda);
+        self.s = Some(s);
+        Ok(u)
+    }
+    fn newton_denominator(&mut self, w: Vec<f64>) -> Result<f64, Self::Error> {
+        Ok(self
+            .s
+            .as_ref()
+            .map_or(f64::NAN, |s| transposed_solve_norm_sq(s, w)))
+    }
+}
+
+/// Moré's safeguarded Newton iteration for `λ` (MINPACK `lmpar`, Moré 1978 §5), shared by the
+/// dense and sparse back ends: from the Gauss–Newton step `(u, ‖u‖)` (longer than `1.1·Δ`),
+/// the bounds `lower` (0 unless known) and `‖J̃ᵀr‖ / Δ`, and the previous `λ`, at most ten
+/// damped steps until `‖u(λ)‖` lies within 10 % of `Δ`. Returns the last step and its `λ`.
+///
+/// # Errors
+/// The first error of `steps`.
+pub(crate) fn lambda_search<D: DampedSteps>(
+    steps: &mut D,
+    delta: f64,
+    lambda0: f64,
+    gauss_newton: (Vec<f64>, f64),
+    lower: f64,
+    g_norm: f64,
+) -> Result<(Vec<f64>, f64), D::Error> {
+    let (mut u, mut u_norm) = gauss_newton;
+    let mut fp = u_norm - delta;
+    let mut lower = lower;
     let mut upper = g_norm / delta;
     if upper == 0.0 {
         upper = f64::MIN_POSITIVE / delta.min(0.1);
@@ -1033,18 +1095,19 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
         if lambda == 0.0 {
             lambda = f64::MIN_POSITIVE.max(0.001 * upper);
         }
-        let (step, s) = damped_step(&f.r, &f.qtr, lambda);
-        u = step;
+        u = steps.damped(lambda)?;
         u_norm = norm(&u);
         let fp_old = fp;
         fp = u_norm - delta;
-        if fp.abs() <= 0.1 * delta
+        if !u_norm.is_finite()
+            || fp.abs() <= 0.1 * delta
             || (lower == 0.0 && fp <= fp_old && fp_old < 0.0)
             || iteration == 10
         {
             break;
         }
-        let correction = (fp / delta) / newton_denominator(&s, &u, u_norm);
+        let w: Vec<f64> = u.iter().map(|v| v / u_norm).collect();
+        let correction = (fp / delta) / steps.newton_denominator(w)?;
         if fp > 0.0 {
             lower = lower.max(lambda);
         } else if fp < 0.0 {
@@ -1052,7 +1115,7 @@ fn lmpar(f: &ScaledQr, delta: f64, lambda0: f64) -> (Vec<f64>, f64) {
         }
         lambda = lower.max(lambda + correction);
     }
-    (u, lambda)
+    Ok((u, lambda))
 }
 
 /// Solves `min ‖[R; √λ·I] u + [Qᵀr; 0]‖` for upper-triangular `R` (`n × n`); returns `u` and
@@ -1138,4 +1201,4 @@ fn damped_step(rmat: &Upper, qtr: &[f64], lambda: f64) -> (Vec<f64>, Upper) {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -22,7 +22,10 @@ use faer::{Col, ColRef, Conj, Mat};
 
 use crate::covariance::Covariance;
 use crate::error::Error;
-use crate::lm::{Fit, Linearised, LmConfig, Step, Subproblem, Termination, check_inputs, run};
+use crate::lm::{
+    DampedSteps, Fit, Linearised, LmConfig, Step, Subproblem, Termination, check_inputs,
+    lambda_search, norm, run,
+};
 use crate::problem::{EvalError, Problem};
 
 /// A Jacobian with a fixed sparsity pattern, evaluated straight into compressed-column form.
@@ -202,6 +205,7 @@ impl Linearised for SparseLinearised<'_> {
             gradient,
             augmented: vec![0.0; self.pattern.augmented.row_idx().len()],
             gauss_newton: None,
+            last: None,
         }
     }
 }
@@ -219,6 +223,8 @@ pub(crate) struct SparseSubproblem {
     augmented: Vec<f64>,
     /// The Gauss–Newton step and its norm, once computed.
     gauss_newton: Option<(Vec<f64>, f64)>,
+    /// The factors of the last damped step and its `λ`.
+    last: Option<(Qr<usize, f64>, f64)>,
 }
 
 impl SparseSubproblem {
@@ -274,20 +280,14 @@ impl SparseSubproblem {
 }
 
 impl Subproblem for SparseSubproblem {
-    /// Moré's `lmpar` (as the dense [`crate::lm`]) with one sparse factorisation per `λ` tried.
-    /// The lower bound of `λ` is 0 (MINPACK's bound for a rank-deficient `J`: the bound for a
-    /// full-rank one needs `R⁻ᵀ` at `λ = 0`, which the sparse factors do not expose); the
-    /// safeguarded Newton iteration converges from either.
+    /// Moré's `lmpar` ([`lambda_search`], as the dense back end) with one sparse factorisation
+    /// per `λ` tried. The lower bound of `λ` is 0 (MINPACK's bound for a rank-deficient `J`:
+    /// the bound for a full-rank one needs `R⁻ᵀ` at `λ = 0`, which the sparse factors do not
+    /// expose); the safeguarded Newton iteration converges from either.
     fn step(&mut self, delta: f64, lambda0: f64) -> Result<Step, Error> {
-        let finish = |this: &Self, u: Vec<f64>, u_norm: f64, lambda: f64| Step {
-            jp_norm: this.jacobian_times_norm(&u),
-            u,
-            u_norm,
-            lambda,
-        };
         // Gauss–Newton step, once per linearisation (a rejected step tries again with a
         // smaller Δ); a singular J (not finite) makes it infinitely long.
-        let (mut u, mut u_norm) = match &self.gauss_newton {
+        let (u, u_norm) = match &self.gauss_newton {
             Some(gn) => gn.clone(),
             None => {
                 let qr = self.factorise(0.0)?;
@@ -301,56 +301,41 @@ impl Subproblem for SparseSubproblem {
                 (u, u_norm)
             }
         };
-        let mut fp = u_norm - delta;
-        if fp <= 0.1 * delta {
-            return Ok(finish(self, u, u_norm, 0.0));
-        }
-        let mut lower = 0.0_f64;
-        // Upper bound: ‖D⁻¹Jᵀr‖ / Δ.
-        let g_norm = norm(&self.gradient);
-        let mut upper = g_norm / delta;
-        if upper == 0.0 {
-            upper = f64::MIN_POSITIVE / delta.min(0.1);
-        }
-        let mut lambda = lambda0.max(lower).min(upper);
-        if lambda == 0.0 {
-            lambda = g_norm / u_norm;
-        }
-        for iteration in 1..=10 {
-            if lambda == 0.0 {
-                lambda = f64::MIN_POSITIVE.max(0.001 * upper);
-            }
-            let qr = self.factorise(lambda)?;
-            u = self.damped_step(&qr);
-            u_norm = norm(&u);
-            let fp_old = fp;
-            fp = u_norm - delta;
-            if !u_norm.is_finite()
-                || fp.abs() <= 0.1 * delta
-                || (lower == 0.0 && fp <= fp_old && fp_old < 0.0)
-                || iteration == 10
-            {
-                break;
-            }
-            // ‖S⁻ᵀ w‖² = wᵀ (SᵀS)⁻¹ w with w = u/‖u‖.
-            let w: Vec<f64> = u.iter().map(|v| v / u_norm).collect();
-            let bottom: Vec<f64> = w.iter().map(|v| v / lambda.sqrt()).collect();
-            let z = self.solve(&qr, &[], &bottom);
-            let denominator: f64 = w.iter().zip(&z).map(|(a, b)| a * b).sum();
-            let correction = (fp / delta) / denominator;
-            if fp > 0.0 {
-                lower = lower.max(lambda);
-            } else if fp < 0.0 {
-                upper = upper.min(lambda);
-            }
-            lambda = lower.max(lambda + correction);
-        }
-        Ok(finish(self, u, u_norm, lambda))
+        let (u, u_norm, lambda) = if u_norm - delta <= 0.1 * delta {
+            (u, u_norm, 0.0)
+        } else {
+            let g_norm = norm(&self.gradient);
+            let (u, lambda) = lambda_search(self, delta, lambda0, (u, u_norm), 0.0, g_norm)?;
+            let u_norm = norm(&u);
+            (u, u_norm, lambda)
+        };
+        Ok(Step {
+            jp_norm: self.jacobian_times_norm(&u),
+            u,
+            u_norm,
+            lambda,
+        })
     }
 }
 
-fn norm(v: &[f64]) -> f64 {
-    v.iter().map(|a| a * a).sum::<f64>().sqrt()
+impl DampedSteps for SparseSubproblem {
+    type Error = Error;
+    fn damped(&mut self, lambda: f64) -> Result<Vec<f64>, Error> {
+        let qr = self.factorise(lambda)?;
+        let u = self.damped_step(&qr);
+        self.last = Some((qr, lambda));
+        Ok(u)
+    }
+    /// `wᵀ z` with `z = (SᵀS)⁻¹ w`, the least-squares solution of `[J D⁻¹; √λ·I] z ≈
+    /// [0; w/√λ]` with the last factors.
+    fn newton_denominator(&mut self, w: Vec<f64>) -> Result<f64, Error> {
+        let Some((qr, lambda)) = &self.last else {
+            return Ok(f64::NAN);
+        };
+        let bottom: Vec<f64> = w.iter().map(|v| v / lambda.sqrt()).collect();
+        let z = self.solve(qr, &[], &bottom);
+        Ok(w.iter().zip(&z).map(|(a, b)| a * b).sum())
+    }
 }
 
 /// Levenberg–Marquardt on the sparse back end, over all parameters of `p` (no pruning: the

@@ -17,8 +17,9 @@ fn layout(names: &[&str]) -> ParamLayout {
 }
 
 /// Rosenbrock as least squares: r = [10(x2 − x1²), 1 − x1], minimum 0 at (1, 1)
-/// (Moré, Garbow, Hillstrom, "Testing unconstrained optimization software", 1981, problem 1).
-struct Rosenbrock(ParamLayout);
+/// (Moré, Garbow, Hillstrom, "Testing unconstrained optimization software", 1981, problem 1);
+/// the sparse back end's tests give it a sparse Jacobian too.
+pub(crate) struct Rosenbrock(ParamLayout);
 
 impl Problem for Rosenbrock {
     fn layout(&self) -> &ParamLayout {
@@ -39,9 +40,12 @@ impl Problem for Rosenbrock {
         jac[(1, 1)] = 0.0;
         Ok(())
     }
+    fn sparse_jacobian(&self) -> Option<&dyn crate::SparseJacobian> {
+        Some(self)
+    }
 }
 
-fn rosenbrock() -> Rosenbrock {
+pub(crate) fn rosenbrock() -> Rosenbrock {
     Rosenbrock(layout(&["x1", "x2"]))
 }
 

@@ -1,50 +1,10 @@
 use faer::linalg::solvers::Solve;
-use faer::{ColMut, ColRef, MatMut, col};
+use faer::{ColRef, col};
 
 use super::*;
-use crate::problem::{ParamLayout, ParamSpec, Role, Unit};
+use crate::lm::tests::{Rosenbrock, rosenbrock};
 
-fn layout(names: &[&str]) -> ParamLayout {
-    ParamLayout::new(
-        names
-            .iter()
-            .map(|&name| ParamSpec {
-                name: name.to_owned(),
-                unit: Unit::Dimensionless,
-                role: Role::Model,
-            })
-            .collect(),
-    )
-}
-
-/// Rosenbrock as least squares, `r = [10(x2 − x1²), 1 − x1]`, minimum 0 at (1, 1) (Moré,
-/// Garbow, Hillstrom 1981, problem 1), with its Jacobian also in sparse form (`J₁₁ = 0`).
-struct Rosenbrock(ParamLayout);
-
-impl Problem for Rosenbrock {
-    fn layout(&self) -> &ParamLayout {
-        &self.0
-    }
-    fn n_residuals(&self) -> usize {
-        2
-    }
-    fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
-        out[0] = 10.0 * (x[1] - x[0] * x[0]);
-        out[1] = 1.0 - x[0];
-        Ok(())
-    }
-    fn jacobian(&self, x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
-        jac[(0, 0)] = -20.0 * x[0];
-        jac[(0, 1)] = 10.0;
-        jac[(1, 0)] = -1.0;
-        jac[(1, 1)] = 0.0;
-        Ok(())
-    }
-    fn sparse_jacobian(&self) -> Option<&dyn SparseJacobian> {
-        Some(self)
-    }
-}
-
+/// The dense tests' Rosenbrock problem (`J₁₁ = 0`), its Jacobian also in sparse form.
 impl SparseJacobian for Rosenbrock {
     fn pattern(&self) -> (Vec<usize>, Vec<usize>) {
         (vec![0, 2, 3], vec![0, 1, 0])
@@ -64,7 +24,7 @@ impl SparseJacobian for Rosenbrock {
 
 #[test]
 fn rosenbrock_from_the_standard_start_reaches_the_dense_back_ends_minimum() {
-    let p = Rosenbrock(layout(&["x1", "x2"]));
+    let p = rosenbrock();
     // MINPACK's initial radius (factor 100) from (−1.2, 1): damped steps until the valley.
     let cfg = LmConfig::default();
     let sparse = levenberg_marquardt_sparse(&p, col![-1.2, 1.0], &cfg, &[0, 1]).expect("valid");
@@ -135,6 +95,7 @@ fn subproblem(pattern: Pattern, scaled: Vec<f64>, r: Vec<f64>) -> SparseSubprobl
         gradient,
         augmented: vec![0.0; n_aug],
         gauss_newton: None,
+        last: None,
     }
 }
 
