@@ -27,7 +27,7 @@ create_exception!(
 
 /// The anyhow chain as one message (`outer: inner: …`), as the command line prints it.
 fn py_err(e: anyhow::Error) -> PyErr {
-    HapcalError::new_err(format!("{e:#}"))
+    HapcalError::new_err(hapcal_calibrate::calibrate::error_chain(&e))
 }
 
 fn units(length_unit: &str, angle_unit: &str) -> Result<Units> {
@@ -95,7 +95,7 @@ impl PyDevice {
             )));
         }
         let device = calibrate::load_device(&path, "").map_err(py_err)?;
-        let robot = measured::robot_from_device(&device).map_err(|e| format!("{e:#}"));
+        let robot = measured::robot_from_device(&device).map_err(|e| calibrate::error_chain(&e));
         Ok(Self {
             path,
             tip: String::new(),

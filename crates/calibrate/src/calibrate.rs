@@ -1046,6 +1046,24 @@ pub fn check_extension(path: &Path, allowed: &[&str], what: &str, strict: bool) 
     )
 }
 
+/// The error and its causes joined by `: `, as `{:#}` prints them, but without a cause whose
+/// text the message before it already ends with: an error type that prints its source in its
+/// own message (`cannot read <path>: <io error>`) would otherwise show it twice. The command
+/// line and the Python package print errors with it, so both say the same.
+pub fn error_chain(err: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in err.chain() {
+        let part = cause.to_string();
+        if text.is_empty() {
+            text = part;
+        } else if !text.ends_with(&part) {
+            text.push_str(": ");
+            text.push_str(&part);
+        }
+    }
+    text
+}
+
 /// `Err` when one file or folder is given twice among `plan`'s training and test data (by
 /// path, or as byte-identical files): held-out data that are the training data measure
 /// nothing, and a training file given twice counts every row twice (every σ shrinks by √2).

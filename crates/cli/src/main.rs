@@ -879,25 +879,8 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            note!("hapcal: error: {}", error_chain(&err));
+            note!("hapcal: error: {}", calibrate::error_chain(&err));
             ExitCode::from(2)
         }
     }
-}
-
-/// The error and its causes joined by `: `, as `{:#}` prints them, but without a cause whose
-/// text the message before it already ends with: an error type that prints its source in its
-/// own message (`cannot read <path>: <io error>`) would otherwise show it twice.
-fn error_chain(err: &anyhow::Error) -> String {
-    let mut text = String::new();
-    for cause in err.chain() {
-        let part = cause.to_string();
-        if text.is_empty() {
-            text = part;
-        } else if !text.ends_with(&part) {
-            text.push_str(": ");
-            text.push_str(&part);
-        }
-    }
-    text
 }
