@@ -71,6 +71,9 @@ pub struct GeometricBaseline {
     /// The robot from its base to the first tip, without instrument or marker frames: the
     /// chain of gravity torques (base frame: gravity along −z).
     pub torque_chain: Chain,
+    /// The robot's every tip, without instrument or marker frames: the tree of the gravity
+    /// loads ([`hapcal_problems::GravityCompliance::joint_loads`]).
+    pub torque_tips: Vec<Chain>,
     /// The geometric problem on the training rows.
     pub train: CalibrationProblem,
     /// The geometric estimate, in `train`'s layout.
@@ -239,6 +242,7 @@ pub fn baseline_from_tables(
             ..robot.clone()
         },
         torque_chain: robot.tree.tips()[0].clone(),
+        torque_tips: robot.tree.tips().to_vec(),
         n_shared: x.nrows(),
         train: train_problem,
         x,
@@ -430,6 +434,7 @@ pub fn baseline_from_sets(
         kind,
         robot: robot.clone(),
         torque_chain: robot.tree.tips()[0].clone(),
+        torque_tips: robot.tree.tips().to_vec(),
         train: problem,
         x,
         kept,

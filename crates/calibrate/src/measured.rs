@@ -58,15 +58,20 @@ pub enum Rung {
     Geometric,
     /// Geometric plus a gravity compliance per joint.
     Compliance,
+    /// Compliance plus a transversal compliance per revolute joint: the joint frame bends
+    /// about the axes normal to its axis under the gravity moment about them (Tenhumberg &
+    /// Bäuml 2021; [`hapcal_problems::TransversalTerm`]). URDF robots only.
+    TransversalCompliance,
 }
 
 impl Rung {
     /// Every rung, simplest first.
-    pub const ALL: [Rung; 4] = [
+    pub const ALL: [Rung; 5] = [
         Rung::FramesOnly,
         Rung::JointOffsets,
         Rung::Geometric,
         Rung::Compliance,
+        Rung::TransversalCompliance,
     ];
 }
 
@@ -77,6 +82,7 @@ impl std::fmt::Display for Rung {
             Rung::JointOffsets => "joint offsets",
             Rung::Geometric => "geometric",
             Rung::Compliance => "compliance",
+            Rung::TransversalCompliance => "transversal compliance",
         })
     }
 }
@@ -721,7 +727,7 @@ pub(crate) fn observations(
 
 /// The problem's model terms for `rung`.
 fn terms(rung: Rung, robot: &Robot) -> ModelTerms {
-    let compliance = (rung == Rung::Compliance).then(|| {
+    let compliance = (rung >= Rung::Compliance).then(|| {
         if robot.masses.is_empty() {
             GravityCompliance::default()
         } else {
@@ -730,9 +736,21 @@ fn terms(rung: Rung, robot: &Robot) -> ModelTerms {
     });
     ModelTerms {
         compliance,
+        transversal: rung == Rung::TransversalCompliance,
         harmonics: None,
-        torque_chain: Some(robot.tree.tips()[0].clone()),
+        torque_tips: Some(robot.tree.tips().to_vec()),
     }
+}
+
+/// Whether `robot` can carry `rung`: transversal compliance needs revolute joints with
+/// rotation deviations (URDF placements, `{joint}.rx`); every other rung fits any robot.
+pub fn carries(rung: Rung, robot: &Robot) -> bool {
+    if rung != Rung::TransversalCompliance {
+        return true;
+    }
+    let chain = &robot.tree.tips()[0];
+    (robot.joint_names.iter().zip(&robot.prismatic))
+        .any(|(name, &prismatic)| !prismatic && chain.param_index(&format!("{name}.rx")).is_some())
 }
 
 /// Free parameters of `rung` in the layout of a problem on `framed` (the tree with joint
@@ -761,7 +779,9 @@ fn free_of(
     match rung {
         Rung::FramesOnly => {}
         Rung::JointOffsets => free.extend(offsets.iter().flatten().map(|&i| i + 6)),
-        Rung::Geometric | Rung::Compliance => free.extend(6..6 + n_robot),
+        Rung::Geometric | Rung::Compliance | Rung::TransversalCompliance => {
+            free.extend(6..6 + n_robot)
+        }
     }
     // Compliance (and any other model term) after the kinematic parameters.
     free.extend(n_kin..n_layout);
@@ -1139,7 +1159,10 @@ pub fn calibrate_measured(
         None => {
             let mut held = Vec::new();
             let mut scored = Vec::new();
-            for r in Rung::ALL {
+            let rungs: Vec<Rung> = (Rung::ALL.into_iter())
+                .filter(|&r| carries(r, robot))
+                .collect();
+            for &r in &rungs {
                 let (h, s) = cross_validate(r, robot, &start, &offsets, train, cfg, weights)?;
                 held.push(h);
                 scored.push(s);
@@ -1148,7 +1171,7 @@ pub fn calibrate_measured(
                 (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt()
             };
             let mut chosen = 0;
-            for (i, r) in Rung::ALL.iter().enumerate() {
+            for (i, r) in rungs.iter().enumerate() {
                 let to_frames = blocked_difference(&scored[i], &scored[0]);
                 ladder.push(RungReport {
                     rung: *r,
@@ -1161,7 +1184,7 @@ pub fn calibrate_measured(
                     chosen = i;
                 }
             }
-            Rung::ALL[chosen]
+            rungs[chosen]
         }
     };
     let (model, fitted) = if rung == Rung::FramesOnly {
@@ -1386,8 +1409,9 @@ fn rung_of(model: crate::calibrate::ModelChoice) -> Result<Option<Rung>> {
         M::JointOffsets => Some(Rung::JointOffsets),
         M::Geometric => Some(Rung::Geometric),
         M::Compliance | M::MassCompliance => Some(Rung::Compliance),
+        M::TransversalCompliance => Some(Rung::TransversalCompliance),
         other => bail!(
-            "--model {other:?} is not fitted to marker data: use auto, frames-only, joint-offsets, geometric or compliance"
+            "--model {other:?} is not fitted to marker data: use auto, frames-only, joint-offsets, geometric, compliance or transversal-compliance"
         ),
     })
 }
@@ -1400,6 +1424,7 @@ fn model_of(rung: Rung) -> crate::calibrate::ModelChoice {
         Rung::JointOffsets => M::JointOffsets,
         Rung::Geometric => M::Geometric,
         Rung::Compliance => M::Compliance,
+        Rung::TransversalCompliance => M::TransversalCompliance,
     }
 }
 

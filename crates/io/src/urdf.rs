@@ -87,7 +87,9 @@ pub struct UrdfTree {
     pub joints: Vec<JointSpec>,
     /// Whether each joint of `joints` is prismatic.
     pub prismatic: Vec<bool>,
-    /// The `<inertial>` of every link on the paths below the first moving joint.
+    /// The `<inertial>` of every link with a mass below a moving joint of the paths, on the
+    /// paths or off them (another arm, a head, a tool below a tip), in the frame of the
+    /// nearest such joint above it.
     pub inertials: Vec<LinkInertial>,
 }
 
@@ -169,7 +171,7 @@ pub fn import_urdf_tips(path: &Path, tips: &[String]) -> Result<UrdfTree, Error>
             format!("no moving joint between the root link {root:?} and the tips"),
         ));
     }
-    let inertials = inertials(&robot, &chains, &joints, path)?;
+    let inertials = inertials(&robot, &joints, path)?;
     Ok(UrdfTree {
         paths,
         joints,
@@ -178,52 +180,60 @@ pub fn import_urdf_tips(path: &Path, tips: &[String]) -> Result<UrdfTree, Error>
     })
 }
 
-/// The inertials of the links on `chains` below a moving joint, in that joint's frame.
+/// The inertial of every link of the robot that hangs below one of `joints` (the moving
+/// joints on the measured paths), expressed in the frame of the nearest such joint above it.
+///
+/// Links off the measured paths count too: the other arm of a torso when only one hand is
+/// measured, a head, a tool below the tip link. The joints between such a link and the
+/// nearest measured joint are taken at their zero position (a moving joint that no
+/// measurement reads is held rigid there), so the link's weight loads every measured joint
+/// above it.
 fn inertials(
     robot: &urdf_rs::Robot,
-    chains: &[Vec<&urdf_rs::Joint>],
     joints: &[JointSpec],
     path: &Path,
 ) -> Result<Vec<LinkInertial>, Error> {
+    let parent_joint = |link: &str| robot.joints.iter().find(|j| j.child.link == link);
     let mut out: Vec<LinkInertial> = Vec::new();
-    for chain in chains {
-        // Transform from the nearest moving joint's frame to the current link's frame.
-        let mut above: Option<(usize, Isometry3<f64>)> = None;
-        for joint in chain {
-            let origin = origin_of(joint);
-            above = match joint.joint_type {
-                urdf_rs::JointType::Fixed => above.map(|(j, t)| (j, t * origin)),
-                _ => joints
-                    .iter()
-                    .position(|s| s.name == joint.name)
-                    .map(|j| (j, Isometry3::identity())),
+    for l in &robot.links {
+        // Walk up from the link to the nearest measured moving joint, composing the origins
+        // of the joints passed (bounded by the joint count: the tree has no loop).
+        let mut frame = Isometry3::identity();
+        let mut link = l.name.as_str();
+        let mut above = None;
+        for _ in 0..=robot.joints.len() {
+            let Some(joint) = parent_joint(link) else {
+                break;
             };
-            let Some((j, frame)) = above else { continue };
-            let link = &joint.child.link;
-            if out.iter().any(|l| &l.link == link) {
-                continue;
+            if let Some(j) = joints.iter().position(|s| s.name == joint.name) {
+                above = Some(j);
+                break;
             }
-            let Some(l) = robot.links.iter().find(|l| &l.name == link) else {
-                continue;
-            };
-            let mass_kg = l.inertial.mass.value;
-            let xyz = l.inertial.origin.xyz.0;
-            if !(mass_kg.is_finite() && mass_kg >= 0.0) || xyz.iter().any(|v| !v.is_finite()) {
-                return Err(urdf_error(
-                    path,
-                    format!(
-                        "link {link:?}: inertial mass {mass_kg} kg at {xyz:?} m is not a finite, non-negative mass at a finite point"
-                    ),
-                ));
-            }
-            let com = frame * Point3::from(xyz);
-            out.push(LinkInertial {
-                joint: j,
-                link: link.clone(),
-                mass_kg,
-                com_m: [com.x, com.y, com.z],
-            });
+            frame = origin_of(joint) * frame;
+            link = &joint.parent.link;
         }
+        let Some(j) = above else { continue };
+        let mass_kg = l.inertial.mass.value;
+        let xyz = l.inertial.origin.xyz.0;
+        let name = &l.name;
+        if !(mass_kg.is_finite() && mass_kg >= 0.0) || xyz.iter().any(|v| !v.is_finite()) {
+            return Err(urdf_error(
+                path,
+                format!(
+                    "link {name:?}: inertial mass {mass_kg} kg at {xyz:?} m is not a finite, non-negative mass at a finite point"
+                ),
+            ));
+        }
+        if mass_kg == 0.0 {
+            continue;
+        }
+        let com = frame * Point3::from(xyz);
+        out.push(LinkInertial {
+            joint: j,
+            link: name.clone(),
+            mass_kg,
+            com_m: [com.x, com.y, com.z],
+        });
     }
     Ok(out)
 }

@@ -1,6 +1,6 @@
 //! Joint compliance under gravity: a lumped, linear-in-parameters model.
 
-use hapcal_kinematics::{Chain, Factor, Motion, Vector3};
+use hapcal_kinematics::{Chain, Factor, Isometry3, Motion, Point3, UnitQuaternion, Vector3};
 
 /// Joint deflection proportional to a lumped gravity torque (non-geometric calibration,
 /// Judd & Knasinski 1990, "A technique to calibrate industrial robots with experimental
@@ -182,65 +182,123 @@ impl GravityCompliance {
     }
 
     /// Gravity torques (length `n_joints`) at angles `q` (rad) on the nominal chain: lumped `τ̂`
-    /// (m) without [`Self::masses`], physical `τ` (N·m) with them.
+    /// (m) without [`Self::masses`], physical `τ` (N·m) with them. The chain is one path of
+    /// the robot; [`Self::joint_loads`] gives the torques of a tree.
     ///
     /// # Panics
     /// If `q.len() != chain.n_joints()`, or a [`LinkMass::joint`] is not a joint of `chain`.
     #[track_caller]
     pub fn lumped_torques(&self, chain: &Chain, q: &[f64]) -> Vec<f64> {
-        let x0 = vec![0.0; chain.n_params()];
-        let poses = chain.frame_poses(&x0, q);
-        let n = chain.n_joints();
+        (self.joint_loads(std::slice::from_ref(chain), q).iter())
+            .map(|l| l.torque)
+            .collect()
+    }
+
+    /// The gravity load of every joint of a tree (`tips`: one chain per tip, all with the same
+    /// joints and parameters, as [`hapcal_kinematics::Tree::tips`]) at readings `q` (rad, m
+    /// for a prismatic joint), evaluated on the nominal tree (zero deviations) in the frame of
+    /// the tips' base, where [`Self::gravity_dir`] is given. Length `n_joints`.
+    ///
+    /// The moment about joint `j`'s origin `o_j` sums the weights hanging below it on every
+    /// branch: a weight counts for `j` when `j` lies on the path from the root to the joint
+    /// whose link carries it, on some tip,
+    ///
+    /// `M_j = Σ_{i ⪰ j} (c_i − o_j) × (m_i·g₀·ĝ)`  (N·m; `i ⪰ j`: `j` on `i`'s root path),
+    ///
+    /// with [`Self::masses`]; without them, unit weights at the origin of every joint below
+    /// `j` and at the end of every tip below `j`: `M_j = Σ (o_i − o_j) × ĝ` (m). The torque
+    /// about the axis is `τ_j = w_j·M_j`; the transversal moment, `M_j − (w_j·M_j)·w_j`, is
+    /// expressed in the joint's frame before its motion (the frame of its placement's
+    /// rotation deviations), for transversal compliance. A prismatic joint carries the
+    /// links below it but no moment (zeros); so does a joint on no tip's path.
+    ///
+    /// Source: the gravity torque of a serial chain (Siciliano et al., *Robotics: Modelling,
+    /// Planning and Control*, 2009, §7.2), summed over the subtree of a branched chain
+    /// (Featherstone, *Rigid Body Dynamics Algorithms*, 2008, §4.1: the loads of a joint are
+    /// those of its subtree).
+    ///
+    /// # Panics
+    /// If `tips` is empty, `q.len()` differs from the tips' joint count, or a
+    /// [`LinkMass::joint`] is not a joint of the tips.
+    #[track_caller]
+    pub fn joint_loads(&self, tips: &[Chain], q: &[f64]) -> Vec<JointLoad> {
+        let n = tips[0].n_joints();
         let mut origin = vec![Vector3::zeros(); n];
         let mut axis = vec![Vector3::zeros(); n];
-        let mut link = vec![hapcal_kinematics::Isometry3::identity(); n];
-        for (factor, pose) in chain.factors().iter().zip(&poses) {
-            if let Factor::Screw {
-                motion,
-                axis: a,
-                joint: Some(j),
-                ..
-            } = factor
-            {
-                // A prismatic joint carries its link (and its masses) but no torque.
-                link[*j] = *pose;
-                if *motion == Motion::Rotation {
+        let mut before = vec![UnitQuaternion::identity(); n];
+        let mut link = vec![Isometry3::identity(); n];
+        // below[j][i]: joint j lies on the root path of joint i (i = j included).
+        let mut below = vec![vec![false; n]; n];
+        // Tips whose path passes through each joint.
+        let mut tips_below = vec![Vec::new(); n];
+        let mut ends = Vec::with_capacity(tips.len());
+        for (t, chain) in tips.iter().enumerate() {
+            let x0 = vec![0.0; chain.n_params()];
+            let poses = chain.frame_poses(&x0, q);
+            let mut path = Vec::new();
+            let mut previous = Isometry3::identity();
+            for (factor, pose) in chain.factors().iter().zip(&poses) {
+                if let Factor::Screw {
+                    motion,
+                    axis: a,
+                    joint: Some(j),
+                    ..
+                } = factor
+                {
+                    link[*j] = *pose;
                     origin[*j] = pose.translation.vector;
-                    axis[*j] = pose.rotation * a.into_inner();
+                    before[*j] = previous.rotation;
+                    if *motion == Motion::Rotation {
+                        axis[*j] = pose.rotation * a.into_inner();
+                    }
+                    path.push(*j);
+                    for &k in &path {
+                        below[k][*j] = true;
+                    }
+                    tips_below[*j].push(t);
                 }
+                previous = *pose;
             }
+            ends.push(previous.translation.vector);
         }
         let g = self.gravity_dir;
-        if !self.masses.is_empty() {
-            let weights: Vec<(usize, Vector3<f64>, Vector3<f64>)> = self
-                .masses
-                .iter()
-                .map(|m| {
-                    let c = link[m.joint] * hapcal_kinematics::Point3::from(m.com_m);
-                    (m.joint, c.coords, g * (m.mass_kg * G0))
-                })
-                .collect();
-            return (0..n)
-                .map(|j| {
-                    let moment: Vector3<f64> = weights
-                        .iter()
-                        .filter(|(i, _, _)| *i >= j)
-                        .map(|(_, c, f)| (c - origin[j]).cross(f))
-                        .sum();
-                    axis[j].dot(&moment)
-                })
-                .collect();
-        }
-        let tip = chain.end_point(&x0, q).coords;
+        let moment = |j: usize| -> Vector3<f64> {
+            if self.masses.is_empty() {
+                let joints = (0..n).filter(|&i| i != j && below[j][i]).map(|i| origin[i]);
+                let tips = tips_below[j].iter().map(|&t| ends[t]);
+                joints.chain(tips).map(|o| (o - origin[j]).cross(&g)).sum()
+            } else {
+                (self.masses.iter())
+                    .filter(|m| below[j][m.joint])
+                    .map(|m| {
+                        let c = link[m.joint] * Point3::from(m.com_m);
+                        (c.coords - origin[j]).cross(&(g * (m.mass_kg * G0)))
+                    })
+                    .sum()
+            }
+        };
         (0..n)
             .map(|j| {
-                let lever: Vector3<f64> = origin[j + 1..]
-                    .iter()
-                    .chain(std::iter::once(&tip))
-                    .map(|o| (o - origin[j]).cross(&g))
-                    .sum();
-                axis[j].dot(&lever)
+                if axis[j] == Vector3::zeros() {
+                    return JointLoad::default();
+                }
+                let m = moment(j);
+                let torque = axis[j].dot(&m);
+                JointLoad {
+                    torque,
+                    transversal: before[j].inverse() * (m - torque * axis[j]),
+                }
             })
             .collect()
     }
+}
+
+/// The gravity load of one joint at one configuration ([`GravityCompliance::joint_loads`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct JointLoad {
+    /// Moment about the joint axis, N·m (m for the lumped unit weights).
+    pub torque: f64,
+    /// Moment normal to the joint axis, in the joint's frame before its motion, N·m (m for
+    /// the lumped unit weights).
+    pub transversal: Vector3<f64>,
 }

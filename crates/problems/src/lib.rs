@@ -52,13 +52,14 @@ mod model;
 mod problem;
 mod transmission;
 
-pub use compliance::{GravityCompliance, LinkMass};
+pub use compliance::{GravityCompliance, JointLoad, LinkMass};
 pub use fleet::{FleetDevice, FleetProblem, cable_angle, fleet_initial_guess};
 pub use harmonics::JointHarmonics;
 pub use joint::{JointData, JointProblem, JointTransmissions};
 pub use model::CalibratedModel;
 pub use problem::{
-    CalibrationProblem, ModelTerms, Observations, PointDistance, Row, RowKind, Weights,
+    CalibrationProblem, ModelTerms, Observations, PointDistance, Row, RowKind, TransversalTerm,
+    Weights,
 };
 pub use transmission::{CapstanProblem, PolynomialProblem};
 
@@ -101,6 +102,12 @@ pub enum Error {
         index: usize,
         /// Number of chain parameters.
         n_params: usize,
+    },
+    /// Transversal compliance asked for where it cannot be modelled.
+    #[error("transversal compliance cannot be modelled: {reason}")]
+    NoTransversal {
+        /// Why, in the user's words.
+        reason: &'static str,
     },
     /// A value in an observation is NaN or infinite.
     #[error("observation {row} holds a value that is not finite")]

@@ -1,6 +1,6 @@
 //! A calibrated model: the chain with identified deviations and compliance.
 
-use crate::{GravityCompliance, JointHarmonics};
+use crate::{GravityCompliance, JointHarmonics, TransversalTerm};
 use hapcal_kinematics::{Chain, Isometry3, Point3};
 
 /// A chain plus identified parameter deviations, ready to predict end points.
@@ -11,9 +11,9 @@ pub struct CalibratedModel {
     /// The chain of every tip of a tree ([`crate::CalibrationProblem::on_tree`]); empty for
     /// one chain.
     pub tips: Vec<Chain>,
-    /// The chain whose base frame gravity is expressed in (the robot without an instrument
-    /// frame), if not `chain`.
-    pub torque_chain: Option<Chain>,
+    /// The tips whose base frame gravity is expressed in, for the compliance loads (the robot
+    /// without an instrument frame, every branch of its tree); empty: `[chain]`.
+    pub torque_tips: Vec<Chain>,
     /// Kinematic deviations (length `chain.n_params()`, m or rad; zeros = nominal).
     pub x_kin: Vec<f64>,
     /// Compliance model and its `k_j` (length `n_joints`, rad/m), if modelled.
@@ -21,6 +21,9 @@ pub struct CalibratedModel {
     /// Joint harmonic model and its coefficients (length [`JointHarmonics::n_params`], rad),
     /// if modelled.
     pub harmonics: Option<(JointHarmonics, Vec<f64>)>,
+    /// Transversal compliance of each joint that has it, with its identified value (loads
+    /// from [`Self::compliance`]'s model); empty without.
+    pub transversal: Vec<TransversalTerm>,
 }
 
 impl CalibratedModel {
@@ -30,10 +33,11 @@ impl CalibratedModel {
         Self {
             chain,
             tips: Vec::new(),
-            torque_chain: None,
+            torque_tips: Vec::new(),
             x_kin,
             compliance: None,
             harmonics: None,
+            transversal: Vec::new(),
         }
     }
 
@@ -53,19 +57,51 @@ impl CalibratedModel {
         out
     }
 
+    fn torque_tips(&self) -> &[Chain] {
+        if self.torque_tips.is_empty() {
+            std::slice::from_ref(&self.chain)
+        } else {
+            &self.torque_tips
+        }
+    }
+
     fn compliant_angles(&self, q: &[f64]) -> Vec<f64> {
         match &self.compliance {
             None => q.to_vec(),
             Some((model, k)) => {
-                let tau =
-                    model.lumped_torques(self.torque_chain.as_ref().unwrap_or(&self.chain), q);
+                let loads = model.joint_loads(self.torque_tips(), q);
                 q.iter()
                     .zip(k)
-                    .zip(&tau)
-                    .map(|((q, k), t)| q + k * t)
+                    .zip(&loads)
+                    .map(|((q, k), l)| q + k * l.torque)
                     .collect()
             }
         }
+    }
+
+    /// Kinematic deviations for readings `q`: [`Self::x_kin`] with the transversal tilts
+    /// added to their joints' rotation deviations ([`TransversalTerm`]).
+    ///
+    /// # Panics
+    /// If `q.len()` differs from the chain's joint count.
+    #[track_caller]
+    pub fn effective_deviations(&self, q: &[f64]) -> std::borrow::Cow<'_, [f64]> {
+        let Some((model, _)) = self
+            .compliance
+            .as_ref()
+            .filter(|_| !self.transversal.is_empty())
+        else {
+            return std::borrow::Cow::Borrowed(&self.x_kin);
+        };
+        let loads = model.joint_loads(self.torque_tips(), q);
+        let mut x = self.x_kin.clone();
+        for t in &self.transversal {
+            let v = loads[t.joint].transversal;
+            for (&i, v) in t.rotation_params.iter().zip(v.iter()) {
+                x[i] += t.compliance * v;
+            }
+        }
+        std::borrow::Cow::Owned(x)
     }
 
     /// End point (m, base frame) for joint readings `q` (rad).
@@ -74,7 +110,8 @@ impl CalibratedModel {
     /// If `q.len()` differs from the chain's joint count.
     #[track_caller]
     pub fn end_point(&self, q: &[f64]) -> Point3<f64> {
-        self.chain.end_point(&self.x_kin, &self.effective_angles(q))
+        self.chain
+            .end_point(&self.effective_deviations(q), &self.effective_angles(q))
     }
 
     /// Pose of tip `tip`'s frame (m; in the instrument frame for a tree with frames) for
@@ -89,6 +126,6 @@ impl CalibratedModel {
         } else {
             &self.tips[tip]
         };
-        chain.end_pose(&self.x_kin, &self.effective_angles(q))
+        chain.end_pose(&self.effective_deviations(q), &self.effective_angles(q))
     }
 }

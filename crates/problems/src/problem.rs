@@ -69,11 +69,38 @@ impl RowKind {
 pub struct ModelTerms {
     /// Gravity compliance, if modelled.
     pub compliance: Option<GravityCompliance>,
+    /// Transversal compliance: each revolute joint's frame tilts about the axes normal to
+    /// its axis by `c_j` times the gravity moment about them ([`TransversalTerm`]); needs
+    /// [`Self::compliance`] (its weights give the moments) and a robot whose joints carry
+    /// rotation deviations (URDF placements: `{joint}.rx`, `.ry`, `.rz`).
+    pub transversal: bool,
     /// Joint angle harmonics, if modelled.
     pub harmonics: Option<JointHarmonics>,
-    /// The chain whose base frame gravity is expressed in, for the compliance torques (the
-    /// robot without the instrument frame); `None` = the problem's first tip.
-    pub torque_chain: Option<Chain>,
+    /// The tips whose base frame gravity is expressed in, for the compliance loads (the
+    /// robot without the instrument frame, every tip of its tree,
+    /// [`GravityCompliance::joint_loads`]); `None` = the problem's own tips.
+    pub torque_tips: Option<Vec<Chain>>,
+}
+
+/// One joint's transversal compliance (Tenhumberg & Bäuml 2021, "Calibration of an elastic
+/// humanoid upper body and efficient compensation for motion planning", arXiv 2311.08333:
+/// the joint frame bends about the two axes normal to the joint axis under the gravity
+/// moment about them; here with one compliance per joint, the same about both axes).
+///
+/// The tilt is the rotation vector `c·m⊥(q)`, `m⊥` the transversal gravity moment in the
+/// joint's frame before its motion ([`crate::JointLoad::transversal`], N·m, or m for the
+/// lumped unit weights), added to the joint placement's rotation deviations
+/// (`{joint}.rx`, `.ry`, `.rz`) for that configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TransversalTerm {
+    /// The joint (0-based, the tree's numbering).
+    pub joint: usize,
+    /// Indices of the joint's rotation deviations `rx`, `ry`, `rz` among the kinematic
+    /// parameters.
+    pub rotation_params: [usize; 3],
+    /// Compliance `c`, rad/(N·m) (rad/m for the lumped unit weights); 0 in a problem's term
+    /// list, the identified value in a [`CalibratedModel`].
+    pub compliance: f64,
 }
 
 /// One measured configuration.
@@ -142,12 +169,17 @@ pub struct CalibrationProblem {
     chain: Chain,
     /// The chain of each tip (marker and pose rows); `[chain]` unless built on a tree.
     tips: Vec<Chain>,
-    /// The chain of the compliance torques, if not `chain`.
-    torque_chain: Option<Chain>,
+    /// The tips of the compliance loads (the robot without instrument frame, every branch).
+    torque_tips: Vec<Chain>,
     obs: Observations,
     weights: Weights,
     compliance: Option<GravityCompliance>,
     harmonics: Option<JointHarmonics>,
+    /// Transversal compliance terms (parameters after the harmonics); empty without.
+    transversal: Vec<TransversalTerm>,
+    /// Tilt of each transversal term per row (row-major, `n_rows × transversal.len()`), the
+    /// transversal moment in the joint's frame ([`TransversalTerm`]).
+    tilt_basis: Vec<[f64; 3]>,
     /// Joint-angle terms of the compliance and harmonic models: (joint, parameter index after
     /// the kinematic ones). Empty for a purely geometric problem.
     angle_terms: Vec<(usize, usize)>,
@@ -222,8 +254,9 @@ impl CalibrationProblem {
             weights,
             ModelTerms {
                 compliance,
+                transversal: false,
                 harmonics,
-                torque_chain: None,
+                torque_tips: None,
             },
         )
     }
@@ -269,8 +302,9 @@ impl CalibrationProblem {
     ) -> Result<Self, Error> {
         let ModelTerms {
             compliance,
+            transversal,
             harmonics,
-            torque_chain,
+            torque_tips,
         } = terms;
         let Some(chain) = tips.first().cloned() else {
             return Err(Error::NoSuchParam {
@@ -278,11 +312,22 @@ impl CalibrationProblem {
                 n_params: 0,
             });
         };
-        if let Some(t) = &torque_chain
-            && t.n_joints() != chain.n_joints()
+        let torque_tips = torque_tips.unwrap_or_else(|| tips.clone());
+        if let Some(t) = torque_tips
+            .iter()
+            .find(|t| t.n_joints() != chain.n_joints())
+            .or(if torque_tips.is_empty() {
+                Some(&chain)
+            } else {
+                None
+            })
         {
             return Err(Error::NoSuchParam {
-                index: t.n_joints(),
+                index: if torque_tips.is_empty() {
+                    0
+                } else {
+                    t.n_joints()
+                },
                 n_params: chain.n_joints(),
             });
         }
@@ -385,7 +430,7 @@ impl CalibrationProblem {
                 });
             }
         }
-        let torques: Vec<Vec<f64>> = match &compliance {
+        let loads: Vec<Vec<crate::JointLoad>> = match &compliance {
             Some(model) => {
                 let names = chain.joint_names();
                 specs.extend((0..model.n_params(n_joints)).map(|g| {
@@ -401,13 +446,14 @@ impl CalibrationProblem {
                 }));
                 obs.rows
                     .iter()
-                    .map(|row| {
-                        model.lumped_torques(torque_chain.as_ref().unwrap_or(&chain), &row.q)
-                    })
+                    .map(|row| model.joint_loads(&torque_tips, &row.q))
                     .collect()
             }
             None => Vec::new(),
         };
+        let torques: Vec<Vec<f64>> = (loads.iter())
+            .map(|l| l.iter().map(|l| l.torque).collect())
+            .collect();
         let n_comp = compliance.as_ref().map_or(0, |c| c.n_params(n_joints));
         let mut angle_terms: Vec<(usize, usize)> = match &compliance {
             Some(c) => (0..n_joints).map(|j| (j, c.group(j))).collect(),
@@ -430,6 +476,48 @@ impl CalibrationProblem {
                     .map(|(t, (j, _, _))| (j, n_comp + t)),
             );
         }
+        let mut transversal_terms = Vec::new();
+        if transversal {
+            let Some(model) = &compliance else {
+                return Err(Error::NoTransversal {
+                    reason: "it needs the gravity compliance model",
+                });
+            };
+            let revolute = revolute_joints(&torque_tips);
+            let names = chain.joint_names();
+            for (j, name) in names.iter().enumerate() {
+                let index = |axis: &str| chain.param_index(&format!("{name}.{axis}"));
+                if let (true, Some(rx), Some(ry), Some(rz)) =
+                    (revolute[j], index("rx"), index("ry"), index("rz"))
+                {
+                    transversal_terms.push(TransversalTerm {
+                        joint: j,
+                        rotation_params: [rx, ry, rz],
+                        compliance: 0.0,
+                    });
+                }
+            }
+            if transversal_terms.is_empty() {
+                return Err(Error::NoTransversal {
+                    reason: "no revolute joint has rotation deviations (a URDF robot has them; a D-H chain does not)",
+                });
+            }
+            // Compliance × moment is an angle: the parameter's unit is the rotation it scales,
+            // as for the axial compliance.
+            let _ = model;
+            specs.extend(transversal_terms.iter().map(|t| ParamSpec {
+                name: format!("transversal.{}", names[t.joint]),
+                unit: Unit::Radian,
+                role: Role::Model,
+            }));
+        }
+        let tilt_basis: Vec<[f64; 3]> = (loads.iter())
+            .flat_map(|l| {
+                transversal_terms
+                    .iter()
+                    .map(|t| l[t.joint].transversal.into())
+            })
+            .collect();
         let mut angle_basis = Vec::with_capacity(obs.rows.len() * angle_terms.len());
         for (row_idx, row) in obs.rows.iter().enumerate() {
             if let Some(t) = torques.get(row_idx) {
@@ -467,6 +555,7 @@ impl CalibrationProblem {
             residual += len + extra;
         }
         let lanes = angle_terms.is_empty()
+            && transversal_terms.is_empty()
             && any_distance
             && chain.freeze(&vec![0.0; chain.n_params()]).supports_lanes();
         let mut lane_groups = Vec::new();
@@ -500,7 +589,7 @@ impl CalibrationProblem {
             lane_distance_m.push(std::array::from_fn(|l| distance(&group[l]).unwrap_or(0.0)));
         }
         let mut trig = Vec::new();
-        if angle_terms.is_empty() && any_distance {
+        if angle_terms.is_empty() && transversal_terms.is_empty() && any_distance {
             let mut groups = lane_groups.iter().peekable();
             let mut row_idx = 0;
             while row_idx < obs.rows.len() {
@@ -515,11 +604,13 @@ impl CalibrationProblem {
         Ok(Self {
             chain,
             tips,
-            torque_chain,
+            torque_tips,
             obs,
             weights,
             compliance,
             harmonics,
+            transversal: transversal_terms,
+            tilt_basis,
             angle_terms,
             angle_basis,
             layout: ParamLayout::new(specs),
@@ -546,8 +637,9 @@ impl CalibrationProblem {
             self.weights,
             ModelTerms {
                 compliance: self.compliance.clone(),
+                transversal: !self.transversal.is_empty(),
                 harmonics: self.harmonics.clone(),
-                torque_chain: self.torque_chain.clone(),
+                torque_tips: Some(self.torque_tips.clone()),
             },
         )?;
         if problem.layout.len() == self.layout.len() {
@@ -589,9 +681,15 @@ impl CalibrationProblem {
         self.harmonics.as_ref().map_or(0, JointHarmonics::n_params)
     }
 
+    /// Number of transversal compliance parameters (0 without them, else one per revolute
+    /// joint with rotation deviations, [`TransversalTerm`]).
+    pub fn n_transversal(&self) -> usize {
+        self.transversal.len()
+    }
+
     /// Index of the first unknown-point parameter in `x`.
     pub fn points_offset(&self) -> usize {
-        self.chain.n_params() + self.n_compliance() + self.n_harmonics()
+        self.chain.n_params() + self.n_compliance() + self.n_harmonics() + self.n_transversal()
     }
 
     /// Start vector: zero deviations and compliance, each unknown point at the mean of the nominal
@@ -645,17 +743,30 @@ impl CalibrationProblem {
                 (0..h.n_params()).map(|t| x[n + n_comp + t]).collect(),
             )
         });
+        let n_harm = self.n_harmonics();
+        let transversal = (self.transversal.iter().enumerate())
+            .map(|(t, term)| TransversalTerm {
+                compliance: x[n + n_comp + n_harm + t],
+                ..term.clone()
+            })
+            .collect();
+        let own_tips = self.torque_tips == self.tips;
         CalibratedModel {
             chain: self.chain.clone(),
-            tips: if self.tips.len() > 1 || self.torque_chain.is_some() {
+            tips: if self.tips.len() > 1 || !own_tips {
                 self.tips.clone()
             } else {
                 Vec::new()
             },
-            torque_chain: self.torque_chain.clone(),
+            torque_tips: if own_tips && self.tips.len() == 1 {
+                Vec::new()
+            } else {
+                self.torque_tips.clone()
+            },
             x_kin,
             compliance,
             harmonics,
+            transversal,
         }
     }
 
@@ -691,6 +802,33 @@ impl CalibrationProblem {
         buf.extend_from_slice(q);
         for (&(j, param), b) in self.angle_terms.iter().zip(basis) {
             buf[j] += x[n + param] * b;
+        }
+        buf
+    }
+
+    /// The kinematic deviations the chain sees in row `row_idx`: `x_kin` with the transversal
+    /// tilts added to their joints' rotation deviations (written to `buf`), or `x_kin` itself
+    /// without transversal compliance.
+    fn effective_x<'a>(
+        &'a self,
+        row_idx: usize,
+        x: ColRef<'_, f64>,
+        x_kin: &'a [f64],
+        buf: &'a mut Vec<f64>,
+    ) -> &'a [f64] {
+        if self.transversal.is_empty() {
+            return x_kin;
+        }
+        let first = self.chain.n_params() + self.n_compliance() + self.n_harmonics();
+        let n_terms = self.transversal.len();
+        let basis = &self.tilt_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
+        buf.clear();
+        buf.extend_from_slice(x_kin);
+        for (t, (term, v)) in self.transversal.iter().zip(basis).enumerate() {
+            let c = x[first + t];
+            for (&i, v) in term.rotation_params.iter().zip(v) {
+                buf[i] += c * v;
+            }
         }
         buf
     }
@@ -785,8 +923,10 @@ impl CalibrationProblem {
         mut jac: Option<&mut [&mut [f64]]>,
     ) {
         let n_kin = self.chain.n_params();
-        let n_comp = self.n_compliance() + self.n_harmonics();
+        let n_angle = self.n_compliance() + self.n_harmonics();
+        let n_comp = n_angle + self.n_transversal();
         let n_terms = self.angle_terms.len();
+        let n_tilts = self.transversal.len();
         let off = self.points_offset();
         let point_distances: &[PointDistance] = if with_point_distances {
             &self.obs.point_distances
@@ -814,6 +954,7 @@ impl CalibrationProblem {
         let mut q_buf = Vec::new();
         let mut grad = Vec::new();
         let mut x_kin: Vec<f64> = Vec::new();
+        let mut x_buf: Vec<f64> = Vec::new();
         let n_joints = self.chain.n_joints();
         let s_distance = self.weights.sigma_distance_m;
         let inv_s_distance = 1.0 / s_distance;
@@ -902,21 +1043,23 @@ impl CalibrationProblem {
                 if x_kin.is_empty() {
                     x_kin.extend((0..n_kin).map(|i| x[i]));
                 }
+                let x_eff = self.effective_x(row_idx, x, &x_kin, &mut x_buf);
                 let pose = if jac.is_some() {
                     buf.resize(6 * n_kin, 0.0);
                     let ws = ws.get_or_insert_with(|| FkWorkspace::new(chain));
-                    chain.pose_and_jacobian_in(&x_kin, q_eff, ws, &mut buf)
+                    chain.pose_and_jacobian_in(x_eff, q_eff, ws, &mut buf)
                 } else {
-                    chain.end_pose(&x_kin, q_eff)
+                    chain.end_pose(x_eff, q_eff)
                 };
                 let jq =
-                    (n_comp > 0 && jac.is_some()).then(|| chain.geometric_jacobian(&x_kin, q_eff));
+                    (n_angle > 0 && jac.is_some()).then(|| chain.geometric_jacobian(x_eff, q_eff));
                 let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
+                let tilts = &self.tilt_basis[row_idx * n_tilts..(row_idx + 1) * n_tilts];
                 // Row k of the pose Jacobian (0–2 position, 3–5 rotation vector) at column col.
                 let dpose = |k: usize, col: usize| -> f64 {
                     if col < n_kin {
                         buf[6 * col + k]
-                    } else {
+                    } else if col < n_kin + n_angle {
                         let g = col - n_kin;
                         jq.as_ref().map_or(0.0, |m| {
                             (self.angle_terms.iter().zip(basis))
@@ -924,6 +1067,12 @@ impl CalibrationProblem {
                                 .map(|((j, _), b)| m[(k, *j)] * b)
                                 .sum()
                         })
+                    } else {
+                        let t = col - n_kin - n_angle;
+                        (self.transversal[t].rotation_params.iter())
+                            .zip(&tilts[t])
+                            .map(|(&i, v)| buf[6 * i + k] * v)
+                            .sum()
                     }
                 };
                 let s = self.weights.sigma_position_m;
@@ -966,7 +1115,20 @@ impl CalibrationProblem {
                 continue;
             }
             let q_eff = self.effective_q(row_idx, x, &mut q_buf);
-            let p = if jac.is_some() {
+            let p = if n_tilts > 0 {
+                // Transversal tilts change the deviations row by row: the chain itself.
+                if x_kin.is_empty() {
+                    x_kin.extend((0..n_kin).map(|i| x[i]));
+                }
+                let x_eff = self.effective_x(row_idx, x, &x_kin, &mut x_buf);
+                if jac.is_some() {
+                    buf.resize(3 * n_kin, 0.0);
+                    let ws = ws.get_or_insert_with(|| FkWorkspace::new(&self.chain));
+                    self.chain.point_and_jacobian_in(x_eff, q_eff, ws, &mut buf)
+                } else {
+                    self.chain.end_point(x_eff, q_eff)
+                }
+            } else if jac.is_some() {
                 buf.resize(3 * n_kin, 0.0);
                 let ws = ws.get_or_insert_with(|| FkWorkspace::new(&self.chain));
                 frozen.point_and_jacobian(q_eff, &mut buf, ws)
@@ -975,16 +1137,18 @@ impl CalibrationProblem {
             };
             // ∂p/∂k_j = (∂p/∂q_j)·τ̂_j (and ∂p/∂a_jh = (∂p/∂q_j)·sin(h·q_j), …), from the
             // geometric Jacobian's linear rows.
-            let jq = if n_comp > 0 && jac.is_some() {
+            let jq = if n_angle > 0 && jac.is_some() {
                 let x_kin: Vec<f64> = (0..n_kin).map(|i| x[i]).collect();
-                Some(self.chain.geometric_jacobian(&x_kin, q_eff))
+                let x_eff = self.effective_x(row_idx, x, &x_kin, &mut x_buf);
+                Some(self.chain.geometric_jacobian(x_eff, q_eff))
             } else {
                 None
             };
+            let tilts = &self.tilt_basis[row_idx * n_tilts..(row_idx + 1) * n_tilts];
             let dp = |k: usize, col: usize| -> f64 {
                 if col < n_kin {
                     buf[3 * col + k]
-                } else {
+                } else if col < n_kin + n_angle {
                     let g = col - n_kin;
                     let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
                     jq.as_ref().map_or(0.0, |m| {
@@ -993,6 +1157,12 @@ impl CalibrationProblem {
                             .map(|((j, _), b)| m[(k, *j)] * b)
                             .sum()
                     })
+                } else {
+                    let t = col - n_kin - n_angle;
+                    (self.transversal[t].rotation_params.iter())
+                        .zip(&tilts[t])
+                        .map(|(&i, v)| buf[3 * i + k] * v)
+                        .sum()
                 }
             };
             match &row.kind {
@@ -1251,4 +1421,24 @@ fn check_shape(nx: usize, n: usize, nr: usize, m: usize) -> Result<(), EvalError
         });
     }
     Ok(())
+}
+
+/// Per joint of the tips (the same joints on every tip): whether its screw is a rotation.
+fn revolute_joints(tips: &[Chain]) -> Vec<bool> {
+    let n = tips.first().map_or(0, Chain::n_joints);
+    let mut revolute = vec![false; n];
+    for chain in tips {
+        for factor in chain.factors() {
+            if let hapcal_kinematics::Factor::Screw {
+                motion,
+                joint: Some(j),
+                ..
+            } = factor
+                && let Some(r) = revolute.get_mut(*j)
+            {
+                *r = *motion == hapcal_kinematics::Motion::Rotation;
+            }
+        }
+    }
+    revolute
 }

@@ -172,6 +172,31 @@ fn link_masses_are_carried_to_the_nearest_moving_joint() {
 }
 
 #[test]
+fn masses_off_the_measured_paths_load_the_joint_above_them() {
+    // Only arm_a is measured: arm_b (another branch, its joint held at zero) and the tool below
+    // a tip still weigh on the joints above them.
+    let tree = import_urdf_tips(&data("branches.urdf"), &["arm_a".to_owned()]).unwrap();
+    let names: Vec<&str> = tree.joints.iter().map(|j| j.name.as_str()).collect();
+    assert_eq!(names, ["j1", "a1"]);
+    let of = |link: &str| {
+        (tree.inertials.iter())
+            .find(|l| l.link == link)
+            .unwrap_or_else(|| panic!("no inertial for {link}: {:?}", tree.inertials))
+    };
+    assert_eq!((of("torso").joint, of("torso").mass_kg), (0, 4.0));
+    assert_eq!((of("arm_a").joint, of("arm_a").com_m), (1, [0.1, 0.0, 0.0]));
+    let b = of("arm_b");
+    assert_eq!((b.joint, b.mass_kg), (0, 3.0));
+    // b1's origin (0, −0.2, 0.3), rotated 90° about z: the 0.1 m along arm_b's x is along
+    // the torso's y.
+    for (got, want) in b.com_m.iter().zip([0.0, -0.1, 0.3]) {
+        assert!((got - want).abs() < 1e-15, "{:?}", b.com_m);
+    }
+    let tool_below_tip = import_urdf_tips(&data("inertial.urdf"), &["arm".to_owned()]).unwrap();
+    assert!(tool_below_tip.inertials.iter().any(|l| l.link == "tool"));
+}
+
+#[test]
 fn unsupported_and_malformed_urdfs_are_errors() {
     let msg = message(import_urdf(&data("tiny.urdf"), "base"));
     assert_contains(&msg, &["no moving joint between the root link \"base\""]);

@@ -3,6 +3,7 @@
 
 mod crosscheck;
 mod fleet;
+mod gravity;
 mod identifiability;
 mod streaming;
 mod transmission;

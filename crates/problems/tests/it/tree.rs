@@ -112,15 +112,16 @@ fn pose_rows_jacobian_matches_central_differences() {
         ..Weights::default()
     };
     let n_joints = tree.n_joints();
-    let torque = two_arm_tree().tips()[0].clone();
+    let torque = two_arm_tree().tips().to_vec();
     let problem = CalibrationProblem::on_tree(
         tree,
         obs,
         weights,
         ModelTerms {
             compliance: Some(GravityCompliance::default()),
+            transversal: false,
             harmonics: None,
-            torque_chain: Some(torque),
+            torque_tips: Some(torque),
         },
     )
     .expect("valid problem");

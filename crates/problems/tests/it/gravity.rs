@@ -1,0 +1,270 @@
+//! Gravity loads on a tree: every branch loads the joints above it and no other, the torque
+//! is the derivative of the potential energy, and the transversal compliance's analytic
+//! Jacobian agrees with central differences.
+
+use faer::{Col, Mat};
+use hapcal_identify::Problem;
+use hapcal_kinematics::{Chain, Factor, FrameSpec, Isometry3, Placement, Point3, Tree, Vector3};
+use hapcal_problems::{
+    CalibrationProblem, GravityCompliance, LinkMass, ModelTerms, Observations, Row, RowKind,
+    Weights,
+};
+
+fn placement(name: &str, xyz_m: [f64; 3], axis: [f64; 3]) -> Placement {
+    Placement {
+        name: name.into(),
+        xyz_m,
+        rpy_rad: [0.1, -0.2, 0.05],
+        axis: Some(axis),
+        prismatic: false,
+    }
+}
+
+/// A torso that pitches (axis y, so that both arms load it) under two arms of two revolute
+/// joints each, with a fixed tool.
+fn torso_tree() -> Tree {
+    let torso = placement("torso", [0.0, 0.0, 0.4], [0.0, 1.0, 0.0]);
+    let arm = |side: &str, y: f64| {
+        vec![
+            torso.clone(),
+            placement(&format!("{side}_1"), [0.1, y, 0.2], [0.0, 1.0, 0.0]),
+            placement(&format!("{side}_2"), [0.3, 0.0, 0.0], [1.0, 0.0, 0.3]),
+            Placement {
+                name: format!("{side}_tool"),
+                xyz_m: [0.2, 0.0, 0.05],
+                rpy_rad: [0.0; 3],
+                axis: None,
+                prismatic: false,
+            },
+        ]
+    };
+    Tree::from_placement_paths(&[arm("left", 0.2), arm("right", -0.2)]).expect("valid tree")
+}
+
+/// A mass on every link, centres of mass off every axis.
+fn masses(n_joints: usize) -> Vec<LinkMass> {
+    (0..n_joints)
+        .map(|joint| LinkMass {
+            joint,
+            mass_kg: 1.0 + joint as f64,
+            com_m: Vector3::new(0.05, -0.02 * joint as f64, 0.1),
+        })
+        .collect()
+}
+
+/// World pose of each joint's link (after its motion) on the nominal tree.
+fn link_poses(tree: &Tree, q: &[f64]) -> Vec<Isometry3<f64>> {
+    let mut link = vec![Isometry3::identity(); tree.n_joints()];
+    for chain in tree.tips() {
+        let poses = chain.frame_poses(&vec![0.0; chain.n_params()], q);
+        for (f, pose) in chain.factors().iter().zip(poses) {
+            if let Factor::Screw { joint: Some(j), .. } = f {
+                link[*j] = pose;
+            }
+        }
+    }
+    link
+}
+
+/// Potential energy `Σ m·g₀·z` of the masses (gravity along −z), J.
+fn potential(tree: &Tree, masses: &[LinkMass], q: &[f64]) -> f64 {
+    let link = link_poses(tree, q);
+    (masses.iter())
+        .map(|m| m.mass_kg * 9.806_65 * (link[m.joint] * Point3::from(m.com_m)).z)
+        .sum()
+}
+
+#[test]
+fn every_branch_loads_the_joints_above_it_and_no_other() {
+    let tree = torso_tree();
+    let model = GravityCompliance::from_link_masses(masses(tree.n_joints()), -Vector3::z());
+    for q in [
+        vec![0.3, -0.7, 0.4, 1.1, -0.2],
+        vec![-0.5, 0.2, -1.3, 0.6, 0.9],
+    ] {
+        let loads = model.joint_loads(tree.tips(), &q);
+        for j in 0..q.len() {
+            // The torque gravity exerts about a joint is −∂U/∂q_j (virtual work).
+            let h = 1e-6;
+            let (mut qp, mut qm) = (q.clone(), q.clone());
+            qp[j] += h;
+            qm[j] -= h;
+            let expected = -(potential(&tree, &model.masses, &qp)
+                - potential(&tree, &model.masses, &qm))
+                / (2.0 * h);
+            // Central differences: O(h²·U''') ≈ 1e-11 N·m, rounding ≈ 1e-16·U/h ≈ 1e-9 N·m.
+            assert!(
+                (loads[j].torque - expected).abs() < 1e-6,
+                "joint {}: {} vs {expected} N·m",
+                tree.joint_names()[j],
+                loads[j].torque
+            );
+        }
+        // The right arm's masses do not load the left arm: the left arm's torques are those
+        // of the left arm's masses alone.
+        let left_only: Vec<LinkMass> = (masses(tree.n_joints()).into_iter())
+            .filter(|m| m.joint <= 2)
+            .collect();
+        let left = GravityCompliance::from_link_masses(left_only, -Vector3::z());
+        let alone = left.joint_loads(tree.tips(), &q);
+        for j in 1..=2 {
+            assert!((alone[j].torque - loads[j].torque).abs() < 1e-12);
+        }
+        // The torso carries both arms: more than either alone.
+        assert!((alone[0].torque - loads[0].torque).abs() > 0.1);
+    }
+}
+
+#[test]
+fn one_chain_keeps_the_serial_torques() {
+    // A single path of the tree: the tree's loads restricted to it are the serial ones.
+    let tree = torso_tree();
+    let left: &Chain = &tree.tips()[0];
+    let left_masses: Vec<LinkMass> = (masses(tree.n_joints()).into_iter())
+        .filter(|m| m.joint <= 2)
+        .collect();
+    let model = GravityCompliance::from_link_masses(left_masses, -Vector3::z());
+    let q = [0.4, -0.3, 0.8, 0.0, 0.0];
+    let serial = model.lumped_torques(left, &q);
+    let tree_loads = model.joint_loads(tree.tips(), &q);
+    for j in 0..3 {
+        assert!((serial[j] - tree_loads[j].torque).abs() < 1e-12);
+    }
+    // The right arm's joints are on no path of the left chain: no torque there.
+    assert_eq!(serial[3], 0.0);
+    assert_eq!(serial[4], 0.0);
+}
+
+#[test]
+fn transversal_compliance_jacobian_matches_central_differences() {
+    let robot = torso_tree();
+    let base = FrameSpec {
+        name: "instrument".into(),
+        nominal: Isometry3::new(Vector3::new(1.0, -0.5, 0.3), Vector3::new(0.2, 0.1, -0.4)),
+    };
+    let marker = |name: &str| FrameSpec {
+        name: name.into(),
+        nominal: Isometry3::new(Vector3::new(0.02, 0.01, 0.03), Vector3::new(-0.1, 0.3, 0.2)),
+    };
+    let tree = (robot.with_joint_offsets())
+        .with_frames(&base, &[(0, marker("marker1")), (1, marker("marker2"))])
+        .expect("valid frames");
+    let mut obs = Observations::default();
+    for i in 0..6 {
+        let t = i as f64;
+        let q = vec![
+            0.3 * (0.7 * t).sin(),
+            (1.3 * t).sin(),
+            (0.9 * t + 1.0).cos(),
+            (0.4 * t).sin() * 1.5,
+            (1.7 * t + 0.3).cos(),
+        ];
+        let kind = if i % 2 == 0 {
+            RowKind::Pose {
+                tip: i % 3 % 2,
+                position_m: [1.0, 0.2, -0.1],
+                rotation: [0.9, 0.1, -0.3, 0.2],
+            }
+        } else {
+            RowKind::Marker {
+                tip: 1,
+                position_m: [0.5, 0.4, 0.3],
+            }
+        };
+        obs.rows.push(Row { q, kind });
+    }
+    let weights = Weights {
+        sigma_position_m: 1e-3,
+        sigma_orientation_rad: 2e-3,
+        ..Weights::default()
+    };
+    let n_joints = tree.n_joints();
+    let problem = CalibrationProblem::on_tree(
+        tree,
+        obs,
+        weights,
+        ModelTerms {
+            compliance: Some(GravityCompliance::from_link_masses(
+                masses(n_joints),
+                -Vector3::z(),
+            )),
+            transversal: true,
+            harmonics: None,
+            torque_tips: Some(robot.tips().to_vec()),
+        },
+    )
+    .expect("valid problem");
+    // Every joint revolute with rotation deviations: one transversal parameter each.
+    assert_eq!(problem.n_transversal(), n_joints);
+    let n = problem.layout().len();
+    // Compliances of 1e-3 rad/(N·m) give tilts of tens of mrad: far from linear.
+    let x = Col::from_fn(n, |i| 1e-3 * ((i * 7 % 11) as f64 - 5.0));
+    let mut jac = Mat::zeros(problem.n_residuals(), n);
+    problem
+        .jacobian(x.as_ref(), jac.as_mut())
+        .expect("jacobian");
+    let h = 1e-7;
+    let mut worst: f64 = 0.0;
+    for c in 0..n {
+        let (mut xp, mut xm) = (x.clone(), x.clone());
+        xp[c] += h;
+        xm[c] -= h;
+        let m = problem.n_residuals();
+        let (mut rp, mut rm) = (Col::zeros(m), Col::zeros(m));
+        problem
+            .residuals(xp.as_ref(), rp.as_mut())
+            .expect("residuals");
+        problem
+            .residuals(xm.as_ref(), rm.as_mut())
+            .expect("residuals");
+        for r in 0..m {
+            let fd = (rp[r] - rm[r]) / (2.0 * h);
+            // Residuals are O(1e3·30 N·m) per unit compliance; central differences at
+            // h = 1e-7 are exact to O(h²·|r'''|), rounding ≈ 1e-16·|r|/h ≈ 1e-8.
+            worst = worst.max((fd - jac[(r, c)]).abs() / (1.0 + jac[(r, c)].abs()));
+        }
+    }
+    assert!(worst < 1e-5, "largest relative Jacobian error {worst:e}");
+    // The model predicts what the problem fits.
+    let model = problem.model(x.as_ref());
+    assert_eq!(model.transversal.len(), n_joints);
+    let mut r = Col::zeros(problem.n_residuals());
+    problem
+        .residuals(x.as_ref(), r.as_mut())
+        .expect("residuals");
+    let row = &problem.observations().rows[1];
+    let RowKind::Marker { tip, position_m } = row.kind else {
+        panic!("row 1 is a marker row")
+    };
+    let p = model.end_pose_of(tip, &row.q).translation.vector;
+    // Row 0 is a pose row (6 residuals); row 1's position residuals follow.
+    for k in 0..3 {
+        assert!(((p[k] - position_m[k]) / 1e-3 - r[6 + k]).abs() < 1e-9);
+    }
+}
+
+#[test]
+fn transversal_compliance_needs_the_compliance_model() {
+    let robot = torso_tree();
+    let obs = Observations {
+        rows: vec![Row {
+            q: vec![0.0; 5],
+            kind: RowKind::Marker {
+                tip: 0,
+                position_m: [0.0; 3],
+            },
+        }],
+        ..Observations::default()
+    };
+    let err = CalibrationProblem::on_tree(
+        robot,
+        obs,
+        Weights::default(),
+        ModelTerms {
+            transversal: true,
+            ..ModelTerms::default()
+        },
+    )
+    .expect_err("no compliance model");
+    assert!(err.to_string().contains("gravity compliance"), "{err}");
+}
