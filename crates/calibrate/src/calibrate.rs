@@ -14,47 +14,168 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Which model to identify.
+/// Which model to identify. The doc comment of each variant is its `hapcal calibrate --help`
+/// text: plain words (no links), saying what the value does in each [`Workflow`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum ModelChoice {
-    /// Choose by k-fold cross-validation on the training data only (for marker data: the
-    /// ladder frames only → joint offsets → geometric → compliance, [`crate::measured`]).
+    /// Chosen on the training data only. Socket recordings and distance logs: repeated blocked
+    /// cross-validation among geometric, compliance and, for a robot with published link
+    /// masses, mass-compliance and actuator-compliance; a compliance model must beat geometric
+    /// by 1 standard error of the held-out difference. Measurement files: the ladder
+    /// frames-only, joint-offsets, geometric, compliance, transversal-compliance, climbing only
+    /// while a model beats the one chosen below it by 2 standard errors. A haptic device's
+    /// logs: transmissions, or the kinematic deviations alone when the logs have no
+    /// external-encoder columns.
     Auto,
-    /// Marker data: the nominal kinematics, only the instrument and marker frames fitted.
+    /// Measurement files only: the nominal kinematics; only the instrument's frame and the
+    /// markers' frames are fitted.
     FramesOnly,
-    /// Marker data: the frames plus one offset per joint.
+    /// Measurement files only: the frames plus one offset per joint.
     JointOffsets,
-    /// Kinematic parameters only.
+    /// Every kinematic parameter the data determine (the others are pruned and reported), on
+    /// socket recordings, distance logs and measurement files. Not for a haptic device's logs.
     Geometric,
-    /// Kinematic parameters plus lumped gravity compliance per joint.
+    /// Geometric plus one gravity compliance per joint. Socket recordings and distance logs:
+    /// lumped link weights. Measurement files: the torques of the URDF's inertial masses when
+    /// it has them, lumped weights otherwise.
     Compliance,
-    /// Kinematic parameters plus gravity compliance per joint, with the torque of the robot's
-    /// published link masses (Franka Panda, KUKA LBR iiwa 14; see
-    /// [`GravityCompliance::published`]). Not available for other robots.
+    /// Socket recordings and distance logs only: geometric plus one gravity compliance per
+    /// joint, with the torques of the robot's published link masses (Franka Panda, KUKA LBR
+    /// iiwa 14; refused for other robots). On measurement files use compliance, which takes
+    /// the masses from the URDF.
     MassCompliance,
-    /// As [`ModelChoice::MassCompliance`], with one compliance per actuator size
-    /// ([`GravityCompliance::published_by_actuator`]).
+    /// Socket recordings and distance logs only: as mass-compliance, with one compliance per
+    /// actuator size.
     ActuatorCompliance,
-    /// Kinematic parameters plus once-per-revolution harmonic angle errors on every joint
-    /// ([`JointHarmonics::first_order`]: encoder eccentricity). Not a candidate of
-    /// [`ModelChoice::Auto`], nor are the other harmonic models: on one MUKCa placement they
-    /// fit the training data better and the other placements worse (docs/results/mukca.md).
+    /// Measurement files only: compliance plus a transversal compliance per revolute joint
+    /// (the joint frame bends about the axes normal to its axis under the gravity moment; link
+    /// masses from the URDF's inertial tags).
+    TransversalCompliance,
+    /// Socket recordings and distance logs only: geometric plus once-per-revolution harmonic
+    /// angle errors on every joint (encoder eccentricity). Never chosen by auto, nor is any
+    /// other harmonic model: on one MUKCa placement they fit the training data better and the
+    /// other placements worse (docs/results/mukca.md).
     Harmonic,
-    /// Kinematic parameters plus first- and second-order harmonic angle errors on every joint.
+    /// Socket recordings and distance logs only: geometric plus first- and second-order
+    /// harmonic angle errors on every joint.
     Harmonic2,
-    /// [`ModelChoice::MassCompliance`] plus [`ModelChoice::Harmonic`].
+    /// Socket recordings and distance logs only: mass-compliance plus harmonic.
     MassComplianceHarmonic,
-    /// [`ModelChoice::Compliance`] plus [`ModelChoice::Harmonic`].
+    /// Socket recordings and distance logs only: compliance plus harmonic.
     ComplianceHarmonic,
-    /// A haptic device's transmissions (capstan eq. 1, the parallelogram's polynomial, from the
-    /// external encoders) and its kinematic deviations (from the cable distances): the paper's
-    /// calibration ([`crate::haptic::calibrate_logs`]); the choice of `auto` for a device file
-    /// with transmissions and logs with external-encoder columns.
+    /// A haptic device's logs only: the transmissions (each capstan's eq. 1 and the
+    /// parallelogram's polynomial, from the external-encoder columns, which every training log
+    /// must have) and then the kinematic deviations (from the cable distances): the paper's two
+    /// steps.
     Transmissions,
 }
 
+/// The three ways `hapcal calibrate` fits data, each with the models it takes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Workflow {
+    /// MUKCa socket recordings, or distance logs of a device with a cable encoder of its own
+    /// and no transmissions.
+    SocketsOrDistances,
+    /// Measurement files: marker positions or poses, or distances from an anchor, in an
+    /// instrument's frame ([`crate::measured`]).
+    MeasurementFiles,
+    /// The logs of a haptic device with transmissions ([`crate::haptic::calibrate_logs`]).
+    HapticLogs,
+}
+
+impl Workflow {
+    /// The data, in the words of an error message.
+    fn data(self) -> &'static str {
+        match self {
+            Workflow::SocketsOrDistances => "socket recordings and distance logs",
+            Workflow::MeasurementFiles => {
+                "measurement files (marker positions, poses, anchor distances)"
+            }
+            Workflow::HapticLogs => "a haptic device's logs",
+        }
+    }
+}
+
+impl std::fmt::Display for ModelChoice {
+    /// The `--model` value, as the user types it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(self.name())
+    }
+}
+
 impl ModelChoice {
+    /// The `--model` value that selects this choice (`mass-compliance`), as the user types it.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelChoice::Auto => "auto",
+            ModelChoice::FramesOnly => "frames-only",
+            ModelChoice::JointOffsets => "joint-offsets",
+            ModelChoice::Geometric => "geometric",
+            ModelChoice::Compliance => "compliance",
+            ModelChoice::MassCompliance => "mass-compliance",
+            ModelChoice::ActuatorCompliance => "actuator-compliance",
+            ModelChoice::TransversalCompliance => "transversal-compliance",
+            ModelChoice::Harmonic => "harmonic",
+            ModelChoice::Harmonic2 => "harmonic2",
+            ModelChoice::MassComplianceHarmonic => "mass-compliance-harmonic",
+            ModelChoice::ComplianceHarmonic => "compliance-harmonic",
+            ModelChoice::Transmissions => "transmissions",
+        }
+    }
+
+    /// Whether `workflow` fits this choice.
+    pub fn fits(self, workflow: Workflow) -> bool {
+        use ModelChoice as M;
+        match workflow {
+            Workflow::SocketsOrDistances => !matches!(
+                self,
+                M::FramesOnly | M::JointOffsets | M::TransversalCompliance | M::Transmissions
+            ),
+            Workflow::MeasurementFiles => matches!(
+                self,
+                M::Auto
+                    | M::FramesOnly
+                    | M::JointOffsets
+                    | M::Geometric
+                    | M::Compliance
+                    | M::TransversalCompliance
+            ),
+            Workflow::HapticLogs => matches!(self, M::Auto | M::Transmissions),
+        }
+    }
+
+    /// `Ok` if `workflow` fits this choice.
+    ///
+    /// # Errors
+    /// A model the workflow does not fit, named as the user typed it, with the models it does
+    /// fit.
+    pub fn check_fits(self, workflow: Workflow) -> Result<()> {
+        if self.fits(workflow) {
+            return Ok(());
+        }
+        let names: Vec<&str> = <ModelChoice as clap::ValueEnum>::value_variants()
+            .iter()
+            .filter(|m| m.fits(workflow))
+            .map(|m| m.name())
+            .collect();
+        let hint = match (self, workflow) {
+            (
+                ModelChoice::MassCompliance | ModelChoice::ActuatorCompliance,
+                Workflow::MeasurementFiles,
+            ) => "; compliance takes the link masses from the URDF's inertial tags",
+            (_, Workflow::HapticLogs) => {
+                "; auto fits the kinematic deviations alone to logs without external-encoder columns"
+            }
+            _ => "",
+        };
+        bail!(
+            "--model {self} does not apply to {}: they take {}{hint}",
+            workflow.data(),
+            names.join(", ")
+        )
+    }
+
     /// The compliance term of a fixed choice (`None` for geometric); an error for
     /// [`ModelChoice::MassCompliance`] on a robot without published masses.
     fn compliance(self, chain: &Chain) -> Result<Option<GravityCompliance>> {
@@ -68,6 +189,10 @@ impl ModelChoice {
             ModelChoice::Compliance | ModelChoice::ComplianceHarmonic => {
                 Some(GravityCompliance::default())
             }
+            ModelChoice::TransversalCompliance => bail!(
+                "--model transversal-compliance is fitted to marker, position and pose data, not \
+                 to socket recordings or distance logs"
+            ),
             ModelChoice::MassCompliance | ModelChoice::MassComplianceHarmonic => Some(
                 GravityCompliance::published(chain.joint_names()).context(
                     "--model mass-compliance: no published link masses for this robot's joint names",
@@ -431,6 +556,22 @@ pub fn identify_config(sigma_m: Option<f64>) -> IdentifyConfig {
     cfg
 }
 
+/// How the least-squares fit ended, in plain words for the report: `converged (…)` for the
+/// three convergence criteria, else `not converged (…)` or `stopped (…)`.
+pub fn termination_text(termination: &hapcal_identify::Termination) -> String {
+    use hapcal_identify::Termination as T;
+    match termination {
+        T::FtolReached => "converged (relative cost reduction below ftol)".to_owned(),
+        T::XtolReached => "converged (step below xtol)".to_owned(),
+        T::GtolReached => "converged (gradient below gtol)".to_owned(),
+        T::MaxEvaluations => "not converged (evaluation limit reached)".to_owned(),
+        T::Numerical => "stopped (the step or the Jacobian is not finite)".to_owned(),
+        T::EvalFailed(e) => format!("stopped ({e})"),
+        other if other.is_success() => "converged".to_owned(),
+        _ => "stopped".to_owned(),
+    }
+}
+
 /// Identifies `choice` from `obs` on `chain` at unit weights (residuals in metres).
 pub(crate) fn solve(
     chain: &Chain,
@@ -741,15 +882,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             "a haptic device's log (the cable-encoder σ comes from the residuals, the \
              held-out data from --test)",
         )?;
-        if !matches!(
-            plan.model,
-            ModelChoice::Auto | ModelChoice::Transmissions | ModelChoice::Geometric
-        ) {
-            bail!(
-                "--model {:?}: a haptic device with transmissions is calibrated with the model auto, transmissions or geometric",
-                plan.model
-            );
-        }
+        plan.model.check_fits(Workflow::HapticLogs)?;
         return crate::haptic::calibrate_logs(plan, device, start);
     }
     if plan.joint {
@@ -759,8 +892,10 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     // position the data must determine, as a tracker's frame.
     let distances = device.cable_encoder.is_none();
     if (plan.data.iter()).any(|p| crate::measured::is_marker_file(p, distances)) {
+        plan.model.check_fits(Workflow::MeasurementFiles)?;
         return crate::measured::run(plan, &device, start);
     }
+    plan.model.check_fits(Workflow::SocketsOrDistances)?;
     if plan.test_last.is_some() {
         bail!(
             "--test-last applies to measurement files (positions, poses, distances); hold out \
@@ -928,7 +1063,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         correlated,
         observability,
         warnings,
-        termination: format!("{:?}", identified.fit.termination),
+        termination: termination_text(&identified.fit.termination),
         backend: backend_of(&identified),
         n_evaluations: identified.fit.n_evaluations,
         n_jacobians: identified.fit.n_jacobians,
@@ -1256,7 +1391,7 @@ pub fn write_outputs_beside(
         date: None,
         data_hash: None,
         notes: Some(format!(
-            "hapcal calibrate, model {:?}; {} kept parameters; compliance terms are not part of the kinematic description",
+            "hapcal calibrate, model {}; {} kept parameters; compliance terms are not part of the kinematic description",
             outcome.report.model,
             outcome.report.parameters.len()
         )),
@@ -1314,7 +1449,80 @@ pub fn write_outputs_beside(
 
 #[cfg(test)]
 mod tests {
-    use super::{HeldOut, ModelChoice, blocked_difference, choose, fold_of};
+    use super::{HeldOut, ModelChoice, Workflow, blocked_difference, choose, fold_of};
+
+    #[test]
+    fn a_model_is_named_by_its_command_line_value() {
+        for &model in <ModelChoice as clap::ValueEnum>::value_variants() {
+            let value = clap::ValueEnum::to_possible_value(&model).map(|v| v.get_name().to_owned());
+            assert_eq!(Some(model.to_string()), value, "{model:?}");
+        }
+        assert_eq!(
+            ModelChoice::ComplianceHarmonic.to_string(),
+            "compliance-harmonic"
+        );
+    }
+
+    #[test]
+    fn each_workflow_refuses_the_models_it_does_not_fit_by_their_values() {
+        let cases = [
+            (
+                ModelChoice::Geometric,
+                Workflow::HapticLogs,
+                "auto, transmissions",
+            ),
+            (
+                ModelChoice::Compliance,
+                Workflow::HapticLogs,
+                "auto, transmissions",
+            ),
+            (
+                ModelChoice::MassCompliance,
+                Workflow::MeasurementFiles,
+                "compliance takes the link masses from the URDF",
+            ),
+            (
+                ModelChoice::ComplianceHarmonic,
+                Workflow::MeasurementFiles,
+                "frames-only, joint-offsets",
+            ),
+            (
+                ModelChoice::FramesOnly,
+                Workflow::SocketsOrDistances,
+                "auto, geometric",
+            ),
+            (
+                ModelChoice::Transmissions,
+                Workflow::SocketsOrDistances,
+                "auto, geometric",
+            ),
+        ];
+        for (model, workflow, listed) in cases {
+            let err = model.check_fits(workflow).map_err(|e| e.to_string());
+            let Err(err) = err else {
+                panic!("{model} is refused on {workflow:?}");
+            };
+            assert!(
+                err.starts_with(&format!("--model {model} does not apply to "))
+                    && err.contains(listed),
+                "{err}"
+            );
+        }
+        for (model, workflow) in [
+            (ModelChoice::Auto, Workflow::HapticLogs),
+            (ModelChoice::Transmissions, Workflow::HapticLogs),
+            (ModelChoice::Compliance, Workflow::MeasurementFiles),
+            (
+                ModelChoice::MassComplianceHarmonic,
+                Workflow::SocketsOrDistances,
+            ),
+        ] {
+            assert!(
+                model.check_fits(workflow).is_ok(),
+                "{model} on {workflow:?}"
+            );
+        }
+    }
 
     /// Held-out errors on 10 blocks of 5 rows: `base` everywhere, minus `gain` in every block,
     /// with ±`spread` alternating between blocks (the block-to-block scatter of the gain).

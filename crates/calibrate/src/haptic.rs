@@ -576,6 +576,12 @@ pub fn calibrate_logs(
                 .iter()
                 .all(|r| r.ext.get(j - 1).copied().flatten().is_some())
     });
+    if plan.model == ModelChoice::Transmissions && !has_ext {
+        bail!(
+            "--model transmissions needs the external-encoder columns (ext1..ext{PARALLELOGRAM_JOINT}) \
+             in every training log; auto fits the kinematic deviations alone to logs without them"
+        );
+    }
     let mut parameters = Vec::new();
     let push_kept = |parameters: &mut Vec<ParamReport>, id: &Identified| {
         for (&i, &std) in id.covariance.free.iter().zip(id.covariance.std().iter()) {
@@ -728,7 +734,7 @@ pub fn calibrate_logs(
         correlated,
         observability: None,
         warnings,
-        termination: format!("{:?}", kin.fit.termination),
+        termination: crate::calibrate::termination_text(&kin.fit.termination),
         backend: crate::calibrate::backend_of(&kin),
         n_evaluations: kin.fit.n_evaluations,
         n_jacobians: kin.fit.n_jacobians,

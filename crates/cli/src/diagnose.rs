@@ -58,14 +58,24 @@ fn um(m: f64) -> String {
     format!("{:.1}", m * 1e6)
 }
 
+/// The `--baseline` value of a baseline, as the user types it.
+fn baseline_name(baseline: Baseline) -> &'static str {
+    match baseline {
+        Baseline::Full => "full",
+        Baseline::Kinematics => "kinematics",
+    }
+}
+
 /// The diagnosis as a text report: gap, where (flagged bins and signals), which (every
 /// candidate), how far (accepted effects with their parameters), verdict.
 pub fn render(d: &Diagnosis) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "baseline: {:?}, {} samples, {} identifiable parameters",
-        d.baseline, d.n_samples, d.n_params
+        "baseline: {}, {} samples, {} identifiable parameters",
+        baseline_name(d.baseline),
+        d.n_samples,
+        d.n_params
     );
     let _ = writeln!(s, "floor: {}", d.floor_method);
     let _ = writeln!(

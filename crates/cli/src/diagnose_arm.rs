@@ -5,7 +5,7 @@
 use std::fmt::Write as _;
 
 use anyhow::{Context, Result};
-use hapcal_calibrate::baseline::geometric_baseline;
+use hapcal_calibrate::baseline::{DataKind, geometric_baseline};
 use hapcal_calibrate::calibrate::Plan;
 use hapcal_diagnose::arm::{ArmConfig, ArmDiagnosis, diagnose_arm};
 
@@ -25,14 +25,25 @@ fn mm(m: f64) -> String {
     format!("{:.3}", m * 1e3)
 }
 
+/// What the training rows measured, in words.
+fn kind_name(kind: DataKind) -> &'static str {
+    match kind {
+        DataKind::Sockets => "socket",
+        DataKind::Distances => "distance",
+        DataKind::Markers => "marker",
+    }
+}
+
 /// The diagnosis as a text report: floor and gap, where (flagged bins), which (every
 /// candidate), how far (accepted effects with their parameters), the ladder, the verdict.
 pub fn render_arm(d: &ArmDiagnosis) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "geometric baseline: {:?} data, {} training configurations, {} parameters kept",
-        d.kind, d.n_configurations, d.n_baseline_params
+        "geometric baseline: {} data, {} training configurations, {} parameters kept",
+        kind_name(d.kind),
+        d.n_configurations,
+        d.n_baseline_params
     );
     let _ = writeln!(s, "floor: {}", d.floor_method);
     match d.floor_rms_m {

@@ -27,3 +27,47 @@ pub fn count_in<const MIN: usize, const MAX: usize>(
         Err(_) => Err(format!("expected a whole number, got {text:?}")),
     }
 }
+
+/// `text` (a doc comment) as plain text for `--help`: rustdoc links (`` [`x`] ``) and code
+/// spans (`` `x` ``) become their bare words.
+pub fn plain_text(text: &str) -> String {
+    text.replace("[`", "").replace("`]", "").replace('`', "")
+}
+
+/// clap's value parser for the value enum `E`, with each value's help as [`plain_text`]: for an
+/// enum of another crate whose doc comments, written for rustdoc, carry links and code spans.
+#[derive(Clone, Copy, Debug)]
+pub struct PlainEnum<E>(std::marker::PhantomData<E>);
+
+impl<E> Default for PlainEnum<E> {
+    fn default() -> Self {
+        Self(std::marker::PhantomData)
+    }
+}
+
+impl<E: clap::ValueEnum + Clone + Send + Sync + 'static> clap::builder::TypedValueParser
+    for PlainEnum<E>
+{
+    type Value = E;
+
+    fn parse_ref(
+        &self,
+        cmd: &clap::Command,
+        arg: Option<&clap::Arg>,
+        value: &std::ffi::OsStr,
+    ) -> std::result::Result<E, clap::Error> {
+        clap::builder::EnumValueParser::<E>::new().parse_ref(cmd, arg, value)
+    }
+
+    fn possible_values(
+        &self,
+    ) -> Option<Box<dyn Iterator<Item = clap::builder::PossibleValue> + '_>> {
+        let values = (E::value_variants().iter())
+            .filter_map(clap::ValueEnum::to_possible_value)
+            .map(|v| match v.get_help().map(|h| plain_text(&h.to_string())) {
+                Some(help) => v.help(help),
+                None => v,
+            });
+        Some(Box::new(values))
+    }
+}

@@ -4,7 +4,7 @@
 //! standard output never panics.
 
 use anyhow::{Context, Result};
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use hapcal::calibrate::{self, ModelChoice, Plan};
 use std::io::{ErrorKind, Write};
 use std::path::PathBuf;
@@ -59,8 +59,8 @@ struct Cli {
 enum Command {
     /// Identify kinematic deviations from measurements and report accuracy before and after.
     ///
-    /// With no arguments: MUKCa kuka_14, training on `front`, testing on `left_back` and
-    /// `raised_left` (bundled in fixtures/mukca).
+    /// With no arguments: MUKCa kuka_14, training on the front placement, testing on left_back
+    /// and raised_left (bundled in fixtures/mukca).
     #[command(allow_negative_numbers = true)]
     Calibrate {
         /// Device file (.toml) or URDF (.urdf, with --tip).
@@ -86,17 +86,16 @@ enum Command {
         /// Test data, same kinds; only evaluated, never fitted.
         #[arg(long, num_args = 1..)]
         test: Vec<PathBuf>,
-        /// Write the calibrated device: `.urdf` (copy of the source URDF with calibrated joint
-        /// origins) or `.toml` (device file with a [calibration] table).
+        /// Write the calibrated device: .urdf (a copy of the source URDF with the calibrated
+        /// joint origins) or .toml (a device file with a [calibration] table).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Print the report as one JSON document instead of a table.
         #[arg(long)]
         json: bool,
-        /// Model: auto (repeated blocked cross-validation on the training data; a compliance
-        /// model must beat the geometric one by one standard error), geometric, compliance,
-        /// mass-compliance, actuator-compliance, or a joint-harmonic model (harmonic,
-        /// harmonic2, mass-compliance-harmonic, compliance-harmonic; never chosen by auto).
+        /// Model to identify. Which values apply, and what they fit, depends on the data:
+        /// socket recordings and distance logs, measurement files, or a haptic device's logs;
+        /// a value the data do not take is refused.
         #[arg(long, value_enum, default_value_t = ModelChoice::Auto)]
         model: ModelChoice,
         /// Known distance between the two sockets of a placement, m.
@@ -144,12 +143,12 @@ enum Command {
         /// Compare with the golden file instead of writing (UPDATE_GOLDEN=1 rewrites it and fails).
         #[arg(long)]
         check: bool,
-        /// Choose the identification poses from `--candidates` random ones by this criterion of
+        /// Choose the identification poses from --candidates random ones by this criterion of
         /// the distance Jacobian at the nominal model (d-optimal, o1, o3, o4, o5, i-optimal)
         /// instead of taking random poses as the paper does.
         #[arg(long)]
         design: Option<hapcal_identify::Criterion>,
-        /// Random candidates per seed for `--design` (1 to 100,000).
+        /// Random candidates per seed for --design (1 to 100,000).
         #[arg(long, default_value_t = 2000, value_parser = hapcal::count_in::<1, 100_000>)]
         candidates: usize,
     },
@@ -169,14 +168,14 @@ enum Command {
         /// Number of poses (1 to 1,000,000).
         #[arg(long, default_value_t = 200, value_parser = hapcal::count_in::<1, 1_000_000>)]
         poses: usize,
-        /// Cable noise: `paper` (σ_m = 2π·R_d·σ_e, the paper's formula) or `arc-length` (R_d·σ_e).
+        /// Cable noise: paper (σ_m = 2π·R_d·σ_e, the paper's formula) or arc-length (R_d·σ_e).
         #[arg(long, default_value = "paper")]
         noise: String,
         /// Output log CSV.
         #[arg(long)]
         out: PathBuf,
-        /// Inject an unmodelled effect (docs/design.md §6), e.g. `backlash:j2=1e-3` or
-        /// `cable_angle:k=2e-4`; repeatable. Implies --motion.
+        /// Inject an unmodelled effect (docs/design.md §6), e.g. backlash:j2=1e-3 or
+        /// cable_angle:k=2e-4; repeatable. Implies --motion.
         #[arg(long = "effect")]
         effects: Vec<String>,
         /// Time-ordered motion (t_s column, every joint in both directions) instead of
@@ -190,8 +189,8 @@ enum Command {
     /// Diagnose the sim-to-real gap: how far the calibrated model's held-out residual lies
     /// above the noise floor, where (residual maps), which unmodelled effect explains it and
     /// how far it shrinks. A haptic device's TOML with its log: the reference device's
-    /// diagnosis (transmissions and kinematics). A URDF or D-H device with anything `hapcal
-    /// calibrate` reads (MUKCa socket folders, distance logs, marker / pose / distance files):
+    /// diagnosis (transmissions and kinematics). A URDF or D-H device with anything hapcal
+    /// calibrate reads (MUKCa socket folders, distance logs, marker / pose / distance files):
     /// the serial-arm diagnosis on the geometric calibration, with the model ladder. Prints a
     /// table (or one JSON document with --json) and writes the residual maps as SVG.
     Diagnose {
@@ -202,7 +201,7 @@ enum Command {
         #[arg(long = "tip", default_values_t = ["ball_link".to_owned()])]
         tips: Vec<String>,
         /// Data: the haptic device's log (CSV, docs/design.md §5), or the training data of an
-        /// arm as `hapcal calibrate --data` takes them.
+        /// arm as hapcal calibrate --data takes them.
         #[arg(long, num_args = 1..)]
         data: Vec<PathBuf>,
         /// Held-out data of an arm (never used to fit or to choose): its error at each rung.
@@ -227,7 +226,7 @@ enum Command {
         /// Unit of angles in measurement files: rad or deg.
         #[arg(long, default_value = "rad")]
         angle_unit: hapcal_io::AngleUnit,
-        /// Haptic device: `full` (transmissions + kinematics) or `kinematics` (the transmission
+        /// Haptic device: full (transmissions + kinematics) or kinematics (the transmission
         /// models then join the candidates).
         #[arg(long, default_value = "full")]
         baseline: String,
@@ -241,8 +240,8 @@ enum Command {
         #[arg(long, default_value = "diagnose_residuals.svg")]
         svg: PathBuf,
     },
-    /// Run the blind test of `diagnose` on the reference device and print the Markdown report
-    /// (confusion matrix, the paper's story); `cargo xtask blind-test` writes it to
+    /// Run the blind test of diagnose on the reference device and print the Markdown report
+    /// (confusion matrix, the paper's story); cargo xtask blind-test writes it to
     /// docs/results/diagnose.md.
     BlindTest {
         /// Number of cases (kinds stratified: 1/8 none, 1/8 outside, 1/8 two, 5/8 one effect).
@@ -266,7 +265,7 @@ enum Command {
         /// Truth file (the simulated device).
         #[arg(long)]
         truth: PathBuf,
-        /// Calibrated device file (from `hapcal calibrate --out calibrated.toml`).
+        /// Calibrated device file (from hapcal calibrate --out calibrated.toml).
         #[arg(long)]
         calibrated: PathBuf,
         /// Force-feedback gain G of the closed-loop rows.
@@ -861,8 +860,30 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
+/// The command line as `main` parses it: [`Cli`], with the value help of the studies' enums
+/// (doc comments written for rustdoc) as plain text.
+fn command() -> clap::Command {
+    use hapcal::PlainEnum;
+    use hapcal::plan::RowNoise;
+    use hapcal::pose_study::TransmissionData;
+    Cli::command()
+        .mut_subcommand("pose-study", |c| {
+            c.mut_arg("transmissions", |a| {
+                a.value_parser(PlainEnum::<TransmissionData>::default())
+            })
+        })
+        .mut_subcommand("pose-bound", |c| {
+            c.mut_arg("noise", |a| {
+                a.value_parser(PlainEnum::<RowNoise>::default())
+            })
+        })
+}
+
 fn main() -> ExitCode {
-    let cli = match Cli::try_parse() {
+    let parsed = command()
+        .try_get_matches()
+        .and_then(|m| Cli::from_arg_matches(&m));
+    let cli = match parsed {
         Ok(cli) => cli,
         Err(e) => {
             // Help and version go to standard output, usage errors to standard error (where a

@@ -41,7 +41,7 @@ pub fn render(r: &CalibrationReport) -> String {
             let _ = writeln!(
                 s,
                 "  {:<20} {:>9.4} mm {:>+10.0} ± {:<8.0} µm²{}",
-                model_name(cv.model),
+                cv.model,
                 cv.heldout_rms_m * 1e3,
                 diff * 1e12,
                 se * 1e12,
@@ -74,7 +74,7 @@ pub fn render(r: &CalibrationReport) -> String {
     let _ = writeln!(
         s,
         "\nmodel: {}; sigma = {:.4} mm (from {}); LM: {}; back end {}",
-        model_name(r.model),
+        r.model,
         r.sigma_m * 1e3,
         r.sigma_source,
         r.termination,
@@ -249,10 +249,4 @@ pub fn render(r: &CalibrationReport) -> String {
     }
     let _ = writeln!(s, "\nelapsed: {:.1} ms", r.elapsed_s * 1e3);
     s
-}
-
-/// The command-line name of a model (`mass-compliance`).
-fn model_name(model: crate::calibrate::ModelChoice) -> String {
-    clap::ValueEnum::to_possible_value(&model)
-        .map_or_else(|| format!("{model:?}"), |v| v.get_name().to_owned())
 }

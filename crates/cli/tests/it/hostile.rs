@@ -1,6 +1,7 @@
 //! Hostile inputs and environments: a closed or full standard output, outputs that would
-//! replace an input or land in a missing folder, more folds than data, and finite but absurd
-//! lengths. Each must end with a clear message and exit code, never a panic.
+//! replace an input or land in a missing folder, more folds than data, finite but absurd
+//! lengths, and a `--model` the data do not take. Each must end with a clear message and exit
+//! code, never a panic.
 
 use super::{hapcal, root, scratch, stderr};
 use std::path::{Path, PathBuf};
@@ -346,4 +347,120 @@ fn folds_on_the_haptic_path_is_a_warning_that_it_is_unused() {
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     let report = String::from_utf8_lossy(&out.stdout);
     assert!(!report.contains("--folds"), "{report}");
+}
+
+/// `hapcal calibrate --model value` with `args` (device and data): exit code 2 and a message
+/// that names the value as typed, never the Rust name of the model.
+fn refused_model(args: &[&str], value: &str) -> String {
+    let mut all = vec!["calibrate", "--model", value];
+    all.extend_from_slice(args);
+    let out = hapcal(&all);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "--model {value}: {err}");
+    assert!(
+        err.contains(&format!("--model {value} does not apply to")),
+        "--model {value}: {err}"
+    );
+    for rust in [
+        "Geometric",
+        "Compliance",
+        "Harmonic",
+        "Transmissions",
+        "FramesOnly",
+    ] {
+        assert!(!err.contains(rust), "{rust}: {err}");
+    }
+    err
+}
+
+#[test]
+fn a_model_the_haptic_log_does_not_take_is_refused_naming_those_it_takes() {
+    let dir = scratch("hostile-haptic-model");
+    let log = simulated_log(&dir, 40);
+    for value in [
+        "geometric",
+        "compliance",
+        "compliance-harmonic",
+        "frames-only",
+    ] {
+        let (device, log) = (reference("device.toml"), show(&log));
+        let err = refused_model(&["--device", &device, "--data", &log], value);
+        assert!(
+            err.contains("a haptic device's logs: they take auto, transmissions"),
+            "{err}"
+        );
+    }
+}
+
+#[test]
+fn transmissions_without_external_encoder_columns_is_refused() {
+    let dir = scratch("hostile-haptic-no-ext");
+    let log = simulated_log(&dir, 40);
+    let text = std::fs::read_to_string(&log).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let n_keep = header.iter().take_while(|c| !c.starts_with("ext")).count();
+    assert!(n_keep < header.len(), "the simulated log has ext columns");
+    let stripped: String = (text.lines())
+        .map(|l| l.split(',').take(n_keep).collect::<Vec<_>>().join(",") + "\n")
+        .collect();
+    std::fs::write(&log, stripped).unwrap();
+    let out = hapcal(&[
+        "calibrate",
+        "--device",
+        &reference("device.toml"),
+        "--data",
+        &show(&log),
+        "--model",
+        "transmissions",
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("--model transmissions needs the external-encoder columns"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_model_the_measurement_files_do_not_take_is_refused_by_its_value() {
+    let urdf = show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf"));
+    let csv = show(&root().join("fixtures/figaroh/ur10/calibration.csv"));
+    // The ladder has no rung of published masses: mass-compliance is not turned into
+    // compliance.
+    let args = ["--device", &urdf, "--tip", "wrist_3_link", "--data", &csv];
+    let err = refused_model(&args, "mass-compliance");
+    assert!(
+        err.contains("compliance takes the link masses from the URDF's inertial tags"),
+        "{err}"
+    );
+    for value in [
+        "compliance-harmonic",
+        "harmonic",
+        "transmissions",
+        "actuator-compliance",
+    ] {
+        let err = refused_model(&args, value);
+        assert!(
+            err.contains("measurement files") && err.contains("frames-only, joint-offsets"),
+            "{err}"
+        );
+    }
+}
+
+#[test]
+fn a_marker_model_on_socket_recordings_is_refused_by_its_value() {
+    let iiwa = show(&root().join("fixtures/mukca/urdf/iiwa14.urdf"));
+    let front = show(&root().join("fixtures/mukca/data/kuka_14/front"));
+    for value in [
+        "frames-only",
+        "joint-offsets",
+        "transversal-compliance",
+        "transmissions",
+    ] {
+        let err = refused_model(&["--device", &iiwa, "--data", &front], value);
+        assert!(
+            err.contains("socket recordings and distance logs: they take auto, geometric"),
+            "{err}"
+        );
+    }
 }

@@ -321,6 +321,8 @@ fn simulated_log_calibrates_with_the_distance_model() {
     assert!(out.status.success(), "{}", stderr(&out));
     let text = std::fs::read_to_string(&log).unwrap();
     assert_eq!(text.lines().count(), 121, "header + 120 rows");
+    // Without the external encoders' columns, auto fits the kinematics alone.
+    std::fs::write(&log, without_ext_columns(&text)).unwrap();
     let device = root().join("fixtures/reference-device/device.toml");
     let v = json(&hapcal(&[
         "calibrate",
@@ -328,16 +330,116 @@ fn simulated_log_calibrates_with_the_distance_model() {
         &device.display().to_string(),
         "--data",
         &log.display().to_string(),
-        "--model",
-        "geometric",
         "--json",
     ]));
+    assert_eq!(v["model"], "geometric");
+    assert!(
+        v["termination"]
+            .as_str()
+            .unwrap()
+            .starts_with("converged ("),
+        "{}",
+        v["termination"]
+    );
     let before = figure(&v, "log", "before", "distance_rms_m");
     let after = figure(&v, "log", "after", "distance_rms_m");
     // Kinematics alone on raw readings: the transmission errors stay (the paper's 44.7 % case),
     // but the distance RMS still falls well below the nominal model's (several mm).
     assert!(before > 1e-3, "{before}");
     assert!(after < 0.5 * before, "{after} vs {before}");
+}
+
+/// A log CSV without its external-encoder columns (`ext1..`).
+fn without_ext_columns(text: &str) -> String {
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let keep: Vec<usize> = (0..header.len())
+        .filter(|&i| !header[i].starts_with("ext"))
+        .collect();
+    let mut out = String::new();
+    for line in text.lines() {
+        let cells: Vec<&str> = line.split(',').collect();
+        let kept: Vec<&str> = keep.iter().map(|&i| cells[i]).collect();
+        out.push_str(&kept.join(","));
+        out.push('\n');
+    }
+    out
+}
+
+/// Every subcommand's `--help` (and `-h`) is plain text: no rustdoc links or paths, and the
+/// margins it states for `--model auto` are the ones the code uses.
+#[test]
+fn every_help_is_plain_text() {
+    let top = hapcal(&["--help"]);
+    assert!(top.status.success(), "{}", stderr(&top));
+    let top = String::from_utf8_lossy(&top.stdout).into_owned();
+    // The subcommands, as `hapcal --help` lists them.
+    let subcommands: Vec<String> = (top.lines())
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .filter_map(|l| l.split_whitespace().next())
+        .filter(|name| *name != "help")
+        .map(str::to_owned)
+        .collect();
+    assert!(subcommands.len() >= 10, "{subcommands:?}");
+    let mut texts = vec![("hapcal --help".to_owned(), top.clone())];
+    for sub in &subcommands {
+        for flag in ["--help", "-h"] {
+            let out = hapcal(&[sub, flag]);
+            assert!(out.status.success(), "{sub} {flag}: {}", stderr(&out));
+            let text = String::from_utf8_lossy(&out.stdout).into_owned();
+            texts.push((format!("hapcal {sub} {flag}"), text));
+        }
+    }
+    for (what, text) in &texts {
+        for bad in ["[`", "`]", "crate::"] {
+            assert!(!text.contains(bad), "{what} contains {bad:?}:\n{text}");
+        }
+    }
+    let calibrate = &texts
+        .iter()
+        .find(|(w, _)| w == "hapcal calibrate --help")
+        .unwrap()
+        .1;
+    let socket_margin = format!(
+        "by {} standard error of the held-out difference",
+        hapcal_calibrate::calibrate::CV_SIGNIFICANCE_Z
+    );
+    let ladder_margin = format!(
+        "by {} standard errors",
+        hapcal_calibrate::measured::LADDER_SIGNIFICANCE_Z
+    );
+    assert!(calibrate.contains(&socket_margin), "{calibrate}");
+    assert!(calibrate.contains(&ladder_margin), "{calibrate}");
+    // Every --model value says which data it applies to.
+    for line in calibrate.lines().map(str::trim_start) {
+        let Some((value, help)) = line.strip_prefix("- ").and_then(|l| l.split_once(':')) else {
+            continue;
+        };
+        if value.contains(char::is_whitespace) {
+            continue;
+        }
+        assert!(
+            help.contains("Measurement files")
+                || help.contains("Socket recordings")
+                || help.contains("haptic device's logs"),
+            "--model {value}:{help}"
+        );
+    }
+}
+
+/// The text report and the JSON name the model by its `--model` value and the fit's end in
+/// words, never by a Rust name.
+#[test]
+fn reports_name_models_by_their_command_line_values() {
+    let out = hapcal(&["calibrate", "--model", "mass-compliance"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("model: mass-compliance;"), "{text}");
+    assert!(text.contains("LM: converged ("), "{text}");
+    for rust in ["MassCompliance", "Reached", "Geometric"] {
+        assert!(!text.contains(rust), "{rust}: {text}");
+    }
 }
 
 /// The two-step covariance's sensitivity `G` (paper::Sensitivity) is what step 2 really does:
