@@ -1,6 +1,6 @@
 //! Both steps of the paper's procedure (Fig. 6) in one problem: the external-encoder residuals
 //! of every transmission and the cable-distance residuals of the corrected chain, sharing the
-//! transmission parameters (DESIGN.md §3, "one joint identification").
+//! transmission parameters (docs/design.md, "Identification": one joint identification).
 
 use faer::{Col, ColMut, ColRef, MatMut};
 use hapcal_identify::{EvalError, ParamLayout, Problem, Unit};
@@ -16,7 +16,8 @@ use crate::transmission::{CapstanProblem, spec};
 /// joint whose transmission error is a Chebyshev polynomial of its reading (the paper's
 /// joint 4, capstan + parallelogram, tenth order).
 ///
-/// Source: paper eq. 1, Table 2 and the parallelogram section; DESIGN.md §3.
+/// Source: paper eq. 1, Table 2 and the parallelogram section; docs/design.md, "Capstan drive
+/// (paper eq. 1)" and "Parallelogram (paper eq. 2) and the joint-4 polynomial".
 #[derive(Clone, Debug)]
 pub struct JointTransmissions {
     /// Capstan drives in layout order: `(joint, geometry)`, the joint 1-based (the paper's
@@ -45,8 +46,8 @@ pub struct JointData {
     pub distance_m: Vec<f64>,
 }
 
-/// Both steps of the paper's calibration in one least-squares problem (DESIGN.md §3, "one
-/// joint identification"): the external-encoder residuals of every transmission and the
+/// Both steps of the paper's calibration in one least-squares problem (docs/design.md,
+/// "Identification": one joint identification): the external-encoder residuals of every transmission and the
 /// cable-distance residuals of the corrected chain share the transmission parameters, so the
 /// transmission uncertainty reaches the kinematic covariance.
 ///
@@ -63,7 +64,8 @@ pub struct JointData {
 /// the transmissions. The Jacobian is analytic, including the distance rows' dependence on the
 /// transmission parameters through the corrected angles.
 ///
-/// Source: Baser & Konukseven, Fig. 6 (steps 1 and 2), eqs. 1 and 5; DESIGN.md §3.
+/// Source: Baser & Konukseven, Fig. 6 (steps 1 and 2), eqs. 1 and 5; docs/design.md,
+/// "Identification".
 #[derive(Clone, Debug)]
 pub struct JointProblem {
     chain: Chain,

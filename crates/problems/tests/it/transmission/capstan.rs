@@ -87,7 +87,7 @@ fn assert_kept_within_4_std(id: &Identified, label: &str) -> String {
 
 #[test]
 fn capstan1_over_its_joint_range() {
-    // q1 ∈ [−1, 1] rad (DESIGN.md §2): a third of an output turn.
+    // q1 ∈ [−1, 1] rad (docs/design.md, "Joint limits and home"): a third of an output turn.
     let id = identify_capstan1(1, -1.0, 1.0, &CapstanProblem::identify_config());
     eprintln!("{}", assert_kept_within_4_std(&id, "q1 range"));
     for name in ["capstan1.c", "capstan1.re", "capstan1.r_o"] {

@@ -8,15 +8,15 @@ use rand_chacha::ChaCha8Rng;
 
 use super::{SIGMA_E, noisy, uniform_readings};
 
-/// q4's range, rad (DESIGN.md §2).
+/// q4's range, rad (docs/design.md, "Joint limits and home").
 const LO: f64 = 0.3;
 const HI: f64 = 1.8;
 
 /// Table 2's joint 4: capstan 4 (R = 12, D = 60 mm, Re = 0.02, r_o = 0.1 mm, β_o = −40°,
-/// r_i = 0.002 mm, β_i = −120°; c not listed: 0) driving the parallelogram of DESIGN.md §2 with
-/// ΔL1 = −0.5 mm, ΔL2 = −0.7 mm. Table 2 prints "ΔL1 (mm) = −0.0005", "ΔL2 (mm) = −0.0007";
-/// we read those as metres (0.5 mm, 0.7 mm): 0.5 µm would change the joint angle by about
-/// ΔL/L1 ≈ 1e-5 rad, a tenth of σ_e, invisible at the encoder resolution.
+/// r_i = 0.002 mm, β_i = −120°; c not listed: 0) driving the parallelogram of docs/design.md,
+/// "Transmissions", with ΔL1 = −0.5 mm, ΔL2 = −0.7 mm. Table 2 prints "ΔL1 (mm) = −0.0005",
+/// "ΔL2 (mm) = −0.0007"; we read those as metres (0.5 mm, 0.7 mm): 0.5 µm would change the
+/// joint angle by about ΔL/L1 ≈ 1e-5 rad, a tenth of σ_e, invisible at the encoder resolution.
 fn table2_joint4() -> Joint4Transmission {
     Joint4Transmission {
         capstan: Capstan::try_new(12.0, 0.06).expect("valid capstan"),
