@@ -93,9 +93,11 @@ enum Command {
         /// Print the report as one JSON document instead of a table.
         #[arg(long)]
         json: bool,
-        /// Model to identify. Which values apply, and what they fit, depends on the data:
-        /// socket recordings and distance logs, measurement files, or a haptic device's logs;
-        /// a value the data do not take is refused.
+        /// Model to identify (--help says what each value fits to each kind of data).
+        ///
+        /// Which values apply, and what they fit, depends on the data: socket recordings and
+        /// distance logs, measurement files, or a haptic device's logs; a value the data do not
+        /// take is refused.
         #[arg(long, value_enum, default_value_t = ModelChoice::Auto)]
         model: ModelChoice,
         /// Known distance between the two sockets of a placement, m.

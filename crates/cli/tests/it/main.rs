@@ -595,3 +595,44 @@ fn plan_poses_writes_the_chosen_readings_and_beats_a_random_set() {
         "the undetermined parameters are named: {text}"
     );
 }
+
+/// `hapcal diagnose` names its baseline and the kind of data in words (`--baseline` values),
+/// never by a Rust name.
+#[test]
+fn diagnose_reports_name_the_baseline_and_the_data_in_words() {
+    let dir = scratch("diagnose-words");
+    let show = |p: &Path| p.display().to_string();
+    let haptic = hapcal(&[
+        "diagnose",
+        "--device",
+        &show(&root().join("fixtures/reference-device/device.toml")),
+        "--data",
+        &show(&root().join("fixtures/reference-device/log.csv")),
+        "--svg",
+        &show(&dir.join("haptic.svg")),
+    ]);
+    let arm = hapcal(&[
+        "diagnose",
+        "--device",
+        &show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf")),
+        "--tip",
+        "wrist_3_link",
+        "--data",
+        &show(&root().join("fixtures/figaroh/ur10/calibration.csv")),
+        "--test-last",
+        "0.3",
+        "--svg",
+        &show(&dir.join("arm.svg")),
+    ]);
+    for (out, first) in [
+        (&haptic, "baseline: full, "),
+        (&arm, "geometric baseline: marker data, "),
+    ] {
+        assert!(out.status.success(), "{}", stderr(out));
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(text.starts_with(first), "{text}");
+        for rust in ["Full", "Kinematics", "Markers", "Sockets", "Distances"] {
+            assert!(!text.contains(rust), "{rust}: {text}");
+        }
+    }
+}
