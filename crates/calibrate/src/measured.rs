@@ -1211,7 +1211,7 @@ pub fn calibrate_measured(
         warnings.push(format!(
             "the data determine none of the {} model's kinematic parameters: only the \
              instrument and marker frames are fitted; move every joint over its range",
-            format!("{rung:?}").to_lowercase()
+            rung
         ));
     }
     let n_samples: usize = fitted.identified.fit.residuals.nrows();
@@ -1225,9 +1225,10 @@ pub fn calibrate_measured(
     let termination = &fitted.identified.fit.termination;
     if !termination.is_success() {
         warnings.push(format!(
-            "the least-squares fit did not converge ({termination:?} after {} evaluations): the \
+            "the least-squares fit did not converge ({} after {} evaluations): the \
              estimate is the last iterate, not a minimum (a --sigma-m far below the residual keeps \
              parameters the data do not determine)",
+            crate::calibrate::termination_text(termination),
             fitted.identified.fit.n_evaluations
         ));
     }
@@ -1402,17 +1403,16 @@ pub fn is_marker_file(path: &std::path::Path, distances: bool) -> bool {
 /// # Errors
 /// A model the marker workflow does not fit (harmonics, transmissions).
 fn rung_of(model: crate::calibrate::ModelChoice) -> Result<Option<Rung>> {
-    use crate::calibrate::ModelChoice as M;
+    use crate::calibrate::{ModelChoice as M, Workflow};
+    model.check_fits(Workflow::MeasurementFiles)?;
     Ok(match model {
         M::Auto => None,
         M::FramesOnly => Some(Rung::FramesOnly),
         M::JointOffsets => Some(Rung::JointOffsets),
         M::Geometric => Some(Rung::Geometric),
-        M::Compliance | M::MassCompliance => Some(Rung::Compliance),
+        M::Compliance => Some(Rung::Compliance),
         M::TransversalCompliance => Some(Rung::TransversalCompliance),
-        other => bail!(
-            "--model {other:?} is not fitted to marker data: use auto, frames-only, joint-offsets, geometric, compliance or transversal-compliance"
-        ),
+        other => bail!("--model {other} is not fitted to measurement files"),
     })
 }
 
@@ -1569,7 +1569,7 @@ pub fn run_tables(
         correlated,
         observability: None,
         warnings,
-        termination: format!("{:?}", id.fit.termination),
+        termination: crate::calibrate::termination_text(&id.fit.termination),
         backend: crate::calibrate::backend_of(id),
         n_evaluations: id.fit.n_evaluations,
         n_jacobians: id.fit.n_jacobians,
