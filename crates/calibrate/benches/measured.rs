@@ -121,6 +121,7 @@ fn bench(c: &mut Criterion) {
             sigma_m: Some(1e-4),
             sigma_rad: None,
             marker_tips: Vec::new(),
+            workspace: Vec::new(),
         };
         group.bench_function(name, |b| {
             b.iter(|| {

@@ -31,6 +31,7 @@ fn main() -> Result<()> {
         sigma_m: None,
         sigma_rad: None,
         marker_tips: Vec::new(),
+        workspace: Vec::new(),
     };
     let out = calibrate_measured(&robot, &train, &test, &cfg)?;
     println!("chosen model: {}", out.rung);

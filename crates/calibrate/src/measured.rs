@@ -24,7 +24,7 @@
 use anyhow::{Context, Result, bail};
 use faer::Col;
 use hapcal_identify::{Identified, Problem, Subset, identify};
-use hapcal_io::{JointSchema, MeasurementTable, Units};
+use hapcal_io::{JointSchema, MeasuredRow, MeasurementTable, Units};
 use hapcal_kinematics::{FrameSpec, Isometry3, Point3, Tree, UnitQuaternion, Vector3};
 use hapcal_problems::{
     CalibratedModel, CalibrationProblem, GravityCompliance, LinkMass, ModelTerms, Observations,
@@ -117,6 +117,10 @@ pub struct MeasuredConfig {
     /// Tip (index into the tree's tips) of each marker; markers past its end sit on the last
     /// tip.
     pub marker_tips: Vec<usize>,
+    /// Joint configurations where the calibration will be used (rad, m for a prismatic
+    /// joint; each of the robot's joint count), besides the test rows: the ladder judges
+    /// extrapolation on the joint-range folds on whose side of the training range they lie.
+    pub workspace: Vec<Vec<f64>>,
 }
 
 /// Position and orientation errors of one data set under one model.
@@ -176,6 +180,14 @@ pub struct RungReport {
     /// Mean held-out weighted squared error per row (`Σ |e_p|²/σ_p² + θ²/σ_θ²` over the row's
     /// markers, dimensionless) minus the frames-only rung's, and its blocked standard error.
     pub score_difference_to_frames: (f64, f64),
+    /// Held-out RMS of the 3-D position error per row over the joint-range folds (each
+    /// holds out one end of one joint's training range, [`RangeFold`]), m; `None` without
+    /// such folds.
+    pub range_rms_m: Option<f64>,
+    /// Mean weighted squared error per row over the judged joint-range folds minus the
+    /// frames-only rung's (dimensionless; negative: better than frames only where the model
+    /// must extrapolate).
+    pub range_difference_to_frames: f64,
     /// Kept model parameters (kinematic and compliance) on the full training data.
     pub n_kept: usize,
 }
@@ -216,6 +228,11 @@ pub struct MeasuredOutcome {
     pub sample_errors: Vec<SampleErrors>,
     /// Position σ (m) and orientation σ (rad) that weight the rows.
     pub weights: Weights,
+    /// The joint-range folds the ladder judged extrapolation by (empty when the rung was
+    /// given).
+    pub range_folds: Vec<RangeFold>,
+    /// Each joint's training range (rad, m for a prismatic joint), chain order.
+    pub training_ranges: Vec<(f64, f64)>,
     /// Plain-language warnings.
     pub warnings: Vec<String>,
 }
@@ -949,62 +966,279 @@ fn figures(model: &CalibratedModel, tables: &[MeasurementTable], table: usize) -
     }
 }
 
-/// Held-out squared position errors of `rung` by repeated blocked k-fold cross-validation over
-/// the training tables (blocks contiguous in file order within each table).
+/// A rung fitted on every training row: where its cross-validation folds start.
+struct Warm {
+    /// Every parameter of the problem at the full-data estimate.
+    x: Col<f64>,
+    /// The parameters that identification kept (frames included), in the full layout.
+    free: Vec<usize>,
+}
+
+impl Warm {
+    fn of(fitted: &Fitted) -> Warm {
+        let id = &fitted.identified;
+        let index: std::collections::HashMap<&str, usize> = (fitted.names.iter())
+            .enumerate()
+            .map(|(i, n)| (n.as_str(), i))
+            .collect();
+        let free = (id.identifiability.kept.iter())
+            .filter_map(|&k| index.get(id.layout.name(k)).copied())
+            .collect();
+        Warm {
+            x: fitted.x.clone(),
+            free,
+        }
+    }
+}
+
+/// `rung` refitted on the rows `keep` selects, from `warm` and over its kept parameters
+/// (the identifiability decided on all training rows): Levenberg–Marquardt alone, a few
+/// iterations from a nearby start.
+#[allow(clippy::too_many_arguments)]
+fn refit(
+    rung: Rung,
+    robot: &Robot,
+    tree: &Tree,
+    tables: &[MeasurementTable],
+    weights: Weights,
+    keep: &dyn Fn(usize, usize) -> bool,
+    warm: &Warm,
+) -> Result<CalibratedModel> {
+    let obs = observations(tables, keep);
+    let problem = CalibrationProblem::on_tree(tree.clone(), obs, weights, terms(rung, robot))
+        .context("building the calibration problem")?;
+    let lm = crate::calibrate::identify_config(None).lm;
+    let fit = hapcal_identify::levenberg_marquardt(&problem, warm.x.clone(), &warm.free, &lm)
+        .with_context(|| format!("refitting the {rung} model on a fold"))?;
+    Ok(problem.model(fit.x.as_ref()))
+}
+
+/// Held-out rows of one cross-validation fold: per table, per row, whether it is held out.
+type Fold = Vec<Vec<bool>>;
+
+/// The blocked folds: repeat `r` of [`CV_REPEATS`] cuts each table's rows (file order,
+/// circularly shifted by `r/CV_REPEATS` of a block) into `k` contiguous blocks.
+fn blocked_folds(tables: &[MeasurementTable], k: usize) -> Vec<Fold> {
+    let mut folds = Vec::new();
+    for rep in 0..CV_REPEATS {
+        for fold in 0..k {
+            folds.push(
+                (tables.iter())
+                    .map(|t| {
+                        let n = t.rows.len();
+                        (0..n)
+                            .map(|r| fold_of(r, n, k, rep, CV_REPEATS) == fold)
+                            .collect()
+                    })
+                    .collect(),
+            );
+        }
+    }
+    folds
+}
+
+/// Share of the training rows each joint-range fold holds out, from one end of the joint's
+/// range.
+pub const RANGE_FOLD_SHARE: f64 = 0.2;
+
+/// A fold that holds out one end of one joint's training range: the model is fitted on the
+/// rest and judged where it must extrapolate.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RangeFold {
+    /// The joint's name.
+    pub joint: String,
+    /// `true`: the rows at the top of its range are held out; `false`: the bottom.
+    pub upper: bool,
+    /// Whether a test or workspace configuration lies beyond the training range on this side
+    /// of this joint (the folds the ladder judges extrapolation by, when there are any).
+    pub relevant: bool,
+}
+
+/// The training range of every joint, rad or m: (min, max) over the training rows.
+pub fn training_ranges(tables: &[MeasurementTable], n_joints: usize) -> Vec<(f64, f64)> {
+    let mut range = vec![(f64::INFINITY, f64::NEG_INFINITY); n_joints];
+    for row in tables.iter().flat_map(|t| &t.rows) {
+        for (r, q) in range.iter_mut().zip(&row.q) {
+            *r = (r.0.min(*q), r.1.max(*q));
+        }
+    }
+    range
+}
+
+/// The joint-range folds: for each joint whose readings vary, the rows in the top and in the
+/// bottom [`RANGE_FOLD_SHARE`] of its training readings held out (a side is skipped when
+/// ties would hold out more than half the rows or fewer than 3). `beyond` are the test and
+/// workspace configurations: a side is relevant when one of them lies past the training
+/// range there.
+fn range_folds(
+    robot: &Robot,
+    tables: &[MeasurementTable],
+    beyond: &[&[f64]],
+) -> Vec<(RangeFold, Fold)> {
+    let n_joints = robot.joint_names.len();
+    let ranges = training_ranges(tables, n_joints);
+    let n_rows: usize = tables.iter().map(|t| t.rows.len()).sum();
+    let mut out = Vec::new();
+    for (j, &(lo, hi)) in ranges.iter().enumerate() {
+        if (hi - lo).is_nan() || hi - lo <= 1e-9 {
+            continue;
+        }
+        let mut values: Vec<f64> = (tables.iter().flat_map(|t| &t.rows))
+            .map(|r| r.q[j])
+            .collect();
+        values.sort_by(f64::total_cmp);
+        let cut = ((RANGE_FOLD_SHARE * n_rows as f64).ceil() as usize).clamp(1, n_rows);
+        let (low_cut, high_cut) = (values[cut - 1], values[n_rows - cut]);
+        // A configuration past the range by more than a thousandth of it counts as outside.
+        let slack = 1e-3 * (hi - lo);
+        for upper in [false, true] {
+            let held = |q: f64| if upper { q >= high_cut } else { q <= low_cut };
+            let fold: Fold = (tables.iter())
+                .map(|t| t.rows.iter().map(|r| held(r.q[j])).collect())
+                .collect();
+            let count = fold.iter().flatten().filter(|&&h| h).count();
+            if count < 3 || 2 * count > n_rows {
+                continue;
+            }
+            let relevant = beyond.iter().any(|q| {
+                if upper {
+                    q[j] > hi + slack
+                } else {
+                    q[j] < lo - slack
+                }
+            });
+            out.push((
+                RangeFold {
+                    joint: robot.joint_names[j].clone(),
+                    upper,
+                    relevant,
+                },
+                fold,
+            ));
+        }
+    }
+    out
+}
+
+/// Cross-validation scores of one rung.
+struct Scores {
+    /// Blocked folds: the held-out squared position error per row, averaged over the
+    /// repeats.
+    squared: HeldOut,
+    /// Blocked folds: the held-out weighted squared error per row (the fit's objective).
+    score: HeldOut,
+    /// Joint-range folds: the mean held-out weighted squared error of each fold.
+    range_score: Vec<f64>,
+    /// Joint-range folds: the held-out squared position errors, summed, and their count.
+    range_squared: (f64, usize),
+}
+
+/// `rung` cross-validated on the training tables: the blocked folds (repeated, rows
+/// contiguous in file order within each table) and the joint-range folds, each refitted from
+/// the rung's full-data estimate `warm`, the folds in parallel.
+#[allow(clippy::too_many_arguments)]
 fn cross_validate(
     rung: Rung,
     robot: &Robot,
-    start: &Start<'_>,
-    offsets: &[Option<usize>],
+    tree: &Tree,
+    warm: &Warm,
     tables: &[MeasurementTable],
     cfg: &MeasuredConfig,
     weights: Weights,
-) -> Result<(HeldOut, HeldOut)> {
-    let k = cfg.folds;
-    let lens: Vec<usize> = tables.iter().map(|t| t.rows.len()).collect();
-    let mut sq_sum = Vec::new();
-    let mut score_sum = Vec::new();
-    let mut block = Vec::new();
-    for (ti, &n) in lens.iter().enumerate() {
-        for r in 0..n {
-            block.push(ti * k + fold_of(r, n, k, 0, CV_REPEATS));
-            sq_sum.push(0.0);
-            score_sum.push(0.0);
-        }
-    }
-    for rep in 0..CV_REPEATS {
-        for fold in 0..k {
-            let (model, _) = fit(rung, robot, start, offsets, tables, weights, &|ti, r| {
-                fold_of(r, lens[ti], k, rep, CV_REPEATS) != fold
-            })?;
-            let mut idx = 0;
-            for (ti, &n) in lens.iter().enumerate() {
-                let Errors {
-                    per_row,
-                    score: scores,
-                    ..
-                } = errors(&model, tables, ti, Some(&weights));
-                for r in 0..n {
-                    if fold_of(r, n, k, rep, CV_REPEATS) == fold {
-                        sq_sum[idx + r] += per_row[r];
-                        score_sum[idx + r] += scores[r];
+    ranges: &[(RangeFold, Fold)],
+) -> Result<Scores> {
+    use rayon::prelude::*;
+    let blocked = blocked_folds(tables, cfg.folds);
+    let folds: Vec<&Fold> = blocked.iter().chain(ranges.iter().map(|r| &r.1)).collect();
+    let held: Vec<Vec<(usize, usize, f64, f64)>> = folds
+        .par_iter()
+        .map(|fold| {
+            let model = refit(
+                rung,
+                robot,
+                tree,
+                tables,
+                weights,
+                &|ti, r| !fold[ti][r],
+                warm,
+            )?;
+            let mut out = Vec::new();
+            for (ti, t) in tables.iter().enumerate() {
+                for (r, row) in t.rows.iter().enumerate() {
+                    if fold[ti][r] {
+                        let (sq, score) = row_error(&model, row, &weights);
+                        out.push((ti, r, sq, score));
                     }
                 }
-                idx += n;
             }
+            Ok(out)
+        })
+        .collect::<Result<_>>()?;
+    let k = cfg.folds;
+    let offsets: Vec<usize> = (tables.iter())
+        .scan(0, |acc, t| {
+            let start = *acc;
+            *acc += t.rows.len();
+            Some(start)
+        })
+        .collect();
+    let n_rows: usize = tables.iter().map(|t| t.rows.len()).sum();
+    let (mut sq, mut score) = (vec![0.0; n_rows], vec![0.0; n_rows]);
+    let mut block = vec![0; n_rows];
+    for (ti, t) in tables.iter().enumerate() {
+        let n = t.rows.len();
+        for r in 0..n {
+            block[offsets[ti] + r] = ti * k + fold_of(r, n, k, 0, CV_REPEATS);
         }
     }
-    let mean = |v: &[f64]| v.iter().map(|v| v / CV_REPEATS as f64).collect();
-    Ok((
-        HeldOut {
-            sq_errors: mean(&sq_sum),
+    for fold in &held[..blocked.len()] {
+        for &(ti, r, e2, s) in fold {
+            sq[offsets[ti] + r] += e2 / CV_REPEATS as f64;
+            score[offsets[ti] + r] += s / CV_REPEATS as f64;
+        }
+    }
+    let mut range_squared = (0.0, 0);
+    let range_score = (held[blocked.len()..].iter())
+        .map(|fold| {
+            range_squared.0 += fold.iter().map(|e| e.2).sum::<f64>();
+            range_squared.1 += fold.len();
+            fold.iter().map(|e| e.3).sum::<f64>() / fold.len().max(1) as f64
+        })
+        .collect();
+    Ok(Scores {
+        squared: HeldOut {
+            sq_errors: sq,
             block: block.clone(),
         },
-        HeldOut {
-            sq_errors: mean(&score_sum),
+        score: HeldOut {
+            sq_errors: score,
             block,
         },
-    ))
+        range_score,
+        range_squared,
+    })
+}
+
+/// Squared error (m², every marker and the distance of the row) and weighted squared error
+/// (the fit's objective) of one row under `model`.
+fn row_error(model: &CalibratedModel, row: &MeasuredRow, w: &Weights) -> (f64, f64) {
+    let (mut sq, mut score) = (0.0, 0.0);
+    if let Some(d) = row.distance_m {
+        let e = model.end_pose_of(0, &row.q).translation.vector.norm() - d;
+        sq += e * e;
+        score += (e / w.sigma_distance_m).powi(2);
+    }
+    for m in &row.markers {
+        let pose = model.end_pose_of(m.marker, &row.q);
+        let e = (pose.translation.vector - Vector3::from(m.position_m)).norm();
+        sq += e * e;
+        score += (e / w.sigma_position_m).powi(2);
+        if let Some([qw, qx, qy, qz]) = m.rotation {
+            let meas = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(qw, qx, qy, qz));
+            score += (meas.angle_to(&pose.rotation) / w.sigma_orientation_rad).powi(2);
+        }
+    }
+    (sq, score)
 }
 
 /// Calibrates `robot` from marker tables: frames fitted, the rung chosen on the ladder (or
@@ -1154,43 +1388,75 @@ pub fn calibrate_measured(
     };
 
     let mut ladder = Vec::new();
-    let rung = match cfg.rung {
-        Some(r) => r,
+    let mut range_folds_used = Vec::new();
+    let (rung, (model, fitted)) = match cfg.rung {
+        Some(r) if r == Rung::FramesOnly => (r, (frames_model.clone(), frames_only.clone())),
+        Some(r) => (r, fit(r, robot, &start, &offsets, train, weights, &all)?),
         None => {
-            let mut held = Vec::new();
-            let mut scored = Vec::new();
             let rungs: Vec<Rung> = (Rung::ALL.into_iter())
                 .filter(|&r| carries(r, robot))
                 .collect();
+            // Where the calibration will be used: the test rows and the workspace given.
+            let beyond: Vec<&[f64]> = (test.iter().flat_map(|t| &t.rows))
+                .map(|r| r.q.as_slice())
+                .chain(cfg.workspace.iter().map(Vec::as_slice))
+                .collect();
+            let ranges = range_folds(robot, train, &beyond);
+            let relevant: Vec<usize> = (0..ranges.len())
+                .filter(|&f| ranges[f].0.relevant)
+                .collect();
+            let judged: Vec<usize> = if relevant.is_empty() {
+                (0..ranges.len()).collect()
+            } else {
+                relevant
+            };
+            let mut fits = Vec::with_capacity(rungs.len());
+            let mut scores = Vec::with_capacity(rungs.len());
             for &r in &rungs {
-                let (h, s) = cross_validate(r, robot, &start, &offsets, train, cfg, weights)?;
-                held.push(h);
-                scored.push(s);
+                let f = if r == Rung::FramesOnly {
+                    (frames_model.clone(), frames_only.clone())
+                } else {
+                    fit(r, robot, &start, &offsets, train, weights, &all)?
+                };
+                let warm = Warm::of(&f.1);
+                scores.push(cross_validate(
+                    r, robot, &framed, &warm, train, cfg, weights, &ranges,
+                )?);
+                fits.push(f);
             }
             let rms = |h: &HeldOut| {
                 (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt()
             };
+            // Mean over the judged joint-range folds of rung a's score minus rung b's.
+            let extrapolation = |a: usize, b: usize| {
+                (judged.iter())
+                    .map(|&f| scores[a].range_score[f] - scores[b].range_score[f])
+                    .sum::<f64>()
+                    / judged.len().max(1) as f64
+            };
             let mut chosen = 0;
             for (i, r) in rungs.iter().enumerate() {
-                let to_frames = blocked_difference(&scored[i], &scored[0]);
+                let to_frames = blocked_difference(&scores[i].score, &scores[0].score);
+                let (range_sq, range_n) = scores[i].range_squared;
                 ladder.push(RungReport {
                     rung: *r,
-                    heldout_rms_m: rms(&held[i]),
+                    heldout_rms_m: rms(&scores[i].squared),
                     score_difference_to_frames: if i == 0 { (0.0, 0.0) } else { to_frames },
+                    range_rms_m: (range_n > 0).then(|| (range_sq / range_n as f64).sqrt()),
+                    range_difference_to_frames: extrapolation(i, 0),
                     n_kept: 0,
                 });
-                let (d, se) = blocked_difference(&scored[i], &scored[chosen]);
-                if i > chosen && d + LADDER_SIGNIFICANCE_Z * se < 0.0 {
+                let (d, se) = blocked_difference(&scores[i].score, &scores[chosen].score);
+                if i > chosen
+                    && d + LADDER_SIGNIFICANCE_Z * se < 0.0
+                    && extrapolation(i, chosen) <= 0.0
+                {
                     chosen = i;
                 }
             }
-            rungs[chosen]
+            range_folds_used = (judged.iter()).map(|&f| ranges[f].0.clone()).collect();
+            (rungs[chosen], fits.swap_remove(chosen))
         }
-    };
-    let (model, fitted) = if rung == Rung::FramesOnly {
-        (frames_model.clone(), frames_only.clone())
-    } else {
-        fit(rung, robot, &start, &offsets, train, weights, &all)?
     };
     let is_frame = |name: &str| name.starts_with("instrument.") || name.starts_with("marker");
     let n_kept = (fitted.identified.identifiability.kept.iter())
@@ -1296,6 +1562,8 @@ pub fn calibrate_measured(
         sets,
         sample_errors,
         weights,
+        range_folds: range_folds_used,
+        training_ranges: training_ranges(train, robot.joint_names.len()),
         warnings,
     })
 }
@@ -1508,6 +1776,7 @@ pub fn run_tables(
         sigma_m: plan.sigma_m,
         sigma_rad: plan.sigma_rad,
         marker_tips: (0..tips.len()).collect(),
+        workspace: Vec::new(),
     };
     let out = calibrate_measured(robot, &train, &test, &cfg)?;
     warnings.extend(out.warnings.iter().cloned());

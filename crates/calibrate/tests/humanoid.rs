@@ -315,6 +315,7 @@ fn config(rung: Option<Rung>, marker_tips: Vec<usize>) -> MeasuredConfig {
         sigma_m: None,
         sigma_rad: None,
         marker_tips,
+        workspace: Vec::new(),
     }
 }
 

@@ -76,6 +76,7 @@ fn config() -> MeasuredConfig {
         sigma_m: None,
         sigma_rad: None,
         marker_tips: Vec::new(),
+        workspace: Vec::new(),
     }
 }
 
