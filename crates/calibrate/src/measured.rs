@@ -233,6 +233,8 @@ pub struct MeasuredOutcome {
     pub range_folds: Vec<RangeFold>,
     /// Each joint's training range (rad, m for a prismatic joint), chain order.
     pub training_ranges: Vec<(f64, f64)>,
+    /// Training samples the Huber loss bounded, file order.
+    pub downweighted: Vec<Downweighted>,
     /// Plain-language warnings.
     pub warnings: Vec<String>,
 }
@@ -1386,6 +1388,30 @@ pub fn calibrate_measured(
         tree: &framed,
         x: &start_x,
     };
+    // Gross errors bounded by the Huber loss: every fit below sees the winsorized samples;
+    // the figures are of the data as measured.
+    let richest = cfg.rung.unwrap_or_else(|| {
+        (Rung::ALL.into_iter())
+            .filter(|&r| carries(r, robot))
+            .last()
+            .unwrap_or(Rung::Geometric)
+    });
+    let (fit_tables, downweighted) = winsorize(richest, robot, &start, &offsets, train, weights)?;
+    let (frames_model, frames_only) = if downweighted.is_empty() {
+        (frames_model, frames_only)
+    } else {
+        fit(
+            Rung::FramesOnly,
+            robot,
+            &start,
+            &offsets,
+            &fit_tables,
+            weights,
+            &all,
+        )?
+    };
+    let train_measured = train;
+    let train: &[MeasurementTable] = &fit_tables;
 
     let mut ladder = Vec::new();
     let mut range_folds_used = Vec::new();
@@ -1508,7 +1534,7 @@ pub fn calibrate_measured(
 
     let mut sets = Vec::new();
     let mut sample_errors = Vec::new();
-    for (role, tables) in [("train", train), ("test", test)] {
+    for (role, tables) in [("train", train_measured), ("test", test)] {
         for ti in 0..tables.len() {
             let (e0, e1) = (
                 errors(&frames_model, tables, ti, None),
@@ -1550,6 +1576,28 @@ pub fn calibrate_measured(
             ));
         }
     }
+    let ranges = training_ranges(train, robot.joint_names.len());
+    for t in test {
+        warnings.extend(outside_warnings(t, robot, &ranges));
+    }
+    if !downweighted.is_empty() {
+        let worst = (downweighted.iter())
+            .max_by(|a, b| a.residual_m.total_cmp(&b.residual_m))
+            .map(|d| format!("{}:{} marker {}", d.file, d.line, d.marker))
+            .unwrap_or_default();
+        warnings.push(format!(
+            "{} training samples lie beyond {:.2} mm ({HUBER_CORNER} robust standard deviations \
+             per axis) from the {richest} model and were bounded there by the Huber loss (the \
+             largest, {:.2} mm, at {worst}); each is listed with its residual",
+            downweighted.len(),
+            downweighted[0].bound_m * 1e3,
+            downweighted
+                .iter()
+                .map(|d| d.residual_m)
+                .fold(0.0, f64::max)
+                * 1e3,
+        ));
+    }
     let frames = frame_reports(&base, &markers, &fitted.x, robot.tree.n_params());
     Ok(MeasuredOutcome {
         rung,
@@ -1563,9 +1611,148 @@ pub fn calibrate_measured(
         sample_errors,
         weights,
         range_folds: range_folds_used,
-        training_ranges: training_ranges(train, robot.joint_names.len()),
+        training_ranges: ranges,
+        downweighted,
         warnings,
     })
+}
+
+/// One warning per joint of `robot` that rows of `table` read outside its training range
+/// `ranges` (by more than a thousandth of the range): the calibration extrapolates there.
+fn outside_warnings(table: &MeasurementTable, robot: &Robot, ranges: &[(f64, f64)]) -> Vec<String> {
+    let mut out = Vec::new();
+    for (j, &(lo, hi)) in ranges.iter().enumerate() {
+        let slack = 1e-3 * (hi - lo).max(0.0);
+        let outside: Vec<f64> = (table.rows.iter())
+            .map(|r| r.q[j])
+            .filter(|&q| q < lo - slack || q > hi + slack)
+            .collect();
+        if outside.is_empty() {
+            continue;
+        }
+        let unit = if robot.prismatic.get(j).copied().unwrap_or(false) {
+            "m"
+        } else {
+            "rad"
+        };
+        let (min, max) = outside
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &q| {
+                (a.min(q), b.max(q))
+            });
+        out.push(format!(
+            "test set {}: {} of {} rows read {} outside its training range {lo:.3}..{hi:.3} {unit} \
+             ({min:.3}..{max:.3} {unit}): the calibration extrapolates there",
+            table.name,
+            outside.len(),
+            table.rows.len(),
+            robot.joint_names[j],
+        ));
+    }
+    out
+}
+
+/// Corner of the Huber loss, in robust standard deviations per axis of a marker's position:
+/// a sample whose 3-D residual exceeds `HUBER_CORNER·√3·s` pulls on the fit with a bounded
+/// force. `|e|²/s²` of a clean sample is χ² with 3 degrees of freedom, above 27 with
+/// probability 6·10⁻⁶: on Gaussian data the loss is least squares, sample for sample.
+pub const HUBER_CORNER: f64 = 3.0;
+
+/// Median of the χ distribution with 3 degrees of freedom: the median 3-D norm of an
+/// isotropic Gaussian error of unit standard deviation per axis.
+const CHI3_MEDIAN: f64 = 1.538_2;
+
+/// A marker sample the Huber loss bounded: its residual under the fit as measured, and the
+/// bound the fit saw instead.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Downweighted {
+    /// The file.
+    pub file: String,
+    /// Its line (1-based).
+    pub line: u64,
+    /// The marker, 1-based.
+    pub marker: usize,
+    /// 3-D residual under the model the loss was evaluated with, m.
+    pub residual_m: f64,
+    /// The residual the fit saw (the Huber corner), m.
+    pub bound_m: f64,
+}
+
+/// The training tables as the Huber loss sees them (Huber 1981, *Robust Statistics*, §7.8,
+/// metrically winsorized residuals): `rung` is fitted (the richest rung of the ladder, or the
+/// rung given), the robust scale `s` of
+/// the marker residuals taken from their median norm, and every sample whose 3-D residual
+/// `e` exceeds the corner `c = HUBER_CORNER·√3·s` replaced by `model + e·c/|e|`; fitted
+/// again until the set of bounded samples no longer changes (at most 10 rounds). The least-
+/// squares fit of the winsorized samples is the Huber M-estimate. Tables unchanged and no
+/// sample listed when nothing exceeds the corner, with fewer than 20 samples, or when the
+/// rung cannot be fitted.
+fn winsorize(
+    rung: Rung,
+    robot: &Robot,
+    start: &Start<'_>,
+    offsets: &[Option<usize>],
+    train: &[MeasurementTable],
+    weights: Weights,
+) -> Result<(Vec<MeasurementTable>, Vec<Downweighted>)> {
+    let all = |_: usize, _: usize| true;
+    let n_samples: usize = (train.iter().flat_map(|t| &t.rows))
+        .map(|r| r.markers.len())
+        .sum();
+    let mut tables = train.to_vec();
+    if n_samples < 20 {
+        return Ok((tables, Vec::new()));
+    }
+    let mut corner = None;
+    let mut bounded: Vec<Downweighted> = Vec::new();
+    for _ in 0..10 {
+        let Ok((model, _)) = fit(rung, robot, start, offsets, &tables, weights, &all) else {
+            break;
+        };
+        let mut residuals = Vec::with_capacity(n_samples);
+        for (ti, t) in train.iter().enumerate() {
+            for (ri, row) in t.rows.iter().enumerate() {
+                for (mi, m) in row.markers.iter().enumerate() {
+                    let p = model.end_pose_of(m.marker, &row.q).translation.vector;
+                    residuals.push((ti, ri, mi, Vector3::from(m.position_m) - p, p));
+                }
+            }
+        }
+        let c = *corner.get_or_insert_with(|| {
+            let mut norms: Vec<f64> = residuals.iter().map(|r| r.3.norm()).collect();
+            norms.sort_by(f64::total_cmp);
+            HUBER_CORNER * 3f64.sqrt() * norms[norms.len() / 2] / CHI3_MEDIAN
+        });
+        tables = train.to_vec();
+        let mut now = Vec::new();
+        for (ti, ri, mi, e, p) in residuals {
+            let norm = e.norm();
+            if norm > c {
+                let sample = &mut tables[ti].rows[ri].markers[mi];
+                sample.position_m = (p + e * (c / norm)).into();
+                now.push(Downweighted {
+                    file: train[ti].path.display().to_string(),
+                    line: train[ti].rows[ri].line,
+                    marker: sample.marker + 1,
+                    residual_m: norm,
+                    bound_m: c,
+                });
+            }
+        }
+        let same = now.len() == bounded.len()
+            && now
+                .iter()
+                .zip(&bounded)
+                .all(|(a, b)| (a.line, a.marker) == (b.line, b.marker));
+        bounded = now;
+        if same {
+            break;
+        }
+    }
+    if bounded.is_empty() {
+        return Ok((train.to_vec(), bounded));
+    }
+    Ok((tables, bounded))
 }
 
 /// `Tx(x)·Ty(y)·Tz(z)·Rx(rx)·Ry(ry)·Rz(rz)` of six deviations (m, rad), as the frames apply

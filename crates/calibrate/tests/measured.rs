@@ -195,3 +195,79 @@ fn one_configuration_repeated_is_an_error_not_a_zero_sigma() {
         "{err:#}"
     );
 }
+
+#[test]
+fn a_gross_error_is_bounded_and_listed() {
+    let robot = robot();
+    let clean = table(&robot, 120, 1e-3, 1);
+    let test = table(&robot, 60, 1e-3, 2);
+    // One marker reading 20 mm off (a swapped digit, a marker knocked): two hundred times
+    // the noise.
+    let mut train = clean.clone();
+    train.rows[37].markers[0].position_m[1] += 0.02;
+    let cfg = MeasuredConfig {
+        rung: Some(Rung::JointOffsets),
+        ..config()
+    };
+    let out = calibrate_measured(&robot, &[train], std::slice::from_ref(&test), &cfg).unwrap();
+    let lines: Vec<u64> = out.downweighted.iter().map(|d| d.line).collect();
+    assert_eq!(lines, [clean.rows[37].line], "{:?}", out.downweighted);
+    assert!((out.downweighted[0].residual_m - 0.02).abs() < 2e-3);
+    assert!(
+        out.warnings.iter().any(|w| w.contains("Huber")),
+        "{:?}",
+        out.warnings
+    );
+    // The bounded sample pulls the fit by at most the corner (≈ 5 σ): the test error stays
+    // within 10 % of the clean calibration's; least squares would move it by about
+    // 20 mm / 120 rows spread over the parameters.
+    let reference = calibrate_measured(&robot, &[clean], &[test], &cfg).unwrap();
+    assert!(
+        reference.downweighted.is_empty(),
+        "{:?}",
+        reference.downweighted
+    );
+    let rms = |o: &hapcal_calibrate::measured::MeasuredOutcome| o.sets[1].4.position_rms_m;
+    assert!(
+        rms(&out) < 1.1 * rms(&reference),
+        "{} m against {} m without the gross error",
+        rms(&out),
+        rms(&reference)
+    );
+}
+
+#[test]
+fn test_rows_beyond_the_training_range_are_named_and_judged_there() {
+    let robot = robot();
+    let mut train = table(&robot, 150, 1e-3, 8);
+    let mut test = table(&robot, 40, 1e-3, 9);
+    // Training rows with joint 1 on its lower 60 % only; the test rows sweep its top.
+    let (lo, hi) = robot.limits[0];
+    let cut = lo + 0.6 * (hi - lo);
+    train.rows.retain(|r| r.q[0] < cut);
+    test.rows.retain(|r| r.q[0] > cut);
+    assert!(train.rows.len() > 60 && test.rows.len() > 5);
+    let out = calibrate_measured(&robot, &[train], &[test], &config()).unwrap();
+    // Judged where the test rows go: the top of joint 1's range (other joints' sides only
+    // where a test row happens to fall past a training extreme).
+    assert!(
+        (out.range_folds.iter()).all(|f| f.relevant),
+        "{:?}",
+        out.range_folds
+    );
+    assert!(
+        (out.range_folds.iter()).any(|f| f.upper && f.joint == "joint_a1"),
+        "{:?}",
+        out.range_folds
+    );
+    assert!(
+        !(out.range_folds.iter()).any(|f| !f.upper && f.joint == "joint_a1"),
+        "{:?}",
+        out.range_folds
+    );
+    assert!(
+        (out.warnings.iter()).any(|w| w.contains("joint_a1") && w.contains("training range")),
+        "{:?}",
+        out.warnings
+    );
+}
