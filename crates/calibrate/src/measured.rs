@@ -1392,8 +1392,8 @@ pub fn calibrate_measured(
     // the figures are of the data as measured.
     let richest = cfg.rung.unwrap_or_else(|| {
         (Rung::ALL.into_iter())
-            .filter(|&r| carries(r, robot))
-            .last()
+            .rev()
+            .find(|&r| carries(r, robot))
             .unwrap_or(Rung::Geometric)
     });
     let (fit_tables, downweighted) = winsorize(richest, robot, &start, &offsets, train, weights)?;
