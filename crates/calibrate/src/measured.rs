@@ -186,7 +186,7 @@ pub struct RungReport {
     pub range_rms_m: Option<f64>,
     /// Mean weighted squared error per row over the judged joint-range folds minus the
     /// frames-only rung's (dimensionless; negative: better than frames only where the model
-    /// must extrapolate).
+    /// must extrapolate; 0 without such folds).
     pub range_difference_to_frames: f64,
     /// Kept model parameters (kinematic and compliance) on the full training data.
     pub n_kept: usize,
@@ -228,8 +228,9 @@ pub struct MeasuredOutcome {
     pub sample_errors: Vec<SampleErrors>,
     /// Position σ (m) and orientation σ (rad) that weight the rows.
     pub weights: Weights,
-    /// The joint-range folds the ladder judged extrapolation by (empty when the rung was
-    /// given).
+    /// The joint-range folds the ladder judged extrapolation by: the sides of the joints'
+    /// training ranges that test or workspace configurations lie beyond (empty when none does
+    /// or the rung was given).
     pub range_folds: Vec<RangeFold>,
     /// Each joint's training range (rad, m for a prismatic joint), chain order.
     pub training_ranges: Vec<(f64, f64)>,
@@ -1039,6 +1040,11 @@ fn blocked_folds(tables: &[MeasurementTable], k: usize) -> Vec<Fold> {
     folds
 }
 
+/// How far past a joint's training range, as a share of the range, a test or workspace
+/// reading counts as outside it (an extrapolation worth judging and reporting; random test
+/// rows of a random design fall a fraction of a percent past the training extremes).
+pub const OUTSIDE_SHARE: f64 = 0.05;
+
 /// Share of the training rows each joint-range fold holds out, from one end of the joint's
 /// range.
 pub const RANGE_FOLD_SHARE: f64 = 0.2;
@@ -1052,7 +1058,8 @@ pub struct RangeFold {
     /// `true`: the rows at the top of its range are held out; `false`: the bottom.
     pub upper: bool,
     /// Whether a test or workspace configuration lies beyond the training range on this side
-    /// of this joint (the folds the ladder judges extrapolation by, when there are any).
+    /// of this joint by more than [`OUTSIDE_SHARE`] of it (the folds the ladder judges
+    /// extrapolation by).
     pub relevant: bool,
 }
 
@@ -1091,8 +1098,7 @@ fn range_folds(
         values.sort_by(f64::total_cmp);
         let cut = ((RANGE_FOLD_SHARE * n_rows as f64).ceil() as usize).clamp(1, n_rows);
         let (low_cut, high_cut) = (values[cut - 1], values[n_rows - cut]);
-        // A configuration past the range by more than a thousandth of it counts as outside.
-        let slack = 1e-3 * (hi - lo);
+        let slack = OUTSIDE_SHARE * (hi - lo);
         for upper in [false, true] {
             let held = |q: f64| if upper { q >= high_cut } else { q <= low_cut };
             let fold: Fold = (tables.iter())
@@ -1427,15 +1433,10 @@ pub fn calibrate_measured(
                 .map(|r| r.q.as_slice())
                 .chain(cfg.workspace.iter().map(Vec::as_slice))
                 .collect();
-            let ranges = range_folds(robot, train, &beyond);
-            let relevant: Vec<usize> = (0..ranges.len())
-                .filter(|&f| ranges[f].0.relevant)
-                .collect();
-            let judged: Vec<usize> = if relevant.is_empty() {
-                (0..ranges.len()).collect()
-            } else {
-                relevant
-            };
+            // Only the sides where the calibration will be used beyond its training range.
+            let mut ranges = range_folds(robot, train, &beyond);
+            ranges.retain(|f| f.0.relevant);
+            let judged: Vec<usize> = (0..ranges.len()).collect();
             let mut fits = Vec::with_capacity(rungs.len());
             let mut scores = Vec::with_capacity(rungs.len());
             for &r in &rungs {
@@ -1618,11 +1619,12 @@ pub fn calibrate_measured(
 }
 
 /// One warning per joint of `robot` that rows of `table` read outside its training range
-/// `ranges` (by more than a thousandth of the range): the calibration extrapolates there.
+/// `ranges` (by more than [`OUTSIDE_SHARE`] of the range): the calibration extrapolates
+/// there.
 fn outside_warnings(table: &MeasurementTable, robot: &Robot, ranges: &[(f64, f64)]) -> Vec<String> {
     let mut out = Vec::new();
     for (j, &(lo, hi)) in ranges.iter().enumerate() {
-        let slack = 1e-3 * (hi - lo).max(0.0);
+        let slack = OUTSIDE_SHARE * (hi - lo).max(0.0);
         let outside: Vec<f64> = (table.rows.iter())
             .map(|r| r.q[j])
             .filter(|&q| q < lo - slack || q > hi + slack)

@@ -1,0 +1,311 @@
+//! A simulated two-arm humanoid upper body: a pitching torso under a head and two seven-joint
+//! arms, a CAD mass on every link, joint and transversal compliance on the torso and both
+//! arms, a tracker marker on each hand. The truth is evaluated with the measurement model of
+//! `hapcal-problems` at known parameters. Shared by the humanoid test, the measured-data
+//! benchmark and the example that writes the recording (`sim_humanoid`).
+#![allow(clippy::unwrap_used, clippy::expect_used, dead_code, unreachable_pub)]
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use faer::Col;
+use hapcal_calibrate::measured::{Robot, robot_from_urdf};
+use hapcal_identify::Problem;
+use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
+use hapcal_kinematics::{FrameSpec, Isometry3, Vector3};
+use hapcal_problems::{
+    CalibrationProblem, GravityCompliance, ModelTerms, Observations, Row, RowKind, Weights,
+};
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+
+/// Marker noise per axis, m (motion capture).
+pub const NOISE_M: f64 = 2e-4;
+
+/// One joint of the URDF: name, parent, child, origin xyz, origin rpy, axis (fixed if `None`).
+type JointRow<'a> = (
+    &'a str,
+    &'a str,
+    &'a str,
+    [f64; 3],
+    [f64; 3],
+    Option<[f64; 3]>,
+);
+
+/// One arm joint: number, origin xyz (left arm), axis.
+type ArmJoint = (&'static str, [f64; 3], [f64; 3]);
+
+/// An arm joint named for its side: joint, link, origin, axis, side sign.
+type SideJoint = (&'static str, &'static str, [f64; 3], [f64; 3], f64);
+
+/// The humanoid's URDF: torso yaw (vertical, no gravity torque) and two pitches, a head
+/// (fixed, 4 kg), two arms of seven revolute joints, a hand on each.
+pub fn humanoid_urdf() -> String {
+    let mut joints: Vec<JointRow<'_>> = vec![
+        (
+            "torso_1",
+            "base",
+            "torso_1_link",
+            [0.0, 0.0, 0.3],
+            [0.0; 3],
+            Some([0.0, 0.0, 1.0]),
+        ),
+        (
+            "torso_2",
+            "torso_1_link",
+            "torso_2_link",
+            [0.0, 0.0, 0.1],
+            [0.0; 3],
+            Some([0.0, 1.0, 0.0]),
+        ),
+        (
+            "torso_3",
+            "torso_2_link",
+            "chest",
+            [0.0, 0.0, 0.35],
+            [0.0; 3],
+            Some([0.0, 1.0, 0.0]),
+        ),
+        ("neck", "chest", "head", [0.0, 0.0, 0.3], [0.0; 3], None),
+    ];
+    let arm: [ArmJoint; 7] = [
+        ("1", [0.0, 0.22, 0.15], [0.0, 1.0, 0.0]),
+        ("2", [0.0, 0.08, 0.0], [1.0, 0.0, 0.0]),
+        ("3", [0.0, 0.0, -0.12], [0.0, 0.0, 1.0]),
+        ("4", [0.0, 0.0, -0.18], [0.0, 1.0, 0.0]),
+        ("5", [0.0, 0.0, -0.12], [0.0, 0.0, 1.0]),
+        ("6", [0.0, 0.0, -0.16], [0.0, 1.0, 0.0]),
+        ("7", [0.0, 0.0, -0.05], [1.0, 0.0, 0.0]),
+    ];
+    let mut names = Vec::new();
+    for side in ["l", "r"] {
+        let s = if side == "l" { 1.0 } else { -1.0 };
+        for (k, xyz, axis) in arm {
+            names.push((
+                format!("{side}_{k}"),
+                format!("{side}_link{k}"),
+                xyz,
+                axis,
+                s,
+            ));
+        }
+    }
+    let leaked: Vec<SideJoint> = names
+        .into_iter()
+        .map(|(j, l, xyz, axis, s)| {
+            let j: &'static str = Box::leak(j.into_boxed_str());
+            let l: &'static str = Box::leak(l.into_boxed_str());
+            (j, l, xyz, axis, s)
+        })
+        .collect();
+    for side in 0..2 {
+        let mut parent = "chest";
+        for &(j, l, xyz, axis, s) in &leaked[7 * side..7 * side + 7] {
+            joints.push((
+                j,
+                parent,
+                l,
+                [xyz[0], s * xyz[1], xyz[2]],
+                [0.0; 3],
+                Some(axis),
+            ));
+            parent = l;
+        }
+        let hand = if side == 0 { "l_hand" } else { "r_hand" };
+        let name = if side == 0 {
+            "l_hand_joint"
+        } else {
+            "r_hand_joint"
+        };
+        joints.push((name, parent, hand, [0.0, 0.0, -0.1], [0.0; 3], None));
+    }
+    let mut links: Vec<(String, f64, [f64; 3])> = vec![("base".into(), 0.0, [0.0; 3])];
+    for (_, _, child, _, _, _) in &joints {
+        let (mass, com) = match *child {
+            "torso_1_link" => (6.0, [0.0, 0.0, 0.05]),
+            "torso_2_link" => (8.0, [0.02, 0.0, 0.15]),
+            "chest" => (15.0, [0.03, 0.0, 0.15]),
+            "head" => (4.0, [0.02, 0.0, 0.1]),
+            "l_hand" | "r_hand" => (0.8, [0.0, 0.0, -0.05]),
+            c if c.ends_with("link1") || c.ends_with("link2") => (2.5, [0.0, 0.0, -0.03]),
+            c if c.ends_with("link3") || c.ends_with("link4") => (2.0, [0.01, 0.0, -0.09]),
+            _ => (1.2, [0.0, 0.01, -0.06]),
+        };
+        links.push(((*child).to_owned(), mass, com));
+    }
+    let mut s = String::from("<?xml version=\"1.0\"?>\n<robot name=\"humanoid\">\n");
+    for (name, mass, c) in &links {
+        if *mass > 0.0 {
+            writeln!(
+                s,
+                "  <link name=\"{name}\"><inertial><mass value=\"{mass}\"/><origin xyz=\"{} {} {}\"/>\
+                 <inertia ixx=\"0.01\" ixy=\"0\" ixz=\"0\" iyy=\"0.01\" iyz=\"0\" izz=\"0.01\"/></inertial></link>",
+                c[0], c[1], c[2]
+            )
+            .unwrap();
+        } else {
+            writeln!(s, "  <link name=\"{name}\"/>").unwrap();
+        }
+    }
+    for (name, parent, child, xyz, rpy, axis) in &joints {
+        let kind = if axis.is_some() { "revolute" } else { "fixed" };
+        write!(
+            s,
+            "  <joint name=\"{name}\" type=\"{kind}\"><parent link=\"{parent}\"/><child link=\"{child}\"/>\
+             <origin xyz=\"{} {} {}\" rpy=\"{} {} {}\"/>",
+            xyz[0], xyz[1], xyz[2], rpy[0], rpy[1], rpy[2]
+        )
+        .unwrap();
+        if let Some(a) = axis {
+            let limit = if name.starts_with("torso") { 0.5 } else { 2.0 };
+            write!(
+                s,
+                "<axis xyz=\"{} {} {}\"/><limit lower=\"-{limit}\" upper=\"{limit}\" effort=\"100\" velocity=\"1\"/>",
+                a[0], a[1], a[2]
+            )
+            .unwrap();
+        }
+        s.push_str("</joint>\n");
+    }
+    s.push_str("</robot>\n");
+    s
+}
+
+/// The humanoid with tips `tips`, from its URDF written to a temporary file.
+pub fn humanoid(tips: &[&str]) -> Robot {
+    let dir = std::env::temp_dir().join(format!("hapcal-humanoid-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // One file per caller: tests run in parallel.
+    let path = dir.join(format!("humanoid-{}.urdf", tips.join("-")));
+    let tmp = path.with_extension(format!("{:?}.tmp", std::thread::current().id()));
+    std::fs::write(&tmp, humanoid_urdf()).unwrap();
+    std::fs::rename(&tmp, &path).unwrap();
+    let tips: Vec<String> = tips.iter().map(|t| (*t).to_owned()).collect();
+    robot_from_urdf(&path, &tips).unwrap()
+}
+
+/// The simulated robot: the tree with both hands framed, and the truth in its problem layout.
+pub struct Truth {
+    /// The problem whose model the truth is.
+    pub problem: CalibrationProblem,
+    /// The true parameters, in its layout.
+    pub x: Col<f64>,
+}
+
+/// Truth compliance of a joint, rad/(N·m): torso stiffer than the arms' small drives.
+pub fn compliance_of(joint: &str) -> f64 {
+    if joint.starts_with("torso") {
+        4e-5
+    } else {
+        1.5e-4
+    }
+}
+
+/// Transversal compliance of a joint, rad/(N·m).
+pub fn transversal_of(joint: &str) -> f64 {
+    if joint.starts_with("torso") {
+        3e-5
+    } else {
+        6e-5
+    }
+}
+
+pub fn truth(robot: &Robot, seed: u64) -> Truth {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let base = FrameSpec {
+        name: "instrument".into(),
+        nominal: Isometry3::new(Vector3::new(2.5, 0.4, -0.9), Vector3::new(0.05, -0.02, 2.8)),
+    };
+    let marker = |name: &str| FrameSpec {
+        name: name.into(),
+        nominal: Isometry3::translation(0.04, 0.0, -0.08),
+    };
+    let tree = robot.tree.with_joint_offsets();
+    let framed = tree
+        .with_frames(&base, &[(0, marker("marker1")), (1, marker("marker2"))])
+        .unwrap();
+    let dummy = Observations {
+        rows: vec![Row {
+            q: vec![0.0; robot.joint_names.len()],
+            kind: RowKind::Marker {
+                tip: 0,
+                position_m: [0.0; 3],
+            },
+        }],
+        ..Observations::default()
+    };
+    let problem = CalibrationProblem::on_tree(
+        framed,
+        dummy,
+        Weights::default(),
+        ModelTerms {
+            compliance: Some(GravityCompliance::from_link_masses(
+                robot.masses.clone(),
+                -Vector3::z(),
+            )),
+            transversal: true,
+            harmonics: None,
+            torque_tips: Some(robot.tree.tips().to_vec()),
+        },
+    )
+    .unwrap();
+    let layout = problem.layout();
+    let geometry = Normal::new(0.0, 3e-4).unwrap();
+    let x = Col::from_fn(layout.len(), |i| {
+        let name = layout.name(i);
+        if name.starts_with("instrument.") || name.starts_with("marker") {
+            0.0
+        } else if let Some(j) = name.strip_prefix("compliance.") {
+            compliance_of(j)
+        } else if let Some(j) = name.strip_prefix("transversal.") {
+            transversal_of(j)
+        } else {
+            // Geometric deviations: 0.3 mm and 0.3 mrad.
+            geometry.sample(&mut rng)
+        }
+    });
+    Truth { problem, x }
+}
+
+/// `n` rows of the markers in `markers` (0: left hand, 1: right hand) measured in the
+/// tracker frame, with noise [`NOISE_M`].
+pub fn table(robot: &Robot, truth: &Truth, markers: &[usize], n: usize, seed: u64) -> MeasurementTable {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let model = truth.problem.model(truth.x.as_ref());
+    let noise = Normal::new(0.0, NOISE_M).unwrap();
+    let rows = (0..n)
+        .map(|i| {
+            let q: Vec<f64> = (robot.limits.iter())
+                .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
+                .collect();
+            let samples = (markers.iter().enumerate())
+                .map(|(k, &tip)| {
+                    let p = model.end_pose_of(tip, &q).translation.vector;
+                    MarkerSample {
+                        marker: k,
+                        position_m: std::array::from_fn(|a| p[a] + noise.sample(&mut rng)),
+                        rotation: None,
+                    }
+                })
+                .collect();
+            MeasuredRow {
+                line: i as u64 + 2,
+                q,
+                t_s: None,
+                markers: samples,
+                distance_m: None,
+            }
+        })
+        .collect();
+    MeasurementTable {
+        name: format!("seed{seed}"),
+        path: PathBuf::from("mocap.csv"),
+        rows,
+        n_markers: markers.len(),
+        has_orientation: false,
+        has_distance: false,
+        ignored_columns: Vec::new(),
+        warnings: Vec::new(),
+    }
+}
+
