@@ -1402,7 +1402,8 @@ pub fn calibrate_measured(
             .find(|&r| carries(r, robot))
             .unwrap_or(Rung::Geometric)
     });
-    let (fit_tables, downweighted) = winsorize(richest, robot, &start, &offsets, train, weights)?;
+    let (fit_tables, downweighted, mut richest_fit) =
+        winsorize(richest, robot, &start, &offsets, train, weights)?;
     let (frames_model, frames_only) = if downweighted.is_empty() {
         (frames_model, frames_only)
     } else {
@@ -1423,7 +1424,10 @@ pub fn calibrate_measured(
     let mut range_folds_used = Vec::new();
     let (rung, (model, fitted)) = match cfg.rung {
         Some(r) if r == Rung::FramesOnly => (r, (frames_model.clone(), frames_only.clone())),
-        Some(r) => (r, fit(r, robot, &start, &offsets, train, weights, &all)?),
+        Some(r) => match richest_fit.take() {
+            Some(f) => (r, f),
+            None => (r, fit(r, robot, &start, &offsets, train, weights, &all)?),
+        },
         None => {
             let rungs: Vec<Rung> = (Rung::ALL.into_iter())
                 .filter(|&r| carries(r, robot))
@@ -1437,20 +1441,29 @@ pub fn calibrate_measured(
             let mut ranges = range_folds(robot, train, &beyond);
             ranges.retain(|f| f.0.relevant);
             let judged: Vec<usize> = (0..ranges.len()).collect();
-            let mut fits = Vec::with_capacity(rungs.len());
-            let mut scores = Vec::with_capacity(rungs.len());
-            for &r in &rungs {
-                let f = if r == Rung::FramesOnly {
-                    (frames_model.clone(), frames_only.clone())
-                } else {
-                    fit(r, robot, &start, &offsets, train, weights, &all)?
-                };
-                let warm = Warm::of(&f.1);
-                scores.push(cross_validate(
-                    r, robot, &framed, &warm, train, cfg, weights, &ranges,
-                )?);
-                fits.push(f);
-            }
+            // Each rung fitted on every training row (the richest one already was, when the
+            // Huber loss bounded nothing), then cross-validated from there; rungs in parallel.
+            use rayon::prelude::*;
+            let cached = std::sync::Mutex::new(richest_fit.take());
+            let fitted: Vec<((CalibratedModel, Fitted), Scores)> = (rungs.par_iter())
+                .map(|&r| {
+                    let f = if r == Rung::FramesOnly {
+                        (frames_model.clone(), frames_only.clone())
+                    } else if let Some(f) = (r == richest)
+                        .then(|| cached.lock().ok().and_then(|mut c| c.take()))
+                        .flatten()
+                    {
+                        f
+                    } else {
+                        fit(r, robot, &start, &offsets, train, weights, &all)?
+                    };
+                    let warm = Warm::of(&f.1);
+                    let scores =
+                        cross_validate(r, robot, &framed, &warm, train, cfg, weights, &ranges)?;
+                    Ok((f, scores))
+                })
+                .collect::<Result<_>>()?;
+            let (mut fits, scores): (Vec<_>, Vec<_>) = fitted.into_iter().unzip();
             let rms = |h: &HeldOut| {
                 (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt()
             };
@@ -1654,6 +1667,14 @@ fn outside_warnings(table: &MeasurementTable, robot: &Robot, ranges: &[(f64, f64
     out
 }
 
+/// The training tables as the Huber loss sees them, the samples it bounded, and the fit of
+/// the rung it was evaluated with when it bounded none.
+type Winsorized = (
+    Vec<MeasurementTable>,
+    Vec<Downweighted>,
+    Option<(CalibratedModel, Fitted)>,
+);
+
 /// Corner of the Huber loss, in robust standard deviations per axis of a marker's position:
 /// a sample whose 3-D residual exceeds `HUBER_CORNER·√3·s` pulls on the fit with a bounded
 /// force. `|e|²/s²` of a clean sample is χ² with 3 degrees of freedom, above 27 with
@@ -1688,7 +1709,8 @@ pub struct Downweighted {
 /// again until the set of bounded samples no longer changes (at most 10 rounds). The least-
 /// squares fit of the winsorized samples is the Huber M-estimate. Tables unchanged and no
 /// sample listed when nothing exceeds the corner, with fewer than 20 samples, or when the
-/// rung cannot be fitted.
+/// rung cannot be fitted. With nothing bounded, the fit of `rung` on the tables as measured
+/// is returned too.
 fn winsorize(
     rung: Rung,
     robot: &Robot,
@@ -1696,21 +1718,25 @@ fn winsorize(
     offsets: &[Option<usize>],
     train: &[MeasurementTable],
     weights: Weights,
-) -> Result<(Vec<MeasurementTable>, Vec<Downweighted>)> {
+) -> Result<Winsorized> {
     let all = |_: usize, _: usize| true;
     let n_samples: usize = (train.iter().flat_map(|t| &t.rows))
         .map(|r| r.markers.len())
         .sum();
     let mut tables = train.to_vec();
     if n_samples < 20 {
-        return Ok((tables, Vec::new()));
+        return Ok((tables, Vec::new(), None));
     }
+    let mut first = None;
     let mut corner = None;
     let mut bounded: Vec<Downweighted> = Vec::new();
     for _ in 0..10 {
-        let Ok((model, _)) = fit(rung, robot, start, offsets, &tables, weights, &all) else {
+        let Ok((model, fitted)) = fit(rung, robot, start, offsets, &tables, weights, &all) else {
             break;
         };
+        if first.is_none() {
+            first = Some((model.clone(), fitted));
+        }
         let mut residuals = Vec::with_capacity(n_samples);
         for (ti, t) in train.iter().enumerate() {
             for (ri, row) in t.rows.iter().enumerate() {
@@ -1752,9 +1778,9 @@ fn winsorize(
         }
     }
     if bounded.is_empty() {
-        return Ok((train.to_vec(), bounded));
+        return Ok((train.to_vec(), bounded, first));
     }
-    Ok((tables, bounded))
+    Ok((tables, bounded, None))
 }
 
 /// `Tx(x)·Ty(y)·Tz(z)·Rx(rx)·Ry(ry)·Rz(rz)` of six deviations (m, rad), as the frames apply

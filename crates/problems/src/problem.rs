@@ -177,6 +177,11 @@ pub struct CalibrationProblem {
     harmonics: Option<JointHarmonics>,
     /// Transversal compliance terms (parameters after the harmonics); empty without.
     transversal: Vec<TransversalTerm>,
+    /// Per joint, the kinematic parameter added to its screw's value (a joint offset,
+    /// `dtheta`), whose Jacobian column is the joint angle's; `None` for a joint whose screw
+    /// has none. With one for every joint of an angle term, the angle terms' columns come
+    /// from the pose Jacobian, without a second pass for the geometric Jacobian.
+    joint_param: Vec<Option<usize>>,
     /// Tilt of each transversal term per row (row-major, `n_rows × transversal.len()`), the
     /// transversal moment in the joint's frame ([`TransversalTerm`]).
     tilt_basis: Vec<[f64; 3]>,
@@ -511,6 +516,19 @@ impl CalibrationProblem {
                 role: Role::Model,
             }));
         }
+        let mut joint_param = vec![None; n_joints];
+        for tip in &tips {
+            for factor in tip.factors() {
+                if let hapcal_kinematics::Factor::Screw {
+                    param: Some(p),
+                    joint: Some(j),
+                    ..
+                } = factor
+                {
+                    joint_param[*j] = Some(*p);
+                }
+            }
+        }
         let tilt_basis: Vec<[f64; 3]> = (loads.iter())
             .flat_map(|l| {
                 transversal_terms
@@ -610,6 +628,7 @@ impl CalibrationProblem {
             compliance,
             harmonics,
             transversal: transversal_terms,
+            joint_param,
             tilt_basis,
             angle_terms,
             angle_basis,
@@ -927,6 +946,10 @@ impl CalibrationProblem {
         let n_comp = n_angle + self.n_transversal();
         let n_terms = self.angle_terms.len();
         let n_tilts = self.transversal.len();
+        // The angle terms' Jacobian columns from their joints' parameter columns (exact: the
+        // parameter adds to the joint's value), when every such joint has one.
+        let angles_from_params =
+            (self.angle_terms.iter()).all(|(j, _)| self.joint_param[*j].is_some());
         let off = self.points_offset();
         let point_distances: &[PointDistance] = if with_point_distances {
             &self.obs.point_distances
@@ -1051,8 +1074,8 @@ impl CalibrationProblem {
                 } else {
                     chain.end_pose(x_eff, q_eff)
                 };
-                let jq =
-                    (n_angle > 0 && jac.is_some()).then(|| chain.geometric_jacobian(x_eff, q_eff));
+                let jq = (n_angle > 0 && jac.is_some() && !angles_from_params)
+                    .then(|| chain.geometric_jacobian(x_eff, q_eff));
                 let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
                 let tilts = &self.tilt_basis[row_idx * n_tilts..(row_idx + 1) * n_tilts];
                 // Row k of the pose Jacobian (0–2 position, 3–5 rotation vector) at column col.
@@ -1061,12 +1084,16 @@ impl CalibrationProblem {
                         buf[6 * col + k]
                     } else if col < n_kin + n_angle {
                         let g = col - n_kin;
-                        jq.as_ref().map_or(0.0, |m| {
-                            (self.angle_terms.iter().zip(basis))
-                                .filter(|((_, param), _)| *param == g)
-                                .map(|((j, _), b)| m[(k, *j)] * b)
-                                .sum()
-                        })
+                        let terms = (self.angle_terms.iter().zip(basis))
+                            .filter(|((_, param), _)| *param == g);
+                        match &jq {
+                            Some(m) => terms.map(|((j, _), b)| m[(k, *j)] * b).sum(),
+                            None => terms
+                                .filter_map(|((j, _), b)| {
+                                    Some(buf[6 * self.joint_param[*j]? + k] * b)
+                                })
+                                .sum(),
+                        }
                     } else {
                         let t = col - n_kin - n_angle;
                         (self.transversal[t].rotation_params.iter())
@@ -1137,7 +1164,7 @@ impl CalibrationProblem {
             };
             // ∂p/∂k_j = (∂p/∂q_j)·τ̂_j (and ∂p/∂a_jh = (∂p/∂q_j)·sin(h·q_j), …), from the
             // geometric Jacobian's linear rows.
-            let jq = if n_angle > 0 && jac.is_some() {
+            let jq = if n_angle > 0 && jac.is_some() && !angles_from_params {
                 let x_kin: Vec<f64> = (0..n_kin).map(|i| x[i]).collect();
                 let x_eff = self.effective_x(row_idx, x, &x_kin, &mut x_buf);
                 Some(self.chain.geometric_jacobian(x_eff, q_eff))
@@ -1151,12 +1178,14 @@ impl CalibrationProblem {
                 } else if col < n_kin + n_angle {
                     let g = col - n_kin;
                     let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
-                    jq.as_ref().map_or(0.0, |m| {
-                        (self.angle_terms.iter().zip(basis))
-                            .filter(|((_, param), _)| *param == g)
-                            .map(|((j, _), b)| m[(k, *j)] * b)
-                            .sum()
-                    })
+                    let terms =
+                        (self.angle_terms.iter().zip(basis)).filter(|((_, param), _)| *param == g);
+                    match &jq {
+                        Some(m) => terms.map(|((j, _), b)| m[(k, *j)] * b).sum(),
+                        None => terms
+                            .filter_map(|((j, _), b)| Some(buf[3 * self.joint_param[*j]? + k] * b))
+                            .sum(),
+                    }
                 } else {
                     let t = col - n_kin - n_angle;
                     (self.transversal[t].rotation_params.iter())
