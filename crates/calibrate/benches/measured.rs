@@ -5,8 +5,15 @@
 //! - `positions_200`: 200 simulated marker positions (0.1 mm noise) in a tracker frame, the
 //!   instrument frame, the marker offset and the geometric model fitted
 //!   ([`hapcal_calibrate::measured::calibrate_measured`], model given, no cross-validation);
-//! - `positions_200_auto`: the same with the model chosen on the ladder by cross-validation.
+//! - `positions_200_auto`: the same with the model chosen on the ladder by cross-validation;
+//! - `humanoid_500_auto`: the whole ladder (frames only → … → transversal compliance, every
+//!   rung through repeated blocked cross-validation) on the simulated two-arm humanoid
+//!   (`tests/sim/humanoid.rs`: 17 joints on two tips, a CAD mass on every link), 500 rows of
+//!   two markers.
 #![allow(missing_docs, clippy::unwrap_used)] // criterion's macros generate undocumented items
+
+#[path = "../tests/sim/humanoid.rs"]
+mod humanoid;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use hapcal_calibrate::measured::{
@@ -130,6 +137,25 @@ fn bench(c: &mut Criterion) {
             })
         });
     }
+    group.finish();
+    let mut group = c.benchmark_group("humanoid");
+    group.sample_size(10);
+    let robot = humanoid::humanoid(&["l_hand", "r_hand"]);
+    let truth = humanoid::truth(&robot, 11);
+    let table = humanoid::table(&robot, &truth, &[0, 1], 500, 12);
+    let cfg = MeasuredConfig {
+        rung: None,
+        folds: 5,
+        sigma_m: None,
+        sigma_rad: None,
+        marker_tips: vec![0, 1],
+        workspace: Vec::new(),
+    };
+    group.bench_function("humanoid_500_auto", |b| {
+        b.iter(|| {
+            calibrate_measured(&robot, std::slice::from_ref(black_box(&table)), &[], &cfg).unwrap()
+        })
+    });
     group.finish();
 }
 
