@@ -351,7 +351,7 @@ pub struct ParamReport {
     pub value: f64,
     /// Standard deviation.
     pub std: f64,
-    /// `m` or `rad`.
+    /// `m` or `rad`; `rad/(N·m)` (`rad/m` under lumped weights) for a compliance.
     pub unit: &'static str,
 }
 

@@ -1276,8 +1276,6 @@ pub fn calibrate_measured(
             cfg.folds
         );
     }
-    let with_offsets = robot.tree.with_joint_offsets();
-    let offsets = with_offsets.joint_offset_params();
     // Weights: given, or the RMS of each residual group after a frames-only fit at unit weights.
     let mut weights = Weights {
         sigma_position_m: cfg.sigma_m.unwrap_or(1e-3),
@@ -1286,46 +1284,16 @@ pub fn calibrate_measured(
         ..Weights::default()
     };
     let all = |_: usize, _: usize| true;
-    let robot = &Robot {
-        tree: with_offsets.clone(),
-        ..robot.clone()
-    };
-    // Of the closed-form starts, the one whose residual is smallest is fitted, frames only; every
-    // rung starts from its estimate.
-    let samples = samples(robot, train, cfg);
-    let distances: Vec<(Isometry3<f64>, f64)> = {
-        let zero = vec![0.0; robot.tree.n_params()];
-        let tip = &robot.tree.tips()[tip_of(cfg, &robot.tree, 0)];
-        (train.iter().flat_map(|t| &t.rows))
-            .filter_map(|r| Some((tip.end_pose(&zero, &r.q), r.distance_m?)))
-            .collect()
-    };
-    let mut best: Option<(f64, Frames)> = None;
-    for (base, markers) in initial_frames(robot, train, &samples, n_markers(train), cfg) {
-        let cost = start_cost(&samples, &distances, &base, &markers, &weights);
-        if best.as_ref().is_none_or(|(c, _)| cost < *c) {
-            best = Some((cost, (base, markers)));
-        }
-    }
-    let Some((_, (base, markers))) = best else {
-        bail!("no initial guess of the instrument frame");
-    };
-    let framed = with_offsets
-        .with_frames(&base, &markers)
-        .context("attaching the instrument and marker frames")?;
-    let nominal = Col::<f64>::zeros(framed.n_params());
-    let (m0, f0) = fit(
-        Rung::FramesOnly,
+    let FramesOnly {
         robot,
-        &Start {
-            tree: &framed,
-            x: &nominal,
-        },
-        &offsets,
-        train,
-        weights,
-        &all,
-    )?;
+        offsets,
+        base,
+        markers,
+        framed,
+        model: m0,
+        fitted: f0,
+    } = frames_only(robot, train, cfg, weights)?;
+    let robot = &robot;
     // Repeated configurations add residuals but no information: the distinct ones must
     // determine the frames with some redundancy, or σ (and every standard deviation) is zero.
     let mut distinct: Vec<&[f64]> = Vec::new();
@@ -1675,6 +1643,16 @@ type Winsorized = (
     Option<(CalibratedModel, Fitted)>,
 );
 
+/// The unit of a compliance parameter (`compliance.*`, `transversal.*`): rad/(N·m) under the
+/// URDF's link masses, rad/m under the lumped unit weights; `None` for any other parameter.
+fn compliance_unit(name: &str, masses: bool) -> Option<&'static str> {
+    (name.starts_with("compliance.") || name.starts_with("transversal.")).then_some(if masses {
+        "rad/(N·m)"
+    } else {
+        "rad/m"
+    })
+}
+
 /// Corner of the Huber loss, in robust standard deviations per axis of a marker's position:
 /// a sample whose 3-D residual exceeds `HUBER_CORNER·√3·s` pulls on the fit with a bounded
 /// force. `|e|²/s²` of a clean sample is χ² with 3 degrees of freedom, above 27 with
@@ -1781,6 +1759,96 @@ fn winsorize(
         return Ok((train.to_vec(), bounded, first));
     }
     Ok((tables, bounded, None))
+}
+
+/// The frames-only fit of the training tables ([`frames_only`]).
+pub struct FramesOnly {
+    /// The robot with joint offsets (every rung's tree before the frames).
+    pub robot: Robot,
+    /// The joint-offset parameter of each joint, if it has one.
+    pub offsets: Vec<Option<usize>>,
+    /// Nominal instrument frame (the closed-form start).
+    pub base: FrameSpec,
+    /// Nominal marker frames with their tips.
+    pub markers: Vec<(usize, FrameSpec)>,
+    /// The robot behind the instrument frame with a marker frame on each tip.
+    pub framed: Tree,
+    /// The fitted frames-only model.
+    pub model: CalibratedModel,
+    /// Its identification.
+    pub fitted: Fitted,
+}
+
+/// The nominal kinematics with the instrument and marker frames fitted to `tables` at
+/// `weights`: of the closed-form starts (docs/engine.md, "Trees, instruments and markers"),
+/// the one whose residual is smallest, refined by Levenberg–Marquardt over the frames.
+/// Cheap (a few milliseconds for hundreds of rows): the setup check fits it under each
+/// hypothesis of a mistake.
+///
+/// # Errors
+/// No closed-form start, or a failed identification.
+pub fn frames_only(
+    robot: &Robot,
+    tables: &[MeasurementTable],
+    cfg: &MeasuredConfig,
+    weights: Weights,
+) -> Result<FramesOnly> {
+    let with_offsets = robot.tree.with_joint_offsets();
+    let offsets = with_offsets.joint_offset_params();
+    let robot = Robot {
+        tree: with_offsets.clone(),
+        ..robot.clone()
+    };
+    let samples = samples(&robot, tables, cfg);
+    let distances: Vec<(Isometry3<f64>, f64)> = {
+        let zero = vec![0.0; robot.tree.n_params()];
+        let tip = &robot.tree.tips()[tip_of(cfg, &robot.tree, 0)];
+        (tables.iter().flat_map(|t| &t.rows))
+            .filter_map(|r| Some((tip.end_pose(&zero, &r.q), r.distance_m?)))
+            .collect()
+    };
+    let mut best: Option<(f64, Frames)> = None;
+    for (base, markers) in initial_frames(&robot, tables, &samples, n_markers(tables), cfg) {
+        let cost = start_cost(&samples, &distances, &base, &markers, &weights);
+        if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+            best = Some((cost, (base, markers)));
+        }
+    }
+    let Some((_, (base, markers))) = best else {
+        bail!("no initial guess of the instrument frame");
+    };
+    let framed = with_offsets
+        .with_frames(&base, &markers)
+        .context("attaching the instrument and marker frames")?;
+    let nominal = Col::<f64>::zeros(framed.n_params());
+    let (model, fitted) = fit(
+        Rung::FramesOnly,
+        &robot,
+        &Start {
+            tree: &framed,
+            x: &nominal,
+        },
+        &offsets,
+        tables,
+        weights,
+        &|_, _| true,
+    )?;
+    Ok(FramesOnly {
+        robot,
+        offsets,
+        base,
+        markers,
+        framed,
+        model,
+        fitted,
+    })
+}
+
+/// 3-D position error (m) of every marker sample of `tables` under `model`, file order.
+pub fn position_errors(model: &CalibratedModel, tables: &[MeasurementTable]) -> Vec<f64> {
+    (0..tables.len())
+        .flat_map(|t| errors(model, tables, t, None).position)
+        .collect()
 }
 
 /// `Tx(x)·Ty(y)·Tz(z)·Rx(rx)·Ry(ry)·Rz(rz)` of six deviations (m, rad), as the frames apply
@@ -2004,7 +2072,8 @@ pub fn run_tables(
             name: id.layout.name(i).to_owned(),
             value: id.fit.x[i],
             std,
-            unit: id.layout.spec(i).unit.symbol(),
+            unit: compliance_unit(id.layout.name(i), !robot.masses.is_empty())
+                .unwrap_or_else(|| id.layout.spec(i).unit.symbol()),
         })
         .collect();
     let pruned = crate::calibrate::pruned_report(id)

@@ -11,6 +11,9 @@ fn scaled(value: f64, unit: &str) -> (f64, &'static str) {
     match unit {
         "m" => (value * 1e3, "mm"),
         "rad" => (value * 1e3, "mrad"),
+        // Compliance: a few µrad per N·m (or per m of lumped lever arm) on real robots.
+        "rad/(N·m)" => (value * 1e6, "µrad/(N·m)"),
+        "rad/m" => (value * 1e6, "µrad/m"),
         _ => (value, ""),
     }
 }
