@@ -1370,7 +1370,7 @@ pub fn calibrate_measured(
             .find(|&r| carries(r, robot))
             .unwrap_or(Rung::Geometric)
     });
-    let (fit_tables, downweighted, mut richest_fit) =
+    let (fit_tables, downweighted, mut richest_fit, judge) =
         winsorize(richest, robot, &start, &offsets, train, weights)?;
     let (frames_model, frames_only) = if downweighted.is_empty() {
         (frames_model, frames_only)
@@ -1393,8 +1393,8 @@ pub fn calibrate_measured(
     let (rung, (model, fitted)) = match cfg.rung {
         Some(r) if r == Rung::FramesOnly => (r, (frames_model.clone(), frames_only.clone())),
         Some(r) => match richest_fit.take() {
-            Some(f) => (r, f),
-            None => (r, fit(r, robot, &start, &offsets, train, weights, &all)?),
+            Some((used, f)) if used == r => (r, f),
+            _ => (r, fit(r, robot, &start, &offsets, train, weights, &all)?),
         },
         None => {
             let rungs: Vec<Rung> = (Rung::ALL.into_iter())
@@ -1409,17 +1409,16 @@ pub fn calibrate_measured(
             let mut ranges = range_folds(robot, train, &beyond);
             ranges.retain(|f| f.0.relevant);
             let judged: Vec<usize> = (0..ranges.len()).collect();
-            // Each rung fitted on every training row (the richest one already was, when the
-            // Huber loss bounded nothing), then cross-validated from there; rungs in parallel.
+            // Each rung fitted on every training row (the one the Huber pass fitted already was,
+            // when it bounded nothing), then cross-validated from there; rungs in parallel.
             use rayon::prelude::*;
             let cached = std::sync::Mutex::new(richest_fit.take());
             let fitted: Vec<((CalibratedModel, Fitted), Scores)> = (rungs.par_iter())
                 .map(|&r| {
                     let f = if r == Rung::FramesOnly {
                         (frames_model.clone(), frames_only.clone())
-                    } else if let Some(f) = (r == richest)
-                        .then(|| cached.lock().ok().and_then(|mut c| c.take()))
-                        .flatten()
+                    } else if let Some((_, f)) =
+                        (cached.lock().ok()).and_then(|mut c| c.take_if(|(used, _)| *used == r))
                     {
                         f
                     } else {
@@ -1569,7 +1568,7 @@ pub fn calibrate_measured(
             .unwrap_or_default();
         warnings.push(format!(
             "{} training samples lie beyond {:.2} mm ({HUBER_CORNER} robust standard deviations \
-             per axis) from the {richest} model and were bounded there by the Huber loss (the \
+             per axis) from the {judge} model and were bounded there by the Huber loss (the \
              largest, {:.2} mm, at {worst}); each is listed with its residual",
             downweighted.len(),
             downweighted[0].bound_m * 1e3,
@@ -1635,12 +1634,13 @@ fn outside_warnings(table: &MeasurementTable, robot: &Robot, ranges: &[(f64, f64
     out
 }
 
-/// The training tables as the Huber loss sees them, the samples it bounded, and the fit of
-/// the rung it was evaluated with when it bounded none.
+/// The training tables as the Huber loss sees them, the samples it bounded, the rung it was
+/// evaluated with and its fit when it bounded none, and that rung.
 type Winsorized = (
     Vec<MeasurementTable>,
     Vec<Downweighted>,
-    Option<(CalibratedModel, Fitted)>,
+    Option<(Rung, (CalibratedModel, Fitted))>,
+    Rung,
 );
 
 /// The unit of a compliance parameter (`compliance.*`, `transversal.*`): rad/(N·m) under the
@@ -1655,9 +1655,16 @@ fn compliance_unit(name: &str, masses: bool) -> Option<&'static str> {
 
 /// Corner of the Huber loss, in robust standard deviations per axis of a marker's position:
 /// a sample whose 3-D residual exceeds `HUBER_CORNER·√3·s` pulls on the fit with a bounded
-/// force. `|e|²/s²` of a clean sample is χ² with 3 degrees of freedom, above 27 with
-/// probability 6·10⁻⁶: on Gaussian data the loss is least squares, sample for sample.
-pub const HUBER_CORNER: f64 = 3.0;
+/// force. `|e|²/s²` of a clean Gaussian sample is χ² with 3 degrees of freedom, above 48 with
+/// probability 10⁻⁹: on Gaussian data the loss is least squares, sample for sample. Real
+/// residuals carry model error and have heavier tails: at 3, three samples of the TIAGo
+/// recording (the largest 6.7 mm) were bounded though nothing sets them apart from the rest;
+/// at 4 none is.
+pub const HUBER_CORNER: f64 = 4.0;
+
+/// Residuals per parameter a fit needs before its residuals measure the noise well enough to
+/// call a sample a gross error ([`winsorize`]).
+const MIN_REDUNDANCY: f64 = 4.0;
 
 /// Median of the χ distribution with 3 degrees of freedom: the median 3-D norm of an
 /// isotropic Gaussian error of unit standard deviation per axis.
@@ -1687,8 +1694,10 @@ pub struct Downweighted {
 /// again until the set of bounded samples no longer changes (at most 10 rounds). The least-
 /// squares fit of the winsorized samples is the Huber M-estimate. Tables unchanged and no
 /// sample listed when nothing exceeds the corner, with fewer than 20 samples, or when the
-/// rung cannot be fitted. With nothing bounded, the fit of `rung` on the tables as measured
-/// is returned too.
+/// rung cannot be fitted. A rung with fewer than [`MIN_REDUNDANCY`] residuals per kept
+/// parameter gives way to the geometric rung; the scale is corrected for the parameters
+/// fitted (`√(m/(m − p))`). With nothing bounded, the rung used and its fit on the tables as
+/// measured are returned too.
 fn winsorize(
     rung: Rung,
     robot: &Robot,
@@ -1703,17 +1712,35 @@ fn winsorize(
         .sum();
     let mut tables = train.to_vec();
     if n_samples < 20 {
-        return Ok((tables, Vec::new(), None));
+        return Ok((tables, Vec::new(), None, rung));
     }
     let mut first = None;
     let mut corner = None;
+    let mut redundancy = 1.0;
+    let mut rung = rung;
     let mut bounded: Vec<Downweighted> = Vec::new();
     for _ in 0..10 {
         let Ok((model, fitted)) = fit(rung, robot, start, offsets, &tables, weights, &all) else {
             break;
         };
+        let n_residuals = fitted.identified.fit.residuals.nrows() as f64;
+        let n_kept = fitted.identified.identifiability.kept.len() as f64;
+        if corner.is_none() {
+            // Residuals of a fit with p parameters from m residuals are smaller than the
+            // noise by √((m − p)/m); a rung with fewer than MIN_REDUNDANCY residuals per
+            // parameter fits the noise itself, and a gross error hides in it: the geometric
+            // rung judges instead.
+            if n_residuals < MIN_REDUNDANCY * n_kept && rung > Rung::Geometric {
+                rung = Rung::Geometric;
+                continue;
+            }
+            if n_residuals < MIN_REDUNDANCY * n_kept {
+                break;
+            }
+            redundancy = (n_residuals / (n_residuals - n_kept)).sqrt();
+        }
         if first.is_none() {
-            first = Some((model.clone(), fitted));
+            first = Some((rung, (model.clone(), fitted)));
         }
         let mut residuals = Vec::with_capacity(n_samples);
         for (ti, t) in train.iter().enumerate() {
@@ -1727,7 +1754,7 @@ fn winsorize(
         let c = *corner.get_or_insert_with(|| {
             let mut norms: Vec<f64> = residuals.iter().map(|r| r.3.norm()).collect();
             norms.sort_by(f64::total_cmp);
-            HUBER_CORNER * 3f64.sqrt() * norms[norms.len() / 2] / CHI3_MEDIAN
+            HUBER_CORNER * 3f64.sqrt() * redundancy * norms[norms.len() / 2] / CHI3_MEDIAN
         });
         tables = train.to_vec();
         let mut now = Vec::new();
@@ -1756,9 +1783,9 @@ fn winsorize(
         }
     }
     if bounded.is_empty() {
-        return Ok((train.to_vec(), bounded, first));
+        return Ok((train.to_vec(), bounded, first, rung));
     }
-    Ok((tables, bounded, None))
+    Ok((tables, bounded, None, rung))
 }
 
 /// The frames-only fit of the training tables ([`frames_only`]).

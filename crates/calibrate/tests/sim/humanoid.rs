@@ -269,7 +269,13 @@ pub fn truth(robot: &Robot, seed: u64) -> Truth {
 
 /// `n` rows of the markers in `markers` (0: left hand, 1: right hand) measured in the
 /// tracker frame, with noise [`NOISE_M`].
-pub fn table(robot: &Robot, truth: &Truth, markers: &[usize], n: usize, seed: u64) -> MeasurementTable {
+pub fn table(
+    robot: &Robot,
+    truth: &Truth,
+    markers: &[usize],
+    n: usize,
+    seed: u64,
+) -> MeasurementTable {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let model = truth.problem.model(truth.x.as_ref());
     let noise = Normal::new(0.0, NOISE_M).unwrap();
@@ -308,4 +314,3 @@ pub fn table(robot: &Robot, truth: &Truth, markers: &[usize], n: usize, seed: u6
         warnings: Vec::new(),
     }
 }
-
