@@ -1558,8 +1558,44 @@ pub fn calibrate_measured(
         }
     }
     let ranges = training_ranges(train, robot.joint_names.len());
-    for t in test {
-        warnings.extend(outside_warnings(t, robot, &ranges));
+    // The model's own uncertainty where a test set extrapolates, beside its value on (up to
+    // 100 evenly spaced) training rows.
+    let outside_any = |t: &MeasurementTable| {
+        (t.rows.iter()).any(|r| {
+            (r.q.iter().zip(&ranges)).any(|(q, (lo, hi))| {
+                let slack = OUTSIDE_SHARE * (hi - lo).max(0.0);
+                *q < lo - slack || *q > hi + slack
+            })
+        })
+    };
+    if test.iter().any(outside_any) {
+        let rms = |v: &[f64]| (v.iter().map(|s| s * s).sum::<f64>() / v.len().max(1) as f64).sqrt();
+        let sample: Vec<MeasurementTable> = (train_measured.iter())
+            .map(|t| MeasurementTable {
+                rows: (t.rows.iter())
+                    .step_by((n_rows / 100).max(1))
+                    .cloned()
+                    .collect(),
+                ..t.clone()
+            })
+            .collect();
+        let reference: Vec<f64> =
+            prediction_sigmas(rung, robot, &framed, &fitted, &sample, weights)
+                .into_iter()
+                .flatten()
+                .collect();
+        for t in test.iter().filter(|t| outside_any(t)) {
+            let sigmas = prediction_sigmas(
+                rung,
+                robot,
+                &framed,
+                &fitted,
+                std::slice::from_ref(t),
+                weights,
+            );
+            let sigmas = sigmas.first().map_or(&[][..], Vec::as_slice);
+            warnings.extend(outside_warnings(t, robot, &ranges, sigmas, rms(&reference)));
+        }
     }
     if !downweighted.is_empty() {
         let worst = (downweighted.iter())
@@ -1598,16 +1634,109 @@ pub fn calibrate_measured(
     })
 }
 
+/// Covariance-propagated 3-D position uncertainty of the calibrated model (m) at every marker
+/// sample of `tables`, per table in file order: `√trace(J·C·Jᵀ)` with `J` the position's
+/// Jacobian with respect to the identified parameters at the estimate and `C` their
+/// covariance (docs/engine.md, "Identification"). It is the spread the estimate's own noise
+/// gives a prediction there, not the model's error: where the rows extrapolate, it says how
+/// much less the data pin the model down. Empty for a table whose Jacobian cannot be
+/// evaluated.
+#[allow(clippy::too_many_arguments)]
+fn prediction_sigmas(
+    rung: Rung,
+    robot: &Robot,
+    tree: &Tree,
+    fitted: &Fitted,
+    tables: &[MeasurementTable],
+    weights: Weights,
+) -> Vec<Vec<f64>> {
+    let cov = &fitted.identified.covariance;
+    let columns: Vec<Option<usize>> = (cov.names.iter())
+        .map(|n| fitted.names.iter().position(|m| m == n))
+        .collect();
+    (0..tables.len())
+        .map(|ti| {
+            let mut obs = observations(tables, &|t, _| t == ti);
+            // Positions only: one 3-row block per marker sample, in the rows' order.
+            obs.rows
+                .retain(|r| matches!(r.kind, RowKind::Marker { .. } | RowKind::Pose { .. }));
+            for r in &mut obs.rows {
+                if let RowKind::Pose {
+                    tip, position_m, ..
+                } = r.kind
+                {
+                    r.kind = RowKind::Marker { tip, position_m };
+                }
+            }
+            let n_samples = obs.rows.len();
+            let Ok(problem) =
+                CalibrationProblem::on_tree(tree.clone(), obs, weights, terms(rung, robot))
+            else {
+                return Vec::new();
+            };
+            let mut jac = faer::Mat::<f64>::zeros(problem.n_residuals(), problem.layout().len());
+            if problem.jacobian(fitted.x.as_ref(), jac.as_mut()).is_err() {
+                return Vec::new();
+            }
+            let s = weights.sigma_position_m;
+            (0..n_samples)
+                .map(|i| {
+                    let mut trace = 0.0;
+                    for k in 0..3 {
+                        let row = 3 * i + k;
+                        let g: Vec<f64> = (columns.iter())
+                            .map(|c| c.map_or(0.0, |c| s * jac[(row, c)]))
+                            .collect();
+                        for (a, ga) in g.iter().enumerate() {
+                            if *ga == 0.0 {
+                                continue;
+                            }
+                            for (b, gb) in g.iter().enumerate() {
+                                trace += ga * cov.matrix[(a, b)] * gb;
+                            }
+                        }
+                    }
+                    trace.max(0.0).sqrt()
+                })
+                .collect()
+        })
+        .collect()
+}
+
 /// One warning per joint of `robot` that rows of `table` read outside its training range
 /// `ranges` (by more than [`OUTSIDE_SHARE`] of the range): the calibration extrapolates
 /// there.
-fn outside_warnings(table: &MeasurementTable, robot: &Robot, ranges: &[(f64, f64)]) -> Vec<String> {
+/// `sigmas` are the calibrated model's covariance-propagated position uncertainties at the
+/// table's marker samples ([`prediction_sigmas`]), `train_sigma` their RMS over the training
+/// samples: each warning gives their RMS over the samples of the rows outside.
+fn outside_warnings(
+    table: &MeasurementTable,
+    robot: &Robot,
+    ranges: &[(f64, f64)],
+    sigmas: &[f64],
+    train_sigma: f64,
+) -> Vec<String> {
+    // The first sample of each row among `sigmas`.
+    let first: Vec<usize> = (table.rows.iter())
+        .scan(0, |n, r| {
+            let start = *n;
+            *n += r.markers.len();
+            Some(start)
+        })
+        .collect();
     let mut out = Vec::new();
     for (j, &(lo, hi)) in ranges.iter().enumerate() {
         let slack = OUTSIDE_SHARE * (hi - lo).max(0.0);
-        let outside: Vec<f64> = (table.rows.iter())
-            .map(|r| r.q[j])
-            .filter(|&q| q < lo - slack || q > hi + slack)
+        let outside_rows: Vec<usize> = (0..table.rows.len())
+            .filter(|&r| {
+                let q = table.rows[r].q[j];
+                q < lo - slack || q > hi + slack
+            })
+            .collect();
+        let outside: Vec<f64> = outside_rows.iter().map(|&r| table.rows[r].q[j]).collect();
+        let there: Vec<f64> = (outside_rows.iter())
+            .flat_map(|&r| first[r]..first[r] + table.rows[r].markers.len())
+            .filter_map(|i| sigmas.get(i).copied())
             .collect();
         if outside.is_empty() {
             continue;
@@ -1622,9 +1751,20 @@ fn outside_warnings(table: &MeasurementTable, robot: &Robot, ranges: &[(f64, f64
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &q| {
                 (a.min(q), b.max(q))
             });
+        let uncertainty = if there.is_empty() {
+            String::new()
+        } else {
+            let rms = (there.iter().map(|s| s * s).sum::<f64>() / there.len() as f64).sqrt();
+            format!(
+                " (the model's own position uncertainty there {:.3} mm RMS, {:.3} mm on the \
+                 training rows)",
+                rms * 1e3,
+                train_sigma * 1e3
+            )
+        };
         out.push(format!(
             "test set {}: {} of {} rows read {} outside its training range {lo:.3}..{hi:.3} {unit} \
-             ({min:.3}..{max:.3} {unit}): the calibration extrapolates there",
+             ({min:.3}..{max:.3} {unit}): the calibration extrapolates there{uncertainty}",
             table.name,
             outside.len(),
             table.rows.len(),

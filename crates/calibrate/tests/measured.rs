@@ -266,7 +266,9 @@ fn test_rows_beyond_the_training_range_are_named_and_judged_there() {
         out.range_folds
     );
     assert!(
-        (out.warnings.iter()).any(|w| w.contains("joint_a1") && w.contains("training range")),
+        (out.warnings.iter()).any(|w| w.contains("joint_a1")
+            && w.contains("training range")
+            && w.contains("position uncertainty there")),
         "{:?}",
         out.warnings
     );
