@@ -432,6 +432,19 @@ pub struct CalibrationReport {
     pub placements: Vec<SetReport>,
     /// Wall time from reading the files to the finished report, s.
     pub elapsed_s: f64,
+    /// Measurement files: the training samples the Huber loss bounded, each with its file,
+    /// line and residual (empty otherwise).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub downweighted: Vec<crate::measured::Downweighted>,
+    /// Measurement files: the joint-range folds the ladder judged extrapolation by (empty
+    /// when no test row lies beyond a joint's training range).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub range_folds: Vec<crate::measured::RangeFold>,
+    /// Compliance models on measurement files: how far one more fixed-point step of the
+    /// torque equilibrium would move the tips, at most over the training rows, m
+    /// (`CalibratedModel::equilibrium_step_m`); small against σ, no iteration is needed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub equilibrium_step_m: Option<f64>,
 }
 
 /// Output of a calibration: the report plus what is needed to write the calibrated files.
@@ -1070,6 +1083,9 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         rounds: identified.rounds,
         placements,
         elapsed_s: start.elapsed().as_secs_f64(),
+        downweighted: Vec::new(),
+        range_folds: Vec::new(),
+        equilibrium_step_m: None,
     };
     Ok(Outcome {
         report,

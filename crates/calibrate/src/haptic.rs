@@ -741,6 +741,9 @@ pub fn calibrate_logs(
         rounds: kin.rounds,
         placements,
         elapsed_s: start.elapsed().as_secs_f64(),
+        downweighted: Vec::new(),
+        range_folds: Vec::new(),
+        equilibrium_step_m: None,
     };
     let kin_model = hapcal_problems::CalibratedModel {
         x_kin: x_kin.clone(),

@@ -236,6 +236,10 @@ pub struct MeasuredOutcome {
     pub training_ranges: Vec<(f64, f64)>,
     /// Training samples the Huber loss bounded, file order.
     pub downweighted: Vec<Downweighted>,
+    /// With compliance: how far one more fixed-point step of the torque equilibrium would
+    /// move the tips, at most over the training rows, m
+    /// ([`CalibratedModel::equilibrium_step_m`]).
+    pub equilibrium_step_m: Option<f64>,
     /// Plain-language warnings.
     pub warnings: Vec<String>,
 }
@@ -1615,6 +1619,24 @@ pub fn calibrate_measured(
                 * 1e3,
         ));
     }
+    let equilibrium_step_m = model.compliance.is_some().then(|| {
+        (train_measured.iter().flat_map(|t| &t.rows))
+            .map(|r| model.equilibrium_step_m(&r.q))
+            .fold(0.0, f64::max)
+    });
+    let noise = weights.sigma_position_m * fitted.identified.sigma;
+    if let Some(step) = equilibrium_step_m
+        && step > EQUILIBRIUM_SHARE * noise
+    {
+        warnings.push(format!(
+            "the deflection changes the gravity loads: one more fixed-point step of the torque \
+             equilibrium moves the tips by up to {:.3} mm, more than {EQUILIBRIUM_SHARE} of the \
+             noise ({:.3} mm per axis), and the model evaluates the loads of the undeflected \
+             robot",
+            step * 1e3,
+            noise * 1e3
+        ));
+    }
     let frames = frame_reports(&base, &markers, &fitted.x, robot.tree.n_params());
     Ok(MeasuredOutcome {
         rung,
@@ -1630,9 +1652,15 @@ pub fn calibrate_measured(
         range_folds: range_folds_used,
         training_ranges: ranges,
         downweighted,
+        equilibrium_step_m,
         warnings,
     })
 }
+
+/// Share of the position noise σ below which the gravity loads of the undeflected robot are
+/// close enough to the equilibrium's: one more fixed-point step moves the tips by less than
+/// this, and the model's single step is reported as enough.
+pub const EQUILIBRIUM_SHARE: f64 = 0.3;
 
 /// Covariance-propagated 3-D position uncertainty of the calibrated model (m) at every marker
 /// sample of `tables`, per table in file order: `√trace(J·C·Jᵀ)` with `J` the position's
@@ -2296,6 +2324,9 @@ pub fn run_tables(
         rounds: id.rounds,
         placements,
         elapsed_s: start.elapsed().as_secs_f64(),
+        downweighted: out.downweighted.clone(),
+        range_folds: out.range_folds.clone(),
+        equilibrium_step_m: out.equilibrium_step_m,
     };
     Ok(crate::calibrate::Outcome {
         report,

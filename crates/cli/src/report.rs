@@ -144,6 +144,36 @@ pub fn render(r: &CalibrationReport) -> String {
             o.n_params, o.n_poses, o.o1, o.o2, o.condition_number, o.o3, o.o4, o.o5
         );
     }
+    if !r.downweighted.is_empty() {
+        let _ = writeln!(
+            s,
+            "\nbounded by the Huber loss (residual as measured → what the fit saw, mm):"
+        );
+        for d in &r.downweighted {
+            let _ = writeln!(
+                s,
+                "  {}:{} marker {}  {:.3} → {:.3}",
+                d.file,
+                d.line,
+                d.marker,
+                d.residual_m * 1e3,
+                d.bound_m * 1e3
+            );
+        }
+    }
+    if let Some(step) = r.equilibrium_step_m {
+        let _ = writeln!(
+            s,
+            "\ntorque equilibrium: one more fixed-point step would move the tips by at most \
+             {:.4} mm{}",
+            step * 1e3,
+            if step > hapcal_calibrate::measured::EQUILIBRIUM_SHARE * r.sigma_m {
+                " (see the warnings)"
+            } else {
+                " (the loads of the undeflected robot suffice)"
+            }
+        );
+    }
     if !r.warnings.is_empty() {
         let _ = writeln!(s, "\nwarnings:");
         for w in &r.warnings {

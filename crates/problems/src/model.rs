@@ -104,6 +104,58 @@ impl CalibratedModel {
         std::borrow::Cow::Owned(x)
     }
 
+    /// How far one more fixed-point step of the torque equilibrium would move the tips, m:
+    /// the model deflects the joints under the gravity loads of the *undeflected* robot
+    /// (`q + k∘τ(q)`); the loads of the deflected robot, `τ(q + k∘τ(q))`, give the next
+    /// iterate of `θ = q + k∘τ(θ)`. The largest tip displacement between the two (every tip,
+    /// axial and transversal compliance), 0 without compliance. Small against the noise, the
+    /// equilibrium needs no iteration.
+    ///
+    /// # Panics
+    /// If `q.len()` differs from the chain's joint count.
+    #[track_caller]
+    pub fn equilibrium_step_m(&self, q: &[f64]) -> f64 {
+        let Some((model, k)) = &self.compliance else {
+            return 0.0;
+        };
+        let harmonic = |angles: &mut Vec<f64>| {
+            if let Some((h, coef)) = &self.harmonics {
+                for (o, c) in angles.iter_mut().zip(h.corrections(q, coef)) {
+                    *o += c;
+                }
+            }
+        };
+        let step = |loads: &[crate::JointLoad]| {
+            let mut angles: Vec<f64> = (q.iter().zip(k).zip(loads))
+                .map(|((q, k), l)| q + k * l.torque)
+                .collect();
+            harmonic(&mut angles);
+            let mut x = self.x_kin.clone();
+            for t in &self.transversal {
+                let v = loads[t.joint].transversal;
+                for (&i, v) in t.rotation_params.iter().zip(v.iter()) {
+                    x[i] += t.compliance * v;
+                }
+            }
+            (x, angles)
+        };
+        let first = model.joint_loads(self.torque_tips(), q);
+        let deflected: Vec<f64> = (q.iter().zip(k).zip(&first))
+            .map(|((q, k), l)| q + k * l.torque)
+            .collect();
+        let second = model.joint_loads(self.torque_tips(), &deflected);
+        let (x1, q1) = step(&first);
+        let (x2, q2) = step(&second);
+        let tips: Vec<&Chain> = if self.tips.is_empty() {
+            vec![&self.chain]
+        } else {
+            self.tips.iter().collect()
+        };
+        (tips.iter())
+            .map(|c| (c.end_point(&x1, &q1) - c.end_point(&x2, &q2)).norm())
+            .fold(0.0, f64::max)
+    }
+
     /// End point (m, base frame) for joint readings `q` (rad).
     ///
     /// # Panics
