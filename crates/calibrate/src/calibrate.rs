@@ -445,6 +445,9 @@ pub struct CalibrationReport {
     /// (`CalibratedModel::equilibrium_step_m`); small against σ, no iteration is needed.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub equilibrium_step_m: Option<f64>,
+    /// Compliance models on measurement files: refits with the gravity loads at the torque
+    /// equilibrium of the estimate (0: the loads of the undeflected robot were close enough).
+    pub equilibrium_refits: usize,
 }
 
 /// Output of a calibration: the report plus what is needed to write the calibrated files.
@@ -1086,6 +1089,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         downweighted: Vec::new(),
         range_folds: Vec::new(),
         equilibrium_step_m: None,
+        equilibrium_refits: 0,
     };
     Ok(Outcome {
         report,

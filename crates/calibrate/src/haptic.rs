@@ -744,6 +744,7 @@ pub fn calibrate_logs(
         downweighted: Vec::new(),
         range_folds: Vec::new(),
         equilibrium_step_m: None,
+        equilibrium_refits: 0,
     };
     let kin_model = hapcal_problems::CalibratedModel {
         x_kin: x_kin.clone(),

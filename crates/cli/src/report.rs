@@ -162,13 +162,23 @@ pub fn render(r: &CalibrationReport) -> String {
         }
     }
     if let Some(step) = r.equilibrium_step_m {
+        let solved = if r.equilibrium_refits > 0 {
+            format!(
+                "solved by fixed-point iteration (loads of the deflected robot, {} refits); ",
+                r.equilibrium_refits
+            )
+        } else {
+            String::new()
+        };
         let _ = writeln!(
             s,
-            "\ntorque equilibrium: one more fixed-point step would move the tips by at most \
-             {:.4} mm{}",
+            "\ntorque equilibrium: {solved}one more fixed-point step would move the tips by at \
+             most {:.4} mm{}",
             step * 1e3,
             if step > hapcal_calibrate::measured::EQUILIBRIUM_SHARE * r.sigma_m {
                 " (see the warnings)"
+            } else if r.equilibrium_refits > 0 {
+                ""
             } else {
                 " (the loads of the undeflected robot suffice)"
             }

@@ -56,7 +56,7 @@ pub use compliance::{GravityCompliance, JointLoad, LinkMass};
 pub use fleet::{FleetDevice, FleetProblem, cable_angle, fleet_initial_guess};
 pub use harmonics::JointHarmonics;
 pub use joint::{JointData, JointProblem, JointTransmissions};
-pub use model::CalibratedModel;
+pub use model::{CalibratedModel, EQUILIBRIUM_ITERATIONS};
 pub use problem::{
     CalibrationProblem, ModelTerms, Observations, PointDistance, Row, RowKind, TransversalTerm,
     Weights,

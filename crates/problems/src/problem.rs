@@ -80,6 +80,11 @@ pub struct ModelTerms {
     /// robot without the instrument frame, every tip of its tree,
     /// [`GravityCompliance::joint_loads`]); `None` = the problem's own tips.
     pub torque_tips: Option<Vec<Chain>>,
+    /// Per observation row, the joint angles at which the gravity loads are evaluated (the
+    /// torque equilibrium of a previous estimate, [`CalibratedModel::load_angles`]); `None`:
+    /// at the readings. With them, the model the problem describes solves the equilibrium
+    /// ([`CalibratedModel::equilibrium`]).
+    pub load_angles: Option<Vec<Vec<f64>>>,
 }
 
 /// One joint's transversal compliance (Tenhumberg & Bäuml 2021, "Calibration of an elastic
@@ -177,6 +182,8 @@ pub struct CalibrationProblem {
     harmonics: Option<JointHarmonics>,
     /// Transversal compliance terms (parameters after the harmonics); empty without.
     transversal: Vec<TransversalTerm>,
+    /// Whether the loads were evaluated at given angles (a torque equilibrium).
+    equilibrium: bool,
     /// Per joint, the kinematic parameter added to its screw's value (a joint offset,
     /// `dtheta`), whose Jacobian column is the joint angle's; `None` for a joint whose screw
     /// has none. With one for every joint of an angle term, the angle terms' columns come
@@ -262,6 +269,7 @@ impl CalibrationProblem {
                 transversal: false,
                 harmonics,
                 torque_tips: None,
+                load_angles: None,
             },
         )
     }
@@ -310,7 +318,17 @@ impl CalibrationProblem {
             transversal,
             harmonics,
             torque_tips,
+            load_angles,
         } = terms;
+        if let Some(a) = &load_angles
+            && (a.len() != obs.rows.len() || a.iter().any(|q| q.len() != tips[0].n_joints()))
+        {
+            return Err(Error::JointCount {
+                row: a.len(),
+                expected: obs.rows.len(),
+                found: a.len(),
+            });
+        }
         let Some(chain) = tips.first().cloned() else {
             return Err(Error::NoSuchParam {
                 index: 0,
@@ -449,9 +467,11 @@ impl CalibrationProblem {
                         role: Role::Model,
                     }
                 }));
-                obs.rows
-                    .iter()
-                    .map(|row| model.joint_loads(&torque_tips, &row.q))
+                (obs.rows.iter().enumerate())
+                    .map(|(r, row)| {
+                        let at = load_angles.as_ref().map_or(&row.q, |a| &a[r]);
+                        model.joint_loads(&torque_tips, at)
+                    })
                     .collect()
             }
             None => Vec::new(),
@@ -628,6 +648,7 @@ impl CalibrationProblem {
             compliance,
             harmonics,
             transversal: transversal_terms,
+            equilibrium: load_angles.is_some(),
             joint_param,
             tilt_basis,
             angle_terms,
@@ -659,6 +680,7 @@ impl CalibrationProblem {
                 transversal: !self.transversal.is_empty(),
                 harmonics: self.harmonics.clone(),
                 torque_tips: Some(self.torque_tips.clone()),
+                load_angles: None,
             },
         )?;
         if problem.layout.len() == self.layout.len() {
@@ -786,6 +808,7 @@ impl CalibrationProblem {
             compliance,
             harmonics,
             transversal,
+            equilibrium: self.equilibrium,
         }
     }
 

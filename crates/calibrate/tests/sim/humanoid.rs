@@ -246,6 +246,7 @@ pub fn truth(robot: &Robot, seed: u64) -> Truth {
             transversal: true,
             harmonics: None,
             torque_tips: Some(robot.tree.tips().to_vec()),
+            load_angles: None,
         },
     )
     .unwrap();
@@ -277,7 +278,12 @@ pub fn table(
     seed: u64,
 ) -> MeasurementTable {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let model = truth.problem.model(truth.x.as_ref());
+    // The robot deflects until the gravity loads of its deflected links balance: the torque
+    // equilibrium, not one step from the undeflected robot.
+    let model = hapcal_problems::CalibratedModel {
+        equilibrium: true,
+        ..truth.problem.model(truth.x.as_ref())
+    };
     let noise = Normal::new(0.0, NOISE_M).unwrap();
     let rows = (0..n)
         .map(|i| {

@@ -191,6 +191,7 @@ fn transversal_compliance_jacobian_matches_central_differences() {
             transversal: true,
             harmonics: None,
             torque_tips: Some(robot.tips().to_vec()),
+            load_angles: None,
         },
     )
     .expect("valid problem");
@@ -267,4 +268,40 @@ fn transversal_compliance_needs_the_compliance_model() {
     )
     .expect_err("no compliance model");
     assert!(err.to_string().contains("gravity compliance"), "{err}");
+}
+
+#[test]
+fn the_torque_equilibrium_is_a_fixed_point() {
+    let tree = torso_tree();
+    let n = tree.n_joints();
+    let compliance = GravityCompliance::from_link_masses(masses(n), -Vector3::z());
+    // An elastic robot: 2 mrad per N·m turns the torso by tens of mrad under its arms.
+    let k = vec![2e-3; n];
+    let model = hapcal_problems::CalibratedModel {
+        tips: tree.tips().to_vec(),
+        torque_tips: tree.tips().to_vec(),
+        compliance: Some((compliance.clone(), k.clone())),
+        equilibrium: true,
+        ..hapcal_problems::CalibratedModel::nominal(tree.tips()[0].clone())
+    };
+    let q = [0.3, -0.7, 0.4, 1.1, -0.2];
+    let (theta, iterations) = model.load_angles(&q);
+    assert!(iterations > 1 && iterations < hapcal_problems::EQUILIBRIUM_ITERATIONS);
+    let loads = compliance.joint_loads(tree.tips(), &theta);
+    for j in 0..n {
+        let gap = (theta[j] - (q[j] + k[j] * loads[j].torque)).abs();
+        assert!(gap < 1e-11, "joint {j}: {gap:e} after {iterations} iterations");
+    }
+    // The deflection with the equilibrium's loads is the equilibrium itself.
+    let angles = model.effective_angles(&q);
+    for j in 0..n {
+        assert!((angles[j] - theta[j]).abs() < 1e-11);
+    }
+    // At the fixed point one more step moves nothing; from the undeflected loads it does.
+    assert!(model.equilibrium_step_m(&q) < 1e-9);
+    let one_step = hapcal_problems::CalibratedModel {
+        equilibrium: false,
+        ..model
+    };
+    assert!(one_step.equilibrium_step_m(&q) > 1e-5);
 }

@@ -122,6 +122,7 @@ fn pose_rows_jacobian_matches_central_differences() {
             transversal: false,
             harmonics: None,
             torque_tips: Some(torque),
+            load_angles: None,
         },
     )
     .expect("valid problem");
