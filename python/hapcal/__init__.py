@@ -635,27 +635,33 @@ class Diagnosis:
 
     def __repr__(self) -> str:
         r = self._report
-        return (
-            f"Diagnosis(verdict={r['verdict']!r}, heldout_rms_m={r['heldout_rms_m']:.3g}, "
-            f"floor_rms_m={r['floor_rms_m']:.3g})"
-        )
+        return f"Diagnosis(verdict={r.get('verdict')!r})"
 
 
 def diagnose(
     device: Device,
-    data: Union[Measurements, PathLike],
+    data: MeasurementsLike,
     baseline: str = "full",
     folds: int = 5,
+    *,
+    test: Optional[MeasurementsLike] = None,
+    sigma_m: Optional[float] = None,
+    test_last: Optional[float] = None,
 ) -> Diagnosis:
-    """Diagnoses the sim-to-real gap of a haptic device's log, as ``hapcal diagnose`` does
-    (``hapcal_diagnose::diagnose``).
+    """Diagnoses the sim-to-real gap, as ``hapcal diagnose`` does.
 
-    - ``device``: the device, :meth:`Device.from_toml`.
-    - ``data``: the measurement log (CSV, ``q1..qn, distance_m, ext1..ext4, t_s``): a path,
-      or :meth:`Measurements.from_csv` of one (m and rad).
-    - ``baseline``: ``"full"`` (transmissions + kinematics) or ``"kinematics"`` (the
-      transmission models then join the candidates).
+    - ``device``: a haptic device with transmissions (:meth:`Device.from_toml`): its own
+      log is diagnosed (``hapcal_diagnose::diagnose``); any other robot
+      (:meth:`Device.from_urdf`, a D-H device file): everything :func:`calibrate` reads —
+      sockets, distances, markers, poses — on its geometric calibration
+      (``hapcal_diagnose::arm``).
+    - ``data``: :class:`Measurements`, a list of them, or paths (a haptic device: one log,
+      ``q1..qn, distance_m, ext1..ext4, t_s``, in m and rad).
+    - ``baseline``: haptic device: ``"full"`` (transmissions + kinematics) or
+      ``"kinematics"`` (the transmission models then join the candidates); a robot: ``"full"``.
     - ``folds``: cross-validation folds (time-contiguous blocks, ≥ 2).
+    - ``test``, ``sigma_m``, ``test_last``: a robot only: held-out sets, the instrument's σ
+      (m, the noise floor), the share of each training set's last rows held out.
 
     The residual-map SVG of the command line is not written. The GIL is released while
     diagnosing. Raises :class:`HapcalError` on any error (unreadable files with
@@ -663,18 +669,28 @@ def diagnose(
     """
     if not isinstance(device, Device):
         raise TypeError(f"device: expected hapcal.Device, found {type(device).__name__}")
-    if isinstance(data, Measurements):
-        if data.path is None:
-            raise HapcalError(
-                f"{data.name}: diagnose reads a log file; give its path or "
-                "Measurements.from_csv(path)"
-            )
-        if not data._inner.si_units:
-            raise HapcalError(
-                f"{data.path}: a log is in m and rad; read it with Measurements.from_csv(path)"
-            )
-        data = data.path
     if isinstance(folds, bool) or not isinstance(folds, (int, np.integer)):
         raise HapcalError(f"folds: expected a whole number ≥ 2, found {folds!r}")
-    text, warnings = _hapcal._diagnose(device, os.fspath(data), str(baseline), max(int(folds), 0))
+    # Paths are read by the diagnosis itself, which names a missing file in its own words.
+    def items(what: str, value: Any) -> List[Any]:
+        if isinstance(value, (str, os.PathLike)):
+            return [_hapcal._Measurements.from_path_unchecked(os.fspath(value))]
+        if isinstance(value, (list, tuple)):
+            return [
+                _hapcal._Measurements.from_path_unchecked(os.fspath(v))
+                if isinstance(v, (str, os.PathLike))
+                else _as_list(what, v)[0]
+                for v in value
+            ]
+        return _as_list(what, value)
+
+    text, warnings = _hapcal._diagnose(
+        device,
+        items("data", data),
+        items("test", test) if test is not None else [],
+        str(baseline),
+        max(int(folds), 0),
+        None if sigma_m is None else float(sigma_m),
+        None if test_last is None else float(test_last),
+    )
     return Diagnosis(text, warnings)

@@ -212,6 +212,18 @@ impl PyMeasurements {
         })
     }
 
+    /// A path in m and rad, not checked here: the workflow that reads it reports a missing
+    /// file in its own words (`hapcal diagnose`'s "reading log …").
+    #[staticmethod]
+    fn from_path_unchecked(path: PathBuf) -> Self {
+        Self {
+            source: Source::Path {
+                path,
+                units: Units::default(),
+            },
+        }
+    }
+
     /// Flat row-major arrays (shapes checked by the Python wrapper, again here).
     #[staticmethod]
     #[allow(clippy::too_many_arguments)]
@@ -878,35 +890,153 @@ fn _plan_poses(
     .map_err(py_err)
 }
 
-/// Diagnoses the sim-to-real gap of a log, as `hapcal diagnose` does
-/// (`hapcal_diagnose::diagnose`). Returns the report as `hapcal diagnose --json` prints it
-/// (without the final newline) and the log's warnings. See `hapcal.diagnose`.
+/// Diagnoses the sim-to-real gap, as `hapcal diagnose` does: a haptic device with
+/// transmissions from its own log (`hapcal_diagnose::diagnose`), any other robot from what
+/// `hapcal calibrate` reads (sockets, distances, markers, poses; `hapcal_diagnose::arm`).
+/// Returns the report as `hapcal diagnose --json` prints it (without the final newline) and
+/// the data's warnings. See `hapcal.diagnose`.
 #[pyfunction]
-#[pyo3(signature = (device, data, baseline, folds))]
+#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (device, data, test, baseline, folds, sigma_m, test_last))]
 fn _diagnose(
     py: Python<'_>,
     device: &PyDevice,
-    data: PathBuf,
+    data: Vec<PyRef<'_, PyMeasurements>>,
+    test: Vec<PyRef<'_, PyMeasurements>>,
     baseline: &str,
     folds: usize,
+    sigma_m: Option<f64>,
+    test_last: Option<f64>,
 ) -> PyResult<(String, Vec<String>)> {
     let hapcal_device = &device.device;
-    py.detach(move || -> Result<(String, Vec<String>)> {
-        let baseline: hapcal_diagnose::Baseline = baseline.parse()?;
-        if folds < 2 {
-            bail!("folds must be at least 2, got {folds}");
-        }
-        let config = hapcal_diagnose::DiagnoseConfig {
-            baseline,
-            folds,
-            ..hapcal_diagnose::DiagnoseConfig::default()
+    let train: Vec<Source> = data.iter().map(|m| m.source.clone()).collect();
+    let test: Vec<Source> = test.iter().map(|m| m.source.clone()).collect();
+    if folds < 2 {
+        return Err(py_err(anyhow!("folds must be at least 2, got {folds}")));
+    }
+    if !hapcal_device.capstans.is_empty() || hapcal_device.parallelogram.is_some() {
+        // The reference device's diagnosis: one log, its own held-out folds.
+        let path = match train.as_slice() {
+            [Source::Path { path, units }] if *units == Units::default() => path,
+            [Source::Path { path, .. }] => {
+                return Err(py_err(anyhow!(
+                    "{}: a log is in m and rad; read it with Measurements.from_csv(path)",
+                    path.display()
+                )));
+            }
+            [Source::Arrays(a)] => {
+                return Err(py_err(anyhow!(
+                    "{}: diagnose reads a log file; give its path or \
+                     Measurements.from_csv(path)",
+                    a.name
+                )));
+            }
+            _ => {
+                return Err(py_err(anyhow!(
+                    "{}: a haptic device is diagnosed from one log file, found {}",
+                    device.path.display(),
+                    train.len()
+                )));
+            }
         };
-        let log = hapcal_io::read_log(&data, hapcal_device)
-            .with_context(|| format!("reading log {}", data.display()))?;
-        let d = hapcal_diagnose::diagnose(hapcal_device, &log.rows, &config)
-            .with_context(|| format!("diagnosing {}", data.display()))?;
+        if !test.is_empty() || sigma_m.is_some() || test_last.is_some() {
+            return Err(py_err(anyhow!(
+                "test, sigma_m and test_last apply to robots measured by an instrument, not to \
+                 a haptic device's log"
+            )));
+        }
+        let data = path.clone();
+        return py
+            .detach(move || -> Result<(String, Vec<String>)> {
+                let baseline: hapcal_diagnose::Baseline = baseline.parse()?;
+                let config = hapcal_diagnose::DiagnoseConfig {
+                    baseline,
+                    folds,
+                    ..hapcal_diagnose::DiagnoseConfig::default()
+                };
+                let log = hapcal_io::read_log(&data, hapcal_device)
+                    .with_context(|| format!("reading log {}", data.display()))?;
+                let d = hapcal_diagnose::diagnose(hapcal_device, &log.rows, &config)
+                    .with_context(|| format!("diagnosing {}", data.display()))?;
+                let json = serde_json::to_string_pretty(&d).context("serialising the diagnosis")?;
+                Ok((json, log.warnings))
+            })
+            .map_err(py_err);
+    }
+    if baseline != "full" {
+        return Err(py_err(anyhow!(
+            "baseline {baseline:?}: a robot measured by an instrument is diagnosed on its \
+             geometric calibration; baseline applies to a haptic device's log"
+        )));
+    }
+    let mut plan = Plan {
+        device: device.path.clone(),
+        tip: device.tip.clone(),
+        tips: device.tips.clone(),
+        units: Units::default(),
+        sigma_rad: None,
+        test_last,
+        data: Vec::new(),
+        test: Vec::new(),
+        socket_distance_m: 0.05,
+        model: ModelChoice::Auto,
+        folds,
+        sigma_m,
+        joint: false,
+    };
+    let paths = |sources: &[Source]| -> Option<Vec<(PathBuf, Units)>> {
+        sources
+            .iter()
+            .map(|s| match s {
+                Source::Path { path, units } => Some((path.clone(), *units)),
+                Source::Arrays(_) => None,
+            })
+            .collect()
+    };
+    let files = paths(&train).zip(paths(&test));
+    let robot = device.robot.as_ref();
+    py.detach(move || -> Result<(String, Vec<String>)> {
+        // Files that share their units go through the command line's loaders.
+        let baseline = match files {
+            Some((tr, te)) if tr.iter().chain(&te).all(|(_, u)| *u == tr[0].1) => {
+                plan.units = tr[0].1;
+                plan.data = tr.into_iter().map(|(p, _)| p).collect();
+                plan.test = te.into_iter().map(|(p, _)| p).collect();
+                hapcal_calibrate::baseline::geometric_baseline(&plan, true)?
+            }
+            _ => {
+                let robot = robot.map_err(|e| anyhow!("{e}"))?;
+                let tables = |sources: &[Source]| -> Result<Vec<MeasurementTable>> {
+                    let mut out = Vec::new();
+                    for s in sources {
+                        match s {
+                            Source::Path { path, units } => out.extend(measured::load_tables(
+                                std::slice::from_ref(path),
+                                robot,
+                                units,
+                            )?),
+                            Source::Arrays(a) => out.push(table(a, robot)?),
+                        }
+                    }
+                    Ok(out)
+                };
+                hapcal_calibrate::baseline::baseline_from_tables(
+                    robot,
+                    tables(&train)?,
+                    tables(&test)?,
+                    &plan,
+                    true,
+                )?
+            }
+        };
+        let cfg = hapcal_diagnose::arm::ArmConfig {
+            folds,
+            ..Default::default()
+        };
+        let d = hapcal_diagnose::arm::diagnose_arm(&baseline, &cfg)
+            .context("diagnosing the geometric baseline")?;
         let json = serde_json::to_string_pretty(&d).context("serialising the diagnosis")?;
-        Ok((json, log.warnings))
+        Ok((json, baseline.warnings))
     })
     .map_err(py_err)
 }

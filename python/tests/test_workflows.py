@@ -204,3 +204,37 @@ def test_diagnose_errors(tmp_path: Path, effect_log: Path) -> None:
                                                              distances=np.ones(3)))
     with pytest.raises(hapcal.HapcalError, match="m and rad"):
         hapcal.diagnose(dev, hapcal.Measurements.from_csv(effect_log, length_unit="mm"))
+
+
+# --- diagnose, serial arms --------------------------------------------------------------------
+
+
+def test_diagnose_arm_poses_equal_cli(tmp_path: Path) -> None:
+    text = cli("diagnose", "--device", UR10_URDF, "--tip", UR10_TIP, "--data",
+               "fixtures/figaroh/ur10/calibration.csv", "--test-last", "0.3", "--json", "--svg",
+               str(tmp_path / "m.svg"))
+    d = hapcal.diagnose(hapcal.Device.from_urdf(UR10_URDF, tip=UR10_TIP),
+                        "fixtures/figaroh/ur10/calibration.csv", test_last=0.3)
+    assert_close(d.report, json.loads(text))
+    assert d.to_json() + "\n" == text
+
+
+def test_diagnose_arm_sockets_equal_cli(tmp_path: Path) -> None:
+    urdf = "fixtures/mukca/urdf/iiwa14.urdf"
+    front = "fixtures/mukca/data/kuka_14/front"
+    back = "fixtures/mukca/data/kuka_14/left_back"
+    text = cli("diagnose", "--device", urdf, "--data", front, "--test", back, "--json", "--svg",
+               str(tmp_path / "m.svg"))
+    d = hapcal.diagnose(hapcal.Device.from_urdf(urdf, tip="ball_link"),
+                        hapcal.Measurements.from_csv(front), test=back)
+    assert_close(d.report, json.loads(text))
+    assert d.verdict == json.loads(text)["verdict"]
+
+
+def test_diagnose_arm_options(tmp_path: Path) -> None:
+    dev = hapcal.Device.from_urdf(UR10_URDF, tip=UR10_TIP)
+    with pytest.raises(hapcal.HapcalError, match="baseline applies to a haptic device"):
+        hapcal.diagnose(dev, "fixtures/figaroh/ur10/calibration.csv", baseline="kinematics")
+    with pytest.raises(hapcal.HapcalError, match="test, sigma_m and test_last"):
+        hapcal.diagnose(hapcal.Device.from_toml(DEVICE), "fixtures/reference-device/log.csv",
+                        test_last=0.3)
