@@ -1188,13 +1188,16 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
         }
         let p_cv: Vec<f64> = tested.iter().map(|t| t.p_cv).collect();
         let adj_f = holm(&tested.iter().map(|t| t.p_f).collect::<Vec<_>>());
-        // The gap of this round: above the floor, or (no floor) above the best candidate.
+        // The gap of this round, what the effects named so far left: above the floor, or
+        // (no floor) above the best candidate. A second effect is judged by the share of that
+        // gap it closes, not of the gap before the first effect (which the first one may have
+        // mostly closed: drift then a gear ratio, 85 % then all of what was left).
         let best_mse = (tested.iter())
             .filter_map(|t| t.held.as_ref().map(HeldOut::mse))
             .fold(base.mse(), f64::min);
         let gap2 = match floor0 {
-            Some(f) => mse0 - f,
-            None => mse0 - best_mse,
+            Some(f) => base.mse() - f,
+            None => base.mse() - best_mse,
         };
         for (t, (pc, pf)) in tested.iter_mut().zip(p_cv.iter().zip(&adj_f)) {
             t.cand.heldout_p_value = *pc;
@@ -1216,7 +1219,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                 )
             } else if floor0.is_some() && share < cfg.min_gap_share {
                 format!(
-                    "closes only {:.0} % of the gap above the floor",
+                    "closes only {:.0} % of the gap left above the floor",
                     100.0 * share
                 )
             } else {
@@ -1357,6 +1360,19 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             100.0 * closed
         ));
         verdict = "none".to_owned();
+    }
+    if verdict != "none"
+        && let Some(f) = floor0
+        && gap_p_value(&rows, &base) < cfg.alpha
+    {
+        notes.push(format!(
+            "after {verdict} the held-out RMS is {:.3} mm, {:.1}× the floor's {:.3} mm, a \
+             significant residual: another effect may be at work that no further candidate \
+             of the library explains",
+            final_mse.sqrt() * 1e3,
+            (final_mse / f).sqrt(),
+            f.sqrt() * 1e3
+        ));
     }
     if let Some(step) = steps.first()
         && step.heldout_rms_after_m > 0.95 * step.heldout_rms_before_m
