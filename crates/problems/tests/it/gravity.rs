@@ -290,7 +290,10 @@ fn the_torque_equilibrium_is_a_fixed_point() {
     let loads = compliance.joint_loads(tree.tips(), &theta);
     for j in 0..n {
         let gap = (theta[j] - (q[j] + k[j] * loads[j].torque)).abs();
-        assert!(gap < 1e-11, "joint {j}: {gap:e} after {iterations} iterations");
+        assert!(
+            gap < 1e-11,
+            "joint {j}: {gap:e} after {iterations} iterations"
+        );
     }
     // The deflection with the equilibrium's loads is the equilibrium itself.
     let angles = model.effective_angles(&q);
