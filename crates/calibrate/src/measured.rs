@@ -1313,6 +1313,7 @@ pub fn calibrate_measured(
         sigma_orientation_rad: cfg.sigma_rad.unwrap_or(1e-2),
         ..Weights::default()
     };
+    let initial_weights = weights;
     let all = |_: usize, _: usize| true;
     let FramesOnly {
         robot,
@@ -1371,7 +1372,11 @@ pub fn calibrate_measured(
             [&pos, &dist].iter().filter(|v| !v.is_empty()).count() + usize::from(!rot.is_empty());
         reweighted = kinds > 1;
     }
-    let (frames_model, frames_only) = if reweighted {
+    // Weights move a frames-only estimate only when they balance residuals of two kinds, but
+    // they always scale its σ and covariance: the fit at the unit weights is redone at the
+    // estimated ones whenever they changed (position-only data printed σ²/1 mm before).
+    let weights_changed = weights != initial_weights;
+    let (frames_model, frames_only) = if reweighted || weights_changed {
         fit(
             Rung::FramesOnly,
             robot,

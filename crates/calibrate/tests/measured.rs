@@ -273,3 +273,21 @@ fn test_rows_beyond_the_training_range_are_named_and_judged_there() {
         out.warnings
     );
 }
+
+#[test]
+fn the_frames_only_sigma_is_the_noise() {
+    // Position-only data, frames only: the σ reported is the noise per axis, not σ²/1 mm.
+    let robot = robot();
+    let train = table(&robot, 120, 0.0, 5);
+    let cfg = MeasuredConfig {
+        rung: Some(Rung::FramesOnly),
+        ..config()
+    };
+    let out = calibrate_measured(&robot, &[train], &[], &cfg).unwrap();
+    let sigma = out.weights.sigma_position_m * out.fitted.identified.sigma;
+    // 360 residuals less 12 frame parameters: σ̂ within 3 standard errors (σ/√(2·348) ≈ 4 %).
+    assert!(
+        (sigma / NOISE_M - 1.0).abs() < 0.12,
+        "σ = {sigma:e} m against noise {NOISE_M:e} m"
+    );
+}
