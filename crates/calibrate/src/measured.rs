@@ -1545,12 +1545,35 @@ pub fn calibrate_measured(
             fitted.identified.fit.n_evaluations
         ));
     }
-    let frame_sigma_ratio = frames_only.identified.sigma;
-    if cfg.sigma_m.is_some() && frame_sigma_ratio > 10.0 {
+    // Two scales, each where it means something: the frames-only residual against what a
+    // real robot's manufacturing deviations produce (an uncalibrated robot is no mistake; a
+    // file in the wrong units or with the wrong joint order is), the calibrated residual
+    // against the instrument's stated σ (far above it: an effect the model lacks).
+    let frames_rms = {
+        let e = position_errors(&frames_model, train);
+        (e.iter().map(|e| e * e).sum::<f64>() / e.len().max(1) as f64).sqrt()
+    };
+    if frames_rms > PLAUSIBLE_FRAMES_ONLY_RMS_M {
         warnings.push(format!(
-            "the frames-only residual is {frame_sigma_ratio:.0}× the stated σ: the nominal model \
-             may be wrong (joint order, units, tip link, marker on the wrong link)"
+            "the nominal model misses the measurements by {:.1} mm RMS with the instrument and \
+             marker frames fitted, more than manufacturing deviations of a real robot produce \
+             ({:.0} mm): the setup is likely wrong (units, joint order, tip link, marker on \
+             the wrong link, another robot's description)",
+            frames_rms * 1e3,
+            PLAUSIBLE_FRAMES_ONLY_RMS_M * 1e3
         ));
+    }
+    if let Some(stated) = cfg.sigma_m {
+        let calibrated = weights.sigma_position_m * fitted.identified.sigma;
+        if calibrated > CALIBRATED_SIGMA_RATIO * stated {
+            warnings.push(format!(
+                "the {rung} model leaves {:.3} mm per axis, {:.1}× the stated σ of {:.3} mm: \
+                 an effect the model lacks, or a setup mistake",
+                calibrated * 1e3,
+                calibrated / stated,
+                stated * 1e3
+            ));
+        }
     }
 
     let mut sets = Vec::new();
@@ -1693,6 +1716,18 @@ pub fn calibrate_measured(
         warnings,
     })
 }
+
+/// Frames-only 3-D RMS error beyond which the nominal model cannot be the robot's: joint
+/// origin deviations of a fraction of a millimetre and a milliradian, and the elastic
+/// deflection of an elastic humanoid's arms under their own weight, give millimetres to a
+/// few centimetres; a file in millimetres read as metres, or joint columns in the wrong order,
+/// give decimetres to metres.
+pub const PLAUSIBLE_FRAMES_ONLY_RMS_M: f64 = 0.05;
+
+/// Ratio of the calibrated model's σ per axis to the stated instrument σ above which the
+/// report says the model lacks an effect (or the setup is wrong): a right model leaves the
+/// noise, within a few per cent for hundreds of residuals.
+pub const CALIBRATED_SIGMA_RATIO: f64 = 3.0;
 
 /// Most refits of [`equilibrate`].
 const EQUILIBRIUM_REFITS: usize = 6;

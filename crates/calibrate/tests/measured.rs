@@ -291,3 +291,35 @@ fn the_frames_only_sigma_is_the_noise() {
         "σ = {sigma:e} m against noise {NOISE_M:e} m"
     );
 }
+
+#[test]
+fn an_uncalibrated_robot_is_no_setup_warning_and_millimetres_as_metres_are() {
+    let robot = robot();
+    // 2 mrad per joint: millimetres of frames-only error, an ordinary uncalibrated arm.
+    let train = table(&robot, 120, 2e-3, 6);
+    let cfg = MeasuredConfig {
+        sigma_m: Some(NOISE_M),
+        ..config()
+    };
+    let out = calibrate_measured(&robot, std::slice::from_ref(&train), &[], &cfg).unwrap();
+    assert!(
+        !(out.warnings.iter()).any(|w| w.contains("setup is likely wrong") || w.contains("lacks")),
+        "{:?}",
+        out.warnings
+    );
+    // The same positions written in millimetres and read as metres.
+    let mut mm = train.clone();
+    for row in &mut mm.rows {
+        for m in &mut row.markers {
+            for v in &mut m.position_m {
+                *v *= 1e3;
+            }
+        }
+    }
+    let out = calibrate_measured(&robot, &[mm], &[], &cfg).unwrap();
+    assert!(
+        (out.warnings.iter()).any(|w| w.contains("setup is likely wrong")),
+        "{:?}",
+        out.warnings
+    );
+}
