@@ -240,7 +240,7 @@ pub struct MeasuredOutcome {
     /// move the tips, at most over the training rows, m
     /// ([`CalibratedModel::equilibrium_step_m`]).
     pub equilibrium_step_m: Option<f64>,
-    /// Refits with the loads at the torque equilibrium ([`equilibrate`]); 0 when the loads of
+    /// Refits with the loads at the torque equilibrium (docs/engine.md); 0 when the loads of
     /// the undeflected robot were close enough.
     pub equilibrium_refits: usize,
     /// Plain-language warnings.
