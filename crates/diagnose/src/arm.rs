@@ -581,9 +581,14 @@ fn joint_terms(
             } else {
                 GravityCompliance::default()
             };
-            let chain = &ctx.baseline.torque_chain;
+            // Every link's weight on every branch of the robot's tree (its loads).
+            let tips = &ctx.baseline.torque_tips;
             let torques: Vec<Vec<f64>> = (rows.q.iter())
-                .map(|q| model.lumped_torques(chain, q))
+                .map(|q| {
+                    (model.joint_loads(tips, q).iter())
+                        .map(|l| l.torque)
+                        .collect()
+                })
                 .collect();
             let unit = if effect == ArmEffect::GravityCompliance {
                 "rad/(N·m)"
@@ -1577,7 +1582,11 @@ fn residual_map(
     signals.push(("time".into(), rows.time.clone()));
     if let Some(m) = &ctx.masses {
         let t: Vec<Vec<f64>> = (rows.q.iter())
-            .map(|q| m.lumped_torques(&ctx.baseline.torque_chain, q))
+            .map(|q| {
+                (m.joint_loads(&ctx.baseline.torque_tips, q).iter())
+                    .map(|l| l.torque)
+                    .collect::<Vec<f64>>()
+            })
             .collect();
         for j in 0..names.len() {
             let v: Vec<f64> = t.iter().map(|t| t[j]).collect();
