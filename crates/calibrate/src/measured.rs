@@ -942,8 +942,8 @@ fn errors(
                 score += (e / w.sigma_distance_m).powi(2);
             }
         }
-        for m in &row.markers {
-            let pose = model.end_pose_of(m.marker, &row.q);
+        let tips: Vec<usize> = row.markers.iter().map(|m| m.marker).collect();
+        for (m, pose) in row.markers.iter().zip(model.end_poses_of(&tips, &row.q)) {
             let e = (pose.translation.vector - Vector3::from(m.position_m)).norm();
             sq += e * e;
             out.position.push(e);
@@ -1266,8 +1266,8 @@ fn row_error(model: &CalibratedModel, row: &MeasuredRow, w: &Weights) -> (f64, f
         sq += e * e;
         score += (e / w.sigma_distance_m).powi(2);
     }
-    for m in &row.markers {
-        let pose = model.end_pose_of(m.marker, &row.q);
+    let tips: Vec<usize> = row.markers.iter().map(|m| m.marker).collect();
+    for (m, pose) in row.markers.iter().zip(model.end_poses_of(&tips, &row.q)) {
         let e = (pose.translation.vector - Vector3::from(m.position_m)).norm();
         sq += e * e;
         score += (e / w.sigma_position_m).powi(2);
@@ -2081,8 +2081,10 @@ fn winsorize(
         let mut residuals = Vec::with_capacity(n_samples);
         for (ti, t) in train.iter().enumerate() {
             for (ri, row) in t.rows.iter().enumerate() {
-                for (mi, m) in row.markers.iter().enumerate() {
-                    let p = model.end_pose_of(m.marker, &row.q).translation.vector;
+                let tips: Vec<usize> = row.markers.iter().map(|m| m.marker).collect();
+                let poses = model.end_poses_of(&tips, &row.q);
+                for (mi, (m, pose)) in row.markers.iter().zip(poses).enumerate() {
+                    let p = pose.translation.vector;
                     residuals.push((ti, ri, mi, Vector3::from(m.position_m) - p, p));
                 }
             }

@@ -196,6 +196,26 @@ impl CalibratedModel {
         self.chain.end_point(&x, &angles)
     }
 
+    /// Poses of the frames of `tips` (as [`Self::end_pose_of`]) for one reading `q`, with one
+    /// evaluation of the gravity loads for them all.
+    ///
+    /// # Panics
+    /// If a tip is not a tip of the model or `q.len()` differs from the joint count.
+    #[track_caller]
+    pub fn end_poses_of(&self, tips: &[usize], q: &[f64]) -> Vec<Isometry3<f64>> {
+        let (x, angles) = self.effective(q);
+        (tips.iter())
+            .map(|&tip| {
+                let chain = if self.tips.is_empty() && tip == 0 {
+                    &self.chain
+                } else {
+                    &self.tips[tip]
+                };
+                chain.end_pose(&x, &angles)
+            })
+            .collect()
+    }
+
     /// Pose of tip `tip`'s frame (m; in the instrument frame for a tree with frames) for
     /// joint readings `q` (rad or m); tip 0 is [`Self::chain`].
     ///

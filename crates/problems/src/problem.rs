@@ -467,12 +467,20 @@ impl CalibrationProblem {
                         role: Role::Model,
                     }
                 }));
-                (obs.rows.iter().enumerate())
-                    .map(|(r, row)| {
-                        let at = load_angles.as_ref().map_or(&row.q, |a| &a[r]);
-                        model.joint_loads(&torque_tips, at)
-                    })
-                    .collect()
+                // Rows of one configuration (several markers, a distance) follow each other:
+                // their loads are computed once.
+                let mut out: Vec<Vec<crate::JointLoad>> = Vec::with_capacity(obs.rows.len());
+                for (r, row) in obs.rows.iter().enumerate() {
+                    let at = load_angles.as_ref().map_or(&row.q, |a| &a[r]);
+                    let previous = r
+                        .checked_sub(1)
+                        .map(|p| load_angles.as_ref().map_or(&obs.rows[p].q, |a| &a[p]));
+                    match (previous, out.last()) {
+                        (Some(p), Some(last)) if p == at => out.push(last.clone()),
+                        _ => out.push(model.joint_loads(&torque_tips, at)),
+                    }
+                }
+                out
             }
             None => Vec::new(),
         };
