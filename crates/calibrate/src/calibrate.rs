@@ -52,13 +52,13 @@ pub enum ModelChoice {
     /// (the joint frame bends about the axes normal to its axis under the gravity moment; link
     /// masses from the URDF's inertial tags).
     TransversalCompliance,
-    /// Socket recordings and distance logs only: geometric plus once-per-revolution harmonic
-    /// angle errors on every joint (encoder eccentricity). Never chosen by auto, nor is any
-    /// other harmonic model: on one MUKCa placement they fit the training data better and the
-    /// other placements worse (docs/results/mukca.md).
+    /// Socket recordings, distance logs and measurement files: geometric plus
+    /// once-per-revolution harmonic angle errors on every joint (encoder eccentricity). Never
+    /// chosen by auto, nor is any other harmonic model: on one MUKCa placement they fit the
+    /// training data better and the other placements worse (docs/results/mukca.md).
     Harmonic,
-    /// Socket recordings and distance logs only: geometric plus first- and second-order
-    /// harmonic angle errors on every joint.
+    /// Socket recordings, distance logs and measurement files: geometric plus first- and
+    /// second-order harmonic angle errors on every joint.
     Harmonic2,
     /// Socket recordings and distance logs only: mass-compliance plus harmonic.
     MassComplianceHarmonic,
@@ -140,6 +140,8 @@ impl ModelChoice {
                     | M::Geometric
                     | M::Compliance
                     | M::TransversalCompliance
+                    | M::Harmonic
+                    | M::Harmonic2
             ),
             Workflow::HapticLogs => matches!(self, M::Auto | M::Transmissions),
         }

@@ -62,6 +62,13 @@ pub enum Rung {
     /// about the axes normal to its axis under the gravity moment about them (Tenhumberg &
     /// Bäuml 2021; [`hapcal_problems::TransversalTerm`]). URDF robots only.
     TransversalCompliance,
+    /// Geometric plus a once-per-revolution harmonic angle error on every joint
+    /// ([`hapcal_problems::JointHarmonics::first_order`]: encoder eccentricity). Fitted when
+    /// asked for, not a rung the ladder climbs (as on socket data).
+    Harmonic,
+    /// Geometric plus first- and second-order harmonic angle errors on every joint. Fitted
+    /// when asked for, not a rung the ladder climbs.
+    Harmonic2,
 }
 
 impl Rung {
@@ -83,6 +90,8 @@ impl std::fmt::Display for Rung {
             Rung::Geometric => "geometric",
             Rung::Compliance => "compliance",
             Rung::TransversalCompliance => "transversal compliance",
+            Rung::Harmonic => "harmonic",
+            Rung::Harmonic2 => "harmonic2",
         })
     }
 }
@@ -754,17 +763,26 @@ pub(crate) fn observations(
 
 /// The problem's model terms for `rung`.
 fn terms(rung: Rung, robot: &Robot) -> ModelTerms {
-    let compliance = (rung >= Rung::Compliance).then(|| {
+    let compliance = matches!(rung, Rung::Compliance | Rung::TransversalCompliance).then(|| {
         if robot.masses.is_empty() {
             GravityCompliance::default()
         } else {
             GravityCompliance::from_link_masses(robot.masses.clone(), -Vector3::z())
         }
     });
+    let n = robot.joint_names.len();
+    let harmonics = match rung {
+        Rung::Harmonic => Some(hapcal_problems::JointHarmonics::first_order(n)),
+        Rung::Harmonic2 => Some(hapcal_problems::JointHarmonics {
+            joints: (0..n).collect(),
+            orders: vec![1, 2],
+        }),
+        _ => None,
+    };
     ModelTerms {
         compliance,
         transversal: rung == Rung::TransversalCompliance,
-        harmonics: None,
+        harmonics,
         torque_tips: Some(robot.tree.tips().to_vec()),
         load_angles: None,
     }
@@ -807,7 +825,11 @@ fn free_of(
     match rung {
         Rung::FramesOnly => {}
         Rung::JointOffsets => free.extend(offsets.iter().flatten().map(|&i| i + 6)),
-        Rung::Geometric | Rung::Compliance | Rung::TransversalCompliance => {
+        Rung::Geometric
+        | Rung::Compliance
+        | Rung::TransversalCompliance
+        | Rung::Harmonic
+        | Rung::Harmonic2 => {
             free.extend(6..6 + n_robot)
         }
     }
@@ -2328,6 +2350,8 @@ fn rung_of(model: crate::calibrate::ModelChoice) -> Result<Option<Rung>> {
         M::Geometric => Some(Rung::Geometric),
         M::Compliance => Some(Rung::Compliance),
         M::TransversalCompliance => Some(Rung::TransversalCompliance),
+        M::Harmonic => Some(Rung::Harmonic),
+        M::Harmonic2 => Some(Rung::Harmonic2),
         other => bail!("--model {other} is not fitted to measurement files"),
     })
 }
@@ -2341,6 +2365,8 @@ fn model_of(rung: Rung) -> crate::calibrate::ModelChoice {
         Rung::Geometric => M::Geometric,
         Rung::Compliance => M::Compliance,
         Rung::TransversalCompliance => M::TransversalCompliance,
+        Rung::Harmonic => M::Harmonic,
+        Rung::Harmonic2 => M::Harmonic2,
     }
 }
 

@@ -323,3 +323,40 @@ fn an_uncalibrated_robot_is_no_setup_warning_and_millimetres_as_metres_are() {
         out.warnings
     );
 }
+
+#[test]
+fn harmonics_are_fitted_to_marker_data_when_asked() {
+    let robot = robot();
+    let train = table(&robot, 150, 1e-3, 10);
+    let test = table(&robot, 60, 1e-3, 11);
+    for (rung, per_joint) in [(Rung::Harmonic, 2), (Rung::Harmonic2, 4)] {
+        let cfg = MeasuredConfig {
+            rung: Some(rung),
+            ..config()
+        };
+        let out = calibrate_measured(
+            &robot,
+            std::slice::from_ref(&train),
+            std::slice::from_ref(&test),
+            &cfg,
+        )
+        .unwrap();
+        assert_eq!(out.rung, rung);
+        let harmonic = (out.fitted.names.iter())
+            .filter(|n| n.starts_with("harmonic") || n.contains(".sin") || n.contains(".cos"))
+            .count();
+        assert_eq!(
+            harmonic,
+            per_joint * robot.joint_names.len(),
+            "{:?}",
+            out.fitted.names
+        );
+        // No harmonic in the simulation: the extra terms cost little held out.
+        let floor = 3f64.sqrt() * NOISE_M;
+        assert!(
+            out.sets[1].4.position_rms_m < 1.5 * floor,
+            "{rung}: {} m",
+            out.sets[1].4.position_rms_m
+        );
+    }
+}
