@@ -625,6 +625,34 @@ fn model_choice(model: &str) -> Result<ModelChoice> {
     })
 }
 
+/// The measurement tables of `sources` for `robot`: files through the command line's loader
+/// (`measured::load_tables`), arrays as they are.
+fn load_sources(sources: &[Source], robot: &Robot) -> Result<Vec<MeasurementTable>> {
+    let mut out = Vec::new();
+    for s in sources {
+        match s {
+            Source::Path { path, units } => out.extend(measured::load_tables(
+                std::slice::from_ref(path),
+                robot,
+                units,
+            )?),
+            Source::Arrays(a) => out.push(table(a, robot)?),
+        }
+    }
+    Ok(out)
+}
+
+/// The paths and units of `sources`, if every one is a file.
+fn file_sources(sources: &[Source]) -> Option<Vec<(PathBuf, Units)>> {
+    sources
+        .iter()
+        .map(|s| match s {
+            Source::Path { path, units } => Some((path.clone(), *units)),
+            Source::Arrays(_) => None,
+        })
+        .collect()
+}
+
 /// Calibrates `device` from `train` (`test` only evaluated). See `hapcal.calibrate`.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
@@ -664,16 +692,7 @@ fn _calibrate(
         joint,
     };
     // Files that share their units go through `calibrate::run`, exactly as the command line.
-    let paths = |sources: &[Source]| -> Option<Vec<(PathBuf, Units)>> {
-        sources
-            .iter()
-            .map(|s| match s {
-                Source::Path { path, units } => Some((path.clone(), *units)),
-                Source::Arrays(_) => None,
-            })
-            .collect()
-    };
-    let files = paths(&train).zip(paths(&test));
+    let files = file_sources(&train).zip(file_sources(&test));
     let outcome = match files {
         Some((tr, te)) if tr.iter().chain(&te).all(|(_, u)| *u == tr[0].1) => {
             plan.units = tr[0].1;
@@ -693,22 +712,8 @@ fn _calibrate(
                     );
                 }
                 let robot = robot.map_err(|e| anyhow!("{e}"))?;
-                let tables = |sources: &[Source]| -> Result<Vec<MeasurementTable>> {
-                    let mut out = Vec::new();
-                    for s in sources {
-                        match s {
-                            Source::Path { path, units } => out.extend(measured::load_tables(
-                                std::slice::from_ref(path),
-                                robot,
-                                units,
-                            )?),
-                            Source::Arrays(a) => out.push(table(a, robot)?),
-                        }
-                    }
-                    Ok(out)
-                };
-                let train = tables(&train)?;
-                let test = tables(&test)?;
+                let train = load_sources(&train, robot)?;
+                let test = load_sources(&test, robot)?;
                 measured::run_tables(&plan, hapcal_device, robot, train, test, start)
             })
         }
@@ -984,16 +989,7 @@ fn _diagnose(
         sigma_m,
         joint: false,
     };
-    let paths = |sources: &[Source]| -> Option<Vec<(PathBuf, Units)>> {
-        sources
-            .iter()
-            .map(|s| match s {
-                Source::Path { path, units } => Some((path.clone(), *units)),
-                Source::Arrays(_) => None,
-            })
-            .collect()
-    };
-    let files = paths(&train).zip(paths(&test));
+    let files = file_sources(&train).zip(file_sources(&test));
     let robot = device.robot.as_ref();
     py.detach(move || -> Result<(String, Vec<String>)> {
         // Files that share their units go through the command line's loaders.
@@ -1006,24 +1002,10 @@ fn _diagnose(
             }
             _ => {
                 let robot = robot.map_err(|e| anyhow!("{e}"))?;
-                let tables = |sources: &[Source]| -> Result<Vec<MeasurementTable>> {
-                    let mut out = Vec::new();
-                    for s in sources {
-                        match s {
-                            Source::Path { path, units } => out.extend(measured::load_tables(
-                                std::slice::from_ref(path),
-                                robot,
-                                units,
-                            )?),
-                            Source::Arrays(a) => out.push(table(a, robot)?),
-                        }
-                    }
-                    Ok(out)
-                };
                 hapcal_calibrate::baseline::baseline_from_tables(
                     robot,
-                    tables(&train)?,
-                    tables(&test)?,
+                    load_sources(&train, robot)?,
+                    load_sources(&test, robot)?,
                     &plan,
                     true,
                 )?

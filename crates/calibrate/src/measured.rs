@@ -290,21 +290,9 @@ pub fn robot_from_urdf(path: &std::path::Path, tips: &[String]) -> Result<Robot>
 
 /// Per joint of `tree`: whether its screw is a translation (a prismatic joint).
 fn prismatic_joints(tree: &Tree) -> Vec<bool> {
-    let mut prismatic = vec![false; tree.joint_names().len()];
-    for chain in tree.tips() {
-        for f in chain.factors() {
-            if let hapcal_kinematics::Factor::Screw {
-                motion,
-                joint: Some(j),
-                ..
-            } = f
-                && let Some(p) = prismatic.get_mut(*j)
-            {
-                *p = *motion == hapcal_kinematics::Motion::Translation;
-            }
-        }
-    }
-    prismatic
+    (hapcal_kinematics::joint_motions(tree.tips()).iter())
+        .map(|m| *m == Some(hapcal_kinematics::Motion::Translation))
+        .collect()
 }
 
 /// Robot of a device file (a D-H, modified D-H or placement chain; one tip).
@@ -829,9 +817,7 @@ fn free_of(
         | Rung::Compliance
         | Rung::TransversalCompliance
         | Rung::Harmonic
-        | Rung::Harmonic2 => {
-            free.extend(6..6 + n_robot)
-        }
+        | Rung::Harmonic2 => free.extend(6..6 + n_robot),
     }
     // Compliance (and any other model term) after the kinematic parameters.
     free.extend(n_kin..n_layout);

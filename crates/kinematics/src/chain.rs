@@ -110,6 +110,28 @@ fn apply(pose: &mut Isometry3<f64>, factor: &Factor, x: &[f64], q: &[f64]) {
     }
 }
 
+/// The motion of each joint of `chains` (the tips of one tree, all with the same joints):
+/// rotation or translation of the screw that carries it, `None` for a joint no chain moves.
+/// Length: the first chain's joint count (0 without a chain).
+pub fn joint_motions(chains: &[Chain]) -> Vec<Option<Motion>> {
+    let n = chains.first().map_or(0, Chain::n_joints);
+    let mut motions = vec![None; n];
+    for chain in chains {
+        for factor in chain.factors() {
+            if let Factor::Screw {
+                motion,
+                joint: Some(j),
+                ..
+            } = factor
+                && let Some(m) = motions.get_mut(*j)
+            {
+                *m = Some(*motion);
+            }
+        }
+    }
+    motions
+}
+
 /// A serial kinematic chain: a sequence of [`Factor`]s from the base frame to the tip
 /// frame, with named parameters, joints and elements.
 ///

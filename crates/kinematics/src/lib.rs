@@ -59,7 +59,7 @@ mod frozen;
 mod placement;
 mod tree;
 
-pub use chain::{Chain, Factor, FkWorkspace, Motion, ParamInfo, ParamUnit};
+pub use chain::{Chain, Factor, FkWorkspace, Motion, ParamInfo, ParamUnit, joint_motions};
 pub use dh::{DhConvention, DhRow};
 pub use error::Error;
 pub use frozen::{FrozenChain, LANES, joint_trig, joint_trig_lanes};

@@ -516,7 +516,9 @@ impl CalibrationProblem {
                     reason: "it needs the gravity compliance model",
                 });
             };
-            let revolute = revolute_joints(&torque_tips);
+            let revolute: Vec<bool> = (hapcal_kinematics::joint_motions(&torque_tips).iter())
+                .map(|m| *m == Some(hapcal_kinematics::Motion::Rotation))
+                .collect();
             let names = chain.joint_names();
             for (j, name) in names.iter().enumerate() {
                 let index = |axis: &str| chain.param_index(&format!("{name}.{axis}"));
@@ -856,6 +858,45 @@ impl CalibrationProblem {
         buf
     }
 
+    /// Entry `k` of the Jacobian column `col` of one measured point or pose: a kinematic
+    /// parameter's from `buf` (the forward kinematics' Jacobian, `rows` entries per column); an
+    /// angle term's (compliance, harmonic) as its joints' angle derivatives times the row's
+    /// `basis`, from the geometric Jacobian `jq` or, without it, from the joints' parameter
+    /// columns; a transversal term's as its rotation parameters' columns times the row's
+    /// `tilts`.
+    #[allow(clippy::too_many_arguments)]
+    fn column(
+        &self,
+        buf: &[f64],
+        rows: usize,
+        k: usize,
+        col: usize,
+        jq: Option<&hapcal_kinematics::Matrix6xX<f64>>,
+        basis: &[f64],
+        tilts: &[[f64; 3]],
+    ) -> f64 {
+        let n_kin = self.chain.n_params();
+        let n_angle = self.n_compliance() + self.n_harmonics();
+        if col < n_kin {
+            buf[rows * col + k]
+        } else if col < n_kin + n_angle {
+            let g = col - n_kin;
+            let terms = (self.angle_terms.iter().zip(basis)).filter(|((_, param), _)| *param == g);
+            match jq {
+                Some(m) => terms.map(|((j, _), b)| m[(k, *j)] * b).sum(),
+                None => terms
+                    .filter_map(|((j, _), b)| Some(buf[rows * self.joint_param[*j]? + k] * b))
+                    .sum(),
+            }
+        } else {
+            let t = col - n_kin - n_angle;
+            (self.transversal[t].rotation_params.iter())
+                .zip(&tilts[t])
+                .map(|(&i, v)| buf[rows * i + k] * v)
+                .sum()
+        }
+    }
+
     /// The kinematic deviations the chain sees in row `row_idx`: `x_kin` with the transversal
     /// tilts added to their joints' rotation deviations (written to `buf`), or `x_kin` itself
     /// without transversal compliance.
@@ -1111,27 +1152,7 @@ impl CalibrationProblem {
                 let tilts = &self.tilt_basis[row_idx * n_tilts..(row_idx + 1) * n_tilts];
                 // Row k of the pose Jacobian (0–2 position, 3–5 rotation vector) at column col.
                 let dpose = |k: usize, col: usize| -> f64 {
-                    if col < n_kin {
-                        buf[6 * col + k]
-                    } else if col < n_kin + n_angle {
-                        let g = col - n_kin;
-                        let terms = (self.angle_terms.iter().zip(basis))
-                            .filter(|((_, param), _)| *param == g);
-                        match &jq {
-                            Some(m) => terms.map(|((j, _), b)| m[(k, *j)] * b).sum(),
-                            None => terms
-                                .filter_map(|((j, _), b)| {
-                                    Some(buf[6 * self.joint_param[*j]? + k] * b)
-                                })
-                                .sum(),
-                        }
-                    } else {
-                        let t = col - n_kin - n_angle;
-                        (self.transversal[t].rotation_params.iter())
-                            .zip(&tilts[t])
-                            .map(|(&i, v)| buf[6 * i + k] * v)
-                            .sum()
-                    }
+                    self.column(&buf, 6, k, col, jq.as_ref(), basis, tilts)
                 };
                 let s = self.weights.sigma_position_m;
                 let p = pose.translation.vector;
@@ -1203,27 +1224,9 @@ impl CalibrationProblem {
                 None
             };
             let tilts = &self.tilt_basis[row_idx * n_tilts..(row_idx + 1) * n_tilts];
+            let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
             let dp = |k: usize, col: usize| -> f64 {
-                if col < n_kin {
-                    buf[3 * col + k]
-                } else if col < n_kin + n_angle {
-                    let g = col - n_kin;
-                    let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
-                    let terms =
-                        (self.angle_terms.iter().zip(basis)).filter(|((_, param), _)| *param == g);
-                    match &jq {
-                        Some(m) => terms.map(|((j, _), b)| m[(k, *j)] * b).sum(),
-                        None => terms
-                            .filter_map(|((j, _), b)| Some(buf[3 * self.joint_param[*j]? + k] * b))
-                            .sum(),
-                    }
-                } else {
-                    let t = col - n_kin - n_angle;
-                    (self.transversal[t].rotation_params.iter())
-                        .zip(&tilts[t])
-                        .map(|(&i, v)| buf[3 * i + k] * v)
-                        .sum()
-                }
+                self.column(&buf, 3, k, col, jq.as_ref(), basis, tilts)
             };
             match &row.kind {
                 RowKind::Distance { distance_m } => {
@@ -1481,24 +1484,4 @@ fn check_shape(nx: usize, n: usize, nr: usize, m: usize) -> Result<(), EvalError
         });
     }
     Ok(())
-}
-
-/// Per joint of the tips (the same joints on every tip): whether its screw is a rotation.
-fn revolute_joints(tips: &[Chain]) -> Vec<bool> {
-    let n = tips.first().map_or(0, Chain::n_joints);
-    let mut revolute = vec![false; n];
-    for chain in tips {
-        for factor in chain.factors() {
-            if let hapcal_kinematics::Factor::Screw {
-                motion,
-                joint: Some(j),
-                ..
-            } = factor
-                && let Some(r) = revolute.get_mut(*j)
-            {
-                *r = *motion == hapcal_kinematics::Motion::Rotation;
-            }
-        }
-    }
-    revolute
 }
