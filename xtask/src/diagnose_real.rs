@@ -224,16 +224,30 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
         ));
         match d["floor_rms_m"].as_f64() {
             Some(_) => md.push_str(&format!(
-                "- Held-out RMS {} mm, floor {} mm, gap {} mm (p = {:.1e}).\n",
-                mm(&d["heldout_rms_m"]),
+                "- Cross-validated RMS {} mm, floor {} mm, gap {} mm (p = {:.1e}).\n",
+                mm(&d["cv_rms_m"]),
                 mm(&d["floor_rms_m"]),
                 mm(&d["gap_rms_m"]),
                 d["gap_p_value"].as_f64().unwrap_or(f64::NAN)
             )),
             None => md.push_str(&format!(
-                "- Held-out RMS {} mm; no floor.\n",
-                mm(&d["heldout_rms_m"])
+                "- Cross-validated RMS {} mm; no floor.\n",
+                mm(&d["cv_rms_m"])
             )),
+        }
+        let per_test = |key: &str| -> String {
+            (d[key].as_array().into_iter().flatten())
+                .map(mm)
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        if d["test_rms_m"].as_array().is_some_and(|t| !t.is_empty()) {
+            md.push_str(&format!(
+                "- Test-file RMS (training estimate carried over): {} mm geometric, {} mm with \
+                 the named effects.\n",
+                per_test("test_rms_m"),
+                per_test("test_rms_final_m")
+            ));
         }
         let flagged = (d["where"].as_array().into_iter().flatten())
             .filter(|b| b["flagged"] == true)
@@ -257,11 +271,13 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
                 })
                 .collect();
             md.push_str(&format!(
-                "- Named: **{}**, held-out RMS {} → {} mm, {:.0} % of the gap; {}.\n",
+                "- Named: **{}**, cross-validated RMS {} → {} mm, {:.0} % of the gap ({:.0} % of \
+                 the gap its round faced); {}.\n",
                 st["effect"].as_str().unwrap_or("?"),
-                mm(&st["heldout_rms_before_m"]),
-                mm(&st["heldout_rms_after_m"]),
+                mm(&st["cv_rms_before_m"]),
+                mm(&st["cv_rms_after_m"]),
                 st["gap_closed_pct"].as_f64().unwrap_or(f64::NAN),
+                st["round_gap_closed_pct"].as_f64().unwrap_or(f64::NAN),
                 params.join(", ")
             ));
             for c in st["confusable_with"].as_array().into_iter().flatten() {
@@ -277,24 +293,24 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
             .filter(|c| c["round"] == 1)
             .collect();
         cands.sort_by(|a, b| {
-            let f = |v: &Value| v["heldout_rms_after_m"].as_f64().unwrap_or(f64::INFINITY);
+            let f = |v: &Value| v["cv_rms_after_m"].as_f64().unwrap_or(f64::INFINITY);
             f(a).total_cmp(&f(b))
         });
         md.push_str(
-            "\n| candidate (round 1) | k | held-out RMS after, mm | held-out improvement, standard errors | p (held-out, one-sided) | p (F, Holm) | decision |\n|---|---|---|---|---|---|---|\n",
+            "\n| candidate (round 1) | k | CV RMS after, mm | CV improvement, standard errors | p (CV, one-sided) | p (F, Holm) | decision |\n|---|---|---|---|---|---|---|\n",
         );
         for c in cands {
-            let imp = &c["heldout_improvement"];
+            let imp = &c["cv_improvement"];
             md.push_str(&format!(
                 "| {} | {} | {} | {} | {:.1e} | {:.1e} | {} |\n",
                 c["effect"].as_str().unwrap_or("?"),
                 c["n_visible"],
-                mm(&c["heldout_rms_after_m"]),
+                mm(&c["cv_rms_after_m"]),
                 match (imp[0].as_f64(), imp[1].as_f64()) {
                     (Some(m), Some(se)) if se > 0.0 => format!("{:+.1}", m / se),
                     _ => "–".to_owned(),
                 },
-                c["heldout_p_value"].as_f64().unwrap_or(f64::NAN),
+                c["cv_p_value"].as_f64().unwrap_or(f64::NAN),
                 c["f_p_value"].as_f64().unwrap_or(f64::NAN),
                 c["reason"].as_str().unwrap_or("").replace('|', "/")
             ));
@@ -304,7 +320,9 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
             .collect();
         md.push_str(&format!(
             "\n| rung | CV, training | {} |\n|---|---|{}\n",
-            tests.join(" | "),
+            (tests.iter().map(|t| format!("test: {t}")))
+                .collect::<Vec<_>>()
+                .join(" | "),
             "---|".repeat(tests.len())
         ));
         for r in d["ladder"].as_array().into_iter().flatten() {

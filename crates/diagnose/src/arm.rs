@@ -16,7 +16,10 @@
 //! `alpha`), and blocked k-fold cross-validation (contiguous configurations of one socket or
 //! file per block, three shifted repeats): the held-out error must undercut the round's
 //! baseline by two blocked standard errors (the calibration ladder's margin). An effect is
-//! named only when both hold and it closes at least `min_gap_share` of the gap above the floor.
+//! named only when both hold and it closes at least `min_gap_share` of the gap its round
+//! faces: the held-out error left by the effects named before it, above the floor. Rounds go
+//! on while that error is significantly above the floor and a candidate passes, up to
+//! `max_effects`.
 
 use hapcal_calibrate::baseline::{DataKind, GeometricBaseline, HeldOutSet};
 use hapcal_calibrate::calibrate::blocked_mean_difference;
@@ -41,10 +44,17 @@ const READING_STEP: f64 = 1e-6;
 /// it does not move.
 const WORKSPACE_SPREAD_M: f64 = 0.01;
 
-/// Share of the gap above the floor the named effects must close together, unless what is
-/// left is consistent with the floor; below it the verdict is `none` (the reference device's
-/// rule, docs/diagnosis.md).
+/// Share of the gap its round faced (the held-out error left by the effects before it, above
+/// the floor) the last named effect must close, unless what it leaves is consistent with the
+/// floor; below it the effect is not named, and the rule goes on with the one before it
+/// (docs/diagnosis.md, the reference device's rule taken round by round).
 const SUFFICIENT_SHARE: f64 = 0.8;
+
+/// The same on the in-sample excess `RSS − dof` (in floor units) of the round: an effect that
+/// is estimated poorly on training folds (a weakly determined parameter among several) closes
+/// less of the held-out gap than of the in-sample excess (the reference device's second
+/// chance).
+const SUFFICIENT_SHARE_IN_SAMPLE: f64 = 0.9;
 
 /// Blocked standard errors by which a candidate's held-out error must undercut the round's
 /// baseline: the calibration ladder's margin (`hapcal_calibrate::measured::LADDER_SIGNIFICANCE_Z`).
@@ -75,8 +85,11 @@ pub enum ArmEffect {
     /// torque of the URDF `<inertial>` masses (or the published masses of a known robot),
     /// N·m; `k_j` rad/(N·m) (Zhou, Kang & Ryu 2014; Nubiola & Bonev 2013).
     GravityCompliance,
-    /// Lumped compliance: `Δq_j = k_j·τ̂_j(q)`, `τ̂_j` the torque of a unit weight at the tip
-    /// (m); the model when no link masses are known, or a payload dominates.
+    /// Lumped compliance: `Δq_j = k_j·τ̂_j(q)`, `τ̂_j = w_j·Σ (o_i − o_j) × ĝ` (m) the
+    /// moment about joint `j`'s axis `w_j` of unit weights (along the unit gravity `ĝ`, base
+    /// −z) at the origin `o_i` of every joint below `j` and at the tip, on the nominal chain at
+    /// the readings ([`GravityCompliance::joint_loads`] without masses); `k_j` rad/m. The model
+    /// when no link masses are known.
     LumpedCompliance,
     /// Once-per-revolution angle error of each revolute joint, `a_j sin q_j + b_j cos q_j`:
     /// encoder or gear eccentricity (Renders et al. 1991).
@@ -89,9 +102,10 @@ pub enum ArmEffect {
     Backlash,
     /// Gear-ratio (scale) error: `Δq_j = s_j·q_j`.
     GearRatio,
-    /// Thermal drift: the measured point moves linearly in time, `Δp = v·(t − t̄)/T` (three
-    /// components in the measurement frame, m over the recording's span `T`; one for
-    /// distances).
+    /// Thermal drift: the measured point moves linearly in time, `Δp = v·(t − t₀)/T` (three
+    /// components in the measurement frame, m over the training recording's span `T`, `t₀` its
+    /// first time; one for distances). Held-out sets keep the training's `t₀` and `T`: their
+    /// configurations are taken to follow the training's, at its median time step.
     ThermalDrift,
     /// Link deflection under gravity: the tip sags by `c·(ρ/ρ_max)³` along gravity, `ρ` its
     /// horizontal reach from the base axis (a cantilever under an end load, δ ∝ L³).
@@ -167,21 +181,21 @@ pub struct ArmConfig {
     pub alpha: f64,
     /// Largest number of effects added one after the other.
     pub max_effects: usize,
-    /// Smallest share of the gap above the floor a named effect must close, 0–1 (not used
-    /// without a floor).
+    /// Smallest share of its round's gap a named effect must close, 0–1: the held-out error
+    /// left by the effects named before it, above the floor (not used without a floor).
     pub min_gap_share: f64,
     /// Quantile bins per signal of the residual map.
     pub bins: usize,
 }
 
 impl Default for ArmConfig {
-    /// 5 folds, α = 0.01, up to 2 effects, each closing ≥ 20 % of the gap, 6 bins: the
-    /// reference device's settings (docs/diagnosis.md).
+    /// 5 folds, α = 0.01, up to 3 effects, each closing ≥ 20 % of the gap its round faces,
+    /// 6 bins: the reference device's settings (docs/diagnosis.md).
     fn default() -> Self {
         Self {
             folds: 5,
             alpha: 0.01,
-            max_effects: 2,
+            max_effects: 3,
             min_gap_share: 0.2,
             bins: 6,
         }
@@ -232,20 +246,25 @@ pub struct ArmCandidate {
     pub round: usize,
     /// Parameters visible in these data (not absorbed by the baseline).
     pub n_visible: usize,
-    /// Held-out position RMS of the round's baseline, m.
+    /// Cross-validated position RMS of the round's baseline on the training rows, m.
+    #[serde(rename = "cv_rms_before_m")]
     pub heldout_rms_before_m: f64,
-    /// Held-out position RMS with the candidate, m.
+    /// Cross-validated position RMS with the candidate, m.
+    #[serde(rename = "cv_rms_after_m")]
     pub heldout_rms_after_m: f64,
-    /// Mean held-out weighted squared error per configuration, baseline minus candidate, and
-    /// its blocked standard error (> 0: the candidate predicts better).
+    /// Mean cross-validated weighted squared error per configuration, baseline minus
+    /// candidate, and its blocked standard error (> 0: the candidate predicts better).
+    #[serde(rename = "cv_improvement")]
     pub heldout_improvement: (f64, f64),
-    /// One-sided Student-t p-value of the held-out improvement over the blocks (not adjusted:
-    /// the gate is the improvement in standard errors).
+    /// One-sided Student-t p-value of the cross-validated improvement over the blocks (not
+    /// adjusted: the gate is the improvement in standard errors).
+    #[serde(rename = "cv_p_value")]
     pub heldout_p_value: f64,
     /// F-test p-value of the in-sample improvement, Holm-adjusted over the round.
     pub f_p_value: f64,
-    /// Share of the gap above the floor it closes, % (relative to the best model without a
-    /// floor).
+    /// Share of the round's gap it closes, %: `(MSE_before − MSE_after)/(MSE_before − floor²)`
+    /// with the cross-validated MSEs (without a floor, of what the round's best candidate
+    /// removes).
     pub gap_closed_pct: f64,
     /// Whether it was named.
     pub accepted: bool,
@@ -281,9 +300,9 @@ pub struct ArmBin {
 pub struct ArmRung {
     /// `frames only`, `joint offsets`, `geometric`, `+ gravity_compliance`, ….
     pub rung: String,
-    /// Held-out RMS of the 3-D position error on the training rows (blocked CV), m.
+    /// Cross-validated RMS of the 3-D position error on the training rows (blocked CV), m.
     pub cv_rms_m: f64,
-    /// RMS on each held-out set, m (order of [`ArmDiagnosis::test_sets`]).
+    /// RMS on each held-out set (test file), m (order of [`ArmDiagnosis::test_sets`]).
     pub test_rms_m: Vec<f64>,
 }
 
@@ -292,12 +311,16 @@ pub struct ArmRung {
 pub struct ArmStep {
     /// Effect name.
     pub effect: String,
-    /// Held-out position RMS before and after, m.
+    /// Cross-validated position RMS on the training rows before it, m.
+    #[serde(rename = "cv_rms_before_m")]
     pub heldout_rms_before_m: f64,
-    /// After.
+    /// After it.
+    #[serde(rename = "cv_rms_after_m")]
     pub heldout_rms_after_m: f64,
-    /// Share of the original gap it closes, %.
+    /// Share of the original gap (before the first effect) it closes, %.
     pub gap_closed_pct: f64,
+    /// Share of the gap its round faced (left by the effects before it) it closes, %.
+    pub round_gap_closed_pct: f64,
     /// Its parameters ± std.
     pub parameters: Vec<EffectParam>,
     /// Candidates the data confuse with it, each with the measurement that would separate them.
@@ -321,8 +344,12 @@ pub struct ArmDiagnosis {
     pub floor_sigma_m: Option<f64>,
     /// Floor of the held-out 3-D position RMS, m (`None` without a floor).
     pub floor_rms_m: Option<f64>,
-    /// Held-out 3-D position RMS of the geometric baseline, m.
+    /// Cross-validated 3-D position RMS of the geometric baseline on the training rows, m.
+    #[serde(rename = "cv_rms_m")]
     pub heldout_rms_m: f64,
+    /// 3-D position RMS of the geometric baseline on each held-out set (test file), m (order
+    /// of `test_sets`).
+    pub test_rms_m: Vec<f64>,
     /// `sqrt(max(0, MSE − floor²))`, m; without a floor, relative to the best model found.
     pub gap_rms_m: f64,
     /// `P(χ² > Σe²/var)` of the held-out residuals under the floor (1 without a floor).
@@ -338,8 +365,12 @@ pub struct ArmDiagnosis {
     pub steps: Vec<ArmStep>,
     /// Accepted effects joined by `+`, or `none`.
     pub verdict: String,
-    /// Held-out position RMS after the accepted effects, m.
+    /// Cross-validated position RMS after the accepted effects, m.
+    #[serde(rename = "cv_rms_final_m")]
     pub heldout_rms_final_m: f64,
+    /// Position RMS on each held-out set after the accepted effects, m (the training's
+    /// estimate carried over; order of `test_sets`).
+    pub test_rms_final_m: Vec<f64>,
     /// Share of the gap closed by the accepted effects, %.
     pub gap_closed_pct: f64,
     /// Held-out sets' names.
@@ -524,9 +555,11 @@ struct Context<'a> {
     gravity: Vector3<f64>,
     /// Largest horizontal reach over the training configurations, m.
     reach_max: f64,
-    /// Mean and span of the training times.
-    time_mean: f64,
+    /// The drift's time origin (the first training time), the training's span and its
+    /// median time step, s.
+    time_origin: f64,
     time_span: f64,
+    time_step: f64,
 }
 
 impl Context<'_> {
@@ -683,7 +716,7 @@ fn effect_columns(
             if ctx.time_span <= 0.0 {
                 return Err("all configurations at one time".into());
             }
-            let s = |c: usize| (ctx.time_of(rows, c) - ctx.time_mean) / ctx.time_span;
+            let s = |c: usize| (rows.time[c] - ctx.time_origin) / ctx.time_span;
             let mut names = Vec::new();
             if has_position {
                 names.extend(["x", "y", "z"].map(|a| (format!("thermal_drift.{a}"), "m")));
@@ -755,10 +788,23 @@ fn effect_columns(
 }
 
 impl Context<'_> {
-    /// Time of configuration `c` of `rows` (the training times; a held-out set at the mean).
-    fn time_of(&self, rows: &Rows, c: usize) -> f64 {
-        rows.time.get(c).copied().unwrap_or(self.time_mean)
+    /// Times of the `n` configurations of a held-out set on the training's clock: a held-out
+    /// set carries no time of its own, so it is taken to follow the training rows (the last
+    /// rows of a file, or a file recorded after it), at the training's median time step.
+    fn held_out_times(&self, n: usize) -> Vec<f64> {
+        let end = self.time_origin + self.time_span;
+        (1..=n).map(|k| end + k as f64 * self.time_step).collect()
     }
+}
+
+/// Median of the positive steps between consecutive times (1 without any).
+fn median_step(time: &[f64]) -> f64 {
+    let mut d: Vec<f64> = (time.windows(2))
+        .map(|w| w[1] - w[0])
+        .filter(|d| *d > 0.0)
+        .collect();
+    d.sort_by(f64::total_cmp);
+    d.get(d.len() / 2).copied().unwrap_or(1.0)
 }
 
 /// The fold of each configuration in each of [`CV_REPEATS`] repeats (contiguous blocks within
@@ -1076,8 +1122,9 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
         masses,
         gravity: baseline.base_to_measurement * -Vector3::z(),
         reach_max: 1.0,
-        time_mean: mean(&baseline.time),
+        time_origin: if t_min.is_finite() { t_min } else { 0.0 },
         time_span: (t_max - t_min).max(0.0),
+        time_step: median_step(&baseline.time),
     };
     ctx.reach_max = (baseline.q.iter())
         .map(|q| ctx.reach(q))
@@ -1111,6 +1158,20 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
     // Accepted effects' columns on the training rows and their names (for the ladder).
     let mut effect_cols: Vec<(ArmEffect, DMatrix<f64>, Vec<usize>)> = Vec::new();
     let mut untestable = Vec::new();
+    // After each named effect: the χ² p-value of what is left under the floor.
+    let mut p_after: Vec<f64> = Vec::new();
+    // Each named effect's share of its round's in-sample excess (RSS − dof, in floor units).
+    let mut in_sample_share: Vec<f64> = Vec::new();
+    let floor_units = match (
+        floor_var,
+        rows.res.iter().find_map(|(kind, _)| match kind {
+            Res::Position { sigma, .. } => Some(*sigma),
+            _ => None,
+        }),
+    ) {
+        (Some(v), Some(s)) if v > 0.0 => s * s / v,
+        _ => 1.0,
+    };
     for round in 1..=cfg.max_effects {
         let (qb, _) = pivoted_basis(&a, &DMatrix::zeros(a.nrows(), 0), 1e-9);
         let r_perp = &r - &qb * (qb.transpose() * &r);
@@ -1118,7 +1179,17 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
         let dof_b = (r.len() as f64 - qb.ncols() as f64).max(1.0);
         let mut tested: Vec<Tested> = Vec::new();
         for effect in ArmEffect::LIBRARY {
-            if accepted.contains(&effect) {
+            // Gravity and lumped compliance are one effect under two torque models: once one
+            // is named, the other is not a further effect.
+            let compliance = |e: &ArmEffect| {
+                matches!(
+                    e,
+                    ArmEffect::GravityCompliance | ArmEffect::LumpedCompliance
+                )
+            };
+            if accepted.contains(&effect)
+                || (compliance(&effect) && accepted.iter().any(compliance))
+            {
                 continue;
             }
             let (cols, names) = match effect_columns(effect, &ctx, &rows, &dq) {
@@ -1280,6 +1351,12 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             break;
         };
         let win_fit = tested[w].fitted.clone();
+        let excess = rss_b * floor_units - dof_b;
+        in_sample_share.push(if excess > 0.0 {
+            (win_fit.norm_squared() * floor_units - tested[w].cand.n_visible as f64) / excess
+        } else {
+            0.0
+        });
         let win_effect = tested[w].effect;
         let confusable: Vec<(String, String)> = (tested.iter().enumerate())
             .filter(|(i, t)| {
@@ -1309,6 +1386,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             } else {
                 0.0
             },
+            round_gap_closed_pct: win.cand.gap_closed_pct,
             parameters: win.cand.parameters.clone(),
             confusable_with: confusable,
         });
@@ -1323,6 +1401,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
         a = grown;
         base = held;
         candidates.extend(tested.into_iter().map(|t| t.cand));
+        p_after.push(gap_p_value(&rows, &base));
         // Stop when what is left is consistent with the floor.
         if floor_var.is_some() && gap_p_value(&rows, &base) >= cfg.alpha {
             break;
@@ -1344,36 +1423,71 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                 / (mse0 - final_mse);
         }
     }
-    let mut verdict = if accepted.is_empty() {
-        "none".to_owned()
-    } else {
-        (accepted.iter().map(|e| e.name()).collect::<Vec<_>>()).join("+")
-    };
     let closed = if gap2 > 0.0 {
         (mse0 - final_mse) / gap2
     } else {
         0.0
     };
-    if !accepted.is_empty()
-        && floor0.is_some()
-        && closed < SUFFICIENT_SHARE
-        && gap_p_value(&rows, &base) < cfg.alpha
-    {
-        notes.push(format!(
-            "{verdict} closes {:.0} % of the gap above the floor and a significant residual \
-             remains: not enough to name it (the effect at work is likely outside the library)",
-            100.0 * closed
-        ));
-        verdict = "none".to_owned();
+    // Sufficiency, from the last named effect back: an effect that closes less than
+    // SUFFICIENT_SHARE of the gap its round faced (what the effects before it left) and leaves
+    // a significant residual explains a part of something else, not itself; it is not named,
+    // and the rule applies to the one before it.
+    let mut named = accepted.len();
+    if let Some(f) = floor0 {
+        while named > 0 {
+            let st = &steps[named - 1];
+            let (before, after) = (
+                st.heldout_rms_before_m.powi(2),
+                st.heldout_rms_after_m.powi(2),
+            );
+            let faced = before - f;
+            let share = if faced > 0.0 {
+                (before - after) / faced
+            } else {
+                1.0
+            };
+            let share_in = in_sample_share[named - 1];
+            if share >= SUFFICIENT_SHARE
+                || share_in >= SUFFICIENT_SHARE_IN_SAMPLE
+                || p_after[named - 1] >= cfg.alpha
+            {
+                break;
+            }
+            notes.push(format!(
+                "{} closes {:.0} % of the gap left before it ({:.0} % in-sample) and a \
+                 significant residual remains: not enough to name it (the effect at work is \
+                 likely outside the library)",
+                st.effect,
+                100.0 * share,
+                100.0 * share_in
+            ));
+            named -= 1;
+        }
     }
-    if verdict != "none"
+    let verdict = if named == 0 {
+        "none".to_owned()
+    } else {
+        (accepted[..named].iter().map(|e| e.name()))
+            .collect::<Vec<_>>()
+            .join("+")
+    };
+    if named > 0
         && let Some(f) = floor0
-        && gap_p_value(&rows, &base) < cfg.alpha
+        && p_after[named - 1] < cfg.alpha
     {
+        let final_mse = steps[named - 1].heldout_rms_after_m.powi(2);
+        let why = if named >= cfg.max_effects {
+            format!(
+                "the search stops at {} effects (max_effects)",
+                cfg.max_effects
+            )
+        } else {
+            "no further candidate of the library passes".to_owned()
+        };
         notes.push(format!(
-            "after {verdict} the held-out RMS is {:.3} mm, {:.1}× the floor's {:.3} mm, a \
-             significant residual: another effect may be at work that no further candidate \
-             of the library explains",
+            "after {verdict} the cross-validated RMS is {:.3} mm, {:.1}× the floor's {:.3} mm, \
+             a significant residual: another effect is at work that the verdict does not name \
+             ({why})",
             final_mse.sqrt() * 1e3,
             (final_mse / f).sqrt(),
             f.sqrt() * 1e3
@@ -1390,7 +1504,13 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             100.0 * (step.heldout_rms_after_m / step.heldout_rms_before_m - 1.0)
         ));
     }
-    let ladder = ladder(baseline, &ctx, &rows, &r, &jb, &effect_cols, &folds, cfg)?;
+    let (ladder, test_rms) = ladder(baseline, &ctx, &rows, &r, &jb, &effect_cols, &folds, cfg)?;
+    let test_rms_final = match effect_cols.is_empty() {
+        true => test_rms.clone(),
+        false => ladder
+            .last()
+            .map_or_else(Vec::new, |l| l.test_rms_m.clone()),
+    };
     Ok(ArmDiagnosis {
         kind: baseline.kind,
         n_configurations: n_c,
@@ -1400,6 +1520,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
         floor_sigma_m: floor_var.map(f64::sqrt),
         floor_rms_m: floor0.map(f64::sqrt),
         heldout_rms_m: mse0.sqrt(),
+        test_rms_m: test_rms,
         gap_rms_m: gap2.max(0.0).sqrt(),
         gap_p_value: gap_p,
         gap_significant: chi_known && gap_p < cfg.alpha,
@@ -1408,6 +1529,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
         steps,
         verdict,
         heldout_rms_final_m: final_mse.sqrt(),
+        test_rms_final_m: test_rms_final,
         gap_closed_pct: 100.0 * closed,
         test_sets: baseline.tests.iter().map(|t| t.name.clone()).collect(),
         ladder,
@@ -1435,8 +1557,10 @@ fn cosine(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
     if d > 0.0 { (a.dot(b) / d).abs() } else { 0.0 }
 }
 
-/// The ladder: the baseline's kinematic rungs, then each accepted effect with its held-out
-/// error on the training rows (CV) and on every held-out set.
+/// The ladder: the baseline's kinematic rungs, then each accepted effect with its
+/// cross-validated error on the training rows and its error on every held-out set; and the
+/// geometric estimate's error on every held-out set (at the linearisation point, as the
+/// effects' rungs).
 #[allow(clippy::too_many_arguments)] // the pieces of one diagnosis
 fn ladder(
     baseline: &GeometricBaseline,
@@ -1447,7 +1571,7 @@ fn ladder(
     effects: &[(ArmEffect, DMatrix<f64>, Vec<usize>)],
     folds: &[Vec<usize>],
     cfg: &ArmConfig,
-) -> Result<Vec<ArmRung>, Error> {
+) -> Result<(Vec<ArmRung>, Vec<f64>), Error> {
     let mut out: Vec<ArmRung> = (baseline.ladder.iter())
         .map(|k| ArmRung {
             rung: k.rung.clone(),
@@ -1471,9 +1595,14 @@ fn ladder(
         .collect();
     let mut tests = Vec::new();
     for t in &baseline.tests {
-        tests.push(test_of(t, baseline, n_joints)?);
+        tests.push(test_of(t, baseline, ctx, n_joints)?);
     }
-    fn test_of(t: &HeldOutSet, b: &GeometricBaseline, n_joints: usize) -> Result<Test, Error> {
+    fn test_of(
+        t: &HeldOutSet,
+        b: &GeometricBaseline,
+        ctx: &Context<'_>,
+        n_joints: usize,
+    ) -> Result<Test, Error> {
         let n_c = t.configuration.iter().max().map_or(0, |m| m + 1);
         let q: Vec<Vec<f64>> = {
             let mut q = vec![Vec::new(); n_c];
@@ -1482,7 +1611,8 @@ fn ladder(
             }
             q
         };
-        let rows = Rows::new(&t.problem, &t.configuration, q, vec![0; n_c], Vec::new());
+        let time = ctx.held_out_times(n_c);
+        let rows = Rows::new(&t.problem, &t.configuration, q, vec![0; n_c], time);
         let r = -residuals(&t.problem, &t.x)?;
         let shared_idx: Vec<usize> = b.kept.iter().copied().filter(|&i| i < b.n_shared).collect();
         let shared = jacobian(&t.problem, &t.x, &shared_idx)?;
@@ -1497,7 +1627,20 @@ fn ladder(
             dq,
         })
     }
-    // The geometric rung's test figures at the linearisation point, for the step-by-step rows.
+    // The training coefficients of the shared columns (and the effects' after them) carried
+    // to a held-out set, then the set's own nuisance parameters (socket points) re-fitted.
+    let test_rms = |t: &Test, cols: &DMatrix<f64>, coef: Vec<f64>| {
+        let mut e = &t.r - cols * DVector::from_vec(coef);
+        if t.own.ncols() > 0 {
+            let (y, _) = lstsq(&t.own, &e);
+            e -= &t.own * y;
+        }
+        position_rms(&t.rows, &e)
+    };
+    let (x0, _) = lstsq(jb, r);
+    let geometric: Vec<f64> = (tests.iter())
+        .map(|t| test_rms(t, &t.shared, shared_kept.iter().map(|&k| x0[k]).collect()))
+        .collect();
     let mut a = jb.clone();
     let mut test_cols: Vec<DMatrix<f64>> = tests.iter().map(|t| t.shared.clone()).collect();
     let mut names_so_far = String::new();
@@ -1508,7 +1651,7 @@ fn ladder(
         a = grown;
         let held = cross_validate(&a, r, rows, folds, cfg.folds, None);
         let (x, _) = lstsq(&a, r);
-        let mut test_rms = Vec::new();
+        let mut rms = Vec::new();
         for (t, tc) in tests.iter().zip(&mut test_cols) {
             let (c, _) = effect_columns(*effect, ctx, &t.rows, &t.dq)
                 .unwrap_or_else(|_| (DMatrix::zeros(t.r.len(), visible.len().max(1)), Vec::new()));
@@ -1523,31 +1666,21 @@ fn ladder(
                 .columns_mut(tc.ncols(), c_vis.ncols())
                 .copy_from(&c_vis);
             *tc = grown;
-            // The training coefficients of the shared and effect columns, then the set's own
-            // nuisance parameters (socket points) re-fitted.
-            let coef: Vec<f64> = shared_kept
-                .iter()
-                .copied()
+            let coef: Vec<f64> = (shared_kept.iter().copied())
                 .chain(jb.ncols()..a.ncols())
                 .map(|k| x[k])
                 .collect();
-            let pred = &*tc * DVector::from_vec(coef);
-            let mut e = &t.r - pred;
-            if t.own.ncols() > 0 {
-                let (y, _) = lstsq(&t.own, &e);
-                e -= &t.own * y;
-            }
-            test_rms.push(position_rms(&t.rows, &e));
+            rms.push(test_rms(t, tc, coef));
         }
         names_so_far.push_str(&format!("+ {}", effect.name()));
         out.push(ArmRung {
             rung: names_so_far.clone(),
             cv_rms_m: held.mse().sqrt(),
-            test_rms_m: test_rms,
+            test_rms_m: rms,
         });
         names_so_far.push(' ');
     }
-    Ok(out)
+    Ok((out, geometric))
 }
 
 /// RMS of the 3-D position error per configuration, m, of weighted residuals `e`.

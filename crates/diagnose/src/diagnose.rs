@@ -17,12 +17,11 @@ use crate::Error;
 /// the column to count as visible (below: indistinguishable from the baseline).
 const VISIBLE_TOL: f64 = 0.005;
 
-/// Share of the original gap the accepted effects must close together (unless what remains
-/// is consistent with the floor); below it the verdict is `none`.
+/// Share of its round's held-out gap (what the effects accepted before it left, above the
+/// floor) the last accepted effect must close, unless what it leaves is consistent with the
+/// floor (or it closes [`SUFFICIENT_SHARE_IN_SAMPLE`] of the round's in-sample excess); below
+/// it the effect is not named and the rule goes on with the one before it.
 const SUFFICIENT_SHARE: f64 = 0.8;
-
-/// Once the accepted effects close this share of the held-out gap, the greedy search stops.
-const STOP_SHARE: f64 = 0.95;
 
 /// The same on the in-sample weighted excess (an effect the baseline mostly absorbs is
 /// estimated poorly on training folds, so its held-out share understates it).
@@ -72,15 +71,18 @@ pub struct DiagnoseConfig {
     /// Family-wise significance level of the candidate tests (Holm–Bonferroni) and of the
     /// gap test.
     pub alpha: f64,
-    /// Largest number of effects added greedily.
+    /// Largest number of effects added greedily (rounds go on while the cross-validated
+    /// error is significantly above the floor and a candidate passes).
     pub max_effects: usize,
-    /// Smallest share of the remaining gap (held-out) a winner must close, 0–1.
+    /// Smallest share of its round's gap a winner must close, 0–1: the cross-validated error
+    /// left by the effects accepted before it, above the floor.
     pub min_gap_share: f64,
 }
 
 impl Default for DiagnoseConfig {
-    /// Full baseline, 5 folds, α = 0.01, up to 2 effects, each winner closes ≥ 20 % of the
-    /// remaining gap (so that two effects of similar size can be found one after the other);
+    /// Full baseline, 5 folds, α = 0.01, up to 3 effects, each winner closes ≥ 20 % of the
+    /// gap left by the effects before it (so that two effects of similar size, or a small one
+    /// after a large one, can be found one after the other);
     /// together the accepted effects must close ≥ 80 % of the gap or leave a residual
     /// consistent with the floor, else the verdict is `none` (docs/diagnosis.md §3 (d)).
     fn default() -> DiagnoseConfig {
@@ -88,7 +90,7 @@ impl Default for DiagnoseConfig {
             baseline: Baseline::Full,
             folds: 5,
             alpha: 0.01,
-            max_effects: 2,
+            max_effects: 3,
             min_gap_share: 0.2,
         }
     }
@@ -114,9 +116,11 @@ pub struct Candidate {
     pub effect: String,
     /// Greedy round (1 = against the baseline; 2 = after the first winner was added).
     pub round: usize,
-    /// Held-out (cross-validated) distance RMS of the round's baseline, m.
+    /// Cross-validated distance RMS of the round's baseline, m.
+    #[serde(rename = "cv_rms_before_m")]
     pub heldout_rms_before_m: f64,
-    /// Held-out distance RMS with this candidate's parameters added, m.
+    /// Cross-validated distance RMS with this candidate's parameters added, m.
+    #[serde(rename = "cv_rms_after_m")]
     pub heldout_rms_after_m: f64,
     /// Share of the round's held-out gap the candidate closes, %:
     /// `(MSE_before − MSE_after)/(MSE_before − floor)`.
@@ -193,9 +197,11 @@ pub struct JointProbe {
 pub struct Step {
     /// The effect.
     pub effect: String,
-    /// Held-out distance RMS before adding it, m.
+    /// Cross-validated distance RMS before adding it, m.
+    #[serde(rename = "cv_rms_before_m")]
     pub heldout_rms_before_m: f64,
-    /// Held-out distance RMS after adding it (nonlinear refit), m.
+    /// Cross-validated distance RMS after adding it (nonlinear refit), m.
+    #[serde(rename = "cv_rms_after_m")]
     pub heldout_rms_after_m: f64,
     /// Share of the original gap closed by this step, %.
     pub gap_closed_pct: f64,
@@ -222,7 +228,8 @@ pub struct Diagnosis {
     pub sigma_e_rad: f64,
     /// Floor of the held-out distance RMS, m: `sqrt(mean(σ_i²·(1 + h_i)))`.
     pub floor_rms_m: f64,
-    /// Held-out distance RMS of the baseline, m.
+    /// Cross-validated distance RMS of the baseline, m.
+    #[serde(rename = "cv_rms_m")]
     pub heldout_rms_m: f64,
     /// The gap `sqrt(max(0, MSE_cv − floor²))`, m.
     pub gap_rms_m: f64,
@@ -243,7 +250,8 @@ pub struct Diagnosis {
     pub candidates: Vec<Candidate>,
     /// Accepted effects in order.
     pub steps: Vec<Step>,
-    /// Held-out distance RMS after all accepted effects, m.
+    /// Cross-validated distance RMS after all accepted effects, m.
+    #[serde(rename = "cv_rms_final_m")]
     pub heldout_rms_final_m: f64,
     /// Share of the held-out gap closed by all accepted effects, %.
     pub gap_closed_pct: f64,
@@ -1127,6 +1135,9 @@ pub fn diagnose(
     }
     let mut candidates = Vec::new();
     let mut steps: Vec<Step> = Vec::new();
+    // Per accepted effect: its share of its round's held-out gap and of its round's in-sample
+    // excess, and whether a significant gap remains after it.
+    let mut round_shares: Vec<(f64, f64, bool)> = Vec::new();
     let mut accepted_names: Vec<String> = Vec::new();
     let mut round_gap_significant = gap_significant;
     for round in 1..=cfg.max_effects {
@@ -1156,7 +1167,6 @@ pub fn diagnose(
             }
         }
         let adjusted = holm(&tested.iter().map(|t| t.p_raw).collect::<Vec<_>>());
-        let round_gap2 = base.cv.mse() - base.cv.floor();
         for (t, p) in tested.iter_mut().zip(&adjusted) {
             t.cand.p_value = *p;
             if t.cand.n_visible == 0 {
@@ -1263,19 +1273,21 @@ pub fn diagnose(
             parameters,
             confusable_with: confusable,
         });
-        let _ = round_gap2;
         accepted_names.push(win.cand.effect.clone());
         candidates.extend(tested.into_iter().map(|t| t.cand));
+        let (mse_b, floor_b, excess_b) = (base.cv.mse(), base.cv.floor(), base_rss_excess(&base));
         base = new_base;
         round_gap_significant = chi2_sf(base.cv.chi2(), n as f64) < cfg.alpha;
-        // Sufficient: what is left is noise, or too small a share of the gap to attribute
-        // beside the nonlinear remainder of a large first effect.
-        let closed_so_far = if gap2 > 0.0 {
-            (mse0 - base.cv.mse()) / gap2
-        } else {
-            1.0
-        };
-        if !round_gap_significant || closed_so_far >= STOP_SHARE {
+        let share = |b: f64, a: f64, gap: f64| if gap > 0.0 { (b - a) / gap } else { 1.0 };
+        round_shares.push((
+            share(mse_b, base.cv.mse(), mse_b - floor_b),
+            share(excess_b, base_rss_excess(&base), excess_b),
+            round_gap_significant,
+        ));
+        // Another round while what is left is significantly above the floor: a second
+        // effect is judged by the gap the first one left, however small a share of the
+        // original gap that is.
+        if !round_gap_significant {
             break;
         }
     }
@@ -1290,32 +1302,54 @@ pub fn diagnose(
         .collect();
     let floor_rms = floor0.sqrt();
     let gap_rms = gap2.max(0.0).sqrt();
-    let closed = if gap2 > 0.0 {
-        (mse0 - final_mse) / gap2
-    } else {
-        0.0
-    };
     let closed_in_sample = if excess0 > 0.0 {
         (excess0 - base_rss_excess(&base)) / excess0
     } else {
         0.0
     };
-    let mut verdict = if accepted_names.is_empty() {
+    // Sufficiency, from the last accepted effect back: one that closes less than
+    // SUFFICIENT_SHARE of its round's held-out gap (what the effects before it left) and less
+    // than SUFFICIENT_SHARE_IN_SAMPLE of its round's in-sample excess, leaving a significant
+    // gap, explains a part of something else; it is not named, and the rule goes on with the
+    // one before it.
+    let mut named = accepted_names.len();
+    while named > 0 {
+        let (cv, in_sample, significant) = round_shares[named - 1];
+        if cv >= SUFFICIENT_SHARE || in_sample >= SUFFICIENT_SHARE_IN_SAMPLE || !significant {
+            break;
+        }
+        notes.push(format!(
+            "{} explains {:.0} % of the held-out gap left before it ({:.0} % in-sample) and a \
+             significant residual remains: not enough to name it",
+            accepted_names[named - 1],
+            100.0 * cv,
+            100.0 * in_sample
+        ));
+        named -= 1;
+    }
+    let verdict = if named == 0 {
         "none".to_owned()
     } else {
-        accepted_names.join("+")
+        accepted_names[..named].join("+")
     };
-    if !accepted_names.is_empty()
-        && closed < SUFFICIENT_SHARE
-        && closed_in_sample < SUFFICIENT_SHARE_IN_SAMPLE
-        && round_gap_significant
-    {
+    if named > 0 && round_shares[named - 1].2 {
+        let final_mse = steps[named - 1].heldout_rms_after_m.powi(2);
+        let why = if named >= cfg.max_effects {
+            format!(
+                "the search stops at {} effects (max_effects)",
+                cfg.max_effects
+            )
+        } else {
+            "no further candidate of the library passes".to_owned()
+        };
         notes.push(format!(
-            "{verdict} explains {:.0} % of the held-out gap ({:.0} % in-sample) and a significant residual remains: not enough to name it",
-            100.0 * closed,
-            100.0 * closed_in_sample
+            "after {verdict} the cross-validated RMS is {:.1} µm, {:.1}× the floor's {:.1} µm, a \
+             significant residual: another effect is at work that the verdict does not name \
+             ({why})",
+            final_mse.sqrt() * 1e6,
+            (final_mse / floor0).sqrt(),
+            floor_rms * 1e6
         ));
-        verdict = "none".to_owned();
     }
     Ok(Diagnosis {
         baseline,

@@ -1,9 +1,12 @@
 //! The serial-arm blind test on a few fixed cases (positions data, fewer rows than the full
 //! run so that it takes seconds): clean data and an outside effect must give `none`, gravity
-//! compliance and backlash must be named.
+//! compliance and backlash must be named; and on the full 200 rows, a drift carried to the
+//! held-out rows, a second effect after a dominant first, and the report's names.
 
+use hapcal_diagnose::arm::{ArmConfig, ArmDiagnosis, diagnose_arm};
 use hapcal_studies::arm_blind::{
-    ArmCase, ArmCaseKind, ArmData, ArmRobot, Injected, load_setup, run_case,
+    ArmCase, ArmCaseKind, ArmData, ArmRobot, Injected, N_POSITIONS, SIGMA_POSITION_M, load_setup,
+    run_case, simulate_baseline,
 };
 
 /// Rows per case (the full run uses 200).
@@ -76,4 +79,100 @@ fn fixed_positions_cases_get_their_verdicts() {
         }
     }
     assert!(wrong.is_empty(), "{wrong:#?}");
+}
+
+/// Geometry, noise and the effects of `injected` on the iiwa 14's positions data (200 rows,
+/// the last 30 % held out), diagnosed with the default settings.
+fn diagnose_iiwa_positions(seed: u64, injected: Injected) -> ArmDiagnosis {
+    let setup = load_setup(ArmRobot::Iiwa14).expect("iiwa14 fixtures");
+    let kind = match injected {
+        Injected::Pair(..) => ArmCaseKind::Two,
+        _ => ArmCaseKind::One,
+    };
+    let c = case(seed, ArmRobot::Iiwa14, kind, injected);
+    let baseline = simulate_baseline(&c, &setup, N_POSITIONS).expect("baseline");
+    diagnose_arm(&baseline, &ArmConfig::default()).expect("diagnosis")
+}
+
+/// The floor of a 3-D position RMS: σ per axis on three axes.
+fn floor_3d() -> f64 {
+    SIGMA_POSITION_M * 3f64.sqrt()
+}
+
+#[test]
+fn thermal_drift_fitted_on_the_training_rows_carries_to_the_later_test_rows() {
+    // 1.1 mm over the recording: the held-out rows (the last 30 %, recorded after the
+    // training rows) lie 0.2–0.5 mm beyond the training's mean position of the drift.
+    let d = diagnose_iiwa_positions(
+        11,
+        Injected::ThermalDrift {
+            v: [8e-4, -6e-4, 5e-4],
+        },
+    );
+    assert_eq!(d.verdict, "thermal_drift", "{:#?}", d.candidates);
+    let (geometric, named) = (d.test_rms_m[0], d.test_rms_final_m[0]);
+    // 60 held-out rows × 3 axes: the RMS's relative standard error is 1/√360 ≈ 5 %; the
+    // carried estimate adds its own prediction variance (140 training rows). 1.3 × the floor
+    // is six standard errors; a drift referenced to the held-out rows' own time (or left at
+    // the training's mean) leaves several floors.
+    assert!(
+        named < 1.3 * floor_3d(),
+        "test RMS with the drift {named}, floor {}",
+        floor_3d()
+    );
+    assert!(geometric > 3.0 * floor_3d(), "test RMS without {geometric}");
+}
+
+#[test]
+fn a_second_effect_is_judged_by_the_gap_the_first_one_left() {
+    // A dominant drift and a gear-ratio error that leaves a small share of the original gap
+    // but most of what the drift leaves.
+    let d = diagnose_iiwa_positions(
+        12,
+        Injected::Pair(
+            Box::new(Injected::GearRatio {
+                s: vec![1.2e-4, -1.2e-4, 1.2e-4, 1.2e-4, -1.2e-4, 1.2e-4, 6e-5],
+            }),
+            Box::new(Injected::ThermalDrift {
+                v: [1.2e-3, -9e-4, 8e-4],
+            }),
+        ),
+    );
+    let cfg = ArmConfig::default();
+    assert_eq!(d.steps.len(), 2, "{:#?}", d.candidates);
+    assert_eq!(d.steps[0].effect, "thermal_drift");
+    assert_eq!(d.steps[1].effect, "gear_ratio");
+    // The case this is about: the second effect closes less than `min_gap_share` of the gap
+    // before the first, and more of the gap the first left.
+    assert!(
+        d.steps[1].gap_closed_pct < 100.0 * cfg.min_gap_share,
+        "{:?}",
+        d.steps
+    );
+    assert!(d.steps[1].round_gap_closed_pct >= 100.0 * cfg.min_gap_share);
+    assert_eq!(d.verdict, "thermal_drift+gear_ratio", "{:?}", d.notes);
+    // Both named: what is left is the floor (the search stopped there).
+    assert!(
+        d.heldout_rms_final_m < 1.3 * floor_3d(),
+        "{}",
+        d.heldout_rms_final_m
+    );
+}
+
+#[test]
+fn the_report_names_cross_validated_and_test_figures_as_such() {
+    let d = diagnose_iiwa_positions(13, Injected::None);
+    let v = serde_json::to_value(&d).expect("json");
+    for key in [
+        "cv_rms_m",
+        "test_rms_m",
+        "cv_rms_final_m",
+        "test_rms_final_m",
+    ] {
+        assert!(v.get(key).is_some(), "no {key}");
+    }
+    assert!(v.get("heldout_rms_m").is_none());
+    let c = &v["candidates"][0];
+    assert!(c.get("cv_rms_before_m").is_some() && c.get("cv_rms_after_m").is_some());
+    assert_eq!(v["test_rms_m"].as_array().map(Vec::len), Some(1));
 }
