@@ -241,13 +241,22 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
                 .collect::<Vec<_>>()
                 .join(", ")
         };
+        let accepted: Vec<&str> = (d["steps"].as_array().into_iter().flatten())
+            .filter_map(|s| s["effect"].as_str())
+            .collect();
         if d["test_rms_m"].as_array().is_some_and(|t| !t.is_empty()) {
             md.push_str(&format!(
-                "- Test-file RMS (training estimate carried over): {} mm geometric, {} mm with \
-                 the named effects.\n",
-                per_test("test_rms_m"),
-                per_test("test_rms_final_m")
+                "- Test-file RMS (training estimate carried over): {} mm geometric",
+                per_test("test_rms_m")
             ));
+            if !accepted.is_empty() {
+                md.push_str(&format!(
+                    ", {} mm with {}",
+                    per_test("test_rms_final_m"),
+                    accepted.join(" + ")
+                ));
+            }
+            md.push_str(".\n");
         }
         let flagged = (d["where"].as_array().into_iter().flatten())
             .filter(|b| b["flagged"] == true)
