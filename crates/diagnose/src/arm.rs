@@ -98,7 +98,8 @@ pub enum ArmEffect {
     /// encoder disc.
     Harmonic2,
     /// Backlash: `Δq_j = b_j·s_j`, `s_j` the sign of the joint's last motion in time order
-    /// within the same socket or file ([`approach_signs`]).
+    /// within the same socket or file ([`approach_signs`], on the readings); `b_j < 0` when the
+    /// output trails the motor by the half-play `|b_j|`.
     Backlash,
     /// Gear-ratio (scale) error: `Δq_j = s_j·q_j`.
     GearRatio,

@@ -183,8 +183,9 @@ pub enum Injected {
         /// Cosine amplitudes, rad.
         b: Vec<f64>,
     },
-    /// `Δq_j = b_j·s_j`, `s_j` the sign of joint `j`'s last motion in its readings
-    /// ([`hapcal_diagnose::arm::approach_signs`], the diagnosis's own definition), rad.
+    /// `Δq_j = −b_j·s_j`, `s_j` the sign of joint `j`'s last motion in its readings
+    /// ([`hapcal_diagnose::arm::approach_signs`], the diagnosis's own definition): the output
+    /// trails the motor by the half-play `b_j > 0`, so the diagnosis's parameter is `−b_j`.
     Backlash {
         /// Half-play per joint, rad.
         b: Vec<f64>,
@@ -539,7 +540,7 @@ impl Truth<'_> {
                     a[j] * hq.sin() + b[j] * hq.cos()
                 })
                 .collect(),
-            Injected::Backlash { b } => (0..n).map(|j| b[j] * signs[j]).collect(),
+            Injected::Backlash { b } => (0..n).map(|j| -b[j] * signs[j]).collect(),
             Injected::GearRatio { s } => (0..n).map(|j| s[j] * q[j]).collect(),
             Injected::Coupling { j, k, c } => {
                 let mut d = vec![0.0; n];
@@ -553,15 +554,15 @@ impl Truth<'_> {
     /// The readings of one group's configurations (a file or a socket, in time order) at
     /// effective angles `q_eff`: `q_read = q_eff − Δq`. Backlash's sign is that of the
     /// readings' own last motion ([`hapcal_diagnose::arm::approach_signs`] on the readings, as the diagnosis sees
-    /// them: the motor drives, the output trails by the play), so each joint's sign is chosen
-    /// to agree with the reading it produces; in the dead band, where neither sign does, the
-    /// previous one is kept.
+    /// them: the motor drives, the output trails by the half-play), so each joint's sign is
+    /// chosen to agree with the reading it produces (with the output trailing, one always
+    /// does; the previous sign is the fallback).
     fn readings(&self, q_eff: &[Vec<f64>]) -> Vec<Vec<f64>> {
         let play: Vec<f64> = (0..q_eff.first().map_or(0, Vec::len))
             .map(|j| {
                 (self.injected.parts().into_iter())
                     .map(|e| match e {
-                        Injected::Backlash { b } => b[j],
+                        Injected::Backlash { b } => -b[j],
                         _ => 0.0,
                     })
                     .sum()
