@@ -433,7 +433,11 @@ fn a_model_the_measurement_files_do_not_take_is_refused_by_its_value() {
         err.contains("compliance takes the link masses from the URDF's inertial tags"),
         "{err}"
     );
-    for value in ["compliance-harmonic", "transmissions", "actuator-compliance"] {
+    for value in [
+        "compliance-harmonic",
+        "transmissions",
+        "actuator-compliance",
+    ] {
         let err = refused_model(&args, value);
         assert!(
             err.contains("measurement files") && err.contains("frames-only, joint-offsets"),
