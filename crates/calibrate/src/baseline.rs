@@ -47,6 +47,11 @@ pub struct HeldOutSet {
     pub x: Col<f64>,
     /// Configuration (0-based, in file order) of each problem row.
     pub configuration: Vec<usize>,
+    /// Per configuration: its time on the training rows' clock, s, when the set has a time
+    /// column that continues that clock (every time after the training's last); `None`
+    /// otherwise (a clock that restarts with each file, no time column, sockets): the set is
+    /// then taken to follow the training rows.
+    pub time: Option<Vec<f64>>,
 }
 
 /// One rung of the kinematic ladder.
@@ -180,16 +185,23 @@ pub fn baseline_from_tables(
     let x = out.fitted.x.clone();
     let kept = kept_in_full_layout(&out.fitted.identified, &out.fitted.names);
     let mut tests = Vec::new();
+    let last_training_time = (train.iter().flat_map(|t| &t.rows))
+        .map(|r| r.t_s)
+        .try_fold(f64::NEG_INFINITY, |m, t| t.map(|t| m.max(t)));
     for t in &test {
         let (obs, configuration) = table_observations(std::slice::from_ref(t));
         let problem =
             CalibrationProblem::on_tree(out.tree.clone(), obs, weights, Default::default())
                 .context("building the held-out problem")?;
+        let time: Option<Vec<f64>> = t.rows.iter().map(|r| r.t_s).collect();
+        let time = time
+            .filter(|time| last_training_time.is_some_and(|last| time.iter().all(|&s| s > last)));
         tests.push(HeldOutSet {
             name: t.name.clone(),
             problem,
             x: x.clone(),
             configuration,
+            time,
         });
     }
     let (mut group, mut time, mut q) = (Vec::new(), Vec::new(), Vec::new());
@@ -384,6 +396,7 @@ pub fn baseline_from_sets(
             problem: held,
             x: xt,
             configuration: (0..n).collect(),
+            time: None,
         });
     }
     let mut rungs = Vec::new();

@@ -1612,7 +1612,11 @@ fn ladder(
             }
             q
         };
-        let time = ctx.held_out_times(n_c);
+        // The set's own times where they continue the training's clock, else the training's
+        // clock continued at its median step.
+        let time = (t.time.clone())
+            .filter(|time| time.len() == n_c)
+            .unwrap_or_else(|| ctx.held_out_times(n_c));
         let rows = Rows::new(&t.problem, &t.configuration, q, vec![0; n_c], time);
         let r = -residuals(&t.problem, &t.x)?;
         let shared_idx: Vec<usize> = b.kept.iter().copied().filter(|&i| i < b.n_shared).collect();
