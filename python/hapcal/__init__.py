@@ -98,7 +98,8 @@ class Measurements:
         hapcal log CSV, or a MUKCa placement / run folder, read when calibrating (its joint
         columns are matched to the device's joints then).
 
-        ``length_unit``: ``"m"`` or ``"mm"`` (positions, distances, prismatic joints);
+        ``length_unit``: ``"m"`` or ``"mm"`` (positions, distances; prismatic joint readings
+        stay in m, the robot's own unit);
         ``angle_unit``: ``"rad"`` or ``"deg"`` (revolute joints, ``phix, phiy, phiz``).
 
         Raises :class:`HapcalError` for a missing file or a unit it does not know.

@@ -116,9 +116,13 @@ enum Command {
         /// ones in file order, as a test set (0.3: the first 70 % train).
         #[arg(long, allow_hyphen_values = true)]
         test_last: Option<f64>,
-        /// Unit of lengths in measurement files: m or mm.
+        /// Unit of positions and distances in measurement files: m or mm.
         #[arg(long, default_value = "m")]
         length_unit: hapcal_io::LengthUnit,
+        /// Unit of prismatic joint readings in measurement files: m or mm (their own unit,
+        /// whatever the instrument's).
+        #[arg(long, default_value = "m")]
+        joint_length_unit: hapcal_io::LengthUnit,
         /// Unit of angles in measurement files: rad or deg.
         #[arg(long, default_value = "rad")]
         angle_unit: hapcal_io::AngleUnit,
@@ -222,9 +226,13 @@ enum Command {
         /// Known distance between the two sockets of a placement, m.
         #[arg(long, default_value_t = 0.05)]
         socket_distance_m: f64,
-        /// Unit of lengths in measurement files: m or mm.
+        /// Unit of positions and distances in measurement files: m or mm.
         #[arg(long, default_value = "m")]
         length_unit: hapcal_io::LengthUnit,
+        /// Unit of prismatic joint readings in measurement files: m or mm (their own unit,
+        /// whatever the instrument's).
+        #[arg(long, default_value = "m")]
+        joint_length_unit: hapcal_io::LengthUnit,
         /// Unit of angles in measurement files: rad or deg.
         #[arg(long, default_value = "rad")]
         angle_unit: hapcal_io::AngleUnit,
@@ -423,10 +431,12 @@ fn run(cli: Cli) -> Result<()> {
             sigma_rad,
             test_last,
             length_unit,
+            joint_length_unit,
             angle_unit,
             joint,
         } => {
-            let units = hapcal_io::Units::new(length_unit, angle_unit);
+            let units =
+                hapcal_io::Units::new(length_unit, angle_unit).with_joint_length(joint_length_unit);
             let (tip, more_tips) = match tips.split_first() {
                 Some((first, rest)) => (first.clone(), rest.to_vec()),
                 None => ("ball_link".to_owned(), Vec::new()),
@@ -742,6 +752,7 @@ fn run(cli: Cli) -> Result<()> {
             sigma_rad,
             socket_distance_m,
             length_unit,
+            joint_length_unit,
             angle_unit,
             baseline,
             folds,
@@ -805,7 +816,8 @@ fn run(cli: Cli) -> Result<()> {
                     device: device.clone(),
                     tip,
                     tips: more_tips,
-                    units: hapcal_io::Units::new(length_unit, angle_unit),
+                    units: hapcal_io::Units::new(length_unit, angle_unit)
+                        .with_joint_length(joint_length_unit),
                     sigma_rad,
                     test_last,
                     data: data.clone(),

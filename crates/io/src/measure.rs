@@ -77,16 +77,32 @@ impl std::str::FromStr for AngleUnit {
 /// The units of a measurement file's columns (SI by default).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Units {
-    /// Positions, distances and prismatic joints.
+    /// Positions and distances (what the instrument measured).
     pub length: LengthUnit,
     /// Revolute joints and `phix, phiy, phiz`.
     pub angle: AngleUnit,
+    /// Prismatic joint readings (what the robot's encoders report): their own unit, since an
+    /// instrument in millimetres says nothing about the robot's controller (a torso lift read
+    /// in m stays in m).
+    pub joint_length: LengthUnit,
 }
 
 impl Units {
-    /// Units from their parts.
+    /// Units of the measurements' lengths and angles; prismatic joints in m.
     pub fn new(length: LengthUnit, angle: AngleUnit) -> Self {
-        Self { length, angle }
+        Self {
+            length,
+            angle,
+            joint_length: LengthUnit::M,
+        }
+    }
+
+    /// The same units with prismatic joint readings in `joint_length`.
+    pub fn with_joint_length(self, joint_length: LengthUnit) -> Self {
+        Self {
+            joint_length,
+            ..self
+        }
     }
 }
 
@@ -449,6 +465,7 @@ pub fn read_measurement_file(
         .collect();
 
     let length = units.length.to_m();
+    let joint_length = units.joint_length.to_m();
     let angle = units.angle.to_rad();
     let mut rows = Vec::new();
     let mut previous_t: Option<f64> = None;
@@ -472,7 +489,7 @@ pub fn read_measurement_file(
         let mut q = Vec::with_capacity(n);
         for (j, &c) in joint_column.iter().enumerate() {
             let prismatic = schema.prismatic.get(j).copied().unwrap_or(false);
-            let v = value(c)? * if prismatic { length } else { angle };
+            let v = value(c)? * if prismatic { joint_length } else { angle };
             if prismatic {
                 Error::check_length(path, line, c as u64 + 1, &names[c], v)?;
             }

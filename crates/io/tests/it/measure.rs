@@ -110,11 +110,22 @@ fn joint_columns_by_name_in_any_order_with_markers_and_an_unknown_column() {
 fn q_numbered_columns_and_units_scale_lengths_and_angles() {
     // Joint 1 prismatic (m), joint 2 revolute (rad).
     let schema = Schema::new(&["slide", "turn"], &[true, false], &[(0.0, 1.0), (-PI, PI)]);
-    let mm = Units::new(LengthUnit::Mm, AngleUnit::Rad);
+    let mm = Units::new(LengthUnit::Mm, AngleUnit::Rad).with_joint_length(LengthUnit::Mm);
     let table = read("mm.csv", "q2,q1,x,y,z\n0.5,500,100,-200,300\n", &schema, mm).unwrap();
     let row = &table.rows[0];
     assert_close(row.q[0], 0.5, 1e-15);
     assert_eq!(row.q[1], 0.5, "a revolute joint is not a length");
+    // Millimetres of the instrument leave the robot's prismatic readings in their own unit.
+    let instrument_mm = Units::new(LengthUnit::Mm, AngleUnit::Rad);
+    let table = read(
+        "mm2.csv",
+        "q2,q1,x,y,z\n0.5,0.24,100,-200,300\n",
+        &schema,
+        instrument_mm,
+    )
+    .unwrap();
+    assert_eq!(table.rows[0].q[0], 0.24, "a torso lift read in m stays in m");
+    assert_eq!(table.rows[0].markers[0].position_m, [0.1, -0.2, 0.3]);
     let p = row.markers[0].position_m;
     assert_close(p[0], 0.1, 1e-15);
     assert_close(p[1], -0.2, 1e-15);
