@@ -124,7 +124,10 @@ fn q_numbered_columns_and_units_scale_lengths_and_angles() {
         instrument_mm,
     )
     .unwrap();
-    assert_eq!(table.rows[0].q[0], 0.24, "a torso lift read in m stays in m");
+    assert_eq!(
+        table.rows[0].q[0], 0.24,
+        "a torso lift read in m stays in m"
+    );
     assert_eq!(table.rows[0].markers[0].position_m, [0.1, -0.2, 0.3]);
     let p = row.markers[0].position_m;
     assert_close(p[0], 0.1, 1e-15);
