@@ -1,0 +1,267 @@
+//! Transmissions: the map from a joint reading θ to the joint angle q and its derivative.
+
+use crate::math::{atan, sin_cos};
+use crate::{Error, MAX_COEFFS};
+
+/// Parameters of the capstan transmission error, paper eq. 1 (docs/design.md §3.2).
+///
+/// `Default` is the ideal drive (no offset, exact ratio, concentric drums). The names are
+/// those of `[calibration.values]`: `capstan{j}.c`, `.re`, `.r_o`, `.beta_o`, `.r_i`,
+/// `.beta_i`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CapstanParams {
+    /// Joint offset `c`, rad.
+    pub c_rad: f64,
+    /// Ratio error `Re` (the actual ratio is `R + Re`), dimensionless.
+    pub re: f64,
+    /// Output-drum eccentricity radius `r_o`, m.
+    pub r_o_m: f64,
+    /// Output-drum eccentricity phase `β_o`, rad.
+    pub beta_o_rad: f64,
+    /// Input-drum eccentricity radius `r_i`, m.
+    pub r_i_m: f64,
+    /// Input-drum eccentricity phase `β_i`, rad.
+    pub beta_i_rad: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Kind {
+    Direct,
+    Capstan {
+        drum_distance_m: f64,
+        p: CapstanParams,
+        /// `atan(r_o sin β_o / (D − r_o cos β_o))`, the output term at θ = 0.
+        ecc_o0: f64,
+        /// The input term at θ = 0.
+        ecc_i0: f64,
+    },
+    Polynomial {
+        lo: f64,
+        hi: f64,
+        n_coeffs: usize,
+        coeffs: [f64; MAX_COEFFS],
+    },
+}
+
+/// How one joint is driven: reading θ (motor angle / R, rad) → joint angle q (rad), and the
+/// nominal ratio R (motor angle per unit reading).
+///
+/// Three kinds, as `hapcal calibrate` identifies them (docs/design.md §3.2–3.3): direct
+/// (`q = θ`, R = 1), capstan (`q = θ + Δθ_caps(θ)`, paper eq. 1) and polynomial
+/// (`q = θ + p(θ)`, `p` in the Chebyshev basis on the joint range: the paper's tenth-order
+/// model of the capstan-plus-parallelogram joint 4).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Drive {
+    ratio: f64,
+    kind: Kind,
+}
+
+/// One eccentricity term of eq. 1 and its derivative with respect to its phase φ:
+/// `atan(r sin φ / (D − r cos φ))` and `r (D cos φ − r) / (r² + D² − 2 r D cos φ)`.
+#[inline]
+fn ecc_and_dphi(r: f64, d: f64, phi: f64) -> (f64, f64) {
+    let (s, c) = sin_cos(phi);
+    let value = atan(r * s / (d - r * c));
+    let q = r * r + d * d - 2.0 * r * d * c;
+    (value, r * (d * c - r) / q)
+}
+
+fn positive(what: &'static str, value: f64) -> Result<f64, Error> {
+    if !value.is_finite() {
+        return Err(Error::NotFinite {
+            what,
+            index: 0,
+            value,
+        });
+    }
+    if value <= 0.0 {
+        return Err(Error::Invalid {
+            what,
+            value,
+            expected: "a positive number",
+        });
+    }
+    Ok(value)
+}
+
+impl Drive {
+    /// Direct drive: `q = θ`, R = 1.
+    pub const DIRECT: Drive = Drive {
+        ratio: 1.0,
+        kind: Kind::Direct,
+    };
+
+    /// A capstan drive of nominal ratio `ratio` (> 0) and drum centre distance
+    /// `drum_distance_m` (m, > 0) with transmission-error parameters `p` (paper eq. 1).
+    ///
+    /// # Errors
+    /// [`Error::NotFinite`] for a NaN or infinite value (named `ratio`, `drum_distance_m`,
+    /// `c_rad`, …); [`Error::Invalid`] for a non-positive ratio or drum distance, an
+    /// eccentricity `|r_o_m|` or `|r_i_m|` ≥ D, or `R + Re ≤ 0` (eq. 1 is undefined there).
+    pub fn capstan(ratio: f64, drum_distance_m: f64, p: CapstanParams) -> Result<Drive, Error> {
+        let ratio = positive("ratio", ratio)?;
+        let d = positive("drum_distance_m", drum_distance_m)?;
+        let fields = [
+            ("c_rad", p.c_rad),
+            ("re", p.re),
+            ("r_o_m", p.r_o_m),
+            ("beta_o_rad", p.beta_o_rad),
+            ("r_i_m", p.r_i_m),
+            ("beta_i_rad", p.beta_i_rad),
+        ];
+        for (what, value) in fields {
+            if !value.is_finite() {
+                return Err(Error::NotFinite {
+                    what,
+                    index: 0,
+                    value,
+                });
+            }
+        }
+        for (what, value) in [("r_o_m", p.r_o_m), ("r_i_m", p.r_i_m)] {
+            if value.abs() >= d {
+                return Err(Error::Invalid {
+                    what,
+                    value,
+                    expected: "|r| < drum_distance_m",
+                });
+            }
+        }
+        if ratio + p.re <= 0.0 {
+            return Err(Error::Invalid {
+                what: "ratio + re",
+                value: ratio + p.re,
+                expected: "a positive number",
+            });
+        }
+        Ok(Drive {
+            ratio,
+            kind: Kind::Capstan {
+                drum_distance_m: d,
+                p,
+                ecc_o0: ecc_and_dphi(p.r_o_m, d, p.beta_o_rad).0,
+                ecc_i0: ecc_and_dphi(p.r_i_m, d, p.beta_i_rad).0,
+            },
+        })
+    }
+
+    /// A drive of nominal ratio `ratio` (> 0) whose joint angle is `q = θ + p(θ)`, with
+    /// `p(θ) = Σ_k coeffs[k]·T_k(u)`, `u = (2θ − lo − hi)/(hi − lo)` (rad; Chebyshev basis
+    /// on `[lo, hi]`, the joint range; docs/design.md §3.3). Outside the range `p` is
+    /// extrapolated.
+    ///
+    /// # Errors
+    /// [`Error::NotFinite`] for a NaN or infinite value; [`Error::Invalid`] for a
+    /// non-positive ratio, `lo ≥ hi` or no coefficient; [`Error::TooMany`] for more than
+    /// [`MAX_COEFFS`] coefficients.
+    pub fn polynomial(ratio: f64, lo: f64, hi: f64, coeffs: &[f64]) -> Result<Drive, Error> {
+        let ratio = positive("ratio", ratio)?;
+        for (index, value) in [lo, hi].into_iter().enumerate() {
+            if !value.is_finite() {
+                return Err(Error::NotFinite {
+                    what: "domain",
+                    index,
+                    value,
+                });
+            }
+        }
+        if lo >= hi {
+            return Err(Error::Invalid {
+                what: "domain",
+                value: lo,
+                expected: "lo < hi",
+            });
+        }
+        if coeffs.is_empty() {
+            return Err(Error::Invalid {
+                what: "coefficients",
+                value: 0.0,
+                expected: "at least one",
+            });
+        }
+        if coeffs.len() > MAX_COEFFS {
+            return Err(Error::TooMany {
+                what: "coefficients",
+                found: coeffs.len(),
+                max: MAX_COEFFS,
+            });
+        }
+        let mut stored = [0.0; MAX_COEFFS];
+        for (index, (&c, slot)) in coeffs.iter().zip(&mut stored).enumerate() {
+            if !c.is_finite() {
+                return Err(Error::NotFinite {
+                    what: "coeffs",
+                    index,
+                    value: c,
+                });
+            }
+            *slot = c;
+        }
+        Ok(Drive {
+            ratio,
+            kind: Kind::Polynomial {
+                lo,
+                hi,
+                n_coeffs: coeffs.len(),
+                coeffs: stored,
+            },
+        })
+    }
+
+    /// Nominal ratio R between the motor angle and the reading (1 for a direct drive).
+    pub fn ratio(&self) -> f64 {
+        self.ratio
+    }
+
+    /// Joint angle q (rad) and `dq/dθ` (rad/rad) at reading `theta` (rad), analytic:
+    /// `1 + ∂Δθ_caps/∂θ` for a capstan (paper eq. 1 differentiated), `1 + p'(θ)` for a
+    /// polynomial (`T_k' = k·U_{k−1}`; Trefethen, *Approximation Theory and Approximation
+    /// Practice*, 2013, ch. 3). No allocation.
+    #[inline]
+    pub fn angle_and_derivative(&self, theta: f64) -> (f64, f64) {
+        match &self.kind {
+            Kind::Direct => (theta, 1.0),
+            Kind::Capstan {
+                drum_distance_m: d,
+                p,
+                ecc_o0,
+                ecc_i0,
+            } => {
+                let (r, t) = (self.ratio, theta);
+                let (eo, dbo) = ecc_and_dphi(p.r_o_m, *d, t + p.beta_o_rad);
+                let (ei, dbi) = ecc_and_dphi(p.r_i_m, *d, r * t + p.beta_i_rad);
+                // Each eccentricity difference first, so that θ = 0 gives exactly `c`.
+                let error = p.c_rad - p.re / (p.re + r) * t + (eo - ecc_o0) + (ei - ecc_i0);
+                let derror = -p.re / (p.re + r) + dbo + r * dbi;
+                (t + error, 1.0 + derror)
+            }
+            Kind::Polynomial {
+                lo,
+                hi,
+                n_coeffs,
+                coeffs,
+            } => {
+                let w = hi - lo;
+                let u = (2.0 * theta - lo - hi) / w;
+                let coeffs = coeffs.get(..*n_coeffs).unwrap_or(&[]);
+                // Clenshaw's recurrence for p, the U_{k−1} recurrence for p'.
+                let (mut b1, mut b2) = (0.0, 0.0);
+                for &c in coeffs.iter().skip(1).rev() {
+                    let b0 = c + 2.0 * u * b1 - b2;
+                    b2 = b1;
+                    b1 = b0;
+                }
+                let value = coeffs.first().copied().unwrap_or(0.0) + u * b1 - b2;
+                let (mut u_prev, mut u_cur) = (0.0, 1.0);
+                let mut sum = 0.0;
+                for (k, &c) in coeffs.iter().enumerate().skip(1) {
+                    sum += c * k as f64 * u_cur;
+                    let next = 2.0 * u * u_cur - u_prev;
+                    u_prev = u_cur;
+                    u_cur = next;
+                }
+                (theta + value, 1.0 + sum * (2.0 / w))
+            }
+        }
+    }
+}

@@ -1,0 +1,250 @@
+//! The runtime's numbers against the calibration library's, to 1e-12.
+
+use hapcal_force::{ForceModel, Vector6};
+use hapcal_io::read_device;
+use hapcal_kinematics::{Chain, DhConvention as KinConvention, DhRow as KinRow};
+use hapcal_runtime::{DhConvention, DhRow, Drive, Evaluation, Model, Pose};
+use nalgebra::Isometry3;
+
+use crate::{fixture, readings};
+
+const TOL: f64 = 1e-12;
+
+/// Largest difference between a runtime pose and a library pose (rotation entries and
+/// translation, m).
+fn pose_gap(ours: &Pose, theirs: &Isometry3<f64>) -> f64 {
+    let r = theirs.rotation.to_rotation_matrix();
+    let mut gap: f64 = 0.0;
+    for i in 0..3 {
+        for j in 0..3 {
+            gap = gap.max((ours.rotation[i][j] - r[(i, j)]).abs());
+        }
+        gap = gap.max((ours.translation_m[i] - theirs.translation.vector[i]).abs());
+    }
+    gap
+}
+
+fn wrenches() -> [[f64; 6]; 3] {
+    [
+        [0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
+        [1.5, -2.0, 0.5, 0.0, 0.0, 0.0],
+        [-0.3, 0.7, 2.0, 0.05, -0.02, 0.1],
+    ]
+}
+
+/// Compares every output for `n` readings; returns the largest gap seen.
+fn compare(model: &Model, library: &ForceModel, chain: &Chain, limits: &[(f64, f64)]) -> f64 {
+    let n = model.n_joints();
+    assert_eq!(n, library.n_joints());
+    let mut worst: f64 = 0.0;
+    let gap = |worst: &mut f64, a: f64, b: f64| *worst = worst.max((a - b).abs());
+    for theta in readings(limits, 200) {
+        let (mut q, mut dq) = (vec![0.0; n], vec![0.0; n]);
+        model.joint_angles(&theta, &mut q, &mut dq).expect("valid");
+        let q_lib = library.joint_angles(&theta).expect("valid");
+        let dq_lib = library.angle_derivatives(&theta).expect("valid");
+        for k in 0..n {
+            gap(&mut worst, q[k], q_lib[k]);
+            gap(&mut worst, dq[k], dq_lib[k]);
+        }
+        let pose = model.end_pose(&theta).expect("valid");
+        let pose_lib = library.end_pose(&theta).expect("valid");
+        worst = worst.max(pose_gap(&pose, &pose_lib));
+
+        let mut jac = vec![[0.0; 6]; n];
+        model.body_jacobian(&theta, &mut jac).expect("valid");
+        let jac_lib = library.body_jacobian(&theta).expect("valid");
+        let mut spatial = vec![[0.0; 6]; n];
+        model.spatial_jacobian(&theta, &mut spatial).expect("valid");
+        let x = vec![0.0; chain.n_params()];
+        let spatial_lib = chain.geometric_jacobian(&x, &q_lib);
+        for k in 0..n {
+            for r in 0..6 {
+                gap(&mut worst, jac[k][r], jac_lib[(r, k)]);
+                gap(&mut worst, spatial[k][r], spatial_lib[(r, k)]);
+            }
+        }
+        for w in wrenches() {
+            let mut tau = vec![0.0; n];
+            model.motor_torques(&theta, &w, &mut tau).expect("valid");
+            let tau_lib = library
+                .motor_torques(&theta, &Vector6::from_row_slice(&w))
+                .expect("valid");
+            let mut out = Evaluation::default();
+            model.evaluate(&theta, &w, &mut out).expect("valid");
+            for k in 0..n {
+                gap(&mut worst, tau[k], tau_lib[k]);
+                assert_eq!(out.motor_torques_nm[k], tau[k], "evaluate = motor_torques");
+                assert_eq!(out.body_jacobian[k], jac[k], "evaluate = body_jacobian");
+            }
+            assert_eq!(out.pose, pose);
+        }
+    }
+    worst
+}
+
+#[test]
+fn calibrated_reference_device_matches_the_force_model() {
+    let path = fixture("reference-device/calibrated.toml");
+    let device = read_device(&path).expect("fixture");
+    let library = ForceModel::calibrated(&device).expect("fixture");
+    let model = Model::load(&path).expect("fixture");
+    let chain = device.chain().expect("fixture");
+    let worst = compare(&model, &library, &chain, &device.joint_limits());
+    assert!(worst <= TOL, "largest gap {worst:e}");
+}
+
+#[test]
+fn nominal_reference_device_matches_the_force_model() {
+    let path = fixture("reference-device/device.toml");
+    let device = read_device(&path).expect("fixture");
+    let library = ForceModel::nominal(&device).expect("fixture");
+    let model = Model::load(&path).expect("fixture");
+    let chain = device.chain().expect("fixture");
+    let worst = compare(&model, &library, &chain, &device.joint_limits());
+    assert!(worst <= TOL, "largest gap {worst:e}");
+}
+
+/// Negative control: the comparison sees a change of one calibrated value far below any
+/// physical tolerance (0.1 µm on `r_o` of capstan 2).
+#[test]
+fn comparison_detects_a_changed_transmission_value() {
+    let path = fixture("reference-device/calibrated.toml");
+    let text = std::fs::read_to_string(&path).expect("fixture");
+    let old = "\"capstan2.r_o\" = { value = 0.00016445718982752866";
+    assert!(text.contains(old));
+    let changed = text.replace(old, "\"capstan2.r_o\" = { value = 0.00016455718982752866");
+    let model = Model::from_toml(&changed, "changed").expect("valid");
+    let device = read_device(&path).expect("fixture");
+    let library = ForceModel::calibrated(&device).expect("fixture");
+    let chain = device.chain().expect("fixture");
+    let worst = compare(&model, &library, &chain, &device.joint_limits());
+    assert!(
+        worst > 1e-7,
+        "largest gap {worst:e}: the change went unseen"
+    );
+}
+
+/// A modified D-H chain with a Hayati β and fixed rows at both ends, against
+/// `hapcal-kinematics`.
+#[test]
+fn modified_dh_with_beta_matches_the_kinematics_library() {
+    let rows = [
+        (0.1, 0.3, 0.05, 0.2, None, false),
+        (0.0, -1.2, 0.1, 0.1, Some(0.02), true),
+        (0.3, 0.4, -0.02, -0.3, None, true),
+        (0.25, 1.5, 0.07, 0.05, Some(-0.01), true),
+        (0.05, -0.2, 0.03, 0.4, None, false),
+    ];
+    for (convention, kin_convention) in [
+        (DhConvention::Modified, KinConvention::Modified),
+        (DhConvention::Standard, KinConvention::Standard),
+    ] {
+        let ours: Vec<DhRow> = (rows.iter())
+            .map(|&(a_m, alpha_rad, d_m, theta_rad, beta_rad, joint)| DhRow {
+                a_m,
+                alpha_rad,
+                d_m,
+                theta_rad,
+                beta_rad,
+                joint,
+            })
+            .collect();
+        let mut next = 0;
+        let theirs: Vec<KinRow> = (rows.iter())
+            .map(
+                |&(a_m, alpha_rad, d_m, theta_rad, beta_rad, joint)| KinRow {
+                    convention: kin_convention,
+                    a_m,
+                    alpha_rad,
+                    d_m,
+                    theta_rad,
+                    beta_rad,
+                    joint: joint.then(|| {
+                        next += 1;
+                        next - 1
+                    }),
+                },
+            )
+            .collect();
+        let model = Model::from_dh(convention, &ours, &[Drive::DIRECT; 3]).expect("valid");
+        let chain = Chain::from_dh(&theirs).expect("valid");
+        let x = vec![0.0; chain.n_params()];
+        for q in readings(&[(-2.0, 2.0); 3], 50) {
+            let pose = model.end_pose_at_joints(&q).expect("valid");
+            assert!(pose_gap(&pose, &chain.end_pose(&x, &q)) <= TOL);
+            let mut jac = vec![[0.0; 6]; 3];
+            model
+                .spatial_jacobian_at_joints(&q, &mut jac)
+                .expect("valid");
+            let lib = chain.geometric_jacobian(&x, &q);
+            for (k, col) in jac.iter().enumerate() {
+                for (r, v) in col.iter().enumerate() {
+                    assert!((v - lib[(r, k)]).abs() <= TOL, "{convention:?} ({r}, {k})");
+                }
+            }
+        }
+    }
+}
+
+/// The body Jacobian against central differences of the runtime's own pose: linear rows
+/// from the end point, angular rows from `Rᵀ·dR` (the body angular velocity).
+#[test]
+fn body_jacobian_matches_central_differences() {
+    let model = Model::load(&fixture("reference-device/calibrated.toml")).expect("fixture");
+    let h = 1e-6;
+    for q in readings(&[(-1.0, 1.0); 7], 20) {
+        let mut jac = [[0.0; 6]; 7];
+        let pose = model.body_jacobian_at_joints(&q, &mut jac).expect("valid");
+        for k in 0..7 {
+            let (mut up, mut down) = (q.clone(), q.clone());
+            up[k] += h;
+            down[k] -= h;
+            let (pu, pd) = (
+                model.end_pose_at_joints(&up).expect("valid"),
+                model.end_pose_at_joints(&down).expect("valid"),
+            );
+            let dp: Vec<f64> = (0..3)
+                .map(|i| (pu.translation_m[i] - pd.translation_m[i]) / (2.0 * h))
+                .collect();
+            let lin = pose.inverse_rotate(&[dp[0], dp[1], dp[2]]);
+            // dR/dq = R·[ω_b]×: ω_b from the off-diagonal entries of Rᵀ·dR.
+            let skew = |i: usize, j: usize| -> f64 {
+                (0..3)
+                    .map(|m| {
+                        pose.rotation[m][i] * (pu.rotation[m][j] - pd.rotation[m][j]) / (2.0 * h)
+                    })
+                    .sum()
+            };
+            let ang = [skew(2, 1), skew(0, 2), skew(1, 0)];
+            for r in 0..3 {
+                assert!((jac[k][r] - lin[r]).abs() < 1e-8, "joint {k} row {r}");
+                assert!(
+                    (jac[k][3 + r] - ang[r]).abs() < 1e-8,
+                    "joint {k} row {}",
+                    3 + r
+                );
+            }
+        }
+    }
+}
+
+/// `dq/dθ` against central differences of q, for every drive kind of the calibrated device.
+#[test]
+fn angle_derivatives_match_central_differences() {
+    let model = Model::load(&fixture("reference-device/calibrated.toml")).expect("fixture");
+    let h = 1e-6;
+    for drive in model.drives() {
+        for i in 0..50 {
+            let theta = -1.5 + 0.06 * i as f64;
+            let (_, g) = drive.angle_and_derivative(theta);
+            let fd = (drive.angle_and_derivative(theta + h).0
+                - drive.angle_and_derivative(theta - h).0)
+                / (2.0 * h);
+            assert!(
+                (g - fd).abs() < 1e-8 * (1.0 + fd.abs()),
+                "θ = {theta}: {g} vs {fd}"
+            );
+        }
+    }
+}
