@@ -3,6 +3,7 @@
 
 mod against_library;
 mod errors;
+mod no_alloc;
 
 use std::path::PathBuf;
 
