@@ -941,36 +941,48 @@ fn errors(
 ) -> Errors {
     let mut out = Errors::default();
     for row in &tables[table].rows {
-        let (mut sq, mut score) = (0.0, 0.0);
-        if let Some(d) = row.distance_m {
-            let e = model.end_pose_of(0, &row.q).translation.vector.norm() - d;
-            sq += e * e;
-            out.distance.push(e);
-            if let Some(w) = weights {
-                score += (e / w.sigma_distance_m).powi(2);
-            }
-        }
-        let tips: Vec<usize> = row.markers.iter().map(|m| m.marker).collect();
-        for (m, pose) in row.markers.iter().zip(model.end_poses_of(&tips, &row.q)) {
-            let e = (pose.translation.vector - Vector3::from(m.position_m)).norm();
-            sq += e * e;
-            out.position.push(e);
-            if let Some(w) = weights {
-                score += (e / w.sigma_position_m).powi(2);
-            }
-            if let Some([w, xq, y, z]) = m.rotation {
-                let meas = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, xq, y, z));
-                let theta = meas.angle_to(&pose.rotation);
-                out.orientation.push(theta);
-                if let Some(w) = weights {
-                    score += (theta / w.sigma_orientation_rad).powi(2);
-                }
-            }
-        }
-        out.per_row.push(sq);
-        out.score.push(score);
+        push_row_errors(model, row, weights, &mut out);
     }
     out
+}
+
+/// Pushes the errors of one row under `model` onto `out`: its distance and each marker
+/// sample's position and orientation errors, its squared error and its score with `weights`
+/// (0 without).
+fn push_row_errors(
+    model: &CalibratedModel,
+    row: &MeasuredRow,
+    weights: Option<&Weights>,
+    out: &mut Errors,
+) {
+    let (mut sq, mut score) = (0.0, 0.0);
+    if let Some(d) = row.distance_m {
+        let e = model.end_pose_of(0, &row.q).translation.vector.norm() - d;
+        sq += e * e;
+        out.distance.push(e);
+        if let Some(w) = weights {
+            score += (e / w.sigma_distance_m).powi(2);
+        }
+    }
+    let tips: Vec<usize> = row.markers.iter().map(|m| m.marker).collect();
+    for (m, pose) in row.markers.iter().zip(model.end_poses_of(&tips, &row.q)) {
+        let e = (pose.translation.vector - Vector3::from(m.position_m)).norm();
+        sq += e * e;
+        out.position.push(e);
+        if let Some(w) = weights {
+            score += (e / w.sigma_position_m).powi(2);
+        }
+        if let Some([w, xq, y, z]) = m.rotation {
+            let meas = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, xq, y, z));
+            let theta = meas.angle_to(&pose.rotation);
+            out.orientation.push(theta);
+            if let Some(w) = weights {
+                score += (theta / w.sigma_orientation_rad).powi(2);
+            }
+        }
+    }
+    out.per_row.push(sq);
+    out.score.push(score);
 }
 
 /// Mean, RMS and maximum of `v` (zeros when empty).
@@ -1093,6 +1105,19 @@ fn blocked_folds(tables: &[MeasurementTable], k: usize) -> Vec<Fold> {
 /// rows of a random design fall a fraction of a percent past the training extremes).
 pub const OUTSIDE_SHARE: f64 = 0.05;
 
+/// Which side of the training range `(lo, hi)` reading `q` lies past by more than
+/// [`OUTSIDE_SHARE`] of the range: `Some(true)` above, `Some(false)` below, `None` within.
+fn past_range(q: f64, (lo, hi): (f64, f64)) -> Option<bool> {
+    let slack = OUTSIDE_SHARE * (hi - lo).max(0.0);
+    if q > hi + slack {
+        Some(true)
+    } else if q < lo - slack {
+        Some(false)
+    } else {
+        None
+    }
+}
+
 /// Share of the training rows each joint-range fold holds out, from one end of the joint's
 /// range.
 pub const RANGE_FOLD_SHARE: f64 = 0.2;
@@ -1146,7 +1171,6 @@ fn range_folds(
         values.sort_by(f64::total_cmp);
         let cut = ((RANGE_FOLD_SHARE * n_rows as f64).ceil() as usize).clamp(1, n_rows);
         let (low_cut, high_cut) = (values[cut - 1], values[n_rows - cut]);
-        let slack = OUTSIDE_SHARE * (hi - lo);
         for upper in [false, true] {
             let held = |q: f64| if upper { q >= high_cut } else { q <= low_cut };
             let fold: Fold = (tables.iter())
@@ -1156,13 +1180,9 @@ fn range_folds(
             if count < 3 || 2 * count > n_rows {
                 continue;
             }
-            let relevant = beyond.iter().any(|q| {
-                if upper {
-                    q[j] > hi + slack
-                } else {
-                    q[j] < lo - slack
-                }
-            });
+            let relevant = beyond
+                .iter()
+                .any(|q| past_range(q[j], (lo, hi)) == Some(upper));
             out.push((
                 RangeFold {
                     joint: robot.joint_names[j].clone(),
@@ -1278,23 +1298,9 @@ fn cross_validate(
 /// Squared error (m², every marker and the distance of the row) and weighted squared error
 /// (the fit's objective) of one row under `model`.
 fn row_error(model: &CalibratedModel, row: &MeasuredRow, w: &Weights) -> (f64, f64) {
-    let (mut sq, mut score) = (0.0, 0.0);
-    if let Some(d) = row.distance_m {
-        let e = model.end_pose_of(0, &row.q).translation.vector.norm() - d;
-        sq += e * e;
-        score += (e / w.sigma_distance_m).powi(2);
-    }
-    let tips: Vec<usize> = row.markers.iter().map(|m| m.marker).collect();
-    for (m, pose) in row.markers.iter().zip(model.end_poses_of(&tips, &row.q)) {
-        let e = (pose.translation.vector - Vector3::from(m.position_m)).norm();
-        sq += e * e;
-        score += (e / w.sigma_position_m).powi(2);
-        if let Some([qw, qx, qy, qz]) = m.rotation {
-            let meas = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(qw, qx, qy, qz));
-            score += (meas.angle_to(&pose.rotation) / w.sigma_orientation_rad).powi(2);
-        }
-    }
-    (sq, score)
+    let mut e = Errors::default();
+    push_row_errors(model, row, Some(w), &mut e);
+    (e.per_row[0], e.score[0])
 }
 
 /// Calibrates `robot` from marker tables: frames fitted, the rung chosen on the ladder (or
@@ -1642,12 +1648,8 @@ pub fn calibrate_measured(
     // The model's own uncertainty where a test set extrapolates, beside its value on (up to
     // 100 evenly spaced) training rows.
     let outside_any = |t: &MeasurementTable| {
-        (t.rows.iter()).any(|r| {
-            (r.q.iter().zip(&ranges)).any(|(q, (lo, hi))| {
-                let slack = OUTSIDE_SHARE * (hi - lo).max(0.0);
-                *q < lo - slack || *q > hi + slack
-            })
-        })
+        (t.rows.iter())
+            .any(|r| (r.q.iter().zip(&ranges)).any(|(&q, &range)| past_range(q, range).is_some()))
     };
     if test.iter().any(outside_any) {
         let rms = |v: &[f64]| (v.iter().map(|s| s * s).sum::<f64>() / v.len().max(1) as f64).sqrt();
@@ -1940,12 +1942,8 @@ fn outside_warnings(
         .collect();
     let mut out = Vec::new();
     for (j, &(lo, hi)) in ranges.iter().enumerate() {
-        let slack = OUTSIDE_SHARE * (hi - lo).max(0.0);
         let outside_rows: Vec<usize> = (0..table.rows.len())
-            .filter(|&r| {
-                let q = table.rows[r].q[j];
-                q < lo - slack || q > hi + slack
-            })
+            .filter(|&r| past_range(table.rows[r].q[j], (lo, hi)).is_some())
             .collect();
         let outside: Vec<f64> = outside_rows.iter().map(|&r| table.rows[r].q[j]).collect();
         let there: Vec<f64> = (outside_rows.iter())

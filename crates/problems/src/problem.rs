@@ -336,21 +336,18 @@ impl CalibrationProblem {
             });
         };
         let torque_tips = torque_tips.unwrap_or_else(|| tips.clone());
-        if let Some(t) = torque_tips
+        // The torque tips must exist and have the tree's joints: the first joint count that
+        // differs is reported (0 without any tip).
+        let wrong = match torque_tips
             .iter()
             .find(|t| t.n_joints() != chain.n_joints())
-            .or(if torque_tips.is_empty() {
-                Some(&chain)
-            } else {
-                None
-            })
         {
+            Some(t) => Some(t.n_joints()),
+            None => torque_tips.is_empty().then_some(0),
+        };
+        if let Some(index) = wrong {
             return Err(Error::NoSuchParam {
-                index: if torque_tips.is_empty() {
-                    0
-                } else {
-                    t.n_joints()
-                },
+                index,
                 n_params: chain.n_joints(),
             });
         }
@@ -511,11 +508,11 @@ impl CalibrationProblem {
         }
         let mut transversal_terms = Vec::new();
         if transversal {
-            let Some(model) = &compliance else {
+            if compliance.is_none() {
                 return Err(Error::NoTransversal {
                     reason: "it needs the gravity compliance model",
                 });
-            };
+            }
             let revolute: Vec<bool> = (hapcal_kinematics::joint_motions(&torque_tips).iter())
                 .map(|m| *m == Some(hapcal_kinematics::Motion::Rotation))
                 .collect();
@@ -539,7 +536,6 @@ impl CalibrationProblem {
             }
             // Compliance × moment is an angle: the parameter's unit is the rotation it scales,
             // as for the axial compliance.
-            let _ = model;
             specs.extend(transversal_terms.iter().map(|t| ParamSpec {
                 name: format!("transversal.{}", names[t.joint]),
                 unit: Unit::Radian,

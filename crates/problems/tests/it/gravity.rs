@@ -2,7 +2,7 @@
 //! is the derivative of the potential energy, and the transversal compliance's analytic
 //! Jacobian agrees with central differences.
 
-use faer::{Col, Mat};
+use faer::Col;
 use hapcal_identify::Problem;
 use hapcal_kinematics::{Chain, Factor, FrameSpec, Isometry3, Placement, Point3, Tree, Vector3};
 use hapcal_problems::{
@@ -200,31 +200,9 @@ fn transversal_compliance_jacobian_matches_central_differences() {
     let n = problem.layout().len();
     // Compliances of 1e-3 rad/(N·m) give tilts of tens of mrad: far from linear.
     let x = Col::from_fn(n, |i| 1e-3 * ((i * 7 % 11) as f64 - 5.0));
-    let mut jac = Mat::zeros(problem.n_residuals(), n);
-    problem
-        .jacobian(x.as_ref(), jac.as_mut())
-        .expect("jacobian");
-    let h = 1e-7;
-    let mut worst: f64 = 0.0;
-    for c in 0..n {
-        let (mut xp, mut xm) = (x.clone(), x.clone());
-        xp[c] += h;
-        xm[c] -= h;
-        let m = problem.n_residuals();
-        let (mut rp, mut rm) = (Col::zeros(m), Col::zeros(m));
-        problem
-            .residuals(xp.as_ref(), rp.as_mut())
-            .expect("residuals");
-        problem
-            .residuals(xm.as_ref(), rm.as_mut())
-            .expect("residuals");
-        for r in 0..m {
-            let fd = (rp[r] - rm[r]) / (2.0 * h);
-            // Residuals are O(1e3·30 N·m) per unit compliance; central differences at
-            // h = 1e-7 are exact to O(h²·|r'''|), rounding ≈ 1e-16·|r|/h ≈ 1e-8.
-            worst = worst.max((fd - jac[(r, c)]).abs() / (1.0 + jac[(r, c)].abs()));
-        }
-    }
+    // Residuals are O(1e3·30 N·m) per unit compliance; central differences at h = 1e-7 are
+    // exact to O(h²·|r'''|), rounding ≈ 1e-16·|r|/h ≈ 1e-8.
+    let worst = crate::worst_relative_jacobian_error(&problem, &x, 1e-7);
     assert!(worst < 1e-5, "largest relative Jacobian error {worst:e}");
     // The model predicts what the problem fits.
     let model = problem.model(x.as_ref());

@@ -158,6 +158,34 @@ fn distance_runs_problem(qs: &[Vec<f64>]) -> CalibrationProblem {
     CalibrationProblem::new(reference_chain(), obs, weights, None).expect("valid")
 }
 
+/// The largest error of the analytic Jacobian of `problem` at `x` against central differences
+/// of its residuals with step `h`, relative to `1 + |entry|`.
+fn worst_relative_jacobian_error(problem: &CalibrationProblem, x: &Col<f64>, h: f64) -> f64 {
+    let (m, n) = (problem.n_residuals(), problem.layout().len());
+    let mut jac = Mat::zeros(m, n);
+    problem
+        .jacobian(x.as_ref(), jac.as_mut())
+        .expect("jacobian");
+    let mut worst: f64 = 0.0;
+    for c in 0..n {
+        let (mut xp, mut xm) = (x.clone(), x.clone());
+        xp[c] += h;
+        xm[c] -= h;
+        let (mut rp, mut rm) = (Col::zeros(m), Col::zeros(m));
+        problem
+            .residuals(xp.as_ref(), rp.as_mut())
+            .expect("residuals");
+        problem
+            .residuals(xm.as_ref(), rm.as_mut())
+            .expect("residuals");
+        for r in 0..m {
+            let fd = (rp[r] - rm[r]) / (2.0 * h);
+            worst = worst.max((fd - jac[(r, c)]).abs() / (1.0 + jac[(r, c)].abs()));
+        }
+    }
+    worst
+}
+
 /// Every entry of the analytic `jac` (`m × n`, at `x`) against central differences of the
 /// residuals with step 1e-6. Residuals are divided by σ ~ 1e-5 m, so entries are ~1e5 per unit;
 /// the central difference's truncation and rounding stay below 1e-3 absolute + 1e-6 relative.

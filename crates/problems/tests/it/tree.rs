@@ -1,7 +1,7 @@
 //! Marker and pose rows on a kinematic tree with instrument and marker frames: the analytic
 //! Jacobian against central differences, and frames recovered from exact data.
 
-use faer::{Col, Mat};
+use faer::Col;
 use hapcal_identify::{IdentifyConfig, Problem, Subset, identify};
 use hapcal_kinematics::{FrameSpec, Isometry3, Placement, Tree, Vector3};
 use hapcal_problems::{
@@ -130,33 +130,9 @@ fn pose_rows_jacobian_matches_central_differences() {
     assert_eq!(n, 6 + 42 + 5 + 12 + n_joints);
     assert_eq!(problem.n_residuals(), 3 * 6 + 3 * 3);
     let x = Col::from_fn(n, |i| 1e-3 * ((i * 7 % 11) as f64 - 5.0));
-    let mut jac = Mat::zeros(problem.n_residuals(), n);
-    problem
-        .jacobian(x.as_ref(), jac.as_mut())
-        .expect("jacobian");
-    let h = 1e-6;
-    let mut worst: f64 = 0.0;
-    for c in 0..n {
-        let (mut xp, mut xm) = (x.clone(), x.clone());
-        xp[c] += h;
-        xm[c] -= h;
-        let (mut rp, mut rm) = (
-            Col::zeros(problem.n_residuals()),
-            Col::zeros(problem.n_residuals()),
-        );
-        problem
-            .residuals(xp.as_ref(), rp.as_mut())
-            .expect("residuals");
-        problem
-            .residuals(xm.as_ref(), rm.as_mut())
-            .expect("residuals");
-        for r in 0..problem.n_residuals() {
-            let fd = (rp[r] - rm[r]) / (2.0 * h);
-            // Residuals are O(1e3) per unit parameter (σ = 1e-3); central differences at
-            // h = 1e-6 are exact to O(h²·|r'''|) ≈ 1e-9 of that, rounding ≈ 1e-16·|r|/h.
-            worst = worst.max((fd - jac[(r, c)]).abs() / (1.0 + jac[(r, c)].abs()));
-        }
-    }
+    // Residuals are O(1e3) per unit parameter (σ = 1e-3); central differences at h = 1e-6
+    // are exact to O(h²·|r'''|) ≈ 1e-9 of that, rounding ≈ 1e-16·|r|/h.
+    let worst = crate::worst_relative_jacobian_error(&problem, &x, 1e-6);
     assert!(worst < 1e-5, "largest relative Jacobian error {worst:e}");
 }
 
