@@ -16,11 +16,12 @@ use hapcal_problems::{CalibrationProblem, Observations, Weights};
 use nalgebra::Rotation3;
 use serde::Serialize;
 
-use crate::calibrate::{CV_REPEATS, DataSet, ModelChoice, Plan, load_data, load_device};
+use crate::calibrate::{CV_REPEATS, DataSet, Plan, load_data, load_device};
 use crate::measured::{
-    MeasuredConfig, Robot, Rung, calibrate_measured, is_marker_file, load_tables,
-    robot_from_device, robot_from_urdf,
+    MeasuredConfig, Robot, calibrate_measured, is_marker_file, load_tables, robot_from_device,
+    robot_from_urdf,
 };
+use crate::model::ModelChoice;
 
 /// What the training rows measured.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -164,7 +165,7 @@ pub fn baseline_from_tables(
 ) -> Result<GeometricBaseline> {
     crate::measured::split_test_last(&mut train, &mut test, plan.test_last)?;
     let n_tips = 1 + plan.tips.len();
-    let cfg = |rung: Option<Rung>| MeasuredConfig {
+    let cfg = |rung: Option<ModelChoice>| MeasuredConfig {
         rung,
         folds: plan.folds,
         sigma_m: plan.sigma_m,
@@ -172,7 +173,7 @@ pub fn baseline_from_tables(
         marker_tips: (0..n_tips).collect(),
         workspace: Vec::new(),
     };
-    let out = calibrate_measured(robot, &train, &test, &cfg(Some(Rung::Geometric)))?;
+    let out = calibrate_measured(robot, &train, &test, &cfg(Some(ModelChoice::Geometric)))?;
     let mut warnings: Vec<String> = (train.iter().chain(&test))
         .flat_map(|t| t.warnings.iter().cloned())
         .collect();
@@ -224,8 +225,12 @@ pub fn baseline_from_tables(
     let mut rungs = Vec::new();
     if ladder {
         let auto = calibrate_measured(robot, &train, &test, &cfg(None))?;
-        for rung in [Rung::FramesOnly, Rung::JointOffsets, Rung::Geometric] {
-            let fitted = if rung == Rung::Geometric {
+        for rung in [
+            ModelChoice::FramesOnly,
+            ModelChoice::JointOffsets,
+            ModelChoice::Geometric,
+        ] {
+            let fitted = if rung == ModelChoice::Geometric {
                 None
             } else {
                 Some(calibrate_measured(robot, &train, &test, &cfg(Some(rung)))?)

@@ -1,288 +1,29 @@
-//! `hapcal calibrate`: identify kinematic deviations (and, when cross-validation on the
-//! training data asks for it, joint compliance) from socket or distance measurements.
+//! `hapcal calibrate`: reads the device and the data, types the data's kind, and runs the
+//! workflow of that kind: socket recordings and distance logs here, measurement files in
+//! [`crate::measured`], a haptic device's logs in [`crate::haptic`]; every one chooses its model
+//! on the ladder of [`crate::model`] and reports in the types of [`crate::report`].
 
 use anyhow::{Context, Result, bail};
-use hapcal_identify::{Identified, IdentifyConfig, Problem, PruneReason, identify};
+use hapcal_identify::{Identified, Problem, identify};
 use hapcal_io::{Device, SocketPlacement};
-use hapcal_kinematics::Chain;
+use hapcal_kinematics::{Chain, Tree};
 use hapcal_metrics::socket_figures;
 use hapcal_problems::{
-    CalibratedModel, CalibrationProblem, GravityCompliance, JointHarmonics, Observations,
-    PointDistance, Row, RowKind, Weights,
+    CalibratedModel, CalibrationProblem, GravityCompliance, Observations, PointDistance, Row,
+    RowKind, Weights,
 };
-use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Which model to identify. The doc comment of each variant is its `hapcal calibrate --help`
-/// text: plain words (no links), saying what the value does in each [`Workflow`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
-#[serde(rename_all = "snake_case")]
-pub enum ModelChoice {
-    /// Chosen on the training data only. Socket recordings and distance logs: repeated blocked
-    /// cross-validation among geometric, compliance and, for a robot with published link
-    /// masses, mass-compliance and actuator-compliance; a compliance model must beat geometric
-    /// by 1 standard error of the held-out difference. Measurement files: the ladder
-    /// frames-only, joint-offsets, geometric, compliance, transversal-compliance, climbing only
-    /// while a model beats the one chosen below it by 2 standard errors. A haptic device's
-    /// logs: transmissions, or the kinematic deviations alone when the logs have no
-    /// external-encoder columns.
-    Auto,
-    /// Measurement files only: the nominal kinematics; only the instrument's frame and the
-    /// markers' frames are fitted.
-    FramesOnly,
-    /// Measurement files only: the frames plus one offset per joint.
-    JointOffsets,
-    /// Every kinematic parameter the data determine (the others are pruned and reported), on
-    /// socket recordings, distance logs and measurement files. Not for a haptic device's logs.
-    Geometric,
-    /// Geometric plus one gravity compliance per joint. Socket recordings and distance logs:
-    /// lumped link weights. Measurement files: the torques of the URDF's inertial masses when
-    /// it has them, lumped weights otherwise.
-    Compliance,
-    /// Socket recordings and distance logs only: geometric plus one gravity compliance per
-    /// joint, with the torques of the robot's published link masses (Franka Panda, KUKA LBR
-    /// iiwa 14; refused for other robots). On measurement files use compliance, which takes
-    /// the masses from the URDF.
-    MassCompliance,
-    /// Socket recordings and distance logs only: as mass-compliance, with one compliance per
-    /// actuator size.
-    ActuatorCompliance,
-    /// Measurement files only: compliance plus a transversal compliance per revolute joint
-    /// (the joint frame bends about the axes normal to its axis under the gravity moment; link
-    /// masses from the URDF's inertial tags).
-    TransversalCompliance,
-    /// Socket recordings, distance logs and measurement files: geometric plus
-    /// once-per-revolution harmonic angle errors on every joint (encoder eccentricity). Never
-    /// chosen by auto, nor is any other harmonic model: on one MUKCa placement they fit the
-    /// training data better and the other placements worse (docs/results/mukca.md).
-    Harmonic,
-    /// Socket recordings, distance logs and measurement files: geometric plus first- and
-    /// second-order harmonic angle errors on every joint.
-    Harmonic2,
-    /// Socket recordings and distance logs only: mass-compliance plus harmonic.
-    MassComplianceHarmonic,
-    /// Socket recordings and distance logs only: compliance plus harmonic.
-    ComplianceHarmonic,
-    /// A haptic device's logs only: the transmissions (each capstan's eq. 1 and the
-    /// parallelogram's polynomial, from the external-encoder columns, which every training log
-    /// must have) and then the kinematic deviations (from the cable distances): the paper's two
-    /// steps.
-    Transmissions,
-}
-
-/// The three ways `hapcal calibrate` fits data, each with the models it takes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Workflow {
-    /// MUKCa socket recordings, or distance logs of a device with a cable encoder of its own
-    /// and no transmissions.
-    SocketsOrDistances,
-    /// Measurement files: marker positions or poses, or distances from an anchor, in an
-    /// instrument's frame ([`crate::measured`]).
-    MeasurementFiles,
-    /// The logs of a haptic device with transmissions ([`crate::haptic::calibrate_logs`]).
-    HapticLogs,
-}
-
-impl Workflow {
-    /// The data, in the words of an error message.
-    fn data(self) -> &'static str {
-        match self {
-            Workflow::SocketsOrDistances => "socket recordings and distance logs",
-            Workflow::MeasurementFiles => {
-                "measurement files (marker positions, poses, anchor distances)"
-            }
-            Workflow::HapticLogs => "a haptic device's logs",
-        }
-    }
-}
-
-impl std::fmt::Display for ModelChoice {
-    /// The `--model` value, as the user types it.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.pad(self.name())
-    }
-}
-
-impl ModelChoice {
-    /// The `--model` value that selects this choice (`mass-compliance`), as the user types it.
-    pub fn name(self) -> &'static str {
-        match self {
-            ModelChoice::Auto => "auto",
-            ModelChoice::FramesOnly => "frames-only",
-            ModelChoice::JointOffsets => "joint-offsets",
-            ModelChoice::Geometric => "geometric",
-            ModelChoice::Compliance => "compliance",
-            ModelChoice::MassCompliance => "mass-compliance",
-            ModelChoice::ActuatorCompliance => "actuator-compliance",
-            ModelChoice::TransversalCompliance => "transversal-compliance",
-            ModelChoice::Harmonic => "harmonic",
-            ModelChoice::Harmonic2 => "harmonic2",
-            ModelChoice::MassComplianceHarmonic => "mass-compliance-harmonic",
-            ModelChoice::ComplianceHarmonic => "compliance-harmonic",
-            ModelChoice::Transmissions => "transmissions",
-        }
-    }
-
-    /// Whether `workflow` fits this choice.
-    pub fn fits(self, workflow: Workflow) -> bool {
-        use ModelChoice as M;
-        match workflow {
-            Workflow::SocketsOrDistances => !matches!(
-                self,
-                M::FramesOnly | M::JointOffsets | M::TransversalCompliance | M::Transmissions
-            ),
-            Workflow::MeasurementFiles => matches!(
-                self,
-                M::Auto
-                    | M::FramesOnly
-                    | M::JointOffsets
-                    | M::Geometric
-                    | M::Compliance
-                    | M::TransversalCompliance
-                    | M::Harmonic
-                    | M::Harmonic2
-            ),
-            Workflow::HapticLogs => matches!(self, M::Auto | M::Transmissions),
-        }
-    }
-
-    /// `Ok` if `workflow` fits this choice.
-    ///
-    /// # Errors
-    /// A model the workflow does not fit, named as the user typed it, with the models it does
-    /// fit.
-    pub fn check_fits(self, workflow: Workflow) -> Result<()> {
-        if self.fits(workflow) {
-            return Ok(());
-        }
-        let names: Vec<&str> = <ModelChoice as clap::ValueEnum>::value_variants()
-            .iter()
-            .filter(|m| m.fits(workflow))
-            .map(|m| m.name())
-            .collect();
-        let hint = match (self, workflow) {
-            (
-                ModelChoice::MassCompliance | ModelChoice::ActuatorCompliance,
-                Workflow::MeasurementFiles,
-            ) => "; compliance takes the link masses from the URDF's inertial tags",
-            (_, Workflow::HapticLogs) => {
-                "; auto fits the kinematic deviations alone to logs without external-encoder columns"
-            }
-            _ => "",
-        };
-        bail!(
-            "--model {self} does not apply to {}: they take {}{hint}",
-            workflow.data(),
-            names.join(", ")
-        )
-    }
-
-    /// The compliance term of a fixed choice (`None` for geometric); an error for
-    /// [`ModelChoice::MassCompliance`] on a robot without published masses.
-    fn compliance(self, chain: &Chain) -> Result<Option<GravityCompliance>> {
-        Ok(match self {
-            ModelChoice::Auto
-            | ModelChoice::Geometric
-            | ModelChoice::Transmissions
-            | ModelChoice::FramesOnly
-            | ModelChoice::JointOffsets => None,
-            ModelChoice::Harmonic | ModelChoice::Harmonic2 => None,
-            ModelChoice::Compliance | ModelChoice::ComplianceHarmonic => {
-                Some(GravityCompliance::default())
-            }
-            ModelChoice::TransversalCompliance => bail!(
-                "--model transversal-compliance is fitted to marker, position and pose data, not \
-                 to socket recordings or distance logs"
-            ),
-            ModelChoice::MassCompliance | ModelChoice::MassComplianceHarmonic => Some(
-                GravityCompliance::published(chain.joint_names()).context(
-                    "--model mass-compliance: no published link masses for this robot's joint names",
-                )?,
-            ),
-            ModelChoice::ActuatorCompliance => Some(
-                GravityCompliance::published_by_actuator(chain.joint_names()).context(
-                    "--model actuator-compliance: no published link masses for this robot's joint names",
-                )?,
-            ),
-        })
-    }
-
-    /// The harmonic angle-error term of a fixed choice (`None` without one).
-    fn harmonics(self, chain: &Chain) -> Option<JointHarmonics> {
-        let n = chain.n_joints();
-        match self {
-            ModelChoice::Harmonic
-            | ModelChoice::MassComplianceHarmonic
-            | ModelChoice::ComplianceHarmonic => Some(JointHarmonics::first_order(n)),
-            ModelChoice::Harmonic2 => Some(JointHarmonics {
-                joints: (0..n).collect(),
-                orders: vec![1, 2],
-            }),
-            _ => None,
-        }
-    }
-}
-
-/// Validated inputs of one calibration.
-#[derive(Clone, Debug)]
-pub struct Plan {
-    /// Device file (`.toml`) or URDF (`.urdf`, with `tip`).
-    pub device: PathBuf,
-    /// Tip link for a URDF device.
-    pub tip: String,
-    /// Further tip links of a URDF tree (marker `k + 1` sits on tip `k` of `[tip, tips…]`;
-    /// markers past the last tip sit on it).
-    pub tips: Vec<String>,
-    /// Units of lengths and angles in the measurement files.
-    pub units: hapcal_io::Units,
-    /// Orientation noise σ, rad, of pose data, if known.
-    pub sigma_rad: Option<f64>,
-    /// Marker data: hold out this fraction of each training file's rows, the last ones in
-    /// file order, as a test set (`round((1 − f)·n)` rows train); `None` holds out nothing.
-    pub test_last: Option<f64>,
-    /// Training data: MUKCa placement or run folders, or hapcal log CSVs.
-    pub data: Vec<PathBuf>,
-    /// Test data (same kinds); never used to fit or to choose settings.
-    pub test: Vec<PathBuf>,
-    /// Known distance between the two sockets of a placement, m.
-    pub socket_distance_m: f64,
-    /// Model choice.
-    pub model: ModelChoice,
-    /// Folds of the cross-validation (time-contiguous blocks per socket).
-    pub folds: usize,
-    /// Measurement noise (m) if known; otherwise estimated from the residuals.
-    pub sigma_m: Option<f64>,
-    /// For a haptic device: identify the transmissions and the kinematics in one problem
-    /// ([`crate::haptic::identify_jointly`]) instead of the paper's two steps.
-    pub joint: bool,
-}
-
-impl Plan {
-    /// The bundled default: MUKCa `kuka_14`, training on `front`, testing on `left_back` and
-    /// `raised_left` (fixtures/mukca, MIT licence, TU Delft).
-    pub fn bundled_default() -> Self {
-        let root = crate::project_root().join("fixtures/mukca");
-        Self {
-            device: root.join("urdf/iiwa14.urdf"),
-            tip: "ball_link".into(),
-            tips: Vec::new(),
-            units: hapcal_io::Units::default(),
-            sigma_rad: None,
-            test_last: None,
-            data: vec![root.join("data/kuka_14/front")],
-            test: vec![
-                root.join("data/kuka_14/left_back"),
-                root.join("data/kuka_14/raised_left"),
-            ],
-            socket_distance_m: 0.05,
-            model: ModelChoice::Auto,
-            folds: 5,
-            sigma_m: None,
-            joint: false,
-        }
-    }
-}
+pub use crate::fit::{
+    CV_REPEATS, HeldOut, backend_of, blocked_difference, blocked_mean_difference, fold_of,
+    identify_config, pruned_report, termination_text,
+};
+pub use crate::inputs::Plan;
+pub use crate::model::{DataKind, LADDER_SIGNIFICANCE_Z, ModelChoice};
+pub use crate::report::{
+    CalibrationReport, CvReport, Figures, Outcome, ParamReport, PrunedReport, SetReport,
+};
 
 /// One measured data set: a socket placement or a distance log.
 #[derive(Clone, Debug)]
@@ -307,171 +48,6 @@ impl DataSet {
             DataSet::Distances { name, .. } => name,
         }
     }
-}
-
-/// Figures of one data set under one model.
-#[derive(Clone, Copy, Debug, Serialize)]
-pub struct Figures {
-    /// MUKCa mean absolute error ("consistency"), m; socket data only.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub mean_absolute_error_m: Option<f64>,
-    /// MUKCa distance error ("distortion"), m; socket data with two sockets only.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub distance_error_m: Option<f64>,
-    /// RMS of the distance residual, m; distance logs only.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub distance_rms_m: Option<f64>,
-    /// Position and orientation errors of marker data.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub pose: Option<crate::measured::PoseFigures>,
-}
-
-/// Figures of one data set before and after calibration.
-#[derive(Clone, Debug, Serialize)]
-pub struct SetReport {
-    /// Placement folder or log name.
-    pub name: String,
-    /// `train` or `test`.
-    pub role: &'static str,
-    /// Number of rows.
-    pub n_rows: usize,
-    /// With the nominal model.
-    pub before: Figures,
-    /// With the calibrated model.
-    pub after: Figures,
-    /// Marker and distance data: the error of every sample, frames only and calibrated.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub errors: Option<crate::measured::SampleErrors>,
-}
-
-/// One identified parameter.
-#[derive(Clone, Debug, Serialize)]
-pub struct ParamReport {
-    /// Stable name (`joint_a2.rx`, `dtheta3`, `compliance.joint_a4`).
-    pub name: String,
-    /// Identified deviation from nominal.
-    pub value: f64,
-    /// Standard deviation.
-    pub std: f64,
-    /// `m` or `rad`; `rad/(N·m)` (`rad/m` under lumped weights) for a compliance.
-    pub unit: &'static str,
-}
-
-/// One pruned parameter and why.
-#[derive(Clone, Debug, Serialize)]
-pub struct PrunedReport {
-    /// Parameter name.
-    pub name: String,
-    /// `near_zero_column` or `dependent`.
-    pub reason: &'static str,
-    /// For `dependent`: kept parameters that reproduce it, with coefficients.
-    pub depends_on: Vec<(String, f64)>,
-    /// Its standard deviation had it been kept, in its unit.
-    pub std_if_kept: f64,
-}
-
-/// Cross-validation score of one candidate model.
-#[derive(Clone, Debug, Serialize)]
-pub struct CvReport {
-    /// Candidate.
-    pub model: ModelChoice,
-    /// Held-out RMS of the 3-D point (or distance) error over all folds, m.
-    pub heldout_rms_m: f64,
-    /// Mean over held-out rows of this model's squared error minus the geometric model's, m²,
-    /// and its standard error from the contiguous blocks (rows of one block are correlated);
-    /// `(0, 0)` for the geometric model itself.
-    pub difference_to_geometric_m2: (f64, f64),
-    /// Whether the difference is below zero by [`CV_SIGNIFICANCE_Z`] standard errors (the
-    /// condition for choosing this model over the geometric one).
-    pub beats_geometric: bool,
-    /// Number of kept parameters on the full training data.
-    pub n_kept: usize,
-}
-
-/// Everything `hapcal calibrate` found; printed as a table or as one JSON document.
-#[derive(Clone, Debug, Serialize)]
-pub struct CalibrationReport {
-    /// Device path.
-    pub device: String,
-    /// Chosen model.
-    pub model: ModelChoice,
-    /// Cross-validation folds (time-contiguous blocks per socket).
-    pub folds: usize,
-    /// Cross-validation scores (empty when the model was given).
-    pub cross_validation: Vec<CvReport>,
-    /// Marker data: held-out score of each rung of the model ladder (empty otherwise).
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub ladder: Vec<crate::measured::RungReport>,
-    /// Marker data: the identified instrument and marker frames.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub frames: Vec<crate::measured::FrameReport>,
-    /// Residual noise used for the rank decision and the covariance, m.
-    pub sigma_m: f64,
-    /// `given` or `residuals`.
-    pub sigma_source: &'static str,
-    /// Identified parameters (kept model parameters).
-    pub parameters: Vec<ParamReport>,
-    /// Pruned parameters.
-    pub pruned: Vec<PrunedReport>,
-    /// Pairs of kept parameters with |correlation| > 0.95.
-    pub correlated: Vec<(String, String, f64)>,
-    /// Observability indices O1–O5 of the scaled Jacobian at the estimate.
-    pub observability: Option<crate::support::ObservabilityReport>,
-    /// Plain-language warnings about what the data cannot support.
-    pub warnings: Vec<String>,
-    /// LM termination.
-    pub termination: String,
-    /// The least-squares back end of the final fit and why (`dense: auto: a 372 × 47
-    /// Jacobian, …`).
-    pub backend: String,
-    /// Residual evaluations of the final fit.
-    pub n_evaluations: usize,
-    /// Jacobian evaluations of the final fit.
-    pub n_jacobians: usize,
-    /// Prune-and-refit rounds (identifiability re-decided at the estimate).
-    pub rounds: usize,
-    /// Data sets, training first.
-    pub placements: Vec<SetReport>,
-    /// Wall time from reading the files to the finished report, s.
-    pub elapsed_s: f64,
-    /// Measurement files: the training samples the Huber loss bounded, each with its file,
-    /// line and residual (empty otherwise).
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub downweighted: Vec<crate::measured::Downweighted>,
-    /// Measurement files: the joint-range folds the ladder judged extrapolation by (empty
-    /// when no test row lies beyond a joint's training range).
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub range_folds: Vec<crate::measured::RangeFold>,
-    /// Compliance models on measurement files: how far one more fixed-point step of the
-    /// torque equilibrium would move the tips, at most over the training rows, m
-    /// (`CalibratedModel::equilibrium_step_m`); small against σ, no iteration is needed.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub equilibrium_step_m: Option<f64>,
-    /// Compliance models on measurement files: refits with the gravity loads at the torque
-    /// equilibrium of the estimate (0: the loads of the undeflected robot were close enough).
-    pub equilibrium_refits: usize,
-}
-
-/// Output of a calibration: the report plus what is needed to write the calibrated files.
-#[derive(Debug)]
-pub struct Outcome {
-    /// The report.
-    pub report: CalibrationReport,
-    /// The device as read.
-    pub device: Device,
-    /// Path of the device file.
-    pub device_path: PathBuf,
-    /// The calibrated kinematic model.
-    pub model: CalibratedModel,
-    /// The calibrated device file when the workflow writes more than kinematic deviations (a
-    /// haptic device's transmissions); `None`: [`write_outputs`] applies the report's
-    /// parameters to `device`.
-    pub calibrated: Option<Device>,
-}
-
-/// The back end of an identification and why, for the report.
-pub(crate) fn backend_of(id: &Identified) -> String {
-    format!("{}: {}", id.backend.name, id.backend.reason)
 }
 
 /// Reads the device: a TOML device file, or a URDF imported with `tip`.
@@ -563,34 +139,9 @@ pub(crate) fn observations(
     obs
 }
 
-/// Identification settings of a kinematic calibration: exact ties between collinear
-/// parameters keep the one further from the base (the gauge goes to the base side).
-pub fn identify_config(sigma_m: Option<f64>) -> IdentifyConfig {
-    let mut cfg = IdentifyConfig {
-        sigma: sigma_m,
-        ..IdentifyConfig::default()
-    };
-    cfg.rank.tie_break = hapcal_identify::TieBreak::LaterInLayout;
-    cfg
-}
-
-/// How the least-squares fit ended, in plain words for the report: `converged (…)` for the
-/// three convergence criteria, else `not converged (…)` or `stopped (…)`.
-pub fn termination_text(termination: &hapcal_identify::Termination) -> String {
-    use hapcal_identify::Termination as T;
-    match termination {
-        T::FtolReached => "converged (relative cost reduction below ftol)".to_owned(),
-        T::XtolReached => "converged (step below xtol)".to_owned(),
-        T::GtolReached => "converged (gradient below gtol)".to_owned(),
-        T::MaxEvaluations => "not converged (evaluation limit reached)".to_owned(),
-        T::Numerical => "stopped (the step or the Jacobian is not finite)".to_owned(),
-        T::EvalFailed(e) => format!("stopped ({e})"),
-        other if other.is_success() => "converged".to_owned(),
-        _ => "stopped".to_owned(),
-    }
-}
-
-/// Identifies `choice` from `obs` on `chain` at unit weights (residuals in metres).
+/// Identifies `choice` from `obs` on `chain` at unit weights (residuals in metres), with the
+/// model terms of [`crate::model::terms`] (lumped link weights for `compliance`: a device file
+/// carries no link masses).
 pub(crate) fn solve(
     chain: &Chain,
     obs: Observations,
@@ -598,53 +149,14 @@ pub(crate) fn solve(
     sigma_m: Option<f64>,
 ) -> Result<(CalibrationProblem, Identified)> {
     let n_rows = obs.rows.len();
-    let problem = CalibrationProblem::with_harmonics(
-        chain.clone(),
-        obs,
-        Weights::default(),
-        choice.compliance(chain)?,
-        choice.harmonics(chain),
-    )
-    .context("building the calibration problem")?;
+    let terms = crate::model::terms(choice, chain.joint_names(), &[])?;
+    let problem =
+        CalibrationProblem::on_tree(Tree::single(chain.clone()), obs, Weights::default(), terms)
+            .context("building the calibration problem")?;
     let x0 = problem.initial_guess();
     let identified = identify(&problem, x0, &identify_config(sigma_m))
         .with_context(|| format!("identifying parameters from {n_rows} configurations"))?;
     Ok((problem, identified))
-}
-
-/// Repeats of the cross-validation: repeat `r` shifts every block boundary by `r/CV_REPEATS` of
-/// a block. Averaging the held-out errors over shifted partitions makes the choice less
-/// sensitive to where the fold boundaries fall (measured for 3…10 folds on the MUKCa training
-/// placements in docs/results/mukca.md: kuka_14, panda_1 and panda_6 keep their model, panda_7
-/// moves between two compliance models), at three times the cost of one k-fold pass.
-pub const CV_REPEATS: usize = 3;
-
-/// Standard errors by which a candidate's held-out squared error must undercut the geometric
-/// model's before it is chosen: the one-standard-error rule (Breiman et al., "Classification and
-/// Regression Trees", 1984; Hastie, Tibshirani & Friedman, "The Elements of Statistical
-/// Learning", 2nd ed., §7.10), z = 1, taken as the textbook default before any test placement
-/// was looked at. A larger margin tuned on the MUKCa test placements (1.5 keeps panda_1 on the
-/// geometric model at every fold count 3…10) would break the rule that settings are chosen on
-/// the training placement only; docs/results/mukca.md shows the fold sweep with z = 1 as it is.
-pub const CV_SIGNIFICANCE_Z: f64 = 1.0;
-
-/// Held-out errors of one candidate: one entry per training row, in a fixed order.
-#[derive(Clone, Debug, Default)]
-pub(crate) struct HeldOut {
-    /// Squared held-out error per row, m² (3-D point or distance), averaged over the repeats.
-    pub(crate) sq_errors: Vec<f64>,
-    /// Block of each row: `(data set, socket, fold)` of the first repeat, numbered in that
-    /// order (a block with no row, for a socket shorter than the folds, stays empty).
-    pub(crate) block: Vec<usize>,
-}
-
-/// Fold (`0..k`) of row `row` of `n` in repeat `r` of `repeats`: the rows, circularly shifted
-/// by `r·n/(k·repeats)`, cut into `k` contiguous blocks of (nearly) equal length. Repeat 0 is
-/// plain contiguous k-fold.
-pub(crate) fn fold_of(row: usize, n: usize, k: usize, r: usize, repeats: usize) -> usize {
-    let n = n.max(1);
-    let shifted = (row * k * repeats + r * n) % (n * k * repeats);
-    shifted / (n * repeats)
 }
 
 /// Repeated k-fold cross-validation with time-contiguous blocks per socket: repeat `r` of
@@ -729,89 +241,44 @@ pub(crate) fn cross_validate(
     })
 }
 
-/// Mean over rows of `a − b` and its standard error from the block means (rows of one
-/// contiguous block are correlated, so the blocks, not the rows, are the independent units:
-/// Roberts et al. 2017, "Cross-validation strategies for data with temporal, spatial,
-/// hierarchical, or phylogenetic structure", Ecography 40(8)). `(0, ∞)` with fewer than 2 blocks.
-pub(crate) fn blocked_difference(a: &HeldOut, b: &HeldOut) -> (f64, f64) {
-    match blocked_mean_difference(&a.sq_errors, &b.sq_errors, &a.block) {
-        (_, _, filled) if filled < 2 => (0.0, f64::INFINITY),
-        (mean, se, _) => (mean, se),
-    }
-}
-
-/// Mean over rows of `a − b` (the first `min(a.len(), b.len())` rows), its standard error from
-/// the blocks `block[row]` (the independent units of correlated rows), and the number of
-/// non-empty blocks; the standard error is `∞` with fewer than 2 blocks. The variance is the
-/// ratio estimator of a mean over clusters of unequal size (Cochran, "Sampling Techniques",
-/// 3rd ed., 1977, §6.4): `v = Σ (y_b − ȳ·m_b)² / ((n_b − 1)·n_b·m̄²)`.
+/// The model choice of `--model auto` from the held-out errors of each candidate: the one rule
+/// of [`crate::model::climb`] over the candidates' ladder levels `level` (candidate 0 the
+/// geometric model, the reference of the reported differences). A candidate beats another when
+/// its held-out squared error is lower by [`LADDER_SIGNIFICANCE_Z`] blocked standard errors.
 ///
 /// # Panics
-/// If `block` is shorter than the rows compared.
+/// If `held`, `level` and `candidates` differ in length or are empty.
 #[track_caller]
-pub fn blocked_mean_difference(a: &[f64], b: &[f64], block: &[usize]) -> (f64, f64, usize) {
-    let n = a.len().min(b.len());
-    let n_blocks = block[..n].iter().max().map_or(0, |m| m + 1);
-    let mut sum = vec![0.0; n_blocks];
-    let mut count = vec![0usize; n_blocks];
-    for i in 0..n {
-        sum[block[i]] += a[i] - b[i];
-        count[block[i]] += 1;
-    }
-    let filled = count.iter().filter(|&&c| c > 0).count();
-    let mean = sum.iter().sum::<f64>() / n.max(1) as f64;
-    if filled < 2 {
-        return (mean, f64::INFINITY, filled);
-    }
-    let nb = filled as f64;
-    let m_bar = n as f64 / nb;
-    let var = (sum.iter().zip(&count))
-        .map(|(s, &c)| (s - mean * c as f64).powi(2))
-        .sum::<f64>()
-        / (nb - 1.0)
-        / (nb * m_bar * m_bar);
-    (mean, var.sqrt(), filled)
-}
-
-/// The model choice of `--model auto` from the held-out errors of each candidate
-/// (`candidates[0]` must be the geometric model, the reference of the differences): a candidate
-/// must undercut the geometric model by [`CV_SIGNIFICANCE_Z`] blocked standard errors, and the
-/// lowest held-out RMS among those that do wins (the geometric model if none does).
-///
-/// # Panics
-/// If `held` and `candidates` differ in length or are empty.
-#[track_caller]
-fn choose(candidates: &[ModelChoice], held: &[HeldOut]) -> (ModelChoice, Vec<CvReport>) {
+fn choose(
+    candidates: &[ModelChoice],
+    level: &[usize],
+    held: &[HeldOut],
+) -> (ModelChoice, Vec<CvReport>) {
     assert!(
-        !held.is_empty() && held.len() == candidates.len(),
-        "one held-out set per candidate"
+        !held.is_empty() && held.len() == candidates.len() && level.len() == held.len(),
+        "one held-out set and one level per candidate"
     );
     let rms =
         |h: &HeldOut| (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt();
-    let mut choice = candidates[0];
-    let mut best_rms = rms(&held[0]);
-    let mut reports = Vec::new();
-    for (candidate, h) in candidates.iter().zip(held) {
-        let difference = blocked_difference(h, &held[0]);
-        let beats =
-            *candidate != candidates[0] && difference.0 + CV_SIGNIFICANCE_Z * difference.1 < 0.0;
-        if beats && rms(h) < best_rms {
-            choice = *candidate;
-            best_rms = rms(h);
-        }
-        reports.push(CvReport {
+    let beats = |i: usize, j: usize| {
+        let (d, se) = blocked_difference(&held[i], &held[j]);
+        i != j && d + LADDER_SIGNIFICANCE_Z * se < 0.0
+    };
+    let chosen = crate::model::climb(level, &beats, &|i| rms(&held[i]));
+    let reports = (candidates.iter().zip(held).enumerate())
+        .map(|(i, (candidate, h))| CvReport {
             model: *candidate,
             heldout_rms_m: rms(h),
-            difference_to_geometric_m2: if *candidate == candidates[0] {
+            difference_to_geometric_m2: if i == 0 {
                 (0.0, 0.0)
             } else {
-                difference
+                blocked_difference(h, &held[0])
             },
-            beats_geometric: beats,
+            beats_geometric: beats(i, 0),
             n_kept: 0,
-        });
-    }
-    (choice, reports)
+        })
+        .collect();
+    (candidates[chosen], reports)
 }
 
 /// Refuses a calibration whose data determine no parameter, or fewer configurations than the
@@ -876,6 +343,26 @@ fn n_rows(set: &DataSet) -> usize {
     }
 }
 
+/// The kind of the data at `paths` for `device`: a haptic device's logs when the device has
+/// transmissions; measurement files when any file has marker, pose or (on a device without a
+/// cable encoder of its own) anchor-distance columns; socket recordings when every path is a
+/// folder; distance logs otherwise. The workflow that reads them refuses a mixture.
+pub fn data_kind(device: &Device, paths: &[PathBuf]) -> DataKind {
+    if !device.capstans.is_empty() || device.parallelogram.is_some() {
+        return DataKind::HapticLogs;
+    }
+    // A device without a cable encoder of its own: a distance comes from an anchor whose
+    // position the data must determine, as a tracker's frame.
+    let anchor_distances = device.cable_encoder.is_none();
+    if (paths.iter()).any(|p| crate::measured::is_marker_file(p, anchor_distances)) {
+        DataKind::Measurements
+    } else if paths.iter().all(|p| p.is_dir()) {
+        DataKind::Sockets
+    } else {
+        DataKind::Distances
+    }
+}
+
 /// Runs a calibration: reads everything, chooses the model by cross-validation on the training
 /// data, identifies, and evaluates on training and test data.
 ///
@@ -894,26 +381,23 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     }
     check_distinct_inputs(plan)?;
     let device = load_device(&plan.device, &plan.tip)?;
-    if !device.capstans.is_empty() || device.parallelogram.is_some() {
-        refuse_options(
-            plan,
-            "a haptic device's log (the cable-encoder σ comes from the residuals, the \
-             held-out data from --test)",
-        )?;
-        plan.model.check_fits(Workflow::HapticLogs)?;
-        return crate::haptic::calibrate_logs(plan, device, start);
-    }
-    if plan.joint {
+    let kind = data_kind(&device, &plan.data);
+    if kind != DataKind::HapticLogs && plan.joint {
         bail!("--joint applies to a haptic device with transmissions (capstans, parallelogram)");
     }
-    // A device without a cable encoder of its own: a distance comes from an anchor whose
-    // position the data must determine, as a tracker's frame.
-    let distances = device.cable_encoder.is_none();
-    if (plan.data.iter()).any(|p| crate::measured::is_marker_file(p, distances)) {
-        plan.model.check_fits(Workflow::MeasurementFiles)?;
-        return crate::measured::run(plan, &device, start);
+    plan.model.check_fits(kind)?;
+    match kind {
+        DataKind::HapticLogs => {
+            refuse_options(
+                plan,
+                "a haptic device's log (the cable-encoder σ comes from the residuals, the \
+                 held-out data from --test)",
+            )?;
+            return crate::haptic::calibrate_logs(plan, device, start);
+        }
+        DataKind::Measurements => return crate::measured::run(plan, &device, start),
+        DataKind::Sockets | DataKind::Distances => {}
     }
-    plan.model.check_fits(Workflow::SocketsOrDistances)?;
     if plan.test_last.is_some() {
         bail!(
             "--test-last applies to measurement files (positions, poses, distances); hold out \
@@ -966,21 +450,30 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     let mut cross_validation = Vec::new();
     let choice = match plan.model {
         ModelChoice::Auto => {
-            // Every model the robot supports is a candidate. A compliance model must beat the
-            // geometric one by CV_SIGNIFICANCE_Z blocked standard errors of the held-out
-            // difference; among those that do, the lowest held-out RMS wins. Within one
-            // placement the gravity torques hardly change, so compliance and geometry are
-            // nearly confounded and a win inside the noise does not carry to other placements.
-            let mut candidates = vec![ModelChoice::Geometric, ModelChoice::Compliance];
-            if GravityCompliance::published(chain.joint_names()).is_some() {
-                candidates.push(ModelChoice::MassCompliance);
-                candidates.push(ModelChoice::ActuatorCompliance);
+            // The ladder of the data's kind, every rung the robot carries (transversal
+            // compliance needs rotation deviations on a revolute joint), chosen by the rule
+            // every workflow uses (docs/engine.md). Within one placement the gravity torques
+            // hardly change, so compliance and geometry are nearly confounded and a win inside
+            // the noise does not carry to other placements: hence the margin.
+            let published = GravityCompliance::published(chain.joint_names()).is_some();
+            let (mut candidates, mut level) = (Vec::new(), Vec::new());
+            for (l, rungs) in crate::model::ladder(kind, published)
+                .into_iter()
+                .enumerate()
+            {
+                for m in rungs {
+                    if m != ModelChoice::TransversalCompliance
+                        || crate::model::carries_transversal(std::slice::from_ref(&chain))
+                    {
+                        candidates.push(m);
+                        level.push(l);
+                    }
+                }
             }
-            let mut held = Vec::new();
-            for &candidate in &candidates {
-                held.push(cross_validate(&chain, &train, plan, candidate, CV_REPEATS)?);
-            }
-            let (choice, reports) = choose(&candidates, &held);
+            let held = (candidates.iter())
+                .map(|&candidate| cross_validate(&chain, &train, plan, candidate, CV_REPEATS))
+                .collect::<Result<Vec<_>>>()?;
+            let (choice, reports) = choose(&candidates, &level, &held);
             cross_validation = reports;
             choice
         }
@@ -1100,28 +593,6 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         model,
         calibrated: None,
     })
-}
-
-/// The pruned parameters of `identified`, each with why.
-pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
-    identified
-        .identifiability
-        .pruned
-        .iter()
-        .map(|p| {
-            let (reason, depends_on) = match &p.reason {
-                PruneReason::NearZeroColumn => ("near_zero_column", Vec::new()),
-                PruneReason::Dependent { on } => ("dependent", on.clone()),
-                _ => ("other", Vec::new()),
-            };
-            PrunedReport {
-                name: p.name.clone(),
-                reason,
-                depends_on,
-                std_if_kept: p.std_if_kept,
-            }
-        })
-        .collect()
 }
 
 /// Extensions of the formats hapcal reads or writes: an output whose extension names one of
@@ -1471,80 +942,7 @@ pub fn write_outputs_beside(
 
 #[cfg(test)]
 mod tests {
-    use super::{HeldOut, ModelChoice, Workflow, blocked_difference, choose, fold_of};
-
-    #[test]
-    fn a_model_is_named_by_its_command_line_value() {
-        for &model in <ModelChoice as clap::ValueEnum>::value_variants() {
-            let value = clap::ValueEnum::to_possible_value(&model).map(|v| v.get_name().to_owned());
-            assert_eq!(Some(model.to_string()), value, "{model:?}");
-        }
-        assert_eq!(
-            ModelChoice::ComplianceHarmonic.to_string(),
-            "compliance-harmonic"
-        );
-    }
-
-    #[test]
-    fn each_workflow_refuses_the_models_it_does_not_fit_by_their_values() {
-        let cases = [
-            (
-                ModelChoice::Geometric,
-                Workflow::HapticLogs,
-                "auto, transmissions",
-            ),
-            (
-                ModelChoice::Compliance,
-                Workflow::HapticLogs,
-                "auto, transmissions",
-            ),
-            (
-                ModelChoice::MassCompliance,
-                Workflow::MeasurementFiles,
-                "compliance takes the link masses from the URDF",
-            ),
-            (
-                ModelChoice::ComplianceHarmonic,
-                Workflow::MeasurementFiles,
-                "frames-only, joint-offsets",
-            ),
-            (
-                ModelChoice::FramesOnly,
-                Workflow::SocketsOrDistances,
-                "auto, geometric",
-            ),
-            (
-                ModelChoice::Transmissions,
-                Workflow::SocketsOrDistances,
-                "auto, geometric",
-            ),
-        ];
-        for (model, workflow, listed) in cases {
-            let err = model.check_fits(workflow).map_err(|e| e.to_string());
-            let Err(err) = err else {
-                panic!("{model} is refused on {workflow:?}");
-            };
-            assert!(
-                err.starts_with(&format!("--model {model} does not apply to "))
-                    && err.contains(listed),
-                "{err}"
-            );
-        }
-        for (model, workflow) in [
-            (ModelChoice::Auto, Workflow::HapticLogs),
-            (ModelChoice::Transmissions, Workflow::HapticLogs),
-            (ModelChoice::Compliance, Workflow::MeasurementFiles),
-            (
-                ModelChoice::MassComplianceHarmonic,
-                Workflow::SocketsOrDistances,
-            ),
-        ] {
-            assert!(
-                model.check_fits(workflow).is_ok(),
-                "{model} on {workflow:?}"
-            );
-        }
-    }
+    use super::{HeldOut, ModelChoice, blocked_difference, choose, fold_of};
 
     /// Held-out errors on 10 blocks of 5 rows: `base` everywhere, minus `gain` in every block,
     /// with ±`spread` alternating between blocks (the block-to-block scatter of the gain).
@@ -1565,24 +963,32 @@ mod tests {
         use ModelChoice::{ActuatorCompliance, Compliance, Geometric, MassCompliance};
         let geometric = held(10.0, 0.0, 0.0);
         // Block scatter ±1 over 10 blocks: standard error 1/3 (sample SD 1.054, /√10).
-        // A gain of 0.2 is 0.6 SE (not enough), 0.6 is 1.8 SE (enough), 0.9 is 2.7 SE.
+        // A gain of 0.2 is 0.6 SE (not enough), 0.6 is 1.8 SE (not enough at 2 SE), 0.8 is
+        // 2.4 SE and 0.9 is 2.7 SE (enough).
         let candidates = [Geometric, Compliance, MassCompliance, ActuatorCompliance];
+        let level = [0, 1, 1, 1];
         let sets = [
             geometric.clone(),
-            held(10.0, 0.2, 1.0),
             held(10.0, 0.6, 1.0),
+            held(10.0, 0.8, 1.0),
             held(10.0, 0.9, 1.0),
         ];
-        let (choice, reports) = choose(&candidates, &sets);
+        let (choice, reports) = choose(&candidates, &level, &sets);
         let beats: Vec<bool> = reports.iter().map(|r| r.beats_geometric).collect();
         assert_eq!(beats, [false, false, true, true]);
-        // Among those that pass, the lowest held-out RMS.
+        // Among the alternatives of a level that pass, the lowest held-out RMS.
         assert_eq!(choice, ActuatorCompliance);
+        let (choice, _) = choose(&candidates[..3], &level[..3], &sets[..3]);
+        assert_eq!(choice, MassCompliance);
         // Only a gain inside the margin: the geometric model stays.
-        let (choice, _) = choose(&candidates[..2], &sets[..2]);
+        let (choice, _) = choose(&candidates[..2], &level[..2], &sets[..2]);
         assert_eq!(choice, Geometric);
-        // The same gain without block scatter is decisive.
-        let (choice, _) = choose(&candidates[..2], &[geometric, held(10.0, 0.2, 0.0)]);
+        // A small gain without block scatter is decisive.
+        let (choice, _) = choose(
+            &candidates[..2],
+            &level[..2],
+            &[geometric, held(10.0, 0.2, 0.0)],
+        );
         assert_eq!(choice, Compliance);
     }
 

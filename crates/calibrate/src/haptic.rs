@@ -226,7 +226,7 @@ pub fn identify_kinematics(
     };
     let problem = CalibrationProblem::new(r.chain.clone(), obs, weights, None)?;
     let x0: Col<f64> = problem.initial_guess();
-    let identified = identify(&problem, x0, &crate::calibrate::identify_config(None))
+    let identified = identify(&problem, x0, &crate::fit::identify_config(None))
         .context("identifying kinematic deviations")?;
     Ok((problem, identified))
 }
@@ -519,11 +519,12 @@ pub fn calibrated_device(
 /// line, column), a folder among the data, too few rows, no more distinct joint configurations
 /// than kept parameters ([`check_distinct_configurations`]), or a failed identification.
 pub fn calibrate_logs(
-    plan: &crate::calibrate::Plan,
+    plan: &crate::inputs::Plan,
     device: Device,
     start: std::time::Instant,
-) -> Result<crate::calibrate::Outcome> {
-    use crate::calibrate::{CalibrationReport, Figures, ModelChoice, ParamReport, SetReport};
+) -> Result<crate::report::Outcome> {
+    use crate::model::ModelChoice;
+    use crate::report::{CalibrationReport, Figures, ParamReport, SetReport};
     /// One log: its name, its rows and the reader's warnings.
     type NamedLog = (String, Vec<LogRow>, Vec<String>);
     let haptic = HapticDevice::new(device)?;
@@ -594,7 +595,10 @@ pub fn calibrate_logs(
             });
         }
     };
-    let (transmissions, kin, model, calibrated) = if has_ext {
+    // `--model geometric`: the kinematic deviations alone, whether or not the logs could carry
+    // the transmissions.
+    let (transmissions, kin, model, calibrated) = if has_ext && plan.model != ModelChoice::Geometric
+    {
         let t = identify_transmissions(&haptic, &rows).context("step 1 (transmissions)")?;
         let (_, kin) =
             identify_kinematics(&haptic, &rows, Some(&t)).context("step 2 (kinematics)")?;
@@ -623,12 +627,14 @@ pub fn calibrate_logs(
         let calibrated = calibrated_device(&haptic, &t, &kin, notes)?;
         (Some(t), kin, ModelChoice::Transmissions, calibrated)
     } else {
-        warnings.push(format!(
+        if !has_ext {
+            warnings.push(format!(
             "the training logs have no external-encoder columns (ext1..ext{PARALLELOGRAM_JOINT}): \
              the transmissions are not identified and the kinematic deviations absorb their errors \
              (the paper's \"transmission errors left out\"); record the external encoders to \
              calibrate the transmissions"
         ));
+        }
         let (_, kin) = identify_kinematics(&haptic, &rows, None).context("kinematics")?;
         push_kept(&mut parameters, &kin);
         let values: Vec<CalibratedValue> = parameters
@@ -698,7 +704,7 @@ pub fn calibrate_logs(
             );
         }
     }
-    let pruned = crate::calibrate::pruned_report(&kin);
+    let pruned = crate::fit::pruned_report(&kin);
     let correlated = (kin.covariance.correlated_pairs(0.95).into_iter())
         .map(|(a, b, c)| {
             (
@@ -734,8 +740,8 @@ pub fn calibrate_logs(
         correlated,
         observability: None,
         warnings,
-        termination: crate::calibrate::termination_text(&kin.fit.termination),
-        backend: crate::calibrate::backend_of(&kin),
+        termination: crate::fit::termination_text(&kin.fit.termination),
+        backend: crate::fit::backend_of(&kin),
         n_evaluations: kin.fit.n_evaluations,
         n_jacobians: kin.fit.n_jacobians,
         rounds: kin.rounds,
@@ -750,7 +756,7 @@ pub fn calibrate_logs(
         x_kin: x_kin.clone(),
         ..hapcal_problems::CalibratedModel::nominal(haptic.chain.clone())
     };
-    Ok(crate::calibrate::Outcome {
+    Ok(crate::report::Outcome {
         report,
         device: haptic.device.clone(),
         device_path: plan.device.clone(),

@@ -8,9 +8,13 @@
 
 pub mod baseline;
 pub mod calibrate;
+pub mod fit;
 pub mod haptic;
+pub mod inputs;
 pub mod measured;
+pub mod model;
 pub mod plan;
+pub mod report;
 pub mod support;
 
 use std::path::{Path, PathBuf};

@@ -11,13 +11,15 @@
 //! 2. **joint offsets**: plus one offset per joint;
 //! 3. **geometric**: every kinematic parameter the data determine (identifiability pruning);
 //! 4. **compliance**: plus a gravity compliance per joint (torques from the URDF's
-//!    `<inertial>` masses when it has them, lumped weights otherwise).
+//!    `<inertial>` masses when it has them, lumped weights otherwise; for a robot with
+//!    published link masses, mass-compliance and actuator-compliance as alternatives);
+//! 5. **transversal compliance**: plus the bending of each revolute joint's frame.
 //!
 //! Blocked cross-validation on the training rows (contiguous blocks in file order, the
 //! blocked standard error of the socket workflow) scores each rung by its held-out weighted
 //! squared error, `|e_p|²/σ_p² + θ²/σ_θ²` per marker (the fit's own objective, so that pose
 //! data are judged on orientation too), and climbs the ladder only while a rung beats the one
-//! chosen so far by [`LADDER_SIGNIFICANCE_Z`] standard errors of the held-out difference; a
+//! chosen so far by [`crate::model::LADDER_SIGNIFICANCE_Z`] standard errors of the held-out difference; a
 //! calibration that does not beat frames only on held-out rows keeps the nominal kinematics,
 //! and the report says so.
 
@@ -30,71 +32,15 @@ use hapcal_problems::{
     CalibratedModel, CalibrationProblem, GravityCompliance, LinkMass, ModelTerms, Observations,
     Row, RowKind, Weights,
 };
-use serde::Serialize;
 
-use crate::calibrate::{CV_REPEATS, HeldOut, blocked_difference, fold_of};
+use crate::fit::{CV_REPEATS, HeldOut, blocked_difference, fold_of};
+use crate::model::{DataKind, ModelChoice};
+pub use crate::report::{
+    Downweighted, FrameReport, PoseFigures, RangeFold, RungReport, SampleErrors,
+};
 
 /// The instrument frame and the markers' frames with their tips.
 type Frames = (FrameSpec, Vec<(usize, FrameSpec)>);
-
-/// Standard errors by which a rung's held-out score must beat the rung chosen so far.
-///
-/// The ladder makes up to three sequential one-sided comparisons, each of which can climb by
-/// chance. At one standard error a useless rung wins a comparison with probability ≈ 0.16
-/// (normal tail), ≈ 0.4 over three; at two, ≈ 0.023 and ≈ 0.07. A calibration that is worse
-/// than doing nothing costs more than one that leaves a small gain unclaimed, so the ladder
-/// uses two.
-pub const LADDER_SIGNIFICANCE_Z: f64 = 2.0;
-
-/// A rung of the model ladder, simplest first.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Rung {
-    /// Nominal kinematics; instrument and marker frames fitted.
-    FramesOnly,
-    /// Frames plus one offset per joint.
-    JointOffsets,
-    /// Frames plus every kinematic parameter the data determine.
-    Geometric,
-    /// Geometric plus a gravity compliance per joint.
-    Compliance,
-    /// Compliance plus a transversal compliance per revolute joint: the joint frame bends
-    /// about the axes normal to its axis under the gravity moment about them (Tenhumberg &
-    /// Bäuml 2021; [`hapcal_problems::TransversalTerm`]). URDF robots only.
-    TransversalCompliance,
-    /// Geometric plus a once-per-revolution harmonic angle error on every joint
-    /// ([`hapcal_problems::JointHarmonics::first_order`]: encoder eccentricity). Fitted when
-    /// asked for, not a rung the ladder climbs (as on socket data).
-    Harmonic,
-    /// Geometric plus first- and second-order harmonic angle errors on every joint. Fitted
-    /// when asked for, not a rung the ladder climbs.
-    Harmonic2,
-}
-
-impl Rung {
-    /// Every rung, simplest first.
-    pub const ALL: [Rung; 5] = [
-        Rung::FramesOnly,
-        Rung::JointOffsets,
-        Rung::Geometric,
-        Rung::Compliance,
-        Rung::TransversalCompliance,
-    ];
-}
-
-impl std::fmt::Display for Rung {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Rung::FramesOnly => "frames only",
-            Rung::JointOffsets => "joint offsets",
-            Rung::Geometric => "geometric",
-            Rung::Compliance => "compliance",
-            Rung::TransversalCompliance => "transversal compliance",
-            Rung::Harmonic => "harmonic",
-            Rung::Harmonic2 => "harmonic2",
-        })
-    }
-}
 
 /// The robot as the measured workflow needs it: its tree (one chain per tip, sharing one
 /// parameter vector), its joints and, from a URDF, its link masses.
@@ -116,7 +62,7 @@ pub struct Robot {
 #[derive(Clone, Debug)]
 pub struct MeasuredConfig {
     /// The rung to fit, or `None` to choose by cross-validation.
-    pub rung: Option<Rung>,
+    pub rung: Option<ModelChoice>,
     /// Cross-validation folds (contiguous blocks of rows in file order).
     pub folds: usize,
     /// Position noise σ, m, if known; else estimated from the frames-only residuals.
@@ -132,91 +78,11 @@ pub struct MeasuredConfig {
     pub workspace: Vec<Vec<f64>>,
 }
 
-/// Position and orientation errors of one data set under one model.
-#[derive(Clone, Copy, Debug, Default, Serialize)]
-pub struct PoseFigures {
-    /// Mean 3-D position error over every marker sample, m.
-    pub position_mean_m: f64,
-    /// RMS of the 3-D position error, m.
-    pub position_rms_m: f64,
-    /// Largest 3-D position error, m.
-    pub position_max_m: f64,
-    /// Mean orientation error (angle of the relative rotation), rad; pose data only.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub orientation_mean_rad: Option<f64>,
-    /// RMS orientation error, rad.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub orientation_rms_rad: Option<f64>,
-    /// Largest orientation error, rad.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub orientation_max_rad: Option<f64>,
-    /// Mean absolute distance error over the distance rows, m; distance data only.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub distance_mean_m: Option<f64>,
-    /// RMS distance error, m.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub distance_rms_m: Option<f64>,
-    /// Largest absolute distance error, m.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub distance_max_m: Option<f64>,
-}
-
-/// Per-sample errors of one data set, frames only and calibrated, in file order: what a
-/// residual plot shows.
-#[derive(Clone, Debug, Default, Serialize)]
-pub struct SampleErrors {
-    /// 3-D position error of every marker sample with frames only, m.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub position_before_m: Vec<f64>,
-    /// The same with the calibrated model, m.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub position_after_m: Vec<f64>,
-    /// Distance error (model − measured) of every distance row with frames only, m.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub distance_before_m: Vec<f64>,
-    /// The same with the calibrated model, m.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub distance_after_m: Vec<f64>,
-}
-
-/// One rung's cross-validation score.
-#[derive(Clone, Debug, Serialize)]
-pub struct RungReport {
-    /// The rung.
-    pub rung: Rung,
-    /// Held-out RMS of the 3-D position error over all folds, m.
-    pub heldout_rms_m: f64,
-    /// Mean held-out weighted squared error per row (`Σ |e_p|²/σ_p² + θ²/σ_θ²` over the row's
-    /// markers, dimensionless) minus the frames-only rung's, and its blocked standard error.
-    pub score_difference_to_frames: (f64, f64),
-    /// Held-out RMS of the 3-D position error per row over the joint-range folds (each
-    /// holds out one end of one joint's training range, [`RangeFold`]), m; `None` without
-    /// such folds.
-    pub range_rms_m: Option<f64>,
-    /// Mean weighted squared error per row over the judged joint-range folds minus the
-    /// frames-only rung's (dimensionless; negative: better than frames only where the model
-    /// must extrapolate; 0 without such folds).
-    pub range_difference_to_frames: f64,
-    /// Kept model parameters (kinematic and compliance) on the full training data.
-    pub n_kept: usize,
-}
-
-/// An identified frame: the instrument-to-base transform or a marker on its link.
-#[derive(Clone, Debug, Serialize)]
-pub struct FrameReport {
-    /// `instrument` or `marker1`, `marker2`, ….
-    pub name: String,
-    /// Translation, m.
-    pub xyz_m: [f64; 3],
-    /// Rotation as roll, pitch, yaw (R = Rz(yaw)·Ry(pitch)·Rx(roll)), rad.
-    pub rpy_rad: [f64; 3],
-}
-
 /// Everything the measured workflow found.
 #[derive(Clone, Debug)]
 pub struct MeasuredOutcome {
     /// The chosen rung.
-    pub rung: Rung,
+    pub rung: ModelChoice,
     /// Cross-validation scores, simplest rung first (empty when the rung was given).
     pub ladder: Vec<RungReport>,
     /// Final identification of the chosen rung on all training rows.
@@ -749,42 +615,50 @@ pub(crate) fn observations(
     obs
 }
 
-/// The problem's model terms for `rung`.
-fn terms(rung: Rung, robot: &Robot) -> ModelTerms {
-    let compliance = matches!(rung, Rung::Compliance | Rung::TransversalCompliance).then(|| {
-        if robot.masses.is_empty() {
-            GravityCompliance::default()
-        } else {
-            GravityCompliance::from_link_masses(robot.masses.clone(), -Vector3::z())
-        }
-    });
-    let n = robot.joint_names.len();
-    let harmonics = match rung {
-        Rung::Harmonic => Some(hapcal_problems::JointHarmonics::first_order(n)),
-        Rung::Harmonic2 => Some(hapcal_problems::JointHarmonics {
-            joints: (0..n).collect(),
-            orders: vec![1, 2],
-        }),
-        _ => None,
-    };
-    ModelTerms {
-        compliance,
-        transversal: rung == Rung::TransversalCompliance,
-        harmonics,
+/// The problem's model terms for `rung` ([`crate::model::terms`] with the robot's link masses),
+/// the gravity loads taken on every tip of the tree.
+///
+/// # Errors
+/// A published-mass model on a robot without published masses.
+fn terms(rung: ModelChoice, robot: &Robot) -> Result<ModelTerms> {
+    Ok(ModelTerms {
         torque_tips: Some(robot.tree.tips().to_vec()),
-        load_angles: None,
-    }
+        ..crate::model::terms(rung, &robot.joint_names, &robot.masses)?
+    })
 }
 
 /// Whether `robot` can carry `rung`: transversal compliance needs revolute joints with
-/// rotation deviations (URDF placements, `{joint}.rx`); every other rung fits any robot.
-pub fn carries(rung: Rung, robot: &Robot) -> bool {
-    if rung != Rung::TransversalCompliance {
-        return true;
+/// rotation deviations (URDF placements, `{joint}.rx`), the published-mass models a robot
+/// whose joint names have published masses; every other rung fits any robot.
+pub fn carries(rung: ModelChoice, robot: &Robot) -> bool {
+    match rung.families() {
+        f if f.transversal => crate::model::carries_transversal(robot.tree.tips()),
+        f if f
+            .compliance
+            .is_some_and(|c| c != crate::model::ComplianceSource::Robot) =>
+        {
+            GravityCompliance::published(&robot.joint_names).is_some()
+        }
+        _ => true,
     }
-    let chain = &robot.tree.tips()[0];
-    (robot.joint_names.iter().zip(&robot.prismatic))
-        .any(|(name, &prismatic)| !prismatic && chain.param_index(&format!("{name}.rx")).is_some())
+}
+
+/// The rungs of the measurement files' ladder `robot` carries, simplest first, with each
+/// one's level.
+fn ladder_of(robot: &Robot) -> (Vec<ModelChoice>, Vec<usize>) {
+    let published = GravityCompliance::published(&robot.joint_names).is_some();
+    let mut rungs = Vec::new();
+    let mut levels = Vec::new();
+    for (l, level) in crate::model::ladder(DataKind::Measurements, published)
+        .into_iter()
+        .enumerate()
+    {
+        for r in level.into_iter().filter(|&r| carries(r, robot)) {
+            rungs.push(r);
+            levels.push(l);
+        }
+    }
+    (rungs, levels)
 }
 
 /// Free parameters of `rung` in the layout of a problem on `framed` (the tree with joint
@@ -792,7 +666,7 @@ pub fn carries(rung: Rung, robot: &Robot) -> bool {
 /// parameter count, after the 6 of the instrument frame); `orientation`: whether marker
 /// rotations are observed.
 fn free_of(
-    rung: Rung,
+    rung: ModelChoice,
     framed: &Tree,
     offsets: &[Option<usize>],
     n_robot: usize,
@@ -810,14 +684,11 @@ fn free_of(
         }
         k += 6;
     }
-    match rung {
-        Rung::FramesOnly => {}
-        Rung::JointOffsets => free.extend(offsets.iter().flatten().map(|&i| i + 6)),
-        Rung::Geometric
-        | Rung::Compliance
-        | Rung::TransversalCompliance
-        | Rung::Harmonic
-        | Rung::Harmonic2 => free.extend(6..6 + n_robot),
+    let families = rung.families();
+    if families.geometric {
+        free.extend(6..6 + n_robot);
+    } else if families.joint_offsets {
+        free.extend(offsets.iter().flatten().map(|&i| i + 6));
     }
     // Compliance (and any other model term) after the kinematic parameters.
     free.extend(n_kin..n_layout);
@@ -836,7 +707,7 @@ struct Start<'a> {
 /// Fits `rung` on the rows `keep` selects: the problem and its identification (estimates
 /// mapped back to the full layout).
 fn fit(
-    rung: Rung,
+    rung: ModelChoice,
     robot: &Robot,
     start: &Start<'_>,
     offsets: &[Option<usize>],
@@ -847,7 +718,7 @@ fn fit(
     let obs = observations(tables, keep);
     fit_terms(
         rung,
-        terms(rung, robot),
+        terms(rung, robot)?,
         robot,
         start,
         offsets,
@@ -859,7 +730,7 @@ fn fit(
 /// [`fit`] of the observations `obs` with the model terms `terms` (the rung's, with the
 /// loads at a torque equilibrium, say).
 fn fit_terms(
-    rung: Rung,
+    rung: ModelChoice,
     terms: ModelTerms,
     robot: &Robot,
     start: &Start<'_>,
@@ -887,7 +758,7 @@ fn fit_terms(
     }
     let subset = Subset::new(&problem, free, x_full);
     let x0 = subset.initial_free();
-    let id = identify(&subset, x0, &crate::calibrate::identify_config(None))
+    let id = identify(&subset, x0, &crate::fit::identify_config(None))
         .with_context(|| format!("identifying the {rung} model from {n_rows} marker samples"))?;
     let x = subset.full_x(id.fit.x.as_ref());
     let model = problem.model(x.as_ref());
@@ -1049,7 +920,7 @@ impl Warm {
 /// iterations from a nearby start.
 #[allow(clippy::too_many_arguments)]
 fn refit(
-    rung: Rung,
+    rung: ModelChoice,
     robot: &Robot,
     tree: &Tree,
     tables: &[MeasurementTable],
@@ -1058,7 +929,7 @@ fn refit(
     warm: &Warm,
 ) -> Result<CalibratedModel> {
     let obs = observations(tables, keep);
-    let problem = CalibrationProblem::on_tree(tree.clone(), obs, weights, terms(rung, robot))
+    let problem = CalibrationProblem::on_tree(tree.clone(), obs, weights, terms(rung, robot)?)
         .context("building the calibration problem")?;
     // A fold's estimate is judged by its held-out error: a relative cost reduction of 10⁻⁸
     // changes that error by about 10⁻⁸ of itself, far below the blocked standard errors the
@@ -1066,7 +937,7 @@ fn refit(
     let lm = hapcal_identify::LmConfig {
         ftol: FOLD_TOLERANCE,
         xtol: FOLD_TOLERANCE,
-        ..crate::calibrate::identify_config(None).lm
+        ..crate::fit::identify_config(None).lm
     };
     let fit = hapcal_identify::levenberg_marquardt(&problem, warm.x.clone(), &warm.free, &lm)
         .with_context(|| format!("refitting the {rung} model on a fold"))?;
@@ -1121,20 +992,6 @@ fn past_range(q: f64, (lo, hi): (f64, f64)) -> Option<bool> {
 /// Share of the training rows each joint-range fold holds out, from one end of the joint's
 /// range.
 pub const RANGE_FOLD_SHARE: f64 = 0.2;
-
-/// A fold that holds out one end of one joint's training range: the model is fitted on the
-/// rest and judged where it must extrapolate.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct RangeFold {
-    /// The joint's name.
-    pub joint: String,
-    /// `true`: the rows at the top of its range are held out; `false`: the bottom.
-    pub upper: bool,
-    /// Whether a test or workspace configuration lies beyond the training range on this side
-    /// of this joint by more than [`OUTSIDE_SHARE`] of it (the folds the ladder judges
-    /// extrapolation by).
-    pub relevant: bool,
-}
 
 /// The training range of every joint, rad or m: (min, max) over the training rows.
 pub fn training_ranges(tables: &[MeasurementTable], n_joints: usize) -> Vec<(f64, f64)> {
@@ -1214,7 +1071,7 @@ struct Scores {
 /// the rung's full-data estimate `warm`, the folds in parallel.
 #[allow(clippy::too_many_arguments)]
 fn cross_validate(
-    rung: Rung,
+    rung: ModelChoice,
     robot: &Robot,
     tree: &Tree,
     warm: &Warm,
@@ -1402,7 +1259,7 @@ pub fn calibrate_measured(
     let weights_changed = weights != initial_weights;
     let (frames_model, frames_only) = if reweighted || weights_changed {
         fit(
-            Rung::FramesOnly,
+            ModelChoice::FramesOnly,
             robot,
             &Start {
                 tree: &framed,
@@ -1423,11 +1280,13 @@ pub fn calibrate_measured(
     };
     // Gross errors bounded by the Huber loss: every fit below sees the winsorized samples;
     // the figures are of the data as measured.
+    let (ladder_rungs, ladder_levels) = ladder_of(robot);
+    // The richest rung: the first alternative of the ladder's top level.
+    let top = ladder_levels.iter().copied().max().unwrap_or(0);
     let richest = cfg.rung.unwrap_or_else(|| {
-        (Rung::ALL.into_iter())
-            .rev()
-            .find(|&r| carries(r, robot))
-            .unwrap_or(Rung::Geometric)
+        (ladder_rungs.iter().zip(&ladder_levels))
+            .find(|&(_, &l)| l == top)
+            .map_or(ModelChoice::Geometric, |(&r, _)| r)
     });
     let (fit_tables, downweighted, mut richest_fit, judge) =
         winsorize(richest, robot, &start, &offsets, train, weights)?;
@@ -1435,7 +1294,7 @@ pub fn calibrate_measured(
         (frames_model, frames_only)
     } else {
         fit(
-            Rung::FramesOnly,
+            ModelChoice::FramesOnly,
             robot,
             &start,
             &offsets,
@@ -1450,15 +1309,13 @@ pub fn calibrate_measured(
     let mut ladder = Vec::new();
     let mut range_folds_used = Vec::new();
     let (rung, (model, fitted)) = match cfg.rung {
-        Some(r) if r == Rung::FramesOnly => (r, (frames_model.clone(), frames_only.clone())),
+        Some(r) if r == ModelChoice::FramesOnly => (r, (frames_model.clone(), frames_only.clone())),
         Some(r) => match richest_fit.take() {
             Some((used, f)) if used == r => (r, f),
             _ => (r, fit(r, robot, &start, &offsets, train, weights, &all)?),
         },
         None => {
-            let rungs: Vec<Rung> = (Rung::ALL.into_iter())
-                .filter(|&r| carries(r, robot))
-                .collect();
+            let rungs = &ladder_rungs;
             // Where the calibration will be used: the test rows and the workspace given.
             let beyond: Vec<&[f64]> = (test.iter().flat_map(|t| &t.rows))
                 .map(|r| r.q.as_slice())
@@ -1474,7 +1331,7 @@ pub fn calibrate_measured(
             let cached = std::sync::Mutex::new(richest_fit.take());
             let fitted: Vec<((CalibratedModel, Fitted), Scores)> = (rungs.par_iter())
                 .map(|&r| {
-                    let f = if r == Rung::FramesOnly {
+                    let f = if r == ModelChoice::FramesOnly {
                         (frames_model.clone(), frames_only.clone())
                     } else if let Some((_, f)) =
                         (cached.lock().ok()).and_then(|mut c| c.take_if(|(used, _)| *used == r))
@@ -1500,7 +1357,6 @@ pub fn calibrate_measured(
                     .sum::<f64>()
                     / judged.len().max(1) as f64
             };
-            let mut chosen = 0;
             for (i, r) in rungs.iter().enumerate() {
                 let to_frames = blocked_difference(&scores[i].score, &scores[0].score);
                 let (range_sq, range_n) = scores[i].range_squared;
@@ -1512,14 +1368,17 @@ pub fn calibrate_measured(
                     range_difference_to_frames: extrapolation(i, 0),
                     n_kept: 0,
                 });
-                let (d, se) = blocked_difference(&scores[i].score, &scores[chosen].score);
-                if i > chosen
-                    && d + LADDER_SIGNIFICANCE_Z * se < 0.0
-                    && extrapolation(i, chosen) <= 0.0
-                {
-                    chosen = i;
-                }
             }
+            // The one rule of every workflow (crate::model::climb): a rung must beat the one
+            // chosen so far by LADDER_SIGNIFICANCE_Z blocked standard errors and do no worse
+            // on the judged joint-range folds.
+            let beats = |i: usize, j: usize| {
+                let (d, se) = blocked_difference(&scores[i].score, &scores[j].score);
+                i != j
+                    && d + crate::model::LADDER_SIGNIFICANCE_Z * se < 0.0
+                    && extrapolation(i, j) <= 0.0
+            };
+            let chosen = crate::model::climb(&ladder_levels, &beats, &|i| rms(&scores[i].squared));
             range_folds_used = (judged.iter()).map(|&f| ranges[f].0.clone()).collect();
             (rungs[chosen], fits.swap_remove(chosen))
         }
@@ -1537,14 +1396,14 @@ pub fn calibrate_measured(
         r.n_kept = n_kept;
     }
     let mut warnings = Vec::new();
-    if cfg.rung.is_none() && rung == Rung::FramesOnly {
+    if cfg.rung.is_none() && rung == ModelChoice::FramesOnly {
         warnings.push(
             "no calibrated model beat frames only on held-out training rows: the nominal \
              kinematics are kept (only the instrument and marker frames are fitted)"
                 .to_owned(),
         );
     }
-    if rung != Rung::FramesOnly && n_kept == 0 {
+    if rung != ModelChoice::FramesOnly && n_kept == 0 {
         warnings.push(format!(
             "the data determine none of the {} model's kinematic parameters: only the \
              instrument and marker frames are fitted; move every joint over its range",
@@ -1565,7 +1424,7 @@ pub fn calibrate_measured(
             "the least-squares fit did not converge ({} after {} evaluations): the \
              estimate is the last iterate, not a minimum (a --sigma-m far below the residual keeps \
              parameters the data do not determine)",
-            crate::calibrate::termination_text(termination),
+            crate::fit::termination_text(termination),
             fitted.identified.fit.n_evaluations
         ));
     }
@@ -1761,7 +1620,7 @@ const EQUILIBRIUM_REFITS: usize = 6;
 /// was made; with the refits made.
 #[allow(clippy::too_many_arguments)]
 fn equilibrate(
-    rung: Rung,
+    rung: ModelChoice,
     robot: &Robot,
     tree: &Tree,
     offsets: &[Option<usize>],
@@ -1789,7 +1648,7 @@ fn equilibrate(
     let mut previous: Option<Vec<Vec<f64>>> = None;
     let mut refits = 0;
     let obs = observations(train, &|_, _| true);
-    let lm = crate::calibrate::identify_config(None).lm;
+    let lm = crate::fit::identify_config(None).lm;
     while refits < EQUILIBRIUM_REFITS {
         let solving = CalibratedModel {
             equilibrium: true,
@@ -1815,7 +1674,7 @@ fn equilibrate(
         }
         let terms = ModelTerms {
             load_angles: Some(at.clone()),
-            ..terms(rung, robot)
+            ..terms(rung, robot)?
         };
         let problem = CalibrationProblem::on_tree(tree.clone(), obs.clone(), weights, terms)
             .context("building the calibration problem")?;
@@ -1831,7 +1690,7 @@ fn equilibrate(
     };
     let terms = ModelTerms {
         load_angles: Some(at),
-        ..terms(rung, robot)
+        ..terms(rung, robot)?
     };
     let (model, fitted) = fit_terms(
         rung,
@@ -1859,7 +1718,7 @@ pub const EQUILIBRIUM_SHARE: f64 = 0.3;
 /// evaluated.
 #[allow(clippy::too_many_arguments)]
 fn prediction_sigmas(
-    rung: Rung,
+    rung: ModelChoice,
     robot: &Robot,
     tree: &Tree,
     fitted: &Fitted,
@@ -1885,8 +1744,8 @@ fn prediction_sigmas(
                 }
             }
             let n_samples = obs.rows.len();
-            let Ok(problem) =
-                CalibrationProblem::on_tree(tree.clone(), obs, weights, terms(rung, robot))
+            let Ok(problem) = terms(rung, robot)
+                .and_then(|t| Ok(CalibrationProblem::on_tree(tree.clone(), obs, weights, t)?))
             else {
                 return Vec::new();
             };
@@ -1991,8 +1850,8 @@ fn outside_warnings(
 type Winsorized = (
     Vec<MeasurementTable>,
     Vec<Downweighted>,
-    Option<(Rung, (CalibratedModel, Fitted))>,
-    Rung,
+    Option<(ModelChoice, (CalibratedModel, Fitted))>,
+    ModelChoice,
 );
 
 /// The unit of a compliance parameter (`compliance.*`, `transversal.*`): rad/(N·m) under the
@@ -2022,22 +1881,6 @@ const MIN_REDUNDANCY: f64 = 4.0;
 /// isotropic Gaussian error of unit standard deviation per axis.
 const CHI3_MEDIAN: f64 = 1.538_2;
 
-/// A marker sample the Huber loss bounded: its residual under the fit as measured, and the
-/// bound the fit saw instead.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Downweighted {
-    /// The file.
-    pub file: String,
-    /// Its line (1-based).
-    pub line: u64,
-    /// The marker, 1-based.
-    pub marker: usize,
-    /// 3-D residual under the model the loss was evaluated with, m.
-    pub residual_m: f64,
-    /// The residual the fit saw (the Huber corner), m.
-    pub bound_m: f64,
-}
-
 /// The training tables as the Huber loss sees them (Huber 1981, *Robust Statistics*, §7.8,
 /// metrically winsorized residuals): `rung` is fitted (the richest rung of the ladder, or the
 /// rung given), the robust scale `s` of
@@ -2051,7 +1894,7 @@ pub struct Downweighted {
 /// fitted (`√(m/(m − p))`). With nothing bounded, the rung used and its fit on the tables as
 /// measured are returned too.
 fn winsorize(
-    rung: Rung,
+    rung: ModelChoice,
     robot: &Robot,
     start: &Start<'_>,
     offsets: &[Option<usize>],
@@ -2082,8 +1925,8 @@ fn winsorize(
             // noise by √((m − p)/m); a rung with fewer than MIN_REDUNDANCY residuals per
             // parameter fits the noise itself, and a gross error hides in it: the geometric
             // rung judges instead.
-            if n_residuals < MIN_REDUNDANCY * n_kept && rung > Rung::Geometric {
-                rung = Rung::Geometric;
+            if n_residuals < MIN_REDUNDANCY * n_kept && rung > ModelChoice::Geometric {
+                rung = ModelChoice::Geometric;
                 continue;
             }
             if n_residuals < MIN_REDUNDANCY * n_kept {
@@ -2203,7 +2046,7 @@ pub fn frames_only(
         .context("attaching the instrument and marker frames")?;
     let nominal = Col::<f64>::zeros(framed.n_params());
     let (model, fitted) = fit(
-        Rung::FramesOnly,
+        ModelChoice::FramesOnly,
         &robot,
         &Start {
             tree: &framed,
@@ -2330,50 +2173,16 @@ pub fn is_marker_file(path: &std::path::Path, distances: bool) -> bool {
     }
 }
 
-/// The rung a fixed `--model` asks for, or `None` for `auto`.
-///
-/// # Errors
-/// A model the marker workflow does not fit (harmonics, transmissions).
-fn rung_of(model: crate::calibrate::ModelChoice) -> Result<Option<Rung>> {
-    use crate::calibrate::{ModelChoice as M, Workflow};
-    model.check_fits(Workflow::MeasurementFiles)?;
-    Ok(match model {
-        M::Auto => None,
-        M::FramesOnly => Some(Rung::FramesOnly),
-        M::JointOffsets => Some(Rung::JointOffsets),
-        M::Geometric => Some(Rung::Geometric),
-        M::Compliance => Some(Rung::Compliance),
-        M::TransversalCompliance => Some(Rung::TransversalCompliance),
-        M::Harmonic => Some(Rung::Harmonic),
-        M::Harmonic2 => Some(Rung::Harmonic2),
-        other => bail!("--model {other} is not fitted to measurement files"),
-    })
-}
-
-/// The command-line model of a rung.
-fn model_of(rung: Rung) -> crate::calibrate::ModelChoice {
-    use crate::calibrate::ModelChoice as M;
-    match rung {
-        Rung::FramesOnly => M::FramesOnly,
-        Rung::JointOffsets => M::JointOffsets,
-        Rung::Geometric => M::Geometric,
-        Rung::Compliance => M::Compliance,
-        Rung::TransversalCompliance => M::TransversalCompliance,
-        Rung::Harmonic => M::Harmonic,
-        Rung::Harmonic2 => M::Harmonic2,
-    }
-}
-
 /// `hapcal calibrate` on marker files: [`calibrate_measured`] with the plan's settings, as a
-/// [`crate::calibrate::Outcome`].
+/// [`crate::report::Outcome`].
 ///
 /// # Errors
 /// As [`calibrate_measured`], and unreadable files.
 pub fn run(
-    plan: &crate::calibrate::Plan,
+    plan: &crate::inputs::Plan,
     device: &hapcal_io::Device,
     start: std::time::Instant,
-) -> Result<crate::calibrate::Outcome> {
+) -> Result<crate::report::Outcome> {
     let is_urdf = plan
         .device
         .extension()
@@ -2412,14 +2221,14 @@ pub fn run(
 /// # Errors
 /// As [`run`].
 pub fn run_tables(
-    plan: &crate::calibrate::Plan,
+    plan: &crate::inputs::Plan,
     device: &hapcal_io::Device,
     robot: &Robot,
     mut train: Vec<MeasurementTable>,
     mut test: Vec<MeasurementTable>,
     start: std::time::Instant,
-) -> Result<crate::calibrate::Outcome> {
-    use crate::calibrate::{CalibrationReport, Figures, ParamReport, SetReport};
+) -> Result<crate::report::Outcome> {
+    use crate::report::{CalibrationReport, Figures, ParamReport, SetReport};
     let tips: Vec<String> = std::iter::once(plan.tip.clone())
         .chain(plan.tips.iter().cloned())
         .collect();
@@ -2439,7 +2248,10 @@ pub fn run_tables(
         }
     }
     let cfg = MeasuredConfig {
-        rung: rung_of(plan.model)?,
+        rung: {
+            plan.model.check_fits(DataKind::Measurements)?;
+            (plan.model != ModelChoice::Auto).then_some(plan.model)
+        },
         folds: plan.folds,
         sigma_m: plan.sigma_m,
         sigma_rad: plan.sigma_rad,
@@ -2461,7 +2273,7 @@ pub fn run_tables(
                 .unwrap_or_else(|| id.layout.spec(i).unit.symbol()),
         })
         .collect();
-    let pruned = crate::calibrate::pruned_report(id)
+    let pruned = crate::fit::pruned_report(id)
         .into_iter()
         .filter(|p| !is_frame(&p.name))
         .collect();
@@ -2495,7 +2307,7 @@ pub fn run_tables(
         .collect();
     let report = CalibrationReport {
         device: plan.device.display().to_string(),
-        model: model_of(out.rung),
+        model: out.rung,
         folds: plan.folds,
         cross_validation: Vec::new(),
         ladder: out.ladder.clone(),
@@ -2507,8 +2319,8 @@ pub fn run_tables(
         correlated,
         observability: None,
         warnings,
-        termination: crate::calibrate::termination_text(&id.fit.termination),
-        backend: crate::calibrate::backend_of(id),
+        termination: crate::fit::termination_text(&id.fit.termination),
+        backend: crate::fit::backend_of(id),
         n_evaluations: id.fit.n_evaluations,
         n_jacobians: id.fit.n_jacobians,
         rounds: id.rounds,
@@ -2519,7 +2331,7 @@ pub fn run_tables(
         equilibrium_step_m: out.equilibrium_step_m,
         equilibrium_refits: out.equilibrium_refits,
     };
-    Ok(crate::calibrate::Outcome {
+    Ok(crate::report::Outcome {
         report,
         device: device.clone(),
         device_path: plan.device.clone(),

@@ -199,7 +199,7 @@ pub fn candidate_blocks(
         .jacobian(x0.as_ref(), jac.as_mut())
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     // Residuals are divided by σ, so σ = 1 in residual units.
-    let rank = crate::calibrate::identify_config(None).rank.with_sigma(1.0);
+    let rank = crate::fit::identify_config(None).rank.with_sigma(1.0);
     let candidates: Vec<usize> = (0..layout.len()).collect();
     let ident = identifiability(jac.as_ref(), &layout, &candidates, &rank);
     let kept = ident.kept.clone();

@@ -6,10 +6,11 @@
 #[path = "sim/humanoid.rs"]
 mod sim;
 
-use hapcal_calibrate::measured::{MeasuredConfig, MeasuredOutcome, Rung, calibrate_measured};
+use hapcal_calibrate::measured::{MeasuredConfig, MeasuredOutcome, calibrate_measured};
+use hapcal_calibrate::model::ModelChoice;
 use sim::{NOISE_M, compliance_of, humanoid, table, transversal_of, truth};
 
-fn config(rung: Option<Rung>, marker_tips: Vec<usize>) -> MeasuredConfig {
+fn config(rung: Option<ModelChoice>, marker_tips: Vec<usize>) -> MeasuredConfig {
     MeasuredConfig {
         rung,
         folds: 5,
@@ -48,7 +49,7 @@ fn both_hands_recover_every_compliance_and_reach_the_noise_floor() {
     let out = calibrate_measured(&robot, &[train], &[test], &config(None, vec![0, 1])).unwrap();
     assert_eq!(
         out.rung,
-        Rung::TransversalCompliance,
+        ModelChoice::TransversalCompliance,
         "ladder {:?}",
         out.ladder
     );
@@ -108,7 +109,7 @@ fn one_hand_still_recovers_the_torso_compliance() {
         &robot,
         &[train],
         &[],
-        &config(Some(Rung::TransversalCompliance), vec![0]),
+        &config(Some(ModelChoice::TransversalCompliance), vec![0]),
     )
     .unwrap();
     let found = compliances(&out);

@@ -35,9 +35,9 @@ pub fn render(r: &CalibrationReport) -> String {
             s,
             "\nmodel choice by {}-fold cross-validation on the training data (held-out RMS; \
              held-out squared error minus the geometric model's, ± its standard error; a model \
-             must beat the geometric one by {} standard error(s)):",
+             is taken only if it beats the one chosen below it by {} standard errors):",
             r.folds,
-            crate::calibrate::CV_SIGNIFICANCE_Z
+            hapcal_calibrate::model::LADDER_SIGNIFICANCE_Z
         );
         for cv in &r.cross_validation {
             let (diff, se) = cv.difference_to_geometric_m2;
@@ -60,7 +60,7 @@ pub fn render(r: &CalibrationReport) -> String {
              only's, ± its standard error; a rung is taken only if it beats the one chosen \
              below it by {} standard errors):",
             r.folds,
-            hapcal_calibrate::measured::LADDER_SIGNIFICANCE_Z
+            hapcal_calibrate::model::LADDER_SIGNIFICANCE_Z
         );
         for l in &r.ladder {
             let (diff, se) = l.score_difference_to_frames;

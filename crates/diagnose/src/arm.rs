@@ -57,11 +57,11 @@ const SUFFICIENT_SHARE: f64 = 0.8;
 const SUFFICIENT_SHARE_IN_SAMPLE: f64 = 0.9;
 
 /// Blocked standard errors by which a candidate's held-out error must undercut the round's
-/// baseline: the calibration ladder's margin (`hapcal_calibrate::measured::LADDER_SIGNIFICANCE_Z`).
+/// baseline: the calibration ladder's margin (`hapcal_calibrate::model::LADDER_SIGNIFICANCE_Z`).
 /// The family-wise control is the in-sample F-test's (Holm); the held-out test guards against
 /// a term that fits the training rows and predicts worse, with as few as 5 blocks (4 degrees of
 /// freedom), where a Holm-corrected held-out test has little power.
-const HELDOUT_SIGNIFICANCE_Z: f64 = hapcal_calibrate::measured::LADDER_SIGNIFICANCE_Z;
+const HELDOUT_SIGNIFICANCE_Z: f64 = hapcal_calibrate::model::LADDER_SIGNIFICANCE_Z;
 
 /// A joint's basis below this fraction of the effect's largest is left out (numerical zero).
 const NEGLIGIBLE_BASIS: f64 = 1e-6;

@@ -401,29 +401,31 @@ fn every_help_is_plain_text() {
         .find(|(w, _)| w == "hapcal calibrate --help")
         .unwrap()
         .1;
-    let socket_margin = format!(
-        "by {} standard error of the held-out difference",
-        hapcal_calibrate::calibrate::CV_SIGNIFICANCE_Z
-    );
+    // One rule for every kind of data, with its margin.
     let ladder_margin = format!(
         "by {} standard errors",
-        hapcal_calibrate::measured::LADDER_SIGNIFICANCE_Z
+        hapcal_calibrate::model::LADDER_SIGNIFICANCE_Z
     );
-    assert!(calibrate.contains(&socket_margin), "{calibrate}");
     assert!(calibrate.contains(&ladder_margin), "{calibrate}");
-    // Every --model value says which data it applies to.
-    for line in calibrate.lines().map(str::trim_start) {
-        let Some((value, help)) = line.strip_prefix("- ").and_then(|l| l.split_once(':')) else {
-            continue;
-        };
-        if value.contains(char::is_whitespace) {
-            continue;
-        }
+    // Auto names the ladder of every kind of data.
+    for kind in [
+        "Measurement files",
+        "Socket recordings",
+        "haptic device's logs",
+    ] {
+        assert!(calibrate.contains(kind), "{kind}: {calibrate}");
+    }
+    // Every --model value is explained in words.
+    for &model in hapcal_calibrate::model::ModelChoice::all() {
+        let needle = format!("- {model}:");
+        let line = calibrate
+            .lines()
+            .map(str::trim_start)
+            .find(|l| l.starts_with(&needle));
+        let help = line.map_or("", |l| &l[needle.len()..]);
         assert!(
-            help.contains("Measurement files")
-                || help.contains("Socket recordings")
-                || help.contains("haptic device's logs"),
-            "--model {value}:{help}"
+            help.split_whitespace().count() >= 3,
+            "--model {model}: {calibrate}"
         );
     }
 }

@@ -1,0 +1,131 @@
+//! What every workflow's fits share: the identification settings of a kinematic calibration,
+//! the repeated blocked cross-validation's folds and statistics, and the fit's termination,
+//! back end and pruned parameters in the report's words.
+
+use hapcal_identify::{Identified, IdentifyConfig, PruneReason};
+
+use crate::report::PrunedReport;
+
+/// The back end of an identification and why, for the report.
+pub fn backend_of(id: &Identified) -> String {
+    format!("{}: {}", id.backend.name, id.backend.reason)
+}
+
+/// Identification settings of a kinematic calibration: exact ties between collinear
+/// parameters keep the one further from the base (the gauge goes to the base side).
+pub fn identify_config(sigma_m: Option<f64>) -> IdentifyConfig {
+    let mut cfg = IdentifyConfig {
+        sigma: sigma_m,
+        ..IdentifyConfig::default()
+    };
+    cfg.rank.tie_break = hapcal_identify::TieBreak::LaterInLayout;
+    cfg
+}
+
+/// How the least-squares fit ended, in plain words for the report: `converged (…)` for the
+/// three convergence criteria, else `not converged (…)` or `stopped (…)`.
+pub fn termination_text(termination: &hapcal_identify::Termination) -> String {
+    use hapcal_identify::Termination as T;
+    match termination {
+        T::FtolReached => "converged (relative cost reduction below ftol)".to_owned(),
+        T::XtolReached => "converged (step below xtol)".to_owned(),
+        T::GtolReached => "converged (gradient below gtol)".to_owned(),
+        T::MaxEvaluations => "not converged (evaluation limit reached)".to_owned(),
+        T::Numerical => "stopped (the step or the Jacobian is not finite)".to_owned(),
+        T::EvalFailed(e) => format!("stopped ({e})"),
+        other if other.is_success() => "converged".to_owned(),
+        _ => "stopped".to_owned(),
+    }
+}
+
+/// Repeats of the cross-validation: repeat `r` shifts every block boundary by `r/CV_REPEATS` of
+/// a block. Averaging the held-out errors over shifted partitions makes the choice less
+/// sensitive to where the fold boundaries fall (measured for 3…10 folds on the MUKCa training
+/// placements in docs/results/mukca.md: kuka_14, panda_1 and panda_6 keep their model, panda_7
+/// moves between two compliance models), at three times the cost of one k-fold pass.
+pub const CV_REPEATS: usize = 3;
+
+/// Held-out errors of one candidate: one entry per training row, in a fixed order.
+#[derive(Clone, Debug, Default)]
+pub struct HeldOut {
+    /// Squared held-out error per row, m² (3-D point or distance), averaged over the repeats.
+    pub sq_errors: Vec<f64>,
+    /// Block of each row: `(data set, socket, fold)` of the first repeat, numbered in that
+    /// order (a block with no row, for a socket shorter than the folds, stays empty).
+    pub block: Vec<usize>,
+}
+
+/// Fold (`0..k`) of row `row` of `n` in repeat `r` of `repeats`: the rows, circularly shifted
+/// by `r·n/(k·repeats)`, cut into `k` contiguous blocks of (nearly) equal length. Repeat 0 is
+/// plain contiguous k-fold.
+pub fn fold_of(row: usize, n: usize, k: usize, r: usize, repeats: usize) -> usize {
+    let n = n.max(1);
+    let shifted = (row * k * repeats + r * n) % (n * k * repeats);
+    shifted / (n * repeats)
+}
+
+/// Mean over rows of `a − b` and its standard error from the block means (rows of one
+/// contiguous block are correlated, so the blocks, not the rows, are the independent units:
+/// Roberts et al. 2017, "Cross-validation strategies for data with temporal, spatial,
+/// hierarchical, or phylogenetic structure", Ecography 40(8)). `(0, ∞)` with fewer than 2 blocks.
+pub fn blocked_difference(a: &HeldOut, b: &HeldOut) -> (f64, f64) {
+    match blocked_mean_difference(&a.sq_errors, &b.sq_errors, &a.block) {
+        (_, _, filled) if filled < 2 => (0.0, f64::INFINITY),
+        (mean, se, _) => (mean, se),
+    }
+}
+
+/// Mean over rows of `a − b` (the first `min(a.len(), b.len())` rows), its standard error from
+/// the blocks `block[row]` (the independent units of correlated rows), and the number of
+/// non-empty blocks; the standard error is `∞` with fewer than 2 blocks. The variance is the
+/// ratio estimator of a mean over clusters of unequal size (Cochran, "Sampling Techniques",
+/// 3rd ed., 1977, §6.4): `v = Σ (y_b − ȳ·m_b)² / ((n_b − 1)·n_b·m̄²)`.
+///
+/// # Panics
+/// If `block` is shorter than the rows compared.
+#[track_caller]
+pub fn blocked_mean_difference(a: &[f64], b: &[f64], block: &[usize]) -> (f64, f64, usize) {
+    let n = a.len().min(b.len());
+    let n_blocks = block[..n].iter().max().map_or(0, |m| m + 1);
+    let mut sum = vec![0.0; n_blocks];
+    let mut count = vec![0usize; n_blocks];
+    for i in 0..n {
+        sum[block[i]] += a[i] - b[i];
+        count[block[i]] += 1;
+    }
+    let filled = count.iter().filter(|&&c| c > 0).count();
+    let mean = sum.iter().sum::<f64>() / n.max(1) as f64;
+    if filled < 2 {
+        return (mean, f64::INFINITY, filled);
+    }
+    let nb = filled as f64;
+    let m_bar = n as f64 / nb;
+    let var = (sum.iter().zip(&count))
+        .map(|(s, &c)| (s - mean * c as f64).powi(2))
+        .sum::<f64>()
+        / (nb - 1.0)
+        / (nb * m_bar * m_bar);
+    (mean, var.sqrt(), filled)
+}
+
+/// The pruned parameters of `identified`, each with why.
+pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
+    identified
+        .identifiability
+        .pruned
+        .iter()
+        .map(|p| {
+            let (reason, depends_on) = match &p.reason {
+                PruneReason::NearZeroColumn => ("near_zero_column", Vec::new()),
+                PruneReason::Dependent { on } => ("dependent", on.clone()),
+                _ => ("other", Vec::new()),
+            };
+            PrunedReport {
+                name: p.name.clone(),
+                reason,
+                depends_on,
+                std_if_kept: p.std_if_kept,
+            }
+        })
+        .collect()
+}

@@ -1,0 +1,467 @@
+//! The calibration model, typed once for every kind of data: which parameter families a model
+//! frees ([`ModelChoice`], [`ModelChoice::families`]), which kinds of data can determine it
+//! ([`DataKind`], [`ModelChoice::refusal`]), the model terms a problem is built with
+//! ([`terms`]), the ladder `--model auto` climbs on each kind of data ([`ladder`]) and the one
+//! rule that climbs it ([`climb`], argued in docs/engine.md, "The rule that picks a rung").
+//!
+//! `calibrate` (every workflow), `diagnose`, `plan-poses`, the Rust API and the Python package
+//! name models with this type alone.
+
+use anyhow::{Context, Result, bail};
+use hapcal_problems::{GravityCompliance, JointHarmonics, LinkMass, ModelTerms};
+use serde::Serialize;
+
+/// A calibration model: the parameter families it frees on top of the nominal kinematics.
+/// The doc comment of each variant is its `hapcal calibrate --help` text: plain words (no
+/// links). Ordered simplest first within the ladder (`FramesOnly < JointOffsets < Geometric <
+/// Compliance …`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum ModelChoice {
+    /// Chosen on the training data only: the ladder of the data's kind is climbed by repeated
+    /// blocked cross-validation, a model must beat the one chosen below it by 2 standard
+    /// errors of the held-out difference (and, where the calibration will be used beyond the
+    /// training range of a joint, do no worse on folds that hold out that end of the range).
+    /// Measurement files: frames-only, joint-offsets, geometric, compliance,
+    /// transversal-compliance. Socket recordings and distance logs: geometric, then compliance
+    /// (with mass-compliance and actuator-compliance for a robot with published link masses).
+    /// A haptic device's logs: transmissions, or geometric when the logs have no
+    /// external-encoder columns.
+    Auto,
+    /// The nominal kinematics; only the instrument's and the markers' frames are fitted
+    /// (measurement files).
+    FramesOnly,
+    /// The frames plus one offset per joint (measurement files).
+    JointOffsets,
+    /// Every kinematic parameter the data determine (the others are pruned and reported). On
+    /// a haptic device's logs: the kinematic deviations alone, without the transmissions.
+    Geometric,
+    /// Geometric plus one gravity compliance per joint, about its axis: the torques of the
+    /// URDF's inertial masses on the whole tree when measurement files come with them, lumped
+    /// link weights otherwise.
+    Compliance,
+    /// Geometric plus one gravity compliance per joint with the torques of the robot's
+    /// published link masses (Franka Panda, KUKA LBR iiwa 14; refused for other robots).
+    MassCompliance,
+    /// As mass-compliance, with one compliance per actuator size.
+    ActuatorCompliance,
+    /// Compliance plus a transversal compliance per revolute joint: the joint frame bends
+    /// about the axes normal to its axis under the gravity moment about them (URDF robots).
+    TransversalCompliance,
+    /// Geometric plus once-per-revolution harmonic angle errors on every joint (encoder
+    /// eccentricity). Never chosen by auto: on one MUKCa placement the harmonic models fit the
+    /// training data better and the other placements worse (docs/results/mukca.md).
+    Harmonic,
+    /// Geometric plus first- and second-order harmonic angle errors on every joint.
+    Harmonic2,
+    /// Mass-compliance plus harmonic.
+    MassComplianceHarmonic,
+    /// Compliance plus harmonic.
+    ComplianceHarmonic,
+    /// A haptic device's logs only: the transmissions (each capstan's eq. 1 and the
+    /// parallelogram's polynomial, from the external-encoder columns, which every training log
+    /// must have) and then the kinematic deviations (from the cable distances): the paper's two
+    /// steps.
+    Transmissions,
+}
+
+/// The kind of the training data, typed when they are loaded: it decides which models the
+/// data can determine and which ladder `--model auto` climbs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DataKind {
+    /// MUKCa socket recordings: the tip in a fixed socket, whose position is identified.
+    Sockets,
+    /// Distance logs of a device with a cable encoder of its own (anchor known).
+    Distances,
+    /// Measurement files: marker positions, poses or distances from an anchor, in an
+    /// instrument's frame that is identified with the kinematics.
+    Measurements,
+    /// The logs of a haptic device with transmissions (joint readings, external encoders,
+    /// cable distance).
+    HapticLogs,
+}
+
+impl DataKind {
+    /// The data, in the words of a message.
+    pub fn words(self) -> &'static str {
+        match self {
+            DataKind::Sockets => "socket recordings",
+            DataKind::Distances => "distance logs of a device with its own cable encoder",
+            DataKind::Measurements => {
+                "measurement files (marker positions, poses, anchor distances)"
+            }
+            DataKind::HapticLogs => "a haptic device's logs",
+        }
+    }
+}
+
+/// Where a compliance model's gravity torques come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ComplianceSource {
+    /// The URDF's inertial masses when the robot has them, a unit weight per link otherwise.
+    Robot,
+    /// The robot's published link masses (by joint names).
+    Published,
+    /// The published link masses with one compliance per actuator size.
+    PublishedByActuator,
+}
+
+/// The parameter families a model frees besides the instrument and marker frames (which every
+/// model on measurement files fits).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct Families {
+    /// One offset per joint (and no other kinematic parameter unless `geometric`).
+    pub joint_offsets: bool,
+    /// Every kinematic deviation the data determine.
+    pub geometric: bool,
+    /// Gravity compliance about each joint axis, with its torque source.
+    pub compliance: Option<ComplianceSource>,
+    /// Transversal compliance of each revolute joint.
+    pub transversal: bool,
+    /// Highest order of the joint angle harmonics (0: none).
+    pub harmonic_order: usize,
+    /// The haptic device's transmissions (capstans, parallelogram).
+    pub transmissions: bool,
+}
+
+impl std::fmt::Display for ModelChoice {
+    /// The `--model` value, as the user types it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(self.name())
+    }
+}
+
+impl ModelChoice {
+    /// The `--model` value that selects this model (`mass-compliance`), as the user types it.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelChoice::Auto => "auto",
+            ModelChoice::FramesOnly => "frames-only",
+            ModelChoice::JointOffsets => "joint-offsets",
+            ModelChoice::Geometric => "geometric",
+            ModelChoice::Compliance => "compliance",
+            ModelChoice::MassCompliance => "mass-compliance",
+            ModelChoice::ActuatorCompliance => "actuator-compliance",
+            ModelChoice::TransversalCompliance => "transversal-compliance",
+            ModelChoice::Harmonic => "harmonic",
+            ModelChoice::Harmonic2 => "harmonic2",
+            ModelChoice::MassComplianceHarmonic => "mass-compliance-harmonic",
+            ModelChoice::ComplianceHarmonic => "compliance-harmonic",
+            ModelChoice::Transmissions => "transmissions",
+        }
+    }
+
+    /// Every model, in `--help` order.
+    pub fn all() -> &'static [ModelChoice] {
+        <ModelChoice as clap::ValueEnum>::value_variants()
+    }
+
+    /// The parameter families this model frees (`Auto`: none; it stands for a choice).
+    pub fn families(self) -> Families {
+        use ModelChoice as M;
+        let compliance = match self {
+            M::Compliance | M::TransversalCompliance | M::ComplianceHarmonic => {
+                Some(ComplianceSource::Robot)
+            }
+            M::MassCompliance | M::MassComplianceHarmonic => Some(ComplianceSource::Published),
+            M::ActuatorCompliance => Some(ComplianceSource::PublishedByActuator),
+            _ => None,
+        };
+        Families {
+            joint_offsets: self == M::JointOffsets,
+            geometric: !matches!(self, M::Auto | M::FramesOnly | M::JointOffsets),
+            compliance,
+            transversal: self == M::TransversalCompliance,
+            harmonic_order: match self {
+                M::Harmonic | M::MassComplianceHarmonic | M::ComplianceHarmonic => 1,
+                M::Harmonic2 => 2,
+                _ => 0,
+            },
+            transmissions: self == M::Transmissions,
+        }
+    }
+
+    /// Why data of `kind` cannot determine this model, in the user's words; `None` when they
+    /// can (whether a particular robot carries it, such as published masses or revolute joints
+    /// with rotation deviations, is decided when the problem is built).
+    pub fn refusal(self, kind: DataKind) -> Option<&'static str> {
+        use ModelChoice as M;
+        match (self, kind) {
+            (M::Auto, _) => None,
+            (M::Transmissions, DataKind::HapticLogs) => None,
+            (M::Transmissions, _) => Some(
+                "the transmissions are identified from a haptic device's external-encoder columns",
+            ),
+            (M::Geometric, DataKind::HapticLogs) => None,
+            (_, DataKind::HapticLogs) => Some(
+                "a haptic device's logs determine its transmissions and kinematic deviations \
+                 (auto, transmissions, geometric); its cable encoder carries no gravity model",
+            ),
+            (M::FramesOnly | M::JointOffsets, DataKind::Sockets | DataKind::Distances) => Some(
+                "socket recordings and distance logs have no instrument or marker frame: their \
+                 smallest model is geometric",
+            ),
+            _ => None,
+        }
+    }
+
+    /// `Ok` when data of `kind` can determine this model.
+    ///
+    /// # Errors
+    /// The model, named as the user typed it, the reason, and the models those data take.
+    pub fn check_fits(self, kind: DataKind) -> Result<()> {
+        let Some(reason) = self.refusal(kind) else {
+            return Ok(());
+        };
+        let names: Vec<&str> = (Self::all().iter())
+            .filter(|m| m.refusal(kind).is_none())
+            .map(|m| m.name())
+            .collect();
+        bail!(
+            "--model {self} does not apply to {}: {reason}; they take {}",
+            kind.words(),
+            names.join(", ")
+        )
+    }
+}
+
+/// The model terms (compliance, transversal compliance, joint harmonics) of `model` for a
+/// robot with joints `joint_names` and, from a URDF, link masses `masses` (empty: lumped unit
+/// weights for [`ComplianceSource::Robot`]). `torque_tips` and `load_angles` are left `None`
+/// (the caller sets them for a tree or an equilibrium).
+///
+/// # Errors
+/// A published-mass model on a robot whose joint names have no published masses.
+pub fn terms(
+    model: ModelChoice,
+    joint_names: &[String],
+    masses: &[LinkMass],
+) -> Result<ModelTerms> {
+    let families = model.families();
+    let compliance = match families.compliance {
+        None => None,
+        Some(ComplianceSource::Robot) if masses.is_empty() => Some(GravityCompliance::default()),
+        Some(ComplianceSource::Robot) => Some(GravityCompliance::from_link_masses(
+            masses.to_vec(),
+            -nalgebra::Vector3::z(),
+        )),
+        Some(ComplianceSource::Published) => {
+            Some(GravityCompliance::published(joint_names).with_context(|| {
+                format!("--model {model}: no published link masses for this robot's joint names")
+            })?)
+        }
+        Some(ComplianceSource::PublishedByActuator) => Some(
+            GravityCompliance::published_by_actuator(joint_names).with_context(|| {
+                format!("--model {model}: no published link masses for this robot's joint names")
+            })?,
+        ),
+    };
+    let n = joint_names.len();
+    let harmonics = match families.harmonic_order {
+        0 => None,
+        1 => Some(JointHarmonics::first_order(n)),
+        order => Some(JointHarmonics {
+            joints: (0..n).collect(),
+            orders: (1..=order as u32).collect(),
+        }),
+    };
+    Ok(ModelTerms {
+        compliance,
+        transversal: families.transversal,
+        harmonics,
+        torque_tips: None,
+        load_angles: None,
+    })
+}
+
+/// The ladder `--model auto` climbs on data of `kind`: levels, simplest first, each a list of
+/// alternatives (`published_masses`: the robot's joint names have published link masses, so
+/// the compliance level also offers mass-compliance and actuator-compliance). Whether a robot
+/// carries a rung (transversal compliance needs revolute joints with rotation deviations) is
+/// the caller's filter.
+///
+/// - measurement files: frames-only → joint-offsets → geometric → compliance →
+///   transversal-compliance;
+/// - socket recordings and distance logs (no frame to fit: geometric is the bottom): geometric
+///   → compliance (or its published-mass alternatives) → transversal-compliance;
+/// - a haptic device's logs: transmissions when the logs have external-encoder columns, else
+///   geometric (decided by the data, not cross-validated: the paper's two steps).
+pub fn ladder(kind: DataKind, published_masses: bool) -> Vec<Vec<ModelChoice>> {
+    use ModelChoice as M;
+    let compliance = if published_masses {
+        vec![M::Compliance, M::MassCompliance, M::ActuatorCompliance]
+    } else {
+        vec![M::Compliance]
+    };
+    match kind {
+        DataKind::Measurements => vec![
+            vec![M::FramesOnly],
+            vec![M::JointOffsets],
+            vec![M::Geometric],
+            compliance,
+            vec![M::TransversalCompliance],
+        ],
+        DataKind::Sockets | DataKind::Distances => vec![
+            vec![M::Geometric],
+            compliance,
+            vec![M::TransversalCompliance],
+        ],
+        DataKind::HapticLogs => vec![vec![M::Transmissions]],
+    }
+}
+
+/// Whether a robot whose tips are `tips` carries transversal compliance: a revolute joint
+/// with rotation deviations (`{joint}.rx`: URDF placements; a D-H row has none).
+pub fn carries_transversal(tips: &[hapcal_kinematics::Chain]) -> bool {
+    let Some(chain) = tips.first() else {
+        return false;
+    };
+    let motions = hapcal_kinematics::joint_motions(tips);
+    (chain.joint_names().iter().zip(&motions)).any(|(name, motion)| {
+        *motion == Some(hapcal_kinematics::Motion::Rotation)
+            && chain.param_index(&format!("{name}.rx")).is_some()
+    })
+}
+
+/// Standard errors by which a rung's held-out score must beat the rung chosen so far.
+///
+/// The ladder makes up to four sequential one-sided comparisons, each of which can climb by
+/// chance. At one standard error a useless rung wins a comparison with probability ≈ 0.16
+/// (normal tail), ≈ 0.5 over four; at two, ≈ 0.023 and ≈ 0.09. A calibration that is worse
+/// than doing nothing costs more than one that leaves a small gain unclaimed, so the ladder
+/// uses two, on every kind of data.
+pub const LADDER_SIGNIFICANCE_Z: f64 = 2.0;
+
+/// The one rule that picks a rung (docs/engine.md). `level[i]` is candidate `i`'s level on
+/// the ladder (candidates in ladder order, candidate 0 the bottom rung, level 0);
+/// `beats(i, j)` whether candidate `i` beats candidate `j` (its held-out score lower by
+/// [`LADDER_SIGNIFICANCE_Z`] blocked standard errors, and no worse where the calibration
+/// extrapolates); `rms(i)` its held-out RMS. Level by level, among the alternatives that beat
+/// the rung chosen so far the one with the lowest held-out RMS is chosen; a level where none
+/// does is passed over (the next is compared with the same rung). Returns the chosen
+/// candidate's index.
+///
+/// # Panics
+/// If `level` is empty.
+pub fn climb(
+    level: &[usize],
+    beats: &dyn Fn(usize, usize) -> bool,
+    rms: &dyn Fn(usize) -> f64,
+) -> usize {
+    assert!(!level.is_empty(), "a ladder has at least one rung");
+    let mut chosen = 0;
+    let top = level.iter().copied().max().unwrap_or(0);
+    for l in (level[0] + 1)..=top {
+        let passing = (0..level.len()).filter(|&i| level[i] == l && beats(i, chosen));
+        if let Some(best) = passing.min_by(|&a, &b| rms(a).total_cmp(&rms(b))) {
+            chosen = best;
+        }
+    }
+    chosen
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{DataKind, ModelChoice, climb, ladder};
+
+    #[test]
+    fn a_model_is_named_by_its_command_line_value() {
+        for &model in ModelChoice::all() {
+            let value = clap::ValueEnum::to_possible_value(&model).map(|v| v.get_name().to_owned());
+            assert_eq!(Some(model.to_string()), value, "{model:?}");
+        }
+        assert_eq!(
+            ModelChoice::ComplianceHarmonic.to_string(),
+            "compliance-harmonic"
+        );
+    }
+
+    #[test]
+    fn each_kind_of_data_refuses_the_models_it_cannot_determine_by_their_values() {
+        use DataKind as K;
+        use ModelChoice as M;
+        let cases = [
+            (
+                M::Compliance,
+                K::HapticLogs,
+                "auto, geometric, transmissions",
+            ),
+            (
+                M::FramesOnly,
+                K::Sockets,
+                "their smallest model is geometric",
+            ),
+            (M::JointOffsets, K::Distances, "auto, geometric, compliance"),
+            (
+                M::Transmissions,
+                K::Measurements,
+                "external-encoder columns",
+            ),
+        ];
+        for (model, kind, listed) in cases {
+            let Err(err) = model.check_fits(kind).map_err(|e| e.to_string()) else {
+                panic!("{model} is refused on {kind:?}");
+            };
+            assert!(
+                err.starts_with(&format!(
+                    "--model {model} does not apply to {}",
+                    kind.words()
+                )) && err.contains(listed)
+                    && !err.contains("ModelChoice"),
+                "{err}"
+            );
+        }
+        // Every non-transmission model on every robot data kind; the haptic logs' own three.
+        for kind in [K::Sockets, K::Distances, K::Measurements] {
+            for &m in ModelChoice::all() {
+                let expected = !matches!(m, M::Transmissions)
+                    && !(kind != K::Measurements && matches!(m, M::FramesOnly | M::JointOffsets));
+                assert_eq!(m.check_fits(kind).is_ok(), expected, "{m} on {kind:?}");
+            }
+        }
+        for &m in ModelChoice::all() {
+            let expected = matches!(m, M::Auto | M::Transmissions | M::Geometric);
+            assert_eq!(m.check_fits(K::HapticLogs).is_ok(), expected, "{m}");
+        }
+    }
+
+    #[test]
+    fn every_rung_of_every_ladder_is_a_model_its_data_determine() {
+        for kind in [
+            DataKind::Sockets,
+            DataKind::Distances,
+            DataKind::Measurements,
+            DataKind::HapticLogs,
+        ] {
+            for published in [false, true] {
+                let rungs = ladder(kind, published);
+                assert!(!rungs.is_empty());
+                for m in rungs.iter().flatten() {
+                    assert!(m.check_fits(kind).is_ok(), "{m} on {kind:?}");
+                    assert_ne!(*m, ModelChoice::Auto);
+                }
+                // Simplest first: the rungs' order is the models' order.
+                let flat: Vec<ModelChoice> = rungs.iter().flatten().copied().collect();
+                assert!(flat.windows(2).all(|w| w[0] < w[1]), "{flat:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_rule_climbs_level_by_level_and_takes_the_best_passing_alternative() {
+        // Levels: 0 | 1 | 2, 2, 2 | 3.
+        let level = [0, 1, 2, 2, 2, 3];
+        let rms = [10.0, 9.0, 5.0, 4.0, 4.5, 3.0];
+        // Level 1 fails, level 2: candidates 2 and 4 beat the bottom, 3 does not (lower RMS
+        // but inside the margin); level 3 does not beat candidate 4.
+        let beats = |i: usize, j: usize| matches!((i, j), (2, 0) | (4, 0) | (5, 2));
+        assert_eq!(climb(&level, &beats, &|i| rms[i]), 4);
+        // A rung is compared with the one chosen so far, not with the bottom.
+        let beats = |i: usize, j: usize| matches!((i, j), (1, 0) | (2, 0) | (5, 1));
+        assert_eq!(climb(&level, &beats, &|i| rms[i]), 5);
+        // Nothing beats the bottom: it stays.
+        assert_eq!(climb(&level, &|_, _| false, &|i| rms[i]), 0);
+    }
+}

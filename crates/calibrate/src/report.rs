@@ -1,0 +1,279 @@
+//! The typed results of a calibration, every workflow's: rendered as text by the command line,
+//! as JSON by `--json`, as dictionaries by the Python package, all from these types.
+
+use hapcal_io::Device;
+use hapcal_problems::CalibratedModel;
+use serde::Serialize;
+use std::path::PathBuf;
+
+use crate::model::ModelChoice;
+
+/// Figures of one data set under one model.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct Figures {
+    /// MUKCa mean absolute error ("consistency"), m; socket data only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_absolute_error_m: Option<f64>,
+    /// MUKCa distance error ("distortion"), m; socket data with two sockets only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distance_error_m: Option<f64>,
+    /// RMS of the distance residual, m; distance logs only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distance_rms_m: Option<f64>,
+    /// Position and orientation errors of marker data.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose: Option<PoseFigures>,
+}
+
+/// Figures of one data set before and after calibration.
+#[derive(Clone, Debug, Serialize)]
+pub struct SetReport {
+    /// Placement folder or log name.
+    pub name: String,
+    /// `train` or `test`.
+    pub role: &'static str,
+    /// Number of rows.
+    pub n_rows: usize,
+    /// With the nominal model.
+    pub before: Figures,
+    /// With the calibrated model.
+    pub after: Figures,
+    /// Marker and distance data: the error of every sample, frames only and calibrated.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub errors: Option<SampleErrors>,
+}
+
+/// One identified parameter.
+#[derive(Clone, Debug, Serialize)]
+pub struct ParamReport {
+    /// Stable name (`joint_a2.rx`, `dtheta3`, `compliance.joint_a4`).
+    pub name: String,
+    /// Identified deviation from nominal.
+    pub value: f64,
+    /// Standard deviation.
+    pub std: f64,
+    /// `m` or `rad`; `rad/(N·m)` (`rad/m` under lumped weights) for a compliance.
+    pub unit: &'static str,
+}
+
+/// One pruned parameter and why.
+#[derive(Clone, Debug, Serialize)]
+pub struct PrunedReport {
+    /// Parameter name.
+    pub name: String,
+    /// `near_zero_column` or `dependent`.
+    pub reason: &'static str,
+    /// For `dependent`: kept parameters that reproduce it, with coefficients.
+    pub depends_on: Vec<(String, f64)>,
+    /// Its standard deviation had it been kept, in its unit.
+    pub std_if_kept: f64,
+}
+
+/// Cross-validation score of one candidate model.
+#[derive(Clone, Debug, Serialize)]
+pub struct CvReport {
+    /// Candidate.
+    pub model: ModelChoice,
+    /// Held-out RMS of the 3-D point (or distance) error over all folds, m.
+    pub heldout_rms_m: f64,
+    /// Mean over held-out rows of this model's squared error minus the geometric model's, m²,
+    /// and its standard error from the contiguous blocks (rows of one block are correlated);
+    /// `(0, 0)` for the geometric model itself.
+    pub difference_to_geometric_m2: (f64, f64),
+    /// Whether the difference is below zero by [`crate::model::LADDER_SIGNIFICANCE_Z`] standard errors (the
+    /// condition for choosing this model over the geometric one).
+    pub beats_geometric: bool,
+    /// Number of kept parameters on the full training data.
+    pub n_kept: usize,
+}
+
+/// Everything `hapcal calibrate` found; printed as a table or as one JSON document.
+#[derive(Clone, Debug, Serialize)]
+pub struct CalibrationReport {
+    /// Device path.
+    pub device: String,
+    /// Chosen model.
+    pub model: ModelChoice,
+    /// Cross-validation folds (time-contiguous blocks per socket).
+    pub folds: usize,
+    /// Cross-validation scores (empty when the model was given).
+    pub cross_validation: Vec<CvReport>,
+    /// Marker data: held-out score of each rung of the model ladder (empty otherwise).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub ladder: Vec<RungReport>,
+    /// Marker data: the identified instrument and marker frames.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub frames: Vec<FrameReport>,
+    /// Residual noise used for the rank decision and the covariance, m.
+    pub sigma_m: f64,
+    /// `given` or `residuals`.
+    pub sigma_source: &'static str,
+    /// Identified parameters (kept model parameters).
+    pub parameters: Vec<ParamReport>,
+    /// Pruned parameters.
+    pub pruned: Vec<PrunedReport>,
+    /// Pairs of kept parameters with |correlation| > 0.95.
+    pub correlated: Vec<(String, String, f64)>,
+    /// Observability indices O1–O5 of the scaled Jacobian at the estimate.
+    pub observability: Option<crate::support::ObservabilityReport>,
+    /// Plain-language warnings about what the data cannot support.
+    pub warnings: Vec<String>,
+    /// LM termination.
+    pub termination: String,
+    /// The least-squares back end of the final fit and why (`dense: auto: a 372 × 47
+    /// Jacobian, …`).
+    pub backend: String,
+    /// Residual evaluations of the final fit.
+    pub n_evaluations: usize,
+    /// Jacobian evaluations of the final fit.
+    pub n_jacobians: usize,
+    /// Prune-and-refit rounds (identifiability re-decided at the estimate).
+    pub rounds: usize,
+    /// Data sets, training first.
+    pub placements: Vec<SetReport>,
+    /// Wall time from reading the files to the finished report, s.
+    pub elapsed_s: f64,
+    /// Measurement files: the training samples the Huber loss bounded, each with its file,
+    /// line and residual (empty otherwise).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub downweighted: Vec<Downweighted>,
+    /// Measurement files: the joint-range folds the ladder judged extrapolation by (empty
+    /// when no test row lies beyond a joint's training range).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub range_folds: Vec<RangeFold>,
+    /// Compliance models on measurement files: how far one more fixed-point step of the
+    /// torque equilibrium would move the tips, at most over the training rows, m
+    /// (`CalibratedModel::equilibrium_step_m`); small against σ, no iteration is needed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub equilibrium_step_m: Option<f64>,
+    /// Compliance models on measurement files: refits with the gravity loads at the torque
+    /// equilibrium of the estimate (0: the loads of the undeflected robot were close enough).
+    pub equilibrium_refits: usize,
+}
+
+/// Output of a calibration: the report plus what is needed to write the calibrated files.
+#[derive(Debug)]
+pub struct Outcome {
+    /// The report.
+    pub report: CalibrationReport,
+    /// The device as read.
+    pub device: Device,
+    /// Path of the device file.
+    pub device_path: PathBuf,
+    /// The calibrated kinematic model.
+    pub model: CalibratedModel,
+    /// The calibrated device file when the workflow writes more than kinematic deviations (a
+    /// haptic device's transmissions); `None`: [`write_outputs`] applies the report's
+    /// parameters to `device`.
+    pub calibrated: Option<Device>,
+}
+
+/// Position and orientation errors of one data set under one model.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct PoseFigures {
+    /// Mean 3-D position error over every marker sample, m.
+    pub position_mean_m: f64,
+    /// RMS of the 3-D position error, m.
+    pub position_rms_m: f64,
+    /// Largest 3-D position error, m.
+    pub position_max_m: f64,
+    /// Mean orientation error (angle of the relative rotation), rad; pose data only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orientation_mean_rad: Option<f64>,
+    /// RMS orientation error, rad.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orientation_rms_rad: Option<f64>,
+    /// Largest orientation error, rad.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orientation_max_rad: Option<f64>,
+    /// Mean absolute distance error over the distance rows, m; distance data only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distance_mean_m: Option<f64>,
+    /// RMS distance error, m.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distance_rms_m: Option<f64>,
+    /// Largest absolute distance error, m.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distance_max_m: Option<f64>,
+}
+
+/// Per-sample errors of one data set, frames only and calibrated, in file order: what a
+/// residual plot shows.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct SampleErrors {
+    /// 3-D position error of every marker sample with frames only, m.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub position_before_m: Vec<f64>,
+    /// The same with the calibrated model, m.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub position_after_m: Vec<f64>,
+    /// Distance error (model − measured) of every distance row with frames only, m.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub distance_before_m: Vec<f64>,
+    /// The same with the calibrated model, m.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub distance_after_m: Vec<f64>,
+}
+
+/// One rung's cross-validation score.
+#[derive(Clone, Debug, Serialize)]
+pub struct RungReport {
+    /// The rung.
+    pub rung: ModelChoice,
+    /// Held-out RMS of the 3-D position error over all folds, m.
+    pub heldout_rms_m: f64,
+    /// Mean held-out weighted squared error per row (`Σ |e_p|²/σ_p² + θ²/σ_θ²` over the row's
+    /// markers, dimensionless) minus the frames-only rung's, and its blocked standard error.
+    pub score_difference_to_frames: (f64, f64),
+    /// Held-out RMS of the 3-D position error per row over the joint-range folds (each
+    /// holds out one end of one joint's training range, [`RangeFold`]), m; `None` without
+    /// such folds.
+    pub range_rms_m: Option<f64>,
+    /// Mean weighted squared error per row over the judged joint-range folds minus the
+    /// frames-only rung's (dimensionless; negative: better than frames only where the model
+    /// must extrapolate; 0 without such folds).
+    pub range_difference_to_frames: f64,
+    /// Kept model parameters (kinematic and compliance) on the full training data.
+    pub n_kept: usize,
+}
+
+/// An identified frame: the instrument-to-base transform or a marker on its link.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameReport {
+    /// `instrument` or `marker1`, `marker2`, ….
+    pub name: String,
+    /// Translation, m.
+    pub xyz_m: [f64; 3],
+    /// Rotation as roll, pitch, yaw (R = Rz(yaw)·Ry(pitch)·Rx(roll)), rad.
+    pub rpy_rad: [f64; 3],
+}
+
+/// A fold that holds out one end of one joint's training range: the model is fitted on the
+/// rest and judged where it must extrapolate.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RangeFold {
+    /// The joint's name.
+    pub joint: String,
+    /// `true`: the rows at the top of its range are held out; `false`: the bottom.
+    pub upper: bool,
+    /// Whether a test or workspace configuration lies beyond the training range on this side
+    /// of this joint by more than `OUTSIDE_SHARE` (measured) of it (the folds the ladder judges
+    /// extrapolation by).
+    pub relevant: bool,
+}
+
+/// A marker sample the Huber loss bounded: its residual under the fit as measured, and the
+/// bound the fit saw instead.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Downweighted {
+    /// The file.
+    pub file: String,
+    /// Its line (1-based).
+    pub line: u64,
+    /// The marker, 1-based.
+    pub marker: usize,
+    /// 3-D residual under the model the loss was evaluated with, m.
+    pub residual_m: f64,
+    /// The residual the fit saw (the Huber corner), m.
+    pub bound_m: f64,
+}
