@@ -677,6 +677,7 @@ fn _calibrate(
     let train: Vec<Source> = train.iter().map(|m| m.source.clone()).collect();
     let test: Vec<Source> = test.iter().map(|m| m.source.clone()).collect();
     let mut plan = Plan {
+        workspace: None,
         device: device.path.clone(),
         tip: device.tip.clone(),
         tips: device.tips.clone(),
@@ -975,6 +976,7 @@ fn _diagnose(
         )));
     }
     let mut plan = Plan {
+        workspace: None,
         device: device.path.clone(),
         tip: device.tip.clone(),
         tips: device.tips.clone(),

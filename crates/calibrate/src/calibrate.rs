@@ -19,7 +19,7 @@ pub use crate::fit::{
     CV_REPEATS, HeldOut, backend_of, blocked_difference, blocked_mean_difference, fold_of,
     identify_config, pruned_report, termination_text,
 };
-pub use crate::inputs::Plan;
+pub use crate::inputs::{Plan, SIGMA_M_RANGE, SIGMA_RAD_RANGE, check_sigma};
 pub use crate::model::{DataKind, LADDER_SIGNIFICANCE_Z, ModelChoice};
 pub use crate::report::{
     CalibrationReport, CvReport, Figures, Outcome, ParamReport, PrunedReport, SetReport,
@@ -87,10 +87,47 @@ pub fn load_data(paths: &[PathBuf], device: &Device) -> Result<Vec<DataSet>> {
         } else {
             let placements = hapcal_io::read_mukca_paths_for(std::slice::from_ref(path), device)
                 .with_context(|| format!("reading measurements in {}", path.display()))?;
+            for placement in &placements {
+                check_sockets(placement)?;
+            }
             sets.extend(placements.into_iter().map(DataSet::Sockets));
         }
     }
     Ok(sets)
+}
+
+/// Refuses a placement that cannot determine its sockets: a socket whose rows are all one joint
+/// configuration (its position takes that one; the copies fit exactly and σ would shrink
+/// towards 0), or two sockets with the same readings row for row (a copied file).
+///
+/// # Errors
+/// The socket file and what is wrong with it.
+pub fn check_sockets(placement: &SocketPlacement) -> Result<()> {
+    for socket in &placement.sockets {
+        let distinct: std::collections::HashSet<Vec<u64>> = (socket.q.iter())
+            .map(|q| q.iter().map(|v| (v + 0.0).to_bits()).collect())
+            .collect();
+        if socket.q.len() > 1 && distinct.len() == 1 {
+            bail!(
+                "{}: the {} rows are copies of one joint configuration: a socket's position \
+                 (3 coordinates) takes that one, and the copies add no information; measure \
+                 at least 2 distinct configurations per socket",
+                socket.file.display(),
+                socket.q.len()
+            );
+        }
+    }
+    for (b, later) in placement.sockets.iter().enumerate() {
+        if let Some(earlier) = placement.sockets[..b].iter().find(|s| s.q == later.q) {
+            bail!(
+                "{} repeats {} row for row: two sockets are two points and cannot give the \
+                 same joint readings (a copied file?)",
+                later.file.display(),
+                earlier.file.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Observations of `sets`; `keep(set, socket, row)` selects rows (for cross-validation).
@@ -370,15 +407,7 @@ pub fn data_kind(device: &Device, paths: &[PathBuf]) -> DataKind {
 /// Unreadable or inconsistent input, or too few configurations for the kept parameters.
 pub fn run(plan: &Plan) -> Result<Outcome> {
     let start = Instant::now();
-    if plan.folds < 2 {
-        bail!("--folds must be at least 2, got {}", plan.folds);
-    }
-    if !(plan.socket_distance_m.is_finite() && plan.socket_distance_m > 0.0) {
-        bail!(
-            "--socket-distance-m must be a positive length, got {}",
-            plan.socket_distance_m
-        );
-    }
+    plan.validate()?;
     check_distinct_inputs(plan)?;
     let device = load_device(&plan.device, &plan.tip)?;
     let kind = data_kind(&device, &plan.data);
@@ -386,6 +415,16 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         bail!("--joint applies to a haptic device with transmissions (capstans, parallelogram)");
     }
     plan.model.check_fits(kind)?;
+    if let Some(w) = &plan.workspace
+        && kind != DataKind::Measurements
+    {
+        bail!(
+            "--workspace {} applies to measurement files (positions, poses, anchor distances): \
+             {} have no joint-range folds",
+            w.display(),
+            kind.words()
+        );
+    }
     match kind {
         DataKind::HapticLogs => {
             refuse_options(

@@ -1,9 +1,36 @@
 //! The validated inputs of one calibration ([`Plan`]): what the command line, the Rust API and
 //! the Python package hand to [`crate::calibrate::run`].
 
+use anyhow::{Result, bail};
 use std::path::PathBuf;
 
 use crate::model::ModelChoice;
+
+/// Instrument position σ accepted by `--sigma-m` (`Plan::sigma_m`), m: from an
+/// interferometer's nanometre to a decimetre. Outside it the value is a unit slip (mm for m)
+/// or a typo, and a σ far from the residual decides the pruning wrongly (1e-300 keeps every
+/// parameter, 1 none).
+pub const SIGMA_M_RANGE: (f64, f64) = (1e-9, 0.1);
+
+/// Orientation σ accepted by `--sigma-rad` (`Plan::sigma_rad`), rad (a nanoradian to about
+/// 30°).
+pub const SIGMA_RAD_RANGE: (f64, f64) = (1e-9, 0.5);
+
+/// `Err` naming `option`, its value and the range unless `value` (if given) lies in `range`
+/// (inclusive); `unit` is the range's unit as printed.
+///
+/// # Errors
+/// A value outside the range, NaN included.
+pub fn check_sigma(option: &str, value: Option<f64>, range: (f64, f64), unit: &str) -> Result<()> {
+    match value {
+        Some(v) if !(v >= range.0 && v <= range.1) => bail!(
+            "{option} must lie between {:e} and {} {unit}, got {v:e}",
+            range.0,
+            range.1
+        ),
+        _ => Ok(()),
+    }
+}
 
 /// Validated inputs of one calibration.
 #[derive(Clone, Debug)]
@@ -26,6 +53,11 @@ pub struct Plan {
     pub data: Vec<PathBuf>,
     /// Test data (same kinds); never used to fit or to choose settings.
     pub test: Vec<PathBuf>,
+    /// Measurement files: a CSV of joint configurations where the calibration will be used
+    /// (the joint columns of the data; other columns ignored): the ladder also judges each
+    /// rung where they lie beyond a joint's training range (docs/engine.md), and the report
+    /// names them with the model's uncertainty there. Only their joint readings are used.
+    pub workspace: Option<PathBuf>,
     /// Known distance between the two sockets of a placement, m.
     pub socket_distance_m: f64,
     /// Model choice.
@@ -40,6 +72,37 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// Checks the settings that need no file: folds, socket distance, the σ ranges
+    /// ([`SIGMA_M_RANGE`], [`SIGMA_RAD_RANGE`]) and the held-out share, so that the Rust API
+    /// and the Python package refuse what the command line refuses, in its words (the
+    /// option names). [`crate::calibrate::run`] calls it first; what needs the files (copied
+    /// sockets, frozen sensors, units) is checked where they are read.
+    ///
+    /// # Errors
+    /// The first setting out of its range, named by its command-line option.
+    pub fn validate(&self) -> Result<()> {
+        if self.folds < 2 {
+            bail!("--folds must be at least 2, got {}", self.folds);
+        }
+        if !(self.socket_distance_m.is_finite() && self.socket_distance_m > 0.0) {
+            bail!(
+                "--socket-distance-m must be a positive length, got {}",
+                self.socket_distance_m
+            );
+        }
+        check_sigma("--sigma-m", self.sigma_m, SIGMA_M_RANGE, "m")?;
+        check_sigma("--sigma-rad", self.sigma_rad, SIGMA_RAD_RANGE, "rad")?;
+        if let Some(f) = self.test_last
+            && !(f > 0.0 && f < 1.0)
+        {
+            bail!(
+                "--test-last must lie strictly between 0 and 1 (the fraction of each file's rows \
+                 held out), got {f}"
+            );
+        }
+        Ok(())
+    }
+
     /// The bundled default: MUKCa `kuka_14`, training on `front`, testing on `left_back` and
     /// `raised_left` (fixtures/mukca, MIT licence, TU Delft).
     pub fn bundled_default() -> Self {
@@ -52,6 +115,7 @@ impl Plan {
             sigma_rad: None,
             test_last: None,
             data: vec![root.join("data/kuka_14/front")],
+            workspace: None,
             test: vec![
                 root.join("data/kuka_14/left_back"),
                 root.join("data/kuka_14/raised_left"),
@@ -61,6 +125,58 @@ impl Plan {
             folds: 5,
             sigma_m: None,
             joint: false,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Plan;
+
+    #[test]
+    fn a_plan_refuses_what_the_command_line_refuses_in_its_words() {
+        let valid = Plan::bundled_default();
+        assert!(valid.validate().is_ok());
+        let cases = [
+            (
+                Plan {
+                    sigma_m: Some(1e308),
+                    ..valid.clone()
+                },
+                "--sigma-m must lie between",
+            ),
+            (
+                Plan {
+                    sigma_rad: Some(f64::NAN),
+                    ..valid.clone()
+                },
+                "--sigma-rad must lie between",
+            ),
+            (
+                Plan {
+                    folds: 1,
+                    ..valid.clone()
+                },
+                "--folds must be at least 2",
+            ),
+            (
+                Plan {
+                    socket_distance_m: -0.05,
+                    ..valid.clone()
+                },
+                "--socket-distance-m must be a positive length",
+            ),
+            (
+                Plan {
+                    test_last: Some(1.0),
+                    ..valid.clone()
+                },
+                "--test-last must lie strictly between 0 and 1",
+            ),
+        ];
+        for (plan, words) in cases {
+            let err = plan.validate().map_err(|e| e.to_string());
+            assert!(matches!(&err, Err(e) if e.starts_with(words)), "{err:?}");
         }
     }
 }

@@ -209,6 +209,33 @@ pub fn load_tables(
         .collect()
 }
 
+/// The joint configurations of a workspace file (`--workspace`): a CSV with the robot's joint
+/// columns as the measurement files have them (q1..qn or the joint names; other columns
+/// ignored), rad or m for a prismatic joint.
+///
+/// # Errors
+/// An unreadable or malformed file (file, line, column), or one without a row.
+pub fn workspace_configurations(
+    path: &std::path::Path,
+    robot: &Robot,
+    units: &Units,
+) -> Result<Vec<Vec<f64>>> {
+    let schema = JointSchema {
+        names: &robot.joint_names,
+        prismatic: &robot.prismatic,
+        limits: &robot.limits,
+    };
+    let t = hapcal_io::read_measurement_file(path, &schema, units)
+        .with_context(|| format!("reading the workspace {}", path.display()))?;
+    if t.rows.is_empty() {
+        bail!(
+            "{}: the workspace file has no row: expected one joint configuration per row",
+            path.display()
+        );
+    }
+    Ok(t.rows.into_iter().map(|r| r.q).collect())
+}
+
 /// The rigid transform `T` minimising `Σ |T·a_i − b_i|²` (Kabsch 1976; Horn 1987, "Closed-form
 /// solution of absolute orientation using unit quaternions", JOSA A 4(4)), by the SVD of the
 /// cross-covariance; identity for fewer than 3 points.
@@ -2256,7 +2283,10 @@ pub fn run_tables(
         sigma_m: plan.sigma_m,
         sigma_rad: plan.sigma_rad,
         marker_tips: (0..tips.len()).collect(),
-        workspace: Vec::new(),
+        workspace: match &plan.workspace {
+            Some(path) => workspace_configurations(path, robot, &plan.units)?,
+            None => Vec::new(),
+        },
     };
     let out = calibrate_measured(robot, &train, &test, &cfg)?;
     warnings.extend(out.warnings.iter().cloned());

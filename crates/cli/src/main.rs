@@ -86,6 +86,11 @@ enum Command {
         /// Test data, same kinds; only evaluated, never fitted.
         #[arg(long, num_args = 1..)]
         test: Vec<PathBuf>,
+        /// Measurement files: a CSV of the joint configurations where the calibration will be
+        /// used (joint columns as in the data). The model choice also judges each model where
+        /// they lie beyond a joint's training range, and the report names them.
+        #[arg(long)]
+        workspace: Option<PathBuf>,
         /// Write the calibrated device: .urdf (a copy of the source URDF with the calibrated
         /// joint origins) or .toml (a device file with a [calibration] table).
         #[arg(long)]
@@ -326,25 +331,7 @@ fn count_at_least<const MIN: usize>(text: &str) -> std::result::Result<usize, St
     }
 }
 
-/// Instrument position σ accepted by `--sigma-m`, m: from an interferometer's nanometre to a
-/// decimetre. Outside it the value is a unit slip (mm for m) or a typo, and a σ far from the
-/// residual decides the pruning wrongly (1e-300 keeps every parameter, 1 none).
-const SIGMA_M_RANGE: (f64, f64) = (1e-9, 0.1);
-/// Orientation σ accepted by `--sigma-rad`, rad (a nanoradian to about 30°).
-const SIGMA_RAD_RANGE: (f64, f64) = (1e-9, 0.5);
-
-/// `Err` naming `option`, its value and the range unless `value` (if given) lies in
-/// `range` (inclusive).
-fn check_sigma(option: &str, value: Option<f64>, range: (f64, f64), unit: &str) -> Result<()> {
-    match value {
-        Some(v) if !(v >= range.0 && v <= range.1) => anyhow::bail!(
-            "{option} must lie between {:e} and {} {unit}, got {v:e}",
-            range.0,
-            range.1
-        ),
-        _ => Ok(()),
-    }
-}
+use hapcal::calibrate::{SIGMA_M_RANGE, SIGMA_RAD_RANGE, check_sigma};
 
 /// `Err` naming `option` and its value unless `value` (if given) is finite and positive.
 fn check_positive(option: &str, value: Option<f64>, unit: &str) -> Result<()> {
@@ -382,34 +369,10 @@ fn check_socket_folders(plan: &Plan) -> Result<()> {
         for warning in placements.iter().flat_map(|p| &p.warnings) {
             note!("hapcal: warning: {warning}");
         }
-        // A socket's position takes one configuration; copies of it add residuals but no
-        // information, and fit exactly: the reported σ would shrink towards 0.
-        for socket in placements.iter().flat_map(|p| &p.sockets) {
-            let distinct: std::collections::HashSet<Vec<u64>> = (socket.q.iter())
-                .map(|q| q.iter().map(|v| (v + 0.0).to_bits()).collect())
-                .collect();
-            if socket.q.len() > 1 && distinct.len() == 1 {
-                anyhow::bail!(
-                    "{}: the {} rows are copies of one joint configuration: a socket's position \
-                     (3 coordinates) takes that one, and the copies add no information; measure \
-                     at least 2 distinct configurations per socket",
-                    socket.file.display(),
-                    socket.q.len()
-                );
-            }
-        }
-        // Two sockets are two points: the same readings row for row are a copied file.
+        // Copied sockets and sockets of one configuration: `calibrate::run` refuses them
+        // (`calibrate::check_sockets`) before any fit.
         for placement in &placements {
-            for (b, later) in placement.sockets.iter().enumerate() {
-                if let Some(earlier) = placement.sockets[..b].iter().find(|s| s.q == later.q) {
-                    anyhow::bail!(
-                        "{} repeats {} row for row: two sockets are two points and cannot give the \
-                         same joint readings (a copied file?)",
-                        later.file.display(),
-                        earlier.file.display()
-                    );
-                }
-            }
+            calibrate::check_sockets(placement)?;
         }
     }
     Ok(())
@@ -422,6 +385,7 @@ fn run(cli: Cli) -> Result<()> {
             tips,
             data,
             test,
+            workspace,
             out,
             json,
             model,
@@ -444,6 +408,7 @@ fn run(cli: Cli) -> Result<()> {
             let default = Plan::bundled_default();
             let plan = if device.is_none() && data.is_empty() && test.is_empty() {
                 Plan {
+                    workspace,
                     model,
                     socket_distance_m,
                     folds,
@@ -456,6 +421,7 @@ fn run(cli: Cli) -> Result<()> {
                 }
             } else {
                 Plan {
+                    workspace,
                     device: device.unwrap_or(default.device),
                     tip,
                     tips: more_tips,
@@ -472,20 +438,13 @@ fn run(cli: Cli) -> Result<()> {
                 }
             };
             let inputs: Vec<&std::path::Path> = (plan.data.iter().chain(&plan.test))
+                .chain(&plan.workspace)
                 .map(PathBuf::as_path)
                 .collect();
             if let Some(out) = &out {
                 calibrate::check_outputs(&plan.device, out, &inputs)?;
             }
-            check_sigma("--sigma-m", plan.sigma_m, SIGMA_M_RANGE, "m")?;
-            check_sigma("--sigma-rad", plan.sigma_rad, SIGMA_RAD_RANGE, "rad")?;
-            if let Some(f) = plan.test_last
-                && !(f > 0.0 && f < 1.0)
-            {
-                anyhow::bail!(
-                    "--test-last must lie strictly between 0 and 1 (the fraction of each file's rows held out), got {f}"
-                );
-            }
+            plan.validate()?;
             check_socket_folders(&plan)?;
             let outcome = calibrate::run(&plan)?;
             if json {
@@ -813,6 +772,7 @@ fn run(cli: Cli) -> Result<()> {
                     None => ("ball_link".to_owned(), Vec::new()),
                 };
                 let plan = Plan {
+                    workspace: None,
                     device: device.clone(),
                     tip,
                     tips: more_tips,

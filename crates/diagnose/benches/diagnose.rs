@@ -35,6 +35,7 @@ fn bench(c: &mut Criterion) {
     });
     let data = root.join("fixtures/mukca/data/kuka_14");
     let plan = Plan {
+        workspace: None,
         device: root.join("fixtures/mukca/urdf/iiwa14.urdf"),
         data: vec![data.join("front")],
         test: vec![data.join("left_back"), data.join("raised_left")],

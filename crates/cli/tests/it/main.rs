@@ -638,3 +638,65 @@ fn diagnose_reports_name_the_baseline_and_the_data_in_words() {
         }
     }
 }
+
+/// `--workspace`: configurations beyond a joint's training range make the ladder judge each
+/// model on folds that hold out that end of the range; socket data refuse the option.
+#[test]
+fn a_workspace_beyond_the_training_range_adds_joint_range_folds() {
+    let dir = scratch("workspace");
+    let show = |p: &Path| p.display().to_string();
+    let data = root().join("fixtures/figaroh/ur10/calibration.csv");
+    // The first training row with shoulder_pan_joint 1 rad past the largest reading (the
+    // UR10's readings lie within ±π, its limits ±2π).
+    let text = std::fs::read_to_string(&data).expect("UR10 data");
+    let mut lines = text.lines();
+    let header = lines.next().expect("header");
+    let pan = (header.split(','))
+        .position(|c| c == "shoulder_pan_joint")
+        .expect("column");
+    let rows: Vec<Vec<f64>> = (lines.filter(|l| !l.trim().is_empty()))
+        .map(|l| {
+            l.split(',')
+                .map(|v| v.trim().parse().expect("number"))
+                .collect()
+        })
+        .collect();
+    let max = rows
+        .iter()
+        .map(|r| r[pan])
+        .fold(f64::NEG_INFINITY, f64::max);
+    let mut beyond = rows[0].clone();
+    beyond[pan] = max + 1.0;
+    let cells: Vec<String> = beyond.iter().map(f64::to_string).collect();
+    let workspace = dir.join("workspace.csv");
+    std::fs::write(&workspace, format!("{header}\n{}\n", cells.join(","))).expect("write");
+    let out = hapcal(&[
+        "calibrate",
+        "--device",
+        &show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf")),
+        "--tip",
+        "wrist_3_link",
+        "--data",
+        &show(&data),
+        "--workspace",
+        &show(&workspace),
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let folds = report["range_folds"].as_array().expect("range folds");
+    assert!(
+        folds
+            .iter()
+            .any(|f| f["joint"] == "shoulder_pan_joint" && f["upper"] == true),
+        "{folds:?}"
+    );
+    // Socket recordings have no joint-range folds: the option is refused by name.
+    let sockets = hapcal(&["calibrate", "--workspace", &show(&workspace)]);
+    assert_eq!(sockets.status.code(), Some(2), "{}", stderr(&sockets));
+    assert!(
+        stderr(&sockets).contains("--workspace"),
+        "{}",
+        stderr(&sockets)
+    );
+}

@@ -18,6 +18,7 @@ fn root() -> PathBuf {
 fn mukca_plan(unit: &str, urdf: &str, train: &str, test: &[&str]) -> Plan {
     let data = root().join("fixtures/mukca/data").join(unit);
     Plan {
+        workspace: None,
         device: root().join("fixtures/mukca/urdf").join(urdf),
         data: vec![data.join(train)],
         test: test.iter().map(|t| data.join(t)).collect(),
@@ -134,6 +135,7 @@ fn repeated_poses_give_the_floor_and_clean_data_name_nothing() {
     )
     .expect("urdf");
     let plan = Plan {
+        workspace: None,
         device: root().join("fixtures/mukca/urdf/iiwa14.urdf"),
         ..Plan::bundled_default()
     };
