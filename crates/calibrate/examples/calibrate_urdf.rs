@@ -54,7 +54,9 @@ fn main() -> Result<()> {
     }
     // The ladder's promise: never worse than frames only on held-out rows.
     for (name, role, _, before, after) in &out.sets {
-        if *role == "test" && after.position_rms_m > before.position_rms_m * (1.0 + 1e-9) {
+        if *role == hapcal_calibrate::report::SetRole::Test
+            && after.position_rms_m > before.position_rms_m * (1.0 + 1e-9)
+        {
             anyhow::bail!(
                 "{name}: calibrated position RMS {:.3} mm is worse than frames only's {:.3} mm",
                 after.position_rms_m * 1e3,

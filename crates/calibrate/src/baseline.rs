@@ -247,7 +247,7 @@ pub fn baseline_from_tables(
                     .find(|r| r.rung == rung)
                     .map_or(f64::NAN, |r| r.heldout_rms_m),
                 test_rms_m: (o.sets.iter())
-                    .filter(|s| s.1 == "test")
+                    .filter(|s| s.1 == crate::report::SetRole::Test)
                     .map(|s| rms(&s.4))
                     .collect(),
             });

@@ -22,7 +22,8 @@ pub use crate::fit::{
 pub use crate::inputs::{Plan, SIGMA_M_RANGE, SIGMA_RAD_RANGE, check_sigma};
 pub use crate::model::{DataKind, LADDER_SIGNIFICANCE_Z, ModelChoice};
 pub use crate::report::{
-    CalibrationReport, CvReport, Figures, Outcome, ParamReport, PrunedReport, SetReport,
+    CalibrationReport, CvReport, Figures, Outcome, ParamReport, PruneCause, PrunedReport,
+    SetReport, SetRole,
 };
 
 /// One measured data set: a socket placement or a distance log.
@@ -567,7 +568,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
 
     let nominal = CalibratedModel::nominal(chain.clone());
     let mut placements = Vec::new();
-    for (role, sets) in [("train", &train), ("test", &test)] {
+    for (role, sets) in [(SetRole::Train, &train), (SetRole::Test, &test)] {
         for set in sets.iter() {
             placements.push(SetReport {
                 name: set.name().to_string(),
@@ -581,7 +582,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     }
     // A test placement the calibration made worse is the first thing an engineer must see.
     let mut worse = Vec::new();
-    for p in placements.iter().filter(|p| p.role == "test") {
+    for p in placements.iter().filter(|p| p.role == SetRole::Test) {
         if let (Some(before), Some(after)) = (
             p.before.mean_absolute_error_m,
             p.after.mean_absolute_error_m,

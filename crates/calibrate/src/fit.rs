@@ -4,7 +4,7 @@
 
 use hapcal_identify::{Identified, IdentifyConfig, PruneReason};
 
-use crate::report::PrunedReport;
+use crate::report::{PruneCause, PrunedReport};
 
 /// The back end of an identification and why, for the report.
 pub fn backend_of(id: &Identified) -> String {
@@ -116,9 +116,9 @@ pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
         .iter()
         .map(|p| {
             let (reason, depends_on) = match &p.reason {
-                PruneReason::NearZeroColumn => ("near_zero_column", Vec::new()),
-                PruneReason::Dependent { on } => ("dependent", on.clone()),
-                _ => ("other", Vec::new()),
+                PruneReason::NearZeroColumn => (PruneCause::NearZeroColumn, Vec::new()),
+                PruneReason::Dependent { on } => (PruneCause::Dependent, on.clone()),
+                _ => (PruneCause::Insensitive, Vec::new()),
             };
             PrunedReport {
                 name: p.name.clone(),

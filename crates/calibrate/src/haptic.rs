@@ -524,7 +524,7 @@ pub fn calibrate_logs(
     start: std::time::Instant,
 ) -> Result<crate::report::Outcome> {
     use crate::model::ModelChoice;
-    use crate::report::{CalibrationReport, Figures, ParamReport, SetReport};
+    use crate::report::{CalibrationReport, Figures, ParamReport, SetReport, SetRole};
     /// One log: its name, its rows and the reader's warnings.
     type NamedLog = (String, Vec<LogRow>, Vec<String>);
     let haptic = HapticDevice::new(device)?;
@@ -676,7 +676,7 @@ pub fn calibrate_logs(
         }
     };
     let mut placements = Vec::new();
-    for (role, sets) in [("train", &train), ("test", &test)] {
+    for (role, sets) in [(SetRole::Train, &train), (SetRole::Test, &test)] {
         for (name, rows, _) in sets {
             placements.push(SetReport {
                 name: name.clone(),
@@ -688,7 +688,7 @@ pub fn calibrate_logs(
             });
         }
     }
-    for p in placements.iter().filter(|p| p.role == "test") {
+    for p in placements.iter().filter(|p| p.role == SetRole::Test) {
         if let (Some(before), Some(after)) = (p.before.distance_rms_m, p.after.distance_rms_m)
             && after > before
         {

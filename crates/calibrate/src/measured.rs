@@ -35,6 +35,7 @@ use hapcal_problems::{
 
 use crate::fit::{CV_REPEATS, HeldOut, blocked_difference, fold_of};
 use crate::model::{DataKind, ModelChoice};
+use crate::report::SetRole;
 pub use crate::report::{
     Downweighted, FrameReport, PoseFigures, RangeFold, RungReport, SampleErrors,
 };
@@ -98,7 +99,7 @@ pub struct MeasuredOutcome {
     /// layout.
     pub tree: Tree,
     /// Per data set (training first): name, role, rows, frames-only and calibrated figures.
-    pub sets: Vec<(String, &'static str, usize, PoseFigures, PoseFigures)>,
+    pub sets: Vec<(String, SetRole, usize, PoseFigures, PoseFigures)>,
     /// Per data set (the order of `sets`), the errors of every sample.
     pub sample_errors: Vec<SampleErrors>,
     /// Position σ (m) and orientation σ (rad) that weight the rows.
@@ -1488,7 +1489,7 @@ pub fn calibrate_measured(
 
     let mut sets = Vec::new();
     let mut sample_errors = Vec::new();
-    for (role, tables) in [("train", train_measured), ("test", test)] {
+    for (role, tables) in [(SetRole::Train, train_measured), (SetRole::Test, test)] {
         for ti in 0..tables.len() {
             let (e0, e1) = (
                 errors(&frames_model, tables, ti, None),
@@ -1511,11 +1512,11 @@ pub fn calibrate_measured(
                     a * 1e3
                 )
             };
-            if role == "test" && after.position_rms_m > before.position_rms_m {
+            if role == SetRole::Test && after.position_rms_m > before.position_rms_m {
                 let w = worse("position", before.position_rms_m, after.position_rms_m);
                 warnings.insert(0, w);
             }
-            if role == "test"
+            if role == SetRole::Test
                 && let (Some(b), Some(a)) = (before.distance_rms_m, after.distance_rms_m)
                 && a > b
             {
@@ -2327,7 +2328,7 @@ pub fn run_tables(
             };
             SetReport {
                 name: name.clone(),
-                role,
+                role: *role,
                 n_rows: *n_rows,
                 before: f(before),
                 after: f(after),

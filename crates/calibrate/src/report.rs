@@ -8,6 +8,39 @@ use std::path::PathBuf;
 
 use crate::model::ModelChoice;
 
+/// The role of a data set in a calibration (JSON: `train`, `test`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SetRole {
+    /// Fitted (and cross-validated).
+    Train,
+    /// Only evaluated, never fitted nor used to choose.
+    Test,
+}
+
+impl std::fmt::Display for SetRole {
+    /// `train` or `test`, as the JSON report writes it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(match self {
+            SetRole::Train => "train",
+            SetRole::Test => "test",
+        })
+    }
+}
+
+/// Why a parameter was pruned (JSON: `near_zero_column`, `dependent`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PruneCause {
+    /// The data do not move the residuals with it: its Jacobian column is (nearly) zero.
+    NearZeroColumn,
+    /// Kept parameters reproduce its effect (`depends_on`).
+    Dependent,
+    /// Nearly independent of the kept ones but too small for the noise: its standard deviation
+    /// would exceed its plausible range.
+    Insensitive,
+}
+
 /// Figures of one data set under one model.
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct Figures {
@@ -30,8 +63,8 @@ pub struct Figures {
 pub struct SetReport {
     /// Placement folder or log name.
     pub name: String,
-    /// `train` or `test`.
-    pub role: &'static str,
+    /// Training or test data.
+    pub role: SetRole,
     /// Number of rows.
     pub n_rows: usize,
     /// With the nominal model.
@@ -61,8 +94,8 @@ pub struct ParamReport {
 pub struct PrunedReport {
     /// Parameter name.
     pub name: String,
-    /// `near_zero_column` or `dependent`.
-    pub reason: &'static str,
+    /// Why it was pruned.
+    pub reason: PruneCause,
     /// For `dependent`: kept parameters that reproduce it, with coefficients.
     pub depends_on: Vec<(String, f64)>,
     /// Its standard deviation had it been kept, in its unit.

@@ -99,7 +99,7 @@ pub fn render(r: &CalibrationReport) -> String {
         r.pruned.len()
     );
     for p in &r.pruned {
-        let why = if p.reason == "near_zero_column" {
+        let why = if p.reason == hapcal_calibrate::report::PruneCause::NearZeroColumn {
             "no effect on the measurements".to_string()
         } else if p.depends_on.is_empty() {
             "not determined better than its plausible range".to_string()
@@ -224,9 +224,9 @@ pub fn render(r: &CalibrationReport) -> String {
                 a.distance_max_m,
             ) {
                 let (name, role, n) = if distance_only {
-                    (p.name.as_str(), p.role, p.n_rows.to_string())
+                    (p.name.as_str(), p.role.to_string(), p.n_rows.to_string())
                 } else {
-                    ("", "", String::new())
+                    ("", String::new(), String::new())
                 };
                 let _ = writeln!(
                     s,
