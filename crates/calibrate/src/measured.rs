@@ -301,10 +301,9 @@ fn prismatic_joints(tree: &Tree) -> Vec<bool> {
 /// A device whose chain does not compile.
 pub fn robot_from_device(device: &hapcal_io::Device) -> Result<Robot> {
     let chain = device.chain()?;
-    let n = chain.n_joints();
     Ok(Robot {
         joint_names: chain.joint_names().to_vec(),
-        prismatic: vec![false; n],
+        prismatic: device.prismatic_joints(),
         limits: device.joint_limits(),
         masses: Vec::new(),
         tree: Tree::single(chain),

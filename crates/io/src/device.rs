@@ -132,9 +132,12 @@ impl UrdfSource {
 pub struct JointSpec {
     /// Joint name (`q1`, `joint_a1`, …), used in messages.
     pub name: String,
-    /// Lower joint limit, rad.
+    /// Lower joint limit, rad; m for a prismatic joint, whose file keys are `lower_m` and
+    /// `upper_m`.
+    #[serde(alias = "lower_m")]
     pub lower_rad: f64,
-    /// Upper joint limit, rad (> `lower_rad`).
+    /// Upper joint limit, rad; m for a prismatic joint (> `lower_rad`).
+    #[serde(alias = "upper_m")]
     pub upper_rad: f64,
     /// Encoder counts per revolution of the encoder shaft (the motor, for a capstan joint:
     /// docs/design.md §2), if known.
@@ -291,11 +294,25 @@ impl Device {
         }
     }
 
-    /// `(lower, upper)` limits in rad of each `[[joint]]`, in joint order.
+    /// `(lower, upper)` limits of each `[[joint]]`, in joint order: rad, m for a prismatic
+    /// joint.
     pub fn joint_limits(&self) -> Vec<(f64, f64)> {
         (self.joints.iter())
             .map(|j| (j.lower_rad, j.upper_rad))
             .collect()
+    }
+
+    /// Whether each joint of the chain, in joint order, is prismatic (a placement with an
+    /// axis and `prismatic = true`; a D-H joint is revolute).
+    pub fn prismatic_joints(&self) -> Vec<bool> {
+        if self.dh.is_empty() {
+            (self.placements.iter())
+                .filter(|p| p.axis.is_some())
+                .map(|p| p.prismatic)
+                .collect()
+        } else {
+            vec![false; self.n_joints()]
+        }
     }
 
     /// The `[[dh]]` rows as [`hapcal_kinematics::DhRow`]s (with the device's convention and

@@ -55,6 +55,26 @@ impl<'a> Locator<'a> {
         found
     }
 
+    /// Whether the file has a value at exactly `keys`.
+    fn has(&self, keys: &[Key<'_>]) -> bool {
+        let Some(root) = self.root.as_ref() else {
+            return false;
+        };
+        let mut current: Option<&Spanned<DeValue<'_>>> = None;
+        for (k, key) in keys.iter().enumerate() {
+            current = match (k, key) {
+                (0, N(name)) => root.get_ref().get(*name),
+                (0, I(_)) => None,
+                (_, N(name)) => current.and_then(|v| v.get_ref().get(*name)),
+                (_, I(i)) => current.and_then(|v| v.get_ref().get(*i)),
+            };
+            if current.is_none() {
+                return false;
+            }
+        }
+        current.is_some()
+    }
+
     /// 1-based (line, column) of the value at `keys`, or of its nearest existing parent,
     /// or (1, 1).
     fn at(&self, keys: &[Key<'_>]) -> (u64, u64) {
@@ -257,6 +277,7 @@ fn check_joints(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
             found: device.joints.len(),
         });
     }
+    let prismatic = device.prismatic_joints();
     let mut names = HashSet::new();
     for (i, joint) in device.joints.iter().enumerate() {
         let at = |field| [N("joint"), I(i), N(field)];
@@ -269,17 +290,52 @@ fn check_joints(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
                 format!("joint name {:?} is used twice", joint.name),
             ));
         }
-        // A limit beyond ±MAX_JOINT_LIMIT_RAD (about 159 turns) is a wrong unit or a
-        // placeholder, and would let any reading pass the limit checks of the readers.
-        let within = |v: f64| v.abs() <= MAX_JOINT_LIMIT_RAD;
-        let requirement = format!("is outside ±{MAX_JOINT_LIMIT_RAD} rad");
-        loc.check(&at("lower_rad"), joint.lower_rad, within, &requirement)?;
-        loc.check(&at("upper_rad"), joint.upper_rad, within, &requirement)?;
+        // A prismatic joint's limits are lengths (`lower_m`, `upper_m`), a revolute one's
+        // angles (`lower_rad`, `upper_rad`): the key says the unit, and must match the joint.
+        let is_prismatic = prismatic.get(i) == Some(&true);
+        let unit = if is_prismatic { "m" } else { "rad" };
+        let (lower_key, upper_key) = if is_prismatic {
+            ("lower_m", "upper_m")
+        } else {
+            ("lower_rad", "upper_rad")
+        };
+        let wrong_keys: [(&str, &str); 2] = if is_prismatic {
+            [("lower", "lower_rad"), ("upper", "upper_rad")]
+        } else {
+            [("lower", "lower_m"), ("upper", "upper_m")]
+        };
+        for (bound, wrong) in wrong_keys {
+            if loc.has(&at(wrong)) {
+                let kind = if is_prismatic {
+                    "a prismatic joint: its limits are lengths"
+                } else {
+                    "a revolute joint: its limits are angles"
+                };
+                return Err(loc.invalid(
+                    &at(wrong),
+                    format!(
+                        "joint {:?} is {kind}, expected {bound}_{unit} (in {unit}), found {wrong}",
+                        joint.name
+                    ),
+                ));
+            }
+        }
+        if is_prismatic {
+            loc.length(&at(lower_key), joint.lower_rad)?;
+            loc.length(&at(upper_key), joint.upper_rad)?;
+        } else {
+            // A limit beyond ±MAX_JOINT_LIMIT_RAD (about 159 turns) is a wrong unit or a
+            // placeholder, and would let any reading pass the limit checks of the readers.
+            let within = |v: f64| v.abs() <= MAX_JOINT_LIMIT_RAD;
+            let requirement = format!("is outside ±{MAX_JOINT_LIMIT_RAD} rad");
+            loc.check(&at(lower_key), joint.lower_rad, within, &requirement)?;
+            loc.check(&at(upper_key), joint.upper_rad, within, &requirement)?;
+        }
         if joint.lower_rad >= joint.upper_rad {
             return Err(loc.invalid(
-                &at("lower_rad"),
+                &at(lower_key),
                 format!(
-                    "joint {:?}: lower_rad = {} must be below upper_rad = {}",
+                    "joint {:?}: {lower_key} = {} must be below {upper_key} = {}",
                     joint.name, joint.lower_rad, joint.upper_rad
                 ),
             ));

@@ -55,14 +55,24 @@ pub fn write_device(device: &Device) -> String {
         line(format!("rpy_rad = {}", array(&p.rpy_rad)));
         if let Some(axis) = p.axis {
             line(format!("axis = {}", array(&axis)));
+            if p.prismatic {
+                line("prismatic = true".into());
+            }
         }
     }
-    for j in &device.joints {
+    let prismatic = device.prismatic_joints();
+    for (k, j) in device.joints.iter().enumerate() {
         line(String::new());
         line("[[joint]]".into());
         line(format!("name = {}", string(&j.name)));
-        line(format!("lower_rad = {}", float(j.lower_rad)));
-        line(format!("upper_rad = {}", float(j.upper_rad)));
+        // A prismatic joint's limits are lengths.
+        let unit = if prismatic.get(k) == Some(&true) {
+            "m"
+        } else {
+            "rad"
+        };
+        line(format!("lower_{unit} = {}", float(j.lower_rad)));
+        line(format!("upper_{unit} = {}", float(j.upper_rad)));
         if let Some(counts) = j.counts_per_rev {
             line(format!("counts_per_rev = {counts}"));
         }
