@@ -489,6 +489,26 @@ pub fn load_device(path: &Path, tip: &str) -> Result<Device> {
     }
 }
 
+/// Reads the device of a tree: a TOML device file, or a URDF imported with the tip `tip` and
+/// the further tips `tips` ([`hapcal_io::import_urdf_tree`]: one `[[branch]]` per further tip).
+///
+/// # Errors
+/// Whatever `hapcal-io` reports, with the path as context.
+pub fn load_device_tips(path: &Path, tip: &str, tips: &[String]) -> Result<Device> {
+    let is_urdf = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    if is_urdf {
+        let all: Vec<String> = std::iter::once(tip.to_owned())
+            .chain(tips.iter().cloned())
+            .collect();
+        hapcal_io::import_urdf_tree(path, &all)
+            .with_context(|| format!("importing {}", path.display()))
+    } else {
+        load_device(path, tip)
+    }
+}
+
 /// Reads data sets: MUKCa placement or run folders, or hapcal log CSV files.
 ///
 /// # Errors
@@ -893,7 +913,11 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         );
     }
     check_distinct_inputs(plan)?;
-    let device = load_device(&plan.device, &plan.tip)?;
+    let device = if plan.tips.is_empty() {
+        load_device(&plan.device, &plan.tip)?
+    } else {
+        load_device_tips(&plan.device, &plan.tip, &plan.tips)?
+    };
     if !device.capstans.is_empty() || device.parallelogram.is_some() {
         refuse_options(
             plan,
@@ -1402,12 +1426,12 @@ pub fn write_outputs_beside(
             unit: p.unit.to_string(),
         })
         .collect();
-    let device_chain = outcome.device.chain()?;
+    let device_tree = outcome.device.tree()?;
     let (values, leftover): (Vec<_>, Vec<_>) = if outcome.report.frames.is_empty() {
         (all.into_iter()).partition(|v| outcome.model.chain.param_index(&v.name).is_some())
     } else {
         (crate::measured::fold_joint_offsets(&outcome.device, &all)?.into_iter())
-            .partition(|v| device_chain.param_index(&v.name).is_some())
+            .partition(|v| device_tree.params().iter().any(|p| p.name == v.name))
     };
     let meta = hapcal_io::CalibrationMeta {
         date: None,
@@ -1446,7 +1470,8 @@ pub fn write_outputs_beside(
                 outcome.device_path.display()
             );
         };
-        hapcal_io::write_calibrated_urdf(&source, &calibrated.placements).with_context(|| {
+        let placements: Vec<_> = calibrated.all_placements().cloned().collect();
+        hapcal_io::write_calibrated_urdf(&source, &placements).with_context(|| {
             format!(
                 "writing the calibrated joint origins into a copy of {}",
                 source.display()

@@ -295,18 +295,19 @@ fn prismatic_joints(tree: &Tree) -> Vec<bool> {
         .collect()
 }
 
-/// Robot of a device file (a D-H, modified D-H or placement chain; one tip).
+/// Robot of a device file (a D-H, modified D-H or placement chain; a placement tree with
+/// `[[branch]]` rows, one tip per path).
 ///
 /// # Errors
 /// A device whose chain does not compile.
 pub fn robot_from_device(device: &hapcal_io::Device) -> Result<Robot> {
-    let chain = device.chain()?;
+    let tree = device.tree()?;
     Ok(Robot {
-        joint_names: chain.joint_names().to_vec(),
+        joint_names: tree.joint_names().to_vec(),
         prismatic: device.prismatic_joints(),
         limits: device.joint_limits(),
         masses: Vec::new(),
-        tree: Tree::single(chain),
+        tree,
     })
 }
 
@@ -2582,7 +2583,7 @@ pub fn fold_joint_offsets(
         .collect();
     for v in values.iter().filter(|v| v.name.ends_with(".offset")) {
         let joint = v.name.trim_end_matches(".offset");
-        let Some(p) = device.placements.iter().find(|p| p.name == joint) else {
+        let Some(p) = device.all_placements().find(|p| p.name == joint) else {
             bail!(
                 "{}: the device has no placement {joint:?} to fold it into",
                 v.name

@@ -11,7 +11,7 @@ use quick_xml::events::{BytesStart, Event};
 use quick_xml::reader::Reader;
 
 use crate::Error;
-use crate::device::{Device, JointSpec, UrdfSource};
+use crate::device::{Branch, Device, JointSpec, UrdfSource};
 use crate::error::line_column;
 
 /// A device whose chain is the URDF's joints from the root link to the link `tip`.
@@ -63,6 +63,7 @@ pub fn import_urdf(path: &Path, tip: &str) -> Result<Device, Error> {
             tip: tip.to_owned(),
         }),
         placements,
+        branches: Vec::new(),
         joints,
         capstans: Vec::new(),
         parallelogram: None,
@@ -71,6 +72,48 @@ pub fn import_urdf(path: &Path, tip: &str) -> Result<Device, Error> {
         calibration: None,
     };
     device.chain()?;
+    Ok(device)
+}
+
+/// A device whose placements form a tree with the links `tips` as its tips: the path to
+/// the first tip as in [`import_urdf`], and each further tip as a [`Branch`] hanging from the
+/// last joint its path shares with the paths before it (from the root link if it shares
+/// none), with the `[[joint]]` entries of its own moving joints after the earlier ones (the
+/// joint order of [`import_urdf_tips`]). Limits as in [`import_urdf`]. With one tip, the
+/// device of [`import_urdf`].
+///
+/// # Errors
+///
+/// As [`import_urdf_tips`].
+pub fn import_urdf_tree(path: &Path, tips: &[String]) -> Result<Device, Error> {
+    let Some((first, rest)) = tips.split_first() else {
+        return Err(urdf_error(path, "no tip link given".into()));
+    };
+    let mut device = import_urdf(path, first)?;
+    if rest.is_empty() {
+        return Ok(device);
+    }
+    // The checks of a tree: tips named once, under one root.
+    import_urdf_tips(path, tips)?;
+    let robot = read_robot(path)?;
+    let mut known: Vec<String> = device.placements.iter().map(|p| p.name.clone()).collect();
+    for tip in rest {
+        let chain = chain_to(&robot, tip, path)?;
+        // In a tree the joints above a link are one path: the known ones are a prefix.
+        let shared = chain.iter().take_while(|j| known.contains(&j.name)).count();
+        let from = (shared.checked_sub(1))
+            .and_then(|i| chain.get(i))
+            .map(|j| j.name.clone());
+        let mut placements = Vec::new();
+        for joint in chain.iter().skip(shared) {
+            let (placement, spec) = placement_of(joint, path, Limits::Continuous1Turn)?;
+            device.joints.extend(spec);
+            known.push(placement.name.clone());
+            placements.push(placement);
+        }
+        device.branches.push(Branch { from, placements });
+    }
+    device.tree()?;
     Ok(device)
 }
 

@@ -174,6 +174,9 @@ pub(super) fn validate(device: &Device, loc: &Locator<'_>) -> Result<(), Error> 
     device
         .chain()
         .map_err(|e| loc.invalid(&[], e.to_string()))?;
+    device
+        .tree()
+        .map_err(|e| loc.invalid(&[N("branch")], e.to_string()))?;
     Ok(())
 }
 
@@ -229,8 +232,18 @@ fn check_chain(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
     }
 
     let mut names = HashSet::new();
-    for (i, p) in device.placements.iter().enumerate() {
-        let at = |field| [N("placement"), I(i), N(field)];
+    let main = device.placements.iter().enumerate().map(|(i, p)| {
+        let at: Vec<Key<'_>> = vec![N("placement"), I(i)];
+        (at, p)
+    });
+    let branches = device.branches.iter().enumerate().flat_map(|(b, branch)| {
+        branch.placements.iter().enumerate().map(move |(i, p)| {
+            let at: Vec<Key<'_>> = vec![N("branch"), I(b), N("placement"), I(i)];
+            (at, p)
+        })
+    });
+    for (row, p) in main.chain(branches) {
+        let at = |field| [row.as_slice(), &[N(field)]].concat();
         if p.name.is_empty() {
             return Err(loc.invalid(&at("name"), "placement name is empty"));
         }
@@ -245,11 +258,11 @@ fn check_chain(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
             .chain(p.axis.map(|a| ("axis", a)))
         {
             for (k, v) in values.into_iter().enumerate() {
-                loc.finite(&[N("placement"), I(i), N(field), I(k)], v)?;
+                loc.finite(&[at(field).as_slice(), &[I(k)]].concat(), v)?;
             }
         }
         for (k, v) in p.xyz_m.into_iter().enumerate() {
-            loc.length(&[N("placement"), I(i), N("xyz_m"), I(k)], v)?;
+            loc.length(&[at("xyz_m").as_slice(), &[I(k)]].concat(), v)?;
         }
         if let Some(axis) = p.axis
             && axis.iter().map(|a| a * a).sum::<f64>().sqrt() < 1e-12
@@ -259,6 +272,27 @@ fn check_chain(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
                 format!("placement {:?}: axis {axis:?} has zero length", p.name),
             ));
         }
+    }
+    if !device.branches.is_empty() && device.placements.is_empty() {
+        return Err(loc.invalid(
+            &[N("branch")],
+            "[[branch]] rows need the [[placement]] rows of the main chain",
+        ));
+    }
+    // A branch hangs from a placement above it: of the main chain or an earlier branch.
+    let mut above: HashSet<&str> = device.placements.iter().map(|p| p.name.as_str()).collect();
+    for (b, branch) in device.branches.iter().enumerate() {
+        if let Some(from) = &branch.from
+            && !above.contains(from.as_str())
+        {
+            return Err(loc.invalid(
+                &[N("branch"), I(b), N("from")],
+                format!(
+                    "branch from = {from:?}: no placement of the main chain or of an earlier branch has that name"
+                ),
+            ));
+        }
+        above.extend(branch.placements.iter().map(|p| p.name.as_str()));
     }
     if device.n_joints() == 0 {
         return Err(loc.invalid(&[], "the kinematic chain has no joints"));

@@ -50,14 +50,18 @@ pub fn write_device(device: &Device) -> String {
     for p in &device.placements {
         line(String::new());
         line("[[placement]]".into());
-        line(format!("name = {}", string(&p.name)));
-        line(format!("xyz_m = {}", array(&p.xyz_m)));
-        line(format!("rpy_rad = {}", array(&p.rpy_rad)));
-        if let Some(axis) = p.axis {
-            line(format!("axis = {}", array(&axis)));
-            if p.prismatic {
-                line("prismatic = true".into());
-            }
+        placement(&mut line, p);
+    }
+    for b in &device.branches {
+        line(String::new());
+        line("[[branch]]".into());
+        if let Some(from) = &b.from {
+            line(format!("from = {}", string(from)));
+        }
+        for p in &b.placements {
+            line(String::new());
+            line("[[branch.placement]]".into());
+            placement(&mut line, p);
         }
     }
     let prismatic = device.prismatic_joints();
@@ -128,6 +132,19 @@ pub fn write_device(device: &Device) -> String {
         }
     }
     out
+}
+
+/// The keys of one placement row.
+fn placement(line: &mut impl FnMut(String), p: &hapcal_kinematics::Placement) {
+    line(format!("name = {}", string(&p.name)));
+    line(format!("xyz_m = {}", array(&p.xyz_m)));
+    line(format!("rpy_rad = {}", array(&p.rpy_rad)));
+    if let Some(axis) = p.axis {
+        line(format!("axis = {}", array(&axis)));
+        if p.prismatic {
+            line("prismatic = true".into());
+        }
+    }
 }
 
 /// A TOML float that parses back to exactly `v`.
