@@ -28,6 +28,35 @@ pub fn count_in<const MIN: usize, const MAX: usize>(
     }
 }
 
+/// Instrument position σ accepted by `--sigma-m` (calibrate, diagnose, plan-poses), m: from an
+/// interferometer's nanometre to a decimetre. Outside it the value is a unit slip (mm for m)
+/// or a typo, and a σ far from the residual decides the pruning wrongly (1e-300 keeps every
+/// parameter, 1 none).
+pub const SIGMA_M_RANGE: (f64, f64) = (1e-9, 0.1);
+/// Orientation σ accepted by `--sigma-rad`, rad (a nanoradian to about 30°).
+pub const SIGMA_RAD_RANGE: (f64, f64) = (1e-9, 0.5);
+
+/// `Err` naming `option`, its value and the range unless `value` (if given) lies in `range`
+/// (inclusive; `unit` is the unit of both).
+///
+/// # Errors
+/// `{option} must lie between {low} and {high} {unit}, got {value}`.
+pub fn check_sigma(
+    option: &str,
+    value: Option<f64>,
+    range: (f64, f64),
+    unit: &str,
+) -> anyhow::Result<()> {
+    match value {
+        Some(v) if !(v >= range.0 && v <= range.1) => anyhow::bail!(
+            "{option} must lie between {:e} and {} {unit}, got {v:e}",
+            range.0,
+            range.1
+        ),
+        _ => Ok(()),
+    }
+}
+
 /// `text` (a doc comment) as plain text for `--help`: rustdoc links (`` [`x`] ``) and code
 /// spans (`` `x` ``) become their bare words.
 pub fn plain_text(text: &str) -> String {

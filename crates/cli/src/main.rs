@@ -326,25 +326,7 @@ fn count_at_least<const MIN: usize>(text: &str) -> std::result::Result<usize, St
     }
 }
 
-/// Instrument position σ accepted by `--sigma-m`, m: from an interferometer's nanometre to a
-/// decimetre. Outside it the value is a unit slip (mm for m) or a typo, and a σ far from the
-/// residual decides the pruning wrongly (1e-300 keeps every parameter, 1 none).
-const SIGMA_M_RANGE: (f64, f64) = (1e-9, 0.1);
-/// Orientation σ accepted by `--sigma-rad`, rad (a nanoradian to about 30°).
-const SIGMA_RAD_RANGE: (f64, f64) = (1e-9, 0.5);
-
-/// `Err` naming `option`, its value and the range unless `value` (if given) lies in
-/// `range` (inclusive).
-fn check_sigma(option: &str, value: Option<f64>, range: (f64, f64), unit: &str) -> Result<()> {
-    match value {
-        Some(v) if !(v >= range.0 && v <= range.1) => anyhow::bail!(
-            "{option} must lie between {:e} and {} {unit}, got {v:e}",
-            range.0,
-            range.1
-        ),
-        _ => Ok(()),
-    }
-}
+use hapcal::{SIGMA_M_RANGE, SIGMA_RAD_RANGE, check_sigma};
 
 /// `Err` naming `option` and its value unless `value` (if given) is finite and positive.
 fn check_positive(option: &str, value: Option<f64>, unit: &str) -> Result<()> {

@@ -1854,6 +1854,32 @@ fn option_cases(t: &mut Table) {
             vec!["--count must be between 1 and the number of candidates (10), got 50"],
         ),
         (
+            "plan-poses --sigma-m 1e308",
+            vec![
+                "plan-poses",
+                "--device",
+                &device,
+                "--sigma-m",
+                "1e308",
+                "--out",
+                &out_csv,
+            ],
+            vec!["--sigma-m must lie between 1e-9 and 0.1 m, got 1e308"],
+        ),
+        (
+            "plan-poses --sigma-m 1e-12",
+            vec![
+                "plan-poses",
+                "--device",
+                &device,
+                "--sigma-m",
+                "1e-12",
+                "--out",
+                &out_csv,
+            ],
+            vec!["--sigma-m must lie between 1e-9 and 0.1 m, got 1e-12"],
+        ),
+        (
             "plan-poses --criterion unknown",
             vec![
                 "plan-poses",
