@@ -829,10 +829,9 @@ fn run(cli: Cli) -> Result<()> {
             } else {
                 emit(&text);
             }
-            match calibrate::write_new(&svg, &svg_text, &inputs) {
-                Ok(()) => note!("hapcal: wrote residual maps to {}", svg.display()),
-                Err(e) => note!("hapcal: warning: {e:#}"),
-            }
+            // The maps are an output asked for: failing to write them fails the command.
+            calibrate::write_new(&svg, &svg_text, &inputs)?;
+            note!("hapcal: wrote residual maps to {}", svg.display());
             Ok(())
         }
         Command::BlindTest {

@@ -2245,6 +2245,8 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
         std::fs::create_dir_all(folder).expect("scratch folder is writable");
         std::os::unix::fs::symlink(device, link).expect("scratch folder is writable");
     }
+    let full_svg = t.path("limits/full.svg");
+    std::os::unix::fs::symlink("/dev/full", &full_svg).expect("scratch folder is writable");
     let scratch_out = t.path("limits/x.csv");
     let truth_text = std::fs::read_to_string(root().join("fixtures/reference-device/truth.toml"))
         .expect("truth fixture");
@@ -2291,6 +2293,22 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
             args(&["simulate", "--poses", "10", "--out", &full]),
             2,
             vec![format!("cannot write {full}: No space left on device")],
+        ),
+        (
+            "diagnose --svg a link to /dev/full",
+            args(&[
+                "diagnose", "--device", &device, "--data", &log, "--svg", &full_svg,
+            ]),
+            2,
+            vec![format!("cannot write {full_svg}: No space left on device")],
+        ),
+        (
+            "diagnose (arm) --svg a link to /dev/full",
+            args(&[
+                "diagnose", "--device", &iiwa, "--data", &front, "--svg", &full_svg,
+            ]),
+            2,
+            vec![format!("cannot write {full_svg}: No space left on device")],
         ),
         (
             "simulate --out a link to /dev/null",
