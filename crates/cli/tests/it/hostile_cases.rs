@@ -2254,6 +2254,42 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
         "limits/far-truth.toml",
         truth_text.replace("da1 = -1.1e-3", "da1 = 1e10"),
     );
+    // Truths next to the fixture's device (their device path made absolute).
+    let device_abs = show(&root().join("fixtures/reference-device/device.toml"));
+    let truth_with = |t: &Table, name: &str, from: &str, to: &str| {
+        let text = truth_text
+            .replace(
+                "device = \"device.toml\"",
+                &format!("device = {device_abs:?}"),
+            )
+            .replacen(from, to, 1);
+        assert!(text.contains(to), "{name}: {from} not in the truth fixture");
+        t.file(&format!("limits/{name}"), text)
+    };
+    let phi0_high = truth_with(
+        t,
+        "phi0-high.toml",
+        "phi0_rad = 0.5207963267948965",
+        "phi0_rad = 3.5",
+    );
+    let phi0_negative = truth_with(
+        t,
+        "phi0-negative.toml",
+        "phi0_rad = 0.5207963267948965",
+        "phi0_rad = -0.1",
+    );
+    let phi0_folds = truth_with(
+        t,
+        "phi0-folds.toml",
+        "phi0_rad = 0.5207963267948965",
+        "phi0_rad = 2.0",
+    );
+    let negative_radius = truth_with(
+        t,
+        "negative-radius.toml",
+        "r_o_m = 0.2e-3",
+        "r_o_m = -0.2e-3",
+    );
     let ratio_truth = t.file(
         "limits/ratio-truth.toml",
         truth_text.replacen("re = -0.025", "re = 1e6", 1),
@@ -2409,6 +2445,48 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
             args(&["simulate", "--truth", &far_truth, "--out", &scratch_out]),
             2,
             vec![format!("{far_truth}:22:7: da1 = 1e10 m is outside ±0.1 m")],
+        ),
+        (
+            "simulate a truth with phi0_rad = 3.5 (past π)",
+            args(&["simulate", "--truth", &phi0_high, "--out", &scratch_out]),
+            2,
+            vec![format!("{phi0_high}:106:12: phi0_rad = 3.5 rad is outside (0, π)")],
+        ),
+        (
+            "force with a truth whose phi0_rad = -0.1",
+            args(&[
+                "force",
+                "--device",
+                &device,
+                "--truth",
+                &phi0_negative,
+                "--calibrated",
+                &calibrated,
+            ]),
+            2,
+            vec![format!("{phi0_negative}:106:12: phi0_rad = -0.1 rad is outside (0, π)")],
+        ),
+        (
+            "simulate a truth whose crank folds flat within joint 4's range (phi0_rad = 2)",
+            args(&["simulate", "--truth", &phi0_folds, "--out", &scratch_out]),
+            2,
+            vec![
+                "phi0_rad = 2 rad puts the crank at 2.3000..3.8000 rad over joint 4's range [0.3, 1.8] rad, outside (0, π)".to_owned(),
+            ],
+        ),
+        (
+            "force with a truth whose capstan eccentricity radius is negative",
+            args(&[
+                "force",
+                "--device",
+                &device,
+                "--truth",
+                &negative_radius,
+                "--calibrated",
+                &calibrated,
+            ]),
+            2,
+            vec![format!("{negative_radius}:53:9: r_o_m = -2e-4 m is negative")],
         ),
         (
             "force with a truth whose capstan ratio error is 1e6",
