@@ -509,6 +509,52 @@ pub fn load_device_tips(path: &Path, tip: &str, tips: &[String]) -> Result<Devic
     }
 }
 
+/// `Err` if the CSV file `path` (by extension) shows on its first line why no reader can take
+/// it: cells separated by semicolons or tabs instead of commas, or numbers where the header
+/// row naming the columns belongs. Anything else passes (the readers report the rest), and so
+/// does a path that is not a readable CSV file.
+///
+/// # Errors
+/// `{path}:1:1: …` naming the separator found, or the first cell of a missing header.
+pub fn check_csv_header(path: &Path) -> Result<()> {
+    let is_csv = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+    if !is_csv || !path.is_file() {
+        return Ok(());
+    }
+    let mut first = String::new();
+    let read = std::fs::File::open(path)
+        .and_then(|f| std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut first));
+    if read.is_err() {
+        return Ok(());
+    }
+    let first = first.trim_start_matches('\u{feff}').trim();
+    if !first.contains(',') {
+        for (separator, name) in [(';', "semicolons"), ('\t', "tabs")] {
+            if first.contains(separator) {
+                bail!(
+                    "{}:1:1: expected comma-separated columns, found cells separated by {name}: \
+                     measurement files and logs are CSV with a comma between cells and a point \
+                     as the decimal mark",
+                    path.display()
+                );
+            }
+        }
+    }
+    let cells: Vec<&str> = first.split(',').map(str::trim).collect();
+    if !first.is_empty() && cells.iter().all(|c| c.parse::<f64>().is_ok()) {
+        bail!(
+            "{}:1:1: the first line holds numbers ({} …), not column names: the header row is \
+             missing; a measurement file starts with one naming its columns (the joints as \
+             q1..qn or by name, markers as x1,y1,z1,…, a distance as distance_m)",
+            path.display(),
+            cells.first().copied().unwrap_or_default()
+        );
+    }
+    Ok(())
+}
+
 /// Reads data sets: MUKCa placement or run folders, or hapcal log CSV files.
 ///
 /// # Errors
@@ -929,6 +975,9 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     }
     if plan.joint {
         bail!("--joint applies to a haptic device with transmissions (capstans, parallelogram)");
+    }
+    for path in plan.data.iter().chain(&plan.test) {
+        check_csv_header(path)?;
     }
     // A device without a cable encoder of its own: a distance comes from an anchor whose
     // position the data must determine, as a tracker's frame.

@@ -1325,9 +1325,16 @@ pub fn calibrate_measured(
         );
     }
     if cfg.folds < 2 || cfg.folds > n_rows {
+        // The row count is the problem as often as the flag (the default is 5 folds).
+        let files: Vec<String> = (train.iter())
+            .map(|t| format!("{}: {} rows", t.name, t.rows.len()))
+            .collect();
         bail!(
-            "--folds {} is not possible with {n_rows} training rows (2 to {n_rows})",
-            cfg.folds
+            "{n_rows} training rows ({}) are too few for {k}-fold cross-validation (--folds {k}): \
+             it holds out one block of rows per fold and needs at least {k} training rows; \
+             measure at least {k} configurations, or give --folds between 2 and {n_rows}",
+            files.join(", "),
+            k = cfg.folds
         );
     }
     // Weights: given, or the RMS of each residual group after a frames-only fit at unit weights.

@@ -183,6 +183,23 @@ pub enum Error {
         /// What went wrong.
         message: String,
     },
+    /// A measurement file whose marker and distance cells are empty in every row: joint
+    /// readings and nothing measured.
+    #[error(
+        "{path}:{line}:{column}: the measurement columns ({columns}) are empty in all {rows} rows: no row measures a marker or a distance, so there is nothing to calibrate from"
+    )]
+    NothingMeasured {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line of the header.
+        line: u64,
+        /// 1-based column of the first measurement column.
+        column: u64,
+        /// The measurement columns, comma-separated.
+        columns: String,
+        /// Number of data rows.
+        rows: usize,
+    },
     /// A file holds fewer data rows than needed.
     #[error("{path}: expected at least {min} data rows, found {found}")]
     TooFewRows {

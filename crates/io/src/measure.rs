@@ -644,6 +644,37 @@ pub fn read_measurement_file(
             found: 0,
         });
     }
+    let has_measurements = n_markers > 0 || distance_column.is_some();
+    if has_measurements
+        && rows
+            .iter()
+            .all(|r| r.markers.is_empty() && r.distance_m.is_none())
+    {
+        // Every measurement cell is empty: the file holds joint readings and nothing measured.
+        let first = (markers.iter().flat_map(|m| m.position.iter().flatten()))
+            .chain(distance_column.as_ref())
+            .copied()
+            .min()
+            .unwrap_or(0);
+        let measured: Vec<&str> = (markers.iter())
+            .flat_map(|m| {
+                m.position
+                    .iter()
+                    .chain(&m.quaternion)
+                    .chain(&m.rpy)
+                    .flatten()
+            })
+            .chain(distance_column.as_ref())
+            .map(|c| names[*c].as_str())
+            .collect();
+        return Err(Error::NothingMeasured {
+            path: path.to_path_buf(),
+            line: header_line,
+            column: first as u64 + 1,
+            columns: measured.join(", "),
+            rows: rows.len(),
+        });
+    }
     if let (Some(c), Some((value, rows))) = (distance_column, frozen_distance.frozen()) {
         return Err(Error::FrozenMeasurement {
             path: path.to_path_buf(),

@@ -920,6 +920,22 @@ fn urdf_cases(t: &mut Table) {
     );
     import(
         t,
+        "a length with a unit (360mm)",
+        edit("xyz=\"-0.00043624 0 0.36\"", "xyz=\"-0.00043624 0 360mm\""),
+        "ball_link",
+        &[
+            "@:83:5: joint \"joint_a2\" <origin xyz>: expected 3 numbers separated by spaces (m: URDF values carry no unit), found \"-0.00043624 0 360mm\" (\"360mm\" is not a number)",
+        ],
+    );
+    import(
+        t,
+        "a joint name twice",
+        edit("<joint name=\"joint_a2\"", "<joint name=\"joint_a1\""),
+        "ball_link",
+        &["@:82:3: a second <joint> named \"joint_a1\": joint names must be unique"],
+    );
+    import(
+        t,
         "missing child link",
         edit("<child link=\"link_3\"/>", "<child link=\"link_nowhere\"/>"),
         "ball_link",
@@ -1420,6 +1436,56 @@ fn measurement_cases(t: &mut Table) {
         "header only",
         csv(&rows[..1]),
         &["@: expected at least 1 data rows"],
+    );
+    calibrate(
+        t,
+        "missing header row",
+        csv(&rows[1..]),
+        &[
+            "@:1:1: the first line holds numbers (0.9088284523365023 …), not column names: the header row is missing",
+        ],
+    );
+    calibrate(
+        t,
+        "three rows with the default 5 folds",
+        csv(&rows[..4]),
+        &[
+            "3 training rows (three-rows-with-the-default-5-folds: 3 rows) are too few for 5-fold cross-validation (--folds 5)",
+            "needs at least 5 training rows",
+        ],
+    );
+    let mut empty_markers = rows.clone();
+    for r in empty_markers.iter_mut().skip(1) {
+        for cell in r.iter_mut().take(6) {
+            cell.clear();
+        }
+    }
+    calibrate(
+        t,
+        "every marker cell empty",
+        csv(&empty_markers),
+        &[
+            "@:1:1: the measurement columns (x1, y1, z1, phix1, phiy1, phiz1) are empty in all 23 rows",
+        ],
+    );
+    // Semicolons with --test-last: the separator is the problem, not the option.
+    let semicolons = t.file("measure/semicolons-test-last.csv", text.replace(',', ";"));
+    t.add(
+        C,
+        "semicolons with --test-last",
+        &[
+            "calibrate",
+            "--device",
+            &ur10,
+            "--tip",
+            "tool0",
+            "--data",
+            &semicolons,
+            "--test-last",
+            "0.3",
+        ],
+        2,
+        &[&format!("{semicolons}:1:1: expected comma-separated columns, found cells separated by semicolons")],
     );
     // industrial_calibration YAML on its positioner.
     let positioner = fixture("industrial-calibration/two_axis_positioner.toml");
