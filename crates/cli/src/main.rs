@@ -79,7 +79,7 @@ enum Command {
         /// pitch, yaw: R = Rz·Ry·Rx); distance_m, distance or d for a distance from an anchor
         /// (cable encoder, ballbar) to the first marker's frame, on a device without a
         /// [cable_encoder] of its own; t or t_s for time; other columns are reported once and
-        /// ignored. industrial_calibration's measurements.yaml is read as it is. The
+        /// ignored. industrial_calibration's measurements.yaml is read as it is (m, rad). The
         /// instrument frame (the anchor) and each marker's frame on its link are identified.
         #[arg(long, num_args = 1..)]
         data: Vec<PathBuf>,

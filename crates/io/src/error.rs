@@ -200,6 +200,17 @@ pub enum Error {
         /// Number of data rows.
         rows: usize,
     },
+    /// Units other than SI asked for a file format whose units are fixed (industrial_calibration's
+    /// YAML: m and rad).
+    #[error(
+        "{path}: industrial_calibration's YAML has fixed units (pose x, y, z in m, joint angles in rad; the format has no unit field, as everywhere in ROS): {asked} cannot apply to it; leave the unit options at their defaults, or convert the file"
+    )]
+    FixedUnits {
+        /// The file.
+        path: PathBuf,
+        /// The units asked for, in the user's words (with their option).
+        asked: String,
+    },
     /// A file holds fewer data rows than needed.
     #[error("{path}: expected at least {min} data rows, found {found}")]
     TooFewRows {

@@ -1489,6 +1489,38 @@ fn measurement_cases(t: &mut Table) {
     );
     // industrial_calibration YAML on its positioner.
     let positioner = fixture("industrial-calibration/two_axis_positioner.toml");
+    let measurements = fixture("industrial-calibration/measurements.yaml");
+    for (flag, unit, said) in [
+        (
+            "--length-unit",
+            "mm",
+            "positions in mm (--length-unit mm) cannot apply to it",
+        ),
+        (
+            "--angle-unit",
+            "deg",
+            "angles in deg (--angle-unit deg) cannot apply to it",
+        ),
+    ] {
+        t.add(
+            C,
+            &format!("YAML with {flag} {unit}"),
+            &[
+                "calibrate",
+                "--device",
+                &positioner,
+                "--data",
+                &measurements,
+                flag,
+                unit,
+            ],
+            2,
+            &[
+                &format!("{measurements}: industrial_calibration's YAML has fixed units (pose x, y, z in m, joint angles in rad"),
+                said,
+            ],
+        );
+    }
     let yaml =
         std::fs::read_to_string(root().join("fixtures/industrial-calibration/measurements.yaml"))
             .expect("yaml");
