@@ -138,6 +138,9 @@ pub fn geometric_baseline(plan: &Plan, ladder: bool) -> Result<GeometricBaseline
     } else {
         robot_from_device(&device)?
     };
+    for path in plan.data.iter().chain(&plan.test) {
+        crate::calibrate::check_csv_header(path)?;
+    }
     let distances = device.cable_encoder.is_none();
     if (plan.data.iter()).any(|p| is_marker_file(p, distances)) {
         let train = load_tables(&plan.data, &robot, &plan.units)?;

@@ -66,6 +66,72 @@ pub fn load_device(path: &Path, tip: &str) -> Result<Device> {
     }
 }
 
+/// Reads the device of a tree: a TOML device file, or a URDF imported with the tip `tip` and
+/// the further tips `tips` ([`hapcal_io::import_urdf_tree`]: one `[[branch]]` per further tip).
+///
+/// # Errors
+/// Whatever `hapcal-io` reports, with the path as context.
+pub fn load_device_tips(path: &Path, tip: &str, tips: &[String]) -> Result<Device> {
+    let is_urdf = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    if is_urdf {
+        let all: Vec<String> = std::iter::once(tip.to_owned())
+            .chain(tips.iter().cloned())
+            .collect();
+        hapcal_io::import_urdf_tree(path, &all)
+            .with_context(|| format!("importing {}", path.display()))
+    } else {
+        load_device(path, tip)
+    }
+}
+
+/// `Err` if the CSV file `path` (by extension) shows on its first line why no reader can take
+/// it: cells separated by semicolons or tabs instead of commas, or numbers where the header
+/// row naming the columns belongs. Anything else passes (the readers report the rest), and so
+/// does a path that is not a readable CSV file.
+///
+/// # Errors
+/// `{path}:1:1: …` naming the separator found, or the first cell of a missing header.
+pub fn check_csv_header(path: &Path) -> Result<()> {
+    let is_csv = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+    if !is_csv || !path.is_file() {
+        return Ok(());
+    }
+    let mut first = String::new();
+    let read = std::fs::File::open(path)
+        .and_then(|f| std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut first));
+    if read.is_err() {
+        return Ok(());
+    }
+    let first = first.trim_start_matches('\u{feff}').trim();
+    if !first.contains(',') {
+        for (separator, name) in [(';', "semicolons"), ('\t', "tabs")] {
+            if first.contains(separator) {
+                bail!(
+                    "{}:1:1: expected comma-separated columns, found cells separated by {name}: \
+                     measurement files and logs are CSV with a comma between cells and a point \
+                     as the decimal mark",
+                    path.display()
+                );
+            }
+        }
+    }
+    let cells: Vec<&str> = first.split(',').map(str::trim).collect();
+    if !first.is_empty() && cells.iter().all(|c| c.parse::<f64>().is_ok()) {
+        bail!(
+            "{}:1:1: the first line holds numbers ({} …), not column names: the header row is \
+             missing; a measurement file starts with one naming its columns (the joints as \
+             q1..qn or by name, markers as x1,y1,z1,…, a distance as distance_m)",
+            path.display(),
+            cells.first().copied().unwrap_or_default()
+        );
+    }
+    Ok(())
+}
+
 /// Reads data sets: MUKCa placement or run folders, or hapcal log CSV files.
 ///
 /// # Errors
@@ -410,8 +476,17 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     let start = Instant::now();
     plan.validate()?;
     check_distinct_inputs(plan)?;
-    let device = load_device(&plan.device, &plan.tip)?;
+    let device = if plan.tips.is_empty() {
+        load_device(&plan.device, &plan.tip)?
+    } else {
+        load_device_tips(&plan.device, &plan.tip, &plan.tips)?
+    };
     let kind = data_kind(&device, &plan.data);
+    if kind != DataKind::HapticLogs {
+        for path in plan.data.iter().chain(&plan.test) {
+            check_csv_header(path)?;
+        }
+    }
     if kind != DataKind::HapticLogs && plan.joint {
         bail!("--joint applies to a haptic device with transmissions (capstans, parallelogram)");
     }
@@ -913,12 +988,12 @@ pub fn write_outputs_beside(
             unit: p.unit.to_string(),
         })
         .collect();
-    let device_chain = outcome.device.chain()?;
+    let device_tree = outcome.device.tree()?;
     let (values, leftover): (Vec<_>, Vec<_>) = if outcome.report.frames.is_empty() {
         (all.into_iter()).partition(|v| outcome.model.chain.param_index(&v.name).is_some())
     } else {
         (crate::measured::fold_joint_offsets(&outcome.device, &all)?.into_iter())
-            .partition(|v| device_chain.param_index(&v.name).is_some())
+            .partition(|v| device_tree.params().iter().any(|p| p.name == v.name))
     };
     let meta = hapcal_io::CalibrationMeta {
         date: None,
@@ -957,7 +1032,8 @@ pub fn write_outputs_beside(
                 outcome.device_path.display()
             );
         };
-        hapcal_io::write_calibrated_urdf(&source, &calibrated.placements).with_context(|| {
+        let placements: Vec<_> = calibrated.all_placements().cloned().collect();
+        hapcal_io::write_calibrated_urdf(&source, &placements).with_context(|| {
             format!(
                 "writing the calibrated joint origins into a copy of {}",
                 source.display()

@@ -162,19 +162,19 @@ fn prismatic_joints(tree: &Tree) -> Vec<bool> {
         .collect()
 }
 
-/// Robot of a device file (a D-H, modified D-H or placement chain; one tip).
+/// Robot of a device file (a D-H, modified D-H or placement chain; a placement tree with
+/// `[[branch]]` rows, one tip per path).
 ///
 /// # Errors
 /// A device whose chain does not compile.
 pub fn robot_from_device(device: &hapcal_io::Device) -> Result<Robot> {
-    let chain = device.chain()?;
-    let n = chain.n_joints();
+    let tree = device.tree()?;
     Ok(Robot {
-        joint_names: chain.joint_names().to_vec(),
-        prismatic: vec![false; n],
+        joint_names: tree.joint_names().to_vec(),
+        prismatic: device.prismatic_joints(),
         limits: device.joint_limits(),
         masses: Vec::new(),
-        tree: Tree::single(chain),
+        tree,
     })
 }
 
@@ -1210,9 +1210,16 @@ pub fn calibrate_measured(
         );
     }
     if cfg.folds < 2 || cfg.folds > n_rows {
+        // The row count is the problem as often as the flag (the default is 5 folds).
+        let files: Vec<String> = (train.iter())
+            .map(|t| format!("{}: {} rows", t.name, t.rows.len()))
+            .collect();
         bail!(
-            "--folds {} is not possible with {n_rows} training rows (2 to {n_rows})",
-            cfg.folds
+            "{n_rows} training rows ({}) are too few for {k}-fold cross-validation (--folds {k}): \
+             it holds out one block of rows per fold and needs at least {k} training rows; \
+             measure at least {k} configurations, or give --folds between 2 and {n_rows}",
+            files.join(", "),
+            k = cfg.folds
         );
     }
     // Weights: given, or the RMS of each residual group after a frames-only fit at unit weights.
@@ -2426,7 +2433,7 @@ pub fn fold_joint_offsets(
         .collect();
     for v in values.iter().filter(|v| v.name.ends_with(".offset")) {
         let joint = v.name.trim_end_matches(".offset");
-        let Some(p) = device.placements.iter().find(|p| p.name == joint) else {
+        let Some(p) = device.all_placements().find(|p| p.name == joint) else {
             bail!(
                 "{}: the device has no placement {joint:?} to fold it into",
                 v.name

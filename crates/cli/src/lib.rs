@@ -28,6 +28,10 @@ pub fn count_in<const MIN: usize, const MAX: usize>(
     }
 }
 
+/// The σ ranges `calibrate` and `plan-poses` accept, and their check: one definition, in the
+/// calibration library, so that the Rust API and the Python package refuse the same values.
+pub use hapcal_calibrate::calibrate::{SIGMA_M_RANGE, SIGMA_RAD_RANGE, check_sigma};
+
 /// `text` (a doc comment) as plain text for `--help`: rustdoc links (`` [`x`] ``) and code
 /// spans (`` `x` ``) become their bare words.
 pub fn plain_text(text: &str) -> String {

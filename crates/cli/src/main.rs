@@ -79,7 +79,7 @@ enum Command {
         /// pitch, yaw: R = Rz·Ry·Rx); distance_m, distance or d for a distance from an anchor
         /// (cable encoder, ballbar) to the first marker's frame, on a device without a
         /// [cable_encoder] of its own; t or t_s for time; other columns are reported once and
-        /// ignored. industrial_calibration's measurements.yaml is read as it is. The
+        /// ignored. industrial_calibration's measurements.yaml is read as it is (m, rad). The
         /// instrument frame (the anchor) and each marker's frame on its link are identified.
         #[arg(long, num_args = 1..)]
         data: Vec<PathBuf>,
@@ -331,7 +331,7 @@ fn count_at_least<const MIN: usize>(text: &str) -> std::result::Result<usize, St
     }
 }
 
-use hapcal::calibrate::{SIGMA_M_RANGE, SIGMA_RAD_RANGE, check_sigma};
+use hapcal::{SIGMA_M_RANGE, SIGMA_RAD_RANGE, check_sigma};
 
 /// `Err` naming `option` and its value unless `value` (if given) is finite and positive.
 fn check_positive(option: &str, value: Option<f64>, unit: &str) -> Result<()> {
@@ -807,10 +807,9 @@ fn run(cli: Cli) -> Result<()> {
             } else {
                 emit(&text);
             }
-            match calibrate::write_new(&svg, &svg_text, &inputs) {
-                Ok(()) => note!("hapcal: wrote residual maps to {}", svg.display()),
-                Err(e) => note!("hapcal: warning: {e:#}"),
-            }
+            // The maps are an output asked for: failing to write them fails the command.
+            calibrate::write_new(&svg, &svg_text, &inputs)?;
+            note!("hapcal: wrote residual maps to {}", svg.display());
             Ok(())
         }
         Command::BlindTest {

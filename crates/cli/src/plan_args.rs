@@ -1,6 +1,6 @@
 //! Flags of `hapcal plan-poses` and the glue that runs it.
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 use hapcal_calibrate::plan::{Measurement, PlanConfig, plan_poses, poses_csv, summary};
 use hapcal_identify::Criterion;
 
@@ -28,7 +28,8 @@ pub struct PlanArgs {
     /// Criterion: d-optimal (= o1 for a fixed count), o3, o4 or o5.
     #[arg(long, default_value = "d-optimal")]
     pub criterion: Criterion,
-    /// Measurement noise σ, m (default: the paper's σ_m of the cable encoder, else 10 µm).
+    /// Measurement noise σ, m, between 1e-9 and 0.1 as calibrate takes it (default: the
+    /// paper's σ_m of the cable encoder, else 10 µm).
     #[arg(long)]
     pub sigma_m: Option<f64>,
     /// The transmissions are identified from a separate external-encoder run: plan the
@@ -49,11 +50,9 @@ pub struct PlanArgs {
 /// # Errors
 /// Unreadable device, invalid flags, a design failure, or an unwritable output.
 pub fn run_plan(args: &PlanArgs) -> Result<(String, std::path::PathBuf)> {
-    if let Some(s) = args.sigma_m
-        && !(s.is_finite() && s > 0.0)
-    {
-        bail!("--sigma-m must be a positive length, got {s}");
-    }
+    // The range of calibrate's --sigma-m: the σ the poses are planned for is the one they
+    // will be calibrated with.
+    crate::check_sigma("--sigma-m", args.sigma_m, crate::SIGMA_M_RANGE, "m")?;
     crate::calibrate::check_extension(&args.out, &["csv"], "the planned poses", false)?;
     crate::calibrate::check_output(&args.out, &[&args.device])?;
     let device = crate::calibrate::load_device(&args.device, &args.tip)?;

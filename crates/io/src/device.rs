@@ -54,7 +54,12 @@ pub struct Device {
         skip_serializing_if = "Vec::is_empty"
     )]
     pub placements: Vec<Placement>,
-    /// One entry per joint of the chain, in joint order (`[[joint]]`).
+    /// Further branches of a placement tree (`[[branch]]`), one per further tip: a robot with
+    /// several tips (two arms on one torso). `placements` is then the path to the first tip.
+    #[serde(default, rename = "branch", skip_serializing_if = "Vec::is_empty")]
+    pub branches: Vec<Branch>,
+    /// One entry per joint of the chain, in joint order (`[[joint]]`); for a tree, the joints
+    /// of `placements` first, then those of each branch in order.
     #[serde(default, rename = "joint")]
     pub joints: Vec<JointSpec>,
     /// Capstan drives (`[[capstan]]`).
@@ -72,6 +77,25 @@ pub struct Device {
     /// Identified values of a calibrated device (`[calibration]`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<Calibration>,
+}
+
+/// One branch of a placement tree (`[[branch]]`): the placements below the placement `from`
+/// down to a further tip. Its path from the root is the path to `from` (on the main chain or
+/// an earlier branch) followed by `placements`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Branch {
+    /// The placement the branch hangs below; absent: the branch starts at the root link.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub from: Option<String>,
+    /// The branch's placements, root side first (`[[branch.placement]]`, as `[[placement]]`).
+    #[serde(
+        default,
+        rename = "placement",
+        with = "serde_helpers::placements",
+        skip_serializing_if = "Vec::is_empty"
+    )]
+    pub placements: Vec<Placement>,
 }
 
 /// One `[[dh]]` row as written in the device file (docs/design.md §2, paper eq. 3).
@@ -132,9 +156,12 @@ impl UrdfSource {
 pub struct JointSpec {
     /// Joint name (`q1`, `joint_a1`, …), used in messages.
     pub name: String,
-    /// Lower joint limit, rad.
+    /// Lower joint limit, rad; m for a prismatic joint, whose file keys are `lower_m` and
+    /// `upper_m`.
+    #[serde(alias = "lower_m")]
     pub lower_rad: f64,
-    /// Upper joint limit, rad (> `lower_rad`).
+    /// Upper joint limit, rad; m for a prismatic joint (> `lower_rad`).
+    #[serde(alias = "upper_m")]
     pub upper_rad: f64,
     /// Encoder counts per revolution of the encoder shaft (the motor, for a capstan joint:
     /// docs/design.md §2), if known.
@@ -280,10 +307,11 @@ pub fn parse_device(text: &str, path: &Path) -> Result<Device, Error> {
 }
 
 impl Device {
-    /// The number of joints of the chain (non-fixed `[[dh]]` rows, or placements with an axis).
+    /// The number of joints of the chain (non-fixed `[[dh]]` rows, or placements with an axis,
+    /// branches included).
     pub fn n_joints(&self) -> usize {
         if self.dh.is_empty() {
-            self.placements.iter().filter(|p| p.axis.is_some()).count()
+            self.all_placements().filter(|p| p.axis.is_some()).count()
         } else {
             (self.dh.iter())
                 .filter(|r| matches!(r.joint, JointRef::Joint(_)))
@@ -291,11 +319,25 @@ impl Device {
         }
     }
 
-    /// `(lower, upper)` limits in rad of each `[[joint]]`, in joint order.
+    /// `(lower, upper)` limits of each `[[joint]]`, in joint order: rad, m for a prismatic
+    /// joint.
     pub fn joint_limits(&self) -> Vec<(f64, f64)> {
         (self.joints.iter())
             .map(|j| (j.lower_rad, j.upper_rad))
             .collect()
+    }
+
+    /// Whether each joint of the chain, in joint order, is prismatic (a placement with an
+    /// axis and `prismatic = true`; a D-H joint is revolute).
+    pub fn prismatic_joints(&self) -> Vec<bool> {
+        if self.dh.is_empty() {
+            (self.all_placements())
+                .filter(|p| p.axis.is_some())
+                .map(|p| p.prismatic)
+                .collect()
+        } else {
+            vec![false; self.n_joints()]
+        }
     }
 
     /// The `[[dh]]` rows as [`hapcal_kinematics::DhRow`]s (with the device's convention and
@@ -316,6 +358,58 @@ impl Device {
                 },
             })
             .collect()
+    }
+
+    /// Every placement: those of the main chain, then those of each branch in order.
+    pub fn all_placements(&self) -> impl Iterator<Item = &Placement> {
+        (self.placements.iter()).chain(self.branches.iter().flat_map(|b| &b.placements))
+    }
+
+    /// The root-to-tip placement paths, one per tip: `placements`, then for each branch the
+    /// path down to its `from` placement followed by its own placements (the shape
+    /// [`hapcal_kinematics::Tree::from_placement_paths`] takes).
+    ///
+    /// # Errors
+    ///
+    /// [`Error::Parameter`] (named after the branch's `from`) if no placement of the main
+    /// chain or of an earlier branch has that name.
+    pub fn placement_paths(&self) -> Result<Vec<Vec<Placement>>, Error> {
+        let mut paths = vec![self.placements.clone()];
+        for branch in &self.branches {
+            let mut path = match &branch.from {
+                None => Vec::new(),
+                Some(from) => {
+                    let prefix = paths.iter().find_map(|p| {
+                        let i = p.iter().position(|q| &q.name == from)?;
+                        p.get(..=i)
+                    });
+                    let Some(prefix) = prefix else {
+                        return Err(Error::Parameter {
+                            name: from.clone(),
+                            message: "a [[branch]] hangs from it, but no placement above the branch has that name".into(),
+                        });
+                    };
+                    prefix.to_vec()
+                }
+            };
+            path.extend(branch.placements.iter().cloned());
+            paths.push(path);
+        }
+        Ok(paths)
+    }
+
+    /// The kinematic tree of a device: one tip per path of [`Device::placement_paths`] (a
+    /// D-H device or a placement chain without branches: the tree of [`Device::chain`]).
+    ///
+    /// # Errors
+    ///
+    /// As [`Device::chain`] and [`Device::placement_paths`].
+    pub fn tree(&self) -> Result<hapcal_kinematics::Tree, Error> {
+        if self.branches.is_empty() {
+            return Ok(hapcal_kinematics::Tree::single(self.chain()?));
+        }
+        hapcal_kinematics::Tree::from_placement_paths(&self.placement_paths()?)
+            .map_err(|source| Error::Chain { source })
     }
 
     /// Compiles the kinematic chain: [`Chain::from_dh`] of the D-H rows, or
@@ -344,8 +438,8 @@ impl Device {
     /// `Δ = Tx(x)·Ty(y)·Tz(z)·Rx(rx)·Ry(ry)·Rz(rz)` of `{name}.x` … `{name}.rz` (units `m`
     /// and `rad`) is composed onto that placement's origin: new origin = origin · Δ, written
     /// back as `xyz`/`rpy`. This holds for a revolute placement (whose Δ follows its
-    /// origin) and for the tip element named after the last placement (whose Δ follows the
-    /// trailing fixed origins, i.e. the last one). Every other name (transmission
+    /// origin) and for the tip element named after the last placement of a path (whose Δ
+    /// follows the trailing fixed origins, i.e. the last one), branches included. Every other name (transmission
     /// parameters, …) is only recorded.
     ///
     /// # Errors
@@ -360,7 +454,18 @@ impl Device {
         meta: CalibrationMeta,
     ) -> Result<Device, Error> {
         let mut device = self.clone();
-        let mut pending: Vec<[f64; 6]> = vec![[0.0; 6]; device.placements.len()];
+        // Every placement, flattened as `all_placements`, with whether it carries deviations:
+        // a moving joint, or the last placement of its path (a tip element).
+        let mut eligible: Vec<(String, bool)> = Vec::new();
+        for path in
+            std::iter::once(&device.placements).chain(device.branches.iter().map(|b| &b.placements))
+        {
+            let n = path.len();
+            for (i, p) in path.iter().enumerate() {
+                eligible.push((p.name.clone(), p.axis.is_some() || i + 1 == n));
+            }
+        }
+        let mut pending: Vec<[f64; 6]> = vec![[0.0; 6]; eligible.len()];
         for (k, v) in values.iter().enumerate() {
             let err = |message: String| Error::Parameter {
                 name: v.name.clone(),
@@ -386,10 +491,8 @@ impl Device {
                 let Some((name, kind)) = parse_placement_param(&v.name) else {
                     continue;
                 };
-                let n = device.placements.len();
-                let eligible = (device.placements.iter().enumerate())
-                    .position(|(i, p)| p.name == name && (p.axis.is_some() || i + 1 == n));
-                let Some(index) = eligible else {
+                let index = (eligible.iter()).position(|(n, ok)| n == name && *ok);
+                let Some(index) = index else {
                     return Err(err(format!(
                         "no revolute or tip placement named {name:?} carries it"
                     )));
@@ -419,7 +522,13 @@ impl Device {
                 }
             }
         }
-        for (placement, delta) in device.placements.iter_mut().zip(&pending) {
+        let all = (device.placements.iter_mut()).chain(
+            device
+                .branches
+                .iter_mut()
+                .flat_map(|b| b.placements.iter_mut()),
+        );
+        for (placement, delta) in all.zip(&pending) {
             if delta.iter().any(|d| *d != 0.0) {
                 compose_deviation(placement, delta);
             }

@@ -183,6 +183,34 @@ pub enum Error {
         /// What went wrong.
         message: String,
     },
+    /// A measurement file whose marker and distance cells are empty in every row: joint
+    /// readings and nothing measured.
+    #[error(
+        "{path}:{line}:{column}: the measurement columns ({columns}) are empty in all {rows} rows: no row measures a marker or a distance, so there is nothing to calibrate from"
+    )]
+    NothingMeasured {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line of the header.
+        line: u64,
+        /// 1-based column of the first measurement column.
+        column: u64,
+        /// The measurement columns, comma-separated.
+        columns: String,
+        /// Number of data rows.
+        rows: usize,
+    },
+    /// Units other than SI asked for a file format whose units are fixed (industrial_calibration's
+    /// YAML: m and rad).
+    #[error(
+        "{path}: industrial_calibration's YAML has fixed units (pose x, y, z in m, joint angles in rad; the format has no unit field, as everywhere in ROS): {asked} cannot apply to it; leave the unit options at their defaults, or convert the file"
+    )]
+    FixedUnits {
+        /// The file.
+        path: PathBuf,
+        /// The units asked for, in the user's words (with their option).
+        asked: String,
+    },
     /// A file holds fewer data rows than needed.
     #[error("{path}: expected at least {min} data rows, found {found}")]
     TooFewRows {

@@ -78,8 +78,9 @@ mod table;
 mod urdf;
 
 pub use device::{
-    CableEncoder, CalibratedValue, Calibration, CalibrationMeta, Capstan, Device, DhEntry, Handle,
-    JointRef, JointSpec, Parallelogram, UrdfSource, parse_device, read_device, write_device,
+    Branch, CableEncoder, CalibratedValue, Calibration, CalibrationMeta, Capstan, Device, DhEntry,
+    Handle, JointRef, JointSpec, Parallelogram, UrdfSource, parse_device, read_device,
+    write_device,
 };
 pub use error::{Error, line_column};
 pub use hapcal_kinematics::{DhConvention, DhRow, Placement};
@@ -93,6 +94,6 @@ pub use mukca::{
     read_mukca_placement_for,
 };
 pub use urdf::{
-    LinkInertial, MAX_CHAIN_LENGTH_M, UrdfTree, import_urdf, import_urdf_tips,
+    LinkInertial, MAX_CHAIN_LENGTH_M, UrdfTree, import_urdf, import_urdf_tips, import_urdf_tree,
     write_calibrated_urdf,
 };

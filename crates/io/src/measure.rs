@@ -308,7 +308,10 @@ fn spelled(stem: &str, k: usize, unnumbered: bool) -> String {
 /// is not 1 within 10⁻³, or invalid UTF-8; [`Error::FrozenMeasurement`] (file, header line,
 /// column) if the distance column holds the same value (m) in every one of two or more rows,
 /// or a marker's `x, y, z` the same position (m) in every one of two or more rows where it is
-/// seen: a frozen or disconnected instrument (joint columns may be constant).
+/// seen: a frozen or disconnected instrument (joint columns may be constant);
+/// [`Error::NothingMeasured`] (file, header line, first measurement column) if the file has
+/// marker or distance columns but every one of their cells is empty; [`Error::FixedUnits`] for
+/// an industrial_calibration YAML read with `units` other than m and rad.
 ///
 /// The header is handled in time linear in its number of columns.
 pub fn read_measurement_file(
@@ -320,6 +323,30 @@ pub fn read_measurement_file(
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
     if matches!(ext.as_deref(), Some("yaml" | "yml")) {
+        // The format fixes its units: `units` cannot apply, and must not pass unnoticed.
+        let asked: Vec<&str> = [
+            (
+                units.length != LengthUnit::M,
+                "positions in mm (--length-unit mm)",
+            ),
+            (
+                units.angle != AngleUnit::Rad,
+                "angles in deg (--angle-unit deg)",
+            ),
+            (
+                units.joint_length != LengthUnit::M,
+                "prismatic joints in mm (--joint-length-unit mm)",
+            ),
+        ]
+        .into_iter()
+        .filter_map(|(asked, what)| asked.then_some(what))
+        .collect();
+        if !asked.is_empty() {
+            return Err(Error::FixedUnits {
+                path: path.to_path_buf(),
+                asked: asked.join(", "),
+            });
+        }
         return read_industrial_yaml(path, schema);
     }
     let n = schema.names.len();
@@ -644,6 +671,37 @@ pub fn read_measurement_file(
             found: 0,
         });
     }
+    let has_measurements = n_markers > 0 || distance_column.is_some();
+    if has_measurements
+        && rows
+            .iter()
+            .all(|r| r.markers.is_empty() && r.distance_m.is_none())
+    {
+        // Every measurement cell is empty: the file holds joint readings and nothing measured.
+        let first = (markers.iter().flat_map(|m| m.position.iter().flatten()))
+            .chain(distance_column.as_ref())
+            .copied()
+            .min()
+            .unwrap_or(0);
+        let measured: Vec<&str> = (markers.iter())
+            .flat_map(|m| {
+                m.position
+                    .iter()
+                    .chain(&m.quaternion)
+                    .chain(&m.rpy)
+                    .flatten()
+            })
+            .chain(distance_column.as_ref())
+            .map(|c| names[*c].as_str())
+            .collect();
+        return Err(Error::NothingMeasured {
+            path: path.to_path_buf(),
+            line: header_line,
+            column: first as u64 + 1,
+            columns: measured.join(", "),
+            rows: rows.len(),
+        });
+    }
     if let (Some(c), Some((value, rows))) = (distance_column, frozen_distance.frozen()) {
         return Err(Error::FrozenMeasurement {
             path: path.to_path_buf(),
@@ -792,7 +850,9 @@ struct Pose {
 /// a map from an observation key to `{camera_joints, pose: {x, y, z, qw, qx, qy, qz},
 /// target_joints}`, the pose (m, unit quaternion) of a target on the robot's tip as the
 /// static camera measures it. Rows come in file order; each has one marker with a rotation.
-/// Units are those of `industrial_calibration` (m, rad); joint readings within
+/// Units are those of `industrial_calibration` (m, rad: the format has no unit field, its
+/// poses and joint angles are SI as everywhere in ROS, REP 103), so [`read_measurement_file`]
+/// refuses other [`Units`] for it; joint readings within
 /// [`JOINT_LIMIT_SLACK`] past their limits are kept with a warning, as in CSV files.
 ///
 /// # Errors

@@ -11,7 +11,7 @@ use quick_xml::events::{BytesStart, Event};
 use quick_xml::reader::Reader;
 
 use crate::Error;
-use crate::device::{Device, JointSpec, UrdfSource};
+use crate::device::{Branch, Device, JointSpec, UrdfSource};
 use crate::error::line_column;
 
 /// A device whose chain is the URDF's joints from the root link to the link `tip`.
@@ -63,6 +63,7 @@ pub fn import_urdf(path: &Path, tip: &str) -> Result<Device, Error> {
             tip: tip.to_owned(),
         }),
         placements,
+        branches: Vec::new(),
         joints,
         capstans: Vec::new(),
         parallelogram: None,
@@ -71,6 +72,48 @@ pub fn import_urdf(path: &Path, tip: &str) -> Result<Device, Error> {
         calibration: None,
     };
     device.chain()?;
+    Ok(device)
+}
+
+/// A device whose placements form a tree with the links `tips` as its tips: the path to
+/// the first tip as in [`import_urdf`], and each further tip as a [`Branch`] hanging from the
+/// last joint its path shares with the paths before it (from the root link if it shares
+/// none), with the `[[joint]]` entries of its own moving joints after the earlier ones (the
+/// joint order of [`import_urdf_tips`]). Limits as in [`import_urdf`]. With one tip, the
+/// device of [`import_urdf`].
+///
+/// # Errors
+///
+/// As [`import_urdf_tips`].
+pub fn import_urdf_tree(path: &Path, tips: &[String]) -> Result<Device, Error> {
+    let Some((first, rest)) = tips.split_first() else {
+        return Err(urdf_error(path, "no tip link given".into()));
+    };
+    let mut device = import_urdf(path, first)?;
+    if rest.is_empty() {
+        return Ok(device);
+    }
+    // The checks of a tree: tips named once, under one root.
+    import_urdf_tips(path, tips)?;
+    let robot = read_robot(path)?;
+    let mut known: Vec<String> = device.placements.iter().map(|p| p.name.clone()).collect();
+    for tip in rest {
+        let chain = chain_to(&robot, tip, path)?;
+        // In a tree the joints above a link are one path: the known ones are a prefix.
+        let shared = chain.iter().take_while(|j| known.contains(&j.name)).count();
+        let from = (shared.checked_sub(1))
+            .and_then(|i| chain.get(i))
+            .map(|j| j.name.clone());
+        let mut placements = Vec::new();
+        for joint in chain.iter().skip(shared) {
+            let (placement, spec) = placement_of(joint, path, Limits::Continuous1Turn)?;
+            device.joints.extend(spec);
+            known.push(placement.name.clone());
+            placements.push(placement);
+        }
+        device.branches.push(Branch { from, placements });
+    }
+    device.tree()?;
     Ok(device)
 }
 
@@ -272,6 +315,38 @@ fn check_tree(robot: &urdf_rs::Robot, text: &str, path: &Path) -> Result<(), Err
             message,
         }
     };
+    // Names identify joints and links (parents, children, parameters): each must be unique.
+    for (element, names) in [
+        (
+            "joint",
+            robot
+                .joints
+                .iter()
+                .map(|j| j.name.as_str())
+                .collect::<Vec<_>>(),
+        ),
+        (
+            "link",
+            robot.links.iter().map(|l| l.name.as_str()).collect(),
+        ),
+    ] {
+        for (i, name) in names.iter().enumerate() {
+            if names.iter().take(i).any(|n| n == name) {
+                let (line, column) = element_positions(text, element, name)
+                    .get(1)
+                    .copied()
+                    .unwrap_or((0, 0));
+                return Err(Error::UrdfStructure {
+                    path: path.to_path_buf(),
+                    line,
+                    column,
+                    message: format!(
+                        "a second <{element}> named {name:?}: {element} names must be unique"
+                    ),
+                });
+            }
+        }
+    }
     let links: std::collections::HashSet<&str> =
         robot.links.iter().map(|l| l.name.as_str()).collect();
     let mut parent_of: std::collections::HashMap<&str, &str> = std::collections::HashMap::new();
@@ -324,6 +399,15 @@ fn check_tree(robot: &urdf_rs::Robot, text: &str, path: &Path) -> Result<(), Err
 
 /// 1-based line and column of the `<{element} name="{name}"` tag in `text`, or (0, 0).
 fn element_position(text: &str, element: &str, name: &str) -> (u64, u64) {
+    element_positions(text, element, name)
+        .first()
+        .copied()
+        .unwrap_or((0, 0))
+}
+
+/// 1-based line and column of every `<{element} name="{name}"` tag in `text`, in file order.
+fn element_positions(text: &str, element: &str, name: &str) -> Vec<(u64, u64)> {
+    let mut found_at = Vec::new();
     let open = format!("<{element}");
     let mut from = 0;
     while let Some(found) = text.get(from..).and_then(|t| t.find(&open)) {
@@ -338,11 +422,11 @@ fn element_position(text: &str, element: &str, name: &str) -> (u64, u64) {
             && (tag.contains(&format!("name=\"{name}\""))
                 || tag.contains(&format!("name='{name}'")))
         {
-            return crate::line_column(text, start);
+            found_at.push(crate::line_column(text, start));
         }
         from = start + open.len();
     }
-    (0, 0)
+    found_at
 }
 
 /// `Err(`[`Error::UrdfStructure`]`)` if the `<origin xyz>` lengths of `chain` (root to tip)
@@ -667,6 +751,7 @@ fn plan_edits(
                     let own = attribute(e, "name").ok().flatten().unwrap_or_default();
                     parent = format!("{} {own:?}", name.as_ref());
                 }
+                check_numbers(e, text, start, path, &parent)?;
                 if name.as_ref() == "origin"
                     && let Ok(Some(xyz)) = attribute(e, "xyz")
                     && let Some(xyz) = parse_triple(&xyz)
@@ -751,6 +836,63 @@ fn plan_edits(
         }
     }
     Ok(edits)
+}
+
+/// `Err(`[`Error::UrdfStructure`]`)` at the tag if a numeric attribute of an `<origin>`
+/// (`xyz`, `rpy`: three numbers), `<axis>` (`xyz`) or `<limit>` (`lower`, `upper`: one
+/// number) is not written as plain numbers (`360mm`, `0,36`): URDF values carry no units
+/// (lengths in m, angles in rad).
+fn check_numbers(
+    e: &BytesStart<'_>,
+    text: &str,
+    start: usize,
+    path: &Path,
+    parent: &str,
+) -> Result<(), Error> {
+    let tag = e.name();
+    let attributes: &[(&str, usize)] = match tag.as_ref() {
+        "origin" => &[("xyz", 3), ("rpy", 3)],
+        "axis" => &[("xyz", 3)],
+        "limit" => &[("lower", 1), ("upper", 1)],
+        _ => return Ok(()),
+    };
+    let element = tag.as_ref().to_owned();
+    for (attr, count) in attributes {
+        let Ok(Some(value)) = attribute(e, attr) else {
+            continue;
+        };
+        let cells: Vec<&str> = value.split_whitespace().collect();
+        let bad = cells.iter().find(|c| c.parse::<f64>().is_err());
+        if cells.len() == *count && bad.is_none() {
+            continue;
+        }
+        let (line, column) = line_column(text, start);
+        let what = if *count == 1 {
+            "one number".to_owned()
+        } else {
+            format!("{count} numbers separated by spaces")
+        };
+        let unit = match (tag.as_ref(), *attr) {
+            ("origin", "xyz") => " (m: URDF values carry no unit)",
+            ("origin", "rpy") => " (rad: URDF values carry no unit)",
+            ("limit", _) => " (rad, m for a prismatic joint: URDF values carry no unit)",
+            _ => "",
+        };
+        let found = match bad {
+            Some(cell) => format!("found {value:?} ({cell:?} is not a number)"),
+            None => format!("found {value:?} ({} values)", cells.len()),
+        };
+        return Err(Error::UrdfStructure {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message: format!(
+                "{} <{element} {attr}>: expected {what}{unit}, {found}",
+                parent.trim_start()
+            ),
+        });
+    }
+    Ok(())
 }
 
 /// The value of attribute `name` of `e`, if present.

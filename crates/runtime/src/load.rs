@@ -78,6 +78,8 @@ struct File {
     #[serde(default)]
     placement: Vec<IgnoredAny>,
     #[serde(default)]
+    branch: Vec<IgnoredAny>,
+    #[serde(default)]
     joint: Vec<JointEntry>,
     #[serde(default)]
     capstan: Vec<CapstanEntry>,
@@ -233,7 +235,7 @@ impl Model {
         };
         let model_error = |what: &str, e: Error| invalid(format!("{what}: {e}"));
 
-        if !file.placement.is_empty() || file.urdf.is_some() {
+        if !file.placement.is_empty() || !file.branch.is_empty() || file.urdf.is_some() {
             return Err(invalid(
                 "[[placement]] (URDF) chains are not supported by the runtime: use a [[dh]] \
                  chain"

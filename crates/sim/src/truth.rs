@@ -36,7 +36,7 @@ use crate::Error;
 /// dl2_m = -0.7e-3
 /// dl3_m = 0.0
 /// dl4_m = 0.0
-/// phi0_rad = 0.0
+/// phi0_rad = 0.5207963267948965
 /// ```
 ///
 /// [`read_truth`] checks the file; a value built by hand (or deserialised directly) is
@@ -70,11 +70,11 @@ pub struct CapstanTruth {
     pub c_rad: f64,
     /// Ratio error `Re` (dimensionless; the true ratio is `R + Re`).
     pub re: f64,
-    /// Output-drum eccentricity `r_o`, m.
+    /// Output-drum eccentricity radius `r_o`, m (≥ 0; its direction is `beta_o_rad`).
     pub r_o_m: f64,
     /// Output-drum eccentricity phase `beta_o`, rad.
     pub beta_o_rad: f64,
-    /// Input-drum (motor) eccentricity `r_i`, m.
+    /// Input-drum (motor) eccentricity radius `r_i`, m (≥ 0; its direction is `beta_i_rad`).
     pub r_i_m: f64,
     /// Input-drum eccentricity phase `beta_i`, rad.
     pub beta_i_rad: f64,
@@ -107,8 +107,10 @@ pub struct ParallelogramTruth {
     pub dl3_m: f64,
     /// Ground length deviation `ΔL4`, m.
     pub dl4_m: f64,
-    /// Crank angle offset `phi0`, rad, as
-    /// [`Joint4Transmission::phi0_rad`](hapcal_transmission::Joint4Transmission).
+    /// Crank angle offset `phi0`, rad, in (0, π), as
+    /// [`Joint4Transmission::phi0_rad`](hapcal_transmission::Joint4Transmission): the crank
+    /// angle at joint-4 reading 0, measured from the ground link; the four-bar folds flat at
+    /// 0 and π.
     pub phi0_rad: f64,
 }
 
@@ -141,7 +143,8 @@ impl Truth {
     ///
     /// # Errors
     ///
-    /// [`Error::Parallelogram`] if the device or this truth has no parallelogram;
+    /// [`Error::Parallelogram`] if the device or this truth has no parallelogram, or if
+    /// `phi0_rad` + the joint's limits leave (0, π);
     /// [`Error::Transmission`] for lengths that do not close a four-bar.
     pub fn joint4(
         &self,
@@ -156,6 +159,26 @@ impl Truth {
         };
         let p = device.parallelogram.ok_or_else(|| missing("device"))?;
         let pt = self.parallelogram.ok_or_else(|| missing("truth"))?;
+        // The crank angle φ0 + θ must stay inside (0, π) over the joint's range, where the
+        // parallelogram does not fold flat (see `Joint4Transmission`).
+        if let Some(limits) = device.joints.get(joint - 1) {
+            let (lo, hi) = (
+                pt.phi0_rad + limits.lower_rad,
+                pt.phi0_rad + limits.upper_rad,
+            );
+            if !(lo > 0.0 && hi < std::f64::consts::PI) {
+                return Err(Error::Parallelogram {
+                    joint,
+                    message: format!(
+                        "the truth's phi0_rad = {} rad puts the crank at {lo:.4}..{hi:.4} rad over joint {joint}'s range [{}, {}] rad, outside (0, π), where the parallelogram folds flat; π/2 − (lo + hi)/2 = {:.4} rad puts it perpendicular mid-range",
+                        pt.phi0_rad,
+                        limits.lower_rad,
+                        limits.upper_rad,
+                        Joint4Transmission::phi0_mid_range_rad(limits.lower_rad, limits.upper_rad)
+                    ),
+                });
+            }
+        }
         let four_bar = hapcal_transmission::FourBar::try_new(
             p.l1_m + pt.dl1_m,
             p.l2_m + pt.dl2_m,
@@ -214,7 +237,8 @@ impl Truth {
 /// Checks, beyond the TOML syntax and types (unknown keys are errors): every number is
 /// finite and within its plausible range (length deviations and the parallelogram's
 /// `dl1_m..dl4_m` within ±0.1 m, angle deviations within ±π/4 rad, phases and offsets within
-/// ±2π rad, eccentricities within ±0.01 m, the ratio error within ±1); every `[deviations]`
+/// ±2π rad, eccentricity radii within [0, 0.01] m, the ratio error within ±1, the crank angle
+/// `phi0_rad` within (0, π), where the parallelogram does not fold flat); every `[deviations]`
 /// name has the form of a chain parameter (`da`, `dalpha`,
 /// `dd`, `dtheta` or `dbeta` followed by a row number); capstan joints are ≥ 1 and unique;
 /// the device path is not empty. Whether the names and joints exist on the device is
@@ -299,6 +323,35 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
     const ECCENTRICITY_M: f64 = 0.01;
     const RATIO_ERROR: f64 = 1.0;
 
+    // An eccentricity is a radius and a phase: a negative radius is the same eccentricity
+    // with the phase turned by π, a sign slip rather than a device.
+    let radius = |name: &str, value: &Spanned<f64>| {
+        let v = bounded(name, value, ECCENTRICITY_M, "m")?;
+        if v < 0.0 {
+            return Err(invalid(
+                value.span().start,
+                format!(
+                    "{name} = {v:e} m is negative: an eccentricity radius lies in [0, {ECCENTRICITY_M}] m (its direction is the phase beta_*_rad)"
+                ),
+            ));
+        }
+        Ok(v)
+    };
+    // The ideal parallelogram folds flat at crank angles 0 and π: outside (0, π) it renders
+    // the joint mirrored.
+    let crank_angle = |value: &Spanned<f64>| {
+        let v = finite("phi0_rad", value)?;
+        if v > 0.0 && v < std::f64::consts::PI {
+            return Ok(v);
+        }
+        Err(invalid(
+            value.span().start,
+            format!(
+                "phi0_rad = {v} rad is outside (0, π) = (0, 3.14159…) rad: the crank angle at joint-4 reading 0, where the parallelogram does not fold flat (π/2 − (lo + hi)/2 puts the crank perpendicular mid-range)"
+            ),
+        ))
+    };
+
     if raw.device.get_ref().as_os_str().is_empty() {
         return Err(invalid(
             raw.device.span().start,
@@ -351,9 +404,9 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
             joint,
             c_rad: bounded("c_rad", &c.c_rad, PHASE_RAD, "rad")?,
             re: bounded("re", &c.re, RATIO_ERROR, "")?,
-            r_o_m: bounded("r_o_m", &c.r_o_m, ECCENTRICITY_M, "m")?,
+            r_o_m: radius("r_o_m", &c.r_o_m)?,
             beta_o_rad: bounded("beta_o_rad", &c.beta_o_rad, PHASE_RAD, "rad")?,
-            r_i_m: bounded("r_i_m", &c.r_i_m, ECCENTRICITY_M, "m")?,
+            r_i_m: radius("r_i_m", &c.r_i_m)?,
             beta_i_rad: bounded("beta_i_rad", &c.beta_i_rad, PHASE_RAD, "rad")?,
         });
     }
@@ -365,7 +418,7 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
             dl2_m: bounded("dl2_m", &p.dl2_m, LENGTH_DEVIATION_M, "m")?,
             dl3_m: bounded("dl3_m", &p.dl3_m, LENGTH_DEVIATION_M, "m")?,
             dl4_m: bounded("dl4_m", &p.dl4_m, LENGTH_DEVIATION_M, "m")?,
-            phi0_rad: bounded("phi0_rad", &p.phi0_rad, PHASE_RAD, "rad")?,
+            phi0_rad: crank_angle(&p.phi0_rad)?,
         }),
     };
 

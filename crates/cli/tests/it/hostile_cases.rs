@@ -920,6 +920,22 @@ fn urdf_cases(t: &mut Table) {
     );
     import(
         t,
+        "a length with a unit (360mm)",
+        edit("xyz=\"-0.00043624 0 0.36\"", "xyz=\"-0.00043624 0 360mm\""),
+        "ball_link",
+        &[
+            "@:83:5: joint \"joint_a2\" <origin xyz>: expected 3 numbers separated by spaces (m: URDF values carry no unit), found \"-0.00043624 0 360mm\" (\"360mm\" is not a number)",
+        ],
+    );
+    import(
+        t,
+        "a joint name twice",
+        edit("<joint name=\"joint_a2\"", "<joint name=\"joint_a1\""),
+        "ball_link",
+        &["@:82:3: a second <joint> named \"joint_a1\": joint names must be unique"],
+    );
+    import(
+        t,
         "missing child link",
         edit("<child link=\"link_3\"/>", "<child link=\"link_nowhere\"/>"),
         "ball_link",
@@ -1421,8 +1437,90 @@ fn measurement_cases(t: &mut Table) {
         csv(&rows[..1]),
         &["@: expected at least 1 data rows"],
     );
+    calibrate(
+        t,
+        "missing header row",
+        csv(&rows[1..]),
+        &[
+            "@:1:1: the first line holds numbers (0.9088284523365023 …), not column names: the header row is missing",
+        ],
+    );
+    calibrate(
+        t,
+        "three rows with the default 5 folds",
+        csv(&rows[..4]),
+        &[
+            "3 training rows (three-rows-with-the-default-5-folds: 3 rows) are too few for 5-fold cross-validation (--folds 5)",
+            "needs at least 5 training rows",
+        ],
+    );
+    let mut empty_markers = rows.clone();
+    for r in empty_markers.iter_mut().skip(1) {
+        for cell in r.iter_mut().take(6) {
+            cell.clear();
+        }
+    }
+    calibrate(
+        t,
+        "every marker cell empty",
+        csv(&empty_markers),
+        &[
+            "@:1:1: the measurement columns (x1, y1, z1, phix1, phiy1, phiz1) are empty in all 23 rows",
+        ],
+    );
+    // Semicolons with --test-last: the separator is the problem, not the option.
+    let semicolons = t.file("measure/semicolons-test-last.csv", text.replace(',', ";"));
+    t.add(
+        C,
+        "semicolons with --test-last",
+        &[
+            "calibrate",
+            "--device",
+            &ur10,
+            "--tip",
+            "tool0",
+            "--data",
+            &semicolons,
+            "--test-last",
+            "0.3",
+        ],
+        2,
+        &[&format!("{semicolons}:1:1: expected comma-separated columns, found cells separated by semicolons")],
+    );
     // industrial_calibration YAML on its positioner.
     let positioner = fixture("industrial-calibration/two_axis_positioner.toml");
+    let measurements = fixture("industrial-calibration/measurements.yaml");
+    for (flag, unit, said) in [
+        (
+            "--length-unit",
+            "mm",
+            "positions in mm (--length-unit mm) cannot apply to it",
+        ),
+        (
+            "--angle-unit",
+            "deg",
+            "angles in deg (--angle-unit deg) cannot apply to it",
+        ),
+    ] {
+        t.add(
+            C,
+            &format!("YAML with {flag} {unit}"),
+            &[
+                "calibrate",
+                "--device",
+                &positioner,
+                "--data",
+                &measurements,
+                flag,
+                unit,
+            ],
+            2,
+            &[
+                &format!("{measurements}: industrial_calibration's YAML has fixed units (pose x, y, z in m, joint angles in rad"),
+                said,
+            ],
+        );
+    }
     let yaml =
         std::fs::read_to_string(root().join("fixtures/industrial-calibration/measurements.yaml"))
             .expect("yaml");
@@ -1854,6 +1952,32 @@ fn option_cases(t: &mut Table) {
             vec!["--count must be between 1 and the number of candidates (10), got 50"],
         ),
         (
+            "plan-poses --sigma-m 1e308",
+            vec![
+                "plan-poses",
+                "--device",
+                &device,
+                "--sigma-m",
+                "1e308",
+                "--out",
+                &out_csv,
+            ],
+            vec!["--sigma-m must lie between 1e-9 and 0.1 m, got 1e308"],
+        ),
+        (
+            "plan-poses --sigma-m 1e-12",
+            vec![
+                "plan-poses",
+                "--device",
+                &device,
+                "--sigma-m",
+                "1e-12",
+                "--out",
+                &out_csv,
+            ],
+            vec!["--sigma-m must lie between 1e-9 and 0.1 m, got 1e-12"],
+        ),
+        (
             "plan-poses --criterion unknown",
             vec![
                 "plan-poses",
@@ -2219,12 +2343,50 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
         std::fs::create_dir_all(folder).expect("scratch folder is writable");
         std::os::unix::fs::symlink(device, link).expect("scratch folder is writable");
     }
+    let full_svg = t.path("limits/full.svg");
+    std::os::unix::fs::symlink("/dev/full", &full_svg).expect("scratch folder is writable");
     let scratch_out = t.path("limits/x.csv");
     let truth_text = std::fs::read_to_string(root().join("fixtures/reference-device/truth.toml"))
         .expect("truth fixture");
     let far_truth = t.file(
         "limits/far-truth.toml",
         truth_text.replace("da1 = -1.1e-3", "da1 = 1e10"),
+    );
+    // Truths next to the fixture's device (their device path made absolute).
+    let device_abs = show(&root().join("fixtures/reference-device/device.toml"));
+    let truth_with = |t: &Table, name: &str, from: &str, to: &str| {
+        let text = truth_text
+            .replace(
+                "device = \"device.toml\"",
+                &format!("device = {device_abs:?}"),
+            )
+            .replacen(from, to, 1);
+        assert!(text.contains(to), "{name}: {from} not in the truth fixture");
+        t.file(&format!("limits/{name}"), text)
+    };
+    let phi0_high = truth_with(
+        t,
+        "phi0-high.toml",
+        "phi0_rad = 0.5207963267948965",
+        "phi0_rad = 3.5",
+    );
+    let phi0_negative = truth_with(
+        t,
+        "phi0-negative.toml",
+        "phi0_rad = 0.5207963267948965",
+        "phi0_rad = -0.1",
+    );
+    let phi0_folds = truth_with(
+        t,
+        "phi0-folds.toml",
+        "phi0_rad = 0.5207963267948965",
+        "phi0_rad = 2.0",
+    );
+    let negative_radius = truth_with(
+        t,
+        "negative-radius.toml",
+        "r_o_m = 0.2e-3",
+        "r_o_m = -0.2e-3",
     );
     let ratio_truth = t.file(
         "limits/ratio-truth.toml",
@@ -2265,6 +2427,22 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
             args(&["simulate", "--poses", "10", "--out", &full]),
             2,
             vec![format!("cannot write {full}: No space left on device")],
+        ),
+        (
+            "diagnose --svg a link to /dev/full",
+            args(&[
+                "diagnose", "--device", &device, "--data", &log, "--svg", &full_svg,
+            ]),
+            2,
+            vec![format!("cannot write {full_svg}: No space left on device")],
+        ),
+        (
+            "diagnose (arm) --svg a link to /dev/full",
+            args(&[
+                "diagnose", "--device", &iiwa, "--data", &front, "--svg", &full_svg,
+            ]),
+            2,
+            vec![format!("cannot write {full_svg}: No space left on device")],
         ),
         (
             "simulate --out a link to /dev/null",
@@ -2365,6 +2543,48 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
             args(&["simulate", "--truth", &far_truth, "--out", &scratch_out]),
             2,
             vec![format!("{far_truth}:22:7: da1 = 1e10 m is outside ±0.1 m")],
+        ),
+        (
+            "simulate a truth with phi0_rad = 3.5 (past π)",
+            args(&["simulate", "--truth", &phi0_high, "--out", &scratch_out]),
+            2,
+            vec![format!("{phi0_high}:106:12: phi0_rad = 3.5 rad is outside (0, π)")],
+        ),
+        (
+            "force with a truth whose phi0_rad = -0.1",
+            args(&[
+                "force",
+                "--device",
+                &device,
+                "--truth",
+                &phi0_negative,
+                "--calibrated",
+                &calibrated,
+            ]),
+            2,
+            vec![format!("{phi0_negative}:106:12: phi0_rad = -0.1 rad is outside (0, π)")],
+        ),
+        (
+            "simulate a truth whose crank folds flat within joint 4's range (phi0_rad = 2)",
+            args(&["simulate", "--truth", &phi0_folds, "--out", &scratch_out]),
+            2,
+            vec![
+                "phi0_rad = 2 rad puts the crank at 2.3000..3.8000 rad over joint 4's range [0.3, 1.8] rad, outside (0, π)".to_owned(),
+            ],
+        ),
+        (
+            "force with a truth whose capstan eccentricity radius is negative",
+            args(&[
+                "force",
+                "--device",
+                &device,
+                "--truth",
+                &negative_radius,
+                "--calibrated",
+                &calibrated,
+            ]),
+            2,
+            vec![format!("{negative_radius}:53:9: r_o_m = -2e-4 m is negative")],
         ),
         (
             "force with a truth whose capstan ratio error is 1e6",

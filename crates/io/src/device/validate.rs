@@ -55,6 +55,26 @@ impl<'a> Locator<'a> {
         found
     }
 
+    /// Whether the file has a value at exactly `keys`.
+    fn has(&self, keys: &[Key<'_>]) -> bool {
+        let Some(root) = self.root.as_ref() else {
+            return false;
+        };
+        let mut current: Option<&Spanned<DeValue<'_>>> = None;
+        for (k, key) in keys.iter().enumerate() {
+            current = match (k, key) {
+                (0, N(name)) => root.get_ref().get(*name),
+                (0, I(_)) => None,
+                (_, N(name)) => current.and_then(|v| v.get_ref().get(*name)),
+                (_, I(i)) => current.and_then(|v| v.get_ref().get(*i)),
+            };
+            if current.is_none() {
+                return false;
+            }
+        }
+        current.is_some()
+    }
+
     /// 1-based (line, column) of the value at `keys`, or of its nearest existing parent,
     /// or (1, 1).
     fn at(&self, keys: &[Key<'_>]) -> (u64, u64) {
@@ -154,6 +174,9 @@ pub(super) fn validate(device: &Device, loc: &Locator<'_>) -> Result<(), Error> 
     device
         .chain()
         .map_err(|e| loc.invalid(&[], e.to_string()))?;
+    device
+        .tree()
+        .map_err(|e| loc.invalid(&[N("branch")], e.to_string()))?;
     Ok(())
 }
 
@@ -209,8 +232,18 @@ fn check_chain(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
     }
 
     let mut names = HashSet::new();
-    for (i, p) in device.placements.iter().enumerate() {
-        let at = |field| [N("placement"), I(i), N(field)];
+    let main = device.placements.iter().enumerate().map(|(i, p)| {
+        let at: Vec<Key<'_>> = vec![N("placement"), I(i)];
+        (at, p)
+    });
+    let branches = device.branches.iter().enumerate().flat_map(|(b, branch)| {
+        branch.placements.iter().enumerate().map(move |(i, p)| {
+            let at: Vec<Key<'_>> = vec![N("branch"), I(b), N("placement"), I(i)];
+            (at, p)
+        })
+    });
+    for (row, p) in main.chain(branches) {
+        let at = |field| [row.as_slice(), &[N(field)]].concat();
         if p.name.is_empty() {
             return Err(loc.invalid(&at("name"), "placement name is empty"));
         }
@@ -225,11 +258,11 @@ fn check_chain(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
             .chain(p.axis.map(|a| ("axis", a)))
         {
             for (k, v) in values.into_iter().enumerate() {
-                loc.finite(&[N("placement"), I(i), N(field), I(k)], v)?;
+                loc.finite(&[at(field).as_slice(), &[I(k)]].concat(), v)?;
             }
         }
         for (k, v) in p.xyz_m.into_iter().enumerate() {
-            loc.length(&[N("placement"), I(i), N("xyz_m"), I(k)], v)?;
+            loc.length(&[at("xyz_m").as_slice(), &[I(k)]].concat(), v)?;
         }
         if let Some(axis) = p.axis
             && axis.iter().map(|a| a * a).sum::<f64>().sqrt() < 1e-12
@@ -239,6 +272,27 @@ fn check_chain(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
                 format!("placement {:?}: axis {axis:?} has zero length", p.name),
             ));
         }
+    }
+    if !device.branches.is_empty() && device.placements.is_empty() {
+        return Err(loc.invalid(
+            &[N("branch")],
+            "[[branch]] rows need the [[placement]] rows of the main chain",
+        ));
+    }
+    // A branch hangs from a placement above it: of the main chain or an earlier branch.
+    let mut above: HashSet<&str> = device.placements.iter().map(|p| p.name.as_str()).collect();
+    for (b, branch) in device.branches.iter().enumerate() {
+        if let Some(from) = &branch.from
+            && !above.contains(from.as_str())
+        {
+            return Err(loc.invalid(
+                &[N("branch"), I(b), N("from")],
+                format!(
+                    "branch from = {from:?}: no placement of the main chain or of an earlier branch has that name"
+                ),
+            ));
+        }
+        above.extend(branch.placements.iter().map(|p| p.name.as_str()));
     }
     if device.n_joints() == 0 {
         return Err(loc.invalid(&[], "the kinematic chain has no joints"));
@@ -257,6 +311,7 @@ fn check_joints(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
             found: device.joints.len(),
         });
     }
+    let prismatic = device.prismatic_joints();
     let mut names = HashSet::new();
     for (i, joint) in device.joints.iter().enumerate() {
         let at = |field| [N("joint"), I(i), N(field)];
@@ -269,17 +324,52 @@ fn check_joints(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
                 format!("joint name {:?} is used twice", joint.name),
             ));
         }
-        // A limit beyond ±MAX_JOINT_LIMIT_RAD (about 159 turns) is a wrong unit or a
-        // placeholder, and would let any reading pass the limit checks of the readers.
-        let within = |v: f64| v.abs() <= MAX_JOINT_LIMIT_RAD;
-        let requirement = format!("is outside ±{MAX_JOINT_LIMIT_RAD} rad");
-        loc.check(&at("lower_rad"), joint.lower_rad, within, &requirement)?;
-        loc.check(&at("upper_rad"), joint.upper_rad, within, &requirement)?;
+        // A prismatic joint's limits are lengths (`lower_m`, `upper_m`), a revolute one's
+        // angles (`lower_rad`, `upper_rad`): the key says the unit, and must match the joint.
+        let is_prismatic = prismatic.get(i) == Some(&true);
+        let unit = if is_prismatic { "m" } else { "rad" };
+        let (lower_key, upper_key) = if is_prismatic {
+            ("lower_m", "upper_m")
+        } else {
+            ("lower_rad", "upper_rad")
+        };
+        let wrong_keys: [(&str, &str); 2] = if is_prismatic {
+            [("lower", "lower_rad"), ("upper", "upper_rad")]
+        } else {
+            [("lower", "lower_m"), ("upper", "upper_m")]
+        };
+        for (bound, wrong) in wrong_keys {
+            if loc.has(&at(wrong)) {
+                let kind = if is_prismatic {
+                    "a prismatic joint: its limits are lengths"
+                } else {
+                    "a revolute joint: its limits are angles"
+                };
+                return Err(loc.invalid(
+                    &at(wrong),
+                    format!(
+                        "joint {:?} is {kind}, expected {bound}_{unit} (in {unit}), found {wrong}",
+                        joint.name
+                    ),
+                ));
+            }
+        }
+        if is_prismatic {
+            loc.length(&at(lower_key), joint.lower_rad)?;
+            loc.length(&at(upper_key), joint.upper_rad)?;
+        } else {
+            // A limit beyond ±MAX_JOINT_LIMIT_RAD (about 159 turns) is a wrong unit or a
+            // placeholder, and would let any reading pass the limit checks of the readers.
+            let within = |v: f64| v.abs() <= MAX_JOINT_LIMIT_RAD;
+            let requirement = format!("is outside ±{MAX_JOINT_LIMIT_RAD} rad");
+            loc.check(&at(lower_key), joint.lower_rad, within, &requirement)?;
+            loc.check(&at(upper_key), joint.upper_rad, within, &requirement)?;
+        }
         if joint.lower_rad >= joint.upper_rad {
             return Err(loc.invalid(
-                &at("lower_rad"),
+                &at(lower_key),
                 format!(
-                    "joint {:?}: lower_rad = {} must be below upper_rad = {}",
+                    "joint {:?}: {lower_key} = {} must be below {upper_key} = {}",
                     joint.name, joint.lower_rad, joint.upper_rad
                 ),
             ));

@@ -50,19 +50,33 @@ pub fn write_device(device: &Device) -> String {
     for p in &device.placements {
         line(String::new());
         line("[[placement]]".into());
-        line(format!("name = {}", string(&p.name)));
-        line(format!("xyz_m = {}", array(&p.xyz_m)));
-        line(format!("rpy_rad = {}", array(&p.rpy_rad)));
-        if let Some(axis) = p.axis {
-            line(format!("axis = {}", array(&axis)));
+        placement(&mut line, p);
+    }
+    for b in &device.branches {
+        line(String::new());
+        line("[[branch]]".into());
+        if let Some(from) = &b.from {
+            line(format!("from = {}", string(from)));
+        }
+        for p in &b.placements {
+            line(String::new());
+            line("[[branch.placement]]".into());
+            placement(&mut line, p);
         }
     }
-    for j in &device.joints {
+    let prismatic = device.prismatic_joints();
+    for (k, j) in device.joints.iter().enumerate() {
         line(String::new());
         line("[[joint]]".into());
         line(format!("name = {}", string(&j.name)));
-        line(format!("lower_rad = {}", float(j.lower_rad)));
-        line(format!("upper_rad = {}", float(j.upper_rad)));
+        // A prismatic joint's limits are lengths.
+        let unit = if prismatic.get(k) == Some(&true) {
+            "m"
+        } else {
+            "rad"
+        };
+        line(format!("lower_{unit} = {}", float(j.lower_rad)));
+        line(format!("upper_{unit} = {}", float(j.upper_rad)));
         if let Some(counts) = j.counts_per_rev {
             line(format!("counts_per_rev = {counts}"));
         }
@@ -118,6 +132,19 @@ pub fn write_device(device: &Device) -> String {
         }
     }
     out
+}
+
+/// The keys of one placement row.
+fn placement(line: &mut impl FnMut(String), p: &hapcal_kinematics::Placement) {
+    line(format!("name = {}", string(&p.name)));
+    line(format!("xyz_m = {}", array(&p.xyz_m)));
+    line(format!("rpy_rad = {}", array(&p.rpy_rad)));
+    if let Some(axis) = p.axis {
+        line(format!("axis = {}", array(&axis)));
+        if p.prismatic {
+            line("prismatic = true".into());
+        }
+    }
 }
 
 /// A TOML float that parses back to exactly `v`.

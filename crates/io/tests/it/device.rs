@@ -237,3 +237,101 @@ fn missing_device_file_is_an_io_error() {
     let msg = message(read_device(&data("no_such_device.toml")));
     assert_contains(&msg, &["cannot read ", "no_such_device.toml: "]);
 }
+
+/// TIAGo's torso is a prismatic joint with limits 0 to 0.35 m: the device file must say so
+/// (`prismatic = true`, `lower_m`/`upper_m`), and read back to the same prismatic joint.
+#[test]
+fn prismatic_joint_survives_the_device_file_with_its_unit() {
+    let urdf = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/figaroh/tiago/tiago.urdf");
+    let device = hapcal_io::import_urdf(&urdf, "arm_7_link").unwrap();
+    assert_eq!(device.prismatic_joints().iter().filter(|p| **p).count(), 1);
+    let text = write_device(&device);
+    assert_contains(
+        &text,
+        &[
+            "name = \"torso_lift_joint\"\nxyz_m = [0.0, 0.0, 0.597]\nrpy_rad = [0.0, 0.0, 0.0]\naxis = [0.0, 0.0, 1.0]\nprismatic = true\n",
+            "name = \"torso_lift_joint\"\nlower_m = 0.0\nupper_m = 0.35\n",
+            "name = \"arm_1_joint\"\nlower_rad = ",
+        ],
+    );
+    let back = parse_device(&text, Path::new("tiago.toml")).unwrap();
+    assert_eq!(back, device);
+    assert_eq!(back.prismatic_joints(), device.prismatic_joints());
+
+    // The limit keys name the unit and must match the joint.
+    let as_rad = text.replacen(
+        "lower_m = 0.0\nupper_m = 0.35",
+        "lower_rad = 0.0\nupper_rad = 0.35",
+        1,
+    );
+    assert_contains(
+        &message(parse_device(&as_rad, Path::new("t.toml"))),
+        &[
+            "t.toml:",
+            "joint \"torso_lift_joint\" is a prismatic joint: its limits are lengths, expected lower_m (in m), found lower_rad",
+        ],
+    );
+    let as_m = text.replacen(
+        "name = \"arm_1_joint\"\nlower_rad = ",
+        "name = \"arm_1_joint\"\nlower_m = ",
+        1,
+    );
+    assert_contains(
+        &message(parse_device(&as_m, Path::new("t.toml"))),
+        &[
+            "joint \"arm_1_joint\" is a revolute joint: its limits are angles, expected lower_rad (in rad), found lower_m",
+        ],
+    );
+    // A prismatic limit is a length: 2000 m is out of range.
+    let far = text.replacen("upper_m = 0.35", "upper_m = 2000.0", 1);
+    assert_contains(
+        &message(parse_device(&far, Path::new("t.toml"))),
+        &["t.toml:70:11: joint[0].upper_m = 2e3 m is out of range"],
+    );
+}
+
+/// A two-arm tree (`[[branch]]` per further tip) survives the device file, and a branch that
+/// hangs from no placement above it is refused at its line.
+#[test]
+fn placement_tree_survives_the_device_file() {
+    let urdf = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/sim-humanoid/humanoid.urdf");
+    let tips = ["l_hand".to_owned(), "r_hand".to_owned()];
+    let device = hapcal_io::import_urdf_tree(&urdf, &tips).unwrap();
+    // Three torso joints and two seven-joint arms.
+    assert_eq!(device.n_joints(), 17);
+    assert_eq!(device.joints.len(), 17);
+    assert_eq!(device.branches.len(), 1);
+    let tree = hapcal_io::import_urdf_tips(&urdf, &tips).unwrap();
+    let names: Vec<&str> = device.joints.iter().map(|j| j.name.as_str()).collect();
+    let want: Vec<&str> = tree.joints.iter().map(|j| j.name.as_str()).collect();
+    assert_eq!(names, want);
+    assert_eq!(device.placement_paths().unwrap(), tree.paths);
+
+    let text = write_device(&device);
+    assert_contains(
+        &text,
+        &[
+            "[[branch]]\nfrom = \"torso_3\"\n",
+            "[[branch.placement]]\nname = \"r_1\"",
+        ],
+    );
+    let back = parse_device(&text, Path::new("humanoid.toml")).unwrap();
+    assert_eq!(back, device);
+
+    let bad = text.replacen("from = \"torso_3\"", "from = \"r_3\"", 1);
+    let err = message(parse_device(&bad, Path::new("h.toml")));
+    assert_contains(
+        &err,
+        &[
+            "h.toml:",
+            "branch from = \"r_3\": no placement of the main chain or of an earlier branch has that name",
+        ],
+    );
+    let bad = text.replacen("from = \"torso_3\"", "from = \"torso_9\"", 1);
+    assert_contains(
+        &message(parse_device(&bad, Path::new("h.toml"))),
+        &["torso_9"],
+    );
+}

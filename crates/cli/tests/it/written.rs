@@ -1,0 +1,126 @@
+//! A calibrated device written with `calibrate --out` (TOML and URDF) reads back to the
+//! figures the report printed: the written kinematics, with the instrument and marker frames
+//! fitted again (`--model frames-only`), give the report's calibrated errors.
+
+use super::{hapcal, json, root, scratch};
+
+fn show(p: &std::path::Path) -> String {
+    p.display().to_string()
+}
+use serde_json::Value;
+
+/// Position mean, RMS and max (m) of each data set of a report, `when` = "before" or "after".
+fn position_figures(v: &Value, when: &str) -> Vec<(String, [f64; 3])> {
+    (v["placements"].as_array().expect("placements").iter())
+        .map(|p| {
+            let pose = &p[when]["pose"];
+            let get = |k: &str| pose[k].as_f64().expect("a figure");
+            (
+                p["name"].as_str().unwrap_or_default().to_owned(),
+                [
+                    get("position_mean_m"),
+                    get("position_rms_m"),
+                    get("position_max_m"),
+                ],
+            )
+        })
+        .collect()
+}
+
+/// Calibrates `device` (tips `tips`) on `data` with the geometric model, writes it to each of
+/// `x.toml` and `x.urdf`, and checks that the written device, with its frames fitted again,
+/// reproduces the report's calibrated figures.
+fn written_device_reproduces_the_report(name: &str, device: &str, tips: &[&str], data: &str) {
+    let dir = scratch(name);
+    let tip_args: Vec<&str> = tips.iter().flat_map(|t| ["--tip", *t]).collect();
+    for ext in ["toml", "urdf"] {
+        let out = dir.join(format!("calibrated.{ext}"));
+        let mut args = vec!["calibrate", "--device", device];
+        args.extend(&tip_args);
+        let out_s = show(&out);
+        args.extend([
+            "--data",
+            data,
+            "--test-last",
+            "0.3",
+            "--model",
+            "geometric",
+            "--json",
+            "--out",
+            &out_s,
+        ]);
+        let report = json(&hapcal(&args));
+        let reported = position_figures(&report, "after");
+        // The written kinematics must differ from the nominal ones, or the check says nothing.
+        let nominal = position_figures(&report, "before");
+        assert!(
+            (reported.iter().zip(&nominal)).any(|(a, b)| (a.1[1] - b.1[1]).abs() > 1e-4),
+            "{name}: calibration changed nothing: {reported:?}"
+        );
+
+        let mut again = vec!["calibrate", "--device", &out_s];
+        if ext == "urdf" {
+            again.extend(&tip_args);
+        }
+        again.extend([
+            "--data",
+            data,
+            "--test-last",
+            "0.3",
+            "--model",
+            "frames-only",
+            "--json",
+        ]);
+        let read_back = position_figures(&json(&hapcal(&again)), "before");
+        assert_eq!(read_back.len(), reported.len());
+        for ((set, want), (_, got)) in reported.iter().zip(&read_back) {
+            for k in 0..3 {
+                // The report prints mm to 3 decimals: equal within half its last digit.
+                assert!(
+                    (want[k] - got[k]).abs() < 0.5e-6,
+                    "{name} {ext} {set}: figure {k} reported {} m, from the written file {} m",
+                    want[k],
+                    got[k]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn tiago_with_its_prismatic_torso_reads_back_to_the_reported_figures() {
+    let dir = root().join("fixtures/figaroh/tiago");
+    written_device_reproduces_the_report(
+        "written-tiago",
+        &show(&dir.join("tiago.urdf")),
+        &["arm_7_link"],
+        &show(&dir.join("qualysis_base_hand_calibration.csv")),
+    );
+}
+
+#[test]
+fn two_arm_tree_reads_back_to_the_reported_figures() {
+    let dir = root().join("fixtures/sim-humanoid");
+    written_device_reproduces_the_report(
+        "written-humanoid",
+        &show(&dir.join("humanoid.urdf")),
+        &["l_hand", "r_hand"],
+        &show(&dir.join("mocap.csv")),
+    );
+}
+
+#[test]
+fn imported_tiago_says_its_torso_is_prismatic_in_m() {
+    let urdf = root().join("fixtures/figaroh/tiago/tiago.urdf");
+    let out = hapcal(&["import-urdf", &show(&urdf), "--tip", "arm_7_link"]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("axis = [0.0, 0.0, 1.0]\nprismatic = true\n"),
+        "{text}"
+    );
+    assert!(
+        text.contains("name = \"torso_lift_joint\"\nlower_m = 0.0\nupper_m = 0.35\n"),
+        "{text}"
+    );
+}
