@@ -285,7 +285,7 @@ pub fn terms(
 /// - measurement files: frames-only → joint-offsets → geometric → compliance →
 ///   transversal-compliance;
 /// - socket recordings and distance logs (no frame to fit: geometric is the bottom): geometric
-///   → compliance (or its published-mass alternatives) → transversal-compliance;
+///   → compliance (or its published-mass alternatives);
 /// - a haptic device's logs: transmissions when the logs have external-encoder columns, else
 ///   geometric (decided by the data, not cross-validated: the paper's two steps).
 pub fn ladder(kind: DataKind, published_masses: bool) -> Vec<Vec<ModelChoice>> {
@@ -303,11 +303,11 @@ pub fn ladder(kind: DataKind, published_masses: bool) -> Vec<Vec<ModelChoice>> {
             compliance,
             vec![M::TransversalCompliance],
         ],
-        DataKind::Sockets | DataKind::Distances => vec![
-            vec![M::Geometric],
-            compliance,
-            vec![M::TransversalCompliance],
-        ],
+        // Transversal compliance is a model of these data (`--model transversal-compliance`)
+        // but not a rung: a device file carries no link masses, so its moments come from
+        // unit weights, and on one MUKCa placement it climbed by chance (panda_1 at 9 folds,
+        // test error doubled: docs/results/mukca.md).
+        DataKind::Sockets | DataKind::Distances => vec![vec![M::Geometric], compliance],
         DataKind::HapticLogs => vec![vec![M::Transmissions]],
     }
 }

@@ -377,16 +377,12 @@ fn refused_model(args: &[&str], value: &str) -> String {
 fn a_model_the_haptic_log_does_not_take_is_refused_naming_those_it_takes() {
     let dir = scratch("hostile-haptic-model");
     let log = simulated_log(&dir, 40);
-    for value in [
-        "geometric",
-        "compliance",
-        "compliance-harmonic",
-        "frames-only",
-    ] {
+    for value in ["compliance", "compliance-harmonic", "frames-only"] {
         let (device, log) = (reference("device.toml"), show(&log));
         let err = refused_model(&["--device", &device, "--data", &log], value);
         assert!(
-            err.contains("a haptic device's logs: they take auto, transmissions"),
+            err.contains("a haptic device's logs: ")
+                && err.contains("they take auto, geometric, transmissions"),
             "{err}"
         );
     }
@@ -425,22 +421,25 @@ fn transmissions_without_external_encoder_columns_is_refused() {
 fn a_model_the_measurement_files_do_not_take_is_refused_by_its_value() {
     let urdf = show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf"));
     let csv = show(&root().join("fixtures/figaroh/ur10/calibration.csv"));
-    // The ladder has no rung of published masses: mass-compliance is not turned into
-    // compliance.
     let args = ["--device", &urdf, "--tip", "wrist_3_link", "--data", &csv];
-    let err = refused_model(&args, "mass-compliance");
+    let err = refused_model(&args, "transmissions");
     assert!(
-        err.contains("compliance takes the link masses from the URDF's inertial tags"),
+        err.contains("measurement files")
+            && err.contains("they take auto, frames-only, joint-offsets"),
         "{err}"
     );
-    for value in [
-        "compliance-harmonic",
-        "transmissions",
-        "actuator-compliance",
-    ] {
-        let err = refused_model(&args, value);
+    // The published-mass models are models of these data, but not of this robot: refused by
+    // value, not turned into compliance.
+    for value in ["mass-compliance", "actuator-compliance"] {
+        let mut all = vec!["calibrate", "--model", value];
+        all.extend_from_slice(&args);
+        let out = hapcal(&all);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "--model {value}: {err}");
         assert!(
-            err.contains("measurement files") && err.contains("frames-only, joint-offsets"),
+            err.contains(&format!(
+                "--model {value}: no published link masses for this robot's joint names"
+            )),
             "{err}"
         );
     }
@@ -450,15 +449,12 @@ fn a_model_the_measurement_files_do_not_take_is_refused_by_its_value() {
 fn a_marker_model_on_socket_recordings_is_refused_by_its_value() {
     let iiwa = show(&root().join("fixtures/mukca/urdf/iiwa14.urdf"));
     let front = show(&root().join("fixtures/mukca/data/kuka_14/front"));
-    for value in [
-        "frames-only",
-        "joint-offsets",
-        "transversal-compliance",
-        "transmissions",
-    ] {
+    for value in ["frames-only", "joint-offsets", "transmissions"] {
         let err = refused_model(&["--device", &iiwa, "--data", &front], value);
         assert!(
-            err.contains("socket recordings and distance logs: they take auto, geometric"),
+            err.contains(&format!(
+                "--model {value} does not apply to socket recordings: "
+            )) && err.contains("they take auto, geometric"),
             "{err}"
         );
     }
