@@ -11,6 +11,7 @@ pub mod calibrate;
 pub mod haptic;
 pub mod measured;
 pub mod plan;
+pub mod setup;
 pub mod support;
 
 use std::path::{Path, PathBuf};
