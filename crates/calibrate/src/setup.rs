@@ -3,7 +3,7 @@
 //!
 //! For each hypothesis of a mistake (positions in millimetres read as metres, orientations in
 //! degrees read as radians, quaternion components in another order, roll and yaw swapped, a
-//! mirrored or swapped position axis, joint columns in the wrong order, joint rows out of step
+//! mirrored or swapped position axis (one hypothesis: a left-handed frame), joint columns in the wrong order, joint rows out of step
 //! with the measurement rows, the tip link one or two moving joints up or down the chain, tips
 //! given in the wrong order), the data are corrected as the hypothesis says, the frames only
 //! are fitted ([`measured::frames_only`]: the nominal kinematics with the instrument and
@@ -62,6 +62,11 @@ pub const FROZEN_SPREAD: f64 = 1e-9;
 /// Rows out of step tried between the joint readings and the measurements: ±1 and ±2.
 const ROW_SHIFTS: [isize; 4] = [-2, -1, 1, 2];
 
+/// Rows a frames-only fit of the check takes at most (evenly spaced over each file): a factor
+/// of [`OVERWHELMING_FACTOR`] shows on far fewer, and the check stays a small part of a
+/// calibration on long recordings.
+pub const MAX_CHECK_ROWS: usize = 200;
+
 /// Joint counts up to which every pair of joint columns is tried as a swap; longer robots
 /// (trees) try the adjacent pairs.
 const ALL_PAIRS_UP_TO: usize = 8;
@@ -91,10 +96,9 @@ pub enum MistakeClass {
     QuaternionInverse,
     /// Roll and yaw swapped (`phix` and `phiz`).
     EulerOrder,
-    /// One position axis negated (a left-handed instrument frame).
+    /// One position axis negated or two swapped (a left-handed instrument frame; the data
+    /// cannot tell which).
     MirroredAxis,
-    /// Two position axes swapped.
-    SwappedAxes,
     /// Two joint columns swapped, or all of them in reverse order.
     JointOrder,
     /// Joint rows out of step with the measurement rows.
@@ -111,7 +115,7 @@ pub enum MistakeClass {
 
 impl MistakeClass {
     /// Every class, in report order.
-    pub const ALL: [MistakeClass; 14] = [
+    pub const ALL: [MistakeClass; 13] = [
         MistakeClass::LengthUnit,
         MistakeClass::AngleUnit,
         MistakeClass::OrientationUnit,
@@ -119,7 +123,6 @@ impl MistakeClass {
         MistakeClass::QuaternionInverse,
         MistakeClass::EulerOrder,
         MistakeClass::MirroredAxis,
-        MistakeClass::SwappedAxes,
         MistakeClass::JointOrder,
         MistakeClass::RowShift,
         MistakeClass::FrozenJoint,
@@ -138,7 +141,6 @@ impl MistakeClass {
             MistakeClass::QuaternionInverse => "quaternion-inverse",
             MistakeClass::EulerOrder => "euler-order",
             MistakeClass::MirroredAxis => "mirrored-axis",
-            MistakeClass::SwappedAxes => "swapped-axes",
             MistakeClass::JointOrder => "joint-order",
             MistakeClass::RowShift => "row-shift",
             MistakeClass::FrozenJoint => "frozen-joint",
@@ -289,9 +291,7 @@ pub struct SetupReport {
 impl SetupReport {
     /// The first finding of severity error, if any.
     pub fn overwhelming(&self) -> Option<&Finding> {
-        self.findings
-            .iter()
-            .find(|f| f.severity == Severity::Error)
+        self.findings.iter().find(|f| f.severity == Severity::Error)
     }
 
     /// The report as plain text, one finding per line.
@@ -313,7 +313,12 @@ impl SetupReport {
             out.push_str("  nothing found: the data fit this robot as they are\n");
         }
         for f in &self.findings {
-            out.push_str(&format!("  {} [{}]: {}\n", f.severity_word(), f.class, f.text()));
+            out.push_str(&format!(
+                "  {} [{}]: {}\n",
+                f.severity_word(),
+                f.class,
+                f.text()
+            ));
         }
         out
     }
@@ -380,8 +385,28 @@ pub fn frames_only_residual(
         marker_tips: marker_tips.to_vec(),
         workspace: Vec::new(),
     };
-    let fo = measured::frames_only(robot, tables, &cfg, check_weights()).ok()?;
-    Some(residual_of(&fo.model, tables))
+    let tables = thinned(tables);
+    let fo = measured::frames_only(robot, &tables, &cfg, check_weights()).ok()?;
+    Some(residual_of(&fo.model, &tables))
+}
+
+/// `tables` with at most [`MAX_CHECK_ROWS`] rows in all, evenly spaced in each file.
+fn thinned(tables: &[MeasurementTable]) -> Vec<MeasurementTable> {
+    let n: usize = tables.iter().map(|t| t.rows.len()).sum();
+    let mut out = tables.to_vec();
+    if n <= MAX_CHECK_ROWS {
+        return out;
+    }
+    for t in &mut out {
+        let keep = (t.rows.len() * MAX_CHECK_ROWS).div_ceil(n).max(1);
+        let len = t.rows.len();
+        let rows = std::mem::take(&mut t.rows);
+        t.rows = (rows.into_iter().enumerate())
+            .filter(|(i, _)| (i * keep) / len != ((i + 1) * keep) / len || len <= keep)
+            .map(|(_, r)| r)
+            .collect();
+    }
+    out
 }
 
 /// The residual of `tables` under `model` (a framed tree: tip k is marker k).
@@ -491,9 +516,8 @@ fn header_of(path: &Path) -> Vec<String> {
         return Vec::new();
     }
     let mut header = String::new();
-    let read = std::fs::File::open(path).and_then(|f| {
-        std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut header)
-    });
+    let read = std::fs::File::open(path)
+        .and_then(|f| std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut header));
     if read.is_err() {
         return Vec::new();
     }
@@ -694,7 +718,10 @@ fn hypotheses(input: &SetupInput<'_>) -> Vec<Hypothesis> {
     };
     let paths: Vec<PathBuf> = tables.iter().map(|t| t.path.clone()).collect();
     if let Ok(reread) = measured::load_tables(&paths, robot, &other_units)
-        && reread.iter().zip(tables.iter()).all(|(a, b)| a.rows.len() == b.rows.len())
+        && reread
+            .iter()
+            .zip(tables.iter())
+            .all(|(a, b)| a.rows.len() == b.rows.len())
     {
         let any_revolute = robot.prismatic.iter().any(|p| !p);
         if any_revolute {
@@ -772,35 +799,24 @@ fn hypotheses(input: &SetupInput<'_>) -> Vec<Hypothesis> {
         );
     }
 
-    // Position axes.
+    // Position axes: a mirrored axis and two swapped axes are one hypothesis. Each
+    // reflection is any other times a rotation (diag(−1, 1, 1) = Rz(π)·diag(1, −1, 1), a swap
+    // of x and y = a rotation times diag(1, −1, 1)), and the fitted instrument frame takes up
+    // the rotation, in the orientations too (M₁·R·M₁ = Q·M₂·R·M₂·Qᵀ, the Qᵀ taken up by the
+    // marker frame): the data tell that the frame is left-handed, not which axis made it so.
     if has_markers {
-        let axes = ["x", "y", "z"];
-        for (k, axis) in axes.iter().enumerate() {
-            let mut m = nalgebra::Matrix3::identity();
-            m[(k, k)] = -1.0;
-            push(
-                MistakeClass::MirroredAxis,
-                format!("the {axis} axis of the positions is mirrored (a left-handed frame)"),
-                format!("negate the {axis} column(s) of the positions (and mirror the orientations with them)"),
-                reflect(tables, &m),
-            );
-        }
-        for (a, b) in [(0, 1), (0, 2), (1, 2)] {
-            let mut m = nalgebra::Matrix3::zeros();
-            m[(a, b)] = 1.0;
-            m[(b, a)] = 1.0;
-            let c = 3 - a - b;
-            m[(c, c)] = 1.0;
-            push(
-                MistakeClass::SwappedAxes,
-                format!(
-                    "the {} and {} columns of the positions are swapped",
-                    axes[a], axes[b]
-                ),
-                format!("swap the {} and {} columns of the positions", axes[a], axes[b]),
-                reflect(tables, &m),
-            );
-        }
+        let mut m = nalgebra::Matrix3::identity();
+        m[(2, 2)] = -1.0;
+        push(
+            MistakeClass::MirroredAxis,
+            "the positions are in a left-handed frame: one axis mirrored or two axes swapped \
+             (the fit cannot tell which: each is the other up to a rotation)"
+                .to_owned(),
+            "find the axis the export mirrors (negate that column of the positions) or the two \
+             axes it swaps (swap those columns), and mirror the orientations with them"
+                .to_owned(),
+            reflect(tables, &m),
+        );
     }
 
     // Joint columns.
@@ -833,7 +849,9 @@ fn hypotheses(input: &SetupInput<'_>) -> Vec<Hypothesis> {
     }
     if input.tips.len() <= 1 && n >= 3 {
         // Reverse the joints of one kind among themselves (a prismatic lift stays put).
-        let revolute: Vec<usize> = (0..n).filter(|&j| robot.prismatic.get(j) != Some(&true)).collect();
+        let revolute: Vec<usize> = (0..n)
+            .filter(|&j| robot.prismatic.get(j) != Some(&true))
+            .collect();
         if revolute.len() >= 3 {
             let mut perm: Vec<usize> = (0..n).collect();
             for (slot, src) in revolute.iter().zip(revolute.iter().rev()) {
@@ -1007,10 +1025,21 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
         && g >= SUGGESTIVE_FACTOR
     {
         let overwhelming = g >= OVERWHELMING_FACTOR && after.is_plausible();
+        let scale = if h.class == MistakeClass::LengthUnit {
+            " relative to the spread of the positions"
+        } else {
+            ""
+        };
         let message = if overwhelming {
-            format!("{} ({g:.0}× smaller residual when corrected)", h.what)
+            format!(
+                "{} ({g:.0}× smaller residual{scale} when corrected)",
+                h.what
+            )
         } else if after.is_plausible() {
-            format!("perhaps {} ({g:.1}× smaller residual when corrected)", h.what)
+            format!(
+                "perhaps {} ({g:.1}× smaller residual{scale} when corrected)",
+                h.what
+            )
         } else {
             format!(
                 "perhaps {}, but it explains only part of the residual ({g:.1}× smaller, still \
@@ -1157,7 +1186,8 @@ pub fn gate(plan: &crate::calibrate::Plan, cfg: &SetupConfig) -> Result<Vec<Stri
         && !cfg.accept_setup
     {
         anyhow::bail!(
-            "setup check: {}; --accept-setup calibrates the data as they are",
+            "setup check [{}]: {}; --accept-setup calibrates the data as they are",
+            f.class,
             f.text()
         );
     }
@@ -1170,7 +1200,7 @@ pub fn gate(plan: &crate::calibrate::Plan, cfg: &SetupConfig) -> Result<Vec<Stri
             } else {
                 ""
             };
-            format!("setup check{accepted}: {}", f.text())
+            format!("setup check{accepted} [{}]: {}", f.class, f.text())
         })
         .collect())
 }

@@ -916,16 +916,22 @@ fn run(cli: Cli) -> Result<()> {
             joint_length_unit,
             angle_unit,
             json,
-        } => run_check(Plan {
-            device,
-            tip: tips.first().cloned().unwrap_or_else(|| "ball_link".to_owned()),
-            tips: tips.iter().skip(1).cloned().collect(),
-            units: hapcal_io::Units::new(length_unit, angle_unit)
-                .with_joint_length(joint_length_unit),
-            data,
-            test: Vec::new(),
-            ..Plan::bundled_default()
-        }, json),
+        } => run_check(
+            Plan {
+                device,
+                tip: tips
+                    .first()
+                    .cloned()
+                    .unwrap_or_else(|| "ball_link".to_owned()),
+                tips: tips.iter().skip(1).cloned().collect(),
+                units: hapcal_io::Units::new(length_unit, angle_unit)
+                    .with_joint_length(joint_length_unit),
+                data,
+                test: Vec::new(),
+                ..Plan::bundled_default()
+            },
+            json,
+        ),
         Command::ImportUrdf { urdf, tip } => {
             let device = hapcal_io::import_urdf(&urdf, &tip)?;
             emit(&hapcal_io::write_device(&device));
@@ -965,7 +971,7 @@ fn run_check(plan: Plan, json: bool) -> Result<()> {
         emit(&report.render());
     }
     match report.overwhelming() {
-        Some(f) => anyhow::bail!("setup check: {}", f.text()),
+        Some(f) => anyhow::bail!("setup check [{}]: {}", f.class, f.text()),
         None => Ok(()),
     }
 }

@@ -6,6 +6,7 @@
 mod force;
 mod hostile;
 mod hostile_cases;
+mod setup_check;
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
