@@ -284,6 +284,11 @@ pub struct SetupReport {
     /// (reported whether or not it is a finding).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub best: Option<(String, Residual)>,
+    /// How many times the best hypothesis divides the residual as given (position residual
+    /// relative to the data's spread, or orientation residual; below 1: every hypothesis
+    /// raises it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub best_gain: Option<f64>,
     /// Findings, errors first.
     pub findings: Vec<Finding>,
 }
@@ -303,9 +308,9 @@ impl SetupReport {
             self.as_given.text(),
             self.n_hypotheses
         );
-        if let Some((fix, r)) = &self.best {
+        if let (Some((fix, r)), Some(g)) = (&self.best, self.best_gain) {
             out.push_str(&format!(
-                "  closest hypothesis: {fix} (frames-only RMS {})\n",
+                "  closest hypothesis: {fix} (frames-only RMS {}, gain {g:.2}×)\n",
                 r.text()
             ));
         }
@@ -1123,6 +1128,7 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
         as_given,
         n_hypotheses: results.len(),
         best: best.map(|(h, after, _)| (h.fix.clone(), after)),
+        best_gain: best.map(|(_, _, g)| g),
         findings,
     })
 }

@@ -955,9 +955,13 @@ fn run_check(plan: Plan, json: bool) -> Result<()> {
     if plan.data.is_empty() {
         anyhow::bail!("--data: give the measurement files to check");
     }
+    if let Some(missing) = plan.data.iter().find(|p| !p.exists()) {
+        anyhow::bail!("--data {}: no such file", missing.display());
+    }
     let Some(report) = hapcal_calibrate::setup::check_plan(&plan)? else {
         anyhow::bail!(
-            "hapcal check applies to measurement files (marker positions, poses, distances) of              a URDF or a D-H device; {} holds none",
+            "hapcal check applies to measurement files (marker positions, poses, distances) of \
+             a URDF or a D-H device; {} holds none",
             plan.data
                 .iter()
                 .map(|p| p.display().to_string())

@@ -408,13 +408,33 @@ fn swapped_joint_columns_are_named() {
     let dir = scratch("setup-swapj");
     let mut rows = ur10_rows();
     swap_names(&mut rows, "wrist_1_joint", "wrist_2_joint");
+    let data = write(&dir, "swapj.csv", &rows);
     let err = ur10_finds(
-        &write(&dir, "swapj.csv", &rows),
+        &data,
         "wrist_3_link",
         &[],
         &["swap the columns of wrist_1_joint (q4) and wrist_2_joint (q5)"],
     );
     assert_restored(&err);
+    // diagnose runs the same check first.
+    let svg = show(&dir.join("maps.svg"));
+    let out = hapcal(&[
+        "diagnose",
+        "--device",
+        &ur10(),
+        "--tip",
+        "wrist_3_link",
+        "--data",
+        &data,
+        "--svg",
+        &svg,
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("swap the columns of wrist_1_joint (q4) and wrist_2_joint (q5)"),
+        "{}",
+        stderr(&out)
+    );
 }
 
 #[test]
