@@ -259,7 +259,9 @@ pub struct Finding {
 impl Finding {
     /// One line: the message, the residual before → after, the fix.
     pub fn text(&self) -> String {
+        let unread = self.before == Residual::default();
         let residual = match &self.after {
+            Some(after) if unread => format!(" (frames-only RMS {} with the fix)", after.text()),
             Some(after) => format!(
                 " (frames-only RMS {} → {})",
                 self.before.text(),
@@ -301,13 +303,20 @@ impl SetupReport {
 
     /// The report as plain text, one finding per line.
     pub fn render(&self) -> String {
-        let mut out = format!(
-            "setup check: {} rows, frames-only RMS {} as given, {} hypotheses of a mistake \
-             fitted\n",
-            self.n_rows,
-            self.as_given.text(),
-            self.n_hypotheses
-        );
+        let mut out = if self.as_given == Residual::default() {
+            format!(
+                "setup check: {} rows; the files do not read with the tips given\n",
+                self.n_rows
+            )
+        } else {
+            format!(
+                "setup check: {} rows, frames-only RMS {} as given, {} hypotheses of a mistake \
+                 fitted\n",
+                self.n_rows,
+                self.as_given.text(),
+                self.n_hypotheses
+            )
+        };
         if let (Some((fix, r)), Some(g)) = (&self.best, self.best_gain) {
             out.push_str(&format!(
                 "  closest hypothesis: {fix} (frames-only RMS {}, gain {g:.2}×)\n",
@@ -1164,7 +1173,16 @@ pub fn check_plan(plan: &crate::calibrate::Plan) -> Result<Option<SetupReport>> 
     } else {
         measured::robot_from_device(&device)?
     };
-    let tables = measured::load_tables(&files, &robot, &plan.units)?;
+    let tables = match measured::load_tables(&files, &robot, &plan.units) {
+        Ok(tables) => tables,
+        Err(e) => {
+            // A tip below the markers' link may need a joint the files have no column for.
+            if is_urdf && let Some(report) = tip_above(&plan.device, &tips, &files, plan.units) {
+                return Ok(Some(report));
+            }
+            return Err(e);
+        }
+    };
     check_setup(&SetupInput {
         robot: &robot,
         tables: &tables,
@@ -1173,6 +1191,60 @@ pub fn check_plan(plan: &crate::calibrate::Plan) -> Result<Option<SetupReport>> 
         units: plan.units,
     })
     .map(Some)
+}
+
+/// When the files do not read with the tips given: the first tip one or two moving joints up
+/// the chain with which they read and leave a plausible frames-only residual, as a report of
+/// one finding (the tip too low: its joints have no column in the files).
+fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> Option<SetupReport> {
+    let description = urdf_rs::read_file(urdf).ok()?;
+    for (t, tip) in tips.iter().enumerate() {
+        for (link, steps) in tip_candidates(&description, tip) {
+            if steps > 0 || tips.contains(&link) {
+                continue;
+            }
+            let mut other_tips = tips.to_vec();
+            if let Some(slot) = other_tips.get_mut(t) {
+                slot.clone_from(&link);
+            }
+            let Ok(robot) = measured::robot_from_urdf(urdf, &other_tips) else {
+                continue;
+            };
+            let Ok(tables) = measured::load_tables(files, &robot, &units) else {
+                continue;
+            };
+            let marker_tips: Vec<usize> = (0..other_tips.len()).collect();
+            let Some(after) = frames_only_residual(&robot, &tables, &marker_tips) else {
+                continue;
+            };
+            if !after.is_plausible() {
+                continue;
+            }
+            let k = steps.unsigned_abs();
+            let joints = if k == 1 { "joint" } else { "joints" };
+            let flags: Vec<String> = other_tips.iter().map(|t| format!("--tip {t}")).collect();
+            let finding = Finding {
+                class: MistakeClass::TipLink,
+                severity: Severity::Error,
+                message: format!(
+                    "the files have no column for the joints between {link} and the tip {tip}: \
+                     the markers sit on {link}, {k} moving {joints} above the tip"
+                ),
+                fix: format!("use {}", flags.join(" ")),
+                before: Residual::default(),
+                after: Some(after),
+            };
+            return Some(SetupReport {
+                n_rows: tables.iter().map(|t| t.rows.len()).sum(),
+                as_given: Residual::default(),
+                n_hypotheses: 1,
+                best: Some((finding.fix.clone(), after)),
+                best_gain: None,
+                findings: vec![finding],
+            });
+        }
+    }
+    None
 }
 
 /// The setup check at the start of a calibration or diagnosis: the warnings to print, or an

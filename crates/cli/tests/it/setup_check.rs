@@ -534,6 +534,41 @@ fn a_tip_one_or_two_links_too_high_names_the_tip() {
 }
 
 #[test]
+fn a_tip_below_the_markers_whose_joint_has_no_column_names_the_tip_above() {
+    // TIAGo's hand: the index finger's joint has no column in the arm's recording.
+    let urdf = show(&root().join("fixtures/figaroh/tiago/tiago.urdf"));
+    let data = show(&tiago_csv());
+    let out = check(&[
+        "--device",
+        &urdf,
+        "--tip",
+        "hand_index_link",
+        "--data",
+        &data,
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("[tip-link]"), "{err}");
+    assert!(err.contains("fix: use --tip hand_palm_link"), "{err}");
+    // The calibration stops with the same fix, where the reader alone named the column.
+    let out = hapcal(&[
+        "calibrate",
+        "--device",
+        &urdf,
+        "--tip",
+        "hand_index_link",
+        "--data",
+        &data,
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("use --tip hand_palm_link"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
 fn tips_in_the_wrong_order_are_named() {
     let urdf = show(&root().join("fixtures/sim-humanoid/humanoid.urdf"));
     let data = show(&root().join("fixtures/sim-humanoid/mocap.csv"));
