@@ -15,6 +15,7 @@ pub mod measured;
 pub mod model;
 pub mod plan;
 pub mod report;
+pub mod setup;
 pub mod support;
 
 use std::path::{Path, PathBuf};

@@ -135,6 +135,10 @@ enum Command {
         /// one problem instead of the paper's two steps.
         #[arg(long)]
         joint: bool,
+        /// Calibrate measurement files as they are even when the setup check finds a mistake
+        /// (hapcal check).
+        #[arg(long)]
+        accept_setup: bool,
     },
     /// Reproduce the paper's tables on the simulated reference device (Tables 2, 3, Figs. 7, 8)
     /// and write them to --out; with --check, compare with fixtures/golden/ours/paper.csv.
@@ -254,6 +258,40 @@ enum Command {
         /// Where to write the residual maps (SVG).
         #[arg(long, default_value = "diagnose_residuals.svg")]
         svg: PathBuf,
+        /// Diagnose measurement files as they are even when the setup check finds a mistake
+        /// (hapcal check).
+        #[arg(long)]
+        accept_setup: bool,
+    },
+    /// Check the setup of measurement files before calibrating: units, quaternion and Euler
+    /// order, mirrored or swapped axes, joint column order, joint rows out of step, frozen
+    /// joints, the tip link, the order of the tips, another robot. Fits the frames only under
+    /// each hypothesis of a mistake and compares the residual with the data as given.
+    ///
+    /// Exit codes: 0 nothing found or only warnings, 2 a mistake the data show overwhelmingly
+    /// (the message names the fix) or bad input.
+    Check {
+        /// Device: a URDF (with --tip) or a D-H device file.
+        #[arg(long)]
+        device: PathBuf,
+        /// Tip link of a URDF; repeat for a tree (marker k sits on the k-th tip).
+        #[arg(long = "tip", default_values_t = ["ball_link".to_owned()])]
+        tips: Vec<String>,
+        /// Measurement files (marker positions, poses, distances).
+        #[arg(long, num_args = 1..)]
+        data: Vec<PathBuf>,
+        /// Unit of positions and distances in measurement files: m or mm.
+        #[arg(long, default_value = "m")]
+        length_unit: hapcal_io::LengthUnit,
+        /// Unit of prismatic joint readings in measurement files: m or mm.
+        #[arg(long, default_value = "m")]
+        joint_length_unit: hapcal_io::LengthUnit,
+        /// Unit of angles in measurement files: rad or deg.
+        #[arg(long, default_value = "rad")]
+        angle_unit: hapcal_io::AngleUnit,
+        /// Print the findings as one JSON document instead of text.
+        #[arg(long)]
+        json: bool,
     },
     /// Run the blind test of diagnose on the reference device and print the Markdown report
     /// (confusion matrix, the paper's story); cargo xtask blind-test writes it to
@@ -398,6 +436,7 @@ fn run(cli: Cli) -> Result<()> {
             joint_length_unit,
             angle_unit,
             joint,
+            accept_setup,
         } => {
             let units =
                 hapcal_io::Units::new(length_unit, angle_unit).with_joint_length(joint_length_unit);
@@ -446,6 +485,7 @@ fn run(cli: Cli) -> Result<()> {
             }
             plan.validate()?;
             check_socket_folders(&plan)?;
+            setup_gate(&plan, accept_setup)?;
             let outcome = calibrate::run(&plan)?;
             if json {
                 emit(&format!(
@@ -717,6 +757,7 @@ fn run(cli: Cli) -> Result<()> {
             folds,
             json,
             svg,
+            accept_setup,
         } => {
             calibrate::check_extension(&svg, &["svg"], "the residual maps", false)?;
             let mut inputs: Vec<&std::path::Path> = vec![device.as_path()];
@@ -788,6 +829,7 @@ fn run(cli: Cli) -> Result<()> {
                     sigma_m,
                     joint: false,
                 };
+                setup_gate(&plan, accept_setup)?;
                 let cfg = hapcal_diagnose::arm::ArmConfig {
                     folds,
                     ..Default::default()
@@ -825,11 +867,75 @@ fn run(cli: Cli) -> Result<()> {
             emit(&md);
             Ok(())
         }
+        Command::Check {
+            device,
+            tips,
+            data,
+            length_unit,
+            joint_length_unit,
+            angle_unit,
+            json,
+        } => run_check(
+            Plan {
+                device,
+                tip: tips
+                    .first()
+                    .cloned()
+                    .unwrap_or_else(|| "ball_link".to_owned()),
+                tips: tips.iter().skip(1).cloned().collect(),
+                units: hapcal_io::Units::new(length_unit, angle_unit)
+                    .with_joint_length(joint_length_unit),
+                data,
+                test: Vec::new(),
+                ..Plan::bundled_default()
+            },
+            json,
+        ),
         Command::ImportUrdf { urdf, tip } => {
             let device = hapcal_io::import_urdf(&urdf, &tip)?;
             emit(&hapcal_io::write_device(&device));
             Ok(())
         }
+    }
+}
+
+/// The setup check at the start of `calibrate` and `diagnose` on measurement files: prints its
+/// warnings; an overwhelming finding stops with its fix unless `accept_setup`.
+fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<()> {
+    let cfg = hapcal_calibrate::setup::SetupConfig { accept_setup };
+    for warning in hapcal_calibrate::setup::gate(plan, &cfg)? {
+        note!("hapcal: warning: {warning}");
+    }
+    Ok(())
+}
+
+/// `hapcal check`: the findings on standard output; an overwhelming one is the error.
+fn run_check(plan: Plan, json: bool) -> Result<()> {
+    if plan.data.is_empty() {
+        anyhow::bail!("--data: give the measurement files to check");
+    }
+    if let Some(missing) = plan.data.iter().find(|p| !p.exists()) {
+        anyhow::bail!("--data {}: no such file", missing.display());
+    }
+    let Some(report) = hapcal_calibrate::setup::check_plan(&plan)? else {
+        anyhow::bail!(
+            "hapcal check applies to measurement files (marker positions, poses, distances) of \
+             a URDF or a D-H device; {} holds none",
+            plan.data
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    };
+    if json {
+        emit(&format!("{}\n", serde_json::to_string_pretty(&report)?));
+    } else {
+        emit(&report.render());
+    }
+    match report.overwhelming() {
+        Some(f) => anyhow::bail!("setup check [{}]: {}", f.class, f.text()),
+        None => Ok(()),
     }
 }
 

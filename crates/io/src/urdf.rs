@@ -755,10 +755,15 @@ fn plan_edits(
                 if name.as_ref() == "origin"
                     && let Ok(Some(xyz)) = attribute(e, "xyz")
                     && let Some(xyz) = parse_triple(&xyz)
+                    // The position only for a value that fails: counting the lines up to
+                    // every origin made reading a URDF quadratic in its length.
+                    && xyz
+                        .iter()
+                        .any(|v| Error::check_length(path, 0, 0, "", *v).is_err())
                 {
+                    let (line, column) = line_column(text, start);
+                    let what = format!("{parent} <origin xyz>");
                     for v in xyz {
-                        let (line, column) = line_column(text, start);
-                        let what = format!("{parent} <origin xyz>");
                         Error::check_length(path, line, column, what.trim_start(), v)?;
                     }
                 }

@@ -6,6 +6,7 @@
 mod force;
 mod hostile;
 mod hostile_cases;
+mod setup_check;
 mod written;
 
 use serde_json::Value;

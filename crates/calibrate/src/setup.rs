@@ -1,0 +1,1459 @@
+//! The setup check: catches ordinary setup mistakes in a measurement-file calibration before
+//! they become a confident, wrong calibration.
+//!
+//! For each hypothesis of a mistake (positions in millimetres read as metres, orientations in
+//! degrees read as radians, quaternion components in another order, roll and yaw swapped, a
+//! mirrored or swapped position axis (one hypothesis: a left-handed frame), joint columns in the wrong order, joint rows out of step
+//! with the measurement rows, the tip link one or two moving joints up or down the chain, tips
+//! given in the wrong order), the data are corrected as the hypothesis says, the frames only
+//! are fitted ([`measured::frames_only`]: the nominal kinematics with the instrument and
+//! marker frames, a few milliseconds) and the frames-only residual compared with that of the
+//! data as given. A joint column that never changes while the robot's description lets the
+//! joint move is found from the data directly.
+//!
+//! A hypothesis without a free parameter lowers the residual of right data only by chance:
+//! the frames-only residual of right data is the instrument's noise plus the robot's
+//! manufacturing deviations, and relabelling, rescaling or shifting the rows scrambles both
+//! without fitting anything new. A hypothesis that divides the residual by
+//! [`OVERWHELMING_FACTOR`] and leaves a residual a real robot can have
+//! ([`PLAUSIBLE_FRAMES_ONLY_RMS_M`], [`PLAUSIBLE_FRAMES_ONLY_RAD`]) is therefore a finding of
+//! severity error: the caller stops unless the user accepts the data as they are
+//! ([`SetupConfig::accept_setup`]). One that divides it by [`SUGGESTIVE_FACTOR`] is a
+//! warning. Nothing is ever corrected silently: the findings name the flag or the edit that
+//! applies, and the residual before and after it.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use hapcal_io::{AngleUnit, LengthUnit, MeasurementTable, Units};
+use hapcal_kinematics::{UnitQuaternion, Vector3};
+use hapcal_problems::{CalibratedModel, Weights};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::measured::{self, MeasuredConfig, PLAUSIBLE_FRAMES_ONLY_RMS_M, Robot};
+use crate::model::ModelChoice;
+
+/// Factor by which a hypothesis must divide the frames-only residual (position RMS, or
+/// orientation RMS of pose data) to be an error, when the corrected residual is plausible.
+///
+/// Right data leave the instrument's noise and the robot's manufacturing deviations; a
+/// hypothesis with nothing to fit can lower that only by the chance fluctuation of a RMS over
+/// the rows (a few per cent for tens of rows; on the bundled recordings the largest gain of
+/// any hypothesis is below 1.1, docs/results/reliability.md). A mistake turns millimetres
+/// into metres or decimetres: factors of tens to thousands. Five lies far from both.
+pub const OVERWHELMING_FACTOR: f64 = 5.0;
+
+/// Factor by which a hypothesis must divide the frames-only residual to be a warning: twice
+/// the residual of right data is out of reach of chance, but a small mistake (a short link, a
+/// few rows of a slow motion) may explain only part of a residual.
+pub const SUGGESTIVE_FACTOR: f64 = 2.0;
+
+/// Frames-only RMS orientation error (rad) beyond which the nominal model cannot be the
+/// robot's: joint zero offsets and link twists of a real robot are milliradians, a few of them
+/// in series stay below 0.02 rad, a camera's orientation noise is a few milliradians; a
+/// quaternion read in the wrong order or an angle in degrees read in radians gives tenths of a
+/// radian to radians.
+pub const PLAUSIBLE_FRAMES_ONLY_RAD: f64 = 0.05;
+
+/// Largest spread (max − min) of a joint's readings, rad or m, that counts as a column that
+/// never changes: exported encoder readings of a moving joint differ in their last digits.
+pub const FROZEN_SPREAD: f64 = 1e-9;
+
+/// Rows out of step tried between the joint readings and the measurements: ±1 and ±2.
+const ROW_SHIFTS: [isize; 4] = [-2, -1, 1, 2];
+
+/// Rows a frames-only fit of the check takes at most (evenly spaced over each file): a factor
+/// of [`OVERWHELMING_FACTOR`] shows on far fewer, and the check stays a small part of a
+/// calibration on long recordings.
+pub const MAX_CHECK_ROWS: usize = 200;
+
+/// Joint counts up to which every pair of joint columns is tried as a swap; longer robots
+/// (trees) try the adjacent pairs.
+const ALL_PAIRS_UP_TO: usize = 8;
+
+/// What the user accepts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SetupConfig {
+    /// Use the data as they are even when a hypothesis explains them overwhelmingly better
+    /// (`--accept-setup`): the findings become warnings.
+    pub accept_setup: bool,
+}
+
+/// A class of setup mistake; its name (`length-unit`, `joint-order`, …) appears in the
+/// reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[serde(into = "String")]
+pub enum MistakeClass {
+    /// Positions and distances in another length unit (mm read as m, or m as mm).
+    LengthUnit,
+    /// Angles (revolute joints and `phix, phiy, phiz`) in another unit.
+    AngleUnit,
+    /// Only the orientation angles `phix, phiy, phiz` in degrees, the joints in radians.
+    OrientationUnit,
+    /// Quaternion columns holding `x, y, z, w` under the names `qw, qx, qy, qz`.
+    QuaternionOrder,
+    /// The inverse (conjugate) rotation: the instrument in the marker's frame.
+    QuaternionInverse,
+    /// Roll and yaw swapped (`phix` and `phiz`).
+    EulerOrder,
+    /// One position axis negated or two swapped (a left-handed instrument frame; the data
+    /// cannot tell which).
+    MirroredAxis,
+    /// Two joint columns swapped, or all of them in reverse order.
+    JointOrder,
+    /// Joint rows out of step with the measurement rows.
+    RowShift,
+    /// A joint whose reading never changes while the description lets it move.
+    FrozenJoint,
+    /// The tip link one or two moving joints up or down the chain from the markers' link.
+    TipLink,
+    /// Tips given in the wrong order (marker sets of two branches swapped).
+    SwappedTips,
+    /// The residual is far above what a real robot produces and no hypothesis explains it.
+    NoHypothesis,
+}
+
+impl MistakeClass {
+    /// Every class, in report order.
+    pub const ALL: [MistakeClass; 13] = [
+        MistakeClass::LengthUnit,
+        MistakeClass::AngleUnit,
+        MistakeClass::OrientationUnit,
+        MistakeClass::QuaternionOrder,
+        MistakeClass::QuaternionInverse,
+        MistakeClass::EulerOrder,
+        MistakeClass::MirroredAxis,
+        MistakeClass::JointOrder,
+        MistakeClass::RowShift,
+        MistakeClass::FrozenJoint,
+        MistakeClass::TipLink,
+        MistakeClass::SwappedTips,
+        MistakeClass::NoHypothesis,
+    ];
+
+    /// The class's name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            MistakeClass::LengthUnit => "length-unit",
+            MistakeClass::AngleUnit => "angle-unit",
+            MistakeClass::OrientationUnit => "orientation-unit",
+            MistakeClass::QuaternionOrder => "quaternion-order",
+            MistakeClass::QuaternionInverse => "quaternion-inverse",
+            MistakeClass::EulerOrder => "euler-order",
+            MistakeClass::MirroredAxis => "mirrored-axis",
+            MistakeClass::JointOrder => "joint-order",
+            MistakeClass::RowShift => "row-shift",
+            MistakeClass::FrozenJoint => "frozen-joint",
+            MistakeClass::TipLink => "tip-link",
+            MistakeClass::SwappedTips => "swapped-tips",
+            MistakeClass::NoHypothesis => "no-hypothesis",
+        }
+    }
+}
+
+impl std::fmt::Display for MistakeClass {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl From<MistakeClass> for String {
+    fn from(c: MistakeClass) -> String {
+        c.name().to_owned()
+    }
+}
+
+impl std::str::FromStr for MistakeClass {
+    type Err = String;
+    /// A name of [`MistakeClass::name`].
+    fn from_str(s: &str) -> Result<Self, String> {
+        (MistakeClass::ALL.into_iter())
+            .find(|c| c.name() == s)
+            .ok_or_else(|| format!("expected a setup mistake class, found {s:?}"))
+    }
+}
+
+/// How strongly a finding speaks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Severity {
+    /// Overwhelming evidence: the caller stops (exit 2) unless the data are accepted.
+    Error,
+    /// Worth a look; the calibration goes on.
+    Warning,
+}
+
+/// Frames-only residual of a data set.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Residual {
+    /// RMS over every marker sample's 3-D position error and every distance error, m;
+    /// `None` without either.
+    pub length_rms_m: Option<f64>,
+    /// RMS orientation error (angle of the relative rotation) of pose data, rad.
+    pub orientation_rms_rad: Option<f64>,
+    /// RMS distance of the measured positions from each marker's centroid, and of the
+    /// distances from their mean, m: the scale the length residual is judged at (a
+    /// hypothesis that shrinks the data shrinks its residual without explaining anything).
+    pub spread_m: Option<f64>,
+}
+
+impl Residual {
+    /// Whether a real robot's manufacturing deviations can leave this residual
+    /// ([`PLAUSIBLE_FRAMES_ONLY_RMS_M`], [`PLAUSIBLE_FRAMES_ONLY_RAD`]).
+    pub fn is_plausible(&self) -> bool {
+        self.length_rms_m
+            .is_none_or(|e| e <= PLAUSIBLE_FRAMES_ONLY_RMS_M)
+            && self
+                .orientation_rms_rad
+                .is_none_or(|e| e <= PLAUSIBLE_FRAMES_ONLY_RAD)
+    }
+
+    /// In words: `163942.1 mm` or `1.92 mm, 0.31°`.
+    pub fn text(&self) -> String {
+        let mut parts = Vec::new();
+        if let Some(e) = self.length_rms_m {
+            parts.push(format!("{} mm", mm(e)));
+        }
+        if let Some(e) = self.orientation_rms_rad {
+            parts.push(format!("{:.2}°", e.to_degrees()));
+        }
+        if parts.is_empty() {
+            "no residual".to_owned()
+        } else {
+            parts.join(", ")
+        }
+    }
+}
+
+/// Millimetres of `m`, with three significant digits for small values.
+fn mm(m: f64) -> String {
+    let v = m * 1e3;
+    if v >= 100.0 {
+        format!("{v:.0}")
+    } else if v >= 1.0 {
+        format!("{v:.2}")
+    } else {
+        format!("{v:.3}")
+    }
+}
+
+/// One thing the check found.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Finding {
+    /// The class of mistake.
+    pub class: MistakeClass,
+    /// Error (the caller stops unless accepted) or warning.
+    pub severity: Severity,
+    /// What was found, in plain words.
+    pub message: String,
+    /// The flag or the edit of the files that applies.
+    pub fix: String,
+    /// Frames-only residual of the data as given.
+    pub before: Residual,
+    /// Frames-only residual of the data as the fix reads them (`None` for a finding from the
+    /// data alone).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub after: Option<Residual>,
+}
+
+impl Finding {
+    /// One line: the message, the residual before → after, the fix.
+    pub fn text(&self) -> String {
+        let unread = self.before == Residual::default();
+        let residual = match &self.after {
+            Some(after) if unread => format!(" (frames-only RMS {} with the fix)", after.text()),
+            Some(after) => format!(
+                " (frames-only RMS {} → {})",
+                self.before.text(),
+                after.text()
+            ),
+            None => String::new(),
+        };
+        format!("{}{residual}; fix: {}", self.message, self.fix)
+    }
+}
+
+/// Everything the setup check found.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SetupReport {
+    /// Training rows checked.
+    pub n_rows: usize,
+    /// Frames-only residual of the data as given.
+    pub as_given: Residual,
+    /// Hypotheses of a mistake fitted.
+    pub n_hypotheses: usize,
+    /// The hypothesis that lowered the residual most, its fix and the residual under it
+    /// (reported whether or not it is a finding).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub best: Option<(String, Residual)>,
+    /// How many times the best hypothesis divides the residual as given (position residual
+    /// relative to the data's spread, or orientation residual; below 1: every hypothesis
+    /// raises it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub best_gain: Option<f64>,
+    /// Findings, errors first.
+    pub findings: Vec<Finding>,
+}
+
+impl SetupReport {
+    /// The first finding of severity error, if any.
+    pub fn overwhelming(&self) -> Option<&Finding> {
+        self.findings.iter().find(|f| f.severity == Severity::Error)
+    }
+
+    /// The report as plain text, one finding per line.
+    pub fn render(&self) -> String {
+        let mut out = if self.as_given == Residual::default() {
+            format!(
+                "setup check: {} rows; the files do not read with the tips given\n",
+                self.n_rows
+            )
+        } else {
+            format!(
+                "setup check: {} rows, frames-only RMS {} as given, {} hypotheses of a mistake \
+                 fitted\n",
+                self.n_rows,
+                self.as_given.text(),
+                self.n_hypotheses
+            )
+        };
+        if let (Some((fix, r)), Some(g)) = (&self.best, self.best_gain) {
+            out.push_str(&format!(
+                "  closest hypothesis: {fix} (frames-only RMS {}, gain {g:.2}×)\n",
+                r.text()
+            ));
+        }
+        if self.findings.is_empty() {
+            out.push_str("  nothing found: the data fit this robot as they are\n");
+        }
+        for f in &self.findings {
+            out.push_str(&format!(
+                "  {} [{}]: {}\n",
+                f.severity_word(),
+                f.class,
+                f.text()
+            ));
+        }
+        out
+    }
+}
+
+impl Finding {
+    fn severity_word(&self) -> &'static str {
+        match self.severity {
+            Severity::Error => "error",
+            Severity::Warning => "warning",
+        }
+    }
+}
+
+/// What the check needs besides the robot and its tables: where they came from.
+#[derive(Clone, Debug)]
+pub struct SetupInput<'a> {
+    /// The robot as given.
+    pub robot: &'a Robot,
+    /// Its training tables as read with `units`.
+    pub tables: &'a [MeasurementTable],
+    /// The URDF the robot came from (`None` for a device file): the tip hypotheses need it.
+    pub urdf: Option<&'a Path>,
+    /// The tip links given (marker k on tip k), for a URDF.
+    pub tips: &'a [String],
+    /// The units the tables were read with.
+    pub units: Units,
+}
+
+/// One hypothesis: the data as it would correct them.
+struct Hypothesis {
+    class: MistakeClass,
+    /// What the mistake is, in words.
+    what: String,
+    /// The flag or edit that applies.
+    fix: String,
+    robot: Option<Robot>,
+    tables: Vec<MeasurementTable>,
+    marker_tips: Option<Vec<usize>>,
+}
+
+/// The weights of the frames-only fits: those `calibrate_measured` starts from.
+fn check_weights() -> Weights {
+    Weights {
+        sigma_position_m: 1e-3,
+        sigma_distance_m: 1e-3,
+        sigma_orientation_rad: 1e-2,
+        ..Weights::default()
+    }
+}
+
+/// The frames-only residual of `tables` on `robot` with markers on `marker_tips`; `None`
+/// when the fit fails.
+pub fn frames_only_residual(
+    robot: &Robot,
+    tables: &[MeasurementTable],
+    marker_tips: &[usize],
+) -> Option<Residual> {
+    let cfg = MeasuredConfig {
+        rung: Some(ModelChoice::FramesOnly),
+        folds: 2,
+        sigma_m: None,
+        sigma_rad: None,
+        marker_tips: marker_tips.to_vec(),
+        workspace: Vec::new(),
+    };
+    let tables = thinned(tables);
+    let fo = measured::frames_only(robot, &tables, &cfg, check_weights()).ok()?;
+    Some(residual_of(&fo.model, &tables))
+}
+
+/// `tables` with at most [`MAX_CHECK_ROWS`] rows in all, evenly spaced in each file.
+fn thinned(tables: &[MeasurementTable]) -> Vec<MeasurementTable> {
+    let n: usize = tables.iter().map(|t| t.rows.len()).sum();
+    let mut out = tables.to_vec();
+    if n <= MAX_CHECK_ROWS {
+        return out;
+    }
+    for t in &mut out {
+        let keep = (t.rows.len() * MAX_CHECK_ROWS).div_ceil(n).max(1);
+        let len = t.rows.len();
+        let rows = std::mem::take(&mut t.rows);
+        t.rows = (rows.into_iter().enumerate())
+            .filter(|(i, _)| (i * keep) / len != ((i + 1) * keep) / len || len <= keep)
+            .map(|(_, r)| r)
+            .collect();
+    }
+    out
+}
+
+/// Weight of the orientation against the position residual in [`closed_form_residual`], m²
+/// per unit of `‖R_model − R_measured‖²_F` (≈ 2θ²): the weights of the frames-only fit, σ = 1 mm
+/// per axis and 0.01 rad, so that 0.01 rad counts as 1 mm.
+const ORIENTATION_WEIGHT_M2: f64 = 0.5 * 1e-3 * 1e-3 / (1e-2 * 1e-2);
+
+/// Block iterations of [`closed_form_residual`].
+const CLOSED_FORM_ITERATIONS: usize = 50;
+
+/// The nearest rotation to `m` (its polar factor, by SVD; Horn 1987).
+fn nearest_rotation(m: &nalgebra::Matrix3<f64>) -> nalgebra::Matrix3<f64> {
+    let svd = m.svd(true, true);
+    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+        return nalgebra::Matrix3::identity();
+    };
+    let mut d = nalgebra::Matrix3::identity();
+    if (u * v_t).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    u * d * v_t
+}
+
+/// The frames-only residual of marker data (no distance rows) by block coordinate descent on
+/// the nominal tip poses: the instrument rotation `R₀` and translation `t` (Kabsch, with the
+/// orientations' term), then each marker's offset `m_k` (the mean of the back-projected
+/// measurements: `R₀·R_tip` is orthogonal) and rotation `R_k` (the nearest rotation to the sum
+/// of `(R₀·R_tip)ᵀ·R_meas`), each step lowering `Σ|e_p|² + w·Σ‖ΔR‖²_F`. Microseconds per row:
+/// the check screens every hypothesis with it and refits the suspicious ones with
+/// [`frames_only_residual`]. `None` with distance rows or fewer than 3 samples.
+pub fn closed_form_residual(
+    robot: &Robot,
+    tables: &[MeasurementTable],
+    marker_tips: &[usize],
+) -> Option<Residual> {
+    use nalgebra::Matrix3;
+    if tables.iter().any(|t| t.has_distance) {
+        return None;
+    }
+    let tables = thinned(tables);
+    let chains = robot.tree.tips();
+    let last = chains.len().checked_sub(1)?;
+    let zero = vec![0.0; robot.tree.n_params()];
+    // Per sample: marker, tip pose in the base frame, measured position and rotation.
+    let mut samples = Vec::new();
+    for row in tables.iter().flat_map(|t| &t.rows) {
+        for m in &row.markers {
+            let tip = marker_tips.get(m.marker).copied().unwrap_or(last).min(last);
+            let pose = chains.get(tip)?.end_pose(&zero, &row.q);
+            let rotation = m.rotation.map(|[w, x, y, z]| {
+                UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z))
+                    .to_rotation_matrix()
+                    .into_inner()
+            });
+            samples.push((m.marker, pose, Vector3::from(m.position_m), rotation));
+        }
+    }
+    if samples.len() < 3 {
+        return None;
+    }
+    let n_markers = samples.iter().map(|s| s.0 + 1).max().unwrap_or(0);
+    let mut offsets = vec![Vector3::zeros(); n_markers];
+    let mut marker_rot = vec![Matrix3::identity(); n_markers];
+    let (mut r0, mut t) = (Matrix3::identity(), Vector3::zeros());
+    for _ in 0..CLOSED_FORM_ITERATIONS {
+        // Instrument frame.
+        let a: Vec<Vector3<f64>> = (samples.iter())
+            .map(|(k, pose, _, _)| pose * nalgebra::Point3::from(offsets[*k]))
+            .map(|p| p.coords)
+            .collect();
+        let n = a.len() as f64;
+        let ca = a.iter().sum::<Vector3<f64>>() / n;
+        let cb = samples.iter().map(|s| s.2).sum::<Vector3<f64>>() / n;
+        let mut h = Matrix3::zeros();
+        for (ai, s) in a.iter().zip(&samples) {
+            h += (s.2 - cb) * (ai - ca).transpose();
+            if let Some(meas) = &s.3 {
+                let model = s.1.rotation.to_rotation_matrix().into_inner() * marker_rot[s.0];
+                h += ORIENTATION_WEIGHT_M2 * meas * model.transpose();
+            }
+        }
+        r0 = nearest_rotation(&h);
+        t = cb - r0 * ca;
+        // Marker frames.
+        let mut sum_m = vec![(Vector3::zeros(), 0usize); n_markers];
+        let mut sum_r = vec![Matrix3::zeros(); n_markers];
+        for s in &samples {
+            let rt = r0 * s.1.rotation.to_rotation_matrix().into_inner();
+            let back = rt.transpose() * (s.2 - t - r0 * s.1.translation.vector);
+            sum_m[s.0].0 += back;
+            sum_m[s.0].1 += 1;
+            if let Some(meas) = &s.3 {
+                sum_r[s.0] += rt.transpose() * meas;
+            }
+        }
+        for k in 0..n_markers {
+            if sum_m[k].1 > 0 {
+                offsets[k] = sum_m[k].0 / sum_m[k].1 as f64;
+            }
+            if sum_r[k] != Matrix3::zeros() {
+                marker_rot[k] = nearest_rotation(&sum_r[k]);
+            }
+        }
+    }
+    let (mut len_sq, mut rot_sq, mut n_rot) = (0.0, 0.0, 0usize);
+    for s in &samples {
+        let p = r0 * (s.1 * nalgebra::Point3::from(offsets[s.0])).coords + t;
+        len_sq += (p - s.2).norm_squared();
+        if let Some(meas) = &s.3 {
+            let model = r0 * s.1.rotation.to_rotation_matrix().into_inner() * marker_rot[s.0];
+            let rel = nalgebra::Rotation3::from_matrix_unchecked(model.transpose() * meas);
+            rot_sq += rel.angle().powi(2);
+            n_rot += 1;
+        }
+    }
+    let rms = |sq: f64, n: usize| (n > 0).then(|| (sq / n as f64).sqrt());
+    Some(Residual {
+        length_rms_m: rms(len_sq, samples.len()),
+        orientation_rms_rad: rms(rot_sq, n_rot),
+        spread_m: spread_of(&tables),
+    })
+}
+
+/// The residual of `tables` under `model` (a framed tree: tip k is marker k).
+fn residual_of(model: &CalibratedModel, tables: &[MeasurementTable]) -> Residual {
+    let (mut len_sq, mut n_len, mut rot_sq, mut n_rot) = (0.0, 0usize, 0.0, 0usize);
+    let n_tips = model.tips.len().max(1);
+    for row in tables.iter().flat_map(|t| &t.rows) {
+        if let Some(d) = row.distance_m {
+            let e = model.end_pose_of(0, &row.q).translation.vector.norm() - d;
+            len_sq += e * e;
+            n_len += 1;
+        }
+        let markers: Vec<_> = row.markers.iter().filter(|m| m.marker < n_tips).collect();
+        let tips: Vec<usize> = markers.iter().map(|m| m.marker).collect();
+        for (m, pose) in markers.iter().zip(model.end_poses_of(&tips, &row.q)) {
+            len_sq += (pose.translation.vector - Vector3::from(m.position_m)).norm_squared();
+            n_len += 1;
+            if let Some([w, x, y, z]) = m.rotation {
+                let meas = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+                rot_sq += meas.angle_to(&pose.rotation).powi(2);
+                n_rot += 1;
+            }
+        }
+    }
+    let rms = |sq: f64, n: usize| (n > 0).then(|| (sq / n as f64).sqrt());
+    Residual {
+        length_rms_m: rms(len_sq, n_len),
+        orientation_rms_rad: rms(rot_sq, n_rot),
+        spread_m: spread_of(tables),
+    }
+}
+
+/// [`Residual::spread_m`] of `tables`.
+fn spread_of(tables: &[MeasurementTable]) -> Option<f64> {
+    let rows = || tables.iter().flat_map(|t| &t.rows);
+    let mut sum: Vec<(Vector3<f64>, usize)> = Vec::new();
+    let (mut d_sum, mut n_d) = (0.0, 0usize);
+    for row in rows() {
+        for m in &row.markers {
+            if sum.len() <= m.marker {
+                sum.resize(m.marker + 1, (Vector3::zeros(), 0));
+            }
+            if let Some(s) = sum.get_mut(m.marker) {
+                s.0 += Vector3::from(m.position_m);
+                s.1 += 1;
+            }
+        }
+        if let Some(d) = row.distance_m {
+            d_sum += d;
+            n_d += 1;
+        }
+    }
+    let centroid: Vec<Vector3<f64>> = sum.iter().map(|(s, n)| s / (*n).max(1) as f64).collect();
+    let d_mean = d_sum / n_d.max(1) as f64;
+    let (mut sq, mut n) = (0.0, 0usize);
+    for row in rows() {
+        for m in &row.markers {
+            if let Some(c) = centroid.get(m.marker) {
+                sq += (Vector3::from(m.position_m) - c).norm_squared();
+                n += 1;
+            }
+        }
+        if let Some(d) = row.distance_m {
+            sq += (d - d_mean).powi(2);
+            n += 1;
+        }
+    }
+    (n > 0 && sq > 0.0).then(|| (sq / n as f64).sqrt())
+}
+
+/// How many times smaller `after` is than `before`: the larger of the position and the
+/// orientation ratio, unless the other one grows by more than half (then the smaller ratio:
+/// a hypothesis that trades one for the other explains nothing).
+fn gain(before: &Residual, after: &Residual) -> f64 {
+    let ratio = |b: Option<f64>, a: Option<f64>, floor: f64| match (b, a) {
+        (Some(b), Some(a)) if a.is_finite() && b.is_finite() => Some(b.max(floor) / a.max(floor)),
+        (Some(_), _) | (_, Some(_)) => Some(0.0),
+        _ => None,
+    };
+    // Lengths relative to the data's spread: a rescaled data set is judged at its own scale.
+    let relative = |r: &Residual| match (r.length_rms_m, r.spread_m) {
+        (Some(e), Some(s)) => Some(e / s),
+        (e, _) => e,
+    };
+    let r = [
+        ratio(relative(before), relative(after), 1e-9),
+        ratio(before.orientation_rms_rad, after.orientation_rms_rad, 1e-5),
+    ];
+    let r: Vec<f64> = r.into_iter().flatten().collect();
+    let lo = r.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = r.iter().copied().fold(0.0, f64::max);
+    if r.is_empty() {
+        0.0
+    } else if lo < 1.0 / 1.5 {
+        lo
+    } else {
+        hi
+    }
+}
+
+/// The column names of a CSV file's header (empty for another file or an unreadable one).
+fn header_of(path: &Path) -> Vec<String> {
+    let is_csv = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+    if !is_csv {
+        return Vec::new();
+    }
+    let mut header = String::new();
+    let read = std::fs::File::open(path)
+        .and_then(|f| std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut header));
+    if read.is_err() {
+        return Vec::new();
+    }
+    header.split(',').map(|c| c.trim().to_owned()).collect()
+}
+
+/// `tables` with every marker position and distance mapped by `f`.
+fn map_rows(
+    tables: &[MeasurementTable],
+    f: &dyn Fn(&mut hapcal_io::MeasuredRow),
+) -> Vec<MeasurementTable> {
+    let mut out = tables.to_vec();
+    for row in out.iter_mut().flat_map(|t| &mut t.rows) {
+        f(row);
+    }
+    out
+}
+
+/// `tables` with every marker's rotation mapped by `f` (`[w, x, y, z]` in, a rotation out).
+fn map_rotations(
+    tables: &[MeasurementTable],
+    f: &(dyn Fn(UnitQuaternion<f64>) -> UnitQuaternion<f64> + Sync),
+) -> Vec<MeasurementTable> {
+    map_rows(tables, &|row| {
+        for m in &mut row.markers {
+            if let Some([w, x, y, z]) = m.rotation {
+                let r = f(UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                    w, x, y, z,
+                )));
+                m.rotation = Some([r.w, r.i, r.j, r.k]);
+            }
+        }
+    })
+}
+
+/// `tables` with the marker positions and rotations seen through the reflection or
+/// permutation `m` (its own inverse): `p → M·p`, `R → M·R·M`.
+fn reflect(tables: &[MeasurementTable], m: &nalgebra::Matrix3<f64>) -> Vec<MeasurementTable> {
+    map_rows(tables, &|row| {
+        for s in &mut row.markers {
+            s.position_m = (m * Vector3::from(s.position_m)).into();
+            if let Some([w, x, y, z]) = s.rotation {
+                let r = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+                let mm = m * r.to_rotation_matrix().matrix() * m;
+                let r = UnitQuaternion::from_matrix(&mm);
+                s.rotation = Some([r.w, r.i, r.j, r.k]);
+            }
+        }
+    })
+}
+
+/// `tables` with the joint readings of each row taken from the row `shift` further down the
+/// file (rows without a partner dropped): joint readings `shift` rows late.
+fn shifted(tables: &[MeasurementTable], shift: isize) -> Vec<MeasurementTable> {
+    let mut out = tables.to_vec();
+    for (t, src) in out.iter_mut().zip(tables) {
+        let n = src.rows.len() as isize;
+        t.rows = (0..n)
+            .filter_map(|i| {
+                let j = i + shift;
+                if j < 0 || j >= n {
+                    return None;
+                }
+                let mut row = src.rows.get(i as usize)?.clone();
+                row.q.clone_from(&src.rows.get(j as usize)?.q);
+                Some(row)
+            })
+            .collect();
+    }
+    out
+}
+
+/// `tables` with joint `j`'s reading taken from column `perm[j]`.
+fn permuted(tables: &[MeasurementTable], perm: &[usize]) -> Vec<MeasurementTable> {
+    map_rows(tables, &|row| {
+        let q = row.q.clone();
+        for (j, &k) in perm.iter().enumerate() {
+            if let (Some(dst), Some(v)) = (row.q.get_mut(j), q.get(k)) {
+                *dst = *v;
+            }
+        }
+    })
+}
+
+/// The joint's name with its column number: `elbow_joint (q3)`.
+fn joint_label(robot: &Robot, j: usize) -> String {
+    format!(
+        "{} (q{})",
+        robot.joint_names.get(j).map_or("?", String::as_str),
+        j + 1
+    )
+}
+
+/// The links one and two moving joints above and below `tip` in the URDF, each with how
+/// many moving joints it lies above (negative) or below (positive) the tip.
+fn tip_candidates(urdf: &urdf_rs::Robot, tip: &str) -> Vec<(String, isize)> {
+    let moving = |j: &urdf_rs::Joint| !matches!(j.joint_type, urdf_rs::JointType::Fixed);
+    let mut out = Vec::new();
+    // Up: the parent link of the first and second moving joints above the tip.
+    let mut link = tip.to_owned();
+    let mut crossed = 0;
+    for _ in 0..urdf.joints.len() {
+        let Some(joint) = urdf.joints.iter().find(|j| j.child.link == link) else {
+            break;
+        };
+        link.clone_from(&joint.parent.link);
+        if moving(joint) {
+            crossed += 1;
+            out.push((link.clone(), -crossed));
+            if crossed == 2 {
+                break;
+            }
+        }
+    }
+    // Down: the child link of the first and second moving joints below the tip, on every
+    // branch (at most a few).
+    let mut frontier: Vec<(String, isize)> = vec![(tip.to_owned(), 0)];
+    for _ in 0..urdf.joints.len() {
+        let Some((link, depth)) = frontier.pop() else {
+            break;
+        };
+        for joint in urdf.joints.iter().filter(|j| j.parent.link == link) {
+            let d = depth + isize::from(moving(joint));
+            if d > depth {
+                out.push((joint.child.link.clone(), d));
+            }
+            if d < 2 && out.len() < 8 {
+                frontier.push((joint.child.link.clone(), d));
+            }
+        }
+    }
+    out
+}
+
+/// The hypotheses of a mistake for `input`.
+fn hypotheses(input: &SetupInput<'_>) -> Vec<Hypothesis> {
+    let SetupInput {
+        robot,
+        tables,
+        units,
+        ..
+    } = input;
+    let mut out = Vec::new();
+    let mut push = |class, what: String, fix: String, t: Vec<MeasurementTable>| {
+        out.push(Hypothesis {
+            class,
+            what,
+            fix,
+            robot: None,
+            tables: t,
+            marker_tips: None,
+        });
+    };
+    let has_markers = tables.iter().any(|t| t.n_markers > 0);
+    let has_lengths = has_markers || tables.iter().any(|t| t.has_distance);
+    let has_orientation = tables.iter().any(|t| t.has_orientation);
+    let headers: Vec<Vec<String>> = tables.iter().map(|t| header_of(&t.path)).collect();
+    let has_rpy = headers.iter().flatten().any(|c| c.starts_with("phix"));
+    let has_quaternion =
+        has_orientation && (!has_rpy || headers.iter().flatten().any(|c| c.starts_with("qw")));
+
+    // Length unit.
+    if has_lengths {
+        let (scale, what, fix) = match units.length {
+            LengthUnit::M => (
+                1e-3,
+                "the positions and distances are in millimetres, read as metres",
+                "--length-unit mm",
+            ),
+            LengthUnit::Mm => (
+                1e3,
+                "the positions and distances are in metres, read as millimetres",
+                "--length-unit m",
+            ),
+        };
+        push(
+            MistakeClass::LengthUnit,
+            what.to_owned(),
+            fix.to_owned(),
+            map_rows(tables, &|row| {
+                for m in &mut row.markers {
+                    m.position_m = m.position_m.map(|v| v * scale);
+                }
+                row.distance_m = row.distance_m.map(|d| d * scale);
+            }),
+        );
+    }
+
+    // Angle unit: the files read again in the other unit (all angles, or only the
+    // orientation angles).
+    let (other, unit_word, other_word, flag) = match units.angle {
+        AngleUnit::Rad => (AngleUnit::Deg, "radians", "degrees", "--angle-unit deg"),
+        AngleUnit::Deg => (AngleUnit::Rad, "degrees", "radians", "--angle-unit rad"),
+    };
+    let other_units = Units {
+        angle: other,
+        ..*units
+    };
+    let paths: Vec<PathBuf> = tables.iter().map(|t| t.path.clone()).collect();
+    if let Ok(reread) = measured::load_tables(&paths, robot, &other_units)
+        && reread
+            .iter()
+            .zip(tables.iter())
+            .all(|(a, b)| a.rows.len() == b.rows.len())
+    {
+        let any_revolute = robot.prismatic.iter().any(|p| !p);
+        if any_revolute {
+            push(
+                MistakeClass::AngleUnit,
+                format!("the angles are in {other_word}, read as {unit_word}"),
+                flag.to_owned(),
+                reread.clone(),
+            );
+        }
+        if has_rpy && any_revolute {
+            let mut mixed = tables.to_vec();
+            for (t, r) in mixed.iter_mut().zip(&reread) {
+                for (row, rr) in t.rows.iter_mut().zip(&r.rows) {
+                    for (m, mr) in row.markers.iter_mut().zip(&rr.markers) {
+                        m.rotation = mr.rotation;
+                    }
+                }
+            }
+            push(
+                MistakeClass::OrientationUnit,
+                format!(
+                    "the orientation angles phix, phiy, phiz are in {other_word} while the joint \
+                     readings are in {unit_word}"
+                ),
+                format!(
+                    "convert phix, phiy, phiz to {unit_word} in the file ({flag} would convert \
+                     the joint readings too)"
+                ),
+                mixed,
+            );
+        }
+    }
+
+    // Orientations.
+    if has_quaternion {
+        push(
+            MistakeClass::QuaternionOrder,
+            "the quaternion columns qw, qx, qy, qz hold x, y, z, w (scalar last)".to_owned(),
+            "rename the columns qw, qx, qy, qz to qx, qy, qz, qw (the scalar is the last \
+             component)"
+                .to_owned(),
+            map_rotations(tables, &|r| {
+                let (w, x, y, z) = (r.w, r.i, r.j, r.k);
+                // Read as (w, x, y, z) = (x', y', z', w').
+                UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(z, w, x, y))
+            }),
+        );
+    }
+    if has_orientation {
+        push(
+            MistakeClass::QuaternionInverse,
+            "the orientations are inverted (the instrument in the marker's frame)".to_owned(),
+            if has_rpy {
+                "invert the orientations: negate phix, phiy, phiz and reverse their order of \
+                 rotation, or export the marker in the instrument's frame"
+                    .to_owned()
+            } else {
+                "negate qx, qy, qz (the conjugate quaternion), or export the marker in the \
+                 instrument's frame"
+                    .to_owned()
+            },
+            map_rotations(tables, &|r| r.inverse()),
+        );
+    }
+    if has_rpy {
+        push(
+            MistakeClass::EulerOrder,
+            "roll and yaw are swapped: phix holds the yaw and phiz the roll".to_owned(),
+            "swap the columns phix and phiz".to_owned(),
+            map_rotations(tables, &|r| {
+                let (roll, pitch, yaw) = r.euler_angles();
+                UnitQuaternion::from_euler_angles(yaw, pitch, roll)
+            }),
+        );
+    }
+
+    // Position axes: a mirrored axis and two swapped axes are one hypothesis. Each
+    // reflection is any other times a rotation (diag(−1, 1, 1) = Rz(π)·diag(1, −1, 1), a swap
+    // of x and y = a rotation times diag(1, −1, 1)), and the fitted instrument frame takes up
+    // the rotation, in the orientations too (M₁·R·M₁ = Q·M₂·R·M₂·Qᵀ, the Qᵀ taken up by the
+    // marker frame): the data tell that the frame is left-handed, not which axis made it so.
+    if has_markers {
+        let mut m = nalgebra::Matrix3::identity();
+        m[(2, 2)] = -1.0;
+        push(
+            MistakeClass::MirroredAxis,
+            "the positions are in a left-handed frame: one axis mirrored or two axes swapped \
+             (the fit cannot tell which: each is the other up to a rotation)"
+                .to_owned(),
+            "find the axis the export mirrors (negate that column of the positions) or the two \
+             axes it swaps (swap those columns), and mirror the orientations with them"
+                .to_owned(),
+            reflect(tables, &m),
+        );
+    }
+
+    // Joint columns.
+    let n = robot.joint_names.len();
+    let same_kind = |a: usize, b: usize| robot.prismatic.get(a) == robot.prismatic.get(b);
+    let pairs: Vec<(usize, usize)> = if n <= ALL_PAIRS_UP_TO {
+        (0..n)
+            .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
+            .collect()
+    } else {
+        (0..n.saturating_sub(1)).map(|a| (a, a + 1)).collect()
+    };
+    for (a, b) in pairs.into_iter().filter(|&(a, b)| same_kind(a, b)) {
+        let mut perm: Vec<usize> = (0..n).collect();
+        perm.swap(a, b);
+        push(
+            MistakeClass::JointOrder,
+            format!(
+                "the readings of {} and {} are swapped",
+                joint_label(robot, a),
+                joint_label(robot, b)
+            ),
+            format!(
+                "swap the columns of {} and {}",
+                joint_label(robot, a),
+                joint_label(robot, b)
+            ),
+            permuted(tables, &perm),
+        );
+    }
+    if input.tips.len() <= 1 && n >= 3 {
+        // Reverse the joints of one kind among themselves (a prismatic lift stays put).
+        let revolute: Vec<usize> = (0..n)
+            .filter(|&j| robot.prismatic.get(j) != Some(&true))
+            .collect();
+        if revolute.len() >= 3 {
+            let mut perm: Vec<usize> = (0..n).collect();
+            for (slot, src) in revolute.iter().zip(revolute.iter().rev()) {
+                perm[*slot] = *src;
+            }
+            let first = revolute.first().copied().unwrap_or(0);
+            let last = revolute.last().copied().unwrap_or(0);
+            push(
+                MistakeClass::JointOrder,
+                format!(
+                    "the joint columns are in reverse order ({} … {} read as {} … {})",
+                    joint_label(robot, last),
+                    joint_label(robot, first),
+                    joint_label(robot, first),
+                    joint_label(robot, last)
+                ),
+                "reverse the order of the joint columns (the first joint of the chain is the one \
+                 at the base)"
+                    .to_owned(),
+                permuted(tables, &perm),
+            );
+        }
+    }
+
+    // Rows out of step.
+    let min_rows = tables.iter().map(|t| t.rows.len()).min().unwrap_or(0);
+    for shift in ROW_SHIFTS {
+        if min_rows < shift.unsigned_abs() + 6 {
+            continue;
+        }
+        let k = shift.unsigned_abs();
+        let rows = if k == 1 { "row" } else { "rows" };
+        let (what, fix) = if shift > 0 {
+            (
+                format!("the joint readings are {k} {rows} behind the measurements"),
+                format!(
+                    "move the joint columns up by {k} {rows}: the readings on line L + {k} belong \
+                     to the measurement on line L"
+                ),
+            )
+        } else {
+            (
+                format!("the joint readings are {k} {rows} ahead of the measurements"),
+                format!(
+                    "move the joint columns down by {k} {rows}: the readings on line L belong to \
+                     the measurement on line L + {k}"
+                ),
+            )
+        };
+        push(MistakeClass::RowShift, what, fix, shifted(tables, shift));
+    }
+
+    // Tips in the wrong order.
+    let n_tips = input.tips.len();
+    for a in 0..n_tips {
+        for b in a + 1..n_tips {
+            let mut tips: Vec<usize> = (0..n_tips).collect();
+            tips.swap(a, b);
+            let mut order: Vec<String> = input.tips.to_vec();
+            order.swap(a, b);
+            let flags: Vec<String> = order.iter().map(|t| format!("--tip {t}")).collect();
+            out.push(Hypothesis {
+                class: MistakeClass::SwappedTips,
+                what: format!(
+                    "the markers of {} and {} are swapped (the tips in the wrong order)",
+                    input.tips[a], input.tips[b]
+                ),
+                fix: format!(
+                    "give the tips in the order of the markers: {} (or swap the marker columns \
+                     x{}.. and x{}..)",
+                    flags.join(" "),
+                    a + 1,
+                    b + 1
+                ),
+                robot: None,
+                tables: tables.to_vec(),
+                marker_tips: Some(tips),
+            });
+        }
+    }
+
+    // The tip link.
+    if let Some(urdf) = input.urdf
+        && let Ok(description) = urdf_rs::read_file(urdf)
+    {
+        for (t, tip) in input.tips.iter().enumerate() {
+            for (link, steps) in tip_candidates(&description, tip) {
+                if input.tips.contains(&link) {
+                    continue;
+                }
+                let mut tips = input.tips.to_vec();
+                if let Some(slot) = tips.get_mut(t) {
+                    slot.clone_from(&link);
+                }
+                let Ok(other) = measured::robot_from_urdf(urdf, &tips) else {
+                    continue;
+                };
+                let Ok(reread) = measured::load_tables(&paths, &other, units) else {
+                    continue;
+                };
+                let k = steps.unsigned_abs();
+                let joints = if k == 1 { "joint" } else { "joints" };
+                let side = if steps > 0 { "below" } else { "above" };
+                let flags: Vec<String> = tips.iter().map(|t| format!("--tip {t}")).collect();
+                out.push(Hypothesis {
+                    class: MistakeClass::TipLink,
+                    what: format!(
+                        "the markers sit on {link}, {k} moving {joints} {side} the tip {tip}"
+                    ),
+                    fix: format!("use {}", flags.join(" ")),
+                    robot: Some(other),
+                    tables: reread,
+                    marker_tips: None,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// Joints whose readings never change (spread ≤ [`FROZEN_SPREAD`]) over two or more rows
+/// while their limits let them move: `(joint, value)`.
+pub fn frozen_joints(robot: &Robot, tables: &[MeasurementTable]) -> Vec<(usize, f64)> {
+    let rows: Vec<&Vec<f64>> = tables.iter().flat_map(|t| &t.rows).map(|r| &r.q).collect();
+    if rows.len() < 2 {
+        return Vec::new();
+    }
+    (0..robot.joint_names.len())
+        .filter_map(|j| {
+            let v: Vec<f64> = rows.iter().filter_map(|q| q.get(j).copied()).collect();
+            let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let moves = robot
+                .limits
+                .get(j)
+                .is_none_or(|(min, max)| max - min > FROZEN_SPREAD);
+            (hi - lo <= FROZEN_SPREAD && moves).then_some((j, lo))
+        })
+        .collect()
+}
+
+/// Checks the setup of a measurement-file calibration: the frames-only residual of the data as
+/// given against each hypothesis of a mistake, and the joint columns that never change.
+/// Findings, errors first; see the module docs for the decision.
+///
+/// # Errors
+/// The frames-only fit of the data as given fails (no closed-form start, a failed
+/// identification): the calibration would fail the same way.
+pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
+    let n_tips = input.tips.len().max(1);
+    let given_tips: Vec<usize> = (0..n_tips).collect();
+    // Screen with the closed form (the full fit for distance data), refit what looks
+    // suspicious with the full frames-only fit.
+    let screen = |robot: &Robot, tables: &[MeasurementTable], tips: &[usize]| {
+        closed_form_residual(robot, tables, tips)
+            .or_else(|| frames_only_residual(robot, tables, tips))
+    };
+    let mut as_given = screen(input.robot, input.tables, &given_tips)
+        .context("the frames-only fit of the data as given failed")?;
+    let hypotheses = hypotheses(input);
+    let hypothesis_tips =
+        |h: &Hypothesis| h.marker_tips.clone().unwrap_or_else(|| given_tips.clone());
+    let mut results: Vec<(usize, Residual, f64)> = hypotheses
+        .par_iter()
+        .enumerate()
+        .filter_map(|(i, h)| {
+            let robot = h.robot.as_ref().unwrap_or(input.robot);
+            let after = screen(robot, &h.tables, &hypothesis_tips(h))?;
+            Some((i, after, gain(&as_given, &after)))
+        })
+        .collect();
+    results.sort_by(|a, b| b.2.total_cmp(&a.2));
+    let n_results = results.len();
+    let suspicious =
+        !as_given.is_plausible() || results.first().is_some_and(|r| r.2 >= SUGGESTIVE_FACTOR);
+    if suspicious {
+        // The full fit of the data as given and of the three best hypotheses.
+        if let Some(full) = frames_only_residual(input.robot, input.tables, &given_tips) {
+            as_given = full;
+        }
+        results.truncate(3);
+        results = results
+            .par_iter()
+            .filter_map(|&(i, _, _)| {
+                let h = hypotheses.get(i)?;
+                let robot = h.robot.as_ref().unwrap_or(input.robot);
+                let after = frames_only_residual(robot, &h.tables, &hypothesis_tips(h))?;
+                Some((i, after, gain(&as_given, &after)))
+            })
+            .collect();
+        results.sort_by(|a, b| b.2.total_cmp(&a.2));
+    }
+    let best = results
+        .first()
+        .and_then(|&(i, after, g)| Some((hypotheses.get(i)?, after, g)));
+    let mut findings = Vec::new();
+    if let Some((h, after, g)) = best
+        && g >= SUGGESTIVE_FACTOR
+    {
+        let overwhelming = g >= OVERWHELMING_FACTOR && after.is_plausible();
+        let scale = if h.class == MistakeClass::LengthUnit {
+            " relative to the spread of the positions"
+        } else {
+            ""
+        };
+        let message = if overwhelming {
+            format!(
+                "{} ({g:.0}× smaller residual{scale} when corrected)",
+                h.what
+            )
+        } else if after.is_plausible() {
+            format!(
+                "perhaps {} ({g:.1}× smaller residual{scale} when corrected)",
+                h.what
+            )
+        } else {
+            format!(
+                "perhaps {}, but it explains only part of the residual ({g:.1}× smaller, still \
+                 more than a real robot leaves)",
+                h.what
+            )
+        };
+        findings.push(Finding {
+            class: h.class,
+            severity: if overwhelming {
+                Severity::Error
+            } else {
+                Severity::Warning
+            },
+            message,
+            fix: h.fix.clone(),
+            before: as_given,
+            after: Some(after),
+        });
+    }
+    let explained = findings.iter().any(|f| f.severity == Severity::Error);
+    let frozen = frozen_joints(input.robot, input.tables);
+    let n_rows: usize = input.tables.iter().map(|t| t.rows.len()).sum();
+    for &(j, value) in &frozen {
+        let (lo, hi) = input.robot.limits.get(j).copied().unwrap_or((0.0, 0.0));
+        let unit = if input.robot.prismatic.get(j) == Some(&true) {
+            "m"
+        } else {
+            "rad"
+        };
+        let error = !explained && !as_given.is_plausible();
+        findings.push(Finding {
+            class: MistakeClass::FrozenJoint,
+            severity: if error {
+                Severity::Error
+            } else {
+                Severity::Warning
+            },
+            message: format!(
+                "joint {} reads {value} {unit} in every one of the {n_rows} rows while the \
+                 description lets it move over [{lo}, {hi}] {unit}: a frozen encoder or a \
+                 copied column{}",
+                joint_label(input.robot, j),
+                if error {
+                    ", and the residual says the joint did move"
+                } else {
+                    ", or the joint was held still (then its parameters cannot be identified)"
+                }
+            ),
+            fix: format!(
+                "check the export of the column of {}",
+                joint_label(input.robot, j)
+            ),
+            before: as_given,
+            after: None,
+        });
+    }
+    if !explained && frozen.is_empty() && !as_given.is_plausible() {
+        findings.push(Finding {
+            class: MistakeClass::NoHypothesis,
+            severity: Severity::Error,
+            message: format!(
+                "the nominal model misses the measurements by {} RMS with the instrument and \
+                 marker frames fitted, more than manufacturing deviations of a real robot \
+                 produce ({} mm, {:.1}°), and none of the {} checked mistakes explains it: \
+                 these data do not come from this robot (or the setup is wrong in a way not \
+                 checked)",
+                as_given.text(),
+                mm(PLAUSIBLE_FRAMES_ONLY_RMS_M),
+                PLAUSIBLE_FRAMES_ONLY_RAD.to_degrees(),
+                n_results
+            ),
+            fix: "check --device, --tip, the units and the columns of the files".to_owned(),
+            before: as_given,
+            after: None,
+        });
+    }
+    findings.sort_by_key(|f| f.severity != Severity::Error);
+    Ok(SetupReport {
+        n_rows,
+        as_given,
+        n_hypotheses: n_results,
+        best: best.map(|(h, after, _)| (h.fix.clone(), after)),
+        best_gain: best.map(|(_, _, g)| g),
+        findings,
+    })
+}
+
+/// The setup check of a `hapcal calibrate` or `hapcal diagnose` plan: `None` unless its
+/// training data are measurement files (marker positions, poses, distances) of a URDF or a
+/// D-H device; socket folders and a haptic device's logs are not checked.
+///
+/// # Errors
+/// An unreadable device or file, and as [`check_setup`].
+pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
+    let device = crate::calibrate::load_device(&plan.device, &plan.tip)?;
+    if !device.capstans.is_empty() || device.parallelogram.is_some() {
+        return Ok(None);
+    }
+    let distances = device.cable_encoder.is_none();
+    let files: Vec<PathBuf> = (plan.data.iter())
+        .filter(|p| measured::is_marker_file(p, distances))
+        .cloned()
+        .collect();
+    if files.is_empty() || plan.data.iter().any(|p| p.is_dir()) {
+        return Ok(None);
+    }
+    let tips: Vec<String> = std::iter::once(plan.tip.clone())
+        .chain(plan.tips.iter().cloned())
+        .collect();
+    let is_urdf = plan
+        .device
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    let robot = if is_urdf {
+        measured::robot_from_urdf(&plan.device, &tips)?
+    } else {
+        measured::robot_from_device(&device)?
+    };
+    let tables = match measured::load_tables(&files, &robot, &plan.units) {
+        Ok(tables) => tables,
+        Err(e) => {
+            // A tip below the markers' link may need a joint the files have no column for.
+            if is_urdf && let Some(report) = tip_above(&plan.device, &tips, &files, plan.units) {
+                return Ok(Some(report));
+            }
+            return Err(e);
+        }
+    };
+    check_setup(&SetupInput {
+        robot: &robot,
+        tables: &tables,
+        urdf: is_urdf.then_some(plan.device.as_path()),
+        tips: &tips,
+        units: plan.units,
+    })
+    .map(Some)
+}
+
+/// When the files do not read with the tips given: the first tip one or two moving joints up
+/// the chain with which they read and leave a plausible frames-only residual, as a report of
+/// one finding (the tip too low: its joints have no column in the files).
+fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> Option<SetupReport> {
+    let description = urdf_rs::read_file(urdf).ok()?;
+    for (t, tip) in tips.iter().enumerate() {
+        for (link, steps) in tip_candidates(&description, tip) {
+            if steps > 0 || tips.contains(&link) {
+                continue;
+            }
+            let mut other_tips = tips.to_vec();
+            if let Some(slot) = other_tips.get_mut(t) {
+                slot.clone_from(&link);
+            }
+            let Ok(robot) = measured::robot_from_urdf(urdf, &other_tips) else {
+                continue;
+            };
+            let Ok(tables) = measured::load_tables(files, &robot, &units) else {
+                continue;
+            };
+            let marker_tips: Vec<usize> = (0..other_tips.len()).collect();
+            let Some(after) = frames_only_residual(&robot, &tables, &marker_tips) else {
+                continue;
+            };
+            if !after.is_plausible() {
+                continue;
+            }
+            let k = steps.unsigned_abs();
+            let joints = if k == 1 { "joint" } else { "joints" };
+            let flags: Vec<String> = other_tips.iter().map(|t| format!("--tip {t}")).collect();
+            let finding = Finding {
+                class: MistakeClass::TipLink,
+                severity: Severity::Error,
+                message: format!(
+                    "the files have no column for the joints between {link} and the tip {tip}: \
+                     the markers sit on {link}, {k} moving {joints} above the tip"
+                ),
+                fix: format!("use {}", flags.join(" ")),
+                before: Residual::default(),
+                after: Some(after),
+            };
+            return Some(SetupReport {
+                n_rows: tables.iter().map(|t| t.rows.len()).sum(),
+                as_given: Residual::default(),
+                n_hypotheses: 1,
+                best: Some((finding.fix.clone(), after)),
+                best_gain: None,
+                findings: vec![finding],
+            });
+        }
+    }
+    None
+}
+
+/// The setup check at the start of a calibration or diagnosis: the warnings to print, or an
+/// error naming the mistake, its fix and the residual before → after when a finding is
+/// overwhelming and `cfg` does not accept the data (then they are warnings too).
+///
+/// A check that cannot run (an unreadable file, a failed fit) says nothing: the calibration
+/// reports the same problem in its own words.
+///
+/// # Errors
+/// An overwhelming finding without [`SetupConfig::accept_setup`].
+pub fn gate(plan: &crate::inputs::Plan, cfg: &SetupConfig) -> Result<Vec<String>> {
+    let Ok(Some(report)) = check_plan(plan) else {
+        return Ok(Vec::new());
+    };
+    if let Some(f) = report.overwhelming()
+        && !cfg.accept_setup
+    {
+        anyhow::bail!(
+            "setup check [{}]: {}; --accept-setup calibrates the data as they are",
+            f.class,
+            f.text()
+        );
+    }
+    Ok(report
+        .findings
+        .iter()
+        .map(|f| {
+            let accepted = if f.severity == Severity::Error {
+                " (accepted with --accept-setup)"
+            } else {
+                ""
+            };
+            format!("setup check{accepted} [{}]: {}", f.class, f.text())
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_class_survives_the_round_trip_of_its_name() {
+        for c in MistakeClass::ALL {
+            assert_eq!(c.name().parse::<MistakeClass>(), Ok(c));
+        }
+        assert!("mm".parse::<MistakeClass>().is_err());
+    }
+
+    #[test]
+    fn gain_takes_the_better_channel_unless_the_other_grows() {
+        let r = |l: f64, o: f64| Residual {
+            length_rms_m: Some(l),
+            orientation_rms_rad: Some(o),
+            spread_m: Some(0.5),
+        };
+        // Orientation 10× better, position unchanged: 10.
+        assert!((gain(&r(1e-3, 0.5), &r(1e-3, 0.05)) - 10.0).abs() < 1e-9);
+        // Orientation 10× better, position 3× worse: no evidence (1/3).
+        assert!(gain(&r(1e-3, 0.5), &r(3e-3, 0.05)) < 1.0);
+    }
+}
