@@ -416,8 +416,8 @@ mod tests {
         // Every non-transmission model on every robot data kind; the haptic logs' own three.
         for kind in [K::Sockets, K::Distances, K::Measurements] {
             for &m in ModelChoice::all() {
-                let expected = !matches!(m, M::Transmissions)
-                    && !(kind != K::Measurements && matches!(m, M::FramesOnly | M::JointOffsets));
+                let frames = matches!(m, M::FramesOnly | M::JointOffsets);
+                let expected = m != M::Transmissions && (kind == K::Measurements || !frames);
                 assert_eq!(m.check_fits(kind).is_ok(), expected, "{m} on {kind:?}");
             }
         }
