@@ -46,6 +46,8 @@
 //! and a `staticlib` with the header `include/hapcal_runtime.h`.
 #![cfg_attr(not(feature = "std"), no_std)]
 
+#[cfg(feature = "std")]
+mod compensate;
 mod drive;
 mod error;
 #[cfg(feature = "std")]
@@ -53,13 +55,24 @@ mod load;
 mod math;
 mod model;
 mod pose;
+#[cfg(feature = "std")]
+mod robot;
+#[cfg(feature = "std")]
+mod robot_load;
 
+#[cfg(feature = "std")]
+pub use compensate::{Compensation, CompensationConfig, Target, compensate};
 pub use drive::{CapstanParams, Drive};
 pub use error::Error;
 #[cfg(feature = "std")]
 pub use load::LoadError;
 pub use model::{DhConvention, DhRow, Evaluation, Model};
 pub use pose::Pose;
+#[cfg(feature = "std")]
+pub use robot::{
+    DEFLECTION_ITERATIONS, DEFLECTION_TOLERANCE_RAD, Deflection, GravityModel, Robot,
+    RobotWorkspace, STANDARD_GRAVITY,
+};
 
 /// Most joints a [`Model`] holds (its storage is fixed-size).
 pub const MAX_JOINTS: usize = 12;
