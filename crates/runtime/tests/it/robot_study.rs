@@ -63,12 +63,18 @@ const CONFIG: CompensationConfig = CompensationConfig {
     orientation_scale_m: 0.1,
 };
 
-/// Joint configurations within 80 % of the iiwa's ranges (the nominal inverse kinematics'
-/// solutions of the targets).
+/// Joint configurations within 80 % of the iiwa's ranges, the elbow (joint A4) bent by at
+/// least 0.3 rad: the nominal inverse kinematics' solutions of the targets. A target the
+/// nominal arm reaches stretched (A4 near 0) lies on the edge of its workspace, and the true
+/// arm, whose links differ by the deviations and which sags, may not reach it at all.
 fn commands(robot: &Robot, n: usize) -> Vec<Vec<f64>> {
     joint_samples(robot, n)
         .into_iter()
-        .map(|q| q.into_iter().map(|v| 0.8 * v).collect())
+        .map(|q| {
+            let mut q: Vec<f64> = q.into_iter().map(|v| 0.8 * v).collect();
+            q[3] = q[3].signum() * (0.3 + q[3].abs()).min(0.8 * 2.0942);
+            q
+        })
         .collect()
 }
 
