@@ -301,6 +301,9 @@ enum Command {
     /// The optimal-design bound of planned distance poses (continuous I-optimal design with its
     /// equivalence-theorem certificate) against random poses; writes a Markdown table.
     PoseBound(hapcal::pose_study::BoundArgs),
+    /// Joint commands that bring a tip of a calibrated robot, sagging under its own weight,
+    /// onto target positions or poses (exit 2 if a target is not reached).
+    Compensate(hapcal::compensate::CompensateArgs),
     /// Import a URDF chain as a hapcal device file (TOML on stdout).
     ImportUrdf {
         /// The URDF file.
@@ -864,6 +867,11 @@ fn run(cli: Cli) -> Result<()> {
             })?;
             bar.finish_and_clear();
             emit(&md);
+            Ok(())
+        }
+        Command::Compensate(args) => {
+            let summary = hapcal::compensate::run(&args)?;
+            emit(&summary);
             Ok(())
         }
         Command::ImportUrdf { urdf, tip } => {
