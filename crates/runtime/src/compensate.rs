@@ -132,7 +132,11 @@ fn cost(e: &[f64; 6], rows: usize, scale_m: f64) -> f64 {
 
 /// Solves `(J_w·J_wᵀ + λ²·I)·y = e_w` (Cholesky, `rows` ≤ 6) and writes `q + J_wᵀ·y`, clamped
 /// to the joint limits, into `trial`. Rows 3–5 of `J` and `e` are weighted by `scale_m`.
-#[allow(clippy::too_many_arguments)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::needless_range_loop,
+    reason = "a 6 × 6 Cholesky solve reads best with the textbook's indices"
+)]
 fn step(
     jac: &[[f64; 6]],
     e: &[f64; 6],

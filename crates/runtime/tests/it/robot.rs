@@ -253,7 +253,7 @@ pub(crate) fn calibrated_iiwa_text() -> String {
         if p.axis.is_none() {
             continue;
         }
-        let s = |i: usize| if (k + i) % 2 == 0 { 1.0 } else { -1.0 };
+        let s = |i: usize| if (k + i).is_multiple_of(2) { 1.0 } else { -1.0 };
         let kf = k as f64;
         for i in 0..3 {
             p.xyz_m[i] += s(i) * (2e-4 + 2e-4 * ((kf + i as f64) % 4.0));
