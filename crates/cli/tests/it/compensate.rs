@@ -131,3 +131,43 @@ fn compensate_names_the_bad_cell() {
         "{err}"
     );
 }
+
+/// What `hapcal calibrate --model compliance --out robot.urdf` writes (MUKCa iiwa 14, lumped
+/// weights) is what `hapcal compensate` reads: the sidecar's compliances in rad/m.
+#[test]
+fn compensate_reads_what_calibrate_writes() {
+    let dir = scratch("compensate-calibrated");
+    let urdf = dir.join("robot.urdf");
+    let run = hapcal(&[
+        "calibrate",
+        "--model",
+        "compliance",
+        "--out",
+        &urdf.display().to_string(),
+    ]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let sidecar = std::fs::read_to_string(dir.join("robot.calibration.toml")).expect("sidecar");
+    assert!(
+        sidecar.contains("\"compliance.joint_a4\"") && sidecar.contains("unit = \"rad/m\""),
+        "{sidecar}"
+    );
+    let robot = Robot::load_urdf(&urdf, &["ball_link"]).expect("calibrate's output loads");
+    assert!(robot.has_compliance());
+    let targets = dir.join("targets.csv");
+    std::fs::write(&targets, "x,y,z\n0.45,0.1,0.7\n0.5,-0.1,0.6\n").expect("write");
+    let out = dir.join("commands.csv");
+    let run = hapcal(&[
+        "compensate",
+        "--device",
+        &urdf.display().to_string(),
+        "--tip",
+        "ball_link",
+        "--targets",
+        &targets.display().to_string(),
+        "--out",
+        &out.display().to_string(),
+    ]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let written = std::fs::read_to_string(&out).expect("commands");
+    assert_eq!(written.lines().count(), 3, "{written}");
+}
