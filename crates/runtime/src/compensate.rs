@@ -305,3 +305,37 @@ pub fn compensate(
         deflection,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::rotation_vector;
+
+    /// `Rot(axis, angle)` by Rodrigues' formula, independent of the code under test.
+    fn rotation(axis: [f64; 3], angle: f64) -> [[f64; 3]; 3] {
+        let n = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+        let [x, y, z] = axis.map(|a| a / n);
+        let (s, c) = angle.sin_cos();
+        let t = 1.0 - c;
+        [
+            [c + t * x * x, t * x * y - s * z, t * x * z + s * y],
+            [t * x * y + s * z, c + t * y * y, t * y * z - s * x],
+            [t * x * z - s * y, t * y * z + s * x, c + t * z * z],
+        ]
+    }
+
+    #[test]
+    fn rotation_vector_inverts_axis_angle_from_tiny_to_near_half_turn() {
+        let axis = [0.3, -0.5, 0.8];
+        let n = (0.3f64 * 0.3 + 0.25 + 0.64).sqrt();
+        for angle in [1e-9, 1e-4, 0.3, 2.0, 3.1, std::f64::consts::PI - 1e-7] {
+            let w = rotation_vector(&rotation(axis, angle));
+            for (wi, ai) in w.iter().zip(axis) {
+                let expected = ai / n * angle;
+                // Near a half turn the axis comes from the diagonal: √ of a difference of
+                // order 1e-7 loses half the digits.
+                let tol = if angle > 3.0 { 1e-6 } else { 1e-12 };
+                assert!((wi - expected).abs() <= tol, "{angle}: {w:?}");
+            }
+        }
+    }
+}
