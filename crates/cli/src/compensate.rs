@@ -39,6 +39,11 @@ pub struct CompensateArgs {
     /// … and within this angle of a target orientation, mrad.
     #[arg(long, default_value_t = 0.001)]
     pub tolerance_mrad: f64,
+    /// The targets are in the frame of the calibration's instrument (the sidecar's
+    /// frames.instrument) and for its marker on the tip (frames.marker1), as the measurements
+    /// were; without it, in the robot's root link frame and for the tip link.
+    #[arg(long)]
+    pub instrument_frame: bool,
     /// Most damped least-squares steps per target (1 to 10,000).
     #[arg(long, default_value_t = 50, value_parser = crate::count_in::<1, 10_000>)]
     pub max_iterations: usize,
@@ -216,7 +221,32 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
     tips.extend(args.other_tips.iter().map(String::as_str));
     let robot = Robot::load_urdf(&args.device, &tips)
         .with_context(|| format!("loading the calibrated robot {}", args.device.display()))?;
-    let rows = read_targets(&args.targets, &robot)?;
+    let mut rows = read_targets(&args.targets, &robot)?;
+    let robot = if args.instrument_frame {
+        let Some(instrument) = robot.frame("instrument") else {
+            bail!(
+                "--instrument-frame: {} has no identified instrument frame (frames.instrument of its calibration sidecar)",
+                args.device.display()
+            );
+        };
+        let to_root = instrument.inverse();
+        for row in &mut rows {
+            row.target = match row.target {
+                Target::Position(p) => {
+                    let r = to_root.rotate(&p);
+                    let t = to_root.translation_m;
+                    Target::Position([r[0] + t[0], r[1] + t[1], r[2] + t[2]])
+                }
+                Target::Pose(p) => Target::Pose(to_root.compose(&p)),
+            };
+        }
+        match robot.frame("marker1") {
+            Some(marker) => robot.with_marker(0, &marker)?,
+            None => robot,
+        }
+    } else {
+        robot
+    };
     let cfg = CompensationConfig {
         tolerance_m: args.tolerance_mm * 1e-3,
         tolerance_rad: args.tolerance_mrad * 1e-3,

@@ -39,6 +39,9 @@ pub(crate) struct RobotTip {
     pub(crate) parent: Option<usize>,
     /// The tip link's frame in that joint's frame (fixed joints composed), m.
     pub(crate) offset: Pose,
+    /// A frame on the tip link (a marker), in the tip link's frame: the poses and Jacobians
+    /// are of it; the gravity loads keep the tip link's origin. Identity by default.
+    pub(crate) marker: Pose,
 }
 
 /// A link's point mass, in the frame of the nearest moving joint above it.
@@ -310,12 +313,44 @@ impl Robot {
         }
     }
 
+    /// The pose of tip `tip`'s link (without its marker frame).
     #[inline]
-    fn tip_from(&self, tip: usize, frames: &[Pose]) -> Pose {
+    fn tip_link_from(&self, tip: usize, frames: &[Pose]) -> Pose {
         let t = &self.tips[tip];
         t.parent
             .map_or(Pose::IDENTITY, |p| frames[p])
             .compose(&t.offset)
+    }
+
+    /// The pose of tip `tip` (its marker frame on the tip link).
+    #[inline]
+    fn tip_from(&self, tip: usize, frames: &[Pose]) -> Pose {
+        self.tip_link_from(tip, frames)
+            .compose(&self.tips[tip].marker)
+    }
+
+    /// The same robot with a frame `marker` on tip `tip`'s link (in the link's frame, e.g.
+    /// the sidecar's `marker1`, [`Robot::frame`]): poses and Jacobians of that tip are then
+    /// of the marker frame; the gravity loads are unchanged (the calibration's loads hang at
+    /// the tip links).
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] named `tip` for a tip index past the last tip; [`Error::NotFinite`]
+    /// for a non-finite pose entry.
+    pub fn with_marker(&self, tip: usize, marker: &Pose) -> Result<Robot, Error> {
+        self.check_tip(tip)?;
+        let values = marker.rotation.as_flattened().iter();
+        let values = values.chain(marker.translation_m.iter());
+        if let Some((index, value)) = values.enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(Error::NotFinite {
+                what: "marker",
+                index,
+                value: *value,
+            });
+        }
+        let mut robot = self.clone();
+        robot.tips[tip].marker = *marker;
+        Ok(robot)
     }
 
     /// Pose of every tip (in the order of [`Robot::tip_names`]) at joint angles `q` (rad, m
@@ -518,7 +553,7 @@ impl Robot {
                     self.add_load(frames, joint.parent, &o, &g, tau);
                 }
                 for tip in 0..self.tips.len() {
-                    let end = self.tip_from(tip, frames).translation_m;
+                    let end = self.tip_link_from(tip, frames).translation_m;
                     self.add_load(frames, self.tips[tip].parent, &end, &g, tau);
                 }
             }

@@ -219,6 +219,7 @@ impl Robot {
             robot_tips.push(RobotTip {
                 parent,
                 offset: pending,
+                marker: Pose::IDENTITY,
             });
         }
         if joints.is_empty() {
