@@ -39,6 +39,31 @@ class Device:
     @property
     def tips(self) -> List[str]: ...
 
+class RuntimeRobot:
+    """A calibrated robot in a control loop (hapcal-runtime): the URDF and its sidecar
+    ``<stem>.calibration.toml`` that ``hapcal calibrate --out robot.urdf`` writes."""
+
+    def __init__(self, urdf: PathLike, tips: Sequence[str]) -> None: ...
+    @property
+    def joint_names(self) -> List[str]: ...
+    @property
+    def tip_names(self) -> List[str]: ...
+    def tip_poses(self, q: Sequence[float], deflected: bool = True) -> List[List[List[float]]]:
+        """4 × 4 pose (m) of each tip at joint angles ``q`` (rad), deflected under the robot's
+        own weight unless ``deflected=False``. Raises HapcalError."""
+    def compensate(
+        self,
+        target: Sequence[float],
+        start: Sequence[float],
+        tip: int = 0,
+        tolerance_m: float = 1e-6,
+        tolerance_rad: float = 1e-6,
+        max_iterations: int = 50,
+    ) -> Dict[str, Any]:
+        """Joint command at which the deflected tip reaches ``target`` (x, y, z m, or with
+        qw, qx, qy, qz), from ``start``: ``q``, ``reached``, ``position_error_m``,
+        ``orientation_error_rad``, ``iterations``. Raises HapcalError."""
+
 class Measurements:
     """One data set of joint readings with marker poses or distances."""
 

@@ -1026,12 +1026,140 @@ fn _diagnose(
 }
 
 /// hapcal's compiled core; use the `hapcal` package.
+/// A calibrated robot in a control loop (`hapcal_runtime::Robot`): loaded from the URDF and
+/// sidecar `hapcal calibrate --out robot.urdf` writes; poses of its tips, rigid or deflected
+/// under its own weight, and compensated joint commands.
+#[pyclass(module = "hapcal", name = "RuntimeRobot", frozen)]
+struct PyRuntimeRobot {
+    robot: hapcal_runtime::Robot,
+}
+
+/// A pose as a 4 × 4 homogeneous matrix (rows; translation in m).
+fn matrix_of(p: &hapcal_runtime::Pose) -> Vec<Vec<f64>> {
+    let mut rows: Vec<Vec<f64>> = (0..3)
+        .map(|i| {
+            let mut row = p.rotation[i].to_vec();
+            row.push(p.translation_m[i]);
+            row
+        })
+        .collect();
+    rows.push(vec![0.0, 0.0, 0.0, 1.0]);
+    rows
+}
+
+fn runtime_err(e: impl std::fmt::Display) -> PyErr {
+    HapcalError::new_err(e.to_string())
+}
+
+#[pymethods]
+impl PyRuntimeRobot {
+    /// Loads `urdf` (and its sidecar `<stem>.calibration.toml` beside it) with the links
+    /// `tips` as tips.
+    #[new]
+    fn new(urdf: PathBuf, tips: Vec<String>) -> PyResult<Self> {
+        let tips: Vec<&str> = tips.iter().map(String::as_str).collect();
+        let robot = hapcal_runtime::Robot::load_urdf(&urdf, &tips).map_err(runtime_err)?;
+        Ok(Self { robot })
+    }
+
+    /// Joint names, in the order of `q`.
+    #[getter]
+    fn joint_names(&self) -> Vec<String> {
+        self.robot.joint_names().to_vec()
+    }
+
+    /// Tip link names, in the order of the tip indices.
+    #[getter]
+    fn tip_names(&self) -> Vec<String> {
+        self.robot.tip_names().to_vec()
+    }
+
+    /// Pose of each tip (4 × 4, m) at joint angles `q` (rad, m for a prismatic joint): of the
+    /// robot deflected under its own weight, or of the rigid robot with `deflected=False`.
+    #[pyo3(signature = (q, deflected = true))]
+    fn tip_poses(&self, q: Vec<f64>, deflected: bool) -> PyResult<Vec<Vec<Vec<f64>>>> {
+        let mut ws = self.robot.workspace();
+        let mut out = vec![hapcal_runtime::Pose::IDENTITY; self.robot.tip_names().len()];
+        if deflected {
+            self.robot.deflected_tip_poses(&q, &mut ws, &mut out)
+        } else {
+            self.robot
+                .tip_poses(&q, &mut ws, &mut out)
+                .map(|()| Default::default())
+        }
+        .map_err(runtime_err)?;
+        Ok(out.iter().map(matrix_of).collect())
+    }
+
+    /// The joint command at which tip `tip` (an index into `tip_names`) of the deflected robot
+    /// reaches `target`: `(x, y, z)` m, or `(x, y, z, qw, qx, qy, qz)` with a unit quaternion;
+    /// from `start` (the nominal inverse kinematics' solution). Returns a dict with `q`,
+    /// `reached`, `position_error_m`, `orientation_error_rad`, `iterations`.
+    #[pyo3(signature = (target, start, tip = 0, tolerance_m = 1e-6, tolerance_rad = 1e-6, max_iterations = 50))]
+    #[allow(clippy::too_many_arguments, reason = "Python keyword arguments")]
+    fn compensate<'py>(
+        &self,
+        py: Python<'py>,
+        target: Vec<f64>,
+        start: Vec<f64>,
+        tip: usize,
+        tolerance_m: f64,
+        tolerance_rad: f64,
+        max_iterations: usize,
+    ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let target = match target.as_slice() {
+            [x, y, z] => hapcal_runtime::Target::Position([*x, *y, *z]),
+            [x, y, z, w, qx, qy, qz] => {
+                let q =
+                    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(*w, *qx, *qy, *qz));
+                let r = q.to_rotation_matrix();
+                let mut rotation = [[0.0; 3]; 3];
+                for (i, row) in rotation.iter_mut().enumerate() {
+                    for (j, v) in row.iter_mut().enumerate() {
+                        *v = r[(i, j)];
+                    }
+                }
+                hapcal_runtime::Target::Pose(hapcal_runtime::Pose {
+                    rotation,
+                    translation_m: [*x, *y, *z],
+                })
+            }
+            other => {
+                return Err(HapcalError::new_err(format!(
+                    "target: expected 3 values (x, y, z) or 7 (x, y, z, qw, qx, qy, qz), found {}",
+                    other.len()
+                )));
+            }
+        };
+        let cfg = hapcal_runtime::CompensationConfig {
+            tolerance_m,
+            tolerance_rad,
+            max_iterations,
+            damping_m: 1e-3,
+            orientation_scale_m: 0.1,
+        };
+        let mut ws = self.robot.workspace();
+        let mut q = vec![0.0; self.robot.n_joints()];
+        let c =
+            hapcal_runtime::compensate(&self.robot, tip, &target, &start, &cfg, &mut ws, &mut q)
+                .map_err(runtime_err)?;
+        let d = pyo3::types::PyDict::new(py);
+        d.set_item("q", q)?;
+        d.set_item("reached", c.reached)?;
+        d.set_item("position_error_m", c.position_error_m)?;
+        d.set_item("orientation_error_rad", c.orientation_error_rad)?;
+        d.set_item("iterations", c.iterations)?;
+        Ok(d)
+    }
+}
+
 #[pymodule]
 fn _hapcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("HapcalError", m.py().get_type::<HapcalError>())?;
     m.add_class::<PyDevice>()?;
     m.add_class::<PyMeasurements>()?;
     m.add_class::<PyCalibration>()?;
+    m.add_class::<PyRuntimeRobot>()?;
     m.add_function(wrap_pyfunction!(_calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(_simulate, m)?)?;
     m.add_function(wrap_pyfunction!(_plan_poses, m)?)?;

@@ -980,12 +980,29 @@ pub fn write_outputs_beside(
         write_new(out, &text, inputs)?;
         return Ok(vec![out.to_path_buf()]);
     }
+    // A compliance is in rad per unit of load: rad/(N·m) under link masses, rad/m under the
+    // lumped unit weights (the report's layout calls it an angle, rad); the sidecar says which,
+    // so that a reader (hapcal-runtime's `Robot::load_urdf`) can check its loads are the same.
+    let compliance_unit = (outcome.model.compliance.as_ref()).map(|(g, _)| {
+        if g.masses.is_empty() {
+            "rad/m"
+        } else {
+            "rad/(N·m)"
+        }
+    });
     let all: Vec<hapcal_io::CalibratedValue> = (outcome.report.parameters.iter())
         .map(|p| hapcal_io::CalibratedValue {
             name: p.name.clone(),
             value: p.value,
             std: p.std,
-            unit: p.unit.to_string(),
+            unit: match compliance_unit {
+                Some(unit)
+                    if p.name.starts_with("compliance.") || p.name.starts_with("transversal.") =>
+                {
+                    unit.to_owned()
+                }
+                _ => p.unit.to_string(),
+            },
         })
         .collect();
     let device_tree = outcome.device.tree()?;

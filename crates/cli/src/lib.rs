@@ -3,6 +3,7 @@
 //!
 //! Architecture invariant: *the library part never prints; `main.rs` prints what it returns.*
 
+pub mod compensate;
 pub mod diagnose;
 pub mod diagnose_arm;
 pub mod plan_args;

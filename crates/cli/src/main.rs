@@ -344,6 +344,9 @@ enum Command {
     /// The optimal-design bound of planned distance poses (continuous I-optimal design with its
     /// equivalence-theorem certificate) against random poses; writes a Markdown table.
     PoseBound(hapcal::pose_study::BoundArgs),
+    /// Joint commands that bring a tip of a calibrated robot, sagging under its own weight,
+    /// onto target positions or poses (exit 2 if a target is not reached).
+    Compensate(hapcal::compensate::CompensateArgs),
     /// Import a URDF chain as a hapcal device file (TOML on stdout).
     ImportUrdf {
         /// The URDF file.
@@ -891,6 +894,11 @@ fn run(cli: Cli) -> Result<()> {
             },
             json,
         ),
+        Command::Compensate(args) => {
+            let summary = hapcal::compensate::run(&args)?;
+            emit(&summary);
+            Ok(())
+        }
         Command::ImportUrdf { urdf, tip } => {
             let device = hapcal_io::import_urdf(&urdf, &tip)?;
             emit(&hapcal_io::write_device(&device));

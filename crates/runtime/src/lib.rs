@@ -38,6 +38,42 @@
 //! # }
 //! ```
 //!
+//! **Robots** (with `std`): a [`Robot`] is loaded from the URDF and its sidecar
+//! `robot.calibration.toml` that `hapcal calibrate --out robot.urdf` writes (calibrated joint
+//! origins; identified frames and joint compliances), for any number of tip links of the
+//! tree. For joint angles q it gives every tip's pose ([`Robot::tip_poses`]), spatial and body
+//! Jacobians, the gravity torques from the URDF's link masses, and the robot deflected under
+//! its own weight, `θ = q + k∘τ(θ)` by bounded fixed-point iterations
+//! ([`Robot::deflected_tip_poses`], [`Deflection`]); the results agree with
+//! `hapcal_problems::CalibratedModel` to 1e-12 (tests/it/robot.rs). [`compensate`] finds the
+//! joint command that brings a tip, deflection included, onto a target position or pose
+//! (damped least squares). Buffers live in a [`RobotWorkspace`]: no call allocates.
+//!
+//! ```
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! use hapcal_runtime::{CompensationConfig, Pose, Robot, Target, compensate};
+//!
+//! let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../fixtures/mukca/urdf/iiwa14.urdf");
+//! let robot = Robot::load_urdf(std::path::Path::new(path), &["ball_link"])?;
+//! let mut ws = robot.workspace();                     // allocates once
+//! let q = [0.3, 0.7, -0.2, -1.2, 0.4, 0.9, 0.1];      // rad
+//! let mut tip = [Pose::IDENTITY];
+//! let deflection = robot.deflected_tip_poses(&q, &mut ws, &mut tip)?;
+//! assert!(deflection.converged);
+//! let cfg = CompensationConfig {
+//!     tolerance_m: 1e-6,
+//!     tolerance_rad: 1e-6,
+//!     max_iterations: 50,
+//!     damping_m: 1e-3,
+//!     orientation_scale_m: 0.1,
+//! };
+//! let mut command = [0.0; 7];
+//! let c = compensate(&robot, 0, &Target::Pose(tip[0]), &q, &cfg, &mut ws, &mut command)?;
+//! assert!(c.reached);
+//! # Ok(())
+//! # }
+//! ```
+//!
 //! Without the default feature `std` the crate is `no_std` (libm for the elementary
 //! functions): a model is then built from its parts with [`Model::from_dh`], [`Drive::capstan`]
 //! and [`Drive::polynomial`]; loading files needs `std`.
@@ -46,6 +82,8 @@
 //! and a `staticlib` with the header `include/hapcal_runtime.h`.
 #![cfg_attr(not(feature = "std"), no_std)]
 
+#[cfg(feature = "std")]
+mod compensate;
 mod drive;
 mod error;
 #[cfg(feature = "std")]
@@ -53,13 +91,24 @@ mod load;
 mod math;
 mod model;
 mod pose;
+#[cfg(feature = "std")]
+mod robot;
+#[cfg(feature = "std")]
+mod robot_load;
 
+#[cfg(feature = "std")]
+pub use compensate::{Compensation, CompensationConfig, Target, compensate};
 pub use drive::{CapstanParams, Drive};
 pub use error::Error;
 #[cfg(feature = "std")]
 pub use load::LoadError;
 pub use model::{DhConvention, DhRow, Evaluation, Model};
 pub use pose::Pose;
+#[cfg(feature = "std")]
+pub use robot::{
+    DEFLECTION_ITERATIONS, DEFLECTION_TOLERANCE_RAD, Deflection, GravityModel, Robot,
+    RobotWorkspace, STANDARD_GRAVITY,
+};
 
 /// Most joints a [`Model`] holds (its storage is fixed-size).
 pub const MAX_JOINTS: usize = 12;

@@ -42,6 +42,23 @@ impl Pose {
         out
     }
 
+    /// The inverse transform `b_T_a` (`Rᵀ`, `−Rᵀ·t`).
+    #[inline]
+    pub fn inverse(&self) -> Pose {
+        let r = &self.rotation;
+        let mut rotation = [[0.0; 3]; 3];
+        for (i, row) in rotation.iter_mut().enumerate() {
+            for (j, x) in row.iter_mut().enumerate() {
+                *x = r[j][i];
+            }
+        }
+        let t = self.inverse_rotate(&self.translation_m);
+        Pose {
+            rotation,
+            translation_m: [-t[0], -t[1], -t[2]],
+        }
+    }
+
     /// `a` applied to a vector: `R · v` (no translation).
     #[inline]
     pub fn rotate(&self, v: &[f64; 3]) -> [f64; 3] {

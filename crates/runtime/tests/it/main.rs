@@ -4,6 +4,8 @@
 mod against_library;
 mod errors;
 mod no_alloc;
+mod robot;
+mod robot_study;
 
 use std::path::PathBuf;
 

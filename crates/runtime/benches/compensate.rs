@@ -1,0 +1,87 @@
+//! The iiwa 14 (7 joints) with Drake's link masses and gravity compliance, one thread:
+//! deflected tip pose (the fixed point θ = q + k∘τ(θ)), and the compensation of one 6-D
+//! target from the nominal inverse kinematics' solution (`hapcal_runtime::compensate`).
+
+use std::hint::black_box;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use hapcal_problems::GravityCompliance;
+use hapcal_runtime::{CompensationConfig, Pose, Robot, Target, compensate};
+
+const JOINTS: [&str; 7] = [
+    "joint_a1", "joint_a2", "joint_a3", "joint_a4", "joint_a5", "joint_a6", "joint_a7",
+];
+
+/// The bundled iiwa 14 URDF with Drake's masses as `<inertial>`s and a sidecar of joint
+/// compliances from 1e-4 to 3e-4 rad/(N·m).
+fn compliant_iiwa() -> Robot {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../fixtures/mukca/urdf/iiwa14.urdf"
+    );
+    let mut text = std::fs::read_to_string(path).expect("bundled fixture");
+    let names: Vec<String> = JOINTS.iter().map(|j| (*j).to_owned()).collect();
+    let model = GravityCompliance::published(&names).expect("iiwa joint names");
+    for m in &model.masses {
+        let link = format!("<link name=\"link_{}\">", m.joint + 1);
+        let c = m.com_m;
+        let inertial = format!(
+            "{link}<inertial><origin xyz=\"{:?} {:?} {:?}\"/><mass value=\"{:?}\"/><inertia ixx=\"0.01\" ixy=\"0\" ixz=\"0\" iyy=\"0.01\" iyz=\"0\" izz=\"0.01\"/></inertial>",
+            c.x, c.y, c.z, m.mass_kg
+        );
+        text = text.replacen(&link, &inertial, 1);
+    }
+    let k = [1e-4, 1e-4, 1.5e-4, 1.5e-4, 2e-4, 3e-4, 3e-4];
+    let mut sidecar = String::from("[values]\n");
+    for (j, k) in JOINTS.iter().zip(k) {
+        sidecar.push_str(&format!(
+            "\"compliance.{j}\" = {{ value = {k:?}, std = 0.0, unit = \"rad/(N·m)\" }}\n"
+        ));
+    }
+    Robot::from_urdf_str(
+        &text,
+        "iiwa14.urdf",
+        Some((&sidecar, "sidecar")),
+        &["ball_link"],
+    )
+    .expect("valid")
+}
+
+const Q: [f64; 7] = [0.3, 0.7, -0.2, -1.2, 0.4, 0.9, 0.1];
+
+fn bench(c: &mut Criterion) {
+    let robot = compliant_iiwa();
+    let rigid = robot.with_compliances(&[0.0; 7]).expect("valid");
+    let mut ws = robot.workspace();
+    // The target: where the rigid (nominal) arm puts its tip at Q, so Q is the nominal
+    // inverse kinematics' solution and the compensation corrects the sag.
+    let target = Target::Pose(rigid.tip_pose(0, &Q, &mut ws).expect("valid"));
+    let cfg = CompensationConfig {
+        tolerance_m: 1e-6,
+        tolerance_rad: 1e-6,
+        max_iterations: 50,
+        damping_m: 1e-3,
+        orientation_scale_m: 0.1,
+    };
+    let mut group = c.benchmark_group("iiwa14_compliant");
+    group.bench_function("deflected_tip_pose", |b| {
+        let mut out = [Pose::IDENTITY];
+        b.iter(|| {
+            robot
+                .deflected_tip_poses(black_box(&Q), &mut ws, &mut out)
+                .map(|d| d.iterations)
+        })
+    });
+    group.bench_function("compensate_pose", |b| {
+        let mut q = [0.0; 7];
+        b.iter(|| {
+            let c = compensate(&robot, 0, black_box(&target), &Q, &cfg, &mut ws, &mut q);
+            assert!(c.is_ok_and(|c| c.reached));
+            q[0]
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,673 @@
+//! A calibrated robot of URDF joints: a tree of revolute and prismatic joints with several
+//! tips, link masses and joint compliances; poses, Jacobians and the deflection under its own
+//! weight, with no allocation per call (the buffers live in a [`RobotWorkspace`]).
+
+use crate::math::sin_cos;
+use crate::pose::cross;
+use crate::{Error, Pose};
+
+/// Standard gravity, m/s² (CGPM 1901), as `hapcal-problems` uses it.
+pub const STANDARD_GRAVITY: f64 = 9.806_65;
+
+/// Most fixed-point iterations of the deflection `θ = q + k∘τ(θ)` ([`Robot::deflect`]), as the
+/// calibration library's torque equilibrium (`hapcal_problems::EQUILIBRIUM_ITERATIONS`): each
+/// multiplies the error by about `k·∂τ/∂θ` (10⁻³ for a stiff arm), so a handful suffice.
+pub const DEFLECTION_ITERATIONS: usize = 20;
+
+/// The deflection iterations stop once no joint moves by more than this, rad (the calibration
+/// library's threshold).
+pub const DEFLECTION_TOLERANCE_RAD: f64 = 1e-12;
+
+/// One moving joint: its origin in its parent joint's frame (after that joint's motion; the
+/// root link's frame for a joint without parent), through the fixed joints between them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct RobotJoint {
+    /// Index of the nearest moving joint above, if any.
+    pub(crate) parent: Option<usize>,
+    /// Joint frame at zero motion in the parent frame (URDF `<origin>`s composed).
+    pub(crate) origin: Pose,
+    /// Unit axis in the joint frame.
+    pub(crate) axis: [f64; 3],
+    /// Translation along the axis (m) instead of rotation about it (rad).
+    pub(crate) prismatic: bool,
+}
+
+/// One tip: a link's frame in the frame of the nearest moving joint above it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct RobotTip {
+    /// Index of the nearest moving joint above, if any (`None`: fixed to the root).
+    pub(crate) parent: Option<usize>,
+    /// The tip link's frame in that joint's frame (fixed joints composed), m.
+    pub(crate) offset: Pose,
+    /// A frame on the tip link (a marker), in the tip link's frame: the poses and Jacobians
+    /// are of it; the gravity loads keep the tip link's origin. Identity by default.
+    pub(crate) marker: Pose,
+}
+
+/// A link's point mass, in the frame of the nearest moving joint above it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct PointMass {
+    /// The joint.
+    pub(crate) joint: usize,
+    /// Mass, kg.
+    pub(crate) mass_kg: f64,
+    /// Centre of mass in the joint's frame (after its motion), m.
+    pub(crate) com_m: [f64; 3],
+}
+
+/// How the gravity load of a joint is computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GravityModel {
+    /// From the links' point masses (the URDF's `<inertial>`s): torques in N·m, compliances
+    /// in rad/(N·m).
+    Masses,
+    /// Without masses, the calibration library's lumped unit weights at the origin of every
+    /// joint below and at every tip below: "torques" in m, compliances in rad/m
+    /// (`hapcal_problems::GravityCompliance`).
+    Lumped,
+}
+
+/// A calibrated robot ready to evaluate: the moving joints of a URDF tree on the paths from
+/// its root link to the chosen tip links, with the calibrated joint origins, the link masses
+/// and one compliance per joint.
+///
+/// Joint angles `q` are in rad (m for a prismatic joint), in the order of
+/// [`Robot::joint_names`] (moving joints in order of first appearance on the tips' paths, root
+/// first, tip by tip: the order of `hapcal_kinematics::Tree::from_placement_paths` and of the
+/// measurement files). Poses are of the tip links' frames in the root link's frame, m.
+///
+/// Built by [`Robot::load_urdf`] (with `std`); evaluation never allocates: every call takes a
+/// [`RobotWorkspace`] made once by [`Robot::workspace`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Robot {
+    pub(crate) joints: Vec<RobotJoint>,
+    pub(crate) joint_names: Vec<String>,
+    pub(crate) limits: Vec<(f64, f64)>,
+    pub(crate) tips: Vec<RobotTip>,
+    pub(crate) tip_names: Vec<String>,
+    pub(crate) masses: Vec<PointMass>,
+    /// Compliance per joint (0 = rigid), rad/(N·m) with masses, rad/m lumped.
+    pub(crate) compliance: Vec<f64>,
+    pub(crate) gravity: GravityModel,
+    /// Unit vector of gravity in the root link's frame.
+    pub(crate) gravity_dir: [f64; 3],
+    /// Identified frames from the calibration's sidecar (`instrument`, `marker1`, …).
+    pub(crate) frames: Vec<(String, Pose)>,
+}
+
+/// Buffers of [`Robot`]'s evaluation calls, sized for one robot ([`Robot::workspace`]).
+#[derive(Clone, Debug)]
+pub struct RobotWorkspace {
+    /// Root-link frame of each joint after its motion.
+    pub(crate) frames: Vec<Pose>,
+    /// Joint angles of the deflection iterate, rad.
+    pub(crate) theta: Vec<f64>,
+    /// Gravity torques, N·m (m lumped).
+    pub(crate) torque: Vec<f64>,
+    /// Jacobian columns of one tip.
+    pub(crate) jac: Vec<[f64; 6]>,
+    /// A second joint vector (the compensation's trial command).
+    pub(crate) trial: Vec<f64>,
+    /// The compensation's accepted command.
+    pub(crate) command: Vec<f64>,
+}
+
+/// What [`Robot::deflect`] did: fixed-point iterations of `θ = q + k∘τ(θ)` and the last step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Deflection {
+    /// Iterations taken (0 for a robot without compliance).
+    pub iterations: usize,
+    /// Largest joint change of the last iteration, rad (m for a prismatic joint).
+    pub final_step_rad: f64,
+    /// Whether the last step was at most [`DEFLECTION_TOLERANCE_RAD`] (true without
+    /// compliance). False: the iterations hit [`DEFLECTION_ITERATIONS`] first (a compliance
+    /// so large that `k·∂τ/∂θ` nears 1).
+    pub converged: bool,
+}
+
+/// The pose `Rot(axis, angle)` or `Trans(axis · d)` of one joint's motion.
+#[inline]
+fn motion(joint: &RobotJoint, value: f64) -> Pose {
+    let a = joint.axis;
+    if joint.prismatic {
+        return Pose {
+            translation_m: [a[0] * value, a[1] * value, a[2] * value],
+            ..Pose::IDENTITY
+        };
+    }
+    // Rodrigues: R = c·I + s·[a]× + (1 − c)·a·aᵀ.
+    let (s, c) = sin_cos(value);
+    let t = 1.0 - c;
+    let [x, y, z] = a;
+    Pose {
+        rotation: [
+            [c + t * x * x, t * x * y - s * z, t * x * z + s * y],
+            [t * x * y + s * z, c + t * y * y, t * y * z - s * x],
+            [t * x * z - s * y, t * y * z + s * x, c + t * z * z],
+        ],
+        translation_m: [0.0; 3],
+    }
+}
+
+/// `pose` applied to the point `p`.
+#[inline]
+pub(crate) fn transform_point(pose: &Pose, p: &[f64; 3]) -> [f64; 3] {
+    let r = pose.rotate(p);
+    let t = pose.translation_m;
+    [r[0] + t[0], r[1] + t[1], r[2] + t[2]]
+}
+
+#[inline]
+fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+#[inline]
+fn sub(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn check_len(what: &'static str, expected: usize, found: usize) -> Result<(), Error> {
+    if expected == found {
+        Ok(())
+    } else {
+        Err(Error::Length {
+            what,
+            expected,
+            found,
+        })
+    }
+}
+
+fn check_finite(what: &'static str, values: &[f64]) -> Result<(), Error> {
+    match values.iter().position(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(index) => Err(Error::NotFinite {
+            what,
+            index,
+            value: values[index],
+        }),
+    }
+}
+
+impl Robot {
+    /// Number of moving joints n.
+    pub fn n_joints(&self) -> usize {
+        self.joints.len()
+    }
+
+    /// Joint names (URDF `<joint name>`), in the order of `q`.
+    pub fn joint_names(&self) -> &[String] {
+        &self.joint_names
+    }
+
+    /// Joint limits `(lower, upper)`, rad (m for a prismatic joint); infinite for a
+    /// continuous joint.
+    pub fn limits(&self) -> &[(f64, f64)] {
+        &self.limits
+    }
+
+    /// Whether joint `j` is prismatic (its `q` in m).
+    ///
+    /// # Panics
+    /// If `j ≥ n_joints()`.
+    #[track_caller]
+    pub fn is_prismatic(&self, j: usize) -> bool {
+        self.joints[j].prismatic
+    }
+
+    /// The tip link names, in the order of the tip indices.
+    pub fn tip_names(&self) -> &[String] {
+        &self.tip_names
+    }
+
+    /// The index of the tip link `name`, if it is a tip.
+    pub fn tip_index(&self, name: &str) -> Option<usize> {
+        self.tip_names.iter().position(|t| t == name)
+    }
+
+    /// The compliance of each joint (0 = rigid): rad/(N·m) under [`GravityModel::Masses`],
+    /// rad/m under [`GravityModel::Lumped`].
+    pub fn compliances(&self) -> &[f64] {
+        &self.compliance
+    }
+
+    /// How the gravity loads are computed.
+    pub fn gravity_model(&self) -> GravityModel {
+        self.gravity
+    }
+
+    /// Whether any joint is compliant (the deflection is not the identity).
+    pub fn has_compliance(&self) -> bool {
+        self.compliance.iter().any(|&k| k != 0.0)
+    }
+
+    /// An identified frame of the calibration's sidecar by name: `instrument` (the robot's
+    /// root frame in the instrument's frame) or `marker1`, `marker2`, … (a marker's frame in
+    /// its tip's frame); `None` if the calibration identified none of that name.
+    pub fn frame(&self, name: &str) -> Option<Pose> {
+        (self.frames.iter())
+            .find(|(n, _)| n == name)
+            .map(|(_, p)| *p)
+    }
+
+    /// The same robot with compliances `k` (one per joint; rad/(N·m) or rad/m as
+    /// [`Robot::gravity_model`]), e.g. a rigid copy with zeros.
+    ///
+    /// # Errors
+    /// [`Error::Length`] unless `k` has n entries; [`Error::NotFinite`] for a NaN or infinite
+    /// compliance.
+    pub fn with_compliances(&self, k: &[f64]) -> Result<Robot, Error> {
+        check_len("compliances", self.n_joints(), k.len())?;
+        check_finite("compliances", k)?;
+        let mut robot = self.clone();
+        robot.compliance.copy_from_slice(k);
+        Ok(robot)
+    }
+
+    /// Buffers for this robot's evaluation calls (allocates; make it once).
+    pub fn workspace(&self) -> RobotWorkspace {
+        let n = self.n_joints();
+        RobotWorkspace {
+            frames: vec![Pose::IDENTITY; n],
+            theta: vec![0.0; n],
+            torque: vec![0.0; n],
+            jac: vec![[0.0; 6]; n],
+            trial: vec![0.0; n],
+            command: vec![0.0; n],
+        }
+    }
+
+    fn check_joints(&self, what: &'static str, q: &[f64]) -> Result<(), Error> {
+        check_len(what, self.n_joints(), q.len())?;
+        check_finite(what, q)
+    }
+
+    fn check_tip(&self, tip: usize) -> Result<(), Error> {
+        if tip < self.tips.len() {
+            Ok(())
+        } else {
+            Err(Error::Invalid {
+                what: "tip",
+                value: tip as f64,
+                expected: "a tip index below the number of tips",
+            })
+        }
+    }
+
+    #[track_caller]
+    fn check_workspace(&self, ws: &RobotWorkspace) {
+        assert_eq!(
+            ws.frames.len(),
+            self.n_joints(),
+            "a workspace of another robot"
+        );
+    }
+
+    /// Joint frames after their motion at `q` into `ws.frames` (q checked by the caller).
+    #[inline]
+    fn forward(&self, q: &[f64], frames: &mut [Pose]) {
+        for (k, (joint, &value)) in self.joints.iter().zip(q).enumerate() {
+            let parent = joint.parent.map_or(Pose::IDENTITY, |p| frames[p]);
+            frames[k] = parent.compose(&joint.origin).compose(&motion(joint, value));
+        }
+    }
+
+    /// The pose of tip `tip`'s link (without its marker frame).
+    #[inline]
+    fn tip_link_from(&self, tip: usize, frames: &[Pose]) -> Pose {
+        let t = &self.tips[tip];
+        t.parent
+            .map_or(Pose::IDENTITY, |p| frames[p])
+            .compose(&t.offset)
+    }
+
+    /// The pose of tip `tip` (its marker frame on the tip link).
+    #[inline]
+    fn tip_from(&self, tip: usize, frames: &[Pose]) -> Pose {
+        self.tip_link_from(tip, frames)
+            .compose(&self.tips[tip].marker)
+    }
+
+    /// The same robot with a frame `marker` on tip `tip`'s link (in the link's frame, e.g.
+    /// the sidecar's `marker1`, [`Robot::frame`]): poses and Jacobians of that tip are then
+    /// of the marker frame; the gravity loads are unchanged (the calibration's loads hang at
+    /// the tip links).
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] named `tip` for a tip index past the last tip; [`Error::NotFinite`]
+    /// for a non-finite pose entry.
+    pub fn with_marker(&self, tip: usize, marker: &Pose) -> Result<Robot, Error> {
+        self.check_tip(tip)?;
+        let values = marker.rotation.as_flattened().iter();
+        let values = values.chain(marker.translation_m.iter());
+        if let Some((index, value)) = values.enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(Error::NotFinite {
+                what: "marker",
+                index,
+                value: *value,
+            });
+        }
+        let mut robot = self.clone();
+        robot.tips[tip].marker = *marker;
+        Ok(robot)
+    }
+
+    /// Pose of every tip (in the order of [`Robot::tip_names`]) at joint angles `q` (rad, m
+    /// for a prismatic joint) of the rigid robot (no deflection), in the root link's frame.
+    ///
+    /// # Errors
+    /// [`Error::Length`] unless `q` has n entries and `out` one per tip; [`Error::NotFinite`]
+    /// for a NaN or infinite angle.
+    ///
+    /// # Panics
+    /// If `ws` was made for another robot.
+    #[track_caller]
+    pub fn tip_poses(
+        &self,
+        q: &[f64],
+        ws: &mut RobotWorkspace,
+        out: &mut [Pose],
+    ) -> Result<(), Error> {
+        self.check_workspace(ws);
+        self.check_joints("joint angles", q)?;
+        check_len("tip poses", self.tips.len(), out.len())?;
+        self.forward(q, &mut ws.frames);
+        for (tip, pose) in out.iter_mut().enumerate() {
+            *pose = self.tip_from(tip, &ws.frames);
+        }
+        Ok(())
+    }
+
+    /// Pose of tip `tip` at joint angles `q` of the rigid robot (see [`Robot::tip_poses`]).
+    ///
+    /// # Errors
+    /// As [`Robot::tip_poses`], and [`Error::Invalid`] named `tip` for a tip index past the
+    /// last tip.
+    ///
+    /// # Panics
+    /// If `ws` was made for another robot.
+    #[track_caller]
+    pub fn tip_pose(&self, tip: usize, q: &[f64], ws: &mut RobotWorkspace) -> Result<Pose, Error> {
+        self.check_workspace(ws);
+        self.check_tip(tip)?;
+        self.check_joints("joint angles", q)?;
+        self.forward(q, &mut ws.frames);
+        Ok(self.tip_from(tip, &ws.frames))
+    }
+
+    /// Spatial Jacobian of tip `tip` at joint angles `q` of the rigid robot, and the tip pose.
+    ///
+    /// `jac` has one column of 6 per joint: for a revolute joint `(w_k × (p − o_k), w_k)`,
+    /// for a prismatic one `(w_k, 0)`, with `w_k`, `o_k` the joint's axis and origin and `p`
+    /// the tip's origin, all in the root link's frame; zero for a joint not on the tip's path.
+    /// Rows 0–2: tip-origin velocity, m/rad (m/m); rows 3–5: angular velocity, rad/rad
+    /// (Siciliano et al., *Robotics*, 2009, §3.1.3; the calibration library's
+    /// `Chain::geometric_jacobian`).
+    ///
+    /// # Errors
+    /// As [`Robot::tip_pose`], and [`Error::Length`] unless `jac` has n columns.
+    ///
+    /// # Panics
+    /// If `ws` was made for another robot.
+    #[track_caller]
+    pub fn spatial_jacobian(
+        &self,
+        tip: usize,
+        q: &[f64],
+        ws: &mut RobotWorkspace,
+        jac: &mut [[f64; 6]],
+    ) -> Result<Pose, Error> {
+        self.check_workspace(ws);
+        self.check_tip(tip)?;
+        self.check_joints("joint angles", q)?;
+        check_len("jacobian columns", self.n_joints(), jac.len())?;
+        self.forward(q, &mut ws.frames);
+        Ok(self.jacobian_from(tip, &ws.frames, jac, false))
+    }
+
+    /// Body Jacobian of tip `tip` at joint angles `q` of the rigid robot, and the tip pose:
+    /// the spatial Jacobian's columns expressed in the tip frame, `diag(Rᵀ, Rᵀ)·J_s` (see
+    /// [`Robot::spatial_jacobian`]; rows and units alike).
+    ///
+    /// # Errors
+    /// As [`Robot::spatial_jacobian`].
+    ///
+    /// # Panics
+    /// If `ws` was made for another robot.
+    #[track_caller]
+    pub fn body_jacobian(
+        &self,
+        tip: usize,
+        q: &[f64],
+        ws: &mut RobotWorkspace,
+        jac: &mut [[f64; 6]],
+    ) -> Result<Pose, Error> {
+        self.check_workspace(ws);
+        self.check_tip(tip)?;
+        self.check_joints("joint angles", q)?;
+        check_len("jacobian columns", self.n_joints(), jac.len())?;
+        self.forward(q, &mut ws.frames);
+        Ok(self.jacobian_from(tip, &ws.frames, jac, true))
+    }
+
+    /// Jacobian columns of `tip` from the joint frames; returns the tip pose.
+    fn jacobian_from(&self, tip: usize, frames: &[Pose], jac: &mut [[f64; 6]], body: bool) -> Pose {
+        let pose = self.tip_from(tip, frames);
+        let p = pose.translation_m;
+        for col in jac.iter_mut() {
+            *col = [0.0; 6];
+        }
+        let mut on_path = self.tips[tip].parent;
+        while let Some(k) = on_path {
+            let joint = &self.joints[k];
+            let w = frames[k].rotate(&joint.axis);
+            let (lin, ang) = if joint.prismatic {
+                (w, [0.0; 3])
+            } else {
+                (cross(&w, &sub(&p, &frames[k].translation_m)), w)
+            };
+            let (lin, ang) = if body {
+                (pose.inverse_rotate(&lin), pose.inverse_rotate(&ang))
+            } else {
+                (lin, ang)
+            };
+            jac[k][..3].copy_from_slice(&lin);
+            jac[k][3..].copy_from_slice(&ang);
+            on_path = joint.parent;
+        }
+        pose
+    }
+
+    /// Gravity torque of every joint at joint angles `q` (no deflection), into `tau`: N·m
+    /// under [`GravityModel::Masses`], m under [`GravityModel::Lumped`]; 0 for a prismatic
+    /// joint.
+    ///
+    /// `τ_j = w_j · Σ_{i ⪰ j} (c_i − o_j) × (m_i·g₀·ĝ)` over the masses on links below joint
+    /// `j` (Siciliano et al., *Robotics*, 2009, §7.2; summed over the subtree, Featherstone,
+    /// *Rigid Body Dynamics Algorithms*, 2008, §4.1), or with lumped unit weights at the
+    /// origin of every joint below and every tip below, `τ̂_j = w_j · Σ (o_i − o_j) × ĝ`
+    /// (`hapcal_problems::GravityCompliance::joint_loads`).
+    ///
+    /// # Errors
+    /// [`Error::Length`] unless `q` and `tau` have n entries; [`Error::NotFinite`] for a NaN
+    /// or infinite angle.
+    ///
+    /// # Panics
+    /// If `ws` was made for another robot.
+    #[track_caller]
+    pub fn gravity_torques(
+        &self,
+        q: &[f64],
+        ws: &mut RobotWorkspace,
+        tau: &mut [f64],
+    ) -> Result<(), Error> {
+        self.check_workspace(ws);
+        self.check_joints("joint angles", q)?;
+        check_len("gravity torques", self.n_joints(), tau.len())?;
+        self.forward(q, &mut ws.frames);
+        self.torques_from(&ws.frames, tau);
+        Ok(())
+    }
+
+    /// Adds the moment of `force` applied at `point` (root frame) to the torque of `from`
+    /// and every joint above it.
+    #[inline]
+    fn add_load(
+        &self,
+        frames: &[Pose],
+        from: Option<usize>,
+        point: &[f64; 3],
+        force: &[f64; 3],
+        tau: &mut [f64],
+    ) {
+        let mut at = from;
+        while let Some(j) = at {
+            let joint = &self.joints[j];
+            if !joint.prismatic {
+                let w = frames[j].rotate(&joint.axis);
+                let lever = sub(point, &frames[j].translation_m);
+                tau[j] += dot(&w, &cross(&lever, force));
+            }
+            at = joint.parent;
+        }
+    }
+
+    fn torques_from(&self, frames: &[Pose], tau: &mut [f64]) {
+        for t in tau.iter_mut() {
+            *t = 0.0;
+        }
+        let g = self.gravity_dir;
+        match self.gravity {
+            GravityModel::Masses => {
+                for m in &self.masses {
+                    let c = transform_point(&frames[m.joint], &m.com_m);
+                    let w = m.mass_kg * STANDARD_GRAVITY;
+                    let force = [g[0] * w, g[1] * w, g[2] * w];
+                    self.add_load(frames, Some(m.joint), &c, &force, tau);
+                }
+            }
+            GravityModel::Lumped => {
+                for (i, joint) in self.joints.iter().enumerate() {
+                    let o = frames[i].translation_m;
+                    self.add_load(frames, joint.parent, &o, &g, tau);
+                }
+                for tip in 0..self.tips.len() {
+                    let end = self.tip_link_from(tip, frames).translation_m;
+                    self.add_load(frames, self.tips[tip].parent, &end, &g, tau);
+                }
+            }
+        }
+    }
+
+    /// The joint angles θ the robot takes under its own weight when commanded `q` (rad, m
+    /// for a prismatic joint), into `theta`: the fixed point of `θ = q + k∘τ(θ)`
+    /// ([`Robot::gravity_torques`], [`Robot::compliances`]), iterated from `θ = q` until no
+    /// joint moves by more than [`DEFLECTION_TOLERANCE_RAD`] or [`DEFLECTION_ITERATIONS`]
+    /// (the calibration library's torque equilibrium, `CalibratedModel::load_angles`,
+    /// Judd & Knasinski 1990 for the compliance model). `theta = q` without compliance.
+    ///
+    /// # Errors
+    /// [`Error::Length`] unless `q` and `theta` have n entries; [`Error::NotFinite`] for a
+    /// NaN or infinite angle.
+    ///
+    /// # Panics
+    /// If `ws` was made for another robot.
+    #[track_caller]
+    pub fn deflect(
+        &self,
+        q: &[f64],
+        ws: &mut RobotWorkspace,
+        theta: &mut [f64],
+    ) -> Result<Deflection, Error> {
+        self.check_workspace(ws);
+        self.check_joints("joint angles", q)?;
+        check_len("deflected joint angles", self.n_joints(), theta.len())?;
+        Ok(self.deflect_unchecked(q, ws, theta))
+    }
+
+    /// [`Robot::deflect`] on checked inputs; leaves `ws.frames` at the joint frames of θ.
+    pub(crate) fn deflect_unchecked(
+        &self,
+        q: &[f64],
+        ws: &mut RobotWorkspace,
+        theta: &mut [f64],
+    ) -> Deflection {
+        theta.copy_from_slice(q);
+        if !self.has_compliance() {
+            self.forward(theta, &mut ws.frames);
+            return Deflection {
+                iterations: 0,
+                final_step_rad: 0.0,
+                converged: true,
+            };
+        }
+        let mut out = Deflection::default();
+        for iteration in 1..=DEFLECTION_ITERATIONS {
+            self.forward(theta, &mut ws.frames);
+            self.torques_from(&ws.frames, &mut ws.torque);
+            let mut step: f64 = 0.0;
+            let values = q.iter().zip(&self.compliance).zip(&ws.torque);
+            for (t, ((q, k), tau)) in theta.iter_mut().zip(values) {
+                let next = q + k * tau;
+                step = step.max((next - *t).abs());
+                *t = next;
+            }
+            out = Deflection {
+                iterations: iteration,
+                final_step_rad: step,
+                converged: step <= DEFLECTION_TOLERANCE_RAD,
+            };
+            if out.converged {
+                break;
+            }
+        }
+        self.forward(theta, &mut ws.frames);
+        out
+    }
+
+    /// Pose of every tip of the robot deflected under its own weight when commanded `q`
+    /// (see [`Robot::deflect`] and [`Robot::tip_poses`]), with the iterations taken.
+    ///
+    /// # Errors
+    /// As [`Robot::tip_poses`].
+    ///
+    /// # Panics
+    /// If `ws` was made for another robot.
+    #[track_caller]
+    pub fn deflected_tip_poses(
+        &self,
+        q: &[f64],
+        ws: &mut RobotWorkspace,
+        out: &mut [Pose],
+    ) -> Result<Deflection, Error> {
+        self.check_workspace(ws);
+        self.check_joints("joint angles", q)?;
+        check_len("tip poses", self.tips.len(), out.len())?;
+        let mut theta = core::mem::take(&mut ws.theta);
+        let deflection = self.deflect_unchecked(q, ws, &mut theta);
+        ws.theta = theta;
+        for (tip, pose) in out.iter_mut().enumerate() {
+            *pose = self.tip_from(tip, &ws.frames);
+        }
+        Ok(deflection)
+    }
+
+    /// The deflected pose of tip `tip` and its spatial Jacobian with respect to the deflected
+    /// angles θ (the rigid Jacobian at θ; the compliance's own `∂θ/∂q = (I − K·∂τ/∂θ)⁻¹` is
+    /// left out, a relative change of about `k·∂τ/∂θ`), with the deflection's iterations.
+    pub(crate) fn deflected_jacobian(
+        &self,
+        tip: usize,
+        q: &[f64],
+        ws: &mut RobotWorkspace,
+    ) -> (Pose, Deflection) {
+        let mut theta = core::mem::take(&mut ws.theta);
+        let deflection = self.deflect_unchecked(q, ws, &mut theta);
+        ws.theta = theta;
+        let mut jac = core::mem::take(&mut ws.jac);
+        let pose = self.jacobian_from(tip, &ws.frames, &mut jac, false);
+        ws.jac = jac;
+        (pose, deflection)
+    }
+}
