@@ -748,7 +748,7 @@ fn joint_label(robot: &Robot, j: usize) -> String {
 
 /// The links one and two moving joints above and below `tip` in the URDF, each with how
 /// many moving joints it lies above (negative) or below (positive) the tip.
-fn tip_candidates(urdf: &urdf_rs::Robot, tip: &str) -> Vec<(String, isize)> {
+fn tip_candidates(urdf: &urdf_rs::Robot, tip: &str) -> Vec<(String, isize, Vec<String>)> {
     let moving = |j: &urdf_rs::Joint| !matches!(j.joint_type, urdf_rs::JointType::Fixed);
     let mut out = Vec::new();
     // Up: the parent link of the first and second moving joints above the tip.
@@ -761,7 +761,7 @@ fn tip_candidates(urdf: &urdf_rs::Robot, tip: &str) -> Vec<(String, isize)> {
         link.clone_from(&joint.parent.link);
         if moving(joint) {
             crossed += 1;
-            out.push((link.clone(), -crossed));
+            out.push((link.clone(), -crossed, Vec::new()));
             if crossed == 2 {
                 break;
             }
@@ -769,22 +769,86 @@ fn tip_candidates(urdf: &urdf_rs::Robot, tip: &str) -> Vec<(String, isize)> {
     }
     // Down: the child link of the first and second moving joints below the tip, on every
     // branch (at most a few).
-    let mut frontier: Vec<(String, isize)> = vec![(tip.to_owned(), 0)];
+    let mut frontier: Vec<(String, isize, Vec<String>)> = vec![(tip.to_owned(), 0, Vec::new())];
     for _ in 0..urdf.joints.len() {
-        let Some((link, depth)) = frontier.pop() else {
+        let Some((link, depth, joints)) = frontier.pop() else {
             break;
         };
         for joint in urdf.joints.iter().filter(|j| j.parent.link == link) {
-            let d = depth + isize::from(moving(joint));
+            let mut joints = joints.clone();
+            let d = if moving(joint) {
+                joints.push(joint.name.clone());
+                depth + 1
+            } else {
+                depth
+            };
             if d > depth {
-                out.push((joint.child.link.clone(), d));
+                out.push((joint.child.link.clone(), d, joints.clone()));
             }
             if d < 2 && out.len() < 8 {
-                frontier.push((joint.child.link.clone(), d));
+                frontier.push((joint.child.link.clone(), d, joints));
             }
         }
     }
     out
+}
+
+/// Whether every file's header has a column for each of `joints` (by name, or as `q{n}` past
+/// the `n_joints` the robot has).
+fn has_columns(headers: &[Vec<String>], joints: &[String], n_joints: usize) -> bool {
+    headers.iter().all(|h| {
+        joints
+            .iter()
+            .enumerate()
+            .all(|(i, name)| h.contains(name) || h.contains(&format!("q{}", n_joints + i + 1)))
+    })
+}
+
+/// The robot of a URDF for each set of tips in `tip_sets`, from one reading of the URDF (with
+/// the union of the tips): the robot of [`measured::robot_from_urdf`] without link masses
+/// (the frames-only fits do not use them); `None` for a set that does not build.
+fn robots_for_tips(urdf: &Path, tip_sets: &[Vec<String>]) -> Vec<Option<Robot>> {
+    let mut all: Vec<String> = Vec::new();
+    for t in tip_sets.iter().flatten() {
+        if !all.contains(t) {
+            all.push(t.clone());
+        }
+    }
+    let Ok(description) = hapcal_io::import_urdf_tips(urdf, &all) else {
+        // One bad tip spoils the union: each set on its own.
+        return (tip_sets.iter())
+            .map(|set| measured::robot_from_urdf(urdf, set).ok())
+            .collect();
+    };
+    tip_sets
+        .iter()
+        .map(|set| {
+            let paths: Vec<_> = (set.iter())
+                .map(|t| {
+                    let i = all.iter().position(|a| a == t)?;
+                    description.paths.get(i).cloned()
+                })
+                .collect::<Option<_>>()?;
+            let tree = hapcal_kinematics::Tree::from_placement_paths(&paths).ok()?;
+            let joint_names = tree.joint_names().to_vec();
+            let limits = (joint_names.iter())
+                .map(|n| {
+                    let j = description.joints.iter().find(|j| &j.name == n)?;
+                    Some((j.lower_rad, j.upper_rad))
+                })
+                .collect::<Option<Vec<_>>>()?;
+            let prismatic = (hapcal_kinematics::joint_motions(tree.tips()).iter())
+                .map(|m| *m == Some(hapcal_kinematics::Motion::Translation))
+                .collect();
+            Some(Robot {
+                joint_names,
+                prismatic,
+                limits,
+                masses: Vec::new(),
+                tree,
+            })
+        })
+        .collect()
 }
 
 /// The hypotheses of a mistake for `input`.
@@ -1068,40 +1132,46 @@ fn hypotheses(input: &SetupInput<'_>) -> Vec<Hypothesis> {
         }
     }
 
-    // The tip link.
+    // The tip link: the candidates whose joints the files have columns for, their robots
+    // from one reading of the URDF.
     if let Some(urdf) = input.urdf
         && let Ok(description) = urdf_rs::read_file(urdf)
     {
+        let mut candidates = Vec::new();
         for (t, tip) in input.tips.iter().enumerate() {
-            for (link, steps) in tip_candidates(&description, tip) {
-                if input.tips.contains(&link) {
+            for (link, steps, joints) in tip_candidates(&description, tip) {
+                if input.tips.contains(&link) || !has_columns(&headers, &joints, n) {
                     continue;
                 }
                 let mut tips = input.tips.to_vec();
                 if let Some(slot) = tips.get_mut(t) {
                     slot.clone_from(&link);
                 }
-                let Ok(other) = measured::robot_from_urdf(urdf, &tips) else {
-                    continue;
-                };
-                let Ok(reread) = measured::load_tables(&paths, &other, units) else {
-                    continue;
-                };
-                let k = steps.unsigned_abs();
-                let joints = if k == 1 { "joint" } else { "joints" };
-                let side = if steps > 0 { "below" } else { "above" };
-                let flags: Vec<String> = tips.iter().map(|t| format!("--tip {t}")).collect();
-                out.push(Hypothesis {
-                    class: MistakeClass::TipLink,
-                    what: format!(
-                        "the markers sit on {link}, {k} moving {joints} {side} the tip {tip}"
-                    ),
-                    fix: format!("use {}", flags.join(" ")),
-                    robot: Some(other),
-                    tables: reread,
-                    marker_tips: None,
-                });
+                candidates.push((tip.clone(), link, steps, tips));
             }
+        }
+        let sets: Vec<Vec<String>> = candidates.iter().map(|c| c.3.clone()).collect();
+        for ((tip, link, steps, tips), other) in
+            candidates.into_iter().zip(robots_for_tips(urdf, &sets))
+        {
+            let Some(other) = other else { continue };
+            let Ok(reread) = measured::load_tables(&paths, &other, units) else {
+                continue;
+            };
+            let k = steps.unsigned_abs();
+            let joints = if k == 1 { "joint" } else { "joints" };
+            let side = if steps > 0 { "below" } else { "above" };
+            let flags: Vec<String> = tips.iter().map(|t| format!("--tip {t}")).collect();
+            out.push(Hypothesis {
+                class: MistakeClass::TipLink,
+                what: format!(
+                    "the markers sit on {link}, {k} moving {joints} {side} the tip {tip}"
+                ),
+                fix: format!("use {}", flags.join(" ")),
+                robot: Some(other),
+                tables: reread,
+                marker_tips: None,
+            });
         }
     }
     out
@@ -1160,8 +1230,8 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
         .collect();
     results.sort_by(|a, b| b.2.total_cmp(&a.2));
     let n_results = results.len();
-    let suspicious = !as_given.is_plausible()
-        || results.first().is_some_and(|r| r.2 >= SUGGESTIVE_FACTOR);
+    let suspicious =
+        !as_given.is_plausible() || results.first().is_some_and(|r| r.2 >= SUGGESTIVE_FACTOR);
     if suspicious {
         // The full fit of the data as given and of the three best hypotheses.
         if let Some(full) = frames_only_residual(input.robot, input.tables, &given_tips) {
@@ -1347,7 +1417,7 @@ pub fn check_plan(plan: &crate::calibrate::Plan) -> Result<Option<SetupReport>> 
 fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> Option<SetupReport> {
     let description = urdf_rs::read_file(urdf).ok()?;
     for (t, tip) in tips.iter().enumerate() {
-        for (link, steps) in tip_candidates(&description, tip) {
+        for (link, steps, _) in tip_candidates(&description, tip) {
             if steps > 0 || tips.contains(&link) {
                 continue;
             }
