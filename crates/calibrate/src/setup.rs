@@ -1513,6 +1513,75 @@ mod tests {
         assert!("mm".parse::<MistakeClass>().is_err());
     }
 
+    fn ur10() -> (Robot, Vec<MeasurementTable>) {
+        let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures");
+        let robot = measured::robot_from_urdf(
+            &root.join("figaroh/ur10/ur10_robot.urdf"),
+            &["wrist_3_link".to_owned()],
+        )
+        .expect("the UR10 URDF");
+        let tables = measured::load_tables(
+            &[root.join("figaroh/ur10/calibration.csv")],
+            &robot,
+            &Units::default(),
+        )
+        .expect("the UR10 recording");
+        (robot, tables)
+    }
+
+    #[test]
+    fn closed_form_screening_reaches_the_full_frames_only_fit() {
+        // Both minimise Σ|e_p|²/σ_p² + θ²/σ_θ² over the frames at σ_p = 1 mm, σ_θ = 0.01 rad;
+        // they differ by how far each converged, a fraction of a per cent.
+        let (robot, tables) = ur10();
+        let closed = closed_form_residual(&robot, &tables, &[0]).expect("marker data");
+        let full = frames_only_residual(&robot, &tables, &[0]).expect("a fit");
+        let (c, f) = (
+            closed.length_rms_m.expect("positions"),
+            full.length_rms_m.expect("positions"),
+        );
+        assert!((c - f).abs() <= 0.01 * f, "{c} vs {f}");
+        let (c, f) = (
+            closed.orientation_rms_rad.expect("poses"),
+            full.orientation_rms_rad.expect("poses"),
+        );
+        assert!((c - f).abs() <= 0.01 * f, "{c} vs {f}");
+    }
+
+    #[test]
+    fn every_reflection_of_the_positions_leaves_the_same_residual() {
+        // diag(−1, 1, 1) and the swap of x and z differ by a rotation, which the instrument
+        // and marker frames take up: the residuals agree to the fit's convergence.
+        let (robot, tables) = ur10();
+        let mut mirror = nalgebra::Matrix3::identity();
+        mirror[(0, 0)] = -1.0;
+        let mut swap = nalgebra::Matrix3::zeros();
+        swap[(0, 2)] = 1.0;
+        swap[(2, 0)] = 1.0;
+        swap[(1, 1)] = 1.0;
+        let a = closed_form_residual(&robot, &reflect(&tables, &mirror), &[0]).expect("a fit");
+        let b = closed_form_residual(&robot, &reflect(&tables, &swap), &[0]).expect("a fit");
+        let given = closed_form_residual(&robot, &tables, &[0]).expect("a fit");
+        let (la, lb) = (a.length_rms_m.expect("m"), b.length_rms_m.expect("m"));
+        assert!((la - lb).abs() <= 1e-3 * la, "{la} vs {lb}");
+        // And a reflection is no rotation: far worse than the data as given.
+        assert!(la > 3.0 * given.length_rms_m.expect("m"), "{la}");
+    }
+
+    #[test]
+    fn thinning_keeps_evenly_spaced_rows_up_to_the_cap() {
+        let (_, tables) = ur10();
+        let mut long = tables.clone();
+        let rows = long[0].rows.clone();
+        while long[0].rows.len() < 3 * MAX_CHECK_ROWS {
+            long[0].rows.extend(rows.iter().cloned());
+        }
+        let n = long[0].rows.len();
+        let thin = thinned(&long);
+        assert_eq!(thin[0].rows.len(), MAX_CHECK_ROWS.min(n));
+        assert_eq!(thinned(&tables)[0].rows.len(), tables[0].rows.len());
+    }
+
     #[test]
     fn gain_takes_the_better_channel_unless_the_other_grows() {
         let r = |l: f64, o: f64| Residual {
