@@ -6,10 +6,13 @@
 //! mirrored or swapped position axis (one hypothesis: a left-handed frame), joint columns in the wrong order, joint rows out of step
 //! with the measurement rows, the tip link one or two moving joints up or down the chain, tips
 //! given in the wrong order), the data are corrected as the hypothesis says, the frames only
-//! are fitted ([`measured::frames_only`]: the nominal kinematics with the instrument and
-//! marker frames, a few milliseconds) and the frames-only residual compared with that of the
-//! data as given. A joint column that never changes while the robot's description lets the
-//! joint move is found from the data directly.
+//! are fitted (the nominal kinematics with the instrument and marker frames) and the
+//! frames-only residual compared with that of the data as given. Every hypothesis is screened
+//! with a closed-form fit ([`closed_form_residual`], microseconds per row); when something
+//! looks wrong, the data as given and the three best hypotheses are refitted with the
+//! calibration's own frames-only fit ([`measured::frames_only`]), whose residuals the findings
+//! report. A joint column that never changes while the robot's description lets the joint
+//! move is found from the data directly.
 //!
 //! A hypothesis without a free parameter lowers the residual of right data only by chance:
 //! the frames-only residual of right data is the instrument's noise plus the robot's
