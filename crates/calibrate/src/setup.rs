@@ -276,6 +276,22 @@ impl Finding {
     }
 }
 
+/// The hypothesis of a mistake that lowered the frames-only residual most.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ClosestHypothesis {
+    /// Its class.
+    pub class: MistakeClass,
+    /// The flag or edit it stands for.
+    pub fix: String,
+    /// The frames-only residual of the data as it corrects them.
+    pub after: Residual,
+    /// How many times it divides the residual as given (position residual relative to the
+    /// data's spread, or orientation residual; below 1: every hypothesis raises it); `None`
+    /// when the data do not read as given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gain: Option<f64>,
+}
+
 /// Everything the setup check found.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct SetupReport {
@@ -285,15 +301,10 @@ pub struct SetupReport {
     pub as_given: Residual,
     /// Hypotheses of a mistake fitted.
     pub n_hypotheses: usize,
-    /// The hypothesis that lowered the residual most, its fix and the residual under it
-    /// (reported whether or not it is a finding).
+    /// The hypothesis that lowered the residual most (reported whether or not it is a
+    /// finding).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub best: Option<(String, Residual)>,
-    /// How many times the best hypothesis divides the residual as given (position residual
-    /// relative to the data's spread, or orientation residual; below 1: every hypothesis
-    /// raises it).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub best_gain: Option<f64>,
+    pub closest: Option<ClosestHypothesis>,
     /// Findings, errors first.
     pub findings: Vec<Finding>,
 }
@@ -320,10 +331,14 @@ impl SetupReport {
                 self.n_hypotheses
             )
         };
-        if let (Some((fix, r)), Some(g)) = (&self.best, self.best_gain) {
+        if let Some(c) = &self.closest
+            && let Some(g) = c.gain
+        {
             out.push_str(&format!(
-                "  closest hypothesis: {fix} (frames-only RMS {}, gain {g:.2}×)\n",
-                r.text()
+                "  closest hypothesis [{}]: {} (frames-only RMS {}, gain {g:.2}×)\n",
+                c.class,
+                c.fix,
+                c.after.text()
             ));
         }
         if self.findings.is_empty() {
@@ -1357,8 +1372,12 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
         n_rows,
         as_given,
         n_hypotheses: n_results,
-        best: best.map(|(h, after, _)| (h.fix.clone(), after)),
-        best_gain: best.map(|(_, _, g)| g),
+        closest: best.map(|(h, after, g)| ClosestHypothesis {
+            class: h.class,
+            fix: h.fix.clone(),
+            after,
+            gain: Some(g),
+        }),
         findings,
     })
 }
@@ -1459,8 +1478,12 @@ fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> O
                 n_rows: tables.iter().map(|t| t.rows.len()).sum(),
                 as_given: Residual::default(),
                 n_hypotheses: 1,
-                best: Some((finding.fix.clone(), after)),
-                best_gain: None,
+                closest: Some(ClosestHypothesis {
+                    class: MistakeClass::TipLink,
+                    fix: finding.fix.clone(),
+                    after,
+                    gain: None,
+                }),
                 findings: vec![finding],
             });
         }
