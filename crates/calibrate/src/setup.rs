@@ -6,10 +6,13 @@
 //! mirrored or swapped position axis (one hypothesis: a left-handed frame), joint columns in the wrong order, joint rows out of step
 //! with the measurement rows, the tip link one or two moving joints up or down the chain, tips
 //! given in the wrong order), the data are corrected as the hypothesis says, the frames only
-//! are fitted ([`measured::frames_only`]: the nominal kinematics with the instrument and
-//! marker frames, a few milliseconds) and the frames-only residual compared with that of the
-//! data as given. A joint column that never changes while the robot's description lets the
-//! joint move is found from the data directly.
+//! are fitted (the nominal kinematics with the instrument and marker frames) and the
+//! frames-only residual compared with that of the data as given. Every hypothesis is screened
+//! with a closed-form fit ([`closed_form_residual`], microseconds per row); when something
+//! looks wrong, the data as given and the three best hypotheses are refitted with the
+//! calibration's own frames-only fit ([`measured::frames_only`]), whose residuals the findings
+//! report. A joint column that never changes while the robot's description lets the joint
+//! move is found from the data directly.
 //!
 //! A hypothesis without a free parameter lowers the residual of right data only by chance:
 //! the frames-only residual of right data is the instrument's noise plus the robot's
@@ -274,6 +277,22 @@ impl Finding {
     }
 }
 
+/// The hypothesis of a mistake that lowered the frames-only residual most.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ClosestHypothesis {
+    /// Its class.
+    pub class: MistakeClass,
+    /// The flag or edit it stands for.
+    pub fix: String,
+    /// The frames-only residual of the data as it corrects them.
+    pub after: Residual,
+    /// How many times it divides the residual as given (position residual relative to the
+    /// data's spread, or orientation residual; below 1: every hypothesis raises it); `None`
+    /// when the data do not read as given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gain: Option<f64>,
+}
+
 /// Everything the setup check found.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct SetupReport {
@@ -283,15 +302,10 @@ pub struct SetupReport {
     pub as_given: Residual,
     /// Hypotheses of a mistake fitted.
     pub n_hypotheses: usize,
-    /// The hypothesis that lowered the residual most, its fix and the residual under it
-    /// (reported whether or not it is a finding).
+    /// The hypothesis that lowered the residual most (reported whether or not it is a
+    /// finding).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub best: Option<(String, Residual)>,
-    /// How many times the best hypothesis divides the residual as given (position residual
-    /// relative to the data's spread, or orientation residual; below 1: every hypothesis
-    /// raises it).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub best_gain: Option<f64>,
+    pub closest: Option<ClosestHypothesis>,
     /// Findings, errors first.
     pub findings: Vec<Finding>,
 }
@@ -318,10 +332,14 @@ impl SetupReport {
                 self.n_hypotheses
             )
         };
-        if let (Some((fix, r)), Some(g)) = (&self.best, self.best_gain) {
+        if let Some(c) = &self.closest
+            && let Some(g) = c.gain
+        {
             out.push_str(&format!(
-                "  closest hypothesis: {fix} (frames-only RMS {}, gain {g:.2}×)\n",
-                r.text()
+                "  closest hypothesis [{}]: {} (frames-only RMS {}, gain {g:.2}×)\n",
+                c.class,
+                c.fix,
+                c.after.text()
             ));
         }
         if self.findings.is_empty() {
@@ -749,7 +767,7 @@ fn joint_label(robot: &Robot, j: usize) -> String {
 
 /// The links one and two moving joints above and below `tip` in the URDF, each with how
 /// many moving joints it lies above (negative) or below (positive) the tip.
-fn tip_candidates(urdf: &urdf_rs::Robot, tip: &str) -> Vec<(String, isize)> {
+fn tip_candidates(urdf: &urdf_rs::Robot, tip: &str) -> Vec<(String, isize, Vec<String>)> {
     let moving = |j: &urdf_rs::Joint| !matches!(j.joint_type, urdf_rs::JointType::Fixed);
     let mut out = Vec::new();
     // Up: the parent link of the first and second moving joints above the tip.
@@ -762,7 +780,7 @@ fn tip_candidates(urdf: &urdf_rs::Robot, tip: &str) -> Vec<(String, isize)> {
         link.clone_from(&joint.parent.link);
         if moving(joint) {
             crossed += 1;
-            out.push((link.clone(), -crossed));
+            out.push((link.clone(), -crossed, Vec::new()));
             if crossed == 2 {
                 break;
             }
@@ -770,22 +788,86 @@ fn tip_candidates(urdf: &urdf_rs::Robot, tip: &str) -> Vec<(String, isize)> {
     }
     // Down: the child link of the first and second moving joints below the tip, on every
     // branch (at most a few).
-    let mut frontier: Vec<(String, isize)> = vec![(tip.to_owned(), 0)];
+    let mut frontier: Vec<(String, isize, Vec<String>)> = vec![(tip.to_owned(), 0, Vec::new())];
     for _ in 0..urdf.joints.len() {
-        let Some((link, depth)) = frontier.pop() else {
+        let Some((link, depth, joints)) = frontier.pop() else {
             break;
         };
         for joint in urdf.joints.iter().filter(|j| j.parent.link == link) {
-            let d = depth + isize::from(moving(joint));
+            let mut joints = joints.clone();
+            let d = if moving(joint) {
+                joints.push(joint.name.clone());
+                depth + 1
+            } else {
+                depth
+            };
             if d > depth {
-                out.push((joint.child.link.clone(), d));
+                out.push((joint.child.link.clone(), d, joints.clone()));
             }
             if d < 2 && out.len() < 8 {
-                frontier.push((joint.child.link.clone(), d));
+                frontier.push((joint.child.link.clone(), d, joints));
             }
         }
     }
     out
+}
+
+/// Whether every file's header has a column for each of `joints` (by name, or as `q{n}` past
+/// the `n_joints` the robot has).
+fn has_columns(headers: &[Vec<String>], joints: &[String], n_joints: usize) -> bool {
+    headers.iter().all(|h| {
+        joints
+            .iter()
+            .enumerate()
+            .all(|(i, name)| h.contains(name) || h.contains(&format!("q{}", n_joints + i + 1)))
+    })
+}
+
+/// The robot of a URDF for each set of tips in `tip_sets`, from one reading of the URDF (with
+/// the union of the tips): the robot of [`measured::robot_from_urdf`] without link masses
+/// (the frames-only fits do not use them); `None` for a set that does not build.
+fn robots_for_tips(urdf: &Path, tip_sets: &[Vec<String>]) -> Vec<Option<Robot>> {
+    let mut all: Vec<String> = Vec::new();
+    for t in tip_sets.iter().flatten() {
+        if !all.contains(t) {
+            all.push(t.clone());
+        }
+    }
+    let Ok(description) = hapcal_io::import_urdf_tips(urdf, &all) else {
+        // One bad tip spoils the union: each set on its own.
+        return (tip_sets.iter())
+            .map(|set| measured::robot_from_urdf(urdf, set).ok())
+            .collect();
+    };
+    tip_sets
+        .iter()
+        .map(|set| {
+            let paths: Vec<_> = (set.iter())
+                .map(|t| {
+                    let i = all.iter().position(|a| a == t)?;
+                    description.paths.get(i).cloned()
+                })
+                .collect::<Option<_>>()?;
+            let tree = hapcal_kinematics::Tree::from_placement_paths(&paths).ok()?;
+            let joint_names = tree.joint_names().to_vec();
+            let limits = (joint_names.iter())
+                .map(|n| {
+                    let j = description.joints.iter().find(|j| &j.name == n)?;
+                    Some((j.lower_rad, j.upper_rad))
+                })
+                .collect::<Option<Vec<_>>>()?;
+            let prismatic = (hapcal_kinematics::joint_motions(tree.tips()).iter())
+                .map(|m| *m == Some(hapcal_kinematics::Motion::Translation))
+                .collect();
+            Some(Robot {
+                joint_names,
+                prismatic,
+                limits,
+                masses: Vec::new(),
+                tree,
+            })
+        })
+        .collect()
 }
 
 /// The hypotheses of a mistake for `input`.
@@ -1069,40 +1151,46 @@ fn hypotheses(input: &SetupInput<'_>) -> Vec<Hypothesis> {
         }
     }
 
-    // The tip link.
+    // The tip link: the candidates whose joints the files have columns for, their robots
+    // from one reading of the URDF.
     if let Some(urdf) = input.urdf
         && let Ok(description) = urdf_rs::read_file(urdf)
     {
+        let mut candidates = Vec::new();
         for (t, tip) in input.tips.iter().enumerate() {
-            for (link, steps) in tip_candidates(&description, tip) {
-                if input.tips.contains(&link) {
+            for (link, steps, joints) in tip_candidates(&description, tip) {
+                if input.tips.contains(&link) || !has_columns(&headers, &joints, n) {
                     continue;
                 }
                 let mut tips = input.tips.to_vec();
                 if let Some(slot) = tips.get_mut(t) {
                     slot.clone_from(&link);
                 }
-                let Ok(other) = measured::robot_from_urdf(urdf, &tips) else {
-                    continue;
-                };
-                let Ok(reread) = measured::load_tables(&paths, &other, units) else {
-                    continue;
-                };
-                let k = steps.unsigned_abs();
-                let joints = if k == 1 { "joint" } else { "joints" };
-                let side = if steps > 0 { "below" } else { "above" };
-                let flags: Vec<String> = tips.iter().map(|t| format!("--tip {t}")).collect();
-                out.push(Hypothesis {
-                    class: MistakeClass::TipLink,
-                    what: format!(
-                        "the markers sit on {link}, {k} moving {joints} {side} the tip {tip}"
-                    ),
-                    fix: format!("use {}", flags.join(" ")),
-                    robot: Some(other),
-                    tables: reread,
-                    marker_tips: None,
-                });
+                candidates.push((tip.clone(), link, steps, tips));
             }
+        }
+        let sets: Vec<Vec<String>> = candidates.iter().map(|c| c.3.clone()).collect();
+        for ((tip, link, steps, tips), other) in
+            candidates.into_iter().zip(robots_for_tips(urdf, &sets))
+        {
+            let Some(other) = other else { continue };
+            let Ok(reread) = measured::load_tables(&paths, &other, units) else {
+                continue;
+            };
+            let k = steps.unsigned_abs();
+            let joints = if k == 1 { "joint" } else { "joints" };
+            let side = if steps > 0 { "below" } else { "above" };
+            let flags: Vec<String> = tips.iter().map(|t| format!("--tip {t}")).collect();
+            out.push(Hypothesis {
+                class: MistakeClass::TipLink,
+                what: format!(
+                    "the markers sit on {link}, {k} moving {joints} {side} the tip {tip}"
+                ),
+                fix: format!("use {}", flags.join(" ")),
+                robot: Some(other),
+                tables: reread,
+                marker_tips: None,
+            });
         }
     }
     out
@@ -1285,8 +1373,12 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
         n_rows,
         as_given,
         n_hypotheses: n_results,
-        best: best.map(|(h, after, _)| (h.fix.clone(), after)),
-        best_gain: best.map(|(_, _, g)| g),
+        closest: best.map(|(h, after, g)| ClosestHypothesis {
+            class: h.class,
+            fix: h.fix.clone(),
+            after,
+            gain: Some(g),
+        }),
         findings,
     })
 }
@@ -1348,7 +1440,7 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
 fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> Option<SetupReport> {
     let description = urdf_rs::read_file(urdf).ok()?;
     for (t, tip) in tips.iter().enumerate() {
-        for (link, steps) in tip_candidates(&description, tip) {
+        for (link, steps, _) in tip_candidates(&description, tip) {
             if steps > 0 || tips.contains(&link) {
                 continue;
             }
@@ -1387,8 +1479,12 @@ fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> O
                 n_rows: tables.iter().map(|t| t.rows.len()).sum(),
                 as_given: Residual::default(),
                 n_hypotheses: 1,
-                best: Some((finding.fix.clone(), after)),
-                best_gain: None,
+                closest: Some(ClosestHypothesis {
+                    class: MistakeClass::TipLink,
+                    fix: finding.fix.clone(),
+                    after,
+                    gain: None,
+                }),
                 findings: vec![finding],
             });
         }
@@ -1442,6 +1538,75 @@ mod tests {
             assert_eq!(c.name().parse::<MistakeClass>(), Ok(c));
         }
         assert!("mm".parse::<MistakeClass>().is_err());
+    }
+
+    fn ur10() -> (Robot, Vec<MeasurementTable>) {
+        let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures");
+        let robot = measured::robot_from_urdf(
+            &root.join("figaroh/ur10/ur10_robot.urdf"),
+            &["wrist_3_link".to_owned()],
+        )
+        .expect("the UR10 URDF");
+        let tables = measured::load_tables(
+            &[root.join("figaroh/ur10/calibration.csv")],
+            &robot,
+            &Units::default(),
+        )
+        .expect("the UR10 recording");
+        (robot, tables)
+    }
+
+    #[test]
+    fn closed_form_screening_reaches_the_full_frames_only_fit() {
+        // Both minimise Σ|e_p|²/σ_p² + θ²/σ_θ² over the frames at σ_p = 1 mm, σ_θ = 0.01 rad;
+        // they differ by how far each converged, a fraction of a per cent.
+        let (robot, tables) = ur10();
+        let closed = closed_form_residual(&robot, &tables, &[0]).expect("marker data");
+        let full = frames_only_residual(&robot, &tables, &[0]).expect("a fit");
+        let (c, f) = (
+            closed.length_rms_m.expect("positions"),
+            full.length_rms_m.expect("positions"),
+        );
+        assert!((c - f).abs() <= 0.01 * f, "{c} vs {f}");
+        let (c, f) = (
+            closed.orientation_rms_rad.expect("poses"),
+            full.orientation_rms_rad.expect("poses"),
+        );
+        assert!((c - f).abs() <= 0.01 * f, "{c} vs {f}");
+    }
+
+    #[test]
+    fn every_reflection_of_the_positions_leaves_the_same_residual() {
+        // diag(−1, 1, 1) and the swap of x and z differ by a rotation, which the instrument
+        // and marker frames take up: the residuals agree to the fit's convergence.
+        let (robot, tables) = ur10();
+        let mut mirror = nalgebra::Matrix3::identity();
+        mirror[(0, 0)] = -1.0;
+        let mut swap = nalgebra::Matrix3::zeros();
+        swap[(0, 2)] = 1.0;
+        swap[(2, 0)] = 1.0;
+        swap[(1, 1)] = 1.0;
+        let a = closed_form_residual(&robot, &reflect(&tables, &mirror), &[0]).expect("a fit");
+        let b = closed_form_residual(&robot, &reflect(&tables, &swap), &[0]).expect("a fit");
+        let given = closed_form_residual(&robot, &tables, &[0]).expect("a fit");
+        let (la, lb) = (a.length_rms_m.expect("m"), b.length_rms_m.expect("m"));
+        assert!((la - lb).abs() <= 1e-3 * la, "{la} vs {lb}");
+        // And a reflection is no rotation: far worse than the data as given.
+        assert!(la > 3.0 * given.length_rms_m.expect("m"), "{la}");
+    }
+
+    #[test]
+    fn thinning_keeps_evenly_spaced_rows_up_to_the_cap() {
+        let (_, tables) = ur10();
+        let mut long = tables.clone();
+        let rows = long[0].rows.clone();
+        while long[0].rows.len() < 3 * MAX_CHECK_ROWS {
+            long[0].rows.extend(rows.iter().cloned());
+        }
+        let n = long[0].rows.len();
+        let thin = thinned(&long);
+        assert_eq!(thin[0].rows.len(), MAX_CHECK_ROWS.min(n));
+        assert_eq!(thinned(&tables)[0].rows.len(), tables[0].rows.len());
     }
 
     #[test]
