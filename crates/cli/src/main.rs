@@ -351,9 +351,9 @@ enum Command {
     ImportUrdf {
         /// The URDF file.
         urdf: PathBuf,
-        /// The tip link (e.g. ball_link).
-        #[arg(long)]
-        tip: String,
+        /// The tip link (e.g. ball_link); repeat it for a tree (one [[branch]] per further tip).
+        #[arg(long = "tip", value_name = "TIP", required = true)]
+        tips: Vec<String>,
     },
 }
 
@@ -899,8 +899,8 @@ fn run(cli: Cli) -> Result<()> {
             emit(&summary);
             Ok(())
         }
-        Command::ImportUrdf { urdf, tip } => {
-            let device = hapcal_io::import_urdf(&urdf, &tip)?;
+        Command::ImportUrdf { urdf, tips } => {
+            let device = hapcal_io::import_urdf_tree(&urdf, &tips)?;
             emit(&hapcal_io::write_device(&device));
             Ok(())
         }

@@ -124,3 +124,44 @@ fn imported_tiago_says_its_torso_is_prismatic_in_m() {
         "{text}"
     );
 }
+
+/// `import-urdf` with two tips writes the tree as a device file that reads back to the URDF's
+/// own figures: the same frames-only fit on the same data, from the URDF and from the file.
+#[test]
+fn imported_tree_reads_back_to_the_urdf_figures() {
+    let dir = root().join("fixtures/sim-humanoid");
+    let urdf = show(&dir.join("humanoid.urdf"));
+    let data = show(&dir.join("mocap.csv"));
+    let out = hapcal(&["import-urdf", &urdf, "--tip", "l_hand", "--tip", "r_hand"]);
+    assert!(out.status.success(), "{}", super::stderr(&out));
+    let toml = scratch("imported-tree").join("humanoid.toml");
+    std::fs::write(&toml, &out.stdout).expect("scratch folder is writable");
+    let common = ["--data", &data, "--model", "frames-only", "--json"];
+    let mut from_urdf = vec![
+        "calibrate",
+        "--device",
+        &urdf,
+        "--tip",
+        "l_hand",
+        "--tip",
+        "r_hand",
+    ];
+    from_urdf.extend(common);
+    let toml_s = show(&toml);
+    let mut from_toml = vec!["calibrate", "--device", &toml_s];
+    from_toml.extend(common);
+    let want = position_figures(&json(&hapcal(&from_urdf)), "after");
+    let got = position_figures(&json(&hapcal(&from_toml)), "after");
+    assert_eq!(want.len(), got.len());
+    for ((set, w), (_, g)) in want.iter().zip(&got) {
+        for k in 0..3 {
+            // Same model, data and fit: equal within half the report's last digit (1 µm).
+            assert!(
+                (w[k] - g[k]).abs() < 0.5e-6,
+                "{set}: figure {k}: {} vs {}",
+                w[k],
+                g[k]
+            );
+        }
+    }
+}
