@@ -77,7 +77,7 @@ def test_bad_units_and_model(ur10: hapcal.Device) -> None:
                                         length_unit="inch")
     with pytest.raises(hapcal.HapcalError, match=r"model: expected one of .*geometric"):
         hapcal.calibrate(ur10, hapcal.Measurements.from_csv(UR10_CSV), model="best")
-    with pytest.raises(hapcal.HapcalError, match="--test-last must be a fraction"):
+    with pytest.raises(hapcal.HapcalError, match="--test-last must lie strictly between 0 and 1"):
         hapcal.calibrate(ur10, hapcal.Measurements.from_csv(UR10_CSV), test_last=1.5)
     with pytest.raises(hapcal.HapcalError, match="folds"):
         hapcal.calibrate(ur10, hapcal.Measurements.from_csv(UR10_CSV), folds=1)
