@@ -183,15 +183,10 @@ impl FleetProblem {
             } else {
                 frozen.end_point(q)
             };
-            let norm = p.coords.norm();
+            let (norm, u) = crate::problem::length_and_direction(&p.coords);
             let (phi, dphi) = cable_angle(&p);
             r[i] = (norm + c + k * phi - delta) / s;
             if let Some((g, sh)) = grads.as_mut() {
-                let u = if norm > 0.0 {
-                    p.coords / norm
-                } else {
-                    Vector3::zeros()
-                };
                 let w = (u + dphi * k) / s;
                 for (a, &j) in self.device_params.iter().enumerate() {
                     g[i * np + a] = w.x * buf[3 * j] + w.y * buf[3 * j + 1] + w.z * buf[3 * j + 2];

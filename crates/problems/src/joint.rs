@@ -4,7 +4,7 @@
 
 use faer::{Col, ColMut, ColRef, MatMut};
 use hapcal_identify::{EvalError, ParamLayout, Problem, Unit};
-use hapcal_kinematics::{Chain, FkWorkspace, ParamUnit, Vector3};
+use hapcal_kinematics::{Chain, FkWorkspace, ParamUnit};
 use hapcal_transmission::{
     Capstan, CapstanParams, Chebyshev, Error as TransmissionError, JointRad,
 };
@@ -333,16 +333,11 @@ impl JointProblem {
             } else {
                 self.chain.end_point(&x_kin, &q)
             };
-            let norm = p.coords.norm();
+            let (norm, u) = crate::problem::length_and_direction(&p.coords);
             if let Some(o) = out.as_mut() {
                 o[drow] = (norm - self.distance_m[k]) / self.sigma_distance_m;
             }
             if let Some(jm) = jac.as_mut() {
-                let u = if norm > 0.0 {
-                    p.coords / norm
-                } else {
-                    Vector3::zeros()
-                };
                 for i in 0..n_kin {
                     jm[(drow, nt + i)] =
                         (u[0] * buf[3 * i] + u[1] * buf[3 * i + 1] + u[2] * buf[3 * i + 2])

@@ -1227,16 +1227,11 @@ impl CalibrationProblem {
             match &row.kind {
                 RowKind::Distance { distance_m } => {
                     let s = self.weights.sigma_distance_m;
-                    let norm = p.coords.norm();
+                    let (norm, u) = length_and_direction(&p.coords);
                     if let Some(o) = out.as_mut() {
                         o[r] = (norm - distance_m) / s;
                     }
                     if let Some(j) = jac.as_mut() {
-                        let u = if norm > 0.0 {
-                            p.coords / norm
-                        } else {
-                            Vector3::zeros()
-                        };
                         for (col, c) in j.iter_mut().enumerate().take(n_kin + n_comp) {
                             c[r] = (0..3).map(|k| u[k] * dp(k, col)).sum::<f64>() / s;
                         }
@@ -1279,16 +1274,11 @@ impl CalibrationProblem {
         let s = self.weights.sigma_point_distance_m;
         for pd in point_distances {
             let d = Vector3::from_fn(|k, _| x[off + 3 * pd.a + k] - x[off + 3 * pd.b + k]);
-            let norm = d.norm();
+            let (norm, u) = length_and_direction(&d);
             if let Some(o) = out.as_mut() {
                 o[r] = (norm - pd.distance_m) / s;
             }
             if let Some(j) = jac.as_mut() {
-                let u = if norm > 0.0 {
-                    d / norm
-                } else {
-                    Vector3::zeros()
-                };
                 for k in 0..3 {
                     j[off + 3 * pd.a + k][r] = u[k] / s;
                     j[off + 3 * pd.b + k][r] = -u[k] / s;
@@ -1454,6 +1444,20 @@ impl CalibrationProblem {
             reason: format!("block {block} of {}", self.blocks.len()),
         })
     }
+}
+
+/// The length `|d|` of a vector (m) and its gradient `d/|d|` with respect to `d` (the unit
+/// direction; zero at the origin, where the length has no gradient): the measurement model of
+/// every distance row (cable encoder, paper eq. 5; anchor distances; the socket distance), with
+/// the chain rule through the point's Jacobian left to the caller.
+pub(crate) fn length_and_direction(d: &Vector3<f64>) -> (f64, Vector3<f64>) {
+    let norm = d.norm();
+    let u = if norm > 0.0 {
+        d / norm
+    } else {
+        Vector3::zeros()
+    };
+    (norm, u)
 }
 
 /// The inverse right Jacobian of SO(3) at the rotation vector `phi`:
