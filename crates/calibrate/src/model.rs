@@ -23,8 +23,9 @@ pub enum ModelChoice {
     /// errors of the held-out difference (and, where the calibration will be used beyond the
     /// training range of a joint, do no worse on folds that hold out that end of the range).
     /// Measurement files: frames-only, joint-offsets, geometric, compliance,
-    /// transversal-compliance. Socket recordings and distance logs: geometric, then compliance
-    /// (with mass-compliance and actuator-compliance for a robot with published link masses).
+    /// transversal-compliance. Socket recordings and distance logs: geometric, then compliance.
+    /// For a robot with published link masses, mass-compliance and actuator-compliance are
+    /// alternatives to compliance (the lowest held-out error of those that pass).
     /// A haptic device's logs: transmissions, or geometric when the logs have no
     /// external-encoder columns.
     Auto,
