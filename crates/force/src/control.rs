@@ -68,12 +68,12 @@ pub fn wrench_map(
     let dq_m = model.angle_derivatives(&readings.controller)?;
     let dq_t = truth.angle_derivatives(&readings.device)?;
     let (mut a_model, mut a_truth) = (Matrix6::zeros(), Matrix6::zeros());
-    let (drives_m, drives_t) = (model.drives(), truth.drives());
+    let (ratios_m, ratios_t) = (model.ratios(), truth.ratios());
     for (row, &j) in active.iter().enumerate() {
         // Rows of Jᵀ restricted to the unlocked joints, the model's scaled by the torque gain
         // g = (dq/dθ)_model/R_model · R_truth/(dq/dθ)_truth (R cancels when both use the
         // device file's nominal ratio).
-        let g = dq_m[j] / drives_m[j].ratio() * drives_t[j].ratio() / dq_t[j];
+        let g = dq_m[j] / ratios_m[j] * ratios_t[j] / dq_t[j];
         for k in 0..6 {
             a_model[(row, k)] = g * jm[(k, j)];
             a_truth[(row, k)] = jt[(k, j)];

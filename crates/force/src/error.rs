@@ -36,6 +36,19 @@ pub enum Error {
         /// What is wrong with it.
         message: String,
     },
+    /// The runtime ([`hapcal_runtime::Model`]) refused the device file: a placement (URDF)
+    /// chain, a malformed `[calibration.values]` entry, an invalid transmission value, …
+    #[error("runtime model: {source}")]
+    Runtime {
+        /// The runtime's error, naming the file element.
+        source: hapcal_runtime::LoadError,
+    },
+    /// The runtime refused an input while evaluating (a NaN or infinite reading).
+    #[error("runtime evaluation: {source}")]
+    Evaluate {
+        /// The runtime's error.
+        source: hapcal_runtime::Error,
+    },
     /// A slice has the wrong number of entries.
     #[error("{what}: expected {expected} entries, found {found}")]
     Length {

@@ -25,6 +25,14 @@
 //! 5. **Virtual wall** (Z_e, paper Fig. 12): stiffness K, wall moved s along the tip z axis
 //!    against the fixed handle, `w_d = (0, 0, K·s, 0, 0, 0)` ([`virtual_wall`]).
 //!
+//! **Evaluation.** The models under test, [`ForceModel::nominal`] and
+//! [`ForceModel::calibrated`], run on `hapcal-runtime` (`hapcal_runtime::Model`, loaded from
+//! the device file as a controller loads it): the study measures the code a controller runs.
+//! The truth ([`ForceModel::truth`]) is the simulated real device, no controller code, and
+//! keeps the calibration library's evaluation (hapcal-kinematics, hapcal-transmission), as do
+//! [`ForceModel::nominal_library`] and [`ForceModel::calibrated_library`], against which the
+//! runtime models are tested to 1e-12 (tests/it).
+//!
 //! Gravity is left out: the device is statically balanced but for the handle, whose weight
 //! the fixture carries (the sensor is tared). Units inside are SI; reports convert.
 //!

@@ -1,10 +1,12 @@
-//! The full static model of a device: kinematic chain plus one drive per joint.
+//! The full static model of a device: kinematic chain plus one drive per joint, evaluated
+//! by the runtime (the models a controller runs) or by the calibration library (the truth).
 
 use hapcal_io::Device;
 use hapcal_kinematics::{Chain, Isometry3, Matrix6xX};
+use hapcal_runtime::{Evaluation, MAX_JOINTS};
 use hapcal_sim::{PARALLELOGRAM_JOINT, Truth};
 use hapcal_transmission::{Capstan, CapstanParams, Chebyshev, Joint4Transmission, JointRad};
-use nalgebra::{Matrix3, Vector6};
+use nalgebra::{Matrix3, Rotation3, Translation3, UnitQuaternion, Vector6};
 
 use crate::Error;
 
@@ -87,9 +89,21 @@ impl Drive {
     }
 }
 
-/// A device as the force computation sees it: the kinematic chain with its deviations `x`
-/// and one [`Drive`] per joint. Used both for the model under test (what the controller
-/// believes) and for the truth (what the simulated device is).
+/// A device as the force computation sees it: a kinematic chain and one drive per joint.
+/// Used both for the model under test (what the controller believes) and for the truth (what
+/// the simulated device is).
+///
+/// Two evaluations stand behind it:
+///
+/// - **the runtime** ([`hapcal_runtime::Model`], allocation-free, the code a controller
+///   runs): [`ForceModel::nominal`] and [`ForceModel::calibrated`] load the device file into
+///   it exactly as [`hapcal_runtime::Model::from_toml`] reads it, so the force study
+///   measures what a controller would render;
+/// - **the calibration library** (`hapcal-kinematics` chain with deviations `x`, [`Drive`]s
+///   of `hapcal-transmission`): [`ForceModel::truth`], the simulated "real device" with its
+///   four-bar, which is no controller code; [`ForceModel::try_new`]; and
+///   [`ForceModel::nominal_library`], [`ForceModel::calibrated_library`], the independent
+///   implementation the runtime models are tested against (to 1e-12).
 ///
 /// Wrenches and Jacobians are in the **end-effector (body) frame at the end point**: a
 /// wrench `w = (f, m)` holds the force f (N) and moment m (N·m) about the end point,
@@ -98,9 +112,42 @@ impl Drive {
 /// `alpha0`, `theta0` do not matter).
 #[derive(Clone, Debug)]
 pub struct ForceModel {
-    chain: Chain,
-    x: Vec<f64>,
-    drives: Vec<Drive>,
+    eval: Eval,
+}
+
+/// How a [`ForceModel`] is evaluated.
+#[derive(Clone, Debug)]
+enum Eval {
+    /// The runtime a controller runs (boxed: its storage is fixed-size and large).
+    Runtime(Box<hapcal_runtime::Model>),
+    /// The calibration library: chain, deviations (length `chain.n_params()`), drives.
+    Library {
+        chain: Chain,
+        x: Vec<f64>,
+        drives: Vec<Drive>,
+    },
+}
+
+/// The runtime model of `device`'s file text, as [`hapcal_runtime::Model::from_toml`] reads
+/// it (the text is the device written back, [`hapcal_io::write_device`]).
+fn runtime_model(device: &Device) -> Result<ForceModel, Error> {
+    let text = hapcal_io::write_device(device);
+    let model = hapcal_runtime::Model::from_toml(&text, "device file")
+        .map_err(|source| Error::Runtime { source })?;
+    Ok(ForceModel {
+        eval: Eval::Runtime(Box::new(model)),
+    })
+}
+
+/// A runtime pose as an isometry (the rotation re-orthonormalised through a quaternion,
+/// which changes entries by rounding only).
+fn isometry(pose: &hapcal_runtime::Pose) -> Isometry3<f64> {
+    let r = Matrix3::from_fn(|i, j| pose.rotation[i][j]);
+    let [x, y, z] = pose.translation_m;
+    Isometry3::from_parts(
+        Translation3::new(x, y, z),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)),
+    )
 }
 
 /// The capstan of 1-based joint `joint`, if the device has one.
@@ -137,17 +184,55 @@ impl ForceModel {
                 found: drives.len(),
             });
         }
-        Ok(ForceModel { chain, x, drives })
+        Ok(ForceModel {
+            eval: Eval::Library { chain, x, drives },
+        })
     }
 
-    /// The nominal model of `device`: its D-H rows as written (x = 0) and ideal drives
-    /// (`q = θ`) with the nominal capstan ratios. This is the uncalibrated controller; for a
-    /// calibrated device file (rows already corrected) use [`ForceModel::calibrated`].
+    /// The nominal model of `device`, evaluated by the runtime: its D-H rows as written and
+    /// ideal drives (`q = θ`) with the nominal capstan ratios, i.e. the device file without
+    /// its `[calibration]` loaded by [`hapcal_runtime::Model::from_toml`]. This is the
+    /// uncalibrated controller; for a calibrated device file (rows already corrected) use
+    /// [`ForceModel::calibrated`]. The same model in the calibration library is
+    /// [`ForceModel::nominal_library`].
+    ///
+    /// # Errors
+    /// [`Error::Runtime`] for a device the runtime refuses: a `[[placement]]` (URDF) chain,
+    /// more than [`hapcal_runtime::MAX_JOINTS`] joints, an invalid capstan.
+    pub fn nominal(device: &Device) -> Result<ForceModel, Error> {
+        let mut nominal = device.clone();
+        nominal.calibration = None;
+        runtime_model(&nominal)
+    }
+
+    /// The calibrated model stored in a calibrated device file, evaluated by the runtime as a
+    /// controller loads it ([`hapcal_runtime::Model::from_toml`]): the same model as
+    /// [`ForceModel::calibrated_library`] (which lists the `[calibration.values]` entries it
+    /// reads), computed by other code. A device without `[calibration]` gives the nominal
+    /// model.
+    ///
+    /// # Errors
+    /// [`Error::Runtime`] naming the entry for an unknown capstan field, a joint without a
+    /// capstan, a wrong unit, a gap in the Chebyshev indices or invalid capstan parameters;
+    /// and those of [`ForceModel::nominal`].
+    pub fn calibrated(device: &Device) -> Result<ForceModel, Error> {
+        runtime_model(device)
+    }
+
+    /// [`ForceModel::nominal`] evaluated by the calibration library (hapcal-kinematics,
+    /// hapcal-transmission) instead of the runtime: D-H rows as written (x = 0), ideal
+    /// capstan drives, direct drives elsewhere.
     ///
     /// # Errors
     /// [`Error::Device`] if the chain cannot be built, [`Error::Transmission`] for an invalid
     /// capstan.
-    pub fn nominal(device: &Device) -> Result<ForceModel, Error> {
+    pub fn nominal_library(device: &Device) -> Result<ForceModel, Error> {
+        let (chain, x, drives) = ForceModel::nominal_parts(device)?;
+        ForceModel::try_new(chain, x, drives)
+    }
+
+    /// Chain, zero deviations and ideal drives of [`ForceModel::nominal_library`].
+    fn nominal_parts(device: &Device) -> Result<(Chain, Vec<f64>, Vec<Drive>), Error> {
         let chain = device.chain().map_err(|source| Error::Device { source })?;
         let mut drives = Vec::with_capacity(chain.n_joints());
         for joint in 1..=chain.n_joints() {
@@ -160,11 +245,12 @@ impl ForceModel {
             });
         }
         let x = vec![0.0; chain.n_params()];
-        ForceModel::try_new(chain, x, drives)
+        Ok((chain, x, drives))
     }
 
-    /// The calibrated model stored in a calibrated device file: the D-H rows as written (the
-    /// identified kinematic deviations are already applied, see
+    /// [`ForceModel::calibrated`] evaluated by the calibration library instead of the
+    /// runtime, the independent implementation the runtime is tested against: the D-H rows
+    /// as written (the identified kinematic deviations are already applied, see
     /// [`Device::with_calibration`]) and drives from `[calibration.values]`:
     ///
     /// - `capstan{j}.c`, `.re`, `.r_o`, `.beta_o`, `.r_i`, `.beta_i` (units `rad`, `1`, `m`,
@@ -179,13 +265,13 @@ impl ForceModel {
     /// # Errors
     /// [`Error::Calibration`] naming the entry for an unknown suffix, a joint without a
     /// capstan, a wrong unit, a gap in the Chebyshev indices or invalid capstan parameters;
-    /// and the errors of [`ForceModel::nominal`].
-    pub fn calibrated(device: &Device) -> Result<ForceModel, Error> {
-        let mut model = ForceModel::nominal(device)?;
+    /// and the errors of [`ForceModel::nominal_library`].
+    pub fn calibrated_library(device: &Device) -> Result<ForceModel, Error> {
+        let (chain, x, mut drives) = ForceModel::nominal_parts(device)?;
         let Some(calibration) = &device.calibration else {
-            return Ok(model);
+            return ForceModel::try_new(chain, x, drives);
         };
-        let n_joints = model.drives.len();
+        let n_joints = drives.len();
         let mut cheb: Vec<Vec<Option<f64>>> = vec![Vec::new(); n_joints];
         for v in &calibration.values {
             let bad = |message: String| Error::Calibration {
@@ -209,7 +295,7 @@ impl ForceModel {
             };
             if let Some(joint) = joint_of("capstan") {
                 let slot = (joint.checked_sub(1))
-                    .and_then(|j| model.drives.get_mut(j))
+                    .and_then(|j| drives.get_mut(j))
                     .ok_or_else(|| bad(format!("the device has joints 1..={n_joints}")))?;
                 let Drive::Capstan { params, .. } = slot else {
                     return Err(bad(format!("joint {joint} has no capstan")));
@@ -262,10 +348,10 @@ impl ForceModel {
                 .collect::<Result<_, _>>()?;
             let (lo, hi) = limits.get(j).copied().unwrap_or((-1.0, 1.0));
             let poly = Chebyshev::try_new(lo, hi, coeffs).map_err(|e| bad(e.to_string()))?;
-            let ratio = model.drives[j].ratio();
-            model.drives[j] = Drive::Polynomial { ratio, poly };
+            let ratio = drives[j].ratio();
+            drives[j] = Drive::Polynomial { ratio, poly };
         }
-        for (j, drive) in model.drives.iter().enumerate() {
+        for (j, drive) in drives.iter().enumerate() {
             if let Drive::Capstan { capstan, params } = drive {
                 capstan
                     .check_params(params)
@@ -275,10 +361,11 @@ impl ForceModel {
                     })?;
             }
         }
-        Ok(model)
+        ForceModel::try_new(chain, x, drives)
     }
 
-    /// The truth device: the chain with the truth's deviations, every capstan with its true
+    /// The truth device, evaluated by the calibration library (it is the simulated real
+    /// device, not controller code): the chain with the truth's deviations, every capstan with its true
     /// eq.-1 parameters, and joint [`PARALLELOGRAM_JOINT`] through its capstan and the true
     /// four-bar (lengths `L + ΔL`, crank offset `phi0_rad`; paper eqs. 1–2). Its
     /// [`ForceModel::joint_angles`] equal [`hapcal_sim::true_joint_angles`].
@@ -286,12 +373,12 @@ impl ForceModel {
     /// # Errors
     /// [`Error::Truth`] for a deviation that is not a chain parameter or a capstan the truth
     /// lacks; [`Error::Transmission`] for invalid values; and those of
-    /// [`ForceModel::nominal`].
+    /// [`ForceModel::nominal_library`].
     pub fn truth(device: &Device, truth: &Truth) -> Result<ForceModel, Error> {
-        let mut model = ForceModel::nominal(device)?;
-        model.x = hapcal_sim::truth_deviations(&model.chain, truth)
+        let (chain, _, mut drives) = ForceModel::nominal_parts(device)?;
+        let x = hapcal_sim::truth_deviations(&chain, truth)
             .map_err(|source| Error::Truth { source })?;
-        for (j, drive) in model.drives.iter_mut().enumerate() {
+        for (j, drive) in drives.iter_mut().enumerate() {
             let joint = j + 1;
             let Drive::Capstan { capstan, params } = drive else {
                 continue;
@@ -310,17 +397,42 @@ impl ForceModel {
                 *drive = Drive::Parallelogram(joint4);
             }
         }
-        Ok(model)
+        ForceModel::try_new(chain, x, drives)
     }
 
     /// Number of joints.
     pub fn n_joints(&self) -> usize {
-        self.drives.len()
+        match &self.eval {
+            Eval::Runtime(model) => model.n_joints(),
+            Eval::Library { drives, .. } => drives.len(),
+        }
     }
 
-    /// The drives, one per joint.
-    pub fn drives(&self) -> &[Drive] {
-        &self.drives
+    /// The calibration library's drives, one per joint; `None` for a model the runtime
+    /// evaluates ([`ForceModel::runtime`] has its drives).
+    pub fn library_drives(&self) -> Option<&[Drive]> {
+        match &self.eval {
+            Eval::Runtime(_) => None,
+            Eval::Library { drives, .. } => Some(drives),
+        }
+    }
+
+    /// The runtime model behind [`ForceModel::nominal`] and [`ForceModel::calibrated`], the
+    /// one a controller loads; `None` for a model the calibration library evaluates.
+    pub fn runtime(&self) -> Option<&hapcal_runtime::Model> {
+        match &self.eval {
+            Eval::Runtime(model) => Some(model),
+            Eval::Library { .. } => None,
+        }
+    }
+
+    /// Nominal ratio R of each joint's drive (motor angle per unit reading; 1 for a direct
+    /// drive), one per joint.
+    pub fn ratios(&self) -> Vec<f64> {
+        match &self.eval {
+            Eval::Runtime(model) => model.drives().iter().map(|d| d.ratio()).collect(),
+            Eval::Library { drives, .. } => drives.iter().map(Drive::ratio).collect(),
+        }
     }
 
     fn check_readings(&self, theta: &[f64]) -> Result<(), Error> {
@@ -334,21 +446,37 @@ impl ForceModel {
         Ok(())
     }
 
+    /// Joint angles q and `dq/dθ` from the runtime (n entries each).
+    fn runtime_angles(
+        model: &hapcal_runtime::Model,
+        theta: &[f64],
+    ) -> Result<(Vec<f64>, Vec<f64>), Error> {
+        let n = model.n_joints();
+        let (mut q, mut dq) = (vec![0.0; n], vec![0.0; n]);
+        (model.joint_angles(theta, &mut q, &mut dq))
+            .map_err(|source| Error::Evaluate { source })?;
+        Ok((q, dq))
+    }
+
     /// Joint angles q (rad, one per joint) for readings `theta` (rad): each drive's map.
     ///
     /// # Errors
     /// [`Error::Length`] for a wrong number of readings; [`Error::Transmission`] where a
-    /// four-bar cannot close.
+    /// four-bar cannot close; [`Error::Evaluate`] for a reading the runtime refuses (NaN or
+    /// infinite).
     pub fn joint_angles(&self, theta: &[f64]) -> Result<Vec<f64>, Error> {
         self.check_readings(theta)?;
-        (self.drives.iter().zip(theta).enumerate())
-            .map(|(j, (d, &t))| {
-                d.angle_rad(t).map_err(|source| Error::Transmission {
-                    joint: j + 1,
-                    source,
+        match &self.eval {
+            Eval::Runtime(model) => Ok(ForceModel::runtime_angles(model, theta)?.0),
+            Eval::Library { drives, .. } => (drives.iter().zip(theta).enumerate())
+                .map(|(j, (d, &t))| {
+                    d.angle_rad(t).map_err(|source| Error::Transmission {
+                        joint: j + 1,
+                        source,
+                    })
                 })
-            })
-            .collect()
+                .collect(),
+        }
     }
 
     /// `dq/dθ` of each drive at readings `theta` (rad/rad, one per joint).
@@ -357,14 +485,17 @@ impl ForceModel {
     /// As [`ForceModel::joint_angles`].
     pub fn angle_derivatives(&self, theta: &[f64]) -> Result<Vec<f64>, Error> {
         self.check_readings(theta)?;
-        (self.drives.iter().zip(theta).enumerate())
-            .map(|(j, (d, &t))| {
-                d.angle_derivative(t).map_err(|source| Error::Transmission {
-                    joint: j + 1,
-                    source,
+        match &self.eval {
+            Eval::Runtime(model) => Ok(ForceModel::runtime_angles(model, theta)?.1),
+            Eval::Library { drives, .. } => (drives.iter().zip(theta).enumerate())
+                .map(|(j, (d, &t))| {
+                    d.angle_derivative(t).map_err(|source| Error::Transmission {
+                        joint: j + 1,
+                        source,
+                    })
                 })
-            })
-            .collect()
+                .collect(),
+        }
     }
 
     /// Pose of the end-effector (tip) frame in the chain's base frame for readings `theta`
@@ -373,8 +504,17 @@ impl ForceModel {
     /// # Errors
     /// As [`ForceModel::joint_angles`].
     pub fn end_pose(&self, theta: &[f64]) -> Result<Isometry3<f64>, Error> {
-        let q = self.joint_angles(theta)?;
-        Ok(self.chain.end_pose(&self.x, &q))
+        self.check_readings(theta)?;
+        match &self.eval {
+            Eval::Runtime(model) => {
+                let pose = (model.end_pose(theta)).map_err(|source| Error::Evaluate { source })?;
+                Ok(isometry(&pose))
+            }
+            Eval::Library { chain, x, .. } => {
+                let q = self.joint_angles(theta)?;
+                Ok(chain.end_pose(x, &q))
+            }
+        }
     }
 
     /// Body Jacobian with respect to the joint angles at readings `theta`: 6 × `n_joints`,
@@ -385,30 +525,52 @@ impl ForceModel {
     /// # Errors
     /// As [`ForceModel::joint_angles`].
     pub fn body_jacobian(&self, theta: &[f64]) -> Result<Matrix6xX<f64>, Error> {
-        let q = self.joint_angles(theta)?;
-        let pose = self.chain.end_pose(&self.x, &q);
-        let rt: Matrix3<f64> = pose.rotation.to_rotation_matrix().matrix().transpose();
-        let mut jac = self.chain.geometric_jacobian(&self.x, &q);
-        for col in 0..jac.ncols() {
-            let lin = rt * jac.fixed_view::<3, 1>(0, col);
-            let ang = rt * jac.fixed_view::<3, 1>(3, col);
-            jac.fixed_view_mut::<3, 1>(0, col).copy_from(&lin);
-            jac.fixed_view_mut::<3, 1>(3, col).copy_from(&ang);
+        self.check_readings(theta)?;
+        match &self.eval {
+            Eval::Runtime(model) => {
+                let n = model.n_joints();
+                let mut jac = [[0.0; 6]; MAX_JOINTS];
+                (model.body_jacobian(theta, &mut jac[..n]))
+                    .map_err(|source| Error::Evaluate { source })?;
+                Ok(Matrix6xX::from_fn(n, |r, k| jac[k][r]))
+            }
+            Eval::Library { chain, x, .. } => {
+                let q = self.joint_angles(theta)?;
+                let pose = chain.end_pose(x, &q);
+                let rt: Matrix3<f64> = pose.rotation.to_rotation_matrix().matrix().transpose();
+                let mut jac = chain.geometric_jacobian(x, &q);
+                for col in 0..jac.ncols() {
+                    let lin = rt * jac.fixed_view::<3, 1>(0, col);
+                    let ang = rt * jac.fixed_view::<3, 1>(3, col);
+                    jac.fixed_view_mut::<3, 1>(0, col).copy_from(&lin);
+                    jac.fixed_view_mut::<3, 1>(3, col).copy_from(&ang);
+                }
+                Ok(jac)
+            }
         }
-        Ok(jac)
     }
 
     /// Motor torques (N·m, one per joint) that this model commands for the body-frame wrench
     /// `wrench` (N, N·m) at readings `theta`: `τ_j = J_bᵀ w` (paper Fig. 11's Jacobian
-    /// block), then `τ_m = τ_j·(dq/dθ)/R` per drive ([`Drive`]).
+    /// block), then `τ_m = τ_j·(dq/dθ)/R` per drive ([`Drive`]). A runtime model computes
+    /// them with [`hapcal_runtime::Model::evaluate`], as a controller does.
     ///
     /// # Errors
     /// As [`ForceModel::joint_angles`].
     pub fn motor_torques(&self, theta: &[f64], wrench: &Vector6<f64>) -> Result<Vec<f64>, Error> {
+        self.check_readings(theta)?;
+        if let Eval::Runtime(model) = &self.eval {
+            let w = [
+                wrench[0], wrench[1], wrench[2], wrench[3], wrench[4], wrench[5],
+            ];
+            let mut out = Evaluation::default();
+            (model.evaluate(theta, &w, &mut out)).map_err(|source| Error::Evaluate { source })?;
+            return Ok(out.motor_torques_nm[..model.n_joints()].to_vec());
+        }
         let tau_j = self.body_jacobian(theta)?.transpose() * wrench;
         let dq = self.angle_derivatives(theta)?;
-        Ok((self.drives.iter().zip(&dq).zip(tau_j.iter()))
-            .map(|((d, &g), &t)| t * g / d.ratio())
+        Ok((self.ratios().iter().zip(&dq).zip(tau_j.iter()))
+            .map(|((r, &g), &t)| t * g / r)
             .collect())
     }
 
@@ -426,8 +588,8 @@ impl ForceModel {
             });
         }
         let dq = self.angle_derivatives(theta)?;
-        Ok((self.drives.iter().zip(&dq).zip(tau_m))
-            .map(|((d, &g), &t)| t * d.ratio() / g)
+        Ok((self.ratios().iter().zip(&dq).zip(tau_m))
+            .map(|((r, &g), &t)| t * r / g)
             .collect())
     }
 }

@@ -82,8 +82,8 @@ fn virtual_work_holds_from_motors_to_handle() {
         let mid = model.end_pose(&theta).expect("pose");
         let dx = body_displacement(&minus, &plus, &mid);
         // Motor angle φ_m = R·θ, so δφ_m = R·2h·u over the central step.
-        let motor_work: f64 = (model.drives().iter().zip(&u).zip(&tau_m))
-            .map(|((d, du), t)| t * d.ratio() * 2.0 * h * du)
+        let motor_work: f64 = (model.ratios().iter().zip(&u).zip(&tau_m))
+            .map(|((r, du), t)| t * r * 2.0 * h * du)
             .sum();
         let handle_work = w.dot(&dx);
         let scale = motor_work.abs().max(handle_work.abs());
@@ -268,30 +268,35 @@ fn truth_model_agrees_with_the_simulator() {
 }
 
 /// The committed calibrated reference device reads back as capstans 1–3 with their identified
-/// parameters and the joint-4 polynomial; a wrong unit is an error naming the entry.
+/// parameters and the joint-4 polynomial; a wrong unit is an error naming the entry, from the
+/// library and from the runtime.
 #[test]
 fn calibrated_device_file_gives_the_calibrated_drives() {
     let path = fixtures().join("calibrated.toml");
     let device = hapcal_io::read_device(&path).expect("calibrated fixture");
-    let model = ForceModel::calibrated(&device).expect("calibrated model");
+    let model = ForceModel::calibrated_library(&device).expect("calibrated model");
+    let drives = model.library_drives().expect("a library model");
     let re1 = device
         .calibration
         .as_ref()
         .and_then(|c| c.values.iter().find(|v| v.name == "capstan1.re"))
         .map(|v| v.value)
         .expect("capstan1.re");
-    match &model.drives()[0] {
+    match &drives[0] {
         Drive::Capstan { params, .. } => assert_eq!(params.re, re1),
         other => panic!("joint 1: {other:?}"),
     }
-    match &model.drives()[3] {
+    match &drives[3] {
         Drive::Polynomial { ratio, poly } => {
             assert_eq!(*ratio, 12.0);
             assert_eq!(poly.degree(), 10);
         }
         other => panic!("joint 4: {other:?}"),
     }
-    assert!(matches!(model.drives()[6], Drive::Direct));
+    assert!(matches!(drives[6], Drive::Direct));
+    let runtime = ForceModel::calibrated(&device).expect("calibrated model");
+    assert!(runtime.runtime().is_some() && runtime.library_drives().is_none());
+    assert_eq!(runtime.ratios(), model.ratios());
 
     let mut bad = device.clone();
     if let Some(v) = (bad.calibration.as_mut())
@@ -299,11 +304,18 @@ fn calibrated_device_file_gives_the_calibrated_drives() {
     {
         v.unit = "rad".into();
     }
-    let err = ForceModel::calibrated(&bad).expect_err("wrong unit");
+    let err = ForceModel::calibrated_library(&bad).expect_err("wrong unit");
     assert!(matches!(err, Error::Calibration { .. }));
     assert_eq!(
         err.to_string(),
         "calibration value \"capstan2.r_o\": unit is \"rad\", expected \"m\""
+    );
+    let err = ForceModel::calibrated(&bad).expect_err("wrong unit");
+    assert!(matches!(err, Error::Runtime { .. }));
+    assert_eq!(
+        err.to_string(),
+        "runtime model: device file: [calibration.values] capstan2.r_o: unit is \"rad\", \
+         expected \"m\""
     );
 }
 

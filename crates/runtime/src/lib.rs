@@ -19,8 +19,9 @@
 //!   paper's force control, Fig. 11; [`Model::motor_torques`]).
 //!
 //! Storage is fixed-size ([`MAX_JOINTS`], [`MAX_ROWS`], [`MAX_COEFFS`]); errors are `Copy`
-//! values ([`Error`]). The results agree with `hapcal-force`'s `ForceModel::calibrated` and
-//! `hapcal-kinematics` to 1e-12 (tests/it).
+//! values ([`Error`]). The results agree with `hapcal-kinematics` to 1e-12 (tests/it), and
+//! with the calibration library's force model to 1e-12 (hapcal-force's tests). The force
+//! study (`hapcal-force`) evaluates its nominal and calibrated controllers with this crate.
 //!
 //! ```
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -194,7 +194,8 @@ impl Model {
     }
 
     /// The calibrated model of a device file's text (docs/design.md §5.1), the same model
-    /// as `hapcal_force::ForceModel::calibrated`:
+    /// as `hapcal_force::ForceModel::calibrated_library` (hapcal-force evaluates it through
+    /// this function):
     ///
     /// - the `[[dh]]` rows as written (`hapcal calibrate` adds the identified kinematic
     ///   deviations to them), standard or modified by `convention`;

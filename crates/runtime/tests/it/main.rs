@@ -1,5 +1,6 @@
-//! Integration tests: the runtime against the calibration library (`hapcal-force`,
-//! `hapcal-io`, `hapcal-kinematics`), central differences, and its error paths.
+//! Integration tests: the runtime against the calibration library (`hapcal-io`,
+//! `hapcal-kinematics`; its drives and motor torques are checked in hapcal-force's tests),
+//! central differences, and its error paths.
 
 mod against_library;
 mod errors;
