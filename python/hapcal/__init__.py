@@ -29,12 +29,13 @@ from typing import Any, Dict, List, Optional, Sequence, Union
 import numpy as np
 
 from . import _hapcal
-from ._hapcal import Device, HapcalError, RuntimeRobot
+from ._hapcal import Device, HapcalError, RuntimeModel, RuntimeRobot
 
 __all__ = [
     "Calibration",
     "Device",
     "HapcalError",
+    "RuntimeModel",
     "RuntimeRobot",
     "Measurements",
     "MODELS",

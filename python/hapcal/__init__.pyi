@@ -39,6 +39,18 @@ class Device:
     @property
     def tips(self) -> List[str]: ...
 
+class RuntimeModel:
+    """A calibrated haptic device in a control loop (hapcal-runtime; the object the C ABI's
+    handle holds): the device file ``hapcal calibrate`` writes."""
+
+    def __init__(self, path: PathLike) -> None: ...
+    @property
+    def n_joints(self) -> int: ...
+    def evaluate(self, theta: Sequence[float], wrench: Sequence[float]) -> Dict[str, Any]:
+        """For joint readings ``theta`` (rad) and a wrench in the tip frame (N, N·m):
+        ``q_rad``, ``dq_dtheta``, ``pose`` (4 × 4, m), ``body_jacobian`` (6 × n: linear,
+        then angular) and ``motor_torques_nm``. Raises HapcalError."""
+
 class RuntimeRobot:
     """A calibrated robot in a control loop (hapcal-runtime): the URDF and its sidecar
     ``<stem>.calibration.toml`` that ``hapcal calibrate --out robot.urdf`` writes."""

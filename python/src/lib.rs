@@ -1025,7 +1025,6 @@ fn _diagnose(
     .map_err(py_err)
 }
 
-/// hapcal's compiled core; use the `hapcal` package.
 /// A calibrated robot in a control loop (`hapcal_runtime::Robot`): loaded from the URDF and
 /// sidecar `hapcal calibrate --out robot.urdf` writes; poses of its tips, rigid or deflected
 /// under its own weight, and compensated joint commands.
@@ -1153,6 +1152,65 @@ impl PyRuntimeRobot {
     }
 }
 
+/// A calibrated haptic device in a control loop (`hapcal_runtime::Model`, the object the C ABI's
+/// handle holds): loaded from the device file `hapcal calibrate` writes (D-H rows and the
+/// `[calibration]` table), evaluated for joint readings θ.
+#[pyclass(module = "hapcal", name = "RuntimeModel", frozen)]
+struct PyRuntimeModel {
+    model: hapcal_runtime::Model,
+}
+
+#[pymethods]
+impl PyRuntimeModel {
+    /// Loads the device file `path` (TOML).
+    #[new]
+    fn new(path: PathBuf) -> PyResult<Self> {
+        let model = hapcal_runtime::Model::load(&path).map_err(runtime_err)?;
+        Ok(Self { model })
+    }
+
+    /// Number of joints n.
+    #[getter]
+    fn n_joints(&self) -> usize {
+        self.model.n_joints()
+    }
+
+    /// Everything one reading gives, as `hapcal_runtime::Model::evaluate`: for joint readings
+    /// `theta` (n values, rad) and a wrench `wrench` in the tip frame (fx, fy, fz in N, then
+    /// mx, my, mz in N·m), a dict with `q_rad` (the calibrated joint angles), `dq_dtheta`,
+    /// `pose` (4 × 4, m), `body_jacobian` (6 rows × n columns: linear, then angular) and
+    /// `motor_torques_nm`.
+    fn evaluate<'py>(
+        &self,
+        py: Python<'py>,
+        theta: Vec<f64>,
+        wrench: Vec<f64>,
+    ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let wrench: [f64; 6] = wrench.as_slice().try_into().map_err(|_| {
+            HapcalError::new_err(format!(
+                "wrench: expected 6 values (fx, fy, fz, mx, my, mz), found {}",
+                wrench.len()
+            ))
+        })?;
+        let mut e = hapcal_runtime::Evaluation::default();
+        self.model
+            .evaluate(&theta, &wrench, &mut e)
+            .map_err(runtime_err)?;
+        let n = e.n_joints;
+        let d = pyo3::types::PyDict::new(py);
+        d.set_item("q_rad", e.q_rad[..n].to_vec())?;
+        d.set_item("dq_dtheta", e.dq_dtheta[..n].to_vec())?;
+        d.set_item("pose", matrix_of(&e.pose))?;
+        let jac: Vec<Vec<f64>> = (0..6)
+            .map(|r| (0..n).map(|c| e.body_jacobian[c][r]).collect())
+            .collect();
+        d.set_item("body_jacobian", jac)?;
+        d.set_item("motor_torques_nm", e.motor_torques_nm[..n].to_vec())?;
+        Ok(d)
+    }
+}
+
+/// hapcal's compiled core; use the `hapcal` package.
 #[pymodule]
 fn _hapcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("HapcalError", m.py().get_type::<HapcalError>())?;
@@ -1160,6 +1218,7 @@ fn _hapcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyMeasurements>()?;
     m.add_class::<PyCalibration>()?;
     m.add_class::<PyRuntimeRobot>()?;
+    m.add_class::<PyRuntimeModel>()?;
     m.add_function(wrap_pyfunction!(_calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(_simulate, m)?)?;
     m.add_function(wrap_pyfunction!(_plan_poses, m)?)?;
