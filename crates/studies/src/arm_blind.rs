@@ -36,7 +36,7 @@ use anyhow::{Context, Result};
 use hapcal_calibrate::baseline::{GeometricBaseline, baseline_from_sets, baseline_from_tables};
 use hapcal_calibrate::calibrate::{DataSet, ModelChoice, Plan, load_device};
 use hapcal_calibrate::measured::{Robot, robot_from_urdf};
-use hapcal_calibrate::setup::{Severity, SetupInput, SetupReport, check_setup};
+use hapcal_calibrate::setup::{SetupInput, SetupReport, Severity, check_setup};
 use hapcal_diagnose::arm::{ArmConfig, ArmEffect, REPEAT_TOLERANCE, diagnose_arm};
 use hapcal_io::{
     MarkerSample, MeasuredRow, MeasurementTable, SocketPlacement, SocketSamples, Units,
@@ -1036,7 +1036,12 @@ impl SetupSweep {
             .filter_map(|(case, g, class, _)| {
                 Some((
                     (*g)?,
-                    format!("{} {} seed {}", case.robot.name(), case.injected.label(), case.seed),
+                    format!(
+                        "{} {} seed {}",
+                        case.robot.name(),
+                        case.injected.label(),
+                        case.seed
+                    ),
                     class.clone(),
                 ))
             })
