@@ -45,6 +45,10 @@ enum Task {
         /// Number of cases (≥ 100 for the report).
         #[arg(long, default_value_t = 256)]
         cases: usize,
+        /// Run the setup check on every positions case instead and print its findings and
+        /// counts (nothing is written).
+        #[arg(long)]
+        setup_check: bool,
     },
     /// Calibrate every MUKCa split of docs/results/mukca.md with the release binary and write
     /// the table (ours beside MUKCa's own optimiser); `--check` only verifies the acceptance
@@ -126,7 +130,7 @@ fn main() -> Result<()> {
         Task::DiagnoseReal { check } => diagnose_real::run(&sh, check),
         Task::Bench { peers, criterion } => bench::run(&sh, peers, criterion),
         Task::BlindTest { cases } => blind_test(&sh, cases),
-        Task::BlindTestArm { cases } => arm_blind::run(&sh, cases),
+        Task::BlindTestArm { cases, setup_check } => arm_blind::run(&sh, cases, setup_check),
         Task::ReproduceTables { check } => reproduce_tables(&sh, check),
     }
 }

@@ -126,3 +126,32 @@ fn one_hand_still_recovers_the_torso_compliance() {
         );
     }
 }
+
+#[test]
+fn the_simulated_humanoid_passes_the_setup_check_silently() {
+    use hapcal_calibrate::setup::{SUGGESTIVE_FACTOR, SetupInput, check_setup};
+    let robot = humanoid(&["l_hand", "r_hand"]);
+    let urdf = std::env::temp_dir()
+        .join(format!("hapcal-humanoid-{}", std::process::id()))
+        .join("humanoid-l_hand-r_hand.urdf");
+    let tips = ["l_hand".to_owned(), "r_hand".to_owned()];
+    for seed in [11, 21] {
+        let truth = truth(&robot, seed);
+        let train = table(&robot, &truth, &[0, 1], 200, seed + 1);
+        let report = check_setup(&SetupInput {
+            robot: &robot,
+            tables: std::slice::from_ref(&train),
+            urdf: Some(&urdf),
+            tips: &tips,
+            units: hapcal_io::Units::default(),
+        })
+        .unwrap();
+        assert!(report.findings.is_empty(), "{}", report.render());
+        let gain = report.closest.as_ref().and_then(|c| c.gain);
+        assert!(
+            gain.is_some_and(|g| g < SUGGESTIVE_FACTOR),
+            "{}",
+            report.render()
+        );
+    }
+}

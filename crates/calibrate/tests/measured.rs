@@ -359,3 +359,31 @@ fn harmonics_are_fitted_to_marker_data_when_asked() {
         );
     }
 }
+
+#[test]
+fn simulated_iiwa_data_pass_the_setup_check_silently() {
+    use hapcal_calibrate::setup::{SUGGESTIVE_FACTOR, SetupInput, check_setup};
+    let robot = robot();
+    let urdf =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/mukca/urdf/iiwa14.urdf");
+    // The nominal robot, the 1 mrad and the 2 mrad joint offsets of the tests above: an
+    // uncalibrated arm is no setup mistake.
+    for (offset_rad, seed) in [(0.0, 3), (1e-3, 1), (2e-3, 6)] {
+        let train = table(&robot, 120, offset_rad, seed);
+        let report = check_setup(&SetupInput {
+            robot: &robot,
+            tables: std::slice::from_ref(&train),
+            urdf: Some(&urdf),
+            tips: &["ball_link".to_owned()],
+            units: hapcal_io::Units::default(),
+        })
+        .unwrap();
+        assert!(report.findings.is_empty(), "{}", report.render());
+        let gain = report.closest.as_ref().and_then(|c| c.gain);
+        assert!(
+            gain.is_some_and(|g| g < SUGGESTIVE_FACTOR),
+            "{}",
+            report.render()
+        );
+    }
+}

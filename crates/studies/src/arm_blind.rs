@@ -36,8 +36,11 @@ use anyhow::{Context, Result};
 use hapcal_calibrate::baseline::{GeometricBaseline, baseline_from_sets, baseline_from_tables};
 use hapcal_calibrate::calibrate::{DataSet, ModelChoice, Plan, load_device};
 use hapcal_calibrate::measured::{Robot, robot_from_urdf};
+use hapcal_calibrate::setup::{SetupInput, SetupReport, Severity, check_setup};
 use hapcal_diagnose::arm::{ArmConfig, ArmEffect, REPEAT_TOLERANCE, diagnose_arm};
-use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable, SocketPlacement, SocketSamples};
+use hapcal_io::{
+    MarkerSample, MeasuredRow, MeasurementTable, SocketPlacement, SocketSamples, Units,
+};
 use hapcal_kinematics::{Chain, ParamUnit};
 use hapcal_problems::GravityCompliance;
 use nalgebra::{DMatrix, DVector, Matrix3, UnitQuaternion, Vector3};
@@ -932,7 +935,7 @@ pub fn simulate_baseline(
     setup: &ArmSetup,
     n_rows: usize,
 ) -> Result<GeometricBaseline> {
-    let mut rng = ChaCha8Rng::seed_from_u64(0x51B0_0000 + case.seed);
+    let mut rng = simulation_rng(case);
     let mut plan = Plan::bundled_default();
     plan.device = case.robot.urdf();
     plan.data = Vec::new();
@@ -959,6 +962,192 @@ pub fn simulate_baseline(
             )?
         }
     })
+}
+
+/// The random stream of `case`'s simulation (geometry, configurations, instrument, noise).
+fn simulation_rng(case: &ArmCase) -> ChaCha8Rng {
+    ChaCha8Rng::seed_from_u64(0x51B0_0000 + case.seed)
+}
+
+/// The measurement table [`simulate_baseline`] calibrates for a positions case (`n_rows`
+/// rows, all of them: the held-out last [`TEST_FRACTION`] is in the same file); `None` for a
+/// sockets case (MUKCa socket folders are not measurement files).
+pub fn simulate_positions_table(
+    case: &ArmCase,
+    setup: &ArmSetup,
+    n_rows: usize,
+) -> Option<MeasurementTable> {
+    (case.data == ArmData::Positions)
+        .then(|| simulate_positions(case, setup, n_rows, &mut simulation_rng(case)))
+}
+
+/// The setup check ([`hapcal_calibrate::setup::check_setup`]) of a positions case's table
+/// ([`simulate_positions_table`]) on the robot's URDF, tip `ball_link`, SI units, as `hapcal
+/// check` runs it on the written file; `None` for a sockets case.
+///
+/// # Errors
+/// A failed frames-only fit of the data as given.
+pub fn setup_check_case(
+    case: &ArmCase,
+    setup: &ArmSetup,
+    n_rows: usize,
+) -> Result<Option<SetupReport>> {
+    let Some(table) = simulate_positions_table(case, setup, n_rows) else {
+        return Ok(None);
+    };
+    let urdf = case.robot.urdf();
+    check_setup(&SetupInput {
+        robot: &setup.robot,
+        tables: std::slice::from_ref(&table),
+        urdf: Some(&urdf),
+        tips: &["ball_link".to_owned()],
+        units: Units::default(),
+    })
+    .map(Some)
+}
+
+/// The setup check over simulated positions cases ([`setup_sweep`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SetupSweep {
+    /// Per case: the case, the largest gain of any hypothesis (`None`: no hypothesis read),
+    /// its class, and the findings as `severity [class]: text` lines (`error: …` when the
+    /// check failed).
+    pub cases: Vec<(ArmCase, Option<f64>, String, Vec<String>)>,
+}
+
+impl SetupSweep {
+    /// Cases with a finding of severity error (or a check that failed).
+    pub fn n_errors(&self) -> usize {
+        (self.cases.iter())
+            .filter(|c| c.3.iter().any(|f| f.starts_with("error")))
+            .count()
+    }
+
+    /// Cases with warnings only.
+    pub fn n_warnings(&self) -> usize {
+        (self.cases.iter())
+            .filter(|c| !c.3.is_empty() && !c.3.iter().any(|f| f.starts_with("error")))
+            .count()
+    }
+
+    /// The largest gain of any hypothesis over every case, with its case's label and class.
+    pub fn largest_gain(&self) -> Option<(f64, String, String)> {
+        (self.cases.iter())
+            .filter_map(|(case, g, class, _)| {
+                Some((
+                    (*g)?,
+                    format!(
+                        "{} {} seed {}",
+                        case.robot.name(),
+                        case.injected.label(),
+                        case.seed
+                    ),
+                    class.clone(),
+                ))
+            })
+            .max_by(|a, b| a.0.total_cmp(&b.0))
+    }
+
+    /// Plain text: one line per case with a finding, then the counts and the largest gain.
+    pub fn text(&self) -> String {
+        let mut out = String::new();
+        for (case, _, _, findings) in &self.cases {
+            for f in findings {
+                out.push_str(&format!(
+                    "{} {} seed {}: {f}\n",
+                    case.robot.name(),
+                    case.injected.label(),
+                    case.seed
+                ));
+            }
+        }
+        out.push_str(&format!(
+            "{} positions cases: {} with an error, {} with warnings only, {} silent\n",
+            self.cases.len(),
+            self.n_errors(),
+            self.n_warnings(),
+            self.cases.len() - self.n_errors() - self.n_warnings()
+        ));
+        if let Some((g, label, class)) = self.largest_gain() {
+            out.push_str(&format!(
+                "largest gain of any hypothesis: {g:.3} ({class}, {label})\n"
+            ));
+        }
+        out
+    }
+}
+
+/// The positions cases of the setup sweep: those of `0..n_cases` ([`draw_case`]) and, since
+/// the draw gives positions data only the coupling and the third harmonic of the outside
+/// effects, a quadratic instrument and a quadratic drift of 1 mm per robot (seeds from
+/// `n_cases` on).
+pub fn setup_sweep_cases(n_cases: u64, setups: &[ArmSetup]) -> Vec<ArmCase> {
+    let n_joints = |robot: ArmRobot| {
+        (setups.iter())
+            .find(|s| s.which == robot)
+            .map_or(7, |s| s.robot.joint_names.len())
+    };
+    let drawn = (0..n_cases)
+        .map(|i| draw_case(i, n_joints(ArmRobot::ALL[((i / 8) % 2) as usize])))
+        .filter(|c| c.data == ArmData::Positions);
+    let outside = (ArmRobot::ALL.iter().enumerate()).flat_map(|(r, &robot)| {
+        [
+            Injected::QuadraticInstrument { axis: r, d: 1e-3 },
+            Injected::QuadraticDrift {
+                v: [6e-4, -6e-4, 5e-4],
+            },
+        ]
+        .into_iter()
+        .enumerate()
+        .map(move |(k, injected)| ArmCase {
+            seed: n_cases + 2 * r as u64 + k as u64,
+            robot,
+            data: ArmData::Positions,
+            kind: ArmCaseKind::Outside,
+            injected,
+        })
+    });
+    drawn.chain(outside).collect()
+}
+
+/// Runs the setup check ([`setup_check_case`]) on every case of [`setup_sweep_cases`] with
+/// `n_rows` rows, in parallel (rayon).
+///
+/// # Errors
+/// A robot that cannot be loaded (a failed check is a finding line `error: …`).
+pub fn setup_sweep(n_cases: u64, n_rows: usize) -> Result<SetupSweep> {
+    use rayon::prelude::*;
+    let setups = (ArmRobot::ALL.iter())
+        .map(|&r| load_setup(r))
+        .collect::<Result<Vec<_>>>()?;
+    let cases = setup_sweep_cases(n_cases, &setups);
+    let cases = cases
+        .into_par_iter()
+        .map(|case| {
+            let setup = &setups[case.robot as usize];
+            match setup_check_case(&case, setup, n_rows) {
+                Ok(Some(report)) => {
+                    let (gain, class) = report
+                        .closest
+                        .as_ref()
+                        .map_or((None, String::new()), |c| (c.gain, c.class.to_string()));
+                    let findings = (report.findings.iter())
+                        .map(|f| {
+                            let severity = match f.severity {
+                                Severity::Error => "error",
+                                Severity::Warning => "warning",
+                            };
+                            format!("{severity} [{}]: {}", f.class, f.text())
+                        })
+                        .collect();
+                    (case, gain, class, findings)
+                }
+                Ok(None) => (case, None, String::new(), Vec::new()),
+                Err(e) => (case, None, String::new(), vec![format!("error: {e:#}")]),
+            }
+        })
+        .collect();
+    Ok(SetupSweep { cases })
 }
 
 /// Runs cases `0..n_cases` in parallel (rayon) with diagnosis settings `cfg`; `progress` is
