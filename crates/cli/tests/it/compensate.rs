@@ -175,7 +175,7 @@ fn compensate_reads_what_calibrate_writes() {
 /// The accuracy study with a calibration from simulated data (docs/results/runtime.md): a
 /// simulated iiwa 14 truth (joint origins off by 0.2–0.8 mm and 0.3–1.2 mrad, Drake's link
 /// masses, compliances of 1e-4 to 3e-4 rad/(N·m)) measured at 300 poses (marker pose at the
-/// ball, σ = 20 µm and 0.1 mrad), calibrated by `hapcal calibrate --model compliance`; 500
+/// ball, σ = 20 µm and 0.1 mrad), calibrated by `hapcal calibrate --model compliance`; 1000
 /// held-out targets, commanded with the nominal solution and with `hapcal_runtime::compensate`
 /// on the calibrated robot, the truth's tip measured at each.
 #[test]
@@ -331,7 +331,7 @@ fn compensation_with_a_calibration_from_simulated_data() {
     let mut q_cmd = vec![0.0; 7];
     let mut unreached = 0;
     let mut cli_rows = Vec::new();
-    for k in 0..500 {
+    for k in 0..1000 {
         let q = configuration(&mut rng);
         let target = nominal.tip_pose(0, &q, &mut ws_n).expect("valid");
         if k < 20 {
