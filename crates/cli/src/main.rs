@@ -78,7 +78,7 @@ enum Command {
         /// orientation per marker as qw,qx,qy,qz (qw1,…) or figaroh's phix,phiy,phiz (roll,
         /// pitch, yaw: R = Rz·Ry·Rx); distance_m, distance or d for a distance from an anchor
         /// (cable encoder, ballbar) to the first marker's frame, on a device without a
-        /// [cable_encoder] of its own; t or t_s for time; other columns are reported once and
+        /// cable_encoder table of its own; t or t_s for time; other columns are reported once and
         /// ignored. industrial_calibration's measurements.yaml is read as it is (m, rad). The
         /// instrument frame (the anchor) and each marker's frame on its link are identified.
         #[arg(long, num_args = 1..)]
@@ -92,7 +92,7 @@ enum Command {
         #[arg(long)]
         workspace: Option<PathBuf>,
         /// Write the calibrated device: .urdf (a copy of the source URDF with the calibrated
-        /// joint origins) or .toml (a device file with a [calibration] table).
+        /// joint origins) or .toml (a device file with a calibration table).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Print the report as one JSON document instead of a table.
