@@ -55,6 +55,29 @@ struct Cli {
     command: Command,
 }
 
+/// The units of measurement files, the same options on every command that reads them.
+#[derive(clap::Args, Clone, Copy, Debug)]
+struct UnitArgs {
+    /// Unit of positions and distances in measurement files: m or mm.
+    #[arg(long, default_value = "m")]
+    length_unit: hapcal_io::LengthUnit,
+    /// Unit of prismatic joint readings in measurement files: m or mm (their own unit,
+    /// whatever the instrument's).
+    #[arg(long, default_value = "m")]
+    joint_length_unit: hapcal_io::LengthUnit,
+    /// Unit of angles in measurement files: rad or deg.
+    #[arg(long, default_value = "rad")]
+    angle_unit: hapcal_io::AngleUnit,
+}
+
+impl UnitArgs {
+    /// The units the readers take.
+    fn units(self) -> hapcal_io::Units {
+        hapcal_io::Units::new(self.length_unit, self.angle_unit)
+            .with_joint_length(self.joint_length_unit)
+    }
+}
+
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Identify kinematic deviations from measurements and report accuracy before and after.
@@ -121,16 +144,8 @@ enum Command {
         /// ones in file order, as a test set (0.3: the first 70 % train).
         #[arg(long, allow_hyphen_values = true)]
         test_last: Option<f64>,
-        /// Unit of positions and distances in measurement files: m or mm.
-        #[arg(long, default_value = "m")]
-        length_unit: hapcal_io::LengthUnit,
-        /// Unit of prismatic joint readings in measurement files: m or mm (their own unit,
-        /// whatever the instrument's).
-        #[arg(long, default_value = "m")]
-        joint_length_unit: hapcal_io::LengthUnit,
-        /// Unit of angles in measurement files: rad or deg.
-        #[arg(long, default_value = "rad")]
-        angle_unit: hapcal_io::AngleUnit,
+        #[command(flatten)]
+        units: UnitArgs,
         /// Haptic device with transmissions: identify the transmissions and the kinematics in
         /// one problem instead of the paper's two steps.
         #[arg(long)]
@@ -235,16 +250,8 @@ enum Command {
         /// Known distance between the two sockets of a placement, m.
         #[arg(long, default_value_t = 0.05)]
         socket_distance_m: f64,
-        /// Unit of positions and distances in measurement files: m or mm.
-        #[arg(long, default_value = "m")]
-        length_unit: hapcal_io::LengthUnit,
-        /// Unit of prismatic joint readings in measurement files: m or mm (their own unit,
-        /// whatever the instrument's).
-        #[arg(long, default_value = "m")]
-        joint_length_unit: hapcal_io::LengthUnit,
-        /// Unit of angles in measurement files: rad or deg.
-        #[arg(long, default_value = "rad")]
-        angle_unit: hapcal_io::AngleUnit,
+        #[command(flatten)]
+        units: UnitArgs,
         /// Haptic device: full (transmissions + kinematics) or kinematics (the transmission
         /// models then join the candidates).
         #[arg(long, default_value = "full")]
@@ -280,15 +287,8 @@ enum Command {
         /// Measurement files (marker positions, poses, distances).
         #[arg(long, num_args = 1..)]
         data: Vec<PathBuf>,
-        /// Unit of positions and distances in measurement files: m or mm.
-        #[arg(long, default_value = "m")]
-        length_unit: hapcal_io::LengthUnit,
-        /// Unit of prismatic joint readings in measurement files: m or mm.
-        #[arg(long, default_value = "m")]
-        joint_length_unit: hapcal_io::LengthUnit,
-        /// Unit of angles in measurement files: rad or deg.
-        #[arg(long, default_value = "rad")]
-        angle_unit: hapcal_io::AngleUnit,
+        #[command(flatten)]
+        units: UnitArgs,
         /// Print the findings as one JSON document instead of text.
         #[arg(long)]
         json: bool,
@@ -435,14 +435,11 @@ fn run(cli: Cli) -> Result<()> {
             sigma_m,
             sigma_rad,
             test_last,
-            length_unit,
-            joint_length_unit,
-            angle_unit,
+            units,
             joint,
             accept_setup,
         } => {
-            let units =
-                hapcal_io::Units::new(length_unit, angle_unit).with_joint_length(joint_length_unit);
+            let units = units.units();
             let (tip, more_tips) = match tips.split_first() {
                 Some((first, rest)) => (first.clone(), rest.to_vec()),
                 None => ("ball_link".to_owned(), Vec::new()),
@@ -753,9 +750,7 @@ fn run(cli: Cli) -> Result<()> {
             sigma_m,
             sigma_rad,
             socket_distance_m,
-            length_unit,
-            joint_length_unit,
-            angle_unit,
+            units,
             baseline,
             folds,
             json,
@@ -820,8 +815,7 @@ fn run(cli: Cli) -> Result<()> {
                     device: device.clone(),
                     tip,
                     tips: more_tips,
-                    units: hapcal_io::Units::new(length_unit, angle_unit)
-                        .with_joint_length(joint_length_unit),
+                    units: units.units(),
                     sigma_rad,
                     test_last,
                     data: data.clone(),
@@ -874,9 +868,7 @@ fn run(cli: Cli) -> Result<()> {
             device,
             tips,
             data,
-            length_unit,
-            joint_length_unit,
-            angle_unit,
+            units,
             json,
         } => run_check(
             Plan {
@@ -886,8 +878,7 @@ fn run(cli: Cli) -> Result<()> {
                     .cloned()
                     .unwrap_or_else(|| "ball_link".to_owned()),
                 tips: tips.iter().skip(1).cloned().collect(),
-                units: hapcal_io::Units::new(length_unit, angle_unit)
-                    .with_joint_length(joint_length_unit),
+                units: units.units(),
                 data,
                 test: Vec::new(),
                 ..Plan::bundled_default()

@@ -1,6 +1,7 @@
 //! The calibrated device: a D-H chain folded into one constant transform per joint, and one
 //! drive per joint.
 
+use crate::error::{check_finite, check_len};
 use crate::math::sin_cos;
 use crate::pose::cross;
 use crate::{Drive, Error, MAX_JOINTS, MAX_ROWS, Pose};
@@ -90,29 +91,6 @@ impl Default for Evaluation {
             body_jacobian: [[0.0; 6]; MAX_JOINTS],
             motor_torques_nm: [0.0; MAX_JOINTS],
         }
-    }
-}
-
-fn check_len(what: &'static str, expected: usize, found: usize) -> Result<(), Error> {
-    if expected == found {
-        Ok(())
-    } else {
-        Err(Error::Length {
-            what,
-            expected,
-            found,
-        })
-    }
-}
-
-fn check_finite(what: &'static str, values: &[f64]) -> Result<(), Error> {
-    match values.iter().position(|v| !v.is_finite()) {
-        None => Ok(()),
-        Some(index) => Err(Error::NotFinite {
-            what,
-            index,
-            value: values[index],
-        }),
     }
 }
 

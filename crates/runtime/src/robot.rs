@@ -2,6 +2,7 @@
 //! tips, link masses and joint compliances; poses, Jacobians and the deflection under its own
 //! weight, with no allocation per call (the buffers live in a [`RobotWorkspace`]).
 
+use crate::error::{check_finite, check_len};
 use crate::math::sin_cos;
 use crate::pose::cross;
 use crate::{Error, Pose};
@@ -165,29 +166,6 @@ fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 #[inline]
 fn sub(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn check_len(what: &'static str, expected: usize, found: usize) -> Result<(), Error> {
-    if expected == found {
-        Ok(())
-    } else {
-        Err(Error::Length {
-            what,
-            expected,
-            found,
-        })
-    }
-}
-
-fn check_finite(what: &'static str, values: &[f64]) -> Result<(), Error> {
-    match values.iter().position(|v| !v.is_finite()) {
-        None => Ok(()),
-        Some(index) => Err(Error::NotFinite {
-            what,
-            index,
-            value: values[index],
-        }),
-    }
 }
 
 impl Robot {
