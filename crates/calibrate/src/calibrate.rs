@@ -9,8 +9,7 @@ use hapcal_io::{Device, SocketPlacement};
 use hapcal_kinematics::{Chain, Tree};
 use hapcal_metrics::socket_figures;
 use hapcal_problems::{
-    CalibratedModel, CalibrationProblem, GravityCompliance, Observations, PointDistance, Row,
-    RowKind, Weights,
+    CalibratedModel, CalibrationProblem, Observations, PointDistance, Row, RowKind, Weights,
 };
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -570,21 +569,8 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             // every workflow uses (docs/engine.md). Within one placement the gravity torques
             // hardly change, so compliance and geometry are nearly confounded and a win inside
             // the noise does not carry to other placements: hence the margin.
-            let published = GravityCompliance::published(chain.joint_names()).is_some();
-            let (mut candidates, mut level) = (Vec::new(), Vec::new());
-            for (l, rungs) in crate::model::ladder(kind, published)
-                .into_iter()
-                .enumerate()
-            {
-                for m in rungs {
-                    if m != ModelChoice::TransversalCompliance
-                        || crate::model::carries_transversal(std::slice::from_ref(&chain))
-                    {
-                        candidates.push(m);
-                        level.push(l);
-                    }
-                }
-            }
+            let (candidates, level) =
+                crate::model::ladder_for(kind, chain.joint_names(), std::slice::from_ref(&chain));
             let held = (candidates.iter())
                 .map(|&candidate| cross_validate(&chain, &train, plan, candidate, CV_REPEATS))
                 .collect::<Result<Vec<_>>>()?;

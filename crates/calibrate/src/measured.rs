@@ -29,8 +29,7 @@ use hapcal_identify::{Identified, Problem, Subset, identify};
 use hapcal_io::{JointSchema, MeasuredRow, MeasurementTable, Units};
 use hapcal_kinematics::{FrameSpec, Isometry3, Point3, Tree, UnitQuaternion, Vector3};
 use hapcal_problems::{
-    CalibratedModel, CalibrationProblem, GravityCompliance, LinkMass, ModelTerms, Observations,
-    Row, RowKind, Weights,
+    CalibratedModel, CalibrationProblem, LinkMass, ModelTerms, Observations, Row, RowKind, Weights,
 };
 
 use crate::fit::{CV_REPEATS, HeldOut, blocked_difference, fold_of};
@@ -655,38 +654,14 @@ fn terms(rung: ModelChoice, robot: &Robot) -> Result<ModelTerms> {
     })
 }
 
-/// Whether `robot` can carry `rung`: transversal compliance needs revolute joints with
-/// rotation deviations (URDF placements, `{joint}.rx`), the published-mass models a robot
-/// whose joint names have published masses; every other rung fits any robot.
-pub fn carries(rung: ModelChoice, robot: &Robot) -> bool {
-    match rung.families() {
-        f if f.transversal => crate::model::carries_transversal(robot.tree.tips()),
-        f if f
-            .compliance
-            .is_some_and(|c| c != crate::model::ComplianceSource::Robot) =>
-        {
-            GravityCompliance::published(&robot.joint_names).is_some()
-        }
-        _ => true,
-    }
-}
-
 /// The rungs of the measurement files' ladder `robot` carries, simplest first, with each
-/// one's level.
+/// one's level ([`crate::model::ladder_for`]).
 fn ladder_of(robot: &Robot) -> (Vec<ModelChoice>, Vec<usize>) {
-    let published = GravityCompliance::published(&robot.joint_names).is_some();
-    let mut rungs = Vec::new();
-    let mut levels = Vec::new();
-    for (l, level) in crate::model::ladder(DataKind::Measurements, published)
-        .into_iter()
-        .enumerate()
-    {
-        for r in level.into_iter().filter(|&r| carries(r, robot)) {
-            rungs.push(r);
-            levels.push(l);
-        }
-    }
-    (rungs, levels)
+    crate::model::ladder_for(
+        DataKind::Measurements,
+        &robot.joint_names,
+        robot.tree.tips(),
+    )
 }
 
 /// Free parameters of `rung` in the layout of a problem on `framed` (the tree with joint

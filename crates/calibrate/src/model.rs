@@ -326,6 +326,46 @@ pub fn carries_transversal(tips: &[hapcal_kinematics::Chain]) -> bool {
     })
 }
 
+/// Whether a robot with joints `joint_names` and tips `tips` carries `model`: transversal
+/// compliance needs a revolute joint with rotation deviations ([`carries_transversal`]), the
+/// published-mass models joint names with published masses; every other model fits any robot.
+pub fn carries(
+    model: ModelChoice,
+    joint_names: &[String],
+    tips: &[hapcal_kinematics::Chain],
+) -> bool {
+    let families = model.families();
+    if families.transversal {
+        carries_transversal(tips)
+    } else if families
+        .compliance
+        .is_some_and(|c| c != ComplianceSource::Robot)
+    {
+        GravityCompliance::published(joint_names).is_some()
+    } else {
+        true
+    }
+}
+
+/// The rungs of `kind`'s ladder ([`ladder`]) that a robot with joints `joint_names` and tips
+/// `tips` carries ([`carries`]), simplest first, and each one's level: what [`climb`] takes.
+pub fn ladder_for(
+    kind: DataKind,
+    joint_names: &[String],
+    tips: &[hapcal_kinematics::Chain],
+) -> (Vec<ModelChoice>, Vec<usize>) {
+    let published = GravityCompliance::published(joint_names).is_some();
+    let mut rungs = Vec::new();
+    let mut levels = Vec::new();
+    for (l, level) in ladder(kind, published).into_iter().enumerate() {
+        for m in level.into_iter().filter(|&m| carries(m, joint_names, tips)) {
+            rungs.push(m);
+            levels.push(l);
+        }
+    }
+    (rungs, levels)
+}
+
 /// Standard errors by which a rung's held-out score must beat the rung chosen so far.
 ///
 /// The ladder makes up to four sequential one-sided comparisons, each of which can climb by
