@@ -9,7 +9,9 @@
 //! - `humanoid_500_auto`: the whole ladder (frames only → … → transversal compliance, every
 //!   rung through repeated blocked cross-validation) on the simulated two-arm humanoid
 //!   (`tests/sim/humanoid.rs`: 17 joints on two tips, a CAD mass on every link), 500 rows of
-//!   two markers.
+//!   two markers;
+//! - `humanoid19_500_auto`: the same on the humanoid with a torso of five joints (19 joints on
+//!   two tips), the size of a real humanoid upper body.
 #![allow(missing_docs, clippy::unwrap_used)] // criterion's macros generate undocumented items
 
 #[path = "../tests/sim/humanoid.rs"]
@@ -151,6 +153,14 @@ fn bench(c: &mut Criterion) {
         workspace: Vec::new(),
     };
     group.bench_function("humanoid_500_auto", |b| {
+        b.iter(|| {
+            calibrate_measured(&robot, std::slice::from_ref(black_box(&table)), &[], &cfg).unwrap()
+        })
+    });
+    let robot = humanoid::long_torso_humanoid(&["l_hand", "r_hand"]);
+    let truth = humanoid::truth(&robot, 11);
+    let table = humanoid::table(&robot, &truth, &[0, 1], 500, 12);
+    group.bench_function("humanoid19_500_auto", |b| {
         b.iter(|| {
             calibrate_measured(&robot, std::slice::from_ref(black_box(&table)), &[], &cfg).unwrap()
         })

@@ -16,24 +16,11 @@ use hapcal_problems::{CalibrationProblem, Observations, Weights};
 use nalgebra::Rotation3;
 use serde::Serialize;
 
-use crate::calibrate::{CV_REPEATS, DataSet, Plan, load_data, load_device};
-use crate::measured::{
-    MeasuredConfig, Robot, calibrate_measured, is_marker_file, load_tables, robot_from_device,
-    robot_from_urdf,
-};
+use crate::calibrate::{CV_REPEATS, DataSet, Plan, load_device};
+use crate::data::Data;
+use crate::measured::{MeasuredConfig, Robot, calibrate_measured};
+pub use crate::model::DataKind;
 use crate::model::ModelChoice;
-
-/// What the training rows measured.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum DataKind {
-    /// A ball in sockets at unknown points (MUKCa); residuals in the robot's base frame.
-    Sockets,
-    /// Distances from the base origin (a cable encoder of the device's own).
-    Distances,
-    /// Marker positions, poses or anchor distances in an external instrument's frame.
-    Markers,
-}
 
 /// A held-out data set as a problem whose first [`GeometricBaseline::n_shared`] parameters are
 /// the training problem's.
@@ -129,29 +116,17 @@ pub fn geometric_baseline(plan: &Plan, ladder: bool) -> Result<GeometricBaseline
             plan.device.display()
         );
     }
-    let is_urdf = (plan.device.extension()).is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
-    let tips: Vec<String> = std::iter::once(plan.tip.clone())
-        .chain(plan.tips.iter().cloned())
-        .collect();
-    let robot = if is_urdf {
-        robot_from_urdf(&plan.device, &tips)?
-    } else {
-        robot_from_device(&device)?
+    let (train, test) = match crate::data::load(plan, &device)? {
+        Data::Measurements { robot, train, test } => {
+            return baseline_from_tables(&robot, train, test, plan, ladder);
+        }
+        Data::Joints { train, test, .. } => (train, test),
+        Data::HapticLogs { .. } => bail!("a haptic device's logs are diagnosed as its own"),
     };
-    for path in plan.data.iter().chain(&plan.test) {
-        crate::calibrate::check_csv_header(path)?;
-    }
-    let distances = device.cable_encoder.is_none();
-    if (plan.data.iter()).any(|p| is_marker_file(p, distances)) {
-        let train = load_tables(&plan.data, &robot, &plan.units)?;
-        let test = load_tables(&plan.test, &robot, &plan.units)?;
-        return baseline_from_tables(&robot, train, test, plan, ladder);
-    }
+    let robot = crate::data::robot_of(plan, &device)?;
     let chain = device
         .chain()
         .with_context(|| format!("building the kinematic chain of {}", plan.device.display()))?;
-    let train = load_data(&plan.data, &device)?;
-    let test = load_data(&plan.test, &device)?;
     baseline_from_sets(&robot, &chain, &train, &test, plan, ladder)
 }
 
@@ -257,7 +232,7 @@ pub fn baseline_from_tables(
         }
     }
     Ok(GeometricBaseline {
-        kind: DataKind::Markers,
+        kind: DataKind::Measurements,
         robot: Robot {
             tree: robot.tree.clone(),
             ..robot.clone()

@@ -5,7 +5,6 @@
 
 use anyhow::{Context, Result, bail};
 use hapcal_identify::{Identified, Problem, identify};
-use hapcal_io::{Device, SocketPlacement};
 use hapcal_kinematics::{Chain, Tree};
 use hapcal_metrics::socket_figures;
 use hapcal_problems::{
@@ -14,6 +13,10 @@ use hapcal_problems::{
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+pub use crate::data::{
+    Data, DataSet, NamedLog, check_csv_header, check_sockets, load, load_data, load_device,
+    load_device_tips,
+};
 pub use crate::fit::{
     CV_REPEATS, HeldOut, backend_of, blocked_difference, blocked_mean_difference, fold_of,
     identify_config, pruned_report, termination_text,
@@ -24,177 +27,6 @@ pub use crate::report::{
     CalibrationReport, CvReport, Figures, Outcome, ParamReport, PruneCause, PrunedReport,
     SetReport, SetRole,
 };
-
-/// One measured data set: a socket placement or a distance log.
-#[derive(Clone, Debug)]
-pub enum DataSet {
-    /// MUKCa-style placement: rows per socket.
-    Sockets(SocketPlacement),
-    /// Distance log (docs/design.md §5): joint readings and cable distance per row.
-    Distances {
-        /// Name (file stem).
-        name: String,
-        /// Joint readings per row, rad.
-        q: Vec<Vec<f64>>,
-        /// Distance per row, m.
-        distance_m: Vec<f64>,
-    },
-}
-
-impl DataSet {
-    pub(crate) fn name(&self) -> &str {
-        match self {
-            DataSet::Sockets(p) => &p.name,
-            DataSet::Distances { name, .. } => name,
-        }
-    }
-}
-
-/// Reads the device: a TOML device file, or a URDF imported with `tip`.
-///
-/// # Errors
-/// Whatever `hapcal-io` reports, with the path as context.
-pub fn load_device(path: &Path, tip: &str) -> Result<Device> {
-    let is_urdf = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
-    if is_urdf {
-        hapcal_io::import_urdf(path, tip).with_context(|| format!("importing {}", path.display()))
-    } else {
-        hapcal_io::read_device(path).with_context(|| format!("reading device {}", path.display()))
-    }
-}
-
-/// Reads the device of a tree: a TOML device file, or a URDF imported with the tip `tip` and
-/// the further tips `tips` ([`hapcal_io::import_urdf_tree`]: one `[[branch]]` per further tip).
-///
-/// # Errors
-/// Whatever `hapcal-io` reports, with the path as context.
-pub fn load_device_tips(path: &Path, tip: &str, tips: &[String]) -> Result<Device> {
-    let is_urdf = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
-    if is_urdf {
-        let all: Vec<String> = std::iter::once(tip.to_owned())
-            .chain(tips.iter().cloned())
-            .collect();
-        hapcal_io::import_urdf_tree(path, &all)
-            .with_context(|| format!("importing {}", path.display()))
-    } else {
-        load_device(path, tip)
-    }
-}
-
-/// `Err` if the CSV file `path` (by extension) shows on its first line why no reader can take
-/// it: cells separated by semicolons or tabs instead of commas, or numbers where the header
-/// row naming the columns belongs. Anything else passes (the readers report the rest), and so
-/// does a path that is not a readable CSV file.
-///
-/// # Errors
-/// `{path}:1:1: …` naming the separator found, or the first cell of a missing header.
-pub fn check_csv_header(path: &Path) -> Result<()> {
-    let is_csv = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
-    if !is_csv || !path.is_file() {
-        return Ok(());
-    }
-    let mut first = String::new();
-    let read = std::fs::File::open(path)
-        .and_then(|f| std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut first));
-    if read.is_err() {
-        return Ok(());
-    }
-    let first = first.trim_start_matches('\u{feff}').trim();
-    if !first.contains(',') {
-        for (separator, name) in [(';', "semicolons"), ('\t', "tabs")] {
-            if first.contains(separator) {
-                bail!(
-                    "{}:1:1: expected comma-separated columns, found cells separated by {name}: \
-                     measurement files and logs are CSV with a comma between cells and a point \
-                     as the decimal mark",
-                    path.display()
-                );
-            }
-        }
-    }
-    let cells: Vec<&str> = first.split(',').map(str::trim).collect();
-    if !first.is_empty() && cells.iter().all(|c| c.parse::<f64>().is_ok()) {
-        bail!(
-            "{}:1:1: the first line holds numbers ({} …), not column names: the header row is \
-             missing; a measurement file starts with one naming its columns (the joints as \
-             q1..qn or by name, markers as x1,y1,z1,…, a distance as distance_m)",
-            path.display(),
-            cells.first().copied().unwrap_or_default()
-        );
-    }
-    Ok(())
-}
-
-/// Reads data sets: MUKCa placement or run folders, or hapcal log CSV files.
-///
-/// # Errors
-/// Missing files, malformed rows (file, line, column), joint-count mismatch.
-pub fn load_data(paths: &[PathBuf], device: &Device) -> Result<Vec<DataSet>> {
-    let mut sets = Vec::new();
-    for path in paths {
-        if path.is_file() {
-            let log = hapcal_io::read_log(path, device)
-                .with_context(|| format!("reading log {}", path.display()))?;
-            let name = path.file_stem().map_or_else(
-                || path.display().to_string(),
-                |s| s.to_string_lossy().into_owned(),
-            );
-            sets.push(DataSet::Distances {
-                name,
-                q: log.rows.iter().map(|r| r.q.clone()).collect(),
-                distance_m: log.rows.iter().map(|r| r.distance_m).collect(),
-            });
-        } else {
-            let placements = hapcal_io::read_mukca_paths_for(std::slice::from_ref(path), device)
-                .with_context(|| format!("reading measurements in {}", path.display()))?;
-            for placement in &placements {
-                check_sockets(placement)?;
-            }
-            sets.extend(placements.into_iter().map(DataSet::Sockets));
-        }
-    }
-    Ok(sets)
-}
-
-/// Refuses a placement that cannot determine its sockets: a socket whose rows are all one joint
-/// configuration (its position takes that one; the copies fit exactly and σ would shrink
-/// towards 0), or two sockets with the same readings row for row (a copied file).
-///
-/// # Errors
-/// The socket file and what is wrong with it.
-pub fn check_sockets(placement: &SocketPlacement) -> Result<()> {
-    for socket in &placement.sockets {
-        let distinct: std::collections::HashSet<Vec<u64>> = (socket.q.iter())
-            .map(|q| q.iter().map(|v| (v + 0.0).to_bits()).collect())
-            .collect();
-        if socket.q.len() > 1 && distinct.len() == 1 {
-            bail!(
-                "{}: the {} rows are copies of one joint configuration: a socket's position \
-                 (3 coordinates) takes that one, and the copies add no information; measure \
-                 at least 2 distinct configurations per socket",
-                socket.file.display(),
-                socket.q.len()
-            );
-        }
-    }
-    for (b, later) in placement.sockets.iter().enumerate() {
-        if let Some(earlier) = placement.sockets[..b].iter().find(|s| s.q == later.q) {
-            bail!(
-                "{} repeats {} row for row: two sockets are two points and cannot give the \
-                 same joint readings (a copied file?)",
-                later.file.display(),
-                earlier.file.display()
-            );
-        }
-    }
-    Ok(())
-}
 
 /// Observations of `sets`; `keep(set, socket, row)` selects rows (for cross-validation).
 pub(crate) fn observations(
@@ -446,26 +278,6 @@ fn n_rows(set: &DataSet) -> usize {
     }
 }
 
-/// The kind of the data at `paths` for `device`: a haptic device's logs when the device has
-/// transmissions; measurement files when any file has marker, pose or (on a device without a
-/// cable encoder of its own) anchor-distance columns; socket recordings when every path is a
-/// folder; distance logs otherwise. The workflow that reads them refuses a mixture.
-pub fn data_kind(device: &Device, paths: &[PathBuf]) -> DataKind {
-    if !device.capstans.is_empty() || device.parallelogram.is_some() {
-        return DataKind::HapticLogs;
-    }
-    // A device without a cable encoder of its own: a distance comes from an anchor whose
-    // position the data must determine, as a tracker's frame.
-    let anchor_distances = device.cable_encoder.is_none();
-    if (paths.iter()).any(|p| crate::measured::is_marker_file(p, anchor_distances)) {
-        DataKind::Measurements
-    } else if paths.iter().all(|p| p.is_dir()) {
-        DataKind::Sockets
-    } else {
-        DataKind::Distances
-    }
-}
-
 /// Runs a calibration: reads everything, chooses the model by cross-validation on the training
 /// data, identifies, and evaluates on training and test data.
 ///
@@ -480,12 +292,8 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     } else {
         load_device_tips(&plan.device, &plan.tip, &plan.tips)?
     };
-    let kind = data_kind(&device, &plan.data);
-    if kind != DataKind::HapticLogs {
-        for path in plan.data.iter().chain(&plan.test) {
-            check_csv_header(path)?;
-        }
-    }
+    let data = crate::data::load(plan, &device)?;
+    let kind = data.kind();
     if kind != DataKind::HapticLogs && plan.joint {
         bail!("--joint applies to a haptic device with transmissions (capstans, parallelogram)");
     }
@@ -500,18 +308,20 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             kind.words()
         );
     }
-    match kind {
-        DataKind::HapticLogs => {
+    let (train, test) = match data {
+        Data::HapticLogs { train, test } => {
             refuse_options(
                 plan,
                 "a haptic device's log (the cable-encoder σ comes from the residuals, the \
                  held-out data from --test)",
             )?;
-            return crate::haptic::calibrate_logs(plan, device, start);
+            return crate::haptic::calibrate_logs(plan, device, train, test, start);
         }
-        DataKind::Measurements => return crate::measured::run(plan, &device, start),
-        DataKind::Sockets | DataKind::Distances => {}
-    }
+        Data::Measurements { robot, train, test } => {
+            return crate::measured::run_tables(plan, &device, &robot, train, test, start);
+        }
+        Data::Joints { train, test, .. } => (train, test),
+    };
     if plan.test_last.is_some() {
         bail!(
             "--test-last applies to measurement files (positions, poses, distances); hold out \
@@ -521,8 +331,6 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     let chain = device
         .chain()
         .with_context(|| format!("building the kinematic chain of {}", plan.device.display()))?;
-    let train = load_data(&plan.data, &device)?;
-    let test = load_data(&plan.test, &device)?;
 
     // The geometric fit on all training data comes first: it refuses data that cannot determine
     // the model before any time goes into cross-validation, and it is the answer whenever the

@@ -16,6 +16,8 @@ use hapcal_problems::{
 use hapcal_sim::NoiseModel;
 use hapcal_transmission::{Capstan, CapstanParams, Chebyshev, JointRad};
 
+use crate::data::NamedLog;
+
 /// Degree of the joint-4 polynomial (paper: tenth order).
 pub const POLY_DEGREE: usize = 10;
 /// The joint whose capstan feeds the parallelogram (1-based).
@@ -515,44 +517,20 @@ pub fn calibrated_device(
 /// raw readings against the calibrated model on the corrected ones.
 ///
 /// # Errors
-/// A device that is not the paper's kind ([`HapticDevice::new`]), unreadable logs (file,
-/// line, column), a folder among the data, too few rows, no more distinct joint configurations
+/// A device that is not the paper's kind ([`HapticDevice::new`]), too few rows, no more distinct joint configurations
 /// than kept parameters ([`check_distinct_configurations`]), or a failed identification.
 pub fn calibrate_logs(
     plan: &crate::inputs::Plan,
     device: Device,
+    train: Vec<NamedLog>,
+    test: Vec<NamedLog>,
     start: std::time::Instant,
 ) -> Result<crate::report::Outcome> {
     use crate::model::ModelChoice;
     use crate::report::{CalibrationReport, Figures, ParamReport, SetReport, SetRole};
-    /// One log: its name, its rows and the reader's warnings.
-    type NamedLog = (String, Vec<LogRow>, Vec<String>);
     let haptic = HapticDevice::new(device)?;
-    let read = |paths: &[std::path::PathBuf]| -> Result<Vec<NamedLog>> {
-        paths
-            .iter()
-            .map(|path| {
-                if !path.is_file() {
-                    bail!(
-                        "{}: a haptic device is calibrated from log files (CSV with q1..q{}, distance_m, ext1..ext4), not a folder",
-                        path.display(),
-                        haptic.device.n_joints()
-                    );
-                }
-                let log = hapcal_io::read_log(path, &haptic.device)
-                    .with_context(|| format!("reading log {}", path.display()))?;
-                let name = path.file_stem().map_or_else(
-                    || path.display().to_string(),
-                    |s| s.to_string_lossy().into_owned(),
-                );
-                Ok((name, log.rows, log.warnings))
-            })
-            .collect()
-    };
-    let train = read(&plan.data)?;
-    let test = read(&plan.test)?;
     let mut warnings: Vec<String> = (train.iter().chain(&test))
-        .flat_map(|(_, _, w)| w.iter().cloned())
+        .flat_map(|log| log.warnings.iter().cloned())
         .collect();
     // The haptic path fits the paper's model on every training row: no cross-validation.
     // `hapcal calibrate`'s default is 5; any other value was asked for and is not used.
@@ -564,7 +542,7 @@ pub fn calibrate_logs(
     }
     let rows: Vec<LogRow> = train
         .iter()
-        .flat_map(|(_, r, _)| r.iter().cloned())
+        .flat_map(|log| log.rows.iter().cloned())
         .collect();
     if rows.is_empty() {
         bail!("the training logs have no row");
@@ -677,7 +655,7 @@ pub fn calibrate_logs(
     };
     let mut placements = Vec::new();
     for (role, sets) in [(SetRole::Train, &train), (SetRole::Test, &test)] {
-        for (name, rows, _) in sets {
+        for NamedLog { name, rows, .. } in sets {
             placements.push(SetReport {
                 name: name.clone(),
                 role,

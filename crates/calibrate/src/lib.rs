@@ -8,6 +8,7 @@
 
 pub mod baseline;
 pub mod calibrate;
+pub mod data;
 pub mod fit;
 pub mod haptic;
 pub mod inputs;

@@ -2183,53 +2183,13 @@ pub fn is_marker_file(path: &std::path::Path, distances: bool) -> bool {
     }
 }
 
-/// `hapcal calibrate` on marker files: [`calibrate_measured`] with the plan's settings, as a
-/// [`crate::report::Outcome`].
-///
-/// # Errors
-/// As [`calibrate_measured`], and unreadable files.
-pub fn run(
-    plan: &crate::inputs::Plan,
-    device: &hapcal_io::Device,
-    start: std::time::Instant,
-) -> Result<crate::report::Outcome> {
-    let is_urdf = plan
-        .device
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
-    let tips: Vec<String> = std::iter::once(plan.tip.clone())
-        .chain(plan.tips.iter().cloned())
-        .collect();
-    let robot = if is_urdf {
-        robot_from_urdf(&plan.device, &tips)?
-    } else {
-        robot_from_device(device)?
-    };
-    // Measurement files and MUKCa socket folders are two calibrations (a marker's positions
-    // against sockets' unknown points): one kind per run.
-    let files: Vec<&std::path::PathBuf> = plan.data.iter().chain(&plan.test).collect();
-    if let (Some(folder), Some(file)) = (
-        files.iter().find(|p| p.is_dir()),
-        files.iter().find(|p| !p.is_dir()),
-    ) {
-        bail!(
-            "{} is a folder (MUKCa sockets) and {} a measurement file: calibrate from one kind \
-             of data at a time",
-            folder.display(),
-            file.display()
-        );
-    }
-    let train = load_tables(&plan.data, &robot, &plan.units)?;
-    let test = load_tables(&plan.test, &robot, &plan.units)?;
-    run_tables(plan, device, &robot, train, test, start)
-}
-
-/// As [`run`], on measurement tables already in memory (read by
-/// [`hapcal_io::read_measurement_file`] or built from arrays) for `robot`; `plan.data` and
+/// `hapcal calibrate` on measurement tables ([`calibrate_measured`] with the plan's settings,
+/// as a [`crate::report::Outcome`]), read by [`crate::data::load`] or
+/// [`hapcal_io::read_measurement_file`], or built from arrays, for `robot`; `plan.data` and
 /// `plan.test` are not read, `plan.test_last` splits `train`.
 ///
 /// # Errors
-/// As [`run`].
+/// As [`calibrate_measured`]; a `--test-last` share that leaves no training row.
 pub fn run_tables(
     plan: &crate::inputs::Plan,
     device: &hapcal_io::Device,

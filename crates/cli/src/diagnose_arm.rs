@@ -30,7 +30,8 @@ fn kind_name(kind: DataKind) -> &'static str {
     match kind {
         DataKind::Sockets => "socket",
         DataKind::Distances => "distance",
-        DataKind::Markers => "marker",
+        DataKind::Measurements => "marker",
+        DataKind::HapticLogs => "haptic log",
     }
 }
 

@@ -39,8 +39,19 @@ type ArmJoint = (&'static str, [f64; 3], [f64; 3]);
 type SideJoint = (&'static str, &'static str, [f64; 3], [f64; 3], f64);
 
 /// The humanoid's URDF: torso yaw (vertical, no gravity torque) and two pitches, a head
-/// (fixed, 4 kg), two arms of seven revolute joints, a hand on each.
+/// (fixed, 4 kg), two arms of seven revolute joints, a hand on each: 17 joints.
 pub fn humanoid_urdf() -> String {
+    humanoid_urdf_with_torso(false)
+}
+
+/// The humanoid's URDF, with `long_torso` a torso of five joints (yaw, pitch, pitch, roll,
+/// pitch, as an upper body with a waist and a chest joint): 19 joints on the two hands.
+pub fn humanoid_urdf_with_torso(long_torso: bool) -> String {
+    let chest_parent = if long_torso {
+        "torso_4_link"
+    } else {
+        "torso_2_link"
+    };
     let mut joints: Vec<JointRow<'_>> = vec![
         (
             "torso_1",
@@ -58,16 +69,40 @@ pub fn humanoid_urdf() -> String {
             [0.0; 3],
             Some([0.0, 1.0, 0.0]),
         ),
+    ];
+    if long_torso {
+        joints.extend([
+            (
+                "torso_3",
+                "torso_2_link",
+                "torso_3_link",
+                [0.0, 0.0, 0.2],
+                [0.0; 3],
+                Some([0.0, 1.0, 0.0]),
+            ),
+            (
+                "torso_4",
+                "torso_3_link",
+                "torso_4_link",
+                [0.0, 0.0, 0.05],
+                [0.0; 3],
+                Some([1.0, 0.0, 0.0]),
+            ),
+        ]);
+    }
+    let last = if long_torso { "torso_5" } else { "torso_3" };
+    let rise = if long_torso { 0.1 } else { 0.35 };
+    joints.extend([
         (
-            "torso_3",
-            "torso_2_link",
+            last,
+            chest_parent,
             "chest",
-            [0.0, 0.0, 0.35],
+            [0.0, 0.0, rise],
             [0.0; 3],
             Some([0.0, 1.0, 0.0]),
         ),
         ("neck", "chest", "head", [0.0, 0.0, 0.3], [0.0; 3], None),
-    ];
+    ]);
     let arm: [ArmJoint; 7] = [
         ("1", [0.0, 0.22, 0.15], [0.0, 1.0, 0.0]),
         ("2", [0.0, 0.08, 0.0], [1.0, 0.0, 0.0]),
@@ -124,6 +159,8 @@ pub fn humanoid_urdf() -> String {
         let (mass, com) = match *child {
             "torso_1_link" => (6.0, [0.0, 0.0, 0.05]),
             "torso_2_link" => (8.0, [0.02, 0.0, 0.15]),
+            "torso_3_link" => (3.0, [0.01, 0.0, 0.1]),
+            "torso_4_link" => (2.0, [0.0, 0.0, 0.03]),
             "chest" => (15.0, [0.03, 0.0, 0.15]),
             "head" => (4.0, [0.02, 0.0, 0.1]),
             "l_hand" | "r_hand" => (0.8, [0.0, 0.0, -0.05]),
@@ -173,12 +210,26 @@ pub fn humanoid_urdf() -> String {
 
 /// The humanoid with tips `tips`, from its URDF written to a temporary file.
 pub fn humanoid(tips: &[&str]) -> Robot {
+    humanoid_of(&humanoid_urdf(), tips)
+}
+
+/// The humanoid of [`humanoid_urdf_with_torso`] (19 joints) with tips `tips`.
+pub fn long_torso_humanoid(tips: &[&str]) -> Robot {
+    humanoid_of(&humanoid_urdf_with_torso(true), tips)
+}
+
+fn humanoid_of(urdf: &str, tips: &[&str]) -> Robot {
     let dir = std::env::temp_dir().join(format!("hapcal-humanoid-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    // One file per caller: tests run in parallel.
-    let path = dir.join(format!("humanoid-{}.urdf", tips.join("-")));
+    // One file per caller and robot: tests run in parallel.
+    let robot = if urdf.contains("torso_5") {
+        "long"
+    } else {
+        "short"
+    };
+    let path = dir.join(format!("humanoid-{robot}-{}.urdf", tips.join("-")));
     let tmp = path.with_extension(format!("{:?}.tmp", std::thread::current().id()));
-    std::fs::write(&tmp, humanoid_urdf()).unwrap();
+    std::fs::write(&tmp, urdf).unwrap();
     std::fs::rename(&tmp, &path).unwrap();
     let tips: Vec<String> = tips.iter().map(|t| (*t).to_owned()).collect();
     robot_from_urdf(&path, &tips).unwrap()

@@ -703,3 +703,53 @@ fn a_workspace_beyond_the_training_range_adds_joint_range_folds() {
         stderr(&sockets)
     );
 }
+
+/// The diagnosis and the calibration fit one model with one code path: on the bundled UR10
+/// poses (last 30 % held out), each kinematic rung of `hapcal diagnose`'s ladder gives the
+/// held-out position RMS that `hapcal calibrate --model <rung>` reports for the same rows.
+/// Both are the same least-squares solution evaluated on the same rows, so they agree to
+/// rounding (1e-9 relative), far below the 1 % a second implementation would differ by.
+#[test]
+fn diagnosis_and_calibration_give_the_same_held_out_error_for_the_same_model() {
+    let ur10 = root().join("fixtures/figaroh/ur10");
+    let urdf = ur10.join("ur10_robot.urdf").display().to_string();
+    let data = ur10.join("calibration.csv").display().to_string();
+    let svg = scratch("same-model").join("maps.svg").display().to_string();
+    let common = [
+        "--device",
+        urdf.as_str(),
+        "--tip",
+        "wrist_3_link",
+        "--data",
+        data.as_str(),
+        "--test-last",
+        "0.3",
+        "--json",
+    ];
+    let mut diagnose = vec!["diagnose"];
+    diagnose.extend(common);
+    diagnose.extend(["--svg", svg.as_str()]);
+    let d = json(&hapcal(&diagnose));
+    let ladder = d["ladder"].as_array().expect("a ladder");
+    let mut compared = 0;
+    for rung in ["frames-only", "joint-offsets", "geometric"] {
+        let from_diagnosis = (ladder.iter())
+            .find(|r| r["rung"] == rung)
+            .and_then(|r| r["test_rms_m"][0].as_f64())
+            .unwrap_or_else(|| panic!("the ladder has no {rung} rung: {ladder:?}"));
+        let mut calibrate = vec!["calibrate"];
+        calibrate.extend(common);
+        calibrate.extend(["--model", rung]);
+        let c = json(&hapcal(&calibrate));
+        let from_calibration = (c["placements"].as_array().expect("placements").iter())
+            .find(|p| p["role"] == "test")
+            .and_then(|p| p["after"]["pose"]["position_rms_m"].as_f64())
+            .expect("a test set with a position RMS");
+        assert!(
+            (from_diagnosis - from_calibration).abs() <= 1e-9 * from_calibration,
+            "{rung}: diagnose {from_diagnosis} m, calibrate {from_calibration} m"
+        );
+        compared += 1;
+    }
+    assert_eq!(compared, 3);
+}

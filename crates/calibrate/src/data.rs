@@ -1,0 +1,334 @@
+//! The data of a calibration, read once and typed by what they measured: socket recordings,
+//! distance logs, measurement files (markers, poses, anchor distances) or a haptic device's
+//! logs. [`load`] reads the training and held-out paths of a [`Plan`] with the reader of their
+//! kind and returns them as a [`Data`]; the workflows take the typed data, never the paths.
+
+use anyhow::{Context, Result, bail};
+use hapcal_io::{Device, LogRow, MeasurementTable, SocketPlacement};
+use std::path::{Path, PathBuf};
+
+use crate::inputs::Plan;
+use crate::measured::{Robot, is_marker_file, load_tables, robot_from_device, robot_from_urdf};
+use crate::model::DataKind;
+
+/// A haptic device's log, read: its name (file stem), its rows and the reader's warnings.
+#[derive(Clone, Debug)]
+pub struct NamedLog {
+    /// File stem.
+    pub name: String,
+    /// The rows: joint readings (rad), external encoders (rad), cable distance (m), time (s).
+    pub rows: Vec<LogRow>,
+    /// What the reader noticed (columns ignored, …), in the user's words.
+    pub warnings: Vec<String>,
+}
+
+/// The training and held-out data of one calibration, typed by what they measured.
+#[derive(Debug)]
+pub enum Data {
+    /// Logs of a haptic device with transmissions (the device file has capstans or a
+    /// parallelogram).
+    HapticLogs {
+        /// Training logs.
+        train: Vec<NamedLog>,
+        /// Held-out logs.
+        test: Vec<NamedLog>,
+    },
+    /// Measurement files: marker positions, poses or anchor distances in an instrument's frame.
+    Measurements {
+        /// The robot the tables' joint columns were read for (URDF tips or device file).
+        robot: Robot,
+        /// Training tables, one per file.
+        train: Vec<MeasurementTable>,
+        /// Held-out tables, one per file.
+        test: Vec<MeasurementTable>,
+    },
+    /// Socket recordings (every training path a MUKCa placement or run folder) or distance logs
+    /// of a device with a cable encoder of its own, possibly with socket folders beside them.
+    Joints {
+        /// [`DataKind::Sockets`] when every training set is a socket placement, else
+        /// [`DataKind::Distances`].
+        kind: DataKind,
+        /// Training sets.
+        train: Vec<DataSet>,
+        /// Held-out sets.
+        test: Vec<DataSet>,
+    },
+}
+
+impl Data {
+    /// What the training data measured.
+    pub fn kind(&self) -> DataKind {
+        match self {
+            Data::HapticLogs { .. } => DataKind::HapticLogs,
+            Data::Measurements { .. } => DataKind::Measurements,
+            Data::Joints { kind, .. } => *kind,
+        }
+    }
+}
+
+/// Reads `plan`'s training and held-out paths for `device`, each with the reader of its kind:
+/// a haptic device's logs when the device has transmissions; measurement files when any
+/// training file is a measurement file ([`is_marker_file`]: marker, pose or, on a device
+/// without a cable encoder of its own, anchor-distance columns); socket folders and distance
+/// logs otherwise.
+///
+/// # Errors
+/// A CSV file no reader can take ([`check_csv_header`]), a folder given for a haptic device's
+/// log, socket folders mixed with measurement files, and whatever the readers report (file,
+/// line, column).
+pub fn load(plan: &Plan, device: &Device) -> Result<Data> {
+    if !device.capstans.is_empty() || device.parallelogram.is_some() {
+        let read = |paths: &[PathBuf]| -> Result<Vec<NamedLog>> {
+            paths.iter().map(|p| read_log(p, device)).collect()
+        };
+        return Ok(Data::HapticLogs {
+            train: read(&plan.data)?,
+            test: read(&plan.test)?,
+        });
+    }
+    for path in plan.data.iter().chain(&plan.test) {
+        check_csv_header(path)?;
+    }
+    // A device without a cable encoder of its own: a distance comes from an anchor whose
+    // position the data must determine, as a tracker's frame.
+    let anchor_distances = device.cable_encoder.is_none();
+    if (plan.data.iter()).any(|p| is_marker_file(p, anchor_distances)) {
+        // Measurement files and MUKCa socket folders are two calibrations (a marker's positions
+        // against sockets' unknown points): one kind per run.
+        let files: Vec<&PathBuf> = plan.data.iter().chain(&plan.test).collect();
+        if let (Some(folder), Some(file)) = (
+            files.iter().find(|p| p.is_dir()),
+            files.iter().find(|p| !p.is_dir()),
+        ) {
+            bail!(
+                "{} is a folder (MUKCa sockets) and {} a measurement file: calibrate from one \
+                 kind of data at a time",
+                folder.display(),
+                file.display()
+            );
+        }
+        let robot = robot_of(plan, device)?;
+        let train = load_tables(&plan.data, &robot, &plan.units)?;
+        let test = load_tables(&plan.test, &robot, &plan.units)?;
+        return Ok(Data::Measurements { robot, train, test });
+    }
+    let train = load_data(&plan.data, device)?;
+    let test = load_data(&plan.test, device)?;
+    let kind = if train.iter().all(|s| matches!(s, DataSet::Sockets(_))) {
+        DataKind::Sockets
+    } else {
+        DataKind::Distances
+    };
+    Ok(Data::Joints { kind, train, test })
+}
+
+/// The robot of `plan`'s device: the URDF with the plan's tips, or the device file's chain or
+/// tree.
+///
+/// # Errors
+/// A URDF or device whose kinematics do not compile.
+pub fn robot_of(plan: &Plan, device: &Device) -> Result<Robot> {
+    let is_urdf = (plan.device.extension()).is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    if is_urdf {
+        let tips: Vec<String> = std::iter::once(plan.tip.clone())
+            .chain(plan.tips.iter().cloned())
+            .collect();
+        robot_from_urdf(&plan.device, &tips)
+    } else {
+        robot_from_device(device)
+    }
+}
+
+/// Reads one log of a haptic device.
+fn read_log(path: &Path, device: &Device) -> Result<NamedLog> {
+    if !path.is_file() {
+        bail!(
+            "{}: a haptic device is calibrated from log files (CSV with q1..q{}, distance_m, \
+             ext1..ext4), not a folder",
+            path.display(),
+            device.n_joints()
+        );
+    }
+    let log = hapcal_io::read_log(path, device)
+        .with_context(|| format!("reading log {}", path.display()))?;
+    Ok(NamedLog {
+        name: file_stem(path),
+        rows: log.rows,
+        warnings: log.warnings,
+    })
+}
+
+/// A file's stem, or the whole path when it has none.
+fn file_stem(path: &Path) -> String {
+    path.file_stem().map_or_else(
+        || path.display().to_string(),
+        |s| s.to_string_lossy().into_owned(),
+    )
+}
+
+/// One measured data set: a socket placement or a distance log.
+#[derive(Clone, Debug)]
+pub enum DataSet {
+    /// MUKCa-style placement: rows per socket.
+    Sockets(SocketPlacement),
+    /// Distance log (docs/design.md §5): joint readings and cable distance per row.
+    Distances {
+        /// Name (file stem).
+        name: String,
+        /// Joint readings per row, rad.
+        q: Vec<Vec<f64>>,
+        /// Distance per row, m.
+        distance_m: Vec<f64>,
+    },
+}
+
+impl DataSet {
+    pub(crate) fn name(&self) -> &str {
+        match self {
+            DataSet::Sockets(p) => &p.name,
+            DataSet::Distances { name, .. } => name,
+        }
+    }
+}
+
+/// Reads the device: a TOML device file, or a URDF imported with `tip`.
+///
+/// # Errors
+/// Whatever `hapcal-io` reports, with the path as context.
+pub fn load_device(path: &Path, tip: &str) -> Result<Device> {
+    let is_urdf = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    if is_urdf {
+        hapcal_io::import_urdf(path, tip).with_context(|| format!("importing {}", path.display()))
+    } else {
+        hapcal_io::read_device(path).with_context(|| format!("reading device {}", path.display()))
+    }
+}
+
+/// Reads the device of a tree: a TOML device file, or a URDF imported with the tip `tip` and
+/// the further tips `tips` ([`hapcal_io::import_urdf_tree`]: one `[[branch]]` per further tip).
+///
+/// # Errors
+/// Whatever `hapcal-io` reports, with the path as context.
+pub fn load_device_tips(path: &Path, tip: &str, tips: &[String]) -> Result<Device> {
+    let is_urdf = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    if is_urdf {
+        let all: Vec<String> = std::iter::once(tip.to_owned())
+            .chain(tips.iter().cloned())
+            .collect();
+        hapcal_io::import_urdf_tree(path, &all)
+            .with_context(|| format!("importing {}", path.display()))
+    } else {
+        load_device(path, tip)
+    }
+}
+
+/// `Err` if the CSV file `path` (by extension) shows on its first line why no reader can take
+/// it: cells separated by semicolons or tabs instead of commas, or numbers where the header
+/// row naming the columns belongs. Anything else passes (the readers report the rest), and so
+/// does a path that is not a readable CSV file.
+///
+/// # Errors
+/// `{path}:1:1: …` naming the separator found, or the first cell of a missing header.
+pub fn check_csv_header(path: &Path) -> Result<()> {
+    let is_csv = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+    if !is_csv || !path.is_file() {
+        return Ok(());
+    }
+    let mut first = String::new();
+    let read = std::fs::File::open(path)
+        .and_then(|f| std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut first));
+    if read.is_err() {
+        return Ok(());
+    }
+    let first = first.trim_start_matches('\u{feff}').trim();
+    if !first.contains(',') {
+        for (separator, name) in [(';', "semicolons"), ('\t', "tabs")] {
+            if first.contains(separator) {
+                bail!(
+                    "{}:1:1: expected comma-separated columns, found cells separated by {name}: \
+                     measurement files and logs are CSV with a comma between cells and a point \
+                     as the decimal mark",
+                    path.display()
+                );
+            }
+        }
+    }
+    let cells: Vec<&str> = first.split(',').map(str::trim).collect();
+    if !first.is_empty() && cells.iter().all(|c| c.parse::<f64>().is_ok()) {
+        bail!(
+            "{}:1:1: the first line holds numbers ({} …), not column names: the header row is \
+             missing; a measurement file starts with one naming its columns (the joints as \
+             q1..qn or by name, markers as x1,y1,z1,…, a distance as distance_m)",
+            path.display(),
+            cells.first().copied().unwrap_or_default()
+        );
+    }
+    Ok(())
+}
+
+/// Reads data sets: MUKCa placement or run folders, or hapcal log CSV files.
+///
+/// # Errors
+/// Missing files, malformed rows (file, line, column), joint-count mismatch.
+pub fn load_data(paths: &[PathBuf], device: &Device) -> Result<Vec<DataSet>> {
+    let mut sets = Vec::new();
+    for path in paths {
+        if path.is_file() {
+            let log = hapcal_io::read_log(path, device)
+                .with_context(|| format!("reading log {}", path.display()))?;
+            sets.push(DataSet::Distances {
+                name: file_stem(path),
+                q: log.rows.iter().map(|r| r.q.clone()).collect(),
+                distance_m: log.rows.iter().map(|r| r.distance_m).collect(),
+            });
+        } else {
+            let placements = hapcal_io::read_mukca_paths_for(std::slice::from_ref(path), device)
+                .with_context(|| format!("reading measurements in {}", path.display()))?;
+            for placement in &placements {
+                check_sockets(placement)?;
+            }
+            sets.extend(placements.into_iter().map(DataSet::Sockets));
+        }
+    }
+    Ok(sets)
+}
+
+/// Refuses a placement that cannot determine its sockets: a socket whose rows are all one joint
+/// configuration (its position takes that one; the copies fit exactly and σ would shrink
+/// towards 0), or two sockets with the same readings row for row (a copied file).
+///
+/// # Errors
+/// The socket file and what is wrong with it.
+pub fn check_sockets(placement: &SocketPlacement) -> Result<()> {
+    for socket in &placement.sockets {
+        let distinct: std::collections::HashSet<Vec<u64>> = (socket.q.iter())
+            .map(|q| q.iter().map(|v| (v + 0.0).to_bits()).collect())
+            .collect();
+        if socket.q.len() > 1 && distinct.len() == 1 {
+            bail!(
+                "{}: the {} rows are copies of one joint configuration: a socket's position \
+                 (3 coordinates) takes that one, and the copies add no information; measure \
+                 at least 2 distinct configurations per socket",
+                socket.file.display(),
+                socket.q.len()
+            );
+        }
+    }
+    for (b, later) in placement.sockets.iter().enumerate() {
+        if let Some(earlier) = placement.sockets[..b].iter().find(|s| s.q == later.q) {
+            bail!(
+                "{} repeats {} row for row: two sockets are two points and cannot give the \
+                 same joint readings (a copied file?)",
+                later.file.display(),
+                earlier.file.display()
+            );
+        }
+    }
+    Ok(())
+}
