@@ -43,7 +43,7 @@ use hapcal_identify::{
 use hapcal_io::Device;
 use hapcal_problems::{CalibrationProblem, Observations, Row, RowKind, Weights};
 use hapcal_sim::NoiseModel;
-use hapcal_transmission::Chebyshev;
+use hapcal_transmission::{Capstan, Chebyshev, JointRad};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -229,22 +229,15 @@ pub fn candidate_blocks(
             }
             transmissions.push((j, Box::new(move |t: f64| cheb.basis(t))));
         } else {
-            let ratio = c.ratio;
+            // The capstan's own linearisation about a perfect drive (Cartesian eccentricity
+            // coordinates: the paper's polar ones have no phase column at zero eccentricity).
+            let capstan = Capstan::try_new(c.ratio, c.drum_distance_m)?;
             for name in ["c", "a", "sin", "cos", "sin_r", "cos_r"] {
                 columns.push(format!("capstan{}.{name}", c.joint));
             }
             transmissions.push((
                 j,
-                Box::new(move |t: f64| {
-                    vec![
-                        1.0,
-                        t,
-                        t.sin(),
-                        t.cos() - 1.0,
-                        (ratio * t).sin(),
-                        (ratio * t).cos() - 1.0,
-                    ]
-                }),
+                Box::new(move |t: f64| capstan.linear_basis(JointRad(t)).to_vec()),
             ));
         }
     }

@@ -162,6 +162,31 @@ impl Capstan {
         ]
     }
 
+    /// The linearisation of Δθ (paper eq. 1) about a perfect drive (`Re = 0`, no eccentricity),
+    /// in Cartesian eccentricity coordinates: for small `r_o`, `r_i`, `Re`,
+    ///
+    /// ```text
+    /// Δθ(θ) ≈ c − (Re/R)·θ + a_o·sin θ + b_o·(cos θ − 1) + a_i·sin Rθ + b_i·(cos Rθ − 1)
+    /// ```
+    ///
+    /// with `a_o = (r_o/D)·cos β_o`, `b_o = (r_o/D)·sin β_o` (and alike for the input drum), since
+    /// `atan(r sin φ / (D − r cos φ)) ≈ (r/D)·sin φ`. Returns the six basis functions
+    /// `[1, θ, sin θ, cos θ − 1, sin Rθ, cos Rθ − 1]` (rad per unit coefficient) at reading
+    /// `theta`. The paper's polar parameters `(r, β)` are singular where the eccentricity is
+    /// zero ([`Capstan::error_grad`] has no `β` column there); these coordinates are not, which
+    /// is what a design criterion evaluated at the nominal drive needs.
+    pub fn linear_basis(&self, theta: JointRad) -> [f64; 6] {
+        let (t, r) = (theta.0, self.ratio);
+        [
+            1.0,
+            t,
+            t.sin(),
+            t.cos() - 1.0,
+            (r * t).sin(),
+            (r * t).cos() - 1.0,
+        ]
+    }
+
     /// `∂Δθ/∂θ` (paper eq. 1), analytic, rad/rad.
     pub fn error_dtheta(&self, p: &CapstanParams, theta: JointRad) -> f64 {
         let (r, d, t) = (self.ratio, self.drum_distance_m, theta.0);

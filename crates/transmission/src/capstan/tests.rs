@@ -222,3 +222,41 @@ proptest! {
         prop_assert!((got - want).abs() <= 1e-16, "{got} vs {want}");
     }
 }
+
+/// The linear basis is eq. 1's first-order expansion about a perfect drive: with eccentricities
+/// of `ε·D` and a ratio error of `ε·R`, its combination with the Cartesian coefficients differs
+/// from eq. 1 by O(ε²), so shrinking ε tenfold shrinks the gap a hundredfold.
+#[test]
+fn linear_basis_is_the_first_order_expansion_of_eq1() {
+    let (r, d) = (13.5, 0.03);
+    let capstan = Capstan::try_new(r, d).unwrap();
+    let gap = |eps: f64| {
+        let p = CapstanParams {
+            c_rad: 1e-3,
+            re: eps * r,
+            r_o_m: eps * d,
+            beta_o_rad: 0.7,
+            r_i_m: 0.5 * eps * d,
+            beta_i_rad: -1.9,
+        };
+        let coef = [
+            p.c_rad,
+            -p.re / r,
+            p.r_o_m / d * p.beta_o_rad.cos(),
+            p.r_o_m / d * p.beta_o_rad.sin(),
+            p.r_i_m / d * p.beta_i_rad.cos(),
+            p.r_i_m / d * p.beta_i_rad.sin(),
+        ];
+        (0..50)
+            .map(|k| -1.5 + 3.0 * f64::from(k) / 49.0)
+            .map(|t| {
+                let basis = capstan.linear_basis(JointRad(t));
+                let linear: f64 = basis.iter().zip(coef).map(|(b, c)| b * c).sum();
+                (capstan.error_rad(&p, JointRad(t)) - linear).abs()
+            })
+            .fold(0.0, f64::max)
+    };
+    let (coarse, fine) = (gap(1e-3), gap(1e-4));
+    assert!(coarse > 0.0 && coarse < 1e-5, "gap at ε = 1e-3: {coarse}");
+    assert!(fine < coarse / 50.0, "gap {coarse} → {fine}: not second order");
+}
