@@ -351,7 +351,7 @@ enum Command {
     ImportUrdf {
         /// The URDF file.
         urdf: PathBuf,
-        /// The tip link (e.g. ball_link); repeat it for a tree (one [[branch]] per further tip).
+        /// The tip link (e.g. ball_link); repeat it for a tree (one branch table per further tip).
         #[arg(long = "tip", value_name = "TIP", required = true)]
         tips: Vec<String>,
     },
@@ -957,6 +957,29 @@ fn command() -> clap::Command {
         })
 }
 
+/// Help as plain text: clap's bracketed notations (`[OPTIONS]`, `[default: 5]`,
+/// `[possible values: …]`) in parentheses, so that square brackets never stand in what a user
+/// reads (the help text's own words have none either; a test checks both).
+fn plain_help(text: &str) -> String {
+    let mut out = text
+        .replace(" [OPTIONS]", " (options)")
+        .replace(" [COMMAND]", " (command)");
+    for (from, to) in [
+        ("[default: ", "(default: "),
+        ("[possible values: ", "(one of: "),
+        ("[aliases: ", "(also: "),
+    ] {
+        while let Some(start) = out.find(from) {
+            let Some(len) = out[start..].find(']') else {
+                break;
+            };
+            let inner = out[start + from.len()..start + len].to_owned();
+            out.replace_range(start..=start + len, &format!("{to}{inner})"));
+        }
+    }
+    out
+}
+
 fn main() -> ExitCode {
     let parsed = command()
         .try_get_matches()
@@ -965,8 +988,14 @@ fn main() -> ExitCode {
         Ok(cli) => cli,
         Err(e) => {
             // Help and version go to standard output, usage errors to standard error (where a
-            // failed write has nowhere left to be reported).
-            let printed = e.print().and_then(|()| std::io::stdout().flush());
+            // failed write has nowhere left to be reported). Help is plain text in words.
+            let printed = if e.kind() == clap::error::ErrorKind::DisplayHelp {
+                let mut out = std::io::stdout();
+                out.write_all(plain_help(&e.render().to_string()).as_bytes())
+                    .and_then(|()| out.flush())
+            } else {
+                e.print().and_then(|()| std::io::stdout().flush())
+            };
             if let Err(io) = printed
                 && !e.use_stderr()
             {

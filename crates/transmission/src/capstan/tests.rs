@@ -258,5 +258,8 @@ fn linear_basis_is_the_first_order_expansion_of_eq1() {
     };
     let (coarse, fine) = (gap(1e-3), gap(1e-4));
     assert!(coarse > 0.0 && coarse < 1e-5, "gap at ε = 1e-3: {coarse}");
-    assert!(fine < coarse / 50.0, "gap {coarse} → {fine}: not second order");
+    assert!(
+        fine < coarse / 50.0,
+        "gap {coarse} → {fine}: not second order"
+    );
 }
