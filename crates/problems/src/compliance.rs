@@ -287,6 +287,7 @@ impl GravityCompliance {
                 JointLoad {
                     torque,
                     transversal: before[j].inverse() * (m - torque * axis[j]),
+                    turn: before[j].inverse() * link[j].rotation,
                 }
             })
             .collect()
@@ -301,4 +302,7 @@ pub struct JointLoad {
     /// Moment normal to the joint axis, in the joint's frame before its motion, N·m (m for
     /// the lumped unit weights).
     pub transversal: Vector3<f64>,
+    /// The joint's own rotation at the configuration: its frame after the motion in its frame
+    /// before it (identity for a prismatic joint or a joint on no tip's path).
+    pub turn: UnitQuaternion<f64>,
 }

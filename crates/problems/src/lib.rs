@@ -58,8 +58,8 @@ pub use harmonics::JointHarmonics;
 pub use joint::{JointData, JointProblem, JointTransmissions};
 pub use model::{CalibratedModel, EQUILIBRIUM_ITERATIONS};
 pub use problem::{
-    CalibrationProblem, ModelTerms, Observations, PointDistance, Row, RowKind, TransversalTerm,
-    Weights,
+    CalibrationProblem, ModelTerms, Observations, PointDistance, Row, RowKind, Transversal,
+    TransversalTerm, Weights,
 };
 pub use transmission::{CapstanProblem, PolynomialProblem};
 

@@ -128,7 +128,7 @@ impl CalibratedModel {
         }
         let mut x = self.x_kin.clone();
         for t in &self.transversal {
-            let v = loads[t.joint].transversal;
+            let v = t.tilt(&loads[t.joint]);
             for (&i, v) in t.rotation_params.iter().zip(v.iter()) {
                 x[i] += t.compliance * v;
             }

@@ -70,10 +70,10 @@ pub struct ModelTerms {
     /// Gravity compliance, if modelled.
     pub compliance: Option<GravityCompliance>,
     /// Transversal compliance: each revolute joint's frame tilts about the axes normal to
-    /// its axis by `c_j` times the gravity moment about them ([`TransversalTerm`]); needs
+    /// its axis in proportion to the gravity moment about them ([`TransversalTerm`]); needs
     /// [`Self::compliance`] (its weights give the moments) and a robot whose joints carry
     /// rotation deviations (URDF placements: `{joint}.rx`, `.ry`, `.rz`).
-    pub transversal: bool,
+    pub transversal: Transversal,
     /// Joint angle harmonics, if modelled.
     pub harmonics: Option<JointHarmonics>,
     /// The tips whose base frame gravity is expressed in, for the compliance loads (the
@@ -87,25 +87,74 @@ pub struct ModelTerms {
     pub load_angles: Option<Vec<Vec<f64>>>,
 }
 
-/// One joint's transversal compliance (Tenhumberg & Bäuml 2021, "Calibration of an elastic
-/// humanoid upper body and efficient compensation for motion planning", arXiv 2311.08333:
-/// the joint frame bends about the two axes normal to the joint axis under the gravity
-/// moment about them; here with one compliance per joint, the same about both axes).
+/// How many transversal compliances a revolute joint has ([`ModelTerms::transversal`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Transversal {
+    /// None.
+    #[default]
+    None,
+    /// One per joint, the same about both axes normal to the joint axis (a bearing that
+    /// tilts alike in every direction): parameter `transversal.{joint}`.
+    Isotropic,
+    /// Two per joint, about the two axes of the joint's link frame normal to the joint axis
+    /// (a link that bends more easily one way than the other; they turn with the joint):
+    /// parameters `transversal.{joint}.u` and `transversal.{joint}.v`
+    /// ([`TransversalTerm::direction`]).
+    PerAxis,
+}
+
+/// One transversal compliance of a joint (Tenhumberg & Bäuml 2021, "Calibration of an
+/// elastic humanoid upper body and efficient compensation for motion planning", arXiv
+/// 2311.08333: the joint frame bends about the two axes normal to the joint axis under the
+/// gravity moment about them).
 ///
-/// The tilt is the rotation vector `c·m⊥(q)`, `m⊥` the transversal gravity moment in the
-/// joint's frame before its motion ([`crate::JointLoad::transversal`], N·m, or m for the
-/// lumped unit weights), added to the joint placement's rotation deviations
-/// (`{joint}.rx`, `.ry`, `.rz`) for that configuration.
+/// With no [`Self::direction`] (isotropic) the tilt is the rotation vector `c·m⊥(q)`, `m⊥` the
+/// transversal gravity moment in the joint's frame before its motion
+/// ([`crate::JointLoad::transversal`], N·m, or m for the lumped unit weights). With a
+/// direction `u` (a unit vector normal to the joint axis in the joint's frame after its
+/// motion, so fixed to the link it moves), the tilt is `c·(u·m⊥′)·u`, `m⊥′` the same moment
+/// in that frame: the bending about `u` alone. Either tilt, expressed in the frame before the
+/// motion, is added to the joint placement's rotation deviations (`{joint}.rx`, `.ry`, `.rz`)
+/// for that configuration ([`Self::tilt`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct TransversalTerm {
     /// The joint (0-based, the tree's numbering).
     pub joint: usize,
+    /// The axis of this compliance in the joint's link frame (unit, normal to the joint axis);
+    /// `None`: both axes alike.
+    pub direction: Option<Vector3<f64>>,
     /// Indices of the joint's rotation deviations `rx`, `ry`, `rz` among the kinematic
     /// parameters.
     pub rotation_params: [usize; 3],
     /// Compliance `c`, rad/(N·m) (rad/m for the lumped unit weights); 0 in a problem's term
     /// list, the identified value in a [`CalibratedModel`].
     pub compliance: f64,
+}
+
+impl TransversalTerm {
+    /// The tilt (rotation vector in the joint's frame before its motion, rad) per unit
+    /// compliance under the gravity load `load` of this term's joint: `m⊥`, or `(u·m⊥′)·u`
+    /// turned into the frame before the motion.
+    pub fn tilt(&self, load: &crate::JointLoad) -> Vector3<f64> {
+        match self.direction {
+            None => load.transversal,
+            Some(u) => {
+                let in_link = load.turn.inverse() * load.transversal;
+                load.turn * (u * u.dot(&in_link))
+            }
+        }
+    }
+}
+
+/// The two axes normal to a revolute joint's `axis` (unit, in its frame) that the per-axis
+/// transversal compliance bends about: `u = axis × e` with `e` the frame axis least aligned
+/// with the joint axis (normalised), `v = axis × u`.
+fn normal_axes(axis: &Vector3<f64>) -> [Vector3<f64>; 2] {
+    let e = (0..3)
+        .min_by(|&a, &b| axis[a].abs().total_cmp(&axis[b].abs()))
+        .map_or_else(Vector3::x, |k| Vector3::ith(k, 1.0));
+    let u = axis.cross(&e).normalize();
+    [u, axis.cross(&u)]
 }
 
 /// One measured configuration.
@@ -266,7 +315,7 @@ impl CalibrationProblem {
             weights,
             ModelTerms {
                 compliance,
-                transversal: false,
+                transversal: Transversal::None,
                 harmonics,
                 torque_tips: None,
                 load_angles: None,
@@ -507,7 +556,7 @@ impl CalibrationProblem {
             );
         }
         let mut transversal_terms = Vec::new();
-        if transversal {
+        if transversal != Transversal::None {
             if compliance.is_none() {
                 return Err(Error::NoTransversal {
                     reason: "it needs the gravity compliance model",
@@ -516,17 +565,38 @@ impl CalibrationProblem {
             let revolute: Vec<bool> = (hapcal_kinematics::joint_motions(&torque_tips).iter())
                 .map(|m| *m == Some(hapcal_kinematics::Motion::Rotation))
                 .collect();
+            // Each joint's axis in its own frame, for the per-axis directions.
+            let mut joint_axis = vec![Vector3::z(); n_joints];
+            for tip in &torque_tips {
+                for factor in tip.factors() {
+                    if let hapcal_kinematics::Factor::Screw {
+                        axis,
+                        joint: Some(j),
+                        ..
+                    } = factor
+                    {
+                        joint_axis[*j] = axis.into_inner();
+                    }
+                }
+            }
             let names = chain.joint_names();
             for (j, name) in names.iter().enumerate() {
                 let index = |axis: &str| chain.param_index(&format!("{name}.{axis}"));
                 if let (true, Some(rx), Some(ry), Some(rz)) =
                     (revolute[j], index("rx"), index("ry"), index("rz"))
                 {
-                    transversal_terms.push(TransversalTerm {
+                    let term = |direction| TransversalTerm {
                         joint: j,
+                        direction,
                         rotation_params: [rx, ry, rz],
                         compliance: 0.0,
-                    });
+                    };
+                    if transversal == Transversal::PerAxis {
+                        let [u, v] = normal_axes(&joint_axis[j]);
+                        transversal_terms.extend([term(Some(u)), term(Some(v))]);
+                    } else {
+                        transversal_terms.push(term(None));
+                    }
                 }
             }
             if transversal_terms.is_empty() {
@@ -536,11 +606,25 @@ impl CalibrationProblem {
             }
             // Compliance × moment is an angle: the parameter's unit is the rotation it scales,
             // as for the axial compliance.
-            specs.extend(transversal_terms.iter().map(|t| ParamSpec {
-                name: format!("transversal.{}", names[t.joint]),
-                unit: Unit::Radian,
-                role: Role::Model,
-            }));
+            let n_per_joint = if transversal == Transversal::PerAxis {
+                2
+            } else {
+                1
+            };
+            specs.extend(
+                transversal_terms
+                    .iter()
+                    .enumerate()
+                    .map(|(k, t)| ParamSpec {
+                        name: match (n_per_joint, k % 2) {
+                            (1, _) => format!("transversal.{}", names[t.joint]),
+                            (_, 0) => format!("transversal.{}.u", names[t.joint]),
+                            _ => format!("transversal.{}.v", names[t.joint]),
+                        },
+                        unit: Unit::Radian,
+                        role: Role::Model,
+                    }),
+            );
         }
         let mut joint_param = vec![None; n_joints];
         for tip in &tips {
@@ -556,11 +640,7 @@ impl CalibrationProblem {
             }
         }
         let tilt_basis: Vec<[f64; 3]> = (loads.iter())
-            .flat_map(|l| {
-                transversal_terms
-                    .iter()
-                    .map(|t| l[t.joint].transversal.into())
-            })
+            .flat_map(|l| transversal_terms.iter().map(|t| t.tilt(&l[t.joint]).into()))
             .collect();
         let mut angle_basis = Vec::with_capacity(obs.rows.len() * angle_terms.len());
         for (row_idx, row) in obs.rows.iter().enumerate() {
@@ -683,7 +763,7 @@ impl CalibrationProblem {
             self.weights,
             ModelTerms {
                 compliance: self.compliance.clone(),
-                transversal: !self.transversal.is_empty(),
+                transversal: self.transversal_kind(),
                 harmonics: self.harmonics.clone(),
                 torque_tips: Some(self.torque_tips.clone()),
                 load_angles: None,
@@ -726,6 +806,15 @@ impl CalibrationProblem {
     /// Number of harmonic parameters (0 without them, [`JointHarmonics::n_params`] otherwise).
     pub fn n_harmonics(&self) -> usize {
         self.harmonics.as_ref().map_or(0, JointHarmonics::n_params)
+    }
+
+    /// The transversal compliance the problem models.
+    pub fn transversal_kind(&self) -> Transversal {
+        match self.transversal.first() {
+            None => Transversal::None,
+            Some(t) if t.direction.is_some() => Transversal::PerAxis,
+            Some(_) => Transversal::Isotropic,
+        }
     }
 
     /// Number of transversal compliance parameters (0 without them, else one per revolute

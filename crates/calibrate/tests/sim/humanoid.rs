@@ -223,11 +223,11 @@ fn humanoid_of(urdf: &str, tips: &[&str]) -> Robot {
     std::fs::create_dir_all(&dir).unwrap();
     // One file per caller and robot: tests run in parallel.
     let robot = if urdf.contains("torso_5") {
-        "long"
+        "humanoid19"
     } else {
-        "short"
+        "humanoid"
     };
-    let path = dir.join(format!("humanoid-{robot}-{}.urdf", tips.join("-")));
+    let path = dir.join(format!("{robot}-{}.urdf", tips.join("-")));
     let tmp = path.with_extension(format!("{:?}.tmp", std::thread::current().id()));
     std::fs::write(&tmp, urdf).unwrap();
     std::fs::rename(&tmp, &path).unwrap();
@@ -261,7 +261,22 @@ pub fn transversal_of(joint: &str) -> f64 {
     }
 }
 
+/// The per-axis transversal compliances of a joint, rad/(N·m): about `u` and `v` of
+/// [`hapcal_problems::Transversal::PerAxis`], one four times the other.
+pub fn transversal_axes_of(joint: &str) -> [f64; 2] {
+    let c = transversal_of(joint);
+    [1.6 * c, 0.4 * c]
+}
+
+/// The truth: geometric deviations (0.3 mm, 0.3 mrad) drawn from `seed`, the compliances of
+/// [`compliance_of`] and [`transversal_of`].
 pub fn truth(robot: &Robot, seed: u64) -> Truth {
+    truth_with(robot, seed, hapcal_problems::Transversal::Isotropic)
+}
+
+/// As [`truth`], with the transversal compliance `transversal` ([`transversal_axes_of`] for
+/// per-axis).
+pub fn truth_with(robot: &Robot, seed: u64, transversal: hapcal_problems::Transversal) -> Truth {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let base = FrameSpec {
         name: "instrument".into(),
@@ -294,7 +309,7 @@ pub fn truth(robot: &Robot, seed: u64) -> Truth {
                 robot.masses.clone(),
                 -Vector3::z(),
             )),
-            transversal: true,
+            transversal,
             harmonics: None,
             torque_tips: Some(robot.tree.tips().to_vec()),
             load_angles: None,
@@ -310,7 +325,11 @@ pub fn truth(robot: &Robot, seed: u64) -> Truth {
         } else if let Some(j) = name.strip_prefix("compliance.") {
             compliance_of(j)
         } else if let Some(j) = name.strip_prefix("transversal.") {
-            transversal_of(j)
+            match (j.strip_suffix(".u"), j.strip_suffix(".v")) {
+                (Some(j), _) => transversal_axes_of(j)[0],
+                (_, Some(j)) => transversal_axes_of(j)[1],
+                _ => transversal_of(j),
+            }
         } else {
             // Geometric deviations: 0.3 mm and 0.3 mrad.
             geometry.sample(&mut rng)

@@ -137,6 +137,21 @@ fn one_chain_keeps_the_serial_torques() {
 
 #[test]
 fn transversal_compliance_jacobian_matches_central_differences() {
+    transversal_jacobian_matches_central_differences(hapcal_problems::Transversal::Isotropic);
+}
+
+/// The per-axis form: two compliances per joint, about axes that turn with the joint.
+#[test]
+fn per_axis_transversal_compliance_jacobian_matches_central_differences() {
+    transversal_jacobian_matches_central_differences(hapcal_problems::Transversal::PerAxis);
+}
+
+fn transversal_jacobian_matches_central_differences(transversal: hapcal_problems::Transversal) {
+    let per_joint = if transversal == hapcal_problems::Transversal::PerAxis {
+        2
+    } else {
+        1
+    };
     let robot = torso_tree();
     let base = FrameSpec {
         name: "instrument".into(),
@@ -188,15 +203,16 @@ fn transversal_compliance_jacobian_matches_central_differences() {
                 masses(n_joints),
                 -Vector3::z(),
             )),
-            transversal: true,
+            transversal,
             harmonics: None,
             torque_tips: Some(robot.tips().to_vec()),
             load_angles: None,
         },
     )
     .expect("valid problem");
-    // Every joint revolute with rotation deviations: one transversal parameter each.
-    assert_eq!(problem.n_transversal(), n_joints);
+    // Every joint revolute with rotation deviations: one (two) transversal parameters each.
+    assert_eq!(problem.n_transversal(), per_joint * n_joints);
+    assert_eq!(problem.transversal_kind(), transversal);
     let n = problem.layout().len();
     // Compliances of 1e-3 rad/(N·m) give tilts of tens of mrad: far from linear.
     let x = Col::from_fn(n, |i| 1e-3 * ((i * 7 % 11) as f64 - 5.0));
@@ -206,7 +222,7 @@ fn transversal_compliance_jacobian_matches_central_differences() {
     assert!(worst < 1e-5, "largest relative Jacobian error {worst:e}");
     // The model predicts what the problem fits.
     let model = problem.model(x.as_ref());
-    assert_eq!(model.transversal.len(), n_joints);
+    assert_eq!(model.transversal.len(), per_joint * n_joints);
     let mut r = Col::zeros(problem.n_residuals());
     problem
         .residuals(x.as_ref(), r.as_mut())
@@ -240,7 +256,7 @@ fn transversal_compliance_needs_the_compliance_model() {
         obs,
         Weights::default(),
         ModelTerms {
-            transversal: true,
+            transversal: hapcal_problems::Transversal::Isotropic,
             ..ModelTerms::default()
         },
     )
@@ -285,4 +301,73 @@ fn the_torque_equilibrium_is_a_fixed_point() {
         ..model
     };
     assert!(one_step.equilibrium_step_m(&q) > 1e-5);
+}
+
+/// Two per-axis compliances of one value bend a joint as one isotropic compliance of that
+/// value: the two axes and the joint axis are orthonormal, so `(u·m)u + (v·m)v` is the whole
+/// transversal moment `m`.
+#[test]
+fn equal_per_axis_compliances_are_the_isotropic_one() {
+    use hapcal_problems::Transversal;
+    let tree = torso_tree();
+    let n_joints = tree.n_joints();
+    let obs = Observations {
+        rows: vec![Row {
+            q: vec![0.0; n_joints],
+            kind: RowKind::Marker {
+                tip: 0,
+                position_m: [0.0; 3],
+            },
+        }],
+        ..Observations::default()
+    };
+    let model_of = |transversal| {
+        let problem = CalibrationProblem::on_tree(
+            tree.clone(),
+            obs.clone(),
+            Weights::default(),
+            ModelTerms {
+                compliance: Some(GravityCompliance::from_link_masses(
+                    masses(n_joints),
+                    -Vector3::z(),
+                )),
+                transversal,
+                harmonics: None,
+                torque_tips: Some(tree.tips().to_vec()),
+                load_angles: None,
+            },
+        )
+        .expect("valid problem");
+        let layout = problem.layout().clone();
+        // 1e-3 rad/(N·m) per joint j·1e-4 apart; the same value for `.u` and `.v`.
+        let x = Col::from_fn(layout.len(), |i| {
+            let name = layout.name(i);
+            let joint = name
+                .strip_prefix("transversal.")
+                .map(|j| j.trim_end_matches(".u").trim_end_matches(".v"));
+            match joint {
+                Some(j) => {
+                    1e-3 + 1e-4
+                        * (tree.joint_names().iter().position(|n| n == j).unwrap_or(0) as f64)
+                }
+                None if name.starts_with("compliance.") => 5e-4,
+                None => 0.0,
+            }
+        });
+        problem.model(x.as_ref())
+    };
+    let isotropic = model_of(Transversal::Isotropic);
+    let per_axis = model_of(Transversal::PerAxis);
+    for i in 0..5 {
+        let t = f64::from(i);
+        let q: Vec<f64> = (0..n_joints)
+            .map(|j| (0.7 * t + 1.3 * j as f64).sin())
+            .collect();
+        for tip in 0..tree.tips().len() {
+            let a = isotropic.end_pose_of(tip, &q);
+            let b = per_axis.end_pose_of(tip, &q);
+            let gap = (a.translation.vector - b.translation.vector).norm();
+            assert!(gap < 1e-12, "tip {tip}, configuration {i}: {gap:e} m apart");
+        }
+    }
 }

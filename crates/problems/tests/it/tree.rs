@@ -119,7 +119,7 @@ fn pose_rows_jacobian_matches_central_differences() {
         weights,
         ModelTerms {
             compliance: Some(GravityCompliance::default()),
-            transversal: false,
+            transversal: hapcal_problems::Transversal::None,
             harmonics: None,
             torque_tips: Some(torque),
             load_angles: None,
