@@ -227,8 +227,8 @@ impl GravityCompliance {
         let mut axis = vec![Vector3::zeros(); n];
         let mut before = vec![UnitQuaternion::identity(); n];
         let mut link = vec![Isometry3::identity(); n];
-        // below[j][i]: joint j lies on the root path of joint i (i = j included).
-        let mut below = vec![vec![false; n]; n];
+        // below[j * n + i]: joint j lies on the root path of joint i (i = j included).
+        let mut below = vec![false; n * n];
         // Tips whose path passes through each joint.
         let mut tips_below = vec![Vec::new(); n];
         let mut ends = Vec::with_capacity(tips.len());
@@ -253,7 +253,7 @@ impl GravityCompliance {
                     }
                     path.push(*j);
                     for &k in &path {
-                        below[k][*j] = true;
+                        below[k * n + *j] = true;
                     }
                     tips_below[*j].push(t);
                 }
@@ -264,12 +264,14 @@ impl GravityCompliance {
         let g = self.gravity_dir;
         let moment = |j: usize| -> Vector3<f64> {
             if self.masses.is_empty() {
-                let joints = (0..n).filter(|&i| i != j && below[j][i]).map(|i| origin[i]);
+                let joints = (0..n)
+                    .filter(|&i| i != j && below[j * n + i])
+                    .map(|i| origin[i]);
                 let tips = tips_below[j].iter().map(|&t| ends[t]);
                 joints.chain(tips).map(|o| (o - origin[j]).cross(&g)).sum()
             } else {
                 (self.masses.iter())
-                    .filter(|m| below[j][m.joint])
+                    .filter(|m| below[j * n + m.joint])
                     .map(|m| {
                         let c = link[m.joint] * Point3::from(m.com_m);
                         (c.coords - origin[j]).cross(&(g * (m.mass_kg * G0)))

@@ -244,6 +244,9 @@ pub struct CalibrationProblem {
     /// Joint-angle terms of the compliance and harmonic models: (joint, parameter index after
     /// the kinematic ones). Empty for a purely geometric problem.
     angle_terms: Vec<(usize, usize)>,
+    /// Per angle parameter (index after the kinematic ones), its terms' indices in
+    /// [`Self::angle_terms`]: a Jacobian column sums only its own terms.
+    terms_of_param: Vec<Vec<usize>>,
     /// Basis value of each angle term per row (row-major, `n_rows × angle_terms.len()`):
     /// gravity torque (m or N·m) for compliance terms, `sin`/`cos` for harmonic terms.
     angle_basis: Vec<f64>,
@@ -737,6 +740,14 @@ impl CalibrationProblem {
             equilibrium: load_angles.is_some(),
             joint_param,
             tilt_basis,
+            terms_of_param: {
+                let n_params = angle_terms.iter().map(|&(_, p)| p + 1).max().unwrap_or(0);
+                let mut of = vec![Vec::new(); n_params];
+                for (t, &(_, p)) in angle_terms.iter().enumerate() {
+                    of[p].push(t);
+                }
+                of
+            },
             angle_terms,
             angle_basis,
             layout: ParamLayout::new(specs),
@@ -966,11 +977,12 @@ impl CalibrationProblem {
             buf[rows * col + k]
         } else if col < n_kin + n_angle {
             let g = col - n_kin;
-            let terms = (self.angle_terms.iter().zip(basis)).filter(|((_, param), _)| *param == g);
+            let terms = (self.terms_of_param.get(g).into_iter().flatten())
+                .map(|&t| (self.angle_terms[t].0, basis[t]));
             match jq {
-                Some(m) => terms.map(|((j, _), b)| m[(k, *j)] * b).sum(),
+                Some(m) => terms.map(|(j, b)| m[(k, j)] * b).sum(),
                 None => terms
-                    .filter_map(|((j, _), b)| Some(buf[rows * self.joint_param[*j]? + k] * b))
+                    .filter_map(|(j, b)| Some(buf[rows * self.joint_param[j]? + k] * b))
                     .sum(),
             }
         } else {
@@ -979,6 +991,35 @@ impl CalibrationProblem {
                 .zip(&tilts[t])
                 .map(|(&i, v)| buf[rows * i + k] * v)
                 .sum()
+        }
+    }
+
+    /// The Jacobian rows `r..r + 3` of a position residual (`/ s`): column by column, the
+    /// three rows together; the kinematic columns straight from the point or pose Jacobian
+    /// `buf` (`stride` rows per parameter, position first), the model columns (compliance,
+    /// harmonics, transversal) from `d(k, col)`.
+    fn position_columns(
+        &self,
+        jac: &mut [&mut [f64]],
+        r: usize,
+        s: f64,
+        buf: &[f64],
+        n_comp: usize,
+        d: &dyn Fn(usize, usize) -> f64,
+    ) {
+        let n_kin = self.chain.n_params();
+        let stride = buf.len() / n_kin.max(1);
+        let (kin, model) = jac[..n_kin + n_comp].split_at_mut(n_kin);
+        for (col, c) in kin.iter_mut().enumerate() {
+            let b = &buf[stride * col..stride * col + 3];
+            for k in 0..3 {
+                c[r + k] = b[k] / s;
+            }
+        }
+        for (col, c) in (n_kin..).zip(model.iter_mut()) {
+            for k in 0..3 {
+                c[r + k] = d(k, col) / s;
+            }
         }
     }
 
@@ -1241,15 +1282,13 @@ impl CalibrationProblem {
                 };
                 let s = self.weights.sigma_position_m;
                 let p = pose.translation.vector;
-                for k in 0..3 {
-                    if let Some(o) = out.as_mut() {
+                if let Some(o) = out.as_mut() {
+                    for k in 0..3 {
                         o[r + k] = (p[k] - position_m[k]) / s;
                     }
-                    if let Some(j) = jac.as_mut() {
-                        for (col, c) in j.iter_mut().enumerate().take(n_kin + n_comp) {
-                            c[r + k] = dpose(k, col) / s;
-                        }
-                    }
+                }
+                if let Some(j) = jac.as_mut() {
+                    self.position_columns(j, r, s, &buf, n_comp, &dpose);
                 }
                 r += 3;
                 if let RowKind::Pose { rotation, .. } = &row.kind {
@@ -1329,28 +1368,26 @@ impl CalibrationProblem {
                 }
                 RowKind::Position { position_m } => {
                     let s = self.weights.sigma_position_m;
-                    for k in 0..3 {
-                        if let Some(o) = out.as_mut() {
+                    if let Some(o) = out.as_mut() {
+                        for k in 0..3 {
                             o[r + k] = (p[k] - position_m[k]) / s;
                         }
-                        if let Some(j) = jac.as_mut() {
-                            for (col, c) in j.iter_mut().enumerate().take(n_kin + n_comp) {
-                                c[r + k] = dp(k, col) / s;
-                            }
-                        }
+                    }
+                    if let Some(j) = jac.as_mut() {
+                        self.position_columns(j, r, s, &buf, n_comp, &dp);
                     }
                     r += 3;
                 }
                 RowKind::Point { point } => {
                     let s = self.weights.sigma_point_m;
-                    for k in 0..3 {
-                        if let Some(o) = out.as_mut() {
+                    if let Some(o) = out.as_mut() {
+                        for k in 0..3 {
                             o[r + k] = (p[k] - x[off + 3 * point + k]) / s;
                         }
-                        if let Some(j) = jac.as_mut() {
-                            for (col, c) in j.iter_mut().enumerate().take(n_kin + n_comp) {
-                                c[r + k] = dp(k, col) / s;
-                            }
+                    }
+                    if let Some(j) = jac.as_mut() {
+                        self.position_columns(j, r, s, &buf, n_comp, &dp);
+                        for k in 0..3 {
                             j[off + 3 * point + k][r + k] = -1.0 / s;
                         }
                     }
