@@ -753,3 +753,51 @@ fn diagnosis_and_calibration_give_the_same_held_out_error_for_the_same_model() {
     }
     assert_eq!(compared, 3);
 }
+
+/// The same for socket recordings: the geometric rung's cross-validated error in `hapcal
+/// diagnose`'s ladder is the one `hapcal calibrate`'s model table reports for geometric (one
+/// cross-validation, the same folds), on MUKCa's kuka_14.
+#[test]
+fn diagnosis_and_calibration_give_the_same_cross_validated_error_on_sockets() {
+    let data = root().join("fixtures/mukca/data/kuka_14");
+    let front = data.join("front").display().to_string();
+    let left_back = data.join("left_back").display().to_string();
+    let svg = scratch("same-model-sockets")
+        .join("maps.svg")
+        .display()
+        .to_string();
+    let urdf = iiwa();
+    let common = [
+        "--device",
+        urdf.as_str(),
+        "--tip",
+        "ball_link",
+        "--data",
+        front.as_str(),
+        "--test",
+        left_back.as_str(),
+        "--json",
+    ];
+    let mut diagnose = vec!["diagnose"];
+    diagnose.extend(common);
+    diagnose.extend(["--svg", svg.as_str()]);
+    let d = json(&hapcal(&diagnose));
+    let from_diagnosis = (d["ladder"].as_array().expect("a ladder").iter())
+        .find(|r| r["rung"] == "geometric")
+        .and_then(|r| r["cv_rms_m"].as_f64())
+        .expect("a geometric rung");
+    let mut calibrate = vec!["calibrate"];
+    calibrate.extend(common);
+    let c = json(&hapcal(&calibrate));
+    let from_calibration = (c["cross_validation"]
+        .as_array()
+        .expect("a model table")
+        .iter())
+    .find(|m| m["model"] == "geometric")
+    .and_then(|m| m["heldout_rms_m"].as_f64())
+    .expect("geometric in the model table");
+    assert!(
+        (from_diagnosis - from_calibration).abs() <= 1e-9 * from_calibration,
+        "diagnose {from_diagnosis} m, calibrate {from_calibration} m"
+    );
+}
