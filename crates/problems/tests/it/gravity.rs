@@ -135,6 +135,24 @@ fn one_chain_keeps_the_serial_torques() {
     assert_eq!(serial[4], 0.0);
 }
 
+/// Gravity compliance from [`masses`] on `tips`, with the transversal compliance `transversal`.
+fn gravity_terms(
+    n_joints: usize,
+    tips: &[hapcal_kinematics::Chain],
+    transversal: hapcal_problems::Transversal,
+) -> ModelTerms {
+    ModelTerms {
+        compliance: Some(GravityCompliance::from_link_masses(
+            masses(n_joints),
+            -Vector3::z(),
+        )),
+        transversal,
+        harmonics: None,
+        torque_tips: Some(tips.to_vec()),
+        load_angles: None,
+    }
+}
+
 #[test]
 fn transversal_compliance_jacobian_matches_central_differences() {
     transversal_jacobian_matches_central_differences(hapcal_problems::Transversal::Isotropic);
@@ -198,16 +216,7 @@ fn transversal_jacobian_matches_central_differences(transversal: hapcal_problems
         tree,
         obs,
         weights,
-        ModelTerms {
-            compliance: Some(GravityCompliance::from_link_masses(
-                masses(n_joints),
-                -Vector3::z(),
-            )),
-            transversal,
-            harmonics: None,
-            torque_tips: Some(robot.tips().to_vec()),
-            load_angles: None,
-        },
+        gravity_terms(n_joints, robot.tips(), transversal),
     )
     .expect("valid problem");
     // Every joint revolute with rotation deviations: one (two) transversal parameters each.
@@ -326,16 +335,7 @@ fn equal_per_axis_compliances_are_the_isotropic_one() {
             tree.clone(),
             obs.clone(),
             Weights::default(),
-            ModelTerms {
-                compliance: Some(GravityCompliance::from_link_masses(
-                    masses(n_joints),
-                    -Vector3::z(),
-                )),
-                transversal,
-                harmonics: None,
-                torque_tips: Some(tree.tips().to_vec()),
-                load_angles: None,
-            },
+            gravity_terms(n_joints, tree.tips(), transversal),
         )
         .expect("valid problem");
         let layout = problem.layout().clone();
