@@ -17,6 +17,7 @@ pub mod model;
 pub mod plan;
 pub mod report;
 pub mod setup;
+pub mod setup_haptic;
 pub mod support;
 
 use std::path::{Path, PathBuf};

@@ -187,9 +187,33 @@ pub enum Severity {
     Warning,
 }
 
-/// Frames-only residual of a data set.
+/// Which fit a [`Residual`] is the residual of.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ResidualOf {
+    /// The nominal kinematics with the instrument and marker frames fitted (measurement
+    /// files).
+    #[default]
+    FramesOnly,
+    /// The nominal device's cable distance, its zero fitted (a haptic device's logs).
+    CableDistance,
+}
+
+impl ResidualOf {
+    /// In the reports' words: `frames-only RMS`, `nominal cable-distance RMS`.
+    pub fn words(self) -> &'static str {
+        match self {
+            ResidualOf::FramesOnly => "frames-only RMS",
+            ResidualOf::CableDistance => "nominal cable-distance RMS",
+        }
+    }
+}
+
+/// Frames-only residual of a data set (or its counterpart for other data, [`ResidualOf`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct Residual {
+    /// The fit this is the residual of.
+    pub of: ResidualOf,
     /// RMS over every marker sample's 3-D position error and every distance error, m;
     /// `None` without either.
     pub length_rms_m: Option<f64>,
@@ -265,9 +289,12 @@ impl Finding {
     pub fn text(&self) -> String {
         let unread = self.before == Residual::default();
         let residual = match &self.after {
-            Some(after) if unread => format!(" (frames-only RMS {} with the fix)", after.text()),
+            Some(after) if unread => {
+                format!(" ({} {} with the fix)", after.of.words(), after.text())
+            }
             Some(after) => format!(
-                " (frames-only RMS {} → {})",
+                " ({} {} → {})",
+                after.of.words(),
                 self.before.text(),
                 after.text()
             ),
@@ -325,9 +352,9 @@ impl SetupReport {
             )
         } else {
             format!(
-                "setup check: {} rows, frames-only RMS {} as given, {} hypotheses of a mistake \
-                 fitted\n",
+                "setup check: {} rows, {} {} as given, {} hypotheses of a mistake fitted\n",
                 self.n_rows,
+                self.as_given.of.words(),
                 self.as_given.text(),
                 self.n_hypotheses
             )
@@ -336,9 +363,10 @@ impl SetupReport {
             && let Some(g) = c.gain
         {
             out.push_str(&format!(
-                "  closest hypothesis [{}]: {} (frames-only RMS {}, gain {g:.2}×)\n",
+                "  closest hypothesis [{}]: {} ({} {}, gain {g:.2}×)\n",
                 c.class,
                 c.fix,
+                c.after.of.words(),
                 c.after.text()
             ));
         }
@@ -557,6 +585,7 @@ pub fn closed_form_residual(
     }
     let rms = |sq: f64, n: usize| (n > 0).then(|| (sq / n as f64).sqrt());
     Some(Residual {
+        of: ResidualOf::FramesOnly,
         length_rms_m: rms(len_sq, samples.len()),
         orientation_rms_rad: rms(rot_sq, n_rot),
         spread_m: spread_of(&tables),
@@ -587,6 +616,7 @@ fn residual_of(model: &CalibratedModel, tables: &[MeasurementTable]) -> Residual
     }
     let rms = |sq: f64, n: usize| (n > 0).then(|| (sq / n as f64).sqrt());
     Residual {
+        of: ResidualOf::FramesOnly,
         length_rms_m: rms(len_sq, n_len),
         orientation_rms_rad: rms(rot_sq, n_rot),
         spread_m: spread_of(tables),
@@ -634,7 +664,7 @@ fn spread_of(tables: &[MeasurementTable]) -> Option<f64> {
 /// How many times smaller `after` is than `before`: the larger of the position and the
 /// orientation ratio, unless the other one grows by more than half (then the smaller ratio:
 /// a hypothesis that trades one for the other explains nothing).
-fn gain(before: &Residual, after: &Residual) -> f64 {
+pub(crate) fn gain(before: &Residual, after: &Residual) -> f64 {
     let ratio = |b: Option<f64>, a: Option<f64>, floor: f64| match (b, a) {
         (Some(b), Some(a)) if a.is_finite() && b.is_finite() => Some(b.max(floor) / a.max(floor)),
         (Some(_), _) | (_, Some(_)) => Some(0.0),
@@ -1383,15 +1413,18 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
     })
 }
 
-/// The setup check of a `hapcal calibrate` or `hapcal diagnose` plan: `None` unless its
-/// training data are measurement files (marker positions, poses, distances) of a URDF or a
-/// D-H device; socket folders and a haptic device's logs are not checked.
+/// The setup check of a `hapcal calibrate` or `hapcal diagnose` plan: measurement files
+/// (marker positions, poses, distances) of a URDF or a D-H device, and a haptic device's logs
+/// ([`crate::setup_haptic::check_logs`]); `None` for other data.
 ///
 /// # Errors
 /// An unreadable device or file, and as [`check_setup`].
 pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
     let device = crate::calibrate::load_device(&plan.device, &plan.tip)?;
     if !device.capstans.is_empty() || device.parallelogram.is_some() {
+        if plan.data.iter().all(|p| p.is_file()) {
+            return crate::setup_haptic::check_logs(&device, &plan.data).map(Some);
+        }
         return Ok(None);
     }
     let distances = device.cable_encoder.is_none();
@@ -1612,6 +1645,7 @@ mod tests {
     #[test]
     fn gain_takes_the_better_channel_unless_the_other_grows() {
         let r = |l: f64, o: f64| Residual {
+            of: ResidualOf::FramesOnly,
             length_rms_m: Some(l),
             orientation_rms_rad: Some(o),
             spread_m: Some(0.5),

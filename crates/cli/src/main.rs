@@ -788,6 +788,27 @@ fn run(cli: Cli) -> Result<()> {
                         );
                     }
                 }
+                // The setup check of the log (units, column order, rows out of step, the
+                // external encoders), as `calibrate` runs it.
+                setup_gate(
+                    &Plan {
+                        workspace: None,
+                        device: device.clone(),
+                        tip: "ball_link".to_owned(),
+                        tips: Vec::new(),
+                        units: units.units(),
+                        sigma_rad: None,
+                        test_last: None,
+                        data: data.clone(),
+                        test: Vec::new(),
+                        socket_distance_m,
+                        model: calibrate::ModelChoice::Geometric,
+                        folds,
+                        sigma_m: None,
+                        joint: false,
+                    },
+                    accept_setup,
+                )?;
                 let plan = hapcal::diagnose::DiagnosePlan::new(
                     device.clone(),
                     data[0].clone(),

@@ -8,6 +8,7 @@ mod force;
 mod hostile;
 mod hostile_cases;
 mod setup_check;
+mod setup_haptic;
 mod written;
 
 use serde_json::Value;

@@ -1,0 +1,376 @@
+//! The setup check of a haptic device's logs: the mistakes of [`crate::setup`], for the
+//! joint readings, cable distances and external encoders of the paper's device.
+//!
+//! The log's counterpart of the frames-only residual is the cable distance of the nominal
+//! device, `d_i − |P(q_i)|` with the raw joint readings (transmissions ideal, kinematics
+//! nominal) and one constant removed (the cable's zero, which no assembly gets exactly right):
+//! its RMS is what manufacturing deviations and transmission errors leave, millimetres on
+//! a right log. Each hypothesis of a mistake (distances in millimetres or centimetres,
+//! joint readings in degrees, two joint columns swapped or all reversed, the joint rows out of
+//! step with the distances) reads the log as it says, and the residual is compared with the
+//! log's as given, relative to the spread of the distances (a hypothesis that shrinks the
+//! distances shrinks their residual without explaining anything), with the factors and
+//! severities of [`crate::setup`]. The external encoders are checked against the joint
+//! readings they measure: an encoder reads its joint's output angle, within the
+//! transmission's error (milliradians), so a column that matches another joint, or its own in
+//! degrees, is named. A joint column that never changes is found from the data. A log that
+//! violates the device's joint limits is read again without them, so that degrees or swapped
+//! columns are named instead of the first reading outside a limit.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use hapcal_io::{Device, LogRow};
+
+use crate::measured::PLAUSIBLE_FRAMES_ONLY_RMS_M;
+use crate::setup::{
+    ClosestHypothesis, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OVERWHELMING_FACTOR,
+    Residual, ResidualOf, SUGGESTIVE_FACTOR, SetupReport, Severity, gain,
+};
+
+/// RMS difference (rad) between an external encoder and its joint's reading beyond which the
+/// column cannot be that joint's output: the paper's capstan and parallelogram errors are
+/// milliradians (docs/design.md §3), a swapped column or degrees read as radians tenths of a
+/// radian to radians.
+pub const PLAUSIBLE_EXT_RAD: f64 = 0.05;
+
+/// Rows out of step tried between the joint readings and the distances.
+const ROW_SHIFTS: [isize; 4] = [-2, -1, 1, 2];
+
+/// The setup check of a haptic device's training logs `paths`.
+///
+/// # Errors
+/// A log that cannot be read even without the joint limits (file, line, column), or a device
+/// whose chain does not compile.
+pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
+    let chain = device
+        .chain()
+        .context("building the device's kinematic chain")?;
+    let mut rows = Vec::new();
+    let mut outside_limits = None;
+    for path in paths {
+        match hapcal_io::read_log(path, device) {
+            Ok(log) => rows.extend(log.rows),
+            Err(e) => {
+                // Read again without the limits: the check names what put the readings there.
+                let log = hapcal_io::read_log(path, &unbounded(device))
+                    .with_context(|| format!("reading log {}", path.display()))?;
+                outside_limits.get_or_insert_with(|| e.to_string());
+                rows.extend(log.rows);
+            }
+        }
+    }
+    let rows = thinned(rows);
+    let residual = |rows: &[LogRow]| distance_residual(&chain, rows);
+    let as_given = residual(&rows);
+    let n_joints = chain.n_joints();
+    let mut hypotheses: Vec<(MistakeClass, String, String, Vec<LogRow>)> = Vec::new();
+    for (factor, unit) in [(1e-3, "millimetres"), (1e-2, "centimetres")] {
+        hypotheses.push((
+            MistakeClass::LengthUnit,
+            format!("the cable distances look like {unit} read as metres"),
+            format!("write distance_m in metres (divide by {})", 1.0 / factor),
+            map(&rows, |r| r.distance_m *= factor),
+        ));
+    }
+    hypotheses.push((
+        MistakeClass::AngleUnit,
+        "the joint readings look like degrees read as radians".to_owned(),
+        "write q1..q7 in radians (multiply by π/180)".to_owned(),
+        map(&rows, |r| r.q.iter_mut().for_each(|q| *q = q.to_radians())),
+    ));
+    for a in 0..n_joints {
+        for b in a + 1..n_joints {
+            hypotheses.push((
+                MistakeClass::JointOrder,
+                format!("columns q{} and q{} look swapped", a + 1, b + 1),
+                format!("swap the columns q{} and q{}", a + 1, b + 1),
+                map(&rows, |r| r.q.swap(a, b)),
+            ));
+        }
+    }
+    hypotheses.push((
+        MistakeClass::JointOrder,
+        format!("the joint columns look reversed (q{n_joints} first)"),
+        format!("reverse the order of q1..q{n_joints}"),
+        map(&rows, |r| r.q.reverse()),
+    ));
+    for shift in ROW_SHIFTS {
+        let n = rows.len();
+        let shifted: Vec<LogRow> = (0..n)
+            .filter_map(|i| {
+                let j = i.checked_add_signed(shift).filter(|&j| j < n)?;
+                let mut row = rows[i].clone();
+                row.q.clone_from(&rows[j].q);
+                Some(row)
+            })
+            .collect();
+        let later = if shift > 0 { "later" } else { "earlier" };
+        hypotheses.push((
+            MistakeClass::RowShift,
+            format!(
+                "the joint readings look {} row{} {later} than the distances",
+                shift.unsigned_abs(),
+                if shift.unsigned_abs() == 1 { "" } else { "s" }
+            ),
+            "align the joint readings with the distances row for row".to_owned(),
+            shifted,
+        ));
+    }
+    let n_hypotheses = hypotheses.len();
+    let mut scored: Vec<(MistakeClass, String, String, Residual, f64, Vec<LogRow>)> = hypotheses
+        .into_iter()
+        .map(|(class, what, fix, rows)| {
+            let after = residual(&rows);
+            let g = gain(&as_given, &after);
+            (class, what, fix, after, g, rows)
+        })
+        .collect();
+    scored.sort_by(|a, b| b.4.total_cmp(&a.4));
+    let closest = scored
+        .first()
+        .map(|(class, _, fix, after, g, _)| ClosestHypothesis {
+            class: *class,
+            fix: fix.clone(),
+            after: *after,
+            gain: Some(*g),
+        });
+    let mut findings = Vec::new();
+    // The external encoders are judged against the joint readings as the finding corrects
+    // them: two joint columns swapped leave their encoders where they belong.
+    let mut corrected = &rows;
+    if let Some((class, what, fix, after, g, fixed)) = scored.first()
+        && *g >= SUGGESTIVE_FACTOR
+    {
+        let error = *g >= OVERWHELMING_FACTOR && after.is_plausible();
+        if error && *class != MistakeClass::LengthUnit {
+            corrected = fixed;
+        }
+        findings.push(Finding {
+            class: *class,
+            severity: if error {
+                Severity::Error
+            } else {
+                Severity::Warning
+            },
+            message: if error {
+                what.clone()
+            } else {
+                format!("perhaps {what}, but it explains only part of the residual")
+            },
+            fix: fix.clone(),
+            before: as_given,
+            after: Some(*after),
+        });
+    }
+    findings.extend(frozen_joints(device, &rows));
+    findings.extend(external_encoders(corrected, n_joints));
+    if findings.iter().all(|f| f.severity != Severity::Error)
+        && let Some(limit) = &outside_limits
+    {
+        // Nothing explains the readings outside the limits: the reader's own words.
+        findings.insert(
+            0,
+            Finding {
+                class: MistakeClass::NoHypothesis,
+                severity: Severity::Error,
+                message: format!("{limit}, and none of the checked mistakes explains it"),
+                fix: "check the log's columns and units against the device file".to_owned(),
+                before: as_given,
+                after: None,
+            },
+        );
+    }
+    if !as_given.is_plausible() && findings.iter().all(|f| f.severity != Severity::Error) {
+        findings.insert(
+            0,
+            Finding {
+                class: MistakeClass::NoHypothesis,
+                severity: Severity::Error,
+                message: format!(
+                    "the nominal device misses the cable distances by {} RMS, more than \
+                     manufacturing deviations produce ({:.0} mm), and none of the {n_hypotheses} \
+                     checked mistakes explains it: these logs do not come from this device (or \
+                     the setup is wrong in a way not checked)",
+                    as_given.text(),
+                    PLAUSIBLE_FRAMES_ONLY_RMS_M * 1e3
+                ),
+                fix: "check --device and the columns and units of the logs".to_owned(),
+                before: as_given,
+                after: None,
+            },
+        );
+    }
+    findings.sort_by_key(|f| f.severity != Severity::Error);
+    Ok(SetupReport {
+        n_rows: rows.len(),
+        as_given,
+        n_hypotheses,
+        closest,
+        findings,
+    })
+}
+
+/// The device with every joint's range opened: the readings of a log read as they are.
+fn unbounded(device: &Device) -> Device {
+    let mut open = device.clone();
+    for joint in &mut open.joints {
+        joint.lower_rad = -1e6;
+        joint.upper_rad = 1e6;
+    }
+    open
+}
+
+/// At most [`MAX_CHECK_ROWS`] rows, evenly spaced (consecutive pairs kept for the row
+/// shifts: the thinned log is a run of consecutive rows when the log is longer).
+fn thinned(rows: Vec<LogRow>) -> Vec<LogRow> {
+    if rows.len() <= MAX_CHECK_ROWS {
+        return rows;
+    }
+    // One contiguous stretch from the middle keeps the row order a shift needs, and a
+    // haptic device's recording covers its workspace in any stretch of this length.
+    let start = (rows.len() - MAX_CHECK_ROWS) / 2;
+    rows[start..start + MAX_CHECK_ROWS].to_vec()
+}
+
+/// `rows` with `edit` applied to each.
+fn map(rows: &[LogRow], edit: impl Fn(&mut LogRow)) -> Vec<LogRow> {
+    rows.iter()
+        .cloned()
+        .map(|mut r| {
+            edit(&mut r);
+            r
+        })
+        .collect()
+}
+
+/// The nominal device's cable-distance residual of `rows`: RMS of `d − |P(q)|` about its
+/// mean, and the spread (RMS about the mean) of the distances.
+fn distance_residual(chain: &hapcal_kinematics::Chain, rows: &[LogRow]) -> Residual {
+    let x0 = vec![0.0; chain.n_params()];
+    let e: Vec<f64> = (rows.iter())
+        .map(|r| r.distance_m - chain.end_point(&x0, &r.q).coords.norm())
+        .collect();
+    let d: Vec<f64> = rows.iter().map(|r| r.distance_m).collect();
+    Residual {
+        of: ResidualOf::CableDistance,
+        length_rms_m: rms_about_mean(&e),
+        orientation_rms_rad: None,
+        spread_m: rms_about_mean(&d),
+    }
+}
+
+/// RMS of `v` about its mean; `None` when empty or not finite.
+fn rms_about_mean(v: &[f64]) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    let mean = v.iter().sum::<f64>() / v.len() as f64;
+    let rms = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
+    rms.is_finite().then_some(rms)
+}
+
+/// Joint columns that never change while the device lets the joint move.
+fn frozen_joints(device: &Device, rows: &[LogRow]) -> Vec<Finding> {
+    let limits = device.joint_limits();
+    (0..limits.len())
+        .filter_map(|j| {
+            let values = rows.iter().filter_map(|r| r.q.get(j).copied());
+            let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(v), hi.max(v))
+            });
+            let (lower, upper) = limits[j];
+            (rows.len() > 2 && hi - lo <= FROZEN_SPREAD && upper - lower > FROZEN_SPREAD).then(
+                || Finding {
+                    class: MistakeClass::FrozenJoint,
+                    severity: Severity::Error,
+                    message: format!(
+                        "q{} reads {lo} on every row while the device lets the joint move: a \
+                         disconnected or frozen encoder column",
+                        j + 1
+                    ),
+                    fix: format!(
+                        "check the encoder of joint {} and the column q{}",
+                        j + 1,
+                        j + 1
+                    ),
+                    before: Residual::default(),
+                    after: None,
+                },
+            )
+        })
+        .collect()
+}
+
+/// External-encoder columns that cannot be their joint's output: one that matches another
+/// joint's readings, or its own in degrees.
+fn external_encoders(rows: &[LogRow], n_joints: usize) -> Vec<Finding> {
+    let n_ext = rows.iter().map(|r| r.ext.len()).max().unwrap_or(0);
+    let rms_against = |k: usize, j: usize, scale: f64| {
+        let d: Vec<f64> = (rows.iter())
+            .filter_map(|r| Some(r.ext.get(k).copied().flatten()? * scale - *r.q.get(j)?))
+            .collect();
+        let n = d.len();
+        (n > 0).then(|| (d.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt())
+    };
+    let mut findings = Vec::new();
+    for k in 0..n_ext.min(n_joints) {
+        let Some(own) = rms_against(k, k, 1.0) else {
+            continue;
+        };
+        if own <= PLAUSIBLE_EXT_RAD {
+            continue;
+        }
+        let degrees = rms_against(k, k, 1f64.to_radians()).filter(|&e| e <= PLAUSIBLE_EXT_RAD);
+        let other = (0..n_joints)
+            .filter(|&j| j != k)
+            .filter_map(|j| Some((j, rms_against(k, j, 1.0)?)))
+            .filter(|&(_, e)| e <= PLAUSIBLE_EXT_RAD && e * OVERWHELMING_FACTOR <= own)
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        let (message, fix) = match (degrees, other) {
+            (Some(e), _) => (
+                format!(
+                    "ext{} looks like degrees read as radians: it differs from q{} by {:.3} rad \
+                     RMS as given, {:.4} rad read as degrees",
+                    k + 1,
+                    k + 1,
+                    own,
+                    e
+                ),
+                format!("write ext{} in radians (multiply by π/180)", k + 1),
+            ),
+            (None, Some((j, e))) => (
+                format!(
+                    "ext{} follows joint {} (RMS {:.4} rad from q{}), not joint {} ({:.3} rad \
+                     from q{}): the external-encoder columns look swapped",
+                    k + 1,
+                    j + 1,
+                    e,
+                    j + 1,
+                    k + 1,
+                    own,
+                    k + 1
+                ),
+                format!(
+                    "put joint {}'s external encoder in column ext{}",
+                    k + 1,
+                    k + 1
+                ),
+            ),
+            (None, None) => continue,
+        };
+        findings.push(Finding {
+            class: if degrees.is_some() {
+                MistakeClass::AngleUnit
+            } else {
+                MistakeClass::JointOrder
+            },
+            severity: Severity::Error,
+            message,
+            fix,
+            before: Residual::default(),
+            after: None,
+        });
+    }
+    findings
+}
