@@ -691,6 +691,98 @@ pub(crate) fn gain(before: &Residual, after: &Residual) -> f64 {
     }
 }
 
+/// A hypothesis of a mistake with the data as it corrects them, for the checks of data that
+/// carry no instrument frame (a haptic device's logs, socket recordings).
+pub(crate) struct Corrected<T> {
+    pub(crate) class: MistakeClass,
+    /// What the mistake is, in words.
+    pub(crate) what: String,
+    /// The flag or the edit that applies.
+    pub(crate) fix: String,
+    pub(crate) data: T,
+}
+
+impl<T> Corrected<T> {
+    pub(crate) fn new(class: MistakeClass, what: String, fix: String, data: T) -> Self {
+        Corrected {
+            class,
+            what,
+            fix,
+            data,
+        }
+    }
+}
+
+/// The hypotheses of a check, judged: the closest one, its finding (error when it divides the
+/// residual by [`OVERWHELMING_FACTOR`] and leaves a plausible one, warning from
+/// [`SUGGESTIVE_FACTOR`]), and its index when the finding is an error.
+pub(crate) struct Judged {
+    pub(crate) closest: Option<ClosestHypothesis>,
+    pub(crate) finding: Option<Finding>,
+    pub(crate) error_at: Option<usize>,
+}
+
+/// Judges `hypotheses` against the residual `as_given` by the residual each leaves
+/// ([`gain`]).
+pub(crate) fn judge<T: Sync>(
+    as_given: Residual,
+    hypotheses: &[Corrected<T>],
+    residual: impl Fn(&T) -> Residual + Sync,
+) -> Judged {
+    let scored: Vec<(Residual, f64)> = (hypotheses.par_iter())
+        .map(|h| {
+            let after = residual(&h.data);
+            (after, gain(&as_given, &after))
+        })
+        .collect();
+    let Some(best) = (0..scored.len()).max_by(|&a, &b| scored[a].1.total_cmp(&scored[b].1)) else {
+        return Judged {
+            closest: None,
+            finding: None,
+            error_at: None,
+        };
+    };
+    let (after, g) = scored[best];
+    let h = &hypotheses[best];
+    let closest = Some(ClosestHypothesis {
+        class: h.class,
+        fix: h.fix.clone(),
+        after,
+        gain: Some(g),
+    });
+    if g < SUGGESTIVE_FACTOR {
+        return Judged {
+            closest,
+            finding: None,
+            error_at: None,
+        };
+    }
+    let error = g >= OVERWHELMING_FACTOR && after.is_plausible();
+    Judged {
+        closest,
+        finding: Some(Finding {
+            class: h.class,
+            severity: if error {
+                Severity::Error
+            } else {
+                Severity::Warning
+            },
+            message: if error {
+                h.what.clone()
+            } else {
+                format!(
+                    "perhaps {}, but it explains only part of the residual",
+                    h.what
+                )
+            },
+            fix: h.fix.clone(),
+            before: as_given,
+            after: Some(after),
+        }),
+        error_at: error.then_some(best),
+    }
+}
+
 /// The column names of a CSV file's header (empty for another file or an unreadable one).
 fn header_of(path: &Path) -> Vec<String> {
     let is_csv = path

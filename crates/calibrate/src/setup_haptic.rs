@@ -24,8 +24,8 @@ use hapcal_io::{Device, LogRow};
 
 use crate::measured::PLAUSIBLE_FRAMES_ONLY_RMS_M;
 use crate::setup::{
-    ClosestHypothesis, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OVERWHELMING_FACTOR,
-    Residual, ResidualOf, SUGGESTIVE_FACTOR, SetupReport, Severity, gain,
+    Corrected, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OVERWHELMING_FACTOR, Residual,
+    ResidualOf, SetupReport, Severity, judge,
 };
 
 /// RMS difference (rad) between an external encoder and its joint's reading beyond which the
@@ -64,16 +64,16 @@ pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
     let residual = |rows: &[LogRow]| distance_residual(&chain, rows);
     let as_given = residual(&rows);
     let n_joints = chain.n_joints();
-    let mut hypotheses: Vec<(MistakeClass, String, String, Vec<LogRow>)> = Vec::new();
+    let mut hypotheses: Vec<Corrected<Vec<LogRow>>> = Vec::new();
     for (factor, unit) in [(1e-3, "millimetres"), (1e-2, "centimetres")] {
-        hypotheses.push((
+        hypotheses.push(Corrected::new(
             MistakeClass::LengthUnit,
             format!("the cable distances look like {unit} read as metres"),
             format!("write distance_m in metres (divide by {})", 1.0 / factor),
             map(&rows, |r| r.distance_m *= factor),
         ));
     }
-    hypotheses.push((
+    hypotheses.push(Corrected::new(
         MistakeClass::AngleUnit,
         "the joint readings look like degrees read as radians".to_owned(),
         "write q1..q7 in radians (multiply by π/180)".to_owned(),
@@ -81,7 +81,7 @@ pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
     ));
     for a in 0..n_joints {
         for b in a + 1..n_joints {
-            hypotheses.push((
+            hypotheses.push(Corrected::new(
                 MistakeClass::JointOrder,
                 format!("columns q{} and q{} look swapped", a + 1, b + 1),
                 format!("swap the columns q{} and q{}", a + 1, b + 1),
@@ -89,7 +89,7 @@ pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
             ));
         }
     }
-    hypotheses.push((
+    hypotheses.push(Corrected::new(
         MistakeClass::JointOrder,
         format!("the joint columns look reversed (q{n_joints} first)"),
         format!("reverse the order of q1..q{n_joints}"),
@@ -106,7 +106,7 @@ pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
             })
             .collect();
         let later = if shift > 0 { "later" } else { "earlier" };
-        hypotheses.push((
+        hypotheses.push(Corrected::new(
             MistakeClass::RowShift,
             format!(
                 "the joint readings look {} row{} {later} than the distances",
@@ -118,51 +118,15 @@ pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
         ));
     }
     let n_hypotheses = hypotheses.len();
-    let mut scored: Vec<(MistakeClass, String, String, Residual, f64, Vec<LogRow>)> = hypotheses
-        .into_iter()
-        .map(|(class, what, fix, rows)| {
-            let after = residual(&rows);
-            let g = gain(&as_given, &after);
-            (class, what, fix, after, g, rows)
-        })
-        .collect();
-    scored.sort_by(|a, b| b.4.total_cmp(&a.4));
-    let closest = scored
-        .first()
-        .map(|(class, _, fix, after, g, _)| ClosestHypothesis {
-            class: *class,
-            fix: fix.clone(),
-            after: *after,
-            gain: Some(*g),
-        });
-    let mut findings = Vec::new();
-    // The external encoders are judged against the joint readings as the finding corrects
-    // them: two joint columns swapped leave their encoders where they belong.
-    let mut corrected = &rows;
-    if let Some((class, what, fix, after, g, fixed)) = scored.first()
-        && *g >= SUGGESTIVE_FACTOR
-    {
-        let error = *g >= OVERWHELMING_FACTOR && after.is_plausible();
-        if error && *class != MistakeClass::LengthUnit {
-            corrected = fixed;
-        }
-        findings.push(Finding {
-            class: *class,
-            severity: if error {
-                Severity::Error
-            } else {
-                Severity::Warning
-            },
-            message: if error {
-                what.clone()
-            } else {
-                format!("perhaps {what}, but it explains only part of the residual")
-            },
-            fix: fix.clone(),
-            before: as_given,
-            after: Some(*after),
-        });
-    }
+    let judged = judge(as_given, &hypotheses, |rows| residual(rows));
+    let mut findings: Vec<Finding> = judged.finding.into_iter().collect();
+    // The external encoders are judged against the joint readings as an error's correction
+    // reads them: two joint columns swapped leave their encoders where they belong.
+    let corrected = match judged.error_at.map(|i| &hypotheses[i]) {
+        Some(h) if h.class != MistakeClass::LengthUnit => &h.data,
+        _ => &rows,
+    };
+    let closest = judged.closest;
     findings.extend(frozen_joints(device, &rows));
     findings.extend(external_encoders(corrected, n_joints));
     if findings.iter().all(|f| f.severity != Severity::Error)
