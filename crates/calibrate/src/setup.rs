@@ -197,6 +197,8 @@ pub enum ResidualOf {
     FramesOnly,
     /// The nominal device's cable distance, its zero fitted (a haptic device's logs).
     CableDistance,
+    /// The nominal ball's scatter about each socket's mean (socket recordings).
+    SocketScatter,
 }
 
 impl ResidualOf {
@@ -205,6 +207,7 @@ impl ResidualOf {
         match self {
             ResidualOf::FramesOnly => "frames-only RMS",
             ResidualOf::CableDistance => "nominal cable-distance RMS",
+            ResidualOf::SocketScatter => "nominal socket scatter",
         }
     }
 }
@@ -689,6 +692,31 @@ pub(crate) fn gain(before: &Residual, after: &Residual) -> f64 {
     } else {
         hi
     }
+}
+
+/// The median of `v` (NaN for an empty `v`).
+pub(crate) fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// The RMS of `dims`-dimensional errors from the median of their squared lengths `sq`:
+/// `√(dims·median(sq)/m)`, `m` the median of χ² with `dims` degrees of freedom (0.4549 for 1,
+/// 2.3660 for 3), so that Gaussian errors give their RMS while a few gross rows (a mistyped
+/// reading) move it by little. `None` when empty or not finite.
+pub(crate) fn robust_rms(sq: Vec<f64>, dims: usize) -> Option<f64> {
+    let chi2_median = if dims == 1 { 0.454_936 } else { 2.365_974 };
+    let m = median(sq);
+    let rms = (dims as f64 * m / chi2_median).sqrt();
+    rms.is_finite().then_some(rms)
 }
 
 /// A hypothesis of a mistake with the data as it corrects them, for the checks of data that
@@ -1506,8 +1534,9 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
 }
 
 /// The setup check of a `hapcal calibrate` or `hapcal diagnose` plan: measurement files
-/// (marker positions, poses, distances) of a URDF or a D-H device, and a haptic device's logs
-/// ([`crate::setup_haptic::check_logs`]); `None` for other data.
+/// (marker positions, poses, distances) of a URDF or a D-H device, a haptic device's logs
+/// ([`crate::setup_haptic::check_logs`]) and socket folders
+/// ([`crate::setup_sockets::check_sockets`]); `None` for other data (distance logs).
 ///
 /// # Errors
 /// An unreadable device or file, and as [`check_setup`].
@@ -1518,6 +1547,16 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
             return crate::setup_haptic::check_logs(&device, &plan.data).map(Some);
         }
         return Ok(None);
+    }
+    if !plan.data.is_empty() && plan.data.iter().all(|p| p.is_dir()) {
+        let is_urdf = (plan.device.extension()).is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+        return crate::setup_sockets::check_sockets(
+            &device,
+            is_urdf.then_some(plan.device.as_path()),
+            &plan.tip,
+            &plan.data,
+        )
+        .map(Some);
     }
     let distances = device.cable_encoder.is_none();
     let files: Vec<PathBuf> = (plan.data.iter())

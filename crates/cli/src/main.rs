@@ -484,8 +484,10 @@ fn run(cli: Cli) -> Result<()> {
                 calibrate::check_outputs(&plan.device, out, &inputs)?;
             }
             plan.validate()?;
-            check_socket_folders(&plan)?;
+            // The setup check first: a mistake it names (degrees, a column order, another
+            // robot) would otherwise be reported as its symptom (a reading past a limit).
             setup_gate(&plan, accept_setup)?;
+            check_socket_folders(&plan)?;
             let outcome = calibrate::run(&plan)?;
             if json {
                 emit(&format!(
