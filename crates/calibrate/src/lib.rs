@@ -18,6 +18,7 @@ pub mod plan;
 pub mod report;
 pub mod setup;
 pub mod setup_haptic;
+pub mod setup_sockets;
 pub mod support;
 
 use std::path::{Path, PathBuf};

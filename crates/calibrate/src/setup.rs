@@ -197,6 +197,9 @@ pub enum ResidualOf {
     FramesOnly,
     /// The nominal device's cable distance, its zero fitted (a haptic device's logs).
     CableDistance,
+    /// The scatter of the nominal tip positions about each socket's mean, with the error of
+    /// the distance between a placement's two sockets (socket recordings).
+    SocketScatter,
 }
 
 impl ResidualOf {
@@ -205,6 +208,7 @@ impl ResidualOf {
         match self {
             ResidualOf::FramesOnly => "frames-only RMS",
             ResidualOf::CableDistance => "nominal cable-distance RMS",
+            ResidualOf::SocketScatter => "nominal socket-scatter RMS",
         }
     }
 }
@@ -479,7 +483,7 @@ const ORIENTATION_WEIGHT_M2: f64 = 0.5 * 1e-3 * 1e-3 / (1e-2 * 1e-2);
 const CLOSED_FORM_ITERATIONS: usize = 50;
 
 /// The nearest rotation to `m` (its polar factor, by SVD; Horn 1987).
-fn nearest_rotation(m: &nalgebra::Matrix3<f64>) -> nalgebra::Matrix3<f64> {
+pub(crate) fn nearest_rotation(m: &nalgebra::Matrix3<f64>) -> nalgebra::Matrix3<f64> {
     let svd = m.svd(true, true);
     let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
         return nalgebra::Matrix3::identity();
@@ -889,7 +893,7 @@ fn joint_label(robot: &Robot, j: usize) -> String {
 
 /// The links one and two moving joints above and below `tip` in the URDF, each with how
 /// many moving joints it lies above (negative) or below (positive) the tip.
-fn tip_candidates(urdf: &urdf_rs::Robot, tip: &str) -> Vec<(String, isize, Vec<String>)> {
+pub(crate) fn tip_candidates(urdf: &urdf_rs::Robot, tip: &str) -> Vec<(String, isize, Vec<String>)> {
     let moving = |j: &urdf_rs::Joint| !matches!(j.joint_type, urdf_rs::JointType::Fixed);
     let mut out = Vec::new();
     // Up: the parent link of the first and second moving joints above the tip.
@@ -1506,8 +1510,9 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
 }
 
 /// The setup check of a `hapcal calibrate` or `hapcal diagnose` plan: measurement files
-/// (marker positions, poses, distances) of a URDF or a D-H device, and a haptic device's logs
-/// ([`crate::setup_haptic::check_logs`]); `None` for other data.
+/// (marker positions, poses, distances) of a URDF or a D-H device, a haptic device's logs
+/// ([`crate::setup_haptic::check_logs`]) and socket folders of a single tip
+/// ([`crate::setup_sockets::check_socket_plan`]); `None` for other data.
 ///
 /// # Errors
 /// An unreadable device or file, and as [`check_setup`].
@@ -1518,6 +1523,9 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
             return crate::setup_haptic::check_logs(&device, &plan.data).map(Some);
         }
         return Ok(None);
+    }
+    if plan.tips.is_empty() && !plan.data.is_empty() && plan.data.iter().all(|p| p.is_dir()) {
+        return crate::setup_sockets::check_socket_plan(plan, &device).map(Some);
     }
     let distances = device.cable_encoder.is_none();
     let files: Vec<PathBuf> = (plan.data.iter())
