@@ -45,7 +45,8 @@ pub struct SocketInput<'a> {
 type SocketData = (Option<Chain>, Vec<SocketPlacement>);
 
 /// The socket scatter of `placements` on `chain` ([`ResidualOf::SocketScatter`]): the RMS,
-/// over every row, of the distance (m) of the nominal tip position from its socket's mean,
+/// over the [`KEPT_SHARE`] of each socket's rows closest to its centre, of the distance (m) of
+/// the nominal tip position from that centre (the mean of those rows),
 /// and, for each placement of exactly two sockets, of the error of the distance between the
 /// two means against `socket_distance_m`, as one more term of the RMS.
 ///
@@ -76,12 +77,16 @@ pub fn socket_scatter(
             }
             let points: Vec<Vector3<f64>> =
                 poses.iter().map(|p| p.translation.vector).collect();
+            // The socket's centre and scatter from the rows closest to it: a few rows off
+            // their socket (a reading edited or mistyped) do not make the placement implausible.
             let mean = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
-            sq += (points.iter())
-                .map(|p| (p - mean).norm_squared())
-                .sum::<f64>();
-            n += points.len();
-            means.push(mean);
+            let center = trimmed_mean(&points, &trimmed_mean(&points, &mean));
+            let mut d: Vec<f64> = points.iter().map(|p| (p - center).norm_squared()).collect();
+            d.sort_by(f64::total_cmp);
+            let k = n_kept(points.len());
+            sq += d.iter().take(k).sum::<f64>();
+            n += k;
+            means.push(center);
             let rotations: Vec<Matrix3<f64>> = (poses.iter())
                 .map(|p| p.rotation.to_rotation_matrix().into_inner())
                 .collect();
@@ -106,6 +111,30 @@ pub fn socket_scatter(
         orientation_rms_rad: None,
         spread_m: turn_m.filter(|t| *t > 0.0 && t.is_finite()),
     })
+}
+
+/// Share of each socket's rows, the closest to its centre, whose scatter counts: the rest may
+/// be rows off their socket (an edited or mistyped reading), which an RMS over every row would
+/// turn into a placement no robot fits. Every hypothesis is scored the same way.
+const KEPT_SHARE: f64 = 0.9;
+
+/// How many of `n` rows [`KEPT_SHARE`] keeps (at least one).
+fn n_kept(n: usize) -> usize {
+    ((n as f64 * KEPT_SHARE).ceil() as usize).clamp(1, n.max(1))
+}
+
+/// The mean of the [`n_kept`] `points` closest to `center`.
+fn trimmed_mean(
+    points: &[nalgebra::Vector3<f64>],
+    center: &nalgebra::Vector3<f64>,
+) -> nalgebra::Vector3<f64> {
+    let mut d: Vec<(f64, usize)> = (points.iter().enumerate())
+        .map(|(i, p)| ((p - center).norm_squared(), i))
+        .collect();
+    d.sort_by(|a, b| a.0.total_cmp(&b.0));
+    d.truncate(n_kept(points.len()));
+    let sum: nalgebra::Vector3<f64> = d.iter().filter_map(|&(_, i)| points.get(i)).sum();
+    sum / d.len().max(1) as f64
 }
 
 /// The lever (m) that turns the tip's RMS turn about a socket (rad) into the length scale of
@@ -336,13 +365,17 @@ fn n_columns(paths: &[std::path::PathBuf]) -> Option<usize> {
 
 /// The setup check of a plan whose training data are socket folders, on `device` (the device
 /// of `plan.device` and `plan.tip`): the files read without the joint-limit check (a file in
-/// degrees is a hypothesis here, not a reading error), then [`check_sockets`]. When the files
+/// degrees is a hypothesis here, not a reading error), then [`check_sockets`]. When a reading
+/// lies past its joint's limits, the error finding that explains it (a mistake, or data of
+/// another robot) starts with the reader's message (`file:line:column: joint … is outside …`);
+/// without one, the reader's error is the result. When the files
 /// do not read with the device's joint count and the device is a URDF, the tips whose chain
 /// has the files' joint count are tried (the tip given one or two moving joints too high or
 /// too low), and the one leaving a plausible scatter is the finding.
 ///
 /// # Errors
-/// Unreadable socket files that no other tip reads either, or a device without a chain.
+/// Unreadable socket files that no other tip reads either, a reading past its joint's limits
+/// that no finding explains (the reader's error), or a device without a chain.
 pub fn check_socket_plan(
     plan: &crate::inputs::Plan,
     device: &hapcal_io::Device,
@@ -355,14 +388,27 @@ pub fn check_socket_plan(
         .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
     let urdf = is_urdf.then_some(plan.device.as_path());
     match hapcal_io::read_mukca_paths(&plan.data, chain.n_joints()) {
-        Ok(placements) => check_sockets(&SocketInput {
-            chain: &chain,
-            joint_names: &names,
-            placements: &placements,
-            socket_distance_m: plan.socket_distance_m,
-            urdf,
-            tip: &plan.tip,
-        }),
+        Ok(placements) => {
+            let mut report = check_sockets(&SocketInput {
+                chain: &chain,
+                joint_names: &names,
+                placements: &placements,
+                socket_distance_m: plan.socket_distance_m,
+                urdf,
+                tip: &plan.tip,
+            })?;
+            // The reader's joint-limit check: a reading past a limit that a finding explains
+            // is named with it; one that no finding explains is the reader's error as before.
+            if let Err(limit) = hapcal_io::read_mukca_paths_for(&plan.data, device) {
+                // An error finding names the cause (a mistake, or another robot); without one,
+                // a reading past a limit in data that fit the robot is the reader's error.
+                match (report.findings.iter_mut()).find(|f| f.severity == Severity::Error) {
+                    Some(f) => f.message = format!("{limit}: {}", f.message),
+                    None => return Err(limit.into()),
+                }
+            }
+            Ok(report)
+        }
         Err(e) => {
             let Some(urdf) = urdf else {
                 return Err(e.into());

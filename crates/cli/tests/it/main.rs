@@ -9,6 +9,7 @@ mod hostile;
 mod hostile_cases;
 mod setup_check;
 mod setup_haptic;
+mod setup_sockets;
 mod written;
 
 use serde_json::Value;
