@@ -1554,6 +1554,11 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
             if is_urdf && let Some(report) = tip_above(&plan.device, &tips, &files, plan.units) {
                 return Ok(Some(report));
             }
+            // A reading past its joint's limits: read again without the limits, so that the
+            // finding that put it there (degrees, swapped columns) is named with it.
+            if let Some(report) = past_limits(&robot, &files, &tips, plan, is_urdf, &e) {
+                return Ok(Some(report));
+            }
             return Err(e);
         }
     };
@@ -1565,6 +1570,46 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
         units: plan.units,
     })
     .map(Some)
+}
+
+/// Half-width (rad or m) of the joint ranges with which [`past_limits`] reads the files again:
+/// wide enough for any reading in degrees or millimetres.
+const OPEN_LIMIT: f64 = 1e6;
+
+/// The setup check of files that the reader refused with `limit_error` (a reading past its
+/// joint's limits), read again with every range opened to ±[`OPEN_LIMIT`]: when the check
+/// finds an error (a mistake such as degrees or swapped columns, or data of another robot),
+/// the report with the reader's message (`file:line:column: joint … is outside …`) at the start
+/// of that finding; `None` when the files do not read either or nothing explains the reading
+/// (then the reader's error stands).
+fn past_limits(
+    robot: &Robot,
+    files: &[PathBuf],
+    tips: &[String],
+    plan: &crate::inputs::Plan,
+    is_urdf: bool,
+    limit_error: &anyhow::Error,
+) -> Option<SetupReport> {
+    let limit = limit_error.root_cause().to_string();
+    if !limit.contains("is outside") {
+        return None;
+    }
+    let mut open = robot.clone();
+    for l in &mut open.limits {
+        *l = (-OPEN_LIMIT, OPEN_LIMIT);
+    }
+    let tables = measured::load_tables(files, &open, &plan.units).ok()?;
+    let mut report = check_setup(&SetupInput {
+        robot: &open,
+        tables: &tables,
+        urdf: is_urdf.then_some(plan.device.as_path()),
+        tips,
+        units: plan.units,
+    })
+    .ok()?;
+    let f = (report.findings.iter_mut()).find(|f| f.severity == Severity::Error)?;
+    f.message = format!("{limit}: {}", f.message);
+    Some(report)
 }
 
 /// When the files do not read with the tips given: the first tip one or two moving joints up

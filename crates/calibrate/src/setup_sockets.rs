@@ -310,7 +310,7 @@ pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
                 class: MistakeClass::NoHypothesis,
                 severity: Severity::Error,
                 message: format!(
-                    "the nominal tip positions scatter by {} RMS about each socket's mean, more \
+                    "the nominal tip positions scatter by {} RMS about each socket's centre, more \
                      than manufacturing deviations of a real robot produce ({:.0} mm), and none \
                      of the {n_hypotheses} checked mistakes explains it: these data do not come \
                      from this robot (or the setup is wrong in a way not checked)",
