@@ -197,7 +197,8 @@ pub enum ResidualOf {
     FramesOnly,
     /// The nominal device's cable distance, its zero fitted (a haptic device's logs).
     CableDistance,
-    /// The nominal ball's scatter about each socket's mean (socket recordings).
+    /// The scatter of the nominal tip positions about each socket's mean, with the error of
+    /// the distance between a placement's two sockets (socket recordings).
     SocketScatter,
 }
 
@@ -207,7 +208,7 @@ impl ResidualOf {
         match self {
             ResidualOf::FramesOnly => "frames-only RMS",
             ResidualOf::CableDistance => "nominal cable-distance RMS",
-            ResidualOf::SocketScatter => "nominal socket scatter",
+            ResidualOf::SocketScatter => "nominal socket-scatter RMS",
         }
     }
 }
@@ -482,7 +483,7 @@ const ORIENTATION_WEIGHT_M2: f64 = 0.5 * 1e-3 * 1e-3 / (1e-2 * 1e-2);
 const CLOSED_FORM_ITERATIONS: usize = 50;
 
 /// The nearest rotation to `m` (its polar factor, by SVD; Horn 1987).
-fn nearest_rotation(m: &nalgebra::Matrix3<f64>) -> nalgebra::Matrix3<f64> {
+pub(crate) fn nearest_rotation(m: &nalgebra::Matrix3<f64>) -> nalgebra::Matrix3<f64> {
     let svd = m.svd(true, true);
     let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
         return nalgebra::Matrix3::identity();
@@ -917,7 +918,10 @@ fn joint_label(robot: &Robot, j: usize) -> String {
 
 /// The links one and two moving joints above and below `tip` in the URDF, each with how
 /// many moving joints it lies above (negative) or below (positive) the tip.
-fn tip_candidates(urdf: &urdf_rs::Robot, tip: &str) -> Vec<(String, isize, Vec<String>)> {
+pub(crate) fn tip_candidates(
+    urdf: &urdf_rs::Robot,
+    tip: &str,
+) -> Vec<(String, isize, Vec<String>)> {
     let moving = |j: &urdf_rs::Joint| !matches!(j.joint_type, urdf_rs::JointType::Fixed);
     let mut out = Vec::new();
     // Up: the parent link of the first and second moving joints above the tip.
@@ -1535,8 +1539,8 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
 
 /// The setup check of a `hapcal calibrate` or `hapcal diagnose` plan: measurement files
 /// (marker positions, poses, distances) of a URDF or a D-H device, a haptic device's logs
-/// ([`crate::setup_haptic::check_logs`]) and socket folders
-/// ([`crate::setup_sockets::check_sockets`]); `None` for other data (distance logs).
+/// ([`crate::setup_haptic::check_logs`]) and socket folders of a single tip
+/// ([`crate::setup_sockets::check_socket_plan`]); `None` for other data.
 ///
 /// # Errors
 /// An unreadable device or file, and as [`check_setup`].
@@ -1548,15 +1552,8 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
         }
         return Ok(None);
     }
-    if !plan.data.is_empty() && plan.data.iter().all(|p| p.is_dir()) {
-        let is_urdf = (plan.device.extension()).is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
-        return crate::setup_sockets::check_sockets(
-            &device,
-            is_urdf.then_some(plan.device.as_path()),
-            &plan.tip,
-            &plan.data,
-        )
-        .map(Some);
+    if plan.tips.is_empty() && !plan.data.is_empty() && plan.data.iter().all(|p| p.is_dir()) {
+        return crate::setup_sockets::check_socket_plan(plan, &device).map(Some);
     }
     let distances = device.cable_encoder.is_none();
     let files: Vec<PathBuf> = (plan.data.iter())
@@ -1585,6 +1582,11 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
             if is_urdf && let Some(report) = tip_above(&plan.device, &tips, &files, plan.units) {
                 return Ok(Some(report));
             }
+            // A reading past its joint's limits: read again without the limits, so that the
+            // finding that put it there (degrees, swapped columns) is named with it.
+            if let Some(report) = past_limits(&robot, &files, &tips, plan, is_urdf, &e) {
+                return Ok(Some(report));
+            }
             return Err(e);
         }
     };
@@ -1596,6 +1598,46 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
         units: plan.units,
     })
     .map(Some)
+}
+
+/// Half-width (rad or m) of the joint ranges with which [`past_limits`] reads the files again:
+/// wide enough for any reading in degrees or millimetres.
+const OPEN_LIMIT: f64 = 1e6;
+
+/// The setup check of files that the reader refused with `limit_error` (a reading past its
+/// joint's limits), read again with every range opened to ±[`OPEN_LIMIT`]: when the check
+/// finds an error (a mistake such as degrees or swapped columns, or data of another robot),
+/// the report with the reader's message (`file:line:column: joint … is outside …`) at the start
+/// of that finding; `None` when the files do not read either or nothing explains the reading
+/// (then the reader's error stands).
+fn past_limits(
+    robot: &Robot,
+    files: &[PathBuf],
+    tips: &[String],
+    plan: &crate::inputs::Plan,
+    is_urdf: bool,
+    limit_error: &anyhow::Error,
+) -> Option<SetupReport> {
+    let limit = limit_error.root_cause().to_string();
+    if !limit.contains("is outside") {
+        return None;
+    }
+    let mut open = robot.clone();
+    for l in &mut open.limits {
+        *l = (-OPEN_LIMIT, OPEN_LIMIT);
+    }
+    let tables = measured::load_tables(files, &open, &plan.units).ok()?;
+    let mut report = check_setup(&SetupInput {
+        robot: &open,
+        tables: &tables,
+        urdf: is_urdf.then_some(plan.device.as_path()),
+        tips,
+        units: plan.units,
+    })
+    .ok()?;
+    let f = (report.findings.iter_mut()).find(|f| f.severity == Severity::Error)?;
+    f.message = format!("{limit}: {}", f.message);
+    Some(report)
 }
 
 /// When the files do not read with the tips given: the first tip one or two moving joints up

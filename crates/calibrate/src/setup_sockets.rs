@@ -1,200 +1,191 @@
-//! The setup check of socket recordings (MUKCa placement folders): the mistakes of
-//! [`crate::setup`] for data that are joint readings alone.
+//! The setup check of MUKCa socket folders (`hole_0.csv`, `hole_1.csv`, … of joint readings
+//! with the tip held in a fixed socket).
 //!
-//! With the ball in a fixed socket, the nominal robot puts the ball at nearly one point for
-//! every configuration of that socket: the counterpart of the frames-only residual is the
-//! scatter of the nominal ball positions about each socket's mean (closed form, microseconds
-//! per row), a fraction of a millimetre to a millimetre on a real robot. It is judged relative
-//! to how far the arm moved between those configurations (the scatter of its joint origins): a
-//! hypothesis that freezes the arm (readings in radians read as degrees barely move it) would
-//! otherwise shrink the scatter without explaining anything. The hypotheses: joint readings in
-//! degrees, two joint columns swapped or all reversed, and the ball on another link fixed to
-//! the same joints (`--tip` naming the flange or a tool frame instead of the ball); a scatter
-//! no hypothesis explains, far above a real robot's, says that the recordings do not come from
-//! this robot. Readings outside the robot's limits are read again without them, so that the
-//! unit or the column order is named instead of the first reading outside a limit.
+//! The socket analogue of the frames-only residual is closed-form: the scatter of the nominal
+//! tip positions about each socket's mean (the mean is the socket position that minimises it),
+//! together with the error of the distance between a placement's two socket means against the
+//! known socket distance (`--socket-distance-m`). Right data leave the robot's manufacturing
+//! deviations (millimetres); the same hypotheses as for measurement files (joint readings in
+//! degrees, two joint columns swapped or all reversed, the ball on another link) are scored by
+//! how many times they divide it, and decided by the rule of the other checks
+//! ([`crate::setup`]'s judge: an error at a factor of 5 with a plausible scatter left, a
+//! warning from 2). The files are read without the joint-limit check, so that a file in
+//! degrees or with swapped columns is named instead of the first reading outside a limit.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use anyhow::{Context, Result};
-use hapcal_io::{Device, SocketPlacement};
-use hapcal_kinematics::{Chain, Vector3};
+use hapcal_io::SocketPlacement;
+use hapcal_kinematics::Chain;
 
 use crate::measured::PLAUSIBLE_FRAMES_ONLY_RMS_M;
 use crate::setup::{
-    Corrected, Finding, MistakeClass, Residual, ResidualOf, SetupReport, Severity, judge,
+    ClosestHypothesis, Corrected, Finding, MistakeClass, Residual, ResidualOf, SetupReport,
+    Severity, judge, tip_candidates,
 };
 
-/// One socket's configurations: the joint readings of each row.
-type Socket = Vec<Vec<f64>>;
+/// Rows (over every socket of the training placements) below which the socket check judges
+/// nothing: a scatter and a tip turn over fewer rows are too uncertain for a factor of
+/// [`crate::setup::OVERWHELMING_FACTOR`] to mean a mistake (MUKCa records about thirty rows a
+/// socket).
+pub const MIN_CHECK_ROWS: usize = 12;
 
-/// The setup check of the socket folders `paths` recorded with `device` (from a URDF with the
-/// tip `tip` when `urdf` is given).
+/// What the socket check needs.
+#[derive(Clone, Debug)]
+pub struct SocketInput<'a> {
+    /// The device's nominal chain (base → tip), as the calibration builds it.
+    pub chain: &'a Chain,
+    /// The chain's joint names, in column order.
+    pub joint_names: &'a [String],
+    /// The placements as read (joint readings in rad, rows × joints of `chain`).
+    pub placements: &'a [SocketPlacement],
+    /// The known distance between the two sockets of a placement, m.
+    pub socket_distance_m: f64,
+    /// The URDF the chain came from (`None` for a device file): the tip hypotheses need it.
+    pub urdf: Option<&'a Path>,
+    /// The tip link given.
+    pub tip: &'a str,
+}
+
+/// The data as a hypothesis corrects them: another chain (another tip) or the same one, and
+/// the placements.
+type SocketData = (Option<Chain>, Vec<SocketPlacement>);
+
+/// The socket scatter of `placements` on `chain` ([`ResidualOf::SocketScatter`]): the RMS,
+/// over the [`KEPT_SHARE`] of each socket's rows closest to its centre, of the distance (m) of
+/// the nominal tip position from that centre (the mean of those rows),
+/// and, for each placement of exactly two sockets, of the error of the distance between the
+/// two means against `socket_distance_m`, as one more term of the RMS.
 ///
-/// # Errors
-/// A folder that cannot be read even without the joint limits, or a device whose chain does
-/// not compile.
-pub fn check_sockets(
-    device: &Device,
-    urdf: Option<&Path>,
-    tip: &str,
-    paths: &[PathBuf],
-) -> Result<SetupReport> {
-    let chain = device
-        .chain()
-        .context("building the robot's kinematic chain")?;
-    let (placements, outside_limits) = match hapcal_io::read_mukca_paths_for(paths, device) {
-        Ok(p) => (p, None),
-        Err(e) => {
-            let open = hapcal_io::read_mukca_paths_for(paths, &unbounded(device))
-                .context("reading the socket folders")?;
-            (open, Some(e.to_string()))
-        }
-    };
-    let sockets: Vec<Socket> = (placements.iter())
-        .flat_map(|p: &SocketPlacement| p.sockets.iter().map(|s| s.q.clone()))
-        .filter(|s| s.len() > 1)
-        .collect();
-    let as_given = scatter(&chain, &sockets);
-    let n_joints = chain.n_joints();
-    let mut hypotheses: Vec<Corrected<(Option<Chain>, Vec<Socket>)>> = Vec::new();
-    let remap = |edit: &dyn Fn(&mut Vec<f64>)| -> Vec<Socket> {
-        (sockets.iter())
-            .map(|s| {
-                (s.iter().cloned())
-                    .map(|mut q| {
-                        edit(&mut q);
-                        q
-                    })
-                    .collect()
-            })
-            .collect()
-    };
-    hypotheses.push(Corrected::new(
-        MistakeClass::AngleUnit,
-        "the joint readings look like degrees read as radians".to_owned(),
-        "write the joint columns in radians (multiply by π/180)".to_owned(),
-        (
-            None,
-            remap(&|q| q.iter_mut().for_each(|v| *v = v.to_radians())),
-        ),
-    ));
-    for a in 0..n_joints {
-        for b in a + 1..n_joints {
-            hypotheses.push(Corrected::new(
-                MistakeClass::JointOrder,
-                format!("joint columns {} and {} look swapped", a + 1, b + 1),
-                format!("swap columns {} and {} of the socket files", a + 1, b + 1),
-                (None, remap(&|q| q.swap(a, b))),
-            ));
-        }
-    }
-    hypotheses.push(Corrected::new(
-        MistakeClass::JointOrder,
-        format!("the joint columns look reversed (joint {n_joints} first)"),
-        format!("reverse the order of the {n_joints} columns of the socket files"),
-        (None, remap(&|q| q.reverse())),
-    ));
-    if let Some(urdf) = urdf {
-        for link in fixed_neighbours(urdf, tip) {
-            let Ok(other) = hapcal_io::import_urdf(urdf, &link) else {
-                continue;
-            };
-            let Ok(other_chain) = other.chain() else {
-                continue;
-            };
-            if other_chain.n_joints() != n_joints {
+/// Its scale ([`Residual::spread_m`]) is how far the tip frame turns about each socket: the
+/// RMS angle (rad) of the nominal tip rotations from their mean rotation, times 1 m. A
+/// hypothesis that shrinks the joint readings (degrees read as radians, the other way round)
+/// brings every row near one configuration and shrinks the scatter with it, without explaining
+/// anything; relative to the turn it does not. `None` without rows or when a row's length is
+/// not the chain's joint count.
+pub fn socket_scatter(
+    chain: &Chain,
+    placements: &[SocketPlacement],
+    socket_distance_m: f64,
+) -> Option<Residual> {
+    use nalgebra::{Matrix3, Rotation3, Vector3};
+    let zero = vec![0.0; chain.n_params()];
+    let (mut sq, mut n) = (0.0, 0usize);
+    let (mut turn_sq, mut n_turn) = (0.0, 0usize);
+    for p in placements {
+        let mut means = Vec::new();
+        for socket in &p.sockets {
+            if socket.q.iter().any(|q| q.len() != chain.n_joints()) {
+                return None;
+            }
+            let poses: Vec<_> = (socket.q.iter())
+                .map(|q| chain.end_pose(&zero, q))
+                .collect();
+            if poses.is_empty() {
                 continue;
             }
-            hypotheses.push(Corrected::new(
-                MistakeClass::TipLink,
-                format!("the ball sits on {link}, not on {tip}"),
-                format!("use --tip {link}"),
-                (Some(other_chain), sockets.clone()),
-            ));
+            let points: Vec<Vector3<f64>> = poses.iter().map(|p| p.translation.vector).collect();
+            // The socket's centre and scatter from the rows closest to it: a few rows off
+            // their socket (a reading edited or mistyped) do not make the placement implausible.
+            let mean = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
+            let center = trimmed_mean(&points, &trimmed_mean(&points, &mean));
+            let mut d: Vec<f64> = points.iter().map(|p| (p - center).norm_squared()).collect();
+            d.sort_by(f64::total_cmp);
+            let k = n_kept(points.len());
+            sq += d.iter().take(k).sum::<f64>();
+            n += k;
+            means.push(center);
+            let rotations: Vec<Matrix3<f64>> = (poses.iter())
+                .map(|p| p.rotation.to_rotation_matrix().into_inner())
+                .collect();
+            let mean_rotation =
+                crate::setup::nearest_rotation(&rotations.iter().sum::<Matrix3<f64>>());
+            for r in &rotations {
+                turn_sq += Rotation3::from_matrix_unchecked(mean_rotation.transpose() * r)
+                    .angle()
+                    .powi(2);
+                n_turn += 1;
+            }
+        }
+        if let [a, b] = means.as_slice() {
+            sq += ((a - b).norm() - socket_distance_m).powi(2);
+            n += 1;
         }
     }
-    let n_hypotheses = hypotheses.len();
-    let judged = judge(as_given, &hypotheses, |(other, sockets)| {
-        scatter(other.as_ref().unwrap_or(&chain), sockets)
-    });
-    let mut findings: Vec<Finding> = judged.finding.into_iter().collect();
-    let no_error = |f: &[Finding]| f.iter().all(|f| f.severity != Severity::Error);
-    if !as_given.is_plausible() && no_error(&findings) {
-        findings.insert(
-            0,
-            Finding {
-                class: MistakeClass::NoHypothesis,
-                severity: Severity::Error,
-                message: format!(
-                    "the nominal robot scatters the ball of each socket by {} RMS, more than \
-                     manufacturing deviations produce ({:.0} mm), and none of the \
-                     {n_hypotheses} checked mistakes explains it: these recordings do not come \
-                     from this robot (or the setup is wrong in a way not checked)",
-                    as_given.text(),
-                    PLAUSIBLE_FRAMES_ONLY_RMS_M * 1e3
-                ),
-                fix: "check --device, --tip and the socket files' columns".to_owned(),
-                before: as_given,
-                after: None,
-            },
-        );
-    }
-    if no_error(&findings)
-        && let Some(limit) = &outside_limits
-    {
-        findings.insert(
-            0,
-            Finding {
-                class: MistakeClass::NoHypothesis,
-                severity: Severity::Error,
-                message: format!("{limit}, and none of the checked mistakes explains it"),
-                fix: "check the socket files' columns and units against the robot".to_owned(),
-                before: as_given,
-                after: None,
-            },
-        );
-    }
-    findings.sort_by_key(|f| f.severity != Severity::Error);
-    Ok(SetupReport {
-        n_rows: sockets.iter().map(Vec::len).sum(),
-        as_given,
-        n_hypotheses,
-        closest: judged.closest,
-        findings,
+    let turn_m = (n_turn > 0).then(|| (turn_sq / n_turn as f64).sqrt() * TURN_LEVER_M);
+    (n > 0 && sq.is_finite()).then(|| Residual {
+        of: ResidualOf::SocketScatter,
+        length_rms_m: Some((sq / n as f64).sqrt()),
+        orientation_rms_rad: None,
+        spread_m: turn_m.filter(|t| *t > 0.0 && t.is_finite()),
     })
 }
 
-/// The device with every joint's range opened.
-fn unbounded(device: &Device) -> Device {
-    let mut open = device.clone();
-    for joint in &mut open.joints {
-        joint.lower_rad = -1e6;
-        joint.upper_rad = 1e6;
-    }
-    open
+/// Share of each socket's rows, the closest to its centre, whose scatter counts: the rest may
+/// be rows off their socket (an edited or mistyped reading), which an RMS over every row would
+/// turn into a placement no robot fits. Every hypothesis is scored the same way.
+const KEPT_SHARE: f64 = 0.9;
+
+/// How many of `n` rows [`KEPT_SHARE`] keeps (at least one).
+fn n_kept(n: usize) -> usize {
+    ((n as f64 * KEPT_SHARE).ceil() as usize).clamp(1, n.max(1))
 }
 
-/// The links joined to `tip` by fixed joints only (up and down the URDF), `tip` excluded: the
-/// frames the ball could have been named by on the same moving joints.
-fn fixed_neighbours(urdf: &Path, tip: &str) -> Vec<String> {
-    let Ok(robot) = urdf_rs::read_file(urdf) else {
-        return Vec::new();
-    };
-    let fixed = |j: &&urdf_rs::Joint| j.joint_type == urdf_rs::JointType::Fixed;
-    let mut seen = vec![tip.to_owned()];
-    let mut frontier = vec![tip.to_owned()];
-    while let Some(link) = frontier.pop() {
-        let up = (robot.joints.iter().filter(fixed))
-            .filter(|j| j.child.link == link)
-            .map(|j| j.parent.link.clone());
-        let down = (robot.joints.iter().filter(fixed))
-            .filter(|j| j.parent.link == link)
-            .map(|j| j.child.link.clone());
-        for next in up.chain(down).collect::<Vec<_>>() {
-            if !seen.contains(&next) && seen.len() < 16 {
+/// The mean of the [`n_kept`] `points` closest to `center`.
+fn trimmed_mean(
+    points: &[nalgebra::Vector3<f64>],
+    center: &nalgebra::Vector3<f64>,
+) -> nalgebra::Vector3<f64> {
+    let mut d: Vec<(f64, usize)> = (points.iter().enumerate())
+        .map(|(i, p)| ((p - center).norm_squared(), i))
+        .collect();
+    d.sort_by(|a, b| a.0.total_cmp(&b.0));
+    d.truncate(n_kept(points.len()));
+    let sum: nalgebra::Vector3<f64> = d.iter().filter_map(|&(_, i)| points.get(i)).sum();
+    sum / d.len().max(1) as f64
+}
+
+/// The lever (m) that turns the tip's RMS turn about a socket (rad) into the length scale of
+/// [`socket_scatter`]: only ratios of the scale enter the judgement, so any length works.
+const TURN_LEVER_M: f64 = 1.0;
+
+/// `placements` with every joint reading mapped by `f` (one row in, one out).
+fn map_q(placements: &[SocketPlacement], f: &dyn Fn(&[f64]) -> Vec<f64>) -> Vec<SocketPlacement> {
+    let mut out = placements.to_vec();
+    for s in out.iter_mut().flat_map(|p| &mut p.sockets) {
+        for q in &mut s.q {
+            *q = f(q);
+        }
+    }
+    out
+}
+
+/// The joint's name with its column number: `joint_a3 (column 3)`.
+fn column_label(names: &[String], j: usize) -> String {
+    format!(
+        "{} (column {})",
+        names.get(j).map_or("?", String::as_str),
+        j + 1
+    )
+}
+
+/// The links joined to `link` by fixed joints only (children and parents, transitively),
+/// `link` excluded: the other names of the same rigid body.
+fn fixed_relatives(urdf: &urdf_rs::Robot, link: &str) -> Vec<String> {
+    let fixed = |j: &urdf_rs::Joint| matches!(j.joint_type, urdf_rs::JointType::Fixed);
+    let mut seen = vec![link.to_owned()];
+    let mut frontier = vec![link.to_owned()];
+    while let Some(l) = frontier.pop() {
+        for j in urdf.joints.iter().filter(|j| fixed(j)) {
+            let next = if j.parent.link == l {
+                &j.child.link
+            } else if j.child.link == l {
+                &j.parent.link
+            } else {
+                continue;
+            };
+            if !seen.contains(next) {
                 seen.push(next.clone());
-                frontier.push(next);
+                frontier.push(next.clone());
             }
         }
     }
@@ -202,41 +193,297 @@ fn fixed_neighbours(urdf: &Path, tip: &str) -> Vec<String> {
     seen
 }
 
-/// The nominal ball's scatter about each socket's centre, judged at the scatter of the joint
-/// origins over the same rows ([`Residual::spread_m`]). Both are robust RMS values
-/// ([`crate::setup::robust_rms`]) about the coordinate-wise median: one mistyped reading
-/// moves its row's ball by decimetres, which a plain RMS over a few tens of rows would read as
-/// a wrong robot.
-fn scatter(chain: &Chain, sockets: &[Socket]) -> Residual {
-    let x0 = vec![0.0; chain.n_params()];
-    let (mut ball_sq, mut joint_sq) = (Vec::new(), Vec::new());
-    for socket in sockets {
-        let poses: Vec<Vec<Vector3<f64>>> = (socket.iter())
-            .map(|q| {
-                (chain.frame_poses(&x0, q).iter())
-                    .map(|p| p.translation.vector)
-                    .collect()
-            })
-            .collect();
-        let Some(n_frames) = poses.first().map(Vec::len) else {
+/// The tips to try instead of `tip` for data of `n_columns` joint columns: the links one and
+/// two moving joints up or down from it ([`tip_candidates`]) and every link fixed to one of
+/// them or to `tip`, whose chain from the URDF has `n_columns` joints; with the chain of each.
+fn tip_chains(urdf: &Path, tip: &str, n_columns: usize) -> Vec<(String, Chain)> {
+    let Ok(description) = urdf_rs::read_file(urdf) else {
+        return Vec::new();
+    };
+    let mut links: Vec<String> = fixed_relatives(&description, tip);
+    for (link, _, _) in tip_candidates(&description, tip) {
+        links.extend(fixed_relatives(&description, &link));
+        links.push(link);
+    }
+    let mut out: Vec<(String, Chain)> = Vec::new();
+    for link in links {
+        if link == tip || out.iter().any(|(l, _)| *l == link) {
+            continue;
+        }
+        let Ok(chain) = hapcal_io::import_urdf(urdf, &link).and_then(|d| d.chain()) else {
             continue;
         };
-        for f in 0..n_frames {
-            let centre = Vector3::from_fn(|a, _| {
-                crate::setup::median(poses.iter().map(|p| p[f][a]).collect())
-            });
-            let sq = poses.iter().map(|p| (p[f] - centre).norm_squared());
-            if f + 1 == n_frames {
-                ball_sq.extend(sq);
-            } else {
-                joint_sq.extend(sq);
-            }
+        if chain.n_joints() == n_columns {
+            out.push((link, chain));
         }
     }
-    Residual {
-        of: ResidualOf::SocketScatter,
-        length_rms_m: crate::setup::robust_rms(ball_sq, 3),
-        orientation_rms_rad: None,
-        spread_m: crate::setup::robust_rms(joint_sq, 3),
+    out
+}
+
+/// The hypotheses of a mistake for `input`.
+fn hypotheses(input: &SocketInput<'_>) -> Vec<Corrected<SocketData>> {
+    let mut out = Vec::new();
+    let n = input.chain.n_joints();
+    let names = input.joint_names;
+    let mut push = |class, what: String, fix: String, placements| {
+        out.push(Corrected::new(class, what, fix, (None, placements)));
+    };
+    push(
+        MistakeClass::AngleUnit,
+        "the joint readings look like degrees read as radians".to_owned(),
+        "write the joint readings in radians (multiply by π/180): socket files hold one joint \
+         angle in rad per column"
+            .to_owned(),
+        map_q(input.placements, &|q| {
+            q.iter().map(|v| v.to_radians()).collect()
+        }),
+    );
+    for a in 0..n {
+        for b in a + 1..n {
+            let mut perm: Vec<usize> = (0..n).collect();
+            perm.swap(a, b);
+            push(
+                MistakeClass::JointOrder,
+                format!(
+                    "columns {} and {} look swapped",
+                    column_label(names, a),
+                    column_label(names, b)
+                ),
+                format!(
+                    "swap the columns {} and {} of the socket files",
+                    a + 1,
+                    b + 1
+                ),
+                map_q(input.placements, &|q| {
+                    perm.iter().filter_map(|&k| q.get(k).copied()).collect()
+                }),
+            );
+        }
+    }
+    if n >= 3 {
+        push(
+            MistakeClass::JointOrder,
+            format!(
+                "the joint columns look reversed ({} first)",
+                column_label(names, n - 1)
+            ),
+            format!(
+                "reverse the order of the {n} columns (the first joint of the chain is the one at \
+                 the base)"
+            ),
+            map_q(input.placements, &|q| q.iter().rev().copied().collect()),
+        );
+    }
+    if let Some(urdf) = input.urdf {
+        for (link, chain) in tip_chains(urdf, input.tip, n) {
+            out.push(Corrected::new(
+                MistakeClass::TipLink,
+                format!(
+                    "the point held in the sockets looks like the origin of {link}, not of the \
+                     tip {}",
+                    input.tip
+                ),
+                format!("use --tip {link}"),
+                (Some(chain), input.placements.to_vec()),
+            ));
+        }
+    }
+    out
+}
+
+/// Checks the setup of a socket calibration: the socket scatter of the data as given against
+/// each hypothesis of a mistake ([`hypotheses`]); findings, errors first, by the rule of the module docs.
+///
+/// # Errors
+/// None of the rows has the chain's joint count (the reader refuses such files first).
+pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
+    let as_given = socket_scatter(input.chain, input.placements, input.socket_distance_m)
+        .ok_or_else(|| anyhow::anyhow!("the socket files do not read on this chain"))?;
+    let hypotheses = hypotheses(input);
+    let n_hypotheses = hypotheses.len();
+    let judged = judge(as_given, &hypotheses, |(chain, placements)| {
+        let chain = chain.as_ref().unwrap_or(input.chain);
+        socket_scatter(chain, placements, input.socket_distance_m).unwrap_or(Residual {
+            of: ResidualOf::SocketScatter,
+            length_rms_m: Some(f64::INFINITY),
+            ..Residual::default()
+        })
+    });
+    let mut findings: Vec<Finding> = judged.finding.into_iter().collect();
+    if !as_given.is_plausible() && findings.iter().all(|f| f.severity != Severity::Error) {
+        findings.insert(
+            0,
+            Finding {
+                class: MistakeClass::NoHypothesis,
+                severity: Severity::Error,
+                message: format!(
+                    "the nominal tip positions scatter by {} RMS about each socket's centre, more \
+                     than manufacturing deviations of a real robot produce ({:.0} mm), and none \
+                     of the {n_hypotheses} checked mistakes explains it: these data do not come \
+                     from this robot (or the setup is wrong in a way not checked)",
+                    as_given.text(),
+                    PLAUSIBLE_FRAMES_ONLY_RMS_M * 1e3
+                ),
+                fix: "check --device, --tip and the columns and units of the socket files"
+                    .to_owned(),
+                before: as_given,
+                after: None,
+            },
+        );
+    }
+    findings.sort_by_key(|f| f.severity != Severity::Error);
+    let n_rows = (input.placements.iter())
+        .flat_map(|p| &p.sockets)
+        .map(|s| s.q.len())
+        .sum();
+    Ok(SetupReport {
+        n_rows,
+        as_given,
+        n_hypotheses,
+        closest: judged.closest,
+        findings,
+    })
+}
+
+/// The number of cells on the first line of the first socket file under `paths` (a placement
+/// folder or a run folder of placements); `None` when there is none.
+fn n_columns(paths: &[std::path::PathBuf]) -> Option<usize> {
+    let first_line = |dir: &Path| -> Option<usize> {
+        let text = std::fs::read_to_string(dir.join("hole_0.csv")).ok()?;
+        let line = text.lines().find(|l| !l.trim().is_empty())?;
+        Some(line.split(',').count())
+    };
+    for path in paths {
+        if let Some(n) = first_line(path) {
+            return Some(n);
+        }
+        let mut subs: Vec<_> = std::fs::read_dir(path)
+            .ok()?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.is_dir())
+            .collect();
+        subs.sort();
+        if let Some(n) = subs.iter().find_map(|s| first_line(s)) {
+            return Some(n);
+        }
+    }
+    None
+}
+
+/// The setup check of a plan whose training data are socket folders, on `device` (the device
+/// of `plan.device` and `plan.tip`): the files read without the joint-limit check (a file in
+/// degrees is a hypothesis here, not a reading error), then [`check_sockets`]. When a reading
+/// lies past its joint's limits, the error finding that explains it (a mistake, or data of
+/// another robot) starts with the reader's message (`file:line:column: joint … is outside …`);
+/// without one, the reader's error is the result. When the files
+/// do not read with the device's joint count and the device is a URDF, the tips whose chain
+/// has the files' joint count are tried (the tip given one or two moving joints too high or
+/// too low), and the one leaving a plausible scatter is the finding.
+///
+/// # Errors
+/// Unreadable socket files that no other tip reads either, a reading past its joint's limits
+/// that no finding explains (the reader's error), or a device without a chain.
+pub fn check_socket_plan(
+    plan: &crate::inputs::Plan,
+    device: &hapcal_io::Device,
+) -> anyhow::Result<SetupReport> {
+    let chain = device.chain()?;
+    let names: Vec<String> = device.joints.iter().map(|j| j.name.clone()).collect();
+    let is_urdf = plan
+        .device
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    let urdf = is_urdf.then_some(plan.device.as_path());
+    match hapcal_io::read_mukca_paths(&plan.data, chain.n_joints()) {
+        Ok(placements) => {
+            // A scatter over a handful of rows says nothing about the setup (the calibration
+            // refuses so few configurations in its own words).
+            let n_rows: usize = (placements.iter().flat_map(|p| &p.sockets))
+                .map(|s| s.q.len())
+                .sum();
+            if n_rows < MIN_CHECK_ROWS {
+                return Ok(SetupReport {
+                    n_rows,
+                    as_given: Residual::default(),
+                    n_hypotheses: 0,
+                    closest: None,
+                    findings: Vec::new(),
+                });
+            }
+            let mut report = check_sockets(&SocketInput {
+                chain: &chain,
+                joint_names: &names,
+                placements: &placements,
+                socket_distance_m: plan.socket_distance_m,
+                urdf,
+                tip: &plan.tip,
+            })?;
+            // The reader's joint-limit check: a reading past a limit that a finding explains
+            // is named with it; one that no finding explains is the reader's error as before.
+            if let Err(limit) = hapcal_io::read_mukca_paths_for(&plan.data, device) {
+                // An error finding names the cause (a mistake, or another robot); without one,
+                // a reading past a limit in data that fit the robot is the reader's error.
+                match (report.findings.iter_mut()).find(|f| f.severity == Severity::Error) {
+                    Some(f) => f.message = format!("{limit}: {}", f.message),
+                    None => return Err(limit.into()),
+                }
+            }
+            Ok(report)
+        }
+        Err(e) => {
+            let Some(urdf) = urdf else {
+                return Err(e.into());
+            };
+            let Some(n) = n_columns(&plan.data) else {
+                return Err(e.into());
+            };
+            let mut best: Option<(String, Residual)> = None;
+            for (link, other) in tip_chains(urdf, &plan.tip, n) {
+                let Ok(placements) = hapcal_io::read_mukca_paths(&plan.data, n) else {
+                    continue;
+                };
+                let Some(r) = socket_scatter(&other, &placements, plan.socket_distance_m) else {
+                    continue;
+                };
+                let better = best.as_ref().is_none_or(|(_, b)| {
+                    r.length_rms_m.unwrap_or(f64::INFINITY)
+                        < b.length_rms_m.unwrap_or(f64::INFINITY)
+                });
+                if r.is_plausible() && better {
+                    best = Some((link, r));
+                }
+            }
+            let Some((link, after)) = best else {
+                return Err(e.into());
+            };
+            let m = chain.n_joints();
+            let finding = Finding {
+                class: MistakeClass::TipLink,
+                severity: Severity::Error,
+                message: format!(
+                    "the socket files have {n} joint columns while the chain to the tip {} has \
+                     {m} moving joints: the ball sits on {link}",
+                    plan.tip
+                ),
+                fix: format!("use --tip {link}"),
+                before: Residual::default(),
+                after: Some(after),
+            };
+            let n_rows = hapcal_io::read_mukca_paths(&plan.data, n)
+                .map(|ps| ps.iter().flat_map(|p| &p.sockets).map(|s| s.q.len()).sum())
+                .unwrap_or(0);
+            Ok(SetupReport {
+                n_rows,
+                as_given: Residual::default(),
+                n_hypotheses: 1,
+                closest: Some(ClosestHypothesis {
+                    class: MistakeClass::TipLink,
+                    fix: finding.fix.clone(),
+                    after,
+                    gain: None,
+                }),
+                findings: vec![finding],
+            })
+        }
     }
 }

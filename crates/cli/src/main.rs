@@ -270,10 +270,12 @@ enum Command {
         #[arg(long)]
         accept_setup: bool,
     },
-    /// Check the setup of measurement files before calibrating: units, quaternion and Euler
-    /// order, mirrored or swapped axes, joint column order, joint rows out of step, frozen
-    /// joints, the tip link, the order of the tips, another robot. Fits the frames only under
-    /// each hypothesis of a mistake and compares the residual with the data as given.
+    /// Check the setup of measurement files, a haptic device's logs or socket folders before
+    /// calibrating: units, quaternion and Euler order, mirrored or swapped axes, joint column
+    /// order, joint rows out of step, frozen joints, the tip link, the order of the tips,
+    /// another robot. Fits the frames only (for socket folders: the scatter of the nominal tip
+    /// about each socket) under each hypothesis of a mistake and compares the residual with the
+    /// data as given.
     ///
     /// Exit codes: 0 nothing found or only warnings, 2 a mistake the data show overwhelmingly
     /// (the message names the fix) or bad input.
@@ -284,9 +286,13 @@ enum Command {
         /// Tip link of a URDF; repeat for a tree (marker k sits on the k-th tip).
         #[arg(long = "tip", default_values_t = ["ball_link".to_owned()])]
         tips: Vec<String>,
-        /// Measurement files (marker positions, poses, distances).
+        /// Measurement files (marker positions, poses, distances), a haptic device's logs, or
+        /// MUKCa socket folders.
         #[arg(long, num_args = 1..)]
         data: Vec<PathBuf>,
+        /// Known distance between the two sockets of a placement, m (socket folders).
+        #[arg(long, default_value_t = 0.05)]
+        socket_distance_m: f64,
         #[command(flatten)]
         units: UnitArgs,
         /// Print the findings as one JSON document instead of text.
@@ -484,8 +490,8 @@ fn run(cli: Cli) -> Result<()> {
                 calibrate::check_outputs(&plan.device, out, &inputs)?;
             }
             plan.validate()?;
-            // The setup check first: a mistake it names (degrees, a column order, another
-            // robot) would otherwise be reported as its symptom (a reading past a limit).
+            // The setup check first: socket files in degrees or with swapped columns are named
+            // before the reader's joint-limit check reports the first reading past a limit.
             setup_gate(&plan, accept_setup)?;
             check_socket_folders(&plan)?;
             let outcome = calibrate::run(&plan)?;
@@ -891,6 +897,7 @@ fn run(cli: Cli) -> Result<()> {
             device,
             tips,
             data,
+            socket_distance_m,
             units,
             json,
         } => run_check(
@@ -904,6 +911,7 @@ fn run(cli: Cli) -> Result<()> {
                 units: units.units(),
                 data,
                 test: Vec::new(),
+                socket_distance_m,
                 ..Plan::bundled_default()
             },
             json,
@@ -939,10 +947,11 @@ fn run_check(plan: Plan, json: bool) -> Result<()> {
     if let Some(missing) = plan.data.iter().find(|p| !p.exists()) {
         anyhow::bail!("--data {}: no such file", missing.display());
     }
+    plan.validate()?;
     let Some(report) = hapcal_calibrate::setup::check_plan(&plan)? else {
         anyhow::bail!(
-            "hapcal check applies to measurement files (marker positions, poses, distances) of \
-             a URDF or a D-H device; {} holds none",
+            "hapcal check applies to measurement files (marker positions, poses, distances), \
+             a haptic device's logs and socket folders; {} holds none",
             plan.data
                 .iter()
                 .map(|p| p.display().to_string())
