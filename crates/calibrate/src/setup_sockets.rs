@@ -51,7 +51,7 @@ pub struct SocketInput<'a> {
 type SocketData = (Option<Chain>, Vec<SocketPlacement>);
 
 /// The socket scatter of `placements` on `chain` ([`ResidualOf::SocketScatter`]): the RMS,
-/// over the [`KEPT_SHARE`] of each socket's rows closest to its centre, of the distance (m) of
+/// over the `KEPT_SHARE` of each socket's rows closest to its centre, of the distance (m) of
 /// the nominal tip position from that centre (the mean of those rows),
 /// and, for each placement of exactly two sockets, of the error of the distance between the
 /// two means against `socket_distance_m`, as one more term of the RMS.
@@ -292,7 +292,7 @@ fn hypotheses(input: &SocketInput<'_>) -> Vec<Corrected<SocketData>> {
 }
 
 /// Checks the setup of a socket calibration: the socket scatter of the data as given against
-/// each hypothesis of a mistake ([`hypotheses`]); findings, errors first, by the rule of the module docs.
+/// each hypothesis of a mistake; findings, errors first, by the rule of the module docs.
 ///
 /// # Errors
 /// None of the rows has the chain's joint count (the reader refuses such files first).

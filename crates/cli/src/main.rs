@@ -798,7 +798,7 @@ fn run(cli: Cli) -> Result<()> {
                 }
                 // The setup check of the log (units, column order, rows out of step, the
                 // external encoders), as `calibrate` runs it.
-                setup_gate(
+                let accepted = setup_gate(
                     &Plan {
                         workspace: None,
                         device: device.clone(),
@@ -823,7 +823,8 @@ fn run(cli: Cli) -> Result<()> {
                     &baseline,
                     folds,
                 )?;
-                let (d, warnings) = hapcal::diagnose::run(&plan)?;
+                let (mut d, warnings) = hapcal::diagnose::run(&plan)?;
+                setup_verdict(&mut d.verdict, &mut d.notes, accepted);
                 for w in warnings {
                     note!("hapcal: warning: {w}");
                 }
@@ -855,12 +856,13 @@ fn run(cli: Cli) -> Result<()> {
                     sigma_m,
                     joint: false,
                 };
-                setup_gate(&plan, accept_setup)?;
+                let accepted = setup_gate(&plan, accept_setup)?;
                 let cfg = hapcal_diagnose::arm::ArmConfig {
                     folds,
                     ..Default::default()
                 };
-                let (d, warnings) = hapcal::diagnose_arm::run_arm(&plan, &cfg)?;
+                let (mut d, warnings) = hapcal::diagnose_arm::run_arm(&plan, &cfg)?;
+                setup_verdict(&mut d.verdict, &mut d.notes, accepted);
                 for w in warnings {
                     note!("hapcal: warning: {w}");
                 }
@@ -931,12 +933,34 @@ fn run(cli: Cli) -> Result<()> {
 
 /// The setup check at the start of `calibrate` and `diagnose` on measurement files: prints its
 /// warnings; an overwhelming finding stops with its fix unless `accept_setup`.
-fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<()> {
+/// The setup check at the start of a calibration or diagnosis: its findings printed as
+/// warnings, or the error that stops the command. Returns the error finding the user accepted
+/// with `--accept-setup` (class and text), if any: a diagnosis then names no physical effect.
+fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<Option<String>> {
     let cfg = hapcal_calibrate::setup::SetupConfig { accept_setup };
+    let mut accepted = None;
     for warning in hapcal_calibrate::setup::gate(plan, &cfg)? {
+        if accepted.is_none() && warning.starts_with("setup check (accepted") {
+            accepted = Some(warning.clone());
+        }
         note!("hapcal: warning: {warning}");
     }
-    Ok(())
+    Ok(accepted)
+}
+
+/// The verdict of a diagnosis whose setup the check found wrong and the user accepted: no
+/// physical effect is named on data set up wrong; the note says what the check found.
+fn setup_verdict(verdict: &mut String, notes: &mut Vec<String>, accepted: Option<String>) {
+    if let Some(finding) = accepted {
+        if *verdict != "none" {
+            notes.push(format!(
+                "the fits named {verdict}, but no physical effect is named on data the setup \
+                 check found set up wrong"
+            ));
+        }
+        *verdict = "setup".to_owned();
+        notes.push(finding);
+    }
 }
 
 /// `hapcal check`: the findings on standard output; an overwhelming one is the error.

@@ -264,3 +264,40 @@ fn an_external_encoder_in_degrees_is_named() {
         false,
     );
 }
+
+/// `diagnose` names no physical effect on a log the setup check finds set up wrong, even when
+/// the user accepts it: the verdict is `setup` and the notes say what the check found.
+#[test]
+fn diagnose_names_no_effect_on_an_accepted_mistake() {
+    let dir = scratch("setup-haptic-diagnose");
+    let right = simulated(&dir, "right.csv", 3, 150, &[]);
+    let (header, mut rows) = read(&right);
+    let q: Vec<usize> = (1..=7).map(|j| col(&header, &format!("q{j}"))).collect();
+    let next: Vec<Vec<f64>> = rows[1..].to_vec();
+    rows.pop();
+    for (r, n) in rows.iter_mut().zip(&next) {
+        q.iter().for_each(|&c| r[c] = n[c]);
+    }
+    let bad = write(&dir.join("shifted.csv"), &header, &rows);
+    let svg = dir.join("maps.svg").display().to_string();
+    let args = [
+        "diagnose",
+        "--device",
+        &device(),
+        "--data",
+        &bad,
+        "--svg",
+        &svg,
+        "--json",
+    ];
+    let refused = hapcal(&args);
+    assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
+    let mut accepted_args = args.to_vec();
+    accepted_args.push("--accept-setup");
+    let out = hapcal(&accepted_args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let d: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
+    assert_eq!(d["verdict"], "setup", "{d}");
+    let notes = d["notes"].to_string();
+    assert!(notes.contains("[row-shift]"), "{notes}");
+}
