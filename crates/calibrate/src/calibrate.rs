@@ -436,10 +436,18 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     );
     // The calibrated residual against the stated σ or, for sockets, the robots' repeatability
     // (crate::noise): far above it, the model lacks an effect or the setup is wrong.
-    if plan.sigma_m.is_none() && matches!(identified.sigma_source, hapcal_identify::SigmaSource::Residuals) {
+    if plan.sigma_m.is_none()
+        && matches!(
+            identified.sigma_source,
+            hapcal_identify::SigmaSource::Residuals
+        )
+    {
         let sockets = train.iter().any(|s| matches!(s, DataSet::Sockets(_)));
         let (sigma, class) = if sockets {
-            (crate::noise::SOCKET_SIGMA_M, "a robot's repeatability in a socket")
+            (
+                crate::noise::SOCKET_SIGMA_M,
+                "a robot's repeatability in a socket",
+            )
         } else {
             (crate::noise::ANCHOR_DISTANCE_SIGMA_M, "a draw-wire encoder")
         };

@@ -84,7 +84,10 @@ mod tests {
         assert!(residual_warning("geometric", 2e-3, 1e-3, Some("motion capture"), 3.0).is_none());
         let w = residual_warning("geometric", 5e-3, 1e-3, Some("motion capture"), 3.0)
             .expect("a warning");
-        assert!(w.contains("5.0× the typical σ of motion capture (1.000 mm"), "{w}");
+        assert!(
+            w.contains("5.0× the typical σ of motion capture (1.000 mm"),
+            "{w}"
+        );
         let w = residual_warning("geometric", 5e-3, 1e-3, None, 3.0).expect("a warning");
         assert!(w.contains("the stated σ of 1.000 mm"), "{w}");
         assert!(residual_warning("geometric", f64::NAN, 1e-3, None, 3.0).is_none());

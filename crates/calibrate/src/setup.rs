@@ -893,7 +893,10 @@ fn joint_label(robot: &Robot, j: usize) -> String {
 
 /// The links one and two moving joints above and below `tip` in the URDF, each with how
 /// many moving joints it lies above (negative) or below (positive) the tip.
-pub(crate) fn tip_candidates(urdf: &urdf_rs::Robot, tip: &str) -> Vec<(String, isize, Vec<String>)> {
+pub(crate) fn tip_candidates(
+    urdf: &urdf_rs::Robot,
+    tip: &str,
+) -> Vec<(String, isize, Vec<String>)> {
     let moving = |j: &urdf_rs::Joint| !matches!(j.joint_type, urdf_rs::JointType::Fixed);
     let mut out = Vec::new();
     // Up: the parent link of the first and second moving joints above the tip.

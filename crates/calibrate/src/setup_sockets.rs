@@ -71,12 +71,13 @@ pub fn socket_scatter(
             if socket.q.iter().any(|q| q.len() != chain.n_joints()) {
                 return None;
             }
-            let poses: Vec<_> = (socket.q.iter()).map(|q| chain.end_pose(&zero, q)).collect();
+            let poses: Vec<_> = (socket.q.iter())
+                .map(|q| chain.end_pose(&zero, q))
+                .collect();
             if poses.is_empty() {
                 continue;
             }
-            let points: Vec<Vector3<f64>> =
-                poses.iter().map(|p| p.translation.vector).collect();
+            let points: Vec<Vector3<f64>> = poses.iter().map(|p| p.translation.vector).collect();
             // The socket's centre and scatter from the rows closest to it: a few rows off
             // their socket (a reading edited or mistyped) do not make the placement implausible.
             let mean = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
@@ -425,7 +426,8 @@ pub fn check_socket_plan(
                     continue;
                 };
                 let better = best.as_ref().is_none_or(|(_, b)| {
-                    r.length_rms_m.unwrap_or(f64::INFINITY) < b.length_rms_m.unwrap_or(f64::INFINITY)
+                    r.length_rms_m.unwrap_or(f64::INFINITY)
+                        < b.length_rms_m.unwrap_or(f64::INFINITY)
                 });
                 if r.is_plausible() && better {
                     best = Some((link, r));

@@ -642,7 +642,14 @@ fn tiago_with(dir: &Path, name: &str, edit: &dyn Fn(&mut Vec<Vec<String>>)) -> S
 fn tiago_calibrate_fails(data: &str, needles: &[&str]) -> String {
     let urdf = show(&root().join("fixtures/figaroh/tiago/tiago.urdf"));
     let out = hapcal(&[
-        "calibrate", "--device", &urdf, "--tip", "arm_7_link", "--data", data, "--model",
+        "calibrate",
+        "--device",
+        &urdf,
+        "--tip",
+        "arm_7_link",
+        "--data",
+        data,
+        "--model",
         "frames-only",
     ]);
     let err = stderr(&out);
@@ -689,7 +696,12 @@ fn revolute_joints_in_degrees_past_the_limits_name_the_angle_unit() {
     });
     let err = tiago_calibrate_fails(
         &data,
-        &["[angle-unit]", "deg.csv:2:", "is outside", "fix: --angle-unit deg"],
+        &[
+            "[angle-unit]",
+            "deg.csv:2:",
+            "is outside",
+            "fix: --angle-unit deg",
+        ],
     );
     let (before, after) = before_after_mm(&err);
     assert!(before > 50.0 && (1.0..10.0).contains(&after), "{err}");

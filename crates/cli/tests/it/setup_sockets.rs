@@ -82,7 +82,10 @@ fn finds(data: &str, tip: &str, needles: &[&str]) -> String {
 fn assert_restored(err: &str) {
     let (before, after) = before_after_mm(err);
     let bundled = bundled_mm();
-    assert!((after - bundled).abs() <= 0.01 * bundled, "{after} vs {bundled}: {err}");
+    assert!(
+        (after - bundled).abs() <= 0.01 * bundled,
+        "{after} vs {bundled}: {err}"
+    );
     assert!(before > 50.0, "{err}");
 }
 
@@ -167,7 +170,11 @@ fn reversed_socket_columns_are_named() {
     let err = finds(
         &data,
         "ball_link",
-        &["[joint-order]", "reversed", "fix: reverse the order of the 7 columns"],
+        &[
+            "[joint-order]",
+            "reversed",
+            "fix: reverse the order of the 7 columns",
+        ],
     );
     assert_restored(&err);
 }
@@ -178,7 +185,11 @@ fn a_tip_without_the_ball_names_the_ball_link() {
     let err = finds(
         &show(&front()),
         "link_7",
-        &["[tip-link]", "origin of ball_link", "fix: use --tip ball_link"],
+        &[
+            "[tip-link]",
+            "origin of ball_link",
+            "fix: use --tip ball_link",
+        ],
     );
     assert_restored(&err);
     // One and two moving joints too high: the files have a column more than the chain.
@@ -247,7 +258,10 @@ fn a_socket_residual_far_above_the_robots_repeatability_warns() {
     let data = mapped(&dir, &|q| {
         q.iter()
             .map(|v| {
-                let s = state.get().wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                let s = state
+                    .get()
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
                 state.set(s);
                 v + ((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 1e-2
             })
