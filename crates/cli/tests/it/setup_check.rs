@@ -797,3 +797,24 @@ fn camera_positions_far_noisier_than_a_camera_warn() {
         "{warnings:?}"
     );
 }
+
+#[test]
+fn a_tip_one_short_link_too_high_whose_joint_the_file_names_is_an_error() {
+    // TIAGo with --tip arm_6_link: the wrist's last link is short, so the residual falls only
+    // 4.9× (21.42 → 4.35 mm), below the factor 5; the file's column arm_7_joint, which the
+    // chain to arm_6_link leaves out, makes it an error.
+    let urdf = show(&root().join("fixtures/figaroh/tiago/tiago.urdf"));
+    let data = show(&tiago_csv());
+    let out = check(&["--device", &urdf, "--tip", "arm_6_link", "--data", &data]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    for n in [
+        "[tip-link]",
+        "the files have a column for arm_7_joint",
+        "fix: use --tip arm_7_link",
+    ] {
+        assert!(err.contains(n), "{n:?} not in: {err}");
+    }
+    let (before, after) = before_after_mm(&err);
+    assert!(before > 2.0 * after && (1.0..10.0).contains(&after), "{err}");
+}
