@@ -816,5 +816,8 @@ fn a_tip_one_short_link_too_high_whose_joint_the_file_names_is_an_error() {
         assert!(err.contains(n), "{n:?} not in: {err}");
     }
     let (before, after) = before_after_mm(&err);
-    assert!(before > 2.0 * after && (1.0..10.0).contains(&after), "{err}");
+    assert!(
+        before > 2.0 * after && (1.0..10.0).contains(&after),
+        "{err}"
+    );
 }
