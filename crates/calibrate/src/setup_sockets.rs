@@ -117,7 +117,7 @@ pub fn socket_scatter(
 /// Share of each socket's rows, the closest to its centre, whose scatter counts: the rest may
 /// be rows off their socket (an edited or mistyped reading), which an RMS over every row would
 /// turn into a placement no robot fits. Every hypothesis is scored the same way.
-const KEPT_SHARE: f64 = 0.9;
+pub const KEPT_SHARE: f64 = 0.9;
 
 /// How many of `n` rows [`KEPT_SHARE`] keeps (at least one).
 fn n_kept(n: usize) -> usize {
@@ -286,7 +286,7 @@ fn hypotheses(input: &SocketInput<'_>) -> Vec<Corrected<SocketData>> {
 }
 
 /// Checks the setup of a socket calibration: the socket scatter of the data as given against
-/// each hypothesis of a mistake ([`hypotheses`]); findings, errors first, by the rule of the module docs.
+/// each hypothesis of a mistake; findings, errors first, by the rule of the module docs.
 ///
 /// # Errors
 /// None of the rows has the chain's joint count (the reader refuses such files first).
