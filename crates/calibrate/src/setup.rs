@@ -699,6 +699,31 @@ pub(crate) fn gain(before: &Residual, after: &Residual) -> f64 {
     }
 }
 
+/// The median of `v` (NaN for an empty `v`).
+pub(crate) fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// The RMS of `dims`-dimensional errors from the median of their squared lengths `sq`:
+/// `√(dims·median(sq)/m)`, `m` the median of χ² with `dims` degrees of freedom (0.4549 for 1,
+/// 2.3660 for 3), so that Gaussian errors give their RMS while a few gross rows (a mistyped
+/// reading) move it by little. `None` when empty or not finite.
+pub(crate) fn robust_rms(sq: Vec<f64>, dims: usize) -> Option<f64> {
+    let chi2_median = if dims == 1 { 0.454_936 } else { 2.365_974 };
+    let m = median(sq);
+    let rms = (dims as f64 * m / chi2_median).sqrt();
+    rms.is_finite().then_some(rms)
+}
+
 /// A hypothesis of a mistake with the data as it corrects them, for the checks of data that
 /// carry no instrument frame (a haptic device's logs, socket recordings).
 pub(crate) struct Corrected<T> {

@@ -129,22 +129,6 @@ pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
     let closest = judged.closest;
     findings.extend(frozen_joints(device, &rows));
     findings.extend(external_encoders(corrected, n_joints));
-    if findings.iter().all(|f| f.severity != Severity::Error)
-        && let Some(limit) = &outside_limits
-    {
-        // Nothing explains the readings outside the limits: the reader's own words.
-        findings.insert(
-            0,
-            Finding {
-                class: MistakeClass::NoHypothesis,
-                severity: Severity::Error,
-                message: format!("{limit}, and none of the checked mistakes explains it"),
-                fix: "check the log's columns and units against the device file".to_owned(),
-                before: as_given,
-                after: None,
-            },
-        );
-    }
     if !as_given.is_plausible() && findings.iter().all(|f| f.severity != Severity::Error) {
         findings.insert(
             0,
@@ -160,6 +144,22 @@ pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
                     PLAUSIBLE_FRAMES_ONLY_RMS_M * 1e3
                 ),
                 fix: "check --device and the columns and units of the logs".to_owned(),
+                before: as_given,
+                after: None,
+            },
+        );
+    }
+    if findings.iter().all(|f| f.severity != Severity::Error)
+        && let Some(limit) = &outside_limits
+    {
+        // Nothing explains the readings outside the limits: the reader's own words.
+        findings.insert(
+            0,
+            Finding {
+                class: MistakeClass::NoHypothesis,
+                severity: Severity::Error,
+                message: format!("{limit}, and none of the checked mistakes explains it"),
+                fix: "check the log's columns and units against the device file".to_owned(),
                 before: as_given,
                 after: None,
             },
@@ -208,8 +208,9 @@ fn map(rows: &[LogRow], edit: impl Fn(&mut LogRow)) -> Vec<LogRow> {
         .collect()
 }
 
-/// The nominal device's cable-distance residual of `rows`: RMS of `d − |P(q)|` about its
-/// mean, and the spread (RMS about the mean) of the distances.
+/// The nominal device's cable-distance residual of `rows`: the robust RMS
+/// ([`crate::setup::robust_rms`]) of `d − |P(q)|` about its median, and of the distances about
+/// theirs (the spread): one mistyped row leaves both nearly where they were.
 fn distance_residual(chain: &hapcal_kinematics::Chain, rows: &[LogRow]) -> Residual {
     let x0 = vec![0.0; chain.n_params()];
     let e: Vec<f64> = (rows.iter())
@@ -218,20 +219,16 @@ fn distance_residual(chain: &hapcal_kinematics::Chain, rows: &[LogRow]) -> Resid
     let d: Vec<f64> = rows.iter().map(|r| r.distance_m).collect();
     Residual {
         of: ResidualOf::CableDistance,
-        length_rms_m: rms_about_mean(&e),
+        length_rms_m: about_median(e),
         orientation_rms_rad: None,
-        spread_m: rms_about_mean(&d),
+        spread_m: about_median(d),
     }
 }
 
-/// RMS of `v` about its mean; `None` when empty or not finite.
-fn rms_about_mean(v: &[f64]) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    let mean = v.iter().sum::<f64>() / v.len() as f64;
-    let rms = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
-    rms.is_finite().then_some(rms)
+/// Robust RMS of `v` about its median.
+fn about_median(v: Vec<f64>) -> Option<f64> {
+    let m = crate::setup::median(v.clone());
+    crate::setup::robust_rms(v.iter().map(|x| (x - m).powi(2)).collect(), 1)
 }
 
 /// Joint columns that never change while the device lets the joint move.

@@ -23,6 +23,12 @@ use crate::setup::{
     Severity, judge, tip_candidates,
 };
 
+/// Rows (over every socket of the training placements) below which the socket check judges
+/// nothing: a scatter and a tip turn over fewer rows are too uncertain for a factor of
+/// [`crate::setup::OVERWHELMING_FACTOR`] to mean a mistake (MUKCa records about thirty rows a
+/// socket).
+pub const MIN_CHECK_ROWS: usize = 12;
+
 /// What the socket check needs.
 #[derive(Clone, Debug)]
 pub struct SocketInput<'a> {
@@ -390,6 +396,20 @@ pub fn check_socket_plan(
     let urdf = is_urdf.then_some(plan.device.as_path());
     match hapcal_io::read_mukca_paths(&plan.data, chain.n_joints()) {
         Ok(placements) => {
+            // A scatter over a handful of rows says nothing about the setup (the calibration
+            // refuses so few configurations in its own words).
+            let n_rows: usize = (placements.iter().flat_map(|p| &p.sockets))
+                .map(|s| s.q.len())
+                .sum();
+            if n_rows < MIN_CHECK_ROWS {
+                return Ok(SetupReport {
+                    n_rows,
+                    as_given: Residual::default(),
+                    n_hypotheses: 0,
+                    closest: None,
+                    findings: Vec::new(),
+                });
+            }
             let mut report = check_sockets(&SocketInput {
                 chain: &chain,
                 joint_names: &names,
