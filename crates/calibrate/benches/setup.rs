@@ -2,7 +2,10 @@
 //! against a calibration of the same data (the model chosen on the ladder by cross-validation,
 //! [`hapcal_calibrate::measured::calibrate_measured`]):
 //! - `ur10`: figaroh's UR10 camera poses (23 rows, 6 joints, position and orientation);
-//! - `tiago`: figaroh's TIAGo motion capture (34 rows of 4 markers, 8 joints).
+//! - `tiago`: figaroh's TIAGo motion capture (34 rows of 4 markers, 8 joints);
+//! - `kuka_14_front`: MUKCa's iiwa 14 socket placement `front` (62 rows, 7 joints), the socket
+//!   check ([`hapcal_calibrate::setup_sockets::check_sockets`]) against `hapcal calibrate`'s
+//!   socket workflow ([`hapcal_calibrate::calibrate::run`], no test data).
 #![allow(missing_docs, clippy::unwrap_used)] // criterion's macros generate undocumented items
 
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -70,5 +73,39 @@ fn bench(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench);
+fn bench_sockets(c: &mut Criterion) {
+    use hapcal_calibrate::calibrate::{Plan, load_device, run};
+    use hapcal_calibrate::setup_sockets::{SocketInput, check_sockets};
+    let urdf = fixture("mukca/urdf/iiwa14.urdf");
+    let front = fixture("mukca/data/kuka_14/front");
+    let device = load_device(&urdf, "ball_link").unwrap();
+    let chain = device.chain().unwrap();
+    let names: Vec<String> = device.joints.iter().map(|j| j.name.clone()).collect();
+    let placements = hapcal_io::read_mukca_paths(std::slice::from_ref(&front), 7).unwrap();
+    let mut group = c.benchmark_group("kuka_14_front");
+    group.sample_size(10);
+    group.bench_function("setup_check", |b| {
+        b.iter(|| {
+            check_sockets(black_box(&SocketInput {
+                chain: &chain,
+                joint_names: &names,
+                placements: &placements,
+                socket_distance_m: 0.05,
+                urdf: Some(&urdf),
+                tip: "ball_link",
+            }))
+            .unwrap()
+        })
+    });
+    let plan = Plan {
+        device: urdf.clone(),
+        data: vec![front.clone()],
+        test: Vec::new(),
+        ..Plan::bundled_default()
+    };
+    group.bench_function("calibration", |b| b.iter(|| run(black_box(&plan)).unwrap()));
+    group.finish();
+}
+
+criterion_group!(benches, bench, bench_sockets);
 criterion_main!(benches);

@@ -434,6 +434,31 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         0.95,
         observability.as_ref(),
     );
+    // The calibrated residual against the stated σ or, for sockets, the robots' repeatability
+    // (crate::noise): far above it, the model lacks an effect or the setup is wrong.
+    if plan.sigma_m.is_none()
+        && matches!(
+            identified.sigma_source,
+            hapcal_identify::SigmaSource::Residuals
+        )
+    {
+        let sockets = train.iter().any(|s| matches!(s, DataSet::Sockets(_)));
+        let (sigma, class) = if sockets {
+            (
+                crate::noise::SOCKET_SIGMA_M,
+                "a robot's repeatability in a socket",
+            )
+        } else {
+            (crate::noise::ANCHOR_DISTANCE_SIGMA_M, "a draw-wire encoder")
+        };
+        warnings.extend(crate::noise::residual_warning(
+            &choice.to_string(),
+            identified.sigma,
+            sigma,
+            Some(class),
+            crate::measured::CALIBRATED_SIGMA_RATIO,
+        ));
+    }
 
     let nominal = CalibratedModel::nominal(chain.clone());
     let mut placements = Vec::new();

@@ -14,6 +14,7 @@ pub mod haptic;
 pub mod inputs;
 pub mod measured;
 pub mod model;
+pub mod noise;
 pub mod plan;
 pub mod report;
 pub mod setup;

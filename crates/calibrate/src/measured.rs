@@ -1456,18 +1456,25 @@ pub fn calibrate_measured(
             PLAUSIBLE_FRAMES_ONLY_RMS_M * 1e3
         ));
     }
-    if let Some(stated) = cfg.sigma_m {
-        let calibrated = weights.sigma_position_m * fitted.identified.sigma;
-        if calibrated > CALIBRATED_SIGMA_RATIO * stated {
-            warnings.push(format!(
-                "the {rung} model leaves {:.3} mm per axis, {:.1}× the stated σ of {:.3} mm: \
-                 an effect the model lacks, or a setup mistake",
-                calibrated * 1e3,
-                calibrated / stated,
-                stated * 1e3
-            ));
+    // The stated σ, or the default of the instrument class that writes such files
+    // (crate::noise).
+    let (sigma, default_of) = match cfg.sigma_m {
+        Some(stated) => (stated, None),
+        None => {
+            let poses = train.iter().any(|t| t.has_orientation);
+            let positions = train.iter().any(|t| t.n_markers > 0);
+            let (sigma, class) = crate::noise::default_sigma_m(poses, positions);
+            (sigma, Some(class))
         }
-    }
+    };
+    let calibrated = weights.sigma_position_m * fitted.identified.sigma;
+    warnings.extend(crate::noise::residual_warning(
+        &rung.to_string(),
+        calibrated,
+        sigma,
+        default_of,
+        CALIBRATED_SIGMA_RATIO,
+    ));
 
     let mut sets = Vec::new();
     let mut sample_errors = Vec::new();
@@ -1613,9 +1620,10 @@ pub fn calibrate_measured(
 /// give decimetres to metres.
 pub const PLAUSIBLE_FRAMES_ONLY_RMS_M: f64 = 0.05;
 
-/// Ratio of the calibrated model's σ per axis to the stated instrument σ above which the
-/// report says the model lacks an effect (or the setup is wrong): a right model leaves the
-/// noise, within a few per cent for hundreds of residuals.
+/// Ratio of the calibrated model's σ per axis to the stated instrument σ (or the default of
+/// its class, [`crate::noise`]) above which the report says the model lacks an effect (or the
+/// setup is wrong): a right model leaves the noise, within a few per cent for hundreds of
+/// residuals, and a default is the upper end of its class.
 pub const CALIBRATED_SIGMA_RATIO: f64 = 3.0;
 
 /// Most refits of [`equilibrate`].

@@ -423,6 +423,10 @@ struct Hypothesis {
     robot: Option<Robot>,
     tables: Vec<MeasurementTable>,
     marker_tips: Option<Vec<usize>>,
+    /// The joints the files have a column for (by name) that the chain as given leaves out
+    /// and the hypothesis uses (a tip below the one given): evidence of its own, so that a
+    /// gain of [`SUGGESTIVE_FACTOR`] with a plausible residual is an error.
+    ignored_columns: Vec<String>,
 }
 
 /// The weights of the frames-only fits: those `calibrate_measured` starts from.
@@ -1041,6 +1045,7 @@ fn hypotheses(input: &SetupInput<'_>) -> Vec<Hypothesis> {
             robot: None,
             tables: t,
             marker_tips: None,
+            ignored_columns: Vec::new(),
         });
     };
     let has_markers = tables.iter().any(|t| t.n_markers > 0);
@@ -1301,6 +1306,7 @@ fn hypotheses(input: &SetupInput<'_>) -> Vec<Hypothesis> {
                 robot: None,
                 tables: tables.to_vec(),
                 marker_tips: Some(tips),
+                ignored_columns: Vec::new(),
             });
         }
     }
@@ -1311,11 +1317,19 @@ fn hypotheses(input: &SetupInput<'_>) -> Vec<Hypothesis> {
         && let Ok(description) = urdf_rs::read_file(urdf)
     {
         let mut candidates = Vec::new();
+        let mut named = Vec::new();
         for (t, tip) in input.tips.iter().enumerate() {
             for (link, steps, joints) in tip_candidates(&description, tip) {
                 if input.tips.contains(&link) || !has_columns(&headers, &joints, n) {
                     continue;
                 }
+                // Columns named for the joints between (not q8, q9 past the chain's count).
+                named.push(
+                    (joints.iter())
+                        .filter(|j| headers.iter().all(|h| h.contains(j)))
+                        .cloned()
+                        .collect::<Vec<String>>(),
+                );
                 let mut tips = input.tips.to_vec();
                 if let Some(slot) = tips.get_mut(t) {
                     slot.clone_from(&link);
@@ -1324,8 +1338,10 @@ fn hypotheses(input: &SetupInput<'_>) -> Vec<Hypothesis> {
             }
         }
         let sets: Vec<Vec<String>> = candidates.iter().map(|c| c.3.clone()).collect();
-        for ((tip, link, steps, tips), other) in
-            candidates.into_iter().zip(robots_for_tips(urdf, &sets))
+        for (((tip, link, steps, tips), other), ignored) in candidates
+            .into_iter()
+            .zip(robots_for_tips(urdf, &sets))
+            .zip(named)
         {
             let Some(other) = other else { continue };
             let Ok(reread) = measured::load_tables(&paths, &other, units) else {
@@ -1344,6 +1360,7 @@ fn hypotheses(input: &SetupInput<'_>) -> Vec<Hypothesis> {
                 robot: Some(other),
                 tables: reread,
                 marker_tips: None,
+                ignored_columns: ignored,
             });
         }
     }
@@ -1429,13 +1446,24 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
     if let Some((h, after, g)) = best
         && g >= SUGGESTIVE_FACTOR
     {
-        let overwhelming = g >= OVERWHELMING_FACTOR && after.is_plausible();
+        // A tip above the markers' link leaves out joints the files name: that column is
+        // evidence of its own, so a gain out of chance's reach (SUGGESTIVE_FACTOR) decides.
+        let named = !h.ignored_columns.is_empty();
+        let overwhelming = (g >= OVERWHELMING_FACTOR || named) && after.is_plausible();
         let scale = if h.class == MistakeClass::LengthUnit {
             " relative to the spread of the positions"
         } else {
             ""
         };
-        let message = if overwhelming {
+        let message = if overwhelming && named {
+            let digits = if g < 10.0 { 1 } else { 0 };
+            format!(
+                "{} ({g:.digits$}× smaller residual when corrected, and the files have a column \
+                 for {}, which the chain to the tip given leaves out)",
+                h.what,
+                h.ignored_columns.join(", ")
+            )
+        } else if overwhelming {
             format!(
                 "{} ({g:.0}× smaller residual{scale} when corrected)",
                 h.what

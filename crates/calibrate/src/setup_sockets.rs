@@ -123,7 +123,7 @@ pub fn socket_scatter(
 /// Share of each socket's rows, the closest to its centre, whose scatter counts: the rest may
 /// be rows off their socket (an edited or mistyped reading), which an RMS over every row would
 /// turn into a placement no robot fits. Every hypothesis is scored the same way.
-const KEPT_SHARE: f64 = 0.9;
+pub const KEPT_SHARE: f64 = 0.9;
 
 /// How many of `n` rows [`KEPT_SHARE`] keeps (at least one).
 fn n_kept(n: usize) -> usize {

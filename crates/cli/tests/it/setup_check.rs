@@ -706,3 +706,118 @@ fn revolute_joints_in_degrees_past_the_limits_name_the_angle_unit() {
     let (before, after) = before_after_mm(&err);
     assert!(before > 50.0 && (1.0..10.0).contains(&after), "{err}");
 }
+
+/// The warnings of `hapcal calibrate --json` with `args`.
+fn calibration_warnings(args: &[&str]) -> Vec<String> {
+    let mut all = vec!["calibrate"];
+    all.extend_from_slice(args);
+    all.push("--json");
+    let out = hapcal(&all);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
+    v["warnings"]
+        .as_array()
+        .expect("warnings")
+        .iter()
+        .map(|w| w.as_str().unwrap_or_default().to_owned())
+        .collect()
+}
+
+#[test]
+fn bundled_recordings_stay_within_their_instruments_default_noise() {
+    // UR10 camera poses leave 2.05 mm per axis, TIAGo's motion capture 2.57 mm, the
+    // positioner's camera 0.24 mm: all below 3 × 1 mm, no warning without --sigma-m.
+    let tiago = root().join("fixtures/figaroh/tiago");
+    let cases: Vec<Vec<String>> = vec![
+        vec![
+            "--device".into(),
+            ur10(),
+            "--tip".into(),
+            "wrist_3_link".into(),
+            "--data".into(),
+            show(&root().join("fixtures/figaroh/ur10/calibration.csv")),
+        ],
+        vec![
+            "--device".into(),
+            show(&tiago.join("tiago.urdf")),
+            "--tip".into(),
+            "arm_7_link".into(),
+            "--data".into(),
+            show(&tiago_csv()),
+        ],
+        vec![
+            "--device".into(),
+            show(&root().join("fixtures/industrial-calibration/two_axis_positioner.toml")),
+            "--data".into(),
+            show(&root().join("fixtures/industrial-calibration/measurements.yaml")),
+        ],
+    ];
+    for args in cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let warnings = calibration_warnings(&args);
+        assert!(
+            !warnings.iter().any(|w| w.contains("typical σ")),
+            "{args:?}: {warnings:?}"
+        );
+    }
+}
+
+#[test]
+fn camera_positions_far_noisier_than_a_camera_warn() {
+    // ±12 mm of uniform noise (σ = 6.9 mm per axis) on the UR10's camera positions: the
+    // calibrated residual is several times the 1 mm default of a camera's poses, while the
+    // frames-only residual stays below what the setup check calls implausible.
+    let dir = scratch("setup-noisy-camera");
+    let mut rows = ur10_rows();
+    let state = std::cell::Cell::new(98765u64);
+    for name in ["x1", "y1", "z1"] {
+        map_column(&mut rows, name, &|v| {
+            let s = state
+                .get()
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            state.set(s);
+            v + ((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.024
+        });
+    }
+    let data = write(&dir, "noisy.csv", &rows);
+    let warnings = calibration_warnings(&[
+        "--device",
+        &ur10(),
+        "--tip",
+        "wrist_3_link",
+        "--data",
+        &data,
+        "--accept-setup",
+    ]);
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("the typical σ of a camera's poses (1.000 mm")),
+        "{warnings:?}"
+    );
+}
+
+#[test]
+fn a_tip_one_short_link_too_high_whose_joint_the_file_names_is_an_error() {
+    // TIAGo with --tip arm_6_link: the wrist's last link is short, so the residual falls only
+    // 4.9× (21.42 → 4.35 mm), below the factor 5; the file's column arm_7_joint, which the
+    // chain to arm_6_link leaves out, makes it an error.
+    let urdf = show(&root().join("fixtures/figaroh/tiago/tiago.urdf"));
+    let data = show(&tiago_csv());
+    let out = check(&["--device", &urdf, "--tip", "arm_6_link", "--data", &data]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    for n in [
+        "[tip-link]",
+        "the files have a column for arm_7_joint",
+        "fix: use --tip arm_7_link",
+    ] {
+        assert!(err.contains(n), "{n:?} not in: {err}");
+    }
+    let (before, after) = before_after_mm(&err);
+    assert!(
+        before > 2.0 * after && (1.0..10.0).contains(&after),
+        "{err}"
+    );
+}

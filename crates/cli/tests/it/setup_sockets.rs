@@ -213,3 +213,65 @@ fn another_robots_sockets_fit_no_hypothesis() {
     );
     assert!(!err.contains("→"), "{err}");
 }
+
+/// The warnings of `hapcal calibrate --json` on `args`.
+fn calibration_warnings(args: &[&str]) -> Vec<String> {
+    let mut all = vec!["calibrate"];
+    all.extend_from_slice(args);
+    all.push("--json");
+    let out = hapcal(&all);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
+    v["warnings"]
+        .as_array()
+        .expect("warnings")
+        .iter()
+        .map(|w| w.as_str().unwrap_or_default().to_owned())
+        .collect()
+}
+
+#[test]
+fn bundled_socket_calibrations_stay_within_the_default_noise() {
+    // The iiwa's front placement leaves 0.05 mm per axis, the Panda's panda_2/high the largest
+    // of the bundled placements, 0.63 mm: neither may warn.
+    let panda = show(&root().join("fixtures/mukca/urdf/panda.urdf"));
+    let front_right = show(&root().join("fixtures/mukca/data/panda_2/high"));
+    for args in [
+        vec!["--device", &iiwa(), "--data", &show(&front())],
+        vec!["--device", &panda, "--data", &front_right],
+    ] {
+        let warnings = calibration_warnings(&args);
+        assert!(
+            !warnings.iter().any(|w| w.contains("typical σ")),
+            "{args:?}: {warnings:?}"
+        );
+    }
+}
+
+#[test]
+fn a_socket_residual_far_above_the_robots_repeatability_warns() {
+    // ±5 mrad of uniform noise (σ = 2.9 mrad) on every joint reading leaves about 2 mm per axis
+    // after calibration (±2 mrad left 0.76 mm): far more than 3 times the 0.25 mm default, and
+    // no setup mistake (the scatter stays plausible).
+    let dir = scratch("sockets-noisy");
+    let state = std::cell::Cell::new(12345u64);
+    let data = mapped(&dir, &|q| {
+        q.iter()
+            .map(|v| {
+                let s = state
+                    .get()
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                state.set(s);
+                v + ((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 1e-2
+            })
+            .collect()
+    });
+    let warnings = calibration_warnings(&["--device", &iiwa(), "--data", &data, "--accept-setup"]);
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("typical σ of a robot's repeatability in a socket (0.250 mm")),
+        "{warnings:?}"
+    );
+}
