@@ -456,7 +456,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             identified.sigma,
             sigma,
             Some(class),
-            crate::measured::CALIBRATED_SIGMA_RATIO,
+            crate::noise::DEFAULT_SIGMA_RATIO,
         ));
     }
 

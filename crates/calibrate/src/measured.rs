@@ -1468,12 +1468,17 @@ pub fn calibrate_measured(
         }
     };
     let calibrated = weights.sigma_position_m * fitted.identified.sigma;
+    let ratio = if default_of.is_some() {
+        crate::noise::DEFAULT_SIGMA_RATIO
+    } else {
+        CALIBRATED_SIGMA_RATIO
+    };
     warnings.extend(crate::noise::residual_warning(
         &rung.to_string(),
         calibrated,
         sigma,
         default_of,
-        CALIBRATED_SIGMA_RATIO,
+        ratio,
     ));
 
     let mut sets = Vec::new();
