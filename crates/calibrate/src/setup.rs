@@ -342,6 +342,47 @@ pub struct SetupReport {
 }
 
 impl SetupReport {
+    /// The report of data that do not read as given, with the one `finding` that makes them
+    /// read (its residual `after`): the tip one or two links up.
+    pub(crate) fn of_unread(n_rows: usize, finding: Finding, after: Residual) -> SetupReport {
+        SetupReport {
+            n_rows,
+            as_given: Residual::default(),
+            n_hypotheses: 1,
+            closest: Some(ClosestHypothesis {
+                class: finding.class,
+                fix: finding.fix.clone(),
+                after,
+                gain: None,
+            }),
+            findings: vec![finding],
+        }
+    }
+
+    /// Adds, first, the error "`message`: nothing explains the residual as given" when
+    /// `as_given` is more than a real robot leaves and no finding is an error yet.
+    pub(crate) fn add_implausible(
+        findings: &mut Vec<Finding>,
+        as_given: Residual,
+        message: String,
+        fix: &str,
+    ) {
+        if as_given.is_plausible() || findings.iter().any(|f| f.severity == Severity::Error) {
+            return;
+        }
+        findings.insert(
+            0,
+            Finding {
+                class: MistakeClass::NoHypothesis,
+                severity: Severity::Error,
+                message,
+                fix: fix.to_owned(),
+                before: as_given,
+                after: None,
+            },
+        );
+    }
+
     /// The first finding of severity error, if any.
     pub fn overwhelming(&self) -> Option<&Finding> {
         self.findings.iter().find(|f| f.severity == Severity::Error)
@@ -1709,18 +1750,11 @@ fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> O
                 before: Residual::default(),
                 after: Some(after),
             };
-            return Some(SetupReport {
-                n_rows: tables.iter().map(|t| t.rows.len()).sum(),
-                as_given: Residual::default(),
-                n_hypotheses: 1,
-                closest: Some(ClosestHypothesis {
-                    class: MistakeClass::TipLink,
-                    fix: finding.fix.clone(),
-                    after,
-                    gain: None,
-                }),
-                findings: vec![finding],
-            });
+            return Some(SetupReport::of_unread(
+                tables.iter().map(|t| t.rows.len()).sum(),
+                finding,
+                after,
+            ));
         }
     }
     None

@@ -129,26 +129,19 @@ pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
     let closest = judged.closest;
     findings.extend(frozen_joints(device, &rows));
     findings.extend(external_encoders(corrected, n_joints));
-    if !as_given.is_plausible() && findings.iter().all(|f| f.severity != Severity::Error) {
-        findings.insert(
-            0,
-            Finding {
-                class: MistakeClass::NoHypothesis,
-                severity: Severity::Error,
-                message: format!(
-                    "the nominal device misses the cable distances by {} RMS, more than \
+    SetupReport::add_implausible(
+        &mut findings,
+        as_given,
+        format!(
+            "the nominal device misses the cable distances by {} RMS, more than \
                      manufacturing deviations produce ({:.0} mm), and none of the {n_hypotheses} \
                      checked mistakes explains it: these logs do not come from this device (or \
                      the setup is wrong in a way not checked)",
-                    as_given.text(),
-                    PLAUSIBLE_FRAMES_ONLY_RMS_M * 1e3
-                ),
-                fix: "check --device and the columns and units of the logs".to_owned(),
-                before: as_given,
-                after: None,
-            },
-        );
-    }
+            as_given.text(),
+            PLAUSIBLE_FRAMES_ONLY_RMS_M * 1e3
+        ),
+        "check --device and the columns and units of the logs",
+    );
     if findings.iter().all(|f| f.severity != Severity::Error)
         && let Some(limit) = &outside_limits
     {

@@ -19,8 +19,8 @@ use hapcal_kinematics::Chain;
 
 use crate::measured::PLAUSIBLE_FRAMES_ONLY_RMS_M;
 use crate::setup::{
-    ClosestHypothesis, Corrected, Finding, MistakeClass, Residual, ResidualOf, SetupReport,
-    Severity, judge, tip_candidates,
+    Corrected, Finding, MistakeClass, Residual, ResidualOf, SetupReport, Severity, judge,
+    tip_candidates,
 };
 
 /// Rows (over every socket of the training placements) below which the socket check judges
@@ -310,27 +310,19 @@ pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
         })
     });
     let mut findings: Vec<Finding> = judged.finding.into_iter().collect();
-    if !as_given.is_plausible() && findings.iter().all(|f| f.severity != Severity::Error) {
-        findings.insert(
-            0,
-            Finding {
-                class: MistakeClass::NoHypothesis,
-                severity: Severity::Error,
-                message: format!(
-                    "the nominal tip positions scatter by {} RMS about each socket's centre, more \
+    SetupReport::add_implausible(
+        &mut findings,
+        as_given,
+        format!(
+            "the nominal tip positions scatter by {} RMS about each socket's centre, more \
                      than manufacturing deviations of a real robot produce ({:.0} mm), and none \
                      of the {n_hypotheses} checked mistakes explains it: these data do not come \
                      from this robot (or the setup is wrong in a way not checked)",
-                    as_given.text(),
-                    PLAUSIBLE_FRAMES_ONLY_RMS_M * 1e3
-                ),
-                fix: "check --device, --tip and the columns and units of the socket files"
-                    .to_owned(),
-                before: as_given,
-                after: None,
-            },
-        );
-    }
+            as_given.text(),
+            PLAUSIBLE_FRAMES_ONLY_RMS_M * 1e3
+        ),
+        "check --device, --tip and the columns and units of the socket files",
+    );
     findings.sort_by_key(|f| f.severity != Severity::Error);
     let n_rows = (input.placements.iter())
         .flat_map(|p| &p.sockets)
@@ -472,18 +464,7 @@ pub fn check_socket_plan(
             let n_rows = hapcal_io::read_mukca_paths(&plan.data, n)
                 .map(|ps| ps.iter().flat_map(|p| &p.sockets).map(|s| s.q.len()).sum())
                 .unwrap_or(0);
-            Ok(SetupReport {
-                n_rows,
-                as_given: Residual::default(),
-                n_hypotheses: 1,
-                closest: Some(ClosestHypothesis {
-                    class: MistakeClass::TipLink,
-                    fix: finding.fix.clone(),
-                    after,
-                    gain: None,
-                }),
-                findings: vec![finding],
-            })
+            Ok(SetupReport::of_unread(n_rows, finding, after))
         }
     }
 }
