@@ -740,31 +740,6 @@ pub(crate) fn gain(before: &Residual, after: &Residual) -> f64 {
     }
 }
 
-/// The median of `v` (NaN for an empty `v`).
-pub(crate) fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
-
-/// The RMS of `dims`-dimensional errors from the median of their squared lengths `sq`:
-/// `√(dims·median(sq)/m)`, `m` the median of χ² with `dims` degrees of freedom (0.4549 for 1,
-/// 2.3660 for 3), so that Gaussian errors give their RMS while a few gross rows (a mistyped
-/// reading) move it by little. `None` when empty or not finite.
-pub(crate) fn robust_rms(sq: Vec<f64>, dims: usize) -> Option<f64> {
-    let chi2_median = if dims == 1 { 0.454_936 } else { 2.365_974 };
-    let m = median(sq);
-    let rms = (dims as f64 * m / chi2_median).sqrt();
-    rms.is_finite().then_some(rms)
-}
-
 /// A hypothesis of a mistake with the data as it corrects them, for the checks of data that
 /// carry no instrument frame (a haptic device's logs, socket recordings).
 pub(crate) struct Corrected<T> {
@@ -1671,7 +1646,7 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
 
 /// Half-width (rad or m) of the joint ranges with which [`past_limits`] reads the files again:
 /// wide enough for any reading in degrees or millimetres.
-const OPEN_LIMIT: f64 = 1e6;
+pub(crate) const OPEN_LIMIT: f64 = 1e6;
 
 /// The setup check of files that the reader refused with `limit_error` (a reading past its
 /// joint's limits), read again with every range opened to ±[`OPEN_LIMIT`]: when the check
@@ -1760,18 +1735,29 @@ fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> O
     None
 }
 
-/// The setup check at the start of a calibration or diagnosis: the warnings to print, or an
-/// error naming the mistake, its fix and the residual before → after when a finding is
-/// overwhelming and `cfg` does not accept the data (then they are warnings too).
+/// What the setup check at the start of a calibration or diagnosis lets through.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Gated {
+    /// The findings as warnings to print, errors first.
+    pub warnings: Vec<String>,
+    /// The error finding the user accepted with [`SetupConfig::accept_setup`], if any: a
+    /// diagnosis then names no physical effect.
+    pub accepted: Option<Finding>,
+}
+
+/// The setup check at the start of a calibration or diagnosis: the warnings to print and the
+/// error finding accepted, or an error naming the mistake, its fix and the residual before →
+/// after when a finding is overwhelming and `cfg` does not accept the data (then they are
+/// warnings too).
 ///
 /// A check that cannot run (an unreadable file, a failed fit) says nothing: the calibration
 /// reports the same problem in its own words.
 ///
 /// # Errors
 /// An overwhelming finding without [`SetupConfig::accept_setup`].
-pub fn gate(plan: &crate::inputs::Plan, cfg: &SetupConfig) -> Result<Vec<String>> {
+pub fn gate(plan: &crate::inputs::Plan, cfg: &SetupConfig) -> Result<Gated> {
     let Ok(Some(report)) = check_plan(plan) else {
-        return Ok(Vec::new());
+        return Ok(Gated::default());
     };
     if let Some(f) = report.overwhelming()
         && !cfg.accept_setup
@@ -1782,18 +1768,19 @@ pub fn gate(plan: &crate::inputs::Plan, cfg: &SetupConfig) -> Result<Vec<String>
             f.text()
         );
     }
-    Ok(report
-        .findings
-        .iter()
-        .map(|f| {
-            let accepted = if f.severity == Severity::Error {
-                " (accepted with --accept-setup)"
-            } else {
-                ""
-            };
-            format!("setup check{accepted} [{}]: {}", f.class, f.text())
-        })
-        .collect())
+    Ok(Gated {
+        warnings: (report.findings.iter())
+            .map(|f| {
+                let accepted = if f.severity == Severity::Error {
+                    " (accepted with --accept-setup)"
+                } else {
+                    ""
+                };
+                format!("setup check{accepted} [{}]: {}", f.class, f.text())
+            })
+            .collect(),
+        accepted: report.overwhelming().cloned(),
+    })
 }
 
 #[cfg(test)]

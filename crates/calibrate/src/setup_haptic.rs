@@ -24,8 +24,8 @@ use hapcal_io::{Device, LogRow};
 
 use crate::measured::PLAUSIBLE_FRAMES_ONLY_RMS_M;
 use crate::setup::{
-    Corrected, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OVERWHELMING_FACTOR, Residual,
-    ResidualOf, SetupReport, Severity, judge,
+    Corrected, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OPEN_LIMIT,
+    OVERWHELMING_FACTOR, Residual, ResidualOf, SetupReport, Severity, judge,
 };
 
 /// RMS difference (rad) between an external encoder and its joint's reading beyond which the
@@ -172,8 +172,8 @@ pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
 fn unbounded(device: &Device) -> Device {
     let mut open = device.clone();
     for joint in &mut open.joints {
-        joint.lower_rad = -1e6;
-        joint.upper_rad = 1e6;
+        joint.lower_rad = -OPEN_LIMIT;
+        joint.upper_rad = OPEN_LIMIT;
     }
     open
 }
@@ -201,8 +201,8 @@ fn map(rows: &[LogRow], edit: impl Fn(&mut LogRow)) -> Vec<LogRow> {
         .collect()
 }
 
-/// The nominal device's cable-distance residual of `rows`: the robust RMS
-/// ([`crate::setup::robust_rms`]) of `d − |P(q)|` about its median, and of the distances about
+/// The nominal device's cable-distance residual of `rows`: the robust RMS ([`about_median`])
+/// of `d − |P(q)|` about its median, and of the distances about
 /// theirs (the spread): one mistyped row leaves both nearly where they were.
 fn distance_residual(chain: &hapcal_kinematics::Chain, rows: &[LogRow]) -> Residual {
     let x0 = vec![0.0; chain.n_params()];
@@ -218,10 +218,27 @@ fn distance_residual(chain: &hapcal_kinematics::Chain, rows: &[LogRow]) -> Resid
     }
 }
 
-/// Robust RMS of `v` about its median.
+/// Robust RMS of `v` about its median: `√(median((v − m)²)/0.4549)`, 0.4549 the median of χ²
+/// with one degree of freedom, so that Gaussian values give their standard deviation while a
+/// few gross rows (a mistyped reading) move it by little; `None` when empty or not finite.
 fn about_median(v: Vec<f64>) -> Option<f64> {
-    let m = crate::setup::median(v.clone());
-    crate::setup::robust_rms(v.iter().map(|x| (x - m).powi(2)).collect(), 1)
+    let m = median(v.clone());
+    let rms = (median(v.iter().map(|x| (x - m).powi(2)).collect()) / 0.454_936).sqrt();
+    rms.is_finite().then_some(rms)
+}
+
+/// The median of `v` (NaN for an empty `v`).
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
 }
 
 /// Joint columns that never change while the device lets the joint move.

@@ -935,17 +935,21 @@ fn run(cli: Cli) -> Result<()> {
 /// warnings; an overwhelming finding stops with its fix unless `accept_setup`.
 /// The setup check at the start of a calibration or diagnosis: its findings printed as
 /// warnings, or the error that stops the command. Returns the error finding the user accepted
-/// with `--accept-setup` (class and text), if any: a diagnosis then names no physical effect.
+/// with `--accept-setup`, as the warning says it, if any: a diagnosis then names no physical
+/// effect.
 fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<Option<String>> {
     let cfg = hapcal_calibrate::setup::SetupConfig { accept_setup };
-    let mut accepted = None;
-    for warning in hapcal_calibrate::setup::gate(plan, &cfg)? {
-        if accepted.is_none() && warning.starts_with("setup check (accepted") {
-            accepted = Some(warning.clone());
-        }
+    let gated = hapcal_calibrate::setup::gate(plan, &cfg)?;
+    for warning in &gated.warnings {
         note!("hapcal: warning: {warning}");
     }
-    Ok(accepted)
+    Ok(gated.accepted.map(|f| {
+        format!(
+            "setup check (accepted with --accept-setup) [{}]: {}",
+            f.class,
+            f.text()
+        )
+    }))
 }
 
 /// The verdict of a diagnosis whose setup the check found wrong and the user accepted: no

@@ -996,19 +996,20 @@ impl CalibrationProblem {
 
     /// The Jacobian rows `r..r + 3` of a position residual (`/ s`): column by column, the
     /// three rows together; the kinematic columns straight from the point or pose Jacobian
-    /// `buf` (`stride` rows per parameter, position first), the model columns (compliance,
-    /// harmonics, transversal) from `d(k, col)`.
+    /// `buf` (`stride` rows per parameter: 3 for a point, 6 for a pose, position first), the
+    /// model columns (compliance, harmonics, transversal) from `d(k, col)`.
+    #[allow(clippy::too_many_arguments)]
     fn position_columns(
         &self,
         jac: &mut [&mut [f64]],
         r: usize,
         s: f64,
         buf: &[f64],
+        stride: usize,
         n_comp: usize,
         d: &dyn Fn(usize, usize) -> f64,
     ) {
         let n_kin = self.chain.n_params();
-        let stride = buf.len() / n_kin.max(1);
         let (kin, model) = jac[..n_kin + n_comp].split_at_mut(n_kin);
         for (col, c) in kin.iter_mut().enumerate() {
             let b = &buf[stride * col..stride * col + 3];
@@ -1288,7 +1289,7 @@ impl CalibrationProblem {
                     }
                 }
                 if let Some(j) = jac.as_mut() {
-                    self.position_columns(j, r, s, &buf, n_comp, &dpose);
+                    self.position_columns(j, r, s, &buf, 6, n_comp, &dpose);
                 }
                 r += 3;
                 if let RowKind::Pose { rotation, .. } = &row.kind {
@@ -1374,7 +1375,7 @@ impl CalibrationProblem {
                         }
                     }
                     if let Some(j) = jac.as_mut() {
-                        self.position_columns(j, r, s, &buf, n_comp, &dp);
+                        self.position_columns(j, r, s, &buf, 3, n_comp, &dp);
                     }
                     r += 3;
                 }
@@ -1386,7 +1387,7 @@ impl CalibrationProblem {
                         }
                     }
                     if let Some(j) = jac.as_mut() {
-                        self.position_columns(j, r, s, &buf, n_comp, &dp);
+                        self.position_columns(j, r, s, &buf, 3, n_comp, &dp);
                         for k in 0..3 {
                             j[off + 3 * point + k][r + k] = -1.0 / s;
                         }

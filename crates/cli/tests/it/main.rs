@@ -31,6 +31,43 @@ fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
+/// A path as an argument.
+fn show(p: &Path) -> String {
+    p.display().to_string()
+}
+
+/// The residual before → after in a setup finding, mm: the numbers after `key` (the
+/// residual's name in the report, `frames-only RMS`, `socket-scatter RMS`, …) and after the
+/// arrow.
+fn before_after_mm(err: &str, key: &str) -> (f64, f64) {
+    let key = format!("{key} ");
+    let at = err.find(&key).expect("a residual") + key.len();
+    let rest = &err[at..];
+    let number = |s: &str| -> f64 {
+        (s.split(' ').next().expect("a number"))
+            .parse()
+            .expect("mm")
+    };
+    let arrow = rest.find("→ ").expect("an arrow") + "→ ".len();
+    (number(rest), number(&rest[arrow..]))
+}
+
+/// The warnings of `hapcal calibrate --json` with `args` (exit code 0 asserted).
+fn calibration_warnings(args: &[&str]) -> Vec<String> {
+    let mut all = vec!["calibrate"];
+    all.extend_from_slice(args);
+    all.push("--json");
+    let out = hapcal(&all);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let v: Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
+    v["warnings"]
+        .as_array()
+        .expect("warnings")
+        .iter()
+        .map(|w| w.as_str().unwrap_or_default().to_owned())
+        .collect()
+}
+
 /// A fresh scratch folder per test.
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("hapcal-cli-{}-{name}", std::process::id()));

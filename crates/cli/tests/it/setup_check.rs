@@ -6,14 +6,10 @@
 //! millimetres and below a degree, frames only): the mistake must be named with its fix, and
 //! the command must stop with exit code 2.
 
-use super::{hapcal, root, scratch, stderr};
+use super::{before_after_mm, calibration_warnings, hapcal, root, scratch, show, stderr};
 use hapcal_kinematics::UnitQuaternion;
 use std::path::{Path, PathBuf};
 use std::process::Output;
-
-fn show(p: &Path) -> String {
-    p.display().to_string()
-}
 
 /// The UR10's camera recording (23 rows: 3 positions, roll, pitch, yaw, then the 6 joints).
 fn ur10_rows() -> Vec<Vec<String>> {
@@ -134,28 +130,13 @@ fn ur10_path_leak() -> &'static str {
     Box::leak(ur10().into_boxed_str())
 }
 
-/// The residual before → after in a finding, in mm: `(before, after)`.
-fn before_after_mm(err: &str) -> (f64, f64) {
-    let at = err.find("frames-only RMS ").expect("a residual") + "frames-only RMS ".len();
-    let rest = &err[at..];
-    let before: f64 = rest.split(' ').next().unwrap().parse().expect("mm");
-    let arrow = rest.find("→ ").expect("an arrow") + "→ ".len();
-    let after: f64 = rest[arrow..]
-        .split(' ')
-        .next()
-        .unwrap()
-        .parse()
-        .expect("mm");
-    (before, after)
-}
-
 /// The frames-only position residual of the UR10 recording as given: a few millimetres
 /// (camera noise and manufacturing deviations), the bound every corrected residual must
 /// meet.
 const UR10_AS_GIVEN_MM: (f64, f64) = (1.0, 10.0);
 
 fn assert_restored(err: &str) {
-    let (before, after) = before_after_mm(err);
+    let (before, after) = before_after_mm(err, "frames-only RMS");
     assert!(
         (UR10_AS_GIVEN_MM.0..UR10_AS_GIVEN_MM.1).contains(&after),
         "after {after} mm: {err}"
@@ -163,10 +144,11 @@ fn assert_restored(err: &str) {
     assert!(before > after, "{err}");
 }
 
-#[test]
-fn bundled_recordings_pass_silently() {
+/// The `hapcal check` / `calibrate` arguments of the bundled measurement recordings: UR10
+/// camera poses, TIAGo motion capture, the positioner's camera.
+fn bundled_measurement_recordings() -> Vec<Vec<String>> {
     let tiago = root().join("fixtures/figaroh/tiago");
-    let cases: Vec<Vec<String>> = vec![
+    vec![
         vec![
             "--device".into(),
             ur10(),
@@ -189,17 +171,22 @@ fn bundled_recordings_pass_silently() {
             "--data".into(),
             show(&root().join("fixtures/industrial-calibration/measurements.yaml")),
         ],
-        vec![
-            "--device".into(),
-            show(&root().join("fixtures/sim-humanoid/humanoid.urdf")),
-            "--tip".into(),
-            "l_hand".into(),
-            "--tip".into(),
-            "r_hand".into(),
-            "--data".into(),
-            show(&root().join("fixtures/sim-humanoid/mocap.csv")),
-        ],
-    ];
+    ]
+}
+
+#[test]
+fn bundled_recordings_pass_silently() {
+    let mut cases = bundled_measurement_recordings();
+    cases.extend([vec![
+        "--device".into(),
+        show(&root().join("fixtures/sim-humanoid/humanoid.urdf")),
+        "--tip".into(),
+        "l_hand".into(),
+        "--tip".into(),
+        "r_hand".into(),
+        "--data".into(),
+        show(&root().join("fixtures/sim-humanoid/mocap.csv")),
+    ]]);
     for args in cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let out = check(&args);
@@ -238,7 +225,7 @@ fn positions_in_millimetres_read_as_metres_name_the_length_unit() {
     assert!(err.contains("fix: --length-unit mm"), "{err}");
     // Motion capture of a mobile manipulator's hand: a frames-only residual of millimetres
     // once read in mm, hundreds of metres before.
-    let (before, after) = before_after_mm(&err);
+    let (before, after) = before_after_mm(&err, "frames-only RMS");
     assert!(before > 1e4 && after < 20.0, "{err}");
     // The calibration stops the same way, and goes on when the data are accepted.
     let mut calibrate = vec!["calibrate"];
@@ -677,7 +664,7 @@ fn swapped_joint_columns_past_the_limits_are_named_with_the_reading() {
             "swap the columns of arm_2_joint (q3) and arm_3_joint (q4)",
         ],
     );
-    let (before, after) = before_after_mm(&err);
+    let (before, after) = before_after_mm(&err, "frames-only RMS");
     // TIAGo as given leaves 4.35 mm (motion capture and manufacturing deviations).
     assert!(before > 50.0 && (1.0..10.0).contains(&after), "{err}");
 }
@@ -703,55 +690,15 @@ fn revolute_joints_in_degrees_past_the_limits_name_the_angle_unit() {
             "fix: --angle-unit deg",
         ],
     );
-    let (before, after) = before_after_mm(&err);
+    let (before, after) = before_after_mm(&err, "frames-only RMS");
     assert!(before > 50.0 && (1.0..10.0).contains(&after), "{err}");
-}
-
-/// The warnings of `hapcal calibrate --json` with `args`.
-fn calibration_warnings(args: &[&str]) -> Vec<String> {
-    let mut all = vec!["calibrate"];
-    all.extend_from_slice(args);
-    all.push("--json");
-    let out = hapcal(&all);
-    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
-    v["warnings"]
-        .as_array()
-        .expect("warnings")
-        .iter()
-        .map(|w| w.as_str().unwrap_or_default().to_owned())
-        .collect()
 }
 
 #[test]
 fn bundled_recordings_stay_within_their_instruments_default_noise() {
     // UR10 camera poses leave 2.05 mm per axis, TIAGo's motion capture 2.57 mm, the
-    // positioner's camera 0.24 mm: all below 3 × 1 mm, no warning without --sigma-m.
-    let tiago = root().join("fixtures/figaroh/tiago");
-    let cases: Vec<Vec<String>> = vec![
-        vec![
-            "--device".into(),
-            ur10(),
-            "--tip".into(),
-            "wrist_3_link".into(),
-            "--data".into(),
-            show(&root().join("fixtures/figaroh/ur10/calibration.csv")),
-        ],
-        vec![
-            "--device".into(),
-            show(&tiago.join("tiago.urdf")),
-            "--tip".into(),
-            "arm_7_link".into(),
-            "--data".into(),
-            show(&tiago_csv()),
-        ],
-        vec![
-            "--device".into(),
-            show(&root().join("fixtures/industrial-calibration/two_axis_positioner.toml")),
-            "--data".into(),
-            show(&root().join("fixtures/industrial-calibration/measurements.yaml")),
-        ],
-    ];
+    // positioner's camera 0.24 mm: all below 5 × 1 mm, no warning without --sigma-m.
+    let cases = bundled_measurement_recordings();
     for args in cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let warnings = calibration_warnings(&args);
@@ -815,7 +762,7 @@ fn a_tip_one_short_link_too_high_whose_joint_the_file_names_is_an_error() {
     ] {
         assert!(err.contains(n), "{n:?} not in: {err}");
     }
-    let (before, after) = before_after_mm(&err);
+    let (before, after) = before_after_mm(&err, "frames-only RMS");
     assert!(
         before > 2.0 * after && (1.0..10.0).contains(&after),
         "{err}"

@@ -7,7 +7,7 @@
 //! deviations and transmission errors, a few millimetres (2.5 mm on the reference truth);
 //! every corrected residual must come back to that, and the mistaken one be far above it.
 
-use super::{hapcal, root, scratch, stderr};
+use super::{before_after_mm, hapcal, root, scratch, stderr};
 use std::path::Path;
 
 fn device() -> String {
@@ -69,24 +69,6 @@ fn col(header: &[String], name: &str) -> usize {
     (header.iter().position(|c| c == name)).unwrap_or_else(|| panic!("no column {name}"))
 }
 
-/// The nominal cable-distance residual before → after in a finding, mm.
-fn before_after_mm(err: &str) -> (f64, f64) {
-    let key = "nominal cable-distance RMS ";
-    let at = err.find(key).expect("a residual") + key.len();
-    let rest = &err[at..];
-    let before: f64 = rest
-        .split(' ')
-        .next()
-        .expect("a number")
-        .parse()
-        .expect("mm");
-    let arrow = rest.find("→ ").expect("an arrow") + "→ ".len();
-    let after: f64 = (rest[arrow..].split(' ').next().expect("a number"))
-        .parse()
-        .expect("mm");
-    (before, after)
-}
-
 /// `hapcal check` on the log `edit` makes of a right one: exit code 2, each of `needles`
 /// named and none of `absent`; with `restored`, the residual back to a right log's (1–10 mm)
 /// from at least five times that.
@@ -106,7 +88,7 @@ fn finds(name: &str, edit: &Edit, needles: &[&str], absent: &[&str], restored: b
         assert!(!err.contains(n), "{n:?} in: {err}");
     }
     if restored {
-        let (before, after) = before_after_mm(&err);
+        let (before, after) = before_after_mm(&err, "nominal cable-distance RMS");
         assert!((1.0..10.0).contains(&after), "after {after} mm: {err}");
         assert!(before > 5.0 * after, "{err}");
     }

@@ -6,12 +6,8 @@
 //! its socket scatter must come back to the bundled one's within 1 %; the mistaken one must be
 //! far above what manufacturing deviations leave (the 50 mm of the plausibility bound).
 
-use super::{hapcal, iiwa, root, scratch, stderr};
+use super::{before_after_mm, calibration_warnings, hapcal, iiwa, root, scratch, show, stderr};
 use std::path::{Path, PathBuf};
-
-fn show(p: &Path) -> String {
-    p.display().to_string()
-}
 
 fn front() -> PathBuf {
     root().join("fixtures/mukca/data/kuka_14/front")
@@ -45,21 +41,6 @@ fn as_given_mm(stdout: &str) -> f64 {
         .expect("mm")
 }
 
-/// The residual before → after in a finding, in mm.
-fn before_after_mm(err: &str) -> (f64, f64) {
-    let at = err.find("socket-scatter RMS ").expect("a residual") + "socket-scatter RMS ".len();
-    let rest = &err[at..];
-    let before: f64 = rest.split(' ').next().unwrap().parse().expect("mm");
-    let arrow = rest.find("→ ").expect("an arrow") + "→ ".len();
-    let after: f64 = rest[arrow..]
-        .split(' ')
-        .next()
-        .unwrap()
-        .parse()
-        .expect("mm");
-    (before, after)
-}
-
 /// The scatter of the bundled placement as given.
 fn bundled_mm() -> f64 {
     let out = hapcal(&["check", "--device", &iiwa(), "--data", &show(&front())]);
@@ -80,7 +61,7 @@ fn finds(data: &str, tip: &str, needles: &[&str]) -> String {
 }
 
 fn assert_restored(err: &str) {
-    let (before, after) = before_after_mm(err);
+    let (before, after) = before_after_mm(err, "socket-scatter RMS");
     let bundled = bundled_mm();
     assert!(
         (after - bundled).abs() <= 0.01 * bundled,
@@ -212,22 +193,6 @@ fn another_robots_sockets_fit_no_hypothesis() {
         &["[no-hypothesis]", "do not come from this robot"],
     );
     assert!(!err.contains("→"), "{err}");
-}
-
-/// The warnings of `hapcal calibrate --json` on `args`.
-fn calibration_warnings(args: &[&str]) -> Vec<String> {
-    let mut all = vec!["calibrate"];
-    all.extend_from_slice(args);
-    all.push("--json");
-    let out = hapcal(&all);
-    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
-    v["warnings"]
-        .as_array()
-        .expect("warnings")
-        .iter()
-        .map(|w| w.as_str().unwrap_or_default().to_owned())
-        .collect()
 }
 
 #[test]
