@@ -1,5 +1,6 @@
 //! Runs a few blind cases and prints each verdict: `cargo run --release -p hapcal-diagnose
-//! --example blind_cases -- [first_seed] [count]`.
+//! --example blind_cases -- [first_seed] [count]`
+//! (`KIND=two` keeps the two-effect cases, `VERBOSE=1` lists a wrong case's candidates).
 #![allow(clippy::print_stdout)] // an example prints its results
 
 use std::path::Path;
@@ -18,7 +19,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let truth = hapcal_sim::read_truth(&truth_file)?;
     let device = truth.read_device(&truth_file)?;
     let cfg = BlindConfig::default();
+    // KIND=two (none, one, outside) runs only the cases of that kind among the seeds.
+    let only = std::env::var("KIND").ok();
     for seed in first..first + count {
+        if only
+            .as_deref()
+            .is_some_and(|k| !format!("{:?}", kind_of(seed)).eq_ignore_ascii_case(k))
+        {
+            continue;
+        }
         let t = std::time::Instant::now();
         let (o, d) = run_case(&device, &truth, kind_of(seed), seed, &cfg)?;
         println!(

@@ -160,13 +160,24 @@ pub fn holm(p: &[f64]) -> Vec<f64> {
     adjusted
 }
 
+/// Norm, relative to the largest column of the matrix, below which a column is rounding noise
+/// of a structural zero and is never picked. The distance `|P|` does not change under a
+/// rotation about an axis through the base origin (D-H `dalpha0`, `dtheta0`), a vertical joint
+/// carries no gravity torque: such columns come out at 10⁻¹¹ where the smallest real column of
+/// the reference device is 16 and the largest 3·10⁶ (weighted, SI units). Relative to its own
+/// norm a noise column is as independent as any other, and a solve gives it a step of 10¹¹
+/// rad, which an effect that does depend on it (the cable angle on the base twist) then
+/// follows.
+pub(crate) const NUMERICAL_ZERO_COLUMN: f64 = 1e-9;
+
 /// Column-pivoted modified Gram–Schmidt on the columns `cols` of `a`, after projecting out the
 /// orthonormal columns of `against` (N × p, may have 0 columns).
 ///
 /// Returns the orthonormal basis (N × r) and, per input column, its remaining norm as a
 /// fraction of its own norm when it was picked, or `None` when it was never picked (its
-/// remaining fraction fell below `rel_tol`). Columns are picked largest remaining fraction
-/// first, so exact or near dependencies drop the later-picked column.
+/// remaining fraction fell below `rel_tol`, or its norm is below [`NUMERICAL_ZERO_COLUMN`] of
+/// the largest column's). Columns are picked largest remaining fraction first, so exact or
+/// near dependencies drop the later-picked column.
 pub(crate) fn pivoted_basis(
     a: &DMatrix<f64>,
     against: &DMatrix<f64>,
@@ -174,7 +185,17 @@ pub(crate) fn pivoted_basis(
 ) -> (DMatrix<f64>, Vec<Option<f64>>) {
     let n = a.nrows();
     let k = a.ncols();
-    let norms: Vec<f64> = (0..k).map(|j| a.column(j).norm()).collect();
+    let mut norms: Vec<f64> = (0..k).map(|j| a.column(j).norm()).collect();
+    let largest = norms
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    for v in &mut norms {
+        if *v <= NUMERICAL_ZERO_COLUMN * largest {
+            *v = 0.0;
+        }
+    }
     let mut work = a.clone();
     if against.ncols() > 0 {
         let proj = against.transpose() * &work;
@@ -266,5 +287,34 @@ mod tests {
         let (q, picked) = pivoted_basis(&a, &DMatrix::zeros(3, 0), 1e-8);
         assert_eq!(q.ncols(), 2);
         assert_eq!(picked.iter().filter(|p| p.is_none()).count(), 1);
+    }
+
+    #[test]
+    fn pivoted_basis_never_picks_rounding_noise() {
+        // Two real columns and the rounding noise of a structural zero (10⁻¹⁷ of the largest,
+        // as a rotation about the base origin leaves on the distance): relative to its own
+        // norm the noise column is orthogonal to the others, and must still not be picked.
+        let a = DMatrix::from_row_slice(
+            4,
+            3,
+            &[
+                1e5, 3.0, 2e-12, //
+                -2e5, 1.0, -1e-12, //
+                1e5, -4.0, 3e-12, //
+                5e4, 2.0, 1e-12,
+            ],
+        );
+        let (q, picked) = pivoted_basis(&a, &DMatrix::zeros(4, 0), 1e-8);
+        assert_eq!(q.ncols(), 2);
+        assert!(picked[0].is_some() && picked[1].is_some());
+        assert!(
+            picked[2].is_none(),
+            "the noise column was picked: {picked:?}"
+        );
+        // The same column scaled up to a real size (10⁻³ of the largest) is picked.
+        let mut b = a.clone();
+        b.column_mut(2).scale_mut(1e14);
+        let (_, picked) = pivoted_basis(&b, &DMatrix::zeros(4, 0), 1e-8);
+        assert!(picked[2].is_some());
     }
 }
