@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import json
 import os
-from typing import Any, Dict, List, Optional, Sequence, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -48,21 +48,9 @@ __all__ = [
 ]
 __version__: str = _hapcal.__version__
 
-#: Model names accepted by :func:`calibrate` (``_`` and ``-`` are interchangeable).
-MODELS = (
-    "auto",
-    "frames-only",
-    "joint-offsets",
-    "geometric",
-    "compliance",
-    "mass-compliance",
-    "actuator-compliance",
-    "harmonic",
-    "harmonic2",
-    "mass-compliance-harmonic",
-    "compliance-harmonic",
-    "transmissions",
-)
+#: Model names accepted by :func:`calibrate` (``_`` and ``-`` are interchangeable): the
+#: command line's ``--model`` values, from the compiled core's one definition of the model choice.
+MODELS: Tuple[str, ...] = tuple(_hapcal.MODELS)
 
 PathLike = Union[str, "os.PathLike[str]"]
 

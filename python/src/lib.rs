@@ -610,17 +610,22 @@ impl PyCalibration {
     }
 }
 
+/// The names of every model, as the command line's `--model` takes them (`ModelChoice`).
+fn model_names() -> Vec<String> {
+    use clap::ValueEnum;
+    ModelChoice::value_variants()
+        .iter()
+        .filter_map(|v| v.to_possible_value().map(|p| p.get_name().to_owned()))
+        .collect()
+}
+
 fn model_choice(model: &str) -> Result<ModelChoice> {
     use clap::ValueEnum;
     let wanted = model.trim().replace('_', "-");
     ModelChoice::from_str(&wanted, true).map_err(|_| {
-        let names: Vec<String> = ModelChoice::value_variants()
-            .iter()
-            .filter_map(|v| v.to_possible_value().map(|p| p.get_name().to_owned()))
-            .collect();
         anyhow!(
             "model: expected one of {}, found {model:?}",
-            names.join(", ")
+            model_names().join(", ")
         )
     })
 }
@@ -1224,5 +1229,7 @@ fn _hapcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_plan_poses, m)?)?;
     m.add_function(wrap_pyfunction!(_diagnose, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    // The models `calibrate` takes, from the one definition of the model choice.
+    m.add("MODELS", model_names())?;
     Ok(())
 }

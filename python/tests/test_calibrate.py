@@ -15,6 +15,7 @@ from conftest import (
     UR10_TIP,
     UR10_URDF,
     assert_close,
+    cli,
     cli_json,
     without_elapsed,
 )
@@ -252,3 +253,16 @@ def test_haptic_log_equals_cli(tmp_path) -> None:
             dev, hapcal.Measurements.from_arrays(np.zeros((3, dev.n_joints)),
                                                  distances=np.ones(3)),
         )
+
+
+def test_models_are_the_command_lines() -> None:
+    """`hapcal.MODELS` is the command line's list of `--model` values, in its order."""
+    help_text = cli("calibrate", "--help")
+    listed = [
+        line.strip()[2:].split(":")[0]
+        for line in help_text.splitlines()
+        if line.strip().startswith("- ") and ":" in line
+    ]
+    assert list(hapcal.MODELS) == listed[: len(hapcal.MODELS)]
+    assert "transversal-compliance" in hapcal.MODELS
+    assert "transversal-axes" in hapcal.MODELS
