@@ -39,12 +39,17 @@ pub fn render(r: &CalibrationReport) -> String {
             r.folds,
             hapcal_calibrate::model::LADDER_SIGNIFICANCE_Z
         );
+        // The names' column as wide as the longest (mass-compliance-harmonic).
+        let width = (r.cross_validation.iter())
+            .map(|cv| cv.model.to_string().len())
+            .max()
+            .unwrap_or(0);
         for cv in &r.cross_validation {
             let (diff, se) = cv.difference_to_geometric_m2;
             let _ = writeln!(
                 s,
-                "  {:<20} {:>9.4} mm {:>+10.0} ± {:<8.0} µm²{}",
-                cv.model,
+                "  {:<width$} {:>9.4} mm {:>+10.0} ± {:<8.0} µm²{}",
+                cv.model.to_string(),
                 cv.heldout_rms_m * 1e3,
                 diff * 1e12,
                 se * 1e12,
@@ -62,11 +67,15 @@ pub fn render(r: &CalibrationReport) -> String {
             r.folds,
             hapcal_calibrate::model::LADDER_SIGNIFICANCE_Z
         );
+        let width = (r.ladder.iter())
+            .map(|l| l.rung.to_string().len())
+            .max()
+            .unwrap_or(0);
         for l in &r.ladder {
             let (diff, se) = l.score_difference_to_frames;
             let _ = writeln!(
                 s,
-                "  {:<20} {:>9.4} mm {:>+9.2} ± {:<7.2}",
+                "  {:<width$} {:>9.4} mm {:>+9.2} ± {:<7.2}",
                 l.rung.to_string(),
                 l.heldout_rms_m * 1e3,
                 diff,
