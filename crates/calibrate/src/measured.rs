@@ -34,6 +34,7 @@ use hapcal_problems::{
 
 use crate::fit::{CV_REPEATS, HeldOut, blocked_difference, fold_of};
 use crate::model::{DataKind, ModelChoice};
+pub use crate::noise::{CALIBRATED_SIGMA_RATIO, PLAUSIBLE_FRAMES_ONLY_RMS_M};
 use crate::report::SetRole;
 pub use crate::report::{
     Downweighted, FrameReport, PoseFigures, RangeFold, RungReport, SampleErrors,
@@ -1617,19 +1618,6 @@ pub fn calibrate_measured(
         warnings,
     })
 }
-
-/// Frames-only 3-D RMS error beyond which the nominal model cannot be the robot's: joint
-/// origin deviations of a fraction of a millimetre and a milliradian, and the elastic
-/// deflection of an elastic humanoid's arms under their own weight, give millimetres to a
-/// few centimetres; a file in millimetres read as metres, or joint columns in the wrong order,
-/// give decimetres to metres.
-pub const PLAUSIBLE_FRAMES_ONLY_RMS_M: f64 = 0.05;
-
-/// Ratio of the calibrated model's σ per axis to the stated instrument σ (or the default of
-/// its class, [`crate::noise`]) above which the report says the model lacks an effect (or the
-/// setup is wrong): a right model leaves the noise, within a few per cent for hundreds of
-/// residuals, and a default is the upper end of its class.
-pub const CALIBRATED_SIGMA_RATIO: f64 = 3.0;
 
 /// Most refits of [`equilibrate`].
 const EQUILIBRIUM_REFITS: usize = 6;

@@ -34,8 +34,9 @@ use hapcal_problems::{CalibratedModel, Weights};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::measured::{self, MeasuredConfig, PLAUSIBLE_FRAMES_ONLY_RMS_M, Robot};
+use crate::measured::{self, MeasuredConfig, Robot};
 use crate::model::ModelChoice;
+use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
 
 /// Factor by which a hypothesis must divide the frames-only residual (position RMS, or
 /// orientation RMS of pose data) to be an error, when the corrected residual is plausible.

@@ -22,7 +22,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use hapcal_io::{Device, LogRow};
 
-use crate::measured::PLAUSIBLE_FRAMES_ONLY_RMS_M;
+use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
 use crate::setup::{
     Corrected, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OPEN_LIMIT,
     OVERWHELMING_FACTOR, Residual, ResidualOf, SetupReport, Severity, judge,

@@ -17,7 +17,7 @@ use std::path::Path;
 use hapcal_io::SocketPlacement;
 use hapcal_kinematics::Chain;
 
-use crate::measured::PLAUSIBLE_FRAMES_ONLY_RMS_M;
+use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
 use crate::setup::{
     Corrected, Finding, MistakeClass, Residual, ResidualOf, SetupReport, Severity, judge,
     tip_candidates,
