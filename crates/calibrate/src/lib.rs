@@ -20,6 +20,7 @@ pub mod report;
 pub mod setup;
 pub mod setup_haptic;
 pub mod setup_sockets;
+mod solve;
 pub mod support;
 
 use std::path::{Path, PathBuf};

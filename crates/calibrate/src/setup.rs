@@ -1590,7 +1590,7 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
 /// # Errors
 /// An unreadable device or file, and as [`check_setup`].
 pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
-    let device = crate::calibrate::load_device(&plan.device, &plan.tip)?;
+    let device = crate::data::load_device(&plan.device, &plan.tip)?;
     if !device.capstans.is_empty() || device.parallelogram.is_some() {
         if plan.data.iter().all(|p| p.is_file()) {
             return crate::setup_haptic::check_logs(&device, &plan.data).map(Some);
