@@ -1,7 +1,8 @@
 //! `hapcal calibrate`: reads the device and the data, types the data's kind, and runs the
-//! workflow of that kind: socket recordings and distance logs here, measurement files in
-//! [`crate::measured`], a haptic device's logs in [`crate::haptic`]; every one chooses its model
-//! on the ladder of [`crate::model`] and reports in the types of [`crate::report`].
+//! workflow of that kind: socket recordings and distance logs here (their fits in `solve`),
+//! measurement files in [`crate::measured`], a haptic device's logs in [`crate::haptic`]; every
+//! one chooses its model on the ladder of [`crate::model`] and reports in the types of
+//! [`crate::report`].
 
 use anyhow::{Context, Result, bail};
 use hapcal_identify::{Identified, Problem};
