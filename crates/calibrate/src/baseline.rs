@@ -16,8 +16,9 @@ use hapcal_problems::{CalibrationProblem, Observations, Weights};
 use nalgebra::Rotation3;
 use serde::Serialize;
 
-use crate::calibrate::{CV_REPEATS, DataSet, Plan, load_device};
-use crate::data::Data;
+use crate::data::{Data, DataSet, load_device};
+use crate::fit::CV_REPEATS;
+use crate::inputs::Plan;
 use crate::measured::{MeasuredConfig, Robot, calibrate_measured};
 pub use crate::model::DataKind;
 use crate::model::ModelChoice;
@@ -101,7 +102,7 @@ pub struct GeometricBaseline {
     pub warnings: Vec<String>,
 }
 
-/// Loads `plan`'s device and data as [`crate::calibrate::run`] does, and fits the geometric
+/// Loads `plan`'s device and data as `calibrate::run` does, and fits the geometric
 /// baseline on the training data; `ladder`: also cross-validate the simpler kinematic rungs.
 ///
 /// # Errors
@@ -298,7 +299,7 @@ pub fn baseline_from_sets(
     ladder: bool,
 ) -> Result<GeometricBaseline> {
     let all = |_: usize, _: usize, _: usize| true;
-    let obs = crate::calibrate::observations(train, plan.socket_distance_m, &all);
+    let obs = crate::solve::observations(train, plan.socket_distance_m, &all);
     if obs.rows.is_empty() {
         bail!("the training data have no configuration");
     }
@@ -308,7 +309,7 @@ pub fn baseline_from_sets(
         DataKind::Distances
     };
     let (problem, identified) =
-        crate::calibrate::solve(chain, obs, ModelChoice::Geometric, plan.sigma_m)?;
+        crate::solve::solve(chain, obs, ModelChoice::Geometric, plan.sigma_m)?;
     let n_shared = problem.points_offset();
     let n_kept = (identified.identifiability.kept.iter())
         .filter(|&&i| i < n_shared)
@@ -351,7 +352,7 @@ pub fn baseline_from_sets(
     let mut tests = Vec::new();
     for set in test {
         let obs =
-            crate::calibrate::observations(std::slice::from_ref(set), plan.socket_distance_m, &all);
+            crate::solve::observations(std::slice::from_ref(set), plan.socket_distance_m, &all);
         let n = obs.rows.len();
         let held = CalibrationProblem::new(chain.clone(), obs, Weights::default(), None)
             .context("building the held-out problem")?;
@@ -411,13 +412,8 @@ pub fn baseline_from_sets(
             cv_rms_m: point_rms(&problem, &nominal_x)?,
             test_rms_m: nominal_test,
         });
-        let held = crate::calibrate::cross_validate(
-            chain,
-            train,
-            plan,
-            ModelChoice::Geometric,
-            CV_REPEATS,
-        )?;
+        let held =
+            crate::solve::cross_validate(chain, train, plan, ModelChoice::Geometric, CV_REPEATS)?;
         let cv = (held.sq_errors.iter().sum::<f64>() / held.sq_errors.len().max(1) as f64).sqrt();
         rungs.push(KinematicRung {
             rung: "geometric".into(),

@@ -2,13 +2,16 @@
 //! distance logs, measurement files (markers, poses, anchor distances) or a haptic device's
 //! logs. [`load`] reads the training and held-out paths of a [`Plan`] with the reader of their
 //! kind and returns them as a [`Data`]; the workflows take the typed data, never the paths.
+//! The robot that measurement files are read against ([`Robot`], from a URDF or a device
+//! file) and its readers live here too.
 
 use anyhow::{Context, Result, bail};
-use hapcal_io::{Device, LogRow, MeasurementTable, SocketPlacement};
+use hapcal_io::{Device, JointSchema, LogRow, MeasurementTable, SocketPlacement, Units};
+use hapcal_kinematics::{Tree, Vector3};
+use hapcal_problems::LinkMass;
 use std::path::{Path, PathBuf};
 
 use crate::inputs::Plan;
-use crate::measured::{Robot, is_marker_file, load_tables, robot_from_device, robot_from_urdf};
 use crate::model::DataKind;
 
 /// A haptic device's log, read: its name (file stem), its rows and the reader's warnings.
@@ -137,6 +140,136 @@ pub fn robot_of(plan: &Plan, device: &Device) -> Result<Robot> {
     } else {
         robot_from_device(device)
     }
+}
+
+/// The robot as the measured workflow needs it: its tree (one chain per tip, sharing one
+/// parameter vector), its joints and, from a URDF, its link masses.
+#[derive(Clone, Debug)]
+pub struct Robot {
+    /// The kinematic tree, root to each tip.
+    pub tree: Tree,
+    /// Joint names, chain order (the columns of the measurement files).
+    pub joint_names: Vec<String>,
+    /// Prismatic flag per joint.
+    pub prismatic: Vec<bool>,
+    /// Joint limits per joint, rad or m.
+    pub limits: Vec<(f64, f64)>,
+    /// Link masses from the URDF's `<inertial>` tags (empty for a D-H device).
+    pub masses: Vec<LinkMass>,
+}
+
+/// Robot of a URDF with one or more tips.
+///
+/// # Errors
+/// Whatever the URDF reader reports, with the path as context.
+pub fn robot_from_urdf(path: &std::path::Path, tips: &[String]) -> Result<Robot> {
+    let urdf = hapcal_io::import_urdf_tips(path, tips)
+        .with_context(|| format!("importing {}", path.display()))?;
+    let tree = Tree::from_placement_paths(&urdf.paths)
+        .with_context(|| format!("building the kinematic tree of {}", path.display()))?;
+    let masses = urdf
+        .inertials
+        .iter()
+        .filter(|l| l.mass_kg > 0.0)
+        .map(|l| LinkMass {
+            joint: l.joint,
+            mass_kg: l.mass_kg,
+            com_m: Vector3::from(l.com_m),
+        })
+        .collect();
+    Ok(Robot {
+        joint_names: tree.joint_names().to_vec(),
+        prismatic: prismatic_joints(&tree),
+        limits: urdf
+            .joints
+            .iter()
+            .map(|j| (j.lower_rad, j.upper_rad))
+            .collect(),
+        masses,
+        tree,
+    })
+}
+
+/// Per joint of `tree`: whether its screw is a translation (a prismatic joint).
+fn prismatic_joints(tree: &Tree) -> Vec<bool> {
+    (hapcal_kinematics::joint_motions(tree.tips()).iter())
+        .map(|m| *m == Some(hapcal_kinematics::Motion::Translation))
+        .collect()
+}
+
+/// Robot of a device file (a D-H, modified D-H or placement chain; a placement tree with
+/// `[[branch]]` rows, one tip per path).
+///
+/// # Errors
+/// A device whose chain does not compile.
+pub fn robot_from_device(device: &hapcal_io::Device) -> Result<Robot> {
+    let tree = device.tree()?;
+    Ok(Robot {
+        joint_names: tree.joint_names().to_vec(),
+        prismatic: device.prismatic_joints(),
+        limits: device.joint_limits(),
+        masses: Vec::new(),
+        tree,
+    })
+}
+
+/// Reads the measurement files of `robot` ([`hapcal_io::read_measurement_file`]).
+///
+/// # Errors
+/// Unreadable files (file, line, column), a file without markers.
+pub fn load_tables(
+    paths: &[std::path::PathBuf],
+    robot: &Robot,
+    units: &Units,
+) -> Result<Vec<MeasurementTable>> {
+    let schema = JointSchema {
+        names: &robot.joint_names,
+        prismatic: &robot.prismatic,
+        limits: &robot.limits,
+    };
+    paths
+        .iter()
+        .map(|p| {
+            let t = hapcal_io::read_measurement_file(p, &schema, units)
+                .with_context(|| format!("reading measurements {}", p.display()))?;
+            if t.n_markers == 0 && !t.has_distance {
+                bail!(
+                    "{}: no measurement columns: expected marker positions (x,y,z or \
+                     x1,y1,z1,…) or a distance (distance_m, distance or d); the columns are {}",
+                    p.display(),
+                    t.ignored_columns.join(", ")
+                );
+            }
+            Ok(t)
+        })
+        .collect()
+}
+
+/// The joint configurations of a workspace file (`--workspace`): a CSV with the robot's joint
+/// columns as the measurement files have them (q1..qn or the joint names; other columns
+/// ignored), rad or m for a prismatic joint.
+///
+/// # Errors
+/// An unreadable or malformed file (file, line, column), or one without a row.
+pub fn workspace_configurations(
+    path: &std::path::Path,
+    robot: &Robot,
+    units: &Units,
+) -> Result<Vec<Vec<f64>>> {
+    let schema = JointSchema {
+        names: &robot.joint_names,
+        prismatic: &robot.prismatic,
+        limits: &robot.limits,
+    };
+    let t = hapcal_io::read_measurement_file(path, &schema, units)
+        .with_context(|| format!("reading the workspace {}", path.display()))?;
+    if t.rows.is_empty() {
+        bail!(
+            "{}: the workspace file has no row: expected one joint configuration per row",
+            path.display()
+        );
+    }
+    Ok(t.rows.into_iter().map(|r| r.q).collect())
 }
 
 /// Reads one log of a haptic device.
@@ -270,6 +403,33 @@ pub fn check_csv_header(path: &Path) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Whether `path` holds measurements of an external instrument for the marker workflow: an
+/// industrial_calibration YAML, or a CSV whose header has marker columns (`x`, `x1`), or, with
+/// `distances` (a device without a cable encoder of its own, so the anchor is unknown), a
+/// distance column (`distance_m`, `distance`, `d`).
+pub fn is_marker_file(path: &std::path::Path, distances: bool) -> bool {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("yaml" | "yml") => true,
+        Some("csv") => {
+            // The header alone decides; the file is read in full once, by its reader.
+            let mut header = String::new();
+            let read = std::fs::File::open(path).and_then(|f| {
+                std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut header)
+            });
+            read.is_ok()
+                && header.split(',').any(|c| match c.trim() {
+                    "x" | "x1" => true,
+                    "distance_m" | "distance" | "d" => distances,
+                    _ => false,
+                })
+        }
+        _ => false,
+    }
 }
 
 /// Reads data sets: MUKCa placement or run folders, or hapcal log CSV files.

@@ -1,5 +1,5 @@
 //! The validated inputs of one calibration ([`Plan`]): what the command line, the Rust API and
-//! the Python package hand to [`crate::calibrate::run`].
+//! the Python package hand to `calibrate::run`.
 
 use anyhow::{Result, bail};
 use std::path::PathBuf;
@@ -67,7 +67,7 @@ pub struct Plan {
     /// Measurement noise (m) if known; otherwise estimated from the residuals.
     pub sigma_m: Option<f64>,
     /// For a haptic device: identify the transmissions and the kinematics in one problem
-    /// ([`crate::haptic::identify_jointly`]) instead of the paper's two steps.
+    /// (`haptic::identify_jointly`) instead of the paper's two steps.
     pub joint: bool,
 }
 
@@ -75,7 +75,7 @@ impl Plan {
     /// Checks the settings that need no file: folds, socket distance, the σ ranges
     /// ([`SIGMA_M_RANGE`], [`SIGMA_RAD_RANGE`]) and the held-out share, so that the Rust API
     /// and the Python package refuse what the command line refuses, in its words (the
-    /// option names). [`crate::calibrate::run`] calls it first; what needs the files (copied
+    /// option names). `calibrate::run` calls it first; what needs the files (copied
     /// sockets, frozen sensors, units) is checked where they are read.
     ///
     /// # Errors

@@ -18,8 +18,10 @@ pub mod noise;
 pub mod plan;
 pub mod report;
 pub mod setup;
+pub mod setup_findings;
 pub mod setup_haptic;
 pub mod setup_sockets;
+mod solve;
 pub mod support;
 
 use std::path::{Path, PathBuf};

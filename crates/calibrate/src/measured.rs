@@ -26,14 +26,19 @@
 use anyhow::{Context, Result, bail};
 use faer::Col;
 use hapcal_identify::{Identified, Problem, Subset, identify};
-use hapcal_io::{JointSchema, MeasuredRow, MeasurementTable, Units};
+use hapcal_io::{MeasuredRow, MeasurementTable};
 use hapcal_kinematics::{FrameSpec, Isometry3, Point3, Tree, UnitQuaternion, Vector3};
 use hapcal_problems::{
-    CalibratedModel, CalibrationProblem, LinkMass, ModelTerms, Observations, Row, RowKind, Weights,
+    CalibratedModel, CalibrationProblem, ModelTerms, Observations, Row, RowKind, Weights,
 };
 
+pub use crate::data::{
+    Robot, is_marker_file, load_tables, robot_from_device, robot_from_urdf,
+    workspace_configurations,
+};
 use crate::fit::{CV_REPEATS, HeldOut, blocked_difference, fold_of};
 use crate::model::{DataKind, ModelChoice};
+pub use crate::noise::{CALIBRATED_SIGMA_RATIO, PLAUSIBLE_FRAMES_ONLY_RMS_M};
 use crate::report::SetRole;
 pub use crate::report::{
     Downweighted, FrameReport, PoseFigures, RangeFold, RungReport, SampleErrors,
@@ -41,22 +46,6 @@ pub use crate::report::{
 
 /// The instrument frame and the markers' frames with their tips.
 type Frames = (FrameSpec, Vec<(usize, FrameSpec)>);
-
-/// The robot as the measured workflow needs it: its tree (one chain per tip, sharing one
-/// parameter vector), its joints and, from a URDF, its link masses.
-#[derive(Clone, Debug)]
-pub struct Robot {
-    /// The kinematic tree, root to each tip.
-    pub tree: Tree,
-    /// Joint names, chain order (the columns of the measurement files).
-    pub joint_names: Vec<String>,
-    /// Prismatic flag per joint.
-    pub prismatic: Vec<bool>,
-    /// Joint limits per joint, rad or m.
-    pub limits: Vec<(f64, f64)>,
-    /// Link masses from the URDF's `<inertial>` tags (empty for a D-H device).
-    pub masses: Vec<LinkMass>,
-}
 
 /// Settings of [`calibrate_measured`].
 #[derive(Clone, Debug)]
@@ -120,120 +109,6 @@ pub struct MeasuredOutcome {
     pub equilibrium_refits: usize,
     /// Plain-language warnings.
     pub warnings: Vec<String>,
-}
-
-/// Robot of a URDF with one or more tips.
-///
-/// # Errors
-/// Whatever the URDF reader reports, with the path as context.
-pub fn robot_from_urdf(path: &std::path::Path, tips: &[String]) -> Result<Robot> {
-    let urdf = hapcal_io::import_urdf_tips(path, tips)
-        .with_context(|| format!("importing {}", path.display()))?;
-    let tree = Tree::from_placement_paths(&urdf.paths)
-        .with_context(|| format!("building the kinematic tree of {}", path.display()))?;
-    let masses = urdf
-        .inertials
-        .iter()
-        .filter(|l| l.mass_kg > 0.0)
-        .map(|l| LinkMass {
-            joint: l.joint,
-            mass_kg: l.mass_kg,
-            com_m: Vector3::from(l.com_m),
-        })
-        .collect();
-    Ok(Robot {
-        joint_names: tree.joint_names().to_vec(),
-        prismatic: prismatic_joints(&tree),
-        limits: urdf
-            .joints
-            .iter()
-            .map(|j| (j.lower_rad, j.upper_rad))
-            .collect(),
-        masses,
-        tree,
-    })
-}
-
-/// Per joint of `tree`: whether its screw is a translation (a prismatic joint).
-fn prismatic_joints(tree: &Tree) -> Vec<bool> {
-    (hapcal_kinematics::joint_motions(tree.tips()).iter())
-        .map(|m| *m == Some(hapcal_kinematics::Motion::Translation))
-        .collect()
-}
-
-/// Robot of a device file (a D-H, modified D-H or placement chain; a placement tree with
-/// `[[branch]]` rows, one tip per path).
-///
-/// # Errors
-/// A device whose chain does not compile.
-pub fn robot_from_device(device: &hapcal_io::Device) -> Result<Robot> {
-    let tree = device.tree()?;
-    Ok(Robot {
-        joint_names: tree.joint_names().to_vec(),
-        prismatic: device.prismatic_joints(),
-        limits: device.joint_limits(),
-        masses: Vec::new(),
-        tree,
-    })
-}
-
-/// Reads the measurement files of `robot` ([`hapcal_io::read_measurement_file`]).
-///
-/// # Errors
-/// Unreadable files (file, line, column), a file without markers.
-pub fn load_tables(
-    paths: &[std::path::PathBuf],
-    robot: &Robot,
-    units: &Units,
-) -> Result<Vec<MeasurementTable>> {
-    let schema = JointSchema {
-        names: &robot.joint_names,
-        prismatic: &robot.prismatic,
-        limits: &robot.limits,
-    };
-    paths
-        .iter()
-        .map(|p| {
-            let t = hapcal_io::read_measurement_file(p, &schema, units)
-                .with_context(|| format!("reading measurements {}", p.display()))?;
-            if t.n_markers == 0 && !t.has_distance {
-                bail!(
-                    "{}: no measurement columns: expected marker positions (x,y,z or \
-                     x1,y1,z1,…) or a distance (distance_m, distance or d); the columns are {}",
-                    p.display(),
-                    t.ignored_columns.join(", ")
-                );
-            }
-            Ok(t)
-        })
-        .collect()
-}
-
-/// The joint configurations of a workspace file (`--workspace`): a CSV with the robot's joint
-/// columns as the measurement files have them (q1..qn or the joint names; other columns
-/// ignored), rad or m for a prismatic joint.
-///
-/// # Errors
-/// An unreadable or malformed file (file, line, column), or one without a row.
-pub fn workspace_configurations(
-    path: &std::path::Path,
-    robot: &Robot,
-    units: &Units,
-) -> Result<Vec<Vec<f64>>> {
-    let schema = JointSchema {
-        names: &robot.joint_names,
-        prismatic: &robot.prismatic,
-        limits: &robot.limits,
-    };
-    let t = hapcal_io::read_measurement_file(path, &schema, units)
-        .with_context(|| format!("reading the workspace {}", path.display()))?;
-    if t.rows.is_empty() {
-        bail!(
-            "{}: the workspace file has no row: expected one joint configuration per row",
-            path.display()
-        );
-    }
-    Ok(t.rows.into_iter().map(|r| r.q).collect())
 }
 
 /// The rigid transform `T` minimising `Σ |T·a_i − b_i|²` (Kabsch 1976; Horn 1987, "Closed-form
@@ -1618,19 +1493,6 @@ pub fn calibrate_measured(
     })
 }
 
-/// Frames-only 3-D RMS error beyond which the nominal model cannot be the robot's: joint
-/// origin deviations of a fraction of a millimetre and a milliradian, and the elastic
-/// deflection of an elastic humanoid's arms under their own weight, give millimetres to a
-/// few centimetres; a file in millimetres read as metres, or joint columns in the wrong order,
-/// give decimetres to metres.
-pub const PLAUSIBLE_FRAMES_ONLY_RMS_M: f64 = 0.05;
-
-/// Ratio of the calibrated model's σ per axis to the stated instrument σ (or the default of
-/// its class, [`crate::noise`]) above which the report says the model lacks an effect (or the
-/// setup is wrong): a right model leaves the noise, within a few per cent for hundreds of
-/// residuals, and a default is the upper end of its class.
-pub const CALIBRATED_SIGMA_RATIO: f64 = 3.0;
-
 /// Most refits of [`equilibrate`].
 const EQUILIBRIUM_REFITS: usize = 6;
 
@@ -2167,33 +2029,6 @@ fn frame_reports(
         ));
     }
     out
-}
-
-/// Whether `path` holds measurements of an external instrument for the marker workflow: an
-/// industrial_calibration YAML, or a CSV whose header has marker columns (`x`, `x1`), or, with
-/// `distances` (a device without a cable encoder of its own, so the anchor is unknown), a
-/// distance column (`distance_m`, `distance`, `d`).
-pub fn is_marker_file(path: &std::path::Path, distances: bool) -> bool {
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
-    match ext.as_deref() {
-        Some("yaml" | "yml") => true,
-        Some("csv") => {
-            // The header alone decides; the file is read in full once, by its reader.
-            let mut header = String::new();
-            let read = std::fs::File::open(path).and_then(|f| {
-                std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut header)
-            });
-            read.is_ok()
-                && header.split(',').any(|c| match c.trim() {
-                    "x" | "x1" => true,
-                    "distance_m" | "distance" | "d" => distances,
-                    _ => false,
-                })
-        }
-        _ => false,
-    }
 }
 
 /// `hapcal calibrate` on measurement tables ([`calibrate_measured`] with the plan's settings,

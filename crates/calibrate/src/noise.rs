@@ -1,10 +1,10 @@
 //! Default instrument noise σ per kind of measurement, the scale the *calibrated* residual is
 //! judged at when no `--sigma-m` is given (the frames-only residual is judged against what a
-//! real robot's manufacturing deviations leave, [`crate::measured::PLAUSIBLE_FRAMES_ONLY_RMS_M`]).
+//! real robot's manufacturing deviations leave, [`PLAUSIBLE_FRAMES_ONLY_RMS_M`]).
 //!
 //! A right model leaves the instrument's noise; a calibrated residual more than
 //! [`DEFAULT_SIGMA_RATIO`] times the σ of its instrument's class (or
-//! [`crate::measured::CALIBRATED_SIGMA_RATIO`] times a stated σ) says the model lacks an
+//! [`CALIBRATED_SIGMA_RATIO`] times a stated σ) says the model lacks an
 //! effect, or the setup is wrong. The data do not say which instrument measured
 //! them (a laser tracker and a motion-capture system both write positions), so each default is
 //! the *upper* end of the class that writes that kind of file: a finer instrument's user gives
@@ -12,11 +12,24 @@
 
 /// Ratio of the calibrated residual (per axis) to a class's *default* σ above which the
 /// report warns: 5, where a σ the user states is held to
-/// [`crate::measured::CALIBRATED_SIGMA_RATIO`] (3). A default is the upper end of its class and
+/// [`CALIBRATED_SIGMA_RATIO`] (3). A default is the upper end of its class and
 /// the instrument a guess, so the warning waits for a residual a right model with a working
 /// instrument of that class cannot leave; the bundled recordings sit at 2.6× (TIAGo, motion
 /// capture) and 2.5× (Panda panda_2 `high`, sockets) of their defaults.
 pub const DEFAULT_SIGMA_RATIO: f64 = 5.0;
+
+/// Frames-only 3-D RMS error beyond which the nominal model cannot be the robot's: joint
+/// origin deviations of a fraction of a millimetre and a milliradian, and the elastic
+/// deflection of an elastic humanoid's arms under their own weight, give millimetres to a
+/// few centimetres; a file in millimetres read as metres, or joint columns in the wrong order,
+/// give decimetres to metres.
+pub const PLAUSIBLE_FRAMES_ONLY_RMS_M: f64 = 0.05;
+
+/// Ratio of the calibrated model's σ per axis to the stated instrument σ (or the default of
+/// its class, [`default_sigma_m`]) above which the report says the model lacks an effect (or the
+/// setup is wrong): a right model leaves the noise, within a few per cent for hundreds of
+/// residuals, and a default is the upper end of its class.
+pub const CALIBRATED_SIGMA_RATIO: f64 = 3.0;
 
 /// Marker positions (motion capture, or any instrument that writes positions only): 1 mm per
 /// axis. Optical motion-capture makers state 0.1 to 0.5 mm per marker in a calibrated lab

@@ -770,7 +770,7 @@ mod tests {
     fn reference_device() -> Device {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../fixtures/reference-device/device.toml");
-        crate::calibrate::load_device(&path, "ball_link").expect("reference device")
+        crate::data::load_device(&path, "ball_link").expect("reference device")
     }
 
     #[test]

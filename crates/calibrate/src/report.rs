@@ -196,7 +196,7 @@ pub struct Outcome {
     /// The calibrated kinematic model.
     pub model: CalibratedModel,
     /// The calibrated device file when the workflow writes more than kinematic deviations (a
-    /// haptic device's transmissions); `None`: [`crate::calibrate::write_outputs`] applies the report's
+    /// haptic device's transmissions); `None`: `calibrate::write_outputs` applies the report's
     /// parameters to `device`.
     pub calibrated: Option<Device>,
 }

@@ -32,44 +32,18 @@ use hapcal_io::{AngleUnit, LengthUnit, MeasurementTable, Units};
 use hapcal_kinematics::{UnitQuaternion, Vector3};
 use hapcal_problems::{CalibratedModel, Weights};
 use rayon::prelude::*;
-use serde::Serialize;
 
-use crate::measured::{self, MeasuredConfig, PLAUSIBLE_FRAMES_ONLY_RMS_M, Robot};
+use crate::measured::{self, MeasuredConfig, Robot};
 use crate::model::ModelChoice;
-
-/// Factor by which a hypothesis must divide the frames-only residual (position RMS, or
-/// orientation RMS of pose data) to be an error, when the corrected residual is plausible.
-///
-/// Right data leave the instrument's noise and the robot's manufacturing deviations; a
-/// hypothesis with nothing to fit can lower that only by the chance fluctuation of a RMS over
-/// the rows (a few per cent for tens of rows; on the bundled recordings the largest gain of
-/// any hypothesis is below 1.1, docs/results/reliability.md). A mistake turns millimetres
-/// into metres or decimetres: factors of tens to thousands. Five lies far from both.
-pub const OVERWHELMING_FACTOR: f64 = 5.0;
-
-/// Factor by which a hypothesis must divide the frames-only residual to be a warning: twice
-/// the residual of right data is out of reach of chance, but a small mistake (a short link, a
-/// few rows of a slow motion) may explain only part of a residual.
-pub const SUGGESTIVE_FACTOR: f64 = 2.0;
-
-/// Frames-only RMS orientation error (rad) beyond which the nominal model cannot be the
-/// robot's: joint zero offsets and link twists of a real robot are milliradians, a few of them
-/// in series stay below 0.02 rad, a camera's orientation noise is a few milliradians; a
-/// quaternion read in the wrong order or an angle in degrees read in radians gives tenths of a
-/// radian to radians.
-pub const PLAUSIBLE_FRAMES_ONLY_RAD: f64 = 0.05;
-
-/// Largest spread (max − min) of a joint's readings, rad or m, that counts as a column that
-/// never changes: exported encoder readings of a moving joint differ in their last digits.
-pub const FROZEN_SPREAD: f64 = 1e-9;
+use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
+pub use crate::setup_findings::{
+    ClosestHypothesis, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OVERWHELMING_FACTOR,
+    PLAUSIBLE_FRAMES_ONLY_RAD, Residual, ResidualOf, SUGGESTIVE_FACTOR, SetupReport, Severity,
+};
+use crate::setup_findings::{OPEN_LIMIT, gain, mm, nearest_rotation, tip_candidates};
 
 /// Rows out of step tried between the joint readings and the measurements: ±1 and ±2.
 const ROW_SHIFTS: [isize; 4] = [-2, -1, 1, 2];
-
-/// Rows a frames-only fit of the check takes at most (evenly spaced over each file): a factor
-/// of [`OVERWHELMING_FACTOR`] shows on far fewer, and the check stays a small part of a
-/// calibration on long recordings.
-pub const MAX_CHECK_ROWS: usize = 200;
 
 /// Joint counts up to which every pair of joint columns is tried as a swap; longer robots
 /// (trees) try the adjacent pairs.
@@ -81,362 +55,6 @@ pub struct SetupConfig {
     /// Use the data as they are even when a hypothesis explains them overwhelmingly better
     /// (`--accept-setup`): the findings become warnings.
     pub accept_setup: bool,
-}
-
-/// A class of setup mistake; its name (`length-unit`, `joint-order`, …) appears in the
-/// reports.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
-#[serde(into = "String")]
-pub enum MistakeClass {
-    /// Positions and distances in another length unit (mm read as m, or m as mm).
-    LengthUnit,
-    /// Angles (revolute joints and `phix, phiy, phiz`) in another unit.
-    AngleUnit,
-    /// Only the orientation angles `phix, phiy, phiz` in degrees, the joints in radians.
-    OrientationUnit,
-    /// Quaternion columns holding `x, y, z, w` under the names `qw, qx, qy, qz`.
-    QuaternionOrder,
-    /// The inverse (conjugate) rotation: the instrument in the marker's frame.
-    QuaternionInverse,
-    /// Roll and yaw swapped (`phix` and `phiz`).
-    EulerOrder,
-    /// One position axis negated or two swapped (a left-handed instrument frame; the data
-    /// cannot tell which).
-    MirroredAxis,
-    /// Two joint columns swapped, or all of them in reverse order.
-    JointOrder,
-    /// Joint rows out of step with the measurement rows.
-    RowShift,
-    /// A joint whose reading never changes while the description lets it move.
-    FrozenJoint,
-    /// The tip link one or two moving joints up or down the chain from the markers' link.
-    TipLink,
-    /// Tips given in the wrong order (marker sets of two branches swapped).
-    SwappedTips,
-    /// The residual is far above what a real robot produces and no hypothesis explains it.
-    NoHypothesis,
-}
-
-impl MistakeClass {
-    /// Every class, in report order.
-    pub const ALL: [MistakeClass; 13] = [
-        MistakeClass::LengthUnit,
-        MistakeClass::AngleUnit,
-        MistakeClass::OrientationUnit,
-        MistakeClass::QuaternionOrder,
-        MistakeClass::QuaternionInverse,
-        MistakeClass::EulerOrder,
-        MistakeClass::MirroredAxis,
-        MistakeClass::JointOrder,
-        MistakeClass::RowShift,
-        MistakeClass::FrozenJoint,
-        MistakeClass::TipLink,
-        MistakeClass::SwappedTips,
-        MistakeClass::NoHypothesis,
-    ];
-
-    /// The class's name in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            MistakeClass::LengthUnit => "length-unit",
-            MistakeClass::AngleUnit => "angle-unit",
-            MistakeClass::OrientationUnit => "orientation-unit",
-            MistakeClass::QuaternionOrder => "quaternion-order",
-            MistakeClass::QuaternionInverse => "quaternion-inverse",
-            MistakeClass::EulerOrder => "euler-order",
-            MistakeClass::MirroredAxis => "mirrored-axis",
-            MistakeClass::JointOrder => "joint-order",
-            MistakeClass::RowShift => "row-shift",
-            MistakeClass::FrozenJoint => "frozen-joint",
-            MistakeClass::TipLink => "tip-link",
-            MistakeClass::SwappedTips => "swapped-tips",
-            MistakeClass::NoHypothesis => "no-hypothesis",
-        }
-    }
-}
-
-impl std::fmt::Display for MistakeClass {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl From<MistakeClass> for String {
-    fn from(c: MistakeClass) -> String {
-        c.name().to_owned()
-    }
-}
-
-impl std::str::FromStr for MistakeClass {
-    type Err = String;
-    /// A name of [`MistakeClass::name`].
-    fn from_str(s: &str) -> Result<Self, String> {
-        (MistakeClass::ALL.into_iter())
-            .find(|c| c.name() == s)
-            .ok_or_else(|| format!("expected a setup mistake class, found {s:?}"))
-    }
-}
-
-/// How strongly a finding speaks.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Severity {
-    /// Overwhelming evidence: the caller stops (exit 2) unless the data are accepted.
-    Error,
-    /// Worth a look; the calibration goes on.
-    Warning,
-}
-
-/// Which fit a [`Residual`] is the residual of.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ResidualOf {
-    /// The nominal kinematics with the instrument and marker frames fitted (measurement
-    /// files).
-    #[default]
-    FramesOnly,
-    /// The nominal device's cable distance, its zero fitted (a haptic device's logs).
-    CableDistance,
-    /// The scatter of the nominal tip positions about each socket's mean, with the error of
-    /// the distance between a placement's two sockets (socket recordings).
-    SocketScatter,
-}
-
-impl ResidualOf {
-    /// In the reports' words: `frames-only RMS`, `nominal cable-distance RMS`.
-    pub fn words(self) -> &'static str {
-        match self {
-            ResidualOf::FramesOnly => "frames-only RMS",
-            ResidualOf::CableDistance => "nominal cable-distance RMS",
-            ResidualOf::SocketScatter => "nominal socket-scatter RMS",
-        }
-    }
-}
-
-/// Frames-only residual of a data set (or its counterpart for other data, [`ResidualOf`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct Residual {
-    /// The fit this is the residual of.
-    pub of: ResidualOf,
-    /// RMS over every marker sample's 3-D position error and every distance error, m;
-    /// `None` without either.
-    pub length_rms_m: Option<f64>,
-    /// RMS orientation error (angle of the relative rotation) of pose data, rad.
-    pub orientation_rms_rad: Option<f64>,
-    /// RMS distance of the measured positions from each marker's centroid, and of the
-    /// distances from their mean, m: the scale the length residual is judged at (a
-    /// hypothesis that shrinks the data shrinks its residual without explaining anything).
-    pub spread_m: Option<f64>,
-}
-
-impl Residual {
-    /// Whether a real robot's manufacturing deviations can leave this residual
-    /// ([`PLAUSIBLE_FRAMES_ONLY_RMS_M`], [`PLAUSIBLE_FRAMES_ONLY_RAD`]).
-    pub fn is_plausible(&self) -> bool {
-        self.length_rms_m
-            .is_none_or(|e| e <= PLAUSIBLE_FRAMES_ONLY_RMS_M)
-            && self
-                .orientation_rms_rad
-                .is_none_or(|e| e <= PLAUSIBLE_FRAMES_ONLY_RAD)
-    }
-
-    /// In words: `163942.1 mm` or `1.92 mm, 0.31°`.
-    pub fn text(&self) -> String {
-        let mut parts = Vec::new();
-        if let Some(e) = self.length_rms_m {
-            parts.push(format!("{} mm", mm(e)));
-        }
-        if let Some(e) = self.orientation_rms_rad {
-            parts.push(format!("{:.2}°", e.to_degrees()));
-        }
-        if parts.is_empty() {
-            "no residual".to_owned()
-        } else {
-            parts.join(", ")
-        }
-    }
-}
-
-/// Millimetres of `m`, with three significant digits for small values.
-fn mm(m: f64) -> String {
-    let v = m * 1e3;
-    if v >= 100.0 {
-        format!("{v:.0}")
-    } else if v >= 1.0 {
-        format!("{v:.2}")
-    } else {
-        format!("{v:.3}")
-    }
-}
-
-/// One thing the check found.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Finding {
-    /// The class of mistake.
-    pub class: MistakeClass,
-    /// Error (the caller stops unless accepted) or warning.
-    pub severity: Severity,
-    /// What was found, in plain words.
-    pub message: String,
-    /// The flag or the edit of the files that applies.
-    pub fix: String,
-    /// Frames-only residual of the data as given.
-    pub before: Residual,
-    /// Frames-only residual of the data as the fix reads them (`None` for a finding from the
-    /// data alone).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub after: Option<Residual>,
-}
-
-impl Finding {
-    /// One line: the message, the residual before → after, the fix.
-    pub fn text(&self) -> String {
-        let unread = self.before == Residual::default();
-        let residual = match &self.after {
-            Some(after) if unread => {
-                format!(" ({} {} with the fix)", after.of.words(), after.text())
-            }
-            Some(after) => format!(
-                " ({} {} → {})",
-                after.of.words(),
-                self.before.text(),
-                after.text()
-            ),
-            None => String::new(),
-        };
-        format!("{}{residual}; fix: {}", self.message, self.fix)
-    }
-}
-
-/// The hypothesis of a mistake that lowered the frames-only residual most.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct ClosestHypothesis {
-    /// Its class.
-    pub class: MistakeClass,
-    /// The flag or edit it stands for.
-    pub fix: String,
-    /// The frames-only residual of the data as it corrects them.
-    pub after: Residual,
-    /// How many times it divides the residual as given (position residual relative to the
-    /// data's spread, or orientation residual; below 1: every hypothesis raises it); `None`
-    /// when the data do not read as given.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub gain: Option<f64>,
-}
-
-/// Everything the setup check found.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct SetupReport {
-    /// Training rows checked.
-    pub n_rows: usize,
-    /// Frames-only residual of the data as given.
-    pub as_given: Residual,
-    /// Hypotheses of a mistake fitted.
-    pub n_hypotheses: usize,
-    /// The hypothesis that lowered the residual most (reported whether or not it is a
-    /// finding).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub closest: Option<ClosestHypothesis>,
-    /// Findings, errors first.
-    pub findings: Vec<Finding>,
-}
-
-impl SetupReport {
-    /// The report of data that do not read as given, with the one `finding` that makes them
-    /// read (its residual `after`): the tip one or two links up.
-    pub(crate) fn of_unread(n_rows: usize, finding: Finding, after: Residual) -> SetupReport {
-        SetupReport {
-            n_rows,
-            as_given: Residual::default(),
-            n_hypotheses: 1,
-            closest: Some(ClosestHypothesis {
-                class: finding.class,
-                fix: finding.fix.clone(),
-                after,
-                gain: None,
-            }),
-            findings: vec![finding],
-        }
-    }
-
-    /// Adds, first, the error "`message`: nothing explains the residual as given" when
-    /// `as_given` is more than a real robot leaves and no finding is an error yet.
-    pub(crate) fn add_implausible(
-        findings: &mut Vec<Finding>,
-        as_given: Residual,
-        message: String,
-        fix: &str,
-    ) {
-        if as_given.is_plausible() || findings.iter().any(|f| f.severity == Severity::Error) {
-            return;
-        }
-        findings.insert(
-            0,
-            Finding {
-                class: MistakeClass::NoHypothesis,
-                severity: Severity::Error,
-                message,
-                fix: fix.to_owned(),
-                before: as_given,
-                after: None,
-            },
-        );
-    }
-
-    /// The first finding of severity error, if any.
-    pub fn overwhelming(&self) -> Option<&Finding> {
-        self.findings.iter().find(|f| f.severity == Severity::Error)
-    }
-
-    /// The report as plain text, one finding per line.
-    pub fn render(&self) -> String {
-        let mut out = if self.as_given == Residual::default() {
-            format!(
-                "setup check: {} rows; the files do not read with the tips given\n",
-                self.n_rows
-            )
-        } else {
-            format!(
-                "setup check: {} rows, {} {} as given, {} hypotheses of a mistake fitted\n",
-                self.n_rows,
-                self.as_given.of.words(),
-                self.as_given.text(),
-                self.n_hypotheses
-            )
-        };
-        if let Some(c) = &self.closest
-            && let Some(g) = c.gain
-        {
-            out.push_str(&format!(
-                "  closest hypothesis [{}]: {} ({} {}, gain {g:.2}×)\n",
-                c.class,
-                c.fix,
-                c.after.of.words(),
-                c.after.text()
-            ));
-        }
-        if self.findings.is_empty() {
-            out.push_str("  nothing found: the data fit this robot as they are\n");
-        }
-        for f in &self.findings {
-            out.push_str(&format!(
-                "  {} [{}]: {}\n",
-                f.severity_word(),
-                f.class,
-                f.text()
-            ));
-        }
-        out
-    }
-}
-
-impl Finding {
-    fn severity_word(&self) -> &'static str {
-        match self.severity {
-            Severity::Error => "error",
-            Severity::Warning => "warning",
-        }
-    }
 }
 
 /// What the check needs besides the robot and its tables: where they came from.
@@ -526,19 +144,6 @@ const ORIENTATION_WEIGHT_M2: f64 = 0.5 * 1e-3 * 1e-3 / (1e-2 * 1e-2);
 
 /// Block iterations of [`closed_form_residual`].
 const CLOSED_FORM_ITERATIONS: usize = 50;
-
-/// The nearest rotation to `m` (its polar factor, by SVD; Horn 1987).
-pub(crate) fn nearest_rotation(m: &nalgebra::Matrix3<f64>) -> nalgebra::Matrix3<f64> {
-    let svd = m.svd(true, true);
-    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
-        return nalgebra::Matrix3::identity();
-    };
-    let mut d = nalgebra::Matrix3::identity();
-    if (u * v_t).determinant() < 0.0 {
-        d[(2, 2)] = -1.0;
-    }
-    u * d * v_t
-}
 
 /// The frames-only residual of marker data (no distance rows) by block coordinate descent on
 /// the nominal tip poses: the instrument rotation `R₀` and translation `t` (Kabsch, with the
@@ -710,128 +315,6 @@ fn spread_of(tables: &[MeasurementTable]) -> Option<f64> {
     (n > 0 && sq > 0.0).then(|| (sq / n as f64).sqrt())
 }
 
-/// How many times smaller `after` is than `before`: the larger of the position and the
-/// orientation ratio, unless the other one grows by more than half (then the smaller ratio:
-/// a hypothesis that trades one for the other explains nothing).
-pub(crate) fn gain(before: &Residual, after: &Residual) -> f64 {
-    let ratio = |b: Option<f64>, a: Option<f64>, floor: f64| match (b, a) {
-        (Some(b), Some(a)) if a.is_finite() && b.is_finite() => Some(b.max(floor) / a.max(floor)),
-        (Some(_), _) | (_, Some(_)) => Some(0.0),
-        _ => None,
-    };
-    // Lengths relative to the data's spread: a rescaled data set is judged at its own scale.
-    let relative = |r: &Residual| match (r.length_rms_m, r.spread_m) {
-        (Some(e), Some(s)) => Some(e / s),
-        (e, _) => e,
-    };
-    let r = [
-        ratio(relative(before), relative(after), 1e-9),
-        ratio(before.orientation_rms_rad, after.orientation_rms_rad, 1e-5),
-    ];
-    let r: Vec<f64> = r.into_iter().flatten().collect();
-    let lo = r.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = r.iter().copied().fold(0.0, f64::max);
-    if r.is_empty() {
-        0.0
-    } else if lo < 1.0 / 1.5 {
-        lo
-    } else {
-        hi
-    }
-}
-
-/// A hypothesis of a mistake with the data as it corrects them, for the checks of data that
-/// carry no instrument frame (a haptic device's logs, socket recordings).
-pub(crate) struct Corrected<T> {
-    pub(crate) class: MistakeClass,
-    /// What the mistake is, in words.
-    pub(crate) what: String,
-    /// The flag or the edit that applies.
-    pub(crate) fix: String,
-    pub(crate) data: T,
-}
-
-impl<T> Corrected<T> {
-    pub(crate) fn new(class: MistakeClass, what: String, fix: String, data: T) -> Self {
-        Corrected {
-            class,
-            what,
-            fix,
-            data,
-        }
-    }
-}
-
-/// The hypotheses of a check, judged: the closest one, its finding (error when it divides the
-/// residual by [`OVERWHELMING_FACTOR`] and leaves a plausible one, warning from
-/// [`SUGGESTIVE_FACTOR`]), and its index when the finding is an error.
-pub(crate) struct Judged {
-    pub(crate) closest: Option<ClosestHypothesis>,
-    pub(crate) finding: Option<Finding>,
-    pub(crate) error_at: Option<usize>,
-}
-
-/// Judges `hypotheses` against the residual `as_given` by the residual each leaves
-/// ([`gain`]).
-pub(crate) fn judge<T: Sync>(
-    as_given: Residual,
-    hypotheses: &[Corrected<T>],
-    residual: impl Fn(&T) -> Residual + Sync,
-) -> Judged {
-    let scored: Vec<(Residual, f64)> = (hypotheses.par_iter())
-        .map(|h| {
-            let after = residual(&h.data);
-            (after, gain(&as_given, &after))
-        })
-        .collect();
-    let Some(best) = (0..scored.len()).max_by(|&a, &b| scored[a].1.total_cmp(&scored[b].1)) else {
-        return Judged {
-            closest: None,
-            finding: None,
-            error_at: None,
-        };
-    };
-    let (after, g) = scored[best];
-    let h = &hypotheses[best];
-    let closest = Some(ClosestHypothesis {
-        class: h.class,
-        fix: h.fix.clone(),
-        after,
-        gain: Some(g),
-    });
-    if g < SUGGESTIVE_FACTOR {
-        return Judged {
-            closest,
-            finding: None,
-            error_at: None,
-        };
-    }
-    let error = g >= OVERWHELMING_FACTOR && after.is_plausible();
-    Judged {
-        closest,
-        finding: Some(Finding {
-            class: h.class,
-            severity: if error {
-                Severity::Error
-            } else {
-                Severity::Warning
-            },
-            message: if error {
-                h.what.clone()
-            } else {
-                format!(
-                    "perhaps {}, but it explains only part of the residual",
-                    h.what
-                )
-            },
-            fix: h.fix.clone(),
-            before: as_given,
-            after: Some(after),
-        }),
-        error_at: error.then_some(best),
-    }
-}
-
 /// The column names of a CSV file's header (empty for another file or an unreadable one).
 fn header_of(path: &Path) -> Vec<String> {
     let is_csv = path
@@ -934,56 +417,6 @@ fn joint_label(robot: &Robot, j: usize) -> String {
         robot.joint_names.get(j).map_or("?", String::as_str),
         j + 1
     )
-}
-
-/// The links one and two moving joints above and below `tip` in the URDF, each with how
-/// many moving joints it lies above (negative) or below (positive) the tip.
-pub(crate) fn tip_candidates(
-    urdf: &urdf_rs::Robot,
-    tip: &str,
-) -> Vec<(String, isize, Vec<String>)> {
-    let moving = |j: &urdf_rs::Joint| !matches!(j.joint_type, urdf_rs::JointType::Fixed);
-    let mut out = Vec::new();
-    // Up: the parent link of the first and second moving joints above the tip.
-    let mut link = tip.to_owned();
-    let mut crossed = 0;
-    for _ in 0..urdf.joints.len() {
-        let Some(joint) = urdf.joints.iter().find(|j| j.child.link == link) else {
-            break;
-        };
-        link.clone_from(&joint.parent.link);
-        if moving(joint) {
-            crossed += 1;
-            out.push((link.clone(), -crossed, Vec::new()));
-            if crossed == 2 {
-                break;
-            }
-        }
-    }
-    // Down: the child link of the first and second moving joints below the tip, on every
-    // branch (at most a few).
-    let mut frontier: Vec<(String, isize, Vec<String>)> = vec![(tip.to_owned(), 0, Vec::new())];
-    for _ in 0..urdf.joints.len() {
-        let Some((link, depth, joints)) = frontier.pop() else {
-            break;
-        };
-        for joint in urdf.joints.iter().filter(|j| j.parent.link == link) {
-            let mut joints = joints.clone();
-            let d = if moving(joint) {
-                joints.push(joint.name.clone());
-                depth + 1
-            } else {
-                depth
-            };
-            if d > depth {
-                out.push((joint.child.link.clone(), d, joints.clone()));
-            }
-            if d < 2 && out.len() < 8 {
-                frontier.push((joint.child.link.clone(), d, joints));
-            }
-        }
-    }
-    out
 }
 
 /// Whether every file's header has a column for each of `joints` (by name, or as `q{n}` past
@@ -1589,7 +1022,7 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
 /// # Errors
 /// An unreadable device or file, and as [`check_setup`].
 pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
-    let device = crate::calibrate::load_device(&plan.device, &plan.tip)?;
+    let device = crate::data::load_device(&plan.device, &plan.tip)?;
     if !device.capstans.is_empty() || device.parallelogram.is_some() {
         if plan.data.iter().all(|p| p.is_file()) {
             return crate::setup_haptic::check_logs(&device, &plan.data).map(Some);
@@ -1643,10 +1076,6 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
     })
     .map(Some)
 }
-
-/// Half-width (rad or m) of the joint ranges with which [`past_limits`] reads the files again:
-/// wide enough for any reading in degrees or millimetres.
-pub(crate) const OPEN_LIMIT: f64 = 1e6;
 
 /// The setup check of files that the reader refused with `limit_error` (a reading past its
 /// joint's limits), read again with every range opened to ±[`OPEN_LIMIT`]: when the check
@@ -1787,14 +1216,6 @@ pub fn gate(plan: &crate::inputs::Plan, cfg: &SetupConfig) -> Result<Gated> {
 mod tests {
     use super::*;
 
-    #[test]
-    fn every_class_survives_the_round_trip_of_its_name() {
-        for c in MistakeClass::ALL {
-            assert_eq!(c.name().parse::<MistakeClass>(), Ok(c));
-        }
-        assert!("mm".parse::<MistakeClass>().is_err());
-    }
-
     fn ur10() -> (Robot, Vec<MeasurementTable>) {
         let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures");
         let robot = measured::robot_from_urdf(
@@ -1862,19 +1283,5 @@ mod tests {
         let thin = thinned(&long);
         assert_eq!(thin[0].rows.len(), MAX_CHECK_ROWS.min(n));
         assert_eq!(thinned(&tables)[0].rows.len(), tables[0].rows.len());
-    }
-
-    #[test]
-    fn gain_takes_the_better_channel_unless_the_other_grows() {
-        let r = |l: f64, o: f64| Residual {
-            of: ResidualOf::FramesOnly,
-            length_rms_m: Some(l),
-            orientation_rms_rad: Some(o),
-            spread_m: Some(0.5),
-        };
-        // Orientation 10× better, position unchanged: 10.
-        assert!((gain(&r(1e-3, 0.5), &r(1e-3, 0.05)) - 10.0).abs() < 1e-9);
-        // Orientation 10× better, position 3× worse: no evidence (1/3).
-        assert!(gain(&r(1e-3, 0.5), &r(3e-3, 0.05)) < 1.0);
     }
 }

@@ -1,5 +1,6 @@
-//! The setup check of a haptic device's logs: the mistakes of [`crate::setup`], for the
-//! joint readings, cable distances and external encoders of the paper's device.
+//! The setup check of a haptic device's logs: the mistakes of
+//! [`crate::setup_findings::MistakeClass`], for the joint readings, cable distances and external
+//! encoders of the paper's device.
 //!
 //! The log's counterpart of the frames-only residual is the cable distance of the nominal
 //! device, `d_i − |P(q_i)|` with the raw joint readings (transmissions ideal, kinematics
@@ -10,7 +11,7 @@
 //! step with the distances) reads the log as it says, and the residual is compared with the
 //! log's as given, relative to the spread of the distances (a hypothesis that shrinks the
 //! distances shrinks their residual without explaining anything), with the factors and
-//! severities of [`crate::setup`]. The external encoders are checked against the joint
+//! severities of [`crate::setup_findings`]. The external encoders are checked against the joint
 //! readings they measure: an encoder reads its joint's output angle, within the
 //! transmission's error (milliradians), so a column that matches another joint, or its own in
 //! degrees, is named. A joint column that never changes is found from the data. A log that
@@ -22,8 +23,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use hapcal_io::{Device, LogRow};
 
-use crate::measured::PLAUSIBLE_FRAMES_ONLY_RMS_M;
-use crate::setup::{
+use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
+use crate::setup_findings::{
     Corrected, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OPEN_LIMIT,
     OVERWHELMING_FACTOR, Residual, ResidualOf, SetupReport, Severity, judge,
 };

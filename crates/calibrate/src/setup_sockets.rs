@@ -8,7 +8,7 @@
 //! deviations (millimetres); the same hypotheses as for measurement files (joint readings in
 //! degrees, two joint columns swapped or all reversed, the ball on another link) are scored by
 //! how many times they divide it, and decided by the rule of the other checks
-//! ([`crate::setup`]'s judge: an error at a factor of 5 with a plausible scatter left, a
+//! ([`crate::setup_findings`]'s judge: an error at a factor of 5 with a plausible scatter left, a
 //! warning from 2). The files are read without the joint-limit check, so that a file in
 //! degrees or with swapped columns is named instead of the first reading outside a limit.
 
@@ -17,15 +17,15 @@ use std::path::Path;
 use hapcal_io::SocketPlacement;
 use hapcal_kinematics::Chain;
 
-use crate::measured::PLAUSIBLE_FRAMES_ONLY_RMS_M;
-use crate::setup::{
+use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
+use crate::setup_findings::{
     Corrected, Finding, MistakeClass, Residual, ResidualOf, SetupReport, Severity, judge,
     tip_candidates,
 };
 
 /// Rows (over every socket of the training placements) below which the socket check judges
 /// nothing: a scatter and a tip turn over fewer rows are too uncertain for a factor of
-/// [`crate::setup::OVERWHELMING_FACTOR`] to mean a mistake (MUKCa records about thirty rows a
+/// [`crate::setup_findings::OVERWHELMING_FACTOR`] to mean a mistake (MUKCa records about thirty rows a
 /// socket).
 pub const MIN_CHECK_ROWS: usize = 12;
 
@@ -98,7 +98,7 @@ pub fn socket_scatter(
                 .map(|p| p.rotation.to_rotation_matrix().into_inner())
                 .collect();
             let mean_rotation =
-                crate::setup::nearest_rotation(&rotations.iter().sum::<Matrix3<f64>>());
+                crate::setup_findings::nearest_rotation(&rotations.iter().sum::<Matrix3<f64>>());
             for r in &rotations {
                 turn_sq += Rotation3::from_matrix_unchecked(mean_rotation.transpose() * r)
                     .angle()
