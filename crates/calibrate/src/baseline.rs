@@ -21,7 +21,7 @@ use crate::fit::CV_REPEATS;
 use crate::inputs::Plan;
 use crate::measured::{MeasuredConfig, Robot, calibrate_measured};
 pub use crate::model::DataKind;
-use crate::model::ModelChoice;
+use crate::model::{ModelChoice, Rung};
 
 /// A held-out data set as a problem whose first [`GeometricBaseline::n_shared`] parameters are
 /// the training problem's.
@@ -46,8 +46,8 @@ pub struct HeldOutSet {
 /// One rung of the kinematic ladder.
 #[derive(Clone, Debug, Serialize)]
 pub struct KinematicRung {
-    /// `nominal`, `frames only`, `joint offsets`, `geometric`.
-    pub rung: String,
+    /// The nominal model, frames only, joint offsets or geometric.
+    pub rung: Rung,
     /// Held-out RMS of the 3-D position (or distance) error by blocked cross-validation on the
     /// training rows, m; for `nominal`, the training RMS (no parameter but the sockets).
     pub cv_rms_m: f64,
@@ -221,7 +221,7 @@ pub fn baseline_from_tables(
                     .unwrap_or(p.position_rms_m)
             };
             rungs.push(KinematicRung {
-                rung: rung.to_string(),
+                rung: Rung::Model(rung),
                 cv_rms_m: (auto.ladder.iter())
                     .find(|r| r.rung == rung)
                     .map_or(f64::NAN, |r| r.heldout_rms_m),
@@ -408,7 +408,7 @@ pub fn baseline_from_sets(
             nominal_x[i] = 0.0;
         }
         rungs.push(KinematicRung {
-            rung: "nominal".into(),
+            rung: Rung::Nominal,
             cv_rms_m: point_rms(&problem, &nominal_x)?,
             test_rms_m: nominal_test,
         });
@@ -416,7 +416,7 @@ pub fn baseline_from_sets(
             crate::solve::cross_validate(chain, train, plan, ModelChoice::Geometric, CV_REPEATS)?;
         let cv = (held.sq_errors.iter().sum::<f64>() / held.sq_errors.len().max(1) as f64).sqrt();
         rungs.push(KinematicRung {
-            rung: "geometric".into(),
+            rung: Rung::Model(ModelChoice::Geometric),
             cv_rms_m: cv,
             test_rms_m: (tests.iter())
                 .map(|t| point_rms(&t.problem, &t.x))

@@ -144,6 +144,32 @@ fn transversal_name<S: serde::Serializer>(t: &Transversal, s: S) -> Result<S::Ok
     })
 }
 
+/// A rung of a kinematic ladder as a report names it: the nominal model (nothing fitted but
+/// the nuisance parameters, the socket points) or one of the models of [`ModelChoice`].
+/// Rendered, and serialised, as the user reads it: `nominal`, or the model's `--model` value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rung {
+    /// The nominal kinematics.
+    Nominal,
+    /// A model of the ladder.
+    Model(ModelChoice),
+}
+
+impl std::fmt::Display for Rung {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Rung::Nominal => f.pad("nominal"),
+            Rung::Model(m) => f.pad(m.name()),
+        }
+    }
+}
+
+impl Serialize for Rung {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
 impl std::fmt::Display for ModelChoice {
     /// The `--model` value, as the user types it.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

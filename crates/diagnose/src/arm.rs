@@ -23,6 +23,7 @@
 
 use hapcal_calibrate::baseline::{DataKind, GeometricBaseline, HeldOutSet};
 use hapcal_calibrate::calibrate::blocked_mean_difference;
+use hapcal_calibrate::model::Rung;
 use hapcal_identify::Problem;
 use hapcal_problems::{CalibrationProblem, GravityCompliance, Observations, RowKind};
 use nalgebra::{DMatrix, DVector, Vector3};
@@ -296,11 +297,41 @@ pub struct ArmBin {
     pub flagged: bool,
 }
 
+/// A rung of the diagnosis's ladder: a kinematic rung of the baseline (nominal, frames only,
+/// joint offsets, geometric), or the geometric model with the effects named so far, in the
+/// order they were named. Rendered and serialised as the user reads it: `geometric`,
+/// `+ gravity_compliance + harmonic1`.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ArmLadderRung {
+    /// A rung of the calibration's ladder.
+    Kinematic(Rung),
+    /// Geometric plus these effects.
+    Effects(Vec<ArmEffect>),
+}
+
+impl std::fmt::Display for ArmLadderRung {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ArmLadderRung::Kinematic(r) => f.pad(&r.to_string()),
+            ArmLadderRung::Effects(e) => {
+                let names: Vec<String> = e.iter().map(|e| format!("+ {}", e.name())).collect();
+                f.pad(&names.join(" "))
+            }
+        }
+    }
+}
+
+impl Serialize for ArmLadderRung {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
 /// One rung of the ladder.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ArmRung {
-    /// `frames only`, `joint offsets`, `geometric`, `+ gravity_compliance`, ….
-    pub rung: String,
+    /// The rung.
+    pub rung: ArmLadderRung,
     /// Cross-validated RMS of the 3-D position error on the training rows (blocked CV), m.
     pub cv_rms_m: f64,
     /// RMS on each held-out set (test file), m (order of [`ArmDiagnosis::test_sets`]).
@@ -1575,7 +1606,7 @@ fn ladder(
 ) -> Result<(Vec<ArmRung>, Vec<f64>), Error> {
     let mut out: Vec<ArmRung> = (baseline.ladder.iter())
         .map(|k| ArmRung {
-            rung: k.rung.clone(),
+            rung: ArmLadderRung::Kinematic(k.rung),
             cv_rms_m: k.cv_rms_m,
             test_rms_m: k.test_rms_m.clone(),
         })
@@ -1648,7 +1679,7 @@ fn ladder(
         .collect();
     let mut a = jb.clone();
     let mut test_cols: Vec<DMatrix<f64>> = tests.iter().map(|t| t.shared.clone()).collect();
-    let mut names_so_far = String::new();
+    let mut named_so_far: Vec<ArmEffect> = Vec::new();
     for (effect, cols, visible) in effects {
         let mut grown = DMatrix::zeros(a.nrows(), a.ncols() + cols.ncols());
         grown.columns_mut(0, a.ncols()).copy_from(&a);
@@ -1677,13 +1708,12 @@ fn ladder(
                 .collect();
             rms.push(test_rms(t, tc, coef));
         }
-        names_so_far.push_str(&format!("+ {}", effect.name()));
+        named_so_far.push(*effect);
         out.push(ArmRung {
-            rung: names_so_far.clone(),
+            rung: ArmLadderRung::Effects(named_so_far.clone()),
             cv_rms_m: held.mse().sqrt(),
             test_rms_m: rms,
         });
-        names_so_far.push(' ');
     }
     Ok((out, geometric))
 }

@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 use hapcal_calibrate::baseline::{baseline_from_tables, geometric_baseline};
 use hapcal_calibrate::calibrate::{ModelChoice, Plan};
 use hapcal_calibrate::measured::robot_from_urdf;
-use hapcal_diagnose::arm::{ArmConfig, FloorSource, diagnose_arm};
+use hapcal_calibrate::model::Rung;
+use hapcal_diagnose::arm::{ArmConfig, ArmLadderRung, FloorSource, diagnose_arm};
 use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -48,7 +49,7 @@ fn kuka_14_names_gravity_compliance_and_it_carries_to_the_test_placements() {
     let geometric = d
         .ladder
         .iter()
-        .find(|r| r.rung == "geometric")
+        .find(|r| r.rung == ArmLadderRung::Kinematic(Rung::Model(ModelChoice::Geometric)))
         .expect("rung");
     let with = d.ladder.last().expect("rung");
     for (g, w) in geometric.test_rms_m.iter().zip(&with.test_rms_m) {
