@@ -632,7 +632,7 @@ class Diagnosis:
 def diagnose(
     device: Device,
     data: MeasurementsLike,
-    baseline: str = "full",
+    baseline: Optional[str] = None,
     folds: int = 5,
     *,
     test: Optional[MeasurementsLike] = None,
@@ -648,8 +648,11 @@ def diagnose(
       (``hapcal_diagnose::arm``).
     - ``data``: :class:`Measurements`, a list of them, or paths (a haptic device: one log,
       ``q1..qn, distance_m, ext1..ext4, t_s``, in m and rad).
-    - ``baseline``: haptic device: ``"full"`` (transmissions + kinematics) or
-      ``"kinematics"`` (the transmission models then join the candidates); a robot: ``"full"``.
+    - ``baseline``: the model the gap is measured against, by its :data:`MODELS` name. A
+      haptic device: ``"transmissions"`` (the paper's full calibration; the default) or
+      ``"geometric"`` (the kinematic deviations alone; the transmission models then join the
+      candidates), ``"full"`` and ``"kinematics"`` being read as these; a robot:
+      ``"geometric"`` (the default).
     - ``folds``: cross-validation folds (time-contiguous blocks, ≥ 2).
     - ``test``, ``sigma_m``, ``test_last``: a robot only: held-out sets, the instrument's σ
       (m, the noise floor), the share of each training set's last rows held out.
@@ -679,7 +682,7 @@ def diagnose(
         device,
         items("data", data),
         items("test", test) if test is not None else [],
-        str(baseline),
+        None if baseline is None else str(baseline),
         max(int(folds), 0),
         None if sigma_m is None else float(sigma_m),
         None if test_last is None else float(test_last),

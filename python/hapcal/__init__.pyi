@@ -222,8 +222,9 @@ class Diagnosis:
 def diagnose(
     device: Device,
     data: Union[Measurements, PathLike],
-    baseline: str = "full",
+    baseline: Optional[str] = None,
     folds: int = 5,
 ) -> Diagnosis:
     """``hapcal diagnose``: ``data`` a log CSV path or ``Measurements.from_csv`` of one;
-    ``baseline``: "full" | "kinematics"; ``folds`` ≥ 2. Raises HapcalError."""
+    ``baseline``: "transmissions" (default) | "geometric" ("full" | "kinematics" read as
+    these); ``folds`` ≥ 2. Raises HapcalError."""

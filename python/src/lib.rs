@@ -612,17 +612,11 @@ impl PyCalibration {
 
 /// The names of every model, as the command line's `--model` takes them (`ModelChoice`).
 fn model_names() -> Vec<String> {
-    use clap::ValueEnum;
-    ModelChoice::value_variants()
-        .iter()
-        .filter_map(|v| v.to_possible_value().map(|p| p.get_name().to_owned()))
-        .collect()
+    ModelChoice::all().iter().map(|m| m.name().to_owned()).collect()
 }
 
 fn model_choice(model: &str) -> Result<ModelChoice> {
-    use clap::ValueEnum;
-    let wanted = model.trim().replace('_', "-");
-    ModelChoice::from_str(&wanted, true).map_err(|_| {
+    ModelChoice::from_name(model).ok_or_else(|| {
         anyhow!(
             "model: expected one of {}, found {model:?}",
             model_names().join(", ")
@@ -914,7 +908,7 @@ fn _diagnose(
     device: &PyDevice,
     data: Vec<PyRef<'_, PyMeasurements>>,
     test: Vec<PyRef<'_, PyMeasurements>>,
-    baseline: &str,
+    baseline: Option<String>,
     folds: usize,
     sigma_m: Option<f64>,
     test_last: Option<f64>,
@@ -959,7 +953,8 @@ fn _diagnose(
         let data = path.clone();
         return py
             .detach(move || -> Result<(String, Vec<String>)> {
-                let baseline: hapcal_diagnose::Baseline = baseline.parse()?;
+                let baseline =
+                    hapcal_diagnose::baseline_model(baseline.as_deref().unwrap_or("transmissions"))?;
                 let config = hapcal_diagnose::DiagnoseConfig {
                     baseline,
                     folds,
@@ -974,12 +969,7 @@ fn _diagnose(
             })
             .map_err(py_err);
     }
-    if baseline != "full" {
-        return Err(py_err(anyhow!(
-            "baseline {baseline:?}: a robot measured by an instrument is diagnosed on its \
-             geometric calibration; baseline applies to a haptic device's log"
-        )));
-    }
+    hapcal_diagnose::arm::robot_baseline(baseline.as_deref()).map_err(|e| py_err(e.into()))?;
     let mut plan = Plan {
         workspace: None,
         device: device.path.clone(),

@@ -160,7 +160,7 @@ def effect_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-@pytest.mark.parametrize("baseline, folds", [("full", 5), ("kinematics", 4)])
+@pytest.mark.parametrize("baseline, folds", [("transmissions", 5), ("geometric", 4)])
 def test_diagnose_equals_cli(tmp_path: Path, effect_log: Path, baseline: str, folds: int) -> None:
     text = cli("diagnose", "--device", DEVICE, "--data", str(effect_log), "--baseline", baseline,
                "--folds", str(folds), "--json", "--svg", str(tmp_path / "maps.svg"))
@@ -233,7 +233,7 @@ def test_diagnose_arm_sockets_equal_cli(tmp_path: Path) -> None:
 
 def test_diagnose_arm_options(tmp_path: Path) -> None:
     dev = hapcal.Device.from_urdf(UR10_URDF, tip=UR10_TIP)
-    with pytest.raises(hapcal.HapcalError, match="baseline applies to a haptic device"):
+    with pytest.raises(hapcal.HapcalError, match="diagnosed on its geometric calibration"):
         hapcal.diagnose(dev, "fixtures/figaroh/ur10/calibration.csv", baseline="kinematics")
     with pytest.raises(hapcal.HapcalError, match="test, sigma_m and test_last"):
         hapcal.diagnose(hapcal.Device.from_toml(DEVICE), "fixtures/reference-device/log.csv",

@@ -203,6 +203,15 @@ impl ModelChoice {
         <ModelChoice as clap::ValueEnum>::value_variants()
     }
 
+    /// The model whose `--model` value is `name` (`-` or `_` between words), if any.
+    pub fn from_name(name: &str) -> Option<ModelChoice> {
+        let wanted = name.trim().to_ascii_lowercase().replace('_', "-");
+        ModelChoice::all()
+            .iter()
+            .copied()
+            .find(|m| m.name() == wanted)
+    }
+
     /// The parameter families this model frees (`Auto`: none; it stands for a choice).
     pub fn families(self) -> Families {
         use ModelChoice as M;

@@ -5,7 +5,8 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use hapcal_diagnose::{Baseline, DiagnoseConfig, Diagnosis, diagnose};
+use hapcal_calibrate::model::ModelChoice;
+use hapcal_diagnose::{DiagnoseConfig, Diagnosis, diagnose};
 
 /// What `hapcal diagnose` was asked to do, validated.
 #[derive(Clone, Debug)]
@@ -19,12 +20,13 @@ pub struct DiagnosePlan {
 }
 
 impl DiagnosePlan {
-    /// A plan from raw flags: `baseline` is `full` or `kinematics`, `folds` ≥ 2.
+    /// A plan from raw flags: `baseline` is `transmissions` or `geometric` (or their older
+    /// names `full`, `kinematics`; `hapcal_diagnose::baseline_model`), `folds` ≥ 2.
     ///
     /// # Errors
     /// A bad baseline name or fold count.
     pub fn new(device: PathBuf, data: PathBuf, baseline: &str, folds: usize) -> Result<Self> {
-        let baseline: Baseline = baseline.parse()?;
+        let baseline = hapcal_diagnose::baseline_model(baseline)?;
         if folds < 2 {
             anyhow::bail!("--folds must be at least 2, got {folds}");
         }
@@ -58,14 +60,6 @@ fn um(m: f64) -> String {
     format!("{:.1}", m * 1e6)
 }
 
-/// The `--baseline` value of a baseline, as the user types it.
-fn baseline_name(baseline: Baseline) -> &'static str {
-    match baseline {
-        Baseline::Full => "full",
-        Baseline::Kinematics => "kinematics",
-    }
-}
-
 /// The diagnosis as a text report: gap, where (flagged bins and signals), which (every
 /// candidate), how far (accepted effects with their parameters), verdict.
 pub fn render(d: &Diagnosis) -> String {
@@ -73,7 +67,7 @@ pub fn render(d: &Diagnosis) -> String {
     let _ = writeln!(
         s,
         "baseline: {}, {} samples, {} identifiable parameters",
-        baseline_name(d.baseline),
+        d.baseline.name(),
         d.n_samples,
         d.n_params
     );
@@ -303,7 +297,7 @@ pub fn bar_panels_svg(title: &str, panels: &[Panel], ymax: f64) -> String {
 
 /// Runs `n_cases` blind cases (seeds `first_seed…`, kinds stratified by
 /// [`hapcal_diagnose::blind::kind_of`]) on the reference device and the paper's story
-/// (kinematics baseline on static poses of the reference truth, `n_story` seeds), and returns
+/// (geometric baseline on static poses of the reference truth, `n_story` seeds), and returns
 /// the Markdown report of `docs/results/diagnose.md`. `progress` is called after each case.
 ///
 /// # Errors
@@ -412,14 +406,14 @@ pub fn blind_report(
         "\n## The paper's story: transmissions left out\n\n\
          `hapcal simulate --truth fixtures/reference-device/truth.toml --seed S --out log.csv` \
          (200 static random poses, the paper's transmission errors, no other effect), then \
-         `hapcal diagnose --baseline kinematics`:\n"
+         `hapcal diagnose --baseline geometric`:\n"
     );
     let _ = writeln!(
         md,
         "| seed | gap (floors) | joints explaining most (free joint-angle error) | verdict | gap closed |\n|---|---|---|---|---|"
     );
     let story_cfg = DiagnoseConfig {
-        baseline: Baseline::Kinematics,
+        baseline: ModelChoice::Geometric,
         ..DiagnoseConfig::default()
     };
     for seed in 1..=n_story as u64 {
@@ -458,5 +452,22 @@ mod tests {
         assert!(err.to_string().contains("baseline must be"), "{err}");
         let err = DiagnosePlan::new("d".into(), "l".into(), "full", 1).expect_err("one fold");
         assert!(err.to_string().contains("--folds"), "{err}");
+        // A model the haptic diagnosis does not start from is refused by its --model name.
+        let err = DiagnosePlan::new("d".into(), "l".into(), "mass-compliance", 5)
+            .expect_err("not a baseline");
+        assert!(err.to_string().contains("not mass-compliance"), "{err}");
+    }
+
+    #[test]
+    fn baselines_are_models_and_the_older_names_still_read() {
+        for (name, model) in [
+            ("transmissions", ModelChoice::Transmissions),
+            ("full", ModelChoice::Transmissions),
+            ("geometric", ModelChoice::Geometric),
+            ("kinematics", ModelChoice::Geometric),
+        ] {
+            let plan = DiagnosePlan::new("d".into(), "l".into(), name, 5).expect("a baseline");
+            assert_eq!(plan.config.baseline, model, "{name}");
+        }
     }
 }

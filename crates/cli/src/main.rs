@@ -252,10 +252,12 @@ enum Command {
         socket_distance_m: f64,
         #[command(flatten)]
         units: UnitArgs,
-        /// Haptic device: full (transmissions + kinematics) or kinematics (the transmission
-        /// models then join the candidates).
-        #[arg(long, default_value = "full")]
-        baseline: String,
+        /// The model the gap is measured against, by its --model name. A haptic device's log:
+        /// transmissions (the paper's full calibration, the default) or geometric (the
+        /// kinematic deviations alone; the transmission models then join the candidates); full
+        /// and kinematics are read as these. Any other robot: geometric, the only one.
+        #[arg(long)]
+        baseline: Option<String>,
         /// Cross-validation folds (time-contiguous blocks, at least 2).
         #[arg(long, default_value_t = 5, value_parser = count_at_least::<2>)]
         folds: usize,
@@ -309,7 +311,7 @@ enum Command {
         /// First seed.
         #[arg(long, default_value_t = 0)]
         first_seed: u64,
-        /// Seeds of the paper's story (kinematics baseline on static poses).
+        /// Seeds of the paper's story (geometric baseline on static poses).
         #[arg(long, default_value_t = 5)]
         story: usize,
     },
@@ -820,7 +822,7 @@ fn run(cli: Cli) -> Result<()> {
                 let plan = hapcal::diagnose::DiagnosePlan::new(
                     device.clone(),
                     data[0].clone(),
-                    &baseline,
+                    baseline.as_deref().unwrap_or("transmissions"),
                     folds,
                 )?;
                 let (mut d, warnings) = hapcal::diagnose::run(&plan)?;
@@ -834,6 +836,7 @@ fn run(cli: Cli) -> Result<()> {
                     hapcal::diagnose::residual_map_svg(&d),
                 )
             } else {
+                hapcal_diagnose::arm::robot_baseline(baseline.as_deref())?;
                 check_sigma("--sigma-m", sigma_m, SIGMA_M_RANGE, "m")?;
                 check_sigma("--sigma-rad", sigma_rad, SIGMA_RAD_RANGE, "rad")?;
                 let (tip, more_tips) = match tips.split_first() {

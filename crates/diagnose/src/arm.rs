@@ -23,7 +23,7 @@
 
 use hapcal_calibrate::baseline::{DataKind, GeometricBaseline, HeldOutSet};
 use hapcal_calibrate::calibrate::blocked_mean_difference;
-use hapcal_calibrate::model::Rung;
+use hapcal_calibrate::model::{ModelChoice, Rung};
 use hapcal_identify::Problem;
 use hapcal_problems::{CalibrationProblem, GravityCompliance, Observations, RowKind};
 use nalgebra::{DMatrix, DVector, Vector3};
@@ -1101,6 +1101,25 @@ struct Tested {
     p_cv: f64,
     p_f: f64,
     improvement: f64,
+}
+
+/// Checks the `--baseline` asked for a robot measured by an instrument: it is diagnosed on its
+/// geometric calibration, so only `geometric` (or nothing) is taken.
+///
+/// # Errors
+/// [`Error::Config`] naming the value given, in the user's words.
+pub fn robot_baseline(name: Option<&str>) -> Result<(), Error> {
+    match name {
+        None => Ok(()),
+        Some(n) if ModelChoice::from_name(n) == Some(ModelChoice::Geometric) => Ok(()),
+        Some(n) => Err(Error::Config {
+            message: format!(
+                "baseline {n:?}: a robot measured by an instrument is diagnosed on its geometric \
+                 calibration (baseline geometric); the other baselines apply to a haptic \
+                 device's log"
+            ),
+        }),
+    }
 }
 
 /// Diagnoses `baseline` (see the module documentation).

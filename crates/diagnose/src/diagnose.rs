@@ -11,6 +11,8 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::Serialize;
 
+use hapcal_calibrate::model::ModelChoice;
+
 use crate::Error;
 
 /// Smallest fraction of a candidate column's norm left after projecting out the baseline for
@@ -32,40 +34,45 @@ use crate::model::{
 use crate::solve::lstsq;
 use crate::stats::{chi2_sf, f_sf, holm, pivoted_basis};
 
-/// Which model the gap is measured against.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Baseline {
-    /// Transmissions (paper eq. 1 on the capstans, the joint-4 polynomial) from the external
-    /// encoders, plus the kinematic deviations: the paper's full calibration (Fig. 6).
-    Full,
-    /// Kinematic deviations alone on the raw readings; the paper's capstan and
-    /// parallelogram models join the candidates (`capstan`, `parallelogram`).
-    Kinematics,
-}
-
-impl std::str::FromStr for Baseline {
-    type Err = Error;
-    /// `full` or `kinematics`.
-    ///
-    /// # Errors
-    /// [`Error::Config`] for anything else.
-    fn from_str(s: &str) -> Result<Baseline, Error> {
-        match s {
-            "full" => Ok(Baseline::Full),
-            "kinematics" => Ok(Baseline::Kinematics),
-            other => Err(Error::Config {
-                message: format!("baseline must be `full` or `kinematics`, got {other:?}"),
-            }),
-        }
+/// The model a haptic device's log is diagnosed against, by the name `--baseline` takes: one
+/// of the two models `hapcal calibrate` fits to such a log ([`ModelChoice`], the one
+/// definition of a model):
+///
+/// - `transmissions`: the transmissions (paper eq. 1 on the capstans, the joint-4 polynomial)
+///   from the external encoders, plus the kinematic deviations: the paper's full calibration
+///   (Fig. 6); `full` is read as this;
+/// - `geometric`: the kinematic deviations alone on the raw readings; the paper's capstan and
+///   parallelogram models join the candidates (`capstan`, `parallelogram`); `kinematics` is
+///   read as this.
+///
+/// # Errors
+/// [`Error::Config`] for any other name, in the user's words.
+pub fn baseline_model(name: &str) -> Result<ModelChoice, Error> {
+    match name.trim().replace('_', "-").as_str() {
+        "full" => return Ok(ModelChoice::Transmissions),
+        "kinematics" => return Ok(ModelChoice::Geometric),
+        _ => {}
+    }
+    match ModelChoice::from_name(name) {
+        Some(m @ (ModelChoice::Transmissions | ModelChoice::Geometric)) => Ok(m),
+        Some(m) => Err(Error::Config {
+            message: format!(
+                "baseline must be transmissions or geometric (full and kinematics are the same):                  a haptic device's log is diagnosed against one of the two, not {m}"
+            ),
+        }),
+        None => Err(Error::Config {
+            message: format!(
+                "baseline must be transmissions or geometric (full and kinematics are the same),                  got {name:?}"
+            ),
+        }),
     }
 }
 
 /// Settings of [`diagnose`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DiagnoseConfig {
-    /// The baseline model.
-    pub baseline: Baseline,
+    /// The baseline model: transmissions or geometric ([`baseline_model`]).
+    pub baseline: ModelChoice,
     /// Number of cross-validation folds (time-contiguous blocks of samples), ≥ 2.
     pub folds: usize,
     /// Family-wise significance level of the candidate tests (Holm–Bonferroni) and of the
@@ -80,14 +87,14 @@ pub struct DiagnoseConfig {
 }
 
 impl Default for DiagnoseConfig {
-    /// Full baseline, 5 folds, α = 0.01, up to 3 effects, each winner closes ≥ 20 % of the
+    /// Transmissions baseline, 5 folds, α = 0.01, up to 3 effects, each winner closes ≥ 20 % of the
     /// gap left by the effects before it (so that two effects of similar size, or a small one
     /// after a large one, can be found one after the other);
     /// together the accepted effects must close ≥ 80 % of the gap or leave a residual
     /// consistent with the floor, else the verdict is `none` (docs/diagnosis.md §3 (d)).
     fn default() -> DiagnoseConfig {
         DiagnoseConfig {
-            baseline: Baseline::Full,
+            baseline: ModelChoice::Transmissions,
             folds: 5,
             alpha: 0.01,
             max_effects: 3,
@@ -112,7 +119,7 @@ pub struct ParamValue {
 /// One candidate effect, tested against the current baseline.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Candidate {
-    /// Stable name (docs/design.md §6), or `capstan`/`parallelogram` with the kinematics baseline.
+    /// Stable name (docs/design.md §6), or `capstan`/`parallelogram` with the geometric baseline.
     pub effect: String,
     /// Greedy round (1 = against the baseline; 2 = after the first winner was added).
     pub round: usize,
@@ -214,8 +221,8 @@ pub struct Step {
 /// The diagnosis of one log (see [`diagnose`]).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Diagnosis {
-    /// The baseline used.
-    pub baseline: Baseline,
+    /// The baseline used: transmissions or geometric ([`baseline_model`]).
+    pub baseline: ModelChoice,
     /// Samples in the log.
     pub n_samples: usize,
     /// Identifiable baseline parameters.
@@ -929,7 +936,7 @@ pub fn baseline_residuals_m(
     let data = Data::new(rows);
     let mut setup = Setup::new(device, chain, true);
     let trans_joints: Vec<usize> = device.capstans.iter().map(|c| c.joint - 1).collect();
-    let full = cfg.baseline == Baseline::Full
+    let full = cfg.baseline == ModelChoice::Transmissions
         && !trans_joints.is_empty()
         && ext_available(rows, &trans_joints);
     let trans = if full {
@@ -1016,12 +1023,14 @@ pub fn diagnose(
     let mut setup = Setup::new(device, chain, true);
     let trans_joints: Vec<usize> = device.capstans.iter().map(|c| c.joint - 1).collect();
     let mut baseline = cfg.baseline;
-    if baseline == Baseline::Full && !trans_joints.is_empty() && !ext_available(rows, &trans_joints)
+    if baseline == ModelChoice::Transmissions
+        && !trans_joints.is_empty()
+        && !ext_available(rows, &trans_joints)
     {
-        notes.push("the log lacks external-encoder readings for the transmissions: kinematics baseline used".to_owned());
-        baseline = Baseline::Kinematics;
+        notes.push("the log lacks external-encoder readings for the transmissions: geometric baseline used".to_owned());
+        baseline = ModelChoice::Geometric;
     }
-    let trans = if baseline == Baseline::Full {
+    let trans = if baseline == ModelChoice::Transmissions {
         setup.ext_joints = trans_joints.clone();
         fit_transmissions(device, &data, setup.sigma_e_rad)?
     } else {
@@ -1127,7 +1136,7 @@ pub fn diagnose(
         .iter()
         .map(|k| k.name().to_owned())
         .collect();
-    if baseline == Baseline::Kinematics && !device.capstans.is_empty() {
+    if baseline == ModelChoice::Geometric && !device.capstans.is_empty() {
         library.push("capstan".into());
         if device.parallelogram.is_some() {
             library.push("parallelogram".into());

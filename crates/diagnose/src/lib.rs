@@ -42,8 +42,8 @@ mod solve;
 mod stats;
 
 pub use diagnose::{
-    Baseline, Bin, Candidate, DiagnoseConfig, Diagnosis, JointProbe, ParamValue, SignalTest, Step,
-    baseline_residuals_m, diagnose,
+    Bin, Candidate, DiagnoseConfig, Diagnosis, JointProbe, ParamValue, SignalTest, Step,
+    baseline_model, baseline_residuals_m, diagnose,
 };
 pub use error::Error;
 pub use stats::{chi2_sf, f_sf, holm};

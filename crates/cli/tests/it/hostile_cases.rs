@@ -1609,6 +1609,7 @@ fn measurement_cases(t: &mut Table) {
 fn option_cases(t: &mut Table) {
     const C: &str = "options";
     let device = fixture("reference-device/device.toml");
+    let ur10_urdf = fixture("figaroh/ur10/ur10_robot.urdf");
     let truth = fixture("reference-device/truth.toml");
     let calibrated = fixture("reference-device/calibrated.toml");
     let iiwa = fixture("mukca/urdf/iiwa14.urdf");
@@ -2042,6 +2043,23 @@ fn option_cases(t: &mut Table) {
                 &t.path("options/d.svg"),
             ],
             vec!["most"],
+        ),
+        (
+            "diagnose --baseline transmissions on a robot",
+            vec![
+                "diagnose",
+                "--device",
+                &ur10_urdf,
+                "--tip",
+                "wrist_3_link",
+                "--data",
+                &fixture("figaroh/ur10/calibration.csv"),
+                "--baseline",
+                "transmissions",
+                "--svg",
+                &t.path("options/d-robot.svg"),
+            ],
+            vec!["transmissions", "geometric calibration"],
         ),
     ] {
         t.add(C, name, &args, 2, &needles);

@@ -669,13 +669,19 @@ fn diagnose_reports_name_the_baseline_and_the_data_in_words() {
         &show(&dir.join("arm.svg")),
     ]);
     for (out, first) in [
-        (&haptic, "baseline: full, "),
+        (&haptic, "baseline: transmissions, "),
         (&arm, "geometric baseline: marker data, "),
     ] {
         assert!(out.status.success(), "{}", stderr(out));
         let text = String::from_utf8_lossy(&out.stdout);
         assert!(text.starts_with(first), "{text}");
-        for rust in ["Full", "Kinematics", "Markers", "Sockets", "Distances"] {
+        for rust in [
+            "Transmissions",
+            "Geometric",
+            "Markers",
+            "Sockets",
+            "Distances",
+        ] {
             assert!(!text.contains(rust), "{rust}: {text}");
         }
     }

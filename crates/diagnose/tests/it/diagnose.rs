@@ -2,8 +2,9 @@
 
 use std::path::Path;
 
+use hapcal_calibrate::model::ModelChoice;
 use hapcal_diagnose::blind::{BlindConfig, CaseKind, run_case};
-use hapcal_diagnose::{Baseline, DiagnoseConfig, Error, diagnose};
+use hapcal_diagnose::{DiagnoseConfig, Error, diagnose};
 use hapcal_io::Device;
 use hapcal_sim::{Effect, MotionConfig, NoiseModel, SimConfig, Truth, simulate, simulate_motion};
 
@@ -99,7 +100,7 @@ fn leaving_the_transmissions_out_localises_joints_1_to_4_and_names_them() {
     let (device, truth) = reference();
     let rows = simulate(&device, &truth, &sim_cfg(&device, 15)).expect("simulates");
     let cfg = DiagnoseConfig {
-        baseline: Baseline::Kinematics,
+        baseline: ModelChoice::Geometric,
         ..DiagnoseConfig::default()
     };
     let d = diagnose(&device, &rows, &cfg).expect("diagnoses");
