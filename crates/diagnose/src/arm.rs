@@ -1103,6 +1103,148 @@ struct Tested {
     improvement: f64,
 }
 
+/// The stepwise check of the effects the rounds named (`named`: each with its visible
+/// columns, in the order named; `full`: their held-out errors together). Returns the effect to
+/// leave out of the library, with the note that says why, or `None` when every named effect
+/// stands:
+///
+/// - backward: an effect (of two or more) without which the others predict as well, the
+///   others not beaten by [`HELDOUT_SIGNIFICANCE_Z`] blocked standard errors — the entry
+///   margin — is not needed beside them (a first-round harmonic that a later gear-ratio term
+///   explains better); the least needed one goes;
+/// - alternatives: gravity and lumped compliance are one effect under two torque models, the
+///   two harmonic orders one effect at two frequencies; beside the later effects the named one
+///   gives way to its alternative by the rounds' own rule (better by one blocked standard
+///   error, or within one and earlier in the library).
+///
+/// Source: stepwise selection with backward elimination (Efroymson, "Multiple regression
+/// analysis", 1960; Miller, "Subset Selection in Regression", 2nd ed., 2002, §3.3). An effect
+/// left out is never offered again, so the revisions end.
+#[allow(clippy::too_many_arguments)] // the pieces of one diagnosis
+fn revise(
+    ctx: &Context<'_>,
+    rows: &Rows,
+    r: &DVector<f64>,
+    jb: &DMatrix<f64>,
+    dq: &DMatrix<f64>,
+    named: &[(ArmEffect, DMatrix<f64>, Vec<usize>)],
+    full: &HeldOut,
+    folds: &[Vec<usize>],
+    block: &[usize],
+    floor_var: Option<f64>,
+    cfg: &ArmConfig,
+    excluded: &[ArmEffect],
+) -> Option<(ArmEffect, String)> {
+    let with = |parts: &[&DMatrix<f64>]| {
+        let n = jb.ncols() + parts.iter().map(|p| p.ncols()).sum::<usize>();
+        let mut a = DMatrix::zeros(jb.nrows(), n);
+        a.columns_mut(0, jb.ncols()).copy_from(jb);
+        let mut at = jb.ncols();
+        for p in parts {
+            a.columns_mut(at, p.ncols()).copy_from(*p);
+            at += p.ncols();
+        }
+        a
+    };
+    let held = |a: &DMatrix<f64>| cross_validate(a, r, rows, folds, cfg.folds, floor_var);
+    let set = |skip: usize| -> String {
+        (named.iter().enumerate())
+            .filter(|(i, _)| *i != skip)
+            .map(|(_, (e, _, _))| e.name())
+            .collect::<Vec<_>>()
+            .join("+")
+    };
+    // Backward: the least needed effect, if it is not needed.
+    if named.len() >= 2 {
+        let least = (0..named.len())
+            .map(|k| {
+                let others: Vec<&DMatrix<f64>> = (named.iter().enumerate())
+                    .filter(|(i, _)| *i != k)
+                    .map(|(_, (_, c, _))| c)
+                    .collect();
+                let without = held(&with(&others));
+                let (m, se, _) = blocked_mean_difference(&without.score, &full.score, block);
+                (k, m, se)
+            })
+            .min_by(|a, b| (a.1 / a.2).total_cmp(&(b.1 / b.2)));
+        if let Some((k, m, se)) = least
+            && (m <= HELDOUT_SIGNIFICANCE_Z * se || m.is_nan())
+        {
+            let effect = named[k].0;
+            return Some((
+                effect,
+                format!(
+                    "{} left out: beside {} it improves the held-out error by {:.1} standard \
+                     errors, not the {HELDOUT_SIGNIFICANCE_Z} required; the rounds were run \
+                     again without it",
+                    effect.name(),
+                    set(k),
+                    m / se
+                ),
+            ));
+        }
+    }
+    // Alternatives, beside the other named effects.
+    let alternative = |e: ArmEffect| match e {
+        ArmEffect::GravityCompliance => Some(ArmEffect::LumpedCompliance),
+        ArmEffect::LumpedCompliance => Some(ArmEffect::GravityCompliance),
+        ArmEffect::Harmonic1 => Some(ArmEffect::Harmonic2),
+        ArmEffect::Harmonic2 => Some(ArmEffect::Harmonic1),
+        _ => None,
+    };
+    let order = |e: ArmEffect| ArmEffect::LIBRARY.iter().position(|l| *l == e);
+    for (k, (effect, cols, _)) in named.iter().enumerate() {
+        let Some(alt) = alternative(*effect) else {
+            continue;
+        };
+        if excluded.contains(&alt) || named.iter().any(|(e, _, _)| *e == alt) {
+            continue;
+        }
+        let Ok((alt_cols, _)) = effect_columns(alt, ctx, rows, dq) else {
+            continue;
+        };
+        let others: Vec<&DMatrix<f64>> = (named.iter().enumerate())
+            .filter(|(i, _)| *i != k)
+            .map(|(_, (_, c, _))| c)
+            .collect();
+        let base = with(&others);
+        let (qb, _) = pivoted_basis(&base, &DMatrix::zeros(base.nrows(), 0), 1e-9);
+        let (_, picked) = pivoted_basis(&alt_cols, &qb, VISIBLE_TOL);
+        let visible: Vec<usize> = (0..alt_cols.ncols())
+            .filter(|&c| picked[c].is_some())
+            .collect();
+        if visible.is_empty() {
+            continue;
+        }
+        let alt_vis = alt_cols.select_columns(&visible);
+        let mut parts = others.clone();
+        parts.push(&alt_vis);
+        let swapped = held(&with(&parts));
+        // Improvement of the alternative over the named effect.
+        let (m, se, _) = blocked_mean_difference(&full.score, &swapped.score, block);
+        let simpler = (visible.len(), order(alt)) < (cols.ncols(), order(*effect));
+        if m > se || (m >= -se && simpler) {
+            return Some((
+                *effect,
+                format!(
+                    "{} gives way to {}: beside the other named effects it predicts {} ({:+.1} \
+                     standard errors); the rounds were run again without {}",
+                    effect.name(),
+                    alt.name(),
+                    if m > se {
+                        "better"
+                    } else {
+                        "as well, with fewer or earlier terms"
+                    },
+                    m / se,
+                    effect.name()
+                ),
+            ));
+        }
+    }
+    None
+}
+
 /// Checks the `--baseline` asked for a robot measured by an instrument: it is diagnosed on its
 /// geometric calibration, so only `geometric` (or nothing) is taken.
 ///
@@ -1223,241 +1365,284 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
         (Some(v), Some(s)) if v > 0.0 => s * s / v,
         _ => 1.0,
     };
-    for round in 1..=cfg.max_effects {
-        let (qb, _) = pivoted_basis(&a, &DMatrix::zeros(a.nrows(), 0), 1e-9);
-        let r_perp = &r - &qb * (qb.transpose() * &r);
-        let rss_b = r_perp.norm_squared();
-        let dof_b = (r.len() as f64 - qb.ncols() as f64).max(1.0);
-        let mut tested: Vec<Tested> = Vec::new();
-        for effect in ArmEffect::LIBRARY {
-            // Gravity and lumped compliance are one effect under two torque models: once one
-            // is named, the other is not a further effect.
-            let compliance = |e: &ArmEffect| {
-                matches!(
-                    e,
-                    ArmEffect::GravityCompliance | ArmEffect::LumpedCompliance
-                )
-            };
-            if accepted.contains(&effect)
-                || (compliance(&effect) && accepted.iter().any(compliance))
-            {
-                continue;
-            }
-            let (cols, names) = match effect_columns(effect, &ctx, &rows, &dq) {
-                Ok(c) => c,
-                Err(reason) => {
-                    if round == 1 {
-                        untestable.push(format!("{}: {reason}", effect.name()));
-                    }
+    // Stepwise: the rounds add effects greedily; once they stop, every named effect is checked
+    // against the others (revise): one that no longer earns its place beside the later ones,
+    // or whose alternative under the other torque model or harmonic order now predicts better,
+    // is left out of the library and the rounds run again from the geometric baseline.
+    let base0 = base.clone();
+    let mut excluded: Vec<ArmEffect> = Vec::new();
+    let mut revisions: Vec<String> = Vec::new();
+    loop {
+        a = jb.clone();
+        base = base0.clone();
+        candidates.clear();
+        steps.clear();
+        accepted.clear();
+        effect_cols.clear();
+        untestable.clear();
+        p_after.clear();
+        in_sample_share.clear();
+        for round in 1..=cfg.max_effects {
+            let (qb, _) = pivoted_basis(&a, &DMatrix::zeros(a.nrows(), 0), 1e-9);
+            let r_perp = &r - &qb * (qb.transpose() * &r);
+            let rss_b = r_perp.norm_squared();
+            let dof_b = (r.len() as f64 - qb.ncols() as f64).max(1.0);
+            let mut tested: Vec<Tested> = Vec::new();
+            for effect in ArmEffect::LIBRARY {
+                // Gravity and lumped compliance are one effect under two torque models: once one
+                // is named, the other is not a further effect.
+                let compliance = |e: &ArmEffect| {
+                    matches!(
+                        e,
+                        ArmEffect::GravityCompliance | ArmEffect::LumpedCompliance
+                    )
+                };
+                if accepted.contains(&effect)
+                    || excluded.contains(&effect)
+                    || (compliance(&effect) && accepted.iter().any(compliance))
+                {
                     continue;
                 }
-            };
-            let (qc, picked) = pivoted_basis(&cols, &qb, VISIBLE_TOL);
-            let visible: Vec<usize> = (0..cols.ncols()).filter(|&c| picked[c].is_some()).collect();
-            let mut cand = ArmCandidate {
-                effect: effect.name().to_owned(),
-                round,
-                n_visible: visible.len(),
-                heldout_rms_before_m: base.mse().sqrt(),
-                heldout_rms_after_m: base.mse().sqrt(),
-                heldout_improvement: (0.0, 0.0),
-                heldout_p_value: 1.0,
-                f_p_value: 1.0,
-                gap_closed_pct: 0.0,
-                accepted: false,
-                reason: String::new(),
-                parameters: Vec::new(),
-            };
-            if visible.is_empty() {
-                cand.reason = "absorbed by the geometric parameters in these data".into();
+                let (cols, names) = match effect_columns(effect, &ctx, &rows, &dq) {
+                    Ok(c) => c,
+                    Err(reason) => {
+                        if round == 1 {
+                            untestable.push(format!("{}: {reason}", effect.name()));
+                        }
+                        continue;
+                    }
+                };
+                let (qc, picked) = pivoted_basis(&cols, &qb, VISIBLE_TOL);
+                let visible: Vec<usize> =
+                    (0..cols.ncols()).filter(|&c| picked[c].is_some()).collect();
+                let mut cand = ArmCandidate {
+                    effect: effect.name().to_owned(),
+                    round,
+                    n_visible: visible.len(),
+                    heldout_rms_before_m: base.mse().sqrt(),
+                    heldout_rms_after_m: base.mse().sqrt(),
+                    heldout_improvement: (0.0, 0.0),
+                    heldout_p_value: 1.0,
+                    f_p_value: 1.0,
+                    gap_closed_pct: 0.0,
+                    accepted: false,
+                    reason: String::new(),
+                    parameters: Vec::new(),
+                };
+                if visible.is_empty() {
+                    cand.reason = "absorbed by the geometric parameters in these data".into();
+                    tested.push(Tested {
+                        effect,
+                        cand,
+                        columns: DMatrix::zeros(r.len(), 0),
+                        names,
+                        visible,
+                        held: None,
+                        fitted: DVector::zeros(r.len()),
+                        p_cv: 1.0,
+                        p_f: 1.0,
+                        improvement: 0.0,
+                    });
+                    continue;
+                }
+                let c_vis = cols.select_columns(&visible);
+                let proj = qc.transpose() * &r_perp;
+                let drss = proj.norm_squared();
+                let k = visible.len() as f64;
+                let dof = (dof_b - k).max(1.0);
+                let p_f = f_sf((drss / k) / ((rss_b - drss).max(1e-300) / dof), k, dof);
+                let mut ac = DMatrix::zeros(a.nrows(), a.ncols() + c_vis.ncols());
+                ac.columns_mut(0, a.ncols()).copy_from(&a);
+                ac.columns_mut(a.ncols(), c_vis.ncols()).copy_from(&c_vis);
+                let held = cross_validate(&ac, &r, &rows, &folds, cfg.folds, floor_var);
+                let (m, se, filled) = blocked_mean_difference(&base.score, &held.score, &block);
+                let p_cv = one_sided_p(m, se, filled.saturating_sub(1) as f64);
+                let (params, _) = parameters(&ac, &r, a.ncols(), &names, &visible);
+                cand.heldout_rms_after_m = held.mse().sqrt();
+                cand.heldout_improvement = (m, se);
+                cand.parameters = params;
                 tested.push(Tested {
                     effect,
                     cand,
-                    columns: DMatrix::zeros(r.len(), 0),
+                    columns: c_vis,
                     names,
                     visible,
-                    held: None,
-                    fitted: DVector::zeros(r.len()),
-                    p_cv: 1.0,
-                    p_f: 1.0,
-                    improvement: 0.0,
+                    held: Some(held),
+                    fitted: &qc * proj,
+                    p_cv,
+                    p_f,
+                    improvement: m,
                 });
-                continue;
             }
-            let c_vis = cols.select_columns(&visible);
-            let proj = qc.transpose() * &r_perp;
-            let drss = proj.norm_squared();
-            let k = visible.len() as f64;
-            let dof = (dof_b - k).max(1.0);
-            let p_f = f_sf((drss / k) / ((rss_b - drss).max(1e-300) / dof), k, dof);
-            let mut ac = DMatrix::zeros(a.nrows(), a.ncols() + c_vis.ncols());
-            ac.columns_mut(0, a.ncols()).copy_from(&a);
-            ac.columns_mut(a.ncols(), c_vis.ncols()).copy_from(&c_vis);
-            let held = cross_validate(&ac, &r, &rows, &folds, cfg.folds, floor_var);
-            let (m, se, filled) = blocked_mean_difference(&base.score, &held.score, &block);
-            let p_cv = one_sided_p(m, se, filled.saturating_sub(1) as f64);
-            let (params, _) = parameters(&ac, &r, a.ncols(), &names, &visible);
-            cand.heldout_rms_after_m = held.mse().sqrt();
-            cand.heldout_improvement = (m, se);
-            cand.parameters = params;
-            tested.push(Tested {
-                effect,
-                cand,
-                columns: c_vis,
-                names,
-                visible,
-                held: Some(held),
-                fitted: &qc * proj,
-                p_cv,
-                p_f,
-                improvement: m,
-            });
-        }
-        let p_cv: Vec<f64> = tested.iter().map(|t| t.p_cv).collect();
-        let adj_f = holm(&tested.iter().map(|t| t.p_f).collect::<Vec<_>>());
-        // The gap of this round, what the effects named so far left: above the floor, or
-        // (no floor) above the best candidate. A second effect is judged by the share of that
-        // gap it closes, not of the gap before the first effect (which the first one may have
-        // mostly closed: drift then a gear ratio, 85 % then all of what was left).
-        let best_mse = (tested.iter())
-            .filter_map(|t| t.held.as_ref().map(HeldOut::mse))
-            .fold(base.mse(), f64::min);
-        let gap2 = match floor0 {
-            Some(f) => base.mse() - f,
-            None => base.mse() - best_mse,
-        };
-        for (t, (pc, pf)) in tested.iter_mut().zip(p_cv.iter().zip(&adj_f)) {
-            t.cand.heldout_p_value = *pc;
-            t.cand.f_p_value = *pf;
-            let Some(h) = &t.held else { continue };
-            let share = if gap2 > 0.0 {
-                (base.mse() - h.mse()) / gap2
-            } else {
-                0.0
+            let p_cv: Vec<f64> = tested.iter().map(|t| t.p_cv).collect();
+            let adj_f = holm(&tested.iter().map(|t| t.p_f).collect::<Vec<_>>());
+            // The gap of this round, what the effects named so far left: above the floor, or
+            // (no floor) above the best candidate. A second effect is judged by the share of that
+            // gap it closes, not of the gap before the first effect (which the first one may have
+            // mostly closed: drift then a gear ratio, 85 % then all of what was left).
+            let best_mse = (tested.iter())
+                .filter_map(|t| t.held.as_ref().map(HeldOut::mse))
+                .fold(base.mse(), f64::min);
+            let gap2 = match floor0 {
+                Some(f) => base.mse() - f,
+                None => base.mse() - best_mse,
             };
-            t.cand.gap_closed_pct = 100.0 * share.clamp(-9.99, 9.99);
-            let (m, se) = t.cand.heldout_improvement;
-            let reason = if *pf >= cfg.alpha {
-                format!("in-sample F-test not significant (Holm-adjusted p = {pf:.2e})")
-            } else if m <= HELDOUT_SIGNIFICANCE_Z * se || m.is_nan() {
-                format!(
-                    "held-out improvement {:.1} standard errors, not the {HELDOUT_SIGNIFICANCE_Z} required",
-                    m / se
-                )
-            } else if floor0.is_some() && share < cfg.min_gap_share {
-                format!(
-                    "closes only {:.0} % of the gap left above the floor",
-                    100.0 * share
-                )
-            } else {
-                String::new()
-            };
-            t.cand.accepted = reason.is_empty();
-            t.cand.reason = if reason.is_empty() {
-                format!(
-                    "F-test p = {pf:.1e} (Holm), held-out better by {:.1} standard errors (p = \
-                     {pc:.1e}), closes {:.0} % of the gap",
-                    m / se.max(1e-300),
-                    100.0 * share
-                )
-            } else {
-                reason
-            };
-        }
-        // The best held-out improvement wins; among the named candidates that predict as well
-        // within one blocked standard error (the one-standard-error rule), the one with fewer
-        // parameters, then the earlier in the library (which uses more of what is known about
-        // the robot: its link masses before a unit weight).
-        let best = (tested.iter().enumerate())
-            .filter(|(_, t)| t.cand.accepted)
-            .max_by(|a, b| a.1.improvement.total_cmp(&b.1.improvement))
-            .map(|(i, _)| i);
-        let winner = best.map(|b| {
-            let best_score = tested[b]
-                .held
-                .as_ref()
-                .map(|h| h.score.clone())
-                .unwrap_or_default();
-            (tested.iter().enumerate())
+            for (t, (pc, pf)) in tested.iter_mut().zip(p_cv.iter().zip(&adj_f)) {
+                t.cand.heldout_p_value = *pc;
+                t.cand.f_p_value = *pf;
+                let Some(h) = &t.held else { continue };
+                let share = if gap2 > 0.0 {
+                    (base.mse() - h.mse()) / gap2
+                } else {
+                    0.0
+                };
+                t.cand.gap_closed_pct = 100.0 * share.clamp(-9.99, 9.99);
+                let (m, se) = t.cand.heldout_improvement;
+                let reason = if *pf >= cfg.alpha {
+                    format!("in-sample F-test not significant (Holm-adjusted p = {pf:.2e})")
+                } else if m <= HELDOUT_SIGNIFICANCE_Z * se || m.is_nan() {
+                    format!(
+                        "held-out improvement {:.1} standard errors, not the {HELDOUT_SIGNIFICANCE_Z} required",
+                        m / se
+                    )
+                } else if floor0.is_some() && share < cfg.min_gap_share {
+                    format!(
+                        "closes only {:.0} % of the gap left above the floor",
+                        100.0 * share
+                    )
+                } else {
+                    String::new()
+                };
+                t.cand.accepted = reason.is_empty();
+                t.cand.reason = if reason.is_empty() {
+                    format!(
+                        "F-test p = {pf:.1e} (Holm), held-out better by {:.1} standard errors (p = \
+                         {pc:.1e}), closes {:.0} % of the gap",
+                        m / se.max(1e-300),
+                        100.0 * share
+                    )
+                } else {
+                    reason
+                };
+            }
+            // The best held-out improvement wins; among the named candidates that predict as well
+            // within one blocked standard error (the one-standard-error rule), the one with fewer
+            // parameters, then the earlier in the library (which uses more of what is known about
+            // the robot: its link masses before a unit weight).
+            let best = (tested.iter().enumerate())
                 .filter(|(_, t)| t.cand.accepted)
-                .filter(|(_, t)| {
-                    let Some(h) = &t.held else { return false };
-                    let (d, se, _) = blocked_mean_difference(&h.score, &best_score, &block);
-                    d <= se
-                })
-                .min_by_key(|(i, t)| (t.cand.n_visible, *i))
-                .map_or(b, |(i, _)| i)
-        });
-        for (i, t) in tested.iter_mut().enumerate() {
-            if Some(i) != winner && t.cand.accepted {
-                t.cand.accepted = false;
-                t.cand.reason = format!(
-                    "passes, but predicts less well than the winner ({})",
-                    t.cand.reason
-                );
+                .max_by(|a, b| a.1.improvement.total_cmp(&b.1.improvement))
+                .map(|(i, _)| i);
+            let winner = best.map(|b| {
+                let best_score = tested[b]
+                    .held
+                    .as_ref()
+                    .map(|h| h.score.clone())
+                    .unwrap_or_default();
+                (tested.iter().enumerate())
+                    .filter(|(_, t)| t.cand.accepted)
+                    .filter(|(_, t)| {
+                        let Some(h) = &t.held else { return false };
+                        let (d, se, _) = blocked_mean_difference(&h.score, &best_score, &block);
+                        d <= se
+                    })
+                    .min_by_key(|(i, t)| (t.cand.n_visible, *i))
+                    .map_or(b, |(i, _)| i)
+            });
+            for (i, t) in tested.iter_mut().enumerate() {
+                if Some(i) != winner && t.cand.accepted {
+                    t.cand.accepted = false;
+                    t.cand.reason = format!(
+                        "passes, but predicts less well than the winner ({})",
+                        t.cand.reason
+                    );
+                }
             }
-        }
-        let Some(w) = winner else {
-            candidates.extend(tested.into_iter().map(|t| t.cand));
-            break;
-        };
-        let win_fit = tested[w].fitted.clone();
-        let excess = rss_b * floor_units - dof_b;
-        in_sample_share.push(if excess > 0.0 {
-            (win_fit.norm_squared() * floor_units - tested[w].cand.n_visible as f64) / excess
-        } else {
-            0.0
-        });
-        let win_effect = tested[w].effect;
-        let confusable: Vec<(String, String)> = (tested.iter().enumerate())
-            .filter(|(i, t)| {
-                *i != w && t.cand.n_visible > 0 && cosine(&t.fitted, &win_fit) > CONFUSABLE_COSINE
-            })
-            .map(|(_, t)| {
-                (
-                    t.cand.effect.clone(),
-                    win_effect.separating_measurement(t.effect).to_owned(),
-                )
-            })
-            .collect();
-        let win = &tested[w];
-        let held = win.held.clone().unwrap_or_else(|| base.clone());
-        let before = base.mse().sqrt();
-        let after = held.mse().sqrt();
-        let gap_orig = match floor0 {
-            Some(f) => mse0 - f,
-            None => mse0 - held.mse(),
-        };
-        steps.push(ArmStep {
-            effect: win.cand.effect.clone(),
-            heldout_rms_before_m: before,
-            heldout_rms_after_m: after,
-            gap_closed_pct: if gap_orig > 0.0 {
-                100.0 * (before * before - after * after) / gap_orig
+            let Some(w) = winner else {
+                candidates.extend(tested.into_iter().map(|t| t.cand));
+                break;
+            };
+            let win_fit = tested[w].fitted.clone();
+            let excess = rss_b * floor_units - dof_b;
+            in_sample_share.push(if excess > 0.0 {
+                (win_fit.norm_squared() * floor_units - tested[w].cand.n_visible as f64) / excess
             } else {
                 0.0
-            },
-            round_gap_closed_pct: win.cand.gap_closed_pct,
-            parameters: win.cand.parameters.clone(),
-            confusable_with: confusable,
-        });
-        let mut grown = DMatrix::zeros(a.nrows(), a.ncols() + win.columns.ncols());
-        grown.columns_mut(0, a.ncols()).copy_from(&a);
-        grown
-            .columns_mut(a.ncols(), win.columns.ncols())
-            .copy_from(&win.columns);
-        effect_cols.push((win.effect, win.columns.clone(), win.visible.clone()));
-        let _ = &win.names;
-        accepted.push(win.effect);
-        a = grown;
-        base = held;
-        candidates.extend(tested.into_iter().map(|t| t.cand));
-        p_after.push(gap_p_value(&rows, &base));
-        // Stop when what is left is consistent with the floor.
-        if floor_var.is_some() && gap_p_value(&rows, &base) >= cfg.alpha {
-            break;
+            });
+            let win_effect = tested[w].effect;
+            let confusable: Vec<(String, String)> = (tested.iter().enumerate())
+                .filter(|(i, t)| {
+                    *i != w
+                        && t.cand.n_visible > 0
+                        && cosine(&t.fitted, &win_fit) > CONFUSABLE_COSINE
+                })
+                .map(|(_, t)| {
+                    (
+                        t.cand.effect.clone(),
+                        win_effect.separating_measurement(t.effect).to_owned(),
+                    )
+                })
+                .collect();
+            let win = &tested[w];
+            let held = win.held.clone().unwrap_or_else(|| base.clone());
+            let before = base.mse().sqrt();
+            let after = held.mse().sqrt();
+            let gap_orig = match floor0 {
+                Some(f) => mse0 - f,
+                None => mse0 - held.mse(),
+            };
+            steps.push(ArmStep {
+                effect: win.cand.effect.clone(),
+                heldout_rms_before_m: before,
+                heldout_rms_after_m: after,
+                gap_closed_pct: if gap_orig > 0.0 {
+                    100.0 * (before * before - after * after) / gap_orig
+                } else {
+                    0.0
+                },
+                round_gap_closed_pct: win.cand.gap_closed_pct,
+                parameters: win.cand.parameters.clone(),
+                confusable_with: confusable,
+            });
+            let mut grown = DMatrix::zeros(a.nrows(), a.ncols() + win.columns.ncols());
+            grown.columns_mut(0, a.ncols()).copy_from(&a);
+            grown
+                .columns_mut(a.ncols(), win.columns.ncols())
+                .copy_from(&win.columns);
+            effect_cols.push((win.effect, win.columns.clone(), win.visible.clone()));
+            let _ = &win.names;
+            accepted.push(win.effect);
+            a = grown;
+            base = held;
+            candidates.extend(tested.into_iter().map(|t| t.cand));
+            p_after.push(gap_p_value(&rows, &base));
+            // Stop when what is left is consistent with the floor.
+            if floor_var.is_some() && gap_p_value(&rows, &base) >= cfg.alpha {
+                break;
+            }
+        }
+        match revise(
+            &ctx,
+            &rows,
+            &r,
+            &jb,
+            &dq,
+            &effect_cols,
+            &base,
+            &folds,
+            &block,
+            floor_var,
+            cfg,
+            &excluded,
+        ) {
+            Some((effect, note)) => {
+                excluded.push(effect);
+                revisions.push(note);
+            }
+            None => break,
         }
     }
+    notes.extend(revisions);
     for u in untestable {
         notes.push(format!("not testable: {u}"));
     }
