@@ -387,3 +387,101 @@ fn simulated_iiwa_data_pass_the_setup_check_silently() {
         );
     }
 }
+
+/// A tracker recording like an industrial arm's whose test rows sweep joint 1 beyond the
+/// training range: every URDF placement parameter deviates (0.5 mm, 1 mrad), joints 1–3 carry
+/// an unmodelled second harmonic (what the geometric parameters can only partly absorb, and
+/// extrapolate), one training row is 21 mm off; training rows have joint 1 in
+/// [−2.88, 1.00] rad, test rows in [0, 2.88] rad. Whatever the ladder takes, the test rows
+/// must not end worse than frames only.
+#[test]
+fn extrapolating_test_rows_do_not_end_worse_than_frames_only() {
+    let robot = robot();
+    let tree = robot.tree.with_joint_offsets();
+    let base = FrameSpec {
+        name: "instrument".into(),
+        nominal: Isometry3::new(Vector3::new(2.5, -0.4, -0.8), Vector3::new(0.0, 0.0, 1.2)),
+    };
+    let marker = FrameSpec {
+        name: "marker1".into(),
+        nominal: Isometry3::translation(0.02, 0.01, 0.06),
+    };
+    let framed = tree.with_frames(&base, &[(0, marker)]).unwrap();
+    let mut worst: f64 = 0.0;
+    for seed in 0..3u64 {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(100 + seed);
+        let mut x = vec![0.0; framed.n_params()];
+        let lin = Normal::new(0.0, 5e-4).unwrap();
+        let ang = Normal::new(0.0, 1e-3).unwrap();
+        let names: Vec<String> = framed.params().iter().map(|p| p.name.clone()).collect();
+        for (i, v) in x.iter_mut().enumerate().skip(6) {
+            let name = &names[i];
+            if name.starts_with("marker") {
+                continue;
+            }
+            *v = if name.ends_with(".x") || name.ends_with(".y") || name.ends_with(".z") {
+                lin.sample(&mut rng)
+            } else {
+                ang.sample(&mut rng)
+            };
+        }
+        let harmonic: Vec<(f64, f64)> = (0..3)
+            .map(|j| {
+                let a = [2e-3, 1e-3, 1e-3][j];
+                (a, rng.random_range(0.0..std::f64::consts::TAU))
+            })
+            .collect();
+        let noise = Normal::new(0.0, 5e-5).unwrap();
+        let mut rows = |n: usize, q1: (f64, f64), first_line: u64| -> MeasurementTable {
+            let rows = (0..n)
+                .map(|i| {
+                    let mut q: Vec<f64> = (robot.limits.iter())
+                        .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
+                        .collect();
+                    q[0] = rng.random_range(q1.0..q1.1);
+                    let mut moved = q.clone();
+                    for (j, (a, phase)) in harmonic.iter().enumerate() {
+                        moved[j] += a * (2.0 * q[j] + phase).sin();
+                    }
+                    let p = framed.tips()[0].end_point(&x, &moved);
+                    MeasuredRow {
+                        line: first_line + i as u64,
+                        q,
+                        t_s: None,
+                        markers: vec![MarkerSample {
+                            marker: 0,
+                            position_m: std::array::from_fn(|k| p[k] + noise.sample(&mut rng)),
+                            rotation: None,
+                        }],
+                        distance_m: None,
+                    }
+                })
+                .collect();
+            MeasurementTable {
+                name: format!("seed{seed}"),
+                path: PathBuf::from("tracker.csv"),
+                rows,
+                n_markers: 1,
+                has_orientation: false,
+                has_distance: false,
+                ignored_columns: Vec::new(),
+                warnings: Vec::new(),
+            }
+        };
+        let mut train = rows(250, (-2.88, 1.0), 2);
+        let test = rows(100, (0.0, 2.88), 300);
+        train.rows[41].markers[0].position_m[2] += 0.021;
+        let out = calibrate_measured(&robot, &[train], &[test], &config()).unwrap();
+        let (_, _, _, frames, chosen) = &out.sets[1];
+        eprintln!(
+            "seed {seed}: {} test {:.3} mm, frames only {:.3} mm",
+            out.rung,
+            chosen.position_rms_m * 1e3,
+            frames.position_rms_m * 1e3
+        );
+        worst = worst.max(chosen.position_rms_m / frames.position_rms_m);
+    }
+    // Measured: 0.43, 0.31, 0.23 of frames only's test RMS (seeds 0, 1, 2); the bound is the
+    // claim itself, no worse than frames only, with room for the harmonic's share.
+    assert!(worst <= 1.0, "worst ratio {worst}");
+}
