@@ -426,6 +426,18 @@ enum Res {
     Constraint,
 }
 
+impl Res {
+    /// σ (m) of a residual that is a length error — a position axis or a distance — whose
+    /// squares the held-out RMS, the floor and the residual map add up; `None` for an
+    /// orientation or a constraint. (On a distance log every scored residual is a distance.)
+    fn length_sigma(&self) -> Option<f64> {
+        match self {
+            Res::Position { sigma, .. } | Res::Distance { sigma } => Some(*sigma),
+            Res::Orientation | Res::Constraint => None,
+        }
+    }
+}
+
 /// The rows of one problem, described for the effects.
 struct Rows {
     /// Per residual: its kind and configuration (`usize::MAX` for constraints).
@@ -927,7 +939,7 @@ fn cross_validate(
                 let e = r[i] - (row * &x)[0];
                 let c = rows.res[i].1;
                 out.score[c] += w * e * e;
-                if let Res::Position { sigma, .. } = rows.res[i].0 {
+                if let Some(sigma) = rows.res[i].0.length_sigma() {
                     out.position_m2[c] += w * (e * sigma).powi(2);
                     if let Some(v) = floor_var {
                         let h = (row * &cov * row.transpose())[0];
@@ -967,7 +979,7 @@ fn floor(
     let n_c = rows.n_configurations();
     let mut pos: Vec<Vec<f64>> = vec![Vec::new(); n_c];
     for (i, (kind, c)) in rows.res.iter().enumerate() {
-        if let Res::Position { sigma, .. } = kind {
+        if let Some(sigma) = kind.length_sigma() {
             pos[*c].push(r[i] * sigma);
         }
     }
@@ -1357,10 +1369,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
     let mut in_sample_share: Vec<f64> = Vec::new();
     let floor_units = match (
         floor_var,
-        rows.res.iter().find_map(|(kind, _)| match kind {
-            Res::Position { sigma, .. } => Some(*sigma),
-            _ => None,
-        }),
+        rows.res.iter().find_map(|(kind, _)| kind.length_sigma()),
     ) {
         (Some(v), Some(s)) if v > 0.0 => s * s / v,
         _ => 1.0,
@@ -1777,7 +1786,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
 /// `Σ floor / k`, k position residuals).
 fn gap_p_value(rows: &Rows, held: &HeldOut) -> f64 {
     let k = (rows.res.iter())
-        .filter(|(kind, c)| matches!(kind, Res::Position { .. }) && *c != usize::MAX)
+        .filter(|(kind, c)| kind.length_sigma().is_some() && *c != usize::MAX)
         .count() as f64;
     let floor: f64 = held.floor_m2.iter().sum();
     let ss: f64 = held.position_m2.iter().sum();
@@ -1926,7 +1935,7 @@ fn ladder(
 fn position_rms(rows: &Rows, e: &DVector<f64>) -> f64 {
     let mut per = vec![0.0; rows.n_configurations()];
     for (i, (kind, c)) in rows.res.iter().enumerate() {
-        if let Res::Position { sigma, .. } = kind
+        if let Some(sigma) = kind.length_sigma()
             && *c != usize::MAX
         {
             per[*c] += (e[i] * sigma).powi(2);
@@ -1991,7 +2000,7 @@ fn residual_map(
     // Per configuration: number of position residuals.
     let mut n_pos = vec![0usize; n_c];
     for (kind, c) in &rows.res {
-        if matches!(kind, Res::Position { .. }) && *c != usize::MAX {
+        if kind.length_sigma().is_some() && *c != usize::MAX {
             n_pos[*c] += 1;
         }
     }

@@ -687,6 +687,77 @@ fn diagnose_reports_name_the_baseline_and_the_data_in_words() {
     }
 }
 
+/// The same for distance logs (a device with its own cable encoder and no transmissions: the
+/// reference device without its capstans and parallelogram, on its bundled log): the geometric
+/// rung of `hapcal diagnose`'s ladder is `hapcal calibrate`'s cross-validated geometric error,
+/// and the diagnosis's own held-out error of that baseline (a linearised cross-validation at
+/// the estimate) is a distance error of the same size, not zero (it once summed position
+/// residuals only, and a distance log has none).
+#[test]
+fn diagnosis_and_calibration_give_the_same_cross_validated_error_on_distance_logs() {
+    let dir = scratch("same-model-distances");
+    let device_text = std::fs::read_to_string(root().join("fixtures/reference-device/device.toml"))
+        .expect("the reference device");
+    let mut plain = String::new();
+    let mut skip = false;
+    for line in device_text.lines() {
+        if line.starts_with('[') {
+            skip = line.starts_with("[[capstan") || line.starts_with("[parallelogram");
+        }
+        if !skip {
+            plain.push_str(line);
+            plain.push('\n');
+        }
+    }
+    let device = dir.join("plain.toml");
+    std::fs::write(&device, plain).expect("write the device");
+    let device = device.display().to_string();
+    let log = root()
+        .join("fixtures/reference-device/log.csv")
+        .display()
+        .to_string();
+    let svg = dir.join("maps.svg").display().to_string();
+    let common = [
+        "--device",
+        device.as_str(),
+        "--data",
+        log.as_str(),
+        "--json",
+    ];
+    let mut diagnose = vec!["diagnose"];
+    diagnose.extend(common);
+    diagnose.extend(["--svg", svg.as_str()]);
+    let d = json(&hapcal(&diagnose));
+    assert_eq!(d["kind"], "distances", "{d}");
+    let from_diagnosis = (d["ladder"].as_array().expect("a ladder").iter())
+        .find(|r| r["rung"] == "geometric")
+        .and_then(|r| r["cv_rms_m"].as_f64())
+        .expect("a geometric rung");
+    let mut calibrate = vec!["calibrate"];
+    calibrate.extend(common);
+    let c = json(&hapcal(&calibrate));
+    let from_calibration = (c["cross_validation"]
+        .as_array()
+        .expect("a model table")
+        .iter())
+    .find(|m| m["model"] == "geometric")
+    .and_then(|m| m["heldout_rms_m"].as_f64())
+    .expect("geometric in the model table");
+    assert!(
+        (from_diagnosis - from_calibration).abs() <= 1e-9 * from_calibration,
+        "diagnose {from_diagnosis} m, calibrate {from_calibration} m"
+    );
+    // The linearised cross-validation of the diagnosis against the refitted one of the
+    // calibration: the same model about its estimate, within 1 % (0.09 % measured).
+    let own = d["cv_rms_m"]
+        .as_f64()
+        .expect("the diagnosis's held-out RMS");
+    assert!(
+        (own - from_calibration).abs() <= 0.01 * from_calibration,
+        "diagnosis {own} m, calibration {from_calibration} m"
+    );
+}
+
 /// `--workspace`: configurations beyond a joint's training range make the ladder judge each
 /// model on folds that hold out that end of the range; socket data refuse the option.
 #[test]
