@@ -359,7 +359,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         correlated,
         observability,
         warnings,
-        termination: termination_text(&identified.fit.termination),
+        termination: identified.fit.termination.clone(),
         backend: backend_of(&identified),
         n_evaluations: identified.fit.n_evaluations,
         n_jacobians: identified.fit.n_jacobians,

@@ -22,21 +22,7 @@ pub fn identify_config(sigma_m: Option<f64>) -> IdentifyConfig {
     cfg
 }
 
-/// How the least-squares fit ended, in plain words for the report: `converged (…)` for the
-/// three convergence criteria, else `not converged (…)` or `stopped (…)`.
-pub fn termination_text(termination: &hapcal_identify::Termination) -> String {
-    use hapcal_identify::Termination as T;
-    match termination {
-        T::FtolReached => "converged (relative cost reduction below ftol)".to_owned(),
-        T::XtolReached => "converged (step below xtol)".to_owned(),
-        T::GtolReached => "converged (gradient below gtol)".to_owned(),
-        T::MaxEvaluations => "not converged (evaluation limit reached)".to_owned(),
-        T::Numerical => "stopped (the step or the Jacobian is not finite)".to_owned(),
-        T::EvalFailed(e) => format!("stopped ({e})"),
-        other if other.is_success() => "converged".to_owned(),
-        _ => "stopped".to_owned(),
-    }
-}
+pub use crate::report::termination_text;
 
 /// Repeats of the cross-validation: repeat `r` shifts every block boundary by `r/CV_REPEATS` of
 /// a block. Averaging the held-out errors over shifted partitions makes the choice less

@@ -718,7 +718,7 @@ pub fn calibrate_logs(
         correlated,
         observability: None,
         warnings,
-        termination: crate::fit::termination_text(&kin.fit.termination),
+        termination: kin.fit.termination.clone(),
         backend: crate::fit::backend_of(&kin),
         n_evaluations: kin.fit.n_evaluations,
         n_jacobians: kin.fit.n_jacobians,

@@ -2140,7 +2140,7 @@ pub fn run_tables(
         correlated,
         observability: None,
         warnings,
-        termination: crate::fit::termination_text(&id.fit.termination),
+        termination: id.fit.termination.clone(),
         backend: crate::fit::backend_of(id),
         n_evaluations: id.fit.n_evaluations,
         n_jacobians: id.fit.n_jacobians,

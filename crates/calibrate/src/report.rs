@@ -151,8 +151,10 @@ pub struct CalibrationReport {
     pub observability: Option<crate::support::ObservabilityReport>,
     /// Plain-language warnings about what the data cannot support.
     pub warnings: Vec<String>,
-    /// LM termination.
-    pub termination: String,
+    /// Why the final Levenberg–Marquardt fit stopped; rendered and serialised in plain words
+    /// ([`termination_text`]: `converged (relative cost reduction below ftol)`).
+    #[serde(serialize_with = "termination_words")]
+    pub termination: hapcal_identify::Termination,
     /// The least-squares back end of the final fit and why (`dense: auto: a 372 × 47
     /// Jacobian, …`).
     pub backend: String,
@@ -309,4 +311,28 @@ pub struct Downweighted {
     pub residual_m: f64,
     /// The residual the fit saw (the Huber corner), m.
     pub bound_m: f64,
+}
+
+/// [`CalibrationReport::termination`] in the report's words.
+fn termination_words<S: serde::Serializer>(
+    t: &hapcal_identify::Termination,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    s.serialize_str(&termination_text(t))
+}
+
+/// How the least-squares fit ended, in plain words for the report: `converged (…)` for the
+/// three convergence criteria, else `not converged (…)` or `stopped (…)`.
+pub fn termination_text(termination: &hapcal_identify::Termination) -> String {
+    use hapcal_identify::Termination as T;
+    match termination {
+        T::FtolReached => "converged (relative cost reduction below ftol)".to_owned(),
+        T::XtolReached => "converged (step below xtol)".to_owned(),
+        T::GtolReached => "converged (gradient below gtol)".to_owned(),
+        T::MaxEvaluations => "not converged (evaluation limit reached)".to_owned(),
+        T::Numerical => "stopped (the step or the Jacobian is not finite)".to_owned(),
+        T::EvalFailed(e) => format!("stopped ({e})"),
+        other if other.is_success() => "converged".to_owned(),
+        _ => "stopped".to_owned(),
+    }
 }

@@ -957,15 +957,19 @@ fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<Option<String>> {
 
 /// The verdict of a diagnosis whose setup the check found wrong and the user accepted: no
 /// physical effect is named on data set up wrong; the note says what the check found.
-fn setup_verdict(verdict: &mut String, notes: &mut Vec<String>, accepted: Option<String>) {
+fn setup_verdict(
+    verdict: &mut hapcal_diagnose::Verdict,
+    notes: &mut Vec<String>,
+    accepted: Option<String>,
+) {
     if let Some(finding) = accepted {
-        if *verdict != "none" {
+        if !verdict.effects().is_empty() {
             notes.push(format!(
                 "the fits named {verdict}, but no physical effect is named on data the setup \
                  check found set up wrong"
             ));
         }
-        *verdict = "setup".to_owned();
+        *verdict = hapcal_diagnose::Verdict::Setup;
         notes.push(finding);
     }
 }

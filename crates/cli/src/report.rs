@@ -89,7 +89,7 @@ pub fn render(r: &CalibrationReport) -> String {
         r.model,
         r.sigma_m * 1e3,
         r.sigma_source,
-        r.termination,
+        hapcal_calibrate::fit::termination_text(&r.termination),
         r.backend
     );
     let _ = writeln!(

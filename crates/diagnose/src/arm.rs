@@ -29,9 +29,9 @@ use hapcal_problems::{CalibrationProblem, GravityCompliance, Observations, RowKi
 use nalgebra::{DMatrix, DVector, Vector3};
 use serde::Serialize;
 
-use crate::Error;
 use crate::solve::lstsq;
 use crate::stats::{chi2_sf, f_sf, holm, pivoted_basis};
+use crate::{Error, Verdict};
 
 /// Remaining fraction of a candidate column's norm, after projecting out the baseline, below
 /// which the column is absorbed by the baseline (invisible in these data).
@@ -395,8 +395,8 @@ pub struct ArmDiagnosis {
     pub candidates: Vec<ArmCandidate>,
     /// Accepted effects in order.
     pub steps: Vec<ArmStep>,
-    /// Accepted effects joined by `+`, or `none`.
-    pub verdict: String,
+    /// The effects named (`none`, or their names joined by `+` in the report).
+    pub verdict: Verdict,
     /// Cross-validated position RMS after the accepted effects, m.
     #[serde(rename = "cv_rms_final_m")]
     pub heldout_rms_final_m: f64,
@@ -1709,13 +1709,8 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             named -= 1;
         }
     }
-    let verdict = if named == 0 {
-        "none".to_owned()
-    } else {
-        (accepted[..named].iter().map(|e| e.name()))
-            .collect::<Vec<_>>()
-            .join("+")
-    };
+    let names: Vec<&str> = accepted[..named].iter().map(|e| e.name()).collect();
+    let verdict = Verdict::of(&names);
     if named > 0
         && let Some(f) = floor0
         && p_after[named - 1] < cfg.alpha

@@ -290,7 +290,8 @@ pub struct Outcome {
 /// Scores a diagnosis against its case.
 pub fn score(case: &Case, d: &Diagnosis) -> Outcome {
     let expected = case.expected();
-    let mut got: Vec<&str> = d.verdict.split('+').collect();
+    let named = d.verdict.to_string();
+    let mut got: Vec<&str> = named.split('+').collect();
     got.sort_by_key(|name| {
         name.parse::<EffectKind>()
             .map_or(usize::MAX, |k| k as usize)
@@ -327,7 +328,7 @@ pub fn score(case: &Case, d: &Diagnosis) -> Outcome {
         label: case.label(),
         correct: verdict_sorted == expected,
         expected,
-        verdict: d.verdict.clone(),
+        verdict: d.verdict.to_string(),
         localised,
         gap_closed_pct: d.gap_closed_pct,
         gap_in_floors: d.gap_in_floors,

@@ -13,7 +13,7 @@ use serde::Serialize;
 
 use hapcal_calibrate::model::ModelChoice;
 
-use crate::Error;
+use crate::{Error, Verdict};
 
 /// Smallest fraction of a candidate column's norm left after projecting out the baseline for
 /// the column to count as visible (below: indistinguishable from the baseline).
@@ -264,8 +264,8 @@ pub struct Diagnosis {
     pub gap_closed_pct: f64,
     /// Share of the in-sample excess `RSS − dof` (weighted) closed by all accepted effects, %.
     pub gap_closed_in_sample_pct: f64,
-    /// Accepted effect names joined by `+`, or `none`.
-    pub verdict: String,
+    /// The effects named (`none`, or their names joined by `+` in the report).
+    pub verdict: Verdict,
     /// Signals along which the final residual still varies (leads when nothing fits).
     pub leads: Vec<String>,
     /// Things the user should know (baseline fallbacks, untestable candidates).
@@ -1336,11 +1336,7 @@ pub fn diagnose(
         ));
         named -= 1;
     }
-    let verdict = if named == 0 {
-        "none".to_owned()
-    } else {
-        accepted_names[..named].join("+")
-    };
+    let verdict = Verdict::of(&accepted_names[..named]);
     if named > 0 && round_shares[named - 1].2 {
         let final_mse = steps[named - 1].heldout_rms_after_m.powi(2);
         let why = if named >= cfg.max_effects {

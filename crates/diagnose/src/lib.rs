@@ -40,6 +40,7 @@ mod error;
 mod model;
 mod solve;
 mod stats;
+mod verdict;
 
 pub use diagnose::{
     Bin, Candidate, DiagnoseConfig, Diagnosis, JointProbe, ParamValue, SignalTest, Step,
@@ -47,3 +48,4 @@ pub use diagnose::{
 };
 pub use error::Error;
 pub use stats::{chi2_sf, f_sf, holm};
+pub use verdict::Verdict;

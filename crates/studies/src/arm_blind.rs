@@ -911,8 +911,8 @@ pub fn run_case_with(
     let d = diagnose_arm(&baseline, cfg)?;
     Ok(ArmOutcome {
         case: case.clone(),
-        right: case.is_right(&d.verdict),
-        verdict: d.verdict.clone(),
+        right: case.is_right(&d.verdict.to_string()),
+        verdict: d.verdict.to_string(),
         gap_closed_pct: d.gap_closed_pct,
         heldout_rms_m: d.heldout_rms_m,
         floor_rms_m: d.floor_rms_m.unwrap_or(f64::NAN),

@@ -192,7 +192,7 @@ fn effects_named_early_are_checked_again_beside_the_later_ones() {
         let baseline = simulate_baseline(&c, &setup, N_POSITIONS).expect("baseline");
         let d = diagnose_arm(&baseline, &ArmConfig::default()).expect("diagnosis");
         assert!(
-            c.is_right(&d.verdict),
+            c.is_right(&d.verdict.to_string()),
             "seed {seed}: injected {}, named {} ({:#?})",
             c.injected.label(),
             d.verdict,

@@ -1,0 +1,89 @@
+//! What a diagnosis names, typed; rendered and serialised as the report has always written it
+//! (`none`, `setup`, `cable_angle+thermal_drift`).
+
+use serde::Serialize;
+
+/// The verdict of a diagnosis (the haptic device's, `crate::diagnose`, or a robot's,
+/// `crate::arm`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Verdict {
+    /// No effect of the library is named: the gap is at the floor, or what explains it lies
+    /// outside the library.
+    None,
+    /// The setup check found the data set up wrong and the user went on anyway: no physical
+    /// effect is named (the command line sets it; the notes carry the finding).
+    Setup,
+    /// The library effects named, in the order they were named (their library names:
+    /// `cable_angle`, `gravity_compliance`, `capstan`, …); never empty.
+    Effects(Vec<String>),
+}
+
+impl Verdict {
+    /// The verdict naming `effects` (in order), or [`Verdict::None`] for none.
+    pub fn of<S: AsRef<str>>(effects: &[S]) -> Verdict {
+        if effects.is_empty() {
+            Verdict::None
+        } else {
+            Verdict::Effects(effects.iter().map(|e| e.as_ref().to_owned()).collect())
+        }
+    }
+
+    /// The effects named (empty for `none` and `setup`).
+    pub fn effects(&self) -> &[String] {
+        match self {
+            Verdict::Effects(e) => e,
+            Verdict::None | Verdict::Setup => &[],
+        }
+    }
+}
+
+impl std::fmt::Display for Verdict {
+    /// `none`, `setup`, or the effects joined by `+`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Verdict::None => f.pad("none"),
+            Verdict::Setup => f.pad("setup"),
+            Verdict::Effects(e) => f.pad(&e.join("+")),
+        }
+    }
+}
+
+impl Serialize for Verdict {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl PartialEq<str> for Verdict {
+    /// Whether the report would write this verdict as `other`.
+    fn eq(&self, other: &str) -> bool {
+        match self {
+            Verdict::None => other == "none",
+            Verdict::Setup => other == "setup",
+            Verdict::Effects(e) => other.split('+').eq(e.iter().map(String::as_str)),
+        }
+    }
+}
+
+impl PartialEq<&str> for Verdict {
+    fn eq(&self, other: &&str) -> bool {
+        *self == **other
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_verdict_reads_as_the_report_writes_it() {
+        assert_eq!(Verdict::of::<&str>(&[]).to_string(), "none");
+        assert_eq!(Verdict::Setup.to_string(), "setup");
+        let two = Verdict::of(&["cable_angle", "thermal_drift"]);
+        assert_eq!(two.to_string(), "cable_angle+thermal_drift");
+        assert_eq!(two, "cable_angle+thermal_drift");
+        assert_eq!(two.effects(), ["cable_angle", "thermal_drift"]);
+        assert_ne!(two, "cable_angle");
+        assert_ne!(Verdict::None, "setup");
+    }
+}
