@@ -43,19 +43,35 @@ fn table(robot: &Robot, n: usize, offset_rad: f64, seed: u64) -> MeasurementTabl
                 .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
                 .collect();
             let p = framed.tips()[0].end_point(&x, &q);
-            MeasuredRow {
-                line: i as u64 + 2,
-                q,
-                t_s: None,
-                markers: vec![MarkerSample {
-                    marker: 0,
-                    position_m: std::array::from_fn(|k| p[k] + noise.sample(&mut rng)),
-                    rotation: None,
-                }],
-                distance_m: None,
-            }
+            marker_row(i as u64 + 2, q, p, &noise, &mut rng)
         })
         .collect();
+    tracker_table(seed, rows)
+}
+
+/// A row of one marker at `p` (m) plus `noise` per axis, read at line `line`.
+fn marker_row(
+    line: u64,
+    q: Vec<f64>,
+    p: hapcal_kinematics::Point3<f64>,
+    noise: &Normal<f64>,
+    rng: &mut rand_chacha::ChaCha8Rng,
+) -> MeasuredRow {
+    MeasuredRow {
+        line,
+        q,
+        t_s: None,
+        markers: vec![MarkerSample {
+            marker: 0,
+            position_m: std::array::from_fn(|k| p[k] + noise.sample(rng)),
+            rotation: None,
+        }],
+        distance_m: None,
+    }
+}
+
+/// The tracker file `tracker.csv` of one marker holding `rows`, named after `seed`.
+fn tracker_table(seed: u64, rows: Vec<MeasuredRow>) -> MeasurementTable {
     MeasurementTable {
         name: format!("seed{seed}"),
         path: PathBuf::from("tracker.csv"),
@@ -444,29 +460,10 @@ fn extrapolating_test_rows_do_not_end_worse_than_frames_only() {
                         moved[j] += a * (2.0 * q[j] + phase).sin();
                     }
                     let p = framed.tips()[0].end_point(&x, &moved);
-                    MeasuredRow {
-                        line: first_line + i as u64,
-                        q,
-                        t_s: None,
-                        markers: vec![MarkerSample {
-                            marker: 0,
-                            position_m: std::array::from_fn(|k| p[k] + noise.sample(&mut rng)),
-                            rotation: None,
-                        }],
-                        distance_m: None,
-                    }
+                    marker_row(first_line + i as u64, q, p, &noise, &mut rng)
                 })
                 .collect();
-            MeasurementTable {
-                name: format!("seed{seed}"),
-                path: PathBuf::from("tracker.csv"),
-                rows,
-                n_markers: 1,
-                has_orientation: false,
-                has_distance: false,
-                ignored_columns: Vec::new(),
-                warnings: Vec::new(),
-            }
+            tracker_table(seed, rows)
         };
         let mut train = rows(250, (-2.88, 1.0), 2);
         let test = rows(100, (0.0, 2.88), 300);

@@ -724,29 +724,8 @@ fn diagnosis_and_calibration_give_the_same_cross_validated_error_on_distance_log
         log.as_str(),
         "--json",
     ];
-    let mut diagnose = vec!["diagnose"];
-    diagnose.extend(common);
-    diagnose.extend(["--svg", svg.as_str()]);
-    let d = json(&hapcal(&diagnose));
+    let (d, from_calibration) = same_geometric_cross_validation(&common, &svg);
     assert_eq!(d["kind"], "distances", "{d}");
-    let from_diagnosis = (d["ladder"].as_array().expect("a ladder").iter())
-        .find(|r| r["rung"] == "geometric")
-        .and_then(|r| r["cv_rms_m"].as_f64())
-        .expect("a geometric rung");
-    let mut calibrate = vec!["calibrate"];
-    calibrate.extend(common);
-    let c = json(&hapcal(&calibrate));
-    let from_calibration = (c["cross_validation"]
-        .as_array()
-        .expect("a model table")
-        .iter())
-    .find(|m| m["model"] == "geometric")
-    .and_then(|m| m["heldout_rms_m"].as_f64())
-    .expect("geometric in the model table");
-    assert!(
-        (from_diagnosis - from_calibration).abs() <= 1e-9 * from_calibration,
-        "diagnose {from_diagnosis} m, calibrate {from_calibration} m"
-    );
     // The linearised cross-validation of the diagnosis against the refitted one of the
     // calibration: the same model about its estimate, within 1 % (0.09 % measured).
     let own = d["cv_rms_m"]
@@ -894,9 +873,17 @@ fn diagnosis_and_calibration_give_the_same_cross_validated_error_on_sockets() {
         left_back.as_str(),
         "--json",
     ];
+    same_geometric_cross_validation(&common, &svg);
+}
+
+/// Runs `hapcal diagnose` and `hapcal calibrate` with the `common` flags and checks that the
+/// geometric rung of the diagnosis's ladder is the calibration's cross-validated geometric
+/// error (one cross-validation, the same folds; 1e-9 relative). Returns the diagnosis's JSON
+/// and that error, m.
+fn same_geometric_cross_validation(common: &[&str], svg: &str) -> (Value, f64) {
     let mut diagnose = vec!["diagnose"];
     diagnose.extend(common);
-    diagnose.extend(["--svg", svg.as_str()]);
+    diagnose.extend(["--svg", svg]);
     let d = json(&hapcal(&diagnose));
     let from_diagnosis = (d["ladder"].as_array().expect("a ladder").iter())
         .find(|r| r["rung"] == "geometric")
@@ -916,4 +903,5 @@ fn diagnosis_and_calibration_give_the_same_cross_validated_error_on_sockets() {
         (from_diagnosis - from_calibration).abs() <= 1e-9 * from_calibration,
         "diagnose {from_diagnosis} m, calibrate {from_calibration} m"
     );
+    (d, from_calibration)
 }
