@@ -552,6 +552,7 @@ def plan_poses(
     separate_transmission_run: bool = False,
     refine: bool = False,
     path: Optional[PathLike] = None,
+    model: str = "geometric",
 ) -> np.ndarray:
     """Chooses the poses to measure, as ``hapcal plan-poses`` does (``plan::plan_poses``):
     from ``candidates`` poses sampled uniformly within the joint limits (seed ``seed``), the
@@ -568,6 +569,9 @@ def plan_poses(
     - ``refine``: refine the chosen poses by coordinate exchange over the joint box.
     - ``path``: also write the poses CSV there (atomically), byte for byte what
       ``hapcal plan-poses --out`` writes (joint names, readings to 9 decimals).
+    - ``model``: the model the poses are planned for, one of :data:`MODELS` (``"geometric"``,
+      or a richer one you will calibrate: ``"compliance"``, ``"harmonic"``, …; not
+      ``"auto"``, ``"frames-only"`` or ``"joint-offsets"``).
 
     Returns the joint readings, shape ``(count, n_joints)``, rad (m for a prismatic joint),
     columns in chain order (``device.joint_names``), full precision. The GIL is released
@@ -586,6 +590,7 @@ def plan_poses(
         bool(separate_transmission_run),
         bool(refine),
         _optional_path(path),
+        str(model),
     )
     return np.asarray(readings, dtype=np.float64).reshape(len(readings), device.n_joints)
 

@@ -198,6 +198,7 @@ def plan_poses(
     separate_transmission_run: bool = False,
     refine: bool = False,
     path: Optional[PathLike] = None,
+    model: str = "geometric",
 ) -> npt.NDArray[np.float64]:
     """``hapcal plan-poses``: joint readings ``(count, n_joints)``, rad (m prismatic), chain
     order, full precision. ``measurement``: "distance" | "position"; ``criterion``: one of

@@ -832,7 +832,7 @@ fn _simulate(
 /// readings (rad, one row per pose). See `hapcal.plan_poses`.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (device, measurement, count, candidates, seed, criterion, sigma_m, separate_transmission_run, refine, path))]
+#[pyo3(signature = (device, measurement, count, candidates, seed, criterion, sigma_m, separate_transmission_run, refine, path, model))]
 fn _plan_poses(
     py: Python<'_>,
     device: &PyDevice,
@@ -845,6 +845,7 @@ fn _plan_poses(
     separate_transmission_run: bool,
     refine: bool,
     path: Option<PathBuf>,
+    model: &str,
 ) -> PyResult<(Vec<String>, Vec<Vec<f64>>)> {
     use clap::ValueEnum;
     use hapcal_calibrate::plan::{self, Measurement, PlanConfig};
@@ -875,6 +876,7 @@ fn _plan_poses(
             sigma_m,
             transmission_rows: !separate_transmission_run,
             refine,
+            model: model_choice(model)?,
         };
         let planned = plan::plan_poses(hapcal_device, &cfg)?;
         let names: Vec<String> = hapcal_device

@@ -122,12 +122,14 @@ def test_plan_poses_equals_cli(tmp_path: Path) -> None:
     assert np.all((q >= lo) & (q <= hi))
 
 
-def test_plan_poses_urdf_position_equals_cli(tmp_path: Path) -> None:
+@pytest.mark.parametrize("model", ["geometric", "compliance"])
+def test_plan_poses_urdf_position_equals_cli(tmp_path: Path, model: str) -> None:
     cli("plan-poses", "--device", UR10_URDF, "--tip", UR10_TIP, "--measurement", "position",
-        "--count", "20", "--candidates", "200", "--criterion", "o3", "--out",
+        "--count", "20", "--candidates", "200", "--criterion", "o3", "--model", model, "--out",
         str(tmp_path / "cli.csv"))
     dev = hapcal.Device.from_urdf(UR10_URDF, tip=UR10_TIP)
-    hapcal.plan_poses(dev, "position", 20, "o3", candidates=200, path=tmp_path / "py.csv")
+    hapcal.plan_poses(dev, "position", 20, "o3", candidates=200, path=tmp_path / "py.csv",
+                      model=model)
     assert (tmp_path / "py.csv").read_bytes() == (tmp_path / "cli.csv").read_bytes()
 
 
@@ -145,6 +147,8 @@ def test_plan_poses_errors(tmp_path: Path) -> None:
         hapcal.plan_poses(dev, measurement="angle")
     with pytest.raises(hapcal.HapcalError, match="sigma_m must be a positive length"):
         hapcal.plan_poses(dev, sigma_m=-1.0)
+    with pytest.raises(hapcal.HapcalError, match="--model auto: the poses are planned for one"):
+        hapcal.plan_poses(dev, model="auto")
     with pytest.raises(hapcal.HapcalError, match=r"device\.toml: the planned poses is written as \.csv"):
         hapcal.plan_poses(dev, path=ROOT / DEVICE)
     assert not list(tmp_path.iterdir())

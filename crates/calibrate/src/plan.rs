@@ -41,6 +41,8 @@ use hapcal_identify::{
     select_poses,
 };
 use hapcal_io::Device;
+
+use crate::model::{DataKind, ModelChoice};
 use hapcal_problems::{CalibrationProblem, Observations, Row, RowKind, Weights};
 use hapcal_sim::NoiseModel;
 use hapcal_transmission::{Capstan, Chebyshev, JointRad};
@@ -82,6 +84,49 @@ pub struct PlanConfig {
     /// Refine the chosen poses by [`coordinate_exchange`] over the joint box (distance
     /// measurement without transmission rows, i-optimal or d-optimal).
     pub refine: bool,
+    /// The model the poses are planned for, by its `--model` name ([`ModelChoice`]; see
+    /// [`planned_model`]): its parameter families are the blocks' columns.
+    pub model: ModelChoice,
+}
+
+/// Checks that `model` is one the planner can plan `device`'s poses for, in the user's words:
+/// the models `hapcal calibrate` fits to the data of the planned measurement (a haptic device's
+/// logs, distance logs, or measurement files), less those that are a choice or fit only
+/// instrument frames: `auto` (plan for the richest model you will calibrate), `frames-only`
+/// and `joint-offsets` (poses that determine the geometric model determine them).
+///
+/// # Errors
+/// The refusal, naming the model as the user typed it.
+pub fn planned_model(device: &Device, measurement: Measurement, model: ModelChoice) -> Result<()> {
+    let haptic = !device.capstans.is_empty() || device.parallelogram.is_some();
+    let kind = match (haptic, measurement) {
+        (true, Measurement::Distance) => DataKind::HapticLogs,
+        (false, Measurement::Distance) => DataKind::Distances,
+        (_, Measurement::Position) => DataKind::Measurements,
+    };
+    match model {
+        ModelChoice::Auto => bail!(
+            "--model auto: the poses are planned for one model; give the richest you will \
+             calibrate (geometric, compliance, …)"
+        ),
+        ModelChoice::FramesOnly | ModelChoice::JointOffsets => bail!(
+            "--model {model}: plan for geometric: poses that determine every kinematic \
+             parameter determine the {}",
+            if model == ModelChoice::FramesOnly {
+                "instrument frame"
+            } else {
+                "joint offsets"
+            }
+        ),
+        _ => {}
+    }
+    // A haptic device's poses serve its transmissions and kinematics: geometric and
+    // transmissions plan the same blocks (the transmission rows follow
+    // --separate-transmission-run).
+    if kind == DataKind::HapticLogs && model == ModelChoice::Geometric {
+        return Ok(());
+    }
+    model.check_fits(kind)
 }
 
 /// Result of [`plan_poses`].
@@ -162,6 +207,32 @@ pub fn candidate_blocks(
     sigma_m: Option<f64>,
     transmission_rows: bool,
 ) -> Result<Candidates> {
+    candidate_blocks_for(
+        device,
+        readings,
+        measurement,
+        sigma_m,
+        transmission_rows,
+        ModelChoice::Geometric,
+    )
+}
+
+/// [`candidate_blocks`] for `model`: the measurement rows span the columns of every parameter
+/// family `model` frees that the candidates determine (kinematic, gravity compliance with
+/// lumped unit weights or the published masses, transversal compliance, joint harmonics;
+/// [`crate::model::terms`]). I-optimality weighs the end point's prediction through the
+/// kinematic and transmission columns only (the weight matrix has zeros for the others).
+///
+/// # Errors
+/// Those of [`candidate_blocks`], and a model whose terms the robot does not carry.
+pub fn candidate_blocks_for(
+    device: &Device,
+    readings: &[Vec<f64>],
+    measurement: Measurement,
+    sigma_m: Option<f64>,
+    transmission_rows: bool,
+    model: ModelChoice,
+) -> Result<Candidates> {
     let chain = device.chain().context("building the kinematic chain")?;
     let chain_for_weight = chain.clone();
     let (sigma_m, sigma_e) = sigmas(device, sigma_m);
@@ -191,7 +262,15 @@ pub fn candidate_blocks(
         sigma_position_m: sigma_m,
         ..Weights::default()
     };
-    let problem = CalibrationProblem::new(chain, obs, weights, None)?;
+    let problem = if model.families() == ModelChoice::Geometric.families()
+        || model == ModelChoice::Transmissions
+    {
+        CalibrationProblem::new(chain, obs, weights, None)?
+    } else {
+        let names: Vec<String> = chain.joint_names().iter().map(|n| n.to_string()).collect();
+        let terms = crate::model::terms(model, &names, &[])?;
+        CalibrationProblem::on_tree(hapcal_kinematics::Tree::single(chain), obs, weights, terms)?
+    };
     let layout = problem.layout().clone();
     let x0 = problem.initial_guess();
     let mut jac = Mat::<f64>::zeros(problem.n_residuals(), layout.len());
@@ -344,7 +423,19 @@ pub fn plan_poses_weighted(
             "refining the poses over the joint box needs distance measurements planned without the transmission rows"
         );
     }
+    planned_model(device, cfg.measurement, cfg.model)?;
     let kinematic_rows = cfg.measurement == Measurement::Distance && !cfg.transmission_rows;
+    let geometric = matches!(
+        cfg.model,
+        ModelChoice::Geometric | ModelChoice::Transmissions
+    );
+    if kinematic_rows && !geometric {
+        bail!(
+            "--model {}: a separate transmission run plans the kinematic rows of the geometric \
+             model; plan for geometric, or without --separate-transmission-run",
+            cfg.model
+        );
+    }
     if joint_var.is_some() && !kinematic_rows {
         bail!(
             "noise-weighted rows need distance measurements planned without the transmission rows"
@@ -356,12 +447,13 @@ pub fn plan_poses_weighted(
         undetermined,
         weight,
         kept,
-    } = candidate_blocks(
+    } = candidate_blocks_for(
         device,
         &candidates,
         cfg.measurement,
         cfg.sigma_m,
         cfg.transmission_rows,
+        cfg.model,
     )?;
     let chain = device.chain()?;
     let (sigma_m, _) = sigmas(device, cfg.sigma_m);
@@ -845,5 +937,73 @@ mod tests {
             err.to_string(),
             "coordinate exchange supports i-optimal and d-optimal, not o3"
         );
+    }
+
+    fn iiwa() -> Device {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fixtures/mukca/urdf/iiwa14.urdf");
+        crate::data::load_device(&path, "ball_link").expect("iiwa 14 URDF")
+    }
+
+    fn config(model: ModelChoice) -> PlanConfig {
+        PlanConfig {
+            measurement: Measurement::Position,
+            count: 40,
+            n_candidates: 300,
+            seed: 3,
+            criterion: Criterion::DOptimal,
+            sigma_m: Some(5e-5),
+            transmission_rows: true,
+            refine: false,
+            model,
+        }
+    }
+
+    #[test]
+    fn poses_are_planned_for_the_model_asked_for() {
+        let device = iiwa();
+        let geometric = plan_poses(&device, &config(ModelChoice::Geometric)).expect("geometric");
+        let compliance = plan_poses(&device, &config(ModelChoice::Compliance)).expect("compliance");
+        let is_compliance = |c: &String| c.starts_with("compliance.");
+        assert!(!geometric.columns.iter().any(is_compliance));
+        // The iiwa's five loaded joints (a1 and a7 turn about the vertical and the tool
+        // axis: no gravity torque) are columns the planned poses must determine.
+        let n = compliance
+            .columns
+            .iter()
+            .filter(|c| is_compliance(c))
+            .count();
+        assert_eq!(n, 5, "{:?}", compliance.columns);
+        // The kinematic columns are the same: the model adds its families, nothing else.
+        let kinematic = |p: &PosePlan| -> Vec<String> {
+            (p.columns.iter())
+                .filter(|c| !is_compliance(c))
+                .cloned()
+                .collect()
+        };
+        assert_eq!(kinematic(&geometric), kinematic(&compliance));
+        // The planned set determines them better than a random one of the same size.
+        assert!(compliance.design.log_det > compliance.random.0);
+    }
+
+    #[test]
+    fn models_the_planner_cannot_plan_for_are_refused_in_words() {
+        let device = iiwa();
+        for (model, words) in [
+            (ModelChoice::Auto, "--model auto"),
+            (ModelChoice::FramesOnly, "--model frames-only"),
+            (ModelChoice::JointOffsets, "--model joint-offsets"),
+            (ModelChoice::Transmissions, "--model transmissions"),
+        ] {
+            let err = plan_poses(&device, &config(model)).expect_err("refused");
+            assert!(err.to_string().contains(words), "{err}");
+        }
+        let haptic = reference_device();
+        let cfg = PlanConfig {
+            measurement: Measurement::Distance,
+            ..config(ModelChoice::Compliance)
+        };
+        let err = plan_poses(&haptic, &cfg).expect_err("refused on a haptic device");
+        assert!(err.to_string().contains("haptic device"), "{err}");
     }
 }

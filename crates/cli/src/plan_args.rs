@@ -40,6 +40,12 @@ pub struct PlanArgs {
     /// --separate-transmission-run; i-optimal or d-optimal).
     #[arg(long)]
     pub refine: bool,
+    /// The model the poses are planned for (its --model name, as calibrate takes it): the
+    /// parameters the chosen poses must determine. geometric (the default; with transmissions
+    /// on a haptic device), or a richer model you will calibrate: compliance,
+    /// transversal-compliance, harmonic, … (not auto, frames-only or joint-offsets).
+    #[arg(long, value_enum, hide_possible_values = true, default_value_t = hapcal_calibrate::model::ModelChoice::Geometric)]
+    pub model: hapcal_calibrate::model::ModelChoice,
     /// Output CSV (joint readings, rad, one pose per row).
     #[arg(long)]
     pub out: std::path::PathBuf,
@@ -65,6 +71,7 @@ pub fn run_plan(args: &PlanArgs) -> Result<(String, std::path::PathBuf)> {
         sigma_m: args.sigma_m,
         transmission_rows: !args.separate_transmission_run,
         refine: args.refine,
+        model: args.model,
     };
     let plan = plan_poses(&device, &cfg)?;
     let names: Vec<String> = device
