@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -441,6 +442,7 @@ def calibrate(
     *,
     socket_distance_m: float = 0.05,
     joint: bool = False,
+    accept_setup: bool = False,
 ) -> Calibration:
     """Calibrates ``device`` from ``train`` and evaluates on ``test`` (never fitted).
 
@@ -453,6 +455,10 @@ def calibrate(
     - ``folds``: cross-validation folds (≥ 2).
     - ``socket_distance_m``: MUKCa recordings: distance between the two sockets, m.
     - ``joint``: haptic device: transmissions and kinematics in one problem.
+    - ``accept_setup``: calibrate files even when the setup check (``hapcal check``) finds a
+      mistake (millimetres read as metres, swapped joint columns, another tip link, …); without
+      it such a mistake raises :class:`HapcalError`, as ``hapcal calibrate`` exits. The
+      check's warnings are issued as :class:`UserWarning` (the command line prints them).
 
     Measurements read from files with the same units run exactly the command line's
     ``hapcal calibrate``; arrays go through the marker workflow (``measured::run_tables``).
@@ -471,7 +477,10 @@ def calibrate(
         int(folds),
         float(socket_distance_m),
         bool(joint),
+        bool(accept_setup),
     )
+    for w in inner.setup_warnings:
+        warnings.warn(w, UserWarning, stacklevel=2)
     return Calibration(inner)
 
 
@@ -643,6 +652,7 @@ def diagnose(
     test: Optional[MeasurementsLike] = None,
     sigma_m: Optional[float] = None,
     test_last: Optional[float] = None,
+    accept_setup: bool = False,
 ) -> Diagnosis:
     """Diagnoses the sim-to-real gap, as ``hapcal diagnose`` does.
 
@@ -661,6 +671,10 @@ def diagnose(
     - ``folds``: cross-validation folds (time-contiguous blocks, ≥ 2).
     - ``test``, ``sigma_m``, ``test_last``: a robot only: held-out sets, the instrument's σ
       (m, the noise floor), the share of each training set's last rows held out.
+    - ``accept_setup``: diagnose files even when the setup check finds a mistake; the verdict
+      is then ``setup`` (no physical effect is named on data set up wrong) and the notes give
+      the finding. Without it the mistake raises :class:`HapcalError`, as the command line
+      exits; the check's warnings join :attr:`Diagnosis.warnings`.
 
     The residual-map SVG of the command line is not written. The GIL is released while
     diagnosing. Raises :class:`HapcalError` on any error (unreadable files with
@@ -691,5 +705,6 @@ def diagnose(
         max(int(folds), 0),
         None if sigma_m is None else float(sigma_m),
         None if test_last is None else float(test_last),
+        bool(accept_setup),
     )
     return Diagnosis(text, warnings)

@@ -163,6 +163,7 @@ def calibrate(
     *,
     socket_distance_m: float = 0.05,
     joint: bool = False,
+    accept_setup: bool = False,
 ) -> Calibration:
     """Identify the model (``model="auto"``: chosen by blocked cross-validation on ``train``)
     and report figures before / after on ``train`` and ``test``. Raises HapcalError."""
@@ -222,9 +223,14 @@ class Diagnosis:
 
 def diagnose(
     device: Device,
-    data: Union[Measurements, PathLike],
+    data: Union[Measurements, PathLike, Sequence[Union[Measurements, PathLike]]],
     baseline: Optional[str] = None,
     folds: int = 5,
+    *,
+    test: Optional[Union[Measurements, PathLike, Sequence[Union[Measurements, PathLike]]]] = None,
+    sigma_m: Optional[float] = None,
+    test_last: Optional[float] = None,
+    accept_setup: bool = False,
 ) -> Diagnosis:
     """``hapcal diagnose``: ``data`` a log CSV path or ``Measurements.from_csv`` of one;
     ``baseline``: "transmissions" (default) | "geometric" ("full" | "kinematics" read as

@@ -593,10 +593,18 @@ fn table(a: &Arrays, robot: &Robot) -> Result<MeasurementTable> {
 struct PyCalibration {
     outcome: Outcome,
     json: String,
+    /// The setup check's warnings (the command line prints them on standard error).
+    setup_warnings: Vec<String>,
 }
 
 #[pymethods]
 impl PyCalibration {
+    /// The setup check's warnings, as the command line prints them (without its prefix).
+    #[getter]
+    fn setup_warnings(&self) -> Vec<String> {
+        self.setup_warnings.clone()
+    }
+
     /// The report as the command line prints it with `--json`.
     fn to_json(&self) -> String {
         self.json.clone()
@@ -641,6 +649,22 @@ fn load_sources(sources: &[Source], robot: &Robot) -> Result<Vec<MeasurementTabl
     Ok(out)
 }
 
+/// The setup check before a calibration or diagnosis of files, as the command line's: its
+/// warnings, and the error finding accepted with `accept_setup` (in the words the command
+/// line's notes give it), or the error naming the mistake.
+fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<(Vec<String>, Option<String>)> {
+    let cfg = hapcal_calibrate::setup::SetupConfig { accept_setup };
+    let gated = hapcal_calibrate::setup::gate(plan, &cfg)?;
+    let accepted = gated.accepted.map(|f| {
+        format!(
+            "setup check (accepted with accept_setup) [{}]: {}",
+            f.class,
+            f.text()
+        )
+    });
+    Ok((gated.warnings, accepted))
+}
+
 /// The paths and units of `sources`, if every one is a file.
 fn file_sources(sources: &[Source]) -> Option<Vec<(PathBuf, Units)>> {
     sources
@@ -655,7 +679,7 @@ fn file_sources(sources: &[Source]) -> Option<Vec<(PathBuf, Units)>> {
 /// Calibrates `device` from `train` (`test` only evaluated). See `hapcal.calibrate`.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (device, train, test, model, sigma_m, sigma_rad, test_last, folds, socket_distance_m, joint))]
+#[pyo3(signature = (device, train, test, model, sigma_m, sigma_rad, test_last, folds, socket_distance_m, joint, accept_setup))]
 fn _calibrate(
     py: Python<'_>,
     device: &PyDevice,
@@ -668,6 +692,7 @@ fn _calibrate(
     folds: usize,
     socket_distance_m: f64,
     joint: bool,
+    accept_setup: bool,
 ) -> PyResult<PyCalibration> {
     let model = model_choice(model).map_err(py_err)?;
     if train.is_empty() {
@@ -692,13 +717,19 @@ fn _calibrate(
         joint,
     };
     // Files that share their units go through `calibrate::run`, exactly as the command line.
+    // The setup check runs on files, as the command line's (arrays are taken as given).
     let files = file_sources(&train).zip(file_sources(&test));
+    let mut setup_warnings = Vec::new();
     let outcome = match files {
         Some((tr, te)) if tr.iter().chain(&te).all(|(_, u)| *u == tr[0].1) => {
             plan.units = tr[0].1;
             plan.data = tr.into_iter().map(|(p, _)| p).collect();
             plan.test = te.into_iter().map(|(p, _)| p).collect();
-            py.detach(|| calibrate::run(&plan))
+            py.detach(|| -> Result<Outcome> {
+                plan.validate()?;
+                setup_warnings = setup_gate(&plan, accept_setup)?.0;
+                calibrate::run(&plan)
+            })
         }
         _ => {
             let hapcal_device = &device.device;
@@ -722,7 +753,11 @@ fn _calibrate(
     let json = serde_json::to_string_pretty(&outcome.report)
         .context("serialising the report")
         .map_err(py_err)?;
-    Ok(PyCalibration { outcome, json })
+    Ok(PyCalibration {
+        outcome,
+        json,
+        setup_warnings,
+    })
 }
 
 /// The log columns of `rows` as `hapcal_io::write_log` writes them: `q1..qn`, `distance_m`,
@@ -904,7 +939,7 @@ fn _plan_poses(
 /// the data's warnings. See `hapcal.diagnose`.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (device, data, test, baseline, folds, sigma_m, test_last))]
+#[pyo3(signature = (device, data, test, baseline, folds, sigma_m, test_last, accept_setup))]
 fn _diagnose(
     py: Python<'_>,
     device: &PyDevice,
@@ -914,6 +949,7 @@ fn _diagnose(
     folds: usize,
     sigma_m: Option<f64>,
     test_last: Option<f64>,
+    accept_setup: bool,
 ) -> PyResult<(String, Vec<String>)> {
     let hapcal_device = &device.device;
     let train: Vec<Source> = data.iter().map(|m| m.source.clone()).collect();
@@ -953,6 +989,7 @@ fn _diagnose(
             )));
         }
         let data = path.clone();
+        let device_path = device.path.clone();
         return py
             .detach(move || -> Result<(String, Vec<String>)> {
                 let baseline =
@@ -962,12 +999,34 @@ fn _diagnose(
                     folds,
                     ..hapcal_diagnose::DiagnoseConfig::default()
                 };
+                // The setup check of the log, as the command line runs it.
+                let gate_plan = Plan {
+                    workspace: None,
+                    device: device_path.clone(),
+                    tip: "ball_link".to_owned(),
+                    tips: Vec::new(),
+                    units: Units::default(),
+                    sigma_rad: None,
+                    test_last: None,
+                    data: vec![data.clone()],
+                    test: Vec::new(),
+                    socket_distance_m: 0.05,
+                    model: ModelChoice::Geometric,
+                    folds,
+                    sigma_m: None,
+                    joint: false,
+                };
+                let (mut warnings, accepted) = setup_gate(&gate_plan, accept_setup)?;
                 let log = hapcal_io::read_log(&data, hapcal_device)
                     .with_context(|| format!("reading log {}", data.display()))?;
-                let d = hapcal_diagnose::diagnose(hapcal_device, &log.rows, &config)
+                let mut d = hapcal_diagnose::diagnose(hapcal_device, &log.rows, &config)
                     .with_context(|| format!("diagnosing {}", data.display()))?;
+                if let Some(finding) = accepted {
+                    d.verdict.on_accepted_setup(&mut d.notes, finding);
+                }
                 let json = serde_json::to_string_pretty(&d).context("serialising the diagnosis")?;
-                Ok((json, log.warnings))
+                warnings.extend(log.warnings);
+                Ok((json, warnings))
             })
             .map_err(py_err);
     }
@@ -991,12 +1050,14 @@ fn _diagnose(
     let files = file_sources(&train).zip(file_sources(&test));
     let robot = device.robot.as_ref();
     py.detach(move || -> Result<(String, Vec<String>)> {
-        // Files that share their units go through the command line's loaders.
+        // Files that share their units go through the command line's loaders and setup check.
+        let mut gated = (Vec::new(), None);
         let baseline = match files {
             Some((tr, te)) if tr.iter().chain(&te).all(|(_, u)| *u == tr[0].1) => {
                 plan.units = tr[0].1;
                 plan.data = tr.into_iter().map(|(p, _)| p).collect();
                 plan.test = te.into_iter().map(|(p, _)| p).collect();
+                gated = setup_gate(&plan, accept_setup)?;
                 hapcal_calibrate::baseline::geometric_baseline(&plan, true)?
             }
             _ => {
@@ -1014,10 +1075,15 @@ fn _diagnose(
             folds,
             ..Default::default()
         };
-        let d = hapcal_diagnose::arm::diagnose_arm(&baseline, &cfg)
+        let mut d = hapcal_diagnose::arm::diagnose_arm(&baseline, &cfg)
             .context("diagnosing the geometric baseline")?;
+        let (mut warnings, accepted) = gated;
+        if let Some(finding) = accepted {
+            d.verdict.on_accepted_setup(&mut d.notes, finding);
+        }
         let json = serde_json::to_string_pretty(&d).context("serialising the diagnosis")?;
-        Ok((json, baseline.warnings))
+        warnings.extend(baseline.warnings);
+        Ok((json, warnings))
     })
     .map_err(py_err)
 }

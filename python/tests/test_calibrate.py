@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 import json
+import subprocess
 
 import numpy as np
 import pytest
 
 import hapcal
 from conftest import (
+    ROOT,
     POSITIONER,
     POSITIONER_YAML,
     UR10_CSV,
     UR10_TIP,
     UR10_URDF,
+    _cli_command,
     assert_close,
     cli,
     cli_json,
@@ -266,3 +269,33 @@ def test_models_are_the_command_lines() -> None:
     assert list(hapcal.MODELS) == listed[: len(hapcal.MODELS)]
     assert "transversal-compliance" in hapcal.MODELS
     assert "transversal-axes" in hapcal.MODELS
+
+
+def test_the_setup_check_stops_a_mistake_as_the_command_line_does(tmp_path) -> None:
+    """Centimetres read as metres: `hapcal calibrate` exits 2 naming the mistake; Python raises
+    with the same words, and goes on (with the finding as a warning) when told to."""
+    src = ROOT / UR10_CSV
+    lines = src.read_text().splitlines()
+    header = lines[0].split(",")
+    xyz = [header.index(c) for c in ("x1", "y1", "z1")]
+    out = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        for i in xyz:
+            cells[i] = repr(float(cells[i]) * 1e2)
+        out.append(",".join(cells))
+    mm = tmp_path / "calibration_cm.csv"
+    mm.write_text("\n".join(out) + "\n")
+    run = subprocess.run(
+        _cli_command() + ["calibrate", "--device", UR10_URDF, "--tip", UR10_TIP,
+                          "--data", str(mm)],
+        cwd=ROOT, capture_output=True, text=True)
+    assert run.returncode == 2, run
+    with pytest.raises(hapcal.HapcalError) as e:
+        hapcal.calibrate(ur10_device(), hapcal.Measurements.from_csv(mm))
+    last = run.stderr.strip().splitlines()[-1]
+    assert last.startswith("hapcal: error: ")
+    assert last[len("hapcal: error: "):] in str(e.value)
+    with pytest.warns(UserWarning):
+        cal = hapcal.calibrate(ur10_device(), hapcal.Measurements.from_csv(mm), accept_setup=True)
+    assert cal.model

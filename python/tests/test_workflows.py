@@ -242,3 +242,28 @@ def test_diagnose_arm_options(tmp_path: Path) -> None:
     with pytest.raises(hapcal.HapcalError, match="test, sigma_m and test_last"):
         hapcal.diagnose(hapcal.Device.from_toml(DEVICE), "fixtures/reference-device/log.csv",
                         test_last=0.3)
+
+
+def test_diagnose_runs_the_setup_check(tmp_path: Path) -> None:
+    """Cable distances in centimetres read as metres: `hapcal diagnose` exits 2 naming the
+    mistake, so does Python; told to go on, the verdict is `setup`, as the command line's."""
+    log = ROOT / "fixtures/reference-device/log.csv"
+    lines = log.read_text().splitlines()
+    k = lines[0].split(",").index("distance_m")
+    out = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        cells[k] = repr(float(cells[k]) * 100.0)
+        out.append(",".join(cells))
+    cm = tmp_path / "log_cm.csv"
+    cm.write_text("\n".join(out) + "\n")
+    msg = cli_error("diagnose", "--device", DEVICE, "--data", str(cm), "--svg",
+                    str(tmp_path / "m.svg"))
+    dev = hapcal.Device.from_toml(DEVICE)
+    with pytest.raises(hapcal.HapcalError) as e:
+        hapcal.diagnose(dev, cm)
+    assert msg in str(e.value)
+    d = hapcal.diagnose(dev, cm, accept_setup=True)
+    text = cli("diagnose", "--device", DEVICE, "--data", str(cm), "--accept-setup",
+               "--json", "--svg", str(tmp_path / "n.svg"))
+    assert d.verdict == "setup" == json.loads(text)["verdict"]

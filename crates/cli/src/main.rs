@@ -963,14 +963,7 @@ fn setup_verdict(
     accepted: Option<String>,
 ) {
     if let Some(finding) = accepted {
-        if !verdict.effects().is_empty() {
-            notes.push(format!(
-                "the fits named {verdict}, but no physical effect is named on data the setup \
-                 check found set up wrong"
-            ));
-        }
-        *verdict = hapcal_diagnose::Verdict::Setup;
-        notes.push(finding);
+        verdict.on_accepted_setup(notes, finding);
     }
 }
 

@@ -28,6 +28,21 @@ impl Verdict {
         }
     }
 
+    /// Turns this into [`Verdict::Setup`] for data the setup check found set up wrong and the
+    /// user went on with: no physical effect is named on them. `finding` (the check's finding,
+    /// in words) joins `notes`, after a note naming the effects the fits would have named, if
+    /// any.
+    pub fn on_accepted_setup(&mut self, notes: &mut Vec<String>, finding: String) {
+        if !self.effects().is_empty() {
+            notes.push(format!(
+                "the fits named {self}, but no physical effect is named on data the setup \
+                 check found set up wrong"
+            ));
+        }
+        *self = Verdict::Setup;
+        notes.push(finding);
+    }
+
     /// The effects named (empty for `none` and `setup`).
     pub fn effects(&self) -> &[String] {
         match self {
