@@ -629,13 +629,14 @@ class Diagnosis:
 
     @property
     def verdict(self) -> str:
-        """Accepted effect names joined by ``+``, or ``"none"``."""
+        """The effects named, joined by ``+``; ``"none"``; or ``"setup"`` when the setup check
+        found a mistake and ``accept_setup`` went on (no physical effect is named then)."""
         return self._report["verdict"]
 
     @property
     def warnings(self) -> List[str]:
-        """The log's warnings (unknown columns ignored), ``file:line:column: …``; the command
-        line prints them on standard error."""
+        """The setup check's warnings, then the data's (unknown columns ignored,
+        ``file:line:column: …``); the command line prints them on standard error."""
         return self._warnings
 
     def __repr__(self) -> str:

@@ -216,10 +216,10 @@ class Diagnosis:
         """``hapcal diagnose --json``'s document, byte for byte (no final newline)."""
     @property
     def verdict(self) -> str:
-        """Accepted effects joined by ``+``, or ``"none"``."""
+        """Accepted effects joined by ``+``, ``"none"``, or ``"setup"`` (a mistake accepted)."""
     @property
     def warnings(self) -> List[str]:
-        """The log's warnings (``file:line:column: …``)."""
+        """The setup check's warnings, then the data's (``file:line:column: …``)."""
 
 def diagnose(
     device: Device,
@@ -233,5 +233,6 @@ def diagnose(
     accept_setup: bool = False,
 ) -> Diagnosis:
     """``hapcal diagnose``: ``data`` a log CSV path or ``Measurements.from_csv`` of one;
-    ``baseline``: "transmissions" (default) | "geometric" ("full" | "kinematics" read as
-    these); ``folds`` ≥ 2. Raises HapcalError."""
+    ``baseline``: a haptic device: "transmissions" (default) | "geometric" ("full" |
+    "kinematics" read as these); a robot: "geometric" (default, the only one); ``folds`` ≥ 2;
+    ``accept_setup``: go on past a setup mistake (verdict "setup"). Raises HapcalError."""

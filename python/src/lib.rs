@@ -653,11 +653,14 @@ fn load_sources(sources: &[Source], robot: &Robot) -> Result<Vec<MeasurementTabl
 /// warnings, and the error finding accepted with `accept_setup` (in the words the command
 /// line's notes give it), or the error naming the mistake.
 fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<(Vec<String>, Option<String>)> {
-    let cfg = hapcal_calibrate::setup::SetupConfig { accept_setup };
+    let cfg = hapcal_calibrate::setup::SetupConfig {
+        accept_setup,
+        accept_option: "accept_setup=True",
+    };
     let gated = hapcal_calibrate::setup::gate(plan, &cfg)?;
     let accepted = gated.accepted.map(|f| {
         format!(
-            "setup check (accepted with accept_setup) [{}]: {}",
+            "setup check (accepted with accept_setup=True) [{}]: {}",
             f.class,
             f.text()
         )

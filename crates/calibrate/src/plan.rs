@@ -382,7 +382,7 @@ pub fn candidate_blocks_for(
 }
 
 /// Plans `cfg.count` poses: samples `cfg.n_candidates` readings uniformly within the joint limits
-/// (seed `cfg.seed`), builds their blocks ([`candidate_blocks`]) and chooses with
+/// (seed `cfg.seed`), builds their blocks for `cfg.model` ([`candidate_blocks_for`]) and chooses with
 /// [`select_poses`].
 ///
 /// # Errors

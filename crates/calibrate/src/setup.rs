@@ -55,6 +55,9 @@ pub struct SetupConfig {
     /// Use the data as they are even when a hypothesis explains them overwhelmingly better
     /// (`--accept-setup`): the findings become warnings.
     pub accept_setup: bool,
+    /// How the user says so, as the messages name it: `--accept-setup` on the command line,
+    /// `accept_setup=True` in Python.
+    pub accept_option: &'static str,
 }
 
 /// What the check needs besides the robot and its tables: where they came from.
@@ -1192,18 +1195,19 @@ pub fn gate(plan: &crate::inputs::Plan, cfg: &SetupConfig) -> Result<Gated> {
         && !cfg.accept_setup
     {
         anyhow::bail!(
-            "setup check [{}]: {}; --accept-setup calibrates the data as they are",
+            "setup check [{}]: {}; {} uses the data as they are",
             f.class,
-            f.text()
+            f.text(),
+            cfg.accept_option
         );
     }
     Ok(Gated {
         warnings: (report.findings.iter())
             .map(|f| {
                 let accepted = if f.severity == Severity::Error {
-                    " (accepted with --accept-setup)"
+                    format!(" (accepted with {})", cfg.accept_option)
                 } else {
-                    ""
+                    String::new()
                 };
                 format!("setup check{accepted} [{}]: {}", f.class, f.text())
             })

@@ -455,7 +455,14 @@ mod tests {
         // A model the haptic diagnosis does not start from is refused by its --model name.
         let err = DiagnosePlan::new("d".into(), "l".into(), "mass-compliance", 5)
             .expect_err("not a baseline");
-        assert!(err.to_string().contains("not mass-compliance"), "{err}");
+        assert!(
+            err.to_string().contains(
+                "baseline must be transmissions or geometric (full and kinematics are the \
+                 same): a haptic device's log is diagnosed against one of the two, not \
+                 mass-compliance"
+            ),
+            "{err}"
+        );
     }
 
     #[test]
@@ -465,6 +472,8 @@ mod tests {
             ("full", ModelChoice::Transmissions),
             ("geometric", ModelChoice::Geometric),
             ("kinematics", ModelChoice::Geometric),
+            ("Full", ModelChoice::Transmissions),
+            ("GEOMETRIC", ModelChoice::Geometric),
         ] {
             let plan = DiagnosePlan::new("d".into(), "l".into(), name, 5).expect("a baseline");
             assert_eq!(plan.config.baseline, model, "{name}");

@@ -941,7 +941,10 @@ fn run(cli: Cli) -> Result<()> {
 /// with `--accept-setup`, as the warning says it, if any: a diagnosis then names no physical
 /// effect.
 fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<Option<String>> {
-    let cfg = hapcal_calibrate::setup::SetupConfig { accept_setup };
+    let cfg = hapcal_calibrate::setup::SetupConfig {
+        accept_setup,
+        accept_option: "--accept-setup",
+    };
     let gated = hapcal_calibrate::setup::gate(plan, &cfg)?;
     for warning in &gated.warnings {
         note!("hapcal: warning: {warning}");

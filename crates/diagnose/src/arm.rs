@@ -19,7 +19,13 @@
 //! named only when both hold and it closes at least `min_gap_share` of the gap its round
 //! faces: the held-out error left by the effects named before it, above the floor. Rounds go
 //! on while that error is significantly above the floor and a candidate passes, up to
-//! `max_effects`.
+//! `max_effects`. Once they stop, each named effect is checked beside the others (`revise`,
+//! stepwise selection with backward elimination): one the others do not need, or whose
+//! alternative predicts better, is left out and the rounds run again; a swap stands only if the
+//! rounds then name the alternative.
+//!
+//! Errors are lengths: the 3-D error of a position, or the error of a distance (a distance
+//! log); the RMS figures below are of those.
 
 use hapcal_calibrate::baseline::{DataKind, GeometricBaseline, HeldOutSet};
 use hapcal_calibrate::calibrate::blocked_mean_difference;
@@ -30,7 +36,7 @@ use nalgebra::{DMatrix, DVector, Vector3};
 use serde::Serialize;
 
 use crate::solve::lstsq;
-use crate::stats::{chi2_sf, f_sf, holm, pivoted_basis};
+use crate::stats::{chi2_sf, f_sf, holm, largest_column_norm, pivoted_basis, pivoted_basis_beside};
 use crate::{Error, Verdict};
 
 /// Remaining fraction of a candidate column's norm, after projecting out the baseline, below
@@ -391,7 +397,8 @@ pub struct ArmDiagnosis {
     /// The residual map of the baseline's held-out residuals.
     #[serde(rename = "where")]
     pub where_: Vec<ArmBin>,
-    /// Every candidate of every round.
+    /// Every candidate of every round of the final run of the rounds (after the stepwise
+    /// revision; effects left out by it are named in the notes, with why).
     pub candidates: Vec<ArmCandidate>,
     /// Accepted effects in order.
     pub steps: Vec<ArmStep>,
@@ -1115,6 +1122,14 @@ struct Tested {
     improvement: f64,
 }
 
+/// What [`revise`] found: an effect to leave out of the library, the alternative expected to
+/// take its place (a swap), and the note that says why.
+struct Revision {
+    leave_out: ArmEffect,
+    instead: Option<ArmEffect>,
+    note: String,
+}
+
 /// The stepwise check of the effects the rounds named (`named`: each with its visible
 /// columns, in the order named; `full`: their held-out errors together). Returns the effect to
 /// leave out of the library, with the note that says why, or `None` when every named effect
@@ -1146,7 +1161,7 @@ fn revise(
     floor_var: Option<f64>,
     cfg: &ArmConfig,
     excluded: &[ArmEffect],
-) -> Option<(ArmEffect, String)> {
+) -> Option<Revision> {
     let with = |parts: &[&DMatrix<f64>]| {
         let n = jb.ncols() + parts.iter().map(|p| p.ncols()).sum::<usize>();
         let mut a = DMatrix::zeros(jb.nrows(), n);
@@ -1183,9 +1198,10 @@ fn revise(
             && (m <= HELDOUT_SIGNIFICANCE_Z * se || m.is_nan())
         {
             let effect = named[k].0;
-            return Some((
-                effect,
-                format!(
+            return Some(Revision {
+                leave_out: effect,
+                instead: None,
+                note: format!(
                     "{} left out: beside {} it improves the held-out error by {:.1} standard \
                      errors, not the {HELDOUT_SIGNIFICANCE_Z} required; the rounds were run \
                      again without it",
@@ -1193,7 +1209,7 @@ fn revise(
                     set(k),
                     m / se
                 ),
-            ));
+            });
         }
     }
     // Alternatives, beside the other named effects.
@@ -1221,7 +1237,8 @@ fn revise(
             .collect();
         let base = with(&others);
         let (qb, _) = pivoted_basis(&base, &DMatrix::zeros(base.nrows(), 0), 1e-9);
-        let (_, picked) = pivoted_basis(&alt_cols, &qb, VISIBLE_TOL);
+        let (_, picked) =
+            pivoted_basis_beside(&alt_cols, &qb, VISIBLE_TOL, largest_column_norm(&base));
         let visible: Vec<usize> = (0..alt_cols.ncols())
             .filter(|&c| picked[c].is_some())
             .collect();
@@ -1236,9 +1253,10 @@ fn revise(
         let (m, se, _) = blocked_mean_difference(&full.score, &swapped.score, block);
         let simpler = (visible.len(), order(alt)) < (cols.ncols(), order(*effect));
         if m > se || (m >= -se && simpler) {
-            return Some((
-                *effect,
-                format!(
+            return Some(Revision {
+                leave_out: *effect,
+                instead: Some(alt),
+                note: format!(
                     "{} gives way to {}: beside the other named effects it predicts {} ({:+.1} \
                      standard errors); the rounds were run again without {}",
                     effect.name(),
@@ -1251,21 +1269,27 @@ fn revise(
                     m / se,
                     effect.name()
                 ),
-            ));
+            });
         }
     }
     None
 }
 
 /// Checks the `--baseline` asked for a robot measured by an instrument: it is diagnosed on its
-/// geometric calibration, so only `geometric` (or nothing) is taken.
+/// geometric calibration, so only `geometric` (or nothing; `full`, the older default, is read
+/// as it) is taken.
 ///
 /// # Errors
 /// [`Error::Config`] naming the value given, in the user's words.
 pub fn robot_baseline(name: Option<&str>) -> Result<(), Error> {
     match name {
         None => Ok(()),
-        Some(n) if ModelChoice::from_name(n) == Some(ModelChoice::Geometric) => Ok(()),
+        Some(n)
+            if ModelChoice::from_name(n) == Some(ModelChoice::Geometric)
+                || n.trim().eq_ignore_ascii_case("full") =>
+        {
+            Ok(())
+        }
         Some(n) => Err(Error::Config {
             message: format!(
                 "baseline {n:?}: a robot measured by an instrument is diagnosed on its geometric \
@@ -1381,6 +1405,9 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
     let base0 = base.clone();
     let mut excluded: Vec<ArmEffect> = Vec::new();
     let mut revisions: Vec<String> = Vec::new();
+    // A swap stands only if the rounds run again name the alternative by their own tests;
+    // otherwise the run before it is kept. The run before a swap, and the alternative.
+    let mut before_swap = None;
     loop {
         a = jb.clone();
         base = base0.clone();
@@ -1421,7 +1448,8 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                         continue;
                     }
                 };
-                let (qc, picked) = pivoted_basis(&cols, &qb, VISIBLE_TOL);
+                let (qc, picked) =
+                    pivoted_basis_beside(&cols, &qb, VISIBLE_TOL, largest_column_norm(&a));
                 let visible: Vec<usize> =
                     (0..cols.ncols()).filter(|&c| picked[c].is_some()).collect();
                 let mut cand = ArmCandidate {
@@ -1630,6 +1658,28 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                 break;
             }
         }
+        if let Some((alt, left_out, saved)) = before_swap.take()
+            && !accepted.contains(&alt)
+        {
+            // The alternative did not pass beside the others: the run before the swap stands.
+            (
+                base,
+                candidates,
+                steps,
+                accepted,
+                effect_cols,
+                untestable,
+                p_after,
+                in_sample_share,
+            ) = saved;
+            revisions.pop();
+            revisions.push(format!(
+                "{} stays: run again without it, the rounds did not name {} in its place",
+                ArmEffect::name(left_out),
+                ArmEffect::name(alt)
+            ));
+            break;
+        }
         match revise(
             &ctx,
             &rows,
@@ -1644,8 +1694,28 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             cfg,
             &excluded,
         ) {
-            Some((effect, note)) => {
-                excluded.push(effect);
+            Some(Revision {
+                leave_out,
+                instead,
+                note,
+            }) => {
+                if let Some(alt) = instead {
+                    before_swap = Some((
+                        alt,
+                        leave_out,
+                        (
+                            base.clone(),
+                            candidates.clone(),
+                            steps.clone(),
+                            accepted.clone(),
+                            effect_cols.clone(),
+                            untestable.clone(),
+                            p_after.clone(),
+                            in_sample_share.clone(),
+                        ),
+                    ));
+                }
+                excluded.push(leave_out);
                 revisions.push(note);
             }
             None => break,

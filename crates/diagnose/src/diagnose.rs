@@ -32,7 +32,7 @@ use crate::model::{
     Data, Linear, POLY_DEGREE, RANK_TOL, Setup, State, Term, TermKind, Trans, ext_available,
 };
 use crate::solve::lstsq;
-use crate::stats::{chi2_sf, f_sf, holm, pivoted_basis};
+use crate::stats::{chi2_sf, f_sf, holm, largest_column_norm, pivoted_basis, pivoted_basis_beside};
 
 /// The model a haptic device's log is diagnosed against, by the name `--baseline` takes: one
 /// of the two models `hapcal calibrate` fits to such a log ([`ModelChoice`], the one
@@ -48,7 +48,7 @@ use crate::stats::{chi2_sf, f_sf, holm, pivoted_basis};
 /// # Errors
 /// [`Error::Config`] for any other name, in the user's words.
 pub fn baseline_model(name: &str) -> Result<ModelChoice, Error> {
-    match name.trim().replace('_', "-").as_str() {
+    match name.trim().to_ascii_lowercase().as_str() {
         "full" => return Ok(ModelChoice::Transmissions),
         "kinematics" => return Ok(ModelChoice::Geometric),
         _ => {}
@@ -57,12 +57,14 @@ pub fn baseline_model(name: &str) -> Result<ModelChoice, Error> {
         Some(m @ (ModelChoice::Transmissions | ModelChoice::Geometric)) => Ok(m),
         Some(m) => Err(Error::Config {
             message: format!(
-                "baseline must be transmissions or geometric (full and kinematics are the same):                  a haptic device's log is diagnosed against one of the two, not {m}"
+                "baseline must be transmissions or geometric (full and kinematics are the same): \
+                 a haptic device's log is diagnosed against one of the two, not {m}"
             ),
         }),
         None => Err(Error::Config {
             message: format!(
-                "baseline must be transmissions or geometric (full and kinematics are the same),                  got {name:?}"
+                "baseline must be transmissions or geometric (full and kinematics are the same), \
+                 got {name:?}"
             ),
         }),
     }
@@ -588,7 +590,12 @@ fn test_candidate(
     let lin = setup.linearise(data, &s);
     let k_all = terms.len();
     let c_all = lin.j.columns(n_base_cols, k_all).into_owned();
-    let (qc, picked) = pivoted_basis(&c_all, &base.q, VISIBLE_TOL);
+    let (qc, picked) = pivoted_basis_beside(
+        &c_all,
+        &base.q,
+        VISIBLE_TOL,
+        largest_column_norm(&base.lin.j),
+    );
     let visible: Vec<usize> = (0..k_all).filter(|&c| picked[c].is_some()).collect();
     // Absorbed parts: which baseline parameters carry them.
     let mut absorbed_by = Vec::new();
@@ -1101,7 +1108,7 @@ pub fn diagnose(
         s.terms.extend(terms.into_iter().map(|t| (t, 0.0)));
         let lin = setup.linearise(&data, &s);
         let c = lin.j.columns(n_base_cols, 6).into_owned();
-        let (qc, _) = pivoted_basis(&c, &base.q, 0.02);
+        let (qc, _) = pivoted_basis_beside(&c, &base.q, 0.02, largest_column_norm(&base.lin.j));
         let k = qc.ncols() as f64;
         let drss = (qc.transpose() * &base.r_perp).norm_squared();
         let excess = base.rss - base.dof();

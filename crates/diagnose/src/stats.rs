@@ -183,14 +183,32 @@ pub(crate) fn pivoted_basis(
     against: &DMatrix<f64>,
     rel_tol: f64,
 ) -> (DMatrix<f64>, Vec<Option<f64>>) {
+    pivoted_basis_beside(a, against, rel_tol, 0.0)
+}
+
+/// The largest finite column norm of `a` (0 for no column).
+pub(crate) fn largest_column_norm(a: &DMatrix<f64>) -> f64 {
+    (0..a.ncols())
+        .map(|j| a.column(j).norm())
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max)
+}
+
+/// [`pivoted_basis`] of a candidate's columns `a` beside a baseline whose largest column norm
+/// is `reference` (same units: weighted residual per parameter unit): a column is rounding
+/// noise below [`NUMERICAL_ZERO_COLUMN`] of the larger of `reference` and `a`'s own largest,
+/// so an effect made only of noise columns (a gravity torque about a vertical axis) is not
+/// visible because its largest noise column is the largest of its own.
+pub(crate) fn pivoted_basis_beside(
+    a: &DMatrix<f64>,
+    against: &DMatrix<f64>,
+    rel_tol: f64,
+    reference: f64,
+) -> (DMatrix<f64>, Vec<Option<f64>>) {
     let n = a.nrows();
     let k = a.ncols();
     let mut norms: Vec<f64> = (0..k).map(|j| a.column(j).norm()).collect();
-    let largest = norms
-        .iter()
-        .copied()
-        .filter(|v| v.is_finite())
-        .fold(0.0, f64::max);
+    let largest = largest_column_norm(a).max(reference);
     for v in &mut norms {
         if *v <= NUMERICAL_ZERO_COLUMN * largest {
             *v = 0.0;
@@ -316,5 +334,16 @@ mod tests {
         b.column_mut(2).scale_mut(1e14);
         let (_, picked) = pivoted_basis(&b, &DMatrix::zeros(4, 0), 1e-8);
         assert!(picked[2].is_some());
+    }
+
+    #[test]
+    fn a_candidate_of_noise_alone_is_not_visible_beside_its_baseline() {
+        // One column of rounding noise: alone it is its own largest column, beside a baseline
+        // of columns 10¹⁶ times larger it is noise.
+        let noise = DMatrix::from_column_slice(4, 1, &[2e-12, -1e-12, 3e-12, 1e-12]);
+        let (_, alone) = pivoted_basis(&noise, &DMatrix::zeros(4, 0), 1e-8);
+        assert!(alone[0].is_some());
+        let (_, beside) = pivoted_basis_beside(&noise, &DMatrix::zeros(4, 0), 1e-8, 1e5);
+        assert!(beside[0].is_none());
     }
 }

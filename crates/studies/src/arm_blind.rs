@@ -1190,6 +1190,20 @@ pub fn run(
     Ok(outcomes)
 }
 
+/// The 95 % Wilson score interval of a rate of `right` out of `total` (E. B. Wilson,
+/// "Probable inference, the law of succession, and statistical inference", JASA 22, 1927):
+/// `(lo, hi)` in 0–1; `(0, 1)` for no case.
+pub fn wilson_95((right, total): (usize, usize)) -> (f64, f64) {
+    if total == 0 {
+        return (0.0, 1.0);
+    }
+    let (n, z) = (total as f64, 1.959_964);
+    let p = right as f64 / n;
+    let centre = (p + z * z / (2.0 * n)) / (1.0 + z * z / n);
+    let half = z * (p * (1.0 - p) / n + z * z / (4.0 * n * n)).sqrt() / (1.0 + z * z / n);
+    ((centre - half).max(0.0), (centre + half).min(1.0))
+}
+
 /// Tallies of a blind run.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct ArmSummary {
@@ -1337,21 +1351,23 @@ pub fn report_markdown_with(
         ("`none` on outside effects", outside, 0.95),
         ("gap closed ≥ 80 % when right", s.gap_closed_80, 0.80),
     ] {
-        // The binomial standard error of the rate at this number of cases.
-        let se = (rate(r) * (1.0 - rate(r)) / r.1.max(1) as f64).sqrt();
+        // The Wilson score interval of the rate (95 %): honest at 0 and 100 % too, where the
+        // binomial standard error is zero.
+        let (lo, hi) = wilson_95(r);
         md.push_str(&format!(
-            "| {name} ≥ {:.0} % | {} ± {:.0} % | {} |\n",
+            "| {name} ≥ {:.0} % | {} (95 %: {:.0}–{:.0} %) | {} |\n",
             target * 100.0,
             pct(r),
-            100.0 * se,
+            100.0 * lo,
+            100.0 * hi,
             if rate(r) >= target { "yes" } else { "no" }
         ));
     }
     md.push_str(&format!(
-        "\nThe ± is each rate's binomial standard error at this number of cases (one case in 32 is \
-         3 %): a target met by less than that is met by this run, not shown to hold; \
-         docs/diagnosis.md gives a larger run. Median gap closed over the right single-effect \
-         cases: {:.0} %. Pipeline errors: {}.\n\n",
+        "\nThe interval is each rate's 95 % Wilson score interval at this number of cases: a \
+         target met by this run but inside the interval is not shown to hold; docs/diagnosis.md \
+         gives a larger run. Median gap closed over the right single-effect cases: {:.0} %. \
+         Pipeline errors: {}.\n\n",
         s.median_gap_closed_pct, s.errors
     ));
     md.push_str("## By robot, data kind and case kind\n\n| stratum | right |\n|---|---|\n");

@@ -205,3 +205,22 @@ fn effects_named_early_are_checked_again_beside_the_later_ones() {
         );
     }
 }
+
+/// The results page's interval: at 0 of n it is `[0, z²/(n + z²)]` (nothing in the standard
+/// error), at half it is symmetric about one half.
+#[test]
+fn the_wilson_interval_has_its_closed_forms() {
+    use hapcal_studies::arm_blind::wilson_95;
+    let (lo, hi) = wilson_95((0, 32));
+    let z2 = 1.959_964f64.powi(2);
+    assert!(
+        lo == 0.0 && (hi - z2 / (32.0 + z2)).abs() < 1e-12,
+        "{lo} {hi}"
+    );
+    let (lo, hi) = wilson_95((16, 32));
+    assert!(
+        (lo + hi - 1.0).abs() < 1e-12 && lo > 0.3 && hi < 0.7,
+        "{lo} {hi}"
+    );
+    assert_eq!(wilson_95((0, 0)), (0.0, 1.0));
+}
