@@ -142,7 +142,12 @@ pub fn render_arm(d: &ArmDiagnosis) -> String {
         mm(d.heldout_rms_final_m),
         d.gap_closed_pct
     );
-    let _ = writeln!(s, "\nLADDER (RMS of the 3-D error, mm)");
+    let error = if d.kind == DataKind::Distances {
+        "distance"
+    } else {
+        "3-D position"
+    };
+    let _ = writeln!(s, "\nLADDER (RMS of the {error} error, mm)");
     let _ = writeln!(
         s,
         "  {:40} {:>9}  {}",

@@ -976,10 +976,15 @@ fn floor(
     r: &DVector<f64>,
 ) -> (Option<f64>, FloorSource, String) {
     if let Some(s) = baseline.stated_sigma_m {
+        let per = if baseline.kind == DataKind::Distances {
+            "per distance"
+        } else {
+            "per axis"
+        };
         return (
             Some(s * s),
             FloorSource::Stated,
-            format!("stated instrument σ = {:.4} mm per axis", s * 1e3),
+            format!("stated instrument σ = {:.4} mm {per}", s * 1e3),
         );
     }
     // Residuals (m) of the position residuals per configuration, axis order.

@@ -735,6 +735,24 @@ fn diagnosis_and_calibration_give_the_same_cross_validated_error_on_distance_log
         (own - from_calibration).abs() <= 0.01 * from_calibration,
         "diagnosis {own} m, calibration {from_calibration} m"
     );
+    // The text names the errors as distances, the stated σ as one per distance.
+    let svg2 = dir.join("maps2.svg").display().to_string();
+    let out = hapcal(&[
+        "diagnose",
+        "--device",
+        device.as_str(),
+        "--data",
+        log.as_str(),
+        "--sigma-m",
+        "1e-5",
+        "--svg",
+        svg2.as_str(),
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("LADDER (RMS of the distance error, mm)") && text.contains("mm per distance"),
+        "{text}"
+    );
 }
 
 /// `--workspace`: configurations beyond a joint's training range make the ladder judge each
