@@ -156,6 +156,9 @@ pub struct Robot {
     pub limits: Vec<(f64, f64)>,
     /// Link masses from the URDF's `<inertial>` tags (empty for a D-H device).
     pub masses: Vec<LinkMass>,
+    /// Moving joints off the measured paths that the masses hold at zero (a head's pan and
+    /// tilt between its mass and the torso), URDF names; empty for a D-H device.
+    pub held_joints: Vec<String>,
 }
 
 /// Robot of a URDF with one or more tips.
@@ -186,6 +189,7 @@ pub fn robot_from_urdf(path: &std::path::Path, tips: &[String]) -> Result<Robot>
             .map(|j| (j.lower_rad, j.upper_rad))
             .collect(),
         masses,
+        held_joints: urdf.held_joints,
         tree,
     })
 }
@@ -209,6 +213,7 @@ pub fn robot_from_device(device: &hapcal_io::Device) -> Result<Robot> {
         prismatic: device.prismatic_joints(),
         limits: device.joint_limits(),
         masses: Vec::new(),
+        held_joints: Vec::new(),
         tree,
     })
 }

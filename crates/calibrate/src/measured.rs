@@ -2058,7 +2058,22 @@ pub fn run_tables(
     ignored.sort();
     ignored.dedup();
     if !ignored.is_empty() {
-        warnings.push(format!("columns ignored: {}", ignored.join(", ")));
+        let held: Vec<&str> = (ignored.iter())
+            .filter(|c| robot.held_joints.contains(c))
+            .map(String::as_str)
+            .collect();
+        let hint = if held.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " ({} off the measured paths, held at zero in the gravity torques; \
+                 give a link below {} as a further --tip to use {} readings)",
+                held.join(", "),
+                if held.len() == 1 { "it" } else { "them" },
+                if held.len() == 1 { "its" } else { "their" },
+            )
+        };
+        warnings.push(format!("columns ignored: {}{hint}", ignored.join(", ")));
     }
     for w in (train.iter().chain(&test)).flat_map(|t| &t.warnings) {
         if !warnings.contains(w) {

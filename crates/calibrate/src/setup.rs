@@ -474,6 +474,7 @@ fn robots_for_tips(urdf: &Path, tip_sets: &[Vec<String>]) -> Vec<Option<Robot>> 
                 prismatic,
                 limits,
                 masses: Vec::new(),
+                held_joints: Vec::new(),
                 tree,
             })
         })

@@ -134,6 +134,10 @@ pub struct UrdfTree {
     /// paths or off them (another arm, a head, a tool below a tip), in the frame of the
     /// nearest such joint above it.
     pub inertials: Vec<LinkInertial>,
+    /// The moving joints off the paths that [`UrdfTree::inertials`] hold at their zero
+    /// position (between a link with a mass and the nearest joint of the paths above it: a
+    /// head's pan and tilt), in file order without repeats.
+    pub held_joints: Vec<String>,
 }
 
 /// A link's `<inertial>` mass and centre of mass, expressed in the frame of the nearest
@@ -214,12 +218,13 @@ pub fn import_urdf_tips(path: &Path, tips: &[String]) -> Result<UrdfTree, Error>
             format!("no moving joint between the root link {root:?} and the tips"),
         ));
     }
-    let inertials = inertials(&robot, &joints, path)?;
+    let (inertials, held_joints) = inertials(&robot, &joints, path)?;
     Ok(UrdfTree {
         paths,
         joints,
         prismatic,
         inertials,
+        held_joints,
     })
 }
 
@@ -230,20 +235,22 @@ pub fn import_urdf_tips(path: &Path, tips: &[String]) -> Result<UrdfTree, Error>
 /// measured, a head, a tool below the tip link. The joints between such a link and the
 /// nearest measured joint are taken at their zero position (a moving joint that no
 /// measurement reads is held rigid there), so the link's weight loads every measured joint
-/// above it.
+/// above it; those moving joints are returned second.
 fn inertials(
     robot: &urdf_rs::Robot,
     joints: &[JointSpec],
     path: &Path,
-) -> Result<Vec<LinkInertial>, Error> {
+) -> Result<(Vec<LinkInertial>, Vec<String>), Error> {
     let parent_joint = |link: &str| robot.joints.iter().find(|j| j.child.link == link);
     let mut out: Vec<LinkInertial> = Vec::new();
+    let mut held: Vec<String> = Vec::new();
     for l in &robot.links {
         // Walk up from the link to the nearest measured moving joint, composing the origins
         // of the joints passed (bounded by the joint count: the tree has no loop).
         let mut frame = Isometry3::identity();
         let mut link = l.name.as_str();
         let mut above = None;
+        let mut passed: Vec<&str> = Vec::new();
         for _ in 0..=robot.joints.len() {
             let Some(joint) = parent_joint(link) else {
                 break;
@@ -252,10 +259,20 @@ fn inertials(
                 above = Some(j);
                 break;
             }
+            if !matches!(joint.joint_type, urdf_rs::JointType::Fixed) {
+                passed.push(&joint.name);
+            }
             frame = origin_of(joint) * frame;
             link = &joint.parent.link;
         }
         let Some(j) = above else { continue };
+        if l.inertial.mass.value > 0.0 {
+            for name in passed {
+                if !held.iter().any(|h| h == name) {
+                    held.push(name.to_owned());
+                }
+            }
+        }
         let mass_kg = l.inertial.mass.value;
         let xyz = l.inertial.origin.xyz.0;
         let name = &l.name;
@@ -278,7 +295,7 @@ fn inertials(
             com_m: [com.x, com.y, com.z],
         });
     }
-    Ok(out)
+    Ok((out, held))
 }
 
 /// Reads and parses a URDF, with XML errors located.

@@ -165,3 +165,39 @@ fn imported_tree_reads_back_to_the_urdf_figures() {
         }
     }
 }
+
+/// One hand of the two-arm tree measured: the other arm's readings are not used, and the
+/// warning says they are held at zero in the gravity torques and how to use them.
+#[test]
+fn the_other_arms_columns_are_named_as_held_joints() {
+    let dir = root().join("fixtures/sim-humanoid");
+    let text = std::fs::read_to_string(dir.join("mocap.csv")).expect("the simulated recording");
+    // The left hand's marker only (x1, y1, z1); the right arm's joints stay in the file.
+    let left: String = (text.lines())
+        .map(|l| {
+            let cells: Vec<&str> = l.split(',').collect();
+            format!("{}\n", cells[..cells.len() - 3].join(","))
+        })
+        .collect();
+    let data = scratch("held-joints").join("left.csv");
+    std::fs::write(&data, left).expect("scratch folder is writable");
+    let warnings = super::calibration_warnings(&[
+        "--device",
+        &show(&dir.join("humanoid.urdf")),
+        "--tip",
+        "l_hand",
+        "--data",
+        &show(&data),
+        "--model",
+        "geometric",
+    ]);
+    let ignored = (warnings.iter())
+        .find(|w| w.starts_with("columns ignored"))
+        .unwrap_or_else(|| panic!("no ignored columns: {warnings:?}"));
+    assert!(ignored.contains("r_1, r_2"), "{ignored}");
+    assert!(
+        ignored.contains("held at zero in the gravity torques")
+            && ignored.contains("as a further --tip"),
+        "{ignored}"
+    );
+}

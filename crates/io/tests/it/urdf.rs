@@ -192,8 +192,18 @@ fn masses_off_the_measured_paths_load_the_joint_above_them() {
     for (got, want) in b.com_m.iter().zip([0.0, -0.1, 0.3]) {
         assert!((got - want).abs() < 1e-15, "{:?}", b.com_m);
     }
+    // b1 moves but no measurement reads it: it is the one joint held at zero.
+    assert_eq!(tree.held_joints, ["b1"]);
     let tool_below_tip = import_urdf_tips(&data("inertial.urdf"), &["arm".to_owned()]).unwrap();
     assert!(tool_below_tip.inertials.iter().any(|l| l.link == "tool"));
+    // The tool hangs by a fixed joint: nothing is held.
+    assert!(tool_below_tip.held_joints.is_empty());
+    let both = import_urdf_tips(
+        &data("branches.urdf"),
+        &["arm_a".to_owned(), "arm_b".to_owned()],
+    )
+    .unwrap();
+    assert!(both.held_joints.is_empty(), "{:?}", both.held_joints);
 }
 
 #[test]
