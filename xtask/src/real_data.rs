@@ -80,7 +80,7 @@ const DATASETS: &[Dataset] = &[
                     compliance on the torso and both arms, a CAD mass on every link and the \
                     head, marker noise 0.2 mm per axis: a noise floor of √3·0.2 = 0.35 mm \
                     RMS held out",
-        truth: Some(("transversal_compliance", 3.464e-4)),
+        truth: Some(("transversal-compliance", 3.464e-4)),
     },
 ];
 
@@ -130,7 +130,7 @@ fn deg(v: Option<[f64; 3]>) -> String {
 /// `position mean / RMS / max, orientation mean / RMS / max`.
 fn forced_test_figures(sh: &Shell, d: &Dataset, rung: &str) -> Result<String> {
     let args: Vec<&str> = d.args.to_vec();
-    let model = rung.replace('_', "-");
+    let model = rung;
     let json = cmd!(
         sh,
         "cargo run --release --quiet -p hapcal -- calibrate {args...} --test-last {TEST_LAST} --model {model} --json"
@@ -185,7 +185,7 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
         .read()
         .with_context(|| format!("calibrating {}", d.name))?;
         let report: Value = serde_json::from_str(&json).context("parsing the JSON report")?;
-        let model = report["model"].as_str().unwrap_or("?").replace('_', " ");
+        let model = report["model"].as_str().unwrap_or("?").replace('-', " ");
         let _ = writeln!(md, "\n## {}\n", d.name);
         let _ = writeln!(
             md,
@@ -205,7 +205,7 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
                 let _ = writeln!(
                     md,
                     "| {} | {:.2} | {:+.2} ± {:.2} | {} |",
-                    rung.replace('_', " "),
+                    rung.replace('-', " "),
                     r["heldout_rms_m"].as_f64().unwrap_or(f64::NAN) * 1e3,
                     diff[0].as_f64().unwrap_or(f64::NAN),
                     diff[1].as_f64().unwrap_or(f64::NAN),
@@ -243,7 +243,7 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
             }
         }
         if let Some((rung, floor)) = d.truth {
-            let chosen = report["model"].as_str().unwrap_or("?").replace('-', "_");
+            let chosen = report["model"].as_str().unwrap_or("?");
             let test_rms = (report["placements"].as_array().into_iter().flatten())
                 .filter(|s| s["role"] == "test")
                 .filter_map(|s| pose(&s["after"]))

@@ -15,8 +15,9 @@ use serde::Serialize;
 /// The doc comment of each variant is its `hapcal calibrate --help` text: plain words (no
 /// links). Ordered simplest first within the ladder (`FramesOnly < JointOffsets < Geometric <
 /// Compliance …`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, clap::ValueEnum)]
-#[serde(rename_all = "snake_case")]
+/// Serialised as its `--model` value (`frames-only`, `mass-compliance`), the spelling of every
+/// report.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, clap::ValueEnum)]
 pub enum ModelChoice {
     /// Chosen on the training data only: the ladder of the data's kind is climbed by repeated
     /// blocked cross-validation, a model must beat the one chosen below it by 2 standard
@@ -165,6 +166,12 @@ impl std::fmt::Display for Rung {
 }
 
 impl Serialize for Rung {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl Serialize for ModelChoice {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         s.collect_str(self)
     }
