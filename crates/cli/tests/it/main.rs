@@ -923,3 +923,49 @@ fn same_geometric_cross_validation(common: &[&str], svg: &str) -> (Value, f64) {
     );
     (d, from_calibration)
 }
+
+/// The same for the cross-validated errors of measurement files (TIAGo's motion capture, no
+/// held-out rows): every kinematic rung of the diagnosis's ladder has the cross-validated RMS
+/// of the calibration's ladder (one cross-validation, the same folds; 1e-9 relative).
+#[test]
+fn diagnosis_and_calibration_give_the_same_cross_validated_error_on_markers() {
+    let tiago = root().join("fixtures/figaroh/tiago");
+    let urdf = tiago.join("tiago.urdf").display().to_string();
+    let data = (tiago.join("qualysis_base_hand_calibration.csv"))
+        .display()
+        .to_string();
+    let svg = scratch("same-model-markers")
+        .join("maps.svg")
+        .display()
+        .to_string();
+    let common = [
+        "--device",
+        urdf.as_str(),
+        "--tip",
+        "arm_7_link",
+        "--data",
+        data.as_str(),
+        "--json",
+    ];
+    let mut diagnose = vec!["diagnose"];
+    diagnose.extend(common);
+    diagnose.extend(["--svg", svg.as_str()]);
+    let d = json(&hapcal(&diagnose));
+    let mut calibrate = vec!["calibrate"];
+    calibrate.extend(common);
+    let c = json(&hapcal(&calibrate));
+    let cv = |v: &Value, key: &str, rung: &str| {
+        (v["ladder"].as_array().expect("a ladder").iter())
+            .find(|r| r["rung"] == rung)
+            .and_then(|r| r[key].as_f64())
+            .unwrap_or_else(|| panic!("no {rung} rung: {v}"))
+    };
+    for rung in ["frames-only", "joint-offsets", "geometric"] {
+        let (from_diagnosis, from_calibration) =
+            (cv(&d, "cv_rms_m", rung), cv(&c, "heldout_rms_m", rung));
+        assert!(
+            (from_diagnosis - from_calibration).abs() <= 1e-9 * from_calibration,
+            "{rung}: diagnose {from_diagnosis} m, calibrate {from_calibration} m"
+        );
+    }
+}
