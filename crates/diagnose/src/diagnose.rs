@@ -1403,3 +1403,6 @@ pub fn diagnose(
         notes,
     })
 }
+
+#[cfg(test)]
+mod tests;
