@@ -825,10 +825,13 @@ impl VarianceTable {
 /// per column), with `δ = |P|` (paper eq. 5, `P` the end point in the rig frame) and
 /// `σᵢ² = σ_m² + Σⱼ (∂δ/∂qⱼ)²·joint_var_rad2[j]` (m²): the distance noise plus the joint
 /// angle errors propagated through the Jacobian (first order; e.g.
-/// [`quantisation_variances`], [`transmission_variances`]).
+/// [`quantisation_variances`], [`transmission_variances`]); joints past the end of
+/// `joint_var_rad2` have none. The row is [`hapcal_problems::distance_row`]'s, the distance
+/// Jacobian of the identification problems.
 ///
 /// # Panics
-/// If `q` has the wrong length or an index of `kept` is out of range (misuse).
+/// If `q` has the wrong length or an index of `kept` is out of range (misuse), or if `sigma_m`
+/// is not positive and finite or a variance is negative (validated by the callers' problems).
 #[track_caller]
 pub fn distance_row(
     chain: &hapcal_kinematics::Chain,
@@ -838,21 +841,14 @@ pub fn distance_row(
     joint_var_rad2: &[f64],
 ) -> Mat<f64> {
     let x0 = vec![0.0; chain.n_params()];
-    let p = chain.end_point(&x0, q).coords;
-    let u = p / p.norm();
-    let jp = chain.point_jacobian_wrt_params(&x0, q);
-    let mut var = sigma_m * sigma_m;
-    if joint_var_rad2.iter().any(|&v| v > 0.0) {
-        let jq = chain.geometric_jacobian(&x0, q);
-        for (j, v) in joint_var_rad2.iter().enumerate().take(chain.n_joints()) {
-            let dd_dq = (0..3).map(|a| u[a] * jq[(a, j)]).sum::<f64>();
-            var += dd_dq * dd_dq * v;
-        }
-    }
-    let sigma = var.sqrt();
-    Mat::from_fn(1, kept.len(), |_, k| {
-        (0..3).map(|a| u[a] * jp[(a, kept[k])]).sum::<f64>() / sigma
-    })
+    let joint_var: Vec<f64> = (0..chain.n_joints())
+        .map(|j| joint_var_rad2.get(j).copied().unwrap_or(0.0))
+        .collect();
+    let row = match hapcal_problems::distance_row(chain, &x0, q, sigma_m, &joint_var) {
+        Ok(row) => row,
+        Err(e) => panic!("distance_row: {e}"),
+    };
+    Mat::from_fn(1, kept.len(), |_, k| row.jacobian[kept[k]] / row.sigma_m)
 }
 
 #[cfg(test)]

@@ -4,6 +4,7 @@ use std::f64::consts::TAU;
 
 use hapcal_identify::{IdentifyConfig, identify};
 use hapcal_io::{Device, LogRow};
+use hapcal_kinematics::Point3;
 use hapcal_problems::{CapstanProblem, PolynomialProblem};
 use hapcal_sim::EffectKind;
 use hapcal_transmission::{Capstan, Chebyshev};
@@ -30,6 +31,7 @@ const SUFFICIENT_SHARE: f64 = 0.8;
 const SUFFICIENT_SHARE_IN_SAMPLE: f64 = 0.9;
 use crate::model::{
     Data, Linear, POLY_DEGREE, RANK_TOL, Setup, State, Term, TermKind, Trans, ext_available,
+    log_data,
 };
 use crate::solve::lstsq;
 use crate::stats::{chi2_sf, f_sf, holm, largest_column_norm, pivoted_basis, pivoted_basis_beside};
@@ -360,7 +362,7 @@ fn candidate_terms(
 ) -> Result<Vec<Term>, String> {
     let capstan_of = |j: usize| device.capstans.iter().find(|c| c.joint == j + 1);
     let need_t = || {
-        if data.t.is_some() {
+        if data.t_s().is_some() {
             Ok(())
         } else {
             Err("not testable: the log has no t_s column".to_owned())
@@ -372,7 +374,7 @@ fn candidate_terms(
         kind: TermKind::Joint { joint, g },
     };
     let col = |j: usize, f: &dyn Fn(f64) -> f64| -> Vec<f64> {
-        data.q
+        data.q()
             .iter()
             .map(|q| f(q.get(j).copied().unwrap_or(0.0)))
             .collect()
@@ -465,7 +467,7 @@ fn candidate_terms(
             name: "cable_offset.c".into(),
             unit: "m",
             kind: TermKind::Distance {
-                h: vec![1.0; data.n],
+                h: vec![1.0; data.n_rows()],
             },
         }),
         "capstan" => {
@@ -507,7 +509,7 @@ fn candidate_terms(
             let probe = Chebyshev::try_new(lo, hi, vec![0.0; POLY_DEGREE + 1])
                 .map_err(|e| e.to_string())?;
             let basis: Vec<Vec<f64>> = data
-                .q
+                .q()
                 .iter()
                 .map(|q| probe.basis(q.get(j).copied().unwrap_or(0.0)))
                 .collect();
@@ -571,7 +573,8 @@ struct Tested {
     share: f64,
 }
 
-/// Tests one candidate against `base` (at `state`).
+/// Tests one candidate against `base` (at `state`); `Err` with the reason if the model cannot
+/// take its terms.
 #[allow(clippy::too_many_arguments)] // the pieces of one round, kept apart for clarity
 fn test_candidate(
     setup: &Setup,
@@ -582,12 +585,12 @@ fn test_candidate(
     terms: Vec<Term>,
     round: usize,
     folds: usize,
-) -> Tested {
-    let n = data.n;
+) -> Result<Tested, String> {
+    let n = data.n_rows();
     let n_base_cols = base.lin.j.ncols();
     let mut s = state.clone();
     s.terms.extend(terms.iter().cloned().map(|t| (t, 0.0)));
-    let lin = setup.linearise(data, &s);
+    let lin = setup.linearise(&s).map_err(|e| e.to_string())?;
     let k_all = terms.len();
     let c_all = lin.j.columns(n_base_cols, k_all).into_owned();
     let (qc, picked) = pivoted_basis_beside(
@@ -654,14 +657,14 @@ fn test_candidate(
                 absorbed_by.join(", ")
             }
         );
-        return Tested {
+        return Ok(Tested {
             cand,
             terms: kept_terms,
             fitted: DVector::zeros(n),
             p_raw: 1.0,
             cv_ok: false,
             share: 0.0,
-        };
+        });
     }
     let k = visible.len() as f64;
     let proj = qc.transpose() * &base.r_perp;
@@ -673,7 +676,7 @@ fn test_candidate(
     s_vis
         .terms
         .extend(visible.iter().map(|&c| (terms[c].clone(), 0.0)));
-    let (s_vis, lin) = setup.refine(data, s_vis, 10);
+    let (s_vis, lin) = setup.refine(s_vis, 10).map_err(|e| e.to_string())?;
     let mut cols = base.cols.clone();
     cols.extend((0..visible.len()).map(|c| n_base_cols + c));
     let a = lin.j.select_columns(&cols);
@@ -719,14 +722,14 @@ fn test_candidate(
         0.0
     };
     cand.gap_closed_pct = 100.0 * share.clamp(-9.99, 9.99);
-    Tested {
+    Ok(Tested {
         cand,
         terms: kept_terms,
         fitted,
         p_raw,
         cv_ok,
         share,
-    }
+    })
 }
 
 fn cosine(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
@@ -743,12 +746,12 @@ fn fit_transmissions(device: &Device, data: &Data, sigma_e: f64) -> Result<Vec<T
     for c in &device.capstans {
         let j = c.joint - 1;
         let theta: Vec<f64> = data
-            .q
+            .q()
             .iter()
             .map(|q| q.get(j).copied().unwrap_or(0.0))
             .collect();
         let ext: Vec<f64> = data
-            .ext
+            .ext()
             .iter()
             .map(|e| e.get(j).copied().flatten().unwrap_or(0.0))
             .collect();
@@ -760,7 +763,7 @@ fn fit_transmissions(device: &Device, data: &Data, sigma_e: f64) -> Result<Vec<T
             let p = PolynomialProblem::new(c.joint, POLY_DEGREE, lo, hi, theta, ext, sigma_e)
                 .map_err(|e| fail(e.to_string()))?;
             let id = identify(&p, p.initial_guess(), &cfg).map_err(|e| fail(e.to_string()))?;
-            out.push(Trans::Poly {
+            out.push(Trans::Polynomial {
                 joint: j,
                 poly: p.polynomial(id.fit.x.as_ref()),
             });
@@ -780,6 +783,13 @@ fn fit_transmissions(device: &Device, data: &Data, sigma_e: f64) -> Result<Vec<T
     Ok(out)
 }
 
+/// A model error of the baseline's fit as [`Error::Baseline`].
+fn baseline_error(e: hapcal_problems::Error) -> Error {
+    Error::Baseline {
+        message: e.to_string(),
+    }
+}
+
 /// A binned signal: name, value per sample, bin edges.
 type Signal = (String, Vec<f64>, Vec<(f64, f64)>);
 
@@ -791,7 +801,7 @@ fn residual_map(
     cv: &Cv,
     alpha: f64,
 ) -> (Vec<Bin>, Vec<SignalTest>) {
-    let n = data.n;
+    let n = data.n_rows();
     let mut signals: Vec<Signal> = Vec::new();
     let quantile_edges = |v: &[f64], k: usize| -> Vec<(f64, f64)> {
         let mut s = v.to_vec();
@@ -810,8 +820,8 @@ fn residual_map(
             .map(|b| (TAU * b as f64 / k as f64, TAU * (b + 1) as f64 / k as f64))
             .collect::<Vec<_>>()
     };
-    for j in 0..data.q.first().map_or(0, Vec::len) {
-        let v: Vec<f64> = data.q.iter().map(|q| q[j]).collect();
+    for j in 0..data.q().first().map_or(0, Vec::len) {
+        let v: Vec<f64> = data.q().iter().map(|q| q[j]).collect();
         let edges = quantile_edges(&v, 5);
         signals.push((format!("q{}", j + 1), v.clone(), edges));
         if let Some(c) = device.capstans.iter().find(|c| c.joint == j + 1) {
@@ -828,21 +838,23 @@ fn residual_map(
     }
     signals.push((
         "distance".into(),
-        data.dist.clone(),
-        quantile_edges(&data.dist, 5),
+        data.distance_m().to_vec(),
+        quantile_edges(data.distance_m(), 5),
     ));
-    let gamma: Vec<f64> = lin.p.iter().map(hapcal_sim::cable_angle_rad).collect();
+    let gamma: Vec<f64> = (lin.p.iter())
+        .map(|p| hapcal_problems::cable_angle(&Point3::from(*p)).0)
+        .collect();
     signals.push((
         "cable_angle".into(),
         gamma.clone(),
         quantile_edges(&gamma, 5),
     ));
-    if let Some(t) = &data.t {
-        signals.push(("time".into(), t.clone(), quantile_edges(t, 5)));
+    if let Some(t) = data.t_s() {
+        signals.push(("time".into(), t.to_vec(), quantile_edges(t, 5)));
     }
     let drum = device.cable_encoder.map_or(0.015, |c| c.drum_radius_m);
     let ph: Vec<f64> = data
-        .dist
+        .distance_m()
         .iter()
         .map(|d| (d / drum).rem_euclid(TAU))
         .collect();
@@ -940,27 +952,25 @@ pub fn baseline_residuals_m(
             message: "the log does not fit the device or has fewer than 20 rows".to_owned(),
         });
     }
-    let data = Data::new(rows);
-    let mut setup = Setup::new(device, chain, true);
+    let data = log_data(rows)?;
+    let mut setup = Setup::new(device, chain, data.clone())?;
     let trans_joints: Vec<usize> = device.capstans.iter().map(|c| c.joint - 1).collect();
     let full = cfg.baseline == ModelChoice::Transmissions
         && !trans_joints.is_empty()
         && ext_available(rows, &trans_joints);
     let trans = if full {
-        setup.ext_joints = trans_joints;
-        fit_transmissions(device, &data, setup.sigma_e_rad)?
+        setup.set_ext_joints(trans_joints)?;
+        fit_transmissions(device, &data, setup.sigma_e_rad())?
     } else {
         Vec::new()
     };
-    let state0 = State {
-        trans,
-        x_kin: vec![0.0; setup.chain.n_params()],
-        terms: Vec::new(),
-    };
-    let (_, lin) = setup.refine(&data, state0, 8);
+    let state0 = setup.initial_state(trans);
+    let (_, lin) = setup.refine(state0, 8).map_err(baseline_error)?;
     let (q, _) = pivoted_basis(&lin.j, &DMatrix::zeros(lin.j.nrows(), 0), RANK_TOL);
     let r_perp = &lin.r - &q * (q.transpose() * &lin.r);
-    Ok((0..data.n).map(|i| r_perp[i] * lin.sigma[i]).collect())
+    Ok((0..data.n_rows())
+        .map(|i| r_perp[i] * lin.sigma[i])
+        .collect())
 }
 
 /// Diagnoses a log: the gap between the calibrated model and the floor, where it lies,
@@ -1024,10 +1034,10 @@ pub fn diagnose(
             ),
         });
     }
-    let data = Data::new(rows);
-    let n = data.n;
+    let data = log_data(rows)?;
+    let n = data.n_rows();
     let mut notes = Vec::new();
-    let mut setup = Setup::new(device, chain, true);
+    let mut setup = Setup::new(device, chain, data.clone())?;
     let trans_joints: Vec<usize> = device.capstans.iter().map(|c| c.joint - 1).collect();
     let mut baseline = cfg.baseline;
     if baseline == ModelChoice::Transmissions
@@ -1038,17 +1048,13 @@ pub fn diagnose(
         baseline = ModelChoice::Geometric;
     }
     let trans = if baseline == ModelChoice::Transmissions {
-        setup.ext_joints = trans_joints.clone();
-        fit_transmissions(device, &data, setup.sigma_e_rad)?
+        setup.set_ext_joints(trans_joints.clone())?;
+        fit_transmissions(device, &data, setup.sigma_e_rad())?
     } else {
         Vec::new()
     };
-    let state0 = State {
-        trans,
-        x_kin: vec![0.0; setup.chain.n_params()],
-        terms: Vec::new(),
-    };
-    let (mut state, lin) = setup.refine(&data, state0, 8);
+    let state0 = setup.initial_state(trans);
+    let (mut state, lin) = setup.refine(state0, 8).map_err(baseline_error)?;
     let mut n_base_cols = lin.j.ncols();
     let mut base = Base::new(lin, n_base_cols, cfg.folds, n);
     let base_rss_excess = |b: &Base| b.rss - b.dof();
@@ -1056,8 +1062,8 @@ pub fn diagnose(
     let mut floor_method = "spec: sigma_m = 2*pi*R_d*sigma_e, sigma_e = 2*pi/counts/3 (paper noise model), plus joint-reading quantisation rho^2/12 through dd/dq; held-out floor sigma^2*(1+h)".to_owned();
     let lower = 1.0 - chi2_sf(base.rss, base.dof());
     if lower < 1e-3 {
-        setup.quantisation = false;
-        let (s, lin) = setup.refine(&data, state.clone(), 2);
+        setup.set_quantisation(false);
+        let (s, lin) = setup.refine(state.clone(), 2).map_err(baseline_error)?;
         state = s;
         base = Base::new(lin, n_base_cols, cfg.folds, n);
         floor_method = "spec without quantisation: sigma_m = 2*pi*R_d*sigma_e, sigma_e = 2*pi/counts/3 (paper noise model); the residuals were significantly below the floor with reading quantisation, so the readings are not the quantisation-limited measurement here; held-out floor sigma^2*(1+h)".to_owned();
@@ -1097,7 +1103,7 @@ pub fn diagnose(
                 kind: TermKind::Joint {
                     joint: j,
                     g: data
-                        .q
+                        .q()
                         .iter()
                         .map(|q| probe.basis(q[j]).get(k).copied().unwrap_or(0.0))
                         .collect(),
@@ -1106,7 +1112,7 @@ pub fn diagnose(
             .collect();
         let mut s = state.clone();
         s.terms.extend(terms.into_iter().map(|t| (t, 0.0)));
-        let lin = setup.linearise(&data, &s);
+        let lin = setup.linearise(&s).ok()?;
         let c = lin.j.columns(n_base_cols, 6).into_owned();
         let (qc, _) = pivoted_basis_beside(&c, &base.q, 0.02, largest_column_norm(&base.lin.j));
         let k = qc.ncols() as f64;
@@ -1163,7 +1169,7 @@ pub fn diagnose(
             .par_iter()
             .filter(|e| !accepted_names.contains(e))
             .map(|effect| {
-                let tested = candidate_terms(effect, device, &data, n_joints).map(|terms| {
+                let tested = candidate_terms(effect, device, &data, n_joints).and_then(|terms| {
                     test_candidate(
                         &setup, &data, &state, &base, effect, terms, round, cfg.folds,
                     )
@@ -1247,7 +1253,7 @@ pub fn diagnose(
         let win = &tested[w];
         let mut s = state.clone();
         s.terms.extend(win.terms.iter().cloned().map(|t| (t, 0.0)));
-        let (s, lin) = setup.refine(&data, s, 10);
+        let (s, lin) = setup.refine(s, 10).map_err(baseline_error)?;
         state = s;
         n_base_cols = lin.j.ncols();
         let before = base.cv.mse().sqrt();
@@ -1368,8 +1374,8 @@ pub fn diagnose(
         n_samples: n,
         n_params,
         floor_method,
-        sigma_m_m: setup.sigma_m_m,
-        sigma_e_rad: setup.sigma_e_rad,
+        sigma_m_m: setup.sigma_m_m(),
+        sigma_e_rad: setup.sigma_e_rad(),
         floor_rms_m: floor_rms,
         heldout_rms_m: mse0.sqrt(),
         gap_rms_m: gap_rms,
@@ -1397,3 +1403,6 @@ pub fn diagnose(
         notes,
     })
 }
+
+#[cfg(test)]
+mod tests;

@@ -19,7 +19,7 @@ use hapcal_identify::{
 };
 use nalgebra::{DMatrix, DVector};
 
-use crate::model::{Data, Linear, Setup, State};
+use crate::model::{Linear, Setup, State};
 use crate::stats::pivoted_basis;
 
 /// Relative remaining norm below which [`lstsq`] drops a column as dependent on the columns
@@ -118,7 +118,6 @@ pub(crate) fn lstsq(a: &DMatrix<f64>, b: &DVector<f64>) -> (DVector<f64>, DMatri
 /// `(model − measured)/σ` (the negated [`Linear::r`]) and the Jacobian is [`Linear::j`].
 struct ModelProblem<'a> {
     setup: &'a Setup,
-    data: &'a Data,
     start: &'a State,
     layout: &'a ParamLayout,
     n_residuals: usize,
@@ -135,15 +134,21 @@ impl ModelProblem<'_> {
         s
     }
     /// Evaluates the linearisation at `x` (or reuses the last one) and passes it to `f`.
-    fn with_linear<T>(&self, x: ColRef<'_, f64>, f: impl FnOnce(&Linear) -> T) -> T {
+    fn with_linear<T>(
+        &self,
+        x: ColRef<'_, f64>,
+        f: impl FnOnce(&Linear) -> T,
+    ) -> Result<T, EvalError> {
         let x: Vec<f64> = x.iter().copied().collect();
         let mut last = self.last.borrow_mut();
         if last.as_ref().is_none_or(|(at, _)| *at != x) {
-            let lin = self.setup.linearise(self.data, &self.state_at(&x));
+            let lin = (self.setup.linearise(&self.state_at(&x))).map_err(|e| EvalError {
+                reason: e.to_string(),
+            })?;
             *last = Some((x, lin));
         }
         match last.as_ref() {
-            Some((_, lin)) => f(lin),
+            Some((_, lin)) => Ok(f(lin)),
             None => unreachable!("linearisation stored above"),
         }
     }
@@ -171,12 +176,10 @@ impl Problem for ModelProblem<'_> {
         self.n_residuals
     }
     fn residuals(&self, x: ColRef<'_, f64>, out: ColMut<'_, f64>) -> Result<(), EvalError> {
-        self.with_linear(x, |lin| Self::write(lin, Some(out), None));
-        Ok(())
+        self.with_linear(x, |lin| Self::write(lin, Some(out), None))
     }
     fn jacobian(&self, x: ColRef<'_, f64>, jac: MatMut<'_, f64>) -> Result<(), EvalError> {
-        self.with_linear(x, |lin| Self::write(lin, None, Some(jac)));
-        Ok(())
+        self.with_linear(x, |lin| Self::write(lin, None, Some(jac)))
     }
     fn residuals_and_jacobian(
         &self,
@@ -184,8 +187,7 @@ impl Problem for ModelProblem<'_> {
         out: ColMut<'_, f64>,
         jac: MatMut<'_, f64>,
     ) -> Result<(), EvalError> {
-        self.with_linear(x, |lin| Self::write(lin, Some(out), Some(jac)));
-        Ok(())
+        self.with_linear(x, |lin| Self::write(lin, Some(out), Some(jac)))
     }
 }
 
@@ -207,14 +209,16 @@ fn independent_columns(lin: &Linear, rank_tol: f64) -> Vec<usize> {
 /// near-dependency at the nominal becomes a dependency at the estimate): when the solver
 /// stops on a set that is no longer the independent one at its estimate, it goes on from
 /// there on the new set, with what is left of the budget. `iters = 0` leaves `s` as it is.
+///
+/// # Errors
+/// The model's, for a state that does not fit the log or the chain.
 pub(crate) fn fit_model(
     setup: &Setup,
-    data: &Data,
     mut s: State,
     iters: usize,
     rank_tol: f64,
-) -> (State, Linear) {
-    let mut lin = setup.linearise(data, &s);
+) -> Result<(State, Linear), hapcal_problems::Error> {
+    let mut lin = setup.linearise(&s)?;
     let (m, n) = lin.j.shape();
     let layout = dimensionless_layout(n);
     let mut free = independent_columns(&lin, rank_tol);
@@ -230,7 +234,6 @@ pub(crate) fn fit_model(
         };
         let problem = ModelProblem {
             setup,
-            data,
             start: &s,
             layout: &layout,
             n_residuals: m,
@@ -244,7 +247,7 @@ pub(crate) fn fit_model(
         let next = problem.state_at(&x);
         lin = match problem.last.into_inner() {
             Some((at, lin)) if at == x => lin,
-            _ => setup.linearise(data, &next),
+            _ => setup.linearise(&next)?,
         };
         s = next;
         let Ok(fit) = fit else { break };
@@ -255,5 +258,5 @@ pub(crate) fn fit_model(
         }
         free = now;
     }
-    (s, lin)
+    Ok((s, lin))
 }

@@ -2,6 +2,58 @@
 
 use hapcal_kinematics::{Chain, Factor, Isometry3, Motion, Point3, UnitQuaternion, Vector3};
 
+use crate::Error;
+
+/// Gravity of the haptic device's handle model, m/s² (docs/design.md §2.5: the handle's
+/// weight drives the `joint_compliance` effect of §6).
+pub const GRAVITY_M_S2: f64 = 9.81;
+
+/// Gravity torques of a haptic device's handle about each joint, N·m (length `n_joints`):
+/// `τ = J_vᵀ·F` with `F = −m·g·ẑ_0`, `ẑ_0` the axis of joint 1 (vertical, docs/design.md §2)
+/// and `J_v` the linear part of the geometric Jacobian at deviations `x` (m, rad) and joint
+/// angles `q` (rad) (Siciliano et al. 2009, §3.8.1); `mass_kg` the handle's point mass at the
+/// end point (docs/design.md §2.5), `g` = [`GRAVITY_M_S2`].
+///
+/// Unlike [`GravityCompliance`] (link masses or lumped unit weights on the nominal chain, with
+/// gravity along a fixed direction of the base frame and `g₀` = 9.80665 m/s²), this follows the
+/// deviations: gravity is along the (deviated) axis of joint 1, the lever arms those of the
+/// chain at `x`.
+///
+/// # Errors
+/// [`Error::LengthMismatch`] for `x` not of `chain.n_params()` entries; [`Error::JointCount`]
+/// for `q` not of `chain.n_joints()`.
+pub fn handle_gravity_torques_nm(
+    chain: &Chain,
+    x: &[f64],
+    q: &[f64],
+    mass_kg: f64,
+) -> Result<Vec<f64>, Error> {
+    if x.len() != chain.n_params() {
+        return Err(Error::LengthMismatch {
+            name: "x",
+            expected: chain.n_params(),
+            found: x.len(),
+        });
+    }
+    if q.len() != chain.n_joints() {
+        return Err(Error::JointCount {
+            row: 0,
+            expected: chain.n_joints(),
+            found: q.len(),
+        });
+    }
+    let jac = chain.geometric_jacobian(x, q);
+    let up: Vector3<f64> = if jac.ncols() > 0 {
+        Vector3::new(jac[(3, 0)], jac[(4, 0)], jac[(5, 0)])
+    } else {
+        Vector3::z()
+    };
+    let force = -mass_kg * GRAVITY_M_S2 * up;
+    Ok((0..jac.ncols())
+        .map(|j| jac[(0, j)] * force[0] + jac[(1, j)] * force[1] + jac[(2, j)] * force[2])
+        .collect())
+}
+
 /// Joint deflection proportional to a lumped gravity torque (non-geometric calibration,
 /// Judd & Knasinski 1990, "A technique to calibrate industrial robots with experimental
 /// verification"; Zhou, Na & Kang 2014 for the linear compliance model).

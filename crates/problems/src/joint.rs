@@ -5,11 +5,10 @@
 use faer::{Col, ColMut, ColRef, MatMut};
 use hapcal_identify::{EvalError, ParamLayout, Problem, Unit};
 use hapcal_kinematics::{Chain, FkWorkspace, ParamUnit};
-use hapcal_transmission::{
-    Capstan, CapstanParams, Chebyshev, Error as TransmissionError, JointRad,
-};
+use hapcal_transmission::{Capstan, CapstanParams, Chebyshev, Error as TransmissionError};
 
 use crate::Error;
+use crate::distance_log::{LogTransmission, distance_and_gradient, distance_joint_gradient};
 use crate::transmission::{CapstanProblem, spec};
 
 /// The transmissions of a [`JointProblem`]: capstan drives (paper eq. 1) on some joints and one
@@ -289,8 +288,20 @@ impl JointProblem {
         if let Some(j) = jac.as_mut() {
             j.fill(0.0);
         }
-        let n_caps = self.capstans.len();
-        let off_poly = 6 * n_caps;
+        // The transmissions as the distance-log model holds them: the same eq. 1 and
+        // polynomial evaluation, the capstans first.
+        let trans: Vec<LogTransmission> = (self.capstans.iter().zip(caps))
+            .map(|((joint, capstan), params)| LogTransmission::Capstan {
+                joint: joint - 1,
+                capstan: *capstan,
+                params,
+            })
+            .chain(std::iter::once(LogTransmission::Polynomial {
+                joint: self.poly_joint - 1,
+                poly,
+            }))
+            .collect();
+        let n_ext = trans.len();
         let mut buf = vec![0.0; 3 * n_kin];
         let mut ws = FkWorkspace::new(&self.chain);
         for k in 0..n_rows {
@@ -298,56 +309,41 @@ impl JointProblem {
             let mut q = theta.clone();
             // dq_j/d(transmission parameter) for the corrected joints.
             let mut dq: Vec<(usize, usize, f64)> = Vec::new();
-            for (c, (joint, capstan)) in self.capstans.iter().enumerate() {
-                let t = JointRad(theta[joint - 1]);
-                q[joint - 1] = capstan.output_rad(&caps[c], t);
-                let g = capstan.error_grad(&caps[c], t);
+            let mut col = 0;
+            for (c, tr) in trans.iter().enumerate() {
+                let jt = tr.joint();
+                let (out_angle, grad) = tr.eval(theta[jt]);
+                q[jt] = out_angle;
                 let row = c * n_rows + k;
                 if let Some(o) = out.as_mut() {
-                    o[row] = (q[joint - 1] - self.ext[c][k]) / self.sigma_ext_rad;
+                    o[row] = (q[jt] - self.ext[c][k]) / self.sigma_ext_rad;
                 }
-                for (p, gp) in g.iter().enumerate() {
-                    dq.push((joint - 1, 6 * c + p, *gp));
+                for (p, gp) in grad.iter().enumerate() {
+                    dq.push((jt, col + p, *gp));
                     if let Some(jm) = jac.as_mut() {
-                        jm[(row, 6 * c + p)] = gp / self.sigma_ext_rad;
+                        jm[(row, col + p)] = gp / self.sigma_ext_rad;
                     }
                 }
+                col += tr.n_params();
             }
-            let jp = self.poly_joint - 1;
-            q[jp] = theta[jp] + poly.eval(theta[jp]);
-            let basis = poly.basis(theta[jp]);
-            let row = n_caps * n_rows + k;
-            if let Some(o) = out.as_mut() {
-                o[row] = (q[jp] - self.ext[n_caps][k]) / self.sigma_ext_rad;
-            }
-            for (b, v) in basis.iter().enumerate() {
-                dq.push((jp, off_poly + b, *v));
-                if let Some(jm) = jac.as_mut() {
-                    jm[(row, off_poly + b)] = v / self.sigma_ext_rad;
-                }
-            }
-            let drow = (n_caps + 1) * n_rows + k;
-            let p = if jac.is_some() {
-                self.chain
-                    .point_and_jacobian_in(&x_kin, &q, &mut ws, &mut buf)
-            } else {
-                self.chain.end_point(&x_kin, &q)
-            };
-            let (norm, u) = crate::problem::length_and_direction(&p.coords);
-            if let Some(o) = out.as_mut() {
-                o[drow] = (norm - self.distance_m[k]) / self.sigma_distance_m;
-            }
+            let drow = n_ext * n_rows + k;
             if let Some(jm) = jac.as_mut() {
-                for i in 0..n_kin {
-                    jm[(drow, nt + i)] =
-                        (u[0] * buf[3 * i] + u[1] * buf[3 * i + 1] + u[2] * buf[3 * i + 2])
-                            / self.sigma_distance_m;
+                let (_, norm, u, d_kin) =
+                    distance_and_gradient(&self.chain, &x_kin, &q, &mut ws, &mut buf);
+                if let Some(o) = out.as_mut() {
+                    o[drow] = (norm - self.distance_m[k]) / self.sigma_distance_m;
                 }
-                let jq = self.chain.geometric_jacobian(&x_kin, &q);
+                for (i, d) in d_kin.iter().enumerate() {
+                    jm[(drow, nt + i)] = d / self.sigma_distance_m;
+                }
+                let (_, dd_dq) = distance_joint_gradient(&self.chain, &x_kin, &q, &u);
                 for (joint, col, dqdp) in dq {
-                    let dd = (0..3).map(|a| u[a] * jq[(a, joint)]).sum::<f64>();
-                    jm[(drow, col)] += dd * dqdp / self.sigma_distance_m;
+                    jm[(drow, col)] += dd_dq[joint] * dqdp / self.sigma_distance_m;
                 }
+            } else if let Some(o) = out.as_mut() {
+                let p = self.chain.end_point(&x_kin, &q);
+                let (norm, _) = crate::problem::length_and_direction(&p.coords);
+                o[drow] = (norm - self.distance_m[k]) / self.sigma_distance_m;
             }
         }
         Ok(())

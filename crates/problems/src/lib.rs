@@ -10,7 +10,10 @@
 //! - [`PolynomialProblem`]: step 1 for the parallelogram joint, its transmission error as a
 //!   Chebyshev polynomial of the reading;
 //! - [`JointProblem`]: both steps at once, the transmissions' external-encoder residuals and
-//!   the cable distances of the corrected chain sharing the transmission parameters.
+//!   the cable distances of the corrected chain sharing the transmission parameters;
+//! - [`DistanceLogModel`]: the model of a haptic device's time-ordered distance log that the
+//!   diagnosis linearises: [`JointProblem`]'s transmissions and kinematics plus the terms of
+//!   unmodelled effects, with per-row σ from the encoder specification.
 //!
 //! Architecture invariant: *`problems` turns a chain, transmissions and observations into an
 //! [`hapcal_identify::Problem`]; it never reads files and never solves.*
@@ -45,6 +48,7 @@
 //! ```
 
 mod compliance;
+mod distance_log;
 mod fleet;
 mod harmonics;
 mod joint;
@@ -52,7 +56,13 @@ mod model;
 mod problem;
 mod transmission;
 
-pub use compliance::{GravityCompliance, JointLoad, LinkMass};
+pub use compliance::{
+    GRAVITY_M_S2, GravityCompliance, JointLoad, LinkMass, handle_gravity_torques_nm,
+};
+pub use distance_log::{
+    DistanceLog, DistanceLogLinearisation, DistanceLogModel, DistanceLogNoise, DistanceLogState,
+    DistanceRow, EffectTerm, EffectTermKind, LogTransmission, distance_row,
+};
 pub use fleet::{FleetDevice, FleetProblem, cable_angle, fleet_initial_guess};
 pub use harmonics::JointHarmonics;
 pub use joint::{JointData, JointProblem, JointTransmissions};
@@ -132,6 +142,30 @@ pub enum Error {
         expected: usize,
         /// Actual length.
         found: usize,
+    },
+    /// A model setting is outside its range.
+    #[error("{name} = {value} is out of range: expected {expected}")]
+    OutOfRange {
+        /// The setting.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// The range, in words.
+        expected: &'static str,
+    },
+    /// A term of the model needs the log's sample times, which the log does not have.
+    #[error("{term} needs the sample times of the log, which has none")]
+    NoSampleTimes {
+        /// The term's name.
+        term: String,
+    },
+    /// A row lacks a reading the model uses.
+    #[error("row {row} has no external-encoder reading of joint {joint}")]
+    MissingReading {
+        /// Index of the row.
+        row: usize,
+        /// The joint, 1-based.
+        joint: usize,
     },
     /// A transmission model rejects its input (e.g. a polynomial domain that is not a finite
     /// interval).

@@ -12,15 +12,12 @@ use std::fmt;
 use std::str::FromStr;
 
 use hapcal_io::{Device, LogRow, N_EXT};
-use hapcal_kinematics::{Chain, Vector3};
+use hapcal_kinematics::Point3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
 use crate::{Error, SimConfig, Truth, quantise_readings, true_joint_angles, truth_deviations};
-
-/// Standard gravity, m/s² (used with the handle mass for [`EffectKind::JointCompliance`]).
-pub const GRAVITY_M_S2: f64 = 9.81;
 
 /// Handle mass used when the device file has no `[handle]`, kg (docs/design.md §2: 0.2 kg).
 pub const DEFAULT_HANDLE_MASS_KG: f64 = 0.2;
@@ -349,36 +346,6 @@ impl JointPath {
     }
 }
 
-/// Gravity torques of the handle about each joint, N·m (length `n_joints`): `τ = J_vᵀ·F`
-/// with `F = −m·g·ẑ_0`, `ẑ_0` the axis of joint 1 (vertical, docs/design.md §2) and `J_v` the
-/// linear part of the geometric Jacobian at `q` (Siciliano et al. 2009, §3.8.1).
-///
-/// # Panics
-/// If `x` or `q` do not fit `chain`.
-#[track_caller]
-pub fn handle_gravity_torques_nm(chain: &Chain, x: &[f64], q: &[f64], mass_kg: f64) -> Vec<f64> {
-    let jac = chain.geometric_jacobian(x, q);
-    let up: Vector3<f64> = if jac.ncols() > 0 {
-        Vector3::new(jac[(3, 0)], jac[(4, 0)], jac[(5, 0)])
-    } else {
-        Vector3::z()
-    };
-    let force = -mass_kg * GRAVITY_M_S2 * up;
-    (0..jac.ncols())
-        .map(|j| jac[(0, j)] * force[0] + jac[(1, j)] * force[1] + jac[(2, j)] * force[2])
-        .collect()
-}
-
-/// The cable's angle γ from the rig z axis, rad, for an end point `p` in the rig frame.
-pub fn cable_angle_rad(p: &Vector3<f64>) -> f64 {
-    let n = p.norm();
-    if n > 0.0 {
-        (p[2] / n).clamp(-1.0, 1.0).acos()
-    } else {
-        0.0
-    }
-}
-
 /// Checks the effects against the device: joints exist, capstan harmonics on capstan joints.
 fn check_effects(device: &Device, effects: &[Effect]) -> Result<(), Error> {
     let n = device.n_joints();
@@ -483,7 +450,12 @@ pub fn simulate_motion(
             .iter()
             .any(|e| e.kind == EffectKind::JointCompliance)
         {
-            handle_gravity_torques_nm(&chain, &x, &q, mass_kg)
+            hapcal_problems::handle_gravity_torques_nm(&chain, &x, &q, mass_kg).map_err(|e| {
+                Error::Effect {
+                    spec: "joint_compliance".to_owned(),
+                    message: e.to_string(),
+                }
+            })?
         } else {
             vec![0.0; n_joints]
         };
@@ -540,7 +512,7 @@ pub fn simulate_motion(
         for e in effects {
             d += match e.kind {
                 EffectKind::CableAngle => {
-                    let g = cable_angle_rad(&p);
+                    let (g, _) = hapcal_problems::cable_angle(&Point3::from(p));
                     e.get("k") * (g - g.sin())
                 }
                 EffectKind::ThermalDrift => d_true * e.get("k") * t,

@@ -52,11 +52,10 @@ mod error;
 mod sim;
 mod truth;
 
-pub use effects::{
-    DEFAULT_HANDLE_MASS_KG, Effect, EffectKind, GRAVITY_M_S2, MotionConfig, cable_angle_rad,
-    handle_gravity_torques_nm, simulate_motion,
-};
+pub use effects::{DEFAULT_HANDLE_MASS_KG, Effect, EffectKind, MotionConfig, simulate_motion};
 pub use error::Error;
+/// Gravity of the handle model, m/s² (the measurement model's, `hapcal_problems`).
+pub use hapcal_problems::GRAVITY_M_S2;
 pub use sim::{
     DistanceSamples, NoiseModel, PARALLELOGRAM_JOINT, SimConfig, distance_samples,
     joint_resolutions_rad, quantise_readings, sample_readings, simulate, true_joint_angles,

@@ -1,6 +1,7 @@
 use faer::{Col, Mat};
 use hapcal_identify::Problem;
 use hapcal_kinematics::{Chain, DhConvention, DhRow};
+use hapcal_transmission::JointRad;
 
 use super::*;
 use crate::{PolynomialProblem, Row, RowKind};

@@ -1,0 +1,338 @@
+use faer::Col;
+use hapcal_identify::Problem;
+use hapcal_io::Device;
+
+use super::*;
+use crate::{JointData, JointProblem, JointTransmissions};
+
+const SIGMA_EXT: f64 = 2e-5;
+const SIGMA_D: f64 = 1.5e-5;
+
+fn reference_device() -> Device {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/reference-device/device.toml");
+    hapcal_io::read_device(&path).unwrap()
+}
+
+/// Capstans on joints 1–3, the polynomial on joint 4, parameters away from zero.
+fn transmissions(device: &Device) -> Vec<LogTransmission> {
+    let mut out: Vec<LogTransmission> = (device.capstans.iter())
+        .filter(|c| c.joint != 4)
+        .enumerate()
+        .map(|(k, c)| LogTransmission::Capstan {
+            joint: c.joint - 1,
+            capstan: Capstan::try_new(c.ratio, c.drum_distance_m).unwrap(),
+            params: CapstanParams {
+                c_rad: 1e-3 * (k as f64 + 1.0),
+                re: -0.01,
+                r_o_m: 0.2e-3,
+                beta_o_rad: -1.8 + k as f64,
+                r_i_m: 0.01e-3,
+                beta_i_rad: 0.7,
+            },
+        })
+        .collect();
+    let (lo, hi) = device.joint_limits()[3];
+    out.push(LogTransmission::Polynomial {
+        joint: 3,
+        poly: Chebyshev::try_new(lo, hi, (0..=10).map(|k| 1e-3 / (k as f64 + 1.0)).collect())
+            .unwrap(),
+    });
+    out
+}
+
+/// Readings inside the joint limits, times, external readings near the joint angles and
+/// distances near the nominal chain's.
+fn log(device: &Device, n: usize) -> DistanceLog {
+    let chain = device.chain().unwrap();
+    let limits = device.joint_limits();
+    let q: Vec<Vec<f64>> = (0..n)
+        .map(|i| {
+            (limits.iter().enumerate())
+                .map(|(j, &(lo, hi))| {
+                    let s = (0.37 * (i * (j + 2)) as f64 + 0.5 * j as f64).sin();
+                    0.5 * (lo + hi) + 0.4 * (hi - lo) * s
+                })
+                .collect()
+        })
+        .collect();
+    let x0 = vec![0.0; chain.n_params()];
+    let distance_m = (q.iter().enumerate())
+        .map(|(i, q)| chain.end_point(&x0, q).coords.norm() + 1e-4 * (i as f64).cos())
+        .collect();
+    let ext = (q.iter().enumerate())
+        .map(|(i, q)| {
+            (0..4)
+                .map(|j| Some(q[j] + 1e-4 * ((i + j) as f64).sin()))
+                .collect()
+        })
+        .collect();
+    let t = (0..n).map(|i| 0.01 * i as f64).collect();
+    DistanceLog::new(q, Some(t), distance_m, ext).unwrap()
+}
+
+fn x_kin(chain: &Chain) -> Vec<f64> {
+    (0..chain.n_params())
+        .map(|k| 1e-4 * ((k as f64) * 1.7).sin())
+        .collect()
+}
+
+fn model(device: &Device, log: DistanceLog) -> DistanceLogModel {
+    let chain = device.chain().unwrap();
+    let noise = DistanceLogNoise {
+        sigma_m_m: SIGMA_D,
+        sigma_e_rad: SIGMA_EXT,
+        resolution_rad: vec![1e-4; chain.n_joints()],
+    };
+    DistanceLogModel::new(chain, log, noise, 0.2).unwrap()
+}
+
+#[test]
+fn restricted_to_transmissions_and_kinematics_it_is_the_joint_problem() {
+    let device = reference_device();
+    let chain = device.chain().unwrap();
+    let n = 40;
+    let log = log(&device, n);
+    let trans = transmissions(&device);
+    let mut m = model(&device, log.clone());
+    m.quantisation = false;
+    m.set_ext_joints(trans.iter().map(LogTransmission::joint).collect())
+        .unwrap();
+    let mut state = m.initial_state(trans.clone());
+    state.x_kin = x_kin(&chain);
+    let lin = m.linearise(&state).unwrap();
+
+    let (lo, hi) = device.joint_limits()[3];
+    let capstans: Vec<(usize, Capstan)> = (trans.iter())
+        .filter_map(|t| match t {
+            LogTransmission::Capstan { joint, capstan, .. } => Some((joint + 1, *capstan)),
+            LogTransmission::Polynomial { .. } => None,
+        })
+        .collect();
+    let params: Vec<CapstanParams> = (trans.iter())
+        .filter_map(|t| match t {
+            LogTransmission::Capstan { params, .. } => Some(*params),
+            LogTransmission::Polynomial { .. } => None,
+        })
+        .collect();
+    let coeffs = match &trans[3] {
+        LogTransmission::Polynomial { poly, .. } => poly.coeffs.clone(),
+        LogTransmission::Capstan { .. } => unreachable!(),
+    };
+    let jt = JointTransmissions {
+        capstans,
+        poly_joint: 4,
+        poly_degree: 10,
+        poly_lo_rad: lo,
+        poly_hi_rad: hi,
+    };
+    let data = JointData {
+        q: log.q().to_vec(),
+        ext: (0..4)
+            .map(|j| log.ext().iter().map(|e| e[j].unwrap()).collect())
+            .collect(),
+        distance_m: log.distance_m().to_vec(),
+    };
+    let jp = JointProblem::new(chain.clone(), jt, data, SIGMA_EXT, SIGMA_D).unwrap();
+    let x = jp.start(
+        &params,
+        &coeffs,
+        Col::from_fn(chain.n_params(), |i| state.x_kin[i]).as_ref(),
+    );
+    let layout_names: Vec<String> = jp.layout().specs().iter().map(|p| p.name.clone()).collect();
+    assert_eq!(lin.names, layout_names);
+    let m_rows = jp.n_residuals();
+    assert_eq!(lin.residuals.len(), m_rows);
+    let mut r = Col::zeros(m_rows);
+    jp.residuals(x.as_ref(), r.as_mut()).unwrap();
+    let mut jac = faer::Mat::zeros(m_rows, x.nrows());
+    jp.jacobian(x.as_ref(), jac.as_mut()).unwrap();
+    // The joint problem's rows: the four external encoders, then the distances; the model's:
+    // the distances, then the external encoders.
+    let joint_row = |row: usize| if row < n { 4 * n + row } else { row - n };
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1e-6);
+    for row in 0..m_rows {
+        let jr = joint_row(row);
+        assert!(
+            close(lin.residuals[row], r[jr]),
+            "residual {row}: {} vs {}",
+            lin.residuals[row],
+            r[jr]
+        );
+        for c in 0..x.nrows() {
+            assert!(
+                close(lin.jacobian[(row, c)], jac[(jr, c)]),
+                "row {row}, {}: {} vs {}",
+                lin.names[c],
+                lin.jacobian[(row, c)],
+                jac[(jr, c)]
+            );
+        }
+    }
+    assert!(lin.sigma[..n].iter().all(|&s| s == SIGMA_D));
+    assert!(lin.sigma[n..].iter().all(|&s| s == SIGMA_EXT));
+}
+
+/// Every term kind's columns against central differences of the unweighted model
+/// (coefficients 0 where the model's linearisation leaves out the term's own dependence on the
+/// state, as the diagnosis linearises at a baseline).
+#[test]
+fn jacobian_matches_finite_differences_with_every_term_kind() {
+    let device = reference_device();
+    let chain = device.chain().unwrap();
+    let n = 25;
+    let log = log(&device, n);
+    let mut m = model(&device, log.clone());
+    m.set_ext_joints(vec![0, 3]).unwrap();
+    let mut state = m.initial_state(transmissions(&device));
+    state.x_kin = x_kin(&chain);
+    let term = |name: &str, kind| EffectTerm {
+        name: name.to_owned(),
+        unit: "1",
+        kind,
+    };
+    let g: Vec<f64> = log.q().iter().map(|q| q[4].sin()).collect();
+    state.terms = vec![
+        (term("joint", EffectTermKind::Joint { joint: 4, g }), 2e-3),
+        (
+            term("offset", EffectTermKind::Distance { h: vec![1.0; n] }),
+            1e-4,
+        ),
+        (term("latency", EffectTermKind::Latency), 0.0),
+        (
+            term("drift", EffectTermKind::ThermalDrift { scale: true }),
+            0.0,
+        ),
+        (
+            term("rate", EffectTermKind::ThermalDrift { scale: false }),
+            1e-5,
+        ),
+        (term("angle", EffectTermKind::CableAngle { power: 0 }), 5e-3),
+        (term("cos2", EffectTermKind::CableAngle { power: 2 }), -2e-3),
+        (
+            term("compliance", EffectTermKind::Compliance { joint: 1 }),
+            0.0,
+        ),
+    ];
+    let lin = m.linearise(&state).unwrap();
+    let unweighted = |s: &DistanceLogState| -> Vec<f64> {
+        let l = m.linearise(s).unwrap();
+        // σ is evaluated at the state (quantisation through ∂d/∂q): undo it row by row.
+        (0..l.residuals.len())
+            .map(|i| l.residuals[i] * l.sigma[i])
+            .collect()
+    };
+    let ncols = state.n_params();
+    assert_eq!(lin.jacobian.ncols(), ncols);
+    for c in 0..ncols {
+        let h = 1e-7;
+        let mut delta = vec![0.0; ncols];
+        delta[c] = h;
+        let mut plus = state.clone();
+        plus.apply(&delta);
+        delta[c] = -h;
+        let mut minus = state.clone();
+        minus.apply(&delta);
+        let (rp, rm) = (unweighted(&plus), unweighted(&minus));
+        for i in 0..rp.len() {
+            let fd = (rp[i] - rm[i]) / (2.0 * h);
+            let an = lin.jacobian[(i, c)] * lin.sigma[i];
+            assert!(
+                (fd - an).abs() <= 1e-5 * an.abs().max(1e-3),
+                "row {i}, {}: finite difference {fd} vs {an}",
+                lin.names[c]
+            );
+        }
+    }
+}
+
+#[test]
+fn bad_inputs_are_errors() {
+    let device = reference_device();
+    let chain = device.chain().unwrap();
+    let log = log(&device, 10);
+    assert!(matches!(
+        DistanceLog::new(vec![vec![0.0; 7]; 3], None, vec![1.0; 2], vec![vec![]; 3]),
+        Err(Error::LengthMismatch {
+            name: "distance_m",
+            ..
+        })
+    ));
+    assert!(matches!(
+        DistanceLog::new(vec![vec![f64::NAN; 7]], None, vec![1.0], vec![vec![]]),
+        Err(Error::NotFinite { row: 0 })
+    ));
+    let no_times = DistanceLog::new(
+        log.q().to_vec(),
+        None,
+        log.distance_m().to_vec(),
+        vec![vec![]; 10],
+    )
+    .unwrap();
+    let mut m = model(&device, no_times);
+    assert!(matches!(
+        m.set_ext_joints(vec![0]),
+        Err(Error::MissingReading { row: 0, joint: 1 })
+    ));
+    assert!(matches!(
+        m.set_ext_joints(vec![9]),
+        Err(Error::NoSuchJoint { joint: 10, .. })
+    ));
+    let mut s = m.initial_state(Vec::new());
+    s.terms.push((
+        EffectTerm {
+            name: "latency.tau".into(),
+            unit: "s",
+            kind: EffectTermKind::Latency,
+        },
+        0.0,
+    ));
+    assert!(matches!(m.linearise(&s), Err(Error::NoSampleTimes { .. })));
+    s.terms[0].0.kind = EffectTermKind::Joint {
+        joint: 2,
+        g: vec![0.0; 3],
+    };
+    assert!(matches!(m.linearise(&s), Err(Error::LengthMismatch { .. })));
+    s.x_kin.pop();
+    assert!(matches!(
+        m.linearise(&s),
+        Err(Error::LengthMismatch { name: "x_kin", .. })
+    ));
+    let noise = DistanceLogNoise::paper(20_000, 0.015, vec![0.0; 3]);
+    assert!(matches!(
+        DistanceLogModel::new(chain.clone(), log.clone(), noise, 0.2),
+        Err(Error::LengthMismatch {
+            name: "resolution_rad",
+            ..
+        })
+    ));
+    let q = log.q()[0].clone();
+    assert!(distance_row(&chain, &[0.0; 3], &q, 1e-5, &[]).is_err());
+    assert!(distance_row(&chain, &vec![0.0; chain.n_params()], &q[..3], 1e-5, &[]).is_err());
+    assert!(distance_row(&chain, &vec![0.0; chain.n_params()], &q, 0.0, &[]).is_err());
+    assert!(handle_gravity_torques_nm(&chain, &[0.0], &q, 0.2).is_err());
+}
+
+#[test]
+fn distance_row_adds_the_joint_variances() {
+    let device = reference_device();
+    let chain = device.chain().unwrap();
+    let log = log(&device, 3);
+    let x0 = vec![0.0; chain.n_params()];
+    let q = &log.q()[1];
+    let plain = distance_row(&chain, &x0, q, 1e-5, &[]).unwrap();
+    assert_eq!(plain.sigma_m, 1e-5);
+    assert!(plain.joint_gradient.is_empty());
+    assert!((plain.distance_m - chain.end_point(&x0, q).coords.norm()).abs() < 1e-15);
+    let var = vec![1e-8; chain.n_joints()];
+    let noisy = distance_row(&chain, &x0, q, 1e-5, &var).unwrap();
+    assert_eq!(noisy.jacobian, plain.jacobian);
+    let expected: f64 = 1e-10
+        + noisy
+            .joint_gradient
+            .iter()
+            .map(|d| d * d * 1e-8)
+            .sum::<f64>();
+    assert!((noisy.sigma_m - expected.sqrt()).abs() < 1e-18);
+    assert!(noisy.sigma_m > plain.sigma_m);
+}
