@@ -829,9 +829,11 @@ impl VarianceTable {
 /// `joint_var_rad2` have none. The row is [`hapcal_problems::distance_row`]'s, the distance
 /// Jacobian of the identification problems.
 ///
+/// A negative variance (a quadratic form rounded below zero) counts as zero.
+///
 /// # Panics
 /// If `q` has the wrong length or an index of `kept` is out of range (misuse), or if `sigma_m`
-/// is not positive and finite or a variance is negative (validated by the callers' problems).
+/// is not positive and finite (validated by the callers' problems).
 #[track_caller]
 pub fn distance_row(
     chain: &hapcal_kinematics::Chain,
@@ -842,7 +844,7 @@ pub fn distance_row(
 ) -> Mat<f64> {
     let x0 = vec![0.0; chain.n_params()];
     let joint_var: Vec<f64> = (0..chain.n_joints())
-        .map(|j| joint_var_rad2.get(j).copied().unwrap_or(0.0))
+        .map(|j| joint_var_rad2.get(j).copied().unwrap_or(0.0).max(0.0))
         .collect();
     let row = match hapcal_problems::distance_row(chain, &x0, q, sigma_m, &joint_var) {
         Ok(row) => row,

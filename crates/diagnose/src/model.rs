@@ -5,7 +5,9 @@
 
 use hapcal_io::{Device, LogRow, N_EXT};
 use hapcal_kinematics::{Chain, Vector3};
-use hapcal_problems::{DistanceLogLinearisation, DistanceLogModel, DistanceLogNoise};
+use hapcal_problems::{
+    DistanceLogLinearisation, DistanceLogModel, DistanceLogNoise, Error as ProblemError,
+};
 use nalgebra::{DMatrix, DVector};
 
 pub(crate) use hapcal_problems::{
@@ -33,8 +35,24 @@ pub(crate) fn log_data(rows: &[LogRow]) -> Result<Data, Error> {
         rows.iter().map(|r| r.distance_m).collect(),
         rows.iter().map(|r| r.ext.clone()).collect(),
     )
-    .map_err(|e| Error::Data {
-        message: e.to_string(),
+    .map_err(|e| {
+        // The problem counts rows from 0; the user reads the file's lines.
+        let line = |row: usize| rows.get(row).map_or(0, |r| r.line);
+        let message = match e {
+            ProblemError::NotFinite { row } => {
+                format!("line {}: a reading that is not a finite number", line(row))
+            }
+            ProblemError::JointCount {
+                row,
+                expected,
+                found,
+            } => format!(
+                "line {}: {found} joint readings where the device has {expected} joints",
+                line(row)
+            ),
+            e => e.to_string(),
+        };
+        Error::Data { message }
     })
 }
 
@@ -77,7 +95,8 @@ impl Setup {
     /// noise model, docs/design.md §3) and handle mass, the quantisation on.
     ///
     /// # Errors
-    /// [`Error::Data`] for a log that does not fit the chain.
+    /// [`Error::Baseline`] for a device whose encoder specification or handle mass the model
+    /// refuses, or a log that does not fit its chain.
     pub(crate) fn new(device: &Device, chain: Chain, data: Data) -> Result<Setup, Error> {
         let cable = device.cable_encoder;
         let noise = DistanceLogNoise::paper(
@@ -91,10 +110,11 @@ impl Setup {
         let handle_mass_kg = device
             .handle
             .map_or(hapcal_sim::DEFAULT_HANDLE_MASS_KG, |h| h.mass_kg);
-        let model =
-            DistanceLogModel::new(chain, data, noise, handle_mass_kg).map_err(|e| Error::Data {
-                message: e.to_string(),
-            })?;
+        let model = DistanceLogModel::new(chain, data, noise, handle_mass_kg).map_err(|e| {
+            Error::Baseline {
+                message: format!("the device's model of the log: {e}"),
+            }
+        })?;
         Ok(Setup { model })
     }
 

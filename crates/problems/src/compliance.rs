@@ -5,7 +5,10 @@ use hapcal_kinematics::{Chain, Factor, Isometry3, Motion, Point3, UnitQuaternion
 use crate::Error;
 
 /// Gravity of the haptic device's handle model, m/s² (docs/design.md §2.5: the handle's
-/// weight drives the `joint_compliance` effect of §6).
+/// weight drives the `joint_compliance` effect of §6). The simulator's value since the first
+/// reference-device studies, kept so that their logs and compliances (rad/(N·m) against this
+/// torque) do not move; the link masses of robot arms use standard gravity, 9.80665 m/s²,
+/// 0.03 % less.
 pub const GRAVITY_M_S2: f64 = 9.81;
 
 /// Gravity torques of a haptic device's handle about each joint, N·m (length `n_joints`):

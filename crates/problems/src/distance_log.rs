@@ -488,9 +488,10 @@ impl DistanceLogNoise {
     /// The paper's noise model (docs/design.md §3): `σ_e = 2π/counts/3` (a third of an
     /// encoder count), `σ_m = 2π·R_d·σ_e`, for a cable encoder of `counts_per_rev` counts on a
     /// drum of radius `drum_radius_m` (m), with the joints' reading resolutions
-    /// `resolution_rad` (rad).
+    /// `resolution_rad` (rad). An encoder of 0 counts gives infinite σs, which
+    /// [`DistanceLogModel::new`] refuses.
     pub fn paper(counts_per_rev: u32, drum_radius_m: f64, resolution_rad: Vec<f64>) -> Self {
-        let sigma_e_rad = TAU / f64::from(counts_per_rev.max(1)) / 3.0;
+        let sigma_e_rad = TAU / f64::from(counts_per_rev) / 3.0;
         Self {
             sigma_m_m: TAU * drum_radius_m * sigma_e_rad,
             sigma_e_rad,
@@ -527,7 +528,10 @@ pub struct DistanceLogLinearisation {
 /// `σ_m²`); then, for each joint of [`Self::ext_joints`], its external-encoder reading against
 /// the modelled joint angle, `σ² = σ_e² (+ ρⱼ²/12)`. The Jacobian is analytic, including the
 /// distance rows' dependence on the transmissions through the corrected angles and, for a
-/// cable-angle term, every column's through γ. Restricted to the transmissions and the
+/// cable-angle term, every column's through γ; three second-order products are left out (a
+/// Gauss–Newton Jacobian of the effect terms about the baseline): the dependence of a scaled
+/// thermal drift's `|P|`, of a latency's distance rate and of a compliance's gravity torque
+/// on the kinematic and transmission parameters, each a coefficient times a derivative. Restricted to the transmissions and the
 /// kinematics without quantisation it is [`crate::JointProblem`] (rows and columns permuted).
 ///
 /// Source: Baser & Konukseven, Fig. 6, eqs. 1 and 5; docs/design.md §3 (noise) and §6
@@ -551,8 +555,8 @@ impl DistanceLogModel {
     /// # Errors
     /// [`Error::JointCount`] for readings of another length than the chain's joints;
     /// [`Error::LengthMismatch`] for a `resolution_rad` not of one per joint;
-    /// [`Error::BadSigma`] for a σ not positive and finite or a resolution negative or not
-    /// finite; [`Error::OutOfRange`] for a negative or non-finite handle mass.
+    /// [`Error::BadSigma`] for a σ not positive and finite; [`Error::OutOfRange`] for a
+    /// resolution or a handle mass negative or not finite.
     pub fn new(
         chain: Chain,
         log: DistanceLog,
@@ -584,9 +588,10 @@ impl DistanceLogModel {
         }
         if let Some(&value) = (noise.resolution_rad.iter()).find(|v| !(v.is_finite() && **v >= 0.0))
         {
-            return Err(Error::BadSigma {
+            return Err(Error::OutOfRange {
                 name: "resolution_rad",
                 value,
+                expected: "a finite resolution ≥ 0 (0: unknown)",
             });
         }
         if !(handle_mass_kg.is_finite() && handle_mass_kg >= 0.0) {
@@ -682,6 +687,16 @@ impl DistanceLogModel {
         if let Some(e) = s.transmissions.iter().find_map(|t| no_joint(t.joint())) {
             return Err(e);
         }
+        // One transmission per joint: a second would correct the reading again from θ.
+        for (k, t) in s.transmissions.iter().enumerate() {
+            if s.transmissions[..k].iter().any(|o| o.joint() == t.joint()) {
+                return Err(Error::OutOfRange {
+                    name: "transmissions on one joint",
+                    value: (t.joint() + 1) as f64,
+                    expected: "at most one transmission per joint",
+                });
+            }
+        }
         for (term, _) in &s.terms {
             let samples = |v: &Vec<f64>| {
                 (v.len() != n).then_some(Error::LengthMismatch {
@@ -715,8 +730,8 @@ impl DistanceLogModel {
     /// # Errors
     /// [`Error::LengthMismatch`] for deviations not of the chain's length or a term's samples
     /// not of one per row; [`Error::NoSuchJoint`] for a transmission or term on a joint the
-    /// chain does not have; [`Error::NoSampleTimes`] for a latency or thermal-drift term on a
-    /// log without times.
+    /// chain does not have; [`Error::OutOfRange`] for two transmissions on one joint;
+    /// [`Error::NoSampleTimes`] for a latency or thermal-drift term on a log without times.
     pub fn linearise(&self, s: &DistanceLogState) -> Result<DistanceLogLinearisation, Error> {
         self.check(s)?;
         let data = &self.log;

@@ -15,8 +15,10 @@
 //!   diagnosis linearises: [`JointProblem`]'s transmissions and kinematics plus the terms of
 //!   unmodelled effects, with per-row σ from the encoder specification.
 //!
-//! Architecture invariant: *`problems` turns a chain, transmissions and observations into an
-//! [`hapcal_identify::Problem`]; it never reads files and never solves.*
+//! Architecture invariant: *`problems` turns a chain, transmissions and observations into
+//! residuals and their Jacobian — an [`hapcal_identify::Problem`], or for the diagnosis's
+//! candidate search the linearisation of [`DistanceLogModel`], which the diagnosis hands to
+//! `hapcal-identify` — it never reads files and never solves.*
 //!
 //! Measurement types (each a residual with its analytic Jacobian):
 //! - [`RowKind::Distance`]: distance from the rig origin (the chain's base) to the end point,

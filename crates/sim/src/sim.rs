@@ -47,8 +47,13 @@ impl NoiseModel {
     /// The external encoders are taken to have the cable encoder's `counts_per_rev`
     /// (docs/design.md §2: 20000 on every encoder; the device file lists no external encoders).
     pub fn paper(cable: &CableEncoder) -> NoiseModel {
-        let sigma_e_rad = encoder_sigma_rad(cable.counts_per_rev);
-        NoiseModel::new(sigma_e_rad, TAU * cable.drum_radius_m * sigma_e_rad)
+        // The model's own noise (one definition of the paper's formulas).
+        let paper = hapcal_problems::DistanceLogNoise::paper(
+            cable.counts_per_rev,
+            cable.drum_radius_m,
+            Vec::new(),
+        );
+        NoiseModel::new(paper.sigma_e_rad, paper.sigma_m_m)
     }
 
     /// As [`NoiseModel::paper`], but with the arc length `σ_m = R_d·σ_e` (≈ 1.57 µm for the

@@ -311,6 +311,23 @@ fn bad_inputs_are_errors() {
     assert!(distance_row(&chain, &vec![0.0; chain.n_params()], &q[..3], 1e-5, &[]).is_err());
     assert!(distance_row(&chain, &vec![0.0; chain.n_params()], &q, 0.0, &[]).is_err());
     assert!(handle_gravity_torques_nm(&chain, &[0.0], &q, 0.2).is_err());
+    // Two transmissions on one joint: the second would correct the reading again.
+    let mut twice = model(&device, log.clone()).initial_state(transmissions(&device));
+    let first = twice.transmissions[0].clone();
+    twice.transmissions.push(first);
+    assert!(matches!(
+        model(&device, log.clone()).linearise(&twice),
+        Err(Error::OutOfRange {
+            name: "transmissions on one joint",
+            ..
+        })
+    ));
+    // An encoder of no counts has no finite noise.
+    let none = DistanceLogNoise::paper(0, 0.015, vec![0.0; chain.n_joints()]);
+    assert!(matches!(
+        DistanceLogModel::new(chain.clone(), log, none, 0.2),
+        Err(Error::BadSigma { .. })
+    ));
 }
 
 #[test]
