@@ -528,10 +528,11 @@ pub struct DistanceLogLinearisation {
 /// `σ_m²`); then, for each joint of [`Self::ext_joints`], its external-encoder reading against
 /// the modelled joint angle, `σ² = σ_e² (+ ρⱼ²/12)`. The Jacobian is analytic, including the
 /// distance rows' dependence on the transmissions through the corrected angles and, for a
-/// cable-angle term, every column's through γ; three second-order products are left out (a
-/// Gauss–Newton Jacobian of the effect terms about the baseline): the dependence of a scaled
-/// thermal drift's `|P|`, of a latency's distance rate and of a compliance's gravity torque
-/// on the kinematic and transmission parameters, each a coefficient times a derivative. Restricted to the transmissions and the
+/// cable-angle term or a scaled thermal drift, every column's through γ or `|P|`; two
+/// second-order products are left out (a Gauss–Newton Jacobian of the effect terms about the
+/// baseline): the dependence of a latency's distance rate and of a compliance's gravity torque
+/// on the kinematic and transmission parameters, each a coefficient times a second
+/// derivative of the chain. Restricted to the transmissions and the
 /// kinematics without quantisation it is [`crate::JointProblem`] (rows and columns permuted).
 ///
 /// Source: Baser & Konukseven, Fig. 6, eqs. 1 and 5; docs/design.md §3 (noise) and §6
@@ -824,6 +825,21 @@ impl DistanceLogModel {
                         } else {
                             f64::from(power) * cos_g.powi(power - 1)
                         };
+                }
+            }
+            // A scaled drift `coef·|P|·(t − t₀)` moves with |P|: every column's derivative of
+            // the distance, times `Σ coef·(t − t₀)`.
+            let t_i = data.t.as_ref().map_or(0.0, |t| t[i]);
+            let drift_scale: f64 = (s.terms.iter())
+                .filter(|(t, _)| matches!(t.kind, EffectTermKind::ThermalDrift { scale: true }))
+                .map(|(_, coef)| coef * (t_i - t0))
+                .sum();
+            if drift_scale != 0.0 {
+                for k in 0..n_kin {
+                    row_j[n_trans + k] += drift_scale * d_kin[k];
+                }
+                for &(jt, c, g) in &dq {
+                    row_j[c] += drift_scale * dd_dq[jt] * g;
                 }
             }
             if dh_dc != 0.0 {
