@@ -808,25 +808,20 @@ impl DistanceLogModel {
             for &(jt, c, g) in &dq {
                 row_j[c] += dd_dq[jt] * g;
             }
-            // A cable-angle term moves with P: its derivative through γ (cos γ = P_z/|P|).
-            let grad_c = if norm > 0.0 {
-                (Vector3::z() - u * u[2]) / norm
-            } else {
-                Vector3::zeros()
-            };
-            let cos_g = u[2].clamp(-1.0, 1.0);
-            let mut dh_dc = 0.0;
-            for (term, coef) in &s.terms {
-                if let EffectTermKind::CableAngle { power } = term.kind {
-                    let sin_g = (1.0 - cos_g * cos_g).sqrt().max(1e-9);
-                    dh_dc += coef
-                        * if power == 0 {
-                            -(1.0 - cos_g) / sin_g
-                        } else {
-                            f64::from(power) * cos_g.powi(power - 1)
-                        };
-                }
-            }
+            // A cable-angle term `coef·f(γ)` moves with P: its derivative through γ
+            // ([`cable_angle`]'s gradient), `f′ = 1 − cos γ` for `γ − sin γ`, else
+            // `−power·cos^(power−1) γ·sin γ`.
+            let (gamma, dgamma) = cable_angle(&Point3::from(p));
+            let df_dgamma: f64 = (s.terms.iter())
+                .filter_map(|(term, coef)| match term.kind {
+                    EffectTermKind::CableAngle { power: 0 } => Some(coef * (1.0 - gamma.cos())),
+                    EffectTermKind::CableAngle { power } => {
+                        Some(-coef * f64::from(power) * gamma.cos().powi(power - 1) * gamma.sin())
+                    }
+                    _ => None,
+                })
+                .sum();
+            let grad_c = dgamma * df_dgamma;
             // A scaled drift `coef·|P|·(t − t₀)` moves with |P|: every column's derivative of
             // the distance, times `Σ coef·(t − t₀)`.
             let t_i = data.t.as_ref().map_or(0.0, |t| t[i]);
@@ -842,14 +837,14 @@ impl DistanceLogModel {
                     row_j[c] += drift_scale * dd_dq[jt] * g;
                 }
             }
-            if dh_dc != 0.0 {
+            if df_dgamma != 0.0 {
                 for k in 0..n_kin {
                     let dp = Vector3::new(buf[3 * k], buf[3 * k + 1], buf[3 * k + 2]);
-                    row_j[n_trans + k] += dh_dc * grad_c.dot(&dp);
+                    row_j[n_trans + k] += grad_c.dot(&dp);
                 }
                 for &(jt, c, g) in &dq {
                     let jv = Vector3::new(jq[(0, jt)], jq[(1, jt)], jq[(2, jt)]);
-                    row_j[c] += dh_dc * grad_c.dot(&jv) * g;
+                    row_j[c] += grad_c.dot(&jv) * g;
                 }
             }
             for (k, (term, coef)) in s.terms.iter().enumerate() {
@@ -865,11 +860,10 @@ impl DistanceLogModel {
                         if *scale { norm * (t - t0) } else { t - t0 }
                     }
                     EffectTermKind::CableAngle { power } => {
-                        let (g, _) = cable_angle(&Point3::from(p));
                         if *power == 0 {
-                            g - g.sin()
+                            gamma - gamma.sin()
                         } else {
-                            g.cos().powi(*power)
+                            gamma.cos().powi(*power)
                         }
                     }
                     _ => continue,
