@@ -13,7 +13,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::Error;
 use crate::compliance::handle_gravity_torques_nm;
 use crate::fleet::cable_angle;
-use crate::problem::length_and_direction;
+use crate::problem::{along, length_and_direction};
 
 /// The end point `P` (rig frame, m), the distance `|P|` (paper eq. 5, m), its direction `u`
 /// and `∂|P|/∂x_kin = uᵀ·∂P/∂x_kin` (one entry per chain parameter), at deviations `x_kin` and
@@ -27,9 +27,7 @@ pub(crate) fn distance_and_gradient(
 ) -> (Vector3<f64>, f64, Vector3<f64>, Vec<f64>) {
     let p = chain.point_and_jacobian_in(x_kin, q, ws, buf).coords;
     let (norm, u) = length_and_direction(&p);
-    let d_kin = (0..chain.n_params())
-        .map(|k| u[0] * buf[3 * k] + u[1] * buf[3 * k + 1] + u[2] * buf[3 * k + 2])
-        .collect();
+    let d_kin = (0..chain.n_params()).map(|k| along(&u, buf, k)).collect();
     (p, norm, u, d_kin)
 }
 
@@ -839,8 +837,7 @@ impl DistanceLogModel {
             }
             if df_dgamma != 0.0 {
                 for k in 0..n_kin {
-                    let dp = Vector3::new(buf[3 * k], buf[3 * k + 1], buf[3 * k + 2]);
-                    row_j[n_trans + k] += grad_c.dot(&dp);
+                    row_j[n_trans + k] += along(&grad_c, &buf, k);
                 }
                 for &(jt, c, g) in &dq {
                     let jv = Vector3::new(jq[(0, jt)], jq[(1, jt)], jq[(2, jt)]);

@@ -189,7 +189,7 @@ impl FleetProblem {
             if let Some((g, sh)) = grads.as_mut() {
                 let w = (u + dphi * k) / s;
                 for (a, &j) in self.device_params.iter().enumerate() {
-                    g[i * np + a] = w.x * buf[3 * j] + w.y * buf[3 * j + 1] + w.z * buf[3 * j + 2];
+                    g[i * np + a] = crate::problem::along(&w, &buf, j);
                 }
                 sh[2 * i] = 1.0 / s;
                 sh[2 * i + 1] = phi / s;

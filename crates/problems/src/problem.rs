@@ -1587,6 +1587,18 @@ pub(crate) fn length_and_direction(d: &Vector3<f64>) -> (f64, Vector3<f64>) {
     (norm, u)
 }
 
+/// `wᵀ·∂P/∂x_k`: the derivative along `w` of the end point's column `k` of `buf` (`∂P/∂x`
+/// column by column, 3 entries per parameter, as `Chain::point_and_jacobian_in` and
+/// `FrozenChain::point_and_jacobian` write it). With `w` the direction of
+/// [`length_and_direction`] it is a distance row's `∂|P|/∂x_k` (paper eq. 5); with a cable
+/// angle's gradient folded into `w`, that term's.
+///
+/// # Panics
+/// If `buf` holds fewer than `3·(k + 1)` entries (misuse).
+pub(crate) fn along(w: &Vector3<f64>, buf: &[f64], k: usize) -> f64 {
+    w[0] * buf[3 * k] + w[1] * buf[3 * k + 1] + w[2] * buf[3 * k + 2]
+}
+
 /// The inverse right Jacobian of SO(3) at the rotation vector `phi`:
 /// `log(exp([φ]×)·exp([δ]×)) ≈ φ + J_r⁻¹(φ)·δ`,
 /// `J_r⁻¹(φ) = I + ½[φ]× + (1/θ² − (1 + cos θ)/(2θ sin θ))·[φ]×²`, θ = |φ| (Barfoot,
