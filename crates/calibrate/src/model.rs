@@ -262,8 +262,9 @@ impl ModelChoice {
             ),
             (M::Geometric, DataKind::HapticLogs) => None,
             (_, DataKind::HapticLogs) => Some(
-                "a haptic device's logs determine its transmissions and kinematic deviations \
-                 (auto, transmissions, geometric); its cable encoder carries no gravity model",
+                "a haptic device's logs are calibrated for its transmissions and kinematic \
+                 deviations (auto, transmissions, geometric); the handle's gravity compliance is \
+                 judged by hapcal diagnose (joint_compliance), not fitted by calibrate",
             ),
             (M::FramesOnly | M::JointOffsets, DataKind::Sockets | DataKind::Distances) => Some(
                 "socket recordings and distance logs have no instrument or marker frame: their \
