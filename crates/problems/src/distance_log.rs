@@ -14,6 +14,7 @@ use crate::Error;
 use crate::compliance::handle_gravity_torques_nm;
 use crate::fleet::cable_angle;
 use crate::problem::{along, length_and_direction};
+use crate::transmission::{CAPSTAN_PARAMS, capstan_param, chebyshev_param};
 
 /// The end point `P` (rig frame, m), the distance `|P|` (paper eq. 5, m), its direction `u`
 /// and `∂|P|/∂x_kin = uᵀ·∂P/∂x_kin` (one entry per chain parameter), at deviations `x_kin` and
@@ -327,12 +328,11 @@ impl LogTransmission {
     /// `capstan{j}.c … .beta_i`, `joint{j}.cheb0 … cheb{degree}`.
     pub fn names(&self) -> Vec<String> {
         match self {
-            Self::Capstan { joint, .. } => ["c", "re", "r_o", "beta_o", "r_i", "beta_i"]
-                .iter()
-                .map(|p| format!("capstan{}.{p}", joint + 1))
+            Self::Capstan { joint, .. } => (CAPSTAN_PARAMS.iter())
+                .map(|(p, _)| capstan_param(joint + 1, p))
                 .collect(),
             Self::Polynomial { joint, poly } => (0..poly.coeffs.len())
-                .map(|k| format!("joint{}.cheb{k}", joint + 1))
+                .map(|k| chebyshev_param(joint + 1, k))
                 .collect(),
         }
     }

@@ -9,7 +9,7 @@ use hapcal_transmission::{Capstan, CapstanParams, Chebyshev, Error as Transmissi
 
 use crate::Error;
 use crate::distance_log::{LogTransmission, distance_and_gradient, distance_joint_gradient};
-use crate::transmission::{CapstanProblem, spec};
+use crate::transmission::{CAPSTAN_PARAMS, CapstanProblem, capstan_param, chebyshev_param, spec};
 
 /// The transmissions of a [`JointProblem`]: capstan drives (paper eq. 1) on some joints and one
 /// joint whose transmission error is a Chebyshev polynomial of its reading (the paper's
@@ -169,21 +169,13 @@ impl JointProblem {
             }
         }
         let mut specs = Vec::new();
-        let names = [
-            ("c", Unit::Radian),
-            ("re", Unit::Dimensionless),
-            ("r_o", Unit::Meter),
-            ("beta_o", Unit::Radian),
-            ("r_i", Unit::Meter),
-            ("beta_i", Unit::Radian),
-        ];
         for (joint, _) in &capstans {
-            for (n, unit) in names {
-                specs.push(spec(format!("capstan{joint}.{n}"), unit));
+            for (n, unit) in CAPSTAN_PARAMS {
+                specs.push(spec(capstan_param(*joint, n), unit));
             }
         }
         for k in 0..=degree {
-            specs.push(spec(format!("joint{poly_joint}.cheb{k}"), Unit::Radian));
+            specs.push(spec(chebyshev_param(poly_joint, k), Unit::Radian));
         }
         for p in chain.params() {
             let unit = match p.unit {

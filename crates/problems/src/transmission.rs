@@ -55,6 +55,27 @@ fn check_data(theta: &[f64], ext: &[f64], sigma_rad: f64) -> Result<(), Transmis
     Ok(())
 }
 
+/// A capstan drive's eq. 1 parameters in layout order (as [`CapstanProblem::params`] reads
+/// them), with their units; every problem names them `capstan{j}.{name}` ([`capstan_param`]).
+pub(crate) const CAPSTAN_PARAMS: [(&str, Unit); 6] = [
+    ("c", Unit::Radian),
+    ("re", Unit::Dimensionless),
+    ("r_o", Unit::Meter),
+    ("beta_o", Unit::Radian),
+    ("r_i", Unit::Meter),
+    ("beta_i", Unit::Radian),
+];
+
+/// The name of parameter `name` of the capstan on joint `joint` (1-based).
+pub(crate) fn capstan_param(joint: usize, name: &str) -> String {
+    format!("capstan{joint}.{name}")
+}
+
+/// The name of Chebyshev coefficient `k` of the polynomial on joint `joint` (1-based).
+pub(crate) fn chebyshev_param(joint: usize, k: usize) -> String {
+    format!("joint{joint}.cheb{k}")
+}
+
 /// A model parameter's spec.
 pub(crate) fn spec(name: String, unit: Unit) -> ParamSpec {
     ParamSpec {
@@ -132,15 +153,11 @@ impl CapstanProblem {
         sigma_rad: f64,
     ) -> Result<CapstanProblem, TransmissionError> {
         check_data(&theta, &ext, sigma_rad)?;
-        let name = |p: &str| format!("capstan{joint}.{p}");
-        let layout = ParamLayout::new(vec![
-            spec(name("c"), Unit::Radian),
-            spec(name("re"), Unit::Dimensionless),
-            spec(name("r_o"), Unit::Meter),
-            spec(name("beta_o"), Unit::Radian),
-            spec(name("r_i"), Unit::Meter),
-            spec(name("beta_i"), Unit::Radian),
-        ]);
+        let layout = ParamLayout::new(
+            (CAPSTAN_PARAMS.iter())
+                .map(|(p, unit)| spec(capstan_param(joint, p), *unit))
+                .collect(),
+        );
         Ok(CapstanProblem {
             capstan,
             theta,
@@ -373,7 +390,7 @@ impl PolynomialProblem {
         check_data(&theta, &ext, sigma_rad)?;
         let layout = ParamLayout::new(
             (0..=degree)
-                .map(|k| spec(format!("joint{joint}.cheb{k}"), Unit::Radian))
+                .map(|k| spec(chebyshev_param(joint, k), Unit::Radian))
                 .collect(),
         );
         let basis = theta.iter().flat_map(|&t| zero.basis(t)).collect();
