@@ -853,8 +853,11 @@ impl DistanceLogModel {
                         None => 0.0,
                     },
                     EffectTermKind::ThermalDrift { scale } => {
-                        let t = data.t.as_ref().map_or(0.0, |t| t[i]);
-                        if *scale { norm * (t - t0) } else { t - t0 }
+                        if *scale {
+                            norm * (t_i - t0)
+                        } else {
+                            t_i - t0
+                        }
                     }
                     EffectTermKind::CableAngle { power } => {
                         if *power == 0 {
