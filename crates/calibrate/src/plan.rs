@@ -152,7 +152,9 @@ pub struct PosePlan {
 /// σ_m (m) and σ_e (rad) used to weight the rows.
 fn sigmas(device: &Device, sigma_m: Option<f64>) -> (f64, f64) {
     let paper = device.cable_encoder.as_ref().map(NoiseModel::paper);
-    let sigma_e = paper.map_or(std::f64::consts::TAU / 20_000.0 / 3.0, |n| n.sigma_e_rad);
+    let sigma_e = paper
+        .unwrap_or_else(|| NoiseModel::paper(&hapcal_sim::REFERENCE_CABLE_ENCODER))
+        .sigma_e_rad;
     (
         sigma_m.unwrap_or(paper.map_or(1e-5, |n| n.sigma_m_m)),
         sigma_e,

@@ -852,7 +852,9 @@ fn residual_map(
     if let Some(t) = data.t_s() {
         signals.push(("time".into(), t.to_vec(), quantile_edges(t, 5)));
     }
-    let drum = device.cable_encoder.map_or(0.015, |c| c.drum_radius_m);
+    let drum = (device.cable_encoder)
+        .unwrap_or(hapcal_sim::REFERENCE_CABLE_ENCODER)
+        .drum_radius_m;
     let ph: Vec<f64> = data
         .distance_m()
         .iter()

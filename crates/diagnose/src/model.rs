@@ -98,10 +98,10 @@ impl Setup {
     /// [`Error::Baseline`] for a device whose encoder specification or handle mass the model
     /// refuses, or a log that does not fit its chain.
     pub(crate) fn new(device: &Device, chain: Chain, data: Data) -> Result<Setup, Error> {
-        let cable = device.cable_encoder;
+        let cable = (device.cable_encoder).unwrap_or(hapcal_sim::REFERENCE_CABLE_ENCODER);
         let noise = DistanceLogNoise::paper(
-            cable.map_or(20_000, |c| c.counts_per_rev),
-            cable.map_or(0.015, |c| c.drum_radius_m),
+            cable.counts_per_rev,
+            cable.drum_radius_m,
             hapcal_sim::joint_resolutions_rad(device)
                 .into_iter()
                 .map(|r| r.unwrap_or(0.0))

@@ -424,7 +424,9 @@ pub fn simulate_motion(
         .map(|k| device.capstans.iter().any(|c| c.joint == k + 1))
         .collect();
     let mass_kg = device.handle.map_or(DEFAULT_HANDLE_MASS_KG, |h| h.mass_kg);
-    let drum_radius_m = device.cable_encoder.map_or(0.015, |c| c.drum_radius_m);
+    let drum_radius_m = (device.cable_encoder)
+        .unwrap_or(crate::REFERENCE_CABLE_ENCODER)
+        .drum_radius_m;
 
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
     let duration_s = motion.sample_period_s * cfg.n_poses.max(1) as f64;

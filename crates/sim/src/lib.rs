@@ -57,8 +57,8 @@ pub use error::Error;
 /// Gravity of the handle model, m/s² (the measurement model's, `hapcal_problems`).
 pub use hapcal_problems::GRAVITY_M_S2;
 pub use sim::{
-    DistanceSamples, NoiseModel, PARALLELOGRAM_JOINT, SimConfig, distance_samples,
-    joint_resolutions_rad, quantise_readings, sample_readings, simulate, true_joint_angles,
-    truth_deviations,
+    DistanceSamples, NoiseModel, PARALLELOGRAM_JOINT, REFERENCE_CABLE_ENCODER, SimConfig,
+    distance_samples, joint_resolutions_rad, quantise_readings, sample_readings, simulate,
+    true_joint_angles, truth_deviations,
 };
 pub use truth::{CapstanTruth, ParallelogramTruth, Truth, parse_truth, read_truth};

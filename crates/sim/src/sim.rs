@@ -83,6 +83,14 @@ fn encoder_sigma_rad(counts: u32) -> f64 {
     TAU / f64::from(counts) / 3.0
 }
 
+/// The reference device's cable encoder (docs/design.md §2: 20000 counts/rev on a 0.015 m
+/// drum): the encoder a device file without a `[cable_encoder]` is simulated and diagnosed
+/// with.
+pub const REFERENCE_CABLE_ENCODER: CableEncoder = CableEncoder {
+    drum_radius_m: 0.015,
+    counts_per_rev: 20_000,
+};
+
 /// What [`simulate`] produces: seed, number of poses, noise, quantisation.
 ///
 /// Build it with [`SimConfig::new`] and adjust fields or use the `with_…` methods; more
@@ -107,14 +115,10 @@ impl SimConfig {
     /// `σ_e = 2π/20000/3` rad and `σ_m ≈ 9.87 µm`) and quantised joint readings. For another
     /// device, set `noise` from its cable encoder.
     pub fn new(seed: u64, n_poses: usize) -> SimConfig {
-        let cable = CableEncoder {
-            drum_radius_m: 0.015,
-            counts_per_rev: 20_000,
-        };
         SimConfig {
             seed,
             n_poses,
-            noise: NoiseModel::paper(&cable),
+            noise: NoiseModel::paper(&REFERENCE_CABLE_ENCODER),
             quantise_joints: true,
         }
     }
