@@ -129,6 +129,13 @@ pub fn planned_model(device: &Device, measurement: Measurement, model: ModelChoi
     model.check_fits(kind)
 }
 
+/// Whether `model` frees no family beyond the kinematic deviations (and a haptic device's
+/// transmissions, whose rows the blocks carry either way): the plain identification problem
+/// plans it.
+fn plans_kinematics_only(model: ModelChoice) -> bool {
+    matches!(model, ModelChoice::Geometric | ModelChoice::Transmissions)
+}
+
 /// Result of [`plan_poses`].
 #[derive(Clone, Debug)]
 pub struct PosePlan {
@@ -264,9 +271,7 @@ pub fn candidate_blocks_for(
         sigma_position_m: sigma_m,
         ..Weights::default()
     };
-    let problem = if model.families() == ModelChoice::Geometric.families()
-        || model == ModelChoice::Transmissions
-    {
+    let problem = if plans_kinematics_only(model) {
         CalibrationProblem::new(chain, obs, weights, None)?
     } else {
         let names: Vec<String> = chain.joint_names().iter().map(|n| n.to_string()).collect();
@@ -427,11 +432,7 @@ pub fn plan_poses_weighted(
     }
     planned_model(device, cfg.measurement, cfg.model)?;
     let kinematic_rows = cfg.measurement == Measurement::Distance && !cfg.transmission_rows;
-    let geometric = matches!(
-        cfg.model,
-        ModelChoice::Geometric | ModelChoice::Transmissions
-    );
-    if kinematic_rows && !geometric {
+    if kinematic_rows && !plans_kinematics_only(cfg.model) {
         bail!(
             "--model {}: a separate transmission run plans the kinematic rows of the geometric \
              model; plan for geometric, or without --separate-transmission-run",
