@@ -1167,17 +1167,7 @@ fn revise(
     cfg: &ArmConfig,
     excluded: &[ArmEffect],
 ) -> Option<Revision> {
-    let with = |parts: &[&DMatrix<f64>]| {
-        let n = jb.ncols() + parts.iter().map(|p| p.ncols()).sum::<usize>();
-        let mut a = DMatrix::zeros(jb.nrows(), n);
-        a.columns_mut(0, jb.ncols()).copy_from(jb);
-        let mut at = jb.ncols();
-        for p in parts {
-            a.columns_mut(at, p.ncols()).copy_from(*p);
-            at += p.ncols();
-        }
-        a
-    };
+    let with = |parts: &[&DMatrix<f64>]| beside(jb, parts);
     let held = |a: &DMatrix<f64>| cross_validate(a, r, rows, folds, cfg.folds, floor_var);
     let set = |skip: usize| -> String {
         (named.iter().enumerate())
@@ -1242,11 +1232,7 @@ fn revise(
             .collect();
         let base = with(&others);
         let (qb, _) = pivoted_basis(&base, &DMatrix::zeros(base.nrows(), 0), 1e-9);
-        let (_, picked) =
-            pivoted_basis_beside(&alt_cols, &qb, VISIBLE_TOL, largest_column_norm(&base));
-        let visible: Vec<usize> = (0..alt_cols.ncols())
-            .filter(|&c| picked[c].is_some())
-            .collect();
+        let (_, visible) = visible_columns(&alt_cols, &qb, &base);
         if visible.is_empty() {
             continue;
         }
@@ -1278,6 +1264,32 @@ fn revise(
         }
     }
     None
+}
+
+/// `a` with the columns of `parts` appended, in order.
+fn beside(a: &DMatrix<f64>, parts: &[&DMatrix<f64>]) -> DMatrix<f64> {
+    let n = a.ncols() + parts.iter().map(|p| p.ncols()).sum::<usize>();
+    let mut out = DMatrix::zeros(a.nrows(), n);
+    out.columns_mut(0, a.ncols()).copy_from(a);
+    let mut at = a.ncols();
+    for p in parts {
+        out.columns_mut(at, p.ncols()).copy_from(*p);
+        at += p.ncols();
+    }
+    out
+}
+
+/// The columns of a candidate `cols` visible beside the baseline `base` (`qb` its orthonormal
+/// basis): pivoted against `qb` at [`VISIBLE_TOL`] of the baseline's largest column
+/// ([`pivoted_basis_beside`]); returns their orthonormal basis and their indices.
+fn visible_columns(
+    cols: &DMatrix<f64>,
+    qb: &DMatrix<f64>,
+    base: &DMatrix<f64>,
+) -> (DMatrix<f64>, Vec<usize>) {
+    let (qc, picked) = pivoted_basis_beside(cols, qb, VISIBLE_TOL, largest_column_norm(base));
+    let visible = (0..cols.ncols()).filter(|&c| picked[c].is_some()).collect();
+    (qc, visible)
 }
 
 /// Checks the `--baseline` asked for a robot measured by an instrument: it is diagnosed on its
@@ -1453,10 +1465,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                         continue;
                     }
                 };
-                let (qc, picked) =
-                    pivoted_basis_beside(&cols, &qb, VISIBLE_TOL, largest_column_norm(&a));
-                let visible: Vec<usize> =
-                    (0..cols.ncols()).filter(|&c| picked[c].is_some()).collect();
+                let (qc, visible) = visible_columns(&cols, &qb, &a);
                 let mut cand = ArmCandidate {
                     effect: effect.name().to_owned(),
                     round,
@@ -1493,9 +1502,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                 let k = visible.len() as f64;
                 let dof = (dof_b - k).max(1.0);
                 let p_f = f_sf((drss / k) / ((rss_b - drss).max(1e-300) / dof), k, dof);
-                let mut ac = DMatrix::zeros(a.nrows(), a.ncols() + c_vis.ncols());
-                ac.columns_mut(0, a.ncols()).copy_from(&a);
-                ac.columns_mut(a.ncols(), c_vis.ncols()).copy_from(&c_vis);
+                let ac = beside(&a, &[&c_vis]);
                 let held = cross_validate(&ac, &r, &rows, &folds, cfg.folds, floor_var);
                 let (m, se, filled) = blocked_mean_difference(&base.score, &held.score, &block);
                 let p_cv = one_sided_p(m, se, filled.saturating_sub(1) as f64);
@@ -1646,11 +1653,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                 parameters: win.cand.parameters.clone(),
                 confusable_with: confusable,
             });
-            let mut grown = DMatrix::zeros(a.nrows(), a.ncols() + win.columns.ncols());
-            grown.columns_mut(0, a.ncols()).copy_from(&a);
-            grown
-                .columns_mut(a.ncols(), win.columns.ncols())
-                .copy_from(&win.columns);
+            let grown = beside(&a, &[&win.columns]);
             effect_cols.push((win.effect, win.columns.clone(), win.visible.clone()));
             let _ = &win.names;
             accepted.push(win.effect);
@@ -1964,10 +1967,7 @@ fn ladder(
     let mut test_cols: Vec<DMatrix<f64>> = tests.iter().map(|t| t.shared.clone()).collect();
     let mut named_so_far: Vec<ArmEffect> = Vec::new();
     for (effect, cols, visible) in effects {
-        let mut grown = DMatrix::zeros(a.nrows(), a.ncols() + cols.ncols());
-        grown.columns_mut(0, a.ncols()).copy_from(&a);
-        grown.columns_mut(a.ncols(), cols.ncols()).copy_from(cols);
-        a = grown;
+        a = beside(&a, &[cols]);
         let held = cross_validate(&a, r, rows, folds, cfg.folds, None);
         let (x, _) = lstsq(&a, r);
         let mut rms = Vec::new();
@@ -1979,12 +1979,7 @@ fn ladder(
             } else {
                 DMatrix::zeros(t.r.len(), visible.len())
             };
-            let mut grown = DMatrix::zeros(tc.nrows(), tc.ncols() + c_vis.ncols());
-            grown.columns_mut(0, tc.ncols()).copy_from(tc);
-            grown
-                .columns_mut(tc.ncols(), c_vis.ncols())
-                .copy_from(&c_vis);
-            *tc = grown;
+            *tc = beside(tc, &[&c_vis]);
             let coef: Vec<f64> = (shared_kept.iter().copied())
                 .chain(jb.ncols()..a.ncols())
                 .map(|k| x[k])
