@@ -289,6 +289,13 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
                 st["round_gap_closed_pct"].as_f64().unwrap_or(f64::NAN),
                 params.join(", ")
             ));
+            for a in st["alike"].as_array().into_iter().flatten() {
+                md.push_str(&format!(
+                    "- Torque model open: {} in its place predicts as well (within two standard \
+                     errors, beside the other named effects).\n",
+                    a.as_str().unwrap_or("?")
+                ));
+            }
             for c in st["confusable_with"].as_array().into_iter().flatten() {
                 md.push_str(&format!(
                     "- Confusable with {} on these data; to separate them, record {}.\n",

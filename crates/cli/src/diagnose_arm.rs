@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use anyhow::{Context, Result};
 use hapcal_calibrate::baseline::{DataKind, geometric_baseline};
 use hapcal_calibrate::calibrate::Plan;
-use hapcal_diagnose::arm::{ArmConfig, ArmDiagnosis, diagnose_arm};
+use hapcal_diagnose::arm::{ArmConfig, ArmDiagnosis, ArmEffect, diagnose_arm};
 
 /// Loads `plan`'s device and data, fits the geometric baseline (with the kinematic ladder)
 /// and diagnoses it; returns the diagnosis and the loaders' warnings.
@@ -129,7 +129,20 @@ pub fn render_arm(d: &ArmDiagnosis) -> String {
                 p.name, p.value, p.std, p.unit
             );
         }
-        for (other, how) in &st.confusable_with {
+        for other in &st.alike {
+            let _ = writeln!(
+                s,
+                "      the torque model is open: {other} in its place predicts as well (within two \
+                 standard errors, beside the other named effects); to tell them apart record {}",
+                ArmEffect::from_name(&st.effect)
+                    .zip(ArmEffect::from_name(other))
+                    .map_or(
+                        "the same poses with and without a known payload",
+                        |(a, b)| { a.separating_measurement(b) }
+                    )
+            );
+        }
+        for (other, how) in (st.confusable_with.iter()).filter(|(o, _)| !st.alike.contains(o)) {
             let _ = writeln!(
                 s,
                 "      confusable with {other} on these data; to separate them record {how}"
@@ -168,7 +181,24 @@ pub fn render_arm(d: &ArmDiagnosis) -> String {
     for n in &d.notes {
         let _ = writeln!(s, "note: {n}");
     }
-    let _ = writeln!(s, "\nverdict: {}", d.verdict);
+    let open: Vec<String> = (d.steps.iter())
+        .filter(|st| d.verdict.effects().contains(&st.effect))
+        .flat_map(|st| {
+            st.alike
+                .iter()
+                .map(move |a| format!("{} or {a}", st.effect))
+        })
+        .collect();
+    if open.is_empty() {
+        let _ = writeln!(s, "\nverdict: {}", d.verdict);
+    } else {
+        let _ = writeln!(
+            s,
+            "\nverdict: {} (torque model open: {})",
+            d.verdict,
+            open.join(", ")
+        );
+    }
     s
 }
 

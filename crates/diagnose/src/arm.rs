@@ -152,6 +152,15 @@ impl ArmEffect {
         }
     }
 
+    /// Whether this is a joint compliance (gravity or lumped: one effect under two torque
+    /// models).
+    pub fn is_compliance(self) -> bool {
+        matches!(
+            self,
+            ArmEffect::GravityCompliance | ArmEffect::LumpedCompliance
+        )
+    }
+
     /// The effect named `name`.
     pub fn from_name(name: &str) -> Option<ArmEffect> {
         Self::LIBRARY.into_iter().find(|e| e.name() == name)
@@ -363,6 +372,11 @@ pub struct ArmStep {
     pub parameters: Vec<EffectParam>,
     /// Candidates the data confuse with it, each with the measurement that would separate them.
     pub confusable_with: Vec<(String, String)>,
+    /// The same effect under another model that these data do not tell from it: for a
+    /// compliance, the other torque model when, in its place beside the other named effects,
+    /// it predicts worse by less than the two blocked standard errors that name an effect
+    /// (held-out squared error, paired by block). Empty when the data name the model.
+    pub alike: Vec<String>,
 }
 
 /// The diagnosis of a serial arm's data.
@@ -1223,26 +1237,14 @@ fn revise(
         if excluded.contains(&alt) || named.iter().any(|(e, _, _)| *e == alt) {
             continue;
         }
-        let Ok((alt_cols, _)) = effect_columns(alt, ctx, rows, dq) else {
+        let Some((swapped, n_visible)) =
+            swapped(ctx, rows, r, jb, dq, named, k, alt, folds, floor_var, cfg)
+        else {
             continue;
         };
-        let others: Vec<&DMatrix<f64>> = (named.iter().enumerate())
-            .filter(|(i, _)| *i != k)
-            .map(|(_, (_, c, _))| c)
-            .collect();
-        let base = with(&others);
-        let (qb, _) = pivoted_basis(&base, &DMatrix::zeros(base.nrows(), 0), 1e-9);
-        let (_, visible) = visible_columns(&alt_cols, &qb, &base);
-        if visible.is_empty() {
-            continue;
-        }
-        let alt_vis = alt_cols.select_columns(&visible);
-        let mut parts = others.clone();
-        parts.push(&alt_vis);
-        let swapped = held(&with(&parts));
         // Improvement of the alternative over the named effect.
         let (m, se, _) = blocked_mean_difference(&full.score, &swapped.score, block);
-        let simpler = (visible.len(), order(alt)) < (cols.ncols(), order(*effect));
+        let simpler = (n_visible, order(alt)) < (cols.ncols(), order(*effect));
         if m > se || (m >= -se && simpler) {
             return Some(Revision {
                 leave_out: *effect,
@@ -1264,6 +1266,41 @@ fn revise(
         }
     }
     None
+}
+
+/// The held-out errors of the named effects (`named`, as in [`revise`]) with the `k`-th
+/// replaced by `alt`, and the number of `alt`'s columns visible beside the others; `None` when
+/// `alt` cannot be built on these data or none of its columns is visible.
+#[allow(clippy::too_many_arguments)] // the pieces of one diagnosis
+fn swapped(
+    ctx: &Context<'_>,
+    rows: &Rows,
+    r: &DVector<f64>,
+    jb: &DMatrix<f64>,
+    dq: &DMatrix<f64>,
+    named: &[(ArmEffect, DMatrix<f64>, Vec<usize>)],
+    k: usize,
+    alt: ArmEffect,
+    folds: &[Vec<usize>],
+    floor_var: Option<f64>,
+    cfg: &ArmConfig,
+) -> Option<(HeldOut, usize)> {
+    let (alt_cols, _) = effect_columns(alt, ctx, rows, dq).ok()?;
+    let others: Vec<&DMatrix<f64>> = (named.iter().enumerate())
+        .filter(|(i, _)| *i != k)
+        .map(|(_, (_, c, _))| c)
+        .collect();
+    let base = beside(jb, &others);
+    let (qb, _) = pivoted_basis(&base, &DMatrix::zeros(base.nrows(), 0), 1e-9);
+    let (_, visible) = visible_columns(&alt_cols, &qb, &base);
+    if visible.is_empty() {
+        return None;
+    }
+    let alt_vis = alt_cols.select_columns(&visible);
+    let mut parts = others;
+    parts.push(&alt_vis);
+    let held = cross_validate(&beside(jb, &parts), r, rows, folds, cfg.folds, floor_var);
+    Some((held, visible.len()))
 }
 
 /// `a` with the columns of `parts` appended, in order.
@@ -1444,15 +1481,9 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             for effect in ArmEffect::LIBRARY {
                 // Gravity and lumped compliance are one effect under two torque models: once one
                 // is named, the other is not a further effect.
-                let compliance = |e: &ArmEffect| {
-                    matches!(
-                        e,
-                        ArmEffect::GravityCompliance | ArmEffect::LumpedCompliance
-                    )
-                };
                 if accepted.contains(&effect)
                     || excluded.contains(&effect)
-                    || (compliance(&effect) && accepted.iter().any(compliance))
+                    || (effect.is_compliance() && accepted.iter().any(|e| e.is_compliance()))
                 {
                     continue;
                 }
@@ -1652,6 +1683,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                 round_gap_closed_pct: win.cand.gap_closed_pct,
                 parameters: win.cand.parameters.clone(),
                 confusable_with: confusable,
+                alike: Vec::new(),
             });
             let grown = beside(&a, &[&win.columns]);
             effect_cols.push((win.effect, win.columns.clone(), win.visible.clone()));
@@ -1727,6 +1759,36 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                 revisions.push(note);
             }
             None => break,
+        }
+    }
+    // The compliance's torque model is named only on the evidence that names an effect: beside
+    // the other named effects, the other torque model predicts worse by HELDOUT_SIGNIFICANCE_Z
+    // blocked standard errors. Otherwise the data do not tell the two apart, and the step says
+    // so.
+    for (k, (effect, _, _)) in effect_cols.iter().enumerate() {
+        let alt = match effect {
+            ArmEffect::GravityCompliance => ArmEffect::LumpedCompliance,
+            ArmEffect::LumpedCompliance => ArmEffect::GravityCompliance,
+            _ => continue,
+        };
+        let Some((other, _)) = swapped(
+            &ctx,
+            &rows,
+            &r,
+            &jb,
+            &dq,
+            &effect_cols,
+            k,
+            alt,
+            &folds,
+            floor_var,
+            cfg,
+        ) else {
+            continue;
+        };
+        let (d, se, _) = blocked_mean_difference(&other.score, &base.score, &block);
+        if d <= HELDOUT_SIGNIFICANCE_Z * se || d.is_nan() || se.is_nan() {
+            steps[k].alike.push(alt.name().to_owned());
         }
     }
     notes.extend(revisions);

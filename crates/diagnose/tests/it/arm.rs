@@ -66,6 +66,10 @@ fn kuka_14_names_gravity_compliance_and_it_carries_to_the_test_placements() {
         "{:?}",
         step.confusable_with
     );
+    // With the ball in a socket the link masses' torque and a tip weight's vary together: in
+    // its place the lumped model predicts as well (0.109 against 0.107 mm), and the step says
+    // the torque model is open.
+    assert_eq!(step.alike, ["lumped_compliance"], "{:#?}", d.candidates);
 }
 
 #[test]
