@@ -10,8 +10,9 @@ use hapcal_identify::{Identified, IdentifyConfig, Problem, identify};
 use hapcal_io::{CalibratedValue, CalibrationMeta, Device, LogRow};
 use hapcal_kinematics::{Chain, DhRow};
 use hapcal_problems::{
-    CalibrationProblem, CapstanProblem, JointData, JointProblem, JointTransmissions, Observations,
-    PolynomialProblem, Row, RowKind, Weights,
+    CalibrationProblem, CapstanProblem, DistanceLog, DistanceLogModel, DistanceLogProblem,
+    DistanceLogState, EffectTerm, EffectTermKind, HANDLE_COMPLIANCE_UNIT, JointData, JointProblem,
+    JointTransmissions, LogTransmission, Observations, PolynomialProblem, Row, RowKind, Weights,
 };
 use hapcal_sim::NoiseModel;
 use hapcal_transmission::{Capstan, CapstanParams, Chebyshev, JointRad};
@@ -467,6 +468,327 @@ pub fn identify_jointly(
     Ok((problem, second))
 }
 
+/// The handle's mass (kg) the gravity compliance's torques need, from the device file's
+/// `[handle]`.
+///
+/// # Errors
+/// No `[handle]`, or a mass of 0: the handle's gravity torque, which a compliance multiplies,
+/// is then unknown or zero, and the data cannot determine a compliance in rad/(N·m).
+pub fn handle_mass_kg(device: &Device) -> Result<f64> {
+    match device.handle {
+        Some(h) if h.mass_kg > 0.0 => Ok(h.mass_kg),
+        Some(_) => bail!(
+            "--model compliance needs the handle's weight, and the device file's [handle] has \
+             mass_kg = 0: without a gravity torque there is no compliance to fit"
+        ),
+        None => bail!(
+            "--model compliance needs the handle's weight, and the device file has no [handle] \
+             section: add `[handle]` with `mass_kg = …` (the handle's mass in kg, a point mass at \
+             the end point)"
+        ),
+    }
+}
+
+/// The distance-log model ([`DistanceLogModel`], the diagnosis's) of the log `rows` on `r`'s
+/// nominal chain, with the device's encoder noise ([`hapcal_sim::distance_log_noise`]) and
+/// handle mass ([`handle_mass_kg`]), the reading quantisation in its σs, and the external
+/// encoders of `ext_joints` (0-based) as rows.
+///
+/// # Errors
+/// A device without a handle mass, rows that do not form a log, or a missing ext reading.
+pub fn log_model(
+    r: &HapticDevice,
+    rows: &[LogRow],
+    ext_joints: Vec<usize>,
+) -> Result<DistanceLogModel> {
+    let log = DistanceLog::new(
+        rows.iter().map(|row| row.q.clone()).collect(),
+        rows.iter().map(|row| row.t_s).collect(),
+        rows.iter().map(|row| row.distance_m).collect(),
+        rows.iter().map(|row| row.ext.clone()).collect(),
+    )?;
+    let mut model = DistanceLogModel::new(
+        r.chain.clone(),
+        log,
+        hapcal_sim::distance_log_noise(&r.device),
+        handle_mass_kg(&r.device)?,
+    )?;
+    model.set_ext_joints(ext_joints)?;
+    Ok(model)
+}
+
+/// A calibration with the handle's gravity compliance ([`identify_with_compliance`]).
+#[derive(Clone, Debug)]
+pub struct ComplianceFit {
+    /// The problem it solved (the training log's model and the parameters' layout).
+    pub problem: DistanceLogProblem,
+    /// The identification: names, values, std, pruning.
+    pub identified: Identified,
+    /// The fitted state: transmissions (empty without ext columns), kinematic deviations and
+    /// one `joint_compliance.j{k}` coefficient (rad/(N·m)) per joint.
+    pub state: DistanceLogState,
+}
+
+/// The transmissions of a two-step solution `t` as the distance-log model's: the capstans of
+/// joints 1–3 and the joint-4 polynomial.
+fn log_transmissions(t: &TransmissionFit) -> Vec<LogTransmission> {
+    let mut out: Vec<LogTransmission> = (t.capstans.iter())
+        .map(|c| LogTransmission::Capstan {
+            joint: c.joint - 1,
+            capstan: c.capstan,
+            params: c.params,
+        })
+        .collect();
+    out.push(LogTransmission::Polynomial {
+        joint: PARALLELOGRAM_JOINT - 1,
+        poly: t.poly.clone(),
+    });
+    out
+}
+
+/// The haptic device's calibration with the handle's gravity compliance
+/// (`hapcal calibrate --model compliance` on its logs): the transmissions (when `t` is given:
+/// the capstans of joints 1–3 and the joint-4 polynomial, with the external-encoder rows),
+/// the kinematic deviations and one compliance per joint, all in one least-squares problem
+/// over the diagnosis's measurement model ([`DistanceLogModel`] with the terms
+/// [`EffectTerm::handle_compliance`]: joint `j`'s angle gains `c_j·τ_j(q)`, τ the handle's
+/// gravity torque, [`hapcal_problems::handle_gravity_torques_nm`]), solved by
+/// `hapcal-identify` from the two-step solution (`t`, `kin`) with the compliances at 0. Every
+/// joint gets a candidate, as in the diagnosis; a joint the handle's weight does not load
+/// (joint 1, whose axis is vertical) has a zero column and is pruned. σ is estimated from the
+/// residuals (the rows are already divided by the encoder noise, quantisation included, so it
+/// is ≈ 1 at the noise floor).
+///
+/// A parameter the identification prunes is held where it starts and written nowhere, i.e.
+/// at its nominal value; when it starts away from 0 (the two-step solution chose the other
+/// member of a gauge pair) the problem is refitted with it at 0, so the kept parameters carry
+/// the whole correction.
+///
+/// # Errors
+/// A device without a handle mass ([`handle_mass_kg`]), a log the model refuses, or a failed
+/// identification.
+pub fn identify_with_compliance(
+    r: &HapticDevice,
+    rows: &[LogRow],
+    t: Option<&TransmissionFit>,
+    kin: &Identified,
+) -> Result<ComplianceFit> {
+    let transmissions = t.map(log_transmissions).unwrap_or_default();
+    let ext_joints = transmissions.iter().map(LogTransmission::joint).collect();
+    let model = log_model(r, rows, ext_joints)?;
+    let mut start = model.initial_state(transmissions);
+    start.x_kin = kin.fit.x.iter().copied().collect();
+    start.terms = (0..r.chain.n_joints())
+        .map(|j| (EffectTerm::handle_compliance(j), 0.0))
+        .collect();
+    let problem = DistanceLogProblem::new(model, &start)?;
+    let mut cfg = if t.is_some() {
+        joint_config()
+    } else {
+        crate::fit::identify_config(None)
+    };
+    cfg.sigma = None;
+    let mut x0 = problem.x_of(&start);
+    let mut identified =
+        identify(&problem, x0.clone(), &cfg).context("identification with the compliance")?;
+    let stale: Vec<usize> = (identified.identifiability.pruned.iter())
+        .map(|p| p.index)
+        .filter(|&i| x0[i] != 0.0)
+        .collect();
+    if !stale.is_empty() {
+        for i in stale {
+            x0[i] = 0.0;
+        }
+        identified = identify(&problem, x0, &cfg).context("identification with the compliance")?;
+    }
+    let state = problem.state(identified.fit.x.as_ref());
+    Ok(ComplianceFit {
+        problem,
+        identified,
+        state,
+    })
+}
+
+/// The unit of parameter `name` of a [`ComplianceFit`] as reports and device files write it:
+/// [`HANDLE_COMPLIANCE_UNIT`] for a compliance, else the layout's (`m`, `rad`, `1`).
+fn compliance_fit_unit(fit: &ComplianceFit, i: usize) -> &'static str {
+    let name = &fit.identified.layout.spec(i).name;
+    let is_compliance = (fit.state.terms.iter()).any(|(term, _)| {
+        &term.name == name && matches!(term.kind, EffectTermKind::Compliance { .. })
+    });
+    if is_compliance {
+        HANDLE_COMPLIANCE_UNIT
+    } else {
+        fit.identified.layout.spec(i).unit.symbol()
+    }
+}
+
+/// The kept parameters of `fit` with their std and unit (compliances in rad/(N·m)), in layout
+/// order: what the report lists and the device file records.
+pub fn compliance_values(fit: &ComplianceFit) -> Vec<CalibratedValue> {
+    let id = &fit.identified;
+    (id.covariance.free.iter().zip(id.covariance.std().iter()))
+        .map(|(&i, &std)| CalibratedValue {
+            name: id.layout.spec(i).name.clone(),
+            value: id.fit.x[i],
+            std,
+            unit: compliance_fit_unit(fit, i).to_owned(),
+        })
+        .collect()
+}
+
+/// Distance residuals (model − measured, m, one per row) of the log `rows` under the fitted
+/// state of `fit`: the readings through its transmissions and compliances, the chain at its
+/// deviations (the same model as the fit; ext columns are not needed).
+///
+/// # Errors
+/// Rows that do not form a log of the device.
+pub fn compliance_distance_residuals_m(
+    r: &HapticDevice,
+    fit: &ComplianceFit,
+    rows: &[LogRow],
+) -> Result<Vec<f64>> {
+    let model = log_model(r, rows, Vec::new())?;
+    let lin = model.linearise(&fit.state)?;
+    Ok((0..rows.len())
+        .map(|i| lin.residuals[i] * lin.sigma[i])
+        .collect())
+}
+
+/// The distance-log state a calibrated haptic device file carries, to evaluate with its
+/// (calibrated) chain: the transmissions of `[calibration.values]` (`capstan{j}.*` on each
+/// `[[capstan]]` joint, missing ones 0; `joint{j}.cheb*` as the polynomial on joint `j`'s
+/// range, when any), zero kinematic deviations (the D-H rows already hold them) and one
+/// [`EffectTerm::handle_compliance`] per `joint_compliance.j{k}` value (rad/(N·m)). With
+/// [`log_model`] on the file's chain it reproduces the predictions of the fit that wrote the
+/// file ([`identify_with_compliance`]); a file without such values gives ideal transmissions
+/// where it names none.
+///
+/// # Errors
+/// A value of an unknown capstan field, a wrong unit, a joint the device does not have, or a
+/// gap in the Chebyshev indices.
+pub fn calibrated_log_state(device: &Device) -> Result<DistanceLogState> {
+    let chain = device.chain()?;
+    let values = (device.calibration.as_ref()).map_or(&[][..], |c| &c.values[..]);
+    let n_joints = chain.n_joints();
+    let mut capstans: Vec<(usize, Capstan, CapstanParams)> = (device.capstans.iter())
+        .map(|c| {
+            Ok((
+                c.joint,
+                Capstan::try_new(c.ratio, c.drum_distance_m)?,
+                CapstanParams::default(),
+            ))
+        })
+        .collect::<Result<_>>()?;
+    let mut cheb: Vec<(usize, usize, f64)> = Vec::new();
+    let mut terms = Vec::new();
+    for v in values {
+        let unit = |expected: &str| {
+            if v.unit == expected {
+                Ok(())
+            } else {
+                Err(anyhow::anyhow!(
+                    "[calibration.values] {}: unit is {:?}, expected {expected:?}",
+                    v.name,
+                    v.unit
+                ))
+            }
+        };
+        let Some((element, field)) = v.name.split_once('.') else {
+            continue; // a kinematic deviation, already in the rows
+        };
+        let joint_of = |prefix: &str| {
+            (element.strip_prefix(prefix))
+                .and_then(|d| d.parse::<usize>().ok())
+                .filter(|&j| (1..=n_joints).contains(&j))
+        };
+        if element == "joint_compliance" {
+            let joint = (field.strip_prefix('j'))
+                .and_then(|d| d.parse::<usize>().ok())
+                .filter(|&j| (1..=n_joints).contains(&j))
+                .with_context(|| format!("[calibration.values] {}: no such joint", v.name))?;
+            unit(HANDLE_COMPLIANCE_UNIT)?;
+            terms.push((EffectTerm::handle_compliance(joint - 1), v.value));
+        } else if element.starts_with("capstan") {
+            let joint = joint_of("capstan")
+                .with_context(|| format!("[calibration.values] {}: no such joint", v.name))?;
+            let (_, _, p) = (capstans.iter_mut())
+                .find(|(j, _, _)| *j == joint)
+                .with_context(|| {
+                    format!(
+                        "[calibration.values] {}: no capstan on joint {joint}",
+                        v.name
+                    )
+                })?;
+            let (target, u) = match field {
+                "c" => (&mut p.c_rad, "rad"),
+                "re" => (&mut p.re, "1"),
+                "r_o" => (&mut p.r_o_m, "m"),
+                "beta_o" => (&mut p.beta_o_rad, "rad"),
+                "r_i" => (&mut p.r_i_m, "m"),
+                "beta_i" => (&mut p.beta_i_rad, "rad"),
+                other => bail!(
+                    "[calibration.values] {}: unknown capstan parameter {other:?}",
+                    v.name
+                ),
+            };
+            unit(u)?;
+            *target = v.value;
+        } else if let Some(joint) = joint_of("joint") {
+            let k = (field.strip_prefix("cheb"))
+                .and_then(|d| d.parse::<usize>().ok())
+                .with_context(|| {
+                    format!(
+                        "[calibration.values] {}: expected joint{{j}}.cheb{{k}}",
+                        v.name
+                    )
+                })?;
+            unit("rad")?;
+            cheb.push((joint, k, v.value));
+        }
+    }
+    let mut transmissions: Vec<LogTransmission> = (capstans.into_iter())
+        .filter(|(j, _, _)| !cheb.iter().any(|(pj, _, _)| pj == j))
+        .map(|(joint, capstan, params)| LogTransmission::Capstan {
+            joint: joint - 1,
+            capstan,
+            params,
+        })
+        .collect();
+    let limits = device.joint_limits();
+    let mut poly_joints: Vec<usize> = cheb.iter().map(|(j, _, _)| *j).collect();
+    poly_joints.sort_unstable();
+    poly_joints.dedup();
+    for joint in poly_joints {
+        let n = cheb
+            .iter()
+            .filter(|(j, _, _)| *j == joint)
+            .map(|(_, k, _)| k + 1)
+            .max()
+            .unwrap_or(0);
+        let mut coeffs = vec![None; n];
+        for (_, k, c) in cheb.iter().filter(|(j, _, _)| *j == joint) {
+            coeffs[*k] = Some(*c);
+        }
+        let coeffs = coeffs
+            .into_iter()
+            .enumerate()
+            .map(|(k, c)| c.with_context(|| format!("joint{joint}.cheb{k} is missing")))
+            .collect::<Result<Vec<f64>>>()?;
+        let (lo, hi) = limits[joint - 1];
+        transmissions.push(LogTransmission::Polynomial {
+            joint: joint - 1,
+            poly: Chebyshev::try_new(lo, hi, coeffs)?,
+        });
+    }
+    transmissions.sort_by_key(LogTransmission::joint);
+    Ok(DistanceLogState {
+        transmissions,
+        x_kin: vec![0.0; chain.n_params()],
+        terms,
+    })
+}
+
 /// The calibrated device file of the paper's pipeline: `r`'s nominal device with the kept
 /// kinematic deviations of `kin` applied to its D-H rows ([`Device::with_calibration`]) and
 /// `[calibration.values]` holding those deviations (m, rad) and every identified transmission
@@ -513,12 +835,18 @@ pub fn calibrated_device(
 /// polynomial from the external encoders `ext1..ext4`) and step 2 (kinematic deviations from
 /// the cable distances of the corrected readings), or both in one problem when `plan.joint`
 /// ([`identify_jointly`]). A log without external-encoder columns gets the kinematics alone,
-/// with a warning. Figures: distance RMS of every training and test log, nominal model on the
-/// raw readings against the calibrated model on the corrected ones.
+/// with a warning. `--model compliance` adds the handle's gravity compliance of each joint,
+/// fitted with the transmissions and the kinematics in one problem
+/// ([`identify_with_compliance`]; `plan.joint` changes nothing there), the compliances
+/// reported and written in rad/(N·m). Figures: distance RMS of every training and test log,
+/// nominal model on the raw readings against the calibrated model (with its compliances) on
+/// the corrected ones.
 ///
 /// # Errors
-/// A device that is not the paper's kind ([`HapticDevice::new`]), too few rows, no more distinct joint configurations
-/// than kept parameters ([`check_distinct_configurations`]), or a failed identification.
+/// A device that is not the paper's kind ([`HapticDevice::new`]), `--model compliance` on a
+/// device file without a handle mass ([`handle_mass_kg`]), too few rows, no more distinct
+/// joint configurations than kept parameters ([`check_distinct_configurations`]), or a failed
+/// identification.
 pub fn calibrate_logs(
     plan: &crate::inputs::Plan,
     device: Device,
@@ -573,10 +901,59 @@ pub fn calibrate_logs(
             });
         }
     };
+    let no_ext_warning = || {
+        format!(
+            "the training logs have no external-encoder columns (ext1..ext{PARALLELOGRAM_JOINT}): \
+             the transmissions are not identified and the kinematic deviations absorb their errors \
+             (the paper's \"transmission errors left out\"); record the external encoders to \
+             calibrate the transmissions"
+        )
+    };
+    // `--model compliance`: both steps as the start, then the transmissions (when the logs have
+    // the ext columns), the kinematics and the handle's compliances in one problem.
+    let mut compliance: Option<ComplianceFit> = None;
     // `--model geometric`: the kinematic deviations alone, whether or not the logs could carry
     // the transmissions.
-    let (transmissions, kin, model, calibrated) = if has_ext && plan.model != ModelChoice::Geometric
-    {
+    let (transmissions, kin, model, calibrated) = if plan.model == ModelChoice::Compliance {
+        handle_mass_kg(&haptic.device)?;
+        let t = if has_ext {
+            Some(identify_transmissions(&haptic, &rows).context("step 1 (transmissions)")?)
+        } else {
+            warnings.push(no_ext_warning());
+            None
+        };
+        let (_, kin) =
+            identify_kinematics(&haptic, &rows, t.as_ref()).context("step 2 (kinematics)")?;
+        let fit = identify_with_compliance(&haptic, &rows, t.as_ref(), &kin)?;
+        let values = compliance_values(&fit);
+        parameters.extend(
+            (values.iter().zip(&fit.identified.covariance.free)).map(|(v, &i)| ParamReport {
+                name: v.name.clone(),
+                value: v.value,
+                std: v.std,
+                unit: compliance_fit_unit(&fit, i),
+            }),
+        );
+        let meta = CalibrationMeta {
+            date: None,
+            data_hash: None,
+            notes: Some(format!(
+                "{} with the handle's gravity compliance (joint_compliance.j*, rad/(N·m), a joint \
+                 angle gains c·τ, τ the gravity torque of the [handle] mass) on {} rows; written \
+                 by `hapcal calibrate --model compliance`",
+                if t.is_some() {
+                    "transmissions, kinematic deviations"
+                } else {
+                    "kinematic deviations"
+                },
+                rows.len()
+            )),
+        };
+        let calibrated = haptic.device.with_calibration(&values, meta)?;
+        let identified = fit.identified.clone();
+        compliance = Some(fit);
+        (t, identified, ModelChoice::Compliance, calibrated)
+    } else if has_ext && plan.model != ModelChoice::Geometric {
         let t = identify_transmissions(&haptic, &rows).context("step 1 (transmissions)")?;
         let (_, kin) =
             identify_kinematics(&haptic, &rows, Some(&t)).context("step 2 (kinematics)")?;
@@ -606,12 +983,7 @@ pub fn calibrate_logs(
         (Some(t), kin, ModelChoice::Transmissions, calibrated)
     } else {
         if !has_ext {
-            warnings.push(format!(
-            "the training logs have no external-encoder columns (ext1..ext{PARALLELOGRAM_JOINT}): \
-             the transmissions are not identified and the kinematic deviations absorb their errors \
-             (the paper's \"transmission errors left out\"); record the external encoders to \
-             calibrate the transmissions"
-        ));
+            warnings.push(no_ext_warning());
         }
         let (_, kin) = identify_kinematics(&haptic, &rows, None).context("kinematics")?;
         push_kept(&mut parameters, &kin);
@@ -636,32 +1008,41 @@ pub fn calibrate_logs(
         (None, kin, ModelChoice::Geometric, calibrated)
     };
     check_distinct_configurations(&rows, transmissions.as_ref(), &kin)?;
-    let x_kin: Vec<f64> = kin.fit.x.iter().copied().collect();
+    let x_kin: Vec<f64> = match &compliance {
+        Some(fit) => fit.state.x_kin.clone(),
+        None => kin.fit.x.iter().copied().collect(),
+    };
     let zero = vec![0.0; haptic.chain.n_params()];
-    let distance_rms = |rows: &[LogRow], x: &[f64], t: Option<&TransmissionFit>| {
-        let r: Vec<f64> = rows
-            .iter()
+    let residuals_m = |rows: &[LogRow], x: &[f64], t: Option<&TransmissionFit>| -> Vec<f64> {
+        rows.iter()
             .map(|row| {
                 let q = t.map_or_else(|| row.q.clone(), |t| t.corrected(&row.q));
                 haptic.chain.end_point(x, &q).coords.norm() - row.distance_m
             })
-            .collect();
-        Figures {
-            mean_absolute_error_m: None,
-            distance_error_m: None,
-            distance_rms_m: Some(hapcal_metrics::rms(&r)),
-            pose: None,
-        }
+            .collect()
+    };
+    let figures = |r: &[f64]| Figures {
+        mean_absolute_error_m: None,
+        distance_error_m: None,
+        distance_rms_m: Some(hapcal_metrics::rms(r)),
+        pose: None,
     };
     let mut placements = Vec::new();
     for (role, sets) in [(SetRole::Train, &train), (SetRole::Test, &test)] {
         for NamedLog { name, rows, .. } in sets {
+            // The calibrated model is the fitted one: with the compliance, its transmissions
+            // and compliances on every log, training and test.
+            let after = match &compliance {
+                Some(fit) => compliance_distance_residuals_m(&haptic, fit, rows)
+                    .with_context(|| format!("log {name}: the calibrated model"))?,
+                None => residuals_m(rows, &x_kin, transmissions.as_ref()),
+            };
             placements.push(SetReport {
                 name: name.clone(),
                 role,
                 n_rows: rows.len(),
-                before: distance_rms(rows, &zero, None),
-                after: distance_rms(rows, &x_kin, transmissions.as_ref()),
+                before: figures(&residuals_m(rows, &zero, None)),
+                after: figures(&after),
                 errors: None,
             });
         }

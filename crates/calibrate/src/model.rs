@@ -40,7 +40,10 @@ pub enum ModelChoice {
     Geometric,
     /// Geometric plus one gravity compliance per joint, about its axis: the torques of the
     /// URDF's inertial masses on the whole tree when measurement files come with them, lumped
-    /// link weights otherwise.
+    /// link weights otherwise. On a haptic device's logs: the transmissions (when the logs
+    /// have external-encoder columns), the kinematic deviations and the compliance of each
+    /// joint under the handle's weight (the handle mass of the device file), in rad/(N·m), fitted
+    /// together.
     Compliance,
     /// Geometric plus one gravity compliance per joint with the torques of the robot's
     /// published link masses (Franka Panda, KUKA LBR iiwa 14; refused for other robots).
@@ -260,11 +263,11 @@ impl ModelChoice {
             (M::Transmissions, _) => Some(
                 "the transmissions are identified from a haptic device's external-encoder columns",
             ),
-            (M::Geometric, DataKind::HapticLogs) => None,
+            (M::Geometric | M::Compliance, DataKind::HapticLogs) => None,
             (_, DataKind::HapticLogs) => Some(
-                "a haptic device's logs are calibrated for its transmissions and kinematic \
-                 deviations (auto, transmissions, geometric); the handle's gravity compliance is \
-                 judged by hapcal diagnose (joint_compliance), not fitted by calibrate",
+                "a haptic device's logs determine its transmissions, its kinematic deviations \
+                 and the gravity compliance of its handle (one per joint); they carry no link \
+                 masses, transversal bending or harmonic terms",
             ),
             (M::FramesOnly | M::JointOffsets, DataKind::Sockets | DataKind::Distances) => Some(
                 "socket recordings and distance logs have no instrument or marker frame: their \
@@ -495,9 +498,9 @@ mod tests {
         use ModelChoice as M;
         let cases = [
             (
-                M::Compliance,
+                M::MassCompliance,
                 K::HapticLogs,
-                "auto, geometric, transmissions",
+                "auto, geometric, compliance, transmissions",
             ),
             (
                 M::FramesOnly,
@@ -524,7 +527,7 @@ mod tests {
                 "{err}"
             );
         }
-        // Every non-transmission model on every robot data kind; the haptic logs' own three.
+        // Every non-transmission model on every robot data kind; the haptic logs' own four.
         for kind in [K::Sockets, K::Distances, K::Measurements] {
             for &m in ModelChoice::all() {
                 let frames = matches!(m, M::FramesOnly | M::JointOffsets);
@@ -533,7 +536,7 @@ mod tests {
             }
         }
         for &m in ModelChoice::all() {
-            let expected = matches!(m, M::Auto | M::Transmissions | M::Geometric);
+            let expected = matches!(m, M::Auto | M::Transmissions | M::Geometric | M::Compliance);
             assert_eq!(m.check_fits(K::HapticLogs).is_ok(), expected, "{m}");
         }
     }

@@ -93,7 +93,8 @@ pub struct PlanConfig {
 /// the models `hapcal calibrate` fits to the data of the planned measurement (a haptic device's
 /// logs, distance logs, or measurement files), less those that are a choice or fit only
 /// instrument frames: `auto` (plan for the richest model you will calibrate), `frames-only`
-/// and `joint-offsets` (poses that determine the geometric model determine them).
+/// and `joint-offsets` (poses that determine the geometric model determine them), and, on a
+/// haptic device, `compliance` (the handle's compliance is not a model of the planner).
 ///
 /// # Errors
 /// The refusal, naming the model as the user typed it.
@@ -125,6 +126,16 @@ pub fn planned_model(device: &Device, measurement: Measurement, model: ModelChoi
     // --separate-transmission-run).
     if kind == DataKind::HapticLogs && model == ModelChoice::Geometric {
         return Ok(());
+    }
+    // `hapcal calibrate --model compliance` fits a haptic device's handle compliance with the
+    // diagnosis's model (the handle's weight at the end point); the planner's compliance
+    // blocks are lumped link weights, another model: it does not plan for it.
+    if kind == DataKind::HapticLogs && model == ModelChoice::Compliance {
+        bail!(
+            "--model compliance: the pose planner has no model of a haptic device's handle \
+             compliance; plan for transmissions (calibrate's compliance fits the logs of those \
+             poses)"
+        );
     }
     model.check_fits(kind)
 }

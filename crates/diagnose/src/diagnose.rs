@@ -391,13 +391,7 @@ fn candidate_terms(
             });
         }
         "joint_compliance" => {
-            for j in 0..n_joints {
-                terms.push(Term {
-                    name: format!("joint_compliance.j{}", j + 1),
-                    unit: "rad/(N·m)",
-                    kind: TermKind::Compliance { joint: j },
-                });
-            }
+            terms.extend((0..n_joints).map(Term::handle_compliance));
         }
         "backlash" => {
             need_t()?;

@@ -5,9 +5,7 @@
 
 use hapcal_io::{Device, LogRow, N_EXT};
 use hapcal_kinematics::{Chain, Vector3};
-use hapcal_problems::{
-    DistanceLogLinearisation, DistanceLogModel, DistanceLogNoise, Error as ProblemError,
-};
+use hapcal_problems::{DistanceLogLinearisation, DistanceLogModel, Error as ProblemError};
 use nalgebra::{DMatrix, DVector};
 
 pub(crate) use hapcal_problems::{
@@ -98,15 +96,7 @@ impl Setup {
     /// [`Error::Baseline`] for a device whose encoder specification or handle mass the model
     /// refuses, or a log that does not fit its chain.
     pub(crate) fn new(device: &Device, chain: Chain, data: Data) -> Result<Setup, Error> {
-        let cable = (device.cable_encoder).unwrap_or(hapcal_sim::REFERENCE_CABLE_ENCODER);
-        let noise = DistanceLogNoise::paper(
-            cable.counts_per_rev,
-            cable.drum_radius_m,
-            hapcal_sim::joint_resolutions_rad(device)
-                .into_iter()
-                .map(|r| r.unwrap_or(0.0))
-                .collect(),
-        );
+        let noise = hapcal_sim::distance_log_noise(device);
         let handle_mass_kg = device
             .handle
             .map_or(hapcal_sim::DEFAULT_HANDLE_MASS_KG, |h| h.mass_kg);

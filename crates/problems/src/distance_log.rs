@@ -351,6 +351,17 @@ impl LogTransmission {
         }
     }
 
+    /// The parameters' values, in [`Self::names`]' order (a capstan's `c` rad, `re` 1, `r_o`
+    /// m, `beta_o` rad, `r_i` m, `beta_i` rad; a polynomial's coefficients, rad).
+    pub fn values(&self) -> Vec<f64> {
+        match self {
+            Self::Capstan { params: p, .. } => {
+                vec![p.c_rad, p.re, p.r_o_m, p.beta_o_rad, p.r_i_m, p.beta_i_rad]
+            }
+            Self::Polynomial { poly, .. } => poly.coeffs.clone(),
+        }
+    }
+
     /// Adds `delta` (in [`Self::names`]' order; missing entries 0) to the parameters.
     pub fn update(&mut self, delta: &[f64]) {
         match self {
@@ -449,6 +460,18 @@ impl DistanceLogState {
             .sum::<usize>()
             + self.x_kin.len()
             + self.terms.len()
+    }
+
+    /// Every parameter's value, in the column order of [`DistanceLogModel::linearise`]
+    /// (length [`Self::n_params`]; units as [`LogTransmission::values`], the chain's m or rad,
+    /// each term's [`EffectTerm::unit`]).
+    pub fn values(&self) -> Vec<f64> {
+        let mut v: Vec<f64> = (self.transmissions.iter())
+            .flat_map(LogTransmission::values)
+            .collect();
+        v.extend(&self.x_kin);
+        v.extend(self.terms.iter().map(|(_, c)| *c));
+        v
     }
 
     /// Adds `delta` (in the column order of [`DistanceLogModel::linearise`]; missing entries

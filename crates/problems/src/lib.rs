@@ -54,6 +54,7 @@ mod distance_log;
 mod fleet;
 mod harmonics;
 mod joint;
+mod log_problem;
 mod model;
 mod problem;
 mod transmission;
@@ -68,6 +69,7 @@ pub use distance_log::{
 pub use fleet::{FleetDevice, FleetProblem, cable_angle, fleet_initial_guess};
 pub use harmonics::JointHarmonics;
 pub use joint::{JointData, JointProblem, JointTransmissions};
+pub use log_problem::{DistanceLogProblem, HANDLE_COMPLIANCE_UNIT};
 pub use model::{CalibratedModel, EQUILIBRIUM_ITERATIONS};
 pub use problem::{
     CalibrationProblem, ModelTerms, Observations, PointDistance, Row, RowKind, Transversal,

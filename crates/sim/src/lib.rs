@@ -58,7 +58,7 @@ pub use error::Error;
 pub use hapcal_problems::GRAVITY_M_S2;
 pub use sim::{
     DistanceSamples, NoiseModel, PARALLELOGRAM_JOINT, REFERENCE_CABLE_ENCODER, SimConfig,
-    distance_samples, joint_resolutions_rad, quantise_readings, sample_readings, simulate,
-    true_joint_angles, truth_deviations,
+    distance_log_noise, distance_samples, joint_resolutions_rad, quantise_readings,
+    sample_readings, simulate, true_joint_angles, truth_deviations,
 };
 pub use truth::{CapstanTruth, ParallelogramTruth, Truth, parse_truth, read_truth};

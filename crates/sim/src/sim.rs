@@ -283,6 +283,22 @@ pub fn sample_readings<R: Rng + ?Sized>(device: &Device, rng: &mut R, n: usize) 
         .collect()
 }
 
+/// The noise of a distance log of `device` from its encoder specification
+/// ([`hapcal_problems::DistanceLogNoise::paper`]): its cable encoder's counts and drum radius
+/// (the [`crate::REFERENCE_CABLE_ENCODER`] when the file has no `[cable_encoder]`) and its
+/// joints' reading resolutions ([`joint_resolutions_rad`], 0 where unknown). The noise model
+/// of `diagnose` and of `hapcal calibrate --model compliance` on a haptic device's logs.
+pub fn distance_log_noise(device: &Device) -> hapcal_problems::DistanceLogNoise {
+    let cable = (device.cable_encoder).unwrap_or(crate::REFERENCE_CABLE_ENCODER);
+    hapcal_problems::DistanceLogNoise::paper(
+        cable.counts_per_rev,
+        cable.drum_radius_m,
+        (joint_resolutions_rad(device).into_iter())
+            .map(|r| r.unwrap_or(0.0))
+            .collect(),
+    )
+}
+
 /// Resolution of each joint's reading at the joint side, rad (one entry per
 /// `[[joint]]`): `2π/(counts·R)` for a joint with a capstan of ratio `R`, `2π/counts` for a
 /// direct-drive joint (encoder on the motor, docs/design.md §2); `None` where the device file

@@ -377,15 +377,52 @@ fn refused_model(args: &[&str], value: &str) -> String {
 fn a_model_the_haptic_log_does_not_take_is_refused_naming_those_it_takes() {
     let dir = scratch("hostile-haptic-model");
     let log = simulated_log(&dir, 40);
-    for value in ["compliance", "compliance-harmonic", "frames-only"] {
+    for value in ["mass-compliance", "compliance-harmonic", "frames-only"] {
         let (device, log) = (reference("device.toml"), show(&log));
         let err = refused_model(&["--device", &device, "--data", &log], value);
         assert!(
             err.contains("a haptic device's logs: ")
-                && err.contains("they take auto, geometric, transmissions"),
+                && err.contains("they take auto, geometric, compliance, transmissions"),
             "{err}"
         );
     }
+}
+
+#[test]
+fn compliance_on_a_haptic_device_without_a_handle_mass_is_refused_in_words() {
+    let dir = scratch("hostile-haptic-no-handle");
+    let log = simulated_log(&dir, 40);
+    let text = std::fs::read_to_string(reference("device.toml")).unwrap();
+    let (without, _) = text
+        .split_once("[handle]")
+        .expect("the fixture has a [handle]");
+    let device = dir.join("device.toml");
+    std::fs::write(&device, without).unwrap();
+    let args = [
+        "calibrate",
+        "--device",
+        &show(&device),
+        "--data",
+        &show(&log),
+        "--model",
+        "compliance",
+    ];
+    let out = hapcal(&args);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("needs the handle's weight") && err.contains("no [handle] section"),
+        "{err}"
+    );
+    assert!(
+        !err.contains("Compliance") && !err.contains("Some("),
+        "{err}"
+    );
+    // The other models do not need it.
+    let mut args = args.to_vec();
+    args[6] = "transmissions";
+    let out = hapcal(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
 }
 
 #[test]

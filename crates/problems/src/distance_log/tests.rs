@@ -355,3 +355,47 @@ fn distance_row_adds_the_joint_variances() {
     assert!((noisy.sigma_m - expected.sqrt()).abs() < 1e-18);
     assert!(noisy.sigma_m > plain.sigma_m);
 }
+
+#[test]
+fn as_an_identify_problem_its_x_is_the_state_and_its_rows_the_linearisation() {
+    let device = reference_device();
+    let chain = device.chain().unwrap();
+    let trans = transmissions(&device);
+    let mut m = model(&device, log(&device, 30));
+    m.set_ext_joints(trans.iter().map(LogTransmission::joint).collect())
+        .unwrap();
+    let mut state = m.initial_state(trans);
+    state.x_kin = x_kin(&chain);
+    state.terms = (0..chain.n_joints())
+        .map(|j| (EffectTerm::handle_compliance(j), 1e-3 * j as f64))
+        .collect();
+    let lin = m.linearise(&state).unwrap();
+    let problem = crate::DistanceLogProblem::new(m, &state).unwrap();
+    // Named, with units, in the model's column order: 3 capstans, 11 coefficients, the chain,
+    // 7 compliances.
+    let layout = problem.layout();
+    assert_eq!(layout.len(), 3 * 6 + 11 + chain.n_params() + 7);
+    let names: Vec<&str> = layout.specs().iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(
+        names,
+        lin.names.iter().map(String::as_str).collect::<Vec<_>>()
+    );
+    assert_eq!(names[1], "capstan1.re");
+    assert_eq!(layout.spec(1).unit, hapcal_identify::Unit::Dimensionless);
+    assert_eq!(names[layout.len() - 1], "joint_compliance.j7");
+    // x holds the values themselves, and the state at x is the state.
+    let x = problem.x_of(&state);
+    assert_eq!(x[0], 1e-3);
+    assert_eq!(problem.state(x.as_ref()), state);
+    let mut r = Col::zeros(problem.n_residuals());
+    let mut jac = faer::Mat::zeros(problem.n_residuals(), layout.len());
+    problem
+        .residuals_and_jacobian(x.as_ref(), r.as_mut(), jac.as_mut())
+        .unwrap();
+    for i in 0..r.nrows() {
+        assert_eq!(r[i], lin.residuals[i]);
+        for c in 0..layout.len() {
+            assert_eq!(jac[(i, c)], lin.jacobian[(i, c)]);
+        }
+    }
+}
