@@ -8,7 +8,7 @@ use hapcal_kinematics::{
     Chain, FkWorkspace, FrozenChain, LANES, ParamUnit, Point3, UnitQuaternion, Vector3, joint_trig,
     joint_trig_lanes,
 };
-use nalgebra::Quaternion;
+use nalgebra::{Isometry3, Quaternion};
 use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::{Arc, Mutex};
@@ -277,7 +277,14 @@ pub struct CalibrationProblem {
 #[derive(Debug, Default)]
 struct FrozenCache {
     x_kin: Vec<f64>,
-    chain: Option<Arc<FrozenChain>>,
+    chain: Option<Arc<Frozen>>,
+}
+
+/// The problem's chain and each tip's chain (a tree's marker rows) frozen at one `x_kin`.
+#[derive(Debug)]
+struct Frozen {
+    chain: FrozenChain,
+    tips: Vec<FrozenChain>,
 }
 
 /// Rows per block of the streaming back end: large enough to amortise the per-block set-up
@@ -1209,9 +1216,11 @@ impl CalibrationProblem {
                     // an ulp of the division; the residuals keep the division), written
                     // straight into the kinematic columns.
                     Some(j) => {
-                        frozen.distance_gradient_lanes_into(trig, inv_s_distance, dist, j, r)
+                        frozen
+                            .chain
+                            .distance_gradient_lanes_into(trig, inv_s_distance, dist, j, r)
                     }
-                    None => frozen.distance_gradient_lanes(trig, 1.0, dist, None),
+                    None => frozen.chain.distance_gradient_lanes(trig, 1.0, dist, None),
                 }
                 if let Some(o) = out.as_mut() {
                     let o = o[r..r + n_rows].chunks_exact_mut(LANES);
@@ -1240,14 +1249,14 @@ impl CalibrationProblem {
                     (Some(j), _) => {
                         grad.resize(n_kin, 0.0);
                         let ws = ws.get_or_insert_with(|| FkWorkspace::new(&self.chain));
-                        let p = frozen.distance_gradient(&row.q, trig, &mut grad, ws);
+                        let p = frozen.chain.distance_gradient(&row.q, trig, &mut grad, ws);
                         for (c, g) in j.iter_mut().zip(&grad) {
                             c[r] = g / s_distance;
                         }
                         p
                     }
-                    (None, Some(t)) => frozen.end_point_trig(&row.q, t),
-                    (None, None) => frozen.end_point(&row.q),
+                    (None, Some(t)) => frozen.chain.end_point_trig(&row.q, t),
+                    (None, None) => frozen.chain.end_point(&row.q),
                 };
                 if let Some(o) = out.as_mut() {
                     o[r] = (p.coords.norm() - distance_m) / s_distance;
@@ -1266,12 +1275,31 @@ impl CalibrationProblem {
                     x_kin.extend((0..n_kin).map(|i| x[i]));
                 }
                 let x_eff = self.effective_x(row_idx, x, &x_kin, &mut x_buf);
-                let pose = if jac.is_some() {
-                    buf.resize(6 * n_kin, 0.0);
-                    let ws = ws.get_or_insert_with(|| FkWorkspace::new(chain));
-                    chain.pose_and_jacobian_in(x_eff, q_eff, ws, &mut buf)
-                } else {
-                    chain.end_pose(x_eff, q_eff)
+                // A marker without transversal tilts needs only the tip's point: the tip's chain
+                // frozen at x (the constant factors between joints folded once), 3 Jacobian rows
+                // per parameter. A pose, or tilts that change the deviations row by row: the
+                // chain itself, 6 rows per parameter (position first).
+                let frozen_tip = match row.kind {
+                    RowKind::Marker { .. } if n_tilts == 0 => frozen.tips.get(*tip),
+                    _ => None,
+                };
+                let (pose, stride) = match (frozen_tip, jac.is_some()) {
+                    (Some(f), true) => {
+                        buf.resize(3 * n_kin, 0.0);
+                        let ws = ws.get_or_insert_with(|| FkWorkspace::new(chain));
+                        let p = f.point_and_jacobian(q_eff, &mut buf, ws);
+                        (Isometry3::translation(p.x, p.y, p.z), 3)
+                    }
+                    (Some(f), false) => {
+                        let p = f.end_point(q_eff);
+                        (Isometry3::translation(p.x, p.y, p.z), 3)
+                    }
+                    (None, true) => {
+                        buf.resize(6 * n_kin, 0.0);
+                        let ws = ws.get_or_insert_with(|| FkWorkspace::new(chain));
+                        (chain.pose_and_jacobian_in(x_eff, q_eff, ws, &mut buf), 6)
+                    }
+                    (None, false) => (chain.end_pose(x_eff, q_eff), 6),
                 };
                 let jq = (n_angle > 0 && jac.is_some() && !angles_from_params)
                     .then(|| chain.geometric_jacobian(x_eff, q_eff));
@@ -1279,7 +1307,7 @@ impl CalibrationProblem {
                 let tilts = &self.tilt_basis[row_idx * n_tilts..(row_idx + 1) * n_tilts];
                 // Row k of the pose Jacobian (0–2 position, 3–5 rotation vector) at column col.
                 let dpose = |k: usize, col: usize| -> f64 {
-                    self.column(&buf, 6, k, col, jq.as_ref(), basis, tilts)
+                    self.column(&buf, stride, k, col, jq.as_ref(), basis, tilts)
                 };
                 let s = self.weights.sigma_position_m;
                 let p = pose.translation.vector;
@@ -1289,7 +1317,7 @@ impl CalibrationProblem {
                     }
                 }
                 if let Some(j) = jac.as_mut() {
-                    self.position_columns(j, r, s, &buf, 6, n_comp, &dpose);
+                    self.position_columns(j, r, s, &buf, stride, n_comp, &dpose);
                 }
                 r += 3;
                 if let RowKind::Pose { rotation, .. } = &row.kind {
@@ -1335,9 +1363,9 @@ impl CalibrationProblem {
             } else if jac.is_some() {
                 buf.resize(3 * n_kin, 0.0);
                 let ws = ws.get_or_insert_with(|| FkWorkspace::new(&self.chain));
-                frozen.point_and_jacobian(q_eff, &mut buf, ws)
+                frozen.chain.point_and_jacobian(q_eff, &mut buf, ws)
             } else {
-                frozen.end_point(q_eff)
+                frozen.chain.end_point(q_eff)
             };
             // ∂p/∂k_j = (∂p/∂q_j)·τ̂_j (and ∂p/∂a_jh = (∂p/∂q_j)·sin(h·q_j), …), from the
             // geometric Jacobian's linear rows.
@@ -1420,12 +1448,16 @@ impl CalibrationProblem {
     /// one evaluation, in parallel or streamed, share it), else frozen again into the cached
     /// one's allocations when no evaluation still holds it. Bit-for-bit the chain
     /// [`Chain::freeze`] gives.
-    fn frozen_at(&self, x: ColRef<'_, f64>) -> Arc<FrozenChain> {
+    fn frozen_at(&self, x: ColRef<'_, f64>) -> Arc<Frozen> {
         let n_kin = self.chain.n_params();
         let x_kin = (0..n_kin).map(|i| x[i]);
+        let freeze = |x_kin: &[f64]| Frozen {
+            chain: self.chain.freeze(x_kin),
+            tips: self.tips.iter().map(|t| t.freeze(x_kin)).collect(),
+        };
         let Ok(mut cache) = self.frozen.lock() else {
             // A thread panicked while freezing: leave the cache alone.
-            return Arc::new(self.chain.freeze(&x_kin.collect::<Vec<_>>()));
+            return Arc::new(freeze(&x_kin.collect::<Vec<_>>()));
         };
         let cache = &mut *cache;
         if let Some(frozen) = &cache.chain
@@ -1441,12 +1473,17 @@ impl CalibrationProblem {
         cache.x_kin.clear();
         cache.x_kin.extend(x_kin);
         match cache.chain.as_mut().and_then(Arc::get_mut) {
-            Some(frozen) => self.chain.freeze_into(&cache.x_kin, frozen),
-            None => cache.chain = Some(Arc::new(self.chain.freeze(&cache.x_kin))),
+            Some(frozen) => {
+                self.chain.freeze_into(&cache.x_kin, &mut frozen.chain);
+                for (tip, f) in self.tips.iter().zip(&mut frozen.tips) {
+                    tip.freeze_into(&cache.x_kin, f);
+                }
+            }
+            None => cache.chain = Some(Arc::new(freeze(&cache.x_kin))),
         }
         match &cache.chain {
             Some(frozen) => Arc::clone(frozen),
-            None => Arc::new(self.chain.freeze(&cache.x_kin)),
+            None => Arc::new(freeze(&cache.x_kin)),
         }
     }
 
