@@ -271,6 +271,33 @@ pub fn render(r: &CalibrationReport) -> String {
                 );
             }
         }
+    } else if (r.placements.iter()).all(|p| {
+        p.before.mean_absolute_error_m.is_none()
+            && p.before.distance_error_m.is_none()
+            && p.after.mean_absolute_error_m.is_none()
+            && p.after.distance_error_m.is_none()
+    }) {
+        // A haptic device's logs: the cable distance's RMS alone.
+        let _ = writeln!(
+            s,
+            "\ndistance RMS (mm): the nominal model on the raw readings → the calibrated model"
+        );
+        let _ = writeln!(
+            s,
+            "  {:<16} {:<5} {:>4}  {:>10} {:>10}",
+            "log", "role", "rows", "before", "after"
+        );
+        for p in &r.placements {
+            let _ = writeln!(
+                s,
+                "  {:<16} {:<5} {:>4}  {:>10} {:>10}",
+                p.name,
+                p.role,
+                p.n_rows,
+                mm(p.before.distance_rms_m),
+                mm(p.after.distance_rms_m)
+            );
+        }
     } else {
         let _ = writeln!(
             s,
