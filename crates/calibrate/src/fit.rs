@@ -50,6 +50,45 @@ pub fn fold_of(row: usize, n: usize, k: usize, r: usize, repeats: usize) -> usiz
     shifted / (n * repeats)
 }
 
+/// Held-out rows of one cross-validation fold: per data set (table, log), per row, whether
+/// it is held out.
+pub(crate) type Fold = Vec<Vec<bool>>;
+
+/// The repeated blocked folds of data sets of `lengths` rows: repeat `r` of [`CV_REPEATS`]
+/// cuts each set's rows (file order, circularly shifted by `r/CV_REPEATS` of a block) into `k`
+/// contiguous blocks ([`fold_of`]); `CV_REPEATS · k` folds, repeat by repeat.
+pub(crate) fn blocked_folds(lengths: &[usize], k: usize) -> Vec<Fold> {
+    let mut folds = Vec::new();
+    for rep in 0..CV_REPEATS {
+        for fold in 0..k {
+            folds.push(
+                (lengths.iter())
+                    .map(|&n| {
+                        (0..n)
+                            .map(|r| fold_of(r, n, k, rep, CV_REPEATS) == fold)
+                            .collect()
+                    })
+                    .collect(),
+            );
+        }
+    }
+    folds
+}
+
+/// The block of every row of data sets of `lengths` rows, the sets' rows one after the other:
+/// `set · k + fold` of the first repeat ([`HeldOut::block`]).
+pub(crate) fn first_repeat_blocks(lengths: &[usize], k: usize) -> Vec<usize> {
+    (lengths.iter().enumerate())
+        .flat_map(|(set, &n)| (0..n).map(move |r| set * k + fold_of(r, n, k, 0, CV_REPEATS)))
+        .collect()
+}
+
+/// Relative tolerance (cost reduction, step) of a cross-validation fold's refit. A fold's
+/// estimate is judged by its held-out error: a relative cost reduction of 10⁻⁶ changes that
+/// error by about 10⁻⁶ of itself, far below the blocked standard errors the ladder compares
+/// (a few per cent of the error).
+pub(crate) const FOLD_TOLERANCE: f64 = 1e-6;
+
 /// Mean over rows of `a − b` and its standard error from the block means (rows of one
 /// contiguous block are correlated, so the blocks, not the rows, are the independent units:
 /// Roberts et al. 2017, "Cross-validation strategies for data with temporal, spatial,
