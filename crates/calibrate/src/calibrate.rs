@@ -35,7 +35,7 @@ use crate::solve::{cross_validate, observations, solve};
 /// # Panics
 /// If `held`, `level` and `candidates` differ in length or are empty.
 #[track_caller]
-fn choose(
+pub(crate) fn choose(
     candidates: &[ModelChoice],
     level: &[usize],
     held: &[HeldOut],
@@ -51,8 +51,16 @@ fn choose(
         i != j && d + LADDER_SIGNIFICANCE_Z * se < 0.0
     };
     let chosen = crate::model::climb(level, &beats, &|i| rms(&held[i]));
+    // The rung each candidate was compared with: the one chosen on the levels below its own.
+    let compared = |i: usize| {
+        let below = level.iter().take_while(|&&l| l < level[i]).count();
+        (below > 0).then(|| crate::model::climb(&level[..below], &beats, &|j| rms(&held[j])))
+    };
     let reports = (candidates.iter().zip(held).enumerate())
         .map(|(i, (candidate, h))| CvReport {
+            compared_with: compared(i).map(|j| candidates[j]),
+            difference_to_compared_m2: compared(i)
+                .map_or((0.0, 0.0), |j| blocked_difference(h, &held[j])),
             model: *candidate,
             heldout_rms_m: rms(h),
             difference_to_geometric_m2: if i == 0 {
