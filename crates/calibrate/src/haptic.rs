@@ -857,6 +857,8 @@ pub fn calibrated_device(
 
 /// A rung of the haptic ladder fitted on every training row: where its fold refits start
 /// and over which parameters (the ones its identification kept).
+// A few values built once per calibration: their sizes do not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 pub enum HapticRungFit {
     /// The kinematic deviations alone, on the raw joint readings ([`identify_kinematics`]
@@ -1133,8 +1135,12 @@ pub fn cross_validate_rungs(
 /// on a device file with transmissions: step 1 (each capstan's eq. 1 and the parallelogram's
 /// polynomial from the external encoders `ext1..ext4`) and step 2 (kinematic deviations from
 /// the cable distances of the corrected readings), or both in one problem when `plan.joint`
-/// ([`identify_jointly`]). A log without external-encoder columns gets the kinematics alone,
-/// with a warning. `--model compliance` adds the handle's gravity compliance of each joint,
+/// ([`identify_jointly`]). `--model auto` chooses among geometric, transmissions (when every
+/// training log has the external-encoder columns) and compliance (when the device file has a
+/// handle mass) by repeated blocked cross-validation with `plan.folds` folds
+/// ([`cross_validate_rungs`], [`crate::model::climb`]) and reports every rung's held-out
+/// figures in `cross_validation`; an explicit model is fitted without it. A log without
+/// external-encoder columns cannot give the transmissions, with a warning. `--model compliance` adds the handle's gravity compliance of each joint,
 /// fitted with the transmissions and the kinematics in one problem
 /// ([`identify_with_compliance`]; `plan.joint` changes nothing there), the compliances
 /// reported and written in rad/(N·m). Figures: distance RMS of every training and test log,
