@@ -133,6 +133,54 @@ pub fn blocked_mean_difference(a: &[f64], b: &[f64], block: &[usize]) -> (f64, f
     (mean, var.sqrt(), filled)
 }
 
+/// The model choice of `--model auto` from the held-out errors of each candidate: the one rule
+/// of [`crate::model::climb`] over the candidates' ladder levels `level` (candidate 0 the
+/// geometric model, the reference of the reported differences). A candidate beats another when
+/// its held-out squared error is lower by [`crate::model::LADDER_SIGNIFICANCE_Z`] blocked standard errors.
+///
+/// # Panics
+/// If `held`, `level` and `candidates` differ in length or are empty.
+#[track_caller]
+pub(crate) fn choose(
+    candidates: &[crate::model::ModelChoice],
+    level: &[usize],
+    held: &[HeldOut],
+) -> (crate::model::ModelChoice, Vec<crate::report::CvReport>) {
+    assert!(
+        !held.is_empty() && held.len() == candidates.len() && level.len() == held.len(),
+        "one held-out set and one level per candidate"
+    );
+    let rms =
+        |h: &HeldOut| (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt();
+    let beats = |i: usize, j: usize| {
+        let (d, se) = blocked_difference(&held[i], &held[j]);
+        i != j && d + crate::model::LADDER_SIGNIFICANCE_Z * se < 0.0
+    };
+    let chosen = crate::model::climb(level, &beats, &|i| rms(&held[i]));
+    // The rung each candidate was compared with: the one chosen on the levels below its own.
+    let compared = |i: usize| {
+        let below = level.iter().take_while(|&&l| l < level[i]).count();
+        (below > 0).then(|| crate::model::climb(&level[..below], &beats, &|j| rms(&held[j])))
+    };
+    let reports = (candidates.iter().zip(held).enumerate())
+        .map(|(i, (candidate, h))| crate::report::CvReport {
+            compared_with: compared(i).map(|j| candidates[j]),
+            difference_to_compared_m2: compared(i)
+                .map_or((0.0, 0.0), |j| blocked_difference(h, &held[j])),
+            model: *candidate,
+            heldout_rms_m: rms(h),
+            difference_to_geometric_m2: if i == 0 {
+                (0.0, 0.0)
+            } else {
+                blocked_difference(h, &held[0])
+            },
+            beats_geometric: beats(i, 0),
+            n_kept: 0,
+        })
+        .collect();
+    (candidates[chosen], reports)
+}
+
 /// The pruned parameters of `identified`, each with why.
 pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
     identified

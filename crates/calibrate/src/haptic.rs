@@ -1227,7 +1227,7 @@ pub fn calibrate_logs(
             .collect::<Result<Vec<_>>>()?;
         let lengths: Vec<usize> = train.iter().map(|log| log.rows.len()).collect();
         let held = cross_validate_rungs(&haptic, &rows, &lengths, &fits, plan.folds)?;
-        let (choice, reports) = crate::calibrate::choose(&rungs, &levels, &held);
+        let (choice, reports) = crate::fit::choose(&rungs, &levels, &held);
         cross_validation = reports;
         if choice == ModelChoice::Geometric && has_ext {
             warnings.push(
