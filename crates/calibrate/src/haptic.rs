@@ -1183,7 +1183,7 @@ pub fn calibrate_logs(
     if plan.model == ModelChoice::Transmissions && !has_ext {
         bail!(
             "--model transmissions needs the external-encoder columns (ext1..ext{PARALLELOGRAM_JOINT}) \
-             in every training log; auto fits the kinematic deviations alone to logs without them"
+             in every training log; ask for --model geometric (or auto) on logs without them"
         );
     }
     // `--model auto`: the ladder geometric → transmissions → compliance, each rung the logs and
