@@ -27,46 +27,6 @@ pub use crate::report::{
 };
 use crate::solve::{cross_validate, observations, solve};
 
-/// The model choice of `--model auto` from the held-out errors of each candidate: the one rule
-/// of [`crate::model::climb`] over the candidates' ladder levels `level` (candidate 0 the
-/// geometric model, the reference of the reported differences). A candidate beats another when
-/// its held-out squared error is lower by [`LADDER_SIGNIFICANCE_Z`] blocked standard errors.
-///
-/// # Panics
-/// If `held`, `level` and `candidates` differ in length or are empty.
-#[track_caller]
-fn choose(
-    candidates: &[ModelChoice],
-    level: &[usize],
-    held: &[HeldOut],
-) -> (ModelChoice, Vec<CvReport>) {
-    assert!(
-        !held.is_empty() && held.len() == candidates.len() && level.len() == held.len(),
-        "one held-out set and one level per candidate"
-    );
-    let rms =
-        |h: &HeldOut| (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt();
-    let beats = |i: usize, j: usize| {
-        let (d, se) = blocked_difference(&held[i], &held[j]);
-        i != j && d + LADDER_SIGNIFICANCE_Z * se < 0.0
-    };
-    let chosen = crate::model::climb(level, &beats, &|i| rms(&held[i]));
-    let reports = (candidates.iter().zip(held).enumerate())
-        .map(|(i, (candidate, h))| CvReport {
-            model: *candidate,
-            heldout_rms_m: rms(h),
-            difference_to_geometric_m2: if i == 0 {
-                (0.0, 0.0)
-            } else {
-                blocked_difference(h, &held[0])
-            },
-            beats_geometric: beats(i, 0),
-            n_kept: 0,
-        })
-        .collect();
-    (candidates[chosen], reports)
-}
-
 /// Refuses a calibration whose data determine no parameter, or fewer configurations than the
 /// parameters they would keep.
 fn check_determined(n_configurations: usize, n_kept: usize, n_model_params: usize) -> Result<()> {
@@ -233,7 +193,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             let held = (candidates.iter())
                 .map(|&candidate| cross_validate(&chain, &train, plan, candidate, CV_REPEATS))
                 .collect::<Result<Vec<_>>>()?;
-            let (choice, reports) = choose(&candidates, &level, &held);
+            let (choice, reports) = crate::fit::choose(&candidates, &level, &held);
             cross_validation = reports;
             choice
         }
@@ -745,7 +705,8 @@ pub fn write_outputs_beside(
 
 #[cfg(test)]
 mod tests {
-    use super::{HeldOut, ModelChoice, blocked_difference, choose, fold_of};
+    use super::{HeldOut, ModelChoice, blocked_difference, fold_of};
+    use crate::fit::choose;
 
     /// Held-out errors on 10 blocks of 5 rows: `base` everywhere, minus `gain` in every block,
     /// with ±`spread` alternating between blocks (the block-to-block scatter of the gain).

@@ -50,6 +50,45 @@ pub fn fold_of(row: usize, n: usize, k: usize, r: usize, repeats: usize) -> usiz
     shifted / (n * repeats)
 }
 
+/// Held-out rows of one cross-validation fold: per data set (table, log), per row, whether
+/// it is held out.
+pub(crate) type Fold = Vec<Vec<bool>>;
+
+/// The repeated blocked folds of data sets of `lengths` rows: repeat `r` of [`CV_REPEATS`]
+/// cuts each set's rows (file order, circularly shifted by `r/CV_REPEATS` of a block) into `k`
+/// contiguous blocks ([`fold_of`]); `CV_REPEATS · k` folds, repeat by repeat.
+pub(crate) fn blocked_folds(lengths: &[usize], k: usize) -> Vec<Fold> {
+    let mut folds = Vec::new();
+    for rep in 0..CV_REPEATS {
+        for fold in 0..k {
+            folds.push(
+                (lengths.iter())
+                    .map(|&n| {
+                        (0..n)
+                            .map(|r| fold_of(r, n, k, rep, CV_REPEATS) == fold)
+                            .collect()
+                    })
+                    .collect(),
+            );
+        }
+    }
+    folds
+}
+
+/// The block of every row of data sets of `lengths` rows, the sets' rows one after the other:
+/// `set · k + fold` of the first repeat ([`HeldOut::block`]).
+pub(crate) fn first_repeat_blocks(lengths: &[usize], k: usize) -> Vec<usize> {
+    (lengths.iter().enumerate())
+        .flat_map(|(set, &n)| (0..n).map(move |r| set * k + fold_of(r, n, k, 0, CV_REPEATS)))
+        .collect()
+}
+
+/// Relative tolerance (cost reduction, step) of a cross-validation fold's refit. A fold's
+/// estimate is judged by its held-out error: a relative cost reduction of 10⁻⁶ changes that
+/// error by about 10⁻⁶ of itself, far below the blocked standard errors the ladder compares
+/// (a few per cent of the error).
+pub(crate) const FOLD_TOLERANCE: f64 = 1e-6;
+
 /// Mean over rows of `a − b` and its standard error from the block means (rows of one
 /// contiguous block are correlated, so the blocks, not the rows, are the independent units:
 /// Roberts et al. 2017, "Cross-validation strategies for data with temporal, spatial,
@@ -92,6 +131,54 @@ pub fn blocked_mean_difference(a: &[f64], b: &[f64], block: &[usize]) -> (f64, f
         / (nb - 1.0)
         / (nb * m_bar * m_bar);
     (mean, var.sqrt(), filled)
+}
+
+/// The model choice of `--model auto` from the held-out errors of each candidate: the one rule
+/// of [`crate::model::climb`] over the candidates' ladder levels `level` (candidate 0 the
+/// geometric model, the reference of the reported differences). A candidate beats another when
+/// its held-out squared error is lower by [`crate::model::LADDER_SIGNIFICANCE_Z`] blocked standard errors.
+///
+/// # Panics
+/// If `held`, `level` and `candidates` differ in length or are empty.
+#[track_caller]
+pub(crate) fn choose(
+    candidates: &[crate::model::ModelChoice],
+    level: &[usize],
+    held: &[HeldOut],
+) -> (crate::model::ModelChoice, Vec<crate::report::CvReport>) {
+    assert!(
+        !held.is_empty() && held.len() == candidates.len() && level.len() == held.len(),
+        "one held-out set and one level per candidate"
+    );
+    let rms =
+        |h: &HeldOut| (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt();
+    let beats = |i: usize, j: usize| {
+        let (d, se) = blocked_difference(&held[i], &held[j]);
+        i != j && d + crate::model::LADDER_SIGNIFICANCE_Z * se < 0.0
+    };
+    let chosen = crate::model::climb(level, &beats, &|i| rms(&held[i]));
+    // The rung each candidate was compared with: the one chosen on the levels below its own.
+    let compared = |i: usize| {
+        let below = level.iter().take_while(|&&l| l < level[i]).count();
+        (below > 0).then(|| crate::model::climb(&level[..below], &beats, &|j| rms(&held[j])))
+    };
+    let reports = (candidates.iter().zip(held).enumerate())
+        .map(|(i, (candidate, h))| crate::report::CvReport {
+            compared_with: compared(i).map(|j| candidates[j]),
+            difference_to_compared_m2: compared(i)
+                .map_or((0.0, 0.0), |j| blocked_difference(h, &held[j])),
+            model: *candidate,
+            heldout_rms_m: rms(h),
+            difference_to_geometric_m2: if i == 0 {
+                (0.0, 0.0)
+            } else {
+                blocked_difference(h, &held[0])
+            },
+            beats_geometric: beats(i, 0),
+            n_kept: 0,
+        })
+        .collect();
+    (candidates[chosen], reports)
 }
 
 /// The pruned parameters of `identified`, each with why.

@@ -36,7 +36,7 @@ pub use crate::data::{
     Robot, is_marker_file, load_tables, robot_from_device, robot_from_urdf,
     workspace_configurations,
 };
-use crate::fit::{CV_REPEATS, HeldOut, blocked_difference, fold_of};
+use crate::fit::{CV_REPEATS, FOLD_TOLERANCE, Fold, HeldOut, blocked_difference};
 use crate::model::{DataKind, ModelChoice};
 pub use crate::noise::{CALIBRATED_SIGMA_RATIO, PLAUSIBLE_FRAMES_ONLY_RMS_M};
 use crate::report::SetRole;
@@ -824,31 +824,10 @@ fn refit(
     Ok(problem.model(fit.x.as_ref()))
 }
 
-/// Relative tolerance (cost reduction, step) of a cross-validation fold's refit.
-const FOLD_TOLERANCE: f64 = 1e-6;
-
-/// Held-out rows of one cross-validation fold: per table, per row, whether it is held out.
-type Fold = Vec<Vec<bool>>;
-
-/// The blocked folds: repeat `r` of [`CV_REPEATS`] cuts each table's rows (file order,
-/// circularly shifted by `r/CV_REPEATS` of a block) into `k` contiguous blocks.
+/// The blocked folds of the tables ([`crate::fit::blocked_folds`]).
 fn blocked_folds(tables: &[MeasurementTable], k: usize) -> Vec<Fold> {
-    let mut folds = Vec::new();
-    for rep in 0..CV_REPEATS {
-        for fold in 0..k {
-            folds.push(
-                (tables.iter())
-                    .map(|t| {
-                        let n = t.rows.len();
-                        (0..n)
-                            .map(|r| fold_of(r, n, k, rep, CV_REPEATS) == fold)
-                            .collect()
-                    })
-                    .collect(),
-            );
-        }
-    }
-    folds
+    let lengths: Vec<usize> = tables.iter().map(|t| t.rows.len()).collect();
+    crate::fit::blocked_folds(&lengths, k)
 }
 
 /// How far past a joint's training range, as a share of the range, a test or workspace
@@ -997,13 +976,8 @@ fn cross_validate(
         .collect();
     let n_rows: usize = tables.iter().map(|t| t.rows.len()).sum();
     let (mut sq, mut score) = (vec![0.0; n_rows], vec![0.0; n_rows]);
-    let mut block = vec![0; n_rows];
-    for (ti, t) in tables.iter().enumerate() {
-        let n = t.rows.len();
-        for r in 0..n {
-            block[offsets[ti] + r] = ti * k + fold_of(r, n, k, 0, CV_REPEATS);
-        }
-    }
+    let lengths: Vec<usize> = tables.iter().map(|t| t.rows.len()).collect();
+    let block = crate::fit::first_repeat_blocks(&lengths, k);
     for fold in &held[..blocked.len()] {
         for &(ti, r, e2, s) in fold {
             sq[offsets[ti] + r] += e2 / CV_REPEATS as f64;

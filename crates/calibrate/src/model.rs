@@ -27,8 +27,8 @@ pub enum ModelChoice {
     /// transversal-compliance. Socket recordings and distance logs: geometric, then compliance.
     /// For a robot with published link masses, mass-compliance and actuator-compliance are
     /// alternatives to compliance (the lowest held-out error of those that pass).
-    /// A haptic device's logs: transmissions, or geometric when the logs have no
-    /// external-encoder columns.
+    /// A haptic device's logs: geometric, then transmissions (when the logs have
+    /// external-encoder columns), then compliance (when the device file has a handle mass).
     Auto,
     /// The nominal kinematics; only the instrument's and the markers' frames are fitted
     /// (measurement files).
@@ -356,8 +356,8 @@ pub fn terms(
 ///   transversal-compliance;
 /// - socket recordings and distance logs (no frame to fit: geometric is the bottom): geometric
 ///   → compliance (or its published-mass alternatives);
-/// - a haptic device's logs: transmissions when the logs have external-encoder columns, else
-///   geometric (decided by the data, not cross-validated: the paper's two steps).
+/// - a haptic device's logs: geometric → transmissions (when the logs have external-encoder
+///   columns) → compliance (when the device file has a handle mass).
 pub fn ladder(kind: DataKind, published_masses: bool) -> Vec<Vec<ModelChoice>> {
     use ModelChoice as M;
     let compliance = if published_masses {
@@ -382,7 +382,14 @@ pub fn ladder(kind: DataKind, published_masses: bool) -> Vec<Vec<ModelChoice>> {
         // unit weights, and on one MUKCa placement it climbed by chance (panda_1 at 9 folds,
         // test error doubled: docs/results/mukca.md).
         DataKind::Sockets | DataKind::Distances => vec![vec![M::Geometric], compliance],
-        DataKind::HapticLogs => vec![vec![M::Transmissions]],
+        // The bottom is geometric, as on every kind without frames; the transmissions need
+        // the logs' external-encoder columns, the compliance the device's handle mass
+        // (`haptic::haptic_rungs`).
+        DataKind::HapticLogs => vec![
+            vec![M::Geometric],
+            vec![M::Transmissions],
+            vec![M::Compliance],
+        ],
     }
 }
 
@@ -556,9 +563,22 @@ mod tests {
                     assert!(m.check_fits(kind).is_ok(), "{m} on {kind:?}");
                     assert_ne!(*m, ModelChoice::Auto);
                 }
-                // Simplest first: the rungs' order is the models' order.
+                // Simplest first: the rungs' order is the models' order (the transmissions,
+                // last of the models, sit below the compliance on the haptic ladder: the
+                // haptic compliance model holds them).
                 let flat: Vec<ModelChoice> = rungs.iter().flatten().copied().collect();
-                assert!(flat.windows(2).all(|w| w[0] < w[1]), "{flat:?}");
+                if kind == DataKind::HapticLogs {
+                    assert_eq!(
+                        flat,
+                        [
+                            ModelChoice::Geometric,
+                            ModelChoice::Transmissions,
+                            ModelChoice::Compliance
+                        ]
+                    );
+                } else {
+                    assert!(flat.windows(2).all(|w| w[0] < w[1]), "{flat:?}");
+                }
             }
         }
     }

@@ -116,6 +116,15 @@ pub struct CvReport {
     /// Whether the difference is below zero by [`crate::model::LADDER_SIGNIFICANCE_Z`] standard errors (the
     /// condition for choosing this model over the geometric one).
     pub beats_geometric: bool,
+    /// The model this one was compared with on the climb (the one chosen so far when its
+    /// level was reached; `None` for the bottom rung).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub compared_with: Option<ModelChoice>,
+    /// Mean over held-out rows of this model's squared error minus `compared_with`'s, m², and
+    /// its blocked standard error; `(0, 0)` for the bottom rung. The model is taken when the
+    /// difference is below zero by [`crate::model::LADDER_SIGNIFICANCE_Z`] standard errors
+    /// (and it has the lowest held-out RMS of its level's passing alternatives).
+    pub difference_to_compared_m2: (f64, f64),
     /// Number of kept parameters on the full training data.
     pub n_kept: usize,
 }

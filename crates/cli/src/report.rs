@@ -44,11 +44,21 @@ pub fn render(r: &CalibrationReport) -> String {
             .map(|cv| cv.model.to_string().len())
             .max()
             .unwrap_or(0);
+        let bottom = r.cross_validation.first().map(|cv| cv.model);
         for cv in &r.cross_validation {
             let (diff, se) = cv.difference_to_geometric_m2;
+            // A rung above the second level was compared with the rung chosen below it, which
+            // need not be the bottom one: that comparison decided, so it is shown.
+            let against = match cv.compared_with {
+                Some(m) if Some(m) != bottom => {
+                    let (d, e) = cv.difference_to_compared_m2;
+                    format!("; against {m}: {:+.0} ± {:.0} µm²", d * 1e12, e * 1e12)
+                }
+                _ => String::new(),
+            };
             let _ = writeln!(
                 s,
-                "  {:<width$} {:>9.4} mm {:>+10.0} ± {:<8.0} µm²{}",
+                "  {:<width$} {:>9.4} mm {:>+10.0} ± {:<8.0} µm²{}{against}",
                 cv.model.to_string(),
                 cv.heldout_rms_m * 1e3,
                 diff * 1e12,

@@ -317,7 +317,7 @@ fn absurd_finite_lengths_are_refused_where_they_are_read() {
 }
 
 #[test]
-fn folds_on_the_haptic_path_is_a_warning_that_it_is_unused() {
+fn folds_on_the_haptic_path_set_the_model_ladders_cross_validation() {
     let dir = scratch("hostile-haptic-folds");
     let log = simulated_log(&dir, 40);
     let out = hapcal(&[
@@ -330,23 +330,14 @@ fn folds_on_the_haptic_path_is_a_warning_that_it_is_unused() {
         "7",
     ]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    // The report's warnings (on standard output).
+    // The report (on standard output): the ladder's table, no warning about the folds.
     let report = String::from_utf8_lossy(&out.stdout);
     assert!(
-        report.contains("--folds 7 is not used") && report.contains("without cross-validation"),
+        report.contains("model choice by 7-fold cross-validation")
+            && report.contains("transmissions")
+            && !report.contains("--folds"),
         "{report}"
     );
-    // The default says nothing.
-    let out = hapcal(&[
-        "calibrate",
-        "--device",
-        &reference("device.toml"),
-        "--data",
-        &show(&log),
-    ]);
-    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    let report = String::from_utf8_lossy(&out.stdout);
-    assert!(!report.contains("--folds"), "{report}");
 }
 
 /// `hapcal calibrate --model value` with `args` (device and data): exit code 2 and a message
