@@ -49,21 +49,36 @@ pub fn render(r: &CalibrationReport) -> String {
             let (diff, se) = cv.difference_to_geometric_m2;
             // A rung above the second level was compared with the rung chosen below it, which
             // need not be the bottom one: that comparison decided, so it is shown.
-            let against = match cv.compared_with {
-                Some(m) if Some(m) != bottom => {
+            let against = match (cv.compared_with, bottom) {
+                (Some(m), Some(b)) if m != b => {
                     let (d, e) = cv.difference_to_compared_m2;
-                    format!("; against {m}: {:+.0} ± {:.0} µm²", d * 1e12, e * 1e12)
+                    let z = hapcal_calibrate::model::LADDER_SIGNIFICANCE_Z;
+                    format!(
+                        "{}; against {m}: {:+.0} ± {:.0} µm², {}",
+                        if cv.beats_geometric {
+                            format!("  beats {b}")
+                        } else {
+                            String::new()
+                        },
+                        d * 1e12,
+                        e * 1e12,
+                        if d + z * e < 0.0 {
+                            "beats it"
+                        } else {
+                            "does not beat it"
+                        }
+                    )
                 }
+                _ if cv.beats_geometric => "  beats".to_owned(),
                 _ => String::new(),
             };
             let _ = writeln!(
                 s,
-                "  {:<width$} {:>9.4} mm {:>+10.0} ± {:<8.0} µm²{}{against}",
+                "  {:<width$} {:>9.4} mm {:>+10.0} ± {:<8.0} µm²{against}",
                 cv.model.to_string(),
                 cv.heldout_rms_m * 1e3,
                 diff * 1e12,
                 se * 1e12,
-                if cv.beats_geometric { "  beats" } else { "" }
             );
         }
     }
