@@ -887,7 +887,7 @@ impl HapticRungFit {
     /// The rung refitted on `fit_rows` and its distance residuals (model − measured, m, one
     /// per row) on `held_rows`. The refit is Levenberg–Marquardt alone from this full-data
     /// estimate, over the parameters it kept, to a relative tolerance of
-    /// [`crate::fit::FOLD_TOLERANCE`]; the transmissions' refit is two-step (each capstan and
+    /// `fit::FOLD_TOLERANCE` (10⁻⁶); the transmissions' refit is two-step (each capstan and
     /// the joint-4 polynomial from its external encoder, then the kinematics). The
     /// compliance's refit takes its transmissions from step 1 on the fold, as the
     /// transmissions rung does, and refits the kinematic deviations and the compliances on
@@ -944,7 +944,7 @@ impl HapticRungFit {
 }
 
 /// A fold refit's Levenberg–Marquardt settings: `cfg`'s, stopped at
-/// [`crate::fit::FOLD_TOLERANCE`].
+/// `fit::FOLD_TOLERANCE` (10⁻⁶).
 fn fold_lm(cfg: IdentifyConfig) -> hapcal_identify::LmConfig {
     hapcal_identify::LmConfig {
         ftol: crate::fit::FOLD_TOLERANCE,
@@ -1064,7 +1064,7 @@ pub fn haptic_rungs(
 /// Held-out errors of each rung of `fits` by repeated blocked cross-validation of the
 /// training logs (`lengths[i]` rows of log `i`, concatenated in `rows`): each log's rows cut
 /// into `k` contiguous blocks in row order, [`crate::fit::CV_REPEATS`] times shifted
-/// ([`crate::fit::blocked_folds`]); each rung refitted on each fold's training rows
+/// (`fit::blocked_folds`); each rung refitted on each fold's training rows
 /// ([`HapticRungFit::refit_residuals_m`]) and its squared distance residual (m²) on the
 /// held-out rows averaged over the repeats. One entry per rung, rows in `rows`' order, blocks
 /// `log · k + fold` of the first repeat. Every row has the cable encoder's σ_m, so the squared
