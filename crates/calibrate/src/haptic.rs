@@ -154,18 +154,59 @@ pub fn transmission_config() -> IdentifyConfig {
     cfg
 }
 
+/// Step 1's problem of capstan `capstan` on joint `joint` (1-based): its readings against its
+/// external encoder `ext{joint}`, σ the external encoder's.
+///
+/// # Errors
+/// A row without that ext reading, or the problem's own checks.
+fn capstan_problem(
+    r: &HapticDevice,
+    rows: &[LogRow],
+    joint: usize,
+    capstan: Capstan,
+) -> Result<CapstanProblem> {
+    let theta = rows.iter().map(|row| row.q[joint - 1]).collect();
+    let sigma = r.noise.sigma_e_rad;
+    Ok(CapstanProblem::new(
+        capstan,
+        joint,
+        theta,
+        ext(rows, joint)?,
+        sigma,
+    )?)
+}
+
+/// Step 1's problem of the parallelogram's polynomial (joint 4 against `ext4`, on the joint's
+/// range), σ the external encoder's.
+///
+/// # Errors
+/// A row without an `ext4` reading, or the problem's own checks.
+fn polynomial_problem(r: &HapticDevice, rows: &[LogRow]) -> Result<PolynomialProblem> {
+    let (lo, hi) = r.device.joint_limits()[PARALLELOGRAM_JOINT - 1];
+    let theta = (rows.iter())
+        .map(|row| row.q[PARALLELOGRAM_JOINT - 1])
+        .collect();
+    Ok(PolynomialProblem::new(
+        PARALLELOGRAM_JOINT,
+        POLY_DEGREE,
+        lo,
+        hi,
+        theta,
+        ext(rows, PARALLELOGRAM_JOINT)?,
+        r.noise.sigma_e_rad,
+    )?)
+}
+
 /// Step 1 (paper Fig. 6): each transmission from its external encoder.
 ///
 /// # Errors
 /// Missing ext columns, or an identification failure.
 pub fn identify_transmissions(r: &HapticDevice, rows: &[LogRow]) -> Result<TransmissionFit> {
-    let sigma = r.noise.sigma_e_rad;
     let cfg = transmission_config();
     let mut capstans = Vec::new();
     for joint in 1..PARALLELOGRAM_JOINT {
         let capstan = r.capstan(joint)?;
-        let theta: Vec<f64> = rows.iter().map(|row| row.q[joint - 1]).collect();
-        let problem = CapstanProblem::new(capstan, joint, theta, ext(rows, joint)?, sigma)?;
+        let problem = capstan_problem(r, rows, joint, capstan)?;
         let identified = identify(&problem, problem.initial_guess(), &cfg)
             .with_context(|| format!("identifying capstan {joint}"))?;
         let params = CapstanProblem::params(identified.fit.x.as_ref());
@@ -176,20 +217,7 @@ pub fn identify_transmissions(r: &HapticDevice, rows: &[LogRow]) -> Result<Trans
             identified,
         });
     }
-    let (lo, hi) = r.device.joint_limits()[PARALLELOGRAM_JOINT - 1];
-    let theta: Vec<f64> = rows
-        .iter()
-        .map(|row| row.q[PARALLELOGRAM_JOINT - 1])
-        .collect();
-    let problem = PolynomialProblem::new(
-        PARALLELOGRAM_JOINT,
-        POLY_DEGREE,
-        lo,
-        hi,
-        theta,
-        ext(rows, PARALLELOGRAM_JOINT)?,
-        sigma,
-    )?;
+    let problem = polynomial_problem(r, rows)?;
     let poly_identified = identify(&problem, problem.initial_guess(), &cfg)
         .context("identifying the joint-4 polynomial")?;
     let poly = problem.polynomial(poly_identified.fit.x.as_ref());
@@ -979,12 +1007,10 @@ fn refit_transmissions(
     rows: &[LogRow],
     warm: &TransmissionFit,
 ) -> Result<TransmissionFit> {
-    let sigma = r.noise.sigma_e_rad;
     let lm = fold_lm(transmission_config());
     let mut out = warm.clone();
     for c in &mut out.capstans {
-        let theta = rows.iter().map(|row| row.q[c.joint - 1]).collect();
-        let problem = CapstanProblem::new(c.capstan, c.joint, theta, ext(rows, c.joint)?, sigma)?;
+        let problem = capstan_problem(r, rows, c.joint, c.capstan)?;
         let fit = hapcal_identify::levenberg_marquardt(
             &problem,
             c.identified.fit.x.clone(),
@@ -994,19 +1020,7 @@ fn refit_transmissions(
         .with_context(|| format!("refitting capstan {} on a fold", c.joint))?;
         c.params = CapstanProblem::params(fit.x.as_ref());
     }
-    let (lo, hi) = r.device.joint_limits()[PARALLELOGRAM_JOINT - 1];
-    let theta = (rows.iter())
-        .map(|row| row.q[PARALLELOGRAM_JOINT - 1])
-        .collect();
-    let problem = PolynomialProblem::new(
-        PARALLELOGRAM_JOINT,
-        POLY_DEGREE,
-        lo,
-        hi,
-        theta,
-        ext(rows, PARALLELOGRAM_JOINT)?,
-        sigma,
-    )?;
+    let problem = polynomial_problem(r, rows)?;
     let fit = hapcal_identify::levenberg_marquardt(
         &problem,
         warm.poly_identified.fit.x.clone(),
