@@ -3,32 +3,16 @@
 //! device whose truth the test knows and the calibration does not.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::path::Path;
-
 use hapcal_calibrate::data::NamedLog;
 use hapcal_calibrate::haptic::calibrate_logs;
 use hapcal_calibrate::inputs::Plan;
 use hapcal_calibrate::model::{LADDER_SIGNIFICANCE_Z, ModelChoice};
 use hapcal_calibrate::report::CalibrationReport;
-use hapcal_io::{Device, LogRow};
-use hapcal_sim::{Effect, MotionConfig, NoiseModel, SimConfig, Truth, simulate_motion};
+use hapcal_io::LogRow;
 
-fn reference() -> (Device, Truth) {
-    let truth_file =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/reference-device/truth.toml");
-    let truth = hapcal_sim::read_truth(&truth_file).expect("fixture truth");
-    let device = truth.read_device(&truth_file).expect("fixture device");
-    (device, truth)
-}
-
-/// A motion log of `n` rows of the reference device (the paper's noise) with `effects`.
-fn log(seed: u64, n: usize, effects: &[&str]) -> Vec<LogRow> {
-    let (device, truth) = reference();
-    let cable = device.cable_encoder.expect("fixture has a cable encoder");
-    let effects: Vec<Effect> = effects.iter().map(|e| e.parse().unwrap()).collect();
-    let cfg = SimConfig::new(seed, n).with_noise(NoiseModel::paper(&cable));
-    simulate_motion(&device, &truth, &cfg, &MotionConfig::default(), &effects).expect("sim")
-}
+#[path = "sim/haptic_log.rs"]
+mod haptic_log;
+use haptic_log::{log, reference};
 
 /// `hapcal calibrate --model auto` on the training log `rows` of the reference device.
 fn auto(rows: Vec<LogRow>) -> CalibrationReport {

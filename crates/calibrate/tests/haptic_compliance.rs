@@ -9,26 +9,11 @@ use hapcal_calibrate::haptic::{
     compliance_values, identify_kinematics, identify_transmissions, identify_with_compliance,
     log_model,
 };
-use hapcal_io::{Device, LogRow};
-use hapcal_sim::{Effect, MotionConfig, NoiseModel, SimConfig, Truth, simulate_motion};
+use hapcal_io::LogRow;
 
-fn reference() -> (Device, Truth) {
-    let truth_file =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/reference-device/truth.toml");
-    let truth = hapcal_sim::read_truth(&truth_file).expect("fixture truth");
-    let device = truth.read_device(&truth_file).expect("fixture device");
-    (device, truth)
-}
-
-/// A motion log of `n` rows of the reference device (the paper's noise: cable encoder
-/// σ_m ≈ 9.9 µm, external encoders a third of a count) with `effects`.
-fn log(seed: u64, n: usize, effects: &[&str]) -> Vec<LogRow> {
-    let (device, truth) = reference();
-    let cable = device.cable_encoder.expect("fixture has a cable encoder");
-    let effects: Vec<Effect> = effects.iter().map(|e| e.parse().unwrap()).collect();
-    let cfg = SimConfig::new(seed, n).with_noise(NoiseModel::paper(&cable));
-    simulate_motion(&device, &truth, &cfg, &MotionConfig::default(), &effects).expect("sim")
-}
+#[path = "sim/haptic_log.rs"]
+mod haptic_log;
+use haptic_log::{log, reference};
 
 fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
