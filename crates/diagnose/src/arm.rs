@@ -161,6 +161,18 @@ impl ArmEffect {
         )
     }
 
+    /// The same effect under its other model: the other torque model of a compliance, the
+    /// other order of a joint harmonic; `None` for an effect with one model.
+    pub fn alternative(self) -> Option<ArmEffect> {
+        match self {
+            ArmEffect::GravityCompliance => Some(ArmEffect::LumpedCompliance),
+            ArmEffect::LumpedCompliance => Some(ArmEffect::GravityCompliance),
+            ArmEffect::Harmonic1 => Some(ArmEffect::Harmonic2),
+            ArmEffect::Harmonic2 => Some(ArmEffect::Harmonic1),
+            _ => None,
+        }
+    }
+
     /// The effect named `name`.
     pub fn from_name(name: &str) -> Option<ArmEffect> {
         Self::LIBRARY.into_iter().find(|e| e.name() == name)
@@ -1222,16 +1234,9 @@ fn revise(
         }
     }
     // Alternatives, beside the other named effects.
-    let alternative = |e: ArmEffect| match e {
-        ArmEffect::GravityCompliance => Some(ArmEffect::LumpedCompliance),
-        ArmEffect::LumpedCompliance => Some(ArmEffect::GravityCompliance),
-        ArmEffect::Harmonic1 => Some(ArmEffect::Harmonic2),
-        ArmEffect::Harmonic2 => Some(ArmEffect::Harmonic1),
-        _ => None,
-    };
     let order = |e: ArmEffect| ArmEffect::LIBRARY.iter().position(|l| *l == e);
     for (k, (effect, cols, _)) in named.iter().enumerate() {
-        let Some(alt) = alternative(*effect) else {
+        let Some(alt) = effect.alternative() else {
             continue;
         };
         if excluded.contains(&alt) || named.iter().any(|(e, _, _)| *e == alt) {
@@ -1766,10 +1771,8 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
     // blocked standard errors. Otherwise the data do not tell the two apart, and the step says
     // so.
     for (k, (effect, _, _)) in effect_cols.iter().enumerate() {
-        let alt = match effect {
-            ArmEffect::GravityCompliance => ArmEffect::LumpedCompliance,
-            ArmEffect::LumpedCompliance => ArmEffect::GravityCompliance,
-            _ => continue,
+        let Some(alt) = effect.alternative().filter(|a| a.is_compliance()) else {
+            continue;
         };
         let Some((other, _)) = swapped(
             &ctx,
