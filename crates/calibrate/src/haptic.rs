@@ -773,17 +773,11 @@ pub fn calibrated_log_state(device: &Device) -> Result<DistanceLogState> {
                         v.name
                     )
                 })?;
-            let (target, u) = match field {
-                "c" => (&mut p.c_rad, "rad"),
-                "re" => (&mut p.re, "1"),
-                "r_o" => (&mut p.r_o_m, "m"),
-                "beta_o" => (&mut p.beta_o_rad, "rad"),
-                "r_i" => (&mut p.r_i_m, "m"),
-                "beta_i" => (&mut p.beta_i_rad, "rad"),
-                other => bail!(
-                    "[calibration.values] {}: unknown capstan parameter {other:?}",
+            let Some((target, u)) = p.field_mut(field) else {
+                bail!(
+                    "[calibration.values] {}: unknown capstan parameter {field:?}",
                     v.name
-                ),
+                );
             };
             unit(u)?;
             *target = v.value;

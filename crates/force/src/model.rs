@@ -300,19 +300,11 @@ impl ForceModel {
                 let Drive::Capstan { params, .. } = slot else {
                     return Err(bad(format!("joint {joint} has no capstan")));
                 };
-                let (target, unit) = match field {
-                    "c" => (&mut params.c_rad, "rad"),
-                    "re" => (&mut params.re, "1"),
-                    "r_o" => (&mut params.r_o_m, "m"),
-                    "beta_o" => (&mut params.beta_o_rad, "rad"),
-                    "r_i" => (&mut params.r_i_m, "m"),
-                    "beta_i" => (&mut params.beta_i_rad, "rad"),
-                    other => {
-                        return Err(bad(format!(
-                            "unknown capstan parameter {other:?}: expected c, re, r_o, beta_o, \
-                             r_i or beta_i"
-                        )));
-                    }
+                let Some((target, unit)) = params.field_mut(field) else {
+                    return Err(bad(format!(
+                        "unknown capstan parameter {field:?}: expected c, re, r_o, beta_o, r_i \
+                         or beta_i"
+                    )));
                 };
                 check_unit(unit)?;
                 *target = v.value;
