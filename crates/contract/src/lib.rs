@@ -1,0 +1,754 @@
+//! The file contract of a calibrated model: the calibration record that `hapcal calibrate
+//! --out` writes (a URDF's sidecar `robot.calibration.toml`, or the `[calibration]` table of
+//! a device file) and that every reader shares: `hapcal-io`, the runtime, its C ABI and the
+//! Python package (docs/design.md §5.3).
+//!
+//! *One set of types, in the lowest crate: the writer and every reader parse and check the
+//! record here, so they cannot disagree on a name or a unit.*
+//!
+//! A record ([`Calibration`]) carries the model's name, every identified value with its unit
+//! and standard deviation, the parameter covariance (for the prediction's uncertainty at a
+//! configuration), each compliance's torque source ([`Torque`]), the calibration's tips, the
+//! instrument and marker frames, and the region the model was fitted on ([`Region`]). Value
+//! names are typed by [`ValueName::parse`]; [`Calibration::check`] refuses an unknown name, a
+//! wrong unit, a missing key or a newer schema at file:line:column ([`ContractError`]).
+//!
+//! ```
+//! use hapcal_contract::{Calibration, ModelName};
+//!
+//! let text = r#"
+//! schema_version = 1
+//! model = "compliance"
+//! tips = ["ball_link"]
+//!
+//! [torque]
+//! source = "lumped-unit-weights"
+//! gravity_direction = [0.0, 0.0, -1.0]
+//! gravity_m_s2 = 9.80665
+//! tips = ["ball_link"]
+//!
+//! [region]
+//! rows = 120
+//! joint = [{ name = "joint_a2", min = -0.5, max = 1.1, unit = "rad" }]
+//!
+//! [values]
+//! "compliance.joint_a2" = { value = 1.5e-4, std = 2e-6, unit = "rad/m" }
+//! "#;
+//! let record = Calibration::from_sidecar_str(text, "robot.calibration.toml")?;
+//! assert_eq!(record.model, Some(ModelName::Compliance));
+//! assert_eq!(record.values[0].unit, "rad/m");
+//! // Read back what it writes.
+//! let again = Calibration::from_sidecar_str(&record.to_sidecar_toml(), "again")?;
+//! assert_eq!(again, record);
+//! # Ok::<(), hapcal_contract::ContractError>(())
+//! ```
+
+mod names;
+mod write;
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use serde::{Deserialize, Serialize};
+
+pub use names::{CapstanField, DhField, ElementField, ValueName};
+
+/// The schema version this crate writes and the newest it reads. Version 1 is the first
+/// record with a model name, torque source, region and covariance; a record without
+/// `schema_version` was written by an earlier hapcal (frames and values only, read as before:
+/// [`Calibration::is_legacy`]).
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// The model a calibration identified: the rung of `hapcal calibrate`'s ladder, by the name
+/// its `--model` option takes (`transversal-compliance`, …).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModelName {
+    /// The nominal kinematics; only the instrument's and markers' frames.
+    FramesOnly,
+    /// The frames plus one offset per joint.
+    JointOffsets,
+    /// Every kinematic parameter the data determine.
+    Geometric,
+    /// Geometric plus one gravity compliance per joint (URDF masses, lumped unit weights, or a
+    /// haptic device's handle mass).
+    Compliance,
+    /// Compliance with the robot's published link masses.
+    MassCompliance,
+    /// Mass-compliance with one compliance per actuator size.
+    ActuatorCompliance,
+    /// Compliance plus one transversal compliance per revolute joint, alike in every direction.
+    TransversalCompliance,
+    /// Compliance plus two transversal compliances per revolute joint, one per axis.
+    TransversalAxes,
+    /// Geometric plus once-per-revolution joint harmonics.
+    Harmonic,
+    /// Geometric plus first- and second-order joint harmonics.
+    Harmonic2,
+    /// Mass-compliance plus harmonic.
+    MassComplianceHarmonic,
+    /// Compliance plus harmonic.
+    ComplianceHarmonic,
+    /// A haptic device's transmissions (capstans, the parallelogram's polynomial) and
+    /// kinematic deviations.
+    Transmissions,
+}
+
+impl ModelName {
+    /// Every model, in ladder order.
+    pub const ALL: [ModelName; 13] = [
+        ModelName::FramesOnly,
+        ModelName::JointOffsets,
+        ModelName::Geometric,
+        ModelName::Compliance,
+        ModelName::MassCompliance,
+        ModelName::ActuatorCompliance,
+        ModelName::TransversalCompliance,
+        ModelName::TransversalAxes,
+        ModelName::Harmonic,
+        ModelName::Harmonic2,
+        ModelName::MassComplianceHarmonic,
+        ModelName::ComplianceHarmonic,
+        ModelName::Transmissions,
+    ];
+
+    /// The name as files and `--model` write it (`transversal-compliance`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ModelName::FramesOnly => "frames-only",
+            ModelName::JointOffsets => "joint-offsets",
+            ModelName::Geometric => "geometric",
+            ModelName::Compliance => "compliance",
+            ModelName::MassCompliance => "mass-compliance",
+            ModelName::ActuatorCompliance => "actuator-compliance",
+            ModelName::TransversalCompliance => "transversal-compliance",
+            ModelName::TransversalAxes => "transversal-axes",
+            ModelName::Harmonic => "harmonic",
+            ModelName::Harmonic2 => "harmonic2",
+            ModelName::MassComplianceHarmonic => "mass-compliance-harmonic",
+            ModelName::ComplianceHarmonic => "compliance-harmonic",
+            ModelName::Transmissions => "transmissions",
+        }
+    }
+}
+
+impl fmt::Display for ModelName {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.pad(self.as_str())
+    }
+}
+
+/// Where a compliance's load comes from, which fixes its unit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TorqueSource {
+    /// The link masses of the URDF's `<inertial>` elements: torques in N·m, compliances in
+    /// rad/(N·m). The masses are written into the record ([`Torque::masses`]).
+    UrdfMasses,
+    /// A robot's published link masses (Franka Panda, KUKA LBR iiwa 14): N·m, rad/(N·m); the
+    /// masses are written into the record.
+    PublishedMasses,
+    /// Without masses: a unit weight at the origin of every joint below and at every tip of
+    /// [`Torque::tips`] below ("torques" in m, compliances in rad/m).
+    LumpedUnitWeights,
+    /// A haptic device's handle, a point mass at the end point ([`Torque::handle_mass_kg`]):
+    /// N·m, rad/(N·m).
+    HandleMass,
+}
+
+impl TorqueSource {
+    /// The name as the record writes it (`urdf-masses`, …).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            TorqueSource::UrdfMasses => "urdf-masses",
+            TorqueSource::PublishedMasses => "published-masses",
+            TorqueSource::LumpedUnitWeights => "lumped-unit-weights",
+            TorqueSource::HandleMass => "handle-mass",
+        }
+    }
+
+    /// The unit of a compliance under this load: `rad/m` for the lumped unit weights,
+    /// `rad/(N·m)` otherwise.
+    pub fn compliance_unit(self) -> &'static str {
+        match self {
+            TorqueSource::LumpedUnitWeights => "rad/m",
+            _ => "rad/(N·m)",
+        }
+    }
+}
+
+impl fmt::Display for TorqueSource {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.pad(self.as_str())
+    }
+}
+
+/// A link's point mass, in the frame of the joint that moves it (after the joint's motion).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PointMass {
+    /// The moving joint (URDF name) whose child link carries the mass.
+    pub joint: String,
+    /// Mass, kg (≥ 0).
+    pub mass_kg: f64,
+    /// Centre of mass in that joint's frame after its motion, m.
+    pub com_m: [f64; 3],
+}
+
+/// The gravity load the compliances were identified under (`[torque]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Torque {
+    /// Where the load comes from.
+    pub source: TorqueSource,
+    /// Unit vector of gravity in the robot's root frame (the base of the chain).
+    pub gravity_direction: [f64; 3],
+    /// Gravitational acceleration, m/s² (9.80665 for link masses; 9.81 for the haptic
+    /// handle, as the simulator).
+    pub gravity_m_s2: f64,
+    /// Whether the loads are those of the deflected robot (the torque equilibrium
+    /// `θ = q + k∘τ(θ)`, solved by fixed-point iteration) rather than those of the robot at
+    /// its readings.
+    #[serde(default)]
+    pub equilibrium: bool,
+    /// The tips whose paths carry the load (the calibration's tips): the lumped unit weights
+    /// sit at every joint origin and tip of these paths.
+    #[serde(default)]
+    pub tips: Vec<String>,
+    /// The point masses (URDF or published masses); empty otherwise.
+    #[serde(default, rename = "mass", skip_serializing_if = "Vec::is_empty")]
+    pub masses: Vec<PointMass>,
+    /// The handle's mass, kg (handle mass only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub handle_mass_kg: Option<f64>,
+}
+
+/// A frame identified with the kinematics (`[frames.<name>]`): the instrument's frame in the
+/// robot's root frame, or a marker's frame on its tip link; a URDF `<origin>`, `R =
+/// Rz(yaw)·Ry(pitch)·Rx(roll)`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Frame {
+    /// Translation, m.
+    pub xyz_m: [f64; 3],
+    /// Roll, pitch, yaw, rad.
+    pub rpy_rad: [f64; 3],
+}
+
+/// One joint's range over the training rows.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointRange {
+    /// Joint name (URDF name, or `q<k>` for a D-H device's joint k).
+    pub name: String,
+    /// Least reading, rad (m for a prismatic joint).
+    pub min: f64,
+    /// Greatest reading, rad (m).
+    pub max: f64,
+    /// `rad` or `m`.
+    pub unit: String,
+}
+
+/// The region the model was fitted on (`[region]`): where its predictions are backed by data.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Region {
+    /// Number of training rows.
+    pub rows: usize,
+    /// Every joint's training range, in the order of the joint readings.
+    #[serde(default, rename = "joint")]
+    pub joints: Vec<JointRange>,
+}
+
+/// Share of a joint's training range a reading may lie past it and still count as inside
+/// the region (random readings fall a fraction of a percent past the training extremes).
+pub const REGION_SLACK_SHARE: f64 = 0.05;
+
+/// A configuration's place against a [`Region`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Outside {
+    /// Joints past their training range by more than [`REGION_SLACK_SHARE`] of it: (index
+    /// in the region's joints, signed distance past the nearer end, rad or m).
+    pub joints: Vec<(usize, f64)>,
+}
+
+impl Outside {
+    /// Whether the configuration lies inside the region.
+    pub fn is_inside(&self) -> bool {
+        self.joints.is_empty()
+    }
+}
+
+impl Region {
+    /// Where the readings `q` (rad or m, in the region's joint order) lie against the
+    /// training ranges: the joints past their range by more than [`REGION_SLACK_SHARE`] of
+    /// it, with how far (positive above the range, negative below). Readings beyond the
+    /// region's joints are not judged.
+    pub fn outside(&self, q: &[f64]) -> Outside {
+        let mut out = Outside::default();
+        for (j, (r, &v)) in self.joints.iter().zip(q).enumerate() {
+            let slack = REGION_SLACK_SHARE * (r.max - r.min).max(0.0);
+            if v > r.max + slack {
+                out.joints.push((j, v - r.max));
+            } else if v < r.min - slack {
+                out.joints.push((j, v - r.min));
+            }
+        }
+        out
+    }
+}
+
+/// The covariance of the identified values (`[covariance]`): the symmetric matrix `Σ` over
+/// [`Covariance::names`], its lower triangle row by row (`Σ₀₀, Σ₁₀, Σ₁₁, Σ₂₀, …`,
+/// `n(n+1)/2` entries), in the values' units (m², rad², m·rad, …).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Covariance {
+    /// The values the rows and columns stand for (names of [`Calibration::values`]).
+    pub names: Vec<String>,
+    /// Lower triangle, row-major.
+    pub lower: Vec<f64>,
+}
+
+impl Covariance {
+    /// The covariance of the `n × n` matrix `matrix` (row-major, symmetric; its lower triangle
+    /// is kept) over `names`.
+    ///
+    /// # Panics
+    /// If `matrix` does not have `names.len()²` entries.
+    #[track_caller]
+    pub fn from_matrix(names: Vec<String>, matrix: &[f64]) -> Covariance {
+        let n = names.len();
+        assert_eq!(matrix.len(), n * n, "a covariance needs n² entries");
+        let lower = (0..n)
+            .flat_map(|i| (0..=i).map(move |j| matrix[i * n + j]))
+            .collect();
+        Covariance { names, lower }
+    }
+
+    /// Entry `Σ_ij`.
+    ///
+    /// # Panics
+    /// If `i` or `j` is not below `names.len()`.
+    #[track_caller]
+    pub fn get(&self, i: usize, j: usize) -> f64 {
+        let n = self.names.len();
+        assert!(i < n && j < n, "covariance entry ({i}, {j}) of {n}");
+        let (i, j) = if i >= j { (i, j) } else { (j, i) };
+        self.lower[i * (i + 1) / 2 + j]
+    }
+}
+
+/// One identified value with its standard deviation, in SI units (`[values]`: `"name" = {
+/// value, std, unit }`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CalibratedValue {
+    /// Parameter name ([`ValueName`]: `dtheta3`, `joint_a2.rx`, `compliance.joint_a4`, …).
+    pub name: String,
+    /// Identified value, in `unit` (a deviation from nominal for kinematic values).
+    pub value: f64,
+    /// Its standard deviation, in `unit` (≥ 0).
+    pub std: f64,
+    /// Unit symbol: `m`, `rad`, `1`, `rad/(N·m)` or `rad/m`.
+    pub unit: String,
+}
+
+/// A calibration record: the sidecar of a calibrated URDF, or a device file's
+/// `[calibration]` table.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Calibration {
+    /// The schema it was written in ([`SCHEMA_VERSION`]); `None`: an earlier hapcal's record.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub schema_version: Option<u32>,
+    /// The model identified (required from schema 1 on).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<ModelName>,
+    /// Date of the calibration, free text.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub date: Option<String>,
+    /// Hash of the measurement data.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data_hash: Option<String>,
+    /// Free text.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub notes: Option<String>,
+    /// The calibration's tip links, in the order of the measurement's markers (URDF robots).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tips: Vec<String>,
+    /// The compliances' gravity load (required when the record holds a compliance).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub torque: Option<Torque>,
+    /// The region the model was fitted on (required from schema 1 on).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub region: Option<Region>,
+    /// The identified frames (`instrument`, `marker1`, …).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub frames: BTreeMap<String, Frame>,
+    /// Identified values, in identification order.
+    #[serde(default, with = "values_table")]
+    pub values: Vec<CalibratedValue>,
+    /// Their covariance (absent: the prediction's uncertainty is unknown).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covariance: Option<Covariance>,
+}
+
+/// Why a record was refused: the file, and where known the line and column, and what was
+/// expected.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ContractError {
+    /// The file (or another name for the text).
+    pub origin: String,
+    /// 1-based line, 0 when unknown.
+    pub line: usize,
+    /// 1-based column, 0 when unknown.
+    pub column: usize,
+    /// What is wrong and what was expected.
+    pub message: String,
+}
+
+impl fmt::Display for ContractError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.line == 0 {
+            write!(f, "{}: {}", self.origin, self.message)
+        } else {
+            write!(
+                f,
+                "{}:{}:{}: {}",
+                self.origin, self.line, self.column, self.message
+            )
+        }
+    }
+}
+
+impl std::error::Error for ContractError {}
+
+/// 1-based line and column of byte `offset` in `text`.
+pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let before = text.get(..offset).unwrap_or(text);
+    let line = before.matches('\n').count() + 1;
+    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, column)
+}
+
+/// Where the text names a key: the first line (1-based) that starts with `key =`, `"key" =`
+/// or `[key` after optional spaces, and its column; (0, 0) if none does.
+fn locate(text: &str, key: &str) -> (usize, usize) {
+    let quoted = format!("\"{key}\"");
+    for (i, line) in text.lines().enumerate() {
+        let trimmed = line.trim_start();
+        let column = line.len() - trimmed.len() + 1;
+        for candidate in [key, quoted.as_str()] {
+            if let Some(rest) = trimmed.strip_prefix(candidate)
+                && rest.trim_start().starts_with('=')
+            {
+                return (i + 1, column);
+            }
+        }
+        if trimmed.starts_with('[') && trimmed.trim_start_matches('[').starts_with(key) {
+            return (i + 1, column);
+        }
+    }
+    (0, 0)
+}
+
+impl Calibration {
+    /// A sidecar's text (`robot.calibration.toml`), parsed and checked ([`Self::check`]);
+    /// `origin` names it in errors.
+    ///
+    /// # Errors
+    /// TOML syntax, a missing or unknown key or a wrong type at its line and column; then as
+    /// [`Self::check`].
+    pub fn from_sidecar_str(text: &str, origin: &str) -> Result<Calibration, ContractError> {
+        let record: Calibration = toml::from_str(text).map_err(|e| {
+            let (line, column) = e.span().map_or((0, 0), |s| line_column(text, s.start));
+            ContractError {
+                origin: origin.to_owned(),
+                line,
+                column,
+                message: e.message().trim_end().to_owned(),
+            }
+        })?;
+        record.check(text, origin)?;
+        Ok(record)
+    }
+
+    /// Whether an earlier hapcal wrote the record (no `schema_version`): frames and values
+    /// only, no model, torque source, region or covariance.
+    pub fn is_legacy(&self) -> bool {
+        self.schema_version.is_none()
+    }
+
+    /// The value named `name`, if any.
+    pub fn value(&self, name: &str) -> Option<&CalibratedValue> {
+        self.values.iter().find(|v| v.name == name)
+    }
+
+    /// Checks what the types cannot: the schema version (a newer one is refused in words),
+    /// the keys schema 1 requires (`model`, `region`, `torque` when a compliance is
+    /// recorded), every value's name ([`ValueName::parse`]) and unit ([`ValueName::unit`]),
+    /// finite numbers, standard deviations ≥ 0, a covariance over recorded values with
+    /// `n(n+1)/2` finite entries and a non-negative diagonal, training ranges with `min ≤
+    /// max`, a unit gravity direction, finite non-negative masses. `text` is the record's
+    /// text (the whole file), searched for the line of the key at fault; `origin` names it.
+    ///
+    /// # Errors
+    /// The first fault, at the line of its key where it can be found.
+    pub fn check(&self, text: &str, origin: &str) -> Result<(), ContractError> {
+        let fail = |key: &str, message: String| {
+            let (line, column) = locate(text, key);
+            Err(ContractError {
+                origin: origin.to_owned(),
+                line,
+                column,
+                message,
+            })
+        };
+        if let Some(v) = self.schema_version {
+            if v > SCHEMA_VERSION {
+                return fail(
+                    "schema_version",
+                    format!(
+                        "schema_version = {v}: written by a newer hapcal; this one reads \
+                         calibration records up to version {SCHEMA_VERSION}"
+                    ),
+                );
+            }
+            if v == 0 {
+                return fail(
+                    "schema_version",
+                    "schema_version = 0: expected 1 (or no schema_version for a record written \
+                     before versions were recorded)"
+                        .to_owned(),
+                );
+            }
+            if self.model.is_none() {
+                return fail(
+                    "schema_version",
+                    format!(
+                        "missing key model: expected the identified model's name, one of {}",
+                        ModelName::ALL.map(ModelName::as_str).join(", ")
+                    ),
+                );
+            }
+            if self.region.is_none() {
+                return fail(
+                    "schema_version",
+                    "missing table [region]: expected rows and each joint's training range"
+                        .to_owned(),
+                );
+            }
+        }
+        if let Some(t) = &self.torque {
+            let g = t.gravity_direction;
+            let norm = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+            if !norm.is_finite() || (norm - 1.0).abs() > 1e-6 {
+                return fail(
+                    "gravity_direction",
+                    format!("torque.gravity_direction = {g:?}: expected a unit vector"),
+                );
+            }
+            if !(t.gravity_m_s2.is_finite() && t.gravity_m_s2 > 0.0) {
+                return fail(
+                    "gravity_m_s2",
+                    format!(
+                        "torque.gravity_m_s2 = {}: expected a positive acceleration, m/s²",
+                        t.gravity_m_s2
+                    ),
+                );
+            }
+            for m in &t.masses {
+                if !(m.mass_kg.is_finite() && m.mass_kg >= 0.0)
+                    || m.com_m.iter().any(|c| !c.is_finite())
+                {
+                    return fail(
+                        "[[torque.mass]]",
+                        format!(
+                            "torque mass on joint {:?}: {} kg at {:?} m is not a finite, \
+                             non-negative mass at a finite point",
+                            m.joint, m.mass_kg, m.com_m
+                        ),
+                    );
+                }
+            }
+            let needs_masses = matches!(
+                t.source,
+                TorqueSource::UrdfMasses | TorqueSource::PublishedMasses
+            );
+            if needs_masses && t.masses.is_empty() {
+                return fail(
+                    "[torque",
+                    format!(
+                        "torque.source = \"{}\" without [[torque.mass]]: expected the link masses",
+                        t.source
+                    ),
+                );
+            }
+            if t.source == TorqueSource::HandleMass
+                && !t.handle_mass_kg.is_some_and(|m| m.is_finite() && m > 0.0)
+            {
+                return fail(
+                    "[torque",
+                    "torque.source = \"handle-mass\": expected handle_mass_kg > 0".to_owned(),
+                );
+            }
+        }
+        if let Some(r) = &self.region {
+            for j in &r.joints {
+                if !(j.min.is_finite() && j.max.is_finite() && j.min <= j.max) {
+                    return fail(
+                        "[region",
+                        format!(
+                            "region joint {:?}: min = {}, max = {}: expected finite min ≤ max",
+                            j.name, j.min, j.max
+                        ),
+                    );
+                }
+                if j.unit != "rad" && j.unit != "m" {
+                    return fail(
+                        "[region",
+                        format!(
+                            "region joint {:?}: unit {:?}, expected \"rad\" or \"m\"",
+                            j.name, j.unit
+                        ),
+                    );
+                }
+            }
+        }
+        for (name, f) in &self.frames {
+            if f.xyz_m.iter().chain(&f.rpy_rad).any(|v| !v.is_finite()) {
+                return fail(
+                    &format!("frames.{name}"),
+                    format!("frames.{name}: a value is not finite"),
+                );
+            }
+        }
+        for v in &self.values {
+            let parsed = match ValueName::parse(&v.name) {
+                Ok(p) => p,
+                Err(message) => return fail(&v.name, format!("{:?}: {message}", v.name)),
+            };
+            if !v.value.is_finite() || !v.std.is_finite() || v.std < 0.0 {
+                return fail(
+                    &v.name,
+                    format!(
+                        "{:?}: value {} with std {}: expected finite numbers, std ≥ 0",
+                        v.name, v.value, v.std
+                    ),
+                );
+            }
+            if parsed.is_compliance() && self.torque.is_none() && !self.is_legacy() {
+                return fail(
+                    &v.name,
+                    format!(
+                        "{:?} is a compliance, but the record has no [torque] table: expected \
+                         the load it was identified under",
+                        v.name
+                    ),
+                );
+            }
+            let allowed = parsed.units(self.torque.as_ref().map(|t| t.source));
+            if !allowed.is_empty() && !allowed.contains(&v.unit.as_str()) {
+                let expected: Vec<String> = allowed.iter().map(|u| format!("{u:?}")).collect();
+                return fail(
+                    &v.name,
+                    format!(
+                        "{:?} is in {:?}, expected {}",
+                        v.name,
+                        v.unit,
+                        expected.join(" or ")
+                    ),
+                );
+            }
+        }
+        if let Some(c) = &self.covariance {
+            let n = c.names.len();
+            if c.lower.len() != n * (n + 1) / 2 {
+                return fail(
+                    "lower",
+                    format!(
+                        "covariance.lower has {} entries; {n} names need n(n+1)/2 = {}",
+                        c.lower.len(),
+                        n * (n + 1) / 2
+                    ),
+                );
+            }
+            for name in &c.names {
+                if self.value(name).is_none() {
+                    return fail(
+                        "names",
+                        format!("covariance names {name:?}, which is not a recorded value"),
+                    );
+                }
+            }
+            if c.lower.iter().any(|x| !x.is_finite()) || (0..n).any(|i| c.get(i, i) < 0.0) {
+                return fail(
+                    "lower",
+                    "covariance.lower: expected finite entries and a non-negative diagonal"
+                        .to_owned(),
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
+/// `[values]` as a table of `"name" = { value, std, unit }`, in file order.
+mod values_table {
+    use std::fmt;
+
+    use serde::de::{MapAccess, Visitor};
+    use serde::ser::SerializeMap;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    use super::CalibratedValue;
+
+    #[derive(Serialize, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Body {
+        value: f64,
+        std: f64,
+        unit: String,
+    }
+
+    pub(super) fn serialize<S: Serializer>(
+        values: &[CalibratedValue],
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        let mut map = s.serialize_map(Some(values.len()))?;
+        for v in values {
+            let body = Body {
+                value: v.value,
+                std: v.std,
+                unit: v.unit.clone(),
+            };
+            map.serialize_entry(&v.name, &body)?;
+        }
+        map.end()
+    }
+
+    pub(super) fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<Vec<CalibratedValue>, D::Error> {
+        struct ValuesVisitor;
+        impl<'de> Visitor<'de> for ValuesVisitor {
+            type Value = Vec<CalibratedValue>;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a table of name = { value, std, unit }")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+                let mut values = Vec::new();
+                while let Some((name, body)) = map.next_entry::<String, Body>()? {
+                    values.push(CalibratedValue {
+                        name,
+                        value: body.value,
+                        std: body.std,
+                        unit: body.unit,
+                    });
+                }
+                Ok(values)
+            }
+        }
+        d.deserialize_map(ValuesVisitor)
+    }
+}
