@@ -6,8 +6,27 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 import numpy.typing as npt
 
-PathLike = Union[str, os.PathLike[str]]
-ArrayLike = npt.ArrayLike
+_PathLike = Union[str, os.PathLike[str]]
+_ArrayLike = npt.ArrayLike
+
+__all__ = [
+    "Calibration",
+    "Device",
+    "HapcalError",
+    "RuntimeModel",
+    "RuntimeRobot",
+    "Measurements",
+    "MODELS",
+    "CRITERIA",
+    "Diagnosis",
+    "SetupCheck",
+    "calibrate",
+    "check",
+    "diagnose",
+    "import_urdf",
+    "plan_poses",
+    "simulate",
+]
 
 __version__: str
 MODELS: Tuple[str, ...]
@@ -20,11 +39,11 @@ class Device:
     """A robot or haptic device: a serial URDF with tip link(s), or a hapcal device file."""
 
     @staticmethod
-    def from_urdf(path: PathLike, tip: str, tips: Optional[Sequence[str]] = None) -> Device:
+    def from_urdf(path: _PathLike, tip: str, tips: Optional[Sequence[str]] = None) -> Device:
         """URDF with the tool on link ``tip``; ``tips``: further tip links of a tree (marker
         k+1 on the k-th of ``[tip, *tips]``)."""
     @staticmethod
-    def from_toml(path: PathLike) -> Device:
+    def from_toml(path: _PathLike) -> Device:
         """hapcal device file: D-H / modified D-H table, URDF placements, or a haptic device."""
     @property
     def joint_names(self) -> List[str]:
@@ -43,7 +62,7 @@ class RuntimeModel:
     """A calibrated haptic device in a control loop (hapcal-runtime; the object the C ABI's
     handle holds): the device file ``hapcal calibrate`` writes."""
 
-    def __init__(self, path: PathLike) -> None: ...
+    def __init__(self, path: _PathLike) -> None: ...
     @property
     def n_joints(self) -> int: ...
     def evaluate(self, theta: Sequence[float], wrench: Sequence[float]) -> Dict[str, Any]:
@@ -55,7 +74,7 @@ class RuntimeRobot:
     """A calibrated robot in a control loop (hapcal-runtime): the URDF and its sidecar
     ``<stem>.calibration.toml`` that ``hapcal calibrate --out robot.urdf`` writes."""
 
-    def __init__(self, urdf: PathLike, tips: Sequence[str]) -> None: ...
+    def __init__(self, urdf: _PathLike, tips: Sequence[str]) -> None: ...
     @property
     def joint_names(self) -> List[str]: ...
     @property
@@ -81,21 +100,21 @@ class Measurements:
 
     @classmethod
     def from_csv(
-        cls, path: PathLike, length_unit: str = "m", angle_unit: str = "rad"
+        cls, path: _PathLike, length_unit: str = "m", angle_unit: str = "rad"
     ) -> Measurements:
         """Measurement CSV / industrial_calibration YAML / hapcal log / MUKCa folder, read when
         calibrating. ``length_unit``: "m" | "mm"; ``angle_unit``: "rad" | "deg"."""
     @classmethod
     def from_arrays(
         cls,
-        q: ArrayLike,
-        positions: Optional[ArrayLike] = None,
-        quaternions: Optional[ArrayLike] = None,
-        distances: Optional[ArrayLike] = None,
+        q: _ArrayLike,
+        positions: Optional[_ArrayLike] = None,
+        quaternions: Optional[_ArrayLike] = None,
+        distances: Optional[_ArrayLike] = None,
         joint_names: Optional[Sequence[str]] = None,
         *,
-        rpy: Optional[ArrayLike] = None,
-        t: Optional[ArrayLike] = None,
+        rpy: Optional[_ArrayLike] = None,
+        t: Optional[_ArrayLike] = None,
         name: str = "arrays",
         length_unit: str = "m",
         angle_unit: str = "rad",
@@ -144,17 +163,17 @@ class Calibration:
     def frames(self) -> List[Dict[str, Any]]: ...
     @property
     def warnings(self) -> List[str]: ...
-    def to_urdf(self, path: PathLike) -> List[str]:
+    def to_urdf(self, path: _PathLike) -> List[str]:
         """Calibrated copy of the source URDF (+ ``<path>.calibration.toml``); paths written."""
-    def to_toml(self, path: PathLike) -> List[str]:
+    def to_toml(self, path: _PathLike) -> List[str]:
         """Device file with a ``[calibration]`` table; paths written."""
 
-MeasurementsLike = Union[Measurements, Sequence[Union[Measurements, PathLike]], PathLike]
+_MeasurementsLike = Union[Measurements, Sequence[Union[Measurements, _PathLike]], _PathLike]
 
 def calibrate(
     device: Device,
-    train: MeasurementsLike,
-    test: Optional[MeasurementsLike] = None,
+    train: _MeasurementsLike,
+    test: Optional[_MeasurementsLike] = None,
     model: str = "auto",
     sigma_m: Optional[float] = None,
     sigma_rad: Optional[float] = None,
@@ -171,16 +190,16 @@ def calibrate(
 CRITERIA: Tuple[str, ...]
 
 def simulate(
-    truth: Optional[PathLike] = None,
+    truth: Optional[_PathLike] = None,
     seed: int = 1,
     poses: int = 200,
     motion: bool = False,
     noise: str = "paper",
     effects: Optional[Sequence[str]] = None,
     *,
-    device: Optional[PathLike] = None,
+    device: Optional[_PathLike] = None,
     period_s: float = 0.5,
-    path: Optional[PathLike] = None,
+    path: Optional[_PathLike] = None,
 ) -> Dict[str, npt.NDArray[np.float64]]:
     """``hapcal simulate``: the log's columns in CSV order, each ``(poses,)``: ``q1..qn`` rad
     (m prismatic), ``distance_m`` m, ``ext1..ext4`` rad (NaN: none), ``t_s`` s (motion).
@@ -198,7 +217,7 @@ def plan_poses(
     sigma_m: Optional[float] = None,
     separate_transmission_run: bool = False,
     refine: bool = False,
-    path: Optional[PathLike] = None,
+    path: Optional[_PathLike] = None,
     model: str = "geometric",
 ) -> npt.NDArray[np.float64]:
     """``hapcal plan-poses``: joint readings ``(count, n_joints)``, rad (m prismatic), chain
@@ -223,11 +242,11 @@ class Diagnosis:
 
 def diagnose(
     device: Device,
-    data: Union[Measurements, PathLike, Sequence[Union[Measurements, PathLike]]],
+    data: Union[Measurements, _PathLike, Sequence[Union[Measurements, _PathLike]]],
     baseline: Optional[str] = None,
     folds: int = 5,
     *,
-    test: Optional[Union[Measurements, PathLike, Sequence[Union[Measurements, PathLike]]]] = None,
+    test: Optional[Union[Measurements, _PathLike, Sequence[Union[Measurements, _PathLike]]]] = None,
     sigma_m: Optional[float] = None,
     test_last: Optional[float] = None,
     accept_setup: bool = False,
@@ -236,3 +255,43 @@ def diagnose(
     ``baseline``: a haptic device: "transmissions" (default) | "geometric" ("full" |
     "kinematics" read as these); a robot: "geometric" (default, the only one); ``folds`` ≥ 2;
     ``accept_setup``: go on past a setup mistake (verdict "setup"). Raises HapcalError."""
+
+class SetupCheck:
+    """Result of :func:`check`; a failing check is a result, not an error."""
+
+    @property
+    def report(self) -> Dict[str, Any]:
+        """``hapcal check --json``'s document as a dict (m, rad)."""
+    def to_json(self) -> str:
+        """``hapcal check --json``'s document, byte for byte (no final newline)."""
+    @property
+    def findings(self) -> List[Dict[str, Any]]:
+        """Errors first: ``class`` ("length-unit", "joint-order", …), ``severity`` ("error" |
+        "warning"), ``message``, ``fix`` (the command line's option or the edit of the files),
+        ``before`` / ``after`` residuals (m, rad)."""
+    @property
+    def exit_code(self) -> int:
+        """``hapcal check``'s exit code: 0 nothing found or only warnings, 2 a mistake the
+        data show overwhelmingly."""
+    @property
+    def error(self) -> Optional[str]:
+        """The message ``hapcal check`` stops with when ``exit_code`` is 2, else None."""
+
+def check(
+    device: Device,
+    data: Union[Measurements, _PathLike, Sequence[Union[Measurements, _PathLike]]],
+    *,
+    length_unit: str = "m",
+    angle_unit: str = "rad",
+    socket_distance_m: float = 0.05,
+) -> SetupCheck:
+    """``hapcal check``: the setup of measurement files, a haptic device's logs or socket
+    folders (files only); ``length_unit`` "m" | "mm" and ``angle_unit`` "rad" | "deg" for
+    paths. Raises HapcalError only for input it cannot read."""
+
+def import_urdf(
+    urdf: _PathLike, tips: Union[str, Sequence[str]], *, path: Optional[_PathLike] = None
+) -> str:
+    """``hapcal import-urdf``: the device file's TOML text for the URDF chain to ``tips`` (a
+    tree: one branch per further tip); ``path``: also write it (``.toml``, atomically, never
+    over the URDF). Raises HapcalError."""

@@ -1,6 +1,7 @@
 //! Python bindings of hapcal (`hapcal._hapcal`): devices, measurements (files or arrays), the
-//! calibration of `hapcal-calibrate`, and the `simulate`, `plan-poses` and `diagnose` workflows
-//! (`hapcal-sim`, `hapcal_calibrate::plan`, `hapcal-diagnose`). The Python package `hapcal`
+//! calibration of `hapcal-calibrate`, and the `simulate`, `plan-poses`, `diagnose`, `check` and
+//! `import-urdf` workflows (`hapcal-sim`, `hapcal_calibrate::plan`, `hapcal-diagnose`,
+//! `hapcal_calibrate::setup`, `hapcal_io::import_urdf_tree`). The Python package `hapcal`
 //! (python/hapcal) wraps this module with NumPy / pandas conveniences; everything numeric
 //! happens here, in the same library functions the `hapcal` command line calls.
 
@@ -620,7 +621,10 @@ impl PyCalibration {
 
 /// The names of every model, as the command line's `--model` takes them (`ModelChoice`).
 fn model_names() -> Vec<String> {
-    ModelChoice::all().iter().map(|m| m.name().to_owned()).collect()
+    ModelChoice::all()
+        .iter()
+        .map(|m| m.name().to_owned())
+        .collect()
 }
 
 fn model_choice(model: &str) -> Result<ModelChoice> {
@@ -995,8 +999,9 @@ fn _diagnose(
         let device_path = device.path.clone();
         return py
             .detach(move || -> Result<(String, Vec<String>)> {
-                let baseline =
-                    hapcal_diagnose::baseline_model(baseline.as_deref().unwrap_or("transmissions"))?;
+                let baseline = hapcal_diagnose::baseline_model(
+                    baseline.as_deref().unwrap_or("transmissions"),
+                )?;
                 let config = hapcal_diagnose::DiagnoseConfig {
                     baseline,
                     folds,
@@ -1087,6 +1092,105 @@ fn _diagnose(
         let json = serde_json::to_string_pretty(&d).context("serialising the diagnosis")?;
         warnings.extend(baseline.warnings);
         Ok((json, warnings))
+    })
+    .map_err(py_err)
+}
+
+/// The setup check of measurement files (marker positions, poses, distances), a haptic
+/// device's logs or MUKCa socket folders, as `hapcal check` runs it
+/// (`hapcal_calibrate::setup::check_plan`). Returns the report as `hapcal check --json`
+/// prints it (without the final newline) and, when the data show a mistake overwhelmingly,
+/// the message `hapcal check` stops with (exit code 2); a failing check is a result, not an
+/// error. See `hapcal.check`.
+#[pyfunction]
+#[pyo3(signature = (device, data, socket_distance_m))]
+fn _check(
+    py: Python<'_>,
+    device: &PyDevice,
+    data: Vec<PyRef<'_, PyMeasurements>>,
+    socket_distance_m: f64,
+) -> PyResult<(String, Option<String>)> {
+    let sources: Vec<Source> = data.iter().map(|m| m.source.clone()).collect();
+    let plan = (|| -> Result<Plan> {
+        let Some(files) = file_sources(&sources) else {
+            bail!(
+                "check reads files (measurement files, a haptic device's logs, socket folders); \
+                 measurements given as arrays are taken as given: write them to a CSV file to \
+                 check them"
+            );
+        };
+        let Some(&(_, units)) = files.first() else {
+            bail!("data: give the measurement files to check");
+        };
+        if files.iter().any(|(_, u)| *u != units) {
+            bail!(
+                "data: the files of one check are read in one length unit and one angle unit; \
+                 give every file the same length_unit and angle_unit"
+            );
+        }
+        Ok(Plan {
+            device: device.path.clone(),
+            tip: device.tip.clone(),
+            tips: device.tips.clone(),
+            units,
+            data: files.into_iter().map(|(p, _)| p).collect(),
+            test: Vec::new(),
+            socket_distance_m,
+            ..Plan::bundled_default()
+        })
+    })()
+    .map_err(py_err)?;
+    py.detach(move || -> Result<(String, Option<String>)> {
+        if let Some(missing) = plan.data.iter().find(|p| !p.exists()) {
+            bail!("data {}: no such file", missing.display());
+        }
+        plan.validate()?;
+        let Some(report) = hapcal_calibrate::setup::check_plan(&plan)? else {
+            bail!(
+                "check applies to measurement files (marker positions, poses, distances), a \
+                 haptic device's logs and socket folders; {} holds none",
+                (plan.data.iter())
+                    .map(|p| p.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        };
+        let json = serde_json::to_string_pretty(&report).context("serialising the check")?;
+        let error =
+            (report.overwhelming()).map(|f| format!("setup check [{}]: {}", f.class, f.text()));
+        Ok((json, error))
+    })
+    .map_err(py_err)
+}
+
+/// Imports a URDF chain, or a tree with several tips, as a hapcal device file, as `hapcal
+/// import-urdf` does (`hapcal_io::import_urdf_tree`, `hapcal_io::write_device`); also writes
+/// it to `path` (atomically, never over the URDF) when given. Returns the device file's text
+/// (TOML). See `hapcal.import_urdf`.
+#[pyfunction]
+#[pyo3(signature = (urdf, tips, path))]
+fn _import_urdf(
+    py: Python<'_>,
+    urdf: PathBuf,
+    tips: Vec<String>,
+    path: Option<PathBuf>,
+) -> PyResult<String> {
+    py.detach(move || -> Result<String> {
+        if tips.is_empty() {
+            bail!(
+                "tips: give the tip link (e.g. \"ball_link\"), and one more per branch of a tree"
+            );
+        }
+        if let Some(out) = &path {
+            calibrate::check_extension(out, &["toml"], "a device file", true)?;
+            calibrate::check_output(out, &[urdf.as_path()])?;
+        }
+        let device = hapcal_io::import_urdf_tree(&urdf, &tips)?;
+        let text = hapcal_io::write_device(&device);
+        if let Some(out) = &path {
+            calibrate::write_new(out, &text, &[urdf.as_path()])?;
+        }
+        Ok(text)
     })
     .map_err(py_err)
 }
@@ -1289,6 +1393,8 @@ fn _hapcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_simulate, m)?)?;
     m.add_function(wrap_pyfunction!(_plan_poses, m)?)?;
     m.add_function(wrap_pyfunction!(_diagnose, m)?)?;
+    m.add_function(wrap_pyfunction!(_check, m)?)?;
+    m.add_function(wrap_pyfunction!(_import_urdf, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     // The models `calibrate` takes, from the one definition of the model choice.
     m.add("MODELS", model_names())?;

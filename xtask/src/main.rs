@@ -143,6 +143,22 @@ fn ci(sh: &Shell) -> Result<()> {
         "cargo clippy --workspace --all-targets --quiet -- -D warnings"
     )
     .run()?;
+    // The runtime's `no_std` claim: its library without `std` (lints included), then inside
+    // a `#![no_std]` crate with its own panic handler, which fails to build if std is linked
+    // (its own workspace, so that no other member turns `std` back on; the same target
+    // directory as the rest).
+    cmd!(
+        sh,
+        "cargo clippy -p hapcal-runtime --no-default-features --lib --quiet -- -D warnings"
+    )
+    .run()?;
+    let target_dir = std::env::var_os("CARGO_TARGET_DIR")
+        .map_or_else(|| sh.current_dir().join("target"), PathBuf::from);
+    cmd!(
+        sh,
+        "cargo build --locked --quiet --manifest-path crates/runtime/no-std-check/Cargo.toml --target-dir {target_dir}"
+    )
+    .run()?;
     // Property tests with a fixed seed: a red CI is a regression, never bad luck
     // (`cargo xtask proptest-fresh` runs them with fresh seeds).
     cmd!(sh, "cargo test --workspace --quiet")

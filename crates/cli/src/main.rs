@@ -222,7 +222,7 @@ enum Command {
     /// diagnosis (transmissions and kinematics). A URDF or D-H device with anything hapcal
     /// calibrate reads (MUKCa socket folders, distance logs, marker / pose / distance files):
     /// the serial-arm diagnosis on the geometric calibration, with the model ladder. Prints a
-    /// table (or one JSON document with --json) and writes the residual maps as SVG.
+    /// table (or one JSON document with --json); with --svg FILE, also the residual maps.
     Diagnose {
         /// Device: a haptic device's TOML, a URDF (with --tip) or a D-H device file.
         #[arg(long)]
@@ -264,9 +264,9 @@ enum Command {
         /// Print one JSON document instead of the table.
         #[arg(long)]
         json: bool,
-        /// Where to write the residual maps (SVG).
-        #[arg(long, default_value = "diagnose_residuals.svg")]
-        svg: PathBuf,
+        /// Also write the residual maps (SVG) to this file; without it no file is written.
+        #[arg(long)]
+        svg: Option<PathBuf>,
         /// Diagnose measurement files as they are even when the setup check finds a mistake
         /// (hapcal check).
         #[arg(long)]
@@ -767,10 +767,12 @@ fn run(cli: Cli) -> Result<()> {
             svg,
             accept_setup,
         } => {
-            calibrate::check_extension(&svg, &["svg"], "the residual maps", false)?;
             let mut inputs: Vec<&std::path::Path> = vec![device.as_path()];
             inputs.extend(data.iter().chain(&test).map(PathBuf::as_path));
-            calibrate::check_output(&svg, &inputs)?;
+            if let Some(svg) = &svg {
+                calibrate::check_extension(svg, &["svg"], "the residual maps", false)?;
+                calibrate::check_output(svg, &inputs)?;
+            }
             if data.is_empty() {
                 anyhow::bail!("--data: give the log or the measurements to diagnose");
             }
@@ -881,8 +883,10 @@ fn run(cli: Cli) -> Result<()> {
                 emit(&text);
             }
             // The maps are an output asked for: failing to write them fails the command.
-            calibrate::write_new(&svg, &svg_text, &inputs)?;
-            note!("hapcal: wrote residual maps to {}", svg.display());
+            if let Some(svg) = &svg {
+                calibrate::write_new(svg, &svg_text, &inputs)?;
+                note!("hapcal: wrote residual maps to {}", svg.display());
+            }
             Ok(())
         }
         Command::BlindTest {

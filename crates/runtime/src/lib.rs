@@ -77,7 +77,9 @@
 //!
 //! Without the default feature `std` the crate is `no_std` (libm for the elementary
 //! functions): a model is then built from its parts with [`Model::from_dh`], [`Drive::capstan`]
-//! and [`Drive::polynomial`]; loading files needs `std`.
+//! and [`Drive::polynomial`]; loading files needs `std`. `cargo xtask ci` builds it so, and
+//! links it into a `#![no_std]` crate with its own panic handler (`crates/runtime/no-std-check`),
+//! which would not build if std came along.
 //!
 //! **C ABI**: `hapcal-runtime-capi` (`crates/runtime/capi`) builds this crate as a `cdylib`
 //! and a `staticlib` with the header `include/hapcal_runtime.h`.

@@ -2026,7 +2026,7 @@ fn option_cases(t: &mut Table) {
         ),
         (
             "diagnose without --data",
-            vec!["diagnose", "--device", &device, "--svg", "unused.svg"],
+            vec!["diagnose", "--device", &device],
             vec!["--data: give the log or the measurements to diagnose"],
         ),
         (

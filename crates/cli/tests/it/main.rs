@@ -653,20 +653,31 @@ fn plan_poses_writes_the_chosen_readings_and_beats_a_random_set() {
 }
 
 /// `hapcal diagnose` names its baseline and the kind of data in words (`--baseline` values),
-/// never by a Rust name.
+/// never by a Rust name; it writes the residual maps only where `--svg` says (run from an
+/// empty folder without `--svg`, the folder stays empty).
 #[test]
 fn diagnose_reports_name_the_baseline_and_the_data_in_words() {
     let dir = scratch("diagnose-words");
+    let cwd = scratch("diagnose-words-cwd");
     let show = |p: &Path| p.display().to_string();
-    let haptic = hapcal(&[
-        "diagnose",
-        "--device",
-        &show(&root().join("fixtures/reference-device/device.toml")),
-        "--data",
-        &show(&root().join("fixtures/reference-device/log.csv")),
-        "--svg",
-        &show(&dir.join("haptic.svg")),
-    ]);
+    let haptic = Command::new(env!("CARGO_BIN_EXE_hapcal"))
+        .args([
+            "diagnose",
+            "--device",
+            &show(&root().join("fixtures/reference-device/device.toml")),
+            "--data",
+            &show(&root().join("fixtures/reference-device/log.csv")),
+        ])
+        .current_dir(&cwd)
+        .output()
+        .expect("the binary runs");
+    let left: Vec<_> = std::fs::read_dir(&cwd).expect("scratch folder").collect();
+    assert!(left.is_empty(), "diagnose without --svg wrote {left:?}");
+    assert!(
+        !stderr(&haptic).contains("wrote"),
+        "no file is announced: {}",
+        stderr(&haptic)
+    );
     let arm = hapcal(&[
         "diagnose",
         "--device",
@@ -697,6 +708,8 @@ fn diagnose_reports_name_the_baseline_and_the_data_in_words() {
             assert!(!text.contains(rust), "{rust}: {text}");
         }
     }
+    let maps = std::fs::read_to_string(dir.join("arm.svg")).expect("--svg wrote the maps");
+    assert!(maps.starts_with("<svg"), "{maps}");
 }
 
 /// The same for distance logs (a device with its own cable encoder and no transmissions: the
