@@ -995,7 +995,7 @@ fn range_folds(robot: &Robot, tables: &[MeasurementTable], beyond: &[&[f64]]) ->
 }
 
 /// What the joint-range folds say of one rung against another where the calibration will be
-/// used beyond its training range ([`RangeEvidence::judge`]), averaged over the folds.
+/// used beyond its training range, averaged over the folds.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RangeVerdict {
     /// The difference of the weighted squared errors per row (the first rung's minus the
