@@ -328,6 +328,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         elapsed_s: start.elapsed().as_secs_f64(),
         downweighted: Vec::new(),
         range_folds: Vec::new(),
+        coverage: None,
         equilibrium_step_m: None,
         equilibrium_refits: 0,
     };

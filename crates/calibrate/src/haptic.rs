@@ -1480,6 +1480,7 @@ pub fn calibrate_logs(
         elapsed_s: start.elapsed().as_secs_f64(),
         downweighted: Vec::new(),
         range_folds: Vec::new(),
+        coverage: None,
         equilibrium_step_m: None,
         equilibrium_refits: 0,
     };

@@ -41,7 +41,8 @@ use crate::model::{DataKind, ModelChoice};
 pub use crate::noise::{CALIBRATED_SIGMA_RATIO, PLAUSIBLE_FRAMES_ONLY_RMS_M};
 use crate::report::SetRole;
 pub use crate::report::{
-    Downweighted, FrameReport, PoseFigures, RangeFold, RungReport, SampleErrors,
+    Beyond, Coverage, CoverageSide, Downweighted, FrameReport, PoseFigures, RangeFold, RangeStop,
+    RungReport, SampleErrors,
 };
 
 /// The instrument frame and the markers' frames with their tips.
@@ -98,6 +99,9 @@ pub struct MeasuredOutcome {
     pub range_folds: Vec<RangeFold>,
     /// Each joint's training range (rad, m for a prismatic joint), chain order.
     pub training_ranges: Vec<(f64, f64)>,
+    /// With workspace configurations or test rows: where they lie beyond the training
+    /// ranges, and what the model choice did about it.
+    pub coverage: Option<Coverage>,
     /// Training samples the Huber loss bounded, file order.
     pub downweighted: Vec<Downweighted>,
     /// With compliance: how far one more fixed-point step of the torque equilibrium would
@@ -848,9 +852,20 @@ fn past_range(q: f64, (lo, hi): (f64, f64)) -> Option<bool> {
     }
 }
 
-/// Share of the training rows each joint-range fold holds out, from one end of the joint's
-/// range.
+/// Share of the training rows a joint-range fold holds out at least, from one end of the
+/// joint's range: on evenly spread readings it emulates an extrapolation of a quarter of the
+/// range it is fitted on (0.2 / 0.8).
 pub const RANGE_FOLD_SHARE: f64 = 0.2;
+
+/// Share of the training rows a joint-range fold holds out at most: on evenly spread readings
+/// it emulates an extrapolation of the whole range it is fitted on (0.5 / 0.5); a fold that
+/// held out more would be fitted on fewer rows than it is judged on.
+pub const MAX_RANGE_FOLD_SHARE: f64 = 0.5;
+
+/// Blocks of a joint-range fold's held-out rows, contiguous along the joint's reading, that
+/// the standard error of a difference between rungs is taken over (a rung's extrapolation
+/// error is smooth in the reading, so neighbouring rows are correlated).
+pub const RANGE_BLOCKS: usize = 5;
 
 /// The training range of every joint, rad or m: (min, max) over the training rows.
 pub fn training_ranges(tables: &[MeasurementTable], n_joints: usize) -> Vec<(f64, f64)> {
@@ -863,16 +878,36 @@ pub fn training_ranges(tables: &[MeasurementTable], n_joints: usize) -> Vec<(f64
     range
 }
 
-/// The joint-range folds: for each joint whose readings vary, the rows in the top and in the
-/// bottom [`RANGE_FOLD_SHARE`] of its training readings held out (a side is skipped when
-/// ties would hold out more than half the rows or fewer than 3). `beyond` are the test and
-/// workspace configurations: a side is relevant when one of them lies past the training
-/// range there.
-fn range_folds(
-    robot: &Robot,
-    tables: &[MeasurementTable],
-    beyond: &[&[f64]],
-) -> Vec<(RangeFold, Fold)> {
+/// How far reading `q` lies beyond side `upper` of the training range `(lo, hi)`, as a share
+/// of the range; 0 when it does not lie past it by more than [`OUTSIDE_SHARE`] ([`past_range`]).
+fn beyond_share(q: f64, (lo, hi): (f64, f64), upper: bool) -> f64 {
+    match past_range(q, (lo, hi)) {
+        Some(u) if u == upper && hi > lo => (if upper { q - hi } else { lo - q }) / (hi - lo),
+        _ => 0.0,
+    }
+}
+
+/// A joint-range fold: its report, its joint (chain order) and the rows it holds out.
+struct RangeSplit {
+    report: RangeFold,
+    joint: usize,
+    fold: Fold,
+    /// The reading nearest the held-out end among the rows the fold is fitted on, and the
+    /// width of their range (rad or m): a held-out reading `q` lies `|q − edge| / width`
+    /// beyond them.
+    edge: f64,
+    width: f64,
+}
+
+/// The joint-range folds where the calibration will be used beyond its training range: for
+/// each side of each joint's range that a configuration of `beyond` (test rows, workspace)
+/// lies past by more than [`OUTSIDE_SHARE`] of the range, the rows at that end of the joint's
+/// training readings held out. The fold holds out the fewest rows, from
+/// [`RANGE_FOLD_SHARE`] up to [`MAX_RANGE_FOLD_SHARE`] of them, whose readings reach as far
+/// beyond the readings it is fitted on, relative to their range, as the farthest
+/// configuration lies beyond the training range (docs/engine.md, "Extrapolation"). A side is
+/// skipped when ties would hold out more than half the rows or fewer than 3.
+fn range_folds(robot: &Robot, tables: &[MeasurementTable], beyond: &[&[f64]]) -> Vec<RangeSplit> {
     let n_joints = robot.joint_names.len();
     let ranges = training_ranges(tables, n_joints);
     let n_rows: usize = tables.iter().map(|t| t.rows.len()).sum();
@@ -885,31 +920,316 @@ fn range_folds(
             .map(|r| r.q[j])
             .collect();
         values.sort_by(f64::total_cmp);
-        let cut = ((RANGE_FOLD_SHARE * n_rows as f64).ceil() as usize).clamp(1, n_rows);
-        let (low_cut, high_cut) = (values[cut - 1], values[n_rows - cut]);
+        let k_min = ((RANGE_FOLD_SHARE * n_rows as f64).ceil() as usize).clamp(1, n_rows);
+        let k_max = ((MAX_RANGE_FOLD_SHARE * n_rows as f64).floor() as usize).max(k_min);
         for upper in [false, true] {
-            let held = |q: f64| if upper { q >= high_cut } else { q <= low_cut };
+            let needed = (beyond.iter())
+                .map(|q| beyond_share(q[j], (lo, hi), upper))
+                .fold(0.0, f64::max);
+            if needed <= 0.0 {
+                continue;
+            }
+            // Holding out the k most extreme readings (and their ties): the rows held out and
+            // the extrapolation the fold emulates.
+            let split = |k: usize| {
+                let (count, edge) = if upper {
+                    let cut = values[n_rows - k];
+                    let first = values.partition_point(|&v| v < cut);
+                    (n_rows - first, values[..first].last().copied())
+                } else {
+                    let cut = values[k - 1];
+                    let past = values.partition_point(|&v| v <= cut);
+                    (past, values[past..].first().copied())
+                };
+                let edge = edge.unwrap_or(if upper { lo } else { hi });
+                let fitted = if upper { edge - lo } else { hi - edge };
+                let reach = if upper { hi - edge } else { edge - lo };
+                let emulated = if fitted > 0.0 {
+                    reach / fitted
+                } else {
+                    f64::INFINITY
+                };
+                (count, emulated, edge, fitted)
+            };
+            let mut chosen = None;
+            for k in k_min..=k_max.min(n_rows) {
+                let (count, emulated, edge, width) = split(k);
+                if count < 3 || 2 * count > n_rows {
+                    continue;
+                }
+                chosen = Some((k, count, emulated, edge, width));
+                if emulated >= needed {
+                    break;
+                }
+            }
+            let Some((k, count, emulated, edge, width)) = chosen else {
+                continue;
+            };
+            let held = |q: f64| {
+                if upper {
+                    q >= values[n_rows - k]
+                } else {
+                    q <= values[k - 1]
+                }
+            };
             let fold: Fold = (tables.iter())
                 .map(|t| t.rows.iter().map(|r| held(r.q[j])).collect())
                 .collect();
-            let count = fold.iter().flatten().filter(|&&h| h).count();
-            if count < 3 || 2 * count > n_rows {
-                continue;
-            }
-            let relevant = beyond
-                .iter()
-                .any(|q| past_range(q[j], (lo, hi)) == Some(upper));
-            out.push((
-                RangeFold {
+            out.push(RangeSplit {
+                report: RangeFold {
                     joint: robot.joint_names[j].clone(),
                     upper,
-                    relevant,
+                    relevant: true,
+                    held_out_share: count as f64 / n_rows as f64,
+                    emulated_share: emulated,
+                    needed_share: needed,
                 },
+                joint: j,
                 fold,
-            ));
+                edge,
+                width,
+            });
         }
     }
     out
+}
+
+/// What the joint-range folds say of one rung against another where the calibration will be
+/// used beyond its training range, averaged over the folds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RangeVerdict {
+    /// The difference of the weighted squared errors per row (the first rung's minus the
+    /// second's, dimensionless) predicted at the extrapolation needed, and its standard error.
+    pub predicted: (f64, f64),
+    /// How that difference changes per unit of extrapolation share across the folds' rows
+    /// (dimensionless; positive: the first rung's advantage shrinks the farther it
+    /// extrapolates).
+    pub growth: f64,
+    /// Whether every fold could fit both rungs (`false`: a fold leaves fewer rows than a
+    /// rung's parameters need; the folds cannot judge it, and it is not taken).
+    pub judged: bool,
+}
+
+impl RangeVerdict {
+    /// Whether the folds let the first rung be taken over the second (the one chosen below
+    /// it): better at the extrapolation needed by [`crate::model::LADDER_SIGNIFICANCE_Z`]
+    /// standard errors, the margin of the blocked folds, and with an advantage that does not
+    /// shrink as the folds extrapolate farther (docs/engine.md, "Extrapolation").
+    pub fn allows(&self) -> bool {
+        let (d, se) = self.predicted;
+        self.judged && d + crate::model::LADDER_SIGNIFICANCE_Z * se < 0.0 && self.growth <= 0.0
+    }
+}
+
+/// The joint-range folds' held-out rows of every rung, with the blocks their differences are
+/// judged over.
+struct RangeEvidence {
+    /// Per fold, per rung, the weighted squared error of every held-out row (`None`: the
+    /// fold's remaining rows could not determine the rung's parameters).
+    score: Vec<Vec<Option<Vec<f64>>>>,
+    /// Per rung, the squared position error of every held-out row of every fold, m².
+    squared: Vec<Vec<f64>>,
+    /// Per fold, the block of every held-out row: its rank in extrapolation share cut into
+    /// [`RANGE_BLOCKS`] equal parts (0 nearest the rows the fold is fitted on).
+    block: Vec<Vec<usize>>,
+    /// Per fold, the mean extrapolation share of each block's rows (how far beyond the
+    /// readings the fold is fitted on, as a share of their range).
+    reach: Vec<Vec<f64>>,
+    /// Per fold, the extrapolation share needed on its side.
+    need: Vec<f64>,
+}
+
+impl RangeEvidence {
+    /// The evidence of the folds `ranges` on `tables` from each rung's `scores`.
+    fn new(ranges: &[RangeSplit], tables: &[MeasurementTable], scores: &[Scores]) -> Self {
+        let (mut block, mut reach) = (Vec::new(), Vec::new());
+        for split in ranges {
+            // The held-out rows' extrapolation shares, in the order cross_validate pushes them.
+            let e: Vec<f64> = (tables.iter().enumerate())
+                .flat_map(|(ti, t)| {
+                    (t.rows.iter().enumerate())
+                        .filter(move |&(r, _)| split.fold[ti][r])
+                        .map(move |(_, row)| {
+                            let q = row.q[split.joint];
+                            let d = if split.report.upper {
+                                q - split.edge
+                            } else {
+                                split.edge - q
+                            };
+                            d.max(0.0) / split.width.max(f64::MIN_POSITIVE)
+                        })
+                })
+                .collect();
+            let mut order: Vec<usize> = (0..e.len()).collect();
+            order.sort_by(|&a, &b| e[a].total_cmp(&e[b]));
+            let mut bin = vec![0; e.len()];
+            for (rank, &i) in order.iter().enumerate() {
+                bin[i] = rank * RANGE_BLOCKS / e.len().max(1);
+            }
+            reach.push(block_means(&e, &bin));
+            block.push(bin);
+        }
+        RangeEvidence {
+            score: (0..ranges.len())
+                .map(|f| {
+                    (scores.iter())
+                        .map(|s| {
+                            (s.range_rows[f].as_ref()).map(|r| r.iter().map(|e| e.0).collect())
+                        })
+                        .collect()
+                })
+                .collect(),
+            squared: (scores.iter())
+                .map(|s| {
+                    s.range_rows
+                        .iter()
+                        .flatten()
+                        .flatten()
+                        .map(|e| e.1)
+                        .collect()
+                })
+                .collect(),
+            block,
+            reach,
+            need: ranges.iter().map(|r| r.report.needed_share).collect(),
+        }
+    }
+
+    /// Whether no fold was made.
+    fn is_empty(&self) -> bool {
+        self.block.is_empty()
+    }
+
+    /// Rung `a` against rung `b` where the calibration will be used beyond its training
+    /// range: on each fold, the straight line through its blocks' mean differences of the
+    /// weighted squared error (`a`'s minus `b`'s) against their mean extrapolation share
+    /// ([`Line`]), evaluated at the share needed on its side (within the blocks' reach when
+    /// the fold emulates the need, beyond it when it does not), and its slope; averaged over
+    /// the folds. A fold whose held-out readings do not spread gives its blocked mean
+    /// difference and no slope. Zero without folds; not judged when a fold could not fit
+    /// either rung.
+    fn judge(&self, a: usize, b: usize) -> RangeVerdict {
+        let (mut d, mut var, mut growth) = (0.0, 0.0, 0.0);
+        for f in 0..self.block.len() {
+            let (Some(sa), Some(sb)) = (&self.score[f][a], &self.score[f][b]) else {
+                return RangeVerdict {
+                    predicted: (0.0, 0.0),
+                    growth: 0.0,
+                    judged: false,
+                };
+            };
+            let diff: Vec<f64> = sa.iter().zip(sb).map(|(x, y)| x - y).collect();
+            let (fd, fse, slope) =
+                match Line::fit(&self.reach[f], &block_means(&diff, &self.block[f])) {
+                    Some(line) => {
+                        let (v, se) = line.at(self.need[f]);
+                        (v, se, line.slope)
+                    }
+                    None => {
+                        let (v, se, _) =
+                            crate::fit::blocked_mean_difference(sa, sb, &self.block[f]);
+                        (v, se, 0.0)
+                    }
+                };
+            d += fd;
+            var += fse * fse;
+            growth += slope;
+        }
+        let n = self.block.len().max(1) as f64;
+        RangeVerdict {
+            predicted: (d / n, var.sqrt() / n),
+            growth: growth / n,
+            judged: true,
+        }
+    }
+
+    /// Mean over the held-out rows of every fold that fitted both rungs of rung `a`'s
+    /// weighted squared error minus rung `b`'s; 0 without such folds.
+    fn mean_difference(&self, a: usize, b: usize) -> f64 {
+        let (sa, sb): (Vec<f64>, Vec<f64>) = (self.score.iter())
+            .filter_map(|f| Some(f[a].as_ref()?.iter().zip(f[b].as_ref()?)))
+            .flatten()
+            .unzip();
+        sa.iter().zip(&sb).map(|(x, y)| x - y).sum::<f64>() / sa.len().max(1) as f64
+    }
+
+    /// Held-out position RMS of rung `i` over the folds' rows, m; `None` without folds.
+    fn rms_m(&self, i: usize) -> Option<f64> {
+        let sq = &self.squared[i];
+        (!sq.is_empty()).then(|| (sq.iter().sum::<f64>() / sq.len() as f64).sqrt())
+    }
+}
+
+/// The mean of `values` over each non-empty block of `block` (`block[i] < RANGE_BLOCKS`), in
+/// block order.
+fn block_means(values: &[f64], block: &[usize]) -> Vec<f64> {
+    let mut sum = [(0.0, 0usize); RANGE_BLOCKS];
+    for (&v, &b) in values.iter().zip(block) {
+        sum[b] = (sum[b].0 + v, sum[b].1 + 1);
+    }
+    (sum.iter().filter(|s| s.1 > 0))
+        .map(|s| s.0 / s.1 as f64)
+        .collect()
+}
+
+/// A least-squares straight line `y = ȳ + slope·(x − x̄)` through points `(x, y)`, with what
+/// the standard error of a prediction needs (Draper & Smith, "Applied Regression Analysis",
+/// 3rd ed., 1998, §1.4 and §3.1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Line {
+    n: usize,
+    mean_x: f64,
+    mean_y: f64,
+    slope: f64,
+    /// Residual variance, `Σ (y − ŷ)² / (n − 2)`.
+    s2: f64,
+    /// `Σ (x − x̄)²`.
+    sxx: f64,
+}
+
+impl Line {
+    /// The line through the first `min(x.len(), y.len())` points; `None` with fewer than 3
+    /// points or no spread in `x` (beyond rounding).
+    fn fit(x: &[f64], y: &[f64]) -> Option<Line> {
+        let n = x.len().min(y.len());
+        let (x, y) = (&x[..n], &y[..n]);
+        if n < 3 {
+            return None;
+        }
+        let nf = n as f64;
+        let (mean_x, mean_y) = (x.iter().sum::<f64>() / nf, y.iter().sum::<f64>() / nf);
+        let sxx: f64 = x.iter().map(|v| (v - mean_x).powi(2)).sum();
+        // No spread: every x equal, up to rounding.
+        if sxx <= f64::EPSILON * x.iter().map(|v| v * v).sum::<f64>() || !sxx.is_finite() {
+            return None;
+        }
+        let sxy: f64 = (x.iter().zip(y))
+            .map(|(a, b)| (a - mean_x) * (b - mean_y))
+            .sum();
+        let slope = sxy / sxx;
+        let s2 = (x.iter().zip(y))
+            .map(|(a, b)| (b - mean_y - slope * (a - mean_x)).powi(2))
+            .sum::<f64>()
+            / (nf - 2.0);
+        Some(Line {
+            n,
+            mean_x,
+            mean_y,
+            slope,
+            s2,
+            sxx,
+        })
+    }
+
+    /// The line's value at `x` and the standard error of that mean prediction,
+    /// `√(s²·(1/n + (x − x̄)²/Sxx))`: it grows with the distance from the points' centre.
+    fn at(&self, x: f64) -> (f64, f64) {
+        let dx = x - self.mean_x;
+        (
+            self.mean_y + self.slope * dx,
+            (self.s2 * (1.0 / self.n as f64 + dx * dx / self.sxx)).sqrt(),
+        )
+    }
 }
 
 /// Cross-validation scores of one rung.
@@ -919,10 +1239,9 @@ struct Scores {
     squared: HeldOut,
     /// Blocked folds: the held-out weighted squared error per row (the fit's objective).
     score: HeldOut,
-    /// Joint-range folds: the mean held-out weighted squared error of each fold.
-    range_score: Vec<f64>,
-    /// Joint-range folds: the held-out squared position errors, summed, and their count.
-    range_squared: (f64, usize),
+    /// Joint-range folds: per fold, the held-out weighted squared error and squared position
+    /// error (m²) of each held-out row, rows in table and file order.
+    range_rows: Vec<Option<Vec<(f64, f64)>>>,
 }
 
 /// `rung` cross-validated on the training tables: the blocked folds (repeated, rows
@@ -937,15 +1256,22 @@ fn cross_validate(
     tables: &[MeasurementTable],
     cfg: &MeasuredConfig,
     weights: Weights,
-    ranges: &[(RangeFold, Fold)],
+    ranges: &[RangeSplit],
 ) -> Result<Scores> {
     use rayon::prelude::*;
     let blocked = blocked_folds(tables, cfg.folds);
-    let folds: Vec<&Fold> = blocked.iter().chain(ranges.iter().map(|r| &r.1)).collect();
-    let held: Vec<Vec<(usize, usize, f64, f64)>> = folds
-        .par_iter()
-        .map(|fold| {
-            let model = refit(
+    let folds: Vec<&Fold> = blocked
+        .iter()
+        .chain(ranges.iter().map(|r| &r.fold))
+        .collect();
+    // A joint-range fold that leaves too few rows for the rung's parameters (it holds out up
+    // to half of them) cannot judge the rung: `None`, and the rung is not taken where the
+    // calibration extrapolates. A blocked fold that cannot is an error, as before.
+    // Per fold, per held-out row: table, row, squared error (m²), weighted squared error.
+    type Held = Option<Vec<(usize, usize, f64, f64)>>;
+    let held: Vec<Held> = (folds.par_iter().enumerate())
+        .map(|(f, fold)| {
+            let fitted = refit(
                 rung,
                 robot,
                 tree,
@@ -953,7 +1279,12 @@ fn cross_validate(
                 weights,
                 &|ti, r| !fold[ti][r],
                 warm,
-            )?;
+            );
+            let model = match fitted {
+                Ok(model) => model,
+                Err(_) if f >= blocked.len() => return Ok(None),
+                Err(e) => return Err(e),
+            };
             let mut out = Vec::new();
             for (ti, t) in tables.iter().enumerate() {
                 for (r, row) in t.rows.iter().enumerate() {
@@ -963,7 +1294,7 @@ fn cross_validate(
                     }
                 }
             }
-            Ok(out)
+            Ok(Some(out))
         })
         .collect::<Result<_>>()?;
     let k = cfg.folds;
@@ -978,19 +1309,14 @@ fn cross_validate(
     let (mut sq, mut score) = (vec![0.0; n_rows], vec![0.0; n_rows]);
     let lengths: Vec<usize> = tables.iter().map(|t| t.rows.len()).collect();
     let block = crate::fit::first_repeat_blocks(&lengths, k);
-    for fold in &held[..blocked.len()] {
+    for fold in held[..blocked.len()].iter().flatten() {
         for &(ti, r, e2, s) in fold {
             sq[offsets[ti] + r] += e2 / CV_REPEATS as f64;
             score[offsets[ti] + r] += s / CV_REPEATS as f64;
         }
     }
-    let mut range_squared = (0.0, 0);
-    let range_score = (held[blocked.len()..].iter())
-        .map(|fold| {
-            range_squared.0 += fold.iter().map(|e| e.2).sum::<f64>();
-            range_squared.1 += fold.len();
-            fold.iter().map(|e| e.3).sum::<f64>() / fold.len().max(1) as f64
-        })
+    let range_rows = (held[blocked.len()..].iter())
+        .map(|fold| (fold.as_ref()).map(|rows| rows.iter().map(|e| (e.3, e.2)).collect()))
         .collect();
     Ok(Scores {
         squared: HeldOut {
@@ -1001,8 +1327,7 @@ fn cross_validate(
             sq_errors: score,
             block,
         },
-        range_score,
-        range_squared,
+        range_rows,
     })
 }
 
@@ -1169,6 +1494,7 @@ pub fn calibrate_measured(
 
     let mut ladder = Vec::new();
     let mut range_folds_used = Vec::new();
+    let mut range_stops = Vec::new();
     let (rung, (model, fitted)) = match cfg.rung {
         Some(r) if r == ModelChoice::FramesOnly => (r, (frames_model.clone(), frames_only.clone())),
         Some(r) => match richest_fit.take() {
@@ -1183,9 +1509,7 @@ pub fn calibrate_measured(
                 .chain(cfg.workspace.iter().map(Vec::as_slice))
                 .collect();
             // Only the sides where the calibration will be used beyond its training range.
-            let mut ranges = range_folds(robot, train, &beyond);
-            ranges.retain(|f| f.0.relevant);
-            let judged: Vec<usize> = (0..ranges.len()).collect();
+            let ranges = range_folds(robot, train, &beyond);
             // Each rung fitted on every training row (the one the Huber pass fitted already was,
             // when it bounded nothing), then cross-validated from there; rungs in parallel.
             use rayon::prelude::*;
@@ -1211,36 +1535,45 @@ pub fn calibrate_measured(
             let rms = |h: &HeldOut| {
                 (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt()
             };
-            // Mean over the judged joint-range folds of rung a's score minus rung b's.
-            let extrapolation = |a: usize, b: usize| {
-                (judged.iter())
-                    .map(|&f| scores[a].range_score[f] - scores[b].range_score[f])
-                    .sum::<f64>()
-                    / judged.len().max(1) as f64
-            };
+            let evidence = RangeEvidence::new(&ranges, train, &scores);
             for (i, r) in rungs.iter().enumerate() {
                 let to_frames = blocked_difference(&scores[i].score, &scores[0].score);
-                let (range_sq, range_n) = scores[i].range_squared;
                 ladder.push(RungReport {
                     rung: *r,
                     heldout_rms_m: rms(&scores[i].squared),
                     score_difference_to_frames: if i == 0 { (0.0, 0.0) } else { to_frames },
-                    range_rms_m: (range_n > 0).then(|| (range_sq / range_n as f64).sqrt()),
-                    range_difference_to_frames: extrapolation(i, 0),
+                    range_rms_m: evidence.rms_m(i),
+                    range_difference_to_frames: evidence.mean_difference(i, 0),
+                    range_predicted_to_frames: evidence.judge(i, 0).predicted,
                     n_kept: 0,
                 });
             }
             // The one rule of every workflow (crate::model::climb): a rung must beat the one
-            // chosen so far by LADDER_SIGNIFICANCE_Z blocked standard errors and do no worse
-            // on the judged joint-range folds.
+            // chosen so far by LADDER_SIGNIFICANCE_Z blocked standard errors and, where the
+            // calibration will be used beyond its training range, pass the joint-range folds
+            // (RangeVerdict::allows). Each rung the folds stop is recorded.
+            let stops = std::cell::RefCell::new(Vec::new());
             let beats = |i: usize, j: usize| {
                 let (d, se) = blocked_difference(&scores[i].score, &scores[j].score);
-                i != j
-                    && d + crate::model::LADDER_SIGNIFICANCE_Z * se < 0.0
-                    && extrapolation(i, j) <= 0.0
+                if i == j || d + crate::model::LADDER_SIGNIFICANCE_Z * se >= 0.0 {
+                    return false;
+                }
+                let verdict = evidence.judge(i, j);
+                let allowed = evidence.is_empty() || verdict.allows();
+                if !allowed {
+                    stops.borrow_mut().push(RangeStop {
+                        rung: rungs[i],
+                        compared_with: rungs[j],
+                        range_difference: verdict.predicted,
+                        range_growth: verdict.growth,
+                        judged: verdict.judged,
+                    });
+                }
+                allowed
             };
             let chosen = crate::model::climb(&ladder_levels, &beats, &|i| rms(&scores[i].squared));
-            range_folds_used = (judged.iter()).map(|&f| ranges[f].0.clone()).collect();
+            range_folds_used = ranges.into_iter().map(|r| r.report).collect();
+            range_stops = stops.into_inner();
             (rungs[chosen], fits.swap_remove(chosen))
         }
     };
@@ -1257,10 +1590,18 @@ pub fn calibrate_measured(
         r.n_kept = n_kept;
     }
     let mut warnings = Vec::new();
-    if cfg.rung.is_none() && rung == ModelChoice::FramesOnly {
+    if cfg.rung.is_none() && rung == ModelChoice::FramesOnly && range_stops.is_empty() {
         warnings.push(
             "no calibrated model beat frames only on held-out training rows: the nominal \
              kinematics are kept (only the instrument and marker frames are fitted)"
+                .to_owned(),
+        );
+    } else if cfg.rung.is_none() && rung == ModelChoice::FramesOnly {
+        warnings.push(
+            "the joint-range folds stopped every model that beat frames only on held-out \
+             training rows: where the calibration is used beyond its training range they are \
+             not shown to do better; the nominal kinematics are kept (only the instrument and \
+             marker frames are fitted)"
                 .to_owned(),
         );
     }
@@ -1448,6 +1789,16 @@ pub fn calibrate_measured(
             noise * 1e3
         ));
     }
+    let coverage = coverage(
+        robot,
+        &ranges,
+        &cfg.workspace,
+        test,
+        cfg.rung.is_none(),
+        &range_folds_used,
+        range_stops,
+    );
+    warnings.extend(coverage.iter().flat_map(unvalidated_warnings));
     let frames = frame_reports(&base, &markers, &fitted.x, robot.tree.n_params());
     Ok(MeasuredOutcome {
         rung,
@@ -1460,6 +1811,7 @@ pub fn calibrate_measured(
         sets,
         sample_errors,
         weights,
+        coverage,
         range_folds: range_folds_used,
         training_ranges: ranges,
         downweighted,
@@ -1635,6 +1987,112 @@ fn prediction_sigmas(
                     trace.max(0.0).sqrt()
                 })
                 .collect()
+        })
+        .collect()
+}
+
+/// Where `workspace` and the `test` rows lie against the training ranges `ranges` of
+/// `robot`'s joints: every side of a joint's range that one of them lies past by more than
+/// [`OUTSIDE_SHARE`] of the range, with the joint-range fold of `folds` that judged it and
+/// the rungs the folds `stops`ped (`chosen`: the model was chosen on the ladder). `None`
+/// without workspace configurations and test rows.
+fn coverage(
+    robot: &Robot,
+    ranges: &[(f64, f64)],
+    workspace: &[Vec<f64>],
+    test: &[MeasurementTable],
+    chosen: bool,
+    folds: &[RangeFold],
+    stops: Vec<RangeStop>,
+) -> Option<Coverage> {
+    let test_q: Vec<&[f64]> = (test.iter().flat_map(|t| &t.rows))
+        .map(|r| r.q.as_slice())
+        .collect();
+    let workspace_q: Vec<&[f64]> = workspace.iter().map(Vec::as_slice).collect();
+    if test_q.is_empty() && workspace_q.is_empty() {
+        return None;
+    }
+    let reach = |set: &[&[f64]], j: usize, upper: bool| -> Option<Beyond> {
+        if set.is_empty() {
+            return None;
+        }
+        let shares: Vec<f64> = (set.iter())
+            .map(|q| beyond_share(q[j], ranges[j], upper))
+            .filter(|&s| s > 0.0)
+            .collect();
+        let farthest_share = shares.iter().copied().fold(0.0, f64::max);
+        Some(Beyond {
+            n_beyond: shares.len(),
+            n: set.len(),
+            farthest: farthest_share * (ranges[j].1 - ranges[j].0),
+            farthest_share,
+        })
+    };
+    let mut sides = Vec::new();
+    for (j, &range) in ranges.iter().enumerate() {
+        for upper in [false, true] {
+            let (w, t) = (reach(&workspace_q, j, upper), reach(&test_q, j, upper));
+            if [w, t].iter().flatten().all(|b| b.n_beyond == 0) {
+                continue;
+            }
+            let joint = robot.joint_names[j].clone();
+            sides.push(CoverageSide {
+                fold: (folds.iter())
+                    .find(|f| f.joint == joint && f.upper == upper)
+                    .cloned(),
+                joint,
+                upper,
+                unit: if robot.prismatic.get(j).copied().unwrap_or(false) {
+                    "m"
+                } else {
+                    "rad"
+                },
+                training_range: range,
+                workspace: w,
+                test: t,
+            });
+        }
+    }
+    let mut stopped: Vec<RangeStop> = Vec::new();
+    for s in stops {
+        if !stopped.contains(&s) {
+            stopped.push(s);
+        }
+    }
+    Some(Coverage {
+        n_workspace: workspace.len(),
+        n_test: test_q.len(),
+        sides,
+        chosen,
+        stopped,
+    })
+}
+
+/// One warning per side of a joint's training range that the workspace or the test rows lie
+/// beyond farther than its joint-range fold emulates: the model choice extrapolated the
+/// folds' evidence there, and the calibration is not validated that far.
+fn unvalidated_warnings(coverage: &Coverage) -> Vec<String> {
+    (coverage.sides.iter())
+        .filter_map(|side| {
+            let fold = side.fold.as_ref().filter(|f| !f.emulates())?;
+            let (lo, hi) = side.training_range;
+            let far = [side.workspace, side.test]
+                .into_iter()
+                .flatten()
+                .max_by(|a, b| a.farthest.total_cmp(&b.farthest))?;
+            Some(format!(
+                "{} is used up to {:.3} {unit} {} its training range {lo:.3}..{hi:.3} {unit} \
+                 ({:.0} % of the range), farther than a joint-range fold emulates ({:.0} %, \
+                 holding out {:.0} % of the rows): the model choice extrapolates the folds' \
+                 evidence there, and the calibration is not validated that far",
+                side.joint,
+                far.farthest,
+                if side.upper { "above" } else { "below" },
+                fold.needed_share * 100.0,
+                fold.emulated_share * 100.0,
+                fold.held_out_share * 100.0,
+                unit = side.unit,
+            ))
         })
         .collect()
 }
@@ -2140,6 +2598,7 @@ pub fn run_tables(
         elapsed_s: start.elapsed().as_secs_f64(),
         downweighted: out.downweighted.clone(),
         range_folds: out.range_folds.clone(),
+        coverage: out.coverage.clone(),
         equilibrium_step_m: out.equilibrium_step_m,
         equilibrium_refits: out.equilibrium_refits,
     };
@@ -2292,4 +2751,61 @@ pub fn sidecar_toml(frames: &[FrameReport], leftover: &[hapcal_io::CalibratedVal
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Line, RangeVerdict};
+
+    #[test]
+    fn a_line_through_exact_points_predicts_them_with_no_error() {
+        let x = [0.1, 0.3, 0.5, 0.7, 0.9];
+        let y: Vec<f64> = x.iter().map(|v| 2.0 - 3.0 * v).collect();
+        let line = Line::fit(&x, &y).expect("five spread points");
+        assert!((line.slope + 3.0).abs() < 1e-12);
+        let (at, se) = line.at(1.5);
+        assert!(
+            (at - (2.0 - 4.5)).abs() < 1e-12 && se < 1e-12,
+            "{at} ± {se}"
+        );
+        assert_eq!(Line::fit(&[0.2, 0.2, 0.2], &[1.0, 2.0, 3.0]), None);
+        assert_eq!(Line::fit(&[0.1, 0.2], &[1.0, 2.0]), None);
+    }
+
+    #[test]
+    fn a_prediction_beyond_the_points_is_less_certain() {
+        // Residuals ±0.1 about y = x: s² = 4·0.01/3; at the centre se = s/√5, at x̄ + 1 it
+        // grows by √(1 + 5/Sxx) with Sxx = 0.4.
+        let x = [0.1, 0.3, 0.5, 0.7, 0.9];
+        let y = [0.2, 0.2, 0.5, 0.8, 0.8];
+        let line = Line::fit(&x, &y).expect("five spread points");
+        let (_, near) = line.at(0.5);
+        let (_, far) = line.at(1.5);
+        let s = (line.s2).sqrt();
+        assert!((near - s / 5f64.sqrt()).abs() < 1e-12);
+        assert!(
+            (far / near - (1.0f64 + 5.0 / 0.4).sqrt()).abs() < 1e-9,
+            "{near} {far}"
+        );
+    }
+
+    #[test]
+    fn a_rung_is_taken_only_when_better_by_the_margin_and_not_fading() {
+        let verdict = |d: f64, se: f64, growth: f64| RangeVerdict {
+            predicted: (d, se),
+            growth,
+            judged: true,
+        };
+        assert!(verdict(-3.0, 1.0, -0.5).allows());
+        // Better, but not by two standard errors.
+        assert!(!verdict(-1.5, 1.0, -0.5).allows());
+        // Better by the margin, but the advantage shrinks with the extrapolation.
+        assert!(!verdict(-3.0, 1.0, 0.2).allows());
+        // A fold that could not fit it judges nothing.
+        let unfit = RangeVerdict {
+            judged: false,
+            ..verdict(-3.0, 1.0, -0.5)
+        };
+        assert!(!unfit.allows());
+    }
 }

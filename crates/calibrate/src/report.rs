@@ -185,6 +185,10 @@ pub struct CalibrationReport {
     /// when no test row lies beyond a joint's training range).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub range_folds: Vec<RangeFold>,
+    /// Measurement files with `--workspace` or test rows: where the calibration will be used
+    /// against its training ranges, and what the model choice did about it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub coverage: Option<Coverage>,
     /// Compliance models on measurement files: how far one more fixed-point step of the
     /// torque equilibrium would move the tips, at most over the training rows, m
     /// (`CalibratedModel::equilibrium_step_m`); small against σ, no iteration is needed.
@@ -277,6 +281,11 @@ pub struct RungReport {
     /// frames-only rung's (dimensionless; negative: better than frames only where the model
     /// must extrapolate; 0 without such folds).
     pub range_difference_to_frames: f64,
+    /// The same difference predicted at the extrapolation needed, and its standard error:
+    /// per fold, the straight line through the differences of its blocks of rows against
+    /// their extrapolation, evaluated at the share needed on its side, averaged over the
+    /// folds (`(0, 0)` without such folds).
+    pub range_predicted_to_frames: (f64, f64),
     /// Kept model parameters (kinematic and compliance) on the full training data.
     pub n_kept: usize,
 }
@@ -304,6 +313,104 @@ pub struct RangeFold {
     /// of this joint by more than `OUTSIDE_SHARE` (measured) of it (the folds the ladder judges
     /// extrapolation by).
     pub relevant: bool,
+    /// Share of the training rows held out (from `RANGE_FOLD_SHARE` up to
+    /// `MAX_RANGE_FOLD_SHARE`, measured).
+    pub held_out_share: f64,
+    /// The extrapolation the fold emulates: how far its held-out readings reach beyond the
+    /// readings it is fitted on, as a share of their range (dimensionless).
+    pub emulated_share: f64,
+    /// The extrapolation needed on this side: how far the farthest test or workspace reading
+    /// lies beyond the training range, as a share of that range (dimensionless).
+    pub needed_share: f64,
+}
+
+impl RangeFold {
+    /// Whether the fold reaches as far beyond its fitted readings, relative to their range, as
+    /// the calibration must beyond its training range.
+    pub fn emulates(&self) -> bool {
+        self.emulated_share >= self.needed_share
+    }
+}
+
+/// Where the calibration will be used against where it was trained (measurement files with
+/// `--workspace` or test rows): per joint and side, the configurations beyond the training
+/// range and how far, and what the model choice did about it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Coverage {
+    /// Workspace configurations given (0 without `--workspace`).
+    pub n_workspace: usize,
+    /// Test rows.
+    pub n_test: usize,
+    /// Each side of a joint's training range that workspace configurations or test rows lie
+    /// beyond by more than `OUTSIDE_SHARE` (measured) of the range, joints in chain order
+    /// (empty: they all lie within the training ranges).
+    pub sides: Vec<CoverageSide>,
+    /// Whether the model was chosen on the ladder (`false`: it was given, and no fold judged
+    /// it).
+    pub chosen: bool,
+    /// The rungs the joint-range folds stopped: each beat the rung chosen below it on the
+    /// blocked folds but not on the joint-range folds.
+    pub stopped: Vec<RangeStop>,
+}
+
+/// One side of one joint's training range, and what lies beyond it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CoverageSide {
+    /// The joint's name.
+    pub joint: String,
+    /// `true`: beyond the top of the training range; `false`: below its bottom.
+    pub upper: bool,
+    /// `rad`, or `m` for a prismatic joint.
+    pub unit: &'static str,
+    /// The training rows' readings of the joint, min and max (`unit`).
+    pub training_range: (f64, f64),
+    /// The workspace configurations beyond this side (`None` without `--workspace`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub workspace: Option<Beyond>,
+    /// The test rows beyond this side (`None` without test rows).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub test: Option<Beyond>,
+    /// The joint-range fold that judged the rungs on this side (`None`: the model was given,
+    /// or the training readings' ties leave no fold).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fold: Option<RangeFold>,
+}
+
+/// Configurations of one set (workspace or test rows) beyond one side of a joint's training
+/// range.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Beyond {
+    /// Configurations beyond the side by more than `OUTSIDE_SHARE` (measured) of the range.
+    pub n_beyond: usize,
+    /// Configurations in the set.
+    pub n: usize,
+    /// How far the farthest lies beyond the end of the training range (rad, or m for a
+    /// prismatic joint); 0 when none does.
+    pub farthest: f64,
+    /// `farthest` as a share of the training range (dimensionless).
+    pub farthest_share: f64,
+}
+
+/// A rung the joint-range folds stopped on the climb.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RangeStop {
+    /// The rung stopped.
+    pub rung: ModelChoice,
+    /// The rung it was compared with (chosen below it).
+    pub compared_with: ModelChoice,
+    /// Its weighted squared error per row minus `compared_with`'s predicted at the
+    /// extrapolation needed, averaged over the joint-range folds (dimensionless), and the
+    /// prediction's standard error (docs/engine.md, "Extrapolation").
+    pub range_difference: (f64, f64),
+    /// How that difference changes per unit of extrapolation share across the folds' rows
+    /// (positive: its advantage shrinks the farther it extrapolates). It was stopped because
+    /// the difference is not below zero by `LADDER_SIGNIFICANCE_Z` standard errors, or because
+    /// this is positive.
+    pub range_growth: f64,
+    /// Whether the folds could fit it (`false`: a joint-range fold leaves fewer rows than its
+    /// parameters need, so the folds cannot judge it where the calibration extrapolates, and
+    /// it is not taken; the differences are then 0).
+    pub judged: bool,
 }
 
 /// A marker sample the Huber loss bounded: its residual under the fit as measured, and the

@@ -1,6 +1,7 @@
 //! Plain-text rendering of a [`CalibrationReport`].
 
 use crate::calibrate::{CalibrationReport, Figures};
+use hapcal_calibrate::report::{Beyond, Coverage};
 use std::fmt::Write;
 
 fn mm(v: Option<f64>) -> String {
@@ -24,6 +25,147 @@ fn figures_cells(f: &Figures) -> [String; 3] {
         mm(f.distance_error_m),
         mm(f.distance_rms_m),
     ]
+}
+
+/// A share as a whole percentage (`more than 1000 %` past 10: an extrapolation from readings
+/// that hardly spread).
+fn percent(share: f64) -> String {
+    if share > 10.0 {
+        "more than 1000 %".to_owned()
+    } else {
+        format!("{:.0} %", share * 100.0)
+    }
+}
+
+/// How far one set reaches beyond a side: `40 of 40 workspace configurations, up to 2.02 rad
+/// beyond (100 % of the range)`.
+fn beyond_text(b: &Beyond, what: &str, unit: &str) -> String {
+    format!(
+        "{} of {} {what}, up to {:.3} {unit} beyond ({} of the range)",
+        b.n_beyond,
+        b.n,
+        b.farthest,
+        percent(b.farthest_share)
+    )
+}
+
+/// The coverage section: where the calibration will be used against its training ranges, and
+/// what the model choice did about it.
+fn coverage(s: &mut String, c: &Coverage) {
+    let mut sets = Vec::new();
+    if c.n_workspace > 0 {
+        sets.push(format!("{} workspace configurations", c.n_workspace));
+    }
+    if c.n_test > 0 {
+        sets.push(format!("{} test rows", c.n_test));
+    }
+    let _ = writeln!(
+        s,
+        "
+where the calibration will be used ({}), against the training ranges:",
+        sets.join(", ")
+    );
+    if c.sides.is_empty() {
+        let _ = writeln!(
+            s,
+            "  every configuration lies within the training range of every joint (to {} of \
+             the range)",
+            percent(hapcal_calibrate::measured::OUTSIDE_SHARE)
+        );
+        return;
+    }
+    let z = hapcal_calibrate::model::LADDER_SIGNIFICANCE_Z;
+    for side in &c.sides {
+        let (lo, hi) = side.training_range;
+        let unit = side.unit;
+        let mut reach = Vec::new();
+        if let Some(w) = side.workspace.filter(|w| w.n_beyond > 0) {
+            reach.push(beyond_text(&w, "workspace configurations", unit));
+        }
+        if let Some(t) = side.test.filter(|t| t.n_beyond > 0) {
+            reach.push(beyond_text(&t, "test rows", unit));
+        }
+        let _ = writeln!(
+            s,
+            "  {} {} its training range {lo:.3}..{hi:.3} {unit}: {}",
+            side.joint,
+            if side.upper { "above" } else { "below" },
+            reach.join("; ")
+        );
+        let Some(f) = &side.fold else {
+            if c.chosen {
+                let _ = writeln!(
+                    s,
+                    "    no joint-range fold: the training readings' ties leave none at this end"
+                );
+            }
+            continue;
+        };
+        let end = if f.upper { "top" } else { "bottom" };
+        let reach = if f.emulates() {
+            "as far as needed".to_owned()
+        } else {
+            format!(
+                "less than the {} needed (a fold holds out at most {} of the rows): the \
+                 calibration is not validated that far",
+                percent(f.needed_share),
+                percent(hapcal_calibrate::measured::MAX_RANGE_FOLD_SHARE)
+            )
+        };
+        let _ = writeln!(
+            s,
+            "    judged by a joint-range fold holding out the {end} {} of the training rows, \
+             an extrapolation of {} of the range it is fitted on, {reach}",
+            percent(f.held_out_share),
+            percent(f.emulated_share)
+        );
+    }
+    if c.chosen && c.sides.iter().any(|side| side.fold.is_some()) {
+        let _ = writeln!(
+            s,
+            "  a rung is taken only if, on these folds, it beats the rung chosen below it by {z} \
+             standard errors at the extrapolation needed (a straight line through the \
+             difference of {} blocks of held-out rows against how far they extrapolate) and its \
+             advantage does not shrink the farther they extrapolate",
+            hapcal_calibrate::measured::RANGE_BLOCKS
+        );
+    }
+    if !c.chosen {
+        let _ = writeln!(
+            s,
+            "  the model was given (--model): no joint-range fold judged it"
+        );
+    } else if c.stopped.is_empty() {
+        let _ = writeln!(s, "  the joint-range folds stopped no rung");
+    } else {
+        for stop in &c.stopped {
+            if !stop.judged {
+                let _ = writeln!(
+                    s,
+                    "  the joint-range folds stopped {}: a fold leaves too few rows to fit it, \
+                     so they cannot judge it where the calibration extrapolates",
+                    stop.rung
+                );
+                continue;
+            }
+            let (d, se) = stop.range_difference;
+            let _ = writeln!(
+                s,
+                "  the joint-range folds stopped {} (against {}: {:+.2} ± {:.2} per row at the \
+                 extrapolation needed; {:+.2} per unit of extrapolation, {})",
+                stop.rung,
+                stop.compared_with,
+                d,
+                se,
+                stop.range_growth,
+                if stop.range_growth > 0.0 {
+                    "its advantage shrinks"
+                } else {
+                    "its advantage holds"
+                }
+            );
+        }
+    }
 }
 
 /// Renders the report as the table `hapcal calibrate` prints.
@@ -96,17 +238,36 @@ pub fn render(r: &CalibrationReport) -> String {
             .map(|l| l.rung.to_string().len())
             .max()
             .unwrap_or(0);
-        for l in &r.ladder {
-            let (diff, se) = l.score_difference_to_frames;
+        let ranged = r.ladder.iter().any(|l| l.range_rms_m.is_some());
+        if ranged {
             let _ = writeln!(
                 s,
-                "  {:<width$} {:>9.4} mm {:>+9.2} ± {:<7.2}",
+                "  (then, on the joint-range folds below: held-out position RMS, and weighted \
+                 squared error per row minus frames only's)"
+            );
+        }
+        for l in &r.ladder {
+            let (diff, se) = l.score_difference_to_frames;
+            let range = match l.range_rms_m {
+                Some(rms) => format!(
+                    "   {:>9.4} mm {:>+9.2}",
+                    rms * 1e3,
+                    l.range_difference_to_frames
+                ),
+                None => String::new(),
+            };
+            let _ = writeln!(
+                s,
+                "  {:<width$} {:>9.4} mm {:>+9.2} ± {:<7.2}{range}",
                 l.rung.to_string(),
                 l.heldout_rms_m * 1e3,
                 diff,
                 se
             );
         }
+    }
+    if let Some(c) = &r.coverage {
+        coverage(&mut s, c);
     }
     let _ = writeln!(
         s,

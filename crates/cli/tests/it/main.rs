@@ -4,6 +4,7 @@
 #![allow(clippy::unwrap_used)] // test helpers fail loudly on a malformed report; that is the test
 
 mod compensate;
+mod coverage;
 mod force;
 mod hostile;
 mod hostile_cases;
