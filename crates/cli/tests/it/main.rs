@@ -7,6 +7,7 @@ mod compensate;
 mod force;
 mod hostile;
 mod hostile_cases;
+mod plan_after;
 mod setup_check;
 mod setup_haptic;
 mod setup_sockets;
