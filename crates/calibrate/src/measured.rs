@@ -526,7 +526,7 @@ pub(crate) fn observations(
 ///
 /// # Errors
 /// A published-mass model on a robot without published masses.
-fn terms(rung: ModelChoice, robot: &Robot) -> Result<ModelTerms> {
+pub(crate) fn terms(rung: ModelChoice, robot: &Robot) -> Result<ModelTerms> {
     Ok(ModelTerms {
         torque_tips: Some(robot.tree.tips().to_vec()),
         ..crate::model::terms(rung, &robot.joint_names, &robot.masses)?

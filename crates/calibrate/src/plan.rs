@@ -28,6 +28,13 @@
 //! `--refine` then moves the chosen poses off the candidates by coordinate exchange over the
 //! joint box ([`coordinate_exchange`]).
 //!
+//! After a calibration, [`plan_after`] (`hapcal plan-poses --data … --workspace …`) plans the
+//! poses to add to the rows already measured: the same I-optimal criterion, with the measured
+//! rows' information (and the identification's prior) as the design's prior `M₀`
+//! ([`hapcal_identify::DesignConfig::prior`]) and the workspace the calibration will be used
+//! in as the prediction set; the blocks are rows of the measured rows' own kind at the
+//! calibrated estimate.
+//!
 //! `hapcal pose-bound` (`hapcal_studies::pose_study::design_bound`) answers how well any `N` distance poses can do: the
 //! continuous I-optimal design (multiplicative algorithm, [`hapcal_identify::i_optimal_weights`])
 //! on uniform candidates, enlarged by column generation with the maxima of its sensitivity over
@@ -550,13 +557,45 @@ pub fn coordinate_exchange(
     limits: &[(f64, f64)],
     max_sweeps: usize,
 ) -> Result<f64> {
+    coordinate_exchange_after(poses, row, criterion, w, None, limits, max_sweeps)
+}
+
+/// [`coordinate_exchange`] of blocks of any number of rows (`r × n`) added to the information
+/// already in hand `prior` (`M₀`, `n × n`; `None`: nothing): `M = M₀ + Σ BᵢᵀBᵢ`. A candidate
+/// block `B` for pose `i` is scored by the Woodbury identity, with `S = I + B·N_i·Bᵀ`
+/// (`r × r`): `tr(W(M_{−i} + BᵀB)⁻¹) = tr(W·N_i) − tr(S⁻¹·B·N_iWN_i·Bᵀ)` and
+/// `log det(M_{−i} + BᵀB) = log det M_{−i} + log det S`.
+///
+/// # Errors
+/// As [`coordinate_exchange`].
+///
+/// # Panics
+/// If `prior` is not `n × n` (misuse).
+#[track_caller]
+pub fn coordinate_exchange_after(
+    poses: &mut [Vec<f64>],
+    row: &dyn Fn(&[f64]) -> Mat<f64>,
+    criterion: Criterion,
+    w: &Mat<f64>,
+    prior: Option<&Mat<f64>>,
+    limits: &[(f64, f64)],
+    max_sweeps: usize,
+) -> Result<f64> {
     if !matches!(criterion, Criterion::IOptimal | Criterion::DOptimal) {
         bail!("coordinate exchange supports i-optimal and d-optimal, not {criterion}");
     }
     use faer::linalg::solvers::DenseSolveCore;
     let n = w.nrows();
+    if let Some(p) = prior {
+        assert!(
+            p.nrows() == n && p.ncols() == n,
+            "the prior information is {} × {}, the weight {n} × {n}",
+            p.nrows(),
+            p.ncols()
+        );
+    }
     let info = |poses: &[Vec<f64>]| {
-        let mut m = Mat::<f64>::zeros(n, n);
+        let mut m = prior.cloned().unwrap_or_else(|| Mat::<f64>::zeros(n, n));
         for q in poses {
             let b = row(q);
             m += b.transpose() * &b;
@@ -595,15 +634,17 @@ pub fn coordinate_exchange(
             };
             let score = |q: &[f64]| {
                 let b = row(q);
-                let bn = &b * &n_i;
-                let s: f64 = (0..n).map(|k| bn[(0, k)] * b[(0, k)]).sum();
+                let r = b.nrows();
+                let s = Mat::<f64>::identity(r, r) + &b * &n_i * b.transpose();
+                let Ok(s_llt) = s.llt(faer::Side::Lower) else {
+                    return f64::INFINITY;
+                };
                 match criterion {
                     Criterion::IOptimal => {
-                        let ba = &b * &a;
-                        let t: f64 = (0..n).map(|k| ba[(0, k)] * b[(0, k)]).sum();
-                        base - t / (1.0 + s)
+                        let bab = &b * &a * b.transpose();
+                        base - trace_of_product(&s_llt.inverse(), &bab)
                     }
-                    _ => base - (1.0 + s).ln(),
+                    _ => base - 2.0 * (0..r).map(|k| s_llt.L()[(k, k)].ln()).sum::<f64>(),
                 }
             };
             let mut q = pose.clone();
@@ -649,6 +690,550 @@ pub fn coordinate_exchange(
         }
     }
     Ok(value)
+}
+
+/// Settings of [`plan_after`]: the poses to add to rows already measured.
+#[derive(Clone, Debug)]
+pub struct AfterConfig {
+    /// Number of poses to add.
+    pub count: usize,
+    /// Number of candidate poses sampled uniformly within the joint limits
+    /// ([`candidate_limits`]).
+    pub n_candidates: usize,
+    /// Seed of the candidate sampling (`ChaCha8Rng`).
+    pub seed: u64,
+    /// [`Criterion::IOptimal`] (the workspace's mean predicted position variance) or
+    /// [`Criterion::DOptimal`] (`log det` of the information, measured rows included).
+    pub criterion: Criterion,
+    /// The model the poses are planned for; [`ModelChoice::Auto`]: the one `hapcal calibrate`
+    /// chooses on the measured rows.
+    pub model: ModelChoice,
+    /// Position (and distance) noise σ, m per axis, if known; else the calibration's estimate
+    /// from the training residual.
+    pub sigma_m: Option<f64>,
+    /// Orientation noise σ of pose rows, rad, if known; else estimated as `calibrate` does.
+    pub sigma_rad: Option<f64>,
+    /// Refine the chosen poses by [`coordinate_exchange_after`] over the joint box.
+    pub refine: bool,
+}
+
+/// Where the noise σ of [`AfterPlan::sigma_m`] comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SigmaSource {
+    /// `--sigma-m`.
+    Stated,
+    /// The calibration's residual on the measured rows (its σ per axis).
+    TrainingResidual,
+}
+
+/// Result of [`plan_after`].
+#[derive(Clone, Debug)]
+pub struct AfterPlan {
+    /// The poses to measure next, rad (m for a prismatic joint), `count` rows in candidate
+    /// order (moved off the candidates when refined).
+    pub readings: Vec<Vec<f64>>,
+    /// The model planned for.
+    pub model: ModelChoice,
+    /// Why the model planned for is not the one asked for, in words (auto kept frames only).
+    pub model_note: Option<String>,
+    /// The columns: parameters of the model that the measured rows and the candidates
+    /// determine (the identification's pruning on both).
+    pub columns: Vec<String>,
+    /// Parameters of the model that neither the measured rows nor any candidate determine.
+    pub undetermined: Vec<String>,
+    /// Parameters the measured rows alone leave to the prior (pruned on them alone), which
+    /// the new poses are rewarded for determining.
+    pub unseen: Vec<String>,
+    /// Measured rows (configurations) and workspace configurations.
+    pub n_measured: usize,
+    /// Workspace configurations the prediction is averaged over.
+    pub n_workspace: usize,
+    /// The noise σ the variances are scaled by, m per axis.
+    pub sigma_m: f64,
+    /// Where [`AfterPlan::sigma_m`] comes from.
+    pub sigma_source: SigmaSource,
+    /// RMS over the workspace of the predicted 3-D position σ (m) of the marker(s), base
+    /// frame: from the measured rows alone, with the planned poses added, and with the first
+    /// `count` candidates (a random set) added instead.
+    pub rms_before_m: f64,
+    /// As [`AfterPlan::rms_before_m`], the planned poses added.
+    pub rms_after_m: f64,
+    /// As [`AfterPlan::rms_before_m`], `count` random candidates added.
+    pub rms_random_m: f64,
+    /// The design over the candidates (before any refinement).
+    pub design: Design,
+    /// Whether the poses were refined over the joint box.
+    pub refined: bool,
+    /// Number of candidates.
+    pub n_candidates: usize,
+    /// The criterion.
+    pub criterion: Criterion,
+}
+
+/// The box candidates are sampled in, per joint (rad, m for a prismatic joint): the joint's
+/// limits, except that a revolute joint whose range spans more than a turn gets one turn
+/// centred on its range (a continuous joint's ±1000 rad, a UR's ±2π): every orientation of
+/// the joint, once.
+pub fn candidate_limits(robot: &crate::data::Robot) -> Vec<(f64, f64)> {
+    let turn = std::f64::consts::TAU;
+    (robot.limits.iter().enumerate())
+        .map(|(j, &(lo, hi))| {
+            let prismatic = robot.prismatic.get(j).copied().unwrap_or(false);
+            if !prismatic && hi - lo > turn {
+                let mid = 0.5 * (lo + hi);
+                (mid - 0.5 * turn, mid + 0.5 * turn)
+            } else {
+                (lo, hi)
+            }
+        })
+        .collect()
+}
+
+/// What each planned pose measures, copied from the measured rows: a distance if any row has
+/// one, and each marker (with its orientation if any row of it has one).
+struct RowShape {
+    distance: bool,
+    /// Per marker index: whether it is measured with its orientation.
+    orientation: Vec<bool>,
+}
+
+impl RowShape {
+    fn of(tables: &[hapcal_io::MeasurementTable]) -> Self {
+        let rows = || tables.iter().flat_map(|t| &t.rows);
+        let n_markers = rows()
+            .flat_map(|r| r.markers.iter().map(|m| m.marker + 1))
+            .max()
+            .unwrap_or(0);
+        let mut orientation = vec![false; n_markers];
+        for m in rows().flat_map(|r| &r.markers) {
+            orientation[m.marker] |= m.rotation.is_some();
+        }
+        Self {
+            distance: rows().any(|r| r.distance_m.is_some()),
+            orientation,
+        }
+    }
+
+    /// The row the calibrated `model` predicts at `q`: each sample where the model puts it
+    /// (the orientation residual's Jacobian is the one at a zero residual).
+    fn predicted(
+        &self,
+        model: &hapcal_problems::CalibratedModel,
+        q: &[f64],
+    ) -> hapcal_io::MeasuredRow {
+        let tips: Vec<usize> = (0..self.orientation.len()).collect();
+        let poses = model.end_poses_of(&tips, q);
+        let markers = (self.orientation.iter().zip(poses).enumerate())
+            .map(|(marker, (&oriented, pose))| hapcal_io::MarkerSample {
+                marker,
+                position_m: pose.translation.vector.into(),
+                rotation: oriented.then(|| {
+                    let c = pose.rotation.coords;
+                    [c.w, c.x, c.y, c.z]
+                }),
+            })
+            .collect();
+        hapcal_io::MeasuredRow {
+            line: 0,
+            q: q.to_vec(),
+            t_s: None,
+            markers,
+            distance_m: self
+                .distance
+                .then(|| model.end_pose_of(0, q).translation.vector.norm()),
+        }
+    }
+}
+
+/// Observations of `rows` as the measured workflow builds them
+/// ([`crate::measured::observations`]).
+fn observations_of(rows: Vec<hapcal_io::MeasuredRow>, n_markers: usize) -> Observations {
+    let table = hapcal_io::MeasurementTable {
+        name: String::new(),
+        path: std::path::PathBuf::new(),
+        rows,
+        warnings: Vec::new(),
+        n_markers,
+        has_orientation: false,
+        has_distance: false,
+        ignored_columns: Vec::new(),
+    };
+    crate::measured::observations(std::slice::from_ref(&table), &|_, _| true)
+}
+
+/// Plans the `cfg.count` poses to measure next, given the rows already `measured`, so that
+/// the calibration predicts best at the `workspace` configurations: a sequential I-optimal
+/// design (Atkinson, Donev & Tobias, *Optimum Experimental Designs*, 2007, §11.5 and §10.6).
+///
+/// 1. The model is fitted to the measured rows as `hapcal calibrate --model …` fits it
+///    ([`crate::measured::calibrate_measured`]; with [`ModelChoice::Auto`] the model its
+///    ladder chooses, geometric when it keeps frames only).
+/// 2. At the estimate, one identification Jacobian holds the measured rows, one block per
+///    candidate (the rows of the measured rows' kind: distance, markers, poses, each where
+///    the model predicts it) and the workspace's marker positions; rows divided by their σ.
+/// 3. Columns: the model's parameters that the measured rows and all candidates together
+///    determine (the identification's noise-derived pruning, [`identifiability`]).
+/// 4. `M₀ = J_measᵀJ_meas + s²·diag(1/p_j²)`: the information of the measured rows plus the
+///    identification's prior `p_j` (its plausible deviation per unit, 1 cm and 10 mrad), `s`
+///    the noise σ over the rows' weight σ. Directions the measured rows do not see keep the
+///    prior's variance, which the new poses are rewarded for reducing.
+/// 5. `W = mean_w G_wᵀG_w`, `G_w` the marker positions' derivative (m) at workspace
+///    configuration `w` in the robot's base frame (the instrument frame's columns zero).
+/// 6. [`select_poses`] with the prior `M₀` chooses `count` candidates minimising
+///    `trace(W·(M₀ + Σ BᵢᵀBᵢ)⁻¹)`; with `cfg.refine`, [`coordinate_exchange_after`] moves
+///    them over the joint box.
+///
+/// The predicted variance is `s²·trace(W·M⁻¹)` (m²): `σ²` cancels in the ranking but scales
+/// the RMS prediction σ reported before and after.
+///
+/// # Errors
+/// A count of 0 or above the candidates, another criterion, an empty workspace, a model the
+/// measurement files cannot determine (or frames only, which has no kinematic parameter to
+/// plan for), and the calibration's errors on the measured rows.
+pub fn plan_after(
+    robot: &crate::data::Robot,
+    measured: &[hapcal_io::MeasurementTable],
+    workspace: &[Vec<f64>],
+    cfg: &AfterConfig,
+) -> Result<AfterPlan> {
+    use crate::measured::{MeasuredConfig, calibrate_measured};
+    if cfg.count == 0 || cfg.count > cfg.n_candidates {
+        bail!(
+            "--count must be between 1 and the number of candidates ({}), got {}",
+            cfg.n_candidates,
+            cfg.count
+        );
+    }
+    if !matches!(cfg.criterion, Criterion::IOptimal | Criterion::DOptimal) {
+        bail!(
+            "--criterion {}: poses added to measured rows are planned i-optimal (the \
+             workspace's prediction, the default) or d-optimal",
+            cfg.criterion
+        );
+    }
+    if workspace.is_empty() {
+        bail!(
+            "--workspace: give the joint configurations where the calibration will be used; \
+             the poses are planned to predict there"
+        );
+    }
+    let n_joints = robot.joint_names.len();
+    if let Some(w) = workspace.iter().find(|w| w.len() != n_joints) {
+        bail!(
+            "a workspace configuration has {} joint readings, the robot {n_joints}",
+            w.len()
+        );
+    }
+    if cfg.model == ModelChoice::FramesOnly {
+        bail!(
+            "--model frames-only fits only the instrument and marker frames: no kinematic \
+             parameter to plan the poses for; plan for geometric"
+        );
+    }
+    cfg.model.check_fits(DataKind::Measurements)?;
+    let n_measured: usize = measured.iter().map(|t| t.rows.len()).sum();
+    let calibrate = |rung: Option<ModelChoice>| {
+        let mcfg = MeasuredConfig {
+            rung,
+            folds: 5.min(n_measured).max(2),
+            sigma_m: cfg.sigma_m,
+            sigma_rad: cfg.sigma_rad,
+            marker_tips: (0..robot.tree.tips().len()).collect(),
+            workspace: workspace.to_vec(),
+        };
+        calibrate_measured(robot, measured, &[], &mcfg)
+            .context("calibrating the measured rows (the model the poses are planned for)")
+    };
+    let mut out = calibrate((cfg.model != ModelChoice::Auto).then_some(cfg.model))?;
+    let mut model_note = None;
+    if out.rung == ModelChoice::FramesOnly {
+        model_note = Some(
+            "on the measured rows the calibration keeps frames only (no model beat it held \
+             out): planned for geometric, the model the new rows are to determine"
+                .to_owned(),
+        );
+        out = calibrate(Some(ModelChoice::Geometric))?;
+    } else if cfg.model == ModelChoice::Auto {
+        model_note = Some(format!(
+            "the model the calibration chooses on the measured rows: {}",
+            out.rung
+        ));
+    }
+    let rung = out.rung;
+    let offsets_robot = crate::data::Robot {
+        tree: robot.tree.with_joint_offsets(),
+        ..robot.clone()
+    };
+    let terms = crate::measured::terms(rung, &offsets_robot)?;
+    let shape = RowShape::of(measured);
+    let n_markers = shape.orientation.len();
+    let n_predicted = n_markers.max(1);
+
+    // One problem: measured rows, then the candidates' rows, then the workspace's markers.
+    let limits = candidate_limits(robot);
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+    let candidates: Vec<Vec<f64>> = (0..cfg.n_candidates)
+        .map(|_| {
+            (limits.iter())
+                .map(|&(lo, hi)| {
+                    let u: f64 = rand::Rng::random(&mut rng);
+                    (lo + (hi - lo) * u).clamp(lo, hi)
+                })
+                .collect()
+        })
+        .collect();
+    let mut obs = crate::measured::observations(measured, &|_, _| true);
+    let n_measured_residuals: usize = obs.rows.iter().map(|r| r.kind.n_residuals()).sum();
+    let candidate_obs = |qs: &[Vec<f64>]| {
+        observations_of(
+            qs.iter().map(|q| shape.predicted(&out.model, q)).collect(),
+            n_markers,
+        )
+    };
+    let cand = candidate_obs(&candidates);
+    let rows_per_pose: usize = cand
+        .rows
+        .iter()
+        .map(|r| r.kind.n_residuals())
+        .sum::<usize>()
+        / candidates.len().max(1);
+    obs.rows.extend(cand.rows);
+    for q in workspace {
+        let tips: Vec<usize> = (0..n_predicted).collect();
+        for (tip, pose) in out.model.end_poses_of(&tips, q).into_iter().enumerate() {
+            obs.rows.push(Row {
+                q: q.clone(),
+                kind: RowKind::Marker {
+                    tip,
+                    position_m: pose.translation.vector.into(),
+                },
+            });
+        }
+    }
+    let weights = out.weights;
+    let problem = CalibrationProblem::on_tree(out.tree.clone(), obs, weights, terms)
+        .context("building the planning problem")?;
+    let layout = problem.layout().clone();
+    let names: Vec<&str> = (0..layout.len()).map(|i| layout.name(i)).collect();
+    if names != out.fitted.names {
+        bail!("the planning problem's parameters differ from the calibration's");
+    }
+    let x = &out.fitted.x;
+    let mut jac = Mat::<f64>::zeros(problem.n_residuals(), layout.len());
+    problem
+        .jacobian(x.as_ref(), jac.as_mut())
+        .map_err(|e| anyhow::anyhow!("{e}"))
+        .context("evaluating the identification Jacobian")?;
+
+    // The model's free parameters, in the identification's layout.
+    let id = &out.fitted.identified;
+    let free_layout = id.layout.clone();
+    let free: Vec<usize> = (0..free_layout.len())
+        .map(|k| {
+            layout
+                .index_of(free_layout.name(k))
+                .with_context(|| format!("no parameter {}", free_layout.name(k)))
+        })
+        .collect::<Result<_>>()?;
+    let n_free = free.len();
+    let n_candidate_residuals = rows_per_pose * candidates.len();
+    let distances_only = shape.orientation.is_empty();
+    let sigma_w = if distances_only {
+        weights.sigma_distance_m
+    } else {
+        weights.sigma_position_m
+    };
+    let (sigma_m, sigma_source) = match cfg.sigma_m {
+        Some(s) => (s, SigmaSource::Stated),
+        None => (sigma_w * id.sigma, SigmaSource::TrainingResidual),
+    };
+    let s = sigma_m / sigma_w;
+    let rank = crate::fit::identify_config(None).rank.with_sigma(s);
+    let sub = |rows: std::ops::Range<usize>| {
+        Mat::from_fn(rows.len(), n_free, |i, k| jac[(rows.start + i, free[k])])
+    };
+    let all: Vec<usize> = (0..n_free).collect();
+    let stacked = sub(0..n_measured_residuals + n_candidate_residuals);
+    let ident = identifiability(stacked.as_ref(), &free_layout, &all, &rank);
+    let measured_jac = sub(0..n_measured_residuals);
+    let seen = identifiability(measured_jac.as_ref(), &free_layout, &all, &rank);
+    let kept = ident.kept.clone();
+    let n = kept.len();
+    let columns: Vec<String> = kept
+        .iter()
+        .map(|&k| free_layout.name(k).to_owned())
+        .collect();
+    let is_frame = |name: &str| name.starts_with("instrument.") || name.starts_with("marker");
+    let unseen: Vec<String> = (kept.iter())
+        .filter(|k| !seen.kept.contains(k))
+        .map(|&k| free_layout.name(k).to_owned())
+        .filter(|name| !is_frame(name))
+        .collect();
+    let undetermined: Vec<String> = (ident.pruned_names().into_iter())
+        .filter(|name| !is_frame(name))
+        .map(str::to_owned)
+        .collect();
+    let block_of = |jac: &Mat<f64>, start: usize, nrows: usize| {
+        Mat::from_fn(nrows, n, |i, k| jac[(start + i, free[kept[k]])])
+    };
+    let mut prior = block_of(&jac, 0, n_measured_residuals);
+    prior = prior.transpose() * &prior;
+    for (k, &j) in kept.iter().enumerate() {
+        let p = rank.prior_scale(free_layout.spec(j).unit);
+        prior[(k, k)] += (s / p).powi(2);
+    }
+    let blocks: Vec<Mat<f64>> = (0..candidates.len())
+        .map(|c| {
+            block_of(
+                &jac,
+                n_measured_residuals + c * rows_per_pose,
+                rows_per_pose,
+            )
+        })
+        .collect();
+    // W over the workspace's marker positions, m per parameter unit, base frame.
+    let ws_start = n_measured_residuals + n_candidate_residuals;
+    let instrument: Vec<bool> = (kept.iter())
+        .map(|&k| free_layout.name(k).starts_with("instrument."))
+        .collect();
+    let mut weight = Mat::<f64>::zeros(n, n);
+    for i in 0..workspace.len() * n_predicted {
+        let g = Mat::from_fn(3, n, |a, k| {
+            if instrument[k] {
+                0.0
+            } else {
+                weights.sigma_position_m * jac[(ws_start + 3 * i + a, free[kept[k]])]
+            }
+        });
+        weight += g.transpose() * &g;
+    }
+    weight /= (workspace.len() * n_predicted) as f64;
+
+    let design_cfg = DesignConfig {
+        weight: Some(weight.clone()),
+        prior: Some(prior.clone()),
+        ..DesignConfig::new(cfg.criterion)
+    };
+    let design = select_poses(&blocks, cfg.count, &design_cfg).context("choosing the poses")?;
+    let mut readings: Vec<Vec<f64>> = (design.selected.iter())
+        .map(|&c| candidates[c].clone())
+        .collect();
+    let row = |q: &[f64]| -> Mat<f64> {
+        let one = candidate_obs(std::slice::from_ref(&q.to_vec()));
+        let Ok(p) = problem.with_observations(one) else {
+            return Mat::zeros(rows_per_pose, n);
+        };
+        let mut j = Mat::<f64>::zeros(p.n_residuals(), layout.len());
+        if p.jacobian(x.as_ref(), j.as_mut()).is_err() {
+            return Mat::zeros(rows_per_pose, n);
+        }
+        block_of(&j, 0, p.n_residuals())
+    };
+    if cfg.refine {
+        coordinate_exchange_after(
+            &mut readings,
+            &row,
+            cfg.criterion,
+            &weight,
+            Some(&prior),
+            &limits,
+            50,
+        )?;
+    }
+    let rms = |added: &[Mat<f64>]| -> f64 {
+        use faer::linalg::solvers::DenseSolveCore;
+        let mut m = prior.clone();
+        for b in added {
+            m += b.transpose() * b;
+        }
+        m.llt(faer::Side::Lower).map_or(f64::INFINITY, |llt| {
+            s * trace_of_product(&weight, &llt.inverse()).max(0.0).sqrt()
+        })
+    };
+    let planned: Vec<Mat<f64>> = readings.iter().map(|q| row(q)).collect();
+    let random: Vec<Mat<f64>> = blocks.iter().take(cfg.count).cloned().collect();
+    Ok(AfterPlan {
+        rms_before_m: rms(&[]),
+        rms_after_m: rms(&planned),
+        rms_random_m: rms(&random),
+        readings,
+        model: rung,
+        model_note,
+        columns,
+        undetermined,
+        unseen,
+        n_measured,
+        n_workspace: workspace.len(),
+        sigma_m,
+        sigma_source,
+        design,
+        refined: cfg.refine,
+        n_candidates: cfg.n_candidates,
+        criterion: cfg.criterion,
+    })
+}
+
+/// Text summary of [`plan_after`]: the model, the columns, the noise σ and the workspace's
+/// RMS prediction σ before and after (and after as many random poses).
+pub fn after_summary(plan: &AfterPlan) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let d = &plan.design;
+    let _ = writeln!(
+        s,
+        "planned {} poses to add to {} measured rows, for the {} model, from {} candidates by \
+         {} over {} workspace configurations ({} exchanges{}{}); {} columns",
+        plan.readings.len(),
+        plan.n_measured,
+        plan.model,
+        plan.n_candidates,
+        plan.criterion,
+        plan.n_workspace,
+        d.n_exchanges,
+        if d.converged { "" } else { ", not converged" },
+        if plan.refined {
+            ", refined over the joint box"
+        } else {
+            ""
+        },
+        plan.columns.len()
+    );
+    if let Some(note) = &plan.model_note {
+        let _ = writeln!(s, "model: {note}");
+    }
+    if !plan.undetermined.is_empty() {
+        let _ = writeln!(
+            s,
+            "left out (pruned as the identification prunes them: collinear with the frames or kept parameters, or undetermined by any pose): {}",
+            plan.undetermined.join(", ")
+        );
+    }
+    if !plan.unseen.is_empty() {
+        let _ = writeln!(
+            s,
+            "the measured rows alone do not determine: {}",
+            plan.unseen.join(", ")
+        );
+    }
+    let _ = writeln!(
+        s,
+        "predicted tip position σ over the workspace (RMS of the 3-D σ, base frame), noise σ \
+         {:.4} mm per axis ({}):",
+        plan.sigma_m * 1e3,
+        match plan.sigma_source {
+            SigmaSource::Stated => "--sigma-m",
+            SigmaSource::TrainingResidual => "the calibration's residual on the measured rows",
+        }
+    );
+    let n = plan.readings.len();
+    for (label, value) in [
+        ("the measured rows".to_owned(), plan.rms_before_m),
+        (format!("+ the {n} planned poses"), plan.rms_after_m),
+        (format!("+ {n} random poses"), plan.rms_random_m),
+    ] {
+        let _ = writeln!(s, "  {label:<26}{:>10.4} mm", value * 1e3);
+    }
+    s
 }
 
 /// The poses as CSV: a header of joint names, then one row of readings (rad) per pose.
@@ -949,6 +1534,36 @@ mod tests {
             err.to_string(),
             "coordinate exchange supports i-optimal and d-optimal, not o3"
         );
+    }
+
+    #[test]
+    fn coordinate_exchange_after_a_prior_scores_blocks_of_several_rows() {
+        // A pose measures the line (1, q) twice: the block [[1, q], [1, q]], information
+        // 2·vvᵀ with v = (1, q). With the prior P = 10·I and W = diag(1, 1/3), adding one pose
+        // lowers tr(W·M⁻¹) by 2·vᵀP⁻¹WP⁻¹v/(1 + 2·vᵀP⁻¹v) (Sherman–Morrison), which grows with
+        // q² for P = p·I, p > 4: the pose goes to an end of [−1, 1].
+        let row = |q: &[f64]| Mat::from_fn(2, 2, |_, k| if k == 0 { 1.0 } else { q[0] });
+        let w = Mat::from_fn(2, 2, |i, j| match (i, j) {
+            (0, 0) => 1.0,
+            (1, 1) => 1.0 / 3.0,
+            _ => 0.0,
+        });
+        let prior = Mat::<f64>::identity(2, 2) * 10.0;
+        let mut poses = vec![vec![0.3]];
+        let v = coordinate_exchange_after(
+            &mut poses,
+            &row,
+            Criterion::IOptimal,
+            &w,
+            Some(&prior),
+            &[(-1.0, 1.0)],
+            20,
+        )
+        .expect("design");
+        assert!((poses[0][0].abs() - 1.0).abs() < 1e-9, "{poses:?}");
+        // M = 10·I + 2·(1, ±1)ᵀ(1, ±1) = [[12, ±2], [±2, 12]], M⁻¹ = [[12, ∓2], [∓2, 12]]/140:
+        // tr(W·M⁻¹) = (12 + 12/3)/140.
+        assert!((v - 16.0 / 140.0).abs() < 1e-12, "{v}");
     }
 
     fn iiwa() -> Device {

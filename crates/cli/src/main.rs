@@ -344,8 +344,15 @@ enum Command {
     },
     /// Choose the poses to measure: from candidates sampled within the joint limits, the ones
     /// that maximise an observability criterion of the identification Jacobian at the nominal
-    /// model (greedy start + DETMAX exchange). Writes the readings as CSV.
-    PlanPoses(hapcal::plan_args::PlanArgs),
+    /// model (greedy start + DETMAX exchange). With --data and --workspace: the poses to add
+    /// to the rows already measured that most reduce the predicted position uncertainty where
+    /// the calibration will be used (sequential I-optimal design). Writes the readings as CSV.
+    PlanPoses {
+        #[command(flatten)]
+        plan: hapcal::plan_args::PlanArgs,
+        #[command(flatten)]
+        units: UnitArgs,
+    },
     /// Monte Carlo study of planned vs random poses on the reference device (distance data);
     /// writes a Markdown table. Run it in release.
     PoseStudy(hapcal::pose_study::StudyArgs),
@@ -731,10 +738,18 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::PlanPoses(args) => {
-            let (summary, out) = hapcal::plan_args::run_plan(&args)?;
-            emit(&summary);
-            note!("hapcal: wrote {}", out.display());
+        Command::PlanPoses { plan, units } => {
+            let planned = hapcal::plan_args::run_plan(&plan, &units.units())?;
+            match &planned.out {
+                Some(out) => {
+                    emit(&planned.summary);
+                    note!("hapcal: wrote {}", out.display());
+                }
+                None => {
+                    note!("{}", planned.summary.trim_end());
+                    emit(&planned.csv);
+                }
+            }
             Ok(())
         }
         Command::PoseStudy(args) => {

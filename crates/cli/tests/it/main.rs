@@ -8,6 +8,7 @@ mod coverage;
 mod force;
 mod hostile;
 mod hostile_cases;
+mod plan_after;
 mod setup_check;
 mod setup_haptic;
 mod setup_sockets;
