@@ -1,7 +1,7 @@
 //! The file contract of a calibrated model: the calibration record that `hapcal calibrate
 //! --out` writes (a URDF's sidecar `robot.calibration.toml`, or the `[calibration]` table of
 //! a device file) and that every reader shares: `hapcal-io`, the runtime, its C ABI and the
-//! Python package (docs/design.md §5.3).
+//! Python package (docs/design.md §5.6).
 //!
 //! *One set of types, in the lowest crate: the writer and every reader parse and check the
 //! record here, so they cannot disagree on a name or a unit.*

@@ -321,7 +321,10 @@ mod tests {
         ];
         for (name, kind) in cases {
             let parsed = ValueName::parse(name).unwrap_or_else(|e| panic!("{name}: {e}"));
-            assert!(format!("{parsed:?}").starts_with(kind), "{name}: {parsed:?}");
+            assert!(
+                format!("{parsed:?}").starts_with(kind),
+                "{name}: {parsed:?}"
+            );
         }
         let h = ValueName::parse("harmonic.j.sin2").expect("parses");
         assert_eq!(

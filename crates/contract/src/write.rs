@@ -32,7 +32,7 @@ impl Calibration {
     /// The record as a sidecar file (`robot.calibration.toml`), its keys at the top level.
     pub fn to_sidecar_toml(&self) -> String {
         let mut s = String::from(
-            "# The calibration record of `hapcal calibrate` (docs/design.md §5.3): what the robot \
+            "# The calibration record of `hapcal calibrate` (docs/design.md §5.6): what the robot \
              description cannot hold.\n",
         );
         self.write_toml(None, &mut s);

@@ -124,20 +124,16 @@ fn an_unknown_name_or_a_wrong_unit_is_refused_at_its_line() {
     );
     assert_ne!(bad, text, "the replaced line is in the record");
     let e = refused(&bad);
-    assert!(
-        e.message.contains("expected \"rad/(N·m)\""),
-        "{e}"
-    );
+    assert!(e.message.contains("expected \"rad/(N·m)\""), "{e}");
     assert_eq!(e.line, line_of("\"compliance.left_1\""), "{e}");
     assert!(e.to_string().starts_with("robot.calibration.toml:"), "{e}");
 }
 
 #[test]
 fn a_missing_key_is_refused_with_what_is_expected() {
-    let text = record().to_sidecar_toml().replace(
-        "model = \"transversal-compliance\"\n",
-        "",
-    );
+    let text = record()
+        .to_sidecar_toml()
+        .replace("model = \"transversal-compliance\"\n", "");
     let e = refused(&text);
     assert!(e.message.contains("missing key model"), "{e}");
 

@@ -234,18 +234,9 @@ pub struct Calibration {
     pub values: Vec<CalibratedValue>,
 }
 
-/// One identified value with its standard deviation, in SI units.
-#[derive(Clone, Debug, PartialEq)]
-pub struct CalibratedValue {
-    /// Parameter name (`dtheta3`, `joint_a2.rx`, or a transmission parameter).
-    pub name: String,
-    /// Identified value, in `unit`.
-    pub value: f64,
-    /// Its standard deviation, in `unit` (≥ 0).
-    pub std: f64,
-    /// Unit symbol: `m`, `rad` or `1`.
-    pub unit: String,
-}
+/// One identified value with its standard deviation, in SI units: the calibration record's
+/// type (`hapcal-contract`), shared by the writer and every reader.
+pub use hapcal_contract::CalibratedValue;
 
 /// What [`Device::with_calibration`] records beside the values.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
