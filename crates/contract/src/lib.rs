@@ -486,7 +486,7 @@ impl Calibration {
 
     /// Checks what the types cannot: the schema version (a newer one is refused in words),
     /// the keys schema 1 requires (`model`, `region`, `torque` when a compliance is
-    /// recorded), every value's name ([`ValueName::parse`]) and unit ([`ValueName::unit`]),
+    /// recorded), every value's name ([`ValueName::parse`]) and unit ([`ValueName::units`]),
     /// finite numbers, standard deviations ≥ 0, a covariance over recorded values with
     /// `n(n+1)/2` finite entries and a non-negative diagonal, training ranges with `min ≤
     /// max`, a unit gravity direction, finite non-negative masses. `text` is the record's
