@@ -693,8 +693,9 @@ impl Calibration {
     }
 }
 
-/// `[values]` as a table of `"name" = { value, std, unit }`, in file order.
-mod values_table {
+/// `[values]` as a table of `"name" = { value, std, unit }`, in file order: the serde
+/// `with` module of every table of calibrated values (this record's, a device file's).
+pub mod values_table {
     use std::fmt;
 
     use serde::de::{MapAccess, Visitor};
@@ -711,10 +712,8 @@ mod values_table {
         unit: String,
     }
 
-    pub(super) fn serialize<S: Serializer>(
-        values: &[CalibratedValue],
-        s: S,
-    ) -> Result<S::Ok, S::Error> {
+    /// Writes the values as a table, in order.
+    pub fn serialize<S: Serializer>(values: &[CalibratedValue], s: S) -> Result<S::Ok, S::Error> {
         let mut map = s.serialize_map(Some(values.len()))?;
         for v in values {
             let body = Body {
@@ -727,9 +726,11 @@ mod values_table {
         map.end()
     }
 
-    pub(super) fn deserialize<'de, D: Deserializer<'de>>(
-        d: D,
-    ) -> Result<Vec<CalibratedValue>, D::Error> {
+    /// Reads the table, in file order.
+    ///
+    /// # Errors
+    /// An entry that is not `{ value, std, unit }`.
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<CalibratedValue>, D::Error> {
         struct ValuesVisitor;
         impl<'de> Visitor<'de> for ValuesVisitor {
             type Value = Vec<CalibratedValue>;

@@ -230,7 +230,7 @@ pub struct Calibration {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub notes: Option<String>,
     /// Identified values, in identification order.
-    #[serde(default, with = "serde_helpers::values")]
+    #[serde(default, with = "hapcal_contract::values_table")]
     pub values: Vec<CalibratedValue>,
 }
 

@@ -3,11 +3,10 @@
 use std::fmt;
 
 use hapcal_kinematics::DhConvention;
-use serde::de::{self, MapAccess, Visitor};
-use serde::ser::SerializeMap;
+use serde::de::{self, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-use super::{CalibratedValue, JointRef};
+use super::JointRef;
 
 pub(super) fn standard() -> DhConvention {
     DhConvention::Standard
@@ -90,60 +89,6 @@ pub(super) mod placements {
                 prismatic: r.prismatic,
             })
             .collect())
-    }
-}
-
-/// `[calibration.values]`: `name = { value, std, unit }`, in file order.
-pub(super) mod values {
-    use super::*;
-
-    #[derive(Serialize, Deserialize)]
-    #[serde(deny_unknown_fields)]
-    struct Body {
-        value: f64,
-        std: f64,
-        unit: String,
-    }
-
-    pub(in crate::device) fn serialize<S: Serializer>(
-        values: &[CalibratedValue],
-        s: S,
-    ) -> Result<S::Ok, S::Error> {
-        let mut map = s.serialize_map(Some(values.len()))?;
-        for v in values {
-            let body = Body {
-                value: v.value,
-                std: v.std,
-                unit: v.unit.clone(),
-            };
-            map.serialize_entry(&v.name, &body)?;
-        }
-        map.end()
-    }
-
-    pub(in crate::device) fn deserialize<'de, D: Deserializer<'de>>(
-        d: D,
-    ) -> Result<Vec<CalibratedValue>, D::Error> {
-        struct ValuesVisitor;
-        impl<'de> Visitor<'de> for ValuesVisitor {
-            type Value = Vec<CalibratedValue>;
-            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str("a table of name = { value, std, unit }")
-            }
-            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
-                let mut values = Vec::new();
-                while let Some((name, body)) = map.next_entry::<String, Body>()? {
-                    values.push(CalibratedValue {
-                        name,
-                        value: body.value,
-                        std: body.std,
-                        unit: body.unit,
-                    });
-                }
-                Ok(values)
-            }
-        }
-        d.deserialize_map(ValuesVisitor)
     }
 }
 
