@@ -94,6 +94,11 @@ pub struct Robot {
     pub(crate) gravity_dir: [f64; 3],
     /// Identified frames from the calibration's sidecar (`instrument`, `marker1`, …).
     pub(crate) frames: Vec<(String, Pose)>,
+    /// The calibration record read from the sidecar, if any.
+    pub(crate) record: Option<hapcal_contract::Calibration>,
+    /// The training range of each joint the record's region names: (joint, min, max, slack),
+    /// rad or m.
+    pub(crate) region: Vec<(usize, f64, f64, f64)>,
 }
 
 /// Buffers of [`Robot`]'s evaluation calls, sized for one robot ([`Robot::workspace`]).
@@ -227,6 +232,54 @@ impl Robot {
         (self.frames.iter())
             .find(|(n, _)| n == name)
             .map(|(_, p)| *p)
+    }
+
+    /// The calibration record of the sidecar (`hapcal-contract`), if the robot has one: the
+    /// model's name, every value with its σ, the covariance, the torque source, the region.
+    pub fn calibration(&self) -> Option<&hapcal_contract::Calibration> {
+        self.record.as_ref()
+    }
+
+    /// Whether the readings `q` (rad, m for a prismatic joint) lie outside the region the
+    /// calibration was fitted on (the record's `[region]`: a joint more than
+    /// `hapcal_contract::REGION_SLACK_SHARE` of its training range past it): the joint
+    /// farthest past its range (by share of the range) and by how much (rad or m; positive
+    /// above the range, negative below); `None` inside, or without a recorded region.
+    /// Allocation-free.
+    ///
+    /// # Errors
+    /// [`Error::Length`] unless `q` has n entries; [`Error::NotFinite`] for a NaN or infinite
+    /// reading.
+    pub fn outside_region(&self, q: &[f64]) -> Result<Option<(usize, f64)>, Error> {
+        self.check_joints("joint angles", q)?;
+        let mut worst: Option<(usize, f64, f64)> = None;
+        for &(j, min, max, slack) in &self.region {
+            let v = q[j];
+            let past = if v > max + slack {
+                v - max
+            } else if v < min - slack {
+                v - min
+            } else {
+                continue;
+            };
+            let share = past.abs() / (max - min).max(f64::MIN_POSITIVE);
+            if worst.is_none_or(|(_, _, s)| share > s) {
+                worst = Some((j, past, share));
+            }
+        }
+        Ok(worst.map(|(j, past, _)| (j, past)))
+    }
+
+    /// The same robot with the recorded value `name` (a name of the record's `[values]`, in
+    /// its unit) set to `value`: a kinematic value moves its joint's origin, a compliance,
+    /// transversal compliance or harmonic changes the deflection. How `hapcal predict`
+    /// propagates the covariance to a prediction's uncertainty.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] for a name the record does not hold; [`Error::NotFinite`] for a NaN
+    /// or infinite value.
+    pub fn with_value(&self, name: &str, value: f64) -> Result<Robot, Error> {
+        crate::robot_load::with_value(self, name, value)
     }
 
     /// The same robot with compliances `k` (one per joint; rad/(N·m) or rad/m as

@@ -284,6 +284,8 @@ impl Robot {
             gravity,
             gravity_dir: [0.0, 0.0, -1.0],
             frames: Vec::new(),
+            record: None,
+            region: Vec::new(),
         };
         if let Some((text, sidecar_origin)) = sidecar {
             out.apply_sidecar(text, sidecar_origin)?;
@@ -362,4 +364,14 @@ impl Robot {
         }
         Ok(())
     }
+}
+
+/// [`Robot::with_value`].
+pub(crate) fn with_value(robot: &Robot, name: &str, value: f64) -> Result<Robot, crate::Error> {
+    let _ = (robot, name, value);
+    Err(crate::Error::Invalid {
+        what: "value",
+        value,
+        expected: "a value the calibration record holds",
+    })
 }
