@@ -338,6 +338,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         device_path: plan.device.clone(),
         model,
         calibrated: None,
+        record: None,
     })
 }
 
@@ -621,28 +622,34 @@ pub fn write_outputs_beside(
             "rad/(N·m)"
         }
     });
-    let all: Vec<hapcal_io::CalibratedValue> = (outcome.report.parameters.iter())
-        .map(|p| hapcal_io::CalibratedValue {
-            name: p.name.clone(),
-            value: p.value,
-            std: p.std,
-            unit: match compliance_unit {
-                Some(unit)
-                    if p.name.starts_with("compliance.") || p.name.starts_with("transversal.") =>
-                {
-                    unit.to_owned()
-                }
-                _ => p.unit.to_string(),
-            },
-        })
-        .collect();
-    let device_tree = outcome.device.tree()?;
-    let (values, leftover): (Vec<_>, Vec<_>) = if outcome.report.frames.is_empty() {
-        (all.into_iter()).partition(|v| outcome.model.chain.param_index(&v.name).is_some())
+    let all: Vec<hapcal_io::CalibratedValue> = if let Some(record) = &outcome.record {
+        record.values.clone()
     } else {
-        (crate::measured::fold_joint_offsets(&outcome.device, &all)?.into_iter())
-            .partition(|v| device_tree.params().iter().any(|p| p.name == v.name))
+        (outcome.report.parameters.iter())
+            .map(|p| hapcal_io::CalibratedValue {
+                name: p.name.clone(),
+                value: p.value,
+                std: p.std,
+                unit: match compliance_unit {
+                    Some(unit)
+                        if p.name.starts_with("compliance.")
+                            || p.name.starts_with("transversal.") =>
+                    {
+                        unit.to_owned()
+                    }
+                    _ => p.unit.to_string(),
+                },
+            })
+            .collect()
     };
+    let device_tree = outcome.device.tree()?;
+    let (values, leftover): (Vec<_>, Vec<_>) =
+        if outcome.report.frames.is_empty() && outcome.record.is_none() {
+            (all.into_iter()).partition(|v| outcome.model.chain.param_index(&v.name).is_some())
+        } else {
+            (crate::measured::fold_joint_offsets(&outcome.device, &all)?.into_iter())
+                .partition(|v| device_tree.params().iter().any(|p| p.name == v.name))
+        };
     let meta = hapcal_io::CalibrationMeta {
         date: None,
         data_hash: None,
@@ -692,13 +699,19 @@ pub fn write_outputs_beside(
     };
     write_new(out, &text, inputs)?;
     let mut written = vec![out.to_path_buf()];
-    if !outcome.report.frames.is_empty() || !leftover.is_empty() {
+    let sidecar_text = match &outcome.record {
+        // The record holds every value as identified (the runtime evaluates the transversal
+        // tilts and the gravity loads from the kinematic ones), the model, its loads and its
+        // region.
+        Some(record) => Some(record.to_sidecar_toml()),
+        None if !outcome.report.frames.is_empty() || !leftover.is_empty() => Some(
+            crate::measured::sidecar_toml(&outcome.report.frames, &leftover),
+        ),
+        None => None,
+    };
+    if let Some(text) = sidecar_text {
         let sidecar = out.with_extension("calibration.toml");
-        write_new(
-            &sidecar,
-            &crate::measured::sidecar_toml(&outcome.report.frames, &leftover),
-            inputs,
-        )?;
+        write_new(&sidecar, &text, inputs)?;
         written.push(sidecar);
     }
     Ok(written)

@@ -1494,6 +1494,7 @@ pub fn calibrate_logs(
         device_path: plan.device.clone(),
         model: kin_model,
         calibrated: Some(calibrated),
+        record: None,
     })
 }
 

@@ -16,6 +16,7 @@ pub mod measured;
 pub mod model;
 pub mod noise;
 pub mod plan;
+pub mod record;
 pub mod report;
 pub mod setup;
 pub mod setup_findings;

@@ -1799,7 +1799,7 @@ pub fn calibrate_measured(
         range_stops,
     );
     warnings.extend(coverage.iter().flat_map(unvalidated_warnings));
-    let frames = frame_reports(&base, &markers, &fitted.x, robot.tree.n_params());
+    let frames = frame_reports(&base, &markers, &fitted.x, framed.params());
     Ok(MeasuredOutcome {
         rung,
         ladder,
@@ -2439,14 +2439,26 @@ fn start_cost(
     }
 }
 
-/// The identified instrument and marker frames: each nominal frame times its deviation.
+/// The identified instrument and marker frames: each nominal frame times its deviation,
+/// found by name among the framed tree's parameters (`instrument.x` … `marker<k>.rz`; `x`
+/// holds them first, in that order, whatever the model's other terms).
 fn frame_reports(
     base: &FrameSpec,
     markers: &[(usize, FrameSpec)],
     x: &Col<f64>,
-    n_robot: usize,
+    names: &[hapcal_kinematics::ParamInfo],
 ) -> Vec<FrameReport> {
-    let at = |k: usize| -> Vec<f64> { (k..k + 6).map(|i| x[i]).collect() };
+    let at = |name: &str| -> Vec<f64> {
+        ["x", "y", "z", "rx", "ry", "rz"]
+            .iter()
+            .map(|s| {
+                let key = format!("{name}.{s}");
+                (names.iter())
+                    .position(|p| p.name == key)
+                    .map_or(0.0, |i| x[i])
+            })
+            .collect()
+    };
     let report = |name: &str, pose: Isometry3<f64>| {
         let (roll, pitch, yaw) = pose.rotation.euler_angles();
         FrameReport {
@@ -2455,12 +2467,12 @@ fn frame_reports(
             rpy_rad: [roll, pitch, yaw],
         }
     };
-    let mut out = vec![report(&base.name, base.nominal * deviation(&at(0)))];
-    for (k, (_, m)) in markers.iter().enumerate() {
-        out.push(report(
-            &m.name,
-            m.nominal * deviation(&at(6 + n_robot + 6 * k)),
-        ));
+    let mut out = vec![report(
+        &base.name,
+        base.nominal * deviation(&at(&base.name)),
+    )];
+    for (_, m) in markers {
+        out.push(report(&m.name, m.nominal * deviation(&at(&m.name))));
     }
     out
 }
@@ -2602,12 +2614,23 @@ pub fn run_tables(
         equilibrium_step_m: out.equilibrium_step_m,
         equilibrium_refits: out.equilibrium_refits,
     };
+    let record = crate::record::measured_record(&crate::record::MeasuredRecord {
+        model: out.rung,
+        tips: &tips,
+        robot,
+        calibrated: &out.model,
+        parameters: &report.parameters,
+        covariance: &id.covariance,
+        frames: &report.frames,
+        train: &train,
+    });
     Ok(crate::report::Outcome {
         report,
         device: device.clone(),
         device_path: plan.device.clone(),
         model: out.model,
         calibrated: None,
+        record: Some(record),
     })
 }
 

@@ -214,6 +214,10 @@ pub struct Outcome {
     /// haptic device's transmissions); `None`: `calibrate::write_outputs` applies the report's
     /// parameters to `device`.
     pub calibrated: Option<Device>,
+    /// The calibration record the written files carry (model, tips, torque source, region,
+    /// values as identified, covariance; `hapcal-contract`); `None`: the workflow records only
+    /// its values (written as a record without them).
+    pub record: Option<hapcal_contract::Calibration>,
 }
 
 /// Position and orientation errors of one data set under one model.

@@ -31,6 +31,40 @@ pub(crate) struct RobotJoint {
     pub(crate) axis: [f64; 3],
     /// Translation along the axis (m) instead of rotation about it (rad).
     pub(crate) prismatic: bool,
+    /// The joint frame at zero motion at the nominal geometry (the calibration's deviations
+    /// removed): where the calibration evaluated the gravity loads. `origin` without a record.
+    pub(crate) nominal: Pose,
+    /// The joint's identified deviation `x, y, z` (m), `rx, ry, rz` (rad) and offset (rad, m
+    /// for a prismatic joint): `origin = nominal · Δ(x…rz) · motion(offset)`.
+    pub(crate) deviation: [f64; 7],
+    /// Whether a lumped unit weight sits at its origin (it lies on a load tip's path).
+    pub(crate) weight: bool,
+}
+
+/// One transversal compliance term: the joint's rotation deviations grow by `c·tilt` under
+/// the gravity load normal to its axis (`hapcal_problems::TransversalTerm`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct TransversalJoint {
+    /// The joint.
+    pub(crate) joint: usize,
+    /// Compliance `c`, rad/(N·m) (rad/m lumped).
+    pub(crate) compliance: f64,
+    /// The axis of a per-axis term in the joint's frame after its motion; `None`: isotropic.
+    pub(crate) direction: Option<[f64; 3]>,
+}
+
+/// One joint harmonic term: the joint's angle grows by `coef·sin(h·q)` or `coef·cos(h·q)` of
+/// its reading `q` (`hapcal_problems::JointHarmonics`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct HarmonicTerm {
+    /// The joint.
+    pub(crate) joint: usize,
+    /// Order h ≥ 1.
+    pub(crate) order: u32,
+    /// Sine (true) or cosine.
+    pub(crate) sine: bool,
+    /// Coefficient, rad.
+    pub(crate) coef: f64,
 }
 
 /// One tip: a link's frame in the frame of the nearest moving joint above it.
@@ -43,6 +77,10 @@ pub(crate) struct RobotTip {
     /// A frame on the tip link (a marker), in the tip link's frame: the poses and Jacobians
     /// are of it; the gravity loads keep the tip link's origin. Identity by default.
     pub(crate) marker: Pose,
+    /// `offset` at the nominal geometry (the tip element's deviation removed).
+    pub(crate) nominal_offset: Pose,
+    /// Whether the calibration's lumped unit weights hang at this tip (one of its tips).
+    pub(crate) weight: bool,
 }
 
 /// A link's point mass, in the frame of the nearest moving joint above it.
@@ -99,6 +137,20 @@ pub struct Robot {
     /// The training range of each joint the record's region names: (joint, min, max, slack),
     /// rad or m.
     pub(crate) region: Vec<(usize, f64, f64, f64)>,
+    /// Gravitational acceleration of the link masses, m/s².
+    pub(crate) gravity_m_s2: f64,
+    /// Whether the loads are those of the deflected robot (`θ = q + k∘τ(θ)`) rather than of
+    /// the robot at its readings.
+    pub(crate) equilibrium: bool,
+    /// Whether some joint's or tip's nominal frame differs from its calibrated one.
+    pub(crate) nominal_differs: bool,
+    /// Transversal compliance terms.
+    pub(crate) transversal: Vec<TransversalJoint>,
+    /// Joint harmonic terms.
+    pub(crate) harmonics: Vec<HarmonicTerm>,
+    /// Each tip's element name (the last fixed joint of its path, if it ends in fixed
+    /// joints), whose deviation the tip's offset holds.
+    pub(crate) tip_elements: Vec<Option<String>>,
 }
 
 /// Buffers of [`Robot`]'s evaluation calls, sized for one robot ([`Robot::workspace`]).
@@ -116,6 +168,14 @@ pub struct RobotWorkspace {
     pub(crate) trial: Vec<f64>,
     /// The compensation's accepted command.
     pub(crate) command: Vec<f64>,
+    /// Joint frames at the nominal geometry (the gravity loads').
+    pub(crate) nominal: Vec<Pose>,
+    /// Gravity moment about each joint's origin, root frame (transversal compliance).
+    pub(crate) moment: Vec<[f64; 3]>,
+    /// Rotation deviation added to each joint by its transversal compliance, rad.
+    pub(crate) tilt: Vec<[f64; 3]>,
+    /// Joint angles where the gravity loads are evaluated.
+    pub(crate) load_at: Vec<f64>,
 }
 
 /// What [`Robot::deflect`] did: fixed-point iterations of `θ = q + k∘τ(θ)` and the last step.
@@ -153,6 +213,39 @@ fn motion(joint: &RobotJoint, value: f64) -> Pose {
         ],
         translation_m: [0.0; 3],
     }
+}
+
+/// The deviation `Δ = Tx(x)·Ty(y)·Tz(z)·Rx(rx)·Ry(ry)·Rz(rz)` of `d = [x, y, z, rx, ry, rz]`
+/// (m, rad), as the calibration library's placement chains compose it
+/// (`hapcal_kinematics::Chain::from_placements`).
+pub(crate) fn deviation_pose(d: &[f64; 6]) -> Pose {
+    let (sx, cx) = sin_cos(d[3]);
+    let (sy, cy) = sin_cos(d[4]);
+    let (sz, cz) = sin_cos(d[5]);
+    Pose::translation([d[0], d[1], d[2]])
+        .compose(&Pose::rot_x(sx, cx))
+        .compose(&Pose::rot_y(sy, cy))
+        .compose(&Pose::rot_z(sz, cz))
+}
+
+/// A joint's origin with its rotation deviations grown by `tilt` (rad):
+/// `nominal · Δ(x, y, z, rx + t₀, ry + t₁, rz + t₂) · motion(offset)`.
+fn tilted_origin(joint: &RobotJoint, tilt: &[f64; 3]) -> Pose {
+    let d = &joint.deviation;
+    let delta = deviation_pose(&[
+        d[0],
+        d[1],
+        d[2],
+        d[3] + tilt[0],
+        d[4] + tilt[1],
+        d[5] + tilt[2],
+    ]);
+    joint.nominal.compose(&delta).compose(&motion(joint, d[6]))
+}
+
+/// The motion of `joint` by `value` (rad, or m for a prismatic joint).
+pub(crate) fn joint_motion(joint: &RobotJoint, value: f64) -> Pose {
+    motion(joint, value)
 }
 
 /// `pose` applied to the point `p`.
@@ -306,6 +399,10 @@ impl Robot {
             jac: vec![[0.0; 6]; n],
             trial: vec![0.0; n],
             command: vec![0.0; n],
+            nominal: vec![Pose::IDENTITY; n],
+            moment: vec![[0.0; 3]; n],
+            tilt: vec![[0.0; 3]; n],
+            load_at: vec![0.0; n],
         }
     }
 
@@ -341,6 +438,33 @@ impl Robot {
         for (k, (joint, &value)) in self.joints.iter().zip(q).enumerate() {
             let parent = joint.parent.map_or(Pose::IDENTITY, |p| frames[p]);
             frames[k] = parent.compose(&joint.origin).compose(&motion(joint, value));
+        }
+    }
+
+    /// Joint frames at `q` of the nominal geometry, where the calibration evaluated the
+    /// gravity loads.
+    #[inline]
+    fn forward_nominal(&self, q: &[f64], frames: &mut [Pose]) {
+        for (k, (joint, &value)) in self.joints.iter().zip(q).enumerate() {
+            let parent = joint.parent.map_or(Pose::IDENTITY, |p| frames[p]);
+            frames[k] = parent
+                .compose(&joint.nominal)
+                .compose(&motion(joint, value));
+        }
+    }
+
+    /// Joint frames at `q` with each joint's rotation deviations grown by its transversal
+    /// tilt (`tilt`, rad; zero for a joint without transversal compliance).
+    #[inline]
+    fn forward_tilted(&self, q: &[f64], tilt: &[[f64; 3]], frames: &mut [Pose]) {
+        for (k, (joint, &value)) in self.joints.iter().zip(q).enumerate() {
+            let parent = joint.parent.map_or(Pose::IDENTITY, |p| frames[p]);
+            let origin = if tilt[k] == [0.0; 3] {
+                joint.origin
+            } else {
+                tilted_origin(joint, &tilt[k])
+            };
+            frames[k] = parent.compose(&origin).compose(&motion(joint, value));
         }
     }
 
@@ -542,7 +666,7 @@ impl Robot {
     }
 
     /// Adds the moment of `force` applied at `point` (root frame) to the torque of `from`
-    /// and every joint above it.
+    /// and every joint above it, and with `moment` to their moment vectors (root frame).
     #[inline]
     fn add_load(
         &self,
@@ -551,6 +675,7 @@ impl Robot {
         point: &[f64; 3],
         force: &[f64; 3],
         tau: &mut [f64],
+        mut moment: Option<&mut [[f64; 3]]>,
     ) {
         let mut at = from;
         while let Some(j) = at {
@@ -558,34 +683,71 @@ impl Robot {
             if !joint.prismatic {
                 let w = frames[j].rotate(&joint.axis);
                 let lever = sub(point, &frames[j].translation_m);
-                tau[j] += dot(&w, &cross(&lever, force));
+                let m = cross(&lever, force);
+                tau[j] += dot(&w, &m);
+                if let Some(moment) = moment.as_deref_mut() {
+                    for (a, b) in moment[j].iter_mut().zip(m) {
+                        *a += b;
+                    }
+                }
             }
             at = joint.parent;
         }
     }
 
     fn torques_from(&self, frames: &[Pose], tau: &mut [f64]) {
-        for t in tau.iter_mut() {
-            *t = 0.0;
+        self.loads_from(frames, false, tau, None);
+    }
+
+    /// The gravity torques (and with `moment` the moment vectors, root frame) of the joints
+    /// whose frames are `frames`; the tips' nominal offsets with `nominal`.
+    fn loads_from(
+        &self,
+        frames: &[Pose],
+        nominal: bool,
+        tau: &mut [f64],
+        mut moment: Option<&mut [[f64; 3]]>,
+    ) {
+        tau.fill(0.0);
+        if let Some(m) = moment.as_deref_mut() {
+            m.fill([0.0; 3]);
         }
         let g = self.gravity_dir;
         match self.gravity {
             GravityModel::Masses => {
                 for m in &self.masses {
                     let c = transform_point(&frames[m.joint], &m.com_m);
-                    let w = m.mass_kg * STANDARD_GRAVITY;
+                    let w = m.mass_kg * self.gravity_m_s2;
                     let force = [g[0] * w, g[1] * w, g[2] * w];
-                    self.add_load(frames, Some(m.joint), &c, &force, tau);
+                    self.add_load(
+                        frames,
+                        Some(m.joint),
+                        &c,
+                        &force,
+                        tau,
+                        moment.as_deref_mut(),
+                    );
                 }
             }
             GravityModel::Lumped => {
                 for (i, joint) in self.joints.iter().enumerate() {
-                    let o = frames[i].translation_m;
-                    self.add_load(frames, joint.parent, &o, &g, tau);
+                    if joint.weight {
+                        let o = frames[i].translation_m;
+                        self.add_load(frames, joint.parent, &o, &g, tau, moment.as_deref_mut());
+                    }
                 }
-                for tip in 0..self.tips.len() {
-                    let end = self.tip_link_from(tip, frames).translation_m;
-                    self.add_load(frames, self.tips[tip].parent, &end, &g, tau);
+                for (k, tip) in self.tips.iter().enumerate() {
+                    if !tip.weight {
+                        continue;
+                    }
+                    let end = if nominal {
+                        (tip.parent.map_or(Pose::IDENTITY, |p| frames[p]))
+                            .compose(&tip.nominal_offset)
+                    } else {
+                        self.tip_link_from(k, frames)
+                    };
+                    let end = end.translation_m;
+                    self.add_load(frames, tip.parent, &end, &g, tau, moment.as_deref_mut());
                 }
             }
         }
@@ -625,36 +787,97 @@ impl Robot {
         theta: &mut [f64],
     ) -> Deflection {
         theta.copy_from_slice(q);
-        if !self.has_compliance() {
-            self.forward(theta, &mut ws.frames);
-            return Deflection {
-                iterations: 0,
-                final_step_rad: 0.0,
-                converged: true,
+        let mut out = Deflection {
+            iterations: 0,
+            final_step_rad: 0.0,
+            converged: true,
+        };
+        let tilted = !self.transversal.is_empty();
+        if self.has_compliance() || tilted {
+            // Where the loads are evaluated: the readings, or the torque equilibrium
+            // θ = q + k∘τ(θ) iterated from them (`CalibratedModel::load_angles`).
+            let at = &mut ws.load_at;
+            at.copy_from_slice(q);
+            if self.equilibrium && self.has_compliance() {
+                for iteration in 1..=DEFLECTION_ITERATIONS {
+                    self.forward_nominal(at, &mut ws.nominal);
+                    self.loads_from(&ws.nominal, true, &mut ws.torque, None);
+                    let mut step: f64 = 0.0;
+                    let values = q.iter().zip(&self.compliance).zip(&ws.torque);
+                    for (t, ((q, k), tau)) in at.iter_mut().zip(values) {
+                        let next = q + k * tau;
+                        step = step.max((next - *t).abs());
+                        *t = next;
+                    }
+                    out = Deflection {
+                        iterations: iteration,
+                        final_step_rad: step,
+                        converged: step <= DEFLECTION_TOLERANCE_RAD,
+                    };
+                    if out.converged {
+                        break;
+                    }
+                }
+            }
+            self.forward_nominal(at, &mut ws.nominal);
+            let moment = if tilted {
+                Some(&mut ws.moment[..])
+            } else {
+                None
             };
-        }
-        let mut out = Deflection::default();
-        for iteration in 1..=DEFLECTION_ITERATIONS {
-            self.forward(theta, &mut ws.frames);
-            self.torques_from(&ws.frames, &mut ws.torque);
-            let mut step: f64 = 0.0;
+            self.loads_from(&ws.nominal, true, &mut ws.torque, moment);
             let values = q.iter().zip(&self.compliance).zip(&ws.torque);
             for (t, ((q, k), tau)) in theta.iter_mut().zip(values) {
-                let next = q + k * tau;
-                step = step.max((next - *t).abs());
-                *t = next;
+                *t = q + k * tau;
             }
-            out = Deflection {
-                iterations: iteration,
-                final_step_rad: step,
-                converged: step <= DEFLECTION_TOLERANCE_RAD,
-            };
-            if out.converged {
-                break;
+            if tilted {
+                self.tilts(&ws.nominal, &ws.torque, &ws.moment, &mut ws.tilt);
             }
         }
-        self.forward(theta, &mut ws.frames);
+        for h in &self.harmonics {
+            let (s, c) = sin_cos(f64::from(h.order) * q[h.joint]);
+            theta[h.joint] += h.coef * if h.sine { s } else { c };
+        }
+        if tilted {
+            self.forward_tilted(theta, &ws.tilt, &mut ws.frames);
+        } else {
+            self.forward(theta, &mut ws.frames);
+        }
         out
+    }
+
+    /// Each joint's rotation deviation added by its transversal compliance, rad, from the
+    /// nominal frames at the load angles, their torques and moment vectors:
+    /// `c·m⊥` in the joint's frame before its motion, or for a per-axis term `c·(u·m⊥)·u`
+    /// (`hapcal_problems::TransversalTerm::tilt`).
+    fn tilts(&self, frames: &[Pose], tau: &[f64], moment: &[[f64; 3]], tilt: &mut [[f64; 3]]) {
+        tilt.fill([0.0; 3]);
+        for t in &self.transversal {
+            let j = t.joint;
+            let joint = &self.joints[j];
+            let w = frames[j].rotate(&joint.axis);
+            let m = moment[j];
+            let normal = [
+                m[0] - tau[j] * w[0],
+                m[1] - tau[j] * w[1],
+                m[2] - tau[j] * w[2],
+            ];
+            let bent = match t.direction {
+                None => normal,
+                Some(u) => {
+                    let u = frames[j].rotate(&u);
+                    let along = dot(&u, &normal);
+                    [u[0] * along, u[1] * along, u[2] * along]
+                }
+            };
+            // The frame before the joint's motion: its parent's frame times its origin.
+            let before =
+                (joint.parent.map_or(Pose::IDENTITY, |p| frames[p])).compose(&joint.nominal);
+            let local = before.inverse_rotate(&bent);
+            for (a, b) in tilt[j].iter_mut().zip(local) {
+                *a += t.compliance * b;
+            }
+        }
     }
 
     /// Pose of every tip of the robot deflected under its own weight when commanded `q`

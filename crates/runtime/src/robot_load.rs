@@ -4,9 +4,11 @@
 
 use std::path::Path;
 
+use hapcal_contract::{Calibration, ElementField, TorqueSource, ValueName};
 use serde::Deserialize;
 
-use crate::robot::{PointMass, RobotJoint, RobotTip};
+use crate::robot::deviation_pose;
+use crate::robot::{HarmonicTerm, PointMass, RobotJoint, RobotTip, TransversalJoint};
 use crate::{GravityModel, LoadError, Pose, Robot};
 
 /// The sidecar: `[frames.<name>]` and `[values]` (as `hapcal-calibrate`'s `sidecar_toml`).
@@ -127,6 +129,9 @@ impl Robot {
         let mut joint_names: Vec<String> = Vec::new();
         let mut limits = Vec::new();
         let mut robot_tips = Vec::new();
+        // The name of each tip's element: the last fixed joint of its path, if the path ends
+        // in fixed joints (the calibration's tip element carries that name).
+        let mut tip_elements: Vec<Option<String>> = Vec::new();
         for (i, &tip) in tips.iter().enumerate() {
             if tips[..i].contains(&tip) {
                 return Err(invalid(origin, format!("tip link {tip:?} is given twice")));
@@ -156,6 +161,7 @@ impl Robot {
             path.reverse();
             let mut parent: Option<usize> = None;
             let mut pending = Pose::IDENTITY;
+            let mut last_fixed: Option<String> = None;
             for joint in path {
                 let name = &joint.name;
                 let (xyz, rpy) = (joint.origin.xyz.0, joint.origin.rpy.0);
@@ -168,6 +174,7 @@ impl Robot {
                 let prismatic = match joint.joint_type {
                     urdf_rs::JointType::Fixed => {
                         pending = pending.compose(&joint_pose(joint));
+                        last_fixed = Some(name.clone());
                         continue;
                     }
                     urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => false,
@@ -182,6 +189,7 @@ impl Robot {
                         ));
                     }
                 };
+                last_fixed = None;
                 if let Some(k) = joint_names.iter().position(|n| n == name) {
                     parent = Some(k);
                     pending = Pose::IDENTITY;
@@ -205,11 +213,15 @@ impl Robot {
                         format!("joint {name:?}: limits [{lower}, {upper}] are not lower ≤ upper"),
                     ));
                 }
+                let origin = pending.compose(&joint_pose(joint));
                 joints.push(RobotJoint {
                     parent,
-                    origin: pending.compose(&joint_pose(joint)),
+                    origin,
                     axis: [axis[0] / norm, axis[1] / norm, axis[2] / norm],
                     prismatic,
+                    nominal: origin,
+                    deviation: [0.0; 7],
+                    weight: true,
                 });
                 joint_names.push(name.clone());
                 limits.push((lower, upper));
@@ -220,7 +232,10 @@ impl Robot {
                 parent,
                 offset: pending,
                 marker: Pose::IDENTITY,
+                nominal_offset: pending,
+                weight: true,
             });
+            tip_elements.push(last_fixed);
         }
         if joints.is_empty() {
             return Err(invalid(
@@ -286,15 +301,42 @@ impl Robot {
             frames: Vec::new(),
             record: None,
             region: Vec::new(),
+            gravity_m_s2: crate::STANDARD_GRAVITY,
+            equilibrium: true,
+            nominal_differs: false,
+            transversal: Vec::new(),
+            harmonics: Vec::new(),
+            tip_elements: tip_elements.clone(),
         };
         if let Some((text, sidecar_origin)) = sidecar {
-            out.apply_sidecar(text, sidecar_origin)?;
+            out.apply_sidecar(text, sidecar_origin, &tip_elements)?;
         }
         Ok(out)
     }
 
-    /// Reads the sidecar's frames and compliances into the robot.
-    fn apply_sidecar(&mut self, text: &str, origin: &str) -> Result<(), LoadError> {
+    /// Reads the sidecar into the robot: a calibration record (`hapcal-contract`, schema 1 on)
+    /// through [`Robot::apply_record`]; an earlier hapcal's sidecar (no `schema_version`:
+    /// frames and compliances only) as that hapcal read it.
+    fn apply_sidecar(
+        &mut self,
+        text: &str,
+        origin: &str,
+        tip_elements: &[Option<String>],
+    ) -> Result<(), LoadError> {
+        let record = Calibration::from_sidecar_str(text, origin).map_err(|e| LoadError::Parse {
+            origin: e.origin.clone(),
+            line: e.line,
+            column: e.column,
+            message: e.message.clone(),
+        })?;
+        if record.is_legacy() {
+            return self.apply_legacy_sidecar(text, origin);
+        }
+        self.apply_record(record, origin, tip_elements)
+    }
+
+    /// Reads an earlier hapcal's sidecar: its frames and compliances.
+    fn apply_legacy_sidecar(&mut self, text: &str, origin: &str) -> Result<(), LoadError> {
         let sidecar: Sidecar = toml::from_str(text).map_err(|e| {
             let (line, column) = e
                 .span()
@@ -368,10 +410,344 @@ impl Robot {
 
 /// [`Robot::with_value`].
 pub(crate) fn with_value(robot: &Robot, name: &str, value: f64) -> Result<Robot, crate::Error> {
-    let _ = (robot, name, value);
-    Err(crate::Error::Invalid {
+    let unknown = crate::Error::Invalid {
         what: "value",
         value,
-        expected: "a value the calibration record holds",
-    })
+        expected: "the name of a value the calibration record holds",
+    };
+    if !value.is_finite() {
+        return Err(crate::Error::NotFinite {
+            what: "value",
+            index: 0,
+            value,
+        });
+    }
+    let mut out = robot.clone();
+    let Some(record) = out.record.as_mut() else {
+        return Err(unknown);
+    };
+    let Some(recorded) = record.values.iter_mut().find(|v| v.name == name) else {
+        return Err(unknown);
+    };
+    recorded.value = value;
+    let Ok(parsed) = ValueName::parse(name) else {
+        return Err(unknown);
+    };
+    match parsed {
+        ValueName::Element { element, field } => {
+            let k = field_index(field);
+            if let Some(j) = out.joint_names.iter().position(|n| *n == element) {
+                let joint = &mut out.joints[j];
+                joint.deviation[k] = value;
+                let d = joint.deviation;
+                joint.origin = joint
+                    .nominal
+                    .compose(&deviation_pose(&[d[0], d[1], d[2], d[3], d[4], d[5]]))
+                    .compose(&crate::robot::joint_motion(joint, d[6]));
+            } else {
+                let values = &out
+                    .record
+                    .as_ref()
+                    .map(|r| r.values.clone())
+                    .unwrap_or_default();
+                for (tip, e) in out.tips.iter_mut().zip(&out.tip_elements) {
+                    if e.as_deref() != Some(element.as_str()) {
+                        continue;
+                    }
+                    let mut d = [0.0; 6];
+                    for (slot, suffix) in d.iter_mut().zip(["x", "y", "z", "rx", "ry", "rz"]) {
+                        let key = format!("{element}.{suffix}");
+                        if let Some(v) = values.iter().find(|v| v.name == key) {
+                            *slot = v.value;
+                        }
+                    }
+                    tip.offset = tip.nominal_offset.compose(&deviation_pose(&d));
+                }
+            }
+            out.nominal_differs = true;
+        }
+        ValueName::Compliance { joints } => {
+            for joint in &joints {
+                if let Some(j) = out.joint_names.iter().position(|n| n == joint) {
+                    out.compliance[j] = value;
+                }
+            }
+        }
+        ValueName::Transversal { joint, axis } => {
+            let Some(j) = out.joint_names.iter().position(|n| *n == joint) else {
+                return Err(unknown);
+            };
+            let direction = axis.map(|a| {
+                let [u, w] = normal_axes(&out.joints[j].axis);
+                if a == 'u' { u } else { w }
+            });
+            for t in &mut out.transversal {
+                if t.joint == j && t.direction == direction {
+                    t.compliance = value;
+                }
+            }
+        }
+        ValueName::Harmonic { joint, order, sine } => {
+            let Some(j) = out.joint_names.iter().position(|n| *n == joint) else {
+                return Err(unknown);
+            };
+            for h in &mut out.harmonics {
+                if h.joint == j && h.order == order && h.sine == sine {
+                    h.coef = value;
+                }
+            }
+        }
+        _ => return Err(unknown),
+    }
+    Ok(out)
+}
+
+/// The index of a placement deviation's field in a joint's `deviation`.
+fn field_index(field: ElementField) -> usize {
+    match field {
+        ElementField::X => 0,
+        ElementField::Y => 1,
+        ElementField::Z => 2,
+        ElementField::Rx => 3,
+        ElementField::Ry => 4,
+        ElementField::Rz => 5,
+        ElementField::Offset => 6,
+    }
+}
+
+impl Robot {
+    /// Reads a calibration record (schema 1 on) into the robot: its frames; its torque source,
+    /// point masses, gravity, equilibrium and load tips; every value (kinematic deviations,
+    /// which the URDF's joint origins already hold, give the nominal geometry the loads are
+    /// evaluated on and the transversal tilts' base; compliances, transversal compliances,
+    /// harmonics); its region.
+    fn apply_record(
+        &mut self,
+        record: Calibration,
+        origin: &str,
+        tip_elements: &[Option<String>],
+    ) -> Result<(), LoadError> {
+        for (name, f) in &record.frames {
+            self.frames
+                .push((name.clone(), origin_pose(f.xyz_m, f.rpy_rad)));
+        }
+        let joint_index = |this: &Robot, what: &str, joint: &str| {
+            this.joint_names.iter().position(|n| n == joint).ok_or_else(|| {
+                invalid(
+                    origin,
+                    format!(
+                        "{what}: no moving joint {joint:?} on the paths to the tips; joints: {}",
+                        this.joint_names.join(", ")
+                    ),
+                )
+            })
+        };
+        if let Some(torque) = &record.torque {
+            let g = torque.gravity_direction;
+            let norm = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+            if !(norm > 1e-12 && norm.is_finite()) {
+                return Err(invalid(
+                    origin,
+                    format!("torque.gravity_direction {g:?} has no direction"),
+                ));
+            }
+            self.gravity_dir = [g[0] / norm, g[1] / norm, g[2] / norm];
+            self.gravity_m_s2 = torque.gravity_m_s2;
+            self.equilibrium = torque.equilibrium;
+            match torque.source {
+                TorqueSource::HandleMass => {
+                    return Err(invalid(
+                        origin,
+                        "torque.source = \"handle-mass\" is a haptic device's load, not a URDF robot's".to_owned(),
+                    ));
+                }
+                TorqueSource::LumpedUnitWeights => {
+                    self.gravity = GravityModel::Lumped;
+                    self.masses.clear();
+                }
+                TorqueSource::UrdfMasses | TorqueSource::PublishedMasses => {
+                    self.gravity = GravityModel::Masses;
+                    if !torque.masses.is_empty() {
+                        let mut masses = Vec::with_capacity(torque.masses.len());
+                        for m in &torque.masses {
+                            masses.push(PointMass {
+                                joint: joint_index(self, "torque.mass", &m.joint)?,
+                                mass_kg: m.mass_kg,
+                                com_m: m.com_m,
+                            });
+                        }
+                        self.masses = masses;
+                    }
+                }
+            }
+            // The lumped weights hang at the calibration's tips and the joints on their paths.
+            let missing: Vec<&str> = (torque.tips.iter())
+                .filter(|t| !self.tip_names.contains(t))
+                .map(String::as_str)
+                .collect();
+            if self.gravity == GravityModel::Lumped && !missing.is_empty() {
+                return Err(invalid(
+                    origin,
+                    format!(
+                        "the calibration's gravity loads hang at the tips {}: load the robot with {} as tips too",
+                        torque.tips.join(", "),
+                        missing.join(", ")
+                    ),
+                ));
+            }
+            if !torque.tips.is_empty() {
+                for joint in &mut self.joints {
+                    joint.weight = false;
+                }
+                for k in 0..self.tips.len() {
+                    let carries = torque.tips.contains(&self.tip_names[k]);
+                    self.tips[k].weight = carries;
+                    let mut at = if carries { self.tips[k].parent } else { None };
+                    while let Some(j) = at {
+                        self.joints[j].weight = true;
+                        at = self.joints[j].parent;
+                    }
+                }
+            }
+        }
+        let mut tip_deviation = vec![[0.0; 6]; self.tips.len()];
+        for v in &record.values {
+            let name = ValueName::parse(&v.name).map_err(|e| invalid(origin, e))?;
+            match name {
+                ValueName::Element { element, field } => {
+                    let k = field_index(field);
+                    if let Some(j) = self.joint_names.iter().position(|n| *n == element) {
+                        self.joints[j].deviation[k] = v.value;
+                    } else if let Some(t) =
+                        (tip_elements.iter()).position(|e| e.as_deref() == Some(element.as_str()))
+                        && k < 6
+                    {
+                        // Tips sharing the element share its deviation.
+                        for (d, e) in tip_deviation.iter_mut().zip(tip_elements) {
+                            if e.as_deref() == Some(element.as_str()) {
+                                d[k] = v.value;
+                            }
+                        }
+                        let _ = t;
+                    } else {
+                        return Err(invalid(
+                            origin,
+                            format!(
+                                "{:?}: no moving joint or tip element {element:?} of this name on the paths to the tips; joints: {}",
+                                v.name,
+                                self.joint_names.join(", ")
+                            ),
+                        ));
+                    }
+                }
+                ValueName::Compliance { joints } => {
+                    for joint in &joints {
+                        let j = joint_index(self, &v.name, joint)?;
+                        self.compliance[j] = v.value;
+                    }
+                }
+                ValueName::Transversal { joint, axis } => {
+                    let j = joint_index(self, &v.name, &joint)?;
+                    if self.joints[j].prismatic {
+                        return Err(invalid(
+                            origin,
+                            format!("{:?}: joint {joint:?} is prismatic", v.name),
+                        ));
+                    }
+                    let direction = axis.map(|a| {
+                        let [u, w] = normal_axes(&self.joints[j].axis);
+                        if a == 'u' { u } else { w }
+                    });
+                    self.transversal.push(TransversalJoint {
+                        joint: j,
+                        compliance: v.value,
+                        direction,
+                    });
+                }
+                ValueName::Harmonic { joint, order, sine } => {
+                    let j = joint_index(self, &v.name, &joint)?;
+                    self.harmonics.push(HarmonicTerm {
+                        joint: j,
+                        order,
+                        sine,
+                        coef: v.value,
+                    });
+                }
+                ValueName::Dh { .. } => {
+                    return Err(invalid(
+                        origin,
+                        format!(
+                            "{:?} is a D-H deviation: a calibrated URDF's record holds placement deviations (<joint>.x … .rz, .offset)",
+                            v.name
+                        ),
+                    ));
+                }
+                ValueName::HandleCompliance { .. }
+                | ValueName::Capstan { .. }
+                | ValueName::Chebyshev { .. } => {
+                    return Err(invalid(
+                        origin,
+                        format!(
+                            "{:?} is a haptic device's value, not a URDF robot's",
+                            v.name
+                        ),
+                    ));
+                }
+            }
+        }
+        if (self.has_compliance() || !self.transversal.is_empty()) && record.torque.is_none() {
+            return Err(invalid(
+                origin,
+                "the record holds compliances but no [torque] table (their gravity load)"
+                    .to_owned(),
+            ));
+        }
+        // The nominal geometry: the URDF's origins hold `nominal · Δ · motion(offset)`.
+        for joint in &mut self.joints {
+            if joint.deviation == [0.0; 7] {
+                continue;
+            }
+            let d = &joint.deviation;
+            let delta = deviation_pose(&[d[0], d[1], d[2], d[3], d[4], d[5]]);
+            let undo = delta
+                .compose(&crate::robot::joint_motion(joint, d[6]))
+                .inverse();
+            joint.nominal = joint.origin.compose(&undo);
+            self.nominal_differs = true;
+        }
+        for (tip, d) in self.tips.iter_mut().zip(&tip_deviation) {
+            if *d != [0.0; 6] {
+                tip.nominal_offset = tip.offset.compose(&deviation_pose(d).inverse());
+                self.nominal_differs = true;
+            }
+        }
+        if let Some(region) = &record.region {
+            for r in &region.joints {
+                if let Some(j) = self.joint_names.iter().position(|n| *n == r.name) {
+                    let slack = hapcal_contract::REGION_SLACK_SHARE * (r.max - r.min).max(0.0);
+                    self.region.push((j, r.min, r.max, slack));
+                }
+            }
+        }
+        self.record = Some(record);
+        Ok(())
+    }
+}
+
+/// The two axes normal to a revolute joint's unit `axis` (in its frame) that a per-axis
+/// transversal compliance bends about: `u = axis × e` with `e` the frame axis least aligned
+/// with the joint axis, normalised, and `v = axis × u` (`hapcal_problems`'s rule).
+fn normal_axes(axis: &[f64; 3]) -> [[f64; 3]; 2] {
+    let mut k = 0;
+    for i in 1..3 {
+        if axis[i].abs() < axis[k].abs() {
+            k = i;
+        }
+    }
+    let mut e = [0.0; 3];
+    e[k] = 1.0;
+    let u = crate::pose::cross(axis, &e);
+    let n = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
+    let u = [u[0] / n, u[1] / n, u[2] / n];
+    [u, crate::pose::cross(axis, &u)]
 }

@@ -1,0 +1,244 @@
+//! The calibration record of a calibration on measurement files (`hapcal-contract`,
+//! docs/design.md §5.6): what `hapcal calibrate --out` writes beside the calibrated URDF so
+//! that the runtime, `predict` and `compensate` evaluate the model that was identified.
+
+use hapcal_contract::{
+    Calibration, Covariance, Frame, JointRange, ModelName, PointMass, Region, SCHEMA_VERSION,
+    Torque, TorqueSource,
+};
+use hapcal_io::MeasurementTable;
+use hapcal_problems::CalibratedModel;
+
+use crate::data::Robot;
+use crate::model::ModelChoice;
+use crate::report::{FrameReport, ParamReport};
+
+/// Standard gravity, m/s² (CGPM 1901): the acceleration of the link masses' loads.
+const STANDARD_GRAVITY: f64 = 9.806_65;
+
+/// What a calibration on measurement files found, as the record needs it.
+pub(crate) struct MeasuredRecord<'a> {
+    /// The rung identified.
+    pub model: ModelChoice,
+    /// The calibration's tip links, in marker order.
+    pub tips: &'a [String],
+    /// The robot calibrated (joint names, prismatic flags, URDF masses).
+    pub robot: &'a Robot,
+    /// The calibrated model (its compliance's loads and equilibrium).
+    pub calibrated: &'a CalibratedModel,
+    /// The identified values with their σ, as the report lists them (frames excluded).
+    pub parameters: &'a [ParamReport],
+    /// The identification's covariance over its free parameters (frames included).
+    pub covariance: &'a hapcal_identify::Covariance,
+    /// The identified instrument and marker frames.
+    pub frames: &'a [FrameReport],
+    /// The training tables (the region).
+    pub train: &'a [MeasurementTable],
+}
+
+/// The model name a record gives the rung `choice`; `None` for `auto`, which is never the
+/// rung identified.
+pub(crate) fn model_name(choice: ModelChoice) -> Option<ModelName> {
+    ModelName::ALL
+        .into_iter()
+        .find(|m| m.as_str() == choice.name())
+}
+
+/// The schema-1 record of a calibration on measurement files: the model, the tips, the
+/// compliances' torque source with the point masses it used, the training region, the frames,
+/// every value as identified (kinematic values are also applied to the written URDF's joint
+/// origins; `.offset`s fold into them) and the covariance of those values.
+pub(crate) fn measured_record(m: &MeasuredRecord<'_>) -> Calibration {
+    let torque = m.calibrated.compliance.as_ref().map(|(g, _)| {
+        let source = if g.masses.is_empty() {
+            TorqueSource::LumpedUnitWeights
+        } else if matches!(
+            m.model,
+            ModelChoice::MassCompliance
+                | ModelChoice::ActuatorCompliance
+                | ModelChoice::MassComplianceHarmonic
+        ) {
+            TorqueSource::PublishedMasses
+        } else {
+            TorqueSource::UrdfMasses
+        };
+        Torque {
+            source,
+            gravity_direction: g.gravity_dir.into(),
+            gravity_m_s2: STANDARD_GRAVITY,
+            equilibrium: m.calibrated.equilibrium,
+            tips: m.tips.to_vec(),
+            masses: (g.masses.iter())
+                .map(|l| PointMass {
+                    joint: m.robot.joint_names[l.joint].clone(),
+                    mass_kg: l.mass_kg,
+                    com_m: l.com_m.into(),
+                })
+                .collect(),
+            handle_mass_kg: None,
+        }
+    });
+    let compliance_unit = torque.as_ref().map(|t| t.source.compliance_unit());
+    let values: Vec<hapcal_contract::CalibratedValue> = (m.parameters.iter())
+        .map(|p| hapcal_contract::CalibratedValue {
+            name: p.name.clone(),
+            value: p.value,
+            std: p.std,
+            unit: match compliance_unit {
+                Some(unit)
+                    if p.name.starts_with("compliance.") || p.name.starts_with("transversal.") =>
+                {
+                    unit.to_owned()
+                }
+                _ => p.unit.to_string(),
+            },
+        })
+        .collect();
+    // A kinematic value the final identification held rather than estimated (its warm start
+    // from an earlier fit) is part of the model all the same: recorded with σ 0.
+    let mut values = values;
+    let chain = m.calibrated.tips.first().unwrap_or(&m.calibrated.chain);
+    for (p, &x) in chain.params().iter().zip(&m.calibrated.x_kin) {
+        let frame = p.name.starts_with("instrument.") || p.name.starts_with("marker");
+        if x != 0.0 && !frame && !values.iter().any(|v| v.name == p.name) {
+            values.push(hapcal_contract::CalibratedValue {
+                name: p.name.clone(),
+                value: x,
+                std: 0.0,
+                unit: p.unit.symbol().to_owned(),
+            });
+        }
+    }
+    let n = m.robot.joint_names.len();
+    let ranges = crate::measured::training_ranges(m.train, n);
+    let region = Region {
+        rows: m.train.iter().map(|t| t.rows.len()).sum(),
+        joints: (m.robot.joint_names.iter().zip(&ranges))
+            .zip(&m.robot.prismatic)
+            .map(|((name, &(min, max)), &prismatic)| JointRange {
+                name: name.clone(),
+                min,
+                max,
+                unit: if prismatic { "m" } else { "rad" }.to_owned(),
+            })
+            .collect(),
+    };
+    Calibration {
+        schema_version: Some(SCHEMA_VERSION),
+        model: model_name(m.model),
+        date: None,
+        data_hash: None,
+        notes: Some(format!("hapcal calibrate, model {}", m.model)),
+        tips: m.tips.to_vec(),
+        torque,
+        region: Some(region),
+        frames: (m.frames.iter())
+            .map(|f| {
+                (
+                    f.name.clone(),
+                    Frame {
+                        xyz_m: f.xyz_m,
+                        rpy_rad: f.rpy_rad,
+                    },
+                )
+            })
+            .collect(),
+        covariance: covariance_of(m.covariance, &values),
+        values,
+    }
+}
+
+/// The covariance block of `values` among the identification's free parameters; `None` if a
+/// value is not among them.
+fn covariance_of(
+    cov: &hapcal_identify::Covariance,
+    values: &[hapcal_contract::CalibratedValue],
+) -> Option<Covariance> {
+    let index: Vec<usize> = (values.iter())
+        .map(|v| cov.names.iter().position(|n| *n == v.name))
+        .collect::<Option<_>>()?;
+    let k = index.len();
+    let mut matrix = vec![0.0; k * k];
+    for (a, &i) in index.iter().enumerate() {
+        for (b, &j) in index.iter().enumerate() {
+            matrix[a * k + b] = cov.matrix[(i, j)];
+        }
+    }
+    Some(Covariance::from_matrix(
+        values.iter().map(|v| v.name.clone()).collect(),
+        &matrix,
+    ))
+}
+
+/// Sets the value `name` (a record's value name: `compliance.<joint>[+<joint>…]`,
+/// `transversal.<joint>[.u|.v]`, `harmonic.<joint>.sin<h>|cos<h>`) of `model` to `value`
+/// (rad/(N·m), rad/m or rad), with `joint_names` the model's joints in chain order. Returns
+/// whether the model holds such a value. How a test exercises the runtime against the
+/// library at values larger than the identified ones.
+pub fn set_model_value(
+    model: &mut CalibratedModel,
+    joint_names: &[String],
+    name: &str,
+    value: f64,
+) -> bool {
+    use hapcal_contract::ValueName;
+    let index = |joint: &str| joint_names.iter().position(|n| n == joint);
+    match ValueName::parse(name) {
+        Ok(ValueName::Compliance { joints }) => {
+            let Some((_, k)) = model.compliance.as_mut() else {
+                return false;
+            };
+            let mut found = false;
+            for joint in &joints {
+                if let Some(j) = index(joint) {
+                    k[j] = value;
+                    found = true;
+                }
+            }
+            found
+        }
+        Ok(ValueName::Transversal { joint, axis }) => {
+            let Some(j) = index(&joint) else {
+                return false;
+            };
+            // Per-axis terms of a joint come in the order u, v.
+            let wanted = match axis {
+                None => None,
+                Some('u') => Some(0),
+                Some(_) => Some(1),
+            };
+            let mut seen = 0;
+            for t in model.transversal.iter_mut().filter(|t| t.joint == j) {
+                let hit = match (wanted, t.direction) {
+                    (None, None) => true,
+                    (Some(w), Some(_)) => {
+                        seen += 1;
+                        seen - 1 == w
+                    }
+                    _ => false,
+                };
+                if hit {
+                    t.compliance = value;
+                    return true;
+                }
+            }
+            false
+        }
+        Ok(ValueName::Harmonic { joint, order, sine }) => {
+            let Some(j) = index(&joint) else {
+                return false;
+            };
+            let Some((h, coef)) = model.harmonics.as_mut() else {
+                return false;
+            };
+            match (h.terms().iter()).position(|&t| t == (j, order, sine)) {
+                Some(i) => {
+                    coef[i] = value;
+                    true
+                }
+                None => false,
+            }
+        }
+        _ => false,
+    }
+}

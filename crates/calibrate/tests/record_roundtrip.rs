@@ -1,0 +1,248 @@
+//! Every model the ladder can choose on measurement files reaches the runtime: calibrate a
+//! simulated robot with the model, write the calibrated URDF and its record
+//! (`calibrate::write_outputs_beside`), load them with `hapcal_runtime::Robot`, and the
+//! runtime's marker positions at the training and held-out configurations equal the
+//! calibration library's own predictions (`CalibratedModel::end_poses_of`) within 1e-9 m. The
+//! values are then enlarged until each effect moves the markers by millimetres, in the
+//! library's model and through `Robot::with_value`, and the two must still agree: a runtime
+//! that left an effect out, or evaluated it on another geometry, fails there.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+#[path = "sim/humanoid.rs"]
+mod humanoid;
+#[path = "sim/split_arm.rs"]
+mod split_arm;
+
+use std::path::{Path, PathBuf};
+
+use hapcal_calibrate::inputs::Plan;
+use hapcal_calibrate::measured::{Robot as ArmRobot, run_tables};
+use hapcal_calibrate::model::ModelChoice;
+use hapcal_calibrate::report::Outcome;
+use hapcal_io::MeasurementTable;
+use hapcal_runtime::{Pose, Robot};
+
+/// Agreement required between the runtime and the library, m: both evaluate the same
+/// equations in double precision; 1e-9 m leaves six orders of magnitude to rounding.
+const TOLERANCE_M: f64 = 1e-9;
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "hapcal-record-roundtrip-{}-{name}",
+        std::process::id()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Calibrates `model` on `train`, `test` and writes `<dir>/cal.urdf` with its record.
+fn calibrate_and_write(
+    urdf: &Path,
+    tips: &[&str],
+    robot: &ArmRobot,
+    model: ModelChoice,
+    train: MeasurementTable,
+    test: MeasurementTable,
+    dir: &Path,
+) -> (Outcome, PathBuf) {
+    let plan = Plan {
+        device: urdf.to_path_buf(),
+        tip: tips[0].to_owned(),
+        tips: tips[1..].iter().map(|t| (*t).to_owned()).collect(),
+        data: Vec::new(),
+        test: Vec::new(),
+        model,
+        ..Plan::bundled_default()
+    };
+    let tip_names: Vec<String> = plan.tips.clone();
+    let device = hapcal_calibrate::data::load_device_tips(urdf, tips[0], &tip_names).unwrap();
+    let outcome = run_tables(
+        &plan,
+        &device,
+        robot,
+        vec![train],
+        vec![test],
+        std::time::Instant::now(),
+    )
+    .unwrap();
+    let out = dir.join(format!("cal-{model}.urdf"));
+    let _ = std::fs::remove_file(&out);
+    let _ = std::fs::remove_file(out.with_extension("calibration.toml"));
+    hapcal_calibrate::calibrate::write_outputs_beside(&outcome, &out, &[]).unwrap();
+    (outcome, out)
+}
+
+/// The runtime's marker position of marker `k` (on tip `k`) in the instrument frame.
+fn runtime_marker(robot: &Robot, q: &[f64], k: usize) -> [f64; 3] {
+    let mut ws = robot.workspace();
+    let mut poses = vec![Pose::IDENTITY; robot.tip_names().len()];
+    robot.deflected_tip_poses(q, &mut ws, &mut poses).unwrap();
+    let instrument = robot.frame("instrument").unwrap_or(Pose::IDENTITY);
+    let marker = robot
+        .frame(&format!("marker{}", k + 1))
+        .unwrap_or(Pose::IDENTITY);
+    instrument.compose(&poses[k]).compose(&marker).translation_m
+}
+
+/// Largest distance between the runtime's and the library's markers over `rows`, m.
+fn worst_gap(
+    robot: &Robot,
+    outcome_model: &hapcal_problems::CalibratedModel,
+    rows: &[Vec<f64>],
+    n_tips: usize,
+) -> f64 {
+    let tips: Vec<usize> = (0..n_tips).collect();
+    let mut worst: f64 = 0.0;
+    for q in rows {
+        let library = outcome_model.end_poses_of(&tips, q);
+        for (k, pose) in library.iter().enumerate() {
+            let r = runtime_marker(robot, q, k);
+            let p = pose.translation.vector;
+            let d = ((r[0] - p.x).powi(2) + (r[1] - p.y).powi(2) + (r[2] - p.z).powi(2)).sqrt();
+            worst = worst.max(d);
+        }
+    }
+    worst
+}
+
+/// The scale that makes a value of this name move a marker by millimetres (a compliance of
+/// 1e-4 rad/(N·m) under tens of N·m; a harmonic of 2 mrad), or `None` for a value the check
+/// leaves (kinematic deviations are exercised as identified).
+fn enlarged(name: &str, unit: &str) -> Option<f64> {
+    if name.starts_with("compliance.") || name.starts_with("transversal.") {
+        Some(if unit == "rad/m" { 2e-3 } else { 1e-4 })
+    } else if name.starts_with("harmonic.") {
+        Some(2e-3)
+    } else {
+        None
+    }
+}
+
+/// Writes, loads and compares `model`, then again with enlarged values; returns the two gaps
+/// and how far the enlarged effects moved the markers.
+fn round_trip(
+    urdf: &Path,
+    tips: &[&str],
+    robot: &ArmRobot,
+    model: ModelChoice,
+    train: MeasurementTable,
+    test: MeasurementTable,
+) -> (f64, f64, f64) {
+    let rows: Vec<Vec<f64>> = (train.rows.iter().chain(&test.rows))
+        .map(|r| r.q.clone())
+        .collect();
+    let dir = scratch(&format!("{model}-{}", tips.join("-")));
+    let (outcome, out) = calibrate_and_write(urdf, tips, robot, model, train, test, &dir);
+    let runtime = Robot::load_urdf(&out, tips).unwrap();
+    let record = runtime.calibration().expect("a record").clone();
+    assert_eq!(record.model.map(|m| m.as_str()), Some(model.name()));
+    let gap = worst_gap(&runtime, &outcome.model, &rows, tips.len());
+    // Enlarge every load-dependent value and harmonic, in both.
+    let mut library = outcome.model.clone();
+    let mut enlarged_runtime = runtime.clone();
+    let mut shifted: f64 = 0.0;
+    for v in &record.values {
+        let Some(value) = enlarged(&v.name, &v.unit) else {
+            continue;
+        };
+        enlarged_runtime = enlarged_runtime.with_value(&v.name, value).unwrap();
+        assert!(
+            hapcal_calibrate::record::set_model_value(
+                &mut library,
+                &robot.joint_names,
+                &v.name,
+                value
+            ),
+            "{} is not a value of the library's model",
+            v.name
+        );
+    }
+    for q in &rows {
+        let a = runtime_marker(&runtime, q, 0);
+        let b = runtime_marker(&enlarged_runtime, q, 0);
+        shifted = shifted
+            .max(((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt());
+    }
+    let enlarged_gap = worst_gap(&enlarged_runtime, &library, &rows, tips.len());
+    (gap, enlarged_gap, shifted)
+}
+
+fn iiwa_tables(seed: u64, n: usize) -> (ArmRobot, MeasurementTable, MeasurementTable) {
+    let robot = split_arm::robot();
+    let truth = split_arm::truth(
+        &robot,
+        seed,
+        split_arm::Effect::Harmonic {
+            amplitude_rad: 1e-3,
+            order: 1.0,
+            phase_rad: 0.4,
+        },
+    );
+    let train = split_arm::rows(&robot, &truth, n, (-2.5, 2.5), seed + 1, "train");
+    let test = split_arm::rows(&robot, &truth, n / 2, (-2.5, 2.5), seed + 2, "test");
+    (robot, train, test)
+}
+
+fn iiwa_urdf() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/mukca/urdf/iiwa14.urdf")
+}
+
+fn check(model: ModelChoice, (gap, enlarged_gap, shifted): (f64, f64, f64), effect: bool) {
+    assert!(
+        gap < TOLERANCE_M,
+        "{model}: runtime and library differ by {gap:e} m"
+    );
+    assert!(
+        enlarged_gap < TOLERANCE_M,
+        "{model} with enlarged values: runtime and library differ by {enlarged_gap:e} m"
+    );
+    if effect {
+        assert!(
+            shifted > 1e-4,
+            "{model}: the enlarged values moved the marker by only {shifted:e} m"
+        );
+    }
+}
+
+#[test]
+fn every_model_of_a_serial_arm_round_trips_into_the_runtime() {
+    let urdf = iiwa_urdf();
+    for (model, effect) in [
+        (ModelChoice::FramesOnly, false),
+        (ModelChoice::JointOffsets, false),
+        (ModelChoice::Geometric, false),
+        (ModelChoice::Compliance, true),
+        (ModelChoice::MassCompliance, true),
+        (ModelChoice::ActuatorCompliance, true),
+        (ModelChoice::TransversalCompliance, true),
+        (ModelChoice::TransversalAxes, true),
+        (ModelChoice::Harmonic, true),
+        (ModelChoice::Harmonic2, true),
+        (ModelChoice::ComplianceHarmonic, true),
+        (ModelChoice::MassComplianceHarmonic, true),
+    ] {
+        let (robot, train, test) = iiwa_tables(5, 80);
+        let result = round_trip(&urdf, &["ball_link"], &robot, model, train, test);
+        check(model, result, effect);
+    }
+}
+
+#[test]
+fn the_compliances_of_a_two_arm_tree_with_link_masses_round_trip_into_the_runtime() {
+    let tips = ["l_hand", "r_hand"];
+    let robot = humanoid::humanoid(&tips);
+    let truth = humanoid::truth(&robot, 3);
+    let train = humanoid::table(&robot, &truth, &[0, 1], 200, 4);
+    let test = humanoid::table(&robot, &truth, &[0, 1], 30, 5);
+    let dir = scratch("humanoid-urdf");
+    let urdf = dir.join("humanoid.urdf");
+    std::fs::write(&urdf, humanoid::humanoid_urdf()).unwrap();
+    for model in [
+        ModelChoice::Compliance,
+        ModelChoice::TransversalCompliance,
+        ModelChoice::TransversalAxes,
+    ] {
+        let result = round_trip(&urdf, &tips, &robot, model, train.clone(), test.clone());
+        check(model, result, true);
+    }
+}
