@@ -147,6 +147,14 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     // the model before any time goes into cross-validation, and it is the answer whenever the
     // geometric model is chosen.
     let obs = observations(&train, plan.socket_distance_m, &|_, _, _| true);
+    // The training region: each joint's range over the rows, for the record.
+    let mut ranges = vec![(f64::INFINITY, f64::NEG_INFINITY); chain.n_joints()];
+    for row in &obs.rows {
+        for (r, q) in ranges.iter_mut().zip(&row.q) {
+            *r = (r.0.min(*q), r.1.max(*q));
+        }
+    }
+    let n_training_rows = obs.rows.len();
     // Copies of a configuration add residuals but no information: count distinct ones.
     let n_configurations = (obs.rows.iter())
         .map(|row| {
@@ -332,13 +340,40 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         equilibrium_step_m: None,
         equilibrium_refits: 0,
     };
+    let joint_names = chain.joint_names().to_vec();
+    let prismatic: Vec<bool> = (hapcal_kinematics::joint_motions(std::slice::from_ref(&chain)))
+        .into_iter()
+        .map(|m| m == Some(hapcal_kinematics::Motion::Translation))
+        .collect();
+    let is_urdf = plan
+        .device
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
+        || device.urdf.is_some();
+    let tips = if is_urdf {
+        vec![plan.tip.clone()]
+    } else {
+        Vec::new()
+    };
+    let record = crate::record::measured_record(&crate::record::MeasuredRecord {
+        model: choice,
+        tips: &tips,
+        joint_names: &joint_names,
+        prismatic: &prismatic,
+        calibrated: &model,
+        parameters: &report.parameters,
+        covariance: &identified.covariance,
+        frames: &[],
+        ranges,
+        rows: n_training_rows,
+    });
     Ok(Outcome {
         report,
         device,
         device_path: plan.device.clone(),
         model,
         calibrated: None,
-        record: None,
+        record: Some(record),
     })
 }
 

@@ -2617,12 +2617,14 @@ pub fn run_tables(
     let record = crate::record::measured_record(&crate::record::MeasuredRecord {
         model: out.rung,
         tips: &tips,
-        robot,
+        joint_names: &robot.joint_names,
+        prismatic: &robot.prismatic,
         calibrated: &out.model,
         parameters: &report.parameters,
         covariance: &id.covariance,
         frames: &report.frames,
-        train: &train,
+        ranges: training_ranges(&train, robot.joint_names.len()),
+        rows: train.iter().map(|t| t.rows.len()).sum(),
     });
     Ok(crate::report::Outcome {
         report,

@@ -6,10 +6,8 @@ use hapcal_contract::{
     Calibration, Covariance, Frame, JointRange, ModelName, PointMass, Region, SCHEMA_VERSION,
     Torque, TorqueSource,
 };
-use hapcal_io::MeasurementTable;
 use hapcal_problems::CalibratedModel;
 
-use crate::data::Robot;
 use crate::model::ModelChoice;
 use crate::report::{FrameReport, ParamReport};
 
@@ -22,8 +20,10 @@ pub(crate) struct MeasuredRecord<'a> {
     pub model: ModelChoice,
     /// The calibration's tip links, in marker order.
     pub tips: &'a [String],
-    /// The robot calibrated (joint names, prismatic flags, URDF masses).
-    pub robot: &'a Robot,
+    /// The joints' names, in the order of the readings.
+    pub joint_names: &'a [String],
+    /// Whether each joint is prismatic (its range in m).
+    pub prismatic: &'a [bool],
     /// The calibrated model (its compliance's loads and equilibrium).
     pub calibrated: &'a CalibratedModel,
     /// The identified values with their σ, as the report lists them (frames excluded).
@@ -32,8 +32,10 @@ pub(crate) struct MeasuredRecord<'a> {
     pub covariance: &'a hapcal_identify::Covariance,
     /// The identified instrument and marker frames.
     pub frames: &'a [FrameReport],
-    /// The training tables (the region).
-    pub train: &'a [MeasurementTable],
+    /// Each joint's training range, rad or m (`training_ranges`).
+    pub ranges: Vec<(f64, f64)>,
+    /// Number of training rows.
+    pub rows: usize,
 }
 
 /// The model name a record gives the rung `choice`; `None` for `auto`, which is never the
@@ -70,7 +72,7 @@ pub(crate) fn measured_record(m: &MeasuredRecord<'_>) -> Calibration {
             tips: m.tips.to_vec(),
             masses: (g.masses.iter())
                 .map(|l| PointMass {
-                    joint: m.robot.joint_names[l.joint].clone(),
+                    joint: m.joint_names[l.joint].clone(),
                     mass_kg: l.mass_kg,
                     com_m: l.com_m.into(),
                 })
@@ -109,12 +111,10 @@ pub(crate) fn measured_record(m: &MeasuredRecord<'_>) -> Calibration {
             });
         }
     }
-    let n = m.robot.joint_names.len();
-    let ranges = crate::measured::training_ranges(m.train, n);
     let region = Region {
-        rows: m.train.iter().map(|t| t.rows.len()).sum(),
-        joints: (m.robot.joint_names.iter().zip(&ranges))
-            .zip(&m.robot.prismatic)
+        rows: m.rows,
+        joints: (m.joint_names.iter().zip(&m.ranges))
+            .zip(m.prismatic)
             .map(|((name, &(min, max)), &prismatic)| JointRange {
                 name: name.clone(),
                 min,

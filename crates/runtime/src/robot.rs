@@ -753,12 +753,17 @@ impl Robot {
         }
     }
 
-    /// The joint angles θ the robot takes under its own weight when commanded `q` (rad, m
-    /// for a prismatic joint), into `theta`: the fixed point of `θ = q + k∘τ(θ)`
-    /// ([`Robot::gravity_torques`], [`Robot::compliances`]), iterated from `θ = q` until no
-    /// joint moves by more than [`DEFLECTION_TOLERANCE_RAD`] or [`DEFLECTION_ITERATIONS`]
-    /// (the calibration library's torque equilibrium, `CalibratedModel::load_angles`,
-    /// Judd & Knasinski 1990 for the compliance model). `theta = q` without compliance.
+    /// The joint angles θ the calibrated robot takes when commanded `q` (rad, m for a
+    /// prismatic joint), into `theta`, as the calibration library predicts them
+    /// (`hapcal_problems::CalibratedModel`): `θ = q + k∘τ(θ_L) + h(q)` with the gravity
+    /// torques τ ([`Robot::gravity_torques`], evaluated on the nominal geometry as the
+    /// calibration evaluated them) at `θ_L = q`, or with the record's torque equilibrium at
+    /// the fixed point `θ_L = q + k∘τ(θ_L)`, iterated from `q` until no joint moves by more
+    /// than [`DEFLECTION_TOLERANCE_RAD`] or [`DEFLECTION_ITERATIONS`] (Judd & Knasinski 1990
+    /// for the compliance model), and `h` the joint harmonics. A transversal compliance tilts
+    /// its joint's origin (`c·m⊥` added to its rotation deviations); the tilted frames are
+    /// those [`Robot::deflected_tip_poses`] evaluates. `theta = q` without compliance or
+    /// harmonics.
     ///
     /// # Errors
     /// [`Error::Length`] unless `q` and `theta` have n entries; [`Error::NotFinite`] for a
@@ -880,8 +885,10 @@ impl Robot {
         }
     }
 
-    /// Pose of every tip of the robot deflected under its own weight when commanded `q`
-    /// (see [`Robot::deflect`] and [`Robot::tip_poses`]), with the iterations taken.
+    /// Pose of every tip of the calibrated robot commanded `q`: deflected under its own
+    /// weight, tilted by its transversal compliances, with its joint harmonics (see
+    /// [`Robot::deflect`] and [`Robot::tip_poses`]): the calibration's prediction, with the
+    /// iterations taken.
     ///
     /// # Errors
     /// As [`Robot::tip_poses`].

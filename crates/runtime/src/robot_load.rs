@@ -77,19 +77,27 @@ impl Robot {
     /// the root link to each tip, their `<origin>`s (fixed joints folded into the next moving
     /// joint's origin or the tip's offset), `<axis>` and `<limit>` (infinite for a continuous
     /// joint), and the `<inertial>` mass and centre of mass of every link below a moving joint
-    /// of the paths (a moving joint off the paths held at zero). From the sidecar: the frames
-    /// ([`Robot::frame`]) and the compliances `compliance.<joint>` (or
-    /// `compliance.<joint>+<joint>…` for a shared one), in rad/(N·m) with link masses and in
-    /// rad/m without (the calibration's lumped unit weights; the tips must then be those of
-    /// the calibration). Gravity is along −z of the root link (ROS REP 103).
+    /// of the paths (a moving joint off the paths held at zero). From the sidecar, the
+    /// calibration record (`hapcal-contract`, docs/design.md §5.6): the frames
+    /// ([`Robot::frame`]); the compliances' torque source, gravity, point masses (replacing the
+    /// URDF's), equilibrium and load tips; every value: the kinematic deviations (which the
+    /// URDF's origins already hold; they give the nominal geometry the gravity loads are
+    /// evaluated on, as the calibration evaluated them, and the base of the transversal
+    /// tilts), the compliances `compliance.<joint>[+<joint>…]`, the transversal compliances
+    /// `transversal.<joint>[.u|.v]` and the joint harmonics `harmonic.<joint>.sin<h>|cos<h>`;
+    /// the region ([`Robot::outside_region`]). A sidecar of an earlier hapcal (no
+    /// `schema_version`) reads as that hapcal read it: frames and compliances, loads on the
+    /// calibrated geometry at the torque equilibrium. Gravity is along −z of the root link
+    /// (ROS REP 103) unless the record says otherwise.
     ///
     /// # Errors
     /// [`LoadError::Io`] for a file that cannot be read; [`LoadError::Parse`] (line, column)
-    /// for a malformed sidecar; [`LoadError::Invalid`] for a URDF that urdf-rs cannot read, a
-    /// tip that is not a link (listing them), a tip named twice, a floating or planar joint on
-    /// a path, a joint without axis, a non-finite number, a negative mass, a sidecar value the
-    /// runtime does not evaluate (transversal compliance, joint harmonics), a compliance of an
-    /// unknown joint or in the wrong unit.
+    /// for a malformed sidecar, an unknown value name, a wrong unit, a missing key or a newer
+    /// schema; [`LoadError::Invalid`] for a URDF that urdf-rs cannot read, a tip that is not a
+    /// link (listing them), a tip named twice, a floating or planar joint on a path, a joint
+    /// without axis, a non-finite number, a negative mass, a value of a joint or element not
+    /// on the paths to the tips, a haptic device's value, lumped loads whose tips are not all
+    /// loaded.
     pub fn load_urdf(urdf: &Path, tips: &[&str]) -> Result<Robot, LoadError> {
         let read = |path: &Path| {
             std::fs::read_to_string(path).map_err(|e| LoadError::Io {
