@@ -47,6 +47,50 @@ fn compliant_iiwa() -> Robot {
     .expect("valid")
 }
 
+/// The iiwa 14 as `hapcal calibrate --model mass-compliance` writes it: the URDF's origins
+/// hold the calibrated geometry, the record (schema 1) Drake's masses as published masses,
+/// joint offsets and origin deviations, compliances, the loads of the robot at its readings.
+fn recorded_iiwa() -> Robot {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../fixtures/mukca/urdf/iiwa14.urdf"
+    );
+    let text = std::fs::read_to_string(path).expect("bundled fixture");
+    let names: Vec<String> = JOINTS.iter().map(|j| (*j).to_owned()).collect();
+    let model = GravityCompliance::published(&names).expect("iiwa joint names");
+    let mut record = String::from(
+        "schema_version = 1\nmodel = \"mass-compliance\"\ntips = [\"ball_link\"]\n\n[torque]\nsource = \"published-masses\"\ngravity_direction = [0.0, 0.0, -1.0]\ngravity_m_s2 = 9.80665\nequilibrium = false\ntips = [\"ball_link\"]\n",
+    );
+    for m in &model.masses {
+        let c = m.com_m;
+        record.push_str(&format!(
+            "\n[[torque.mass]]\njoint = \"{}\"\nmass_kg = {:?}\ncom_m = [{:?}, {:?}, {:?}]\n",
+            JOINTS[m.joint], m.mass_kg, c.x, c.y, c.z
+        ));
+    }
+    record.push_str("\n[region]\nrows = 100\n");
+    for j in JOINTS {
+        record.push_str(&format!(
+            "\n[[region.joint]]\nname = \"{j}\"\nmin = -2.0\nmax = 2.0\nunit = \"rad\"\n"
+        ));
+    }
+    record.push_str("\n[values]\n");
+    let k = [1e-4, 1e-4, 1.5e-4, 1.5e-4, 2e-4, 3e-4, 3e-4];
+    for (i, (j, k)) in JOINTS.iter().zip(k).enumerate() {
+        let d = 1e-4 * (i as f64 + 1.0);
+        for (field, unit) in [("x", "m"), ("rx", "rad"), ("offset", "rad")] {
+            record.push_str(&format!(
+                "\"{j}.{field}\" = {{ value = {d:?}, std = 1e-5, unit = \"{unit}\" }}\n"
+            ));
+        }
+        record.push_str(&format!(
+            "\"compliance.{j}\" = {{ value = {k:?}, std = 1e-6, unit = \"rad/(N·m)\" }}\n"
+        ));
+    }
+    Robot::from_urdf_str(&text, "iiwa14.urdf", Some((&record, "record")), &["ball_link"])
+        .expect("valid")
+}
+
 const Q: [f64; 7] = [0.3, 0.7, -0.2, -1.2, 0.4, 0.9, 0.1];
 
 fn bench(c: &mut Criterion) {
@@ -70,6 +114,31 @@ fn bench(c: &mut Criterion) {
             robot
                 .deflected_tip_poses(black_box(&Q), &mut ws, &mut out)
                 .map(|d| d.iterations)
+        })
+    });
+    group.bench_function("compensate_pose", |b| {
+        let mut q = [0.0; 7];
+        b.iter(|| {
+            let c = compensate(&robot, 0, black_box(&target), &Q, &cfg, &mut ws, &mut q);
+            assert!(c.is_ok_and(|c| c.reached));
+            q[0]
+        })
+    });
+    group.finish();
+
+    // As calibrate writes it: loads of the robot at its readings, nominal geometry for them.
+    let robot = recorded_iiwa();
+    let rigid = robot.with_compliances(&[0.0; 7]).expect("valid");
+    let target = Target::Pose(rigid.tip_pose(0, &Q, &mut ws).expect("valid"));
+    let mut ws = robot.workspace();
+    let mut group = c.benchmark_group("iiwa14_recorded");
+    group.bench_function("pose_jacobian_deflected", |b| {
+        let mut out = [Pose::IDENTITY];
+        let mut jac = [[0.0; 6]; 7];
+        b.iter(|| {
+            let pose = robot.spatial_jacobian(0, black_box(&Q), &mut ws, &mut jac);
+            let deflection = robot.deflected_tip_poses(black_box(&Q), &mut ws, &mut out);
+            (pose.map(|p| p.translation_m[0]), deflection.map(|d| d.iterations))
         })
     });
     group.bench_function("compensate_pose", |b| {

@@ -176,6 +176,8 @@ pub struct RobotWorkspace {
     pub(crate) tilt: Vec<[f64; 3]>,
     /// Joint angles where the gravity loads are evaluated.
     pub(crate) load_at: Vec<f64>,
+    /// Each joint subtree's gravity force and moment about the root (the loads' one pass).
+    pub(crate) sums: Vec<[f64; 6]>,
 }
 
 /// What [`Robot::deflect`] did: fixed-point iterations of `θ = q + k∘τ(θ)` and the last step.
@@ -403,6 +405,7 @@ impl Robot {
             moment: vec![[0.0; 3]; n],
             tilt: vec![[0.0; 3]; n],
             load_at: vec![0.0; n],
+            sums: vec![[0.0; 6]; n],
         }
     }
 
@@ -661,79 +664,56 @@ impl Robot {
         self.check_joints("joint angles", q)?;
         check_len("gravity torques", self.n_joints(), tau.len())?;
         self.forward(q, &mut ws.frames);
-        self.torques_from(&ws.frames, tau);
+        self.torques_from(&ws.frames, tau, &mut ws.sums);
         Ok(())
     }
 
-    /// Adds the moment of `force` applied at `point` (root frame) to the torque of `from`
-    /// and every joint above it, and with `moment` to their moment vectors (root frame).
-    #[inline]
-    fn add_load(
-        &self,
-        frames: &[Pose],
-        from: Option<usize>,
-        point: &[f64; 3],
-        force: &[f64; 3],
-        tau: &mut [f64],
-        mut moment: Option<&mut [[f64; 3]]>,
-    ) {
-        let mut at = from;
-        while let Some(j) = at {
-            let joint = &self.joints[j];
-            if !joint.prismatic {
-                let w = frames[j].rotate(&joint.axis);
-                let lever = sub(point, &frames[j].translation_m);
-                let m = cross(&lever, force);
-                tau[j] += dot(&w, &m);
-                if let Some(moment) = moment.as_deref_mut() {
-                    for (a, b) in moment[j].iter_mut().zip(m) {
-                        *a += b;
-                    }
-                }
-            }
-            at = joint.parent;
-        }
+    /// The gravity torques of the joints whose frames are `frames` into `tau` (calibrated
+    /// geometry; the public [`Robot::gravity_torques`]).
+    fn torques_from(&self, frames: &[Pose], tau: &mut [f64], sums: &mut [[f64; 6]]) {
+        self.loads_from(frames, false, tau, None, sums);
     }
 
-    fn torques_from(&self, frames: &[Pose], tau: &mut [f64]) {
-        self.loads_from(frames, false, tau, None);
-    }
-
-    /// The gravity torques (and with `moment` the moment vectors, root frame) of the joints
-    /// whose frames are `frames`; the tips' nominal offsets with `nominal`.
+    /// The gravity torques (and with `moment` the moment vectors about each joint's origin,
+    /// root frame) of the joints whose frames are `frames`; the tips' nominal offsets with
+    /// `nominal`. One pass: each load's force `f` and moment `p × f` about the root are summed
+    /// over every joint's subtree (children follow their parents in the joint order), and
+    /// `m_j = Σ p × f − o_j × Σ f`, `τ_j = w_j · m_j` (Featherstone, *Rigid Body Dynamics
+    /// Algorithms*, 2008, §4.1), linear in the joint count.
     fn loads_from(
         &self,
         frames: &[Pose],
         nominal: bool,
         tau: &mut [f64],
         mut moment: Option<&mut [[f64; 3]]>,
+        sums: &mut [[f64; 6]],
     ) {
-        tau.fill(0.0);
-        if let Some(m) = moment.as_deref_mut() {
-            m.fill([0.0; 3]);
-        }
+        sums.fill([0.0; 6]);
+        let add = |sums: &mut [[f64; 6]], at: Option<usize>, p: &[f64; 3], f: &[f64; 3]| {
+            if let Some(j) = at {
+                let m = cross(p, f);
+                let s = &mut sums[j];
+                s[0] += f[0];
+                s[1] += f[1];
+                s[2] += f[2];
+                s[3] += m[0];
+                s[4] += m[1];
+                s[5] += m[2];
+            }
+        };
         let g = self.gravity_dir;
         match self.gravity {
             GravityModel::Masses => {
                 for m in &self.masses {
                     let c = transform_point(&frames[m.joint], &m.com_m);
                     let w = m.mass_kg * self.gravity_m_s2;
-                    let force = [g[0] * w, g[1] * w, g[2] * w];
-                    self.add_load(
-                        frames,
-                        Some(m.joint),
-                        &c,
-                        &force,
-                        tau,
-                        moment.as_deref_mut(),
-                    );
+                    add(sums, Some(m.joint), &c, &[g[0] * w, g[1] * w, g[2] * w]);
                 }
             }
             GravityModel::Lumped => {
                 for (i, joint) in self.joints.iter().enumerate() {
                     if joint.weight {
-                        let o = frames[i].translation_m;
-                        self.add_load(frames, joint.parent, &o, &g, tau, moment.as_deref_mut());
+                        add(sums, joint.parent, &frames[i].translation_m, &g);
                     }
                 }
                 for (k, tip) in self.tips.iter().enumerate() {
@@ -746,9 +726,27 @@ impl Robot {
                     } else {
                         self.tip_link_from(k, frames)
                     };
-                    let end = end.translation_m;
-                    self.add_load(frames, tip.parent, &end, &g, tau, moment.as_deref_mut());
+                    add(sums, tip.parent, &end.translation_m, &g);
                 }
+            }
+        }
+        for j in (0..self.joints.len()).rev() {
+            if let Some(p) = self.joints[j].parent {
+                let s = sums[j];
+                for (a, b) in sums[p].iter_mut().zip(s) {
+                    *a += b;
+                }
+            }
+        }
+        for (j, joint) in self.joints.iter().enumerate() {
+            let s = &sums[j];
+            let o = frames[j].translation_m;
+            let about = cross(&o, &[s[0], s[1], s[2]]);
+            let m = [s[3] - about[0], s[4] - about[1], s[5] - about[2]];
+            let m = if joint.prismatic { [0.0; 3] } else { m };
+            tau[j] = dot(&frames[j].rotate(&joint.axis), &m);
+            if let Some(moment) = moment.as_deref_mut() {
+                moment[j] = m;
             }
         }
     }
@@ -806,7 +804,7 @@ impl Robot {
             if self.equilibrium && self.has_compliance() {
                 for iteration in 1..=DEFLECTION_ITERATIONS {
                     self.forward_nominal(at, &mut ws.nominal);
-                    self.loads_from(&ws.nominal, true, &mut ws.torque, None);
+                    self.loads_from(&ws.nominal, true, &mut ws.torque, None, &mut ws.sums);
                     let mut step: f64 = 0.0;
                     let values = q.iter().zip(&self.compliance).zip(&ws.torque);
                     for (t, ((q, k), tau)) in at.iter_mut().zip(values) {
@@ -830,7 +828,7 @@ impl Robot {
             } else {
                 None
             };
-            self.loads_from(&ws.nominal, true, &mut ws.torque, moment);
+            self.loads_from(&ws.nominal, true, &mut ws.torque, moment, &mut ws.sums);
             let values = q.iter().zip(&self.compliance).zip(&ws.torque);
             for (t, ((q, k), tau)) in theta.iter_mut().zip(values) {
                 *t = q + k * tau;
