@@ -3,8 +3,22 @@
 #ifndef HAPCAL_RUNTIME_H
 #define HAPCAL_RUNTIME_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+
+// The joint index hapcal_robot_outside_region writes for joint angles inside the region the
+// calibration was fitted on (or a robot without a recorded region): SIZE_MAX.
+#define HAPCAL_INSIDE_REGION SIZE_MAX
+
+// [`HapcalTarget::kind`]: reach the target's position only (`pose.translation_m`; the
+// rotation is ignored), 3 equations.
+#define HAPCAL_TARGET_POSITION 0
+
+// [`HapcalTarget::kind`]: reach the target's full pose, 6 equations.
+#define HAPCAL_TARGET_POSE 1
+
+
 
 // Result of every fallible call; `Ok` is 0. On anything else,
 // [`hapcal_last_error_message`] says what went wrong.
@@ -13,26 +27,36 @@ typedef enum HapcalStatus {
   HAPCAL_STATUS_OK = 0,
   // A required pointer was NULL.
   HAPCAL_STATUS_NULL_POINTER = 1,
-  // `n_joints` differs from the model's.
+  // An array length differs from the model's or robot's (`n_joints`, `n_tips`), or a name
+  // buffer is too small.
   HAPCAL_STATUS_LENGTH = 2,
-  // A reading or joint angle is NaN or infinite.
+  // An input number (a reading, joint angle, target value or setting) is NaN or infinite.
   HAPCAL_STATUS_NOT_FINITE = 3,
-  // The device file cannot be read.
+  // The device file, URDF or sidecar cannot be read.
   HAPCAL_STATUS_IO = 4,
-  // The device file is not valid TOML or has a missing, unknown or mistyped key.
+  // The device file or sidecar is not valid TOML or has a missing, unknown or mistyped key.
   HAPCAL_STATUS_PARSE = 5,
-  // The device file is well formed but describes a model the runtime cannot use.
+  // The device file or URDF is well formed but describes a model the runtime cannot use.
   HAPCAL_STATUS_INVALID_MODEL = 6,
   // A string argument is not UTF-8.
   HAPCAL_STATUS_INVALID_UTF8 = 7,
   // A panic was caught (a bug; please report it with the message).
   HAPCAL_STATUS_PANIC = 8,
+  // An index (tip, joint) past the last, an unknown target kind, or a setting outside its
+  // domain (a tolerance that is not positive).
+  HAPCAL_STATUS_INVALID_ARGUMENT = 9,
 } HapcalStatus;
 
 // A loaded model, opaque to C: create with [`hapcal_model_load`] or
 // [`hapcal_model_from_toml`], release with [`hapcal_model_free`]. Evaluation calls take it
 // `const`: one model may be evaluated from several threads at once.
 typedef struct HapcalModel HapcalModel;
+
+// A loaded calibrated robot and its evaluation buffers, opaque to C: create with
+// [`hapcal_robot_load`], release with [`hapcal_robot_free`]. Calls that take it `const`
+// (counts, names, the region flag) may run from several threads at once; the others use the
+// handle's workspace and must not overlap on one handle.
+typedef struct HapcalRobot HapcalRobot;
 
 // A rigid transform `base_T_tip`: rotation matrix (row-major, `rotation[i][j]` = row i,
 // column j; column j is the tip's j-th axis in the base frame) and translation (m).
@@ -42,6 +66,56 @@ typedef struct HapcalPose {
   // Tip origin (the end point) in the base frame, m.
   double translation_m[3];
 } HapcalPose;
+
+// What the deflection under the robot's own weight did ([`hapcal_runtime::Deflection`]):
+// fixed-point iterations of `θ = q + k∘τ(θ)`.
+typedef struct HapcalDeflection {
+  // Iterations taken (0 for a robot without compliance).
+  size_t iterations;
+  // Largest joint change of the last iteration, rad (m for a prismatic joint).
+  double final_step_rad;
+  // Whether the last step was at most 1e-12 rad (true without compliance); false when the
+  // iterations hit their bound (20) first.
+  bool converged;
+} HapcalDeflection;
+
+// Where a tip should go, in the robot's root link frame ([`hapcal_runtime::Target`]).
+typedef struct HapcalTarget {
+  // [`HAPCAL_TARGET_POSITION`] or [`HAPCAL_TARGET_POSE`].
+  uint32_t kind;
+  // The target pose (m); only its translation for [`HAPCAL_TARGET_POSITION`].
+  struct HapcalPose pose;
+} HapcalTarget;
+
+// Settings of [`hapcal_robot_compensate`] ([`hapcal_runtime::CompensationConfig`]).
+typedef struct HapcalCompensationConfig {
+  // A target is reached when the tip's origin is within this distance of it, m (> 0).
+  double tolerance_m;
+  // … and, for a pose target, its orientation within this angle, rad (> 0).
+  double tolerance_rad;
+  // Most damped least-squares steps (each one deflection and one Jacobian).
+  size_t max_iterations;
+  // Initial damping λ of the step `Δq = Jᵀ(J·Jᵀ + λ²·I)⁻¹·e`, m (> 0; 1e-3 is typical).
+  double damping_m;
+  // Length that weighs orientation against position, m (> 0): an orientation error of
+  // 1 rad counts as a position error of this length.
+  double orientation_scale_m;
+} HapcalCompensationConfig;
+
+// The outcome of [`hapcal_robot_compensate`] ([`hapcal_runtime::Compensation`]).
+typedef struct HapcalCompensation {
+  // Whether the deflected tip is within the tolerances of the target at the command.
+  bool reached;
+  // Damped least-squares steps taken (accepted or not).
+  size_t iterations;
+  // Distance from the deflected tip's origin to the target at the command, m.
+  double position_error_m;
+  // Angle between the deflected tip's orientation and the target's, rad (0 for a position
+  // target).
+  double orientation_error_rad;
+  // The deflection at the command.
+  struct HapcalDeflection deflection;
+} HapcalCompensation;
 
 #ifdef __cplusplus
 extern "C" {
@@ -200,6 +274,210 @@ enum HapcalStatus hapcal_evaluate(const struct HapcalModel *model,
 // failure). Successful calls leave it as it was. Never NULL; the pointer stays valid until
 // the next failing call on this thread.
 const char *hapcal_last_error_message(void);
+
+// Loads the calibrated robot `urdf_path` (UTF-8, NUL-terminated) with the links `tips[0 ..
+// n_tips]` as its tips, and the sidecar `<urdf stem>.calibration.toml` beside it if there is
+// one (as `hapcal calibrate --out robot.urdf` writes them: identified frames and joint
+// compliances), and stores a new handle in `*out` ([`hapcal_runtime::Robot::load_urdf`]).
+//
+// The joints are the moving joints on the paths from the root link to the tips; gravity is
+// along −z of the root link; torques use the URDF's link masses (N·m, compliances in
+// rad/(N·m)), or without any, the calibration's lumped unit weights (m, rad/m).
+//
+// Returns `Ok`, `NullPointer`, `InvalidUtf8`, `Io`, `Parse` (a malformed sidecar, with
+// line and column) or `InvalidModel` (a URDF the runtime cannot use, an unknown tip link, a
+// sidecar value it does not evaluate, no tip); `*out` is written only on success.
+//
+// # Safety
+// `urdf_path` is NULL or a NUL-terminated string; `tips` is NULL or valid for `n_tips`
+// reads, each NULL or a NUL-terminated string; `out` is NULL or valid for one write.
+enum HapcalStatus hapcal_robot_load(const char *urdf_path,
+                                    const char *const *tips,
+                                    size_t n_tips,
+                                    struct HapcalRobot **out);
+
+// Releases a robot handle; NULL is ignored.
+//
+// # Safety
+// `robot` is NULL or a handle from [`hapcal_robot_load`] not yet freed; it must not be used
+// afterwards.
+void hapcal_robot_free(struct HapcalRobot *robot);
+
+// Number of moving joints n of the robot (0 for NULL).
+//
+// # Safety
+// `robot` is NULL or a live handle.
+size_t hapcal_robot_n_joints(const struct HapcalRobot *robot);
+
+// Number of tips of the robot, as loaded (0 for NULL).
+//
+// # Safety
+// `robot` is NULL or a live handle.
+size_t hapcal_robot_n_tips(const struct HapcalRobot *robot);
+
+// Whether the robot's gravity torques come from the URDF's link masses (N·m; compliances in
+// rad/(N·m)); false: the lumped unit weights of a URDF without masses (m; rad/m), or NULL.
+//
+// # Safety
+// `robot` is NULL or a live handle.
+bool hapcal_robot_has_link_masses(const struct HapcalRobot *robot);
+
+// Writes the name of joint `joint` (the URDF's `<joint name>`, UTF-8) with its NUL into
+// `buf[0 .. buf_len]`, and its length in bytes without the NUL into `*len_out` unless
+// `len_out` is NULL. With `buf` NULL and `buf_len` 0 only the length is written (to size a
+// buffer).
+//
+// Returns `Ok`, `NullPointer`, `InvalidArgument` (joint index past the last) or `Length`
+// (`buf_len` ≤ the name's length; `*len_out` is still written, `buf` is not).
+//
+// # Safety
+// `robot` is NULL or a live handle; `buf` NULL or valid for `buf_len` writes; `len_out`
+// NULL or valid for one write.
+enum HapcalStatus hapcal_robot_joint_name(const struct HapcalRobot *robot,
+                                          size_t joint,
+                                          char *buf,
+                                          size_t buf_len,
+                                          size_t *len_out);
+
+// Writes the name of tip `tip` (its link's name, as given to [`hapcal_robot_load`]); as
+// [`hapcal_robot_joint_name`].
+//
+// # Safety
+// As [`hapcal_robot_joint_name`].
+enum HapcalStatus hapcal_robot_tip_name(const struct HapcalRobot *robot,
+                                        size_t tip,
+                                        char *buf,
+                                        size_t buf_len,
+                                        size_t *len_out);
+
+// Pose of tip `tip` of the rigid robot (no deflection) at joint angles `q` (rad, m for a
+// prismatic joint), in the root link frame ([`hapcal_runtime::Robot::tip_pose`]).
+//
+// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `InvalidArgument` (tip index past
+// the last).
+//
+// # Safety
+// `robot` is NULL or a live handle not in use by another call; `q` NULL or valid for
+// `n_joints` values; `pose_out` NULL or valid for one write.
+enum HapcalStatus hapcal_robot_tip_pose(struct HapcalRobot *robot,
+                                        size_t tip,
+                                        const double *q,
+                                        size_t n_joints,
+                                        struct HapcalPose *pose_out);
+
+// Poses of every tip (`poses_out[n_tips]`, in the order of the tip names) of the robot
+// deflected under its own weight when commanded `q` (rad, m for a prismatic joint): the
+// calibrated model's prediction, compliance included ([`hapcal_runtime::Robot::deflected_tip_poses`]:
+// the fixed point `θ = q + k∘τ(θ)`), and what the deflection did into `*deflection_out`
+// unless it is NULL.
+//
+// Returns `Ok`, `NullPointer`, `Length` (`n_joints` or `n_tips` not the robot's) or
+// `NotFinite`.
+//
+// # Safety
+// `robot` is NULL or a live handle not in use by another call; `q` NULL or valid for
+// `n_joints` values; `poses_out` NULL or valid for `n_tips` writes; `deflection_out` NULL or
+// valid for one write.
+enum HapcalStatus hapcal_robot_deflected_tip_poses(struct HapcalRobot *robot,
+                                                   const double *q,
+                                                   size_t n_joints,
+                                                   struct HapcalPose *poses_out,
+                                                   size_t n_tips,
+                                                   struct HapcalDeflection *deflection_out);
+
+// Spatial Jacobian of tip `tip` of the rigid robot at joint angles `q` (6 × `n_joints`,
+// column-major into `jac_out[6·n_joints]`; column k: `(w_k × (p − o_k), w_k)` for a revolute
+// joint, `(w_k, 0)` for a prismatic one, zero for a joint not on the tip's path, in the root
+// link frame; rows 0–2 m/rad, rows 3–5 rad/rad), and the tip pose in `*pose_out` unless it is
+// NULL ([`hapcal_runtime::Robot::spatial_jacobian`]).
+//
+// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `InvalidArgument` (tip index past
+// the last).
+//
+// # Safety
+// `robot` is NULL or a live handle not in use by another call; `q` NULL or valid for
+// `n_joints` values; `jac_out` NULL or valid for `6·n_joints` writes; `pose_out` NULL or
+// valid for one write.
+enum HapcalStatus hapcal_robot_spatial_jacobian(struct HapcalRobot *robot,
+                                                size_t tip,
+                                                const double *q,
+                                                size_t n_joints,
+                                                double *jac_out,
+                                                struct HapcalPose *pose_out);
+
+// Body Jacobian of tip `tip` of the rigid robot at joint angles `q`: the spatial Jacobian's
+// columns in the tip frame, `diag(Rᵀ, Rᵀ)·J_s` ([`hapcal_runtime::Robot::body_jacobian`]);
+// as [`hapcal_robot_spatial_jacobian`].
+//
+// # Safety
+// As [`hapcal_robot_spatial_jacobian`].
+enum HapcalStatus hapcal_robot_body_jacobian(struct HapcalRobot *robot,
+                                             size_t tip,
+                                             const double *q,
+                                             size_t n_joints,
+                                             double *jac_out,
+                                             struct HapcalPose *pose_out);
+
+// Gravity torque of every joint at joint angles `q` (no deflection), into
+// `tau_out[n_joints]`: N·m from the link masses, m with lumped unit weights
+// ([`hapcal_robot_has_link_masses`]); 0 for a prismatic joint
+// ([`hapcal_runtime::Robot::gravity_torques`]).
+//
+// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+//
+// # Safety
+// `robot` is NULL or a live handle not in use by another call; `q` and `tau_out` NULL or
+// valid for `n_joints` values.
+enum HapcalStatus hapcal_robot_gravity_torques(struct HapcalRobot *robot,
+                                               const double *q,
+                                               size_t n_joints,
+                                               double *tau_out);
+
+// The joint command `q_out[n_joints]` (rad, m for a prismatic joint) at which tip `tip`,
+// deflected under the robot's own weight, reaches `*target` (root link frame): damped least
+// squares from `q_start` (the nominal inverse kinematics' solution, or the previous command
+// along a path), commands clamped to the joint limits ([`hapcal_runtime::compensate`]).
+// The outcome goes to `*result_out` unless it is NULL.
+//
+// Not reaching the target is a result (`reached` false, the errors left; `q_out` the best
+// command found), not a failure status.
+//
+// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` (a start angle, target value or
+// setting) or `InvalidArgument` (tip index past the last, unknown target kind, a setting
+// not positive).
+//
+// # Safety
+// `robot` is NULL or a live handle not in use by another call; `target` and `config` NULL
+// or valid for one read; `q_start` and `q_out` NULL or valid for `n_joints` values;
+// `result_out` NULL or valid for one write.
+enum HapcalStatus hapcal_robot_compensate(struct HapcalRobot *robot,
+                                          size_t tip,
+                                          const struct HapcalTarget *target,
+                                          const double *q_start,
+                                          size_t n_joints,
+                                          const struct HapcalCompensationConfig *config,
+                                          double *q_out,
+                                          struct HapcalCompensation *result_out);
+
+// Whether joint angles `q` (rad, m for a prismatic joint) lie outside the region the
+// calibration was fitted on (the sidecar's recorded training range of each joint, with
+// 5 % of the range as slack; [`hapcal_runtime::Robot::outside_region`]). Outside:
+// `*joint_out` is the joint farthest past its range (by share of the range) and
+// `*distance_out` how far past it (rad or m; positive above the range, negative below).
+// Inside, or for a robot without a recorded region: `*joint_out` is
+// [`HAPCAL_INSIDE_REGION`] and `*distance_out` 0.
+//
+// Returns `Ok` (inside or outside: read `*joint_out`), `NullPointer`, `Length` or
+// `NotFinite`; the out-params are written only on `Ok`.
+//
+// # Safety
+// `robot` is NULL or a live handle; `q` NULL or valid for `n_joints` values; `joint_out`
+// and `distance_out` NULL or valid for one write.
+enum HapcalStatus hapcal_robot_outside_region(const struct HapcalRobot *robot,
+                                              const double *q,
+                                              size_t n_joints,
+                                              size_t *joint_out,
+                                              double *distance_out);
 
 #ifdef __cplusplus
 }  // extern "C"
