@@ -1,14 +1,25 @@
 //! The same per-cycle evaluation as `hapcal-runtime`'s `reference_device/evaluate`, called
 //! through the C ABI (`hapcal_evaluate`, by a function pointer the optimiser cannot see
 //! through): pointer checks, the panic guard and the copies out.
+//!
+//! Robots: the C ABI's 7-joint test robot (`tests/data/iiwa14_calibrated.urdf`, link masses,
+//! joint compliances of 1e-4 to 3e-4 rad/(N·m) in its sidecar), tip `ball_link`: one control
+//! cycle (rigid tip pose + spatial Jacobian + deflected tip pose) and one compensation of a
+//! 6-D target, through the C ABI (function pointers) and through `hapcal_runtime::Robot`
+//! directly.
 
 use std::ffi::CString;
 use std::hint::black_box;
 use std::ptr;
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use hapcal_runtime::{CompensationConfig, Pose, Robot, Target, compensate};
 use hapcal_runtime_c::{
-    HapcalModel, HapcalPose, HapcalStatus, hapcal_evaluate, hapcal_model_free, hapcal_model_load,
+    HAPCAL_TARGET_POSE, HapcalCompensation, HapcalCompensationConfig, HapcalDeflection,
+    HapcalModel, HapcalPose, HapcalRobot, HapcalStatus, HapcalTarget, hapcal_evaluate,
+    hapcal_model_free, hapcal_model_load, hapcal_robot_compensate,
+    hapcal_robot_deflected_tip_poses, hapcal_robot_free, hapcal_robot_load,
+    hapcal_robot_spatial_jacobian, hapcal_robot_tip_pose,
 };
 
 const THETA: [f64; 7] = [0.1, 0.5, -0.2, 1.0, 0.3, 0.6, -0.4];
@@ -63,5 +74,158 @@ fn bench(c: &mut Criterion) {
     unsafe { hapcal_model_free(model) };
 }
 
-criterion_group!(benches, bench);
+const Q: [f64; 7] = [0.3, 0.7, -0.2, -1.2, 0.4, 0.9, 0.1];
+
+type TipPose = unsafe extern "C" fn(
+    *mut HapcalRobot,
+    usize,
+    *const f64,
+    usize,
+    *mut HapcalPose,
+) -> HapcalStatus;
+type Jacobian = unsafe extern "C" fn(
+    *mut HapcalRobot,
+    usize,
+    *const f64,
+    usize,
+    *mut f64,
+    *mut HapcalPose,
+) -> HapcalStatus;
+type Deflected = unsafe extern "C" fn(
+    *mut HapcalRobot,
+    *const f64,
+    usize,
+    *mut HapcalPose,
+    usize,
+    *mut HapcalDeflection,
+) -> HapcalStatus;
+type Compensate = unsafe extern "C" fn(
+    *mut HapcalRobot,
+    usize,
+    *const HapcalTarget,
+    *const f64,
+    usize,
+    *const HapcalCompensationConfig,
+    *mut f64,
+    *mut HapcalCompensation,
+) -> HapcalStatus;
+
+fn bench_robot(c: &mut Criterion) {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/iiwa14_calibrated.urdf"
+    );
+    let robot = Robot::load_urdf(std::path::Path::new(path), &["ball_link"]).expect("test robot");
+    let mut ws = robot.workspace();
+    let c_path = CString::new(path).expect("no NUL");
+    let tip = CString::new("ball_link").expect("no NUL");
+    let mut handle = ptr::null_mut();
+    // SAFETY: valid strings, array and out pointer.
+    let status = unsafe { hapcal_robot_load(c_path.as_ptr(), &tip.as_ptr(), 1, &mut handle) };
+    assert_eq!(status, HapcalStatus::Ok);
+    let (tip_pose, spatial, deflected, comp): (TipPose, Jacobian, Deflected, Compensate) =
+        black_box((
+            hapcal_robot_tip_pose,
+            hapcal_robot_spatial_jacobian,
+            hapcal_robot_deflected_tip_poses,
+            hapcal_robot_compensate,
+        ));
+    // The target: where the rigid arm puts its tip at Q (Q is the nominal solution); the
+    // compensation corrects the sag.
+    let rigid = robot
+        .with_compliances(&[0.0; 7])
+        .expect("valid")
+        .tip_pose(0, &Q, &mut ws)
+        .expect("valid");
+    let cfg = CompensationConfig {
+        tolerance_m: 1e-6,
+        tolerance_rad: 1e-6,
+        max_iterations: 50,
+        damping_m: 1e-3,
+        orientation_scale_m: 0.1,
+    };
+    let c_cfg = HapcalCompensationConfig {
+        tolerance_m: cfg.tolerance_m,
+        tolerance_rad: cfg.tolerance_rad,
+        max_iterations: cfg.max_iterations,
+        damping_m: cfg.damping_m,
+        orientation_scale_m: cfg.orientation_scale_m,
+    };
+    let c_target = HapcalTarget {
+        kind: HAPCAL_TARGET_POSE,
+        pose: HapcalPose {
+            rotation: rigid.rotation,
+            translation_m: rigid.translation_m,
+        },
+    };
+
+    let mut group = c.benchmark_group("robot_cycle");
+    group.bench_function("c_abi", |b| {
+        let mut pose = HapcalPose {
+            rotation: [[0.0; 3]; 3],
+            translation_m: [0.0; 3],
+        };
+        let mut tips = [pose];
+        let mut jac = [0.0; 42];
+        b.iter(|| {
+            let q = black_box(&Q);
+            // SAFETY: a live handle and arrays of the stated sizes.
+            unsafe {
+                let s1 = tip_pose(handle, 0, q.as_ptr(), 7, &mut pose);
+                let s2 = spatial(handle, 0, q.as_ptr(), 7, jac.as_mut_ptr(), ptr::null_mut());
+                let s3 = deflected(handle, q.as_ptr(), 7, tips.as_mut_ptr(), 1, ptr::null_mut());
+                (s1, s2, s3, tips[0].translation_m[0])
+            }
+        })
+    });
+    group.bench_function("rust", |b| {
+        let mut tips = [Pose::IDENTITY];
+        let mut jac = [[0.0; 6]; 7];
+        b.iter(|| {
+            let q = black_box(&Q);
+            let pose = robot.tip_pose(0, q, &mut ws).map(|p| p.translation_m[0]);
+            let j = robot.spatial_jacobian(0, q, &mut ws, &mut jac).is_ok();
+            let d = robot.deflected_tip_poses(q, &mut ws, &mut tips).is_ok();
+            (pose, j, d, tips[0].translation_m[0])
+        })
+    });
+    group.finish();
+
+    let mut group = c.benchmark_group("robot_compensate_pose");
+    group.bench_function("c_abi", |b| {
+        let mut q = [0.0; 7];
+        let mut result = HapcalCompensation::default();
+        b.iter(|| {
+            // SAFETY: a live handle and arrays of the stated sizes.
+            let s = unsafe {
+                comp(
+                    handle,
+                    0,
+                    black_box(&c_target),
+                    Q.as_ptr(),
+                    7,
+                    &c_cfg,
+                    q.as_mut_ptr(),
+                    &mut result,
+                )
+            };
+            assert!(s == HapcalStatus::Ok && result.reached);
+            q[0]
+        })
+    });
+    group.bench_function("rust", |b| {
+        let mut q = [0.0; 7];
+        let target = Target::Pose(rigid);
+        b.iter(|| {
+            let c = compensate(&robot, 0, black_box(&target), &Q, &cfg, &mut ws, &mut q);
+            assert!(c.is_ok_and(|c| c.reached));
+            q[0]
+        })
+    });
+    group.finish();
+    // SAFETY: a live handle, freed once.
+    unsafe { hapcal_robot_free(handle) };
+}
+
+criterion_group!(benches, bench, bench_robot);
 criterion_main!(benches);

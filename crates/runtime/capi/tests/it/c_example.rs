@@ -9,7 +9,7 @@ use hapcal_runtime::{Evaluation, Model};
 
 /// The folder cargo put this crate's libraries in (`target/<profile>/deps`), beside the test
 /// binary `integration-…`.
-fn lib_dir() -> PathBuf {
+pub(crate) fn lib_dir() -> PathBuf {
     let exe = std::env::current_exe().expect("test binary path");
     exe.parent().expect("target/<profile>/deps").to_path_buf()
 }
@@ -18,8 +18,9 @@ fn fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../fixtures/reference-device/calibrated.toml")
 }
 
-/// Compiles the example with the C compiler (`$CC`, else `cc`), linking `lib_args`.
-fn compile(name: &str, lib_args: &[String]) -> PathBuf {
+/// Compiles the example `examples/c/<source>` with the C compiler (`$CC`, else `cc`) into
+/// `name`, linking `lib_args`.
+pub(crate) fn compile(source: &str, name: &str, lib_args: &[String]) -> PathBuf {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
     let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
     let cc = std::env::var("CC").unwrap_or_else(|_| "cc".to_owned());
@@ -34,7 +35,7 @@ fn compile(name: &str, lib_args: &[String]) -> PathBuf {
         ])
         .arg("-I")
         .arg(dir.join("include"))
-        .arg(dir.join("examples/c/reference_reading.c"))
+        .arg(dir.join("examples/c").join(source))
         .args(lib_args)
         .args(["-lpthread", "-ldl", "-lm", "-o"])
         .arg(&out)
@@ -44,9 +45,10 @@ fn compile(name: &str, lib_args: &[String]) -> PathBuf {
     out
 }
 
-fn run(exe: &Path) -> String {
+/// Runs `exe` with `arg`; its standard output.
+pub(crate) fn run(exe: &Path, arg: &Path) -> String {
     let output = Command::new(exe)
-        .arg(fixture())
+        .arg(arg)
         .output()
         .expect("run the C example");
     let stderr = String::from_utf8_lossy(&output.stderr);
@@ -55,7 +57,7 @@ fn run(exe: &Path) -> String {
 }
 
 /// The numbers after `key` on its line.
-fn row(stdout: &str, key: &str) -> Vec<f64> {
+pub(crate) fn row(stdout: &str, key: &str) -> Vec<f64> {
     let line = (stdout.lines())
         .find(|l| l.split_whitespace().next() == Some(key))
         .unwrap_or_else(|| panic!("no line {key:?} in\n{stdout}"));
@@ -108,8 +110,12 @@ fn check(stdout: &str) -> (usize, usize) {
 fn c_example_on_the_static_library_prints_the_library_numbers() {
     let lib = lib_dir().join("libhapcal_runtime_c.a");
     assert!(lib.exists(), "{} was not built", lib.display());
-    let exe = compile("reference_reading_static", &[lib.display().to_string()]);
-    let (identical, total) = check(&run(&exe));
+    let exe = compile(
+        "reference_reading.c",
+        "reference_reading_static",
+        &[lib.display().to_string()],
+    );
+    let (identical, total) = check(&run(&exe, &fixture()));
     // The staticlib is the same compiled code as the library the test links.
     assert_eq!(
         identical, total,
@@ -125,6 +131,7 @@ fn c_example_on_the_shared_library_prints_the_library_numbers() {
         "no shared library"
     );
     let exe = compile(
+        "reference_reading.c",
         "reference_reading_shared",
         &[
             format!("-L{}", dir.display()),
@@ -132,7 +139,7 @@ fn c_example_on_the_shared_library_prints_the_library_numbers() {
             "-lhapcal_runtime_c".to_owned(),
         ],
     );
-    let (identical, total) = check(&run(&exe));
+    let (identical, total) = check(&run(&exe, &fixture()));
     assert_eq!(
         identical, total,
         "{identical} of {total} numbers bit-identical"

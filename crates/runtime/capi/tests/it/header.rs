@@ -32,6 +32,16 @@ fn header_is_current() {
         "hapcal_last_error_message",
         "HAPCAL_STATUS_NULL_POINTER",
         "HapcalPose",
+        "hapcal_robot_load",
+        "hapcal_robot_deflected_tip_poses",
+        "hapcal_robot_spatial_jacobian",
+        "hapcal_robot_body_jacobian",
+        "hapcal_robot_compensate",
+        "hapcal_robot_outside_region",
+        "HAPCAL_INSIDE_REGION",
+        "HAPCAL_TARGET_POSE",
+        "HAPCAL_STATUS_INVALID_ARGUMENT",
+        "HapcalCompensationConfig",
     ] {
         assert!(generated.contains(name), "{name} missing from the header");
     }

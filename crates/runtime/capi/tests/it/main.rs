@@ -1,6 +1,9 @@
-//! Integration tests of the C ABI: the committed header is cbindgen's output, and the C
-//! example, compiled and run, prints the Rust library's numbers.
+//! Integration tests of the C ABI: the committed header is cbindgen's output, the C examples,
+//! compiled and run, print the Rust library's numbers, and every failure is a status code
+//! with a message.
 
 mod c_example;
+mod c_robot;
 mod ffi;
+mod ffi_robot;
 mod header;

@@ -1,0 +1,453 @@
+//! The robot C ABI called from Rust: statuses and messages for every kind of bad input,
+//! name queries, position targets, and no allocation per call.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::ffi::{CStr, CString, c_char};
+use std::ptr;
+
+use hapcal_runtime::{Pose, Robot};
+use hapcal_runtime_c::*;
+
+use crate::c_robot::robot_path;
+
+fn message() -> String {
+    // SAFETY: never NULL, NUL-terminated.
+    unsafe { CStr::from_ptr(hapcal_last_error_message()) }
+        .to_string_lossy()
+        .into_owned()
+}
+
+const Q: [f64; 7] = [0.3, 0.7, -0.2, -1.2, 0.4, 0.9, 0.1];
+
+const CONFIG: HapcalCompensationConfig = HapcalCompensationConfig {
+    tolerance_m: 1e-9,
+    tolerance_rad: 1e-9,
+    max_iterations: 50,
+    damping_m: 1e-3,
+    orientation_scale_m: 0.1,
+};
+
+fn c_string(text: &str) -> CString {
+    CString::new(text).expect("no NUL")
+}
+
+/// Loads `path` with `tips` through the ABI: the status and the handle.
+fn load_with(path: &str, tips: &[&str]) -> (HapcalStatus, *mut HapcalRobot) {
+    let path = c_string(path);
+    let tips: Vec<CString> = tips.iter().map(|t| c_string(t)).collect();
+    let ptrs: Vec<*const c_char> = tips.iter().map(|t| t.as_ptr()).collect();
+    let mut robot = ptr::null_mut();
+    // SAFETY: valid strings, array and out pointer.
+    let status = unsafe { hapcal_robot_load(path.as_ptr(), ptrs.as_ptr(), ptrs.len(), &mut robot) };
+    (status, robot)
+}
+
+fn load() -> *mut HapcalRobot {
+    let (status, robot) = load_with(
+        robot_path().to_str().expect("UTF-8 path"),
+        &["ball_link", "tool0"],
+    );
+    assert_eq!(status, HapcalStatus::Ok, "{}", message());
+    robot
+}
+
+fn zero_pose() -> HapcalPose {
+    HapcalPose {
+        rotation: [[0.0; 3]; 3],
+        translation_m: [0.0; 3],
+    }
+}
+
+#[test]
+fn loading_failures_are_statuses_with_messages() {
+    let path = robot_path();
+    let path = path.to_str().expect("UTF-8 path");
+    let (status, robot) = load_with("/no/such/robot.urdf", &["ball_link"]);
+    assert_eq!(status, HapcalStatus::Io);
+    assert!(
+        message().starts_with("/no/such/robot.urdf: cannot read"),
+        "{}",
+        message()
+    );
+    assert!(robot.is_null(), "nothing stored on failure");
+    let (status, _) = load_with(path, &["no_such_link"]);
+    assert_eq!(status, HapcalStatus::InvalidModel);
+    assert!(
+        message().contains("no link \"no_such_link\""),
+        "{}",
+        message()
+    );
+    let (status, _) = load_with(path, &[]);
+    assert_eq!(status, HapcalStatus::InvalidModel);
+    assert!(message().ends_with("no tip link given"), "{}", message());
+    let c_path = c_string(path);
+    let tips = [c_string("ball_link").into_raw().cast_const(), ptr::null()];
+    let mut out = ptr::null_mut();
+    let not_utf8 = [0xffu8, 0xfe, 0];
+    // SAFETY: every pointer is NULL or valid for the stated sizes.
+    unsafe {
+        assert_eq!(
+            hapcal_robot_load(c_path.as_ptr(), tips.as_ptr(), 2, &mut out),
+            HapcalStatus::NullPointer
+        );
+        assert_eq!(message(), "tips[1] is NULL");
+        assert_eq!(
+            hapcal_robot_load(c_path.as_ptr(), ptr::null(), 1, &mut out),
+            HapcalStatus::NullPointer
+        );
+        assert_eq!(message(), "tips is NULL");
+        assert_eq!(
+            hapcal_robot_load(c_path.as_ptr(), tips.as_ptr(), 1, ptr::null_mut()),
+            HapcalStatus::NullPointer
+        );
+        assert_eq!(message(), "out is NULL");
+        let bad = [not_utf8.as_ptr().cast::<c_char>()];
+        assert_eq!(
+            hapcal_robot_load(c_path.as_ptr(), bad.as_ptr(), 1, &mut out),
+            HapcalStatus::InvalidUtf8
+        );
+        assert_eq!(message(), "tips[0] is not UTF-8");
+        drop(CString::from_raw(tips[0].cast_mut()));
+    }
+    assert!(out.is_null());
+}
+
+#[test]
+fn evaluation_failures_are_statuses_with_messages() {
+    let robot = load();
+    let mut pose = zero_pose();
+    let mut jac = [0.0; 42];
+    let mut tau = [0.0; 7];
+    let mut poses = [zero_pose(); 2];
+    let mut command = [0.0; 7];
+    let nan = {
+        let mut q = Q;
+        q[6] = f64::INFINITY;
+        q
+    };
+    // SAFETY: every pointer is NULL or valid for the stated sizes.
+    unsafe {
+        assert_eq!(hapcal_robot_n_joints(ptr::null()), 0);
+        assert_eq!(hapcal_robot_n_tips(ptr::null()), 0);
+        assert!(!hapcal_robot_has_link_masses(ptr::null()));
+        hapcal_robot_free(ptr::null_mut());
+        let s = hapcal_robot_tip_pose(ptr::null_mut(), 0, Q.as_ptr(), 7, &mut pose);
+        assert_eq!(
+            (s, message().as_str()),
+            (HapcalStatus::NullPointer, "robot is NULL")
+        );
+        let s = hapcal_robot_tip_pose(robot, 0, Q.as_ptr(), 7, ptr::null_mut());
+        assert_eq!(
+            (s, message().as_str()),
+            (HapcalStatus::NullPointer, "pose_out is NULL")
+        );
+        let s = hapcal_robot_gravity_torques(robot, ptr::null(), 7, tau.as_mut_ptr());
+        assert_eq!(
+            (s, message().as_str()),
+            (HapcalStatus::NullPointer, "q is NULL")
+        );
+        let s = hapcal_robot_gravity_torques(robot, nan.as_ptr(), 7, tau.as_mut_ptr());
+        assert_eq!(s, HapcalStatus::NotFinite);
+        assert_eq!(message(), "joint angles[6] = inf is not finite");
+        let s = hapcal_robot_body_jacobian(robot, 0, Q.as_ptr(), 8, jac.as_mut_ptr(), &mut pose);
+        assert_eq!(s, HapcalStatus::Length);
+        assert_eq!(message(), "n_joints: expected 7 values, found 8");
+        let s = hapcal_robot_deflected_tip_poses(
+            robot,
+            Q.as_ptr(),
+            7,
+            poses.as_mut_ptr(),
+            1,
+            ptr::null_mut(),
+        );
+        assert_eq!(s, HapcalStatus::Length);
+        assert_eq!(message(), "n_tips: expected 2 values, found 1");
+        let s = hapcal_robot_deflected_tip_poses(
+            robot,
+            nan.as_ptr(),
+            7,
+            poses.as_mut_ptr(),
+            2,
+            ptr::null_mut(),
+        );
+        assert_eq!(s, HapcalStatus::NotFinite);
+
+        // Compensation: every number of the target and the settings is checked.
+        let rigid = {
+            let mut p = zero_pose();
+            assert_eq!(
+                hapcal_robot_tip_pose(robot, 0, Q.as_ptr(), 7, &mut p),
+                HapcalStatus::Ok
+            );
+            p
+        };
+        let compensate = |target: &HapcalTarget, cfg: &HapcalCompensationConfig, q: &[f64]| {
+            let mut out = [0.0; 7];
+            hapcal_robot_compensate(
+                robot,
+                0,
+                target,
+                q.as_ptr(),
+                7,
+                cfg,
+                out.as_mut_ptr(),
+                ptr::null_mut(),
+            )
+        };
+        let mut target = HapcalTarget {
+            kind: HAPCAL_TARGET_POSE,
+            pose: rigid,
+        };
+        target.pose.translation_m[1] = f64::NAN;
+        assert_eq!(compensate(&target, &CONFIG, &Q), HapcalStatus::NotFinite);
+        assert_eq!(message(), "target translation_m[1] = NaN is not finite");
+        target.pose = rigid;
+        target.pose.rotation[2][0] = f64::NEG_INFINITY;
+        assert_eq!(compensate(&target, &CONFIG, &Q), HapcalStatus::NotFinite);
+        assert_eq!(message(), "target rotation[6] = -inf is not finite");
+        // A position target ignores the rotation.
+        target.kind = HAPCAL_TARGET_POSITION;
+        assert_eq!(compensate(&target, &CONFIG, &Q), HapcalStatus::Ok);
+        target.kind = 7;
+        assert_eq!(
+            compensate(&target, &CONFIG, &Q),
+            HapcalStatus::InvalidArgument
+        );
+        assert_eq!(
+            message(),
+            "target kind 7 is invalid: expected 0 (position) or 1 (pose)"
+        );
+        target = HapcalTarget {
+            kind: HAPCAL_TARGET_POSE,
+            pose: rigid,
+        };
+        let mut cfg = CONFIG;
+        cfg.damping_m = f64::NAN;
+        assert_eq!(compensate(&target, &cfg, &Q), HapcalStatus::NotFinite);
+        assert!(
+            message().ends_with("[2] = NaN is not finite"),
+            "{}",
+            message()
+        );
+        cfg.damping_m = -1e-3;
+        assert_eq!(compensate(&target, &cfg, &Q), HapcalStatus::InvalidArgument);
+        assert_eq!(
+            message(),
+            "damping_m = -0.001 is invalid: expected a finite, positive value"
+        );
+        assert_eq!(compensate(&target, &CONFIG, &nan), HapcalStatus::NotFinite);
+        let s = hapcal_robot_compensate(
+            robot,
+            5,
+            &target,
+            Q.as_ptr(),
+            7,
+            &CONFIG,
+            command.as_mut_ptr(),
+            ptr::null_mut(),
+        );
+        assert_eq!(s, HapcalStatus::InvalidArgument);
+        let s = hapcal_robot_compensate(
+            robot,
+            0,
+            ptr::null(),
+            Q.as_ptr(),
+            7,
+            &CONFIG,
+            command.as_mut_ptr(),
+            ptr::null_mut(),
+        );
+        assert_eq!(
+            (s, message().as_str()),
+            (HapcalStatus::NullPointer, "target is NULL")
+        );
+
+        // The region flag.
+        let (mut joint, mut distance) = (0, 1.0);
+        let s = hapcal_robot_outside_region(robot, nan.as_ptr(), 7, &mut joint, &mut distance);
+        assert_eq!(s, HapcalStatus::NotFinite);
+        let s = hapcal_robot_outside_region(robot, Q.as_ptr(), 7, ptr::null_mut(), &mut distance);
+        assert_eq!(s, HapcalStatus::NullPointer);
+        let s = hapcal_robot_outside_region(robot, Q.as_ptr(), 7, &mut joint, &mut distance);
+        assert_eq!(s, HapcalStatus::Ok);
+        // The test robot's sidecar records no region: inside.
+        assert_eq!((joint, distance), (HAPCAL_INSIDE_REGION, 0.0));
+        assert_eq!(HAPCAL_INSIDE_REGION, usize::MAX);
+        hapcal_robot_free(robot);
+    }
+}
+
+#[test]
+fn names_query_their_length_and_fill_a_buffer() {
+    let robot = load();
+    let mut buf = [0 as c_char; 16];
+    let mut len = 0;
+    // SAFETY: every pointer is NULL or valid for the stated sizes.
+    unsafe {
+        assert_eq!(
+            hapcal_robot_tip_name(robot, 0, ptr::null_mut(), 0, &mut len),
+            HapcalStatus::Ok
+        );
+        assert_eq!(len, "ball_link".len());
+        assert_eq!(
+            hapcal_robot_tip_name(robot, 0, buf.as_mut_ptr(), len + 1, ptr::null_mut()),
+            HapcalStatus::Ok
+        );
+        assert_eq!(CStr::from_ptr(buf.as_ptr()).to_str(), Ok("ball_link"));
+        assert_eq!(
+            hapcal_robot_tip_name(robot, 1, buf.as_mut_ptr(), len, &mut len),
+            HapcalStatus::Ok,
+            "tool0 fits in 9 bytes"
+        );
+        assert_eq!(CStr::from_ptr(buf.as_ptr()).to_str(), Ok("tool0"));
+        assert_eq!(
+            hapcal_robot_joint_name(robot, 6, buf.as_mut_ptr(), buf.len(), &mut len),
+            HapcalStatus::Ok
+        );
+        assert_eq!(
+            (CStr::from_ptr(buf.as_ptr()).to_str(), len),
+            (Ok("joint_a7"), 8)
+        );
+        assert_eq!(
+            hapcal_robot_joint_name(robot, 7, buf.as_mut_ptr(), buf.len(), &mut len),
+            HapcalStatus::InvalidArgument
+        );
+        assert_eq!(
+            message(),
+            "joint index 7 is past the last joint: the robot has 7"
+        );
+        assert_eq!(
+            hapcal_robot_joint_name(robot, 0, ptr::null_mut(), 4, &mut len),
+            HapcalStatus::NullPointer
+        );
+        hapcal_robot_free(robot);
+    }
+}
+
+#[test]
+fn a_position_target_is_reached_by_the_deflected_tip() {
+    let robot = load();
+    let lib = Robot::load_urdf(&robot_path(), &["ball_link", "tool0"]).expect("test robot");
+    let mut ws = lib.workspace();
+    // Tip 1 (tool0) 2 cm above where the rigid arm puts it at Q.
+    let mut goal = lib.tip_pose(1, &Q, &mut ws).expect("valid");
+    goal.translation_m[2] += 0.02;
+    let target = HapcalTarget {
+        kind: HAPCAL_TARGET_POSITION,
+        pose: HapcalPose {
+            rotation: [[f64::NAN; 3]; 3],
+            translation_m: goal.translation_m,
+        },
+    };
+    let mut command = [0.0; 7];
+    let mut result = HapcalCompensation::default();
+    // SAFETY: valid pointers of the stated sizes.
+    let status = unsafe {
+        hapcal_robot_compensate(
+            robot,
+            1,
+            &target,
+            Q.as_ptr(),
+            7,
+            &CONFIG,
+            command.as_mut_ptr(),
+            &mut result,
+        )
+    };
+    assert_eq!(status, HapcalStatus::Ok, "{}", message());
+    assert!(result.reached, "{result:?}");
+    assert!(result.deflection.converged && result.deflection.iterations > 0);
+    assert_eq!(result.orientation_error_rad, 0.0);
+    let mut tips = [Pose::IDENTITY; 2];
+    lib.deflected_tip_poses(&command, &mut ws, &mut tips)
+        .expect("valid");
+    for i in 0..3 {
+        let gap = (tips[1].translation_m[i] - goal.translation_m[i]).abs();
+        assert!(gap <= 1e-9, "axis {i}: {gap:e} m");
+    }
+    // SAFETY: a live handle, freed once.
+    unsafe { hapcal_robot_free(robot) };
+}
+
+struct Counting;
+
+thread_local! {
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+// SAFETY: forwards to the system allocator; the counter is a const-initialised thread-local
+// that never allocates.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
+        // SAFETY: the caller's contract.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: the caller's contract.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn robot_calls_do_not_allocate() {
+    let robot = load();
+    let mut pose = zero_pose();
+    let mut poses = [zero_pose(); 2];
+    let (mut jac, mut tau, mut command) = ([0.0; 42], [0.0; 7], [0.0; 7]);
+    let mut buf = [0 as c_char; 16];
+    let (mut joint, mut distance, mut len) = (0, 0.0, 0);
+    let mut result = HapcalCompensation::default();
+    // SAFETY: a live handle and arrays of the stated sizes.
+    let target = unsafe {
+        assert_eq!(
+            hapcal_robot_tip_pose(robot, 0, Q.as_ptr(), 7, &mut pose),
+            HapcalStatus::Ok
+        );
+        HapcalTarget {
+            kind: HAPCAL_TARGET_POSE,
+            pose,
+        }
+    };
+    let before = ALLOCATIONS.with(Cell::get);
+    for _ in 0..10 {
+        // SAFETY: as above.
+        let statuses = unsafe {
+            [
+                hapcal_robot_tip_pose(robot, 0, Q.as_ptr(), 7, &mut pose),
+                hapcal_robot_spatial_jacobian(robot, 0, Q.as_ptr(), 7, jac.as_mut_ptr(), &mut pose),
+                hapcal_robot_body_jacobian(robot, 1, Q.as_ptr(), 7, jac.as_mut_ptr(), &mut pose),
+                hapcal_robot_gravity_torques(robot, Q.as_ptr(), 7, tau.as_mut_ptr()),
+                hapcal_robot_deflected_tip_poses(
+                    robot,
+                    Q.as_ptr(),
+                    7,
+                    poses.as_mut_ptr(),
+                    2,
+                    ptr::null_mut(),
+                ),
+                hapcal_robot_compensate(
+                    robot,
+                    0,
+                    &target,
+                    Q.as_ptr(),
+                    7,
+                    &CONFIG,
+                    command.as_mut_ptr(),
+                    &mut result,
+                ),
+                hapcal_robot_outside_region(robot, Q.as_ptr(), 7, &mut joint, &mut distance),
+                hapcal_robot_joint_name(robot, 0, buf.as_mut_ptr(), buf.len(), &mut len),
+            ]
+        };
+        assert!(statuses.iter().all(|s| *s == HapcalStatus::Ok));
+    }
+    assert_eq!(ALLOCATIONS.with(Cell::get) - before, 0);
+    assert!(result.reached);
+    // SAFETY: a live handle, freed once.
+    unsafe { hapcal_robot_free(robot) };
+}
