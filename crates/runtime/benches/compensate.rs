@@ -87,8 +87,13 @@ fn recorded_iiwa() -> Robot {
             "\"compliance.{j}\" = {{ value = {k:?}, std = 1e-6, unit = \"rad/(N·m)\" }}\n"
         ));
     }
-    Robot::from_urdf_str(&text, "iiwa14.urdf", Some((&record, "record")), &["ball_link"])
-        .expect("valid")
+    Robot::from_urdf_str(
+        &text,
+        "iiwa14.urdf",
+        Some((&record, "record")),
+        &["ball_link"],
+    )
+    .expect("valid")
 }
 
 const Q: [f64; 7] = [0.3, 0.7, -0.2, -1.2, 0.4, 0.9, 0.1];
@@ -138,7 +143,10 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             let pose = robot.spatial_jacobian(0, black_box(&Q), &mut ws, &mut jac);
             let deflection = robot.deflected_tip_poses(black_box(&Q), &mut ws, &mut out);
-            (pose.map(|p| p.translation_m[0]), deflection.map(|d| d.iterations))
+            (
+                pose.map(|p| p.translation_m[0]),
+                deflection.map(|d| d.iterations),
+            )
         })
     });
     group.bench_function("compensate_pose", |b| {

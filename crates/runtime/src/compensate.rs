@@ -236,15 +236,18 @@ pub fn compensate(
             found: q_out.len(),
         });
     }
-    let values: &[f64] = match target {
-        Target::Position(p) => p,
-        Target::Pose(p) => p.rotation.as_flattened(),
+    // Every number of the target: the position, or the rotation's 9 entries then the
+    // translation's 3 (the index the error names).
+    let (first, second): (&[f64], &[f64]) = match target {
+        Target::Position(p) => (p, &[]),
+        Target::Pose(p) => (p.rotation.as_flattened(), &p.translation_m),
     };
-    if let Some(index) = values.iter().position(|v| !v.is_finite()) {
+    let values = first.iter().chain(second);
+    if let Some((index, value)) = values.enumerate().find(|(_, v)| !v.is_finite()) {
         return Err(Error::NotFinite {
             what: "target",
             index,
-            value: values[index],
+            value: *value,
         });
     }
     for (what, value) in [

@@ -5,6 +5,7 @@
 mod against_library;
 mod errors;
 mod no_alloc;
+mod record;
 mod robot;
 mod robot_study;
 

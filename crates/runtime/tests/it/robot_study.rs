@@ -195,6 +195,20 @@ fn a_position_target_is_reached_and_an_unreachable_one_is_reported() {
     let nan = Target::Position([f64::NAN, 0.0, 0.5]);
     let e = compensate(&truth, 0, &nan, &start, &CONFIG, &mut ws, &mut q).expect_err("nan");
     assert_eq!(e.to_string(), "target[0] = NaN is not finite");
+    // A pose target's translation is checked as its rotation is (entries 9–11).
+    let mut pose = goal;
+    pose.translation_m[1] = f64::INFINITY;
+    let e = compensate(
+        &truth,
+        0,
+        &Target::Pose(pose),
+        &start,
+        &CONFIG,
+        &mut ws,
+        &mut q,
+    )
+    .expect_err("infinite translation");
+    assert_eq!(e.to_string(), "target[10] = inf is not finite");
     let e = compensate(&truth, 1, &far, &start, &CONFIG, &mut ws, &mut q).expect_err("tip");
     assert!(e.to_string().contains("tip"), "{e}");
 }
