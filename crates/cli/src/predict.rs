@@ -302,8 +302,8 @@ fn uncertainty_words(predictor: &Predictor) -> (&'static str, Option<String>) {
 }
 
 /// The CSV of `prediction`: `line`, per tip `x, y, z` (numbered `x1, y1, z1, …` for several
-/// tips) [`qw, qx, qy, qz`] `sigma_m` [`sigma_rad`], then `outside_region` (0 or 1),
-/// `region_joint` and `region_past`.
+/// tips), with `poses` also `qw, qx, qy, qz`, then `sigma_m` (with `poses` also `sigma_rad`),
+/// then `outside_region` (0 or 1), `region_joint` and `region_past`.
 pub fn csv(prediction: &Prediction, poses: bool) -> String {
     let numbered = prediction.tips.len() > 1;
     let mut out = String::from("line");
