@@ -17,7 +17,8 @@ Example::
 Also :func:`simulate` (a haptic device's log from a truth file), :func:`plan_poses` (which
 poses to measure), :func:`diagnose` (the sim-to-real gap of a log), :func:`check` (the setup
 of measurement files) and :func:`import_urdf` (a URDF as a device file), as the command
-line's subcommands of the same names.
+line's subcommands of the same names, and :func:`predict` (the calibrated model's tip
+positions with their 1σ at new joint readings, ``hapcal predict``).
 
 Units are SI throughout: metres, radians, seconds.
 
@@ -34,12 +35,14 @@ from ._api import (
     Diagnosis,
     HapcalError,
     Measurements,
+    Prediction,
     SetupCheck,
     calibrate,
     check,
     diagnose,
     import_urdf,
     plan_poses,
+    predict,
     simulate,
 )
 from ._hapcal import RuntimeModel, RuntimeRobot
@@ -55,18 +58,20 @@ __all__ = [
     "CRITERIA",
     "Diagnosis",
     "SetupCheck",
+    "Prediction",
     "calibrate",
     "check",
     "diagnose",
     "import_urdf",
     "plan_poses",
+    "predict",
     "simulate",
 ]
 __version__: str = _hapcal.__version__
 
 # The classes and functions defined in Python say they are hapcal's (as the compiled ones do),
 # not the private module's, in their repr and in help().
-for _obj in (Calibration, Diagnosis, Measurements, SetupCheck, calibrate, check, diagnose,
-             import_urdf, plan_poses, simulate):
+for _obj in (Calibration, Diagnosis, Measurements, Prediction, SetupCheck, calibrate, check,
+             diagnose, import_urdf, plan_poses, predict, simulate):
     _obj.__module__ = __name__
 del _obj

@@ -20,11 +20,13 @@ __all__ = [
     "CRITERIA",
     "Diagnosis",
     "SetupCheck",
+    "Prediction",
     "calibrate",
     "check",
     "diagnose",
     "import_urdf",
     "plan_poses",
+    "predict",
     "simulate",
 ]
 
@@ -295,3 +297,38 @@ def import_urdf(
     """``hapcal import-urdf``: the device file's TOML text for the URDF chain to ``tips`` (a
     tree: one branch per further tip); ``path``: also write it (``.toml``, atomically, never
     over the URDF). Raises HapcalError."""
+
+class Prediction:
+    """Result of :func:`predict`: positions (m), σ (m, rad), region flags, errors."""
+
+    lines: npt.NDArray[np.int64]
+    positions: npt.NDArray[np.float64]
+    quaternions: npt.NDArray[np.float64]
+    sigma_m: npt.NDArray[np.float64]
+    sigma_rad: npt.NDArray[np.float64]
+    region_joint: List[Optional[str]]
+    region_past: npt.NDArray[np.float64]
+    errors: Optional[Dict[str, Dict[str, float]]]
+    uncertainty: str
+    uncertainty_note: Optional[str]
+    n_values: int
+    warnings: List[str]
+    tips: List[str]
+    frame: str
+    @property
+    def outside_region(self) -> npt.NDArray[np.bool_]:
+        """Whether each row lies outside the calibration's region."""
+
+def predict(
+    device: _PathLike,
+    tips: Union[str, Sequence[str]],
+    data: _PathLike,
+    *,
+    instrument_frame: bool = False,
+    length_unit: str = "m",
+    angle_unit: str = "rad",
+) -> Prediction:
+    """``hapcal predict``: the calibrated URDF's tip positions (or, with
+    ``instrument_frame``, its markers in the instrument frame) at the joint readings of
+    ``data``, with 1σ from the calibration record, the region flag and the errors against
+    measured columns. Raises HapcalError."""

@@ -801,3 +801,114 @@ def import_urdf(
     """
     tip_list = [tips] if isinstance(tips, str) else [str(t) for t in tips]
     return _hapcal._import_urdf(os.fspath(urdf), tip_list, _optional_path(path))
+
+
+class Prediction:
+    """The result of :func:`predict`: the calibrated model's tip positions (or poses) at the
+    joint readings of a measurement file, each with its 1σ uncertainty and whether the
+    readings lie outside the region the calibration was fitted on; with measured columns, the
+    errors against them (no refit). What ``hapcal predict`` prints."""
+
+    __slots__ = (
+        "lines", "positions", "quaternions", "sigma_m", "sigma_rad", "region_joint",
+        "region_past", "errors", "uncertainty", "uncertainty_note", "n_values", "warnings",
+        "tips", "frame",
+    )
+
+    def __init__(self, raw: Tuple[Any, ...], tips: List[str], frame: str,
+                 joint_names: List[str]) -> None:
+        lines, poses, sigmas, region, errors, (basis, note, n_values), warnings = raw
+        poses = np.asarray(poses, dtype=np.float64).reshape(len(lines), len(tips), 7)
+        sig = np.asarray(sigmas, dtype=np.float64).reshape(len(lines), len(tips), 2)
+        #: Line of each row in the data file, ``(n,)``.
+        self.lines = np.asarray(lines, dtype=np.int64)
+        #: Predicted positions, ``(n, n_tips, 3)``, m.
+        self.positions = poses[:, :, :3]
+        #: Predicted orientations, unit quaternions ``(w, x, y, z)``, ``(n, n_tips, 4)``.
+        self.quaternions = poses[:, :, 3:]
+        #: 1σ of each position (RMS length of its error), ``(n, n_tips)``, m; NaN without σ.
+        self.sigma_m = sig[:, :, 0]
+        #: 1σ of each orientation, ``(n, n_tips)``, rad; NaN without σ.
+        self.sigma_rad = sig[:, :, 1]
+        #: Per row, the joint farthest past its training range, or ``None`` inside the region.
+        self.region_joint = [None if j < 0 else joint_names[j] for j, _ in region]
+        #: Per row, how far past that joint's range (rad, m for a prismatic joint; positive
+        #: above, negative below), NaN inside the region.
+        self.region_past = np.asarray([p for _, p in region], dtype=np.float64)
+        #: The errors against the measured columns: ``{"position_m": {"count", "mean",
+        #: "rms", "max"}, "orientation_rad": …, "distance_m": …}`` (kinds without samples
+        #: left out), or ``None`` for a file of joint readings alone.
+        self.errors: Optional[Dict[str, Dict[str, float]]] = None
+        if errors is not None:
+            self.errors = {
+                key: {"count": f[0], "mean": f[1], "rms": f[2], "max": f[3]}
+                for key, f in zip(("position_m", "orientation_rad", "distance_m"), errors)
+                if f is not None
+            }
+        #: What σ rests on: ``"covariance"``, ``"stds-only"`` (no covariance recorded: the
+        #: values' standard deviations, correlations ignored) or ``"none"``.
+        self.uncertainty: str = basis
+        #: Why there is no σ, or what it leaves out, in words; ``None`` with a covariance.
+        self.uncertainty_note: Optional[str] = note
+        #: Number of recorded values σ propagates.
+        self.n_values: int = n_values
+        #: What the reader noticed (columns ignored, readings slightly past a limit).
+        self.warnings: List[str] = list(warnings)
+        #: The tips, in the order of the second axis.
+        self.tips: List[str] = tips
+        #: ``"root"`` (tip links in the root link frame) or ``"instrument"`` (markers in the
+        #: calibration's instrument frame).
+        self.frame: str = frame
+
+    @property
+    def outside_region(self) -> np.ndarray:
+        """Whether each row lies outside the calibration's region, ``(n,)`` bool."""
+        return np.asarray([j is not None for j in self.region_joint], dtype=bool)
+
+    def __repr__(self) -> str:
+        return (
+            f"Prediction(rows={len(self.lines)}, tips={self.tips!r}, frame={self.frame!r}, "
+            f"uncertainty={self.uncertainty!r}, outside_region={int(self.outside_region.sum())})"
+        )
+
+
+def predict(
+    device: PathLike,
+    tips: Union[str, Sequence[str]],
+    data: PathLike,
+    *,
+    instrument_frame: bool = False,
+    length_unit: str = "m",
+    angle_unit: str = "rad",
+) -> Prediction:
+    """The calibrated model's predictions at new joint readings, as ``hapcal predict`` makes
+    them (``hapcal_runtime::Predictor``).
+
+    - ``device``: the calibrated URDF ``hapcal calibrate --out robot.urdf`` wrote; its sidecar
+      ``robot.calibration.toml`` (values with σ, covariance, region, frames) is read beside it.
+    - ``tips``: the tip link, or a list of them for a tree (the calibration's order).
+    - ``data``: a measurement file as :func:`calibrate` reads it (CSV with the joints as
+      ``q1..qn`` or by name, or industrial_calibration's YAML); measured columns (markers,
+      orientations, distances), if present, are compared with the predictions.
+    - ``instrument_frame``: predict the markers in the calibration's instrument frame (as the
+      instrument measures them) instead of the tip links in the root link frame.
+    - ``length_unit`` / ``angle_unit``: how the file is read (``"m"``/``"mm"``,
+      ``"rad"``/``"deg"``).
+
+    σ is first-order propagation of the record's covariance, ``√trace(G·Σ·Gᵀ)`` with ``G``
+    the central-difference derivative of the position with respect to each recorded value;
+    without a covariance the values' standard deviations stand for it
+    (:attr:`Prediction.uncertainty` says which). The GIL is released while predicting.
+    Raises :class:`HapcalError` for an unreadable robot or file (file:line:column).
+    """
+    tip_list = [tips] if isinstance(tips, str) else [str(t) for t in tips]
+    raw = _hapcal._predict(
+        os.fspath(device),
+        tip_list,
+        os.fspath(data),
+        str(length_unit),
+        str(angle_unit),
+        bool(instrument_frame),
+    )
+    joint_names = _hapcal.RuntimeRobot(os.fspath(device), tip_list).joint_names
+    return Prediction(raw, tip_list, "instrument" if instrument_frame else "root", joint_names)

@@ -1380,6 +1380,167 @@ impl PyRuntimeModel {
     }
 }
 
+/// One kind of error figure of `_predict`: (count, mean, RMS, max), `None` without samples.
+fn figures(f: &hapcal_runtime::ErrorFigures) -> Option<(usize, f64, f64, f64)> {
+    (f.count > 0).then(|| (f.count, f.mean(), f.rms(), f.max()))
+}
+
+/// What `_predict` returns: per row its line, per row and tip the pose (x, y, z, qw, qx, qy,
+/// qz; m) and σ (m, rad; NaN without), per row the region flag (joint index or −1, and how
+/// far past its range), the errors against the measured columns (position, orientation,
+/// distance figures), the uncertainty's basis and note, the number of values, the reader's
+/// warnings.
+type Predicted = (
+    Vec<u64>,
+    Vec<Vec<[f64; 7]>>,
+    Vec<Vec<(f64, f64)>>,
+    Vec<(i64, f64)>,
+    Option<[Option<(usize, f64, f64, f64)>; 3]>,
+    (String, Option<String>, usize),
+    Vec<String>,
+);
+
+/// The calibrated model's predictions at the joint readings of a measurement file, as
+/// `hapcal predict` makes them (`hapcal_runtime::Predictor`): the tip links in the root frame
+/// or, with `instrument_frame`, the markers in the instrument frame, with their 1σ and the
+/// region flag, and the errors against the file's measured columns (no refit). See
+/// `hapcal.predict`.
+#[pyfunction]
+#[pyo3(signature = (urdf, tips, data, length_unit, angle_unit, instrument_frame))]
+fn _predict(
+    py: Python<'_>,
+    urdf: PathBuf,
+    tips: Vec<String>,
+    data: PathBuf,
+    length_unit: &str,
+    angle_unit: &str,
+    instrument_frame: bool,
+) -> PyResult<Predicted> {
+    let units = units(length_unit, angle_unit).map_err(py_err)?;
+    py.detach(move || -> Result<Predicted> {
+        use hapcal_runtime::{PredictionFrame, Predictor, UncertaintyBasis};
+        if tips.is_empty() {
+            bail!("tips: give the tip link (e.g. \"ball_link\"), one per tip of a tree");
+        }
+        let tip_refs: Vec<&str> = tips.iter().map(String::as_str).collect();
+        let robot = hapcal_runtime::Robot::load_urdf(&urdf, &tip_refs)
+            .with_context(|| format!("loading the calibrated robot {}", urdf.display()))?;
+        if instrument_frame && robot.frame("instrument").is_none() {
+            bail!(
+                "instrument_frame: {} has no identified instrument frame (frames.instrument of \
+                 its calibration sidecar)",
+                urdf.display()
+            );
+        }
+        if data.is_dir() {
+            bail!(
+                "{}: a folder; predict reads a measurement file (CSV with the joints as q1..qn \
+                 or by name)",
+                data.display()
+            );
+        }
+        let prismatic: Vec<bool> = (0..robot.n_joints()).map(|j| robot.is_prismatic(j)).collect();
+        let schema = hapcal_io::JointSchema {
+            names: robot.joint_names(),
+            prismatic: &prismatic,
+            limits: robot.limits(),
+        };
+        let table = hapcal_io::read_measurement_file(&data, &schema, &units)
+            .with_context(|| format!("reading joint readings {}", data.display()))?;
+        if table.rows.is_empty() {
+            bail!("{}: no data row: expected one joint configuration per row", data.display());
+        }
+        let frame = if instrument_frame {
+            PredictionFrame::Instrument
+        } else {
+            PredictionFrame::Root
+        };
+        let predictor = Predictor::new(&robot, frame).map_err(|e| anyhow!("{e}"))?;
+        let mut ws = predictor.workspace();
+        let mut out = vec![hapcal_runtime::TipPrediction::default(); tips.len()];
+        let measured = table.n_markers > 0 || table.has_distance;
+        let mut errors = hapcal_runtime::MeasuredErrors::default();
+        let (mut lines, mut poses, mut sigmas, mut region) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for row in &table.rows {
+            let at = || format!("{}:{}", data.display(), row.line);
+            predictor
+                .predict(&row.q, &mut ws, &mut out)
+                .map_err(|e| anyhow!("{}: {e}", at()))?;
+            let outside = (robot.outside_region(&row.q)).map_err(|e| anyhow!("{}: {e}", at()))?;
+            if measured {
+                let markers: Vec<hapcal_runtime::MarkerObservation> = (row.markers.iter())
+                    .map(|m| hapcal_runtime::MarkerObservation {
+                        marker: m.marker,
+                        position_m: m.position_m,
+                        rotation_wxyz: m.rotation,
+                    })
+                    .collect();
+                predictor
+                    .add_errors(&row.q, &markers, row.distance_m, &mut ws, &mut errors)
+                    .map_err(|e| anyhow!("{}: {e}", at()))?;
+            }
+            lines.push(row.line);
+            poses.push(
+                (out.iter())
+                    .map(|t| {
+                        let r = nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_fn(
+                            |i, j| t.pose.rotation[i][j],
+                        ));
+                        let q = UnitQuaternion::from_rotation_matrix(&r);
+                        let (w, v) = (q.w, q.imag());
+                        let s = if w < 0.0 { -1.0 } else { 1.0 };
+                        let p = t.pose.translation_m;
+                        [p[0], p[1], p[2], s * w, s * v.x, s * v.y, s * v.z]
+                    })
+                    .collect(),
+            );
+            sigmas.push(
+                (out.iter())
+                    .map(|t| (t.sigma_m.unwrap_or(f64::NAN), t.sigma_rad.unwrap_or(f64::NAN)))
+                    .collect(),
+            );
+            region.push(outside.map_or((-1, f64::NAN), |(j, past)| (j as i64, past)));
+        }
+        let basis = match predictor.basis() {
+            UncertaintyBasis::Covariance => "covariance",
+            UncertaintyBasis::StdsOnly => "stds-only",
+            UncertaintyBasis::NoRecord => "none",
+        };
+        let note = match (predictor.basis(), predictor.uncertainty_unavailable()) {
+            (_, Some((name, e))) => Some(format!(
+                "no σ: the runtime cannot vary the recorded value {name:?} ({e})"
+            )),
+            (UncertaintyBasis::NoRecord, None) => {
+                Some("no σ: the robot has no calibration record".to_owned())
+            }
+            (UncertaintyBasis::StdsOnly, None) => Some(
+                "the calibration record holds no covariance: σ from the values' standard \
+                 deviations alone, their correlations ignored"
+                    .to_owned(),
+            ),
+            (UncertaintyBasis::Covariance, None) => None,
+        };
+        let errors = measured.then(|| {
+            [
+                figures(&errors.position),
+                figures(&errors.orientation),
+                figures(&errors.distance),
+            ]
+        });
+        Ok((
+            lines,
+            poses,
+            sigmas,
+            region,
+            errors,
+            (basis.to_owned(), note, predictor.n_values()),
+            table.warnings,
+        ))
+    })
+    .map_err(py_err)
+}
+
 /// hapcal's compiled core; use the `hapcal` package.
 #[pymodule]
 fn _hapcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -1395,6 +1556,7 @@ fn _hapcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_diagnose, m)?)?;
     m.add_function(wrap_pyfunction!(_check, m)?)?;
     m.add_function(wrap_pyfunction!(_import_urdf, m)?)?;
+    m.add_function(wrap_pyfunction!(_predict, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     // The models `calibrate` takes, from the one definition of the model choice.
     m.add("MODELS", model_names())?;

@@ -266,11 +266,26 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
     }
     out.push_str(",position_error_m,orientation_error_rad\n");
     let mut missed = Vec::new();
+    let mut outside = Vec::new();
     let (mut worst_m, mut worst_rad) = (0.0_f64, 0.0_f64);
     for row in &rows {
         let start = row.start.as_deref().unwrap_or(&previous);
         let c = compensate(&robot, 0, &row.target, start, &cfg, &mut ws, &mut command)
             .map_err(|e| anyhow::anyhow!("{}:{}: {e}", args.targets.display(), row.line))?;
+        if let Some((j, past)) = robot
+            .outside_region(&command)
+            .map_err(|e| anyhow::anyhow!("{}:{}: {e}", args.targets.display(), row.line))?
+        {
+            outside.push(format!(
+                "{}:{}: {} {:.4} {} {} its training range",
+                args.targets.display(),
+                row.line,
+                robot.joint_names()[j],
+                past.abs(),
+                if robot.is_prismatic(j) { "m" } else { "rad" },
+                if past > 0.0 { "above" } else { "below" }
+            ));
+        }
         if c.reached {
             let _ = write!(out, "{}", row.line);
             for q in &command {
@@ -297,19 +312,33 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
     }
     crate::calibrate::write_new(&args.out, &out, &[&args.device, &args.targets])?;
     let reached = rows.len() - missed.len();
+    let region = if outside.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "warning: the commands of {} targets lie outside the calibration's region (the model extrapolates there):\n{}\n",
+            outside.len(),
+            outside.join("\n")
+        )
+    };
     if !missed.is_empty() {
         bail!(
-            "{} of {} targets not reached within {} mm / {} mrad (wrote the {reached} reached to {}):\n{}",
+            "{} of {} targets not reached within {} mm / {} mrad (wrote the {reached} reached to {}):\n{}{}",
             missed.len(),
             rows.len(),
             args.tolerance_mm,
             args.tolerance_mrad,
             args.out.display(),
-            missed.join("\n")
+            missed.join("\n"),
+            if region.is_empty() {
+                String::new()
+            } else {
+                format!("\n{}", region.trim_end())
+            }
         );
     }
     Ok(format!(
-        "{reached} targets reached; largest residual {:.3e} mm, {:.3e} mrad; wrote {}\n",
+        "{reached} targets reached; largest residual {:.3e} mm, {:.3e} mrad; wrote {}\n{region}",
         worst_m * 1e3,
         worst_rad * 1e3,
         args.out.display()

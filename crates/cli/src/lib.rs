@@ -7,6 +7,7 @@ pub mod compensate;
 pub mod diagnose;
 pub mod diagnose_arm;
 pub mod plan_args;
+pub mod predict;
 pub mod report;
 
 pub use hapcal_calibrate::{calibrate, haptic, plan, project_root, support};

@@ -362,6 +362,16 @@ enum Command {
     /// Joint commands that bring a tip of a calibrated robot, sagging under its own weight,
     /// onto target positions or poses (exit 2 if a target is not reached).
     Compensate(hapcal::compensate::CompensateArgs),
+    /// The calibrated model's tip positions (or poses) at new joint readings, each with its
+    /// 1σ uncertainty from the calibration's covariance and a flag where the readings lie
+    /// outside the region the calibration was fitted on; with measured columns, the errors
+    /// against them (no refit).
+    Predict {
+        #[command(flatten)]
+        args: hapcal::predict::PredictArgs,
+        #[command(flatten)]
+        units: UnitArgs,
+    },
     /// Import a URDF chain as a hapcal device file (TOML on stdout).
     ImportUrdf {
         /// The URDF file.
@@ -943,6 +953,14 @@ fn run(cli: Cli) -> Result<()> {
         Command::Compensate(args) => {
             let summary = hapcal::compensate::run(&args)?;
             emit(&summary);
+            Ok(())
+        }
+        Command::Predict { args, units } => {
+            let (stdout, notes) = hapcal::predict::run(&args, &units.units())?;
+            for note in notes {
+                note!("{note}");
+            }
+            emit(&stdout);
             Ok(())
         }
         Command::ImportUrdf { urdf, tips } => {

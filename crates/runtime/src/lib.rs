@@ -95,6 +95,8 @@ mod math;
 mod model;
 mod pose;
 #[cfg(feature = "std")]
+mod predict;
+#[cfg(feature = "std")]
 mod robot;
 #[cfg(feature = "std")]
 mod robot_load;
@@ -107,6 +109,11 @@ pub use error::Error;
 pub use load::LoadError;
 pub use model::{DhConvention, DhRow, Evaluation, Model};
 pub use pose::Pose;
+#[cfg(feature = "std")]
+pub use predict::{
+    ErrorFigures, MarkerObservation, MeasuredErrors, PredictionFrame, PredictionWorkspace,
+    Predictor, STEP_FLOOR, STEP_SHARE_OF_STD, TipPrediction, UncertaintyBasis,
+};
 #[cfg(feature = "std")]
 pub use robot::{
     DEFLECTION_ITERATIONS, DEFLECTION_TOLERANCE_RAD, Deflection, GravityModel, Robot,

@@ -9,6 +9,7 @@ mod force;
 mod hostile;
 mod hostile_cases;
 mod plan_after;
+mod predict;
 mod setup_check;
 mod setup_haptic;
 mod setup_sockets;

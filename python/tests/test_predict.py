@@ -1,0 +1,101 @@
+"""`hapcal.predict`: the UR10 calibrated on the bundled poses, predicted at its own rows
+(against the runtime robot and an error computed here), and a reading outside the region of
+a hand-written record."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import hapcal
+
+from conftest import UR10_CSV, UR10_TIP, UR10_URDF
+
+ARM = """<?xml version="1.0"?>
+<robot name="arm">
+  <link name="base"/><link name="upper"/><link name="fore"/><link name="tip"/>
+  <joint name="joint1" type="revolute"><parent link="base"/><child link="upper"/>
+    <origin xyz="0 0 0.1" rpy="0 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="joint2" type="revolute"><parent link="upper"/><child link="fore"/>
+    <origin xyz="0.5 0 0" rpy="0 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="tip_joint" type="fixed"><parent link="fore"/><child link="tip"/>
+    <origin xyz="0.4 0 0" rpy="0 0 0"/></joint>
+</robot>
+"""
+
+RECORD = """schema_version = 1
+model = "compliance"
+tips = ["tip"]
+
+[torque]
+source = "lumped-unit-weights"
+gravity_direction = [0.0, 0.0, -1.0]
+gravity_m_s2 = 9.80665
+tips = ["tip"]
+
+[region]
+rows = 40
+joint = [
+  { name = "joint1", min = -0.5, max = 0.5, unit = "rad" },
+  { name = "joint2", min = 0.2, max = 1.2, unit = "rad" },
+]
+
+[values]
+"compliance.joint2" = { value = 2e-3, std = 4e-4, unit = "rad/m" }
+
+[covariance]
+names = ["compliance.joint2"]
+lower = [1.6e-7]
+"""
+
+
+def test_predictions_at_the_training_rows(tmp_path: Path) -> None:
+    out = tmp_path / "ur10.urdf"
+    cal = hapcal.calibrate(
+        hapcal.Device.from_urdf(UR10_URDF, tip=UR10_TIP),
+        hapcal.Measurements.from_csv(UR10_CSV),
+        model="geometric",
+    )
+    cal.to_urdf(out)
+    p = hapcal.predict(out, UR10_TIP, UR10_CSV)
+    assert p.positions.shape == (23, 1, 3)
+    robot = hapcal.RuntimeRobot(str(out), [UR10_TIP])
+    data = np.genfromtxt(UR10_CSV, delimiter=",", names=True)
+    q = np.column_stack([data[j] for j in robot.joint_names])
+    for row, position in zip(q, p.positions[:, 0]):
+        (pose,) = robot.tip_poses(list(row))
+        assert np.allclose(position, np.asarray(pose)[:3, 3], rtol=0, atol=1e-12)
+    # In the instrument frame, the position error against x1, y1, z1 computed here.
+    m = hapcal.predict(out, UR10_TIP, UR10_CSV, instrument_frame=True)
+    measured = np.column_stack([data["x1"], data["y1"], data["z1"]])
+    rms = np.sqrt(np.mean(np.sum((m.positions[:, 0] - measured) ** 2, axis=1)))
+    assert m.errors is not None
+    assert m.errors["position_m"]["rms"] == pytest.approx(rms, rel=1e-9)
+    assert m.errors["position_m"]["count"] == 23
+
+
+def test_a_reading_outside_the_region_is_flagged(tmp_path: Path) -> None:
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(ARM)
+    (tmp_path / "arm.calibration.toml").write_text(RECORD)
+    readings = tmp_path / "readings.csv"
+    readings.write_text("joint1,joint2\n0.1,0.7\n0.2,1.5\n")
+    p = hapcal.predict(urdf, "tip", readings)
+    assert list(p.outside_region) == [False, True]
+    assert p.region_joint == [None, "joint2"]
+    assert p.region_past[1] == pytest.approx(0.3, abs=1e-12)
+    assert p.uncertainty == "covariance"
+    assert np.all(p.sigma_m > 0)
+
+
+def test_bad_readings_name_file_line_and_column(tmp_path: Path) -> None:
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(ARM)
+    readings = tmp_path / "readings.csv"
+    readings.write_text("joint1,joint2\n0.1,abc\n")
+    with pytest.raises(hapcal.HapcalError, match=r"readings\.csv:2:2"):
+        hapcal.predict(urdf, "tip", readings)
