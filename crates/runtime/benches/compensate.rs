@@ -149,6 +149,14 @@ fn bench(c: &mut Criterion) {
             )
         })
     });
+    group.bench_function("deflected_pose_jacobian", |b| {
+        let mut jac = [[0.0; 6]; 7];
+        b.iter(|| {
+            robot
+                .deflected_spatial_jacobian(0, black_box(&Q), &mut ws, &mut jac)
+                .map(|(p, _)| p.translation_m[0])
+        })
+    });
     group.bench_function("compensate_pose", |b| {
         let mut q = [0.0; 7];
         b.iter(|| {

@@ -250,6 +250,19 @@ pub(crate) fn joint_motion(joint: &RobotJoint, value: f64) -> Pose {
     motion(joint, value)
 }
 
+/// `frame · motion(joint, value)`: about the joint frame's z axis (the usual URDF axis) by
+/// turning two columns, otherwise by composing [`motion`].
+#[inline]
+fn moved(mut frame: Pose, joint: &RobotJoint, value: f64) -> Pose {
+    if !joint.prismatic && joint.axis == [0.0, 0.0, 1.0] {
+        let (s, c) = sin_cos(value);
+        frame.then_rot_z(s, c);
+        frame
+    } else {
+        frame.compose(&motion(joint, value))
+    }
+}
+
 /// `pose` applied to the point `p`.
 #[inline]
 pub(crate) fn transform_point(pose: &Pose, p: &[f64; 3]) -> [f64; 3] {
@@ -440,7 +453,7 @@ impl Robot {
     fn forward(&self, q: &[f64], frames: &mut [Pose]) {
         for (k, (joint, &value)) in self.joints.iter().zip(q).enumerate() {
             let parent = joint.parent.map_or(Pose::IDENTITY, |p| frames[p]);
-            frames[k] = parent.compose(&joint.origin).compose(&motion(joint, value));
+            frames[k] = moved(parent.compose(&joint.origin), joint, value);
         }
     }
 
@@ -450,9 +463,7 @@ impl Robot {
     fn forward_nominal(&self, q: &[f64], frames: &mut [Pose]) {
         for (k, (joint, &value)) in self.joints.iter().zip(q).enumerate() {
             let parent = joint.parent.map_or(Pose::IDENTITY, |p| frames[p]);
-            frames[k] = parent
-                .compose(&joint.nominal)
-                .compose(&motion(joint, value));
+            frames[k] = moved(parent.compose(&joint.nominal), joint, value);
         }
     }
 
@@ -467,7 +478,7 @@ impl Robot {
             } else {
                 tilted_origin(joint, &tilt[k])
             };
-            frames[k] = parent.compose(&origin).compose(&motion(joint, value));
+            frames[k] = moved(parent.compose(&origin), joint, value);
         }
     }
 
@@ -910,6 +921,36 @@ impl Robot {
             *pose = self.tip_from(tip, &ws.frames);
         }
         Ok(deflection)
+    }
+
+    /// The calibrated pose of tip `tip` at the command `q` (deflected, tilted, with
+    /// harmonics: [`Robot::deflected_tip_poses`]) and its spatial Jacobian at the deflected
+    /// angles (as [`Robot::spatial_jacobian`] at θ; the compliance's own
+    /// `∂θ/∂q = (I − K·∂τ/∂θ)⁻¹`, a relative change of about `k·∂τ/∂θ`, left out): what a
+    /// controller needs per cycle, from one deflection.
+    ///
+    /// # Errors
+    /// As [`Robot::spatial_jacobian`].
+    ///
+    /// # Panics
+    /// If `ws` was made for another robot.
+    #[track_caller]
+    pub fn deflected_spatial_jacobian(
+        &self,
+        tip: usize,
+        q: &[f64],
+        ws: &mut RobotWorkspace,
+        jac: &mut [[f64; 6]],
+    ) -> Result<(Pose, Deflection), Error> {
+        self.check_workspace(ws);
+        self.check_tip(tip)?;
+        self.check_joints("joint angles", q)?;
+        check_len("jacobian columns", self.n_joints(), jac.len())?;
+        let mut theta = core::mem::take(&mut ws.theta);
+        let deflection = self.deflect_unchecked(q, ws, &mut theta);
+        ws.theta = theta;
+        let pose = self.jacobian_from(tip, &ws.frames, jac, false);
+        Ok((pose, deflection))
     }
 
     /// The deflected pose of tip `tip` and its spatial Jacobian with respect to the deflected
