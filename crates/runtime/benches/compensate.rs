@@ -149,6 +149,13 @@ fn bench(c: &mut Criterion) {
             )
         })
     });
+    group.bench_function("tip_pose", |b| {
+        b.iter(|| {
+            robot
+                .tip_pose(0, black_box(&Q), &mut ws)
+                .map(|p| p.translation_m[0])
+        })
+    });
     group.bench_function("deflected_pose_jacobian", |b| {
         let mut jac = [[0.0; 6]; 7];
         b.iter(|| {

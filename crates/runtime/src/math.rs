@@ -1,13 +1,9 @@
-//! The few elementary functions the evaluation needs: the platform's with `std`, libm's
-//! without (the same functions to within an ulp or so; the tests hold either to 1e-12).
+//! The few elementary functions the evaluation needs: libm's `sincos` in every build (one
+//! call for both), the platform's `atan` with `std` and libm's without (the same functions
+//! to within an ulp or so; the tests hold either to 1e-12).
 
-#[cfg(feature = "std")]
-#[inline]
-pub(crate) fn sin_cos(x: f64) -> (f64, f64) {
-    x.sin_cos()
-}
-
-#[cfg(not(feature = "std"))]
+/// Sine and cosine of `x` (rad) in one call (libm's, with or without `std`: the standard
+/// library computes them apart).
 #[inline]
 pub(crate) fn sin_cos(x: f64) -> (f64, f64) {
     libm::sincos(x)
