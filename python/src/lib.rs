@@ -1418,7 +1418,7 @@ fn _predict(
 ) -> PyResult<Predicted> {
     let units = units(length_unit, angle_unit).map_err(py_err)?;
     py.detach(move || -> Result<Predicted> {
-        use hapcal_runtime::{PredictionFrame, Predictor, UncertaintyBasis};
+        use hapcal_runtime::{PredictionFrame, Predictor};
         if tips.is_empty() {
             bail!("tips: give the tip link (e.g. \"ball_link\"), one per tip of a tree");
         }
@@ -1502,25 +1502,8 @@ fn _predict(
             );
             region.push(outside.map_or((-1, f64::NAN), |(j, past)| (j as i64, past)));
         }
-        let basis = match predictor.basis() {
-            UncertaintyBasis::Covariance => "covariance",
-            UncertaintyBasis::StdsOnly => "stds-only",
-            UncertaintyBasis::NoRecord => "none",
-        };
-        let note = match (predictor.basis(), predictor.uncertainty_unavailable()) {
-            (_, Some((name, e))) => Some(format!(
-                "no σ: the runtime cannot vary the recorded value {name:?} ({e})"
-            )),
-            (UncertaintyBasis::NoRecord, None) => {
-                Some("no σ: the robot has no calibration record".to_owned())
-            }
-            (UncertaintyBasis::StdsOnly, None) => Some(
-                "the calibration record holds no covariance: σ from the values' standard \
-                 deviations alone, their correlations ignored"
-                    .to_owned(),
-            ),
-            (UncertaintyBasis::Covariance, None) => None,
-        };
+        let basis = predictor.basis().name();
+        let note = predictor.uncertainty_note();
         let errors = measured.then(|| {
             [
                 figures(&errors.position),

@@ -66,7 +66,12 @@ pub(crate) fn measured_record(m: &MeasuredRecord<'_>) -> Calibration {
         };
         Torque {
             source,
-            gravity_direction: g.gravity_dir.into(),
+            // `+ 0.0` writes −0 as 0.
+            gravity_direction: [
+                g.gravity_dir.x + 0.0,
+                g.gravity_dir.y + 0.0,
+                g.gravity_dir.z + 0.0,
+            ],
             gravity_m_s2: STANDARD_GRAVITY,
             equilibrium: m.calibrated.equilibrium,
             tips: m.tips.to_vec(),
@@ -154,6 +159,9 @@ fn covariance_of(
     cov: &hapcal_identify::Covariance,
     values: &[hapcal_contract::CalibratedValue],
 ) -> Option<Covariance> {
+    if values.is_empty() {
+        return None;
+    }
     let index: Vec<usize> = (values.iter())
         .map(|v| cov.names.iter().position(|n| *n == v.name))
         .collect::<Option<_>>()?;

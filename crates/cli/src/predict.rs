@@ -10,7 +10,6 @@ use anyhow::{Context, Result, bail};
 use hapcal_io::{JointSchema, MeasurementTable, Units};
 use hapcal_runtime::{
     MarkerObservation, MeasuredErrors, PredictionFrame, Predictor, Robot, TipPrediction,
-    UncertaintyBasis,
 };
 use serde::Serialize;
 
@@ -277,27 +276,8 @@ pub fn predict_table(
 
 /// The uncertainty's basis and note, in words.
 fn uncertainty_words(predictor: &Predictor) -> (&'static str, Option<String>) {
-    let basis = match predictor.basis() {
-        UncertaintyBasis::Covariance => "covariance",
-        UncertaintyBasis::StdsOnly => "stds-only",
-        UncertaintyBasis::NoRecord => "none",
-    };
-    let note = match (predictor.basis(), predictor.uncertainty_unavailable()) {
-        (_, Some((name, e))) => Some(format!(
-            "no σ: the runtime cannot vary the recorded value {name:?} ({e})"
-        )),
-        (UncertaintyBasis::NoRecord, None) => Some(
-            "no σ: the robot has no calibration record (its sidecar robot.calibration.toml \
-             with the values' standard deviations)"
-                .to_owned(),
-        ),
-        (UncertaintyBasis::StdsOnly, None) => Some(
-            "the calibration record holds no covariance: σ from the values' standard \
-             deviations alone, their correlations ignored"
-                .to_owned(),
-        ),
-        (UncertaintyBasis::Covariance, None) => None,
-    };
+    let basis = predictor.basis().name();
+    let note = predictor.uncertainty_note();
     (basis, note)
 }
 

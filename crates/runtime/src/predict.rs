@@ -32,7 +32,7 @@ pub enum PredictionFrame {
     Instrument,
 }
 
-/// What a prediction's uncertainty rests on.
+/// What a prediction's uncertainty rests on ([`UncertaintyBasis::name`] in files).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum UncertaintyBasis {
     /// The calibration record's covariance of the values.
@@ -42,6 +42,9 @@ pub enum UncertaintyBasis {
     StdsOnly,
     /// The robot has no calibration record: no uncertainty.
     NoRecord,
+    /// The record holds no identified value (a frames-only calibration: only the instrument
+    /// and marker frames, whose uncertainty it does not hold): no uncertainty.
+    NoValues,
 }
 
 /// One tip's prediction.
@@ -55,6 +58,18 @@ pub struct TipPrediction {
     /// 1σ of the predicted orientation, rad: the same with `G` the derivative of the
     /// rotation vector; `None` likewise.
     pub sigma_rad: Option<f64>,
+}
+
+impl UncertaintyBasis {
+    /// The name files and JSON write: `covariance`, `stds-only`, `none`, `frames-only`.
+    pub fn name(self) -> &'static str {
+        match self {
+            UncertaintyBasis::Covariance => "covariance",
+            UncertaintyBasis::StdsOnly => "stds-only",
+            UncertaintyBasis::NoRecord => "none",
+            UncertaintyBasis::NoValues => "frames-only",
+        }
+    }
 }
 
 impl Default for TipPrediction {
@@ -297,6 +312,10 @@ impl Predictor {
         let Some(record) = robot.calibration() else {
             return Ok(out);
         };
+        if record.values.is_empty() {
+            out.basis = UncertaintyBasis::NoValues;
+            return Ok(out);
+        }
         // (name, recorded value, row in the full covariance)
         let (names, full): (Vec<&str>, Vec<f64>) = match &record.covariance {
             Some(c) => {
@@ -365,9 +384,38 @@ impl Predictor {
         self.basis
     }
 
+    /// What the prediction's σ rests on, in words, when it is not the record's covariance:
+    /// the note `hapcal predict` and Python's `predict` print; `None` with a covariance.
+    pub fn uncertainty_note(&self) -> Option<String> {
+        match (self.basis, self.uncertainty_unavailable()) {
+            (_, Some((name, e))) => Some(format!(
+                "no σ: the runtime cannot vary the recorded value {name:?} ({e})"
+            )),
+            (UncertaintyBasis::NoRecord, None) => Some(
+                "no σ: the robot has no calibration record (its sidecar robot.calibration.toml \
+                 with the values' standard deviations)"
+                    .to_owned(),
+            ),
+            (UncertaintyBasis::NoValues, None) => Some(
+                "no σ: the calibration identified only the instrument and marker frames, whose \
+                 uncertainty the record does not hold"
+                    .to_owned(),
+            ),
+            (UncertaintyBasis::StdsOnly, None) => Some(
+                "the calibration record holds no covariance: σ from the values' standard \
+                 deviations alone, their correlations ignored"
+                    .to_owned(),
+            ),
+            (UncertaintyBasis::Covariance, None) => None,
+        }
+    }
+
     /// Whether the predictions carry a σ: a record whose values could all be varied.
     pub fn has_uncertainty(&self) -> bool {
-        self.basis != UncertaintyBasis::NoRecord && self.unavailable.is_none()
+        matches!(
+            self.basis,
+            UncertaintyBasis::Covariance | UncertaintyBasis::StdsOnly
+        ) && self.unavailable.is_none()
     }
 
     /// The value [`Robot::with_value`] refused, and why, when that left the predictions
