@@ -7,3 +7,4 @@ mod c_robot;
 mod ffi;
 mod ffi_robot;
 mod header;
+mod record;
