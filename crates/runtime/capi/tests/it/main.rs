@@ -3,4 +3,5 @@
 
 mod c_example;
 mod ffi;
+mod haptic_record;
 mod header;
