@@ -6,7 +6,9 @@
 
 use anyhow::{Context, Result, bail};
 use faer::Col;
-use hapcal_contract::{Calibration, Covariance, JointRange, ModelName, Region, Torque, TorqueSource};
+use hapcal_contract::{
+    Calibration, Covariance, JointRange, ModelName, Region, Torque, TorqueSource,
+};
 use hapcal_identify::{Identified, IdentifyConfig, Problem, identify};
 use hapcal_io::{CalibratedValue, CalibrationMeta, Device, LogRow};
 use hapcal_kinematics::{Chain, DhRow};
@@ -1491,8 +1493,9 @@ pub fn calibrate_logs(
             push_kept(&mut parameters, &kin);
             // Each step's own covariance; the steps' sensors are independent, and step 2's
             // block is its own (what the report's σ are).
-            let mut blocks: Vec<&hapcal_identify::Covariance> =
-                (t.capstans.iter()).map(|c| &c.identified.covariance).collect();
+            let mut blocks: Vec<&hapcal_identify::Covariance> = (t.capstans.iter())
+                .map(|c| &c.identified.covariance)
+                .collect();
             blocks.push(&t.poly_identified.covariance);
             blocks.push(&kin.covariance);
             let covariance = block_covariance(&blocks);

@@ -475,10 +475,7 @@ impl Model {
                         ));
                     };
                     let z = model.joint1_axis();
-                    (
-                        handle.mass_kg * HANDLE_GRAVITY_M_S2,
-                        [-z[0], -z[1], -z[2]],
-                    )
+                    (handle.mass_kg * HANDLE_GRAVITY_M_S2, [-z[0], -z[1], -z[2]])
                 }
             };
             model

@@ -327,7 +327,8 @@ impl Model {
     pub fn outside_region(&self, theta: &[f64]) -> Result<Option<(usize, f64)>, Error> {
         self.check_readings(theta)?;
         let mut worst: Option<(usize, f64, f64)> = None;
-        for (j, (&(min, max, slack), &v)) in self.region[..self.n_region].iter().zip(theta).enumerate()
+        for (j, (&(min, max, slack), &v)) in
+            self.region[..self.n_region].iter().zip(theta).enumerate()
         {
             let past = if v > max + slack {
                 v - max
@@ -561,7 +562,11 @@ impl Model {
         let (pose, axes, origins) = self.frames(q);
         let p = pose.translation_m;
         let f = self.handle_force_n;
-        for ((qj, &k), (z, o)) in q[..n].iter_mut().zip(&self.compliance).zip(axes.iter().zip(&origins)) {
+        for ((qj, &k), (z, o)) in q[..n]
+            .iter_mut()
+            .zip(&self.compliance)
+            .zip(axes.iter().zip(&origins))
+        {
             let lever = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
             let v = cross(z, &lever);
             let tau = v[0] * f[0] + v[1] * f[1] + v[2] * f[2];
@@ -603,7 +608,10 @@ impl Model {
     /// Tip pose, and each joint's axis and origin in the base frame, at joint angles `q`
     /// (first n entries).
     #[inline]
-    fn frames(&self, q: &[f64; MAX_JOINTS]) -> (Pose, [[f64; 3]; MAX_JOINTS], [[f64; 3]; MAX_JOINTS]) {
+    fn frames(
+        &self,
+        q: &[f64; MAX_JOINTS],
+    ) -> (Pose, [[f64; 3]; MAX_JOINTS], [[f64; 3]; MAX_JOINTS]) {
         let n = self.n_joints;
         let mut axes = [[0.0; 3]; MAX_JOINTS];
         let mut origins = [[0.0; 3]; MAX_JOINTS];

@@ -65,9 +65,10 @@ fn invalid_files_name_the_place_and_the_problem() {
     );
     assert_ne!(unit, text);
     let err = Model::from_toml(&unit, "dev.toml").expect_err("unit");
-    let line = 1 + (unit.lines())
-        .position(|l| l.starts_with("\"capstan1.re\""))
-        .expect("the entry");
+    let line = 1
+        + (unit.lines())
+            .position(|l| l.starts_with("\"capstan1.re\""))
+            .expect("the entry");
     assert_eq!(
         err.to_string(),
         format!("dev.toml:{line}:1: \"capstan1.re\" is in \"rad\", expected \"1\"")

@@ -69,7 +69,10 @@ fn gaps(model: &Model, haptic: &HapticDevice, s: &DistanceLogState, rows: &[LogR
         .expect("linearise");
     let (mut point, mut distance) = (0.0f64, 0.0f64);
     for (i, row) in rows.iter().enumerate() {
-        let p = model.end_pose(&row.q).expect("valid readings").translation_m;
+        let p = model
+            .end_pose(&row.q)
+            .expect("valid readings")
+            .translation_m;
         let want = library_end_point(haptic, s, &row.q);
         for k in 0..3 {
             point = point.max((p[k] - want[k]).abs());
@@ -104,8 +107,11 @@ fn a_haptic_compliance_calibration_evaluates_in_the_runtime_as_in_the_library() 
     let text = hapcal_io::write_device(&calibrated);
     if std::env::var_os("UPDATE_FIXTURES").is_some() {
         // Rewrites the committed file the next test and the C ABI's and Python's tests load.
-        std::fs::write(fixture("reference-device/compliance-calibrated.toml"), &text)
-            .expect("write the fixture");
+        std::fs::write(
+            fixture("reference-device/compliance-calibrated.toml"),
+            &text,
+        )
+        .expect("write the fixture");
     }
 
     // The record, read back by the io reader (checked by the contract).
@@ -116,7 +122,10 @@ fn a_haptic_compliance_calibration_evaluates_in_the_runtime_as_in_the_library() 
     let torque = record.torque.as_ref().expect("a torque source");
     assert_eq!(torque.source, TorqueSource::HandleMass);
     assert_eq!(torque.gravity_m_s2, hapcal_problems::GRAVITY_M_S2);
-    assert_eq!(torque.handle_mass_kg, haptic.device.handle.map(|h| h.mass_kg));
+    assert_eq!(
+        torque.handle_mass_kg,
+        haptic.device.handle.map(|h| h.mass_kg)
+    );
     let region = record.region.as_ref().expect("a region");
     assert_eq!((region.rows, region.joints.len()), (200, 7));
     let covariance = record.covariance.as_ref().expect("a covariance");
@@ -136,7 +145,10 @@ fn a_haptic_compliance_calibration_evaluates_in_the_runtime_as_in_the_library() 
     for (what, rows) in [("training", &train), ("held-out", &held_out)] {
         let (point, distance) = gaps(&model, &haptic, &fit.state, rows);
         assert!(point <= TOL_M, "{what}: end points differ by {point:e} m");
-        assert!(distance <= TOL_M, "{what}: distances differ by {distance:e} m");
+        assert!(
+            distance <= TOL_M,
+            "{what}: distances differ by {distance:e} m"
+        );
     }
     // The library reading the file it wrote (calibrated rows, the record's values) agrees.
     let state = calibrated_log_state(&again).expect("library state");
@@ -159,7 +171,10 @@ fn a_haptic_compliance_calibration_evaluates_in_the_runtime_as_in_the_library() 
     let mut past = train[0].q.clone();
     let j2 = &region.joints[1];
     past[1] = j2.max + 0.5 * (j2.max - j2.min);
-    let (joint, by) = model.outside_region(&past).expect("valid").expect("outside");
+    let (joint, by) = model
+        .outside_region(&past)
+        .expect("valid")
+        .expect("outside");
     assert_eq!(joint, 1);
     assert!((by - 0.5 * (j2.max - j2.min)).abs() < 1e-12);
 }
@@ -176,7 +191,10 @@ fn the_committed_compliance_fixture_evaluates_as_the_library_reads_it() {
     let model = Model::load(&path).expect("the runtime loads it");
     assert!(model.compliances().iter().any(|&k| k != 0.0));
     let (point, distance) = gaps(&model, &haptic, &state, &log(33, 40));
-    assert!(point <= TOL_M && distance <= TOL_M, "{point:e} m, {distance:e} m");
+    assert!(
+        point <= TOL_M && distance <= TOL_M,
+        "{point:e} m, {distance:e} m"
+    );
 }
 
 /// A mistyped value name is refused at its line and column, not skipped.
@@ -197,7 +215,10 @@ fn a_mistyped_value_name_is_refused_at_its_line() {
             ..
         }) => {
             assert_eq!((l, column), (line, 1));
-            assert!(message.contains("\"joint_complience.j2\": unknown value name"), "{message}");
+            assert!(
+                message.contains("\"joint_complience.j2\": unknown value name"),
+                "{message}"
+            );
         }
         other => panic!("expected a refusal at line {line}, got {other:?}"),
     }
