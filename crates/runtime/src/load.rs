@@ -217,9 +217,9 @@ impl Model {
     /// [`LoadError::Invalid`] for a `[[placement]]` chain (not supported by the runtime),
     /// joints not numbered 1, 2, … in row order, a `[[joint]]` count that differs from the
     /// chain's, `lower_rad ≥ upper_rad`, a capstan on a missing joint or twice on one, a
-    /// gap in the Chebyshev indices, a handle
-    /// compliance without a known handle weight or under another torque source, or a model
-    /// value [`Model::from_dh`], [`Drive`] or [`Model::with_handle_compliance`] refuses.
+    /// gap in the Chebyshev indices, a handle compliance without a known handle weight or
+    /// under another torque source, or a model value [`Model::from_dh`], [`Drive`] or
+    /// [`Model::with_handle_compliance`] refuses.
     pub fn from_toml(text: &str, origin: &str) -> Result<Model, LoadError> {
         let file: File = toml::from_str(text).map_err(|e| {
             let (line, column) = e

@@ -5,11 +5,11 @@
 use std::path::Path;
 
 use hapcal_calibrate::haptic::{
-    ComplianceFit, HapticDevice, calibrated_log_state, compliance_device, identify_kinematics,
-    identify_transmissions, identify_with_compliance, log_model,
+    ComplianceFit, HapticDevice, calibrated_log_state, compliance_device, compliance_values,
+    identify_kinematics, identify_transmissions, identify_with_compliance, log_model,
 };
 use hapcal_contract::{ModelName, TorqueSource};
-use hapcal_io::{Device, LogRow};
+use hapcal_io::{CalibrationMeta, Device, LogRow};
 use hapcal_problems::{DistanceLogState, EffectTermKind, handle_gravity_torques_nm};
 use hapcal_runtime::{LoadError, Model};
 use hapcal_sim::{Effect, MotionConfig, NoiseModel, SimConfig, simulate_motion};
@@ -155,6 +155,21 @@ fn a_haptic_compliance_calibration_evaluates_in_the_runtime_as_in_the_library() 
     let file_haptic = HapticDevice::new(again.clone()).expect("a haptic device");
     let (point, _) = gaps(&model, &file_haptic, &state, &held_out);
     assert!(point <= TOL_M, "file: end points differ by {point:e} m");
+
+    // An earlier hapcal's record of the same fit (values only, no [calibration.torque]):
+    // the handle's load from [handle], gravity along minus joint 1's axis, as the library.
+    let legacy = haptic
+        .device
+        .with_calibration(&compliance_values(&fit), CalibrationMeta::default())
+        .expect("legacy");
+    let legacy = Model::from_toml(&hapcal_io::write_device(&legacy), "legacy.toml")
+        .expect("the runtime loads an earlier record");
+    let (point, _) = gaps(&legacy, &haptic, &fit.state, &held_out);
+    assert!(
+        point <= TOL_M,
+        "earlier record: end points differ by {point:e} m"
+    );
+    assert!(!legacy.has_region());
 
     // Negative control: the same model without its compliances is far off (the handle's
     // sag, tens of µm), so the comparisons above see the deflection.
