@@ -6,6 +6,9 @@
 
 use anyhow::{Context, Result, bail};
 use faer::Col;
+use hapcal_contract::{
+    Calibration, Covariance, JointRange, ModelName, Region, Torque, TorqueSource,
+};
 use hapcal_identify::{Identified, IdentifyConfig, Problem, identify};
 use hapcal_io::{CalibratedValue, CalibrationMeta, Device, LogRow};
 use hapcal_kinematics::{Chain, DhRow};
@@ -836,6 +839,147 @@ pub fn calibrated_log_state(device: &Device) -> Result<DistanceLogState> {
     })
 }
 
+/// The file contract's name of a haptic rung (`--model geometric`, `transmissions`,
+/// `compliance`); `None` for a choice that is not a haptic rung (`auto` before it is chosen).
+pub fn model_name(model: crate::model::ModelChoice) -> Option<ModelName> {
+    use crate::model::ModelChoice as M;
+    match model {
+        M::Geometric => Some(ModelName::Geometric),
+        M::Transmissions => Some(ModelName::Transmissions),
+        M::Compliance => Some(ModelName::Compliance),
+        _ => None,
+    }
+}
+
+/// The region a haptic calibration was fitted on: each joint's range of readings over the
+/// training rows `rows` (rad, named after the device's `[[joint]]`s), and the row count.
+pub fn training_region(r: &HapticDevice, rows: &[LogRow]) -> Region {
+    let joints = (r.device.joints.iter().enumerate())
+        .map(|(j, spec)| {
+            let (min, max) = (rows.iter())
+                .filter_map(|row| row.q.get(j).copied())
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                    (lo.min(v), hi.max(v))
+                });
+            JointRange {
+                name: spec.name.clone(),
+                min,
+                max,
+                unit: "rad".to_owned(),
+            }
+        })
+        .collect();
+    Region {
+        rows: rows.len(),
+        joints,
+    }
+}
+
+/// The load the handle compliances were identified under: the handle's mass
+/// ([`handle_mass_kg`]) at the end point, gravity [`hapcal_problems::GRAVITY_M_S2`] along
+/// minus the axis of joint 1 at the deviations `x_kin` (the direction
+/// [`hapcal_problems::handle_gravity_torques_nm`] takes, in the chain's base frame), at the
+/// readings' angles (no equilibrium).
+///
+/// # Errors
+/// A device without a handle mass; `x_kin` not of the chain's length.
+pub fn handle_torque(r: &HapticDevice, x_kin: &[f64]) -> Result<Torque> {
+    if x_kin.len() != r.chain.n_params() {
+        bail!(
+            "{} kinematic deviations for a chain of {} parameters",
+            x_kin.len(),
+            r.chain.n_params()
+        );
+    }
+    let jac = r
+        .chain
+        .geometric_jacobian(x_kin, &vec![0.0; r.chain.n_joints()]);
+    if jac.ncols() == 0 {
+        bail!("the chain has no joint");
+    }
+    Ok(Torque {
+        source: TorqueSource::HandleMass,
+        gravity_direction: [-jac[(3, 0)], -jac[(4, 0)], -jac[(5, 0)]],
+        gravity_m_s2: hapcal_problems::GRAVITY_M_S2,
+        equilibrium: false,
+        tips: Vec::new(),
+        masses: Vec::new(),
+        handle_mass_kg: Some(handle_mass_kg(&r.device)?),
+    })
+}
+
+/// The covariance of the identifications `ids`, block diagonal (each one's covariance over
+/// its free parameters, in order; no covariance between them): the record's `[covariance]`.
+pub fn block_covariance(ids: &[&hapcal_identify::Covariance]) -> Covariance {
+    let names: Vec<String> = ids.iter().flat_map(|c| c.names.iter().cloned()).collect();
+    let n = names.len();
+    let mut matrix = vec![0.0; n * n];
+    let mut off = 0;
+    for c in ids {
+        let k = c.names.len();
+        for a in 0..k {
+            for b in 0..k {
+                matrix[(off + a) * n + off + b] = c.matrix[(a, b)];
+            }
+        }
+        off += k;
+    }
+    Covariance::from_matrix(names, &matrix)
+}
+
+/// The calibration record (schema 1) of a haptic calibration on the training rows `rows`:
+/// the model's name, `values`, their `covariance`, the training region
+/// ([`training_region`]), the handle's load `torque` (for the compliance model) and `notes`.
+pub fn haptic_record(
+    r: &HapticDevice,
+    rows: &[LogRow],
+    model: ModelName,
+    values: Vec<CalibratedValue>,
+    covariance: Option<Covariance>,
+    torque: Option<Torque>,
+    notes: String,
+) -> Calibration {
+    Calibration {
+        schema_version: Some(hapcal_contract::SCHEMA_VERSION),
+        model: Some(model),
+        notes: Some(notes),
+        torque,
+        region: Some(training_region(r, rows)),
+        values,
+        covariance,
+        ..Calibration::default()
+    }
+}
+
+/// The calibrated device file of `--model compliance` on the training rows `rows`: `r`'s
+/// nominal device with the kept kinematic deviations of `fit` applied to its D-H rows, and
+/// `[calibration]` the full record ([`Device::with_record`]): model `compliance`, every kept
+/// parameter of `fit` ([`compliance_values`]: transmissions, kinematic deviations,
+/// `joint_compliance.j{k}` in rad/(N·m)) with its σ, their covariance (the identification's,
+/// over the kept parameters), the handle's load ([`handle_torque`] at the fitted
+/// deviations) and the training region.
+///
+/// # Errors
+/// A device without a handle mass, or a value the device file rejects.
+pub fn compliance_device(
+    r: &HapticDevice,
+    rows: &[LogRow],
+    fit: &ComplianceFit,
+    notes: String,
+) -> Result<Device> {
+    let cov = &fit.identified.covariance;
+    let record = haptic_record(
+        r,
+        rows,
+        ModelName::Compliance,
+        compliance_values(fit),
+        Some(block_covariance(&[cov])),
+        Some(handle_torque(r, &fit.state.x_kin)?),
+        notes,
+    );
+    Ok(r.device.with_record(record)?)
+}
+
 /// The calibrated device file of the paper's pipeline: `r`'s nominal device with the kept
 /// kinematic deviations of `kin` applied to its D-H rows ([`Device::with_calibration`]) and
 /// `[calibration.values]` holding those deviations (m, rad) and every identified transmission
@@ -1139,6 +1283,18 @@ pub fn cross_validate_rungs(
     Ok(held)
 }
 
+/// The record's values of the report's parameters (the same names, values, σ and units).
+fn report_values(parameters: &[crate::report::ParamReport]) -> Vec<CalibratedValue> {
+    (parameters.iter())
+        .map(|p| CalibratedValue {
+            name: p.name.clone(),
+            value: p.value,
+            std: p.std,
+            unit: p.unit.to_owned(),
+        })
+        .collect()
+}
+
 /// The paper's calibration of a haptic device from its own logs, as `hapcal calibrate` runs it
 /// on a device file with transmissions: step 1 (each capstan's eq. 1 and the parallelogram's
 /// polynomial from the external encoders `ext1..ext4`) and step 2 (kinematic deviations from
@@ -1303,22 +1459,18 @@ pub fn calibrate_logs(
                 unit: compliance_fit_unit(&fit, i),
             }),
         );
-        let meta = CalibrationMeta {
-            date: None,
-            data_hash: None,
-            notes: Some(format!(
-                "{} with the handle's gravity compliance (joint_compliance.j*, rad/(N·m), a joint \
-                 angle gains c·τ, τ the gravity torque of the [handle] mass) on {} rows; written \
-                 by `hapcal calibrate --model compliance`",
-                if t.is_some() {
-                    "transmissions, kinematic deviations"
-                } else {
-                    "kinematic deviations"
-                },
-                rows.len()
-            )),
-        };
-        let calibrated = haptic.device.with_calibration(&values, meta)?;
+        let notes = format!(
+            "{} with the handle's gravity compliance (joint_compliance.j*, rad/(N·m), a joint \
+             angle gains c·τ, τ the gravity torque of the [handle] mass) on {} rows; written by \
+             `hapcal calibrate --model compliance`",
+            if t.is_some() {
+                "transmissions, kinematic deviations"
+            } else {
+                "kinematic deviations"
+            },
+            rows.len()
+        );
+        let calibrated = compliance_device(&haptic, &rows, &fit, notes)?;
         let identified = fit.identified.clone();
         compliance = Some(fit);
         (t, identified, ModelChoice::Compliance, calibrated)
@@ -1326,18 +1478,28 @@ pub fn calibrate_logs(
         let t = identify_transmissions(&haptic, &rows).context("step 1 (transmissions)")?;
         let (_, kin) =
             identify_kinematics(&haptic, &rows, Some(&t)).context("step 2 (kinematics)")?;
-        let (t, kin) = if plan.joint {
+        let (t, kin, covariance) = if plan.joint {
             let (problem, joint) = identify_jointly(&haptic, &rows, &t, &kin)?;
-            // The joint covariance carries both steps' uncertainty: report it.
+            // The joint covariance carries both steps' uncertainty: report and record it.
             push_kept(&mut parameters, &joint);
-            split_joint(&problem, &joint, t, kin)?
+            let covariance = block_covariance(&[&joint.covariance]);
+            let (t, kin) = split_joint(&problem, &joint, t, kin)?;
+            (t, kin, covariance)
         } else {
             for c in &t.capstans {
                 push_kept(&mut parameters, &c.identified);
             }
             push_kept(&mut parameters, &t.poly_identified);
             push_kept(&mut parameters, &kin);
-            (t, kin)
+            // Each step's own covariance; the steps' sensors are independent, and step 2's
+            // block is its own (what the report's σ are).
+            let mut blocks: Vec<&hapcal_identify::Covariance> = (t.capstans.iter())
+                .map(|c| &c.identified.covariance)
+                .collect();
+            blocks.push(&t.poly_identified.covariance);
+            blocks.push(&kin.covariance);
+            let covariance = block_covariance(&blocks);
+            (t, kin, covariance)
         };
         let notes = format!(
             "the paper's {} on {} rows; written by `hapcal calibrate`",
@@ -1348,7 +1510,16 @@ pub fn calibrate_logs(
             },
             rows.len()
         );
-        let calibrated = calibrated_device(&haptic, &t, &kin, notes)?;
+        let record = haptic_record(
+            &haptic,
+            &rows,
+            ModelName::Transmissions,
+            report_values(&parameters),
+            Some(covariance),
+            None,
+            notes,
+        );
+        let calibrated = haptic.device.with_record(record)?;
         (Some(t), kin, ModelChoice::Transmissions, calibrated)
     } else {
         if !has_ext {
@@ -1356,24 +1527,19 @@ pub fn calibrate_logs(
         }
         let (_, kin) = identify_kinematics(&haptic, &rows, None).context("kinematics")?;
         push_kept(&mut parameters, &kin);
-        let values: Vec<CalibratedValue> = parameters
-            .iter()
-            .map(|p| CalibratedValue {
-                name: p.name.clone(),
-                value: p.value,
-                std: p.std,
-                unit: p.unit.to_owned(),
-            })
-            .collect();
-        let meta = CalibrationMeta {
-            date: None,
-            data_hash: None,
-            notes: Some(format!(
+        let record = haptic_record(
+            &haptic,
+            &rows,
+            ModelName::Geometric,
+            report_values(&parameters),
+            Some(block_covariance(&[&kin.covariance])),
+            None,
+            format!(
                 "kinematics only (no external encoders) on {} rows; written by `hapcal calibrate`",
                 rows.len()
-            )),
-        };
-        let calibrated = haptic.device.with_calibration(&values, meta)?;
+            ),
+        );
+        let calibrated = haptic.device.with_record(record)?;
         (None, kin, ModelChoice::Geometric, calibrated)
     };
     check_distinct_configurations(&rows, transmissions.as_ref(), &kin)?;

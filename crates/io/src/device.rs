@@ -213,32 +213,22 @@ pub struct Handle {
     pub mass_kg: f64,
 }
 
-/// The identified values of a calibrated device (`[calibration]`).
+/// The calibration record of a calibrated device (`[calibration]`): the contract's record
+/// (`hapcal-contract`, docs/design.md §5.6), the same keys as a URDF's sidecar under the
+/// table `[calibration]` (`[calibration.values]`, `[calibration.region]`, …).
 ///
 /// In the file the values form the table `[calibration.values]`, one inline table per
 /// parameter in identification order: `dtheta3 = { value = 1.2e-3, std = 4e-5, unit = "rad" }`.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Calibration {
-    /// Date of the calibration, free text (e.g. `"2025-05-01"`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub date: Option<String>,
-    /// Hash of the measurement data it was identified from.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub data_hash: Option<String>,
-    /// Free text.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub notes: Option<String>,
-    /// Identified values, in identification order.
-    #[serde(default, with = "hapcal_contract::values_table")]
-    pub values: Vec<CalibratedValue>,
-}
+/// A record with `schema_version` is checked by [`Calibration::check`] when the file is read;
+/// one without (an earlier hapcal's: date, data hash, notes and values) is read as before.
+pub use hapcal_contract::Calibration;
 
 /// One identified value with its standard deviation, in SI units: the calibration record's
 /// type (`hapcal-contract`), shared by the writer and every reader.
 pub use hapcal_contract::CalibratedValue;
 
-/// What [`Device::with_calibration`] records beside the values.
+/// What [`Device::with_calibration`] records beside the values (a record without a schema
+/// version: [`Device::with_record`] writes a full one).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct CalibrationMeta {
     /// Date of the calibration.
@@ -444,6 +434,38 @@ impl Device {
         values: &[CalibratedValue],
         meta: CalibrationMeta,
     ) -> Result<Device, Error> {
+        let mut device = self.with_deviations(values)?;
+        device.calibration = Some(Calibration {
+            date: meta.date,
+            data_hash: meta.data_hash,
+            notes: meta.notes,
+            values: values.to_vec(),
+            ..Calibration::default()
+        });
+        Ok(device)
+    }
+
+    /// A calibrated copy carrying the whole calibration record `record` as `[calibration]`
+    /// (replacing any earlier one): its kinematic values applied to the nominal rows or
+    /// placements as [`Device::with_calibration`] applies them, and the record (model name,
+    /// torque source, region, values, covariance, …) stored as it is, for
+    /// [`write_device`] to write and [`read_device`] to check.
+    ///
+    /// # Errors
+    /// [`Error::Contract`] if the record fails [`Calibration::check`] (an unknown value name,
+    /// a wrong unit, a missing key of its schema, …); then as [`Device::with_calibration`].
+    pub fn with_record(&self, record: Calibration) -> Result<Device, Error> {
+        record
+            .check("", "calibration record")
+            .map_err(|source| Error::Contract { source })?;
+        let mut device = self.with_deviations(&record.values)?;
+        device.calibration = Some(record);
+        Ok(device)
+    }
+
+    /// A copy with the kinematic deviations among `values` applied (see
+    /// [`Device::with_calibration`]); `[calibration]` is left as it was.
+    fn with_deviations(&self, values: &[CalibratedValue]) -> Result<Device, Error> {
         let mut device = self.clone();
         // Every placement, flattened as `all_placements`, with whether it carries deviations:
         // a moving joint, or the last placement of its path (a tip element).
@@ -524,12 +546,6 @@ impl Device {
                 compose_deviation(placement, delta);
             }
         }
-        device.calibration = Some(Calibration {
-            date: meta.date,
-            data_hash: meta.data_hash,
-            notes: meta.notes,
-            values: values.to_vec(),
-        });
         Ok(device)
     }
 }

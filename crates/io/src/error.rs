@@ -448,6 +448,14 @@ pub enum Error {
         /// What is wrong, naming the joint or link.
         message: String,
     },
+    /// A calibration record the file contract refuses (`hapcal-contract`): an unknown
+    /// value name, a wrong unit, a missing key of its schema, a newer schema.
+    #[error("{source}")]
+    Contract {
+        /// The contract's message, with the record's origin and, where known, line and
+        /// column.
+        source: hapcal_contract::ContractError,
+    },
     /// A calibrated value cannot be applied to the device.
     #[error("parameter {name:?}: {message}")]
     Parameter {

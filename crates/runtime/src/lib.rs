@@ -106,7 +106,7 @@ pub use compensate::{Compensation, CompensationConfig, Target, compensate};
 pub use drive::{CapstanParams, Drive};
 pub use error::Error;
 #[cfg(feature = "std")]
-pub use load::LoadError;
+pub use load::{HANDLE_GRAVITY_M_S2, LoadError};
 pub use model::{DhConvention, DhRow, Evaluation, Model};
 pub use pose::Pose;
 #[cfg(feature = "std")]

@@ -1,11 +1,17 @@
 //! Loading a device file (TOML, docs/design.md §5.1), as `hapcal calibrate` writes it.
 
+use hapcal_contract::{Calibration, CapstanField, ContractError, TorqueSource, ValueName};
 use serde::Deserialize;
 use serde::de::IgnoredAny;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
 use crate::{CapstanParams, DhConvention, DhRow, Drive, Error, Model};
+
+/// Gravity of a haptic device's handle, m/s²: `hapcal_problems::GRAVITY_M_S2`, the value its
+/// handle compliances (rad/(N·m)) were identified with, for a device file whose
+/// `[calibration]` does not record it (written before the record had a `[torque]` table).
+pub const HANDLE_GRAVITY_M_S2: f64 = 9.81;
 
 /// Why a device file could not be loaded. Messages name the file (`origin`) and, for syntax
 /// and type errors, the line and column.
@@ -96,10 +102,15 @@ struct File {
     )]
     cable_encoder: Option<IgnoredAny>,
     #[serde(default)]
-    #[expect(dead_code, reason = "gravity is left out, as in the force study")]
-    handle: Option<IgnoredAny>,
+    handle: Option<HandleEntry>,
     #[serde(default)]
     calibration: Option<Calibration>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct HandleEntry {
+    mass_kg: f64,
 }
 
 #[derive(Deserialize)]
@@ -134,30 +145,6 @@ struct CapstanEntry {
     joint: usize,
     ratio: f64,
     drum_distance_m: f64,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Calibration {
-    #[serde(default)]
-    #[expect(dead_code, reason = "metadata")]
-    date: Option<String>,
-    #[serde(default)]
-    #[expect(dead_code, reason = "metadata")]
-    data_hash: Option<String>,
-    #[serde(default)]
-    #[expect(dead_code, reason = "metadata")]
-    notes: Option<String>,
-    #[serde(default)]
-    values: toml::Table,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Value {
-    value: f64,
-    std: f64,
-    unit: String,
 }
 
 /// The drive of one joint while the calibration is read.
@@ -204,20 +191,35 @@ impl Model {
     ///   `[calibration.values]` (units `rad`, `1`, `m`, `rad`, `m`, `rad`; missing ones 0);
     /// - a joint with `joint{j}.cheb0 … joint{j}.cheb{n}` (rad) the polynomial drive on its
     ///   `[[joint]]` range, keeping its nominal ratio (the paper's joint-4 model);
-    /// - every other joint direct.
+    /// - every other joint direct;
+    /// - each `joint_compliance.j{k}` (rad/(N·m)) the handle's gravity compliance of joint k
+    ///   ([`Model::with_handle_compliance`]): the joint angle deflected by `k·τ_k`, τ the
+    ///   torque of the handle's weight at the end point, with the mass, gravity and
+    ///   direction of `[calibration.torque]` (`source = "handle-mass"`), or for a record
+    ///   without it the `[handle]` mass, [`HANDLE_GRAVITY_M_S2`] and minus the axis of joint
+    ///   1 (what `hapcal_problems::handle_gravity_torques_nm` takes);
+    /// - `[calibration.region]`, the joints' training ranges, for [`Model::outside_region`].
     ///
-    /// Kinematic names (`da1`, `dtheta3`, …) are skipped: the rows already hold them. A file
-    /// without `[calibration]` gives the nominal model (ideal capstans). `origin` names the
-    /// text in messages.
+    /// `[calibration]` is the file contract's record (`hapcal-contract`, docs/design.md
+    /// §5.6), checked by `Calibration::check`: an unknown or mistyped value name, a wrong
+    /// unit, a missing key of its schema or a newer schema is refused at its line. Kinematic
+    /// names (`da1`, `dtheta3`, …) are skipped: the rows already hold them; the instrument's
+    /// and markers' frames (`[calibration.frames]`) are the measurement rig's. A value the
+    /// device model cannot evaluate (a robot's `compliance.*`, `transversal.*`,
+    /// `harmonic.*`, a placement deviation) is refused. A file without `[calibration]` gives
+    /// the nominal model (ideal capstans, rigid joints). `origin` names the text in messages.
     ///
     /// # Errors
-    /// [`LoadError::Parse`] for TOML syntax, a missing or unknown key or a wrong type;
+    /// [`LoadError::Parse`] for TOML syntax, a missing or unknown key or a wrong type, and
+    /// for a `[calibration]` the contract refuses or a value naming a joint, row or
+    /// coefficient the device does not have (or a capstan value on a joint without a
+    /// capstan), at its line and column;
     /// [`LoadError::Invalid`] for a `[[placement]]` chain (not supported by the runtime),
     /// joints not numbered 1, 2, … in row order, a `[[joint]]` count that differs from the
     /// chain's, `lower_rad ≥ upper_rad`, a capstan on a missing joint or twice on one, a
-    /// calibrated value with an unknown capstan field, a wrong unit, a joint without a
-    /// capstan, a gap in the Chebyshev indices, or a model value [`Model::from_dh`] or
-    /// [`Drive`] refuses.
+    /// gap in the Chebyshev indices, a handle compliance without a known handle weight or
+    /// under another torque source, or a model value [`Model::from_dh`], [`Drive`] or
+    /// [`Model::with_handle_compliance`] refuses.
     pub fn from_toml(text: &str, origin: &str) -> Result<Model, LoadError> {
         let file: File = toml::from_str(text).map_err(|e| {
             let (line, column) = e
@@ -315,70 +317,93 @@ impl Model {
         }
 
         let mut cheb: Vec<Vec<Option<f64>>> = vec![Vec::new(); n_joints];
-        let values = file.calibration.map(|c| c.values).unwrap_or_default();
-        for (name, raw) in values {
-            let bad = |message: String| invalid(format!("[calibration.values] {name}: {message}"));
-            let v = Value::deserialize(raw).map_err(|e| bad(e.message().trim_end().to_owned()))?;
-            if !v.value.is_finite() || !v.std.is_finite() || v.std < 0.0 {
-                return Err(bad(format!(
-                    "value {} with std {} must be finite, std ≥ 0",
-                    v.value, v.std
-                )));
-            }
-            let check_unit = |unit: &str| {
-                if v.unit == unit {
-                    Ok(())
-                } else {
-                    Err(bad(format!("unit is {:?}, expected {unit:?}", v.unit)))
-                }
-            };
-            let Some((element, field)) = name.split_once('.') else {
-                continue; // a kinematic deviation, already in the rows
-            };
-            let joint_of =
-                |prefix: &str| (element.strip_prefix(prefix)).and_then(|d| d.parse::<usize>().ok());
-            if let Some(joint) = joint_of("capstan") {
-                let slot = (joint.checked_sub(1))
-                    .and_then(|j| pending.get_mut(j))
-                    .ok_or_else(|| bad(format!("the device has joints 1..={n_joints}")))?;
-                let Pending::Capstan { params, .. } = slot else {
-                    return Err(bad(format!("joint {joint} has no capstan")));
-                };
-                let (target, unit) = match field {
-                    "c" => (&mut params.c_rad, "rad"),
-                    "re" => (&mut params.re, "1"),
-                    "r_o" => (&mut params.r_o_m, "m"),
-                    "beta_o" => (&mut params.beta_o_rad, "rad"),
-                    "r_i" => (&mut params.r_i_m, "m"),
-                    "beta_i" => (&mut params.beta_i_rad, "rad"),
-                    other => {
-                        return Err(bad(format!(
-                            "unknown capstan parameter {other:?}: expected c, re, r_o, beta_o, \
-                             r_i or beta_i"
-                        )));
+        let mut compliance = vec![0.0; n_joints];
+        let record = file.calibration.unwrap_or_default();
+        record
+            .check(text, origin)
+            .map_err(|e| contract_error(e, origin))?;
+        // A refusal at the line of the value's name.
+        let at = |name: &str, message: String| {
+            let (line, column) = locate(text, name);
+            contract_error(
+                ContractError {
+                    origin: origin.to_owned(),
+                    line,
+                    column,
+                    message: format!("[calibration.values] {name}: {message}"),
+                },
+                origin,
+            )
+        };
+        let joint_slot = |name: &str, joint: usize| {
+            (1..=n_joints)
+                .contains(&joint)
+                .then_some(joint - 1)
+                .ok_or_else(|| at(name, format!("the device has joints 1..={n_joints}")))
+        };
+        for v in &record.values {
+            let name = v.name.as_str();
+            // The contract's check parsed every name.
+            let parsed = ValueName::parse(name).map_err(|message| at(name, message))?;
+            match parsed {
+                ValueName::Dh { row, .. } => {
+                    // A kinematic deviation, already in the rows.
+                    if row >= rows.len() {
+                        return Err(at(
+                            name,
+                            format!("the [[dh]] table has rows 0..{}", rows.len()),
+                        ));
                     }
-                };
-                check_unit(unit)?;
-                *target = v.value;
-            } else if let Some(joint) = joint_of("joint") {
-                let Some(k) = (field.strip_prefix("cheb")).and_then(|d| d.parse::<usize>().ok())
-                else {
-                    return Err(bad("expected joint{j}.cheb{k}".to_owned()));
-                };
-                check_unit("rad")?;
-                let coeffs = (joint.checked_sub(1))
-                    .and_then(|j| cheb.get_mut(j))
-                    .ok_or_else(|| bad(format!("the device has joints 1..={n_joints}")))?;
-                if k >= crate::MAX_COEFFS {
-                    return Err(bad(format!(
-                        "the runtime holds at most {} coefficients",
-                        crate::MAX_COEFFS
-                    )));
                 }
-                if coeffs.len() <= k {
-                    coeffs.resize(k + 1, None);
+                ValueName::Capstan { joint, field } => {
+                    let slot = &mut pending[joint_slot(name, joint)?];
+                    let Pending::Capstan { params, .. } = slot else {
+                        return Err(at(name, format!("joint {joint} has no [[capstan]]")));
+                    };
+                    *match field {
+                        CapstanField::C => &mut params.c_rad,
+                        CapstanField::Re => &mut params.re,
+                        CapstanField::ROut => &mut params.r_o_m,
+                        CapstanField::BetaOut => &mut params.beta_o_rad,
+                        CapstanField::RIn => &mut params.r_i_m,
+                        CapstanField::BetaIn => &mut params.beta_i_rad,
+                    } = v.value;
                 }
-                coeffs[k] = Some(v.value);
+                ValueName::Chebyshev { joint, index } => {
+                    let coeffs = &mut cheb[joint_slot(name, joint)?];
+                    if index >= crate::MAX_COEFFS {
+                        return Err(at(
+                            name,
+                            format!(
+                                "the runtime holds at most {} coefficients",
+                                crate::MAX_COEFFS
+                            ),
+                        ));
+                    }
+                    if coeffs.len() <= index {
+                        coeffs.resize(index + 1, None);
+                    }
+                    coeffs[index] = Some(v.value);
+                }
+                ValueName::HandleCompliance { joint } => {
+                    compliance[joint_slot(name, joint)?] = v.value;
+                }
+                // A frame of the measurement rig, not part of the evaluated model.
+                ValueName::Element { element, .. } if record.frames.contains_key(&element) => {}
+                ValueName::Element { .. }
+                | ValueName::Compliance { .. }
+                | ValueName::Transversal { .. }
+                | ValueName::Harmonic { .. } => {
+                    return Err(at(
+                        name,
+                        "a robot's value, which a device's [[dh]] model cannot evaluate: the \
+                         runtime's device model holds capstans (capstan<j>.*), joint \
+                         polynomials (joint<j>.cheb<k>), the handle's compliance \
+                         (joint_compliance.j<k>) and D-H deviations; load a calibrated URDF with \
+                         Robot::load_urdf"
+                            .to_owned(),
+                    ));
+                }
             }
         }
 
@@ -420,6 +445,89 @@ impl Model {
             };
             drives.push(drive);
         }
-        Model::from_dh(convention, &rows, &drives).map_err(|e| model_error("[[dh]]", e))
+        let model =
+            Model::from_dh(convention, &rows, &drives).map_err(|e| model_error("[[dh]]", e))?;
+        let model = if compliance.iter().any(|&k| k != 0.0) {
+            let (weight_n, direction) = match &record.torque {
+                Some(t) => {
+                    if t.source != TorqueSource::HandleMass || t.equilibrium {
+                        return Err(invalid(format!(
+                            "[calibration.torque]: source = \"{}\", equilibrium = {}: the \
+                             handle compliances joint_compliance.j<k> are evaluated under the \
+                             handle's weight at the undeflected angles (source = \
+                             \"handle-mass\", equilibrium = false)",
+                            t.source, t.equilibrium
+                        )));
+                    }
+                    // The contract's check asks a handle mass of this source.
+                    let mass_kg = t.handle_mass_kg.unwrap_or(0.0);
+                    (mass_kg * t.gravity_m_s2, t.gravity_direction)
+                }
+                // An earlier hapcal's record: the handle of `[handle]`, gravity along minus
+                // the axis of joint 1, as the calibration library takes them.
+                None => {
+                    let Some(handle) = &file.handle else {
+                        return Err(invalid(
+                            "[calibration.values] holds joint_compliance.j<k>, but the file has \
+                             neither [calibration.torque] nor [handle]: the handle's weight is \
+                             unknown"
+                                .to_owned(),
+                        ));
+                    };
+                    let z = model.joint1_axis();
+                    (handle.mass_kg * HANDLE_GRAVITY_M_S2, [-z[0], -z[1], -z[2]])
+                }
+            };
+            model
+                .with_handle_compliance(&compliance, weight_n, direction)
+                .map_err(|e| model_error("joint_compliance", e))?
+        } else {
+            model
+        };
+        match &record.region {
+            Some(region) => {
+                let ranges: Vec<(f64, f64)> =
+                    region.joints.iter().map(|j| (j.min, j.max)).collect();
+                model
+                    .with_region(&ranges, hapcal_contract::REGION_SLACK_SHARE)
+                    .map_err(|e| model_error("[calibration.region]", e))
+            }
+            None => Ok(model),
+        }
     }
+}
+
+/// A contract's refusal as a load error: at its line and column when known.
+fn contract_error(e: ContractError, origin: &str) -> LoadError {
+    if e.line == 0 {
+        LoadError::Invalid {
+            origin: origin.to_owned(),
+            message: e.message,
+        }
+    } else {
+        LoadError::Parse {
+            origin: origin.to_owned(),
+            line: e.line,
+            column: e.column,
+            message: e.message,
+        }
+    }
+}
+
+/// Where the text names the value `name`: the first line that starts with `name =` or
+/// `"name" =` after optional spaces, and its column; (0, 0) if none does.
+fn locate(text: &str, name: &str) -> (usize, usize) {
+    let quoted = format!("\"{name}\"");
+    for (i, line) in text.lines().enumerate() {
+        let trimmed = line.trim_start();
+        let column = line.chars().count() - trimmed.chars().count() + 1;
+        for candidate in [name, quoted.as_str()] {
+            if let Some(rest) = trimmed.strip_prefix(candidate)
+                && rest.trim_start().starts_with('=')
+            {
+                return (i + 1, column);
+            }
+        }
+    }
+    (0, 0)
 }

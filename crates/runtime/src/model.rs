@@ -56,12 +56,29 @@ struct Link {
 ///
 /// Inputs are either the **readings** θ the device reports (rad, motor angle / R), mapped
 /// through the drives, or the **joint angles** q (rad) directly (`…_at_joints`).
+///
+/// A model may carry a haptic handle's **gravity compliance**
+/// ([`Model::with_handle_compliance`], `joint_compliance.j{k}` of a device file): from the
+/// readings, each joint angle is then deflected by the handle's weight,
+/// `q_j = q̄_j + k_j·τ_j(q̄)`, `q̄` the drives' angles and `τ = J_vᵀ·F` the gravity torque
+/// of the handle's weight F at the end point (N·m; `J_v` the linear rows of the spatial
+/// Jacobian at `q̄`), without iterating to the deflected equilibrium: the model
+/// `hapcal_problems::handle_gravity_torques_nm` and `hapcal calibrate --model compliance`
+/// identify. The `…_at_joints` calls take the joint angles as given (no deflection).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Model {
     base: Pose,
     links: [Link; MAX_JOINTS],
     drives: [Drive; MAX_JOINTS],
     n_joints: usize,
+    /// The handle compliance k_j of each joint, rad/(N·m) (0: rigid).
+    compliance: [f64; MAX_JOINTS],
+    /// The handle's weight, a force at the end point in the base frame, N.
+    handle_force_n: [f64; 3],
+    /// The training range of the first `n_region` joints' readings: (min, max, slack), rad.
+    region: [(f64, f64, f64); MAX_JOINTS],
+    /// How many joints the region judges (0: no region recorded).
+    n_region: usize,
 }
 
 /// Everything [`Model::evaluate`] computes for one reading. Entries past `n_joints` are 0.
@@ -69,7 +86,7 @@ pub struct Model {
 pub struct Evaluation {
     /// Number of joints n; the arrays below hold n entries.
     pub n_joints: usize,
-    /// Joint angles q, rad.
+    /// Joint angles q, rad (deflected by the handle's weight, if the model has a compliance).
     pub q_rad: [f64; MAX_JOINTS],
     /// `dq/dθ` of each drive, rad/rad.
     pub dq_dtheta: [f64; MAX_JOINTS],
@@ -160,6 +177,10 @@ impl Model {
             links: [link; MAX_JOINTS],
             drives: [Drive::DIRECT; MAX_JOINTS],
             n_joints,
+            compliance: [0.0; MAX_JOINTS],
+            handle_force_n: [0.0; 3],
+            region: [(0.0, 0.0, 0.0); MAX_JOINTS],
+            n_region: 0,
         };
         model.drives[..n_joints].copy_from_slice(drives);
         // `acc` collects the constant transforms since the last joint's Rz.
@@ -199,6 +220,153 @@ impl Model {
         Ok(model)
     }
 
+    /// The same model with a haptic handle's gravity compliance: `k` one compliance per
+    /// joint (rad/(N·m); 0 for a rigid joint), `handle_weight_n` the handle's weight m·g (N,
+    /// ≥ 0) and `gravity_direction` the unit direction of gravity in the base frame (for a
+    /// haptic device, minus the axis of joint 1: [`Model::joint1_axis`]). From the readings
+    /// each joint angle is then deflected by `k_j·τ_j` (see [`Model`]). Allocation-free and
+    /// `no_std`.
+    ///
+    /// # Errors
+    /// [`Error::Length`] unless `k` has n entries; [`Error::NotFinite`] for a NaN or infinite
+    /// value (`compliances`, `handle_weight_n`, `gravity_direction`); [`Error::Invalid`] for
+    /// a negative weight or a direction that is not a unit vector (within 1e-6).
+    pub fn with_handle_compliance(
+        &self,
+        k: &[f64],
+        handle_weight_n: f64,
+        gravity_direction: [f64; 3],
+    ) -> Result<Model, Error> {
+        check_len("compliances", self.n_joints, k.len())?;
+        check_finite("compliances", k)?;
+        check_finite("handle_weight_n", &[handle_weight_n])?;
+        check_finite("gravity_direction", &gravity_direction)?;
+        if handle_weight_n < 0.0 {
+            return Err(Error::Invalid {
+                what: "handle_weight_n",
+                value: handle_weight_n,
+                expected: "a weight ≥ 0 N",
+            });
+        }
+        let g = gravity_direction;
+        let norm2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
+        if (norm2 - 1.0).abs() > 2e-6 {
+            return Err(Error::Invalid {
+                what: "gravity_direction",
+                value: norm2,
+                expected: "a unit vector (squared norm 1)",
+            });
+        }
+        let mut model = *self;
+        model.compliance = [0.0; MAX_JOINTS];
+        model.compliance[..self.n_joints].copy_from_slice(k);
+        model.handle_force_n = [
+            handle_weight_n * g[0],
+            handle_weight_n * g[1],
+            handle_weight_n * g[2],
+        ];
+        Ok(model)
+    }
+
+    /// The same model with the region its calibration was fitted on: `ranges[k] = (min,
+    /// max)` the training range of joint k's readings (rad), for the first `ranges.len()`
+    /// joints; a reading more than `slack_share` of its range past it lies outside
+    /// ([`Model::outside_region`]; the record's share is `hapcal_contract::REGION_SLACK_SHARE`).
+    ///
+    /// # Errors
+    /// [`Error::TooMany`] for more ranges than joints; [`Error::NotFinite`] for a NaN or
+    /// infinite bound; [`Error::Invalid`] for `min > max` or a negative `slack_share`.
+    pub fn with_region(&self, ranges: &[(f64, f64)], slack_share: f64) -> Result<Model, Error> {
+        if ranges.len() > self.n_joints {
+            return Err(Error::TooMany {
+                what: "region ranges",
+                found: ranges.len(),
+                max: self.n_joints,
+            });
+        }
+        check_finite("slack_share", &[slack_share])?;
+        if slack_share < 0.0 {
+            return Err(Error::Invalid {
+                what: "slack_share",
+                value: slack_share,
+                expected: "a share ≥ 0",
+            });
+        }
+        let mut model = *self;
+        model.region = [(0.0, 0.0, 0.0); MAX_JOINTS];
+        for (index, (&(min, max), slot)) in ranges.iter().zip(&mut model.region).enumerate() {
+            for value in [min, max] {
+                if !value.is_finite() {
+                    return Err(Error::NotFinite {
+                        what: "region",
+                        index,
+                        value,
+                    });
+                }
+            }
+            if min > max {
+                return Err(Error::Invalid {
+                    what: "region",
+                    value: min,
+                    expected: "min ≤ max",
+                });
+            }
+            *slot = (min, max, slack_share * (max - min));
+        }
+        model.n_region = ranges.len();
+        Ok(model)
+    }
+
+    /// Whether the readings `theta` (rad) lie outside the region the calibration was fitted
+    /// on ([`Model::with_region`], a device file's `[calibration.region]`): the joint farthest
+    /// past its range (by share of the range) and by how much (rad; positive above the
+    /// range, negative below); `None` inside, or without a recorded region. Allocation-free.
+    ///
+    /// # Errors
+    /// As [`Model::joint_angles`] for the readings.
+    pub fn outside_region(&self, theta: &[f64]) -> Result<Option<(usize, f64)>, Error> {
+        self.check_readings(theta)?;
+        let mut worst: Option<(usize, f64, f64)> = None;
+        for (j, (&(min, max, slack), &v)) in
+            self.region[..self.n_region].iter().zip(theta).enumerate()
+        {
+            let past = if v > max + slack {
+                v - max
+            } else if v < min - slack {
+                v - min
+            } else {
+                continue;
+            };
+            let share = past.abs() / (max - min).max(f64::MIN_POSITIVE);
+            if worst.is_none_or(|(_, _, s)| share > s) {
+                worst = Some((j, past, share));
+            }
+        }
+        Ok(worst.map(|(j, past, _)| (j, past)))
+    }
+
+    /// Whether the model has a recorded region ([`Model::with_region`]).
+    pub fn has_region(&self) -> bool {
+        self.n_region > 0
+    }
+
+    /// The handle compliance of each joint, rad/(N·m) (zeros for a rigid model).
+    pub fn compliances(&self) -> &[f64] {
+        &self.compliance[..self.n_joints]
+    }
+
+    /// The handle's weight as a force at the end point in the base frame, N (zero without
+    /// a handle compliance).
+    pub fn handle_force_n(&self) -> [f64; 3] {
+        self.handle_force_n
+    }
+
+    /// The axis of joint 1 in the base frame (unit; constant, whatever the joint angles).
+    pub fn joint1_axis(&self) -> [f64; 3] {
+        let r = &self.base.rotation;
+        [r[0][2], r[1][2], r[2][2]]
+    }
+
     /// Number of joints n.
     pub fn n_joints(&self) -> usize {
         self.n_joints
@@ -210,7 +378,11 @@ impl Model {
     }
 
     /// Joint angles q (rad) and `dq/dθ` (rad/rad) for readings `theta` (rad, motor angle /
-    /// R), through each joint's [`Drive`] (paper eq. 1; the joint-4 polynomial).
+    /// R), through each joint's [`Drive`] (paper eq. 1; the joint-4 polynomial) and, for a
+    /// model with a handle compliance, deflected by the handle's weight (see [`Model`]).
+    /// `dq/dθ` is the drives' derivative: the deflection's own, `k_j·∂τ_j/∂q`, is left out
+    /// (the motor torques pass through the drives only; the compliance carries the joint
+    /// torque).
     ///
     /// # Errors
     /// [`Error::Length`] unless all three slices have n entries; [`Error::NotFinite`] for a
@@ -224,9 +396,9 @@ impl Model {
         self.check_readings(theta)?;
         check_len("joint angles", self.n_joints, q_rad.len())?;
         check_len("joint angle derivatives", self.n_joints, dq_dtheta.len())?;
-        for (((drive, &t), q), g) in self.drives.iter().zip(theta).zip(q_rad).zip(dq_dtheta) {
-            (*q, *g) = drive.angle_and_derivative(t);
-        }
+        let (q, dq) = self.angles(theta)?;
+        q_rad.copy_from_slice(&q[..self.n_joints]);
+        dq_dtheta.copy_from_slice(&dq[..self.n_joints]);
         Ok(())
     }
 
@@ -367,14 +539,39 @@ impl Model {
         check_finite("joint readings", theta)
     }
 
-    /// Joint angles and derivatives for readings, in fixed arrays.
+    /// Joint angles (deflected by the handle's weight, if the model has a compliance) and
+    /// the drives' derivatives for readings, in fixed arrays.
     fn angles(&self, theta: &[f64]) -> Result<([f64; MAX_JOINTS], [f64; MAX_JOINTS]), Error> {
         self.check_readings(theta)?;
         let (mut q, mut dq) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS]);
         for (k, (drive, &t)) in self.drives.iter().zip(theta).enumerate() {
             (q[k], dq[k]) = drive.angle_and_derivative(t);
         }
+        self.deflect(&mut q);
         Ok((q, dq))
+    }
+
+    /// `q_j += k_j·τ_j(q)`, `τ_j = F·(z_j × (p − o_j))` the handle weight's torque about
+    /// joint j at the undeflected angles (Siciliano et al., *Robotics*, 2009, §3.8.1: `τ =
+    /// J_vᵀ·F`); nothing for a rigid model.
+    fn deflect(&self, q: &mut [f64; MAX_JOINTS]) {
+        let n = self.n_joints;
+        if self.compliance[..n].iter().all(|&k| k == 0.0) {
+            return;
+        }
+        let (pose, axes, origins) = self.frames(q);
+        let p = pose.translation_m;
+        let f = self.handle_force_n;
+        for ((qj, &k), (z, o)) in q[..n]
+            .iter_mut()
+            .zip(&self.compliance)
+            .zip(axes.iter().zip(&origins))
+        {
+            let lever = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
+            let v = cross(z, &lever);
+            let tau = v[0] * f[0] + v[1] * f[1] + v[2] * f[2];
+            *qj += k * tau;
+        }
     }
 
     fn joint_array(&self, q_rad: &[f64]) -> Result<[f64; MAX_JOINTS], Error> {
@@ -389,6 +586,32 @@ impl Model {
     /// (exactly n columns).
     #[inline]
     fn kinematics(&self, q: &[f64; MAX_JOINTS], jac: Option<(Frame, &mut [[f64; 6]])>) -> Pose {
+        let (pose, axes, origins) = self.frames(q);
+        if let Some((frame, jac)) = jac {
+            let p = pose.translation_m;
+            for ((col, z), o) in jac.iter_mut().zip(&axes).zip(&origins) {
+                let lever = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
+                let (lin, ang) = match frame {
+                    Frame::Spatial => (cross(z, &lever), *z),
+                    Frame::Body => (
+                        pose.inverse_rotate(&cross(z, &lever)),
+                        pose.inverse_rotate(z),
+                    ),
+                };
+                col[..3].copy_from_slice(&lin);
+                col[3..].copy_from_slice(&ang);
+            }
+        }
+        pose
+    }
+
+    /// Tip pose, and each joint's axis and origin in the base frame, at joint angles `q`
+    /// (first n entries).
+    #[inline]
+    fn frames(
+        &self,
+        q: &[f64; MAX_JOINTS],
+    ) -> (Pose, [[f64; 3]; MAX_JOINTS], [[f64; 3]; MAX_JOINTS]) {
         let n = self.n_joints;
         let mut axes = [[0.0; 3]; MAX_JOINTS];
         let mut origins = [[0.0; 3]; MAX_JOINTS];
@@ -406,21 +629,6 @@ impl Model {
             pose.then_rot_z(s, c);
             pose = pose.compose(&link.after);
         }
-        if let Some((frame, jac)) = jac {
-            let p = pose.translation_m;
-            for ((col, z), o) in jac.iter_mut().zip(&axes).zip(&origins) {
-                let lever = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
-                let (lin, ang) = match frame {
-                    Frame::Spatial => (cross(z, &lever), *z),
-                    Frame::Body => (
-                        pose.inverse_rotate(&cross(z, &lever)),
-                        pose.inverse_rotate(z),
-                    ),
-                };
-                col[..3].copy_from_slice(&lin);
-                col[3..].copy_from_slice(&ang);
-            }
-        }
-        pose
+        (pose, axes, origins)
     }
 }

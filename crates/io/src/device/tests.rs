@@ -116,6 +116,7 @@ fn toml_strings_and_keys_are_escaped() {
             value("", 3.0, "rad"),
             value("ü", 4.0, "rad"),
         ],
+        ..Calibration::default()
     });
     let text = write_device(&device);
     let again = parse_device(&text, Path::new("escaped.toml")).unwrap();

@@ -451,6 +451,24 @@ fn check_calibration(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
     let Some(calibration) = &device.calibration else {
         return Ok(());
     };
+    // A record of a schema (`schema_version`): the contract's checks, at the line of the
+    // key at fault (else at `[calibration]`). An earlier hapcal's record: as before.
+    if !calibration.is_legacy() {
+        let origin = loc.path.display().to_string();
+        if let Err(e) = calibration.check(loc.text, &origin) {
+            let (line, column) = if e.line == 0 {
+                loc.at(&[N("calibration")])
+            } else {
+                (e.line as u64, e.column as u64)
+            };
+            return Err(Error::InvalidDevice {
+                path: loc.path.to_path_buf(),
+                line,
+                column,
+                message: format!("[calibration]: {}", e.message),
+            });
+        }
+    }
     for v in &calibration.values {
         let at = |field| [N("calibration"), N("values"), N(&v.name), N(field)];
         loc.check(&at("value"), v.value, any, "")?;

@@ -108,28 +108,8 @@ pub fn write_device(device: &Device) -> String {
         line(format!("mass_kg = {}", float(h.mass_kg)));
     }
     if let Some(c) = &device.calibration {
-        line(String::new());
-        line("[calibration]".into());
-        for (key, value) in [
-            ("date", &c.date),
-            ("data_hash", &c.data_hash),
-            ("notes", &c.notes),
-        ] {
-            if let Some(value) = value {
-                line(format!("{key} = {}", string(value)));
-            }
-        }
-        line(String::new());
-        line("[calibration.values]".into());
-        for v in &c.values {
-            line(format!(
-                "{} = {{ value = {}, std = {}, unit = {} }}",
-                key(&v.name),
-                float(v.value),
-                float(v.std),
-                string(&v.unit)
-            ));
-        }
+        // The contract's writer: the same keys and number forms as a URDF's sidecar.
+        c.write_toml(Some("calibration"), &mut out);
     }
     out
 }
@@ -183,12 +163,4 @@ fn string(s: &str) -> String {
     }
     out.push('"');
     out
-}
-
-/// A TOML key: bare if it can be, else quoted.
-fn key(k: &str) -> String {
-    let bare = !k.is_empty()
-        && k.bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-');
-    if bare { k.to_owned() } else { string(k) }
 }

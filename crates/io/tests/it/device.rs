@@ -335,3 +335,47 @@ fn placement_tree_survives_the_device_file() {
         &["torso_9"],
     );
 }
+
+/// A device file's `[calibration]` of schema 1 is the contract's record: it reads back whole,
+/// and the contract's refusals come at the file's line, while an earlier hapcal's record
+/// (no `schema_version`) reads as before.
+#[test]
+fn a_calibration_record_is_checked_at_its_line() {
+    let path = reference_device().with_file_name("compliance-calibrated.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let device = parse_device(&text, &path).unwrap();
+    let record = device.calibration.as_ref().unwrap();
+    assert_eq!(record.schema_version, Some(1));
+    assert!(record.region.is_some() && record.covariance.is_some());
+    // Written again, it reads back equal.
+    assert_eq!(
+        parse_device(&write_device(&device), Path::new("again.toml")).unwrap(),
+        device
+    );
+    let line_of =
+        |text: &str, start: &str| 1 + text.lines().position(|l| l.starts_with(start)).unwrap();
+    let mistyped = text.replacen("\"joint_compliance.j3\"", "\"joint_compliance.k3\"", 1);
+    let at = line_of(&mistyped, "\"joint_compliance.k3\"");
+    let err = message(parse_device(&mistyped, Path::new("cal.toml")));
+    assert!(
+        err.starts_with(&format!(
+            "cal.toml:{at}:1: [calibration]: \"joint_compliance.k3\": unknown value name"
+        )),
+        "{err}"
+    );
+    let newer = text.replacen("schema_version = 1", "schema_version = 2", 1);
+    let at = line_of(&newer, "schema_version");
+    let err = message(parse_device(&newer, Path::new("cal.toml")));
+    assert!(
+        err.starts_with(&format!(
+            "cal.toml:{at}:1: [calibration]: schema_version = 2"
+        )),
+        "{err}"
+    );
+    let no_model = text.replacen("model = \"compliance\"\n", "", 1);
+    let err = message(parse_device(&no_model, Path::new("cal.toml")));
+    assert!(err.contains("missing key model"), "{err}");
+    // An earlier hapcal's record reads as before.
+    let legacy = read_device(&reference_device().with_file_name("calibrated.toml")).unwrap();
+    assert!(legacy.calibration.unwrap().is_legacy());
+}

@@ -59,25 +59,41 @@ fn invalid_files_name_the_place_and_the_problem() {
         .expect_err("unknown table");
     assert!(err.to_string().contains("handel"), "{err}");
 
-    let unit = text.replace(
-        "\"capstan1.re\" = { value = -0.01947422091443384, std = 0.002929969124261182, unit = \"1\" }",
-        "\"capstan1.re\" = { value = -0.01947422091443384, std = 0.002929969124261182, unit = \"rad\" }",
-    );
+    // One entry's line changed, the rest of the file as written.
+    let edit_line = |start: &str, edit: &dyn Fn(&str) -> String| -> String {
+        (text.lines())
+            .map(|l| {
+                if l.starts_with(start) {
+                    edit(l)
+                } else {
+                    l.to_owned()
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    let unit = edit_line("\"capstan1.re\"", &|l| {
+        l.replace("unit = \"1\"", "unit = \"rad\"")
+    });
     assert_ne!(unit, text);
     let err = Model::from_toml(&unit, "dev.toml").expect_err("unit");
+    let line = 1
+        + (unit.lines())
+            .position(|l| l.starts_with("\"capstan1.re\""))
+            .expect("the entry");
     assert_eq!(
         err.to_string(),
-        "dev.toml: [calibration.values] capstan1.re: unit is \"rad\", expected \"1\""
+        format!("dev.toml:{line}:1: \"capstan1.re\" is in \"rad\", expected \"1\"")
     );
 
     let gap = text.replace("\"joint4.cheb3\"", "\"joint4.cheb13\"");
     let err = Model::from_toml(&gap, "dev.toml").expect_err("gap");
     assert!(err.to_string().contains("joint4.cheb3 is missing"), "{err}");
 
-    let eccentric = text.replace(
-        "\"capstan3.r_o\" = { value = 0.00024774306127440577",
-        "\"capstan3.r_o\" = { value = 0.07",
-    );
+    let eccentric = edit_line("\"capstan3.r_o\"", &|_| {
+        "\"capstan3.r_o\" = { value = 0.07, std = 1e-5, unit = \"m\" }".to_owned()
+    });
+    assert_ne!(eccentric, text);
     let err = Model::from_toml(&eccentric, "dev.toml").expect_err("r_o ≥ D");
     assert!(
         err.to_string()

@@ -4,6 +4,7 @@
 
 mod against_library;
 mod errors;
+mod haptic_record;
 mod no_alloc;
 mod record;
 mod robot;

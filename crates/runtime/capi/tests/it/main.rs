@@ -6,5 +6,6 @@ mod c_example;
 mod c_robot;
 mod ffi;
 mod ffi_robot;
+mod haptic_record;
 mod header;
 mod record;
