@@ -694,14 +694,19 @@ pub fn write_outputs_beside(
             outcome.report.parameters.len()
         )),
     };
-    let calibrated = outcome
+    let mut calibrated = outcome
         .device
         .with_calibration(&values, meta)
         .context("applying the identified deviations to the device description")?;
-    let text = if out
+    // A device file's `[calibration]` is the whole record (its kinematic values, offsets
+    // folded, are those just applied to the rows and placements).
+    if let Some(record) = &outcome.record {
+        calibrated.calibration = Some(record.clone());
+    }
+    let urdf_output = out
         .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
-    {
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    let text = if urdf_output {
         let from_urdf = outcome
             .device_path
             .extension()
@@ -738,7 +743,9 @@ pub fn write_outputs_beside(
         // The record holds every value as identified (the runtime evaluates the transversal
         // tilts and the gravity loads from the kinematic ones), the model, its loads and its
         // region.
-        Some(record) => Some(record.to_sidecar_toml()),
+        Some(record) if urdf_output => Some(record.to_sidecar_toml()),
+        // A device file holds the record in its `[calibration]` table.
+        Some(_) => None,
         None if !outcome.report.frames.is_empty() || !leftover.is_empty() => Some(
             crate::measured::sidecar_toml(&outcome.report.frames, &leftover),
         ),
