@@ -246,3 +246,56 @@ fn the_compliances_of_a_two_arm_tree_with_link_masses_round_trip_into_the_runtim
         check(model, result, true);
     }
 }
+
+/// The README's first calibration: MUKCa's socket recordings of an iiwa 14 (the chain's end
+/// point is the ball's centre), every compliance model the ladder holds for sockets, written
+/// and loaded: the runtime's ball at configurations over the joint limits equals the
+/// library's `CalibratedModel::end_point`.
+#[test]
+fn socket_calibrations_round_trip_into_the_runtime() {
+    let dir = scratch("sockets");
+    for model in [
+        ModelChoice::Geometric,
+        ModelChoice::MassCompliance,
+        ModelChoice::ActuatorCompliance,
+    ] {
+        let plan = Plan {
+            model,
+            test: Vec::new(),
+            ..Plan::bundled_default()
+        };
+        let outcome = hapcal_calibrate::calibrate::run(&plan).unwrap();
+        let out = dir.join(format!("iiwa-{model}.urdf"));
+        let _ = std::fs::remove_file(&out);
+        let _ = std::fs::remove_file(out.with_extension("calibration.toml"));
+        hapcal_calibrate::calibrate::write_outputs_beside(&outcome, &out, &[]).unwrap();
+        let runtime = Robot::load_urdf(&out, &["ball_link"]).unwrap();
+        assert_eq!(
+            runtime
+                .calibration()
+                .and_then(|r| r.model)
+                .map(|m| m.as_str()),
+            Some(model.name())
+        );
+        let mut ws = runtime.workspace();
+        let mut worst: f64 = 0.0;
+        for k in 0..40 {
+            let q: Vec<f64> = (runtime.limits().iter().enumerate())
+                .map(|(j, (lo, hi))| {
+                    let t = 0.5 + 0.45 * ((k * 7 + j) as f64 * 0.61).sin();
+                    lo + t * (hi - lo)
+                })
+                .collect();
+            let mut pose = [Pose::IDENTITY];
+            runtime.deflected_tip_poses(&q, &mut ws, &mut pose).unwrap();
+            let p = outcome.model.end_point(&q);
+            let r = pose[0].translation_m;
+            let d = ((r[0] - p.x).powi(2) + (r[1] - p.y).powi(2) + (r[2] - p.z).powi(2)).sqrt();
+            worst = worst.max(d);
+        }
+        assert!(
+            worst < TOLERANCE_M,
+            "{model}: runtime and library differ by {worst:e} m"
+        );
+    }
+}

@@ -375,7 +375,14 @@ fn a_calibration_record_is_checked_at_its_line() {
     let no_model = text.replacen("model = \"compliance\"\n", "", 1);
     let err = message(parse_device(&no_model, Path::new("cal.toml")));
     assert!(err.contains("missing key model"), "{err}");
-    // An earlier hapcal's record reads as before.
-    let legacy = read_device(&reference_device().with_file_name("calibrated.toml")).unwrap();
-    assert!(legacy.calibration.unwrap().is_legacy());
+    // An earlier hapcal's record (no schema_version, model, region: notes and values) reads
+    // as before.
+    let device_part = &text[..text.find("[calibration]").expect("a calibration table")];
+    let legacy_text = format!(
+        "{device_part}[calibration]\nnotes = \"an earlier hapcal\"\n\n[calibration.values]\n\"dd3\" = {{ value = 1e-4, std = 1e-5, unit = \"m\" }}\n"
+    );
+    let legacy = parse_device(&legacy_text, Path::new("legacy.toml")).unwrap();
+    let record = legacy.calibration.unwrap();
+    assert!(record.is_legacy());
+    assert_eq!(record.values.len(), 1);
 }
