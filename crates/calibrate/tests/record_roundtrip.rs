@@ -299,3 +299,100 @@ fn socket_calibrations_round_trip_into_the_runtime() {
         );
     }
 }
+
+/// A torso with a prismatic lift, a turn and two 3-joint arms (fixed joints between moving
+/// ones, a continuous joint about a skew axis, a head off the paths, link masses): simulated
+/// tracker markers on both tools.
+fn torso_tables(n: usize, seed: u64) -> (PathBuf, ArmRobot, MeasurementTable, MeasurementTable) {
+    use hapcal_io::{MarkerSample, MeasuredRow};
+    use hapcal_kinematics::{FrameSpec, Isometry3, Vector3};
+    use rand::{Rng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+    let urdf =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../runtime/test_data/torso_two_arms.urdf");
+    let tips = ["l_tool".to_owned(), "r_tool".to_owned()];
+    let robot = hapcal_calibrate::measured::robot_from_urdf(&urdf, &tips).unwrap();
+    let base = FrameSpec {
+        name: "instrument".into(),
+        nominal: Isometry3::new(Vector3::new(2.0, 0.3, -0.5), Vector3::new(0.0, 0.0, 2.9)),
+    };
+    let marker = |name: &str| FrameSpec {
+        name: name.into(),
+        nominal: Isometry3::translation(0.03, 0.0, 0.05),
+    };
+    let framed = (robot.tree.with_joint_offsets())
+        .with_frames(&base, &[(0, marker("marker1")), (1, marker("marker2"))])
+        .unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let geometry = Normal::new(0.0, 5e-4).unwrap();
+    let x: Vec<f64> = (framed.params().iter().enumerate())
+        .map(|(i, p)| {
+            if i < 6 || p.name.starts_with("marker") {
+                0.0
+            } else {
+                geometry.sample(&mut rng)
+            }
+        })
+        .collect();
+    let noise = Normal::new(0.0, 5e-5).unwrap();
+    let mut table = |rows: usize, name: &str| {
+        let rows = (0..rows)
+            .map(|i| {
+                let q: Vec<f64> = (robot.limits.iter())
+                    .map(|&(lo, hi)| rng.random_range(0.8 * lo.max(-2.0)..0.8 * hi.min(2.0)))
+                    .collect();
+                let markers = (0..2)
+                    .map(|k| {
+                        let p = framed.tips()[k].end_point(&x, &q);
+                        MarkerSample {
+                            marker: k,
+                            position_m: std::array::from_fn(|a| p[a] + noise.sample(&mut rng)),
+                            rotation: None,
+                        }
+                    })
+                    .collect();
+                MeasuredRow {
+                    line: i as u64 + 2,
+                    q,
+                    t_s: None,
+                    markers,
+                    distance_m: None,
+                }
+            })
+            .collect();
+        MeasurementTable {
+            name: name.to_owned(),
+            path: PathBuf::from(format!("{name}.csv")),
+            rows,
+            n_markers: 2,
+            has_orientation: false,
+            has_distance: false,
+            ignored_columns: Vec::new(),
+            warnings: Vec::new(),
+        }
+    };
+    let train = table(n, "train");
+    let test = table(n / 2, "test");
+    (urdf, robot, train, test)
+}
+
+#[test]
+fn a_tree_with_a_prismatic_joint_round_trips_into_the_runtime() {
+    let (urdf, robot, train, test) = torso_tables(80, 21);
+    for (model, effect) in [
+        (ModelChoice::Geometric, false),
+        (ModelChoice::Compliance, true),
+        (ModelChoice::TransversalCompliance, true),
+        (ModelChoice::Harmonic, true),
+    ] {
+        let result = round_trip(
+            &urdf,
+            &["l_tool", "r_tool"],
+            &robot,
+            model,
+            train.clone(),
+            test.clone(),
+        );
+        check(model, result, effect);
+    }
+}
