@@ -364,6 +364,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         parameters: &report.parameters,
         covariance: &identified.covariance,
         frames: &[],
+        frame_values: &[],
         ranges,
         rows: n_training_rows,
     });

@@ -2614,6 +2614,16 @@ pub fn run_tables(
         equilibrium_step_m: out.equilibrium_step_m,
         equilibrium_refits: out.equilibrium_refits,
     };
+    let frame_values: Vec<ParamReport> = (id.covariance.free.iter())
+        .zip(id.covariance.std())
+        .filter(|(i, _)| is_frame(id.layout.name(**i)))
+        .map(|(&i, std)| ParamReport {
+            name: id.layout.name(i).to_owned(),
+            value: id.fit.x[i],
+            std,
+            unit: id.layout.spec(i).unit.symbol(),
+        })
+        .collect();
     let record = crate::record::measured_record(&crate::record::MeasuredRecord {
         model: out.rung,
         tips: &tips,
@@ -2623,6 +2633,7 @@ pub fn run_tables(
         parameters: &report.parameters,
         covariance: &id.covariance,
         frames: &report.frames,
+        frame_values: &frame_values,
         ranges: training_ranges(&train, robot.joint_names.len()),
         rows: train.iter().map(|t| t.rows.len()).sum(),
     });

@@ -32,6 +32,10 @@ pub(crate) struct MeasuredRecord<'a> {
     pub covariance: &'a hapcal_identify::Covariance,
     /// The identified instrument and marker frames.
     pub frames: &'a [FrameReport],
+    /// The frames' identified deviations from their nominal guesses (`instrument.x` …
+    /// `marker<k>.rz`) with their σ: recorded so that a prediction in the instrument frame
+    /// carries the frames' uncertainty.
+    pub frame_values: &'a [ParamReport],
     /// Each joint's training range, rad or m (`training_ranges`).
     pub ranges: Vec<(f64, f64)>,
     /// Number of training rows.
@@ -87,6 +91,7 @@ pub(crate) fn measured_record(m: &MeasuredRecord<'_>) -> Calibration {
     });
     let compliance_unit = torque.as_ref().map(|t| t.source.compliance_unit());
     let values: Vec<hapcal_contract::CalibratedValue> = (m.parameters.iter())
+        .chain(m.frame_values)
         .map(|p| hapcal_contract::CalibratedValue {
             name: p.name.clone(),
             value: p.value,

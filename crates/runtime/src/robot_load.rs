@@ -444,7 +444,31 @@ pub(crate) fn with_value(robot: &Robot, name: &str, value: f64) -> Result<Robot,
     match parsed {
         ValueName::Element { element, field } => {
             let k = field_index(field);
-            if let Some(j) = out.joint_names.iter().position(|n| *n == element) {
+            if let Some(f) = out.frames.iter().position(|(n, _)| *n == element) {
+                // A frame holds `nominal · Δ(d)`: it becomes `frame · Δ(d)⁻¹ · Δ(d')`.
+                let deviation = |values: &[hapcal_contract::CalibratedValue]| {
+                    let mut d = [0.0; 6];
+                    for (slot, suffix) in d.iter_mut().zip(["x", "y", "z", "rx", "ry", "rz"]) {
+                        let key = format!("{element}.{suffix}");
+                        if let Some(v) = values.iter().find(|v| v.name == key) {
+                            *slot = v.value;
+                        }
+                    }
+                    d
+                };
+                let before = robot
+                    .record
+                    .as_ref()
+                    .map_or([0.0; 6], |r| deviation(&r.values));
+                let after = out
+                    .record
+                    .as_ref()
+                    .map_or([0.0; 6], |r| deviation(&r.values));
+                let frame = &mut out.frames[f].1;
+                *frame = frame
+                    .compose(&deviation_pose(&before).inverse())
+                    .compose(&deviation_pose(&after));
+            } else if let Some(j) = out.joint_names.iter().position(|n| *n == element) {
                 let joint = &mut out.joints[j];
                 joint.deviation[k] = value;
                 let d = joint.deviation;
@@ -626,6 +650,10 @@ impl Robot {
                     let k = field_index(field);
                     if let Some(j) = self.joint_names.iter().position(|n| *n == element) {
                         self.joints[j].deviation[k] = v.value;
+                    } else if record.frames.contains_key(&element) && k < 6 {
+                        // An identified frame's deviation from its nominal guess: the frame
+                        // itself is in [frames]; the value and its σ serve the prediction's
+                        // uncertainty ([`Robot::with_value`]).
                     } else if let Some(t) =
                         (tip_elements.iter()).position(|e| e.as_deref() == Some(element.as_str()))
                         && k < 6

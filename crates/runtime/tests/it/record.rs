@@ -135,3 +135,46 @@ fn with_value_moves_the_tip_as_the_record_with_that_value_does() {
     }
     assert!(robot.with_value("compliance.joint_a9", 1.0).is_err());
 }
+
+#[test]
+fn with_value_moves_an_identified_frame_by_its_deviation() {
+    // The instrument frame is nominal · Δ(d) with d = (x 0.001 m, rz 0.002 rad); setting x
+    // to 0.003 m moves it by 2 mm along the nominal · Rx…Rz-turned x axis, i.e. along the
+    // frame's own x axis turned back by rz: `frame · Δ(d)⁻¹ · Δ(d')`.
+    let text = format!(
+        "{}\"instrument.x\" = {{ value = 0.001, std = 1e-4, unit = \"m\" }}\n\"instrument.rz\" = {{ value = 0.002, std = 1e-4, unit = \"rad\" }}\n",
+        record("").replacen(
+            "[values]",
+            "[frames.instrument]\nxyz_m = [2.0, 0.5, -0.3]\nrpy_rad = [0.0, 0.0, 1.0]\n\n[values]",
+            1
+        )
+    );
+    let robot = load(&text, &["ball_link"]).expect("valid");
+    let before = robot.frame("instrument").expect("frame");
+    let moved = robot.with_value("instrument.x", 0.003).expect("recorded");
+    let after = moved.frame("instrument").expect("frame");
+    // Δ(d) = Tx(0.001)·Rz(0.002): the translation part sits before the rotation, so the
+    // change of x moves the origin along the nominal frame's x axis, the frame's turned back
+    // by rz: yaw 1.0 − 0.002 rad in the root frame.
+    let yaw: f64 = 1.0 - 0.002;
+    let expected = [
+        before.translation_m[0] + 0.002 * yaw.cos(),
+        before.translation_m[1] + 0.002 * yaw.sin(),
+        before.translation_m[2],
+    ];
+    for k in 0..3 {
+        assert!(
+            (after.translation_m[k] - expected[k]).abs() < 1e-12,
+            "{:?} {expected:?}",
+            after.translation_m
+        );
+    }
+    for (a, b) in after
+        .rotation
+        .as_flattened()
+        .iter()
+        .zip(before.rotation.as_flattened())
+    {
+        assert!((a - b).abs() < 1e-15, "{a} {b}");
+    }
+}
