@@ -148,12 +148,8 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     // geometric model is chosen.
     let obs = observations(&train, plan.socket_distance_m, &|_, _, _| true);
     // The training region: each joint's range over the rows, for the record.
-    let mut ranges = vec![(f64::INFINITY, f64::NEG_INFINITY); chain.n_joints()];
-    for row in &obs.rows {
-        for (r, q) in ranges.iter_mut().zip(&row.q) {
-            *r = (r.0.min(*q), r.1.max(*q));
-        }
-    }
+    let ranges =
+        crate::measured::reading_ranges(obs.rows.iter().map(|r| r.q.as_slice()), chain.n_joints());
     let n_training_rows = obs.rows.len();
     // Copies of a configuration add residuals but no information: count distinct ones.
     let n_configurations = (obs.rows.iter())

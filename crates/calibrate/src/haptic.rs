@@ -854,19 +854,16 @@ pub fn model_name(model: crate::model::ModelChoice) -> Option<ModelName> {
 /// The region a haptic calibration was fitted on: each joint's range of readings over the
 /// training rows `rows` (rad, named after the device's `[[joint]]`s), and the row count.
 pub fn training_region(r: &HapticDevice, rows: &[LogRow]) -> Region {
-    let joints = (r.device.joints.iter().enumerate())
-        .map(|(j, spec)| {
-            let (min, max) = (rows.iter())
-                .filter_map(|row| row.q.get(j).copied())
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-                    (lo.min(v), hi.max(v))
-                });
-            JointRange {
-                name: spec.name.clone(),
-                min,
-                max,
-                unit: "rad".to_owned(),
-            }
+    let ranges = crate::measured::reading_ranges(
+        rows.iter().map(|row| row.q.as_slice()),
+        r.device.joints.len(),
+    );
+    let joints = (r.device.joints.iter().zip(ranges))
+        .map(|(spec, (min, max))| JointRange {
+            name: spec.name.clone(),
+            min,
+            max,
+            unit: "rad".to_owned(),
         })
         .collect();
     Region {

@@ -869,9 +869,21 @@ pub const RANGE_BLOCKS: usize = 5;
 
 /// The training range of every joint, rad or m: (min, max) over the training rows.
 pub fn training_ranges(tables: &[MeasurementTable], n_joints: usize) -> Vec<(f64, f64)> {
+    reading_ranges(
+        tables.iter().flat_map(|t| &t.rows).map(|r| r.q.as_slice()),
+        n_joints,
+    )
+}
+
+/// The range of every joint over `readings` (one slice of joint readings per row, rad or
+/// m): (min, max); (+∞, −∞) for a joint no row reads.
+pub fn reading_ranges<'a>(
+    readings: impl IntoIterator<Item = &'a [f64]>,
+    n_joints: usize,
+) -> Vec<(f64, f64)> {
     let mut range = vec![(f64::INFINITY, f64::NEG_INFINITY); n_joints];
-    for row in tables.iter().flat_map(|t| &t.rows) {
-        for (r, q) in range.iter_mut().zip(&row.q) {
+    for q in readings {
+        for (r, q) in range.iter_mut().zip(q) {
             *r = (r.0.min(*q), r.1.max(*q));
         }
     }

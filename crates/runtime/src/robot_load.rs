@@ -446,24 +446,8 @@ pub(crate) fn with_value(robot: &Robot, name: &str, value: f64) -> Result<Robot,
             let k = field_index(field);
             if let Some(f) = out.frames.iter().position(|(n, _)| *n == element) {
                 // A frame holds `nominal · Δ(d)`: it becomes `frame · Δ(d)⁻¹ · Δ(d')`.
-                let deviation = |values: &[hapcal_contract::CalibratedValue]| {
-                    let mut d = [0.0; 6];
-                    for (slot, suffix) in d.iter_mut().zip(["x", "y", "z", "rx", "ry", "rz"]) {
-                        let key = format!("{element}.{suffix}");
-                        if let Some(v) = values.iter().find(|v| v.name == key) {
-                            *slot = v.value;
-                        }
-                    }
-                    d
-                };
-                let before = robot
-                    .record
-                    .as_ref()
-                    .map_or([0.0; 6], |r| deviation(&r.values));
-                let after = out
-                    .record
-                    .as_ref()
-                    .map_or([0.0; 6], |r| deviation(&r.values));
+                let before = element_deviation(robot.record.as_ref(), &element);
+                let after = element_deviation(out.record.as_ref(), &element);
                 let frame = &mut out.frames[f].1;
                 *frame = frame
                     .compose(&deviation_pose(&before).inverse())
@@ -477,21 +461,10 @@ pub(crate) fn with_value(robot: &Robot, name: &str, value: f64) -> Result<Robot,
                     .compose(&deviation_pose(&[d[0], d[1], d[2], d[3], d[4], d[5]]))
                     .compose(&crate::robot::joint_motion(joint, d[6]));
             } else {
-                let values = &out
-                    .record
-                    .as_ref()
-                    .map(|r| r.values.clone())
-                    .unwrap_or_default();
+                let d = element_deviation(out.record.as_ref(), &element);
                 for (tip, e) in out.tips.iter_mut().zip(&out.tip_elements) {
                     if e.as_deref() != Some(element.as_str()) {
                         continue;
-                    }
-                    let mut d = [0.0; 6];
-                    for (slot, suffix) in d.iter_mut().zip(["x", "y", "z", "rx", "ry", "rz"]) {
-                        let key = format!("{element}.{suffix}");
-                        if let Some(v) = values.iter().find(|v| v.name == key) {
-                            *slot = v.value;
-                        }
                     }
                     tip.offset = tip.nominal_offset.compose(&deviation_pose(&d));
                 }
@@ -532,6 +505,22 @@ pub(crate) fn with_value(robot: &Robot, name: &str, value: f64) -> Result<Robot,
         _ => return Err(unknown),
     }
     Ok(out)
+}
+
+/// The deviation `[x, y, z, rx, ry, rz]` (m, rad) the record's values `<element>.x` …
+/// `<element>.rz` give an element (a tip element or a frame); 0 for a value it lacks.
+fn element_deviation(record: Option<&Calibration>, element: &str) -> [f64; 6] {
+    let mut d = [0.0; 6];
+    let Some(record) = record else {
+        return d;
+    };
+    for (slot, suffix) in d.iter_mut().zip(["x", "y", "z", "rx", "ry", "rz"]) {
+        let key = format!("{element}.{suffix}");
+        if let Some(v) = record.values.iter().find(|v| v.name == key) {
+            *slot = v.value;
+        }
+    }
+    d
 }
 
 /// The index of a placement deviation's field in a joint's `deviation`.
@@ -654,9 +643,8 @@ impl Robot {
                         // An identified frame's deviation from its nominal guess: the frame
                         // itself is in [frames]; the value and its σ serve the prediction's
                         // uncertainty ([`Robot::with_value`]).
-                    } else if let Some(t) =
-                        (tip_elements.iter()).position(|e| e.as_deref() == Some(element.as_str()))
-                        && k < 6
+                    } else if k < 6
+                        && (tip_elements.iter()).any(|e| e.as_deref() == Some(element.as_str()))
                     {
                         // Tips sharing the element share its deviation.
                         for (d, e) in tip_deviation.iter_mut().zip(tip_elements) {
@@ -664,7 +652,6 @@ impl Robot {
                                 d[k] = v.value;
                             }
                         }
-                        let _ = t;
                     } else {
                         return Err(invalid(
                             origin,
