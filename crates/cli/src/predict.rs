@@ -407,35 +407,22 @@ pub fn summary(prediction: &Prediction, robot: &Robot) -> String {
             s,
             "errors against the measured columns (no refit; mean, RMS, max):"
         );
-        if let Some(f) = e.position_m {
-            let _ = writeln!(
-                s,
-                "  position     {:.4} {:.4} {:.4} mm over {} marker samples",
-                f.mean * 1e3,
-                f.rms * 1e3,
-                f.max * 1e3,
-                f.count
-            );
-        }
-        if let Some(f) = e.orientation_rad {
-            let _ = writeln!(
-                s,
-                "  orientation  {:.4} {:.4} {:.4} mrad over {} samples",
-                f.mean * 1e3,
-                f.rms * 1e3,
-                f.max * 1e3,
-                f.count
-            );
-        }
-        if let Some(f) = e.distance_m {
-            let _ = writeln!(
-                s,
-                "  distance     {:.4} {:.4} {:.4} mm over {} rows",
-                f.mean * 1e3,
-                f.rms * 1e3,
-                f.max * 1e3,
-                f.count
-            );
+        let lines = [
+            ("position   ", e.position_m, "mm", "marker samples"),
+            ("orientation", e.orientation_rad, "mrad", "samples"),
+            ("distance   ", e.distance_m, "mm", "rows"),
+        ];
+        for (what, figures, unit, over) in lines {
+            if let Some(f) = figures {
+                let _ = writeln!(
+                    s,
+                    "  {what}  {:.4} {:.4} {:.4} {unit} over {} {over}",
+                    f.mean * 1e3,
+                    f.rms * 1e3,
+                    f.max * 1e3,
+                    f.count
+                );
+            }
         }
     }
     s
