@@ -851,7 +851,7 @@ fn _simulate(
         };
         let cfg = hapcal_sim::SimConfig::new(seed, poses).with_noise(noise);
         let effects = (effects.iter())
-            .map(|e| e.parse::<hapcal_sim::Effect>())
+            .map(|e| e.parse::<hapcal_sim::Injected>())
             .collect::<Result<Vec<_>, _>>()?;
         let rows = if motion || !effects.is_empty() {
             let motion = hapcal_sim::MotionConfig {

@@ -3,6 +3,7 @@
 //! docs/results/diagnose-real.md with the residual maps in docs/results/diagnose-real/.
 
 use anyhow::{Context, Result, bail};
+use hapcal_contract::Effect;
 use serde_json::Value;
 use xshell::{Shell, cmd};
 
@@ -37,7 +38,7 @@ const RECORDINGS: &[Recording] = &[
         ],
         known: "cross-validation of the calibration's models chooses gravity compliance with the \
                 published link masses (docs/results/mukca.md): held-out 163 → 107 µm",
-        required: Some("gravity_compliance"),
+        required: Some(Effect::GravityCompliance.name()),
     },
     Recording {
         id: "panda_1",

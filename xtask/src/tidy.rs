@@ -22,6 +22,12 @@
 //!   `fixtures/` or `crates/*/test_data/`; within one set identical files may be part of its
 //!   layout (e.g. the valid socket files of the malformed MUKCa recordings of the io tests).
 //!
+//! - **One vocabulary**: the Rust sources of the crates and the Python bindings (`crates/*/src`,
+//!   `python/src`; test modules, tests and examples excluded) never write an
+//!   effect's name (`hapcal_contract::Effect::name`: `gravity_compliance`, …) as a string
+//!   literal of their own: they take it from the type, whose module
+//!   (`crates/contract/src/effect.rs`) is the one place that spells it.
+//!
 //! Every finding is printed as `file:line: message`; the task fails if there is any.
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -70,6 +76,9 @@ pub(crate) fn run(sh: &Shell) -> Result<()> {
             continue;
         };
         findings.extend(check_text(file, &text));
+        if is_vocabulary_checked(file) {
+            findings.extend(check_vocabulary(file, &text));
+        }
         if is_crate_manifest(file) {
             findings.extend(check_description(file, &text));
         }
@@ -91,6 +100,51 @@ pub(crate) fn run(sh: &Shell) -> Result<()> {
     }
     println!("tidy: {} tracked files, no findings", files.len());
     Ok(())
+}
+
+/// The one module that spells the effects' names.
+const VOCABULARY: &str = "crates/contract/src/effect.rs";
+
+/// Rust sources of the product (not tests, benches or examples), where an effect's name must
+/// come from the type.
+fn is_vocabulary_checked(file: &str) -> bool {
+    let in_src =
+        (file.starts_with("crates/") && file.contains("/src/")) || file.starts_with("python/src/");
+    let test_module = file.ends_with("/tests.rs") || file.contains("/tests/");
+    in_src && !test_module && file.ends_with(".rs") && file != VOCABULARY && file != SELF
+}
+
+/// A string literal that is exactly an effect's name.
+fn check_vocabulary(file: &str, text: &str) -> Vec<Finding> {
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        if line.trim_start().starts_with("#[cfg(test)]") {
+            break; // the file's test module, at its end
+        }
+        if line.trim_start().starts_with("//") {
+            continue;
+        }
+        for effect in hapcal_contract::Effect::ALL {
+            use hapcal_contract::Effect::{Capstans, Geometric, JointOffsets, Parallelogram};
+            // These words are also a model's `--model` name (the model that frees just this
+            // effect) or a device file's element: written in those roles too.
+            if matches!(effect, Geometric | JointOffsets | Capstans | Parallelogram) {
+                continue;
+            }
+            let name = effect.name();
+            if line.contains(&format!("\"{name}\"")) {
+                out.push(Finding {
+                    file: file.to_owned(),
+                    line: i + 1,
+                    message: format!(
+                        "the effect name \"{name}\" written out: take it from \
+                         hapcal_contract::Effect (one vocabulary, {VOCABULARY})"
+                    ),
+                });
+            }
+        }
+    }
+    out
 }
 
 /// Files whose words are not ours to check: the lock file, upstream notices, recorded data.

@@ -43,7 +43,7 @@ fn rungs(report: &CalibrationReport) -> Vec<ModelChoice> {
 
 #[test]
 fn a_handle_compliance_climbs_past_the_transmissions_by_two_standard_errors() {
-    let report = auto(log(51, 300, &["joint_compliance:j2=5e-3,j3=5e-3"]));
+    let report = auto(log(51, 300, &["gravity_compliance:j2=5e-3,j3=5e-3"]));
     use ModelChoice as M;
     assert_eq!(
         rungs(&report),

@@ -64,7 +64,7 @@ const NEAR_FLOOR: f64 = 1.2;
 fn a_handle_compliance_is_recovered_and_predicts_held_out_distances_at_the_noise_floor() {
     let (device, _) = reference();
     let haptic = HapticDevice::new(device).unwrap();
-    let effect = ["joint_compliance:j2=5e-3,j3=5e-3"];
+    let effect = ["gravity_compliance:j2=5e-3,j3=5e-3"];
     let (train, test) = (log(31, 300, &effect), log(32, 200, &effect));
     let (fit, held_out, floor) = compliance_fit(&haptic, &train, &test);
     let values = compliance_values(&fit);

@@ -151,7 +151,8 @@ pub fn render(d: &Diagnosis) -> String {
             );
         }
         if !st.confusable_with.is_empty() {
-            let _ = writeln!(s, "      resembles: {}", st.confusable_with.join(", "));
+            let names: Vec<&str> = st.confusable_with.iter().map(|e| e.name()).collect();
+            let _ = writeln!(s, "      resembles: {}", names.join(", "));
         }
     }
     let _ = writeln!(

@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use anyhow::{Context, Result};
 use hapcal_calibrate::baseline::{DataKind, geometric_baseline};
 use hapcal_calibrate::calibrate::Plan;
-use hapcal_diagnose::arm::{ArmConfig, ArmDiagnosis, ArmEffect, diagnose_arm};
+use hapcal_diagnose::arm::{ArmConfig, ArmDiagnosis, diagnose_arm};
 
 /// Loads `plan`'s device and data, fits the geometric baseline (with the kinematic ladder)
 /// and diagnoses it; returns the diagnosis and the loaders' warnings.
@@ -134,12 +134,7 @@ pub fn render_arm(d: &ArmDiagnosis) -> String {
                 s,
                 "      the torque model is open: {other} in its place predicts as well (within two \
                  standard errors, beside the other named effects); to tell them apart record {}",
-                ArmEffect::from_name(&st.effect)
-                    .zip(ArmEffect::from_name(other))
-                    .map_or(
-                        "the same poses with and without a known payload",
-                        |(a, b)| { a.separating_measurement(b) }
-                    )
+                st.effect.separating_measurement(*other)
             );
         }
         for (other, how) in (st.confusable_with.iter()).filter(|(o, _)| !st.alike.contains(o)) {

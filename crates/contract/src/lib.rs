@@ -43,8 +43,11 @@
 //! # Ok::<(), hapcal_contract::ContractError>(())
 //! ```
 
+mod effect;
 mod names;
 mod write;
+
+pub use effect::{Effect, SeparatingMeasurement};
 
 use std::collections::BTreeMap;
 use std::fmt;

@@ -12,7 +12,7 @@ use hapcal_calibrate::baseline::geometric_baseline;
 use hapcal_calibrate::calibrate::{ModelChoice, Plan};
 use hapcal_diagnose::arm::{ArmConfig, diagnose_arm};
 use hapcal_diagnose::{DiagnoseConfig, diagnose};
-use hapcal_sim::{Effect, MotionConfig, NoiseModel, SimConfig, read_truth, simulate_motion};
+use hapcal_sim::{Injected, MotionConfig, NoiseModel, SimConfig, read_truth, simulate_motion};
 
 fn bench(c: &mut Criterion) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
@@ -23,7 +23,7 @@ fn bench(c: &mut Criterion) {
         .cable_encoder
         .expect("the reference device has a cable encoder");
     let cfg = SimConfig::new(1, 600).with_noise(NoiseModel::paper(&cable));
-    let backlash: Effect = "backlash:j2=1e-3".parse().expect("effect");
+    let backlash: Injected = "backlash:j2=1e-3".parse().expect("effect");
     let rows = simulate_motion(&device, &truth, &cfg, &MotionConfig::default(), &[backlash])
         .expect("simulation");
     let mut group = c.benchmark_group("diagnose");

@@ -30,6 +30,7 @@
 use hapcal_calibrate::baseline::{DataKind, GeometricBaseline, HeldOutSet};
 use hapcal_calibrate::calibrate::blocked_mean_difference;
 use hapcal_calibrate::model::{ModelChoice, Rung};
+use hapcal_contract::Effect;
 use hapcal_identify::Problem;
 use hapcal_problems::{CalibrationProblem, GravityCompliance, Observations, RowKind};
 use nalgebra::{DMatrix, DVector, Vector3};
@@ -84,122 +85,19 @@ const CONFUSABLE_COSINE: f64 = 0.8;
 /// repeated pose (a floor from repeatability).
 pub const REPEAT_TOLERANCE: f64 = 1e-4;
 
-/// An effect of the serial-arm library.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ArmEffect {
-    /// Joint compliance under the links' own weight: `Δq_j = k_j·τ_j(q)`, `τ_j` the gravity
-    /// torque of the URDF `<inertial>` masses (or the published masses of a known robot),
-    /// N·m; `k_j` rad/(N·m) (Zhou, Kang & Ryu 2014; Nubiola & Bonev 2013).
-    GravityCompliance,
-    /// Lumped compliance: `Δq_j = k_j·τ̂_j(q)`, `τ̂_j = w_j·Σ (o_i − o_j) × ĝ` (m) the
-    /// moment about joint `j`'s axis `w_j` of unit weights (along the unit gravity `ĝ`, base
-    /// −z) at the origin `o_i` of every joint below `j` and at the tip, on the nominal chain at
-    /// the readings ([`GravityCompliance::joint_loads`] without masses); `k_j` rad/m. The model
-    /// when no link masses are known.
-    LumpedCompliance,
-    /// Once-per-revolution angle error of each revolute joint, `a_j sin q_j + b_j cos q_j`:
-    /// encoder or gear eccentricity (Renders et al. 1991).
-    Harmonic1,
-    /// Twice-per-revolution angle error, `a_j sin 2q_j + b_j cos 2q_j`: elliptic gear or
-    /// encoder disc.
-    Harmonic2,
-    /// Backlash: `Δq_j = b_j·s_j`, `s_j` the sign of the joint's last motion in time order
-    /// within the same socket or file ([`approach_signs`], on the readings); `b_j < 0` when the
-    /// output trails the motor by the half-play `|b_j|`.
-    Backlash,
-    /// Gear-ratio (scale) error: `Δq_j = s_j·q_j`.
-    GearRatio,
-    /// Thermal drift: the measured point moves linearly in time, `Δp = v·(t − t₀)/T` (three
-    /// components in the measurement frame, m over the training recording's span `T`, `t₀` its
-    /// first time; one for distances). Held-out sets keep the training's `t₀` and `T`: their
-    /// configurations are taken to follow the training's, at its median time step.
-    ThermalDrift,
-    /// Link deflection under gravity: the tip sags by `c·(ρ/ρ_max)³` along gravity, `ρ` its
-    /// horizontal reach from the base axis (a cantilever under an end load, δ ∝ L³).
-    LinkDeflection,
-    /// Scale error of the instrument: `Δp = s·p` (positions in the instrument frame) or
-    /// `Δd = s·d`.
-    InstrumentScale,
-}
-
-impl ArmEffect {
-    /// Every effect, in report order.
-    pub const LIBRARY: [ArmEffect; 9] = [
-        ArmEffect::GravityCompliance,
-        ArmEffect::LumpedCompliance,
-        ArmEffect::Harmonic1,
-        ArmEffect::Harmonic2,
-        ArmEffect::Backlash,
-        ArmEffect::GearRatio,
-        ArmEffect::ThermalDrift,
-        ArmEffect::LinkDeflection,
-        ArmEffect::InstrumentScale,
-    ];
-
-    /// Stable name (`gravity_compliance`, …).
-    pub fn name(self) -> &'static str {
-        match self {
-            ArmEffect::GravityCompliance => "gravity_compliance",
-            ArmEffect::LumpedCompliance => "lumped_compliance",
-            ArmEffect::Harmonic1 => "harmonic1",
-            ArmEffect::Harmonic2 => "harmonic2",
-            ArmEffect::Backlash => "backlash",
-            ArmEffect::GearRatio => "gear_ratio",
-            ArmEffect::ThermalDrift => "thermal_drift",
-            ArmEffect::LinkDeflection => "link_deflection",
-            ArmEffect::InstrumentScale => "instrument_scale",
-        }
-    }
-
-    /// Whether this is a joint compliance (gravity or lumped: one effect under two torque
-    /// models).
-    pub fn is_compliance(self) -> bool {
-        matches!(
-            self,
-            ArmEffect::GravityCompliance | ArmEffect::LumpedCompliance
-        )
-    }
-
-    /// The same effect under its other model: the other torque model of a compliance, the
-    /// other order of a joint harmonic; `None` for an effect with one model.
-    pub fn alternative(self) -> Option<ArmEffect> {
-        match self {
-            ArmEffect::GravityCompliance => Some(ArmEffect::LumpedCompliance),
-            ArmEffect::LumpedCompliance => Some(ArmEffect::GravityCompliance),
-            ArmEffect::Harmonic1 => Some(ArmEffect::Harmonic2),
-            ArmEffect::Harmonic2 => Some(ArmEffect::Harmonic1),
-            _ => None,
-        }
-    }
-
-    /// The effect named `name`.
-    pub fn from_name(name: &str) -> Option<ArmEffect> {
-        Self::LIBRARY.into_iter().find(|e| e.name() == name)
-    }
-
-    /// The measurement that separates this effect from `other` when the data confuse them.
-    pub fn separating_measurement(self, other: ArmEffect) -> &'static str {
-        use ArmEffect::*;
-        let pair = |a, b| (self == a && other == b) || (self == b && other == a);
-        if pair(GravityCompliance, LumpedCompliance) {
-            "the same poses with and without a known payload"
-        } else if pair(GravityCompliance, LinkDeflection) || pair(LumpedCompliance, LinkDeflection)
-        {
-            "poses of equal joint torque at different reach (elbow up and down)"
-        } else if self == Backlash || other == Backlash {
-            "each pose approached from both sides of every joint"
-        } else if self == ThermalDrift || other == ThermalDrift {
-            "one reference pose repeated at the start, middle and end of the recording"
-        } else if self == InstrumentScale || other == InstrumentScale {
-            "a calibrated length (scale bar) measured by the instrument"
-        } else if pair(Harmonic1, GearRatio) || pair(Harmonic2, GearRatio) {
-            "poses covering each joint's full range"
-        } else {
-            "poses spread over every joint's range and the workspace"
-        }
-    }
-}
+/// The serial-arm diagnosis's library, in report order: the effects it tests on measurement
+/// files and socket recordings (one vocabulary with calibration: [`Effect`]).
+pub const ARM_LIBRARY: [Effect; 9] = [
+    Effect::GravityCompliance,
+    Effect::LumpedCompliance,
+    Effect::FirstHarmonic,
+    Effect::SecondHarmonic,
+    Effect::Backlash,
+    Effect::GearRatio,
+    Effect::ThermalDrift,
+    Effect::LinkDeflection,
+    Effect::InstrumentScale,
+];
 
 /// Settings of [`diagnose_arm`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -269,8 +167,8 @@ pub struct EffectParam {
 /// One candidate tested in one round.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ArmCandidate {
-    /// Effect name.
-    pub effect: String,
+    /// The effect, serialised by its name.
+    pub effect: Effect,
     /// Round (1 = against the geometric baseline).
     pub round: usize,
     /// Parameters visible in these data (not absorbed by the baseline).
@@ -333,7 +231,7 @@ pub enum ArmLadderRung {
     /// A rung of the calibration's ladder.
     Kinematic(Rung),
     /// Geometric plus these effects.
-    Effects(Vec<ArmEffect>),
+    Effects(Vec<Effect>),
 }
 
 impl std::fmt::Display for ArmLadderRung {
@@ -368,8 +266,8 @@ pub struct ArmRung {
 /// One accepted effect.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ArmStep {
-    /// Effect name.
-    pub effect: String,
+    /// The effect, serialised by its name.
+    pub effect: Effect,
     /// Cross-validated position RMS on the training rows before it, m.
     #[serde(rename = "cv_rms_before_m")]
     pub heldout_rms_before_m: f64,
@@ -383,12 +281,12 @@ pub struct ArmStep {
     /// Its parameters ± std.
     pub parameters: Vec<EffectParam>,
     /// Candidates the data confuse with it, each with the measurement that would separate them.
-    pub confusable_with: Vec<(String, String)>,
+    pub confusable_with: Vec<(Effect, String)>,
     /// The same effect under another model that these data do not tell from it: for a
     /// compliance, the other torque model when, in its place beside the other named effects,
     /// it predicts worse by less than the two blocked standard errors that name an effect
     /// (held-out squared error, paired by block). Empty when the data name the model.
-    pub alike: Vec<String>,
+    pub alike: Vec<Effect>,
 }
 
 /// The diagnosis of a serial arm's data.
@@ -660,7 +558,7 @@ impl Context<'_> {
 /// joint and per-configuration value; `Err` with the reason when the data cannot test it.
 #[allow(clippy::type_complexity)]
 fn joint_terms(
-    effect: ArmEffect,
+    effect: Effect,
     ctx: &Context<'_>,
     rows: &Rows,
 ) -> Result<Vec<(String, &'static str, usize, Vec<f64>)>, String> {
@@ -683,8 +581,8 @@ fn joint_terms(
             .collect::<Vec<_>>()
     };
     Ok(match effect {
-        ArmEffect::GravityCompliance | ArmEffect::LumpedCompliance => {
-            let model = if effect == ArmEffect::GravityCompliance {
+        Effect::GravityCompliance | Effect::LumpedCompliance => {
+            let model = if effect == Effect::GravityCompliance {
                 ctx.masses.clone().ok_or(
                     "no link masses: the URDF has no <inertial> and the robot's published masses are unknown",
                 )?
@@ -700,15 +598,15 @@ fn joint_terms(
                         .collect()
                 })
                 .collect();
-            let unit = if effect == ArmEffect::GravityCompliance {
+            let unit = if effect == Effect::GravityCompliance {
                 "rad/(N·m)"
             } else {
                 "rad/m"
             };
             per_joint(unit, &|c, j| torques[c][j], false)
         }
-        ArmEffect::Harmonic1 | ArmEffect::Harmonic2 => {
-            let h = if effect == ArmEffect::Harmonic1 {
+        Effect::FirstHarmonic | Effect::SecondHarmonic => {
+            let h = if effect == Effect::FirstHarmonic {
                 1.0
             } else {
                 2.0
@@ -722,11 +620,11 @@ fn joint_terms(
             }
             out
         }
-        ArmEffect::Backlash => {
+        Effect::Backlash => {
             let signs = approach_signs(&rows.q, &rows.group);
             per_joint("rad", &|c, j| signs[c][j], false)
         }
-        ArmEffect::GearRatio => per_joint("1", &|c, j| rows.q[c][j], false),
+        Effect::GearRatio => per_joint("1", &|c, j| rows.q[c][j], false),
         _ => return Err("not a joint-angle effect".into()),
     })
 }
@@ -735,7 +633,7 @@ fn joint_terms(
 /// configurations before it in the same group (`group[c]`), in order: `+1` or `−1` when the
 /// joint moved by at least [`REPEAT_TOLERANCE`] since the previous configuration, the previous
 /// sign when it did not (the gear stays on the flank it was driven against), 0 before the
-/// group's first motion. The basis of [`ArmEffect::Backlash`]; shape `q.len() × n_joints`.
+/// group's first motion. The basis of [`Effect::Backlash`]; shape `q.len() × n_joints`.
 pub fn approach_signs(q: &[Vec<f64>], group: &[usize]) -> Vec<Vec<f64>> {
     let mut out: Vec<Vec<f64>> = Vec::with_capacity(q.len());
     for c in 0..q.len() {
@@ -762,7 +660,7 @@ pub fn approach_signs(q: &[Vec<f64>], group: &[usize]) -> Vec<Vec<f64>> {
 /// and units; `Err` with the reason when these data cannot test it.
 #[allow(clippy::type_complexity)]
 fn effect_columns(
-    effect: ArmEffect,
+    effect: Effect,
     ctx: &Context<'_>,
     rows: &Rows,
     dq: &DMatrix<f64>,
@@ -789,7 +687,7 @@ fn effect_columns(
     let has_distance = rows.res.iter().any(|r| matches!(r.0, Res::Distance { .. }));
     let has_position = rows.res.iter().any(|r| matches!(r.0, Res::Position { .. }));
     match effect {
-        ArmEffect::ThermalDrift => {
+        Effect::ThermalDrift => {
             if ctx.time_span <= 0.0 {
                 return Err("all configurations at one time".into());
             }
@@ -817,7 +715,7 @@ fn effect_columns(
             );
             Ok((m, names))
         }
-        ArmEffect::LinkDeflection => {
+        Effect::LinkDeflection => {
             if !has_position {
                 return Err("no position measured".into());
             }
@@ -834,7 +732,7 @@ fn effect_columns(
             );
             Ok((m, vec![("link_deflection.sag".into(), "m")]))
         }
-        ArmEffect::InstrumentScale => {
+        Effect::InstrumentScale => {
             if ctx.baseline.kind == DataKind::Sockets {
                 return Err("socket data have no instrument".into());
             }
@@ -1140,7 +1038,7 @@ fn parameters(
 
 /// One candidate's evaluation in a round.
 struct Tested {
-    effect: ArmEffect,
+    effect: Effect,
     cand: ArmCandidate,
     /// Its visible columns on the training rows.
     columns: DMatrix<f64>,
@@ -1156,8 +1054,8 @@ struct Tested {
 /// What [`revise`] found: an effect to leave out of the library, the alternative expected to
 /// take its place (a swap), and the note that says why.
 struct Revision {
-    leave_out: ArmEffect,
-    instead: Option<ArmEffect>,
+    leave_out: Effect,
+    instead: Option<Effect>,
     note: String,
 }
 
@@ -1185,13 +1083,13 @@ fn revise(
     r: &DVector<f64>,
     jb: &DMatrix<f64>,
     dq: &DMatrix<f64>,
-    named: &[(ArmEffect, DMatrix<f64>, Vec<usize>)],
+    named: &[(Effect, DMatrix<f64>, Vec<usize>)],
     full: &HeldOut,
     folds: &[Vec<usize>],
     block: &[usize],
     floor_var: Option<f64>,
     cfg: &ArmConfig,
-    excluded: &[ArmEffect],
+    excluded: &[Effect],
 ) -> Option<Revision> {
     let with = |parts: &[&DMatrix<f64>]| beside(jb, parts);
     let held = |a: &DMatrix<f64>| cross_validate(a, r, rows, folds, cfg.folds, floor_var);
@@ -1234,7 +1132,7 @@ fn revise(
         }
     }
     // Alternatives, beside the other named effects.
-    let order = |e: ArmEffect| ArmEffect::LIBRARY.iter().position(|l| *l == e);
+    let order = |e: Effect| ARM_LIBRARY.iter().position(|l| *l == e);
     for (k, (effect, cols, _)) in named.iter().enumerate() {
         let Some(alt) = effect.alternative() else {
             continue;
@@ -1283,9 +1181,9 @@ fn swapped(
     r: &DVector<f64>,
     jb: &DMatrix<f64>,
     dq: &DMatrix<f64>,
-    named: &[(ArmEffect, DMatrix<f64>, Vec<usize>)],
+    named: &[(Effect, DMatrix<f64>, Vec<usize>)],
     k: usize,
-    alt: ArmEffect,
+    alt: Effect,
     folds: &[Vec<usize>],
     floor_var: Option<f64>,
     cfg: &ArmConfig,
@@ -1442,9 +1340,9 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
 
     let mut candidates = Vec::new();
     let mut steps: Vec<ArmStep> = Vec::new();
-    let mut accepted: Vec<ArmEffect> = Vec::new();
+    let mut accepted: Vec<Effect> = Vec::new();
     // Accepted effects' columns on the training rows and their names (for the ladder).
-    let mut effect_cols: Vec<(ArmEffect, DMatrix<f64>, Vec<usize>)> = Vec::new();
+    let mut effect_cols: Vec<(Effect, DMatrix<f64>, Vec<usize>)> = Vec::new();
     let mut untestable = Vec::new();
     // After each named effect: the χ² p-value of what is left under the floor.
     let mut p_after: Vec<f64> = Vec::new();
@@ -1462,7 +1360,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
     // or whose alternative under the other torque model or harmonic order now predicts better,
     // is left out of the library and the rounds run again from the geometric baseline.
     let base0 = base.clone();
-    let mut excluded: Vec<ArmEffect> = Vec::new();
+    let mut excluded: Vec<Effect> = Vec::new();
     let mut revisions: Vec<String> = Vec::new();
     // A swap stands only if the rounds run again name the alternative by their own tests;
     // otherwise the run before it is kept. The run before a swap, and the alternative.
@@ -1483,12 +1381,13 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             let rss_b = r_perp.norm_squared();
             let dof_b = (r.len() as f64 - qb.ncols() as f64).max(1.0);
             let mut tested: Vec<Tested> = Vec::new();
-            for effect in ArmEffect::LIBRARY {
+            for effect in ARM_LIBRARY {
                 // Gravity and lumped compliance are one effect under two torque models: once one
                 // is named, the other is not a further effect.
                 if accepted.contains(&effect)
                     || excluded.contains(&effect)
-                    || (effect.is_compliance() && accepted.iter().any(|e| e.is_compliance()))
+                    || (effect.is_joint_compliance()
+                        && accepted.iter().any(|e| e.is_joint_compliance()))
                 {
                     continue;
                 }
@@ -1503,7 +1402,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                 };
                 let (qc, visible) = visible_columns(&cols, &qb, &a);
                 let mut cand = ArmCandidate {
-                    effect: effect.name().to_owned(),
+                    effect,
                     round,
                     n_visible: visible.len(),
                     heldout_rms_before_m: base.mse().sqrt(),
@@ -1655,7 +1554,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                 0.0
             });
             let win_effect = tested[w].effect;
-            let confusable: Vec<(String, String)> = (tested.iter().enumerate())
+            let confusable: Vec<(Effect, String)> = (tested.iter().enumerate())
                 .filter(|(i, t)| {
                     *i != w
                         && t.cand.n_visible > 0
@@ -1663,7 +1562,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                 })
                 .map(|(_, t)| {
                     (
-                        t.cand.effect.clone(),
+                        t.cand.effect,
                         win_effect.separating_measurement(t.effect).to_owned(),
                     )
                 })
@@ -1720,8 +1619,8 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             revisions.pop();
             revisions.push(format!(
                 "{} stays: run again without it, the rounds did not name {} in its place",
-                ArmEffect::name(left_out),
-                ArmEffect::name(alt)
+                Effect::name(left_out),
+                Effect::name(alt)
             ));
             break;
         }
@@ -1771,7 +1670,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
     // blocked standard errors. Otherwise the data do not tell the two apart, and the step says
     // so.
     for (k, (effect, _, _)) in effect_cols.iter().enumerate() {
-        let Some(alt) = effect.alternative().filter(|a| a.is_compliance()) else {
+        let Some(alt) = effect.alternative().filter(|a| a.is_joint_compliance()) else {
             continue;
         };
         let Some((other, _)) = swapped(
@@ -1791,7 +1690,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
         };
         let (d, se, _) = blocked_mean_difference(&other.score, &base.score, &block);
         if d <= HELDOUT_SIGNIFICANCE_Z * se || d.is_nan() || se.is_nan() {
-            steps[k].alike.push(alt.name().to_owned());
+            steps[k].alike.push(alt);
         }
     }
     notes.extend(revisions);
@@ -1852,8 +1751,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             named -= 1;
         }
     }
-    let names: Vec<&str> = accepted[..named].iter().map(|e| e.name()).collect();
-    let verdict = Verdict::of(&names);
+    let verdict = Verdict::of(&accepted[..named]);
     if named > 0
         && let Some(f) = floor0
         && p_after[named - 1] < cfg.alpha
@@ -1951,7 +1849,7 @@ fn ladder(
     rows: &Rows,
     r: &DVector<f64>,
     jb: &DMatrix<f64>,
-    effects: &[(ArmEffect, DMatrix<f64>, Vec<usize>)],
+    effects: &[(Effect, DMatrix<f64>, Vec<usize>)],
     folds: &[Vec<usize>],
     cfg: &ArmConfig,
 ) -> Result<(Vec<ArmRung>, Vec<f64>), Error> {
@@ -2030,7 +1928,7 @@ fn ladder(
         .collect();
     let mut a = jb.clone();
     let mut test_cols: Vec<DMatrix<f64>> = tests.iter().map(|t| t.shared.clone()).collect();
-    let mut named_so_far: Vec<ArmEffect> = Vec::new();
+    let mut named_so_far: Vec<Effect> = Vec::new();
     for (effect, cols, visible) in effects {
         a = beside(&a, &[cols]);
         let held = cross_validate(&a, r, rows, folds, cfg.folds, None);

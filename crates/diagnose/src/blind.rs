@@ -14,7 +14,9 @@ use std::collections::BTreeMap;
 use std::f64::consts::TAU;
 
 use hapcal_io::{Device, LogRow};
-use hapcal_sim::{Effect, EffectKind, MotionConfig, NoiseModel, SimConfig, Truth, simulate_motion};
+use hapcal_sim::{
+    EffectKind, Injected, MotionConfig, NoiseModel, SimConfig, Truth, simulate_motion,
+};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
@@ -44,12 +46,12 @@ pub struct Case {
     pub kind: CaseKind,
     /// The injected effects (already scaled).
     #[serde(serialize_with = "effects_as_strings")]
-    pub effects: Vec<Effect>,
+    pub effects: Vec<Injected>,
     /// Size `s`: the baseline residual RMS the effect alone produces, in floors (per effect).
     pub sizes: Vec<f64>,
 }
 
-fn effects_as_strings<S: serde::Serializer>(e: &[Effect], s: S) -> Result<S::Ok, S::Error> {
+fn effects_as_strings<S: serde::Serializer>(e: &[Injected], s: S) -> Result<S::Ok, S::Error> {
     s.collect_seq(e.iter().map(ToString::to_string))
 }
 
@@ -91,7 +93,7 @@ fn reference_effect(
     kind: EffectKind,
     device: &Device,
     rng: &mut ChaCha8Rng,
-) -> Result<Effect, Error> {
+) -> Result<Injected, Error> {
     let n = device.n_joints();
     let capstan_joints: Vec<usize> = device.capstans.iter().map(|c| c.joint).collect();
     let direct: Vec<usize> = (1..=n).filter(|j| !capstan_joints.contains(j)).collect();
@@ -109,9 +111,9 @@ fn reference_effect(
         EffectKind::ThermalDrift => vec![("k".into(), 1e-6)],
         EffectKind::Latency => vec![("tau".into(), 1e-3)],
         EffectKind::CableOffset => vec![("c".into(), 1e-3)],
-        EffectKind::JointCompliance => vec![(format!("j{}", pick(rng, &torque_joints)), 1e-3)],
+        EffectKind::GravityCompliance => vec![(format!("j{}", pick(rng, &torque_joints)), 1e-3)],
         EffectKind::Backlash => vec![(format!("j{}", pick(rng, &all)), 1e-3)],
-        EffectKind::EncoderEccentricity => {
+        EffectKind::FirstHarmonic => {
             let j = pick(rng, if direct.is_empty() { &all } else { &direct });
             vec![(format!("j{j}"), 1e-3), (format!("phase{j}"), phase(rng))]
         }
@@ -135,14 +137,14 @@ fn reference_effect(
         }
         EffectKind::CableDrumRunout => vec![("a".into(), 1e-4), ("phase".into(), phase(rng))],
     };
-    Effect::try_new(kind, params).map_err(|e| Error::Blind {
+    Injected::try_new(kind, params).map_err(|e| Error::Blind {
         message: e.to_string(),
     })
 }
 
 /// The effect with its amplitudes (not phases, positions or widths) multiplied by `factor`.
-fn scaled(e: &Effect, factor: f64) -> Effect {
-    Effect {
+fn scaled(e: &Injected, factor: f64) -> Injected {
+    Injected {
         kind: e.kind,
         params: e
             .params
@@ -215,7 +217,7 @@ pub fn draw_case(
     }
     let sim = sim_cfg(device, seed, cfg.n_samples);
     let motion = MotionConfig::default();
-    let simulate = |effects: &[Effect]| {
+    let simulate = |effects: &[Injected]| {
         simulate_motion(device, truth, &sim, &motion, effects).map_err(|e| Error::Blind {
             message: e.to_string(),
         })

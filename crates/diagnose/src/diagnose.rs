@@ -13,6 +13,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use hapcal_calibrate::model::ModelChoice;
+use hapcal_contract::Effect;
 
 use crate::{Error, Verdict};
 
@@ -123,8 +124,9 @@ pub struct ParamValue {
 /// One candidate effect, tested against the current baseline.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Candidate {
-    /// Stable name (docs/design.md §6), or `capstan`/`parallelogram` with the geometric baseline.
-    pub effect: String,
+    /// The effect (docs/design.md §6; `capstan`/`parallelogram` with the geometric baseline),
+    /// serialised by its name.
+    pub effect: Effect,
     /// Greedy round (1 = against the baseline; 2 = after the first winner was added).
     pub round: usize,
     /// Cross-validated distance RMS of the round's baseline, m.
@@ -206,8 +208,8 @@ pub struct JointProbe {
 /// One accepted effect and how far it shrinks the residual.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Step {
-    /// The effect.
-    pub effect: String,
+    /// The effect, serialised by its name.
+    pub effect: Effect,
     /// Cross-validated distance RMS before adding it, m.
     #[serde(rename = "cv_rms_before_m")]
     pub heldout_rms_before_m: f64,
@@ -219,7 +221,7 @@ pub struct Step {
     /// Identified parameters ± std.
     pub parameters: Vec<ParamValue>,
     /// Candidates whose signature resembles this one's (cosine > 0.9).
-    pub confusable_with: Vec<String>,
+    pub confusable_with: Vec<Effect>,
 }
 
 /// The diagnosis of one log (see [`diagnose`]).
@@ -355,7 +357,7 @@ fn cross_validate(
 
 /// The candidate terms of an effect, or why it cannot be tested on this log.
 fn candidate_terms(
-    effect: &str,
+    effect: Effect,
     device: &Device,
     data: &Data,
     n_joints: usize,
@@ -381,90 +383,90 @@ fn candidate_terms(
     };
     let mut terms = Vec::new();
     match effect {
-        "cable_angle" => {
+        Effect::CableAngle => {
             // Eyelet wrap `k·(γ − sin γ)`. (Adding powers of cos γ for other laws made the
             // mostly absorbed columns nearly collinear and the refit unstable.)
             terms.push(Term {
-                name: "cable_angle.k".into(),
+                name: format!("{effect}.k"),
                 unit: "m",
                 kind: TermKind::CableAngle { power: 0 },
             });
         }
-        "joint_compliance" => {
+        Effect::GravityCompliance => {
             terms.extend((0..n_joints).map(Term::handle_compliance));
         }
-        "backlash" => {
+        Effect::Backlash => {
             need_t()?;
             for j in 0..n_joints {
                 let dir = data.direction(j).unwrap_or_default();
                 terms.push(joint_term(
-                    format!("backlash.j{}", j + 1),
+                    format!("{effect}.j{}", j + 1),
                     j,
                     dir.iter().map(|d| -d).collect(),
                 ));
             }
         }
-        "encoder_eccentricity" => {
+        Effect::FirstHarmonic => {
             for j in (0..n_joints).filter(|&j| capstan_of(j).is_none()) {
                 terms.push(joint_term(
-                    format!("encoder_eccentricity.j{}_sin", j + 1),
+                    format!("{effect}.j{}_sin", j + 1),
                     j,
                     col(j, &f64::sin),
                 ));
                 terms.push(joint_term(
-                    format!("encoder_eccentricity.j{}_cos", j + 1),
+                    format!("{effect}.j{}_cos", j + 1),
                     j,
                     col(j, &f64::cos),
                 ));
             }
         }
-        "capstan_harmonic" => {
+        Effect::CapstanHarmonic => {
             for j in 0..n_joints {
                 let Some(c) = capstan_of(j) else { continue };
                 let r = c.ratio;
                 // Second harmonic of the motor drum, 2·R·θ. (The output drum's, 2·θ, is so
                 // smooth over a joint range that it fits any slow joint error: not tested.)
                 terms.push(joint_term(
-                    format!("capstan_harmonic.j{}_sin", j + 1),
+                    format!("{effect}.j{}_sin", j + 1),
                     j,
                     col(j, &|q| (2.0 * r * q).sin()),
                 ));
                 terms.push(joint_term(
-                    format!("capstan_harmonic.j{}_cos", j + 1),
+                    format!("{effect}.j{}_cos", j + 1),
                     j,
                     col(j, &|q| (2.0 * r * q).cos()),
                 ));
             }
         }
-        "thermal_drift" => {
+        Effect::ThermalDrift => {
             need_t()?;
             terms.push(Term {
-                name: "thermal_drift.k".into(),
+                name: format!("{effect}.k"),
                 unit: "1/s",
                 kind: TermKind::ThermalDrift { scale: true },
             });
             terms.push(Term {
-                name: "thermal_drift.rate".into(),
+                name: format!("{effect}.rate"),
                 unit: "m/s",
                 kind: TermKind::ThermalDrift { scale: false },
             });
         }
-        "latency" => {
+        Effect::Latency => {
             need_t()?;
             terms.push(Term {
-                name: "latency.tau".into(),
+                name: format!("{effect}.tau"),
                 unit: "s",
                 kind: TermKind::Latency,
             });
         }
-        "cable_offset" => terms.push(Term {
-            name: "cable_offset.c".into(),
+        Effect::CableOffset => terms.push(Term {
+            name: format!("{effect}.c"),
             unit: "m",
             kind: TermKind::Distance {
                 h: vec![1.0; data.n_rows()],
             },
         }),
-        "capstan" => {
+        Effect::Capstans => {
             // Paper eq. 1 to first order in r/D: offset (= dtheta), ratio error, output- and
             // input-drum eccentricity harmonics.
             for j in 0..n_joints {
@@ -474,30 +476,34 @@ fn candidate_terms(
                 }
                 let r = c.ratio;
                 let n = j + 1;
-                terms.push(joint_term(format!("capstan.j{n}_ratio"), j, col(j, &|q| q)));
                 terms.push(joint_term(
-                    format!("capstan.j{n}_out_sin"),
+                    format!("{effect}.j{n}_ratio"),
+                    j,
+                    col(j, &|q| q),
+                ));
+                terms.push(joint_term(
+                    format!("{effect}.j{n}_out_sin"),
                     j,
                     col(j, &f64::sin),
                 ));
                 terms.push(joint_term(
-                    format!("capstan.j{n}_out_cos"),
+                    format!("{effect}.j{n}_out_cos"),
                     j,
                     col(j, &f64::cos),
                 ));
                 terms.push(joint_term(
-                    format!("capstan.j{n}_in_sin"),
+                    format!("{effect}.j{n}_in_sin"),
                     j,
                     col(j, &|q| (r * q).sin()),
                 ));
                 terms.push(joint_term(
-                    format!("capstan.j{n}_in_cos"),
+                    format!("{effect}.j{n}_in_cos"),
                     j,
                     col(j, &|q| (r * q).cos()),
                 ));
             }
         }
-        "parallelogram" => {
+        Effect::Parallelogram => {
             let j = hapcal_sim::PARALLELOGRAM_JOINT - 1;
             let (lo, hi) = device.joint_limits().get(j).copied().unwrap_or((-1.0, 1.0));
             let probe = Chebyshev::try_new(lo, hi, vec![0.0; POLY_DEGREE + 1])
@@ -509,7 +515,7 @@ fn candidate_terms(
                 .collect();
             for k in 1..=POLY_DEGREE {
                 terms.push(joint_term(
-                    format!("parallelogram.cheb{k}"),
+                    format!("{effect}.cheb{k}"),
                     j,
                     basis
                         .iter()
@@ -518,7 +524,11 @@ fn candidate_terms(
                 ));
             }
         }
-        other => return Err(format!("unknown candidate {other}")),
+        other => {
+            return Err(format!(
+                "not a candidate of the haptic device's library: {other}"
+            ));
+        }
     }
     if terms.is_empty() {
         return Err("not testable: the device has no joint it applies to".to_owned());
@@ -575,7 +585,7 @@ fn test_candidate(
     data: &Data,
     state: &State,
     base: &Base,
-    effect: &str,
+    effect: Effect,
     terms: Vec<Term>,
     round: usize,
     folds: usize,
@@ -627,7 +637,7 @@ fn test_candidate(
     let before = base.cv.mse().sqrt();
     let gap2 = base.cv.mse() - base.cv.floor();
     let mut cand = Candidate {
-        effect: effect.to_owned(),
+        effect,
         round,
         heldout_rms_before_m: before,
         heldout_rms_after_m: before,
@@ -839,7 +849,7 @@ fn residual_map(
         .map(|p| hapcal_problems::cable_angle(&Point3::from(*p)).0)
         .collect();
     signals.push((
-        "cable_angle".into(),
+        Effect::CableAngle.name().into(),
         gamma.clone(),
         quantile_edges(&gamma, 5),
     ));
@@ -1141,14 +1151,11 @@ pub fn diagnose(
         .flatten()
         .collect();
 
-    let mut library: Vec<String> = EffectKind::LIBRARY
-        .iter()
-        .map(|k| k.name().to_owned())
-        .collect();
+    let mut library: Vec<Effect> = EffectKind::LIBRARY.iter().map(|k| k.effect()).collect();
     if baseline == ModelChoice::Geometric && !device.capstans.is_empty() {
-        library.push("capstan".into());
+        library.push(Effect::Capstans);
         if device.parallelogram.is_some() {
-            library.push("parallelogram".into());
+            library.push(Effect::Parallelogram);
         }
     }
     let mut candidates = Vec::new();
@@ -1156,15 +1163,15 @@ pub fn diagnose(
     // Per accepted effect: its share of its round's held-out gap and of its round's in-sample
     // excess, and whether a significant gap remains after it.
     let mut round_shares: Vec<(f64, f64, bool)> = Vec::new();
-    let mut accepted_names: Vec<String> = Vec::new();
+    let mut accepted_names: Vec<Effect> = Vec::new();
     let mut round_gap_significant = gap_significant;
     for round in 1..=cfg.max_effects {
         // The candidates of a round are independent: tested in parallel (rayon), collected in
         // library order, so the result does not depend on the number of threads.
-        let outcomes: Vec<(&String, Result<Tested, String>)> = library
+        let outcomes: Vec<(Effect, Result<Tested, String>)> = library
             .par_iter()
             .filter(|e| !accepted_names.contains(e))
-            .map(|effect| {
+            .map(|&effect| {
                 let tested = candidate_terms(effect, device, &data, n_joints).and_then(|terms| {
                     test_candidate(
                         &setup, &data, &state, &base, effect, terms, round, cfg.folds,
@@ -1222,7 +1229,7 @@ pub fn diagnose(
             .filter(|(_, t)| t.cand.accepted)
             .max_by(|a, b| a.1.cand.bic_gain.total_cmp(&b.1.cand.bic_gain))
             .map(|(i, _)| i);
-        let confusable: Vec<String> = winner
+        let confusable: Vec<Effect> = winner
             .map(|w| {
                 tested
                     .iter()
@@ -1232,7 +1239,7 @@ pub fn diagnose(
                             && t.cand.n_visible > 0
                             && cosine(&t.fitted, &tested[w].fitted) > 0.9
                     })
-                    .map(|(_, t)| t.cand.effect.clone())
+                    .map(|(_, t)| t.cand.effect)
                     .collect()
             })
             .unwrap_or_default();
@@ -1280,7 +1287,7 @@ pub fn diagnose(
             .collect();
         let after = new_base.cv.mse().sqrt();
         steps.push(Step {
-            effect: win.cand.effect.clone(),
+            effect: win.cand.effect,
             heldout_rms_before_m: before,
             heldout_rms_after_m: after,
             gap_closed_pct: if gap2 > 0.0 {
@@ -1291,7 +1298,7 @@ pub fn diagnose(
             parameters,
             confusable_with: confusable,
         });
-        accepted_names.push(win.cand.effect.clone());
+        accepted_names.push(win.cand.effect);
         candidates.extend(tested.into_iter().map(|t| t.cand));
         let (mse_b, floor_b, excess_b) = (base.cv.mse(), base.cv.floor(), base_rss_excess(&base));
         base = new_base;

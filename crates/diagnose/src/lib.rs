@@ -16,7 +16,7 @@
 //! use std::path::Path;
 //!
 //! use hapcal_diagnose::{DiagnoseConfig, diagnose};
-//! use hapcal_sim::{Effect, MotionConfig, NoiseModel, SimConfig, read_truth, simulate_motion};
+//! use hapcal_sim::{Injected, MotionConfig, NoiseModel, SimConfig, read_truth, simulate_motion};
 //!
 //! let truth_file = Path::new(env!("CARGO_MANIFEST_DIR"))
 //!     .join("../../fixtures/reference-device/truth.toml");
@@ -24,7 +24,7 @@
 //! let device = truth.read_device(&truth_file)?;
 //! let cable = device.cable_encoder.ok_or("no cable encoder")?;
 //! let cfg = SimConfig::new(3, 200).with_noise(NoiseModel::paper(&cable));
-//! let latency: Effect = "latency:tau=0.004".parse()?;
+//! let latency: Injected = "latency:tau=0.004".parse()?;
 //! let rows = simulate_motion(&device, &truth, &cfg, &MotionConfig::default(), &[latency])?;
 //!
 //! let d = diagnose(&device, &rows, &DiagnoseConfig::default())?;

@@ -1,6 +1,7 @@
-//! What a diagnosis names, typed; rendered and serialised as the report has always written it
-//! (`none`, `setup`, `cable_angle+thermal_drift`).
+//! What a diagnosis names, typed end to end in the one vocabulary ([`Effect`]); rendered and
+//! serialised as the report writes it (`none`, `setup`, `cable_angle+thermal_drift`).
 
+use hapcal_contract::Effect;
 use serde::Serialize;
 
 /// The verdict of a diagnosis (the haptic device's, `crate::diagnose`, or a robot's,
@@ -13,18 +14,17 @@ pub enum Verdict {
     /// The setup check found the data set up wrong and the user went on anyway: no physical
     /// effect is named (the command line sets it; the notes carry the finding).
     Setup,
-    /// The library effects named, in the order they were named (their library names:
-    /// `cable_angle`, `gravity_compliance`, `capstan`, …); never empty.
-    Effects(Vec<String>),
+    /// The library effects named, in the order they were named; never empty.
+    Effects(Vec<Effect>),
 }
 
 impl Verdict {
     /// The verdict naming `effects` (in order), or [`Verdict::None`] for none.
-    pub fn of<S: AsRef<str>>(effects: &[S]) -> Verdict {
+    pub fn of(effects: &[Effect]) -> Verdict {
         if effects.is_empty() {
             Verdict::None
         } else {
-            Verdict::Effects(effects.iter().map(|e| e.as_ref().to_owned()).collect())
+            Verdict::Effects(effects.to_vec())
         }
     }
 
@@ -44,7 +44,7 @@ impl Verdict {
     }
 
     /// The effects named (empty for `none` and `setup`).
-    pub fn effects(&self) -> &[String] {
+    pub fn effects(&self) -> &[Effect] {
         match self {
             Verdict::Effects(e) => e,
             Verdict::None | Verdict::Setup => &[],
@@ -58,7 +58,10 @@ impl std::fmt::Display for Verdict {
         match self {
             Verdict::None => f.pad("none"),
             Verdict::Setup => f.pad("setup"),
-            Verdict::Effects(e) => f.pad(&e.join("+")),
+            Verdict::Effects(e) => {
+                let names: Vec<&str> = e.iter().map(|e| e.name()).collect();
+                f.pad(&names.join("+"))
+            }
         }
     }
 }
@@ -75,7 +78,7 @@ impl PartialEq<str> for Verdict {
         match self {
             Verdict::None => other == "none",
             Verdict::Setup => other == "setup",
-            Verdict::Effects(e) => other.split('+').eq(e.iter().map(String::as_str)),
+            Verdict::Effects(e) => other.split('+').eq(e.iter().map(|e| e.name())),
         }
     }
 }
@@ -92,12 +95,12 @@ mod tests {
 
     #[test]
     fn a_verdict_reads_as_the_report_writes_it() {
-        assert_eq!(Verdict::of::<&str>(&[]).to_string(), "none");
+        assert_eq!(Verdict::of(&[]).to_string(), "none");
         assert_eq!(Verdict::Setup.to_string(), "setup");
-        let two = Verdict::of(&["cable_angle", "thermal_drift"]);
+        let two = Verdict::of(&[Effect::CableAngle, Effect::ThermalDrift]);
         assert_eq!(two.to_string(), "cable_angle+thermal_drift");
         assert_eq!(two, "cable_angle+thermal_drift");
-        assert_eq!(two.effects(), ["cable_angle", "thermal_drift"]);
+        assert_eq!(two.effects(), [Effect::CableAngle, Effect::ThermalDrift]);
         assert_ne!(two, "cable_angle");
         assert_ne!(Verdict::None, "setup");
     }

@@ -2,7 +2,7 @@
 //!
 //! [`simulate_motion`] moves the truth device along a smooth multi-sine trajectory
 //! (every joint in both directions, several cycles per log), samples it every
-//! [`MotionConfig::sample_period_s`], and injects any number of [`Effect`]s on top of the
+//! [`MotionConfig::sample_period_s`], and injects any number of [`Injected`]s on top of the
 //! truth transmissions and deviations. Each effect has a stable name ([`EffectKind`]),
 //! parameters given by key (`backlash:j2=1e-3`), a physical model and a source, listed on
 //! [`EffectKind`].
@@ -11,6 +11,7 @@ use std::f64::consts::TAU;
 use std::fmt;
 use std::str::FromStr;
 
+use hapcal_contract::Effect as Vocabulary;
 use hapcal_io::{Device, LogRow, N_EXT};
 use hapcal_kinematics::Point3;
 use rand::{Rng, SeedableRng};
@@ -22,7 +23,8 @@ use crate::{Error, SimConfig, Truth, quantise_readings, true_joint_angles, truth
 /// Handle mass used when the device file has no `[handle]`, kg (docs/design.md §2: 0.2 kg).
 pub const DEFAULT_HANDLE_MASS_KG: f64 = 0.2;
 
-/// The unmodelled effects the simulator can inject, by stable name (docs/design.md §6).
+/// The unmodelled effects the simulator can inject: a subset of the one vocabulary
+/// ([`Vocabulary`], `hapcal_contract::Effect`), by its names (docs/design.md §6, §6.1).
 ///
 /// The first eight ([`EffectKind::LIBRARY`]) form the diagnosis library; the last two
 /// ([`EffectKind::OUTSIDE`]) exist only to test that `diagnose` answers `none` honestly
@@ -32,9 +34,9 @@ pub const DEFAULT_HANDLE_MASS_KG: f64 = 0.2;
 /// | name | keys | model |
 /// |---|---|---|
 /// | `cable_angle` | `k` (m) | `Δd = k·(γ − sin γ)`, γ the cable's angle from the rig z axis |
-/// | `joint_compliance` | `j1..j7` (rad/(N·m)) | `Δθ_j = c_j·τ_j(q)`, τ the handle's gravity torque |
+/// | `gravity_compliance` | `j1..j7` (rad/(N·m)) | `Δθ_j = c_j·τ_j(q)`, τ the handle's gravity torque |
 /// | `backlash` | `j1..j7` (rad) | `Δθ_j = −b_j·sgn(θ̇_j)` |
-/// | `encoder_eccentricity` | `j<k>`, `phase<k>` (rad) | `Δθ_j = e_j·sin(θ_j + φ_j)` |
+/// | `first_harmonic` | `j<k>`, `phase<k>` (rad) | `Δθ_j = e_j·sin(θ_j + φ_j)` |
 /// | `capstan_harmonic` | `j<k>`, `phase<k>` (rad) | `Δθ_j = h_j·sin(2·R_j·θ_j + φ_j)` |
 /// | `thermal_drift` | `k` (1/s) | `d = d_true·(1 + k·(t − t_0))` |
 /// | `latency` | `tau` (s) | `d(t) = d_true(t + τ)` |
@@ -61,11 +63,11 @@ pub enum EffectKind {
     /// Cable encoder error growing with the cable's angle from the rig z axis.
     CableAngle,
     /// Joint deflection proportional to the handle's gravity torque.
-    JointCompliance,
+    GravityCompliance,
     /// Half-width offset signed by motion direction.
     Backlash,
     /// Once-per-revolution harmonic on direct-drive joints.
-    EncoderEccentricity,
+    FirstHarmonic,
     /// Second harmonic of the capstan's motor-drum eccentricity.
     CapstanHarmonic,
     /// Cable length scale drifting linearly in time.
@@ -84,9 +86,9 @@ impl EffectKind {
     /// The diagnosis library, in docs/design.md §6 order.
     pub const LIBRARY: [EffectKind; 8] = [
         EffectKind::CableAngle,
-        EffectKind::JointCompliance,
+        EffectKind::GravityCompliance,
         EffectKind::Backlash,
-        EffectKind::EncoderEccentricity,
+        EffectKind::FirstHarmonic,
         EffectKind::CapstanHarmonic,
         EffectKind::ThermalDrift,
         EffectKind::Latency,
@@ -100,20 +102,30 @@ impl EffectKind {
         EffectKind::LIBRARY.into_iter().chain(EffectKind::OUTSIDE)
     }
 
-    /// The stable name (`cable_angle`, …).
-    pub fn name(self) -> &'static str {
+    /// The effect of the one vocabulary this kind injects.
+    pub fn effect(self) -> Vocabulary {
         match self {
-            EffectKind::CableAngle => "cable_angle",
-            EffectKind::JointCompliance => "joint_compliance",
-            EffectKind::Backlash => "backlash",
-            EffectKind::EncoderEccentricity => "encoder_eccentricity",
-            EffectKind::CapstanHarmonic => "capstan_harmonic",
-            EffectKind::ThermalDrift => "thermal_drift",
-            EffectKind::Latency => "latency",
-            EffectKind::CableOffset => "cable_offset",
-            EffectKind::JointBump => "joint_bump",
-            EffectKind::CableDrumRunout => "cable_drum_runout",
+            EffectKind::CableAngle => Vocabulary::CableAngle,
+            EffectKind::GravityCompliance => Vocabulary::GravityCompliance,
+            EffectKind::Backlash => Vocabulary::Backlash,
+            EffectKind::FirstHarmonic => Vocabulary::FirstHarmonic,
+            EffectKind::CapstanHarmonic => Vocabulary::CapstanHarmonic,
+            EffectKind::ThermalDrift => Vocabulary::ThermalDrift,
+            EffectKind::Latency => Vocabulary::Latency,
+            EffectKind::CableOffset => Vocabulary::CableOffset,
+            EffectKind::JointBump => Vocabulary::JointBump,
+            EffectKind::CableDrumRunout => Vocabulary::CableDrumRunout,
         }
+    }
+
+    /// The kind that injects `effect`; `None` for an effect the simulator cannot inject.
+    pub fn of(effect: Vocabulary) -> Option<EffectKind> {
+        EffectKind::all().find(|k| k.effect() == effect)
+    }
+
+    /// The effect's one name (`cable_angle`, …: [`Vocabulary::name`]).
+    pub fn name(self) -> &'static str {
+        self.effect().name()
     }
 
     /// Whether the diagnosis library contains this effect.
@@ -132,8 +144,8 @@ impl EffectKind {
             EffectKind::CableAngle | EffectKind::ThermalDrift => key == "k",
             EffectKind::Latency => key == "tau",
             EffectKind::CableOffset => key == "c",
-            EffectKind::JointCompliance | EffectKind::Backlash => joint_key("j"),
-            EffectKind::EncoderEccentricity | EffectKind::CapstanHarmonic => {
+            EffectKind::GravityCompliance | EffectKind::Backlash => joint_key("j"),
+            EffectKind::FirstHarmonic | EffectKind::CapstanHarmonic => {
                 joint_key("j") || joint_key("phase")
             }
             EffectKind::JointBump => joint_key("j") || joint_key("at") || key == "width",
@@ -163,8 +175,8 @@ impl EffectKind {
             EffectKind::CableAngle | EffectKind::ThermalDrift => "k",
             EffectKind::Latency => "tau",
             EffectKind::CableOffset => "c",
-            EffectKind::JointCompliance | EffectKind::Backlash => "j1, j2, …",
-            EffectKind::EncoderEccentricity | EffectKind::CapstanHarmonic => {
+            EffectKind::GravityCompliance | EffectKind::Backlash => "j1, j2, …",
+            EffectKind::FirstHarmonic | EffectKind::CapstanHarmonic => {
                 "j1, j2, …, phase1, phase2, …"
             }
             EffectKind::JointBump => "j1, …, at1, …, width",
@@ -203,20 +215,20 @@ impl FromStr for EffectKind {
 
 /// One injected effect: its kind and parameters by key (SI units, see [`EffectKind`]).
 #[derive(Clone, Debug, PartialEq)]
-pub struct Effect {
+pub struct Injected {
     /// Which effect.
     pub kind: EffectKind,
     /// `(key, value)` pairs; keys not given are 0 (`width` defaults to 0.1 rad).
     pub params: Vec<(String, f64)>,
 }
 
-impl Effect {
+impl Injected {
     /// An effect with checked parameters.
     ///
     /// # Errors
     /// [`Error::Effect`] for a key the effect does not accept, a repeated key or a
     /// non-finite value.
-    pub fn try_new(kind: EffectKind, params: Vec<(String, f64)>) -> Result<Effect, Error> {
+    pub fn try_new(kind: EffectKind, params: Vec<(String, f64)>) -> Result<Injected, Error> {
         let bad = |message: String| Error::Effect {
             spec: kind.name().to_owned(),
             message,
@@ -242,7 +254,7 @@ impl Effect {
                 )));
             }
         }
-        Ok(Effect { kind, params })
+        Ok(Injected { kind, params })
     }
 
     /// The value of `key`, or 0 when it is not given.
@@ -262,7 +274,7 @@ impl Effect {
     }
 }
 
-impl fmt::Display for Effect {
+impl fmt::Display for Injected {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}", self.kind)?;
         for (i, (k, v)) in self.params.iter().enumerate() {
@@ -272,13 +284,13 @@ impl fmt::Display for Effect {
     }
 }
 
-impl FromStr for Effect {
+impl FromStr for Injected {
     type Err = Error;
     /// Parses `name[:key=value,key=value…]`, e.g. `backlash:j2=1e-3,j3=5e-4`.
     ///
     /// # Errors
     /// [`Error::Effect`] for an unknown name or key, a malformed pair or a non-finite value.
-    fn from_str(s: &str) -> Result<Effect, Error> {
+    fn from_str(s: &str) -> Result<Injected, Error> {
         let (name, rest) = s.split_once(':').unwrap_or((s, ""));
         let kind: EffectKind = name.trim().parse()?;
         let mut params = Vec::new();
@@ -296,7 +308,7 @@ impl FromStr for Effect {
                 .map_err(|_| bad(format!("expected a number for {key}, found {value:?}")))?;
             params.push((key.trim().to_owned(), value));
         }
-        Effect::try_new(kind, params)
+        Injected::try_new(kind, params)
     }
 }
 
@@ -347,7 +359,7 @@ impl JointPath {
 }
 
 /// Checks the effects against the device: joints exist, capstan harmonics on capstan joints.
-fn check_effects(device: &Device, effects: &[Effect]) -> Result<(), Error> {
+fn check_effects(device: &Device, effects: &[Injected]) -> Result<(), Error> {
     let n = device.n_joints();
     for e in effects {
         for (key, _) in &e.params {
@@ -391,7 +403,7 @@ pub fn simulate_motion(
     truth: &Truth,
     cfg: &SimConfig,
     motion: &MotionConfig,
-    effects: &[Effect],
+    effects: &[Injected],
 ) -> Result<Vec<LogRow>, Error> {
     let noise = cfg.noise;
     for (name, value) in [
@@ -450,7 +462,7 @@ pub fn simulate_motion(
         let mut q = true_joint_angles(device, truth, &theta)?;
         let torques = if effects
             .iter()
-            .any(|e| e.kind == EffectKind::JointCompliance)
+            .any(|e| e.kind == EffectKind::GravityCompliance)
         {
             hapcal_problems::handle_gravity_torques_nm(&chain, &x, &q, mass_kg).map_err(|e| {
                 Error::Effect {
@@ -466,11 +478,9 @@ pub fn simulate_motion(
             for j in 0..n_joints {
                 let th = theta[j];
                 dq[j] += match e.kind {
-                    EffectKind::JointCompliance => e.joint("j", j) * torques[j],
+                    EffectKind::GravityCompliance => e.joint("j", j) * torques[j],
                     EffectKind::Backlash => -e.joint("j", j) * rate[j].signum(),
-                    EffectKind::EncoderEccentricity => {
-                        e.joint("j", j) * (th + e.joint("phase", j)).sin()
-                    }
+                    EffectKind::FirstHarmonic => e.joint("j", j) * (th + e.joint("phase", j)).sin(),
                     EffectKind::CapstanHarmonic => {
                         e.joint("j", j) * (2.0 * ratios[j] * th + e.joint("phase", j)).sin()
                     }
@@ -562,22 +572,28 @@ mod tests {
 
     #[test]
     fn effect_specs_parse_and_reject_bad_input() {
-        let e: Effect = "backlash:j2=1e-3,j3=5e-4".parse().expect("valid");
+        let e: Injected = "backlash:j2=1e-3,j3=5e-4".parse().expect("valid");
         assert_eq!(e.kind, EffectKind::Backlash);
         assert_eq!(e.joint("j", 1), 1e-3);
         assert_eq!(e.get("j1"), 0.0);
-        let round: Effect = e.to_string().parse().expect("round trip");
+        let round: Injected = e.to_string().parse().expect("round trip");
         assert_eq!(round, e);
         let err = "backlash:k=1"
-            .parse::<Effect>()
+            .parse::<Injected>()
             .expect_err("k is not a backlash key");
         assert!(err.to_string().contains("unknown parameter \"k\""), "{err}");
-        let err = "wobble:k=1".parse::<Effect>().expect_err("unknown effect");
+        let err = "wobble:k=1"
+            .parse::<Injected>()
+            .expect_err("unknown effect");
         assert!(err.to_string().contains("unknown effect"), "{err}");
-        let err = "latency:tau=x".parse::<Effect>().expect_err("not a number");
+        let err = "latency:tau=x"
+            .parse::<Injected>()
+            .expect_err("not a number");
         assert!(err.to_string().contains("expected a number"), "{err}");
-        let err = "latency:tau=1,tau=2".parse::<Effect>().expect_err("twice");
+        let err = "latency:tau=1,tau=2"
+            .parse::<Injected>()
+            .expect_err("twice");
         assert!(err.to_string().contains("twice"), "{err}");
-        assert!("cable_offset".parse::<Effect>().is_ok());
+        assert!("cable_offset".parse::<Injected>().is_ok());
     }
 }

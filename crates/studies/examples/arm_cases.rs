@@ -42,7 +42,7 @@ fn main() -> anyhow::Result<()> {
                 c.gap_closed_pct,
                 c.reason
             );
-            if c.effect.contains("compliance") && std::env::var_os("PARAMS").is_some() {
+            if c.effect.is_joint_compliance() && std::env::var_os("PARAMS").is_some() {
                 let z: Vec<String> = (c.parameters.iter())
                     .map(|p| format!("{:.1}", p.value / p.std))
                     .collect();

@@ -1,6 +1,6 @@
 //! The blind test of the serial-arm diagnosis ([`hapcal_diagnose::arm`]) on simulated URDF
 //! robots: draw a case (robot, data kind, a random geometric truth, and no effect, one effect
-//! of [`ArmEffect::LIBRARY`], two of them together, or one effect outside it), simulate the data
+//! of [`ARM_LIBRARY`], two of them together, or one effect outside it), simulate the data
 //! without telling the diagnosis which, fit the geometric baseline
 //! ([`hapcal_calibrate::baseline`]) and score the verdict.
 //!
@@ -37,7 +37,9 @@ use hapcal_calibrate::baseline::{GeometricBaseline, baseline_from_sets, baseline
 use hapcal_calibrate::calibrate::{DataSet, ModelChoice, Plan, load_device};
 use hapcal_calibrate::measured::{Robot, robot_from_urdf};
 use hapcal_calibrate::setup::{SetupInput, SetupReport, Severity, check_setup};
-use hapcal_diagnose::arm::{ArmConfig, ArmEffect, REPEAT_TOLERANCE, diagnose_arm};
+use hapcal_contract::Effect;
+use hapcal_diagnose::Verdict;
+use hapcal_diagnose::arm::{ARM_LIBRARY, ArmConfig, REPEAT_TOLERANCE, diagnose_arm};
 use hapcal_io::{
     MarkerSample, MeasuredRow, MeasurementTable, SocketPlacement, SocketSamples, Units,
 };
@@ -138,10 +140,10 @@ impl ArmData {
     /// geometric baseline fits exactly (the diagnosis reports it "absorbed by the geometric
     /// parameters"), so it leaves no gap to diagnose. Link deflection (a function of the tip's
     /// reach) cannot vary at a socket, where the tip does not move: left out for sockets.
-    pub fn library(self) -> Vec<ArmEffect> {
-        (ArmEffect::LIBRARY.into_iter())
-            .filter(|e| *e != ArmEffect::InstrumentScale)
-            .filter(|e| self == ArmData::Positions || *e != ArmEffect::LinkDeflection)
+    pub fn library(self) -> Vec<Effect> {
+        (ARM_LIBRARY.into_iter())
+            .filter(|e| *e != Effect::InstrumentScale)
+            .filter(|e| self == ArmData::Positions || *e != Effect::LinkDeflection)
             .collect()
     }
 }
@@ -241,22 +243,37 @@ pub enum Injected {
 }
 
 impl Injected {
-    /// Short label (`gravity_compliance`, `harmonic3`, `coupling`, …, `none`).
+    /// The library effect this injects (one vocabulary with the diagnosis); `None` for no
+    /// effect, an effect outside the library or a pair.
+    pub fn effect(&self) -> Option<Effect> {
+        match self {
+            Injected::GravityCompliance { .. } => Some(Effect::GravityCompliance),
+            Injected::LumpedCompliance { .. } => Some(Effect::LumpedCompliance),
+            Injected::Harmonic { h: 1, .. } => Some(Effect::FirstHarmonic),
+            Injected::Harmonic { h: 2, .. } => Some(Effect::SecondHarmonic),
+            Injected::Backlash { .. } => Some(Effect::Backlash),
+            Injected::GearRatio { .. } => Some(Effect::GearRatio),
+            Injected::ThermalDrift { .. } => Some(Effect::ThermalDrift),
+            Injected::LinkDeflection { .. } => Some(Effect::LinkDeflection),
+            Injected::InstrumentScale { .. } => Some(Effect::InstrumentScale),
+            _ => None,
+        }
+    }
+
+    /// Short label: a library effect's name (`gravity_compliance`), or `harmonic3`,
+    /// `coupling`, …, `none`.
     pub fn label(&self) -> String {
+        if let Some(e) = self.effect() {
+            return e.name().into();
+        }
         match self {
             Injected::None => "none".into(),
-            Injected::GravityCompliance { .. } => "gravity_compliance".into(),
-            Injected::LumpedCompliance { .. } => "lumped_compliance".into(),
             Injected::Harmonic { h, .. } => format!("harmonic{h}"),
-            Injected::Backlash { .. } => "backlash".into(),
-            Injected::GearRatio { .. } => "gear_ratio".into(),
-            Injected::ThermalDrift { .. } => "thermal_drift".into(),
-            Injected::LinkDeflection { .. } => "link_deflection".into(),
-            Injected::InstrumentScale { .. } => "instrument_scale".into(),
             Injected::Coupling { .. } => "coupling".into(),
             Injected::QuadraticInstrument { .. } => "quadratic_instrument".into(),
             Injected::QuadraticDrift { .. } => "quadratic_drift".into(),
             Injected::Pair(a, b) => format!("{}+{}", a.label(), b.label()),
+            _ => unreachable!("a library effect is labelled by its name"),
         }
     }
 
@@ -285,35 +302,42 @@ pub struct ArmCase {
 }
 
 impl ArmCase {
-    /// The right verdict: the effect's name for [`ArmCaseKind::One`], both names joined by
-    /// `+` for [`ArmCaseKind::Two`], else `none`.
-    pub fn expected(&self) -> String {
+    /// The right verdict: the injected effect for [`ArmCaseKind::One`], both for
+    /// [`ArmCaseKind::Two`], else none.
+    pub fn expected(&self) -> Verdict {
         match self.kind {
-            ArmCaseKind::One | ArmCaseKind::Two => self.injected.label(),
-            _ => "none".into(),
+            ArmCaseKind::One | ArmCaseKind::Two => {
+                let named: Vec<Effect> = (self.injected.parts().iter())
+                    .filter_map(|p| p.effect())
+                    .collect();
+                Verdict::of(&named)
+            }
+            _ => Verdict::None,
         }
     }
 
     /// Whether `verdict` is right: the expected effects, in any order.
-    pub fn is_right(&self, verdict: &str) -> bool {
+    pub fn is_right(&self, verdict: &Verdict) -> bool {
         self.is_right_with(verdict, &[])
     }
 
     /// Whether `verdict` is right when a named compliance whose torque model the diagnosis
     /// left open (`open`: the named compliance and the other torque model it predicts alike,
     /// [`hapcal_diagnose::arm::ArmStep::alike`]) also stands for that other model.
-    pub fn is_right_with(&self, verdict: &str, open: &[(String, String)]) -> bool {
-        let sorted = |v: &str| {
-            let mut n: Vec<String> = v.split('+').map(str::to_owned).collect();
+    pub fn is_right_with(&self, verdict: &Verdict, open: &[(Effect, Effect)]) -> bool {
+        let sorted = |v: &[Effect]| {
+            let mut n = v.to_vec();
             n.sort();
             n
         };
-        let expected = sorted(&self.expected());
-        let named = sorted(verdict);
-        named == expected
-            || open.iter().any(|(named_model, alike)| {
-                expected.contains(alike)
-                    && sorted(&verdict.replace(named_model.as_str(), alike)) == expected
+        let expected = sorted(self.expected().effects());
+        let named = verdict.effects();
+        sorted(named) == expected
+            || open.iter().any(|&(named_model, alike)| {
+                let swapped: Vec<Effect> = (named.iter())
+                    .map(|&e| if e == named_model { alike } else { e })
+                    .collect();
+                expected.contains(&alike) && sorted(&swapped) == expected
             })
     }
 }
@@ -380,31 +404,32 @@ pub fn draw_case(i: u64, n_joints: usize) -> ArmCase {
         }
         Injected::Harmonic { h, a, b }
     };
-    let library_effect = |rng: &mut ChaCha8Rng, effect: ArmEffect| -> Injected {
+    let library_effect = |rng: &mut ChaCha8Rng, effect: Effect| -> Injected {
         match effect {
-            ArmEffect::GravityCompliance => Injected::GravityCompliance {
+            Effect::GravityCompliance => Injected::GravityCompliance {
                 k: per_joint(rng, 1e-5, 5e-5, false),
             },
-            ArmEffect::LumpedCompliance => Injected::LumpedCompliance {
+            Effect::LumpedCompliance => Injected::LumpedCompliance {
                 k: per_joint(rng, 2e-4, 1e-3, false),
             },
-            ArmEffect::Harmonic1 => harmonic(rng, 1),
-            ArmEffect::Harmonic2 => harmonic(rng, 2),
-            ArmEffect::Backlash => Injected::Backlash {
+            Effect::FirstHarmonic => harmonic(rng, 1),
+            Effect::SecondHarmonic => harmonic(rng, 2),
+            Effect::Backlash => Injected::Backlash {
                 b: per_joint(rng, 2e-4, 1e-3, false),
             },
-            ArmEffect::GearRatio => Injected::GearRatio {
+            Effect::GearRatio => Injected::GearRatio {
                 s: per_joint(rng, 1e-4, 1e-3, true),
             },
-            ArmEffect::ThermalDrift => Injected::ThermalDrift {
+            Effect::ThermalDrift => Injected::ThermalDrift {
                 v: vector(rng, 2e-4, 1e-3),
             },
-            ArmEffect::LinkDeflection => Injected::LinkDeflection {
+            Effect::LinkDeflection => Injected::LinkDeflection {
                 c: rng.random_range(2e-4..=1e-3),
             },
-            ArmEffect::InstrumentScale => Injected::InstrumentScale {
+            Effect::InstrumentScale => Injected::InstrumentScale {
                 s: signed(rng, 2e-4, 1e-3),
             },
+            other => unreachable!("{other} is not in the arm library"),
         }
     };
     let lib = data.library();
@@ -416,13 +441,9 @@ pub fn draw_case(i: u64, n_joints: usize) -> ArmCase {
         }
         ArmCaseKind::Two => {
             let a = lib[rng.random_range(0..lib.len())];
-            let compliance = |e: ArmEffect| {
-                matches!(
-                    e,
-                    ArmEffect::GravityCompliance | ArmEffect::LumpedCompliance
-                )
-            };
-            let others: Vec<ArmEffect> = (lib.iter().copied())
+            let compliance =
+                |e: Effect| matches!(e, Effect::GravityCompliance | Effect::LumpedCompliance);
+            let others: Vec<Effect> = (lib.iter().copied())
                 .filter(|&b| b != a && !(compliance(a) && compliance(b)))
                 .collect();
             let b = others[rng.random_range(0..others.len())];
@@ -881,8 +902,10 @@ fn simulate_sockets(
 pub struct ArmOutcome {
     /// The case.
     pub case: ArmCase,
-    /// The diagnosis's verdict (`error: …` if the pipeline failed).
-    pub verdict: String,
+    /// The diagnosis's verdict, or the error that stopped the pipeline (serialised as the
+    /// report writes it: `gravity_compliance+backlash`, `none`, `error: …`).
+    #[serde(serialize_with = "verdict_or_error")]
+    pub verdict: Result<Verdict, String>,
     /// Whether it names the injected effects ([`ArmCase::is_right_with`]: a compliance whose
     /// torque model the diagnosis left open stands for either model).
     pub right: bool,
@@ -891,7 +914,7 @@ pub struct ArmOutcome {
     pub right_as_written: bool,
     /// Each named compliance whose torque model the diagnosis left open, with the other
     /// model.
-    pub torque_model_open: Vec<(String, String)>,
+    pub torque_model_open: Vec<(Effect, Effect)>,
     /// Share of the gap above the floor the named effects closed, %.
     pub gap_closed_pct: f64,
     /// Held-out (cross-validated) 3-D position RMS of the geometric baseline, m.
@@ -901,7 +924,7 @@ pub struct ArmOutcome {
     /// Whether the gap above the floor was significant.
     pub gap_significant: bool,
     /// Per library effect, the round-1 candidate's held-out RMS after, m, and its reason.
-    pub round1: Vec<(String, f64, String)>,
+    pub round1: Vec<(Effect, f64, String)>,
     /// Wall time of the case, s.
     pub seconds: f64,
 }
@@ -929,23 +952,23 @@ pub fn run_case_with(
     let start = std::time::Instant::now();
     let baseline = simulate_baseline(case, setup, n_rows)?;
     let d = diagnose_arm(&baseline, cfg)?;
-    let open: Vec<(String, String)> = (d.steps.iter())
+    let open: Vec<(Effect, Effect)> = (d.steps.iter())
         .filter(|s| d.verdict.effects().contains(&s.effect))
-        .flat_map(|s| s.alike.iter().map(|a| (s.effect.clone(), a.clone())))
+        .flat_map(|s| s.alike.iter().map(|&a| (s.effect, a)))
         .collect();
     Ok(ArmOutcome {
         case: case.clone(),
-        right: case.is_right_with(&d.verdict.to_string(), &open),
-        right_as_written: case.is_right(&d.verdict.to_string()),
+        right: case.is_right_with(&d.verdict, &open),
+        right_as_written: case.is_right(&d.verdict),
         torque_model_open: open,
-        verdict: d.verdict.to_string(),
+        verdict: Ok(d.verdict),
         gap_closed_pct: d.gap_closed_pct,
         heldout_rms_m: d.heldout_rms_m,
         floor_rms_m: d.floor_rms_m.unwrap_or(f64::NAN),
         gap_significant: d.gap_significant,
         round1: (d.candidates.iter())
             .filter(|c| c.round == 1)
-            .map(|c| (c.effect.clone(), c.heldout_rms_after_m, c.reason.clone()))
+            .map(|c| (c.effect, c.heldout_rms_after_m, c.reason.clone()))
             .collect(),
         seconds: start.elapsed().as_secs_f64(),
     })
@@ -1202,7 +1225,7 @@ pub fn run(
                 right: false,
                 right_as_written: false,
                 torque_model_open: Vec::new(),
-                verdict: format!("error: {e:#}"),
+                verdict: Err(format!("{e:#}")),
                 gap_closed_pct: f64::NAN,
                 heldout_rms_m: f64::NAN,
                 floor_rms_m: f64::NAN,
@@ -1260,6 +1283,21 @@ pub struct ArmSummary {
     pub torque_model_open: BTreeMap<String, (usize, usize)>,
 }
 
+/// A verdict as the report writes it, or `error: …`.
+fn verdict_words(v: &Result<Verdict, String>) -> String {
+    match v {
+        Ok(v) => v.to_string(),
+        Err(e) => format!("error: {e}"),
+    }
+}
+
+fn verdict_or_error<S: serde::Serializer>(
+    v: &Result<Verdict, String>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    s.collect_str(&verdict_words(v))
+}
+
 /// Tallies `outcomes`.
 pub fn summarise(outcomes: &[ArmOutcome]) -> ArmSummary {
     let mut s = ArmSummary::default();
@@ -1273,7 +1311,8 @@ pub fn summarise(outcomes: &[ArmOutcome]) -> ArmSummary {
         let kind = format!("{:?}", o.case.kind).to_lowercase();
         bump(&mut s.by_kind, kind.clone(), o.right);
         bump(&mut s.by_kind_as_written, kind.clone(), o.right_as_written);
-        if o.verdict.split('+').any(|e| e.ends_with("_compliance")) {
+        let named = o.verdict.as_ref().map_or(&[][..], |v| v.effects());
+        if named.iter().any(|e| e.is_joint_compliance()) {
             bump(
                 &mut s.torque_model_open,
                 o.case.data.name().to_owned(),
@@ -1287,11 +1326,12 @@ pub fn summarise(outcomes: &[ArmOutcome]) -> ArmSummary {
         );
         let label = o.case.injected.label();
         bump(&mut s.by_effect, label.clone(), o.right);
-        let verdict = if o.verdict.starts_with("error") {
-            s.errors += 1;
-            "error".to_owned()
-        } else {
-            o.verdict.clone()
+        let verdict = match &o.verdict {
+            Err(_) => {
+                s.errors += 1;
+                "error".to_owned()
+            }
+            Ok(v) => v.to_string(),
         };
         *s.confusion
             .entry(label)
@@ -1447,11 +1487,11 @@ pub fn report_markdown_with(
         if o.case.kind != ArmCaseKind::One || o.right {
             continue;
         }
-        let label = o.case.injected.label();
+        let injected = o.case.injected.effect();
         let reason = (o.round1.iter())
-            .find(|c| c.0 == label)
+            .find(|c| Some(c.0) == injected)
             .map_or("not tested", |c| c.2.split(" (").next().unwrap_or(""));
-        let reason = if o.verdict != "none" && !o.verdict.starts_with("error") {
+        let reason = if o.verdict.as_ref().is_ok_and(|v| *v != Verdict::None) {
             format!("another effect named ({reason})")
         } else {
             reason.to_owned()
@@ -1483,7 +1523,7 @@ pub fn report_markdown_with(
             o.case.robot.name(),
             o.case.data.name(),
             o.case.injected.label(),
-            o.verdict.replace('|', "/"),
+            verdict_words(&o.verdict).replace('|', "/"),
             o.heldout_rms_m * 1e6,
             o.floor_rms_m * 1e6
         ));
@@ -1504,12 +1544,12 @@ mod tests {
                 let parts = c.injected.parts();
                 assert_eq!(parts.len(), if c.kind == ArmCaseKind::Two { 2 } else { 1 });
                 for p in parts {
-                    let e = ArmEffect::from_name(&p.label()).expect("a library effect");
+                    let e = Effect::from_name(&p.label()).expect("a library effect");
                     assert!(c.data.library().contains(&e), "{c:?}");
                 }
                 assert!(c.is_right(&c.expected()));
             } else {
-                assert!(ArmEffect::from_name(&c.injected.label()).is_none());
+                assert!(Effect::from_name(&c.injected.label()).is_none());
             }
         }
     }

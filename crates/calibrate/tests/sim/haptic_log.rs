@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use hapcal_io::{Device, LogRow};
-use hapcal_sim::{Effect, MotionConfig, NoiseModel, SimConfig, Truth, simulate_motion};
+use hapcal_sim::{Injected, MotionConfig, NoiseModel, SimConfig, Truth, simulate_motion};
 
 /// The reference device and its truth (the paper's assigned deviations and transmissions).
 pub(crate) fn reference() -> (Device, Truth) {
@@ -17,11 +17,11 @@ pub(crate) fn reference() -> (Device, Truth) {
 
 /// A motion log of `n` rows of the reference device (the paper's noise: cable encoder
 /// σ_m ≈ 9.9 µm, external encoders a third of a count) with `effects` (the simulator's
-/// effect syntax, e.g. `joint_compliance:j2=5e-3`).
+/// effect syntax, e.g. `gravity_compliance:j2=5e-3`).
 pub(crate) fn log(seed: u64, n: usize, effects: &[&str]) -> Vec<LogRow> {
     let (device, truth) = reference();
     let cable = device.cable_encoder.expect("fixture has a cable encoder");
-    let effects: Vec<Effect> = effects.iter().map(|e| e.parse().unwrap()).collect();
+    let effects: Vec<Injected> = effects.iter().map(|e| e.parse().unwrap()).collect();
     let cfg = SimConfig::new(seed, n).with_noise(NoiseModel::paper(&cable));
     simulate_motion(&device, &truth, &cfg, &MotionConfig::default(), &effects).expect("sim")
 }

@@ -127,7 +127,7 @@ fn compliance_on_a_haptic_log_is_reported_written_and_read_back() {
             "--poses",
             poses,
             "--effect",
-            "joint_compliance:j2=5e-3,j3=5e-3",
+            "gravity_compliance:j2=5e-3,j3=5e-3",
             "--out",
             &log.display().to_string(),
         ]);

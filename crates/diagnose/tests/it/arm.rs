@@ -6,6 +6,7 @@ use hapcal_calibrate::baseline::{baseline_from_tables, geometric_baseline};
 use hapcal_calibrate::calibrate::{ModelChoice, Plan};
 use hapcal_calibrate::measured::robot_from_urdf;
 use hapcal_calibrate::model::Rung;
+use hapcal_contract::Effect;
 use hapcal_diagnose::arm::{ArmConfig, ArmLadderRung, FloorSource, diagnose_arm};
 use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
 use rand::SeedableRng;
@@ -62,14 +63,19 @@ fn kuka_14_names_gravity_compliance_and_it_carries_to_the_test_placements() {
     assert!(
         step.confusable_with
             .iter()
-            .any(|(e, _)| e == "lumped_compliance"),
+            .any(|(e, _)| *e == Effect::LumpedCompliance),
         "{:?}",
         step.confusable_with
     );
     // With the ball in a socket the link masses' torque and a tip weight's vary together: in
     // its place the lumped model predicts as well (0.109 against 0.107 mm), and the step says
     // the torque model is open.
-    assert_eq!(step.alike, ["lumped_compliance"], "{:#?}", d.candidates);
+    assert_eq!(
+        step.alike,
+        [Effect::LumpedCompliance],
+        "{:#?}",
+        d.candidates
+    );
 }
 
 #[test]

@@ -3,10 +3,11 @@
 use std::path::Path;
 
 use hapcal_calibrate::model::ModelChoice;
+use hapcal_contract::Effect;
 use hapcal_diagnose::blind::{BlindConfig, CaseKind, run_case};
 use hapcal_diagnose::{DiagnoseConfig, Error, diagnose};
 use hapcal_io::Device;
-use hapcal_sim::{Effect, MotionConfig, NoiseModel, SimConfig, Truth, simulate, simulate_motion};
+use hapcal_sim::{Injected, MotionConfig, NoiseModel, SimConfig, Truth, simulate, simulate_motion};
 
 fn reference() -> (Device, Truth) {
     let truth_file =
@@ -23,7 +24,7 @@ fn sim_cfg(device: &Device, seed: u64) -> SimConfig {
 
 fn motion_log(seed: u64, effects: &[&str]) -> (Device, Vec<hapcal_io::LogRow>) {
     let (device, truth) = reference();
-    let effects: Vec<Effect> = effects
+    let effects: Vec<Injected> = effects
         .iter()
         .map(|e| e.parse().expect("valid effect"))
         .collect();
@@ -76,7 +77,7 @@ fn backlash_on_joint_2_is_named_and_closes_the_gap() {
 fn latency_and_thermal_drift_together_are_both_found() {
     let (device, rows) = motion_log(13, &["latency:tau=2e-3", "thermal_drift:k=3e-6"]);
     let d = diagnose(&device, &rows, &DiagnoseConfig::default()).expect("diagnoses");
-    let mut found: Vec<&str> = d.verdict.effects().iter().map(String::as_str).collect();
+    let mut found: Vec<&str> = d.verdict.effects().iter().map(|e| e.name()).collect();
     found.sort_unstable();
     assert_eq!(found, ["latency", "thermal_drift"], "{}", d.verdict);
 }
@@ -112,7 +113,7 @@ fn leaving_the_transmissions_out_localises_joints_1_to_4_and_names_them() {
     };
     assert!(top.iter().all(|j| (1..=4).contains(j)), "{:?}", d.joints);
     assert!(
-        (d.verdict.effects().iter()).any(|e| e == "capstan" || e == "parallelogram"),
+        (d.verdict.effects().iter()).any(|e| matches!(e, Effect::Capstans | Effect::Parallelogram)),
         "{}",
         d.verdict
     );

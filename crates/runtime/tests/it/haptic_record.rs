@@ -12,7 +12,7 @@ use hapcal_contract::{ModelName, TorqueSource};
 use hapcal_io::{CalibrationMeta, Device, LogRow};
 use hapcal_problems::{DistanceLogState, EffectTermKind, handle_gravity_torques_nm};
 use hapcal_runtime::{LoadError, Model};
-use hapcal_sim::{Effect, MotionConfig, NoiseModel, SimConfig, simulate_motion};
+use hapcal_sim::{Injected, MotionConfig, NoiseModel, SimConfig, simulate_motion};
 
 use crate::fixture;
 
@@ -31,7 +31,7 @@ fn log(seed: u64, n: usize) -> Vec<LogRow> {
     let truth = hapcal_sim::read_truth(&truth_file).expect("fixture truth");
     let device = truth.read_device(&truth_file).expect("fixture device");
     let cable = device.cable_encoder.expect("a cable encoder");
-    let effect: Effect = format!("joint_compliance:j2={COMPLIANCE},j3={COMPLIANCE}")
+    let effect: Injected = format!("gravity_compliance:j2={COMPLIANCE},j3={COMPLIANCE}")
         .parse()
         .expect("effect");
     let cfg = SimConfig::new(seed, n).with_noise(NoiseModel::paper(&cable));

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use hapcal_sim::{Effect, EffectKind, MotionConfig, NoiseModel, SimConfig, simulate_motion};
+use hapcal_sim::{EffectKind, Injected, MotionConfig, NoiseModel, SimConfig, simulate_motion};
 
 fn reference() -> (hapcal_io::Device, hapcal_sim::Truth) {
     let truth_file =
@@ -14,7 +14,7 @@ fn reference() -> (hapcal_io::Device, hapcal_sim::Truth) {
 
 fn run(effects: &[&str], noise: NoiseModel) -> Vec<hapcal_io::LogRow> {
     let (device, truth) = reference();
-    let effects: Vec<Effect> = effects.iter().map(|e| e.parse().expect("valid")).collect();
+    let effects: Vec<Injected> = effects.iter().map(|e| e.parse().expect("valid")).collect();
     let cfg = SimConfig::new(5, 120).with_noise(noise);
     simulate_motion(&device, &truth, &cfg, &MotionConfig::default(), &effects).expect("simulates")
 }
@@ -69,11 +69,11 @@ fn cable_effects_change_only_the_distance() {
 fn effects_that_do_not_fit_the_device_are_errors() {
     let (device, truth) = reference();
     let cfg = SimConfig::new(1, 10);
-    let bad: Effect = "backlash:j9=1e-3".parse().expect("parses");
+    let bad: Injected = "backlash:j9=1e-3".parse().expect("parses");
     let err = simulate_motion(&device, &truth, &cfg, &MotionConfig::default(), &[bad])
         .expect_err("no joint 9");
     assert!(err.to_string().contains("joints 1..7"), "{err}");
-    let bad: Effect = "capstan_harmonic:j6=1e-3".parse().expect("parses");
+    let bad: Injected = "capstan_harmonic:j6=1e-3".parse().expect("parses");
     let err = simulate_motion(&device, &truth, &cfg, &MotionConfig::default(), &[bad])
         .expect_err("no capstan on 6");
     assert!(err.to_string().contains("no capstan"), "{err}");
