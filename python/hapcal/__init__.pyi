@@ -81,6 +81,9 @@ class RuntimeRobot:
     def joint_names(self) -> List[str]: ...
     @property
     def tip_names(self) -> List[str]: ...
+    def frame(self, name: str) -> Optional[List[List[float]]]:
+        """Identified frame (4 × 4, m): ``"instrument"`` (root link in the instrument frame)
+        or ``"marker1"``, … (marker in its tip link's frame); None if not identified."""
     def tip_poses(self, q: Sequence[float], deflected: bool = True) -> List[List[List[float]]]:
         """4 × 4 pose (m) of each tip at joint angles ``q`` (rad), deflected under the robot's
         own weight unless ``deflected=False``. Raises HapcalError."""
@@ -169,6 +172,11 @@ class Calibration:
         """Calibrated copy of the source URDF (+ ``<path>.calibration.toml``); paths written."""
     def to_toml(self, path: _PathLike) -> List[str]:
         """Device file with a ``[calibration]`` table; paths written."""
+    def predicted_positions(self, q: _ArrayLike) -> npt.NDArray[np.float64]:
+        """The calibration library's positions (m) at joint readings ``q`` (n_rows, n_joints;
+        rad, m prismatic), shape (n_rows, n_markers, 3): a robot's markers in the instrument
+        frame (marker k on tip min(k, last)); a haptic device's end point (n_markers = 1),
+        readings through its transmissions and handle compliance. Raises HapcalError."""
 
 _MeasurementsLike = Union[Measurements, Sequence[Union[Measurements, _PathLike]], _PathLike]
 

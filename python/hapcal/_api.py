@@ -370,6 +370,26 @@ class Calibration:
         """Writes a device file with a ``[calibration]`` table. Returns the paths written."""
         return [os.fspath(p) for p in self._inner.write_outputs(os.fspath(path))]
 
+    def predicted_positions(self, q: Any) -> np.ndarray:
+        """The calibration library's predicted positions at joint readings ``q`` (n_rows,
+        n_joints; rad, m for a prismatic joint; the device's joints in order), m, shape
+        (n_rows, n_markers, 3): for a robot, each marker in the instrument frame (marker k on
+        tip min(k, last)), from the model the report's errors come from; for a haptic device
+        (n_markers = 1), its end point with the readings through the identified
+        transmissions and handle compliance. What the written files must reproduce in
+        :class:`RuntimeRobot` and :class:`RuntimeModel`. Raises HapcalError."""
+        a = _float_array("q", q)
+        if a.ndim != 2:
+            raise HapcalError(
+                f"q: expected a 2-D array (n_rows, n_joints), found {a.ndim} dimension(s)"
+            )
+        rows = [list(map(float, r)) for r in a]
+        if not rows:
+            return np.zeros((0, 0, 3))
+        return np.asarray(self._inner.predicted_positions(rows), dtype=np.float64).reshape(
+            len(rows), -1, 3
+        )
+
     def __repr__(self) -> str:
         return (
             f"Calibration(model={self.model!r}, parameters={len(self._report['parameters'])}, "

@@ -617,6 +617,72 @@ impl PyCalibration {
         py.detach(|| calibrate::write_outputs(outcome, &path))
             .map_err(py_err)
     }
+
+    /// The calibration library's predicted positions at the joint readings `q` (one row per
+    /// configuration, the device's joints in order; rad, m for a prismatic joint), m: per row
+    /// and marker of a robot, the position in the instrument frame from the calibrated model
+    /// the report's errors come from (`CalibratedModel::end_poses_of`, marker k on tip
+    /// min(k, last)); per row of a haptic device, its end point (the readings through the
+    /// identified transmissions and handle compliance; `DistanceLogModel`'s points).
+    fn predicted_positions(
+        &self,
+        py: Python<'_>,
+        q: Vec<Vec<f64>>,
+    ) -> PyResult<Vec<Vec<[f64; 3]>>> {
+        let outcome = &self.outcome;
+        py.detach(|| library_positions(outcome, &q)).map_err(py_err)
+    }
+}
+
+/// [`PyCalibration::predicted_positions`].
+fn library_positions(outcome: &Outcome, q: &[Vec<f64>]) -> Result<Vec<Vec<[f64; 3]>>> {
+    let model = &outcome.model;
+    let n_joints = model.chain.n_joints();
+    for (i, row) in q.iter().enumerate() {
+        if row.len() != n_joints {
+            bail!(
+                "q: row {i} has {} values, expected {n_joints} (one per joint of the device)",
+                row.len()
+            );
+        }
+        if let Some(j) = row.iter().position(|v| !v.is_finite()) {
+            bail!("q: row {i}, joint {j}: {} is not a finite number", row[j]);
+        }
+    }
+    let device = &outcome.device;
+    let haptic = !device.capstans.is_empty() || device.parallelogram.is_some();
+    if let (true, Some(calibrated)) = (haptic, &outcome.calibrated) {
+        use hapcal_calibrate::haptic;
+        let nominal = haptic::HapticDevice::new(device.clone())?;
+        let mut state = haptic::calibrated_log_state(calibrated)?;
+        state.x_kin.clone_from(&model.x_kin);
+        let rows: Vec<hapcal_io::LogRow> = (q.iter())
+            .map(|q| hapcal_io::LogRow {
+                q: q.clone(),
+                distance_m: 0.0,
+                ext: vec![None; hapcal_io::N_EXT],
+                t_s: None,
+                line: 0,
+            })
+            .collect();
+        let log = haptic::log_model(&nominal, &rows, Vec::new()).context(
+            "the positions of a haptic device come from its distance-log model, which needs the \
+             device file's [handle] mass",
+        )?;
+        let lin = log.linearise(&state)?;
+        return Ok((lin.points.iter()).map(|p| vec![[p.x, p.y, p.z]]).collect());
+    }
+    let tips: Vec<usize> = (0..model.tips.len().max(1)).collect();
+    Ok((q.iter())
+        .map(|row| {
+            (model.end_poses_of(&tips, row).iter())
+                .map(|p| {
+                    let t = p.translation.vector;
+                    [t.x, t.y, t.z]
+                })
+                .collect()
+        })
+        .collect())
 }
 
 /// The names of every model, as the command line's `--model` takes them (`ModelChoice`).
@@ -1243,6 +1309,13 @@ impl PyRuntimeRobot {
         self.robot.tip_names().to_vec()
     }
 
+    /// An identified frame of the calibration by name (4 × 4, m): `instrument` (the robot's
+    /// root link frame in the instrument frame) or `marker1`, `marker2`, … (a marker's frame
+    /// in its tip link's frame); `None` if the calibration identified none of that name.
+    fn frame(&self, name: &str) -> Option<Vec<Vec<f64>>> {
+        self.robot.frame(name).as_ref().map(matrix_of)
+    }
+
     /// Pose of each tip (4 × 4, m) at joint angles `q` (rad, m for a prismatic joint): of the
     /// robot deflected under its own weight, or of the rigid robot with `deflected=False`.
     #[pyo3(signature = (q, deflected = true))]
@@ -1439,7 +1512,9 @@ fn _predict(
                 data.display()
             );
         }
-        let prismatic: Vec<bool> = (0..robot.n_joints()).map(|j| robot.is_prismatic(j)).collect();
+        let prismatic: Vec<bool> = (0..robot.n_joints())
+            .map(|j| robot.is_prismatic(j))
+            .collect();
         let schema = hapcal_io::JointSchema {
             names: robot.joint_names(),
             prismatic: &prismatic,
@@ -1448,7 +1523,10 @@ fn _predict(
         let table = hapcal_io::read_measurement_file(&data, &schema, &units)
             .with_context(|| format!("reading joint readings {}", data.display()))?;
         if table.rows.is_empty() {
-            bail!("{}: no data row: expected one joint configuration per row", data.display());
+            bail!(
+                "{}: no data row: expected one joint configuration per row",
+                data.display()
+            );
         }
         let frame = if instrument_frame {
             PredictionFrame::Instrument
@@ -1484,9 +1562,9 @@ fn _predict(
             poses.push(
                 (out.iter())
                     .map(|t| {
-                        let r = nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_fn(
-                            |i, j| t.pose.rotation[i][j],
-                        ));
+                        let r = nalgebra::Rotation3::from_matrix_unchecked(
+                            nalgebra::Matrix3::from_fn(|i, j| t.pose.rotation[i][j]),
+                        );
                         let q = UnitQuaternion::from_rotation_matrix(&r);
                         let (w, v) = (q.w, q.imag());
                         let s = if w < 0.0 { -1.0 } else { 1.0 };
@@ -1497,7 +1575,12 @@ fn _predict(
             );
             sigmas.push(
                 (out.iter())
-                    .map(|t| (t.sigma_m.unwrap_or(f64::NAN), t.sigma_rad.unwrap_or(f64::NAN)))
+                    .map(|t| {
+                        (
+                            t.sigma_m.unwrap_or(f64::NAN),
+                            t.sigma_rad.unwrap_or(f64::NAN),
+                        )
+                    })
                     .collect(),
             );
             region.push(outside.map_or((-1, f64::NAN), |(j, past)| (j as i64, past)));

@@ -4,9 +4,10 @@
 //!
 //! Robots: the C ABI's 7-joint test robot (`tests/data/iiwa14_calibrated.urdf`, link masses,
 //! joint compliances of 1e-4 to 3e-4 rad/(N·m) in its sidecar), tip `ball_link`: one control
-//! cycle (rigid tip pose + spatial Jacobian + deflected tip pose) and one compensation of a
-//! 6-D target, through the C ABI (function pointers) and through `hapcal_runtime::Robot`
-//! directly.
+//! cycle (rigid tip pose + spatial Jacobian + deflected tip pose), pose + spatial Jacobian in
+//! one call (rigid, and deflected with the Jacobian at the deflected angles) and one
+//! compensation of a 6-D target, through the C ABI (function pointers) and through
+//! `hapcal_runtime::Robot` directly.
 
 use std::ffi::CString;
 use std::hint::black_box;
@@ -18,8 +19,8 @@ use hapcal_runtime_c::{
     HAPCAL_TARGET_POSE, HapcalCompensation, HapcalCompensationConfig, HapcalDeflection,
     HapcalModel, HapcalPose, HapcalRobot, HapcalStatus, HapcalTarget, hapcal_evaluate,
     hapcal_model_free, hapcal_model_load, hapcal_robot_compensate,
-    hapcal_robot_deflected_tip_poses, hapcal_robot_free, hapcal_robot_load,
-    hapcal_robot_spatial_jacobian, hapcal_robot_tip_pose,
+    hapcal_robot_deflected_spatial_jacobian, hapcal_robot_deflected_tip_poses, hapcal_robot_free,
+    hapcal_robot_load, hapcal_robot_spatial_jacobian, hapcal_robot_tip_pose,
 };
 
 const THETA: [f64; 7] = [0.1, 0.5, -0.2, 1.0, 0.3, 0.6, -0.4];
@@ -99,6 +100,15 @@ type Deflected = unsafe extern "C" fn(
     usize,
     *mut HapcalDeflection,
 ) -> HapcalStatus;
+type DeflectedJacobian = unsafe extern "C" fn(
+    *mut HapcalRobot,
+    usize,
+    *const f64,
+    usize,
+    *mut f64,
+    *mut HapcalPose,
+    *mut HapcalDeflection,
+) -> HapcalStatus;
 type Compensate = unsafe extern "C" fn(
     *mut HapcalRobot,
     usize,
@@ -130,6 +140,7 @@ fn bench_robot(c: &mut Criterion) {
             hapcal_robot_deflected_tip_poses,
             hapcal_robot_compensate,
         ));
+    let deflected_jacobian: DeflectedJacobian = black_box(hapcal_robot_deflected_spatial_jacobian);
     // The target: where the rigid arm puts its tip at Q (Q is the nominal solution); the
     // compensation corrects the sag.
     let rigid = robot
@@ -187,6 +198,66 @@ fn bench_robot(c: &mut Criterion) {
             let j = robot.spatial_jacobian(0, q, &mut ws, &mut jac).is_ok();
             let d = robot.deflected_tip_poses(q, &mut ws, &mut tips).is_ok();
             (pose, j, d, tips[0].translation_m[0])
+        })
+    });
+    group.finish();
+
+    // Pose + Jacobian in one call: of the rigid robot, and of the deflected robot (one
+    // deflection, the Jacobian at the deflected angles), what a controller calls per cycle.
+    let mut group = c.benchmark_group("robot_pose_jacobian");
+    group.bench_function("c_abi", |b| {
+        let mut pose = HapcalPose {
+            rotation: [[0.0; 3]; 3],
+            translation_m: [0.0; 3],
+        };
+        let mut jac = [0.0; 42];
+        b.iter(|| {
+            let q = black_box(&Q);
+            // SAFETY: a live handle and arrays of the stated sizes.
+            let s = unsafe { spatial(handle, 0, q.as_ptr(), 7, jac.as_mut_ptr(), &mut pose) };
+            (s, pose.translation_m[0], jac[0])
+        })
+    });
+    group.bench_function("rust", |b| {
+        let mut jac = [[0.0; 6]; 7];
+        b.iter(|| {
+            let q = black_box(&Q);
+            let pose = robot.spatial_jacobian(0, q, &mut ws, &mut jac);
+            (pose.map(|p| p.translation_m[0]), jac[0][0])
+        })
+    });
+    group.finish();
+
+    let mut group = c.benchmark_group("robot_deflected_pose_jacobian");
+    group.bench_function("c_abi", |b| {
+        let mut pose = HapcalPose {
+            rotation: [[0.0; 3]; 3],
+            translation_m: [0.0; 3],
+        };
+        let mut jac = [0.0; 42];
+        b.iter(|| {
+            let q = black_box(&Q);
+            // SAFETY: a live handle and arrays of the stated sizes.
+            let s = unsafe {
+                deflected_jacobian(
+                    handle,
+                    0,
+                    q.as_ptr(),
+                    7,
+                    jac.as_mut_ptr(),
+                    &mut pose,
+                    ptr::null_mut(),
+                )
+            };
+            (s, pose.translation_m[0], jac[0])
+        })
+    });
+    group.bench_function("rust", |b| {
+        let mut jac = [[0.0; 6]; 7];
+        b.iter(|| {
+            let q = black_box(&Q);
+            let out = robot.deflected_spatial_jacobian(0, q, &mut ws, &mut jac);
+            (out.map(|(p, _)| p.translation_m[0]), jac[0][0])
         })
     });
     group.finish();

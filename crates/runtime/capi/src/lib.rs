@@ -19,7 +19,13 @@
 //!
 //! A robot handle ([`hapcal_robot_load`]) holds the robot's evaluation workspace, so its
 //! calls allocate nothing; its evaluation calls take it non-`const` and must not overlap on
-//! one handle (one handle per thread).
+//! one handle (one handle per thread). It gives the rigid and deflected tip poses, Jacobians
+//! (also at the deflected angles, [`hapcal_robot_deflected_spatial_jacobian`]), the deflected
+//! joint angles ([`hapcal_robot_deflect`]), the calibration's identified frames
+//! ([`hapcal_robot_frame`]) and new handles with a marker on a tip, other compliances or
+//! another recorded value ([`hapcal_robot_with_marker`]). A predictor handle
+//! ([`hapcal_predictor_new`]) gives the predictions with their 1σ from the calibration
+//! record, as `hapcal predict` prints them.
 //!
 //! ```c
 //! HapcalModel *model = NULL;
@@ -49,8 +55,10 @@ use std::path::Path;
 
 use hapcal_runtime::{Error, Evaluation, LoadError, MAX_JOINTS, Model, Pose};
 
+mod predict;
 mod robot;
 
+pub use predict::*;
 pub use robot::*;
 
 /// A rigid transform `base_T_tip`: rotation matrix (row-major, `rotation[i][j]` = row i,

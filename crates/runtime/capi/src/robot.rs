@@ -33,6 +33,13 @@ pub struct HapcalRobot {
     ws: RobotWorkspace,
 }
 
+impl HapcalRobot {
+    /// The robot the handle evaluates.
+    pub(crate) fn robot(&self) -> &Robot {
+        &self.robot
+    }
+}
+
 /// [`HapcalTarget::kind`]: reach the target's position only (`pose.translation_m`; the
 /// rotation is ignored), 3 equations.
 pub const HAPCAL_TARGET_POSITION: u32 = 0;
@@ -279,9 +286,9 @@ unsafe fn name(
     guard(|| {
         // SAFETY: the caller's contract.
         let robot = &unsafe { crate::get(robot, "robot") }?.robot;
-        let (names, what) = match kind {
-            NameKind::Joint => (robot.joint_names(), "joint"),
-            NameKind::Tip => (robot.tip_names(), "tip"),
+        let (names, what, label) = match kind {
+            NameKind::Joint => (robot.joint_names(), "joint", "joint name"),
+            NameKind::Tip => (robot.tip_names(), "tip", "tip name"),
         };
         let Some(name) = names.get(index) else {
             return Err(Failure::Message(
@@ -292,30 +299,47 @@ unsafe fn name(
                 ),
             ));
         };
-        let bytes = name.as_bytes();
-        // SAFETY: the caller's contract: NULL or valid for one write.
-        if let Some(len) = unsafe { len_out.as_mut() } {
-            *len = bytes.len();
-        }
-        if buf.is_null() && buf_len == 0 {
-            return Ok(());
-        }
-        // SAFETY: the caller's contract: NULL or valid for `buf_len` writes.
-        let buf = unsafe { slice_mut(buf.cast::<u8>(), buf_len, "buf") }?;
-        if buf.len() <= bytes.len() {
-            return Err(Failure::Message(
-                HapcalStatus::Length,
-                format!(
-                    "buf: {} bytes cannot hold the {what} name {name:?} ({} bytes with its NUL)",
-                    buf.len(),
-                    bytes.len() + 1
-                ),
-            ));
-        }
-        buf[..bytes.len()].copy_from_slice(bytes);
-        buf[bytes.len()] = 0;
-        Ok(())
+        // SAFETY: forwarded contract.
+        unsafe { copy_text(name, label, buf, buf_len, len_out) }
     })
+}
+
+/// Writes `text` with its NUL into `buf[0 .. buf_len]` and its length in bytes without the
+/// NUL into `*len_out` unless `len_out` is NULL; with `buf` NULL and `buf_len` 0 only the
+/// length. `Length` (naming `what`) when the buffer is too small; `*len_out` is still written.
+///
+/// # Safety
+/// `buf` NULL or valid for `buf_len` writes; `len_out` NULL or valid for one write.
+pub(crate) unsafe fn copy_text(
+    text: &str,
+    what: &str,
+    buf: *mut c_char,
+    buf_len: usize,
+    len_out: *mut usize,
+) -> Result<(), Failure> {
+    let bytes = text.as_bytes();
+    // SAFETY: the caller's contract: NULL or valid for one write.
+    if let Some(len) = unsafe { len_out.as_mut() } {
+        *len = bytes.len();
+    }
+    if buf.is_null() && buf_len == 0 {
+        return Ok(());
+    }
+    // SAFETY: the caller's contract: NULL or valid for `buf_len` writes.
+    let buf = unsafe { slice_mut(buf.cast::<u8>(), buf_len, "buf") }?;
+    if buf.len() <= bytes.len() {
+        return Err(Failure::Message(
+            HapcalStatus::Length,
+            format!(
+                "buf: {} bytes cannot hold the {what} {text:?} ({} bytes with its NUL)",
+                buf.len(),
+                bytes.len() + 1
+            ),
+        ));
+    }
+    buf[..bytes.len()].copy_from_slice(bytes);
+    buf[bytes.len()] = 0;
+    Ok(())
 }
 
 /// Writes the name of joint `joint` (the URDF's `<joint name>`, UTF-8) with its NUL into
@@ -708,6 +732,335 @@ pub unsafe extern "C" fn hapcal_robot_outside_region(
         };
         let flag = robot.outside_region(q).map_err(Failure::Robot)?;
         (*joint, *distance) = flag.unwrap_or((HAPCAL_INSIDE_REGION, 0.0));
+        Ok(())
+    })
+}
+
+/// Stores a new handle holding `robot` (and a workspace made for it) in `*out`.
+///
+/// # Safety
+/// `out` is valid for one write.
+unsafe fn store_robot(out: *mut *mut HapcalRobot, robot: Robot) {
+    let ws = robot.workspace();
+    // SAFETY: the caller's contract.
+    unsafe { *out = Box::into_raw(Box::new(HapcalRobot { robot, ws })) };
+}
+
+/// Joint limits of the robot, into `lower_out[n_joints]` and `upper_out[n_joints]` (rad, m for
+/// a prismatic joint; `-INFINITY` and `INFINITY` for a continuous joint), in the order of the
+/// joint names ([`hapcal_runtime::Robot::limits`]).
+///
+/// Returns `Ok`, `NullPointer` or `Length`.
+///
+/// # Safety
+/// `robot` is NULL or a live handle; `lower_out` and `upper_out` NULL or valid for `n_joints`
+/// writes.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hapcal_robot_limits(
+    robot: *const HapcalRobot,
+    lower_out: *mut f64,
+    upper_out: *mut f64,
+    n_joints: usize,
+) -> HapcalStatus {
+    guard(|| {
+        // SAFETY: the caller's contract, for every pointer.
+        let (robot, lower, upper) = unsafe {
+            let robot = &crate::get(robot, "robot")?.robot;
+            check_n(robot, n_joints)?;
+            (
+                robot,
+                slice_mut(lower_out, n_joints, "lower_out")?,
+                slice_mut(upper_out, n_joints, "upper_out")?,
+            )
+        };
+        for ((lo, hi), &(l, h)) in lower.iter_mut().zip(upper.iter_mut()).zip(robot.limits()) {
+            (*lo, *hi) = (l, h);
+        }
+        Ok(())
+    })
+}
+
+/// Whether joint `joint` is prismatic (its angle in m, not rad); false for NULL or a joint
+/// index past the last ([`hapcal_runtime::Robot::is_prismatic`]).
+///
+/// # Safety
+/// `robot` is NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hapcal_robot_is_prismatic(
+    robot: *const HapcalRobot,
+    joint: usize,
+) -> bool {
+    // SAFETY: the caller's contract.
+    unsafe { robot.as_ref() }
+        .is_some_and(|r| joint < r.robot.n_joints() && r.robot.is_prismatic(joint))
+}
+
+/// The compliance of each joint (0: rigid), into `k_out[n_joints]`: rad/(N·m) with link
+/// masses, rad/m with lumped unit weights ([`hapcal_robot_has_link_masses`];
+/// [`hapcal_runtime::Robot::compliances`]).
+///
+/// Returns `Ok`, `NullPointer` or `Length`.
+///
+/// # Safety
+/// `robot` is NULL or a live handle; `k_out` NULL or valid for `n_joints` writes.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hapcal_robot_compliances(
+    robot: *const HapcalRobot,
+    k_out: *mut f64,
+    n_joints: usize,
+) -> HapcalStatus {
+    guard(|| {
+        // SAFETY: the caller's contract, for every pointer.
+        let (robot, k) = unsafe {
+            let robot = &crate::get(robot, "robot")?.robot;
+            check_n(robot, n_joints)?;
+            (robot, slice_mut(k_out, n_joints, "k_out")?)
+        };
+        k.copy_from_slice(robot.compliances());
+        Ok(())
+    })
+}
+
+/// An identified frame of the calibration by name (UTF-8, NUL-terminated): `instrument`
+/// (the robot's root link frame in the instrument's frame) or `marker1`, `marker2`, … (a
+/// marker's frame in its tip link's frame), as the sidecar holds them
+/// ([`hapcal_runtime::Robot::frame`]). `*found_out` says whether the calibration identified
+/// a frame of that name; only then is `*pose_out` written.
+///
+/// Returns `Ok` (found or not: read `*found_out`), `NullPointer` or `InvalidUtf8`.
+///
+/// # Safety
+/// `robot` is NULL or a live handle; `name` NULL or a NUL-terminated string; `pose_out` and
+/// `found_out` NULL or valid for one write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hapcal_robot_frame(
+    robot: *const HapcalRobot,
+    name: *const c_char,
+    pose_out: *mut HapcalPose,
+    found_out: *mut bool,
+) -> HapcalStatus {
+    guard(|| {
+        // SAFETY: the caller's contract, for every pointer.
+        let (robot, name, pose, found) = unsafe {
+            (
+                &crate::get(robot, "robot")?.robot,
+                crate::str_arg(name, "name")?,
+                pose_out.as_mut().ok_or(Failure::Null("pose_out"))?,
+                found_out.as_mut().ok_or(Failure::Null("found_out"))?,
+            )
+        };
+        *found = false;
+        if let Some(frame) = robot.frame(name) {
+            *pose = frame.into();
+            *found = true;
+        }
+        Ok(())
+    })
+}
+
+/// A new handle in `*out`: the robot with the frame `*marker` on tip `tip`'s link (in the
+/// link's frame, e.g. the calibration's `marker1` from [`hapcal_robot_frame`]); its poses and
+/// Jacobians of that tip are then of the marker frame, the gravity loads unchanged
+/// ([`hapcal_runtime::Robot::with_marker`]). `robot` itself is unchanged; free both.
+///
+/// Returns `Ok`, `NullPointer`, `NotFinite` (a pose entry) or `InvalidArgument` (tip index
+/// past the last); `*out` is written only on success.
+///
+/// # Safety
+/// `robot` is NULL or a live handle; `marker` NULL or valid for one read; `out` NULL or valid
+/// for one write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hapcal_robot_with_marker(
+    robot: *const HapcalRobot,
+    tip: usize,
+    marker: *const HapcalPose,
+    out: *mut *mut HapcalRobot,
+) -> HapcalStatus {
+    guard(|| {
+        // SAFETY: the caller's contract, for every pointer.
+        let (robot, marker) = unsafe {
+            (
+                &crate::get(robot, "robot")?.robot,
+                crate::get(marker, "marker")?,
+            )
+        };
+        if out.is_null() {
+            return Err(Failure::Null("out"));
+        }
+        let marker = Pose {
+            rotation: marker.rotation,
+            translation_m: marker.translation_m,
+        };
+        let moved = robot.with_marker(tip, &marker).map_err(Failure::Robot)?;
+        // SAFETY: `out` is non-null and valid for a write by the caller's contract.
+        unsafe { store_robot(out, moved) };
+        Ok(())
+    })
+}
+
+/// A new handle in `*out`: the robot with the joint compliances `k[n_joints]` (rad/(N·m)
+/// with link masses, rad/m with lumped unit weights), e.g. a rigid copy with zeros
+/// ([`hapcal_runtime::Robot::with_compliances`]). `robot` itself is unchanged; free both.
+///
+/// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`; `*out` is written only on success.
+///
+/// # Safety
+/// `robot` is NULL or a live handle; `k` NULL or valid for `n_joints` reads; `out` NULL or
+/// valid for one write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hapcal_robot_with_compliances(
+    robot: *const HapcalRobot,
+    k: *const f64,
+    n_joints: usize,
+    out: *mut *mut HapcalRobot,
+) -> HapcalStatus {
+    guard(|| {
+        // SAFETY: the caller's contract, for every pointer.
+        let (robot, k) = unsafe {
+            let robot = &crate::get(robot, "robot")?.robot;
+            check_n(robot, n_joints)?;
+            (robot, slice(k, n_joints, "k")?)
+        };
+        if out.is_null() {
+            return Err(Failure::Null("out"));
+        }
+        let changed = robot.with_compliances(k).map_err(Failure::Robot)?;
+        // SAFETY: `out` is non-null and valid for a write by the caller's contract.
+        unsafe { store_robot(out, changed) };
+        Ok(())
+    })
+}
+
+/// A new handle in `*out`: the robot with the calibration record's value `name` (UTF-8,
+/// NUL-terminated; a name of the sidecar's `[values]`, e.g. `compliance.joint_a2`) set to
+/// `value` (in the record's unit): a kinematic value moves its joint's origin, a compliance or
+/// harmonic changes the deflection ([`hapcal_runtime::Robot::with_value`]). `robot` itself is
+/// unchanged; free both.
+///
+/// Returns `Ok`, `NullPointer`, `InvalidUtf8`, `NotFinite` or `InvalidArgument` (a name the
+/// record does not hold); `*out` is written only on success.
+///
+/// # Safety
+/// `robot` is NULL or a live handle; `name` NULL or a NUL-terminated string; `out` NULL or
+/// valid for one write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hapcal_robot_with_value(
+    robot: *const HapcalRobot,
+    name: *const c_char,
+    value: f64,
+    out: *mut *mut HapcalRobot,
+) -> HapcalStatus {
+    guard(|| {
+        // SAFETY: the caller's contract, for every pointer.
+        let (robot, name) = unsafe {
+            (
+                &crate::get(robot, "robot")?.robot,
+                crate::str_arg(name, "name")?,
+            )
+        };
+        if out.is_null() {
+            return Err(Failure::Null("out"));
+        }
+        let changed = robot.with_value(name, value).map_err(|e| match e {
+            Error::Invalid { .. } => {
+                Failure::Message(HapcalStatus::InvalidArgument, format!("{name:?}: {e}"))
+            }
+            e => Failure::Robot(e),
+        })?;
+        // SAFETY: `out` is non-null and valid for a write by the caller's contract.
+        unsafe { store_robot(out, changed) };
+        Ok(())
+    })
+}
+
+/// The joint angles θ the calibrated robot takes when commanded `q` (rad, m for a prismatic
+/// joint), into `theta_out[n_joints]`: `θ = q + k∘τ + h(q)`, the gravity torques τ on the
+/// nominal geometry at the readings, or at the torque equilibrium `θ = q + k∘τ(θ)` when the
+/// calibration solved it, and the joint harmonics h (Judd & Knasinski 1990;
+/// [`hapcal_runtime::Robot::deflect`]); `theta_out` = `q` without compliance or harmonics.
+/// What the deflection did goes to `*deflection_out` unless it is NULL.
+///
+/// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+///
+/// # Safety
+/// `robot` is NULL or a live handle not in use by another call; `q` and `theta_out` NULL or
+/// valid for `n_joints` values; `deflection_out` NULL or valid for one write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hapcal_robot_deflect(
+    robot: *mut HapcalRobot,
+    q: *const f64,
+    n_joints: usize,
+    theta_out: *mut f64,
+    deflection_out: *mut HapcalDeflection,
+) -> HapcalStatus {
+    // SAFETY: the caller's contract.
+    let handle = unsafe { robot.as_mut() };
+    with_robot(handle, |robot, ws| {
+        check_n(robot, n_joints)?;
+        // SAFETY: the caller's contract, for every pointer.
+        let (q, theta) = unsafe {
+            (
+                slice(q, n_joints, "q")?,
+                slice_mut(theta_out, n_joints, "theta_out")?,
+            )
+        };
+        let deflection = robot.deflect(q, ws, theta).map_err(Failure::Robot)?;
+        // SAFETY: the caller's contract: NULL or valid for one write.
+        if let Some(out) = unsafe { deflection_out.as_mut() } {
+            *out = deflection.into();
+        }
+        Ok(())
+    })
+}
+
+/// The calibrated pose of tip `tip` when commanded `q` (deflected under the robot's own
+/// weight, with the calibration's harmonics: as [`hapcal_robot_deflected_tip_poses`]) into
+/// `*pose_out` unless it is NULL, and its spatial Jacobian at the deflected angles θ into
+/// `jac_out[6·n_joints]` (as [`hapcal_robot_spatial_jacobian`] at θ; the compliance's own
+/// `∂θ/∂q`, a relative change of about `k·∂τ/∂θ`, left out), from one deflection: what a
+/// controller needs per cycle ([`hapcal_runtime::Robot::deflected_spatial_jacobian`]). What
+/// the deflection did goes to `*deflection_out` unless it is NULL.
+///
+/// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `InvalidArgument` (tip index past
+/// the last).
+///
+/// # Safety
+/// `robot` is NULL or a live handle not in use by another call; `q` NULL or valid for
+/// `n_joints` values; `jac_out` NULL or valid for `6·n_joints` writes; `pose_out` and
+/// `deflection_out` NULL or valid for one write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hapcal_robot_deflected_spatial_jacobian(
+    robot: *mut HapcalRobot,
+    tip: usize,
+    q: *const f64,
+    n_joints: usize,
+    jac_out: *mut f64,
+    pose_out: *mut HapcalPose,
+    deflection_out: *mut HapcalDeflection,
+) -> HapcalStatus {
+    // SAFETY: the caller's contract.
+    let handle = unsafe { robot.as_mut() };
+    with_robot(handle, |robot, ws| {
+        check_n(robot, n_joints)?;
+        // SAFETY: the caller's contract, for every pointer; `[f64; 6]` has the layout of
+        // six consecutive doubles, so 6·n doubles are n columns.
+        let (q, jac) = unsafe {
+            (
+                slice(q, n_joints, "q")?,
+                slice_mut(jac_out.cast::<[f64; 6]>(), n_joints, "jac_out")?,
+            )
+        };
+        let (pose, deflection) =
+            (robot.deflected_spatial_jacobian(tip, q, ws, jac)).map_err(Failure::Robot)?;
+        // SAFETY: the caller's contract: NULL or valid for one write each.
+        unsafe {
+            if let Some(out) = pose_out.as_mut() {
+                *out = pose.into();
+            }
+            if let Some(out) = deflection_out.as_mut() {
+                *out = deflection.into();
+            }
+        }
         Ok(())
     })
 }

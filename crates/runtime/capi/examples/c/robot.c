@@ -2,20 +2,27 @@
  * masses and joint compliances in its sidecar) with the tips ball_link and tool0, and prints,
  * at one joint configuration, the rigid tip pose, the spatial and body Jacobians, the gravity
  * torques, the tips' poses deflected under the robot's own weight (the calibrated model's
- * prediction), the region flag, and the command that brings the deflected tip onto the rigid
- * tip's pose (compensation), with 17 significant digits (the numbers round-trip to the same
- * doubles).
+ * prediction), the joint limits and compliances, the deflected joint angles, the deflected
+ * pose and spatial Jacobian of one control cycle, the identified instrument and marker
+ * frames, the poses of the robot with its marker on tip 0, the predictions with their 1σ in
+ * the instrument frame, the region flag, and the command that brings the deflected tip onto
+ * the rigid tip's pose (compensation), with 17 significant digits (the numbers round-trip to
+ * the same doubles).
  *
- *   robot [robot.urdf] [--bench N]
+ *   robot [robot.urdf] [--record record.urdf] [--bench N]
+ *
+ * --record also loads a robot whose sidecar is a calibration record (with tip ball_link) and
+ * prints its prediction with 1σ and the region flag at a reading past its training range.
  *
  * --bench N also times N cycles of tip pose + spatial Jacobian + deflected tip poses on one
- * thread and prints the mean in ns. Build (from crates/runtime/capi, after
+ * thread, and N calls of the deflected pose + spatial Jacobian, and prints the means in ns. Build (from crates/runtime/capi, after
  * `cargo build --release -p hapcal-runtime-capi`):
  *
  *   cc -std=c99 -D_POSIX_C_SOURCE=199309L -O2 -Iinclude examples/c/robot.c \
  *      ../../../target/release/libhapcal_runtime_c.a -lpthread -ldl -lm -o robot
  */
 #include <math.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -48,10 +55,13 @@ static int fail(HapcalRobot *robot) {
 
 int main(int argc, char **argv) {
     const char *path = "tests/data/iiwa14_calibrated.urdf";
+    const char *record_path = NULL;
     long bench = 0;
     for (int i = 1; i < argc; i++) {
         if (strcmp(argv[i], "--bench") == 0 && i + 1 < argc) {
             bench = strtol(argv[++i], NULL, 10);
+        } else if (strcmp(argv[i], "--record") == 0 && i + 1 < argc) {
+            record_path = argv[++i];
         } else {
             path = argv[i];
         }
@@ -102,6 +112,111 @@ int main(int argc, char **argv) {
     print_pose("deflected1", &deflected[1]);
     printf("deflection %zu %.17g %d\n", deflection.iterations, deflection.final_step_rad,
            (int)deflection.converged);
+
+    /* Limits and compliances. */
+    double lower[N_JOINTS], upper[N_JOINTS], k[N_JOINTS];
+    if (hapcal_robot_limits(robot, lower, upper, n) != HAPCAL_STATUS_OK ||
+        hapcal_robot_compliances(robot, k, n) != HAPCAL_STATUS_OK) {
+        return fail(robot);
+    }
+    print_row("limits_lower", lower, n);
+    print_row("limits_upper", upper, n);
+    print_row("compliances", k, n);
+    printf("is_prismatic %d\n", (int)hapcal_robot_is_prismatic(robot, 0));
+
+    /* The deflected joint angles, and one control cycle's deflected pose and spatial
+     * Jacobian (at the deflected angles) from one deflection. */
+    double theta[N_JOINTS], deflected_jac[6 * N_JOINTS];
+    HapcalPose deflected_pose;
+    HapcalDeflection theta_deflection, jac_deflection;
+    if (hapcal_robot_deflect(robot, q, n, theta, &theta_deflection) != HAPCAL_STATUS_OK ||
+        hapcal_robot_deflected_spatial_jacobian(robot, 0, q, n, deflected_jac, &deflected_pose,
+                                                &jac_deflection) != HAPCAL_STATUS_OK) {
+        return fail(robot);
+    }
+    print_row("deflected_theta_rad", theta, n);
+    printf("theta_deflection %zu %.17g %d\n", theta_deflection.iterations,
+           theta_deflection.final_step_rad, (int)theta_deflection.converged);
+    print_pose("deflected_jacobian_pose", &deflected_pose);
+    print_row("deflected_spatial_jacobian", deflected_jac, 6 * n);
+    printf("jacobian_deflection %zu\n", jac_deflection.iterations);
+
+    /* The calibration's identified frames, and the robot with marker1 on tip 0. */
+    HapcalPose instrument, marker, unused;
+    bool found_instrument = false, found_marker = false, found_other = true;
+    if (hapcal_robot_frame(robot, "instrument", &instrument, &found_instrument) != HAPCAL_STATUS_OK ||
+        hapcal_robot_frame(robot, "marker1", &marker, &found_marker) != HAPCAL_STATUS_OK ||
+        hapcal_robot_frame(robot, "marker9", &unused, &found_other) != HAPCAL_STATUS_OK) {
+        return fail(robot);
+    }
+    printf("frames_found %d %d %d\n", (int)found_instrument, (int)found_marker, (int)found_other);
+    print_pose("frame_instrument", &instrument);
+    print_pose("frame_marker1", &marker);
+    HapcalRobot *marked = NULL;
+    if (hapcal_robot_with_marker(robot, 0, &marker, &marked) != HAPCAL_STATUS_OK) return fail(robot);
+    HapcalPose marked_pose, marked_deflected[N_TIPS];
+    HapcalStatus marked_status = hapcal_robot_tip_pose(marked, 0, q, n, &marked_pose);
+    if (marked_status == HAPCAL_STATUS_OK) {
+        marked_status = hapcal_robot_deflected_tip_poses(marked, q, n, marked_deflected, N_TIPS, NULL);
+    }
+    hapcal_robot_free(marked);
+    if (marked_status != HAPCAL_STATUS_OK) return fail(robot);
+    print_pose("marked_tip_pose", &marked_pose);
+    print_pose("marked_deflected0", &marked_deflected[0]);
+
+    /* Predictions with their 1σ, in the instrument frame (marker1 on tip 0). */
+    HapcalPredictor *predictor = NULL;
+    if (hapcal_predictor_new(robot, HAPCAL_FRAME_INSTRUMENT, &predictor) != HAPCAL_STATUS_OK) return fail(robot);
+    HapcalTipPrediction predicted[N_TIPS];
+    char note[256];
+    HapcalStatus predicted_status = hapcal_predictor_predict(predictor, q, n, predicted, N_TIPS);
+    if (predicted_status == HAPCAL_STATUS_OK) {
+        predicted_status = hapcal_predictor_uncertainty_note(predictor, note, sizeof note, NULL);
+    }
+    printf("predictor %d %d %zu\n", (int)hapcal_predictor_basis(predictor),
+           (int)hapcal_predictor_has_uncertainty(predictor), hapcal_predictor_n_values(predictor));
+    hapcal_predictor_free(predictor);
+    if (predicted_status != HAPCAL_STATUS_OK) return fail(robot);
+    for (size_t t = 0; t < N_TIPS; t++) {
+        char key[32];
+        snprintf(key, sizeof key, "predicted%zu", t);
+        print_pose(key, &predicted[t].pose);
+        printf("predicted%zu_has_sigma %d\n", t, (int)predicted[t].has_sigma);
+    }
+    printf("uncertainty_note %s\n", note);
+
+    /* --record PATH: a robot whose sidecar is a calibration record (values with their σ and
+     * covariance, a region), tip ball_link: its prediction in the instrument frame with 1σ,
+     * and the region flag at a reading past its training range. */
+    if (record_path != NULL) {
+        const char *record_tips[1] = {"ball_link"};
+        HapcalRobot *record_robot = NULL;
+        HapcalPredictor *record_predictor = NULL;
+        HapcalTipPrediction record_predicted[1];
+        double far[N_JOINTS];
+        memcpy(far, q, sizeof far);
+        far[1] = 1.6;
+        size_t record_joint = 0;
+        double record_distance = 0.0;
+        HapcalStatus st = hapcal_robot_load(record_path, record_tips, 1, &record_robot);
+        if (st == HAPCAL_STATUS_OK) st = hapcal_predictor_new(record_robot, HAPCAL_FRAME_INSTRUMENT, &record_predictor);
+        if (st == HAPCAL_STATUS_OK) st = hapcal_predictor_predict(record_predictor, q, n, record_predicted, 1);
+        if (st == HAPCAL_STATUS_OK) {
+            st = hapcal_predictor_outside_region(record_predictor, far, n, &record_joint, &record_distance);
+        }
+        if (st == HAPCAL_STATUS_OK) {
+            print_pose("record_predicted0", &record_predicted[0].pose);
+            double sigma[2] = {record_predicted[0].sigma_m, record_predicted[0].sigma_rad};
+            print_row("record_predicted0_sigma", sigma, 2);
+            printf("record_predictor %d %d %zu\n", (int)hapcal_predictor_basis(record_predictor),
+                   (int)hapcal_predictor_has_uncertainty(record_predictor),
+                   hapcal_predictor_n_values(record_predictor));
+            printf("record_region %zu %.17g\n", record_joint, record_distance);
+        }
+        hapcal_predictor_free(record_predictor);
+        hapcal_robot_free(record_robot);
+        if (st != HAPCAL_STATUS_OK) return fail(robot);
+    }
 
     /* The region the calibration was fitted on. */
     size_t joint;
@@ -157,6 +272,16 @@ int main(int argc, char **argv) {
         clock_gettime(CLOCK_MONOTONIC, &t1);
         double ns = (double)(t1.tv_sec - t0.tv_sec) * 1e9 + (double)(t1.tv_nsec - t0.tv_nsec);
         printf("bench_ns_per_cycle %.1f (%ld cycles, checksum %.6g)\n", ns / (double)bench, bench, sink);
+        clock_gettime(CLOCK_MONOTONIC, &t0);
+        for (long i = 0; i < bench; i++) {
+            qb[0] = q[0] + 1e-9 * (double)(i & 1023);
+            hapcal_robot_deflected_spatial_jacobian(robot, 0, qb, n, spatial, &pose, NULL);
+            sink += pose.translation_m[0] + spatial[0];
+        }
+        clock_gettime(CLOCK_MONOTONIC, &t1);
+        ns = (double)(t1.tv_sec - t0.tv_sec) * 1e9 + (double)(t1.tv_nsec - t0.tv_nsec);
+        printf("bench_ns_per_deflected_jacobian %.1f (%ld calls, checksum %.6g)\n", ns / (double)bench,
+               bench, sink);
     }
 
     hapcal_robot_free(robot);

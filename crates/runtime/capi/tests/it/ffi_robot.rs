@@ -370,6 +370,195 @@ fn a_position_target_is_reached_by_the_deflected_tip() {
     unsafe { hapcal_robot_free(robot) };
 }
 
+#[test]
+fn frames_markers_values_and_predictors_fail_with_statuses_and_messages() {
+    let robot = load();
+    let name = c_string("marker1");
+    let mut pose = zero_pose();
+    let mut found = false;
+    let mut out = ptr::null_mut();
+    let nan_marker = HapcalPose {
+        rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, f64::NAN]],
+        translation_m: [0.0; 3],
+    };
+    // SAFETY: every pointer is NULL or valid for the stated sizes.
+    unsafe {
+        let s = hapcal_robot_frame(robot, ptr::null(), &mut pose, &mut found);
+        assert_eq!(
+            (s, message().as_str()),
+            (HapcalStatus::NullPointer, "name is NULL")
+        );
+        let s = hapcal_robot_frame(robot, name.as_ptr(), &mut pose, ptr::null_mut());
+        assert_eq!(
+            (s, message().as_str()),
+            (HapcalStatus::NullPointer, "found_out is NULL")
+        );
+        let s = hapcal_robot_with_marker(robot, 2, &pose, &mut out);
+        assert_eq!(s, HapcalStatus::InvalidArgument);
+        assert_eq!(
+            message(),
+            "tip = 2 is invalid: expected a tip index below the number of tips"
+        );
+        let s = hapcal_robot_with_marker(robot, 0, &nan_marker, &mut out);
+        assert_eq!(s, HapcalStatus::NotFinite);
+        assert_eq!(message(), "marker[8] = NaN is not finite");
+        let s = hapcal_robot_with_marker(robot, 0, ptr::null(), &mut out);
+        assert_eq!(
+            (s, message().as_str()),
+            (HapcalStatus::NullPointer, "marker is NULL")
+        );
+        let s = hapcal_robot_with_compliances(robot, [0.0; 6].as_ptr(), 6, &mut out);
+        assert_eq!(s, HapcalStatus::Length);
+        let unknown = c_string("compliance.no_such_joint");
+        let s = hapcal_robot_with_value(robot, unknown.as_ptr(), 1e-4, &mut out);
+        assert_eq!(s, HapcalStatus::InvalidArgument);
+        assert!(
+            message().starts_with("\"compliance.no_such_joint\": value = 0.0001 is invalid"),
+            "{}",
+            message()
+        );
+        assert!(out.is_null(), "nothing stored on failure");
+        let mut a = [zero_pose(); 2];
+        let n = ptr::null_mut();
+        assert_eq!(
+            hapcal_robot_deflected_tip_poses(robot, Q.as_ptr(), 7, a.as_mut_ptr(), 2, n),
+            HapcalStatus::Ok
+        );
+
+        let mut predictor = ptr::null_mut();
+        let s = hapcal_predictor_new(robot, 2, &mut predictor);
+        assert_eq!(s, HapcalStatus::InvalidArgument);
+        assert_eq!(
+            message(),
+            "frame 2 is invalid: expected 0 (root link) or 1 (instrument)"
+        );
+        let s = hapcal_predictor_new(robot, HAPCAL_FRAME_ROOT, &mut predictor);
+        assert_eq!(s, HapcalStatus::Ok);
+        let mut tips = [HapcalTipPrediction {
+            pose: zero_pose(),
+            sigma_m: 0.0,
+            sigma_rad: 0.0,
+            has_sigma: false,
+        }; 2];
+        let s = hapcal_predictor_predict(predictor, Q.as_ptr(), 7, tips.as_mut_ptr(), 1);
+        assert_eq!(s, HapcalStatus::Length);
+        assert_eq!(message(), "n_tips: expected 2 values, found 1");
+        let s = hapcal_predictor_predict(predictor, Q.as_ptr(), 7, tips.as_mut_ptr(), 2);
+        assert_eq!(s, HapcalStatus::Ok);
+        // In the root frame the prediction is the deflected tip link.
+        assert_eq!(tips[0].pose, a[0]);
+        // The test robot's sidecar is frames and values without a record: no σ.
+        assert!(!tips[0].has_sigma && tips[0].sigma_m.is_nan());
+        assert_eq!(
+            hapcal_predictor_basis(predictor),
+            HapcalUncertaintyBasis::NoRecord
+        );
+        let mut len = 0;
+        let s = hapcal_predictor_uncertainty_note(predictor, ptr::null_mut(), 0, &mut len);
+        assert_eq!(s, HapcalStatus::Ok);
+        assert!(len > 0, "no record: a note");
+        let mut small = [0 as c_char; 8];
+        let s = hapcal_predictor_uncertainty_note(predictor, small.as_mut_ptr(), 8, &mut len);
+        assert_eq!(s, HapcalStatus::Length);
+        let (mut joint, mut distance) = (0, 1.0);
+        let s =
+            hapcal_predictor_outside_region(predictor, Q.as_ptr(), 7, &mut joint, &mut distance);
+        assert_eq!(
+            (s, joint, distance),
+            (HapcalStatus::Ok, HAPCAL_INSIDE_REGION, 0.0)
+        );
+        hapcal_predictor_free(predictor);
+        assert_eq!(hapcal_predictor_n_values(ptr::null()), 0);
+        assert_eq!(
+            hapcal_predictor_basis(ptr::null()),
+            HapcalUncertaintyBasis::NoRecord
+        );
+        hapcal_predictor_free(ptr::null_mut());
+        hapcal_robot_free(robot);
+    }
+
+    // The record robot: a recorded value moves the deflected tip, the original handle
+    // unchanged; its predictions carry σ.
+    let record = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/iiwa14_record.urdf");
+    let (status, robot) = load_with(record, &["ball_link"]);
+    assert_eq!(status, HapcalStatus::Ok, "{}", message());
+    // SAFETY: a live handle and valid pointers of the stated sizes.
+    unsafe {
+        let known = c_string("compliance.joint_a2");
+        let s = hapcal_robot_with_value(robot, known.as_ptr(), 4.2e-3, &mut out);
+        assert_eq!(s, HapcalStatus::Ok, "{}", message());
+        let (mut a, mut b) = ([zero_pose()], [zero_pose()]);
+        let n = ptr::null_mut();
+        assert_eq!(
+            hapcal_robot_deflected_tip_poses(robot, Q.as_ptr(), 7, a.as_mut_ptr(), 1, n),
+            HapcalStatus::Ok
+        );
+        assert_eq!(
+            hapcal_robot_deflected_tip_poses(out, Q.as_ptr(), 7, b.as_mut_ptr(), 1, n),
+            HapcalStatus::Ok
+        );
+        let gap = (0..3)
+            .map(|i| (a[0].translation_m[i] - b[0].translation_m[i]).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            gap > 1e-6,
+            "doubling one compliance moves the tip: {gap:e} m"
+        );
+        hapcal_robot_free(out);
+        let mut predictor = ptr::null_mut();
+        let s = hapcal_predictor_new(robot, HAPCAL_FRAME_INSTRUMENT, &mut predictor);
+        assert_eq!(s, HapcalStatus::Ok, "{}", message());
+        assert!(hapcal_predictor_has_uncertainty(predictor));
+        assert!(hapcal_predictor_n_values(predictor) > 0);
+        let mut tip = [HapcalTipPrediction {
+            pose: zero_pose(),
+            sigma_m: 0.0,
+            sigma_rad: 0.0,
+            has_sigma: false,
+        }];
+        let s = hapcal_predictor_predict(predictor, Q.as_ptr(), 7, tip.as_mut_ptr(), 1);
+        assert_eq!(s, HapcalStatus::Ok);
+        assert!(tip[0].has_sigma && tip[0].sigma_m > 0.0 && tip[0].sigma_rad > 0.0);
+        hapcal_predictor_free(predictor);
+        hapcal_robot_free(robot);
+    }
+
+    // A robot without a calibration: no instrument frame, no σ.
+    let plain = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../fixtures/mukca/urdf/iiwa14.urdf"
+    );
+    let (status, robot) = load_with(plain, &["ball_link"]);
+    assert_eq!(status, HapcalStatus::Ok, "{}", message());
+    let mut predictor = ptr::null_mut();
+    // SAFETY: a live handle and valid out pointers.
+    unsafe {
+        let s = hapcal_robot_frame(robot, name.as_ptr(), &mut pose, &mut found);
+        assert_eq!((s, found), (HapcalStatus::Ok, false));
+        let s = hapcal_predictor_new(robot, HAPCAL_FRAME_INSTRUMENT, &mut predictor);
+        assert_eq!(s, HapcalStatus::InvalidArgument);
+        assert!(message().starts_with("instrument frame"), "{}", message());
+        let s = hapcal_predictor_new(robot, HAPCAL_FRAME_ROOT, &mut predictor);
+        assert_eq!(s, HapcalStatus::Ok);
+        assert_eq!(
+            hapcal_predictor_basis(predictor),
+            HapcalUncertaintyBasis::NoRecord
+        );
+        assert!(!hapcal_predictor_has_uncertainty(predictor));
+        let mut tip = [HapcalTipPrediction {
+            pose: zero_pose(),
+            sigma_m: 0.0,
+            sigma_rad: 0.0,
+            has_sigma: true,
+        }];
+        let s = hapcal_predictor_predict(predictor, Q.as_ptr(), 7, tip.as_mut_ptr(), 1);
+        assert_eq!(s, HapcalStatus::Ok);
+        assert!(!tip[0].has_sigma && tip[0].sigma_m.is_nan());
+        hapcal_predictor_free(predictor);
+        hapcal_robot_free(robot);
+    }
+}
+
 struct Counting;
 
 thread_local! {
@@ -402,6 +591,24 @@ fn robot_calls_do_not_allocate() {
     let mut buf = [0 as c_char; 16];
     let (mut joint, mut distance, mut len) = (0, 0.0, 0);
     let mut result = HapcalCompensation::default();
+    let (mut theta, mut lower, mut upper) = ([0.0; 7], [0.0; 7], [0.0; 7]);
+    let mut deflection = HapcalDeflection::default();
+    let mut found = false;
+    let marker1 = c_string("marker1");
+    // The record robot's predictor: σ from its values.
+    let record = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/iiwa14_record.urdf");
+    let (status, record) = load_with(record, &["ball_link"]);
+    assert_eq!(status, HapcalStatus::Ok);
+    let mut predictor = ptr::null_mut();
+    // SAFETY: a live handle and a valid out pointer.
+    let status = unsafe { hapcal_predictor_new(record, HAPCAL_FRAME_INSTRUMENT, &mut predictor) };
+    assert_eq!(status, HapcalStatus::Ok);
+    let mut predicted = [HapcalTipPrediction {
+        pose: zero_pose(),
+        sigma_m: 0.0,
+        sigma_rad: 0.0,
+        has_sigma: false,
+    }];
     // SAFETY: a live handle and arrays of the stated sizes.
     let target = unsafe {
         assert_eq!(
@@ -442,12 +649,31 @@ fn robot_calls_do_not_allocate() {
                 ),
                 hapcal_robot_outside_region(robot, Q.as_ptr(), 7, &mut joint, &mut distance),
                 hapcal_robot_joint_name(robot, 0, buf.as_mut_ptr(), buf.len(), &mut len),
+                hapcal_robot_deflect(robot, Q.as_ptr(), 7, theta.as_mut_ptr(), &mut deflection),
+                hapcal_robot_deflected_spatial_jacobian(
+                    robot,
+                    1,
+                    Q.as_ptr(),
+                    7,
+                    jac.as_mut_ptr(),
+                    &mut pose,
+                    &mut deflection,
+                ),
+                hapcal_robot_frame(robot, marker1.as_ptr(), &mut pose, &mut found),
+                hapcal_robot_limits(robot, lower.as_mut_ptr(), upper.as_mut_ptr(), 7),
+                hapcal_robot_compliances(robot, tau.as_mut_ptr(), 7),
+                hapcal_predictor_predict(predictor, Q.as_ptr(), 7, predicted.as_mut_ptr(), 1),
+                hapcal_predictor_marker_poses(predictor, Q.as_ptr(), 7, poses.as_mut_ptr(), 2),
             ]
         };
         assert!(statuses.iter().all(|s| *s == HapcalStatus::Ok));
     }
     assert_eq!(ALLOCATIONS.with(Cell::get) - before, 0);
-    assert!(result.reached);
-    // SAFETY: a live handle, freed once.
-    unsafe { hapcal_robot_free(robot) };
+    assert!(result.reached && found && predicted[0].has_sigma);
+    // SAFETY: live handles, freed once.
+    unsafe {
+        hapcal_predictor_free(predictor);
+        hapcal_robot_free(record);
+        hapcal_robot_free(robot);
+    }
 }
