@@ -32,7 +32,11 @@ use hapcal_calibrate::calibrate::blocked_mean_difference;
 use hapcal_calibrate::model::{ModelChoice, Rung};
 use hapcal_contract::Effect;
 use hapcal_identify::Problem;
-use hapcal_problems::{CalibrationProblem, GravityCompliance, Observations, RowKind};
+use hapcal_kinematics::Tree;
+use hapcal_problems::{
+    CalibrationProblem, GravityCompliance, JointLoad, ModelTerms, Observations, RowKind,
+    Transversal, TransversalTerm, Weights,
+};
 use nalgebra::{DMatrix, DVector, Vector3};
 use serde::Serialize;
 
@@ -86,7 +90,8 @@ const CONFUSABLE_COSINE: f64 = 0.8;
 pub const REPEAT_TOLERANCE: f64 = 1e-4;
 
 /// The serial-arm diagnosis's library, in report order: the effects it tests on measurement
-/// files and socket recordings (one vocabulary with calibration: [`Effect`]).
+/// files and socket recordings (one vocabulary with calibration: [`Effect`]), from the first
+/// round on; [`ARM_BESIDE_COMPLIANCE`] adds the effects tested once a joint compliance is named.
 pub const ARM_LIBRARY: [Effect; 9] = [
     Effect::GravityCompliance,
     Effect::LumpedCompliance,
@@ -98,6 +103,31 @@ pub const ARM_LIBRARY: [Effect; 9] = [
     Effect::LinkDeflection,
     Effect::InstrumentScale,
 ];
+
+/// The effects the serial-arm diagnosis tests beside a joint compliance, in the rounds after
+/// [`Effect::GravityCompliance`] or [`Effect::LumpedCompliance`] is named, with that
+/// compliance's weights as their loads: transversal compliance, one per revolute joint
+/// (isotropic) or one per axis normal to the joint axis, each the other's alternative. Wherever
+/// the calibration can fit them: a robot whose revolute joints carry rotation deviations (URDF
+/// placements).
+///
+/// Why after the joint compliance rather than as one candidate with its columns: the
+/// calibration fits transversal compliance only with the joint compliance, from the same gravity
+/// loads (`--model transversal-compliance` is `compliance` plus the tilts, the rung above it on
+/// the ladder), so the verdict names the two effects of that model, each on its own evidence:
+/// the joint compliance against the geometric baseline, the tilts against what it leaves. A
+/// candidate holding both would be named for the joint compliance alone (its columns carry
+/// most of the signal), with 33 parameters where 16 explain it, and would fix the torque model
+/// of the joint compliance to its own instead of leaving it to the joint compliance's test
+/// ([`ArmStep::alike`]).
+pub const ARM_BESIDE_COMPLIANCE: [Effect; 2] =
+    [Effect::TransversalCompliance, Effect::TransversalAxes];
+
+/// Every candidate of the diagnosis, in report order: [`ARM_LIBRARY`], then
+/// [`ARM_BESIDE_COMPLIANCE`].
+fn arm_candidates() -> impl Iterator<Item = Effect> {
+    ARM_LIBRARY.into_iter().chain(ARM_BESIDE_COMPLIANCE)
+}
 
 /// Settings of [`diagnose_arm`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -477,21 +507,43 @@ fn residuals(problem: &CalibrationProblem, x: &faer::Col<f64>) -> Result<DVector
     Ok(DVector::from_iterator(r.nrows(), r.iter().copied()))
 }
 
-/// Jacobian columns `cols` of `problem` at `x`.
-fn jacobian(
+/// Jacobian columns of `problem` at `x`, one matrix per set of `sets` (a `None` entry is a
+/// zero column), from one evaluation of the Jacobian.
+fn jacobian_sets<const N: usize>(
     problem: &CalibrationProblem,
     x: &faer::Col<f64>,
-    cols: &[usize],
-) -> Result<DMatrix<f64>, Error> {
+    sets: [&[Option<usize>]; N],
+) -> Result<[DMatrix<f64>; N], Error> {
     let mut j = faer::Mat::<f64>::zeros(problem.n_residuals(), problem.layout().len());
     problem
         .jacobian(x.as_ref(), j.as_mut())
         .map_err(|e| Error::Baseline {
             message: format!("evaluating the Jacobian: {e}"),
         })?;
-    Ok(DMatrix::from_fn(j.nrows(), cols.len(), |i, k| {
-        j[(i, cols[k])]
+    Ok(sets.map(|cols| {
+        DMatrix::from_fn(j.nrows(), cols.len(), |i, k| {
+            cols[k].map_or(0.0, |c| j[(i, c)])
+        })
     }))
+}
+
+/// Per joint of `names`, the indices of its placement's rotation deviations `{joint}.rx`,
+/// `.ry`, `.rz` in `problem`'s layout, three entries per joint (`None` for a joint without
+/// them: a D-H row, or no rotation deviations).
+fn rotation_params(problem: &CalibrationProblem, names: &[String]) -> Vec<Option<usize>> {
+    let chain = problem.chain();
+    (names.iter())
+        .flat_map(|name| ["rx", "ry", "rz"].map(|a| chain.param_index(&format!("{name}.{a}"))))
+        .collect()
+}
+
+/// What the effects are built from: the problem's derivatives at the estimate.
+struct Derivatives {
+    /// `∂r/∂q_j` for every joint (`n_residuals × n_joints`).
+    dq: DMatrix<f64>,
+    /// `∂r/∂ρ_{j,a}` for the rotation deviations `rx`, `ry`, `rz` of every joint's placement
+    /// (`n_residuals × 3·n_joints`, columns `3j..3j + 3`; zero for a joint without them).
+    rotation: DMatrix<f64>,
 }
 
 /// `∂r/∂q_j` for every joint (n_residuals × n_joints), by central differences of the problem
@@ -535,11 +587,28 @@ struct Context<'a> {
     time_origin: f64,
     time_span: f64,
     time_step: f64,
+    /// The calibration's transversal compliance terms of the robot, isotropic and per axis
+    /// ([`library_transversal`]), or why it has none.
+    transversal: Result<[Vec<TransversalTerm>; 2], String>,
 }
 
 impl Context<'_> {
     fn n_joints(&self) -> usize {
         self.baseline.robot.joint_names.len()
+    }
+
+    /// The gravity loads of a joint compliance `effect`: the link masses for
+    /// [`Effect::GravityCompliance`], unit weights for [`Effect::LumpedCompliance`]; `Err`
+    /// with the reason when the robot's masses are unknown.
+    fn torque_model(&self, effect: Effect) -> Result<GravityCompliance, String> {
+        match effect {
+            Effect::GravityCompliance => self.masses.clone().ok_or_else(|| {
+                "no link masses: the URDF has no <inertial> and the robot's published masses \
+                 are unknown"
+                    .to_owned()
+            }),
+            _ => Ok(GravityCompliance::default()),
+        }
     }
 
     /// Tip position on the nominal robot, base frame, m.
@@ -582,13 +651,7 @@ fn joint_terms(
     };
     Ok(match effect {
         Effect::GravityCompliance | Effect::LumpedCompliance => {
-            let model = if effect == Effect::GravityCompliance {
-                ctx.masses.clone().ok_or(
-                    "no link masses: the URDF has no <inertial> and the robot's published masses are unknown",
-                )?
-            } else {
-                GravityCompliance::default()
-            };
+            let model = ctx.torque_model(effect)?;
             // Every link's weight on every branch of the robot's tree (its loads).
             let tips = &ctx.baseline.torque_tips;
             let torques: Vec<Vec<f64>> = (rows.q.iter())
@@ -629,6 +692,152 @@ fn joint_terms(
     })
 }
 
+/// The calibration's transversal compliance terms of `robot` (its tree without instrument
+/// frames, whose tips carry the gravity loads), isotropic and per axis: the terms
+/// [`CalibrationProblem`] builds for `--model transversal-compliance` and `transversal-axes`
+/// (joint and, per axis, the axis normal to the joint axis), read from such a problem on no
+/// rows, so that the joints and axes are the calibration's own. `Err` with the calibration's
+/// reason when the robot has none (a D-H chain, no revolute joint).
+fn library_transversal(robot: &Tree) -> Result<[Vec<TransversalTerm>; 2], String> {
+    let terms = |transversal| {
+        let problem = CalibrationProblem::on_tree(
+            robot.clone(),
+            Observations::default(),
+            Weights::default(),
+            ModelTerms {
+                compliance: Some(GravityCompliance::default()),
+                transversal,
+                ..ModelTerms::default()
+            },
+        )
+        .map_err(|e| e.to_string())?;
+        Ok::<_, String>(problem.model(problem.initial_guess().as_ref()).transversal)
+    };
+    Ok([terms(Transversal::Isotropic)?, terms(Transversal::PerAxis)?])
+}
+
+/// The columns of the transversal compliance terms `terms` on `rows`, under the gravity loads
+/// `loads[c]` of each configuration `c`: for term `t` of joint `j` and residual `i` of
+/// configuration `c`, `Σ_a ∂r_i/∂ρ_{j,a} · tilt_t(c)_a`, with `ρ_j = (rx, ry, rz)` joint
+/// `j`'s placement rotation deviations (its frame before its motion; `rotation`, three columns
+/// per joint) and `tilt_t(c)` [`TransversalTerm::tilt`]. The calibration adds `c_t·tilt_t(c)`
+/// to `ρ_j` in every row ([`hapcal_problems::Transversal`]), so each column is the exact first
+/// derivative of its residuals in `c_t` at zero compliance: the tilt carried through the
+/// chain to every marker or tip below the joint and into the instrument frame.
+fn transversal_block(
+    terms: &[TransversalTerm],
+    rotation: &DMatrix<f64>,
+    rows: &Rows,
+    loads: &[Vec<JointLoad>],
+) -> DMatrix<f64> {
+    let tilts: Vec<Vec<Vector3<f64>>> = (loads.iter())
+        .map(|l| terms.iter().map(|t| t.tilt(&l[t.joint])).collect())
+        .collect();
+    let mut m = DMatrix::zeros(rows.res.len(), terms.len());
+    for (i, (_, c)) in rows.res.iter().enumerate() {
+        if *c == usize::MAX {
+            continue;
+        }
+        for (p, (t, tilt)) in terms.iter().zip(&tilts[*c]).enumerate() {
+            m[(i, p)] = (0..3)
+                .map(|a| rotation[(i, 3 * t.joint + a)] * tilt[a])
+                .sum();
+        }
+    }
+    m
+}
+
+/// The parameter names of transversal compliance terms (`effect.joint`, and `.u` / `.v` per
+/// axis, the calibration's `transversal.{joint}[.u|.v]`), and their unit under `compliance`'s
+/// loads.
+fn transversal_names(
+    effect: Effect,
+    terms: &[TransversalTerm],
+    joint_names: &[String],
+    compliance: Effect,
+) -> Vec<(String, &'static str)> {
+    let unit = if compliance == Effect::GravityCompliance {
+        "rad/(N·m)"
+    } else {
+        "rad/m"
+    };
+    (terms.iter().enumerate())
+        .map(|(k, t)| {
+            let axis = match (t.direction, k % 2) {
+                (None, _) => "",
+                (Some(_), 0) => ".u",
+                (Some(_), _) => ".v",
+            };
+            (
+                format!("{}.{}{axis}", effect.name(), joint_names[t.joint]),
+                unit,
+            )
+        })
+        .collect()
+}
+
+/// The columns the diagnosis tests for the transversal compliance `effect`
+/// ([`Effect::TransversalCompliance`] or [`Effect::TransversalAxes`]) on `problem` at `x`,
+/// with the gravity loads of `weights` on the tips of `robot` (the robot's tree without
+/// instrument frames, as [`GeometricBaseline::torque_tips`]): per parameter, its name (as in
+/// [`ArmCandidate::parameters`]) and the derivative of each of `problem`'s residuals (its
+/// order and weighting) per unit compliance, rad/(N·m) with link masses, rad/m with unit
+/// weights. They are the exact first derivatives of the calibration's transversal model
+/// (`--model transversal-compliance` and `transversal-axes`: the tilt `c·m⊥(q)` added to each
+/// revolute joint's rotation deviations) at zero compliance; `problem` is a geometric
+/// calibration problem, or one whose compliances are zero at `x`.
+///
+/// # Errors
+/// [`Error::Config`] for an effect that is not a transversal compliance; [`Error::Data`] when
+/// the robot has none (no revolute joint with rotation deviations); [`Error::Baseline`] if
+/// the problem cannot be evaluated.
+///
+/// # Panics
+/// If `x.nrows()` differs from `problem`'s parameter count, or `robot`'s joints from
+/// `problem`'s.
+#[track_caller]
+pub fn transversal_columns(
+    problem: &CalibrationProblem,
+    x: &faer::Col<f64>,
+    robot: &Tree,
+    weights: &GravityCompliance,
+    effect: Effect,
+) -> Result<Vec<(String, Vec<f64>)>, Error> {
+    if !effect.is_transversal() {
+        return Err(Error::Config {
+            message: format!("{} is not a transversal compliance", effect.name()),
+        });
+    }
+    let terms = library_transversal(robot).map_err(|message| Error::Data { message })?;
+    let terms = &terms[usize::from(effect == Effect::TransversalAxes)];
+    let obs = problem.observations();
+    let q: Vec<Vec<f64>> = obs.rows.iter().map(|r| r.q.clone()).collect();
+    let n_rows = q.len();
+    let rows = Rows::new(
+        problem,
+        &(0..n_rows).collect::<Vec<_>>(),
+        q,
+        vec![0; n_rows],
+        vec![0.0; n_rows],
+    );
+    let names = robot.joint_names();
+    let [rotation] = jacobian_sets(problem, x, [&rotation_params(problem, names)])?;
+    let loads: Vec<Vec<JointLoad>> = (rows.q.iter())
+        .map(|q| weights.joint_loads(robot.tips(), q))
+        .collect();
+    let m = transversal_block(terms, &rotation, &rows, &loads);
+    let compliance = if weights.masses.is_empty() {
+        Effect::LumpedCompliance
+    } else {
+        Effect::GravityCompliance
+    };
+    Ok(transversal_names(effect, terms, names, compliance)
+        .into_iter()
+        .enumerate()
+        .map(|(k, (name, _))| (name, m.column(k).iter().copied().collect()))
+        .collect())
+}
+
 /// The sign of each joint's last motion at every configuration (`q[c]`, rad or m), from the
 /// configurations before it in the same group (`group[c]`), in order: `+1` or `−1` when the
 /// joint moved by at least [`REPEAT_TOLERANCE`] since the previous configuration, the previous
@@ -656,14 +865,17 @@ pub fn approach_signs(q: &[Vec<f64>], group: &[usize]) -> Vec<Vec<f64>> {
     out
 }
 
-/// The columns (weighted residual per unit parameter) of `effect` on `rows`, and their names
-/// and units; `Err` with the reason when these data cannot test it.
+/// The columns (weighted residual per unit parameter) of `effect` on `rows` (derivatives
+/// `d`), named with the effects `with` (a transversal compliance takes the gravity loads of
+/// the joint compliance among them), and their names and units; `Err` with the reason when
+/// these data cannot test it.
 #[allow(clippy::type_complexity)]
 fn effect_columns(
     effect: Effect,
     ctx: &Context<'_>,
     rows: &Rows,
-    dq: &DMatrix<f64>,
+    d: &Derivatives,
+    with: &[Effect],
 ) -> Result<(DMatrix<f64>, Vec<(String, &'static str)>), String> {
     let n_res = rows.res.len();
     let positional = |basis: &dyn Fn(usize, usize, Option<[f64; 3]>) -> Vec<[f64; 3]>,
@@ -742,6 +954,24 @@ fn effect_columns(
             );
             Ok((m, vec![("instrument_scale.s".into(), "1")]))
         }
+        Effect::TransversalCompliance | Effect::TransversalAxes => {
+            let Some(&compliance) = with.iter().find(|e| e.is_joint_compliance()) else {
+                return Err("tested beside a joint compliance, none is named".into());
+            };
+            let model = ctx.torque_model(compliance)?;
+            let terms = &ctx.transversal.as_ref().map_err(Clone::clone)?
+                [usize::from(effect == Effect::TransversalAxes)];
+            let loads: Vec<Vec<JointLoad>> = (rows.q.iter())
+                .map(|q| model.joint_loads(&ctx.baseline.torque_tips, q))
+                .collect();
+            let m = transversal_block(terms, &d.rotation, rows, &loads);
+            if (0..m.ncols()).all(|k| m.column(k).norm() == 0.0) {
+                return Err("no variation in these data".into());
+            }
+            let names =
+                transversal_names(effect, terms, &ctx.baseline.robot.joint_names, compliance);
+            Ok((m, names))
+        }
         _ => {
             let terms = joint_terms(effect, ctx, rows)?;
             let mut m = DMatrix::zeros(n_res, terms.len());
@@ -750,7 +980,7 @@ fn effect_columns(
                     continue;
                 }
                 for (p, (_, _, j, basis)) in terms.iter().enumerate() {
-                    m[(i, p)] = dq[(i, *j)] * basis[*c];
+                    m[(i, p)] = d.dq[(i, *j)] * basis[*c];
                 }
             }
             let norms_zero = (0..m.ncols()).all(|k| m.column(k).norm() == 0.0);
@@ -1069,9 +1299,14 @@ struct Revision {
 ///   margin — is not needed beside them (a first-round harmonic that a later gear-ratio term
 ///   explains better); the least needed one goes;
 /// - alternatives: gravity and lumped compliance are one effect under two torque models, the
-///   two harmonic orders one effect at two frequencies; beside the later effects the named one
-///   gives way to its alternative by the rounds' own rule (better by one blocked standard
-///   error, or within one and earlier in the library).
+///   two harmonic orders one effect at two frequencies, isotropic and per-axis transversal
+///   compliance one effect in two forms; beside the later effects the named one gives way to
+///   its alternative by the rounds' own rule (better by one blocked standard error, or within
+///   one and earlier in the library).
+///
+/// A joint compliance with a transversal compliance named beside it is not left out: the
+/// transversal compliance is tested on its loads and fitted with it (the calibration's
+/// `transversal-compliance` model holds both).
 ///
 /// Source: stepwise selection with backward elimination (Efroymson, "Multiple regression
 /// analysis", 1960; Miller, "Subset Selection in Regression", 2nd ed., 2002, §3.3). An effect
@@ -1082,7 +1317,7 @@ fn revise(
     rows: &Rows,
     r: &DVector<f64>,
     jb: &DMatrix<f64>,
-    dq: &DMatrix<f64>,
+    d: &Derivatives,
     named: &[(Effect, DMatrix<f64>, Vec<usize>)],
     full: &HeldOut,
     folds: &[Vec<usize>],
@@ -1101,8 +1336,10 @@ fn revise(
             .join("+")
     };
     // Backward: the least needed effect, if it is not needed.
+    let transversal = named.iter().any(|(e, _, _)| e.is_transversal());
     if named.len() >= 2 {
         let least = (0..named.len())
+            .filter(|&k| !(transversal && named[k].0.is_joint_compliance()))
             .map(|k| {
                 let others: Vec<&DMatrix<f64>> = (named.iter().enumerate())
                     .filter(|(i, _)| *i != k)
@@ -1132,7 +1369,7 @@ fn revise(
         }
     }
     // Alternatives, beside the other named effects.
-    let order = |e: Effect| ARM_LIBRARY.iter().position(|l| *l == e);
+    let order = |e: Effect| arm_candidates().position(|l| l == e);
     for (k, (effect, cols, _)) in named.iter().enumerate() {
         let Some(alt) = effect.alternative() else {
             continue;
@@ -1141,7 +1378,7 @@ fn revise(
             continue;
         }
         let Some((swapped, n_visible)) =
-            swapped(ctx, rows, r, jb, dq, named, k, alt, folds, floor_var, cfg)
+            swapped(ctx, rows, r, jb, d, named, k, alt, folds, floor_var, cfg)
         else {
             continue;
         };
@@ -1173,14 +1410,16 @@ fn revise(
 
 /// The held-out errors of the named effects (`named`, as in [`revise`]) with the `k`-th
 /// replaced by `alt`, and the number of `alt`'s columns visible beside the others; `None` when
-/// `alt` cannot be built on these data or none of its columns is visible.
+/// `alt` cannot be built on these data or none of its columns is visible. A transversal
+/// compliance named beside a joint compliance that gives way to its other torque model is
+/// rebuilt on that model's loads (the same visible columns).
 #[allow(clippy::too_many_arguments)] // the pieces of one diagnosis
 fn swapped(
     ctx: &Context<'_>,
     rows: &Rows,
     r: &DVector<f64>,
     jb: &DMatrix<f64>,
-    dq: &DMatrix<f64>,
+    d: &Derivatives,
     named: &[(Effect, DMatrix<f64>, Vec<usize>)],
     k: usize,
     alt: Effect,
@@ -1188,10 +1427,27 @@ fn swapped(
     floor_var: Option<f64>,
     cfg: &ArmConfig,
 ) -> Option<(HeldOut, usize)> {
-    let (alt_cols, _) = effect_columns(alt, ctx, rows, dq).ok()?;
+    let with: Vec<Effect> = (named.iter().enumerate())
+        .map(|(i, (e, _, _))| if i == k { alt } else { *e })
+        .collect();
+    let (alt_cols, _) = effect_columns(alt, ctx, rows, d, &with).ok()?;
+    let mut rebuilt: Vec<DMatrix<f64>> = Vec::new();
+    for (i, (e, _, visible)) in named.iter().enumerate() {
+        if i != k && e.is_transversal() && alt.is_joint_compliance() {
+            let (c, _) = effect_columns(*e, ctx, rows, d, &with).ok()?;
+            rebuilt.push(c.select_columns(visible));
+        }
+    }
+    let mut rebuilt = rebuilt.iter();
     let others: Vec<&DMatrix<f64>> = (named.iter().enumerate())
         .filter(|(i, _)| *i != k)
-        .map(|(_, (_, c, _))| c)
+        .filter_map(|(_, (e, c, _))| {
+            if e.is_transversal() && alt.is_joint_compliance() {
+                rebuilt.next()
+            } else {
+                Some(c)
+            }
+        })
         .collect();
     let base = beside(jb, &others);
     let (qb, _) = pivoted_basis(&base, &DMatrix::zeros(base.nrows(), 0), 1e-9);
@@ -1291,8 +1547,13 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
         baseline.time.clone(),
     );
     let r = -residuals(problem, &baseline.x)?;
-    let jb = jacobian(problem, &baseline.x, &baseline.kept)?;
-    let dq = reading_derivatives(problem, &baseline.x, n_joints)?;
+    let kept: Vec<Option<usize>> = baseline.kept.iter().copied().map(Some).collect();
+    let rotation = rotation_params(problem, &baseline.robot.joint_names);
+    let [jb, rotation] = jacobian_sets(problem, &baseline.x, [&kept, &rotation])?;
+    let d = Derivatives {
+        dq: reading_derivatives(problem, &baseline.x, n_joints)?,
+        rotation,
+    };
     let masses = if baseline.robot.masses.is_empty() {
         GravityCompliance::published(&baseline.robot.joint_names)
     } else {
@@ -1311,6 +1572,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
         time_origin: if t_min.is_finite() { t_min } else { 0.0 },
         time_span: (t_max - t_min).max(0.0),
         time_step: median_step(&baseline.time),
+        transversal: library_transversal(&baseline.robot.tree),
     };
     ctx.reach_max = (baseline.q.iter())
         .map(|q| ctx.reach(q))
@@ -1381,21 +1643,27 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             let rss_b = r_perp.norm_squared();
             let dof_b = (r.len() as f64 - qb.ncols() as f64).max(1.0);
             let mut tested: Vec<Tested> = Vec::new();
-            for effect in ARM_LIBRARY {
-                // Gravity and lumped compliance are one effect under two torque models: once one
-                // is named, the other is not a further effect.
+            for effect in arm_candidates() {
+                // Gravity and lumped compliance are one effect under two torque models, the
+                // two transversal compliances one effect in two forms: once one is named, the
+                // other is not a further effect. A transversal compliance is tested once a
+                // joint compliance is named (ARM_BESIDE_COMPLIANCE).
                 if accepted.contains(&effect)
                     || excluded.contains(&effect)
                     || (effect.is_joint_compliance()
                         && accepted.iter().any(|e| e.is_joint_compliance()))
+                    || (effect.is_transversal()
+                        && (accepted.iter().any(|e| e.is_transversal())
+                            || !accepted.iter().any(|e| e.is_joint_compliance())))
                 {
                     continue;
                 }
-                let (cols, names) = match effect_columns(effect, &ctx, &rows, &dq) {
+                let (cols, names) = match effect_columns(effect, &ctx, &rows, &d, &accepted) {
                     Ok(c) => c,
                     Err(reason) => {
-                        if round == 1 {
-                            untestable.push(format!("{}: {reason}", effect.name()));
+                        let note = format!("{}: {reason}", effect.name());
+                        if (round == 1 || effect.is_transversal()) && !untestable.contains(&note) {
+                            untestable.push(note);
                         }
                         continue;
                     }
@@ -1629,7 +1897,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             &rows,
             &r,
             &jb,
-            &dq,
+            &d,
             &effect_cols,
             &base,
             &folds,
@@ -1665,12 +1933,14 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             None => break,
         }
     }
-    // The compliance's torque model is named only on the evidence that names an effect: beside
-    // the other named effects, the other torque model predicts worse by HELDOUT_SIGNIFICANCE_Z
-    // blocked standard errors. Otherwise the data do not tell the two apart, and the step says
-    // so.
+    // The compliance's torque model, and the transversal compliance's form, are named only on
+    // the evidence that names an effect: beside the other named effects, the other torque model
+    // (or form) predicts worse by HELDOUT_SIGNIFICANCE_Z blocked standard errors. Otherwise the
+    // data do not tell the two apart, and the step says so.
     for (k, (effect, _, _)) in effect_cols.iter().enumerate() {
-        let Some(alt) = effect.alternative().filter(|a| a.is_joint_compliance()) else {
+        let Some(alt) =
+            (effect.alternative()).filter(|a| a.is_joint_compliance() || a.is_transversal())
+        else {
             continue;
         };
         let Some((other, _)) = swapped(
@@ -1678,7 +1948,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             &rows,
             &r,
             &jb,
-            &dq,
+            &d,
             &effect_cols,
             k,
             alt,
@@ -1861,13 +2131,13 @@ fn ladder(
         })
         .collect();
     // Held-out sets: their residuals, shared-parameter columns, own nuisance columns and
-    // reading derivatives at the training estimate.
+    // derivatives at the training estimate.
     struct Test {
         rows: Rows,
         r: DVector<f64>,
         shared: DMatrix<f64>,
         own: DMatrix<f64>,
-        dq: DMatrix<f64>,
+        d: Derivatives,
     }
     let n_joints = ctx.n_joints();
     let shared_kept: Vec<usize> = (baseline.kept.iter().enumerate())
@@ -1899,17 +2169,25 @@ fn ladder(
             .unwrap_or_else(|| ctx.held_out_times(n_c));
         let rows = Rows::new(&t.problem, &t.configuration, q, vec![0; n_c], time);
         let r = -residuals(&t.problem, &t.x)?;
-        let shared_idx: Vec<usize> = b.kept.iter().copied().filter(|&i| i < b.n_shared).collect();
-        let shared = jacobian(&t.problem, &t.x, &shared_idx)?;
-        let own_idx: Vec<usize> = (b.n_shared..t.problem.layout().len()).collect();
-        let own = jacobian(&t.problem, &t.x, &own_idx)?;
-        let dq = reading_derivatives(&t.problem, &t.x, n_joints)?;
+        let shared_idx: Vec<Option<usize>> = (b.kept.iter().copied())
+            .filter(|&i| i < b.n_shared)
+            .map(Some)
+            .collect();
+        let own_idx: Vec<Option<usize>> =
+            (b.n_shared..t.problem.layout().len()).map(Some).collect();
+        let rotation_idx = rotation_params(&t.problem, &b.robot.joint_names);
+        let [shared, own, rotation] =
+            jacobian_sets(&t.problem, &t.x, [&shared_idx, &own_idx, &rotation_idx])?;
+        let d = Derivatives {
+            dq: reading_derivatives(&t.problem, &t.x, n_joints)?,
+            rotation,
+        };
         Ok(Test {
             rows,
             r,
             shared,
             own,
-            dq,
+            d,
         })
     }
     // The training coefficients of the shared columns (and the effects' after them) carried
@@ -1935,7 +2213,7 @@ fn ladder(
         let (x, _) = lstsq(&a, r);
         let mut rms = Vec::new();
         for (t, tc) in tests.iter().zip(&mut test_cols) {
-            let (c, _) = effect_columns(*effect, ctx, &t.rows, &t.dq)
+            let (c, _) = effect_columns(*effect, ctx, &t.rows, &t.d, &named_so_far)
                 .unwrap_or_else(|_| (DMatrix::zeros(t.r.len(), visible.len().max(1)), Vec::new()));
             let c_vis = if c.ncols() >= visible.iter().max().map_or(0, |m| m + 1) {
                 c.select_columns(visible)

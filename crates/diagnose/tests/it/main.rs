@@ -2,4 +2,5 @@
 //! the serial-arm diagnosis on recorded and simulated arm data.
 
 mod arm;
+mod arm_transversal;
 mod diagnose;
