@@ -174,8 +174,8 @@ fn transversal_columns_are_the_first_derivatives_of_the_calibrations_model() {
 }
 
 /// The diagnosis of the humanoid simulated from `truth` (the recording of
-/// `fixtures/sim-humanoid`: 550 rows, the last 30 % held out, no stated σ), with its runtime.
-fn diagnose_humanoid(robot: &Robot, truth: &sim::Truth) -> (ArmDiagnosis, f64) {
+/// `fixtures/sim-humanoid`, shortened to [`ROWS`] rows: the last 30 % held out, no stated σ).
+fn diagnose_humanoid(robot: &Robot, truth: &sim::Truth) -> ArmDiagnosis {
     let table = sim::table(robot, truth, &[0, 1], ROWS, ROWS_SEED);
     let plan = Plan {
         workspace: None,
@@ -185,18 +185,16 @@ fn diagnose_humanoid(robot: &Robot, truth: &sim::Truth) -> (ArmDiagnosis, f64) {
         test_last: Some(0.3),
         ..Plan::bundled_default()
     };
-    let started = std::time::Instant::now();
     let baseline = baseline_from_tables(robot, vec![table], Vec::new(), &plan, false).unwrap();
-    let d = diagnose_arm(&baseline, &ArmConfig::default()).unwrap();
-    (d, started.elapsed().as_secs_f64())
+    diagnose_arm(&baseline, &ArmConfig::default()).unwrap()
 }
 
-/// Prints what a report reads, for the record.
-fn show(label: &str, d: &ArmDiagnosis, seconds: f64) {
+/// What a report reads: the verdict, each step's held-out RMS and the candidates' reasons.
+fn summary(d: &ArmDiagnosis) -> String {
     let steps: Vec<String> = (d.steps.iter())
         .map(|s| {
             format!(
-                "{} {:.3} -> {:.3} mm (alike {:?})",
+                "{}: {:.3} -> {:.3} mm, alike {:?}",
                 s.effect,
                 s.heldout_rms_before_m * 1e3,
                 s.heldout_rms_after_m * 1e3,
@@ -204,33 +202,35 @@ fn show(label: &str, d: &ArmDiagnosis, seconds: f64) {
             )
         })
         .collect();
-    eprintln!(
-        "{label}: verdict {}, cv {:.3} -> {:.3} mm, test {:?} -> {:?} mm, {seconds:.1} s; {steps:?}; notes {:?}",
-        d.verdict,
-        d.heldout_rms_m * 1e3,
-        d.heldout_rms_final_m * 1e3,
-        d.test_rms_m.iter().map(|v| v * 1e3).collect::<Vec<_>>(),
-        d.test_rms_final_m
-            .iter()
-            .map(|v| v * 1e3)
-            .collect::<Vec<_>>(),
-        d.notes
-    );
+    let candidates: Vec<String> = (d.candidates.iter())
+        .map(|c| format!("round {} {}: {}", c.round, c.effect, c.reason))
+        .collect();
+    format!(
+        "verdict {}; steps {steps:#?}; test RMS {:?} -> {:?} m; candidates {candidates:#?}; notes {:#?}",
+        d.verdict, d.test_rms_m, d.test_rms_final_m, d.notes
+    )
 }
 
 #[test]
 fn humanoid_with_joint_and_transversal_compliance_names_both() {
     let robot = sim::humanoid(&["l_hand", "r_hand"]);
     let truth = sim::truth(&robot, TRUTH_SEED);
-    let (d, seconds) = diagnose_humanoid(&robot, &truth);
-    show("compliant", &d, seconds);
+    let d = diagnose_humanoid(&robot, &truth);
     // The joint compliance first (it carries most of the signal), then the tilts beside it.
     let Verdict::Effects(named) = &d.verdict else {
-        panic!("{}: {:#?}", d.verdict, d.candidates);
+        panic!("{}", summary(&d));
     };
-    assert_eq!(named.len(), 2, "{}: {:#?}", d.verdict, d.candidates);
-    assert_eq!(named[0], Effect::GravityCompliance, "{}", d.verdict);
-    assert!(named[1].is_transversal(), "{}", d.verdict);
+    assert_eq!(named.len(), 2, "{}", summary(&d));
+    assert_eq!(named[0], Effect::GravityCompliance, "{}", summary(&d));
+    assert!(named[1].is_transversal(), "{}", summary(&d));
+    // Together they bring the held-out error to the noise (`√6·σ` per configuration: two
+    // markers, three axes) within 10 %: the RMS's sampling error over a few hundred
+    // configurations (≈ 3 %) and the estimation error of ~180 parameters from ~1,300
+    // residuals (≈ 6 % of the RMS).
+    let clean = 6f64.sqrt() * sim::NOISE_M;
+    for rms in d.test_rms_final_m.iter().chain([&d.heldout_rms_final_m]) {
+        assert!(*rms < 1.1 * clean, "{rms} m: {}", summary(&d));
+    }
 }
 
 #[test]
@@ -246,7 +246,6 @@ fn humanoid_without_compliance_names_none() {
             truth.x[i] = 0.0;
         }
     }
-    let (d, seconds) = diagnose_humanoid(&robot, &truth);
-    show("clean", &d, seconds);
-    assert_eq!(d.verdict.to_string(), "none", "{:#?}", d.candidates);
+    let d = diagnose_humanoid(&robot, &truth);
+    assert_eq!(d.verdict, "none", "{}", summary(&d));
 }
