@@ -313,9 +313,11 @@ pub struct ArmStep {
     /// Candidates the data confuse with it, each with the measurement that would separate them.
     pub confusable_with: Vec<(Effect, String)>,
     /// The same effect under another model that these data do not tell from it: for a
-    /// compliance, the other torque model when, in its place beside the other named effects,
-    /// it predicts worse by less than the two blocked standard errors that name an effect
-    /// (held-out squared error, paired by block). Empty when the data name the model.
+    /// compliance, the other torque model when, in its place beside the other named effects
+    /// (a transversal compliance named beside it taking that model's loads too), it predicts
+    /// worse by less than the two blocked standard errors that name an effect (held-out
+    /// squared error, paired by block). Empty when the data name the model. A transversal
+    /// compliance's torque model is its joint compliance's: it is open when that one is.
     pub alike: Vec<Effect>,
 }
 
@@ -1933,14 +1935,14 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
             None => break,
         }
     }
-    // The compliance's torque model, and the transversal compliance's form, are named only on
-    // the evidence that names an effect: beside the other named effects, the other torque model
-    // (or form) predicts worse by HELDOUT_SIGNIFICANCE_Z blocked standard errors. Otherwise the
-    // data do not tell the two apart, and the step says so.
+    // The compliance's torque model is named only on the evidence that names an effect: beside
+    // the other named effects (a transversal compliance on the other model's loads too), the
+    // other torque model predicts worse by HELDOUT_SIGNIFICANCE_Z blocked standard errors.
+    // Otherwise the data do not tell the two apart, and the step says so. (The two forms of a
+    // transversal compliance are told apart by the rounds and the revision, and reported as
+    // confusable when their fits look alike.)
     for (k, (effect, _, _)) in effect_cols.iter().enumerate() {
-        let Some(alt) =
-            (effect.alternative()).filter(|a| a.is_joint_compliance() || a.is_transversal())
-        else {
+        let Some(alt) = effect.alternative().filter(|a| a.is_joint_compliance()) else {
             continue;
         };
         let Some((other, _)) = swapped(
