@@ -307,7 +307,10 @@ fn check(convention: &str, models: &[(ModelChoice, bool)], seed: u64) {
             g.moved_dh
         );
         if model != ModelChoice::FramesOnly {
-            assert!(g.n_dh > 0, "{convention} {model}: no D-H deviation recorded");
+            assert!(
+                g.n_dh > 0,
+                "{convention} {model}: no D-H deviation recorded"
+            );
         }
         if effect {
             assert!(

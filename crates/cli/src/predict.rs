@@ -358,7 +358,9 @@ impl<'a> SummaryModel<'a> {
         SummaryModel {
             has_region: (robot.calibration()).is_some_and(|c| c.region.is_some()),
             joint_names: robot.joint_names(),
-            prismatic: (0..robot.n_joints()).map(|j| robot.is_prismatic(j)).collect(),
+            prismatic: (0..robot.n_joints())
+                .map(|j| robot.is_prismatic(j))
+                .collect(),
         }
     }
 }
@@ -558,9 +560,8 @@ fn read_haptic_rows(path: &Path, device: &hapcal_io::Device, units: &Units) -> R
     }
     hapcal_calibrate::data::check_csv_header(path)?;
     let mut header = String::new();
-    let _ = std::fs::File::open(path).and_then(|f| {
-        std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut header)
-    });
+    let _ = std::fs::File::open(path)
+        .and_then(|f| std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut header));
     let has_distance = header.split(',').any(|c| c.trim() == "distance_m");
     if has_distance {
         let log = hapcal_io::read_log(path, device)
@@ -695,7 +696,13 @@ pub fn run(args: &PredictArgs, units: &Units) -> Result<(String, Vec<String>)> {
             joint_names: &joint_names,
             prismatic: vec![false; model.n_joints()],
         };
-        return finish(args, &inputs, &prediction, &summary(&prediction, &view), Vec::new());
+        return finish(
+            args,
+            &inputs,
+            &prediction,
+            &summary(&prediction, &view),
+            Vec::new(),
+        );
     }
     let (predictor, table) = prepare(
         &args.device,
@@ -730,7 +737,7 @@ pub fn run(args: &PredictArgs, units: &Units) -> Result<(String, Vec<String>)> {
             PredictionFrame::Root => "root",
             PredictionFrame::Instrument => "instrument",
         },
-        tips: args.tips.clone(),
+        tips: predictor.robot().tip_names().to_vec(),
         uncertainty,
         n_values: predictor.n_values(),
         uncertainty_note,

@@ -456,83 +456,83 @@ pub(crate) struct DeviceFile {
 /// # Errors
 /// As [`Model::from_toml`] for these checks.
 pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DeviceFile, LoadError> {
-        let file: File = toml::from_str(text).map_err(|e| {
-            let (line, column) = e
-                .span()
-                .map_or((0, 0), |span| line_column(text, span.start));
-            LoadError::Parse {
-                origin: origin.to_owned(),
-                line,
-                column,
-                message: e.message().trim_end().to_owned(),
-            }
-        })?;
-        let invalid = |message: String| LoadError::Invalid {
+    let file: File = toml::from_str(text).map_err(|e| {
+        let (line, column) = e
+            .span()
+            .map_or((0, 0), |span| line_column(text, span.start));
+        LoadError::Parse {
             origin: origin.to_owned(),
-            message,
-        };
+            line,
+            column,
+            message: e.message().trim_end().to_owned(),
+        }
+    })?;
+    let invalid = |message: String| LoadError::Invalid {
+        origin: origin.to_owned(),
+        message,
+    };
 
-        if !file.placement.is_empty() || !file.branch.is_empty() || file.urdf.is_some() {
-            return Err(invalid(
-                "[[placement]] (URDF) chains are not supported by the runtime: use a [[dh]] \
+    if !file.placement.is_empty() || !file.branch.is_empty() || file.urdf.is_some() {
+        return Err(invalid(
+            "[[placement]] (URDF) chains are not supported by the runtime: use a [[dh]] \
                  chain"
-                    .to_owned(),
-            ));
-        }
-        let convention = match file.convention.as_deref() {
-            None | Some("dh") => DhConvention::Standard,
-            Some("mdh") => DhConvention::Modified,
-            Some(other) => {
-                return Err(invalid(format!(
-                    "unknown convention {other:?}, expected \"dh\" (standard) or \"mdh\" \
-                     (modified)"
-                )));
-            }
-        };
-        let mut rows = Vec::with_capacity(file.dh.len());
-        let mut n_joints = 0usize;
-        for (i, entry) in file.dh.iter().enumerate() {
-            let joint = match &entry.joint {
-                toml::Value::String(s) if s == "fixed" => false,
-                toml::Value::Integer(j) if usize::try_from(*j).ok() == Some(n_joints + 1) => true,
-                other => {
-                    return Err(invalid(format!(
-                        "[[dh]] row {i}: joint = {other}, expected {} (joints numbered in row \
-                         order) or \"fixed\"",
-                        n_joints + 1
-                    )));
-                }
-            };
-            n_joints += usize::from(joint);
-            rows.push(DhRow {
-                a_m: entry.a_m,
-                alpha_rad: entry.alpha_rad,
-                d_m: entry.d_m,
-                theta_rad: entry.theta_rad,
-                beta_rad: entry.beta_rad,
-                joint,
-            });
-        }
-        if file.joint.len() != n_joints {
+                .to_owned(),
+        ));
+    }
+    let convention = match file.convention.as_deref() {
+        None | Some("dh") => DhConvention::Standard,
+        Some("mdh") => DhConvention::Modified,
+        Some(other) => {
             return Err(invalid(format!(
-                "the chain has {n_joints} joints but {} [[joint]] entries",
-                file.joint.len()
+                "unknown convention {other:?}, expected \"dh\" (standard) or \"mdh\" \
+                     (modified)"
             )));
         }
-        for j in &file.joint {
-            if !j.lower_rad.is_finite() || !j.upper_rad.is_finite() || j.lower_rad >= j.upper_rad {
+    };
+    let mut rows = Vec::with_capacity(file.dh.len());
+    let mut n_joints = 0usize;
+    for (i, entry) in file.dh.iter().enumerate() {
+        let joint = match &entry.joint {
+            toml::Value::String(s) if s == "fixed" => false,
+            toml::Value::Integer(j) if usize::try_from(*j).ok() == Some(n_joints + 1) => true,
+            other => {
                 return Err(invalid(format!(
-                    "[[joint]] {:?}: lower_rad = {} must be finite and below upper_rad = {}",
-                    j.name, j.lower_rad, j.upper_rad
+                    "[[dh]] row {i}: joint = {other}, expected {} (joints numbered in row \
+                         order) or \"fixed\"",
+                    n_joints + 1
                 )));
             }
+        };
+        n_joints += usize::from(joint);
+        rows.push(DhRow {
+            a_m: entry.a_m,
+            alpha_rad: entry.alpha_rad,
+            d_m: entry.d_m,
+            theta_rad: entry.theta_rad,
+            beta_rad: entry.beta_rad,
+            joint,
+        });
+    }
+    if file.joint.len() != n_joints {
+        return Err(invalid(format!(
+            "the chain has {n_joints} joints but {} [[joint]] entries",
+            file.joint.len()
+        )));
+    }
+    for j in &file.joint {
+        if !j.lower_rad.is_finite() || !j.upper_rad.is_finite() || j.lower_rad >= j.upper_rad {
+            return Err(invalid(format!(
+                "[[joint]] {:?}: lower_rad = {} must be finite and below upper_rad = {}",
+                j.name, j.lower_rad, j.upper_rad
+            )));
         }
-        Ok(DeviceFile {
-            file,
-            convention,
-            rows,
-            n_joints,
-        })
+    }
+    Ok(DeviceFile {
+        file,
+        convention,
+        rows,
+        n_joints,
+    })
 }
 
 /// A contract's refusal as a load error: at its line and column when known.

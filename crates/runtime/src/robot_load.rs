@@ -577,7 +577,13 @@ impl Robot {
             ));
         }
         for (i, r) in rows.iter().enumerate() {
-            let fields = [r.a_m, r.alpha_rad, r.d_m, r.theta_rad, r.beta_rad.unwrap_or(0.0)];
+            let fields = [
+                r.a_m,
+                r.alpha_rad,
+                r.d_m,
+                r.theta_rad,
+                r.beta_rad.unwrap_or(0.0),
+            ];
             if fields.iter().any(|v| !v.is_finite()) {
                 return Err(invalid(
                     origin,
@@ -639,7 +645,11 @@ impl Robot {
         let mut out = Robot {
             joints,
             joint_names: (1..=n_joints).map(|j| format!("q{j}")).collect(),
-            limits: file.joint.iter().map(|j| (j.lower_rad, j.upper_rad)).collect(),
+            limits: file
+                .joint
+                .iter()
+                .map(|j| (j.lower_rad, j.upper_rad))
+                .collect(),
             tips: vec![tip],
             tip_names: vec![tip_name],
             masses: Vec::new(),
@@ -655,7 +665,10 @@ impl Robot {
             transversal: Vec::new(),
             harmonics: Vec::new(),
             tip_elements: vec![None],
-            dh: Some(DhTable { convention, nominal }),
+            dh: Some(DhTable {
+                convention,
+                nominal,
+            }),
         };
         if let Some(record) = record {
             // Every marker of a device file's calibration sits on its one tip, which carries

@@ -54,7 +54,7 @@ fn a_calibrated_dh_robot_predicts_its_training_rows_as_calibrate_reported_them()
     ]);
     assert_eq!(report["model"], "compliance", "{}", report["model"]);
     let written = std::fs::read_to_string(&out).expect("the calibrated device file");
-    assert!(written.contains("compliance.q"), "{written}");
+    assert!(written.contains("lumped-unit-weights"), "{written}");
     let v = json_of(&[
         "predict",
         "--device",
