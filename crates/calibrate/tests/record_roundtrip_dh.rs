@@ -208,13 +208,11 @@ fn round_trip(
     let mut library = outcome.model.clone();
     let mut enlarged = runtime.clone();
     for v in &record.values {
-        let value = if v.name.starts_with("compliance.") {
-            2e-3
-        } else if v.name.starts_with("harmonic.") {
-            2e-3
-        } else {
+        // 2 mrad of harmonic; 2e-3 rad/m of compliance under lumped loads of about a metre.
+        if !(v.name.starts_with("compliance.") || v.name.starts_with("harmonic.")) {
             continue;
-        };
+        }
+        let value = 2e-3;
         enlarged = enlarged.with_value(&v.name, value).unwrap();
         assert!(
             hapcal_calibrate::record::set_model_value(
@@ -284,11 +282,6 @@ fn check(convention: &str, models: &[(ModelChoice, bool)], seed: u64) {
             train.clone(),
             test.clone(),
             &dir,
-        );
-        println!(
-            "{convention} {model}: identified {:.2e} m, enlarged {:.2e} m (moved {:.2e} m), \
-             {} D-H deviations moved: {:.2e} m",
-            g.identified, g.enlarged, g.shifted, g.n_dh, g.moved_dh
         );
         assert!(
             g.identified < TOLERANCE_M,

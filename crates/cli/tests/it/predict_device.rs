@@ -73,7 +73,6 @@ fn a_calibrated_dh_robot_predicts_its_training_rows_as_calibrate_reported_them()
         .as_f64()
         .expect("position errors");
     let calibrated = training(&report, "position_rms_m");
-    println!("positioner, compliance: predict {predicted:e} m, calibrate {calibrated:e} m");
     assert!(
         (predicted - calibrated).abs() <= TOLERANCE_M,
         "predict {predicted} m, calibrate {calibrated} m"
@@ -177,7 +176,6 @@ fn a_calibrated_haptic_device_predicts_its_log_s_distances_as_calibrate_reported
         .expect("distance errors");
     assert_eq!(v["errors"]["distance_m"]["count"], 200);
     let calibrated = training(&report, "distance_rms_m");
-    println!("reference device, compliance: predict {predicted:e} m, calibrate {calibrated:e} m");
     assert!(
         (predicted - calibrated).abs() <= TOLERANCE_M,
         "predict {predicted} m, calibrate {calibrated} m"
