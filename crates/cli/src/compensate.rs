@@ -13,7 +13,7 @@ use hapcal_runtime::{CompensationConfig, Pose, Robot, Target, compensate};
 pub struct CompensateArgs {
     /// The calibrated robot as `hapcal calibrate --out` writes it: a URDF (its sidecar
     /// robot.calibration.toml, compliances and frames, is read from beside it), or a serial
-    /// robot's device file (.toml with a D-H table and the record in [calibration]).
+    /// robot's device file (.toml with a D-H table and the record in its calibration table).
     #[arg(long)]
     pub device: PathBuf,
     /// The tip link of a URDF the targets are for (e.g. ball_link); a device file's chain has

@@ -23,7 +23,7 @@ pub struct PredictArgs {
     /// The calibrated device as `hapcal calibrate --out` writes it: a URDF (its sidecar
     /// robot.calibration.toml, the calibration record with the values' σ, the covariance, the
     /// region and the frames, is read from beside it), or a device file (.toml) with the
-    /// record in [calibration]: a serial robot's D-H table, or a haptic device.
+    /// record in its calibration table: a serial robot's D-H table, or a haptic device.
     #[arg(long)]
     pub device: PathBuf,
     /// A tip link of a URDF to predict (e.g. ball_link); repeat it for a tree, in the

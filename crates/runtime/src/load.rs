@@ -206,8 +206,9 @@ impl Model {
     /// and markers' frames (`[calibration.frames]`) are the measurement rig's. A value the
     /// device model cannot evaluate (a robot's `compliance.*`, `transversal.*`,
     /// `harmonic.*`, a placement deviation) is refused: a serial robot's device file with
-    /// such a record is a [`crate::Robot`] ([`crate::Robot::load_device`]). A file without `[calibration]` gives
-    /// the nominal model (ideal capstans, rigid joints). `origin` names the text in messages.
+    /// such a record is a [`crate::Robot`] ([`crate::Robot::load_device`]). A file without
+    /// `[calibration]` gives the nominal model (ideal capstans, rigid joints). `origin` names
+    /// the text in messages.
     ///
     /// # Errors
     /// [`LoadError::Parse`] for TOML syntax, a missing or unknown key or a wrong type, and
