@@ -151,6 +151,9 @@ pub struct Robot {
     /// Each tip's element name (the last fixed joint of its path, if it ends in fixed
     /// joints), whose deviation the tip's offset holds.
     pub(crate) tip_elements: Vec<Option<String>>,
+    /// A D-H robot's nominal `[[dh]]` rows, from which a D-H deviation moves the joint
+    /// origins ([`Robot::with_value`]); `None` for a URDF robot.
+    pub(crate) dh: Option<crate::robot_load::DhTable>,
 }
 
 /// Buffers of [`Robot`]'s evaluation calls, sized for one robot ([`Robot::workspace`]).
