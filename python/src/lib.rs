@@ -1439,7 +1439,9 @@ fn _predict(
                 data.display()
             );
         }
-        let prismatic: Vec<bool> = (0..robot.n_joints()).map(|j| robot.is_prismatic(j)).collect();
+        let prismatic: Vec<bool> = (0..robot.n_joints())
+            .map(|j| robot.is_prismatic(j))
+            .collect();
         let schema = hapcal_io::JointSchema {
             names: robot.joint_names(),
             prismatic: &prismatic,
@@ -1448,7 +1450,10 @@ fn _predict(
         let table = hapcal_io::read_measurement_file(&data, &schema, &units)
             .with_context(|| format!("reading joint readings {}", data.display()))?;
         if table.rows.is_empty() {
-            bail!("{}: no data row: expected one joint configuration per row", data.display());
+            bail!(
+                "{}: no data row: expected one joint configuration per row",
+                data.display()
+            );
         }
         let frame = if instrument_frame {
             PredictionFrame::Instrument
@@ -1484,9 +1489,9 @@ fn _predict(
             poses.push(
                 (out.iter())
                     .map(|t| {
-                        let r = nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_fn(
-                            |i, j| t.pose.rotation[i][j],
-                        ));
+                        let r = nalgebra::Rotation3::from_matrix_unchecked(
+                            nalgebra::Matrix3::from_fn(|i, j| t.pose.rotation[i][j]),
+                        );
                         let q = UnitQuaternion::from_rotation_matrix(&r);
                         let (w, v) = (q.w, q.imag());
                         let s = if w < 0.0 { -1.0 } else { 1.0 };
@@ -1497,7 +1502,12 @@ fn _predict(
             );
             sigmas.push(
                 (out.iter())
-                    .map(|t| (t.sigma_m.unwrap_or(f64::NAN), t.sigma_rad.unwrap_or(f64::NAN)))
+                    .map(|t| {
+                        (
+                            t.sigma_m.unwrap_or(f64::NAN),
+                            t.sigma_rad.unwrap_or(f64::NAN),
+                        )
+                    })
                     .collect(),
             );
             region.push(outside.map_or((-1, f64::NAN), |(j, past)| (j as i64, past)));
