@@ -5,6 +5,7 @@
 use anyhow::{Context, Result, bail};
 use hapcal_contract::Effect;
 use serde_json::Value;
+use std::path::Path;
 use xshell::{Shell, cmd};
 
 /// One diagnosed recording.
@@ -166,7 +167,9 @@ fn mm(v: &Value) -> String {
 }
 
 /// Runs every recording; with `check`, verifies the required verdicts without writing.
-pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
+pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
+    let (hapcal, pre) = crate::hapcal_cmd(bin);
+    let (hapcal, pre) = (&hapcal, pre.as_slice());
     let _ = M;
     let dir = "docs/results/diagnose-real";
     let tmp = sh.create_temp_dir()?;
@@ -194,7 +197,7 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
         };
         let json = cmd!(
             sh,
-            "cargo run --release --quiet -p hapcal -- diagnose {args...} --json --svg {svg}"
+            "{hapcal} {pre...} diagnose {args...} --json --svg {svg}"
         )
         .read()
         .with_context(|| format!("diagnosing {}", rec.name))?;
