@@ -3,7 +3,7 @@
 //! docs/results/diagnose-real.md with the residual maps in docs/results/diagnose-real/.
 
 use anyhow::{Context, Result, bail};
-use hapcal_contract::Effect;
+use hapcal_contract::{Effect, ModelName};
 use serde_json::Value;
 use std::path::Path;
 use xshell::{Shell, cmd};
@@ -166,6 +166,50 @@ fn mm(v: &Value) -> String {
         .map_or_else(|| "–".to_owned(), |m| format!("{:.3}", m * 1e3))
 }
 
+/// How the diagnosis's verdict compares with the rung `hapcal calibrate --model auto` takes
+/// on the same files: the same model, or why not (docs/design.md §6.1).
+fn agreement(verdict: &str, rung: &str) -> String {
+    let named: Vec<Effect> = if verdict == "none" {
+        Vec::new()
+    } else {
+        verdict.split('+').filter_map(Effect::from_name).collect()
+    };
+    let f = ModelName::for_effects(&named);
+    let kinematic = ["frames-only", "joint-offsets", "geometric"];
+    let mut words = format!("Calibration: `--model auto` takes **{rung}**; ");
+    match &f.model {
+        Ok(None) if kinematic.contains(&rung) => {
+            words.push_str("the diagnosis names no effect a model frees: they agree");
+        }
+        Ok(None) => words.push_str(
+            "the diagnosis names no effect a model frees, the ladder a model beyond the \
+             kinematics: an effect the ladder's cross-validation sees (two standard errors) \
+             that closes less than the diagnosis's share of the gap (20 %)",
+        ),
+        Ok(Some(m)) if m.as_str() == rung => {
+            words.push_str(&format!("the named effects are the model {m}: they agree"));
+        }
+        Ok(Some(m)) => words.push_str(&format!(
+            "the named effects are the model {m}: they differ, as the ladder's rungs are the \
+             models it climbs to in order (a model must beat the rung below it by two standard \
+             errors, and the joint-range folds where the calibration extrapolates), the \
+             diagnosis's the effects that each close a share of the gap above the floor"
+        )),
+        Err(together) => {
+            let names: Vec<&str> = together.iter().map(|e| e.name()).collect();
+            words.push_str(&format!(
+                "no one calibration model frees {} together",
+                names.join(" and ")
+            ));
+        }
+    }
+    for (e, reason) in &f.beyond {
+        words.push_str(&format!("; {e}: {reason}"));
+    }
+    words.push('.');
+    words
+}
+
 /// Runs every recording; with `check`, verifies the required verdicts without writing.
 pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
     let (hapcal, pre) = crate::hapcal_cmd(bin);
@@ -222,6 +266,13 @@ pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
             "- **Verdict: {verdict}.** {} training configurations, {} geometric parameters kept.\n",
             d["n_configurations"], d["n_baseline_params"]
         ));
+        let calibrated = cmd!(sh, "{hapcal} {pre...} calibrate {args...} --json")
+            .ignore_stderr()
+            .read()
+            .with_context(|| format!("calibrating {}", rec.name))?;
+        let c: Value = serde_json::from_str(&calibrated).context("parsing calibrate's JSON")?;
+        let rung = c["rung"].as_str().or(c["model"].as_str()).unwrap_or("?");
+        md.push_str(&format!("- {}\n", agreement(&verdict, rung)));
         md.push_str(&format!(
             "- Floor: {}.\n",
             d["floor_method"].as_str().unwrap_or("?")
