@@ -232,7 +232,7 @@ pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
     );
     let mut failures = Vec::new();
     for rec in RECORDINGS {
-        let args: Vec<&str> = rec.args.to_vec();
+        let args: &[&str] = rec.args;
         let svg = if check {
             tmp.path().join(format!("{}.svg", rec.id))
         } else {

@@ -1576,7 +1576,7 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
                 None => mse0 - held.mse(),
             };
             steps.push(ArmStep {
-                effect: win.cand.effect.clone(),
+                effect: win.cand.effect,
                 heldout_rms_before_m: before,
                 heldout_rms_after_m: after,
                 gap_closed_pct: if gap_orig > 0.0 {
