@@ -12,6 +12,7 @@ pub(crate) fn sin_cos(x: f64) -> (f64, f64) {
 
 /// Largest `|x − base|` (rad) for which [`sin_cos_near`] sums its series: the first term left
 /// out, `δ¹¹/11!` of the sine, is 2.5e-19 at 0.1 rad, far below an ulp of a sine near 1.
+#[cfg(feature = "std")]
 pub(crate) const NEAR_RAD: f64 = 0.1;
 
 /// Sine and cosine of `x` (rad) from those of `base` (`(sin base, cos base)`) by the angle
@@ -19,14 +20,15 @@ pub(crate) const NEAR_RAD: f64 = 0.1;
 /// from their Taylor series (to `δ⁹` and `δ¹⁰`; Abramowitz & Stegun 4.3.65–66) when
 /// `|δ| ≤ NEAR_RAD`, otherwise [`sin_cos`]: for a deflected angle next to the reading, a
 /// few multiplications instead of a libm call, within two ulps of it.
+#[cfg(feature = "std")]
 #[inline(always)]
 pub(crate) fn sin_cos_near(x: f64, base: f64, (s0, c0): (f64, f64)) -> (f64, f64) {
     let d = x - base;
     if d == 0.0 {
         return (s0, c0);
     }
-    // Also false for a NaN difference: libm then says what the angle is.
-    if !(d.abs() <= NEAR_RAD) {
+    // Also for a NaN difference: libm then says what the angle is.
+    if d.abs() > NEAR_RAD || d.is_nan() {
         return sin_cos(x);
     }
     let d2 = d * d;
@@ -59,13 +61,13 @@ pub(crate) fn atan(x: f64) -> f64 {
     libm::atan(x)
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "std"))]
 mod tests {
     use super::{NEAR_RAD, sin_cos, sin_cos_near};
 
     #[test]
     fn sine_and_cosine_near_a_known_angle_agree_with_libm_to_two_ulps() {
-        for base in [-3.0, -1.2, 0.0, 0.4, 1.5707963267948966, 2.9] {
+        for base in [-3.0, -1.2, 0.0, 0.4, std::f64::consts::FRAC_PI_2, 2.9] {
             let sc = sin_cos(base);
             for d in [
                 0.0, 1e-12, -3e-7, 2e-4, -0.013, 0.05, -0.0999, NEAR_RAD, 0.3, -1.0,

@@ -45,6 +45,7 @@ impl Pose {
     /// [`Pose::compose`], with the rotation product skipped when `other`'s rotation is the
     /// identity (a URDF origin without `rpy`, a marker left at its default): the same result,
     /// a translation instead of 45 products and sums.
+    #[cfg(feature = "std")]
     #[inline]
     pub(crate) fn compose_fast(&self, other: &Pose) -> Pose {
         let r = &other.rotation;
