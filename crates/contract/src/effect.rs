@@ -438,8 +438,14 @@ mod tests {
         use Effect::*;
         let of = |e: &[Effect]| ModelName::for_effects(e);
         assert_eq!(of(&[]).model, Ok(None));
-        assert_eq!(of(&[GravityCompliance]).model, Ok(Some(ModelName::Compliance)));
-        assert_eq!(of(&[LumpedCompliance]).model, Ok(Some(ModelName::Compliance)));
+        assert_eq!(
+            of(&[GravityCompliance]).model,
+            Ok(Some(ModelName::Compliance))
+        );
+        assert_eq!(
+            of(&[LumpedCompliance]).model,
+            Ok(Some(ModelName::Compliance))
+        );
         assert_eq!(
             of(&[GravityCompliance, FirstHarmonic]).model,
             Ok(Some(ModelName::ComplianceHarmonic))
