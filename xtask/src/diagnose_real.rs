@@ -167,35 +167,68 @@ fn mm(v: &Value) -> String {
 }
 
 /// How the diagnosis's verdict compares with the rung `hapcal calibrate --model auto` takes
-/// on the same files: the same model, or why not (docs/design.md §6.1).
-fn agreement(verdict: &str, rung: &str) -> String {
+/// on the same files (`calibrated`, its JSON report): the same model (the same effects), or
+/// why not, from the calibration's own ladder (docs/design.md §6.1).
+fn agreement(verdict: &str, calibrated: &Value) -> String {
     let named: Vec<Effect> = if verdict == "none" {
         Vec::new()
     } else {
         verdict.split('+').filter_map(Effect::from_name).collect()
     };
+    let rung_name = calibrated["model"].as_str().unwrap_or("?");
+    let rung = ModelName::ALL.into_iter().find(|m| m.as_str() == rung_name);
+    let same = |a: ModelName, b: ModelName| {
+        [true, false].into_iter().any(|masses| {
+            let (mut x, mut y) = (a.effects(masses), b.effects(masses));
+            x.sort();
+            y.sort();
+            x == y
+        })
+    };
+    let kinematic = |m: ModelName| {
+        matches!(
+            m,
+            ModelName::FramesOnly | ModelName::JointOffsets | ModelName::Geometric
+        )
+    };
     let f = ModelName::for_effects(&named);
-    let kinematic = ["frames-only", "joint-offsets", "geometric"];
-    let mut words = format!("Calibration: `--model auto` takes **{rung}**; ");
-    match &f.model {
-        Ok(None) if kinematic.contains(&rung) => {
+    let mut words = format!("Calibration: `--model auto` takes **{rung_name}**; ");
+    match (&f.model, rung) {
+        (Ok(None), Some(r)) if kinematic(r) => {
             words.push_str("the diagnosis names no effect a model frees: they agree");
         }
-        Ok(None) => words.push_str(
+        (Ok(None), _) => words.push_str(
             "the diagnosis names no effect a model frees, the ladder a model beyond the \
-             kinematics: an effect the ladder's cross-validation sees (two standard errors) \
-             that closes less than the diagnosis's share of the gap (20 %)",
+             kinematics: its cross-validation sees an effect (two standard errors) that closes \
+             less than the diagnosis's share of the gap (20 %)",
         ),
-        Ok(Some(m)) if m.as_str() == rung => {
-            words.push_str(&format!("the named effects are the model {m}: they agree"));
+        (Ok(Some(m)), Some(r)) if same(*m, r) => {
+            words.push_str(&format!(
+                "the named effects are that model ({m}): they agree"
+            ));
         }
-        Ok(Some(m)) => words.push_str(&format!(
-            "the named effects are the model {m}: they differ, as the ladder's rungs are the \
-             models it climbs to in order (a model must beat the rung below it by two standard \
-             errors, and the joint-range folds where the calibration extrapolates), the \
-             diagnosis's the effects that each close a share of the gap above the floor"
-        )),
-        Err(together) => {
+        (Ok(Some(m)), _) => {
+            words.push_str(&format!("the named effects are the model {m}; "));
+            let stopped = (calibrated["coverage"]["stopped"]
+                .as_array()
+                .into_iter()
+                .flatten())
+            .any(|s| s["rung"].as_str() == Some(m.as_str()));
+            let row = (calibrated["ladder"].as_array().into_iter().flatten())
+                .find(|l| l["rung"].as_str() == Some(m.as_str()));
+            words.push_str(&match row {
+                _ if stopped => format!(
+                    "the joint-range folds stopped {m}: where the calibration is used beyond its \
+                     training range it is not shown to do better"
+                ),
+                Some(_) => format!(
+                    "{m} is a rung of this ladder that did not beat the rung chosen below it by \
+                     two standard errors of the held-out difference"
+                ),
+                None => format!("{m} is not a rung of the ladder for these data"),
+            });
+        }
+        (Err(together), _) => {
             let names: Vec<&str> = together.iter().map(|e| e.name()).collect();
             words.push_str(&format!(
                 "no one calibration model frees {} together",
@@ -271,8 +304,7 @@ pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
             .read()
             .with_context(|| format!("calibrating {}", rec.name))?;
         let c: Value = serde_json::from_str(&calibrated).context("parsing calibrate's JSON")?;
-        let rung = c["rung"].as_str().or(c["model"].as_str()).unwrap_or("?");
-        md.push_str(&format!("- {}\n", agreement(&verdict, rung)));
+        md.push_str(&format!("- {}\n", agreement(&verdict, &c)));
         md.push_str(&format!(
             "- Floor: {}.\n",
             d["floor_method"].as_str().unwrap_or("?")
