@@ -3,8 +3,9 @@
 //! docs/results/diagnose-real.md with the residual maps in docs/results/diagnose-real/.
 
 use anyhow::{Context, Result, bail};
-use hapcal_contract::Effect;
+use hapcal_contract::{Effect, ModelName};
 use serde_json::Value;
+use std::path::Path;
 use xshell::{Shell, cmd};
 
 /// One diagnosed recording.
@@ -165,8 +166,87 @@ fn mm(v: &Value) -> String {
         .map_or_else(|| "–".to_owned(), |m| format!("{:.3}", m * 1e3))
 }
 
+/// How the diagnosis's verdict compares with the rung `hapcal calibrate --model auto` takes
+/// on the same files (`calibrated`, its JSON report): the same model (the same effects), or
+/// why not, from the calibration's own ladder (docs/design.md §6.1).
+fn agreement(verdict: &str, calibrated: &Value) -> String {
+    let named: Vec<Effect> = if verdict == "none" {
+        Vec::new()
+    } else {
+        verdict.split('+').filter_map(Effect::from_name).collect()
+    };
+    let rung_name = calibrated["model"].as_str().unwrap_or("?");
+    let rung = ModelName::ALL.into_iter().find(|m| m.as_str() == rung_name);
+    let same = |a: ModelName, b: ModelName| {
+        [true, false].into_iter().any(|masses| {
+            let (mut x, mut y) = (a.effects(masses), b.effects(masses));
+            x.sort();
+            y.sort();
+            x == y
+        })
+    };
+    let kinematic = |m: ModelName| {
+        matches!(
+            m,
+            ModelName::FramesOnly | ModelName::JointOffsets | ModelName::Geometric
+        )
+    };
+    let f = ModelName::for_effects(&named);
+    let mut words = format!("Calibration: `--model auto` takes **{rung_name}**; ");
+    match (&f.model, rung) {
+        (Ok(None), Some(r)) if kinematic(r) => {
+            words.push_str("the diagnosis names no effect a model frees: they agree");
+        }
+        (Ok(None), _) => words.push_str(
+            "the diagnosis names no effect a model frees, the ladder a model beyond the \
+             kinematics: its cross-validation sees an effect (two standard errors) that closes \
+             less than the diagnosis's share of the gap (20 %)",
+        ),
+        (Ok(Some(m)), Some(r)) if same(*m, r) => {
+            words.push_str(&format!(
+                "the named effects are that model ({m}): they agree"
+            ));
+        }
+        (Ok(Some(m)), _) => {
+            words.push_str(&format!("the named effects are the model {m}; "));
+            let stopped = (calibrated["coverage"]["stopped"]
+                .as_array()
+                .into_iter()
+                .flatten())
+            .any(|s| s["rung"].as_str() == Some(m.as_str()));
+            let row = (calibrated["ladder"].as_array().into_iter().flatten())
+                .find(|l| l["rung"].as_str() == Some(m.as_str()));
+            words.push_str(&match row {
+                _ if stopped => format!(
+                    "the joint-range folds stopped {m}: where the calibration is used beyond its \
+                     training range it is not shown to do better"
+                ),
+                Some(_) => format!(
+                    "{m} is a rung of this ladder that did not beat the rung chosen below it by \
+                     two standard errors of the held-out difference"
+                ),
+                None => format!("{m} is not a rung of the ladder for these data"),
+            });
+        }
+        (Err(together), _) => {
+            let names: Vec<&str> = together.iter().map(|e| e.name()).collect();
+            words.push_str(&format!(
+                "no one calibration model frees {} together",
+                names.join(" and ")
+            ));
+        }
+    }
+    for (e, reason) in &f.beyond {
+        words.push_str(&format!("; {e}: {reason}"));
+    }
+    words.push('.');
+    words
+}
+
 /// Runs every recording; with `check`, verifies the required verdicts without writing.
-pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
+pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
+    let (hapcal, pre) = crate::hapcal_cmd(bin);
+    let (hapcal, pre) = (&hapcal, pre.as_slice());
     let _ = M;
     let dir = "docs/results/diagnose-real";
     let tmp = sh.create_temp_dir()?;
@@ -185,7 +265,7 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     );
     let mut failures = Vec::new();
     for rec in RECORDINGS {
-        let args: Vec<&str> = rec.args.to_vec();
+        let args: &[&str] = rec.args;
         let svg = if check {
             tmp.path().join(format!("{}.svg", rec.id))
         } else {
@@ -194,7 +274,7 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
         };
         let json = cmd!(
             sh,
-            "cargo run --release --quiet -p hapcal -- diagnose {args...} --json --svg {svg}"
+            "{hapcal} {pre...} diagnose {args...} --json --svg {svg}"
         )
         .read()
         .with_context(|| format!("diagnosing {}", rec.name))?;
@@ -219,6 +299,12 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
             "- **Verdict: {verdict}.** {} training configurations, {} geometric parameters kept.\n",
             d["n_configurations"], d["n_baseline_params"]
         ));
+        let calibrated = cmd!(sh, "{hapcal} {pre...} calibrate {args...} --json")
+            .ignore_stderr()
+            .read()
+            .with_context(|| format!("calibrating {}", rec.name))?;
+        let c: Value = serde_json::from_str(&calibrated).context("parsing calibrate's JSON")?;
+        md.push_str(&format!("- {}\n", agreement(&verdict, &c)));
         md.push_str(&format!(
             "- Floor: {}.\n",
             d["floor_method"].as_str().unwrap_or("?")

@@ -13,13 +13,16 @@ mod tidy;
 
 use anyhow::Result;
 use clap::Parser;
-use std::path::PathBuf;
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
 use xshell::{Shell, cmd};
 
 #[derive(Parser)]
 enum Task {
-    /// fmt, tidy, clippy, tests, the library example, docs, `reproduce-tables --check` and
-    /// `real-data --check` (release): what CI runs.
+    /// fmt, tidy, clippy, tests (and the vector-kernel crates' again on scalar code), the
+    /// library example, docs, then `reproduce-tables --check`, `real-data --check` and
+    /// `diagnose-real --check` with the release binary: what CI runs (the Python bindings are
+    /// built and tested by .ci/run).
     Ci,
     /// Reproduce the paper's tables (release build) into docs/results/paper (100 seeds) and
     /// docs/results/paper/seeds-1000 (1000 seeds) and docs/results/paper/planned-d-optimal
@@ -118,7 +121,7 @@ fn main() -> Result<()> {
         Task::Ci => ci(&sh),
         Task::Mukca { check } => mukca::run(&sh, check),
         Task::HapticHeldout { check } => haptic::run(&sh, check),
-        Task::RealData { check } => real_data::run(&sh, check),
+        Task::RealData { check } => real_data::run(&sh, check, None),
         Task::ProptestFresh => {
             cmd!(sh, "cargo test --workspace --release --quiet")
                 .env_remove("PROPTEST_RNG_SEED")
@@ -127,20 +130,25 @@ fn main() -> Result<()> {
         }
         Task::Tidy => tidy::run(&sh),
         Task::Deny => deny::run(&sh),
-        Task::DiagnoseReal { check } => diagnose_real::run(&sh, check),
+        Task::DiagnoseReal { check } => diagnose_real::run(&sh, check, None),
         Task::Bench { peers, criterion } => bench::run(&sh, peers, criterion),
         Task::BlindTest { cases } => blind_test(&sh, cases),
         Task::BlindTestArm { cases, setup_check } => arm_blind::run(&sh, cases, setup_check),
-        Task::ReproduceTables { check } => reproduce_tables(&sh, check),
+        Task::ReproduceTables { check } => reproduce_tables(&sh, check, None),
     }
 }
+
+/// The crates whose vector kernels also run on scalar code in CI (`HAPCAL_SIMD=off`).
+const SCALAR_CRATES: [&str; 3] = ["hapcal-identify", "hapcal-kinematics", "hapcal-problems"];
 
 fn ci(sh: &Shell) -> Result<()> {
     cmd!(sh, "cargo fmt --all --check").run()?;
     tidy::run(sh)?;
+    // The Python bindings are left out of clippy, tests and docs, as before they joined the
+    // workspace: the Python step of .ci/run builds and tests them.
     cmd!(
         sh,
-        "cargo clippy --workspace --all-targets --quiet -- -D warnings"
+        "cargo clippy --workspace --exclude hapcal-py --all-targets --quiet -- -D warnings"
     )
     .run()?;
     // The runtime's `no_std` claim: its library without `std` (lints included), then inside
@@ -161,31 +169,139 @@ fn ci(sh: &Shell) -> Result<()> {
     .run()?;
     // Property tests with a fixed seed: a red CI is a regression, never bad luck
     // (`cargo xtask proptest-fresh` runs them with fresh seeds).
-    cmd!(sh, "cargo test --workspace --quiet")
+    cmd!(sh, "cargo test --workspace --exclude hapcal-py --quiet")
         .env("PROPTEST_RNG_SEED", PROPTEST_CI_SEED)
         .run()?;
+    // Every executable of that build (nothing is compiled again). Cargo resolves dependency
+    // features over the packages a command selects, so `cargo test -p` of fewer packages, or
+    // `cargo run -p`, would compile most dependencies a second time: the steps below run these
+    // executables instead.
+    let built = executables(
+        &cmd!(
+            sh,
+            "cargo test --workspace --exclude hapcal-py --no-run --quiet --message-format=json-render-diagnostics"
+        )
+        .read()?,
+    )?;
     // The same crates on scalar code (the vector kernels give the same bits; this runs the
-    // scalar instantiation that machines without AVX2 or NEON take).
+    // scalar instantiation that machines without AVX2 or NEON take): their test executables as
+    // `cargo test` runs them (from the package's directory), then the doctests.
+    for exe in built
+        .iter()
+        .filter(|e| e.test && SCALAR_CRATES.contains(&e.package.as_str()))
+    {
+        let _dir = sh.push_dir(&exe.package_dir);
+        let path = &exe.path;
+        cmd!(sh, "{path} --quiet")
+            .env("PROPTEST_RNG_SEED", PROPTEST_CI_SEED)
+            .env("HAPCAL_SIMD", "off")
+            .run()?;
+    }
     cmd!(
         sh,
-        "cargo test -p hapcal-identify -p hapcal-kinematics -p hapcal-problems --quiet"
+        "cargo test --workspace --exclude hapcal-py --doc --quiet"
     )
     .env("PROPTEST_RNG_SEED", PROPTEST_CI_SEED)
     .env("HAPCAL_SIMD", "off")
     .run()?;
+    // The library example, from the test build (debug assertions on).
+    let example = find(&built, "hapcal-calibrate", "example", "calibrate_urdf")?;
+    cmd!(sh, "{example}").run()?;
     cmd!(
         sh,
-        "cargo run --release --quiet -p hapcal-calibrate --example calibrate_urdf"
+        "cargo doc --workspace --exclude hapcal-py --no-deps --quiet"
     )
+    .env("RUSTDOCFLAGS", "-D warnings")
     .run()?;
-    cmd!(sh, "cargo doc --workspace --no-deps --quiet")
-        .env("RUSTDOCFLAGS", "-D warnings")
-        .run()?;
-    reproduce_tables(sh, true)?;
+    // The release binary for the checks, with dependency features resolved together with the
+    // Python bindings' (only the binary is built): the wheel that .ci/run builds next then
+    // reuses every compiled dependency and compiles only PyO3 and the bindings.
+    let release = executables(
+        &cmd!(
+            sh,
+            "cargo build --release --quiet -p hapcal -p hapcal-py --bin hapcal --message-format=json-render-diagnostics"
+        )
+        .read()?,
+    )?;
+    let hapcal = find(&release, "hapcal", "bin", "hapcal")?;
+    reproduce_tables(sh, true, Some(&hapcal))?;
     // The published recordings: no calibrated model worse than frames only held out.
-    real_data::run(sh, true)?;
+    real_data::run(sh, true, Some(&hapcal))?;
     // The diagnosis of the real robots keeps its verdicts.
-    diagnose_real::run(sh, true)
+    diagnose_real::run(sh, true, Some(&hapcal))
+}
+
+/// An executable that cargo built: its package, target and path (from `--message-format=json`).
+struct Executable {
+    /// Package name.
+    package: String,
+    /// The package's directory (where `cargo test` runs its tests).
+    package_dir: PathBuf,
+    /// Target kind: `lib`, `bin`, `test`, `example`, `bench`.
+    kind: String,
+    /// Target name.
+    name: String,
+    /// Whether it is a test harness (unit or integration tests).
+    test: bool,
+    path: PathBuf,
+}
+
+/// The executables among cargo's JSON messages (one JSON object a line; other lines skipped).
+fn executables(messages: &str) -> Result<Vec<Executable>> {
+    let mut out = Vec::new();
+    for line in messages.lines().filter(|l| l.starts_with('{')) {
+        let m: serde_json::Value = serde_json::from_str(line)?;
+        let (Some(path), Some(manifest)) = (m["executable"].as_str(), m["manifest_path"].as_str())
+        else {
+            continue;
+        };
+        // `path+file:///…/crates/identify#hapcal-identify@0.1.0`, or `…/xtask#0.1.0` when the
+        // directory is named after the package.
+        let id = m["package_id"].as_str().unwrap_or_default();
+        let (url, fragment) = id.rsplit_once('#').unwrap_or((id, ""));
+        let package = match fragment.split_once('@') {
+            Some((name, _)) => name,
+            None => url.rsplit('/').next().unwrap_or_default(),
+        };
+        out.push(Executable {
+            package: package.to_owned(),
+            package_dir: PathBuf::from(manifest)
+                .parent()
+                .map(PathBuf::from)
+                .unwrap_or_default(),
+            kind: m["target"]["kind"][0]
+                .as_str()
+                .unwrap_or_default()
+                .to_owned(),
+            name: m["target"]["name"].as_str().unwrap_or_default().to_owned(),
+            test: m["profile"]["test"].as_bool().unwrap_or(false),
+            path: PathBuf::from(path),
+        });
+    }
+    Ok(out)
+}
+
+/// The path of `package`'s `kind` target `name` among `built`.
+fn find(built: &[Executable], package: &str, kind: &str, name: &str) -> Result<PathBuf> {
+    built
+        .iter()
+        .find(|e| e.package == package && e.kind == kind && e.name == name && !e.test)
+        .map(|e| e.path.clone())
+        .ok_or_else(|| anyhow::anyhow!("cargo built no {kind} {name} of {package}"))
+}
+
+/// How the xtask runs the `hapcal` tool: a program and the arguments before hapcal's own;
+/// `bin` when given (CI passes the binary it built), else `cargo run --release -p hapcal --`.
+fn hapcal_cmd(bin: Option<&Path>) -> (OsString, Vec<OsString>) {
+    match bin {
+        Some(bin) => (bin.into(), Vec::new()),
+        None => (
+            "cargo".into(),
+            ["run", "--release", "--quiet", "-p", "hapcal", "--"]
+                .map(OsString::from)
+                .to_vec(),
+        ),
+    }
 }
 
 fn blind_test(sh: &Shell, cases: usize) -> Result<()> {
@@ -202,13 +318,10 @@ fn blind_test(sh: &Shell, cases: usize) -> Result<()> {
     Ok(())
 }
 
-fn reproduce_tables(sh: &Shell, check: bool) -> Result<()> {
+fn reproduce_tables(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
     if check {
-        cmd!(
-            sh,
-            "cargo run --release --quiet -p hapcal -- reproduce --check"
-        )
-        .run()?;
+        let (hapcal, pre) = hapcal_cmd(bin);
+        cmd!(sh, "{hapcal} {pre...} reproduce --check").run()?;
     } else {
         cmd!(
             sh,

@@ -5,7 +5,9 @@
 
 use anyhow::{Context, Result, bail};
 use serde_json::Value;
+use std::ffi::OsString;
 use std::fmt::Write;
+use std::path::Path;
 use xshell::{Shell, cmd};
 
 /// One recording: name, `hapcal calibrate` arguments, and the publisher's figures (markdown).
@@ -128,12 +130,17 @@ fn deg(v: Option<[f64; 3]>) -> String {
 
 /// The test rows' figures of `d` with the model forced to `rung` (`--model`), as
 /// `position mean / RMS / max, orientation mean / RMS / max`.
-fn forced_test_figures(sh: &Shell, d: &Dataset, rung: &str) -> Result<String> {
+fn forced_test_figures(
+    sh: &Shell,
+    (hapcal, pre): (&OsString, &[OsString]),
+    d: &Dataset,
+    rung: &str,
+) -> Result<String> {
     let args: Vec<&str> = d.args.to_vec();
     let model = rung;
     let json = cmd!(
         sh,
-        "cargo run --release --quiet -p hapcal -- calibrate {args...} --test-last {TEST_LAST} --model {model} --json"
+        "{hapcal} {pre...} calibrate {args...} --test-last {TEST_LAST} --model {model} --json"
     )
     .read()
     .with_context(|| format!("calibrating {} with {rung}", d.name))?;
@@ -146,14 +153,17 @@ fn forced_test_figures(sh: &Shell, d: &Dataset, rung: &str) -> Result<String> {
 
 /// Runs every recording; with `check`, only verifies that no calibrated model is worse than
 /// frames only on its held-out rows.
-pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
+pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
+    let (hapcal, pre) = crate::hapcal_cmd(bin);
+    let (hapcal, pre) = (&hapcal, pre.as_slice());
     let mut md = String::from(
         "# Real recordings, held out\n\nWritten by `cargo xtask real-data` (release build). Each \
          recording is calibrated with the one `hapcal calibrate` command shown, on the files as \
          published; `--test-last 0.3` trains on the first 70 % of the rows in file order and \
          tests on the rest. The model is chosen by blocked cross-validation on the training rows \
          over the ladder frames only → joint offsets → geometric → compliance → transversal \
-         compliance (docs/engine.md, the rule that picks a rung); frames only fits \
+         compliance → joint harmonics (docs/engine.md, the rule that picks a rung); frames \
+         only fits \
          the instrument and marker frames to the nominal kinematics. Errors on the test rows: \
          3-D position error of every marker sample (mean / RMS / max, mm) and, for pose data, \
          the angle of the relative rotation (mean / RMS / max, °).\n",
@@ -180,7 +190,7 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
         let args: Vec<&str> = d.args.to_vec();
         let json = cmd!(
             sh,
-            "cargo run --release --quiet -p hapcal -- calibrate {args...} --test-last {TEST_LAST} --json"
+            "{hapcal} {pre...} calibrate {args...} --test-last {TEST_LAST} --json"
         )
         .read()
         .with_context(|| format!("calibrating {}", d.name))?;
@@ -201,7 +211,7 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
             for r in ladder {
                 let rung = r["rung"].as_str().unwrap_or("?");
                 let diff = &r["score_difference_to_frames"];
-                let forced = forced_test_figures(sh, d, rung)?;
+                let forced = forced_test_figures(sh, (hapcal, pre), d, rung)?;
                 let _ = writeln!(
                     md,
                     "| {} | {:.2} | {:+.2} ± {:.2} | {} |",

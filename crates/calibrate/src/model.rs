@@ -24,7 +24,7 @@ pub enum ModelChoice {
     /// errors of the held-out difference (and, where the calibration will be used beyond the
     /// training range of a joint, do no worse on folds that hold out that end of the range).
     /// Measurement files: frames-only, joint-offsets, geometric, compliance,
-    /// transversal-compliance. Socket recordings and distance logs: geometric, then compliance.
+    /// transversal-compliance, then harmonic or harmonic2. Socket recordings and distance logs: geometric, then compliance.
     /// For a robot with published link masses, mass-compliance and actuator-compliance are
     /// alternatives to compliance (the lowest held-out error of those that pass).
     /// A haptic device's logs: geometric, then transmissions (when the logs have
@@ -60,10 +60,12 @@ pub enum ModelChoice {
     /// times transversal-compliance's).
     TransversalAxes,
     /// Geometric plus once-per-revolution harmonic angle errors on every joint (encoder
-    /// eccentricity). Never chosen by auto: on one MUKCa placement the harmonic models fit the
-    /// training data better and the other placements worse (docs/results/mukca.md).
+    /// eccentricity). A rung of auto on measurement files (the last level, with harmonic2), not
+    /// on socket recordings: on one MUKCa placement the harmonic models fit the training data
+    /// better and the other placements worse (docs/results/mukca.md).
     Harmonic,
-    /// Geometric plus first- and second-order harmonic angle errors on every joint.
+    /// Geometric plus first- and second-order harmonic angle errors on every joint (the alternative
+    /// of harmonic on auto's last level on measurement files).
     Harmonic2,
     /// Mass-compliance plus harmonic.
     MassComplianceHarmonic,
@@ -353,7 +355,8 @@ pub fn terms(
 /// the caller's filter.
 ///
 /// - measurement files: frames-only → joint-offsets → geometric → compliance →
-///   transversal-compliance;
+///   transversal-compliance → {harmonic, harmonic2} (the diagnosis names joint harmonics on
+///   these data: docs/engine.md);
 /// - socket recordings and distance logs (no frame to fit: geometric is the bottom): geometric
 ///   → compliance (or its published-mass alternatives);
 /// - a haptic device's logs: geometric → transmissions (when the logs have external-encoder
@@ -376,6 +379,9 @@ pub fn ladder(kind: DataKind, published_masses: bool) -> Vec<Vec<ModelChoice>> {
             // on a 19-joint tree), which the ladder's time budget does not carry; it is
             // asked for by name where a link is known to bend one way more than the other.
             vec![M::TransversalCompliance],
+            // The diagnosis names joint harmonics on these data, so their models are rungs;
+            // the joint-range folds stop them where they would extrapolate (docs/engine.md).
+            vec![M::Harmonic, M::Harmonic2],
         ],
         // Transversal compliance is a model of these data (`--model transversal-compliance`)
         // but not a rung: a device file carries no link masses, so its moments come from

@@ -132,10 +132,11 @@ fn a_workspace_beyond_half_a_joints_range_is_named_and_the_choice_does_not_end_w
     );
 }
 
-/// The negative control of the test above: a first harmonic of joint 2's angle, which its
-/// gravity compliance models on both sides of the vertical (the torque is a first harmonic of
-/// the angle). The folds let the compliance through, and it more than halves frames only's
-/// test RMS (measured: 0.54 against 1.83 mm).
+/// The negative control of the test above: a first harmonic of joint 2's angle, which the
+/// ladder's harmonic rung models exactly (and its gravity compliance on both sides of the
+/// vertical: the torque is a first harmonic of the angle). The folds let the harmonic model
+/// through, and it brings frames only's test RMS down by more than five times (measured: 0.113
+/// against 1.826 mm; the compliance, the rung taken before the ladder had harmonics, 0.54).
 #[test]
 fn a_rung_that_extrapolates_is_still_taken_beyond_half_a_joints_range() {
     let effect = Effect::Harmonic {
@@ -146,7 +147,7 @@ fn a_rung_that_extrapolates_is_still_taken_beyond_half_a_joints_range() {
     let (out, _) = joint_2_split(effect, 0);
     let (chosen, frames) = test_rms(&out);
     assert!(
-        out.rung.families().compliance.is_some() && chosen < 0.5 * frames,
+        out.rung.families().harmonic_order >= 1 && chosen < 0.2 * frames,
         "{}: {:.3} mm against frames only's {:.3} mm",
         out.rung,
         chosen * 1e3,

@@ -11,14 +11,16 @@ use hapcal_runtime::{CompensationConfig, Pose, Robot, Target, compensate};
 /// Flags of `hapcal compensate`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct CompensateArgs {
-    /// The calibrated robot: a URDF as `hapcal calibrate --out robot.urdf` writes it; its
-    /// sidecar robot.calibration.toml (compliances, frames) is read from beside it.
+    /// The calibrated robot as `hapcal calibrate --out` writes it: a URDF (its sidecar
+    /// robot.calibration.toml, compliances and frames, is read from beside it), or a serial
+    /// robot's device file (.toml with a D-H table and the record in its calibration table).
     #[arg(long)]
     pub device: PathBuf,
-    /// The tip link the targets are for (e.g. ball_link).
+    /// The tip link of a URDF the targets are for (e.g. ball_link); a device file's chain has
+    /// one tip: no --tip.
     #[arg(long)]
-    pub tip: String,
-    /// Another tip link of the calibration (repeatable): a robot calibrated as a tree
+    pub tip: Option<String>,
+    /// Another tip link of a URDF's calibration (repeatable): a robot calibrated as a tree
     /// without link masses carries lumped weights at every tip of the calibration.
     #[arg(long = "other-tip")]
     pub other_tips: Vec<String>,
@@ -199,6 +201,33 @@ fn read_targets(path: &Path, robot: &Robot) -> Result<Vec<TargetRow>> {
     Ok(rows)
 }
 
+/// The calibrated robot of `args.device`: a URDF with `--tip` and `--other-tip`, or a serial
+/// robot's device file (`.toml`, no tips).
+fn load_robot(args: &CompensateArgs) -> Result<Robot> {
+    let device = &args.device;
+    let context = || format!("loading the calibrated robot {}", device.display());
+    let is_toml = (device.extension()).is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+    if is_toml {
+        if let Some(tip) = args.tip.iter().chain(&args.other_tips).next() {
+            bail!(
+                "--tip {tip}: {} is a device file, whose chain has one tip; compensate without \
+                 --tip or --other-tip",
+                device.display()
+            );
+        }
+        return Robot::load_device(device).with_context(context);
+    }
+    let Some(tip) = &args.tip else {
+        bail!(
+            "--tip: name the tip link of {} the targets are for (e.g. --tip ball_link)",
+            device.display()
+        );
+    };
+    let mut tips = vec![tip.as_str()];
+    tips.extend(args.other_tips.iter().map(String::as_str));
+    Robot::load_urdf(device, &tips).with_context(context)
+}
+
 /// Runs `hapcal compensate`: writes the commands of the reached targets and returns the
 /// summary to print.
 ///
@@ -217,15 +246,12 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
     }
     crate::calibrate::check_extension(&args.out, &["csv"], "the joint commands", false)?;
     crate::calibrate::check_output(&args.out, &[&args.device, &args.targets])?;
-    let mut tips = vec![args.tip.as_str()];
-    tips.extend(args.other_tips.iter().map(String::as_str));
-    let robot = Robot::load_urdf(&args.device, &tips)
-        .with_context(|| format!("loading the calibrated robot {}", args.device.display()))?;
+    let robot = load_robot(args)?;
     let mut rows = read_targets(&args.targets, &robot)?;
     let robot = if args.instrument_frame {
         let Some(instrument) = robot.frame("instrument") else {
             bail!(
-                "--instrument-frame: {} has no identified instrument frame (frames.instrument of its calibration sidecar)",
+                "--instrument-frame: {} has no identified instrument frame (frames.instrument of its calibration record)",
                 args.device.display()
             );
         };

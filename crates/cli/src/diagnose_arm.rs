@@ -7,6 +7,7 @@ use std::fmt::Write as _;
 use anyhow::{Context, Result};
 use hapcal_calibrate::baseline::{DataKind, geometric_baseline};
 use hapcal_calibrate::calibrate::Plan;
+use hapcal_contract::{Effect, ModelName};
 use hapcal_diagnose::arm::{ArmConfig, ArmDiagnosis, diagnose_arm};
 
 /// Loads `plan`'s device and data, fits the geometric baseline (with the kinematic ladder)
@@ -194,7 +195,45 @@ pub fn render_arm(d: &ArmDiagnosis) -> String {
             open.join(", ")
         );
     }
+    model_of_verdict(&mut s, d.verdict.effects());
     s
+}
+
+/// The calibration model that describes the named effects (`hapcal calibrate --model …`), or
+/// why none does: how this verdict compares with the rung `calibrate`'s ladder takes.
+fn model_of_verdict(s: &mut String, named: &[Effect]) {
+    if named.is_empty() {
+        return;
+    }
+    let f = ModelName::for_effects(named);
+    match f.model {
+        Ok(Some(m)) => {
+            let _ = writeln!(
+                s,
+                "calibration model of these effects: {m} (hapcal calibrate --model {m}; the \
+                 ladder of --model auto takes it where cross-validation shows it)"
+            );
+        }
+        Ok(None) => {
+            let _ = writeln!(
+                s,
+                "no calibration model frees these effects: the kinematic rungs are what \
+                 calibrate can fit"
+            );
+        }
+        Err(together) => {
+            let names: Vec<&str> = together.iter().map(|e| e.name()).collect();
+            let _ = writeln!(
+                s,
+                "no one calibration model frees {} together: calibrate fits one of them at a \
+                 time",
+                names.join(" and ")
+            );
+        }
+    }
+    for (e, reason) in &f.beyond {
+        let _ = writeln!(s, "  {e}: {reason}");
+    }
 }
 
 /// The residual maps as one SVG document: per signal (each joint reading, time, each joint's

@@ -1,7 +1,10 @@
 //! Flags of `hapcal predict` and the glue that runs it: joint readings from a measurement
 //! file, the calibrated model's tip positions (or poses) with their 1σ uncertainty and the
 //! region flag ([`hapcal_runtime::Predictor`]), to a CSV file; with measured columns, the
-//! errors of the predictions against them, without refitting.
+//! errors of the predictions against them, without refitting. A calibrated URDF and a serial
+//! robot's device file (`[[dh]]`) are [`Robot`]s; a haptic device's file (capstans,
+//! parallelogram) is a [`Model`]: the handle's position from the joint readings of a log and,
+//! with its cable distances, the distance errors.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -9,26 +12,30 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use hapcal_io::{JointSchema, MeasurementTable, Units};
 use hapcal_runtime::{
-    MarkerObservation, MeasuredErrors, PredictionFrame, Predictor, Robot, TipPrediction,
+    ErrorFigures, MarkerObservation, MeasuredErrors, Model, PredictionFrame, Predictor, Robot,
+    TipPrediction,
 };
 use serde::Serialize;
 
 /// Flags of `hapcal predict`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct PredictArgs {
-    /// The calibrated robot: a URDF as `hapcal calibrate --out robot.urdf` writes it; its
-    /// sidecar robot.calibration.toml (the calibration record: values with their σ, the
-    /// covariance, the region, the frames) is read from beside it.
+    /// The calibrated device as `hapcal calibrate --out` writes it: a URDF (its sidecar
+    /// robot.calibration.toml, the calibration record with the values' σ, the covariance, the
+    /// region and the frames, is read from beside it), or a device file (.toml) with the
+    /// record in its calibration table: a serial robot's D-H table, or a haptic device.
     #[arg(long)]
     pub device: PathBuf,
-    /// A tip link to predict (e.g. ball_link); repeat it for a tree, in the calibration's
-    /// order (marker k sits on the k-th tip).
-    #[arg(long = "tip", required = true)]
+    /// A tip link of a URDF to predict (e.g. ball_link); repeat it for a tree, in the
+    /// calibration's order (marker k sits on the k-th tip). A device file's chain has one
+    /// tip: no --tip.
+    #[arg(long = "tip")]
     pub tips: Vec<String>,
     /// Joint readings: a measurement file as hapcal calibrate reads it (CSV with the joints as
     /// q1..qn or by name, or industrial_calibration's YAML). Marker positions (x,y,z or
     /// x1,y1,z1,…), orientations and distances, if present, are compared with the predictions;
-    /// a file of joint columns alone is predicted only.
+    /// a file of joint columns alone is predicted only. For a haptic device, its log (q1..qn,
+    /// with distance_m the cable distances to compare with the handle's predicted distance).
     #[arg(long)]
     pub data: PathBuf,
     /// Predict in the calibration's instrument frame, the poses of the markers on the tips
@@ -128,13 +135,13 @@ pub struct Errors {
 pub struct Prediction {
     /// The data file.
     pub data: String,
-    /// `root` (the robot's root link frame, tip links) or `instrument` (the calibration's
-    /// instrument frame, markers).
+    /// `root` (the robot's root link frame, tip links), `instrument` (the calibration's
+    /// instrument frame, markers) or `base` (a haptic device's base frame, its handle).
     pub frame: &'static str,
     /// The tips, in the order of each row's `tips`.
     pub tips: Vec<String>,
     /// What σ rests on: `covariance`, `stds-only` (no covariance recorded: the values'
-    /// standard deviations, correlations ignored) or `none`.
+    /// standard deviations, correlations ignored) or `none` (no record, or a haptic device).
     pub uncertainty: &'static str,
     /// Number of values σ propagates.
     pub n_values: usize,
@@ -334,11 +341,36 @@ pub fn csv(prediction: &Prediction, poses: bool) -> String {
     out
 }
 
+/// What the summary needs to know of the calibrated model: whether its record holds a
+/// training region, and which joints are prismatic (their ranges in m).
+pub struct SummaryModel<'a> {
+    /// Whether the record holds a training region.
+    pub has_region: bool,
+    /// The joints' names, in the order of the readings.
+    pub joint_names: &'a [String],
+    /// Whether each joint is prismatic.
+    pub prismatic: Vec<bool>,
+}
+
+impl<'a> SummaryModel<'a> {
+    /// The summary's view of `robot`.
+    pub fn of_robot(robot: &'a Robot) -> SummaryModel<'a> {
+        SummaryModel {
+            has_region: (robot.calibration()).is_some_and(|c| c.region.is_some()),
+            joint_names: robot.joint_names(),
+            prismatic: (0..robot.n_joints())
+                .map(|j| robot.is_prismatic(j))
+                .collect(),
+        }
+    }
+}
+
 /// The summary of `prediction` in words.
-pub fn summary(prediction: &Prediction, robot: &Robot) -> String {
+pub fn summary(prediction: &Prediction, model: &SummaryModel<'_>) -> String {
     let mut s = String::new();
     let frame = match prediction.frame {
         "instrument" => "markers in the calibration's instrument frame",
+        "base" => "the handle in the device's base frame, where the cable encoder is",
         _ => "tip links in the root link frame",
     };
     let _ = writeln!(
@@ -361,11 +393,7 @@ pub fn summary(prediction: &Prediction, robot: &Robot) -> String {
             );
         }
     }
-    if robot
-        .calibration()
-        .and_then(|c| c.region.as_ref())
-        .is_none()
-    {
+    if !model.has_region {
         let _ = writeln!(
             s,
             "region: the calibration records no training region; no reading is flagged"
@@ -385,8 +413,8 @@ pub fn summary(prediction: &Prediction, robot: &Robot) -> String {
         let outside =
             (prediction.rows.iter()).filter_map(|r| r.outside_region.as_ref().map(|o| (r.line, o)));
         for (line, o) in outside.clone().take(10) {
-            let unit = match robot.joint_names().iter().position(|j| *j == o.joint) {
-                Some(j) if robot.is_prismatic(j) => "m",
+            let unit = match model.joint_names.iter().position(|j| *j == o.joint) {
+                Some(j) if model.prismatic.get(j) == Some(&true) => "m",
                 _ => "rad",
             };
             let _ = writeln!(
@@ -429,11 +457,12 @@ pub fn summary(prediction: &Prediction, robot: &Robot) -> String {
 }
 
 /// The loaded robot, its predictor and the data, as `hapcal predict` and the Python package
-/// prepare them.
+/// prepare them: a calibrated URDF with the tips `tips`, or a serial robot's device file
+/// (`.toml` with a `[[dh]]` table; no tips: its chain has one).
 ///
 /// # Errors
-/// A device that is not a URDF, an unreadable robot or data file (file:line:column),
-/// `instrument_frame` on a robot without an identified instrument frame.
+/// A URDF without tips, tips given for a device file, an unreadable robot or data file
+/// (file:line:column), `instrument_frame` on a robot without an identified instrument frame.
 pub fn prepare(
     device: &Path,
     tips: &[String],
@@ -441,24 +470,12 @@ pub fn prepare(
     units: &Units,
     instrument_frame: bool,
 ) -> Result<(Predictor, MeasurementTable)> {
-    let is_urdf = device
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
-    if !is_urdf {
-        bail!(
-            "{}: predict reads a calibrated URDF (hapcal calibrate --out robot.urdf) and its \
-             sidecar robot.calibration.toml",
-            device.display()
-        );
-    }
-    let tip_refs: Vec<&str> = tips.iter().map(String::as_str).collect();
-    let robot = Robot::load_urdf(device, &tip_refs)
-        .with_context(|| format!("loading the calibrated robot {}", device.display()))?;
+    let robot = load_robot(device, tips)?;
     let frame = if instrument_frame {
         if robot.frame("instrument").is_none() {
             bail!(
                 "--instrument-frame: {} has no identified instrument frame (frames.instrument \
-                 of its calibration sidecar)",
+                 of its calibration record)",
                 device.display()
             );
         }
@@ -472,6 +489,177 @@ pub fn prepare(
     Ok((predictor, table))
 }
 
+/// Whether `device` is a device file (`.toml`) rather than a URDF.
+fn is_device_file(device: &Path) -> bool {
+    device
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
+}
+
+/// The calibrated robot of `device`: a URDF with the tips `tips`, or a serial robot's device
+/// file (no tips).
+fn load_robot(device: &Path, tips: &[String]) -> Result<Robot> {
+    let is_urdf = device
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    if is_device_file(device) {
+        if !tips.is_empty() {
+            bail!(
+                "--tip {}: {} is a device file, whose chain has one tip; predict it without --tip",
+                tips.join(" --tip "),
+                device.display()
+            );
+        }
+        return Robot::load_device(device)
+            .with_context(|| format!("loading the calibrated robot {}", device.display()));
+    }
+    if !is_urdf {
+        bail!(
+            "{}: predict reads a calibrated URDF (hapcal calibrate --out robot.urdf, with its \
+             sidecar robot.calibration.toml) or a calibrated device file (--out device.toml)",
+            device.display()
+        );
+    }
+    if tips.is_empty() {
+        bail!(
+            "--tip: name the tip link of {} to predict (e.g. --tip ball_link), as calibrated",
+            device.display()
+        );
+    }
+    let tip_refs: Vec<&str> = tips.iter().map(String::as_str).collect();
+    Robot::load_urdf(device, &tip_refs)
+        .with_context(|| format!("loading the calibrated robot {}", device.display()))
+}
+
+/// The haptic device of a device file, if it is one (capstans or a parallelogram: its
+/// calibration is of logs, as `hapcal calibrate` decides).
+fn haptic_device(device: &Path) -> Result<Option<hapcal_io::Device>> {
+    if !is_device_file(device) {
+        return Ok(None);
+    }
+    let d = hapcal_io::read_device(device)
+        .with_context(|| format!("reading device {}", device.display()))?;
+    Ok((!d.capstans.is_empty() || d.parallelogram.is_some()).then_some(d))
+}
+
+/// Per row of a haptic device's log its line, the joint readings (rad) and the cable
+/// distance (m), if any; and the reader's warnings.
+type HapticRows = (Vec<(u64, Vec<f64>, Option<f64>)>, Vec<String>);
+
+/// A haptic device's log as `hapcal calibrate` reads it (`q1..qn` and `distance_m`, with
+/// its checks), or without a `distance_m` column its joint readings alone (a measurement
+/// file of columns `q1..qn`).
+fn read_haptic_rows(path: &Path, device: &hapcal_io::Device, units: &Units) -> Result<HapticRows> {
+    if path.is_dir() {
+        bail!(
+            "{}: a folder; predict reads a log of the haptic device (CSV with q1..q{} and \
+             distance_m)",
+            path.display(),
+            device.n_joints()
+        );
+    }
+    hapcal_calibrate::data::check_csv_header(path)?;
+    let mut header = String::new();
+    let _ = std::fs::File::open(path)
+        .and_then(|f| std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut header));
+    let has_distance = header.split(',').any(|c| c.trim() == "distance_m");
+    if has_distance {
+        let log = hapcal_io::read_log(path, device)
+            .with_context(|| format!("reading log {}", path.display()))?;
+        let rows = (log.rows.into_iter())
+            .map(|r| (r.line, r.q, Some(r.distance_m)))
+            .collect();
+        return Ok((rows, log.warnings));
+    }
+    let names: Vec<String> = (1..=device.n_joints()).map(|j| format!("q{j}")).collect();
+    let prismatic = vec![false; names.len()];
+    let limits = device.joint_limits();
+    let schema = JointSchema {
+        names: &names,
+        prismatic: &prismatic,
+        limits: &limits,
+    };
+    let table = hapcal_io::read_measurement_file(path, &schema, units)
+        .with_context(|| format!("reading joint readings {}", path.display()))?;
+    if table.rows.is_empty() {
+        bail!(
+            "{}: no data row: expected one row of joint readings q1..q{}",
+            path.display(),
+            names.len()
+        );
+    }
+    let rows = (table.rows.into_iter())
+        .map(|r| (r.line, r.q, None))
+        .collect();
+    Ok((rows, table.warnings))
+}
+
+/// The handle's predictions of a haptic device (`hapcal_runtime::Model` of its calibrated
+/// device file) at every row of its log: the handle's position (pose) in the device's base
+/// frame from the joint readings, the region flag and, with the log's cable distances, the
+/// distance errors `|p| − d` (m) as `hapcal calibrate` reports them. No σ: the device model
+/// does not vary the record's values.
+///
+/// # Errors
+/// An unreadable device file or log (file:line:column), a reading the model refuses.
+pub fn predict_haptic(
+    device_path: &Path,
+    device: &hapcal_io::Device,
+    data: &Path,
+    units: &Units,
+    poses: bool,
+) -> Result<(Prediction, Model)> {
+    let model = Model::load(device_path)
+        .with_context(|| format!("loading the calibrated device {}", device_path.display()))?;
+    let (log, warnings) = read_haptic_rows(data, device, units)?;
+    let joint_names: Vec<String> = (1..=model.n_joints()).map(|j| format!("q{j}")).collect();
+    let mut distance = ErrorFigures::default();
+    let mut rows = Vec::with_capacity(log.len());
+    for (line, theta, d) in &log {
+        let at = || format!("{}:{line}", data.display());
+        let pose = model.end_pose(theta).with_context(at)?;
+        let p = pose.translation_m;
+        if let Some(d) = d {
+            distance.push((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - d);
+        }
+        let outside = model.outside_region(theta).with_context(at)?;
+        rows.push(PredictedRow {
+            line: *line,
+            tips: vec![TipRow {
+                position_m: p,
+                quaternion_wxyz: poses.then(|| quaternion_of(&pose.rotation)),
+                sigma_m: None,
+                sigma_rad: None,
+            }],
+            outside_region: outside.map(|(j, past)| OutsideRegion {
+                joint: joint_names[j].clone(),
+                past,
+            }),
+        });
+    }
+    let prediction = Prediction {
+        data: data.display().to_string(),
+        frame: "base",
+        tips: vec!["handle".to_owned()],
+        uncertainty: "none",
+        n_values: 0,
+        uncertainty_note: Some(
+            "no σ: the runtime's model of a haptic device does not propagate the record's \
+             covariance"
+                .to_owned(),
+        ),
+        n_outside_region: rows.iter().filter(|r| r.outside_region.is_some()).count(),
+        errors: (distance.count > 0).then(|| Errors {
+            position_m: None,
+            orientation_rad: None,
+            distance_m: Figures::of(&distance),
+        }),
+        warnings,
+        rows,
+    };
+    Ok((prediction, model))
+}
+
 /// Runs `hapcal predict`: returns what to print on standard output and the messages for
 /// standard error; writes `--out` (atomically, never over an input).
 ///
@@ -483,6 +671,38 @@ pub fn run(args: &PredictArgs, units: &Units) -> Result<(String, Vec<String>)> {
     if let Some(out) = &args.out {
         crate::calibrate::check_extension(out, &["csv"], "the predictions", false)?;
         crate::calibrate::check_output(out, &inputs)?;
+    }
+    if let Some(device) = haptic_device(&args.device)? {
+        if !args.tips.is_empty() {
+            bail!(
+                "--tip {}: {} is a haptic device, whose prediction is its handle; predict it \
+                 without --tip",
+                args.tips.join(" --tip "),
+                args.device.display()
+            );
+        }
+        if args.instrument_frame {
+            bail!(
+                "--instrument-frame: {} is a haptic device, calibrated from cable distances \
+                 measured in its base frame: it has no instrument frame",
+                args.device.display()
+            );
+        }
+        let (prediction, model) =
+            predict_haptic(&args.device, &device, &args.data, units, args.poses)?;
+        let joint_names: Vec<String> = (1..=model.n_joints()).map(|j| format!("q{j}")).collect();
+        let view = SummaryModel {
+            has_region: model.has_region(),
+            joint_names: &joint_names,
+            prismatic: vec![false; model.n_joints()],
+        };
+        return finish(
+            args,
+            &inputs,
+            &prediction,
+            &summary(&prediction, &view),
+            Vec::new(),
+        );
     }
     let (predictor, table) = prepare(
         &args.device,
@@ -517,7 +737,7 @@ pub fn run(args: &PredictArgs, units: &Units) -> Result<(String, Vec<String>)> {
             PredictionFrame::Root => "root",
             PredictionFrame::Instrument => "instrument",
         },
-        tips: args.tips.clone(),
+        tips: predictor.robot().tip_names().to_vec(),
         uncertainty,
         n_values: predictor.n_values(),
         uncertainty_note,
@@ -530,20 +750,36 @@ pub fn run(args: &PredictArgs, units: &Units) -> Result<(String, Vec<String>)> {
         warnings: table.warnings.clone(),
         rows,
     };
-    let mut notes: Vec<String> = (prediction.warnings.iter())
-        .map(|w| format!("hapcal: warning: {w}"))
-        .collect();
+    let mut extra = Vec::new();
     if !prediction.rows.is_empty() && errors_without_instrument(&predictor, &prediction) {
-        notes.push(
+        extra.push(
             "hapcal: warning: the calibration identified no instrument frame: the measured \
              columns are compared in the robot's root link frame"
                 .to_owned(),
         );
     }
-    let csv_text = csv(&prediction, args.poses);
-    let text = summary(&prediction, predictor.robot());
+    let text = summary(&prediction, &SummaryModel::of_robot(predictor.robot()));
+    finish(args, &inputs, &prediction, &text, extra)
+}
+
+/// Prints or writes `prediction` as `args` ask: the CSV to `--out` or standard output, the
+/// JSON document with `--json`, the summary `text`; `extra` notes after the reader's
+/// warnings.
+fn finish(
+    args: &PredictArgs,
+    inputs: &[&Path],
+    prediction: &Prediction,
+    text: &str,
+    extra: Vec<String>,
+) -> Result<(String, Vec<String>)> {
+    let mut notes: Vec<String> = (prediction.warnings.iter())
+        .map(|w| format!("hapcal: warning: {w}"))
+        .collect();
+    notes.extend(extra);
+    let text = text.to_owned();
+    let csv_text = csv(prediction, args.poses);
     let stdout = if args.json {
-        format!("{}\n", serde_json::to_string_pretty(&prediction)?)
+        format!("{}\n", serde_json::to_string_pretty(prediction)?)
     } else if args.out.is_some() {
         text
     } else {
@@ -551,7 +787,7 @@ pub fn run(args: &PredictArgs, units: &Units) -> Result<(String, Vec<String>)> {
         csv_text.clone()
     };
     if let Some(out) = &args.out {
-        crate::calibrate::write_new(out, &csv_text, &inputs)?;
+        crate::calibrate::write_new(out, &csv_text, inputs)?;
         notes.push(format!("hapcal: wrote {}", out.display()));
     }
     Ok((stdout, notes))

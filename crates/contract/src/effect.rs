@@ -340,6 +340,61 @@ impl ModelName {
     }
 }
 
+/// The calibration model that describes a diagnosis's verdict ([`ModelName::for_effects`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ModelFor {
+    /// The smallest model that frees every named effect that has a model: `Ok(None)` when
+    /// none has one (the kinematic rungs describe the data), `Err` with the effects when no
+    /// single model frees them together.
+    pub model: Result<Option<ModelName>, Vec<Effect>>,
+    /// The named effects no calibration model has, each with the reason
+    /// ([`Effect::model`]).
+    pub beyond: Vec<(Effect, &'static str)>,
+}
+
+impl ModelName {
+    /// The smallest model (fewest effects; a data-dependent compliance before the published
+    /// masses) that frees every effect of `effects` which has a model, with either torque
+    /// model of its compliance; the other effects with the reason no model has them. How a
+    /// diagnosis's verdict is compared with the rung `--model auto` takes.
+    pub fn for_effects(effects: &[Effect]) -> ModelFor {
+        let mut beyond = Vec::new();
+        let mut fitted = Vec::new();
+        for &e in effects {
+            match e.model() {
+                Ok(_) => fitted.push(e),
+                Err(reason) => beyond.push((e, reason)),
+            }
+        }
+        if fitted.is_empty() {
+            return ModelFor {
+                model: Ok(None),
+                beyond,
+            };
+        }
+        let published = |m: ModelName| {
+            matches!(
+                m,
+                ModelName::MassCompliance
+                    | ModelName::ActuatorCompliance
+                    | ModelName::MassComplianceHarmonic
+            )
+        };
+        let frees = |m: ModelName| {
+            [true, false]
+                .into_iter()
+                .any(|masses| fitted.iter().all(|e| m.effects(masses).contains(e)))
+        };
+        let model = (ModelName::ALL.into_iter())
+            .filter(|&m| frees(m))
+            .min_by_key(|&m| (m.effects(true).len(), published(m)));
+        ModelFor {
+            model: model.map(Some).ok_or(fitted),
+            beyond,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -376,6 +431,43 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn a_verdict_leads_to_the_smallest_model_that_frees_it() {
+        use Effect::*;
+        let of = |e: &[Effect]| ModelName::for_effects(e);
+        assert_eq!(of(&[]).model, Ok(None));
+        assert_eq!(
+            of(&[GravityCompliance]).model,
+            Ok(Some(ModelName::Compliance))
+        );
+        assert_eq!(
+            of(&[LumpedCompliance]).model,
+            Ok(Some(ModelName::Compliance))
+        );
+        assert_eq!(
+            of(&[GravityCompliance, FirstHarmonic]).model,
+            Ok(Some(ModelName::ComplianceHarmonic))
+        );
+        assert_eq!(
+            of(&[GravityCompliance, TransversalCompliance]).model,
+            Ok(Some(ModelName::TransversalCompliance))
+        );
+        assert_eq!(
+            of(&[FirstHarmonic, SecondHarmonic]).model,
+            Ok(Some(ModelName::Harmonic2))
+        );
+        // No one model has transversal compliance and harmonics together.
+        assert_eq!(
+            of(&[TransversalCompliance, FirstHarmonic]).model,
+            Err(vec![TransversalCompliance, FirstHarmonic])
+        );
+        // Effects without a model are set apart with their reason.
+        let f = of(&[Backlash, FirstHarmonic, GearRatio]);
+        assert_eq!(f.model, Ok(Some(ModelName::Harmonic)));
+        let apart: Vec<Effect> = f.beyond.iter().map(|b| b.0).collect();
+        assert_eq!(apart, [Backlash, GearRatio]);
     }
 
     #[test]

@@ -47,7 +47,7 @@ mod effect;
 mod names;
 mod write;
 
-pub use effect::{Effect, SeparatingMeasurement};
+pub use effect::{Effect, ModelFor, SeparatingMeasurement};
 
 use std::collections::BTreeMap;
 use std::fmt;

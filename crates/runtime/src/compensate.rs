@@ -130,17 +130,17 @@ fn cost(e: &[f64; 6], rows: usize, scale_m: f64) -> f64 {
         .sum()
 }
 
-/// Solves `(J_w·J_wᵀ + λ²·I)·y = e_w` (Cholesky, `rows` ≤ 6) and writes `q + J_wᵀ·y`, clamped
-/// to the joint limits, into `trial`. Rows 3–5 of `J` and `e` are weighted by `scale_m`.
+/// Solves `(J_w·J_wᵀ + λ²·I)·y = e_w` (Cholesky, `R` = 3 or 6 rows) and writes `q + J_wᵀ·y`,
+/// clamped to the joint limits, into `trial`. Rows 3–5 of `J` and `e` are weighted by
+/// `scale_m`.
 #[allow(
     clippy::too_many_arguments,
     clippy::needless_range_loop,
     reason = "a 6 × 6 Cholesky solve reads best with the textbook's indices"
 )]
-fn step(
+fn step<const R: usize>(
     jac: &[[f64; 6]],
     e: &[f64; 6],
-    rows: usize,
     scale_m: f64,
     lambda: f64,
     q: &[f64],
@@ -148,50 +148,56 @@ fn step(
     trial: &mut [f64],
 ) {
     let w = |i: usize| if i < 3 { 1.0 } else { scale_m };
-    let mut m = [[0.0; 6]; 6];
-    for (a, row) in m.iter_mut().enumerate().take(rows) {
-        for (b, x) in row.iter_mut().enumerate().take(rows) {
-            let mut s = 0.0;
-            for col in jac {
-                s += col[a] * col[b];
+    // M = J_w·J_wᵀ + λ²·I, row by row (a row's sums stay in registers over the columns).
+    let mut m = [[0.0; R]; R];
+    for (a, row) in m.iter_mut().enumerate() {
+        let mut sum = [0.0; R];
+        for col in jac {
+            let ca = col[a];
+            for (s, cb) in sum.iter_mut().zip(col) {
+                *s += ca * cb;
             }
-            *x = w(a) * w(b) * s + if a == b { lambda * lambda } else { 0.0 };
         }
+        for (b, (x, s)) in row.iter_mut().zip(sum).enumerate() {
+            *x = w(a) * w(b) * s;
+        }
+        row[a] += lambda * lambda;
     }
     // Cholesky M = L·Lᵀ in place (lower triangle); M is positive definite (λ > 0).
-    for j in 0..rows {
+    for j in 0..R {
         let mut d = m[j][j];
         for k in 0..j {
             d -= m[j][k] * m[j][k];
         }
         let d = d.max(f64::MIN_POSITIVE).sqrt();
         m[j][j] = d;
-        for i in j + 1..rows {
+        let inv = 1.0 / d;
+        for i in j + 1..R {
             let mut s = m[i][j];
             for k in 0..j {
                 s -= m[i][k] * m[j][k];
             }
-            m[i][j] = s / d;
+            m[i][j] = s * inv;
         }
     }
-    let mut y = [0.0; 6];
-    for i in 0..rows {
+    let mut y = [0.0; R];
+    for i in 0..R {
         let mut s = w(i) * e[i];
         for k in 0..i {
             s -= m[i][k] * y[k];
         }
         y[i] = s / m[i][i];
     }
-    for i in (0..rows).rev() {
+    for i in (0..R).rev() {
         let mut s = y[i];
-        for k in i + 1..rows {
+        for k in i + 1..R {
             s -= m[k][i] * y[k];
         }
         y[i] = s / m[i][i];
     }
     for (((t, q), col), (lo, hi)) in trial.iter_mut().zip(q).zip(jac).zip(limits) {
         let mut dq = 0.0;
-        for i in 0..rows {
+        for i in 0..R {
             dq += w(i) * col[i] * y[i];
         }
         *t = (q + dq).clamp(*lo, *hi);
@@ -227,8 +233,9 @@ pub fn compensate(
     q_out: &mut [f64],
 ) -> Result<Compensation, Error> {
     let n = robot.n_joints();
-    // Checks the workspace, the tip and the start angles.
-    robot.tip_pose(tip, q_start, ws)?;
+    robot.check_workspace(ws);
+    robot.check_tip(tip)?;
+    robot.check_joints("joint angles", q_start)?;
     if q_out.len() != n {
         return Err(Error::Length {
             what: "joint command",
@@ -271,26 +278,38 @@ pub fn compensate(
         *c = s.clamp(*lo, *hi);
     }
     let scale = cfg.orientation_scale_m;
-    let (pose, mut deflection) = robot.deflected_jacobian(tip, &q, ws);
+    let (mut pose, mut deflection) = robot.deflected_pose(tip, &q, ws);
     let (mut e, rows, mut distance, mut angle) = error(target, &pose);
     let mut current = cost(&e, rows, scale);
     let mut lambda = cfg.damping_m;
     let mut iterations = 0;
+    // Whether `ws.jac` holds the Jacobian at `q`: made from the frames of the deflection
+    // at `q` only when a step needs it (not for the command that ends the iterations), and
+    // kept when a trial is refused.
+    let mut jacobian_at_q = false;
     let within = |d: f64, a: f64| d <= cfg.tolerance_m && a <= cfg.tolerance_rad;
     while !within(distance, angle) && iterations < cfg.max_iterations {
+        if !jacobian_at_q {
+            robot.deflected_columns(tip, &pose, ws);
+            jacobian_at_q = true;
+        }
         iterations += 1;
-        step(&ws.jac, &e, rows, scale, lambda, &q, limits, &mut trial);
-        let (pose_t, deflection_t) = robot.deflected_jacobian(tip, &trial, ws);
+        if rows == 3 {
+            step::<3>(&ws.jac, &e, scale, lambda, &q, limits, &mut trial);
+        } else {
+            step::<6>(&ws.jac, &e, scale, lambda, &q, limits, &mut trial);
+        }
+        let (pose_t, deflection_t) = robot.deflected_pose(tip, &trial, ws);
         let (e_t, _, distance_t, angle_t) = error(target, &pose_t);
         let cost_t = cost(&e_t, rows, scale);
         if cost_t < current {
             q.copy_from_slice(&trial);
-            (e, distance, angle, current, deflection) =
-                (e_t, distance_t, angle_t, cost_t, deflection_t);
+            (pose, e, distance, angle, current, deflection) =
+                (pose_t, e_t, distance_t, angle_t, cost_t, deflection_t);
+            jacobian_at_q = false;
             lambda = (lambda * 0.1).max(1e-12);
         } else {
-            // Back to the Jacobian at q, with more damping.
-            robot.deflected_jacobian(tip, &q, ws);
+            // The Jacobian at q again, with more damping.
             lambda *= 10.0;
             if lambda > 1e6 {
                 break;

@@ -66,9 +66,11 @@ impl fmt::Display for LoadError {
 
 impl std::error::Error for LoadError {}
 
+/// A device file's tables, as [`Model::from_toml`] and [`crate::Robot::from_device_str`]
+/// read them.
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct File {
+pub(crate) struct File {
     #[serde(default)]
     #[expect(
         dead_code,
@@ -76,25 +78,21 @@ struct File {
     )]
     name: Option<String>,
     #[serde(default)]
-    convention: Option<String>,
+    pub(crate) convention: Option<String>,
     #[serde(default)]
-    dh: Vec<DhEntry>,
+    pub(crate) dh: Vec<DhEntry>,
     #[serde(default)]
-    urdf: Option<IgnoredAny>,
+    pub(crate) urdf: Option<IgnoredAny>,
     #[serde(default)]
-    placement: Vec<IgnoredAny>,
+    pub(crate) placement: Vec<IgnoredAny>,
     #[serde(default)]
-    branch: Vec<IgnoredAny>,
+    pub(crate) branch: Vec<IgnoredAny>,
     #[serde(default)]
-    joint: Vec<JointEntry>,
+    pub(crate) joint: Vec<JointEntry>,
     #[serde(default)]
-    capstan: Vec<CapstanEntry>,
+    pub(crate) capstan: Vec<CapstanEntry>,
     #[serde(default)]
-    #[expect(
-        dead_code,
-        reason = "the calibrated joint 4 is a polynomial; nominal: a capstan"
-    )]
-    parallelogram: Option<IgnoredAny>,
+    pub(crate) parallelogram: Option<IgnoredAny>,
     #[serde(default)]
     #[expect(
         dead_code,
@@ -102,20 +100,20 @@ struct File {
     )]
     cable_encoder: Option<IgnoredAny>,
     #[serde(default)]
-    handle: Option<HandleEntry>,
+    pub(crate) handle: Option<HandleEntry>,
     #[serde(default)]
-    calibration: Option<Calibration>,
+    pub(crate) calibration: Option<Calibration>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct HandleEntry {
+pub(crate) struct HandleEntry {
     mass_kg: f64,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct DhEntry {
+pub(crate) struct DhEntry {
     a_m: f64,
     alpha_rad: f64,
     d_m: f64,
@@ -125,12 +123,13 @@ struct DhEntry {
     joint: toml::Value,
 }
 
+/// One `[[joint]]`: its name and limits.
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct JointEntry {
-    name: String,
-    lower_rad: f64,
-    upper_rad: f64,
+pub(crate) struct JointEntry {
+    pub(crate) name: String,
+    pub(crate) lower_rad: f64,
+    pub(crate) upper_rad: f64,
     #[serde(default)]
     #[expect(
         dead_code,
@@ -141,7 +140,7 @@ struct JointEntry {
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct CapstanEntry {
+pub(crate) struct CapstanEntry {
     joint: usize,
     ratio: f64,
     drum_distance_m: f64,
@@ -206,8 +205,10 @@ impl Model {
     /// names (`da1`, `dtheta3`, …) are skipped: the rows already hold them; the instrument's
     /// and markers' frames (`[calibration.frames]`) are the measurement rig's. A value the
     /// device model cannot evaluate (a robot's `compliance.*`, `transversal.*`,
-    /// `harmonic.*`, a placement deviation) is refused. A file without `[calibration]` gives
-    /// the nominal model (ideal capstans, rigid joints). `origin` names the text in messages.
+    /// `harmonic.*`, a placement deviation) is refused: a serial robot's device file with
+    /// such a record is a [`crate::Robot`] ([`crate::Robot::load_device`]). A file without
+    /// `[calibration]` gives the nominal model (ideal capstans, rigid joints). `origin` names
+    /// the text in messages.
     ///
     /// # Errors
     /// [`LoadError::Parse`] for TOML syntax, a missing or unknown key or a wrong type, and
@@ -221,78 +222,17 @@ impl Model {
     /// under another torque source, or a model value [`Model::from_dh`], [`Drive`] or
     /// [`Model::with_handle_compliance`] refuses.
     pub fn from_toml(text: &str, origin: &str) -> Result<Model, LoadError> {
-        let file: File = toml::from_str(text).map_err(|e| {
-            let (line, column) = e
-                .span()
-                .map_or((0, 0), |span| line_column(text, span.start));
-            LoadError::Parse {
-                origin: origin.to_owned(),
-                line,
-                column,
-                message: e.message().trim_end().to_owned(),
-            }
-        })?;
+        let DeviceFile {
+            file,
+            convention,
+            rows,
+            n_joints,
+        } = read_device_file(text, origin)?;
         let invalid = |message: String| LoadError::Invalid {
             origin: origin.to_owned(),
             message,
         };
         let model_error = |what: &str, e: Error| invalid(format!("{what}: {e}"));
-
-        if !file.placement.is_empty() || !file.branch.is_empty() || file.urdf.is_some() {
-            return Err(invalid(
-                "[[placement]] (URDF) chains are not supported by the runtime: use a [[dh]] \
-                 chain"
-                    .to_owned(),
-            ));
-        }
-        let convention = match file.convention.as_deref() {
-            None | Some("dh") => DhConvention::Standard,
-            Some("mdh") => DhConvention::Modified,
-            Some(other) => {
-                return Err(invalid(format!(
-                    "unknown convention {other:?}, expected \"dh\" (standard) or \"mdh\" \
-                     (modified)"
-                )));
-            }
-        };
-        let mut rows = Vec::with_capacity(file.dh.len());
-        let mut n_joints = 0usize;
-        for (i, entry) in file.dh.iter().enumerate() {
-            let joint = match &entry.joint {
-                toml::Value::String(s) if s == "fixed" => false,
-                toml::Value::Integer(j) if usize::try_from(*j).ok() == Some(n_joints + 1) => true,
-                other => {
-                    return Err(invalid(format!(
-                        "[[dh]] row {i}: joint = {other}, expected {} (joints numbered in row \
-                         order) or \"fixed\"",
-                        n_joints + 1
-                    )));
-                }
-            };
-            n_joints += usize::from(joint);
-            rows.push(DhRow {
-                a_m: entry.a_m,
-                alpha_rad: entry.alpha_rad,
-                d_m: entry.d_m,
-                theta_rad: entry.theta_rad,
-                beta_rad: entry.beta_rad,
-                joint,
-            });
-        }
-        if file.joint.len() != n_joints {
-            return Err(invalid(format!(
-                "the chain has {n_joints} joints but {} [[joint]] entries",
-                file.joint.len()
-            )));
-        }
-        for j in &file.joint {
-            if !j.lower_rad.is_finite() || !j.upper_rad.is_finite() || j.lower_rad >= j.upper_rad {
-                return Err(invalid(format!(
-                    "[[joint]] {:?}: lower_rad = {} must be finite and below upper_rad = {}",
-                    j.name, j.lower_rad, j.upper_rad
-                )));
-            }
-        }
         let mut pending: Vec<Pending> = (0..n_joints).map(|_| Pending::Direct).collect();
         for c in &file.capstan {
             let slot = (c.joint.checked_sub(1))
@@ -396,11 +336,11 @@ impl Model {
                 | ValueName::Harmonic { .. } => {
                     return Err(at(
                         name,
-                        "a robot's value, which a device's [[dh]] model cannot evaluate: the \
+                        "a robot's value, which a haptic device's model cannot evaluate: the \
                          runtime's device model holds capstans (capstan<j>.*), joint \
                          polynomials (joint<j>.cheb<k>), the handle's compliance \
-                         (joint_compliance.j<k>) and D-H deviations; load a calibrated URDF with \
-                         Robot::load_urdf"
+                         (joint_compliance.j<k>) and D-H deviations; load a D-H robot's device \
+                         file with Robot::load_device, a calibrated URDF with Robot::load_urdf"
                             .to_owned(),
                     ));
                 }
@@ -497,8 +437,107 @@ impl Model {
     }
 }
 
+/// A device file's `[[dh]]` chain, read and checked: the tables, the convention, the rows
+/// (as written) and the number of joints.
+pub(crate) struct DeviceFile {
+    /// The file's tables.
+    pub(crate) file: File,
+    /// Standard or modified D-H.
+    pub(crate) convention: DhConvention,
+    /// The `[[dh]]` rows as written.
+    pub(crate) rows: Vec<DhRow>,
+    /// Number of joint rows (= `[[joint]]` entries).
+    pub(crate) n_joints: usize,
+}
+
+/// Reads a device file's text up to its chain: TOML syntax and keys, the convention, the
+/// `[[dh]]` rows numbered 1, 2, … in row order, one `[[joint]]` per joint row with
+/// `lower_rad < upper_rad`. `[[placement]]` (URDF) chains are refused.
+///
+/// # Errors
+/// As [`Model::from_toml`] for these checks.
+pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DeviceFile, LoadError> {
+    let file: File = toml::from_str(text).map_err(|e| {
+        let (line, column) = e
+            .span()
+            .map_or((0, 0), |span| line_column(text, span.start));
+        LoadError::Parse {
+            origin: origin.to_owned(),
+            line,
+            column,
+            message: e.message().trim_end().to_owned(),
+        }
+    })?;
+    let invalid = |message: String| LoadError::Invalid {
+        origin: origin.to_owned(),
+        message,
+    };
+
+    if !file.placement.is_empty() || !file.branch.is_empty() || file.urdf.is_some() {
+        return Err(invalid(
+            "[[placement]] (URDF) chains are not supported by the runtime: use a [[dh]] \
+                 chain"
+                .to_owned(),
+        ));
+    }
+    let convention = match file.convention.as_deref() {
+        None | Some("dh") => DhConvention::Standard,
+        Some("mdh") => DhConvention::Modified,
+        Some(other) => {
+            return Err(invalid(format!(
+                "unknown convention {other:?}, expected \"dh\" (standard) or \"mdh\" \
+                     (modified)"
+            )));
+        }
+    };
+    let mut rows = Vec::with_capacity(file.dh.len());
+    let mut n_joints = 0usize;
+    for (i, entry) in file.dh.iter().enumerate() {
+        let joint = match &entry.joint {
+            toml::Value::String(s) if s == "fixed" => false,
+            toml::Value::Integer(j) if usize::try_from(*j).ok() == Some(n_joints + 1) => true,
+            other => {
+                return Err(invalid(format!(
+                    "[[dh]] row {i}: joint = {other}, expected {} (joints numbered in row \
+                         order) or \"fixed\"",
+                    n_joints + 1
+                )));
+            }
+        };
+        n_joints += usize::from(joint);
+        rows.push(DhRow {
+            a_m: entry.a_m,
+            alpha_rad: entry.alpha_rad,
+            d_m: entry.d_m,
+            theta_rad: entry.theta_rad,
+            beta_rad: entry.beta_rad,
+            joint,
+        });
+    }
+    if file.joint.len() != n_joints {
+        return Err(invalid(format!(
+            "the chain has {n_joints} joints but {} [[joint]] entries",
+            file.joint.len()
+        )));
+    }
+    for j in &file.joint {
+        if !j.lower_rad.is_finite() || !j.upper_rad.is_finite() || j.lower_rad >= j.upper_rad {
+            return Err(invalid(format!(
+                "[[joint]] {:?}: lower_rad = {} must be finite and below upper_rad = {}",
+                j.name, j.lower_rad, j.upper_rad
+            )));
+        }
+    }
+    Ok(DeviceFile {
+        file,
+        convention,
+        rows,
+        n_joints,
+    })
+}
+
 /// A contract's refusal as a load error: at its line and column when known.
-fn contract_error(e: ContractError, origin: &str) -> LoadError {
+pub(crate) fn contract_error(e: ContractError, origin: &str) -> LoadError {
     if e.line == 0 {
         LoadError::Invalid {
             origin: origin.to_owned(),
@@ -516,7 +555,7 @@ fn contract_error(e: ContractError, origin: &str) -> LoadError {
 
 /// Where the text names the value `name`: the first line that starts with `name =` or
 /// `"name" =` after optional spaces, and its column; (0, 0) if none does.
-fn locate(text: &str, name: &str) -> (usize, usize) {
+pub(crate) fn locate(text: &str, name: &str) -> (usize, usize) {
     let quoted = format!("\"{name}\"");
     for (i, line) in text.lines().enumerate() {
         let trimmed = line.trim_start();

@@ -42,6 +42,47 @@ impl Pose {
         out
     }
 
+    /// [`Pose::compose`], with the rotation product skipped when `other`'s rotation is the
+    /// identity (a URDF origin without `rpy`, a marker left at its default): the same result,
+    /// a translation instead of 45 products and sums.
+    #[cfg(feature = "std")]
+    #[inline]
+    pub(crate) fn compose_fast(&self, other: &Pose) -> Pose {
+        let r = &other.rotation;
+        // Off the diagonal first: a general rotation fails at the first test.
+        if r[0][1] == 0.0
+            && r[0][2] == 0.0
+            && r[1][0] == 0.0
+            && r[1][2] == 0.0
+            && r[2][0] == 0.0
+            && r[2][1] == 0.0
+            && r[0][0] == 1.0
+            && r[1][1] == 1.0
+            && r[2][2] == 1.0
+        {
+            let t = self.rotate(&other.translation_m);
+            let s = &self.translation_m;
+            Pose {
+                rotation: self.rotation,
+                translation_m: [s[0] + t[0], s[1] + t[1], s[2] + t[2]],
+            }
+        } else {
+            self.compose(other)
+        }
+    }
+
+    /// `self · R` with `R` a rotation about the coordinate axis after `I` and before `J`
+    /// (x for `I, J = 1, 2`; y for 2, 0; z for 0, 1) by the angle of sine `s` and cosine `c`:
+    /// columns I and J turn, the third column and the translation stay.
+    #[inline]
+    pub(crate) fn then_turn<const I: usize, const J: usize>(&mut self, s: f64, c: f64) {
+        for row in &mut self.rotation {
+            let (x, y) = (row[I], row[J]);
+            row[I] = c * x + s * y;
+            row[J] = -s * x + c * y;
+        }
+    }
+
     /// The inverse transform `b_T_a` (`Rᵀ`, `−Rᵀ·t`).
     #[inline]
     pub fn inverse(&self) -> Pose {
@@ -85,11 +126,7 @@ impl Pose {
     /// and the translation stay.
     #[inline]
     pub(crate) fn then_rot_z(&mut self, s: f64, c: f64) {
-        for row in &mut self.rotation {
-            let (x, y) = (row[0], row[1]);
-            row[0] = c * x + s * y;
-            row[1] = -s * x + c * y;
-        }
+        self.then_turn::<0, 1>(s, c);
     }
 
     /// Rotation about x by `(s, c)`.

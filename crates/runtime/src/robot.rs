@@ -3,7 +3,7 @@
 //! weight, with no allocation per call (the buffers live in a [`RobotWorkspace`]).
 
 use crate::error::{check_finite, check_len};
-use crate::math::sin_cos;
+use crate::math::{sin_cos, sin_cos_near};
 use crate::pose::cross;
 use crate::{Error, Pose};
 
@@ -151,6 +151,9 @@ pub struct Robot {
     /// Each tip's element name (the last fixed joint of its path, if it ends in fixed
     /// joints), whose deviation the tip's offset holds.
     pub(crate) tip_elements: Vec<Option<String>>,
+    /// A D-H robot's nominal `[[dh]]` rows, from which a D-H deviation moves the joint
+    /// origins ([`Robot::with_value`]); `None` for a URDF robot.
+    pub(crate) dh: Option<crate::robot_load::DhTable>,
 }
 
 /// Buffers of [`Robot`]'s evaluation calls, sized for one robot ([`Robot::workspace`]).
@@ -176,8 +179,16 @@ pub struct RobotWorkspace {
     pub(crate) tilt: Vec<[f64; 3]>,
     /// Joint angles where the gravity loads are evaluated.
     pub(crate) load_at: Vec<f64>,
-    /// Each joint subtree's gravity force and moment about the root (the loads' one pass).
-    pub(crate) sums: Vec<[f64; 6]>,
+    /// Each joint subtree's weight `W` and first moment `Σ w·c` about the root (the loads'
+    /// one pass), N and N·m (1 and m lumped).
+    pub(crate) sums: Vec<[f64; 4]>,
+    /// Sine and cosine of each joint's reading in the last deflection (the angles near it
+    /// take theirs from these, [`sin_cos_near`]).
+    pub(crate) sin_cos: Vec<(f64, f64)>,
+    /// Sine and cosine of each joint's load angle.
+    pub(crate) load_sin_cos: Vec<(f64, f64)>,
+    /// The gravity direction in each joint's frame at the load angles (nominal geometry).
+    pub(crate) gravity_local: Vec<[f64; 3]>,
 }
 
 /// What [`Robot::deflect`] did: fixed-point iterations of `θ = q + k∘τ(θ)` and the last step.
@@ -203,17 +214,52 @@ fn motion(joint: &RobotJoint, value: f64) -> Pose {
             ..Pose::IDENTITY
         };
     }
-    // Rodrigues: R = c·I + s·[a]× + (1 − c)·a·aᵀ.
     let (s, c) = sin_cos(value);
-    let t = 1.0 - c;
-    let [x, y, z] = a;
     Pose {
-        rotation: [
-            [c + t * x * x, t * x * y - s * z, t * x * z + s * y],
-            [t * x * y + s * z, c + t * y * y, t * y * z - s * x],
-            [t * x * z - s * y, t * y * z + s * x, c + t * z * z],
-        ],
+        rotation: rodrigues(&a, s, c),
         translation_m: [0.0; 3],
+    }
+}
+
+/// Rodrigues' rotation `R = c·I + s·[a]× + (1 − c)·a·aᵀ` about the unit axis `a` by the
+/// angle of sine `s` and cosine `c`.
+#[inline]
+fn rodrigues(a: &[f64; 3], s: f64, c: f64) -> [[f64; 3]; 3] {
+    let t = 1.0 - c;
+    let [x, y, z] = *a;
+    [
+        [c + t * x * x, t * x * y - s * z, t * x * z + s * y],
+        [t * x * y + s * z, c + t * y * y, t * y * z - s * x],
+        [t * x * z - s * y, t * y * z + s * x, c + t * z * z],
+    ]
+}
+
+/// `frame · motion(joint, value)` given the sine and cosine of a revolute joint's angle
+/// (ignored for a prismatic joint): about a coordinate axis of the joint frame (the usual
+/// URDF axes, either sign) by turning two columns, otherwise by composing Rodrigues'
+/// rotation; along the axis by moving the translation.
+#[inline(always)]
+fn apply_motion(frame: &mut Pose, joint: &RobotJoint, value: f64, (s, c): (f64, f64)) {
+    let a = &joint.axis;
+    if joint.prismatic {
+        let t = frame.rotate(&[a[0] * value, a[1] * value, a[2] * value]);
+        for (x, d) in frame.translation_m.iter_mut().zip(t) {
+            *x += d;
+        }
+        return;
+    }
+    // A unit axis along a coordinate axis has ±1 there: the sign turns the angle.
+    if a[0] == 0.0 && a[1] == 0.0 {
+        frame.then_turn::<0, 1>(a[2] * s, c);
+    } else if a[2] == 0.0 && a[0] == 0.0 {
+        frame.then_turn::<2, 0>(a[1] * s, c);
+    } else if a[1] == 0.0 && a[2] == 0.0 {
+        frame.then_turn::<1, 2>(a[0] * s, c);
+    } else {
+        *frame = frame.compose(&Pose {
+            rotation: rodrigues(a, s, c),
+            translation_m: [0.0; 3],
+        });
     }
 }
 
@@ -250,16 +296,66 @@ pub(crate) fn joint_motion(joint: &RobotJoint, value: f64) -> Pose {
     motion(joint, value)
 }
 
-/// `frame · motion(joint, value)`: about the joint frame's z axis (the usual URDF axis) by
-/// turning two columns, otherwise by composing [`motion`].
-#[inline]
-fn moved(mut frame: Pose, joint: &RobotJoint, value: f64) -> Pose {
-    if !joint.prismatic && joint.axis == [0.0, 0.0, 1.0] {
-        let (s, c) = sin_cos(value);
-        frame.then_rot_z(s, c);
-        frame
+/// `R·v`, or `Rᵀ·v` with `inverse`, for the rotation `R` of a revolute joint's motion by the
+/// angle of sine `s` and cosine `c` (as [`apply_motion`] turns a frame): two components turn
+/// for a coordinate axis.
+#[inline(always)]
+fn motion_rotate(a: &[f64; 3], (s, c): (f64, f64), v: &[f64; 3], inverse: bool) -> [f64; 3] {
+    let turn = |i: usize, j: usize, s: f64| {
+        let mut out = *v;
+        out[i] = c * v[i] - s * v[j];
+        out[j] = s * v[i] + c * v[j];
+        out
+    };
+    let sign = if inverse { -1.0 } else { 1.0 };
+    if a[0] == 0.0 && a[1] == 0.0 {
+        turn(0, 1, sign * a[2] * s)
+    } else if a[2] == 0.0 && a[0] == 0.0 {
+        turn(2, 0, sign * a[1] * s)
+    } else if a[1] == 0.0 && a[2] == 0.0 {
+        turn(1, 2, sign * a[0] * s)
     } else {
-        frame.compose(&motion(joint, value))
+        let r = Pose {
+            rotation: rodrigues(a, s, c),
+            translation_m: [0.0; 3],
+        };
+        if inverse {
+            r.inverse_rotate(v)
+        } else {
+            r.rotate(v)
+        }
+    }
+}
+
+/// Whether `r` is exactly the identity rotation (off the diagonal first: a general rotation
+/// fails at the first test).
+#[inline(always)]
+fn is_identity(r: &[[f64; 3]; 3]) -> bool {
+    r[0][1] == 0.0
+        && r[0][2] == 0.0
+        && r[1][0] == 0.0
+        && r[1][2] == 0.0
+        && r[2][0] == 0.0
+        && r[2][1] == 0.0
+        && r[0][0] == 1.0
+        && r[1][1] == 1.0
+        && r[2][2] == 1.0
+}
+
+/// The unit axis `a` of a joint frame in the root frame, `frame`'s rotation times `a`: a
+/// column of it, signed, for a coordinate axis (as [`apply_motion`] tells them apart).
+#[inline(always)]
+fn axis_in(frame: &Pose, a: &[f64; 3]) -> [f64; 3] {
+    let r = &frame.rotation;
+    let column = |j: usize, s: f64| [s * r[0][j], s * r[1][j], s * r[2][j]];
+    if a[0] == 0.0 && a[1] == 0.0 {
+        column(2, a[2])
+    } else if a[2] == 0.0 && a[0] == 0.0 {
+        column(1, a[1])
+    } else if a[1] == 0.0 && a[2] == 0.0 {
+        column(0, a[0])
+    } else {
+        frame.rotate(a)
     }
 }
 
@@ -418,16 +514,19 @@ impl Robot {
             moment: vec![[0.0; 3]; n],
             tilt: vec![[0.0; 3]; n],
             load_at: vec![0.0; n],
-            sums: vec![[0.0; 6]; n],
+            sums: vec![[0.0; 4]; n],
+            sin_cos: vec![(0.0, 1.0); n],
+            load_sin_cos: vec![(0.0, 1.0); n],
+            gravity_local: vec![[0.0; 3]; n],
         }
     }
 
-    fn check_joints(&self, what: &'static str, q: &[f64]) -> Result<(), Error> {
+    pub(crate) fn check_joints(&self, what: &'static str, q: &[f64]) -> Result<(), Error> {
         check_len(what, self.n_joints(), q.len())?;
         check_finite(what, q)
     }
 
-    fn check_tip(&self, tip: usize) -> Result<(), Error> {
+    pub(crate) fn check_tip(&self, tip: usize) -> Result<(), Error> {
         if tip < self.tips.len() {
             Ok(())
         } else {
@@ -440,7 +539,7 @@ impl Robot {
     }
 
     #[track_caller]
-    fn check_workspace(&self, ws: &RobotWorkspace) {
+    pub(crate) fn check_workspace(&self, ws: &RobotWorkspace) {
         assert_eq!(
             ws.frames.len(),
             self.n_joints(),
@@ -448,37 +547,82 @@ impl Robot {
         );
     }
 
-    /// Joint frames after their motion at `q` into `ws.frames` (q checked by the caller).
-    #[inline]
-    fn forward(&self, q: &[f64], frames: &mut [Pose]) {
+    /// One forward pass: each joint's frame after its motion at `q` into `frames` (root
+    /// frame; parents come before their children), from each joint's origin `origin(k)` and
+    /// the sine and cosine `sin_cos(k)` of a revolute joint's angle `q[k]`.
+    #[inline(always)]
+    fn pass(
+        &self,
+        q: &[f64],
+        frames: &mut [Pose],
+        origin: impl Fn(usize) -> Pose,
+        sin_cos: impl Fn(usize) -> (f64, f64),
+    ) {
         for (k, (joint, &value)) in self.joints.iter().zip(q).enumerate() {
-            let parent = joint.parent.map_or(Pose::IDENTITY, |p| frames[p]);
-            frames[k] = moved(parent.compose(&joint.origin), joint, value);
+            let o = origin(k);
+            let mut frame = match joint.parent {
+                Some(p) => frames[p].compose_fast(&o),
+                None => o,
+            };
+            let sc = if joint.prismatic {
+                (0.0, 1.0)
+            } else {
+                sin_cos(k)
+            };
+            apply_motion(&mut frame, joint, value, sc);
+            frames[k] = frame;
         }
+    }
+
+    /// Joint frames after their motion at `q` into `frames` (q checked by the caller).
+    fn forward(&self, q: &[f64], frames: &mut [Pose]) {
+        self.pass(q, frames, |k| self.joints[k].origin, |k| sin_cos(q[k]));
     }
 
     /// Joint frames at `q` of the nominal geometry, where the calibration evaluated the
-    /// gravity loads.
-    #[inline]
-    fn forward_nominal(&self, q: &[f64], frames: &mut [Pose]) {
-        for (k, (joint, &value)) in self.joints.iter().zip(q).enumerate() {
-            let parent = joint.parent.map_or(Pose::IDENTITY, |p| frames[p]);
-            frames[k] = moved(parent.compose(&joint.nominal), joint, value);
-        }
+    /// gravity loads; the sines and cosines from those of the readings `near` (`near_sc`).
+    fn forward_nominal(
+        &self,
+        q: &[f64],
+        near: &[f64],
+        near_sc: &[(f64, f64)],
+        frames: &mut [Pose],
+    ) {
+        self.pass(
+            q,
+            frames,
+            |k| self.joints[k].nominal,
+            |k| sin_cos_near(q[k], near[k], near_sc[k]),
+        );
     }
 
-    /// Joint frames at `q` with each joint's rotation deviations grown by its transversal
-    /// tilt (`tilt`, rad; zero for a joint without transversal compliance).
-    #[inline]
-    fn forward_tilted(&self, q: &[f64], tilt: &[[f64; 3]], frames: &mut [Pose]) {
-        for (k, (joint, &value)) in self.joints.iter().zip(q).enumerate() {
-            let parent = joint.parent.map_or(Pose::IDENTITY, |p| frames[p]);
-            let origin = if tilt[k] == [0.0; 3] {
-                joint.origin
-            } else {
-                tilted_origin(joint, &tilt[k])
-            };
-            frames[k] = moved(parent.compose(&origin), joint, value);
+    /// Joint frames at the deflected angles `theta` (the sines and cosines from those of
+    /// the readings `near`, `near_sc`), with each joint's rotation deviations grown by its
+    /// transversal tilt (`tilt`, rad; zero for a joint without transversal compliance) if
+    /// given.
+    fn forward_deflected(
+        &self,
+        theta: &[f64],
+        near: &[f64],
+        near_sc: &[(f64, f64)],
+        tilt: Option<&[[f64; 3]]>,
+        frames: &mut [Pose],
+    ) {
+        let sc = |k: usize| sin_cos_near(theta[k], near[k], near_sc[k]);
+        match tilt {
+            None => self.pass(theta, frames, |k| self.joints[k].origin, sc),
+            Some(tilt) => self.pass(
+                theta,
+                frames,
+                |k| {
+                    if tilt[k] == [0.0; 3] {
+                        self.joints[k].origin
+                    } else {
+                        tilted_origin(&self.joints[k], &tilt[k])
+                    }
+                },
+                sc,
+            ),
         }
     }
 
@@ -486,16 +630,17 @@ impl Robot {
     #[inline]
     fn tip_link_from(&self, tip: usize, frames: &[Pose]) -> Pose {
         let t = &self.tips[tip];
-        t.parent
-            .map_or(Pose::IDENTITY, |p| frames[p])
-            .compose(&t.offset)
+        match t.parent {
+            Some(p) => frames[p].compose_fast(&t.offset),
+            None => t.offset,
+        }
     }
 
     /// The pose of tip `tip` (its marker frame on the tip link).
     #[inline]
-    fn tip_from(&self, tip: usize, frames: &[Pose]) -> Pose {
+    pub(crate) fn tip_from(&self, tip: usize, frames: &[Pose]) -> Pose {
         self.tip_link_from(tip, frames)
-            .compose(&self.tips[tip].marker)
+            .compose_fast(&self.tips[tip].marker)
     }
 
     /// The same robot with a frame `marker` on tip `tip`'s link (in the link's frame, e.g.
@@ -623,6 +768,19 @@ impl Robot {
     /// Jacobian columns of `tip` from the joint frames; returns the tip pose.
     fn jacobian_from(&self, tip: usize, frames: &[Pose], jac: &mut [[f64; 6]], body: bool) -> Pose {
         let pose = self.tip_from(tip, frames);
+        self.columns_from(tip, frames, &pose, jac, body);
+        pose
+    }
+
+    /// Jacobian columns of `tip`, whose pose is `pose`, from the joint frames.
+    fn columns_from(
+        &self,
+        tip: usize,
+        frames: &[Pose],
+        pose: &Pose,
+        jac: &mut [[f64; 6]],
+        body: bool,
+    ) {
         let p = pose.translation_m;
         for col in jac.iter_mut() {
             *col = [0.0; 6];
@@ -630,7 +788,7 @@ impl Robot {
         let mut on_path = self.tips[tip].parent;
         while let Some(k) = on_path {
             let joint = &self.joints[k];
-            let w = frames[k].rotate(&joint.axis);
+            let w = axis_in(&frames[k], &joint.axis);
             let (lin, ang) = if joint.prismatic {
                 (w, [0.0; 3])
             } else {
@@ -641,11 +799,9 @@ impl Robot {
             } else {
                 (lin, ang)
             };
-            jac[k][..3].copy_from_slice(&lin);
-            jac[k][3..].copy_from_slice(&ang);
+            jac[k] = [lin[0], lin[1], lin[2], ang[0], ang[1], ang[2]];
             on_path = joint.parent;
         }
-        pose
     }
 
     /// Gravity torque of every joint at joint angles `q` (no deflection), into `tau`: N·m
@@ -681,63 +837,175 @@ impl Robot {
 
     /// The gravity torques of the joints whose frames are `frames` into `tau` (calibrated
     /// geometry; the public [`Robot::gravity_torques`]).
-    fn torques_from(&self, frames: &[Pose], tau: &mut [f64], sums: &mut [[f64; 6]]) {
+    fn torques_from(&self, frames: &[Pose], tau: &mut [f64], sums: &mut [[f64; 4]]) {
         self.loads_from(frames, false, tau, None, sums);
+    }
+
+    /// The gravity torques of the nominal geometry at the load angles `at` into `tau` (the
+    /// sines and cosines from those of the readings `near`, `near_sc`), without the joints'
+    /// frames in the root: two passes of three- and four-vectors in the joints' own frames.
+    /// Forward, gravity's direction in each joint frame `g_j = R_jᵀ·ĝ` (one rotation by the
+    /// joint's origin and motion); backward, each subtree's weight `W_j` and first moment
+    /// `C_j = Σ w·c` in joint `j`'s frame (a child's moved into its parent's frame by its
+    /// origin and motion), and `τ_j = a_j · (C_j × g_j)` (the moment `(C − W·o_j) × ĝ` of
+    /// [`Robot::loads_from`] in the joint's frame, Featherstone, *Rigid Body Dynamics
+    /// Algorithms*, 2008, §4.1). Linear in the joint count.
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "the workspace's buffers, borrowed apart from the angles read"
+    )]
+    fn nominal_torques(
+        &self,
+        at: &[f64],
+        near: &[f64],
+        near_sc: &[(f64, f64)],
+        ws_sc: &mut [(f64, f64)],
+        g_local: &mut [[f64; 3]],
+        sums: &mut [[f64; 4]],
+        tau: &mut [f64],
+    ) {
+        // The translation of joint k's frame in its parent's (origin and motion).
+        let local_t = |k: usize| {
+            let joint = &self.joints[k];
+            let t = joint.nominal.translation_m;
+            if joint.prismatic {
+                let a = joint.axis;
+                let v = at[k];
+                let d = joint.nominal.rotate(&[a[0] * v, a[1] * v, a[2] * v]);
+                [t[0] + d[0], t[1] + d[1], t[2] + d[2]]
+            } else {
+                t
+            }
+        };
+        for (k, joint) in self.joints.iter().enumerate() {
+            let sc = if joint.prismatic {
+                (0.0, 1.0)
+            } else {
+                sin_cos_near(at[k], near[k], near_sc[k])
+            };
+            ws_sc[k] = sc;
+            let g = match joint.parent {
+                Some(p) => g_local[p],
+                None => self.gravity_dir,
+            };
+            let r = &joint.nominal;
+            let g = if is_identity(&r.rotation) {
+                g
+            } else {
+                r.inverse_rotate(&g)
+            };
+            g_local[k] = if joint.prismatic {
+                g
+            } else {
+                motion_rotate(&joint.axis, sc, &g, true)
+            };
+        }
+        sums.fill([0.0; 4]);
+        let add = |s: &mut [f64; 4], w: f64, c: &[f64; 3]| {
+            s[0] += w;
+            s[1] += w * c[0];
+            s[2] += w * c[1];
+            s[3] += w * c[2];
+        };
+        match self.gravity {
+            GravityModel::Masses => {
+                for m in &self.masses {
+                    add(&mut sums[m.joint], m.mass_kg * self.gravity_m_s2, &m.com_m);
+                }
+            }
+            GravityModel::Lumped => {
+                for (i, joint) in self.joints.iter().enumerate() {
+                    if let (true, Some(p)) = (joint.weight, joint.parent) {
+                        add(&mut sums[p], 1.0, &local_t(i));
+                    }
+                }
+                for tip in &self.tips {
+                    if let (true, Some(p)) = (tip.weight, tip.parent) {
+                        add(&mut sums[p], 1.0, &tip.nominal_offset.translation_m);
+                    }
+                }
+            }
+        }
+        for j in (0..self.joints.len()).rev() {
+            let joint = &self.joints[j];
+            let [w, cx, cy, cz] = sums[j];
+            let c = [cx, cy, cz];
+            tau[j] = if joint.prismatic {
+                0.0
+            } else {
+                dot(&joint.axis, &cross(&c, &g_local[j]))
+            };
+            if let Some(p) = joint.parent {
+                // C_j in the parent's frame: R_origin·R_motion·C_j + W_j·t.
+                let c = if joint.prismatic {
+                    c
+                } else {
+                    motion_rotate(&joint.axis, ws_sc[j], &c, false)
+                };
+                let r = &joint.nominal;
+                let c = if is_identity(&r.rotation) {
+                    c
+                } else {
+                    r.rotate(&c)
+                };
+                let t = local_t(j);
+                let s = &mut sums[p];
+                s[0] += w;
+                s[1] += c[0] + w * t[0];
+                s[2] += c[1] + w * t[1];
+                s[3] += c[2] + w * t[2];
+            }
+        }
     }
 
     /// The gravity torques (and with `moment` the moment vectors about each joint's origin,
     /// root frame) of the joints whose frames are `frames`; the tips' nominal offsets with
-    /// `nominal`. One pass: each load's force `f` and moment `p × f` about the root are summed
-    /// over every joint's subtree (children follow their parents in the joint order), and
-    /// `m_j = Σ p × f − o_j × Σ f`, `τ_j = w_j · m_j` (Featherstone, *Rigid Body Dynamics
-    /// Algorithms*, 2008, §4.1), linear in the joint count.
+    /// `nominal`. One pass: every load is a weight `w` along the one gravity direction `ĝ`,
+    /// so each joint's subtree needs only its weight `W = Σ w` and first moment `C = Σ w·c`
+    /// about the root (children follow their parents in the joint order, so the sums run
+    /// backward), and `m_j = (C_j − W_j·o_j) × ĝ`, `τ_j = w_j · m_j` (Featherstone, *Rigid
+    /// Body Dynamics Algorithms*, 2008, §4.1), linear in the joint count.
     fn loads_from(
         &self,
         frames: &[Pose],
         nominal: bool,
         tau: &mut [f64],
         mut moment: Option<&mut [[f64; 3]]>,
-        sums: &mut [[f64; 6]],
+        sums: &mut [[f64; 4]],
     ) {
-        sums.fill([0.0; 6]);
-        let add = |sums: &mut [[f64; 6]], at: Option<usize>, p: &[f64; 3], f: &[f64; 3]| {
-            if let Some(j) = at {
-                let m = cross(p, f);
-                let s = &mut sums[j];
-                s[0] += f[0];
-                s[1] += f[1];
-                s[2] += f[2];
-                s[3] += m[0];
-                s[4] += m[1];
-                s[5] += m[2];
-            }
+        sums.fill([0.0; 4]);
+        let add = |s: &mut [f64; 4], w: f64, c: &[f64; 3]| {
+            s[0] += w;
+            s[1] += w * c[0];
+            s[2] += w * c[1];
+            s[3] += w * c[2];
         };
-        let g = self.gravity_dir;
         match self.gravity {
             GravityModel::Masses => {
                 for m in &self.masses {
                     let c = transform_point(&frames[m.joint], &m.com_m);
-                    let w = m.mass_kg * self.gravity_m_s2;
-                    add(sums, Some(m.joint), &c, &[g[0] * w, g[1] * w, g[2] * w]);
+                    add(&mut sums[m.joint], m.mass_kg * self.gravity_m_s2, &c);
                 }
             }
             GravityModel::Lumped => {
                 for (i, joint) in self.joints.iter().enumerate() {
-                    if joint.weight {
-                        add(sums, joint.parent, &frames[i].translation_m, &g);
+                    if let (true, Some(p)) = (joint.weight, joint.parent) {
+                        add(&mut sums[p], 1.0, &frames[i].translation_m);
                     }
                 }
-                for (k, tip) in self.tips.iter().enumerate() {
-                    if !tip.weight {
-                        continue;
+                for tip in &self.tips {
+                    if let (true, Some(p)) = (tip.weight, tip.parent) {
+                        let offset = if nominal {
+                            &tip.nominal_offset
+                        } else {
+                            &tip.offset
+                        };
+                        add(
+                            &mut sums[p],
+                            1.0,
+                            &transform_point(&frames[p], &offset.translation_m),
+                        );
                     }
-                    let end = if nominal {
-                        (tip.parent.map_or(Pose::IDENTITY, |p| frames[p]))
-                            .compose(&tip.nominal_offset)
-                    } else {
-                        self.tip_link_from(k, frames)
-                    };
-                    add(sums, tip.parent, &end.translation_m, &g);
                 }
             }
         }
@@ -749,13 +1017,16 @@ impl Robot {
                 }
             }
         }
+        let g = &self.gravity_dir;
         for (j, joint) in self.joints.iter().enumerate() {
-            let s = &sums[j];
-            let o = frames[j].translation_m;
-            let about = cross(&o, &[s[0], s[1], s[2]]);
-            let m = [s[3] - about[0], s[4] - about[1], s[5] - about[2]];
-            let m = if joint.prismatic { [0.0; 3] } else { m };
-            tau[j] = dot(&frames[j].rotate(&joint.axis), &m);
+            let [w, cx, cy, cz] = sums[j];
+            let o = &frames[j].translation_m;
+            let m = if joint.prismatic {
+                [0.0; 3]
+            } else {
+                cross(&[cx - w * o[0], cy - w * o[1], cz - w * o[2]], g)
+            };
+            tau[j] = dot(&axis_in(&frames[j], &joint.axis), &m);
             if let Some(moment) = moment.as_deref_mut() {
                 moment[j] = m;
             }
@@ -794,6 +1065,9 @@ impl Robot {
     }
 
     /// [`Robot::deflect`] on checked inputs; leaves `ws.frames` at the joint frames of θ.
+    /// The sines and cosines of the readings come from libm once (into `ws.sin_cos`); those
+    /// of the load angles and of θ, which differ from the readings by the deflection, from
+    /// them ([`sin_cos_near`]).
     pub(crate) fn deflect_unchecked(
         &self,
         q: &[f64],
@@ -806,6 +1080,11 @@ impl Robot {
             final_step_rad: 0.0,
             converged: true,
         };
+        for ((sc, &value), joint) in ws.sin_cos.iter_mut().zip(q).zip(&self.joints) {
+            if !joint.prismatic {
+                *sc = sin_cos(value);
+            }
+        }
         let tilted = !self.transversal.is_empty();
         if self.has_compliance() || tilted {
             // Where the loads are evaluated: the readings, or the torque equilibrium
@@ -814,8 +1093,15 @@ impl Robot {
             at.copy_from_slice(q);
             if self.equilibrium && self.has_compliance() {
                 for iteration in 1..=DEFLECTION_ITERATIONS {
-                    self.forward_nominal(at, &mut ws.nominal);
-                    self.loads_from(&ws.nominal, true, &mut ws.torque, None, &mut ws.sums);
+                    self.nominal_torques(
+                        at,
+                        q,
+                        &ws.sin_cos,
+                        &mut ws.load_sin_cos,
+                        &mut ws.gravity_local,
+                        &mut ws.sums,
+                        &mut ws.torque,
+                    );
                     let mut step: f64 = 0.0;
                     let values = q.iter().zip(&self.compliance).zip(&ws.torque);
                     for (t, ((q, k), tau)) in at.iter_mut().zip(values) {
@@ -833,13 +1119,22 @@ impl Robot {
                     }
                 }
             }
-            self.forward_nominal(at, &mut ws.nominal);
-            let moment = if tilted {
-                Some(&mut ws.moment[..])
+            if tilted {
+                // The tilts need the moment vectors and the nominal frames in the root.
+                self.forward_nominal(at, q, &ws.sin_cos, &mut ws.nominal);
+                let moment = Some(&mut ws.moment[..]);
+                self.loads_from(&ws.nominal, true, &mut ws.torque, moment, &mut ws.sums);
             } else {
-                None
-            };
-            self.loads_from(&ws.nominal, true, &mut ws.torque, moment, &mut ws.sums);
+                self.nominal_torques(
+                    at,
+                    q,
+                    &ws.sin_cos,
+                    &mut ws.load_sin_cos,
+                    &mut ws.gravity_local,
+                    &mut ws.sums,
+                    &mut ws.torque,
+                );
+            }
             let values = q.iter().zip(&self.compliance).zip(&ws.torque);
             for (t, ((q, k), tau)) in theta.iter_mut().zip(values) {
                 *t = q + k * tau;
@@ -852,11 +1147,8 @@ impl Robot {
             let (s, c) = sin_cos(f64::from(h.order) * q[h.joint]);
             theta[h.joint] += h.coef * if h.sine { s } else { c };
         }
-        if tilted {
-            self.forward_tilted(theta, &ws.tilt, &mut ws.frames);
-        } else {
-            self.forward(theta, &mut ws.frames);
-        }
+        let tilt = if tilted { Some(&ws.tilt[..]) } else { None };
+        self.forward_deflected(theta, q, &ws.sin_cos, tilt, &mut ws.frames);
         out
     }
 
@@ -953,10 +1245,10 @@ impl Robot {
         Ok((pose, deflection))
     }
 
-    /// The deflected pose of tip `tip` and its spatial Jacobian with respect to the deflected
-    /// angles θ (the rigid Jacobian at θ; the compliance's own `∂θ/∂q = (I − K·∂τ/∂θ)⁻¹` is
-    /// left out, a relative change of about `k·∂τ/∂θ`), with the deflection's iterations.
-    pub(crate) fn deflected_jacobian(
+    /// The deflected pose of tip `tip` at the command `q` (checked by the caller), with the
+    /// deflection's iterations; `ws.frames` holds the deflected joint frames after it (for
+    /// [`Robot::deflected_columns`]).
+    pub(crate) fn deflected_pose(
         &self,
         tip: usize,
         q: &[f64],
@@ -965,9 +1257,14 @@ impl Robot {
         let mut theta = core::mem::take(&mut ws.theta);
         let deflection = self.deflect_unchecked(q, ws, &mut theta);
         ws.theta = theta;
-        let mut jac = core::mem::take(&mut ws.jac);
-        let pose = self.jacobian_from(tip, &ws.frames, &mut jac, false);
-        ws.jac = jac;
-        (pose, deflection)
+        (self.tip_from(tip, &ws.frames), deflection)
+    }
+
+    /// The spatial Jacobian of tip `tip` (pose `pose`) with respect to the deflected angles
+    /// θ into `ws.jac`, from the frames [`Robot::deflected_pose`] left (the rigid Jacobian at
+    /// θ; the compliance's own `∂θ/∂q = (I − K·∂τ/∂θ)⁻¹` is left out, a relative change of
+    /// about `k·∂τ/∂θ`).
+    pub(crate) fn deflected_columns(&self, tip: usize, pose: &Pose, ws: &mut RobotWorkspace) {
+        self.columns_from(tip, &ws.frames, pose, &mut ws.jac, false);
     }
 }

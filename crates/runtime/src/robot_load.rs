@@ -1,15 +1,16 @@
-//! Loading a calibrated robot as `hapcal calibrate --out robot.urdf` writes it: the URDF with
-//! calibrated joint origins and the sidecar `robot.calibration.toml` (identified frames and
-//! compliances, what a URDF cannot hold).
+//! Loading a calibrated robot as `hapcal calibrate --out` writes it: the URDF with calibrated
+//! joint origins and the sidecar `robot.calibration.toml` (identified frames and compliances,
+//! what a URDF cannot hold), or a serial robot's device file (`[[dh]]` rows with the
+//! identified deviations added, the record in `[calibration]`).
 
 use std::path::Path;
 
-use hapcal_contract::{Calibration, ElementField, TorqueSource, ValueName};
+use hapcal_contract::{Calibration, DhField, ElementField, TorqueSource, ValueName};
 use serde::Deserialize;
 
 use crate::robot::deviation_pose;
 use crate::robot::{HarmonicTerm, PointMass, RobotJoint, RobotTip, TransversalJoint};
-use crate::{GravityModel, LoadError, Pose, Robot};
+use crate::{DhConvention, DhRow, GravityModel, LoadError, Pose, Robot};
 
 /// The sidecar: `[frames.<name>]` and `[values]` (as `hapcal-calibrate`'s `sidecar_toml`).
 #[derive(Deserialize)]
@@ -315,6 +316,7 @@ impl Robot {
             transversal: Vec::new(),
             harmonics: Vec::new(),
             tip_elements: tip_elements.clone(),
+            dh: None,
         };
         if let Some((text, sidecar_origin)) = sidecar {
             out.apply_sidecar(text, sidecar_origin, &tip_elements)?;
@@ -416,6 +418,272 @@ impl Robot {
     }
 }
 
+/// A D-H robot's table: the convention and the `[[dh]]` rows at the nominal geometry (the
+/// record's D-H deviations removed), in file order.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct DhTable {
+    convention: DhConvention,
+    nominal: Vec<DhRow>,
+}
+
+/// `Rz(angle)`, `Rx(angle)`, `Ry(angle)`.
+fn rot_z(angle: f64) -> Pose {
+    let (s, c) = angle.sin_cos();
+    Pose::rot_z(s, c)
+}
+fn rot_x(angle: f64) -> Pose {
+    let (s, c) = angle.sin_cos();
+    Pose::rot_x(s, c)
+}
+fn rot_y(angle: f64) -> Pose {
+    let (s, c) = angle.sin_cos();
+    Pose::rot_y(s, c)
+}
+
+/// One D-H row split at its joint's motion `Rz(q)`: the factors before it and after it, in
+/// the order `hapcal_kinematics::Chain::from_dh` composes them. Standard:
+/// `Rz(θ) | Rz(q) | Tz(d)·Tx(a)·Rx(α)·Ry(β)`; modified (Craig):
+/// `Rx(α)·Ry(β)·Tx(a)·Rz(θ) | Rz(q) | Tz(d)` (`Ry(β)` only for a row with β).
+fn dh_parts(convention: DhConvention, row: &DhRow) -> (Pose, Pose) {
+    let beta = row.beta_rad.map_or(Pose::IDENTITY, rot_y);
+    let tz = Pose::translation([0.0, 0.0, row.d_m]);
+    let tx = Pose::translation([row.a_m, 0.0, 0.0]);
+    match convention {
+        DhConvention::Standard => (
+            rot_z(row.theta_rad),
+            tz.compose(&tx)
+                .compose(&rot_x(row.alpha_rad))
+                .compose(&beta),
+        ),
+        DhConvention::Modified => (
+            rot_x(row.alpha_rad)
+                .compose(&beta)
+                .compose(&tx)
+                .compose(&rot_z(row.theta_rad)),
+            tz,
+        ),
+    }
+}
+
+/// The joint origins of the chain `rows` (each joint's frame at zero motion in the frame of
+/// the joint before it after that joint's motion, the first in the base frame: the frame
+/// just after the joint's `Rz(θ + q)`, where the calibration library places a joint) and the
+/// tip's offset in the last joint's frame (the rest of the chain, fixed rows included).
+fn dh_frames(convention: DhConvention, rows: &[DhRow]) -> (Vec<Pose>, Pose) {
+    let mut origins = Vec::new();
+    let mut pending = Pose::IDENTITY;
+    for row in rows {
+        let (before, after) = dh_parts(convention, row);
+        if row.joint {
+            origins.push(pending.compose(&before));
+            pending = after;
+        } else {
+            pending = pending.compose(&before).compose(&after);
+        }
+    }
+    (origins, pending)
+}
+
+/// Adds `sign ×` the D-H deviation `field` (m or rad) to `row`; a `β` deviation on a row
+/// without β gives it one (as the device file's writer does).
+fn add_dh(row: &mut DhRow, field: DhField, value: f64) {
+    match field {
+        DhField::A => row.a_m += value,
+        DhField::Alpha => row.alpha_rad += value,
+        DhField::D => row.d_m += value,
+        DhField::Theta => row.theta_rad += value,
+        DhField::Beta => row.beta_rad = Some(row.beta_rad.unwrap_or(0.0) + value),
+    }
+}
+
+impl DhTable {
+    /// The rows with the D-H deviations of `record` added (those of rows it names).
+    fn calibrated_rows(&self, record: Option<&Calibration>) -> Vec<DhRow> {
+        let mut rows = self.nominal.clone();
+        for v in record.iter().flat_map(|r| &r.values) {
+            if let Ok(ValueName::Dh { field, row }) = ValueName::parse(&v.name)
+                && let Some(r) = rows.get_mut(row)
+            {
+                add_dh(r, field, v.value);
+            }
+        }
+        rows
+    }
+}
+
+impl Robot {
+    /// Loads a serial robot's device file as `hapcal calibrate --out robot.toml` writes it
+    /// (docs/design.md §5.1): see [`Robot::from_device_str`].
+    ///
+    /// # Errors
+    /// [`LoadError::Io`] for a file that cannot be read; otherwise as
+    /// [`Robot::from_device_str`], with the path as origin.
+    pub fn load_device(path: &Path) -> Result<Robot, LoadError> {
+        let text = std::fs::read_to_string(path).map_err(|e| LoadError::Io {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        Robot::from_device_str(&text, &path.display().to_string())
+    }
+
+    /// The robot of a device file's text (`origin` names it in errors) whose chain is a
+    /// `[[dh]]` table (standard or modified by `convention`, fixed rows allowed): one revolute
+    /// joint per joint row, about the z axis of the frame just after its row's `Rz(θ)`
+    /// (standard D-H: `Rz(θ + q)·Tz(d)·Tx(a)·Rx(α)·Ry(β)`; modified:
+    /// `Rx(α)·Ry(β)·Tx(a)·Rz(θ + q)·Tz(d)`), as `hapcal_kinematics::Chain::from_dh` builds
+    /// the chain the calibration identified; the tip at the end of the last row. The joints
+    /// are named `q1 … qn` (the calibration's names: the columns of the measurement files and
+    /// the record's), with the `[[joint]]` limits. The tip is named after the record's first
+    /// tip (`tip` without a record).
+    ///
+    /// The rows as written hold the identified D-H deviations (`da<i>`, `dalpha<i>`, `dd<i>`,
+    /// `dtheta<i>`, `dbeta<i>`, row i counted from 0); the nominal rows, without them, carry
+    /// the gravity loads, as the calibration evaluated them. The rest of the record
+    /// (`[calibration]`, `hapcal-contract`, docs/design.md §5.6) reads as
+    /// [`Robot::load_urdf`] reads a sidecar's: frames, the compliances' torque source (lumped
+    /// unit weights at the joints' origins and the tip, the calibration library's
+    /// `GravityCompliance` without link masses), gravity and equilibrium, the compliances
+    /// `compliance.q<j>`, the harmonics `harmonic.q<j>.sin<h>|cos<h>`, the region. Every
+    /// [`Robot`] feature (deflection, prediction, compensation) then works for it.
+    ///
+    /// # Errors
+    /// [`LoadError::Parse`] for TOML syntax, a missing or unknown key, a wrong type, a
+    /// `[calibration]` the contract refuses, or a D-H deviation of a row the table does not
+    /// have, at its line; [`LoadError::Invalid`] for a `[[placement]]` chain, joints not
+    /// numbered 1, 2, … in row order, a `[[joint]]` count that differs from the chain's,
+    /// bad limits, a chain without a joint or a non-finite row, a haptic device (capstans or
+    /// a parallelogram: its model is a [`crate::Model`], [`crate::Model::load`]), and the
+    /// record values a D-H robot cannot hold (placement deviations, transversal compliances,
+    /// a haptic device's values) or that name no joint `q<j>` of the chain.
+    pub fn from_device_str(text: &str, origin: &str) -> Result<Robot, LoadError> {
+        let crate::load::DeviceFile {
+            file,
+            convention,
+            rows,
+            n_joints,
+        } = crate::load::read_device_file(text, origin)?;
+        if !file.capstan.is_empty() || file.parallelogram.is_some() {
+            return Err(invalid(
+                origin,
+                "a haptic device (its file has [[capstan]] or [parallelogram] tables): its \
+                 calibrated model is a hapcal_runtime::Model (Model::load), not a Robot"
+                    .to_owned(),
+            ));
+        }
+        if n_joints == 0 {
+            return Err(invalid(
+                origin,
+                "the [[dh]] table has no joint row (joint = 1, 2, …)".to_owned(),
+            ));
+        }
+        for (i, r) in rows.iter().enumerate() {
+            let fields = [
+                r.a_m,
+                r.alpha_rad,
+                r.d_m,
+                r.theta_rad,
+                r.beta_rad.unwrap_or(0.0),
+            ];
+            if fields.iter().any(|v| !v.is_finite()) {
+                return Err(invalid(
+                    origin,
+                    format!("[[dh]] row {i}: a value is not finite"),
+                ));
+            }
+        }
+        let record = file.calibration;
+        let mut nominal = rows.clone();
+        if let Some(record) = &record {
+            record
+                .check(text, origin)
+                .map_err(|e| crate::load::contract_error(e, origin))?;
+            for v in &record.values {
+                if let Ok(ValueName::Dh { field, row }) = ValueName::parse(&v.name) {
+                    let Some(r) = nominal.get_mut(row) else {
+                        let (line, column) = crate::load::locate(text, &v.name);
+                        return Err(crate::load::contract_error(
+                            hapcal_contract::ContractError {
+                                origin: origin.to_owned(),
+                                line,
+                                column,
+                                message: format!(
+                                    "[calibration.values] {}: the [[dh]] table has rows 0..{}",
+                                    v.name,
+                                    rows.len()
+                                ),
+                            },
+                            origin,
+                        ));
+                    };
+                    add_dh(r, field, -v.value);
+                }
+            }
+        }
+        let (origins, offset) = dh_frames(convention, &rows);
+        let (nominal_origins, nominal_offset) = dh_frames(convention, &nominal);
+        let joints: Vec<RobotJoint> = (origins.iter().zip(&nominal_origins).enumerate())
+            .map(|(j, (&origin, &nominal))| RobotJoint {
+                parent: j.checked_sub(1),
+                origin,
+                axis: [0.0, 0.0, 1.0],
+                prismatic: false,
+                nominal,
+                deviation: [0.0; 7],
+                weight: true,
+            })
+            .collect();
+        let tip = RobotTip {
+            parent: Some(n_joints - 1),
+            offset,
+            marker: Pose::IDENTITY,
+            nominal_offset,
+            weight: true,
+        };
+        let tip_name = (record.as_ref())
+            .and_then(|r| r.tips.first().cloned())
+            .unwrap_or_else(|| "tip".to_owned());
+        let mut out = Robot {
+            joints,
+            joint_names: (1..=n_joints).map(|j| format!("q{j}")).collect(),
+            limits: file
+                .joint
+                .iter()
+                .map(|j| (j.lower_rad, j.upper_rad))
+                .collect(),
+            tips: vec![tip],
+            tip_names: vec![tip_name],
+            masses: Vec::new(),
+            compliance: vec![0.0; n_joints],
+            gravity: GravityModel::Lumped,
+            gravity_dir: [0.0, 0.0, -1.0],
+            frames: Vec::new(),
+            record: None,
+            region: Vec::new(),
+            gravity_m_s2: crate::STANDARD_GRAVITY,
+            equilibrium: true,
+            nominal_differs: nominal != rows,
+            transversal: Vec::new(),
+            harmonics: Vec::new(),
+            tip_elements: vec![None],
+            dh: Some(DhTable {
+                convention,
+                nominal,
+            }),
+        };
+        if let Some(record) = record {
+            // Every marker of a device file's calibration sits on its one tip, which carries
+            // the loads of every tip the record names.
+            let mut one_tip = record.clone();
+            if let Some(t) = &mut one_tip.torque {
+                t.tips.truncate(1);
+            }
+            out.apply_record(one_tip, origin, &[None])?;
+            out.record = Some(record);
+        }
+        Ok(out)
+    }
+}
+
 /// [`Robot::with_value`].
 pub(crate) fn with_value(robot: &Robot, name: &str, value: f64) -> Result<Robot, crate::Error> {
     let unknown = crate::Error::Invalid {
@@ -501,6 +769,21 @@ pub(crate) fn with_value(robot: &Robot, name: &str, value: f64) -> Result<Robot,
                     h.coef = value;
                 }
             }
+        }
+        ValueName::Dh { .. } => {
+            // The rows at the nominal geometry plus the record's deviations, this one moved.
+            let Some(table) = &out.dh else {
+                return Err(unknown);
+            };
+            let rows = table.calibrated_rows(out.record.as_ref());
+            let (origins, offset) = dh_frames(table.convention, &rows);
+            for (joint, origin) in out.joints.iter_mut().zip(origins) {
+                joint.origin = origin;
+            }
+            if let Some(tip) = out.tips.first_mut() {
+                tip.offset = offset;
+            }
+            out.nominal_differs = true;
         }
         _ => return Err(unknown),
     }
@@ -637,7 +920,17 @@ impl Robot {
             match name {
                 ValueName::Element { element, field } => {
                     let k = field_index(field);
-                    if let Some(j) = self.joint_names.iter().position(|n| *n == element) {
+                    let joint = self.joint_names.iter().position(|n| *n == element);
+                    if let (Some(_), Some(_)) = (joint, &self.dh) {
+                        return Err(invalid(
+                            origin,
+                            format!(
+                                "{:?} is a placement deviation: a D-H robot's record holds D-H deviations (da<i>, dalpha<i>, dd<i>, dtheta<i>, dbeta<i>)",
+                                v.name
+                            ),
+                        ));
+                    }
+                    if let Some(j) = joint {
                         self.joints[j].deviation[k] = v.value;
                     } else if record.frames.contains_key(&element) && k < 6 {
                         // An identified frame's deviation from its nominal guess: the frame
@@ -671,6 +964,15 @@ impl Robot {
                 }
                 ValueName::Transversal { joint, axis } => {
                     let j = joint_index(self, &v.name, &joint)?;
+                    if self.dh.is_some() {
+                        return Err(invalid(
+                            origin,
+                            format!(
+                                "{:?}: a transversal compliance tilts a joint's placement, which a D-H row does not have",
+                                v.name
+                            ),
+                        ));
+                    }
                     if self.joints[j].prismatic {
                         return Err(invalid(
                             origin,
@@ -696,6 +998,8 @@ impl Robot {
                         coef: v.value,
                     });
                 }
+                // A D-H robot's rows already hold it (its nominal rows were read without it).
+                ValueName::Dh { .. } if self.dh.is_some() => {}
                 ValueName::Dh { .. } => {
                     return Err(invalid(
                         origin,

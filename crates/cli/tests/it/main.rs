@@ -10,6 +10,7 @@ mod hostile;
 mod hostile_cases;
 mod plan_after;
 mod predict;
+mod predict_device;
 mod setup_check;
 mod setup_haptic;
 mod setup_sockets;
