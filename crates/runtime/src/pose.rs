@@ -48,18 +48,7 @@ impl Pose {
     #[cfg(feature = "std")]
     #[inline]
     pub(crate) fn compose_fast(&self, other: &Pose) -> Pose {
-        let r = &other.rotation;
-        // Off the diagonal first: a general rotation fails at the first test.
-        if r[0][1] == 0.0
-            && r[0][2] == 0.0
-            && r[1][0] == 0.0
-            && r[1][2] == 0.0
-            && r[2][0] == 0.0
-            && r[2][1] == 0.0
-            && r[0][0] == 1.0
-            && r[1][1] == 1.0
-            && r[2][2] == 1.0
-        {
+        if other.has_identity_rotation() {
             let t = self.rotate(&other.translation_m);
             let s = &self.translation_m;
             Pose {
@@ -69,6 +58,23 @@ impl Pose {
         } else {
             self.compose(other)
         }
+    }
+
+    /// Whether the rotation is exactly the identity (off the diagonal first: a general
+    /// rotation fails at the first test).
+    #[cfg(feature = "std")]
+    #[inline(always)]
+    pub(crate) fn has_identity_rotation(&self) -> bool {
+        let r = &self.rotation;
+        r[0][1] == 0.0
+            && r[0][2] == 0.0
+            && r[1][0] == 0.0
+            && r[1][2] == 0.0
+            && r[2][0] == 0.0
+            && r[2][1] == 0.0
+            && r[0][0] == 1.0
+            && r[1][1] == 1.0
+            && r[2][2] == 1.0
     }
 
     /// `self · R` with `R` a rotation about the coordinate axis after `I` and before `J`

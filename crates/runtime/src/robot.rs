@@ -327,19 +327,13 @@ fn motion_rotate(a: &[f64; 3], (s, c): (f64, f64), v: &[f64; 3], inverse: bool) 
     }
 }
 
-/// Whether `r` is exactly the identity rotation (off the diagonal first: a general rotation
-/// fails at the first test).
+/// Adds a weight `w` at `c` to a subtree's sums `[Σw, Σw·c]`.
 #[inline(always)]
-fn is_identity(r: &[[f64; 3]; 3]) -> bool {
-    r[0][1] == 0.0
-        && r[0][2] == 0.0
-        && r[1][0] == 0.0
-        && r[1][2] == 0.0
-        && r[2][0] == 0.0
-        && r[2][1] == 0.0
-        && r[0][0] == 1.0
-        && r[1][1] == 1.0
-        && r[2][2] == 1.0
+fn add_weight(s: &mut [f64; 4], w: f64, c: &[f64; 3]) {
+    s[0] += w;
+    s[1] += w * c[0];
+    s[2] += w * c[1];
+    s[3] += w * c[2];
 }
 
 /// The unit axis `a` of a joint frame in the root frame, `frame`'s rotation times `a`: a
@@ -889,7 +883,7 @@ impl Robot {
                 None => self.gravity_dir,
             };
             let r = &joint.nominal;
-            let g = if is_identity(&r.rotation) {
+            let g = if r.has_identity_rotation() {
                 g
             } else {
                 r.inverse_rotate(&g)
@@ -901,27 +895,21 @@ impl Robot {
             };
         }
         sums.fill([0.0; 4]);
-        let add = |s: &mut [f64; 4], w: f64, c: &[f64; 3]| {
-            s[0] += w;
-            s[1] += w * c[0];
-            s[2] += w * c[1];
-            s[3] += w * c[2];
-        };
         match self.gravity {
             GravityModel::Masses => {
                 for m in &self.masses {
-                    add(&mut sums[m.joint], m.mass_kg * self.gravity_m_s2, &m.com_m);
+                    add_weight(&mut sums[m.joint], m.mass_kg * self.gravity_m_s2, &m.com_m);
                 }
             }
             GravityModel::Lumped => {
                 for (i, joint) in self.joints.iter().enumerate() {
                     if let (true, Some(p)) = (joint.weight, joint.parent) {
-                        add(&mut sums[p], 1.0, &local_t(i));
+                        add_weight(&mut sums[p], 1.0, &local_t(i));
                     }
                 }
                 for tip in &self.tips {
                     if let (true, Some(p)) = (tip.weight, tip.parent) {
-                        add(&mut sums[p], 1.0, &tip.nominal_offset.translation_m);
+                        add_weight(&mut sums[p], 1.0, &tip.nominal_offset.translation_m);
                     }
                 }
             }
@@ -943,7 +931,7 @@ impl Robot {
                     motion_rotate(&joint.axis, ws_sc[j], &c, false)
                 };
                 let r = &joint.nominal;
-                let c = if is_identity(&r.rotation) {
+                let c = if r.has_identity_rotation() {
                     c
                 } else {
                     r.rotate(&c)
@@ -974,23 +962,17 @@ impl Robot {
         sums: &mut [[f64; 4]],
     ) {
         sums.fill([0.0; 4]);
-        let add = |s: &mut [f64; 4], w: f64, c: &[f64; 3]| {
-            s[0] += w;
-            s[1] += w * c[0];
-            s[2] += w * c[1];
-            s[3] += w * c[2];
-        };
         match self.gravity {
             GravityModel::Masses => {
                 for m in &self.masses {
                     let c = transform_point(&frames[m.joint], &m.com_m);
-                    add(&mut sums[m.joint], m.mass_kg * self.gravity_m_s2, &c);
+                    add_weight(&mut sums[m.joint], m.mass_kg * self.gravity_m_s2, &c);
                 }
             }
             GravityModel::Lumped => {
                 for (i, joint) in self.joints.iter().enumerate() {
                     if let (true, Some(p)) = (joint.weight, joint.parent) {
-                        add(&mut sums[p], 1.0, &frames[i].translation_m);
+                        add_weight(&mut sums[p], 1.0, &frames[i].translation_m);
                     }
                 }
                 for tip in &self.tips {
@@ -1000,7 +982,7 @@ impl Robot {
                         } else {
                             &tip.offset
                         };
-                        add(
+                        add_weight(
                             &mut sums[p],
                             1.0,
                             &transform_point(&frames[p], &offset.translation_m),
