@@ -5,6 +5,7 @@
 //! (python/hapcal) wraps this module with NumPy / pandas conveniences; everything numeric
 //! happens here, in the same library functions the `hapcal` command line calls.
 
+use hapcal_calibrate::model::ModelName;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -1066,7 +1067,8 @@ fn _diagnose(
         return py
             .detach(move || -> Result<(String, Vec<String>)> {
                 let baseline = hapcal_diagnose::baseline_model(
-                    baseline.as_deref().unwrap_or("transmissions"),
+                    (baseline.as_deref())
+                        .unwrap_or(hapcal_calibrate::model::ModelName::Transmissions.name()),
                 )?;
                 let config = hapcal_diagnose::DiagnoseConfig {
                     baseline,
@@ -1085,7 +1087,7 @@ fn _diagnose(
                     data: vec![data.clone()],
                     test: Vec::new(),
                     socket_distance_m: 0.05,
-                    model: ModelChoice::Geometric,
+                    model: ModelName::Geometric.into(),
                     folds,
                     sigma_m: None,
                     joint: false,

@@ -198,7 +198,7 @@ fn agreement(verdict: &str, calibrated: &Value) -> String {
         verdict.split('+').filter_map(Effect::from_name).collect()
     };
     let rung_name = calibrated["model"].as_str().unwrap_or("?");
-    let rung = ModelName::ALL.into_iter().find(|m| m.as_str() == rung_name);
+    let rung = ModelName::ALL.into_iter().find(|m| m.name() == rung_name);
     let same = |a: ModelName, b: ModelName| {
         [true, false].into_iter().any(|masses| {
             let (mut x, mut y) = (a.effects(masses), b.effects(masses));
@@ -235,9 +235,9 @@ fn agreement(verdict: &str, calibrated: &Value) -> String {
                 .as_array()
                 .into_iter()
                 .flatten())
-            .any(|s| s["rung"].as_str() == Some(m.as_str()));
+            .any(|s| s["rung"].as_str() == Some(m.name()));
             let row = (calibrated["ladder"].as_array().into_iter().flatten())
-                .find(|l| l["rung"].as_str() == Some(m.as_str()));
+                .find(|l| l["rung"].as_str() == Some(m.name()));
             words.push_str(&match row {
                 _ if stopped => format!(
                     "the joint-range folds stopped {m}: where the calibration is used beyond its \

@@ -26,7 +26,9 @@
 //!   `python/src`; test modules, tests and examples excluded) never write an
 //!   effect's name (`hapcal_contract::Effect::name`: `gravity_compliance`, …) as a string
 //!   literal of their own: they take it from the type, whose module
-//!   (`crates/contract/src/effect.rs`) is the one place that spells it.
+//!   (`crates/contract/src/effect.rs`) is the one place that spells it. Likewise a model's
+//!   name (`hapcal_contract::ModelName::name`: `transversal-compliance`, …), spelled only in
+//!   `crates/contract/src/lib.rs`.
 //!
 //! Every finding is printed as `file:line: message`; the task fails if there is any.
 
@@ -114,7 +116,10 @@ fn is_vocabulary_checked(file: &str) -> bool {
     in_src && !test_module && file.ends_with(".rs") && file != VOCABULARY && file != SELF
 }
 
-/// A string literal that is exactly an effect's name.
+/// The one module that spells the models' names.
+const MODEL_VOCABULARY: &str = "crates/contract/src/lib.rs";
+
+/// A string literal that is exactly an effect's or a model's name.
 fn check_vocabulary(file: &str, text: &str) -> Vec<Finding> {
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {
@@ -139,6 +144,27 @@ fn check_vocabulary(file: &str, text: &str) -> Vec<Finding> {
                     message: format!(
                         "the effect name \"{name}\" written out: take it from \
                          hapcal_contract::Effect (one vocabulary, {VOCABULARY})"
+                    ),
+                });
+            }
+        }
+        if file == MODEL_VOCABULARY {
+            continue;
+        }
+        for model in hapcal_contract::ModelName::ALL {
+            let name = model.name();
+            // `geometric` is also the effect of that name, exempt above; a command-line
+            // argument's id (`mut_arg("transmissions", …)`) is not a model's name.
+            if model != hapcal_contract::ModelName::Geometric
+                && !line.contains("mut_arg(")
+                && line.contains(&format!("\"{name}\""))
+            {
+                out.push(Finding {
+                    file: file.to_owned(),
+                    line: i + 1,
+                    message: format!(
+                        "the model name \"{name}\" written out: take it from \
+                         hapcal_contract::ModelName (one vocabulary, {MODEL_VOCABULARY})"
                     ),
                 });
             }

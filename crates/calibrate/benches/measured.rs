@@ -19,7 +19,7 @@ mod humanoid;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use hapcal_calibrate::measured::{MeasuredConfig, Robot, calibrate_measured, robot_from_urdf};
-use hapcal_calibrate::model::ModelChoice;
+use hapcal_calibrate::model::ModelName;
 use hapcal_identify::{IdentifyConfig, identify};
 use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
 use hapcal_kinematics::{FrameSpec, Isometry3, Vector3};
@@ -120,7 +120,7 @@ fn bench(c: &mut Criterion) {
     let robot = robot_from_urdf(&urdf, &["ball_link".to_owned()]).unwrap();
     let table = positions(&robot);
     for (name, rung) in [
-        ("positions_200", Some(ModelChoice::Geometric)),
+        ("positions_200", Some(ModelName::Geometric)),
         ("positions_200_auto", None),
     ] {
         let cfg = MeasuredConfig {

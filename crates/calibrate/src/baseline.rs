@@ -7,6 +7,7 @@
 //! Everything here is the calibration's own model ([`CalibrationProblem`]) and loaders: the
 //! diagnosis adds effect terms to this baseline, it holds no model of its own.
 
+use crate::model::ModelName;
 use anyhow::{Context, Result, bail};
 use faer::Col;
 use hapcal_identify::Problem;
@@ -21,7 +22,7 @@ use crate::fit::CV_REPEATS;
 use crate::inputs::Plan;
 use crate::measured::{MeasuredConfig, Robot, calibrate_measured};
 pub use crate::model::DataKind;
-use crate::model::{ModelChoice, Rung};
+use crate::model::Rung;
 
 /// A held-out data set as a problem whose first [`GeometricBaseline::n_shared`] parameters are
 /// the training problem's.
@@ -144,7 +145,7 @@ pub fn baseline_from_tables(
 ) -> Result<GeometricBaseline> {
     crate::measured::split_test_last(&mut train, &mut test, plan.test_last)?;
     let n_tips = 1 + plan.tips.len();
-    let cfg = |rung: Option<ModelChoice>| MeasuredConfig {
+    let cfg = |rung: Option<ModelName>| MeasuredConfig {
         rung,
         folds: plan.folds,
         sigma_m: plan.sigma_m,
@@ -152,7 +153,7 @@ pub fn baseline_from_tables(
         marker_tips: (0..n_tips).collect(),
         workspace: Vec::new(),
     };
-    let out = calibrate_measured(robot, &train, &test, &cfg(Some(ModelChoice::Geometric)))?;
+    let out = calibrate_measured(robot, &train, &test, &cfg(Some(ModelName::Geometric)))?;
     let mut warnings: Vec<String> = (train.iter().chain(&test))
         .flat_map(|t| t.warnings.iter().cloned())
         .collect();
@@ -205,11 +206,11 @@ pub fn baseline_from_tables(
     if ladder {
         let auto = calibrate_measured(robot, &train, &test, &cfg(None))?;
         for rung in [
-            ModelChoice::FramesOnly,
-            ModelChoice::JointOffsets,
-            ModelChoice::Geometric,
+            ModelName::FramesOnly,
+            ModelName::JointOffsets,
+            ModelName::Geometric,
         ] {
-            let fitted = if rung == ModelChoice::Geometric {
+            let fitted = if rung == ModelName::Geometric {
                 None
             } else {
                 Some(calibrate_measured(robot, &train, &test, &cfg(Some(rung)))?)
@@ -309,7 +310,7 @@ pub fn baseline_from_sets(
         DataKind::Distances
     };
     let (problem, identified) =
-        crate::solve::solve(chain, obs, ModelChoice::Geometric, plan.sigma_m)?;
+        crate::solve::solve(chain, obs, ModelName::Geometric, plan.sigma_m)?;
     let n_shared = problem.points_offset();
     let n_kept = (identified.identifiability.kept.iter())
         .filter(|&&i| i < n_shared)
@@ -413,10 +414,10 @@ pub fn baseline_from_sets(
             test_rms_m: nominal_test,
         });
         let held =
-            crate::solve::cross_validate(chain, train, plan, ModelChoice::Geometric, CV_REPEATS)?;
+            crate::solve::cross_validate(chain, train, plan, ModelName::Geometric, CV_REPEATS)?;
         let cv = (held.sq_errors.iter().sum::<f64>() / held.sq_errors.len().max(1) as f64).sqrt();
         rungs.push(KinematicRung {
-            rung: Rung::Model(ModelChoice::Geometric),
+            rung: Rung::Model(ModelName::Geometric),
             cv_rms_m: cv,
             test_rms_m: (tests.iter())
                 .map(|t| point_rms(&t.problem, &t.x))

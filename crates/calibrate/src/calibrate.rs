@@ -20,7 +20,7 @@ pub use crate::fit::{
     identify_config, pruned_report, termination_text,
 };
 pub use crate::inputs::{Plan, SIGMA_M_RANGE, SIGMA_RAD_RANGE, check_sigma};
-pub use crate::model::{DataKind, LADDER_SIGNIFICANCE_Z, ModelChoice};
+pub use crate::model::{DataKind, LADDER_SIGNIFICANCE_Z, ModelChoice, ModelName};
 pub use crate::report::{
     CalibrationReport, CvReport, Figures, Outcome, ParamReport, PruneCause, PrunedReport,
     SetReport, SetRole,
@@ -163,7 +163,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         })
         .collect::<std::collections::HashSet<_>>()
         .len();
-    let geometric = solve(&chain, obs.clone(), ModelChoice::Geometric, plan.sigma_m)?;
+    let geometric = solve(&chain, obs.clone(), ModelName::Geometric, plan.sigma_m)?;
     let n_kept = |p: &CalibrationProblem, id: &Identified| {
         id.identifiability
             .kept
@@ -201,9 +201,9 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             cross_validation = reports;
             choice
         }
-        fixed => fixed,
+        ModelChoice::Model(fixed) => fixed,
     };
-    let (problem, identified) = if choice == ModelChoice::Geometric {
+    let (problem, identified) = if choice == ModelName::Geometric {
         geometric
     } else {
         solve(&chain, obs, choice, plan.sigma_m)?
@@ -758,7 +758,7 @@ pub fn write_outputs_beside(
 
 #[cfg(test)]
 mod tests {
-    use super::{HeldOut, ModelChoice, blocked_difference, fold_of};
+    use super::{HeldOut, ModelName, blocked_difference, fold_of};
     use crate::fit::choose;
 
     /// Held-out errors on 10 blocks of 5 rows: `base` everywhere, minus `gain` in every block,
@@ -777,7 +777,7 @@ mod tests {
 
     #[test]
     fn a_candidate_must_beat_the_geometric_model_by_the_margin() {
-        use ModelChoice::{ActuatorCompliance, Compliance, Geometric, MassCompliance};
+        use ModelName::{ActuatorCompliance, Compliance, Geometric, MassCompliance};
         let geometric = held(10.0, 0.0, 0.0);
         // Block scatter ±1 over 10 blocks: standard error 1/3 (sample SD 1.054, /√10).
         // A gain of 0.2 is 0.6 SE (not enough), 0.6 is 1.8 SE (not enough at 2 SE), 0.8 is

@@ -142,10 +142,10 @@ pub fn blocked_mean_difference(a: &[f64], b: &[f64], block: &[usize]) -> (f64, f
 /// If `held`, `level` and `candidates` differ in length or are empty.
 #[track_caller]
 pub(crate) fn choose(
-    candidates: &[crate::model::ModelChoice],
+    candidates: &[crate::model::ModelName],
     level: &[usize],
     held: &[HeldOut],
-) -> (crate::model::ModelChoice, Vec<crate::report::CvReport>) {
+) -> (crate::model::ModelName, Vec<crate::report::CvReport>) {
     assert!(
         !held.is_empty() && held.len() == candidates.len() && level.len() == held.len(),
         "one held-out set and one level per candidate"

@@ -840,15 +840,10 @@ pub fn calibrated_log_state(device: &Device) -> Result<DistanceLogState> {
 }
 
 /// The file contract's name of a haptic rung (`--model geometric`, `transmissions`,
-/// `compliance`); `None` for a choice that is not a haptic rung (`auto` before it is chosen).
-pub fn model_name(model: crate::model::ModelChoice) -> Option<ModelName> {
-    use crate::model::ModelChoice as M;
-    match model {
-        M::Geometric => Some(ModelName::Geometric),
-        M::Transmissions => Some(ModelName::Transmissions),
-        M::Compliance => Some(ModelName::Compliance),
-        _ => None,
-    }
+/// `compliance`); `None` for a model that is not a haptic rung.
+pub fn model_name(model: ModelName) -> Option<ModelName> {
+    use ModelName as M;
+    matches!(model, M::Geometric | M::Transmissions | M::Compliance).then_some(model)
 }
 
 /// The region a haptic calibration was fitted on: each joint's range of readings over the
@@ -1038,8 +1033,8 @@ pub enum HapticRungFit {
 
 impl HapticRungFit {
     /// The rung's `--model` value.
-    pub fn model(&self) -> crate::model::ModelChoice {
-        use crate::model::ModelChoice as M;
+    pub fn model(&self) -> crate::model::ModelName {
+        use crate::model::ModelName as M;
         match self {
             HapticRungFit::Geometric(_) => M::Geometric,
             HapticRungFit::Transmissions(..) => M::Transmissions,
@@ -1190,8 +1185,8 @@ fn kinematic_residuals_m(
 pub fn haptic_rungs(
     has_ext: bool,
     has_handle_mass: bool,
-) -> (Vec<crate::model::ModelChoice>, Vec<usize>) {
-    use crate::model::{DataKind, ModelChoice as M, ladder};
+) -> (Vec<crate::model::ModelName>, Vec<usize>) {
+    use crate::model::{DataKind, ModelName as M, ladder};
     let mut rungs = Vec::new();
     let mut levels = Vec::new();
     for (l, level) in ladder(DataKind::HapticLogs, false).into_iter().enumerate() {
@@ -1320,7 +1315,7 @@ pub fn calibrate_logs(
     test: Vec<NamedLog>,
     start: std::time::Instant,
 ) -> Result<crate::report::Outcome> {
-    use crate::model::ModelChoice;
+    use crate::model::{ModelChoice, ModelName};
     use crate::report::{CalibrationReport, Figures, ParamReport, SetReport, SetRole};
     let haptic = HapticDevice::new(device)?;
     let mut warnings: Vec<String> = (train.iter().chain(&test))
@@ -1341,7 +1336,7 @@ pub fn calibrate_logs(
                 .iter()
                 .all(|r| r.ext.get(j - 1).copied().flatten().is_some())
     });
-    if plan.model == ModelChoice::Transmissions && !has_ext {
+    if plan.model == ModelChoice::Model(ModelName::Transmissions) && !has_ext {
         bail!(
             "--model transmissions needs the external-encoder columns (ext1..ext{PARALLELOGRAM_JOINT}) \
              in every training log; ask for --model geometric (or auto) on logs without them"
@@ -1351,7 +1346,9 @@ pub fn calibrate_logs(
     // the device carry, climbed by the rule of every workflow (crate::model::climb) on the
     // rungs' held-out errors.
     let mut cross_validation = Vec::new();
-    let chosen = if plan.model == ModelChoice::Auto {
+    let chosen = if let ModelChoice::Model(chosen) = plan.model {
+        chosen
+    } else {
         let has_mass = haptic.device.handle.is_some_and(|h| h.mass_kg > 0.0);
         let (rungs, levels) = haptic_rungs(has_ext, has_mass);
         let geometric = identify_kinematics(&haptic, &rows, None)
@@ -1368,11 +1365,11 @@ pub fn calibrate_logs(
         let fits = (rungs.iter())
             .map(|&m| {
                 Ok(match m {
-                    ModelChoice::Transmissions => {
+                    ModelName::Transmissions => {
                         let (t, kin) = two_steps.clone().context("no transmissions fitted")?;
                         HapticRungFit::Transmissions(t, kin)
                     }
-                    ModelChoice::Compliance => {
+                    ModelName::Compliance => {
                         let (t, kin) = match &two_steps {
                             Some((t, kin)) => (Some(t), kin),
                             None => (None, &geometric),
@@ -1390,7 +1387,7 @@ pub fn calibrate_logs(
         let held = cross_validate_rungs(&haptic, &rows, &lengths, &fits, plan.folds)?;
         let (choice, reports) = crate::fit::choose(&rungs, &levels, &held);
         cross_validation = reports;
-        if choice == ModelChoice::Geometric && has_ext {
+        if choice == ModelName::Geometric && has_ext {
             warnings.push(
                 "the transmissions did not beat the kinematic deviations alone on held-out \
                  training rows: they are not identified (ask for --model transmissions to fit \
@@ -1398,7 +1395,7 @@ pub fn calibrate_logs(
                     .to_owned(),
             );
         }
-        if choice == ModelChoice::Compliance && !has_ext {
+        if choice == ModelName::Compliance && !has_ext {
             warnings.push(
                 "the compliance model predicted the held-out training rows best, but without \
                  the external-encoder columns its compliances also absorb the transmission \
@@ -1408,8 +1405,6 @@ pub fn calibrate_logs(
             );
         }
         choice
-    } else {
-        plan.model
     };
     let mut parameters = Vec::new();
     let push_kept = |parameters: &mut Vec<ParamReport>, id: &Identified| {
@@ -1436,7 +1431,7 @@ pub fn calibrate_logs(
     let mut compliance: Option<ComplianceFit> = None;
     // `--model geometric`: the kinematic deviations alone, whether or not the logs could carry
     // the transmissions.
-    let (transmissions, kin, model, calibrated) = if chosen == ModelChoice::Compliance {
+    let (transmissions, kin, model, calibrated) = if chosen == ModelName::Compliance {
         handle_mass_kg(&haptic.device)?;
         let t = if has_ext {
             Some(identify_transmissions(&haptic, &rows).context("step 1 (transmissions)")?)
@@ -1470,8 +1465,8 @@ pub fn calibrate_logs(
         let calibrated = compliance_device(&haptic, &rows, &fit, notes)?;
         let identified = fit.identified.clone();
         compliance = Some(fit);
-        (t, identified, ModelChoice::Compliance, calibrated)
-    } else if has_ext && chosen != ModelChoice::Geometric {
+        (t, identified, ModelName::Compliance, calibrated)
+    } else if has_ext && chosen != ModelName::Geometric {
         let t = identify_transmissions(&haptic, &rows).context("step 1 (transmissions)")?;
         let (_, kin) =
             identify_kinematics(&haptic, &rows, Some(&t)).context("step 2 (kinematics)")?;
@@ -1517,7 +1512,7 @@ pub fn calibrate_logs(
             notes,
         );
         let calibrated = haptic.device.with_record(record)?;
-        (Some(t), kin, ModelChoice::Transmissions, calibrated)
+        (Some(t), kin, ModelName::Transmissions, calibrated)
     } else {
         if !has_ext {
             warnings.push(no_ext_warning());
@@ -1537,7 +1532,7 @@ pub fn calibrate_logs(
             ),
         );
         let calibrated = haptic.device.with_record(record)?;
-        (None, kin, ModelChoice::Geometric, calibrated)
+        (None, kin, ModelName::Geometric, calibrated)
     };
     check_distinct_configurations(&rows, transmissions.as_ref(), &kin)?;
     if let Some(cv) = cross_validation.iter_mut().find(|cv| cv.model == model) {

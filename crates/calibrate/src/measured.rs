@@ -23,6 +23,7 @@
 //! calibration that does not beat frames only on held-out rows keeps the nominal kinematics,
 //! and the report says so.
 
+use crate::model::ModelName;
 use anyhow::{Context, Result, bail};
 use faer::Col;
 use hapcal_identify::{Identified, Problem, Subset, identify};
@@ -37,7 +38,7 @@ pub use crate::data::{
     workspace_configurations,
 };
 use crate::fit::{CV_REPEATS, FOLD_TOLERANCE, Fold, HeldOut, blocked_difference};
-use crate::model::{DataKind, ModelChoice};
+use crate::model::{DataKind, ModelRules};
 pub use crate::noise::{CALIBRATED_SIGMA_RATIO, PLAUSIBLE_FRAMES_ONLY_RMS_M};
 use crate::report::SetRole;
 pub use crate::report::{
@@ -52,7 +53,7 @@ type Frames = (FrameSpec, Vec<(usize, FrameSpec)>);
 #[derive(Clone, Debug)]
 pub struct MeasuredConfig {
     /// The rung to fit, or `None` to choose by cross-validation.
-    pub rung: Option<ModelChoice>,
+    pub rung: Option<ModelName>,
     /// Cross-validation folds (contiguous blocks of rows in file order).
     pub folds: usize,
     /// Position noise σ, m, if known; else estimated from the frames-only residuals.
@@ -72,7 +73,7 @@ pub struct MeasuredConfig {
 #[derive(Clone, Debug)]
 pub struct MeasuredOutcome {
     /// The chosen rung.
-    pub rung: ModelChoice,
+    pub rung: ModelName,
     /// Cross-validation scores, simplest rung first (empty when the rung was given).
     pub ladder: Vec<RungReport>,
     /// Final identification of the chosen rung on all training rows.
@@ -526,7 +527,7 @@ pub(crate) fn observations(
 ///
 /// # Errors
 /// A published-mass model on a robot without published masses.
-pub(crate) fn terms(rung: ModelChoice, robot: &Robot) -> Result<ModelTerms> {
+pub(crate) fn terms(rung: ModelName, robot: &Robot) -> Result<ModelTerms> {
     Ok(ModelTerms {
         torque_tips: Some(robot.tree.tips().to_vec()),
         ..crate::model::terms(rung, &robot.joint_names, &robot.masses)?
@@ -535,7 +536,7 @@ pub(crate) fn terms(rung: ModelChoice, robot: &Robot) -> Result<ModelTerms> {
 
 /// The rungs of the measurement files' ladder `robot` carries, simplest first, with each
 /// one's level ([`crate::model::ladder_for`]).
-fn ladder_of(robot: &Robot) -> (Vec<ModelChoice>, Vec<usize>) {
+fn ladder_of(robot: &Robot) -> (Vec<ModelName>, Vec<usize>) {
     crate::model::ladder_for(
         DataKind::Measurements,
         &robot.joint_names,
@@ -548,7 +549,7 @@ fn ladder_of(robot: &Robot) -> (Vec<ModelChoice>, Vec<usize>) {
 /// parameter count, after the 6 of the instrument frame); `orientation`: whether marker
 /// rotations are observed.
 fn free_of(
-    rung: ModelChoice,
+    rung: ModelName,
     framed: &Tree,
     offsets: &[Option<usize>],
     n_robot: usize,
@@ -589,7 +590,7 @@ struct Start<'a> {
 /// Fits `rung` on the rows `keep` selects: the problem and its identification (estimates
 /// mapped back to the full layout).
 fn fit(
-    rung: ModelChoice,
+    rung: ModelName,
     robot: &Robot,
     start: &Start<'_>,
     offsets: &[Option<usize>],
@@ -612,7 +613,7 @@ fn fit(
 /// [`fit`] of the observations `obs` with the model terms `terms` (the rung's, with the
 /// loads at a torque equilibrium, say).
 fn fit_terms(
-    rung: ModelChoice,
+    rung: ModelName,
     terms: ModelTerms,
     robot: &Robot,
     start: &Start<'_>,
@@ -802,7 +803,7 @@ impl Warm {
 /// iterations from a nearby start.
 #[allow(clippy::too_many_arguments)]
 fn refit(
-    rung: ModelChoice,
+    rung: ModelName,
     robot: &Robot,
     tree: &Tree,
     tables: &[MeasurementTable],
@@ -1261,7 +1262,7 @@ struct Scores {
 /// the rung's full-data estimate `warm`, the folds in parallel.
 #[allow(clippy::too_many_arguments)]
 fn cross_validate(
-    rung: ModelChoice,
+    rung: ModelName,
     robot: &Robot,
     tree: &Tree,
     warm: &Warm,
@@ -1457,7 +1458,7 @@ pub fn calibrate_measured(
     let weights_changed = weights != initial_weights;
     let (frames_model, frames_only) = if reweighted || weights_changed {
         fit(
-            ModelChoice::FramesOnly,
+            ModelName::FramesOnly,
             robot,
             &Start {
                 tree: &framed,
@@ -1484,7 +1485,7 @@ pub fn calibrate_measured(
     let richest = cfg.rung.unwrap_or_else(|| {
         (ladder_rungs.iter().zip(&ladder_levels))
             .find(|&(_, &l)| l == top)
-            .map_or(ModelChoice::Geometric, |(&r, _)| r)
+            .map_or(ModelName::Geometric, |(&r, _)| r)
     });
     let (fit_tables, downweighted, mut richest_fit, judge) =
         winsorize(richest, robot, &start, &offsets, train, weights)?;
@@ -1492,7 +1493,7 @@ pub fn calibrate_measured(
         (frames_model, frames_only)
     } else {
         fit(
-            ModelChoice::FramesOnly,
+            ModelName::FramesOnly,
             robot,
             &start,
             &offsets,
@@ -1508,7 +1509,7 @@ pub fn calibrate_measured(
     let mut range_folds_used = Vec::new();
     let mut range_stops = Vec::new();
     let (rung, (model, fitted)) = match cfg.rung {
-        Some(r) if r == ModelChoice::FramesOnly => (r, (frames_model.clone(), frames_only.clone())),
+        Some(r) if r == ModelName::FramesOnly => (r, (frames_model.clone(), frames_only.clone())),
         Some(r) => match richest_fit.take() {
             Some((used, f)) if used == r => (r, f),
             _ => (r, fit(r, robot, &start, &offsets, train, weights, &all)?),
@@ -1528,7 +1529,7 @@ pub fn calibrate_measured(
             let cached = std::sync::Mutex::new(richest_fit.take());
             let fitted: Vec<((CalibratedModel, Fitted), Scores)> = (rungs.par_iter())
                 .map(|&r| {
-                    let f = if r == ModelChoice::FramesOnly {
+                    let f = if r == ModelName::FramesOnly {
                         (frames_model.clone(), frames_only.clone())
                     } else if let Some((_, f)) =
                         (cached.lock().ok()).and_then(|mut c| c.take_if(|(used, _)| *used == r))
@@ -1602,13 +1603,13 @@ pub fn calibrate_measured(
         r.n_kept = n_kept;
     }
     let mut warnings = Vec::new();
-    if cfg.rung.is_none() && rung == ModelChoice::FramesOnly && range_stops.is_empty() {
+    if cfg.rung.is_none() && rung == ModelName::FramesOnly && range_stops.is_empty() {
         warnings.push(
             "no calibrated model beat frames only on held-out training rows: the nominal \
              kinematics are kept (only the instrument and marker frames are fitted)"
                 .to_owned(),
         );
-    } else if cfg.rung.is_none() && rung == ModelChoice::FramesOnly {
+    } else if cfg.rung.is_none() && rung == ModelName::FramesOnly {
         warnings.push(
             "the joint-range folds stopped every model that beat frames only on held-out \
              training rows: where the calibration is used beyond its training range they are \
@@ -1617,7 +1618,7 @@ pub fn calibrate_measured(
                 .to_owned(),
         );
     }
-    if rung != ModelChoice::FramesOnly && n_kept == 0 {
+    if rung != ModelName::FramesOnly && n_kept == 0 {
         warnings.push(format!(
             "the data determine none of the {} model's kinematic parameters: only the \
              instrument and marker frames are fitted; move every joint over its range",
@@ -1845,7 +1846,7 @@ const EQUILIBRIUM_REFITS: usize = 6;
 /// was made; with the refits made.
 #[allow(clippy::too_many_arguments)]
 fn equilibrate(
-    rung: ModelChoice,
+    rung: ModelName,
     robot: &Robot,
     tree: &Tree,
     offsets: &[Option<usize>],
@@ -1943,7 +1944,7 @@ pub const EQUILIBRIUM_SHARE: f64 = 0.3;
 /// evaluated.
 #[allow(clippy::too_many_arguments)]
 fn prediction_sigmas(
-    rung: ModelChoice,
+    rung: ModelName,
     robot: &Robot,
     tree: &Tree,
     fitted: &Fitted,
@@ -2181,8 +2182,8 @@ fn outside_warnings(
 type Winsorized = (
     Vec<MeasurementTable>,
     Vec<Downweighted>,
-    Option<(ModelChoice, (CalibratedModel, Fitted))>,
-    ModelChoice,
+    Option<(ModelName, (CalibratedModel, Fitted))>,
+    ModelName,
 );
 
 /// The unit of a compliance parameter (`compliance.*`, `transversal.*`): rad/(N·m) under the
@@ -2225,7 +2226,7 @@ const CHI3_MEDIAN: f64 = 1.538_2;
 /// fitted (`√(m/(m − p))`). With nothing bounded, the rung used and its fit on the tables as
 /// measured are returned too.
 fn winsorize(
-    rung: ModelChoice,
+    rung: ModelName,
     robot: &Robot,
     start: &Start<'_>,
     offsets: &[Option<usize>],
@@ -2256,8 +2257,8 @@ fn winsorize(
             // noise by √((m − p)/m); a rung with fewer than MIN_REDUNDANCY residuals per
             // parameter fits the noise itself, and a gross error hides in it: the geometric
             // rung judges instead.
-            if n_residuals < MIN_REDUNDANCY * n_kept && rung > ModelChoice::Geometric {
-                rung = ModelChoice::Geometric;
+            if n_residuals < MIN_REDUNDANCY * n_kept && rung > ModelName::Geometric {
+                rung = ModelName::Geometric;
                 continue;
             }
             if n_residuals < MIN_REDUNDANCY * n_kept {
@@ -2377,7 +2378,7 @@ pub fn frames_only(
         .context("attaching the instrument and marker frames")?;
     let nominal = Col::<f64>::zeros(framed.n_params());
     let (model, fitted) = fit(
-        ModelChoice::FramesOnly,
+        ModelName::FramesOnly,
         &robot,
         &Start {
             tree: &framed,
@@ -2541,7 +2542,7 @@ pub fn run_tables(
     let cfg = MeasuredConfig {
         rung: {
             plan.model.check_fits(DataKind::Measurements)?;
-            (plan.model != ModelChoice::Auto).then_some(plan.model)
+            plan.model.model()
         },
         folds: plan.folds,
         sigma_m: plan.sigma_m,

@@ -1,81 +1,139 @@
-//! The calibration model, typed once for every kind of data: which parameter families a model
-//! frees ([`ModelChoice`], [`ModelChoice::families`]), which kinds of data can determine it
-//! ([`DataKind`], [`ModelChoice::refusal`]), the model terms a problem is built with
-//! ([`terms`]), the ladder `--model auto` climbs on each kind of data ([`ladder`]) and the one
-//! rule that climbs it ([`climb`], argued in docs/engine.md, "The rule that picks a rung").
+//! The calibration model, typed once for every kind of data. The models are named once, by
+//! [`ModelName`] (`hapcal-contract`, the name every file and report writes); this module says
+//! what calibration makes of them: which parameter families a model frees
+//! ([`ModelRules::families`]), which kinds of data can determine it ([`DataKind`],
+//! [`ModelRules::refusal`]), the model terms a problem is built with ([`terms`]), what
+//! `--model` asks for ([`ModelChoice`]: `auto` or a model), the ladder `--model auto` climbs on
+//! each kind of data ([`ladder`]) and the one rule that climbs it ([`climb`], argued in
+//! docs/engine.md, "The rule that picks a rung").
 //!
 //! `calibrate` (every workflow), `diagnose`, `plan-poses`, the Rust API and the Python package
-//! name models with this type alone.
+//! name models with these types alone.
 
 use anyhow::{Context, Result, bail};
 use hapcal_problems::{GravityCompliance, JointHarmonics, LinkMass, ModelTerms, Transversal};
 use serde::Serialize;
 
-/// A calibration model: the parameter families it frees on top of the nominal kinematics.
-/// The doc comment of each variant is its `hapcal calibrate --help` text: plain words (no
-/// links). Ordered simplest first within the ladder (`FramesOnly < JointOffsets < Geometric <
-/// Compliance …`).
-/// Serialised as its `--model` value (`frames-only`, `mass-compliance`), the spelling of every
-/// report.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, clap::ValueEnum)]
+pub use hapcal_contract::ModelName;
+
+/// What `--model` asks for: the ladder ([`ModelChoice::Auto`]) or one model
+/// ([`ModelName`], defined once in `hapcal-contract`, the name every file and report writes).
+/// Rendered, and serialised, as the user types it: `auto`, or the model's name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum ModelChoice {
-    /// Chosen on the training data only: the ladder of the data's kind is climbed by repeated
-    /// blocked cross-validation, a model must beat the one chosen below it by 2 standard
-    /// errors of the held-out difference (and, where the calibration will be used beyond the
-    /// training range of a joint, do no worse on folds that hold out that end of the range).
-    /// Measurement files: frames-only, joint-offsets, geometric, compliance,
-    /// transversal-compliance, then harmonic or harmonic2. Socket recordings and distance logs: geometric, then compliance.
-    /// For a robot with published link masses, mass-compliance and actuator-compliance are
-    /// alternatives to compliance (the lowest held-out error of those that pass).
-    /// A haptic device's logs: geometric, then transmissions (when the logs have
-    /// external-encoder columns), then compliance (when the device file has a handle mass).
+    /// Chosen on the training data only (see [`help`] for the ladders).
     Auto,
-    /// The nominal kinematics; only the instrument's and the markers' frames are fitted
-    /// (measurement files).
-    FramesOnly,
-    /// The frames plus one offset per joint (measurement files).
-    JointOffsets,
-    /// Every kinematic parameter the data determine (the others are pruned and reported). On
-    /// a haptic device's logs: the kinematic deviations alone, without the transmissions.
-    Geometric,
-    /// Geometric plus one gravity compliance per joint, about its axis: the torques of the
-    /// URDF's inertial masses on the whole tree when measurement files come with them, lumped
-    /// link weights otherwise. On a haptic device's logs: the transmissions (when the logs
-    /// have external-encoder columns), the kinematic deviations and the compliance of each
-    /// joint under the handle's weight (the handle mass of the device file), in rad/(N·m), fitted
-    /// together.
-    Compliance,
-    /// Geometric plus one gravity compliance per joint with the torques of the robot's
-    /// published link masses (Franka Panda, KUKA LBR iiwa 14; refused for other robots).
-    MassCompliance,
-    /// As mass-compliance, with one compliance per actuator size.
-    ActuatorCompliance,
-    /// Compliance plus a transversal compliance per revolute joint: the joint frame bends
-    /// about the axes normal to its axis under the gravity moment about them, alike in every
-    /// direction (URDF robots).
-    TransversalCompliance,
-    /// Compliance plus two transversal compliances per revolute joint, one about each of the
-    /// two axes of the link's frame normal to the joint axis: a link that bends more easily
-    /// one way than the other (URDF robots). Not a rung of auto (its fit costs about three
-    /// times transversal-compliance's).
-    TransversalAxes,
-    /// Geometric plus once-per-revolution harmonic angle errors on every joint (encoder
-    /// eccentricity). A rung of auto on measurement files (the last level, with harmonic2), not
-    /// on socket recordings: on one MUKCa placement the harmonic models fit the training data
-    /// better and the other placements worse (docs/results/mukca.md).
-    Harmonic,
-    /// Geometric plus first- and second-order harmonic angle errors on every joint (the alternative
-    /// of harmonic on auto's last level on measurement files).
-    Harmonic2,
-    /// Mass-compliance plus harmonic.
-    MassComplianceHarmonic,
-    /// Compliance plus harmonic.
-    ComplianceHarmonic,
-    /// A haptic device's logs only: the transmissions (each capstan's eq. 1 and the
-    /// parallelogram's polynomial, from the external-encoder columns, which every training log
-    /// must have) and then the kinematic deviations (from the cable distances): the paper's two
-    /// steps.
-    Transmissions,
+    /// The model named.
+    Model(ModelName),
+}
+
+/// `auto`, then every model in ladder order: the values `--model` takes.
+const CHOICES: [ModelChoice; 14] = {
+    let mut all = [ModelChoice::Auto; 14];
+    let mut i = 0;
+    while i < ModelName::ALL.len() {
+        all[i + 1] = ModelChoice::Model(ModelName::ALL[i]);
+        i += 1;
+    }
+    all
+};
+
+impl From<ModelName> for ModelChoice {
+    fn from(model: ModelName) -> ModelChoice {
+        ModelChoice::Model(model)
+    }
+}
+
+impl PartialEq<ModelName> for ModelChoice {
+    /// Whether this choice names `model` (`auto` names none).
+    fn eq(&self, model: &ModelName) -> bool {
+        *self == ModelChoice::Model(*model)
+    }
+}
+
+impl clap::ValueEnum for ModelChoice {
+    fn value_variants<'a>() -> &'a [Self] {
+        &CHOICES
+    }
+
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()).help(help(*self)))
+    }
+}
+
+/// The `hapcal calibrate --help` text of a `--model` value: plain words (no links).
+pub fn help(choice: ModelChoice) -> &'static str {
+    let ModelChoice::Model(model) = choice else {
+        return "Chosen on the training data only: the ladder of the data's kind is climbed by \
+                repeated blocked cross-validation, a model must beat the one chosen below it by \
+                2 standard errors of the held-out difference (and, where the calibration will be \
+                used beyond the training range of a joint, do no worse on folds that hold out \
+                that end of the range). Measurement files: frames-only, joint-offsets, \
+                geometric, compliance, transversal-compliance, then harmonic or harmonic2. \
+                Socket recordings and distance logs: geometric, then compliance. For a robot \
+                with published link masses, mass-compliance and actuator-compliance are \
+                alternatives to compliance (the lowest held-out error of those that pass). A \
+                haptic device's logs: geometric, then transmissions (when the logs have \
+                external-encoder columns), then compliance (when the device file has a handle \
+                mass).";
+    };
+    match model {
+        ModelName::FramesOnly => {
+            "The nominal kinematics; only the instrument's and the markers' frames are fitted \
+             (measurement files)."
+        }
+        ModelName::JointOffsets => "The frames plus one offset per joint (measurement files).",
+        ModelName::Geometric => {
+            "Every kinematic parameter the data determine (the others are pruned and reported). \
+             On a haptic device's logs: the kinematic deviations alone, without the \
+             transmissions."
+        }
+        ModelName::Compliance => {
+            "Geometric plus one gravity compliance per joint, about its axis: the torques of \
+             the URDF's inertial masses on the whole tree when measurement files come with \
+             them, lumped link weights otherwise. On a haptic device's logs: the transmissions \
+             (when the logs have external-encoder columns), the kinematic deviations and the \
+             compliance of each joint under the handle's weight (the handle mass of the device \
+             file), in rad/(N·m), fitted together."
+        }
+        ModelName::MassCompliance => {
+            "Geometric plus one gravity compliance per joint with the torques of the robot's \
+             published link masses (Franka Panda, KUKA LBR iiwa 14; refused for other robots)."
+        }
+        ModelName::ActuatorCompliance => {
+            "As mass-compliance, with one compliance per actuator size."
+        }
+        ModelName::TransversalCompliance => {
+            "Compliance plus a transversal compliance per revolute joint: the joint frame \
+             bends about the axes normal to its axis under the gravity moment about them, alike \
+             in every direction (URDF robots)."
+        }
+        ModelName::TransversalAxes => {
+            "Compliance plus two transversal compliances per revolute joint, one about each of \
+             the two axes of the link's frame normal to the joint axis: a link that bends more \
+             easily one way than the other (URDF robots). Not a rung of auto (its fit costs \
+             about three times transversal-compliance's)."
+        }
+        ModelName::Harmonic => {
+            "Geometric plus once-per-revolution harmonic angle errors on every joint (encoder \
+             eccentricity). A rung of auto on measurement files (the last level, with \
+             harmonic2), not on socket recordings: on one MUKCa placement the harmonic models \
+             fit the training data better and the other placements worse \
+             (docs/results/mukca.md)."
+        }
+        ModelName::Harmonic2 => {
+            "Geometric plus first- and second-order harmonic angle errors on every joint (the \
+             alternative of harmonic on auto's last level on measurement files)."
+        }
+        ModelName::MassComplianceHarmonic => "Mass-compliance plus harmonic.",
+        ModelName::ComplianceHarmonic => "Compliance plus harmonic.",
+        ModelName::Transmissions => {
+            "A haptic device's logs only: the transmissions (each capstan's eq. 1 and the \
+             parallelogram's polynomial, from the external-encoder columns, which every \
+             training log must have) and then the kinematic deviations (from the cable \
+             distances): the paper's two steps."
+        }
+    }
 }
 
 /// The kind of the training data, typed when they are loaded: it decides which models the
@@ -151,14 +209,14 @@ fn transversal_name<S: serde::Serializer>(t: &Transversal, s: S) -> Result<S::Ok
 }
 
 /// A rung of a kinematic ladder as a report names it: the nominal model (nothing fitted but
-/// the nuisance parameters, the socket points) or one of the models of [`ModelChoice`].
+/// the nuisance parameters, the socket points) or a model.
 /// Rendered, and serialised, as the user reads it: `nominal`, or the model's `--model` value.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Rung {
     /// The nominal kinematics.
     Nominal,
     /// A model of the ladder.
-    Model(ModelChoice),
+    Model(ModelName),
 }
 
 impl std::fmt::Display for Rung {
@@ -190,43 +248,76 @@ impl std::fmt::Display for ModelChoice {
 }
 
 impl ModelChoice {
-    /// The `--model` value that selects this model (`mass-compliance`), as the user types it.
+    /// The `--model` value (`auto`, `mass-compliance`), as the user types it.
     pub fn name(self) -> &'static str {
         match self {
             ModelChoice::Auto => "auto",
-            ModelChoice::FramesOnly => "frames-only",
-            ModelChoice::JointOffsets => "joint-offsets",
-            ModelChoice::Geometric => "geometric",
-            ModelChoice::Compliance => "compliance",
-            ModelChoice::MassCompliance => "mass-compliance",
-            ModelChoice::ActuatorCompliance => "actuator-compliance",
-            ModelChoice::TransversalCompliance => "transversal-compliance",
-            ModelChoice::TransversalAxes => "transversal-axes",
-            ModelChoice::Harmonic => "harmonic",
-            ModelChoice::Harmonic2 => "harmonic2",
-            ModelChoice::MassComplianceHarmonic => "mass-compliance-harmonic",
-            ModelChoice::ComplianceHarmonic => "compliance-harmonic",
-            ModelChoice::Transmissions => "transmissions",
+            ModelChoice::Model(m) => m.name(),
         }
     }
 
-    /// Every model, in `--help` order.
+    /// `auto`, then every model in ladder order (`--help` order).
     pub fn all() -> &'static [ModelChoice] {
-        <ModelChoice as clap::ValueEnum>::value_variants()
+        &CHOICES
     }
 
-    /// The model whose `--model` value is `name` (`-` or `_` between words), if any.
+    /// The choice whose `--model` value is `name` (`-` or `_` between words), if any.
     pub fn from_name(name: &str) -> Option<ModelChoice> {
-        let wanted = name.trim().to_ascii_lowercase().replace('_', "-");
-        ModelChoice::all()
-            .iter()
-            .copied()
-            .find(|m| m.name() == wanted)
+        if name.trim().eq_ignore_ascii_case("auto") {
+            return Some(ModelChoice::Auto);
+        }
+        ModelName::from_name(name).map(ModelChoice::Model)
     }
 
-    /// The parameter families this model frees (`Auto`: none; it stands for a choice).
-    pub fn families(self) -> Families {
-        use ModelChoice as M;
+    /// The model named, `None` for `auto`.
+    pub fn model(self) -> Option<ModelName> {
+        match self {
+            ModelChoice::Auto => None,
+            ModelChoice::Model(m) => Some(m),
+        }
+    }
+
+    /// Why data of `kind` cannot determine this choice, in the user's words; `None` when they
+    /// can (`auto` always can).
+    pub fn refusal(self, kind: DataKind) -> Option<&'static str> {
+        self.model().and_then(|m| m.refusal(kind))
+    }
+
+    /// `Ok` when data of `kind` can determine this choice.
+    ///
+    /// # Errors
+    /// The model, named as the user typed it, the reason, and the values those data take.
+    pub fn check_fits(self, kind: DataKind) -> Result<()> {
+        let Some(reason) = self.refusal(kind) else {
+            return Ok(());
+        };
+        let names: Vec<&str> = (Self::all().iter())
+            .filter(|m| m.refusal(kind).is_none())
+            .map(|m| m.name())
+            .collect();
+        bail!(
+            "--model {self} does not apply to {}: {reason}; they take {}",
+            kind.words(),
+            names.join(", ")
+        )
+    }
+}
+
+/// What calibration makes of a model ([`ModelName`], defined in `hapcal-contract`): the
+/// parameter families it frees and the kinds of data that determine it.
+pub trait ModelRules {
+    /// The parameter families this model frees.
+    fn families(self) -> Families;
+
+    /// Why data of `kind` cannot determine this model, in the user's words; `None` when they
+    /// can (whether a particular robot carries it, such as published masses or revolute
+    /// joints with rotation deviations, is decided when the problem is built).
+    fn refusal(self, kind: DataKind) -> Option<&'static str>;
+}
+
+impl ModelRules for ModelName {
+    fn families(self) -> Families {
+        use ModelName as M;
         let compliance = match self {
             M::Compliance
             | M::TransversalCompliance
@@ -238,7 +329,7 @@ impl ModelChoice {
         };
         Families {
             joint_offsets: self == M::JointOffsets,
-            geometric: !matches!(self, M::Auto | M::FramesOnly | M::JointOffsets),
+            geometric: !matches!(self, M::FramesOnly | M::JointOffsets),
             compliance,
             transversal: match self {
                 M::TransversalCompliance => Transversal::Isotropic,
@@ -254,13 +345,9 @@ impl ModelChoice {
         }
     }
 
-    /// Why data of `kind` cannot determine this model, in the user's words; `None` when they
-    /// can (whether a particular robot carries it, such as published masses or revolute joints
-    /// with rotation deviations, is decided when the problem is built).
-    pub fn refusal(self, kind: DataKind) -> Option<&'static str> {
-        use ModelChoice as M;
+    fn refusal(self, kind: DataKind) -> Option<&'static str> {
+        use ModelName as M;
         match (self, kind) {
-            (M::Auto, _) => None,
             (M::Transmissions, DataKind::HapticLogs) => None,
             (M::Transmissions, _) => Some(
                 "the transmissions are identified from a haptic device's external-encoder columns",
@@ -278,25 +365,6 @@ impl ModelChoice {
             _ => None,
         }
     }
-
-    /// `Ok` when data of `kind` can determine this model.
-    ///
-    /// # Errors
-    /// The model, named as the user typed it, the reason, and the models those data take.
-    pub fn check_fits(self, kind: DataKind) -> Result<()> {
-        let Some(reason) = self.refusal(kind) else {
-            return Ok(());
-        };
-        let names: Vec<&str> = (Self::all().iter())
-            .filter(|m| m.refusal(kind).is_none())
-            .map(|m| m.name())
-            .collect();
-        bail!(
-            "--model {self} does not apply to {}: {reason}; they take {}",
-            kind.words(),
-            names.join(", ")
-        )
-    }
 }
 
 /// The model terms (compliance, transversal compliance, joint harmonics) of `model` for a
@@ -306,11 +374,7 @@ impl ModelChoice {
 ///
 /// # Errors
 /// A published-mass model on a robot whose joint names have no published masses.
-pub fn terms(
-    model: ModelChoice,
-    joint_names: &[String],
-    masses: &[LinkMass],
-) -> Result<ModelTerms> {
+pub fn terms(model: ModelName, joint_names: &[String], masses: &[LinkMass]) -> Result<ModelTerms> {
     let families = model.families();
     let compliance = match families.compliance {
         None => None,
@@ -361,8 +425,8 @@ pub fn terms(
 ///   → compliance (or its published-mass alternatives);
 /// - a haptic device's logs: geometric → transmissions (when the logs have external-encoder
 ///   columns) → compliance (when the device file has a handle mass).
-pub fn ladder(kind: DataKind, published_masses: bool) -> Vec<Vec<ModelChoice>> {
-    use ModelChoice as M;
+pub fn ladder(kind: DataKind, published_masses: bool) -> Vec<Vec<ModelName>> {
+    use ModelName as M;
     let compliance = if published_masses {
         vec![M::Compliance, M::MassCompliance, M::ActuatorCompliance]
     } else {
@@ -416,7 +480,7 @@ pub fn carries_transversal(tips: &[hapcal_kinematics::Chain]) -> bool {
 /// compliance needs a revolute joint with rotation deviations ([`carries_transversal`]), the
 /// published-mass models joint names with published masses; every other model fits any robot.
 pub fn carries(
-    model: ModelChoice,
+    model: ModelName,
     joint_names: &[String],
     tips: &[hapcal_kinematics::Chain],
 ) -> bool {
@@ -439,7 +503,7 @@ pub fn ladder_for(
     kind: DataKind,
     joint_names: &[String],
     tips: &[hapcal_kinematics::Chain],
-) -> (Vec<ModelChoice>, Vec<usize>) {
+) -> (Vec<ModelName>, Vec<usize>) {
     let published = GravityCompliance::published(joint_names).is_some();
     let mut rungs = Vec::new();
     let mut levels = Vec::new();
@@ -491,7 +555,7 @@ pub fn climb(
 
 #[cfg(test)]
 mod tests {
-    use super::{DataKind, ModelChoice, climb, ladder};
+    use super::{DataKind, ModelChoice, ModelName, climb, ladder};
 
     #[test]
     fn a_model_is_named_by_its_command_line_value() {
@@ -500,15 +564,25 @@ mod tests {
             assert_eq!(Some(model.to_string()), value, "{model:?}");
         }
         assert_eq!(
-            ModelChoice::ComplianceHarmonic.to_string(),
+            ModelChoice::from(ModelName::ComplianceHarmonic).to_string(),
             "compliance-harmonic"
         );
+        // `auto` first, then every model once, in ladder order.
+        let models: Vec<ModelName> = ModelChoice::all()
+            .iter()
+            .filter_map(|c| c.model())
+            .collect();
+        assert_eq!(ModelChoice::all()[0], ModelChoice::Auto);
+        assert_eq!(models, ModelName::ALL);
+        for &choice in ModelChoice::all() {
+            assert_eq!(ModelChoice::from_name(choice.name()), Some(choice));
+        }
     }
 
     #[test]
     fn each_kind_of_data_refuses_the_models_it_cannot_determine_by_their_values() {
         use DataKind as K;
-        use ModelChoice as M;
+        use ModelName as M;
         let cases = [
             (
                 M::MassCompliance,
@@ -528,6 +602,7 @@ mod tests {
             ),
         ];
         for (model, kind, listed) in cases {
+            let model = ModelChoice::Model(model);
             let Err(err) = model.check_fits(kind).map_err(|e| e.to_string()) else {
                 panic!("{model} is refused on {kind:?}");
             };
@@ -543,13 +618,16 @@ mod tests {
         // Every non-transmission model on every robot data kind; the haptic logs' own four.
         for kind in [K::Sockets, K::Distances, K::Measurements] {
             for &m in ModelChoice::all() {
-                let frames = matches!(m, M::FramesOnly | M::JointOffsets);
+                let frames = m == M::FramesOnly || m == M::JointOffsets;
                 let expected = m != M::Transmissions && (kind == K::Measurements || !frames);
                 assert_eq!(m.check_fits(kind).is_ok(), expected, "{m} on {kind:?}");
             }
         }
         for &m in ModelChoice::all() {
-            let expected = matches!(m, M::Auto | M::Transmissions | M::Geometric | M::Compliance);
+            let expected = m == ModelChoice::Auto
+                || m == M::Transmissions
+                || m == M::Geometric
+                || m == M::Compliance;
             assert_eq!(m.check_fits(K::HapticLogs).is_ok(), expected, "{m}");
         }
     }
@@ -566,20 +644,20 @@ mod tests {
                 let rungs = ladder(kind, published);
                 assert!(!rungs.is_empty());
                 for m in rungs.iter().flatten() {
-                    assert!(m.check_fits(kind).is_ok(), "{m} on {kind:?}");
-                    assert_ne!(*m, ModelChoice::Auto);
+                    let choice = ModelChoice::Model(*m);
+                    assert!(choice.check_fits(kind).is_ok(), "{m} on {kind:?}");
                 }
                 // Simplest first: the rungs' order is the models' order (the transmissions,
                 // last of the models, sit below the compliance on the haptic ladder: the
                 // haptic compliance model holds them).
-                let flat: Vec<ModelChoice> = rungs.iter().flatten().copied().collect();
+                let flat: Vec<ModelName> = rungs.iter().flatten().copied().collect();
                 if kind == DataKind::HapticLogs {
                     assert_eq!(
                         flat,
                         [
-                            ModelChoice::Geometric,
-                            ModelChoice::Transmissions,
-                            ModelChoice::Compliance
+                            ModelName::Geometric,
+                            ModelName::Transmissions,
+                            ModelName::Compliance
                         ]
                     );
                 } else {

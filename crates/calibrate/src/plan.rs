@@ -41,6 +41,7 @@
 //! the joint box, and the equivalence-theorem certificate `Φ* ≥ Φ(ξ)²/sup d` that bounds every
 //! `N`-pose design by `Φ*/N`; compared with the study's random reference sets.
 
+use crate::model::ModelName;
 use anyhow::{Context, Result, bail};
 use faer::Mat;
 use hapcal_identify::{
@@ -96,7 +97,8 @@ pub struct PlanConfig {
     pub model: ModelChoice,
 }
 
-/// Checks that `model` is one the planner can plan `device`'s poses for, in the user's words:
+/// The model `choice` names, checked to be one the planner can plan `device`'s poses for, in
+/// the user's words:
 /// the models `hapcal calibrate` fits to the data of the planned measurement (a haptic device's
 /// logs, distance logs, or measurement files), less those that are a choice or fit only
 /// instrument frames: `auto` (plan for the richest model you will calibrate), `frames-only`
@@ -105,22 +107,28 @@ pub struct PlanConfig {
 ///
 /// # Errors
 /// The refusal, naming the model as the user typed it.
-pub fn planned_model(device: &Device, measurement: Measurement, model: ModelChoice) -> Result<()> {
+pub fn planned_model(
+    device: &Device,
+    measurement: Measurement,
+    choice: ModelChoice,
+) -> Result<ModelName> {
     let haptic = !device.capstans.is_empty() || device.parallelogram.is_some();
     let kind = match (haptic, measurement) {
         (true, Measurement::Distance) => DataKind::HapticLogs,
         (false, Measurement::Distance) => DataKind::Distances,
         (_, Measurement::Position) => DataKind::Measurements,
     };
-    match model {
-        ModelChoice::Auto => bail!(
+    let ModelChoice::Model(model) = choice else {
+        bail!(
             "--model auto: the poses are planned for one model; give the richest you will \
              calibrate (geometric, compliance, …)"
-        ),
-        ModelChoice::FramesOnly | ModelChoice::JointOffsets => bail!(
+        )
+    };
+    match model {
+        ModelName::FramesOnly | ModelName::JointOffsets => bail!(
             "--model {model}: plan for geometric: poses that determine every kinematic \
              parameter determine the {}",
-            if model == ModelChoice::FramesOnly {
+            if model == ModelName::FramesOnly {
                 "instrument frame"
             } else {
                 "joint offsets"
@@ -131,27 +139,28 @@ pub fn planned_model(device: &Device, measurement: Measurement, model: ModelChoi
     // A haptic device's poses serve its transmissions and kinematics: geometric and
     // transmissions plan the same blocks (the transmission rows follow
     // --separate-transmission-run).
-    if kind == DataKind::HapticLogs && model == ModelChoice::Geometric {
-        return Ok(());
+    if kind == DataKind::HapticLogs && model == ModelName::Geometric {
+        return Ok(model);
     }
     // `hapcal calibrate --model compliance` fits a haptic device's handle compliance with the
     // diagnosis's model (the handle's weight at the end point); the planner's compliance
     // blocks are lumped link weights, another model: it does not plan for it.
-    if kind == DataKind::HapticLogs && model == ModelChoice::Compliance {
+    if kind == DataKind::HapticLogs && model == ModelName::Compliance {
         bail!(
             "--model compliance: the pose planner has no model of a haptic device's handle \
              compliance; plan for transmissions (calibrate's compliance fits the logs of those \
              poses)"
         );
     }
-    model.check_fits(kind)
+    choice.check_fits(kind)?;
+    Ok(model)
 }
 
 /// Whether `model` frees no family beyond the kinematic deviations (and a haptic device's
 /// transmissions, whose rows the blocks carry either way): the plain identification problem
 /// plans it.
-fn plans_kinematics_only(model: ModelChoice) -> bool {
-    matches!(model, ModelChoice::Geometric | ModelChoice::Transmissions)
+fn plans_kinematics_only(model: ModelName) -> bool {
+    matches!(model, ModelName::Geometric | ModelName::Transmissions)
 }
 
 /// Result of [`plan_poses`].
@@ -240,7 +249,7 @@ pub fn candidate_blocks(
         measurement,
         sigma_m,
         transmission_rows,
-        ModelChoice::Geometric,
+        ModelName::Geometric,
     )
 }
 
@@ -258,7 +267,7 @@ pub fn candidate_blocks_for(
     measurement: Measurement,
     sigma_m: Option<f64>,
     transmission_rows: bool,
-    model: ModelChoice,
+    model: ModelName,
 ) -> Result<Candidates> {
     let chain = device.chain().context("building the kinematic chain")?;
     let chain_for_weight = chain.clone();
@@ -448,9 +457,9 @@ pub fn plan_poses_weighted(
             "refining the poses over the joint box needs distance measurements planned without the transmission rows"
         );
     }
-    planned_model(device, cfg.measurement, cfg.model)?;
+    let model = planned_model(device, cfg.measurement, cfg.model)?;
     let kinematic_rows = cfg.measurement == Measurement::Distance && !cfg.transmission_rows;
-    if kinematic_rows && !plans_kinematics_only(cfg.model) {
+    if kinematic_rows && !plans_kinematics_only(model) {
         bail!(
             "--model {}: a separate transmission run plans the kinematic rows of the geometric \
              model; plan for geometric, or without --separate-transmission-run",
@@ -474,7 +483,7 @@ pub fn plan_poses_weighted(
         cfg.measurement,
         cfg.sigma_m,
         cfg.transmission_rows,
-        cfg.model,
+        model,
     )?;
     let chain = device.chain()?;
     let (sigma_m, _) = sigmas(device, cfg.sigma_m);
@@ -733,7 +742,7 @@ pub struct AfterPlan {
     /// order (moved off the candidates when refined).
     pub readings: Vec<Vec<f64>>,
     /// The model planned for.
-    pub model: ModelChoice,
+    pub model: ModelName,
     /// Why the model planned for is not the one asked for, in words (auto kept frames only).
     pub model_note: Option<String>,
     /// The columns: parameters of the model that the measured rows and the candidates
@@ -924,7 +933,7 @@ pub fn plan_after(
             w.len()
         );
     }
-    if cfg.model == ModelChoice::FramesOnly {
+    if cfg.model == ModelName::FramesOnly {
         bail!(
             "--model frames-only fits only the instrument and marker frames: no kinematic \
              parameter to plan the poses for; plan for geometric"
@@ -932,7 +941,7 @@ pub fn plan_after(
     }
     cfg.model.check_fits(DataKind::Measurements)?;
     let n_measured: usize = measured.iter().map(|t| t.rows.len()).sum();
-    let calibrate = |rung: Option<ModelChoice>| {
+    let calibrate = |rung: Option<ModelName>| {
         let mcfg = MeasuredConfig {
             rung,
             folds: 5.min(n_measured).max(2),
@@ -944,15 +953,15 @@ pub fn plan_after(
         calibrate_measured(robot, measured, &[], &mcfg)
             .context("calibrating the measured rows (the model the poses are planned for)")
     };
-    let mut out = calibrate((cfg.model != ModelChoice::Auto).then_some(cfg.model))?;
+    let mut out = calibrate(cfg.model.model())?;
     let mut model_note = None;
-    if out.rung == ModelChoice::FramesOnly {
+    if out.rung == ModelName::FramesOnly {
         model_note = Some(
             "on the measured rows the calibration keeps frames only (no model beat it held \
              out): planned for geometric, the model the new rows are to determine"
                 .to_owned(),
         );
-        out = calibrate(Some(ModelChoice::Geometric))?;
+        out = calibrate(Some(ModelName::Geometric))?;
     } else if cfg.model == ModelChoice::Auto {
         model_note = Some(format!(
             "the model the calibration chooses on the measured rows: {}",
@@ -1572,7 +1581,7 @@ mod tests {
         crate::data::load_device(&path, "ball_link").expect("iiwa 14 URDF")
     }
 
-    fn config(model: ModelChoice) -> PlanConfig {
+    fn config(model: impl Into<ModelChoice>) -> PlanConfig {
         PlanConfig {
             measurement: Measurement::Position,
             count: 40,
@@ -1582,15 +1591,15 @@ mod tests {
             sigma_m: Some(5e-5),
             transmission_rows: true,
             refine: false,
-            model,
+            model: model.into(),
         }
     }
 
     #[test]
     fn poses_are_planned_for_the_model_asked_for() {
         let device = iiwa();
-        let geometric = plan_poses(&device, &config(ModelChoice::Geometric)).expect("geometric");
-        let compliance = plan_poses(&device, &config(ModelChoice::Compliance)).expect("compliance");
+        let geometric = plan_poses(&device, &config(ModelName::Geometric)).expect("geometric");
+        let compliance = plan_poses(&device, &config(ModelName::Compliance)).expect("compliance");
         let is_compliance = |c: &String| c.starts_with("compliance.");
         assert!(!geometric.columns.iter().any(is_compliance));
         // The iiwa's five loaded joints (a1 and a7 turn about the vertical and the tool
@@ -1618,9 +1627,9 @@ mod tests {
         let device = iiwa();
         for (model, words) in [
             (ModelChoice::Auto, "--model auto"),
-            (ModelChoice::FramesOnly, "--model frames-only"),
-            (ModelChoice::JointOffsets, "--model joint-offsets"),
-            (ModelChoice::Transmissions, "--model transmissions"),
+            (ModelName::FramesOnly.into(), "--model frames-only"),
+            (ModelName::JointOffsets.into(), "--model joint-offsets"),
+            (ModelName::Transmissions.into(), "--model transmissions"),
         ] {
             let err = plan_poses(&device, &config(model)).expect_err("refused");
             assert!(err.to_string().contains(words), "{err}");
@@ -1628,7 +1637,7 @@ mod tests {
         let haptic = reference_device();
         let cfg = PlanConfig {
             measurement: Measurement::Distance,
-            ..config(ModelChoice::Compliance)
+            ..config(ModelName::Compliance)
         };
         let err = plan_poses(&haptic, &cfg).expect_err("refused on a haptic device");
         assert!(err.to_string().contains("haptic device"), "{err}");

@@ -8,7 +8,6 @@ use hapcal_contract::{
 };
 use hapcal_problems::CalibratedModel;
 
-use crate::model::ModelChoice;
 use crate::report::{FrameReport, ParamReport};
 
 /// Standard gravity, m/s² (CGPM 1901): the acceleration of the link masses' loads.
@@ -17,7 +16,7 @@ const STANDARD_GRAVITY: f64 = 9.806_65;
 /// What a calibration on measurement files found, as the record needs it.
 pub(crate) struct MeasuredRecord<'a> {
     /// The rung identified.
-    pub model: ModelChoice,
+    pub model: ModelName,
     /// The calibration's tip links, in marker order.
     pub tips: &'a [String],
     /// The joints' names, in the order of the readings.
@@ -42,14 +41,6 @@ pub(crate) struct MeasuredRecord<'a> {
     pub rows: usize,
 }
 
-/// The model name a record gives the rung `choice`; `None` for `auto`, which is never the
-/// rung identified.
-pub(crate) fn model_name(choice: ModelChoice) -> Option<ModelName> {
-    ModelName::ALL
-        .into_iter()
-        .find(|m| m.as_str() == choice.name())
-}
-
 /// The schema-1 record of a calibration on measurement files: the model, the tips, the
 /// compliances' torque source with the point masses it used, the training region, the frames,
 /// every value as identified (kinematic values are also applied to the written URDF's joint
@@ -60,9 +51,9 @@ pub(crate) fn measured_record(m: &MeasuredRecord<'_>) -> Calibration {
             TorqueSource::LumpedUnitWeights
         } else if matches!(
             m.model,
-            ModelChoice::MassCompliance
-                | ModelChoice::ActuatorCompliance
-                | ModelChoice::MassComplianceHarmonic
+            ModelName::MassCompliance
+                | ModelName::ActuatorCompliance
+                | ModelName::MassComplianceHarmonic
         ) {
             TorqueSource::PublishedMasses
         } else {
@@ -135,7 +126,7 @@ pub(crate) fn measured_record(m: &MeasuredRecord<'_>) -> Calibration {
     };
     Calibration {
         schema_version: Some(SCHEMA_VERSION),
-        model: model_name(m.model),
+        model: Some(m.model),
         date: None,
         data_hash: None,
         notes: Some(format!("hapcal calibrate, model {}", m.model)),

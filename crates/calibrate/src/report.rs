@@ -6,7 +6,7 @@ use hapcal_problems::CalibratedModel;
 use serde::Serialize;
 use std::path::PathBuf;
 
-use crate::model::ModelChoice;
+use crate::model::ModelName;
 
 /// The role of a data set in a calibration (JSON: `train`, `test`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -106,7 +106,7 @@ pub struct PrunedReport {
 #[derive(Clone, Debug, Serialize)]
 pub struct CvReport {
     /// Candidate.
-    pub model: ModelChoice,
+    pub model: ModelName,
     /// Held-out RMS of the 3-D point (or distance) error over all folds, m.
     pub heldout_rms_m: f64,
     /// Mean over held-out rows of this model's squared error minus the geometric model's, m²,
@@ -119,7 +119,7 @@ pub struct CvReport {
     /// The model this one was compared with on the climb (the one chosen so far when its
     /// level was reached; `None` for the bottom rung).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub compared_with: Option<ModelChoice>,
+    pub compared_with: Option<ModelName>,
     /// Mean over held-out rows of this model's squared error minus `compared_with`'s, m², and
     /// its blocked standard error; `(0, 0)` for the bottom rung. The model is taken when the
     /// difference is below zero by [`crate::model::LADDER_SIGNIFICANCE_Z`] standard errors
@@ -135,7 +135,7 @@ pub struct CalibrationReport {
     /// Device path.
     pub device: String,
     /// Chosen model.
-    pub model: ModelChoice,
+    pub model: ModelName,
     /// Cross-validation folds (time-contiguous blocks per socket).
     pub folds: usize,
     /// Cross-validation scores (empty when the model was given).
@@ -271,7 +271,7 @@ pub struct SampleErrors {
 #[derive(Clone, Debug, Serialize)]
 pub struct RungReport {
     /// The rung.
-    pub rung: ModelChoice,
+    pub rung: ModelName,
     /// Held-out RMS of the 3-D position error over all folds, m.
     pub heldout_rms_m: f64,
     /// Mean held-out weighted squared error per row (`Σ |e_p|²/σ_p² + θ²/σ_θ²` over the row's
@@ -399,9 +399,9 @@ pub struct Beyond {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RangeStop {
     /// The rung stopped.
-    pub rung: ModelChoice,
+    pub rung: ModelName,
     /// The rung it was compared with (chosen below it).
-    pub compared_with: ModelChoice,
+    pub compared_with: ModelName,
     /// Its weighted squared error per row minus `compared_with`'s predicted at the
     /// extrapolation needed, averaged over the joint-range folds (dimensionless), and the
     /// prediction's standard error (docs/engine.md, "Extrapolation").

@@ -25,6 +25,7 @@
 //! warning. Nothing is ever corrected silently: the findings name the flag or the edit that
 //! applies, and the residual before and after it.
 
+use crate::model::ModelName;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
@@ -34,7 +35,6 @@ use hapcal_problems::{CalibratedModel, Weights};
 use rayon::prelude::*;
 
 use crate::measured::{self, MeasuredConfig, Robot};
-use crate::model::ModelChoice;
 use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
 pub use crate::setup_findings::{
     ClosestHypothesis, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OVERWHELMING_FACTOR,
@@ -109,7 +109,7 @@ pub fn frames_only_residual(
     marker_tips: &[usize],
 ) -> Option<Residual> {
     let cfg = MeasuredConfig {
-        rung: Some(ModelChoice::FramesOnly),
+        rung: Some(ModelName::FramesOnly),
         folds: 2,
         sigma_m: None,
         sigma_rad: None,

@@ -10,7 +10,7 @@ use hapcal_problems::{CalibrationProblem, Observations, PointDistance, Row, RowK
 use crate::data::DataSet;
 use crate::fit::{HeldOut, fold_of, identify_config};
 use crate::inputs::Plan;
-use crate::model::ModelChoice;
+use crate::model::ModelName;
 
 /// Observations of `sets`; `keep(set, socket, row)` selects rows (for cross-validation).
 pub(crate) fn observations(
@@ -64,7 +64,7 @@ pub(crate) fn observations(
 pub(crate) fn solve(
     chain: &Chain,
     obs: Observations,
-    choice: ModelChoice,
+    choice: ModelName,
     sigma_m: Option<f64>,
 ) -> Result<(CalibrationProblem, Identified)> {
     let n_rows = obs.rows.len();
@@ -85,7 +85,7 @@ pub(crate) fn cross_validate(
     chain: &Chain,
     sets: &[DataSet],
     plan: &Plan,
-    choice: ModelChoice,
+    choice: ModelName,
     repeats: usize,
 ) -> Result<HeldOut> {
     let lens: Vec<Vec<usize>> = sets

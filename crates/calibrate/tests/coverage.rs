@@ -6,11 +6,11 @@
 mod sim;
 
 use hapcal_calibrate::measured::{MeasuredConfig, MeasuredOutcome, calibrate_measured};
-use hapcal_calibrate::model::ModelChoice;
+use hapcal_calibrate::model::{ModelName, ModelRules};
 use hapcal_calibrate::report::SetRole;
 use sim::Effect;
 
-fn config(rung: Option<ModelChoice>, workspace: Vec<Vec<f64>>) -> MeasuredConfig {
+fn config(rung: Option<ModelName>, workspace: Vec<Vec<f64>>) -> MeasuredConfig {
     MeasuredConfig {
         rung,
         folds: 5,
@@ -303,7 +303,7 @@ fn sweep() {
     }
     let robot = sim::robot();
     let forced = std::env::var_os("SWEEP_FORCED").is_some();
-    let mut ratios: Vec<(&str, f64, ModelChoice)> = Vec::new();
+    let mut ratios: Vec<(&str, f64, ModelName)> = Vec::new();
     for set in &SWEEP {
         let effects = [
             Effect::Harmonic {
@@ -364,7 +364,7 @@ fn sweep() {
             .map(|x| x.1)
             .collect();
         let frames_only = (ratios.iter())
-            .filter(|x| x.0 == name && x.2 == ModelChoice::FramesOnly)
+            .filter(|x| x.0 == name && x.2 == ModelName::FramesOnly)
             .count();
         eprintln!(
             "{name}: {} cases, {} end worse than frames only by more than 0.5 %, worst {:.2}×, \

@@ -6,7 +6,7 @@
 use hapcal_calibrate::data::NamedLog;
 use hapcal_calibrate::haptic::calibrate_logs;
 use hapcal_calibrate::inputs::Plan;
-use hapcal_calibrate::model::{LADDER_SIGNIFICANCE_Z, ModelChoice};
+use hapcal_calibrate::model::{LADDER_SIGNIFICANCE_Z, ModelChoice, ModelName};
 use hapcal_calibrate::report::CalibrationReport;
 use hapcal_io::LogRow;
 
@@ -37,14 +37,14 @@ fn auto(rows: Vec<LogRow>) -> CalibrationReport {
     out.report
 }
 
-fn rungs(report: &CalibrationReport) -> Vec<ModelChoice> {
+fn rungs(report: &CalibrationReport) -> Vec<ModelName> {
     report.cross_validation.iter().map(|cv| cv.model).collect()
 }
 
 #[test]
 fn a_handle_compliance_climbs_past_the_transmissions_by_two_standard_errors() {
     let report = auto(log(51, 300, &["gravity_compliance:j2=5e-3,j3=5e-3"]));
-    use ModelChoice as M;
+    use ModelName as M;
     assert_eq!(
         rungs(&report),
         [M::Geometric, M::Transmissions, M::Compliance]
@@ -73,7 +73,7 @@ fn a_handle_compliance_climbs_past_the_transmissions_by_two_standard_errors() {
 #[test]
 fn on_a_clean_log_the_transmissions_are_chosen() {
     let report = auto(log(52, 300, &[]));
-    use ModelChoice as M;
+    use ModelName as M;
     assert_eq!(
         report.model,
         M::Transmissions,
@@ -108,7 +108,7 @@ fn without_external_encoder_columns_the_ladder_has_no_transmissions() {
         }
     }
     let report = auto(rows);
-    use ModelChoice as M;
+    use ModelName as M;
     assert_eq!(rungs(&report), [M::Geometric, M::Compliance]);
     assert_eq!(
         report.model,

@@ -7,10 +7,10 @@
 mod sim;
 
 use hapcal_calibrate::measured::{MeasuredConfig, MeasuredOutcome, calibrate_measured};
-use hapcal_calibrate::model::ModelChoice;
+use hapcal_calibrate::model::ModelName;
 use sim::{NOISE_M, compliance_of, humanoid, table, transversal_of, truth, truth_with};
 
-fn config(rung: Option<ModelChoice>, marker_tips: Vec<usize>) -> MeasuredConfig {
+fn config(rung: Option<ModelName>, marker_tips: Vec<usize>) -> MeasuredConfig {
     MeasuredConfig {
         rung,
         folds: 5,
@@ -49,7 +49,7 @@ fn both_hands_recover_every_compliance_and_reach_the_noise_floor() {
     let out = calibrate_measured(&robot, &[train], &[test], &config(None, vec![0, 1])).unwrap();
     assert_eq!(
         out.rung,
-        ModelChoice::TransversalCompliance,
+        ModelName::TransversalCompliance,
         "ladder {:?}",
         out.ladder
     );
@@ -109,7 +109,7 @@ fn one_hand_still_recovers_the_torso_compliance() {
         &robot,
         &[train],
         &[],
-        &config(Some(ModelChoice::TransversalCompliance), vec![0]),
+        &config(Some(ModelName::TransversalCompliance), vec![0]),
     )
     .unwrap();
     let found = compliances(&out);
@@ -177,8 +177,8 @@ fn per_axis_transversal_compliance_fits_links_that_bend_one_way() {
         out.sets[1].4.position_rms_m
     };
     let floor = 3f64.sqrt() * NOISE_M;
-    let axes = test_rms(ModelChoice::TransversalAxes);
-    let isotropic = test_rms(ModelChoice::TransversalCompliance);
+    let axes = test_rms(ModelName::TransversalAxes);
+    let isotropic = test_rms(ModelName::TransversalCompliance);
     // As in the test above: the noise plus the estimation error of ~170 parameters.
     assert!(
         axes < 1.15 * floor,

@@ -3,7 +3,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use hapcal_calibrate::measured::{MeasuredConfig, Robot, calibrate_measured, robot_from_urdf};
-use hapcal_calibrate::model::ModelChoice;
+use hapcal_calibrate::model::ModelName;
 use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
 use hapcal_kinematics::{FrameSpec, Isometry3, Vector3};
 use rand::{Rng, SeedableRng};
@@ -102,7 +102,7 @@ fn joint_offsets_are_found_and_the_test_error_reaches_the_noise() {
     let train = table(&robot, 120, 1e-3, 1);
     let test = table(&robot, 60, 1e-3, 2);
     let out = calibrate_measured(&robot, &[train], &[test], &config()).unwrap();
-    assert!(out.rung >= ModelChoice::JointOffsets, "chose {}", out.rung);
+    assert!(out.rung >= ModelName::JointOffsets, "chose {}", out.rung);
     let (_, _, _, before, after) = &out.sets[1];
     // 3-D RMS of noise σ per axis is √3·σ; allow 50 % for the estimation error of ~60
     // parameters from 360 residuals.
@@ -185,7 +185,7 @@ fn distances_from_an_unknown_anchor_find_the_joint_offsets() {
     let train = distances(&robot, 200, 2e-3, 5);
     let test = distances(&robot, 80, 2e-3, 6);
     let out = calibrate_measured(&robot, &[train], &[test], &config()).unwrap();
-    assert!(out.rung >= ModelChoice::JointOffsets, "chose {}", out.rung);
+    assert!(out.rung >= ModelName::JointOffsets, "chose {}", out.rung);
     let (_, _, _, before, after) = &out.sets[1];
     let (before, after) = (
         before.distance_rms_m.unwrap(),
@@ -221,7 +221,7 @@ fn a_gross_error_is_bounded_and_listed() {
     let mut train = clean.clone();
     train.rows[37].markers[0].position_m[1] += 0.02;
     let cfg = MeasuredConfig {
-        rung: Some(ModelChoice::JointOffsets),
+        rung: Some(ModelName::JointOffsets),
         ..config()
     };
     let out = calibrate_measured(&robot, &[train], std::slice::from_ref(&test), &cfg).unwrap();
@@ -295,7 +295,7 @@ fn the_frames_only_sigma_is_the_noise() {
     let robot = robot();
     let train = table(&robot, 120, 0.0, 5);
     let cfg = MeasuredConfig {
-        rung: Some(ModelChoice::FramesOnly),
+        rung: Some(ModelName::FramesOnly),
         ..config()
     };
     let out = calibrate_measured(&robot, &[train], &[], &cfg).unwrap();
@@ -344,7 +344,7 @@ fn harmonics_are_fitted_to_marker_data_when_asked() {
     let robot = robot();
     let train = table(&robot, 150, 1e-3, 10);
     let test = table(&robot, 60, 1e-3, 11);
-    for (rung, per_joint) in [(ModelChoice::Harmonic, 2), (ModelChoice::Harmonic2, 4)] {
+    for (rung, per_joint) in [(ModelName::Harmonic, 2), (ModelName::Harmonic2, 4)] {
         let cfg = MeasuredConfig {
             rung: Some(rung),
             ..config()

@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use hapcal_calibrate::measured::{MeasuredConfig, Robot, calibrate_measured, robot_from_urdf};
-use hapcal_calibrate::model::ModelChoice;
+use hapcal_calibrate::model::ModelName;
 use hapcal_calibrate::plan::{AfterConfig, after_summary, plan_after};
 use hapcal_identify::Criterion;
 use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
@@ -112,7 +112,7 @@ fn measure(robot: &Robot, qs: &[Vec<f64>], rng: &mut ChaCha8Rng) -> MeasurementT
 /// The geometric calibration of `train`, and its 3-D RMS error on `test`, m.
 fn heldout_rms(robot: &Robot, train: &[MeasurementTable], test: &MeasurementTable) -> f64 {
     let cfg = MeasuredConfig {
-        rung: Some(ModelChoice::Geometric),
+        rung: Some(ModelName::Geometric),
         folds: 5,
         sigma_m: None,
         sigma_rad: None,
@@ -144,7 +144,7 @@ fn poses_planned_for_the_uncovered_half_bring_its_error_down() {
         n_candidates: 300,
         seed: 3,
         criterion: Criterion::IOptimal,
-        model: ModelChoice::Geometric,
+        model: ModelName::Geometric.into(),
         sigma_m: None,
         sigma_rad: None,
         refine: false,

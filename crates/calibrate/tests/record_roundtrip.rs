@@ -13,6 +13,7 @@ mod humanoid;
 #[path = "sim/split_arm.rs"]
 mod split_arm;
 
+use hapcal_calibrate::model::ModelName;
 use std::path::{Path, PathBuf};
 
 use hapcal_calibrate::inputs::Plan;
@@ -135,7 +136,7 @@ fn round_trip(
     let (outcome, out) = calibrate_and_write(urdf, tips, robot, model, train, test, &dir);
     let runtime = Robot::load_urdf(&out, tips).unwrap();
     let record = runtime.calibration().expect("a record").clone();
-    assert_eq!(record.model.map(|m| m.as_str()), Some(model.name()));
+    assert_eq!(record.model.map(|m| m.name()), Some(model.name()));
     let gap = worst_gap(&runtime, &outcome.model, &rows, tips.len());
     // Enlarge every load-dependent value and harmonic, in both.
     let mut library = outcome.model.clone();
@@ -208,22 +209,22 @@ fn check(model: ModelChoice, (gap, enlarged_gap, shifted): (f64, f64, f64), effe
 fn every_model_of_a_serial_arm_round_trips_into_the_runtime() {
     let urdf = iiwa_urdf();
     for (model, effect) in [
-        (ModelChoice::FramesOnly, false),
-        (ModelChoice::JointOffsets, false),
-        (ModelChoice::Geometric, false),
-        (ModelChoice::Compliance, true),
-        (ModelChoice::MassCompliance, true),
-        (ModelChoice::ActuatorCompliance, true),
-        (ModelChoice::TransversalCompliance, true),
-        (ModelChoice::TransversalAxes, true),
-        (ModelChoice::Harmonic, true),
-        (ModelChoice::Harmonic2, true),
-        (ModelChoice::ComplianceHarmonic, true),
-        (ModelChoice::MassComplianceHarmonic, true),
+        (ModelName::FramesOnly, false),
+        (ModelName::JointOffsets, false),
+        (ModelName::Geometric, false),
+        (ModelName::Compliance, true),
+        (ModelName::MassCompliance, true),
+        (ModelName::ActuatorCompliance, true),
+        (ModelName::TransversalCompliance, true),
+        (ModelName::TransversalAxes, true),
+        (ModelName::Harmonic, true),
+        (ModelName::Harmonic2, true),
+        (ModelName::ComplianceHarmonic, true),
+        (ModelName::MassComplianceHarmonic, true),
     ] {
         let (robot, train, test) = iiwa_tables(5, 80);
-        let result = round_trip(&urdf, &["ball_link"], &robot, model, train, test);
-        check(model, result, effect);
+        let result = round_trip(&urdf, &["ball_link"], &robot, model.into(), train, test);
+        check(model.into(), result, effect);
     }
 }
 
@@ -238,12 +239,19 @@ fn the_compliances_of_a_two_arm_tree_with_link_masses_round_trip_into_the_runtim
     let urdf = dir.join("humanoid.urdf");
     std::fs::write(&urdf, humanoid::humanoid_urdf()).unwrap();
     for model in [
-        ModelChoice::Compliance,
-        ModelChoice::TransversalCompliance,
-        ModelChoice::TransversalAxes,
+        ModelName::Compliance,
+        ModelName::TransversalCompliance,
+        ModelName::TransversalAxes,
     ] {
-        let result = round_trip(&urdf, &tips, &robot, model, train.clone(), test.clone());
-        check(model, result, true);
+        let result = round_trip(
+            &urdf,
+            &tips,
+            &robot,
+            model.into(),
+            train.clone(),
+            test.clone(),
+        );
+        check(model.into(), result, true);
     }
 }
 
@@ -255,12 +263,12 @@ fn the_compliances_of_a_two_arm_tree_with_link_masses_round_trip_into_the_runtim
 fn socket_calibrations_round_trip_into_the_runtime() {
     let dir = scratch("sockets");
     for model in [
-        ModelChoice::Geometric,
-        ModelChoice::MassCompliance,
-        ModelChoice::ActuatorCompliance,
+        ModelName::Geometric,
+        ModelName::MassCompliance,
+        ModelName::ActuatorCompliance,
     ] {
         let plan = Plan {
-            model,
+            model: model.into(),
             test: Vec::new(),
             ..Plan::bundled_default()
         };
@@ -274,7 +282,7 @@ fn socket_calibrations_round_trip_into_the_runtime() {
             runtime
                 .calibration()
                 .and_then(|r| r.model)
-                .map(|m| m.as_str()),
+                .map(|m| m.name()),
             Some(model.name())
         );
         let mut ws = runtime.workspace();
@@ -380,19 +388,19 @@ fn torso_tables(n: usize, seed: u64) -> (PathBuf, ArmRobot, MeasurementTable, Me
 fn a_tree_with_a_prismatic_joint_round_trips_into_the_runtime() {
     let (urdf, robot, train, test) = torso_tables(80, 21);
     for (model, effect) in [
-        (ModelChoice::Geometric, false),
-        (ModelChoice::Compliance, true),
-        (ModelChoice::TransversalCompliance, true),
-        (ModelChoice::Harmonic, true),
+        (ModelName::Geometric, false),
+        (ModelName::Compliance, true),
+        (ModelName::TransversalCompliance, true),
+        (ModelName::Harmonic, true),
     ] {
         let result = round_trip(
             &urdf,
             &["l_tool", "r_tool"],
             &robot,
-            model,
+            model.into(),
             train.clone(),
             test.clone(),
         );
-        check(model, result, effect);
+        check(model.into(), result, effect);
     }
 }

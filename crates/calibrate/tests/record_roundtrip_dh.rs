@@ -11,6 +11,7 @@
 //! another geometry fails there.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+use hapcal_calibrate::model::ModelName;
 use std::path::{Path, PathBuf};
 
 use hapcal_calibrate::inputs::Plan;
@@ -201,7 +202,7 @@ fn round_trip(
     hapcal_calibrate::calibrate::write_outputs_beside(&outcome, &out, &[]).unwrap();
     let runtime = Robot::load_device(&out).unwrap();
     let record = runtime.calibration().expect("a record").clone();
-    assert_eq!(record.model.map(|m| m.as_str()), Some(model.name()));
+    assert_eq!(record.model.map(|m| m.name()), Some(model.name()));
     assert_eq!(runtime.joint_names(), robot.joint_names.as_slice());
     let identified = worst_gap(&runtime, &outcome.model, &rows);
 
@@ -299,7 +300,7 @@ fn check(convention: &str, models: &[(ModelChoice, bool)], seed: u64) {
              {:e} m off the library's move",
             g.moved_dh
         );
-        if model != ModelChoice::FramesOnly {
+        if model != ModelName::FramesOnly {
             assert!(
                 g.n_dh > 0,
                 "{convention} {model}: no D-H deviation recorded"
@@ -320,12 +321,12 @@ fn every_model_of_a_standard_dh_arm_round_trips_into_the_runtime() {
     check(
         "dh",
         &[
-            (ModelChoice::FramesOnly, false),
-            (ModelChoice::JointOffsets, false),
-            (ModelChoice::Geometric, false),
-            (ModelChoice::Compliance, true),
-            (ModelChoice::Harmonic, true),
-            (ModelChoice::ComplianceHarmonic, true),
+            (ModelName::FramesOnly.into(), false),
+            (ModelName::JointOffsets.into(), false),
+            (ModelName::Geometric.into(), false),
+            (ModelName::Compliance.into(), true),
+            (ModelName::Harmonic.into(), true),
+            (ModelName::ComplianceHarmonic.into(), true),
         ],
         7,
     );
@@ -336,8 +337,8 @@ fn the_compliance_of_a_modified_dh_arm_round_trips_into_the_runtime() {
     check(
         "mdh",
         &[
-            (ModelChoice::Geometric, false),
-            (ModelChoice::Compliance, true),
+            (ModelName::Geometric.into(), false),
+            (ModelName::Compliance.into(), true),
         ],
         8,
     );

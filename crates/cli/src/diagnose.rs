@@ -1,11 +1,11 @@
 //! `hapcal diagnose`: read a device and a log, run [`hapcal_diagnose::diagnose`], render the
 //! table and the residual maps (SVG).
 
+use hapcal_calibrate::model::ModelName;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use hapcal_calibrate::model::ModelChoice;
 use hapcal_diagnose::{DiagnoseConfig, Diagnosis, diagnose};
 
 /// What `hapcal diagnose` was asked to do, validated.
@@ -414,7 +414,7 @@ pub fn blind_report(
         "| seed | gap (floors) | joints explaining most (free joint-angle error) | verdict | gap closed |\n|---|---|---|---|---|"
     );
     let story_cfg = DiagnoseConfig {
-        baseline: ModelChoice::Geometric,
+        baseline: ModelName::Geometric,
         ..DiagnoseConfig::default()
     };
     for seed in 1..=n_story as u64 {
@@ -469,12 +469,12 @@ mod tests {
     #[test]
     fn baselines_are_models_and_the_older_names_still_read() {
         for (name, model) in [
-            ("transmissions", ModelChoice::Transmissions),
-            ("full", ModelChoice::Transmissions),
-            ("geometric", ModelChoice::Geometric),
-            ("kinematics", ModelChoice::Geometric),
-            ("Full", ModelChoice::Transmissions),
-            ("GEOMETRIC", ModelChoice::Geometric),
+            ("transmissions", ModelName::Transmissions),
+            ("full", ModelName::Transmissions),
+            ("geometric", ModelName::Geometric),
+            ("kinematics", ModelName::Geometric),
+            ("Full", ModelName::Transmissions),
+            ("GEOMETRIC", ModelName::Geometric),
         ] {
             let plan = DiagnosePlan::new("d".into(), "l".into(), name, 5).expect("a baseline");
             assert_eq!(plan.config.baseline, model, "{name}");

@@ -839,7 +839,7 @@ fn run(cli: Cli) -> Result<()> {
                         data: data.clone(),
                         test: Vec::new(),
                         socket_distance_m,
-                        model: calibrate::ModelChoice::Geometric,
+                        model: calibrate::ModelName::Geometric.into(),
                         folds,
                         sigma_m: None,
                         joint: false,
@@ -849,7 +849,8 @@ fn run(cli: Cli) -> Result<()> {
                 let plan = hapcal::diagnose::DiagnosePlan::new(
                     device.clone(),
                     data[0].clone(),
-                    baseline.as_deref().unwrap_or("transmissions"),
+                    (baseline.as_deref())
+                        .unwrap_or(hapcal_contract::ModelName::Transmissions.name()),
                     folds,
                 )?;
                 let (mut d, warnings) = hapcal::diagnose::run(&plan)?;
@@ -881,7 +882,7 @@ fn run(cli: Cli) -> Result<()> {
                     data: data.clone(),
                     test: test.clone(),
                     socket_distance_m,
-                    model: calibrate::ModelChoice::Geometric,
+                    model: calibrate::ModelName::Geometric.into(),
                     folds,
                     sigma_m,
                     joint: false,

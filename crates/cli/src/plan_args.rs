@@ -4,6 +4,7 @@
 
 use anyhow::{Result, bail};
 use hapcal_calibrate::model::ModelChoice;
+use hapcal_calibrate::model::ModelName;
 use hapcal_calibrate::plan::{
     AfterConfig, Measurement, PlanConfig, after_summary, plan_after, plan_poses, poses_csv, summary,
 };
@@ -145,7 +146,7 @@ fn plan_nominal(args: &PlanArgs, device: &hapcal_io::Device) -> Result<(String, 
         sigma_m: args.sigma_m,
         transmission_rows: !args.separate_transmission_run,
         refine: args.refine,
-        model: args.model.unwrap_or(ModelChoice::Geometric),
+        model: args.model.unwrap_or(ModelName::Geometric.into()),
     };
     let plan = plan_poses(device, &cfg)?;
     Ok((summary(&plan, &cfg), plan.readings))

@@ -412,7 +412,7 @@ mod tests {
             // (`geometric`, `transversal-compliance`); `harmonic2` is a model, the first two
             // orders, and the second order alone is the effect `second_harmonic`.
             for m in ModelName::ALL {
-                if m.as_str().replace('-', "_") == e.name() {
+                if m.name().replace('-', "_") == e.name() {
                     assert_eq!(m.effects(true).last(), Some(&e), "{m} and {e}");
                     assert_eq!(m.effects(false).last(), Some(&e), "{m} and {e}");
                 }

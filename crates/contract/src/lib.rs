@@ -64,7 +64,10 @@ pub const SCHEMA_VERSION: u32 = 1;
 
 /// The model a calibration identified: the rung of `hapcal calibrate`'s ladder, by the name
 /// its `--model` option takes (`transversal-compliance`, …).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+///
+/// Ordered simplest first within the ladder (`FramesOnly < JointOffsets < Geometric <
+/// Compliance …`), the order of [`ModelName::ALL`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ModelName {
     /// The nominal kinematics; only the instrument's and markers' frames.
@@ -116,7 +119,7 @@ impl ModelName {
     ];
 
     /// The name as files and `--model` write it (`transversal-compliance`).
-    pub fn as_str(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         match self {
             ModelName::FramesOnly => "frames-only",
             ModelName::JointOffsets => "joint-offsets",
@@ -133,11 +136,17 @@ impl ModelName {
             ModelName::Transmissions => "transmissions",
         }
     }
+
+    /// The model whose name is `name` (`-` or `_` between words, any case), if any.
+    pub fn from_name(name: &str) -> Option<ModelName> {
+        let wanted = name.trim().to_ascii_lowercase().replace('_', "-");
+        ModelName::ALL.into_iter().find(|m| m.name() == wanted)
+    }
 }
 
 impl fmt::Display for ModelName {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.pad(self.as_str())
+        f.pad(self.name())
     }
 }
 
@@ -530,7 +539,7 @@ impl Calibration {
                     "schema_version",
                     format!(
                         "missing key model: expected the identified model's name, one of {}",
-                        ModelName::ALL.map(ModelName::as_str).join(", ")
+                        ModelName::ALL.map(ModelName::name).join(", ")
                     ),
                 );
             }

@@ -50,7 +50,7 @@ impl Calibration {
             let _ = writeln!(out, "schema_version = {v}");
         }
         if let Some(m) = self.model {
-            let _ = writeln!(out, "model = {}", string(m.as_str()));
+            let _ = writeln!(out, "model = {}", string(m.name()));
         }
         for (k, v) in [
             ("date", &self.date),

@@ -4,12 +4,13 @@
 //!
 //! `cargo bench -p hapcal-diagnose --bench diagnose`
 
+use hapcal_calibrate::model::ModelName;
 use std::hint::black_box;
 use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use hapcal_calibrate::baseline::geometric_baseline;
-use hapcal_calibrate::calibrate::{ModelChoice, Plan};
+use hapcal_calibrate::calibrate::Plan;
 use hapcal_diagnose::arm::{ArmConfig, diagnose_arm};
 use hapcal_diagnose::{DiagnoseConfig, diagnose};
 use hapcal_sim::{Injected, MotionConfig, NoiseModel, SimConfig, read_truth, simulate_motion};
@@ -39,7 +40,7 @@ fn bench(c: &mut Criterion) {
         device: root.join("fixtures/mukca/urdf/iiwa14.urdf"),
         data: vec![data.join("front")],
         test: vec![data.join("left_back"), data.join("raised_left")],
-        model: ModelChoice::Geometric,
+        model: ModelName::Geometric.into(),
         ..Plan::bundled_default()
     };
     group.bench_function("kuka_14_sockets_with_ladder", |b| {

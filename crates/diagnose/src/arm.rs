@@ -29,7 +29,7 @@
 
 use hapcal_calibrate::baseline::{DataKind, GeometricBaseline, HeldOutSet};
 use hapcal_calibrate::calibrate::blocked_mean_difference;
-use hapcal_calibrate::model::{ModelChoice, Rung};
+use hapcal_calibrate::model::{ModelName, Rung};
 use hapcal_contract::Effect;
 use hapcal_identify::Problem;
 use hapcal_kinematics::Tree;
@@ -1500,7 +1500,7 @@ pub fn robot_baseline(name: Option<&str>) -> Result<(), Error> {
     match name {
         None => Ok(()),
         Some(n)
-            if ModelChoice::from_name(n) == Some(ModelChoice::Geometric)
+            if ModelName::from_name(n) == Some(ModelName::Geometric)
                 || n.trim().eq_ignore_ascii_case("full") =>
         {
             Ok(())

@@ -1,5 +1,6 @@
 //! The diagnosis: baseline, gap against the floor, where, which, how far.
 
+use hapcal_calibrate::model::ModelName;
 use std::f64::consts::TAU;
 
 use hapcal_identify::{IdentifyConfig, identify};
@@ -12,7 +13,6 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use hapcal_calibrate::model::ModelChoice;
 use hapcal_contract::Effect;
 
 use crate::{Error, Verdict};
@@ -38,7 +38,7 @@ use crate::solve::lstsq;
 use crate::stats::{chi2_sf, f_sf, holm, largest_column_norm, pivoted_basis, pivoted_basis_beside};
 
 /// The model a haptic device's log is diagnosed against, by the name `--baseline` takes: one
-/// of the two models `hapcal calibrate` fits to such a log ([`ModelChoice`], the one
+/// of the two models `hapcal calibrate` fits to such a log ([`ModelName`], the one
 /// definition of a model):
 ///
 /// - `transmissions`: the transmissions (paper eq. 1 on the capstans, the joint-4 polynomial)
@@ -50,14 +50,14 @@ use crate::stats::{chi2_sf, f_sf, holm, largest_column_norm, pivoted_basis, pivo
 ///
 /// # Errors
 /// [`Error::Config`] for any other name, in the user's words.
-pub fn baseline_model(name: &str) -> Result<ModelChoice, Error> {
+pub fn baseline_model(name: &str) -> Result<ModelName, Error> {
     match name.trim().to_ascii_lowercase().as_str() {
-        "full" => return Ok(ModelChoice::Transmissions),
-        "kinematics" => return Ok(ModelChoice::Geometric),
+        "full" => return Ok(ModelName::Transmissions),
+        "kinematics" => return Ok(ModelName::Geometric),
         _ => {}
     }
-    match ModelChoice::from_name(name) {
-        Some(m @ (ModelChoice::Transmissions | ModelChoice::Geometric)) => Ok(m),
+    match ModelName::from_name(name) {
+        Some(m @ (ModelName::Transmissions | ModelName::Geometric)) => Ok(m),
         Some(m) => Err(Error::Config {
             message: format!(
                 "baseline must be transmissions or geometric (full and kinematics are the same): \
@@ -77,7 +77,7 @@ pub fn baseline_model(name: &str) -> Result<ModelChoice, Error> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DiagnoseConfig {
     /// The baseline model: transmissions or geometric ([`baseline_model`]).
-    pub baseline: ModelChoice,
+    pub baseline: ModelName,
     /// Number of cross-validation folds (time-contiguous blocks of samples), ≥ 2.
     pub folds: usize,
     /// Family-wise significance level of the candidate tests (Holm–Bonferroni) and of the
@@ -99,7 +99,7 @@ impl Default for DiagnoseConfig {
     /// consistent with the floor, else the verdict is `none` (docs/diagnosis.md §3 (d)).
     fn default() -> DiagnoseConfig {
         DiagnoseConfig {
-            baseline: ModelChoice::Transmissions,
+            baseline: ModelName::Transmissions,
             folds: 5,
             alpha: 0.01,
             max_effects: 3,
@@ -228,7 +228,7 @@ pub struct Step {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Diagnosis {
     /// The baseline used: transmissions or geometric ([`baseline_model`]).
-    pub baseline: ModelChoice,
+    pub baseline: ModelName,
     /// Samples in the log.
     pub n_samples: usize,
     /// Identifiable baseline parameters.
@@ -961,7 +961,7 @@ pub fn baseline_residuals_m(
     let data = log_data(rows)?;
     let mut setup = Setup::new(device, chain, data.clone())?;
     let trans_joints: Vec<usize> = device.capstans.iter().map(|c| c.joint - 1).collect();
-    let full = cfg.baseline == ModelChoice::Transmissions
+    let full = cfg.baseline == ModelName::Transmissions
         && !trans_joints.is_empty()
         && ext_available(rows, &trans_joints);
     let trans = if full {
@@ -1046,14 +1046,14 @@ pub fn diagnose(
     let mut setup = Setup::new(device, chain, data.clone())?;
     let trans_joints: Vec<usize> = device.capstans.iter().map(|c| c.joint - 1).collect();
     let mut baseline = cfg.baseline;
-    if baseline == ModelChoice::Transmissions
+    if baseline == ModelName::Transmissions
         && !trans_joints.is_empty()
         && !ext_available(rows, &trans_joints)
     {
         notes.push("the log lacks external-encoder readings for the transmissions: geometric baseline used".to_owned());
-        baseline = ModelChoice::Geometric;
+        baseline = ModelName::Geometric;
     }
-    let trans = if baseline == ModelChoice::Transmissions {
+    let trans = if baseline == ModelName::Transmissions {
         setup.set_ext_joints(trans_joints.clone())?;
         fit_transmissions(device, &data, setup.sigma_e_rad())?
     } else {
@@ -1152,7 +1152,7 @@ pub fn diagnose(
         .collect();
 
     let mut library: Vec<Effect> = EffectKind::LIBRARY.iter().map(|k| k.effect()).collect();
-    if baseline == ModelChoice::Geometric && !device.capstans.is_empty() {
+    if baseline == ModelName::Geometric && !device.capstans.is_empty() {
         library.push(Effect::Capstans);
         if device.parallelogram.is_some() {
             library.push(Effect::Parallelogram);

@@ -67,7 +67,7 @@ impl UncertaintyBasis {
             UncertaintyBasis::Covariance => "covariance",
             UncertaintyBasis::StdsOnly => "stds-only",
             UncertaintyBasis::NoRecord => "none",
-            UncertaintyBasis::NoValues => "frames-only",
+            UncertaintyBasis::NoValues => hapcal_contract::ModelName::FramesOnly.name(),
         }
     }
 }

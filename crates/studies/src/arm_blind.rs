@@ -28,13 +28,14 @@
 //!
 //! The diagnosis is told the noise σ (`Plan::sigma_m`) and runs with [`ArmConfig::default`].
 
+use hapcal_calibrate::model::ModelName;
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use hapcal_calibrate::baseline::{GeometricBaseline, baseline_from_sets, baseline_from_tables};
-use hapcal_calibrate::calibrate::{DataSet, ModelChoice, Plan, load_device};
+use hapcal_calibrate::calibrate::{DataSet, Plan, load_device};
 use hapcal_calibrate::measured::{Robot, robot_from_urdf};
 use hapcal_calibrate::setup::{SetupInput, SetupReport, Severity, check_setup};
 use hapcal_contract::Effect;
@@ -989,7 +990,7 @@ pub fn simulate_baseline(
     plan.device = case.robot.urdf();
     plan.data = Vec::new();
     plan.test = Vec::new();
-    plan.model = ModelChoice::Geometric;
+    plan.model = ModelName::Geometric.into();
     plan.socket_distance_m = SOCKET_DISTANCE_M;
     Ok(match case.data {
         ArmData::Positions => {

@@ -221,7 +221,7 @@ pub fn pose_study(
                     sigma_m: Some(r.noise.sigma_m_m),
                     transmission_rows: cfg.transmissions == TransmissionData::SamePoses,
                     refine: cfg.refine,
-                    model: hapcal_calibrate::model::ModelChoice::Geometric,
+                    model: hapcal_calibrate::model::ModelName::Geometric.into(),
                 },
                 joint_var
                     .as_ref()

@@ -1,9 +1,10 @@
 //! The serial-arm diagnosis on recorded MUKCa data and on positions simulated from a URDF.
 
+use hapcal_calibrate::model::ModelName;
 use std::path::{Path, PathBuf};
 
 use hapcal_calibrate::baseline::{baseline_from_tables, geometric_baseline};
-use hapcal_calibrate::calibrate::{ModelChoice, Plan};
+use hapcal_calibrate::calibrate::Plan;
 use hapcal_calibrate::measured::robot_from_urdf;
 use hapcal_calibrate::model::Rung;
 use hapcal_contract::Effect;
@@ -24,7 +25,7 @@ fn mukca_plan(unit: &str, urdf: &str, train: &str, test: &[&str]) -> Plan {
         device: root().join("fixtures/mukca/urdf").join(urdf),
         data: vec![data.join(train)],
         test: test.iter().map(|t| data.join(t)).collect(),
-        model: ModelChoice::Geometric,
+        model: ModelName::Geometric.into(),
         ..Plan::bundled_default()
     }
 }
@@ -50,7 +51,7 @@ fn kuka_14_names_gravity_compliance_and_it_carries_to_the_test_placements() {
     let geometric = d
         .ladder
         .iter()
-        .find(|r| r.rung == ArmLadderRung::Kinematic(Rung::Model(ModelChoice::Geometric)))
+        .find(|r| r.rung == ArmLadderRung::Kinematic(Rung::Model(ModelName::Geometric)))
         .expect("rung");
     let with = d.ladder.last().expect("rung");
     for (g, w) in geometric.test_rms_m.iter().zip(&with.test_rms_m) {

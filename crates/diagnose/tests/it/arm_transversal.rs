@@ -7,13 +7,14 @@
 #[path = "../../../calibrate/tests/sim/humanoid.rs"]
 mod sim;
 
+use hapcal_calibrate::model::ModelName;
 use std::path::PathBuf;
 
 use faer::Col;
 use hapcal_calibrate::baseline::baseline_from_tables;
 use hapcal_calibrate::calibrate::Plan;
 use hapcal_calibrate::measured::Robot;
-use hapcal_calibrate::model::{ModelChoice, terms};
+use hapcal_calibrate::model::terms;
 use hapcal_contract::Effect;
 use hapcal_diagnose::Verdict;
 use hapcal_diagnose::arm::{ArmConfig, ArmDiagnosis, diagnose_arm, transversal_columns};
@@ -105,10 +106,10 @@ fn transversal_columns_are_the_first_derivatives_of_the_calibrations_model() {
         };
         for (model, effect) in [
             (
-                ModelChoice::TransversalCompliance,
+                ModelName::TransversalCompliance,
                 Effect::TransversalCompliance,
             ),
-            (ModelChoice::TransversalAxes, Effect::TransversalAxes),
+            (ModelName::TransversalAxes, Effect::TransversalAxes),
         ] {
             let columns = transversal_columns(&geometric, &x_kin, &robot.tree, &loads, effect)
                 .expect("columns");

@@ -1,8 +1,8 @@
 //! Simulated logs whose effect is known to the test, not to `diagnose`.
 
+use hapcal_calibrate::model::ModelName;
 use std::path::Path;
 
-use hapcal_calibrate::model::ModelChoice;
 use hapcal_contract::Effect;
 use hapcal_diagnose::blind::{BlindConfig, CaseKind, run_case};
 use hapcal_diagnose::{DiagnoseConfig, Error, diagnose};
@@ -101,7 +101,7 @@ fn leaving_the_transmissions_out_localises_joints_1_to_4_and_names_them() {
     let (device, truth) = reference();
     let rows = simulate(&device, &truth, &sim_cfg(&device, 15)).expect("simulates");
     let cfg = DiagnoseConfig {
-        baseline: ModelChoice::Geometric,
+        baseline: ModelName::Geometric,
         ..DiagnoseConfig::default()
     };
     let d = diagnose(&device, &rows, &cfg).expect("diagnoses");
