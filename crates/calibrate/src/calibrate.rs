@@ -354,6 +354,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     let record = crate::record::measured_record(&crate::record::MeasuredRecord {
         model: choice,
         tips: &tips,
+        load_tips: &[],
         joint_names: &joint_names,
         prismatic: &prismatic,
         calibrated: &model,

@@ -128,15 +128,36 @@ pub fn load(plan: &Plan, device: &Device) -> Result<Data> {
 /// The robot of `plan`'s device: the URDF with the plan's tips, or the device file's chain or
 /// tree.
 ///
+/// A URDF's joints off the measured paths whose readings the data files hold (the other arm
+/// of a torso when one hand is measured) are read, not held at zero: the links below them
+/// become further tips after the plan's ([`hapcal_io::load_tips`]), which carry no marker but
+/// load the gravity torques of the joints they share with the measured paths.
+///
 /// # Errors
 /// A URDF or device whose kinematics do not compile.
 pub fn robot_of(plan: &Plan, device: &Device) -> Result<Robot> {
     let is_urdf = (plan.device.extension()).is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
     if is_urdf {
-        let tips: Vec<String> = std::iter::once(plan.tip.clone())
+        let mut tips: Vec<String> = std::iter::once(plan.tip.clone())
             .chain(plan.tips.iter().cloned())
             .collect();
-        robot_from_urdf(&plan.device, &tips)
+        let robot = robot_from_urdf(&plan.device, &tips)?;
+        if robot.held_joints.is_empty() {
+            return Ok(robot);
+        }
+        let read: Vec<String> = (plan.data.iter().chain(&plan.test))
+            .flat_map(|p| csv_columns(p))
+            .collect();
+        let load = hapcal_io::load_tips(&plan.device, &tips, &read)
+            .with_context(|| format!("importing {}", plan.device.display()))?;
+        if load.is_empty() {
+            return Ok(robot);
+        }
+        tips.extend(load.iter().cloned());
+        Ok(Robot {
+            load_tips: load,
+            ..robot_from_urdf(&plan.device, &tips)?
+        })
     } else {
         robot_from_device(device)
     }
@@ -159,6 +180,9 @@ pub struct Robot {
     /// Moving joints off the measured paths that the masses hold at zero (a head's pan and
     /// tilt between its mass and the torso), URDF names; empty for a D-H device.
     pub held_joints: Vec<String>,
+    /// Tips after the measured ones that carry no marker, only loads: the links below joints
+    /// off the measured paths whose readings the data hold ([`robot_of`]); URDF link names.
+    pub load_tips: Vec<String>,
 }
 
 /// Robot of a URDF with one or more tips.
@@ -190,6 +214,7 @@ pub fn robot_from_urdf(path: &std::path::Path, tips: &[String]) -> Result<Robot>
             .collect(),
         masses,
         held_joints: urdf.held_joints,
+        load_tips: Vec::new(),
         tree,
     })
 }
@@ -214,6 +239,7 @@ pub fn robot_from_device(device: &hapcal_io::Device) -> Result<Robot> {
         limits: device.joint_limits(),
         masses: Vec::new(),
         held_joints: Vec::new(),
+        load_tips: Vec::new(),
         tree,
     })
 }
@@ -435,6 +461,21 @@ pub fn is_marker_file(path: &std::path::Path, distances: bool) -> bool {
         }
         _ => false,
     }
+}
+
+/// The column names of a CSV file's header (trimmed); empty for another file or one that
+/// cannot be read (its reader reports that).
+fn csv_columns(path: &Path) -> Vec<String> {
+    let is_csv = (path.extension()).is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+    let mut header = String::new();
+    let read = std::fs::File::open(path)
+        .and_then(|f| std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut header));
+    if !is_csv || read.is_err() {
+        return Vec::new();
+    }
+    (header.trim_start_matches('\u{feff}').split(','))
+        .map(|c| c.trim().to_owned())
+        .collect()
 }
 
 /// Reads data sets: MUKCa placement or run folders, or hapcal log CSV files.

@@ -2640,6 +2640,7 @@ pub fn run_tables(
     let record = crate::record::measured_record(&crate::record::MeasuredRecord {
         model: out.rung,
         tips: &tips,
+        load_tips: &robot.load_tips,
         joint_names: &robot.joint_names,
         prismatic: &robot.prismatic,
         calibrated: &out.model,

@@ -19,6 +19,8 @@ pub(crate) struct MeasuredRecord<'a> {
     pub model: ModelName,
     /// The calibration's tip links, in marker order.
     pub tips: &'a [String],
+    /// Tips after `tips` that carry loads only ([`crate::data::Robot::load_tips`]).
+    pub load_tips: &'a [String],
     /// The joints' names, in the order of the readings.
     pub joint_names: &'a [String],
     /// Whether each joint is prismatic (its range in m).
@@ -69,7 +71,7 @@ pub(crate) fn measured_record(m: &MeasuredRecord<'_>) -> Calibration {
             ],
             gravity_m_s2: STANDARD_GRAVITY,
             equilibrium: m.calibrated.equilibrium,
-            tips: m.tips.to_vec(),
+            tips: m.tips.iter().chain(m.load_tips).cloned().collect(),
             masses: (g.masses.iter())
                 .map(|l| PointMass {
                     joint: m.joint_names[l.joint].clone(),

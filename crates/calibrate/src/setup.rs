@@ -475,6 +475,7 @@ fn robots_for_tips(urdf: &Path, tip_sets: &[Vec<String>]) -> Vec<Option<Robot>> 
                 limits,
                 masses: Vec::new(),
                 held_joints: Vec::new(),
+                load_tips: Vec::new(),
                 tree,
             })
         })
@@ -1051,11 +1052,8 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
         .device
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
-    let robot = if is_urdf {
-        measured::robot_from_urdf(&plan.device, &tips)?
-    } else {
-        measured::robot_from_device(&device)?
-    };
+    // The robot the calibration builds: a URDF's read joints off the measured paths load it.
+    let robot = crate::data::robot_of(plan, &device)?;
     let tables = match measured::load_tables(&files, &robot, &plan.units) {
         Ok(tables) => tables,
         Err(e) => {

@@ -95,5 +95,5 @@ pub use mukca::{
 };
 pub use urdf::{
     LinkInertial, MAX_CHAIN_LENGTH_M, UrdfTree, import_urdf, import_urdf_tips, import_urdf_tree,
-    write_calibrated_urdf,
+    load_tips, write_calibrated_urdf,
 };

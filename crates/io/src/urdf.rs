@@ -228,6 +228,71 @@ pub fn import_urdf_tips(path: &Path, tips: &[String]) -> Result<UrdfTree, Error>
     })
 }
 
+/// The links to add to `tips` as further tips so that the moving joints of `read` (the joint
+/// columns a measurement file holds) that hang off the root-to-tip paths and carry a link
+/// mass onto them ([`UrdfTree::held_joints`]) lie on a path: their readings then load the
+/// gravity torques as they were read, instead of being held at zero. A further tip is the
+/// deepest link reached from the paths through moving joints of `read` alone (and fixed
+/// joints), the one covering the most such joints first; in file order of the held joints,
+/// without repeats. Empty when no held joint is read.
+///
+/// # Errors
+/// As [`import_urdf_tips`].
+pub fn load_tips(path: &Path, tips: &[String], read: &[String]) -> Result<Vec<String>, Error> {
+    let tree = import_urdf_tips(path, tips)?;
+    let wanted: Vec<&String> = (tree.held_joints.iter())
+        .filter(|j| read.contains(j))
+        .collect();
+    if wanted.is_empty() {
+        return Ok(Vec::new());
+    }
+    let robot = read_robot(path)?;
+    let on_paths = |name: &str| tree.joints.iter().any(|j| j.name == name);
+    // Per link: the moving joints between it and the paths, if each is read (else `None`:
+    // the link cannot be a tip whose every joint has a reading).
+    let parent_joint = |link: &str| robot.joints.iter().find(|j| j.child.link == link);
+    let reach = |link: &str| -> Option<Vec<String>> {
+        let mut off = Vec::new();
+        let mut at = link;
+        for _ in 0..=robot.joints.len() {
+            let Some(joint) = parent_joint(at) else {
+                return None; // the root, never meeting a path
+            };
+            if on_paths(&joint.name) {
+                return Some(off);
+            }
+            if !matches!(joint.joint_type, urdf_rs::JointType::Fixed) {
+                if !read.contains(&joint.name) {
+                    return None;
+                }
+                off.push(joint.name.clone());
+            }
+            at = &joint.parent.link;
+        }
+        None
+    };
+    let candidates: Vec<(String, Vec<String>)> = (robot.links.iter())
+        .filter(|l| !tips.contains(&l.name))
+        .filter_map(|l| reach(&l.name).map(|off| (l.name.clone(), off)))
+        .filter(|(_, off)| !off.is_empty())
+        .collect();
+    let mut added: Vec<String> = Vec::new();
+    let mut covered: Vec<String> = Vec::new();
+    for joint in wanted {
+        if covered.contains(joint) {
+            continue;
+        }
+        let best = (candidates.iter())
+            .filter(|(_, off)| off.contains(joint))
+            .max_by_key(|(_, off)| off.iter().filter(|j| !covered.contains(j)).count());
+        if let Some((link, off)) = best {
+            added.push(link.clone());
+            covered.extend(off.iter().cloned());
+        }
+    }
+    Ok(added)
+}
+
 /// The inertial of every link of the robot that hangs below one of `joints` (the moving
 /// joints on the measured paths), expressed in the frame of the nearest such joint above it.
 ///

@@ -81,15 +81,16 @@ impl Robot {
     /// of the paths (a moving joint off the paths held at zero). From the sidecar, the
     /// calibration record (`hapcal-contract`, docs/design.md §5.6): the frames
     /// ([`Robot::frame`]); the compliances' torque source, gravity, point masses (replacing the
-    /// URDF's), equilibrium and load tips; every value: the kinematic deviations (which the
-    /// URDF's origins already hold; they give the nominal geometry the gravity loads are
-    /// evaluated on, as the calibration evaluated them, and the base of the transversal
-    /// tilts), the compliances `compliance.<joint>[+<joint>…]`, the transversal compliances
-    /// `transversal.<joint>[.u|.v]` and the joint harmonics `harmonic.<joint>.sin<h>|cos<h>`;
-    /// the region ([`Robot::outside_region`]). A sidecar of an earlier hapcal (no
-    /// `schema_version`) reads as that hapcal read it: frames and compliances, loads on the
-    /// calibrated geometry at the torque equilibrium. Gravity is along −z of the root link
-    /// (ROS REP 103) unless the record says otherwise.
+    /// URDF's), equilibrium and load tips (a load tip not among `tips` is loaded as a further tip
+    /// after them: the calibration read its joints to load the tree); every value: the
+    /// kinematic deviations (which the URDF's origins already hold; they give the nominal
+    /// geometry the gravity loads are evaluated on, as the calibration evaluated them, and the
+    /// base of the transversal tilts), the compliances `compliance.<joint>[+<joint>…]`, the
+    /// transversal compliances `transversal.<joint>[.u|.v]` and the joint harmonics
+    /// `harmonic.<joint>.sin<h>|cos<h>`; the region ([`Robot::outside_region`]). A sidecar of
+    /// an earlier hapcal (no `schema_version`) reads as that hapcal read it: frames and
+    /// compliances, loads on the calibrated geometry at the torque equilibrium. Gravity is
+    /// along −z of the root link (ROS REP 103) unless the record says otherwise.
     ///
     /// # Errors
     /// [`LoadError::Io`] for a file that cannot be read; [`LoadError::Parse`] (line, column)
@@ -133,6 +134,18 @@ impl Robot {
         if tips.is_empty() {
             return Err(invalid(origin, "no tip link given".to_owned()));
         }
+        // The tips whose paths carry the record's loads and that the caller did not give
+        // (the other arm, read but not measured): further tips after the given ones, so that
+        // their joints' readings load the tree as the calibration loaded it.
+        let load_tips: Vec<String> = (sidecar
+            .and_then(|(t, o)| Calibration::from_sidecar_str(t, o).ok()))
+        .and_then(|record| record.torque)
+        .map(|torque| torque.tips)
+        .unwrap_or_default();
+        let all_tips: Vec<&str> = (tips.iter().copied())
+            .chain((load_tips.iter().map(String::as_str)).filter(|t| !tips.contains(t)))
+            .collect();
+        let tips = all_tips.as_slice();
         let parent_joint = |link: &str| robot.joints.iter().find(|j| j.child.link == link);
         let mut joints: Vec<RobotJoint> = Vec::new();
         let mut joint_names: Vec<String> = Vec::new();

@@ -1,8 +1,8 @@
 use std::path::Path;
 
 use hapcal_io::{
-    CalibratedValue, CalibrationMeta, Error, import_urdf, import_urdf_tips, parse_device,
-    write_calibrated_urdf, write_device,
+    CalibratedValue, CalibrationMeta, Error, import_urdf, import_urdf_tips, load_tips,
+    parse_device, write_calibrated_urdf, write_device,
 };
 
 use crate::{assert_contains, data, message, mukca};
@@ -204,6 +204,22 @@ fn masses_off_the_measured_paths_load_the_joint_above_them() {
     )
     .unwrap();
     assert!(both.held_joints.is_empty(), "{:?}", both.held_joints);
+}
+
+/// The joints off the measured paths that the data read become paths of further tips: the
+/// deepest link reached through read joints alone (the simulated humanoid, its left hand
+/// measured).
+#[test]
+fn read_joints_off_the_paths_get_a_load_tip() {
+    let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/sim-humanoid/humanoid.urdf");
+    let tips = ["l_hand".to_owned()];
+    let right: Vec<String> = (1..=7).map(|k| format!("r_{k}")).collect();
+    assert_eq!(load_tips(&urdf, &tips, &right).unwrap(), ["r_hand"]);
+    // Without r_7's reading, the deepest link reached through read joints is r_7's parent.
+    assert_eq!(load_tips(&urdf, &tips, &right[..6]).unwrap(), ["r_link6"]);
+    // No right-arm reading: nothing to add (the arm stays held at zero).
+    assert!(load_tips(&urdf, &tips, &[]).unwrap().is_empty());
 }
 
 #[test]
