@@ -169,8 +169,9 @@ fn imported_tree_reads_back_to_the_urdf_figures() {
 /// One hand of the two-arm tree measured, every joint read: the other arm's readings load
 /// the torso's gravity torques as they were read (the right hand becomes a tip that carries
 /// loads only), without a flag. Held out, the transversal-compliance calibration then reaches
-/// the instrument's noise: 0.2 mm per axis, √3 · 0.2 = 0.346 mm in 3-D; with the other arm held
-/// at zero (the earlier behaviour) it stayed at 1.9 mm. The bound, 1.3 times the noise, is
+/// the instrument's noise: 0.2 mm per axis, √3 · 0.2 = 0.346 mm in 3-D (with the other arm
+/// held at zero, the earlier behaviour, the mirror case, the right hand measured, held out
+/// 1.88 mm). The bound, 1.3 times the noise, is
 /// far above the sampling spread of an RMS over 165 rows (3 %). `predict` on the written URDF
 /// (asked for the left hand alone) loads the right hand from the record and gives the same
 /// held-out errors.
