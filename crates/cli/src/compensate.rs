@@ -234,7 +234,7 @@ fn load_robot(args: &CompensateArgs) -> Result<Robot> {
 /// # Errors
 /// Unreadable or invalid files (file, line, column), invalid flags, an unwritable output;
 /// after writing the output, any target not reached within the tolerance (file:line and
-/// residuals).
+/// residuals); with a target not reached, an existing output file is not replaced.
 pub fn run(args: &CompensateArgs) -> Result<String> {
     for (flag, value) in [
         ("--tolerance-mm", args.tolerance_mm),
@@ -336,7 +336,12 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
             ));
         }
     }
-    crate::calibrate::write_new(&args.out, &out, &[&args.device, &args.targets])?;
+    // A partial result never replaces an earlier complete one: with a target missed, an
+    // existing --out is left as it was.
+    let kept = !missed.is_empty() && args.out.exists();
+    if !kept {
+        crate::calibrate::write_new(&args.out, &out, &[&args.device, &args.targets])?;
+    }
     let reached = rows.len() - missed.len();
     let region = if outside.is_empty() {
         String::new()
@@ -348,13 +353,21 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
         )
     };
     if !missed.is_empty() {
+        let written = if kept {
+            format!(
+                "{} exists and was left as it was: the {reached} reached are not written; \
+                 give a new --out to keep them",
+                args.out.display()
+            )
+        } else {
+            format!("wrote the {reached} reached to {}", args.out.display())
+        };
         bail!(
-            "{} of {} targets not reached within {} mm / {} mrad (wrote the {reached} reached to {}):\n{}{}",
+            "{} of {} targets not reached within {} mm / {} mrad ({written}):\n{}{}",
             missed.len(),
             rows.len(),
             args.tolerance_mm,
             args.tolerance_mrad,
-            args.out.display(),
             missed.join("\n"),
             if region.is_empty() {
                 String::new()

@@ -208,6 +208,27 @@ impl Drive {
         })
     }
 
+    /// `Ok` when the model holds at reading `theta` (rad): always, except for a polynomial,
+    /// whose domain `[lo, hi]` it may leave by at most [`crate::DOMAIN_MARGIN`] of its width.
+    ///
+    /// # Errors
+    /// [`Error::OutsideDomain`] (`index` is the caller's joint index).
+    pub fn check_reading(&self, index: usize, theta: f64) -> Result<(), Error> {
+        if let Kind::Polynomial { lo, hi, .. } = self.kind {
+            let margin = crate::DOMAIN_MARGIN * (hi - lo);
+            if !(lo - margin..=hi + margin).contains(&theta) {
+                return Err(Error::OutsideDomain {
+                    what: "joint readings",
+                    index,
+                    value: theta,
+                    lo,
+                    hi,
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// Nominal ratio R between the motor angle and the reading (1 for a direct drive).
     pub fn ratio(&self) -> f64 {
         self.ratio

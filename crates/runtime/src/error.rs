@@ -37,6 +37,22 @@ pub enum Error {
         /// [`MAX_COEFFS`](crate::MAX_COEFFS)).
         max: usize,
     },
+    /// An input outside the range the model holds on: a joint reading past its transmission
+    /// polynomial's domain by more than [`DOMAIN_MARGIN`](crate::DOMAIN_MARGIN) of its width
+    /// (the Chebyshev series is fitted there; beyond it the correction and its derivative grow
+    /// without bound, and the motor torques can change sign).
+    OutsideDomain {
+        /// The quantity (`"joint readings"`).
+        what: &'static str,
+        /// Its index (joint, 0-based).
+        index: usize,
+        /// The value (rad).
+        value: f64,
+        /// The domain's lower end (rad).
+        lo: f64,
+        /// The domain's upper end (rad).
+        hi: f64,
+    },
     /// A model value outside its domain, e.g. a capstan with `|r_o| ≥ D` where paper eq. 1 is
     /// undefined, a non-positive ratio, a polynomial domain with `lo ≥ hi`, a chain without
     /// joints.
@@ -61,6 +77,18 @@ impl fmt::Display for Error {
             Error::NotFinite { what, index, value } => {
                 write!(f, "{what}[{index}] = {value} is not finite")
             }
+            Error::OutsideDomain {
+                what,
+                index,
+                value,
+                lo,
+                hi,
+            } => write!(
+                f,
+                "{what}[{index}] = {value} rad lies outside the transmission polynomial's domain \
+                 [{lo}, {hi}] rad (the range it was fitted on, with a margin of 5 % of its width \
+                 each side)"
+            ),
             Error::TooMany { what, found, max } => {
                 write!(f, "{found} {what}, the runtime model holds at most {max}")
             }

@@ -130,3 +130,7 @@ pub const MAX_JOINTS: usize = 12;
 pub const MAX_ROWS: usize = 16;
 /// Most Chebyshev coefficients of a polynomial [`Drive`] (degree ≤ 15).
 pub const MAX_COEFFS: usize = 16;
+/// How far past its domain `[lo, hi]` a polynomial [`Drive`] is evaluated, as a share of the
+/// domain's width (each side): the 5 % by which `hapcal calibrate` calls a configuration within
+/// a joint's training range. Further out, [`Error::OutsideDomain`].
+pub const DOMAIN_MARGIN: f64 = 0.05;

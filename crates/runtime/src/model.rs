@@ -490,7 +490,7 @@ impl Model {
     /// `wrench = (f, m)`: force (N) and moment about the end point (N·m), in the tip frame.
     ///
     /// # Errors
-    /// As [`Model::joint_angles`], and [`Error::Length`] unless `tau_m` has n entries.
+    /// As [`Model::evaluate`], and [`Error::Length`] unless `tau_m` has n entries.
     pub fn motor_torques(
         &self,
         theta: &[f64],
@@ -509,13 +509,15 @@ impl Model {
     /// [`Model::body_jacobian`], [`Model::motor_torques`]). Overwrites all of `out`.
     ///
     /// # Errors
-    /// As [`Model::joint_angles`].
+    /// As [`Model::joint_angles`]; [`Error::NotFinite`] named `wrench` for a NaN or infinite
+    /// force or moment (`out` is then left as it was).
     pub fn evaluate(
         &self,
         theta: &[f64],
         wrench: &[f64; 6],
         out: &mut Evaluation,
     ) -> Result<(), Error> {
+        check_finite("wrench", wrench)?;
         let (q, dq) = self.angles(theta)?;
         *out = Evaluation::default();
         out.n_joints = self.n_joints;
@@ -536,7 +538,11 @@ impl Model {
 
     fn check_readings(&self, theta: &[f64]) -> Result<(), Error> {
         check_len("joint readings", self.n_joints, theta.len())?;
-        check_finite("joint readings", theta)
+        check_finite("joint readings", theta)?;
+        for (k, (drive, &t)) in self.drives.iter().zip(theta).enumerate() {
+            drive.check_reading(k, t)?;
+        }
+        Ok(())
     }
 
     /// Joint angles (deflected by the handle's weight, if the model has a compliance) and

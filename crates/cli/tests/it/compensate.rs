@@ -102,6 +102,27 @@ fn compensate_writes_reached_commands_and_reports_the_unreachable_row() {
             .fold(0.0, f64::max);
         assert!(moved > 1e-5, "{moved}");
     }
+    // Run again onto the same --out: a target is still missed, so the existing file (an
+    // earlier result, maybe complete) is not replaced, and the message says so.
+    std::fs::write(&out, "an earlier result\n").expect("write");
+    let again = hapcal(&[
+        "compensate",
+        "--device",
+        &urdf.display().to_string(),
+        "--tip",
+        "ball_link",
+        "--targets",
+        &targets.display().to_string(),
+        "--out",
+        &out.display().to_string(),
+    ]);
+    let err = stderr(&again);
+    assert_eq!(again.status.code(), Some(2), "{err}");
+    assert!(err.contains("exists and was left as it was"), "{err}");
+    assert_eq!(
+        std::fs::read_to_string(&out).expect("kept"),
+        "an earlier result\n"
+    );
 }
 
 #[test]

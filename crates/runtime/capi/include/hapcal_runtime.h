@@ -53,6 +53,9 @@ typedef enum HapcalStatus {
   // An index (tip, joint) past the last, an unknown target kind, or a setting outside its
   // domain (a tolerance that is not positive).
   HAPCAL_STATUS_INVALID_ARGUMENT = 9,
+  // A joint reading outside the range the model holds on (past its transmission
+  // polynomial's fitted domain by more than 5 % of its width): nothing is written.
+  HAPCAL_STATUS_OUTSIDE_DOMAIN = 10,
 } HapcalStatus;
 
 // What a prediction's σ rests on ([`hapcal_runtime::UncertaintyBasis`]).
@@ -194,7 +197,8 @@ size_t hapcal_model_n_joints(const struct HapcalModel *model);
 // Joint angles q (rad) and `dq/dθ` (rad/rad) for readings `theta` (rad): paper eq. 1 per
 // capstan, the joint-4 polynomial ([`hapcal_runtime::Model::joint_angles`]).
 //
-// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `OutsideDomain` (a reading past
+// its polynomial's domain).
 //
 // # Safety
 // `model` is NULL or a live handle; each array is NULL or valid for `n_joints` values.
@@ -206,7 +210,8 @@ enum HapcalStatus hapcal_joint_angles(const struct HapcalModel *model,
 
 // Tip pose in the base frame at readings `theta` (rad) ([`hapcal_runtime::Model::end_pose`]).
 //
-// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `OutsideDomain` (a reading past
+// its polynomial's domain).
 //
 // # Safety
 // `model` is NULL or a live handle; `theta` NULL or valid for `n_joints` values;
@@ -232,7 +237,8 @@ enum HapcalStatus hapcal_end_pose_at_joints(const struct HapcalModel *model,
 // frame, rad/rad) at readings `theta` (rad), and the tip pose in `*pose_out` unless it is
 // NULL ([`hapcal_runtime::Model::body_jacobian`]).
 //
-// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `OutsideDomain` (a reading past
+// its polynomial's domain).
 //
 // # Safety
 // `model` is NULL or a live handle; `theta` NULL or valid for `n_joints` values; `jac_out`
@@ -247,7 +253,8 @@ enum HapcalStatus hapcal_body_jacobian(const struct HapcalModel *model,
 // `n_joints` column-major; m/rad, rad/rad) at readings `theta` (rad), and optionally the
 // tip pose ([`hapcal_runtime::Model::spatial_jacobian`]).
 //
-// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `OutsideDomain` (a reading past
+// its polynomial's domain).
 //
 // # Safety
 // As [`hapcal_body_jacobian`].
@@ -281,7 +288,8 @@ enum HapcalStatus hapcal_spatial_jacobian_at_joints(const struct HapcalModel *mo
 // about the end point, tip frame) at readings `theta` (rad):
 // `τ_m = diag((dq/dθ)/R)·J_bᵀ·w` ([`hapcal_runtime::Model::motor_torques`]).
 //
-// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `OutsideDomain` (a reading past
+// its polynomial's domain).
 //
 // # Safety
 // `model` is NULL or a live handle; `theta` and `tau_out` NULL or valid for `n_joints`
@@ -296,7 +304,8 @@ enum HapcalStatus hapcal_motor_torques(const struct HapcalModel *model,
 // ([`hapcal_runtime::Model::evaluate`]): what a force controller needs per cycle. `pose_out` and `jac_out`
 // may be NULL (not wanted); `tau_out` is required.
 //
-// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `OutsideDomain` (a reading past
+// its polynomial's domain).
 //
 // # Safety
 // `model` is NULL or a live handle; `theta` and `tau_out` NULL or valid for `n_joints`

@@ -113,6 +113,9 @@ pub enum HapcalStatus {
     /// An index (tip, joint) past the last, an unknown target kind, or a setting outside its
     /// domain (a tolerance that is not positive).
     InvalidArgument = 9,
+    /// A joint reading outside the range the model holds on (past its transmission
+    /// polynomial's fitted domain by more than 5 % of its width): nothing is written.
+    OutsideDomain = 10,
 }
 
 thread_local! {
@@ -151,6 +154,7 @@ fn guard(f: impl FnOnce() -> Result<(), Failure>) -> HapcalStatus {
             let status = match e {
                 Error::NotFinite { .. } => HapcalStatus::NotFinite,
                 Error::Length { .. } => HapcalStatus::Length,
+                Error::OutsideDomain { .. } => HapcalStatus::OutsideDomain,
                 _ => HapcalStatus::InvalidModel,
             };
             record(status, e.to_string())
@@ -326,7 +330,8 @@ pub unsafe extern "C" fn hapcal_model_n_joints(model: *const HapcalModel) -> usi
 /// Joint angles q (rad) and `dq/dθ` (rad/rad) for readings `theta` (rad): paper eq. 1 per
 /// capstan, the joint-4 polynomial ([`hapcal_runtime::Model::joint_angles`]).
 ///
-/// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+/// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `OutsideDomain` (a reading past
+/// its polynomial's domain).
 ///
 /// # Safety
 /// `model` is NULL or a live handle; each array is NULL or valid for `n_joints` values.
@@ -353,7 +358,8 @@ pub unsafe extern "C" fn hapcal_joint_angles(
 
 /// Tip pose in the base frame at readings `theta` (rad) ([`hapcal_runtime::Model::end_pose`]).
 ///
-/// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+/// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `OutsideDomain` (a reading past
+/// its polynomial's domain).
 ///
 /// # Safety
 /// `model` is NULL or a live handle; `theta` NULL or valid for `n_joints` values;
@@ -451,7 +457,8 @@ unsafe fn jacobian(
 /// frame, rad/rad) at readings `theta` (rad), and the tip pose in `*pose_out` unless it is
 /// NULL ([`hapcal_runtime::Model::body_jacobian`]).
 ///
-/// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+/// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `OutsideDomain` (a reading past
+/// its polynomial's domain).
 ///
 /// # Safety
 /// `model` is NULL or a live handle; `theta` NULL or valid for `n_joints` values; `jac_out`
@@ -482,7 +489,8 @@ pub unsafe extern "C" fn hapcal_body_jacobian(
 /// `n_joints` column-major; m/rad, rad/rad) at readings `theta` (rad), and optionally the
 /// tip pose ([`hapcal_runtime::Model::spatial_jacobian`]).
 ///
-/// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+/// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `OutsideDomain` (a reading past
+/// its polynomial's domain).
 ///
 /// # Safety
 /// As [`hapcal_body_jacobian`].
@@ -564,7 +572,8 @@ pub unsafe extern "C" fn hapcal_spatial_jacobian_at_joints(
 /// about the end point, tip frame) at readings `theta` (rad):
 /// `τ_m = diag((dq/dθ)/R)·J_bᵀ·w` ([`hapcal_runtime::Model::motor_torques`]).
 ///
-/// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+/// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `OutsideDomain` (a reading past
+/// its polynomial's domain).
 ///
 /// # Safety
 /// `model` is NULL or a live handle; `theta` and `tau_out` NULL or valid for `n_joints`
@@ -595,7 +604,8 @@ pub unsafe extern "C" fn hapcal_motor_torques(
 /// ([`hapcal_runtime::Model::evaluate`]): what a force controller needs per cycle. `pose_out` and `jac_out`
 /// may be NULL (not wanted); `tau_out` is required.
 ///
-/// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`.
+/// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` or `OutsideDomain` (a reading past
+/// its polynomial's domain).
 ///
 /// # Safety
 /// `model` is NULL or a live handle; `theta` and `tau_out` NULL or valid for `n_joints`

@@ -113,6 +113,46 @@ fn invalid_files_name_the_place_and_the_problem() {
     assert!(matches!(err, LoadError::Io { .. }), "{err:?}");
 }
 
+/// Numbers the command line's readers refuse at their place: a length of 1e308 m, a NaN
+/// parallelogram length, a polynomial coefficient of 1e300 rad.
+#[test]
+fn absurd_and_non_finite_numbers_are_refused_at_their_line() {
+    let (_, text) = reference();
+    let line_of = |needle: &str, t: &str| {
+        1 + t[..t.find(needle).expect("in the file")]
+            .matches('\n')
+            .count()
+    };
+    let cases = [
+        (
+            text.replacen("d_m = 0.0\n", "d_m = 1e308\n", 1),
+            "d_m = 1e308",
+            "dh[0].d_m",
+        ),
+        (
+            text.replacen("l1_m = 0.05", "l1_m = nan", 1),
+            "l1_m = nan",
+            "parallelogram.l1_m",
+        ),
+        (
+            text.replacen("value = 0.01620786094299803", "value = 1e300", 1),
+            "value = 1e300",
+            "joint4.cheb0",
+        ),
+    ];
+    for (bad, needle, name) in cases {
+        let err = Model::from_toml(&bad, "dev.toml").expect_err(name);
+        let LoadError::Parse {
+            line, ref message, ..
+        } = err
+        else {
+            panic!("{err:?}");
+        };
+        assert_eq!(line, line_of(needle, &bad), "{message}");
+        assert!(message.contains(name), "{message}");
+    }
+}
+
 #[test]
 fn placement_chains_are_refused_with_a_reason() {
     let text = "[[placement]]\nname = \"j1\"\nxyz_m = [0, 0, 0]\nrpy_rad = [0, 0, 0]\naxis = [0, 0, 1]\n\

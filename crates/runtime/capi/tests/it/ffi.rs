@@ -95,7 +95,8 @@ fn evaluation_through_the_abi_matches_the_library() {
 #[test]
 fn failures_are_status_codes_with_messages() {
     let model = load();
-    let theta = [0.1; 7];
+    // Joint 4 within its polynomial's domain (the joint's limits, 0.3 to 1.8 rad).
+    let theta = [0.1, 0.1, 0.1, 1.0, 0.1, 0.1, 0.1];
     let mut tau = [0.0; 7];
     let wrench = [0.0; 6];
     // SAFETY: every pointer is NULL or valid for the stated sizes.
@@ -119,10 +120,43 @@ fn failures_are_status_codes_with_messages() {
         let s = hapcal_motor_torques(model, nan.as_ptr(), 7, wrench.as_ptr(), tau.as_mut_ptr());
         assert_eq!(s, HapcalStatus::NotFinite);
         assert_eq!(message(), "joint readings[0] = NaN is not finite");
+        // A non-finite wrench, and a joint-4 reading far past its polynomial's fitted domain:
+        // a status, and the torques left as they were.
+        let mut untouched = [7.0; 7];
+        let bad_wrench = [0.0, 0.0, f64::INFINITY, 0.0, 0.0, 0.0];
+        let s = hapcal_motor_torques(
+            model,
+            theta.as_ptr(),
+            7,
+            bad_wrench.as_ptr(),
+            untouched.as_mut_ptr(),
+        );
+        assert_eq!(s, HapcalStatus::NotFinite);
+        assert_eq!(message(), "wrench[2] = inf is not finite");
+        let mut far = theta;
+        far[3] = 100.0;
+        let s = hapcal_motor_torques(
+            model,
+            far.as_ptr(),
+            7,
+            wrench.as_ptr(),
+            untouched.as_mut_ptr(),
+        );
+        assert_eq!(s, HapcalStatus::OutsideDomain);
+        assert!(
+            message().starts_with("joint readings[3] = 100 rad lies outside"),
+            "{}",
+            message()
+        );
+        assert_eq!(untouched, [7.0; 7]);
         // A success leaves the last message in place.
         let s = hapcal_motor_torques(model, theta.as_ptr(), 7, wrench.as_ptr(), tau.as_mut_ptr());
         assert_eq!(s, HapcalStatus::Ok);
-        assert_eq!(message(), "joint readings[0] = NaN is not finite");
+        assert!(
+            message().starts_with("joint readings[3] = 100 rad"),
+            "{}",
+            message()
+        );
         assert_eq!(hapcal_model_n_joints(ptr::null()), 0);
         hapcal_model_free(ptr::null_mut());
 
