@@ -386,7 +386,8 @@ impl Model {
     ///
     /// # Errors
     /// [`Error::Length`] unless all three slices have n entries; [`Error::NotFinite`] for a
-    /// NaN or infinite reading.
+    /// NaN or infinite reading; [`Error::OutsideDomain`] for a reading past its transmission
+    /// polynomial's domain by more than [`crate::DOMAIN_MARGIN`] of its width.
     pub fn joint_angles(
         &self,
         theta: &[f64],
