@@ -5,7 +5,7 @@
 //!   Jacobian `a`, solved by one Gauss–Newton step of [`levenberg_marquardt`] from `x = 0`, with
 //!   `(aᵀa)⁻¹` from [`covariance`].
 //! - [`fit_model`]: the nonlinear fit of the diagnosis model ([`Setup::linearise`]) by
-//!   [`levenberg_marquardt`].
+//!   [`levenberg_marquardt`]; [`refine`] at the model's rank tolerance.
 //!
 //! Dependent columns are dropped before either solve ([`pivoted_basis`]): the identify solvers
 //! expect a free set the data determine.
@@ -19,7 +19,7 @@ use hapcal_identify::{
 };
 use nalgebra::{DMatrix, DVector};
 
-use crate::model::{Linear, Setup, State};
+use crate::model::{Linear, RANK_TOL, Setup, State};
 use crate::stats::pivoted_basis;
 
 /// Relative remaining norm below which [`lstsq`] drops a column as dependent on the columns
@@ -259,4 +259,18 @@ pub(crate) fn fit_model(
         free = now;
     }
     Ok((s, lin))
+}
+
+/// Fits the model of `setup` from `s` by [`fit_model`] on the identifiable columns
+/// ([`RANK_TOL`], re-picked when they change at the estimate), within a budget of `iters`
+/// Gauss–Newton iterations; returns the refined state and the linearisation there.
+///
+/// # Errors
+/// The model's, for a state that does not fit the log or the chain.
+pub(crate) fn refine(
+    setup: &Setup,
+    s: State,
+    iters: usize,
+) -> Result<(State, Linear), hapcal_problems::Error> {
+    fit_model(setup, s, iters, RANK_TOL)
 }
