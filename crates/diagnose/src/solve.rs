@@ -9,9 +9,15 @@
 //!
 //! Dependent columns are dropped before either solve ([`pivoted_basis`]): the identify solvers
 //! expect a free set the data determine.
+//!
+//! - [`lstsq_leverage`]: the many small solves of a cross-validation, each with the leverage of
+//!   the held-out rows: one Householder QR of the column-scaled matrix (faer, as
+//!   [`covariance`]) instead of [`lstsq`]'s column selection, solver step and covariance, the
+//!   same least-squares solution when the columns are independent (else [`lstsq`]).
 
 use std::cell::RefCell;
 
+use faer::prelude::SolveLstsq;
 use faer::{Col, ColMut, ColRef, Mat, MatMut};
 use hapcal_identify::{
     EvalError, LmConfig, ParamLayout, ParamSpec, Problem, Role, Unit, covariance,
@@ -20,7 +26,7 @@ use hapcal_identify::{
 use nalgebra::{DMatrix, DVector};
 
 use crate::model::{Linear, RANK_TOL, Setup, State};
-use crate::stats::pivoted_basis;
+use crate::stats::{NUMERICAL_ZERO_COLUMN, largest_column_norm, pivoted_basis};
 
 /// Relative remaining norm below which [`lstsq`] drops a column as dependent on the columns
 /// picked before it (the scaled problem's numerical rank; the SVD solve it replaces cut
@@ -111,6 +117,70 @@ pub(crate) fn lstsq(a: &DMatrix<f64>, b: &DVector<f64>) -> (DVector<f64>, DMatri
         }
     }
     (x, cov)
+}
+
+/// [`lstsq`] on `a`, `b`, with the leverage `hᵢ = tᵢ·(aᵀa)⁻¹·tᵢᵀ` of each row `tᵢ` of `test`
+/// (on the kept columns; the quantity that makes a held-out error's variance `σ²(1 + h)`).
+///
+/// When every column of `a` is independent of the ones before it at [`LSTSQ_RANK_TOL`] (the
+/// Householder QR `a·D⁻¹ = Q·R` of the columns scaled to unit norm, `|R_jj| ≥` the
+/// tolerance) and none is rounding noise ([`NUMERICAL_ZERO_COLUMN`] of the largest), the
+/// solution is `D⁻¹R⁻¹Qᵀb` and `hᵢ = ‖R⁻ᵀD⁻¹tᵢᵀ‖²`: the least-squares
+/// solution and covariance [`lstsq`] computes, from one factorisation instead of three.
+/// Otherwise it is [`lstsq`]'s, which drops the dependent columns.
+///
+/// Source: Golub and Van Loan, *Matrix Computations*, 4th ed., 2013, §5.3 (least squares by
+/// QR); the leverage as in Hastie, Tibshirani and Friedman, *The Elements of Statistical
+/// Learning*, 2nd ed., 2009, §7.10.
+///
+/// # Panics
+/// If `b` or `test` do not match `a`'s rows or columns.
+#[track_caller]
+pub(crate) fn lstsq_leverage(
+    a: &DMatrix<f64>,
+    b: &DVector<f64>,
+    test: &DMatrix<f64>,
+) -> (DVector<f64>, Vec<f64>) {
+    let (m, k) = a.shape();
+    assert!(
+        b.len() == m && test.ncols() == k,
+        "lstsq_leverage: {m}×{k} matrix, {} right-hand side, {} test columns",
+        b.len(),
+        test.ncols()
+    );
+    let by_lstsq = || {
+        let (x, cov) = lstsq(a, b);
+        let h = (0..test.nrows())
+            .map(|i| {
+                let row = test.row(i);
+                (row * &cov * row.transpose())[0]
+            })
+            .collect();
+        (x, h)
+    };
+    let scale: Vec<f64> = (0..k).map(|j| a.column(j).norm()).collect();
+    let largest = largest_column_norm(a);
+    if k == 0
+        || m < k
+        || (scale.iter()).any(|s| !(s.is_finite() && *s > NUMERICAL_ZERO_COLUMN * largest))
+    {
+        return by_lstsq();
+    }
+    let scaled = Mat::from_fn(m, k, |i, j| a[(i, j)] / scale[j]);
+    let qr = scaled.qr();
+    let r = qr.thin_R();
+    if (0..k).any(|j| r[(j, j)].abs() < LSTSQ_RANK_TOL || r[(j, j)].is_nan()) {
+        return by_lstsq();
+    }
+    let mut rhs = Mat::from_fn(m, 1, |i, _| b[i]);
+    qr.solve_lstsq_in_place(rhs.as_mut());
+    let x = DVector::from_fn(k, |j, _| rhs[(j, 0)] / scale[j]);
+    let mut w = Mat::from_fn(k, test.nrows(), |j, i| test[(i, j)] / scale[j]);
+    r.transpose().solve_lower_triangular_in_place(w.as_mut());
+    let h = (0..test.nrows())
+        .map(|i| w.col(i).squared_norm_l2())
+        .collect();
+    (x, h)
 }
 
 /// The diagnosis model as a [`Problem`]: `x` is the change of the parameters from `start`

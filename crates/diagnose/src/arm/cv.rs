@@ -2,10 +2,11 @@
 //! the stages share (appending columns, the columns visible beside a baseline).
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 use super::problem::Rows;
 use super::{CV_REPEATS, VISIBLE_TOL};
-use crate::solve::lstsq;
+use crate::solve::lstsq_leverage;
 use crate::stats::{f_sf, largest_column_norm, pivoted_basis_beside};
 
 /// The fold of each configuration in each of [`CV_REPEATS`] repeats (contiguous blocks within
@@ -61,7 +62,9 @@ pub(super) fn mean(v: &[f64]) -> f64 {
 }
 
 /// Repeated blocked k-fold cross-validation of the linear model `a·δ ≈ r` (weighted
-/// residuals); `folds[r][c]` is configuration `c`'s fold in repeat `r`.
+/// residuals); `folds[r][c]` is configuration `c`'s fold in repeat `r`. The fits of the folds
+/// are independent and solved in parallel ([`lstsq_leverage`]); their held-out errors are
+/// added up in the order of the folds, so the result does not depend on the threads.
 pub(super) fn cross_validate(
     a: &DMatrix<f64>,
     r: &DVector<f64>,
@@ -77,36 +80,64 @@ pub(super) fn cross_validate(
         floor_m2: vec![0.0; n_c],
     };
     let w = 1.0 / folds.len().max(1) as f64;
-    for fold in folds {
-        for f in 0..k {
-            let held = |i: usize| {
-                let c = rows.res[i].1;
-                c != usize::MAX && fold[c] == f
-            };
-            let train: Vec<usize> = (0..r.len()).filter(|&i| !held(i)).collect();
-            let test: Vec<usize> = (0..r.len()).filter(|&i| held(i)).collect();
-            if test.is_empty() || train.is_empty() {
-                continue;
-            }
-            let at = a.select_rows(&train);
-            let bt = DVector::from_iterator(train.len(), train.iter().map(|&i| r[i]));
-            let (x, cov) = lstsq(&at, &bt);
-            for &i in &test {
-                let row = a.row(i);
-                let e = r[i] - (row * &x)[0];
-                let c = rows.res[i].1;
-                out.score[c] += w * e * e;
-                if let Some(sigma) = rows.res[i].0.length_sigma() {
-                    out.position_m2[c] += w * (e * sigma).powi(2);
-                    if let Some(v) = floor_var {
-                        let h = (row * &cov * row.transpose())[0];
-                        out.floor_m2[c] += w * v * (1.0 + h.max(0.0));
-                    }
+    let jobs: Vec<(&[usize], usize)> = (folds.iter())
+        .flat_map(|fold| (0..k).map(move |f| (fold.as_slice(), f)))
+        .collect();
+    let fits: Vec<Option<HeldOutFold>> = (jobs.par_iter())
+        .map(|&(fold, f)| fit_fold(a, r, rows, fold, f, floor_var.is_some()))
+        .collect();
+    for fit in fits.iter().flatten() {
+        for (p, &i) in fit.test.iter().enumerate() {
+            let e = fit.e[p];
+            let c = rows.res[i].1;
+            out.score[c] += w * e * e;
+            if let Some(sigma) = rows.res[i].0.length_sigma() {
+                out.position_m2[c] += w * (e * sigma).powi(2);
+                if let Some(v) = floor_var {
+                    out.floor_m2[c] += w * v * (1.0 + fit.h[p].max(0.0));
                 }
             }
         }
     }
     out
+}
+
+/// The held-out rows of one fold, their errors and (if asked) leverages.
+struct HeldOutFold {
+    test: Vec<usize>,
+    e: Vec<f64>,
+    h: Vec<f64>,
+}
+
+/// Fits `a·δ ≈ r` on the rows outside fold `f` (`fold[c]`: configuration `c`'s fold) and
+/// predicts the rows in it; `None` when either set is empty.
+fn fit_fold(
+    a: &DMatrix<f64>,
+    r: &DVector<f64>,
+    rows: &Rows,
+    fold: &[usize],
+    f: usize,
+    leverage: bool,
+) -> Option<HeldOutFold> {
+    let held = |i: usize| {
+        let c = rows.res[i].1;
+        c != usize::MAX && fold[c] == f
+    };
+    let train: Vec<usize> = (0..r.len()).filter(|&i| !held(i)).collect();
+    let test: Vec<usize> = (0..r.len()).filter(|&i| held(i)).collect();
+    if test.is_empty() || train.is_empty() {
+        return None;
+    }
+    let at = a.select_rows(&train);
+    let bt = DVector::from_iterator(train.len(), train.iter().map(|&i| r[i]));
+    let a_test = a.select_rows(&test);
+    let no_rows = DMatrix::zeros(0, a.ncols());
+    let (x, h) = lstsq_leverage(&at, &bt, if leverage { &a_test } else { &no_rows });
+    let predicted = &a_test * &x;
+    let e = (test.iter().enumerate())
+        .map(|(p, &i)| r[i] - predicted[p])
+        .collect();
+    Some(HeldOutFold { test, e, h })
 }
 
 /// One-sided p-value of a mean `m` with standard error `se` being ≤ 0, Student t with `dof`.

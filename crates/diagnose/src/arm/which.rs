@@ -6,6 +6,7 @@
 use hapcal_calibrate::calibrate::blocked_mean_difference;
 use hapcal_contract::Effect;
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 use super::baseline::{Baseline, gap_p_value};
 use super::columns::effect_columns;
@@ -130,12 +131,16 @@ fn run_rounds(b: &Baseline<'_>, cfg: &ArmConfig, excluded: &[Effect]) -> Run {
             rss_b,
             dof_b,
         };
+        // The candidates are independent: tested in parallel, taken in the library's order.
+        let offered_now: Vec<Effect> = arm_candidates()
+            .filter(|&e| offered(e, &run.accepted, excluded))
+            .collect();
+        let results: Vec<Result<Tested, String>> = (offered_now.par_iter())
+            .map(|&effect| test_candidate(b, &fit, &run, effect, cfg))
+            .collect();
         let mut tested: Vec<Tested> = Vec::new();
-        for effect in arm_candidates() {
-            if !offered(effect, &run.accepted, excluded) {
-                continue;
-            }
-            match test_candidate(b, &fit, &run, effect, cfg) {
+        for (effect, result) in offered_now.into_iter().zip(results) {
+            match result {
                 Ok(t) => tested.push(t),
                 Err(reason) => {
                     let note = format!("{}: {reason}", effect.name());
