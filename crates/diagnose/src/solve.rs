@@ -344,3 +344,56 @@ pub(crate) fn refine(
 ) -> Result<(State, Linear), hapcal_problems::Error> {
     fit_model(setup, s, iters, RANK_TOL)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A well-conditioned 40 × 4 design whose columns differ in scale, as the weighted
+    /// Jacobians' do.
+    fn design() -> DMatrix<f64> {
+        DMatrix::from_fn(40, 4, |i, j| {
+            let t = i as f64 / 40.0;
+            [1.0, 10.0 * t, (3.0 * t).sin(), 0.1 * (5.0 * t).cos()][j]
+        })
+    }
+
+    #[test]
+    fn lstsq_leverage_is_the_least_squares_solution_and_its_leverage() {
+        let a = design();
+        let b = DVector::from_fn(40, |i, _| (0.7 * i as f64).cos() + 0.1 * i as f64);
+        let test = DMatrix::from_fn(3, 4, |i, j| 0.5 + (i * 4 + j) as f64 * 0.1);
+        let (x, h) = lstsq_leverage(&a, &b, &test);
+        // The normal equations hold: aᵀ(b − a·x) = 0 to rounding, relative to ‖aᵀ‖·‖b‖.
+        let g = a.transpose() * (&b - &a * &x);
+        for j in 0..4 {
+            let scale = a.column(j).norm() * b.norm();
+            assert!(g[j].abs() < 1e-12 * scale, "normal equation {j}: {}", g[j]);
+        }
+        // The leverage is t·(aᵀa)⁻¹·tᵀ, here from the normal equations' inverse (aᵀa of these
+        // columns is conditioned well enough for agreement to 1e-8 relative).
+        let inv = (a.transpose() * &a).try_inverse().expect("invertible");
+        for (i, hi) in h.iter().enumerate() {
+            let row = test.row(i);
+            let want = (row * &inv * row.transpose())[0];
+            assert!((hi - want).abs() < 1e-8 * want.abs(), "{hi} vs {want}");
+        }
+    }
+
+    #[test]
+    fn lstsq_leverage_drops_a_dependent_column_as_lstsq() {
+        let mut a = design().insert_column(4, 0.0);
+        let dup = a.column(1) * 2.0;
+        a.set_column(4, &dup);
+        let b = DVector::from_fn(40, |i, _| (0.3 * i as f64).sin());
+        let test = DMatrix::from_fn(2, 5, |i, j| (i + j) as f64);
+        let (x, h) = lstsq_leverage(&a, &b, &test);
+        let (x_ref, cov) = lstsq(&a, &b);
+        assert_eq!(x, x_ref);
+        assert_eq!(x.iter().filter(|v| **v == 0.0).count(), 1);
+        for (i, hi) in h.iter().enumerate() {
+            let row = test.row(i);
+            assert_eq!(*hi, (row * &cov * row.transpose())[0]);
+        }
+    }
+}
