@@ -1,6 +1,9 @@
 //! Speed of one diagnosis: the reference device's 600-row time-ordered log with a withheld
-//! backlash (the size of the blind test's logs), and the serial-arm diagnosis of the MUKCa
-//! kuka_14 training placement with its two held-out placements.
+//! backlash (the size of the blind test's logs), the serial-arm diagnosis of the MUKCa
+//! kuka_14 training placement with its two held-out placements, and the serial-arm diagnosis
+//! of the simulated two-arm humanoid (`fixtures/sim-humanoid`: 17 joints, two hand markers,
+//! 385 training configurations, the last 30 % held out), its geometric baseline built once
+//! outside the timed loop.
 //!
 //! `cargo bench -p hapcal-diagnose --bench diagnose`
 
@@ -48,6 +51,23 @@ fn bench(c: &mut Criterion) {
             let baseline = geometric_baseline(black_box(&plan), true).expect("baseline");
             diagnose_arm(&baseline, &ArmConfig::default()).expect("diagnosis")
         })
+    });
+    let humanoid = root.join("fixtures/sim-humanoid");
+    let plan = Plan {
+        workspace: None,
+        device: humanoid.join("humanoid.urdf"),
+        tip: "l_hand".into(),
+        tips: vec!["r_hand".into()],
+        data: vec![humanoid.join("mocap.csv")],
+        test: Vec::new(),
+        test_last: Some(0.3),
+        model: ModelName::Geometric.into(),
+        ..Plan::bundled_default()
+    };
+    let baseline = geometric_baseline(&plan, true).expect("humanoid baseline");
+    group.sample_size(10);
+    group.bench_function("arm_humanoid", |b| {
+        b.iter(|| diagnose_arm(black_box(&baseline), &ArmConfig::default()).expect("diagnosis"))
     });
     group.finish();
 }

@@ -34,7 +34,7 @@ use crate::model::{
     Data, Linear, POLY_DEGREE, RANK_TOL, Setup, State, Term, TermKind, Trans, ext_available,
     log_data,
 };
-use crate::solve::lstsq;
+use crate::solve::{lstsq, refine};
 use crate::stats::{chi2_sf, f_sf, holm, largest_column_norm, pivoted_basis, pivoted_basis_beside};
 
 /// The model a haptic device's log is diagnosed against, by the name `--baseline` takes: one
@@ -680,7 +680,7 @@ fn test_candidate(
     s_vis
         .terms
         .extend(visible.iter().map(|&c| (terms[c].clone(), 0.0)));
-    let (s_vis, lin) = setup.refine(s_vis, 10).map_err(|e| e.to_string())?;
+    let (s_vis, lin) = refine(setup, s_vis, 10).map_err(|e| e.to_string())?;
     let mut cols = base.cols.clone();
     cols.extend((0..visible.len()).map(|c| n_base_cols + c));
     let a = lin.j.select_columns(&cols);
@@ -971,7 +971,7 @@ pub fn baseline_residuals_m(
         Vec::new()
     };
     let state0 = setup.initial_state(trans);
-    let (_, lin) = setup.refine(state0, 8).map_err(baseline_error)?;
+    let (_, lin) = refine(&setup, state0, 8).map_err(baseline_error)?;
     let (q, _) = pivoted_basis(&lin.j, &DMatrix::zeros(lin.j.nrows(), 0), RANK_TOL);
     let r_perp = &lin.r - &q * (q.transpose() * &lin.r);
     Ok((0..data.n_rows())
@@ -1060,7 +1060,7 @@ pub fn diagnose(
         Vec::new()
     };
     let state0 = setup.initial_state(trans);
-    let (mut state, lin) = setup.refine(state0, 8).map_err(baseline_error)?;
+    let (mut state, lin) = refine(&setup, state0, 8).map_err(baseline_error)?;
     let mut n_base_cols = lin.j.ncols();
     let mut base = Base::new(lin, n_base_cols, cfg.folds, n);
     let base_rss_excess = |b: &Base| b.rss - b.dof();
@@ -1069,7 +1069,7 @@ pub fn diagnose(
     let lower = 1.0 - chi2_sf(base.rss, base.dof());
     if lower < 1e-3 {
         setup.set_quantisation(false);
-        let (s, lin) = setup.refine(state.clone(), 2).map_err(baseline_error)?;
+        let (s, lin) = refine(&setup, state.clone(), 2).map_err(baseline_error)?;
         state = s;
         base = Base::new(lin, n_base_cols, cfg.folds, n);
         floor_method = "spec without quantisation: sigma_m = 2*pi*R_d*sigma_e, sigma_e = 2*pi/counts/3 (paper noise model); the residuals were significantly below the floor with reading quantisation, so the readings are not the quantisation-limited measurement here; held-out floor sigma^2*(1+h)".to_owned();
@@ -1256,7 +1256,7 @@ pub fn diagnose(
         let win = &tested[w];
         let mut s = state.clone();
         s.terms.extend(win.terms.iter().cloned().map(|t| (t, 0.0)));
-        let (s, lin) = setup.refine(s, 10).map_err(baseline_error)?;
+        let (s, lin) = refine(&setup, s, 10).map_err(baseline_error)?;
         state = s;
         n_base_cols = lin.j.ncols();
         let before = base.cv.mse().sqrt();

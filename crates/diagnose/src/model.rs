@@ -144,18 +144,6 @@ impl Setup {
     pub(crate) fn linearise(&self, s: &State) -> Result<Linear, hapcal_problems::Error> {
         self.model.linearise(s).map(Linear::from)
     }
-
-    /// Fits the model from `s` by `hapcal-identify`'s Levenberg–Marquardt
-    /// ([`crate::solve::fit_model`]) on the identifiable columns ([`RANK_TOL`], re-picked when
-    /// they change at the estimate), within a budget of `iters` Gauss–Newton iterations;
-    /// returns the refined state and the linearisation there.
-    pub(crate) fn refine(
-        &self,
-        s: State,
-        iters: usize,
-    ) -> Result<(State, Linear), hapcal_problems::Error> {
-        crate::solve::fit_model(self, s, iters, RANK_TOL)
-    }
 }
 
 /// Whether the log has every external encoder the device's transmissions need.

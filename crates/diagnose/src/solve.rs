@@ -5,13 +5,19 @@
 //!   Jacobian `a`, solved by one Gauss–Newton step of [`levenberg_marquardt`] from `x = 0`, with
 //!   `(aᵀa)⁻¹` from [`covariance`].
 //! - [`fit_model`]: the nonlinear fit of the diagnosis model ([`Setup::linearise`]) by
-//!   [`levenberg_marquardt`].
+//!   [`levenberg_marquardt`]; [`refine`] at the model's rank tolerance.
 //!
 //! Dependent columns are dropped before either solve ([`pivoted_basis`]): the identify solvers
 //! expect a free set the data determine.
+//!
+//! - [`lstsq_leverage`]: the many small solves of a cross-validation, each with the leverage of
+//!   the held-out rows: one Householder QR of the column-scaled matrix (faer, as
+//!   [`covariance`]) instead of [`lstsq`]'s column selection, solver step and covariance, the
+//!   same least-squares solution when the columns are independent (else [`lstsq`]).
 
 use std::cell::RefCell;
 
+use faer::prelude::SolveLstsq;
 use faer::{Col, ColMut, ColRef, Mat, MatMut};
 use hapcal_identify::{
     EvalError, LmConfig, ParamLayout, ParamSpec, Problem, Role, Unit, covariance,
@@ -19,8 +25,8 @@ use hapcal_identify::{
 };
 use nalgebra::{DMatrix, DVector};
 
-use crate::model::{Linear, Setup, State};
-use crate::stats::pivoted_basis;
+use crate::model::{Linear, RANK_TOL, Setup, State};
+use crate::stats::{NUMERICAL_ZERO_COLUMN, largest_column_norm, pivoted_basis};
 
 /// Relative remaining norm below which [`lstsq`] drops a column as dependent on the columns
 /// picked before it (the scaled problem's numerical rank; the SVD solve it replaces cut
@@ -111,6 +117,70 @@ pub(crate) fn lstsq(a: &DMatrix<f64>, b: &DVector<f64>) -> (DVector<f64>, DMatri
         }
     }
     (x, cov)
+}
+
+/// [`lstsq`] on `a`, `b`, with the leverage `hᵢ = tᵢ·(aᵀa)⁻¹·tᵢᵀ` of each row `tᵢ` of `test`
+/// (on the kept columns; the quantity that makes a held-out error's variance `σ²(1 + h)`).
+///
+/// When every column of `a` is independent of the ones before it at [`LSTSQ_RANK_TOL`] (the
+/// Householder QR `a·D⁻¹ = Q·R` of the columns scaled to unit norm, `|R_jj| ≥` the
+/// tolerance) and none is rounding noise ([`NUMERICAL_ZERO_COLUMN`] of the largest), the
+/// solution is `D⁻¹R⁻¹Qᵀb` and `hᵢ = ‖R⁻ᵀD⁻¹tᵢᵀ‖²`: the least-squares
+/// solution and covariance [`lstsq`] computes, from one factorisation instead of three.
+/// Otherwise it is [`lstsq`]'s, which drops the dependent columns.
+///
+/// Source: Golub and Van Loan, *Matrix Computations*, 4th ed., 2013, §5.3 (least squares by
+/// QR); the leverage as in Hastie, Tibshirani and Friedman, *The Elements of Statistical
+/// Learning*, 2nd ed., 2009, §7.10.
+///
+/// # Panics
+/// If `b` or `test` do not match `a`'s rows or columns.
+#[track_caller]
+pub(crate) fn lstsq_leverage(
+    a: &DMatrix<f64>,
+    b: &DVector<f64>,
+    test: &DMatrix<f64>,
+) -> (DVector<f64>, Vec<f64>) {
+    let (m, k) = a.shape();
+    assert!(
+        b.len() == m && test.ncols() == k,
+        "lstsq_leverage: {m}×{k} matrix, {} right-hand side, {} test columns",
+        b.len(),
+        test.ncols()
+    );
+    let by_lstsq = || {
+        let (x, cov) = lstsq(a, b);
+        let h = (0..test.nrows())
+            .map(|i| {
+                let row = test.row(i);
+                (row * &cov * row.transpose())[0]
+            })
+            .collect();
+        (x, h)
+    };
+    let scale: Vec<f64> = (0..k).map(|j| a.column(j).norm()).collect();
+    let largest = largest_column_norm(a);
+    if k == 0
+        || m < k
+        || (scale.iter()).any(|s| !(s.is_finite() && *s > NUMERICAL_ZERO_COLUMN * largest))
+    {
+        return by_lstsq();
+    }
+    let scaled = Mat::from_fn(m, k, |i, j| a[(i, j)] / scale[j]);
+    let qr = scaled.qr();
+    let r = qr.thin_R();
+    if (0..k).any(|j| r[(j, j)].abs() < LSTSQ_RANK_TOL || r[(j, j)].is_nan()) {
+        return by_lstsq();
+    }
+    let mut rhs = Mat::from_fn(m, 1, |i, _| b[i]);
+    qr.solve_lstsq_in_place(rhs.as_mut());
+    let x = DVector::from_fn(k, |j, _| rhs[(j, 0)] / scale[j]);
+    let mut w = Mat::from_fn(k, test.nrows(), |j, i| test[(i, j)] / scale[j]);
+    r.transpose().solve_lower_triangular_in_place(w.as_mut());
+    let h = (0..test.nrows())
+        .map(|i| w.col(i).squared_norm_l2())
+        .collect();
+    (x, h)
 }
 
 /// The diagnosis model as a [`Problem`]: `x` is the change of the parameters from `start`
@@ -259,4 +329,71 @@ pub(crate) fn fit_model(
         free = now;
     }
     Ok((s, lin))
+}
+
+/// Fits the model of `setup` from `s` by [`fit_model`] on the identifiable columns
+/// ([`RANK_TOL`], re-picked when they change at the estimate), within a budget of `iters`
+/// Gauss–Newton iterations; returns the refined state and the linearisation there.
+///
+/// # Errors
+/// The model's, for a state that does not fit the log or the chain.
+pub(crate) fn refine(
+    setup: &Setup,
+    s: State,
+    iters: usize,
+) -> Result<(State, Linear), hapcal_problems::Error> {
+    fit_model(setup, s, iters, RANK_TOL)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A well-conditioned 40 × 4 design whose columns differ in scale, as the weighted
+    /// Jacobians' do.
+    fn design() -> DMatrix<f64> {
+        DMatrix::from_fn(40, 4, |i, j| {
+            let t = i as f64 / 40.0;
+            [1.0, 10.0 * t, (3.0 * t).sin(), 0.1 * (5.0 * t).cos()][j]
+        })
+    }
+
+    #[test]
+    fn lstsq_leverage_is_the_least_squares_solution_and_its_leverage() {
+        let a = design();
+        let b = DVector::from_fn(40, |i, _| (0.7 * i as f64).cos() + 0.1 * i as f64);
+        let test = DMatrix::from_fn(3, 4, |i, j| 0.5 + (i * 4 + j) as f64 * 0.1);
+        let (x, h) = lstsq_leverage(&a, &b, &test);
+        // The normal equations hold: aᵀ(b − a·x) = 0 to rounding, relative to ‖aᵀ‖·‖b‖.
+        let g = a.transpose() * (&b - &a * &x);
+        for j in 0..4 {
+            let scale = a.column(j).norm() * b.norm();
+            assert!(g[j].abs() < 1e-12 * scale, "normal equation {j}: {}", g[j]);
+        }
+        // The leverage is t·(aᵀa)⁻¹·tᵀ, here from the normal equations' inverse (aᵀa of these
+        // columns is conditioned well enough for agreement to 1e-8 relative).
+        let inv = (a.transpose() * &a).try_inverse().expect("invertible");
+        for (i, hi) in h.iter().enumerate() {
+            let row = test.row(i);
+            let want = (row * &inv * row.transpose())[0];
+            assert!((hi - want).abs() < 1e-8 * want.abs(), "{hi} vs {want}");
+        }
+    }
+
+    #[test]
+    fn lstsq_leverage_drops_a_dependent_column_as_lstsq() {
+        let mut a = design().insert_column(4, 0.0);
+        let dup = a.column(1) * 2.0;
+        a.set_column(4, &dup);
+        let b = DVector::from_fn(40, |i, _| (0.3 * i as f64).sin());
+        let test = DMatrix::from_fn(2, 5, |i, j| (i + j) as f64);
+        let (x, h) = lstsq_leverage(&a, &b, &test);
+        let (x_ref, cov) = lstsq(&a, &b);
+        assert_eq!(x, x_ref);
+        assert_eq!(x.iter().filter(|v| **v == 0.0).count(), 1);
+        for (i, hi) in h.iter().enumerate() {
+            let row = test.row(i);
+            assert_eq!(*hi, (row * &cov * row.transpose())[0]);
+        }
+    }
 }

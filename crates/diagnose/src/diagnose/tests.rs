@@ -29,14 +29,14 @@ fn the_transmissions_baseline_is_the_calibrations_joint_fit() {
     let trans_joints: Vec<usize> = device.capstans.iter().map(|c| c.joint - 1).collect();
     setup.set_ext_joints(trans_joints).expect("ext rows");
     let trans = fit_transmissions(&device, &data, setup.sigma_e_rad()).expect("step 1");
-    let (state, lin) = setup.refine(setup.initial_state(trans), 8).expect("fit");
+    let (state, lin) = refine(&setup, setup.initial_state(trans), 8).expect("fit");
     let base = Base::new(lin, state.n_params(), 5, data.n_rows());
     let quantised = 1.0 - chi2_sf(base.rss, base.dof()) >= 1e-3;
     let (state, lin) = if quantised {
         (state, base.lin)
     } else {
         setup.set_quantisation(false);
-        setup.refine(state, 2).expect("refit")
+        refine(&setup, state, 2).expect("refit")
     };
     let cols = {
         let b = Base::new(lin, state.n_params(), 5, data.n_rows());
