@@ -757,6 +757,27 @@ pub fn run(
         .collect())
 }
 
+/// Per injected effect: `(right, total)` and the count of each verdict.
+type EffectTally = ((usize, usize), BTreeMap<String, usize>);
+
+/// Share of the variance of `f(q)` over `n` points evenly spaced in `[−range, range]` (rad)
+/// that least squares on `basis` explains, 0–1: how much of one joint-angle effect another
+/// holds over the joint range the data cover.
+pub fn spanned_share(range: f64, f: fn(f64) -> f64, basis: &[fn(f64) -> f64], n: usize) -> f64 {
+    let q: Vec<f64> = (0..n)
+        .map(|i| -range + 2.0 * range * i as f64 / (n.max(2) - 1) as f64)
+        .collect();
+    let a = nalgebra::DMatrix::from_fn(n, basis.len(), |i, j| basis[j](q[i]));
+    let y = nalgebra::DVector::from_fn(n, |i, _| f(q[i]));
+    let Ok(c) = a.clone().svd(true, true).solve(&y, 1e-12) else {
+        return f64::NAN;
+    };
+    let r = &y - a * c;
+    let mean = y.mean();
+    let total: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
+    1.0 - r.norm_squared() / total
+}
+
 /// The class of a case as the report names it.
 fn class_name(kind: ArmCaseKind) -> &'static str {
     match kind {
@@ -788,9 +809,11 @@ fn tally(
 
 /// The Markdown report of a run: the targets per class with their Wilson intervals, the
 /// pairs of joint and transversal compliance on their own line, each injected effect's
-/// verdicts, and every wrong case.
+/// verdicts, how much of one joint-angle effect another holds over the arms' range (their
+/// joint limits ±`arm_limit_rad`, rad, of which 80 % is drawn), and every wrong case.
 pub fn report_markdown(
     outcomes: &[TreeOutcome],
+    arm_limit_rad: f64,
     command: &str,
     machine: &str,
     n_rows: usize,
@@ -887,8 +910,7 @@ pub fn report_markdown(
          time per case: {:.1} s (both cores shared by the cases).\n",
         seconds.get(seconds.len() / 2).copied().unwrap_or(f64::NAN)
     ));
-    let mut by_effect: BTreeMap<(usize, String), ((usize, usize), BTreeMap<String, usize>)> =
-        BTreeMap::new();
+    let mut by_effect: BTreeMap<(usize, String), EffectTally> = BTreeMap::new();
     for o in outcomes {
         let order = match o.case.kind {
             ArmCaseKind::None => 0,
@@ -923,6 +945,39 @@ pub fn report_markdown(
             pct(*r)
         ));
     }
+    // Over the arms' range, which joint-angle effects hold which (the confusions above).
+    let range = 0.8 * arm_limit_rad;
+    let offset: fn(f64) -> f64 = |_| 1.0;
+    let h1: [fn(f64) -> f64; 3] = [offset, f64::sin, f64::cos];
+    let h12: [fn(f64) -> f64; 5] = [
+        offset,
+        f64::sin,
+        f64::cos,
+        |q| (2.0 * q).sin(),
+        |q| (2.0 * q).cos(),
+    ];
+    let share =
+        |f: fn(f64) -> f64, basis: &[fn(f64) -> f64]| 100.0 * spanned_share(range, f, basis, 2001);
+    md.push_str(&format!(
+        "\n## Joint ranges\n\nThe arms' readings span ±{range:.1} rad (80 % of their limits), \
+         less than a turn. Over that range, by least squares on evenly spaced angles \
+         (`hapcal_studies::tree_blind::spanned_share`): a first harmonic and an offset hold {:.1} % of the variance of a \
+         gear ratio's `q`; first and second harmonics and an offset hold {:.1} % of `sin 3q` \
+         and {:.1} % of `cos 3q`. Over ±π they hold {:.1} %, {:.1} % and {:.1} %. Where the \
+         diagnosis names a first and second harmonic for a third, or a first harmonic for a \
+         gear ratio beside it, the data hold little else to tell them apart.\n\n\
+         ## Transversal compliance alone\n\nThe diagnosis tests a transversal compliance only \
+         beside a named joint compliance, under its loads (`hapcal_diagnose::arm::\
+         ARM_BESIDE_COMPLIANCE`, as the calibration fits it only on top of the joint \
+         compliance): a transversal compliance without joint compliance can only be named \
+         with a joint compliance it does not have.\n",
+        share(|q| q, &h1),
+        share(|q| (3.0 * q).sin(), &h12),
+        share(|q| (3.0 * q).cos(), &h12),
+        100.0 * spanned_share(PI, |q| q, &h1, 2001),
+        100.0 * spanned_share(PI, |q| (3.0 * q).sin(), &h12, 2001),
+        100.0 * spanned_share(PI, |q| (3.0 * q).cos(), &h12, 2001),
+    ));
     md.push_str(
         "\n## Wrong cases\n\nThe effect RMS is that of the injected effects' 3-D displacement \
          of the markers over all rows; the reason is the round-1 candidate's of each injected \
@@ -1016,6 +1071,48 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    /// The record's point masses (read by the calibration from the URDF) load the joints as
+    /// the runtime's own reading of the URDF's `<inertial>`s does.
+    #[test]
+    fn the_records_masses_are_the_urdfs() {
+        let setup = setup();
+        let n = setup.robot.joint_names.len();
+        let recorded = truth_robot(
+            &setup,
+            &[],
+            &Injected::GravityCompliance { k: vec![1e-6; n] },
+        )
+        .expect("valid");
+        assert_eq!(
+            recorded.gravity_model(),
+            hapcal_runtime::GravityModel::Masses
+        );
+        let own = hapcal_runtime::Robot::from_urdf_str(&setup.urdf, "humanoid.urdf", None, &TIPS)
+            .expect("valid");
+        let (mut a, mut b) = (recorded.workspace(), own.workspace());
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        for _ in 0..20 {
+            let q: Vec<f64> = (setup.robot.limits.iter())
+                .map(|(lo, hi)| rng.random_range(*lo..*hi))
+                .collect();
+            let (mut ta, mut tb) = (vec![0.0; n], vec![0.0; n]);
+            recorded
+                .gravity_torques(&q, &mut a, &mut ta)
+                .expect("valid");
+            own.gravity_torques(&q, &mut b, &mut tb).expect("valid");
+            // Torques up to ~100 N·m (the torso carries ~50 kg); rounding only.
+            for j in 0..n {
+                assert!(
+                    (ta[j] - tb[j]).abs() < 1e-9,
+                    "joint {j}: {} vs {}",
+                    ta[j],
+                    tb[j]
+                );
+            }
+            assert!(tb.iter().any(|t| t.abs() > 1.0), "{tb:?}");
         }
     }
 

@@ -36,9 +36,14 @@ fn main() -> Result<()> {
         format!(" --rows {rows}")
     };
     let command = format!("cargo xtask blind-test-tree --cases {cases}{rows_flag}");
+    // The arms' limits (the widest joints of the humanoid).
+    let setup = tree_blind::load_setup()?;
+    let arm_limit_rad = (setup.robot.limits.iter())
+        .map(|(lo, hi)| lo.abs().max(hi.abs()))
+        .fold(0.0, f64::max);
     println!(
         "{}",
-        tree_blind::report_markdown(&outcomes, &command, &machine, rows)
+        tree_blind::report_markdown(&outcomes, arm_limit_rad, &command, &machine, rows)
     );
     Ok(())
 }
