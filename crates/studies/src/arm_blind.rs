@@ -39,7 +39,7 @@ use hapcal_calibrate::measured::{Robot, robot_from_urdf};
 use hapcal_calibrate::setup::{SetupInput, SetupReport, Severity, check_setup};
 use hapcal_contract::Effect;
 use hapcal_diagnose::Verdict;
-use hapcal_diagnose::arm::{ARM_LIBRARY, ArmConfig, REPEAT_TOLERANCE, diagnose_arm};
+use hapcal_diagnose::arm::{ARM_LIBRARY, ArmConfig, ArmDiagnosis, REPEAT_TOLERANCE, diagnose_arm};
 use hapcal_io::{
     MarkerSample, MeasuredRow, MeasurementTable, SocketPlacement, SocketSamples, Units,
 };
@@ -973,10 +973,7 @@ pub fn run_case_with(
     let start = std::time::Instant::now();
     let baseline = simulate_baseline(case, setup, n_rows)?;
     let d = diagnose_arm(&baseline, cfg)?;
-    let open: Vec<(Effect, Effect)> = (d.steps.iter())
-        .filter(|s| d.verdict.effects().contains(&s.effect))
-        .flat_map(|s| s.alike.iter().map(|&a| (s.effect, a)))
-        .collect();
+    let open = open_torque_models(&d);
     Ok(ArmOutcome {
         case: case.clone(),
         right: case.is_right_with(&d.verdict, &open),
@@ -993,6 +990,15 @@ pub fn run_case_with(
             .collect(),
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Each named compliance of `d`'s verdict whose torque model the diagnosis left open, with
+/// the other model ([`hapcal_diagnose::arm::ArmStep::alike`]).
+pub(crate) fn open_torque_models(d: &ArmDiagnosis) -> Vec<(Effect, Effect)> {
+    (d.steps.iter())
+        .filter(|s| d.verdict.effects().contains(&s.effect))
+        .flat_map(|s| s.alike.iter().map(|&a| (s.effect, a)))
+        .collect()
 }
 
 /// Simulates `case` (`n_rows` positions configurations) and fits its geometric baseline, the

@@ -62,7 +62,7 @@ use hapcal_contract::{
     TorqueSource,
 };
 use hapcal_diagnose::Verdict;
-use hapcal_diagnose::arm::{ArmConfig, REPEAT_TOLERANCE, diagnose_arm};
+use hapcal_diagnose::arm::{ARM_LIBRARY, ArmConfig, REPEAT_TOLERANCE, diagnose_arm};
 use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
 use hapcal_runtime::Pose;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3, Vector4};
@@ -72,8 +72,8 @@ use rand_distr::{Distribution, Normal, StandardNormal};
 use serde::Serialize;
 
 use crate::arm_blind::{
-    ArmCaseKind, Injected, apply_point_effects, names_right, pct, signed, vector, verdict_or_error,
-    verdict_words, wilson_95,
+    ArmCaseKind, Injected, apply_point_effects, names_right, open_torque_models, pct, signed,
+    vector, verdict_or_error, verdict_words, wilson_95,
 };
 
 /// Rows of a case (the last [`TEST_FRACTION`] held out).
@@ -103,16 +103,10 @@ const GRAVITY_M_S2: f64 = 9.806_65;
 /// The library effects drawn: [`hapcal_diagnose::arm::ARM_LIBRARY`] without instrument
 /// scale and link deflection (see the module docs), and transversal compliance.
 pub fn library() -> Vec<Effect> {
-    vec![
-        Effect::GravityCompliance,
-        Effect::LumpedCompliance,
-        Effect::FirstHarmonic,
-        Effect::SecondHarmonic,
-        Effect::Backlash,
-        Effect::GearRatio,
-        Effect::ThermalDrift,
-        Effect::TransversalCompliance,
-    ]
+    (ARM_LIBRARY.into_iter())
+        .filter(|e| !matches!(e, Effect::InstrumentScale | Effect::LinkDeflection))
+        .chain([Effect::TransversalCompliance])
+        .collect()
 }
 
 /// One blind case.
@@ -698,10 +692,7 @@ pub fn run_case(case: &TreeCase, setup: &TreeSetup, n_rows: usize) -> Result<Tre
     };
     let baseline = baseline_from_tables(&setup.robot, vec![sim.table], Vec::new(), &plan, false)?;
     let d = diagnose_arm(&baseline, &ArmConfig::default())?;
-    let open: Vec<(Effect, Effect)> = (d.steps.iter())
-        .filter(|s| d.verdict.effects().contains(&s.effect))
-        .flat_map(|s| s.alike.iter().map(|&a| (s.effect, a)))
-        .collect();
+    let open = open_torque_models(&d);
     Ok(TreeOutcome {
         case: case.clone(),
         right: case.is_right_with(&d.verdict, &open),
