@@ -10,6 +10,7 @@ mod haptic;
 mod mukca;
 mod real_data;
 mod tidy;
+mod tree_blind;
 
 use anyhow::Result;
 use clap::Parser;
@@ -52,6 +53,14 @@ enum Task {
         /// counts (nothing is written).
         #[arg(long)]
         setup_check: bool,
+    },
+    /// Blind test of the serial-arm diagnosis on a two-arm tree (release build): `--cases`
+    /// simulated humanoid recordings (crates/studies/src/tree_blind.rs) with a withheld
+    /// effect (or none), into docs/results/diagnose-tree-blind.md.
+    BlindTestTree {
+        /// Number of cases (at least 16 per class: none, one, two, outside in turn).
+        #[arg(long, default_value_t = 64)]
+        cases: usize,
     },
     /// Calibrate every MUKCa split of docs/results/mukca.md with the release binary and write
     /// the table (ours beside MUKCa's own optimiser); `--check` only verifies the acceptance
@@ -134,6 +143,7 @@ fn main() -> Result<()> {
         Task::Bench { peers, criterion } => bench::run(&sh, peers, criterion),
         Task::BlindTest { cases } => blind_test(&sh, cases),
         Task::BlindTestArm { cases, setup_check } => arm_blind::run(&sh, cases, setup_check),
+        Task::BlindTestTree { cases } => tree_blind::run(&sh, cases),
         Task::ReproduceTables { check } => reproduce_tables(&sh, check, None),
     }
 }

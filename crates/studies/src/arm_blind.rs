@@ -40,7 +40,7 @@ use hapcal_calibrate::measured::{Robot, robot_from_urdf};
 use hapcal_calibrate::setup::{SetupInput, SetupReport, Severity, check_setup};
 use hapcal_contract::Effect;
 use hapcal_diagnose::Verdict;
-use hapcal_diagnose::arm::{ARM_LIBRARY, ArmConfig, REPEAT_TOLERANCE, diagnose_arm};
+use hapcal_diagnose::arm::{ARM_LIBRARY, ArmConfig, ArmDiagnosis, REPEAT_TOLERANCE, diagnose_arm};
 use hapcal_io::{
     MarkerSample, MeasuredRow, MeasurementTable, SocketPlacement, SocketSamples, Units,
 };
@@ -239,6 +239,15 @@ pub enum Injected {
         /// Displacement at the ends, m.
         v: [f64; 3],
     },
+    /// A transversal compliance of every revolute joint (the joint's placement tilts by
+    /// `c_j·m⊥_j`, `m⊥` the gravity moment normal to its axis; the calibration's
+    /// `transversal.<joint>`), under the loads of the joint compliance beside it, or of the
+    /// link masses alone; used by the tree blind test ([`crate::tree_blind`]).
+    TransversalCompliance {
+        /// Compliance per joint (0 for a prismatic joint), rad/(N·m) (rad/m under lumped
+        /// unit weights).
+        c: Vec<f64>,
+    },
     /// Two library effects at once (their joint-angle errors and displacements add).
     Pair(Box<Injected>, Box<Injected>),
 }
@@ -257,6 +266,7 @@ impl Injected {
             Injected::ThermalDrift { .. } => Some(Effect::ThermalDrift),
             Injected::LinkDeflection { .. } => Some(Effect::LinkDeflection),
             Injected::InstrumentScale { .. } => Some(Effect::InstrumentScale),
+            Injected::TransversalCompliance { .. } => Some(Effect::TransversalCompliance),
             _ => None,
         }
     }
@@ -326,21 +336,32 @@ impl ArmCase {
     /// left open (`open`: the named compliance and the other torque model it predicts alike,
     /// [`hapcal_diagnose::arm::ArmStep::alike`]) also stands for that other model.
     pub fn is_right_with(&self, verdict: &Verdict, open: &[(Effect, Effect)]) -> bool {
-        let sorted = |v: &[Effect]| {
-            let mut n = v.to_vec();
-            n.sort();
-            n
-        };
-        let expected = sorted(self.expected().effects());
-        let named = verdict.effects();
-        sorted(named) == expected
-            || open.iter().any(|&(named_model, alike)| {
-                let swapped: Vec<Effect> = (named.iter())
-                    .map(|&e| if e == named_model { alike } else { e })
-                    .collect();
-                expected.contains(&alike) && sorted(&swapped) == expected
-            })
+        names_right(self.expected().effects(), verdict, open)
     }
+}
+
+/// Whether `verdict` names exactly the effects `expected` (in any order), a named compliance
+/// whose torque model the diagnosis left open (`open`: the named effect and the other model
+/// it predicts alike) standing for either model.
+pub(crate) fn names_right(
+    expected: &[Effect],
+    verdict: &Verdict,
+    open: &[(Effect, Effect)],
+) -> bool {
+    let sorted = |v: &[Effect]| {
+        let mut n = v.to_vec();
+        n.sort();
+        n
+    };
+    let expected = sorted(expected);
+    let named = verdict.effects();
+    sorted(named) == expected
+        || open.iter().any(|&(named_model, alike)| {
+            let swapped: Vec<Effect> = (named.iter())
+                .map(|&e| if e == named_model { alike } else { e })
+                .collect();
+            expected.contains(&alike) && sorted(&swapped) == expected
+        })
 }
 
 /// The kind of case `i`, stratified: of every 8, one clean, one outside, five single library
@@ -355,13 +376,13 @@ pub fn kind_of(i: u64) -> ArmCaseKind {
 }
 
 /// Magnitude drawn uniformly in `[lo, hi]` with a random sign.
-fn signed(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
+pub(crate) fn signed(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
     let m = rng.random_range(lo..=hi);
     if rng.random_bool(0.5) { m } else { -m }
 }
 
 /// A vector of norm uniform in `[lo, hi]` in a uniformly random direction.
-fn vector(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> [f64; 3] {
+pub(crate) fn vector(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> [f64; 3] {
     let v =
         Vector3::from_fn(|_, _| StandardNormal.sample(rng)).normalize() * rng.random_range(lo..=hi);
     [v.x, v.y, v.z]
@@ -753,7 +774,7 @@ fn simulate_positions(
 }
 
 /// Adds the displacements of the measurement-frame effects to `points` (time = index).
-fn apply_point_effects(
+pub(crate) fn apply_point_effects(
     injected: &Injected,
     points: &mut [Vector3<f64>],
     t_mean: f64,
@@ -953,10 +974,7 @@ pub fn run_case_with(
     let start = std::time::Instant::now();
     let baseline = simulate_baseline(case, setup, n_rows)?;
     let d = diagnose_arm(&baseline, cfg)?;
-    let open: Vec<(Effect, Effect)> = (d.steps.iter())
-        .filter(|s| d.verdict.effects().contains(&s.effect))
-        .flat_map(|s| s.alike.iter().map(|&a| (s.effect, a)))
-        .collect();
+    let open = open_torque_models(&d);
     Ok(ArmOutcome {
         case: case.clone(),
         right: case.is_right_with(&d.verdict, &open),
@@ -973,6 +991,15 @@ pub fn run_case_with(
             .collect(),
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Each named compliance of `d`'s verdict whose torque model the diagnosis left open, with
+/// the other model ([`hapcal_diagnose::arm::ArmStep::alike`]).
+pub(crate) fn open_torque_models(d: &ArmDiagnosis) -> Vec<(Effect, Effect)> {
+    (d.steps.iter())
+        .filter(|s| d.verdict.effects().contains(&s.effect))
+        .flat_map(|s| s.alike.iter().map(|&a| (s.effect, a)))
+        .collect()
 }
 
 /// Simulates `case` (`n_rows` positions configurations) and fits its geometric baseline, the
@@ -1285,14 +1312,15 @@ pub struct ArmSummary {
 }
 
 /// A verdict as the report writes it, or `error: …`.
-fn verdict_words(v: &Result<Verdict, String>) -> String {
+pub(crate) fn verdict_words(v: &Result<Verdict, String>) -> String {
     match v {
         Ok(v) => v.to_string(),
         Err(e) => format!("error: {e}"),
     }
 }
 
-fn verdict_or_error<S: serde::Serializer>(
+/// Serialises a verdict as the report writes it ([`verdict_words`]).
+pub(crate) fn verdict_or_error<S: serde::Serializer>(
     v: &Result<Verdict, String>,
     s: S,
 ) -> Result<S::Ok, S::Error> {
@@ -1356,7 +1384,8 @@ pub fn summarise(outcomes: &[ArmOutcome]) -> ArmSummary {
     s
 }
 
-fn pct((a, b): (usize, usize)) -> String {
+/// `a/b (p %)`, or `–` for no case.
+pub(crate) fn pct((a, b): (usize, usize)) -> String {
     if b == 0 {
         "–".into()
     } else {

@@ -11,5 +11,6 @@ pub mod force;
 pub mod paper;
 pub mod pose_study;
 pub mod reproduce;
+pub mod tree_blind;
 
 pub use hapcal_calibrate::project_root;
