@@ -6,12 +6,15 @@
 //!   instrument frame, the marker offset and the geometric model fitted
 //!   ([`hapcal_calibrate::measured::calibrate_measured`], model given, no cross-validation);
 //! - `positions_200_auto`: the same with the model chosen on the ladder by cross-validation;
-//! - `humanoid_500_auto`: the whole ladder (frames only → … → transversal compliance, every
-//!   rung through repeated blocked cross-validation) on the simulated two-arm humanoid
-//!   (`tests/sim/humanoid.rs`: 17 joints on two tips, a CAD mass on every link), 500 rows of
-//!   two markers;
+//! - `humanoid_500_auto`: the whole ladder (frames only → … → isotropic and per-axis
+//!   transversal compliance → harmonics, every rung through repeated blocked
+//!   cross-validation) on the simulated two-arm humanoid (`tests/sim/humanoid.rs`: 17 joints
+//!   on two tips, a CAD mass on every link), 500 rows of two markers;
 //! - `humanoid19_500_auto`: the same on the humanoid with a torso of five joints (19 joints on
-//!   two tips), the size of a real humanoid upper body.
+//!   two tips), the size of a real humanoid upper body;
+//! - `ladder_humanoid`: the whole ladder at the size of a real humanoid's recording: the
+//!   19-joint humanoid, 350 configurations of two markers (the ladder's time budget, 1 s on
+//!   two cores, is set at this size).
 #![allow(missing_docs, clippy::unwrap_used)] // criterion's macros generate undocumented items
 
 #[path = "../tests/sim/humanoid.rs"]
@@ -161,6 +164,17 @@ fn bench(c: &mut Criterion) {
     let truth = humanoid::truth(&robot, 11);
     let table = humanoid::table(&robot, &truth, &[0, 1], 500, 12);
     group.bench_function("humanoid19_500_auto", |b| {
+        b.iter(|| {
+            calibrate_measured(&robot, std::slice::from_ref(black_box(&table)), &[], &cfg).unwrap()
+        })
+    });
+    group.finish();
+    // Ten samples of about a second (the fewest criterion takes): well under a minute.
+    let mut group = c.benchmark_group("ladder");
+    group.sample_size(10);
+    group.warm_up_time(std::time::Duration::from_secs(1));
+    let table = humanoid::table(&robot, &truth, &[0, 1], 350, 13);
+    group.bench_function("ladder_humanoid", |b| {
         b.iter(|| {
             calibrate_measured(&robot, std::slice::from_ref(black_box(&table)), &[], &cfg).unwrap()
         })

@@ -69,9 +69,9 @@ pub fn help(choice: ModelChoice) -> &'static str {
                 2 standard errors of the held-out difference (and, where the calibration will be \
                 used beyond the training range of a joint, do no worse on folds that hold out \
                 that end of the range). Measurement files: frames-only, joint-offsets, \
-                geometric, compliance, transversal-compliance, then harmonic or harmonic2. \
-                Socket recordings and distance logs: geometric, then compliance. For a robot \
-                with published link masses, mass-compliance and actuator-compliance are \
+                geometric, compliance, transversal-compliance or transversal-axes, then harmonic \
+                or harmonic2. Socket recordings and distance logs: geometric, then compliance. \
+                For a robot with published link masses, mass-compliance and actuator-compliance are \
                 alternatives to compliance (the lowest held-out error of those that pass). A \
                 haptic device's logs: geometric, then transmissions (when the logs have \
                 external-encoder columns), then compliance (when the device file has a handle \
@@ -111,8 +111,8 @@ pub fn help(choice: ModelChoice) -> &'static str {
         ModelName::TransversalAxes => {
             "Compliance plus two transversal compliances per revolute joint, one about each of \
              the two axes of the link's frame normal to the joint axis: a link that bends more \
-             easily one way than the other (URDF robots). Not a rung of auto (its fit costs \
-             about three times transversal-compliance's)."
+             easily one way than the other (URDF robots). A rung of auto on measurement files, \
+             the alternative of transversal-compliance."
         }
         ModelName::Harmonic => {
             "Geometric plus once-per-revolution harmonic angle errors on every joint (encoder \
@@ -419,8 +419,8 @@ pub fn terms(model: ModelName, joint_names: &[String], masses: &[LinkMass]) -> R
 /// the caller's filter.
 ///
 /// - measurement files: frames-only → joint-offsets → geometric → compliance →
-///   transversal-compliance → {harmonic, harmonic2} (the diagnosis names joint harmonics on
-///   these data: docs/engine.md);
+///   {transversal-compliance, transversal-axes} → {harmonic, harmonic2} (the diagnosis names
+///   joint harmonics on these data: docs/engine.md);
 /// - socket recordings and distance logs (no frame to fit: geometric is the bottom): geometric
 ///   → compliance (or its published-mass alternatives);
 /// - a haptic device's logs: geometric → transmissions (when the logs have external-encoder
@@ -438,11 +438,10 @@ pub fn ladder(kind: DataKind, published_masses: bool) -> Vec<Vec<ModelName>> {
             vec![M::JointOffsets],
             vec![M::Geometric],
             compliance,
-            // Transversal-axes is not a rung: on the simulated humanoid it costs three times
-            // the isotropic rung's fit (more pruning rounds and equilibrium refits, and more
-            // on a 19-joint tree), which the ladder's time budget does not carry; it is
-            // asked for by name where a link is known to bend one way more than the other.
-            vec![M::TransversalCompliance],
+            // Isotropic or per-axis transversal compliance: a link may bend more easily one
+            // way than the other; the per-axis rung is taken only where it beats the rung
+            // chosen below by the margin, with the lower held-out error of the two.
+            vec![M::TransversalCompliance, M::TransversalAxes],
             // The diagnosis names joint harmonics on these data, so their models are rungs;
             // the joint-range folds stop them where they would extrapolate (docs/engine.md).
             vec![M::Harmonic, M::Harmonic2],
@@ -665,6 +664,14 @@ mod tests {
                 }
             }
         }
+        // Measurement files: isotropic and per-axis transversal compliance are one level's
+        // alternatives.
+        let transversal = [ModelName::TransversalCompliance, ModelName::TransversalAxes];
+        assert!(
+            ladder(DataKind::Measurements, false).contains(&transversal.to_vec()),
+            "{:?}",
+            ladder(DataKind::Measurements, false)
+        );
     }
 
     #[test]
