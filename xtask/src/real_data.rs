@@ -162,9 +162,8 @@ pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
          published; `--test-last 0.3` trains on the first 70 % of the rows in file order and \
          tests on the rest. The model is chosen by blocked cross-validation on the training rows \
          over the ladder frames only → joint offsets → geometric → compliance → transversal \
-         compliance → joint harmonics (docs/engine.md, the rule that picks a rung); frames \
-         only fits \
-         the instrument and marker frames to the nominal kinematics. Errors on the test rows: \
+         compliance (isotropic or per axis) → joint harmonics (docs/engine.md, the rule that \
+         picks a rung); frames only fits the instrument and marker frames to the nominal kinematics. Errors on the test rows: \
          3-D position error of every marker sample (mean / RMS / max, mm) and, for pose data, \
          the angle of the relative rotation (mean / RMS / max, °).\n",
     );
