@@ -241,7 +241,7 @@ fn open(chromium: &Path, r: &Report, dir: &Path) -> Result<Vec<String>> {
         .filter(|l| l.contains("CONSOLE") || l.contains("Uncaught"))
         .map(|l| format!("console: {}", l.trim()))
         .collect();
-    let (Some(a), Some(b)) = (dom.find("HTML-CHECK-BEGIN"), dom.find("HTML-CHECK-END")) else {
+    let (Some(a), Some(b)) = (dom.rfind("HTML-CHECK-BEGIN"), dom.rfind("HTML-CHECK-END")) else {
         problems.push(format!(
             "the check script did not run (chromium exit status {})",
             out.status
