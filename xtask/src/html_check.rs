@@ -4,7 +4,7 @@
 //! a console error, a figure of zero size, text that overflows its box, a missing figure, or a
 //! kuka_14 figure whose numbers differ from fixtures/golden/ours/html-kuka_14.json
 //! (`UPDATE_GOLDEN=1` rewrites that file and fails). `--figures` also writes the README's PNGs
-//! of the UR10 report's ladder and residual-against-joint figures into docs/figures/.
+//! of the simulated humanoid's ladder and residual-against-joint figures into docs/figures/.
 
 use anyhow::{Context, Result, bail};
 use serde_json::Value;
@@ -166,7 +166,8 @@ pub(crate) fn run(sh: &Shell, bin: Option<&Path>, figures: bool) -> Result<()> {
     }
     failures.extend(golden(&kuka)?);
     if figures {
-        let ur10 = dir.join("recording-0.html");
+        // The simulated humanoid: a compliance rung taken, joint-dependent frames-only errors.
+        let humanoid = dir.join("recording-3.html");
         for (id, png) in [
             ("fig-ladder", "docs/figures/report-ladder.png"),
             (
@@ -174,7 +175,7 @@ pub(crate) fn run(sh: &Shell, bin: Option<&Path>, figures: bool) -> Result<()> {
                 "docs/figures/report-residual-joint.png",
             ),
         ] {
-            screenshot(&chromium, &ur10, id, Path::new(png), dir)?;
+            screenshot(&chromium, &humanoid, id, Path::new(png), dir)?;
             println!("html-check: wrote {png}");
         }
     }

@@ -282,7 +282,7 @@ pub(crate) fn hbars(
     mark: f64,
 ) -> Figure {
     let n = names.len().max(1);
-    let height = (18 * n as u32 + 90).clamp(160, 1600);
+    let height = (18 * n as u32 + 90).clamp(160, 4000);
     let (lo, hi) = padded(values.iter().copied().chain([-mark, mark]), true);
     let svg = svg((760, height), |root| {
         let mut chart = ChartBuilder::on(root)

@@ -317,7 +317,7 @@ p.command code { white-space: pre-wrap; overflow-wrap: anywhere; }
 td.hash code { overflow-wrap: anywhere; word-break: break-all; }
 table { border-collapse: collapse; margin: 0.5em 0; }
 th, td { border: 1px solid #ccc; padding: 0.15em 0.5em; text-align: left; vertical-align: top;
-  overflow-wrap: anywhere; }
+  overflow-wrap: break-word; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
 div.table { max-width: 100%; overflow-x: auto; }
 table.inputs { table-layout: fixed; width: 100%; }
