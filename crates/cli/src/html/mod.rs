@@ -104,7 +104,7 @@ pub fn write(path: &Path, html: &str, inputs: &[&Path]) -> Result<()> {
 /// that it is none of `inputs`).
 ///
 /// # Errors
-/// As [`write`], before anything is computed.
+/// As [`write()`], before anything is computed.
 pub fn check(path: &Path, inputs: &[&Path]) -> Result<()> {
     crate::calibrate::check_extension(path, &["html", "htm"], "the HTML report", true)?;
     crate::calibrate::check_output(path, inputs)
@@ -114,7 +114,7 @@ pub fn check(path: &Path, inputs: &[&Path]) -> Result<()> {
 /// `path`, with this process's command line and the files' hashes.
 ///
 /// # Errors
-/// As [`write`].
+/// As [`write()`].
 pub fn write_calibration(
     path: &Path,
     report: &hapcal_calibrate::report::CalibrationReport,
@@ -132,7 +132,7 @@ pub fn write_calibration(
 /// `maps_svg`) made from `inputs` (the device first) to `path`.
 ///
 /// # Errors
-/// As [`write`].
+/// As [`write()`].
 pub fn write_diagnosis(
     path: &Path,
     view: &DiagnosisView,
