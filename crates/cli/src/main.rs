@@ -875,14 +875,14 @@ fn run(cli: Cli) -> Result<()> {
                 )?;
                 let (mut d, warnings) = hapcal::diagnose::run(&plan)?;
                 setup_verdict(&mut d.verdict, &mut d.notes, accepted);
-                for w in warnings {
+                for w in &warnings {
                     note!("hapcal: warning: {w}");
                 }
                 (
                     hapcal::diagnose::render(&d),
                     serde_json::to_string_pretty(&d)?,
                     hapcal::diagnose::residual_map_svg(&d),
-                    hapcal::html::DiagnosisView::haptic(&d),
+                    hapcal::html::DiagnosisView::haptic(&d).with_warnings(warnings),
                 )
             } else {
                 hapcal_diagnose::arm::robot_baseline(baseline.as_deref())?;
@@ -915,14 +915,14 @@ fn run(cli: Cli) -> Result<()> {
                 };
                 let (mut d, warnings) = hapcal::diagnose_arm::run_arm(&plan, &cfg)?;
                 setup_verdict(&mut d.verdict, &mut d.notes, accepted);
-                for w in warnings {
+                for w in &warnings {
                     note!("hapcal: warning: {w}");
                 }
                 (
                     hapcal::diagnose_arm::render_arm(&d),
                     serde_json::to_string_pretty(&d)?,
                     hapcal::diagnose_arm::arm_map_svg(&d),
-                    hapcal::html::DiagnosisView::arm(&d),
+                    hapcal::html::DiagnosisView::arm(&d).with_warnings(warnings),
                 )
             };
             if json {

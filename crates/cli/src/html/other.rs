@@ -64,6 +64,12 @@ impl DiagnosisView {
         }
     }
 
+    /// The view with the diagnosis' `warnings` (as the command prints them) before its notes.
+    pub fn with_warnings(mut self, warnings: Vec<String>) -> DiagnosisView {
+        self.notes.splice(0..0, warnings);
+        self
+    }
+
     /// A serial arm's diagnosis.
     pub fn arm(d: &ArmDiagnosis) -> DiagnosisView {
         DiagnosisView {
@@ -123,7 +129,7 @@ pub fn diagnosis_page(
         view.gap.1
     ));
     if !view.notes.is_empty() {
-        page.section("warnings", "Notes");
+        page.section("warnings", "Warnings and notes");
         page.list("warnings", &view.notes);
     }
     for f in diagnosis_figures(view, maps_svg) {
