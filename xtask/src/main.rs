@@ -7,6 +7,7 @@ mod bench;
 mod deny;
 mod diagnose_real;
 mod haptic;
+mod html_check;
 mod mukca;
 mod real_data;
 mod tidy;
@@ -93,6 +94,15 @@ enum Task {
         #[arg(long)]
         check: bool,
     },
+    /// The HTML reports (`--report`) of the bundled calibrations, a diagnosis and a prediction
+    /// opened in headless Chromium: fails on a console error, a figure of zero size, text that
+    /// overflows its box, a missing figure, or kuka_14's figures differing from
+    /// fixtures/golden/ours/html-kuka_14.json (UPDATE_GOLDEN=1 rewrites it and fails).
+    HtmlCheck {
+        /// Also write the README's PNGs (docs/figures/report-*.png).
+        #[arg(long)]
+        figures: bool,
+    },
     /// `cargo deny check` (deny.toml): licences, sources, duplicate versions and, with network
     /// access, the RustSec advisories; installs cargo-deny on first use.
     Deny,
@@ -131,6 +141,7 @@ fn main() -> Result<()> {
         Task::Mukca { check } => mukca::run(&sh, check),
         Task::HapticHeldout { check } => haptic::run(&sh, check),
         Task::RealData { check } => real_data::run(&sh, check, None),
+        Task::HtmlCheck { figures } => html_check::run(&sh, None, figures),
         Task::ProptestFresh => {
             cmd!(sh, "cargo test --workspace --release --quiet")
                 .env_remove("PROPTEST_RNG_SEED")
@@ -238,7 +249,9 @@ fn ci(sh: &Shell) -> Result<()> {
     // The published recordings: no calibrated model worse than frames only held out.
     real_data::run(sh, true, Some(&hapcal))?;
     // The diagnosis of the real robots keeps its verdicts.
-    diagnose_real::run(sh, true, Some(&hapcal))
+    diagnose_real::run(sh, true, Some(&hapcal))?;
+    // The HTML reports open in a browser with every figure, kuka_14's figures unchanged.
+    html_check::run(sh, Some(&hapcal), false)
 }
 
 /// An executable that cargo built: its package, target and path (from `--message-format=json`).

@@ -86,6 +86,11 @@ const DATASETS: &[Dataset] = &[
     },
 ];
 
+/// Each bundled recording's name and its `hapcal calibrate` arguments (without the split).
+pub(crate) fn recordings() -> impl Iterator<Item = (&'static str, &'static [&'static str])> {
+    DATASETS.iter().map(|d| (d.name, d.args))
+}
+
 /// Fraction of each file's rows, the last in file order, held out.
 const TEST_LAST: &str = "0.3";
 

@@ -1759,6 +1759,8 @@ pub fn calibrate_measured(
                 position_after_m: e1.position,
                 distance_before_m: e0.distance,
                 distance_after_m: e1.distance,
+                rows: crate::report::sample_rows(&tables[ti]),
+                joints: crate::report::joint_units(&robot.joint_names, &robot.prismatic),
             });
             let before = figures(&frames_model, tables, ti);
             let after = figures(&model, tables, ti);
@@ -2142,6 +2144,7 @@ fn coverage(
         sides,
         chosen,
         stopped,
+        workspace_q: workspace.to_vec(),
     })
 }
 

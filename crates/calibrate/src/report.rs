@@ -265,6 +265,56 @@ pub struct SampleErrors {
     /// The same with the calibrated model, m.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub distance_after_m: Vec<f64>,
+    /// The rows behind the samples, in file order: what the figures of the HTML report plot the
+    /// errors against (not serialised: the JSON report is unchanged).
+    #[serde(skip)]
+    pub rows: Vec<SampleRow>,
+    /// The robot's joints in chain order, each with the unit of its readings (`rad`, or `m`
+    /// for a prismatic joint); not serialised.
+    #[serde(skip)]
+    pub joints: Vec<(String, &'static str)>,
+}
+
+/// One row of a measurement file as the figures see it: its line, its joint readings and the
+/// markers its position samples belong to.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SampleRow {
+    /// 1-based line in the file.
+    pub line: u64,
+    /// Joint readings in chain order, rad (m for a prismatic joint).
+    pub q: Vec<f64>,
+    /// The 0-based marker of each of the row's position samples, in the order of
+    /// [`SampleErrors::position_before_m`].
+    pub markers: Vec<usize>,
+    /// Whether the row has a distance sample (one entry of [`SampleErrors::distance_before_m`]).
+    pub distance: bool,
+}
+
+/// The rows of `table` as [`SampleErrors::rows`] holds them.
+pub fn sample_rows(table: &hapcal_io::MeasurementTable) -> Vec<SampleRow> {
+    (table.rows.iter())
+        .map(|r| SampleRow {
+            line: r.line,
+            q: r.q.clone(),
+            markers: r.markers.iter().map(|m| m.marker).collect(),
+            distance: r.distance_m.is_some(),
+        })
+        .collect()
+}
+
+/// The joints named `names` (chain order) with the unit of their readings: `m` where
+/// `prismatic` says so, else `rad` ([`SampleErrors::joints`]).
+pub fn joint_units(names: &[String], prismatic: &[bool]) -> Vec<(String, &'static str)> {
+    (names.iter().enumerate())
+        .map(|(j, n)| {
+            let unit = if prismatic.get(j).copied().unwrap_or(false) {
+                "m"
+            } else {
+                "rad"
+            };
+            (n.clone(), unit)
+        })
+        .collect()
 }
 
 /// One rung's cross-validation score.
@@ -355,6 +405,10 @@ pub struct Coverage {
     /// The rungs the joint-range folds stopped: each beat the rung chosen below it on the
     /// blocked folds but not on the joint-range folds.
     pub stopped: Vec<RangeStop>,
+    /// The workspace configurations (rad, m for a prismatic joint; chain order), for the
+    /// figures of the HTML report (not serialised).
+    #[serde(skip)]
+    pub workspace_q: Vec<Vec<f64>>,
 }
 
 /// One side of one joint's training range, and what lies beyond it.

@@ -6,6 +6,7 @@
 pub mod compensate;
 pub mod diagnose;
 pub mod diagnose_arm;
+pub mod html;
 pub mod plan_args;
 pub mod predict;
 pub mod report;

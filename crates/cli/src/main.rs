@@ -121,6 +121,10 @@ enum Command {
         /// Print the report as one JSON document instead of a table.
         #[arg(long)]
         json: bool,
+        /// Also write the report as one self-contained HTML file (figures, tables, the text
+        /// report; nothing fetched, readable offline).
+        #[arg(long)]
+        report: Option<PathBuf>,
         /// Model to identify (--help says what each value fits to each kind of data).
         ///
         /// Which values apply, and what they fit, depends on the data: socket recordings and
@@ -267,6 +271,10 @@ enum Command {
         /// Also write the residual maps (SVG) to this file; without it no file is written.
         #[arg(long)]
         svg: Option<PathBuf>,
+        /// Also write the diagnosis as one self-contained HTML file (the verdict, the
+        /// candidates, the residual maps, the text report).
+        #[arg(long)]
+        report: Option<PathBuf>,
         /// Diagnose measurement files as they are even when the setup check finds a mistake
         /// (hapcal check).
         #[arg(long)]
@@ -454,6 +462,7 @@ fn run(cli: Cli) -> Result<()> {
             workspace,
             out,
             json,
+            report,
             model,
             socket_distance_m,
             folds,
@@ -508,6 +517,9 @@ fn run(cli: Cli) -> Result<()> {
             if let Some(out) = &out {
                 calibrate::check_outputs(&plan.device, out, &inputs)?;
             }
+            if let Some(report) = &report {
+                hapcal::html::check(report, &[&[plan.device.as_path()], &inputs[..]].concat())?;
+            }
             plan.validate()?;
             // The setup check first: socket files in degrees or with swapped columns are named
             // before the reader's joint-limit check reports the first reading past a limit.
@@ -521,6 +533,10 @@ fn run(cli: Cli) -> Result<()> {
                 ));
             } else {
                 emit(&hapcal::report::render(&outcome.report));
+            }
+            if let Some(path) = &report {
+                hapcal::html::write_calibration(path, &outcome.report, &plan.device, &inputs)?;
+                note!("hapcal: wrote {}", path.display());
             }
             if let Some(out) = out {
                 for path in calibrate::write_outputs_beside(&outcome, &out, &inputs)? {
@@ -790,6 +806,7 @@ fn run(cli: Cli) -> Result<()> {
             folds,
             json,
             svg,
+            report,
             accept_setup,
         } => {
             let mut inputs: Vec<&std::path::Path> = vec![device.as_path()];
@@ -797,6 +814,9 @@ fn run(cli: Cli) -> Result<()> {
             if let Some(svg) = &svg {
                 calibrate::check_extension(svg, &["svg"], "the residual maps", false)?;
                 calibrate::check_output(svg, &inputs)?;
+            }
+            if let Some(report) = &report {
+                hapcal::html::check(report, &inputs)?;
             }
             if data.is_empty() {
                 anyhow::bail!("--data: give the log or the measurements to diagnose");
@@ -806,7 +826,7 @@ fn run(cli: Cli) -> Result<()> {
                 .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
                 && hapcal_io::read_device(&device)
                     .is_ok_and(|d| !d.capstans.is_empty() || d.parallelogram.is_some());
-            let (text, json_text, svg_text) = if haptic {
+            let (text, json_text, svg_text, view) = if haptic {
                 if data.len() != 1 || !test.is_empty() {
                     anyhow::bail!("a haptic device is diagnosed from one log: --data <log.csv>");
                 }
@@ -855,13 +875,14 @@ fn run(cli: Cli) -> Result<()> {
                 )?;
                 let (mut d, warnings) = hapcal::diagnose::run(&plan)?;
                 setup_verdict(&mut d.verdict, &mut d.notes, accepted);
-                for w in warnings {
+                for w in &warnings {
                     note!("hapcal: warning: {w}");
                 }
                 (
                     hapcal::diagnose::render(&d),
                     serde_json::to_string_pretty(&d)?,
                     hapcal::diagnose::residual_map_svg(&d),
+                    hapcal::html::DiagnosisView::haptic(&d).with_warnings(warnings),
                 )
             } else {
                 hapcal_diagnose::arm::robot_baseline(baseline.as_deref())?;
@@ -894,13 +915,14 @@ fn run(cli: Cli) -> Result<()> {
                 };
                 let (mut d, warnings) = hapcal::diagnose_arm::run_arm(&plan, &cfg)?;
                 setup_verdict(&mut d.verdict, &mut d.notes, accepted);
-                for w in warnings {
+                for w in &warnings {
                     note!("hapcal: warning: {w}");
                 }
                 (
                     hapcal::diagnose_arm::render_arm(&d),
                     serde_json::to_string_pretty(&d)?,
                     hapcal::diagnose_arm::arm_map_svg(&d),
+                    hapcal::html::DiagnosisView::arm(&d).with_warnings(warnings),
                 )
             };
             if json {
@@ -912,6 +934,10 @@ fn run(cli: Cli) -> Result<()> {
             if let Some(svg) = &svg {
                 calibrate::write_new(svg, &svg_text, &inputs)?;
                 note!("hapcal: wrote residual maps to {}", svg.display());
+            }
+            if let Some(path) = &report {
+                hapcal::html::write_diagnosis(path, &view, &text, &svg_text, &inputs)?;
+                note!("hapcal: wrote {}", path.display());
             }
             Ok(())
         }

@@ -54,6 +54,10 @@ pub struct PredictArgs {
     /// Print one JSON document (the summary and every prediction) instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Also write the prediction as one self-contained HTML file (the errors, each row's
+    /// predicted σ, the rows outside the calibration's region).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
 }
 
 /// One tip's prediction at one row, SI units.
@@ -672,6 +676,9 @@ pub fn run(args: &PredictArgs, units: &Units) -> Result<(String, Vec<String>)> {
         crate::calibrate::check_extension(out, &["csv"], "the predictions", false)?;
         crate::calibrate::check_output(out, &inputs)?;
     }
+    if let Some(report) = &args.report {
+        crate::html::check(report, &inputs)?;
+    }
     if let Some(device) = haptic_device(&args.device)? {
         if !args.tips.is_empty() {
             bail!(
@@ -777,6 +784,7 @@ fn finish(
         .collect();
     notes.extend(extra);
     let text = text.to_owned();
+    let text_for_report = text.clone();
     let csv_text = csv(prediction, args.poses);
     let stdout = if args.json {
         format!("{}\n", serde_json::to_string_pretty(prediction)?)
@@ -789,6 +797,17 @@ fn finish(
     if let Some(out) = &args.out {
         crate::calibrate::write_new(out, &csv_text, inputs)?;
         notes.push(format!("hapcal: wrote {}", out.display()));
+    }
+    if let Some(path) = &args.report {
+        let command = crate::html::this_command();
+        let html = crate::html::prediction_page(
+            prediction,
+            &text_for_report,
+            &command,
+            &crate::html::inputs(inputs),
+        );
+        crate::html::write(path, &html, inputs)?;
+        notes.push(format!("hapcal: wrote {}", path.display()));
     }
     Ok((stdout, notes))
 }

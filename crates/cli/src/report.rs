@@ -8,7 +8,7 @@ fn mm(v: Option<f64>) -> String {
     v.map_or_else(|| "-".to_string(), |v| format!("{:.3}", v * 1e3))
 }
 
-fn scaled(value: f64, unit: &str) -> (f64, &'static str) {
+pub(crate) fn scaled(value: f64, unit: &str) -> (f64, &'static str) {
     match unit {
         "m" => (value * 1e3, "mm"),
         "rad" => (value * 1e3, "mrad"),
@@ -168,8 +168,33 @@ where the calibration will be used ({}), against the training ranges:",
     }
 }
 
+/// Why a parameter was pruned, in the report's words (`≈ +1.000·dtheta2` for a dependent
+/// one).
+pub(crate) fn pruned_why(p: &hapcal_calibrate::report::PrunedReport) -> String {
+    if p.reason == hapcal_calibrate::report::PruneCause::NearZeroColumn {
+        "no effect on the measurements".to_string()
+    } else if p.depends_on.is_empty() {
+        "not determined better than its plausible range".to_string()
+    } else {
+        let terms: Vec<String> = p
+            .depends_on
+            .iter()
+            .map(|(n, c)| format!("{c:+.3}·{n}"))
+            .collect();
+        format!("≈ {}", terms.join(" "))
+    }
+}
+
 /// Renders the report as the table `hapcal calibrate` prints.
 pub fn render(r: &CalibrationReport) -> String {
+    let mut s = render_results(r);
+    let _ = writeln!(s, "\nelapsed: {:.1} ms", r.elapsed_s * 1e3);
+    s
+}
+
+/// The text report without the wall time: the machine-independent results (what the HTML
+/// report shows in its words).
+pub fn render_results(r: &CalibrationReport) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "hapcal calibrate: {}", r.device);
     if !r.cross_validation.is_empty() {
@@ -294,19 +319,7 @@ pub fn render(r: &CalibrationReport) -> String {
         r.pruned.len()
     );
     for p in &r.pruned {
-        let why = if p.reason == hapcal_calibrate::report::PruneCause::NearZeroColumn {
-            "no effect on the measurements".to_string()
-        } else if p.depends_on.is_empty() {
-            "not determined better than its plausible range".to_string()
-        } else {
-            let terms: Vec<String> = p
-                .depends_on
-                .iter()
-                .map(|(n, c)| format!("{c:+.3}·{n}"))
-                .collect();
-            format!("≈ {}", terms.join(" "))
-        };
-        let _ = writeln!(s, "  {:<28} {why}", p.name);
+        let _ = writeln!(s, "  {:<28} {}", p.name, pruned_why(p));
     }
     if !r.frames.is_empty() {
         let _ = writeln!(s, "\nframes (xyz mm; roll, pitch, yaw deg):");
@@ -512,6 +525,5 @@ pub fn render(r: &CalibrationReport) -> String {
             );
         }
     }
-    let _ = writeln!(s, "\nelapsed: {:.1} ms", r.elapsed_s * 1e3);
     s
 }

@@ -8,6 +8,7 @@ mod coverage;
 mod force;
 mod hostile;
 mod hostile_cases;
+mod html;
 mod plan_after;
 mod predict;
 mod predict_device;
