@@ -25,6 +25,14 @@ struct Recording {
 
 const M: &str = "fixtures/mukca";
 
+/// The bundled Panda socket recordings (name, arguments of `hapcal calibrate` or `diagnose`:
+/// device, training and held-out placements).
+pub(crate) fn panda_recordings() -> impl Iterator<Item = (&'static str, &'static [&'static str])> {
+    (RECORDINGS.iter())
+        .filter(|r| r.id.starts_with("panda"))
+        .map(|r| (r.name, r.args))
+}
+
 const RECORDINGS: &[Recording] = &[
     Recording {
         id: "kuka_14",

@@ -127,6 +127,20 @@ pub(crate) fn run(sh: &Shell, bin: Option<&Path>, figures: bool) -> Result<()> {
             figures: MEASURED_FIGURES,
         });
     }
+    // The Panda socket placements: kuka_14's figures.
+    for (i, (name, args)) in crate::diagnose_real::panda_recordings().enumerate() {
+        let path = dir.join(format!("panda-{i}.html"));
+        cmd!(sh, "{hapcal} {pre...} calibrate {args...} --report {path}")
+            .quiet()
+            .ignore_stdout()
+            .run()
+            .with_context(|| format!("calibrating {name}"))?;
+        reports.push(Report {
+            name: name.to_owned(),
+            path,
+            figures: KUKA_FIGURES,
+        });
+    }
     let predict = dir.join("predict.html");
     let urdf = dir.join("calibrated.urdf");
     cmd!(
