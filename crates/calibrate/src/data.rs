@@ -446,26 +446,19 @@ pub fn is_marker_file(path: &std::path::Path, distances: bool) -> bool {
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
     match ext.as_deref() {
         Some("yaml" | "yml") => true,
-        Some("csv") => {
-            // The header alone decides; the file is read in full once, by its reader.
-            let mut header = String::new();
-            let read = std::fs::File::open(path).and_then(|f| {
-                std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut header)
-            });
-            read.is_ok()
-                && header.split(',').any(|c| match c.trim() {
-                    "x" | "x1" => true,
-                    "distance_m" | "distance" | "d" => distances,
-                    _ => false,
-                })
-        }
+        // The header alone decides; the file is read in full once, by its reader.
+        Some("csv") => csv_columns(path).iter().any(|c| match c.as_str() {
+            "x" | "x1" => true,
+            "distance_m" | "distance" | "d" => distances,
+            _ => false,
+        }),
         _ => false,
     }
 }
 
-/// The column names of a CSV file's header (trimmed); empty for another file or one that
-/// cannot be read (its reader reports that).
-fn csv_columns(path: &Path) -> Vec<String> {
+/// The column names of a CSV file's header (trimmed, a byte-order mark dropped as the readers
+/// drop it); empty for another file or one that cannot be read (its reader reports that).
+pub(crate) fn csv_columns(path: &Path) -> Vec<String> {
     let is_csv = (path.extension()).is_some_and(|e| e.eq_ignore_ascii_case("csv"));
     let mut header = String::new();
     let read = std::fs::File::open(path)

@@ -318,23 +318,6 @@ fn spread_of(tables: &[MeasurementTable]) -> Option<f64> {
     (n > 0 && sq > 0.0).then(|| (sq / n as f64).sqrt())
 }
 
-/// The column names of a CSV file's header (empty for another file or an unreadable one).
-fn header_of(path: &Path) -> Vec<String> {
-    let is_csv = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
-    if !is_csv {
-        return Vec::new();
-    }
-    let mut header = String::new();
-    let read = std::fs::File::open(path)
-        .and_then(|f| std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut header));
-    if read.is_err() {
-        return Vec::new();
-    }
-    header.split(',').map(|c| c.trim().to_owned()).collect()
-}
-
 /// `tables` with every marker position and distance mapped by `f`.
 fn map_rows(
     tables: &[MeasurementTable],
@@ -505,7 +488,10 @@ fn hypotheses(input: &SetupInput<'_>) -> Vec<Hypothesis> {
     let has_markers = tables.iter().any(|t| t.n_markers > 0);
     let has_lengths = has_markers || tables.iter().any(|t| t.has_distance);
     let has_orientation = tables.iter().any(|t| t.has_orientation);
-    let headers: Vec<Vec<String>> = tables.iter().map(|t| header_of(&t.path)).collect();
+    let headers: Vec<Vec<String>> = tables
+        .iter()
+        .map(|t| crate::data::csv_columns(&t.path))
+        .collect();
     let has_rpy = headers.iter().flatten().any(|c| c.starts_with("phix"));
     let has_quaternion =
         has_orientation && (!has_rpy || headers.iter().flatten().any(|c| c.starts_with("qw")));

@@ -137,11 +137,13 @@ impl Robot {
         // The tips whose paths carry the record's loads and that the caller did not give
         // (the other arm, read but not measured): further tips after the given ones, so that
         // their joints' readings load the tree as the calibration loaded it.
-        let load_tips: Vec<String> = (sidecar
-            .and_then(|(t, o)| Calibration::from_sidecar_str(t, o).ok()))
-        .and_then(|record| record.torque)
-        .map(|torque| torque.tips)
-        .unwrap_or_default();
+        // Parsed once; a malformed sidecar is reported after the URDF's own checks.
+        let parsed = sidecar.map(|(t, o)| (Calibration::from_sidecar_str(t, o), t, o));
+        let load_tips: Vec<String> = (parsed.as_ref())
+            .and_then(|(record, _, _)| record.as_ref().ok())
+            .and_then(|record| record.torque.as_ref())
+            .map(|torque| torque.tips.clone())
+            .unwrap_or_default();
         let all_tips: Vec<&str> = (tips.iter().copied())
             .chain((load_tips.iter().map(String::as_str)).filter(|t| !tips.contains(t)))
             .collect();
@@ -331,8 +333,8 @@ impl Robot {
             tip_elements: tip_elements.clone(),
             dh: None,
         };
-        if let Some((text, sidecar_origin)) = sidecar {
-            out.apply_sidecar(text, sidecar_origin, &tip_elements)?;
+        if let Some((record, text, sidecar_origin)) = parsed {
+            out.apply_sidecar(record, text, sidecar_origin, &tip_elements)?;
         }
         Ok(out)
     }
@@ -340,13 +342,15 @@ impl Robot {
     /// Reads the sidecar into the robot: a calibration record (`hapcal-contract`, schema 1 on)
     /// through [`Robot::apply_record`]; an earlier hapcal's sidecar (no `schema_version`:
     /// frames and compliances only) as that hapcal read it.
+    /// `record` is `text` parsed ([`Calibration::from_sidecar_str`]).
     fn apply_sidecar(
         &mut self,
+        record: Result<Calibration, hapcal_contract::ContractError>,
         text: &str,
         origin: &str,
         tip_elements: &[Option<String>],
     ) -> Result<(), LoadError> {
-        let record = Calibration::from_sidecar_str(text, origin).map_err(|e| LoadError::Parse {
+        let record = record.map_err(|e| LoadError::Parse {
             origin: e.origin.clone(),
             line: e.line,
             column: e.column,

@@ -109,6 +109,13 @@ pub fn library() -> Vec<Effect> {
         .collect()
 }
 
+/// The reasons [`TreeCase::confounded`] gives, in the report's order.
+pub const CONFOUNDED: [&str; 3] = [
+    "transversal compliance without a joint compliance",
+    "third harmonic",
+    "gear ratio beside a harmonic",
+];
+
 /// One blind case.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct TreeCase {
@@ -155,11 +162,11 @@ impl TreeCase {
         if has(Effect::TransversalCompliance)
             && !(parts.iter()).any(|p| p.effect().is_some_and(Effect::is_joint_compliance))
         {
-            Some("transversal compliance without a joint compliance")
+            Some(CONFOUNDED[0])
         } else if (parts.iter()).any(|p| matches!(p, Injected::Harmonic { h: 3, .. })) {
-            Some("third harmonic")
+            Some(CONFOUNDED[1])
         } else if has(Effect::GearRatio) && harmonic {
-            Some("gear ratio beside a harmonic")
+            Some(CONFOUNDED[2])
         } else {
             None
         }
@@ -937,11 +944,7 @@ pub fn report_markdown(
             true,
         );
     }
-    for reason in [
-        "transversal compliance without a joint compliance",
-        "third harmonic",
-        "gear ratio beside a harmonic",
-    ] {
+    for reason in CONFOUNDED {
         line(
             &mut md,
             &format!("left out: {reason}"),
