@@ -19,6 +19,7 @@ pub mod plan;
 pub mod record;
 pub mod report;
 pub mod setup;
+pub mod setup_families;
 pub mod setup_findings;
 pub mod setup_haptic;
 pub mod setup_sockets;

@@ -78,11 +78,30 @@ pub enum MistakeClass {
     SwappedTips,
     /// The residual is far above what a real robot produces and no hypothesis explains it.
     NoHypothesis,
+    /// One joint column in another angle unit than the file's (degrees, gradians,
+    /// revolutions).
+    ColumnUnit,
+    /// One joint column's sign reversed (an encoder counting the other way).
+    ColumnSign,
+    /// One joint's zero off by a multiple of 90°.
+    ColumnZero,
+    /// Rows whose joint readings and measurements do not belong together.
+    RowMismatch,
+    /// Joint readings that lag the measurements by a fraction of a row: a latency, which
+    /// `diagnose` models, not a mistake.
+    Latency,
+    /// The known distance between two sockets given wrong (`--socket-distance-m`).
+    SocketDistance,
+    /// Rows filed under the wrong socket of a placement.
+    WrongSocket,
+    /// Calibrated deviations beyond any manufacturing tolerance: the data of another device or
+    /// robot.
+    AnotherDevice,
 }
 
 impl MistakeClass {
     /// Every class, in report order.
-    pub const ALL: [MistakeClass; 13] = [
+    pub const ALL: [MistakeClass; 21] = [
         MistakeClass::LengthUnit,
         MistakeClass::AngleUnit,
         MistakeClass::OrientationUnit,
@@ -96,6 +115,14 @@ impl MistakeClass {
         MistakeClass::TipLink,
         MistakeClass::SwappedTips,
         MistakeClass::NoHypothesis,
+        MistakeClass::ColumnUnit,
+        MistakeClass::ColumnSign,
+        MistakeClass::ColumnZero,
+        MistakeClass::RowMismatch,
+        MistakeClass::Latency,
+        MistakeClass::SocketDistance,
+        MistakeClass::WrongSocket,
+        MistakeClass::AnotherDevice,
     ];
 
     /// The class's name in reports.
@@ -114,6 +141,14 @@ impl MistakeClass {
             MistakeClass::TipLink => "tip-link",
             MistakeClass::SwappedTips => "swapped-tips",
             MistakeClass::NoHypothesis => "no-hypothesis",
+            MistakeClass::ColumnUnit => "column-unit",
+            MistakeClass::ColumnSign => "column-sign",
+            MistakeClass::ColumnZero => "column-zero",
+            MistakeClass::RowMismatch => "row-mismatch",
+            MistakeClass::Latency => "latency",
+            MistakeClass::SocketDistance => "socket-distance",
+            MistakeClass::WrongSocket => "wrong-socket",
+            MistakeClass::AnotherDevice => "another-device",
         }
     }
 }
@@ -417,20 +452,32 @@ pub(crate) fn nearest_rotation(m: &nalgebra::Matrix3<f64>) -> nalgebra::Matrix3<
 
 /// How many times smaller `after` is than `before`: the larger of the position and the
 /// orientation ratio, unless the other one grows by more than half (then the smaller ratio:
-/// a hypothesis that trades one for the other explains nothing).
+/// a hypothesis that trades one for the other explains nothing). Lengths are taken relative
+/// to the data's spread ([`Residual::spread_m`]): a rescaled data set is judged at its own
+/// scale.
 pub(crate) fn gain(before: &Residual, after: &Residual) -> f64 {
+    ratio_of(before, after, true)
+}
+
+/// [`gain`] with the lengths as they are (m), not relative to the spread: how the residual
+/// itself falls, which decides whether a hypothesis brings an implausible residual to a
+/// plausible one.
+pub(crate) fn absolute_gain(before: &Residual, after: &Residual) -> f64 {
+    ratio_of(before, after, false)
+}
+
+fn ratio_of(before: &Residual, after: &Residual, relative_to_spread: bool) -> f64 {
     let ratio = |b: Option<f64>, a: Option<f64>, floor: f64| match (b, a) {
         (Some(b), Some(a)) if a.is_finite() && b.is_finite() => Some(b.max(floor) / a.max(floor)),
         (Some(_), _) | (_, Some(_)) => Some(0.0),
         _ => None,
     };
-    // Lengths relative to the data's spread: a rescaled data set is judged at its own scale.
-    let relative = |r: &Residual| match (r.length_rms_m, r.spread_m) {
-        (Some(e), Some(s)) => Some(e / s),
+    let length = |r: &Residual| match (r.length_rms_m, r.spread_m) {
+        (Some(e), Some(s)) if relative_to_spread => Some(e / s),
         (e, _) => e,
     };
     let r = [
-        ratio(relative(before), relative(after), 1e-9),
+        ratio(length(before), length(after), 1e-9),
         ratio(before.orientation_rms_rad, after.orientation_rms_rad, 1e-5),
     ];
     let r: Vec<f64> = r.into_iter().flatten().collect();
@@ -445,8 +492,7 @@ pub(crate) fn gain(before: &Residual, after: &Residual) -> f64 {
     }
 }
 
-/// A hypothesis of a mistake with the data as it corrects them, for the checks of data that
-/// carry no instrument frame (a haptic device's logs, socket recordings).
+/// A hypothesis of a mistake with the data as it corrects them.
 pub(crate) struct Corrected<T> {
     pub(crate) class: MistakeClass,
     /// What the mistake is, in words.
@@ -454,6 +500,10 @@ pub(crate) struct Corrected<T> {
     /// The flag or the edit that applies.
     pub(crate) fix: String,
     pub(crate) data: T,
+    /// Columns the files name that the hypothesis uses and the data as given leave out (a tip
+    /// below the one given): evidence of its own, so that a gain of [`SUGGESTIVE_FACTOR`] with
+    /// a plausible residual is an error.
+    pub(crate) evidence: Vec<String>,
 }
 
 impl<T> Corrected<T> {
@@ -463,56 +513,212 @@ impl<T> Corrected<T> {
             what,
             fix,
             data,
+            evidence: Vec::new(),
         }
     }
 }
 
-/// The hypotheses of a check, judged: the closest one, its finding (error when it divides the
-/// residual by [`OVERWHELMING_FACTOR`] and leaves a plausible one, warning from
-/// [`SUGGESTIVE_FACTOR`]), and its index when the finding is an error.
-pub(crate) struct Judged {
-    pub(crate) closest: Option<ClosestHypothesis>,
-    pub(crate) finding: Option<Finding>,
-    pub(crate) error_at: Option<usize>,
+/// How a check scores data: a quick residual for every hypothesis, and optionally a finer
+/// one for the data as given and the best few when something looks wrong.
+pub(crate) struct Scoring<'a, T> {
+    /// The residual of data as a hypothesis corrects them; `None` when they do not fit.
+    pub(crate) screen: &'a (dyn Fn(&T) -> Option<Residual> + Sync),
+    /// The finer residual (the calibration's own frames-only fit), if the check has one.
+    pub(crate) refine: Option<&'a (dyn Fn(&T) -> Option<Residual> + Sync)>,
 }
 
-/// Judges `hypotheses` against the residual `as_given` by the residual each leaves
-/// ([`gain`]).
+/// Hypotheses refitted with [`Scoring::refine`] when something looks wrong.
+const REFINED: usize = 3;
+
+/// Two hypotheses whose residuals lie within this factor of each other explain the data
+/// equally: the finding names both.
+const EQUAL_FACTOR: f64 = 1.25;
+
+/// The hypotheses of a check, judged.
+pub(crate) struct Judged {
+    /// The residual of the data as given (refined when the others were).
+    pub(crate) as_given: Residual,
+    /// The hypothesis closest to the data.
+    pub(crate) closest: Option<ClosestHypothesis>,
+    /// Its finding, if it is one.
+    pub(crate) finding: Option<Finding>,
+    /// Its index when its finding is an error.
+    pub(crate) error_at: Option<usize>,
+    /// Hypotheses scored.
+    pub(crate) n_scored: usize,
+}
+
+/// One hypothesis scored.
+#[derive(Clone, Copy)]
+struct Score {
+    at: usize,
+    after: Residual,
+    gain: f64,
+    absolute: f64,
+    explains: bool,
+}
+
+impl Score {
+    fn of(at: usize, as_given: &Residual, after: Residual) -> Score {
+        let absolute = absolute_gain(as_given, &after);
+        Score {
+            at,
+            after,
+            gain: gain(as_given, &after),
+            absolute,
+            explains: !as_given.is_plausible()
+                && after.is_plausible()
+                && absolute >= SUGGESTIVE_FACTOR,
+        }
+    }
+
+    /// The order of the hypotheses, best first: those that bring an implausible residual to
+    /// a plausible one (by how far the residual itself falls), then the others by gain.
+    fn rank(&self) -> (bool, f64) {
+        (
+            self.explains,
+            if self.explains {
+                self.absolute
+            } else {
+                self.gain
+            },
+        )
+    }
+}
+
+fn by_rank(a: &Score, b: &Score) -> std::cmp::Ordering {
+    let (ea, va) = a.rank();
+    let (eb, vb) = b.rank();
+    eb.cmp(&ea).then(vb.total_cmp(&va))
+}
+
+/// Judges `hypotheses` of the data `given` (residual `as_given` by [`Scoring::screen`]):
+///
+/// - a hypothesis that brings a residual more than a real robot leaves
+///   ([`Residual::is_plausible`]) to one it can leave, falling by [`SUGGESTIVE_FACTOR`] or
+///   more, explains the data whatever its gain relative to their spread: an error;
+/// - otherwise one that divides the residual by [`OVERWHELMING_FACTOR`] (by
+///   [`SUGGESTIVE_FACTOR`] with columns of its own as evidence) and leaves a plausible residual
+///   is an error, one that divides it by [`SUGGESTIVE_FACTOR`] a warning;
+/// - a second hypothesis with another fix whose residual lies within [`EQUAL_FACTOR`] of the
+///   best one's is named with it.
 pub(crate) fn judge<T: Sync>(
     as_given: Residual,
+    given: &T,
     hypotheses: &[Corrected<T>],
-    residual: impl Fn(&T) -> Residual + Sync,
+    scoring: &Scoring<'_, T>,
 ) -> Judged {
-    let scored: Vec<(Residual, f64)> = (hypotheses.par_iter())
-        .map(|h| {
-            let after = residual(&h.data);
-            (after, gain(&as_given, &after))
-        })
+    let mut as_given = as_given;
+    let mut scores: Vec<Score> = (hypotheses.par_iter().enumerate())
+        .filter_map(|(i, h)| Some(Score::of(i, &as_given, (scoring.screen)(&h.data)?)))
         .collect();
-    let Some(best) = (0..scored.len()).max_by(|&a, &b| scored[a].1.total_cmp(&scored[b].1)) else {
+    scores.sort_by(by_rank);
+    let n_scored = scores.len();
+    let suspicious = !as_given.is_plausible()
+        || (scores.first()).is_some_and(|s| s.explains || s.gain >= SUGGESTIVE_FACTOR);
+    if suspicious && let Some(refine) = scoring.refine {
+        if let Some(full) = refine(given) {
+            as_given = full;
+        }
+        scores.truncate(REFINED);
+        scores = (scores.par_iter())
+            .filter_map(|s| {
+                Some(Score::of(
+                    s.at,
+                    &as_given,
+                    refine(&hypotheses.get(s.at)?.data)?,
+                ))
+            })
+            .collect();
+        scores.sort_by(by_rank);
+    }
+    let Some(best) = scores.first().copied() else {
         return Judged {
+            as_given,
             closest: None,
             finding: None,
             error_at: None,
+            n_scored,
         };
     };
-    let (after, g) = scored[best];
-    let h = &hypotheses[best];
+    let h = &hypotheses[best.at];
     let closest = Some(ClosestHypothesis {
         class: h.class,
         fix: h.fix.clone(),
-        after,
-        gain: Some(g),
+        after: best.after,
+        gain: Some(best.gain),
     });
-    if g < SUGGESTIVE_FACTOR {
+    let g = best.gain;
+    let named = !h.evidence.is_empty();
+    let plausible = best.after.is_plausible();
+    let error = best.explains
+        || (plausible && (g >= OVERWHELMING_FACTOR || (named && g >= SUGGESTIVE_FACTOR)));
+    if !error && g < SUGGESTIVE_FACTOR {
         return Judged {
+            as_given,
             closest,
             finding: None,
             error_at: None,
+            n_scored,
         };
     }
-    let error = g >= OVERWHELMING_FACTOR && after.is_plausible();
+    let scale = if h.class == MistakeClass::LengthUnit {
+        " relative to the spread of the positions"
+    } else {
+        ""
+    };
+    let mut message = if error && named {
+        let digits = if g < 10.0 { 1 } else { 0 };
+        format!(
+            "{} ({g:.digits$}× smaller residual when corrected, and the files have a column for \
+             {}, which the chain to the tip given leaves out)",
+            h.what,
+            h.evidence.join(", ")
+        )
+    } else if error && best.explains && g < OVERWHELMING_FACTOR {
+        format!(
+            "{} (corrected, the residual falls {:.0}× to what a real robot leaves)",
+            h.what, best.absolute
+        )
+    } else if error {
+        format!(
+            "{} ({g:.0}× smaller residual{scale} when corrected)",
+            h.what
+        )
+    } else if plausible {
+        format!(
+            "perhaps {} ({g:.1}× smaller residual{scale} when corrected)",
+            h.what
+        )
+    } else {
+        format!(
+            "perhaps {}, but it explains only part of the residual ({g:.1}× smaller, still more \
+             than a real robot leaves)",
+            h.what
+        )
+    };
+    let close = |a: Option<f64>, b: Option<f64>| match (a, b) {
+        (Some(a), Some(b)) => a <= b * EQUAL_FACTOR,
+        _ => true,
+    };
+    if let Some(other) = scores.iter().skip(1).find(|s| {
+        let o = &hypotheses[s.at];
+        o.fix != h.fix
+            && s.explains == best.explains
+            && close(s.after.length_rms_m, best.after.length_rms_m)
+            && close(s.after.orientation_rms_rad, best.after.orientation_rms_rad)
+    }) {
+        let o = &hypotheses[other.at];
+        message.push_str(&format!(
+            "; the data fit as well if {} ({} {}; fix: {})",
+            o.what,
+            other.after.of.words(),
+            other.after.text(),
+            o.fix
+        ));
+    }
     Judged {
+        as_given,
         closest,
         finding: Some(Finding {
             class: h.class,
@@ -521,19 +727,13 @@ pub(crate) fn judge<T: Sync>(
             } else {
                 Severity::Warning
             },
-            message: if error {
-                h.what.clone()
-            } else {
-                format!(
-                    "perhaps {}, but it explains only part of the residual",
-                    h.what
-                )
-            },
+            message,
             fix: h.fix.clone(),
             before: as_given,
-            after: Some(after),
+            after: Some(best.after),
         }),
-        error_at: error.then_some(best),
+        error_at: error.then_some(best.at),
+        n_scored,
     }
 }
 

@@ -24,9 +24,12 @@ use anyhow::{Context, Result};
 use hapcal_io::{Device, LogRow};
 
 use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
+use crate::setup_families::{
+    JointColumn, Layout, LengthGroup, SetupData, Tier, general_hypotheses, row_hypotheses,
+};
 use crate::setup_findings::{
     Corrected, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OPEN_LIMIT,
-    OVERWHELMING_FACTOR, Residual, ResidualOf, SetupReport, Severity, judge,
+    OVERWHELMING_FACTOR, Residual, ResidualOf, Scoring, SetupReport, Severity, judge,
 };
 
 /// RMS difference (rad) between an external encoder and its joint's reading beyond which the
@@ -34,9 +37,6 @@ use crate::setup_findings::{
 /// milliradians (docs/design.md §3), a swapped column or degrees read as radians tenths of a
 /// radian to radians.
 pub const PLAUSIBLE_EXT_RAD: f64 = 0.05;
-
-/// Rows out of step tried between the joint readings and the distances.
-const ROW_SHIFTS: [isize; 4] = [-2, -1, 1, 2];
 
 /// The setup check of a haptic device's training logs `paths`.
 ///
@@ -61,70 +61,30 @@ pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
             }
         }
     }
-    let rows = thinned(rows);
-    let residual = |rows: &[LogRow]| distance_residual(&chain, rows);
+    // The hypotheses correct every row (a row shift is a shift of the log's rows); the
+    // residuals are taken over at most MAX_CHECK_ROWS of them.
+    let residual = |rows: &[LogRow]| distance_residual(&chain, &thinned(rows.to_vec()));
     let as_given = residual(&rows);
     let n_joints = chain.n_joints();
-    let mut hypotheses: Vec<Corrected<Vec<LogRow>>> = Vec::new();
-    for (factor, unit) in [(1e-3, "millimetres"), (1e-2, "centimetres")] {
-        hypotheses.push(Corrected::new(
-            MistakeClass::LengthUnit,
-            format!("the cable distances look like {unit} read as metres"),
-            format!("write distance_m in metres (divide by {})", 1.0 / factor),
-            map(&rows, |r| r.distance_m *= factor),
-        ));
-    }
-    hypotheses.push(Corrected::new(
-        MistakeClass::AngleUnit,
-        "the joint readings look like degrees read as radians".to_owned(),
-        "write q1..q7 in radians (multiply by π/180)".to_owned(),
-        map(&rows, |r| r.q.iter_mut().for_each(|q| *q = q.to_radians())),
-    ));
-    for a in 0..n_joints {
-        for b in a + 1..n_joints {
-            hypotheses.push(Corrected::new(
-                MistakeClass::JointOrder,
-                format!("columns q{} and q{} look swapped", a + 1, b + 1),
-                format!("swap the columns q{} and q{}", a + 1, b + 1),
-                map(&rows, |r| r.q.swap(a, b)),
-            ));
-        }
-    }
-    hypotheses.push(Corrected::new(
-        MistakeClass::JointOrder,
-        format!("the joint columns look reversed (q{n_joints} first)"),
-        format!("reverse the order of q1..q{n_joints}"),
-        map(&rows, |r| r.q.reverse()),
-    ));
-    for shift in ROW_SHIFTS {
-        let n = rows.len();
-        let shifted: Vec<LogRow> = (0..n)
-            .filter_map(|i| {
-                let j = i.checked_add_signed(shift).filter(|&j| j < n)?;
-                let mut row = rows[i].clone();
-                row.q.clone_from(&rows[j].q);
-                Some(row)
-            })
-            .collect();
-        let later = if shift > 0 { "later" } else { "earlier" };
-        hypotheses.push(Corrected::new(
-            MistakeClass::RowShift,
-            format!(
-                "the joint readings look {} row{} {later} than the distances",
-                shift.unsigned_abs(),
-                if shift.unsigned_abs() == 1 { "" } else { "s" }
-            ),
-            "align the joint readings with the distances row for row".to_owned(),
-            shifted,
-        ));
-    }
+    let given = LogRows(rows);
+    let hypotheses = log_hypotheses(&chain, &given, !as_given.is_clean(), paths);
     let n_hypotheses = hypotheses.len();
-    let judged = judge(as_given, &hypotheses, |rows| residual(rows));
+    let screen = |d: &LogRows| Some(residual(&d.0));
+    let judged = judge(
+        as_given,
+        &given,
+        &hypotheses,
+        &Scoring {
+            screen: &screen,
+            refine: None,
+        },
+    );
+    let rows = thinned(given.0);
     let mut findings: Vec<Finding> = judged.finding.into_iter().collect();
     // The external encoders are judged against the joint readings as an error's correction
     // reads them: two joint columns swapped leave their encoders where they belong.
     let corrected = match judged.error_at.map(|i| &hypotheses[i]) {
-        Some(h) if h.class != MistakeClass::LengthUnit => &h.data,
+        Some(h) if h.class != MistakeClass::LengthUnit => &h.data.0,
         _ => &rows,
     };
     let closest = judged.closest;
@@ -167,6 +127,102 @@ pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
         closest,
         findings,
     })
+}
+
+/// Every hypothesis of a mistake for the log rows `given` on `chain` (the general families;
+/// per column and per row too when the data are `suspicious`).
+fn log_hypotheses(
+    chain: &hapcal_kinematics::Chain,
+    given: &LogRows,
+    suspicious: bool,
+    paths: &[PathBuf],
+) -> Vec<Corrected<LogRows>> {
+    let n_joints = chain.n_joints();
+    let layout = Layout {
+        joints: (0..n_joints)
+            .map(|j| JointColumn {
+                label: format!("q{}", j + 1),
+                words: format!("joint {} (q{})", j + 1, j + 1),
+                revolute: true,
+            })
+            .collect(),
+        lengths: vec![LengthGroup {
+            label: "distance_m".to_owned(),
+            words: "the cable distances (distance_m)".to_owned(),
+        }],
+        angle_unit: "rad",
+        length_unit: "m",
+        file_flags: true,
+        arms: Vec::new(),
+        paired_rows: true,
+    };
+    let mut hypotheses = general_hypotheses(given, &layout, Tier::Always);
+    if suspicious {
+        hypotheses.extend(general_hypotheses(given, &layout, Tier::Suspicious));
+        let checked = thinned(given.0.clone());
+        let x0 = vec![0.0; chain.n_params()];
+        let e: Vec<f64> = (checked.iter())
+            .map(|r| r.distance_m - chain.end_point(&x0, &r.q).coords.norm())
+            .collect();
+        let zero = median(e.clone());
+        let per_row: Vec<(usize, u64, f64)> = (checked.iter().zip(&e))
+            .map(|(r, e)| (0, r.line, (e - zero).abs()))
+            .collect();
+        let names = vec![log_names(paths)];
+        hypotheses.extend(row_hypotheses(given, &layout, &per_row, &names, |drop| {
+            let mut rows = checked.clone();
+            rows.retain(|r| !drop.contains(&(0, r.line)));
+            Some(LogRows(rows))
+        }));
+    }
+    hypotheses
+}
+
+/// A haptic device's log rows, as the general families correct them.
+#[derive(Clone)]
+struct LogRows(Vec<LogRow>);
+
+impl SetupData for LogRows {
+    fn with_joints(&self, f: &(dyn Fn(&mut [f64]) + Sync)) -> Self {
+        LogRows(map(&self.0, |r| f(&mut r.q)))
+    }
+
+    fn with_lengths(&self, _group: Option<usize>, factor: f64) -> Self {
+        LogRows(map(&self.0, |r| r.distance_m *= factor))
+    }
+
+    fn with_shift(&self, shift: isize, from: Option<(usize, u64)>) -> Option<Self> {
+        let rows = &self.0;
+        let n = rows.len();
+        let start = from.map_or(0, |(_, line)| {
+            rows.iter().take_while(|r| r.line < line).count()
+        });
+        let out: Vec<LogRow> = (0..n)
+            .filter_map(|i| {
+                let mut row = rows[i].clone();
+                if i < start {
+                    return Some(row);
+                }
+                let j = i.checked_add_signed(shift).filter(|&j| j < n)?;
+                row.q.clone_from(&rows[j].q);
+                Some(row)
+            })
+            .collect();
+        (out.len() >= 6).then_some(LogRows(out))
+    }
+}
+
+/// The logs' file names, as the row findings name them (`log.csv`, or `a.csv+b.csv`).
+fn log_names(paths: &[PathBuf]) -> String {
+    (paths.iter())
+        .map(|p| {
+            p.file_name().map_or_else(
+                || p.display().to_string(),
+                |f| f.to_string_lossy().into_owned(),
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("+")
 }
 
 /// The device with every joint's range opened: the readings of a log read as they are.
@@ -345,4 +401,29 @@ fn external_encoders(rows: &[LogRow], n_joints: usize) -> Vec<Finding> {
         });
     }
     findings
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_log_check_generates_every_family_of_its_kind() {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures");
+        let device =
+            hapcal_io::read_device(&root.join("reference-device/device.toml")).expect("device");
+        let log = root.join("reference-device/log.csv");
+        let rows = hapcal_io::read_log(&log, &device).expect("log").rows;
+        let chain = device.chain().expect("chain");
+        let hypotheses = log_hypotheses(&chain, &LogRows(rows), true, &[log]);
+        crate::setup_families::assert_families(
+            crate::setup_families::DataKind::HapticLogs,
+            &hypotheses,
+        );
+        assert!(
+            hypotheses
+                .iter()
+                .any(|h| h.class == MistakeClass::ColumnSign)
+        );
+    }
 }

@@ -18,9 +18,10 @@ use hapcal_io::SocketPlacement;
 use hapcal_kinematics::Chain;
 
 use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
+use crate::setup_families::{JointColumn, Layout, SetupData, Tier, general_hypotheses};
 use crate::setup_findings::{
-    Corrected, Finding, MistakeClass, Residual, ResidualOf, SetupReport, Severity, judge,
-    tip_candidates,
+    Corrected, Finding, MistakeClass, Residual, ResidualOf, Scoring, SetupReport, Severity, judge,
+    mm, tip_candidates,
 };
 
 /// Rows (over every socket of the training placements) below which the socket check judges
@@ -46,9 +47,69 @@ pub struct SocketInput<'a> {
     pub tip: &'a str,
 }
 
-/// The data as a hypothesis corrects them: another chain (another tip) or the same one, and
-/// the placements.
-type SocketData = (Option<Chain>, Vec<SocketPlacement>);
+/// The data as a hypothesis corrects them: another chain (another tip) or the same one, the
+/// placements, and the distance between two sockets, m.
+#[derive(Clone)]
+struct SocketData {
+    chain: Option<Chain>,
+    placements: Vec<SocketPlacement>,
+    distance_m: f64,
+}
+
+impl SetupData for SocketData {
+    fn with_joints(&self, f: &(dyn Fn(&mut [f64]) + Sync)) -> Self {
+        SocketData {
+            chain: None,
+            placements: map_q(&self.placements, &|q| {
+                let mut q = q.to_vec();
+                f(&mut q);
+                q
+            }),
+            distance_m: self.distance_m,
+        }
+    }
+
+    /// Socket files hold no lengths (the distance is an option, a hypothesis of its own).
+    fn with_lengths(&self, _group: Option<usize>, _factor: f64) -> Self {
+        self.clone()
+    }
+
+    /// Socket rows pair no joint readings with measurements.
+    fn with_shift(&self, _shift: isize, _from: Option<(usize, u64)>) -> Option<Self> {
+        None
+    }
+}
+
+/// Relative difference between the socket distance given and the one the nominal model puts
+/// between the sockets' centres beyond which the estimated distance is a hypothesis: a real
+/// robot's manufacturing deviations move the centres by millimetres over tens of centimetres.
+const SOCKET_DISTANCE_TOLERANCE: f64 = 0.05;
+
+/// The distance (m) between the two sockets' centres of each placement of two, by the nominal
+/// chain: their median; `None` without such a placement.
+fn nominal_socket_distance(chain: &Chain, placements: &[SocketPlacement]) -> Option<f64> {
+    let zero = vec![0.0; chain.n_params()];
+    let mut d: Vec<f64> = placements
+        .iter()
+        .filter(|p| p.sockets.len() == 2)
+        .filter_map(|p| {
+            let centres: Vec<nalgebra::Vector3<f64>> = (p.sockets.iter())
+                .map(|s| {
+                    let points: Vec<_> = (s.q.iter())
+                        .filter(|q| q.len() == chain.n_joints())
+                        .map(|q| chain.end_pose(&zero, q).translation.vector)
+                        .collect();
+                    let mean =
+                        points.iter().sum::<nalgebra::Vector3<f64>>() / points.len().max(1) as f64;
+                    trimmed_mean(&points, &trimmed_mean(&points, &mean))
+                })
+                .collect();
+            Some((centres.first()? - centres.get(1)?).norm())
+        })
+        .collect();
+    d.sort_by(f64::total_cmp);
+    d.get(d.len() / 2).copied().filter(|v| v.is_finite())
+}
 
 /// The socket scatter of `placements` on `chain` ([`ResidualOf::SocketScatter`]): the RMS,
 /// over the `KEPT_SHARE` of each socket's rows closest to its centre, of the distance (m) of
@@ -220,60 +281,72 @@ fn tip_chains(urdf: &Path, tip: &str, n_columns: usize) -> Vec<(String, Chain)> 
     out
 }
 
-/// The hypotheses of a mistake for `input`.
-fn hypotheses(input: &SocketInput<'_>) -> Vec<Corrected<SocketData>> {
+/// The rows (file, line) whose nominal tip lies near the centre of the other socket of their
+/// placement (within a fifth of the two centres' distance) and far from their own (beyond half
+/// of it): rows filed under the wrong socket. A real robot's deviations move the tip by
+/// millimetres, never by a socket distance.
+fn rows_in_the_other_socket(
+    chain: &Chain,
+    placements: &[SocketPlacement],
+) -> Vec<(std::path::PathBuf, u64)> {
+    let zero = vec![0.0; chain.n_params()];
     let mut out = Vec::new();
-    let n = input.chain.n_joints();
-    let names = input.joint_names;
-    let mut push = |class, what: String, fix: String, placements| {
-        out.push(Corrected::new(class, what, fix, (None, placements)));
-    };
-    push(
-        MistakeClass::AngleUnit,
-        "the joint readings look like degrees read as radians".to_owned(),
-        "write the joint readings in radians (multiply by π/180): socket files hold one joint \
-         angle in rad per column"
-            .to_owned(),
-        map_q(input.placements, &|q| {
-            q.iter().map(|v| v.to_radians()).collect()
-        }),
-    );
-    for a in 0..n {
-        for b in a + 1..n {
-            let mut perm: Vec<usize> = (0..n).collect();
-            perm.swap(a, b);
-            push(
-                MistakeClass::JointOrder,
-                format!(
-                    "columns {} and {} look swapped",
-                    column_label(names, a),
-                    column_label(names, b)
-                ),
-                format!(
-                    "swap the columns {} and {} of the socket files",
-                    a + 1,
-                    b + 1
-                ),
-                map_q(input.placements, &|q| {
-                    perm.iter().filter_map(|&k| q.get(k).copied()).collect()
-                }),
-            );
+    for p in placements.iter().filter(|p| p.sockets.len() == 2) {
+        let points: Vec<Vec<nalgebra::Vector3<f64>>> = (p.sockets.iter())
+            .map(|s| {
+                (s.q.iter())
+                    .filter(|q| q.len() == chain.n_joints())
+                    .map(|q| chain.end_pose(&zero, q).translation.vector)
+                    .collect()
+            })
+            .collect();
+        let centres: Vec<nalgebra::Vector3<f64>> = (points.iter())
+            .map(|pts| {
+                let mean = pts.iter().sum::<nalgebra::Vector3<f64>>() / pts.len().max(1) as f64;
+                trimmed_mean(pts, &trimmed_mean(pts, &mean))
+            })
+            .collect();
+        let apart = (centres[0] - centres[1]).norm();
+        if !apart.is_finite() || apart <= 0.0 {
+            continue;
+        }
+        for (k, (socket, pts)) in p.sockets.iter().zip(&points).enumerate() {
+            let (own, other) = (centres[k], centres[1 - k]);
+            for (pt, line) in pts.iter().zip(&socket.line_numbers) {
+                if (pt - own).norm() > apart / 2.0 && (pt - other).norm() < apart / 5.0 {
+                    out.push((socket.file.clone(), *line));
+                }
+            }
         }
     }
-    if n >= 3 {
-        push(
-            MistakeClass::JointOrder,
-            format!(
-                "the joint columns look reversed ({} first)",
-                column_label(names, n - 1)
-            ),
-            format!(
-                "reverse the order of the {n} columns (the first joint of the chain is the one at \
-                 the base)"
-            ),
-            map_q(input.placements, &|q| q.iter().rev().copied().collect()),
-        );
+    out
+}
+
+/// The layout of socket files: joint columns by position (`q1..qn`), no lengths, no rows that
+/// pair readings with measurements.
+fn layout_of(input: &SocketInput<'_>) -> Layout {
+    Layout {
+        joints: (0..input.chain.n_joints())
+            .map(|j| JointColumn {
+                label: format!("q{}", j + 1),
+                words: column_label(input.joint_names, j),
+                revolute: true,
+            })
+            .collect(),
+        lengths: Vec::new(),
+        angle_unit: "rad",
+        length_unit: "m",
+        file_flags: true,
+        arms: Vec::new(),
+        paired_rows: false,
     }
+}
+
+/// The socket folders' own hypotheses: another tip, the socket distance the nominal model
+/// puts between the sockets.
+fn own_hypotheses(input: &SocketInput<'_>) -> Vec<Corrected<SocketData>> {
+    let mut out = Vec::new();
+    let n = input.chain.n_joints();
     if let Some(urdf) = input.urdf {
         for (link, chain) in tip_chains(urdf, input.tip, n) {
             out.push(Corrected::new(
@@ -284,11 +357,57 @@ fn hypotheses(input: &SocketInput<'_>) -> Vec<Corrected<SocketData>> {
                     input.tip
                 ),
                 format!("use --tip {link}"),
-                (Some(chain), input.placements.to_vec()),
+                SocketData {
+                    chain: Some(chain),
+                    placements: input.placements.to_vec(),
+                    distance_m: input.socket_distance_m,
+                },
             ));
         }
     }
+    if let Some(d) = nominal_socket_distance(input.chain, input.placements)
+        && (d - input.socket_distance_m).abs() > SOCKET_DISTANCE_TOLERANCE * d
+    {
+        let given = input.socket_distance_m;
+        let ratio = d / given;
+        let unit = if (ratio - 1e-3).abs() < 1e-4 {
+            " (a distance in millimetres given as metres)"
+        } else {
+            ""
+        };
+        out.push(Corrected::new(
+            MistakeClass::SocketDistance,
+            format!(
+                "the sockets lie {} mm apart by the nominal model, not the {} mm given \
+                 ({ratio:.3} times){unit}",
+                mm(d),
+                mm(given)
+            ),
+            format!("--socket-distance-m {d:.4} (or the distance the sockets were made to)"),
+            SocketData {
+                chain: None,
+                placements: input.placements.to_vec(),
+                distance_m: d,
+            },
+        ));
+    }
     out
+}
+
+/// Every hypothesis of a mistake for `input` (the data as given, `given`): the folders' own
+/// families and the general ones, per column too when the data are `suspicious`.
+fn socket_hypotheses(
+    input: &SocketInput<'_>,
+    given: &SocketData,
+    suspicious: bool,
+) -> Vec<Corrected<SocketData>> {
+    let layout = layout_of(input);
+    let mut hypotheses = own_hypotheses(input);
+    hypotheses.extend(general_hypotheses(given, &layout, Tier::Always));
+    if suspicious {
+        hypotheses.extend(general_hypotheses(given, &layout, Tier::Suspicious));
+    }
+    hypotheses
 }
 
 /// Checks the setup of a socket calibration: the socket scatter of the data as given against
@@ -299,17 +418,57 @@ fn hypotheses(input: &SocketInput<'_>) -> Vec<Corrected<SocketData>> {
 pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
     let as_given = socket_scatter(input.chain, input.placements, input.socket_distance_m)
         .ok_or_else(|| anyhow::anyhow!("the socket files do not read on this chain"))?;
-    let hypotheses = hypotheses(input);
+    let given = SocketData {
+        chain: None,
+        placements: input.placements.to_vec(),
+        distance_m: input.socket_distance_m,
+    };
+    let hypotheses = socket_hypotheses(input, &given, !as_given.is_clean());
     let n_hypotheses = hypotheses.len();
-    let judged = judge(as_given, &hypotheses, |(chain, placements)| {
-        let chain = chain.as_ref().unwrap_or(input.chain);
-        socket_scatter(chain, placements, input.socket_distance_m).unwrap_or(Residual {
-            of: ResidualOf::SocketScatter,
-            length_rms_m: Some(f64::INFINITY),
-            ..Residual::default()
-        })
-    });
+    let screen = |d: &SocketData| {
+        let chain = d.chain.as_ref().unwrap_or(input.chain);
+        Some(
+            socket_scatter(chain, &d.placements, d.distance_m).unwrap_or(Residual {
+                of: ResidualOf::SocketScatter,
+                length_rms_m: Some(f64::INFINITY),
+                ..Residual::default()
+            }),
+        )
+    };
+    let judged = judge(
+        as_given,
+        &given,
+        &hypotheses,
+        &Scoring {
+            screen: &screen,
+            refine: None,
+        },
+    );
     let mut findings: Vec<Finding> = judged.finding.into_iter().collect();
+    let misfiled = rows_in_the_other_socket(input.chain, input.placements);
+    if let Some(first) = misfiled.first() {
+        let lines: Vec<String> = (misfiled.iter().take(6))
+            .map(|(file, line)| format!("{}:{line}", file.display()))
+            .collect();
+        let more = if misfiled.len() > 6 { ", …" } else { "" };
+        findings.push(Finding {
+            class: MistakeClass::WrongSocket,
+            severity: Severity::Error,
+            message: format!(
+                "{} row{} put the tip in the other socket of {} ({}{more})",
+                misfiled.len(),
+                if misfiled.len() == 1 { "" } else { "s" },
+                first
+                    .0
+                    .parent()
+                    .map_or_else(String::new, |p| p.display().to_string()),
+                lines.join(", ")
+            ),
+            fix: "move these rows to the other socket's file".to_owned(),
+            before: as_given,
+            after: None,
+        });
+    }
     SetupReport::add_implausible(
         &mut findings,
         as_given,
@@ -466,5 +625,46 @@ pub fn check_socket_plan(
                 .unwrap_or(0);
             Ok(SetupReport::of_unread(n_rows, finding, after))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_socket_check_generates_every_family_of_its_kind() {
+        let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures");
+        let urdf = root.join("mukca/urdf/iiwa14.urdf");
+        let device = hapcal_io::import_urdf(&urdf, "ball_link").expect("URDF");
+        let chain = device.chain().expect("chain");
+        let names: Vec<String> = device.joints.iter().map(|j| j.name.clone()).collect();
+        let placements = hapcal_io::read_mukca_paths(&[root.join("mukca/data/kuka_14/front")], 7)
+            .expect("sockets");
+        let nominal = nominal_socket_distance(&chain, &placements).expect("two sockets");
+        // A distance given in millimetres as metres: the estimated distance is a hypothesis.
+        let input = SocketInput {
+            chain: &chain,
+            joint_names: &names,
+            placements: &placements,
+            socket_distance_m: nominal * 1e3,
+            urdf: Some(&urdf),
+            tip: "ball_link",
+        };
+        let given = SocketData {
+            chain: None,
+            placements: placements.clone(),
+            distance_m: input.socket_distance_m,
+        };
+        let hypotheses = socket_hypotheses(&input, &given, true);
+        crate::setup_families::assert_families(
+            crate::setup_families::DataKind::SocketFolders,
+            &hypotheses,
+        );
+        assert!(
+            hypotheses
+                .iter()
+                .any(|h| h.class == MistakeClass::SocketDistance)
+        );
     }
 }

@@ -526,6 +526,14 @@ fn run(cli: Cli) -> Result<()> {
             setup_gate(&plan, accept_setup)?;
             check_socket_folders(&plan)?;
             let outcome = calibrate::run(&plan)?;
+            // After the fit: deviations no real device has say the data are another's.
+            let cfg = hapcal_calibrate::setup::SetupConfig {
+                accept_setup,
+                accept_option: "--accept-setup",
+            };
+            if let Some(warning) = hapcal_calibrate::setup::gate_after_fit(&outcome.report, &cfg)? {
+                note!("hapcal: warning: {warning}");
+            }
             if json {
                 emit(&format!(
                     "{}\n",

@@ -1,0 +1,773 @@
+//! The hypotheses every setup check draws from: a few general families of mistake, generated
+//! once for every kind of data (measurement files, socket folders, a haptic device's logs).
+//!
+//! A kind of data says what it holds (its [`Layout`]: joint columns as the files name them,
+//! length columns, the units it was read with, the arms of a tree) and how to correct it
+//! ([`SetupData`]); [`general_hypotheses`] turns that into hypotheses of
+//!
+//! - **units** ([`Family::Units`]): every angle unit (rad, deg, grad, rev) for the whole file
+//!   and for each joint column, every length unit (m, mm, cm, in, ft) for the whole file and for
+//!   each length column group (one marker's positions, the distances);
+//! - **signs** ([`Family::Sign`]): each joint column negated (an encoder counting the other
+//!   way);
+//! - **zeros** ([`Family::Zero`]): each revolute joint's zero off by ±90° or 180°;
+//! - **permutations** ([`Family::Permutation`]): any two joint columns of one kind swapped,
+//!   every joint column reversed, one arm's columns given as another's;
+//! - **row alignment** ([`Family::RowAlignment`]): joint readings 1 to 4 rows out of step, for
+//!   the whole file or from the row on where the per-row residuals jump, and rows whose joints
+//!   and measurements do not belong together, found from the per-row residuals
+//!   ([`row_hypotheses`]).
+//!
+//! The families a kind adds itself (frames and conventions of pose data, tips and sockets)
+//! are its own; [`DataKind::families`] lists, for each kind, every family it must generate and
+//! why the others cannot apply, and a test fails when a kind misses one.
+//!
+//! The per-column families multiply the hypotheses by the joint count: they are
+//! [`Tier::Suspicious`], generated only when the data as given leave more than right data of a
+//! real robot do ([`Residual::is_clean`]), so that the check of right data costs what it did.
+
+use crate::setup_findings::{Corrected, MistakeClass, Residual};
+
+/// A general family of setup mistakes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Family {
+    /// A unit or scale: angle columns in deg, grad or rev, lengths in mm, cm, in or ft, for the
+    /// whole file or one column.
+    Units,
+    /// One joint column's sign reversed.
+    Sign,
+    /// One joint's zero off by a multiple of 90°.
+    Zero,
+    /// Joint columns in another order: a pair swapped, all reversed, arms exchanged.
+    Permutation,
+    /// Joint rows out of step with the measurement rows, or rows that do not belong together.
+    RowAlignment,
+    /// Frames and conventions of pose data: quaternion order and conjugate, Euler orders,
+    /// mirrored axes, inverted poses.
+    Conventions,
+    /// Tip links and sockets: the tip link, tips swapped, the socket distance, rows filed under
+    /// the wrong socket.
+    TipsAndSockets,
+    /// Another device or robot: calibrated deviations beyond manufacturing tolerance (judged
+    /// after the fit).
+    AnotherDevice,
+}
+
+impl Family {
+    /// Every family.
+    pub const ALL: [Family; 8] = [
+        Family::Units,
+        Family::Sign,
+        Family::Zero,
+        Family::Permutation,
+        Family::RowAlignment,
+        Family::Conventions,
+        Family::TipsAndSockets,
+        Family::AnotherDevice,
+    ];
+
+    /// The family's name in reports and tests.
+    pub fn name(self) -> &'static str {
+        match self {
+            Family::Units => "units",
+            Family::Sign => "sign",
+            Family::Zero => "zero",
+            Family::Permutation => "permutation",
+            Family::RowAlignment => "row alignment",
+            Family::Conventions => "frames and conventions",
+            Family::TipsAndSockets => "tips and sockets",
+            Family::AnotherDevice => "another device",
+        }
+    }
+}
+
+impl MistakeClass {
+    /// The family a class of mistake belongs to; `None` for findings from the data alone (a
+    /// frozen joint) and for the residual nothing explains.
+    pub fn family(self) -> Option<Family> {
+        use MistakeClass as C;
+        Some(match self {
+            C::LengthUnit | C::AngleUnit | C::OrientationUnit | C::ColumnUnit => Family::Units,
+            C::ColumnSign => Family::Sign,
+            C::ColumnZero => Family::Zero,
+            C::JointOrder => Family::Permutation,
+            C::RowShift | C::RowMismatch | C::Latency => Family::RowAlignment,
+            C::QuaternionOrder | C::QuaternionInverse | C::EulerOrder | C::MirroredAxis => {
+                Family::Conventions
+            }
+            C::TipLink | C::SwappedTips | C::SocketDistance | C::WrongSocket => {
+                Family::TipsAndSockets
+            }
+            C::AnotherDevice => Family::AnotherDevice,
+            C::FrozenJoint | C::NoHypothesis => return None,
+        })
+    }
+}
+
+/// A kind of data the setup check corrects.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DataKind {
+    /// Measurement files (marker positions, poses, distances) of a URDF or a D-H device.
+    MeasurementFiles,
+    /// Socket folders (a tip held in sockets a known distance apart).
+    SocketFolders,
+    /// A haptic device's logs (joint readings, cable distance, external encoders).
+    HapticLogs,
+}
+
+impl DataKind {
+    /// Every kind.
+    pub const ALL: [DataKind; 3] = [
+        DataKind::MeasurementFiles,
+        DataKind::SocketFolders,
+        DataKind::HapticLogs,
+    ];
+
+    /// The families the kind's check generates before the fit, and, for each family it does
+    /// not, why none of its mistakes can occur in (or be told from) such data.
+    pub fn families(self) -> (&'static [Family], &'static [(Family, &'static str)]) {
+        const AFTER_FIT: &str = "judged after the fit, on the calibrated deviations";
+        match self {
+            DataKind::MeasurementFiles => (
+                &[
+                    Family::Units,
+                    Family::Sign,
+                    Family::Zero,
+                    Family::Permutation,
+                    Family::RowAlignment,
+                    Family::Conventions,
+                    Family::TipsAndSockets,
+                ],
+                &[(Family::AnotherDevice, AFTER_FIT)],
+            ),
+            DataKind::SocketFolders => (
+                &[
+                    Family::Units,
+                    Family::Sign,
+                    Family::Zero,
+                    Family::Permutation,
+                    Family::TipsAndSockets,
+                ],
+                &[
+                    (
+                        Family::RowAlignment,
+                        "a socket file's rows pair no joint reading with a measurement; rows \
+                         filed under the wrong socket are found from the data (tips and sockets)",
+                    ),
+                    (
+                        Family::Conventions,
+                        "socket files hold joint readings only: no instrument frame, no \
+                         orientation",
+                    ),
+                    (Family::AnotherDevice, AFTER_FIT),
+                ],
+            ),
+            DataKind::HapticLogs => (
+                &[
+                    Family::Units,
+                    Family::Sign,
+                    Family::Zero,
+                    Family::Permutation,
+                    Family::RowAlignment,
+                ],
+                &[
+                    (
+                        Family::Conventions,
+                        "a cable distance has no frame, orientation or axis convention",
+                    ),
+                    (
+                        Family::TipsAndSockets,
+                        "the cable is fixed to the device's handle: no tip to choose, no socket",
+                    ),
+                    (Family::AnotherDevice, AFTER_FIT),
+                ],
+            ),
+        }
+    }
+}
+
+/// An angle unit a column may be in: name (as `--column-unit` takes it), words, rad per unit.
+pub(crate) const ANGLE_UNITS: [(&str, &str, f64); 4] = [
+    ("rad", "radians", 1.0),
+    ("deg", "degrees", std::f64::consts::PI / 180.0),
+    ("grad", "gradians", std::f64::consts::PI / 200.0),
+    ("rev", "revolutions", std::f64::consts::TAU),
+];
+
+/// A length unit a column may be in: name (as `--length-unit` and `--column-unit` take it),
+/// words, m per unit.
+pub(crate) const LENGTH_UNITS: [(&str, &str, f64); 5] = [
+    ("m", "metres", 1.0),
+    ("mm", "millimetres", 1e-3),
+    ("cm", "centimetres", 1e-2),
+    ("in", "inches", 0.0254),
+    ("ft", "feet", 0.3048),
+];
+
+/// Joint zeros tried: +90°, −90°, 180°.
+const ZERO_OFFSETS: [f64; 3] = [
+    std::f64::consts::FRAC_PI_2,
+    -std::f64::consts::FRAC_PI_2,
+    std::f64::consts::PI,
+];
+
+/// Row shifts tried always (±1, ±2 rows) and when the data are suspicious (±3, ±4).
+const SHIFTS_ALWAYS: [isize; 4] = [-2, -1, 1, 2];
+const SHIFTS_SUSPICIOUS: [isize; 4] = [-4, -3, 3, 4];
+
+/// Joint counts up to which every pair of joint columns is tried always; past it, the
+/// adjacent pairs always and the others when the data are suspicious.
+const ALL_PAIRS_UP_TO: usize = 8;
+
+/// Per-row residual, as a multiple of the median row's, above which a row does not belong
+/// with its measurement: the per-row residuals of right data (a 3-D noise vector and smooth
+/// model deviations) stay within about 4 medians.
+const MISMATCH_FACTOR: f64 = 8.0;
+
+/// Share of rows the row-mismatch hypothesis may set aside: more is not a few rows that do
+/// not belong, but a shift or data of another robot.
+const MISMATCH_MAX_SHARE: f64 = 0.45;
+
+/// A joint column, as the files name it.
+#[derive(Clone, Debug)]
+pub(crate) struct JointColumn {
+    /// The column's name in the files (`q3`, `elbow_joint`): what the flags take.
+    pub(crate) label: String,
+    /// In words: `elbow_joint (q3)`.
+    pub(crate) words: String,
+    /// A revolute joint (angle unit, zero offsets), or prismatic (length unit).
+    pub(crate) revolute: bool,
+}
+
+/// A group of length columns read in one unit: one marker's positions, the distances.
+#[derive(Clone, Debug)]
+pub(crate) struct LengthGroup {
+    /// The columns as `--column-unit` takes them: `x2,y2,z2`, `distance_m`.
+    pub(crate) label: String,
+    /// In words: `marker 2's positions`.
+    pub(crate) words: String,
+}
+
+/// What a kind of data holds, as the generator needs it.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Layout {
+    /// Joint columns, in the order of the joint readings.
+    pub(crate) joints: Vec<JointColumn>,
+    /// Length column groups; empty without measured lengths.
+    pub(crate) lengths: Vec<LengthGroup>,
+    /// The angle unit the files were read with (a name of [`ANGLE_UNITS`]).
+    pub(crate) angle_unit: &'static str,
+    /// The length unit the files were read with (a name of [`LENGTH_UNITS`]).
+    pub(crate) length_unit: &'static str,
+    /// The whole file's units as a flag (`--angle-unit`, `--length-unit`) or `None` where the
+    /// data have no such flag (then the fix names the conversion).
+    pub(crate) file_flags: bool,
+    /// The joints of each arm of a tree that no other arm moves, in chain order; empty for a
+    /// chain.
+    pub(crate) arms: Vec<(String, Vec<usize>)>,
+    /// Joint rows: whether the rows pair joint readings with measurements (row alignment
+    /// applies).
+    pub(crate) paired_rows: bool,
+}
+
+/// How a kind of data is corrected; each method returns the data as the correction reads them.
+pub(crate) trait SetupData: Sized + Send + Sync {
+    /// Every row's joint readings (rad, m) edited by `f`.
+    fn with_joints(&self, f: &(dyn Fn(&mut [f64]) + Sync)) -> Self;
+    /// Every length of `group` (every length with `None`) times `factor`.
+    fn with_lengths(&self, group: Option<usize>, factor: f64) -> Self;
+    /// Each row's joint readings taken from the row `shift` further down its file (rows
+    /// without a partner dropped), from row `from` of file `file` on (`None`: every row of
+    /// every file); `None` when too few rows are left.
+    fn with_shift(&self, shift: isize, from: Option<(usize, u64)>) -> Option<Self>;
+}
+
+/// When a hypothesis is generated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Tier {
+    /// Always: a handful per data set.
+    Always,
+    /// Only when the data as given leave more than right data do: the per-column families.
+    Suspicious,
+}
+
+/// The hypotheses of the general families of `tier` for `data` laid out as `layout`.
+pub(crate) fn general_hypotheses<D: SetupData>(
+    data: &D,
+    layout: &Layout,
+    tier: Tier,
+) -> Vec<Corrected<D>> {
+    let mut out = Vec::new();
+    let suspicious = tier == Tier::Suspicious;
+    let joints = &layout.joints;
+    let n = joints.len();
+    let angle_read = unit_factor(&ANGLE_UNITS, layout.angle_unit);
+    let length_read = unit_factor(&LENGTH_UNITS, layout.length_unit);
+    let any_revolute = joints.iter().any(|c| c.revolute);
+
+    // Units of the whole file (always) and of each column (when suspicious).
+    if !suspicious {
+        if any_revolute {
+            for (unit, words, factor) in ANGLE_UNITS {
+                if unit == layout.angle_unit {
+                    continue;
+                }
+                let ratio = factor / angle_read;
+                let fix = if layout.file_flags {
+                    format!("--angle-unit {unit}")
+                } else {
+                    format!(
+                        "convert the joint readings to radians (multiply by {})",
+                        factor_text(factor)
+                    )
+                };
+                out.push(Corrected::new(
+                    MistakeClass::AngleUnit,
+                    format!(
+                        "the joint readings are in {words}, read as {}",
+                        unit_words(&ANGLE_UNITS, layout.angle_unit)
+                    ),
+                    fix,
+                    data.with_joints(&|q: &mut [f64]| {
+                        for (v, c) in q.iter_mut().zip(joints) {
+                            if c.revolute {
+                                *v *= ratio;
+                            }
+                        }
+                    }),
+                ));
+            }
+        }
+        if !layout.lengths.is_empty() {
+            for (unit, words, factor) in LENGTH_UNITS {
+                if unit == layout.length_unit {
+                    continue;
+                }
+                out.push(Corrected::new(
+                    MistakeClass::LengthUnit,
+                    format!(
+                        "the positions and distances are in {words}, read as {}",
+                        unit_words(&LENGTH_UNITS, layout.length_unit)
+                    ),
+                    if layout.file_flags {
+                        format!("--length-unit {unit}")
+                    } else {
+                        format!(
+                            "convert the lengths to metres (multiply by {})",
+                            factor_text(factor)
+                        )
+                    },
+                    data.with_lengths(None, factor / length_read),
+                ));
+            }
+        }
+    } else {
+        for (j, c) in joints.iter().enumerate().filter(|(_, c)| c.revolute) {
+            for (unit, words, factor) in ANGLE_UNITS {
+                if unit == layout.angle_unit {
+                    continue;
+                }
+                let ratio = factor / angle_read;
+                out.push(Corrected::new(
+                    MistakeClass::ColumnUnit,
+                    format!(
+                        "the readings of {} are in {words}, read as {}",
+                        c.words,
+                        unit_words(&ANGLE_UNITS, layout.angle_unit)
+                    ),
+                    format!("--column-unit {}={unit}", c.label),
+                    data.with_joints(&|q: &mut [f64]| {
+                        if let Some(v) = q.get_mut(j) {
+                            *v *= ratio;
+                        }
+                    }),
+                ));
+            }
+        }
+        if layout.lengths.len() > 1 {
+            for (g, group) in layout.lengths.iter().enumerate() {
+                for (unit, words, factor) in LENGTH_UNITS {
+                    if unit == layout.length_unit {
+                        continue;
+                    }
+                    out.push(Corrected::new(
+                        MistakeClass::LengthUnit,
+                        format!(
+                            "{} are in {words}, read as {} as the other lengths",
+                            group.words,
+                            unit_words(&LENGTH_UNITS, layout.length_unit)
+                        ),
+                        format!("--column-unit {}={unit}", group.label),
+                        data.with_lengths(Some(g), factor / length_read),
+                    ));
+                }
+            }
+        }
+        // Signs and zeros.
+        for (j, c) in joints.iter().enumerate() {
+            out.push(Corrected::new(
+                MistakeClass::ColumnSign,
+                format!(
+                    "the readings of {} have the wrong sign (its encoder counts the other way)",
+                    c.words
+                ),
+                format!("--column-sign {}", c.label),
+                data.with_joints(&|q: &mut [f64]| {
+                    if let Some(v) = q.get_mut(j) {
+                        *v = -*v;
+                    }
+                }),
+            ));
+            if !c.revolute {
+                continue;
+            }
+            for offset in ZERO_OFFSETS {
+                out.push(Corrected::new(
+                    MistakeClass::ColumnZero,
+                    format!(
+                        "the zero of {} is {:+.0}° off (its reading plus {:.0}° is the joint's \
+                         angle)",
+                        c.words,
+                        offset.to_degrees(),
+                        offset.to_degrees()
+                    ),
+                    format!("--column-offset {}={offset:.6}", c.label),
+                    data.with_joints(&|q: &mut [f64]| {
+                        if let Some(v) = q.get_mut(j) {
+                            *v += offset;
+                        }
+                    }),
+                ));
+            }
+        }
+    }
+
+    // Permutations: pairs of one kind (all of them up to ALL_PAIRS_UP_TO joints, else the
+    // adjacent ones always and the rest when suspicious), the reversal, arms exchanged.
+    for a in 0..n {
+        for b in a + 1..n {
+            let adjacent = b == a + 1;
+            let always = n <= ALL_PAIRS_UP_TO || adjacent;
+            if always == suspicious || joints[a].revolute != joints[b].revolute {
+                continue;
+            }
+            out.push(Corrected::new(
+                MistakeClass::JointOrder,
+                format!(
+                    "the readings of {} and {} are swapped",
+                    joints[a].words, joints[b].words
+                ),
+                format!(
+                    "swap the columns {} and {} (the header names the joint each column holds)",
+                    joints[a].label, joints[b].label
+                ),
+                data.with_joints(&|q: &mut [f64]| {
+                    if a < q.len() && b < q.len() {
+                        q.swap(a, b);
+                    }
+                }),
+            ));
+        }
+    }
+    let revolute: Vec<usize> = (0..n).filter(|&j| joints[j].revolute).collect();
+    if !suspicious && layout.arms.len() <= 1 && revolute.len() >= 3 {
+        let (first, last) = (revolute[0], revolute[revolute.len() - 1]);
+        let order = revolute.clone();
+        out.push(Corrected::new(
+            MistakeClass::JointOrder,
+            format!(
+                "the joint columns are in reverse order ({} … {} read as {} … {})",
+                joints[last].words, joints[first].words, joints[first].words, joints[last].words
+            ),
+            "reverse the order of the joint columns (the first joint of the chain is the one at \
+             the base)"
+                .to_owned(),
+            data.with_joints(&|q: &mut [f64]| {
+                let src: Vec<f64> = q.to_vec();
+                for (slot, from) in order.iter().zip(order.iter().rev()) {
+                    if let (Some(d), Some(s)) = (q.get_mut(*slot), src.get(*from)) {
+                        *d = *s;
+                    }
+                }
+            }),
+        ));
+    }
+    if !suspicious {
+        for (x, (arm_a, ja)) in layout.arms.iter().enumerate() {
+            for (arm_b, jb) in layout.arms.iter().skip(x + 1) {
+                if ja.len() != jb.len()
+                    || ja.is_empty()
+                    || (ja.iter().zip(jb)).any(|(a, b)| joints[*a].revolute != joints[*b].revolute)
+                {
+                    continue;
+                }
+                let (ja, jb) = (ja.clone(), jb.clone());
+                let labels = |js: &[usize]| {
+                    js.iter()
+                        .map(|&j| joints[j].label.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
+                out.push(Corrected::new(
+                    MistakeClass::JointOrder,
+                    format!("the readings of the {arm_a} arm and of the {arm_b} arm are exchanged"),
+                    format!(
+                        "exchange the columns {} with {} (the header names the joint each \
+                         column holds)",
+                        labels(&ja),
+                        labels(&jb)
+                    ),
+                    data.with_joints(&|q: &mut [f64]| {
+                        for (a, b) in ja.iter().zip(&jb) {
+                            if *a < q.len() && *b < q.len() {
+                                q.swap(*a, *b);
+                            }
+                        }
+                    }),
+                ));
+            }
+        }
+    }
+
+    // Rows out of step, for the whole file.
+    if layout.paired_rows {
+        let shifts: &[isize] = if suspicious {
+            &SHIFTS_SUSPICIOUS
+        } else {
+            &SHIFTS_ALWAYS
+        };
+        for &shift in shifts {
+            if let Some(d) = data.with_shift(shift, None) {
+                let (what, fix) = shift_words(shift, None);
+                out.push(Corrected::new(MistakeClass::RowShift, what, fix, d));
+            }
+        }
+    }
+    out
+}
+
+/// The hypotheses estimated from the per-row residuals of the data as given: joint readings
+/// out of step from the row on where the residuals jump (per file), and the rows that do not
+/// belong with their measurements set aside. `per_row` holds, for each row checked, its file
+/// (index), its line and its residual (m, or any one scale for every row); `without` gives
+/// the data without the rows of the lines listed per file.
+pub(crate) fn row_hypotheses<D: SetupData>(
+    data: &D,
+    layout: &Layout,
+    per_row: &[(usize, u64, f64)],
+    file_names: &[String],
+    without: impl Fn(&[(usize, u64)]) -> Option<D>,
+) -> Vec<Corrected<D>> {
+    let mut out = Vec::new();
+    if !layout.paired_rows || per_row.len() < 12 {
+        return out;
+    }
+    // Rows that do not belong: far above the median row.
+    let mut sorted: Vec<f64> = per_row.iter().map(|r| r.2).collect();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    let flagged: Vec<(usize, u64)> = (per_row.iter())
+        .filter(|r| r.2 > MISMATCH_FACTOR * median)
+        .map(|r| (r.0, r.1))
+        .collect();
+    let share = flagged.len() as f64 / per_row.len() as f64;
+    if !flagged.is_empty()
+        && share <= MISMATCH_MAX_SHARE
+        && let Some(d) = without(&flagged)
+    {
+        let lines: Vec<String> = (flagged.iter().take(6))
+            .map(|(f, l)| format!("{}:{l}", file_names.get(*f).map_or("?", String::as_str)))
+            .collect();
+        let more = if flagged.len() > 6 { ", …" } else { "" };
+        out.push(Corrected::new(
+            MistakeClass::RowMismatch,
+            format!(
+                "{} of the {} rows checked ({:.0} %) do not belong with their measurements: their \
+                 residual is more than {MISMATCH_FACTOR:.0} times the median row's ({}{more})",
+                flagged.len(),
+                per_row.len(),
+                100.0 * share,
+                lines.join(", ")
+            ),
+            "check the export of these rows: the joint readings and the measurements of a row \
+             must be taken at the same instant (rows copied, re-sorted or merged from another \
+             recording)"
+                .to_owned(),
+            d,
+        ));
+    }
+    // A shift from a row on: per file, the split that best separates low residuals before
+    // from high ones after.
+    for f in 0..file_names.len() {
+        let rows: Vec<(u64, f64)> = (per_row.iter())
+            .filter(|r| r.0 == f)
+            .map(|r| (r.1, r.2))
+            .collect();
+        if rows.len() < 12 {
+            continue;
+        }
+        let prefix: Vec<f64> = (rows.iter())
+            .scan(0.0, |sum, r| {
+                *sum += r.1;
+                Some(*sum)
+            })
+            .collect();
+        let total = prefix[rows.len() - 1];
+        let mut best: Option<(usize, f64)> = None;
+        for k in 4..rows.len() - 3 {
+            let before = prefix[k - 1];
+            let mean_before = before / k as f64;
+            let mean_after = (total - before) / (rows.len() - k) as f64;
+            let contrast = mean_after / mean_before.max(f64::MIN_POSITIVE);
+            if best.is_none_or(|(_, c)| contrast > c) {
+                best = Some((k, contrast));
+            }
+        }
+        let Some((k, contrast)) = best else { continue };
+        if contrast < MISMATCH_FACTOR / 2.0 {
+            continue;
+        }
+        // The change lies between the last good row checked and the first bad one: try both.
+        let lines = [rows[k - 1].0 + 1, rows[k].0];
+        for shift in [-2, -1, 1, 2] {
+            for &line in lines.iter().take(if lines[0] == lines[1] { 1 } else { 2 }) {
+                if let Some(d) = data.with_shift(shift, Some((f, line))) {
+                    let file = file_names.get(f).map_or("?", String::as_str);
+                    let (what, fix) = shift_words(shift, Some((file, line)));
+                    out.push(Corrected::new(MistakeClass::RowShift, what, fix, d));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The mistake and fix of joint readings `shift` rows out of step (from `from`'s file and line
+/// on).
+fn shift_words(shift: isize, from: Option<(&str, u64)>) -> (String, String) {
+    let k = shift.unsigned_abs();
+    let rows = if k == 1 { "row" } else { "rows" };
+    let (place, moved) = match from {
+        Some((file, line)) => (
+            format!(" from {file}:{line} on"),
+            format!(" from {file}:{line} on"),
+        ),
+        None => (String::new(), String::new()),
+    };
+    if shift > 0 {
+        (
+            format!("the joint readings are {k} {rows} behind the measurements{place}"),
+            format!(
+                "move the joint columns up by {k} {rows}{moved}: the readings on line L + {k} \
+                 belong to the measurement on line L"
+            ),
+        )
+    } else {
+        (
+            format!("the joint readings are {k} {rows} ahead of the measurements{place}"),
+            format!(
+                "move the joint columns down by {k} {rows}{moved}: the readings on line L belong \
+                 to the measurement on line L + {k}"
+            ),
+        )
+    }
+}
+
+/// The SI factor of the unit named `name` in `units` (1 when unknown).
+fn unit_factor(units: &[(&str, &str, f64)], name: &str) -> f64 {
+    (units.iter()).find(|u| u.0 == name).map_or(1.0, |u| u.2)
+}
+
+/// The words of the unit named `name` in `units`.
+fn unit_words(units: &[(&'static str, &'static str, f64)], name: &str) -> &'static str {
+    (units.iter()).find(|u| u.0 == name).map_or("?", |u| u.1)
+}
+
+/// A conversion factor as the fixes write it: `π/180`, `π/200`, `2π`, `0.0254`.
+fn factor_text(factor: f64) -> String {
+    let pi = std::f64::consts::PI;
+    for (f, text) in [
+        (pi / 180.0, "π/180"),
+        (pi / 200.0, "π/200"),
+        (2.0 * pi, "2π"),
+    ] {
+        if (factor - f).abs() < 1e-12 {
+            return text.to_owned();
+        }
+    }
+    format!("{factor}")
+}
+
+impl Residual {
+    /// Whether right data of a real robot can leave this residual: the frames-only residual of
+    /// the bundled recordings is a few millimetres and below 0.6° (docs/results/reliability.md),
+    /// a fifth of [`Residual::is_plausible`]'s bound in length and 0.02 rad in orientation.
+    /// Above it, the check tries the per-column families ([`Tier::Suspicious`]).
+    pub fn is_clean(&self) -> bool {
+        self.length_rms_m
+            .is_none_or(|e| e <= crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M / 5.0)
+            && self.orientation_rms_rad.is_none_or(|e| e <= 0.02)
+    }
+}
+
+/// Fails the test when the classes of `hypotheses` do not cover exactly the families `kind`
+/// generates before the fit.
+#[cfg(test)]
+pub(crate) fn assert_families<T>(kind: DataKind, hypotheses: &[Corrected<T>]) {
+    let (generated, _) = kind.families();
+    let mut got: Vec<Family> = hypotheses.iter().filter_map(|h| h.class.family()).collect();
+    got.dedup();
+    for f in generated {
+        assert!(
+            got.contains(f),
+            "the check of {kind:?} generates no hypothesis of the family {}",
+            f.name()
+        );
+    }
+    for f in &got {
+        assert!(
+            generated.contains(f),
+            "the check of {kind:?} generates the family {}, which its kind does not list",
+            f.name()
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_kind_generates_or_excuses_every_family_once() {
+        for kind in DataKind::ALL {
+            let (generated, excused) = kind.families();
+            for f in Family::ALL {
+                let n = generated.iter().filter(|g| **g == f).count()
+                    + excused.iter().filter(|(g, _)| *g == f).count();
+                assert_eq!(n, 1, "{kind:?}: family {} listed {n} times", f.name());
+            }
+        }
+    }
+
+    #[test]
+    fn every_class_of_a_hypothesis_has_a_family() {
+        for c in MistakeClass::ALL {
+            let data_alone = matches!(c, MistakeClass::FrozenJoint | MistakeClass::NoHypothesis);
+            assert_eq!(c.family().is_none(), data_alone, "{c}");
+        }
+    }
+
+    #[test]
+    fn unit_factors_turn_a_column_into_radians_and_metres() {
+        // 180 degrees, 200 gradians and half a revolution are π rad.
+        for (unit, value) in [("deg", 180.0), ("grad", 200.0), ("rev", 0.5)] {
+            let rad = value * unit_factor(&ANGLE_UNITS, unit);
+            assert!((rad - std::f64::consts::PI).abs() < 1e-15, "{unit}");
+        }
+        // One foot is 12 inches, 30.48 cm, 304.8 mm.
+        let ft = unit_factor(&LENGTH_UNITS, "ft");
+        assert!((ft - 12.0 * unit_factor(&LENGTH_UNITS, "in")).abs() < 1e-15);
+        assert!((ft - 30.48 * unit_factor(&LENGTH_UNITS, "cm")).abs() < 1e-15);
+        assert!((ft - 304.8 * unit_factor(&LENGTH_UNITS, "mm")).abs() < 1e-15);
+    }
+}
