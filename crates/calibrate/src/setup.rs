@@ -589,7 +589,9 @@ fn layout_of(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Layout {
             js
         })
         .collect();
-    let arms = if input.tips.len() >= 2 {
+    // The measured tips, then the links that only carry loads (the other arm's readings).
+    let names: Vec<&String> = input.tips.iter().chain(&robot.load_tips).collect();
+    let arms = if moved.len() >= 2 {
         (moved.iter().enumerate())
             .filter_map(|(t, js)| {
                 let own: Vec<usize> = (js.iter().copied())
@@ -600,7 +602,7 @@ fn layout_of(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Layout {
                             .all(|(u, o)| u == t || !o.contains(j))
                     })
                     .collect();
-                Some((input.tips.get(t)?.clone(), own))
+                Some(((*names.get(t)?).clone(), own))
             })
             .collect()
     } else {
@@ -730,6 +732,36 @@ fn own_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correc
                 UnitQuaternion::from_euler_angles(yaw, pitch, roll)
             }),
         );
+        // The angles composed in another order than R = Rz(phiz)·Ry(phiy)·Rx(phix).
+        for order in ["XYZ", "XZY", "YXZ", "YZX", "ZXY"] {
+            let product = order
+                .chars()
+                .map(|c| format!("R{}(phi{})", c.to_ascii_lowercase(), c.to_ascii_lowercase()))
+                .collect::<Vec<_>>()
+                .join("·");
+            push(
+                MistakeClass::EulerOrder,
+                format!(
+                    "the orientation angles compose as R = {product} ({order} Euler angles), read \
+                     as R = Rz(phiz)·Ry(phiy)·Rx(phix)"
+                ),
+                format!(
+                    "convert the orientations to R = Rz(phiz)·Ry(phiy)·Rx(phix), or export them \
+                     as quaternions qw, qx, qy, qz (the export uses {order})"
+                ),
+                map_rotations(tables, &|r| {
+                    let (x, y, z) = r.euler_angles();
+                    let axis = |c: char| match c {
+                        'X' => UnitQuaternion::from_axis_angle(&Vector3::x_axis(), x),
+                        'Y' => UnitQuaternion::from_axis_angle(&Vector3::y_axis(), y),
+                        _ => UnitQuaternion::from_axis_angle(&Vector3::z_axis(), z),
+                    };
+                    order
+                        .chars()
+                        .fold(UnitQuaternion::identity(), |acc, c| acc * axis(c))
+                }),
+            );
+        }
     }
 
     // Position axes: a mirrored axis and two swapped axes are one hypothesis. Each

@@ -527,7 +527,8 @@ pub(crate) struct Scoring<'a, T> {
     pub(crate) refine: Option<&'a (dyn Fn(&T) -> Option<Residual> + Sync)>,
 }
 
-/// Hypotheses refitted with [`Scoring::refine`] when something looks wrong.
+/// Hypotheses refitted with [`Scoring::refine`] when something looks wrong: this many by
+/// rank, and this many by gain.
 const REFINED: usize = 3;
 
 /// Two hypotheses whose residuals lie within this factor of each other explain the data
@@ -566,9 +567,13 @@ impl Score {
             after,
             gain: gain(as_given, &after),
             absolute,
+            // Not a collapse of the data onto the model: relative to their spread, the
+            // corrected data fit no worse (positions in mm read as m fit as well relative to
+            // their spread; a shrunken data set relative to it does not).
             explains: !as_given.is_plausible()
                 && after.is_plausible()
-                && absolute >= SUGGESTIVE_FACTOR,
+                && absolute >= SUGGESTIVE_FACTOR
+                && gain(as_given, &after) >= 1.0 / 1.5,
         }
     }
 
@@ -620,7 +625,16 @@ pub(crate) fn judge<T: Sync>(
         if let Some(full) = refine(given) {
             as_given = full;
         }
+        // The best few by rank and the best few by gain: the screen may rank a hypothesis
+        // that explains the data only by its cruder fit above one the full fit prefers.
+        let mut by_gain = scores.clone();
+        by_gain.sort_by(|a, b| b.gain.total_cmp(&a.gain));
         scores.truncate(REFINED);
+        for s in by_gain.into_iter().take(REFINED) {
+            if scores.iter().all(|k| k.at != s.at) {
+                scores.push(s);
+            }
+        }
         scores = (scores.par_iter())
             .filter_map(|s| {
                 Some(Score::of(

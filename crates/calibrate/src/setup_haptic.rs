@@ -67,7 +67,8 @@ pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
     let as_given = residual(&rows);
     let n_joints = chain.n_joints();
     let given = LogRows(rows);
-    let hypotheses = log_hypotheses(&chain, &given, !as_given.is_clean(), paths);
+    // A distance residual costs microseconds a row: every family, whatever the residual.
+    let hypotheses = log_hypotheses(&chain, &given, true, paths);
     let n_hypotheses = hypotheses.len();
     let screen = |d: &LogRows| Some(residual(&d.0));
     let judged = judge(
@@ -79,8 +80,15 @@ pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
             refine: None,
         },
     );
-    let rows = thinned(given.0);
     let mut findings: Vec<Finding> = judged.finding.into_iter().collect();
+    // Readings out of step by a fraction of a row are a latency, which the diagnosis models.
+    if let Some(f) = findings.first_mut()
+        && f.class == MistakeClass::RowShift
+        && let Some(latency) = latency(&chain, &given.0, &as_given)
+    {
+        *f = latency;
+    }
+    let rows = thinned(given.0);
     // The external encoders are judged against the joint readings as an error's correction
     // reads them: two joint columns swapped leave their encoders where they belong.
     let corrected = match judged.error_at.map(|i| &hypotheses[i]) {
@@ -176,6 +184,93 @@ fn log_hypotheses(
         }));
     }
     hypotheses
+}
+
+/// Distance from a whole number of rows (rows) from which the lag that fits best may be a
+/// latency, not rows out of step: a shifted export moves whole rows, a latency any fraction
+/// (45 ms on a 20 Hz log is 0.9 row).
+const FRACTIONAL_LAG: f64 = 0.1;
+
+/// Factor by which the fractional lag's residual must lie below the nearest whole row's for a
+/// latency: the noise of a RMS over the rows checked is a few per cent.
+const WHOLE_ROW_GAIN: f64 = 0.9;
+
+/// The latency finding of `rows` on `chain` (residual `as_given`), when the joint readings
+/// fit the distances best interpolated a fraction of a row later or earlier (within ±3 rows,
+/// on a grid of 0.05 row), that fraction lies [`FRACTIONAL_LAG`] or more from a whole row and
+/// fits better than it ([`WHOLE_ROW_GAIN`]): a warning, since `diagnose` models a latency; `None` otherwise.
+fn latency(
+    chain: &hapcal_kinematics::Chain,
+    rows: &[LogRow],
+    as_given: &Residual,
+) -> Option<Finding> {
+    let n = rows.len();
+    if n < 12 {
+        return None;
+    }
+    let at = |lag: f64| -> Residual {
+        let moved: Vec<LogRow> = (0..n)
+            .filter_map(|i| {
+                let x = i as f64 + lag;
+                if x < 0.0 || x > (n - 1) as f64 {
+                    return None;
+                }
+                let (lo, w) = (x.floor() as usize, x - x.floor());
+                let hi = (lo + 1).min(n - 1);
+                let mut row = rows[i].clone();
+                for (j, q) in row.q.iter_mut().enumerate() {
+                    *q = (1.0 - w) * rows[lo].q[j] + w * rows[hi].q[j];
+                }
+                Some(row)
+            })
+            .collect();
+        distance_residual(chain, &thinned(moved))
+    };
+    let length = |r: &Residual| r.length_rms_m.unwrap_or(f64::INFINITY);
+    let (lag, best) = (-60..=60)
+        .map(|k| f64::from(k) * 0.05)
+        .map(|lag| (lag, at(lag)))
+        .min_by(|a, b| length(&a.1).total_cmp(&length(&b.1)))?;
+    // A whole-row shift interpolates to itself: between rows, the fraction must fit better.
+    let whole = at(lag.round());
+    if (lag - lag.round()).abs() < FRACTIONAL_LAG || length(&best) > WHOLE_ROW_GAIN * length(&whole)
+    {
+        return None;
+    }
+    let period = {
+        let t: Vec<f64> = rows.iter().filter_map(|r| r.t_s).collect();
+        (t.len() == n && n > 1).then(|| (t[n - 1] - t[0]) / (n - 1) as f64)
+    };
+    let time = period
+        .filter(|p| *p > 0.0 && p.is_finite())
+        .map_or_else(String::new, |p| {
+            format!(
+                ", {:.0} ms at the log's {:.0} Hz",
+                lag.abs() * p * 1e3,
+                1.0 / p
+            )
+        });
+    let (who, how) = if lag > 0.0 {
+        ("the joint readings lag", "behind")
+    } else {
+        ("the joint readings lead", "ahead of")
+    };
+    Some(Finding {
+        class: MistakeClass::Latency,
+        severity: Severity::Warning,
+        message: format!(
+            "{who} the cable distances by {:.2} rows{time}: a latency (the readings fit best \
+             {:.2} rows {how} the distances, between whole rows), not rows out of step",
+            lag.abs(),
+            lag.abs()
+        ),
+        fix: format!(
+            "sample the joints and the cable together, or let hapcal diagnose model the {}",
+            hapcal_contract::Effect::Latency.name()
+        ),
+        before: *as_given,
+        after: Some(best),
+    })
 }
 
 /// A haptic device's log rows, as the general families correct them.
