@@ -105,10 +105,15 @@ class Measurements:
 
     @classmethod
     def from_csv(
-        cls, path: _PathLike, length_unit: str = "m", angle_unit: str = "rad"
+        cls,
+        path: _PathLike,
+        length_unit: str = "m",
+        angle_unit: str = "rad",
+        column_units: Optional[Dict[str, str]] = None,
     ) -> Measurements:
         """Measurement CSV / industrial_calibration YAML / hapcal log / MUKCa folder, read when
-        calibrating. ``length_unit``: "m" | "mm"; ``angle_unit``: "rad" | "deg"."""
+        calibrating. ``length_unit``: "m" | "mm" | "cm" | "in" | "ft"; ``angle_unit``: "rad" |
+        "deg" | "grad" | "rev"; ``column_units``: {"q3": "deg", "x2,y2,z2": "mm"}."""
     @classmethod
     def from_arrays(
         cls,

@@ -49,19 +49,30 @@ class Measurements:
 
     @classmethod
     def from_csv(
-        cls, path: PathLike, length_unit: str = "m", angle_unit: str = "rad"
+        cls,
+        path: PathLike,
+        length_unit: str = "m",
+        angle_unit: str = "rad",
+        column_units: Optional[Dict[str, str]] = None,
     ) -> "Measurements":
         """A measurement file (CSV with a header row, or industrial_calibration's YAML), a
         hapcal log CSV, or a MUKCa placement / run folder, read when calibrating (its joint
         columns are matched to the device's joints then).
 
-        ``length_unit``: ``"m"`` or ``"mm"`` (positions, distances; prismatic joint readings
-        stay in m, the robot's own unit);
-        ``angle_unit``: ``"rad"`` or ``"deg"`` (revolute joints, ``phix, phiy, phiz``).
+        ``length_unit``: ``"m"``, ``"mm"``, ``"cm"``, ``"in"`` or ``"ft"`` (positions,
+        distances; prismatic joint readings stay in m, the robot's own unit);
+        ``angle_unit``: ``"rad"``, ``"deg"``, ``"grad"`` or ``"rev"`` (revolute joints,
+        ``phix, phiy, phiz``);
+        ``column_units``: the unit of some columns, as ``--column-unit`` gives it, e.g.
+        ``{"q3": "deg", "x2,y2,z2": "mm"}`` (columns as the header spells them, or ``q1..qn``).
 
-        Raises :class:`HapcalError` for a missing file or a unit it does not know.
+        Raises :class:`HapcalError` for a missing file or a unit it does not know; a column the
+        file lacks is reported when the file is read.
         """
-        return cls(_hapcal._Measurements.from_path(os.fspath(path), length_unit, angle_unit))
+        edits = list(column_units.items()) if column_units else None
+        return cls(
+            _hapcal._Measurements.from_path(os.fspath(path), length_unit, angle_unit, edits)
+        )
 
     @classmethod
     def from_arrays(

@@ -42,6 +42,18 @@ fn units(length_unit: &str, angle_unit: &str) -> Result<Units> {
     Ok(Units::new(length, angle))
 }
 
+/// `units` with the edits of `column_units`: `{"q3": "deg", "x2,y2,z2": "mm"}`, the columns
+/// as `--column-unit` names them, in the dict's order.
+fn with_column_units(units: Units, column_units: Option<Vec<(String, String)>>) -> Result<Units> {
+    let edits = (column_units.unwrap_or_default().into_iter())
+        .map(|(columns, unit)| {
+            hapcal_io::ColumnEdit::parse_unit(&format!("{columns}={unit}"))
+                .map_err(|e| anyhow!("column_units: {e}"))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(units.with_columns(edits))
+}
+
 /// A device: a URDF with one or more tip links, or a hapcal device file (TOML).
 #[pyclass(module = "hapcal", name = "Device", frozen)]
 struct PyDevice {
@@ -204,8 +216,16 @@ fn check_len(what: &str, got: usize, want: usize) -> Result<()> {
 #[pymethods]
 impl PyMeasurements {
     #[staticmethod]
-    fn from_path(path: PathBuf, length_unit: &str, angle_unit: &str) -> PyResult<Self> {
-        let units = units(length_unit, angle_unit).map_err(py_err)?;
+    #[pyo3(signature = (path, length_unit, angle_unit, column_units=None))]
+    fn from_path(
+        path: PathBuf,
+        length_unit: &str,
+        angle_unit: &str,
+        column_units: Option<Vec<(String, String)>>,
+    ) -> PyResult<Self> {
+        let units = units(length_unit, angle_unit)
+            .and_then(|u| with_column_units(u, column_units))
+            .map_err(py_err)?;
         std::fs::metadata(&path)
             .with_context(|| format!("reading measurements {}", path.display()))
             .map_err(py_err)?;
@@ -744,7 +764,7 @@ fn file_sources(sources: &[Source]) -> Option<Vec<(PathBuf, Units)>> {
     sources
         .iter()
         .map(|s| match s {
-            Source::Path { path, units } => Some((path.clone(), *units)),
+            Source::Path { path, units } => Some((path.clone(), units.clone())),
             Source::Arrays(_) => None,
         })
         .collect()
@@ -796,7 +816,7 @@ fn _calibrate(
     let mut setup_warnings = Vec::new();
     let outcome = match files {
         Some((tr, te)) if tr.iter().chain(&te).all(|(_, u)| *u == tr[0].1) => {
-            plan.units = tr[0].1;
+            plan.units = tr[0].1.clone();
             plan.data = tr.into_iter().map(|(p, _)| p).collect();
             plan.test = te.into_iter().map(|(p, _)| p).collect();
             py.detach(|| -> Result<Outcome> {
@@ -1130,7 +1150,7 @@ fn _diagnose(
         let mut gated = (Vec::new(), None);
         let baseline = match files {
             Some((tr, te)) if tr.iter().chain(&te).all(|(_, u)| *u == tr[0].1) => {
-                plan.units = tr[0].1;
+                plan.units = tr[0].1.clone();
                 plan.data = tr.into_iter().map(|(p, _)| p).collect();
                 plan.test = te.into_iter().map(|(p, _)| p).collect();
                 gated = setup_gate(&plan, accept_setup)?;
@@ -1187,7 +1207,7 @@ fn _check(
                  check them"
             );
         };
-        let Some(&(_, units)) = files.first() else {
+        let Some((_, units)) = files.first().cloned() else {
             bail!("data: give the measurement files to check");
         };
         if files.iter().any(|(_, u)| *u != units) {

@@ -207,6 +207,36 @@ def test_unseen_marker_nan_equals_empty_cells(tmp_path, ur10: hapcal.Device) -> 
     assert_close(cal.report, csv_cal.report, ignore={"elapsed_s"})
 
 
+def test_column_units_read_a_column_in_degrees(tmp_path, ur10: hapcal.Device) -> None:
+    """``column_units={"q3": "deg"}`` on a copy with elbow_joint in degrees gives the
+    calibration of the file in rad (the CLI's ``--column-unit q3=deg``)."""
+    import math
+
+    from conftest import ROOT
+
+    lines = (ROOT / UR10_CSV).read_text().splitlines()
+    column = lines[0].split(",").index("elbow_joint")
+    for i in range(1, len(lines)):
+        cells = lines[i].split(",")
+        if len(cells) > column:
+            cells[column] = repr(math.degrees(float(cells[column])))
+            lines[i] = ",".join(cells)
+    path = tmp_path / "calibration.csv"
+    path.write_text("\n".join(lines) + "\n")
+    si = hapcal.calibrate(ur10, hapcal.Measurements.from_csv(ROOT / UR10_CSV), model="geometric")
+    deg = hapcal.calibrate(
+        ur10, hapcal.Measurements.from_csv(path, column_units={"q3": "deg"}), model="geometric"
+    )
+    # The calibration (not the σ a pruned, unidentifiable parameter would have: rounding
+    # decides that one).
+    for key in ("model", "parameters", "frames", "sigma_m", "placements"):
+        assert_close(deg.report[key], si.report[key], tol=1e-9, strings=False)
+    with pytest.raises(hapcal.HapcalError, match='no column "q9"'):
+        hapcal.calibrate(
+            ur10, hapcal.Measurements.from_csv(path, column_units={"q9": "deg"}), model="geometric"
+        )
+
+
 def test_threads(ur10: hapcal.Device) -> None:
     """The solve releases the GIL: calibrations in threads agree with one another."""
     from concurrent.futures import ThreadPoolExecutor

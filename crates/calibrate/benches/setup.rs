@@ -53,7 +53,7 @@ fn bench(c: &mut Criterion) {
                     tables: &tables,
                     urdf: Some(&urdf),
                     tips: &tips,
-                    units,
+                    units: units.clone(),
                 }))
                 .unwrap()
             })

@@ -532,10 +532,6 @@ fn refuse_options(plan: &Plan, what: &str) -> Result<()> {
         ("--sigma-m", plan.sigma_m.is_some()),
         ("--sigma-rad", plan.sigma_rad.is_some()),
         ("--test-last", plan.test_last.is_some()),
-        (
-            "--length-unit / --angle-unit",
-            plan.units != hapcal_io::Units::default(),
-        ),
     ] {
         if given {
             bail!("{option} does not apply to {what}");

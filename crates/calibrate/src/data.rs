@@ -82,7 +82,10 @@ impl Data {
 pub fn load(plan: &Plan, device: &Device) -> Result<Data> {
     if !device.capstans.is_empty() || device.parallelogram.is_some() {
         let read = |paths: &[PathBuf]| -> Result<Vec<NamedLog>> {
-            paths.iter().map(|p| read_log(p, device)).collect()
+            paths
+                .iter()
+                .map(|p| read_log(p, device, &plan.units))
+                .collect()
         };
         return Ok(Data::HapticLogs {
             train: read(&plan.data)?,
@@ -115,8 +118,8 @@ pub fn load(plan: &Plan, device: &Device) -> Result<Data> {
         let test = load_tables(&plan.test, &robot, &plan.units)?;
         return Ok(Data::Measurements { robot, train, test });
     }
-    let train = load_data(&plan.data, device)?;
-    let test = load_data(&plan.test, device)?;
+    let train = load_data(&plan.data, device, &plan.units)?;
+    let test = load_data(&plan.test, device, &plan.units)?;
     let kind = if train.iter().all(|s| matches!(s, DataSet::Sockets(_))) {
         DataKind::Sockets
     } else {
@@ -304,7 +307,7 @@ pub fn workspace_configurations(
 }
 
 /// Reads one log of a haptic device.
-fn read_log(path: &Path, device: &Device) -> Result<NamedLog> {
+fn read_log(path: &Path, device: &Device, units: &Units) -> Result<NamedLog> {
     if !path.is_file() {
         bail!(
             "{}: a haptic device is calibrated from log files (CSV with q1..q{}, distance_m, \
@@ -313,7 +316,7 @@ fn read_log(path: &Path, device: &Device) -> Result<NamedLog> {
             device.n_joints()
         );
     }
-    let log = hapcal_io::read_log(path, device)
+    let log = hapcal_io::read_log_in(path, device, units)
         .with_context(|| format!("reading log {}", path.display()))?;
     Ok(NamedLog {
         name: file_stem(path),
@@ -471,15 +474,18 @@ pub(crate) fn csv_columns(path: &Path) -> Vec<String> {
         .collect()
 }
 
-/// Reads data sets: MUKCa placement or run folders, or hapcal log CSV files.
+/// Reads data sets: MUKCa placement or run folders, or hapcal log CSV files, with their
+/// readings in `units` (file-wide units and column edits; the columns of socket files are
+/// `q1..qn`).
 ///
 /// # Errors
-/// Missing files, malformed rows (file, line, column), joint-count mismatch.
-pub fn load_data(paths: &[PathBuf], device: &Device) -> Result<Vec<DataSet>> {
+/// Missing files, malformed rows (file, line, column), joint-count mismatch, an edit of
+/// `units` naming a column the file does not have or giving a unit of the wrong kind.
+pub fn load_data(paths: &[PathBuf], device: &Device, units: &Units) -> Result<Vec<DataSet>> {
     let mut sets = Vec::new();
     for path in paths {
         if path.is_file() {
-            let log = hapcal_io::read_log(path, device)
+            let log = hapcal_io::read_log_in(path, device, units)
                 .with_context(|| format!("reading log {}", path.display()))?;
             sets.push(DataSet::Distances {
                 name: file_stem(path),
@@ -487,8 +493,9 @@ pub fn load_data(paths: &[PathBuf], device: &Device) -> Result<Vec<DataSet>> {
                 distance_m: log.rows.iter().map(|r| r.distance_m).collect(),
             });
         } else {
-            let placements = hapcal_io::read_mukca_paths_for(std::slice::from_ref(path), device)
-                .with_context(|| format!("reading measurements in {}", path.display()))?;
+            let placements =
+                hapcal_io::read_mukca_paths_in(std::slice::from_ref(path), device, units)
+                    .with_context(|| format!("reading measurements in {}", path.display()))?;
             for placement in &placements {
                 check_sockets(placement)?;
             }

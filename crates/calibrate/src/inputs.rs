@@ -42,7 +42,9 @@ pub struct Plan {
     /// Further tip links of a URDF tree (marker `k + 1` sits on tip `k` of `[tip, tips…]`;
     /// markers past the last tip sit on it).
     pub tips: Vec<String>,
-    /// Units of lengths and angles in the measurement files.
+    /// Units of the data files' columns: file-wide lengths and angles, and the edits of
+    /// named columns (unit, reversed sign, offset), applied by every reader (measurement
+    /// files, logs, socket folders) before its checks.
     pub units: hapcal_io::Units,
     /// Orientation noise σ, rad, of pose data, if known.
     pub sigma_rad: Option<f64>,

@@ -644,10 +644,16 @@ fn own_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correc
     let (other, unit_word, other_word, flag) = match units.angle {
         AngleUnit::Rad => (AngleUnit::Deg, "radians", "degrees", "--angle-unit deg"),
         AngleUnit::Deg => (AngleUnit::Rad, "degrees", "radians", "--angle-unit rad"),
+        _ => (
+            AngleUnit::Rad,
+            "another unit",
+            "radians",
+            "--angle-unit rad",
+        ),
     };
     let other_units = Units {
         angle: other,
-        ..*units
+        ..(*units).clone()
     };
     let paths: Vec<PathBuf> = tables.iter().map(|t| t.path.clone()).collect();
     if let Ok(reread) = measured::load_tables(&paths, robot, &other_units)
@@ -1054,7 +1060,7 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
     let device = crate::data::load_device(&plan.device, &plan.tip)?;
     if !device.capstans.is_empty() || device.parallelogram.is_some() {
         if plan.data.iter().all(|p| p.is_file()) {
-            return crate::setup_haptic::check_logs(&device, &plan.data).map(Some);
+            return crate::setup_haptic::check_logs(&device, &plan.data, &plan.units).map(Some);
         }
         return Ok(None);
     }
@@ -1082,7 +1088,9 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
         Ok(tables) => tables,
         Err(e) => {
             // A tip below the markers' link may need a joint the files have no column for.
-            if is_urdf && let Some(report) = tip_above(&plan.device, &tips, &files, plan.units) {
+            if is_urdf
+                && let Some(report) = tip_above(&plan.device, &tips, &files, plan.units.clone())
+            {
                 return Ok(Some(report));
             }
             // A reading past its joint's limits: read again without the limits, so that the
@@ -1098,7 +1106,7 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
         tables: &tables,
         urdf: is_urdf.then_some(plan.device.as_path()),
         tips: &tips,
-        units: plan.units,
+        units: plan.units.clone(),
     })
     .map(Some)
 }
@@ -1131,7 +1139,7 @@ fn past_limits(
         tables: &tables,
         urdf: is_urdf.then_some(plan.device.as_path()),
         tips,
-        units: plan.units,
+        units: plan.units.clone(),
     })
     .ok()?;
     let f = (report.findings.iter_mut()).find(|f| f.severity == Severity::Error)?;

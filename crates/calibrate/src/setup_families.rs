@@ -476,7 +476,7 @@ pub(crate) fn general_hypotheses<D: SetupData>(
         out.push(Corrected::new(
             MistakeClass::JointOrder,
             format!(
-                "the joint columns are in reverse order ({} … {} read as {} … {})",
+                "the joint columns are reversed ({} … {} read as {} … {})",
                 joints[last].words, joints[first].words, joints[first].words, joints[last].words
             ),
             "reverse the order of the joint columns (the first joint of the chain is the one at \

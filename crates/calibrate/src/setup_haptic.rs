@@ -38,23 +38,28 @@ use crate::setup_findings::{
 /// radian to radians.
 pub const PLAUSIBLE_EXT_RAD: f64 = 0.05;
 
-/// The setup check of a haptic device's training logs `paths`.
+/// The setup check of a haptic device's training logs `paths`, read with `units` (the unit
+/// flags and column edits of the command line).
 ///
 /// # Errors
 /// A log that cannot be read even without the joint limits (file, line, column), or a device
 /// whose chain does not compile.
-pub fn check_logs(device: &Device, paths: &[PathBuf]) -> Result<SetupReport> {
+pub fn check_logs(
+    device: &Device,
+    paths: &[PathBuf],
+    units: &hapcal_io::Units,
+) -> Result<SetupReport> {
     let chain = device
         .chain()
         .context("building the device's kinematic chain")?;
     let mut rows = Vec::new();
     let mut outside_limits = None;
     for path in paths {
-        match hapcal_io::read_log(path, device) {
+        match hapcal_io::read_log_in(path, device, units) {
             Ok(log) => rows.extend(log.rows),
             Err(e) => {
                 // Read again without the limits: the check names what put the readings there.
-                let log = hapcal_io::read_log(path, &unbounded(device))
+                let log = hapcal_io::read_log_in(path, &unbounded(device), units)
                     .with_context(|| format!("reading log {}", path.display()))?;
                 outside_limits.get_or_insert_with(|| e.to_string());
                 rows.extend(log.rows);
@@ -321,7 +326,7 @@ fn log_names(paths: &[PathBuf]) -> String {
 }
 
 /// The device with every joint's range opened: the readings of a log read as they are.
-fn unbounded(device: &Device) -> Device {
+pub(crate) fn unbounded(device: &Device) -> Device {
     let mut open = device.clone();
     for joint in &mut open.joints {
         joint.lower_rad = -OPEN_LIMIT;

@@ -546,7 +546,10 @@ pub fn check_socket_plan(
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
     let urdf = is_urdf.then_some(plan.device.as_path());
-    match hapcal_io::read_mukca_paths(&plan.data, chain.n_joints()) {
+    // Read with the units and column edits given, the joint ranges open: a file in degrees
+    // is a hypothesis here, not a reading error.
+    let open = crate::setup_haptic::unbounded(device);
+    match hapcal_io::read_mukca_paths_in(&plan.data, &open, &plan.units) {
         Ok(placements) => {
             // A scatter over a handful of rows says nothing about the setup (the calibration
             // refuses so few configurations in its own words).
@@ -572,7 +575,7 @@ pub fn check_socket_plan(
             })?;
             // The reader's joint-limit check: a reading past a limit that a finding explains
             // is named with it; one that no finding explains is the reader's error as before.
-            if let Err(limit) = hapcal_io::read_mukca_paths_for(&plan.data, device) {
+            if let Err(limit) = hapcal_io::read_mukca_paths_in(&plan.data, device, &plan.units) {
                 // An error finding names the cause (a mistake, or another robot); without one,
                 // a reading past a limit in data that fit the robot is the reader's error.
                 match (report.findings.iter_mut()).find(|f| f.severity == Severity::Error) {

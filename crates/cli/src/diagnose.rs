@@ -17,6 +17,8 @@ pub struct DiagnosePlan {
     pub data: PathBuf,
     /// Diagnosis settings.
     pub config: DiagnoseConfig,
+    /// Units of the log's columns (SI unless set after [`DiagnosePlan::new`]).
+    pub units: hapcal_io::Units,
 }
 
 impl DiagnosePlan {
@@ -38,6 +40,7 @@ impl DiagnosePlan {
                 folds,
                 ..DiagnoseConfig::default()
             },
+            units: hapcal_io::Units::default(),
         })
     }
 }
@@ -49,7 +52,7 @@ impl DiagnosePlan {
 pub fn run(plan: &DiagnosePlan) -> Result<(Diagnosis, Vec<String>)> {
     let device = hapcal_io::read_device(&plan.device)
         .with_context(|| format!("reading device {}", plan.device.display()))?;
-    let log = hapcal_io::read_log(&plan.data, &device)
+    let log = hapcal_io::read_log_in(&plan.data, &device, &plan.units)
         .with_context(|| format!("reading log {}", plan.data.display()))?;
     let d = diagnose(&device, &log.rows, &plan.config)
         .with_context(|| format!("diagnosing {}", plan.data.display()))?;

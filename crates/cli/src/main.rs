@@ -56,25 +56,46 @@ struct Cli {
 }
 
 /// The units of measurement files, the same options on every command that reads them.
-#[derive(clap::Args, Clone, Copy, Debug)]
+#[derive(clap::Args, Clone, Debug)]
 struct UnitArgs {
-    /// Unit of positions and distances in measurement files: m or mm.
+    /// Unit of positions and distances in measurement files and logs: m, mm, cm, in or ft.
     #[arg(long, default_value = "m")]
     length_unit: hapcal_io::LengthUnit,
-    /// Unit of prismatic joint readings in measurement files: m or mm (their own unit,
-    /// whatever the instrument's).
+    /// Unit of prismatic joint readings in measurement files: m, mm, cm, in or ft (their own
+    /// unit, whatever the instrument's).
     #[arg(long, default_value = "m")]
     joint_length_unit: hapcal_io::LengthUnit,
-    /// Unit of angles in measurement files: rad or deg.
+    /// Unit of angles (joints, external encoders, phix/phiy/phiz) in data files: rad, deg,
+    /// grad or rev.
     #[arg(long, default_value = "rad")]
     angle_unit: hapcal_io::AngleUnit,
+    /// The unit of some columns, over the file-wide unit of their kind: COLUMNS=UNIT, the
+    /// columns as the header spells them (q1..qn for socket files, which have none), separated
+    /// by commas; a length unit (m, mm, cm, in, ft) or an angle unit (rad, deg, grad, rev).
+    /// Repeatable. Example: --column-unit q3=deg --column-unit x2,y2,z2=mm.
+    #[arg(long = "column-unit", value_name = "COLUMNS=UNIT", value_parser = hapcal_io::ColumnEdit::parse_unit)]
+    column_units: Vec<hapcal_io::ColumnEdit>,
+    /// A column whose encoder counts the other way: its readings change sign (after their
+    /// unit). Repeatable. Example: --column-sign q3.
+    #[arg(long = "column-sign", value_name = "COLUMNS", value_parser = hapcal_io::ColumnEdit::parse_sign)]
+    column_signs: Vec<hapcal_io::ColumnEdit>,
+    /// A value added to a column's readings after their unit and sign, in rad (m for a length
+    /// column): a joint's zero. Repeatable. Example: --column-offset q2=-1.5708.
+    #[arg(long = "column-offset", value_name = "COLUMNS=VALUE", value_parser = hapcal_io::ColumnEdit::parse_offset, allow_hyphen_values = true)]
+    column_offsets: Vec<hapcal_io::ColumnEdit>,
 }
 
 impl UnitArgs {
     /// The units the readers take.
-    fn units(self) -> hapcal_io::Units {
+    fn units(&self) -> hapcal_io::Units {
         hapcal_io::Units::new(self.length_unit, self.angle_unit)
             .with_joint_length(self.joint_length_unit)
+            .with_columns(
+                (self.column_units.iter())
+                    .chain(&self.column_signs)
+                    .chain(&self.column_offsets)
+                    .cloned(),
+            )
     }
 }
 
@@ -438,8 +459,9 @@ fn check_socket_folders(plan: &Plan) -> Result<()> {
         return Ok(());
     }
     for folder in folders {
-        let placements = hapcal_io::read_mukca_paths_for(std::slice::from_ref(folder), &device)
-            .with_context(|| format!("reading measurements in {}", folder.display()))?;
+        let placements =
+            hapcal_io::read_mukca_paths_in(std::slice::from_ref(folder), &device, &plan.units)
+                .with_context(|| format!("reading measurements in {}", folder.display()))?;
         for warning in placements.iter().flat_map(|p| &p.warnings) {
             note!("hapcal: warning: {warning}");
         }
@@ -874,13 +896,16 @@ fn run(cli: Cli) -> Result<()> {
                     },
                     accept_setup,
                 )?;
-                let plan = hapcal::diagnose::DiagnosePlan::new(
-                    device.clone(),
-                    data[0].clone(),
-                    (baseline.as_deref())
-                        .unwrap_or(hapcal_contract::ModelName::Transmissions.name()),
-                    folds,
-                )?;
+                let plan = hapcal::diagnose::DiagnosePlan {
+                    units: units.units(),
+                    ..hapcal::diagnose::DiagnosePlan::new(
+                        device.clone(),
+                        data[0].clone(),
+                        (baseline.as_deref())
+                            .unwrap_or(hapcal_contract::ModelName::Transmissions.name()),
+                        folds,
+                    )?
+                };
                 let (mut d, warnings) = hapcal::diagnose::run(&plan)?;
                 setup_verdict(&mut d.verdict, &mut d.notes, accepted);
                 for w in &warnings {

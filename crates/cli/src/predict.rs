@@ -568,7 +568,7 @@ fn read_haptic_rows(path: &Path, device: &hapcal_io::Device, units: &Units) -> R
         .and_then(|f| std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut header));
     let has_distance = header.split(',').any(|c| c.trim() == "distance_m");
     if has_distance {
-        let log = hapcal_io::read_log(path, device)
+        let log = hapcal_io::read_log_in(path, device, units)
             .with_context(|| format!("reading log {}", path.display()))?;
         let rows = (log.rows.into_iter())
             .map(|r| (r.line, r.q, Some(r.distance_m)))

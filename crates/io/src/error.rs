@@ -200,16 +200,56 @@ pub enum Error {
         /// Number of data rows.
         rows: usize,
     },
-    /// Units other than SI asked for a file format whose units are fixed (industrial_calibration's
-    /// YAML: m and rad).
-    #[error(
-        "{path}: industrial_calibration's YAML has fixed units (pose x, y, z in m, joint angles in rad; the format has no unit field, as everywhere in ROS): {asked} cannot apply to it; leave the unit options at their defaults, or convert the file"
-    )]
-    FixedUnits {
+    /// A column edit (`--column-unit`, `--column-sign`, `--column-offset`) names a column the
+    /// file does not have.
+    #[error("{path}:{line}: {flag}: the file has no column {name:?}; its columns are {columns}")]
+    UnknownColumn {
         /// The file.
         path: PathBuf,
-        /// The units asked for, in the user's words (with their option).
-        asked: String,
+        /// 1-based line of the column names (1; for a file without a header, its first row).
+        line: u64,
+        /// The edit as its flag spells it.
+        flag: String,
+        /// The column named.
+        name: String,
+        /// The file's columns, comma-separated (`q1..qn` for a file without a header).
+        columns: String,
+    },
+    /// A column edit gives a length unit to an angle column, or an angle unit to a length
+    /// column.
+    #[error(
+        "{path}:{line}: {flag}: {unit} is {} but column {name:?} holds {}; give it a unit of its kind",
+        .unit.kind_words(),
+        .unit.other_words()
+    )]
+    ColumnUnitKind {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line of the column names.
+        line: u64,
+        /// The edit as its flag spells it.
+        flag: String,
+        /// The column.
+        name: String,
+        /// The unit given (the column holds the other kind of quantity).
+        unit: crate::ColumnUnit,
+    },
+    /// A column edit names a column that has no unit, sign or offset (time, a quaternion
+    /// component, a column the reader ignores).
+    #[error(
+        "{path}:{line}: {flag}: column {name:?} holds {holds}: it takes no unit, sign or offset"
+    )]
+    ColumnNotEditable {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line of the column names.
+        line: u64,
+        /// The edit as its flag spells it.
+        flag: String,
+        /// The column.
+        name: String,
+        /// What the column holds, in words.
+        holds: &'static str,
     },
     /// A file holds fewer data rows than needed.
     #[error("{path}: expected at least {min} data rows, found {found}")]

@@ -69,6 +69,7 @@
 /// and sum of squares of a residual far from overflow.
 pub const MAX_LENGTH_M: f64 = 1e3;
 
+mod columns;
 mod device;
 mod error;
 mod log;
@@ -77,6 +78,7 @@ mod mukca;
 mod table;
 mod urdf;
 
+pub use columns::{AngleUnit, ColumnChange, ColumnEdit, ColumnUnit, LengthUnit, Units};
 pub use device::{
     Branch, CableEncoder, CalibratedValue, Calibration, CalibrationMeta, Capstan, Device, DhEntry,
     Handle, JointRef, JointSpec, Parallelogram, UrdfSource, parse_device, read_device,
@@ -84,14 +86,14 @@ pub use device::{
 };
 pub use error::{Error, line_column};
 pub use hapcal_kinematics::{DhConvention, DhRow, Placement};
-pub use log::{Log, LogRow, N_EXT, read_log, write_log};
+pub use log::{Log, LogRow, N_EXT, read_log, read_log_in, write_log};
 pub use measure::{
-    AngleUnit, JOINT_LIMIT_SLACK, JointSchema, LengthUnit, MAX_YAML_DEPTH, MarkerSample,
-    MeasuredRow, MeasurementTable, Units, read_industrial_yaml, read_measurement_file,
+    JOINT_LIMIT_SLACK, JointSchema, MAX_YAML_DEPTH, MarkerSample, MeasuredRow, MeasurementTable,
+    read_industrial_yaml, read_measurement_file,
 };
 pub use mukca::{
-    SocketPlacement, SocketSamples, read_mukca_paths, read_mukca_paths_for, read_mukca_placement,
-    read_mukca_placement_for,
+    SocketPlacement, SocketSamples, read_mukca_paths, read_mukca_paths_for, read_mukca_paths_in,
+    read_mukca_placement, read_mukca_placement_for,
 };
 pub use urdf::{
     LinkInertial, MAX_CHAIN_LENGTH_M, UrdfTree, import_urdf, import_urdf_tips, import_urdf_tree,

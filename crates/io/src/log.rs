@@ -4,6 +4,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::Error;
+use crate::columns::{ColumnInfo, Quantity, Units, conversions};
 use crate::device::Device;
 use crate::measure::{Reach, reach};
 use crate::table::{Frozen, Repeats, Table, check_separator, first_duplicate, metres, number};
@@ -101,6 +102,21 @@ fn classify(name: &str) -> Column {
 /// of two or more rows (a frozen or disconnected cable encoder; joint columns may be
 /// constant); [`Error::Csv`] for invalid UTF-8.
 pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
+    read_log_in(path, device, &Units::default())
+}
+
+/// Reads a measurement log for `device` as [`read_log`] does, with its readings in `units`:
+/// `q1..qn` and `ext1..ext4` in [`Units::angle`], `distance_m` in [`Units::length`] (the
+/// column keeps its name whatever the unit), and the edits of [`Units::columns`] (a joint
+/// column may be named `q{j}` or by the device's joint name). Readings are converted to SI
+/// before the limit and length checks.
+///
+/// # Errors
+///
+/// As [`read_log`]; [`Error::UnknownColumn`], [`Error::ColumnUnitKind`] and
+/// [`Error::ColumnNotEditable`] for an edit that names no column of the log, gives a unit of
+/// the wrong kind, or names `t_s` or an unknown column.
+pub fn read_log_in(path: &Path, device: &Device, units: &Units) -> Result<Log, Error> {
     let n_joints = device.n_joints();
     let limits = device.joint_limits();
     let mut table = Table::open(path)?;
@@ -163,6 +179,24 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
             });
         }
     }
+    let infos: Vec<ColumnInfo> = (names.iter().zip(&columns))
+        .map(|(name, column)| match *column {
+            Column::Q(j) => ColumnInfo::joint(
+                name,
+                j,
+                device.joints.get(j).map(|s| s.name.as_str()),
+                Quantity::Angle,
+            ),
+            Column::Distance => ColumnInfo::plain(name, Quantity::Length),
+            Column::Ext(_) => ColumnInfo::plain(name, Quantity::Angle),
+            Column::Time => ColumnInfo::plain(name, Quantity::Fixed("times in s")),
+            Column::Unknown => ColumnInfo::plain(
+                name,
+                Quantity::Fixed("nothing hapcal reads (it is ignored)"),
+            ),
+        })
+        .collect();
+    let conversion = conversions(path, header_line, &infos, units)?;
 
     let mut rows = Vec::new();
     let mut previous_t: Option<f64> = None;
@@ -187,10 +221,12 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
         };
         for (c, ((cell, column), name)) in record.iter().zip(&columns).zip(&names).enumerate() {
             let col = c as u64 + 1;
+            let si = conversion.get(c).copied();
             let parse = || number(path, line, col, name, cell);
+            let parse_si = || parse().map(|raw| si.map_or(raw, |k| k.apply(raw)));
             match *column {
                 Column::Q(j) => {
-                    let value = parse()?;
+                    let value = parse_si()?;
                     let (min_rad, max_rad) = limits
                         .get(j)
                         .copied()
@@ -213,7 +249,7 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
                     }
                 }
                 Column::Distance => {
-                    let value = parse()?;
+                    let value = parse_si()?;
                     Error::check_length(path, line, col, name, value)?;
                     if value < 0.0 {
                         return Err(Error::NegativeDistance {
@@ -228,7 +264,7 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
                     row.distance_m = value;
                 }
                 Column::Ext(k) if !cell.is_empty() => {
-                    let value = parse()?;
+                    let value = parse_si()?;
                     if let Some(&(min_rad, max_rad)) = limits.get(k)
                         && reach(value, (min_rad, max_rad)) == Reach::Outside
                     {

@@ -8,103 +8,8 @@ use nalgebra::{Quaternion, UnitQuaternion};
 use serde::Deserialize;
 
 use crate::Error;
+use crate::columns::{ColumnInfo, Quantity, Units, conversions};
 use crate::table::{Frozen, Repeats, Table, check_separator, first_duplicate, metres, number};
-
-/// Unit of the length columns of a measurement file (positions, distances, prismatic joints).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum LengthUnit {
-    /// Metres (the default).
-    #[default]
-    M,
-    /// Millimetres.
-    Mm,
-}
-
-impl LengthUnit {
-    /// Metres per unit.
-    pub fn to_m(self) -> f64 {
-        match self {
-            LengthUnit::M => 1.0,
-            LengthUnit::Mm => 1e-3,
-        }
-    }
-}
-
-/// Unit of the angle columns of a measurement file (revolute joints, `phix, phiy, phiz`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum AngleUnit {
-    /// Radians (the default).
-    #[default]
-    Rad,
-    /// Degrees.
-    Deg,
-}
-
-impl AngleUnit {
-    /// Radians per unit.
-    pub fn to_rad(self) -> f64 {
-        match self {
-            AngleUnit::Rad => 1.0,
-            AngleUnit::Deg => std::f64::consts::PI / 180.0,
-        }
-    }
-}
-
-impl std::str::FromStr for LengthUnit {
-    type Err = String;
-    /// `m` or `mm`.
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "m" => Ok(Self::M),
-            "mm" => Ok(Self::Mm),
-            _ => Err(format!("expected a length unit, m or mm, found {s:?}")),
-        }
-    }
-}
-
-impl std::str::FromStr for AngleUnit {
-    type Err = String;
-    /// `rad` or `deg`.
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "rad" => Ok(Self::Rad),
-            "deg" => Ok(Self::Deg),
-            _ => Err(format!("expected an angle unit, rad or deg, found {s:?}")),
-        }
-    }
-}
-
-/// The units of a measurement file's columns (SI by default).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Units {
-    /// Positions and distances (what the instrument measured).
-    pub length: LengthUnit,
-    /// Revolute joints and `phix, phiy, phiz`.
-    pub angle: AngleUnit,
-    /// Prismatic joint readings (what the robot's encoders report): their own unit, since an
-    /// instrument in millimetres says nothing about the robot's controller (a torso lift read
-    /// in m stays in m).
-    pub joint_length: LengthUnit,
-}
-
-impl Units {
-    /// Units of the measurements' lengths and angles; prismatic joints in m.
-    pub fn new(length: LengthUnit, angle: AngleUnit) -> Self {
-        Self {
-            length,
-            angle,
-            joint_length: LengthUnit::M,
-        }
-    }
-
-    /// The same units with prismatic joint readings in `joint_length`.
-    pub fn with_joint_length(self, joint_length: LengthUnit) -> Self {
-        Self {
-            joint_length,
-            ..self
-        }
-    }
-}
 
 /// What a measurement file's joint columns must match: the device's joints in chain order.
 #[derive(Clone, Copy, Debug)]
@@ -282,6 +187,9 @@ fn spelled(stem: &str, k: usize, unnumbered: bool) -> String {
 ///
 /// - Joints: `q1..qn` (chain order) or the device's joint names; every joint needs a column.
 ///   Readings in rad (m for a prismatic joint), or in `units`.
+///
+/// Every reading is converted to SI by `units` (the file-wide unit of its kind, or its
+/// column's edit: unit, reversed sign, offset) before any check on it.
 /// - Marker positions in the instrument frame: `x,y,z` (one marker) or `x1,y1,z1,x2,…`.
 /// - Marker orientations (optional): a unit quaternion `qw,qx,qy,qz` (or `qw1,…`), or
 ///   figaroh's `phix,phiy,phiz` (or `phix1,…`): roll, pitch, yaw with
@@ -310,8 +218,10 @@ fn spelled(stem: &str, k: usize, unnumbered: bool) -> String {
 /// or a marker's `x, y, z` the same position (m) in every one of two or more rows where it is
 /// seen: a frozen or disconnected instrument (joint columns may be constant);
 /// [`Error::NothingMeasured`] (file, header line, first measurement column) if the file has
-/// marker or distance columns but every one of their cells is empty; [`Error::FixedUnits`] for
-/// an industrial_calibration YAML read with `units` other than m and rad.
+/// marker or distance columns but every one of their cells is empty; [`Error::UnknownColumn`],
+/// [`Error::ColumnUnitKind`] and [`Error::ColumnNotEditable`] for an edit of
+/// [`Units::columns`] that names no column of the file, gives a unit of the wrong kind, or
+/// names a column without a unit (time, a quaternion component, an ignored column).
 ///
 /// The header is handled in time linear in its number of columns.
 pub fn read_measurement_file(
@@ -323,31 +233,7 @@ pub fn read_measurement_file(
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
     if matches!(ext.as_deref(), Some("yaml" | "yml")) {
-        // The format fixes its units: `units` cannot apply, and must not pass unnoticed.
-        let asked: Vec<&str> = [
-            (
-                units.length != LengthUnit::M,
-                "positions in mm (--length-unit mm)",
-            ),
-            (
-                units.angle != AngleUnit::Rad,
-                "angles in deg (--angle-unit deg)",
-            ),
-            (
-                units.joint_length != LengthUnit::M,
-                "prismatic joints in mm (--joint-length-unit mm)",
-            ),
-        ]
-        .into_iter()
-        .filter_map(|(asked, what)| asked.then_some(what))
-        .collect();
-        if !asked.is_empty() {
-            return Err(Error::FixedUnits {
-                path: path.to_path_buf(),
-                asked: asked.join(", "),
-            });
-        }
-        return read_industrial_yaml(path, schema);
+        return read_industrial_yaml_in(path, schema, units);
     }
     let n = schema.names.len();
     let mut table = Table::open(path)?;
@@ -491,9 +377,32 @@ pub fn read_measurement_file(
         .map(|(n, _)| n.clone())
         .collect();
 
-    let length = units.length.to_m();
-    let joint_length = units.joint_length.to_m();
-    let angle = units.angle.to_rad();
+    // Each column's conversion to SI, before any check on its readings.
+    let infos: Vec<ColumnInfo> = (names.iter().zip(&columns))
+        .map(|(name, column)| match *column {
+            Column::Joint(j) => {
+                let prismatic = schema.prismatic.get(j).copied().unwrap_or(false);
+                let quantity = if prismatic {
+                    Quantity::JointLength
+                } else {
+                    Quantity::Angle
+                };
+                ColumnInfo::joint(name, j, schema.names.get(j).map(String::as_str), quantity)
+            }
+            Column::Position(..) | Column::Distance => ColumnInfo::plain(name, Quantity::Length),
+            Column::Rpy(..) => ColumnInfo::plain(name, Quantity::Angle),
+            Column::Quaternion(..) => {
+                ColumnInfo::plain(name, Quantity::Fixed("a quaternion component (no unit)"))
+            }
+            Column::Time => ColumnInfo::plain(name, Quantity::Fixed("times in s")),
+            Column::Ignored => ColumnInfo::plain(
+                name,
+                Quantity::Fixed("nothing hapcal reads (it is ignored)"),
+            ),
+        })
+        .collect();
+    let conversion = conversions(path, header_line, &infos, units)?;
+    let si = |c: usize, raw: f64| conversion.get(c).map_or(raw, |k| k.apply(raw));
     let mut rows = Vec::new();
     let mut previous_t: Option<f64> = None;
     let mut outside = Vec::new();
@@ -516,7 +425,7 @@ pub fn read_measurement_file(
         let mut q = Vec::with_capacity(n);
         for (j, &c) in joint_column.iter().enumerate() {
             let prismatic = schema.prismatic.get(j).copied().unwrap_or(false);
-            let v = value(c)? * if prismatic { joint_length } else { angle };
+            let v = si(c, value(c)?);
             if prismatic {
                 Error::check_length(path, line, c as u64 + 1, &names[c], v)?;
             }
@@ -568,7 +477,7 @@ pub fn read_measurement_file(
         previous_t = t_s.or(previous_t);
         let distance_m = match distance_column {
             Some(c) if !cell(c).is_empty() => {
-                let d = value(c)? * length;
+                let d = si(c, value(c)?);
                 Error::check_length(path, line, c as u64 + 1, &names[c], d)?;
                 if d < 0.0 {
                     return Err(Error::Csv {
@@ -617,7 +526,7 @@ pub fn read_measurement_file(
             }
             let mut position_m = [0.0; 3];
             for (p, c) in position_m.iter_mut().zip(m.position.iter().flatten()) {
-                *p = value(*c)? * length;
+                *p = si(*c, value(*c)?);
                 Error::check_length(path, line, *c as u64 + 1, &names[*c], *p)?;
             }
             if let Some(frozen) = frozen_position.get_mut(k) {
@@ -640,9 +549,9 @@ pub fn read_measurement_file(
                 Some(quaternion.map(|v| v / norm))
             } else if let [Some(r), Some(p), Some(y)] = m.rpy {
                 let rotation = UnitQuaternion::from_euler_angles(
-                    value(r)? * angle,
-                    value(p)? * angle,
-                    value(y)? * angle,
+                    si(r, value(r)?),
+                    si(p, value(p)?),
+                    si(y, value(y)?),
                 );
                 Some([rotation.w, rotation.i, rotation.j, rotation.k])
             } else {
@@ -851,8 +760,10 @@ struct Pose {
 /// target_joints}`, the pose (m, unit quaternion) of a target on the robot's tip as the
 /// static camera measures it. Rows come in file order; each has one marker with a rotation.
 /// Units are those of `industrial_calibration` (m, rad: the format has no unit field, its
-/// poses and joint angles are SI as everywhere in ROS, REP 103), so [`read_measurement_file`]
-/// refuses other [`Units`] for it; joint readings within
+/// poses and joint angles are SI as everywhere in ROS, REP 103); [`read_measurement_file`]
+/// reads the file in other [`Units`] (pose `x, y, z` in [`Units::length`], `target_joints`
+/// in [`Units::angle`] or [`Units::joint_length`], and edits of the columns `x`, `y`, `z`
+/// and `q1..qn` or the joints' names). Joint readings within
 /// [`JOINT_LIMIT_SLACK`] past their limits are kept with a warning, as in CSV files.
 ///
 /// # Errors
@@ -869,6 +780,38 @@ pub fn read_industrial_yaml(
     path: &Path,
     schema: &JointSchema<'_>,
 ) -> Result<MeasurementTable, Error> {
+    read_industrial_yaml_in(path, schema, &Units::default())
+}
+
+/// [`read_industrial_yaml`] with its positions and joint readings in `units`.
+fn read_industrial_yaml_in(
+    path: &Path,
+    schema: &JointSchema<'_>,
+    units: &Units,
+) -> Result<MeasurementTable, Error> {
+    // The columns the edits may name: the pose's x, y, z (qw..qz have no unit) and the
+    // joints, q1..qn or by name.
+    let n = schema.names.len();
+    let infos: Vec<ColumnInfo> = (["x", "y", "z"].into_iter())
+        .map(|c| ColumnInfo::plain(c, Quantity::Length))
+        .chain(
+            ["qw", "qx", "qy", "qz"]
+                .into_iter()
+                .map(|c| ColumnInfo::plain(c, Quantity::Fixed("a quaternion component (no unit)"))),
+        )
+        .chain((0..n).map(|j| {
+            let prismatic = schema.prismatic.get(j).copied().unwrap_or(false);
+            let quantity = if prismatic {
+                Quantity::JointLength
+            } else {
+                Quantity::Angle
+            };
+            let name = format!("q{}", j + 1);
+            ColumnInfo::joint(&name, j, schema.names.get(j).map(String::as_str), quantity)
+        }))
+        .collect();
+    let conversion = conversions(path, 1, &infos, units)?;
+    let si = |c: usize, raw: f64| conversion.get(c).map_or(raw, |k| k.apply(raw));
     let text = Error::read_text(path, |line, column, message| Error::Yaml {
         path: path.to_path_buf(),
         line,
@@ -928,6 +871,12 @@ pub fn read_industrial_yaml(
                 ),
             ));
         }
+        let mut o = o;
+        for (j, v) in o.target_joints.iter_mut().enumerate() {
+            *v = si(7 + j, *v);
+        }
+        let p = &mut o.pose;
+        [p.x, p.y, p.z] = [si(0, p.x), si(1, p.y), si(2, p.z)];
         for (j, &v) in o.target_joints.iter().enumerate() {
             let (min, max) = schema
                 .limits

@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::Error;
+use crate::columns::{ColumnInfo, Quantity, Units, conversions};
 use crate::device::{Device, JointSpec};
 use crate::measure::{Reach, reach};
 use crate::table::{Repeats, Table, check_separator, number};
@@ -49,7 +50,7 @@ pub struct SocketSamples {
 /// (file:line:column, column = field number); [`Error::TooFewRows`] for a file without rows;
 /// [`Error::Csv`] for invalid UTF-8.
 pub fn read_mukca_placement(dir: &Path, n_joints: usize) -> Result<SocketPlacement, Error> {
-    read_placement(dir, n_joints, &[])
+    read_placement(dir, n_joints, &[], &Units::default())
 }
 
 /// Reads one placement folder as [`read_mukca_placement`] does for `device`'s joints, and
@@ -65,7 +66,7 @@ pub fn read_mukca_placement(dir: &Path, n_joints: usize) -> Result<SocketPlaceme
 /// As [`read_mukca_placement`]; [`Error::OutsideJointRange`] (file:line:column, the reading
 /// and the limits) for a reading further past its limits.
 pub fn read_mukca_placement_for(dir: &Path, device: &Device) -> Result<SocketPlacement, Error> {
-    read_placement(dir, device.n_joints(), &device.joints)
+    read_placement(dir, device.n_joints(), &device.joints, &Units::default())
 }
 
 /// Reads MUKCa placements from `paths`, each a placement folder (it holds `hole_*.csv`)
@@ -77,7 +78,7 @@ pub fn read_mukca_placement_for(dir: &Path, device: &Device) -> Result<SocketPla
 ///
 /// As [`read_mukca_placement`]; [`Error::NoSockets`] for a run folder without any placement.
 pub fn read_mukca_paths(paths: &[PathBuf], n_joints: usize) -> Result<Vec<SocketPlacement>, Error> {
-    read_paths(paths, n_joints, &[])
+    read_paths(paths, n_joints, &[], &Units::default())
 }
 
 /// Reads MUKCa placements from `paths` as [`read_mukca_paths`] does, with every reading checked
@@ -91,7 +92,25 @@ pub fn read_mukca_paths_for(
     paths: &[PathBuf],
     device: &Device,
 ) -> Result<Vec<SocketPlacement>, Error> {
-    read_paths(paths, device.n_joints(), &device.joints)
+    read_paths(paths, device.n_joints(), &device.joints, &Units::default())
+}
+
+/// Reads MUKCa placements from `paths` as [`read_mukca_paths_for`] does, with the readings in
+/// `units`: every column in [`Units::angle`], and the edits of [`Units::columns`], which name
+/// the columns `q1..qn` (chain order; the files have no header) or by the device's joint
+/// names. Readings are converted to rad before the limit check.
+///
+/// # Errors
+///
+/// As [`read_mukca_paths_for`]; [`Error::UnknownColumn`] (the socket file, line 1, the
+/// columns `q1..qn`) for an edit naming another column, [`Error::ColumnUnitKind`] for a length
+/// unit.
+pub fn read_mukca_paths_in(
+    paths: &[PathBuf],
+    device: &Device,
+    units: &Units,
+) -> Result<Vec<SocketPlacement>, Error> {
+    read_paths(paths, device.n_joints(), &device.joints, units)
 }
 
 /// [`read_mukca_paths`] with the limits of `joints` checked (none if `joints` is empty).
@@ -99,11 +118,12 @@ fn read_paths(
     paths: &[PathBuf],
     n_joints: usize,
     joints: &[JointSpec],
+    units: &Units,
 ) -> Result<Vec<SocketPlacement>, Error> {
     let mut placements = Vec::new();
     for path in paths {
         if !socket_numbers(path)?.is_empty() {
-            placements.push(read_placement(path, n_joints, joints)?);
+            placements.push(read_placement(path, n_joints, joints, units)?);
             continue;
         }
         let mut subdirs = Vec::new();
@@ -119,7 +139,7 @@ fn read_paths(
         }
         subdirs.sort();
         for sub in subdirs {
-            placements.push(read_placement(&sub, n_joints, joints)?);
+            placements.push(read_placement(&sub, n_joints, joints, units)?);
         }
     }
     Ok(placements)
@@ -130,6 +150,7 @@ fn read_placement(
     dir: &Path,
     n_joints: usize,
     joints: &[JointSpec],
+    units: &Units,
 ) -> Result<SocketPlacement, Error> {
     let mut numbers = socket_numbers(dir)?;
     if numbers.is_empty() {
@@ -150,7 +171,8 @@ fn read_placement(
     let mut sockets = Vec::with_capacity(numbers.len());
     let mut warnings = Vec::new();
     for k in &numbers {
-        let (socket, mut w) = read_socket(&dir.join(format!("hole_{k}.csv")), n_joints, joints)?;
+        let (socket, mut w) =
+            read_socket(&dir.join(format!("hole_{k}.csv")), n_joints, joints, units)?;
         sockets.push(socket);
         warnings.append(&mut w);
     }
@@ -194,7 +216,16 @@ fn read_socket(
     path: &Path,
     n_joints: usize,
     joints: &[JointSpec],
+    units: &Units,
 ) -> Result<(SocketSamples, Vec<String>), Error> {
+    let infos: Vec<ColumnInfo> = (0..n_joints)
+        .map(|j| {
+            let name = format!("q{}", j + 1);
+            let joint = joints.get(j).map(|s| s.name.as_str());
+            ColumnInfo::joint(&name, j, joint, Quantity::Angle)
+        })
+        .collect();
+    let conversion = conversions(path, 1, &infos, units)?;
     let mut table = Table::open(path)?;
     let mut q = Vec::new();
     let mut line_numbers = Vec::new();
@@ -222,7 +253,10 @@ fn read_socket(
             });
         }
         let row = (record.iter().enumerate())
-            .map(|(c, cell)| number(path, line, c as u64 + 1, &format!("q{}", c + 1), cell))
+            .map(|(c, cell)| {
+                let raw = number(path, line, c as u64 + 1, &format!("q{}", c + 1), cell)?;
+                Ok(conversion.get(c).map_or(raw, |k| k.apply(raw)))
+            })
             .collect::<Result<Vec<f64>, _>>()?;
         for (j, (&v, spec)) in row.iter().zip(joints).enumerate() {
             let limits = (spec.lower_rad, spec.upper_rad);

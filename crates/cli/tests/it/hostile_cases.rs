@@ -1490,35 +1490,32 @@ fn measurement_cases(t: &mut Table) {
     // industrial_calibration YAML on its positioner.
     let positioner = fixture("industrial-calibration/two_axis_positioner.toml");
     let measurements = fixture("industrial-calibration/measurements.yaml");
-    for (flag, unit, said) in [
+    // The unit flags apply to its pose and joints; an edit of a column without a unit or of
+    // the wrong kind is refused.
+    for (edit, said) in [
         (
-            "--length-unit",
-            "mm",
-            "positions in mm (--length-unit mm) cannot apply to it",
+            "qw=mm",
+            "--column-unit qw=mm: column \"qw\" holds a quaternion component (no unit): it takes no unit, sign or offset",
         ),
         (
-            "--angle-unit",
-            "deg",
-            "angles in deg (--angle-unit deg) cannot apply to it",
+            "x=deg",
+            "--column-unit x=deg: deg is an angle unit but column \"x\" holds lengths",
         ),
     ] {
         t.add(
             C,
-            &format!("YAML with {flag} {unit}"),
+            &format!("YAML with --column-unit {edit}"),
             &[
                 "calibrate",
                 "--device",
                 &positioner,
                 "--data",
                 &measurements,
-                flag,
-                unit,
+                "--column-unit",
+                edit,
             ],
             2,
-            &[
-                &format!("{measurements}: industrial_calibration's YAML has fixed units (pose x, y, z in m, joint angles in rad"),
-                said,
-            ],
+            &[&format!("{measurements}:1: {said}")],
         );
     }
     let yaml =
@@ -1761,9 +1758,28 @@ fn option_cases(t: &mut Table) {
             &["invalid value 'km' for '--length-unit"],
         ),
         (
-            "--angle-unit grad",
-            &["--angle-unit", "grad"],
-            &["invalid value 'grad' for '--angle-unit"],
+            "--angle-unit gon",
+            &["--angle-unit", "gon"],
+            &[
+                "invalid value 'gon' for '--angle-unit",
+                "rad, deg, grad, rev",
+            ],
+        ),
+        (
+            "--column-unit without a unit",
+            &["--column-unit", "q3"],
+            &[
+                "invalid value 'q3' for '--column-unit <COLUMNS=UNIT>'",
+                "expected COLUMNS=VALUE",
+            ],
+        ),
+        (
+            "--column-offset that is not a number",
+            &["--column-offset", "q3=zero"],
+            &[
+                "invalid value 'q3=zero' for '--column-offset <COLUMNS=VALUE>'",
+                "expected a finite number",
+            ],
         ),
         (
             "--joint on an arm",
@@ -2658,10 +2674,10 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
             vec!["--test-last does not apply to a haptic device's log".to_owned()],
         ),
         (
-            "calibrate a haptic log with --length-unit mm",
-            calibrate(&["--length-unit", "mm"]),
+            "calibrate a haptic log with a column it does not have",
+            calibrate(&["--column-sign", "ext7"]),
             2,
-            vec!["--length-unit / --angle-unit does not apply".to_owned()],
+            vec!["--column-sign ext7: the file has no column \"ext7\"; its columns are q1,".to_owned()],
         ),
         (
             "calibrate --test = --data",

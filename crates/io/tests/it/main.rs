@@ -1,5 +1,6 @@
 //! Integration tests of hapcal-io against the fixtures in `test_data/`.
 
+mod columns;
 mod device;
 mod fuzz;
 mod log;
