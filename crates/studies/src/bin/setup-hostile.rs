@@ -57,7 +57,14 @@ fn main() -> Result<()> {
     }
     let hapcal = hapcal.context("--hapcal BIN is required")?;
     let work = work.context("--work DIR is required")?;
+    // Absolute, so that the report can name the files relative to it.
     let root = hapcal_studies::project_root();
+    let root = if root.as_os_str().is_empty() {
+        PathBuf::from(".")
+    } else {
+        root
+    };
+    let root = std::fs::canonicalize(&root).with_context(|| format!("{}", root.display()))?;
     let sources = Sources::load(&root)?;
     let selected: Vec<_> = (cases(per_family).into_iter())
         .filter(|c| half.is_none_or(|h| c.half == h))
@@ -78,7 +85,7 @@ fn main() -> Result<()> {
                     let i = next.fetch_add(1, Ordering::SeqCst);
                     let Some(case) = selected.get(i) else { break };
                     let dir = work.join(case.id.replace('/', "__"));
-                    match run_case(case, &sources, &dir, &hapcal) {
+                    match run_case(case, &sources, &dir, &hapcal, &root) {
                         Ok(r) => {
                             if let Ok(mut v) = results.lock() {
                                 v[i] = Some(r);
@@ -120,6 +127,7 @@ fn run_case(
     sources: &Sources,
     dir: &Path,
     hapcal: &Path,
+    root: &Path,
 ) -> Result<CaseResult> {
     let simulate = |args: &[String]| -> Result<()> {
         let out = Command::new(hapcal)
@@ -151,7 +159,7 @@ fn run_case(
     std::fs::write(dir.join("args.txt"), inv.args.join(" "))?;
     let code = out.status.code();
     // Paths of the case's files are this machine's: the report names the case instead.
-    let root = format!("{}/", hapcal_studies::project_root().display());
+    let root = format!("{}/", root.display());
     let said = (what_was_said(&stderr).replace(&format!("{}/", dir.display()), "<case>/"))
         .replace(&root, "");
     Ok(CaseResult {
