@@ -10,6 +10,7 @@ mod haptic;
 mod html_check;
 mod mukca;
 mod real_data;
+mod setup_hostile;
 mod tidy;
 mod tree_blind;
 
@@ -103,6 +104,21 @@ enum Task {
         #[arg(long)]
         figures: bool,
     },
+    /// The hostile sweep of setup mistakes (crates/studies/src/setup_hostile.rs): mistakes
+    /// the setup check was not built on, written into the bundled and simulated recordings,
+    /// run through the release `hapcal calibrate` and judged by its exit code and standard
+    /// error, into docs/results/setup-hostile.md.
+    SetupHostile {
+        /// Which half of the cases: tuning, held-back or all.
+        #[arg(long, default_value = "all", value_parser = ["tuning", "held-back", "all"])]
+        half: String,
+        /// Cases per mistake family (and per kind of correct data).
+        #[arg(long, default_value_t = 16)]
+        cases_per_family: usize,
+        /// The report.
+        #[arg(long, default_value = "docs/results/setup-hostile.md")]
+        out: PathBuf,
+    },
     /// `cargo deny check` (deny.toml): licences, sources, duplicate versions and, with network
     /// access, the RustSec advisories; installs cargo-deny on first use.
     Deny,
@@ -150,6 +166,11 @@ fn main() -> Result<()> {
         }
         Task::Tidy => tidy::run(&sh),
         Task::Deny => deny::run(&sh),
+        Task::SetupHostile {
+            half,
+            cases_per_family,
+            out,
+        } => setup_hostile::run(&sh, &half, cases_per_family, &out),
         Task::DiagnoseReal { check } => diagnose_real::run(&sh, check, None),
         Task::Bench { peers, criterion } => bench::run(&sh, peers, criterion),
         Task::BlindTest { cases } => blind_test(&sh, cases),

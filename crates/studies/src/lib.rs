@@ -11,6 +11,7 @@ pub mod force;
 pub mod paper;
 pub mod pose_study;
 pub mod reproduce;
+pub mod setup_hostile;
 pub mod tree_blind;
 
 pub use hapcal_calibrate::project_root;

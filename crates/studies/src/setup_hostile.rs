@@ -1,0 +1,2013 @@
+//! The hostile sweep of setup mistakes: recordings (the bundled real and simulated ones, and
+//! positions files of the arm blind test's simulated iiwa 14 and Panda) with one ordinary
+//! setup mistake each, written as a user would hand them to `hapcal calibrate`, and what the
+//! setup check should answer. Written without the check's code: a case is judged only by the
+//! command's exit code and its standard error ([`judge`]).
+//!
+//! **Mistakes** ([`FAMILIES`], the table of expectations): one joint column in degrees,
+//! gradians or revolutions; every angle in degrees; lengths in mm, cm, inches or feet; one
+//! marker of several in mm; one encoder's sign reversed; one joint's zero off by ±90° or
+//! 180°; joint columns swapped or reversed, the arms' columns exchanged; rows out of step
+//! (whole file, or from a row on) or partly decoupled; quaternions in the wrong order or
+//! conjugated; Euler angles in the wrong order; a mirrored or exchanged instrument axis; the
+//! tips exchanged or one joint off; another robot's data; the socket distance wrong or rows
+//! filed under the wrong socket; a haptic log with a real latency (a note, not a stop).
+//! **Correct data** ([`Family::is_correct`]): the recordings as they are, their rows
+//! re-ordered or sub-sampled, simulated arms with library effects, simulated haptic logs with
+//! effects: any setup finding on them is a false alarm.
+//!
+//! **Split.** Each case belongs to one half ([`Half`]) by a hash of its identity (family,
+//! recording, parameters), so the two halves do not change when cases are added.
+//!
+//! Sources of the recordings: fixtures/figaroh (UR10, TIAGo; Apache-2.0), fixtures/sim-humanoid,
+//! fixtures/industrial-calibration (Apache-2.0), fixtures/mukca (MIT, TU Delft),
+//! fixtures/reference-device.
+
+use std::collections::BTreeMap;
+use std::f64::consts::PI;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use hapcal_calibrate::measured::robot_from_urdf;
+use hapcal_contract::Effect;
+use nalgebra::{Rotation3, UnitQuaternion};
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::arm_blind::{self, ArmCase, ArmCaseKind, ArmData, ArmRobot, Injected};
+
+/// Rows of a simulated arm's positions file (the blind test's walk, fewer rows for speed).
+pub const SIM_ROWS: usize = 120;
+
+/// Distance between the two MUKCa sockets, m (fixtures/mukca/README.md).
+pub const SOCKET_DISTANCE_M: f64 = 0.05;
+
+/// How many times one mistake on one recording is drawn (parts 0, 1, 2, 3).
+pub const MAX_PARTS: u32 = 4;
+
+/// Default number of cases per mistake family (a few hundred cases in all).
+pub const DEFAULT_CASES_PER_FAMILY: usize = 16;
+
+/// A recording a case starts from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Recording {
+    /// figaroh's UR10: camera poses of a checkerboard, Euler angles (fixtures/figaroh/ur10).
+    Ur10,
+    /// The same rows with the orientation written as a quaternion (`qw1,qx1,qy1,qz1`).
+    Ur10Quaternion,
+    /// figaroh's TIAGo: four motion-capture markers on the hand, a prismatic torso.
+    Tiago,
+    /// The simulated two-arm humanoid, a marker on each hand (fixtures/sim-humanoid).
+    Humanoid,
+    /// industrial_calibration's two-axis positioner, 6-D poses with quaternions.
+    Positioner,
+    /// The positioner's poses written with figaroh's Euler angles (`phix,phiy,phiz`).
+    PositionerEuler,
+    /// A MUKCa socket folder: the iiwa 14's `front` placement.
+    SocketsIiwa,
+    /// A MUKCa socket folder: the Panda unit 2's `front_center` placement.
+    SocketsPanda,
+    /// The reference haptic device's log (fixtures/reference-device/log.csv).
+    Haptic,
+    /// A haptic log simulated by `hapcal simulate` along a time-ordered motion at 20 Hz.
+    HapticMotion,
+    /// Positions of the arm blind test's simulated iiwa 14 (tip `ball_link`).
+    SimIiwa,
+    /// Positions of the arm blind test's simulated Panda (tip `ball_link`).
+    SimPanda,
+}
+
+impl Recording {
+    /// Every recording.
+    pub const ALL: [Recording; 12] = [
+        Recording::Ur10,
+        Recording::Ur10Quaternion,
+        Recording::Tiago,
+        Recording::Humanoid,
+        Recording::Positioner,
+        Recording::PositionerEuler,
+        Recording::SocketsIiwa,
+        Recording::SocketsPanda,
+        Recording::Haptic,
+        Recording::HapticMotion,
+        Recording::SimIiwa,
+        Recording::SimPanda,
+    ];
+
+    /// Short name, used in case identities.
+    pub fn name(self) -> &'static str {
+        match self {
+            Recording::Ur10 => "ur10",
+            Recording::Ur10Quaternion => "ur10-quat",
+            Recording::Tiago => "tiago",
+            Recording::Humanoid => "humanoid",
+            Recording::Positioner => "positioner",
+            Recording::PositionerEuler => "positioner-euler",
+            Recording::SocketsIiwa => "sockets-iiwa14",
+            Recording::SocketsPanda => "sockets-panda2",
+            Recording::Haptic => "haptic",
+            Recording::HapticMotion => "haptic-20hz",
+            Recording::SimIiwa => "sim-iiwa14",
+            Recording::SimPanda => "sim-panda",
+        }
+    }
+
+    /// The device file, relative to the project root.
+    fn device(self) -> &'static str {
+        match self {
+            Recording::Ur10 | Recording::Ur10Quaternion => "fixtures/figaroh/ur10/ur10_robot.urdf",
+            Recording::Tiago => "fixtures/figaroh/tiago/tiago.urdf",
+            Recording::Humanoid => "fixtures/sim-humanoid/humanoid.urdf",
+            Recording::Positioner | Recording::PositionerEuler => {
+                "fixtures/industrial-calibration/two_axis_positioner.toml"
+            }
+            Recording::SocketsIiwa | Recording::SimIiwa => "fixtures/mukca/urdf/iiwa14.urdf",
+            Recording::SocketsPanda | Recording::SimPanda => "fixtures/mukca/urdf/panda.urdf",
+            Recording::Haptic | Recording::HapticMotion => "fixtures/reference-device/device.toml",
+        }
+    }
+
+    /// The tip links (`--tip`, in order); empty for a device file without a URDF.
+    fn tips(self) -> &'static [&'static str] {
+        match self {
+            Recording::Ur10 | Recording::Ur10Quaternion => &["wrist_3_link"],
+            Recording::Tiago => &["arm_7_link"],
+            Recording::Humanoid => &["l_hand", "r_hand"],
+            Recording::SocketsIiwa
+            | Recording::SocketsPanda
+            | Recording::SimIiwa
+            | Recording::SimPanda => &["ball_link"],
+            _ => &[],
+        }
+    }
+
+    /// The tip one moving joint up from the first tip, if any.
+    fn tip_up(self) -> Option<&'static str> {
+        match self {
+            Recording::Ur10 | Recording::Ur10Quaternion => Some("wrist_2_link"),
+            Recording::Tiago => Some("arm_6_link"),
+            Recording::Humanoid => Some("l_link6"),
+            Recording::SimIiwa | Recording::SocketsIiwa => Some("link_6"),
+            Recording::SimPanda | Recording::SocketsPanda => Some("panda_link6"),
+            _ => None,
+        }
+    }
+
+    /// The first tip and the links fixed to the same moving link (any of them names the
+    /// tip the markers sit on).
+    fn tip_aliases(self) -> &'static [&'static str] {
+        match self {
+            Recording::Ur10 | Recording::Ur10Quaternion => {
+                &["wrist_3_link", "flange", "tool0", "ee_link"]
+            }
+            Recording::Tiago => &["arm_7_link", "arm_tool_link"],
+            Recording::Humanoid => &["l_hand", "l_link7"],
+            Recording::SocketsIiwa | Recording::SimIiwa => &["ball_link", "link_7", "tool0"],
+            Recording::SocketsPanda | Recording::SimPanda => &[
+                "ball_link",
+                "panda_link7",
+                "panda_link8",
+                "panda_hand",
+                "panda_hand_tcp",
+            ],
+            _ => &[],
+        }
+    }
+
+    /// The revolute joint columns (prismatic ones left out), in chain order.
+    fn revolute(self, table: &Table) -> Vec<String> {
+        let skip = |h: &str| {
+            h == "torso_lift_joint"
+                || h == "t_s"
+                || h == "distance_m"
+                || h.starts_with("ext")
+                || is_position(h)
+                || is_orientation(h)
+        };
+        table.header.iter().filter(|h| !skip(h)).cloned().collect()
+    }
+
+    /// Whether the recording is a haptic device's log.
+    fn is_haptic(self) -> bool {
+        matches!(self, Recording::Haptic | Recording::HapticMotion)
+    }
+
+    /// Whether the recording is a simulated arm.
+    fn sim_arm(self) -> Option<ArmRobot> {
+        match self {
+            Recording::SimIiwa => Some(ArmRobot::Iiwa14),
+            Recording::SimPanda => Some(ArmRobot::Panda),
+            _ => None,
+        }
+    }
+}
+
+/// A position column: `x`, `y`, `z`, optionally numbered (`x2`).
+fn is_position(h: &str) -> bool {
+    let mut c = h.chars();
+    matches!(c.next(), Some('x' | 'y' | 'z')) && c.all(|c| c.is_ascii_digit())
+}
+
+/// An orientation column: `phix1`, `qw`, `qx2`, ….
+fn is_orientation(h: &str) -> bool {
+    let rest = |p: &str| {
+        h.strip_prefix(p)
+            .is_some_and(|r| r.chars().all(|c| c.is_ascii_digit()))
+    };
+    ["phix", "phiy", "phiz", "qw", "qx", "qy", "qz"]
+        .iter()
+        .any(|p| rest(p))
+}
+
+/// A mistake family or a kind of correct data: one row of [`FAMILIES`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Family {
+    /// One joint column in degrees, gradians or revolutions, read as rad.
+    ColumnUnit,
+    /// Every angle in degrees.
+    AngleUnit,
+    /// Positions (and distances) in mm, cm, inches or feet.
+    LengthUnit,
+    /// One marker of several in mm.
+    MarkerUnit,
+    /// One joint's encoder sign reversed.
+    ColumnSign,
+    /// One joint's zero off by +90°, −90° or 180°.
+    ColumnZero,
+    /// Two joint columns swapped, all reversed, or the arms' columns exchanged.
+    JointOrder,
+    /// Joint rows out of step with the measurements by k rows, or from a row on.
+    RowShift,
+    /// 10–30 % of the rows with joints and measurements decoupled.
+    RowMismatch,
+    /// Quaternions written x, y, z, w under `qw,qx,qy,qz`.
+    QuaternionOrder,
+    /// Quaternions conjugated (the inverse rotation).
+    QuaternionInverse,
+    /// Euler angles of R = Rx·Ry·Rz written where R = Rz·Ry·Rx is read.
+    EulerOrder,
+    /// One instrument axis mirrored, or two exchanged.
+    MirroredAxis,
+    /// The humanoid's tips given in the other order.
+    SwappedTips,
+    /// The tip link one moving joint up or down.
+    TipLink,
+    /// Another robot's data, or data of a robot with longer links.
+    AnotherDevice,
+    /// `--socket-distance-m` a tenth, ten times, or in mm.
+    SocketDistance,
+    /// A tenth of one socket's rows filed under the other.
+    WrongSocket,
+    /// A haptic log with a real latency of 45 ms at 20 Hz: a note or warning, not a stop.
+    Latency,
+    /// Correct: a recording as it is.
+    AsIs,
+    /// Correct: rows re-ordered or sub-sampled.
+    Resampled,
+    /// Correct: a simulated arm with library effects (the arm blind test's draws).
+    SimEffects,
+    /// Correct: a simulated haptic log with an effect or a small latency.
+    HapticEffects,
+}
+
+/// What the check should answer to a family.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Expect {
+    /// Stop (exit 2) naming this setup class, with this flag in the fix (if any).
+    Stop(&'static str, Option<&'static str>),
+    /// Run (exit 0 or 1) with a finding of this class (a note or a warning), never a stop.
+    Note(&'static str),
+    /// Correct data: no setup finding at all.
+    Clean,
+}
+
+/// One row of the table of expectations.
+#[derive(Clone, Copy, Debug)]
+pub struct FamilySpec {
+    /// The family.
+    pub family: Family,
+    /// Its name in case identities and the report.
+    pub name: &'static str,
+    /// What the check should answer.
+    pub expect: Expect,
+    /// The recordings it applies to.
+    pub recordings: &'static [Recording],
+}
+
+/// The class name of a latency finding (spelled by the effect vocabulary, whose word it is).
+pub const LATENCY_CLASS: &str = Effect::Latency.name();
+
+use Recording as R;
+
+/// Arms with joint columns (every recording but the haptic logs' special families).
+const JOINTED: &[Recording] = &[
+    R::Ur10,
+    R::Tiago,
+    R::Humanoid,
+    R::Positioner,
+    R::SocketsIiwa,
+    R::SocketsPanda,
+    R::SimIiwa,
+    R::SimPanda,
+    R::Haptic,
+];
+
+/// The table of expectations: each family, what the check should say, and where it applies.
+pub const FAMILIES: &[FamilySpec] = &[
+    FamilySpec {
+        family: Family::ColumnUnit,
+        name: "column-unit",
+        expect: Expect::Stop("column-unit", Some("--column-unit")),
+        recordings: JOINTED,
+    },
+    FamilySpec {
+        family: Family::AngleUnit,
+        name: "angle-unit",
+        expect: Expect::Stop("angle-unit", Some("--angle-unit")),
+        recordings: &[
+            R::Ur10,
+            R::Tiago,
+            R::Humanoid,
+            R::Positioner,
+            R::SocketsIiwa,
+            R::SocketsPanda,
+            R::SimIiwa,
+            R::SimPanda,
+        ],
+    },
+    FamilySpec {
+        family: Family::LengthUnit,
+        name: "length-unit",
+        expect: Expect::Stop("length-unit", Some("--length-unit")),
+        recordings: &[
+            R::Ur10,
+            R::Tiago,
+            R::Humanoid,
+            R::Positioner,
+            R::SimIiwa,
+            R::SimPanda,
+            R::Haptic,
+        ],
+    },
+    FamilySpec {
+        family: Family::MarkerUnit,
+        name: "marker-unit",
+        expect: Expect::Stop("length-unit", Some("--column-unit")),
+        recordings: &[R::Tiago, R::Humanoid],
+    },
+    FamilySpec {
+        family: Family::ColumnSign,
+        name: "column-sign",
+        expect: Expect::Stop("column-sign", Some("--column-sign")),
+        recordings: JOINTED,
+    },
+    FamilySpec {
+        family: Family::ColumnZero,
+        name: "column-zero",
+        expect: Expect::Stop("column-zero", Some("--column-offset")),
+        recordings: JOINTED,
+    },
+    FamilySpec {
+        family: Family::JointOrder,
+        name: "joint-order",
+        expect: Expect::Stop("joint-order", None),
+        recordings: &[
+            R::Ur10,
+            R::Tiago,
+            R::Humanoid,
+            R::Positioner,
+            R::SocketsIiwa,
+            R::SimIiwa,
+            R::SimPanda,
+        ],
+    },
+    FamilySpec {
+        family: Family::RowShift,
+        name: "row-shift",
+        expect: Expect::Stop("row-shift", None),
+        recordings: &[
+            R::Ur10,
+            R::Tiago,
+            R::Humanoid,
+            R::Positioner,
+            R::SimIiwa,
+            R::SimPanda,
+            R::Haptic,
+        ],
+    },
+    FamilySpec {
+        family: Family::RowMismatch,
+        name: "row-mismatch",
+        expect: Expect::Stop("row-mismatch", None),
+        recordings: &[
+            R::Ur10,
+            R::Tiago,
+            R::Humanoid,
+            R::Positioner,
+            R::SimIiwa,
+            R::SimPanda,
+            R::Haptic,
+        ],
+    },
+    FamilySpec {
+        family: Family::QuaternionOrder,
+        name: "quaternion-order",
+        expect: Expect::Stop("quaternion-order", None),
+        recordings: &[R::Positioner, R::Ur10Quaternion],
+    },
+    FamilySpec {
+        family: Family::QuaternionInverse,
+        name: "quaternion-inverse",
+        expect: Expect::Stop("quaternion-inverse", None),
+        recordings: &[R::Positioner, R::Ur10Quaternion],
+    },
+    FamilySpec {
+        family: Family::EulerOrder,
+        name: "euler-order",
+        expect: Expect::Stop("euler-order", None),
+        recordings: &[R::Ur10, R::PositionerEuler],
+    },
+    FamilySpec {
+        family: Family::MirroredAxis,
+        name: "mirrored-axis",
+        expect: Expect::Stop("mirrored-axis", None),
+        recordings: &[
+            R::Ur10,
+            R::Tiago,
+            R::Humanoid,
+            R::Positioner,
+            R::SimIiwa,
+            R::SimPanda,
+        ],
+    },
+    FamilySpec {
+        family: Family::SwappedTips,
+        name: "swapped-tips",
+        expect: Expect::Stop("swapped-tips", None),
+        recordings: &[R::Humanoid],
+    },
+    FamilySpec {
+        family: Family::TipLink,
+        name: "tip-link",
+        expect: Expect::Stop("tip-link", Some("--tip")),
+        recordings: &[
+            R::Ur10,
+            R::Tiago,
+            R::Humanoid,
+            R::SocketsIiwa,
+            R::SimIiwa,
+            R::SimPanda,
+        ],
+    },
+    FamilySpec {
+        family: Family::AnotherDevice,
+        name: "another-device",
+        expect: Expect::Stop("another-device", None),
+        recordings: &[R::Ur10, R::SimIiwa, R::SimPanda, R::HapticMotion],
+    },
+    FamilySpec {
+        family: Family::SocketDistance,
+        name: "socket-distance",
+        expect: Expect::Stop("socket-distance", Some("--socket-distance-m")),
+        recordings: &[R::SocketsIiwa, R::SocketsPanda],
+    },
+    FamilySpec {
+        family: Family::WrongSocket,
+        name: "wrong-socket",
+        expect: Expect::Stop("wrong-socket", None),
+        recordings: &[R::SocketsIiwa, R::SocketsPanda],
+    },
+    FamilySpec {
+        family: Family::Latency,
+        name: LATENCY_CLASS,
+        expect: Expect::Note(LATENCY_CLASS),
+        recordings: &[R::HapticMotion],
+    },
+    FamilySpec {
+        family: Family::AsIs,
+        name: "correct-as-is",
+        expect: Expect::Clean,
+        recordings: &[
+            R::Ur10,
+            R::Ur10Quaternion,
+            R::Tiago,
+            R::Humanoid,
+            R::Positioner,
+            R::PositionerEuler,
+            R::SocketsIiwa,
+            R::SocketsPanda,
+            R::Haptic,
+            R::HapticMotion,
+        ],
+    },
+    FamilySpec {
+        family: Family::Resampled,
+        name: "correct-resampled",
+        expect: Expect::Clean,
+        recordings: &[
+            R::Ur10,
+            R::Tiago,
+            R::Humanoid,
+            R::Positioner,
+            R::SocketsIiwa,
+            R::SocketsPanda,
+            R::Haptic,
+        ],
+    },
+    FamilySpec {
+        family: Family::SimEffects,
+        name: "correct-sim-effects",
+        expect: Expect::Clean,
+        recordings: &[R::SimIiwa, R::SimPanda],
+    },
+    FamilySpec {
+        family: Family::HapticEffects,
+        name: "correct-haptic-effects",
+        expect: Expect::Clean,
+        recordings: &[R::HapticMotion],
+    },
+];
+
+impl Family {
+    /// Its row of [`FAMILIES`].
+    ///
+    /// # Panics
+    /// Never: every family has a row (a test checks it).
+    pub fn spec(self) -> &'static FamilySpec {
+        FAMILIES
+            .iter()
+            .find(|s| s.family == self)
+            .unwrap_or_else(|| unreachable!("every family has a row"))
+    }
+
+    /// Whether the family is correct data (any finding is a false alarm).
+    pub fn is_correct(self) -> bool {
+        self.spec().expect == Expect::Clean
+    }
+}
+
+/// The two halves of the sweep.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Half {
+    /// The half a change of the check may be tuned on.
+    Tuning,
+    /// The half kept back to measure the change.
+    HeldBack,
+}
+
+impl Half {
+    /// `tuning` or `held-back`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Half::Tuning => "tuning",
+            Half::HeldBack => "held-back",
+        }
+    }
+
+    /// The half of a case identity: FNV-1a 64 of the identity, its lowest bit.
+    pub fn of(id: &str) -> Half {
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for b in id.bytes() {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+        // Fold the high bits in: FNV's lowest bit alone is the parity of the bytes' sum.
+        if (h ^ (h >> 29) ^ (h >> 41)) & 1 == 0 {
+            Half::Tuning
+        } else {
+            Half::HeldBack
+        }
+    }
+}
+
+/// A unit an angle column may be written in, read as rad.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum AngleUnit {
+    /// Degrees.
+    Deg,
+    /// Gradians.
+    Grad,
+    /// Revolutions.
+    Rev,
+}
+
+impl AngleUnit {
+    /// The flag's word.
+    pub fn name(self) -> &'static str {
+        match self {
+            AngleUnit::Deg => "deg",
+            AngleUnit::Grad => "grad",
+            AngleUnit::Rev => "rev",
+        }
+    }
+
+    /// The number written for 1 rad.
+    pub fn per_rad(self) -> f64 {
+        match self {
+            AngleUnit::Deg => 180.0 / PI,
+            AngleUnit::Grad => 200.0 / PI,
+            AngleUnit::Rev => 0.5 / PI,
+        }
+    }
+}
+
+/// A unit a length may be written in, read as m.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum LengthUnit {
+    /// Millimetres.
+    Mm,
+    /// Centimetres.
+    Cm,
+    /// Inches.
+    In,
+    /// Feet.
+    Ft,
+}
+
+impl LengthUnit {
+    /// The flag's word.
+    pub fn name(self) -> &'static str {
+        match self {
+            LengthUnit::Mm => "mm",
+            LengthUnit::Cm => "cm",
+            LengthUnit::In => "in",
+            LengthUnit::Ft => "ft",
+        }
+    }
+
+    /// The number written for 1 m.
+    pub fn per_m(self) -> f64 {
+        match self {
+            LengthUnit::Mm => 1e3,
+            LengthUnit::Cm => 1e2,
+            LengthUnit::In => 1.0 / 0.0254,
+            LengthUnit::Ft => 1.0 / 0.3048,
+        }
+    }
+}
+
+/// The mistake of a case, with its parameters (columns are found in the recording's table
+/// when the case is written: `col` is an index into its revolute joint columns).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Mistake {
+    /// One revolute joint column written in `unit`.
+    ColumnUnit {
+        /// Index into the revolute joint columns.
+        col: usize,
+        /// The unit written.
+        unit: AngleUnit,
+    },
+    /// Every angle (joints, Euler angles) in degrees.
+    AllDegrees,
+    /// Every length in `unit`.
+    Lengths(LengthUnit),
+    /// Marker `marker` (1-based) in mm.
+    MarkerMm(usize),
+    /// One revolute joint column negated.
+    Sign(usize),
+    /// One revolute joint column plus `offset_rad`.
+    Zero(usize, f64),
+    /// Two revolute joint columns' data exchanged.
+    Swap(usize, usize),
+    /// The revolute joint columns' data in reverse order.
+    Reverse,
+    /// The humanoid's left-arm columns given as the right arm's and back.
+    Arms,
+    /// Measurements of row `i + k` paired with the joints of row `i` (k rows dropped).
+    Shift(usize),
+    /// From `percent` % of the rows on, the measurements one row late.
+    ShiftFrom(usize),
+    /// `percent` % of the rows' joint readings shuffled among themselves (seeded).
+    Decouple(u32),
+    /// Quaternions written x, y, z, w.
+    Xyzw,
+    /// Quaternions conjugated.
+    Conjugate,
+    /// Euler angles of R = Rx(a)·Ry(b)·Rz(c).
+    EulerXyz,
+    /// Instrument axis `0..3` negated.
+    Mirror(usize),
+    /// Instrument axes exchanged.
+    SwapAxes(usize, usize),
+    /// `--tip r_hand --tip l_hand`.
+    TipsSwapped,
+    /// The tip given one moving joint up from the one measured.
+    TipUp,
+    /// The data measured one moving joint up from the tip given.
+    TipDown,
+    /// TIAGo's readings and first marker on the UR10 / the iiwa 14's positions on the Panda.
+    OtherRobot,
+    /// The data simulated with every link longer by `mm` millimetres.
+    LongerLinks(u32),
+    /// `--socket-distance-m` times `factor`.
+    SocketDistance(f64),
+    /// `percent` % of socket 0's rows filed under socket 1.
+    WrongSocket(u32),
+    /// Cable distance sampled `ms` milliseconds after the joints.
+    LatencyMs(u32),
+    /// Nothing.
+    None,
+    /// Rows re-ordered (seeded permutation).
+    Shuffled,
+    /// Every `n`-th row kept.
+    EveryNth(usize),
+    /// The arm blind test's draw `i` (its effects).
+    Draw(u64),
+    /// `hapcal simulate --effect` with this effect and parameter.
+    HapticEffect(Effect, &'static str),
+}
+
+impl Mistake {
+    /// Its part of the case identity.
+    fn label(&self) -> String {
+        match self {
+            Mistake::ColumnUnit { col, unit } => format!("col{col}-{}", unit.name()),
+            Mistake::AllDegrees => "deg".to_owned(),
+            Mistake::Lengths(u) => u.name().to_owned(),
+            Mistake::MarkerMm(m) => format!("marker{m}-mm"),
+            Mistake::Sign(c) => format!("col{c}"),
+            Mistake::Zero(c, o) => format!("col{c}{:+.0}deg", o.to_degrees()),
+            Mistake::Swap(a, b) => format!("col{a}-col{b}"),
+            Mistake::Reverse => "reversed".to_owned(),
+            Mistake::Arms => "arms".to_owned(),
+            Mistake::Shift(k) => format!("k{k}"),
+            Mistake::ShiftFrom(p) => format!("from-{p}pct"),
+            Mistake::Decouple(p) => format!("{p}pct"),
+            Mistake::Xyzw => "xyzw".to_owned(),
+            Mistake::Conjugate => "conjugate".to_owned(),
+            Mistake::EulerXyz => "xyz".to_owned(),
+            Mistake::Mirror(a) => format!("mirror-{}", axis(*a)),
+            Mistake::SwapAxes(a, b) => format!("swap-{}{}", axis(*a), axis(*b)),
+            Mistake::TipsSwapped => "tips".to_owned(),
+            Mistake::TipUp => "up".to_owned(),
+            Mistake::TipDown => "down".to_owned(),
+            Mistake::OtherRobot => "other-robot".to_owned(),
+            Mistake::LongerLinks(mm) => format!("longer-{mm}mm"),
+            Mistake::SocketDistance(f) => format!("x{f}"),
+            Mistake::WrongSocket(p) => format!("{p}pct"),
+            Mistake::LatencyMs(ms) => format!("{ms}ms"),
+            Mistake::None => "as-is".to_owned(),
+            Mistake::Shuffled => "shuffled".to_owned(),
+            Mistake::EveryNth(n) => format!("every-{n}"),
+            Mistake::Draw(i) => format!("draw{i}"),
+            Mistake::HapticEffect(e, p) => format!("{}-{p}", e.name()),
+        }
+    }
+}
+
+/// `x`, `y` or `z`.
+fn axis(a: usize) -> char {
+    ['x', 'y', 'z'][a % 3]
+}
+
+/// One case of the sweep.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Case {
+    /// Identity: `family/recording/parameters`, unique.
+    pub id: String,
+    /// Family.
+    pub family: Family,
+    /// Recording it starts from.
+    pub recording: Recording,
+    /// The mistake and its parameters.
+    pub mistake: Mistake,
+    /// Seed of anything random in writing it (shuffles, simulations).
+    pub seed: u64,
+    /// 0, or the repeat of a mistake with few parameters: a recorded file then loses a
+    /// seeded fifth of its rows first (a simulated one differs by its seed).
+    pub part: u32,
+    /// Its half.
+    pub half: Half,
+}
+
+/// Number of revolute joint columns of a recording (for drawing column indices).
+fn n_revolute(r: Recording) -> usize {
+    match r {
+        R::Ur10 | R::Ur10Quaternion => 6,
+        R::Tiago | R::SocketsIiwa | R::SocketsPanda | R::SimIiwa | R::SimPanda | R::Haptic => 7,
+        R::HapticMotion => 7,
+        R::Humanoid => 17,
+        R::Positioner | R::PositionerEuler => 2,
+    }
+}
+
+/// Draws the parameters of the `k`-th case of `family` on `rec`.
+fn draw(family: Family, rec: Recording, k: usize, rng: &mut ChaCha8Rng) -> Mistake {
+    let n = n_revolute(rec);
+    let col = |rng: &mut ChaCha8Rng| rng.random_range(0..n);
+    match family {
+        Family::ColumnUnit => Mistake::ColumnUnit {
+            col: col(rng),
+            unit: [AngleUnit::Deg, AngleUnit::Grad, AngleUnit::Rev][k % 3],
+        },
+        Family::AngleUnit => Mistake::AllDegrees,
+        Family::LengthUnit => {
+            if rec == R::Haptic {
+                Mistake::Lengths(LengthUnit::Mm)
+            } else {
+                Mistake::Lengths(
+                    [
+                        LengthUnit::Mm,
+                        LengthUnit::Cm,
+                        LengthUnit::In,
+                        LengthUnit::Ft,
+                    ][k % 4],
+                )
+            }
+        }
+        Family::MarkerUnit => Mistake::MarkerMm(if rec == R::Tiago {
+            1 + k % 3
+        } else {
+            1 + k % 2
+        }),
+        Family::ColumnSign => Mistake::Sign(col(rng)),
+        Family::ColumnZero => Mistake::Zero(col(rng), [PI / 2.0, -PI / 2.0, PI][k % 3]),
+        Family::JointOrder => match (rec, k % 4) {
+            (R::Humanoid, 3) => Mistake::Arms,
+            (_, 2) if n > 2 => Mistake::Reverse,
+            (_, 1) if n > 3 => {
+                let a = rng.random_range(0..n - 2);
+                Mistake::Swap(a, rng.random_range(a + 2..n))
+            }
+            _ => {
+                let a = rng.random_range(0..n - 1);
+                Mistake::Swap(a, a + 1)
+            }
+        },
+        Family::RowShift => {
+            if k % 5 == 4 {
+                Mistake::ShiftFrom(50)
+            } else {
+                Mistake::Shift(1 + k % 4)
+            }
+        }
+        Family::RowMismatch => Mistake::Decouple(10 + 10 * (k % 3) as u32),
+        Family::QuaternionOrder => Mistake::Xyzw,
+        Family::QuaternionInverse => Mistake::Conjugate,
+        Family::EulerOrder => Mistake::EulerXyz,
+        Family::MirroredAxis => {
+            if k.is_multiple_of(2) {
+                Mistake::Mirror(rng.random_range(0..3))
+            } else {
+                let a = rng.random_range(0..3);
+                Mistake::SwapAxes(a, (a + 1 + rng.random_range(0..2)) % 3)
+            }
+        }
+        Family::SwappedTips => Mistake::TipsSwapped,
+        Family::TipLink => {
+            if rec.sim_arm().is_some() && k % 2 == 1 {
+                Mistake::TipDown
+            } else {
+                Mistake::TipUp
+            }
+        }
+        Family::AnotherDevice => match rec {
+            R::Ur10 => Mistake::OtherRobot,
+            R::SimIiwa if k % 2 == 1 => Mistake::OtherRobot,
+            _ => Mistake::LongerLinks(rng.random_range(40..=100)),
+        },
+        Family::SocketDistance => Mistake::SocketDistance([0.1, 10.0, 1000.0][k % 3]),
+        Family::WrongSocket => Mistake::WrongSocket(10),
+        Family::Latency => Mistake::LatencyMs(45),
+        Family::AsIs => Mistake::None,
+        Family::Resampled => match k % 3 {
+            0 => Mistake::Shuffled,
+            1 => Mistake::EveryNth(2),
+            _ => Mistake::EveryNth(3),
+        },
+        Family::SimEffects => Mistake::Draw(rng.random_range(0..64)),
+        Family::HapticEffects => {
+            let effects: [(Effect, &'static str); 5] = [
+                (Effect::Backlash, "j2=1e-3"),
+                (Effect::CableAngle, "k=2e-4"),
+                (Effect::GravityCompliance, "j2=2e-3"),
+                (Effect::ThermalDrift, "k=2e-5"),
+                (Effect::Latency, "tau=0.005"),
+            ];
+            let (e, p) = effects[k % effects.len()];
+            Mistake::HapticEffect(e, p)
+        }
+    }
+}
+
+/// The cases of the sweep: `per_family` cases of every mistake family (recordings in turn,
+/// parameters drawn from a seed per family and index), and of every kind of correct data;
+/// a mistake drawn again is kept as a new part (a fifth of the rows dropped, or another
+/// simulation seed) up to [`MAX_PARTS`] times.
+pub fn cases(per_family: usize) -> Vec<Case> {
+    let mut out: Vec<Case> = Vec::new();
+    let mut seen: BTreeMap<String, u32> = BTreeMap::new();
+    for (f_idx, spec) in FAMILIES.iter().enumerate() {
+        // Families with few distinct cases stop when the draws repeat.
+        let mut k = 0;
+        let mut made = 0;
+        while made < per_family && k < 4 * per_family {
+            let rec = spec.recordings[k % spec.recordings.len()];
+            let seed = 0x5E7_0000 + 1000 * f_idx as u64 + k as u64;
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let mistake = draw(spec.family, rec, k / spec.recordings.len(), &mut rng);
+            let base = format!("{}/{}/{}", spec.name, rec.name(), mistake.label());
+            k += 1;
+            let part = seen.entry(base.clone()).or_insert(0u32);
+            if *part >= MAX_PARTS {
+                continue;
+            }
+            let id = if *part == 0 {
+                base
+            } else {
+                format!("{base}/part{part}")
+            };
+            let this_part = *part;
+            *part += 1;
+            made += 1;
+            out.push(Case {
+                half: Half::of(&id),
+                id,
+                family: spec.family,
+                recording: rec,
+                mistake,
+                seed,
+                part: this_part,
+            });
+        }
+    }
+    out
+}
+
+/// A table of numbers with a header (a CSV measurement file); NaN is an empty cell.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Table {
+    /// Column names.
+    pub header: Vec<String>,
+    /// Rows, one value per column.
+    pub rows: Vec<Vec<f64>>,
+}
+
+impl Table {
+    /// Reads a CSV file with a header row (`headerless`: none, columns named so).
+    ///
+    /// # Errors
+    /// An unreadable file or a cell that is not a number.
+    pub fn read_csv(path: &Path, headerless: Option<Vec<String>>) -> Result<Table> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+        let header = match headerless {
+            Some(h) => h,
+            None => (lines.next().unwrap_or_default().split(','))
+                .map(|s| s.trim().to_owned())
+                .collect(),
+        };
+        let mut rows = Vec::new();
+        for (i, line) in lines.enumerate() {
+            let row = (line.split(','))
+                .map(|c| {
+                    let c = c.trim();
+                    if c.is_empty() {
+                        Ok(f64::NAN)
+                    } else {
+                        c.parse::<f64>().with_context(|| {
+                            format!("{}: row {}: not a number: {c}", path.display(), i + 1)
+                        })
+                    }
+                })
+                .collect::<Result<Vec<f64>>>()?;
+            rows.push(row);
+        }
+        Ok(Table { header, rows })
+    }
+
+    /// The CSV text (with the header row unless `headerless`); shortest round-trip numbers.
+    pub fn to_csv(&self, headerless: bool) -> String {
+        let mut s = String::new();
+        if !headerless {
+            s.push_str(&self.header.join(","));
+            s.push('\n');
+        }
+        for row in &self.rows {
+            let cells: Vec<String> = (row.iter())
+                .map(|v| {
+                    if v.is_nan() {
+                        String::new()
+                    } else {
+                        format!("{v}")
+                    }
+                })
+                .collect();
+            s.push_str(&cells.join(","));
+            s.push('\n');
+        }
+        s
+    }
+
+    /// Index of column `name`.
+    pub fn col(&self, name: &str) -> Option<usize> {
+        self.header.iter().position(|h| h == name)
+    }
+
+    /// Applies `f` to every cell of column `name` (empty cells stay empty).
+    fn map_col(&mut self, name: &str, f: impl Fn(f64) -> f64) {
+        if let Some(c) = self.col(name) {
+            for row in &mut self.rows {
+                row[c] = f(row[c]);
+            }
+        }
+    }
+
+    /// Exchanges the data of two columns.
+    fn swap_cols(&mut self, a: &str, b: &str) {
+        if let (Some(a), Some(b)) = (self.col(a), self.col(b)) {
+            for row in &mut self.rows {
+                row.swap(a, b);
+            }
+        }
+    }
+}
+
+/// The two-axis positioner's `measurements.yaml` as a table `q1,q2,x,y,z,qw,qx,qy,qz` in
+/// file order (its device file's joints are read by position).
+///
+/// # Errors
+/// An unreadable file or an observation without its numbers.
+pub fn read_positioner_yaml(path: &Path) -> Result<Table> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let header: Vec<String> = ["q1", "q2", "x", "y", "z", "qw", "qx", "qy", "qz"]
+        .map(str::to_owned)
+        .to_vec();
+    let mut rows = Vec::new();
+    let mut cur: BTreeMap<String, f64> = BTreeMap::new();
+    let mut joints: Vec<f64> = Vec::new();
+    let mut flush = |cur: &mut BTreeMap<String, f64>, joints: &mut Vec<f64>| -> Result<()> {
+        if cur.is_empty() && joints.is_empty() {
+            return Ok(());
+        }
+        let mut row = joints.clone();
+        for k in ["x", "y", "z", "qw", "qx", "qy", "qz"] {
+            row.push(
+                *cur.get(k)
+                    .with_context(|| format!("an observation without {k}"))?,
+            );
+        }
+        if row.len() != 9 {
+            bail!("an observation with {} joints, expected 2", joints.len());
+        }
+        rows.push(row);
+        cur.clear();
+        joints.clear();
+        Ok(())
+    };
+    for line in text.lines() {
+        if !line.starts_with(' ') && line.trim_end().ends_with(':') {
+            flush(&mut cur, &mut joints)?;
+            continue;
+        }
+        let t = line.trim();
+        if let Some(v) = t.strip_prefix("- ") {
+            joints.push(v.trim().parse()?);
+        } else if let Some((k, v)) = t.split_once(':')
+            && let Ok(v) = v.trim().parse::<f64>()
+        {
+            cur.insert(k.trim().to_owned(), v);
+        }
+    }
+    flush(&mut cur, &mut joints)?;
+    Ok(Table { header, rows })
+}
+
+/// Replaces the quaternion columns `qw{s},qx{s},qy{s},qz{s}` by figaroh's Euler angles
+/// `phix{s},phiy{s},phiz{s}` (R = Rz·Ry·Rx).
+fn quaternion_to_euler(t: &mut Table, s: &str) {
+    let names = ["qw", "qx", "qy", "qz"].map(|n| format!("{n}{s}"));
+    let Some(idx) = names.iter().map(|n| t.col(n)).collect::<Option<Vec<_>>>() else {
+        return;
+    };
+    for row in &mut t.rows {
+        let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            row[idx[0]],
+            row[idx[1]],
+            row[idx[2]],
+            row[idx[3]],
+        ));
+        let (r, p, y) = q.euler_angles();
+        row[idx[0]] = r;
+        row[idx[1]] = p;
+        row[idx[2]] = y;
+        row.remove(idx[3]);
+    }
+    t.header[idx[0]] = format!("phix{s}");
+    t.header[idx[1]] = format!("phiy{s}");
+    t.header[idx[2]] = format!("phiz{s}");
+    t.header.remove(idx[3]);
+}
+
+/// Replaces figaroh's Euler columns `phix{s},phiy{s},phiz{s}` by the quaternion
+/// `qw{s},qx{s},qy{s},qz{s}` of the same rotation.
+fn euler_to_quaternion(t: &mut Table, s: &str) {
+    let names = ["phix", "phiy", "phiz"].map(|n| format!("{n}{s}"));
+    let Some(idx) = names.iter().map(|n| t.col(n)).collect::<Option<Vec<_>>>() else {
+        return;
+    };
+    for row in &mut t.rows {
+        let q = UnitQuaternion::from_euler_angles(row[idx[0]], row[idx[1]], row[idx[2]]);
+        row[idx[0]] = q.w;
+        row[idx[1]] = q.i;
+        row[idx[2]] = q.j;
+        row.insert(idx[2] + 1, q.k);
+    }
+    t.header[idx[0]] = format!("qw{s}");
+    t.header[idx[1]] = format!("qx{s}");
+    t.header[idx[2]] = format!("qy{s}");
+    t.header.insert(idx[2] + 1, format!("qz{s}"));
+}
+
+/// The Euler angles (a, b, c) of R = Rx(a)·Ry(b)·Rz(c) for figaroh's (roll, pitch, yaw) of
+/// R = Rz(yaw)·Ry(pitch)·Rx(roll).
+pub fn euler_xyz_of(roll: f64, pitch: f64, yaw: f64) -> [f64; 3] {
+    // Rᵀ = Rz(−c)·Ry(−b)·Rx(−a): figaroh's order with the angles negated.
+    let rt = Rotation3::from_euler_angles(roll, pitch, yaw).transpose();
+    let (r, p, y) = rt.euler_angles();
+    [-r, -p, -y]
+}
+
+/// What a written case runs: the arguments of `hapcal calibrate` (without `--out`) and what
+/// the fix must name.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Invocation {
+    /// Arguments after `hapcal calibrate`, paths absolute.
+    pub args: Vec<String>,
+    /// Words the fix must hold: each inner list is one requirement, met by any of its words
+    /// (a column's name or its `q<k>` position, the factor's word, the flag).
+    pub fix_words: Vec<Vec<String>>,
+}
+
+/// The loaded sources: the arm blind test's setups (loaded once).
+pub struct Sources {
+    root: PathBuf,
+    arms: Vec<arm_blind::ArmSetup>,
+}
+
+impl Sources {
+    /// Loads the simulated arms' fixtures under `root` (the project root).
+    ///
+    /// # Errors
+    /// Unreadable fixtures.
+    pub fn load(root: &Path) -> Result<Sources> {
+        let arms = (ArmRobot::ALL.iter())
+            .map(|&r| arm_blind::load_setup(r))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Sources {
+            root: root.to_owned(),
+            arms,
+        })
+    }
+
+    fn arm(&self, robot: ArmRobot) -> &arm_blind::ArmSetup {
+        &self.arms[robot as usize]
+    }
+}
+
+/// A simulated arm's positions table (`t_s`, joints by name, `x,y,z`) for `case` with the
+/// given setup.
+fn arm_table(case: &ArmCase, setup: &arm_blind::ArmSetup) -> Result<Table> {
+    let m = arm_blind::simulate_positions_table(case, setup, SIM_ROWS)
+        .context("a positions case has a table")?;
+    let mut header = vec!["t_s".to_owned()];
+    header.extend(setup.robot.joint_names.iter().cloned());
+    header.extend(["x", "y", "z"].map(str::to_owned));
+    let rows = (m.rows.iter())
+        .enumerate()
+        .map(|(i, r)| {
+            let mut v = vec![r.t_s.unwrap_or(i as f64)];
+            v.extend(&r.q);
+            v.extend(r.markers.first().map_or([f64::NAN; 3], |s| s.position_m));
+            v
+        })
+        .collect();
+    Ok(Table { header, rows })
+}
+
+/// The URDF text with every joint origin of length over 5 cm longer by `extra_m` along itself.
+pub fn lengthen_urdf(text: &str, extra_m: f64) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(i) = rest.find("<origin") {
+        out.push_str(&rest[..i]);
+        rest = &rest[i..];
+        let end = rest.find('>').map_or(rest.len(), |e| e + 1);
+        let tag = &rest[..end];
+        out.push_str(&lengthen_origin(tag, extra_m));
+        rest = &rest[end..];
+    }
+    out.push_str(rest);
+    out
+}
+
+/// One `<origin … xyz="…" …>` tag lengthened (see [`lengthen_urdf`]).
+fn lengthen_origin(tag: &str, extra_m: f64) -> String {
+    let Some(s) = tag.find("xyz=\"") else {
+        return tag.to_owned();
+    };
+    let a = s + 5;
+    let Some(len) = tag[a..].find('"') else {
+        return tag.to_owned();
+    };
+    let v: Vec<f64> = (tag[a..a + len].split_whitespace())
+        .filter_map(|x| x.parse().ok())
+        .collect();
+    let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if v.len() != 3 || norm < 0.05 {
+        return tag.to_owned();
+    }
+    let k = (norm + extra_m) / norm;
+    format!(
+        "{}{} {} {}{}",
+        &tag[..a],
+        v[0] * k,
+        v[1] * k,
+        v[2] * k,
+        &tag[a + len..]
+    )
+}
+
+/// The device TOML with every D-H length (`a_m`, `d_m`) over 5 cm in magnitude longer by
+/// `extra_m`.
+pub fn lengthen_device_toml(text: &str, extra_m: f64) -> String {
+    let mut out = String::new();
+    for line in text.lines() {
+        let t = line.trim_start();
+        let is_len = t.starts_with("a_m") || t.starts_with("d_m");
+        let value = (t.split_once('=')).and_then(|(_, v)| {
+            v.split('#')
+                .next()
+                .and_then(|v| v.trim().parse::<f64>().ok())
+        });
+        match value {
+            Some(v) if is_len && v.abs() > 0.05 => {
+                let key = t.split('=').next().unwrap_or_default().trim();
+                let _ = writeln!(out, "{key} = {}", v + extra_m * v.signum());
+            }
+            _ => {
+                out.push_str(line);
+                out.push('\n');
+            }
+        }
+    }
+    out
+}
+
+/// Where a case's data come from before the mistake: a table, or socket files.
+enum Base {
+    /// One measurement table.
+    Table(Table),
+    /// MUKCa socket files `hole_0`, `hole_1` (no header), joint names as columns.
+    Sockets(Table, Table),
+}
+
+/// Writes `case` into `dir` (a fresh folder) and returns what to run. `simulate` runs
+/// `hapcal simulate` with the given arguments (haptic logs along a motion: the sweep passes
+/// the release binary; a test may pass a function that refuses).
+///
+/// # Errors
+/// Unreadable fixtures, an unwritable folder, a failed simulation.
+pub fn write_case(
+    case: &Case,
+    sources: &Sources,
+    dir: &Path,
+    simulate: &dyn Fn(&[String]) -> Result<()>,
+) -> Result<Invocation> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let root = &sources.root;
+    let rec = case.recording;
+    let abs = |p: &str| root.join(p).display().to_string();
+    let mut device = abs(rec.device());
+    let mut tips: Vec<String> = rec.tips().iter().map(|s| (*s).to_owned()).collect();
+    let mut extra: Vec<String> = Vec::new();
+    let mut rng = ChaCha8Rng::seed_from_u64(case.seed ^ 0xC0FF_EE00);
+    let mut base = load_base(case, sources, dir, simulate)?;
+    let simulated = rec.sim_arm().is_some() || rec == R::HapticMotion;
+    if case.part > 0 && !simulated {
+        let tables: Vec<&mut Table> = match &mut base {
+            Base::Table(t) => vec![t],
+            Base::Sockets(a, b) => vec![a, b],
+        };
+        for t in tables {
+            let n = t.rows.len();
+            let mut keep: Vec<usize> = (0..n).collect();
+            keep.shuffle(&mut rng);
+            keep.truncate(n - n / 5);
+            keep.sort_unstable();
+            t.rows = keep.iter().map(|&i| t.rows[i].clone()).collect();
+        }
+    }
+
+    // Column names (the revolute joints) and what the fix must name.
+    let revolute = match &base {
+        Base::Table(t) | Base::Sockets(t, _) => rec.revolute(t),
+    };
+    // A column is named by its joint name or by `q<k>`, its place among all joints (chain
+    // order, a prismatic joint included).
+    let joints = match &base {
+        Base::Table(t) | Base::Sockets(t, _) => joint_side(t),
+    };
+    let col_words = |c: usize| -> Vec<String> {
+        let name = revolute.get(c).cloned().unwrap_or_default();
+        let k = joints.iter().position(|j| *j == name).unwrap_or(c);
+        vec![name, format!("q{}", k + 1)]
+    };
+    let mut fix_words: Vec<Vec<String>> = Vec::new();
+    if let Expect::Stop(_, Some(flag)) = case.family.spec().expect {
+        fix_words.push(vec![flag.to_owned()]);
+    }
+    let tables: Vec<&mut Table> = match &mut base {
+        Base::Table(t) => vec![t],
+        Base::Sockets(a, b) => vec![a, b],
+    };
+    let n_tables = tables.len();
+    for (t_idx, t) in tables.into_iter().enumerate() {
+        let name_of = |c: usize| revolute.get(c).cloned().unwrap_or_default();
+        match &case.mistake {
+            Mistake::ColumnUnit { col, unit } => {
+                let f = unit.per_rad();
+                t.map_col(&name_of(*col), |v| v * f);
+                if t_idx == 0 {
+                    fix_words.push(col_words(*col));
+                    fix_words.push(vec![unit.name().to_owned()]);
+                }
+            }
+            Mistake::AllDegrees => {
+                let names: Vec<String> = (t.header.iter())
+                    .filter(|h| revolute.contains(h) || h.starts_with("phi"))
+                    .cloned()
+                    .collect();
+                for n in names {
+                    t.map_col(&n, f64::to_degrees);
+                }
+                if t_idx == 0 {
+                    fix_words.push(vec!["deg".to_owned()]);
+                }
+            }
+            Mistake::Lengths(u) => {
+                let f = u.per_m();
+                let names: Vec<String> = (t.header.iter())
+                    .filter(|h| is_position(h) || *h == "distance_m")
+                    .cloned()
+                    .collect();
+                for n in names {
+                    t.map_col(&n, |v| v * f);
+                }
+                fix_words.push(vec![u.name().to_owned()]);
+            }
+            Mistake::MarkerMm(m) => {
+                for a in ["x", "y", "z"] {
+                    t.map_col(&format!("{a}{m}"), |v| v * 1e3);
+                }
+                fix_words.push(vec![format!("x{m}")]);
+                fix_words.push(vec!["mm".to_owned()]);
+            }
+            Mistake::Sign(c) => {
+                t.map_col(&name_of(*c), |v| -v);
+                if t_idx == 0 {
+                    fix_words.push(col_words(*c));
+                }
+            }
+            Mistake::Zero(c, o) => {
+                t.map_col(&name_of(*c), |v| v + o);
+                if t_idx == 0 {
+                    fix_words.push(col_words(*c));
+                }
+            }
+            Mistake::Swap(a, b) => {
+                t.swap_cols(&name_of(*a), &name_of(*b));
+                if t_idx == 0 {
+                    let mut w = col_words(*a);
+                    w.extend(col_words(*b));
+                    fix_words.push(w);
+                }
+            }
+            Mistake::Reverse => {
+                let n = revolute.len();
+                for i in 0..n / 2 {
+                    t.swap_cols(&name_of(i), &name_of(n - 1 - i));
+                }
+            }
+            Mistake::Arms => {
+                for j in 1..=7 {
+                    t.swap_cols(&format!("l_{j}"), &format!("r_{j}"));
+                }
+            }
+            Mistake::Shift(k) => shift_rows(t, &joint_side(t), 0, *k),
+            Mistake::ShiftFrom(p) => {
+                let from = t.rows.len() * p / 100;
+                shift_rows(t, &joint_side(t), from, 1);
+            }
+            Mistake::Decouple(p) => decouple(t, &joint_side(t), *p, &mut rng),
+            Mistake::Xyzw => {
+                let s = quaternion_suffix(t);
+                // The file's qw,qx,qy,qz hold x, y, z, w.
+                let idx: Vec<usize> = (["qw", "qx", "qy", "qz"].iter())
+                    .filter_map(|n| t.col(&format!("{n}{s}")))
+                    .collect();
+                if idx.len() == 4 {
+                    for row in &mut t.rows {
+                        let (w, x, y, z) = (row[idx[0]], row[idx[1]], row[idx[2]], row[idx[3]]);
+                        row[idx[0]] = x;
+                        row[idx[1]] = y;
+                        row[idx[2]] = z;
+                        row[idx[3]] = w;
+                    }
+                }
+            }
+            Mistake::Conjugate => {
+                let s = quaternion_suffix(t);
+                for n in ["qx", "qy", "qz"] {
+                    t.map_col(&format!("{n}{s}"), |v| -v);
+                }
+            }
+            Mistake::EulerXyz => {
+                let s = if t.col("phix1").is_some() { "1" } else { "" };
+                let idx: Vec<usize> = (["phix", "phiy", "phiz"].iter())
+                    .filter_map(|n| t.col(&format!("{n}{s}")))
+                    .collect();
+                if idx.len() == 3 {
+                    for row in &mut t.rows {
+                        let e = euler_xyz_of(row[idx[0]], row[idx[1]], row[idx[2]]);
+                        for (i, v) in idx.iter().zip(e) {
+                            row[*i] = v;
+                        }
+                    }
+                }
+            }
+            Mistake::Mirror(a) => {
+                let names: Vec<String> = (t.header.iter())
+                    .filter(|h| is_position(h) && h.starts_with(axis(*a)))
+                    .cloned()
+                    .collect();
+                for n in names {
+                    t.map_col(&n, |v| -v);
+                }
+            }
+            Mistake::SwapAxes(a, b) => {
+                let names: Vec<String> = (t.header.iter())
+                    .filter(|h| is_position(h) && h.starts_with(axis(*a)))
+                    .cloned()
+                    .collect();
+                for n in names {
+                    let other = format!("{}{}", axis(*b), &n[1..]);
+                    t.swap_cols(&n, &other);
+                }
+            }
+            Mistake::TipsSwapped => tips.reverse(),
+            Mistake::TipUp => {
+                if t_idx == 0 {
+                    let up = rec.tip_up().context("a tip one joint up")?;
+                    tips[0] = up.to_owned();
+                    fix_words.push(rec.tip_aliases().iter().map(|s| (*s).to_owned()).collect());
+                }
+            }
+            Mistake::TipDown => {
+                if t_idx == 0 {
+                    fix_words.push(vec![rec.tip_up().unwrap_or_default().to_owned()]);
+                }
+            }
+            Mistake::OtherRobot => {
+                if rec == R::SimIiwa {
+                    device = abs(R::SimPanda.device());
+                    let panda = &sources.arm(ArmRobot::Panda).robot.joint_names;
+                    for (h, p) in t
+                        .header
+                        .iter_mut()
+                        .filter(|h| h.starts_with("joint_a"))
+                        .zip(panda)
+                    {
+                        h.clone_from(p);
+                    }
+                }
+            }
+            Mistake::SocketDistance(f) => {
+                if t_idx == 0 {
+                    extra.push("--socket-distance-m".to_owned());
+                    extra.push(format!("{}", SOCKET_DISTANCE_M * f));
+                }
+            }
+            Mistake::Shuffled => t.rows.shuffle(&mut rng),
+            Mistake::EveryNth(n) => {
+                let rows = std::mem::take(&mut t.rows);
+                t.rows = rows.into_iter().step_by(*n).collect();
+            }
+            Mistake::WrongSocket(_)
+            | Mistake::LongerLinks(_)
+            | Mistake::LatencyMs(_)
+            | Mistake::None
+            | Mistake::Draw(_)
+            | Mistake::HapticEffect(..) => {}
+        }
+    }
+    if let (Mistake::WrongSocket(p), Base::Sockets(a, b)) = (&case.mistake, &mut base) {
+        let n_move = (a.rows.len() * *p as usize).div_ceil(100).max(1);
+        let mut idx: Vec<usize> = (0..a.rows.len()).collect();
+        idx.shuffle(&mut rng);
+        let mut moved: Vec<usize> = idx.into_iter().take(n_move).collect();
+        moved.sort_unstable();
+        for i in moved.into_iter().rev() {
+            let row = a.rows.remove(i);
+            b.rows.push(row);
+        }
+    }
+    let _ = n_tables;
+
+    // Write the data.
+    let mut args = vec!["--device".to_owned(), device];
+    for tip in &tips {
+        args.push("--tip".to_owned());
+        args.push(tip.clone());
+    }
+    match &base {
+        Base::Table(t) => {
+            let path = dir.join("data.csv");
+            write(&path, &t.to_csv(false))?;
+            args.push("--data".to_owned());
+            args.push(path.display().to_string());
+            if !rec.is_haptic() {
+                args.push("--test-last".to_owned());
+                args.push("0.3".to_owned());
+            }
+        }
+        Base::Sockets(a, b) => {
+            let folder = dir.join("placement");
+            std::fs::create_dir_all(&folder)?;
+            write(&folder.join("hole_0.csv"), &a.to_csv(true))?;
+            write(&folder.join("hole_1.csv"), &b.to_csv(true))?;
+            args.push("--data".to_owned());
+            args.push(folder.display().to_string());
+        }
+    }
+    args.extend(extra);
+    Ok(Invocation { args, fix_words })
+}
+
+/// The columns read on the robot's side: joints (prismatic too) and a haptic device's
+/// external encoders; the rest (positions, orientations, distances, time) are the
+/// instrument's.
+fn joint_side(t: &Table) -> Vec<String> {
+    (t.header.iter())
+        .filter(|h| !(is_position(h) || is_orientation(h) || *h == "distance_m" || *h == "t_s"))
+        .cloned()
+        .collect()
+}
+
+/// Writes `text` to `path`.
+fn write(path: &Path, text: &str) -> Result<()> {
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+/// The numbering of the quaternion columns (`1` for `qw1`, empty for `qw`).
+fn quaternion_suffix(t: &Table) -> &'static str {
+    if t.col("qw1").is_some() { "1" } else { "" }
+}
+
+/// Pairs the joint readings of row `i` with the other columns of row `i + k`, from row
+/// `from` on (rows before `from` unchanged; `k` rows dropped at the end).
+fn shift_rows(t: &mut Table, joints: &[String], from: usize, k: usize) {
+    let idx: Vec<usize> = joints.iter().filter_map(|j| t.col(j)).collect();
+    let n = t.rows.len();
+    if n <= from + k {
+        return;
+    }
+    let orig = t.rows.clone();
+    for (row, later) in t.rows[from..n - k].iter_mut().zip(&orig[from + k..]) {
+        for (c, (v, w)) in row.iter_mut().zip(later).enumerate() {
+            if !idx.contains(&c) {
+                *v = *w;
+            }
+        }
+    }
+    t.rows.truncate(n - k);
+}
+
+/// Shuffles the joint readings of `percent` % of the rows among themselves (a derangement
+/// by rotation of the chosen rows, so every chosen row is decoupled).
+fn decouple(t: &mut Table, joints: &[String], percent: u32, rng: &mut ChaCha8Rng) {
+    let idx: Vec<usize> = joints.iter().filter_map(|j| t.col(j)).collect();
+    let n = t.rows.len();
+    let n_pick = (n * percent as usize).div_ceil(100).max(2).min(n);
+    let mut rows: Vec<usize> = (0..n).collect();
+    rows.shuffle(rng);
+    let picked: Vec<usize> = rows.into_iter().take(n_pick).collect();
+    let orig = t.rows.clone();
+    for (k, &r) in picked.iter().enumerate() {
+        let src = picked[(k + 1) % picked.len()];
+        for &c in &idx {
+            t.rows[r][c] = orig[src][c];
+        }
+    }
+}
+
+/// The data of a case before its mistake.
+fn load_base(
+    case: &Case,
+    sources: &Sources,
+    dir: &Path,
+    simulate: &dyn Fn(&[String]) -> Result<()>,
+) -> Result<Base> {
+    let root = &sources.root;
+    let csv = |p: &str| Table::read_csv(&root.join(p), None);
+    Ok(match case.recording {
+        R::Ur10 if case.mistake == Mistake::OtherRobot => {
+            // TIAGo's first marker and its first six arm joints under the UR10's names.
+            let tiago = csv("fixtures/figaroh/tiago/qualysis_base_hand_calibration.csv")?;
+            let ur10 = csv("fixtures/figaroh/ur10/calibration.csv")?;
+            let mut header: Vec<String> = vec!["x1".into(), "y1".into(), "z1".into()];
+            let names = R::Ur10.revolute(&ur10);
+            header.extend(names.iter().cloned());
+            let src: Vec<usize> = (["x1", "y1", "z1"].iter().map(|s| (*s).to_owned()))
+                .chain((1..=6).map(|j| format!("arm_{j}_joint")))
+                .filter_map(|n| tiago.col(&n))
+                .collect();
+            let rows = (tiago.rows.iter())
+                .map(|r| src.iter().map(|&c| r[c]).collect())
+                .collect();
+            Base::Table(Table { header, rows })
+        }
+        R::Ur10 => Base::Table(csv("fixtures/figaroh/ur10/calibration.csv")?),
+        R::Ur10Quaternion => {
+            let mut t = csv("fixtures/figaroh/ur10/calibration.csv")?;
+            euler_to_quaternion(&mut t, "1");
+            Base::Table(t)
+        }
+        R::Tiago => Base::Table(csv(
+            "fixtures/figaroh/tiago/qualysis_base_hand_calibration.csv",
+        )?),
+        R::Humanoid => Base::Table(csv("fixtures/sim-humanoid/mocap.csv")?),
+        R::Positioner | R::PositionerEuler => {
+            let mut t = read_positioner_yaml(
+                &root.join("fixtures/industrial-calibration/measurements.yaml"),
+            )?;
+            if case.recording == R::PositionerEuler {
+                quaternion_to_euler(&mut t, "");
+            }
+            Base::Table(t)
+        }
+        R::SocketsIiwa | R::SocketsPanda => {
+            let (robot, folder) = if case.recording == R::SocketsIiwa {
+                (ArmRobot::Iiwa14, "fixtures/mukca/data/kuka_14/front")
+            } else {
+                (ArmRobot::Panda, "fixtures/mukca/data/panda_2/front_center")
+            };
+            let names = sources.arm(robot).robot.joint_names.clone();
+            let read = |f: &str| Table::read_csv(&root.join(folder).join(f), Some(names.clone()));
+            Base::Sockets(read("hole_0.csv")?, read("hole_1.csv")?)
+        }
+        R::Haptic => Base::Table(csv("fixtures/reference-device/log.csv")?),
+        R::HapticMotion => {
+            let out = dir.join("simulated.csv");
+            let mut args: Vec<String> = vec![
+                "--seed".into(),
+                format!("{}", case.seed % 1000 + 1),
+                "--poses".into(),
+                "300".into(),
+                "--motion".into(),
+                "--period-s".into(),
+                "0.05".into(),
+                "--out".into(),
+                out.display().to_string(),
+            ];
+            match &case.mistake {
+                Mistake::LatencyMs(ms) => {
+                    args.push("--effect".into());
+                    args.push(format!(
+                        "{}:tau={}",
+                        Effect::Latency.name(),
+                        f64::from(*ms) / 1e3
+                    ));
+                }
+                Mistake::HapticEffect(e, p) => {
+                    args.push("--effect".into());
+                    args.push(format!("{}:{p}", e.name()));
+                }
+                Mistake::LongerLinks(mm) => {
+                    let text = std::fs::read_to_string(root.join(R::Haptic.device()))?;
+                    let dev = dir.join("longer-device.toml");
+                    write(&dev, &lengthen_device_toml(&text, f64::from(*mm) / 1e3))?;
+                    args.push("--device".into());
+                    args.push(dev.display().to_string());
+                }
+                _ => {}
+            }
+            simulate(&args)?;
+            Base::Table(Table::read_csv(&out, None)?)
+        }
+        R::SimIiwa | R::SimPanda => {
+            let robot = case.recording.sim_arm().context("a simulated arm")?;
+            let setup = sources.arm(robot);
+            let arm_case = match &case.mistake {
+                Mistake::Draw(i) => {
+                    // The blind test's draw i on this robot, as positions data.
+                    let mut c = arm_blind::draw_case(*i, setup.robot.joint_names.len());
+                    c.robot = robot;
+                    c.data = ArmData::Positions;
+                    c.seed = *i;
+                    c
+                }
+                _ => ArmCase {
+                    seed: case.seed,
+                    robot,
+                    data: ArmData::Positions,
+                    kind: ArmCaseKind::None,
+                    injected: Injected::None,
+                },
+            };
+            let mut setup = setup.clone();
+            let urdf = root.join(case.recording.device());
+            match &case.mistake {
+                Mistake::LongerLinks(mm) => {
+                    let text = std::fs::read_to_string(&urdf)?;
+                    let longer = dir.join("longer.urdf");
+                    write(&longer, &lengthen_urdf(&text, f64::from(*mm) / 1e3))?;
+                    setup.robot = robot_from_urdf(&longer, &["ball_link".to_owned()])?;
+                }
+                Mistake::TipDown => {
+                    let up = case.recording.tip_up().context("a tip one joint up")?;
+                    setup.robot = robot_from_urdf(&urdf, &[up.to_owned()])?;
+                }
+                _ => {}
+            }
+            Base::Table(arm_table(&arm_case, &setup)?)
+        }
+    })
+}
+
+/// How the check answered a case.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Outcome {
+    /// Stopped (or, for a note family, ran) naming the expected class, the fix naming the cause.
+    NamedRight,
+    /// Stopped naming the expected class, but the fix does not name the cause (the column,
+    /// the factor's unit or the flag).
+    ClassOnly,
+    /// Stopped with another class, `no-hypothesis`, or another error.
+    Generic,
+    /// Ran with a setup warning (a mistake family).
+    Warned,
+    /// Ran with no setup finding (a mistake family).
+    Silent,
+    /// Correct data with a setup finding, or a stop on a note family.
+    FalseAlarm,
+    /// Correct data with no setup finding.
+    Clean,
+}
+
+impl Outcome {
+    /// Words of the report.
+    pub fn name(self) -> &'static str {
+        match self {
+            Outcome::NamedRight => "named right",
+            Outcome::ClassOnly => "class only",
+            Outcome::Generic => "generic",
+            Outcome::Warned => "warned",
+            Outcome::Silent => "silent",
+            Outcome::FalseAlarm => "false alarm",
+            Outcome::Clean => "clean",
+        }
+    }
+}
+
+/// The setup findings of a command's standard error: (class, the line from the class on).
+pub fn findings(stderr: &str) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    for line in stderr.lines() {
+        let Some(i) = line.find("setup check") else {
+            continue;
+        };
+        let rest = &line[i..];
+        let (Some(a), Some(b)) = (rest.find('['), rest.find(']')) else {
+            continue;
+        };
+        if a < b {
+            out.push((rest[a + 1..b].to_owned(), rest.to_owned()));
+        }
+    }
+    out
+}
+
+/// Whether `word` occurs in `text` with no letter, digit or `_` on either side.
+fn has_word(text: &str, word: &str) -> bool {
+    if word.is_empty() {
+        return false;
+    }
+    let bytes = text.as_bytes();
+    let inner = |c: u8| c.is_ascii_alphanumeric() || c == b'_';
+    let mut from = 0;
+    while let Some(i) = text[from..].find(word) {
+        let s = from + i;
+        let e = s + word.len();
+        let before = s == 0 || !inner(bytes[s - 1]) || word.starts_with('-');
+        let after = e >= bytes.len() || !inner(bytes[e]);
+        if before && after {
+            return true;
+        }
+        from = s + 1;
+    }
+    false
+}
+
+/// Judges a case by the command's exit code (`None`: killed or no code) and standard error.
+pub fn judge(
+    family: Family,
+    fix_words: &[Vec<String>],
+    code: Option<i32>,
+    stderr: &str,
+) -> Outcome {
+    let found = findings(stderr);
+    let stopped = code != Some(0) && code != Some(1);
+    match family.spec().expect {
+        Expect::Clean => {
+            if found.is_empty() {
+                Outcome::Clean
+            } else {
+                Outcome::FalseAlarm
+            }
+        }
+        Expect::Note(class) => {
+            if stopped {
+                if found.is_empty() {
+                    Outcome::Generic
+                } else {
+                    Outcome::FalseAlarm
+                }
+            } else if found.iter().any(|(c, _)| c == class) {
+                Outcome::NamedRight
+            } else if found.is_empty() {
+                Outcome::Silent
+            } else {
+                Outcome::Warned
+            }
+        }
+        Expect::Stop(class, _) => {
+            if !stopped {
+                return if found.is_empty() {
+                    Outcome::Silent
+                } else {
+                    Outcome::Warned
+                };
+            }
+            let named =
+                |text: &str| (fix_words.iter()).all(|any| any.iter().any(|w| has_word(text, w)));
+            if found.iter().any(|(c, text)| c == class && named(text)) {
+                Outcome::NamedRight
+            } else if found.iter().any(|(c, _)| c == class) {
+                Outcome::ClassOnly
+            } else {
+                Outcome::Generic
+            }
+        }
+    }
+}
+
+/// One run case: the case, what it ran, its outcome and the first setup line (or the last
+/// line of the standard error).
+#[derive(Clone, Debug)]
+pub struct CaseResult {
+    /// The case.
+    pub case: Case,
+    /// Its outcome.
+    pub outcome: Outcome,
+    /// Exit code (`None`: none).
+    pub code: Option<i32>,
+    /// What the check said: the first setup line, else the first error line, else empty.
+    pub said: String,
+    /// Seconds the command took.
+    pub seconds: f64,
+}
+
+/// What the check said, for the report: the first setup finding's line, else the first
+/// line with `error`, else the last line.
+pub fn what_was_said(stderr: &str) -> String {
+    if let Some((_, line)) = findings(stderr).into_iter().next() {
+        return line;
+    }
+    (stderr.lines().find(|l| l.contains("error")))
+        .or_else(|| stderr.lines().last())
+        .unwrap_or_default()
+        .trim()
+        .to_owned()
+}
+
+/// Counts per outcome.
+fn counts<'a>(results: impl Iterator<Item = &'a CaseResult>) -> BTreeMap<Outcome, usize> {
+    let mut m = BTreeMap::new();
+    for r in results {
+        *m.entry(r.outcome).or_insert(0) += 1;
+    }
+    m
+}
+
+/// The report page (markdown): per family and half the counts, then every case not named
+/// right (or a false alarm) with what the check said.
+pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# Setup check: the hostile sweep\n");
+    let _ = writeln!(
+        s,
+        "Ordinary setup mistakes the check was not built on, written into the bundled \
+         recordings and simulated ones (crates/studies/src/setup_hostile.rs has the table of \
+         expectations), run through `hapcal calibrate` as a user runs it and judged only by \
+         its exit code and standard error. A mistake is *named right* when the command stops \
+         (exit 2) with `setup check [<expected class>]` and the fix names the cause (the \
+         column, the factor's unit, the flag); *class only* when the class is right but the \
+         fix does not name the cause; *generic* when it stops otherwise; *warned* \
+         when it runs with a setup warning; *silent* when it runs with none. On correct data \
+         any setup finding is a *false alarm*. The latency family expects a note or warning \
+         of class `{LATENCY_CLASS}`, and a stop on it is a false alarm. Cases are \
+         not screened for observability: a mistake may leave no trace in the data (the \
+         sign or zero of a last joint whose axis passes through the marker).\n"
+    );
+    let _ = writeln!(s, "Command: `{command}`  ");
+    let _ = writeln!(s, "Machine: {machine}\n");
+    let cols = [
+        Outcome::NamedRight,
+        Outcome::ClassOnly,
+        Outcome::Generic,
+        Outcome::Warned,
+        Outcome::Silent,
+        Outcome::FalseAlarm,
+        Outcome::Clean,
+    ];
+    for (title, filter) in [
+        ("All cases", None),
+        ("Tuning half", Some(Half::Tuning)),
+        ("Held-back half", Some(Half::HeldBack)),
+    ] {
+        let sel: Vec<&CaseResult> = (results.iter())
+            .filter(|r| filter.is_none_or(|h| r.case.half == h))
+            .collect();
+        let _ = writeln!(s, "## {title} ({} cases)\n", sel.len());
+        let _ = writeln!(
+            s,
+            "| family | expected | cases | named right | class only | generic | warned | silent | false alarm | clean |"
+        );
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
+        let mut total: BTreeMap<Outcome, usize> = BTreeMap::new();
+        for spec in FAMILIES {
+            let fam: Vec<&CaseResult> = (sel.iter().copied())
+                .filter(|r| r.case.family == spec.family)
+                .collect();
+            if fam.is_empty() {
+                continue;
+            }
+            let c = counts(fam.iter().copied());
+            for (k, v) in &c {
+                *total.entry(*k).or_insert(0) += v;
+            }
+            let expected = match spec.expect {
+                Expect::Stop(class, _) => format!("stop [{class}]"),
+                Expect::Note(class) => format!("note [{class}]"),
+                Expect::Clean => "nothing".to_owned(),
+            };
+            let cells: Vec<String> = (cols.iter())
+                .map(|o| c.get(o).copied().unwrap_or(0).to_string())
+                .collect();
+            let _ = writeln!(
+                s,
+                "| {} | {expected} | {} | {} |",
+                spec.name,
+                fam.len(),
+                cells.join(" | ")
+            );
+        }
+        let cells: Vec<String> = (cols.iter())
+            .map(|o| total.get(o).copied().unwrap_or(0).to_string())
+            .collect();
+        let _ = writeln!(s, "| **all** | | {} | {} |\n", sel.len(), cells.join(" | "));
+    }
+    let _ = writeln!(s, "## Cases not named right\n");
+    let _ = writeln!(
+        s,
+        "Mistakes not named right and false alarms: case, half, expected, outcome, exit code, \
+         and what the check said (first setup line, else the error; 150 characters).\n"
+    );
+    let _ = writeln!(s, "| case | half | expected | outcome | exit | said |");
+    let _ = writeln!(s, "|---|---|---|---|---|---|");
+    for r in results {
+        if matches!(r.outcome, Outcome::NamedRight | Outcome::Clean) {
+            continue;
+        }
+        let expected = match r.case.family.spec().expect {
+            Expect::Stop(class, _) | Expect::Note(class) => class.to_owned(),
+            Expect::Clean => "nothing".to_owned(),
+        };
+        let said: String = r.said.chars().take(150).collect();
+        let said = said.replace('|', "\\|").replace('`', "'");
+        let _ = writeln!(
+            s,
+            "| {} | {} | {expected} | {} | {} | {said} |",
+            r.case.id,
+            r.case.half.name(),
+            r.outcome.name(),
+            r.code.map_or("none".to_owned(), |c| c.to_string()),
+        );
+    }
+    s
+}

@@ -1,0 +1,206 @@
+//! The hostile sweep's generator writes the mistakes it names (a column in degrees is the
+//! recording's column times 180/π, rows out of step pair row i's joints with row i + k's
+//! measurements), splits its cases deterministically into two near halves, and judges a
+//! command's standard error by its class and fix.
+
+use std::collections::BTreeSet;
+use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
+
+use hapcal_studies::setup_hostile::{
+    AngleUnit, Case, DEFAULT_CASES_PER_FAMILY, FAMILIES, Family, Half, Mistake, Outcome, Recording,
+    Sources, Table, cases, euler_xyz_of, judge, write_case,
+};
+use nalgebra::{Rotation3, Vector3};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// A fresh folder for one test's files.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "hapcal-setup-hostile-{name}-{}",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn no_simulation(_: &[String]) -> anyhow::Result<()> {
+    anyhow::bail!("no simulation in this test")
+}
+
+fn case(family: Family, recording: Recording, mistake: Mistake) -> Case {
+    Case {
+        id: "test".to_owned(),
+        family,
+        recording,
+        mistake,
+        seed: 7,
+        part: 0,
+        half: Half::Tuning,
+    }
+}
+
+#[test]
+fn one_column_in_degrees_is_the_recording_times_180_over_pi_and_the_rest_unchanged() {
+    let sources = Sources::load(&root()).expect("fixtures");
+    let dir = scratch("deg");
+    // Column 2 of the UR10's revolute joints is elbow_joint.
+    let c = case(
+        Family::ColumnUnit,
+        Recording::Ur10,
+        Mistake::ColumnUnit {
+            col: 2,
+            unit: AngleUnit::Deg,
+        },
+    );
+    let inv = write_case(&c, &sources, &dir, &no_simulation).expect("written");
+    let orig = Table::read_csv(&root().join("fixtures/figaroh/ur10/calibration.csv"), None)
+        .expect("fixture");
+    let written = Table::read_csv(&dir.join("data.csv"), None).expect("written file");
+    assert_eq!(written.header, orig.header);
+    assert_eq!(written.rows.len(), 23);
+    let elbow = orig.col("elbow_joint").expect("elbow column");
+    for (w, o) in written.rows.iter().zip(&orig.rows) {
+        for (c, (a, b)) in w.iter().zip(o).enumerate() {
+            let want = if c == elbow { b * 180.0 / PI } else { *b };
+            // Shortest round-trip printing: the value read back is the value computed.
+            assert!(
+                (a - want).abs() <= 1e-15 * want.abs(),
+                "column {c}: {a} vs {want}"
+            );
+        }
+    }
+    // The fix must name the flag, the column (by name or position) and the unit.
+    assert_eq!(
+        inv.fix_words,
+        vec![
+            vec!["--column-unit".to_owned()],
+            vec!["elbow_joint".to_owned(), "q3".to_owned()],
+            vec!["deg".to_owned()],
+        ]
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn rows_out_of_step_pair_joints_of_row_i_with_measurements_of_row_i_plus_k() {
+    let sources = Sources::load(&root()).expect("fixtures");
+    let dir = scratch("shift");
+    let c = case(Family::RowShift, Recording::Tiago, Mistake::Shift(3));
+    write_case(&c, &sources, &dir, &no_simulation).expect("written");
+    let orig = Table::read_csv(
+        &root().join("fixtures/figaroh/tiago/qualysis_base_hand_calibration.csv"),
+        None,
+    )
+    .expect("fixture");
+    let written = Table::read_csv(&dir.join("data.csv"), None).expect("written file");
+    assert_eq!(written.rows.len(), orig.rows.len() - 3);
+    let (x1, torso, arm7) = (
+        orig.col("x1").expect("x1"),
+        orig.col("torso_lift_joint").expect("torso"),
+        orig.col("arm_7_joint").expect("arm 7"),
+    );
+    for (i, w) in written.rows.iter().enumerate() {
+        assert_eq!(w[x1], orig.rows[i + 3][x1], "row {i}");
+        assert_eq!(w[torso], orig.rows[i][torso], "row {i}");
+        assert_eq!(w[arm7], orig.rows[i][arm7], "row {i}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn euler_angles_of_the_other_order_give_the_same_rotation() {
+    let (roll, pitch, yaw) = (0.3, -0.7, 2.1);
+    let [a, b, c] = euler_xyz_of(roll, pitch, yaw);
+    let rot = |axis: Vector3<f64>, t: f64| {
+        Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), t)
+    };
+    let figaroh = rot(Vector3::z(), yaw) * rot(Vector3::y(), pitch) * rot(Vector3::x(), roll);
+    let xyz = rot(Vector3::x(), a) * rot(Vector3::y(), b) * rot(Vector3::z(), c);
+    assert!((figaroh.matrix() - xyz.matrix()).norm() < 1e-12);
+    // Read in figaroh's order, the same three numbers are another rotation.
+    let misread = rot(Vector3::z(), c) * rot(Vector3::y(), b) * rot(Vector3::x(), a);
+    assert!((figaroh.matrix() - misread.matrix()).norm() > 0.1);
+}
+
+#[test]
+fn the_split_is_deterministic_and_near_half_and_every_family_has_cases() {
+    let all = cases(DEFAULT_CASES_PER_FAMILY);
+    assert_eq!(all, cases(DEFAULT_CASES_PER_FAMILY));
+    let ids: BTreeSet<&str> = all.iter().map(|c| c.id.as_str()).collect();
+    assert_eq!(ids.len(), all.len(), "identities are unique");
+    for spec in FAMILIES {
+        assert!(
+            all.iter().any(|c| c.family == spec.family),
+            "{} has cases",
+            spec.name
+        );
+        assert!(spec.family.spec().name == spec.name);
+    }
+    // A fair coin per case: the tuning count within 3 σ (σ = √n / 2) of n / 2.
+    let n = all.len() as f64;
+    let tuning = all.iter().filter(|c| c.half == Half::Tuning).count() as f64;
+    assert!(
+        (tuning - n / 2.0).abs() <= 1.5 * n.sqrt(),
+        "{tuning} of {n}"
+    );
+    assert!(n >= 200.0, "a few hundred cases: {n}");
+    for c in &all {
+        assert_eq!(c.half, Half::of(&c.id));
+    }
+}
+
+#[test]
+fn the_judge_reads_the_class_and_the_fix() {
+    let fix = vec![
+        vec!["--column-unit".to_owned()],
+        vec!["elbow_joint".to_owned(), "q3".to_owned()],
+        vec!["deg".to_owned()],
+    ];
+    let stop = |line: &str| format!("reading\nhapcal: error: {line}\n");
+    let f = Family::ColumnUnit;
+    let right = stop(
+        "setup check [column-unit]: elbow_joint looks like degrees; fix: --column-unit q3=deg",
+    );
+    assert_eq!(judge(f, &fix, Some(2), &right), Outcome::NamedRight);
+    let vague = stop("setup check [column-unit]: a column looks like degrees; fix: --column-unit");
+    assert_eq!(judge(f, &fix, Some(2), &vague), Outcome::ClassOnly);
+    // q3 is not q30; elbow_joint is not elbow_joint_2.
+    let other_col = stop("setup check [column-unit]: q30 in degrees; fix: --column-unit q30=deg");
+    assert_eq!(judge(f, &fix, Some(2), &other_col), Outcome::ClassOnly);
+    let other = stop("setup check [angle-unit]: angles in degrees; fix: use --angle-unit deg");
+    assert_eq!(judge(f, &fix, Some(2), &other), Outcome::Generic);
+    assert_eq!(
+        judge(f, &fix, Some(2), "hapcal: error: fit failed\n"),
+        Outcome::Generic
+    );
+    let warning = "warning: setup check [column-unit]: maybe degrees\n";
+    assert_eq!(judge(f, &fix, Some(0), warning), Outcome::Warned);
+    assert_eq!(judge(f, &fix, Some(1), "report\n"), Outcome::Silent);
+    assert_eq!(
+        judge(Family::AsIs, &[], Some(0), warning),
+        Outcome::FalseAlarm
+    );
+    assert_eq!(
+        judge(Family::AsIs, &[], Some(0), "report\n"),
+        Outcome::Clean
+    );
+    // Latency is a note on a run, and a stop on it is a false alarm.
+    let note = "note: setup check [latency]: the distance lags the joints by 45 ms\n";
+    assert_eq!(
+        judge(Family::Latency, &[], Some(0), note),
+        Outcome::NamedRight
+    );
+    assert_eq!(
+        judge(
+            Family::Latency,
+            &[],
+            Some(2),
+            &stop("setup check [row-shift]: rows")
+        ),
+        Outcome::FalseAlarm
+    );
+}
