@@ -130,7 +130,7 @@ fn distances_in_millimetres_name_the_length_unit() {
             let d = col(h, "distance_m");
             rows.iter_mut().for_each(|r| r[d] *= 1e3);
         },
-        &["[length-unit]", "millimetres", "divide by 1000"],
+        &["[length-unit]", "millimetres", "--length-unit mm"],
         &[],
         true,
     );

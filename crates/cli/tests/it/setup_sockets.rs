@@ -109,7 +109,7 @@ fn socket_readings_in_degrees_name_the_unit_with_the_reading_past_its_limit() {
         "ball_link",
         &[
             "[angle-unit]",
-            "degrees read as radians",
+            "in degrees, read as radians",
             "fix: write the joint readings in radians",
         ],
     );
@@ -119,7 +119,7 @@ fn socket_readings_in_degrees_name_the_unit_with_the_reading_past_its_limit() {
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("hole_0.csv:1:1: joint \"joint_a1\""), "{err}");
-    assert!(err.contains("degrees read as radians"), "{err}");
+    assert!(err.contains("in degrees, read as radians"), "{err}");
 }
 
 #[test]
@@ -134,7 +134,7 @@ fn swapped_socket_columns_are_named() {
         "ball_link",
         &[
             "[joint-order]",
-            "joint_a2 (column 2) and joint_a4 (column 4) look swapped",
+            "joint_a2 (column 2) and joint_a4 (column 4) are swapped",
             "fix: swap the columns 2 and 4",
         ],
     );
@@ -154,7 +154,7 @@ fn reversed_socket_columns_are_named() {
         &[
             "[joint-order]",
             "reversed",
-            "fix: reverse the order of the 7 columns",
+            "fix: reverse the order of the joint columns",
         ],
     );
     assert_restored(&err);
