@@ -186,7 +186,7 @@ pub fn closed_form_residual(
     tables: &[MeasurementTable],
     marker_tips: &[usize],
 ) -> Option<Residual> {
-    closed_form_fit(robot, tables, marker_tips).map(|fit| fit.residual)
+    closed_form_fit(robot, tables, marker_tips, None).map(|fit| fit.residual)
 }
 
 /// The closed-form frames-only fit of [`closed_form_residual`]: its residual, and each row's.
@@ -202,6 +202,7 @@ fn closed_form_fit(
     robot: &Robot,
     tables: &[MeasurementTable],
     marker_tips: &[usize],
+    fit_rows: Option<&[bool]>,
 ) -> Option<ClosedForm> {
     use nalgebra::Matrix3;
     if tables.iter().any(|t| t.has_distance) {
@@ -239,17 +240,25 @@ fn closed_form_fit(
     let mut offsets = vec![Vector3::zeros(); n_markers];
     let mut marker_rot = vec![Matrix3::identity(); n_markers];
     let (mut r0, mut t) = (Matrix3::identity(), Vector3::zeros());
+    // The frames from the rows `fit_rows` keeps (every row without it).
+    let fitted: Vec<_> = (samples.iter().zip(&sample_rows))
+        .filter(|(_, r)| fit_rows.is_none_or(|keep| keep.get(**r) == Some(&true)))
+        .map(|(s, _)| s.clone())
+        .collect();
+    if fitted.len() < 3 {
+        return None;
+    }
     for _ in 0..CLOSED_FORM_ITERATIONS {
         // Instrument frame.
-        let a: Vec<Vector3<f64>> = (samples.iter())
+        let a: Vec<Vector3<f64>> = (fitted.iter())
             .map(|(k, pose, _, _)| pose * nalgebra::Point3::from(offsets[*k]))
             .map(|p| p.coords)
             .collect();
         let n = a.len() as f64;
         let ca = a.iter().sum::<Vector3<f64>>() / n;
-        let cb = samples.iter().map(|s| s.2).sum::<Vector3<f64>>() / n;
+        let cb = fitted.iter().map(|s| s.2).sum::<Vector3<f64>>() / n;
         let mut h = Matrix3::zeros();
-        for (ai, s) in a.iter().zip(&samples) {
+        for (ai, s) in a.iter().zip(&fitted) {
             h += (s.2 - cb) * (ai - ca).transpose();
             if let Some(meas) = &s.3 {
                 let model = s.1.rotation.to_rotation_matrix().into_inner() * marker_rot[s.0];
@@ -261,7 +270,7 @@ fn closed_form_fit(
         // Marker frames.
         let mut sum_m = vec![(Vector3::zeros(), 0usize); n_markers];
         let mut sum_r = vec![Matrix3::zeros(); n_markers];
-        for s in &samples {
+        for s in &fitted {
             let rt = r0 * s.1.rotation.to_rotation_matrix().into_inner();
             let back = rt.transpose() * (s.2 - t - r0 * s.1.translation.vector);
             sum_m[s.0].0 += back;
@@ -898,6 +907,7 @@ fn measurement_hypotheses(
     hypotheses.extend(general_hypotheses(given, &layout, Tier::Always));
     if suspicious {
         hypotheses.extend(general_hypotheses(given, &layout, Tier::Suspicious));
+        hypotheses.extend(position_reflections(input.tables));
         if let Some(per_row) = per_row {
             let names: Vec<String> = (input.tables.iter())
                 .map(|t| {
@@ -916,6 +926,56 @@ fn measurement_hypotheses(
         }
     }
     hypotheses
+}
+
+/// With orientations, one position axis mirrored or two exchanged while the orientations are
+/// not: the orientations pin the instrument frame's rotation, so here each reflection is a
+/// hypothesis of its own (naming its columns). Empty without orientations.
+fn position_reflections(tables: &[MeasurementTable]) -> Vec<Corrected<MeasuredData>> {
+    if !tables.iter().any(|t| t.has_orientation) {
+        return Vec::new();
+    }
+    let axes = ["x", "y", "z"];
+    let mut out = Vec::new();
+    let mut push = |m: nalgebra::Matrix3<f64>, what: String, fix: String| {
+        out.push(Corrected::new(
+            MistakeClass::MirroredAxis,
+            what,
+            fix,
+            MeasuredData::tables(map_rows(tables, &|row| {
+                for s in &mut row.markers {
+                    s.position_m = (m * Vector3::from(s.position_m)).into();
+                }
+            })),
+        ));
+    };
+    for (a, name) in axes.iter().enumerate() {
+        let mut m = nalgebra::Matrix3::identity();
+        m[(a, a)] = -1.0;
+        push(
+            m,
+            format!("the positions' {name} axis is mirrored while the orientations are not"),
+            format!("negate the {name} columns of the positions"),
+        );
+    }
+    for (a, b) in [(0, 1), (0, 2), (1, 2)] {
+        let mut m = nalgebra::Matrix3::zeros();
+        m[(a, b)] = 1.0;
+        m[(b, a)] = 1.0;
+        m[(3 - a - b, 3 - a - b)] = 1.0;
+        push(
+            m,
+            format!(
+                "the positions' {} and {} axes are exchanged while the orientations are not",
+                axes[a], axes[b]
+            ),
+            format!(
+                "swap the {} and {} columns of the positions",
+                axes[a], axes[b]
+            ),
+        );
+    }
+    out
 }
 
 /// Joints whose readings never change (spread ≤ [`FROZEN_SPREAD`]) over two or more rows
@@ -962,14 +1022,24 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
     let refine =
         |d: &MeasuredData| frames_only_residual(robot_of(d, input.robot), &d.tables, &tips_of(d));
     let given = MeasuredData::tables(input.tables.to_vec());
-    let closed_form = closed_form_fit(input.robot, input.tables, &given_tips);
+    let closed_form = closed_form_fit(input.robot, input.tables, &given_tips, None);
     let as_given = match &closed_form {
         Some(fit) => fit.residual,
         None => frames_only_residual(input.robot, input.tables, &given_tips)
             .context("the frames-only fit of the data as given failed")?,
     };
-    let per_row = closed_form.as_ref().map(|fit| fit.per_row.as_slice());
-    let hypotheses = measurement_hypotheses(input, &given, !as_given.is_clean(), per_row);
+    // Per-row residuals under frames fitted to the rows that fit (a few rows that do not
+    // belong pull the frames of a fit to every row, and every row's residual with them).
+    let robust = closed_form.as_ref().and_then(|fit| {
+        let mut sorted: Vec<f64> = fit.per_row.iter().map(|r| r.2).collect();
+        sorted.sort_by(f64::total_cmp);
+        let median = *sorted.get(sorted.len() / 2)?;
+        let keep: Vec<bool> = fit.per_row.iter().map(|r| r.2 <= 3.0 * median).collect();
+        closed_form_fit(input.robot, input.tables, &given_tips, Some(&keep))
+    });
+    let per_row = robust.or(closed_form).map(|fit| fit.per_row);
+    let hypotheses =
+        measurement_hypotheses(input, &given, !as_given.is_clean(), per_row.as_deref());
     let judged = judge(
         as_given,
         &given,
@@ -1098,6 +1168,11 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
             if let Some(report) = past_limits(&robot, &files, &tips, plan, is_urdf, &e) {
                 return Ok(Some(report));
             }
+            // A length past the readers' ±1000 m: millimetres read as metres, in every marker
+            // or in some.
+            if let Some(report) = past_length_range(&robot, &files, &tips, plan, is_urdf, &e) {
+                return Ok(Some(report));
+            }
             return Err(e);
         }
     };
@@ -1145,6 +1220,101 @@ fn past_limits(
     let f = (report.findings.iter_mut()).find(|f| f.severity == Severity::Error)?;
     f.message = format!("{limit}: {}", f.message);
     Some(report)
+}
+
+/// The setup check of files that the reader refused with `range_error` (a length past the
+/// readers' ±1000 m), read again with the refused column's group (a marker's `x, y, z`, or the
+/// distance) in millimetres, group after group until they read: when the data then fit the
+/// robot, one finding names the groups in millimetres and the flag (`--length-unit mm` when
+/// every marker was); when the check of the data so read finds another error, that report;
+/// `None` when they do not read or nothing explains them (the reader's error stands).
+fn past_length_range(
+    robot: &Robot,
+    files: &[PathBuf],
+    tips: &[String],
+    plan: &crate::inputs::Plan,
+    is_urdf: bool,
+    range_error: &anyhow::Error,
+) -> Option<SetupReport> {
+    let first = range_error.root_cause().to_string();
+    let mut message = first.clone();
+    let mut groups: Vec<String> = Vec::new();
+    let mut units = plan.units.clone();
+    let tables = loop {
+        if !message.contains("a length must lie within") || groups.len() >= 16 {
+            return None;
+        }
+        // `file:line:column: x2 = 2.2e3 m is out of range: …`.
+        let name = message
+            .split(" = ")
+            .next()?
+            .rsplit(": ")
+            .next()?
+            .trim()
+            .to_owned();
+        let group = match name.split_at_checked(1) {
+            Some((axis @ ("x" | "y" | "z"), k)) if k.chars().all(|c| c.is_ascii_digit()) => {
+                let _ = axis;
+                format!("x{k},y{k},z{k}")
+            }
+            _ => name,
+        };
+        if groups.contains(&group) {
+            return None;
+        }
+        let edit = hapcal_io::ColumnEdit::parse_unit(&format!("{group}=mm")).ok()?;
+        groups.push(group);
+        units = units.with_columns([edit]);
+        match measured::load_tables(files, robot, &units) {
+            Ok(tables) => break tables,
+            Err(e) => message = e.root_cause().to_string(),
+        }
+    };
+    let report = check_setup(&SetupInput {
+        robot,
+        tables: &tables,
+        urdf: is_urdf.then_some(plan.device.as_path()),
+        tips,
+        units: units.clone(),
+    })
+    .ok()?;
+    if let Some(f) = report.overwhelming() {
+        let mut report = report.clone();
+        if let Some(e) = report.findings.iter_mut().find(|x| x.message == f.message) {
+            e.message = format!("{first}: {}", e.message);
+        }
+        return Some(report);
+    }
+    if !report.as_given.is_plausible() {
+        return None;
+    }
+    let n_markers = tables.iter().map(|t| t.n_markers).max().unwrap_or(0);
+    let every_marker = groups.len() >= n_markers.max(1) && groups.iter().all(|g| g.contains(','));
+    let fix = if every_marker {
+        "--length-unit mm".to_owned()
+    } else {
+        (groups.iter())
+            .map(|g| format!("--column-unit {g}=mm"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let finding = Finding {
+        class: MistakeClass::LengthUnit,
+        severity: Severity::Error,
+        message: format!(
+            "{first}: the columns {} are in millimetres, read as metres (read in millimetres, \
+             the data fit this robot)",
+            groups.join(" and ")
+        ),
+        fix,
+        before: Residual::default(),
+        after: Some(report.as_given),
+    };
+    Some(SetupReport::of_unread(
+        report.n_rows,
+        finding,
+        report.as_given,
+    ))
 }
 
 /// When the files do not read with the tips given: the first tip one or two moving joints up

@@ -238,7 +238,8 @@ fn latency(
         .min_by(|a, b| length(&a.1).total_cmp(&length(&b.1)))?;
     // A whole-row shift interpolates to itself: between rows, the fraction must fit better.
     let whole = at(lag.round());
-    if (lag - lag.round()).abs() < FRACTIONAL_LAG || length(&best) > WHOLE_ROW_GAIN * length(&whole)
+    if (lag - lag.round()).abs() < FRACTIONAL_LAG - 1e-9
+        || length(&best) > WHOLE_ROW_GAIN * length(&whole)
     {
         return None;
     }

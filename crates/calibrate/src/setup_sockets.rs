@@ -85,6 +85,21 @@ impl SetupData for SocketData {
 /// robot's manufacturing deviations move the centres by millimetres over tens of centimetres.
 const SOCKET_DISTANCE_TOLERANCE: f64 = 0.05;
 
+/// Share of the nominal socket distance and multiple of the socket scatter by which the
+/// distance given may differ from the nominal one before it is a finding: on the bundled
+/// placements the two differ by up to about 11 % (Panda, whose nominal scatter is 8 mm).
+const SOCKET_DISTANCE_SHARE: f64 = 0.25;
+const SOCKET_DISTANCE_SCATTERS: f64 = 3.0;
+
+/// The data of `input` as given.
+fn given_data(input: &SocketInput<'_>) -> SocketData {
+    SocketData {
+        chain: None,
+        placements: input.placements.to_vec(),
+        distance_m: input.socket_distance_m,
+    }
+}
+
 /// The distance (m) between the two sockets' centres of each placement of two, by the nominal
 /// chain: their median; `None` without such a placement.
 fn nominal_socket_distance(chain: &Chain, placements: &[SocketPlacement]) -> Option<f64> {
@@ -418,11 +433,7 @@ fn socket_hypotheses(
 pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
     let as_given = socket_scatter(input.chain, input.placements, input.socket_distance_m)
         .ok_or_else(|| anyhow::anyhow!("the socket files do not read on this chain"))?;
-    let given = SocketData {
-        chain: None,
-        placements: input.placements.to_vec(),
-        distance_m: input.socket_distance_m,
-    };
+    let given = given_data(input);
     // A socket scatter costs microseconds a row: every family, whatever the residual.
     let hypotheses = socket_hypotheses(input, &given, true);
     let n_hypotheses = hypotheses.len();
@@ -446,6 +457,46 @@ pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
         },
     );
     let mut findings: Vec<Finding> = judged.finding.into_iter().collect();
+    // The socket distance judged directly: the nominal model measures it to a few millimetres
+    // (the scatter), so a distance given wrong by a factor stands out however little it
+    // weighs in the scatter's RMS.
+    if let Some(d) = nominal_socket_distance(input.chain, input.placements)
+        && findings
+            .iter()
+            .all(|f| f.class != MistakeClass::SocketDistance)
+    {
+        let given = input.socket_distance_m;
+        let scatter = as_given.length_rms_m.unwrap_or(0.0);
+        if (d - given).abs() > (SOCKET_DISTANCE_SHARE * d).max(SOCKET_DISTANCE_SCATTERS * scatter) {
+            let after = screen(&SocketData {
+                distance_m: d,
+                ..given_data(input)
+            });
+            findings.insert(
+                0,
+                Finding {
+                    class: MistakeClass::SocketDistance,
+                    severity: Severity::Error,
+                    message: format!(
+                        "the sockets lie {} mm apart by the nominal model, {:.3} times the {} mm \
+                         given: a distance cannot be off by more than {:.0} % or {} times the \
+                         scatter",
+                        mm(d),
+                        d / given,
+                        mm(given),
+                        100.0 * SOCKET_DISTANCE_SHARE,
+                        SOCKET_DISTANCE_SCATTERS
+                    ),
+                    fix: format!(
+                        "--socket-distance-m {d:.4} (or the distance the sockets were made to, in \
+                         metres)"
+                    ),
+                    before: as_given,
+                    after,
+                },
+            );
+        }
+    }
     let misfiled = rows_in_the_other_socket(input.chain, input.placements);
     if let Some(first) = misfiled.first() {
         let lines: Vec<String> = (misfiled.iter().take(6))
