@@ -1375,13 +1375,23 @@ fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> O
 /// another device (links centimetres longer) are fitted with deviations of tens of millimetres.
 pub const MANUFACTURING_TOLERANCE_M: f64 = 0.025;
 
+/// Standard deviations a length deviation must lie from zero to count after the fit: one
+/// determined to a tenth of itself. A large deviation the data hardly determine is the
+/// conditioning's (an unmodelled effect such as a latency pulled on a weak direction), not
+/// evidence of another device.
+pub const DETERMINED_SIGMAS: f64 = 10.0;
+
 /// The setup check after a calibration: an identified length deviation beyond
-/// [`MANUFACTURING_TOLERANCE_M`] says the data come from another device or robot (or a
+/// [`MANUFACTURING_TOLERANCE_M`], determined to [`DETERMINED_SIGMAS`], says the data come from another device or robot (or a
 /// mistake the check before the fit could not tell), an error finding; `None` otherwise.
 /// Compliances, frames and angles are not judged: their size depends on the setup.
 pub fn after_fit(report: &crate::report::CalibrationReport) -> Option<Finding> {
     let beyond: Vec<&crate::report::ParamReport> = (report.parameters.iter())
-        .filter(|p| p.unit == "m" && p.value.abs() > MANUFACTURING_TOLERANCE_M)
+        .filter(|p| {
+            p.unit == "m"
+                && p.value.abs() > MANUFACTURING_TOLERANCE_M
+                && p.value.abs() > DETERMINED_SIGMAS * p.std
+        })
         .collect();
     let worst = beyond
         .iter()

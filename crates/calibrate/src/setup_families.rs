@@ -458,7 +458,7 @@ pub(crate) fn general_hypotheses<D: SetupData>(
                     joints[a].words, joints[b].words
                 ),
                 format!(
-                    "swap the columns {} and {} (the header names the joint each column holds)",
+                    "swap the columns {} and {}",
                     joints[a].label, joints[b].label
                 ),
                 data.with_joints(&|q: &mut [f64]| {
@@ -512,8 +512,7 @@ pub(crate) fn general_hypotheses<D: SetupData>(
                     MistakeClass::JointOrder,
                     format!("the readings of the {arm_a} arm and of the {arm_b} arm are exchanged"),
                     format!(
-                        "exchange the columns {} with {} (the header names the joint each \
-                         column holds)",
+                        "exchange the columns {} with {}, in order",
                         labels(&ja),
                         labels(&jb)
                     ),

@@ -445,10 +445,7 @@ fn reversed_joint_columns_are_named() {
         &write(&dir, "rev.csv", &rows),
         "wrist_3_link",
         &[],
-        &[
-            "reverse order",
-            "fix: reverse the order of the joint columns",
-        ],
+        &["reversed", "fix: reverse the order of the joint columns"],
     );
     assert_restored(&err);
 }

@@ -110,7 +110,7 @@ fn socket_readings_in_degrees_name_the_unit_with_the_reading_past_its_limit() {
         &[
             "[angle-unit]",
             "in degrees, read as radians",
-            "fix: write the joint readings in radians",
+            "fix: --angle-unit deg",
         ],
     );
     assert_restored(&err);
@@ -135,7 +135,7 @@ fn swapped_socket_columns_are_named() {
         &[
             "[joint-order]",
             "joint_a2 (column 2) and joint_a4 (column 4) are swapped",
-            "fix: swap the columns 2 and 4",
+            "fix: swap the columns q2 and q4",
         ],
     );
     assert_restored(&err);
