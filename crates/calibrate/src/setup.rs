@@ -243,7 +243,7 @@ fn closed_form_fit(
     // The frames from the rows `fit_rows` keeps (every row without it).
     let fitted: Vec<_> = (samples.iter().zip(&sample_rows))
         .filter(|(_, r)| fit_rows.is_none_or(|keep| keep.get(**r) == Some(&true)))
-        .map(|(s, _)| s.clone())
+        .map(|(s, _)| *s)
         .collect();
     if fitted.len() < 3 {
         return None;
@@ -840,7 +840,7 @@ fn own_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correc
         let mut named = Vec::new();
         for (t, tip) in input.tips.iter().enumerate() {
             for (link, steps, joints) in tip_candidates(&description, tip) {
-                if input.tips.contains(&link) || !has_columns(&headers, &joints, n) {
+                if input.tips.contains(&link) || !has_columns(headers, &joints, n) {
                     continue;
                 }
                 // Columns named for the joints between (not q8, q9 past the chain's count).

@@ -145,7 +145,7 @@ impl MistakeClass {
             MistakeClass::ColumnSign => "column-sign",
             MistakeClass::ColumnZero => "column-zero",
             MistakeClass::RowMismatch => "row-mismatch",
-            MistakeClass::Latency => "latency",
+            MistakeClass::Latency => hapcal_contract::Effect::Latency.name(),
             MistakeClass::SocketDistance => "socket-distance",
             MistakeClass::WrongSocket => "wrong-socket",
             MistakeClass::AnotherDevice => "another-device",
@@ -518,13 +518,16 @@ impl<T> Corrected<T> {
     }
 }
 
+/// The residual of data as a hypothesis corrects them; `None` when they do not fit.
+pub(crate) type ResidualFn<'a, T> = &'a (dyn Fn(&T) -> Option<Residual> + Sync);
+
 /// How a check scores data: a quick residual for every hypothesis, and optionally a finer
 /// one for the data as given and the best few when something looks wrong.
 pub(crate) struct Scoring<'a, T> {
-    /// The residual of data as a hypothesis corrects them; `None` when they do not fit.
-    pub(crate) screen: &'a (dyn Fn(&T) -> Option<Residual> + Sync),
+    /// The quick residual.
+    pub(crate) screen: ResidualFn<'a, T>,
     /// The finer residual (the calibration's own frames-only fit), if the check has one.
-    pub(crate) refine: Option<&'a (dyn Fn(&T) -> Option<Residual> + Sync)>,
+    pub(crate) refine: Option<ResidualFn<'a, T>>,
 }
 
 /// Hypotheses refitted with [`Scoring::refine`] when something looks wrong: this many by
