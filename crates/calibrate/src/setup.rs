@@ -1038,8 +1038,20 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
         closed_form_fit(input.robot, input.tables, &given_tips, Some(&keep))
     });
     let per_row = robust.or(closed_form).map(|fit| fit.per_row);
-    let hypotheses =
-        measurement_hypotheses(input, &given, !as_given.is_clean(), per_row.as_deref());
+    // The closed form may stop short of the full fit (a long lever between the instrument and
+    // the joints): the per-column families only when the full fit agrees the data are not
+    // right data of a real robot.
+    let full = (!as_given.is_clean())
+        .then(|| frames_only_residual(input.robot, input.tables, &given_tips))
+        .flatten();
+    let suspicious = !as_given.is_clean() && full.is_none_or(|f| !f.is_clean());
+    // Right data whose closed form stopped short are judged against the full fit (no
+    // hypothesis then looks better than the data as given by the screen's shortfall).
+    let as_given = match full {
+        Some(f) if f.is_clean() => f,
+        _ => as_given,
+    };
+    let hypotheses = measurement_hypotheses(input, &given, suspicious, per_row.as_deref());
     let judged = judge(
         as_given,
         &given,
