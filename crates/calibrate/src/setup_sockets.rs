@@ -123,8 +123,15 @@ fn nominal_socket_distance(chain: &Chain, placements: &[SocketPlacement]) -> Opt
         })
         .collect();
     d.sort_by(f64::total_cmp);
-    d.get(d.len() / 2).copied().filter(|v| v.is_finite())
+    // Sockets that coincide are a copied file, which the reader names: no distance to judge.
+    d.get(d.len() / 2)
+        .copied()
+        .filter(|v| v.is_finite() && *v > MIN_SOCKET_DISTANCE_M)
 }
+
+/// Nominal socket distance (m) below which the two sockets of a placement count as one point
+/// (a socket file copied under the other's name): a millimetre.
+const MIN_SOCKET_DISTANCE_M: f64 = 1e-3;
 
 /// The socket scatter of `placements` on `chain` ([`ResidualOf::SocketScatter`]): the RMS,
 /// over the `KEPT_SHARE` of each socket's rows closest to its centre, of the distance (m) of
@@ -640,7 +647,8 @@ pub fn check_socket_plan(
             let Some(urdf) = urdf else {
                 return Err(e.into());
             };
-            let Some(n) = n_columns(&plan.data) else {
+            // Another tip only for files of another joint count (a bad cell is the reader's).
+            let Some(n) = n_columns(&plan.data).filter(|&n| n != chain.n_joints()) else {
                 return Err(e.into());
             };
             let mut best: Option<(String, Residual)> = None;
