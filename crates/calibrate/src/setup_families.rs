@@ -1,9 +1,9 @@
 //! The hypotheses every setup check draws from: a few general families of mistake, generated
 //! once for every kind of data (measurement files, socket folders, a haptic device's logs).
 //!
-//! A kind of data says what it holds (its [`Layout`]: joint columns as the files name them,
+//! A kind of data says what it holds (its `Layout`: joint columns as the files name them,
 //! length columns, the units it was read with, the arms of a tree) and how to correct it
-//! ([`SetupData`]); [`general_hypotheses`] turns that into hypotheses of
+//! (`SetupData`); `general_hypotheses` turns that into hypotheses of
 //!
 //! - **units** ([`Family::Units`]): every angle unit (rad, deg, grad, rev) for the whole file
 //!   and for each joint column, every length unit (m, mm, cm, in, ft) for the whole file and for
@@ -16,14 +16,14 @@
 //! - **row alignment** ([`Family::RowAlignment`]): joint readings 1 to 4 rows out of step, for
 //!   the whole file or from the row on where the per-row residuals jump, and rows whose joints
 //!   and measurements do not belong together, found from the per-row residuals
-//!   ([`row_hypotheses`]).
+//!   (`row_hypotheses`).
 //!
 //! The families a kind adds itself (frames and conventions of pose data, tips and sockets)
 //! are its own; [`DataKind::families`] lists, for each kind, every family it must generate and
 //! why the others cannot apply, and a test fails when a kind misses one.
 //!
 //! The per-column families multiply the hypotheses by the joint count: they are
-//! [`Tier::Suspicious`], generated only when the data as given leave more than right data of a
+//! `Tier::Suspicious`, generated only when the data as given leave more than right data of a
 //! real robot do ([`Residual::is_clean`]), so that the check of right data costs what it did.
 
 use crate::setup_findings::{Corrected, MistakeClass, Residual};
@@ -701,7 +701,7 @@ impl Residual {
     /// Whether right data of a real robot can leave this residual: the frames-only residual of
     /// the bundled recordings is a few millimetres and below 0.6° (docs/results/reliability.md),
     /// a fifth of [`Residual::is_plausible`]'s bound in length and 0.02 rad in orientation.
-    /// Above it, the check tries the per-column families ([`Tier::Suspicious`]).
+    /// Above it, the check tries the per-column families (`Tier::Suspicious`).
     pub fn is_clean(&self) -> bool {
         self.length_rms_m
             .is_none_or(|e| e <= crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M / 5.0)
