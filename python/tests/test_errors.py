@@ -68,10 +68,10 @@ def test_bad_cell_has_file_line_column(tmp_path, ur10: hapcal.Device) -> None:
 
 
 def test_bad_units_and_model(ur10: hapcal.Device) -> None:
-    with pytest.raises(hapcal.HapcalError, match=r'length_unit: .*m or mm.*"km"'):
+    with pytest.raises(hapcal.HapcalError, match=r'length_unit: .*m, mm, cm.*"km"'):
         hapcal.Measurements.from_csv(UR10_CSV, length_unit="km")
-    with pytest.raises(hapcal.HapcalError, match=r'angle_unit: .*rad or deg.*"grad"'):
-        hapcal.Measurements.from_csv(UR10_CSV, angle_unit="grad")
+    with pytest.raises(hapcal.HapcalError, match=r'angle_unit: .*rad, deg, grad.*"gon"'):
+        hapcal.Measurements.from_csv(UR10_CSV, angle_unit="gon")
     with pytest.raises(hapcal.HapcalError, match="length_unit"):
         hapcal.Measurements.from_arrays(np.zeros((3, 6)), positions=np.zeros((3, 3)),
                                         length_unit="inch")
