@@ -301,18 +301,12 @@ pub(crate) fn general_hypotheses<D: SetupData>(
     let suspicious = tier == Tier::Suspicious;
     let joints = &layout.joints;
     let n = joints.len();
-    let angle_read = unit_factor(&ANGLE_UNITS, layout.angle_unit);
-    let length_read = unit_factor(&LENGTH_UNITS, layout.length_unit);
     let any_revolute = joints.iter().any(|c| c.revolute);
 
     // Units of the whole file (always) and of each column (when suspicious).
     if !suspicious {
         if any_revolute {
-            for (unit, words, factor) in ANGLE_UNITS {
-                if unit == layout.angle_unit {
-                    continue;
-                }
-                let ratio = factor / angle_read;
+            for (unit, words, factor, ratio) in others(&ANGLE_UNITS, layout.angle_unit) {
                 let fix = if layout.file_flags {
                     format!("--angle-unit {unit}")
                 } else {
@@ -339,10 +333,7 @@ pub(crate) fn general_hypotheses<D: SetupData>(
             }
         }
         if !layout.lengths.is_empty() {
-            for (unit, words, factor) in LENGTH_UNITS {
-                if unit == layout.length_unit {
-                    continue;
-                }
+            for (unit, words, factor, ratio) in others(&LENGTH_UNITS, layout.length_unit) {
                 out.push(Corrected::new(
                     MistakeClass::LengthUnit,
                     format!(
@@ -357,17 +348,13 @@ pub(crate) fn general_hypotheses<D: SetupData>(
                             factor_text(factor)
                         )
                     },
-                    data.with_lengths(None, factor / length_read),
+                    data.with_lengths(None, ratio),
                 ));
             }
         }
     } else {
         for (j, c) in joints.iter().enumerate().filter(|(_, c)| c.revolute) {
-            for (unit, words, factor) in ANGLE_UNITS {
-                if unit == layout.angle_unit {
-                    continue;
-                }
-                let ratio = factor / angle_read;
+            for (unit, words, _, ratio) in others(&ANGLE_UNITS, layout.angle_unit) {
                 out.push(Corrected::new(
                     MistakeClass::ColumnUnit,
                     format!(
@@ -386,10 +373,7 @@ pub(crate) fn general_hypotheses<D: SetupData>(
         }
         if layout.lengths.len() > 1 {
             for (g, group) in layout.lengths.iter().enumerate() {
-                for (unit, words, factor) in LENGTH_UNITS {
-                    if unit == layout.length_unit {
-                        continue;
-                    }
+                for (unit, words, _, ratio) in others(&LENGTH_UNITS, layout.length_unit) {
                     out.push(Corrected::new(
                         MistakeClass::LengthUnit,
                         format!(
@@ -398,7 +382,7 @@ pub(crate) fn general_hypotheses<D: SetupData>(
                             unit_words(&LENGTH_UNITS, layout.length_unit)
                         ),
                         format!("--column-unit {}={unit}", group.label),
-                        data.with_lengths(Some(g), factor / length_read),
+                        data.with_lengths(Some(g), ratio),
                     ));
                 }
             }
@@ -670,6 +654,18 @@ fn shift_words(shift: isize, from: Option<(&str, u64)>) -> (String, String) {
             ),
         )
     }
+}
+
+/// The units of `units` other than the one named `read`, each with its name, words, SI factor
+/// and the ratio that turns a value read in `read` into one in it.
+fn others(
+    units: &'static [(&'static str, &'static str, f64)],
+    read: &'static str,
+) -> impl Iterator<Item = (&'static str, &'static str, f64, f64)> {
+    let read_factor = unit_factor(units, read);
+    (units.iter())
+        .filter(move |u| u.0 != read)
+        .map(move |&(name, words, factor)| (name, words, factor, factor / read_factor))
 }
 
 /// The SI factor of the unit named `name` in `units` (1 when unknown).
