@@ -359,9 +359,11 @@ fn map(rows: &[LogRow], edit: impl Fn(&mut LogRow)) -> Vec<LogRow> {
         .collect()
 }
 
-/// The nominal device's cable-distance residual of `rows`: the robust RMS ([`about_median`])
-/// of `d − |P(q)|` about its median, and of the distances about
-/// theirs (the spread): one mistyped row leaves both nearly where they were.
+/// The nominal device's cable-distance residual of `rows`: the RMS of `d − |P(q)|` about its
+/// median with the farthest [`TRIMMED_SHARE`] of the rows set aside ([`trimmed_rms`]), and the
+/// robust spread of the distances about theirs ([`about_median`]): one mistyped row leaves
+/// both nearly where they were, while a tenth of the rows whose distances belong to other
+/// joint readings raises the residual.
 fn distance_residual(chain: &hapcal_kinematics::Chain, rows: &[LogRow]) -> Residual {
     let x0 = vec![0.0; chain.n_params()];
     let e: Vec<f64> = (rows.iter())
@@ -370,10 +372,25 @@ fn distance_residual(chain: &hapcal_kinematics::Chain, rows: &[LogRow]) -> Resid
     let d: Vec<f64> = rows.iter().map(|r| r.distance_m).collect();
     Residual {
         of: ResidualOf::CableDistance,
-        length_rms_m: about_median(e),
+        length_rms_m: trimmed_rms(e),
         orientation_rms_rad: None,
         spread_m: about_median(d),
     }
+}
+
+/// Share of the rows, farthest from the median, that [`trimmed_rms`] sets aside: a mistyped
+/// reading or two in a log of a hundred rows, not the tenth of a log whose rows were mixed up.
+const TRIMMED_SHARE: f64 = 0.02;
+
+/// RMS of `v` about its median over all but its [`TRIMMED_SHARE`] farthest values (at least
+/// one once `v` holds 20 values); `None` when empty or not finite.
+fn trimmed_rms(v: Vec<f64>) -> Option<f64> {
+    let m = median(v.clone());
+    let mut sq: Vec<f64> = v.iter().map(|x| (x - m).powi(2)).collect();
+    sq.sort_by(f64::total_cmp);
+    let kept = sq.len() - (TRIMMED_SHARE * sq.len() as f64).round() as usize;
+    let rms = (sq[..kept].iter().sum::<f64>() / kept.max(1) as f64).sqrt();
+    (kept > 0 && rms.is_finite()).then_some(rms)
 }
 
 /// Robust RMS of `v` about its median: `√(median((v − m)²)/0.4549)`, 0.4549 the median of χ²
