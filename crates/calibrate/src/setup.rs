@@ -1101,6 +1101,11 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
             after: None,
         });
     }
+    let another = (!explained && frozen.is_empty() && !as_given.is_plausible())
+        .then(|| another_device(input.robot, input.tables, &given_tips, &as_given))
+        .flatten();
+    let explained = explained || another.is_some();
+    findings.extend(another);
     if !explained && frozen.is_empty() && !as_given.is_plausible() {
         findings.push(Finding {
             class: MistakeClass::NoHypothesis,
@@ -1392,6 +1397,74 @@ pub const MANUFACTURING_TOLERANCE_M: f64 = 0.025;
 /// conditioning's (an unmodelled effect such as a latency pulled on a weak direction), not
 /// evidence of another device.
 pub const DETERMINED_SIGMAS: f64 = 10.0;
+
+/// The another-device finding of data that no hypothesis of a mistake explains: when the
+/// geometric calibration of `tables` (at most [`MAX_CHECK_ROWS`] of their rows, markers on
+/// `marker_tips`) brings the residual `as_given` to one a real robot leaves, moving link lengths
+/// by more than [`MANUFACTURING_TOLERANCE_M`] determined to [`DETERMINED_SIGMAS`], the data
+/// come from a robot of this structure with other dimensions; `None` otherwise (the fit
+/// fails, stays implausible or moves no length that far).
+fn another_device(
+    robot: &Robot,
+    tables: &[MeasurementTable],
+    marker_tips: &[usize],
+    as_given: &Residual,
+) -> Option<Finding> {
+    let cfg = MeasuredConfig {
+        rung: Some(ModelName::Geometric),
+        folds: 2,
+        sigma_m: None,
+        sigma_rad: None,
+        marker_tips: marker_tips.to_vec(),
+        workspace: Vec::new(),
+    };
+    let tables = thinned(tables);
+    let out = measured::calibrate_measured(robot, &tables, &[], &cfg).ok()?;
+    let after = residual_of(&out.model, &tables);
+    if !after.is_plausible() {
+        return None;
+    }
+    let id = &out.fitted.identified;
+    let is_frame = |name: &str| name.starts_with("instrument.") || name.starts_with("marker");
+    let mut beyond: Vec<(String, f64, f64)> = (id.covariance.free.iter())
+        .zip(id.covariance.std())
+        .filter(|(i, _)| id.layout.spec(**i).unit.symbol() == "m")
+        .map(|(&i, std)| (id.layout.name(i).to_owned(), id.fit.x[i], std))
+        .filter(|(name, value, std)| {
+            !is_frame(name)
+                && value.abs() > MANUFACTURING_TOLERANCE_M
+                && value.abs() > DETERMINED_SIGMAS * std
+        })
+        .collect();
+    beyond.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+    if beyond.is_empty() {
+        return None;
+    }
+    let listed: Vec<String> = (beyond.iter().take(4))
+        .map(|(name, value, _)| format!("{name} {:+.1} mm", value * 1e3))
+        .collect();
+    let more = if beyond.len() > 4 { ", …" } else { "" };
+    Some(Finding {
+        class: MistakeClass::AnotherDevice,
+        severity: Severity::Error,
+        message: format!(
+            "the nominal model misses the measurements by {} RMS with the instrument and marker \
+             frames fitted, and no checked mistake explains it; the geometric calibration fits \
+             them to {} RMS by moving {} length{} by more than the {:.0} mm a real robot's \
+             manufacturing leaves ({}{more}): these data come from a robot of this structure \
+             with other dimensions, or the description is not the one measured",
+            as_given.text(),
+            after.text(),
+            beyond.len(),
+            if beyond.len() == 1 { "" } else { "s" },
+            MANUFACTURING_TOLERANCE_M * 1e3,
+            listed.join(", "),
+        ),
+        fix: "check --device (and --tip) against the robot that recorded the data".to_owned(),
+        before: *as_given,
+        after: Some(after),
+    })
+}
 
 /// The setup check after a calibration: an identified length deviation beyond
 /// [`MANUFACTURING_TOLERANCE_M`], determined to [`DETERMINED_SIGMAS`], says the data come from another device or robot (or a
