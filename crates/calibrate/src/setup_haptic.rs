@@ -544,4 +544,70 @@ mod tests {
                 .any(|h| h.class == MistakeClass::ColumnSign)
         );
     }
+
+    #[test]
+    fn a_tenth_of_the_rows_with_other_rows_distances_do_not_belong() {
+        // The reference log with the distances of every tenth row passed round a cycle of
+        // those rows (the joint readings stay): the nominal residual of the other rows is
+        // millimetres, theirs the spread of the distances, tens of millimetres.
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures");
+        let device =
+            hapcal_io::read_device(&root.join("reference-device/device.toml")).expect("device");
+        let text = std::fs::read_to_string(root.join("reference-device/log.csv")).expect("log");
+        let mut lines: Vec<Vec<String>> = (text.lines())
+            .map(|l| l.split(',').map(str::to_owned).collect())
+            .collect();
+        let column = (lines[0].iter().position(|c| c == "distance_m")).expect("distance_m");
+        let picked: Vec<usize> = (1..lines.len()).filter(|i| i % 10 == 3).collect();
+        let distances: Vec<String> = picked.iter().map(|&i| lines[i][column].clone()).collect();
+        for (k, &i) in picked.iter().enumerate() {
+            lines[i][column] = distances[(k + 1) % distances.len()].clone();
+        }
+        let dir = std::env::temp_dir().join(format!("hapcal-mixed-log-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("a scratch directory");
+        let path = dir.join("log.csv");
+        let csv: Vec<String> = lines.iter().map(|l| l.join(",")).collect();
+        std::fs::write(&path, csv.join("\n") + "\n").expect("the mixed log");
+        let report = check_logs(
+            &device,
+            std::slice::from_ref(&path),
+            &hapcal_io::Units::default(),
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+        let report = report.expect("the check runs");
+        let f = report.overwhelming().expect("an error finding");
+        assert_eq!(f.class, MistakeClass::RowMismatch, "{}", f.text());
+        // The rows set aside are mixed ones: most of them (a few got a distance near their
+        // own), the first one named by its line.
+        let flagged: usize = (f.message.split(' ').next())
+            .and_then(|n| n.parse().ok())
+            .expect("the count of rows set aside");
+        assert!(
+            2 * flagged >= picked.len() && flagged <= picked.len(),
+            "{} of {}: {}",
+            flagged,
+            picked.len(),
+            f.text()
+        );
+        assert!(f.message.contains("log.csv:4,"), "{}", f.text());
+    }
+
+    #[test]
+    fn the_trimmed_rms_sets_aside_a_mistyped_row_but_not_a_tenth() {
+        // ±1 mm alternating: RMS 1 mm about the median; one row at 1 m is set aside, ten of a
+        // hundred are not.
+        let base: Vec<f64> = (0..100)
+            .map(|i| if i % 2 == 0 { 1e-3 } else { -1e-3 })
+            .collect();
+        let rms = |v: Vec<f64>| trimmed_rms(v).expect("finite");
+        assert!((rms(base.clone()) - 1e-3).abs() < 1e-12);
+        let mut one = base.clone();
+        one[10] = 1.0;
+        assert!((rms(one) - 1e-3).abs() < 1e-4);
+        let mut tenth = base;
+        for v in tenth.iter_mut().step_by(10) {
+            *v = 0.05;
+        }
+        assert!(rms(tenth) > 10e-3);
+    }
 }
