@@ -189,6 +189,11 @@ pub fn closed_form_residual(
     closed_form_fit(robot, tables, marker_tips, None).map(|fit| fit.residual)
 }
 
+/// Closed-form fits, at most, to the rows that fit the last one (the per-row residuals that
+/// find rows that do not belong): a tenth of a file's rows mixed up ruins the first fit to
+/// every row, and the rows within 3 medians of it still hold some of them.
+const ROBUST_REFITS: usize = 4;
+
 /// The closed-form frames-only fit of [`closed_form_residual`]: its residual, and each row's.
 struct ClosedForm {
     residual: Residual,
@@ -1028,15 +1033,31 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
         None => frames_only_residual(input.robot, input.tables, &given_tips)
             .context("the frames-only fit of the data as given failed")?,
     };
-    // Per-row residuals under frames fitted to the rows that fit (a few rows that do not
-    // belong pull the frames of a fit to every row, and every row's residual with them).
-    let robust = closed_form.as_ref().and_then(|fit| {
+    // Per-row residuals under frames fitted to the rows that fit (rows that do not belong
+    // pull the frames of a fit to every row, and every row's residual with them): the rows
+    // within 3 medians of the last fit, refitted until the rows kept no longer change.
+    let mut robust: Option<ClosedForm> = None;
+    let mut kept: Option<Vec<bool>> = None;
+    for _ in 0..ROBUST_REFITS {
+        let Some(fit) = robust.as_ref().or(closed_form.as_ref()) else {
+            break;
+        };
         let mut sorted: Vec<f64> = fit.per_row.iter().map(|r| r.2).collect();
         sorted.sort_by(f64::total_cmp);
-        let median = *sorted.get(sorted.len() / 2)?;
+        let Some(&median) = sorted.get(sorted.len() / 2) else {
+            break;
+        };
         let keep: Vec<bool> = fit.per_row.iter().map(|r| r.2 <= 3.0 * median).collect();
-        closed_form_fit(input.robot, input.tables, &given_tips, Some(&keep))
-    });
+        if kept.as_ref() == Some(&keep) {
+            break;
+        }
+        let Some(next) = closed_form_fit(input.robot, input.tables, &given_tips, Some(&keep))
+        else {
+            break;
+        };
+        robust = Some(next);
+        kept = Some(keep);
+    }
     let per_row = robust.or(closed_form).map(|fit| fit.per_row);
     // The closed form may stop short of the full fit (a long lever between the instrument and
     // the joints): the per-column families only when the full fit agrees the data are not
