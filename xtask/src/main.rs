@@ -335,9 +335,11 @@ fn find(built: &[Executable], package: &str, kind: &str, name: &str) -> Result<P
 }
 
 /// How the xtask runs the `hapcal` tool: a program and the arguments before hapcal's own;
-/// `bin` when given (CI passes the binary it built), else `cargo run --release -p hapcal --`.
+/// `bin` when given (CI passes the binary it built), else the binary `HAPCAL_BIN` names, else
+/// `cargo run --release -p hapcal --`.
 fn hapcal_cmd(bin: Option<&Path>) -> (OsString, Vec<OsString>) {
-    match bin {
+    let from_env = std::env::var_os("HAPCAL_BIN").map(PathBuf::from);
+    match bin.map(Path::to_path_buf).or(from_env) {
         Some(bin) => (bin.into(), Vec::new()),
         None => (
             "cargo".into(),
