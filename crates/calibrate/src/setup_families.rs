@@ -298,136 +298,160 @@ pub(crate) fn general_hypotheses<D: SetupData>(
     tier: Tier,
 ) -> Vec<Corrected<D>> {
     let mut out = Vec::new();
-    let suspicious = tier == Tier::Suspicious;
-    let joints = &layout.joints;
-    let n = joints.len();
-    let any_revolute = joints.iter().any(|c| c.revolute);
+    match tier {
+        Tier::Always => file_units(data, layout, &mut out),
+        Tier::Suspicious => {
+            column_units(data, layout, &mut out);
+            signs_and_zeros(data, layout, &mut out);
+        }
+    }
+    permutations(data, layout, tier, &mut out);
+    whole_file_shifts(data, layout, tier, &mut out);
+    out
+}
 
-    // Units of the whole file (always) and of each column (when suspicious).
-    if !suspicious {
-        if any_revolute {
-            for (unit, words, factor, ratio) in others(&ANGLE_UNITS, layout.angle_unit) {
-                let fix = if layout.file_flags {
-                    format!("--angle-unit {unit}")
-                } else {
-                    format!(
-                        "convert the joint readings to radians (multiply by {})",
-                        factor_text(factor)
-                    )
-                };
-                out.push(Corrected::new(
-                    MistakeClass::AngleUnit,
-                    format!(
-                        "the joint readings are in {words}, read as {}",
-                        unit_words(&ANGLE_UNITS, layout.angle_unit)
-                    ),
-                    fix,
-                    data.with_joints(&|q: &mut [f64]| {
-                        for (v, c) in q.iter_mut().zip(joints) {
-                            if c.revolute {
-                                *v *= ratio;
-                            }
-                        }
-                    }),
-                ));
-            }
-        }
-        if !layout.lengths.is_empty() {
-            for (unit, words, factor, ratio) in others(&LENGTH_UNITS, layout.length_unit) {
-                out.push(Corrected::new(
-                    MistakeClass::LengthUnit,
-                    format!(
-                        "the positions and distances are in {words}, read as {}",
-                        unit_words(&LENGTH_UNITS, layout.length_unit)
-                    ),
-                    if layout.file_flags {
-                        format!("--length-unit {unit}")
-                    } else {
-                        format!(
-                            "convert the lengths to metres (multiply by {})",
-                            factor_text(factor)
-                        )
-                    },
-                    data.with_lengths(None, ratio),
-                ));
-            }
-        }
-    } else {
-        for (j, c) in joints.iter().enumerate().filter(|(_, c)| c.revolute) {
-            for (unit, words, _, ratio) in others(&ANGLE_UNITS, layout.angle_unit) {
-                out.push(Corrected::new(
-                    MistakeClass::ColumnUnit,
-                    format!(
-                        "the readings of {} are in {words}, read as {}",
-                        c.words,
-                        unit_words(&ANGLE_UNITS, layout.angle_unit)
-                    ),
-                    format!("--column-unit {}={unit}", c.label),
-                    data.with_joints(&|q: &mut [f64]| {
-                        if let Some(v) = q.get_mut(j) {
+/// The units of the whole file: every angle in each unit other than the one read, every
+/// length likewise.
+fn file_units<D: SetupData>(data: &D, layout: &Layout, out: &mut Vec<Corrected<D>>) {
+    let joints = &layout.joints;
+    let any_revolute = joints.iter().any(|c| c.revolute);
+    if any_revolute {
+        for (unit, words, factor, ratio) in others(&ANGLE_UNITS, layout.angle_unit) {
+            let fix = if layout.file_flags {
+                format!("--angle-unit {unit}")
+            } else {
+                format!(
+                    "convert the joint readings to radians (multiply by {})",
+                    factor_text(factor)
+                )
+            };
+            out.push(Corrected::new(
+                MistakeClass::AngleUnit,
+                format!(
+                    "the joint readings are in {words}, read as {}",
+                    unit_words(&ANGLE_UNITS, layout.angle_unit)
+                ),
+                fix,
+                data.with_joints(&|q: &mut [f64]| {
+                    for (v, c) in q.iter_mut().zip(joints) {
+                        if c.revolute {
                             *v *= ratio;
                         }
-                    }),
-                ));
-            }
-        }
-        if layout.lengths.len() > 1 {
-            for (g, group) in layout.lengths.iter().enumerate() {
-                for (unit, words, _, ratio) in others(&LENGTH_UNITS, layout.length_unit) {
-                    out.push(Corrected::new(
-                        MistakeClass::LengthUnit,
-                        format!(
-                            "{} are in {words}, read as {} as the other lengths",
-                            group.words,
-                            unit_words(&LENGTH_UNITS, layout.length_unit)
-                        ),
-                        format!("--column-unit {}={unit}", group.label),
-                        data.with_lengths(Some(g), ratio),
-                    ));
-                }
-            }
-        }
-        // Signs and zeros.
-        for (j, c) in joints.iter().enumerate() {
-            out.push(Corrected::new(
-                MistakeClass::ColumnSign,
-                format!(
-                    "the readings of {} have the wrong sign (its encoder counts the other way)",
-                    c.words
-                ),
-                format!("--column-sign {}", c.label),
-                data.with_joints(&|q: &mut [f64]| {
-                    if let Some(v) = q.get_mut(j) {
-                        *v = -*v;
                     }
                 }),
             ));
-            if !c.revolute {
-                continue;
-            }
-            for offset in ZERO_OFFSETS {
-                out.push(Corrected::new(
-                    MistakeClass::ColumnZero,
+        }
+    }
+    if !layout.lengths.is_empty() {
+        for (unit, words, factor, ratio) in others(&LENGTH_UNITS, layout.length_unit) {
+            out.push(Corrected::new(
+                MistakeClass::LengthUnit,
+                format!(
+                    "the positions and distances are in {words}, read as {}",
+                    unit_words(&LENGTH_UNITS, layout.length_unit)
+                ),
+                if layout.file_flags {
+                    format!("--length-unit {unit}")
+                } else {
                     format!(
-                        "the zero of {} is {:+.0}° off (its reading plus {:.0}° is the joint's \
-                         angle)",
-                        c.words,
-                        offset.to_degrees(),
-                        offset.to_degrees()
+                        "convert the lengths to metres (multiply by {})",
+                        factor_text(factor)
+                    )
+                },
+                data.with_lengths(None, ratio),
+            ));
+        }
+    }
+}
+
+/// The unit of each revolute joint's column, and of each group of lengths where a file holds
+/// several.
+fn column_units<D: SetupData>(data: &D, layout: &Layout, out: &mut Vec<Corrected<D>>) {
+    let joints = &layout.joints;
+    for (j, c) in joints.iter().enumerate().filter(|(_, c)| c.revolute) {
+        for (unit, words, _, ratio) in others(&ANGLE_UNITS, layout.angle_unit) {
+            out.push(Corrected::new(
+                MistakeClass::ColumnUnit,
+                format!(
+                    "the readings of {} are in {words}, read as {}",
+                    c.words,
+                    unit_words(&ANGLE_UNITS, layout.angle_unit)
+                ),
+                format!("--column-unit {}={unit}", c.label),
+                data.with_joints(&|q: &mut [f64]| {
+                    if let Some(v) = q.get_mut(j) {
+                        *v *= ratio;
+                    }
+                }),
+            ));
+        }
+    }
+    if layout.lengths.len() > 1 {
+        for (g, group) in layout.lengths.iter().enumerate() {
+            for (unit, words, _, ratio) in others(&LENGTH_UNITS, layout.length_unit) {
+                out.push(Corrected::new(
+                    MistakeClass::LengthUnit,
+                    format!(
+                        "{} are in {words}, read as {} as the other lengths",
+                        group.words,
+                        unit_words(&LENGTH_UNITS, layout.length_unit)
                     ),
-                    format!("--column-offset {}={offset:.6}", c.label),
-                    data.with_joints(&|q: &mut [f64]| {
-                        if let Some(v) = q.get_mut(j) {
-                            *v += offset;
-                        }
-                    }),
+                    format!("--column-unit {}={unit}", group.label),
+                    data.with_lengths(Some(g), ratio),
                 ));
             }
         }
     }
+}
 
-    // Permutations: pairs of one kind (all of them up to ALL_PAIRS_UP_TO joints, else the
-    // adjacent ones always and the rest when suspicious), the reversal, arms exchanged.
+/// Each joint's sign, and each revolute joint's zero off by [`ZERO_OFFSETS`].
+fn signs_and_zeros<D: SetupData>(data: &D, layout: &Layout, out: &mut Vec<Corrected<D>>) {
+    let joints = &layout.joints;
+    for (j, c) in joints.iter().enumerate() {
+        out.push(Corrected::new(
+            MistakeClass::ColumnSign,
+            format!(
+                "the readings of {} have the wrong sign (its encoder counts the other way)",
+                c.words
+            ),
+            format!("--column-sign {}", c.label),
+            data.with_joints(&|q: &mut [f64]| {
+                if let Some(v) = q.get_mut(j) {
+                    *v = -*v;
+                }
+            }),
+        ));
+        if !c.revolute {
+            continue;
+        }
+        for offset in ZERO_OFFSETS {
+            out.push(Corrected::new(
+                MistakeClass::ColumnZero,
+                format!(
+                    "the zero of {} is {:+.0}° off (its reading plus {:.0}° is the joint's \
+                     angle)",
+                    c.words,
+                    offset.to_degrees(),
+                    offset.to_degrees()
+                ),
+                format!("--column-offset {}={offset:.6}", c.label),
+                data.with_joints(&|q: &mut [f64]| {
+                    if let Some(v) = q.get_mut(j) {
+                        *v += offset;
+                    }
+                }),
+            ));
+        }
+    }
+}
+
+/// Permutations of the joint columns: pairs of one kind (all of them up to
+/// [`ALL_PAIRS_UP_TO`] joints, else the adjacent ones always and the rest when suspicious),
+/// the reversal, arms exchanged.
+fn permutations<D: SetupData>(data: &D, layout: &Layout, tier: Tier, out: &mut Vec<Corrected<D>>) {
+    let suspicious = tier == Tier::Suspicious;
+    let joints = &layout.joints;
+    let n = joints.len();
     for a in 0..n {
         for b in a + 1..n {
             let adjacent = b == a + 1;
@@ -511,10 +535,17 @@ pub(crate) fn general_hypotheses<D: SetupData>(
             }
         }
     }
+}
 
-    // Rows out of step, for the whole file.
+/// Rows out of step by a whole number of rows, for the whole file.
+fn whole_file_shifts<D: SetupData>(
+    data: &D,
+    layout: &Layout,
+    tier: Tier,
+    out: &mut Vec<Corrected<D>>,
+) {
     if layout.paired_rows {
-        let shifts: &[isize] = if suspicious {
+        let shifts: &[isize] = if tier == Tier::Suspicious {
             &SHIFTS_SUSPICIOUS
         } else {
             &SHIFTS_ALWAYS
@@ -526,7 +557,6 @@ pub(crate) fn general_hypotheses<D: SetupData>(
             }
         }
     }
-    out
 }
 
 /// The hypotheses estimated from the per-row residuals of the data as given: joint readings
