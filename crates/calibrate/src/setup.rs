@@ -636,6 +636,14 @@ fn layout_of(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Layout {
 /// The hypotheses of the measurement files' own families (frames and conventions of pose
 /// data, the angles of orientations, tips) for `input`.
 fn own_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Corrected<MeasuredData>> {
+    let mut out = angle_rereads(input, headers);
+    out.extend(orientation_conventions(input.tables, headers));
+    out.extend(tip_hypotheses(input, headers));
+    out
+}
+
+/// The files read again in the other angle unit (all angles, or only the orientation angles).
+fn angle_rereads(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Corrected<MeasuredData>> {
     let SetupInput {
         robot,
         tables,
@@ -646,13 +654,7 @@ fn own_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correc
     let mut push = |class, what: String, fix: String, t: Vec<MeasurementTable>| {
         out.push(Corrected::new(class, what, fix, MeasuredData::tables(t)));
     };
-    let has_markers = tables.iter().any(|t| t.n_markers > 0);
-    let has_orientation = tables.iter().any(|t| t.has_orientation);
     let has_rpy = headers.iter().flatten().any(|c| c.starts_with("phix"));
-    let has_quaternion =
-        has_orientation && (!has_rpy || headers.iter().flatten().any(|c| c.starts_with("qw")));
-    let n = robot.joint_names.len();
-
     // Angle unit: the files read again in the other unit (all angles, or only the
     // orientation angles).
     let (other, unit_word, other_word, flag) = match units.angle {
@@ -710,7 +712,24 @@ fn own_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correc
             );
         }
     }
+    out
+}
 
+/// The conventions of the orientations (quaternion order and conjugate, Euler orders) and of
+/// the instrument's axes (a left-handed frame).
+fn orientation_conventions(
+    tables: &[MeasurementTable],
+    headers: &[Vec<String>],
+) -> Vec<Corrected<MeasuredData>> {
+    let mut out = Vec::new();
+    let mut push = |class, what: String, fix: String, t: Vec<MeasurementTable>| {
+        out.push(Corrected::new(class, what, fix, MeasuredData::tables(t)));
+    };
+    let has_markers = tables.iter().any(|t| t.n_markers > 0);
+    let has_orientation = tables.iter().any(|t| t.has_orientation);
+    let has_rpy = headers.iter().flatten().any(|c| c.starts_with("phix"));
+    let has_quaternion =
+        has_orientation && (!has_rpy || headers.iter().flatten().any(|c| c.starts_with("qw")));
     // Orientations.
     if has_quaternion {
         push(
@@ -803,7 +822,20 @@ fn own_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correc
             reflect(tables, &m),
         );
     }
+    out
+}
 
+/// The tips: given in the wrong order, or one link off the one the markers sit on.
+fn tip_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Corrected<MeasuredData>> {
+    let SetupInput {
+        robot,
+        tables,
+        units,
+        ..
+    } = input;
+    let mut out = Vec::new();
+    let n = robot.joint_names.len();
+    let paths: Vec<PathBuf> = tables.iter().map(|t| t.path.clone()).collect();
     // Tips in the wrong order.
     let n_tips = input.tips.len();
     for a in 0..n_tips {
