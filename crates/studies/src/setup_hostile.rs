@@ -2407,7 +2407,7 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
     for r in results.iter().filter(|r| !r.case.family.is_correct()) {
         let why = match &r.visibility {
             Visibility::MistakenFailed(e) | Visibility::Undecided(e) => {
-                let e: String = e.chars().take(100).collect();
+                let e: String = e.chars().take(140).collect();
                 format!(" ({})", e.replace('|', "\\|").replace('`', "'"))
             }
             _ => String::new(),

@@ -210,19 +210,17 @@ fn screen(
     let stderr = String::from_utf8_lossy(&out.stderr);
     let _ = std::fs::write(dir.join("screen-stderr.txt"), stderr.as_bytes());
     let _ = std::fs::write(dir.join("screen.json"), &out.stdout);
+    // Without a report, the command's error (the setup lines before it were accepted).
+    let error = (stderr.lines())
+        .find_map(|l| l.split_once("error: ").map(|(_, e)| e.to_owned()))
+        .unwrap_or_else(|| what_was_said(&stderr));
     Residual::from_report_json(&String::from_utf8_lossy(&out.stdout)).map_err(|e| {
-        anonymous(
-            &format!(
-                "{}{e}",
-                if stderr.trim().is_empty() {
-                    String::new()
-                } else {
-                    format!("{}; ", what_was_said(&stderr))
-                }
-            ),
-            dir,
-            root,
-        )
+        let why = if error.is_empty() {
+            e.to_string()
+        } else {
+            error
+        };
+        anonymous(&why, dir, root)
     })
 }
 
