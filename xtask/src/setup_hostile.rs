@@ -1,6 +1,7 @@
 //! `cargo xtask setup-hostile`: the hostile sweep of setup mistakes
-//! (crates/studies/src/setup_hostile.rs) run through the release `hapcal calibrate`, into
-//! docs/results/setup-hostile.md (or `--out`).
+//! (crates/studies/src/setup_hostile.rs) run through the release `hapcal calibrate`, each
+//! mistake screened for visibility by a frames-only fit of it and of its correct twin, into
+//! docs/results/setup-hostile.md (or `--out`). Builds in `CARGO_TARGET_DIR` when it is set.
 
 use std::path::{Path, PathBuf};
 

@@ -19,6 +19,13 @@
 //! **Split.** Each case belongs to one half ([`Half`]) by a hash of its identity (family,
 //! recording, parameters), so the two halves do not change when cases are added.
 //!
+//! **Visibility.** A mistake may leave no trace in the data (the zero of a positioner's joint
+//! absorbed by the fitted frames). Each mistake is screened without the check's code: the
+//! least model's fit ([`screening_model`], [`screening_args`]) of the mistaken data and of its
+//! [`correct_twin`] (the same rows and simulation seed, no mistake); the mistake is invisible
+//! when the ratio of their training residuals ([`residual_ratio`]) is below
+//! [`INVISIBLE_RATIO`] ([`Visibility`]).
+//!
 //! Sources of the recordings: fixtures/figaroh (UR10, TIAGo; Apache-2.0), fixtures/sim-humanoid,
 //! fixtures/industrial-calibration (Apache-2.0), fixtures/mukca (MIT, TU Delft),
 //! fixtures/reference-device.
@@ -30,7 +37,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use hapcal_calibrate::measured::robot_from_urdf;
-use hapcal_contract::Effect;
+use hapcal_contract::{Effect, ModelName};
 use nalgebra::{Rotation3, UnitQuaternion};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -1880,6 +1887,225 @@ pub struct CaseResult {
     pub said: String,
     /// Seconds the command took.
     pub seconds: f64,
+    /// Whether the mistake leaves a trace a fit of the least model can see ([`Visibility`]).
+    pub visibility: Visibility,
+}
+
+/// A mistake is *invisible in the data* when the screening fit's training residual on the
+/// mistaken data is below this many times the one on the same data without the mistake: the
+/// data carry no trace of it that a fit of the nominal model (frames only) could see.
+pub const INVISIBLE_RATIO: f64 = 1.05;
+
+/// The model of the screening fit (`hapcal calibrate --model`): the least one the data's kind
+/// takes. Measurement files (markers, poses, positions): frames-only, the nominal kinematics
+/// with the instrument's and markers' frames fitted. Socket folders and haptic logs take no
+/// frames-only fit: geometric, which also fits joint offsets and link lengths (a zero off or
+/// a longer link can be absorbed there).
+pub fn screening_model(rec: Recording) -> ModelName {
+    match rec {
+        R::SocketsIiwa | R::SocketsPanda | R::Haptic | R::HapticMotion => ModelName::Geometric,
+        _ => ModelName::FramesOnly,
+    }
+}
+
+/// The arguments that turn a case's `hapcal calibrate` arguments into its screening fit:
+/// the setup check accepted, the [`screening_model`], the report as JSON on standard output.
+pub fn screening_args(rec: Recording) -> Vec<String> {
+    vec![
+        "--accept-setup".to_owned(),
+        "--model".to_owned(),
+        screening_model(rec).name().to_owned(),
+        "--json".to_owned(),
+    ]
+}
+
+/// The training residual of a calibration, read from `hapcal calibrate --json`: the figures
+/// the data's kind has after the fit, each over the training sets (test sets left out).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Residual {
+    /// RMS of the 3-D marker position error, m (marker and pose data).
+    pub position_rms_m: Option<f64>,
+    /// RMS orientation error, rad (pose data).
+    pub orientation_rms_rad: Option<f64>,
+    /// RMS distance error, m (distance rows, haptic logs).
+    pub distance_rms_m: Option<f64>,
+    /// Mean absolute error of the tips about their sockets ("consistency"), m (socket data).
+    pub consistency_m: Option<f64>,
+    /// Socket distance error ("distortion"), m (socket data with two sockets).
+    pub socket_distance_error_m: Option<f64>,
+}
+
+impl Residual {
+    /// Reads the training residual from the JSON report of `hapcal calibrate --json`
+    /// (`placements[]` with `role`, `n_rows` and `after`). Over several training sets each
+    /// figure is the row-weighted root mean square of the sets' figures.
+    ///
+    /// # Errors
+    /// Text that is not JSON, or a report without a training set or without a figure.
+    pub fn from_report_json(text: &str) -> Result<Residual> {
+        let doc: serde_json::Value =
+            serde_json::from_str(text).context("the calibration report is not JSON")?;
+        let sets = (doc.get("placements"))
+            .and_then(serde_json::Value::as_array)
+            .context("the calibration report has no data sets")?;
+        // Per figure: Σ n·v², Σ n.
+        let mut acc = [(0.0f64, 0.0f64); 5];
+        let mut n_train = 0;
+        for set in sets {
+            if set.get("role").and_then(serde_json::Value::as_str) != Some("train") {
+                continue;
+            }
+            n_train += 1;
+            let n = (set.get("n_rows").and_then(serde_json::Value::as_f64)).unwrap_or(1.0);
+            let after = set.get("after");
+            let at = |path: &[&str]| -> Option<f64> {
+                let mut v = after?;
+                for k in path {
+                    v = v.get(*k)?;
+                }
+                v.as_f64()
+            };
+            let figures = [
+                at(&["pose", "position_rms_m"]),
+                at(&["pose", "orientation_rms_rad"]),
+                at(&["pose", "distance_rms_m"]).or_else(|| at(&["distance_rms_m"])),
+                at(&["mean_absolute_error_m"]),
+                at(&["distance_error_m"]),
+            ];
+            for (a, f) in acc.iter_mut().zip(figures) {
+                if let Some(v) = f {
+                    a.0 += n * v * v;
+                    a.1 += n;
+                }
+            }
+        }
+        if n_train == 0 {
+            bail!("the calibration report has no training set");
+        }
+        let [p, o, d, c, s] = acc.map(|(sum, n)| (n > 0.0).then(|| (sum / n).sqrt()));
+        let r = Residual {
+            position_rms_m: p,
+            orientation_rms_rad: o,
+            distance_rms_m: d,
+            consistency_m: c,
+            socket_distance_error_m: s,
+        };
+        if r.figures().iter().all(Option::is_none) {
+            bail!("the calibration report has no residual figure");
+        }
+        Ok(r)
+    }
+
+    /// The figures in a fixed order (position, orientation, distance, consistency, socket
+    /// distance).
+    fn figures(&self) -> [Option<f64>; 5] {
+        [
+            self.position_rms_m,
+            self.orientation_rms_rad,
+            self.distance_rms_m,
+            self.consistency_m,
+            self.socket_distance_error_m,
+        ]
+    }
+}
+
+/// How much larger the mistaken data's residual is than the correct data's: the largest
+/// ratio over the figures both have (a mistake in the orientations alone shows in the
+/// orientation RMS only). A figure zero on the correct data counts 1 if it is zero on the
+/// mistaken data too, else infinity. `None`: no figure in common.
+pub fn residual_ratio(mistaken: &Residual, correct: &Residual) -> Option<f64> {
+    (mistaken.figures().into_iter())
+        .zip(correct.figures())
+        .filter_map(|(m, c)| Some((m?, c?)))
+        .map(|(m, c)| {
+            let (m, c) = (m.abs(), c.abs());
+            if c > 0.0 {
+                m / c
+            } else if m > 0.0 {
+                f64::INFINITY
+            } else {
+                1.0
+            }
+        })
+        .reduce(f64::max)
+}
+
+/// Whether a mistake leaves a trace the screening fit can see.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Visibility {
+    /// Correct data: not screened.
+    NotScreened,
+    /// The mistaken data's residual over the correct data's ([`residual_ratio`]).
+    Ratio(f64),
+    /// The screening fit of the mistaken data failed (the reader or the fit refused them:
+    /// the data show the mistake); the message's first line.
+    MistakenFailed(String),
+    /// The screening fit of the correct data failed, or the two have no figure in common:
+    /// not decided, counted visible.
+    Undecided(String),
+}
+
+impl Visibility {
+    /// Screens a mistake from its two screening fits: the mistaken data's and the correct
+    /// data's (`Err`: the fit's error message).
+    pub fn screen(
+        mistaken: &std::result::Result<Residual, String>,
+        correct: &std::result::Result<Residual, String>,
+    ) -> Visibility {
+        match (mistaken, correct) {
+            (_, Err(e)) => Visibility::Undecided(format!("correct data: {e}")),
+            (Err(e), Ok(_)) => Visibility::MistakenFailed(e.clone()),
+            (Ok(m), Ok(c)) => residual_ratio(m, c).map_or_else(
+                || Visibility::Undecided("no residual figure in common".to_owned()),
+                Visibility::Ratio,
+            ),
+        }
+    }
+
+    /// Whether the mistake is invisible in the data: a ratio below [`INVISIBLE_RATIO`].
+    pub fn is_invisible(&self) -> bool {
+        matches!(self, Visibility::Ratio(r) if *r < INVISIBLE_RATIO)
+    }
+
+    /// The ratio, or a word for the report (`fit failed`, `undecided`, `—` unscreened).
+    pub fn cell(&self) -> String {
+        match self {
+            Visibility::NotScreened => "—".to_owned(),
+            Visibility::Ratio(r) if *r >= 1e4 => format!("{r:.1e}"),
+            Visibility::Ratio(r) if *r >= 10.0 => format!("{r:.0}"),
+            Visibility::Ratio(r) => format!("{r:.3}"),
+            Visibility::MistakenFailed(_) => "fit failed".to_owned(),
+            Visibility::Undecided(_) => "undecided".to_owned(),
+        }
+    }
+}
+
+/// The case's data without its mistake: the same recording, rows (a part drops the same
+/// fifth) and simulation seed, read as the recording is (its tips, socket distance).
+pub fn correct_twin(case: &Case) -> Case {
+    Case {
+        id: twin_key(case),
+        family: Family::AsIs,
+        recording: case.recording,
+        mistake: Mistake::None,
+        seed: case.seed,
+        part: case.part,
+        half: case.half,
+    }
+}
+
+/// The identity of a case's [`correct_twin`]: cases with the same key have the same correct
+/// data (a recording's part 0 is the recording; a part or a simulation has its own seed).
+pub fn twin_key(case: &Case) -> String {
+    let rec = case.recording;
+    let simulated = rec.sim_arm().is_some() || rec == R::HapticMotion;
+    if simulated {
+        format!("{}/seed{}", rec.name(), case.seed)
+    } else if case.part > 0 {
+        format!("{}/part{}/seed{}", rec.name(), case.part, case.seed)
+    } else {
+        rec.name().to_owned()
+    }
 }
 
 /// What the check said, for the report: the first setup finding's line, else the first
@@ -1904,10 +2130,143 @@ fn counts<'a>(results: impl Iterator<Item = &'a CaseResult>) -> BTreeMap<Outcome
     m
 }
 
-/// The report page (markdown): per family and half the counts, then every case not named
-/// right (or a false alarm) with what the check said.
+/// Whether a case is a visible mistake: a mistake family (not correct data) whose screening
+/// did not find it invisible ([`Visibility::is_invisible`]).
+pub fn is_visible_mistake(r: &CaseResult) -> bool {
+    !r.case.family.is_correct() && !r.visibility.is_invisible()
+}
+
+/// The figures the lead quotes for one selection of cases: over visible mistakes, how many
+/// the check named right and how many it was silent on; over the cases where a finding or a
+/// stop is a false alarm (correct data, and visible mistakes of a note family), how many.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VisibleSummary {
+    /// Visible mistakes (stop and note families).
+    pub n_visible: usize,
+    /// Of them, named right.
+    pub named_right: usize,
+    /// Of them, silent.
+    pub silent: usize,
+    /// False alarms.
+    pub false_alarms: usize,
+    /// Cases a false alarm is possible on: correct data and visible note-family mistakes.
+    pub n_alarm_cases: usize,
+}
+
+impl VisibleSummary {
+    /// Counts `results`.
+    pub fn of<'a>(results: impl IntoIterator<Item = &'a CaseResult>) -> VisibleSummary {
+        let mut s = VisibleSummary {
+            n_visible: 0,
+            named_right: 0,
+            silent: 0,
+            false_alarms: 0,
+            n_alarm_cases: 0,
+        };
+        for r in results {
+            let visible = is_visible_mistake(r);
+            let note = matches!(r.case.family.spec().expect, Expect::Note(_));
+            if visible {
+                s.n_visible += 1;
+                s.named_right += usize::from(r.outcome == Outcome::NamedRight);
+                s.silent += usize::from(r.outcome == Outcome::Silent);
+            }
+            if r.case.family.is_correct() || (visible && note) {
+                s.n_alarm_cases += 1;
+                s.false_alarms += usize::from(r.outcome == Outcome::FalseAlarm);
+            }
+        }
+        s
+    }
+
+    /// One line: `visible mistakes N, named right X (x %), silent Y (y %), false alarms Z of W`.
+    pub fn line(&self) -> String {
+        let pct = |k: usize| {
+            if self.n_visible == 0 {
+                "—".to_owned()
+            } else {
+                format!("{:.0} %", 100.0 * k as f64 / self.n_visible as f64)
+            }
+        };
+        format!(
+            "visible mistakes {}, named right {} ({}), silent {} ({}), false alarms {} of {}",
+            self.n_visible,
+            self.named_right,
+            pct(self.named_right),
+            self.silent,
+            pct(self.silent),
+            self.false_alarms,
+            self.n_alarm_cases
+        )
+    }
+}
+
+/// The outcomes in the order of the report's columns.
+const OUTCOME_COLUMNS: [Outcome; 7] = [
+    Outcome::NamedRight,
+    Outcome::ClassOnly,
+    Outcome::Generic,
+    Outcome::Warned,
+    Outcome::Silent,
+    Outcome::FalseAlarm,
+    Outcome::Clean,
+];
+
+/// One table of counts per family (and a total row) over `sel`.
+fn family_table(s: &mut String, sel: &[&CaseResult]) {
+    let _ = writeln!(
+        s,
+        "| family | expected | cases | named right | class only | generic | warned | silent | false alarm | clean |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
+    let mut total: BTreeMap<Outcome, usize> = BTreeMap::new();
+    for spec in FAMILIES {
+        let fam: Vec<&CaseResult> = (sel.iter().copied())
+            .filter(|r| r.case.family == spec.family)
+            .collect();
+        if fam.is_empty() {
+            continue;
+        }
+        let c = counts(fam.iter().copied());
+        for (k, v) in &c {
+            *total.entry(*k).or_insert(0) += v;
+        }
+        let expected = match spec.expect {
+            Expect::Stop(class, _) => format!("stop [{class}]"),
+            Expect::Note(class) => format!("note [{class}]"),
+            Expect::Clean => "nothing".to_owned(),
+        };
+        let cells: Vec<String> = (OUTCOME_COLUMNS.iter())
+            .map(|o| c.get(o).copied().unwrap_or(0).to_string())
+            .collect();
+        let _ = writeln!(
+            s,
+            "| {} | {expected} | {} | {} |",
+            spec.name,
+            fam.len(),
+            cells.join(" | ")
+        );
+    }
+    let cells: Vec<String> = (OUTCOME_COLUMNS.iter())
+        .map(|o| total.get(o).copied().unwrap_or(0).to_string())
+        .collect();
+    let _ = writeln!(s, "| **all** | | {} | {} |\n", sel.len(), cells.join(" | "));
+}
+
+/// What the check said, for a table cell: 150 characters, no `|` or backquote.
+fn said_cell(r: &CaseResult) -> String {
+    let said: String = r.said.chars().take(150).collect();
+    said.replace('|', "\\|").replace('`', "'")
+}
+
+/// The report page (markdown): how visibility is decided and the figures over visible
+/// mistakes per half; per family and half the counts over all cases, then over visible
+/// mistakes; the invisible mistakes; every case not named right (or a false alarm) with what
+/// the check said; every mistake's ratio.
 pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> String {
     let mut s = String::new();
+    let frames = ModelName::FramesOnly.name();
+    let geometric = ModelName::Geometric.name();
     let _ = writeln!(s, "# Setup check: the hostile sweep\n");
     let _ = writeln!(
         s,
@@ -1920,76 +2279,103 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
          fix does not name the cause; *generic* when it stops otherwise; *warned* \
          when it runs with a setup warning; *silent* when it runs with none. On correct data \
          any setup finding is a *false alarm*. The latency family expects a note or warning \
-         of class `{LATENCY_CLASS}`, and a stop on it is a false alarm. Cases are \
-         not screened for observability: a mistake may leave no trace in the data (the \
-         sign or zero of a last joint whose axis passes through the marker).\n"
+         of class `{LATENCY_CLASS}`, and a stop on it is a false alarm.\n"
+    );
+    let _ = writeln!(
+        s,
+        "**Visibility.** A mistake may leave no trace in the data (the zero of a positioner's \
+         joint absorbed by the fitted frames, the sign of a last joint whose axis passes \
+         through the marker). Each mistake is screened without the check's code: \
+         `hapcal calibrate <the case's arguments> --accept-setup --model {frames} --json` \
+         (`--model {geometric}` for socket folders and haptic logs, the least model they \
+         take; it also fits joint offsets and link lengths) is run on the mistaken data and \
+         on the same data without the mistake (the same rows, the same simulation seed, the \
+         recording's tips and socket distance). The ratio is the mistaken data's training \
+         residual over the correct data's, the largest over the figures both reports have \
+         (position RMS, orientation RMS, distance RMS, socket consistency, socket distance \
+         error). A mistake is *invisible in the data* when the ratio is below \
+         {INVISIBLE_RATIO}; a mistake whose screening fit fails (the reader refuses a reading \
+         past a joint limit, the fit fails) is visible. The tables over all cases stay on \
+         the page; the tables over visible mistakes follow them, with the correct data \
+         unchanged.\n"
     );
     let _ = writeln!(s, "Command: `{command}`  ");
     let _ = writeln!(s, "Machine: {machine}\n");
-    let cols = [
-        Outcome::NamedRight,
-        Outcome::ClassOnly,
-        Outcome::Generic,
-        Outcome::Warned,
-        Outcome::Silent,
-        Outcome::FalseAlarm,
-        Outcome::Clean,
-    ];
-    for (title, filter) in [
+    let _ = writeln!(s, "## Over visible mistakes\n");
+    for half in [Half::Tuning, Half::HeldBack] {
+        let sum = VisibleSummary::of(results.iter().filter(|r| r.case.half == half));
+        let _ = writeln!(s, "- {} half: {}", half.name(), sum.line());
+    }
+    let _ = writeln!(
+        s,
+        "\nFalse alarms are counted over the correct data and the visible mistakes of the \
+         latency family (a stop on them is a false alarm).\n"
+    );
+    let halves = [
         ("All cases", None),
         ("Tuning half", Some(Half::Tuning)),
         ("Held-back half", Some(Half::HeldBack)),
-    ] {
+    ];
+    for (title, filter) in halves {
         let sel: Vec<&CaseResult> = (results.iter())
             .filter(|r| filter.is_none_or(|h| r.case.half == h))
             .collect();
         let _ = writeln!(s, "## {title} ({} cases)\n", sel.len());
+        family_table(&mut s, &sel);
+    }
+    for (title, half) in [
+        ("Tuning half", Half::Tuning),
+        ("Held-back half", Half::HeldBack),
+    ] {
+        let sel: Vec<&CaseResult> = (results.iter())
+            .filter(|r| {
+                r.case.half == half && (r.case.family.is_correct() || is_visible_mistake(r))
+            })
+            .collect();
+        let n_visible = sel.iter().filter(|r| !r.case.family.is_correct()).count();
         let _ = writeln!(
             s,
-            "| family | expected | cases | named right | class only | generic | warned | silent | false alarm | clean |"
+            "## {title}, visible mistakes only ({n_visible} mistakes, {} correct)\n",
+            sel.len() - n_visible
         );
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
-        let mut total: BTreeMap<Outcome, usize> = BTreeMap::new();
-        for spec in FAMILIES {
-            let fam: Vec<&CaseResult> = (sel.iter().copied())
-                .filter(|r| r.case.family == spec.family)
-                .collect();
-            if fam.is_empty() {
-                continue;
-            }
-            let c = counts(fam.iter().copied());
-            for (k, v) in &c {
-                *total.entry(*k).or_insert(0) += v;
-            }
-            let expected = match spec.expect {
-                Expect::Stop(class, _) => format!("stop [{class}]"),
-                Expect::Note(class) => format!("note [{class}]"),
-                Expect::Clean => "nothing".to_owned(),
-            };
-            let cells: Vec<String> = (cols.iter())
-                .map(|o| c.get(o).copied().unwrap_or(0).to_string())
-                .collect();
-            let _ = writeln!(
-                s,
-                "| {} | {expected} | {} | {} |",
-                spec.name,
-                fam.len(),
-                cells.join(" | ")
-            );
-        }
-        let cells: Vec<String> = (cols.iter())
-            .map(|o| total.get(o).copied().unwrap_or(0).to_string())
-            .collect();
-        let _ = writeln!(s, "| **all** | | {} | {} |\n", sel.len(), cells.join(" | "));
+        family_table(&mut s, &sel);
     }
+    let invisible: Vec<&CaseResult> = (results.iter())
+        .filter(|r| !r.case.family.is_correct() && r.visibility.is_invisible())
+        .collect();
+    let _ = writeln!(s, "## Invisible mistakes ({})\n", invisible.len());
+    let _ = writeln!(
+        s,
+        "Mistakes whose data fit as well as the correct data (ratio below {INVISIBLE_RATIO}): \
+         case, half, screening model, ratio, outcome, and what the check said.\n"
+    );
+    let _ = writeln!(s, "| case | half | model | ratio | outcome | said |");
+    let _ = writeln!(s, "|---|---|---|---|---|---|");
+    for r in &invisible {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {} |",
+            r.case.id,
+            r.case.half.name(),
+            screening_model(r.case.recording).name(),
+            r.visibility.cell(),
+            r.outcome.name(),
+            said_cell(r)
+        );
+    }
+    let _ = writeln!(s);
     let _ = writeln!(s, "## Cases not named right\n");
     let _ = writeln!(
         s,
         "Mistakes not named right and false alarms: case, half, expected, outcome, exit code, \
-         and what the check said (first setup line, else the error; 150 characters).\n"
+         visibility ratio, and what the check said (first setup line, else the error; 150 \
+         characters).\n"
     );
-    let _ = writeln!(s, "| case | half | expected | outcome | exit | said |");
-    let _ = writeln!(s, "|---|---|---|---|---|---|");
+    let _ = writeln!(
+        s,
+        "| case | half | expected | outcome | exit | ratio | said |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
     for r in results {
         if matches!(r.outcome, Outcome::NamedRight | Outcome::Clean) {
             continue;
@@ -1998,15 +2384,42 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
             Expect::Stop(class, _) | Expect::Note(class) => class.to_owned(),
             Expect::Clean => "nothing".to_owned(),
         };
-        let said: String = r.said.chars().take(150).collect();
-        let said = said.replace('|', "\\|").replace('`', "'");
         let _ = writeln!(
             s,
-            "| {} | {} | {expected} | {} | {} | {said} |",
+            "| {} | {} | {expected} | {} | {} | {} | {} |",
             r.case.id,
             r.case.half.name(),
             r.outcome.name(),
             r.code.map_or("none".to_owned(), |c| c.to_string()),
+            r.visibility.cell(),
+            said_cell(r)
+        );
+    }
+    let _ = writeln!(s);
+    let _ = writeln!(s, "## Every mistake's ratio\n");
+    let _ = writeln!(
+        s,
+        "The screening of every mistake: case, half, screening model, ratio (or why there is \
+         none: the mistaken data's fit failed, or the correct data's), outcome.\n"
+    );
+    let _ = writeln!(s, "| case | half | model | ratio | outcome |");
+    let _ = writeln!(s, "|---|---|---|---|---|");
+    for r in results.iter().filter(|r| !r.case.family.is_correct()) {
+        let why = match &r.visibility {
+            Visibility::MistakenFailed(e) | Visibility::Undecided(e) => {
+                let e: String = e.chars().take(140).collect();
+                format!(" ({})", e.replace('|', "\\|").replace('`', "'"))
+            }
+            _ => String::new(),
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {}{why} | {} |",
+            r.case.id,
+            r.case.half.name(),
+            screening_model(r.case.recording).name(),
+            r.visibility.cell(),
+            r.outcome.name(),
         );
     }
     s

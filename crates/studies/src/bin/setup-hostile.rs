@@ -1,10 +1,13 @@
 //! `setup-hostile --hapcal BIN --work DIR [--half tuning|held-back|all] [--cases-per-family N]
 //! [--jobs N] [--list]`: the hostile sweep of setup mistakes ([`hapcal_studies::setup_hostile`]).
 //! Writes each case into `DIR`, runs `BIN calibrate … --out DIR/<case>/cal.toml` on it
-//! (`--jobs` at a time, default 2), and prints the Markdown report on stdout; progress on
+//! (`--jobs` at a time, default 2), screens each mistake for visibility (the screening fit,
+//! `--accept-setup --model …  --json`, of the mistaken data and of its correct twin, written
+//! once per twin under `DIR/correct`), and prints the Markdown report on stdout; progress on
 //! stderr. `--list` prints the cases' halves and identities instead.
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line report
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Mutex;
@@ -13,8 +16,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use hapcal_studies::setup_hostile::{
-    CaseResult, DEFAULT_CASES_PER_FAMILY, Half, Sources, cases, judge, report_markdown,
-    what_was_said, write_case,
+    Case, CaseResult, DEFAULT_CASES_PER_FAMILY, Half, Residual, Sources, Visibility, cases,
+    correct_twin, judge, report_markdown, screening_args, twin_key, what_was_said, write_case,
 };
 
 fn main() -> Result<()> {
@@ -72,20 +75,72 @@ fn main() -> Result<()> {
     if work.exists() {
         std::fs::remove_dir_all(&work).with_context(|| format!("clearing {}", work.display()))?;
     }
+    let started = Instant::now();
+    // The correct twins first, once per key: the screening fit of the data without the
+    // mistake.
+    let mut twins: BTreeMap<String, Case> = BTreeMap::new();
+    for c in selected.iter().filter(|c| !c.family.is_correct()) {
+        twins.entry(twin_key(c)).or_insert_with(|| correct_twin(c));
+    }
+    let twins: Vec<Case> = twins.into_values().collect();
+    let n_twins = twins.len();
+    let twin_fits = parallel(&twins, jobs, "correct twins", started, |twin| {
+        let dir = work.join("correct").join(twin.id.replace('/', "__"));
+        let inv = write_case(twin, &sources, &dir, &|args: &[String]| {
+            simulate(&hapcal, args)
+        })
+        .with_context(|| twin.id.clone())?;
+        Ok(screen(twin, &inv.args, &dir, &hapcal, &root))
+    })
+    .context("writing the correct twins")?;
+    let correct: BTreeMap<String, std::result::Result<Residual, String>> = (twins.iter())
+        .map(|t| t.id.clone())
+        .zip(twin_fits)
+        .collect();
     let n = selected.len();
+    let results = parallel(&selected, jobs, "cases", started, |case| {
+        let dir = work.join(case.id.replace('/', "__"));
+        let twin = correct
+            .get(&twin_key(case))
+            .cloned()
+            .unwrap_or_else(|| Err("no correct twin".to_owned()));
+        run_case(case, &sources, &dir, &hapcal, &root, &twin).with_context(|| case.id.clone())
+    })?;
+    let machine = std::env::var("SETUP_HOSTILE_MACHINE").unwrap_or_else(|_| "2 cores".into());
+    let half_arg = half.map_or("all", Half::name);
+    let command =
+        format!("cargo xtask setup-hostile --half {half_arg} --cases-per-family {per_family}");
+    let minutes = started.elapsed().as_secs_f64() / 60.0;
+    let machine = format!(
+        "{machine}; {n} cases and {n_twins} correct twins in {minutes:.1} min, {jobs} at a time"
+    );
+    println!("{}", report_markdown(&results, &command, &machine));
+    Ok(())
+}
+
+/// Runs `f` on every item, `jobs` at a time, in item order; progress on standard error.
+///
+/// # Errors
+/// Every item `f` failed on, one line each.
+fn parallel<T: Sync, U: Send>(
+    items: &[T],
+    jobs: usize,
+    what: &str,
+    started: Instant,
+    f: impl Fn(&T) -> Result<U> + Sync,
+) -> Result<Vec<U>> {
+    let n = items.len();
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<CaseResult>>> = Mutex::new(vec![None; n]);
+    let results: Mutex<Vec<Option<U>>> = Mutex::new((0..n).map(|_| None).collect());
     let errors: Mutex<Vec<String>> = Mutex::new(Vec::new());
-    let started = Instant::now();
     std::thread::scope(|s| {
         for _ in 0..jobs.max(1) {
             s.spawn(|| {
                 loop {
                     let i = next.fetch_add(1, Ordering::SeqCst);
-                    let Some(case) = selected.get(i) else { break };
-                    let dir = work.join(case.id.replace('/', "__"));
-                    match run_case(case, &sources, &dir, &hapcal, &root) {
+                    let Some(item) = items.get(i) else { break };
+                    match f(item) {
                         Ok(r) => {
                             if let Ok(mut v) = results.lock() {
                                 v[i] = Some(r);
@@ -93,12 +148,12 @@ fn main() -> Result<()> {
                         }
                         Err(e) => {
                             if let Ok(mut v) = errors.lock() {
-                                v.push(format!("{}: {e:#}", case.id));
+                                v.push(format!("{e:#}"));
                             }
                         }
                     }
                     let k = done.fetch_add(1, Ordering::SeqCst) + 1;
-                    eprint!("\r{k}/{n} cases, {:.0} s", started.elapsed().as_secs_f64());
+                    eprint!("\r{k}/{n} {what}, {:.0} s", started.elapsed().as_secs_f64());
                 }
             });
         }
@@ -106,45 +161,82 @@ fn main() -> Result<()> {
     eprintln!();
     let errors = errors.into_inner().unwrap_or_default();
     if !errors.is_empty() {
-        bail!("cases that could not be written:\n{}", errors.join("\n"));
+        bail!("{what} that could not be written:\n{}", errors.join("\n"));
     }
-    let results: Vec<CaseResult> = (results.into_inner().unwrap_or_default().into_iter())
+    Ok((results.into_inner().unwrap_or_default().into_iter())
         .flatten()
-        .collect();
-    let machine = std::env::var("SETUP_HOSTILE_MACHINE").unwrap_or_else(|_| "2 cores".into());
-    let half_arg = half.map_or("all", Half::name);
-    let command =
-        format!("cargo xtask setup-hostile --half {half_arg} --cases-per-family {per_family}");
-    let minutes = started.elapsed().as_secs_f64() / 60.0;
-    let machine = format!("{machine}; {n} cases in {minutes:.1} min, {jobs} at a time");
-    println!("{}", report_markdown(&results, &command, &machine));
+        .collect())
+}
+
+/// Runs `hapcal simulate` with `args`.
+fn simulate(hapcal: &Path, args: &[String]) -> Result<()> {
+    let out = Command::new(hapcal)
+        .arg("simulate")
+        .args(args)
+        .output()
+        .with_context(|| format!("running {}", hapcal.display()))?;
+    if !out.status.success() {
+        bail!(
+            "hapcal simulate {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
     Ok(())
 }
 
-/// Writes and runs one case; the case's folder is left for inspection.
+/// The message of a run for the report, with this machine's paths of the case's files
+/// replaced by `<case>/` and the project root left out.
+fn anonymous(text: &str, dir: &Path, root: &Path) -> String {
+    (text.replace(&format!("{}/", dir.display()), "<case>/"))
+        .replace(&format!("{}/", root.display()), "")
+}
+
+/// The screening fit of a written case ([`screening_args`]): its training residual, or the
+/// first error line when the command gives no report.
+fn screen(
+    case: &Case,
+    args: &[String],
+    dir: &Path,
+    hapcal: &Path,
+    root: &Path,
+) -> std::result::Result<Residual, String> {
+    let out = Command::new(hapcal)
+        .arg("calibrate")
+        .args(args)
+        .args(screening_args(case.recording))
+        .output()
+        .map_err(|e| format!("running {}: {e}", hapcal.display()))?;
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let _ = std::fs::write(dir.join("screen-stderr.txt"), stderr.as_bytes());
+    let _ = std::fs::write(dir.join("screen.json"), &out.stdout);
+    // Without a report, the command's error (the setup lines before it were accepted).
+    let error = (stderr.lines())
+        .find_map(|l| l.split_once("error: ").map(|(_, e)| e.to_owned()))
+        .unwrap_or_else(|| what_was_said(&stderr));
+    Residual::from_report_json(&String::from_utf8_lossy(&out.stdout)).map_err(|e| {
+        let why = if error.is_empty() {
+            e.to_string()
+        } else {
+            error
+        };
+        anonymous(&why, dir, root)
+    })
+}
+
+/// Writes and runs one case, then its screening fit; the case's folder is left for
+/// inspection.
 fn run_case(
-    case: &hapcal_studies::setup_hostile::Case,
+    case: &Case,
     sources: &Sources,
     dir: &Path,
     hapcal: &Path,
     root: &Path,
+    twin: &std::result::Result<Residual, String>,
 ) -> Result<CaseResult> {
-    let simulate = |args: &[String]| -> Result<()> {
-        let out = Command::new(hapcal)
-            .arg("simulate")
-            .args(args)
-            .output()
-            .with_context(|| format!("running {}", hapcal.display()))?;
-        if !out.status.success() {
-            bail!(
-                "hapcal simulate {}: {}",
-                args.join(" "),
-                String::from_utf8_lossy(&out.stderr)
-            );
-        }
-        Ok(())
-    };
-    let inv = write_case(case, sources, dir, &simulate)?;
+    let inv = write_case(case, sources, dir, &|args: &[String]| {
+        simulate(hapcal, args)
+    })?;
     let t0 = Instant::now();
     let out = Command::new(hapcal)
         .arg("calibrate")
@@ -158,15 +250,18 @@ fn run_case(
     std::fs::write(dir.join("stderr.txt"), stderr.as_bytes())?;
     std::fs::write(dir.join("args.txt"), inv.args.join(" "))?;
     let code = out.status.code();
-    // Paths of the case's files are this machine's: the report names the case instead.
-    let root = format!("{}/", root.display());
-    let said = (what_was_said(&stderr).replace(&format!("{}/", dir.display()), "<case>/"))
-        .replace(&root, "");
+    let visibility = if case.family.is_correct() {
+        Visibility::NotScreened
+    } else {
+        Visibility::screen(&screen(case, &inv.args, dir, hapcal, root), twin)
+    };
     Ok(CaseResult {
         case: case.clone(),
         outcome: judge(case.family, &inv.fix_words, code, &stderr),
         code,
-        said,
+        // Paths of the case's files are this machine's: the report names the case instead.
+        said: anonymous(&what_was_said(&stderr), dir, root),
         seconds,
+        visibility,
     })
 }

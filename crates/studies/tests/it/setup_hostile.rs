@@ -1,15 +1,17 @@
 //! The hostile sweep's generator writes the mistakes it names (a column in degrees is the
 //! recording's column times 180/π, rows out of step pair row i's joints with row i + k's
-//! measurements), splits its cases deterministically into two near halves, and judges a
-//! command's standard error by its class and fix.
+//! measurements), splits its cases deterministically into two near halves, judges a
+//! command's standard error by its class and fix, and screens a mistake as invisible when its
+//! training residual is within 5 % of its correct twin's.
 
 use std::collections::BTreeSet;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
 use hapcal_studies::setup_hostile::{
-    AngleUnit, Case, DEFAULT_CASES_PER_FAMILY, FAMILIES, Family, Half, Mistake, Outcome, Recording,
-    Sources, Table, cases, euler_xyz_of, judge, write_case,
+    AngleUnit, Case, CaseResult, DEFAULT_CASES_PER_FAMILY, FAMILIES, Family, Half, Mistake,
+    Outcome, Recording, Residual, Sources, Table, Visibility, VisibleSummary, cases, correct_twin,
+    euler_xyz_of, judge, twin_key, write_case,
 };
 use nalgebra::{Rotation3, Vector3};
 
@@ -203,4 +205,120 @@ fn the_judge_reads_the_class_and_the_fix() {
         ),
         Outcome::FalseAlarm
     );
+}
+
+/// A report of `hapcal calibrate --json` as the screening reads it: training sets of
+/// (rows, position RMS after, orientation RMS after), and a test set that must be ignored.
+fn report(train: &[(usize, f64, Option<f64>)]) -> String {
+    let set = |role: &str, n: usize, p: f64, o: Option<f64>| {
+        let o = o.map_or(String::new(), |o| {
+            format!(r#", "orientation_rms_rad": {o}"#)
+        });
+        format!(
+            r#"{{"name": "data.csv", "role": "{role}", "n_rows": {n},
+                "before": {{"pose": {{"position_rms_m": 9.0}}}},
+                "after": {{"pose": {{"position_mean_m": 0.5, "position_rms_m": {p}{o}}}}}}}"#
+        )
+    };
+    let mut sets: Vec<String> = train
+        .iter()
+        .map(|&(n, p, o)| set("train", n, p, o))
+        .collect();
+    sets.push(set("test", 50, 1.0, Some(1.0)));
+    format!(
+        r#"{{"model": "frames-only", "sigma_m": 0.001, "placements": [{}]}}"#,
+        sets.join(",")
+    )
+}
+
+#[test]
+fn a_mistake_within_5_percent_of_its_correct_twins_residual_is_invisible() {
+    // Correct data: two training sets, 30 rows at 1 mm and 10 rows at 2 mm RMS, and 0.01 rad.
+    let correct =
+        Residual::from_report_json(&report(&[(30, 1e-3, Some(0.01)), (10, 2e-3, Some(0.01))]))
+            .expect("a report");
+    // Row-weighted RMS: √((30·1 + 10·4) / 40) mm; the test set's 1 m is left out.
+    let p = correct.position_rms_m.expect("position");
+    assert!((p - (70.0f64 / 40.0).sqrt() * 1e-3).abs() < 1e-15, "{p}");
+    let o = correct.orientation_rms_rad.expect("orientation");
+    assert!((o - 0.01).abs() < 1e-15, "{o}");
+    let ok = |r: Residual| Ok::<_, String>(r);
+    let screen = |p_factor: f64, o_factor: f64| {
+        let m = Residual::from_report_json(&report(&[(40, p * p_factor, Some(0.01 * o_factor))]))
+            .expect("a report");
+        Visibility::screen(&ok(m), &ok(correct))
+    };
+    // 3 % more position error: invisible; just below and just above the threshold.
+    let within = screen(1.03, 1.0);
+    let Visibility::Ratio(r) = within else {
+        panic!("a ratio: {within:?}")
+    };
+    assert!((r - 1.03).abs() < 1e-12, "{r}");
+    assert!(within.is_invisible());
+    assert!(screen(1.0499, 1.0).is_invisible());
+    assert!(!screen(1.0501, 1.0).is_invisible());
+    // A mistake in the orientations alone shows in the orientation RMS: the largest ratio.
+    let turned = screen(1.0, 1.2);
+    assert!(matches!(turned, Visibility::Ratio(r) if (r - 1.2).abs() < 1e-12));
+    assert!(!turned.is_invisible());
+    // A mistaken fit that fails is visible; a failed correct twin decides nothing.
+    let failed = Visibility::screen(&Err("outside the joint limits".into()), &ok(correct));
+    assert!(!failed.is_invisible());
+    assert!(!Visibility::screen(&ok(correct), &Err("no fit".into())).is_invisible());
+    assert!(Residual::from_report_json("not json").is_err());
+    assert!(Residual::from_report_json(r#"{"placements": []}"#).is_err());
+
+    // The summary the lead quotes counts visible mistakes only, false alarms on correct data.
+    let result = |family, visibility, outcome| CaseResult {
+        case: case(family, Recording::Ur10, Mistake::None),
+        outcome,
+        code: Some(0),
+        said: String::new(),
+        seconds: 0.0,
+        visibility,
+    };
+    let results = [
+        result(Family::ColumnSign, screen(2.0, 1.0), Outcome::NamedRight),
+        result(Family::ColumnSign, screen(1.5, 1.0), Outcome::Silent),
+        result(Family::ColumnZero, within.clone(), Outcome::Silent),
+        result(Family::AsIs, Visibility::NotScreened, Outcome::Clean),
+        result(Family::AsIs, Visibility::NotScreened, Outcome::FalseAlarm),
+    ];
+    assert_eq!(
+        VisibleSummary::of(&results).line(),
+        "visible mistakes 2, named right 1 (50 %), silent 1 (50 %), false alarms 1 of 2"
+    );
+}
+
+#[test]
+fn a_correct_twin_is_the_mistaken_data_without_the_mistake() {
+    let sources = Sources::load(&root()).expect("fixtures");
+    let (dir, twin_dir) = (scratch("sign"), scratch("sign-twin"));
+    // Part 1 drops a seeded fifth of the rows: the twin must drop the same ones.
+    let c = Case {
+        part: 1,
+        ..case(Family::ColumnSign, Recording::Ur10, Mistake::Sign(1))
+    };
+    let twin = correct_twin(&c);
+    assert_eq!(twin.mistake, Mistake::None);
+    assert_eq!(twin_key(&c), twin_key(&twin));
+    let inv = write_case(&c, &sources, &dir, &no_simulation).expect("written");
+    let twin_inv = write_case(&twin, &sources, &twin_dir, &no_simulation).expect("written");
+    let data = |inv: &hapcal_studies::setup_hostile::Invocation| {
+        let i = inv.args.iter().position(|a| a == "--data").expect("--data");
+        Table::read_csv(Path::new(&inv.args[i + 1]), None).expect("written file")
+    };
+    let (mistaken, correct) = (data(&inv), data(&twin_inv));
+    assert_eq!(mistaken.header, correct.header);
+    assert_eq!(correct.rows.len(), 23 - 23 / 5);
+    // Exactly one column differs, the second revolute joint's, by its sign.
+    let lift = correct.col("shoulder_lift_joint").expect("column");
+    for (m, c) in mistaken.rows.iter().zip(&correct.rows) {
+        for (k, (a, b)) in m.iter().zip(c).enumerate() {
+            let want = if k == lift { -b } else { *b };
+            assert_eq!(a.to_bits(), want.to_bits(), "column {k}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&twin_dir);
 }
