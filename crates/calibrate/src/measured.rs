@@ -891,7 +891,8 @@ struct Untried {
 }
 
 impl Untried {
-    /// Why, in the user's words: `29 parameters; a fold's 6 training rows give 24 residuals`.
+    /// Why, in the user's words: `38 parameters; a cross-validation fold's 6 training rows
+    /// give 36 residuals`.
     fn reason(&self) -> String {
         match self.fold_rows {
             Some(rows) => format!(
