@@ -284,8 +284,8 @@ mod tests {
                 assert_eq!(folds[row], folds[o], "repeat {r}, row {row}");
             }
             // The distinct rows are cut as 13 rows without copies would be.
-            for row in 0..13 {
-                assert_eq!(folds[row], fold_of(row, 13, k, r, CV_REPEATS));
+            for (row, &fold) in folds.iter().enumerate().take(13) {
+                assert_eq!(fold, fold_of(row, 13, k, r, CV_REPEATS));
             }
         }
         // Every row held out exactly once per repeat, copies with their originals.
