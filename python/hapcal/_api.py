@@ -453,9 +453,11 @@ def calibrate(
     - ``socket_distance_m``: MUKCa recordings: distance between the two sockets, m.
     - ``joint``: haptic device: transmissions and kinematics in one problem.
     - ``accept_setup``: calibrate files even when the setup check (``hapcal check``) finds a
-      mistake (millimetres read as metres, swapped joint columns, another tip link, …); without
-      it such a mistake raises :class:`HapcalError`, as ``hapcal calibrate`` exits. The
-      check's warnings are issued as :class:`UserWarning` (the command line prints them).
+      mistake (millimetres read as metres, swapped joint columns, another tip link, …), or when
+      the fit moves a length by more than a real device's manufacturing leaves (the data are
+      another device's); without it such a mistake raises :class:`HapcalError`, as
+      ``hapcal calibrate`` exits. The check's warnings are issued as :class:`UserWarning`
+      (the command line prints them).
 
     Measurements read from files with the same units run exactly the command line's
     ``hapcal calibrate``; arrays go through the marker workflow (``measured::run_tables``).

@@ -844,6 +844,15 @@ fn _calibrate(
         }
     }
     .map_err(py_err)?;
+    // After the fit, as the command line: deviations no real device has say the data are
+    // another's (an error unless accepted, then a warning).
+    let after_fit = hapcal_calibrate::setup::SetupConfig {
+        accept_setup,
+        accept_option: "accept_setup=True",
+    };
+    setup_warnings.extend(
+        hapcal_calibrate::setup::gate_after_fit(&outcome.report, &after_fit).map_err(py_err)?,
+    );
     let json = serde_json::to_string_pretty(&outcome.report)
         .context("serialising the report")
         .map_err(py_err)?;

@@ -185,6 +185,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         );
     }
     let mut cross_validation = Vec::new();
+    let mut copies = None;
     let choice = match plan.model {
         ModelChoice::Auto => {
             // The ladder of the data's kind, every rung the robot carries (transversal
@@ -199,6 +200,10 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
                 .collect::<Result<Vec<_>>>()?;
             let (choice, reports) = crate::fit::choose(&candidates, &level, &held);
             cross_validation = reports;
+            let n_copies = (crate::solve::set_originals(&train).iter().flatten())
+                .map(|o| crate::fit::n_copies(o))
+                .sum();
+            copies = crate::fit::copies_warning(n_copies);
             choice
         }
         ModelChoice::Model(fixed) => fixed,
@@ -309,6 +314,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         }
     }
     warnings.splice(0..0, worse);
+    warnings.extend(copies);
     let report = CalibrationReport {
         device: plan.device.display().to_string(),
         model: choice,

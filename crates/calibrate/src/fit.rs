@@ -50,24 +50,66 @@ pub fn fold_of(row: usize, n: usize, k: usize, r: usize, repeats: usize) -> usiz
     shifted / (n * repeats)
 }
 
+/// The original of every row of a data set: the index of the earliest row whose key it
+/// repeats (a copy of that row), or its own index. Keys are the readers' repeat keys
+/// ([`hapcal_io::MeasuredRow::repeat_key`], [`hapcal_io::LogRow::repeat_key`]) or, for
+/// rows those do not describe, the values the fit sees as bit patterns.
+pub fn originals<K: std::hash::Hash + Eq>(keys: impl IntoIterator<Item = K>) -> Vec<usize> {
+    let mut first = std::collections::HashMap::new();
+    (keys.into_iter().enumerate())
+        .map(|(i, key)| *first.entry(key).or_insert(i))
+        .collect()
+}
+
+/// Number of rows of `original` ([`originals`]) that repeat an earlier row.
+pub fn n_copies(original: &[usize]) -> usize {
+    (original.iter().enumerate())
+        .filter(|&(i, &o)| o != i)
+        .count()
+}
+
+/// Fold (`0..k`) of every row of a data set in repeat `r` of `repeats`, copies held out with
+/// the row they copy: the distinct rows (those that are their own `original`, [`originals`])
+/// in file order are cut by [`fold_of`], and every copy takes its original's fold. Without
+/// copies, row `i` of `n` falls in `fold_of(i, n, k, r, repeats)`. A copy trained on while
+/// its original is held out would reward a model for memorising rows.
+///
+/// # Panics
+/// If an entry of `original` is not an index at or before its own row.
+#[track_caller]
+pub fn folds_of_rows(original: &[usize], k: usize, r: usize, repeats: usize) -> Vec<usize> {
+    let mut rank = vec![0; original.len()];
+    let mut n_distinct = 0;
+    for (i, &o) in original.iter().enumerate() {
+        assert!(o <= i, "row {i}'s original {o} is not an earlier row");
+        if o == i {
+            rank[i] = n_distinct;
+            n_distinct += 1;
+        }
+    }
+    (original.iter())
+        .map(|&o| fold_of(rank[o], n_distinct, k, r, repeats))
+        .collect()
+}
+
 /// Held-out rows of one cross-validation fold: per data set (table, log), per row, whether
 /// it is held out.
 pub(crate) type Fold = Vec<Vec<bool>>;
 
-/// The repeated blocked folds of data sets of `lengths` rows: repeat `r` of [`CV_REPEATS`]
-/// cuts each set's rows (file order, circularly shifted by `r/CV_REPEATS` of a block) into `k`
-/// contiguous blocks ([`fold_of`]); `CV_REPEATS · k` folds, repeat by repeat.
-pub(crate) fn blocked_folds(lengths: &[usize], k: usize) -> Vec<Fold> {
+/// The repeated blocked folds of data sets whose rows have the originals `sets[set]`
+/// ([`originals`]): repeat `r` of [`CV_REPEATS`] cuts each set's distinct rows (file order,
+/// circularly shifted by `r/CV_REPEATS` of a block) into `k` contiguous blocks, each copy
+/// in its original's ([`folds_of_rows`]); `CV_REPEATS · k` folds, repeat by repeat.
+pub(crate) fn blocked_folds(sets: &[Vec<usize>], k: usize) -> Vec<Fold> {
     let mut folds = Vec::new();
     for rep in 0..CV_REPEATS {
+        let of_rows: Vec<Vec<usize>> = (sets.iter())
+            .map(|original| folds_of_rows(original, k, rep, CV_REPEATS))
+            .collect();
         for fold in 0..k {
             folds.push(
-                (lengths.iter())
-                    .map(|&n| {
-                        (0..n)
-                            .map(|r| fold_of(r, n, k, rep, CV_REPEATS) == fold)
-                            .collect()
-                    })
+                (of_rows.iter())
+                    .map(|rows| rows.iter().map(|&f| f == fold).collect())
                     .collect(),
             );
         }
@@ -75,12 +117,30 @@ pub(crate) fn blocked_folds(lengths: &[usize], k: usize) -> Vec<Fold> {
     folds
 }
 
-/// The block of every row of data sets of `lengths` rows, the sets' rows one after the other:
-/// `set · k + fold` of the first repeat ([`HeldOut::block`]).
-pub(crate) fn first_repeat_blocks(lengths: &[usize], k: usize) -> Vec<usize> {
-    (lengths.iter().enumerate())
-        .flat_map(|(set, &n)| (0..n).map(move |r| set * k + fold_of(r, n, k, 0, CV_REPEATS)))
+/// The block of every row of data sets whose rows have the originals `sets[set]`, the sets'
+/// rows one after the other: `set · k + fold` of the first repeat ([`HeldOut::block`]).
+pub(crate) fn first_repeat_blocks(sets: &[Vec<usize>], k: usize) -> Vec<usize> {
+    (sets.iter().enumerate())
+        .flat_map(|(set, original)| {
+            (folds_of_rows(original, k, 0, CV_REPEATS).into_iter()).map(move |f| set * k + f)
+        })
         .collect()
+}
+
+/// The warning of a cross-validation whose training rows hold copies (`n_copies` of them),
+/// `None` without.
+pub(crate) fn copies_warning(n_copies: usize) -> Option<String> {
+    (n_copies > 0).then(|| {
+        let rows = if n_copies == 1 {
+            "1 training row repeats an earlier row".to_owned()
+        } else {
+            format!("{n_copies} training rows repeat earlier rows")
+        };
+        format!(
+            "{rows}: each is held out with the row it copies in every cross-validation fold, \
+             so a copy cannot reward a model that memorises rows"
+        )
+    })
 }
 
 /// Relative tolerance (cost reduction, step) of a cross-validation fold's refit. A fold's
@@ -201,4 +261,59 @@ pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{
+        CV_REPEATS, blocked_folds, first_repeat_blocks, fold_of, folds_of_rows, originals,
+    };
+
+    #[test]
+    fn copies_fall_in_the_fold_of_the_row_they_copy_in_every_repeat() {
+        // 13 distinct rows, then the file appended again, then two more copies of row 4.
+        let keys: Vec<u32> = (0..13).chain(0..13).chain([4, 4]).collect();
+        let original = originals(keys.iter().copied());
+        assert_eq!(original[13..26], (0..13).collect::<Vec<_>>()[..]);
+        assert_eq!(original[26..], [4, 4]);
+        assert_eq!(super::n_copies(&original), 15);
+        let k = 5;
+        for r in 0..CV_REPEATS {
+            let folds = folds_of_rows(&original, k, r, CV_REPEATS);
+            for (row, &o) in original.iter().enumerate() {
+                assert_eq!(folds[row], folds[o], "repeat {r}, row {row}");
+            }
+            // The distinct rows are cut as 13 rows without copies would be.
+            for (row, &fold) in folds.iter().enumerate().take(13) {
+                assert_eq!(fold, fold_of(row, 13, k, r, CV_REPEATS));
+            }
+        }
+        // Every row held out exactly once per repeat, copies with their originals.
+        let sets = vec![original.clone(), (0..7).collect()];
+        let folds = blocked_folds(&sets, k);
+        assert_eq!(folds.len(), CV_REPEATS * k);
+        for rep in folds.chunks(k) {
+            for (set, rows) in sets.iter().enumerate() {
+                for row in 0..rows.len() {
+                    assert_eq!(rep.iter().filter(|f| f[set][row]).count(), 1);
+                }
+            }
+        }
+        let blocks = first_repeat_blocks(&sets, k);
+        assert_eq!(blocks[13], blocks[0]);
+        assert_eq!(blocks[27], blocks[4]);
+        assert_eq!(blocks[original.len()], k, "the second set's first block");
+    }
+
+    #[test]
+    fn without_copies_the_folds_are_plain_blocked_folds() {
+        let (n, k) = (23, 4);
+        let own: Vec<usize> = (0..n).collect();
+        for r in 0..CV_REPEATS {
+            let expected: Vec<usize> = (0..n)
+                .map(|row| fold_of(row, n, k, r, CV_REPEATS))
+                .collect();
+            assert_eq!(folds_of_rows(&own, k, r, CV_REPEATS), expected);
+        }
+    }
 }

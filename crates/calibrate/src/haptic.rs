@@ -1207,8 +1207,9 @@ pub fn haptic_rungs(
 
 /// Held-out errors of each rung of `fits` by repeated blocked cross-validation of the
 /// training logs (`lengths[i]` rows of log `i`, concatenated in `rows`): each log's rows cut
-/// into `k` contiguous blocks in row order, [`crate::fit::CV_REPEATS`] times shifted
-/// (`fit::blocked_folds`); each rung refitted on each fold's training rows
+/// into `k` contiguous blocks in row order, [`crate::fit::CV_REPEATS`] times shifted, a row
+/// that repeats an earlier row of its log ([`LogRow::repeat_key`]) held out with it
+/// ([`crate::fit::folds_of_rows`]); each rung refitted on each fold's training rows
 /// ([`HapticRungFit::refit_residuals_m`]) and its squared distance residual (m²) on the
 /// held-out rows averaged over the repeats. One entry per rung, rows in `rows`' order, blocks
 /// `log · k + fold` of the first repeat. Every row has the cable encoder's σ_m, so the squared
@@ -1228,7 +1229,15 @@ pub fn cross_validate_rungs(
     if lengths.iter().sum::<usize>() != n {
         bail!("cross-validation: the logs' lengths do not sum to the rows");
     }
-    let masks: Vec<Vec<bool>> = (crate::fit::blocked_folds(lengths, k).into_iter())
+    // A row that repeats an earlier row of its log is held out with it.
+    let originals: Vec<Vec<usize>> = (lengths.iter())
+        .scan(0, |start, &len| {
+            let log = &rows[*start..*start + len];
+            *start += len;
+            Some(crate::fit::originals(log.iter().map(LogRow::repeat_key)))
+        })
+        .collect();
+    let masks: Vec<Vec<bool>> = (crate::fit::blocked_folds(&originals, k).into_iter())
         .map(|fold| fold.into_iter().flatten().collect())
         .collect();
     let jobs: Vec<(usize, usize)> = (0..fits.len())
@@ -1259,7 +1268,7 @@ pub fn cross_validate_rungs(
             ))
         })
         .collect::<Result<_>>()?;
-    let block = crate::fit::first_repeat_blocks(lengths, k);
+    let block = crate::fit::first_repeat_blocks(&originals, k);
     let mut held = vec![
         crate::fit::HeldOut {
             sq_errors: vec![0.0; n],
@@ -1387,6 +1396,11 @@ pub fn calibrate_logs(
         let held = cross_validate_rungs(&haptic, &rows, &lengths, &fits, plan.folds)?;
         let (choice, reports) = crate::fit::choose(&rungs, &levels, &held);
         cross_validation = reports;
+        let n_copies = (train.iter())
+            .map(|log| crate::fit::originals(log.rows.iter().map(LogRow::repeat_key)))
+            .map(|o| crate::fit::n_copies(&o))
+            .sum();
+        warnings.extend(crate::fit::copies_warning(n_copies));
         if choice == ModelName::Geometric && has_ext {
             warnings.push(
                 "the transmissions did not beat the kinematic deviations alone on held-out \

@@ -861,10 +861,113 @@ fn refit(
     Ok(problem.model(fit.x.as_ref()))
 }
 
-/// The blocked folds of the tables ([`crate::fit::blocked_folds`]).
-fn blocked_folds(tables: &[MeasurementTable], k: usize) -> Vec<Fold> {
-    let lengths: Vec<usize> = tables.iter().map(|t| t.rows.len()).collect();
-    crate::fit::blocked_folds(&lengths, k)
+/// The original of every row of every table ([`crate::fit::originals`] by the reader's
+/// repeat key): a row that repeats an earlier row of its table is held out with it.
+fn table_originals(tables: &[MeasurementTable]) -> Vec<Vec<usize>> {
+    (tables.iter())
+        .map(|t| crate::fit::originals(t.rows.iter().map(MeasuredRow::repeat_key)))
+        .collect()
+}
+
+/// Training rows of `tables` that repeat an earlier row of their table.
+pub(crate) fn n_table_copies(tables: &[MeasurementTable]) -> usize {
+    table_originals(tables)
+        .iter()
+        .map(|o| crate::fit::n_copies(o))
+        .sum()
+}
+
+/// A rung of the ladder the training rows cannot fit, and the numbers that say so.
+#[derive(Clone, Debug)]
+struct Untried {
+    rung: ModelName,
+    /// Residuals of the fit that cannot have this rung: all training rows', or the fewest a
+    /// cross-validation fold trains on.
+    n_residuals: usize,
+    /// Parameters the rung keeps.
+    n_params: usize,
+    /// Training rows of that fold; `None` for all training rows.
+    fold_rows: Option<usize>,
+}
+
+impl Untried {
+    /// Why, in the user's words: `38 parameters; a cross-validation fold's 6 training rows
+    /// give 36 residuals`.
+    fn reason(&self) -> String {
+        match self.fold_rows {
+            Some(rows) => format!(
+                "{} parameters; a cross-validation fold's {rows} training rows give {} residuals",
+                self.n_params, self.n_residuals
+            ),
+            None => format!(
+                "{} parameters; the training rows give {} residuals",
+                self.n_params, self.n_residuals
+            ),
+        }
+    }
+}
+
+/// The note of a ladder that left rungs out because the rows cannot fit them: which rung it
+/// stopped at (the last of `ladder`, the rungs tried) and, per rung left out, its parameters
+/// and the residuals; `None` when every rung was tried.
+fn untried_note(ladder: &[RungReport], untried: &[Untried]) -> Option<String> {
+    let top = ladder.last()?.rung;
+    if untried.is_empty() {
+        return None;
+    }
+    let list: Vec<String> = (untried.iter())
+        .map(|u| format!("{} ({})", u.rung, u.reason()))
+        .collect();
+    Some(format!(
+        "{}{top}: every cross-validation fold must fit a rung's parameters from its training \
+         rows, and too few rows were measured for {}; measure more configurations to try them",
+        crate::report::UNTRIED_RUNGS_NOTE,
+        list.join(", ")
+    ))
+}
+
+/// The residual counts of an identification that had fewer residuals than parameters, from
+/// its error: `(residuals, parameters)`.
+fn too_few_residuals(e: &anyhow::Error) -> Option<(usize, usize)> {
+    e.chain()
+        .find_map(|c| match c.downcast_ref::<hapcal_identify::Error>()? {
+            hapcal_identify::Error::TooFewResiduals {
+                n_residuals,
+                n_free,
+            }
+            | hapcal_identify::Error::NoDegreesOfFreedom {
+                n_residuals,
+                n_free,
+            } => Some((*n_residuals, *n_free)),
+            _ => None,
+        })
+}
+
+/// Residuals of one measured row: 1 for a distance, 3 per marker position, 6 per pose.
+fn row_residuals(row: &MeasuredRow) -> usize {
+    usize::from(row.distance_m.is_some())
+        + (row.markers.iter())
+            .map(|m| if m.rotation.is_some() { 6 } else { 3 })
+            .sum::<usize>()
+}
+
+/// The fewest residuals the training rows of a blocked cross-validation fold of `tables`
+/// give, and that fold's training rows.
+fn fewest_fold_residuals(tables: &[MeasurementTable], k: usize) -> (usize, usize) {
+    (crate::fit::blocked_folds(&table_originals(tables), k).iter())
+        .map(|fold| {
+            let mut residuals = 0;
+            let mut rows = 0;
+            for (t, held) in tables.iter().zip(fold) {
+                for (row, _) in t.rows.iter().zip(held).filter(|(_, h)| !**h) {
+                    residuals += row_residuals(row);
+                    rows += 1;
+                }
+            }
+            (residuals, rows)
+        })
+        .min()
+        .unwrap_or((0, 0))
 }
 
 /// How far past a joint's training range, as a share of the range, a test or workspace
@@ -1304,7 +1407,8 @@ fn cross_validate(
     ranges: &[RangeSplit],
 ) -> Result<Scores> {
     use rayon::prelude::*;
-    let blocked = blocked_folds(tables, cfg.folds);
+    let originals = table_originals(tables);
+    let blocked = crate::fit::blocked_folds(&originals, cfg.folds);
     let folds: Vec<&Fold> = blocked
         .iter()
         .chain(ranges.iter().map(|r| &r.fold))
@@ -1352,8 +1456,7 @@ fn cross_validate(
         .collect();
     let n_rows: usize = tables.iter().map(|t| t.rows.len()).sum();
     let (mut sq, mut score) = (vec![0.0; n_rows], vec![0.0; n_rows]);
-    let lengths: Vec<usize> = tables.iter().map(|t| t.rows.len()).collect();
-    let block = crate::fit::first_repeat_blocks(&lengths, k);
+    let block = crate::fit::first_repeat_blocks(&originals, k);
     for fold in held[..blocked.len()].iter().flatten() {
         for &(ti, r, e2, s) in fold {
             sq[offsets[ti] + r] += e2 / CV_REPEATS as f64;
@@ -1542,6 +1645,7 @@ pub fn calibrate_measured(
     let mut ladder = Vec::new();
     let mut range_folds_used = Vec::new();
     let mut range_stops = Vec::new();
+    let mut untried: Vec<Untried> = Vec::new();
     let (rung, (model, fitted)) = match cfg.rung {
         Some(r) if r == ModelName::FramesOnly => (r, (frames_model.clone(), frames_only.clone())),
         Some(r) => match richest_fit.take() {
@@ -1578,7 +1682,10 @@ pub fn calibrate_measured(
             let parent: Vec<Option<usize>> = (rungs.iter())
                 .map(|&r| nested_in(r).and_then(|p| rungs.iter().position(|&q| q == p)))
                 .collect();
-            let mut fits: Vec<Option<(CalibratedModel, Fitted)>> = vec![None; rungs.len()];
+            // A rung whose fit on every training row has fewer residuals than parameters, or
+            // whose refit on some fold's training rows would, is not tried (`Err`).
+            type Tried = std::result::Result<(CalibratedModel, Fitted), Untried>;
+            let mut fits: Vec<Option<Tried>> = vec![None; rungs.len()];
             loop {
                 let ready: Vec<usize> = (0..rungs.len())
                     .filter(|&i| fits[i].is_none() && parent[i].is_none_or(|p| fits[p].is_some()))
@@ -1586,17 +1693,70 @@ pub fn calibrate_measured(
                 if ready.is_empty() {
                     break;
                 }
-                let wave: Vec<(CalibratedModel, Fitted)> = (ready.par_iter())
+                let wave: Vec<Tried> = (ready.par_iter())
                     .map(|&i| {
-                        let nested = parent[i].and_then(|p| fits[p].as_ref()).map(|f| &f.1);
-                        full_fit(rungs[i], nested)
+                        let nested = (parent[i].and_then(|p| fits[p].as_ref()))
+                            .and_then(|f| f.as_ref().ok())
+                            .map(|f| &f.1);
+                        match full_fit(rungs[i], nested) {
+                            Ok(f) => Ok(Ok(f)),
+                            Err(e) => match too_few_residuals(&e) {
+                                Some((n_residuals, n_params)) => Ok(Err(Untried {
+                                    rung: rungs[i],
+                                    n_residuals,
+                                    n_params,
+                                    fold_rows: None,
+                                })),
+                                None => Err(e),
+                            },
+                        }
                     })
                     .collect::<Result<_>>()?;
                 for (i, f) in ready.into_iter().zip(wave) {
                     fits[i] = Some(f);
                 }
             }
-            let fits: Vec<(CalibratedModel, Fitted)> = fits.into_iter().flatten().collect();
+            // The fewest residuals a blocked fold trains on: a rung keeping more parameters on
+            // every row cannot be refitted on that fold.
+            let (fold_residuals, fold_rows) = fewest_fold_residuals(train, cfg.folds);
+            for (i, f) in fits.iter_mut().enumerate() {
+                if let Some(Ok((_, fitted))) = f {
+                    let n_params = fitted.identified.identifiability.kept.len();
+                    if fold_residuals < n_params {
+                        *f = Some(Err(Untried {
+                            rung: rungs[i],
+                            n_residuals: fold_residuals,
+                            n_params,
+                            fold_rows: Some(fold_rows),
+                        }));
+                    }
+                }
+            }
+            let mut tried = Vec::new();
+            let mut tried_fits = Vec::new();
+            for (i, f) in fits.into_iter().enumerate() {
+                match f {
+                    Some(Ok(f)) => {
+                        tried.push(i);
+                        tried_fits.push(f);
+                    }
+                    Some(Err(u)) => untried.push(u),
+                    None => {}
+                }
+            }
+            // Frames only is the ladder's foot: without it nothing can be compared.
+            if tried.first() != Some(&0) {
+                let reason = untried.first().map_or_else(String::new, Untried::reason);
+                bail!(
+                    "the training rows cannot determine even the {} model ({reason}): record \
+                     more configurations",
+                    ModelName::FramesOnly
+                );
+            }
+            let tried_rungs: Vec<ModelName> = tried.iter().map(|&i| rungs[i]).collect();
+            let rungs = &tried_rungs;
+            let ladder_levels: Vec<usize> = tried.iter().map(|&i| ladder_levels[i]).collect();
+            let fits = tried_fits;
             // Then each cross-validated from its estimate; rungs in parallel.
             let scores: Vec<Scores> = (rungs.par_iter().zip(&fits))
                 .map(|(&r, f)| {
@@ -1663,6 +1823,10 @@ pub fn calibrate_measured(
         r.n_kept = n_kept;
     }
     let mut warnings = Vec::new();
+    if cfg.rung.is_none() {
+        warnings.extend(crate::fit::copies_warning(n_table_copies(train)));
+    }
+    warnings.extend(untried_note(&ladder, &untried));
     if cfg.rung.is_none() && rung == ModelName::FramesOnly && range_stops.is_empty() {
         warnings.push(
             "no calibrated model beat frames only on held-out training rows: the nominal \

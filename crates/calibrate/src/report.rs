@@ -18,6 +18,21 @@ pub enum SetRole {
     Test,
 }
 
+/// How the note starts of a `--model auto` ladder that left rungs out because every
+/// cross-validation fold could not fit their parameters from its training rows
+/// ([`CalibrationReport::ladder_notes`]).
+pub const UNTRIED_RUNGS_NOTE: &str = "--model auto tried the ladder up to ";
+
+impl CalibrationReport {
+    /// The warnings that say which rungs of the ladder were not tried for too few rows, and
+    /// why (rows, parameters): the command line prints them on standard error as well.
+    pub fn ladder_notes(&self) -> impl Iterator<Item = &str> {
+        (self.warnings.iter())
+            .map(String::as_str)
+            .filter(|w| w.starts_with(UNTRIED_RUNGS_NOTE))
+    }
+}
+
 impl std::fmt::Display for SetRole {
     /// `train` or `test`, as the JSON report writes it.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

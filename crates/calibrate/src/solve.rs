@@ -8,7 +8,7 @@ use hapcal_kinematics::{Chain, Tree};
 use hapcal_problems::{CalibrationProblem, Observations, PointDistance, Row, RowKind, Weights};
 
 use crate::data::DataSet;
-use crate::fit::{HeldOut, fold_of, identify_config};
+use crate::fit::{HeldOut, folds_of_rows, identify_config};
 use crate::inputs::Plan;
 use crate::model::ModelName;
 
@@ -78,9 +78,34 @@ pub(crate) fn solve(
     Ok((problem, identified))
 }
 
+/// The original of every row of every socket (every log) of `sets`
+/// ([`crate::fit::originals`]): the rows' values as the fit sees them (joint readings, and a
+/// log's distance), bit for bit with −0 as +0, as the readers compare rows for repeats.
+pub(crate) fn set_originals(sets: &[DataSet]) -> Vec<Vec<Vec<usize>>> {
+    let bits = |v: &[f64]| v.iter().map(|x| (x + 0.0).to_bits()).collect::<Vec<u64>>();
+    (sets.iter())
+        .map(|s| match s {
+            DataSet::Sockets(p) => (p.sockets.iter())
+                .map(|s| crate::fit::originals(s.q.iter().map(|q| bits(q))))
+                .collect(),
+            DataSet::Distances { q, distance_m, .. } => {
+                vec![crate::fit::originals(q.iter().zip(distance_m).map(
+                    |(q, d)| {
+                        let mut key = bits(q);
+                        key.push((d + 0.0).to_bits());
+                        key
+                    },
+                ))]
+            }
+        })
+        .collect()
+}
+
 /// Repeated k-fold cross-validation with time-contiguous blocks per socket: repeat `r` of
 /// `repeats` shifts every block boundary by `r/repeats` of a block (a circular shift of the
-/// rows), so that each row is held out once per repeat with different neighbours.
+/// rows), so that each row is held out once per repeat with different neighbours; a row that
+/// repeats an earlier row of its socket or log is held out with it
+/// ([`crate::fit::folds_of_rows`]).
 pub(crate) fn cross_validate(
     chain: &Chain,
     sets: &[DataSet],
@@ -97,9 +122,21 @@ pub(crate) fn cross_validate(
         .collect();
     let k = plan.folds;
     let repeats = repeats.max(1);
-    let block = |r: usize, set: usize, socket: usize, row: usize| {
-        fold_of(row, lens[set][socket], k, r, repeats)
-    };
+    // A row that repeats an earlier row of its socket or log (the same values, bit for bit)
+    // is held out with it: per repeat, set, socket, the fold of each row.
+    let originals = set_originals(sets);
+    let folds: Vec<Vec<Vec<Vec<usize>>>> = (0..repeats)
+        .map(|r| {
+            (originals.iter())
+                .map(|set| {
+                    (set.iter())
+                        .map(|socket| folds_of_rows(socket, k, r, repeats))
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
+    let block = |r: usize, set: usize, socket: usize, row: usize| folds[r][set][socket][row];
     // Row order: sets, sockets, rows, as the evaluation loop below visits them.
     // Blocks of the first repeat, numbered (set, socket, fold) in that order.
     let mut sq_sum: Vec<f64> = Vec::new();

@@ -548,6 +548,9 @@ fn run(cli: Cli) -> Result<()> {
             setup_gate(&plan, accept_setup)?;
             check_socket_folders(&plan)?;
             let outcome = calibrate::run(&plan)?;
+            for ladder_note in outcome.report.ladder_notes() {
+                note!("hapcal: note: {ladder_note}");
+            }
             // After the fit: deviations no real device has say the data are another's.
             let cfg = hapcal_calibrate::setup::SetupConfig {
                 accept_setup,

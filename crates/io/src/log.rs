@@ -43,6 +43,21 @@ pub struct LogRow {
     pub line: u64,
 }
 
+impl LogRow {
+    /// The row's joint readings, distance and external-encoder angles (not its time or
+    /// line) as [`read_log`] compares rows to find repeats: bit patterns, −0 as +0, an empty
+    /// external-encoder cell as NaN. Two rows with equal keys are copies of one another (the
+    /// reader's warning about repeated rows).
+    pub fn repeat_key(&self) -> Vec<u64> {
+        crate::table::repeat_key(self.repeat_values())
+    }
+
+    fn repeat_values(&self) -> impl Iterator<Item = f64> + '_ {
+        let ext = self.ext.iter().map(|e| e.unwrap_or(f64::NAN));
+        self.q.iter().copied().chain([self.distance_m]).chain(ext)
+    }
+}
+
 /// What a header column holds.
 #[derive(Clone, Copy, PartialEq, Eq, Hash)]
 enum Column {
@@ -303,11 +318,7 @@ pub fn read_log_in(path: &Path, device: &Device, units: &Units) -> Result<Log, E
         previous_t = row.t_s;
         distances.see(&[row.distance_m]);
         // Joint readings and measurements; the time of a repeated pose differs.
-        let ext = row.ext.iter().map(|e| e.unwrap_or(f64::NAN));
-        repeats.see(
-            row.q.iter().copied().chain([row.distance_m]).chain(ext),
-            line,
-        );
+        repeats.see(row.repeat_values(), line);
         rows.push(row);
     }
     if rows.is_empty() {

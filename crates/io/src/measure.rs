@@ -50,6 +50,15 @@ pub struct MeasuredRow {
     pub distance_m: Option<f64>,
 }
 
+impl MeasuredRow {
+    /// The row's joint readings and measured values (not its time or line) as the reader
+    /// compares rows to find repeats: bit patterns, −0 as +0, an absent value as NaN. Two rows
+    /// with equal keys are copies of one another (the reader's warning about repeated rows).
+    pub fn repeat_key(&self) -> Vec<u64> {
+        crate::table::repeat_key(measured_values(self))
+    }
+}
+
 /// A measurement file, read and converted to SI units.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MeasurementTable {

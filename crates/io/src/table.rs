@@ -133,8 +133,7 @@ pub(crate) struct Repeats {
 impl Repeats {
     /// Records the row at `line` holding `values`.
     pub(crate) fn see(&mut self, values: impl IntoIterator<Item = f64>, line: u64) {
-        let key: Vec<u64> = values.into_iter().map(|v| (v + 0.0).to_bits()).collect();
-        match self.seen.entry(key) {
+        match self.seen.entry(repeat_key(values)) {
             std::collections::hash_map::Entry::Occupied(earlier) => {
                 self.count += 1;
                 self.first.get_or_insert((line, *earlier.get()));
@@ -159,6 +158,12 @@ impl Repeats {
             path.display()
         ))
     }
+}
+
+/// The values of a row as [`Repeats`] compares them: bit patterns, −0 as +0 (a NaN, which
+/// stands for an absent value, equals itself).
+pub(crate) fn repeat_key(values: impl IntoIterator<Item = f64>) -> Vec<u64> {
+    values.into_iter().map(|v| (v + 0.0).to_bits()).collect()
 }
 
 /// `Err(`[`Error::Separator`]`)` if `record` (at `line`) is one field although `expected`

@@ -10,6 +10,7 @@ mod force;
 mod hostile;
 mod hostile_cases;
 mod html;
+mod ladder_rows;
 mod plan_after;
 mod predict;
 mod predict_device;
