@@ -1371,27 +1371,39 @@ pub fn calibrate_logs(
         } else {
             None
         };
-        let fits = (rungs.iter())
-            .map(|&m| {
-                Ok(match m {
-                    ModelName::Transmissions => {
-                        let (t, kin) = two_steps.clone().context("no transmissions fitted")?;
-                        HapticRungFit::Transmissions(t, kin)
+        // A rung whose identification fails on every training row (the compliance of a
+        // device whose logs cannot tell it from the deviations: a singular covariance) is
+        // left out of the climb, and the report says so.
+        let mut fits = Vec::new();
+        let (mut tried, mut tried_levels) = (Vec::new(), Vec::new());
+        for (&m, &level) in rungs.iter().zip(&levels) {
+            let fit = match m {
+                ModelName::Transmissions => {
+                    let (t, kin) = two_steps.clone().context("no transmissions fitted")?;
+                    HapticRungFit::Transmissions(t, kin)
+                }
+                ModelName::Compliance => {
+                    let (t, kin) = match &two_steps {
+                        Some((t, kin)) => (Some(t), kin),
+                        None => (None, &geometric),
+                    };
+                    match identify_with_compliance(&haptic, &rows, t, kin) {
+                        Ok(fit) => HapticRungFit::Compliance(fit, t.cloned()),
+                        Err(e) => {
+                            warnings.push(format!(
+                                "the {m} model was not tried: {e:#}; the ladder stops below it"
+                            ));
+                            continue;
+                        }
                     }
-                    ModelName::Compliance => {
-                        let (t, kin) = match &two_steps {
-                            Some((t, kin)) => (Some(t), kin),
-                            None => (None, &geometric),
-                        };
-                        HapticRungFit::Compliance(
-                            identify_with_compliance(&haptic, &rows, t, kin)?,
-                            t.cloned(),
-                        )
-                    }
-                    _ => HapticRungFit::Geometric(geometric.clone()),
-                })
-            })
-            .collect::<Result<Vec<_>>>()?;
+                }
+                _ => HapticRungFit::Geometric(geometric.clone()),
+            };
+            fits.push(fit);
+            tried.push(m);
+            tried_levels.push(level);
+        }
+        let (rungs, levels) = (tried, tried_levels);
         let lengths: Vec<usize> = train.iter().map(|log| log.rows.len()).collect();
         let held = cross_validate_rungs(&haptic, &rows, &lengths, &fits, plan.folds)?;
         let (choice, reports) = crate::fit::choose(&rungs, &levels, &held);

@@ -1524,6 +1524,48 @@ fn another_device(
 /// mistake the check before the fit could not tell), an error finding; `None` otherwise.
 /// Compliances, frames and angles are not judged: their size depends on the setup.
 pub fn after_fit(report: &crate::report::CalibrationReport) -> Option<Finding> {
+    lengths_beyond_tolerance(report).or_else(|| misfit_after_calibration(report))
+}
+
+/// The training set the calibrated model misses by more than [`PLAUSIBLE_FRAMES_ONLY_RMS_M`]
+/// RMS (the residual the nominal model of a real robot leaves with its frames fitted): the
+/// calibration could not explain the data, an another-device finding (the identification
+/// may have kept no parameter at all when the nominal model starts that far off); `None` when
+/// every training set is fitted closer.
+fn misfit_after_calibration(report: &crate::report::CalibrationReport) -> Option<Finding> {
+    let (name, rms) = (report.placements.iter())
+        .filter(|s| s.role == crate::report::SetRole::Train)
+        .filter_map(|s| {
+            let a = &s.after;
+            let rms = [a.distance_rms_m, a.pose.map(|p| p.position_rms_m)]
+                .into_iter()
+                .flatten()
+                .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v))))?;
+            Some((s.name.as_str(), rms))
+        })
+        .max_by(|a, b| a.1.total_cmp(&b.1))?;
+    (rms > PLAUSIBLE_FRAMES_ONLY_RMS_M).then(|| Finding {
+        class: MistakeClass::AnotherDevice,
+        severity: Severity::Error,
+        message: format!(
+            "the calibrated {} model still misses the training rows of {name} by {} mm RMS, more \
+             than the nominal model of a real device leaves ({} mm): these data come from \
+             another device or robot, or the setup is wrong in a way not checked",
+            report.model,
+            mm(rms),
+            mm(PLAUSIBLE_FRAMES_ONLY_RMS_M)
+        ),
+        fix: "check --device (and --tip) against the device that recorded the data, and the \
+              units and columns of the files"
+            .to_owned(),
+        before: Residual::default(),
+        after: None,
+    })
+}
+
+/// The length deviations of [`after_fit`]: beyond [`MANUFACTURING_TOLERANCE_M`], determined
+/// to [`DETERMINED_SIGMAS`].
+fn lengths_beyond_tolerance(report: &crate::report::CalibrationReport) -> Option<Finding> {
     let beyond: Vec<&crate::report::ParamReport> = (report.parameters.iter())
         .filter(|p| {
             p.unit == "m"
