@@ -741,9 +741,9 @@ fn load_sources(sources: &[Source], robot: &Robot) -> Result<Vec<MeasurementTabl
 }
 
 /// The setup check before a calibration or diagnosis of files, as the command line's: its
-/// warnings, and the error finding accepted with `accept_setup` (in the words the command
-/// line's notes give it), or the error naming the mistake.
-fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<(Vec<String>, Option<String>)> {
+/// warnings, the error finding accepted with `accept_setup` (in the words the command line's
+/// notes give it) and the classes of the findings, or the error naming the mistake.
+fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<SetupGated> {
     let cfg = hapcal_calibrate::setup::SetupConfig {
         accept_setup,
         accept_option: "accept_setup=True",
@@ -756,7 +756,19 @@ fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<(Vec<String>, Option<St
             f.text()
         )
     });
-    Ok((gated.warnings, accepted))
+    Ok(SetupGated {
+        warnings: gated.warnings,
+        accepted,
+        classes: gated.classes,
+    })
+}
+
+/// What [`setup_gate`] lets through: the warnings, the accepted error finding in the command
+/// line's words, and the classes of every finding (for the check after the fit).
+struct SetupGated {
+    warnings: Vec<String>,
+    accepted: Option<String>,
+    classes: Vec<hapcal_calibrate::setup::MistakeClass>,
 }
 
 /// The paths and units of `sources`, if every one is a file.
@@ -814,6 +826,7 @@ fn _calibrate(
     // The setup check runs on files, as the command line's (arrays are taken as given).
     let files = file_sources(&train).zip(file_sources(&test));
     let mut setup_warnings = Vec::new();
+    let mut setup_classes = Vec::new();
     let outcome = match files {
         Some((tr, te)) if tr.iter().chain(&te).all(|(_, u)| *u == tr[0].1) => {
             plan.units = tr[0].1.clone();
@@ -821,7 +834,8 @@ fn _calibrate(
             plan.test = te.into_iter().map(|(p, _)| p).collect();
             py.detach(|| -> Result<Outcome> {
                 plan.validate()?;
-                setup_warnings = setup_gate(&plan, accept_setup)?.0;
+                let gated = setup_gate(&plan, accept_setup)?;
+                (setup_warnings, setup_classes) = (gated.warnings, gated.classes);
                 calibrate::run(&plan)
             })
         }
@@ -851,7 +865,8 @@ fn _calibrate(
         accept_option: "accept_setup=True",
     };
     setup_warnings.extend(
-        hapcal_calibrate::setup::gate_after_fit(&outcome.report, &after_fit).map_err(py_err)?,
+        hapcal_calibrate::setup::gate_after_fit(&outcome.report, &after_fit, &setup_classes)
+            .map_err(py_err)?,
     );
     let json = serde_json::to_string_pretty(&outcome.report)
         .context("serialising the report")
@@ -1121,7 +1136,11 @@ fn _diagnose(
                     sigma_m: None,
                     joint: false,
                 };
-                let (mut warnings, accepted) = setup_gate(&gate_plan, accept_setup)?;
+                let SetupGated {
+                    mut warnings,
+                    accepted,
+                    ..
+                } = setup_gate(&gate_plan, accept_setup)?;
                 let log = hapcal_io::read_log(&data, hapcal_device)
                     .with_context(|| format!("reading log {}", data.display()))?;
                 let mut d = hapcal_diagnose::diagnose(hapcal_device, &log.rows, &config)
@@ -1156,7 +1175,11 @@ fn _diagnose(
     let robot = device.robot.as_ref();
     py.detach(move || -> Result<(String, Vec<String>)> {
         // Files that share their units go through the command line's loaders and setup check.
-        let mut gated = (Vec::new(), None);
+        let mut gated = SetupGated {
+            warnings: Vec::new(),
+            accepted: None,
+            classes: Vec::new(),
+        };
         let baseline = match files {
             Some((tr, te)) if tr.iter().chain(&te).all(|(_, u)| *u == tr[0].1) => {
                 plan.units = tr[0].1.clone();
@@ -1182,7 +1205,11 @@ fn _diagnose(
         };
         let mut d = hapcal_diagnose::arm::diagnose_arm(&baseline, &cfg)
             .context("diagnosing the geometric baseline")?;
-        let (mut warnings, accepted) = gated;
+        let SetupGated {
+            mut warnings,
+            accepted,
+            ..
+        } = gated;
         if let Some(finding) = accepted {
             d.verdict.on_accepted_setup(&mut d.notes, finding);
         }

@@ -5,7 +5,11 @@
 //! - `tiago`: figaroh's TIAGo motion capture (34 rows of 4 markers, 8 joints);
 //! - `kuka_14_front`: MUKCa's iiwa 14 socket placement `front` (62 rows, 7 joints), the socket
 //!   check ([`hapcal_calibrate::setup_sockets::check_sockets`]) against `hapcal calibrate`'s
-//!   socket workflow ([`hapcal_calibrate::calibrate::run`], no test data).
+//!   socket workflow ([`hapcal_calibrate::calibrate::run`], no test data);
+//! - `positioner`, `haptic_log`, `humanoid`: the industrial_calibration positioner's YAML, the
+//!   reference haptic device's log and the simulated two-arm humanoid, read through a plan as
+//!   `hapcal calibrate` reads them ([`hapcal_calibrate::setup::check_plan`] against
+//!   [`hapcal_calibrate::calibrate::run`]).
 #![allow(missing_docs, clippy::unwrap_used)] // criterion's macros generate undocumented items
 
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -107,5 +111,53 @@ fn bench_sockets(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench, bench_sockets);
+/// The check (`check_plan`) and the calibration (`calibrate::run`, the ladder as
+/// `hapcal calibrate` climbs it) of the bundled recordings read through a plan as the command
+/// line reads them: the positioner's YAML, the haptic device's log, the simulated humanoid.
+fn bench_plans(c: &mut Criterion) {
+    use hapcal_calibrate::calibrate::{Plan, run};
+    use hapcal_calibrate::setup::check_plan;
+    let cases: [(&str, &str, &[&str], &str); 3] = [
+        (
+            "positioner",
+            "industrial-calibration/two_axis_positioner.toml",
+            &[],
+            "industrial-calibration/measurements.yaml",
+        ),
+        (
+            "haptic_log",
+            "reference-device/device.toml",
+            &[],
+            "reference-device/log.csv",
+        ),
+        (
+            "humanoid",
+            "sim-humanoid/humanoid.urdf",
+            &["l_hand", "r_hand"],
+            "sim-humanoid/mocap.csv",
+        ),
+    ];
+    for (name, device, tips, data) in cases {
+        let default = Plan::bundled_default();
+        let plan = Plan {
+            device: fixture(device),
+            tip: tips
+                .first()
+                .map_or(default.tip.clone(), |t| (*t).to_owned()),
+            tips: tips.iter().skip(1).map(|t| (*t).to_owned()).collect(),
+            data: vec![fixture(data)],
+            test: Vec::new(),
+            ..default
+        };
+        let mut group = c.benchmark_group(name);
+        group.sample_size(10);
+        group.bench_function("setup_check", |b| {
+            b.iter(|| check_plan(black_box(&plan)).unwrap())
+        });
+        group.bench_function("calibration", |b| b.iter(|| run(black_box(&plan)).unwrap()));
+        group.finish();
+    }
+}
+
+criterion_group!(benches, bench, bench_sockets, bench_plans);
 criterion_main!(benches);

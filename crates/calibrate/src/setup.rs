@@ -1520,11 +1520,51 @@ fn another_device(
 }
 
 /// The setup check after a calibration: an identified length deviation beyond
-/// [`MANUFACTURING_TOLERANCE_M`], determined to [`DETERMINED_SIGMAS`], says the data come from another device or robot (or a
-/// mistake the check before the fit could not tell), an error finding; `None` otherwise.
-/// Compliances, frames and angles are not judged: their size depends on the setup.
-pub fn after_fit(report: &crate::report::CalibrationReport) -> Option<Finding> {
-    lengths_beyond_tolerance(report).or_else(|| misfit_after_calibration(report))
+/// [`MANUFACTURING_TOLERANCE_M`], determined to [`DETERMINED_SIGMAS`], or a training set the
+/// calibrated model still misses by more than [`PLAUSIBLE_FRAMES_ONLY_RMS_M`], says the data
+/// come from another device or robot (or a mistake the check before the fit could not tell),
+/// an error finding; `None` otherwise. Compliances, frames and angles are not judged: their
+/// size depends on the setup.
+///
+/// `before` holds the classes of the findings the check before the fit warned of: after a
+/// latency warning, lengths beyond tolerance are what a calibration that does not model the
+/// lag makes of it (the lengths absorb it), a latency warning that says so.
+pub fn after_fit(
+    report: &crate::report::CalibrationReport,
+    before: &[MistakeClass],
+) -> Option<Finding> {
+    let Some(beyond) = lengths_beyond_tolerance(report) else {
+        return misfit_after_calibration(report);
+    };
+    if before.contains(&MistakeClass::Latency) {
+        return Some(Finding {
+            class: MistakeClass::Latency,
+            severity: Severity::Warning,
+            message: format!(
+                "the calibration moves {}, as a lag between the joint readings and the \
+                 instrument makes a calibration that does not model it do (the latency warned \
+                 above)",
+                beyond.words()
+            ),
+            fix: "correct the lag before using the calibrated lengths (hapcal diagnose models \
+                  latency)"
+                .to_owned(),
+            before: Residual::default(),
+            after: None,
+        });
+    }
+    Some(Finding {
+        class: MistakeClass::AnotherDevice,
+        severity: Severity::Error,
+        message: format!(
+            "the calibration moves {}: these data come from another device or robot, or the \
+             device file is not the one measured",
+            beyond.words()
+        ),
+        fix: "check --device (and --tip) against the device that recorded the data".to_owned(),
+        before: Residual::default(),
+        after: None,
+    })
 }
 
 /// The training set the calibrated model misses by more than [`PLAUSIBLE_FRAMES_ONLY_RMS_M`]
@@ -1564,8 +1604,10 @@ fn misfit_after_calibration(report: &crate::report::CalibrationReport) -> Option
 }
 
 /// The length deviations of [`after_fit`]: beyond [`MANUFACTURING_TOLERANCE_M`], determined
-/// to [`DETERMINED_SIGMAS`].
-fn lengths_beyond_tolerance(report: &crate::report::CalibrationReport) -> Option<Finding> {
+/// to [`DETERMINED_SIGMAS`], in the report's order (none: `None`).
+fn lengths_beyond_tolerance(
+    report: &crate::report::CalibrationReport,
+) -> Option<LengthsBeyond<'_>> {
     let beyond: Vec<&crate::report::ParamReport> = (report.parameters.iter())
         .filter(|p| {
             p.unit == "m"
@@ -1573,46 +1615,58 @@ fn lengths_beyond_tolerance(report: &crate::report::CalibrationReport) -> Option
                 && p.value.abs() > DETERMINED_SIGMAS * p.std
         })
         .collect();
-    let worst = beyond
-        .iter()
-        .max_by(|a, b| a.value.abs().total_cmp(&b.value.abs()))?;
-    let listed: Vec<String> = (beyond.iter().take(4))
-        .map(|p| format!("{} {:+.1} mm", p.name, p.value * 1e3))
-        .collect();
-    let more = if beyond.len() > 4 { ", …" } else { "" };
-    Some(Finding {
-        class: MistakeClass::AnotherDevice,
-        severity: Severity::Error,
-        message: format!(
-            "the calibration moves {} length{} by more than the {:.0} mm a real device's \
-             manufacturing leaves ({}{more}; the largest, {}, {:.0} standard deviations from \
-             zero): these data come from another device or robot, or the device file is not \
-             the one measured",
+    let worst = *(beyond.iter()).max_by(|a, b| a.value.abs().total_cmp(&b.value.abs()))?;
+    Some(LengthsBeyond { beyond, worst })
+}
+
+/// Identified length deviations beyond manufacturing tolerance.
+struct LengthsBeyond<'a> {
+    /// Every one, in the report's order (at least one).
+    beyond: Vec<&'a crate::report::ParamReport>,
+    /// The largest in size.
+    worst: &'a crate::report::ParamReport,
+}
+
+impl LengthsBeyond<'_> {
+    /// "3 lengths by more than the 25 mm a real device's manufacturing leaves (d2 +58.1 mm,
+    /// …; the largest, d2, 40 standard deviations from zero)".
+    fn words(&self) -> String {
+        let (beyond, worst) = (&self.beyond, self.worst);
+        let listed: Vec<String> = (beyond.iter().take(4))
+            .map(|p| format!("{} {:+.1} mm", p.name, p.value * 1e3))
+            .collect();
+        let more = if beyond.len() > 4 { ", …" } else { "" };
+        format!(
+            "{} length{} by more than the {:.0} mm a real device's manufacturing leaves \
+             ({}{more}; the largest, {}, {:.0} standard deviations from zero)",
             beyond.len(),
             if beyond.len() == 1 { "" } else { "s" },
             MANUFACTURING_TOLERANCE_M * 1e3,
             listed.join(", "),
             worst.name,
             (worst.value / worst.std.max(f64::MIN_POSITIVE)).abs()
-        ),
-        fix: "check --device (and --tip) against the device that recorded the data".to_owned(),
-        before: Residual::default(),
-        after: None,
-    })
+        )
+    }
 }
 
 /// [`after_fit`] as the commands apply it: the warning to print when `cfg` accepts the data,
-/// or the error.
+/// or the error. `before` holds the classes of the findings the check before the fit warned
+/// of ([`Gated::classes`]): after a latency warning, lengths beyond tolerance are the lag
+/// the geometric parameters absorbed, a latency warning and not another device.
 ///
 /// # Errors
 /// A finding without [`SetupConfig::accept_setup`].
 pub fn gate_after_fit(
     report: &crate::report::CalibrationReport,
     cfg: &SetupConfig,
+    before: &[MistakeClass],
 ) -> Result<Option<String>> {
-    let Some(f) = after_fit(report) else {
+    let Some(f) = after_fit(report, before) else {
         return Ok(None);
     };
+    if f.severity == Severity::Warning {
+        return Ok(Some(format!("setup check [{}]: {}", f.class, f.text())));
+    }
     if !cfg.accept_setup {
         anyhow::bail!(
             "setup check [{}]: {}; {} uses the calibration as it is",
@@ -1637,6 +1691,9 @@ pub struct Gated {
     /// The error finding the user accepted with [`SetupConfig::accept_setup`], if any: a
     /// diagnosis then names no physical effect.
     pub accepted: Option<Finding>,
+    /// The classes of every finding, in the order of [`Gated::warnings`]: what the check after
+    /// the fit ([`gate_after_fit`]) weighs its own finding against.
+    pub classes: Vec<MistakeClass>,
 }
 
 /// The setup check at the start of a calibration or diagnosis: the warnings to print and the
@@ -1675,6 +1732,7 @@ pub fn gate(plan: &crate::inputs::Plan, cfg: &SetupConfig) -> Result<Gated> {
             })
             .collect(),
         accepted: report.overwhelming().cloned(),
+        classes: report.findings.iter().map(|f| f.class).collect(),
     })
 }
 

@@ -545,7 +545,7 @@ fn run(cli: Cli) -> Result<()> {
             plan.validate()?;
             // The setup check first: socket files in degrees or with swapped columns are named
             // before the reader's joint-limit check reports the first reading past a limit.
-            setup_gate(&plan, accept_setup)?;
+            let (_, warned) = setup_gate(&plan, accept_setup)?;
             check_socket_folders(&plan)?;
             let outcome = calibrate::run(&plan)?;
             for ladder_note in outcome.report.ladder_notes() {
@@ -556,7 +556,9 @@ fn run(cli: Cli) -> Result<()> {
                 accept_setup,
                 accept_option: "--accept-setup",
             };
-            if let Some(warning) = hapcal_calibrate::setup::gate_after_fit(&outcome.report, &cfg)? {
+            if let Some(warning) =
+                hapcal_calibrate::setup::gate_after_fit(&outcome.report, &cfg, &warned)?
+            {
                 note!("hapcal: warning: {warning}");
             }
             if json {
@@ -880,7 +882,7 @@ fn run(cli: Cli) -> Result<()> {
                 }
                 // The setup check of the log (units, column order, rows out of step, the
                 // external encoders), as `calibrate` runs it.
-                let accepted = setup_gate(
+                let (accepted, _) = setup_gate(
                     &Plan {
                         workspace: None,
                         device: device.clone(),
@@ -944,7 +946,7 @@ fn run(cli: Cli) -> Result<()> {
                     sigma_m,
                     joint: false,
                 };
-                let accepted = setup_gate(&plan, accept_setup)?;
+                let (accepted, _) = setup_gate(&plan, accept_setup)?;
                 let cfg = hapcal_diagnose::arm::ArmConfig {
                     folds,
                     ..Default::default()
@@ -1034,13 +1036,15 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
-/// The setup check at the start of `calibrate` and `diagnose` on measurement files: prints its
-/// warnings; an overwhelming finding stops with its fix unless `accept_setup`.
 /// The setup check at the start of a calibration or diagnosis: its findings printed as
 /// warnings, or the error that stops the command. Returns the error finding the user accepted
-/// with `--accept-setup`, as the warning says it, if any: a diagnosis then names no physical
-/// effect.
-fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<Option<String>> {
+/// with `--accept-setup`, as the warning says it, if any (a diagnosis then names no physical
+/// effect), and the classes of every finding (the check after the fit weighs its own against
+/// them).
+fn setup_gate(
+    plan: &Plan,
+    accept_setup: bool,
+) -> Result<(Option<String>, Vec<hapcal_calibrate::setup::MistakeClass>)> {
     let cfg = hapcal_calibrate::setup::SetupConfig {
         accept_setup,
         accept_option: "--accept-setup",
@@ -1049,13 +1053,14 @@ fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<Option<String>> {
     for warning in &gated.warnings {
         note!("hapcal: warning: {warning}");
     }
-    Ok(gated.accepted.map(|f| {
+    let accepted = gated.accepted.map(|f| {
         format!(
             "setup check (accepted with --accept-setup) [{}]: {}",
             f.class,
             f.text()
         )
-    }))
+    });
+    Ok((accepted, gated.classes))
 }
 
 /// The verdict of a diagnosis whose setup the check found wrong and the user accepted: no
