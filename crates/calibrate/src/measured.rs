@@ -25,7 +25,7 @@
 
 use crate::model::ModelName;
 use anyhow::{Context, Result, bail};
-use faer::Col;
+use faer::{Col, Mat};
 use hapcal_identify::{Identified, Problem, Subset, identify};
 use hapcal_io::{MeasuredRow, MeasurementTable};
 use hapcal_kinematics::{FrameSpec, Isometry3, Point3, Tree, UnitQuaternion, Vector3};
@@ -603,6 +603,27 @@ fn nested_in(rung: ModelName) -> Option<ModelName> {
     }
 }
 
+/// The ladder's rungs in chains of nesting ([`nested_in`]; `parent[i]` the rung rung `i` starts
+/// from): each chain a rung that nests none, then the rungs that nest it, each after its
+/// parent; the longest chains first (their nested fits are the ladder's critical path), ties
+/// in ladder order.
+fn rung_chains(parent: &[Option<usize>]) -> Vec<Vec<usize>> {
+    let mut chains: Vec<Vec<usize>> = Vec::new();
+    for root in (0..parent.len()).filter(|&i| parent[i].is_none()) {
+        let mut chain = vec![root];
+        let mut k = 0;
+        while k < chain.len() {
+            let at = chain[k];
+            chain.extend((0..parent.len()).filter(|&i| parent[i] == Some(at)));
+            k += 1;
+        }
+        chains.push(chain);
+    }
+    // A stable sort keeps the ladder order among chains of one length.
+    chains.sort_by_key(|c| std::cmp::Reverse(c.len()));
+    chains
+}
+
 /// Fits `rung` on the rows `keep` selects: the problem and its identification (estimates
 /// mapped back to the full layout).
 fn fit(
@@ -830,9 +851,82 @@ impl Warm {
     }
 }
 
+/// The residuals and the Jacobian of a rung's problem on every training row at its full-data
+/// estimate [`Warm::x`]: what every fold's refit starts from (its training rows' entries).
+struct AtWarm {
+    /// `r(x)`, length `m` (every training row's residuals, tables and rows in file order).
+    r: Col<f64>,
+    /// `∂r/∂x`, `m × n` (`n` the problem's layout).
+    jac: Mat<f64>,
+    /// Per table, per row, the index of its first residual in `r` ([`row_residuals`] each).
+    first: Vec<Vec<usize>>,
+}
+
+impl AtWarm {
+    /// The problem of `rung` on every row of `tables` evaluated at `warm.x`; `None` where it
+    /// cannot be evaluated (each fold then evaluates its own start).
+    fn new(
+        rung: ModelName,
+        robot: &Robot,
+        tree: &Tree,
+        tables: &[MeasurementTable],
+        weights: Weights,
+        warm: &Warm,
+    ) -> Option<AtWarm> {
+        let obs = observations(tables, &|_, _| true);
+        let terms = terms(rung, robot).ok()?;
+        let problem = CalibrationProblem::on_tree(tree.clone(), obs, weights, terms).ok()?;
+        let (m, n) = (problem.n_residuals(), problem.layout().len());
+        let mut first = Vec::with_capacity(tables.len());
+        let mut at = 0;
+        for t in tables {
+            let mut offsets = Vec::with_capacity(t.rows.len());
+            for row in &t.rows {
+                offsets.push(at);
+                at += row_residuals(row);
+            }
+            first.push(offsets);
+        }
+        if at != m || warm.x.nrows() != n {
+            return None;
+        }
+        let mut r = Col::zeros(m);
+        let mut jac = Mat::zeros(m, n);
+        (problem
+            .residuals_and_jacobian(warm.x.as_ref(), r.as_mut(), jac.as_mut())
+            .ok())?;
+        Some(AtWarm { r, jac, first })
+    }
+
+    /// The entries of the rows `keep` selects (in table and row order, as [`observations`]
+    /// orders them): their residuals and Jacobian rows, `m_keep` and `m_keep × n`.
+    fn rows(
+        &self,
+        tables: &[MeasurementTable],
+        keep: &dyn Fn(usize, usize) -> bool,
+    ) -> (Col<f64>, Mat<f64>) {
+        let mut ranges = Vec::new();
+        for (ti, t) in tables.iter().enumerate() {
+            for (ri, row) in t.rows.iter().enumerate() {
+                if keep(ti, ri) {
+                    let start = self.first[ti][ri];
+                    ranges.push(start..start + row_residuals(row));
+                }
+            }
+        }
+        let m: usize = ranges.iter().map(|r| r.len()).sum();
+        let idx: Vec<usize> = ranges.into_iter().flatten().collect();
+        let r = Col::from_fn(m, |i| self.r[idx[i]]);
+        let jac = Mat::from_fn(m, self.jac.ncols(), |i, j| self.jac[(idx[i], j)]);
+        (r, jac)
+    }
+}
+
 /// `rung` refitted on the rows `keep` selects, from `warm` and over its kept parameters
 /// (the identifiability decided on all training rows): Levenberg–Marquardt alone, a few
-/// iterations from a nearby start.
+/// iterations from a nearby start, from the residuals and Jacobian at `warm` that `at_warm`
+/// holds for every training row (the same values the fold's problem evaluates there), when
+/// given.
 #[allow(clippy::too_many_arguments)]
 fn refit(
     rung: ModelName,
@@ -842,6 +936,7 @@ fn refit(
     weights: Weights,
     keep: &dyn Fn(usize, usize) -> bool,
     warm: &Warm,
+    at_warm: Option<&AtWarm>,
 ) -> Result<CalibratedModel> {
     let obs = observations(tables, keep);
     let problem = CalibrationProblem::on_tree(tree.clone(), obs, weights, terms(rung, robot)?)
@@ -856,8 +951,21 @@ fn refit(
         xtol: FOLD_TOLERANCE,
         ..crate::fit::identify_config(None).lm
     };
-    let fit = hapcal_identify::levenberg_marquardt(&problem, warm.x.clone(), &warm.free, &lm)
-        .with_context(|| format!("refitting the {rung} model on a fold"))?;
+    let start = (at_warm.map(|a| a.rows(tables, keep))).filter(|(r, jac)| {
+        r.nrows() == problem.n_residuals() && jac.ncols() == problem.layout().len()
+    });
+    let fit = match start {
+        Some((r0, jac0)) => hapcal_identify::levenberg_marquardt_from(
+            &problem,
+            warm.x.clone(),
+            &warm.free,
+            &lm,
+            r0,
+            jac0,
+        ),
+        None => hapcal_identify::levenberg_marquardt(&problem, warm.x.clone(), &warm.free, &lm),
+    }
+    .with_context(|| format!("refitting the {rung} model on a fold"))?;
     Ok(problem.model(fit.x.as_ref()))
 }
 
@@ -1418,6 +1526,7 @@ fn cross_validate(
     // calibration extrapolates. A blocked fold that cannot is an error, as before.
     // Per fold, per held-out row: table, row, squared error (m²), weighted squared error.
     type Held = Option<Vec<(usize, usize, f64, f64)>>;
+    let at_warm = AtWarm::new(rung, robot, tree, tables, weights, warm);
     let held: Vec<Held> = (folds.par_iter().enumerate())
         .map(|(f, fold)| {
             let fitted = refit(
@@ -1428,6 +1537,7 @@ fn cross_validate(
                 weights,
                 &|ti, r| !fold[ti][r],
                 warm,
+                at_warm.as_ref(),
             );
             let model = match fitted {
                 Ok(model) => model,
@@ -1677,71 +1787,111 @@ pub fn calibrate_measured(
                 Ok(f)
             };
             // Each rung fitted on every training row (the one the Huber pass fitted already
-            // was, when it bounded nothing), wave by wave: a rung that nests another
-            // ([`nested_in`]) starts from its estimate, the others from the frames-only one.
+            // was, when it bounded nothing), then cross-validated from its estimate. A rung
+            // that nests another ([`nested_in`]) starts from its estimate, the others from the
+            // frames-only one: each chain of nested rungs is one task (its fits in order, then
+            // its cross-validations, the nested rung's first), the chains in parallel, the
+            // longest first. The fits of one rung do not wait for another chain's, so no core
+            // idles while a nested rung is fitted (on two cores the per-axis transversal
+            // compliance fit, the ladder's slowest, ran alone before).
             let parent: Vec<Option<usize>> = (rungs.iter())
                 .map(|&r| nested_in(r).and_then(|p| rungs.iter().position(|&q| q == p)))
                 .collect();
-            // A rung whose fit on every training row has fewer residuals than parameters, or
-            // whose refit on some fold's training rows would, is not tried (`Err`).
-            type Tried = std::result::Result<(CalibratedModel, Fitted), Untried>;
-            let mut fits: Vec<Option<Tried>> = vec![None; rungs.len()];
-            loop {
-                let ready: Vec<usize> = (0..rungs.len())
-                    .filter(|&i| fits[i].is_none() && parent[i].is_none_or(|p| fits[p].is_some()))
-                    .collect();
-                if ready.is_empty() {
-                    break;
-                }
-                let wave: Vec<Tried> = (ready.par_iter())
-                    .map(|&i| {
-                        let nested = (parent[i].and_then(|p| fits[p].as_ref()))
-                            .and_then(|f| f.as_ref().ok())
-                            .map(|f| &f.1);
-                        match full_fit(rungs[i], nested) {
-                            Ok(f) => Ok(Ok(f)),
-                            Err(e) => match too_few_residuals(&e) {
-                                Some((n_residuals, n_params)) => Ok(Err(Untried {
-                                    rung: rungs[i],
-                                    n_residuals,
-                                    n_params,
-                                    fold_rows: None,
-                                })),
-                                None => Err(e),
-                            },
-                        }
-                    })
-                    .collect::<Result<_>>()?;
-                for (i, f) in ready.into_iter().zip(wave) {
-                    fits[i] = Some(f);
-                }
-            }
+            let chains = rung_chains(&parent);
             // The fewest residuals a blocked fold trains on: a rung keeping more parameters on
             // every row cannot be refitted on that fold.
             let (fold_residuals, fold_rows) = fewest_fold_residuals(train, cfg.folds);
-            for (i, f) in fits.iter_mut().enumerate() {
-                if let Some(Ok((_, fitted))) = f {
-                    let n_params = fitted.identified.identifiability.kept.len();
-                    if fold_residuals < n_params {
-                        *f = Some(Err(Untried {
+            // A rung whose fit on every training row has fewer residuals than parameters, or
+            // whose refit on some fold's training rows would, is not tried (`Err`); its fit on
+            // every row, if any, still starts the rungs that nest it.
+            type Tried = std::result::Result<(CalibratedModel, Fitted), (Untried, Option<Fitted>)>;
+            let try_rung = |i: usize, nested: Option<&Fitted>| -> Result<Tried> {
+                let (model, fitted) = match full_fit(rungs[i], nested) {
+                    Ok(f) => f,
+                    Err(e) => {
+                        let Some((n_residuals, n_params)) = too_few_residuals(&e) else {
+                            return Err(e);
+                        };
+                        let untried = Untried {
                             rung: rungs[i],
-                            n_residuals: fold_residuals,
+                            n_residuals,
                             n_params,
-                            fold_rows: Some(fold_rows),
-                        }));
+                            fold_rows: None,
+                        };
+                        return Ok(Err((untried, None)));
                     }
+                };
+                let n_params = fitted.identified.identifiability.kept.len();
+                if fold_residuals < n_params {
+                    let untried = Untried {
+                        rung: rungs[i],
+                        n_residuals: fold_residuals,
+                        n_params,
+                        fold_rows: Some(fold_rows),
+                    };
+                    return Ok(Err((untried, Some(fitted))));
                 }
+                Ok(Ok((model, fitted)))
+            };
+            // Per rung: its fit (or why it was not tried) and, when tried, its
+            // cross-validation.
+            type Run = (Result<Tried>, Option<Result<Scores>>);
+            let run_chain = |chain: &Vec<usize>| -> Vec<(usize, Run)> {
+                // Fits in nesting order (a rung whose parent has no fit starts from the
+                // frames-only estimate), then cross-validations, the last fitted first (the
+                // nested rungs are the slowest).
+                let mut fitted: Vec<(usize, Result<Tried>)> = Vec::new();
+                for &i in chain {
+                    let nested = parent[i].and_then(|p| {
+                        let (_, tried) = fitted.iter().find(|(k, _)| *k == p)?;
+                        match tried.as_ref().ok()? {
+                            Ok((_, f)) | Err((_, Some(f))) => Some(f),
+                            Err((_, None)) => None,
+                        }
+                    });
+                    let tried = try_rung(i, nested);
+                    fitted.push((i, tried));
+                }
+                let mut out: Vec<(usize, Run)> = (fitted.into_iter().rev())
+                    .map(|(i, tried)| {
+                        let scores = match &tried {
+                            Ok(Ok((_, f))) => Some(cross_validate(
+                                rungs[i],
+                                robot,
+                                &framed,
+                                &Warm::of(f),
+                                train,
+                                cfg,
+                                weights,
+                                &ranges,
+                            )),
+                            _ => None,
+                        };
+                        (i, (tried, scores))
+                    })
+                    .collect();
+                out.reverse();
+                out
+            };
+            let mut runs: Vec<Option<Run>> = (0..rungs.len()).map(|_| None).collect();
+            for (i, run) in (chains.par_iter().map(run_chain).flatten()).collect::<Vec<_>>() {
+                runs[i] = Some(run);
             }
+            // A failed fit first (in ladder order), then the ladder's foot, then a failed
+            // cross-validation.
             let mut tried = Vec::new();
             let mut tried_fits = Vec::new();
-            for (i, f) in fits.into_iter().enumerate() {
-                match f {
-                    Some(Ok(f)) => {
+            let mut tried_scores = Vec::new();
+            for (i, (fit, scores)) in
+                (runs.into_iter().enumerate()).filter_map(|(i, run)| run.map(|run| (i, run)))
+            {
+                match fit? {
+                    Ok(f) => {
                         tried.push(i);
                         tried_fits.push(f);
+                        tried_scores.push(scores);
                     }
-                    Some(Err(u)) => untried.push(u),
-                    None => {}
+                    Err((u, _)) => untried.push(u),
                 }
             }
             // Frames only is the ladder's foot: without it nothing can be compared.
@@ -1753,18 +1903,13 @@ pub fn calibrate_measured(
                     ModelName::FramesOnly
                 );
             }
+            let scores: Vec<Scores> = (tried_scores.into_iter())
+                .map(|s| s.unwrap_or_else(|| bail!("a tried rung was not cross-validated")))
+                .collect::<Result<_>>()?;
             let tried_rungs: Vec<ModelName> = tried.iter().map(|&i| rungs[i]).collect();
             let rungs = &tried_rungs;
             let ladder_levels: Vec<usize> = tried.iter().map(|&i| ladder_levels[i]).collect();
-            let fits = tried_fits;
-            // Then each cross-validated from its estimate; rungs in parallel.
-            let scores: Vec<Scores> = (rungs.par_iter().zip(&fits))
-                .map(|(&r, f)| {
-                    let warm = Warm::of(&f.1);
-                    cross_validate(r, robot, &framed, &warm, train, cfg, weights, &ranges)
-                })
-                .collect::<Result<_>>()?;
-            let mut fits = fits;
+            let mut fits = tried_fits;
             let rms = |h: &HeldOut| {
                 (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt()
             };
@@ -3037,7 +3182,7 @@ pub fn sidecar_toml(frames: &[FrameReport], leftover: &[hapcal_io::CalibratedVal
 
 #[cfg(test)]
 mod tests {
-    use super::{Line, RangeVerdict};
+    use super::{Line, RangeVerdict, rung_chains};
 
     #[test]
     fn a_line_through_exact_points_predicts_them_with_no_error() {
@@ -3069,6 +3214,23 @@ mod tests {
             (far / near - (1.0f64 + 5.0 / 0.4).sqrt()).abs() < 1e-9,
             "{near} {far}"
         );
+    }
+
+    #[test]
+    fn nested_rungs_are_fitted_in_the_chain_of_the_rung_they_start_from() {
+        // 0 frames only, 1 geometric, 2 isotropic, 3 per axis (from 2), 4 harmonic.
+        let parent = [None, None, None, Some(2), None];
+        assert_eq!(
+            rung_chains(&parent),
+            vec![vec![2, 3], vec![0], vec![1], vec![4]]
+        );
+        // Every rung exactly once, after its parent.
+        let parent = [None, Some(0), Some(1), Some(0), None];
+        let chains = rung_chains(&parent);
+        assert_eq!(chains, vec![vec![0, 1, 3, 2], vec![4]]);
+        let mut all: Vec<usize> = chains.concat();
+        all.sort_unstable();
+        assert_eq!(all, [0, 1, 2, 3, 4]);
     }
 
     #[test]

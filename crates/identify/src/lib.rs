@@ -84,7 +84,7 @@ pub use design::{
     i_optimal_weights, select_poses,
 };
 pub use error::Error;
-pub use lm::{Fit, LmConfig, Termination, levenberg_marquardt};
+pub use lm::{Fit, LmConfig, Termination, levenberg_marquardt, levenberg_marquardt_from};
 pub use observability::{
     Observability, observability, observability_from_singular_values, scale_by_priors,
 };

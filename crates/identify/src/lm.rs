@@ -295,6 +295,53 @@ pub fn levenberg_marquardt(
     Ok(levenberg_marquardt_at(p, x0, free, cfg, r, jac))
 }
 
+/// [`levenberg_marquardt`] from the residuals `r0` (length `m`) and the Jacobian `jac0`
+/// (`m × n`) of `p` at `x0`, which the caller evaluated (e.g. the rows of one evaluation on
+/// every row of a larger problem, of which `p` keeps a subset: the cross-validation folds of
+/// one model share the Jacobian at their common start). The iterates are those of
+/// [`levenberg_marquardt`] when `r0` and `jac0` are what `p` evaluates at `x0`.
+///
+/// # Errors
+/// As [`levenberg_marquardt`] (inputs, [`Error::NonFiniteResidual`] and
+/// [`Error::NonFiniteJacobian`] for the given `r0` and `jac0`).
+///
+/// # Panics
+/// If `r0` or `jac0` does not have `p`'s shapes (`m`, `m × n`).
+#[track_caller]
+pub fn levenberg_marquardt_from(
+    p: &impl Problem,
+    x0: Col<f64>,
+    free: &[usize],
+    cfg: &LmConfig,
+    r0: Col<f64>,
+    jac0: Mat<f64>,
+) -> Result<Fit, Error> {
+    let (m, n) = (p.n_residuals(), p.layout().len());
+    assert_eq!(r0.nrows(), m, "residuals at x0: length");
+    assert!(
+        jac0.nrows() == m && jac0.ncols() == n,
+        "jacobian at x0: {} × {}, expected {m} × {n}",
+        jac0.nrows(),
+        jac0.ncols()
+    );
+    check_inputs(p, x0.as_ref(), free, cfg)?;
+    if let Some(index) = (0..m).find(|&i| !r0[i].is_finite()) {
+        return Err(Error::NonFiniteResidual { index });
+    }
+    if free.is_empty() {
+        return Ok(levenberg_marquardt_at(
+            p,
+            x0,
+            free,
+            cfg,
+            r0,
+            Mat::zeros(0, 0),
+        ));
+    }
+    check_jacobian_finite(jac0.as_ref(), p.layout())?;
+    Ok(levenberg_marquardt_at(p, x0, free, cfg, r0, jac0))
+}
+
 /// [`levenberg_marquardt`] from residuals `r` and Jacobian `jac` already evaluated (and found
 /// finite) at `x0`, with the inputs already checked ([`check_inputs`]); `jac` may be empty
 /// when `free` is. Counts the evaluations at `x0` as the caller's (1 each).

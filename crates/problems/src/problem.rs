@@ -1060,13 +1060,16 @@ impl CalibrationProblem {
 
     /// Residuals and, if `jac` is given, the Jacobian; one pass shares the forward kinematics.
     fn eval(&self, x: ColRef<'_, f64>, out: Option<ColMut<'_, f64>>, jac: Option<MatMut<'_, f64>>) {
-        if self.blocks.len() < 4 {
+        if self.blocks.len() < 2 {
             self.eval_rows(x, 0..self.obs.rows.len(), true, out, jac);
             return;
         }
-        // Large problems: the row blocks in parallel (rayon), each on its own rows of `out`
-        // and `jac`. Every row is computed the same way whatever the thread, so the result
-        // does not depend on the number of threads.
+        // More than one block: the row blocks in parallel (rayon), each on its own rows of
+        // `out` and `jac`. Every row is computed the same way whatever the thread, so the
+        // result does not depend on the number of threads. From two blocks on (512 rows), not
+        // four: a fit of a few hundred rows that runs alone (the measured ladder's per-axis
+        // transversal fit, on its critical path) then takes an idle core, and where every core
+        // is busy the blocks run on the calling thread for a few microseconds of rayon.
         let mut tasks = Vec::with_capacity(self.blocks.len());
         let (mut out, mut jac) = (out, jac);
         for (b, (rows, res)) in self.blocks.iter().enumerate() {

@@ -378,3 +378,35 @@ fn rank_deficient_triangle_is_pivoted() {
     let (u, _) = lmpar(&qr, f64::INFINITY, 0.0);
     assert!(u[n - 2..].iter().all(|&v| v == 0.0), "{u:?}");
 }
+
+#[test]
+fn a_fit_from_given_residuals_and_jacobian_has_the_iterates_of_the_fit_that_evaluates_them() {
+    let p = rosenbrock();
+    let x0 = col![-1.2, 1.0];
+    let (mut r0, mut jac0) = (Col::<f64>::zeros(2), Mat::<f64>::zeros(2, 2));
+    p.residuals_and_jacobian(x0.as_ref(), r0.as_mut(), jac0.as_mut())
+        .expect("evaluable");
+    let cfg = LmConfig::default();
+    let plain = levenberg_marquardt(&p, x0.clone(), &[0, 1], &cfg).expect("valid input");
+    let given = levenberg_marquardt_from(&p, x0.clone(), &[0, 1], &cfg, r0.clone(), jac0.clone())
+        .expect("valid input");
+    assert_eq!(plain.x, given.x);
+    assert_eq!(plain.n_iterations, given.n_iterations);
+    assert_eq!(plain.n_evaluations, given.n_evaluations);
+    assert_eq!(plain.termination, given.termination);
+    // A start the caller got wrong is refused as the solver's own evaluation would be.
+    r0[1] = f64::NAN;
+    let err = levenberg_marquardt_from(&p, x0.clone(), &[0, 1], &cfg, r0, jac0.clone())
+        .expect_err("a NaN residual");
+    assert!(
+        matches!(err, Error::NonFiniteResidual { index: 1 }),
+        "{err:?}"
+    );
+    jac0[(0, 1)] = f64::INFINITY;
+    let err = levenberg_marquardt_from(&p, x0, &[0, 1], &cfg, Col::zeros(2), jac0)
+        .expect_err("an infinite Jacobian entry");
+    assert!(
+        matches!(&err, Error::NonFiniteJacobian { row: 0, name } if name == "x2"),
+        "{err:?}"
+    );
+}
