@@ -233,16 +233,17 @@ struct Frames {
 /// judges it no better than it is.
 const POLISH_STEPS: usize = 8;
 
-/// [`Frames::polish`] stops when a step lowers the cost by less than this share of it: the
-/// residual then moves in its ninth digit, where the judge compares residuals by factors.
+/// [`Frames::polish`] stops when a step lowers the cost by less than this share of it: the RMS
+/// residual then moves by under 10⁻⁶ of itself, where the judge compares residuals by factors.
 const POLISH_TOLERANCE: f64 = 1e-6;
 
 impl Frames {
     /// Residual rows of one sample: the position error `R₀·(R_tip·m_k + p_tip) + t − p_meas`
     /// (m) and, with a measured rotation, `√(2w)·sin θ·n` for the rotation `θ` about `n` from
     /// the model to the measurement, the axial vector of the antisymmetric part of
-    /// `R_meas·R_modelᵀ` (w [`ORIENTATION_WEIGHT_M2`]: its square is the block iterations'
-    /// `w·‖ΔR‖²_F = 4w·(1 − cos θ)` to fourth order in `θ`, without a trigonometric call).
+    /// `R_meas·R_modelᵀ` (w [`ORIENTATION_WEIGHT_M2`]: its square `2w·sin²θ` is the block
+    /// iterations' `w·‖ΔR‖²_F = 4w·(1 − cos θ)` to second order in `θ`, without a
+    /// trigonometric call).
     fn residual(&self, s: &Sample) -> (Vector3<f64>, Option<Vector3<f64>>) {
         let u = s.r_tip * self.offsets[s.marker] + s.p_tip;
         let e = self.r0 * u + self.t - s.measured;
@@ -254,6 +255,7 @@ impl Frames {
         (e, rot)
     }
 
+    /// The sum of the squared [`Frames::residual`] rows over `samples`, m².
     fn cost(&self, samples: &[Sample]) -> f64 {
         (samples.iter())
             .map(|s| {
