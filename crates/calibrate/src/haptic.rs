@@ -1403,17 +1403,59 @@ pub fn calibrate_logs(
             tried.push(m);
             tried_levels.push(level);
         }
-        let (rungs, levels) = (tried, tried_levels);
         let lengths: Vec<usize> = train.iter().map(|log| log.rows.len()).collect();
-        let held = cross_validate_rungs(&haptic, &rows, &lengths, &fits, plan.folds)?;
-        let (choice, reports) = crate::fit::choose(&rungs, &levels, &held);
-        cross_validation = reports;
+        // A rung that a cross-validation fold's training rows cannot fit (few rows: the fold
+        // keeps four fifths of them) cannot be judged: the ladder stops below it and says so;
+        // when not even the first rung can be judged, it is taken without cross-validation.
+        let mut held = Vec::new();
+        let mut unjudged = None;
+        for fit in &fits {
+            match cross_validate_rungs(
+                &haptic,
+                &rows,
+                &lengths,
+                std::slice::from_ref(fit),
+                plan.folds,
+            ) {
+                Ok(h) => held.extend(h),
+                Err(e) => {
+                    let why = format!(
+                        "{e:#} ({} training rows, {}-fold cross-validation)",
+                        rows.len(),
+                        plan.folds
+                    );
+                    if held.is_empty() {
+                        unjudged = Some(why);
+                    } else {
+                        warnings.push(format!(
+                            "the {} model was not tried: {why}; the ladder stops below it",
+                            fit.model()
+                        ));
+                    }
+                    break;
+                }
+            }
+        }
+        let judged = held.len();
+        let (rungs, levels) = (&tried[..judged], &tried_levels[..judged]);
+        let choice = if let Some(why) = unjudged {
+            let first = *tried.first().context("no model could be fitted")?;
+            warnings.push(format!(
+                "cross-validation cannot judge any model on these rows: {why}; the {first} \
+                 model is taken without it (record more rows for the ladder to compare models)"
+            ));
+            first
+        } else {
+            let (choice, reports) = crate::fit::choose(rungs, levels, &held);
+            cross_validation = reports;
+            choice
+        };
         let n_copies = (train.iter())
             .map(|log| crate::fit::originals(log.rows.iter().map(LogRow::repeat_key)))
             .map(|o| crate::fit::n_copies(&o))
             .sum();
         warnings.extend(crate::fit::copies_warning(n_copies));
-        if choice == ModelName::Geometric && has_ext {
+        if choice == ModelName::Geometric && has_ext && rungs.contains(&ModelName::Transmissions) {
             warnings.push(
                 "the transmissions did not beat the kinematic deviations alone on held-out \
                  training rows: they are not identified (ask for --model transmissions to fit \

@@ -178,3 +178,35 @@ fn a_log_recorded_twice_is_cross_validated_as_the_log_once() {
     );
     assert!(a.warnings.iter().all(|w| !w.contains("repeat earlier")));
 }
+
+#[test]
+fn few_rows_stop_the_ladder_at_the_highest_rung_its_folds_can_fit() {
+    // The reference device's geometric model keeps 27 parameters and the compliance model 34:
+    // on 40 rows a 5-fold fold trains on 32 (too few for the compliance model), on 30 rows on
+    // 24 (too few for any).
+    use ModelName as M;
+    let report = auto(log(53, 40, &[]));
+    assert_eq!(rungs(&report), [M::Geometric, M::Transmissions]);
+    assert_ne!(report.model, M::Compliance);
+    assert!(
+        (report.warnings.iter())
+            .any(|w| w.starts_with("the compliance model was not tried")
+                && w.contains("the ladder stops below it")),
+        "{:#?}",
+        report.warnings
+    );
+    let report = auto(log(54, 30, &[]));
+    assert!(report.cross_validation.is_empty());
+    assert_eq!(report.model, M::Geometric);
+    assert!(
+        (report.warnings.iter())
+            .any(|w| w.starts_with("cross-validation cannot judge any model on these rows")),
+        "{:#?}",
+        report.warnings
+    );
+    assert!(
+        !(report.warnings.iter()).any(|w| w.contains("transmissions did not beat")),
+        "{:#?}",
+        report.warnings
+    );
+}
