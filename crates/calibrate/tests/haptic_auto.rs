@@ -189,9 +189,8 @@ fn few_rows_stop_the_ladder_at_the_highest_rung_its_folds_can_fit() {
     assert_eq!(rungs(&report), [M::Geometric, M::Transmissions]);
     assert_ne!(report.model, M::Compliance);
     assert!(
-        (report.warnings.iter())
-            .any(|w| w.starts_with("the compliance model was not tried")
-                && w.contains("the ladder stops below it")),
+        (report.warnings.iter()).any(|w| w.starts_with("the compliance model was not tried")
+            && w.contains("the ladder stops below it")),
         "{:#?}",
         report.warnings
     );
