@@ -206,6 +206,7 @@ struct ClosedForm {
 }
 
 /// One marker sample of [`closed_form_fit`]: the nominal tip pose and the measurement.
+#[derive(Clone, Copy)]
 struct Sample {
     /// The marker's index.
     marker: usize,
@@ -238,12 +239,91 @@ const POLISH_STEPS: usize = 8;
 const POLISH_TOLERANCE: f64 = 1e-6;
 
 impl Frames {
+    /// The block iterations' start from identity frames: the instrument frame by Kabsch with
+    /// the orientations' term, then each marker's offset (the mean of the back-projected
+    /// measurements: `R₀·R_tip` is orthogonal) and rotation (the nearest rotation to the sum
+    /// of `(R₀·R_tip)ᵀ·R_meas`), each step lowering `Σ|e_p|² + w·Σ‖ΔR‖²_F`; at most
+    /// [`POLISHED_ITERATIONS`], fewer when the frames stop moving. The first iteration's
+    /// rotations by SVD (a global answer from any start), the next ones by ascent from the
+    /// last (the frames move little from one iteration to the next).
+    fn start(samples: &[Sample], n_markers: usize) -> Frames {
+        use nalgebra::Matrix3;
+        let mut offsets = vec![Vector3::zeros(); n_markers];
+        let mut marker_rot = vec![Matrix3::identity(); n_markers];
+        let (mut r0, mut t) = (Matrix3::identity(), Vector3::zeros());
+        let mut first = true;
+        for _ in 0..POLISHED_ITERATIONS {
+            let (r0_before, t_before) = (r0, t);
+            let (offsets_before, marker_rot_before) = (offsets.clone(), marker_rot.clone());
+            // Instrument frame.
+            let a: Vec<Vector3<f64>> = (samples.iter())
+                .map(|s| s.r_tip * offsets[s.marker] + s.p_tip)
+                .collect();
+            let n = a.len() as f64;
+            let ca = a.iter().sum::<Vector3<f64>>() / n;
+            let cb = samples.iter().map(|s| s.measured).sum::<Vector3<f64>>() / n;
+            let mut h = Matrix3::zeros();
+            for (ai, s) in a.iter().zip(samples) {
+                h += (s.measured - cb) * (ai - ca).transpose();
+                if let Some(meas) = &s.rotation {
+                    let model = s.r_tip * marker_rot[s.marker];
+                    h += ORIENTATION_WEIGHT_M2 * meas * model.transpose();
+                }
+            }
+            r0 = if first {
+                nearest_rotation(&h)
+            } else {
+                nearest_rotation_from(&h, &r0)
+            };
+            t = cb - r0 * ca;
+            // Marker frames.
+            let mut sum_m = vec![(Vector3::zeros(), 0usize); n_markers];
+            let mut sum_r = vec![Matrix3::zeros(); n_markers];
+            for s in samples {
+                let rt = r0 * s.r_tip;
+                let back = rt.transpose() * (s.measured - t - r0 * s.p_tip);
+                sum_m[s.marker].0 += back;
+                sum_m[s.marker].1 += 1;
+                if let Some(meas) = &s.rotation {
+                    sum_r[s.marker] += rt.transpose() * meas;
+                }
+            }
+            for k in 0..n_markers {
+                if sum_m[k].1 > 0 {
+                    offsets[k] = sum_m[k].0 / sum_m[k].1 as f64;
+                }
+                if sum_r[k] != Matrix3::zeros() {
+                    marker_rot[k] = if first {
+                        nearest_rotation(&sum_r[k])
+                    } else {
+                        nearest_rotation_from(&sum_r[k], &marker_rot[k])
+                    };
+                }
+            }
+            first = false;
+            // Converged: the frames no longer move (a picometre, 10⁻¹² rad).
+            let moved = (r0 - r0_before).amax() + (t - t_before).amax();
+            let moved_markers = (offsets.iter().zip(&offsets_before))
+                .map(|(a, b)| (a - b).amax())
+                .chain((marker_rot.iter().zip(&marker_rot_before)).map(|(a, b)| (a - b).amax()))
+                .fold(0.0, f64::max);
+            if moved + moved_markers < 1e-12 {
+                break;
+            }
+        }
+        Frames {
+            r0,
+            t,
+            offsets,
+            marker_rot,
+        }
+    }
+
     /// Residual rows of one sample: the position error `R₀·(R_tip·m_k + p_tip) + t − p_meas`
-    /// (m) and, with a measured rotation, `√(2w)·sin θ·n` for the rotation `θ` about `n` from
-    /// the model to the measurement, the axial vector of the antisymmetric part of
-    /// `R_meas·R_modelᵀ` (w [`ORIENTATION_WEIGHT_M2`]: its square `2w·sin²θ` is the block
-    /// iterations' `w·‖ΔR‖²_F = 4w·(1 − cos θ)` to second order in `θ`, without a
-    /// trigonometric call).
+    /// (m) and, with a measured rotation, `√(2w)·θ·n` for the rotation `θ` about `n` from the
+    /// model to the measurement (the logarithm of `R_meas·R_modelᵀ`; w
+    /// [`ORIENTATION_WEIGHT_M2`]: its square `2w·θ²` is the block iterations'
+    /// `w·‖ΔR‖²_F = 4w·(1 − cos θ)` to second order in `θ`).
     fn residual(&self, s: &Sample) -> (Vector3<f64>, Option<Vector3<f64>>) {
         let u = s.r_tip * self.offsets[s.marker] + s.p_tip;
         let e = self.r0 * u + self.t - s.measured;
@@ -381,7 +461,6 @@ fn closed_form_fit(
     marker_tips: &[usize],
     fit_rows: Option<&[bool]>,
 ) -> Option<ClosedForm> {
-    use nalgebra::Matrix3;
     if tables.iter().any(|t| t.has_distance) {
         return None;
     }
@@ -407,110 +486,29 @@ fn closed_form_fit(
                     .to_rotation_matrix()
                     .into_inner()
             });
-            samples.push((m.marker, pose, Vector3::from(m.position_m), rotation));
+            samples.push(Sample {
+                marker: m.marker,
+                r_tip: pose.rotation.to_rotation_matrix().into_inner(),
+                p_tip: pose.translation.vector,
+                measured: Vector3::from(m.position_m),
+                rotation,
+            });
         }
     }
     if samples.len() < 3 {
         return None;
     }
-    let n_markers = samples.iter().map(|s| s.0 + 1).max().unwrap_or(0);
-    let mut offsets = vec![Vector3::zeros(); n_markers];
-    let mut marker_rot = vec![Matrix3::identity(); n_markers];
-    let (mut r0, mut t) = (Matrix3::identity(), Vector3::zeros());
+    let n_markers = samples.iter().map(|s| s.marker + 1).max().unwrap_or(0);
     // The frames from the rows `fit_rows` keeps (every row without it).
-    let fitted: Vec<_> = (samples.iter().zip(&sample_rows))
+    let fitted: Vec<Sample> = (samples.iter().zip(&sample_rows))
         .filter(|(_, r)| fit_rows.is_none_or(|keep| keep.get(**r) == Some(&true)))
         .map(|(s, _)| *s)
         .collect();
     if fitted.len() < 3 {
         return None;
     }
-    // The tip rotations as matrices once (the loop below applies each of them 3 times per
-    // iteration).
-    let fitted: Vec<_> = (fitted.iter())
-        .map(|&(k, pose, meas, rot)| {
-            let r = pose.rotation.to_rotation_matrix().into_inner();
-            (k, r, pose.translation.vector, meas, rot)
-        })
-        .collect();
-    // The first iteration's rotations by SVD (a global answer from any start), the next ones
-    // by ascent from the last (the frames move little from one iteration to the next).
-    let mut first = true;
-    for _ in 0..POLISHED_ITERATIONS {
-        let (r0_before, t_before) = (r0, t);
-        let (offsets_before, marker_rot_before) = (offsets.clone(), marker_rot.clone());
-        // Instrument frame.
-        let a: Vec<Vector3<f64>> = (fitted.iter())
-            .map(|(k, r, p, _, _)| r * offsets[*k] + p)
-            .collect();
-        let n = a.len() as f64;
-        let ca = a.iter().sum::<Vector3<f64>>() / n;
-        let cb = fitted.iter().map(|s| s.3).sum::<Vector3<f64>>() / n;
-        let mut h = Matrix3::zeros();
-        for (ai, s) in a.iter().zip(&fitted) {
-            h += (s.3 - cb) * (ai - ca).transpose();
-            if let Some(meas) = &s.4 {
-                let model = s.1 * marker_rot[s.0];
-                h += ORIENTATION_WEIGHT_M2 * meas * model.transpose();
-            }
-        }
-        r0 = if first {
-            nearest_rotation(&h)
-        } else {
-            nearest_rotation_from(&h, &r0)
-        };
-        t = cb - r0 * ca;
-        // Marker frames.
-        let mut sum_m = vec![(Vector3::zeros(), 0usize); n_markers];
-        let mut sum_r = vec![Matrix3::zeros(); n_markers];
-        for s in &fitted {
-            let rt = r0 * s.1;
-            let back = rt.transpose() * (s.3 - t - r0 * s.2);
-            sum_m[s.0].0 += back;
-            sum_m[s.0].1 += 1;
-            if let Some(meas) = &s.4 {
-                sum_r[s.0] += rt.transpose() * meas;
-            }
-        }
-        for k in 0..n_markers {
-            if sum_m[k].1 > 0 {
-                offsets[k] = sum_m[k].0 / sum_m[k].1 as f64;
-            }
-            if sum_r[k] != Matrix3::zeros() {
-                marker_rot[k] = if first {
-                    nearest_rotation(&sum_r[k])
-                } else {
-                    nearest_rotation_from(&sum_r[k], &marker_rot[k])
-                };
-            }
-        }
-        first = false;
-        // Converged: the frames no longer move (a picometre, 10⁻¹² rad).
-        let moved = (r0 - r0_before).amax() + (t - t_before).amax();
-        let moved_markers = (offsets.iter().zip(&offsets_before))
-            .map(|(a, b)| (a - b).amax())
-            .chain((marker_rot.iter().zip(&marker_rot_before)).map(|(a, b)| (a - b).amax()))
-            .fold(0.0, f64::max);
-        if moved + moved_markers < 1e-12 {
-            break;
-        }
-    }
-    let mut frames = Frames {
-        r0,
-        t,
-        offsets,
-        marker_rot,
-    };
-    let samples_fitted: Vec<Sample> = (fitted.iter())
-        .map(|&(k, r, p, b, meas)| Sample {
-            marker: k,
-            r_tip: r,
-            p_tip: p,
-            measured: b,
-            rotation: meas,
-        })
-        .collect();
-    frames.polish(&samples_fitted);
+    let mut frames = Frames::start(&fitted, n_markers);
+    frames.polish(&fitted);
     let Frames {
         r0,
         t,
@@ -520,12 +518,12 @@ fn closed_form_fit(
     let (mut len_sq, mut rot_sq, mut n_rot) = (0.0, 0.0, 0usize);
     let mut row_sq = vec![0.0; rows.len()];
     for (s, &r) in samples.iter().zip(&sample_rows) {
-        let p = r0 * (s.1 * nalgebra::Point3::from(offsets[s.0])).coords + t;
-        let e = (p - s.2).norm_squared();
+        let p = r0 * (s.r_tip * offsets[s.marker] + s.p_tip) + t;
+        let e = (p - s.measured).norm_squared();
         len_sq += e;
         row_sq[r] += e;
-        if let Some(meas) = &s.3 {
-            let model = r0 * s.1.rotation.to_rotation_matrix().into_inner() * marker_rot[s.0];
+        if let Some(meas) = &s.rotation {
+            let model = r0 * s.r_tip * marker_rot[s.marker];
             let rel = nalgebra::Rotation3::from_matrix_unchecked(model.transpose() * meas);
             let angle_sq = rel.angle().powi(2);
             rot_sq += angle_sq;
