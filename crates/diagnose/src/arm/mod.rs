@@ -22,7 +22,10 @@
 //! `max_effects`. Once they stop, each named effect is checked beside the others (`revise`,
 //! stepwise selection with backward elimination): one the others do not need, or whose
 //! alternative predicts better, is left out and the rounds run again; a swap stands only if the
-//! rounds then name the alternative.
+//! rounds then name the alternative. A joint compliance named with a transversal compliance
+//! beside it is last checked the other way round: when the transversal compliance (on the
+//! joint compliance's loads) and the other effects predict as well without it, the verdict
+//! names the transversal compliance alone.
 //!
 //! Errors are lengths: the 3-D error of a position, or the error of a distance (a distance
 //! log); the RMS figures below are of those.
@@ -134,7 +137,9 @@ pub const ARM_LIBRARY: [Effect; 9] = [
 /// candidate holding both would be named for the joint compliance alone (its columns carry
 /// most of the signal), with 33 parameters where 16 explain it, and would fix the torque model
 /// of the joint compliance to its own instead of leaving it to the joint compliance's test
-/// ([`ArmStep::alike`]).
+/// ([`ArmStep::alike`]). Links that bend sideways without any compliance about the joint
+/// axes are still named: the joint compliance is named first (the tilts' signal projects on
+/// its columns), then left out of the verdict when the tilts predict as well without it.
 pub const ARM_BESIDE_COMPLIANCE: [Effect; 2] =
     [Effect::TransversalCompliance, Effect::TransversalAxes];
 
@@ -215,9 +220,13 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
     }
     let b = baseline::Baseline::new(baseline, cfg)?;
     let where_ = residual_map::residual_map(&b.ctx, &b.rows, &b.held, b.floor.var, cfg);
-    let which::Selection { mut run, revisions } = which::select(&b, cfg);
+    let which::Selection {
+        mut run,
+        mut revisions,
+        not_named,
+    } = which::select(&b, cfg);
     which::alike(&b, &mut run, cfg);
-    let far = how_far::how_far(
+    let mut far = how_far::how_far(
         &b,
         &run.base,
         &mut run.steps,
@@ -225,6 +234,17 @@ pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<Arm
         (&run.p_after, &run.in_sample_share),
         cfg,
     );
+    // The joint compliance a transversal compliance does not need leaves the verdict, while
+    // the transversal compliance stands in it.
+    if let Some((left, note)) = not_named {
+        let kept: Vec<Effect> = (far.verdict.effects().iter().copied())
+            .filter(|&e| e != left)
+            .collect();
+        if kept.iter().any(|e| e.is_transversal()) {
+            far.verdict = crate::Verdict::of(&kept);
+            revisions.push(note);
+        }
+    }
     let ladder = ladder::ladder(&b, &run.effect_cols, cfg)?;
     let test_rms_final = match run.effect_cols.is_empty() {
         true => ladder.geometric_test_rms.clone(),

@@ -134,6 +134,60 @@ pub(super) fn revise(
     None
 }
 
+/// The joint compliance a transversal compliance does not need, once the revisions stand
+/// (`named` and `full` as in [`revise`]): when a joint compliance and a transversal compliance
+/// are both named and, without the joint compliance's columns (the transversal compliance
+/// kept on its loads), the other named effects predict as well — the joint compliance not
+/// better by [`HELDOUT_SIGNIFICANCE_Z`] blocked standard errors, the entry margin — the data
+/// show the links bending sideways and no compliance about the joint axes. Returns the joint
+/// compliance and the note that says why; the rounds are not run again, since the transversal
+/// compliance is tested on the joint compliance's loads ([`super::ARM_BESIDE_COMPLIANCE`]).
+///
+/// The verdict then names the transversal compliance alone; the calibration still fits it on
+/// top of a joint compliance (`transversal-compliance`), whose estimates the data leave near
+/// zero.
+pub(super) fn compliance_not_needed(
+    b: &Baseline<'_>,
+    named: &[Named],
+    full: &HeldOut,
+    cfg: &ArmConfig,
+) -> Option<(Effect, String)> {
+    let k = named.iter().position(|(e, _, _)| e.is_joint_compliance())?;
+    let transversal = named.iter().find(|(e, _, _)| e.is_transversal())?.0;
+    let others: Vec<&DMatrix<f64>> = (named.iter().enumerate())
+        .filter(|(i, _)| *i != k)
+        .map(|(_, (_, c, _))| c)
+        .collect();
+    let without = cross_validate(
+        &beside(&b.jb, &others),
+        &b.r,
+        &b.rows,
+        &b.folds,
+        cfg.folds,
+        b.floor.var,
+    );
+    let (m, se, _) = blocked_mean_difference(&without.score, &full.score, &b.block);
+    if !(m <= HELDOUT_SIGNIFICANCE_Z * se || m.is_nan()) {
+        return None;
+    }
+    let compliance = named[k].0;
+    Some((
+        compliance,
+        format!(
+            "{} not named: beside {} (on its loads) it improves the held-out error by {:.1} \
+             standard errors, not the {HELDOUT_SIGNIFICANCE_Z} required; the calibration's \
+             {} model still holds a joint compliance, which these data leave near zero",
+            compliance.name(),
+            transversal.name(),
+            m / se,
+            match transversal {
+                Effect::TransversalAxes => "transversal-axes",
+                _ => "transversal-compliance",
+            }
+        ),
+    ))
+}
+
 /// The held-out errors of the named effects (`named`, as in [`revise`]) with the `k`-th
 /// replaced by `alt`, and the number of `alt`'s columns visible beside the others; `None` when
 /// `alt` cannot be built on these data or none of its columns is visible. A transversal

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use super::baseline::{Baseline, gap_p_value};
 use super::columns::effect_columns;
 use super::cv::{HeldOut, beside, cross_validate, one_sided_p, visible_columns};
-use super::revise::{Named, Revision, revise, swapped};
+use super::revise::{Named, Revision, compliance_not_needed, revise, swapped};
 use super::{
     ArmCandidate, ArmConfig, ArmStep, CONFUSABLE_COSINE, EffectParam, HELDOUT_SIGNIFICANCE_Z,
     arm_candidates,
@@ -39,10 +39,13 @@ pub(super) struct Run {
     pub(super) in_sample_share: Vec<f64>,
 }
 
-/// The selection stage's output: the run that stands, and the notes of the revisions.
+/// The selection stage's output: the run that stands, the notes of the revisions, and the
+/// named joint compliance a named transversal compliance does not need
+/// ([`compliance_not_needed`]), which the verdict leaves out.
 pub(super) struct Selection {
     pub(super) run: Run,
     pub(super) revisions: Vec<String>,
+    pub(super) not_named: Option<(Effect, String)>,
 }
 
 /// The model a round tests its candidates beside: the baseline and the effects named before.
@@ -80,10 +83,7 @@ pub(super) fn select(b: &Baseline<'_>, cfg: &ArmConfig) -> Selection {
                 Effect::name(left_out),
                 Effect::name(alt)
             ));
-            return Selection {
-                run: saved,
-                revisions,
-            };
+            return finish(b, cfg, saved, revisions);
         }
         match revise(b, &run.effect_cols, &run.base, cfg, &excluded) {
             Some(Revision {
@@ -97,8 +97,19 @@ pub(super) fn select(b: &Baseline<'_>, cfg: &ArmConfig) -> Selection {
                 excluded.push(leave_out);
                 revisions.push(note);
             }
-            None => return Selection { run, revisions },
+            None => return finish(b, cfg, run, revisions),
         }
+    }
+}
+
+/// The selection of `run` once its revisions stand: the joint compliance a named transversal
+/// compliance does not need, if any ([`compliance_not_needed`]), with its note.
+fn finish(b: &Baseline<'_>, cfg: &ArmConfig, run: Run, revisions: Vec<String>) -> Selection {
+    let not_named = compliance_not_needed(b, &run.effect_cols, &run.base, cfg);
+    Selection {
+        run,
+        revisions,
+        not_named,
     }
 }
 

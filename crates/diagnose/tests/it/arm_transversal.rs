@@ -1,7 +1,8 @@
 //! Transversal compliance in the serial-arm diagnosis, on the simulated two-arm humanoid of
 //! `hapcal-calibrate` (`tests/sim/humanoid.rs`): its columns are the first derivatives of the
 //! calibration's own transversal model, the diagnosis names it beside the joint compliance
-//! when the data hold both, and names nothing on the same robot without compliance.
+//! when the data hold both, alone when the links bend sideways without any compliance about
+//! the joint axes, and names nothing on the same robot without compliance.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 #[path = "../../../calibrate/tests/sim/humanoid.rs"]
@@ -233,6 +234,34 @@ fn humanoid_with_joint_and_transversal_compliance_names_both() {
     for rms in d.test_rms_final_m.iter().chain([&d.heldout_rms_final_m]) {
         assert!(*rms < 1.1 * clean, "{rms} m: {}", summary(&d));
     }
+}
+
+#[test]
+fn humanoid_with_transversal_compliance_alone_names_it_alone() {
+    let robot = sim::humanoid(&["l_hand", "r_hand"]);
+    let mut truth = sim::truth(&robot, TRUTH_SEED);
+    // The same deviations, frames, rows and transversal compliances, stiff about the joint
+    // axes.
+    let layout = truth.problem.layout();
+    for i in 0..layout.len() {
+        if layout.name(i).starts_with("compliance.") {
+            truth.x[i] = 0.0;
+        }
+    }
+    let d = diagnose_humanoid(&robot, &truth);
+    // The joint compliance is named first (the tilts' signal projects on its columns), then
+    // left out of the verdict: beside the tilts it no longer predicts better.
+    assert_eq!(
+        d.verdict,
+        Verdict::of(&[Effect::TransversalCompliance]),
+        "{}",
+        summary(&d)
+    );
+    assert!(
+        (d.notes.iter()).any(|n| n.contains("not named: beside transversal_compliance")),
+        "{}",
+        summary(&d)
+    );
 }
 
 #[test]
