@@ -2,6 +2,7 @@
 //! alternatives (the other torque model, harmonic order or transversal form) beside the others.
 
 use hapcal_calibrate::calibrate::blocked_mean_difference;
+use hapcal_calibrate::model::ModelName;
 use hapcal_contract::Effect;
 use nalgebra::DMatrix;
 
@@ -180,10 +181,9 @@ pub(super) fn compliance_not_needed(
             compliance.name(),
             transversal.name(),
             m / se,
-            match transversal {
-                Effect::TransversalAxes => "transversal-axes",
-                _ => "transversal-compliance",
-            }
+            transversal
+                .model()
+                .unwrap_or(ModelName::TransversalCompliance)
         ),
     ))
 }
