@@ -53,10 +53,6 @@ pub(super) fn revise(
     cfg: &ArmConfig,
     excluded: &[Effect],
 ) -> Option<Revision> {
-    let (r, jb, rows, folds, block) = (&b.r, &b.jb, &b.rows, &b.folds, &b.block);
-    let floor_var = b.floor.var;
-    let with = |parts: &[&DMatrix<f64>]| beside(jb, parts);
-    let held = |a: &DMatrix<f64>| cross_validate(a, r, rows, folds, cfg.folds, floor_var);
     let set = |skip: usize| -> String {
         (named.iter().enumerate())
             .filter(|(i, _)| *i != skip)
@@ -70,17 +66,12 @@ pub(super) fn revise(
         let least = (0..named.len())
             .filter(|&k| !(transversal && named[k].0.is_joint_compliance()))
             .map(|k| {
-                let others: Vec<&DMatrix<f64>> = (named.iter().enumerate())
-                    .filter(|(i, _)| *i != k)
-                    .map(|(_, (_, c, _))| c)
-                    .collect();
-                let without = held(&with(&others));
-                let (m, se, _) = blocked_mean_difference(&without.score, &full.score, block);
+                let (m, se) = gain_beside_others(b, named, full, cfg, k);
                 (k, m, se)
             })
             .min_by(|a, b| (a.1 / a.2).total_cmp(&(b.1 / b.2)));
         if let Some((k, m, se)) = least
-            && (m <= HELDOUT_SIGNIFICANCE_Z * se || m.is_nan())
+            && !needed(m, se)
         {
             let effect = named[k].0;
             return Some(Revision {
@@ -110,7 +101,7 @@ pub(super) fn revise(
             continue;
         };
         // Improvement of the alternative over the named effect.
-        let (m, se, _) = blocked_mean_difference(&full.score, &swapped.score, block);
+        let (m, se, _) = blocked_mean_difference(&full.score, &swapped.score, &b.block);
         let simpler = (n_visible, order(alt)) < (cols.ncols(), order(*effect));
         if m > se || (m >= -se && simpler) {
             return Some(Revision {
@@ -135,6 +126,39 @@ pub(super) fn revise(
     None
 }
 
+/// What the `k`-th named effect (`named` and `full` as in [`revise`]) improves the held-out
+/// error by beside the others, their columns kept as named: the blocked mean difference of the
+/// held-out squared errors without it and with every named effect, and its standard error.
+fn gain_beside_others(
+    b: &Baseline<'_>,
+    named: &[Named],
+    full: &HeldOut,
+    cfg: &ArmConfig,
+    k: usize,
+) -> (f64, f64) {
+    let others: Vec<&DMatrix<f64>> = (named.iter().enumerate())
+        .filter(|(i, _)| *i != k)
+        .map(|(_, (_, c, _))| c)
+        .collect();
+    let without = cross_validate(
+        &beside(&b.jb, &others),
+        &b.r,
+        &b.rows,
+        &b.folds,
+        cfg.folds,
+        b.floor.var,
+    );
+    let (m, se, _) = blocked_mean_difference(&without.score, &full.score, &b.block);
+    (m, se)
+}
+
+/// Whether a held-out gain `m` with standard error `se` ([`gain_beside_others`]) keeps an
+/// effect beside the others: better by the entry margin of [`HELDOUT_SIGNIFICANCE_Z`] blocked
+/// standard errors (a NaN gain does not).
+fn needed(m: f64, se: f64) -> bool {
+    !(m <= HELDOUT_SIGNIFICANCE_Z * se || m.is_nan())
+}
+
 /// The joint compliance a transversal compliance does not need, once the revisions stand
 /// (`named` and `full` as in [`revise`]): when a joint compliance and a transversal compliance
 /// are both named and, without the joint compliance's columns (the transversal compliance
@@ -155,20 +179,8 @@ pub(super) fn compliance_not_needed(
 ) -> Option<(Effect, String)> {
     let k = named.iter().position(|(e, _, _)| e.is_joint_compliance())?;
     let transversal = named.iter().find(|(e, _, _)| e.is_transversal())?.0;
-    let others: Vec<&DMatrix<f64>> = (named.iter().enumerate())
-        .filter(|(i, _)| *i != k)
-        .map(|(_, (_, c, _))| c)
-        .collect();
-    let without = cross_validate(
-        &beside(&b.jb, &others),
-        &b.r,
-        &b.rows,
-        &b.folds,
-        cfg.folds,
-        b.floor.var,
-    );
-    let (m, se, _) = blocked_mean_difference(&without.score, &full.score, &b.block);
-    if !(m <= HELDOUT_SIGNIFICANCE_Z * se || m.is_nan()) {
+    let (m, se) = gain_beside_others(b, named, full, cfg, k);
+    if needed(m, se) {
         return None;
     }
     let compliance = named[k].0;

@@ -192,6 +192,16 @@ fn diagnose_humanoid(robot: &Robot, truth: &sim::Truth) -> ArmDiagnosis {
     diagnose_arm(&baseline, &ArmConfig::default()).unwrap()
 }
 
+/// `truth` with every parameter whose name starts with one of `prefixes` set to zero.
+fn zero_params(truth: &mut sim::Truth, prefixes: &[&str]) {
+    let layout = truth.problem.layout();
+    for i in 0..layout.len() {
+        if prefixes.iter().any(|p| layout.name(i).starts_with(p)) {
+            truth.x[i] = 0.0;
+        }
+    }
+}
+
 /// What a report reads: the verdict, each step's held-out RMS and the candidates' reasons.
 fn summary(d: &ArmDiagnosis) -> String {
     let steps: Vec<String> = (d.steps.iter())
@@ -242,12 +252,7 @@ fn humanoid_with_transversal_compliance_alone_names_it_alone() {
     let mut truth = sim::truth(&robot, TRUTH_SEED);
     // The same deviations, frames, rows and transversal compliances, stiff about the joint
     // axes.
-    let layout = truth.problem.layout();
-    for i in 0..layout.len() {
-        if layout.name(i).starts_with("compliance.") {
-            truth.x[i] = 0.0;
-        }
-    }
+    zero_params(&mut truth, &["compliance."]);
     let d = diagnose_humanoid(&robot, &truth);
     // The joint compliance is named first (the tilts' signal projects on its columns), then
     // left out of the verdict: beside the tilts it no longer predicts better.
@@ -270,13 +275,7 @@ fn humanoid_without_compliance_names_none() {
     let mut truth = sim::truth(&robot, TRUTH_SEED);
     // The same geometric deviations, frames and rows, without the joint and transversal
     // compliances.
-    let layout = truth.problem.layout();
-    for i in 0..layout.len() {
-        let name = layout.name(i);
-        if name.starts_with("compliance.") || name.starts_with("transversal.") {
-            truth.x[i] = 0.0;
-        }
-    }
+    zero_params(&mut truth, &["compliance.", "transversal."]);
     let d = diagnose_humanoid(&robot, &truth);
     assert_eq!(d.verdict, "none", "{}", summary(&d));
 }
