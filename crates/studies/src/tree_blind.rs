@@ -838,6 +838,24 @@ pub fn report_markdown(
          crates/studies/src/tree_blind.rs.\n\n",
         outcomes.len()
     ));
+    setup_section(&mut md, n_rows);
+    targets_section(&mut md, outcomes);
+    by_effect_section(&mut md, outcomes);
+    joint_ranges_section(&mut md, arm_limit_rad);
+    wrong_cases_section(&mut md, outcomes);
+    md
+}
+
+/// The classes of case, in the report's order.
+const CLASSES: [ArmCaseKind; 4] = [
+    ArmCaseKind::None,
+    ArmCaseKind::One,
+    ArmCaseKind::Two,
+    ArmCaseKind::Outside,
+];
+
+/// What each case simulates (`n_rows` configurations) and when its verdict is right.
+fn setup_section(md: &mut String, n_rows: usize) {
     md.push_str(&format!(
         "Each case simulates the two-arm humanoid of fixtures/sim-humanoid (a torso of three \
          revolute joints under a head, two seven-joint arms, an `<inertial>` mass on every \
@@ -870,45 +888,62 @@ pub fn report_markdown(
         SIGMA_M * 1e3,
         TEST_FRACTION * 100.0,
     ));
+}
+
+/// One line of a targets table: the cases `keep` selects, named right and as written, with
+/// the Wilson interval, and whether the 90 % target is met (`target`; `–` without one).
+fn target_line(
+    md: &mut String,
+    outcomes: &[TreeOutcome],
+    name: &str,
+    keep: &dyn Fn(&TreeOutcome) -> bool,
+    target: bool,
+) {
+    let r = tally(outcomes, keep, false);
+    let w = tally(outcomes, keep, true);
+    let (lo, hi) = wilson_95(r);
+    let met = if !target {
+        "–"
+    } else if r.1 > 0 && r.0 as f64 >= 0.9 * r.1 as f64 {
+        "yes"
+    } else {
+        "no"
+    };
+    md.push_str(&format!(
+        "| {name} | {} | {:.0}–{:.0} % | {} | {met} |\n",
+        pct(r),
+        100.0 * lo,
+        100.0 * hi,
+        pct(w)
+    ));
+}
+
+/// The targets per class, then on the cases these data can tell apart, the pipeline errors
+/// and the median time per case.
+fn targets_section(md: &mut String, outcomes: &[TreeOutcome]) {
     md.push_str(
         "## Targets\n\n| class | right | 95 % interval | as written | target ≥ 90 % met |\n\
          |---|---|---|---|---|\n",
     );
-    let line = |md: &mut String, name: &str, keep: &dyn Fn(&TreeOutcome) -> bool, target: bool| {
-        let r = tally(outcomes, keep, false);
-        let w = tally(outcomes, keep, true);
-        let (lo, hi) = wilson_95(r);
-        let met = if !target {
-            "–"
-        } else if r.1 > 0 && r.0 as f64 >= 0.9 * r.1 as f64 {
-            "yes"
-        } else {
-            "no"
-        };
-        md.push_str(&format!(
-            "| {name} | {} | {:.0}–{:.0} % | {} | {met} |\n",
-            pct(r),
-            100.0 * lo,
-            100.0 * hi,
-            pct(w)
-        ));
-    };
-    for kind in [
-        ArmCaseKind::None,
-        ArmCaseKind::One,
-        ArmCaseKind::Two,
-        ArmCaseKind::Outside,
-    ] {
-        line(&mut md, class_name(kind), &|o| o.case.kind == kind, true);
+    for kind in CLASSES {
+        target_line(
+            md,
+            outcomes,
+            class_name(kind),
+            &|o| o.case.kind == kind,
+            true,
+        );
     }
-    line(
-        &mut md,
+    target_line(
+        md,
+        outcomes,
         "two: joint + transversal compliance",
         &|o| o.case.kind == ArmCaseKind::Two && o.case.is_compliance_pair(),
         false,
     );
-    line(
-        &mut md,
+    target_line(
+        md,
+        outcomes,
         "two: other pairs",
         &|o| o.case.kind == ArmCaseKind::Two && !o.case.is_compliance_pair(),
         false,
@@ -917,25 +952,23 @@ pub fn report_markdown(
         "\n### The cases these data can tell apart\n\nLeft out: the cases whose injected effects \
          the data cannot tell from the library's others over the arms' range, for a reason \
          measured without the diagnosis (`TreeCase::confounded`, the shares under Joint \
-         ranges): a third harmonic, a gear ratio beside a harmonic. Their verdicts are in the tables below.\n\n\
+         ranges): a third harmonic, a gear ratio beside a harmonic. Their verdicts are in the \
+         tables below.\n\n\
          | class | right | 95 % interval | as written | target ≥ 90 % met |\n|---|---|---|---|---|\n",
     );
-    for kind in [
-        ArmCaseKind::None,
-        ArmCaseKind::One,
-        ArmCaseKind::Two,
-        ArmCaseKind::Outside,
-    ] {
-        line(
-            &mut md,
+    for kind in CLASSES {
+        target_line(
+            md,
+            outcomes,
             class_name(kind),
             &|o| o.case.kind == kind && o.case.confounded().is_none(),
             true,
         );
     }
     for reason in CONFOUNDED {
-        line(
-            &mut md,
+        target_line(
+            md,
+            outcomes,
             &format!("left out: {reason}"),
             &|o| o.case.confounded() == Some(reason),
             false,
@@ -951,6 +984,10 @@ pub fn report_markdown(
          time per case: {:.1} s (both cores shared by the cases).\n",
         seconds.get(seconds.len() / 2).copied().unwrap_or(f64::NAN)
     ));
+}
+
+/// Each injected effect's verdicts.
+fn by_effect_section(md: &mut String, outcomes: &[TreeOutcome]) {
     let mut by_effect: BTreeMap<(usize, String), EffectTally> = BTreeMap::new();
     for o in outcomes {
         let order = match o.case.kind {
@@ -970,12 +1007,7 @@ pub fn report_markdown(
         "\n## By injected effect\n\n| class | injected | right | verdicts |\n|---|---|---|---|\n",
     );
     for ((order, label), (r, verdicts)) in &by_effect {
-        let kind = [
-            ArmCaseKind::None,
-            ArmCaseKind::One,
-            ArmCaseKind::Two,
-            ArmCaseKind::Outside,
-        ][*order];
+        let kind = CLASSES[*order];
         let verdicts = (verdicts.iter())
             .map(|(v, n)| format!("{} × {n}", v.replace('|', "/")))
             .collect::<Vec<_>>()
@@ -986,6 +1018,12 @@ pub fn report_markdown(
             pct(*r)
         ));
     }
+}
+
+/// How much of one joint-angle effect another holds over the arms' range (joint limits
+/// ±`arm_limit_rad`, rad, of which 80 % is drawn), and how transversal compliance alone is
+/// named.
+fn joint_ranges_section(md: &mut String, arm_limit_rad: f64) {
     // Over the arms' range, which joint-angle effects hold which (the confusions above).
     let range = 0.8 * arm_limit_rad;
     let offset: fn(f64) -> f64 = |_| 1.0;
@@ -1022,6 +1060,10 @@ pub fn report_markdown(
         100.0 * spanned_share(PI, |q| (3.0 * q).sin(), &h12, 2001),
         100.0 * spanned_share(PI, |q| (3.0 * q).cos(), &h12, 2001),
     ));
+}
+
+/// Every wrong case with the round-1 reason of each injected library effect.
+fn wrong_cases_section(md: &mut String, outcomes: &[TreeOutcome]) {
     md.push_str(
         "\n## Wrong cases\n\nThe effect RMS is that of the injected effects' 3-D displacement \
          of the markers over all rows; the reason is the round-1 candidate's of each injected \
@@ -1055,7 +1097,6 @@ pub fn report_markdown(
             }
         ));
     }
-    md
 }
 
 #[cfg(test)]
