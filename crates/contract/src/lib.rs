@@ -44,6 +44,7 @@
 //! ```
 
 mod effect;
+mod locate;
 mod names;
 mod write;
 
@@ -54,6 +55,7 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
+use locate::{Step, locate_path};
 pub use names::{CapstanField, DhField, ElementField, ValueName};
 
 /// The schema version this crate writes and the newest it reads. Version 1 is the first
@@ -388,6 +390,13 @@ pub struct Calibration {
     /// The calibration's tip links, in the order of the measurement's markers (URDF robots).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub tips: Vec<String>,
+    /// The digest ([`digest`]) of the robot description the record was written beside: the
+    /// calibrated URDF's bytes (`fnv1a64:` and 16 hex digits). Readers refuse the record
+    /// beside another file ([`Calibration::check_urdf`]); `None`: written before hapcal
+    /// recorded it (nothing binds the record to its robot), or a device file's record (the
+    /// same file holds both).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub urdf_digest: Option<String>,
     /// The compliances' gravity load (required when the record holds a compliance).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub torque: Option<Torque>,
@@ -464,6 +473,23 @@ fn locate(text: &str, key: &str) -> (usize, usize) {
     (0, 0)
 }
 
+/// The digest a record keeps of the robot description it was written beside
+/// ([`Calibration::urdf_digest`]): `fnv1a64:` and the 64-bit FNV-1a hash of `bytes` in 16
+/// lowercase hex digits (Fowler, Noll & Vo; offset basis 0xcbf29ce484222325, prime
+/// 0x100000001b3).
+///
+/// FNV-1a rather than a cryptographic hash: it guards against a record read beside the wrong
+/// file (another robot, a variant, an edited copy), where a chance collision has odds of 2⁻⁶⁴;
+/// it does not guard against a forged file, which nothing in a calibration record could.
+pub fn digest(bytes: &[u8]) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    format!("fnv1a64:{h:016x}")
+}
+
 impl Calibration {
     /// A sidecar's text (`robot.calibration.toml`), parsed and checked ([`Self::check`]);
     /// `origin` names it in errors.
@@ -482,7 +508,60 @@ impl Calibration {
             }
         })?;
         record.check(text, origin)?;
+        if record.model == Some(ModelName::Transmissions) {
+            let (line, column) = locate_path(text, &[Step::Key("model")]).unwrap_or((0, 0));
+            return Err(ContractError {
+                origin: origin.to_owned(),
+                line,
+                column,
+                message: "model = \"transmissions\" is a haptic device's model (capstans and \
+                          polynomial drives), whose record lives in its device file's \
+                          [calibration]; a URDF's sidecar holds a serial robot's model"
+                    .to_owned(),
+            });
+        }
         Ok(record)
+    }
+
+    /// Checks that the record belongs to the robot description beside it: `urdf` (the
+    /// file's bytes, named `urdf_origin`) must have the digest the record holds
+    /// ([`Calibration::urdf_digest`], [`digest`]). `text` is the record's text, named
+    /// `origin`. Returns a note for a record without a digest (written before hapcal recorded
+    /// one: nothing checks that it belongs to this file), `None` when the digests agree.
+    ///
+    /// # Errors
+    /// Another digest: which file, the digest recorded (at its line), the one found and what
+    /// to do.
+    pub fn check_urdf(
+        &self,
+        text: &str,
+        origin: &str,
+        urdf: &[u8],
+        urdf_origin: &str,
+    ) -> Result<Option<String>, ContractError> {
+        let Some(recorded) = &self.urdf_digest else {
+            return Ok(Some(format!(
+                "note: {origin} holds no digest of the URDF it was written beside (an earlier \
+                 hapcal wrote it): nothing checks that it belongs to {urdf_origin}"
+            )));
+        };
+        let found = digest(urdf);
+        if *recorded == found {
+            return Ok(None);
+        }
+        let (line, column) = locate_path(text, &[Step::Key("urdf_digest")]).unwrap_or((0, 0));
+        Err(ContractError {
+            origin: origin.to_owned(),
+            line,
+            column,
+            message: format!(
+                "urdf_digest = \"{recorded}\" is the digest of the URDF this record was written \
+                 beside, but {urdf_origin} has {found}: the record belongs to another robot \
+                 description (another robot or variant, or a URDF edited after the calibration). \
+                 Load it beside the URDF hapcal calibrate wrote with it, or calibrate \
+                 {urdf_origin} again"
+            ),
+        })
     }
 
     /// Whether an earlier hapcal wrote the record (no `schema_version`): frames and values
@@ -507,8 +586,10 @@ impl Calibration {
     /// # Errors
     /// The first fault, at the line of its key where it can be found.
     pub fn check(&self, text: &str, origin: &str) -> Result<(), ContractError> {
-        let fail = |key: &str, message: String| {
-            let (line, column) = locate(text, key);
+        // At the value the path names (the record's own line for it), else the first line
+        // naming `key`.
+        let fail_at = |path: &[Step<'_>], key: &str, message: String| {
+            let (line, column) = locate_path(text, path).unwrap_or_else(|| locate(text, key));
             Err(ContractError {
                 origin: origin.to_owned(),
                 line,
@@ -516,6 +597,30 @@ impl Calibration {
                 message,
             })
         };
+        let fail = |key: &str, message: String| fail_at(&[Step::Key(key)], key, message);
+        if self.schema_version.is_none() {
+            // An earlier hapcal's record holds frames and values only: a key of schema 1
+            // without the version is a record whose first line was lost or edited away.
+            let present = [
+                ("model", self.model.is_some()),
+                ("tips", !self.tips.is_empty()),
+                ("urdf_digest", self.urdf_digest.is_some()),
+                ("torque", self.torque.is_some()),
+                ("region", self.region.is_some()),
+                ("covariance", self.covariance.is_some()),
+            ];
+            if let Some((key, _)) = present.iter().find(|(_, p)| *p) {
+                return fail(
+                    key,
+                    format!(
+                        "missing key schema_version: `{key}` is a key of calibration records \
+                         of schema 1, which begin with schema_version = {SCHEMA_VERSION}; add \
+                         that line (a record without it is read as an earlier hapcal's: frames \
+                         and values only)"
+                    ),
+                );
+            }
+        }
         if let Some(v) = self.schema_version {
             if v > SCHEMA_VERSION {
                 return fail(
@@ -555,13 +660,15 @@ impl Calibration {
             let g = t.gravity_direction;
             let norm = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
             if !norm.is_finite() || (norm - 1.0).abs() > 1e-6 {
-                return fail(
+                return fail_at(
+                    &[Step::Key("torque"), Step::Key("gravity_direction")],
                     "gravity_direction",
                     format!("torque.gravity_direction = {g:?}: expected a unit vector"),
                 );
             }
             if !(t.gravity_m_s2.is_finite() && t.gravity_m_s2 > 0.0) {
-                return fail(
+                return fail_at(
+                    &[Step::Key("torque"), Step::Key("gravity_m_s2")],
                     "gravity_m_s2",
                     format!(
                         "torque.gravity_m_s2 = {}: expected a positive acceleration, m/s²",
@@ -569,12 +676,23 @@ impl Calibration {
                     ),
                 );
             }
-            for m in &t.masses {
+            for (i, m) in t.masses.iter().enumerate() {
                 if !(m.mass_kg.is_finite() && m.mass_kg >= 0.0)
                     || m.com_m.iter().any(|c| !c.is_finite())
                 {
-                    return fail(
-                        "[[torque.mass]]",
+                    let field = if m.mass_kg.is_finite() && m.mass_kg >= 0.0 {
+                        "com_m"
+                    } else {
+                        "mass_kg"
+                    };
+                    return fail_at(
+                        &[
+                            Step::Key("torque"),
+                            Step::Key("mass"),
+                            Step::Index(i),
+                            Step::Key(field),
+                        ],
+                        "torque",
                         format!(
                             "torque mass on joint {:?}: {} kg at {:?} m is not a finite, \
                              non-negative mass at a finite point",
@@ -588,8 +706,9 @@ impl Calibration {
                 TorqueSource::UrdfMasses | TorqueSource::PublishedMasses
             );
             if needs_masses && t.masses.is_empty() {
-                return fail(
-                    "[torque",
+                return fail_at(
+                    &[Step::Key("torque"), Step::Key("source")],
+                    "torque",
                     format!(
                         "torque.source = \"{}\" without [[torque.mass]]: expected the link masses",
                         t.source
@@ -599,17 +718,27 @@ impl Calibration {
             if t.source == TorqueSource::HandleMass
                 && !t.handle_mass_kg.is_some_and(|m| m.is_finite() && m > 0.0)
             {
-                return fail(
-                    "[torque",
+                return fail_at(
+                    &[Step::Key("torque"), Step::Key("source")],
+                    "torque",
                     "torque.source = \"handle-mass\": expected handle_mass_kg > 0".to_owned(),
                 );
             }
         }
         if let Some(r) = &self.region {
-            for j in &r.joints {
+            for (k, j) in r.joints.iter().enumerate() {
+                let entry = |field| {
+                    [
+                        Step::Key("region"),
+                        Step::Key("joint"),
+                        Step::Index(k),
+                        Step::Key(field),
+                    ]
+                };
                 if !(j.min.is_finite() && j.max.is_finite() && j.min <= j.max) {
-                    return fail(
-                        "[region",
+                    return fail_at(
+                        &entry(if j.min.is_finite() { "max" } else { "min" }),
+                        "region",
                         format!(
                             "region joint {:?}: min = {}, max = {}: expected finite min ≤ max",
                             j.name, j.min, j.max
@@ -617,8 +746,9 @@ impl Calibration {
                     );
                 }
                 if j.unit != "rad" && j.unit != "m" {
-                    return fail(
-                        "[region",
+                    return fail_at(
+                        &entry("unit"),
+                        "region",
                         format!(
                             "region joint {:?}: unit {:?}, expected \"rad\" or \"m\"",
                             j.name, j.unit
@@ -629,54 +759,72 @@ impl Calibration {
         }
         for (name, f) in &self.frames {
             if f.xyz_m.iter().chain(&f.rpy_rad).any(|v| !v.is_finite()) {
-                return fail(
+                return fail_at(
+                    &[Step::Key("frames"), Step::Key(name)],
                     &format!("frames.{name}"),
                     format!("frames.{name}: a value is not finite"),
                 );
             }
         }
         for v in &self.values {
+            let at_value = |message: String| {
+                fail_at(&[Step::Key("values"), Step::Key(&v.name)], &v.name, message)
+            };
             let parsed = match ValueName::parse(&v.name) {
                 Ok(p) => p,
-                Err(message) => return fail(&v.name, format!("{:?}: {message}", v.name)),
+                Err(message) => return at_value(format!("{:?}: {message}", v.name)),
             };
             if !v.value.is_finite() || !v.std.is_finite() || v.std < 0.0 {
-                return fail(
-                    &v.name,
-                    format!(
-                        "{:?}: value {} with std {}: expected finite numbers, std ≥ 0",
-                        v.name, v.value, v.std
-                    ),
-                );
+                return at_value(format!(
+                    "{:?}: value {} with std {}: expected finite numbers, std ≥ 0",
+                    v.name, v.value, v.std
+                ));
             }
             if parsed.is_compliance() && self.torque.is_none() && !self.is_legacy() {
-                return fail(
-                    &v.name,
-                    format!(
-                        "{:?} is a compliance, but the record has no [torque] table: expected \
+                return at_value(format!(
+                    "{:?} is a compliance, but the record has no [torque] table: expected \
                          the load it was identified under",
-                        v.name
-                    ),
-                );
+                    v.name
+                ));
             }
             let allowed = parsed.units(self.torque.as_ref().map(|t| t.source));
             if !allowed.is_empty() && !allowed.contains(&v.unit.as_str()) {
                 let expected: Vec<String> = allowed.iter().map(|u| format!("{u:?}")).collect();
-                return fail(
-                    &v.name,
-                    format!(
-                        "{:?} is in {:?}, expected {}",
-                        v.name,
-                        v.unit,
-                        expected.join(" or ")
-                    ),
-                );
+                return at_value(format!(
+                    "{:?} is in {:?}, expected {}",
+                    v.name,
+                    v.unit,
+                    expected.join(" or ")
+                ));
+            }
+            // A gravity compliance is a flexibility: below zero by more than twice its σ it
+            // is no physical value (a transversal compliance's sign follows its axis).
+            let axial = matches!(
+                parsed,
+                ValueName::Compliance { .. } | ValueName::HandleCompliance { .. }
+            );
+            if axial && v.value < -2.0 * v.std {
+                return at_value(format!(
+                    "{:?} = {} {} ± {}: a compliance below zero by more than twice its standard \
+                     deviation is no physical value (a joint cannot be stiffer than rigid); \
+                     expected a value ≥ 0, or within 2 σ of it",
+                    v.name, v.value, v.unit, v.std
+                ));
+            }
+            if let Some(model) = self.model
+                && let Err(why) = model_holds(model, &parsed)
+            {
+                return at_value(format!(
+                    "{:?}: model = \"{model}\" {why}; expected only the values of that model",
+                    v.name
+                ));
             }
         }
         if let Some(c) = &self.covariance {
             let n = c.names.len();
             if c.lower.len() != n * (n + 1) / 2 {
-                return fail(
+                return fail_at(
+                    &[Step::Key("covariance"), Step::Key("lower")],
                     "lower",
                     format!(
                         "covariance.lower has {} entries; {n} names need n(n+1)/2 = {}",
@@ -687,14 +835,41 @@ impl Calibration {
             }
             for name in &c.names {
                 if self.value(name).is_none() {
-                    return fail(
+                    // A value renamed by hand: point at the value, not at the covariance.
+                    let likeness = |v: &&CalibratedValue| {
+                        let a = v.name.as_bytes();
+                        let b = name.as_bytes();
+                        let front = a.iter().zip(b).take_while(|(x, y)| x == y).count();
+                        let back = (a.iter().rev().zip(b.iter().rev()))
+                            .take_while(|(x, y)| x == y)
+                            .count();
+                        front + back
+                    };
+                    if let Some(v) = (self.values.iter())
+                        .filter(|v| !c.names.contains(&v.name))
+                        .max_by_key(likeness)
+                    {
+                        return fail_at(
+                            &[Step::Key("values"), Step::Key(&v.name)],
+                            &v.name,
+                            format!(
+                                "{:?} is not among the covariance's names, which name {name:?} \
+                                 instead: a misnamed value (expected the name the calibration \
+                                 recorded, {name:?})",
+                                v.name
+                            ),
+                        );
+                    }
+                    return fail_at(
+                        &[Step::Key("covariance"), Step::Key("names")],
                         "names",
                         format!("covariance names {name:?}, which is not a recorded value"),
                     );
                 }
             }
             if c.lower.iter().any(|x| !x.is_finite()) || (0..n).any(|i| c.get(i, i) < 0.0) {
-                return fail(
+                return fail_at(
+                    &[Step::Key("covariance"), Step::Key("lower")],
                     "lower",
                     "covariance.lower: expected finite entries and a non-negative diagonal"
                         .to_owned(),
@@ -702,6 +877,51 @@ impl Calibration {
             }
         }
         Ok(())
+    }
+}
+
+/// Whether a record of `model` may hold the value `name`: a compliance only in a model with
+/// compliances, a transversal compliance only in the transversal models, a joint harmonic
+/// only in the harmonic models (order 1 only in `harmonic`), a capstan or polynomial drive
+/// only in a haptic device's `transmissions` or `compliance` record; kinematic and D-H
+/// deviations in any. `Err` says what the model does not hold.
+fn model_holds(model: ModelName, name: &ValueName) -> Result<(), &'static str> {
+    use ModelName as M;
+    let compliance = matches!(
+        model,
+        M::Compliance
+            | M::MassCompliance
+            | M::ActuatorCompliance
+            | M::TransversalCompliance
+            | M::TransversalAxes
+            | M::MassComplianceHarmonic
+            | M::ComplianceHarmonic
+    );
+    match name {
+        ValueName::Compliance { .. } if !compliance => Err("identifies no compliance"),
+        ValueName::HandleCompliance { .. } if !(compliance || model == M::Transmissions) => {
+            Err("identifies no compliance")
+        }
+        ValueName::Transversal { .. }
+            if !matches!(model, M::TransversalCompliance | M::TransversalAxes) =>
+        {
+            Err("identifies no transversal compliance")
+        }
+        ValueName::Harmonic { order, .. } => match model {
+            M::Harmonic if *order > 1 => Err("identifies first-order harmonics only"),
+            M::Harmonic
+            | M::Harmonic2
+            | M::MassComplianceHarmonic
+            | M::ComplianceHarmonic
+            | M::TransversalAxes => Ok(()),
+            _ => Err("identifies no joint harmonic"),
+        },
+        ValueName::Capstan { .. } | ValueName::Chebyshev { .. }
+            if !matches!(model, M::Transmissions | M::Compliance) =>
+        {
+            Err("identifies no transmission (a haptic device's capstans and polynomial drives)")
+        }
+        _ => Ok(()),
     }
 }
 

@@ -65,6 +65,9 @@ impl Calibration {
             let tips: Vec<String> = self.tips.iter().map(|t| string(t)).collect();
             let _ = writeln!(out, "tips = [{}]", tips.join(", "));
         }
+        if let Some(d) = &self.urdf_digest {
+            let _ = writeln!(out, "urdf_digest = {}", string(d));
+        }
         if let Some(t) = &self.torque {
             let _ = writeln!(out, "\n[{prefix}torque]");
             let _ = writeln!(out, "source = {}", string(t.source.as_str()));

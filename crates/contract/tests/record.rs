@@ -2,7 +2,7 @@
 
 use hapcal_contract::{
     CalibratedValue, Calibration, ContractError, Covariance, Frame, JointRange, ModelName,
-    PointMass, Region, SCHEMA_VERSION, Torque, TorqueSource,
+    PointMass, Region, SCHEMA_VERSION, Torque, TorqueSource, digest,
 };
 
 fn record() -> Calibration {
@@ -176,4 +176,206 @@ fn the_region_flags_readings_past_the_training_range() {
     assert!((out.joints[0].1 - 1.0).abs() < 1e-12);
     let out = region.outside(&[-3.5]);
     assert!((out.joints[0].1 + 0.6).abs() < 1e-12);
+}
+
+/// The 1-based line of the first line of `text` that starts with `needle` (after spaces).
+fn line_of(text: &str, needle: &str) -> usize {
+    text.lines()
+        .position(|l| l.trim_start().starts_with(needle))
+        .map(|i| i + 1)
+        .expect("present")
+}
+
+/// `text` with the first line that starts with `needle` replaced by `line`.
+fn with_line(text: &str, needle: &str, line: &str) -> String {
+    let k = line_of(text, needle) - 1;
+    let lines: Vec<&str> = (text.lines().enumerate())
+        .map(|(i, l)| if i == k { line } else { l })
+        .collect();
+    lines.join("\n") + "\n"
+}
+
+#[test]
+fn the_digest_is_fnv1a_64() {
+    // The published test vectors of FNV-1a 64 (Fowler, Noll & Vo): "" and "a".
+    assert_eq!(digest(b""), "fnv1a64:cbf29ce484222325");
+    assert_eq!(digest(b"a"), "fnv1a64:af63dc4c8601ec8c");
+    assert_eq!(digest(b"foobar"), "fnv1a64:85944171f73967e8");
+}
+
+#[test]
+fn a_record_beside_another_urdf_is_refused_in_words() {
+    let urdf = b"<robot name=\"iiwa14\"></robot>\n";
+    let mut r = record();
+    r.urdf_digest = Some(digest(urdf));
+    let text = r.to_sidecar_toml();
+    let again = Calibration::from_sidecar_str(&text, "iiwa14.calibration.toml").expect("reads");
+    assert_eq!(again.urdf_digest, r.urdf_digest);
+    let ok = again.check_urdf(&text, "iiwa14.calibration.toml", urdf, "iiwa14.urdf");
+    assert_eq!(ok, Ok(None));
+    let other = b"<robot name=\"iiwa7\"></robot>\n";
+    let e = (again.check_urdf(&text, "iiwa14.calibration.toml", other, "iiwa7.urdf"))
+        .expect_err("another URDF");
+    assert_eq!(e.line, line_of(&text, "urdf_digest"), "{e}");
+    for words in [
+        "iiwa7.urdf",
+        &digest(urdf),
+        &digest(other),
+        "another robot description",
+        "calibrate iiwa7.urdf again",
+    ] {
+        assert!(e.message.contains(words), "{words}: {e}");
+    }
+    // A record without a digest loads, with a note.
+    let note =
+        (record().check_urdf(&text, "old.calibration.toml", other, "iiwa7.urdf")).expect("loads");
+    assert!(note.is_some_and(|n| n.contains("no digest")));
+}
+
+#[test]
+fn a_missing_schema_version_is_refused_at_the_first_key_of_schema_1() {
+    let text = record().to_sidecar_toml();
+    let bad = text.replace("schema_version = 1\n", "");
+    let e = refused(&bad);
+    assert!(e.message.contains("missing key schema_version"), "{e}");
+    assert!(!e.message.contains("unknown field"), "{e}");
+    assert_eq!(e.line, line_of(&bad, "model ="), "{e}");
+}
+
+#[test]
+fn negative_masses_and_compliances_are_refused_at_their_own_line() {
+    let text = record().to_sidecar_toml();
+    let bad = with_line(&text, "mass_kg", "mass_kg = -1.25");
+    let e = refused(&bad);
+    assert!(e.message.contains("non-negative mass"), "{e}");
+    assert_eq!(e.line, line_of(&bad, "mass_kg"), "{e}");
+
+    let bad = with_line(
+        &text,
+        "\"compliance.left_1\"",
+        "\"compliance.left_1\" = { value = -1e-4, std = 3e-6, unit = \"rad/(N·m)\" }",
+    );
+    let e = refused(&bad);
+    assert!(e.message.contains("below zero"), "{e}");
+    assert_eq!(e.line, line_of(&bad, "\"compliance.left_1\""), "{e}");
+    // Within twice its σ of zero, a negative estimate is zero within its uncertainty.
+    let near = with_line(
+        &text,
+        "\"compliance.left_1\"",
+        "\"compliance.left_1\" = { value = -5e-6, std = 3e-6, unit = \"rad/(N·m)\" }",
+    );
+    Calibration::from_sidecar_str(&near, "x").expect("within 2 σ of zero");
+}
+
+#[test]
+fn a_region_with_min_above_max_is_refused_at_its_line() {
+    let text = record().to_sidecar_toml();
+    let bad = with_line(&text, "max = 1.0", "max = -3.0");
+    let e = refused(&bad);
+    assert!(e.message.contains("min ≤ max"), "{e}");
+    assert_eq!(e.line, line_of(&bad, "max = -3.0"), "{e}");
+    // The inline form of the documentation, and under a device file's [calibration].
+    let inline = "schema_version = 1\nmodel = \"geometric\"\n\n[region]\nrows = 3\n\
+                  joint = [{ name = \"a\", min = 0.5, max = 0.1, unit = \"rad\" }]\n";
+    let e = refused(inline);
+    assert_eq!(e.line, 6, "{e}");
+    let mut device = String::from("name = \"d\"\n");
+    let mut r = record();
+    if let Some(region) = &mut r.region {
+        region.joints[0].max = -3.0;
+    }
+    r.write_toml(Some("calibration"), &mut device);
+    #[derive(serde::Deserialize)]
+    struct File {
+        #[allow(dead_code)]
+        name: String,
+        calibration: Calibration,
+    }
+    let file: File = toml::from_str(&device).expect("parses");
+    let e = file
+        .calibration
+        .check(&device, "d.toml")
+        .expect_err("refused");
+    assert_eq!(e.line, line_of(&device, "max = -3.0"), "{e}");
+}
+
+#[test]
+fn the_model_constrains_the_values_its_record_holds() {
+    let text = record().to_sidecar_toml();
+    // A geometric record with compliance values.
+    let bad = text.replace(
+        "model = \"transversal-compliance\"",
+        "model = \"geometric\"",
+    );
+    let e = refused(&bad);
+    assert!(e.message.contains("identifies no compliance"), "{e}");
+    assert_eq!(e.line, line_of(&bad, "\"compliance.left_1\""), "{e}");
+    // A compliance record with a transversal compliance.
+    let bad = text.replace(
+        "model = \"transversal-compliance\"",
+        "model = \"compliance\"",
+    );
+    let e = refused(&bad);
+    assert!(e.message.contains("no transversal"), "{e}");
+    assert_eq!(e.line, line_of(&bad, "\"transversal.left_1\""), "{e}");
+    // A haptic device's model on a URDF's sidecar.
+    let mut r = record();
+    r.model = Some(ModelName::Transmissions);
+    r.values.retain(|v| v.name == "left_1.rx");
+    r.covariance = None;
+    let bad = r.to_sidecar_toml();
+    let e = refused(&bad);
+    assert!(e.message.contains("haptic device"), "{e}");
+    assert_eq!(e.line, line_of(&bad, "model ="), "{e}");
+    // A second-order harmonic on a first-order harmonic model.
+    let mut r = record();
+    r.model = Some(ModelName::Harmonic);
+    r.torque = None;
+    r.covariance = None;
+    r.values = vec![CalibratedValue {
+        name: "harmonic.left_1.sin2".into(),
+        value: 1e-4,
+        std: 1e-6,
+        unit: "rad".into(),
+    }];
+    let e = refused(&r.to_sidecar_toml());
+    assert!(e.message.contains("first-order"), "{e}");
+}
+
+#[test]
+fn a_misnamed_value_is_refused_at_its_own_line() {
+    let text = record().to_sidecar_toml();
+    let bad = text.replace("\"left_1.rx\" =", "\"left_9.rx\" =");
+    let e = refused(&bad);
+    assert_eq!(e.line, line_of(&bad, "\"left_9.rx\""), "{e}");
+    assert!(e.message.contains("misnamed"), "{e}");
+    assert!(e.message.contains("left_1.rx"), "{e}");
+}
+
+#[test]
+fn no_refusal_of_a_record_points_at_line_zero() {
+    let text = record().to_sidecar_toml();
+    let cases = [
+        with_line(&text, "mass_kg", "mass_kg = -1.25"),
+        with_line(&text, "com_m", "com_m = [nan, 0.0, 0.0]"),
+        with_line(
+            &text,
+            "source",
+            "source = \"urdf-masses\"\nhandle_mass_kg = 1.0",
+        )
+        .replace(
+            "[[torque.mass]]\njoint = \"left_1\"\nmass_kg = 1.25\ncom_m = [0.1, -1e-17, 0.3]\n",
+            "",
+        ),
+        with_line(&text, "unit = \"rad\"", "unit = \"deg\""),
+        with_line(&text, "max = 1.0", "max = -3.0"),
+        with_line(&text, "gravity_m_s2", "gravity_m_s2 = -1.0"),
+        text.replace("schema_version = 1\n", ""),
+        text.replace("\"left_1.rx\" =", "\"left_9.rx\" ="),
+    ];
+    for (k, case) in cases.iter().enumerate() {
+        assert_ne!(*case, text, "case {k} changes the record");
+        let e = refused(case);
+        assert!(e.line > 0 && e.column > 0, "case {k}: {e}");
+    }
 }
