@@ -406,6 +406,14 @@ pub struct Calibration {
     /// The identified frames (`instrument`, `marker1`, …).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub frames: BTreeMap<String, Frame>,
+    /// The nominal `<origin>` of every URDF joint whose placement the record's values
+    /// deviate (`[nominal.<joint>]`), as the URDF the calibration started from holds it: the
+    /// calibrated URDF's origin of that joint is this origin composed with the values'
+    /// deviation, so a reader checks that the values and the URDF beside them agree (a value
+    /// is held in one place: edited in one file only, it is refused, not ignored). Empty:
+    /// written before hapcal recorded it, or a D-H robot's record.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub nominal: BTreeMap<String, Frame>,
     /// Identified values, in identification order.
     #[serde(default, with = "values_table")]
     pub values: Vec<CalibratedValue>,
@@ -607,6 +615,7 @@ impl Calibration {
                 ("urdf_digest", self.urdf_digest.is_some()),
                 ("torque", self.torque.is_some()),
                 ("region", self.region.is_some()),
+                ("nominal", !self.nominal.is_empty()),
                 ("covariance", self.covariance.is_some()),
             ];
             if let Some((key, _)) = present.iter().find(|(_, p)| *p) {
@@ -757,13 +766,15 @@ impl Calibration {
                 }
             }
         }
-        for (name, f) in &self.frames {
-            if f.xyz_m.iter().chain(&f.rpy_rad).any(|v| !v.is_finite()) {
-                return fail_at(
-                    &[Step::Key("frames"), Step::Key(name)],
-                    &format!("frames.{name}"),
-                    format!("frames.{name}: a value is not finite"),
-                );
+        for (table, frames) in [("frames", &self.frames), ("nominal", &self.nominal)] {
+            for (name, f) in frames {
+                if f.xyz_m.iter().chain(&f.rpy_rad).any(|v| !v.is_finite()) {
+                    return fail_at(
+                        &[Step::Key(table), Step::Key(name)],
+                        &format!("{table}.{name}"),
+                        format!("{table}.{name}: a value is not finite"),
+                    );
+                }
             }
         }
         for v in &self.values {
@@ -881,10 +892,12 @@ impl Calibration {
 }
 
 /// Whether a record of `model` may hold the value `name`: a compliance only in a model with
-/// compliances, a transversal compliance only in the transversal models, a joint harmonic
-/// only in the harmonic models (order 1 only in `harmonic`), a capstan or polynomial drive
-/// only in a haptic device's `transmissions` or `compliance` record; kinematic and D-H
-/// deviations in any. `Err` says what the model does not hold.
+/// compliances (or a haptic device's `transmissions`, its handle compliances), a transversal
+/// compliance only in the transversal models, no joint harmonic in the kinematic models
+/// (`frames-only`, `joint-offsets`, `geometric`) nor in `transmissions`, and only first-order
+/// ones in `harmonic`; a capstan or polynomial drive only in a haptic device's
+/// `transmissions` or `compliance` record; kinematic and D-H deviations in any. `Err` says
+/// what the model does not hold.
 fn model_holds(model: ModelName, name: &ValueName) -> Result<(), &'static str> {
     use ModelName as M;
     let compliance = matches!(
@@ -909,12 +922,10 @@ fn model_holds(model: ModelName, name: &ValueName) -> Result<(), &'static str> {
         }
         ValueName::Harmonic { order, .. } => match model {
             M::Harmonic if *order > 1 => Err("identifies first-order harmonics only"),
-            M::Harmonic
-            | M::Harmonic2
-            | M::MassComplianceHarmonic
-            | M::ComplianceHarmonic
-            | M::TransversalAxes => Ok(()),
-            _ => Err("identifies no joint harmonic"),
+            M::FramesOnly | M::JointOffsets | M::Geometric | M::Transmissions => {
+                Err("identifies no joint harmonic")
+            }
+            _ => Ok(()),
         },
         ValueName::Capstan { .. } | ValueName::Chebyshev { .. }
             if !matches!(model, M::Transmissions | M::Compliance) =>

@@ -97,10 +97,12 @@ impl Calibration {
                 let _ = writeln!(out, "unit = {}", string(&j.unit));
             }
         }
-        for (name, f) in &self.frames {
-            let _ = writeln!(out, "\n[{prefix}frames.{}]", key(name));
-            let _ = writeln!(out, "xyz_m = {}", array(&f.xyz_m));
-            let _ = writeln!(out, "rpy_rad = {}", array(&f.rpy_rad));
+        for (table, frames) in [("frames", &self.frames), ("nominal", &self.nominal)] {
+            for (name, f) in frames {
+                let _ = writeln!(out, "\n[{prefix}{table}.{}]", key(name));
+                let _ = writeln!(out, "xyz_m = {}", array(&f.xyz_m));
+                let _ = writeln!(out, "rpy_rad = {}", array(&f.rpy_rad));
+            }
         }
         if !self.values.is_empty() {
             let _ = writeln!(out, "\n[{prefix}values]");

@@ -120,6 +120,43 @@ fn error(target: &Target, pose: &Pose) -> ([f64; 6], usize, f64, f64) {
     (e, 6, distance, angle)
 }
 
+/// Largest departure of a rotation matrix from orthonormality and from determinant 1 that
+/// [`compensate`] accepts in a target: a rotation written to 16 digits is within 1e-15.
+pub const ROTATION_TOLERANCE: f64 = 1e-9;
+
+/// `Ok` for a rotation matrix: `RᵀR = I` entry by entry and `det R = 1`, each to
+/// [`ROTATION_TOLERANCE`]; else [`Error::Invalid`] with the largest entry of `|RᵀR − I|` (a
+/// scaled or sheared matrix) or the determinant (a reflection).
+fn check_rotation(r: &[[f64; 3]; 3]) -> Result<(), Error> {
+    let mut worst = 0.0_f64;
+    for i in 0..3 {
+        for j in 0..3 {
+            let dot = r[0][i] * r[0][j] + r[1][i] * r[1][j] + r[2][i] * r[2][j];
+            let identity = if i == j { 1.0 } else { 0.0 };
+            worst = worst.max((dot - identity).abs());
+        }
+    }
+    if worst > ROTATION_TOLERANCE {
+        return Err(Error::Invalid {
+            what: "the target rotation's largest entry of |RᵀR − I|",
+            value: worst,
+            expected: "at most 1e-9: a rotation matrix is orthonormal (a scaled or sheared \
+                       matrix is no orientation)",
+        });
+    }
+    let det = r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
+        - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
+        + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]);
+    if (det - 1.0).abs() > ROTATION_TOLERANCE {
+        return Err(Error::Invalid {
+            what: "the target rotation's determinant",
+            value: det,
+            expected: "1 within 1e-9: a rotation, not a reflection",
+        });
+    }
+    Ok(())
+}
+
 /// Weighted squared error `|e_p|² + L²·|e_r|²`, m².
 fn cost(e: &[f64; 6], rows: usize, scale_m: f64) -> f64 {
     (0..rows)
@@ -218,7 +255,9 @@ fn step<const R: usize>(
 /// # Errors
 /// [`Error::Length`] unless `q_start` and `q_out` have n entries; [`Error::NotFinite`] for a
 /// NaN or infinite start angle or target value; [`Error::Invalid`] named `tip` for a tip
-/// index past the last tip, or naming a setting of `cfg` that is not finite and positive.
+/// index past the last tip, for a target rotation that is not a rotation matrix (orthonormal
+/// with determinant 1, to [`ROTATION_TOLERANCE`]), or naming a setting of `cfg` that is not
+/// finite and positive.
 ///
 /// # Panics
 /// If `ws` was made for another robot.
@@ -256,6 +295,9 @@ pub fn compensate(
             index,
             value: *value,
         });
+    }
+    if let Target::Pose(p) = target {
+        check_rotation(&p.rotation)?;
     }
     for (what, value) in [
         ("tolerance_m", cfg.tolerance_m),

@@ -106,7 +106,7 @@ mod robot;
 mod robot_load;
 
 #[cfg(feature = "std")]
-pub use compensate::{Compensation, CompensationConfig, Target, compensate};
+pub use compensate::{Compensation, CompensationConfig, ROTATION_TOLERANCE, Target, compensate};
 pub use drive::{CapstanParams, Drive};
 pub use error::Error;
 #[cfg(feature = "std")]

@@ -139,6 +139,13 @@ impl Robot {
         // their joints' readings load the tree as the calibration loaded it.
         // Parsed once; a malformed sidecar is reported after the URDF's own checks.
         let parsed = sidecar.map(|(t, o)| (Calibration::from_sidecar_str(t, o), t, o));
+        if let Some((Ok(record), text, sidecar_origin)) = &parsed {
+            // The record binds to the URDF it was written beside, and to its tips.
+            record
+                .check_urdf(text, sidecar_origin, urdf.as_bytes(), origin)
+                .map_err(|e| crate::load::contract_error(e, sidecar_origin))?;
+            check_tips(record, text, sidecar_origin, tips)?;
+        }
         let load_tips: Vec<String> = (parsed.as_ref())
             .and_then(|(record, _, _)| record.as_ref().ok())
             .and_then(|record| record.torque.as_ref())
@@ -334,7 +341,10 @@ impl Robot {
             dh: None,
         };
         if let Some((record, text, sidecar_origin)) = parsed {
-            out.apply_sidecar(record, text, sidecar_origin, &tip_elements)?;
+            let urdf_joints: Vec<(&str, Pose)> = (robot.joints.iter())
+                .map(|j| (j.name.as_str(), joint_pose(j)))
+                .collect();
+            out.apply_sidecar(record, text, sidecar_origin, &tip_elements, &urdf_joints)?;
         }
         Ok(out)
     }
@@ -349,31 +359,28 @@ impl Robot {
         text: &str,
         origin: &str,
         tip_elements: &[Option<String>],
+        urdf_joints: &[(&str, Pose)],
     ) -> Result<(), LoadError> {
-        let record = record.map_err(|e| LoadError::Parse {
-            origin: e.origin.clone(),
-            line: e.line,
-            column: e.column,
-            message: e.message.clone(),
-        })?;
+        let record = record.map_err(|e| crate::load::contract_error(e, origin))?;
         if record.is_legacy() {
             return self.apply_legacy_sidecar(text, origin);
         }
-        self.apply_record(record, origin, tip_elements)
+        self.apply_record(record, text, origin, tip_elements, urdf_joints)
     }
 
     /// Reads an earlier hapcal's sidecar: its frames and compliances.
     fn apply_legacy_sidecar(&mut self, text: &str, origin: &str) -> Result<(), LoadError> {
-        let sidecar: Sidecar = toml::from_str(text).map_err(|e| {
-            let (line, column) = e
-                .span()
-                .map_or((0, 0), |s| crate::load::line_column(text, s.start));
-            LoadError::Parse {
-                origin: origin.to_owned(),
-                line,
-                column,
-                message: e.message().to_owned(),
+        let sidecar: Sidecar = toml::from_str(text).map_err(|e| match e.span() {
+            Some(span) => {
+                let (line, column) = crate::load::line_column(text, span.start);
+                LoadError::Parse {
+                    origin: origin.to_owned(),
+                    line,
+                    column,
+                    message: e.message().to_owned(),
+                }
             }
+            None => invalid(origin, e.message().to_owned()),
         })?;
         for (name, f) in &sidecar.frames {
             if f.xyz_m.iter().chain(&f.rpy_rad).any(|v| !v.is_finite()) {
@@ -694,7 +701,11 @@ impl Robot {
             if let Some(t) = &mut one_tip.torque {
                 t.tips.truncate(1);
             }
-            out.apply_record(one_tip, origin, &[None])?;
+            let names = out.joint_names.clone();
+            let joints: Vec<(&str, Pose)> = (names.iter())
+                .map(|n| (n.as_str(), Pose::IDENTITY))
+                .collect();
+            out.apply_record(one_tip, text, origin, &[None], &joints)?;
             out.record = Some(record);
         }
         Ok(out)
@@ -841,21 +852,29 @@ impl Robot {
     /// point masses, gravity, equilibrium and load tips; every value (kinematic deviations,
     /// which the URDF's joint origins already hold, give the nominal geometry the loads are
     /// evaluated on and the transversal tilts' base; compliances, transversal compliances,
-    /// harmonics); its region.
+    /// harmonics); its region, whose joints must be among `known_joints` (the URDF's joints
+    /// with their own `<origin>`s, or a D-H robot's joints); its nominal origins, which with
+    /// the values must give those `<origin>`s ([`check_nominal`]). `text` is the record's text
+    /// (refusals at their line).
     fn apply_record(
         &mut self,
         record: Calibration,
+        text: &str,
         origin: &str,
         tip_elements: &[Option<String>],
+        known_joints: &[(&str, Pose)],
     ) -> Result<(), LoadError> {
         for (name, f) in &record.frames {
             self.frames
                 .push((name.clone(), origin_pose(f.xyz_m, f.rpy_rad)));
         }
+        // A refusal of the value `name` at its line.
+        let at_value =
+            |name: &str, message: String| at_line(origin, crate::load::locate(text, name), message);
         let joint_index = |this: &Robot, what: &str, joint: &str| {
             this.joint_names.iter().position(|n| n == joint).ok_or_else(|| {
-                invalid(
-                    origin,
+                at_value(
+                    what,
                     format!(
                         "{what}: no moving joint {joint:?} on the paths to the tips; joints: {}",
                         this.joint_names.join(", ")
@@ -933,14 +952,14 @@ impl Robot {
         }
         let mut tip_deviation = vec![[0.0; 6]; self.tips.len()];
         for v in &record.values {
-            let name = ValueName::parse(&v.name).map_err(|e| invalid(origin, e))?;
+            let name = ValueName::parse(&v.name).map_err(|e| at_value(&v.name, e))?;
             match name {
                 ValueName::Element { element, field } => {
                     let k = field_index(field);
                     let joint = self.joint_names.iter().position(|n| *n == element);
                     if let (Some(_), Some(_)) = (joint, &self.dh) {
-                        return Err(invalid(
-                            origin,
+                        return Err(at_value(
+                            &v.name,
                             format!(
                                 "{:?} is a placement deviation: a D-H robot's record holds D-H deviations (da<i>, dalpha<i>, dd<i>, dtheta<i>, dbeta<i>)",
                                 v.name
@@ -963,8 +982,8 @@ impl Robot {
                             }
                         }
                     } else {
-                        return Err(invalid(
-                            origin,
+                        return Err(at_value(
+                            &v.name,
                             format!(
                                 "{:?}: no moving joint or tip element {element:?} of this name on the paths to the tips; joints: {}",
                                 v.name,
@@ -982,8 +1001,8 @@ impl Robot {
                 ValueName::Transversal { joint, axis } => {
                     let j = joint_index(self, &v.name, &joint)?;
                     if self.dh.is_some() {
-                        return Err(invalid(
-                            origin,
+                        return Err(at_value(
+                            &v.name,
                             format!(
                                 "{:?}: a transversal compliance tilts a joint's placement, which a D-H row does not have",
                                 v.name
@@ -991,8 +1010,8 @@ impl Robot {
                         ));
                     }
                     if self.joints[j].prismatic {
-                        return Err(invalid(
-                            origin,
+                        return Err(at_value(
+                            &v.name,
                             format!("{:?}: joint {joint:?} is prismatic", v.name),
                         ));
                     }
@@ -1018,8 +1037,8 @@ impl Robot {
                 // A D-H robot's rows already hold it (its nominal rows were read without it).
                 ValueName::Dh { .. } if self.dh.is_some() => {}
                 ValueName::Dh { .. } => {
-                    return Err(invalid(
-                        origin,
+                    return Err(at_value(
+                        &v.name,
                         format!(
                             "{:?} is a D-H deviation: a calibrated URDF's record holds placement deviations (<joint>.x … .rz, .offset)",
                             v.name
@@ -1029,8 +1048,8 @@ impl Robot {
                 ValueName::HandleCompliance { .. }
                 | ValueName::Capstan { .. }
                 | ValueName::Chebyshev { .. } => {
-                    return Err(invalid(
-                        origin,
+                    return Err(at_value(
+                        &v.name,
                         format!(
                             "{:?} is a haptic device's value, not a URDF robot's",
                             v.name
@@ -1046,6 +1065,7 @@ impl Robot {
                     .to_owned(),
             ));
         }
+        self.check_nominal(&record, text, origin, known_joints)?;
         // The nominal geometry: the URDF's origins hold `nominal · Δ · motion(offset)`.
         for joint in &mut self.joints {
             if joint.deviation == [0.0; 7] {
@@ -1067,10 +1087,27 @@ impl Robot {
         }
         if let Some(region) = &record.region {
             for r in &region.joints {
-                if let Some(j) = self.joint_names.iter().position(|n| *n == r.name) {
-                    let slack = hapcal_contract::REGION_SLACK_SHARE * (r.max - r.min).max(0.0);
-                    self.region.push((j, r.min, r.max, slack));
+                if !known_joints.iter().any(|(n, _)| *n == r.name) {
+                    return Err(at_line(
+                        origin,
+                        region_line(text, &r.name),
+                        format!(
+                            "[region] joint {:?}: the robot has no joint of this name ({}): the \
+                             record was written for another robot",
+                            r.name,
+                            (known_joints.iter())
+                                .map(|(n, _)| *n)
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    ));
                 }
+                // A joint off the paths to the tips given has no reading to judge.
+                let Some(j) = self.joint_names.iter().position(|n| *n == r.name) else {
+                    continue;
+                };
+                let slack = hapcal_contract::REGION_SLACK_SHARE * (r.max - r.min).max(0.0);
+                self.region.push((j, r.min, r.max, slack));
             }
         }
         self.record = Some(record);
@@ -1094,4 +1131,202 @@ fn normal_axes(axis: &[f64; 3]) -> [[f64; 3]; 2] {
     let n = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
     let u = [u[0] / n, u[1] / n, u[2] / n];
     [u, crate::pose::cross(axis, &u)]
+}
+
+/// 1-based line and column of the region entry of joint `name` in a record's text: the line
+/// `name = "<name>"` (a `[[region.joint]]` table's, or an inline entry's); (1, 1) if none.
+fn region_line(text: &str, name: &str) -> (usize, usize) {
+    let wanted = format!("name = \"{name}\"");
+    (text.lines().enumerate())
+        .find_map(|(i, line)| {
+            line.find(&wanted)
+                .map(|c| (i + 1, line[..c].chars().count() + 1))
+        })
+        .unwrap_or((1, 1))
+}
+
+/// Refuses tips the calibration was not made for: every tip given must be one of the
+/// record's tips or its load tips (a record of schema 1 that names them; an earlier hapcal's
+/// names none).
+fn check_tips(
+    record: &Calibration,
+    text: &str,
+    origin: &str,
+    tips: &[&str],
+) -> Result<(), LoadError> {
+    if record.tips.is_empty() {
+        return Ok(());
+    }
+    let load: &[String] = record.torque.as_ref().map_or(&[], |t| &t.tips);
+    let Some(stranger) = (tips.iter()).find(|t| !record.tips.iter().chain(load).any(|r| r == *t))
+    else {
+        return Ok(());
+    };
+    let (line, column) = crate::load::locate(text, "tips");
+    Err(at_line(
+        origin,
+        (line, column),
+        format!(
+            "tips = [{}]: the calibration was made for these tips, not for the tip {stranger:?} \
+             given; load the robot with {} as tips (--tip {}), or calibrate for {stranger:?}",
+            (record.tips.iter())
+                .map(|t| format!("{t:?}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+            record.tips.join(", "),
+            record.tips.join(" --tip ")
+        ),
+    ))
+}
+
+/// A refusal at `(line, column)` of `origin`; without a line (0), of the file.
+fn at_line(origin: &str, (line, column): (usize, usize), message: String) -> LoadError {
+    crate::load::contract_error(
+        hapcal_contract::ContractError {
+            origin: origin.to_owned(),
+            line,
+            column,
+            message,
+        },
+        origin,
+    )
+}
+
+/// Largest difference between a URDF joint's `<origin>` and the record's nominal origin with
+/// its values' deviation that [`Robot::check_nominal`] accepts, m and rad (entries of the
+/// rotation matrices): the writer puts both in the files in full precision, so they agree to
+/// rounding.
+const NOMINAL_TOLERANCE: f64 = 1e-9;
+
+/// The angles `[a, b, c]` (rad) of `R = Rx(a)·Ry(b)·Rz(c)`, the rotation of a placement
+/// deviation ([`deviation_pose`]).
+fn xyz_angles(r: &[[f64; 3]; 3]) -> [f64; 3] {
+    [
+        (-r[1][2]).atan2(r[2][2]),
+        r[0][2].clamp(-1.0, 1.0).asin(),
+        (-r[0][1]).atan2(r[0][0]),
+    ]
+}
+
+impl Robot {
+    /// Checks that the record's values and the URDF beside it hold one geometry: for every
+    /// joint of the record's `[nominal]`, the URDF's `<origin>` of it (`urdf_joints`) must be
+    /// the nominal origin composed with the values' deviation `Δ(x, y, z, rx, ry, rz)` and
+    /// the joint's motion by its `.offset`, to [`NOMINAL_TOLERANCE`].
+    ///
+    /// # Errors
+    /// A joint the URDF lacks; a value (or the URDF) edited by hand: each value that disagrees,
+    /// at its line, with the number recorded and the number the URDF's origin holds.
+    fn check_nominal(
+        &self,
+        record: &Calibration,
+        text: &str,
+        origin: &str,
+        urdf_joints: &[(&str, Pose)],
+    ) -> Result<(), LoadError> {
+        const FIELDS: [&str; 6] = ["x", "y", "z", "rx", "ry", "rz"];
+        for (element, nominal) in &record.nominal {
+            let Some((_, own)) = urdf_joints.iter().find(|(n, _)| *n == element) else {
+                return Err(at_line(
+                    origin,
+                    header_line(text, &format!("nominal.{element}")),
+                    format!(
+                        "[nominal.{element}]: the URDF has no joint {element:?}: the record was \
+                         written for another robot"
+                    ),
+                ));
+            };
+            let value = |field: &str| {
+                let name = format!("{element}.{field}");
+                record.value(&name).map(|v| (name, v.value))
+            };
+            let mut d = [0.0; 6];
+            for (slot, field) in d.iter_mut().zip(FIELDS) {
+                *slot = value(field).map_or(0.0, |(_, v)| v);
+            }
+            let offset = value("offset").map_or(0.0, |(_, v)| v);
+            let motion = match self.joint_names.iter().position(|n| n == element) {
+                Some(j) => crate::robot::joint_motion(&self.joints[j], offset),
+                // A joint off the paths to the tips: its offset cannot be judged here.
+                None if offset != 0.0 => continue,
+                None => Pose::IDENTITY,
+            };
+            let nominal = origin_pose(nominal.xyz_m, nominal.rpy_rad);
+            let expected = nominal.compose(&deviation_pose(&d)).compose(&motion);
+            let worst = (0..3)
+                .flat_map(|i| {
+                    let t = (expected.translation_m[i] - own.translation_m[i]).abs();
+                    (0..3)
+                        .map(move |k| (expected.rotation[i][k] - own.rotation[i][k]).abs())
+                        .chain(core::iter::once(t))
+                })
+                .fold(0.0_f64, f64::max);
+            if worst <= NOMINAL_TOLERANCE {
+                continue;
+            }
+            // What the URDF's origin holds: Δ = nominal⁻¹ · origin · motion⁻¹.
+            let held = nominal.inverse().compose(own).compose(&motion.inverse());
+            let angles = xyz_angles(&held.rotation);
+            let implied: Vec<f64> = held.translation_m.iter().chain(&angles).copied().collect();
+            let mut words = Vec::new();
+            for (k, field) in FIELDS.iter().enumerate() {
+                if (d[k] - implied[k]).abs() <= NOMINAL_TOLERANCE {
+                    continue;
+                }
+                let name = format!("{element}.{field}");
+                let unit = if k < 3 { "m" } else { "rad" };
+                let (line, _) = crate::load::locate(text, &name);
+                let at = if line > 0 {
+                    format!(" (line {line})")
+                } else {
+                    " (not recorded)".to_owned()
+                };
+                words.push(format!(
+                    "{name} = {} {unit}{at}, where the URDF's origin of {element} holds {} {unit}",
+                    d[k], implied[k]
+                ));
+            }
+            let first = (FIELDS.iter())
+                .map(|f| format!("{element}.{f}"))
+                .chain(core::iter::once(format!("{element}.offset")))
+                .map(|name| crate::load::locate(text, &name))
+                .find(|(line, _)| *line > 0)
+                .unwrap_or_else(|| header_line(text, &format!("nominal.{element}")));
+            return Err(at_line(
+                origin,
+                first,
+                format!(
+                    "the record's values of joint {element:?} and the URDF beside it disagree \
+                     (by {worst:.3e} m or rad): {}. A value is held in one place: the URDF's \
+                     origins hold the calibrated geometry, the record its uncertainty; a value \
+                     edited in one of them is not applied. Restore the number hapcal calibrate \
+                     wrote, or calibrate again",
+                    if words.is_empty() {
+                        format!("{element}.offset")
+                    } else {
+                        words.join("; ")
+                    }
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// 1-based line and column of the table header `[<table>]` (or `[<prefix>.<table>]`, a
+/// device file's) in `text`; (0, 0) if none.
+fn header_line(text: &str, table: &str) -> (usize, usize) {
+    let dotted = format!(".{table}");
+    for (i, line) in text.lines().enumerate() {
+        let trimmed = line.trim_start();
+        let name = trimmed
+            .trim_start_matches('[')
+            .trim_end()
+            .trim_end_matches(']')
+            .trim();
+        if trimmed.starts_with('[') && (name == table || name.ends_with(&dotted)) {
+            return (i + 1, line.len() - trimmed.len() + 1);
+        }
+    }
+    (0, 0)
 }

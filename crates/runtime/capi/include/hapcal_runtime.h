@@ -443,9 +443,12 @@ enum HapcalStatus hapcal_predictor_outside_region(const struct HapcalPredictor *
 // along −z of the root link; torques use the URDF's link masses (N·m, compliances in
 // rad/(N·m)), or without any, the calibration's lumped unit weights (m, rad/m).
 //
-// Returns `Ok`, `NullPointer`, `InvalidUtf8`, `Io`, `Parse` (a malformed sidecar, with
-// line and column) or `InvalidModel` (a URDF the runtime cannot use, an unknown tip link, a
-// sidecar value it does not evaluate, no tip); `*out` is written only on success.
+// Returns `Ok`, `NullPointer`, `InvalidUtf8`, `Io`, `Parse` (a malformed sidecar, or one
+// that does not belong here: written beside another URDF, for other tips, with a region
+// joint the robot lacks or a value that disagrees with the URDF; with line and column) or
+// `InvalidModel` (a URDF the runtime cannot use, an unknown tip link, a sidecar value it
+// does not evaluate, no tip); `*out` is written only on success. The robot has the `n_tips`
+// tips given ([`hapcal_robot_n_tips`]).
 //
 // # Safety
 // `urdf_path` is NULL or a NUL-terminated string; `tips` is NULL or valid for `n_tips`
@@ -468,7 +471,10 @@ void hapcal_robot_free(struct HapcalRobot *robot);
 // `robot` is NULL or a live handle.
 size_t hapcal_robot_n_joints(const struct HapcalRobot *robot);
 
-// Number of tips of the robot, as loaded (0 for NULL).
+// Number of tips of the robot: the `n_tips` given to [`hapcal_robot_load`] (0 for NULL).
+// The tips whose paths carry the calibration's loads and that were not given (the other
+// arm of a humanoid calibrated on one) are loaded after them, to load the joints, but not
+// counted, named or written.
 //
 // # Safety
 // `robot` is NULL or a live handle.
@@ -524,7 +530,7 @@ enum HapcalStatus hapcal_robot_tip_pose(struct HapcalRobot *robot,
                                         size_t n_joints,
                                         struct HapcalPose *pose_out);
 
-// Poses of every tip (`poses_out[n_tips]`, in the order of the tip names) of the robot
+// Poses of every tip given (`poses_out[n_tips]`, in the order of the tip names) of the robot
 // deflected under its own weight when commanded `q` (rad, m for a prismatic joint): the
 // calibrated model's prediction, compliance included ([`hapcal_runtime::Robot::deflected_tip_poses`]:
 // the fixed point `θ = q + k∘τ(θ)`), and what the deflection did into `*deflection_out`
@@ -602,8 +608,8 @@ enum HapcalStatus hapcal_robot_gravity_torques(struct HapcalRobot *robot,
 // command found), not a failure status.
 //
 // Returns `Ok`, `NullPointer`, `Length`, `NotFinite` (a start angle, target value or
-// setting) or `InvalidArgument` (tip index past the last, unknown target kind, a setting
-// not positive).
+// setting) or `InvalidArgument` (tip index past the last, unknown target kind, a target
+// rotation that is not a rotation matrix to 1e-9, a setting not positive).
 //
 // # Safety
 // `robot` is NULL or a live handle not in use by another call; `target` and `config` NULL

@@ -85,18 +85,28 @@ pub struct HapcalPredictor {
     ws: PredictionWorkspace,
     /// One prediction per tip, the runtime's form of the caller's array.
     tips: Vec<TipPrediction>,
+    /// How many tips the robot's caller gave ([`crate::hapcal_robot_n_tips`]): the first of
+    /// `tips`, those written.
+    given: usize,
 }
 
 /// Runs `f` on a handle (`None`: a NULL pointer) under [`guard`]; after a caught panic the
-/// workspace is rebuilt.
+/// workspace is rebuilt. `f` gets the predictor, its workspace, every tip's buffer and how
+/// many tips were given (the first ones, those written).
 fn with_predictor(
     handle: Option<&mut HapcalPredictor>,
-    f: impl FnOnce(&Predictor, &mut PredictionWorkspace, &mut [TipPrediction]) -> Result<(), Failure>,
+    f: impl FnOnce(
+        &Predictor,
+        &mut PredictionWorkspace,
+        &mut [TipPrediction],
+        usize,
+    ) -> Result<(), Failure>,
 ) -> HapcalStatus {
     let Some(handle) = handle else {
         return record(HapcalStatus::NullPointer, "predictor is NULL".to_owned());
     };
-    let status = guard(|| f(&handle.predictor, &mut handle.ws, &mut handle.tips));
+    let given = handle.given;
+    let status = guard(|| f(&handle.predictor, &mut handle.ws, &mut handle.tips, given));
     if status == HapcalStatus::Panic {
         let predictor = &handle.predictor;
         if let Ok(ws) = catch_unwind(AssertUnwindSafe(|| predictor.workspace())) {
@@ -141,7 +151,8 @@ pub unsafe extern "C" fn hapcal_predictor_new(
 ) -> HapcalStatus {
     guard(|| {
         // SAFETY: the caller's contract.
-        let robot = unsafe { crate::get(robot, "robot") }?.robot();
+        let handle = unsafe { crate::get(robot, "robot") }?;
+        let (robot, given) = (handle.robot(), handle.given_tips());
         if out.is_null() {
             return Err(Failure::Null("out"));
         }
@@ -167,6 +178,7 @@ pub unsafe extern "C" fn hapcal_predictor_new(
                 predictor,
                 ws,
                 tips,
+                given,
             }));
         }
         Ok(())
@@ -272,12 +284,12 @@ pub unsafe extern "C" fn hapcal_predictor_predict(
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
     let handle = unsafe { predictor.as_mut() };
-    with_predictor(handle, |predictor, ws, tips| {
+    with_predictor(handle, |predictor, ws, tips, given| {
         check_n(predictor, n_joints)?;
-        if n_tips != tips.len() {
+        if n_tips != given {
             return Err(Failure::Robot(hapcal_runtime::Error::Length {
                 what: "n_tips",
-                expected: tips.len(),
+                expected: given,
                 found: n_tips,
             }));
         }
@@ -312,7 +324,7 @@ pub unsafe extern "C" fn hapcal_predictor_marker_poses(
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
     let handle = unsafe { predictor.as_mut() };
-    with_predictor(handle, |predictor, ws, _| {
+    with_predictor(handle, |predictor, ws, _, _| {
         check_n(predictor, n_joints)?;
         // SAFETY: the caller's contract, for every pointer; `HapcalPose` has `Pose`'s layout
         // (checked in robot.rs).

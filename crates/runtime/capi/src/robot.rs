@@ -31,12 +31,24 @@ const _: () = assert!(
 pub struct HapcalRobot {
     robot: Robot,
     ws: RobotWorkspace,
+    /// How many tips the caller gave: the robot's first tips. The runtime loads the tips
+    /// whose paths carry the calibration's gravity loads after them (the other arm of a
+    /// humanoid calibrated on one, read but not measured); they load the joints, and the
+    /// ABI shows only the tips given.
+    given: usize,
+    /// Every tip's pose, the buffer of [`hapcal_robot_deflected_tip_poses`] (made once).
+    poses: Vec<Pose>,
 }
 
 impl HapcalRobot {
     /// The robot the handle evaluates.
     pub(crate) fn robot(&self) -> &Robot {
         &self.robot
+    }
+
+    /// How many tips the caller gave ([`hapcal_robot_n_tips`]).
+    pub(crate) fn given_tips(&self) -> usize {
+        self.given
     }
 }
 
@@ -145,6 +157,31 @@ fn check_n(robot: &Robot, n_joints: usize) -> Result<(), Failure> {
 
 /// Runs `f` on a handle (`None`: a NULL pointer) under [`guard`]; after a caught panic the
 /// workspace is rebuilt (a panic may leave it half taken apart).
+/// [`with_robot`] for a call on tip `tip`: `InvalidArgument` for a tip past the tips the
+/// caller gave ([`hapcal_robot_n_tips`]), before `f` runs.
+fn with_robot_tip(
+    handle: Option<&mut HapcalRobot>,
+    tip: usize,
+    f: impl FnOnce(&Robot, &mut RobotWorkspace) -> Result<(), Failure>,
+) -> HapcalStatus {
+    if let Some(h) = &handle
+        && tip >= h.given
+    {
+        return guard(|| Err(Failure::Robot(past_given(tip))));
+    }
+    with_robot(handle, f)
+}
+
+/// The error of a tip index past the tips given (the runtime's words for a tip past the
+/// last).
+fn past_given(tip: usize) -> Error {
+    Error::Invalid {
+        what: "tip",
+        value: tip as f64,
+        expected: "a tip index below the number of tips",
+    }
+}
+
 fn with_robot(
     handle: Option<&mut HapcalRobot>,
     f: impl FnOnce(&Robot, &mut RobotWorkspace) -> Result<(), Failure>,
@@ -171,9 +208,12 @@ fn with_robot(
 /// along −z of the root link; torques use the URDF's link masses (N·m, compliances in
 /// rad/(N·m)), or without any, the calibration's lumped unit weights (m, rad/m).
 ///
-/// Returns `Ok`, `NullPointer`, `InvalidUtf8`, `Io`, `Parse` (a malformed sidecar, with
-/// line and column) or `InvalidModel` (a URDF the runtime cannot use, an unknown tip link, a
-/// sidecar value it does not evaluate, no tip); `*out` is written only on success.
+/// Returns `Ok`, `NullPointer`, `InvalidUtf8`, `Io`, `Parse` (a malformed sidecar, or one
+/// that does not belong here: written beside another URDF, for other tips, with a region
+/// joint the robot lacks or a value that disagrees with the URDF; with line and column) or
+/// `InvalidModel` (a URDF the runtime cannot use, an unknown tip link, a sidecar value it
+/// does not evaluate, no tip); `*out` is written only on success. The robot has the `n_tips`
+/// tips given ([`hapcal_robot_n_tips`]).
 ///
 /// # Safety
 /// `urdf_path` is NULL or a NUL-terminated string; `tips` is NULL or valid for `n_tips`
@@ -216,8 +256,15 @@ pub unsafe extern "C" fn hapcal_robot_load(
         }
         let robot = Robot::load_urdf(Path::new(path), &names).map_err(Failure::Load)?;
         let ws = robot.workspace();
+        let poses = vec![Pose::IDENTITY; robot.tip_names().len()];
+        let handle = HapcalRobot {
+            robot,
+            ws,
+            given: names.len(),
+            poses,
+        };
         // SAFETY: `out` is non-null and valid for a write by the caller's contract.
-        unsafe { *out = Box::into_raw(Box::new(HapcalRobot { robot, ws })) };
+        unsafe { *out = Box::into_raw(Box::new(handle)) };
         Ok(())
     })
 }
@@ -245,14 +292,17 @@ pub unsafe extern "C" fn hapcal_robot_n_joints(robot: *const HapcalRobot) -> usi
     unsafe { robot.as_ref() }.map_or(0, |r| r.robot.n_joints())
 }
 
-/// Number of tips of the robot, as loaded (0 for NULL).
+/// Number of tips of the robot: the `n_tips` given to [`hapcal_robot_load`] (0 for NULL).
+/// The tips whose paths carry the calibration's loads and that were not given (the other
+/// arm of a humanoid calibrated on one) are loaded after them, to load the joints, but not
+/// counted, named or written.
 ///
 /// # Safety
 /// `robot` is NULL or a live handle.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn hapcal_robot_n_tips(robot: *const HapcalRobot) -> usize {
     // SAFETY: the caller's contract.
-    unsafe { robot.as_ref() }.map_or(0, |r| r.robot.tip_names().len())
+    unsafe { robot.as_ref() }.map_or(0, |r| r.given)
 }
 
 /// Whether the robot's gravity torques come from the URDF's link masses (N·m; compliances in
@@ -285,10 +335,11 @@ unsafe fn name(
 ) -> HapcalStatus {
     guard(|| {
         // SAFETY: the caller's contract.
-        let robot = &unsafe { crate::get(robot, "robot") }?.robot;
+        let handle = unsafe { crate::get(robot, "robot") }?;
+        let robot = &handle.robot;
         let (names, what, label) = match kind {
             NameKind::Joint => (robot.joint_names(), "joint", "joint name"),
-            NameKind::Tip => (robot.tip_names(), "tip", "tip name"),
+            NameKind::Tip => (&robot.tip_names()[..handle.given], "tip", "tip name"),
         };
         let Some(name) = names.get(index) else {
             return Err(Failure::Message(
@@ -401,7 +452,7 @@ pub unsafe extern "C" fn hapcal_robot_tip_pose(
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
     let handle = unsafe { robot.as_mut() };
-    with_robot(handle, |robot, ws| {
+    with_robot_tip(handle, tip, |robot, ws| {
         check_n(robot, n_joints)?;
         // SAFETY: the caller's contract, for every pointer.
         let q = unsafe { slice(q, n_joints, "q") }?;
@@ -415,7 +466,7 @@ pub unsafe extern "C" fn hapcal_robot_tip_pose(
     })
 }
 
-/// Poses of every tip (`poses_out[n_tips]`, in the order of the tip names) of the robot
+/// Poses of every tip given (`poses_out[n_tips]`, in the order of the tip names) of the robot
 /// deflected under its own weight when commanded `q` (rad, m for a prismatic joint): the
 /// calibrated model's prediction, compliance included ([`hapcal_runtime::Robot::deflected_tip_poses`]:
 /// the fixed point `θ = q + k∘τ(θ)`), and what the deflection did into `*deflection_out`
@@ -438,14 +489,17 @@ pub unsafe extern "C" fn hapcal_robot_deflected_tip_poses(
     deflection_out: *mut HapcalDeflection,
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
-    let handle = unsafe { robot.as_mut() };
-    with_robot(handle, |robot, ws| {
+    let Some(handle) = (unsafe { robot.as_mut() }) else {
+        return record(HapcalStatus::NullPointer, "robot is NULL".to_owned());
+    };
+    let given = handle.given;
+    let mut all = core::mem::take(&mut handle.poses);
+    let status = with_robot(Some(&mut *handle), |robot, ws| {
         check_n(robot, n_joints)?;
-        let tips = robot.tip_names().len();
-        if n_tips != tips {
+        if n_tips != given {
             return Err(Failure::Robot(Error::Length {
                 what: "n_tips",
-                expected: tips,
+                expected: given,
                 found: n_tips,
             }));
         }
@@ -457,13 +511,16 @@ pub unsafe extern "C" fn hapcal_robot_deflected_tip_poses(
                 slice_mut(poses_out.cast::<Pose>(), n_tips, "poses_out")?,
             )
         };
-        let deflection = (robot.deflected_tip_poses(q, ws, poses)).map_err(Failure::Robot)?;
+        let deflection = (robot.deflected_tip_poses(q, ws, &mut all)).map_err(Failure::Robot)?;
+        poses.copy_from_slice(&all[..given]);
         // SAFETY: the caller's contract: NULL or valid for one write.
         if let Some(out) = unsafe { deflection_out.as_mut() } {
             *out = deflection.into();
         }
         Ok(())
-    })
+    });
+    handle.poses = all;
+    status
 }
 
 /// # Safety
@@ -479,7 +536,7 @@ unsafe fn jacobian(
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
     let handle = unsafe { robot.as_mut() };
-    with_robot(handle, |robot, ws| {
+    with_robot_tip(handle, tip, |robot, ws| {
         check_n(robot, n_joints)?;
         // SAFETY: the caller's contract, for every pointer; `[f64; 6]` has the layout of
         // six consecutive doubles, so 6·n doubles are n columns.
@@ -650,8 +707,8 @@ fn target_and_config(
 /// command found), not a failure status.
 ///
 /// Returns `Ok`, `NullPointer`, `Length`, `NotFinite` (a start angle, target value or
-/// setting) or `InvalidArgument` (tip index past the last, unknown target kind, a setting
-/// not positive).
+/// setting) or `InvalidArgument` (tip index past the last, unknown target kind, a target
+/// rotation that is not a rotation matrix to 1e-9, a setting not positive).
 ///
 /// # Safety
 /// `robot` is NULL or a live handle not in use by another call; `target` and `config` NULL
@@ -674,7 +731,7 @@ pub unsafe extern "C" fn hapcal_robot_compensate(
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
     let handle = unsafe { robot.as_mut() };
-    with_robot(handle, |robot, ws| {
+    with_robot_tip(handle, tip, |robot, ws| {
         check_n(robot, n_joints)?;
         // SAFETY: the caller's contract, for every pointer.
         let (target, q_start, cfg, q_out) = unsafe {
@@ -736,14 +793,22 @@ pub unsafe extern "C" fn hapcal_robot_outside_region(
     })
 }
 
-/// Stores a new handle holding `robot` (and a workspace made for it) in `*out`.
+/// Stores a new handle holding `robot` (and a workspace made for it), of which the caller
+/// gave the first `given` tips, in `*out`.
 ///
 /// # Safety
 /// `out` is valid for one write.
-unsafe fn store_robot(out: *mut *mut HapcalRobot, robot: Robot) {
+unsafe fn store_robot(out: *mut *mut HapcalRobot, robot: Robot, given: usize) {
     let ws = robot.workspace();
+    let poses = vec![Pose::IDENTITY; robot.tip_names().len()];
+    let handle = HapcalRobot {
+        robot,
+        ws,
+        given,
+        poses,
+    };
     // SAFETY: the caller's contract.
-    unsafe { *out = Box::into_raw(Box::new(HapcalRobot { robot, ws })) };
+    unsafe { *out = Box::into_raw(Box::new(handle)) };
 }
 
 /// Joint limits of the robot, into `lower_out[n_joints]` and `upper_out[n_joints]` (rad, m for
@@ -877,6 +942,8 @@ pub unsafe extern "C" fn hapcal_robot_with_marker(
     out: *mut *mut HapcalRobot,
 ) -> HapcalStatus {
     guard(|| {
+        // SAFETY: the caller's contract.
+        let given = unsafe { crate::get(robot, "robot") }?.given;
         // SAFETY: the caller's contract, for every pointer.
         let (robot, marker) = unsafe {
             (
@@ -891,9 +958,12 @@ pub unsafe extern "C" fn hapcal_robot_with_marker(
             rotation: marker.rotation,
             translation_m: marker.translation_m,
         };
+        if tip >= given {
+            return Err(Failure::Robot(past_given(tip)));
+        }
         let moved = robot.with_marker(tip, &marker).map_err(Failure::Robot)?;
         // SAFETY: `out` is non-null and valid for a write by the caller's contract.
-        unsafe { store_robot(out, moved) };
+        unsafe { store_robot(out, moved, given) };
         Ok(())
     })
 }
@@ -915,6 +985,8 @@ pub unsafe extern "C" fn hapcal_robot_with_compliances(
     out: *mut *mut HapcalRobot,
 ) -> HapcalStatus {
     guard(|| {
+        // SAFETY: the caller's contract.
+        let given = unsafe { crate::get(robot, "robot") }?.given;
         // SAFETY: the caller's contract, for every pointer.
         let (robot, k) = unsafe {
             let robot = &crate::get(robot, "robot")?.robot;
@@ -926,7 +998,7 @@ pub unsafe extern "C" fn hapcal_robot_with_compliances(
         }
         let changed = robot.with_compliances(k).map_err(Failure::Robot)?;
         // SAFETY: `out` is non-null and valid for a write by the caller's contract.
-        unsafe { store_robot(out, changed) };
+        unsafe { store_robot(out, changed, given) };
         Ok(())
     })
 }
@@ -951,6 +1023,8 @@ pub unsafe extern "C" fn hapcal_robot_with_value(
     out: *mut *mut HapcalRobot,
 ) -> HapcalStatus {
     guard(|| {
+        // SAFETY: the caller's contract.
+        let given = unsafe { crate::get(robot, "robot") }?.given;
         // SAFETY: the caller's contract, for every pointer.
         let (robot, name) = unsafe {
             (
@@ -968,7 +1042,7 @@ pub unsafe extern "C" fn hapcal_robot_with_value(
             e => Failure::Robot(e),
         })?;
         // SAFETY: `out` is non-null and valid for a write by the caller's contract.
-        unsafe { store_robot(out, changed) };
+        unsafe { store_robot(out, changed, given) };
         Ok(())
     })
 }
@@ -1040,7 +1114,7 @@ pub unsafe extern "C" fn hapcal_robot_deflected_spatial_jacobian(
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
     let handle = unsafe { robot.as_mut() };
-    with_robot(handle, |robot, ws| {
+    with_robot_tip(handle, tip, |robot, ws| {
         check_n(robot, n_joints)?;
         // SAFETY: the caller's contract, for every pointer; `[f64; 6]` has the layout of
         // six consecutive doubles, so 6·n doubles are n columns.

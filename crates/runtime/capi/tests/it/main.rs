@@ -2,6 +2,7 @@
 //! compiled and run, print the Rust library's numbers, and every failure is a status code
 //! with a message.
 
+mod binding;
 mod c_example;
 mod c_robot;
 mod ffi;
