@@ -742,8 +742,11 @@ pub fn write_outputs_beside(
     let sidecar_text = match &outcome.record {
         // The record holds every value as identified (the runtime evaluates the transversal
         // tilts and the gravity loads from the kinematic ones), the model, its loads and its
-        // region.
-        Some(record) if urdf_output => Some(record.to_sidecar_toml()),
+        // region, and what binds it to the URDF written beside it (its digest and the nominal
+        // origins of the joints its values deviate).
+        Some(record) if urdf_output => {
+            Some(crate::record::bound_record(record, &text, &outcome.device).to_sidecar_toml())
+        }
         // A device file holds the record in its `[calibration]` table.
         Some(_) => None,
         None if !outcome.report.frames.is_empty() || !leftover.is_empty() => Some(

@@ -133,6 +133,10 @@ pub(crate) fn measured_record(m: &MeasuredRecord<'_>) -> Calibration {
         data_hash: None,
         notes: Some(format!("hapcal calibrate, model {}", m.model)),
         tips: m.tips.to_vec(),
+        // Set when the record is written beside its URDF (`write_outputs`), as the nominal
+        // origins.
+        urdf_digest: None,
+        nominal: std::collections::BTreeMap::new(),
         torque,
         region: Some(region),
         frames: (m.frames.iter())
@@ -148,6 +152,37 @@ pub(crate) fn measured_record(m: &MeasuredRecord<'_>) -> Calibration {
             .collect(),
         covariance: covariance_of(m.covariance, &values),
         values,
+    }
+}
+
+/// `record` bound to the calibrated URDF `urdf` it is written beside: with the URDF's digest
+/// ([`hapcal_contract::digest`]) and the nominal origin (`device`'s placement, the URDF the
+/// calibration started from) of every joint its values deviate, so that a reader refuses the
+/// record beside another URDF and a value edited in one of the two files.
+pub(crate) fn bound_record(
+    record: &Calibration,
+    urdf: &str,
+    device: &hapcal_io::Device,
+) -> Calibration {
+    let mut nominal = std::collections::BTreeMap::new();
+    for v in &record.values {
+        if let Ok(hapcal_contract::ValueName::Element { element, .. }) =
+            hapcal_contract::ValueName::parse(&v.name)
+            && let Some(p) = device.all_placements().find(|p| p.name == element)
+        {
+            nominal.insert(
+                element,
+                Frame {
+                    xyz_m: p.xyz_m,
+                    rpy_rad: p.rpy_rad,
+                },
+            );
+        }
+    }
+    Calibration {
+        urdf_digest: Some(hapcal_contract::digest(urdf.as_bytes())),
+        nominal,
+        ..record.clone()
     }
 }
 

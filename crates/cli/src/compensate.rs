@@ -79,6 +79,49 @@ fn rotation_of(w: f64, x: f64, y: f64, z: f64) -> [[f64; 3]; 3] {
     ]
 }
 
+/// `Ok` when every start command `q` (rad, m for a prismatic joint, in the robot's joint
+/// order) lies within its joint's limits; else the joints outside, with their limits, in
+/// words, and when the values read as degrees lie within them, that they look like degrees.
+fn check_start(q: &[f64], robot: &Robot) -> std::result::Result<(), String> {
+    let outside: Vec<usize> = (0..q.len())
+        .filter(|&j| {
+            let (lo, hi) = robot.limits()[j];
+            !(lo..=hi).contains(&q[j])
+        })
+        .collect();
+    if outside.is_empty() {
+        return Ok(());
+    }
+    let mut words: Vec<String> = (outside.iter())
+        .map(|&j| {
+            let (lo, hi) = robot.limits()[j];
+            let unit = if robot.is_prismatic(j) { "m" } else { "rad" };
+            format!(
+                "{} = {} {unit}, limits [{lo}, {hi}] {unit}",
+                robot.joint_names()[j],
+                q[j]
+            )
+        })
+        .collect();
+    // Degrees read as radians: every revolute start within its limits once converted, and
+    // some beyond a turn's worth of radians no arm reaches.
+    let revolute: Vec<usize> = (0..q.len()).filter(|&j| !robot.is_prismatic(j)).collect();
+    let in_degrees = (revolute.iter()).all(|&j| {
+        let (lo, hi) = robot.limits()[j];
+        (lo..=hi).contains(&q[j].to_radians())
+    });
+    if in_degrees && outside.iter().all(|j| revolute.contains(j)) {
+        words.push(
+            "the start columns look like degrees read as radians (converted from degrees every \
+             one lies within its limits): write them in rad"
+                .to_owned(),
+        );
+    } else {
+        words.push("the start columns are in rad (m for a prismatic joint)".to_owned());
+    }
+    Err(words.join("; "))
+}
+
 /// Reads the targets file: errors name the file, line, column and what was expected.
 fn read_targets(path: &Path, robot: &Robot) -> Result<Vec<TargetRow>> {
     let text = std::fs::read_to_string(path)
@@ -190,7 +233,15 @@ fn read_targets(path: &Path, robot: &Robot) -> Result<Vec<TargetRow>> {
         };
         let start = match &starts {
             None => None,
-            Some(cols) => Some(cols.iter().map(|&c| value(c)).collect::<Result<Vec<_>>>()?),
+            Some(cols) => {
+                let q = cols.iter().map(|&c| value(c)).collect::<Result<Vec<_>>>()?;
+                check_start(&q, robot).map_err(|why| {
+                    anyhow::anyhow!(
+                        "{file}:{line}: a start command outside the robot's limits: {why}"
+                    )
+                })?;
+                Some(q)
+            }
         };
         rows.push(TargetRow {
             line,
@@ -247,6 +298,7 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
     crate::calibrate::check_extension(&args.out, &["csv"], "the joint commands", false)?;
     crate::calibrate::check_output(&args.out, &[&args.device, &args.targets])?;
     let robot = load_robot(args)?;
+    let unbound = crate::predict::unbound_record_note(&args.device, &robot);
     let mut rows = read_targets(&args.targets, &robot)?;
     let robot = if args.instrument_frame {
         let Some(instrument) = robot.frame("instrument") else {
@@ -377,9 +429,10 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
         );
     }
     Ok(format!(
-        "{reached} targets reached; largest residual {:.3e} mm, {:.3e} mrad; wrote {}\n{region}",
+        "{reached} targets reached; largest residual {:.3e} mm, {:.3e} mrad; wrote {}\n{region}{}",
         worst_m * 1e3,
         worst_rad * 1e3,
-        args.out.display()
+        args.out.display(),
+        unbound.map_or(String::new(), |n| format!("{n}\n"))
     ))
 }

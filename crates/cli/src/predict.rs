@@ -535,6 +535,26 @@ fn load_robot(device: &Path, tips: &[String]) -> Result<Robot> {
         .with_context(|| format!("loading the calibrated robot {}", device.display()))
 }
 
+/// The note for a calibrated URDF whose sidecar does not bind it to the URDF (a record
+/// without `urdf_digest`, written by an earlier hapcal: nothing checked that it belongs to
+/// this URDF); `None` for a bound record, a device file (it holds its own record) or a URDF
+/// without a sidecar.
+pub fn unbound_record_note(device: &Path, robot: &Robot) -> Option<String> {
+    let sidecar = device.with_extension("calibration.toml");
+    if is_device_file(device) || !sidecar.is_file() {
+        return None;
+    }
+    if robot.calibration().is_some_and(|r| r.urdf_digest.is_some()) {
+        return None;
+    }
+    Some(format!(
+        "hapcal: note: {} holds no digest of the URDF it was written beside (an earlier hapcal \
+         wrote it): nothing checks that it belongs to {}",
+        sidecar.display(),
+        device.display()
+    ))
+}
+
 /// The haptic device of a device file, if it is one (capstans or a parallelogram: its
 /// calibration is of logs, as `hapcal calibrate` decides).
 fn haptic_device(device: &Path) -> Result<Option<hapcal_io::Device>> {
@@ -757,7 +777,9 @@ pub fn run(args: &PredictArgs, units: &Units) -> Result<(String, Vec<String>)> {
         warnings: table.warnings.clone(),
         rows,
     };
-    let mut extra = Vec::new();
+    let mut extra: Vec<String> = unbound_record_note(&args.device, predictor.robot())
+        .into_iter()
+        .collect();
     if !prediction.rows.is_empty() && errors_without_instrument(&predictor, &prediction) {
         extra.push(
             "hapcal: warning: the calibration identified no instrument frame: the measured \

@@ -41,6 +41,14 @@ fn record() -> Calibration {
             },
         )]
         .into(),
+        nominal: [(
+            "left_1".to_owned(),
+            Frame {
+                xyz_m: [0.0, 0.1, 0.25],
+                rpy_rad: [0.0, -1.5, 0.0],
+            },
+        )]
+        .into(),
         values: vec![
             CalibratedValue {
                 name: "compliance.left_1".into(),
@@ -370,6 +378,7 @@ fn no_refusal_of_a_record_points_at_line_zero() {
         with_line(&text, "unit = \"rad\"", "unit = \"deg\""),
         with_line(&text, "max = 1.0", "max = -3.0"),
         with_line(&text, "gravity_m_s2", "gravity_m_s2 = -1.0"),
+        text.replace("xyz_m = [0.0, 0.1, 0.25]", "xyz_m = [0.0, nan, 0.25]"),
         text.replace("schema_version = 1\n", ""),
         text.replace("\"left_1.rx\" =", "\"left_9.rx\" ="),
     ];

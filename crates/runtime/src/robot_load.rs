@@ -92,10 +92,18 @@ impl Robot {
     /// compliances, loads on the calibrated geometry at the torque equilibrium. Gravity is
     /// along −z of the root link (ROS REP 103) unless the record says otherwise.
     ///
+    /// A record binds to its robot: it is refused beside another URDF than the one it was
+    /// written beside (its `urdf_digest`), for tips it was not made for (its `tips` and load
+    /// tips), with a region joint the URDF lacks, and with values that, from the record's
+    /// nominal origins, do not give the URDF's joint origins (a value edited by hand in one
+    /// of the two files); a record without digest or nominal origins (an earlier hapcal's)
+    /// loads as before.
+    ///
     /// # Errors
     /// [`LoadError::Io`] for a file that cannot be read; [`LoadError::Parse`] (line, column)
     /// for a malformed sidecar, an unknown value name, a wrong unit, a missing key or a newer
-    /// schema; [`LoadError::Invalid`] for a URDF that urdf-rs cannot read, a tip that is not a
+    /// schema, and for a record that does not bind to this URDF and these tips (above);
+    /// [`LoadError::Invalid`] for a URDF that urdf-rs cannot read, a tip that is not a
     /// link (listing them), a tip named twice, a floating or planar joint on a path, a joint
     /// without axis, a non-finite number, a negative mass, a value of a joint or element not
     /// on the paths to the tips, a haptic device's value, lumped loads whose tips are not all

@@ -3,6 +3,7 @@
 
 #![allow(clippy::unwrap_used)] // test helpers fail loudly on a malformed report; that is the test
 
+mod binding;
 mod columns;
 mod compensate;
 mod coverage;

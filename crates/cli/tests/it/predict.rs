@@ -11,7 +11,7 @@ use crate::{hapcal, root, scratch, show, stderr};
 
 /// The UR10 calibrated (geometric) on the bundled poses, written as `dir/ur10.urdf` with its
 /// sidecar; returns the URDF and the calibration's JSON report.
-fn calibrated_ur10(dir: &Path) -> (PathBuf, Value) {
+pub(crate) fn calibrated_ur10(dir: &Path) -> (PathBuf, Value) {
     let ur10 = root().join("fixtures/figaroh/ur10");
     let out = dir.join("ur10.urdf");
     let run = hapcal(&[
