@@ -2258,10 +2258,47 @@ pub fn calibrate_measured(
     })
 }
 
-/// A compliance estimate below zero by more than this many standard deviations is a finding,
-/// never a result ([`plausibility`]): a joint does not bend against its load. Within it, the
-/// estimate is zero within its uncertainty.
+/// A compliance estimate below zero by more than this many standard deviations, at the least,
+/// is a finding, never a result ([`plausibility`]): a joint does not bend against its load.
+/// Within it, the estimate is zero within its uncertainty. Among `n` estimates the bound grows
+/// to keep the chance that a right calibration is stopped at [`NEGATIVE_COMPLIANCE_FAMILY_RISK`]
+/// ([`negative_compliance_sigmas`]).
 pub const NEGATIVE_COMPLIANCE_SIGMAS: f64 = 2.0;
+
+/// Chance that some compliance of a right calibration lies below zero by more than
+/// [`negative_compliance_sigmas`] by noise alone (Bonferroni over the estimates): at 2σ each,
+/// one of 12 compliances of the real UR10 recording's per-axis transversal model lies at
+/// −2.3σ, and half of the right calibrations with 33 compliances would be stopped.
+pub const NEGATIVE_COMPLIANCE_FAMILY_RISK: f64 = 0.05;
+
+/// The bound, in standard deviations, below zero beyond which one of `n` compliance estimates
+/// is a finding: the one-sided normal quantile of [`NEGATIVE_COMPLIANCE_FAMILY_RISK`]/`n`
+/// (Bonferroni), at least [`NEGATIVE_COMPLIANCE_SIGMAS`]: 2.0 for one estimate, 2.64 for 12,
+/// 2.97 for 33.
+pub fn negative_compliance_sigmas(n: usize) -> f64 {
+    let p = NEGATIVE_COMPLIANCE_FAMILY_RISK / n.max(1) as f64;
+    // Upper tail of the standard normal, Q(z) = erfc(z/√2)/2, with erfc from Abramowitz &
+    // Stegun 7.1.26 (error below 1.5·10⁻⁷), inverted by bisection on [0, 10].
+    let q = |z: f64| {
+        let x = z / std::f64::consts::SQRT_2;
+        let t = 1.0 / (1.0 + 0.327_591_1 * x);
+        let poly = t
+            * (0.254_829_592
+                + t * (-0.284_496_736
+                    + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+        0.5 * poly * (-x * x).exp()
+    };
+    let (mut lo, mut hi) = (0.0_f64, 10.0_f64);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if q(mid) > p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    (0.5 * (lo + hi)).max(NEGATIVE_COMPLIANCE_SIGMAS)
+}
 
 /// Longest distance of a marker's frame from the origin of its link's frame, m, that a
 /// mounting can have ([`plausibility`]): a marker, a target or a tool flange sits within a
@@ -2285,8 +2322,8 @@ struct Refit<'a> {
 }
 
 /// The compliance estimates (`compliance.*`, `transversal.*`) of `fitted` below zero by more
-/// than [`NEGATIVE_COMPLIANCE_SIGMAS`] standard deviations, most significant first (name,
-/// value, σ, in the parameter's unit), and the number of compliance estimates.
+/// than [`negative_compliance_sigmas`] of their count standard deviations, most significant
+/// first (name, value, σ, in the parameter's unit), and the number of compliance estimates.
 fn negative_compliances(fitted: &Fitted) -> (Vec<(String, f64, f64)>, usize) {
     let id = &fitted.identified;
     let compliances: Vec<(String, f64, f64)> = (id.covariance.free.iter())
@@ -2295,8 +2332,9 @@ fn negative_compliances(fitted: &Fitted) -> (Vec<(String, f64, f64)>, usize) {
         .filter(|(name, _, _)| compliance_unit(name, true).is_some())
         .collect();
     let n = compliances.len();
+    let z = negative_compliance_sigmas(n);
     let mut negative: Vec<(String, f64, f64)> = (compliances.into_iter())
-        .filter(|(_, value, std)| value + NEGATIVE_COMPLIANCE_SIGMAS * std < 0.0)
+        .filter(|(_, value, std)| value + z * std < 0.0)
         .collect();
     let z = |c: &(String, f64, f64)| c.1 / c.2.max(f64::MIN_POSITIVE);
     negative.sort_by(|a, b| z(a).total_cmp(&z(b)));
@@ -2321,7 +2359,7 @@ fn mounting_words(g: &Vector3<f64>) -> &'static str {
 
 /// Another mounting that explains negative compliances: the chosen rung refitted with gravity
 /// along each other axis of the root frame (±x, ±y, ±z), in parallel; of those whose
-/// compliances are none below zero by [`NEGATIVE_COMPLIANCE_SIGMAS`] σ and whose training
+/// compliances are none below zero by [`negative_compliance_sigmas`] σ and whose training
 /// position residual is within [`MOUNTING_RESIDUAL_RATIO`] of `given_rms_m` (or below), the
 /// one with the smallest residual: its gravity direction and residual, m. `None` when no axis
 /// does.
@@ -2367,9 +2405,9 @@ fn mounting_test(r: &Refit<'_>, given_rms_m: f64) -> Option<(Vector3<f64>, f64)>
 /// - a final fit that did not converge: its estimate is no minimum (`given`: the rung was
 ///   given by `--model`; with `--model auto` the ladder already left out the rungs whose fit
 ///   did not converge);
-/// - compliances below zero by more than [`NEGATIVE_COMPLIANCE_SIGMAS`] σ: named as the
-///   mounting when gravity along another axis of the root frame makes them non-negative at
-///   no larger residual ([`mounting_test`]), else as what they are;
+/// - compliances below zero by more than [`negative_compliance_sigmas`] σ: two or more (a
+///   pattern) named as the mounting when gravity along another axis of the root frame makes
+///   them non-negative at no larger residual ([`mounting_test`]), else as what they are;
 /// - a marker frame farther than [`MARKER_OFFSET_MAX_M`] from its link's origin.
 ///
 /// Empty when the estimate is plausible.
@@ -2416,13 +2454,17 @@ fn plausibility(
         let more = if negative.len() > 3 { ", …" } else { "" };
         let given_g = gravity_text(&r.robot.gravity_dir);
         let counted = format!(
-            "{} of {n_compliances} below zero by more than {NEGATIVE_COMPLIANCE_SIGMAS} standard \
-             deviations: {}{more}",
+            "{} of {n_compliances} below zero by more than {:.1} standard deviations: {}{more}",
             negative.len(),
+            negative_compliance_sigmas(n_compliances),
             listed.join(", ")
         );
         let (_, given_rms, _) = stats(&position_errors(model, r.train));
-        out.push(match mounting_test(r, given_rms) {
+        // A pattern is tested against the mounting; one estimate alone is what it is.
+        let mounting = (negative.len() >= 2)
+            .then(|| mounting_test(r, given_rms))
+            .flatten();
+        out.push(match mounting {
             Some((g, rms)) => Implausible {
                 kind: ImplausibleKind::Mounting,
                 message: format!(
@@ -3456,7 +3498,16 @@ pub fn sidecar_toml(frames: &[FrameReport], leftover: &[hapcal_io::CalibratedVal
 
 #[cfg(test)]
 mod tests {
-    use super::{Line, RangeVerdict, rung_chains};
+    use super::{Line, RangeVerdict, negative_compliance_sigmas, rung_chains};
+
+    #[test]
+    fn the_negative_compliance_bound_is_the_bonferroni_normal_quantile() {
+        // One estimate: the floor of 2σ (Φ⁻¹(0.95) = 1.645 is below it). 12 and 33 estimates:
+        // Φ⁻¹(1 − 0.05/n) = 2.638 and 2.965 (normal tables).
+        assert_eq!(negative_compliance_sigmas(1), 2.0);
+        assert!((negative_compliance_sigmas(12) - 2.638).abs() < 2e-3);
+        assert!((negative_compliance_sigmas(33) - 2.965).abs() < 2e-3);
+    }
 
     #[test]
     fn a_line_through_exact_points_predicts_them_with_no_error() {

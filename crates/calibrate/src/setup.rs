@@ -1748,11 +1748,12 @@ fn another_device(
 /// [`MANUFACTURING_TOLERANCE_M`], determined to [`DETERMINED_SIGMAS`], or a training set the
 /// calibrated model still misses by more than [`PLAUSIBLE_FRAMES_ONLY_RMS_M`], says the data
 /// come from another device or robot (or a mistake the check before the fit could not tell),
-/// an error finding; `None` otherwise. Before those, an estimate no real robot can have
-/// ([`crate::report::CalibrationReport::implausible`]: negative compliances, named as a
-/// mounting when another direction of gravity explains them, a marker frame metres from its
-/// link, an unconverged fit) is an error finding. The size of compliances, frames and angles
-/// is not judged otherwise: it depends on the setup.
+/// an error finding; `None` otherwise. An estimate no real robot can have
+/// ([`crate::report::CalibrationReport::implausible`]) is an error finding too: an
+/// unconverged fit before everything, negative compliances (named as a mounting when another
+/// direction of gravity explains them) and a marker frame metres from its link after the
+/// lengths of another robot (whose compliances absorb what the lengths leave). The size of
+/// compliances, frames and angles is not judged otherwise: it depends on the setup.
 ///
 /// `before` holds the classes of the findings the check before the fit warned of: after a
 /// latency warning, lengths beyond tolerance are what a calibration that does not model the

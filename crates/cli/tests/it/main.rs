@@ -12,6 +12,7 @@ mod hostile_cases;
 mod html;
 mod ladder_rows;
 mod plan_after;
+mod plausibility;
 mod predict;
 mod predict_device;
 mod setup_check;
