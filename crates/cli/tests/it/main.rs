@@ -12,7 +12,6 @@ mod hostile_cases;
 mod html;
 mod ladder_rows;
 mod plan_after;
-mod plausibility;
 mod predict;
 mod predict_device;
 mod setup_check;
