@@ -133,6 +133,7 @@ fn bench(c: &mut Criterion) {
             sigma_rad: None,
             marker_tips: Vec::new(),
             workspace: Vec::new(),
+            max_evaluations: None,
         };
         group.bench_function(name, |b| {
             b.iter(|| {
@@ -154,6 +155,7 @@ fn bench(c: &mut Criterion) {
         sigma_rad: None,
         marker_tips: vec![0, 1],
         workspace: Vec::new(),
+        max_evaluations: None,
     };
     group.bench_function("humanoid_500_auto", |b| {
         b.iter(|| {

@@ -69,6 +69,7 @@ fn bench(c: &mut Criterion) {
             sigma_rad: None,
             marker_tips: vec![0],
             workspace: Vec::new(),
+            max_evaluations: None,
         };
         group.bench_function("calibration", |b| {
             b.iter(|| calibrate_measured(&robot, black_box(&tables), &[], &cfg).unwrap())

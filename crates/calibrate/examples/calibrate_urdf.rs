@@ -32,6 +32,7 @@ fn main() -> Result<()> {
         sigma_rad: None,
         marker_tips: Vec::new(),
         workspace: Vec::new(),
+        max_evaluations: None,
     };
     let out = calibrate_measured(&robot, &train, &test, &cfg)?;
     println!("chosen model: {}", out.rung);

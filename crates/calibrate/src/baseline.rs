@@ -152,6 +152,7 @@ pub fn baseline_from_tables(
         sigma_rad: plan.sigma_rad,
         marker_tips: (0..n_tips).collect(),
         workspace: Vec::new(),
+        max_evaluations: None,
     };
     let out = calibrate_measured(robot, &train, &test, &cfg(Some(ModelName::Geometric)))?;
     let mut warnings: Vec<String> = (train.iter().chain(&test))

@@ -19,7 +19,9 @@ pub use crate::fit::{
     CV_REPEATS, HeldOut, backend_of, blocked_difference, blocked_mean_difference, fold_of,
     identify_config, pruned_report, termination_text,
 };
-pub use crate::inputs::{Plan, SIGMA_M_RANGE, SIGMA_RAD_RANGE, check_sigma};
+pub use crate::inputs::{
+    GRAVITY_DOWN, Plan, SIGMA_M_RANGE, SIGMA_RAD_RANGE, check_sigma, gravity_words, parse_gravity,
+};
 pub use crate::model::{DataKind, LADDER_SIGNIFICANCE_Z, ModelChoice, ModelName};
 pub use crate::report::{
     CalibrationReport, CvReport, Figures, Outcome, ParamReport, PruneCause, PrunedReport,
@@ -116,6 +118,14 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             "--workspace {} applies to measurement files (positions, poses, anchor distances): \
              {} have no joint-range folds",
             w.display(),
+            kind.words()
+        );
+    }
+    if plan.gravity != crate::inputs::GRAVITY_DOWN && kind != DataKind::Measurements {
+        bail!(
+            "--gravity {} applies to measurement files of a URDF robot (its compliance models' \
+             loads): {} take the mounting from the device file",
+            gravity_words(plan.gravity),
             kind.words()
         );
     }
@@ -341,6 +351,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         coverage: None,
         equilibrium_step_m: None,
         equilibrium_refits: 0,
+        implausible: Vec::new(),
     };
     let joint_names = chain.joint_names().to_vec();
     let prismatic: Vec<bool> = (hapcal_kinematics::joint_motions(std::slice::from_ref(&chain)))

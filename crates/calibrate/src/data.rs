@@ -186,6 +186,9 @@ pub struct Robot {
     /// Tips after the measured ones that carry no marker, only loads: the links below joints
     /// off the measured paths whose readings the data hold ([`robot_of`]); URDF link names.
     pub load_tips: Vec<String>,
+    /// Unit direction of gravity in the root frame: the mounting the compliance models load
+    /// the joints with (−z, upright, unless `--gravity` says otherwise).
+    pub gravity_dir: Vector3<f64>,
 }
 
 /// Robot of a URDF with one or more tips.
@@ -218,6 +221,7 @@ pub fn robot_from_urdf(path: &std::path::Path, tips: &[String]) -> Result<Robot>
         masses,
         held_joints: urdf.held_joints,
         load_tips: Vec::new(),
+        gravity_dir: -Vector3::z(),
         tree,
     })
 }
@@ -243,6 +247,7 @@ pub fn robot_from_device(device: &hapcal_io::Device) -> Result<Robot> {
         masses: Vec::new(),
         held_joints: Vec::new(),
         load_tips: Vec::new(),
+        gravity_dir: -Vector3::z(),
         tree,
     })
 }

@@ -1709,6 +1709,7 @@ pub fn calibrate_logs(
         coverage: None,
         equilibrium_step_m: None,
         equilibrium_refits: 0,
+        implausible: Vec::new(),
     };
     let kin_model = hapcal_problems::CalibratedModel {
         x_kin: x_kin.clone(),

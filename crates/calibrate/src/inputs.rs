@@ -16,6 +16,57 @@ pub const SIGMA_M_RANGE: (f64, f64) = (1e-9, 0.1);
 /// 30°).
 pub const SIGMA_RAD_RANGE: (f64, f64) = (1e-9, 0.5);
 
+/// Gravity along −z of the robot's root frame (`Plan::gravity`): a robot mounted upright on a
+/// floor (ROS REP 103).
+pub const GRAVITY_DOWN: [f64; 3] = [0.0, 0.0, -1.0];
+
+/// The unit direction of gravity `--gravity` gives, in the robot's root frame: an axis
+/// (`-z`, `+z`, `x`, `-y`, … : a floor, ceiling or wall mount) or three numbers `gx,gy,gz`
+/// (any length but zero; normalised).
+///
+/// # Errors
+/// Anything else, in words.
+pub fn parse_gravity(text: &str) -> std::result::Result<[f64; 3], String> {
+    let t = text.trim();
+    let (sign, axis) = match t.strip_prefix('-') {
+        Some(rest) => (-1.0, rest),
+        None => (1.0, t.strip_prefix('+').unwrap_or(t)),
+    };
+    let unit = match axis {
+        "x" => Some([1.0, 0.0, 0.0]),
+        "y" => Some([0.0, 1.0, 0.0]),
+        "z" => Some([0.0, 0.0, 1.0]),
+        _ => None,
+    };
+    if let Some(u) = unit {
+        return Ok(u.map(|c: f64| sign * c + 0.0));
+    }
+    let parts: Vec<&str> = t.split(',').map(str::trim).collect();
+    let numbers: Vec<f64> = parts.iter().filter_map(|p| p.parse().ok()).collect();
+    if parts.len() != 3 || numbers.len() != 3 || numbers.iter().any(|v| !v.is_finite()) {
+        return Err(format!(
+            "expected an axis of the robot's root frame (-z upright, +z on a ceiling, ±x or ±y \
+             on a wall) or three numbers gx,gy,gz, found {text:?}"
+        ));
+    }
+    let norm = numbers.iter().map(|v| v * v).sum::<f64>().sqrt();
+    if !(norm > 0.0 && norm.is_finite()) {
+        return Err(format!("{text:?} has no direction"));
+    }
+    Ok([numbers[0] / norm, numbers[1] / norm, numbers[2] / norm])
+}
+
+/// `g` in the words `--gravity` reads: `-z` for an axis, `0.707,0,-0.707` otherwise.
+pub fn gravity_words(g: [f64; 3]) -> String {
+    for (i, axis) in ["x", "y", "z"].iter().enumerate() {
+        let others_zero = (0..3).filter(|&k| k != i).all(|k| g[k] == 0.0);
+        if others_zero && g[i].abs() == 1.0 {
+            return format!("{}{axis}", if g[i] > 0.0 { "+" } else { "-" });
+        }
+    }
+    format!("{},{},{}", g[0], g[1], g[2])
+}
+
 /// `Err` naming `option`, its value and the range unless `value` (if given) lies in `range`
 /// (inclusive); `unit` is the range's unit as printed.
 ///
@@ -71,6 +122,10 @@ pub struct Plan {
     /// For a haptic device: identify the transmissions and the kinematics in one problem
     /// (`haptic::identify_jointly`) instead of the paper's two steps.
     pub joint: bool,
+    /// Measurement files: the unit direction of gravity in the robot's root frame, the
+    /// mounting the compliance models load the joints with ([`GRAVITY_DOWN`]: upright;
+    /// `--gravity`, [`parse_gravity`]); recorded in the calibration record's `[torque]`.
+    pub gravity: [f64; 3],
 }
 
 impl Plan {
@@ -94,6 +149,13 @@ impl Plan {
         }
         check_sigma("--sigma-m", self.sigma_m, SIGMA_M_RANGE, "m")?;
         check_sigma("--sigma-rad", self.sigma_rad, SIGMA_RAD_RANGE, "rad")?;
+        let norm = self.gravity.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if !((norm - 1.0).abs() < 1e-9) {
+            bail!(
+                "--gravity must be a direction (a unit vector in the robot's root frame), got {}",
+                gravity_words(self.gravity)
+            );
+        }
         if let Some(f) = self.test_last
             && !(f > 0.0 && f < 1.0)
         {
@@ -127,6 +189,7 @@ impl Plan {
             folds: 5,
             sigma_m: None,
             joint: false,
+            gravity: GRAVITY_DOWN,
         }
     }
 }

@@ -41,6 +41,7 @@ use crate::fit::{CV_REPEATS, FOLD_TOLERANCE, Fold, HeldOut, blocked_difference};
 use crate::model::{DataKind, ModelRules};
 pub use crate::noise::{CALIBRATED_SIGMA_RATIO, PLAUSIBLE_FRAMES_ONLY_RMS_M};
 use crate::report::SetRole;
+use crate::report::UNCONVERGED_RUNG_NOTE;
 pub use crate::report::{
     Beyond, Coverage, CoverageSide, Downweighted, FrameReport, PoseFigures, RangeFold, RangeStop,
     RungReport, SampleErrors,
@@ -67,6 +68,11 @@ pub struct MeasuredConfig {
     /// joint; each of the robot's joint count), besides the test rows: the ladder judges
     /// extrapolation on the joint-range folds on whose side of the training range they lie.
     pub workspace: Vec<Vec<f64>>,
+    /// Most residual evaluations of each rung's least-squares fit on every training row
+    /// (`None`: the solver's default, [`hapcal_identify::LmConfig::default`]). A fit that
+    /// reaches it did not converge: `--model auto` leaves its rung out of the ladder, and a
+    /// rung given is a finding ([`MeasuredOutcome::implausible`]).
+    pub max_evaluations: Option<usize>,
 }
 
 /// Everything the measured workflow found.
@@ -114,6 +120,9 @@ pub struct MeasuredOutcome {
     pub equilibrium_refits: usize,
     /// Plain-language warnings.
     pub warnings: Vec<String>,
+    /// Estimates no real robot can have, each with its cause and fix ([`plausibility`]):
+    /// never a result (`hapcal calibrate` stops on the first).
+    pub implausible: Vec<crate::report::Implausible>,
 }
 
 /// The rigid transform `T` minimising `Σ |T·a_i − b_i|²` (Kabsch 1976; Horn 1987, "Closed-form
@@ -523,14 +532,19 @@ pub(crate) fn observations(
 }
 
 /// The problem's model terms for `rung` ([`crate::model::terms`] with the robot's link masses),
-/// the gravity loads taken on every tip of the tree.
+/// the gravity loads taken on every tip of the tree, gravity along the robot's mounting
+/// ([`Robot::gravity_dir`]).
 ///
 /// # Errors
 /// A published-mass model on a robot without published masses.
 pub(crate) fn terms(rung: ModelName, robot: &Robot) -> Result<ModelTerms> {
+    let mut terms = crate::model::terms(rung, &robot.joint_names, &robot.masses)?;
+    if let Some(c) = terms.compliance.as_mut() {
+        c.gravity_dir = robot.gravity_dir;
+    }
     Ok(ModelTerms {
         torque_tips: Some(robot.tree.tips().to_vec()),
-        ..crate::model::terms(rung, &robot.joint_names, &robot.masses)?
+        ..terms
     })
 }
 
@@ -588,6 +602,9 @@ struct Start<'a> {
     /// The estimate of a rung this one nests ([`nested_in`]): its parameters, by name, replace
     /// `x`'s (a per-axis transversal compliance starts at the isotropic one's value).
     nested: Option<&'a Fitted>,
+    /// Most residual evaluations of the fit ([`MeasuredConfig::max_evaluations`]; `None`:
+    /// the solver's default).
+    max_evaluations: Option<usize>,
 }
 
 /// The rung whose model `rung` nests (its parameters a subset of `rung`'s, by name, up to the
@@ -694,7 +711,11 @@ fn fit_terms(
     }
     let subset = Subset::new(&problem, free, x_full);
     let x0 = subset.initial_free();
-    let id = identify(&subset, x0, &crate::fit::identify_config(None))
+    let mut config = crate::fit::identify_config(None);
+    if let Some(n) = start.max_evaluations {
+        config.lm.max_evaluations = n;
+    }
+    let id = identify(&subset, x0, &config)
         .with_context(|| format!("identifying the {rung} model from {n_rows} marker samples"))?;
     let x = subset.full_x(id.fit.x.as_ref());
     let model = problem.model(x.as_ref());
@@ -1709,6 +1730,7 @@ pub fn calibrate_measured(
                 tree: &framed,
                 x: &f0.x,
                 nested: None,
+                max_evaluations: None,
             },
             &offsets,
             train,
@@ -1723,6 +1745,7 @@ pub fn calibrate_measured(
         tree: &framed,
         x: &start_x,
         nested: None,
+        max_evaluations: cfg.max_evaluations,
     };
     // Gross errors bounded by the Huber loss: every fit below sees the winsorized samples;
     // the figures are of the data as measured.
@@ -1756,6 +1779,8 @@ pub fn calibrate_measured(
     let mut range_folds_used = Vec::new();
     let mut range_stops = Vec::new();
     let mut untried: Vec<Untried> = Vec::new();
+    // Rungs of the ladder whose fit on every training row did not converge, with that fit.
+    let mut unconverged: Vec<(ModelName, hapcal_identify::Fit)> = Vec::new();
     let (rung, (model, fitted)) = match cfg.rung {
         Some(r) if r == ModelName::FramesOnly => (r, (frames_model.clone(), frames_only.clone())),
         Some(r) => match richest_fit.take() {
@@ -1886,6 +1911,11 @@ pub fn calibrate_measured(
                 (runs.into_iter().enumerate()).filter_map(|(i, run)| run.map(|run| (i, run)))
             {
                 match fit? {
+                    // An unconverged fit is never a result: the rung is left out (frames only,
+                    // the ladder's foot, stays; an unconverged final fit is a finding).
+                    Ok((_, f)) if i > 0 && !f.identified.fit.termination.is_success() => {
+                        unconverged.push((rungs[i], f.identified.fit.clone()));
+                    }
                     Ok(f) => {
                         tried.push(i);
                         tried_fits.push(f);
@@ -1972,6 +2002,14 @@ pub fn calibrate_measured(
         warnings.extend(crate::fit::copies_warning(n_table_copies(train)));
     }
     warnings.extend(untried_note(&ladder, &untried));
+    for (r, f) in &unconverged {
+        warnings.push(format!(
+            "{UNCONVERGED_RUNG_NOTE}{r} model: its least-squares fit stopped after {} evaluations, \
+             {}, so its estimate is the last iterate, not a minimum; the ladder keeps {rung}",
+            f.n_evaluations,
+            crate::fit::termination_text(&f.termination)
+        ));
+    }
     if cfg.rung.is_none() && rung == ModelName::FramesOnly && range_stops.is_empty() {
         warnings.push(
             "no calibrated model beat frames only on held-out training rows: the nominal \
@@ -2184,6 +2222,20 @@ pub fn calibrate_measured(
     );
     warnings.extend(coverage.iter().flat_map(unvalidated_warnings));
     let frames = frame_reports(&base, &markers, &fitted.x, framed.params());
+    let implausible = plausibility(
+        &Refit {
+            rung,
+            robot,
+            start: &start,
+            offsets: &offsets,
+            train,
+            weights,
+        },
+        &model,
+        &fitted,
+        &frames,
+        cfg.rung.is_some(),
+    );
     Ok(MeasuredOutcome {
         rung,
         ladder,
@@ -2202,7 +2254,263 @@ pub fn calibrate_measured(
         equilibrium_step_m,
         equilibrium_refits: equilibrium_iterations,
         warnings,
+        implausible,
     })
+}
+
+/// A compliance estimate below zero by more than this many standard deviations, at the least,
+/// is a finding, never a result ([`plausibility`]): a joint does not bend against its load.
+/// Within it, the estimate is zero within its uncertainty. Among `n` estimates the bound grows
+/// to keep the chance that a right calibration is stopped at [`NEGATIVE_COMPLIANCE_FAMILY_RISK`]
+/// ([`negative_compliance_sigmas`]).
+pub const NEGATIVE_COMPLIANCE_SIGMAS: f64 = 2.0;
+
+/// Chance that some compliance of a right calibration lies below zero by more than
+/// [`negative_compliance_sigmas`] by noise alone (Bonferroni over the estimates): at 2σ each,
+/// one of 12 compliances of the real UR10 recording's per-axis transversal model lies at
+/// −2.3σ, and half of the right calibrations with 33 compliances would be stopped.
+pub const NEGATIVE_COMPLIANCE_FAMILY_RISK: f64 = 0.05;
+
+/// The bound, in standard deviations, below zero beyond which one of `n` compliance estimates
+/// is a finding: the one-sided normal quantile of [`NEGATIVE_COMPLIANCE_FAMILY_RISK`]/`n`
+/// (Bonferroni), at least [`NEGATIVE_COMPLIANCE_SIGMAS`]: 2.0 for one estimate, 2.64 for 12,
+/// 2.97 for 33.
+pub fn negative_compliance_sigmas(n: usize) -> f64 {
+    let p = NEGATIVE_COMPLIANCE_FAMILY_RISK / n.max(1) as f64;
+    // Upper tail of the standard normal, Q(z) = erfc(z/√2)/2, with erfc from Abramowitz &
+    // Stegun 7.1.26 (error below 1.5·10⁻⁷), inverted by bisection on [0, 10].
+    let q = |z: f64| {
+        let x = z / std::f64::consts::SQRT_2;
+        let t = 1.0 / (1.0 + 0.327_591_1 * x);
+        let poly = t
+            * (0.254_829_592
+                + t * (-0.284_496_736
+                    + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+        0.5 * poly * (-x * x).exp()
+    };
+    let (mut lo, mut hi) = (0.0_f64, 10.0_f64);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if q(mid) > p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    (0.5 * (lo + hi)).max(NEGATIVE_COMPLIANCE_SIGMAS)
+}
+
+/// Longest distance of a marker's frame from the origin of its link's frame, m, that a
+/// mounting can have ([`plausibility`]): a marker, a target or a tool flange sits within a
+/// metre of the link it is fixed to; a frame metres away absorbs another mistake.
+pub const MARKER_OFFSET_MAX_M: f64 = 1.0;
+
+/// Largest training residual, as a multiple of the residual under the gravity given, at
+/// which another mounting still explains the data ([`mounting_test`]): flipping gravity
+/// flips every load, so a mounting upside down fits exactly as well with the compliances'
+/// signs flipped, up to the equilibrium refits (a per cent).
+const MOUNTING_RESIDUAL_RATIO: f64 = 1.01;
+
+/// What a refit of the chosen rung needs ([`mounting_test`]).
+struct Refit<'a> {
+    rung: ModelName,
+    robot: &'a Robot,
+    start: &'a Start<'a>,
+    offsets: &'a [Option<usize>],
+    train: &'a [MeasurementTable],
+    weights: Weights,
+}
+
+/// The compliance estimates (`compliance.*`, `transversal.*`) of `fitted` below zero by more
+/// than [`negative_compliance_sigmas`] of their count standard deviations, most significant
+/// first (name, value, σ, in the parameter's unit), and the number of compliance estimates.
+fn negative_compliances(fitted: &Fitted) -> (Vec<(String, f64, f64)>, usize) {
+    let id = &fitted.identified;
+    let compliances: Vec<(String, f64, f64)> = (id.covariance.free.iter())
+        .zip(id.covariance.std())
+        .map(|(&i, std)| (id.layout.name(i).to_owned(), id.fit.x[i], std))
+        .filter(|(name, _, _)| compliance_unit(name, true).is_some())
+        .collect();
+    let n = compliances.len();
+    let z = negative_compliance_sigmas(n);
+    let mut negative: Vec<(String, f64, f64)> = (compliances.into_iter())
+        .filter(|(_, value, std)| value + z * std < 0.0)
+        .collect();
+    let z = |c: &(String, f64, f64)| c.1 / c.2.max(f64::MIN_POSITIVE);
+    negative.sort_by(|a, b| z(a).total_cmp(&z(b)));
+    (negative, n)
+}
+
+/// `g` as `--gravity` reads it (`-z`, or three numbers).
+fn gravity_text(g: &Vector3<f64>) -> String {
+    crate::inputs::gravity_words([g.x + 0.0, g.y + 0.0, g.z + 0.0])
+}
+
+/// The mounting a direction of gravity in the root frame stands for, in words.
+fn mounting_words(g: &Vector3<f64>) -> &'static str {
+    if g.z > 0.5 {
+        "mounted upside down (hanging from a ceiling)"
+    } else if g.z < -0.5 {
+        "mounted upright (on a floor)"
+    } else {
+        "mounted on a wall"
+    }
+}
+
+/// Another mounting that explains negative compliances: the chosen rung refitted with gravity
+/// along each other axis of the root frame (±x, ±y, ±z), in parallel; of those whose
+/// compliances are none below zero by [`negative_compliance_sigmas`] σ and whose training
+/// position residual is within [`MOUNTING_RESIDUAL_RATIO`] of `given_rms_m` (or below), the
+/// one with the smallest residual: its gravity direction and residual, m. `None` when no axis
+/// does.
+fn mounting_test(r: &Refit<'_>, given_rms_m: f64) -> Option<(Vector3<f64>, f64)> {
+    use rayon::prelude::*;
+    let axes: Vec<Vector3<f64>> = (0..3)
+        .flat_map(|k| {
+            let e = Vector3::ith(k, 1.0);
+            [e, -e]
+        })
+        .filter(|g| (g - r.robot.gravity_dir).norm() > 1e-9)
+        .collect();
+    let all = |_: usize, _: usize| true;
+    let trials: Vec<(Vector3<f64>, f64)> = (axes.par_iter())
+        .filter_map(|g| {
+            let robot = Robot {
+                gravity_dir: *g,
+                ..r.robot.clone()
+            };
+            let start = Start {
+                nested: None,
+                ..*r.start
+            };
+            let (model, fitted) =
+                fit(r.rung, &robot, &start, r.offsets, r.train, r.weights, &all).ok()?;
+            if !fitted.identified.fit.termination.is_success()
+                || !negative_compliances(&fitted).0.is_empty()
+            {
+                return None;
+            }
+            let (_, rms, _) = stats(&position_errors(&model, r.train));
+            Some((*g, rms))
+        })
+        .collect();
+    (trials.into_iter())
+        .filter(|(_, rms)| *rms <= MOUNTING_RESIDUAL_RATIO * given_rms_m)
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+}
+
+/// What no real robot can have in the estimate of the chosen rung, each with its cause and
+/// fix, the most basic first:
+///
+/// - a final fit that did not converge: its estimate is no minimum (`given`: the rung was
+///   given by `--model`; with `--model auto` the ladder already left out the rungs whose fit
+///   did not converge);
+/// - compliances below zero by more than [`negative_compliance_sigmas`] σ: two or more (a
+///   pattern) named as the mounting when gravity along another axis of the root frame makes
+///   them non-negative at no larger residual ([`mounting_test`]), else as what they are;
+/// - a marker frame farther than [`MARKER_OFFSET_MAX_M`] from its link's origin.
+///
+/// Empty when the estimate is plausible.
+fn plausibility(
+    r: &Refit<'_>,
+    model: &CalibratedModel,
+    fitted: &Fitted,
+    frames: &[FrameReport],
+    given: bool,
+) -> Vec<crate::report::Implausible> {
+    use crate::report::{Implausible, ImplausibleKind};
+    let mut out = Vec::new();
+    let fit = &fitted.identified.fit;
+    if !fit.termination.is_success() {
+        out.push(Implausible {
+            kind: ImplausibleKind::Unconverged,
+            message: format!(
+                "the least-squares fit of the {} model stopped after {} evaluations, {}: its \
+                 estimate is the last iterate, not a minimum",
+                r.rung,
+                fit.n_evaluations,
+                crate::fit::termination_text(&fit.termination)
+            ),
+            fix: if given {
+                format!(
+                    "give a simpler --model than {} (or --model auto, which keeps the highest \
+                     model whose fit converged)",
+                    r.rung
+                )
+            } else {
+                "give a simpler --model".to_owned()
+            },
+        });
+    }
+    let (negative, n_compliances) = negative_compliances(fitted);
+    if !negative.is_empty() {
+        let masses = !r.robot.masses.is_empty();
+        let listed: Vec<String> = (negative.iter().take(3))
+            .map(|(name, value, std)| {
+                let unit = if masses { "µrad/(N·m)" } else { "µrad/m" };
+                format!("{name} {:.0} ± {:.0} {unit}", value * 1e6, std * 1e6)
+            })
+            .collect();
+        let more = if negative.len() > 3 { ", …" } else { "" };
+        let given_g = gravity_text(&r.robot.gravity_dir);
+        let counted = format!(
+            "{} of {n_compliances} below zero by more than {:.1} standard deviations: {}{more}",
+            negative.len(),
+            negative_compliance_sigmas(n_compliances),
+            listed.join(", ")
+        );
+        let (_, given_rms, _) = stats(&position_errors(model, r.train));
+        // A pattern is tested against the mounting; one estimate alone is what it is.
+        let mounting = (negative.len() >= 2)
+            .then(|| mounting_test(r, given_rms))
+            .flatten();
+        out.push(match mounting {
+            Some((g, rms)) => Implausible {
+                kind: ImplausibleKind::Mounting,
+                message: format!(
+                    "the compliances of the {} model are negative with gravity along {given_g} of \
+                     the robot's root link ({counted}); with gravity along {} none is, and \
+                     the training residual is {:.3} mm RMS against {:.3} mm: the robot is {}",
+                    r.rung,
+                    gravity_text(&g),
+                    rms * 1e3,
+                    given_rms * 1e3,
+                    mounting_words(&g)
+                ),
+                fix: format!("--gravity {}", gravity_text(&g)),
+            },
+            None => Implausible {
+                kind: ImplausibleKind::NegativeCompliance,
+                message: format!(
+                    "the compliances of the {} model are negative with gravity along {given_g} of \
+                     the robot's root link ({counted}), and gravity along no other axis of the \
+                     root frame makes them non-negative: a joint does not bend against its load; \
+                     the model absorbs an effect it lacks or a setup mistake",
+                    r.rung
+                ),
+                fix: "check the link masses and the mounting (--gravity) of the description, or \
+                      give a model without compliance (--model geometric)"
+                    .to_owned(),
+            },
+        });
+    }
+    for f in frames.iter().filter(|f| f.name.starts_with("marker")) {
+        let d = Vector3::from(f.xyz_m).norm();
+        if d > MARKER_OFFSET_MAX_M {
+            out.push(Implausible {
+                kind: ImplausibleKind::Frame,
+                message: format!(
+                    "the identified {} frame lies {d:.2} m from its link's origin, farther than \
+                     any marker mounting ({MARKER_OFFSET_MAX_M} m): the frame absorbs another \
+                     mistake (the tip link, the units, another robot's description)",
+                    f.name
+                ),
+                fix: "check --tip and --device against the robot and the markers measured"
+                    .to_owned(),
+            });
+        }
+    }
+    out
 }
 
 /// Most refits of [`equilibrate`].
@@ -2297,6 +2605,7 @@ fn equilibrate(
             tree,
             x: &x,
             nested: None,
+            max_evaluations: None,
         },
         offsets,
         obs,
@@ -2760,6 +3069,7 @@ pub fn frames_only(
             tree: &framed,
             x: &nominal,
             nested: None,
+            max_evaluations: None,
         },
         &offsets,
         tables,
@@ -2929,6 +3239,11 @@ pub fn run_tables(
             Some(path) => workspace_configurations(path, robot, &plan.units)?,
             None => Vec::new(),
         },
+        max_evaluations: None,
+    };
+    let robot = &Robot {
+        gravity_dir: Vector3::from(plan.gravity),
+        ..robot.clone()
     };
     let out = calibrate_measured(robot, &train, &test, &cfg)?;
     warnings.extend(out.warnings.iter().cloned());
@@ -3003,6 +3318,7 @@ pub fn run_tables(
         coverage: out.coverage.clone(),
         equilibrium_step_m: out.equilibrium_step_m,
         equilibrium_refits: out.equilibrium_refits,
+        implausible: out.implausible.clone(),
     };
     let frame_values: Vec<ParamReport> = (id.covariance.free.iter())
         .zip(id.covariance.std())
@@ -3182,7 +3498,16 @@ pub fn sidecar_toml(frames: &[FrameReport], leftover: &[hapcal_io::CalibratedVal
 
 #[cfg(test)]
 mod tests {
-    use super::{Line, RangeVerdict, rung_chains};
+    use super::{Line, RangeVerdict, negative_compliance_sigmas, rung_chains};
+
+    #[test]
+    fn the_negative_compliance_bound_is_the_bonferroni_normal_quantile() {
+        // One estimate: the floor of 2σ (Φ⁻¹(0.95) = 1.645 is below it). 12 and 33 estimates:
+        // Φ⁻¹(1 − 0.05/n) = 2.638 and 2.965 (normal tables).
+        assert_eq!(negative_compliance_sigmas(1), 2.0);
+        assert!((negative_compliance_sigmas(12) - 2.638).abs() < 2e-3);
+        assert!((negative_compliance_sigmas(33) - 2.965).abs() < 2e-3);
+    }
 
     #[test]
     fn a_line_through_exact_points_predicts_them_with_no_error() {

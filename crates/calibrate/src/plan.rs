@@ -949,6 +949,7 @@ pub fn plan_after(
             sigma_rad: cfg.sigma_rad,
             marker_tips: (0..robot.tree.tips().len()).collect(),
             workspace: workspace.to_vec(),
+            max_evaluations: None,
         };
         calibrate_measured(robot, measured, &[], &mcfg)
             .context("calibrating the measured rows (the model the poses are planned for)")

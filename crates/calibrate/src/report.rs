@@ -23,14 +23,46 @@ pub enum SetRole {
 /// ([`CalibrationReport::ladder_notes`]).
 pub const UNTRIED_RUNGS_NOTE: &str = "--model auto tried the ladder up to ";
 
+/// How the note starts of a `--model auto` ladder that left out a rung whose fit did not
+/// converge ([`CalibrationReport::ladder_notes`]).
+pub const UNCONVERGED_RUNG_NOTE: &str = "--model auto left out the ";
+
 impl CalibrationReport {
     /// The warnings that say which rungs of the ladder were not tried for too few rows, and
-    /// why (rows, parameters): the command line prints them on standard error as well.
+    /// why (rows, parameters), or were left out because their fit did not converge: the
+    /// command line prints them on standard error as well.
     pub fn ladder_notes(&self) -> impl Iterator<Item = &str> {
         (self.warnings.iter())
             .map(String::as_str)
-            .filter(|w| w.starts_with(UNTRIED_RUNGS_NOTE))
+            .filter(|w| w.starts_with(UNTRIED_RUNGS_NOTE) || w.starts_with(UNCONVERGED_RUNG_NOTE))
     }
+}
+
+/// What makes an estimate one no real robot can have ([`Implausible`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ImplausibleKind {
+    /// Compliances below zero beyond their uncertainty that another direction of gravity in
+    /// the root frame (a ceiling or wall mount) makes non-negative, with a smaller residual.
+    Mounting,
+    /// Compliances below zero beyond their uncertainty, no mounting explaining them.
+    NegativeCompliance,
+    /// An identified marker frame no mounting can have (metres from its link).
+    Frame,
+    /// The final least-squares fit stopped before converging.
+    Unconverged,
+}
+
+/// An estimate no real robot can have, found after the fit (measurement files): never a
+/// result; `hapcal calibrate` stops on it (`setup::after_fit`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Implausible {
+    /// What kind.
+    pub kind: ImplausibleKind,
+    /// What was found and why it cannot be, in plain words.
+    pub message: String,
+    /// The flag or the edit that applies.
+    pub fix: String,
 }
 
 impl std::fmt::Display for SetRole {
@@ -212,6 +244,11 @@ pub struct CalibrationReport {
     /// Compliance models on measurement files: refits with the gravity loads at the torque
     /// equilibrium of the estimate (0: the loads of the undeflected robot were close enough).
     pub equilibrium_refits: usize,
+    /// Measurement files: estimates no real robot can have (negative compliances, a marker
+    /// frame metres from its link, an unconverged fit), each with its cause and fix; empty
+    /// when the estimate is plausible.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub implausible: Vec<Implausible>,
 }
 
 /// Output of a calibration: the report plus what is needed to write the calibrated files.

@@ -142,6 +142,7 @@ pub fn frames_only_residual(
         sigma_rad: None,
         marker_tips: marker_tips.to_vec(),
         workspace: Vec::new(),
+        max_evaluations: None,
     };
     let tables = thinned(tables);
     let fo = measured::frames_only(robot, &tables, &cfg, check_weights()).ok()?;
@@ -757,6 +758,7 @@ fn robots_for_tips(urdf: &Path, tip_sets: &[Vec<String>]) -> Vec<Option<Robot>> 
                 masses: Vec::new(),
                 held_joints: Vec::new(),
                 load_tips: Vec::new(),
+                gravity_dir: -hapcal_kinematics::Vector3::z(),
                 tree,
             })
         })
@@ -1692,6 +1694,7 @@ fn another_device(
         sigma_rad: None,
         marker_tips: marker_tips.to_vec(),
         workspace: Vec::new(),
+        max_evaluations: None,
     };
     let tables = thinned(tables);
     let out = measured::calibrate_measured(robot, &tables, &[], &cfg).ok()?;
@@ -1745,8 +1748,12 @@ fn another_device(
 /// [`MANUFACTURING_TOLERANCE_M`], determined to [`DETERMINED_SIGMAS`], or a training set the
 /// calibrated model still misses by more than [`PLAUSIBLE_FRAMES_ONLY_RMS_M`], says the data
 /// come from another device or robot (or a mistake the check before the fit could not tell),
-/// an error finding; `None` otherwise. Compliances, frames and angles are not judged: their
-/// size depends on the setup.
+/// an error finding; `None` otherwise. An estimate no real robot can have
+/// ([`crate::report::CalibrationReport::implausible`]) is an error finding too: an
+/// unconverged fit before everything, negative compliances (named as a mounting when another
+/// direction of gravity explains them) and a marker frame metres from its link after the
+/// lengths of another robot (whose compliances absorb what the lengths leave). The size of
+/// compliances, frames and angles is not judged otherwise: it depends on the setup.
 ///
 /// `before` holds the classes of the findings the check before the fit warned of: after a
 /// latency warning, lengths beyond tolerance are what a calibration that does not model the
@@ -1755,10 +1762,32 @@ pub fn after_fit(
     report: &crate::report::CalibrationReport,
     before: &[MistakeClass],
 ) -> Option<Finding> {
+    use crate::report::ImplausibleKind;
+    let implausible = |i: &crate::report::Implausible| Finding {
+        class: match i.kind {
+            ImplausibleKind::Mounting => MistakeClass::Mounting,
+            _ => MistakeClass::ImplausibleEstimate,
+        },
+        severity: Severity::Error,
+        message: i.message.clone(),
+        fix: i.fix.clone(),
+        before: Residual::default(),
+        after: None,
+    };
+    // An unconverged estimate first (nothing else about it means anything), then lengths of
+    // another robot (its compliances absorb what the lengths leave), then the rest.
+    let unconverged = (report.implausible.iter()).find(|i| i.kind == ImplausibleKind::Unconverged);
+    if let Some(i) = unconverged {
+        return Some(implausible(i));
+    }
     let Some(beyond) = lengths_beyond_tolerance(report) else {
-        return misfit_after_calibration(report);
+        return (report.implausible.first().map(implausible))
+            .or_else(|| misfit_after_calibration(report));
     };
     if before.contains(&MistakeClass::Latency) {
+        if let Some(i) = report.implausible.first() {
+            return Some(implausible(i));
+        }
         return Some(Finding {
             class: MistakeClass::Latency,
             severity: Severity::Warning,

@@ -99,7 +99,11 @@ impl MistakeClass {
                 Family::TipsAndSockets
             }
             C::AnotherDevice => Family::AnotherDevice,
-            C::FrozenJoint | C::NoHypothesis => return None,
+            // Found on the data alone, or on the calibrated estimate after the fit: no
+            // hypothesis of the check before it corrects the data.
+            C::FrozenJoint | C::NoHypothesis | C::Mounting | C::ImplausibleEstimate => {
+                return None;
+            }
         })
     }
 }
@@ -777,7 +781,13 @@ mod tests {
     #[test]
     fn every_class_of_a_hypothesis_has_a_family() {
         for c in MistakeClass::ALL {
-            let data_alone = matches!(c, MistakeClass::FrozenJoint | MistakeClass::NoHypothesis);
+            let data_alone = matches!(
+                c,
+                MistakeClass::FrozenJoint
+                    | MistakeClass::NoHypothesis
+                    | MistakeClass::Mounting
+                    | MistakeClass::ImplausibleEstimate
+            );
             assert_eq!(c.family().is_none(), data_alone, "{c}");
         }
     }

@@ -97,11 +97,18 @@ pub enum MistakeClass {
     /// Calibrated deviations beyond any manufacturing tolerance: the data of another device or
     /// robot.
     AnotherDevice,
+    /// Compliances negative beyond their uncertainty under the gravity given, non-negative
+    /// under another axis of the root frame: the robot is mounted on a ceiling or a wall
+    /// (`--gravity`).
+    Mounting,
+    /// An estimate no real robot can have (negative compliances, a marker frame metres from its
+    /// link, an unconverged fit): found after the fit, never a result.
+    ImplausibleEstimate,
 }
 
 impl MistakeClass {
     /// Every class, in report order.
-    pub const ALL: [MistakeClass; 21] = [
+    pub const ALL: [MistakeClass; 23] = [
         MistakeClass::LengthUnit,
         MistakeClass::AngleUnit,
         MistakeClass::OrientationUnit,
@@ -123,6 +130,8 @@ impl MistakeClass {
         MistakeClass::SocketDistance,
         MistakeClass::WrongSocket,
         MistakeClass::AnotherDevice,
+        MistakeClass::Mounting,
+        MistakeClass::ImplausibleEstimate,
     ];
 
     /// The class's name in reports.
@@ -149,6 +158,8 @@ impl MistakeClass {
             MistakeClass::SocketDistance => "socket-distance",
             MistakeClass::WrongSocket => "wrong-socket",
             MistakeClass::AnotherDevice => "another-device",
+            MistakeClass::Mounting => "mounting",
+            MistakeClass::ImplausibleEstimate => "implausible-estimate",
         }
     }
 }

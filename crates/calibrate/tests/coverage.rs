@@ -18,6 +18,7 @@ fn config(rung: Option<ModelName>, workspace: Vec<Vec<f64>>) -> MeasuredConfig {
         sigma_rad: None,
         marker_tips: Vec::new(),
         workspace,
+        max_evaluations: None,
     }
 }
 

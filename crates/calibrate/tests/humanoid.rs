@@ -18,6 +18,7 @@ fn config(rung: Option<ModelName>, marker_tips: Vec<usize>) -> MeasuredConfig {
         sigma_rad: None,
         marker_tips,
         workspace: Vec::new(),
+        max_evaluations: None,
     }
 }
 
@@ -200,4 +201,144 @@ fn per_axis_transversal_compliance_fits_links_that_bend_one_way() {
         "isotropic {isotropic} m against per axis {per_axis} m cross-validated: the anisotropy \
          was not seen"
     );
+}
+
+/// The bundled humanoid's URDF (fixtures/sim-humanoid) mounted upside down: its root joint's
+/// origin turned by π about x, written to a scratch folder.
+fn ceiling_urdf() -> std::path::PathBuf {
+    let root = hapcal_calibrate::project_root();
+    let text = std::fs::read_to_string(root.join("fixtures/sim-humanoid/humanoid.urdf")).unwrap();
+    let upright = r#"<origin xyz="0 0 0.3" rpy="0 0 0"/>"#;
+    let turned = text.replacen(
+        upright,
+        r#"<origin xyz="0 0 0.3" rpy="3.141592653589793 0 0"/>"#,
+        1,
+    );
+    assert_ne!(turned, text, "the root joint's origin moved in the fixture");
+    let dir = std::env::temp_dir().join(format!("hapcal-ceiling-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("humanoid_ceiling.urdf");
+    std::fs::write(&path, turned).unwrap();
+    path
+}
+
+/// `hapcal calibrate --device <device> --tip l_hand --tip r_hand --data
+/// fixtures/sim-humanoid/mocap.csv --model compliance --gravity <gravity>`, and what the
+/// check after the fit finds.
+fn calibrate_fixture(
+    device: &std::path::Path,
+    gravity: [f64; 3],
+) -> (
+    hapcal_calibrate::report::CalibrationReport,
+    Option<hapcal_calibrate::setup::Finding>,
+) {
+    use hapcal_calibrate::inputs::Plan;
+    let root = hapcal_calibrate::project_root();
+    let plan = Plan {
+        device: device.to_path_buf(),
+        tip: "l_hand".to_owned(),
+        tips: vec!["r_hand".to_owned()],
+        data: vec![root.join("fixtures/sim-humanoid/mocap.csv")],
+        test: Vec::new(),
+        model: ModelName::Compliance.into(),
+        gravity,
+        ..Plan::bundled_default()
+    };
+    let outcome = hapcal_calibrate::calibrate::run(&plan).unwrap();
+    let finding = hapcal_calibrate::setup::after_fit(&outcome.report, &[]);
+    (outcome.report, finding)
+}
+
+#[test]
+fn a_ceiling_mount_is_named_and_its_fix_gives_the_upright_compliances() {
+    use hapcal_calibrate::report::ImplausibleKind;
+    use hapcal_calibrate::setup::{MistakeClass, Severity};
+    let ceiling = ceiling_urdf();
+    // Gravity along −z of a root turned upside down loads every joint the other way: the
+    // compliances come out negative, a finding that names the mounting and its flag.
+    let (report, finding) = calibrate_fixture(&ceiling, [0.0, 0.0, -1.0]);
+    let f = finding.expect("negative compliances pass the check after the fit");
+    assert_eq!(f.class, MistakeClass::Mounting, "{}", f.text());
+    assert_eq!(f.severity, Severity::Error);
+    assert_eq!(f.fix, "--gravity +z", "{}", f.text());
+    assert!(f.message.contains("upside down"), "{}", f.message);
+    assert_eq!(report.implausible[0].kind, ImplausibleKind::Mounting);
+    // The fix applied: nothing implausible, and every compliance is the upright robot's
+    // within its standard deviation (the same data, the same loads in another frame).
+    let (fixed, finding) = calibrate_fixture(&ceiling, [0.0, 0.0, 1.0]);
+    assert!(fixed.implausible.is_empty(), "{:?}", fixed.implausible);
+    assert!(finding.is_none(), "{:?}", finding.map(|f| f.text()));
+    let upright = hapcal_calibrate::project_root().join("fixtures/sim-humanoid/humanoid.urdf");
+    let (reference, _) = calibrate_fixture(&upright, [0.0, 0.0, -1.0]);
+    let compliances = |r: &hapcal_calibrate::report::CalibrationReport| -> Vec<(String, f64, f64)> {
+        (r.parameters.iter())
+            .filter(|p| p.name.starts_with("compliance."))
+            .map(|p| (p.name.clone(), p.value, p.std))
+            .collect()
+    };
+    let (a, b) = (compliances(&fixed), compliances(&reference));
+    assert_eq!(a.len(), b.len());
+    assert!(a.len() >= 14, "{a:?}");
+    for ((name, value, std), (name_b, value_b, _)) in a.iter().zip(&b) {
+        assert_eq!(name, name_b);
+        assert!(
+            (value - value_b).abs() < *std,
+            "{name}: {value} vs {value_b} ± {std}"
+        );
+    }
+}
+
+#[test]
+fn an_unconverged_fit_is_left_out_of_the_ladder_and_a_finding_when_given() {
+    use hapcal_calibrate::report::{ImplausibleKind, UNCONVERGED_RUNG_NOTE};
+    let robot = humanoid(&["l_hand", "r_hand"]);
+    let truth = truth(&robot, 31);
+    let train = table(&robot, &truth, &[0, 1], 200, 32);
+    // Two residual evaluations: no fit above frames only (fitted before the ladder, at the
+    // solver's default) can converge from the frames-only estimate.
+    let limited = |rung| MeasuredConfig {
+        max_evaluations: Some(2),
+        ..config(rung, vec![0, 1])
+    };
+    let out =
+        calibrate_measured(&robot, std::slice::from_ref(&train), &[], &limited(None)).unwrap();
+    assert_eq!(out.rung, ModelName::FramesOnly, "ladder {:?}", out.ladder);
+    assert!(out.fitted.identified.fit.termination.is_success());
+    assert_eq!(out.ladder.len(), 1, "ladder {:?}", out.ladder);
+    let notes: Vec<&String> = (out.warnings.iter())
+        .filter(|w| w.starts_with(UNCONVERGED_RUNG_NOTE))
+        .collect();
+    assert!(
+        notes
+            .iter()
+            .any(|w| w.contains("transversal-compliance model")),
+        "{notes:?}"
+    );
+    assert!(
+        notes
+            .iter()
+            .all(|w| w.ends_with("the ladder keeps frames-only")),
+        "{notes:?}"
+    );
+    assert!(out.implausible.is_empty(), "{:?}", out.implausible);
+    // The model given: its unconverged fit is a finding, never a result.
+    let given = calibrate_measured(
+        &robot,
+        std::slice::from_ref(&train),
+        &[],
+        &limited(Some(ModelName::Geometric)),
+    )
+    .unwrap();
+    assert_eq!(given.implausible[0].kind, ImplausibleKind::Unconverged);
+    assert!(given.implausible[0].fix.contains("--model"));
+    // Without the limit the same rows climb past frames only: the limit alone kept it there.
+    let free = calibrate_measured(
+        &robot,
+        std::slice::from_ref(&train),
+        &[],
+        &config(None, vec![0, 1]),
+    )
+    .unwrap();
+    assert_ne!(free.rung, ModelName::FramesOnly);
+    assert!(free.implausible.is_empty(), "{:?}", free.implausible);
 }

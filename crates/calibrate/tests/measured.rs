@@ -92,6 +92,7 @@ fn config() -> MeasuredConfig {
         sigma_rad: None,
         marker_tips: Vec::new(),
         workspace: Vec::new(),
+        max_evaluations: None,
     }
 }
 

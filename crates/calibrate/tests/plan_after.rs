@@ -118,6 +118,7 @@ fn heldout_rms(robot: &Robot, train: &[MeasurementTable], test: &MeasurementTabl
         sigma_rad: None,
         marker_tips: vec![0],
         workspace: Vec::new(),
+        max_evaluations: None,
     };
     let out = calibrate_measured(robot, train, std::slice::from_ref(test), &cfg).unwrap();
     out.sets.last().unwrap().4.position_rms_m

@@ -169,6 +169,12 @@ enum Command {
         /// ones in file order, as a test set (0.3: the first 70 % train).
         #[arg(long, allow_hyphen_values = true)]
         test_last: Option<f64>,
+        /// Measurement files: the direction of gravity in the robot's root frame, the mounting
+        /// the compliance models load the joints with: -z upright on a floor (the default), +z
+        /// hanging from a ceiling, ±x or ±y on a wall, or three numbers gx,gy,gz. It is written
+        /// into the calibration record.
+        #[arg(long, allow_hyphen_values = true, value_parser = calibrate::parse_gravity)]
+        gravity: Option<[f64; 3]>,
         #[command(flatten)]
         units: UnitArgs,
         /// Haptic device with transmissions: identify the transmissions and the kinematics in
@@ -491,11 +497,13 @@ fn run(cli: Cli) -> Result<()> {
             sigma_m,
             sigma_rad,
             test_last,
+            gravity,
             units,
             joint,
             accept_setup,
         } => {
             let units = units.units();
+            let gravity = gravity.unwrap_or(calibrate::GRAVITY_DOWN);
             let (tip, more_tips) = match tips.split_first() {
                 Some((first, rest)) => (first.clone(), rest.to_vec()),
                 None => ("ball_link".to_owned(), Vec::new()),
@@ -512,6 +520,7 @@ fn run(cli: Cli) -> Result<()> {
                     sigma_rad,
                     units,
                     test_last,
+                    gravity,
                     ..default
                 }
             } else {
@@ -530,6 +539,7 @@ fn run(cli: Cli) -> Result<()> {
                     folds,
                     sigma_m,
                     joint,
+                    gravity,
                 }
             };
             let inputs: Vec<&std::path::Path> = (plan.data.iter().chain(&plan.test))
@@ -898,6 +908,7 @@ fn run(cli: Cli) -> Result<()> {
                         folds,
                         sigma_m: None,
                         joint: false,
+                        gravity: calibrate::GRAVITY_DOWN,
                     },
                     accept_setup,
                 )?;
@@ -945,6 +956,7 @@ fn run(cli: Cli) -> Result<()> {
                     folds,
                     sigma_m,
                     joint: false,
+                    gravity: calibrate::GRAVITY_DOWN,
                 };
                 let (accepted, _) = setup_gate(&plan, accept_setup)?;
                 let cfg = hapcal_diagnose::arm::ArmConfig {

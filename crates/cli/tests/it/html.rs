@@ -98,6 +98,7 @@ fn report(name: &str, n_train: usize, n_test: usize) -> CalibrationReport {
         coverage: None,
         equilibrium_step_m: None,
         equilibrium_refits: 0,
+        implausible: Vec::new(),
     }
 }
 
