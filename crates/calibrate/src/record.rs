@@ -85,22 +85,11 @@ pub(crate) fn measured_record(m: &MeasuredRecord<'_>) -> Calibration {
     let compliance_unit = torque.as_ref().map(|t| t.source.compliance_unit());
     let values: Vec<hapcal_contract::CalibratedValue> = (m.parameters.iter())
         .chain(m.frame_values)
-        .map(|p| hapcal_contract::CalibratedValue {
-            name: p.name.clone(),
-            value: p.value,
-            std: p.std,
-            unit: match compliance_unit {
-                Some(unit)
-                    if p.name.starts_with("compliance.") || p.name.starts_with("transversal.") =>
-                {
-                    unit.to_owned()
-                }
-                _ => p.unit.to_string(),
-            },
-        })
+        .map(|p| value_of(p, compliance_unit, p.std))
         .collect();
     // A kinematic value the final identification held rather than estimated (its warm start
-    // from an earlier fit) is part of the model all the same: recorded with σ 0.
+    // from an earlier fit) is part of the model all the same: recorded with σ 0, outside the
+    // covariance.
     let mut values = values;
     let chain = m.calibrated.tips.first().unwrap_or(&m.calibrated.chain);
     for (p, &x) in chain.params().iter().zip(&m.calibrated.x_kin) {
@@ -186,18 +175,43 @@ pub(crate) fn bound_record(
     }
 }
 
-/// The covariance block of `values` among the identification's free parameters; `None` if a
-/// value is not among them.
+/// The record's value of `p` with standard deviation `std`, in the unit of the torque source
+/// `compliance_unit` for a compliance.
+fn value_of(
+    p: &ParamReport,
+    compliance_unit: Option<&str>,
+    std: f64,
+) -> hapcal_contract::CalibratedValue {
+    hapcal_contract::CalibratedValue {
+        name: p.name.clone(),
+        value: p.value,
+        std,
+        unit: match compliance_unit {
+            Some(unit)
+                if p.name.starts_with("compliance.") || p.name.starts_with("transversal.") =>
+            {
+                unit.to_owned()
+            }
+            _ => p.unit.to_string(),
+        },
+    }
+}
+
+/// The covariance block, in full, of the recorded `values` the identification estimated (its
+/// free parameters); a value it held (σ 0) is exact to the model and stays outside. `None` when it estimated none of them.
 fn covariance_of(
     cov: &hapcal_identify::Covariance,
     values: &[hapcal_contract::CalibratedValue],
 ) -> Option<Covariance> {
-    if values.is_empty() {
+    let (names, index): (Vec<String>, Vec<usize>) = (values.iter())
+        .filter_map(|v| {
+            let i = cov.names.iter().position(|n| *n == v.name)?;
+            Some((v.name.clone(), i))
+        })
+        .unzip();
+    if index.is_empty() {
         return None;
     }
-    let index: Vec<usize> = (values.iter())
-        .map(|v| cov.names.iter().position(|n| *n == v.name))
-        .collect::<Option<_>>()?;
     let k = index.len();
     let mut matrix = vec![0.0; k * k];
     for (a, &i) in index.iter().enumerate() {
@@ -205,10 +219,7 @@ fn covariance_of(
             matrix[a * k + b] = cov.matrix[(i, j)];
         }
     }
-    Some(Covariance::from_matrix(
-        values.iter().map(|v| v.name.clone()).collect(),
-        &matrix,
-    ))
+    Some(Covariance::from_matrix(names, &matrix))
 }
 
 /// Sets the value `name` (a record's value name: `compliance.<joint>[+<joint>…]`,

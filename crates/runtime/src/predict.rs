@@ -55,6 +55,10 @@ pub struct TipPrediction {
     /// 1σ of the predicted position, m: `√trace(G·Σ·Gᵀ)` (see the module docs); `None`
     /// when there is no uncertainty to propagate ([`Predictor::uncertainty_unavailable`]).
     pub sigma_m: Option<f64>,
+    /// 1σ of each coordinate `x, y, z` of the predicted position in the prediction's frame,
+    /// m: the square roots of the diagonal of `G·Σ·Gᵀ` (their root sum of squares is
+    /// [`Self::sigma_m`]); `None` likewise.
+    pub sigma_axes_m: Option<[f64; 3]>,
     /// 1σ of the predicted orientation, rad: the same with `G` the derivative of the
     /// rotation vector; `None` likewise.
     pub sigma_rad: Option<f64>,
@@ -77,6 +81,7 @@ impl Default for TipPrediction {
         TipPrediction {
             pose: Pose::IDENTITY,
             sigma_m: None,
+            sigma_axes_m: None,
             sigma_rad: None,
         }
     }
@@ -495,6 +500,7 @@ impl Predictor {
             *p = TipPrediction {
                 pose: *pose,
                 sigma_m: None,
+                sigma_axes_m: None,
                 sigma_rad: None,
             };
         }
@@ -515,18 +521,22 @@ impl Predictor {
         }
         for (tip, p) in out.iter_mut().enumerate() {
             let g = &gradient[tip * m..(tip + 1) * m];
-            let (mut var_m, mut var_rad) = (0.0, 0.0);
+            let (mut var_axes, mut var_rad) = ([0.0; 3], 0.0);
             for i in 0..m {
                 for j in 0..m {
                     let c = self.covariance[i * m + j];
                     if c == 0.0 {
                         continue;
                     }
-                    var_m += c * (0..3).map(|a| g[i][a] * g[j][a]).sum::<f64>();
+                    for (a, v) in var_axes.iter_mut().enumerate() {
+                        *v += c * g[i][a] * g[j][a];
+                    }
                     var_rad += c * (3..6).map(|a| g[i][a] * g[j][a]).sum::<f64>();
                 }
             }
+            let var_m: f64 = var_axes.iter().sum();
             // A covariance is positive semi-definite; rounding can leave −0.
+            p.sigma_axes_m = Some(var_axes.map(|v: f64| v.max(0.0).sqrt()));
             p.sigma_m = Some(var_m.max(0.0).sqrt());
             p.sigma_rad = Some(var_rad.max(0.0).sqrt());
         }

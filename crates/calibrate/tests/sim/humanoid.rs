@@ -47,6 +47,60 @@ pub fn humanoid_urdf() -> String {
 /// The humanoid's URDF, with `long_torso` a torso of five joints (yaw, pitch, pitch, roll,
 /// pitch, as an upper body with a waist and a chest joint): 19 joints on the two hands.
 pub fn humanoid_urdf_with_torso(long_torso: bool) -> String {
+    humanoid_urdf_of(long_torso, false)
+}
+
+/// The humanoid of [`humanoid_urdf_with_torso`] described as many real humanoids' URDFs are:
+/// every moving joint turns about its own z axis, the frame turned onto the joint by the
+/// fixed `rpy` of its origin (rotations of ±π/2, so the written numbers carry rounding), the
+/// fixed hand and head joints turning back. The same robot: every link's centre of mass and
+/// every tip frame at the same place as in [`humanoid_urdf_with_torso`].
+pub fn humanoid_urdf_z_axes(long_torso: bool) -> String {
+    humanoid_urdf_of(long_torso, true)
+}
+
+/// Re-expresses `joints` and the links' centres of mass `links` in frames whose moving joints
+/// turn about z: a joint about `a` gets the frame `R_a` (z onto `a`) after its original frame;
+/// a fixed joint keeps its original frame. Origins `T = (xyz, I)` in the parent's original
+/// frame become `R_p⁻¹·(xyz, R_c)`, centres of mass `R_c⁻¹·com`.
+fn z_axis_frames(joints: &mut [JointRow<'_>], links: &mut [(String, f64, [f64; 3])]) {
+    use hapcal_kinematics::UnitQuaternion;
+    use std::f64::consts::FRAC_PI_2;
+    // Ry(π/2) turns z onto x, Rx(−π/2) turns z onto y.
+    let turn_of = |axis: Option<[f64; 3]>| match axis {
+        Some([x, _, _]) if x != 0.0 => {
+            UnitQuaternion::from_euler_angles(0.0, x.signum() * FRAC_PI_2, 0.0)
+        }
+        Some([_, y, _]) if y != 0.0 => {
+            UnitQuaternion::from_euler_angles(-y.signum() * FRAC_PI_2, 0.0, 0.0)
+        }
+        _ => UnitQuaternion::identity(),
+    };
+    let turns: Vec<(String, UnitQuaternion<f64>)> = (joints.iter())
+        .map(|(_, _, child, _, _, axis)| ((*child).to_owned(), turn_of(*axis)))
+        .collect();
+    let turn = |link: &str| {
+        (turns.iter())
+            .find(|(l, _)| l == link)
+            .map_or_else(UnitQuaternion::identity, |(_, r)| *r)
+    };
+    for (_, parent, child, xyz, rpy, axis) in joints.iter_mut() {
+        let (rp, rc) = (turn(parent), turn(child));
+        let t = rp.inverse() * Vector3::from(*xyz);
+        *xyz = [t.x, t.y, t.z];
+        let (roll, pitch, yaw) = (rp.inverse() * rc).euler_angles();
+        *rpy = [roll, pitch, yaw];
+        if axis.is_some() {
+            *axis = Some([0.0, 0.0, 1.0]);
+        }
+    }
+    for (name, _, com) in links.iter_mut() {
+        let c = turn(name).inverse() * Vector3::from(*com);
+        *com = [c.x, c.y, c.z];
+    }
+}
+
+fn humanoid_urdf_of(long_torso: bool, z_axes: bool) -> String {
     let chest_parent = if long_torso {
         "torso_4_link"
     } else {
@@ -170,6 +224,9 @@ pub fn humanoid_urdf_with_torso(long_torso: bool) -> String {
         };
         links.push(((*child).to_owned(), mass, com));
     }
+    if z_axes {
+        z_axis_frames(&mut joints, &mut links);
+    }
     let mut s = String::from("<?xml version=\"1.0\"?>\n<robot name=\"humanoid\">\n");
     for (name, mass, c) in &links {
         if *mass > 0.0 {
@@ -218,14 +275,23 @@ pub fn long_torso_humanoid(tips: &[&str]) -> Robot {
     humanoid_of(&humanoid_urdf_with_torso(true), tips)
 }
 
+/// The humanoid of [`humanoid_urdf_z_axes`] with tips `tips`.
+pub fn z_axes_humanoid(long_torso: bool, tips: &[&str]) -> Robot {
+    humanoid_of(&humanoid_urdf_z_axes(long_torso), tips)
+}
+
 fn humanoid_of(urdf: &str, tips: &[&str]) -> Robot {
     let dir = std::env::temp_dir().join(format!("hapcal-humanoid-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     // One file per caller and robot: tests run in parallel.
-    let robot = if urdf.contains("torso_5") {
-        "humanoid19"
-    } else {
-        "humanoid"
+    let robot = match (
+        urdf.contains("torso_5"),
+        urdf.contains("<axis xyz=\"0 1 0\""),
+    ) {
+        (true, true) => "humanoid19",
+        (false, true) => "humanoid",
+        (true, false) => "humanoid19-z",
+        (false, false) => "humanoid-z",
     };
     let path = dir.join(format!("{robot}-{}.urdf", tips.join("-")));
     let tmp = path.with_extension(format!("{:?}.tmp", std::thread::current().id()));
@@ -347,6 +413,18 @@ pub fn table(
     n: usize,
     seed: u64,
 ) -> MeasurementTable {
+    table_with_noise(robot, truth, markers, n, seed, NOISE_M)
+}
+
+/// As [`table`], with Gaussian noise `noise_m` per axis (m) on the markers.
+pub fn table_with_noise(
+    robot: &Robot,
+    truth: &Truth,
+    markers: &[usize],
+    n: usize,
+    seed: u64,
+    noise_m: f64,
+) -> MeasurementTable {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     // The robot deflects until the gravity loads of its deflected links balance: the torque
     // equilibrium, not one step from the undeflected robot.
@@ -354,7 +432,7 @@ pub fn table(
         equilibrium: true,
         ..truth.problem.model(truth.x.as_ref())
     };
-    let noise = Normal::new(0.0, NOISE_M).unwrap();
+    let noise = Normal::new(0.0, noise_m).unwrap();
     let rows = (0..n)
         .map(|i| {
             let q: Vec<f64> = (robot.limits.iter())
