@@ -2258,47 +2258,9 @@ pub fn calibrate_measured(
     })
 }
 
-/// A compliance estimate below zero by more than this many standard deviations, at the least,
-/// is a finding, never a result ([`plausibility`]): a joint does not bend against its load.
-/// Within it, the estimate is zero within its uncertainty. Among `n` estimates the bound grows
-/// to keep the chance that a right calibration is stopped at [`NEGATIVE_COMPLIANCE_FAMILY_RISK`]
-/// ([`negative_compliance_sigmas`]).
-pub const NEGATIVE_COMPLIANCE_SIGMAS: f64 = 2.0;
-
-/// Chance that some compliance of a right calibration lies below zero by more than
-/// [`negative_compliance_sigmas`] by noise alone (Bonferroni over the estimates): at 2σ each,
-/// one of 12 compliances of the real UR10 recording's per-axis transversal model lies at
-/// −2.3σ, and half of the right calibrations with 33 compliances would be stopped.
-pub const NEGATIVE_COMPLIANCE_FAMILY_RISK: f64 = 0.05;
-
-/// The bound, in standard deviations, below zero beyond which one of `n` compliance estimates
-/// is a finding: the one-sided normal quantile of [`NEGATIVE_COMPLIANCE_FAMILY_RISK`]/`n`
-/// (Bonferroni), at least [`NEGATIVE_COMPLIANCE_SIGMAS`]: 2.0 for one estimate, 2.64 for 12,
-/// 2.97 for 33.
-pub fn negative_compliance_sigmas(n: usize) -> f64 {
-    let p = NEGATIVE_COMPLIANCE_FAMILY_RISK / n.max(1) as f64;
-    // Upper tail of the standard normal, Q(z) = erfc(z/√2)/2, with erfc from Abramowitz &
-    // Stegun 7.1.26 (error below 1.5·10⁻⁷), inverted by bisection on [0, 10].
-    let q = |z: f64| {
-        let x = z / std::f64::consts::SQRT_2;
-        let t = 1.0 / (1.0 + 0.327_591_1 * x);
-        let poly = t
-            * (0.254_829_592
-                + t * (-0.284_496_736
-                    + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
-        0.5 * poly * (-x * x).exp()
-    };
-    let (mut lo, mut hi) = (0.0_f64, 10.0_f64);
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if q(mid) > p {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    (0.5 * (lo + hi)).max(NEGATIVE_COMPLIANCE_SIGMAS)
-}
+pub use hapcal_contract::{
+    NEGATIVE_COMPLIANCE_FAMILY_RISK, NEGATIVE_COMPLIANCE_SIGMAS, negative_compliance_sigmas,
+};
 
 /// Longest distance of a marker's frame from the origin of its link's frame, m, that a
 /// mounting can have ([`plausibility`]): a marker, a target or a tool flange sits within a

@@ -312,6 +312,48 @@ impl Region {
     }
 }
 
+/// A compliance estimate below zero by more than this many standard deviations, at the least,
+/// is no physical value: calibrate stops on it and a record holding it is refused: a joint does not bend against its load.
+/// Within it, the estimate is zero within its uncertainty. Among `n` estimates the bound grows
+/// to keep the chance that a right calibration is stopped at [`NEGATIVE_COMPLIANCE_FAMILY_RISK`]
+/// ([`negative_compliance_sigmas`]).
+pub const NEGATIVE_COMPLIANCE_SIGMAS: f64 = 2.0;
+
+/// Chance that some compliance of a right calibration lies below zero by more than
+/// [`negative_compliance_sigmas`] by noise alone (Bonferroni over the estimates): at 2σ each,
+/// one of 12 compliances of the real UR10 recording's per-axis transversal model lies at
+/// −2.3σ, and half of the right calibrations with 33 compliances would be stopped.
+pub const NEGATIVE_COMPLIANCE_FAMILY_RISK: f64 = 0.05;
+
+/// The bound, in standard deviations, below zero beyond which one of `n` compliance estimates
+/// is a finding: the one-sided normal quantile of [`NEGATIVE_COMPLIANCE_FAMILY_RISK`]/`n`
+/// (Bonferroni), at least [`NEGATIVE_COMPLIANCE_SIGMAS`]: 2.0 for one estimate, 2.64 for 12,
+/// 2.97 for 33.
+pub fn negative_compliance_sigmas(n: usize) -> f64 {
+    let p = NEGATIVE_COMPLIANCE_FAMILY_RISK / n.max(1) as f64;
+    // Upper tail of the standard normal, Q(z) = erfc(z/√2)/2, with erfc from Abramowitz &
+    // Stegun 7.1.26 (error below 1.5·10⁻⁷), inverted by bisection on [0, 10].
+    let q = |z: f64| {
+        let x = z / std::f64::consts::SQRT_2;
+        let t = 1.0 / (1.0 + 0.327_591_1 * x);
+        let poly = t
+            * (0.254_829_592
+                + t * (-0.284_496_736
+                    + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+        0.5 * poly * (-x * x).exp()
+    };
+    let (mut lo, mut hi) = (0.0_f64, 10.0_f64);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if q(mid) > p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    (0.5 * (lo + hi)).max(NEGATIVE_COMPLIANCE_SIGMAS)
+}
+
 /// The covariance of the identified values (`[covariance]`): the symmetric matrix `Σ` over
 /// [`Covariance::names`], its lower triangle row by row (`Σ₀₀, Σ₁₀, Σ₁₁, Σ₂₀, …`,
 /// `n(n+1)/2` entries), in the values' units (m², rad², m·rad, …).
@@ -777,6 +819,12 @@ impl Calibration {
                 }
             }
         }
+        // The bound below zero of one compliance among the record's (as calibrate judges its
+        // estimates: negative_compliance_sigmas).
+        let n_compliances = (self.values.iter())
+            .filter(|v| ValueName::parse(&v.name).is_ok_and(|p| p.is_compliance()))
+            .count();
+        let z_negative = negative_compliance_sigmas(n_compliances);
         for v in &self.values {
             let at_value = |message: String| {
                 fail_at(&[Step::Key("values"), Step::Key(&v.name)], &v.name, message)
@@ -814,11 +862,12 @@ impl Calibration {
                 parsed,
                 ValueName::Compliance { .. } | ValueName::HandleCompliance { .. }
             );
-            if axial && v.value < -2.0 * v.std {
+            if axial && v.value < -z_negative * v.std {
                 return at_value(format!(
-                    "{:?} = {} {} ± {}: a compliance below zero by more than twice its standard \
-                     deviation is no physical value (a joint cannot be stiffer than rigid); \
-                     expected a value ≥ 0, or within 2 σ of it",
+                    "{:?} = {} {} ± {}: a compliance below zero by more than {z_negative:.2} \
+                     standard deviations (the bound for {n_compliances} compliances) is no \
+                     physical value (a joint cannot be stiffer than rigid); expected a value ≥ \
+                     0, or within {z_negative:.2} σ of it",
                     v.name, v.value, v.unit, v.std
                 ));
             }
