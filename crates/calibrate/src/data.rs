@@ -27,6 +27,7 @@ pub struct NamedLog {
 
 /// The training and held-out data of one calibration, typed by what they measured.
 #[derive(Debug)]
+#[allow(clippy::large_enum_variant)] // one value per command, moved once: no box needed
 pub enum Data {
     /// Logs of a haptic device with transmissions (the device file has capstans or a
     /// parallelogram).

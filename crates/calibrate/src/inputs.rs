@@ -150,7 +150,7 @@ impl Plan {
         check_sigma("--sigma-m", self.sigma_m, SIGMA_M_RANGE, "m")?;
         check_sigma("--sigma-rad", self.sigma_rad, SIGMA_RAD_RANGE, "rad")?;
         let norm = self.gravity.iter().map(|v| v * v).sum::<f64>().sqrt();
-        if !((norm - 1.0).abs() < 1e-9) {
+        if !norm.is_finite() || (norm - 1.0).abs() >= 1e-9 {
             bail!(
                 "--gravity must be a direction (a unit vector in the robot's root frame), got {}",
                 gravity_words(self.gravity)
