@@ -313,7 +313,7 @@ impl Region {
 }
 
 /// A compliance estimate below zero by more than this many standard deviations, at the least,
-/// is no physical value: calibrate stops on it and a record holding it is refused: a joint does not bend against its load.
+/// is no physical value: calibrate stops on it: a joint does not bend against its load.
 /// Within it, the estimate is zero within its uncertainty. Among `n` estimates the bound grows
 /// to keep the chance that a right calibration is stopped at [`NEGATIVE_COMPLIANCE_FAMILY_RISK`]
 /// ([`negative_compliance_sigmas`]).
@@ -819,12 +819,6 @@ impl Calibration {
                 }
             }
         }
-        // The bound below zero of one compliance among the record's (as calibrate judges its
-        // estimates: negative_compliance_sigmas).
-        let n_compliances = (self.values.iter())
-            .filter(|v| ValueName::parse(&v.name).is_ok_and(|p| p.is_compliance()))
-            .count();
-        let z_negative = negative_compliance_sigmas(n_compliances);
         for v in &self.values {
             let at_value = |message: String| {
                 fail_at(&[Step::Key("values"), Step::Key(&v.name)], &v.name, message)
@@ -854,21 +848,6 @@ impl Calibration {
                     v.name,
                     v.unit,
                     expected.join(" or ")
-                ));
-            }
-            // A gravity compliance is a flexibility: below zero by more than twice its σ it
-            // is no physical value (a transversal compliance's sign follows its axis).
-            let axial = matches!(
-                parsed,
-                ValueName::Compliance { .. } | ValueName::HandleCompliance { .. }
-            );
-            if axial && v.value < -z_negative * v.std {
-                return at_value(format!(
-                    "{:?} = {} {} ± {}: a compliance below zero by more than {z_negative:.2} \
-                     standard deviations (the bound for {n_compliances} compliances) is no \
-                     physical value (a joint cannot be stiffer than rigid); expected a value ≥ \
-                     0, or within {z_negative:.2} σ of it",
-                    v.name, v.value, v.unit, v.std
                 ));
             }
             if let Some(model) = self.model

@@ -1,5 +1,5 @@
-//! Where a record's key stands in its text: the line and column of a value found by its key
-//! path through the TOML parser's spans, so that every refusal points at its own line.
+//! Where a record's key stands in its text: the line of a value found by its key path through
+//! the TOML parser's spans and the column where that line's text starts, so that every refusal points at its own line.
 
 use crate::line_column;
 
@@ -12,7 +12,8 @@ pub(crate) enum Step<'a> {
     Index(usize),
 }
 
-/// 1-based line and column of the value at `path` in `text`, looked up at the top level (a
+/// 1-based line of the value at `path` in `text`, and the column where that line's text
+/// starts (its key), looked up at the top level (a
 /// sidecar) or else under `[calibration]` (a device file's record); at the deepest step found
 /// when the path ends early; `None` when not even its first step is in the text (or the text
 /// is not TOML).
@@ -39,5 +40,11 @@ pub(crate) fn locate_path(text: &str, path: &[Step<'_>]) -> Option<(usize, usize
         span = next.span();
         current = next;
     }
-    Some(line_column(text, span.start))
+    // The line's first character: where its key stands (the value's own column is past the
+    // key on a `key = value` line).
+    let (line, _) = line_column(text, span.start);
+    let column = text.lines().nth(line - 1).map_or(1, |l| {
+        1 + l.chars().take_while(|c| c.is_whitespace()).count()
+    });
+    Some((line, column))
 }

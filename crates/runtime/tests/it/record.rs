@@ -85,14 +85,16 @@ fn an_unknown_value_or_a_wrong_unit_is_refused_at_its_line() {
     assert!(e.to_string().contains("rad/m"), "{e}");
 }
 
-/// The record's lumped loads hang at its tips (`torque.tips`, here `ball_link`): asked for
-/// `link_7` alone, the robot loads `ball_link` as a further tip after it, and deflects as the
-/// robot asked for both.
+/// The record's lumped loads hang at its load tips (`torque.tips`, here `ball_link`, the
+/// calibration made for `link_7`): asked for `link_7` alone, the robot loads `ball_link` as a
+/// further tip after it, and deflects as the robot asked for both.
 #[test]
 fn lumped_loads_hang_at_the_calibrations_tips_loaded_from_the_record() {
-    let alone = load(&record(""), &["link_7"]).expect("valid");
+    // A calibration made for `link_7` whose loads hang at `ball_link`.
+    let made_for_link_7 = record("").replacen("tips = [\"ball_link\"]", "tips = [\"link_7\"]", 1);
+    let alone = load(&made_for_link_7, &["link_7"]).expect("valid");
     assert_eq!(alone.tip_names(), ["link_7", "ball_link"]);
-    let both = load(&record(""), &["link_7", "ball_link"]).expect("valid");
+    let both = load(&made_for_link_7, &["link_7", "ball_link"]).expect("valid");
     let q = [0.3, 0.7, -0.2, -1.2, 0.4, 0.9, 0.1];
     let poses = |robot: &Robot| {
         let mut ws = robot.workspace();
