@@ -120,7 +120,7 @@ pub struct MeasuredOutcome {
     pub equilibrium_refits: usize,
     /// Plain-language warnings.
     pub warnings: Vec<String>,
-    /// Estimates no real robot can have, each with its cause and fix ([`plausibility`]):
+    /// Estimates no real robot can have, each with its cause and fix (checked after the fit):
     /// never a result (`hapcal calibrate` stops on the first).
     pub implausible: Vec<crate::report::Implausible>,
 }
@@ -2263,7 +2263,7 @@ pub use hapcal_contract::{
 };
 
 /// Longest distance of a marker's frame from the origin of its link's frame, m, that a
-/// mounting can have ([`plausibility`]): a marker, a target or a tool flange sits within a
+/// mounting can have (checked after the fit): a marker, a target or a tool flange sits within a
 /// metre of the link it is fixed to; a frame metres away absorbs another mistake.
 pub const MARKER_OFFSET_MAX_M: f64 = 1.0;
 
