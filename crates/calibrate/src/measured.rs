@@ -2561,6 +2561,9 @@ fn compliance_unit(name: &str, masses: bool) -> Option<&'static str> {
 
 pub use crate::robust::HUBER_CORNER;
 
+/// A marker sample under one fit: table, row, marker, residual and model position, m.
+type Evaluated = (usize, usize, usize, Vector3<f64>, Vector3<f64>);
+
 /// The training tables as the Huber loss sees them ([`crate::robust::bound_gross_errors`]):
 /// `rung` is fitted (the richest rung of the ladder, or the rung given) and every marker
 /// sample whose 3-D residual `e` exceeds the corner replaced by `model + e·c/|e|`, until the
@@ -2585,9 +2588,8 @@ fn winsorize(
     let mut first = None;
     let mut rung = rung;
     // Every sample of the last fit: table, row, marker, residual, model position.
-    let mut evaluated: Vec<(usize, usize, usize, Vector3<f64>, Vector3<f64>)> = Vec::new();
-    let winsorized = |evaluated: &[(usize, usize, usize, Vector3<f64>, Vector3<f64>)],
-                      bounds: &[crate::robust::Bound]| {
+    let mut evaluated: Vec<Evaluated> = Vec::new();
+    let winsorized = |evaluated: &[Evaluated], bounds: &[crate::robust::Bound]| {
         let mut tables = train.to_vec();
         for b in bounds {
             let (ti, ri, mi, e, p) = evaluated[b.sample];
