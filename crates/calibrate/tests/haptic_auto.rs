@@ -30,7 +30,6 @@ fn auto(rows: Vec<LogRow>) -> CalibrationReport {
     };
     let train = vec![NamedLog {
         name: "train".into(),
-        path: "train.csv".into(),
         rows,
         warnings: Vec::new(),
     }];

@@ -360,8 +360,10 @@ pub fn render_results(r: &CalibrationReport) -> String {
         for d in &r.downweighted {
             let _ = writeln!(
                 s,
-                "  {}  {:.3} → {:.3}",
-                d.place(),
+                "  {}:{} marker {}  {:.3} → {:.3}",
+                d.file,
+                d.line,
+                d.marker,
                 d.residual_m * 1e3,
                 d.bound_m * 1e3
             );
