@@ -351,7 +351,13 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         coverage: None,
         equilibrium_step_m: None,
         equilibrium_refits: 0,
-        implausible: Vec::new(),
+        // What no real robot has: an unconverged fit, compliances below zero beyond the bound.
+        implausible: crate::fit::implausible_estimates(
+            &identified,
+            choice,
+            matches!(plan.model, ModelChoice::Model(_)),
+            compliance_unit_of(&model),
+        ),
     };
     let joint_names = chain.joint_names().to_vec();
     let prismatic: Vec<bool> = (hapcal_kinematics::joint_motions(std::slice::from_ref(&chain)))
@@ -661,13 +667,8 @@ pub fn write_outputs_beside(
     // A compliance is in rad per unit of load: rad/(N·m) under link masses, rad/m under the
     // lumped unit weights (the report's layout calls it an angle, rad); the sidecar says which,
     // so that a reader (hapcal-runtime's `Robot::load_urdf`) can check its loads are the same.
-    let compliance_unit = (outcome.model.compliance.as_ref()).map(|(g, _)| {
-        if g.masses.is_empty() {
-            "rad/m"
-        } else {
-            "rad/(N·m)"
-        }
-    });
+    let compliance_unit =
+        (outcome.model.compliance.as_ref()).map(|_| compliance_unit_of(&outcome.model));
     let all: Vec<hapcal_io::CalibratedValue> = if let Some(record) = &outcome.record {
         record.values.clone()
     } else {
@@ -870,5 +871,14 @@ mod tests {
             block: vec![0; 4],
         };
         assert_eq!(blocked_difference(&one, &one).1, f64::INFINITY);
+    }
+}
+
+/// The unit of `model`'s compliances: rad/(N·m) under link masses, rad/m under the lumped
+/// unit weights (also for a model without compliance).
+fn compliance_unit_of(model: &hapcal_problems::CalibratedModel) -> &'static str {
+    match &model.compliance {
+        Some((g, _)) if !g.masses.is_empty() => "rad/(N·m)",
+        _ => "rad/m",
     }
 }

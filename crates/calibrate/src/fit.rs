@@ -317,3 +317,115 @@ mod tests {
         }
     }
 }
+
+/// The compliance estimates of `identified` (every value a record names as a compliance:
+/// `compliance.*`, `transversal.*`, `joint_compliance.j*`) below zero by more than
+/// [`hapcal_contract::negative_compliance_sigmas`] of their count standard deviations, most
+/// significant first: `(name, value, σ)` in the parameter's unit (rad/(N·m) or rad/m); with
+/// the number of compliance estimates the bound was taken over.
+pub(crate) fn negative_compliances(identified: &Identified) -> (Vec<(String, f64, f64)>, usize) {
+    let is_compliance =
+        |name: &str| hapcal_contract::ValueName::parse(name).is_ok_and(|v| v.is_compliance());
+    let compliances: Vec<(String, f64, f64)> = (identified.covariance.free.iter())
+        .zip(identified.covariance.std())
+        .map(|(&i, std)| {
+            (
+                identified.layout.name(i).to_owned(),
+                identified.fit.x[i],
+                std,
+            )
+        })
+        .filter(|(name, _, _)| is_compliance(name))
+        .collect();
+    let n = compliances.len();
+    let z = hapcal_contract::negative_compliance_sigmas(n);
+    let mut negative: Vec<(String, f64, f64)> = (compliances.into_iter())
+        .filter(|(_, value, std)| value + z * std < 0.0)
+        .collect();
+    let score = |c: &(String, f64, f64)| c.1 / c.2.max(f64::MIN_POSITIVE);
+    negative.sort_by(|a, b| score(a).total_cmp(&score(b)));
+    (negative, n)
+}
+
+/// "`k` of `n` below zero by more than z standard deviations: name value ± σ unit, …" for the
+/// report's words on [`negative_compliances`]' result; values in µ`unit` (`unit` is
+/// `rad/(N·m)` or `rad/m`), the three most significant listed.
+pub(crate) fn negative_compliance_words(
+    negative: &[(String, f64, f64)],
+    n_compliances: usize,
+    unit: &str,
+) -> String {
+    let listed: Vec<String> = (negative.iter().take(3))
+        .map(|(name, value, std)| format!("{name} {:.0} ± {:.0} µ{unit}", value * 1e6, std * 1e6))
+        .collect();
+    let more = if negative.len() > 3 { ", …" } else { "" };
+    format!(
+        "{} of {n_compliances} below zero by more than {:.1} standard deviations: {}{more}",
+        negative.len(),
+        hapcal_contract::negative_compliance_sigmas(n_compliances),
+        listed.join(", ")
+    )
+}
+
+/// What no real device can be, in any workflow's fit of `rung` ([`crate::report::Implausible`]):
+/// an unconverged fit (its estimate is the last iterate, not a minimum), and compliances
+/// below zero beyond the bound ([`negative_compliances`]; `unit` as there). `given`: the
+/// rung was asked for with `--model` (the fix names `--model auto`). A mounting is not
+/// tested here: the measurement workflow does it where gravity is an option.
+pub(crate) fn implausible_estimates(
+    identified: &Identified,
+    rung: crate::model::ModelName,
+    given: bool,
+    unit: &str,
+) -> Vec<crate::report::Implausible> {
+    use crate::report::{Implausible, ImplausibleKind};
+    let mut out = Vec::new();
+    if let Some(i) = unconverged(identified, rung, given) {
+        out.push(i);
+    }
+    let (negative, n) = negative_compliances(identified);
+    if !negative.is_empty() {
+        out.push(Implausible {
+            kind: ImplausibleKind::NegativeCompliance,
+            message: format!(
+                "the compliances of the {rung} model are negative ({}): a joint does not bend \
+                 against its load; the model absorbs an effect it lacks or a setup mistake",
+                negative_compliance_words(&negative, n, unit)
+            ),
+            fix: "check the device's masses and mounting, or give a model without compliance \
+                  (--model geometric)"
+                .to_owned(),
+        });
+    }
+    out
+}
+
+/// An unconverged fit of `rung` as an implausible estimate ([`implausible_estimates`]), or
+/// `None` when the fit converged.
+pub(crate) fn unconverged(
+    identified: &Identified,
+    rung: crate::model::ModelName,
+    given: bool,
+) -> Option<crate::report::Implausible> {
+    let fit = &identified.fit;
+    if fit.termination.is_success() {
+        return None;
+    }
+    Some(crate::report::Implausible {
+        kind: crate::report::ImplausibleKind::Unconverged,
+        message: format!(
+            "the least-squares fit of the {rung} model stopped after {} evaluations, {}: its \
+             estimate is the last iterate, not a minimum",
+            fit.n_evaluations,
+            termination_text(&fit.termination)
+        ),
+        fix: if given {
+            format!(
+                "give a simpler --model than {rung} (or --model auto, which keeps the highest \
+                 model whose fit converged)"
+            )
+        } else {
+            "give a simpler --model".to_owned()
+        },
+    })
+}

@@ -1683,6 +1683,16 @@ pub fn calibrate_logs(
             floor_m * 1e6
         ));
     }
+    // What no real device has: an unconverged fit, compliances below zero beyond the bound.
+    let given = matches!(plan.model, ModelChoice::Model(_));
+    let implausible = match &compliance {
+        Some(fit) => {
+            crate::fit::implausible_estimates(&fit.identified, model, given, HANDLE_COMPLIANCE_UNIT)
+        }
+        None => crate::fit::unconverged(&kin, model, given)
+            .into_iter()
+            .collect(),
+    };
     let report = CalibrationReport {
         device: plan.device.display().to_string(),
         model,
@@ -1709,7 +1719,7 @@ pub fn calibrate_logs(
         coverage: None,
         equilibrium_step_m: None,
         equilibrium_refits: 0,
-        implausible: Vec::new(),
+        implausible,
     };
     let kin_model = hapcal_problems::CalibratedModel {
         x_kin: x_kin.clone(),

@@ -2199,7 +2199,27 @@ pub fn calibrate_measured(
             .fold(0.0, f64::max)
     });
     let noise = weights.sigma_position_m * fitted.identified.sigma;
+    let mut no_equilibrium = None;
     if let Some(step) = equilibrium_step_m
+        && step > EQUILIBRIUM_SHARE * noise
+        && model.equilibrium
+    {
+        // The fixed point was iterated and is still not reached: the iteration does not
+        // contract, and where it stops depends on rounding (the runtime's evaluation of the
+        // same record stops elsewhere).
+        no_equilibrium = Some(crate::report::Implausible {
+            kind: crate::report::ImplausibleKind::NoEquilibrium,
+            message: format!(
+                "the compliances of the {rung} model are so large that the robot's weight has                  no equilibrium its deflection reaches: after {} fixed-point steps of θ = q +                  k∘τ(θ), one more still moves the tips by up to {:.3} mm, more than                  {EQUILIBRIUM_SHARE} of the noise ({:.3} mm per axis); no real robot bends that                  far under its own weight, and no evaluation of these values (predict, the                  runtime) reproduces the fit; the model absorbs an effect it lacks or a setup                  mistake",
+                hapcal_problems::EQUILIBRIUM_ITERATIONS,
+                step * 1e3,
+                noise * 1e3
+            ),
+            fix: "give a model with fewer compliances (--model compliance, or geometric), or \
+                  check the link masses and the mounting (--gravity) of the description"
+                .to_owned(),
+        });
+    } else if let Some(step) = equilibrium_step_m
         && step > EQUILIBRIUM_SHARE * noise
     {
         warnings.push(format!(
@@ -2222,7 +2242,7 @@ pub fn calibrate_measured(
     );
     warnings.extend(coverage.iter().flat_map(unvalidated_warnings));
     let frames = frame_reports(&base, &markers, &fitted.x, framed.params());
-    let implausible = plausibility(
+    let mut implausible = plausibility(
         &Refit {
             rung,
             robot,
@@ -2236,6 +2256,7 @@ pub fn calibrate_measured(
         &frames,
         cfg.rung.is_some(),
     );
+    implausible.extend(no_equilibrium);
     Ok(MeasuredOutcome {
         rung,
         ladder,
@@ -2283,26 +2304,6 @@ struct Refit<'a> {
     weights: Weights,
 }
 
-/// The compliance estimates (`compliance.*`, `transversal.*`) of `fitted` below zero by more
-/// than [`negative_compliance_sigmas`] of their count standard deviations, most significant
-/// first (name, value, σ, in the parameter's unit), and the number of compliance estimates.
-fn negative_compliances(fitted: &Fitted) -> (Vec<(String, f64, f64)>, usize) {
-    let id = &fitted.identified;
-    let compliances: Vec<(String, f64, f64)> = (id.covariance.free.iter())
-        .zip(id.covariance.std())
-        .map(|(&i, std)| (id.layout.name(i).to_owned(), id.fit.x[i], std))
-        .filter(|(name, _, _)| compliance_unit(name, true).is_some())
-        .collect();
-    let n = compliances.len();
-    let z = negative_compliance_sigmas(n);
-    let mut negative: Vec<(String, f64, f64)> = (compliances.into_iter())
-        .filter(|(_, value, std)| value + z * std < 0.0)
-        .collect();
-    let z = |c: &(String, f64, f64)| c.1 / c.2.max(f64::MIN_POSITIVE);
-    negative.sort_by(|a, b| z(a).total_cmp(&z(b)));
-    (negative, n)
-}
-
 /// `g` as `--gravity` reads it (`-z`, or three numbers).
 fn gravity_text(g: &Vector3<f64>) -> String {
     crate::inputs::gravity_words([g.x + 0.0, g.y + 0.0, g.z + 0.0])
@@ -2348,7 +2349,9 @@ fn mounting_test(r: &Refit<'_>, given_rms_m: f64) -> Option<(Vector3<f64>, f64)>
             let (model, fitted) =
                 fit(r.rung, &robot, &start, r.offsets, r.train, r.weights, &all).ok()?;
             if !fitted.identified.fit.termination.is_success()
-                || !negative_compliances(&fitted).0.is_empty()
+                || !crate::fit::negative_compliances(&fitted.identified)
+                    .0
+                    .is_empty()
             {
                 return None;
             }
@@ -2381,46 +2384,18 @@ fn plausibility(
     given: bool,
 ) -> Vec<crate::report::Implausible> {
     use crate::report::{Implausible, ImplausibleKind};
-    let mut out = Vec::new();
-    let fit = &fitted.identified.fit;
-    if !fit.termination.is_success() {
-        out.push(Implausible {
-            kind: ImplausibleKind::Unconverged,
-            message: format!(
-                "the least-squares fit of the {} model stopped after {} evaluations, {}: its \
-                 estimate is the last iterate, not a minimum",
-                r.rung,
-                fit.n_evaluations,
-                crate::fit::termination_text(&fit.termination)
-            ),
-            fix: if given {
-                format!(
-                    "give a simpler --model than {} (or --model auto, which keeps the highest \
-                     model whose fit converged)",
-                    r.rung
-                )
-            } else {
-                "give a simpler --model".to_owned()
-            },
-        });
-    }
-    let (negative, n_compliances) = negative_compliances(fitted);
+    let mut out: Vec<Implausible> = crate::fit::unconverged(&fitted.identified, r.rung, given)
+        .into_iter()
+        .collect();
+    let (negative, n_compliances) = crate::fit::negative_compliances(&fitted.identified);
     if !negative.is_empty() {
-        let masses = !r.robot.masses.is_empty();
-        let listed: Vec<String> = (negative.iter().take(3))
-            .map(|(name, value, std)| {
-                let unit = if masses { "µrad/(N·m)" } else { "µrad/m" };
-                format!("{name} {:.0} ± {:.0} {unit}", value * 1e6, std * 1e6)
-            })
-            .collect();
-        let more = if negative.len() > 3 { ", …" } else { "" };
+        let unit = if r.robot.masses.is_empty() {
+            "rad/m"
+        } else {
+            "rad/(N·m)"
+        };
         let given_g = gravity_text(&r.robot.gravity_dir);
-        let counted = format!(
-            "{} of {n_compliances} below zero by more than {:.1} standard deviations: {}{more}",
-            negative.len(),
-            negative_compliance_sigmas(n_compliances),
-            listed.join(", ")
-        );
+        let counted = crate::fit::negative_compliance_words(&negative, n_compliances, unit);
         let (_, given_rms, _) = stats(&position_errors(model, r.train));
         // A pattern is tested against the mounting; one estimate alone is what it is.
         let mounting = (negative.len() >= 2)

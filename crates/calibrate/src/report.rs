@@ -51,6 +51,10 @@ pub enum ImplausibleKind {
     Frame,
     /// The final least-squares fit stopped before converging.
     Unconverged,
+    /// Compliances so large that the torque equilibrium under the robot's weight is not
+    /// reached (its fixed-point iteration does not contract): the fit's prediction depends on
+    /// where the iteration stops.
+    NoEquilibrium,
 }
 
 /// An estimate no real robot can have, found after the fit (measurement files): never a
@@ -244,9 +248,11 @@ pub struct CalibrationReport {
     /// Compliance models on measurement files: refits with the gravity loads at the torque
     /// equilibrium of the estimate (0: the loads of the undeflected robot were close enough).
     pub equilibrium_refits: usize,
-    /// Measurement files: estimates no real robot can have (negative compliances, a marker
-    /// frame metres from its link, an unconverged fit), each with its cause and fix; empty
-    /// when the estimate is plausible.
+    /// Estimates no real robot can have (negative compliances, a torque equilibrium the
+    /// deflection does not reach, a marker frame metres from its link, an unconverged fit),
+    /// each with its cause and fix; empty when the estimate is plausible. Every workflow
+    /// judges its fit's compliances and convergence; the measurement workflow also the
+    /// mounting, the equilibrium and the marker frames.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub implausible: Vec<Implausible>,
 }
