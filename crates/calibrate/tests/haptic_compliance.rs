@@ -136,3 +136,46 @@ fn without_a_compliance_the_fitted_coefficients_are_zero_within_their_uncertaint
     }
     assert!(held_out < NEAR_FLOOR * floor);
 }
+
+/// A handle that pulls the joints against its weight (compliances of −5·10⁻³ rad/(N·m) on
+/// joints 2 and 3: no real capstan bends that way) calibrated with `--model compliance`: the
+/// estimates are negative far beyond their uncertainty, and the report names them
+/// implausible (`hapcal calibrate` stops on it, exit 2) instead of a result; the same logs
+/// with the compliance of a real handle (positive) are plausible.
+#[test]
+fn negative_handle_compliances_are_implausible_not_a_result() {
+    use hapcal_calibrate::data::NamedLog;
+    use hapcal_calibrate::haptic::calibrate_logs;
+    use hapcal_calibrate::inputs::Plan;
+    use hapcal_calibrate::model::{ModelChoice, ModelName};
+    use hapcal_calibrate::report::ImplausibleKind;
+    let implausible = |effect: &str| {
+        let (device, _) = reference();
+        let plan = Plan {
+            device: "fixtures/reference-device/device.toml".into(),
+            model: ModelChoice::Model(ModelName::Compliance),
+            data: Vec::new(),
+            test: Vec::new(),
+            ..Plan::bundled_default()
+        };
+        let train = vec![NamedLog {
+            name: "train".into(),
+            rows: log(31, 300, &[effect]),
+            warnings: Vec::new(),
+        }];
+        let outcome =
+            calibrate_logs(&plan, device, train, Vec::new(), std::time::Instant::now()).unwrap();
+        outcome.report.implausible
+    };
+    let negative = implausible("gravity_compliance:j2=-5e-3,j3=-5e-3");
+    assert_eq!(negative.len(), 1, "{negative:?}");
+    assert_eq!(negative[0].kind, ImplausibleKind::NegativeCompliance);
+    assert!(
+        negative[0].message.contains("joint_compliance.j2")
+            && negative[0].message.contains("joint_compliance.j3"),
+        "{}",
+        negative[0].message
+    );
+    let positive = implausible("gravity_compliance:j2=5e-3,j3=5e-3");
+    assert!(positive.is_empty(), "{positive:?}");
+}
