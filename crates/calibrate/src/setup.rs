@@ -29,7 +29,7 @@ use crate::model::ModelName;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use hapcal_io::{AngleUnit, MeasurementTable, Units};
+use hapcal_io::{AngleUnit, LengthUnit, MeasurementTable, Units};
 use hapcal_kinematics::{UnitQuaternion, Vector3};
 use hapcal_problems::{CalibratedModel, Weights};
 
@@ -1169,6 +1169,7 @@ fn measurement_hypotheses(
     if suspicious {
         hypotheses.extend(general_hypotheses(given, &layout, Tier::Suspicious));
         hypotheses.extend(position_reflections(input.tables));
+        hypotheses.extend(part_unit_hypotheses(input.tables, input.units.length));
         if let Some(per_row) = per_row {
             let names: Vec<String> = (input.tables.iter())
                 .map(|t| {
@@ -1187,6 +1188,133 @@ fn measurement_hypotheses(
         }
     }
     hypotheses
+}
+
+/// Least ratio between the position magnitudes of two consecutive rows, sorted by magnitude,
+/// that splits a file into two parts in different length units ([`magnitude_split`]): a
+/// millimetre part among metres is 1000× larger, an inch part 39×; the markers of one
+/// recording, seen by one instrument, do not jump by 20× in their distance from it.
+const PART_UNIT_RATIO: f64 = 20.0;
+
+/// The rows of `table` (indices) whose positions lie [`PART_UNIT_RATIO`] or more times
+/// farther from the instrument than the other rows', with the ratio of the two parts'
+/// median distances; `None` when the rows form one part (or fewer than 4 have positions).
+fn magnitude_split(table: &MeasurementTable) -> Option<(Vec<usize>, f64)> {
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let mut sizes: Vec<(usize, f64)> = (table.rows.iter().enumerate())
+        .filter_map(|(i, r)| {
+            let mut d: Vec<f64> = (r.markers.iter())
+                .map(|m| Vector3::from(m.position_m).norm())
+                .collect();
+            if d.is_empty() {
+                return None;
+            }
+            let d = median(&mut d);
+            (d > 0.0 && d.is_finite()).then_some((i, d))
+        })
+        .collect();
+    if sizes.len() < 4 {
+        return None;
+    }
+    sizes.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let (k, gap) = (1..sizes.len())
+        .map(|k| (k, sizes[k].1 / sizes[k - 1].1))
+        .max_by(|a, b| a.1.total_cmp(&b.1))?;
+    if gap < PART_UNIT_RATIO {
+        return None;
+    }
+    let mut small: Vec<f64> = sizes[..k].iter().map(|s| s.1).collect();
+    let mut large: Vec<f64> = sizes[k..].iter().map(|s| s.1).collect();
+    let ratio = median(&mut large) / median(&mut small);
+    let mut rows: Vec<usize> = sizes[k..].iter().map(|s| s.0).collect();
+    rows.sort_unstable();
+    Some((rows, ratio))
+}
+
+/// File lines as ranges: `19–24, 30`.
+fn line_ranges(lines: &[u64]) -> String {
+    let mut out: Vec<String> = Vec::new();
+    let mut i = 0;
+    while i < lines.len() {
+        let mut j = i;
+        while j + 1 < lines.len() && lines[j + 1] == lines[j] + 1 {
+            j += 1;
+        }
+        out.push(if j > i {
+            format!("{}–{}", lines[i], lines[j])
+        } else {
+            lines[i].to_string()
+        });
+        i = j + 1;
+    }
+    out.join(", ")
+}
+
+/// The length units a part of a file may be in, in metres, with their names.
+const PART_UNITS: [(f64, &str); 5] = [
+    (1.0, "metres"),
+    (1e-2, "centimetres"),
+    (1e-3, "millimetres"),
+    (0.0254, "inches"),
+    (0.3048, "feet"),
+];
+
+/// Part of a file in another length unit ([`magnitude_split`]): for each table whose rows
+/// split into two parts, the larger part's positions read in the unit (of [`PART_UNITS`],
+/// smaller than the file's `unit`) whose ratio to it lies nearest the parts' ratio. The
+/// answer locates the rows: no flag reads part of a file, so the fix is the edit of those
+/// rows.
+fn part_unit_hypotheses(
+    tables: &[MeasurementTable],
+    unit: LengthUnit,
+) -> Vec<Corrected<MeasuredData>> {
+    let file_m = unit.to_m();
+    let Some(&(_, file_name)) = PART_UNITS
+        .iter()
+        .find(|(m, _)| (m / file_m - 1.0).abs() < 1e-9)
+    else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for (t, table) in tables.iter().enumerate() {
+        let Some((rows, ratio)) = magnitude_split(table) else {
+            continue;
+        };
+        let Some(&(part_m, part_name)) =
+            (PART_UNITS.iter())
+                .filter(|(m, _)| *m < file_m)
+                .min_by(|a, b| {
+                    let off = |m: f64| ((file_m / m) / ratio).ln().abs();
+                    off(a.0).total_cmp(&off(b.0))
+                })
+        else {
+            continue;
+        };
+        let factor = part_m / file_m;
+        let mut corrected = tables.to_vec();
+        for &i in &rows {
+            for m in &mut corrected[t].rows[i].markers {
+                m.position_m = m.position_m.map(|v| v * factor);
+            }
+        }
+        let lines: Vec<u64> = rows.iter().map(|&i| table.rows[i].line).collect();
+        let file = (table.path.file_name())
+            .map_or_else(|| table.name.clone(), |f| f.to_string_lossy().into_owned());
+        let where_ = format!("rows {} of {file}", line_ranges(&lines));
+        out.push(Corrected::new(
+            MistakeClass::LengthUnit,
+            format!("{where_} look like {part_name} while the rest are in {file_name}"),
+            format!(
+                "no flag reads part of a file: convert the positions of {where_} to {file_name} \
+                 (×{factor}) or record them again"
+            ),
+            MeasuredData::tables(corrected),
+        ));
+    }
+    out
 }
 
 /// With orientations, one position axis mirrored or two exchanged while the orientations are
@@ -1564,6 +1692,9 @@ fn past_length_range(
             Err(e) => message = e.root_cause().to_string(),
         }
     };
+    if let Some(report) = part_in_millimetres(robot, &tables, tips, plan, is_urdf, &first) {
+        return Some(report);
+    }
     let report = check_setup(&SetupInput {
         robot,
         tables: &tables,
@@ -1601,6 +1732,79 @@ fn past_length_range(
             groups.join(" and ")
         ),
         fix,
+        before: Residual::default(),
+        after: Some(report.as_given),
+    };
+    Some(SetupReport::of_unread(
+        report.n_rows,
+        finding,
+        report.as_given,
+    ))
+}
+
+/// Lengths past the reader's range in part of a file ([`past_length_range`], whose `tables`
+/// read the columns out of range in millimetres): when the rows split into two parts by the
+/// size of their positions ([`magnitude_split`]) and the smaller part read back in the file's
+/// unit makes the data fit the robot (no error finding, a plausible residual), the answer
+/// locates the rows in millimetres; `None` otherwise.
+fn part_in_millimetres(
+    robot: &Robot,
+    tables: &[MeasurementTable],
+    tips: &[String],
+    plan: &crate::inputs::Plan,
+    is_urdf: bool,
+    first: &str,
+) -> Option<SetupReport> {
+    let file_m = plan.units.length.to_m();
+    let &(_, file_name) = PART_UNITS
+        .iter()
+        .find(|(m, _)| (m / file_m - 1.0).abs() < 1e-9)?;
+    let mut corrected = tables.to_vec();
+    let mut located = Vec::new();
+    for (t, table) in tables.iter().enumerate() {
+        let Some((large, _)) = magnitude_split(table) else {
+            continue;
+        };
+        let scale = file_m / 1e-3;
+        for (i, row) in corrected[t].rows.iter_mut().enumerate() {
+            if !large.contains(&i) {
+                for m in &mut row.markers {
+                    m.position_m = m.position_m.map(|v| v * scale);
+                }
+            }
+        }
+        let lines: Vec<u64> = large.iter().map(|&i| table.rows[i].line).collect();
+        let file = (table.path.file_name())
+            .map_or_else(|| table.name.clone(), |f| f.to_string_lossy().into_owned());
+        located.push(format!("rows {} of {file}", line_ranges(&lines)));
+    }
+    if located.is_empty() {
+        return None;
+    }
+    let report = check_setup(&SetupInput {
+        robot,
+        tables: &corrected,
+        urdf: is_urdf.then_some(plan.device.as_path()),
+        tips,
+        units: plan.units.clone(),
+    })
+    .ok()?;
+    if report.overwhelming().is_some() || !report.as_given.is_plausible() {
+        return None;
+    }
+    let where_ = located.join(" and ");
+    let finding = Finding {
+        class: MistakeClass::LengthUnit,
+        severity: Severity::Error,
+        message: format!(
+            "{first}: {where_} look like millimetres while the rest are in {file_name} (read \
+             so, the data fit this robot)"
+        ),
+        fix: format!(
+            "no flag reads part of a file: convert the positions of {where_} to {file_name} \
+             (×{}) or record them again",
+            1e-3 / file_m
+        ),
         before: Residual::default(),
         after: Some(report.as_given),
     };

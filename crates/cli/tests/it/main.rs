@@ -12,6 +12,7 @@ mod hostile;
 mod hostile_cases;
 mod html;
 mod ladder_rows;
+mod part_units;
 mod plan_after;
 mod predict;
 mod predict_device;
