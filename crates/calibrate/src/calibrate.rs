@@ -642,6 +642,22 @@ pub fn write_outputs_beside(
     out: &Path,
     inputs: &[&Path],
 ) -> Result<Vec<PathBuf>> {
+    write_outputs_checked(outcome, out, inputs, &|_, _| Ok(()))
+}
+
+/// [`write_outputs_beside`] once `reproduces` accepts the files' texts (path, text; the
+/// calibrated URDF or device file first, then the sidecar): a check that the files give what
+/// the report says (the command line evaluates them with the runtime, which this crate does
+/// not depend on, and compares with [`check_reproduced`]). Nothing is written when it refuses.
+///
+/// # Errors
+/// As [`write_outputs_beside`], and `reproduces`' refusal.
+pub fn write_outputs_checked(
+    outcome: &Outcome,
+    out: &Path,
+    inputs: &[&Path],
+    reproduces: &dyn Fn(&Outcome, &[(PathBuf, String)]) -> Result<()>,
+) -> Result<Vec<PathBuf>> {
     check_outputs(&outcome.device_path, out, inputs)?;
     let urdf_source = (outcome.device.urdf.as_ref()).map(|u| u.resolve(&outcome.device_path));
     let mut inputs: Vec<&Path> = inputs.to_vec();
@@ -661,8 +677,7 @@ pub fn write_outputs_beside(
             );
         }
         let text = hapcal_io::write_device(calibrated);
-        write_new(out, &text, inputs)?;
-        return Ok(vec![out.to_path_buf()]);
+        return write_all(outcome, vec![(out.to_path_buf(), text)], inputs, reproduces);
     }
     // A compliance is in rad per unit of load: rad/(N·m) under link masses, rad/m under the
     // lumped unit weights (the report's layout calls it an angle, rad); the sidecar says which,
@@ -749,8 +764,7 @@ pub fn write_outputs_beside(
     } else {
         hapcal_io::write_device(&calibrated)
     };
-    write_new(out, &text, inputs)?;
-    let mut written = vec![out.to_path_buf()];
+    let mut files = vec![(out.to_path_buf(), text.clone())];
     let sidecar_text = match &outcome.record {
         // The record holds every value as identified (the runtime evaluates the transversal
         // tilts and the gravity loads from the kinematic ones), the model, its loads and its
@@ -767,11 +781,24 @@ pub fn write_outputs_beside(
         None => None,
     };
     if let Some(text) = sidecar_text {
-        let sidecar = out.with_extension("calibration.toml");
-        write_new(&sidecar, &text, inputs)?;
-        written.push(sidecar);
+        files.push((out.with_extension("calibration.toml"), text));
     }
-    Ok(written)
+    write_all(outcome, files, inputs, reproduces)
+}
+
+/// Writes `files` (path, text) unless `reproduces` refuses them ([`write_outputs_checked`]):
+/// nothing is written then. Returns the paths written.
+fn write_all(
+    outcome: &Outcome,
+    files: Vec<(PathBuf, String)>,
+    inputs: &[&Path],
+    reproduces: &dyn Fn(&Outcome, &[(PathBuf, String)]) -> Result<()>,
+) -> Result<Vec<PathBuf>> {
+    reproduces(outcome, &files)?;
+    for (path, text) in &files {
+        write_new(path, text, inputs)?;
+    }
+    Ok(files.into_iter().map(|(p, _)| p).collect())
 }
 
 #[cfg(test)]
@@ -880,5 +907,66 @@ fn compliance_unit_of(model: &hapcal_problems::CalibratedModel) -> &'static str 
     match &model.compliance {
         Some((g, _)) if !g.masses.is_empty() => "rad/(N·m)",
         _ => "rad/m",
+    }
+}
+
+/// Largest distance, m, between a marker position the calibration predicts and the one its
+/// written files give ([`check_reproduced`]): both evaluate the same equations in double
+/// precision (they agree to 10⁻¹² m on every model of the round-trip tests), so a micrometre,
+/// far below any instrument's noise, is a difference of model, never of rounding.
+pub const REPRODUCTION_TOLERANCE_M: f64 = 1e-6;
+
+/// Whether the written files reproduce the calibration: at every row of every data set the
+/// report lists (training and test), each marker's position as the calibrated model predicts
+/// it (`Outcome::model`, m, in the instrument frame) and as `written` gives it from the files
+/// about to be written (marker `k` at index `k`, m), within [`REPRODUCTION_TOLERANCE_M`].
+/// `written` returning `None` (no marker positions from these files: a device file, a
+/// marker on no tip of its own) checks nothing.
+///
+/// # Errors
+/// A marker farther than the tolerance (the worst one named with its set, line and both
+/// positions), or `written`'s own error.
+pub fn check_reproduced(
+    outcome: &Outcome,
+    written: &mut dyn FnMut(&[f64]) -> Result<Option<Vec<[f64; 3]>>>,
+) -> Result<()> {
+    let n_tips = outcome.model.tips.len().max(1);
+    // (distance, set, line, marker)
+    let mut worst: Option<(f64, &str, u64, usize)> = None;
+    for set in &outcome.report.placements {
+        let Some(errors) = &set.errors else {
+            continue;
+        };
+        let rows = (errors.rows.iter()).filter(|r| !r.markers.is_empty());
+        for row in rows {
+            if row.markers.iter().any(|&m| m >= n_tips) {
+                return Ok(());
+            }
+            let Some(from_files) = written(&row.q)? else {
+                return Ok(());
+            };
+            let fitted = outcome.model.end_poses_of(&row.markers, &row.q);
+            for (pose, &m) in fitted.iter().zip(&row.markers) {
+                let Some(p) = from_files.get(m) else {
+                    return Ok(());
+                };
+                let d = (pose.translation.vector - hapcal_kinematics::Vector3::from(*p)).norm();
+                if worst.is_none_or(|w| d > w.0 || !d.is_finite()) {
+                    worst = Some((d, &set.name, row.line, m));
+                }
+            }
+        }
+    }
+    match worst {
+        Some((d, set, line, m)) if !(d <= REPRODUCTION_TOLERANCE_M) => bail!(
+            "the files calibrate would write do not give its calibration: at line {line} of {set}, \
+             marker {} lies {:.3} mm from the calibration's prediction when the written URDF and \
+             record are evaluated as hapcal predict evaluates them; nothing was written (the \
+             estimate is likely one no real robot has: check the setup findings, or give a \
+             simpler --model)",
+            m + 1,
+            d * 1e3
+        ),
+        _ => Ok(()),
     }
 }

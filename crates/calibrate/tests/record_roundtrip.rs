@@ -747,4 +747,37 @@ fn an_equilibrium_the_deflection_does_not_reach_is_implausible() {
         gap > 1e-3,
         "the runtime and the library agree to {gap:e} m: the case no longer shows the gap"
     );
+    // And calibrate, checking its files before it writes them, refuses them.
+    let refused = reproduced(&outcome, &runtime).expect_err("files that do not reproduce");
+    assert!(
+        refused.to_string().contains("do not give its calibration"),
+        "{refused}"
+    );
+}
+
+/// [`hapcal_calibrate::calibrate::check_reproduced`] with the runtime's markers of `robot`
+/// (as `hapcal calibrate` checks the files it is about to write).
+fn reproduced(outcome: &Outcome, robot: &Robot) -> anyhow::Result<()> {
+    let n = robot.tip_names().len();
+    hapcal_calibrate::calibrate::check_reproduced(outcome, &mut |q| {
+        Ok(Some((0..n).map(|k| runtime_marker(robot, q, k)).collect()))
+    })
+}
+
+/// The files of a plausible calibration (the per-axis transversal compliance of the z-axes
+/// humanoid, 2 mm noise) pass the check `hapcal calibrate` makes before writing them.
+#[test]
+fn the_files_of_a_plausible_calibration_reproduce_it() {
+    let (urdf, robot, train, test) = z_axes_humanoid_tables(150);
+    let tips = ["l_hand", "r_hand"];
+    let dir = scratch("reproduced");
+    let model = ModelChoice::Model(ModelName::TransversalAxes);
+    let (outcome, out) = calibrate_and_write(&urdf, &tips, &robot, model, train, test, &dir);
+    assert!(
+        outcome.report.implausible.is_empty(),
+        "{:?}",
+        outcome.report.implausible
+    );
+    let runtime = Robot::load_urdf(&out, &tips).unwrap();
+    reproduced(&outcome, &runtime).unwrap();
 }
