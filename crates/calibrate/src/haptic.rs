@@ -1388,6 +1388,23 @@ pub fn calibrate_logs(
                         None => (None, &geometric),
                     };
                     match identify_with_compliance(&haptic, &rows, t, kin) {
+                        // An estimate no real device has (compliances below zero beyond the
+                        // bound, an unconverged fit) is never a result: the ladder stops below.
+                        Ok(fit)
+                            if let Some(i) = crate::fit::implausible_estimates(
+                                &fit.identified,
+                                m,
+                                false,
+                                HANDLE_COMPLIANCE_UNIT,
+                            )
+                            .first() =>
+                        {
+                            warnings.push(format!(
+                                "the {m} model was left out: {}; the ladder stops below it",
+                                i.message
+                            ));
+                            continue;
+                        }
                         Ok(fit) => HapticRungFit::Compliance(fit, t.cloned()),
                         Err(e) => {
                             warnings.push(format!(

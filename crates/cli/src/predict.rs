@@ -879,7 +879,8 @@ pub fn check_written(
         .map(|k| robot.frame(&format!("marker{k}")).unwrap_or(Pose::IDENTITY))
         .collect();
     let mut ws = robot.workspace();
-    let mut poses = vec![Pose::IDENTITY; tips.len()];
+    // The record's load tips come with it: the robot may have more tips than the markers.
+    let mut poses = vec![Pose::IDENTITY; robot.tip_names().len()];
     hapcal_calibrate::calibrate::check_reproduced(outcome, &mut |q| {
         robot
             .deflected_tip_poses(q, &mut ws, &mut poses)
