@@ -357,6 +357,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             choice,
             matches!(plan.model, ModelChoice::Model(_)),
             compliance_unit_of(&model),
+            1.0,
         ),
     };
     let joint_names = chain.joint_names().to_vec();

@@ -322,8 +322,13 @@ mod tests {
 /// `compliance.*`, `transversal.*`, `joint_compliance.j*`) below zero by more than
 /// [`hapcal_contract::negative_compliance_sigmas`] of their count standard deviations, most
 /// significant first: `(name, value, σ)` in the parameter's unit (rad/(N·m) or rad/m); with
-/// the number of compliance estimates the bound was taken over.
-pub(crate) fn negative_compliances(identified: &Identified) -> (Vec<(String, f64, f64)>, usize) {
+/// the number of compliance estimates the bound was taken over. `std_scale` multiplies the
+/// identification's σ: `√(rows / distinct rows)` when rows repeat (a copy adds no
+/// information, but the least-squares covariance counts it), else 1.
+pub(crate) fn negative_compliances(
+    identified: &Identified,
+    std_scale: f64,
+) -> (Vec<(String, f64, f64)>, usize) {
     let is_compliance =
         |name: &str| hapcal_contract::ValueName::parse(name).is_ok_and(|v| v.is_compliance());
     let compliances: Vec<(String, f64, f64)> = (identified.covariance.free.iter())
@@ -369,7 +374,8 @@ pub(crate) fn negative_compliance_words(
 
 /// What no real device can be, in any workflow's fit of `rung` ([`crate::report::Implausible`]):
 /// an unconverged fit (its estimate is the last iterate, not a minimum), and compliances
-/// below zero beyond the bound ([`negative_compliances`]; `unit` as there). `given`: the
+/// below zero beyond the bound ([`negative_compliances`]; `unit` and `std_scale` as there).
+/// `given`: the
 /// rung was asked for with `--model` (the fix names `--model auto`). A mounting is not
 /// tested here: the measurement workflow does it where gravity is an option.
 pub(crate) fn implausible_estimates(
@@ -377,13 +383,14 @@ pub(crate) fn implausible_estimates(
     rung: crate::model::ModelName,
     given: bool,
     unit: &str,
+    std_scale: f64,
 ) -> Vec<crate::report::Implausible> {
     use crate::report::{Implausible, ImplausibleKind};
     let mut out = Vec::new();
     if let Some(i) = unconverged(identified, rung, given) {
         out.push(i);
     }
-    let (negative, n) = negative_compliances(identified);
+    let (negative, n) = negative_compliances(identified, std_scale);
     if !negative.is_empty() {
         out.push(Implausible {
             kind: ImplausibleKind::NegativeCompliance,

@@ -1032,6 +1032,16 @@ pub enum HapticRungFit {
 }
 
 impl HapticRungFit {
+    /// The identification whose estimate is the rung's result (step 2's kinematic deviations
+    /// for the transmissions, whose step 1 is judged by its own fits): what the plausibility
+    /// check judges.
+    pub fn identified(&self) -> &Identified {
+        match self {
+            HapticRungFit::Geometric(id) | HapticRungFit::Transmissions(_, id) => id,
+            HapticRungFit::Compliance(fit, _) => &fit.identified,
+        }
+    }
+
     /// The rung's `--model` value.
     pub fn model(&self) -> crate::model::ModelName {
         use crate::model::ModelName as M;
@@ -1351,6 +1361,14 @@ pub fn calibrate_logs(
              in every training log; ask for --model geometric (or auto) on logs without them"
         );
     }
+    // A row that repeats an earlier row of its log adds no information, but the fit's
+    // covariance counts it: the compliances' σ, judged for plausibility, grows back by
+    // √(rows / distinct rows).
+    let n_copies: usize = (train.iter())
+        .map(|log| crate::fit::originals(log.rows.iter().map(LogRow::repeat_key)))
+        .map(|o| crate::fit::n_copies(&o))
+        .sum();
+    let std_scale = (rows.len() as f64 / rows.len().saturating_sub(n_copies).max(1) as f64).sqrt();
     // `--model auto`: the ladder geometric → transmissions → compliance, each rung the logs and
     // the device carry, climbed by the rule of every workflow (crate::model::climb) on the
     // rungs' held-out errors.
@@ -1388,23 +1406,6 @@ pub fn calibrate_logs(
                         None => (None, &geometric),
                     };
                     match identify_with_compliance(&haptic, &rows, t, kin) {
-                        // An estimate no real device has (compliances below zero beyond the
-                        // bound, an unconverged fit) is never a result: the ladder stops below.
-                        Ok(fit)
-                            if let Some(i) = crate::fit::implausible_estimates(
-                                &fit.identified,
-                                m,
-                                false,
-                                HANDLE_COMPLIANCE_UNIT,
-                            )
-                            .first() =>
-                        {
-                            warnings.push(format!(
-                                "the {m} model was left out: {}; the ladder stops below it",
-                                i.message
-                            ));
-                            continue;
-                        }
                         Ok(fit) => HapticRungFit::Compliance(fit, t.cloned()),
                         Err(e) => {
                             warnings.push(format!(
@@ -1463,14 +1464,33 @@ pub fn calibrate_logs(
             ));
             first
         } else {
-            let (choice, reports) = crate::fit::choose(rungs, levels, &held);
+            let (mut choice, reports) = crate::fit::choose(rungs, levels, &held);
             cross_validation = reports;
+            // A chosen rung whose estimate no real device has (compliances below zero beyond
+            // the bound, an unconverged fit) is never the result: the ladder keeps the best of
+            // the rungs below it, and says why.
+            while let Some(k) = rungs.iter().position(|&r| r == choice)
+                && k > 0
+                && let Some(i) = crate::fit::implausible_estimates(
+                    fits[k].identified(),
+                    choice,
+                    false,
+                    HANDLE_COMPLIANCE_UNIT,
+                    std_scale,
+                )
+                .into_iter()
+                .next()
+            {
+                let (below, _) = crate::fit::choose(&rungs[..k], &levels[..k], &held[..k]);
+                warnings.push(format!(
+                    "the {choice} model predicted the held-out rows best but was left out: {}; \
+                     the ladder keeps the {below} model",
+                    i.message
+                ));
+                choice = below;
+            }
             choice
         };
-        let n_copies = (train.iter())
-            .map(|log| crate::fit::originals(log.rows.iter().map(LogRow::repeat_key)))
-            .map(|o| crate::fit::n_copies(&o))
-            .sum();
         warnings.extend(crate::fit::copies_warning(n_copies));
         if choice == ModelName::Geometric && has_ext && rungs.contains(&ModelName::Transmissions) {
             warnings.push(
@@ -1703,9 +1723,13 @@ pub fn calibrate_logs(
     // What no real device has: an unconverged fit, compliances below zero beyond the bound.
     let given = matches!(plan.model, ModelChoice::Model(_));
     let implausible = match &compliance {
-        Some(fit) => {
-            crate::fit::implausible_estimates(&fit.identified, model, given, HANDLE_COMPLIANCE_UNIT)
-        }
+        Some(fit) => crate::fit::implausible_estimates(
+            &fit.identified,
+            model,
+            given,
+            HANDLE_COMPLIANCE_UNIT,
+            std_scale,
+        ),
         None => crate::fit::unconverged(&kin, model, given)
             .into_iter()
             .collect(),

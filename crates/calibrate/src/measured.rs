@@ -2349,7 +2349,7 @@ fn mounting_test(r: &Refit<'_>, given_rms_m: f64) -> Option<(Vector3<f64>, f64)>
             let (model, fitted) =
                 fit(r.rung, &robot, &start, r.offsets, r.train, r.weights, &all).ok()?;
             if !fitted.identified.fit.termination.is_success()
-                || !crate::fit::negative_compliances(&fitted.identified)
+                || !crate::fit::negative_compliances(&fitted.identified, 1.0)
                     .0
                     .is_empty()
             {
@@ -2387,7 +2387,7 @@ fn plausibility(
     let mut out: Vec<Implausible> = crate::fit::unconverged(&fitted.identified, r.rung, given)
         .into_iter()
         .collect();
-    let (negative, n_compliances) = crate::fit::negative_compliances(&fitted.identified);
+    let (negative, n_compliances) = crate::fit::negative_compliances(&fitted.identified, 1.0);
     if !negative.is_empty() {
         let unit = if r.robot.masses.is_empty() {
             "rad/m"

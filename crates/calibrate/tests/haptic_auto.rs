@@ -96,9 +96,10 @@ fn on_a_clean_log_the_transmissions_are_chosen() {
 }
 
 /// Without the external-encoder columns the transmissions cannot be a rung. The compliance
-/// still is (the device has a handle mass), and on a clean log it wins: its per-joint angle
-/// terms absorb part of the transmission errors the kinematics alone leave (held out about
-/// 0.23 mm against 0.32 mm on this log), so the rule takes it, with a warning that says so.
+/// still is (the device has a handle mass), and on a clean log it predicts best held out: its
+/// per-joint angle terms absorb part of the transmission errors the kinematics alone leave
+/// (about 0.23 mm against 0.32 mm on this log), joint 4's far below zero. An estimate no real
+/// device has is never the result: the ladder keeps the geometric model and says why.
 #[test]
 fn without_external_encoder_columns_the_ladder_has_no_transmissions() {
     let mut rows = log(53, 300, &[]);
@@ -110,12 +111,7 @@ fn without_external_encoder_columns_the_ladder_has_no_transmissions() {
     let report = auto(rows);
     use ModelName as M;
     assert_eq!(rungs(&report), [M::Geometric, M::Compliance]);
-    assert_eq!(
-        report.model,
-        M::Compliance,
-        "{:#?}",
-        report.cross_validation
-    );
+    assert_eq!(report.model, M::Geometric, "{:#?}", report.cross_validation);
     assert!(report.cross_validation[1].beats_geometric);
     assert!(
         report
@@ -124,10 +120,10 @@ fn without_external_encoder_columns_the_ladder_has_no_transmissions() {
             .any(|w| w.contains("external-encoder columns"))
     );
     assert!(
-        report
-            .warnings
-            .iter()
-            .any(|w| w.contains("absorb") && w.contains("compliance")),
+        report.warnings.iter().any(|w| w.contains(
+            "the compliance model predicted the held-out rows best but \
+                                   was left out"
+        ) && w.contains("joint_compliance.j4")),
         "{:#?}",
         report.warnings
     );
