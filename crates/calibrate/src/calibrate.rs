@@ -657,7 +657,7 @@ pub fn write_outputs_checked(
     outcome: &Outcome,
     out: &Path,
     inputs: &[&Path],
-    reproduces: &dyn Fn(&Outcome, &[(PathBuf, String)]) -> Result<()>,
+    reproduces: OutputCheck<'_>,
 ) -> Result<Vec<PathBuf>> {
     check_outputs(&outcome.device_path, out, inputs)?;
     let urdf_source = (outcome.device.urdf.as_ref()).map(|u| u.resolve(&outcome.device_path));
@@ -793,13 +793,88 @@ fn write_all(
     outcome: &Outcome,
     files: Vec<(PathBuf, String)>,
     inputs: &[&Path],
-    reproduces: &dyn Fn(&Outcome, &[(PathBuf, String)]) -> Result<()>,
+    reproduces: OutputCheck<'_>,
 ) -> Result<Vec<PathBuf>> {
     reproduces(outcome, &files)?;
     for (path, text) in &files {
         write_new(path, text, inputs)?;
     }
     Ok(files.into_iter().map(|(p, _)| p).collect())
+}
+
+/// The unit of `model`'s compliances: rad/(N·m) under link masses, rad/m under the lumped
+/// unit weights (also for a model without compliance).
+fn compliance_unit_of(model: &hapcal_problems::CalibratedModel) -> &'static str {
+    match &model.compliance {
+        Some((g, _)) if !g.masses.is_empty() => "rad/(N·m)",
+        _ => "rad/m",
+    }
+}
+
+/// A check of the files about to be written ([`write_outputs_checked`]): the outcome and the
+/// files' paths and texts; an error refuses them.
+pub type OutputCheck<'a> = &'a dyn Fn(&Outcome, &[(PathBuf, String)]) -> Result<()>;
+
+/// The marker positions the written files give at joint readings `q` ([`check_reproduced`]):
+/// marker `k` at index `k`, m, in the instrument frame; `None` when the files give none.
+pub type WrittenMarkers<'a> = &'a mut dyn FnMut(&[f64]) -> Result<Option<Vec<[f64; 3]>>>;
+
+/// Largest distance, m, between a marker position the calibration predicts and the one its
+/// written files give ([`check_reproduced`]): both evaluate the same equations in double
+/// precision (they agree to 10⁻¹² m on every model of the round-trip tests), so a micrometre,
+/// far below any instrument's noise, is a difference of model, never of rounding.
+pub const REPRODUCTION_TOLERANCE_M: f64 = 1e-6;
+
+/// Whether the written files reproduce the calibration: at every row of every data set the
+/// report lists (training and test), each marker's position as the calibrated model predicts
+/// it (`Outcome::model`, m, in the instrument frame) and as `written` gives it from the files
+/// about to be written (marker `k` at index `k`, m), within [`REPRODUCTION_TOLERANCE_M`].
+/// `written` returning `None` (no marker positions from these files: a device file, a
+/// marker on no tip of its own) checks nothing.
+///
+/// # Errors
+/// A marker farther than the tolerance (the worst one named with its set, line and both
+/// positions), or `written`'s own error.
+pub fn check_reproduced(outcome: &Outcome, written: WrittenMarkers<'_>) -> Result<()> {
+    let n_tips = outcome.model.tips.len().max(1);
+    // (distance, set, line, marker)
+    let mut worst: Option<(f64, &str, u64, usize)> = None;
+    for set in &outcome.report.placements {
+        let Some(errors) = &set.errors else {
+            continue;
+        };
+        let rows = (errors.rows.iter()).filter(|r| !r.markers.is_empty());
+        for row in rows {
+            if row.markers.iter().any(|&m| m >= n_tips) {
+                return Ok(());
+            }
+            let Some(from_files) = written(&row.q)? else {
+                return Ok(());
+            };
+            let fitted = outcome.model.end_poses_of(&row.markers, &row.q);
+            for (pose, &m) in fitted.iter().zip(&row.markers) {
+                let Some(p) = from_files.get(m) else {
+                    return Ok(());
+                };
+                let d = (pose.translation.vector - hapcal_kinematics::Vector3::from(*p)).norm();
+                if worst.is_none_or(|w| d > w.0 || !d.is_finite()) {
+                    worst = Some((d, &set.name, row.line, m));
+                }
+            }
+        }
+    }
+    match worst {
+        Some((d, set, line, m)) if d.is_nan() || d > REPRODUCTION_TOLERANCE_M => bail!(
+            "the files calibrate would write do not give its calibration: at line {line} of {set}, \
+             marker {} lies {:.3} mm from the calibration's prediction when the written URDF and \
+             record are evaluated as hapcal predict evaluates them; nothing was written (the \
+             estimate is likely one no real robot has: check the setup findings, or give a \
+             simpler --model)",
+            m + 1,
+            d * 1e3
+        ),
+        _ => Ok(()),
+    }
 }
 
 #[cfg(test)]
@@ -899,75 +974,5 @@ mod tests {
             block: vec![0; 4],
         };
         assert_eq!(blocked_difference(&one, &one).1, f64::INFINITY);
-    }
-}
-
-/// The unit of `model`'s compliances: rad/(N·m) under link masses, rad/m under the lumped
-/// unit weights (also for a model without compliance).
-fn compliance_unit_of(model: &hapcal_problems::CalibratedModel) -> &'static str {
-    match &model.compliance {
-        Some((g, _)) if !g.masses.is_empty() => "rad/(N·m)",
-        _ => "rad/m",
-    }
-}
-
-/// Largest distance, m, between a marker position the calibration predicts and the one its
-/// written files give ([`check_reproduced`]): both evaluate the same equations in double
-/// precision (they agree to 10⁻¹² m on every model of the round-trip tests), so a micrometre,
-/// far below any instrument's noise, is a difference of model, never of rounding.
-pub const REPRODUCTION_TOLERANCE_M: f64 = 1e-6;
-
-/// Whether the written files reproduce the calibration: at every row of every data set the
-/// report lists (training and test), each marker's position as the calibrated model predicts
-/// it (`Outcome::model`, m, in the instrument frame) and as `written` gives it from the files
-/// about to be written (marker `k` at index `k`, m), within [`REPRODUCTION_TOLERANCE_M`].
-/// `written` returning `None` (no marker positions from these files: a device file, a
-/// marker on no tip of its own) checks nothing.
-///
-/// # Errors
-/// A marker farther than the tolerance (the worst one named with its set, line and both
-/// positions), or `written`'s own error.
-pub fn check_reproduced(
-    outcome: &Outcome,
-    written: &mut dyn FnMut(&[f64]) -> Result<Option<Vec<[f64; 3]>>>,
-) -> Result<()> {
-    let n_tips = outcome.model.tips.len().max(1);
-    // (distance, set, line, marker)
-    let mut worst: Option<(f64, &str, u64, usize)> = None;
-    for set in &outcome.report.placements {
-        let Some(errors) = &set.errors else {
-            continue;
-        };
-        let rows = (errors.rows.iter()).filter(|r| !r.markers.is_empty());
-        for row in rows {
-            if row.markers.iter().any(|&m| m >= n_tips) {
-                return Ok(());
-            }
-            let Some(from_files) = written(&row.q)? else {
-                return Ok(());
-            };
-            let fitted = outcome.model.end_poses_of(&row.markers, &row.q);
-            for (pose, &m) in fitted.iter().zip(&row.markers) {
-                let Some(p) = from_files.get(m) else {
-                    return Ok(());
-                };
-                let d = (pose.translation.vector - hapcal_kinematics::Vector3::from(*p)).norm();
-                if worst.is_none_or(|w| d > w.0 || !d.is_finite()) {
-                    worst = Some((d, &set.name, row.line, m));
-                }
-            }
-        }
-    }
-    match worst {
-        Some((d, set, line, m)) if !(d <= REPRODUCTION_TOLERANCE_M) => bail!(
-            "the files calibrate would write do not give its calibration: at line {line} of {set}, \
-             marker {} lies {:.3} mm from the calibration's prediction when the written URDF and \
-             record are evaluated as hapcal predict evaluates them; nothing was written (the \
-             estimate is likely one no real robot has: check the setup findings, or give a \
-             simpler --model)",
-            m + 1,
-            d * 1e3
-        ),
-        _ => Ok(()),
     }
 }
