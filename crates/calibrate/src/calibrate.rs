@@ -259,6 +259,33 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         })
         .collect();
     let pruned = pruned_report(&identified);
+    // The lengths the fit held at nominal (pruned), and what fitting them would move them by.
+    let held: Vec<usize> = (0..problem.points_offset())
+        .filter(|&i| layout.spec(i).unit == hapcal_identify::Unit::Meter)
+        .filter(|i| !identified.identifiability.kept.contains(i))
+        .collect();
+    let held_lengths = if shift.iter().all(|&s| s == 0.0) {
+        crate::fit::held_length_moves(
+            &problem,
+            identified.fit.x.as_ref(),
+            identified.sigma,
+            &identified.identifiability.kept,
+            &held,
+        )
+    } else {
+        let mut full = shift.clone();
+        full.resize(problem.n_residuals(), 0.0);
+        crate::fit::held_length_moves(
+            &crate::robust::Shifted {
+                inner: &problem,
+                shift: &full,
+            },
+            identified.fit.x.as_ref(),
+            identified.sigma,
+            &identified.identifiability.kept,
+            &held,
+        )
+    };
     let correlated = identified
         .covariance
         .correlated_pairs(0.95)
@@ -375,6 +402,8 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         equilibrium_step_m: None,
         equilibrium_refits: 0,
         implausible: Vec::new(),
+        held_lengths,
+        origins: crate::setup::joint_origins(std::slice::from_ref(&chain)),
     };
     let joint_names = chain.joint_names().to_vec();
     let prismatic: Vec<bool> = (hapcal_kinematics::joint_motions(std::slice::from_ref(&chain)))

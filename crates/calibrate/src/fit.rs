@@ -241,6 +241,99 @@ pub(crate) fn choose(
     (candidates[chosen], reports)
 }
 
+/// Largest Jacobian, in entries (`m·n`), of which [`held_length_moves`] evaluates the moves:
+/// the dense back end's own bound ([`hapcal_identify::STREAMING_AUTO_ENTRIES`]); beyond it
+/// the fit streamed and no held length is judged.
+pub(crate) const HELD_MOVES_MAX_ENTRIES: usize = hapcal_identify::STREAMING_AUTO_ENTRIES;
+
+/// What a least-squares fit of the lengths `held` (layout indices of `p`: lengths the final
+/// fit held at their nominal values, pruned as not identifiable or not free in the model)
+/// would move them by at the estimate `x` of the parameters `kept` (layout indices, the fit's
+/// free set): one Gauss–Newton step over `kept` and `held` together, from `x`, whose `held`
+/// part is reported. Columns are scaled to unit norm; the `held` columns' components
+/// orthogonal to the `kept` ones are solved by their pseudo-inverse, directions the data do
+/// not see at all (a squared singular value below 10⁻¹², exact gauges such as a base height
+/// a free instrument frame absorbs) left out, so each entry is the minimum-norm move.
+///
+/// Each entry: the parameter's name, the move in its unit (`value`, m) and its standard
+/// deviation (`std`, from `sigma`, the residual noise in `p`'s residual units). A `held`
+/// parameter whose column is zero is left out. Empty when `held` is, when the Jacobian has
+/// more than [`HELD_MOVES_MAX_ENTRIES`] entries or cannot be evaluated, or when the `kept`
+/// columns are singular. Source: the Schur complement of the normal equations, Björck,
+/// *Numerical Methods for Least Squares Problems*, 1996, §2.7.5 (partitioned problems).
+pub(crate) fn held_length_moves(
+    p: &impl hapcal_identify::Problem,
+    x: faer::ColRef<'_, f64>,
+    sigma: f64,
+    kept: &[usize],
+    held: &[usize],
+) -> Vec<crate::report::ParamReport> {
+    use nalgebra::{DMatrix, DVector};
+    let (m, n) = (p.n_residuals(), p.layout().len());
+    if held.is_empty() || m.saturating_mul(n) > HELD_MOVES_MAX_ENTRIES || x.nrows() != n {
+        return Vec::new();
+    }
+    let mut r = faer::Col::<f64>::zeros(m);
+    let mut jac = faer::Mat::<f64>::zeros(m, n);
+    if p.residuals(x, r.as_mut()).is_err() || p.jacobian(x, jac.as_mut()).is_err() {
+        return Vec::new();
+    }
+    let norm = |j: usize| jac.col(j).norm_l2();
+    let held: Vec<usize> = (held.iter().copied())
+        .filter(|&j| j < n && norm(j) > 0.0 && norm(j).is_finite())
+        .collect();
+    let kept: Vec<usize> = (kept.iter().copied())
+        .filter(|&j| j < n && norm(j) > 0.0 && norm(j).is_finite())
+        .collect();
+    if held.is_empty() {
+        return Vec::new();
+    }
+    let cols: Vec<usize> = kept.iter().chain(&held).copied().collect();
+    let scale: Vec<f64> = cols.iter().map(|&j| norm(j)).collect();
+    let q = cols.len();
+    let a = faer::Mat::<f64>::from_fn(m, q, |i, k| jac[(i, cols[k])] / scale[k]);
+    let gram = a.transpose() * &a;
+    let at_r = a.transpose() * &r;
+    let g = DMatrix::from_fn(q, q, |i, k| gram[(i, k)]);
+    let h = DVector::from_fn(q, |i, _| at_r[i]);
+    let (nk, nh) = (kept.len(), held.len());
+    let g_kk = g.view((0, 0), (nk, nk)).into_owned();
+    let g_kh = g.view((0, nk), (nk, nh)).into_owned();
+    let g_hh = g.view((nk, nk), (nh, nh)).into_owned();
+    let (h_k, h_h) = (h.rows(0, nk).into_owned(), h.rows(nk, nh).into_owned());
+    // The held columns and the residual with the kept columns' span taken out.
+    let (schur, rhs) = if nk == 0 {
+        (g_hh, h_h)
+    } else {
+        let Some(chol) = g_kk.cholesky() else {
+            return Vec::new();
+        };
+        let solved = chol.solve(&g_kh);
+        let solved_h = chol.solve(&h_k);
+        (
+            &g_hh - g_kh.transpose() * solved,
+            &h_h - g_kh.transpose() * solved_h,
+        )
+    };
+    let eig = nalgebra::SymmetricEigen::new(schur);
+    let mut pinv = DMatrix::<f64>::zeros(nh, nh);
+    for (k, &lambda) in eig.eigenvalues.iter().enumerate() {
+        if lambda > 1e-12 {
+            let v = eig.eigenvectors.column(k);
+            pinv += v * v.transpose() / lambda;
+        }
+    }
+    let step = -(&pinv * rhs);
+    (held.iter().enumerate())
+        .map(|(k, &j)| crate::report::ParamReport {
+            name: p.layout().name(j).to_owned(),
+            value: step[k] / scale[nk + k],
+            std: sigma * pinv[(k, k)].max(0.0).sqrt() / scale[nk + k],
+            unit: p.layout().spec(j).unit.symbol(),
+        })
+        .collect()
+}
+
 /// The pruned parameters of `identified`, each with why.
 pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
     identified

@@ -123,6 +123,10 @@ pub struct MeasuredOutcome {
     /// Estimates no real robot can have, each with its cause and fix (checked after the fit):
     /// never a result (`hapcal calibrate` stops on the first).
     pub implausible: Vec<crate::report::Implausible>,
+    /// The robot's lengths the chosen rung held at their nominal values (pruned, or not free
+    /// in it), each with what a least-squares fit of them at the estimate would move it by
+    /// (m) and its σ (m) ([`crate::fit::held_length_moves`]).
+    pub held_lengths: Vec<crate::report::ParamReport>,
 }
 
 /// The rigid transform `T` minimising `Σ |T·a_i − b_i|²` (Kabsch 1976; Horn 1987, "Closed-form
@@ -2223,7 +2227,9 @@ pub fn calibrate_measured(
         &frames,
         cfg.rung.is_some(),
     );
+    let held_lengths = held_lengths(rung, robot, &framed, &fitted, train, weights);
     Ok(MeasuredOutcome {
+        held_lengths,
         rung,
         ladder,
         fitted,
@@ -2567,6 +2573,37 @@ fn equilibrate(
 /// close enough to the equilibrium's: one more fixed-point step moves the tips by less than
 /// this, and the model's single step is reported as enough.
 pub const EQUILIBRIUM_SHARE: f64 = 0.3;
+
+/// The robot's lengths (`m` parameters of `robot`'s own, not the instrument's nor the
+/// markers') that the estimate `fitted` of `rung` on `tables` held at their nominal values,
+/// with what a least-squares fit of them at the estimate would move them by
+/// ([`crate::fit::held_length_moves`]); `tree` is the framed tree the problems are built on.
+/// Empty when the problem cannot be rebuilt.
+fn held_lengths(
+    rung: ModelName,
+    robot: &Robot,
+    tree: &Tree,
+    fitted: &Fitted,
+    tables: &[MeasurementTable],
+    weights: Weights,
+) -> Vec<crate::report::ParamReport> {
+    let obs = observations(tables, &|_, _| true);
+    let Ok(problem) = terms(rung, robot)
+        .and_then(|t| Ok(CalibrationProblem::on_tree(tree.clone(), obs, weights, t)?))
+    else {
+        return Vec::new();
+    };
+    let layout = problem.layout();
+    let id = &fitted.identified;
+    let kept: Vec<usize> = (id.identifiability.kept.iter())
+        .filter_map(|&i| layout.index_of(id.layout.name(i)))
+        .collect();
+    let robot_params = 6..6 + robot.tree.n_params();
+    let held: Vec<usize> = (robot_params.filter(|i| *i < layout.len()))
+        .filter(|i| layout.spec(*i).unit == hapcal_identify::Unit::Meter && !kept.contains(i))
+        .collect();
+    crate::fit::held_length_moves(&problem, fitted.x.as_ref(), id.sigma, &kept, &held)
+}
 
 /// Covariance-propagated 3-D position uncertainty of the calibrated model (m) at every marker
 /// sample of `tables`, per table in file order: `√trace(J·C·Jᵀ)` with `J` the position's
@@ -3240,6 +3277,8 @@ pub fn run_tables(
         equilibrium_step_m: out.equilibrium_step_m,
         equilibrium_refits: out.equilibrium_refits,
         implausible: out.implausible.clone(),
+        held_lengths: out.held_lengths.clone(),
+        origins: crate::setup::joint_origins(robot.tree.tips()),
     };
     let frame_values: Vec<ParamReport> = (id.covariance.free.iter())
         .zip(id.covariance.std())

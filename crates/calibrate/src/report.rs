@@ -136,6 +136,20 @@ pub struct ParamReport {
     pub unit: &'static str,
 }
 
+/// The nominal origin of one URDF joint as the length check after the fit
+/// ([`crate::setup::after_fit`]) words a link: the translation from the frame of the moving
+/// joint before it (or the root) to its origin, expressed in the frame its `{joint}.x`, `.y`,
+/// `.z` deviations move along (URDF `<origin>`, fixed joints between folded in).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct JointOrigin {
+    /// The joint (URDF name; the prefix of its length parameters).
+    pub joint: String,
+    /// The moving joint before it on the chain, whose link this origin ends (`None`: the root).
+    pub after: Option<String>,
+    /// The translation, m, in the deviations' frame.
+    pub origin_m: [f64; 3],
+}
+
 /// One pruned parameter and why.
 #[derive(Clone, Debug, Serialize)]
 pub struct PrunedReport {
@@ -249,6 +263,17 @@ pub struct CalibrationReport {
     /// when the estimate is plausible.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub implausible: Vec<Implausible>,
+    /// Robot lengths the final fit held at their nominal values (pruned as not identifiable,
+    /// or not free in the chosen model), each with what a least-squares fit of all of them at
+    /// the estimate would move it by (`value`, m) and the move's σ (`std`, m): the check after
+    /// the fit judges them as it judges the identified lengths, so that pruning cannot hide
+    /// another robot's dimensions. Empty when nothing was held (or the fit streamed).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub held_lengths: Vec<ParamReport>,
+    /// The nominal origins of the URDF joints whose lengths are parameters, chain order: the
+    /// links the check after the fit names (empty for a D-H device).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub origins: Vec<JointOrigin>,
 }
 
 /// Output of a calibration: the report plus what is needed to write the calibrated files.

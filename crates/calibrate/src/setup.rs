@@ -1378,7 +1378,10 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
             after: None,
         });
     }
-    let another = (!explained && frozen.is_empty() && !as_given.is_plausible())
+    // Another robot's lengths: a residual above what right data leave (a plausible one too,
+    // when a free instrument frame absorbs much of the lengths' effect, as a UR5e's
+    // description does of a UR10e's data) that a geometric calibration explains.
+    let another = (!explained && frozen.is_empty() && !as_given.is_clean())
         .then(|| another_device(input.robot, input.tables, &given_tips, &as_given))
         .flatten();
     let explained = explained || another.is_some();
@@ -1704,44 +1707,93 @@ fn another_device(
     }
     let id = &out.fitted.identified;
     let is_frame = |name: &str| name.starts_with("instrument.") || name.starts_with("marker");
-    let mut beyond: Vec<(String, f64, f64)> = (id.covariance.free.iter())
+    let parameters: Vec<crate::report::ParamReport> = (id.covariance.free.iter())
         .zip(id.covariance.std())
-        .filter(|(i, _)| id.layout.spec(**i).unit.symbol() == "m")
-        .map(|(&i, std)| (id.layout.name(i).to_owned(), id.fit.x[i], std))
-        .filter(|(name, value, std)| {
-            !is_frame(name)
-                && value.abs() > MANUFACTURING_TOLERANCE_M
-                && value.abs() > DETERMINED_SIGMAS * std
+        .filter(|(i, _)| {
+            id.layout.spec(**i).unit == hapcal_identify::Unit::Meter
+                && !is_frame(id.layout.name(**i))
+        })
+        .map(|(&i, std)| crate::report::ParamReport {
+            name: id.layout.name(i).to_owned(),
+            value: id.fit.x[i],
+            std,
+            unit: "m",
         })
         .collect();
-    beyond.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
-    if beyond.is_empty() {
-        return None;
-    }
-    let listed: Vec<String> = (beyond.iter().take(4))
-        .map(|(name, value, _)| format!("{name} {:+.1} mm", value * 1e3))
-        .collect();
-    let more = if beyond.len() > 4 { ", …" } else { "" };
+    let beyond = lengths_beyond(&parameters, &out.held_lengths)?;
+    let origins = joint_origins(robot.tree.tips());
+    let links = beyond.links(&parameters, &out.held_lengths, &origins);
+    let conclusion = if links.is_empty() {
+        "these data come from a robot of this structure with other dimensions, or the \
+         description is not the one measured"
+            .to_owned()
+    } else {
+        format!(
+            "these data come from another robot or variant: {}",
+            links.join("; ")
+        )
+    };
     Some(Finding {
         class: MistakeClass::AnotherDevice,
         severity: Severity::Error,
         message: format!(
             "the nominal model misses the measurements by {} RMS with the instrument and marker \
              frames fitted, and no checked mistake explains it; the geometric calibration fits \
-             them to {} RMS by moving {} length{} by more than the {:.0} mm a real robot's \
-             manufacturing leaves ({}{more}): these data come from a robot of this structure \
-             with other dimensions, or the description is not the one measured",
+             them to {} RMS by moving {}: {conclusion}",
             as_given.text(),
             after.text(),
-            beyond.len(),
-            if beyond.len() == 1 { "" } else { "s" },
-            MANUFACTURING_TOLERANCE_M * 1e3,
-            listed.join(", "),
+            beyond.words(),
         ),
-        fix: "check --device (and --tip) against the robot that recorded the data".to_owned(),
+        fix: "calibrate with the robot's own description (--device), and check --tip".to_owned(),
         before: *as_given,
         after: Some(after),
     })
+}
+
+/// The nominal origin of every URDF joint of `chains` whose `{joint}.x`, `.y`, `.z` are
+/// length parameters ([`hapcal_kinematics::Chain::from_placements`]: the origin's fixed
+/// transform, then the six deviations), each once, chain order: what
+/// [`after_fit`] words a link by. Empty for D-H chains (their lengths are `a` and `d`).
+pub fn joint_origins(chains: &[hapcal_kinematics::Chain]) -> Vec<crate::report::JointOrigin> {
+    use hapcal_kinematics::{Factor, ParamUnit};
+    let mut out: Vec<crate::report::JointOrigin> = Vec::new();
+    for chain in chains {
+        let factors = chain.factors();
+        for (i, factor) in factors.iter().enumerate() {
+            let Factor::Screw {
+                param: Some(p),
+                joint: None,
+                ..
+            } = factor
+            else {
+                continue;
+            };
+            let Some(info) = chain.params().get(*p) else {
+                continue;
+            };
+            let Some(joint) = info.name.strip_suffix(".x") else {
+                continue;
+            };
+            if info.unit != ParamUnit::Meter || out.iter().any(|o| o.joint == joint) {
+                continue;
+            }
+            let Some(Factor::Fixed(origin)) = i.checked_sub(1).and_then(|k| factors.get(k))
+            else {
+                continue;
+            };
+            let after = (factors[..i].iter().rev()).find_map(|f| match f {
+                Factor::Screw { joint: Some(j), .. } => chain.joint_names().get(*j).cloned(),
+                _ => None,
+            });
+            let o = origin.rotation.inverse() * origin.translation.vector;
+            out.push(crate::report::JointOrigin {
+                joint: joint.to_owned(),
+                after,
+                origin_m: [o.x, o.y, o.z],
+            });
+        }
+    }
+    out
 }
 
 /// The setup check after a calibration: an identified length deviation beyond
@@ -1804,15 +1856,33 @@ pub fn after_fit(
             after: None,
         });
     }
+    let links = beyond.links(&report.parameters, &report.held_lengths, &report.origins);
+    if links.is_empty() {
+        return Some(Finding {
+            class: MistakeClass::AnotherDevice,
+            severity: Severity::Error,
+            message: format!(
+                "the calibration moves {}: these data come from another device or robot, or the \
+                 device file is not the one measured",
+                beyond.words()
+            ),
+            fix: "check --device (and --tip) against the device that recorded the data"
+                .to_owned(),
+            before: Residual::default(),
+            after: None,
+        });
+    }
     Some(Finding {
         class: MistakeClass::AnotherDevice,
         severity: Severity::Error,
         message: format!(
-            "the calibration moves {}: these data come from another device or robot, or the \
-             device file is not the one measured",
+            "these data come from another robot or variant: {}, beyond the {:.0} mm a real \
+             robot's manufacturing leaves (the calibration moves {})",
+            links.join("; "),
+            MANUFACTURING_TOLERANCE_M * 1e3,
             beyond.words()
         ),
-        fix: "check --device (and --tip) against the device that recorded the data".to_owned(),
+        fix: "calibrate with the robot's own URDF (--device), and check --tip".to_owned(),
         before: Residual::default(),
         after: None,
     })
@@ -1854,50 +1924,124 @@ fn misfit_after_calibration(report: &crate::report::CalibrationReport) -> Option
     })
 }
 
-/// The length deviations of [`after_fit`]: beyond [`MANUFACTURING_TOLERANCE_M`], determined
-/// to [`DETERMINED_SIGMAS`], in the report's order (none: `None`).
+/// The length deviations of [`after_fit`]: the identified ones and what a fit of the lengths
+/// the calibration held at nominal would move them by
+/// ([`crate::report::CalibrationReport::held_lengths`]), beyond [`MANUFACTURING_TOLERANCE_M`]
+/// and determined to [`DETERMINED_SIGMAS`], in the report's order, the identified first
+/// (none: `None`).
 fn lengths_beyond_tolerance(
     report: &crate::report::CalibrationReport,
 ) -> Option<LengthsBeyond<'_>> {
-    let beyond: Vec<&crate::report::ParamReport> = (report.parameters.iter())
-        .filter(|p| {
-            p.unit == "m"
-                && p.value.abs() > MANUFACTURING_TOLERANCE_M
-                && p.value.abs() > DETERMINED_SIGMAS * p.std
-        })
-        .collect();
-    let worst = *(beyond.iter()).max_by(|a, b| a.value.abs().total_cmp(&b.value.abs()))?;
-    Some(LengthsBeyond { beyond, worst })
+    lengths_beyond(&report.parameters, &report.held_lengths)
 }
 
-/// Identified length deviations beyond manufacturing tolerance.
+/// [`lengths_beyond_tolerance`] of the identified deviations `parameters` and the moves
+/// `held` of the lengths held at nominal.
+fn lengths_beyond<'a>(
+    parameters: &'a [crate::report::ParamReport],
+    held: &'a [crate::report::ParamReport],
+) -> Option<LengthsBeyond<'a>> {
+    let beyond_tolerance = |p: &&crate::report::ParamReport| {
+        p.unit == "m"
+            && p.value.abs() > MANUFACTURING_TOLERANCE_M
+            && p.value.abs() > DETERMINED_SIGMAS * p.std
+    };
+    let identified: Vec<&crate::report::ParamReport> =
+        parameters.iter().filter(beyond_tolerance).collect();
+    let held: Vec<&crate::report::ParamReport> = held.iter().filter(beyond_tolerance).collect();
+    let worst = *(identified.iter().chain(&held))
+        .max_by(|a, b| a.value.abs().total_cmp(&b.value.abs()))?;
+    Some(LengthsBeyond {
+        identified,
+        held,
+        worst,
+    })
+}
+
+/// Length deviations beyond manufacturing tolerance.
 struct LengthsBeyond<'a> {
-    /// Every one, in the report's order (at least one).
-    beyond: Vec<&'a crate::report::ParamReport>,
-    /// The largest in size.
+    /// The identified ones, in the report's order.
+    identified: Vec<&'a crate::report::ParamReport>,
+    /// The moves of lengths the calibration held at nominal (pruned, or not in the model).
+    held: Vec<&'a crate::report::ParamReport>,
+    /// The largest in size (at least one of the two lists holds one).
     worst: &'a crate::report::ParamReport,
 }
 
 impl LengthsBeyond<'_> {
     /// "3 lengths by more than the 25 mm a real device's manufacturing leaves (d2 +58.1 mm,
-    /// …; the largest, d2, 40 standard deviations from zero)".
+    /// …; the largest, d2, 40 standard deviations from zero)"; a held length's move is
+    /// followed by "if fitted" (the calibration pruned it).
     fn words(&self) -> String {
-        let (beyond, worst) = (&self.beyond, self.worst);
-        let listed: Vec<String> = (beyond.iter().take(4))
-            .map(|p| format!("{} {:+.1} mm", p.name, p.value * 1e3))
+        let worst = self.worst;
+        let n = self.identified.len() + self.held.len();
+        let listed: Vec<String> = (self.identified.iter().map(|p| (p, "")))
+            .chain(self.held.iter().map(|p| (p, " if fitted")))
+            .take(4)
+            .map(|(p, held)| format!("{} {:+.1} mm{held}", p.name, p.value * 1e3))
             .collect();
-        let more = if beyond.len() > 4 { ", …" } else { "" };
+        let more = if n > 4 { ", …" } else { "" };
         format!(
-            "{} length{} by more than the {:.0} mm a real device's manufacturing leaves \
+            "{n} length{} by more than the {:.0} mm a real device's manufacturing leaves \
              ({}{more}; the largest, {}, {:.0} standard deviations from zero)",
-            beyond.len(),
-            if beyond.len() == 1 { "" } else { "s" },
+            if n == 1 { "" } else { "s" },
             MANUFACTURING_TOLERANCE_M * 1e3,
             listed.join(", "),
             worst.name,
             (worst.value / worst.std.max(f64::MIN_POSITIVE)).abs()
         )
     }
+
+    /// The links of the URDF joints whose lengths are beyond tolerance, in words ("the link
+    /// after elbow_joint (the origin of wrist_1_joint) is about 183 mm longer"), the joints in
+    /// the order of `origins` ([`crate::report::CalibrationReport::origins`]): the change of the origin's
+    /// length under every length deviation of the joint (identified, or held and fitted), or
+    /// how far the origin moves when the length hardly changes; `parameters` and `held` as
+    /// [`lengths_beyond`] took them. Empty without `origins` (a D-H device).
+    fn links(
+        &self,
+        parameters: &[crate::report::ParamReport],
+        held: &[crate::report::ParamReport],
+        origins: &[crate::report::JointOrigin],
+    ) -> Vec<String> {
+        let value = |name: &str| {
+            (parameters.iter().chain(held))
+                .find(|p| p.name == name && p.unit == "m")
+                .map_or(0.0, |p| p.value)
+        };
+        (origins.iter())
+            .filter(|o| {
+                (self.identified.iter().chain(&self.held))
+                    .any(|p| p.name.rsplit_once('.').is_some_and(|(j, _)| j == o.joint))
+            })
+            .map(|o| {
+                let nominal = Vector3::from(o.origin_m);
+                let delta = Vector3::new(
+                    value(&format!("{}.x", o.joint)),
+                    value(&format!("{}.y", o.joint)),
+                    value(&format!("{}.z", o.joint)),
+                );
+                let change = (nominal + delta).norm() - nominal.norm();
+                let link = match &o.after {
+                    Some(after) => format!("the link after {after} (the origin of {})", o.joint),
+                    None => format!("the link from the root to {}", o.joint),
+                };
+                if change.abs() > 0.5 * delta.norm() {
+                    format!(
+                        "{link} is about {:.0} mm {} than the URDF says",
+                        change.abs() * 1e3,
+                        if change > 0.0 { "longer" } else { "shorter" }
+                    )
+                } else {
+                    format!(
+                        "{link} ends about {:.0} mm from where the URDF puts it",
+                        delta.norm() * 1e3
+                    )
+                }
+            })
+            .collect()
+    }
+}
 }
 
 /// [`after_fit`] as the commands apply it: the warning to print when `cfg` accepts the data,
