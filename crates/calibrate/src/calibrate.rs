@@ -259,23 +259,26 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         })
         .collect();
     let pruned = pruned_report(&identified);
-    // The lengths the fit held at nominal (pruned), and what fitting them would move them by.
-    let held: Vec<usize> = (0..problem.points_offset())
+    // The lengths the fit held at nominal (pruned), and every length after fitting them.
+    let lengths: Vec<usize> = (0..problem.points_offset())
         .filter(|&i| layout.spec(i).unit == hapcal_identify::Unit::Meter)
+        .collect();
+    let held: Vec<usize> = (lengths.iter().copied())
         .filter(|i| !identified.identifiability.kept.contains(i))
         .collect();
-    let held_lengths = if shift.iter().all(|&s| s == 0.0) {
-        crate::fit::held_length_moves(
+    let refitted_lengths = if shift.iter().all(|&s| s == 0.0) {
+        crate::fit::refitted_lengths(
             &problem,
             identified.fit.x.as_ref(),
             identified.sigma,
             &identified.identifiability.kept,
             &held,
+            &lengths,
         )
     } else {
         let mut full = shift.clone();
         full.resize(problem.n_residuals(), 0.0);
-        crate::fit::held_length_moves(
+        crate::fit::refitted_lengths(
             &crate::robust::Shifted {
                 inner: &problem,
                 shift: &full,
@@ -284,6 +287,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             identified.sigma,
             &identified.identifiability.kept,
             &held,
+            &lengths,
         )
     };
     let correlated = identified
@@ -402,7 +406,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         equilibrium_step_m: None,
         equilibrium_refits: 0,
         implausible: Vec::new(),
-        held_lengths,
+        refitted_lengths,
         origins: crate::setup::joint_origins(std::slice::from_ref(&chain)),
     };
     let joint_names = chain.joint_names().to_vec();

@@ -241,36 +241,39 @@ pub(crate) fn choose(
     (candidates[chosen], reports)
 }
 
-/// Largest Jacobian, in entries (`m·n`), of which [`held_length_moves`] evaluates the moves:
+/// Largest Jacobian, in entries (`m·n`), of which [`refitted_lengths`] evaluates the step:
 /// the dense back end's own bound ([`hapcal_identify::STREAMING_AUTO_ENTRIES`]); beyond it
 /// the fit streamed and no held length is judged.
-pub(crate) const HELD_MOVES_MAX_ENTRIES: usize = hapcal_identify::STREAMING_AUTO_ENTRIES;
+pub(crate) const REFIT_MAX_ENTRIES: usize = hapcal_identify::STREAMING_AUTO_ENTRIES;
 
-/// What a least-squares fit of the lengths `held` (layout indices of `p`: lengths the final
-/// fit held at their nominal values, pruned as not identifiable or not free in the model)
-/// would move them by at the estimate `x` of the parameters `kept` (layout indices, the fit's
-/// free set): one Gauss–Newton step over `kept` and `held` together, from `x`, whose `held`
-/// part is reported. Columns are scaled to unit norm; the `held` columns' components
-/// orthogonal to the `kept` ones are solved by their pseudo-inverse, directions the data do
-/// not see at all (a squared singular value below 10⁻¹², exact gauges such as a base height
-/// a free instrument frame absorbs) left out, so each entry is the minimum-norm move.
+/// The lengths `held` (layout indices of `p`: lengths the final fit held at their nominal
+/// values, pruned as not identifiable or not free in the model) fitted at the estimate `x` of
+/// the parameters `kept` (layout indices, the fit's free set): one Gauss–Newton step over
+/// `kept` and `held` together, from `x`. Columns are scaled to unit norm; the step of the
+/// `held` columns' components orthogonal to the `kept` ones is their pseudo-inverse's,
+/// directions the data do not see at all (a squared singular value below 10⁻¹², exact gauges
+/// such as a base height a free instrument frame absorbs) left out, so that the `held` part is
+/// the minimum-norm move; the `kept` parameters follow it.
 ///
-/// Each entry: the parameter's name, the move in its unit (`value`, m) and its standard
-/// deviation (`std`, from `sigma`, the residual noise in `p`'s residual units). A `held`
-/// parameter whose column is zero is left out. Empty when `held` is, when the Jacobian has
-/// more than [`HELD_MOVES_MAX_ENTRIES`] entries or cannot be evaluated, or when the `kept`
-/// columns are singular. Source: the Schur complement of the normal equations, Björck,
-/// *Numerical Methods for Least Squares Problems*, 1996, §2.7.5 (partitioned problems).
-pub(crate) fn held_length_moves(
+/// Entries, `held` then `report` (layout indices of kept parameters to report too): the
+/// parameter's name, its deviation from nominal after the step (`value`: `x` plus the step,
+/// in its unit) and its standard deviation in the joint fit (`std`, from `sigma`, the residual
+/// noise in `p`'s residual units). A parameter whose column is zero is left out. Empty when
+/// `held` is, when the Jacobian has more than [`REFIT_MAX_ENTRIES`] entries or cannot be
+/// evaluated, or when the `kept` columns are singular. Source: the Schur complement of the
+/// partitioned normal equations, Björck, *Numerical Methods for Least Squares Problems*,
+/// SIAM 1996, §2.7.
+pub(crate) fn refitted_lengths(
     p: &impl hapcal_identify::Problem,
     x: faer::ColRef<'_, f64>,
     sigma: f64,
     kept: &[usize],
     held: &[usize],
+    report: &[usize],
 ) -> Vec<crate::report::ParamReport> {
     use nalgebra::{DMatrix, DVector};
     let (m, n) = (p.n_residuals(), p.layout().len());
-    if held.is_empty() || m.saturating_mul(n) > HELD_MOVES_MAX_ENTRIES || x.nrows() != n {
+    if held.is_empty() || m.saturating_mul(n) > REFIT_MAX_ENTRIES || x.nrows() != n {
         return Vec::new();
     }
     let mut r = faer::Col::<f64>::zeros(m);
@@ -279,12 +282,9 @@ pub(crate) fn held_length_moves(
         return Vec::new();
     }
     let norm = |j: usize| jac.col(j).norm_l2();
-    let held: Vec<usize> = (held.iter().copied())
-        .filter(|&j| j < n && norm(j) > 0.0 && norm(j).is_finite())
-        .collect();
-    let kept: Vec<usize> = (kept.iter().copied())
-        .filter(|&j| j < n && norm(j) > 0.0 && norm(j).is_finite())
-        .collect();
+    let seen = |j: usize| j < n && norm(j) > 0.0 && norm(j).is_finite();
+    let held: Vec<usize> = held.iter().copied().filter(|&j| seen(j)).collect();
+    let kept: Vec<usize> = kept.iter().copied().filter(|&j| seen(j)).collect();
     if held.is_empty() {
         return Vec::new();
     }
@@ -301,20 +301,18 @@ pub(crate) fn held_length_moves(
     let g_kh = g.view((0, nk), (nk, nh)).into_owned();
     let g_hh = g.view((nk, nk), (nh, nh)).into_owned();
     let (h_k, h_h) = (h.rows(0, nk).into_owned(), h.rows(nk, nh).into_owned());
-    // The held columns and the residual with the kept columns' span taken out.
-    let (schur, rhs) = if nk == 0 {
-        (g_hh, h_h)
+    // G_KK⁻¹ (identity-sized zero without kept columns).
+    let g_kk_inv = if nk == 0 {
+        DMatrix::zeros(0, 0)
     } else {
-        let Some(chol) = g_kk.cholesky() else {
-            return Vec::new();
-        };
-        let solved = chol.solve(&g_kh);
-        let solved_h = chol.solve(&h_k);
-        (
-            &g_hh - g_kh.transpose() * solved,
-            &h_h - g_kh.transpose() * solved_h,
-        )
+        match g_kk.cholesky() {
+            Some(c) => c.inverse(),
+            None => return Vec::new(),
+        }
     };
+    // The held columns and the residual with the kept columns' span taken out.
+    let schur = &g_hh - g_kh.transpose() * &g_kk_inv * &g_kh;
+    let rhs = &h_h - g_kh.transpose() * &g_kk_inv * &h_k;
     let eig = nalgebra::SymmetricEigen::new(schur);
     let mut pinv = DMatrix::<f64>::zeros(nh, nh);
     for (k, &lambda) in eig.eigenvalues.iter().enumerate() {
@@ -323,15 +321,23 @@ pub(crate) fn held_length_moves(
             pinv += v * v.transpose() / lambda;
         }
     }
-    let step = -(&pinv * rhs);
-    (held.iter().enumerate())
-        .map(|(k, &j)| crate::report::ParamReport {
-            name: p.layout().name(j).to_owned(),
-            value: step[k] / scale[nk + k],
-            std: sigma * pinv[(k, k)].max(0.0).sqrt() / scale[nk + k],
-            unit: p.layout().spec(j).unit.symbol(),
-        })
-        .collect()
+    let step_h = -(&pinv * rhs);
+    let step_k = -(&g_kk_inv * (&h_k + &g_kh * &step_h));
+    // Joint covariance of the kept part: G_KK⁻¹ + G_KK⁻¹·G_KH·S⁺·G_HK·G_KK⁻¹ (scaled units).
+    let coupling = &g_kk_inv * &g_kh;
+    let cov_kk = &g_kk_inv + &coupling * &pinv * coupling.transpose();
+    let entry = |j: usize, step: f64, var: f64, k: usize| crate::report::ParamReport {
+        name: p.layout().name(j).to_owned(),
+        value: x[j] + step / scale[k],
+        std: sigma * var.max(0.0).sqrt() / scale[k],
+        unit: p.layout().spec(j).unit.symbol(),
+    };
+    let held_entries =
+        (held.iter().enumerate()).map(|(k, &j)| entry(j, step_h[k], pinv[(k, k)], nk + k));
+    let kept_entries = (kept.iter().enumerate())
+        .filter(|(_, j)| report.contains(j))
+        .map(|(k, &j)| entry(j, step_k[k], cov_kk[(k, k)], k));
+    held_entries.chain(kept_entries).collect()
 }
 
 /// The pruned parameters of `identified`, each with why.

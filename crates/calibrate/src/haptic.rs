@@ -1718,7 +1718,7 @@ pub fn calibrate_logs(
         equilibrium_step_m: None,
         equilibrium_refits: 0,
         implausible: Vec::new(),
-        held_lengths: Vec::new(),
+        refitted_lengths: Vec::new(),
         origins: Vec::new(),
     };
     let kin_model = hapcal_problems::CalibratedModel {

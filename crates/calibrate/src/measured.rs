@@ -123,10 +123,10 @@ pub struct MeasuredOutcome {
     /// Estimates no real robot can have, each with its cause and fix (checked after the fit):
     /// never a result (`hapcal calibrate` stops on the first).
     pub implausible: Vec<crate::report::Implausible>,
-    /// The robot's lengths the chosen rung held at their nominal values (pruned, or not free
-    /// in it), each with what a least-squares fit of them at the estimate would move it by
-    /// (m) and its σ (m) ([`crate::fit::held_length_moves`]).
-    pub held_lengths: Vec<crate::report::ParamReport>,
+    /// The robot's lengths after a least-squares fit, at the estimate, of those the chosen
+    /// rung held at their nominal values (pruned, or not free in it): deviation from nominal
+    /// (m) and σ (m) in that fit, the held lengths first ([`crate::fit::refitted_lengths`]).
+    pub refitted_lengths: Vec<crate::report::ParamReport>,
 }
 
 /// The rigid transform `T` minimising `Σ |T·a_i − b_i|²` (Kabsch 1976; Horn 1987, "Closed-form
@@ -2227,9 +2227,9 @@ pub fn calibrate_measured(
         &frames,
         cfg.rung.is_some(),
     );
-    let held_lengths = held_lengths(rung, robot, &framed, &fitted, train, weights);
+    let refitted_lengths = refit_held_lengths(rung, robot, &framed, &fitted, train, weights);
     Ok(MeasuredOutcome {
-        held_lengths,
+        refitted_lengths,
         rung,
         ladder,
         fitted,
@@ -2575,11 +2575,11 @@ fn equilibrate(
 pub const EQUILIBRIUM_SHARE: f64 = 0.3;
 
 /// The robot's lengths (`m` parameters of `robot`'s own, not the instrument's nor the
-/// markers') that the estimate `fitted` of `rung` on `tables` held at their nominal values,
-/// with what a least-squares fit of them at the estimate would move them by
-/// ([`crate::fit::held_length_moves`]); `tree` is the framed tree the problems are built on.
-/// Empty when the problem cannot be rebuilt.
-fn held_lengths(
+/// markers') after a fit, at the estimate `fitted` of `rung` on `tables`, of those it held at
+/// their nominal values ([`crate::fit::refitted_lengths`]): the held ones first, then the
+/// identified ones as the step moves them; `tree` is the framed tree the problems are built
+/// on. Empty when nothing was held or the problem cannot be rebuilt.
+fn refit_held_lengths(
     rung: ModelName,
     robot: &Robot,
     tree: &Tree,
@@ -2598,11 +2598,20 @@ fn held_lengths(
     let kept: Vec<usize> = (id.identifiability.kept.iter())
         .filter_map(|&i| layout.index_of(id.layout.name(i)))
         .collect();
-    let robot_params = 6..6 + robot.tree.n_params();
-    let held: Vec<usize> = (robot_params.filter(|i| *i < layout.len()))
-        .filter(|i| layout.spec(*i).unit == hapcal_identify::Unit::Meter && !kept.contains(i))
+    let lengths: Vec<usize> = (6..6 + robot.tree.n_params())
+        .filter(|&i| i < layout.len() && layout.spec(i).unit == hapcal_identify::Unit::Meter)
         .collect();
-    crate::fit::held_length_moves(&problem, fitted.x.as_ref(), id.sigma, &kept, &held)
+    let held: Vec<usize> = (lengths.iter().copied())
+        .filter(|i| !kept.contains(i))
+        .collect();
+    crate::fit::refitted_lengths(
+        &problem,
+        fitted.x.as_ref(),
+        id.sigma,
+        &kept,
+        &held,
+        &lengths,
+    )
 }
 
 /// Covariance-propagated 3-D position uncertainty of the calibrated model (m) at every marker
@@ -3277,7 +3286,7 @@ pub fn run_tables(
         equilibrium_step_m: out.equilibrium_step_m,
         equilibrium_refits: out.equilibrium_refits,
         implausible: out.implausible.clone(),
-        held_lengths: out.held_lengths.clone(),
+        refitted_lengths: out.refitted_lengths.clone(),
         origins: crate::setup::joint_origins(robot.tree.tips()),
     };
     let frame_values: Vec<ParamReport> = (id.covariance.free.iter())

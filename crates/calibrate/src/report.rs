@@ -263,13 +263,14 @@ pub struct CalibrationReport {
     /// when the estimate is plausible.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub implausible: Vec<Implausible>,
-    /// Robot lengths the final fit held at their nominal values (pruned as not identifiable,
-    /// or not free in the chosen model), each with what a least-squares fit of all of them at
-    /// the estimate would move it by (`value`, m) and the move's σ (`std`, m): the check after
-    /// the fit judges them as it judges the identified lengths, so that pruning cannot hide
-    /// another robot's dimensions. Empty when nothing was held (or the fit streamed).
+    /// When the final fit held robot lengths at their nominal values (pruned as not
+    /// identifiable, or not free in the chosen model): every robot length after one
+    /// least-squares step at the estimate that fits the held ones too, the held ones first,
+    /// each with its deviation from nominal (`value`, m) and σ in that fit (`std`, m). The
+    /// check after the fit judges them ([`crate::setup::after_fit`]), so that pruning cannot
+    /// hide another robot's dimensions. Empty when nothing was held (or the fit streamed).
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub held_lengths: Vec<ParamReport>,
+    pub refitted_lengths: Vec<ParamReport>,
     /// The nominal origins of the URDF joints whose lengths are parameters, chain order: the
     /// links the check after the fit names (empty for a D-H device).
     #[serde(skip_serializing_if = "Vec::is_empty")]

@@ -1667,10 +1667,13 @@ fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> O
 
 /// Largest identified length deviation (m) a real device or robot leaves: link lengths, joint
 /// origins and prismatic joint offsets deviate from their drawing by fractions of a millimetre
-/// to a few millimetres, and the bundled recordings' calibrations stay below
-/// [`MANUFACTURING_TOLERANCE_M`] by a wide margin (docs/results/reliability.md); data of
-/// another device (links centimetres longer) are fitted with deviations of tens of millimetres.
-pub const MANUFACTURING_TOLERANCE_M: f64 = 0.025;
+/// to a few millimetres (the bundled recordings' calibrations by at most 1 mm on the
+/// iiwa 14's sockets; the reference device's deviations are 1 to 2 mm). Variants of one
+/// robot differ by more: the LBR iiwa 7 R800's upper arm is 20 mm shorter than the iiwa 14
+/// R820's, which its description fitted to the iiwa 14's sockets moves by 20.6 mm
+/// (`crates/calibrate/tests/wrong_robot.rs`); a UR5e's links are 18 to 188 mm shorter than
+/// a UR10e's.
+pub const MANUFACTURING_TOLERANCE_M: f64 = 0.015;
 
 /// Standard deviations a length deviation must lie from zero to count after the fit: one
 /// determined to a tenth of itself. A large deviation the data hardly determine is the
@@ -1681,9 +1684,9 @@ pub const DETERMINED_SIGMAS: f64 = 10.0;
 /// The another-device finding of data that no hypothesis of a mistake explains: when the
 /// geometric calibration of `tables` (at most [`MAX_CHECK_ROWS`] of their rows, markers on
 /// `marker_tips`) brings the residual `as_given` to one a real robot leaves, moving link lengths
-/// by more than [`MANUFACTURING_TOLERANCE_M`] determined to [`DETERMINED_SIGMAS`], the data
-/// come from a robot of this structure with other dimensions; `None` otherwise (the fit
-/// fails, stays implausible or moves no length that far).
+/// by more than [`MANUFACTURING_TOLERANCE_M`] as [`after_fit`] judges them (identified, or
+/// pruned and fitted), the data come from a robot of this structure with other dimensions;
+/// `None` otherwise (the fit fails, stays implausible or moves no length that far).
 fn another_device(
     robot: &Robot,
     tables: &[MeasurementTable],
@@ -1720,9 +1723,9 @@ fn another_device(
             unit: "m",
         })
         .collect();
-    let beyond = lengths_beyond(&parameters, &out.held_lengths)?;
+    let beyond = lengths_beyond(&parameters, &out.refitted_lengths)?;
     let origins = joint_origins(robot.tree.tips());
-    let links = beyond.links(&parameters, &out.held_lengths, &origins);
+    let links = beyond.links(&parameters, &out.refitted_lengths, &origins);
     let conclusion = if links.is_empty() {
         "these data come from a robot of this structure with other dimensions, or the \
          description is not the one measured"
@@ -1797,10 +1800,14 @@ pub fn joint_origins(chains: &[hapcal_kinematics::Chain]) -> Vec<crate::report::
 }
 
 /// The setup check after a calibration: an identified length deviation beyond
-/// [`MANUFACTURING_TOLERANCE_M`], determined to [`DETERMINED_SIGMAS`], or a training set the
+/// [`MANUFACTURING_TOLERANCE_M`], determined to [`DETERMINED_SIGMAS`], a length the
+/// calibration held at nominal (pruned as not identifiable) that a fit of the held lengths
+/// moves that far, determined to [`HELD_DETERMINED_SIGMAS`]
+/// ([`crate::report::CalibrationReport::refitted_lengths`]), or a training set the
 /// calibrated model still misses by more than [`PLAUSIBLE_FRAMES_ONLY_RMS_M`], says the data
 /// come from another device or robot (or a mistake the check before the fit could not tell),
-/// an error finding; `None` otherwise. An estimate no real robot can have
+/// an error finding; `None` otherwise. For a URDF the finding names the links that differ
+/// at the joints whose origins end them, and by how much. An estimate no real robot can have
 /// ([`crate::report::CalibrationReport::implausible`]) is an error finding too: an
 /// unconverged fit before everything, negative compliances (named as a mounting when another
 /// direction of gravity explains them) and a marker frame metres from its link after the
@@ -1856,7 +1863,7 @@ pub fn after_fit(
             after: None,
         });
     }
-    let links = beyond.links(&report.parameters, &report.held_lengths, &report.origins);
+    let links = beyond.links(&report.parameters, &report.refitted_lengths, &report.origins);
     if links.is_empty() {
         return Some(Finding {
             class: MistakeClass::AnotherDevice,
@@ -1876,10 +1883,8 @@ pub fn after_fit(
         class: MistakeClass::AnotherDevice,
         severity: Severity::Error,
         message: format!(
-            "these data come from another robot or variant: {}, beyond the {:.0} mm a real \
-             robot's manufacturing leaves (the calibration moves {})",
+            "these data come from another robot or variant: {}; the calibration moves {}",
             links.join("; "),
-            MANUFACTURING_TOLERANCE_M * 1e3,
             beyond.words()
         ),
         fix: "calibrate with the robot's own URDF (--device), and check --tip".to_owned(),
@@ -1924,69 +1929,98 @@ fn misfit_after_calibration(report: &crate::report::CalibrationReport) -> Option
     })
 }
 
-/// The length deviations of [`after_fit`]: the identified ones and what a fit of the lengths
-/// the calibration held at nominal would move them by
-/// ([`crate::report::CalibrationReport::held_lengths`]), beyond [`MANUFACTURING_TOLERANCE_M`]
-/// and determined to [`DETERMINED_SIGMAS`], in the report's order, the identified first
-/// (none: `None`).
+/// The length deviations of [`after_fit`] (none: `None`): the identified ones beyond
+/// [`MANUFACTURING_TOLERANCE_M`] and determined to [`DETERMINED_SIGMAS`] or, when the
+/// calibration held lengths at nominal (pruned, or not in its model) and a fit of them moves
+/// one that far, determined to [`HELD_DETERMINED_SIGMAS`] in that fit, every length of the
+/// fit that far ([`crate::report::CalibrationReport::refitted_lengths`]).
 fn lengths_beyond_tolerance(
     report: &crate::report::CalibrationReport,
 ) -> Option<LengthsBeyond<'_>> {
-    lengths_beyond(&report.parameters, &report.held_lengths)
+    lengths_beyond(&report.parameters, &report.refitted_lengths)
 }
 
-/// [`lengths_beyond_tolerance`] of the identified deviations `parameters` and the moves
-/// `held` of the lengths held at nominal.
+/// [`lengths_beyond_tolerance`] of the identified deviations `parameters` and the lengths
+/// `refitted` after a fit of those held at nominal.
 fn lengths_beyond<'a>(
     parameters: &'a [crate::report::ParamReport],
-    held: &'a [crate::report::ParamReport],
+    refitted: &'a [crate::report::ParamReport],
 ) -> Option<LengthsBeyond<'a>> {
-    let beyond_tolerance = |p: &&crate::report::ParamReport| {
-        p.unit == "m"
-            && p.value.abs() > MANUFACTURING_TOLERANCE_M
-            && p.value.abs() > DETERMINED_SIGMAS * p.std
+    let beyond = |sigmas: f64| {
+        move |p: &&crate::report::ParamReport| {
+            p.unit == "m"
+                && p.value.abs() > MANUFACTURING_TOLERANCE_M
+                && p.value.abs() > sigmas * p.std
+        }
     };
-    let identified: Vec<&crate::report::ParamReport> =
-        parameters.iter().filter(beyond_tolerance).collect();
-    let held: Vec<&crate::report::ParamReport> = held.iter().filter(beyond_tolerance).collect();
-    let worst = *(identified.iter().chain(&held))
-        .max_by(|a, b| a.value.abs().total_cmp(&b.value.abs()))?;
+    let is_held = |p: &&&crate::report::ParamReport| !parameters.iter().any(|q| q.name == p.name);
+    let mut refit: Vec<&crate::report::ParamReport> = (refitted.iter())
+        .filter(beyond(HELD_DETERMINED_SIGMAS))
+        .collect();
+    if !refit.iter().any(|p| is_held(&p)) {
+        refit.clear();
+    }
+    let refit_given = !refit.is_empty();
+    let listed = if refit_given {
+        refit
+    } else {
+        parameters.iter().filter(beyond(DETERMINED_SIGMAS)).collect()
+    };
+    let worst = *(listed.iter()).max_by(|a, b| a.value.abs().total_cmp(&b.value.abs()))?;
     Some(LengthsBeyond {
-        identified,
-        held,
+        listed,
+        refit: refit_given,
         worst,
     })
 }
 
+/// Standard deviations a length the calibration held at nominal must lie from zero when the
+/// held lengths are fitted ([`lengths_beyond_tolerance`]): a two-sided normal tail of
+/// 6.3·10⁻⁵ per length, so that noise alone stops a right calibration holding 16 lengths once
+/// in a thousand (Bonferroni). Held lengths are the ones the data determine worst, to
+/// centimetres: the UR5e description of the UR10e recording moves the upper arm by
+/// 189 ± 37 mm, 5.2 σ, where the right description's largest move is 1.1 σ (20 ± 18 mm).
+pub const HELD_DETERMINED_SIGMAS: f64 = 4.0;
+
 /// Length deviations beyond manufacturing tolerance.
 struct LengthsBeyond<'a> {
-    /// The identified ones, in the report's order.
-    identified: Vec<&'a crate::report::ParamReport>,
-    /// The moves of lengths the calibration held at nominal (pruned, or not in the model).
-    held: Vec<&'a crate::report::ParamReport>,
-    /// The largest in size (at least one of the two lists holds one).
+    /// The identified ones in the report's order or, after a fit of the held lengths, every
+    /// length of that fit beyond tolerance, the held first (at least one).
+    listed: Vec<&'a crate::report::ParamReport>,
+    /// Whether `listed` comes from the fit of the held lengths.
+    refit: bool,
+    /// The largest in size.
     worst: &'a crate::report::ParamReport,
 }
 
 impl LengthsBeyond<'_> {
     /// "3 lengths by more than the 25 mm a real device's manufacturing leaves (d2 +58.1 mm,
-    /// …; the largest, d2, 40 standard deviations from zero)"; a held length's move is
-    /// followed by "if fitted" (the calibration pruned it).
+    /// …; the largest, d2, 40 standard deviations from zero)"; after a fit of the held
+    /// lengths, each with its σ and the words "once the lengths it held at nominal are fitted".
     fn words(&self) -> String {
-        let worst = self.worst;
-        let n = self.identified.len() + self.held.len();
-        let listed: Vec<String> = (self.identified.iter().map(|p| (p, "")))
-            .chain(self.held.iter().map(|p| (p, " if fitted")))
-            .take(4)
-            .map(|(p, held)| format!("{} {:+.1} mm{held}", p.name, p.value * 1e3))
+        let (listed, worst) = (&self.listed, self.worst);
+        let n = listed.len();
+        let shown: Vec<String> = (listed.iter().take(4))
+            .map(|p| {
+                if self.refit {
+                    format!("{} {:+.1} ± {:.1} mm", p.name, p.value * 1e3, p.std * 1e3)
+                } else {
+                    format!("{} {:+.1} mm", p.name, p.value * 1e3)
+                }
+            })
             .collect();
         let more = if n > 4 { ", …" } else { "" };
         format!(
-            "{n} length{} by more than the {:.0} mm a real device's manufacturing leaves \
-             ({}{more}; the largest, {}, {:.0} standard deviations from zero)",
+            "{n} length{} by more than the {:.0} mm a real device's manufacturing leaves{} \
+             ({}{more}; the largest, {}, {:.1} standard deviations from zero)",
             if n == 1 { "" } else { "s" },
             MANUFACTURING_TOLERANCE_M * 1e3,
-            listed.join(", "),
+            if self.refit {
+                " once the lengths it held at nominal (pruned as not identifiable) are fitted"
+            } else {
+                ""
+            },
+            shown.join(", "),
             worst.name,
             (worst.value / worst.std.max(f64::MIN_POSITIVE)).abs()
         )
@@ -1996,22 +2030,24 @@ impl LengthsBeyond<'_> {
     /// after elbow_joint (the origin of wrist_1_joint) is about 183 mm longer"), the joints in
     /// the order of `origins` ([`crate::report::CalibrationReport::origins`]): the change of the origin's
     /// length under every length deviation of the joint (identified, or held and fitted), or
-    /// how far the origin moves when the length hardly changes; `parameters` and `held` as
-    /// [`lengths_beyond`] took them. Empty without `origins` (a D-H device).
+    /// how far the origin moves when the length hardly changes; `parameters` and `refitted`
+    /// as [`lengths_beyond`] took them (the deviations of the fit the lengths were listed
+    /// from). Empty without `origins` (a D-H device).
     fn links(
         &self,
         parameters: &[crate::report::ParamReport],
-        held: &[crate::report::ParamReport],
+        refitted: &[crate::report::ParamReport],
         origins: &[crate::report::JointOrigin],
     ) -> Vec<String> {
+        let values = if self.refit { refitted } else { parameters };
         let value = |name: &str| {
-            (parameters.iter().chain(held))
+            (values.iter())
                 .find(|p| p.name == name && p.unit == "m")
                 .map_or(0.0, |p| p.value)
         };
         (origins.iter())
             .filter(|o| {
-                (self.identified.iter().chain(&self.held))
+                (self.listed.iter())
                     .any(|p| p.name.rsplit_once('.').is_some_and(|(j, _)| j == o.joint))
             })
             .map(|o| {
@@ -2041,7 +2077,6 @@ impl LengthsBeyond<'_> {
             })
             .collect()
     }
-}
 }
 
 /// [`after_fit`] as the commands apply it: the warning to print when `cfg` accepts the data,

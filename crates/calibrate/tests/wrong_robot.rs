@@ -31,14 +31,14 @@ fn calibrate(device: &str, tip: &str, data: &[&str]) -> CalibrationReport {
 /// The deviation the calibration gives `name`, identified or, when it held the length at
 /// nominal, what fitting it would move it by; m.
 fn moved(report: &CalibrationReport, name: &str) -> f64 {
-    (report.parameters.iter().chain(&report.held_lengths))
+    (report.parameters.iter().chain(&report.refitted_lengths))
         .find(|p| p.name == name)
         .unwrap_or_else(|| panic!("no {name} among {:?}", names(report)))
         .value
 }
 
 fn names(report: &CalibrationReport) -> Vec<(String, f64)> {
-    (report.parameters.iter().chain(&report.held_lengths))
+    (report.parameters.iter().chain(&report.refitted_lengths))
         .filter(|p| p.unit == "m")
         .map(|p| (p.name.clone(), p.value))
         .collect()
@@ -50,7 +50,7 @@ fn another_device(report: &CalibrationReport) -> Finding {
     let finding = after_fit(report, &[]).unwrap_or_else(|| {
         panic!(
             "no finding after the fit; lengths {:?}, held {:?}",
-            report.parameters, report.held_lengths
+            report.parameters, report.refitted_lengths
         )
     });
     assert_eq!(finding.class, MistakeClass::AnotherDevice, "{}", finding.text());
@@ -136,7 +136,7 @@ fn no_another_device(what: &str, report: &CalibrationReport) {
     if let Some(f) = after_fit(report, &[]) {
         assert_ne!(f.class, MistakeClass::AnotherDevice, "{what}: {}", f.text());
     }
-    let largest = (report.parameters.iter().chain(&report.held_lengths))
+    let largest = (report.parameters.iter().chain(&report.refitted_lengths))
         .filter(|p| p.unit == "m")
         .map(|p| p.value.abs())
         .fold(0.0, f64::max);
