@@ -1667,8 +1667,11 @@ fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> O
 
 /// Largest identified length deviation (m) a real device or robot leaves: link lengths, joint
 /// origins and prismatic joint offsets deviate from their drawing by fractions of a millimetre
-/// to a few millimetres (the bundled recordings' calibrations by at most 1 mm on the
-/// iiwa 14's sockets; the reference device's deviations are 1 to 2 mm). Variants of one
+/// to a few millimetres, up to about a centimetre: the bundled recordings' calibrations with
+/// their own descriptions move lengths by at most 1.1 mm on the iiwa 14's sockets, 10.0 mm
+/// on the Pandas' (panda_2/back_left alone), 2.6 mm on the simulated humanoid, and the
+/// lengths they hold at nominal, fitted, by at most 7.6 mm (TIAGo's arm_5_joint.z); the
+/// reference device's deviations are 1 to 2 mm. Variants of one
 /// robot differ by more: the LBR iiwa 7 R800's upper arm is 20 mm shorter than the iiwa 14
 /// R820's, which its description fitted to the iiwa 14's sockets moves by 20.6 mm
 /// (`crates/calibrate/tests/wrong_robot.rs`); a UR5e's links are 18 to 188 mm shorter than
