@@ -1866,9 +1866,25 @@ pub fn after_fit(
             after: None,
         });
     }
+    Some(lengths_finding(report, &beyond))
+}
+
+/// The another-device finding of a calibration whose lengths lie beyond tolerance
+/// ([`lengths_beyond_tolerance`]), with the check after the fit's words; `None` when none
+/// does. The socket check runs it on a geometric calibration of the sockets
+/// (`crate::setup_sockets`), whose nominal scatter the lengths of a variant hardly raise.
+pub(crate) fn another_robot(report: &crate::report::CalibrationReport) -> Option<Finding> {
+    lengths_beyond_tolerance(report).map(|beyond| lengths_finding(report, &beyond))
+}
+
+/// [`another_robot`]'s finding of the lengths `beyond` of `report`.
+fn lengths_finding(
+    report: &crate::report::CalibrationReport,
+    beyond: &LengthsBeyond<'_>,
+) -> Finding {
     let links = beyond.links(&report.parameters, &report.refitted_lengths, &report.origins);
     if links.is_empty() {
-        return Some(Finding {
+        return Finding {
             class: MistakeClass::AnotherDevice,
             severity: Severity::Error,
             message: format!(
@@ -1880,9 +1896,9 @@ pub fn after_fit(
                 .to_owned(),
             before: Residual::default(),
             after: None,
-        });
+        };
     }
-    Some(Finding {
+    Finding {
         class: MistakeClass::AnotherDevice,
         severity: Severity::Error,
         message: format!(
@@ -1893,7 +1909,7 @@ pub fn after_fit(
         fix: "calibrate with the robot's own URDF (--device), and check --tip".to_owned(),
         before: Residual::default(),
         after: None,
-    })
+    }
 }
 
 /// The training set the calibrated model misses by more than [`PLAUSIBLE_FRAMES_ONLY_RMS_M`]
