@@ -7,25 +7,41 @@
 
 use hapcal_calibrate::inputs::Plan;
 use hapcal_calibrate::report::CalibrationReport;
-use hapcal_calibrate::setup::{Finding, MistakeClass, SetupConfig, after_fit, gate_after_fit};
+use hapcal_calibrate::setup::{
+    Finding, MistakeClass, SetupConfig, after_fit, check_plan, gate_after_fit,
+};
 use std::path::PathBuf;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-/// `hapcal calibrate --device <device> --tip <tip> --data <data>` (every row trains).
-fn calibrate(device: &str, tip: &str, data: &[&str]) -> CalibrationReport {
-    let plan = Plan {
+/// The plan of `hapcal calibrate --device <device> --tip <tip> --data <data>` (every row
+/// trains).
+fn plan(device: &str, tip: &str, data: &[&str]) -> Plan {
+    Plan {
         device: root().join(device),
         tip: tip.to_owned(),
         data: data.iter().map(|d| root().join(d)).collect(),
         test: Vec::new(),
         ..Plan::bundled_default()
-    };
-    hapcal_calibrate::calibrate::run(&plan)
+    }
+}
+
+/// `hapcal calibrate --device <device> --tip <tip> --data <data>` past the check before the
+/// fit (as `--accept-setup` goes on).
+fn calibrate(device: &str, tip: &str, data: &[&str]) -> CalibrationReport {
+    hapcal_calibrate::calibrate::run(&plan(device, tip, data))
         .unwrap_or_else(|e| panic!("calibrating {data:?} on {device}: {e:#}"))
         .report
+}
+
+/// `hapcal check`'s error finding on `plan`, which must be another device's, with the text.
+fn checked_another_device(plan: &Plan) -> String {
+    let report = check_plan(plan).unwrap().expect("a check of measurement or socket files");
+    let f = report.overwhelming().unwrap_or_else(|| panic!("{}", report.render()));
+    assert_eq!(f.class, MistakeClass::AnotherDevice, "{}", f.text());
+    f.text()
 }
 
 /// The deviation the calibration gives `name`: after the fit of the lengths it held at
@@ -80,6 +96,17 @@ fn a_ur5e_description_of_the_ur10e_recording_is_another_robot_with_longer_arms()
     let finding = another_device(&report);
     let text = finding.text();
     assert!(text.contains("another robot or variant"), "{text}");
+    // The check before the fit says so too (frames only leave 22 mm, a residual a real robot
+    // can leave, but more than right data do).
+    let before = checked_another_device(&plan(
+        "fixtures/wrong-robot/ur5e_lengths.urdf",
+        "wrist_3_link",
+        &["fixtures/figaroh/ur10/calibration.csv"],
+    ));
+    assert!(
+        before.contains("the link after shoulder_lift_joint (the origin of elbow_joint)"),
+        "{before}"
+    );
     for (joint, after) in [("elbow_joint", "shoulder_lift_joint"), ("wrist_1_joint", "elbow_joint")] {
         assert!(
             text.contains(&format!("the link after {after} (the origin of {joint}) is about")),
@@ -118,6 +145,15 @@ fn an_iiwa7_description_of_the_iiwa14_sockets_is_another_robot() {
         "{text}"
     );
     assert!(text.contains("longer than the URDF says"), "{text}");
+    let before = checked_another_device(&plan(
+        "fixtures/wrong-robot/iiwa7_lengths.urdf",
+        "ball_link",
+        &["fixtures/mukca/data/kuka_14/front"],
+    ));
+    assert!(
+        before.contains("the link after joint_a3 (the origin of joint_a4) is about"),
+        "{before}"
+    );
     let upper = moved(&report, "joint_a4.z");
     assert!(
         (upper - 0.020).abs() < 0.004,
@@ -131,8 +167,16 @@ fn slow_tests() -> bool {
     std::env::var_os("RUN_SLOW_TESTS").is_some()
 }
 
-/// No another-device finding on `report` (any other finding is not this test's business).
-fn no_another_device(what: &str, report: &CalibrationReport) {
+/// No another-device finding of the check before the fit of `plan` nor after its fit,
+/// `report` (any other finding is not this test's business).
+fn no_another_device(what: &str, plan: &Plan, report: &CalibrationReport) {
+    if let Some(checked) = check_plan(plan).unwrap() {
+        assert!(
+            (checked.findings.iter()).all(|f| f.class != MistakeClass::AnotherDevice),
+            "{what}: {}",
+            checked.render()
+        );
+    }
     if let Some(f) = after_fit(report, &[]) {
         assert_ne!(f.class, MistakeClass::AnotherDevice, "{what}: {}", f.text());
     }
@@ -187,7 +231,7 @@ fn the_right_descriptions_of_the_marker_recordings_are_no_other_robot() {
         let report = hapcal_calibrate::calibrate::run(&plan)
             .unwrap_or_else(|e| panic!("{data}: {e:#}"))
             .report;
-        no_another_device(data, &report);
+        no_another_device(data, &plan, &report);
     }
 }
 
@@ -222,6 +266,6 @@ fn the_right_descriptions_of_the_socket_recordings_are_no_other_robot() {
         let report = hapcal_calibrate::calibrate::run(&plan)
             .unwrap_or_else(|e| panic!("{}: {e:#}", folder.display()))
             .report;
-        no_another_device(&folder.display().to_string(), &report);
+        no_another_device(&folder.display().to_string(), &plan, &report);
     }
 }
