@@ -266,7 +266,9 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     let held: Vec<usize> = (lengths.iter().copied())
         .filter(|i| !identified.identifiability.kept.contains(i))
         .collect();
-    let refitted_lengths = if shift.iter().all(|&s| s == 0.0) {
+    // Not after the Huber loss bounded rows: a bounded row's leftover residual, far from the
+    // others' configurations, pulls the weak directions the held lengths lie along.
+    let refitted_lengths = if downweighted.is_empty() {
         crate::fit::refitted_lengths(
             &problem,
             identified.fit.x.as_ref(),
@@ -276,19 +278,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             &lengths,
         )
     } else {
-        let mut full = shift.clone();
-        full.resize(problem.n_residuals(), 0.0);
-        crate::fit::refitted_lengths(
-            &crate::robust::Shifted {
-                inner: &problem,
-                shift: &full,
-            },
-            identified.fit.x.as_ref(),
-            identified.sigma,
-            &identified.identifiability.kept,
-            &held,
-            &lengths,
-        )
+        Vec::new()
     };
     let correlated = identified
         .covariance

@@ -246,14 +246,23 @@ pub(crate) fn choose(
 /// the fit streamed and no held length is judged.
 pub(crate) const REFIT_MAX_ENTRIES: usize = hapcal_identify::STREAMING_AUTO_ENTRIES;
 
+/// Smallest singular value of the held lengths' unit-norm columns, orthogonal to the kept
+/// columns, along which [`refitted_lengths`] fits them: below it the data hardly see the
+/// direction, and a systematic residual (an effect the model lacks) projected on it makes a
+/// move of decimetres look determined. Exact gauges lie at rounding (10⁻¹⁵); one socket of an
+/// iiwa 14 (no socket distance, so no scale) leaves directions at 7·10⁻⁵ to 6·10⁻⁴ that its
+/// geometric residual moves by 210 ± 26 mm; the UR5e description's upper arm on the UR10e
+/// recording, the weakest direction another robot's lengths were found in, lies at 0.024.
+pub(crate) const SEEN_SINGULAR_VALUE: f64 = 1e-3;
+
 /// The lengths `held` (layout indices of `p`: lengths the final fit held at their nominal
 /// values, pruned as not identifiable or not free in the model) fitted at the estimate `x` of
 /// the parameters `kept` (layout indices, the fit's free set): one Gauss–Newton step over
 /// `kept` and `held` together, from `x`. Columns are scaled to unit norm; the step of the
 /// `held` columns' components orthogonal to the `kept` ones is their pseudo-inverse's,
-/// directions the data do not see at all (a squared singular value below 10⁻¹², exact gauges
-/// such as a base height a free instrument frame absorbs) left out, so that the `held` part is
-/// the minimum-norm move; the `kept` parameters follow it.
+/// directions the data do not see at all (a singular value below [`SEEN_SINGULAR_VALUE`],
+/// exact gauges such as a base height a free instrument frame absorbs) left out, so that the
+/// `held` part is the minimum-norm move; the `kept` parameters follow it.
 ///
 /// Entries, `held` then `report` (layout indices of kept parameters to report too): the
 /// parameter's name, its deviation from nominal after the step (`value`: `x` plus the step,
@@ -299,8 +308,7 @@ pub(crate) fn refitted_lengths(
     let (nk, nh) = (kept.len(), held.len());
     let g_kk = g.view((0, 0), (nk, nk)).into_owned();
     let g_kh = g.view((0, nk), (nk, nh)).into_owned();
-    let g_hh = g.view((nk, nk), (nh, nh)).into_owned();
-    let (h_k, h_h) = (h.rows(0, nk).into_owned(), h.rows(nk, nh).into_owned());
+    let h_k = h.rows(0, nk).into_owned();
     // G_KK⁻¹ (identity-sized zero without kept columns).
     let g_kk_inv = if nk == 0 {
         DMatrix::zeros(0, 0)
@@ -310,15 +318,31 @@ pub(crate) fn refitted_lengths(
             None => return Vec::new(),
         }
     };
-    // The held columns and the residual with the kept columns' span taken out.
-    let schur = &g_hh - g_kh.transpose() * &g_kk_inv * &g_kh;
-    let rhs = &h_h - g_kh.transpose() * &g_kk_inv * &h_k;
-    let eig = nalgebra::SymmetricEigen::new(schur);
+    // The held columns with the kept columns' span taken out, by the kept columns' thin QR
+    // (orthogonal projection to working precision: the normal equations' Schur complement
+    // would lose the exact gauges, whose singular values are rounding, in its squared
+    // condition), then their SVD.
+    let a_h = a.subcols(nk, nh).to_owned();
+    let projected = if nk == 0 {
+        a_h
+    } else {
+        let basis = a.subcols(0, nk).qr().compute_thin_Q();
+        let coefficients = basis.transpose() * &a_h;
+        &a_h - &basis * &coefficients
+    };
+    let p_h = DMatrix::from_fn(m, nh, |i, k| projected[(i, k)]);
+    let r_vec = DVector::from_fn(m, |i, _| r[i]);
+    // P_hᵀ·r: the held columns' part of the normal equations with the kept ones eliminated.
+    let rhs = p_h.transpose() * &r_vec;
+    let svd = nalgebra::SVD::new(p_h, false, true);
+    let Some(v_t) = svd.v_t else {
+        return Vec::new();
+    };
     let mut pinv = DMatrix::<f64>::zeros(nh, nh);
-    for (k, &lambda) in eig.eigenvalues.iter().enumerate() {
-        if lambda > 1e-12 {
-            let v = eig.eigenvectors.column(k);
-            pinv += v * v.transpose() / lambda;
+    for (k, &sv) in svd.singular_values.iter().enumerate() {
+        if sv > SEEN_SINGULAR_VALUE {
+            let v = v_t.row(k).transpose();
+            pinv += &v * v.transpose() / (sv * sv);
         }
     }
     let step_h = -(&pinv * rhs);

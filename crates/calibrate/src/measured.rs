@@ -2227,7 +2227,12 @@ pub fn calibrate_measured(
         &frames,
         cfg.rung.is_some(),
     );
-    let refitted_lengths = refit_held_lengths(rung, robot, &framed, &fitted, train, weights);
+    // Not after the Huber loss bounded samples (see `crate::calibrate::run`).
+    let refitted_lengths = if downweighted.is_empty() {
+        refit_held_lengths(rung, robot, &framed, &fitted, train, weights)
+    } else {
+        Vec::new()
+    };
     Ok(MeasuredOutcome {
         refitted_lengths,
         rung,
