@@ -125,7 +125,8 @@ pub struct MeasuredOutcome {
     pub implausible: Vec<crate::report::Implausible>,
     /// The robot's lengths after a least-squares fit, at the estimate, of those the chosen
     /// rung held at their nominal values (pruned, or not free in it): deviation from nominal
-    /// (m) and σ (m) in that fit, the held lengths first ([`crate::fit::refitted_lengths`]).
+    /// (m) and σ (m) in that fit, the held lengths first
+    /// ([`crate::report::CalibrationReport::refitted_lengths`]).
     pub refitted_lengths: Vec<crate::report::ParamReport>,
 }
 

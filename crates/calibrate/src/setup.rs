@@ -1783,8 +1783,7 @@ pub fn joint_origins(chains: &[hapcal_kinematics::Chain]) -> Vec<crate::report::
             if info.unit != ParamUnit::Meter || out.iter().any(|o| o.joint == joint) {
                 continue;
             }
-            let Some(Factor::Fixed(origin)) = i.checked_sub(1).and_then(|k| factors.get(k))
-            else {
+            let Some(Factor::Fixed(origin)) = i.checked_sub(1).and_then(|k| factors.get(k)) else {
                 continue;
             };
             let after = (factors[..i].iter().rev()).find_map(|f| match f {
@@ -1882,7 +1881,11 @@ fn lengths_finding(
     report: &crate::report::CalibrationReport,
     beyond: &LengthsBeyond<'_>,
 ) -> Finding {
-    let links = beyond.links(&report.parameters, &report.refitted_lengths, &report.origins);
+    let links = beyond.links(
+        &report.parameters,
+        &report.refitted_lengths,
+        &report.origins,
+    );
     if links.is_empty() {
         return Finding {
             class: MistakeClass::AnotherDevice,
@@ -1892,8 +1895,7 @@ fn lengths_finding(
                  device file is not the one measured",
                 beyond.words()
             ),
-            fix: "check --device (and --tip) against the device that recorded the data"
-                .to_owned(),
+            fix: "check --device (and --tip) against the device that recorded the data".to_owned(),
             before: Residual::default(),
             after: None,
         };
@@ -1992,7 +1994,10 @@ fn lengths_beyond<'a>(
     let listed = if refit_given {
         refit
     } else {
-        parameters.iter().filter(beyond(DETERMINED_SIGMAS)).collect()
+        parameters
+            .iter()
+            .filter(beyond(DETERMINED_SIGMAS))
+            .collect()
     };
     let worst = *(listed.iter()).max_by(|a, b| a.value.abs().total_cmp(&b.value.abs()))?;
     Some(LengthsBeyond {
@@ -2003,7 +2008,7 @@ fn lengths_beyond<'a>(
 }
 
 /// Standard deviations a length the calibration held at nominal must lie from zero when the
-/// held lengths are fitted ([`lengths_beyond_tolerance`]): a two-sided normal tail of
+/// held lengths are fitted ([`after_fit`]): a two-sided normal tail of
 /// 6.3·10⁻⁵ per length, so that noise alone stops a right calibration holding 16 lengths once
 /// in a thousand (Bonferroni). Held lengths are the ones the data determine worst, to
 /// centimetres: the UR5e description of the UR10e recording moves the upper arm by

@@ -3,7 +3,7 @@
 //! names, only the lengths changed). The calibration stops with an another-device finding that
 //! names the links that differ and by how much, even where the identification prunes the
 //! lengths as not identifiable; the right descriptions of the bundled recordings raise none.
-#![allow(clippy::unwrap_used, clippy::expect_used)]
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stderr)]
 
 use hapcal_calibrate::inputs::Plan;
 use hapcal_calibrate::report::CalibrationReport;
@@ -38,8 +38,12 @@ fn calibrate(device: &str, tip: &str, data: &[&str]) -> CalibrationReport {
 
 /// `hapcal check`'s error finding on `plan`, which must be another device's, with the text.
 fn checked_another_device(plan: &Plan) -> String {
-    let report = check_plan(plan).unwrap().expect("a check of measurement or socket files");
-    let f = report.overwhelming().unwrap_or_else(|| panic!("{}", report.render()));
+    let report = check_plan(plan)
+        .unwrap()
+        .expect("a check of measurement or socket files");
+    let f = report
+        .overwhelming()
+        .unwrap_or_else(|| panic!("{}", report.render()));
     assert_eq!(f.class, MistakeClass::AnotherDevice, "{}", f.text());
     f.text()
 }
@@ -69,7 +73,12 @@ fn another_device(report: &CalibrationReport) -> Finding {
             report.parameters, report.refitted_lengths
         )
     });
-    assert_eq!(finding.class, MistakeClass::AnotherDevice, "{}", finding.text());
+    assert_eq!(
+        finding.class,
+        MistakeClass::AnotherDevice,
+        "{}",
+        finding.text()
+    );
     let cfg = SetupConfig {
         accept_setup: false,
         accept_option: "--accept-setup",
@@ -107,9 +116,14 @@ fn a_ur5e_description_of_the_ur10e_recording_is_another_robot_with_longer_arms()
         before.contains("the link after shoulder_lift_joint (the origin of elbow_joint)"),
         "{before}"
     );
-    for (joint, after) in [("elbow_joint", "shoulder_lift_joint"), ("wrist_1_joint", "elbow_joint")] {
+    for (joint, after) in [
+        ("elbow_joint", "shoulder_lift_joint"),
+        ("wrist_1_joint", "elbow_joint"),
+    ] {
         assert!(
-            text.contains(&format!("the link after {after} (the origin of {joint}) is about")),
+            text.contains(&format!(
+                "the link after {after} (the origin of {joint}) is about"
+            )),
             "{text}"
         );
     }
@@ -185,8 +199,8 @@ fn no_another_device(what: &str, plan: &Plan, report: &CalibrationReport) {
         .map(|p| p.value.abs())
         .fold(0.0, f64::max);
     let held = (report.refitted_lengths.iter())
-        .filter(|p| !report.parameters.iter().any(|q| q.name == p.name))
-        .map(|p| (p.value / p.std.max(f64::MIN_POSITIVE)).abs())
+        .filter(|p| p.std > 0.0 && !report.parameters.iter().any(|q| q.name == p.name))
+        .map(|p| (p.value / p.std).abs())
         .fold(0.0, f64::max);
     eprintln!(
         "{what}: largest identified length deviation {:.2} mm; largest held length fitted {held:.2} σ \
