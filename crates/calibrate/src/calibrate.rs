@@ -246,6 +246,21 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         })
         .collect();
     let pruned = pruned_report(&identified);
+    // The lengths the fit held at nominal (pruned), and every length after fitting them.
+    let lengths: Vec<usize> = (0..problem.points_offset())
+        .filter(|&i| layout.spec(i).unit == hapcal_identify::Unit::Meter)
+        .collect();
+    let held: Vec<usize> = (lengths.iter().copied())
+        .filter(|i| !identified.identifiability.kept.contains(i))
+        .collect();
+    let refitted_lengths = crate::fit::refitted_lengths(
+        &problem,
+        identified.fit.x.as_ref(),
+        identified.sigma,
+        &identified.identifiability.kept,
+        &held,
+        &lengths,
+    );
     let correlated = identified
         .covariance
         .correlated_pairs(0.95)
@@ -359,6 +374,8 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             compliance_unit_of(&model),
             1.0,
         ),
+        refitted_lengths,
+        origins: crate::setup::joint_origins(std::slice::from_ref(&chain)),
     };
     let joint_names = chain.joint_names().to_vec();
     let prismatic: Vec<bool> = (hapcal_kinematics::joint_motions(std::slice::from_ref(&chain)))

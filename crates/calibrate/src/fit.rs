@@ -241,6 +241,129 @@ pub(crate) fn choose(
     (candidates[chosen], reports)
 }
 
+/// Largest Jacobian, in entries (`m·n`), of which [`refitted_lengths`] evaluates the step:
+/// the dense back end's own bound ([`hapcal_identify::STREAMING_AUTO_ENTRIES`]); beyond it
+/// the fit streamed and no held length is judged.
+pub(crate) const REFIT_MAX_ENTRIES: usize = hapcal_identify::STREAMING_AUTO_ENTRIES;
+
+/// Smallest singular value of the held lengths' unit-norm columns, orthogonal to the kept
+/// columns, along which [`refitted_lengths`] fits them: below it the data hardly see the
+/// direction, and a systematic residual (an effect the model lacks) projected on it makes a
+/// move of decimetres look determined. Exact gauges lie at rounding (10⁻¹⁵); one socket of an
+/// iiwa 14 (no socket distance, so no scale) leaves directions at 7·10⁻⁵ to 6·10⁻⁴ that its
+/// geometric residual moves by 210 ± 26 mm; the UR5e description's upper arm on the UR10e
+/// recording, the weakest direction another robot's lengths were found in, lies at 0.024.
+pub(crate) const SEEN_SINGULAR_VALUE: f64 = 1e-3;
+
+/// The lengths `held` (layout indices of `p`: lengths the final fit held at their nominal
+/// values, pruned as not identifiable or not free in the model) fitted at the estimate `x` of
+/// the parameters `kept` (layout indices, the fit's free set): one Gauss–Newton step over
+/// `kept` and `held` together, from `x`. Columns are scaled to unit norm; the step of the
+/// `held` columns' components orthogonal to the `kept` ones is their pseudo-inverse's,
+/// directions the data do not see at all (a singular value below [`SEEN_SINGULAR_VALUE`],
+/// exact gauges such as a base height a free instrument frame absorbs) left out, so that the
+/// `held` part is the minimum-norm move; the `kept` parameters follow it.
+///
+/// Entries, `held` then `report` (layout indices of kept parameters to report too): the
+/// parameter's name, its deviation from nominal after the step (`value`: `x` plus the step,
+/// in its unit) and its standard deviation in the joint fit (`std`, from `sigma`, the residual
+/// noise in `p`'s residual units). A parameter whose column is zero is left out. Empty when
+/// `held` is, when the Jacobian has more than [`REFIT_MAX_ENTRIES`] entries or cannot be
+/// evaluated, or when the `kept` columns are singular. Source: the Schur complement of the
+/// partitioned normal equations, Björck, *Numerical Methods for Least Squares Problems*,
+/// SIAM 1996, §2.7.
+pub(crate) fn refitted_lengths(
+    p: &impl hapcal_identify::Problem,
+    x: faer::ColRef<'_, f64>,
+    sigma: f64,
+    kept: &[usize],
+    held: &[usize],
+    report: &[usize],
+) -> Vec<crate::report::ParamReport> {
+    use nalgebra::{DMatrix, DVector};
+    let (m, n) = (p.n_residuals(), p.layout().len());
+    if held.is_empty() || m.saturating_mul(n) > REFIT_MAX_ENTRIES || x.nrows() != n {
+        return Vec::new();
+    }
+    let mut r = faer::Col::<f64>::zeros(m);
+    let mut jac = faer::Mat::<f64>::zeros(m, n);
+    if p.residuals(x, r.as_mut()).is_err() || p.jacobian(x, jac.as_mut()).is_err() {
+        return Vec::new();
+    }
+    let norm = |j: usize| jac.col(j).norm_l2();
+    let seen = |j: usize| j < n && norm(j) > 0.0 && norm(j).is_finite();
+    let held: Vec<usize> = held.iter().copied().filter(|&j| seen(j)).collect();
+    let kept: Vec<usize> = kept.iter().copied().filter(|&j| seen(j)).collect();
+    if held.is_empty() {
+        return Vec::new();
+    }
+    let cols: Vec<usize> = kept.iter().chain(&held).copied().collect();
+    let scale: Vec<f64> = cols.iter().map(|&j| norm(j)).collect();
+    let q = cols.len();
+    let a = faer::Mat::<f64>::from_fn(m, q, |i, k| jac[(i, cols[k])] / scale[k]);
+    let gram = a.transpose() * &a;
+    let at_r = a.transpose() * &r;
+    let g = DMatrix::from_fn(q, q, |i, k| gram[(i, k)]);
+    let h = DVector::from_fn(q, |i, _| at_r[i]);
+    let (nk, nh) = (kept.len(), held.len());
+    let g_kk = g.view((0, 0), (nk, nk)).into_owned();
+    let g_kh = g.view((0, nk), (nk, nh)).into_owned();
+    let h_k = h.rows(0, nk).into_owned();
+    // G_KK⁻¹ (identity-sized zero without kept columns).
+    let g_kk_inv = if nk == 0 {
+        DMatrix::zeros(0, 0)
+    } else {
+        match g_kk.cholesky() {
+            Some(c) => c.inverse(),
+            None => return Vec::new(),
+        }
+    };
+    // The held columns with the kept columns' span taken out, by the kept columns' thin QR
+    // (orthogonal projection to working precision: the normal equations' Schur complement
+    // would lose the exact gauges, whose singular values are rounding, in its squared
+    // condition), then their SVD.
+    let a_h = a.subcols(nk, nh).to_owned();
+    let projected = if nk == 0 {
+        a_h
+    } else {
+        let basis = a.subcols(0, nk).qr().compute_thin_Q();
+        let coefficients = basis.transpose() * &a_h;
+        &a_h - &basis * &coefficients
+    };
+    let p_h = DMatrix::from_fn(m, nh, |i, k| projected[(i, k)]);
+    let r_vec = DVector::from_fn(m, |i, _| r[i]);
+    // P_hᵀ·r: the held columns' part of the normal equations with the kept ones eliminated.
+    let rhs = p_h.transpose() * &r_vec;
+    let svd = nalgebra::SVD::new(p_h, false, true);
+    let Some(v_t) = svd.v_t else {
+        return Vec::new();
+    };
+    let mut pinv = DMatrix::<f64>::zeros(nh, nh);
+    for (k, &sv) in svd.singular_values.iter().enumerate() {
+        if sv > SEEN_SINGULAR_VALUE {
+            let v = v_t.row(k).transpose();
+            pinv += &v * v.transpose() / (sv * sv);
+        }
+    }
+    let step_h = -(&pinv * rhs);
+    let step_k = -(&g_kk_inv * (&h_k + &g_kh * &step_h));
+    // Joint covariance of the kept part: G_KK⁻¹ + G_KK⁻¹·G_KH·S⁺·G_HK·G_KK⁻¹ (scaled units).
+    let coupling = &g_kk_inv * &g_kh;
+    let cov_kk = &g_kk_inv + &coupling * &pinv * coupling.transpose();
+    let entry = |j: usize, step: f64, var: f64, k: usize| crate::report::ParamReport {
+        name: p.layout().name(j).to_owned(),
+        value: x[j] + step / scale[k],
+        std: sigma * var.max(0.0).sqrt() / scale[k],
+        unit: p.layout().spec(j).unit.symbol(),
+    };
+    let held_entries =
+        (held.iter().enumerate()).map(|(k, &j)| entry(j, step_h[k], pinv[(k, k)], nk + k));
+    let kept_entries = (kept.iter().enumerate())
+        .filter(|(_, j)| report.contains(j))
+        .map(|(k, &j)| entry(j, step_k[k], cov_kk[(k, k)], k));
+    held_entries.chain(kept_entries).collect()
+}
+
 /// The pruned parameters of `identified`, each with why.
 pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
     identified

@@ -1761,6 +1761,8 @@ pub fn calibrate_logs(
         equilibrium_step_m: None,
         equilibrium_refits: 0,
         implausible,
+        refitted_lengths: Vec::new(),
+        origins: Vec::new(),
     };
     let kin_model = hapcal_problems::CalibratedModel {
         x_kin: x_kin.clone(),

@@ -123,6 +123,11 @@ pub struct MeasuredOutcome {
     /// Estimates no real robot can have, each with its cause and fix (checked after the fit):
     /// never a result (`hapcal calibrate` stops on the first).
     pub implausible: Vec<crate::report::Implausible>,
+    /// The robot's lengths after a least-squares fit, at the estimate, of those the chosen
+    /// rung held at their nominal values (pruned, or not free in it): deviation from nominal
+    /// (m) and σ (m) in that fit, the held lengths first
+    /// ([`crate::report::CalibrationReport::refitted_lengths`]).
+    pub refitted_lengths: Vec<crate::report::ParamReport>,
 }
 
 /// The rigid transform `T` minimising `Σ |T·a_i − b_i|²` (Kabsch 1976; Horn 1987, "Closed-form
@@ -2257,7 +2262,14 @@ pub fn calibrate_measured(
         cfg.rung.is_some(),
     );
     implausible.extend(no_equilibrium);
+    // Not after the Huber loss bounded samples (see `crate::calibrate::run`).
+    let refitted_lengths = if downweighted.is_empty() {
+        refit_held_lengths(rung, robot, &framed, &fitted, train, weights)
+    } else {
+        Vec::new()
+    };
     Ok(MeasuredOutcome {
+        refitted_lengths,
         rung,
         ladder,
         fitted,
@@ -2555,6 +2567,46 @@ fn equilibrate(
 /// close enough to the equilibrium's: one more fixed-point step moves the tips by less than
 /// this, and the model's single step is reported as enough.
 pub const EQUILIBRIUM_SHARE: f64 = 0.3;
+
+/// The robot's lengths (`m` parameters of `robot`'s own, not the instrument's nor the
+/// markers') after a fit, at the estimate `fitted` of `rung` on `tables`, of those it held at
+/// their nominal values ([`crate::fit::refitted_lengths`]): the held ones first, then the
+/// identified ones as the step moves them; `tree` is the framed tree the problems are built
+/// on. Empty when nothing was held or the problem cannot be rebuilt.
+fn refit_held_lengths(
+    rung: ModelName,
+    robot: &Robot,
+    tree: &Tree,
+    fitted: &Fitted,
+    tables: &[MeasurementTable],
+    weights: Weights,
+) -> Vec<crate::report::ParamReport> {
+    let obs = observations(tables, &|_, _| true);
+    let Ok(problem) = terms(rung, robot)
+        .and_then(|t| Ok(CalibrationProblem::on_tree(tree.clone(), obs, weights, t)?))
+    else {
+        return Vec::new();
+    };
+    let layout = problem.layout();
+    let id = &fitted.identified;
+    let kept: Vec<usize> = (id.identifiability.kept.iter())
+        .filter_map(|&i| layout.index_of(id.layout.name(i)))
+        .collect();
+    let lengths: Vec<usize> = (6..6 + robot.tree.n_params())
+        .filter(|&i| i < layout.len() && layout.spec(i).unit == hapcal_identify::Unit::Meter)
+        .collect();
+    let held: Vec<usize> = (lengths.iter().copied())
+        .filter(|i| !kept.contains(i))
+        .collect();
+    crate::fit::refitted_lengths(
+        &problem,
+        fitted.x.as_ref(),
+        id.sigma,
+        &kept,
+        &held,
+        &lengths,
+    )
+}
 
 /// Covariance-propagated 3-D position uncertainty of the calibrated model (m) at every marker
 /// sample of `tables`, per table in file order: `√trace(J·C·Jᵀ)` with `J` the position's
@@ -3256,6 +3308,8 @@ pub fn run_tables(
         equilibrium_step_m: out.equilibrium_step_m,
         equilibrium_refits: out.equilibrium_refits,
         implausible: out.implausible.clone(),
+        refitted_lengths: out.refitted_lengths.clone(),
+        origins: crate::setup::joint_origins(robot.tree.tips()),
     };
     let frame_values: Vec<ParamReport> = (id.covariance.free.iter())
         .zip(id.covariance.std())

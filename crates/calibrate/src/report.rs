@@ -140,6 +140,20 @@ pub struct ParamReport {
     pub unit: &'static str,
 }
 
+/// The nominal origin of one URDF joint as the length check after the fit
+/// ([`crate::setup::after_fit`]) words a link: the translation from the frame of the moving
+/// joint before it (or the root) to its origin, expressed in the frame its `{joint}.x`, `.y`,
+/// `.z` deviations move along (URDF `<origin>`, fixed joints between folded in).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct JointOrigin {
+    /// The joint (URDF name; the prefix of its length parameters).
+    pub joint: String,
+    /// The moving joint before it on the chain, whose link this origin ends (`None`: the root).
+    pub after: Option<String>,
+    /// The translation, m, in the deviations' frame.
+    pub origin_m: [f64; 3],
+}
+
 /// One pruned parameter and why.
 #[derive(Clone, Debug, Serialize)]
 pub struct PrunedReport {
@@ -255,6 +269,18 @@ pub struct CalibrationReport {
     /// mounting, the equilibrium and the marker frames.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub implausible: Vec<Implausible>,
+    /// When the final fit held robot lengths at their nominal values (pruned as not
+    /// identifiable, or not free in the chosen model): every robot length after one
+    /// least-squares step at the estimate that fits the held ones too, the held ones first,
+    /// each with its deviation from nominal (`value`, m) and σ in that fit (`std`, m). The
+    /// check after the fit judges them ([`crate::setup::after_fit`]), so that pruning cannot
+    /// hide another robot's dimensions. Empty when nothing was held (or the fit streamed).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub refitted_lengths: Vec<ParamReport>,
+    /// The nominal origins of the URDF joints whose lengths are parameters, chain order: the
+    /// links the check after the fit names (empty for a D-H device).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub origins: Vec<JointOrigin>,
 }
 
 /// Output of a calibration: the report plus what is needed to write the calibrated files.

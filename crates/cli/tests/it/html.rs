@@ -99,6 +99,8 @@ fn report(name: &str, n_train: usize, n_test: usize) -> CalibrationReport {
         equilibrium_step_m: None,
         equilibrium_refits: 0,
         implausible: Vec::new(),
+        refitted_lengths: Vec::new(),
+        origins: Vec::new(),
     }
 }
 
