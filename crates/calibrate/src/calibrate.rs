@@ -375,7 +375,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             1.0,
         ),
         refitted_lengths,
-        origins: crate::setup::joint_origins(std::slice::from_ref(&chain)),
+        origins: crate::report::joint_origins(std::slice::from_ref(&chain)),
     };
     let joint_names = chain.joint_names().to_vec();
     let prismatic: Vec<bool> = (hapcal_kinematics::joint_motions(std::slice::from_ref(&chain)))

@@ -2215,7 +2215,13 @@ pub fn calibrate_measured(
         no_equilibrium = Some(crate::report::Implausible {
             kind: crate::report::ImplausibleKind::NoEquilibrium,
             message: format!(
-                "the compliances of the {rung} model are so large that the robot's weight has                  no equilibrium its deflection reaches: after {} fixed-point steps of θ = q +                  k∘τ(θ), one more still moves the tips by up to {:.3} mm, more than                  {EQUILIBRIUM_SHARE} of the noise ({:.3} mm per axis); no real robot bends that                  far under its own weight, and no evaluation of these values (predict, the                  runtime) reproduces the fit; the model absorbs an effect it lacks or a setup                  mistake",
+                "the compliances of the {rung} model are so large that the robot's weight has \
+                 no equilibrium its deflection reaches: after {} fixed-point steps of θ = q + \
+                 k∘τ(θ), one more still moves the tips by up to {:.3} mm, more than \
+                 {EQUILIBRIUM_SHARE} of the noise ({:.3} mm per axis); no real robot bends that \
+                 far under its own weight, and no evaluation of these values (predict, the \
+                 runtime) reproduces the fit; the model absorbs an effect it lacks or a setup \
+                 mistake",
                 hapcal_problems::EQUILIBRIUM_ITERATIONS,
                 step * 1e3,
                 noise * 1e3
@@ -2262,7 +2268,8 @@ pub fn calibrate_measured(
         cfg.rung.is_some(),
     );
     implausible.extend(no_equilibrium);
-    // Not after the Huber loss bounded samples (see `crate::calibrate::run`).
+    // Not after the Huber loss bounded samples: a bounded sample's leftover residual, far from
+    // the others' configurations, pulls the weak directions the held lengths lie along.
     let refitted_lengths = if downweighted.is_empty() {
         refit_held_lengths(rung, robot, &framed, &fitted, train, weights)
     } else {
@@ -3309,7 +3316,7 @@ pub fn run_tables(
         equilibrium_refits: out.equilibrium_refits,
         implausible: out.implausible.clone(),
         refitted_lengths: out.refitted_lengths.clone(),
-        origins: crate::setup::joint_origins(robot.tree.tips()),
+        origins: crate::report::joint_origins(robot.tree.tips()),
     };
     let frame_values: Vec<ParamReport> = (id.covariance.free.iter())
         .zip(id.covariance.std())

@@ -141,7 +141,7 @@ pub struct ParamReport {
 }
 
 /// The nominal origin of one URDF joint as the length check after the fit
-/// ([`crate::setup::after_fit`]) words a link: the translation from the frame of the moving
+/// (`setup::after_fit`) words a link: the translation from the frame of the moving
 /// joint before it (or the root) to its origin, expressed in the frame its `{joint}.x`, `.y`,
 /// `.z` deviations move along (URDF `<origin>`, fixed joints between folded in).
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -273,7 +273,7 @@ pub struct CalibrationReport {
     /// identifiable, or not free in the chosen model): every robot length after one
     /// least-squares step at the estimate that fits the held ones too, the held ones first,
     /// each with its deviation from nominal (`value`, m) and σ in that fit (`std`, m). The
-    /// check after the fit judges them ([`crate::setup::after_fit`]), so that pruning cannot
+    /// check after the fit judges them (`setup::after_fit`), so that pruning cannot
     /// hide another robot's dimensions. Empty when nothing was held (or the fit streamed).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub refitted_lengths: Vec<ParamReport>,
@@ -593,4 +593,49 @@ pub fn termination_text(termination: &hapcal_identify::Termination) -> String {
         other if other.is_success() => "converged".to_owned(),
         _ => "stopped".to_owned(),
     }
+}
+
+/// The nominal origin of every URDF joint of `chains` whose `{joint}.x`, `.y`, `.z` are
+/// length parameters ([`hapcal_kinematics::Chain::from_placements`]: the origin's fixed
+/// transform, then the six deviations), each once, chain order: what
+/// `setup::after_fit` words a link by. Empty for D-H chains (their lengths are `a` and `d`).
+pub fn joint_origins(chains: &[hapcal_kinematics::Chain]) -> Vec<JointOrigin> {
+    use hapcal_kinematics::{Factor, ParamUnit};
+    let mut out: Vec<JointOrigin> = Vec::new();
+    for chain in chains {
+        let factors = chain.factors();
+        for (i, factor) in factors.iter().enumerate() {
+            let Factor::Screw {
+                param: Some(p),
+                joint: None,
+                ..
+            } = factor
+            else {
+                continue;
+            };
+            let Some(info) = chain.params().get(*p) else {
+                continue;
+            };
+            let Some(joint) = info.name.strip_suffix(".x") else {
+                continue;
+            };
+            if info.unit != ParamUnit::Meter || out.iter().any(|o| o.joint == joint) {
+                continue;
+            }
+            let Some(Factor::Fixed(origin)) = i.checked_sub(1).and_then(|k| factors.get(k)) else {
+                continue;
+            };
+            let after = (factors[..i].iter().rev()).find_map(|f| match f {
+                Factor::Screw { joint: Some(j), .. } => chain.joint_names().get(*j).cloned(),
+                _ => None,
+            });
+            let o = origin.rotation.inverse() * origin.translation.vector;
+            out.push(JointOrigin {
+                joint: joint.to_owned(),
+                after,
+                origin_m: [o.x, o.y, o.z],
+            });
+        }
+    }
+    out
 }

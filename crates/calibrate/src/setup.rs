@@ -1931,7 +1931,7 @@ fn another_device(
         })
         .collect();
     let beyond = lengths_beyond(&parameters, &out.refitted_lengths)?;
-    let origins = joint_origins(robot.tree.tips());
+    let origins = crate::report::joint_origins(robot.tree.tips());
     let links = beyond.links(&parameters, &out.refitted_lengths, &origins);
     let conclusion = if links.is_empty() {
         "these data come from a robot of this structure with other dimensions, or the \
@@ -1958,51 +1958,6 @@ fn another_device(
         before: *as_given,
         after: Some(after),
     })
-}
-
-/// The nominal origin of every URDF joint of `chains` whose `{joint}.x`, `.y`, `.z` are
-/// length parameters ([`hapcal_kinematics::Chain::from_placements`]: the origin's fixed
-/// transform, then the six deviations), each once, chain order: what
-/// [`after_fit`] words a link by. Empty for D-H chains (their lengths are `a` and `d`).
-pub fn joint_origins(chains: &[hapcal_kinematics::Chain]) -> Vec<crate::report::JointOrigin> {
-    use hapcal_kinematics::{Factor, ParamUnit};
-    let mut out: Vec<crate::report::JointOrigin> = Vec::new();
-    for chain in chains {
-        let factors = chain.factors();
-        for (i, factor) in factors.iter().enumerate() {
-            let Factor::Screw {
-                param: Some(p),
-                joint: None,
-                ..
-            } = factor
-            else {
-                continue;
-            };
-            let Some(info) = chain.params().get(*p) else {
-                continue;
-            };
-            let Some(joint) = info.name.strip_suffix(".x") else {
-                continue;
-            };
-            if info.unit != ParamUnit::Meter || out.iter().any(|o| o.joint == joint) {
-                continue;
-            }
-            let Some(Factor::Fixed(origin)) = i.checked_sub(1).and_then(|k| factors.get(k)) else {
-                continue;
-            };
-            let after = (factors[..i].iter().rev()).find_map(|f| match f {
-                Factor::Screw { joint: Some(j), .. } => chain.joint_names().get(*j).cloned(),
-                _ => None,
-            });
-            let o = origin.rotation.inverse() * origin.translation.vector;
-            out.push(crate::report::JointOrigin {
-                joint: joint.to_owned(),
-                after,
-                origin_m: [o.x, o.y, o.z],
-            });
-        }
-    }
-    out
 }
 
 /// The setup check after a calibration: an identified length deviation beyond
@@ -2072,15 +2027,7 @@ pub fn after_fit(
     Some(lengths_finding(report, &beyond))
 }
 
-/// The another-device finding of a calibration whose lengths lie beyond tolerance
-/// ([`lengths_beyond_tolerance`]), with the check after the fit's words; `None` when none
-/// does. The socket check runs it on a geometric calibration of the sockets
-/// (`crate::setup_sockets`), whose nominal scatter the lengths of a variant hardly raise.
-pub(crate) fn another_robot(report: &crate::report::CalibrationReport) -> Option<Finding> {
-    lengths_beyond_tolerance(report).map(|beyond| lengths_finding(report, &beyond))
-}
-
-/// [`another_robot`]'s finding of the lengths `beyond` of `report`.
+/// The another-device finding of the lengths `beyond` of `report` (the check after the fit's).
 fn lengths_finding(
     report: &crate::report::CalibrationReport,
     beyond: &LengthsBeyond<'_>,

@@ -580,20 +580,6 @@ fn n_columns(paths: &[std::path::PathBuf]) -> Option<usize> {
     None
 }
 
-/// The another-device finding of a geometric calibration of the socket folders of `plan`
-/// (the check after the fit's, [`crate::setup::after_fit`]), without test folders; `None`
-/// when it fails or moves no length beyond tolerance.
-fn another_socket_robot(plan: &crate::inputs::Plan) -> Option<Finding> {
-    let geometric = crate::inputs::Plan {
-        model: crate::model::ModelChoice::Model(crate::model::ModelName::Geometric),
-        test: Vec::new(),
-        workspace: None,
-        ..plan.clone()
-    };
-    let outcome = crate::calibrate::run(&geometric).ok()?;
-    crate::setup::another_robot(&outcome.report)
-}
-
 /// The setup check of a plan whose training data are socket folders, on `device` (the device
 /// of `plan.device` and `plan.tip`): the files read without the joint-limit check (a file in
 /// degrees is a hypothesis here, not a reading error), then [`check_sockets`]. When a reading
@@ -645,16 +631,6 @@ pub fn check_socket_plan(
                 urdf,
                 tip: &plan.tip,
             })?;
-            // Another robot's lengths: a variant's (an iiwa 7's upper arm on an iiwa 14's
-            // sockets, 20 mm shorter) raise the nominal scatter no more than a right Panda's
-            // manufacturing deviations do (11 against up to 11 mm); its geometric calibration
-            // moves them beyond tolerance.
-            if report.overwhelming().is_none()
-                && let Some(mut f) = another_socket_robot(plan)
-            {
-                f.before = report.as_given;
-                report.findings.insert(0, f);
-            }
             // The reader's joint-limit check: a reading past a limit that a finding explains
             // is named with it; one that no finding explains is the reader's error as before.
             if let Err(limit) = hapcal_io::read_mukca_paths_in(&plan.data, device, &plan.units) {

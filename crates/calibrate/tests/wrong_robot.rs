@@ -159,15 +159,9 @@ fn an_iiwa7_description_of_the_iiwa14_sockets_is_another_robot() {
         "{text}"
     );
     assert!(text.contains("longer than the URDF says"), "{text}");
-    let before = checked_another_device(&plan(
-        "fixtures/wrong-robot/iiwa7_lengths.urdf",
-        "ball_link",
-        &["fixtures/mukca/data/kuka_14/front"],
-    ));
-    assert!(
-        before.contains("the link after joint_a3 (the origin of joint_a4) is about"),
-        "{before}"
-    );
+    // The check before the fit does not calibrate socket folders (the setup checks sit below
+    // the workflows): its nominal scatter, 11 mm, is what a right Panda's manufacturing
+    // deviations leave too; the check after the fit names the variant.
     let upper = moved(&report, "joint_a4.z");
     assert!(
         (upper - 0.020).abs() < 0.004,
