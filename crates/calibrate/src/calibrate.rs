@@ -27,7 +27,7 @@ pub use crate::report::{
     CalibrationReport, CvReport, Figures, Outcome, ParamReport, PruneCause, PrunedReport,
     SetReport, SetRole,
 };
-use crate::solve::{cross_validate, observations, solve};
+use crate::solve::{cross_validate, observations, residual_shift, solve};
 
 /// Refuses a calibration whose data determine no parameter, or fewer configurations than the
 /// parameters they would keep.
@@ -156,7 +156,12 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     // The geometric fit on all training data comes first: it refuses data that cannot determine
     // the model before any time goes into cross-validation, and it is the answer whenever the
     // geometric model is chosen.
-    let obs = observations(&train, plan.socket_distance_m, &|_, _, _| true);
+    // Gross errors bounded by the Huber loss: every fit below takes the bounded rows' excess
+    // off their residuals; the figures are of the data as measured.
+    let (shifts, downweighted) = crate::solve::winsorize(&chain, &train, plan);
+    let all = |_: usize, _: usize, _: usize| true;
+    let shift = residual_shift(&train, &shifts, &all);
+    let obs = observations(&train, plan.socket_distance_m, &all);
     // The training region: each joint's range over the rows, for the record.
     let ranges =
         crate::measured::reading_ranges(obs.rows.iter().map(|r| r.q.as_slice()), chain.n_joints());
@@ -173,7 +178,13 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         })
         .collect::<std::collections::HashSet<_>>()
         .len();
-    let geometric = solve(&chain, obs.clone(), ModelName::Geometric, plan.sigma_m)?;
+    let geometric = solve(
+        &chain,
+        obs.clone(),
+        ModelName::Geometric,
+        plan.sigma_m,
+        &shift,
+    )?;
     let n_kept = |p: &CalibrationProblem, id: &Identified| {
         id.identifiability
             .kept
@@ -206,7 +217,9 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             let (candidates, level) =
                 crate::model::ladder_for(kind, chain.joint_names(), std::slice::from_ref(&chain));
             let held = (candidates.iter())
-                .map(|&candidate| cross_validate(&chain, &train, plan, candidate, CV_REPEATS))
+                .map(|&candidate| {
+                    cross_validate(&chain, &train, plan, candidate, CV_REPEATS, &shifts)
+                })
                 .collect::<Result<Vec<_>>>()?;
             let (choice, reports) = crate::fit::choose(&candidates, &level, &held);
             cross_validation = reports;
@@ -221,7 +234,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     let (problem, identified) = if choice == ModelName::Geometric {
         geometric
     } else {
-        solve(&chain, obs, choice, plan.sigma_m)?
+        solve(&chain, obs, choice, plan.sigma_m, &shift)?
     };
     let model = problem.model(identified.fit.x.as_ref());
     let layout = problem.layout();
@@ -325,6 +338,16 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     }
     warnings.splice(0..0, worse);
     warnings.extend(copies);
+    let rows = if kind == DataKind::Sockets {
+        "socket rows"
+    } else {
+        "log rows"
+    };
+    warnings.extend(crate::robust::bounded_warning(
+        &downweighted,
+        rows,
+        &ModelName::Geometric.to_string(),
+    ));
     let report = CalibrationReport {
         device: plan.device.display().to_string(),
         model: choice,
@@ -346,7 +369,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         rounds: identified.rounds,
         placements,
         elapsed_s: start.elapsed().as_secs_f64(),
-        downweighted: Vec::new(),
+        downweighted,
         range_folds: Vec::new(),
         coverage: None,
         equilibrium_step_m: None,

@@ -3,14 +3,18 @@
 //! `hapcal calibrate` workflow of these data and the geometric baseline build on them.
 
 use anyhow::{Context, Result, bail};
-use hapcal_identify::{Identified, identify};
+use hapcal_identify::{Identified, Problem, identify};
 use hapcal_kinematics::{Chain, Tree};
 use hapcal_problems::{CalibrationProblem, Observations, PointDistance, Row, RowKind, Weights};
+
+use std::collections::HashMap;
 
 use crate::data::DataSet;
 use crate::fit::{HeldOut, folds_of_rows, identify_config};
 use crate::inputs::Plan;
 use crate::model::ModelName;
+use crate::report::Downweighted;
+use crate::robust::{Bound, Dim, Round, Shifted, bound_gross_errors, redundancy, residuals_at};
 
 /// Observations of `sets`; `keep(set, socket, row)` selects rows (for cross-validation).
 pub(crate) fn observations(
@@ -60,12 +64,14 @@ pub(crate) fn observations(
 
 /// Identifies `choice` from `obs` on `chain` at unit weights (residuals in metres), with the
 /// model terms of [`crate::model::terms`] (lumped link weights for `compliance`: a device file
-/// carries no link masses).
+/// carries no link masses). `shift` ([`residual_shift`]) is taken off the rows' residuals:
+/// the rows the Huber loss bounded ([`winsorize`]); empty or zero, the rows as measured.
 pub(crate) fn solve(
     chain: &Chain,
     obs: Observations,
     choice: ModelName,
     sigma_m: Option<f64>,
+    shift: &[f64],
 ) -> Result<(CalibrationProblem, Identified)> {
     let n_rows = obs.rows.len();
     let terms = crate::model::terms(choice, chain.joint_names(), &[])?;
@@ -73,9 +79,139 @@ pub(crate) fn solve(
         CalibrationProblem::on_tree(Tree::single(chain.clone()), obs, Weights::default(), terms)
             .context("building the calibration problem")?;
     let x0 = problem.initial_guess();
-    let identified = identify(&problem, x0, &identify_config(sigma_m))
-        .with_context(|| format!("identifying parameters from {n_rows} configurations"))?;
+    let cfg = identify_config(sigma_m);
+    let identified = if shift.iter().all(|&s| s == 0.0) {
+        identify(&problem, x0, &cfg)
+    } else {
+        // The point-distance residuals follow the rows' and are never shifted.
+        let mut full = shift.to_vec();
+        full.resize(problem.n_residuals(), 0.0);
+        let shifted = Shifted {
+            inner: &problem,
+            shift: &full,
+        };
+        identify(&shifted, x0, &cfg)
+    }
+    .with_context(|| format!("identifying parameters from {n_rows} configurations"))?;
     Ok((problem, identified))
+}
+
+/// The Huber loss's bounds on socket rows and distance-log rows ([`winsorize`]): per row
+/// `(set, socket, row)` (socket 0 for a log), the part of its residual beyond the corner, m,
+/// in the problem's residual order (end point − socket point, or modelled − measured
+/// distance). Empty: nothing bounded.
+pub(crate) type Shifts = HashMap<(usize, usize, usize), Vec<f64>>;
+
+/// The rows of `sets` in [`observations`]' order: `(set, socket, row)` and the number of
+/// residuals of the row (3 for a socket row, 1 for a distance).
+fn row_ids(sets: &[DataSet]) -> Vec<((usize, usize, usize), usize)> {
+    let mut ids = Vec::new();
+    for (set_idx, set) in sets.iter().enumerate() {
+        match set {
+            DataSet::Sockets(p) => {
+                for (socket_idx, socket) in p.sockets.iter().enumerate() {
+                    ids.extend((0..socket.q.len()).map(|row| ((set_idx, socket_idx, row), 3)));
+                }
+            }
+            DataSet::Distances { q, .. } => {
+                ids.extend((0..q.len()).map(|row| ((set_idx, 0, row), 1)));
+            }
+        }
+    }
+    ids
+}
+
+/// The residual shift of the rows [`observations`] keeps with `keep`, for [`solve`]: the
+/// rows' residuals in order, `shifts`' values on bounded rows and zeros elsewhere; empty when
+/// `shifts` is.
+pub(crate) fn residual_shift(
+    sets: &[DataSet],
+    shifts: &Shifts,
+    keep: &dyn Fn(usize, usize, usize) -> bool,
+) -> Vec<f64> {
+    if shifts.is_empty() {
+        return Vec::new();
+    }
+    let mut shift = Vec::new();
+    for (id, width) in row_ids(sets) {
+        if keep(id.0, id.1, id.2) {
+            match shifts.get(&id) {
+                Some(s) => shift.extend_from_slice(s),
+                None => shift.extend(std::iter::repeat_n(0.0, width)),
+            }
+        }
+    }
+    shift
+}
+
+/// Gross errors of socket folders and distance logs bounded by the Huber loss
+/// ([`crate::robust::bound_gross_errors`]): the geometric model fitted to every training row,
+/// a row whose residual (its end point's distance from its socket point; a log's distance
+/// error) lies beyond the corner pulled back onto it, until the set of bounded rows no longer
+/// changes. Returns the shifts every fit then takes off ([`Shifts`]) and the bounded rows with
+/// their file and line. Nothing when the geometric model cannot be fitted, with fewer than 20
+/// rows, or when the sets mix sockets and logs (their residuals have no common scale).
+pub(crate) fn winsorize(
+    chain: &Chain,
+    sets: &[DataSet],
+    plan: &Plan,
+) -> (Shifts, Vec<Downweighted>) {
+    let sockets = sets.iter().all(|s| matches!(s, DataSet::Sockets(_)));
+    let logs = sets.iter().all(|s| matches!(s, DataSet::Distances { .. }));
+    let (dim, width) = match (sockets, logs) {
+        (true, false) => (Dim::Three, 3),
+        (false, true) => (Dim::One, 1),
+        _ => return (Shifts::new(), Vec::new()),
+    };
+    let all = |_: usize, _: usize, _: usize| true;
+    let ids = row_ids(sets);
+    let n_row_residuals = ids.len() * width;
+    // The rows' residuals of the last fit, as measured.
+    let mut last: Vec<f64> = Vec::new();
+    let shifts_of = |last: &[f64], bounds: &[Bound]| -> Shifts {
+        (bounds.iter())
+            .map(|b| {
+                let e = &last[b.sample * width..(b.sample + 1) * width];
+                (ids[b.sample].0, b.excess(e))
+            })
+            .collect()
+    };
+    let bounds = bound_gross_errors(ids.len(), dim, |bounds| {
+        let shifts = shifts_of(&last, bounds);
+        let obs = observations(sets, plan.socket_distance_m, &all);
+        let shift = residual_shift(sets, &shifts, &all);
+        let (problem, identified) =
+            solve(chain, obs, ModelName::Geometric, plan.sigma_m, &shift).ok()?;
+        let redundancy = redundancy(problem.n_residuals(), identified.identifiability.kept.len())?;
+        let r = residuals_at(&problem, identified.fit.x.as_ref()).ok()?;
+        last = (0..n_row_residuals).map(|i| r[i]).collect();
+        Some(Round {
+            norms: (last.chunks(width))
+                .map(|e| e.iter().map(|v| v * v).sum::<f64>().sqrt())
+                .collect(),
+            redundancy,
+        })
+    });
+    let listed = (bounds.iter())
+        .map(|b| {
+            let (set, socket, row) = ids[b.sample].0;
+            let (file, line) = match &sets[set] {
+                DataSet::Sockets(p) => (
+                    &p.sockets[socket].file,
+                    p.sockets[socket].line_numbers.get(row).copied(),
+                ),
+                DataSet::Distances { file, lines, .. } => (file, lines.get(row).copied()),
+            };
+            Downweighted {
+                file: file.display().to_string(),
+                line: line.unwrap_or(row as u64 + 1),
+                marker: None,
+                residual_m: b.norm,
+                bound_m: b.corner,
+            }
+        })
+        .collect();
+    (shifts_of(&last, &bounds), listed)
 }
 
 /// The original of every row of every socket (every log) of `sets`
@@ -105,13 +241,15 @@ pub(crate) fn set_originals(sets: &[DataSet]) -> Vec<Vec<Vec<usize>>> {
 /// `repeats` shifts every block boundary by `r/repeats` of a block (a circular shift of the
 /// rows), so that each row is held out once per repeat with different neighbours; a row that
 /// repeats an earlier row of its socket or log is held out with it
-/// ([`crate::fit::folds_of_rows`]).
+/// ([`crate::fit::folds_of_rows`]). Every fold's fit takes `shifts` off its bounded rows
+/// ([`winsorize`]); the held-out errors are of the rows as measured.
 pub(crate) fn cross_validate(
     chain: &Chain,
     sets: &[DataSet],
     plan: &Plan,
     choice: ModelName,
     repeats: usize,
+    shifts: &Shifts,
 ) -> Result<HeldOut> {
     let lens: Vec<Vec<usize>> = sets
         .iter()
@@ -153,10 +291,10 @@ pub(crate) fn cross_validate(
     }
     for r in 0..repeats {
         for fold in 0..k {
-            let obs = observations(sets, plan.socket_distance_m, &|s, sk, row| {
-                block(r, s, sk, row) != fold
-            });
-            let (problem, identified) = solve(chain, obs, choice, plan.sigma_m)?;
+            let keep = |s: usize, sk: usize, row: usize| block(r, s, sk, row) != fold;
+            let obs = observations(sets, plan.socket_distance_m, &keep);
+            let shift = residual_shift(sets, shifts, &keep);
+            let (problem, identified) = solve(chain, obs, choice, plan.sigma_m, &shift)?;
             let model = problem.model(identified.fit.x.as_ref());
             let points = problem.points(identified.fit.x.as_ref());
             let mut point_base = 0;
