@@ -420,7 +420,7 @@ pub fn baseline_from_sets(
             plan,
             ModelName::Geometric,
             CV_REPEATS,
-            &crate::solve::Shifts::new(),
+            &crate::solve::RowBounds::new(),
         )?;
         let cv = (held.sq_errors.iter().sum::<f64>() / held.sq_errors.len().max(1) as f64).sqrt();
         rungs.push(KinematicRung {

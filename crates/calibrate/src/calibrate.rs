@@ -27,7 +27,7 @@ pub use crate::report::{
     CalibrationReport, CvReport, Figures, Outcome, ParamReport, PruneCause, PrunedReport,
     SetReport, SetRole,
 };
-use crate::solve::{cross_validate, observations, residual_shift, solve};
+use crate::solve::{cross_validate, observations, residual_scale, solve};
 
 /// Refuses a calibration whose data determine no parameter, or fewer configurations than the
 /// parameters they would keep.
@@ -156,11 +156,11 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     // The geometric fit on all training data comes first: it refuses data that cannot determine
     // the model before any time goes into cross-validation, and it is the answer whenever the
     // geometric model is chosen.
-    // Gross errors bounded by the Huber loss: every fit below takes the bounded rows' excess
-    // off their residuals; the figures are of the data as measured.
-    let (shifts, downweighted) = crate::solve::winsorize(&chain, &train, plan);
+    // Gross errors bounded by the Huber loss: every fit below weights the bounded rows by
+    // their Huber weights; the figures are of the data as measured.
+    let (bounds, downweighted) = crate::solve::winsorize(&chain, &train, plan);
     let all = |_: usize, _: usize, _: usize| true;
-    let shift = residual_shift(&train, &shifts, &all);
+    let scale = residual_scale(&train, &bounds, &all);
     let obs = observations(&train, plan.socket_distance_m, &all);
     // The training region: each joint's range over the rows, for the record.
     let ranges =
@@ -183,7 +183,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         obs.clone(),
         ModelName::Geometric,
         plan.sigma_m,
-        &shift,
+        &scale,
     )?;
     let n_kept = |p: &CalibrationProblem, id: &Identified| {
         id.identifiability
@@ -218,7 +218,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
                 crate::model::ladder_for(kind, chain.joint_names(), std::slice::from_ref(&chain));
             let held = (candidates.iter())
                 .map(|&candidate| {
-                    cross_validate(&chain, &train, plan, candidate, CV_REPEATS, &shifts)
+                    cross_validate(&chain, &train, plan, candidate, CV_REPEATS, &bounds)
                 })
                 .collect::<Result<Vec<_>>>()?;
             let (choice, reports) = crate::fit::choose(&candidates, &level, &held);
@@ -234,7 +234,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     let (problem, identified) = if choice == ModelName::Geometric {
         geometric
     } else {
-        solve(&chain, obs, choice, plan.sigma_m, &shift)?
+        solve(&chain, obs, choice, plan.sigma_m, &scale)?
     };
     let model = problem.model(identified.fit.x.as_ref());
     let layout = problem.layout();
@@ -348,6 +348,15 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         rows,
         &ModelName::Geometric.to_string(),
     ));
+    let n_left_out = (downweighted.iter())
+        .filter(|d| d.residual_m > crate::robust::REJECTION * d.bound_m)
+        .count();
+    if n_left_out > 0 {
+        warnings.push(format!(
+            "{n_left_out} of the bounded {rows} lie beyond {} times the corner and were left              out of every fit (a row far from the others, such as one whose joint reading              glitched, would move the parameters even at the corner's force)",
+            crate::robust::REJECTION
+        ));
+    }
     let report = CalibrationReport {
         device: plan.device.display().to_string(),
         model: choice,
@@ -797,6 +806,15 @@ pub fn write_outputs_beside(
     Ok(written)
 }
 
+/// The unit of `model`'s compliances: rad/(N·m) under link masses, rad/m under the lumped
+/// unit weights (also for a model without compliance).
+fn compliance_unit_of(model: &hapcal_problems::CalibratedModel) -> &'static str {
+    match &model.compliance {
+        Some((g, _)) if !g.masses.is_empty() => "rad/(N·m)",
+        _ => "rad/m",
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::{HeldOut, ModelName, blocked_difference, fold_of};
@@ -894,14 +912,5 @@ mod tests {
             block: vec![0; 4],
         };
         assert_eq!(blocked_difference(&one, &one).1, f64::INFINITY);
-    }
-}
-
-/// The unit of `model`'s compliances: rad/(N·m) under link masses, rad/m under the lumped
-/// unit weights (also for a model without compliance).
-fn compliance_unit_of(model: &hapcal_problems::CalibratedModel) -> &'static str {
-    match &model.compliance {
-        Some((g, _)) if !g.masses.is_empty() => "rad/(N·m)",
-        _ => "rad/m",
     }
 }

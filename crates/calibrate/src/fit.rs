@@ -263,61 +263,6 @@ pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
         .collect()
 }
 
-#[cfg(test)]
-mod tests {
-    use super::{
-        CV_REPEATS, blocked_folds, first_repeat_blocks, fold_of, folds_of_rows, originals,
-    };
-
-    #[test]
-    fn copies_fall_in_the_fold_of_the_row_they_copy_in_every_repeat() {
-        // 13 distinct rows, then the file appended again, then two more copies of row 4.
-        let keys: Vec<u32> = (0..13).chain(0..13).chain([4, 4]).collect();
-        let original = originals(keys.iter().copied());
-        assert_eq!(original[13..26], (0..13).collect::<Vec<_>>()[..]);
-        assert_eq!(original[26..], [4, 4]);
-        assert_eq!(super::n_copies(&original), 15);
-        let k = 5;
-        for r in 0..CV_REPEATS {
-            let folds = folds_of_rows(&original, k, r, CV_REPEATS);
-            for (row, &o) in original.iter().enumerate() {
-                assert_eq!(folds[row], folds[o], "repeat {r}, row {row}");
-            }
-            // The distinct rows are cut as 13 rows without copies would be.
-            for (row, &fold) in folds.iter().enumerate().take(13) {
-                assert_eq!(fold, fold_of(row, 13, k, r, CV_REPEATS));
-            }
-        }
-        // Every row held out exactly once per repeat, copies with their originals.
-        let sets = vec![original.clone(), (0..7).collect()];
-        let folds = blocked_folds(&sets, k);
-        assert_eq!(folds.len(), CV_REPEATS * k);
-        for rep in folds.chunks(k) {
-            for (set, rows) in sets.iter().enumerate() {
-                for row in 0..rows.len() {
-                    assert_eq!(rep.iter().filter(|f| f[set][row]).count(), 1);
-                }
-            }
-        }
-        let blocks = first_repeat_blocks(&sets, k);
-        assert_eq!(blocks[13], blocks[0]);
-        assert_eq!(blocks[27], blocks[4]);
-        assert_eq!(blocks[original.len()], k, "the second set's first block");
-    }
-
-    #[test]
-    fn without_copies_the_folds_are_plain_blocked_folds() {
-        let (n, k) = (23, 4);
-        let own: Vec<usize> = (0..n).collect();
-        for r in 0..CV_REPEATS {
-            let expected: Vec<usize> = (0..n)
-                .map(|row| fold_of(row, n, k, r, CV_REPEATS))
-                .collect();
-            assert_eq!(folds_of_rows(&own, k, r, CV_REPEATS), expected);
-        }
-    }
-}
-
 /// The compliance estimates of `identified` (every value a record names as a compliance:
 /// `compliance.*`, `transversal.*`, `joint_compliance.j*`) below zero by more than
 /// [`hapcal_contract::negative_compliance_sigmas`] of their count standard deviations, most
@@ -428,4 +373,59 @@ pub(crate) fn unconverged(
             "give a simpler --model".to_owned()
         },
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{
+        CV_REPEATS, blocked_folds, first_repeat_blocks, fold_of, folds_of_rows, originals,
+    };
+
+    #[test]
+    fn copies_fall_in_the_fold_of_the_row_they_copy_in_every_repeat() {
+        // 13 distinct rows, then the file appended again, then two more copies of row 4.
+        let keys: Vec<u32> = (0..13).chain(0..13).chain([4, 4]).collect();
+        let original = originals(keys.iter().copied());
+        assert_eq!(original[13..26], (0..13).collect::<Vec<_>>()[..]);
+        assert_eq!(original[26..], [4, 4]);
+        assert_eq!(super::n_copies(&original), 15);
+        let k = 5;
+        for r in 0..CV_REPEATS {
+            let folds = folds_of_rows(&original, k, r, CV_REPEATS);
+            for (row, &o) in original.iter().enumerate() {
+                assert_eq!(folds[row], folds[o], "repeat {r}, row {row}");
+            }
+            // The distinct rows are cut as 13 rows without copies would be.
+            for (row, &fold) in folds.iter().enumerate().take(13) {
+                assert_eq!(fold, fold_of(row, 13, k, r, CV_REPEATS));
+            }
+        }
+        // Every row held out exactly once per repeat, copies with their originals.
+        let sets = vec![original.clone(), (0..7).collect()];
+        let folds = blocked_folds(&sets, k);
+        assert_eq!(folds.len(), CV_REPEATS * k);
+        for rep in folds.chunks(k) {
+            for (set, rows) in sets.iter().enumerate() {
+                for row in 0..rows.len() {
+                    assert_eq!(rep.iter().filter(|f| f[set][row]).count(), 1);
+                }
+            }
+        }
+        let blocks = first_repeat_blocks(&sets, k);
+        assert_eq!(blocks[13], blocks[0]);
+        assert_eq!(blocks[27], blocks[4]);
+        assert_eq!(blocks[original.len()], k, "the second set's first block");
+    }
+
+    #[test]
+    fn without_copies_the_folds_are_plain_blocked_folds() {
+        let (n, k) = (23, 4);
+        let own: Vec<usize> = (0..n).collect();
+        for r in 0..CV_REPEATS {
+            let expected: Vec<usize> = (0..n)
+                .map(|row| fold_of(row, n, k, r, CV_REPEATS))
+                .collect();
+            assert_eq!(folds_of_rows(&own, k, r, CV_REPEATS), expected);
+        }
+    }
 }

@@ -2832,6 +2832,7 @@ fn winsorize(
         .map(|r| r.markers.len())
         .sum();
     let mut first = None;
+    let mut first_redundancy = 1.0;
     let mut rung = rung;
     // Every sample of the last fit: table, row, marker, residual, model position.
     let mut evaluated: Vec<Evaluated> = Vec::new();
@@ -2851,8 +2852,9 @@ fn winsorize(
             let n_kept = fitted.identified.identifiability.kept.len();
             match redundancy(n_residuals, n_kept) {
                 Some(r) => break (model, fitted, r),
-                // Only the first round's redundancy sets the corner.
-                None if first.is_some() => break (model, fitted, 1.0),
+                // A later round's fit of the same rung and samples: the first round's
+                // redundancy.
+                None if first.is_some() => break (model, fitted, first_redundancy),
                 // A rung with too few residuals per parameter fits the noise itself, and a
                 // gross error hides in it: the geometric rung judges instead.
                 None if first.is_none() && rung > ModelName::Geometric => {
@@ -2874,6 +2876,7 @@ fn winsorize(
         }
         if first.is_none() {
             first = Some((rung, (model, fitted)));
+            first_redundancy = redundancy;
         }
         Some(Round {
             norms: evaluated.iter().map(|s| s.3.norm()).collect(),

@@ -14,7 +14,7 @@ use crate::fit::{HeldOut, folds_of_rows, identify_config};
 use crate::inputs::Plan;
 use crate::model::ModelName;
 use crate::report::Downweighted;
-use crate::robust::{Bound, Dim, Round, Shifted, bound_gross_errors, redundancy, residuals_at};
+use crate::robust::{Bound, Dim, Round, Weighted, bound_gross_errors, redundancy, residuals_at};
 
 /// Observations of `sets`; `keep(set, socket, row)` selects rows (for cross-validation).
 pub(crate) fn observations(
@@ -64,14 +64,15 @@ pub(crate) fn observations(
 
 /// Identifies `choice` from `obs` on `chain` at unit weights (residuals in metres), with the
 /// model terms of [`crate::model::terms`] (lumped link weights for `compliance`: a device file
-/// carries no link masses). `shift` ([`residual_shift`]) is taken off the rows' residuals:
-/// the rows the Huber loss bounded ([`winsorize`]); empty or zero, the rows as measured.
+/// carries no link masses). `scale` ([`residual_scale`]) multiplies the rows' residuals and
+/// Jacobian rows: `√w` of the rows the Huber loss bounded ([`winsorize`]); empty or all one,
+/// the rows as measured.
 pub(crate) fn solve(
     chain: &Chain,
     obs: Observations,
     choice: ModelName,
     sigma_m: Option<f64>,
-    shift: &[f64],
+    scale: &[f64],
 ) -> Result<(CalibrationProblem, Identified)> {
     let n_rows = obs.rows.len();
     let terms = crate::model::terms(choice, chain.joint_names(), &[])?;
@@ -80,27 +81,35 @@ pub(crate) fn solve(
             .context("building the calibration problem")?;
     let x0 = problem.initial_guess();
     let cfg = identify_config(sigma_m);
-    let identified = if shift.iter().all(|&s| s == 0.0) {
+    let identified = if scale.iter().all(|&s| s == 1.0) {
         identify(&problem, x0, &cfg)
     } else {
-        // The point-distance residuals follow the rows' and are never shifted.
-        let mut full = shift.to_vec();
-        full.resize(problem.n_residuals(), 0.0);
-        let shifted = Shifted {
+        // The point-distance residuals follow the rows' and are never weighted.
+        let mut full = scale.to_vec();
+        full.resize(problem.n_residuals(), 1.0);
+        let weighted = Weighted {
             inner: &problem,
-            shift: &full,
+            scale: &full,
         };
-        identify(&shifted, x0, &cfg)
+        identify(&weighted, x0, &cfg)
     }
     .with_context(|| format!("identifying parameters from {n_rows} configurations"))?;
     Ok((problem, identified))
 }
 
-/// The Huber loss's bounds on socket rows and distance-log rows ([`winsorize`]): per row
-/// `(set, socket, row)` (socket 0 for a log), the part of its residual beyond the corner, m,
-/// in the problem's residual order (end point − socket point, or modelled − measured
-/// distance). Empty: nothing bounded.
-pub(crate) type Shifts = HashMap<(usize, usize, usize), Vec<f64>>;
+/// A socket row or distance-log row the Huber loss bounded ([`winsorize`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct RowBound {
+    /// Its Huber weight, `corner/|e|` with `|e|` its residual norm in the judging fit, m/m
+    /// ([`crate::robust::Bound::weight`]): every fit weights its residuals by it.
+    pub weight: f64,
+    /// The corner, m.
+    pub corner_m: f64,
+}
+
+/// The Huber loss's bounds on socket rows and distance-log rows ([`winsorize`]), per row
+/// `(set, socket, row)` (socket 0 for a log). Empty: nothing bounded.
+pub(crate) type RowBounds = HashMap<(usize, usize, usize), RowBound>;
 
 /// The rows of `sets` in [`observations`]' order: `(set, socket, row)` and the number of
 /// residuals of the row (3 for a socket row, 1 for a distance).
@@ -121,72 +130,73 @@ fn row_ids(sets: &[DataSet]) -> Vec<((usize, usize, usize), usize)> {
     ids
 }
 
-/// The residual shift of the rows [`observations`] keeps with `keep`, for [`solve`]: the
-/// rows' residuals in order, `shifts`' values on bounded rows and zeros elsewhere; empty when
-/// `shifts` is.
-pub(crate) fn residual_shift(
+/// The residual scale of the rows [`observations`] keeps with `keep`, for [`solve`]: the
+/// rows' residuals in order, `√w` of `bounds`' weight on bounded rows and one elsewhere;
+/// empty when `bounds` is.
+pub(crate) fn residual_scale(
     sets: &[DataSet],
-    shifts: &Shifts,
+    bounds: &RowBounds,
     keep: &dyn Fn(usize, usize, usize) -> bool,
 ) -> Vec<f64> {
-    if shifts.is_empty() {
+    if bounds.is_empty() {
         return Vec::new();
     }
-    let mut shift = Vec::new();
+    let mut scale = Vec::new();
     for (id, width) in row_ids(sets) {
         if keep(id.0, id.1, id.2) {
-            match shifts.get(&id) {
-                Some(s) => shift.extend_from_slice(s),
-                None => shift.extend(std::iter::repeat_n(0.0, width)),
-            }
+            let s = bounds.get(&id).map_or(1.0, |b| b.weight.sqrt());
+            scale.extend(std::iter::repeat_n(s, width));
         }
     }
-    shift
+    scale
 }
 
 /// Gross errors of socket folders and distance logs bounded by the Huber loss
 /// ([`crate::robust::bound_gross_errors`]): the geometric model fitted to every training row,
 /// a row whose residual (its end point's distance from its socket point; a log's distance
-/// error) lies beyond the corner pulled back onto it, until the set of bounded rows no longer
-/// changes. Returns the shifts every fit then takes off ([`Shifts`]) and the bounded rows with
-/// their file and line. Nothing when the geometric model cannot be fitted, with fewer than 20
-/// rows, or when the sets mix sockets and logs (their residuals have no common scale).
+/// error) lies beyond the corner down-weighted to `corner/|e|` (iteratively reweighted least
+/// squares, [`crate::robust::Weighted`]), until the set of bounded rows and the scale no
+/// longer change. Returns the weights every fit then gives the bounded rows ([`RowBounds`])
+/// and the bounded rows with their file and line. Nothing when the geometric model cannot be
+/// fitted, with fewer than 20 rows, or when the sets mix sockets and logs (their residuals
+/// have no common scale).
 pub(crate) fn winsorize(
     chain: &Chain,
     sets: &[DataSet],
     plan: &Plan,
-) -> (Shifts, Vec<Downweighted>) {
+) -> (RowBounds, Vec<Downweighted>) {
     let sockets = sets.iter().all(|s| matches!(s, DataSet::Sockets(_)));
     let logs = sets.iter().all(|s| matches!(s, DataSet::Distances { .. }));
     let (dim, width) = match (sockets, logs) {
         (true, false) => (Dim::Three, 3),
         (false, true) => (Dim::One, 1),
-        _ => return (Shifts::new(), Vec::new()),
+        _ => return (RowBounds::new(), Vec::new()),
     };
     let all = |_: usize, _: usize, _: usize| true;
     let ids = row_ids(sets);
     let n_row_residuals = ids.len() * width;
-    // The rows' residuals of the last fit, as measured.
-    let mut last: Vec<f64> = Vec::new();
-    let shifts_of = |last: &[f64], bounds: &[Bound]| -> Shifts {
+    let row_bounds = |bounds: &[Bound]| -> RowBounds {
         (bounds.iter())
             .map(|b| {
-                let e = &last[b.sample * width..(b.sample + 1) * width];
-                (ids[b.sample].0, b.excess(e))
+                let bound = RowBound {
+                    weight: b.weight(),
+                    corner_m: b.corner,
+                };
+                (ids[b.sample].0, bound)
             })
             .collect()
     };
     let bounds = bound_gross_errors(ids.len(), dim, |bounds| {
-        let shifts = shifts_of(&last, bounds);
         let obs = observations(sets, plan.socket_distance_m, &all);
-        let shift = residual_shift(sets, &shifts, &all);
+        let scale = residual_scale(sets, &row_bounds(bounds), &all);
         let (problem, identified) =
-            solve(chain, obs, ModelName::Geometric, plan.sigma_m, &shift).ok()?;
+            solve(chain, obs, ModelName::Geometric, plan.sigma_m, &scale).ok()?;
         let redundancy = redundancy(problem.n_residuals(), identified.identifiability.kept.len())?;
+        // The rows' residuals as measured.
         let r = residuals_at(&problem, identified.fit.x.as_ref()).ok()?;
-        last = (0..n_row_residuals).map(|i| r[i]).collect();
+        let rows: Vec<f64> = (0..n_row_residuals).map(|i| r[i]).collect();
         Some(Round {
-            norms: (last.chunks(width))
+            norms: (rows.chunks(width))
                 .map(|e| e.iter().map(|v| v * v).sum::<f64>().sqrt())
                 .collect(),
             redundancy,
@@ -211,7 +221,7 @@ pub(crate) fn winsorize(
             }
         })
         .collect();
-    (shifts_of(&last, &bounds), listed)
+    (row_bounds(&bounds), listed)
 }
 
 /// The original of every row of every socket (every log) of `sets`
@@ -241,15 +251,17 @@ pub(crate) fn set_originals(sets: &[DataSet]) -> Vec<Vec<Vec<usize>>> {
 /// `repeats` shifts every block boundary by `r/repeats` of a block (a circular shift of the
 /// rows), so that each row is held out once per repeat with different neighbours; a row that
 /// repeats an earlier row of its socket or log is held out with it
-/// ([`crate::fit::folds_of_rows`]). Every fold's fit takes `shifts` off its bounded rows
-/// ([`winsorize`]); the held-out errors are of the rows as measured.
+/// ([`crate::fit::folds_of_rows`]). Every fold's fit weights its bounded rows by `bounds`
+/// ([`winsorize`]); a bounded row's held-out error is winsorized at its corner
+/// ([`RowBound::corner_m`]), as the haptic and measurement workflows hold out their
+/// winsorized rows.
 pub(crate) fn cross_validate(
     chain: &Chain,
     sets: &[DataSet],
     plan: &Plan,
     choice: ModelName,
     repeats: usize,
-    shifts: &Shifts,
+    bounds: &RowBounds,
 ) -> Result<HeldOut> {
     let lens: Vec<Vec<usize>> = sets
         .iter()
@@ -275,6 +287,14 @@ pub(crate) fn cross_validate(
         })
         .collect();
     let block = |r: usize, set: usize, socket: usize, row: usize| folds[r][set][socket][row];
+    // A bounded row's held-out error is winsorized at its corner, as its residual is in the
+    // fits: as measured (tens of mm for a glitch) it would outweigh every other row's and
+    // decide the comparison of the rungs by how each extrapolates to a wrong reading.
+    let held_out = |set: usize, socket: usize, row: usize, sq: f64| -> f64 {
+        bounds
+            .get(&(set, socket, row))
+            .map_or(sq, |b| sq.min(b.corner_m * b.corner_m))
+    };
     // Row order: sets, sockets, rows, as the evaluation loop below visits them.
     // Blocks of the first repeat, numbered (set, socket, fold) in that order.
     let mut sq_sum: Vec<f64> = Vec::new();
@@ -293,8 +313,8 @@ pub(crate) fn cross_validate(
         for fold in 0..k {
             let keep = |s: usize, sk: usize, row: usize| block(r, s, sk, row) != fold;
             let obs = observations(sets, plan.socket_distance_m, &keep);
-            let shift = residual_shift(sets, shifts, &keep);
-            let (problem, identified) = solve(chain, obs, choice, plan.sigma_m, &shift)?;
+            let scale = residual_scale(sets, bounds, &keep);
+            let (problem, identified) = solve(chain, obs, choice, plan.sigma_m, &scale)?;
             let model = problem.model(identified.fit.x.as_ref());
             let points = problem.points(identified.fit.x.as_ref());
             let mut point_base = 0;
@@ -305,9 +325,9 @@ pub(crate) fn cross_validate(
                         for (socket_idx, socket) in p.sockets.iter().enumerate() {
                             for (row_idx, q) in socket.q.iter().enumerate() {
                                 if block(r, set_idx, socket_idx, row_idx) == fold {
-                                    sq_sum[idx] += (model.end_point(q)
-                                        - points[point_base + socket_idx])
-                                        .norm_squared();
+                                    let e = model.end_point(q) - points[point_base + socket_idx];
+                                    sq_sum[idx] +=
+                                        held_out(set_idx, socket_idx, row_idx, e.norm_squared());
                                 }
                                 idx += 1;
                             }
@@ -317,7 +337,8 @@ pub(crate) fn cross_validate(
                     DataSet::Distances { q, distance_m, .. } => {
                         for (row_idx, (q, d)) in q.iter().zip(distance_m).enumerate() {
                             if block(r, set_idx, 0, row_idx) == fold {
-                                sq_sum[idx] += (model.end_point(q).coords.norm() - d).powi(2);
+                                let e = model.end_point(q).coords.norm() - d;
+                                sq_sum[idx] += held_out(set_idx, 0, row_idx, e * e);
                             }
                             idx += 1;
                         }
