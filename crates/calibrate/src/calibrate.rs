@@ -353,7 +353,11 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         .count();
     if n_left_out > 0 {
         warnings.push(format!(
-            "{n_left_out} of the bounded {rows} lie beyond {} times the corner and were left              out of every fit (a row far from the others, such as one whose joint reading              glitched, would move the parameters even at the corner's force)",
+            "{n_left_out} of the {} bounded {rows} lie beyond {} times the corner and were \
+             left out of every fit: the corner's force alone would let a row far from the \
+             others (a glitch in its joint readings) move the parameters by many standard \
+             deviations",
+            downweighted.len(),
             crate::robust::REJECTION
         ));
     }
