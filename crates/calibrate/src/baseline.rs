@@ -311,7 +311,7 @@ pub fn baseline_from_sets(
         DataKind::Distances
     };
     let (problem, identified) =
-        crate::solve::solve(chain, obs, ModelName::Geometric, plan.sigma_m)?;
+        crate::solve::solve(chain, obs, ModelName::Geometric, plan.sigma_m, &[])?;
     let n_shared = problem.points_offset();
     let n_kept = (identified.identifiability.kept.iter())
         .filter(|&&i| i < n_shared)
@@ -414,8 +414,14 @@ pub fn baseline_from_sets(
             cv_rms_m: point_rms(&problem, &nominal_x)?,
             test_rms_m: nominal_test,
         });
-        let held =
-            crate::solve::cross_validate(chain, train, plan, ModelName::Geometric, CV_REPEATS)?;
+        let held = crate::solve::cross_validate(
+            chain,
+            train,
+            plan,
+            ModelName::Geometric,
+            CV_REPEATS,
+            &crate::solve::RowBounds::new(),
+        )?;
         let cv = (held.sq_errors.iter().sum::<f64>() / held.sq_errors.len().max(1) as f64).sqrt();
         rungs.push(KinematicRung {
             rung: Rung::Model(ModelName::Geometric),

@@ -27,7 +27,7 @@ pub use crate::report::{
     CalibrationReport, CvReport, Figures, Outcome, ParamReport, PruneCause, PrunedReport,
     SetReport, SetRole,
 };
-use crate::solve::{cross_validate, observations, solve};
+use crate::solve::{cross_validate, observations, residual_scale, solve};
 
 /// Refuses a calibration whose data determine no parameter, or fewer configurations than the
 /// parameters they would keep.
@@ -156,7 +156,12 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     // The geometric fit on all training data comes first: it refuses data that cannot determine
     // the model before any time goes into cross-validation, and it is the answer whenever the
     // geometric model is chosen.
-    let obs = observations(&train, plan.socket_distance_m, &|_, _, _| true);
+    // Gross errors bounded by the Huber loss: every fit below weights the bounded rows by
+    // their Huber weights; the figures are of the data as measured.
+    let (bounds, downweighted) = crate::solve::winsorize(&chain, &train, plan);
+    let all = |_: usize, _: usize, _: usize| true;
+    let scale = residual_scale(&train, &bounds, &all);
+    let obs = observations(&train, plan.socket_distance_m, &all);
     // The training region: each joint's range over the rows, for the record.
     let ranges =
         crate::measured::reading_ranges(obs.rows.iter().map(|r| r.q.as_slice()), chain.n_joints());
@@ -173,7 +178,13 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         })
         .collect::<std::collections::HashSet<_>>()
         .len();
-    let geometric = solve(&chain, obs.clone(), ModelName::Geometric, plan.sigma_m)?;
+    let geometric = solve(
+        &chain,
+        obs.clone(),
+        ModelName::Geometric,
+        plan.sigma_m,
+        &scale,
+    )?;
     let n_kept = |p: &CalibrationProblem, id: &Identified| {
         id.identifiability
             .kept
@@ -206,7 +217,9 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             let (candidates, level) =
                 crate::model::ladder_for(kind, chain.joint_names(), std::slice::from_ref(&chain));
             let held = (candidates.iter())
-                .map(|&candidate| cross_validate(&chain, &train, plan, candidate, CV_REPEATS))
+                .map(|&candidate| {
+                    cross_validate(&chain, &train, plan, candidate, CV_REPEATS, &bounds)
+                })
                 .collect::<Result<Vec<_>>>()?;
             let (choice, reports) = crate::fit::choose(&candidates, &level, &held);
             cross_validation = reports;
@@ -221,7 +234,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     let (problem, identified) = if choice == ModelName::Geometric {
         geometric
     } else {
-        solve(&chain, obs, choice, plan.sigma_m)?
+        solve(&chain, obs, choice, plan.sigma_m, &scale)?
     };
     let model = problem.model(identified.fit.x.as_ref());
     let layout = problem.layout();
@@ -253,14 +266,20 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     let held: Vec<usize> = (lengths.iter().copied())
         .filter(|i| !identified.identifiability.kept.contains(i))
         .collect();
-    let refitted_lengths = crate::fit::refitted_lengths(
-        &problem,
-        identified.fit.x.as_ref(),
-        identified.sigma,
-        &identified.identifiability.kept,
-        &held,
-        &lengths,
-    );
+    // Not after the Huber loss bounded rows: a bounded row's leftover residual, far from the
+    // others' configurations, pulls the weak directions the held lengths lie along.
+    let refitted_lengths = if downweighted.is_empty() {
+        crate::fit::refitted_lengths(
+            &problem,
+            identified.fit.x.as_ref(),
+            identified.sigma,
+            &identified.identifiability.kept,
+            &held,
+            &lengths,
+        )
+    } else {
+        Vec::new()
+    };
     let correlated = identified
         .covariance
         .correlated_pairs(0.95)
@@ -340,6 +359,29 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     }
     warnings.splice(0..0, worse);
     warnings.extend(copies);
+    let rows = if kind == DataKind::Sockets {
+        "socket rows"
+    } else {
+        "log rows"
+    };
+    warnings.extend(crate::robust::bounded_warning(
+        &downweighted,
+        rows,
+        &ModelName::Geometric.to_string(),
+    ));
+    let n_left_out = (downweighted.iter())
+        .filter(|d| d.residual_m > crate::robust::REJECTION * d.bound_m)
+        .count();
+    if n_left_out > 0 {
+        warnings.push(format!(
+            "{n_left_out} of the {} bounded {rows} lie beyond {} times the corner and were \
+             left out of every fit: the corner's force alone would let a row far from the \
+             others (a glitch in its joint readings) move the parameters by many standard \
+             deviations",
+            downweighted.len(),
+            crate::robust::REJECTION
+        ));
+    }
     let report = CalibrationReport {
         device: plan.device.display().to_string(),
         model: choice,
@@ -361,7 +403,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         rounds: identified.rounds,
         placements,
         elapsed_s: start.elapsed().as_secs_f64(),
-        downweighted: Vec::new(),
+        downweighted,
         range_folds: Vec::new(),
         coverage: None,
         equilibrium_step_m: None,

@@ -19,6 +19,8 @@ use crate::model::DataKind;
 pub struct NamedLog {
     /// File stem.
     pub name: String,
+    /// The file read (the Huber loss lists a bounded row with it and the row's line).
+    pub path: PathBuf,
     /// The rows: joint readings (rad), external encoders (rad), cable distance (m), time (s).
     pub rows: Vec<LogRow>,
     /// What the reader noticed (columns ignored, …), in the user's words.
@@ -326,6 +328,7 @@ fn read_log(path: &Path, device: &Device, units: &Units) -> Result<NamedLog> {
         .with_context(|| format!("reading log {}", path.display()))?;
     Ok(NamedLog {
         name: file_stem(path),
+        path: path.to_path_buf(),
         rows: log.rows,
         warnings: log.warnings,
     })
@@ -348,6 +351,10 @@ pub enum DataSet {
     Distances {
         /// Name (file stem).
         name: String,
+        /// The file read.
+        file: PathBuf,
+        /// 1-based line of each row in `file`.
+        lines: Vec<u64>,
         /// Joint readings per row, rad.
         q: Vec<Vec<f64>>,
         /// Distance per row, m.
@@ -495,6 +502,8 @@ pub fn load_data(paths: &[PathBuf], device: &Device, units: &Units) -> Result<Ve
                 .with_context(|| format!("reading log {}", path.display()))?;
             sets.push(DataSet::Distances {
                 name: file_stem(path),
+                file: path.clone(),
+                lines: log.rows.iter().map(|r| r.line).collect(),
                 q: log.rows.iter().map(|r| r.q.clone()).collect(),
                 distance_m: log.rows.iter().map(|r| r.distance_m).collect(),
             });

@@ -1369,6 +1369,14 @@ pub fn calibrate_logs(
         .map(|o| crate::fit::n_copies(&o))
         .sum();
     let std_scale = (rows.len() as f64 / rows.len().saturating_sub(n_copies).max(1) as f64).sqrt();
+    // Gross errors bounded by the Huber loss: every fit below sees the winsorized distances;
+    // the figures are of the logs as measured.
+    let (rows, downweighted, judge) = winsorize(&haptic, &train, rows, has_ext);
+    warnings.extend(crate::robust::bounded_warning(
+        &downweighted,
+        "log rows",
+        &judge.to_string(),
+    ));
     // `--model auto`: the ladder geometric → transmissions → compliance, each rung the logs and
     // the device carry, climbed by the rule of every workflow (crate::model::climb) on the
     // rungs' held-out errors.
@@ -1755,7 +1763,7 @@ pub fn calibrate_logs(
         rounds: kin.rounds,
         placements,
         elapsed_s: start.elapsed().as_secs_f64(),
-        downweighted: Vec::new(),
+        downweighted,
         range_folds: Vec::new(),
         coverage: None,
         equilibrium_step_m: None,
@@ -1776,6 +1784,81 @@ pub fn calibrate_logs(
         calibrated: Some(calibrated),
         record: None,
     })
+}
+
+/// The training rows as the Huber loss sees them ([`crate::robust::bound_gross_errors`]):
+/// step 2's kinematic deviations fitted to the cable distances (the readings corrected by
+/// step 1's transmissions when the logs carry the external encoders: the transmissions
+/// model, else the geometric one), and every row whose distance error `e` (measured −
+/// modelled) lies beyond the corner given the distance `model + e·c/|e|`, until the set of
+/// bounded rows no longer changes. Returns the rows, the bounded ones listed with their log
+/// (`logs`, whose rows `rows` are, in order) and line, and the model that judged them. Rows
+/// unchanged and none listed when nothing lies beyond the corner, with fewer than 20 rows,
+/// or when the model cannot be fitted.
+fn winsorize(
+    r: &HapticDevice,
+    logs: &[NamedLog],
+    rows: Vec<LogRow>,
+    has_ext: bool,
+) -> (Vec<LogRow>, Vec<crate::report::Downweighted>, ModelName) {
+    use crate::robust::{Dim, Round, bound_gross_errors, redundancy};
+    let transmissions = if has_ext {
+        identify_transmissions(r, &rows).ok()
+    } else {
+        None
+    };
+    let judge = if transmissions.is_some() {
+        ModelName::Transmissions
+    } else {
+        ModelName::Geometric
+    };
+    // Every row's distance error and modelled distance under the last fit, m.
+    let mut last: Vec<(f64, f64)> = Vec::new();
+    let winsorized = |last: &[(f64, f64)], bounds: &[crate::robust::Bound]| {
+        let mut out = rows.clone();
+        for b in bounds {
+            let (e, model) = last[b.sample];
+            out[b.sample].distance_m = model + e * (b.corner / b.norm);
+        }
+        out
+    };
+    let bounds = bound_gross_errors(rows.len(), Dim::One, |bounds| {
+        let fitted = winsorized(&last, bounds);
+        let (_, kin) = identify_kinematics(r, &fitted, transmissions.as_ref()).ok()?;
+        let redundancy = redundancy(kin.fit.residuals.nrows(), kin.identifiability.kept.len())?;
+        let x: Vec<f64> = kin.fit.x.iter().copied().collect();
+        last = (rows.iter())
+            .map(|row| {
+                let q = transmissions
+                    .as_ref()
+                    .map_or_else(|| row.q.clone(), |t| t.corrected(&row.q));
+                let model = r.chain.end_point(&x, &q).coords.norm();
+                (row.distance_m - model, model)
+            })
+            .collect();
+        Some(Round {
+            norms: last.iter().map(|(e, _)| e.abs()).collect(),
+            redundancy,
+        })
+    });
+    if bounds.is_empty() {
+        return (rows, Vec::new(), judge);
+    }
+    let files: Vec<&std::path::Path> = (logs.iter())
+        .flat_map(|log| log.rows.iter().map(|_| log.path.as_path()))
+        .collect();
+    let listed = (bounds.iter())
+        .map(|b| crate::report::Downweighted {
+            file: files
+                .get(b.sample)
+                .map_or_else(String::new, |f| f.display().to_string()),
+            line: rows[b.sample].line,
+            marker: None,
+            residual_m: b.norm,
+            bound_m: b.corner,
+        })
+        .collect();
+    (winsorized(&last, &bounds), listed, judge)
 }
 
 /// Number of distinct joint-reading vectors among `rows`, or of distinct readings of joint

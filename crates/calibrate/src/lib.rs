@@ -18,6 +18,7 @@ pub mod noise;
 pub mod plan;
 pub mod record;
 pub mod report;
+pub mod robust;
 pub mod setup;
 pub mod setup_families;
 pub mod setup_findings;

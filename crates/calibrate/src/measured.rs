@@ -2180,24 +2180,11 @@ pub fn calibrate_measured(
             warnings.extend(outside_warnings(t, robot, &ranges, sigmas, rms(&reference)));
         }
     }
-    if !downweighted.is_empty() {
-        let worst = (downweighted.iter())
-            .max_by(|a, b| a.residual_m.total_cmp(&b.residual_m))
-            .map(|d| format!("{}:{} marker {}", d.file, d.line, d.marker))
-            .unwrap_or_default();
-        warnings.push(format!(
-            "{} training samples lie beyond {:.2} mm ({HUBER_CORNER} robust standard deviations \
-             per axis) from the {judge} model and were bounded there by the Huber loss (the \
-             largest, {:.2} mm, at {worst}); each is listed with its residual",
-            downweighted.len(),
-            downweighted[0].bound_m * 1e3,
-            downweighted
-                .iter()
-                .map(|d| d.residual_m)
-                .fold(0.0, f64::max)
-                * 1e3,
-        ));
-    }
+    warnings.extend(crate::robust::bounded_warning(
+        &downweighted,
+        "training samples",
+        &judge.to_string(),
+    ));
     let equilibrium_step_m = model.compliance.is_some().then(|| {
         (train_measured.iter().flat_map(|t| &t.rows))
             .map(|r| model.equilibrium_step_m(&r.q))
@@ -2877,35 +2864,19 @@ fn compliance_unit(name: &str, masses: bool) -> Option<&'static str> {
     })
 }
 
-/// Corner of the Huber loss, in robust standard deviations per axis of a marker's position:
-/// a sample whose 3-D residual exceeds `HUBER_CORNER·√3·s` pulls on the fit with a bounded
-/// force. `|e|²/s²` of a clean Gaussian sample is χ² with 3 degrees of freedom, above 48 with
-/// probability 10⁻⁹: on Gaussian data the loss is least squares, sample for sample. Real
-/// residuals carry model error and have heavier tails: at 3, three samples of the TIAGo
-/// recording (the largest 6.7 mm) were bounded though nothing sets them apart from the rest;
-/// at 4 none is.
-pub const HUBER_CORNER: f64 = 4.0;
+pub use crate::robust::HUBER_CORNER;
 
-/// Residuals per parameter a fit needs before its residuals measure the noise well enough to
-/// call a sample a gross error ([`winsorize`]).
-const MIN_REDUNDANCY: f64 = 4.0;
+/// A marker sample under one fit: table, row, marker, residual and model position, m.
+type Evaluated = (usize, usize, usize, Vector3<f64>, Vector3<f64>);
 
-/// Median of the χ distribution with 3 degrees of freedom: the median 3-D norm of an
-/// isotropic Gaussian error of unit standard deviation per axis.
-const CHI3_MEDIAN: f64 = 1.538_2;
-
-/// The training tables as the Huber loss sees them (Huber 1981, *Robust Statistics*, §7.8,
-/// metrically winsorized residuals): `rung` is fitted (the richest rung of the ladder, or the
-/// rung given), the robust scale `s` of
-/// the marker residuals taken from their median norm, and every sample whose 3-D residual
-/// `e` exceeds the corner `c = HUBER_CORNER·√3·s` replaced by `model + e·c/|e|`; fitted
-/// again until the set of bounded samples no longer changes (at most 10 rounds). The least-
-/// squares fit of the winsorized samples is the Huber M-estimate. Tables unchanged and no
-/// sample listed when nothing exceeds the corner, with fewer than 20 samples, or when the
-/// rung cannot be fitted. A rung with fewer than [`MIN_REDUNDANCY`] residuals per kept
-/// parameter gives way to the geometric rung; the scale is corrected for the parameters
-/// fitted (`√(m/(m − p))`). With nothing bounded, the rung used and its fit on the tables as
-/// measured are returned too.
+/// The training tables as the Huber loss sees them ([`crate::robust::bound_gross_errors`]):
+/// `rung` is fitted (the richest rung of the ladder, or the rung given) and every marker
+/// sample whose 3-D residual `e` exceeds the corner replaced by `model + e·c/|e|`, until the
+/// set of bounded samples no longer changes. Tables unchanged and no sample listed when
+/// nothing exceeds the corner, with fewer than 20 samples, or when the rung cannot be fitted.
+/// A rung with fewer than [`crate::robust::MIN_REDUNDANCY`] residuals per kept parameter
+/// gives way to the geometric rung. With nothing bounded, the rung used and its fit on the
+/// tables as measured are returned too.
 fn winsorize(
     rung: ModelName,
     robot: &Robot,
@@ -2914,88 +2885,79 @@ fn winsorize(
     train: &[MeasurementTable],
     weights: Weights,
 ) -> Result<Winsorized> {
+    use crate::robust::{Dim, Round, bound_gross_errors, redundancy};
     let all = |_: usize, _: usize| true;
     let n_samples: usize = (train.iter().flat_map(|t| &t.rows))
         .map(|r| r.markers.len())
         .sum();
-    let mut tables = train.to_vec();
-    if n_samples < 20 {
-        return Ok((tables, Vec::new(), None, rung));
-    }
     let mut first = None;
-    let mut corner = None;
-    let mut redundancy = 1.0;
+    let mut first_redundancy = 1.0;
     let mut rung = rung;
-    let mut bounded: Vec<Downweighted> = Vec::new();
-    for _ in 0..10 {
-        let Ok((model, fitted)) = fit(rung, robot, start, offsets, &tables, weights, &all) else {
-            break;
+    // Every sample of the last fit: table, row, marker, residual, model position.
+    let mut evaluated: Vec<Evaluated> = Vec::new();
+    let winsorized = |evaluated: &[Evaluated], bounds: &[crate::robust::Bound]| {
+        let mut tables = train.to_vec();
+        for b in bounds {
+            let (ti, ri, mi, e, p) = evaluated[b.sample];
+            tables[ti].rows[ri].markers[mi].position_m = (p + e * (b.corner / b.norm)).into();
+        }
+        tables
+    };
+    let bounds = bound_gross_errors(n_samples, Dim::Three, |bounds| {
+        let tables = winsorized(&evaluated, bounds);
+        let (model, fitted, redundancy) = loop {
+            let (model, fitted) = fit(rung, robot, start, offsets, &tables, weights, &all).ok()?;
+            let n_residuals = fitted.identified.fit.residuals.nrows();
+            let n_kept = fitted.identified.identifiability.kept.len();
+            match redundancy(n_residuals, n_kept) {
+                Some(r) => break (model, fitted, r),
+                // A later round's fit of the same rung and samples: the first round's
+                // redundancy.
+                None if first.is_some() => break (model, fitted, first_redundancy),
+                // A rung with too few residuals per parameter fits the noise itself, and a
+                // gross error hides in it: the geometric rung judges instead.
+                None if first.is_none() && rung > ModelName::Geometric => {
+                    rung = ModelName::Geometric;
+                }
+                None => return None,
+            }
         };
-        let n_residuals = fitted.identified.fit.residuals.nrows() as f64;
-        let n_kept = fitted.identified.identifiability.kept.len() as f64;
-        if corner.is_none() {
-            // Residuals of a fit with p parameters from m residuals are smaller than the
-            // noise by √((m − p)/m); a rung with fewer than MIN_REDUNDANCY residuals per
-            // parameter fits the noise itself, and a gross error hides in it: the geometric
-            // rung judges instead.
-            if n_residuals < MIN_REDUNDANCY * n_kept && rung > ModelName::Geometric {
-                rung = ModelName::Geometric;
-                continue;
-            }
-            if n_residuals < MIN_REDUNDANCY * n_kept {
-                break;
-            }
-            redundancy = (n_residuals / (n_residuals - n_kept)).sqrt();
-        }
-        if first.is_none() {
-            first = Some((rung, (model.clone(), fitted)));
-        }
-        let mut residuals = Vec::with_capacity(n_samples);
+        evaluated.clear();
         for (ti, t) in train.iter().enumerate() {
             for (ri, row) in t.rows.iter().enumerate() {
                 let tips: Vec<usize> = row.markers.iter().map(|m| m.marker).collect();
                 let poses = model.end_poses_of(&tips, &row.q);
                 for (mi, (m, pose)) in row.markers.iter().zip(poses).enumerate() {
                     let p = pose.translation.vector;
-                    residuals.push((ti, ri, mi, Vector3::from(m.position_m) - p, p));
+                    evaluated.push((ti, ri, mi, Vector3::from(m.position_m) - p, p));
                 }
             }
         }
-        let c = *corner.get_or_insert_with(|| {
-            let mut norms: Vec<f64> = residuals.iter().map(|r| r.3.norm()).collect();
-            norms.sort_by(f64::total_cmp);
-            HUBER_CORNER * 3f64.sqrt() * redundancy * norms[norms.len() / 2] / CHI3_MEDIAN
-        });
-        tables = train.to_vec();
-        let mut now = Vec::new();
-        for (ti, ri, mi, e, p) in residuals {
-            let norm = e.norm();
-            if norm > c {
-                let sample = &mut tables[ti].rows[ri].markers[mi];
-                sample.position_m = (p + e * (c / norm)).into();
-                now.push(Downweighted {
-                    file: train[ti].path.display().to_string(),
-                    line: train[ti].rows[ri].line,
-                    marker: sample.marker + 1,
-                    residual_m: norm,
-                    bound_m: c,
-                });
+        if first.is_none() {
+            first = Some((rung, (model, fitted)));
+            first_redundancy = redundancy;
+        }
+        Some(Round {
+            norms: evaluated.iter().map(|s| s.3.norm()).collect(),
+            redundancy,
+        })
+    });
+    if bounds.is_empty() {
+        return Ok((train.to_vec(), Vec::new(), first, rung));
+    }
+    let downweighted = (bounds.iter())
+        .map(|b| {
+            let (ti, ri, mi, _, _) = evaluated[b.sample];
+            Downweighted {
+                file: train[ti].path.display().to_string(),
+                line: train[ti].rows[ri].line,
+                marker: Some(train[ti].rows[ri].markers[mi].marker + 1),
+                residual_m: b.norm,
+                bound_m: b.corner,
             }
-        }
-        let same = now.len() == bounded.len()
-            && now
-                .iter()
-                .zip(&bounded)
-                .all(|(a, b)| (a.line, a.marker) == (b.line, b.marker));
-        bounded = now;
-        if same {
-            break;
-        }
-    }
-    if bounded.is_empty() {
-        return Ok((train.to_vec(), bounded, first, rung));
-    }
-    Ok((tables, bounded, None, rung))
+        })
+        .collect();
+    Ok((winsorized(&evaluated, &bounds), downweighted, None, rung))
 }
 
 /// The frames-only fit of the training tables ([`frames_only`]).

@@ -242,8 +242,8 @@ pub struct CalibrationReport {
     pub placements: Vec<SetReport>,
     /// Wall time from reading the files to the finished report, s.
     pub elapsed_s: f64,
-    /// Measurement files: the training samples the Huber loss bounded, each with its file,
-    /// line and residual (empty otherwise).
+    /// The training samples the Huber loss bounded (marker positions, socket rows, distance
+    /// log rows), each with its file, line and residual (empty when none was).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub downweighted: Vec<Downweighted>,
     /// Measurement files: the joint-range folds the ladder judged extrapolation by (empty
@@ -555,7 +555,8 @@ pub struct RangeStop {
     pub judged: bool,
 }
 
-/// A marker sample the Huber loss bounded: its residual under the fit as measured, and the
+/// A sample the Huber loss bounded ([`crate::robust`]): a marker's position, a socket row's
+/// end point, a distance log's distance; its residual under the fit as measured, and the
 /// bound the fit saw instead.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Downweighted {
@@ -563,12 +564,24 @@ pub struct Downweighted {
     pub file: String,
     /// Its line (1-based).
     pub line: u64,
-    /// The marker, 1-based.
-    pub marker: usize,
-    /// 3-D residual under the model the loss was evaluated with, m.
+    /// The marker, 1-based (measurement files; none for a socket row or a distance).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub marker: Option<usize>,
+    /// Residual under the model the loss was evaluated with (3-D for a marker or a socket
+    /// row, the distance's for a log), m.
     pub residual_m: f64,
     /// The residual the fit saw (the Huber corner), m.
     pub bound_m: f64,
+}
+
+impl Downweighted {
+    /// Where it is: `file:line`, and ` marker k` for a marker.
+    pub fn place(&self) -> String {
+        let marker = self
+            .marker
+            .map_or_else(String::new, |m| format!(" marker {m}"));
+        format!("{}:{}{marker}", self.file, self.line)
+    }
 }
 
 /// [`CalibrationReport::termination`] in the report's words.

@@ -30,6 +30,7 @@ fn auto(rows: Vec<LogRow>) -> CalibrationReport {
     };
     let train = vec![NamedLog {
         name: "train".into(),
+        path: "train.csv".into(),
         rows,
         warnings: Vec::new(),
     }];

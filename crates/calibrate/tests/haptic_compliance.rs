@@ -160,6 +160,7 @@ fn negative_handle_compliances_are_implausible_not_a_result() {
         };
         let train = vec![NamedLog {
             name: "train".into(),
+            path: "train.csv".into(),
             rows: log(31, 300, &[effect]),
             warnings: Vec::new(),
         }];

@@ -360,10 +360,8 @@ pub fn render_results(r: &CalibrationReport) -> String {
         for d in &r.downweighted {
             let _ = writeln!(
                 s,
-                "  {}:{} marker {}  {:.3} → {:.3}",
-                d.file,
-                d.line,
-                d.marker,
+                "  {}  {:.3} → {:.3}",
+                d.place(),
                 d.residual_m * 1e3,
                 d.bound_m * 1e3
             );
