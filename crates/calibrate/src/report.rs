@@ -555,7 +555,7 @@ pub struct RangeStop {
     pub judged: bool,
 }
 
-/// A sample the Huber loss bounded ([`crate::robust`]): a marker's position, a socket row's
+/// A sample the Huber loss bounded (module `robust`): a marker's position, a socket row's
 /// end point, a distance log's distance; its residual under the fit as measured, and the
 /// bound the fit saw instead.
 #[derive(Clone, Debug, PartialEq, Serialize)]

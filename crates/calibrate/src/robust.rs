@@ -3,9 +3,9 @@
 //! residuals from their median norm, and every sample beyond the corner pulled back onto it;
 //! fitted again, the scale estimated again from each fit, until the set of bounded samples
 //! and the scale no longer change. Measurement files bound a
-//! marker's position ([`crate::measured`]), socket folders a row's distance from its socket,
-//! distance logs (a chain's and a haptic device's) a row's distance ([`crate::calibrate`],
-//! [`crate::haptic`]); every workflow lists what it bounded with its file and line
+//! marker's position (the measurement workflow), socket folders a row's distance from its socket,
+//! distance logs (a chain's and a haptic device's) a row's distance (`calibrate::run`,
+//! the haptic workflow); every workflow lists what it bounded with its file and line
 //! ([`crate::report::Downweighted`]).
 
 use faer::{Col, ColMut, ColRef, MatMut};
@@ -30,7 +30,7 @@ pub(crate) const MIN_REDUNDANCY: f64 = 4.0;
 /// Samples a fit needs before the Huber loss judges any of them.
 pub(crate) const MIN_SAMPLES: usize = 20;
 
-/// Corners beyond which a socket row or chain distance-log row ([`crate::solve::winsorize`])
+/// Corners beyond which a socket row or chain distance-log row (`solve::winsorize`)
 /// is left out of the fits rather than bounded (weight 0, [`Bound::weight`]): the outer
 /// point of a redescending loss (Hampel's three-part redescending ψ, Hampel, Ronchetti,
 /// Rousseeuw & Stahel 1986, *Robust Statistics: The Approach Based on Influence Functions*,
@@ -41,7 +41,7 @@ pub(crate) const MIN_SAMPLES: usize = 20;
 /// `tests/gross_errors.rs`, with the geometric and the mass-compliance model judging). Left
 /// out, it moves none by more than 0.1 of one. A clean row lies beyond `2·4·√d` robust
 /// standard deviations with probability below 10⁻¹⁴. Marker files and haptic logs move a
-/// bounded sample onto the corner instead ([`crate::measured`], [`crate::haptic`]).
+/// bounded sample onto the corner instead (the measurement and haptic workflows).
 pub(crate) const REJECTION: f64 = 2.0;
 
 /// Fits at most, until the set of bounded samples and the corner no longer change.
