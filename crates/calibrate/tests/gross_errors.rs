@@ -4,8 +4,6 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use hapcal_calibrate::calibrate::run;
-use hapcal_calibrate::data::NamedLog;
-use hapcal_calibrate::haptic::calibrate_logs;
 use hapcal_calibrate::inputs::Plan;
 use hapcal_calibrate::model::{ModelChoice, ModelName};
 use hapcal_calibrate::report::CalibrationReport;
@@ -13,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 #[path = "sim/haptic_log.rs"]
 mod haptic_log;
-use haptic_log::{log, reference};
+use haptic_log::{calibrate_rows, log};
 
 /// A copy of `fixtures/mukca/data/kuka_14/front` in a fresh folder, with `edit` applied to
 /// the rows of `hole_1.csv` (no header: row `k` is line `k + 1`).
@@ -105,23 +103,7 @@ fn one_glitch_row_of_a_socket_folder_is_bounded_listed_and_moves_no_parameter_by
 /// `hapcal calibrate --model geometric` on the reference device's training log `rows`, read
 /// from `train.csv`.
 fn calibrate_log(rows: Vec<hapcal_io::LogRow>) -> CalibrationReport {
-    let (device, _) = reference();
-    let plan = Plan {
-        device: "fixtures/reference-device/device.toml".into(),
-        model: ModelChoice::Model(ModelName::Geometric),
-        data: Vec::new(),
-        test: Vec::new(),
-        ..Plan::bundled_default()
-    };
-    let train = vec![NamedLog {
-        name: "train".into(),
-        path: "train.csv".into(),
-        rows,
-        warnings: Vec::new(),
-    }];
-    calibrate_logs(&plan, device, train, Vec::new(), std::time::Instant::now())
-        .unwrap()
-        .report
+    calibrate_rows(ModelChoice::Model(ModelName::Geometric), rows)
 }
 
 #[test]

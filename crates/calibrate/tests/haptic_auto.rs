@@ -3,16 +3,13 @@
 //! device whose truth the test knows and the calibration does not.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use hapcal_calibrate::data::NamedLog;
-use hapcal_calibrate::haptic::calibrate_logs;
-use hapcal_calibrate::inputs::Plan;
 use hapcal_calibrate::model::{LADDER_SIGNIFICANCE_Z, ModelChoice, ModelName};
 use hapcal_calibrate::report::CalibrationReport;
 use hapcal_io::LogRow;
 
 #[path = "sim/haptic_log.rs"]
 mod haptic_log;
-use haptic_log::{log, reference};
+use haptic_log::{calibrate_rows, log, reference};
 
 /// `hapcal calibrate --model auto` on the training log `rows` of the reference device.
 fn auto(rows: Vec<LogRow>) -> CalibrationReport {
@@ -21,21 +18,7 @@ fn auto(rows: Vec<LogRow>) -> CalibrationReport {
         device.handle.is_some_and(|h| h.mass_kg > 0.0),
         "the reference device has a handle mass: compliance is a rung"
     );
-    let plan = Plan {
-        device: "fixtures/reference-device/device.toml".into(),
-        model: ModelChoice::Auto,
-        data: Vec::new(),
-        test: Vec::new(),
-        ..Plan::bundled_default()
-    };
-    let train = vec![NamedLog {
-        name: "train".into(),
-        path: "train.csv".into(),
-        rows,
-        warnings: Vec::new(),
-    }];
-    let out = calibrate_logs(&plan, device, train, Vec::new(), std::time::Instant::now()).unwrap();
-    out.report
+    calibrate_rows(ModelChoice::Auto, rows)
 }
 
 fn rungs(report: &CalibrationReport) -> Vec<ModelName> {

@@ -13,7 +13,7 @@ use hapcal_io::LogRow;
 
 #[path = "sim/haptic_log.rs"]
 mod haptic_log;
-use haptic_log::{log, reference};
+use haptic_log::{calibrate_rows, log, reference};
 
 fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
@@ -144,29 +144,11 @@ fn without_a_compliance_the_fitted_coefficients_are_zero_within_their_uncertaint
 /// with the compliance of a real handle (positive) are plausible.
 #[test]
 fn negative_handle_compliances_are_implausible_not_a_result() {
-    use hapcal_calibrate::data::NamedLog;
-    use hapcal_calibrate::haptic::calibrate_logs;
-    use hapcal_calibrate::inputs::Plan;
     use hapcal_calibrate::model::{ModelChoice, ModelName};
     use hapcal_calibrate::report::ImplausibleKind;
     let implausible = |effect: &str| {
-        let (device, _) = reference();
-        let plan = Plan {
-            device: "fixtures/reference-device/device.toml".into(),
-            model: ModelChoice::Model(ModelName::Compliance),
-            data: Vec::new(),
-            test: Vec::new(),
-            ..Plan::bundled_default()
-        };
-        let train = vec![NamedLog {
-            name: "train".into(),
-            path: "train.csv".into(),
-            rows: log(31, 300, &[effect]),
-            warnings: Vec::new(),
-        }];
-        let outcome =
-            calibrate_logs(&plan, device, train, Vec::new(), std::time::Instant::now()).unwrap();
-        outcome.report.implausible
+        let rows = log(31, 300, &[effect]);
+        calibrate_rows(ModelChoice::Model(ModelName::Compliance), rows).implausible
     };
     let negative = implausible("gravity_compliance:j2=-5e-3,j3=-5e-3");
     assert_eq!(negative.len(), 1, "{negative:?}");

@@ -25,3 +25,29 @@ pub(crate) fn log(seed: u64, n: usize, effects: &[&str]) -> Vec<LogRow> {
     let cfg = SimConfig::new(seed, n).with_noise(NoiseModel::paper(&cable));
     simulate_motion(&device, &truth, &cfg, &MotionConfig::default(), &effects).expect("sim")
 }
+
+/// `hapcal calibrate --model <model>` on the reference device with the training log `rows`,
+/// read from `train.csv`, no test log: the report.
+pub(crate) fn calibrate_rows(
+    model: hapcal_calibrate::model::ModelChoice,
+    rows: Vec<LogRow>,
+) -> hapcal_calibrate::report::CalibrationReport {
+    let (device, _) = reference();
+    let plan = hapcal_calibrate::inputs::Plan {
+        device: "fixtures/reference-device/device.toml".into(),
+        model,
+        data: Vec::new(),
+        test: Vec::new(),
+        ..hapcal_calibrate::inputs::Plan::bundled_default()
+    };
+    let train = vec![hapcal_calibrate::data::NamedLog {
+        name: "train".into(),
+        path: "train.csv".into(),
+        rows,
+        warnings: Vec::new(),
+    }];
+    let start = std::time::Instant::now();
+    hapcal_calibrate::haptic::calibrate_logs(&plan, device, train, Vec::new(), start)
+        .expect("a calibration of the simulated log")
+        .report
+}
