@@ -1253,6 +1253,21 @@ fn line_ranges(lines: &[u64]) -> String {
     out.join(", ")
 }
 
+/// "rows 19–24 of tail.csv": the rows `rows` (indices) of `table` by their file lines.
+fn rows_of_file(table: &MeasurementTable, rows: &[usize]) -> String {
+    let lines: Vec<u64> = rows.iter().map(|&i| table.rows[i].line).collect();
+    let file = (table.path.file_name())
+        .map_or_else(|| table.name.clone(), |f| f.to_string_lossy().into_owned());
+    format!("rows {} of {file}", line_ranges(&lines))
+}
+
+/// The name of the unit of [`PART_UNITS`] of `m` metres (`metres` for 1), if any.
+fn part_unit_name(m: f64) -> Option<&'static str> {
+    (PART_UNITS.iter())
+        .find(|(u, _)| (u / m - 1.0).abs() < 1e-9)
+        .map(|&(_, name)| name)
+}
+
 /// The length units a part of a file may be in, in metres, with their names.
 const PART_UNITS: [(f64, &str); 5] = [
     (1.0, "metres"),
@@ -1272,10 +1287,7 @@ fn part_unit_hypotheses(
     unit: LengthUnit,
 ) -> Vec<Corrected<MeasuredData>> {
     let file_m = unit.to_m();
-    let Some(&(_, file_name)) = PART_UNITS
-        .iter()
-        .find(|(m, _)| (m / file_m - 1.0).abs() < 1e-9)
-    else {
+    let Some(file_name) = part_unit_name(file_m) else {
         return Vec::new();
     };
     let mut out = Vec::new();
@@ -1300,10 +1312,7 @@ fn part_unit_hypotheses(
                 m.position_m = m.position_m.map(|v| v * factor);
             }
         }
-        let lines: Vec<u64> = rows.iter().map(|&i| table.rows[i].line).collect();
-        let file = (table.path.file_name())
-            .map_or_else(|| table.name.clone(), |f| f.to_string_lossy().into_owned());
-        let where_ = format!("rows {} of {file}", line_ranges(&lines));
+        let where_ = rows_of_file(table, &rows);
         out.push(Corrected::new(
             MistakeClass::LengthUnit,
             format!("{where_} look like {part_name} while the rest are in {file_name}"),
@@ -1759,9 +1768,7 @@ fn part_in_millimetres(
     first: &str,
 ) -> Option<SetupReport> {
     let file_m = plan.units.length.to_m();
-    let &(_, file_name) = PART_UNITS
-        .iter()
-        .find(|(m, _)| (m / file_m - 1.0).abs() < 1e-9)?;
+    let file_name = part_unit_name(file_m)?;
     let mut corrected = tables.to_vec();
     let mut located = Vec::new();
     for (t, table) in tables.iter().enumerate() {
@@ -1776,10 +1783,7 @@ fn part_in_millimetres(
                 }
             }
         }
-        let lines: Vec<u64> = large.iter().map(|&i| table.rows[i].line).collect();
-        let file = (table.path.file_name())
-            .map_or_else(|| table.name.clone(), |f| f.to_string_lossy().into_owned());
-        located.push(format!("rows {} of {file}", line_ranges(&lines)));
+        located.push(rows_of_file(table, &large));
     }
     if located.is_empty() {
         return None;
