@@ -1786,6 +1786,8 @@ pub fn calibrate_measured(
     let mut untried: Vec<Untried> = Vec::new();
     // Rungs of the ladder whose fit on every training row did not converge, with that fit.
     let mut unconverged: Vec<(ModelName, hapcal_identify::Fit)> = Vec::new();
+    // Why the ladder left out the rung that predicted best.
+    let mut ladder_notes: Vec<String> = Vec::new();
     let (rung, (model, fitted)) = match cfg.rung {
         Some(r) if r == ModelName::FramesOnly => (r, (frames_model.clone(), frames_only.clone())),
         Some(r) => match richest_fit.take() {
@@ -1984,7 +1986,53 @@ pub fn calibrate_measured(
                 }
                 allowed
             };
-            let chosen = crate::model::climb(&ladder_levels, &beats, &|i| rms(&scores[i].squared));
+            // A chosen rung whose compliances no real robot has (below zero beyond the bound)
+            // and no other mounting explains is never the result: the ladder keeps the best
+            // of the others, and says why. Negative compliances another mounting explains
+            // stay, for the check after the fit to name the mounting.
+            let unit = if robot.masses.is_empty() {
+                "rad/m"
+            } else {
+                "rad/(N·m)"
+            };
+            let mut left_out: Vec<(usize, String)> = Vec::new();
+            let chosen = loop {
+                stops.borrow_mut().clear();
+                let allowed =
+                    |i: usize, j: usize| left_out.iter().all(|(k, _)| *k != i) && beats(i, j);
+                let chosen =
+                    crate::model::climb(&ladder_levels, &allowed, &|i| rms(&scores[i].squared));
+                let (chosen_model, chosen_fit) = &fits[chosen];
+                let (negative, n_compliances) =
+                    crate::fit::negative_compliances(&chosen_fit.identified, 1.0);
+                if chosen == 0 || negative.is_empty() {
+                    break chosen;
+                }
+                let refit = Refit {
+                    rung: rungs[chosen],
+                    robot,
+                    start: &start,
+                    offsets: &offsets,
+                    train,
+                    weights,
+                };
+                let (_, given_rms, _) = stats(&position_errors(chosen_model, train));
+                if negative.len() >= 2 && mounting_test(&refit, given_rms).is_some() {
+                    break chosen;
+                }
+                left_out.push((
+                    chosen,
+                    crate::fit::negative_compliance_words(&negative, n_compliances, unit),
+                ));
+            };
+            for (i, words) in &left_out {
+                ladder_notes.push(format!(
+                    "the {} model predicted the held-out rows best but was left out: its \
+                     compliances are negative ({words}) and no mounting explains them (it \
+                     absorbs an effect it lacks); the ladder keeps the {} model",
+                    rungs[*i], rungs[chosen]
+                ));
+            }
             range_folds_used = ranges.into_iter().map(|r| r.report).collect();
             range_stops = stops.into_inner();
             (rungs[chosen], fits.swap_remove(chosen))
@@ -2007,6 +2055,7 @@ pub fn calibrate_measured(
         warnings.extend(crate::fit::copies_warning(n_table_copies(train)));
     }
     warnings.extend(untried_note(&ladder, &untried));
+    warnings.extend(ladder_notes);
     for (r, f) in &unconverged {
         warnings.push(format!(
             "{UNCONVERGED_RUNG_NOTE}{r} model: its least-squares fit stopped after {} evaluations, \

@@ -620,27 +620,9 @@ pub(crate) fn row_hypotheses<D: SetupData>(
             .filter(|r| r.0 == f)
             .map(|r| (r.1, r.2))
             .collect();
-        if rows.len() < 12 {
+        let Some((k, contrast)) = step_up(&rows) else {
             continue;
-        }
-        let prefix: Vec<f64> = (rows.iter())
-            .scan(0.0, |sum, r| {
-                *sum += r.1;
-                Some(*sum)
-            })
-            .collect();
-        let total = prefix[rows.len() - 1];
-        let mut best: Option<(usize, f64)> = None;
-        for k in 4..rows.len() - 3 {
-            let before = prefix[k - 1];
-            let mean_before = before / k as f64;
-            let mean_after = (total - before) / (rows.len() - k) as f64;
-            let contrast = mean_after / mean_before.max(f64::MIN_POSITIVE);
-            if best.is_none_or(|(_, c)| contrast > c) {
-                best = Some((k, contrast));
-            }
-        }
-        let Some((k, contrast)) = best else { continue };
+        };
         if contrast < MISMATCH_FACTOR / 2.0 {
             continue;
         }
@@ -657,6 +639,101 @@ pub(crate) fn row_hypotheses<D: SetupData>(
         }
     }
     out
+}
+
+/// The split of one file's rows (line, residual) in checking order that best separates low
+/// residuals before from high ones after: the first row after it and the ratio of the mean
+/// residual after to the mean before. `None` for fewer than 12 rows (a split keeps 4 rows
+/// before it and 3 after).
+fn step_up(rows: &[(u64, f64)]) -> Option<(usize, f64)> {
+    if rows.len() < 12 {
+        return None;
+    }
+    let prefix: Vec<f64> = (rows.iter())
+        .scan(0.0, |sum, r| {
+            *sum += r.1;
+            Some(*sum)
+        })
+        .collect();
+    let total = prefix[rows.len() - 1];
+    let mut best: Option<(usize, f64)> = None;
+    for k in 4..rows.len() - 3 {
+        let before = prefix[k - 1];
+        let mean_before = before / k as f64;
+        let mean_after = (total - before) / (rows.len() - k) as f64;
+        let contrast = mean_after / mean_before.max(f64::MIN_POSITIVE);
+        if best.is_none_or(|(_, c)| contrast > c) {
+            best = Some((k, contrast));
+        }
+    }
+    best
+}
+
+/// Share of the rows checked that, holding more than half the sum of squared residuals, make
+/// a residual *carried by a few rows*.
+const FEW_ROWS_SHARE: f64 = 0.1;
+
+/// Where a residual no hypothesis explains lies, in words that name no cause: the file and
+/// line from which it steps up (the per-row residual after it [`MISMATCH_FACTOR`]`/2` times
+/// the one before), or the few rows (at most [`FEW_ROWS_SHARE`] of them) that hold more than
+/// half its sum of squares, or that it is spread over every row. `per_row` and `file_names`
+/// as [`row_hypotheses`] takes them; `None` for fewer than 12 rows.
+pub(crate) fn residual_location(
+    per_row: &[(usize, u64, f64)],
+    file_names: &[String],
+) -> Option<String> {
+    if per_row.len() < 12 {
+        return None;
+    }
+    let name = |f: usize| file_names.get(f).map_or("?", String::as_str);
+    let mut steps: Vec<(f64, String)> = Vec::new();
+    for f in 0..file_names.len() {
+        let rows: Vec<(u64, f64)> = (per_row.iter())
+            .filter(|r| r.0 == f)
+            .map(|r| (r.1, r.2))
+            .collect();
+        if let Some((k, contrast)) = step_up(&rows)
+            && contrast >= MISMATCH_FACTOR / 2.0
+        {
+            steps.push((
+                contrast,
+                format!(
+                    "it steps up from {}:{} on (the rows after it {contrast:.0}× the rows before)",
+                    name(f),
+                    rows[k].0
+                ),
+            ));
+        }
+    }
+    if let Some((_, words)) = steps.into_iter().max_by(|a, b| a.0.total_cmp(&b.0)) {
+        return Some(words);
+    }
+    let mut by_size: Vec<&(usize, u64, f64)> = per_row.iter().collect();
+    by_size.sort_by(|a, b| b.2.total_cmp(&a.2));
+    let total: f64 = per_row.iter().map(|r| r.2 * r.2).sum();
+    let mut sum = 0.0;
+    let few = (FEW_ROWS_SHARE * per_row.len() as f64).floor() as usize;
+    for (i, r) in by_size.iter().enumerate().take(few) {
+        sum += r.2 * r.2;
+        if sum > 0.5 * total {
+            let lines: Vec<String> = (by_size[..=i].iter())
+                .take(6)
+                .map(|r| format!("{}:{}", name(r.0), r.1))
+                .collect();
+            let more = if i + 1 > 6 { ", …" } else { "" };
+            return Some(format!(
+                "{} of the {} rows checked hold most of it ({}{more})",
+                i + 1,
+                per_row.len(),
+                lines.join(", ")
+            ));
+        }
+    }
+    Some(format!(
+        "it is spread over the {} rows checked (no row or range of rows stands out: the \
+         description, the tip or the columns rather than some rows)",
+        per_row.len()
+    ))
 }
 
 /// The mistake and fix of joint readings `shift` rows out of step (from `from`'s file and line

@@ -632,7 +632,9 @@ fn by_rank(a: &Score, b: &Score) -> std::cmp::Ordering {
 ///   more, explains the data whatever its gain relative to their spread: an error;
 /// - otherwise one that divides the residual by [`OVERWHELMING_FACTOR`] (by
 ///   [`SUGGESTIVE_FACTOR`] with columns of its own as evidence) and leaves a plausible residual
-///   is an error, one that divides it by [`SUGGESTIVE_FACTOR`] a warning;
+///   is an error, one that divides it by [`SUGGESTIVE_FACTOR`] and leaves a plausible
+///   residual a warning; one that leaves more than a real robot leaves is no finding (its fix
+///   would fail again: no cause is named that does not explain the data);
 /// - a second hypothesis with another fix whose residual lies within [`EQUAL_FACTOR`] of the
 ///   best one's is named with it.
 pub(crate) fn judge<T: Sync>(
@@ -695,7 +697,10 @@ pub(crate) fn judge<T: Sync>(
     let plausible = best.after.is_plausible();
     let error = best.explains
         || (plausible && (g >= OVERWHELMING_FACTOR || (named && g >= SUGGESTIVE_FACTOR)));
-    if !error && g < SUGGESTIVE_FACTOR {
+    // No harmful fix: a correction that leaves more than a real robot leaves is not the
+    // cause, or not the only one, and its fix would fail again; the check then names no cause
+    // (the residual nothing explains is located by the caller).
+    if !error && (g < SUGGESTIVE_FACTOR || !plausible) {
         return Judged {
             as_given,
             closest,
@@ -727,15 +732,9 @@ pub(crate) fn judge<T: Sync>(
             "{} ({g:.0}× smaller residual{scale} when corrected)",
             h.what
         )
-    } else if plausible {
-        format!(
-            "perhaps {} ({g:.1}× smaller residual{scale} when corrected)",
-            h.what
-        )
     } else {
         format!(
-            "perhaps {}, but it explains only part of the residual ({g:.1}× smaller, still more \
-             than a real robot leaves)",
+            "perhaps {} ({g:.1}× smaller residual{scale} when corrected)",
             h.what
         )
     };

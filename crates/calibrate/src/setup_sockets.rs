@@ -89,6 +89,49 @@ const SOCKET_DISTANCE_TOLERANCE: f64 = 0.05;
 /// distance given may differ from the nominal one before it is a finding: on the bundled
 /// placements the two differ by up to about 11 % (Panda, whose nominal scatter is 8 mm).
 const SOCKET_DISTANCE_SHARE: f64 = 0.25;
+
+/// Factors a distance given in one unit and read in another is off by: powers of ten (mm,
+/// cm, dm as m, and back) and inches and feet as m.
+const UNIT_SLIPS: [(f64, &str); 10] = [
+    (1e3, "millimetres given as metres"),
+    (1e2, "centimetres given as metres"),
+    (1e1, "ten times the distance"),
+    (1e-1, "a tenth of the distance"),
+    (1e-2, "a hundredth of the distance"),
+    (1e-3, "a thousandth of the distance"),
+    (1.0 / 0.0254, "inches given as metres"),
+    (1.0 / 0.3048, "feet given as metres"),
+    (0.0254, "metres given as inches"),
+    (0.3048, "metres given as feet"),
+];
+
+/// The fix of a socket distance given wrong (`given_m`) where the nominal model measures
+/// `nominal_m` (m): the given distance corrected by the unit slip that brings it within
+/// [`SOCKET_DISTANCE_SHARE`] of the nominal one (the sockets were made to a round figure the
+/// nominal model sees only to its own accuracy), else the words to give the distance the
+/// sockets were made to. The nominal distance itself is never the fix: a robot's nominal
+/// model is off by a few percent, which the calibration would then build into its lengths.
+fn socket_distance_fix(given_m: f64, nominal_m: f64) -> String {
+    let ratio = given_m / nominal_m;
+    let slip = (UNIT_SLIPS.iter())
+        .filter(|(f, _)| (ratio / f - 1.0).abs() < SOCKET_DISTANCE_SHARE)
+        .min_by(|a, b| {
+            (ratio / a.0 - 1.0)
+                .abs()
+                .total_cmp(&(ratio / b.0 - 1.0).abs())
+        });
+    match slip {
+        Some(&(f, words)) => {
+            let fixed = format!("{:.6}", given_m / f);
+            let fixed = fixed.trim_end_matches('0').trim_end_matches('.');
+            format!("--socket-distance-m {fixed} (the distance given looks like {words})")
+        }
+        None => format!(
+            "give the distance the sockets were made to, in metres, with --socket-distance-m \
+             (the nominal model measures {nominal_m:.4} m, to its own accuracy)"
+        ),
+    }
+}
 const SOCKET_DISTANCE_SCATTERS: f64 = 3.0;
 
 /// The data of `input` as given.
@@ -405,7 +448,7 @@ fn own_hypotheses(input: &SocketInput<'_>) -> Vec<Corrected<SocketData>> {
                 mm(d),
                 mm(given)
             ),
-            format!("--socket-distance-m {d:.4} (or the distance the sockets were made to)"),
+            socket_distance_fix(given, d),
             SocketData {
                 chain: None,
                 placements: input.placements.to_vec(),
@@ -494,10 +537,7 @@ pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
                         100.0 * SOCKET_DISTANCE_SHARE,
                         SOCKET_DISTANCE_SCATTERS
                     ),
-                    fix: format!(
-                        "--socket-distance-m {d:.4} (or the distance the sockets were made to, in \
-                         metres)"
-                    ),
+                    fix: socket_distance_fix(given, d),
                     before: as_given,
                     after,
                 },

@@ -277,6 +277,21 @@ pub enum Family {
     SimEffects,
     /// Correct: a simulated haptic log with an effect or a small latency.
     HapticEffects,
+    /// One set of frames before a row and another after it: the tracker moved, a marker or
+    /// tool re-mounted, a capstan re-tensioned (a joint's zero jumps).
+    ChangePoint,
+    /// One joint column scaled: encoder counts, a motor-side reading, a gear-ratio error.
+    ColumnScale,
+    /// One joint column's reading depends on another joint's (q_j + c·q_k).
+    ColumnCoupling,
+    /// The last rows' positions in millimetres, the rest in metres.
+    PartUnit,
+    /// One joint reading of one row off by a glitch (0.2 rad).
+    GlitchRow,
+    /// Another variant of the robot: the same joint names, other link lengths.
+    WrongVariant,
+    /// The robot mounted upside down (its description turned by π about x).
+    Mounting,
 }
 
 /// What the check should answer to a family.
@@ -288,6 +303,9 @@ pub enum Expect {
     Note(&'static str),
     /// Correct data: no setup finding at all.
     Clean,
+    /// Run (exit 0 or 1) naming the row (file:line) the fit left out or bounded: one gross
+    /// error must not stop a calibration nor move it.
+    Listed,
 }
 
 /// One row of the table of expectations.
@@ -535,6 +553,81 @@ pub const FAMILIES: &[FamilySpec] = &[
         expect: Expect::Clean,
         recordings: &[R::HapticMotion],
     },
+    FamilySpec {
+        family: Family::ChangePoint,
+        name: "change-point",
+        expect: Expect::Stop("change-point", None),
+        recordings: &[
+            R::Tiago,
+            R::Humanoid,
+            R::Ur10Quaternion,
+            R::Positioner,
+            R::SimIiwa,
+            R::SimPanda,
+            R::Haptic,
+            R::HapticMotion,
+        ],
+    },
+    FamilySpec {
+        family: Family::ColumnScale,
+        name: "column-scale",
+        expect: Expect::Stop("column-scale", Some("--column-scale")),
+        recordings: JOINTED,
+    },
+    FamilySpec {
+        family: Family::ColumnCoupling,
+        name: "column-coupling",
+        expect: Expect::Stop("column-coupling", Some("--column-coupling")),
+        recordings: &[
+            R::Ur10,
+            R::Tiago,
+            R::Humanoid,
+            R::SocketsIiwa,
+            R::SimIiwa,
+            R::SimPanda,
+            R::Haptic,
+        ],
+    },
+    FamilySpec {
+        family: Family::PartUnit,
+        name: "part-unit",
+        expect: Expect::Stop("length-unit", None),
+        recordings: &[
+            R::Ur10,
+            R::Tiago,
+            R::Humanoid,
+            R::Positioner,
+            R::SimIiwa,
+            R::SimPanda,
+        ],
+    },
+    FamilySpec {
+        family: Family::GlitchRow,
+        name: "glitch-row",
+        expect: Expect::Listed,
+        recordings: &[
+            R::Ur10,
+            R::Tiago,
+            R::Humanoid,
+            R::SocketsIiwa,
+            R::SocketsPanda,
+            R::SimIiwa,
+            R::SimPanda,
+            R::Haptic,
+        ],
+    },
+    FamilySpec {
+        family: Family::WrongVariant,
+        name: "wrong-variant",
+        expect: Expect::Stop("another-device", None),
+        recordings: &[R::Ur10, R::SocketsIiwa, R::SimIiwa],
+    },
+    FamilySpec {
+        family: Family::Mounting,
+        name: "mounting",
+        expect: Expect::Stop("mounting", Some("--gravity")),
+        recordings: &[R::Humanoid],
+    },
 ];
 
 impl Family {
@@ -547,6 +640,21 @@ impl Family {
             .iter()
             .find(|s| s.family == self)
             .unwrap_or_else(|| unreachable!("every family has a row"))
+    }
+
+    /// Whether the family is one of those added with the change-point, per-joint scale and
+    /// coupling hypotheses (reported apart from the earlier families).
+    pub fn is_new(self) -> bool {
+        matches!(
+            self,
+            Family::ChangePoint
+                | Family::ColumnScale
+                | Family::ColumnCoupling
+                | Family::PartUnit
+                | Family::GlitchRow
+                | Family::WrongVariant
+                | Family::Mounting
+        )
     }
 
     /// Whether the family is correct data (any finding is a false alarm).
@@ -724,6 +832,92 @@ pub enum Mistake {
     Draw(u64),
     /// `hapcal simulate --effect` with this effect and parameter.
     HapticEffect(Effect, &'static str),
+    /// From `from_pct` % of the rows on, the instrument turned by `deg`° about a seeded axis
+    /// and moved by `mm` mm in a seeded direction (positions and orientations alike).
+    TrackerMoved {
+        /// Where the change happens, % of the rows.
+        from_pct: u32,
+        /// Rotation, degrees.
+        deg: u32,
+        /// Translation, mm.
+        mm: u32,
+    },
+    /// From `from_pct` % of the rows on, the measured pose's origin `mm` mm away along a seeded
+    /// direction of its own frame (a marker or tool re-mounted).
+    MarkerMoved {
+        /// Where the change happens, % of the rows.
+        from_pct: u32,
+        /// Offset, mm.
+        mm: u32,
+    },
+    /// From `from_pct` % of the rows on, revolute column `col` plus `mrad` (a capstan
+    /// re-tensioned, an encoder re-homed).
+    ZeroFrom {
+        /// Index into the revolute joint columns.
+        col: usize,
+        /// Where the change happens, % of the rows.
+        from_pct: u32,
+        /// The jump, mrad.
+        mrad: i32,
+    },
+    /// Revolute column `col` times `factor`.
+    Scale {
+        /// Index into the revolute joint columns.
+        col: usize,
+        /// The factor.
+        factor: ScaleFactor,
+    },
+    /// Revolute column `col` (1 or more) plus `centi`/100 times column `col - 1`.
+    Coupling {
+        /// Index into the revolute joint columns.
+        col: usize,
+        /// The coefficient, hundredths.
+        centi: i32,
+    },
+    /// From `from_pct` % of the rows on, every position in mm.
+    PartMm(u32),
+    /// Revolute column `col` of the row `at_pct` % into the file plus 0.2 rad.
+    Glitch {
+        /// Index into the revolute joint columns.
+        col: usize,
+        /// Where the row is, % of the rows.
+        at_pct: u32,
+    },
+    /// The description of another variant with the same joint names (fixtures/wrong-robot).
+    Variant,
+    /// The description turned by π about x at its root.
+    Ceiling,
+}
+
+/// A factor a joint column may be scaled by.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum ScaleFactor {
+    /// Encoder counts of a 17-bit encoder: 2¹⁷/2π per rad.
+    Counts17,
+    /// The motor side of a 100:1 gear.
+    MotorSide100,
+    /// A gear ratio 5 % off.
+    GearError5,
+}
+
+impl ScaleFactor {
+    /// The number written for 1 rad.
+    pub fn per_rad(self) -> f64 {
+        match self {
+            ScaleFactor::Counts17 => f64::from(1u32 << 17) / (2.0 * PI),
+            ScaleFactor::MotorSide100 => 100.0,
+            ScaleFactor::GearError5 => 1.05,
+        }
+    }
+
+    /// Its part of a case identity.
+    fn name(self) -> &'static str {
+        match self {
+            ScaleFactor::Counts17 => "counts17",
+            ScaleFactor::MotorSide100 => "motor100",
+            ScaleFactor::GearError5 => "gear1.05",
+        }
+    }
 }
 
 impl Mistake {
@@ -760,6 +954,21 @@ impl Mistake {
             Mistake::EveryNth(n) => format!("every-{n}"),
             Mistake::Draw(i) => format!("draw{i}"),
             Mistake::HapticEffect(e, p) => format!("{}-{p}", e.name()),
+            Mistake::TrackerMoved { from_pct, deg, mm } => {
+                format!("tracker-{deg}deg-{mm}mm-from-{from_pct}pct")
+            }
+            Mistake::MarkerMoved { from_pct, mm } => format!("marker-{mm}mm-from-{from_pct}pct"),
+            Mistake::ZeroFrom {
+                col,
+                from_pct,
+                mrad,
+            } => format!("col{col}{mrad:+}mrad-from-{from_pct}pct"),
+            Mistake::Scale { col, factor } => format!("col{col}-{}", factor.name()),
+            Mistake::Coupling { col, centi } => format!("col{col}{centi:+}pct-col{}", col - 1),
+            Mistake::PartMm(p) => format!("mm-from-{p}pct"),
+            Mistake::Glitch { col, at_pct } => format!("col{col}-row-{at_pct}pct"),
+            Mistake::Variant => "variant".to_owned(),
+            Mistake::Ceiling => "ceiling".to_owned(),
         }
     }
 }
@@ -896,6 +1105,44 @@ fn draw(family: Family, rec: Recording, k: usize, rng: &mut ChaCha8Rng) -> Mista
             let (e, p) = effects[k % effects.len()];
             Mistake::HapticEffect(e, p)
         }
+        Family::ChangePoint => {
+            let from_pct = 40 + 10 * (k % 3) as u32;
+            match rec {
+                R::Haptic | R::HapticMotion => Mistake::ZeroFrom {
+                    col: col(rng),
+                    from_pct,
+                    mrad: [20, -30][k % 2],
+                },
+                R::Ur10Quaternion | R::Positioner if k % 2 == 1 => Mistake::MarkerMoved {
+                    from_pct,
+                    mm: 15 + 5 * (k % 2) as u32,
+                },
+                _ => Mistake::TrackerMoved {
+                    from_pct,
+                    deg: 2 + (k % 3) as u32,
+                    mm: 20 + 10 * (k % 2) as u32,
+                },
+            }
+        }
+        Family::ColumnScale => Mistake::Scale {
+            col: col(rng),
+            factor: [
+                ScaleFactor::MotorSide100,
+                ScaleFactor::Counts17,
+                ScaleFactor::GearError5,
+            ][k % 3],
+        },
+        Family::ColumnCoupling => Mistake::Coupling {
+            col: rng.random_range(1..n),
+            centi: [50, -10, 30][k % 3],
+        },
+        Family::PartUnit => Mistake::PartMm([80, 85, 90][k % 3]),
+        Family::GlitchRow => Mistake::Glitch {
+            col: col(rng),
+            at_pct: rng.random_range(10..90),
+        },
+        Family::WrongVariant => Mistake::Variant,
+        Family::Mounting => Mistake::Ceiling,
     }
 }
 
@@ -1148,6 +1395,9 @@ pub struct Invocation {
     /// Words the fix must hold: each inner list is one requirement, met by any of its words
     /// (a column's name or its `q<k>` position, the factor's word, the flag).
     pub fix_words: Vec<Vec<String>>,
+    /// Words that locate the mistake (`data.csv:61`, a column's name): a stop that names no
+    /// cause but one of these locates it.
+    pub locate_words: Vec<String>,
 }
 
 /// The loaded sources: the arm blind test's setups (loaded once).
@@ -1328,6 +1578,12 @@ pub fn write_case(
     if let Expect::Stop(_, Some(flag)) = case.family.spec().expect {
         fix_words.push(vec![flag.to_owned()]);
     }
+    let mut locate_words: Vec<String> = Vec::new();
+    // The file a line number names: the first socket file, or the measurement file.
+    let data_name = match &base {
+        Base::Table(_) => "data.csv",
+        Base::Sockets(..) => "hole_0.csv",
+    };
     let tables: Vec<&mut Table> = match &mut base {
         Base::Table(t) => vec![t],
         Base::Sockets(a, b) => vec![a, b],
@@ -1504,6 +1760,108 @@ pub fn write_case(
                 let rows = std::mem::take(&mut t.rows);
                 t.rows = rows.into_iter().step_by(*n).collect();
             }
+            Mistake::TrackerMoved { from_pct, deg, mm } => {
+                let from = t.rows.len() * *from_pct as usize / 100;
+                let axis = nalgebra::Unit::new_normalize(random_direction(&mut rng));
+                let turn = UnitQuaternion::from_axis_angle(&axis, f64::from(*deg).to_radians());
+                let shift = random_direction(&mut rng) * (f64::from(*mm) / 1e3);
+                move_poses(t, from, |p, q| (turn * p + shift, turn * q));
+                locate_words.extend(lines_near(&data_name, from + 2));
+                fix_words.push(lines_near(&data_name, from + 2));
+            }
+            Mistake::MarkerMoved { from_pct, mm } => {
+                let from = t.rows.len() * *from_pct as usize / 100;
+                let offset = random_direction(&mut rng) * (f64::from(*mm) / 1e3);
+                move_poses(t, from, |p, q| (p + q * offset, q));
+                locate_words.extend(lines_near(&data_name, from + 2));
+                fix_words.push(lines_near(&data_name, from + 2));
+            }
+            Mistake::ZeroFrom {
+                col,
+                from_pct,
+                mrad,
+            } => {
+                let from = t.rows.len() * *from_pct as usize / 100;
+                if let Some(c) = t.col(&name_of(*col)) {
+                    for row in &mut t.rows[from..] {
+                        row[c] += f64::from(*mrad) / 1e3;
+                    }
+                }
+                locate_words.extend(lines_near(&data_name, from + 2));
+                locate_words.extend(col_words(*col));
+                fix_words.push(lines_near(&data_name, from + 2));
+            }
+            Mistake::Scale { col, factor } => {
+                let f = factor.per_rad();
+                t.map_col(&name_of(*col), |v| v * f);
+                if t_idx == 0 {
+                    fix_words.push(col_words(*col));
+                    locate_words.extend(col_words(*col));
+                }
+            }
+            Mistake::Coupling { col, centi } => {
+                let c = f64::from(*centi) / 100.0;
+                if let (Some(a), Some(b)) = (t.col(&name_of(*col)), t.col(&name_of(col - 1))) {
+                    for row in &mut t.rows {
+                        row[a] += c * row[b];
+                    }
+                }
+                if t_idx == 0 {
+                    fix_words.push(col_words(*col));
+                    locate_words.extend(col_words(*col));
+                }
+            }
+            Mistake::PartMm(p) => {
+                let from = t.rows.len() * *p as usize / 100;
+                let cols: Vec<usize> = (t.header.iter().enumerate())
+                    .filter(|(_, h)| is_position(h))
+                    .map(|(i, _)| i)
+                    .collect();
+                for row in &mut t.rows[from..] {
+                    for &c in &cols {
+                        row[c] *= 1e3;
+                    }
+                }
+                let line = from + 2;
+                locate_words.push(format!("{data_name}:{line}"));
+                fix_words.push(vec![format!("{data_name}:{line}"), format!("{line}")]);
+            }
+            Mistake::Glitch { col, at_pct } => {
+                if t_idx == 0 {
+                    let row = t.rows.len() * *at_pct as usize / 100;
+                    if let Some(c) = t.col(&name_of(*col)) {
+                        t.rows[row][c] += 0.2;
+                    }
+                    // Socket files have no header: row 0 is line 1.
+                    let line = if n_tables == 2 { row + 1 } else { row + 2 };
+                    locate_words.push(format!("{data_name}:{line}"));
+                }
+            }
+            Mistake::Variant => {
+                if t_idx == 0 {
+                    device = abs(match rec {
+                        R::Ur10 => "fixtures/wrong-robot/ur5e_lengths.urdf",
+                        _ => "fixtures/wrong-robot/iiwa7_lengths.urdf",
+                    });
+                }
+            }
+            Mistake::Ceiling => {
+                if t_idx == 0 {
+                    let text = std::fs::read_to_string(root.join(rec.device()))?;
+                    let upright = r#"<origin xyz="0 0 0.3" rpy="0 0 0"/>"#;
+                    let turned = text.replacen(
+                        upright,
+                        r#"<origin xyz="0 0 0.3" rpy="3.141592653589793 0 0"/>"#,
+                        1,
+                    );
+                    if turned == text {
+                        bail!("the humanoid's root joint origin is not {upright}");
+                    }
+                    let path = dir.join("humanoid_ceiling.urdf");
+                    write(&path, &turned)?;
+                    device = path.display().to_string();
+                }
+            }
             Mistake::WrongSocket(_)
             | Mistake::LongerLinks(_)
             | Mistake::LatencyMs(_)
@@ -1552,7 +1910,87 @@ pub fn write_case(
         }
     }
     args.extend(extra);
-    Ok(Invocation { args, fix_words })
+    Ok(Invocation {
+        args,
+        fix_words,
+        locate_words,
+    })
+}
+
+/// A unit vector drawn from `rng` (uniform on the sphere).
+fn random_direction(rng: &mut ChaCha8Rng) -> nalgebra::Vector3<f64> {
+    loop {
+        let v = nalgebra::Vector3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        );
+        let n = v.norm();
+        if n > 0.1 && n <= 1.0 {
+            return v / n;
+        }
+    }
+}
+
+/// `file:line` for the lines within two of `line`: where a change found from the residuals
+/// may be named (the last row before it or the first after it).
+fn lines_near(file: &str, line: usize) -> Vec<String> {
+    (line.saturating_sub(2)..=line + 2)
+        .map(|l| format!("{file}:{l}"))
+        .collect()
+}
+
+/// Applies `f` to the measured poses of every row from `from` on: each position group
+/// (`x,y,z`, `x2,y2,z2`, …) with the orientation of the same number (identity without one);
+/// the orientation written back where the file has one.
+fn move_poses(
+    t: &mut Table,
+    from: usize,
+    f: impl Fn(
+        nalgebra::Vector3<f64>,
+        UnitQuaternion<f64>,
+    ) -> (nalgebra::Vector3<f64>, UnitQuaternion<f64>),
+) {
+    let suffixes: Vec<String> = (t.header.iter())
+        .filter_map(|h| h.strip_prefix('x'))
+        .filter(|r| r.chars().all(|c| c.is_ascii_digit()))
+        .map(str::to_owned)
+        .collect();
+    for s in suffixes {
+        let p: Vec<usize> = (["x", "y", "z"].iter())
+            .filter_map(|a| t.col(&format!("{a}{s}")))
+            .collect();
+        let q: Vec<usize> = (["qw", "qx", "qy", "qz"].iter())
+            .filter_map(|a| t.col(&format!("{a}{s}")))
+            .collect();
+        if p.len() != 3 {
+            continue;
+        }
+        let from = from.min(t.rows.len());
+        for row in &mut t.rows[from..] {
+            let pos = nalgebra::Vector3::new(row[p[0]], row[p[1]], row[p[2]]);
+            if pos.iter().any(|v| v.is_nan()) {
+                continue;
+            }
+            let rot = if q.len() == 4 {
+                UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                    row[q[0]], row[q[1]], row[q[2]], row[q[3]],
+                ))
+            } else {
+                UnitQuaternion::identity()
+            };
+            let (pos, rot) = f(pos, rot);
+            for (c, v) in p.iter().zip(pos.iter()) {
+                row[*c] = *v;
+            }
+            if q.len() == 4 {
+                let r = rot.quaternion();
+                for (c, v) in q.iter().zip([r.w, r.i, r.j, r.k]) {
+                    row[*c] = v;
+                }
+            }
+        }
+    }
 }
 
 /// The columns read on the robot's side: joints (prismatic too) and a haptic device's
@@ -1749,12 +2187,22 @@ fn load_base(
 /// How the check answered a case.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Outcome {
-    /// Stopped (or, for a note family, ran) naming the expected class, the fix naming the cause.
+    /// Stopped (or, for a note family, ran) naming the expected class, the fix naming the cause
+    /// (for a listed family: ran naming the row); or stopped naming another cause and, as one
+    /// the data fit as well, the expected fix.
     NamedRight,
     /// Stopped naming the expected class, but the fix does not name the cause (the column,
     /// the factor's unit or the flag).
     ClassOnly,
-    /// Stopped with another class, `no-hypothesis`, or another error.
+    /// Stopped without naming a cause (`no-hypothesis`, an implausible estimate, the reader's
+    /// own error) but naming where the mistake is: the rows or the column.
+    Located,
+    /// Stopped naming another cause whose fix is an edit, not a flag.
+    WrongCause,
+    /// Stopped with a fix that harms: another cause's flag, or the expected cause's flag that,
+    /// applied, still stops.
+    HarmfulFix,
+    /// Stopped otherwise: no cause, no place.
     Generic,
     /// Ran with a setup warning (a mistake family).
     Warned,
@@ -1772,6 +2220,9 @@ impl Outcome {
         match self {
             Outcome::NamedRight => "named right",
             Outcome::ClassOnly => "class only",
+            Outcome::Located => "located",
+            Outcome::WrongCause => "wrong cause",
+            Outcome::HarmfulFix => "harmful fix",
             Outcome::Generic => "generic",
             Outcome::Warned => "warned",
             Outcome::Silent => "silent",
@@ -1779,10 +2230,24 @@ impl Outcome {
             Outcome::Clean => "clean",
         }
     }
+
+    /// Whether the answer names the cause (the class right).
+    pub fn is_named(self) -> bool {
+        matches!(self, Outcome::NamedRight | Outcome::ClassOnly)
+    }
 }
 
 /// The setup findings of a command's standard error: (class, the line from the class on).
 pub fn findings(stderr: &str) -> Vec<(String, String)> {
+    findings_with_severity(stderr)
+        .into_iter()
+        .map(|(_, c, t)| (c, t))
+        .collect()
+}
+
+/// The setup findings with whether each is a warning (the line says `warning` before the
+/// finding, or the finding was accepted) rather than the error that stopped the command.
+fn findings_with_severity(stderr: &str) -> Vec<(bool, String, String)> {
     let mut out = Vec::new();
     for line in stderr.lines() {
         let Some(i) = line.find("setup check") else {
@@ -1793,11 +2258,15 @@ pub fn findings(stderr: &str) -> Vec<(String, String)> {
             continue;
         };
         if a < b {
-            out.push((rest[a + 1..b].to_owned(), rest.to_owned()));
+            let warning = line[..i].contains("warning") || rest[..a].contains("accepted");
+            out.push((warning, rest[a + 1..b].to_owned(), rest.to_owned()));
         }
     }
     out
 }
+
+/// Classes that name no cause: the residual nothing explains, an implausible estimate.
+const NO_CAUSE: [&str; 2] = ["no-hypothesis", "implausible-estimate"];
 
 /// Whether `word` occurs in `text` with no letter, digit or `_` on either side.
 fn has_word(text: &str, word: &str) -> bool {
@@ -1820,15 +2289,89 @@ fn has_word(text: &str, word: &str) -> bool {
     false
 }
 
-/// Judges a case by the command's exit code (`None`: killed or no code) and standard error.
+/// The flags of a fix (`--column-sign q3`, `--tip l_link6`, `--gravity +z`): each `--flag`
+/// with its value, from the fix's start; empty when the fix is an edit in words.
+pub fn fix_flags(fix: &str) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let mut words = fix.split_whitespace().peekable();
+    while let Some(w) = words.next() {
+        let w = w.trim_end_matches([',', ';', ')']);
+        if !w.starts_with("--") || w.len() < 3 {
+            break;
+        }
+        match words.peek() {
+            Some(v) if !v.starts_with("--") => {
+                let v = v.trim_end_matches([',', ';', ')']).to_owned();
+                words.next();
+                out.push((w.to_owned(), v));
+            }
+            _ => out.push((w.to_owned(), String::new())),
+        }
+    }
+    out
+}
+
+/// The fix of the finding that stopped a command: the text after the last `fix: ` of its
+/// first error line, up to the option that accepts the data.
+pub fn stop_fix(stderr: &str) -> Option<String> {
+    let (_, _, text) = (findings_with_severity(stderr).into_iter()).find(|(w, _, _)| !w)?;
+    // The finding's own fix is its last: an alternative that fits as well is named before it
+    // with its fix in parentheses.
+    let fix = text.rsplit_once("; fix: ")?.1;
+    let fix = fix.split("; --accept-setup").next().unwrap_or(fix);
+    Some(fix.trim().to_owned())
+}
+
+/// A case's arguments with a fix's flags applied: a flag that takes one value (`--tip`,
+/// `--length-unit`, `--gravity`, `--socket-distance-m`, …) replaces the one given (every
+/// `--tip` by the fix's tips), a column edit (`--column-…`) is added.
+pub fn with_fix(args: &[String], flags: &[(String, String)]) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    let replaced = |f: &str| !f.starts_with("--column-") && flags.iter().any(|(g, _)| g == f);
+    let mut i = 0;
+    while i < args.len() {
+        if replaced(&args[i]) {
+            i += 2;
+            continue;
+        }
+        out.push(args[i].clone());
+        i += 1;
+    }
+    for (f, v) in flags {
+        out.push(f.clone());
+        if !v.is_empty() {
+            out.push(v.clone());
+        }
+    }
+    out
+}
+
+/// Whether a printed fix, applied, let the command run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FixApplied {
+    /// No flag to apply (no stop, or a fix in words).
+    NotApplicable,
+    /// Applied, the command ran (exit 0 or 1).
+    Ran,
+    /// Applied, the command stopped again.
+    StoppedAgain,
+}
+
+/// Judges a case by the command's exit code (`None`: killed or no code), its output
+/// (standard error, then standard output) and, for a stop with a flag in its fix, what
+/// applying the fix did (`applied`). `fix_words`: what the fix must name; `locate_words`:
+/// words that place the mistake (a line, a column).
 pub fn judge(
     family: Family,
-    fix_words: &[Vec<String>],
+    words: (&[Vec<String>], &[String]),
     code: Option<i32>,
-    stderr: &str,
+    output: &str,
+    applied: FixApplied,
 ) -> Outcome {
-    let found = findings(stderr);
+    let (fix_words, locate_words) = words;
+    let found = findings_with_severity(output);
     let stopped = code != Some(0) && code != Some(1);
+    let located = || (locate_words.iter()).any(|w| has_word(output, w));
     match family.spec().expect {
         Expect::Clean => {
             if found.is_empty() {
@@ -1837,6 +2380,13 @@ pub fn judge(
                 Outcome::FalseAlarm
             }
         }
+        Expect::Listed => match (stopped, located()) {
+            (false, true) => Outcome::NamedRight,
+            (false, false) if found.is_empty() => Outcome::Silent,
+            (false, false) => Outcome::Warned,
+            (true, true) => Outcome::Located,
+            (true, false) => Outcome::Generic,
+        },
         Expect::Note(class) => {
             if stopped {
                 if found.is_empty() {
@@ -1844,7 +2394,7 @@ pub fn judge(
                 } else {
                     Outcome::FalseAlarm
                 }
-            } else if found.iter().any(|(c, _)| c == class) {
+            } else if found.iter().any(|(_, c, _)| c == class) {
                 Outcome::NamedRight
             } else if found.is_empty() {
                 Outcome::Silent
@@ -1862,10 +2412,30 @@ pub fn judge(
             }
             let named =
                 |text: &str| (fix_words.iter()).all(|any| any.iter().any(|w| has_word(text, w)));
-            if found.iter().any(|(c, text)| c == class && named(text)) {
-                Outcome::NamedRight
-            } else if found.iter().any(|(c, _)| c == class) {
-                Outcome::ClassOnly
+            let errors: Vec<&(bool, String, String)> = found.iter().filter(|f| !f.0).collect();
+            let right = (errors.iter()).find(|(_, c, _)| c == class);
+            let wrong = (errors.iter()).find(|(_, c, _)| c != class && !NO_CAUSE.contains(&&**c));
+            if let Some((_, _, text)) = right {
+                if applied == FixApplied::StoppedAgain {
+                    Outcome::HarmfulFix
+                } else if named(text) {
+                    Outcome::NamedRight
+                } else {
+                    Outcome::ClassOnly
+                }
+            } else if let Some((_, _, text)) = wrong {
+                let fix = text.rsplit_once("; fix: ").map_or("", |f| f.1);
+                if !fix_words.is_empty() && named(text) {
+                    // The data fit the cause named and the expected one as well, and the
+                    // finding names both (the expected fix as the alternative's).
+                    Outcome::NamedRight
+                } else if fix_flags(fix).is_empty() {
+                    Outcome::WrongCause
+                } else {
+                    Outcome::HarmfulFix
+                }
+            } else if located() {
+                Outcome::Located
             } else {
                 Outcome::Generic
             }
@@ -2137,14 +2707,21 @@ pub fn is_visible_mistake(r: &CaseResult) -> bool {
 }
 
 /// The figures the lead quotes for one selection of cases: over visible mistakes, how many
-/// the check named right and how many it was silent on; over the cases where a finding or a
-/// stop is a false alarm (correct data, and visible mistakes of a note family), how many.
+/// the check named, located, named wrongly, gave a harmful fix for, and was silent on; over
+/// the cases where a finding or a stop is a false alarm (correct data, and visible mistakes
+/// of a note family), how many.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct VisibleSummary {
-    /// Visible mistakes (stop and note families).
+    /// Visible mistakes (stop, note and listed families).
     pub n_visible: usize,
-    /// Of them, named right.
-    pub named_right: usize,
+    /// Of them, named (the class right, [`Outcome::is_named`]).
+    pub named: usize,
+    /// Of them, located without a cause.
+    pub located: usize,
+    /// Of them, another cause named with a fix in words.
+    pub wrong_cause: usize,
+    /// Of them, a harmful fix.
+    pub harmful: usize,
     /// Of them, silent.
     pub silent: usize,
     /// False alarms.
@@ -2158,7 +2735,10 @@ impl VisibleSummary {
     pub fn of<'a>(results: impl IntoIterator<Item = &'a CaseResult>) -> VisibleSummary {
         let mut s = VisibleSummary {
             n_visible: 0,
-            named_right: 0,
+            named: 0,
+            located: 0,
+            wrong_cause: 0,
+            harmful: 0,
             silent: 0,
             false_alarms: 0,
             n_alarm_cases: 0,
@@ -2168,7 +2748,10 @@ impl VisibleSummary {
             let note = matches!(r.case.family.spec().expect, Expect::Note(_));
             if visible {
                 s.n_visible += 1;
-                s.named_right += usize::from(r.outcome == Outcome::NamedRight);
+                s.named += usize::from(r.outcome.is_named());
+                s.located += usize::from(r.outcome == Outcome::Located);
+                s.wrong_cause += usize::from(r.outcome == Outcome::WrongCause);
+                s.harmful += usize::from(r.outcome == Outcome::HarmfulFix);
                 s.silent += usize::from(r.outcome == Outcome::Silent);
             }
             if r.case.family.is_correct() || (visible && note) {
@@ -2179,7 +2762,8 @@ impl VisibleSummary {
         s
     }
 
-    /// One line: `visible mistakes N, named right X (x %), silent Y (y %), false alarms Z of W`.
+    /// One line: `visible mistakes N, named X (x %), located …, named or located (z %), wrong
+    /// cause W, harmful fixes H, silent S (s %), false alarms F of G`.
     pub fn line(&self) -> String {
         let pct = |k: usize| {
             if self.n_visible == 0 {
@@ -2189,10 +2773,16 @@ impl VisibleSummary {
             }
         };
         format!(
-            "visible mistakes {}, named right {} ({}), silent {} ({}), false alarms {} of {}",
+            "visible mistakes {}, named {} ({}), located {} ({}), named or located {}, wrong \
+             cause {}, harmful fixes {}, silent {} ({}), false alarms {} of {}",
             self.n_visible,
-            self.named_right,
-            pct(self.named_right),
+            self.named,
+            pct(self.named),
+            self.located,
+            pct(self.located),
+            pct(self.named + self.located),
+            self.wrong_cause,
+            self.harmful,
             self.silent,
             pct(self.silent),
             self.false_alarms,
@@ -2202,9 +2792,12 @@ impl VisibleSummary {
 }
 
 /// The outcomes in the order of the report's columns.
-const OUTCOME_COLUMNS: [Outcome; 7] = [
+const OUTCOME_COLUMNS: [Outcome; 10] = [
     Outcome::NamedRight,
     Outcome::ClassOnly,
+    Outcome::Located,
+    Outcome::WrongCause,
+    Outcome::HarmfulFix,
     Outcome::Generic,
     Outcome::Warned,
     Outcome::Silent,
@@ -2216,9 +2809,9 @@ const OUTCOME_COLUMNS: [Outcome; 7] = [
 fn family_table(s: &mut String, sel: &[&CaseResult]) {
     let _ = writeln!(
         s,
-        "| family | expected | cases | named right | class only | generic | warned | silent | false alarm | clean |"
+        "| family | expected | cases | named right | class only | located | wrong cause | harmful fix | generic | warned | silent | false alarm | clean |"
     );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut total: BTreeMap<Outcome, usize> = BTreeMap::new();
     for spec in FAMILIES {
         let fam: Vec<&CaseResult> = (sel.iter().copied())
@@ -2235,6 +2828,7 @@ fn family_table(s: &mut String, sel: &[&CaseResult]) {
             Expect::Stop(class, _) => format!("stop [{class}]"),
             Expect::Note(class) => format!("note [{class}]"),
             Expect::Clean => "nothing".to_owned(),
+            Expect::Listed => "the row listed".to_owned(),
         };
         let cells: Vec<String> = (OUTCOME_COLUMNS.iter())
             .map(|o| c.get(o).copied().unwrap_or(0).to_string())
@@ -2273,12 +2867,21 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
         "Ordinary setup mistakes the check was not built on, written into the bundled \
          recordings and simulated ones (crates/studies/src/setup_hostile.rs has the table of \
          expectations), run through `hapcal calibrate` as a user runs it and judged only by \
-         its exit code and standard error. A mistake is *named right* when the command stops \
+         its exit code and what it prints. A mistake is *named right* when the command stops \
          (exit 2) with `setup check [<expected class>]` and the fix names the cause (the \
-         column, the factor's unit, the flag); *class only* when the class is right but the \
-         fix does not name the cause; *generic* when it stops otherwise; *warned* \
-         when it runs with a setup warning; *silent* when it runs with none. On correct data \
-         any setup finding is a *false alarm*. The latency family expects a note or warning \
+         column, the factor's unit, the flag, the line); *class only* when the class is right \
+         but the fix does not name the cause; *located* when it stops without naming a cause \
+         (`no-hypothesis`, an implausible estimate, the reader's error) but names the rows \
+         (within two lines) or the column of the mistake; *wrong cause* when it stops naming \
+         another cause whose fix is an edit in words; *harmful fix* when it stops naming \
+         another cause with a flag to apply, or names the right cause with a flag that, \
+         applied to the same command, stops it again (every flag a stop prints is applied and \
+         the command rerun); *generic* when it stops otherwise; *warned* when it runs with a \
+         setup warning; *silent* when it runs with none. On correct data any setup finding is \
+         a *false alarm*. The glitch-row family (one joint reading 0.2 rad off) expects the \
+         calibration to run and list the row (file:line) it bounded or left out; it is named \
+         right when it does, located when it stops naming the row. The latency family expects \
+         a note or warning \
          of class `{LATENCY_CLASS}`, and a stop on it is a false alarm.\n"
     );
     let _ = writeln!(
@@ -2305,6 +2908,18 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
     for half in [Half::Tuning, Half::HeldBack] {
         let sum = VisibleSummary::of(results.iter().filter(|r| r.case.half == half));
         let _ = writeln!(s, "- {} half: {}", half.name(), sum.line());
+        for (name, sel) in [
+            ("families of earlier sweeps", false),
+            (
+                "families added with the change-point, scale and coupling hypotheses",
+                true,
+            ),
+        ] {
+            let sum = VisibleSummary::of(
+                (results.iter()).filter(|r| r.case.half == half && r.case.family.is_new() == sel),
+            );
+            let _ = writeln!(s, "  - {name}: {}", sum.line());
+        }
     }
     let _ = writeln!(
         s,
@@ -2383,6 +2998,7 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
         let expected = match r.case.family.spec().expect {
             Expect::Stop(class, _) | Expect::Note(class) => class.to_owned(),
             Expect::Clean => "nothing".to_owned(),
+            Expect::Listed => "the row listed".to_owned(),
         };
         let _ = writeln!(
             s,

@@ -16,8 +16,9 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use hapcal_studies::setup_hostile::{
-    Case, CaseResult, DEFAULT_CASES_PER_FAMILY, Half, Residual, Sources, Visibility, cases,
-    correct_twin, judge, report_markdown, screening_args, twin_key, what_was_said, write_case,
+    Case, CaseResult, DEFAULT_CASES_PER_FAMILY, FixApplied, Half, Residual, Sources, Visibility,
+    cases, correct_twin, fix_flags, judge, report_markdown, screening_args, stop_fix, twin_key,
+    what_was_said, with_fix, write_case,
 };
 
 fn main() -> Result<()> {
@@ -250,6 +251,30 @@ fn run_case(
     std::fs::write(dir.join("stderr.txt"), stderr.as_bytes())?;
     std::fs::write(dir.join("args.txt"), inv.args.join(" "))?;
     let code = out.status.code();
+    let stopped = code != Some(0) && code != Some(1);
+    // Every flag a stop prints is applied and the command rerun: a fix that stops again
+    // harms.
+    let flags = stop_fix(&stderr).map(|f| fix_flags(&f)).unwrap_or_default();
+    let applied = if stopped && !flags.is_empty() {
+        let fixed_args = with_fix(&inv.args, &flags);
+        let again = Command::new(hapcal)
+            .arg("calibrate")
+            .args(&fixed_args)
+            .arg("--out")
+            .arg(dir.join("cal-fixed.toml"))
+            .output()
+            .with_context(|| format!("running {}", hapcal.display()))?;
+        std::fs::write(dir.join("fixed-args.txt"), fixed_args.join(" "))?;
+        std::fs::write(dir.join("fixed-stderr.txt"), &again.stderr)?;
+        if matches!(again.status.code(), Some(0 | 1)) {
+            FixApplied::Ran
+        } else {
+            FixApplied::StoppedAgain
+        }
+    } else {
+        FixApplied::NotApplicable
+    };
+    let output = format!("{stderr}\n{}", String::from_utf8_lossy(&out.stdout));
     let visibility = if case.family.is_correct() {
         Visibility::NotScreened
     } else {
@@ -257,7 +282,13 @@ fn run_case(
     };
     Ok(CaseResult {
         case: case.clone(),
-        outcome: judge(case.family, &inv.fix_words, code, &stderr),
+        outcome: judge(
+            case.family,
+            (&inv.fix_words, &inv.locate_words),
+            code,
+            &output,
+            applied,
+        ),
         code,
         // Paths of the case's files are this machine's: the report names the case instead.
         said: anonymous(&what_was_said(&stderr), dir, root),

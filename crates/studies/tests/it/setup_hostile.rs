@@ -1,17 +1,18 @@
 //! The hostile sweep's generator writes the mistakes it names (a column in degrees is the
 //! recording's column times 180/π, rows out of step pair row i's joints with row i + k's
-//! measurements), splits its cases deterministically into two near halves, judges a
-//! command's standard error by its class and fix, and screens a mistake as invisible when its
-//! training residual is within 5 % of its correct twin's.
+//! measurements; a tracker moved from a row on moves every later pose rigidly), splits its
+//! cases deterministically into two near halves, judges a command's output by its class, fix
+//! and place (a fix's flags applied to the command), and screens a mistake as invisible when
+//! its training residual is within 5 % of its correct twin's.
 
 use std::collections::BTreeSet;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
 use hapcal_studies::setup_hostile::{
-    AngleUnit, Case, CaseResult, DEFAULT_CASES_PER_FAMILY, FAMILIES, Family, Half, Mistake,
-    Outcome, Recording, Residual, Sources, Table, Visibility, VisibleSummary, cases, correct_twin,
-    euler_xyz_of, judge, twin_key, write_case,
+    AngleUnit, Case, CaseResult, DEFAULT_CASES_PER_FAMILY, FAMILIES, Family, FixApplied, Half,
+    Mistake, Outcome, Recording, Residual, Sources, Table, Visibility, VisibleSummary, cases,
+    correct_twin, euler_xyz_of, fix_flags, judge, stop_fix, twin_key, with_fix, write_case,
 };
 use nalgebra::{Rotation3, Vector3};
 
@@ -156,55 +157,194 @@ fn the_split_is_deterministic_and_near_half_and_every_family_has_cases() {
 }
 
 #[test]
-fn the_judge_reads_the_class_and_the_fix() {
+fn the_judge_reads_the_class_the_fix_and_the_place() {
     let fix = vec![
         vec!["--column-unit".to_owned()],
         vec!["elbow_joint".to_owned(), "q3".to_owned()],
         vec!["deg".to_owned()],
     ];
+    let place = vec!["elbow_joint".to_owned(), "q3".to_owned()];
+    let words = (fix.as_slice(), place.as_slice());
+    let none: (&[Vec<String>], &[String]) = (&[], &[]);
+    let na = FixApplied::NotApplicable;
     let stop = |line: &str| format!("reading\nhapcal: error: {line}\n");
     let f = Family::ColumnUnit;
     let right = stop(
         "setup check [column-unit]: elbow_joint looks like degrees; fix: --column-unit q3=deg",
     );
-    assert_eq!(judge(f, &fix, Some(2), &right), Outcome::NamedRight);
+    assert_eq!(judge(f, words, Some(2), &right, na), Outcome::NamedRight);
+    assert_eq!(
+        judge(f, words, Some(2), &right, FixApplied::Ran),
+        Outcome::NamedRight
+    );
+    // The right cause with a flag that, applied, stops again: harmful.
+    assert_eq!(
+        judge(f, words, Some(2), &right, FixApplied::StoppedAgain),
+        Outcome::HarmfulFix
+    );
     let vague = stop("setup check [column-unit]: a column looks like degrees; fix: --column-unit");
-    assert_eq!(judge(f, &fix, Some(2), &vague), Outcome::ClassOnly);
+    assert_eq!(judge(f, words, Some(2), &vague, na), Outcome::ClassOnly);
     // q3 is not q30; elbow_joint is not elbow_joint_2.
     let other_col = stop("setup check [column-unit]: q30 in degrees; fix: --column-unit q30=deg");
-    assert_eq!(judge(f, &fix, Some(2), &other_col), Outcome::ClassOnly);
-    let other = stop("setup check [angle-unit]: angles in degrees; fix: use --angle-unit deg");
-    assert_eq!(judge(f, &fix, Some(2), &other), Outcome::Generic);
+    assert_eq!(judge(f, words, Some(2), &other_col, na), Outcome::ClassOnly);
+    // Another cause with a flag to apply: harmful; with an edit in words: a wrong cause.
+    let other = stop("setup check [angle-unit]: angles in degrees; fix: --angle-unit deg");
+    assert_eq!(judge(f, words, Some(2), &other, na), Outcome::HarmfulFix);
+    // Another cause with the expected fix as an alternative the data fit as well: named.
+    let tied = stop(
+        "setup check [column-zero]: the zero of q2 is 180° off; the data fit as well if q3 is \
+         in degrees (fix: --column-unit q3=deg); fix: --column-offset q2=3.14",
+    );
+    assert_eq!(judge(f, words, Some(2), &tied, na), Outcome::NamedRight);
+    let edit = stop("setup check [row-shift]: rows late; fix: move the joint columns up");
+    assert_eq!(judge(f, words, Some(2), &edit, na), Outcome::WrongCause);
+    // No cause, but the column named: located; neither: generic.
+    let nothing = stop("setup check [no-hypothesis]: the residual lies in q3; fix: check q3");
+    assert_eq!(judge(f, words, Some(2), &nothing, na), Outcome::Located);
     assert_eq!(
-        judge(f, &fix, Some(2), "hapcal: error: fit failed\n"),
+        judge(f, words, Some(2), "hapcal: error: fit failed\n", na),
         Outcome::Generic
     );
     let warning = "warning: setup check [column-unit]: maybe degrees\n";
-    assert_eq!(judge(f, &fix, Some(0), warning), Outcome::Warned);
-    assert_eq!(judge(f, &fix, Some(1), "report\n"), Outcome::Silent);
+    assert_eq!(judge(f, words, Some(0), warning, na), Outcome::Warned);
+    assert_eq!(judge(f, words, Some(1), "report\n", na), Outcome::Silent);
     assert_eq!(
-        judge(Family::AsIs, &[], Some(0), warning),
+        judge(Family::AsIs, none, Some(0), warning, na),
         Outcome::FalseAlarm
     );
     assert_eq!(
-        judge(Family::AsIs, &[], Some(0), "report\n"),
+        judge(Family::AsIs, none, Some(0), "report\n", na),
         Outcome::Clean
     );
     // Latency is a note on a run, and a stop on it is a false alarm.
     let note = "note: setup check [latency]: the distance lags the joints by 45 ms\n";
     assert_eq!(
-        judge(Family::Latency, &[], Some(0), note),
+        judge(Family::Latency, none, Some(0), note, na),
         Outcome::NamedRight
     );
     assert_eq!(
         judge(
             Family::Latency,
-            &[],
+            none,
             Some(2),
-            &stop("setup check [row-shift]: rows")
+            &stop("setup check [row-shift]: rows"),
+            na
         ),
         Outcome::FalseAlarm
     );
+    // A glitch row: a run that lists the row (data.csv:40 is not data.csv:400).
+    let row = vec!["data.csv:40".to_owned()];
+    let listed = (&[][..], row.as_slice());
+    let g = Family::GlitchRow;
+    let lists = "left out by the Huber loss: data.csv:40 (12 mm)\n";
+    assert_eq!(judge(g, listed, Some(0), lists, na), Outcome::NamedRight);
+    let other_row = "left out by the Huber loss: data.csv:400 (12 mm)\n";
+    assert_eq!(judge(g, listed, Some(0), other_row, na), Outcome::Silent);
+    assert_eq!(
+        judge(g, listed, Some(2), &stop(lists.trim()), na),
+        Outcome::Located
+    );
+}
+
+#[test]
+fn a_fix_is_read_as_flags_and_applied_to_the_command() {
+    assert_eq!(
+        fix_flags("--column-sign q3"),
+        vec![("--column-sign".to_owned(), "q3".to_owned())]
+    );
+    assert_eq!(
+        fix_flags("--tip l_link6 --tip r_hand (the markers sit one joint up)"),
+        vec![
+            ("--tip".to_owned(), "l_link6".to_owned()),
+            ("--tip".to_owned(), "r_hand".to_owned()),
+        ]
+    );
+    assert!(fix_flags("move the joint columns up by 1 row").is_empty());
+    let stderr = "hapcal: error: setup check [mounting]: upside down (…); fix: --gravity +z; \
+                  --accept-setup uses the calibration as it is\n";
+    assert_eq!(stop_fix(stderr).as_deref(), Some("--gravity +z"));
+    let tied = "hapcal: error: setup check [column-sign]: q1's sign; the data fit as well if \
+                q2 is 180° off (fix: --column-offset q2=3.14); fix: --column-sign q1\n";
+    assert_eq!(stop_fix(tied).as_deref(), Some("--column-sign q1"));
+    let args: Vec<String> = [
+        "--device", "d.urdf", "--tip", "a", "--tip", "b", "--data", "x.csv",
+    ]
+    .map(str::to_owned)
+    .to_vec();
+    // A flag of one value replaces the one given (every --tip); a column edit is added.
+    let tips = with_fix(
+        &args,
+        &[
+            ("--tip".to_owned(), "c".to_owned()),
+            ("--tip".to_owned(), "b".to_owned()),
+        ],
+    );
+    assert_eq!(
+        tips.join(" "),
+        "--device d.urdf --data x.csv --tip c --tip b"
+    );
+    let column = with_fix(&args, &[("--column-sign".to_owned(), "q3".to_owned())]);
+    assert_eq!(column.len(), args.len() + 2);
+    assert_eq!(column[..args.len()], args[..]);
+}
+
+#[test]
+fn a_tracker_moved_from_a_row_on_moves_every_later_pose_rigidly() {
+    let sources = Sources::load(&root()).expect("fixtures");
+    let dir = scratch("tracker");
+    let c = case(
+        Family::ChangePoint,
+        Recording::Positioner,
+        Mistake::TrackerMoved {
+            from_pct: 50,
+            deg: 3,
+            mm: 30,
+        },
+    );
+    let inv = write_case(&c, &sources, &dir, &no_simulation).expect("written");
+    let twin_dir = scratch("tracker-twin");
+    let twin = write_case(&correct_twin(&c), &sources, &twin_dir, &no_simulation).expect("twin");
+    let data = |inv: &hapcal_studies::setup_hostile::Invocation| {
+        let i = inv.args.iter().position(|a| a == "--data").expect("--data");
+        Table::read_csv(Path::new(&inv.args[i + 1]), None).expect("written file")
+    };
+    let (moved, orig) = (data(&inv), data(&twin));
+    let from = orig.rows.len() / 2;
+    let p = |t: &Table, r: usize| {
+        let c = |n: &str| t.rows[r][t.col(n).expect("column")];
+        (
+            nalgebra::Vector3::new(c("x"), c("y"), c("z")),
+            nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                c("qw"),
+                c("qx"),
+                c("qy"),
+                c("qz"),
+            )),
+        )
+    };
+    for r in 0..from {
+        assert_eq!(moved.rows[r], orig.rows[r], "row {r} before the change");
+    }
+    // After it: one rotation of 3° and distances between poses kept (a rigid move).
+    let (a0, qa0) = p(&orig, from);
+    let (b0, qb0) = p(&moved, from);
+    let turn = qb0 * qa0.inverse();
+    assert!(
+        (turn.angle().to_degrees() - 3.0).abs() < 1e-9,
+        "{}",
+        turn.angle()
+    );
+    assert!(((b0 - turn * a0).norm() - 0.030).abs() < 1e-9);
+    for r in from + 1..orig.rows.len() {
+        let (a, qa) = p(&orig, r);
+        let (b, qb) = p(&moved, r);
+        assert!(((b - b0).norm() - (a - a0).norm()).abs() < 1e-12, "row {r}");
+        assert!((qb * qa.inverse()).angle_to(&turn) < 1e-9, "row {r}");
+    }
+    // The change is located by the lines around the first moved row (header on line 1).
+    assert!(inv.locate_words.contains(&format!("data.csv:{}", from + 2)));
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&twin_dir);
 }
 
 /// A report of `hapcal calibrate --json` as the screening reads it: training sets of
@@ -286,7 +426,8 @@ fn a_mistake_within_5_percent_of_its_correct_twins_residual_is_invisible() {
     ];
     assert_eq!(
         VisibleSummary::of(&results).line(),
-        "visible mistakes 2, named right 1 (50 %), silent 1 (50 %), false alarms 1 of 2"
+        "visible mistakes 2, named 1 (50 %), located 0 (0 %), named or located 50 %, wrong cause \
+         0, harmful fixes 0, silent 1 (50 %), false alarms 1 of 2"
     );
 }
 
