@@ -2289,10 +2289,12 @@ fn has_word(text: &str, word: &str) -> bool {
     false
 }
 
-/// The flags of a fix (`--column-sign q3`, `--tip l_link6`, `--gravity +z`): each `--flag`
-/// with its value, from the fix's start; empty when the fix is an edit in words.
+/// The flags of a fix (`--column-sign q3`, `use --tip l_link6`, `--gravity +z`): each
+/// `--flag` with its value, from the fix's start (after a leading `use`); empty when the fix
+/// is an edit in words.
 pub fn fix_flags(fix: &str) -> Vec<(String, String)> {
     let mut out = Vec::new();
+    let fix = fix.trim_start().strip_prefix("use ").unwrap_or(fix);
     let mut words = fix.split_whitespace().peekable();
     while let Some(w) = words.next() {
         let w = w.trim_end_matches([',', ';', ')']);

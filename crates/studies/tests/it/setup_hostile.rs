@@ -260,6 +260,11 @@ fn a_fix_is_read_as_flags_and_applied_to_the_command() {
         ]
     );
     assert!(fix_flags("move the joint columns up by 1 row").is_empty());
+    assert_eq!(
+        fix_flags("use --tip arm_5_link"),
+        vec![("--tip".to_owned(), "arm_5_link".to_owned())]
+    );
+    assert!(fix_flags("check --device, --tip, the units").is_empty());
     let stderr = "hapcal: error: setup check [mounting]: upside down (…); fix: --gravity +z; \
                   --accept-setup uses the calibration as it is\n";
     assert_eq!(stop_fix(stderr).as_deref(), Some("--gravity +z"));
