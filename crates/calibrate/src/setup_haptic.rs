@@ -103,6 +103,9 @@ pub fn check_logs(
     let closest = judged.closest;
     findings.extend(frozen_joints(device, &rows));
     findings.extend(external_encoders(corrected, n_joints));
+    if findings.iter().all(|f| f.severity != Severity::Error) {
+        findings.extend(cable_zero(&chain, &rows, as_given));
+    }
     SetupReport::add_implausible(
         &mut findings,
         as_given,
@@ -359,6 +362,53 @@ fn map(rows: &[LogRow], edit: impl Fn(&mut LogRow)) -> Vec<LogRow> {
         .collect()
 }
 
+/// Largest constant (m) by which a right log's cable distances may differ from the nominal
+/// device's: the cable's zero and the link lengths it stands in for are assembled to a
+/// real device's manufacturing tolerance (15 mm, as a link length); beyond it the calibration
+/// would build the constant into a link length (a log whose distances are 50 mm long
+/// moves dd1 by +31.6 mm, then stops as another device).
+pub const CABLE_ZERO_MAX_M: f64 = 0.015;
+
+/// The cable distances' zero when it lies beyond [`CABLE_ZERO_MAX_M`]: the median of
+/// `d − |P(q)|` of the nominal device over `rows`, as a finding whose fix is the column offset
+/// that removes it (`--column-offset distance_m=…`); `None` within it.
+fn cable_zero(
+    chain: &hapcal_kinematics::Chain,
+    rows: &[LogRow],
+    as_given: Residual,
+) -> Option<Finding> {
+    let zero = nominal_cable_zero(chain, rows);
+    if !(zero.abs() > CABLE_ZERO_MAX_M) {
+        return None;
+    }
+    Some(Finding {
+        class: MistakeClass::ColumnZero,
+        severity: Severity::Error,
+        message: format!(
+            "the cable distances are {:.1} mm {} than the nominal device's in every row (the \
+             median of {} rows; their residual about it is {}): the cable encoder's zero is off, \
+             a constant no link length has",
+            zero.abs() * 1e3,
+            if zero > 0.0 { "longer" } else { "shorter" },
+            rows.len(),
+            as_given.text()
+        ),
+        fix: format!("--column-offset distance_m={:.4}", -zero),
+        before: as_given,
+        after: None,
+    })
+}
+
+/// The nominal device's cable zero of `rows`: the median of `d − |P(q)|`, m.
+fn nominal_cable_zero(chain: &hapcal_kinematics::Chain, rows: &[LogRow]) -> f64 {
+    let x0 = vec![0.0; chain.n_params()];
+    median(
+        (rows.iter())
+            .map(|r| r.distance_m - chain.end_point(&x0, &r.q).coords.norm())
+            .collect(),
+    )
+}
+
 /// The nominal device's cable-distance residual of `rows`: the RMS of `d − |P(q)|` about its
 /// median with the farthest [`TRIMMED_SHARE`] of the rows set aside ([`trimmed_rms`]), and the
 /// robust spread of the distances about theirs ([`about_median`]): one mistyped row leaves
@@ -590,6 +640,43 @@ mod tests {
             f.text()
         );
         assert!(f.message.contains("log.csv:4,"), "{}", f.text());
+    }
+
+    #[test]
+    fn a_cable_zero_beyond_tolerance_is_named_with_the_offset_that_removes_it() {
+        // The reference log with every distance 50 mm longer: the nominal device's cable
+        // zero on the log as recorded is millimetres, so the median names the 50 mm to the
+        // residual's RMS about it (2.4 mm); 10 mm longer is within tolerance.
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures");
+        let device =
+            hapcal_io::read_device(&root.join("reference-device/device.toml")).expect("device");
+        let log = root.join("reference-device/log.csv");
+        let rows = hapcal_io::read_log(&log, &device).expect("log").rows;
+        let chain = device.chain().expect("chain");
+        let rows = thinned(rows);
+        let as_given = distance_residual(&chain, &rows);
+        let noise = as_given.length_rms_m.expect("a residual");
+        let longer = |extra: f64| -> Vec<LogRow> {
+            (rows.iter().cloned())
+                .map(|mut r| {
+                    r.distance_m += extra;
+                    r
+                })
+                .collect()
+        };
+        assert!(cable_zero(&chain, &rows, as_given).is_none());
+        assert!(cable_zero(&chain, &longer(0.010), as_given).is_none());
+        let f = cable_zero(&chain, &longer(0.050), as_given).expect("a finding");
+        assert_eq!(f.class, MistakeClass::ColumnZero);
+        assert_eq!(f.severity, Severity::Error);
+        let offset: f64 = (f.fix.strip_prefix("--column-offset distance_m="))
+            .and_then(|v| v.parse().ok())
+            .expect("the fix is the column offset");
+        let zero = nominal_cable_zero(&chain, &rows);
+        assert!(
+            (offset + 0.050 + zero).abs() < 1e-4,
+            "{offset} against −(50 mm + the log's own zero {zero}); {noise}"
+        );
     }
 
     #[test]
