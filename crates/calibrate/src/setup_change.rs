@@ -28,17 +28,24 @@
 //! a drift lowers the residual a little wherever the split lies. A change is a step: moving
 //! the split by an eighth of the file's rows to either side must raise the residual left by
 //! [`STEP_FACTOR`] or more, and the split must at least halve the residual of the whole file
-//! ([`crate::setup_findings::SUGGESTIVE_FACTOR`]), or no hypothesis is generated. The
-//! hypotheses are `Tier::Suspicious` (generated only when the data as given leave more than
-//! right data do), so that the check of right data costs what it did; the judge's rule
-//! ([`crate::setup_findings::OVERWHELMING_FACTOR`] with a plausible residual left) makes one
-//! a finding.
+//! ([`crate::setup_findings::SUGGESTIVE_FACTOR`]), or no hypothesis is generated; the
+//! judge's rule ([`crate::setup_findings::OVERWHELMING_FACTOR`] with a plausible residual
+//! left) makes one a finding.
+//!
+//! The scan runs when the data as given leave more than right data do (`Tier::Suspicious`)
+//! or when the per-row residuals of the fit to every row jump from a row on
+//! (`residuals_jump`, free: the residuals are the row families' own). Otherwise a file is
+//! probed first with two-part fits at a quarter, half and three quarters of its rows
+//! ([`PROBE_SPLITS`], [`PROBE_FACTOR`]; seven closed-form fits, against the few dozen of the
+//! scan): a marker re-mounted by 18 mm halfway through a file leaves 9 mm, a residual right
+//! data can leave, so that neither of the other gates opens for it. On right data the probe
+//! finds nothing and no hypothesis is added.
 //!
 //! The fixes are what a calibration supports: it fits one instrument frame, so data recorded
 //! before and after the instrument moved are calibrated apart (the file split at the line
 //! named); it fits one frame per marker and one marker per tip, so the samples after a
 //! re-mount go to columns of a new marker on a link fixed to the same moving link as the tip
-//! (`--tips`, [`fixed_twin`]), or, without such a link, the file is split as well.
+//! (`--tips`, `fixed_twin`), or, without such a link, the file is split as well.
 
 use hapcal_io::MeasurementTable;
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
@@ -405,7 +412,7 @@ fn tip_of(input: &ChangeInput<'_>, k: usize) -> usize {
 }
 
 /// Factor by which the mean per-row residual of one part of a file must exceed the other's
-/// for [`residuals_jump`]: the per-row residuals of right data stay within about 4 medians of
+/// for `residuals_jump`: the per-row residuals of right data stay within about 4 medians of
 /// one another row by row, and a mean over [`MIN_PART_ROWS`] rows or more within far less.
 pub const JUMP_FACTOR: f64 = 4.0;
 
