@@ -20,6 +20,7 @@ pub mod record;
 pub mod report;
 pub mod robust;
 pub mod setup;
+pub mod setup_change;
 pub mod setup_families;
 pub mod setup_findings;
 pub mod setup_haptic;

@@ -35,6 +35,7 @@ use hapcal_problems::{CalibratedModel, Weights};
 
 use crate::measured::{self, MeasuredConfig, Robot};
 use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
+use crate::setup_change::{ChangeInput, PartFit, change_hypotheses, residuals_jump};
 use crate::setup_families::{
     ANGLE_UNITS, JointColumn, LENGTH_UNITS, Layout, LengthGroup, SetupData, Tier,
     general_hypotheses, residual_location, row_hypotheses,
@@ -204,6 +205,8 @@ struct ClosedForm {
     /// Per row checked: its file (index into the tables), its line, and the root of its
     /// squared position errors plus the weighted orientation term, m.
     per_row: Vec<(usize, u64, f64)>,
+    /// The frames fitted.
+    frames: Frames,
 }
 
 /// One marker sample of [`closed_form_fit`]: the nominal tip pose and the measurement.
@@ -513,8 +516,8 @@ fn closed_form_fit(
     let Frames {
         r0,
         t,
-        offsets,
-        marker_rot,
+        ref offsets,
+        ref marker_rot,
     } = frames;
     let (mut len_sq, mut rot_sq, mut n_rot) = (0.0, 0.0, 0usize);
     let mut row_sq = vec![0.0; rows.len()];
@@ -544,6 +547,7 @@ fn closed_form_fit(
         per_row: (rows.iter().zip(&row_sq))
             .map(|(&(f, line), sq)| (f, line, sq.sqrt()))
             .collect(),
+        frames,
     })
 }
 
@@ -1164,14 +1168,19 @@ fn measurement_hypotheses(
         .map(|t| crate::data::csv_columns(&t.path))
         .collect();
     let layout = layout_of(input, &headers);
+    let names: Vec<String> = input.tables.iter().map(file_name).collect();
     let mut hypotheses = own_hypotheses(input, &headers);
     hypotheses.extend(general_hypotheses(given, &layout, Tier::Always));
+    // Frames that change from a row on: scanned when the data are suspicious or the per-row
+    // residuals jump, else after a probe of a few splits (a move the frames of the whole file
+    // absorb to a residual right data can leave).
+    let jumps = suspicious || per_row.is_some_and(residuals_jump);
+    hypotheses.extend(change_point_hypotheses(input, &names, jumps));
     if suspicious {
         hypotheses.extend(general_hypotheses(given, &layout, Tier::Suspicious));
         hypotheses.extend(position_reflections(input.tables));
         hypotheses.extend(part_unit_hypotheses(input.tables, input.units.length));
         if let Some(per_row) = per_row {
-            let names: Vec<String> = input.tables.iter().map(file_name).collect();
             hypotheses.extend(row_hypotheses(given, &layout, per_row, &names, |drop| {
                 let mut tables = thinned(input.tables);
                 for (f, t) in tables.iter_mut().enumerate() {
@@ -1187,6 +1196,50 @@ fn measurement_hypotheses(
 /// The name a finding gives a table's file: its file name (the table's name without a path).
 fn file_name(t: &MeasurementTable) -> String {
     (t.path.file_name()).map_or_else(|| t.name.clone(), |f| f.to_string_lossy().into_owned())
+}
+
+/// The change-point hypotheses of `input` (files named `names`), with the closed-form fit
+/// as the frames of each part; every file scanned when the data are `suspicious`, else the
+/// files whose probe finds a change.
+fn change_point_hypotheses(
+    input: &SetupInput<'_>,
+    names: &[String],
+    suspicious: bool,
+) -> Vec<Corrected<MeasuredData>> {
+    let given_tips: Vec<usize> = (0..input.tips.len().max(1)).collect();
+    let fit = |tables: &[MeasurementTable], tips: &[usize]| {
+        let fit = closed_form_fit(input.robot, tables, tips, None)?;
+        let n_rows: usize = tables.iter().map(|t| t.rows.len()).sum();
+        let sq: f64 = fit.per_row.iter().map(|r| r.2 * r.2).sum();
+        Some(PartFit {
+            cost_m2: sq / fit.per_row.len().max(1) as f64 * n_rows as f64,
+            instrument: (fit.frames.r0, fit.frames.t),
+            marker_offsets_m: fit.frames.offsets,
+        })
+    };
+    let urdf = input.urdf.and_then(|p| urdf_rs::read_file(p).ok());
+    let twins: Vec<Option<String>> = (input.tips.iter())
+        .map(|tip| {
+            let urdf = urdf.as_ref()?;
+            crate::setup_change::fixed_twin(urdf, tip, input.tips)
+        })
+        .collect();
+    change_hypotheses(
+        &ChangeInput {
+            tables: input.tables,
+            file_names: names,
+            marker_tips: &given_tips,
+            tip_names: input.tips,
+            twins: &twins,
+            suspicious,
+        },
+        &fit,
+        &|tables, tips| MeasuredData {
+            robot: None,
+            tables,
+            marker_tips: Some(tips),
+        },
+    )
 }
 
 /// Least ratio between the position magnitudes of two consecutive rows, sorted by magnitude,
@@ -2456,7 +2509,23 @@ mod tests {
 
     #[test]
     fn the_measurement_check_generates_every_family_of_its_kind() {
-        let (robot, tables) = ur10();
+        let (robot, mut tables) = ur10();
+        // The instrument turned by 0.2 rad and moved by 50 mm from the 13th row on: a step for
+        // the change-point family.
+        let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.2);
+        for m in tables[0]
+            .rows
+            .iter_mut()
+            .skip(12)
+            .flat_map(|r| &mut r.markers)
+        {
+            m.position_m = (turn * Vector3::from(m.position_m) + Vector3::x() * 0.05).into();
+            if let Some([w, x, y, z]) = m.rotation {
+                let r =
+                    turn * UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+                m.rotation = Some([r.w, r.i, r.j, r.k]);
+            }
+        }
         let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures");
         let urdf = root.join("figaroh/ur10/ur10_robot.urdf");
         let tips = ["wrist_3_link".to_owned()];
@@ -2487,6 +2556,7 @@ mod tests {
             MistakeClass::RowMismatch,
             MistakeClass::ColumnUnit,
             MistakeClass::ColumnZero,
+            MistakeClass::ChangePoint,
         ] {
             assert!(hypotheses.iter().any(|h| h.class == class), "{class}");
         }

@@ -104,11 +104,14 @@ pub enum MistakeClass {
     /// An estimate no real robot can have (negative compliances, a marker frame metres from its
     /// link, an unconverged fit): found after the fit, never a result.
     ImplausibleEstimate,
+    /// One set of instrument and marker frames before a row of a file and another from it on:
+    /// the instrument moved or a marker was mounted again during the recording.
+    ChangePoint,
 }
 
 impl MistakeClass {
     /// Every class, in report order.
-    pub const ALL: [MistakeClass; 23] = [
+    pub const ALL: [MistakeClass; 24] = [
         MistakeClass::LengthUnit,
         MistakeClass::AngleUnit,
         MistakeClass::OrientationUnit,
@@ -132,6 +135,7 @@ impl MistakeClass {
         MistakeClass::AnotherDevice,
         MistakeClass::Mounting,
         MistakeClass::ImplausibleEstimate,
+        MistakeClass::ChangePoint,
     ];
 
     /// The class's name in reports.
@@ -160,6 +164,7 @@ impl MistakeClass {
             MistakeClass::AnotherDevice => "another-device",
             MistakeClass::Mounting => "mounting",
             MistakeClass::ImplausibleEstimate => "implausible-estimate",
+            MistakeClass::ChangePoint => "change-point",
         }
     }
 }
