@@ -51,6 +51,7 @@ use hapcal_io::MeasurementTable;
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
+use crate::setup_families::splits;
 use crate::setup_findings::{Corrected, MistakeClass, SUGGESTIVE_FACTOR, mm};
 
 /// Rows each part of a split holds at least: the frames of a part (6 of the instrument, 3 of
@@ -426,24 +427,14 @@ pub(crate) fn residuals_jump(per_row: &[(usize, u64, f64)]) -> bool {
     let n_files = per_row.iter().map(|r| r.0 + 1).max().unwrap_or(0);
     (0..n_files).any(|f| {
         let e: Vec<f64> = per_row.iter().filter(|r| r.0 == f).map(|r| r.2).collect();
-        let n = e.len();
-        if n < 2 * MIN_PART_ROWS {
+        if e.len() < 2 * MIN_PART_ROWS {
             return false;
         }
-        let total: f64 = e.iter().sum();
-        let mut before = 0.0;
-        (0..n).any(|k| {
-            before += e[k];
-            let at = k + 1;
-            if at < MIN_PART_ROWS || n - at < MIN_PART_ROWS {
-                return false;
-            }
-            let mean_before = before / at as f64;
-            let mean_after = (total - before) / (n - at) as f64;
-            let (lo, hi) = if mean_before < mean_after {
-                (mean_before, mean_after)
+        splits(&e, MIN_PART_ROWS, MIN_PART_ROWS).any(|(_, before, after)| {
+            let (lo, hi) = if before < after {
+                (before, after)
             } else {
-                (mean_after, mean_before)
+                (after, before)
             };
             hi >= JUMP_FACTOR * lo.max(f64::MIN_POSITIVE)
         })

@@ -662,32 +662,41 @@ pub(crate) fn row_hypotheses<D: SetupData>(
     out
 }
 
+/// Every split of `values` (one file's per-row residuals in checking order) with at least
+/// `min_before` values before it and `min_after` after: the count before it and the mean
+/// residual before and after. Shared by the row shift from a row on, the located residual and
+/// the change point's test for a jump.
+pub(crate) fn splits(
+    values: &[f64],
+    min_before: usize,
+    min_after: usize,
+) -> impl Iterator<Item = (usize, f64, f64)> + '_ {
+    let n = values.len();
+    let total: f64 = values.iter().sum();
+    let prefix: Vec<f64> = (values.iter())
+        .scan(0.0, |sum, v| {
+            *sum += v;
+            Some(*sum)
+        })
+        .collect();
+    (min_before.max(1)..(n + 1).saturating_sub(min_after.max(1))).map(move |k| {
+        let before = prefix[k - 1];
+        (k, before / k as f64, (total - before) / (n - k) as f64)
+    })
+}
+
 /// The split of one file's rows (line, residual) in checking order that best separates low
 /// residuals before from high ones after: the first row after it and the ratio of the mean
 /// residual after to the mean before. `None` for fewer than 12 rows (a split keeps 4 rows
-/// before it and 3 after).
+/// on either side).
 fn step_up(rows: &[(u64, f64)]) -> Option<(usize, f64)> {
     if rows.len() < 12 {
         return None;
     }
-    let prefix: Vec<f64> = (rows.iter())
-        .scan(0.0, |sum, r| {
-            *sum += r.1;
-            Some(*sum)
-        })
-        .collect();
-    let total = prefix[rows.len() - 1];
-    let mut best: Option<(usize, f64)> = None;
-    for k in 4..rows.len() - 3 {
-        let before = prefix[k - 1];
-        let mean_before = before / k as f64;
-        let mean_after = (total - before) / (rows.len() - k) as f64;
-        let contrast = mean_after / mean_before.max(f64::MIN_POSITIVE);
-        if best.is_none_or(|(_, c)| contrast > c) {
-            best = Some((k, contrast));
-        }
-    }
-    best
+    let values: Vec<f64> = rows.iter().map(|r| r.1).collect();
+    splits(&values, 4, 4)
+        .map(|(k, before, after)| (k, after / before.max(f64::MIN_POSITIVE)))
+        .reduce(|best, s| if s.1 > best.1 { s } else { best })
 }
 
 /// Share of the rows checked that, holding more than half the sum of squared residuals, make
