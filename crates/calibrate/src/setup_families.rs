@@ -488,9 +488,7 @@ fn flag_number(v: f64, digits: usize) -> String {
 /// A factor (reading per true angle) in words: `100`, `20861`, `1/100`, `1.050`.
 fn factor_words(k: f64) -> String {
     let whole = |v: f64| {
-        if (v - v.round()).abs() < 1e-9 * v {
-            format!("{v:.0}")
-        } else if v >= 100.0 {
+        if (v - v.round()).abs() < 1e-9 * v || v >= 100.0 {
             format!("{v:.0}")
         } else {
             format!("{v:.3}")
@@ -626,7 +624,7 @@ pub(crate) fn fitted_hypotheses<D: SetupData>(
     let mut out = Vec::new();
     for (f, p, ratio) in estimates {
         // No better than the data as given (within the search's own rounding).
-        if !(ratio < 0.999) {
+        if ratio.is_nan() || ratio >= 0.999 {
             continue;
         }
         // A free parameter absorbs part of a real robot's manufacturing deviations (a few
