@@ -58,9 +58,19 @@ fn printed_fix(err: &str, flag: &str) -> [String; 2] {
     ]
 }
 
+/// A mistaken file: its name, the class and the flag expected, the words of the finding, and
+/// the edit of the column's value given the other column's.
+type Mistake<'a> = (
+    &'a str,
+    &'a str,
+    &'a str,
+    &'a str,
+    &'a dyn Fn(f64, f64) -> f64,
+);
+
 #[test]
 fn a_scaled_or_coupled_joint_stops_the_calibration_and_its_printed_flag_fixes_it() {
-    let cases: [(&str, &str, &str, &str, &dyn Fn(f64, f64) -> f64); 2] = [
+    let cases: [Mistake<'_>; 2] = [
         (
             "motor-side",
             "column-scale",
