@@ -2486,7 +2486,6 @@ mod tests {
             MistakeClass::ColumnUnit,
             MistakeClass::ColumnZero,
             MistakeClass::ColumnScale,
-            MistakeClass::ColumnCoupling,
         ] {
             assert!(hypotheses.iter().any(|h| h.class == class), "{class}");
         }
