@@ -38,14 +38,14 @@ use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
 use crate::setup_change::{ChangeInput, PartFit, change_hypotheses, residuals_jump};
 use crate::setup_families::{
     ANGLE_UNITS, JointColumn, LENGTH_UNITS, Layout, LengthGroup, SetupData, Tier,
-    general_hypotheses, residual_location, row_hypotheses,
+    fitted_hypotheses, general_hypotheses, residual_location, row_hypotheses,
 };
 pub use crate::setup_findings::{
     ClosestHypothesis, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OVERWHELMING_FACTOR,
     PLAUSIBLE_FRAMES_ONLY_RAD, Residual, ResidualOf, SUGGESTIVE_FACTOR, SetupReport, Severity,
 };
 use crate::setup_findings::{
-    Corrected, OPEN_LIMIT, Scoring, judge, mm, nearest_rotation, nearest_rotation_from,
+    Corrected, OPEN_LIMIT, ResidualFn, Scoring, judge, mm, nearest_rotation, nearest_rotation_from,
     tip_candidates,
 };
 
@@ -1154,14 +1154,15 @@ fn tip_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correc
     out
 }
 
-/// Every hypothesis of a mistake for `input` (the data as given, `given`): the files' own
-/// families and the general ones, the per-column and per-row families too when the data are
-/// `suspicious`, the latter from the per-row residuals `per_row` (file, line, m) when there
+/// Every hypothesis of a mistake for `input` (the data as given, `given`, residual
+/// `as_given`): the files' own families and the general ones, the per-column and per-row
+/// families too when the data are `suspicious` (the free scales and couplings fitted with
+/// `screen`), the row families from the per-row residuals `per_row` (file, line, m) when there
 /// are any.
 fn measurement_hypotheses(
     input: &SetupInput<'_>,
-    given: &MeasuredData,
-    suspicious: bool,
+    (given, as_given): (&MeasuredData, &Residual),
+    suspicious: Option<ResidualFn<'_, MeasuredData>>,
     per_row: Option<&[(usize, u64, f64)]>,
 ) -> Vec<Corrected<MeasuredData>> {
     let headers: Vec<Vec<String>> = (input.tables.iter())
@@ -1174,10 +1175,11 @@ fn measurement_hypotheses(
     // Frames that change from a row on: scanned when the data are suspicious or the per-row
     // residuals jump, else after a probe of a few splits (a move the frames of the whole file
     // absorb to a residual right data can leave).
-    let jumps = suspicious || per_row.is_some_and(residuals_jump);
+    let jumps = suspicious.is_some() || per_row.is_some_and(residuals_jump);
     hypotheses.extend(change_point_hypotheses(input, &names, jumps));
-    if suspicious {
+    if let Some(screen) = suspicious {
         hypotheses.extend(general_hypotheses(given, &layout, Tier::Suspicious));
+        hypotheses.extend(fitted_hypotheses(given, &layout, as_given, screen));
         hypotheses.extend(position_reflections(input.tables));
         hypotheses.extend(part_unit_hypotheses(input.tables, input.units.length));
         if let Some(per_row) = per_row {
@@ -1517,7 +1519,12 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
         Some(f) if f.is_clean() => f,
         _ => as_given,
     };
-    let hypotheses = measurement_hypotheses(input, &given, suspicious, per_row.as_deref());
+    let hypotheses = measurement_hypotheses(
+        input,
+        (&given, &as_given),
+        suspicious.then_some(&screen as ResidualFn<'_, MeasuredData>),
+        per_row.as_deref(),
+    );
     let judged = judge(
         as_given,
         &given,
@@ -2547,7 +2554,10 @@ mod tests {
             })
             .collect();
         let given = MeasuredData::tables(tables.clone());
-        let hypotheses = measurement_hypotheses(&input, &given, true, Some(&per_row));
+        let as_given = closed_form_residual(&robot, &tables, &[0]).expect("marker data");
+        let screen = |d: &MeasuredData| closed_form_residual(&robot, &d.tables, &[0]);
+        let hypotheses =
+            measurement_hypotheses(&input, (&given, &as_given), Some(&screen), Some(&per_row));
         crate::setup_families::assert_families(
             crate::setup_families::DataKind::MeasurementFiles,
             &hypotheses,
@@ -2557,6 +2567,7 @@ mod tests {
             MistakeClass::ColumnUnit,
             MistakeClass::ColumnZero,
             MistakeClass::ChangePoint,
+            MistakeClass::ColumnScale,
         ] {
             assert!(hypotheses.iter().any(|h| h.class == class), "{class}");
         }

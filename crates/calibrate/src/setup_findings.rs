@@ -85,6 +85,12 @@ pub enum MistakeClass {
     ColumnSign,
     /// One joint's zero off by a multiple of 90°.
     ColumnZero,
+    /// One joint column read times a factor: on the motor side of its gear, in encoder
+    /// counts, or through a gear ratio a few per cent off (`--column-scale`).
+    ColumnScale,
+    /// One joint column read plus a multiple of another joint's: a coupled joint
+    /// (`--column-coupling`).
+    ColumnCoupling,
     /// Rows whose joint readings and measurements do not belong together.
     RowMismatch,
     /// Joint readings that lag the measurements by a fraction of a row: a latency, which
@@ -111,7 +117,7 @@ pub enum MistakeClass {
 
 impl MistakeClass {
     /// Every class, in report order.
-    pub const ALL: [MistakeClass; 24] = [
+    pub const ALL: [MistakeClass; 26] = [
         MistakeClass::LengthUnit,
         MistakeClass::AngleUnit,
         MistakeClass::OrientationUnit,
@@ -128,6 +134,8 @@ impl MistakeClass {
         MistakeClass::ColumnUnit,
         MistakeClass::ColumnSign,
         MistakeClass::ColumnZero,
+        MistakeClass::ColumnScale,
+        MistakeClass::ColumnCoupling,
         MistakeClass::RowMismatch,
         MistakeClass::Latency,
         MistakeClass::SocketDistance,
@@ -157,6 +165,8 @@ impl MistakeClass {
             MistakeClass::ColumnUnit => "column-unit",
             MistakeClass::ColumnSign => "column-sign",
             MistakeClass::ColumnZero => "column-zero",
+            MistakeClass::ColumnScale => "column-scale",
+            MistakeClass::ColumnCoupling => "column-coupling",
             MistakeClass::RowMismatch => "row-mismatch",
             MistakeClass::Latency => hapcal_contract::Effect::Latency.name(),
             MistakeClass::SocketDistance => "socket-distance",

@@ -25,7 +25,8 @@ use hapcal_io::{Device, LogRow};
 
 use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
 use crate::setup_families::{
-    JointColumn, Layout, LengthGroup, SetupData, Tier, general_hypotheses, row_hypotheses,
+    JointColumn, Layout, LengthGroup, SetupData, Tier, fitted_hypotheses, general_hypotheses,
+    row_hypotheses,
 };
 use crate::setup_findings::{
     Corrected, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OPEN_LIMIT,
@@ -72,10 +73,19 @@ pub fn check_logs(
     let as_given = residual(&rows);
     let n_joints = chain.n_joints();
     let given = LogRows(rows);
-    // A distance residual costs microseconds a row: every family, whatever the residual.
-    let hypotheses = log_hypotheses(&chain, &given, true, paths);
-    let n_hypotheses = hypotheses.len();
+    // A distance residual costs microseconds a row: every family, whatever the residual; the
+    // free scales and couplings when the residual is more than right data leave.
     let screen = |d: &LogRows| Some(residual(&d.0));
+    let mut hypotheses = log_hypotheses(&chain, &given, true, paths);
+    if !as_given.is_clean() {
+        hypotheses.extend(fitted_hypotheses(
+            &given,
+            &log_layout(n_joints),
+            &as_given,
+            &screen,
+        ));
+    }
+    let n_hypotheses = hypotheses.len();
     let judged = judge(
         as_given,
         &given,
@@ -153,25 +163,7 @@ fn log_hypotheses(
     suspicious: bool,
     paths: &[PathBuf],
 ) -> Vec<Corrected<LogRows>> {
-    let n_joints = chain.n_joints();
-    let layout = Layout {
-        joints: (0..n_joints)
-            .map(|j| JointColumn {
-                label: format!("q{}", j + 1),
-                words: format!("joint {} (q{})", j + 1, j + 1),
-                revolute: true,
-            })
-            .collect(),
-        lengths: vec![LengthGroup {
-            label: "distance_m".to_owned(),
-            words: "the cable distances (distance_m)".to_owned(),
-        }],
-        angle_unit: "rad",
-        length_unit: "m",
-        file_flags: true,
-        arms: Vec::new(),
-        paired_rows: true,
-    };
+    let layout = log_layout(chain.n_joints());
     let mut hypotheses = general_hypotheses(given, &layout, Tier::Always);
     if suspicious {
         hypotheses.extend(general_hypotheses(given, &layout, Tier::Suspicious));
@@ -192,6 +184,29 @@ fn log_hypotheses(
         }));
     }
     hypotheses
+}
+
+/// The columns of a haptic device's log of `n_joints` joints, as the check's families see
+/// them.
+fn log_layout(n_joints: usize) -> Layout {
+    Layout {
+        joints: (0..n_joints)
+            .map(|j| JointColumn {
+                label: format!("q{}", j + 1),
+                words: format!("joint {} (q{})", j + 1, j + 1),
+                revolute: true,
+            })
+            .collect(),
+        lengths: vec![LengthGroup {
+            label: "distance_m".to_owned(),
+            words: "the cable distances (distance_m)".to_owned(),
+        }],
+        angle_unit: "rad",
+        length_unit: "m",
+        file_flags: true,
+        arms: Vec::new(),
+        paired_rows: true,
+    }
 }
 
 /// Distance from a whole number of rows (rows) from which the lag that fits best may be a

@@ -18,7 +18,9 @@ use hapcal_io::SocketPlacement;
 use hapcal_kinematics::Chain;
 
 use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
-use crate::setup_families::{JointColumn, Layout, SetupData, Tier, general_hypotheses};
+use crate::setup_families::{
+    JointColumn, Layout, SetupData, Tier, fitted_hypotheses, general_hypotheses,
+};
 use crate::setup_findings::{
     Corrected, Finding, MistakeClass, Residual, ResidualOf, Scoring, SetupReport, Severity, judge,
     mm, tip_candidates,
@@ -484,9 +486,9 @@ pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
     let as_given = socket_scatter(input.chain, input.placements, input.socket_distance_m)
         .ok_or_else(|| anyhow::anyhow!("the socket files do not read on this chain"))?;
     let given = given_data(input);
-    // A socket scatter costs microseconds a row: every family, whatever the residual.
-    let hypotheses = socket_hypotheses(input, &given, true);
-    let n_hypotheses = hypotheses.len();
+    // A socket scatter costs microseconds a row: every family, whatever the residual; the
+    // free scales and couplings when the scatter is more than right data leave.
+    let mut hypotheses = socket_hypotheses(input, &given, true);
     let screen = |d: &SocketData| {
         let chain = d.chain.as_ref().unwrap_or(input.chain);
         Some(
@@ -497,6 +499,15 @@ pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
             }),
         )
     };
+    if !as_given.is_clean() {
+        hypotheses.extend(fitted_hypotheses(
+            &given,
+            &layout_of(input),
+            &as_given,
+            &screen,
+        ));
+    }
+    let n_hypotheses = hypotheses.len();
     let judged = judge(
         as_given,
         &given,

@@ -83,6 +83,18 @@ struct UnitArgs {
     /// column): a joint's zero. Repeatable. Example: --column-offset q2=-1.5708.
     #[arg(long = "column-offset", value_name = "COLUMNS=VALUE", value_parser = hapcal_io::ColumnEdit::parse_offset, allow_hyphen_values = true)]
     column_offsets: Vec<hapcal_io::ColumnEdit>,
+    /// A factor each reading of some columns is multiplied by, after their unit and before
+    /// their sign and offset: COLUMNS=FACTOR. A joint read on the motor side of a 100:1 gear
+    /// takes 0.01, one in encoder counts of 2^17 per revolution 2π/2^17 = 4.793689962e-5.
+    /// Repeatable. Example: --column-scale q3=0.01.
+    #[arg(long = "column-scale", value_name = "COLUMNS=FACTOR", value_parser = hapcal_io::ColumnEdit::parse_scale, allow_hyphen_values = true)]
+    column_scales: Vec<hapcal_io::ColumnEdit>,
+    /// Another column's value (its unit, scale, sign and offset applied; rad or m) times COEF
+    /// added to a column's, after every other edit: COLUMN=COEF*OTHER. A reading that depends
+    /// on another joint, q6 + 0.5·q5 (a coupled wrist), is fixed by COEF = -0.5. Repeatable.
+    /// Example: --column-coupling q6=-0.5*q5.
+    #[arg(long = "column-coupling", value_name = "COLUMN=COEF*OTHER", value_parser = hapcal_io::ColumnEdit::parse_coupling, allow_hyphen_values = true)]
+    column_couplings: Vec<hapcal_io::ColumnEdit>,
 }
 
 impl UnitArgs {
@@ -94,6 +106,8 @@ impl UnitArgs {
                 (self.column_units.iter())
                     .chain(&self.column_signs)
                     .chain(&self.column_offsets)
+                    .chain(&self.column_scales)
+                    .chain(&self.column_couplings)
                     .cloned(),
             )
     }

@@ -1,9 +1,14 @@
-//! Units of data files, file-wide and per column: the unit of a column, a reversed encoder,
-//! a joint's zero.
+//! Units of data files, file-wide and per column: the unit of a column, its scale (a
+//! motor-side reading, encoder counts, a gear ratio off), a reversed encoder, a joint's zero,
+//! a reading coupled to another column's.
 //!
 //! Every reader (measurement CSV, industrial_calibration YAML, haptic log, MUKCa sockets)
-//! converts each reading to SI as `si = raw · unit · sign + offset` before any check on it,
-//! so that joint limits and plausibility checks see the corrected values.
+//! converts each reading to SI before any check on it, so that joint limits and plausibility
+//! checks see the corrected values: first each column on its own,
+//! `own = raw · unit · scale · sign + offset`, then the couplings,
+//! `si_j = own_j + Σ coef · own_k` over the columns `k` that `--column-coupling` couples to
+//! `j` (the other column's own value: its unit, scale, sign and offset applied, not its
+//! couplings).
 
 use std::fmt;
 use std::path::Path;
@@ -207,7 +212,7 @@ impl std::str::FromStr for ColumnUnit {
 }
 
 /// What a [`ColumnEdit`] changes in its columns.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum ColumnChange {
     /// The columns are in this unit (overriding the file-wide unit of their kind).
     Unit(ColumnUnit),
@@ -217,10 +222,23 @@ pub enum ColumnChange {
     /// Added to each reading after its unit conversion and sign, in SI units (rad, or m for a
     /// length column): a joint's zero.
     Offset(f64),
+    /// Each reading multiplied by this factor after its unit conversion, before its sign and
+    /// offset: a joint read on the motor side of its gear (`0.01` for a 100:1 gear), in
+    /// encoder counts (`2π/2¹⁷`), or through a gear ratio a few per cent off.
+    Scale(f64),
+    /// The column's value plus `coef` times the value of the column `other` (its own unit,
+    /// scale, sign and offset applied, in rad or m): a reading that depends on another joint,
+    /// `q_j + c·q_k` (a coupled wrist), is fixed by `coef = −c`.
+    Coupling {
+        /// The column whose value is added.
+        other: String,
+        /// Times this coefficient (rad per rad, or per m).
+        coef: f64,
+    },
 }
 
-/// One edit of named columns, as one `--column-unit`, `--column-sign` or `--column-offset`
-/// flag gives it.
+/// One edit of named columns, as one `--column-unit`, `--column-scale`, `--column-sign`,
+/// `--column-offset` or `--column-coupling` flag gives it.
 ///
 /// A column is named as the file's header spells it (`q3`, a joint's name, `x2`, …); a
 /// joint's column may also be named `q1..qn` (chain order) or by the joint's name whatever
@@ -308,13 +326,83 @@ impl ColumnEdit {
         })
     }
 
+    /// Parses `--column-scale`'s value: `COLUMNS=FACTOR`, each reading multiplied by the
+    /// factor after its unit conversion (`q3=0.01` for a reading on the motor side of a 100:1
+    /// gear, `q2=0.95238`).
+    ///
+    /// # Errors
+    /// A message naming the value: no `=`, an empty column name, a factor that is not a
+    /// finite number or is zero.
+    pub fn parse_scale(text: &str) -> Result<Self, String> {
+        let (columns, value) = split_assignment(text, "q3=0.01")?;
+        let factor: f64 = value
+            .parse()
+            .ok()
+            .filter(|v: &f64| v.is_finite() && *v != 0.0)
+            .ok_or_else(|| format!("expected a finite, non-zero factor, found {value:?}"))?;
+        Ok(Self {
+            columns: column_names(columns)?,
+            change: ColumnChange::Scale(factor),
+        })
+    }
+
+    /// Parses `--column-coupling`'s value: `COLUMN=COEF*OTHER`, the value of column `OTHER`
+    /// times `COEF` added to column `COLUMN`'s (`q6=-0.5*q5`: the reading of `q6` was
+    /// `q6 + 0.5·q5`).
+    ///
+    /// # Errors
+    /// A message naming the value: no `=`, not one column on the left, no `*` on the right, a
+    /// coefficient that is not a finite number, an empty other column, a column coupled to
+    /// itself.
+    pub fn parse_coupling(text: &str) -> Result<Self, String> {
+        let example = "q6=-0.5*q5";
+        let (column, value) = split_assignment(text, example)?;
+        let columns = column_names(column)?;
+        if columns.len() != 1 {
+            return Err(format!(
+                "expected one column before `=` (e.g. {example}), found {column:?}"
+            ));
+        }
+        let Some((coef, other)) = value.split_once('*') else {
+            return Err(format!(
+                "expected COEF*OTHER after `=` (e.g. {example}), found {value:?}"
+            ));
+        };
+        let coef: f64 = (coef.trim().parse().ok())
+            .filter(|v: &f64| v.is_finite())
+            .ok_or_else(|| format!("expected a finite coefficient before `*`, found {coef:?}"))?;
+        let other = other.trim();
+        if other.is_empty() || other.contains([',', '*']) {
+            return Err(format!(
+                "expected one column name after `*` (e.g. {example}), found {other:?}"
+            ));
+        }
+        if columns.iter().any(|c| c == other) {
+            return Err(format!(
+                "expected another column after `*` than the one coupled, found {other:?} on both \
+                 sides"
+            ));
+        }
+        Ok(Self {
+            columns,
+            change: ColumnChange::Coupling {
+                other: other.to_owned(),
+                coef,
+            },
+        })
+    }
+
     /// The flag that gives this edit, as a user types it (`--column-unit x2,y2,z2=mm`).
     pub fn flag(&self) -> String {
         let columns = self.columns.join(",");
-        match self.change {
+        match &self.change {
             ColumnChange::Unit(u) => format!("--column-unit {columns}={u}"),
             ColumnChange::Reverse => format!("--column-sign {columns}"),
             ColumnChange::Offset(v) => format!("--column-offset {columns}={v}"),
+            ColumnChange::Scale(v) => format!("--column-scale {columns}={v}"),
+            ColumnChange::Coupling { other, coef } => {
+                format!("--column-coupling {columns}={coef}*{other}")
+            }
         }
     }
 }
@@ -428,20 +516,42 @@ impl ColumnInfo {
     }
 }
 
-/// How one column's raw readings become SI: `si = raw · factor + offset`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// How one column's raw readings become SI: `own = raw · factor + offset`, plus
+/// `coef · own_k` for each coupling `(k, coef)`.
+#[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Conversion {
-    /// Unit (m or rad per unit) times the sign (−1 for a reversed column).
+    /// Unit (m or rad per unit) times the scale and the sign (−1 for a reversed column).
     pub(crate) factor: f64,
     /// Added after the factor, SI.
     pub(crate) offset: f64,
+    /// The columns (indices) whose own value, times the coefficient, is added.
+    pub(crate) coupled: Vec<(usize, f64)>,
 }
 
 impl Conversion {
-    /// The reading `raw` in SI units.
-    pub(crate) fn apply(self, raw: f64) -> f64 {
+    /// The reading `raw` in SI units, without couplings (the column's own value).
+    pub(crate) fn apply(&self, raw: f64) -> f64 {
         raw * self.factor + self.offset
     }
+}
+
+/// Column `c`'s SI value in a row whose raw reading of column `k` is `raw(k)`: its own
+/// conversion, plus each coupling's coefficient times the other column's own value (`raw`
+/// is read for the coupled columns only).
+///
+/// # Errors
+/// Whatever `raw` returns for column `c` or a column coupled to it.
+pub(crate) fn si_of<E>(
+    conversions: &[Conversion],
+    c: usize,
+    raw: &dyn Fn(usize) -> Result<f64, E>,
+) -> Result<f64, E> {
+    let own = |k: usize, r: f64| conversions.get(k).map_or(r, |conv| conv.apply(r));
+    let mut v = own(c, raw(c)?);
+    for &(k, coef) in conversions.get(c).map_or(&[][..], |conv| &conv.coupled) {
+        v += coef * own(k, raw(k)?);
+    }
+    Ok(v)
 }
 
 /// The conversion of each of `columns` (same order) under `units`, for the file `path` whose
@@ -468,36 +578,43 @@ pub(crate) fn conversions(
                 Quantity::Fixed(_) => 1.0,
             },
             offset: 0.0,
+            coupled: Vec::new(),
         })
         .collect();
-    // Unit, sign and offset per column, from the edits in order.
+    // Unit, scale, sign, offset and couplings per column, from the edits in order.
     let mut unit: Vec<Option<f64>> = vec![None; columns.len()];
+    let mut scale = vec![1.0; columns.len()];
     let mut reversed = vec![false; columns.len()];
     for edit in &units.columns {
-        for name in &edit.columns {
+        // The column named `name`, which must take an edit.
+        let editable = |name: &str| {
             let Some(c) = columns.iter().position(|c| c.is_named(name)) else {
                 return Err(Error::UnknownColumn {
                     path: path.to_path_buf(),
                     line,
                     flag: edit.flag(),
-                    name: name.clone(),
+                    name: name.to_owned(),
                     columns: (columns.iter().map(|c| c.name.as_str()))
                         .collect::<Vec<_>>()
                         .join(", "),
                 });
             };
-            let info = &columns[c];
-            if let Quantity::Fixed(holds) = info.quantity {
+            if let Quantity::Fixed(holds) = columns[c].quantity {
                 return Err(Error::ColumnNotEditable {
                     path: path.to_path_buf(),
                     line,
                     flag: edit.flag(),
-                    name: info.name.clone(),
+                    name: columns[c].name.clone(),
                     holds,
                 });
             }
-            match edit.change {
-                ColumnChange::Unit(u) => {
+            Ok(c)
+        };
+        for name in &edit.columns {
+            let c = editable(name)?;
+            let info = &columns[c];
+            match &edit.change {
+                &ColumnChange::Unit(u) => {
                     let wrong_kind = matches!(
                         (info.quantity, u),
                         (
@@ -517,14 +634,22 @@ pub(crate) fn conversions(
                     unit[c] = Some(u.to_si());
                 }
                 ColumnChange::Reverse => reversed[c] = true,
-                ColumnChange::Offset(v) => out[c].offset = v,
+                ColumnChange::Offset(v) => out[c].offset = *v,
+                ColumnChange::Scale(v) => scale[c] = *v,
+                ColumnChange::Coupling { other, coef } => {
+                    let k = editable(other)?;
+                    out[c].coupled.retain(|(o, _)| *o != k);
+                    out[c].coupled.push((k, *coef));
+                }
             }
         }
     }
-    for ((conversion, unit), reversed) in out.iter_mut().zip(unit).zip(reversed) {
+    for (((conversion, unit), scale), reversed) in out.iter_mut().zip(unit).zip(scale).zip(reversed)
+    {
         if let Some(u) = unit {
             conversion.factor = u;
         }
+        conversion.factor *= scale;
         if reversed {
             conversion.factor = -conversion.factor;
         }
@@ -609,6 +734,67 @@ mod tests {
     }
 
     #[test]
+    fn scale_edits_parse_and_print_as_their_flags() {
+        let e = ColumnEdit::parse_scale("q3, q4=0.01").unwrap();
+        assert_eq!(e.columns, ["q3", "q4"]);
+        assert_eq!(e.change, ColumnChange::Scale(0.01));
+        assert_eq!(e.flag(), "--column-scale q3,q4=0.01");
+        assert_eq!(
+            ColumnEdit::parse_scale(&e.flag()["--column-scale ".len()..]),
+            Ok(e)
+        );
+        let e = ColumnEdit::parse_scale("q2=4.793689962e-5").unwrap();
+        assert_eq!(e.change, ColumnChange::Scale(4.793689962e-5));
+        assert_eq!(
+            ColumnEdit::parse_scale("q3").unwrap_err(),
+            "expected COLUMNS=VALUE (e.g. q3=0.01), found \"q3\""
+        );
+        for bad in ["inf", "NaN", "0", "x", ""] {
+            let e = ColumnEdit::parse_scale(&format!("q3={bad}")).unwrap_err();
+            assert_eq!(
+                e,
+                format!("expected a finite, non-zero factor, found {bad:?}"),
+                "{bad}"
+            );
+        }
+        assert!(ColumnEdit::parse_scale("=2").unwrap_err().contains("\"\""));
+    }
+
+    #[test]
+    fn coupling_edits_parse_and_print_as_their_flags() {
+        let e = ColumnEdit::parse_coupling("q6=-0.5*q5").unwrap();
+        assert_eq!(e.columns, ["q6"]);
+        let coupling = ColumnChange::Coupling {
+            other: "q5".to_owned(),
+            coef: -0.5,
+        };
+        assert_eq!(e.change, coupling);
+        assert_eq!(e.flag(), "--column-coupling q6=-0.5*q5");
+        let spaced = ColumnEdit::parse_coupling("q6 = -0.5 * q5").unwrap();
+        assert_eq!(spaced, e);
+        let err = |text: &str| ColumnEdit::parse_coupling(text).unwrap_err();
+        assert!(err("q6").contains("COLUMNS=VALUE"), "{}", err("q6"));
+        assert_eq!(
+            err("q6,q7=0.5*q5"),
+            "expected one column before `=` (e.g. q6=-0.5*q5), found \"q6,q7\""
+        );
+        assert_eq!(
+            err("q6=0.5"),
+            "expected COEF*OTHER after `=` (e.g. q6=-0.5*q5), found \"0.5\""
+        );
+        assert_eq!(
+            err("q6=inf*q5"),
+            "expected a finite coefficient before `*`, found \"inf\""
+        );
+        assert_eq!(
+            err("q6=half*q5"),
+            "expected a finite coefficient before `*`, found \"half\""
+        );
+        assert!(err("q6=0.5*").contains("after `*`"), "{}", err("q6=0.5*"));
+        assert!(err("q6=0.5*q6").contains("both sides"));
+    }
+
+    #[test]
     fn conversions_apply_unit_then_sign_then_offset() {
         let columns = [
             ColumnInfo::joint("q1", 0, Some("shoulder"), Quantity::Angle),
@@ -625,5 +811,40 @@ mod tests {
         assert!((c[0].apply(90.0) - (0.5 - std::f64::consts::FRAC_PI_2)).abs() < 1e-15);
         assert_eq!(c[1].apply(2.0), 2e-3);
         assert_eq!(c[2].apply(3.0), 3.0);
+    }
+
+    #[test]
+    fn scale_comes_after_the_unit_and_couplings_after_every_own_edit() {
+        let columns = [
+            ColumnInfo::joint("q1", 0, None, Quantity::Angle),
+            ColumnInfo::joint("q2", 1, Some("wrist"), Quantity::Angle),
+            ColumnInfo::plain("t", Quantity::Fixed("time, s")),
+        ];
+        let units = Units::new(LengthUnit::M, AngleUnit::Rad).with_columns([
+            ColumnEdit::parse_unit("q1=deg").unwrap(),
+            ColumnEdit::parse_scale("q1=0.01").unwrap(),
+            ColumnEdit::parse_offset("q1=0.5").unwrap(),
+            ColumnEdit::parse_coupling("wrist=-0.5*q1").unwrap(),
+        ]);
+        let c = conversions(Path::new("f.csv"), 1, &columns, &units).unwrap();
+        let raw = [9000.0, 2.0, 7.0];
+        let read = |k: usize| Ok::<f64, ()>(raw[k]);
+        // 9000° on the motor side of a 100:1 gear is 90° = π/2; plus 0.5 rad.
+        let q1 = std::f64::consts::FRAC_PI_2 + 0.5;
+        assert!((si_of(&c, 0, &read).unwrap() - q1).abs() < 1e-15);
+        // q2 read as q2 + 0.5·q1.
+        assert!((si_of(&c, 1, &read).unwrap() - (2.0 - 0.5 * q1)).abs() < 1e-15);
+        assert_eq!(si_of(&c, 2, &read), Ok(7.0));
+        // The other column must exist and take edits; the error names the flag.
+        for (edit, found) in [("q2=1*q9", "no column \"q9\""), ("q2=1*t", "\"t\" holds")] {
+            let units = Units::default().with_columns([ColumnEdit::parse_coupling(edit).unwrap()]);
+            let e = conversions(Path::new("f.csv"), 1, &columns, &units)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.starts_with(&format!("f.csv:1: --column-coupling {edit}: ")) && e.contains(found),
+                "{e}"
+            );
+        }
     }
 }

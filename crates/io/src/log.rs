@@ -4,7 +4,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::Error;
-use crate::columns::{ColumnInfo, Quantity, Units, conversions};
+use crate::columns::{ColumnInfo, Quantity, Units, conversions, si_of};
 use crate::device::Device;
 use crate::measure::{Reach, reach};
 use crate::table::{Frozen, Repeats, Table, check_separator, first_duplicate, metres, number};
@@ -234,11 +234,15 @@ pub fn read_log_in(path: &Path, device: &Device, units: &Units) -> Result<Log, E
             t_s: None,
             line,
         };
+        // The raw reading of column `k` of this row (a coupled column's too).
+        let raw_of = |k: usize| {
+            let name = names.get(k).map_or("", String::as_str);
+            number(path, line, k as u64 + 1, name, record.get(k).unwrap_or(""))
+        };
         for (c, ((cell, column), name)) in record.iter().zip(&columns).zip(&names).enumerate() {
             let col = c as u64 + 1;
-            let si = conversion.get(c).copied();
             let parse = || number(path, line, col, name, cell);
-            let parse_si = || parse().map(|raw| si.map_or(raw, |k| k.apply(raw)));
+            let parse_si = || si_of(&conversion, c, &raw_of);
             match *column {
                 Column::Q(j) => {
                     let value = parse_si()?;

@@ -8,7 +8,7 @@ use nalgebra::{Quaternion, UnitQuaternion};
 use serde::Deserialize;
 
 use crate::Error;
-use crate::columns::{ColumnInfo, Quantity, Units, conversions};
+use crate::columns::{ColumnInfo, Quantity, Units, conversions, si_of};
 use crate::table::{Frozen, Repeats, Table, check_separator, first_duplicate, metres, number};
 
 /// What a measurement file's joint columns must match: the device's joints in chain order.
@@ -411,7 +411,6 @@ pub fn read_measurement_file(
         })
         .collect();
     let conversion = conversions(path, header_line, &infos, units)?;
-    let si = |c: usize, raw: f64| conversion.get(c).map_or(raw, |k| k.apply(raw));
     let mut rows = Vec::new();
     let mut previous_t: Option<f64> = None;
     let mut outside = Vec::new();
@@ -431,10 +430,11 @@ pub fn read_measurement_file(
         }
         let cell = |c: usize| record.get(c).unwrap_or("");
         let value = |c: usize| number(path, line, c as u64 + 1, &names[c], cell(c));
+        let si = |c: usize| si_of(&conversion, c, &value);
         let mut q = Vec::with_capacity(n);
         for (j, &c) in joint_column.iter().enumerate() {
             let prismatic = schema.prismatic.get(j).copied().unwrap_or(false);
-            let v = si(c, value(c)?);
+            let v = si(c)?;
             if prismatic {
                 Error::check_length(path, line, c as u64 + 1, &names[c], v)?;
             }
@@ -486,7 +486,7 @@ pub fn read_measurement_file(
         previous_t = t_s.or(previous_t);
         let distance_m = match distance_column {
             Some(c) if !cell(c).is_empty() => {
-                let d = si(c, value(c)?);
+                let d = si(c)?;
                 Error::check_length(path, line, c as u64 + 1, &names[c], d)?;
                 if d < 0.0 {
                     return Err(Error::Csv {
@@ -535,7 +535,7 @@ pub fn read_measurement_file(
             }
             let mut position_m = [0.0; 3];
             for (p, c) in position_m.iter_mut().zip(m.position.iter().flatten()) {
-                *p = si(*c, value(*c)?);
+                *p = si(*c)?;
                 Error::check_length(path, line, *c as u64 + 1, &names[*c], *p)?;
             }
             if let Some(frozen) = frozen_position.get_mut(k) {
@@ -557,11 +557,7 @@ pub fn read_measurement_file(
                 }
                 Some(quaternion.map(|v| v / norm))
             } else if let [Some(r), Some(p), Some(y)] = m.rpy {
-                let rotation = UnitQuaternion::from_euler_angles(
-                    si(r, value(r)?),
-                    si(p, value(p)?),
-                    si(y, value(y)?),
-                );
+                let rotation = UnitQuaternion::from_euler_angles(si(r)?, si(p)?, si(y)?);
                 Some([rotation.w, rotation.i, rotation.j, rotation.k])
             } else {
                 None
@@ -820,7 +816,6 @@ fn read_industrial_yaml_in(
         }))
         .collect();
     let conversion = conversions(path, 1, &infos, units)?;
-    let si = |c: usize, raw: f64| conversion.get(c).map_or(raw, |k| k.apply(raw));
     let text = Error::read_text(path, |line, column, message| Error::Yaml {
         path: path.to_path_buf(),
         line,
@@ -881,11 +876,23 @@ fn read_industrial_yaml_in(
             ));
         }
         let mut o = o;
+        // The raw values in the order of `infos`: x, y, z, the quaternion, the joints.
+        let p = &o.pose;
+        let raw: Vec<f64> = [p.x, p.y, p.z, 0.0, 0.0, 0.0, 0.0]
+            .into_iter()
+            .chain(o.target_joints.iter().copied())
+            .collect();
+        let read =
+            |c: usize| Ok::<f64, std::convert::Infallible>(raw.get(c).copied().unwrap_or(0.0));
+        let si = |c: usize| match si_of(&conversion, c, &read) {
+            Ok(v) => v,
+            Err(never) => match never {},
+        };
         for (j, v) in o.target_joints.iter_mut().enumerate() {
-            *v = si(7 + j, *v);
+            *v = si(7 + j);
         }
         let p = &mut o.pose;
-        [p.x, p.y, p.z] = [si(0, p.x), si(1, p.y), si(2, p.z)];
+        [p.x, p.y, p.z] = [si(0), si(1), si(2)];
         for (j, &v) in o.target_joints.iter().enumerate() {
             let (min, max) = schema
                 .limits

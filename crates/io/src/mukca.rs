@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::Error;
-use crate::columns::{ColumnInfo, Quantity, Units, conversions};
+use crate::columns::{ColumnInfo, Quantity, Units, conversions, si_of};
 use crate::device::{Device, JointSpec};
 use crate::measure::{Reach, reach};
 use crate::table::{Repeats, Table, check_separator, number};
@@ -252,11 +252,12 @@ fn read_socket(
                 }
             });
         }
-        let row = (record.iter().enumerate())
-            .map(|(c, cell)| {
-                let raw = number(path, line, c as u64 + 1, &format!("q{}", c + 1), cell)?;
-                Ok(conversion.get(c).map_or(raw, |k| k.apply(raw)))
-            })
+        let raw_of = |c: usize| {
+            let cell = record.get(c).unwrap_or("");
+            number(path, line, c as u64 + 1, &format!("q{}", c + 1), cell)
+        };
+        let row = (0..record.len())
+            .map(|c| si_of(&conversion, c, &raw_of))
             .collect::<Result<Vec<f64>, _>>()?;
         for (j, (&v, spec)) in row.iter().zip(joints).enumerate() {
             let limits = (spec.lower_rad, spec.upper_rad);

@@ -11,6 +11,7 @@ mod force;
 mod hostile;
 mod hostile_cases;
 mod html;
+mod joint_scale;
 mod ladder_rows;
 mod part_units;
 mod plan_after;

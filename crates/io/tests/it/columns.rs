@@ -1,4 +1,5 @@
-//! Units per column (`--column-unit`, `--column-sign`, `--column-offset`) in every reader:
+//! Units per column (`--column-unit`, `--column-scale`, `--column-sign`, `--column-offset`,
+//! `--column-coupling`) in every reader:
 //! a file written in other units and read with its edits equals the SI file.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -358,6 +359,53 @@ fn a_haptic_log_reads_its_columns_in_their_units() {
     assert_contains(
         &e,
         &["log.csv:1: --column-unit q9=deg: the file has no column \"q9\""],
+    );
+}
+
+#[test]
+fn a_scaled_or_coupled_column_read_with_its_edit_equals_the_si_file() {
+    let dir = scratch("scale");
+    let rows = si_rows();
+    let si = read(
+        &dir,
+        "si.csv",
+        &csv(&rows, |_| 1.0, |_, v| v),
+        &Units::default(),
+    )
+    .unwrap();
+    // The elbow read on the motor side of a 100:1 gear.
+    let motor = csv(&rows, |c| if c == 2 { 0.01 } else { 1.0 }, |_, v| v);
+    let units = Units::default().with_columns([ColumnEdit::parse_scale("elbow=0.01").unwrap()]);
+    assert_same(&read(&dir, "motor.csv", &motor, &units).unwrap(), &si, REL);
+    assert!(
+        read(&dir, "motor.csv", &motor, &Units::default()).is_err(),
+        "past its limits"
+    );
+    // The elbow read as elbow + 0.5·q2 (a coupled joint), the edit adding −0.5·q2.
+    let coupled = csv(&rows, |_| 1.0, |_, v| v);
+    let coupled: String = (coupled.lines().enumerate())
+        .map(|(i, l)| match (i, rows.get(i.wrapping_sub(1))) {
+            (0, _) | (_, None) => format!("{l}\n"),
+            (_, Some(r)) => {
+                let mut cells: Vec<String> = l.split(',').map(str::to_owned).collect();
+                cells[2] = format!("{:?}", r[2] + 0.5 * r[1]);
+                format!("{}\n", cells.join(","))
+            }
+        })
+        .collect();
+    let units =
+        Units::default().with_columns([ColumnEdit::parse_coupling("elbow=-0.5*q2").unwrap()]);
+    let table = read(&dir, "coupled.csv", &coupled, &units).unwrap();
+    // (e + 0.5·q2) − 0.5·q2: two roundings of numbers below 4 in size.
+    assert_same(&table, &si, 4.0 * 4.0 * f64::EPSILON);
+    let plain = read(&dir, "coupled.csv", &coupled, &Units::default()).unwrap();
+    assert_ne!(plain.rows, si.rows);
+    let units =
+        Units::default().with_columns([ColumnEdit::parse_coupling("elbow=-0.5*q9").unwrap()]);
+    let e = message(read(&dir, "coupled.csv", &coupled, &units));
+    assert_contains(
+        &e,
+        &["coupled.csv:1: --column-coupling elbow=-0.5*q9: the file has no column \"q9\""],
     );
 }
 
