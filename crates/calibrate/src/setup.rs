@@ -1655,8 +1655,12 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
     let tables = match measured::load_tables(&files, &robot, &plan.units) {
         Ok(tables) => tables,
         Err(e) => {
-            // A tip below the markers' link may need a joint the files have no column for.
+            // A tip below the markers' link may need a joint the files have no column for; a
+            // column read past its joint's limits is there (a tip above it would leave it out
+            // and hide the mistake: a motor-side or counted reading).
+            let past_limit = e.root_cause().to_string().contains("is outside");
             if is_urdf
+                && !past_limit
                 && let Some(report) = tip_above(&plan.device, &tips, &files, plan.units.clone())
             {
                 return Ok(Some(report));
