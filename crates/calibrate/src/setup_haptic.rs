@@ -398,7 +398,7 @@ fn cable_zero(
     // a device with longer links is tens of millimetres long in a way that varies with the
     // configuration (the hostile sweep's links 51 to 78 mm longer leave 11 to 15 mm).
     let zero = nominal_cable_zero(chain, rows);
-    if !(zero.abs() > CABLE_ZERO_MAX_M) || !as_given.is_clean() {
+    if zero.is_nan() || zero.abs() <= CABLE_ZERO_MAX_M || !as_given.is_clean() {
         return None;
     }
     Some(Finding {

@@ -1766,15 +1766,15 @@ pub fn write_case(
                 let turn = UnitQuaternion::from_axis_angle(&axis, f64::from(*deg).to_radians());
                 let shift = random_direction(&mut rng) * (f64::from(*mm) / 1e3);
                 move_poses(t, from, |p, q| (turn * p + shift, turn * q));
-                locate_words.extend(lines_near(&data_name, from + 2));
-                fix_words.push(lines_near(&data_name, from + 2));
+                locate_words.extend(lines_near(data_name, from + 2));
+                fix_words.push(lines_near(data_name, from + 2));
             }
             Mistake::MarkerMoved { from_pct, mm } => {
                 let from = t.rows.len() * *from_pct as usize / 100;
                 let offset = random_direction(&mut rng) * (f64::from(*mm) / 1e3);
                 move_poses(t, from, |p, q| (p + q * offset, q));
-                locate_words.extend(lines_near(&data_name, from + 2));
-                fix_words.push(lines_near(&data_name, from + 2));
+                locate_words.extend(lines_near(data_name, from + 2));
+                fix_words.push(lines_near(data_name, from + 2));
             }
             Mistake::ZeroFrom {
                 col,
@@ -1787,9 +1787,9 @@ pub fn write_case(
                         row[c] += f64::from(*mrad) / 1e3;
                     }
                 }
-                locate_words.extend(lines_near(&data_name, from + 2));
+                locate_words.extend(lines_near(data_name, from + 2));
                 locate_words.extend(col_words(*col));
-                fix_words.push(lines_near(&data_name, from + 2));
+                fix_words.push(lines_near(data_name, from + 2));
             }
             Mistake::Scale { col, factor } => {
                 let f = factor.per_rad();
