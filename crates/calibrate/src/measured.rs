@@ -1990,11 +1990,7 @@ pub fn calibrate_measured(
             // and no other mounting explains is never the result: the ladder keeps the best
             // of the others, and says why. Negative compliances another mounting explains
             // stay, for the check after the fit to name the mounting.
-            let unit = if robot.masses.is_empty() {
-                "rad/m"
-            } else {
-                "rad/(N·m)"
-            };
+            let unit = compliance_unit_of(robot);
             let mut left_out: Vec<(usize, String)> = Vec::new();
             let chosen = loop {
                 stops.borrow_mut().clear();
@@ -2444,11 +2440,7 @@ fn plausibility(
         .collect();
     let (negative, n_compliances) = crate::fit::negative_compliances(&fitted.identified, 1.0);
     if !negative.is_empty() {
-        let unit = if r.robot.masses.is_empty() {
-            "rad/m"
-        } else {
-            "rad/(N·m)"
-        };
+        let unit = compliance_unit_of(r.robot);
         let given_g = gravity_text(&r.robot.gravity_dir);
         let counted = crate::fit::negative_compliance_words(&negative, n_compliances, unit);
         let (_, given_rms, _) = stats(&position_errors(model, r.train));
@@ -2911,6 +2903,16 @@ fn compliance_unit(name: &str, masses: bool) -> Option<&'static str> {
     } else {
         "rad/m"
     })
+}
+
+/// The unit of `robot`'s compliances: rad/(N·m) with masses (loads are torques), rad/m
+/// without (loads are lever arms).
+fn compliance_unit_of(robot: &Robot) -> &'static str {
+    if robot.masses.is_empty() {
+        "rad/m"
+    } else {
+        "rad/(N·m)"
+    }
 }
 
 pub use crate::robust::HUBER_CORNER;

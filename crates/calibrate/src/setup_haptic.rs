@@ -168,10 +168,7 @@ fn log_hypotheses(
     if suspicious {
         hypotheses.extend(general_hypotheses(given, &layout, Tier::Suspicious));
         let checked = thinned(given.0.clone());
-        let x0 = vec![0.0; chain.n_params()];
-        let e: Vec<f64> = (checked.iter())
-            .map(|r| r.distance_m - chain.end_point(&x0, &r.q).coords.norm())
-            .collect();
+        let e = distance_errors(chain, &checked);
         let zero = median(e.clone());
         let per_row: Vec<(usize, u64, f64)> = (checked.iter().zip(&e))
             .map(|(r, e)| (0, r.line, (e - zero).abs()))
@@ -419,14 +416,17 @@ fn cable_zero(
     })
 }
 
-/// The nominal device's cable zero of `rows`: the median of `d − |P(q)|`, m.
-fn nominal_cable_zero(chain: &hapcal_kinematics::Chain, rows: &[LogRow]) -> f64 {
+/// The nominal device's cable-distance errors of `rows`: `d − |P(q)|` per row, m.
+fn distance_errors(chain: &hapcal_kinematics::Chain, rows: &[LogRow]) -> Vec<f64> {
     let x0 = vec![0.0; chain.n_params()];
-    median(
-        (rows.iter())
-            .map(|r| r.distance_m - chain.end_point(&x0, &r.q).coords.norm())
-            .collect(),
-    )
+    (rows.iter())
+        .map(|r| r.distance_m - chain.end_point(&x0, &r.q).coords.norm())
+        .collect()
+}
+
+/// The nominal device's cable zero of `rows`: the median of [`distance_errors`], m.
+fn nominal_cable_zero(chain: &hapcal_kinematics::Chain, rows: &[LogRow]) -> f64 {
+    median(distance_errors(chain, rows))
 }
 
 /// The nominal device's cable-distance residual of `rows`: the RMS of `d − |P(q)|` about its
@@ -435,10 +435,7 @@ fn nominal_cable_zero(chain: &hapcal_kinematics::Chain, rows: &[LogRow]) -> f64 
 /// both nearly where they were, while a tenth of the rows whose distances belong to other
 /// joint readings raises the residual.
 fn distance_residual(chain: &hapcal_kinematics::Chain, rows: &[LogRow]) -> Residual {
-    let x0 = vec![0.0; chain.n_params()];
-    let e: Vec<f64> = (rows.iter())
-        .map(|r| r.distance_m - chain.end_point(&x0, &r.q).coords.norm())
-        .collect();
+    let e = distance_errors(chain, rows);
     let d: Vec<f64> = rows.iter().map(|r| r.distance_m).collect();
     Residual {
         of: ResidualOf::CableDistance,
