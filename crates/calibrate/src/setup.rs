@@ -35,7 +35,9 @@ use hapcal_problems::{CalibratedModel, Weights};
 
 use crate::measured::{self, MeasuredConfig, Robot};
 use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
-use crate::setup_change::{ChangeInput, PartFit, change_hypotheses, residuals_jump};
+use crate::setup_change::{
+    ChangeInput, PartFit, SampleResidual, change_hypotheses, residuals_jump,
+};
 use crate::setup_families::{
     ANGLE_UNITS, JointColumn, LENGTH_UNITS, Layout, LengthGroup, SetupData, Tier,
     fitted_hypotheses, general_hypotheses, residual_location, row_hypotheses,
@@ -205,6 +207,9 @@ struct ClosedForm {
     /// Per row checked: its file (index into the tables), its line, and the root of its
     /// squared position errors plus the weighted orientation term, m.
     per_row: Vec<(usize, u64, f64)>,
+    /// Per marker sample checked, in the rows' order: its position error under the frames
+    /// fitted (the change-point probe's input).
+    samples: Vec<SampleResidual>,
     /// The frames fitted.
     frames: Frames,
 }
@@ -339,12 +344,20 @@ impl Frames {
         (e, rot)
     }
 
-    /// The sum of the squared [`Frames::residual`] rows over `samples`, m².
+    /// The sum of the squared [`Frames::residual`] rows over `samples`, m²: the rotation's
+    /// `2w·θ²` from its angle alone (`cos θ = (tr(R_meas·R_modelᵀ) − 1)/2`, the trace as the
+    /// sum of the element-wise product), without its axis.
     fn cost(&self, samples: &[Sample]) -> f64 {
         (samples.iter())
             .map(|s| {
-                let (e, r) = self.residual(s);
-                e.norm_squared() + r.map_or(0.0, |r| r.norm_squared())
+                let u = s.r_tip * self.offsets[s.marker] + s.p_tip;
+                let e = self.r0 * u + self.t - s.measured;
+                let turned = s.rotation.map_or(0.0, |meas| {
+                    let model = self.r0 * s.r_tip * self.marker_rot[s.marker];
+                    let cos = ((meas.component_mul(&model).sum() - 1.0) / 2.0).clamp(-1.0, 1.0);
+                    2.0 * ORIENTATION_WEIGHT_M2 * cos.acos().powi(2)
+                });
+                e.norm_squared() + turned
             })
             .sum()
     }
@@ -358,48 +371,72 @@ impl Frames {
     /// when a step lowers the cost by less than [`POLISH_TOLERANCE`] of it or after
     /// [`POLISH_STEPS`].
     fn polish(&mut self, samples: &[Sample]) {
-        use nalgebra::{DMatrix, DVector, Matrix3, Rotation3};
+        use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Rotation3, Vector6};
         let n_markers = self.offsets.len();
         let n = 6 + 6 * n_markers;
         let skew = |v: Vector3<f64>| v.cross_matrix();
         let mut cost = self.cost(samples);
         let mut lambda = 1e-4;
         for _ in 0..POLISH_STEPS {
-            let mut jtj = DMatrix::<f64>::zeros(n, n);
-            let mut jtr = DVector::<f64>::zeros(n);
+            // The upper blocks of JᵀJ and Jᵀr: the instrument's (δ₀, t) with itself, with each
+            // marker's (m_k, δ_k), and each marker's with itself.
+            let mut a00 = Matrix6::<f64>::zeros();
+            let mut g0 = Vector6::<f64>::zeros();
+            let mut a0k = vec![Matrix6::<f64>::zeros(); n_markers];
+            let mut akk = vec![Matrix6::<f64>::zeros(); n_markers];
+            let mut gk = vec![Vector6::<f64>::zeros(); n_markers];
+            let c2 = 2.0 * ORIENTATION_WEIGHT_M2;
+            let c = c2.sqrt();
             for s in samples {
                 let (e, rot) = self.residual(s);
-                let k = 6 + 6 * s.marker;
+                let k = s.marker;
                 // Position rows: ∂/∂δ₀ = −[v]× (v = R₀·(R_tip·m_k + p_tip)), ∂/∂t = I,
-                // ∂/∂m_k = B = R₀·R_tip, orthogonal (BᵀB = I); the upper blocks of JᵀJ.
-                let v = self.r0 * (s.r_tip * self.offsets[s.marker] + s.p_tip);
+                // ∂/∂m_k = B = R₀·R_tip, orthogonal (BᵀB = I).
+                let v = self.r0 * (s.r_tip * self.offsets[k] + s.p_tip);
                 let b = self.r0 * s.r_tip;
                 let vx = skew(v);
-                add(&mut jtr, 0, &v.cross(&e));
-                add(&mut jtr, 3, &e);
-                add(&mut jtr, k, &b.tr_mul(&e));
-                add_block(
-                    &mut jtj,
-                    0,
-                    0,
-                    &(Matrix3::identity() * v.norm_squared() - v * v.transpose()),
-                );
-                add_block(&mut jtj, 0, 3, &vx);
-                add_block(&mut jtj, 0, k, &(vx * b));
-                add_block(&mut jtj, 3, 3, &Matrix3::identity());
-                add_block(&mut jtj, 3, k, &b);
-                add_block(&mut jtj, k, k, &Matrix3::identity());
+                let mut upper = a00.fixed_view_mut::<3, 3>(0, 0);
+                upper += Matrix3::identity() * v.norm_squared() - v * v.transpose();
+                let mut cross = a00.fixed_view_mut::<3, 3>(0, 3);
+                cross += vx;
+                let mut lower = a00.fixed_view_mut::<3, 3>(3, 3);
+                lower += Matrix3::identity();
+                let mut g = g0.fixed_rows_mut::<3>(0);
+                g += v.cross(&e);
+                let mut g = g0.fixed_rows_mut::<3>(3);
+                g += e;
+                let mut block = a0k[k].fixed_view_mut::<3, 3>(0, 0);
+                block += vx * b;
+                let mut block = a0k[k].fixed_view_mut::<3, 3>(3, 0);
+                block += b;
+                let mut block = akk[k].fixed_view_mut::<3, 3>(0, 0);
+                block += Matrix3::identity();
+                let mut g = gk[k].fixed_rows_mut::<3>(0);
+                g += b.tr_mul(&e);
                 if let Some(r) = rot {
                     // Rotation rows: ∂/∂δ₀ = −c·I, ∂/∂δ_k = −c·R_model.
-                    let c2 = 2.0 * ORIENTATION_WEIGHT_M2;
-                    let c = c2.sqrt();
-                    let model = b * self.marker_rot[s.marker];
-                    add(&mut jtr, 0, &(-c * r));
-                    add(&mut jtr, k + 3, &(-c * model.tr_mul(&r)));
-                    add_block(&mut jtj, 0, 0, &(Matrix3::identity() * c2));
-                    add_block(&mut jtj, 0, k + 3, &(c2 * model));
-                    add_block(&mut jtj, k + 3, k + 3, &(Matrix3::identity() * c2));
+                    let model = b * self.marker_rot[k];
+                    let mut upper = a00.fixed_view_mut::<3, 3>(0, 0);
+                    upper += Matrix3::identity() * c2;
+                    let mut g = g0.fixed_rows_mut::<3>(0);
+                    g -= c * r;
+                    let mut block = a0k[k].fixed_view_mut::<3, 3>(0, 3);
+                    block += c2 * model;
+                    let mut block = akk[k].fixed_view_mut::<3, 3>(3, 3);
+                    block += Matrix3::identity() * c2;
+                    let mut g = gk[k].fixed_rows_mut::<3>(3);
+                    g -= c * model.tr_mul(&r);
                 }
+            }
+            let mut jtj = DMatrix::<f64>::zeros(n, n);
+            let mut jtr = DVector::<f64>::zeros(n);
+            jtj.fixed_view_mut::<6, 6>(0, 0).copy_from(&a00);
+            jtr.fixed_rows_mut::<6>(0).copy_from(&g0);
+            for k in 0..n_markers {
+                let at = 6 + 6 * k;
+                jtj.fixed_view_mut::<6, 6>(0, at).copy_from(&a0k[k]);
+                jtj.fixed_view_mut::<6, 6>(at, at).copy_from(&akk[k]);
+                jtr.fixed_rows_mut::<6>(at).copy_from(&gk[k]);
             }
             jtj.fill_lower_triangle_with_upper_triangle();
             let mut accepted = false;
@@ -444,18 +481,6 @@ impl Frames {
             }
         }
     }
-}
-
-/// Adds `g` to rows `at..at + 3` of `v`.
-fn add(v: &mut nalgebra::DVector<f64>, at: usize, g: &Vector3<f64>) {
-    let mut rows = v.fixed_rows_mut::<3>(at);
-    rows += g;
-}
-
-/// Adds `m` to the 3 × 3 block of `a` at rows `i..i + 3`, columns `j..j + 3`.
-fn add_block(a: &mut nalgebra::DMatrix<f64>, i: usize, j: usize, m: &nalgebra::Matrix3<f64>) {
-    let mut block = a.fixed_view_mut::<3, 3>(i, j);
-    block += m;
 }
 
 /// [`closed_form_residual`] with the per-row residuals.
@@ -521,9 +546,18 @@ fn closed_form_fit(
     } = frames;
     let (mut len_sq, mut rot_sq, mut n_rot) = (0.0, 0.0, 0usize);
     let mut row_sq = vec![0.0; rows.len()];
+    let mut residuals = Vec::with_capacity(samples.len());
     for (s, &r) in samples.iter().zip(&sample_rows) {
         let p = r0 * (s.r_tip * offsets[s.marker] + s.p_tip) + t;
-        let e = (p - s.measured).norm_squared();
+        let error = p - s.measured;
+        residuals.push(SampleResidual {
+            file: rows[r].0,
+            marker: s.marker,
+            error_m: error,
+            in_tip_m: (r0 * s.r_tip).tr_mul(&error),
+            measured_m: s.measured,
+        });
+        let e = error.norm_squared();
         len_sq += e;
         row_sq[r] += e;
         if let Some(meas) = &s.rotation {
@@ -547,6 +581,7 @@ fn closed_form_fit(
         per_row: (rows.iter().zip(&row_sq))
             .map(|(&(f, line), sq)| (f, line, sq.sqrt()))
             .collect(),
+        samples: residuals,
         frames,
     })
 }
@@ -862,9 +897,20 @@ fn layout_of(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Layout {
 }
 
 /// The hypotheses of the measurement files' own families (frames and conventions of pose
-/// data, the angles of orientations, tips) for `input`.
-fn own_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Corrected<MeasuredData>> {
-    let mut out = angle_rereads(input, headers);
+/// data, the angles of orientations, tips) for `input`; the files read again in the other
+/// angle unit only when the data are `suspicious` (angles in the wrong unit turn every joint
+/// by a factor of 57, or leave the robot all but still: no frames fit that to a residual right
+/// data leave).
+fn own_hypotheses(
+    input: &SetupInput<'_>,
+    headers: &[Vec<String>],
+    suspicious: bool,
+) -> Vec<Corrected<MeasuredData>> {
+    let mut out = if suspicious {
+        angle_rereads(input, headers)
+    } else {
+        Vec::new()
+    };
     out.extend(orientation_conventions(input.tables, headers));
     out.extend(tip_hypotheses(input, headers));
     out
@@ -1099,7 +1145,7 @@ fn tip_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correc
     // The tip link: the candidates whose joints the files have columns for, their robots
     // from one reading of the URDF.
     if let Some(urdf) = input.urdf
-        && let Ok(description) = urdf_rs::read_file(urdf)
+        && let Ok(description) = hapcal_io::read_urdf(urdf)
     {
         let mut candidates = Vec::new();
         let mut named = Vec::new();
@@ -1158,25 +1204,25 @@ fn tip_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correc
 /// `as_given`): the files' own families and the general ones, the per-column and per-row
 /// families too when the data are `suspicious` (the free scales and couplings fitted with
 /// `screen`), the row families from the per-row residuals `per_row` (file, line, m) when there
-/// are any.
+/// are any. `whole` is the closed-form fit to every row, when it applies.
 fn measurement_hypotheses(
     input: &SetupInput<'_>,
     (given, as_given): (&MeasuredData, &Residual),
     suspicious: Option<ResidualFn<'_, MeasuredData>>,
-    per_row: Option<&[(usize, u64, f64)]>,
+    (whole, per_row): (Option<&ClosedForm>, Option<&[(usize, u64, f64)]>),
 ) -> Vec<Corrected<MeasuredData>> {
     let headers: Vec<Vec<String>> = (input.tables.iter())
         .map(|t| crate::data::csv_columns(&t.path))
         .collect();
     let layout = layout_of(input, &headers);
     let names: Vec<String> = input.tables.iter().map(file_name).collect();
-    let mut hypotheses = own_hypotheses(input, &headers);
+    let mut hypotheses = own_hypotheses(input, &headers, suspicious.is_some());
     hypotheses.extend(general_hypotheses(given, &layout, Tier::Always));
     // Frames that change from a row on: scanned when the data are suspicious or the per-row
     // residuals jump, else after a probe of a few splits (a move the frames of the whole file
     // absorb to a residual right data can leave).
     let jumps = suspicious.is_some() || per_row.is_some_and(residuals_jump);
-    hypotheses.extend(change_point_hypotheses(input, &names, jumps));
+    hypotheses.extend(change_point_hypotheses(input, &names, jumps, whole));
     if let Some(screen) = suspicious {
         hypotheses.extend(general_hypotheses(given, &layout, Tier::Suspicious));
         hypotheses.extend(fitted_hypotheses(given, &layout, as_given, screen));
@@ -1202,24 +1248,32 @@ fn file_name(t: &MeasurementTable) -> String {
 
 /// The change-point hypotheses of `input` (files named `names`), with the closed-form fit
 /// as the frames of each part; every file scanned when the data are `suspicious`, else the
-/// files whose probe finds a change.
+/// files whose probe of `whole` (the closed-form fit to every row) finds a change.
 fn change_point_hypotheses(
     input: &SetupInput<'_>,
     names: &[String],
     suspicious: bool,
+    whole: Option<&ClosedForm>,
 ) -> Vec<Corrected<MeasuredData>> {
     let given_tips: Vec<usize> = (0..input.tips.len().max(1)).collect();
-    let fit = |tables: &[MeasurementTable], tips: &[usize]| {
-        let fit = closed_form_fit(input.robot, tables, tips, None)?;
+    let part = |fit: &ClosedForm, tables: &[MeasurementTable]| {
         let n_rows: usize = tables.iter().map(|t| t.rows.len()).sum();
         let sq: f64 = fit.per_row.iter().map(|r| r.2 * r.2).sum();
-        Some(PartFit {
+        PartFit {
             cost_m2: sq / fit.per_row.len().max(1) as f64 * n_rows as f64,
             instrument: (fit.frames.r0, fit.frames.t),
-            marker_offsets_m: fit.frames.offsets,
-        })
+            marker_offsets_m: fit.frames.offsets.clone(),
+            samples: fit.samples.clone(),
+        }
     };
-    let urdf = input.urdf.and_then(|p| urdf_rs::read_file(p).ok());
+    let fit = |tables: &[MeasurementTable], tips: &[usize]| {
+        Some(part(
+            &closed_form_fit(input.robot, tables, tips, None)?,
+            tables,
+        ))
+    };
+    let whole = whole.map(|w| part(w, input.tables));
+    let urdf = input.urdf.and_then(|p| hapcal_io::read_urdf(p).ok());
     let twins: Vec<Option<String>> = (input.tips.iter())
         .map(|tip| {
             let urdf = urdf.as_ref()?;
@@ -1234,6 +1288,7 @@ fn change_point_hypotheses(
             tip_names: input.tips,
             twins: &twins,
             suspicious,
+            whole: whole.as_ref(),
         },
         &fit,
         &|tables, tips| MeasuredData {
@@ -1495,7 +1550,11 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
             break;
         };
         let keep: Vec<bool> = fit.per_row.iter().map(|r| r.2 <= 3.0 * median).collect();
-        if kept.as_ref() == Some(&keep) {
+        // The rows kept last, or every row of the first fit: the fit would be the same.
+        if kept
+            .as_ref()
+            .map_or(keep.iter().all(|k| *k), |kept| *kept == keep)
+        {
             break;
         }
         let Some(next) = closed_form_fit(input.robot, input.tables, &given_tips, Some(&keep))
@@ -1505,7 +1564,10 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
         robust = Some(next);
         kept = Some(keep);
     }
-    let per_row = robust.or(closed_form).map(|fit| fit.per_row);
+    let per_row = robust
+        .as_ref()
+        .or(closed_form.as_ref())
+        .map(|fit| &fit.per_row[..]);
     // The closed form may stop short of the full fit (a long lever between the instrument and
     // the joints): the per-column families only when the full fit agrees the data are not
     // right data of a real robot.
@@ -1523,7 +1585,7 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
         input,
         (&given, &as_given),
         suspicious.then_some(&screen as ResidualFn<'_, MeasuredData>),
-        per_row.as_deref(),
+        (closed_form.as_ref(), per_row),
     );
     let judged = judge(
         as_given,
@@ -1894,7 +1956,7 @@ fn part_in_millimetres(
 /// the chain with which they read and leave a plausible frames-only residual, as a report of
 /// one finding (the tip too low: its joints have no column in the files).
 fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> Option<SetupReport> {
-    let description = urdf_rs::read_file(urdf).ok()?;
+    let description = hapcal_io::read_urdf(urdf).ok()?;
     for (t, tip) in tips.iter().enumerate() {
         for (link, steps, _) in tip_candidates(&description, tip) {
             if steps > 0 || tips.contains(&link) {
@@ -2560,8 +2622,12 @@ mod tests {
         let given = MeasuredData::tables(tables.clone());
         let as_given = closed_form_residual(&robot, &tables, &[0]).expect("marker data");
         let screen = |d: &MeasuredData| closed_form_residual(&robot, &d.tables, &[0]);
-        let hypotheses =
-            measurement_hypotheses(&input, (&given, &as_given), Some(&screen), Some(&per_row));
+        let hypotheses = measurement_hypotheses(
+            &input,
+            (&given, &as_given),
+            Some(&screen),
+            (None, Some(&per_row)),
+        );
         crate::setup_families::assert_families(
             crate::setup_families::DataKind::MeasurementFiles,
             &hypotheses,

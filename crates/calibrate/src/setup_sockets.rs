@@ -325,7 +325,7 @@ fn fixed_relatives(urdf: &urdf_rs::Robot, link: &str) -> Vec<String> {
 /// two moving joints up or down from it ([`tip_candidates`]) and every link fixed to one of
 /// them or to `tip`, whose chain from the URDF has `n_columns` joints; with the chain of each.
 fn tip_chains(urdf: &Path, tip: &str, n_columns: usize) -> Vec<(String, Chain)> {
-    let Ok(description) = urdf_rs::read_file(urdf) else {
+    let Ok(description) = hapcal_io::read_urdf(urdf) else {
         return Vec::new();
     };
     let mut links: Vec<String> = fixed_relatives(&description, tip);

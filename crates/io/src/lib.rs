@@ -97,5 +97,5 @@ pub use mukca::{
 };
 pub use urdf::{
     LinkInertial, MAX_CHAIN_LENGTH_M, UrdfTree, import_urdf, import_urdf_tips, import_urdf_tree,
-    load_tips, write_calibrated_urdf,
+    load_tips, read_urdf, write_calibrated_urdf,
 };

@@ -3,6 +3,7 @@
 use std::collections::HashMap;
 use std::ops::Range;
 use std::path::Path;
+use std::sync::{Arc, Mutex};
 
 use hapcal_kinematics::Placement;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
@@ -363,18 +364,58 @@ fn inertials(
     Ok((out, held))
 }
 
-/// Reads and parses a URDF, with XML errors located.
-fn read_robot(path: &Path) -> Result<urdf_rs::Robot, Error> {
+/// Reads and parses a URDF, with XML errors located: [`read_urdf`].
+fn read_robot(path: &Path) -> Result<Arc<urdf_rs::Robot>, Error> {
+    read_urdf(path)
+}
+
+/// URDF texts parsed last, with their descriptions, the latest last: a check or a calibration
+/// reads one URDF many times (each set of tips, each hypothesis), and parsing the XML takes
+/// milliseconds where reading the text takes microseconds.
+static PARSED: Mutex<Vec<(String, Arc<urdf_rs::Robot>)>> = Mutex::new(Vec::new());
+
+/// URDF texts [`PARSED`] keeps.
+const PARSED_KEPT: usize = 8;
+
+/// The description of the URDF at `path` as urdf-rs parses it, after the checks every import
+/// makes (well-formed XML, one root, every joint's links defined, no loop). The file is read
+/// each time; a text read before is not parsed again (the description is kept by its text, so
+/// an edited file is parsed anew).
+///
+/// # Errors
+///
+/// [`Error::Io`] if the file cannot be read; [`Error::Xml`] (file:line:column) for malformed
+/// XML; [`Error::UrdfStructure`] (file:line:column) for a joint naming an undefined link, a
+/// link with two parent joints, several roots or a loop; [`Error::Urdf`] if urdf-rs cannot
+/// parse it.
+pub fn read_urdf(path: &Path) -> Result<Arc<urdf_rs::Robot>, Error> {
     let text = Error::read_text(path, |line, column, message| Error::Xml {
         path: path.to_path_buf(),
         line,
         column,
         message,
     })?;
+    let parsed = |cache: &mut Vec<(String, Arc<urdf_rs::Robot>)>| {
+        let at = cache.iter().position(|(t, _)| *t == text)?;
+        let hit = cache.remove(at);
+        let robot = Arc::clone(&hit.1);
+        cache.push(hit);
+        Some(robot)
+    };
+    if let Some(robot) = PARSED.lock().ok().as_deref_mut().and_then(parsed) {
+        return Ok(robot);
+    }
     check_xml(&text, path)?;
     let robot = urdf_rs::read_from_string(&text)
         .map_err(|e| urdf_error(path, format!("not a valid URDF: {e}")))?;
     check_tree(&robot, &text, path)?;
+    let robot = Arc::new(robot);
+    if let Ok(mut cache) = PARSED.lock() {
+        if cache.len() >= PARSED_KEPT {
+            cache.remove(0);
+        }
+        cache.push((text, Arc::clone(&robot)));
+    }
     Ok(robot)
 }
 
