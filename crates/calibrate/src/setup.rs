@@ -1209,7 +1209,8 @@ fn measurement_hypotheses(
     input: &SetupInput<'_>,
     (given, as_given): (&MeasuredData, &Residual),
     suspicious: Option<ResidualFn<'_, MeasuredData>>,
-    (whole, per_row): (Option<&ClosedForm>, Option<&[(usize, u64, f64)]>),
+    whole: Option<&ClosedForm>,
+    per_row: Option<&[(usize, u64, f64)]>,
 ) -> Vec<Corrected<MeasuredData>> {
     let headers: Vec<Vec<String>> = (input.tables.iter())
         .map(|t| crate::data::csv_columns(&t.path))
@@ -1585,7 +1586,8 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
         input,
         (&given, &as_given),
         suspicious.then_some(&screen as ResidualFn<'_, MeasuredData>),
-        (closed_form.as_ref(), per_row),
+        closed_form.as_ref(),
+        per_row,
     );
     let judged = judge(
         as_given,
@@ -1647,7 +1649,7 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
     if !explained && frozen.is_empty() && !as_given.is_plausible() {
         // No cause is named: where the residual lies is.
         let names: Vec<String> = input.tables.iter().map(file_name).collect();
-        let location = (per_row.as_deref())
+        let location = per_row
             .and_then(|rows| residual_location(rows, &names))
             .map_or_else(String::new, |w| format!("; {w}"));
         findings.push(Finding {
@@ -2626,7 +2628,8 @@ mod tests {
             &input,
             (&given, &as_given),
             Some(&screen),
-            (None, Some(&per_row)),
+            None,
+            Some(&per_row),
         );
         crate::setup_families::assert_families(
             crate::setup_families::DataKind::MeasurementFiles,
