@@ -632,7 +632,8 @@ impl PyCalibration {
         self.json.clone()
     }
 
-    /// Writes the calibrated device (`write_outputs`); returns the paths written.
+    /// Writes the calibrated device (`write_outputs`: the files read back first with the runtime,
+    /// nothing written unless they give the calibration); returns the paths written.
     fn write_outputs(&self, py: Python<'_>, path: PathBuf) -> PyResult<Vec<PathBuf>> {
         let outcome = &self.outcome;
         py.detach(|| calibrate::write_outputs(outcome, &path))

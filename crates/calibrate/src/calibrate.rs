@@ -667,12 +667,14 @@ pub fn write_new(path: &Path, text: &str, inputs: &[&Path]) -> Result<()> {
 /// calibrated joint origins; a `.toml` path a device TOML with a `[calibration]` table (any
 /// other extension is refused). With
 /// marker frames or values a URDF cannot hold (compliance, harmonics), `<out>.calibration.toml`
-/// beside it. Files are written atomically. Returns the paths written.
+/// beside it. The files are read back first as `predict` reads them ([`check_written`]), and
+/// nothing is written unless they give the calibration's own marker positions. Files are
+/// written atomically. Returns the paths written.
 ///
 /// # Errors
 /// A `.urdf` output for a device that did not come from a URDF, an output that is neither
-/// `.toml` nor `.urdf`, an output path that is the device file or its source URDF, or an I/O
-/// error.
+/// `.toml` nor `.urdf`, an output path that is the device file or its source URDF, files that
+/// do not give the calibration ([`check_written`]), or an I/O error.
 pub fn write_outputs(outcome: &Outcome, out: &Path) -> Result<Vec<PathBuf>> {
     write_outputs_beside(outcome, out, &[])
 }
@@ -693,7 +695,8 @@ pub fn check_outputs(device: &Path, out: &Path, inputs: &[&Path]) -> Result<()> 
 }
 
 /// [`write_outputs`], refusing also to write over one of `inputs` (the data and test files
-/// the calibration read; the device and its source URDF are always refused).
+/// the calibration read; the device and its source URDF are always refused). The files are
+/// read back first ([`check_written`]).
 ///
 /// # Errors
 /// As [`write_outputs`], and an output path that is one of `inputs`.
@@ -701,22 +704,6 @@ pub fn write_outputs_beside(
     outcome: &Outcome,
     out: &Path,
     inputs: &[&Path],
-) -> Result<Vec<PathBuf>> {
-    write_outputs_checked(outcome, out, inputs, &|_, _| Ok(()))
-}
-
-/// [`write_outputs_beside`] once `reproduces` accepts the files' texts (path, text; the
-/// calibrated URDF or device file first, then the sidecar): a check that the files give what
-/// the report says (the command line evaluates them with the runtime, which this crate does
-/// not depend on, and compares with [`check_reproduced`]). Nothing is written when it refuses.
-///
-/// # Errors
-/// As [`write_outputs_beside`], and `reproduces`' refusal.
-pub fn write_outputs_checked(
-    outcome: &Outcome,
-    out: &Path,
-    inputs: &[&Path],
-    reproduces: OutputCheck<'_>,
 ) -> Result<Vec<PathBuf>> {
     check_outputs(&outcome.device_path, out, inputs)?;
     let urdf_source = (outcome.device.urdf.as_ref()).map(|u| u.resolve(&outcome.device_path));
@@ -737,7 +724,7 @@ pub fn write_outputs_checked(
             );
         }
         let text = hapcal_io::write_device(calibrated);
-        return write_all(outcome, vec![(out.to_path_buf(), text)], inputs, reproduces);
+        return write_all(outcome, vec![(out.to_path_buf(), text)], inputs);
     }
     // A compliance is in rad per unit of load: rad/(N·m) under link masses, rad/m under the
     // lumped unit weights (the report's layout calls it an angle, rad); the sidecar says which,
@@ -843,18 +830,18 @@ pub fn write_outputs_checked(
     if let Some(text) = sidecar_text {
         files.push((out.with_extension("calibration.toml"), text));
     }
-    write_all(outcome, files, inputs, reproduces)
+    write_all(outcome, files, inputs)
 }
 
-/// Writes `files` (path, text) unless `reproduces` refuses them ([`write_outputs_checked`]):
-/// nothing is written then. Returns the paths written.
+/// Writes `files` (path, text; the calibrated URDF or device file first, then the sidecar)
+/// once they give the calibration ([`check_written`]): nothing is written otherwise. Returns
+/// the paths written.
 fn write_all(
     outcome: &Outcome,
     files: Vec<(PathBuf, String)>,
     inputs: &[&Path],
-    reproduces: OutputCheck<'_>,
 ) -> Result<Vec<PathBuf>> {
-    reproduces(outcome, &files)?;
+    check_written(outcome, &files)?;
     for (path, text) in &files {
         write_new(path, text, inputs)?;
     }
@@ -870,9 +857,67 @@ fn compliance_unit_of(model: &hapcal_problems::CalibratedModel) -> &'static str 
     }
 }
 
-/// A check of the files about to be written ([`write_outputs_checked`]): the outcome and the
-/// files' paths and texts; an error refuses them.
-pub type OutputCheck<'a> = &'a dyn Fn(&Outcome, &[(PathBuf, String)]) -> Result<()>;
+/// Whether the files a calibration is about to write (`files`: path and text, the
+/// calibrated URDF first, then its sidecar) give its calibration as `predict` evaluates them:
+/// the URDF and record loaded by the runtime ([`hapcal_runtime::Robot::from_urdf_str`]), each marker `k` at
+/// the instrument frame ∘ tip `k`'s deflected pose ∘ frame `marker{k+1}`, compared with the
+/// calibration's own prediction by [`check_reproduced`]. A device
+/// file (a haptic device's, a D-H robot's), or a calibration without record or tips, is not
+/// checked here.
+///
+/// # Errors
+/// A record the runtime refuses, or markers farther from the calibration's prediction than
+/// [`REPRODUCTION_TOLERANCE_M`].
+pub fn check_written(outcome: &Outcome, files: &[(PathBuf, String)]) -> Result<()> {
+    let is_urdf = |p: &Path| {
+        p.extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
+    };
+    let (Some((urdf_path, urdf)), Some(record)) =
+        (files.iter().find(|(p, _)| is_urdf(p)), &outcome.record)
+    else {
+        return Ok(());
+    };
+    let tips: Vec<&str> = record.tips.iter().map(String::as_str).collect();
+    if tips.is_empty() {
+        return Ok(());
+    }
+    let sidecar_path = urdf_path.with_extension("calibration.toml");
+    let sidecar_name = sidecar_path.display().to_string();
+    let sidecar = (files.iter())
+        .find(|(p, _)| *p == sidecar_path)
+        .map(|(_, text)| (text.as_str(), sidecar_name.as_str()));
+    let robot = hapcal_runtime::Robot::from_urdf_str(
+        urdf,
+        &urdf_path.display().to_string(),
+        sidecar,
+        &tips,
+    )
+    .context("reading back the calibrated URDF and record before writing them")?;
+    let instrument = robot
+        .frame("instrument")
+        .unwrap_or(hapcal_runtime::Pose::IDENTITY);
+    let markers: Vec<hapcal_runtime::Pose> = (1..=tips.len())
+        .map(|k| {
+            robot
+                .frame(&format!("marker{k}"))
+                .unwrap_or(hapcal_runtime::Pose::IDENTITY)
+        })
+        .collect();
+    let mut ws = robot.workspace();
+    // The record's load tips come with it: the robot may have more tips than the markers.
+    let mut poses = vec![hapcal_runtime::Pose::IDENTITY; robot.tip_names().len()];
+    check_reproduced(outcome, &mut |q| {
+        robot
+            .deflected_tip_poses(q, &mut ws, &mut poses)
+            .context("evaluating the calibrated URDF and record")?;
+        Ok(Some(
+            (poses.iter().zip(&markers))
+                .map(|(p, m)| instrument.compose(p).compose(m).translation_m)
+                .collect(),
+        ))
+    })
+}
 
 /// The marker positions the written files give at joint readings `q` ([`check_reproduced`]):
 /// marker `k` at index `k`, m, in the instrument frame; `None` when the files give none.

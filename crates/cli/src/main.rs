@@ -598,12 +598,7 @@ fn run(cli: Cli) -> Result<()> {
                 note!("hapcal: wrote {}", path.display());
             }
             if let Some(out) = out {
-                for path in calibrate::write_outputs_checked(
-                    &outcome,
-                    &out,
-                    &inputs,
-                    &hapcal::predict::check_written,
-                )? {
+                for path in calibrate::write_outputs_beside(&outcome, &out, &inputs)? {
                     note!("hapcal: wrote {}", path.display());
                 }
             }

@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use hapcal_io::{JointSchema, MeasurementTable, Units};
 use hapcal_runtime::{
-    ErrorFigures, MarkerObservation, MeasuredErrors, Model, Pose, PredictionFrame, Predictor,
-    Robot, TipPrediction,
+    ErrorFigures, MarkerObservation, MeasuredErrors, Model, PredictionFrame, Predictor, Robot,
+    TipPrediction,
 };
 use serde::Serialize;
 
@@ -837,58 +837,4 @@ fn finish(
 /// Whether the data's measured columns are compared without an identified instrument frame.
 fn errors_without_instrument(predictor: &Predictor, prediction: &Prediction) -> bool {
     prediction.errors.is_some() && predictor.robot().frame("instrument").is_none()
-}
-
-/// Whether the files `hapcal calibrate` is about to write (`files`: path and text, the
-/// calibrated URDF first, then its sidecar) give its calibration as `predict` evaluates them:
-/// the URDF and record loaded by the runtime ([`Robot::from_urdf_str`]), each marker `k` at
-/// the instrument frame ∘ tip `k`'s deflected pose ∘ frame `marker{k+1}`, compared with the
-/// calibration's own prediction by [`hapcal_calibrate::calibrate::check_reproduced`]. A device
-/// file (a haptic device's, a D-H robot's), or a calibration without record or tips, is not
-/// checked here.
-///
-/// # Errors
-/// A record the runtime refuses, or markers farther from the calibration's prediction than
-/// [`hapcal_calibrate::calibrate::REPRODUCTION_TOLERANCE_M`].
-pub fn check_written(
-    outcome: &hapcal_calibrate::report::Outcome,
-    files: &[(PathBuf, String)],
-) -> Result<()> {
-    let is_urdf = |p: &Path| {
-        p.extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
-    };
-    let (Some((urdf_path, urdf)), Some(record)) =
-        (files.iter().find(|(p, _)| is_urdf(p)), &outcome.record)
-    else {
-        return Ok(());
-    };
-    let tips: Vec<&str> = record.tips.iter().map(String::as_str).collect();
-    if tips.is_empty() {
-        return Ok(());
-    }
-    let sidecar_path = urdf_path.with_extension("calibration.toml");
-    let sidecar_name = sidecar_path.display().to_string();
-    let sidecar = (files.iter())
-        .find(|(p, _)| *p == sidecar_path)
-        .map(|(_, text)| (text.as_str(), sidecar_name.as_str()));
-    let robot = Robot::from_urdf_str(urdf, &urdf_path.display().to_string(), sidecar, &tips)
-        .context("reading back the calibrated URDF and record before writing them")?;
-    let instrument = robot.frame("instrument").unwrap_or(Pose::IDENTITY);
-    let markers: Vec<Pose> = (1..=tips.len())
-        .map(|k| robot.frame(&format!("marker{k}")).unwrap_or(Pose::IDENTITY))
-        .collect();
-    let mut ws = robot.workspace();
-    // The record's load tips come with it: the robot may have more tips than the markers.
-    let mut poses = vec![Pose::IDENTITY; robot.tip_names().len()];
-    hapcal_calibrate::calibrate::check_reproduced(outcome, &mut |q| {
-        robot
-            .deflected_tip_poses(q, &mut ws, &mut poses)
-            .context("evaluating the calibrated URDF and record")?;
-        Ok(Some(
-            (poses.iter().zip(&markers))
-                .map(|(p, m)| instrument.compose(p).compose(m).translation_m)
-                .collect(),
-        ))
-    })
 }
