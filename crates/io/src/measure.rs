@@ -739,6 +739,52 @@ fn stem(path: &Path) -> String {
         .map_or_else(|| "data".to_owned(), |s| s.to_string_lossy().into_owned())
 }
 
+/// The observations of an `industrial_calibration` file in its order, with their keys.
+struct Observations(Vec<(serde_yaml_ng::Value, Observation)>);
+
+impl Observations {
+    /// Whether no key is given twice (a YAML mapping read as values refuses that).
+    fn distinct_keys(&self) -> bool {
+        let mut seen = std::collections::HashSet::new();
+        self.0.iter().all(|(k, _)| seen.insert(key_name(k)))
+    }
+}
+
+impl<'de> Deserialize<'de> for Observations {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Entries;
+        impl<'de> serde::de::Visitor<'de> for Entries {
+            type Value = Observations;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("a mapping of observations")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut map: A,
+            ) -> Result<Observations, A::Error> {
+                let mut out = Vec::with_capacity(map.size_hint().unwrap_or(0));
+                while let Some(entry) = map.next_entry()? {
+                    out.push(entry);
+                }
+                Ok(Observations(out))
+            }
+        }
+        deserializer.deserialize_map(Entries)
+    }
+}
+
+/// An observation's key as the findings name it: the text of a string key, else the key
+/// written as YAML.
+fn key_name(key: &serde_yaml_ng::Value) -> String {
+    match key {
+        serde_yaml_ng::Value::String(s) => s.clone(),
+        other => serde_yaml_ng::to_string(other)
+            .unwrap_or_default()
+            .trim()
+            .to_owned(),
+    }
+}
+
 /// One observation of `industrial_calibration`'s kinematic calibration.
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -823,8 +869,6 @@ fn read_industrial_yaml_in(
         message,
     })?;
     check_yaml_depth(path, &text)?;
-    let observations: serde_yaml_ng::Mapping =
-        serde_yaml_ng::from_str(&text).map_err(|e| yaml_error(path, &e))?;
     // Lines of the top-level keys (the first of each), to locate each observation.
     let mut key_lines: std::collections::HashMap<String, u64> = std::collections::HashMap::new();
     for (i, l) in text.lines().enumerate() {
@@ -836,6 +880,32 @@ fn read_industrial_yaml_in(
         }
     }
     let at = |key: &str| key_lines.get(key).copied().unwrap_or(0);
+    // Straight into observations; a file that does not read so is read again through YAML
+    // values, whose errors name the observation and its line.
+    let direct = serde_yaml_ng::from_str::<Observations>(&text)
+        .ok()
+        .filter(|o| o.distinct_keys());
+    let observations: Vec<(serde_yaml_ng::Value, Observation)> = match direct {
+        Some(o) => o.0,
+        None => {
+            let mapping: serde_yaml_ng::Mapping =
+                serde_yaml_ng::from_str(&text).map_err(|e| yaml_error(path, &e))?;
+            (mapping.into_iter())
+                .map(|(key, value)| {
+                    let name = key_name(&key);
+                    serde_yaml_ng::from_value(value)
+                        .map(|o| (key, o))
+                        .map_err(|e| (name, e))
+                })
+                .collect::<Result<_, _>>()
+                .map_err(|(name, e)| Error::Yaml {
+                    path: path.to_path_buf(),
+                    line: at(&name),
+                    column: 1,
+                    message: format!("observation {name:?}: {e}"),
+                })?
+        }
+    };
     let bad = |line: u64, message: String| Error::Yaml {
         path: path.to_path_buf(),
         line,
@@ -846,17 +916,9 @@ fn read_industrial_yaml_in(
     let (mut n_outside, mut first_outside) = (0usize, String::new());
     let mut repeats = Repeats::default();
     let mut frozen = Frozen::default();
-    for (key, value) in observations {
-        let key = match key {
-            serde_yaml_ng::Value::String(s) => s,
-            other => serde_yaml_ng::to_string(&other)
-                .unwrap_or_default()
-                .trim()
-                .to_owned(),
-        };
+    for (key, o) in observations {
+        let key = key_name(&key);
         let line = at(&key);
-        let o: Observation = serde_yaml_ng::from_value(value)
-            .map_err(|e| bad(line, format!("observation {key:?}: {e}")))?;
         if !o.camera_joints.is_empty() {
             return Err(bad(
                 line,
