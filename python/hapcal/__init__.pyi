@@ -110,10 +110,16 @@ class Measurements:
         length_unit: str = "m",
         angle_unit: str = "rad",
         column_units: Optional[Dict[str, str]] = None,
+        column_signs: Optional[Sequence[str]] = None,
+        column_offsets: Optional[Dict[str, float]] = None,
+        column_scales: Optional[Dict[str, float]] = None,
+        column_couplings: Optional[Dict[str, str]] = None,
     ) -> Measurements:
         """Measurement CSV / industrial_calibration YAML / hapcal log / MUKCa folder, read when
         calibrating. ``length_unit``: "m" | "mm" | "cm" | "in" | "ft"; ``angle_unit``: "rad" |
-        "deg" | "grad" | "rev"; ``column_units``: {"q3": "deg", "x2,y2,z2": "mm"}."""
+        "deg" | "grad" | "rev"; ``column_units``: {"q3": "deg", "x2,y2,z2": "mm"};
+        ``column_signs``: ["q3"]; ``column_offsets``: {"q2": -1.5708}; ``column_scales``:
+        {"q3": 0.01}; ``column_couplings``: {"q6": "-0.5*q5"} (the CLI's --column-* options)."""
     @classmethod
     def from_arrays(
         cls,

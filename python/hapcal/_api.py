@@ -54,6 +54,10 @@ class Measurements:
         length_unit: str = "m",
         angle_unit: str = "rad",
         column_units: Optional[Dict[str, str]] = None,
+        column_signs: Optional[Sequence[str]] = None,
+        column_offsets: Optional[Dict[str, float]] = None,
+        column_scales: Optional[Dict[str, float]] = None,
+        column_couplings: Optional[Dict[str, str]] = None,
     ) -> "Measurements":
         """A measurement file (CSV with a header row, or industrial_calibration's YAML), a
         hapcal log CSV, or a MUKCa placement / run folder, read when calibrating (its joint
@@ -64,14 +68,31 @@ class Measurements:
         ``angle_unit``: ``"rad"``, ``"deg"``, ``"grad"`` or ``"rev"`` (revolute joints,
         ``phix, phiy, phiz``);
         ``column_units``: the unit of some columns, as ``--column-unit`` gives it, e.g.
-        ``{"q3": "deg", "x2,y2,z2": "mm"}`` (columns as the header spells them, or ``q1..qn``).
+        ``{"q3": "deg", "x2,y2,z2": "mm"}`` (columns as the header spells them, or ``q1..qn``);
+        ``column_signs``, ``column_offsets``, ``column_scales``, ``column_couplings``: the
+        corrections ``--column-sign``, ``--column-offset``, ``--column-scale`` and
+        ``--column-coupling`` make, which the setup check's findings name: ``["q3"]`` (the
+        column counts the other way), ``{"q2": -1.5708}`` (rad, m for a length, added after
+        the unit), ``{"q3": 0.01}`` (a reading on the motor side of a 100:1 gear),
+        ``{"q6": "-0.5*q5"}`` (q5's share taken out of q6).
 
         Raises :class:`HapcalError` for a missing file or a unit it does not know; a column the
         file lacks is reported when the file is read.
         """
-        edits = list(column_units.items()) if column_units else None
+        def items(d: Optional[Dict[str, Any]]) -> Optional[List[Tuple[str, Any]]]:
+            return list(d.items()) if d else None
+
         return cls(
-            _hapcal._Measurements.from_path(os.fspath(path), length_unit, angle_unit, edits)
+            _hapcal._Measurements.from_path(
+                os.fspath(path),
+                length_unit,
+                angle_unit,
+                items(column_units),
+                list(column_signs) if column_signs else None,
+                items(column_offsets),
+                items(column_scales),
+                items(column_couplings),
+            )
         )
 
     @classmethod

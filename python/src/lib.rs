@@ -42,15 +42,69 @@ fn units(length_unit: &str, angle_unit: &str) -> Result<Units> {
     Ok(Units::new(length, angle))
 }
 
-/// `units` with the edits of `column_units`: `{"q3": "deg", "x2,y2,z2": "mm"}`, the columns
-/// as `--column-unit` names them, in the dict's order.
-fn with_column_units(units: Units, column_units: Option<Vec<(String, String)>>) -> Result<Units> {
-    let edits = (column_units.unwrap_or_default().into_iter())
-        .map(|(columns, unit)| {
-            hapcal_io::ColumnEdit::parse_unit(&format!("{columns}={unit}"))
-                .map_err(|e| anyhow!("column_units: {e}"))
-        })
-        .collect::<Result<Vec<_>>>()?;
+/// The column edits of a measurement file, as the command line's `--column-unit`,
+/// `--column-sign`, `--column-offset`, `--column-scale` and `--column-coupling` give them, each
+/// in the dict's (list's) order: `units` `{"q3": "deg", "x2,y2,z2": "mm"}`, `signs`
+/// `["q3"]`, `offsets` `{"q2": -1.5708}` (rad, m for a length), `scales` `{"q3": 0.01}`,
+/// `couplings` `{"q6": "-0.5*q5"}`.
+#[derive(Default)]
+struct ColumnArgs {
+    units: Option<Vec<(String, String)>>,
+    signs: Option<Vec<String>>,
+    offsets: Option<Vec<(String, f64)>>,
+    scales: Option<Vec<(String, f64)>>,
+    couplings: Option<Vec<(String, String)>>,
+}
+
+/// `units` with the edits of `args` ([`ColumnArgs`]), parsed as the command line parses its
+/// options.
+///
+/// # Errors
+/// A value the option's parser refuses, named with the Python argument.
+fn with_column_edits(units: Units, args: ColumnArgs) -> Result<Units> {
+    type Parse = fn(&str) -> std::result::Result<hapcal_io::ColumnEdit, String>;
+    let mut edits = Vec::new();
+    let mut add = |argument: &str, parse: Parse, values: Vec<String>| -> Result<()> {
+        for value in values {
+            edits.push(parse(&value).map_err(|e| anyhow!("{argument}: {e}"))?);
+        }
+        Ok(())
+    };
+    let pairs = |v: Option<Vec<(String, String)>>| {
+        (v.unwrap_or_default().into_iter())
+            .map(|(c, x)| format!("{c}={x}"))
+            .collect()
+    };
+    let numbers = |v: Option<Vec<(String, f64)>>| {
+        (v.unwrap_or_default().into_iter())
+            .map(|(c, x)| format!("{c}={x:?}"))
+            .collect()
+    };
+    add(
+        "column_units",
+        hapcal_io::ColumnEdit::parse_unit,
+        pairs(args.units),
+    )?;
+    add(
+        "column_signs",
+        hapcal_io::ColumnEdit::parse_sign,
+        args.signs.unwrap_or_default(),
+    )?;
+    add(
+        "column_offsets",
+        hapcal_io::ColumnEdit::parse_offset,
+        numbers(args.offsets),
+    )?;
+    add(
+        "column_scales",
+        hapcal_io::ColumnEdit::parse_scale,
+        numbers(args.scales),
+    )?;
+    add(
+        "column_couplings",
+        hapcal_io::ColumnEdit::parse_coupling,
+        pairs(args.couplings),
+    )?;
     Ok(units.with_columns(edits))
 }
 
@@ -216,15 +270,27 @@ fn check_len(what: &str, got: usize, want: usize) -> Result<()> {
 #[pymethods]
 impl PyMeasurements {
     #[staticmethod]
-    #[pyo3(signature = (path, length_unit, angle_unit, column_units=None))]
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (path, length_unit, angle_unit, column_units=None, column_signs=None, column_offsets=None, column_scales=None, column_couplings=None))]
     fn from_path(
         path: PathBuf,
         length_unit: &str,
         angle_unit: &str,
         column_units: Option<Vec<(String, String)>>,
+        column_signs: Option<Vec<String>>,
+        column_offsets: Option<Vec<(String, f64)>>,
+        column_scales: Option<Vec<(String, f64)>>,
+        column_couplings: Option<Vec<(String, String)>>,
     ) -> PyResult<Self> {
+        let columns = ColumnArgs {
+            units: column_units,
+            signs: column_signs,
+            offsets: column_offsets,
+            scales: column_scales,
+            couplings: column_couplings,
+        };
         let units = units(length_unit, angle_unit)
-            .and_then(|u| with_column_units(u, column_units))
+            .and_then(|u| with_column_edits(u, columns))
             .map_err(py_err)?;
         std::fs::metadata(&path)
             .with_context(|| format!("reading measurements {}", path.display()))

@@ -237,6 +237,38 @@ def test_column_units_read_a_column_in_degrees(tmp_path, ur10: hapcal.Device) ->
         )
 
 
+def test_column_corrections_undo_what_the_setup_check_names(tmp_path, ur10: hapcal.Device) -> None:
+    """A copy of the UR10 poses with elbow_joint read on the motor side of a 100:1 gear and
+    wrist_1_joint counting the other way, read with ``column_scales={"q3": 0.01}`` and
+    ``column_signs=["q4"]`` (the CLI's ``--column-scale q3=0.01 --column-sign q4``), gives
+    the calibration of the file as it was."""
+    from conftest import ROOT
+
+    lines = (ROOT / UR10_CSV).read_text().splitlines()
+    header = lines[0].split(",")
+    elbow, wrist = header.index("elbow_joint"), header.index("wrist_1_joint")
+    for i in range(1, len(lines)):
+        cells = lines[i].split(",")
+        if len(cells) > max(elbow, wrist):
+            cells[elbow] = repr(100.0 * float(cells[elbow]))
+            cells[wrist] = repr(-float(cells[wrist]))
+            lines[i] = ",".join(cells)
+    path = tmp_path / "calibration.csv"
+    path.write_text("\n".join(lines) + "\n")
+    as_was = hapcal.calibrate(
+        ur10, hapcal.Measurements.from_csv(ROOT / UR10_CSV), model="geometric"
+    )
+    corrected = hapcal.calibrate(
+        ur10,
+        hapcal.Measurements.from_csv(path, column_scales={"q3": 0.01}, column_signs=["q4"]),
+        model="geometric",
+    )
+    for key in ("model", "parameters", "frames", "sigma_m", "placements"):
+        assert_close(corrected.report[key], as_was.report[key], tol=1e-9, strings=False)
+    with pytest.raises(hapcal.HapcalError, match="column_scales"):
+        hapcal.Measurements.from_csv(path, column_scales={"q3": 0.0})
+
+
 def test_threads(ur10: hapcal.Device) -> None:
     """The solve releases the GIL: calibrations in threads agree with one another."""
     from concurrent.futures import ThreadPoolExecutor
