@@ -281,6 +281,9 @@ const GOLDEN_STEPS: usize = 18;
 const SHIFTS_ALWAYS: [isize; 4] = [-2, -1, 1, 2];
 const SHIFTS_SUSPICIOUS: [isize; 4] = [-4, -3, 3, 4];
 
+/// The most rows a whole-file shift moves the readings by ([`SHIFTS_SUSPICIOUS`]).
+pub(crate) const MAX_ROW_SHIFT: usize = 4;
+
 /// Joint counts up to which every pair of joint columns is tried always; past it, the
 /// adjacent pairs always and the others when the data are suspicious.
 const ALL_PAIRS_UP_TO: usize = 8;

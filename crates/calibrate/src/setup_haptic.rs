@@ -25,8 +25,8 @@ use hapcal_io::{Device, LogRow};
 
 use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
 use crate::setup_families::{
-    JointColumn, Layout, LengthGroup, SetupData, Tier, fitted_hypotheses, general_hypotheses,
-    row_hypotheses,
+    JointColumn, Layout, LengthGroup, MAX_ROW_SHIFT, SetupData, Tier, fitted_hypotheses,
+    general_hypotheses, row_hypotheses,
 };
 use crate::setup_findings::{
     Corrected, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OPEN_LIMIT,
@@ -67,8 +67,10 @@ pub fn check_logs(
             }
         }
     }
-    // The hypotheses correct every row (a row shift is a shift of the log's rows); the
-    // residuals are taken over at most MAX_CHECK_ROWS of them.
+    // The hypotheses correct the stretch of rows the check judges (a row shift is a shift of
+    // its rows): each holds a copy of it, never of the whole log; the residuals are taken
+    // over at most MAX_CHECK_ROWS of them.
+    let rows = judged_stretch(rows);
     let residual = |rows: &[LogRow]| distance_residual(&chain, &thinned(rows.to_vec()));
     let as_given = residual(&rows);
     let n_joints = chain.n_joints();
@@ -349,6 +351,21 @@ pub(crate) fn unbounded(device: &Device) -> Device {
         joint.upper_rad = OPEN_LIMIT;
     }
     open
+}
+
+/// The rows of a log the check judges: the middle stretch of [`MAX_CHECK_ROWS`] rows
+/// ([`thinned`]) and the [`MAX_ROW_SHIFT`] rows on either side that a shift of the readings
+/// by whole rows moves into it; every row of a shorter log.
+fn judged_stretch(mut rows: Vec<LogRow>) -> Vec<LogRow> {
+    let keep = MAX_CHECK_ROWS + 2 * MAX_ROW_SHIFT;
+    if rows.len() <= keep {
+        return rows;
+    }
+    let start = (rows.len() - keep) / 2;
+    rows.truncate(start + keep);
+    rows.drain(..start);
+    rows.shrink_to_fit();
+    rows
 }
 
 /// At most [`MAX_CHECK_ROWS`] rows, evenly spaced (consecutive pairs kept for the row
