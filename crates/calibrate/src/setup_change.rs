@@ -134,7 +134,7 @@ pub(crate) struct ChangeInput<'a> {
 }
 
 /// Share of the squared position residual of every sample (the fit to every row) that the
-/// best shift of a file's later samples must take for the scan ([`probe`]). The shifts are
+/// best shift of a file's later samples must take for the scan (`probe`). The shifts are
 /// those a change leaves with the frames of the whole file held: each marker's error in its
 /// tip's frame moved by a constant (a marker mounted again), or every error moved by a small
 /// turn and translation of the instrument. Frames of their own for each part (the scan) take
