@@ -62,14 +62,8 @@ struct ColumnArgs {
 /// # Errors
 /// A value the option's parser refuses, named with the Python argument.
 fn with_column_edits(units: Units, args: ColumnArgs) -> Result<Units> {
-    type Parse = fn(&str) -> std::result::Result<hapcal_io::ColumnEdit, String>;
-    let mut edits = Vec::new();
-    let mut add = |argument: &str, parse: Parse, values: Vec<String>| -> Result<()> {
-        for value in values {
-            edits.push(parse(&value).map_err(|e| anyhow!("{argument}: {e}"))?);
-        }
-        Ok(())
-    };
+    use hapcal_io::ColumnEdit;
+    type Parse = fn(&str) -> std::result::Result<ColumnEdit, String>;
     let pairs = |v: Option<Vec<(String, String)>>| {
         (v.unwrap_or_default().into_iter())
             .map(|(c, x)| format!("{c}={x}"))
@@ -80,31 +74,36 @@ fn with_column_edits(units: Units, args: ColumnArgs) -> Result<Units> {
             .map(|(c, x)| format!("{c}={x:?}"))
             .collect()
     };
-    add(
-        "column_units",
-        hapcal_io::ColumnEdit::parse_unit,
-        pairs(args.units),
-    )?;
-    add(
-        "column_signs",
-        hapcal_io::ColumnEdit::parse_sign,
-        args.signs.unwrap_or_default(),
-    )?;
-    add(
-        "column_offsets",
-        hapcal_io::ColumnEdit::parse_offset,
-        numbers(args.offsets),
-    )?;
-    add(
-        "column_scales",
-        hapcal_io::ColumnEdit::parse_scale,
-        numbers(args.scales),
-    )?;
-    add(
-        "column_couplings",
-        hapcal_io::ColumnEdit::parse_coupling,
-        pairs(args.couplings),
-    )?;
+    // Each argument, its option's parser, and its values as the option's text.
+    let options: [(&str, Parse, Vec<String>); 5] = [
+        ("column_units", ColumnEdit::parse_unit, pairs(args.units)),
+        (
+            "column_signs",
+            ColumnEdit::parse_sign,
+            args.signs.unwrap_or_default(),
+        ),
+        (
+            "column_offsets",
+            ColumnEdit::parse_offset,
+            numbers(args.offsets),
+        ),
+        (
+            "column_scales",
+            ColumnEdit::parse_scale,
+            numbers(args.scales),
+        ),
+        (
+            "column_couplings",
+            ColumnEdit::parse_coupling,
+            pairs(args.couplings),
+        ),
+    ];
+    let mut edits = Vec::new();
+    for (argument, parse, values) in options {
+        for value in values {
+            edits.push(parse(&value).map_err(|e| anyhow!("{argument}: {e}"))?);
+        }
+    }
     Ok(units.with_columns(edits))
 }
 

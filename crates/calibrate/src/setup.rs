@@ -328,14 +328,18 @@ impl Frames {
         }
     }
 
+    /// The position error of one sample, m: `R₀·(R_tip·m_k + p_tip) + t − p_meas`.
+    fn position_error(&self, s: &Sample) -> Vector3<f64> {
+        self.r0 * (s.r_tip * self.offsets[s.marker] + s.p_tip) + self.t - s.measured
+    }
+
     /// Residual rows of one sample: the position error `R₀·(R_tip·m_k + p_tip) + t − p_meas`
     /// (m) and, with a measured rotation, `√(2w)·θ·n` for the rotation `θ` about `n` from the
     /// model to the measurement (the logarithm of `R_meas·R_modelᵀ`; w
     /// [`ORIENTATION_WEIGHT_M2`]: its square `2w·θ²` is the block iterations'
     /// `w·‖ΔR‖²_F = 4w·(1 − cos θ)` to second order in `θ`).
     fn residual(&self, s: &Sample) -> (Vector3<f64>, Option<Vector3<f64>>) {
-        let u = s.r_tip * self.offsets[s.marker] + s.p_tip;
-        let e = self.r0 * u + self.t - s.measured;
+        let e = self.position_error(s);
         let rot = s.rotation.map(|meas| {
             let model = self.r0 * s.r_tip * self.marker_rot[s.marker];
             (2.0 * ORIENTATION_WEIGHT_M2).sqrt()
@@ -350,8 +354,7 @@ impl Frames {
     fn cost(&self, samples: &[Sample]) -> f64 {
         (samples.iter())
             .map(|s| {
-                let u = s.r_tip * self.offsets[s.marker] + s.p_tip;
-                let e = self.r0 * u + self.t - s.measured;
+                let e = self.position_error(s);
                 let turned = s.rotation.map_or(0.0, |meas| {
                     let model = self.r0 * s.r_tip * self.marker_rot[s.marker];
                     let cos = ((meas.component_mul(&model).sum() - 1.0) / 2.0).clamp(-1.0, 1.0);
