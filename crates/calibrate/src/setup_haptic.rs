@@ -356,8 +356,20 @@ pub(crate) fn unbounded(device: &Device) -> Device {
 /// The rows of a log the check judges: the middle stretch of [`MAX_CHECK_ROWS`] rows
 /// ([`thinned`]) and the [`MAX_ROW_SHIFT`] rows on either side that a shift of the readings
 /// by whole rows moves into it; every row of a shorter log.
-fn judged_stretch(mut rows: Vec<LogRow>) -> Vec<LogRow> {
-    let keep = MAX_CHECK_ROWS + 2 * MAX_ROW_SHIFT;
+fn judged_stretch(rows: Vec<LogRow>) -> Vec<LogRow> {
+    middle(rows, MAX_CHECK_ROWS + 2 * MAX_ROW_SHIFT)
+}
+
+/// At most [`MAX_CHECK_ROWS`] rows, evenly spaced (consecutive pairs kept for the row
+/// shifts: the thinned log is a run of consecutive rows when the log is longer).
+fn thinned(rows: Vec<LogRow>) -> Vec<LogRow> {
+    // One contiguous stretch from the middle keeps the row order a shift needs, and a
+    // haptic device's recording covers its workspace in any stretch of this length.
+    middle(rows, MAX_CHECK_ROWS)
+}
+
+/// The `keep` rows in the middle of `rows` (from row `(len − keep)/2`), or every row.
+fn middle(mut rows: Vec<LogRow>, keep: usize) -> Vec<LogRow> {
     if rows.len() <= keep {
         return rows;
     }
@@ -366,18 +378,6 @@ fn judged_stretch(mut rows: Vec<LogRow>) -> Vec<LogRow> {
     rows.drain(..start);
     rows.shrink_to_fit();
     rows
-}
-
-/// At most [`MAX_CHECK_ROWS`] rows, evenly spaced (consecutive pairs kept for the row
-/// shifts: the thinned log is a run of consecutive rows when the log is longer).
-fn thinned(rows: Vec<LogRow>) -> Vec<LogRow> {
-    if rows.len() <= MAX_CHECK_ROWS {
-        return rows;
-    }
-    // One contiguous stretch from the middle keeps the row order a shift needs, and a
-    // haptic device's recording covers its workspace in any stretch of this length.
-    let start = (rows.len() - MAX_CHECK_ROWS) / 2;
-    rows[start..start + MAX_CHECK_ROWS].to_vec()
 }
 
 /// `rows` with `edit` applied to each.
@@ -609,12 +609,17 @@ fn external_encoders(rows: &[LogRow], n_joints: usize) -> Vec<Finding> {
 mod tests {
     use super::*;
 
-    #[test]
-    fn the_log_check_generates_every_family_of_its_kind() {
+    /// The reference device and the path of its bundled log.
+    fn reference() -> (Device, PathBuf) {
         let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures");
         let device =
             hapcal_io::read_device(&root.join("reference-device/device.toml")).expect("device");
-        let log = root.join("reference-device/log.csv");
+        (device, root.join("reference-device/log.csv"))
+    }
+
+    #[test]
+    fn the_log_check_generates_every_family_of_its_kind() {
+        let (device, log) = reference();
         let rows = hapcal_io::read_log(&log, &device).expect("log").rows;
         let chain = device.chain().expect("chain");
         let hypotheses = log_hypotheses(&chain, &LogRows(rows), true, &[log]);
@@ -634,10 +639,8 @@ mod tests {
         // The reference log with the distances of every tenth row passed round a cycle of
         // those rows (the joint readings stay): the nominal residual of the other rows is
         // millimetres, theirs the spread of the distances, tens of millimetres.
-        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures");
-        let device =
-            hapcal_io::read_device(&root.join("reference-device/device.toml")).expect("device");
-        let text = std::fs::read_to_string(root.join("reference-device/log.csv")).expect("log");
+        let (device, log) = reference();
+        let text = std::fs::read_to_string(log).expect("log");
         let mut lines: Vec<Vec<String>> = (text.lines())
             .map(|l| l.split(',').map(str::to_owned).collect())
             .collect();
@@ -681,10 +684,7 @@ mod tests {
         // The reference log with every distance 50 mm longer: the nominal device's cable
         // zero on the log as recorded is millimetres, so the median names the 50 mm to the
         // residual's RMS about it (2.4 mm); 10 mm longer is within tolerance.
-        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures");
-        let device =
-            hapcal_io::read_device(&root.join("reference-device/device.toml")).expect("device");
-        let log = root.join("reference-device/log.csv");
+        let (device, log) = reference();
         let rows = hapcal_io::read_log(&log, &device).expect("log").rows;
         let chain = device.chain().expect("chain");
         let rows = thinned(rows);
