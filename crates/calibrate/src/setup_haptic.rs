@@ -53,24 +53,29 @@ pub fn check_logs(
     let chain = device
         .chain()
         .context("building the device's kinematic chain")?;
+    // The hypotheses correct the stretch of rows the check judges (a row shift is a shift of
+    // its rows): the logs are streamed and only that stretch is kept, each hypothesis holds a
+    // copy of it, never of the whole log; the residuals are taken over at most
+    // MAX_CHECK_ROWS of them.
+    let lengths: Vec<usize> = paths.iter().map(|p| hapcal_io::count_log_rows(p)).collect();
+    let stretch = judged_stretch(lengths.iter().sum());
     let mut rows = Vec::new();
     let mut outside_limits = None;
-    for path in paths {
-        match hapcal_io::read_log_in(path, device, units) {
-            Ok(log) => rows.extend(log.rows),
+    let mut first = 0;
+    for (path, length) in paths.iter().zip(&lengths) {
+        let keep = stretch.start.saturating_sub(first)..stretch.end.saturating_sub(first);
+        first += length;
+        match read_stretch(path, device, units, keep.clone()) {
+            Ok(kept) => rows.extend(kept),
             Err(e) => {
                 // Read again without the limits: the check names what put the readings there.
-                let log = hapcal_io::read_log_in(path, &unbounded(device), units)
+                let kept = read_stretch(path, &unbounded(device), units, keep)
                     .with_context(|| format!("reading log {}", path.display()))?;
                 outside_limits.get_or_insert_with(|| e.to_string());
-                rows.extend(log.rows);
+                rows.extend(kept);
             }
         }
     }
-    // The hypotheses correct the stretch of rows the check judges (a row shift is a shift of
-    // its rows): each holds a copy of it, never of the whole log; the residuals are taken
-    // over at most MAX_CHECK_ROWS of them.
-    let rows = judged_stretch(rows);
     let residual = |rows: &[LogRow]| distance_residual(&chain, &thinned(rows.to_vec()));
     let as_given = residual(&rows);
     let n_joints = chain.n_joints();
@@ -353,11 +358,40 @@ pub(crate) fn unbounded(device: &Device) -> Device {
     open
 }
 
-/// The rows of a log the check judges: the middle stretch of [`MAX_CHECK_ROWS`] rows
-/// ([`thinned`]) and the [`MAX_ROW_SHIFT`] rows on either side that a shift of the readings
-/// by whole rows moves into it; every row of a shorter log.
-fn judged_stretch(rows: Vec<LogRow>) -> Vec<LogRow> {
-    middle(rows, MAX_CHECK_ROWS + 2 * MAX_ROW_SHIFT)
+/// The rows of a log of `n_rows` rows the check judges (indices): the middle stretch of
+/// [`MAX_CHECK_ROWS`] rows ([`thinned`]) and the [`MAX_ROW_SHIFT`] rows on either side that
+/// a shift of the readings by whole rows moves into it; every row of a shorter log.
+fn judged_stretch(n_rows: usize) -> std::ops::Range<usize> {
+    let keep = MAX_CHECK_ROWS + 2 * MAX_ROW_SHIFT;
+    if n_rows <= keep {
+        return 0..n_rows;
+    }
+    let start = (n_rows - keep) / 2;
+    start..start + keep
+}
+
+/// The rows of the log at `path` whose indices lie in `keep`, every row read and checked
+/// as [`hapcal_io::read_log_in`] does, only those kept in memory.
+///
+/// # Errors
+/// [`hapcal_io::read_log_in`]'s.
+fn read_stretch(
+    path: &std::path::Path,
+    device: &Device,
+    units: &hapcal_io::Units,
+    keep: std::ops::Range<usize>,
+) -> Result<Vec<LogRow>, hapcal_io::Error> {
+    let mut reader = hapcal_io::LogReader::open(path, device, units)?;
+    let mut rows = Vec::with_capacity(keep.len().min(MAX_CHECK_ROWS + 2 * MAX_ROW_SHIFT));
+    let mut index = 0;
+    while let Some(row) = reader.next_row()? {
+        if keep.contains(&index) {
+            rows.push(row);
+        }
+        index += 1;
+    }
+    reader.finish()?;
+    Ok(rows)
 }
 
 /// At most [`MAX_CHECK_ROWS`] rows, evenly spaced (consecutive pairs kept for the row

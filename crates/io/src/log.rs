@@ -132,92 +132,198 @@ pub fn read_log(path: &Path, device: &Device) -> Result<Log, Error> {
 /// [`Error::ColumnNotEditable`] for an edit that names no column of the log, gives a unit of
 /// the wrong kind, or names `t_s` or an unknown column.
 pub fn read_log_in(path: &Path, device: &Device, units: &Units) -> Result<Log, Error> {
-    let n_joints = device.n_joints();
-    let limits = device.joint_limits();
-    let mut table = Table::open(path)?;
-    let Some((header_line, header)) = table.next_record()? else {
-        return Err(Error::TooFewRows {
-            path: path.to_path_buf(),
-            min: 1,
-            found: 0,
-        });
+    let mut reader = LogReader::open(path, device, units)?;
+    let mut rows = Vec::new();
+    while let Some(row) = reader.next_row()? {
+        rows.push(row);
+    }
+    let LogSummary { warnings, .. } = reader.finish()?;
+    Ok(Log { rows, warnings })
+}
+
+/// The number of data rows of the log at `path` (its records after the header; blank lines
+/// are not rows), counted without reading their cells: what [`LogReader`] will give when the
+/// file reads without error. A file that cannot be opened or read counts the rows before the
+/// fault (the reader then reports it, with its line).
+pub fn count_log_rows(path: &Path) -> usize {
+    let Ok(file) = std::fs::File::open(path) else {
+        return 0;
     };
-    check_separator(path, header_line, header, n_joints + 1)?;
-    let names: Vec<String> = header.iter().map(str::to_owned).collect();
-    let columns: Vec<Column> = names.iter().map(|n| classify(n)).collect();
-    if let Some(c) = first_duplicate(&names) {
-        return Err(Error::DuplicateColumn {
-            path: path.to_path_buf(),
-            column: c as u64 + 1,
-            name: names.get(c).cloned().unwrap_or_default(),
-        });
+    // Records as the reader sees them (it skips empty lines only), neither trimmed nor
+    // checked as UTF-8.
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .buffer_capacity(1 << 16)
+        .from_reader(file);
+    let mut record = csv::ByteRecord::new();
+    let mut records = 0_usize;
+    while let Ok(true) = reader.read_byte_record(&mut record) {
+        records += 1;
     }
-    let mut warnings = Vec::new();
-    let unknown: Vec<usize> = (columns.iter().enumerate())
-        .filter(|(_, column)| **column == Column::Unknown)
-        .map(|(c, _)| c)
-        .collect();
-    for &c in unknown.iter().take(MAX_UNKNOWN_WARNINGS) {
-        warnings.push(format!(
-            "{}:{header_line}:{}: unknown column {:?} ignored",
-            path.display(),
-            c + 1,
-            names.get(c).map_or("", String::as_str)
-        ));
+    records.saturating_sub(1)
+}
+
+/// What a log holds besides its rows, known once [`LogReader`] has read them all.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LogSummary {
+    /// Number of data rows.
+    pub n_rows: usize,
+    /// As [`Log::warnings`].
+    pub warnings: Vec<String>,
+}
+
+/// A measurement log read row by row, as [`read_log_in`] reads it whole: the same checks,
+/// the same errors, in the same order, with memory bounded by one row (and the repeat
+/// detector's 8-byte hash and line per distinct row), whatever the log's length.
+pub struct LogReader<'a> {
+    path: &'a Path,
+    device: &'a Device,
+    table: Table<'a>,
+    header_line: u64,
+    names: Vec<String>,
+    columns: Vec<Column>,
+    conversion: Vec<crate::columns::Conversion>,
+    limits: Vec<(f64, f64)>,
+    warnings: Vec<String>,
+    previous_t: Option<f64>,
+    repeats: Repeats,
+    distances: Frozen,
+    n_rows: usize,
+}
+
+impl std::fmt::Debug for LogReader<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LogReader")
+            .field("path", &self.path)
+            .field("n_rows", &self.n_rows)
+            .finish_non_exhaustive()
     }
-    if unknown.len() > MAX_UNKNOWN_WARNINGS {
-        warnings.push(format!(
-            "{}:{header_line}: {} more unknown columns ignored ({} in all)",
-            path.display(),
-            unknown.len() - MAX_UNKNOWN_WARNINGS,
-            unknown.len()
-        ));
-    }
-    let n_q = columns.iter().filter(|c| matches!(c, Column::Q(_))).count();
-    if n_q != n_joints {
-        return Err(Error::JointCount {
-            path: path.to_path_buf(),
-            line: header_line,
-            expected: n_joints,
-            found: n_q,
-        });
-    }
-    let required = (0..n_joints)
-        .map(|j| (Column::Q(j), format!("q{}", j + 1)))
-        .chain([(Column::Distance, "distance_m".to_owned())]);
-    let present: std::collections::HashSet<Column> = columns.iter().copied().collect();
-    for (column, name) in required {
-        if !present.contains(&column) {
-            return Err(Error::MissingColumn {
+}
+
+impl<'a> LogReader<'a> {
+    /// Opens the log at `path` for `device` with its readings in `units` and reads its
+    /// header (see [`read_log_in`] for the format).
+    ///
+    /// # Errors
+    ///
+    /// [`read_log_in`]'s errors of the header: [`Error::Io`], [`Error::TooFewRows`] without
+    /// a header, [`Error::Separator`], [`Error::DuplicateColumn`], [`Error::JointCount`],
+    /// [`Error::MissingColumn`] and the column edits' errors.
+    pub fn open(path: &'a Path, device: &'a Device, units: &Units) -> Result<Self, Error> {
+        let n_joints = device.n_joints();
+        let limits = device.joint_limits();
+        let mut table = Table::open(path)?;
+        let Some((header_line, header)) = table.next_record()? else {
+            return Err(Error::TooFewRows {
                 path: path.to_path_buf(),
-                name,
+                min: 1,
+                found: 0,
+            });
+        };
+        check_separator(path, header_line, header, n_joints + 1)?;
+        let names: Vec<String> = header.iter().map(str::to_owned).collect();
+        let columns: Vec<Column> = names.iter().map(|n| classify(n)).collect();
+        if let Some(c) = first_duplicate(&names) {
+            return Err(Error::DuplicateColumn {
+                path: path.to_path_buf(),
+                column: c as u64 + 1,
+                name: names.get(c).cloned().unwrap_or_default(),
             });
         }
-    }
-    let infos: Vec<ColumnInfo> = (names.iter().zip(&columns))
-        .map(|(name, column)| match *column {
-            Column::Q(j) => ColumnInfo::joint(
-                name,
-                j,
-                device.joints.get(j).map(|s| s.name.as_str()),
-                Quantity::Angle,
-            ),
-            Column::Distance => ColumnInfo::plain(name, Quantity::Length),
-            Column::Ext(_) => ColumnInfo::plain(name, Quantity::Angle),
-            Column::Time => ColumnInfo::plain(name, Quantity::Fixed("times in s")),
-            Column::Unknown => ColumnInfo::plain(
-                name,
-                Quantity::Fixed("nothing hapcal reads (it is ignored)"),
-            ),
+        let mut warnings = Vec::new();
+        let unknown: Vec<usize> = (columns.iter().enumerate())
+            .filter(|(_, column)| **column == Column::Unknown)
+            .map(|(c, _)| c)
+            .collect();
+        for &c in unknown.iter().take(MAX_UNKNOWN_WARNINGS) {
+            warnings.push(format!(
+                "{}:{header_line}:{}: unknown column {:?} ignored",
+                path.display(),
+                c + 1,
+                names.get(c).map_or("", String::as_str)
+            ));
+        }
+        if unknown.len() > MAX_UNKNOWN_WARNINGS {
+            warnings.push(format!(
+                "{}:{header_line}: {} more unknown columns ignored ({} in all)",
+                path.display(),
+                unknown.len() - MAX_UNKNOWN_WARNINGS,
+                unknown.len()
+            ));
+        }
+        let n_q = columns.iter().filter(|c| matches!(c, Column::Q(_))).count();
+        if n_q != n_joints {
+            return Err(Error::JointCount {
+                path: path.to_path_buf(),
+                line: header_line,
+                expected: n_joints,
+                found: n_q,
+            });
+        }
+        let required = (0..n_joints)
+            .map(|j| (Column::Q(j), format!("q{}", j + 1)))
+            .chain([(Column::Distance, "distance_m".to_owned())]);
+        let present: std::collections::HashSet<Column> = columns.iter().copied().collect();
+        for (column, name) in required {
+            if !present.contains(&column) {
+                return Err(Error::MissingColumn {
+                    path: path.to_path_buf(),
+                    name,
+                });
+            }
+        }
+        let infos: Vec<ColumnInfo> = (names.iter().zip(&columns))
+            .map(|(name, column)| match *column {
+                Column::Q(j) => ColumnInfo::joint(
+                    name,
+                    j,
+                    device.joints.get(j).map(|s| s.name.as_str()),
+                    Quantity::Angle,
+                ),
+                Column::Distance => ColumnInfo::plain(name, Quantity::Length),
+                Column::Ext(_) => ColumnInfo::plain(name, Quantity::Angle),
+                Column::Time => ColumnInfo::plain(name, Quantity::Fixed("times in s")),
+                Column::Unknown => ColumnInfo::plain(
+                    name,
+                    Quantity::Fixed("nothing hapcal reads (it is ignored)"),
+                ),
+            })
+            .collect();
+        let conversion = conversions(path, header_line, &infos, units)?;
+        Ok(LogReader {
+            path,
+            device,
+            table,
+            header_line,
+            names,
+            columns,
+            conversion,
+            limits,
+            warnings,
+            previous_t: None,
+            repeats: Repeats::default(),
+            distances: Frozen::default(),
+            n_rows: 0,
         })
-        .collect();
-    let conversion = conversions(path, header_line, &infos, units)?;
+    }
 
-    let mut rows = Vec::new();
-    let mut previous_t: Option<f64> = None;
-    let mut repeats = Repeats::default();
-    let mut distances = Frozen::default();
-    while let Some((line, record)) = table.next_record()? {
+    /// The next row, or `None` after the last one.
+    ///
+    /// # Errors
+    ///
+    /// [`read_log_in`]'s errors of a row (file:line:column): [`Error::Ragged`],
+    /// [`Error::Separator`], [`Error::NotANumber`], [`Error::NotFinite`],
+    /// [`Error::OutsideJointLimits`], [`Error::ExtOutsideJointLimits`],
+    /// [`Error::LengthOutOfRange`], [`Error::NegativeDistance`], [`Error::TimeOrder`] and
+    /// [`Error::Csv`].
+    pub fn next_row(&mut self) -> Result<Option<LogRow>, Error> {
+        let n_joints = self.device.n_joints();
+        let (path, device, limits) = (self.path, self.device, &self.limits);
+        let (names, columns, conversion) = (&self.names, &self.columns, &self.conversion);
+        let Some((line, record)) = self.table.next_record()? else {
+            return Ok(None);
+        };
         if record.len() != columns.len() {
             check_separator(path, line, record, columns.len())?;
             return Err(Error::Ragged {
@@ -239,7 +345,7 @@ pub fn read_log_in(path: &Path, device: &Device, units: &Units) -> Result<Log, E
             let name = names.get(k).map_or("", String::as_str);
             number(path, line, k as u64 + 1, name, record.get(k).unwrap_or(""))
         };
-        for (c, ((cell, column), name)) in record.iter().zip(&columns).zip(&names).enumerate() {
+        for (c, ((cell, column), name)) in record.iter().zip(columns).zip(names).enumerate() {
             let col = c as u64 + 1;
             let parse = || number(path, line, col, name, cell);
             let parse_si = || si_of(&conversion, c, &raw_of);
@@ -309,7 +415,7 @@ pub fn read_log_in(path: &Path, device: &Device, units: &Units) -> Result<Log, E
                 Column::Ext(_) | Column::Unknown => {}
             }
         }
-        if let (Some(t_s), Some(previous_t_s)) = (row.t_s, previous_t)
+        if let (Some(t_s), Some(previous_t_s)) = (row.t_s, self.previous_t)
             && t_s < previous_t_s
         {
             return Err(Error::TimeOrder {
@@ -319,33 +425,47 @@ pub fn read_log_in(path: &Path, device: &Device, units: &Units) -> Result<Log, E
                 previous_t_s,
             });
         }
-        previous_t = row.t_s;
-        distances.see(&[row.distance_m]);
+        self.previous_t = row.t_s;
+        self.distances.see(&[row.distance_m]);
         // Joint readings and measurements; the time of a repeated pose differs.
-        repeats.see(row.repeat_values(), line);
-        rows.push(row);
+        self.repeats.see(row.repeat_values(), line);
+        self.n_rows += 1;
+        Ok(Some(row))
     }
-    if rows.is_empty() {
-        return Err(Error::TooFewRows {
-            path: path.to_path_buf(),
-            min: 1,
-            found: 0,
-        });
+
+    /// The log's number of rows and its warnings, once every row has been read.
+    ///
+    /// # Errors
+    ///
+    /// [`Error::TooFewRows`] without a data row; [`Error::FrozenMeasurement`] if
+    /// `distance_m` holds one value in every one of two or more rows.
+    pub fn finish(self) -> Result<LogSummary, Error> {
+        if self.n_rows == 0 {
+            return Err(Error::TooFewRows {
+                path: self.path.to_path_buf(),
+                min: 1,
+                found: 0,
+            });
+        }
+        if let Some((value, rows)) = self.distances.frozen() {
+            let column = self.columns.iter().position(|c| *c == Column::Distance);
+            return Err(Error::FrozenMeasurement {
+                path: self.path.to_path_buf(),
+                line: self.header_line,
+                column: column.map_or(0, |c| c as u64 + 1),
+                name: "distance_m".to_owned(),
+                value: metres(value),
+                rows,
+                what: "rows",
+            });
+        }
+        let mut warnings = self.warnings;
+        warnings.extend(self.repeats.warning(self.path));
+        Ok(LogSummary {
+            n_rows: self.n_rows,
+            warnings,
+        })
     }
-    if let Some((value, rows)) = distances.frozen() {
-        let column = columns.iter().position(|c| *c == Column::Distance);
-        return Err(Error::FrozenMeasurement {
-            path: path.to_path_buf(),
-            line: header_line,
-            column: column.map_or(0, |c| c as u64 + 1),
-            name: "distance_m".to_owned(),
-            value: metres(value),
-            rows,
-            what: "rows",
-        });
-    }
-    warnings.extend(repeats.warning(path));
-    Ok(Log { rows, warnings })
 }
 
 /// The CSV text of `rows` in the format [`read_log`] reads: `q1..qn`, `distance_m`, then

@@ -4,35 +4,65 @@ use std::path::Path;
 
 use crate::Error;
 
-/// A CSV file read record by record, without header handling, fields trimmed.
+/// A CSV file read record by record, without header handling, fields trimmed, streamed
+/// from the file (memory bounded by the longest record, whatever the file's size).
 ///
 /// Line numbers are counted here from the records' byte offsets, because the csv crate's
-/// own line count skips blank lines.
+/// own line count skips blank lines: the bytes pass through [`LineBreaks`] on their way to
+/// the csv reader, which notes where the line breaks lie.
 pub(crate) struct Table<'p> {
     path: &'p Path,
-    bytes: std::sync::Arc<[u8]>,
-    reader: csv::Reader<std::io::Cursor<std::sync::Arc<[u8]>>>,
+    reader: csv::Reader<LineBreaks<std::fs::File>>,
     record: csv::StringRecord,
-    /// Byte offset up to which newlines have been counted, and their count.
-    counted: (usize, u64),
+    /// Line breaks counted before the byte offset of the last record.
+    counted: u64,
+}
+
+/// A reader that notes the byte offset of every line break (`\n` or `\r`) passing through
+/// it, so that a line number can be given to a byte offset the csv reader reports. Breaks
+/// before the last offset asked for are forgotten: memory is bounded by the bytes read
+/// ahead of the record being read.
+pub(crate) struct LineBreaks<R> {
+    inner: R,
+    /// Bytes passed through so far.
+    offset: u64,
+    /// Offsets of the line breaks not yet counted, and whether each is a `\n`.
+    breaks: std::collections::VecDeque<(u64, bool)>,
+}
+
+impl<R: std::io::Read> std::io::Read for LineBreaks<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        let read = buf.get(..n).unwrap_or_default();
+        for i in memchr::memchr2_iter(b'\n', b'\r', read) {
+            let newline = read.get(i) == Some(&b'\n');
+            self.breaks.push_back((self.offset + i as u64, newline));
+        }
+        self.offset += n as u64;
+        Ok(n)
+    }
 }
 
 impl<'p> Table<'p> {
-    /// Reads `path` into memory.
+    /// Opens `path` for reading.
     pub(crate) fn open(path: &'p Path) -> Result<Self, Error> {
-        let bytes: std::sync::Arc<[u8]> =
-            std::fs::read(path).map_err(|e| Error::io(path, e))?.into();
+        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let breaks = LineBreaks {
+            inner: file,
+            offset: 0,
+            breaks: std::collections::VecDeque::new(),
+        };
         let reader = csv::ReaderBuilder::new()
+            .buffer_capacity(1 << 16)
             .has_headers(false)
             .flexible(true)
             .trim(csv::Trim::All)
-            .from_reader(std::io::Cursor::new(bytes.clone()));
+            .from_reader(breaks);
         Ok(Table {
             path,
-            bytes,
             reader,
             record: csv::StringRecord::new(),
-            counted: (0, 0),
+            counted: 0,
         })
     }
 
@@ -40,23 +70,21 @@ impl<'p> Table<'p> {
     /// line break (the csv crate reports a record's position before the blank lines it
     /// skipped); offsets must not decrease between calls.
     fn line_at(&mut self, byte: u64) -> u64 {
-        let mut end = usize::try_from(byte)
-            .unwrap_or(usize::MAX)
-            .min(self.bytes.len());
-        while self
-            .bytes
-            .get(end)
-            .is_some_and(|b| *b == b'\n' || *b == b'\r')
-        {
-            end += 1;
+        let breaks = &mut self.reader.get_mut().breaks;
+        let mut end = byte;
+        while let Some(&(at, newline)) = breaks.front() {
+            if at < end {
+                // A break before the offset asked for.
+            } else if at == end {
+                // A line break at the offset: a blank line the record comes after.
+                end += 1;
+            } else {
+                break;
+            }
+            self.counted += u64::from(newline);
+            breaks.pop_front();
         }
-        let (from, count) = self.counted;
-        let more = self
-            .bytes
-            .get(from..end)
-            .map_or(0, |s| s.iter().filter(|b| **b == b'\n').count() as u64);
-        self.counted = (end.max(from), count + more);
-        self.counted.1 + 1
+        self.counted + 1
     }
 
     /// The next non-empty record and its 1-based line, or `None` at the end.
@@ -122,8 +150,10 @@ pub(crate) fn number(
 /// and shrinks the σ reported for the fit.
 #[derive(Default)]
 pub(crate) struct Repeats {
-    /// Each distinct row's values (bit patterns, −0 as +0) → its line.
-    seen: std::collections::HashMap<Vec<u64>, u64>,
+    /// A 64-bit hash of each distinct row's values (bit patterns, −0 as +0) → its line: 16
+    /// bytes a row whatever the row's width. Two different rows share a hash with
+    /// probability about n²/2⁶⁵ among n rows (3·10⁻⁸ for a million).
+    seen: std::collections::HashMap<u64, u64>,
     /// The first repeated row's line and the line it repeats.
     first: Option<(u64, u64)>,
     /// How many rows repeat an earlier one.
@@ -133,7 +163,7 @@ pub(crate) struct Repeats {
 impl Repeats {
     /// Records the row at `line` holding `values`.
     pub(crate) fn see(&mut self, values: impl IntoIterator<Item = f64>, line: u64) {
-        match self.seen.entry(repeat_key(values)) {
+        match self.seen.entry(row_hash(values)) {
             std::collections::hash_map::Entry::Occupied(earlier) => {
                 self.count += 1;
                 self.first.get_or_insert((line, *earlier.get()));
@@ -158,6 +188,24 @@ impl Repeats {
             path.display()
         ))
     }
+}
+
+/// A 64-bit hash of a row's values as [`Repeats`] compares them: each value's bit pattern
+/// (−0 as +0) folded in by a multiply and a rotation, the whole then mixed by SplitMix64's
+/// finaliser (Steele, Lea & Flood 2014, "Fast splittable pseudorandom number generators",
+/// OOPSLA): the same hash on every run and machine.
+fn row_hash(values: impl IntoIterator<Item = f64>) -> u64 {
+    let mut h: u64 = 0x243F_6A88_85A3_08D3;
+    for bits in values.into_iter().map(|v| (v + 0.0).to_bits()) {
+        h = (h ^ bits)
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            .rotate_left(29);
+    }
+    h ^= h >> 30;
+    h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h ^= h >> 27;
+    h = h.wrapping_mul(0x94D0_49BB_1331_11EB);
+    h ^ (h >> 31)
 }
 
 /// The values of a row as [`Repeats`] compares them: bit patterns, −0 as +0 (a NaN, which
