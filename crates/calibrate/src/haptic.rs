@@ -705,10 +705,7 @@ fn state_distance_residuals_m(
     rows: &[LogRow],
 ) -> Result<Vec<f64>> {
     let model = log_model(r, rows, Vec::new())?;
-    let lin = model.linearise(state)?;
-    Ok((0..rows.len())
-        .map(|i| lin.residuals[i] * lin.sigma[i])
-        .collect())
+    Ok(model.distance_residuals_m(state)?)
 }
 
 /// The distance-log state a calibrated haptic device file carries, to evaluate with its
@@ -1825,7 +1822,8 @@ fn winsorize(
     let bounds = bound_gross_errors(rows.len(), Dim::One, |bounds| {
         let fitted = winsorized(&last, bounds);
         let (_, kin) = identify_kinematics(r, &fitted, transmissions.as_ref()).ok()?;
-        let redundancy = redundancy(kin.fit.residuals.nrows(), kin.identifiability.kept.len())?;
+        // One residual a row (the streaming back end keeps no residual vector).
+        let redundancy = redundancy(fitted.len(), kin.identifiability.kept.len())?;
         let x: Vec<f64> = kin.fit.x.iter().copied().collect();
         last = (rows.iter())
             .map(|row| {

@@ -756,169 +756,30 @@ impl DistanceLogModel {
     /// [`Error::NoSampleTimes`] for a latency or thermal-drift term on a log without times.
     pub fn linearise(&self, s: &DistanceLogState) -> Result<DistanceLogLinearisation, Error> {
         self.check(s)?;
-        let data = &self.log;
-        let n = data.n_rows();
-        let nj = self.chain.n_joints();
-        let n_trans: usize = s.transmissions.iter().map(LogTransmission::n_params).sum();
-        let n_kin = self.chain.n_params();
-        let n_terms = s.terms.len();
-        let ncols = n_trans + n_kin + n_terms;
+        let n = self.log.n_rows();
+        let lay = SampleLayout::new(self, s);
         let n_ext = self.ext_joints.len();
         let nrows = n * (1 + n_ext);
         let mut r = DVector::zeros(nrows);
-        let mut j = DMatrix::zeros(nrows, ncols);
+        let mut j = DMatrix::zeros(nrows, lay.ncols);
         let mut sigma = vec![0.0; nrows];
         let mut sample = vec![0; nrows];
         let mut p_all = Vec::with_capacity(n);
-        let mut names: Vec<String> = s
-            .transmissions
-            .iter()
-            .flat_map(LogTransmission::names)
-            .collect();
-        names.extend(self.chain.params().iter().map(|p| p.name.clone()));
-        names.extend(s.terms.iter().map(|(t, _)| t.name.clone()));
-        let t0 = data
-            .t
-            .as_ref()
-            .and_then(|t| t.first().copied())
-            .unwrap_or(0.0);
-        let needs_torque = s
-            .terms
-            .iter()
-            .any(|(t, _)| matches!(t.kind, EffectTermKind::Compliance { .. }));
-        let mut ws = FkWorkspace::new(&self.chain);
-        let mut buf = vec![0.0; 3 * n_kin];
+        let mut scratch = SampleScratch::new(self, &lay);
         for i in 0..n {
-            let theta = &data.q[i];
-            let mut q = theta.clone();
-            // ∂q_joint/∂(column) for the transmissions and joint terms.
-            let mut dq: Vec<(usize, usize, f64)> = Vec::new();
-            let mut col = 0;
-            for tr in &s.transmissions {
-                let jt = tr.joint();
-                let (out, grad) = tr.eval(theta[jt]);
-                q[jt] = out;
-                for (k, g) in grad.iter().enumerate() {
-                    dq.push((jt, col + k, *g));
-                }
-                col += tr.n_params();
+            let rows = self.sample_rows(s, &lay, i, &mut scratch)?;
+            r[i] = rows.residual;
+            for (c, v) in scratch.row_j.iter().enumerate() {
+                j[(i, c)] = v / rows.sigma;
             }
-            // Gravity torques at the transmission-corrected angles (small terms: no iteration).
-            let torques = if needs_torque {
-                handle_gravity_torques_nm(&self.chain, &s.x_kin, &q, self.handle_mass_kg)?
-            } else {
-                Vec::new()
-            };
-            for (k, (term, coef)) in s.terms.iter().enumerate() {
-                let c = n_trans + n_kin + k;
-                let (jt, g) = match &term.kind {
-                    EffectTermKind::Joint { joint, g } => (*joint, g[i]),
-                    EffectTermKind::Compliance { joint } => (*joint, torques[*joint]),
-                    _ => continue,
-                };
-                q[jt] += coef * g;
-                dq.push((jt, c, g));
-            }
-            let (p, norm, u, d_kin) =
-                distance_and_gradient(&self.chain, &s.x_kin, &q, &mut ws, &mut buf);
-            let (jq, dd_dq) = distance_joint_gradient(&self.chain, &s.x_kin, &q, &u);
-            // Distance model and its column entries.
-            let mut d_model = norm;
-            let mut row_j = vec![0.0; ncols];
-            row_j[n_trans..n_trans + n_kin].copy_from_slice(&d_kin);
-            for &(jt, c, g) in &dq {
-                row_j[c] += dd_dq[jt] * g;
-            }
-            // A cable-angle term `coef·f(γ)` moves with P: its derivative through γ
-            // ([`cable_angle`]'s gradient), `f′ = 1 − cos γ` for `γ − sin γ`, else
-            // `−power·cos^(power−1) γ·sin γ`.
-            let (gamma, dgamma) = cable_angle(&Point3::from(p));
-            let df_dgamma: f64 = (s.terms.iter())
-                .filter_map(|(term, coef)| match term.kind {
-                    EffectTermKind::CableAngle { power: 0 } => Some(coef * (1.0 - gamma.cos())),
-                    EffectTermKind::CableAngle { power } => {
-                        Some(-coef * f64::from(power) * gamma.cos().powi(power - 1) * gamma.sin())
-                    }
-                    _ => None,
-                })
-                .sum();
-            let grad_c = dgamma * df_dgamma;
-            // A scaled drift `coef·|P|·(t − t₀)` moves with |P|: every column's derivative of
-            // the distance, times `Σ coef·(t − t₀)`.
-            let t_i = data.t.as_ref().map_or(0.0, |t| t[i]);
-            let drift_scale: f64 = (s.terms.iter())
-                .filter(|(t, _)| matches!(t.kind, EffectTermKind::ThermalDrift { scale: true }))
-                .map(|(_, coef)| coef * (t_i - t0))
-                .sum();
-            if drift_scale != 0.0 {
-                for k in 0..n_kin {
-                    row_j[n_trans + k] += drift_scale * d_kin[k];
-                }
-                for &(jt, c, g) in &dq {
-                    row_j[c] += drift_scale * dd_dq[jt] * g;
-                }
-            }
-            if df_dgamma != 0.0 {
-                for k in 0..n_kin {
-                    row_j[n_trans + k] += along(&grad_c, &buf, k);
-                }
-                for &(jt, c, g) in &dq {
-                    let jv = Vector3::new(jq[(0, jt)], jq[(1, jt)], jq[(2, jt)]);
-                    row_j[c] += grad_c.dot(&jv) * g;
-                }
-            }
-            for (k, (term, coef)) in s.terms.iter().enumerate() {
-                let c = n_trans + n_kin + k;
-                let h = match &term.kind {
-                    EffectTermKind::Distance { h } => h[i],
-                    EffectTermKind::Latency => match data.qdot.as_ref() {
-                        Some(qd) => (0..nj).map(|jj| dd_dq[jj] * qd[i][jj]).sum(),
-                        None => 0.0,
-                    },
-                    EffectTermKind::ThermalDrift { scale } => {
-                        if *scale {
-                            norm * (t_i - t0)
-                        } else {
-                            t_i - t0
-                        }
-                    }
-                    EffectTermKind::CableAngle { power } => {
-                        if *power == 0 {
-                            gamma - gamma.sin()
-                        } else {
-                            gamma.cos().powi(*power)
-                        }
-                    }
-                    _ => continue,
-                };
-                d_model += coef * h;
-                row_j[c] += h;
-            }
-            let mut var = self.noise.sigma_m_m.powi(2);
-            if self.quantisation {
-                for (dd, res) in dd_dq.iter().zip(&self.noise.resolution_rad) {
-                    var += (dd * res).powi(2) / 12.0;
-                }
-            }
-            let sd = var.sqrt().max(1e-12);
-            r[i] = (d_model - data.distance_m[i]) / sd;
-            for (c, v) in row_j.iter().enumerate() {
-                j[(i, c)] = v / sd;
-            }
-            sigma[i] = sd;
+            sigma[i] = rows.sigma;
             sample[i] = i;
             // External-encoder rows: modelled joint angle − measured output angle.
             for (e, &jt) in self.ext_joints.iter().enumerate() {
                 let row = n * (1 + e) + i;
-                let res = self.noise.resolution_rad[jt];
-                let mut var = self.noise.sigma_e_rad.powi(2);
-                if self.quantisation {
-                    var += res * res / 12.0;
-                }
-                let sd = var.sqrt().max(1e-15);
-                let meas = data.ext[i].get(jt).copied().flatten().unwrap_or(q[jt]);
-                r[row] = (q[jt] - meas) / sd;
-                for &(jq_, c, g) in &dq {
+                let (res, sd) = scratch.ext[e];
+                r[row] = res;
+                for &(jq_, c, g) in &scratch.dq {
                     if jq_ == jt {
                         j[(row, c)] += g / sd;
                     }
@@ -926,17 +787,316 @@ impl DistanceLogModel {
                 sigma[row] = sd;
                 sample[row] = i;
             }
-            p_all.push(p);
+            p_all.push(rows.point);
         }
         Ok(DistanceLogLinearisation {
             residuals: r,
             jacobian: j,
-            names,
+            names: self.names(s),
             sigma,
             sample,
             points: p_all,
         })
     }
+
+    /// The parameter names of a linearisation at `s` ([`DistanceLogLinearisation::names`]):
+    /// the transmissions', the chain's, the terms'.
+    pub fn names(&self, s: &DistanceLogState) -> Vec<String> {
+        let mut names: Vec<String> = s
+            .transmissions
+            .iter()
+            .flat_map(LogTransmission::names)
+            .collect();
+        names.extend(self.chain.params().iter().map(|p| p.name.clone()));
+        names.extend(s.terms.iter().map(|(t, _)| t.name.clone()));
+        names
+    }
+
+    /// Number of rows of a linearisation: one per sample, and one per sample for each
+    /// joint of [`Self::ext_joints`].
+    pub fn n_rows(&self) -> usize {
+        self.log.n_rows() * (1 + self.ext_joints.len())
+    }
+
+    /// The distance residuals (model − measured, m, one per sample) at `s`: the distance
+    /// rows of [`Self::linearise`] times their σ, without forming the Jacobian's matrix
+    /// (memory of one sample's row, whatever the log's length).
+    ///
+    /// # Errors
+    /// As [`Self::linearise`].
+    pub fn distance_residuals_m(&self, s: &DistanceLogState) -> Result<Vec<f64>, Error> {
+        self.check(s)?;
+        let lay = SampleLayout::new(self, s);
+        let mut scratch = SampleScratch::new(self, &lay);
+        (0..self.log.n_rows())
+            .map(|i| {
+                let rows = self.sample_rows(s, &lay, i, &mut scratch)?;
+                Ok(rows.residual * rows.sigma)
+            })
+            .collect()
+    }
+
+    /// The rows of samples `samples` at `s`, sample by sample (each sample's distance row,
+    /// then its external-encoder rows in [`Self::ext_joints`] order): the rows of
+    /// [`Self::linearise`] in another order, written into `r_out` (weighted residuals) and
+    /// `jac` (weighted Jacobian, `rows × columns` in the column order of
+    /// [`Self::linearise`]; cleared first), both of `samples.len() × (1 + ext joints)` rows.
+    ///
+    /// # Errors
+    /// As [`Self::linearise`].
+    pub fn linearise_samples(
+        &self,
+        s: &DistanceLogState,
+        samples: std::ops::Range<usize>,
+        mut r_out: faer::ColMut<'_, f64>,
+        mut jac: Option<faer::MatMut<'_, f64>>,
+    ) -> Result<(), Error> {
+        self.check(s)?;
+        let lay = SampleLayout::new(self, s);
+        let mut scratch = SampleScratch::new(self, &lay);
+        let per = 1 + self.ext_joints.len();
+        if let Some(jac) = jac.as_mut() {
+            jac.fill(0.0);
+        }
+        for (k, i) in samples.enumerate() {
+            let rows = self.sample_rows(s, &lay, i, &mut scratch)?;
+            let row = k * per;
+            r_out[row] = rows.residual;
+            if let Some(jac) = jac.as_mut() {
+                for (c, v) in scratch.row_j.iter().enumerate() {
+                    jac[(row, c)] = v / rows.sigma;
+                }
+            }
+            for (e, &jt) in self.ext_joints.iter().enumerate() {
+                let (res, sd) = scratch.ext[e];
+                r_out[row + 1 + e] = res;
+                if let Some(jac) = jac.as_mut() {
+                    for &(jq_, c, g) in &scratch.dq {
+                        if jq_ == jt {
+                            jac[(row + 1 + e, c)] += g / sd;
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Sample `i`'s rows at `s`: its weighted distance residual, σ and end point; its
+    /// unweighted distance Jacobian row in `scratch.row_j`, its external-encoder rows'
+    /// weighted residuals and σ in `scratch.ext`, and ∂q/∂(column) in `scratch.dq`.
+    fn sample_rows(
+        &self,
+        s: &DistanceLogState,
+        lay: &SampleLayout,
+        i: usize,
+        scratch: &mut SampleScratch,
+    ) -> Result<SampleRows, Error> {
+        let data = &self.log;
+        let nj = self.chain.n_joints();
+        let (n_trans, n_kin, t0) = (lay.n_trans, lay.n_kin, lay.t0);
+        let SampleScratch {
+            ws,
+            buf,
+            dq,
+            row_j,
+            ext,
+        } = scratch;
+        dq.clear();
+        row_j.fill(0.0);
+        ext.clear();
+        let theta = &data.q[i];
+        let mut q = theta.clone();
+        // ∂q_joint/∂(column) for the transmissions and joint terms.
+        let mut col = 0;
+        for tr in &s.transmissions {
+            let jt = tr.joint();
+            let (out, grad) = tr.eval(theta[jt]);
+            q[jt] = out;
+            for (k, g) in grad.iter().enumerate() {
+                dq.push((jt, col + k, *g));
+            }
+            col += tr.n_params();
+        }
+        // Gravity torques at the transmission-corrected angles (small terms: no iteration).
+        let torques = if lay.needs_torque {
+            handle_gravity_torques_nm(&self.chain, &s.x_kin, &q, self.handle_mass_kg)?
+        } else {
+            Vec::new()
+        };
+        for (k, (term, coef)) in s.terms.iter().enumerate() {
+            let c = n_trans + n_kin + k;
+            let (jt, g) = match &term.kind {
+                EffectTermKind::Joint { joint, g } => (*joint, g[i]),
+                EffectTermKind::Compliance { joint } => (*joint, torques[*joint]),
+                _ => continue,
+            };
+            q[jt] += coef * g;
+            dq.push((jt, c, g));
+        }
+        let (p, norm, u, d_kin) = distance_and_gradient(&self.chain, &s.x_kin, &q, ws, buf);
+        let (jq, dd_dq) = distance_joint_gradient(&self.chain, &s.x_kin, &q, &u);
+        // Distance model and its column entries.
+        let mut d_model = norm;
+        row_j[n_trans..n_trans + n_kin].copy_from_slice(&d_kin);
+        for &(jt, c, g) in dq.iter() {
+            row_j[c] += dd_dq[jt] * g;
+        }
+        // A cable-angle term `coef·f(γ)` moves with P: its derivative through γ
+        // ([`cable_angle`]'s gradient), `f′ = 1 − cos γ` for `γ − sin γ`, else
+        // `−power·cos^(power−1) γ·sin γ`.
+        let (gamma, dgamma) = cable_angle(&Point3::from(p));
+        let df_dgamma: f64 = (s.terms.iter())
+            .filter_map(|(term, coef)| match term.kind {
+                EffectTermKind::CableAngle { power: 0 } => Some(coef * (1.0 - gamma.cos())),
+                EffectTermKind::CableAngle { power } => {
+                    Some(-coef * f64::from(power) * gamma.cos().powi(power - 1) * gamma.sin())
+                }
+                _ => None,
+            })
+            .sum();
+        let grad_c = dgamma * df_dgamma;
+        // A scaled drift `coef·|P|·(t − t₀)` moves with |P|: every column's derivative of
+        // the distance, times `Σ coef·(t − t₀)`.
+        let t_i = data.t.as_ref().map_or(0.0, |t| t[i]);
+        let drift_scale: f64 = (s.terms.iter())
+            .filter(|(t, _)| matches!(t.kind, EffectTermKind::ThermalDrift { scale: true }))
+            .map(|(_, coef)| coef * (t_i - t0))
+            .sum();
+        if drift_scale != 0.0 {
+            for k in 0..n_kin {
+                row_j[n_trans + k] += drift_scale * d_kin[k];
+            }
+            for &(jt, c, g) in dq.iter() {
+                row_j[c] += drift_scale * dd_dq[jt] * g;
+            }
+        }
+        if df_dgamma != 0.0 {
+            for k in 0..n_kin {
+                row_j[n_trans + k] += along(&grad_c, buf, k);
+            }
+            for &(jt, c, g) in dq.iter() {
+                let jv = Vector3::new(jq[(0, jt)], jq[(1, jt)], jq[(2, jt)]);
+                row_j[c] += grad_c.dot(&jv) * g;
+            }
+        }
+        for (k, (term, coef)) in s.terms.iter().enumerate() {
+            let c = n_trans + n_kin + k;
+            let h = match &term.kind {
+                EffectTermKind::Distance { h } => h[i],
+                EffectTermKind::Latency => match data.qdot.as_ref() {
+                    Some(qd) => (0..nj).map(|jj| dd_dq[jj] * qd[i][jj]).sum(),
+                    None => 0.0,
+                },
+                EffectTermKind::ThermalDrift { scale } => {
+                    if *scale {
+                        norm * (t_i - t0)
+                    } else {
+                        t_i - t0
+                    }
+                }
+                EffectTermKind::CableAngle { power } => {
+                    if *power == 0 {
+                        gamma - gamma.sin()
+                    } else {
+                        gamma.cos().powi(*power)
+                    }
+                }
+                _ => continue,
+            };
+            d_model += coef * h;
+            row_j[c] += h;
+        }
+        let mut var = self.noise.sigma_m_m.powi(2);
+        if self.quantisation {
+            for (dd, res) in dd_dq.iter().zip(&self.noise.resolution_rad) {
+                var += (dd * res).powi(2) / 12.0;
+            }
+        }
+        let sd = var.sqrt().max(1e-12);
+        // External-encoder rows: modelled joint angle − measured output angle.
+        for &jt in &self.ext_joints {
+            let res = self.noise.resolution_rad[jt];
+            let mut var = self.noise.sigma_e_rad.powi(2);
+            if self.quantisation {
+                var += res * res / 12.0;
+            }
+            let sd = var.sqrt().max(1e-15);
+            let meas = data.ext[i].get(jt).copied().flatten().unwrap_or(q[jt]);
+            ext.push(((q[jt] - meas) / sd, sd));
+        }
+        Ok(SampleRows {
+            residual: (d_model - data.distance_m[i]) / sd,
+            sigma: sd,
+            point: p,
+        })
+    }
+}
+
+/// The column layout of a linearisation at one state, shared by its samples.
+struct SampleLayout {
+    n_trans: usize,
+    n_kin: usize,
+    ncols: usize,
+    /// The log's first time, s (0 without times).
+    t0: f64,
+    /// Whether a compliance term needs the gravity torques.
+    needs_torque: bool,
+}
+
+impl SampleLayout {
+    fn new(model: &DistanceLogModel, s: &DistanceLogState) -> Self {
+        let n_trans: usize = s.transmissions.iter().map(LogTransmission::n_params).sum();
+        let n_kin = model.chain.n_params();
+        let t0 = (model.log.t.as_ref())
+            .and_then(|t| t.first().copied())
+            .unwrap_or(0.0);
+        let needs_torque = s
+            .terms
+            .iter()
+            .any(|(t, _)| matches!(t.kind, EffectTermKind::Compliance { .. }));
+        Self {
+            n_trans,
+            n_kin,
+            ncols: n_trans + n_kin + s.terms.len(),
+            t0,
+            needs_torque,
+        }
+    }
+}
+
+/// The buffers of one sample's rows, reused from sample to sample.
+struct SampleScratch {
+    ws: FkWorkspace,
+    buf: Vec<f64>,
+    /// ∂q_joint/∂(column): (joint, column, derivative).
+    dq: Vec<(usize, usize, f64)>,
+    /// The distance row's Jacobian, unweighted.
+    row_j: Vec<f64>,
+    /// Each external-encoder row's weighted residual and σ.
+    ext: Vec<(f64, f64)>,
+}
+
+impl SampleScratch {
+    fn new(model: &DistanceLogModel, lay: &SampleLayout) -> Self {
+        Self {
+            ws: FkWorkspace::new(&model.chain),
+            buf: vec![0.0; 3 * lay.n_kin],
+            dq: Vec::new(),
+            row_j: vec![0.0; lay.ncols],
+            ext: Vec::new(),
+        }
+    }
+}
+
+/// One sample's distance row ([`DistanceLogModel::sample_rows`]).
+struct SampleRows {
+    /// Weighted residual `(model − measured)/σ`.
+    residual: f64,
+    /// σ, m.
+    sigma: f64,
+    /// The end point in the rig frame, m.
+    point: Vector3<f64>,
 }
 
 #[cfg(test)]

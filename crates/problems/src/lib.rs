@@ -69,7 +69,7 @@ pub use distance_log::{
 pub use fleet::{FleetDevice, FleetProblem, cable_angle, fleet_initial_guess};
 pub use harmonics::JointHarmonics;
 pub use joint::{JointData, JointProblem, JointTransmissions};
-pub use log_problem::{DistanceLogProblem, HANDLE_COMPLIANCE_UNIT};
+pub use log_problem::{DistanceLogProblem, HANDLE_COMPLIANCE_UNIT, SAMPLES_PER_BLOCK};
 pub use model::{CalibratedModel, EQUILIBRIUM_ITERATIONS};
 pub use problem::{
     CalibrationProblem, ModelTerms, Observations, PointDistance, Row, RowKind, Transversal,

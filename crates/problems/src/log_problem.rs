@@ -2,8 +2,10 @@
 //! `hapcal-identify`: the one measurement model that `diagnose` tests effects with, fitted by
 //! the engine that fits every other calibration.
 
+use std::ops::Range;
+
 use faer::{ColMut, ColRef, MatMut};
-use hapcal_identify::{EvalError, ParamLayout, Problem, Unit};
+use hapcal_identify::{EvalError, ParamLayout, Problem, RowBlocks, Unit};
 use hapcal_kinematics::ParamUnit;
 
 use crate::Error;
@@ -63,9 +65,11 @@ impl DistanceLogProblem {
         // Every parameter at 0 (`v + (−v)` is exactly 0).
         let mut zero = structure.clone();
         zero.apply(&structure.values().iter().map(|v| -v).collect::<Vec<f64>>());
-        let lin = model.linearise(&zero)?;
-        let mut specs = Vec::with_capacity(lin.names.len());
-        let mut names = lin.names.iter();
+        // The structure's checks, on no sample.
+        model.linearise_samples(&zero, 0..0, faer::Col::zeros(0).as_mut(), None)?;
+        let all_names = model.names(&zero);
+        let mut specs = Vec::with_capacity(all_names.len());
+        let mut names = all_names.iter();
         for tr in &zero.transmissions {
             let units: Vec<Unit> = match tr {
                 crate::LogTransmission::Capstan { .. } => {
@@ -93,7 +97,7 @@ impl DistanceLogProblem {
             specs.extend(names.next().map(|n| spec(n.clone(), unit)));
         }
         Ok(Self {
-            n_residuals: lin.residuals.len(),
+            n_residuals: model.n_rows(),
             model,
             zero,
             layout: ParamLayout::new(specs),
@@ -166,5 +170,90 @@ impl Problem for DistanceLogProblem {
         jac: MatMut<'_, f64>,
     ) -> Result<(), EvalError> {
         self.eval(x, Some(out), Some(jac))
+    }
+
+    /// Row blocks of [`SAMPLES_PER_BLOCK`] samples when no effect term carries values per
+    /// sample (a state is then built per block in time independent of the log's length).
+    fn row_blocks(&self) -> Option<&dyn RowBlocks> {
+        let per_sample = (self.zero.terms.iter()).any(|(t, _)| {
+            matches!(
+                t.kind,
+                EffectTermKind::Joint { .. } | EffectTermKind::Distance { .. }
+            )
+        });
+        (!per_sample).then_some(self as &dyn RowBlocks)
+    }
+}
+
+/// Samples of a row block of [`DistanceLogProblem`]: a block's rows are its samples'
+/// distance and external-encoder rows.
+pub const SAMPLES_PER_BLOCK: usize = 256;
+
+impl DistanceLogProblem {
+    /// The samples of row block `block`.
+    fn block_samples(&self, block: usize) -> Range<usize> {
+        let n = self.model.log().n_rows();
+        (block * SAMPLES_PER_BLOCK).min(n)..((block + 1) * SAMPLES_PER_BLOCK).min(n)
+    }
+
+    fn eval_block(
+        &self,
+        x: ColRef<'_, f64>,
+        block: usize,
+        out: ColMut<'_, f64>,
+        jac: Option<MatMut<'_, f64>>,
+    ) -> Result<(), EvalError> {
+        let rows = self.block_rows(block);
+        if out.nrows() != rows.len() || x.nrows() != self.layout.len() {
+            return Err(EvalError {
+                reason: format!(
+                    "block {block}: x of {} values and {} residuals, expected {} and {}",
+                    x.nrows(),
+                    out.nrows(),
+                    self.layout.len(),
+                    rows.len()
+                ),
+            });
+        }
+        (self.model)
+            .linearise_samples(&self.state(x), self.block_samples(block), out, jac)
+            .map_err(|e| EvalError {
+                reason: e.to_string(),
+            })
+    }
+}
+
+/// The rows of [`DistanceLogProblem`] in blocks of samples, each sample's distance row then
+/// its external-encoder rows ([`DistanceLogModel::linearise_samples`]): a permutation of
+/// [`Problem::residuals`]'s rows, which has the same Gram matrix and norm, all the streaming
+/// back end reads.
+impl RowBlocks for DistanceLogProblem {
+    fn n_blocks(&self) -> usize {
+        self.model.log().n_rows().div_ceil(SAMPLES_PER_BLOCK)
+    }
+
+    fn block_rows(&self, block: usize) -> Range<usize> {
+        let per = 1 + self.model.ext_joints().len();
+        let samples = self.block_samples(block);
+        samples.start * per..samples.end * per
+    }
+
+    fn block_residuals(
+        &self,
+        x: ColRef<'_, f64>,
+        block: usize,
+        out: ColMut<'_, f64>,
+    ) -> Result<(), EvalError> {
+        self.eval_block(x, block, out, None)
+    }
+
+    fn block_jacobian(
+        &self,
+        x: ColRef<'_, f64>,
+        block: usize,
+        r_out: ColMut<'_, f64>,
+        jac: MatMut<'_, f64>,
+    ) -> Result<(), EvalError> {
+        self.eval_block(x, block, r_out, Some(jac))
     }
 }

@@ -399,3 +399,102 @@ fn as_an_identify_problem_its_x_is_the_state_and_its_rows_the_linearisation() {
         }
     }
 }
+
+#[test]
+fn its_row_blocks_are_the_linearisation_rows_sample_by_sample() {
+    use hapcal_identify::RowBlocks;
+    let device = reference_device();
+    let chain = device.chain().unwrap();
+    let trans = transmissions(&device);
+    // More samples than one block holds, and a last block shorter than the others.
+    let n = crate::SAMPLES_PER_BLOCK + 37;
+    let mut m = model(&device, log(&device, n));
+    m.set_ext_joints(trans.iter().map(LogTransmission::joint).collect())
+        .unwrap();
+    let n_ext = m.ext_joints().len();
+    let mut state = m.initial_state(trans);
+    state.x_kin = x_kin(&chain);
+    state.terms = (0..chain.n_joints())
+        .map(|j| (EffectTerm::handle_compliance(j), 1e-3 * j as f64))
+        .collect();
+    let lin = m.linearise(&state).unwrap();
+    let distances = m.distance_residuals_m(&state).unwrap();
+    for i in 0..n {
+        assert_eq!(distances[i], lin.residuals[i] * lin.sigma[i]);
+    }
+    let problem = crate::DistanceLogProblem::new(m, &state).unwrap();
+    let blocks = problem
+        .row_blocks()
+        .expect("compliance terms have row blocks");
+    assert_eq!(blocks.n_blocks(), 2);
+    let x = problem.x_of(&state);
+    let ncols = problem.layout().len();
+    let mut seen = 0;
+    for b in 0..blocks.n_blocks() {
+        let rows = blocks.block_rows(b);
+        assert_eq!(rows.start, seen);
+        seen = rows.end;
+        let mut r = Col::zeros(rows.len());
+        let mut jac = faer::Mat::zeros(rows.len(), ncols);
+        blocks
+            .block_jacobian(x.as_ref(), b, r.as_mut(), jac.as_mut())
+            .unwrap();
+        let mut r_only = Col::zeros(rows.len());
+        blocks
+            .block_residuals(x.as_ref(), b, r_only.as_mut())
+            .unwrap();
+        for k in 0..rows.len() {
+            // Row k of the block: sample `first + k / (1 + n_ext)`, its distance row or its
+            // external-encoder row `k % (1 + n_ext) − 1`.
+            let sample = rows.start / (1 + n_ext) + k / (1 + n_ext);
+            let section = k % (1 + n_ext);
+            let dense = section * n + sample;
+            assert_eq!(r[k], lin.residuals[dense]);
+            assert_eq!(r_only[k], lin.residuals[dense]);
+            for c in 0..ncols {
+                assert_eq!(jac[(k, c)], lin.jacobian[(dense, c)], "row {k} column {c}");
+            }
+        }
+    }
+    assert_eq!(seen, problem.n_residuals());
+}
+
+#[test]
+fn streamed_in_row_blocks_it_fits_what_the_dense_back_end_fits() {
+    use hapcal_identify::{Backend, IdentifyConfig, identify};
+    let device = reference_device();
+    let chain = device.chain().unwrap();
+    let trans = transmissions(&device);
+    let mut m = model(&device, log(&device, 2 * crate::SAMPLES_PER_BLOCK + 11));
+    m.set_ext_joints(trans.iter().map(LogTransmission::joint).collect())
+        .unwrap();
+    let mut state = m.initial_state(trans);
+    state.x_kin = vec![0.0; chain.n_params()];
+    state.terms = (0..chain.n_joints())
+        .map(|j| (EffectTerm::handle_compliance(j), 0.0))
+        .collect();
+    let problem = crate::DistanceLogProblem::new(m, &state).unwrap();
+    let fit = |backend| {
+        let cfg = IdentifyConfig {
+            backend,
+            sigma: None,
+            ..IdentifyConfig::default()
+        };
+        identify(&problem, problem.x_of(&state), &cfg).unwrap()
+    };
+    let (dense, streamed) = (fit(Backend::Dense), fit(Backend::Streaming));
+    assert_eq!(dense.identifiability.kept, streamed.identifiability.kept);
+    // The same least-squares problem: the estimates agree far inside their uncertainty
+    // (rounding of two QR orders, LM's tolerances).
+    let std = dense.covariance.std();
+    for (k, &i) in dense.covariance.free.iter().enumerate() {
+        let gap = (dense.fit.x[i] - streamed.fit.x[i]).abs();
+        assert!(
+            gap < 1e-3 * std[k],
+            "{}: gap {gap:e}, σ {:e}",
+            problem.layout().name(i),
+            std[k]
+        );
+    }
+    assert!((dense.sigma - streamed.sigma).abs() < 1e-6 * dense.sigma);
+}
