@@ -333,6 +333,12 @@ The last run with hand-written AVX-512/AVX2 kernels ({HAND_WRITTEN_RUN}): {HAND_
             .join(" ")
     ));
     let out = sh.current_dir().join("docs/results/bench.md");
+    // The section `cargo xtask bench --scale` writes is kept.
+    let before = std::fs::read_to_string(&out).unwrap_or_default();
+    if let Some(i) = before.find(crate::bench_scale::SECTION) {
+        md.push('\n');
+        md.push_str(&before[i..]);
+    }
     std::fs::write(&out, md)?;
     println!("wrote {}", out.display());
     Ok(())

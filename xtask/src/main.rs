@@ -4,6 +4,7 @@
 
 mod arm_blind;
 mod bench;
+mod bench_scale;
 mod deny;
 mod diagnose_real;
 mod haptic;
@@ -139,6 +140,14 @@ enum Task {
         /// Also run the criterion benchmarks (`cargo bench -p hapcal-identify --bench scale`).
         #[arg(long)]
         criterion: bool,
+        /// Instead, the command line on long haptic logs (`check`, `calibrate --model auto`,
+        /// `predict`, `diagnose`): time and peak memory per row, into the section "Commands
+        /// on long logs" of docs/results/bench.md (xtask/src/bench_scale.rs).
+        #[arg(long)]
+        scale: bool,
+        /// With `--scale`: the logs' numbers of rows.
+        #[arg(long, value_delimiter = ',', default_value = "10000,100000,1000000")]
+        rows: Vec<usize>,
     },
 }
 
@@ -172,7 +181,12 @@ fn main() -> Result<()> {
             out,
         } => setup_hostile::run(&sh, &half, cases_per_family, &out),
         Task::DiagnoseReal { check } => diagnose_real::run(&sh, check, None),
-        Task::Bench { peers, criterion } => bench::run(&sh, peers, criterion),
+        Task::Bench {
+            scale: true, rows, ..
+        } => bench_scale::run(&sh, &rows),
+        Task::Bench {
+            peers, criterion, ..
+        } => bench::run(&sh, peers, criterion),
         Task::BlindTest { cases } => blind_test(&sh, cases),
         Task::BlindTestArm { cases, setup_check } => arm_blind::run(&sh, cases, setup_check),
         Task::BlindTestTree { cases } => tree_blind::run(&sh, cases),

@@ -4,6 +4,8 @@
 //! readings and identifies the kinematic deviations from the cable distances; or both at once
 //! ([`identify_jointly`]). [`calibrated_device`] writes the result as a device file.
 
+use std::borrow::Borrow;
+
 use anyhow::{Context, Result, bail};
 use faer::Col;
 use hapcal_contract::{
@@ -133,8 +135,8 @@ pub struct Step1Options {
     pub full_revolution: bool,
 }
 
-fn ext(rows: &[LogRow], joint: usize) -> Result<Vec<f64>> {
-    rows.iter()
+fn ext<R: Borrow<LogRow>>(rows: &[R], joint: usize) -> Result<Vec<f64>> {
+    rows_of(rows)
         .map(|r| {
             r.ext
                 .get(joint - 1)
@@ -143,6 +145,11 @@ fn ext(rows: &[LogRow], joint: usize) -> Result<Vec<f64>> {
                 .with_context(|| format!("log line {}: no ext{joint}", r.line))
         })
         .collect()
+}
+
+/// The rows of `rows`, whether held (a log's rows) or borrowed (a fold's).
+fn rows_of<R: Borrow<LogRow>>(rows: &[R]) -> impl Iterator<Item = &LogRow> + Clone {
+    rows.iter().map(Borrow::borrow)
 }
 
 /// Identification settings of step 1: residuals are already divided by σ_e (so σ = 1), and the
@@ -162,13 +169,13 @@ pub fn transmission_config() -> IdentifyConfig {
 ///
 /// # Errors
 /// A row without that ext reading, or the problem's own checks.
-fn capstan_problem(
+fn capstan_problem<R: Borrow<LogRow>>(
     r: &HapticDevice,
-    rows: &[LogRow],
+    rows: &[R],
     joint: usize,
     capstan: Capstan,
 ) -> Result<CapstanProblem> {
-    let theta = rows.iter().map(|row| row.q[joint - 1]).collect();
+    let theta = rows_of(rows).map(|row| row.q[joint - 1]).collect();
     let sigma = r.noise.sigma_e_rad;
     Ok(CapstanProblem::new(
         capstan,
@@ -184,9 +191,12 @@ fn capstan_problem(
 ///
 /// # Errors
 /// A row without an `ext4` reading, or the problem's own checks.
-fn polynomial_problem(r: &HapticDevice, rows: &[LogRow]) -> Result<PolynomialProblem> {
+fn polynomial_problem<R: Borrow<LogRow>>(
+    r: &HapticDevice,
+    rows: &[R],
+) -> Result<PolynomialProblem> {
     let (lo, hi) = r.device.joint_limits()[PARALLELOGRAM_JOINT - 1];
-    let theta = (rows.iter())
+    let theta = (rows_of(rows))
         .map(|row| row.q[PARALLELOGRAM_JOINT - 1])
         .collect();
     Ok(PolynomialProblem::new(
@@ -250,14 +260,13 @@ pub fn identify_kinematics(
 
 /// Step 2's problem: the cable distances of `rows` on `r`'s nominal chain, the joint readings
 /// corrected by `transmissions` (raw when `None`), residuals divided by the cable encoder's σ_m.
-fn kinematics_problem(
+fn kinematics_problem<R: Borrow<LogRow>>(
     r: &HapticDevice,
-    rows: &[LogRow],
+    rows: &[R],
     transmissions: Option<&TransmissionFit>,
 ) -> Result<CalibrationProblem> {
     let obs = Observations {
-        rows: rows
-            .iter()
+        rows: rows_of(rows)
             .map(|row| Row {
                 q: transmissions.map_or_else(|| row.q.clone(), |t| t.corrected(&row.q)),
                 kind: RowKind::Distance {
@@ -542,16 +551,16 @@ pub fn handle_mass_kg(device: &Device) -> Result<f64> {
 ///
 /// # Errors
 /// A device without a handle mass, rows that do not form a log, or a missing ext reading.
-pub fn log_model(
+pub fn log_model<R: Borrow<LogRow>>(
     r: &HapticDevice,
-    rows: &[LogRow],
+    rows: &[R],
     ext_joints: Vec<usize>,
 ) -> Result<DistanceLogModel> {
     let log = DistanceLog::new(
-        rows.iter().map(|row| row.q.clone()).collect(),
-        rows.iter().map(|row| row.t_s).collect(),
-        rows.iter().map(|row| row.distance_m).collect(),
-        rows.iter().map(|row| row.ext.clone()).collect(),
+        rows_of(rows).map(|row| row.q.clone()).collect(),
+        rows_of(rows).map(|row| row.t_s).collect(),
+        rows_of(rows).map(|row| row.distance_m).collect(),
+        rows_of(rows).map(|row| row.ext.clone()).collect(),
     )?;
     let mut model = DistanceLogModel::new(
         r.chain.clone(),
@@ -699,10 +708,10 @@ pub fn compliance_distance_residuals_m(
 
 /// Distance residuals (model − measured, m, one per row) of `rows` under the distance-log
 /// state `state` on `r`'s nominal chain.
-fn state_distance_residuals_m(
+fn state_distance_residuals_m<R: Borrow<LogRow>>(
     r: &HapticDevice,
     state: &DistanceLogState,
-    rows: &[LogRow],
+    rows: &[R],
 ) -> Result<Vec<f64>> {
     let model = log_model(r, rows, Vec::new())?;
     Ok(model.distance_residuals_m(state)?)
@@ -1064,11 +1073,11 @@ impl HapticRungFit {
     ///
     /// # Errors
     /// Rows without the ext columns the rung needs, rows the model refuses, or a failed fit.
-    pub fn refit_residuals_m(
+    pub fn refit_residuals_m<R: Borrow<LogRow>>(
         &self,
         r: &HapticDevice,
-        fit_rows: &[LogRow],
-        held_rows: &[LogRow],
+        fit_rows: &[R],
+        held_rows: &[R],
     ) -> Result<Vec<f64>> {
         match self {
             HapticRungFit::Geometric(kin) => {
@@ -1120,9 +1129,9 @@ fn fold_lm(cfg: IdentifyConfig) -> hapcal_identify::LmConfig {
 
 /// The kinematic deviations refitted on `rows` (readings corrected by `t`) from `warm`, over
 /// its kept parameters.
-fn refit_kinematics(
+fn refit_kinematics<R: Borrow<LogRow>>(
     r: &HapticDevice,
-    rows: &[LogRow],
+    rows: &[R],
     t: Option<&TransmissionFit>,
     warm: &Identified,
 ) -> Result<Vec<f64>> {
@@ -1139,9 +1148,9 @@ fn refit_kinematics(
 
 /// The transmissions refitted on `rows` from `warm`, each capstan and the polynomial over its
 /// kept parameters (the identifications' covariances stay `warm`'s).
-fn refit_transmissions(
+fn refit_transmissions<R: Borrow<LogRow>>(
     r: &HapticDevice,
-    rows: &[LogRow],
+    rows: &[R],
     warm: &TransmissionFit,
 ) -> Result<TransmissionFit> {
     let lm = fold_lm(transmission_config());
@@ -1171,13 +1180,13 @@ fn refit_transmissions(
 
 /// Distance residuals (model − measured, m) of `rows` on `r`'s chain at deviations `x`, the
 /// readings corrected by `t` (raw when `None`).
-fn kinematic_residuals_m(
+fn kinematic_residuals_m<R: Borrow<LogRow>>(
     r: &HapticDevice,
-    rows: &[LogRow],
+    rows: &[R],
     x: &[f64],
     t: Option<&TransmissionFit>,
 ) -> Vec<f64> {
-    (rows.iter())
+    (rows_of(rows))
         .map(|row| {
             let q = t.map_or_else(|| row.q.clone(), |t| t.corrected(&row.q));
             r.chain.end_point(x, &q).coords.norm() - row.distance_m
@@ -1257,11 +1266,12 @@ pub fn cross_validate_rungs(
             if held_idx.is_empty() {
                 return Ok((i, Vec::new()));
             }
-            let fit_rows: Vec<LogRow> = (rows.iter().zip(held))
+            // The fold's rows borrowed, never copied.
+            let fit_rows: Vec<&LogRow> = (rows.iter().zip(held))
                 .filter(|(_, h)| !**h)
-                .map(|(row, _)| row.clone())
+                .map(|(row, _)| row)
                 .collect();
-            let held_rows: Vec<LogRow> = held_idx.iter().map(|&j| rows[j].clone()).collect();
+            let held_rows: Vec<&LogRow> = held_idx.iter().map(|&j| &rows[j]).collect();
             let res = fits[i]
                 .refit_residuals_m(r, &fit_rows, &held_rows)
                 .with_context(|| format!("cross-validating the {} model", fits[i].model()))?;

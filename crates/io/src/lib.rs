@@ -87,7 +87,8 @@ pub use device::{
 pub use error::{Error, line_column};
 pub use hapcal_kinematics::{DhConvention, DhRow, Placement};
 pub use log::{
-    Log, LogReader, LogRow, LogSummary, N_EXT, count_log_rows, read_log, read_log_in, write_log,
+    Log, LogReader, LogRow, LogSummary, N_EXT, RepeatKey, count_log_rows, read_log, read_log_in,
+    write_log,
 };
 pub use measure::{
     JOINT_LIMIT_SLACK, JointSchema, MAX_YAML_DEPTH, MarkerSample, MeasuredRow, MeasurementTable,

@@ -47,14 +47,42 @@ impl LogRow {
     /// The row's joint readings, distance and external-encoder angles (not its time or
     /// line) as [`read_log`] compares rows to find repeats: bit patterns, −0 as +0, an empty
     /// external-encoder cell as NaN. Two rows with equal keys are copies of one another (the
-    /// reader's warning about repeated rows).
-    pub fn repeat_key(&self) -> Vec<u64> {
-        crate::table::repeat_key(self.repeat_values())
+    /// reader's warning about repeated rows). The key borrows the row: a hash map of a
+    /// million rows' keys holds no copy of their values.
+    pub fn repeat_key(&self) -> RepeatKey<'_> {
+        RepeatKey(self)
     }
 
     fn repeat_values(&self) -> impl Iterator<Item = f64> + '_ {
         let ext = self.ext.iter().map(|e| e.unwrap_or(f64::NAN));
         self.q.iter().copied().chain([self.distance_m]).chain(ext)
+    }
+}
+
+/// A [`LogRow`]'s values as [`LogRow::repeat_key`] compares them (equality and hash of their
+/// bit patterns, −0 as +0, an empty external-encoder cell as NaN).
+#[derive(Clone, Copy, Debug)]
+pub struct RepeatKey<'a>(&'a LogRow);
+
+impl RepeatKey<'_> {
+    fn bits(&self) -> impl Iterator<Item = u64> + '_ {
+        self.0.repeat_values().map(|v| (v + 0.0).to_bits())
+    }
+}
+
+impl PartialEq for RepeatKey<'_> {
+    fn eq(&self, other: &Self) -> bool {
+        self.bits().eq(other.bits())
+    }
+}
+
+impl Eq for RepeatKey<'_> {}
+
+impl std::hash::Hash for RepeatKey<'_> {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        for bits in self.bits() {
+            bits.hash(state);
+        }
     }
 }
 

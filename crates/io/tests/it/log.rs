@@ -317,3 +317,33 @@ fn a_frozen_distance_is_refused_but_a_constant_joint_is_not() {
     let log = read_text("frozen", "one.csv", "q1,q2,distance_m\n0.1,0.5,0.4\n").unwrap();
     assert_eq!(log.rows.len(), 1);
 }
+
+#[test]
+fn a_log_streamed_past_the_read_buffer_keeps_its_line_numbers_and_row_count() {
+    // CRLF line ends, blank lines and more than the reader's 64 KiB buffer before the bad
+    // cell: the line of a record is counted from the bytes as they stream past, not from a
+    // copy of the file.
+    let mut text = String::from("q1,q2,distance_m\r\n\r\n");
+    let mut line = 2;
+    for i in 0..6000 {
+        if i % 1000 == 0 {
+            text.push_str("\r\n");
+            line += 1;
+        }
+        text.push_str(&format!("0.{},0.5,0.4{i}\r\n", i % 10));
+        line += 1;
+    }
+    let good = read_text("stream-good", "long.csv", &text).unwrap();
+    assert_eq!(good.rows.len(), 6000);
+    assert_eq!(good.rows[5999].line, line);
+    let dir = std::env::temp_dir().join(format!("hapcal-io-log-count-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("long.csv");
+    std::fs::write(&path, &text).unwrap();
+    let counted = hapcal_io::count_log_rows(&path);
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert_eq!(counted, 6000);
+    text.push_str("0.1,oops,0.4\r\n");
+    let e = message(read_text("stream-bad", "long.csv", &text));
+    assert_contains(&e, &[&format!("long.csv:{}:2", line + 1), "oops"]);
+}
