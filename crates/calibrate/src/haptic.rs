@@ -1832,8 +1832,7 @@ fn winsorize(
     let bounds = bound_gross_errors(rows.len(), Dim::One, |bounds| {
         let fitted = winsorized(&last, bounds);
         let (_, kin) = identify_kinematics(r, &fitted, transmissions.as_ref()).ok()?;
-        // One residual a row (the streaming back end keeps no residual vector).
-        let redundancy = redundancy(fitted.len(), kin.identifiability.kept.len())?;
+        let redundancy = redundancy(kin.n_residuals, kin.identifiability.kept.len())?;
         let x: Vec<f64> = kin.fit.x.iter().copied().collect();
         last = (rows.iter())
             .map(|row| {

@@ -1684,7 +1684,7 @@ pub fn calibrate_measured(
             distinct.push(&row.q);
         }
     }
-    let n_residuals = f0.identified.fit.residuals.nrows();
+    let n_residuals = f0.identified.n_residuals;
     let per_configuration = n_residuals as f64 / n_rows as f64;
     let n_kept = f0.identified.identifiability.kept.len();
     if (distinct.len() as f64) * per_configuration <= n_kept as f64 {
@@ -2082,7 +2082,7 @@ pub fn calibrate_measured(
             rung
         ));
     }
-    let n_samples: usize = fitted.identified.fit.residuals.nrows();
+    let n_samples: usize = fitted.identified.n_residuals;
     let n_free = fitted.identified.identifiability.kept.len();
     if 3 * n_free > n_samples {
         warnings.push(format!(
@@ -2958,7 +2958,7 @@ fn winsorize(
         let tables = winsorized(&evaluated, bounds);
         let (model, fitted, redundancy) = loop {
             let (model, fitted) = fit(rung, robot, start, offsets, &tables, weights, &all).ok()?;
-            let n_residuals = fitted.identified.fit.residuals.nrows();
+            let n_residuals = fitted.identified.n_residuals;
             let n_kept = fitted.identified.identifiability.kept.len();
             match redundancy(n_residuals, n_kept) {
                 Some(r) => break (model, fitted, r),

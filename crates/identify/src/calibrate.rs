@@ -111,6 +111,9 @@ impl SigmaSource {
 pub struct Identified {
     /// The final fit over the kept parameters (pruned entries keep their `x0` values).
     pub fit: Fit,
+    /// Number of residuals `m` of the problem ([`Problem::n_residuals`]): on the streaming
+    /// back end `fit.residuals` is empty, this is not.
+    pub n_residuals: usize,
     /// The pruning decision; `identifiability.kept` is the free set of `fit`.
     pub identifiability: Identifiability,
     /// Covariance of the kept parameters at the estimate.
@@ -348,6 +351,7 @@ fn identify_streaming(
         sigma,
     )?;
     Ok(Identified {
+        n_residuals: p.n_residuals(),
         fit,
         identifiability: ident,
         covariance,
@@ -393,6 +397,7 @@ fn identify_sparse(
         None => (sf.sigma, SigmaSource::Residuals, sf.covariance),
     };
     Ok(Identified {
+        n_residuals: p.n_residuals(),
         fit: sf.fit,
         identifiability: Identifiability {
             kept: (0..n).collect(),
@@ -500,6 +505,7 @@ fn identify_dense(
     };
     let covariance = covariance(jac.as_ref(), &layout, &ident.kept, sigma)?;
     Ok(Identified {
+        n_residuals: p.n_residuals(),
         fit,
         identifiability: ident,
         covariance,
