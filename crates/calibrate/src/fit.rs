@@ -24,6 +24,27 @@ pub fn identify_config(sigma_m: Option<f64>) -> IdentifyConfig {
 
 pub use crate::report::termination_text;
 
+/// Plausible compliance of a robot joint, rad/(N·m): the prior of the rank decision
+/// ([`hapcal_identify::RankConfig::prior_of`]) for the compliances about a joint's axis
+/// (`compliance.*`) and across it (`transversal.*`) when the gravity torques are in N·m (the
+/// URDF's masses). A harmonic drive's torsional stiffness is 10⁴–10⁵ N·m/rad at arm sizes
+/// (compliance 10⁻⁵–10⁻⁴ rad/(N·m)); the smallest drives and the links' bending across an
+/// axis reach a few 10⁻⁴. The angle prior (10 mrad, read as 10⁻² rad/(N·m)) let a
+/// compliance whose column the tilts of its joint nearly reproduce be kept at ±10⁻³ and
+/// absorb them, a valley the solver crosses slowly and leaves at negative compliances; with
+/// this prior such a compliance is pruned and reported with the parameters it is collinear
+/// with (docs/engine.md, "Identification").
+pub const JOINT_COMPLIANCE_PRIOR: f64 = 1e-4;
+
+/// The rank decision's priors by name for compliances in rad/(N·m)
+/// ([`JOINT_COMPLIANCE_PRIOR`] for `compliance.*` and `transversal.*`).
+pub fn compliance_priors() -> Vec<(String, f64)> {
+    ["compliance.", "transversal."]
+        .iter()
+        .map(|prefix| ((*prefix).to_owned(), JOINT_COMPLIANCE_PRIOR))
+        .collect()
+}
+
 /// Repeats of the cross-validation: repeat `r` shifts every block boundary by `r/CV_REPEATS` of
 /// a block. Averaging the held-out errors over shifted partitions makes the choice less
 /// sensitive to where the fold boundaries fall (measured for 3…10 folds on the MUKCa training
@@ -225,9 +246,8 @@ pub(crate) fn choose(
     // The rung each candidate was compared with: the one chosen on the levels below its own.
     let compared = |i: usize| {
         let below = level.iter().take_while(|&&l| l < level[i]).count();
-        (below > 0).then(|| {
-            crate::model::climb(&level[..below], &beats, &|j| rms(&held[j]), &contains)
-        })
+        (below > 0)
+            .then(|| crate::model::climb(&level[..below], &beats, &|j| rms(&held[j]), &contains))
     };
     // The alternative of its own level each candidate contains, and the comparison with it.
     let nested = |i: usize| {

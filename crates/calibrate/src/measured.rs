@@ -720,6 +720,10 @@ fn fit_terms(
     if let Some(n) = start.max_evaluations {
         config.lm.max_evaluations = n;
     }
+    if !robot.masses.is_empty() {
+        // Compliances in rad/(N·m): the physics' prior, not an angle's.
+        config.rank.prior_by_name = crate::fit::compliance_priors();
+    }
     let id = identify(&subset, x0, &config)
         .with_context(|| format!("identifying the {rung} model from {n_rows} marker samples"))?;
     let x = subset.full_x(id.fit.x.as_ref());
