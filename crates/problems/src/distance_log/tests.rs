@@ -402,7 +402,6 @@ fn as_an_identify_problem_its_x_is_the_state_and_its_rows_the_linearisation() {
 
 #[test]
 fn its_row_blocks_are_the_linearisation_rows_sample_by_sample() {
-    use hapcal_identify::RowBlocks;
     let device = reference_device();
     let chain = device.chain().unwrap();
     let trans = transmissions(&device);
