@@ -19,15 +19,16 @@
 
 #[path = "../tests/sim/humanoid.rs"]
 mod humanoid;
+#[path = "../tests/sim/tracker.rs"]
+mod tracker;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use hapcal_calibrate::measured::{MeasuredConfig, Robot, calibrate_measured, robot_from_urdf};
 use hapcal_calibrate::model::ModelName;
 use hapcal_identify::{IdentifyConfig, identify};
-use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
-use hapcal_kinematics::{FrameSpec, Isometry3, Vector3};
+use hapcal_io::MeasurementTable;
 use hapcal_problems::{CalibrationProblem, Observations, PointDistance, Row, RowKind, Weights};
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -64,14 +65,8 @@ fn sockets() -> CalibrationProblem {
 /// 200 marker positions of a perturbed iiwa 14 seen by a tracker 2 m away.
 fn positions(robot: &Robot) -> MeasurementTable {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-    let base = FrameSpec {
-        name: "instrument".into(),
-        nominal: Isometry3::new(Vector3::new(2.0, 0.3, -0.5), Vector3::new(0.0, 0.0, 2.9)),
-    };
-    let marker = FrameSpec {
-        name: "marker1".into(),
-        nominal: Isometry3::translation(0.03, -0.02, 0.05),
-    };
+    let base = tracker::instrument([2.0, 0.3, -0.5], [0.0, 0.0, 2.9]);
+    let marker = tracker::marker("marker1", 0.03, -0.02, 0.05);
     let truth_tree = robot.tree.with_frames(&base, &[(0, marker)]).unwrap();
     let n = truth_tree.n_params();
     let dev = Normal::new(0.0, 5e-4).unwrap();
@@ -79,35 +74,13 @@ fn positions(robot: &Robot) -> MeasurementTable {
     let noise = Normal::new(0.0, 1e-4).unwrap();
     let rows = (0..200)
         .map(|i| {
-            let q: Vec<f64> = robot
-                .limits
-                .iter()
-                .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
-                .collect();
+            let q = tracker::within_limits(robot, &mut rng);
             let p = truth_tree.tips()[0].end_point(&x, &q);
-            MeasuredRow {
-                line: i + 2,
-                q,
-                t_s: None,
-                markers: vec![MarkerSample {
-                    marker: 0,
-                    position_m: std::array::from_fn(|k| p[k] + noise.sample(&mut rng)),
-                    rotation: None,
-                }],
-                distance_m: None,
-            }
+            let marker = tracker::sample(0, &p, &noise, &mut rng);
+            tracker::row(i + 2, q, vec![marker])
         })
         .collect();
-    MeasurementTable {
-        name: "tracker".into(),
-        path: PathBuf::from("tracker.csv"),
-        rows,
-        n_markers: 1,
-        has_orientation: false,
-        has_distance: false,
-        ignored_columns: Vec::new(),
-        warnings: Vec::new(),
-    }
+    tracker::table("tracker", "tracker.csv", 1, rows)
 }
 
 fn bench(c: &mut Criterion) {

@@ -9,8 +9,6 @@
 #[path = "sim/split_arm.rs"]
 mod sim;
 
-use std::path::PathBuf;
-
 use hapcal_calibrate::measured::{Robot, robot_from_urdf};
 use hapcal_calibrate::setup::{MistakeClass, SetupInput, SetupReport, check_setup};
 use hapcal_io::MeasurementTable;
@@ -26,9 +24,7 @@ const CHANGE_AT: usize = 59;
 /// rows' residuals, a row or two of a slow motion near the change fit either frame.
 const LINE_SLACK: u64 = 2;
 
-fn urdf() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/mukca/urdf/iiwa14.urdf")
-}
+use sim::tracker::iiwa_urdf as urdf;
 
 fn tips() -> Vec<String> {
     vec!["ball_link".to_owned()]

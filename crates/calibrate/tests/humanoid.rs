@@ -5,6 +5,8 @@
 
 #[path = "sim/humanoid.rs"]
 mod sim;
+#[path = "sim/tracker.rs"]
+mod tracker;
 
 use hapcal_calibrate::measured::{MeasuredConfig, MeasuredOutcome, calibrate_measured};
 use hapcal_calibrate::model::ModelName;
@@ -130,7 +132,6 @@ fn one_hand_still_recovers_the_torso_compliance() {
 
 #[test]
 fn the_simulated_humanoid_passes_the_setup_check_silently() {
-    use hapcal_calibrate::setup::{SUGGESTIVE_FACTOR, SetupInput, check_setup};
     let robot = humanoid(&["l_hand", "r_hand"]);
     let urdf = std::env::temp_dir()
         .join(format!("hapcal-humanoid-{}", std::process::id()))
@@ -139,21 +140,7 @@ fn the_simulated_humanoid_passes_the_setup_check_silently() {
     for seed in [11, 21] {
         let truth = truth(&robot, seed);
         let train = table(&robot, &truth, &[0, 1], 200, seed + 1);
-        let report = check_setup(&SetupInput {
-            robot: &robot,
-            tables: std::slice::from_ref(&train),
-            urdf: Some(&urdf),
-            tips: &tips,
-            units: hapcal_io::Units::default(),
-        })
-        .unwrap();
-        assert!(report.findings.is_empty(), "{}", report.render());
-        let gain = report.closest.as_ref().and_then(|c| c.gain);
-        assert!(
-            gain.is_some_and(|g| g < SUGGESTIVE_FACTOR),
-            "{}",
-            report.render()
-        );
+        tracker::assert_no_setup_finding(&robot, &train, &urdf, &tips);
     }
 }
 

@@ -2,46 +2,29 @@
 //! ladder climbs as far as the simulated deviations ask, and no further.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use hapcal_calibrate::measured::{MeasuredConfig, Robot, calibrate_measured, robot_from_urdf};
+use hapcal_calibrate::measured::{MeasuredConfig, Robot, calibrate_measured};
 use hapcal_calibrate::model::ModelName;
-use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
-use hapcal_kinematics::{FrameSpec, Isometry3, Vector3};
+use hapcal_io::{MeasuredRow, MeasurementTable};
+use hapcal_kinematics::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use std::path::PathBuf;
 
-fn robot() -> Robot {
-    let urdf =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/mukca/urdf/iiwa14.urdf");
-    robot_from_urdf(&urdf, &["ball_link".to_owned()]).unwrap()
-}
+#[path = "sim/tracker.rs"]
+mod tracker;
+
+use tracker::iiwa as robot;
 
 const NOISE_M: f64 = 1e-4;
 
 /// `n` marker positions in a tracker frame; joint offsets of `offset_rad` (alternating sign).
 fn table(robot: &Robot, n: usize, offset_rad: f64, seed: u64) -> MeasurementTable {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let base = FrameSpec {
-        name: "instrument".into(),
-        nominal: Isometry3::new(Vector3::new(2.0, 0.3, -0.5), Vector3::new(0.1, -0.05, 2.9)),
-    };
-    let marker = FrameSpec {
-        name: "marker1".into(),
-        nominal: Isometry3::translation(0.03, -0.02, 0.05),
-    };
-    let tree = robot.tree.with_joint_offsets();
-    let offsets = tree.joint_offset_params();
-    let framed = tree.with_frames(&base, &[(0, marker)]).unwrap();
-    let mut x = vec![0.0; framed.n_params()];
-    for (j, p) in offsets.iter().enumerate() {
-        x[6 + p.unwrap()] = if j % 2 == 0 { offset_rad } else { -offset_rad };
-    }
+    let (framed, x) = tracker::offsets_truth(robot, offset_rad);
     let noise = Normal::new(0.0, NOISE_M).unwrap();
     let rows = (0..n)
         .map(|i| {
-            let q: Vec<f64> = (robot.limits.iter())
-                .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
-                .collect();
+            let q = tracker::within_limits(robot, &mut rng);
             let p = framed.tips()[0].end_point(&x, &q);
             marker_row(i as u64 + 2, q, p, &noise, &mut rng)
         })
@@ -57,31 +40,12 @@ fn marker_row(
     noise: &Normal<f64>,
     rng: &mut rand_chacha::ChaCha8Rng,
 ) -> MeasuredRow {
-    MeasuredRow {
-        line,
-        q,
-        t_s: None,
-        markers: vec![MarkerSample {
-            marker: 0,
-            position_m: std::array::from_fn(|k| p[k] + noise.sample(rng)),
-            rotation: None,
-        }],
-        distance_m: None,
-    }
+    tracker::row(line, q, vec![tracker::sample(0, &p, noise, rng)])
 }
 
 /// The tracker file `tracker.csv` of one marker holding `rows`, named after `seed`.
 fn tracker_table(seed: u64, rows: Vec<MeasuredRow>) -> MeasurementTable {
-    MeasurementTable {
-        name: format!("seed{seed}"),
-        path: PathBuf::from("tracker.csv"),
-        rows,
-        n_markers: 1,
-        has_orientation: false,
-        has_distance: false,
-        ignored_columns: Vec::new(),
-        warnings: Vec::new(),
-    }
+    tracker::table(format!("seed{seed}"), "tracker.csv", 1, rows)
 }
 
 fn config() -> MeasuredConfig {
@@ -155,9 +119,7 @@ fn distances(robot: &Robot, n: usize, offset_rad: f64, seed: u64) -> Measurement
     let noise = Normal::new(0.0, NOISE_M).unwrap();
     let rows = (0..n)
         .map(|i| {
-            let q: Vec<f64> = (robot.limits.iter())
-                .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
-                .collect();
+            let q = tracker::within_limits(robot, &mut rng);
             let p = tree.tips()[0].end_point(&x, &q);
             MeasuredRow {
                 line: i as u64 + 2,
@@ -379,29 +341,13 @@ fn harmonics_are_fitted_to_marker_data_when_asked() {
 
 #[test]
 fn simulated_iiwa_data_pass_the_setup_check_silently() {
-    use hapcal_calibrate::setup::{SUGGESTIVE_FACTOR, SetupInput, check_setup};
     let robot = robot();
-    let urdf =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/mukca/urdf/iiwa14.urdf");
     // The nominal robot, the 1 mrad and the 2 mrad joint offsets of the tests above: an
     // uncalibrated arm is no setup mistake.
     for (offset_rad, seed) in [(0.0, 3), (1e-3, 1), (2e-3, 6)] {
         let train = table(&robot, 120, offset_rad, seed);
-        let report = check_setup(&SetupInput {
-            robot: &robot,
-            tables: std::slice::from_ref(&train),
-            urdf: Some(&urdf),
-            tips: &["ball_link".to_owned()],
-            units: hapcal_io::Units::default(),
-        })
-        .unwrap();
-        assert!(report.findings.is_empty(), "{}", report.render());
-        let gain = report.closest.as_ref().and_then(|c| c.gain);
-        assert!(
-            gain.is_some_and(|g| g < SUGGESTIVE_FACTOR),
-            "{}",
-            report.render()
-        );
+        let tips = ["ball_link".to_owned()];
+        tracker::assert_no_setup_finding(&robot, &train, &tracker::iiwa_urdf(), &tips);
     }
 }
 
@@ -415,33 +361,13 @@ fn simulated_iiwa_data_pass_the_setup_check_silently() {
 fn extrapolating_test_rows_do_not_end_worse_than_frames_only() {
     let robot = robot();
     let tree = robot.tree.with_joint_offsets();
-    let base = FrameSpec {
-        name: "instrument".into(),
-        nominal: Isometry3::new(Vector3::new(2.5, -0.4, -0.8), Vector3::new(0.0, 0.0, 1.2)),
-    };
-    let marker = FrameSpec {
-        name: "marker1".into(),
-        nominal: Isometry3::translation(0.02, 0.01, 0.06),
-    };
+    let base = tracker::instrument([2.5, -0.4, -0.8], [0.0, 0.0, 1.2]);
+    let marker = tracker::marker("marker1", 0.02, 0.01, 0.06);
     let framed = tree.with_frames(&base, &[(0, marker)]).unwrap();
     let mut worst: f64 = 0.0;
     for seed in 0..3u64 {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(100 + seed);
-        let mut x = vec![0.0; framed.n_params()];
-        let lin = Normal::new(0.0, 5e-4).unwrap();
-        let ang = Normal::new(0.0, 1e-3).unwrap();
-        let names: Vec<String> = framed.params().iter().map(|p| p.name.clone()).collect();
-        for (i, v) in x.iter_mut().enumerate().skip(6) {
-            let name = &names[i];
-            if name.starts_with("marker") {
-                continue;
-            }
-            *v = if name.ends_with(".x") || name.ends_with(".y") || name.ends_with(".z") {
-                lin.sample(&mut rng)
-            } else {
-                ang.sample(&mut rng)
-            };
-        }
+        let x = tracker::placement_deviations(&framed, 1.0, &mut rng);
         let harmonic: Vec<(f64, f64)> = (0..3)
             .map(|j| {
                 let a = [2e-3, 1e-3, 1e-3][j];
@@ -452,9 +378,7 @@ fn extrapolating_test_rows_do_not_end_worse_than_frames_only() {
         let mut rows = |n: usize, q1: (f64, f64), first_line: u64| -> MeasurementTable {
             let rows = (0..n)
                 .map(|i| {
-                    let mut q: Vec<f64> = (robot.limits.iter())
-                        .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
-                        .collect();
+                    let mut q = tracker::within_limits(&robot, &mut rng);
                     q[0] = rng.random_range(q1.0..q1.1);
                     let mut moved = q.clone();
                     for (j, (a, phase)) in harmonic.iter().enumerate() {

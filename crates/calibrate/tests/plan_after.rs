@@ -5,16 +5,15 @@
 //! them brings the error there down more than as many poses from the covered half.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use hapcal_calibrate::measured::{MeasuredConfig, Robot, calibrate_measured, robot_from_urdf};
+use hapcal_calibrate::measured::{MeasuredConfig, Robot, calibrate_measured};
 use hapcal_calibrate::model::ModelName;
 use hapcal_calibrate::plan::{AfterConfig, after_summary, plan_after};
 use hapcal_identify::Criterion;
-use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
-use hapcal_kinematics::{FrameSpec, Isometry3, Tree, Vector3};
+use hapcal_io::MeasurementTable;
+use hapcal_kinematics::Tree;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal};
-use std::path::PathBuf;
+use rand_distr::Normal;
 
 /// Tracker noise per axis, m.
 const NOISE_M: f64 = 5e-5;
@@ -23,31 +22,15 @@ const JOINT: usize = 3;
 /// Gear-ratio error of that joint: the true angle is `(1 + RATIO_ERROR)·q`.
 const RATIO_ERROR: f64 = 2e-3;
 
-fn robot() -> Robot {
-    let urdf =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/mukca/urdf/iiwa14.urdf");
-    robot_from_urdf(&urdf, &["ball_link".to_owned()]).unwrap()
-}
+#[path = "sim/tracker.rs"]
+mod tracker;
+
+use tracker::iiwa as robot;
 
 /// The simulated robot: the URDF with joint offsets of ±0.5 mrad, behind a tracker frame,
 /// with a marker 5 cm off the ball, and its parameter vector.
 fn truth(robot: &Robot) -> (Tree, Vec<f64>) {
-    let base = FrameSpec {
-        name: "instrument".into(),
-        nominal: Isometry3::new(Vector3::new(2.0, 0.3, -0.5), Vector3::new(0.1, -0.05, 2.9)),
-    };
-    let marker = FrameSpec {
-        name: "marker1".into(),
-        nominal: Isometry3::translation(0.03, -0.02, 0.05),
-    };
-    let tree = robot.tree.with_joint_offsets();
-    let offsets = tree.joint_offset_params();
-    let framed = tree.with_frames(&base, &[(0, marker)]).unwrap();
-    let mut x = vec![0.0; framed.n_params()];
-    for (j, p) in offsets.iter().enumerate() {
-        x[6 + p.unwrap()] = if j % 2 == 0 { 5e-4 } else { -5e-4 };
-    }
-    (framed, x)
+    tracker::offsets_truth(robot, 5e-4)
 }
 
 /// Which half of the elbow's range a configuration takes.
@@ -84,29 +67,11 @@ fn measure(robot: &Robot, qs: &[Vec<f64>], rng: &mut ChaCha8Rng) -> MeasurementT
             let mut q_true = q.clone();
             q_true[JOINT] *= 1.0 + RATIO_ERROR;
             let p = framed.tips()[0].end_point(&x, &q_true);
-            MeasuredRow {
-                line: i as u64 + 2,
-                q: q.clone(),
-                t_s: None,
-                markers: vec![MarkerSample {
-                    marker: 0,
-                    position_m: std::array::from_fn(|k| p[k] + noise.sample(rng)),
-                    rotation: None,
-                }],
-                distance_m: None,
-            }
+            let marker = tracker::sample(0, &p, &noise, rng);
+            tracker::row(i as u64 + 2, q.clone(), vec![marker])
         })
         .collect();
-    MeasurementTable {
-        name: "tracker".into(),
-        path: PathBuf::from("tracker.csv"),
-        rows,
-        n_markers: 1,
-        has_orientation: false,
-        has_distance: false,
-        ignored_columns: Vec::new(),
-        warnings: Vec::new(),
-    }
+    tracker::table("tracker", "tracker.csv", 1, rows)
 }
 
 /// The geometric calibration of `train`, and its 3-D RMS error on `test`, m.

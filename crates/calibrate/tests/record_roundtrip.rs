@@ -10,8 +10,12 @@
 
 #[path = "sim/humanoid.rs"]
 mod humanoid;
+#[path = "sim/roundtrip.rs"]
+mod roundtrip;
 #[path = "sim/split_arm.rs"]
 mod split_arm;
+
+use roundtrip::{distance, runtime_marker, set_in_both, worst_gap};
 
 use hapcal_calibrate::model::ModelName;
 use std::path::{Path, PathBuf};
@@ -88,39 +92,6 @@ fn calibrated(
     (outcome, out)
 }
 
-/// The runtime's marker position of marker `k` (on tip `k`) in the instrument frame.
-fn runtime_marker(robot: &Robot, q: &[f64], k: usize) -> [f64; 3] {
-    let mut ws = robot.workspace();
-    let mut poses = vec![Pose::IDENTITY; robot.tip_names().len()];
-    robot.deflected_tip_poses(q, &mut ws, &mut poses).unwrap();
-    let instrument = robot.frame("instrument").unwrap_or(Pose::IDENTITY);
-    let marker = robot
-        .frame(&format!("marker{}", k + 1))
-        .unwrap_or(Pose::IDENTITY);
-    instrument.compose(&poses[k]).compose(&marker).translation_m
-}
-
-/// Largest distance between the runtime's and the library's markers over `rows`, m.
-fn worst_gap(
-    robot: &Robot,
-    outcome_model: &hapcal_problems::CalibratedModel,
-    rows: &[Vec<f64>],
-    n_tips: usize,
-) -> f64 {
-    let tips: Vec<usize> = (0..n_tips).collect();
-    let mut worst: f64 = 0.0;
-    for q in rows {
-        let library = outcome_model.end_poses_of(&tips, q);
-        for (k, pose) in library.iter().enumerate() {
-            let r = runtime_marker(robot, q, k);
-            let p = pose.translation.vector;
-            let d = ((r[0] - p.x).powi(2) + (r[1] - p.y).powi(2) + (r[2] - p.z).powi(2)).sqrt();
-            worst = worst.max(d);
-        }
-    }
-    worst
-}
-
 /// The scale that makes a value of this name move a marker by millimetres (a compliance of
 /// 1e-4 rad/(N·m) under tens of N·m; a harmonic of 2 mrad), or `None` for a value the check
 /// leaves (kinematic deviations are exercised as identified).
@@ -161,23 +132,18 @@ fn round_trip(
         let Some(value) = enlarged(&v.name, &v.unit) else {
             continue;
         };
-        enlarged_runtime = enlarged_runtime.with_value(&v.name, value).unwrap();
-        assert!(
-            hapcal_calibrate::record::set_model_value(
-                &mut library,
-                &robot.joint_names,
-                &v.name,
-                value
-            ),
-            "{} is not a value of the library's model",
-            v.name
+        enlarged_runtime = set_in_both(
+            &enlarged_runtime,
+            &mut library,
+            &robot.joint_names,
+            &v.name,
+            value,
         );
     }
     for q in &rows {
         let a = runtime_marker(&runtime, q, 0);
         let b = runtime_marker(&enlarged_runtime, q, 0);
-        shifted = shifted
-            .max(((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt());
+        shifted = shifted.max(distance(&a, &b));
     }
     let enlarged_gap = worst_gap(&enlarged_runtime, &library, &rows, tips.len());
     (gap, enlarged_gap, shifted)
@@ -199,9 +165,7 @@ fn iiwa_tables(seed: u64, n: usize) -> (ArmRobot, MeasurementTable, MeasurementT
     (robot, train, test)
 }
 
-fn iiwa_urdf() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/mukca/urdf/iiwa14.urdf")
-}
+use split_arm::tracker::iiwa_urdf;
 
 fn check(model: ModelChoice, (gap, enlarged_gap, shifted): (f64, f64, f64), effect: bool) {
     assert!(
@@ -327,36 +291,20 @@ fn socket_calibrations_round_trip_into_the_runtime() {
 /// ones, a continuous joint about a skew axis, a head off the paths, link masses): simulated
 /// tracker markers on both tools.
 fn torso_tables(n: usize, seed: u64) -> (PathBuf, ArmRobot, MeasurementTable, MeasurementTable) {
-    use hapcal_io::{MarkerSample, MeasuredRow};
-    use hapcal_kinematics::{FrameSpec, Isometry3, Vector3};
     use rand::{Rng, SeedableRng};
-    use rand_distr::{Distribution, Normal};
+    use rand_distr::Normal;
+    use split_arm::tracker;
     let urdf =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../runtime/test_data/torso_two_arms.urdf");
     let tips = ["l_tool".to_owned(), "r_tool".to_owned()];
     let robot = hapcal_calibrate::measured::robot_from_urdf(&urdf, &tips).unwrap();
-    let base = FrameSpec {
-        name: "instrument".into(),
-        nominal: Isometry3::new(Vector3::new(2.0, 0.3, -0.5), Vector3::new(0.0, 0.0, 2.9)),
-    };
-    let marker = |name: &str| FrameSpec {
-        name: name.into(),
-        nominal: Isometry3::translation(0.03, 0.0, 0.05),
-    };
+    let base = tracker::instrument([2.0, 0.3, -0.5], [0.0, 0.0, 2.9]);
+    let marker = |name: &str| tracker::marker(name, 0.03, 0.0, 0.05);
     let framed = (robot.tree.with_joint_offsets())
         .with_frames(&base, &[(0, marker("marker1")), (1, marker("marker2"))])
         .unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let geometry = Normal::new(0.0, 5e-4).unwrap();
-    let x: Vec<f64> = (framed.params().iter().enumerate())
-        .map(|(i, p)| {
-            if i < 6 || p.name.starts_with("marker") {
-                0.0
-            } else {
-                geometry.sample(&mut rng)
-            }
-        })
-        .collect();
+    let x = tracker::deviations(&framed, 5e-4, &mut rng);
     let noise = Normal::new(0.0, 5e-5).unwrap();
     let mut table = |rows: usize, name: &str| {
         let rows = (0..rows)
@@ -366,33 +314,13 @@ fn torso_tables(n: usize, seed: u64) -> (PathBuf, ArmRobot, MeasurementTable, Me
                     .collect();
                 let markers = (0..2)
                     .map(|k| {
-                        let p = framed.tips()[k].end_point(&x, &q);
-                        MarkerSample {
-                            marker: k,
-                            position_m: std::array::from_fn(|a| p[a] + noise.sample(&mut rng)),
-                            rotation: None,
-                        }
+                        tracker::sample(k, &framed.tips()[k].end_point(&x, &q), &noise, &mut rng)
                     })
                     .collect();
-                MeasuredRow {
-                    line: i as u64 + 2,
-                    q,
-                    t_s: None,
-                    markers,
-                    distance_m: None,
-                }
+                tracker::row(i as u64 + 2, q, markers)
             })
             .collect();
-        MeasurementTable {
-            name: name.to_owned(),
-            path: PathBuf::from(format!("{name}.csv")),
-            rows,
-            n_markers: 2,
-            has_orientation: false,
-            has_distance: false,
-            ignored_columns: Vec::new(),
-            warnings: Vec::new(),
-        }
+        tracker::table(name, format!("{name}.csv"), 2, rows)
     };
     let train = table(n, "train");
     let test = table(n / 2, "test");

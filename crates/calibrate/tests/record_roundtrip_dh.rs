@@ -17,11 +17,17 @@ use std::path::{Path, PathBuf};
 use hapcal_calibrate::inputs::Plan;
 use hapcal_calibrate::measured::{Robot as ArmRobot, run_tables};
 use hapcal_calibrate::model::ModelChoice;
-use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
-use hapcal_kinematics::{FrameSpec, Isometry3, Vector3};
-use hapcal_runtime::{Pose, Robot};
-use rand::{Rng, SeedableRng};
-use rand_distr::{Distribution, Normal};
+use hapcal_io::MeasurementTable;
+use hapcal_runtime::Robot;
+use rand::SeedableRng;
+use rand_distr::Normal;
+
+#[path = "sim/roundtrip.rs"]
+mod roundtrip;
+#[path = "sim/tracker.rs"]
+mod tracker;
+
+use roundtrip::{distance, set_in_both};
 
 /// Agreement required between the runtime and the library, m: both evaluate the same
 /// equations in double precision; 1e-9 m leaves six orders of magnitude to rounding.
@@ -70,59 +76,24 @@ fn scratch(name: &str) -> PathBuf {
 /// 0.5 mm, 0.5 mrad) of the D-H rows, an instrument 2 m away, noise σ 50 µm; training and
 /// held-out tables.
 fn tables(robot: &ArmRobot, n: usize, seed: u64) -> (MeasurementTable, MeasurementTable) {
-    let base = FrameSpec {
-        name: "instrument".into(),
-        nominal: Isometry3::new(Vector3::new(2.0, 0.3, -0.5), Vector3::new(0.0, 0.0, 2.9)),
-    };
-    let marker = FrameSpec {
-        name: "marker1".into(),
-        nominal: Isometry3::translation(0.03, 0.0, 0.05),
-    };
+    let base = tracker::instrument([2.0, 0.3, -0.5], [0.0, 0.0, 2.9]);
+    let marker = tracker::marker("marker1", 0.03, 0.0, 0.05);
     let framed = (robot.tree.with_joint_offsets())
         .with_frames(&base, &[(0, marker)])
         .unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let geometry = Normal::new(0.0, 5e-4).unwrap();
-    let x: Vec<f64> = (framed.params().iter().enumerate())
-        .map(|(i, p)| {
-            if i < 6 || p.name.starts_with("marker") {
-                0.0
-            } else {
-                geometry.sample(&mut rng)
-            }
-        })
-        .collect();
+    let x = tracker::deviations(&framed, 5e-4, &mut rng);
     let noise = Normal::new(0.0, 5e-5).unwrap();
     let mut table = |rows: usize, name: &str| {
         let rows = (0..rows)
             .map(|i| {
-                let q: Vec<f64> = (robot.limits.iter())
-                    .map(|&(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
-                    .collect();
+                let q = tracker::within_limits(robot, &mut rng);
                 let p = framed.tips()[0].end_point(&x, &q);
-                MeasuredRow {
-                    line: i as u64 + 2,
-                    q,
-                    t_s: None,
-                    markers: vec![MarkerSample {
-                        marker: 0,
-                        position_m: std::array::from_fn(|a| p[a] + noise.sample(&mut rng)),
-                        rotation: None,
-                    }],
-                    distance_m: None,
-                }
+                let marker = tracker::sample(0, &p, &noise, &mut rng);
+                tracker::row(i as u64 + 2, q, vec![marker])
             })
             .collect();
-        MeasurementTable {
-            name: name.to_owned(),
-            path: PathBuf::from(format!("{name}.csv")),
-            rows,
-            n_markers: 1,
-            has_orientation: false,
-            has_distance: false,
-            ignored_columns: Vec::new(),
-            warnings: Vec::new(),
-        }
+        tracker::table(name, format!("{name}.csv"), 1, rows)
     };
     let train = table(n, "train");
     let test = table(n / 2, "test");
@@ -131,26 +102,12 @@ fn tables(robot: &ArmRobot, n: usize, seed: u64) -> (MeasurementTable, Measureme
 
 /// The runtime's position of marker 1 in the instrument frame.
 fn runtime_marker(robot: &Robot, q: &[f64]) -> [f64; 3] {
-    let mut ws = robot.workspace();
-    let mut poses = [Pose::IDENTITY];
-    robot.deflected_tip_poses(q, &mut ws, &mut poses).unwrap();
-    let instrument = robot.frame("instrument").unwrap_or(Pose::IDENTITY);
-    let marker = robot.frame("marker1").unwrap_or(Pose::IDENTITY);
-    instrument.compose(&poses[0]).compose(&marker).translation_m
-}
-
-fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+    roundtrip::runtime_marker(robot, q, 0)
 }
 
 /// Largest distance between the runtime's and the library's marker over `rows`, m.
 fn worst_gap(robot: &Robot, library: &hapcal_problems::CalibratedModel, rows: &[Vec<f64>]) -> f64 {
-    let mut worst: f64 = 0.0;
-    for q in rows {
-        let p = library.end_poses_of(&[0], q)[0].translation.vector;
-        worst = worst.max(distance(&runtime_marker(robot, q), &[p.x, p.y, p.z]));
-    }
-    worst
+    roundtrip::worst_gap(robot, library, rows, 1)
 }
 
 /// What one model's round trip measured, m.
@@ -214,17 +171,7 @@ fn round_trip(
             continue;
         }
         let value = 2e-3;
-        enlarged = enlarged.with_value(&v.name, value).unwrap();
-        assert!(
-            hapcal_calibrate::record::set_model_value(
-                &mut library,
-                &robot.joint_names,
-                &v.name,
-                value
-            ),
-            "{} is not a value of the library's model",
-            v.name
-        );
+        enlarged = set_in_both(&enlarged, &mut library, &robot.joint_names, &v.name, value);
     }
     let shifted = (rows.iter())
         .map(|q| distance(&runtime_marker(&runtime, q), &runtime_marker(&enlarged, q)))

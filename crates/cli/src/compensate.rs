@@ -329,8 +329,7 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
         tolerance_m: args.tolerance_mm * 1e-3,
         tolerance_rad: args.tolerance_mrad * 1e-3,
         max_iterations: args.max_iterations,
-        damping_m: 1e-3,
-        orientation_scale_m: 0.1,
+        ..CompensationConfig::default()
     };
     let n = robot.n_joints();
     let mut ws = robot.workspace();

@@ -8,9 +8,10 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use hapcal_problems::GravityCompliance;
 use hapcal_runtime::{CompensationConfig, Pose, Robot, Target, compensate};
 
-const JOINTS: [&str; 7] = [
-    "joint_a1", "joint_a2", "joint_a3", "joint_a4", "joint_a5", "joint_a6", "joint_a7",
-];
+#[path = "../tests/it/iiwa_masses.rs"]
+mod iiwa_masses;
+
+use iiwa_masses::{JOINTS, with_iiwa_masses};
 
 /// The bundled iiwa 14 URDF with Drake's masses as `<inertial>`s and a sidecar of joint
 /// compliances from 1e-4 to 3e-4 rad/(N·m).
@@ -19,18 +20,7 @@ fn compliant_iiwa() -> Robot {
         env!("CARGO_MANIFEST_DIR"),
         "/../../fixtures/mukca/urdf/iiwa14.urdf"
     );
-    let mut text = std::fs::read_to_string(path).expect("bundled fixture");
-    let names: Vec<String> = JOINTS.iter().map(|j| (*j).to_owned()).collect();
-    let model = GravityCompliance::published(&names).expect("iiwa joint names");
-    for m in &model.masses {
-        let link = format!("<link name=\"link_{}\">", m.joint + 1);
-        let c = m.com_m;
-        let inertial = format!(
-            "{link}<inertial><origin xyz=\"{:?} {:?} {:?}\"/><mass value=\"{:?}\"/><inertia ixx=\"0.01\" ixy=\"0\" ixz=\"0\" iyy=\"0.01\" iyz=\"0\" izz=\"0.01\"/></inertial>",
-            c.x, c.y, c.z, m.mass_kg
-        );
-        text = text.replacen(&link, &inertial, 1);
-    }
+    let text = with_iiwa_masses(&std::fs::read_to_string(path).expect("bundled fixture"));
     let k = [1e-4, 1e-4, 1.5e-4, 1.5e-4, 2e-4, 3e-4, 3e-4];
     let mut sidecar = String::from("[values]\n");
     for (j, k) in JOINTS.iter().zip(k) {
@@ -105,13 +95,7 @@ fn bench(c: &mut Criterion) {
     // The target: where the rigid (nominal) arm puts its tip at Q, so Q is the nominal
     // inverse kinematics' solution and the compensation corrects the sag.
     let target = Target::Pose(rigid.tip_pose(0, &Q, &mut ws).expect("valid"));
-    let cfg = CompensationConfig {
-        tolerance_m: 1e-6,
-        tolerance_rad: 1e-6,
-        max_iterations: 50,
-        damping_m: 1e-3,
-        orientation_scale_m: 0.1,
-    };
+    let cfg = CompensationConfig::default();
     let mut group = c.benchmark_group("iiwa14_compliant");
     group.bench_function("deflected_tip_pose", |b| {
         let mut out = [Pose::IDENTITY];

@@ -31,6 +31,20 @@ pub struct CompensationConfig {
     pub orientation_scale_m: f64,
 }
 
+impl Default for CompensationConfig {
+    /// 1 µm and 1 µrad, at most 50 steps, an initial damping of 1 mm, orientation weighed at
+    /// 0.1 m per rad: a tip on its target to the encoders' resolution within a few steps.
+    fn default() -> Self {
+        CompensationConfig {
+            tolerance_m: 1e-6,
+            tolerance_rad: 1e-6,
+            max_iterations: 50,
+            damping_m: 1e-3,
+            orientation_scale_m: 0.1,
+        }
+    }
+}
+
 /// The outcome of [`compensate`] for one target.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Compensation {

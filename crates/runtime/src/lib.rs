@@ -91,6 +91,8 @@
 
 #[cfg(feature = "std")]
 mod compensate;
+#[cfg(feature = "std")]
+mod dh_table;
 mod drive;
 mod error;
 #[cfg(feature = "std")]

@@ -153,7 +153,7 @@ pub struct Robot {
     pub(crate) tip_elements: Vec<Option<String>>,
     /// A D-H robot's nominal `[[dh]]` rows, from which a D-H deviation moves the joint
     /// origins ([`Robot::with_value`]); `None` for a URDF robot.
-    pub(crate) dh: Option<crate::robot_load::DhTable>,
+    pub(crate) dh: Option<crate::dh_table::DhTable>,
 }
 
 /// Buffers of [`Robot`]'s evaluation calls, sized for one robot ([`Robot::workspace`]).
@@ -466,18 +466,6 @@ impl Robot {
             }
         }
         Ok(worst.map(|(j, past, _)| (j, past)))
-    }
-
-    /// The same robot with the recorded value `name` (a name of the record's `[values]`, in
-    /// its unit) set to `value`: a kinematic value moves its joint's origin, a compliance,
-    /// transversal compliance or harmonic changes the deflection. How `hapcal predict`
-    /// propagates the covariance to a prediction's uncertainty.
-    ///
-    /// # Errors
-    /// [`Error::Invalid`] for a name the record does not hold; [`Error::NotFinite`] for a NaN
-    /// or infinite value.
-    pub fn with_value(&self, name: &str, value: f64) -> Result<Robot, Error> {
-        crate::robot_load::with_value(self, name, value)
     }
 
     /// The same robot with compliances `k` (one per joint; rad/(N·m) or rad/m as

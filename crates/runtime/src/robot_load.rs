@@ -5,12 +5,13 @@
 
 use std::path::Path;
 
-use hapcal_contract::{Calibration, DhField, ElementField, TorqueSource, ValueName};
+use hapcal_contract::{Calibration, ElementField, TorqueSource, ValueName};
 use serde::Deserialize;
 
+use crate::dh_table::{DhTable, add_dh, dh_frames};
 use crate::robot::deviation_pose;
 use crate::robot::{HarmonicTerm, PointMass, RobotJoint, RobotTip, TransversalJoint};
-use crate::{DhConvention, DhRow, GravityModel, LoadError, Pose, Robot};
+use crate::{GravityModel, LoadError, Pose, Robot};
 
 /// The sidecar: `[frames.<name>]` and `[values]` (as `hapcal-calibrate`'s `sidecar_toml`).
 #[derive(Deserialize)]
@@ -450,99 +451,6 @@ impl Robot {
     }
 }
 
-/// A D-H robot's table: the convention and the `[[dh]]` rows at the nominal geometry (the
-/// record's D-H deviations removed), in file order.
-#[derive(Clone, Debug, PartialEq)]
-pub(crate) struct DhTable {
-    convention: DhConvention,
-    nominal: Vec<DhRow>,
-}
-
-/// `Rz(angle)`, `Rx(angle)`, `Ry(angle)`.
-fn rot_z(angle: f64) -> Pose {
-    let (s, c) = angle.sin_cos();
-    Pose::rot_z(s, c)
-}
-fn rot_x(angle: f64) -> Pose {
-    let (s, c) = angle.sin_cos();
-    Pose::rot_x(s, c)
-}
-fn rot_y(angle: f64) -> Pose {
-    let (s, c) = angle.sin_cos();
-    Pose::rot_y(s, c)
-}
-
-/// One D-H row split at its joint's motion `Rz(q)`: the factors before it and after it, in
-/// the order `hapcal_kinematics::Chain::from_dh` composes them. Standard:
-/// `Rz(θ) | Rz(q) | Tz(d)·Tx(a)·Rx(α)·Ry(β)`; modified (Craig):
-/// `Rx(α)·Ry(β)·Tx(a)·Rz(θ) | Rz(q) | Tz(d)` (`Ry(β)` only for a row with β).
-fn dh_parts(convention: DhConvention, row: &DhRow) -> (Pose, Pose) {
-    let beta = row.beta_rad.map_or(Pose::IDENTITY, rot_y);
-    let tz = Pose::translation([0.0, 0.0, row.d_m]);
-    let tx = Pose::translation([row.a_m, 0.0, 0.0]);
-    match convention {
-        DhConvention::Standard => (
-            rot_z(row.theta_rad),
-            tz.compose(&tx)
-                .compose(&rot_x(row.alpha_rad))
-                .compose(&beta),
-        ),
-        DhConvention::Modified => (
-            rot_x(row.alpha_rad)
-                .compose(&beta)
-                .compose(&tx)
-                .compose(&rot_z(row.theta_rad)),
-            tz,
-        ),
-    }
-}
-
-/// The joint origins of the chain `rows` (each joint's frame at zero motion in the frame of
-/// the joint before it after that joint's motion, the first in the base frame: the frame
-/// just after the joint's `Rz(θ + q)`, where the calibration library places a joint) and the
-/// tip's offset in the last joint's frame (the rest of the chain, fixed rows included).
-fn dh_frames(convention: DhConvention, rows: &[DhRow]) -> (Vec<Pose>, Pose) {
-    let mut origins = Vec::new();
-    let mut pending = Pose::IDENTITY;
-    for row in rows {
-        let (before, after) = dh_parts(convention, row);
-        if row.joint {
-            origins.push(pending.compose(&before));
-            pending = after;
-        } else {
-            pending = pending.compose(&before).compose(&after);
-        }
-    }
-    (origins, pending)
-}
-
-/// Adds `sign ×` the D-H deviation `field` (m or rad) to `row`; a `β` deviation on a row
-/// without β gives it one (as the device file's writer does).
-fn add_dh(row: &mut DhRow, field: DhField, value: f64) {
-    match field {
-        DhField::A => row.a_m += value,
-        DhField::Alpha => row.alpha_rad += value,
-        DhField::D => row.d_m += value,
-        DhField::Theta => row.theta_rad += value,
-        DhField::Beta => row.beta_rad = Some(row.beta_rad.unwrap_or(0.0) + value),
-    }
-}
-
-impl DhTable {
-    /// The rows with the D-H deviations of `record` added (those of rows it names).
-    fn calibrated_rows(&self, record: Option<&Calibration>) -> Vec<DhRow> {
-        let mut rows = self.nominal.clone();
-        for v in record.iter().flat_map(|r| &r.values) {
-            if let Ok(ValueName::Dh { field, row }) = ValueName::parse(&v.name)
-                && let Some(r) = rows.get_mut(row)
-            {
-                add_dh(r, field, v.value);
-            }
-        }
-        rows
-    }
-}
-
 impl Robot {
     /// Loads a serial robot's device file as `hapcal calibrate --out robot.toml` writes it
     /// (docs/design.md §5.1): see [`Robot::from_device_str`].
@@ -720,110 +628,120 @@ impl Robot {
     }
 }
 
-/// [`Robot::with_value`].
-pub(crate) fn with_value(robot: &Robot, name: &str, value: f64) -> Result<Robot, crate::Error> {
-    let unknown = crate::Error::Invalid {
-        what: "value",
-        value,
-        expected: "the name of a value the calibration record holds",
-    };
-    if !value.is_finite() {
-        return Err(crate::Error::NotFinite {
+impl Robot {
+    /// The same robot with the recorded value `name` (a name of the record's `[values]`, in
+    /// its unit) set to `value`: a kinematic value moves its joint's origin, a compliance,
+    /// transversal compliance or harmonic changes the deflection. How `hapcal predict`
+    /// propagates the covariance to a prediction's uncertainty.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`](crate::Error::Invalid) for a name the record does not hold;
+    /// [`Error::NotFinite`](crate::Error::NotFinite) for a NaN or infinite value.
+    pub fn with_value(&self, name: &str, value: f64) -> Result<Robot, crate::Error> {
+        let robot = self;
+        let unknown = crate::Error::Invalid {
             what: "value",
-            index: 0,
             value,
-        });
-    }
-    let mut out = robot.clone();
-    let Some(record) = out.record.as_mut() else {
-        return Err(unknown);
-    };
-    let Some(recorded) = record.values.iter_mut().find(|v| v.name == name) else {
-        return Err(unknown);
-    };
-    recorded.value = value;
-    let Ok(parsed) = ValueName::parse(name) else {
-        return Err(unknown);
-    };
-    match parsed {
-        ValueName::Element { element, field } => {
-            let k = field_index(field);
-            if let Some(f) = out.frames.iter().position(|(n, _)| *n == element) {
-                // A frame holds `nominal · Δ(d)`: it becomes `frame · Δ(d)⁻¹ · Δ(d')`.
-                let before = element_deviation(robot.record.as_ref(), &element);
-                let after = element_deviation(out.record.as_ref(), &element);
-                let frame = &mut out.frames[f].1;
-                *frame = frame
-                    .compose(&deviation_pose(&before).inverse())
-                    .compose(&deviation_pose(&after));
-            } else if let Some(j) = out.joint_names.iter().position(|n| *n == element) {
-                let joint = &mut out.joints[j];
-                joint.deviation[k] = value;
-                let d = joint.deviation;
-                joint.origin = joint
-                    .nominal
-                    .compose(&deviation_pose(&[d[0], d[1], d[2], d[3], d[4], d[5]]))
-                    .compose(&crate::robot::joint_motion(joint, d[6]));
-            } else {
-                let d = element_deviation(out.record.as_ref(), &element);
-                for (tip, e) in out.tips.iter_mut().zip(&out.tip_elements) {
-                    if e.as_deref() != Some(element.as_str()) {
-                        continue;
-                    }
-                    tip.offset = tip.nominal_offset.compose(&deviation_pose(&d));
-                }
-            }
-            out.nominal_differs = true;
-        }
-        ValueName::Compliance { joints } => {
-            for joint in &joints {
-                if let Some(j) = out.joint_names.iter().position(|n| n == joint) {
-                    out.compliance[j] = value;
-                }
-            }
-        }
-        ValueName::Transversal { joint, axis } => {
-            let Some(j) = out.joint_names.iter().position(|n| *n == joint) else {
-                return Err(unknown);
-            };
-            let direction = axis.map(|a| {
-                let [u, w] = normal_axes(&out.joints[j].axis);
-                if a == 'u' { u } else { w }
+            expected: "the name of a value the calibration record holds",
+        };
+        if !value.is_finite() {
+            return Err(crate::Error::NotFinite {
+                what: "value",
+                index: 0,
+                value,
             });
-            for t in &mut out.transversal {
-                if t.joint == j && t.direction == direction {
-                    t.compliance = value;
+        }
+        let mut out = robot.clone();
+        let Some(record) = out.record.as_mut() else {
+            return Err(unknown);
+        };
+        let Some(recorded) = record.values.iter_mut().find(|v| v.name == name) else {
+            return Err(unknown);
+        };
+        recorded.value = value;
+        let Ok(parsed) = ValueName::parse(name) else {
+            return Err(unknown);
+        };
+        match parsed {
+            ValueName::Element { element, field } => {
+                let k = field_index(field);
+                if let Some(f) = out.frames.iter().position(|(n, _)| *n == element) {
+                    // A frame holds `nominal · Δ(d)`: it becomes `frame · Δ(d)⁻¹ · Δ(d')`.
+                    let before = element_deviation(robot.record.as_ref(), &element);
+                    let after = element_deviation(out.record.as_ref(), &element);
+                    let frame = &mut out.frames[f].1;
+                    *frame = frame
+                        .compose(&deviation_pose(&before).inverse())
+                        .compose(&deviation_pose(&after));
+                } else if let Some(j) = out.joint_names.iter().position(|n| *n == element) {
+                    let joint = &mut out.joints[j];
+                    joint.deviation[k] = value;
+                    let d = joint.deviation;
+                    joint.origin = joint
+                        .nominal
+                        .compose(&deviation_pose(&[d[0], d[1], d[2], d[3], d[4], d[5]]))
+                        .compose(&crate::robot::joint_motion(joint, d[6]));
+                } else {
+                    let d = element_deviation(out.record.as_ref(), &element);
+                    for (tip, e) in out.tips.iter_mut().zip(&out.tip_elements) {
+                        if e.as_deref() != Some(element.as_str()) {
+                            continue;
+                        }
+                        tip.offset = tip.nominal_offset.compose(&deviation_pose(&d));
+                    }
+                }
+                out.nominal_differs = true;
+            }
+            ValueName::Compliance { joints } => {
+                for joint in &joints {
+                    if let Some(j) = out.joint_names.iter().position(|n| n == joint) {
+                        out.compliance[j] = value;
+                    }
                 }
             }
-        }
-        ValueName::Harmonic { joint, order, sine } => {
-            let Some(j) = out.joint_names.iter().position(|n| *n == joint) else {
-                return Err(unknown);
-            };
-            for h in &mut out.harmonics {
-                if h.joint == j && h.order == order && h.sine == sine {
-                    h.coef = value;
+            ValueName::Transversal { joint, axis } => {
+                let Some(j) = out.joint_names.iter().position(|n| *n == joint) else {
+                    return Err(unknown);
+                };
+                let direction = axis.map(|a| {
+                    let [u, w] = normal_axes(&out.joints[j].axis);
+                    if a == 'u' { u } else { w }
+                });
+                for t in &mut out.transversal {
+                    if t.joint == j && t.direction == direction {
+                        t.compliance = value;
+                    }
                 }
             }
-        }
-        ValueName::Dh { .. } => {
-            // The rows at the nominal geometry plus the record's deviations, this one moved.
-            let Some(table) = &out.dh else {
-                return Err(unknown);
-            };
-            let rows = table.calibrated_rows(out.record.as_ref());
-            let (origins, offset) = dh_frames(table.convention, &rows);
-            for (joint, origin) in out.joints.iter_mut().zip(origins) {
-                joint.origin = origin;
+            ValueName::Harmonic { joint, order, sine } => {
+                let Some(j) = out.joint_names.iter().position(|n| *n == joint) else {
+                    return Err(unknown);
+                };
+                for h in &mut out.harmonics {
+                    if h.joint == j && h.order == order && h.sine == sine {
+                        h.coef = value;
+                    }
+                }
             }
-            if let Some(tip) = out.tips.first_mut() {
-                tip.offset = offset;
+            ValueName::Dh { .. } => {
+                // The rows at the nominal geometry plus the record's deviations, this one moved.
+                let Some(table) = &out.dh else {
+                    return Err(unknown);
+                };
+                let rows = table.calibrated_rows(out.record.as_ref());
+                let (origins, offset) = dh_frames(table.convention, &rows);
+                for (joint, origin) in out.joints.iter_mut().zip(origins) {
+                    joint.origin = origin;
+                }
+                if let Some(tip) = out.tips.first_mut() {
+                    tip.offset = offset;
+                }
+                out.nominal_differs = true;
             }
-            out.nominal_differs = true;
+            _ => return Err(unknown),
         }
-        _ => return Err(unknown),
+        Ok(out)
     }
-    Ok(out)
 }
 
 /// The deviation `[x, y, z, rx, ry, rz]` (m, rad) the record's values `<element>.x` …

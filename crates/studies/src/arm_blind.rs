@@ -252,7 +252,43 @@ pub enum Injected {
     Pair(Box<Injected>, Box<Injected>),
 }
 
+/// Two effects of `pool` drawn with `rng`, never two joint compliances, injected in the order
+/// of `pool` with the parameters `library_effect` draws for each.
+pub(crate) fn draw_pair(
+    rng: &mut ChaCha8Rng,
+    pool: &[Effect],
+    library_effect: impl Fn(&mut ChaCha8Rng, Effect) -> Injected,
+) -> Injected {
+    let a = pool[rng.random_range(0..pool.len())];
+    let others: Vec<Effect> = (pool.iter().copied())
+        .filter(|&b| b != a && !(a.is_joint_compliance() && b.is_joint_compliance()))
+        .collect();
+    let b = others[rng.random_range(0..others.len())];
+    let position = |e: Effect| pool.iter().position(|&x| x == e);
+    let (a, b) = if position(a) < position(b) {
+        (a, b)
+    } else {
+        (b, a)
+    };
+    Injected::Pair(
+        Box::new(library_effect(rng, a)),
+        Box::new(library_effect(rng, b)),
+    )
+}
+
 impl Injected {
+    /// The right verdict of a case of `kind` that injects this: the injected library effects
+    /// for [`ArmCaseKind::One`] and [`ArmCaseKind::Two`], else none.
+    pub fn expected(&self, kind: ArmCaseKind) -> Verdict {
+        match kind {
+            ArmCaseKind::One | ArmCaseKind::Two => {
+                let named: Vec<Effect> = (self.parts().iter()).filter_map(|p| p.effect()).collect();
+                Verdict::of(&named)
+            }
+            _ => Verdict::None,
+        }
+    }
+
     /// The library effect this injects (one vocabulary with the diagnosis); `None` for no
     /// effect, an effect outside the library or a pair.
     pub fn effect(&self) -> Option<Effect> {
@@ -316,15 +352,7 @@ impl ArmCase {
     /// The right verdict: the injected effect for [`ArmCaseKind::One`], both for
     /// [`ArmCaseKind::Two`], else none.
     pub fn expected(&self) -> Verdict {
-        match self.kind {
-            ArmCaseKind::One | ArmCaseKind::Two => {
-                let named: Vec<Effect> = (self.injected.parts().iter())
-                    .filter_map(|p| p.effect())
-                    .collect();
-                Verdict::of(&named)
-            }
-            _ => Verdict::None,
-        }
+        self.injected.expected(self.kind)
     }
 
     /// Whether `verdict` is right: the expected effects, in any order.
@@ -461,24 +489,7 @@ pub fn draw_case(i: u64, n_joints: usize) -> ArmCase {
             let slot = (i / 8) * 5 + (i % 8 - 2);
             library_effect(&mut rng, lib[(slot % lib.len() as u64) as usize])
         }
-        ArmCaseKind::Two => {
-            let a = lib[rng.random_range(0..lib.len())];
-            let compliance =
-                |e: Effect| matches!(e, Effect::GravityCompliance | Effect::LumpedCompliance);
-            let others: Vec<Effect> = (lib.iter().copied())
-                .filter(|&b| b != a && !(compliance(a) && compliance(b)))
-                .collect();
-            let b = others[rng.random_range(0..others.len())];
-            let (a, b) = if lib.iter().position(|&e| e == a) < lib.iter().position(|&e| e == b) {
-                (a, b)
-            } else {
-                (b, a)
-            };
-            Injected::Pair(
-                Box::new(library_effect(&mut rng, a)),
-                Box::new(library_effect(&mut rng, b)),
-            )
-        }
+        ArmCaseKind::Two => draw_pair(&mut rng, &lib, &library_effect),
         ArmCaseKind::Outside => {
             let n_kinds = if data == ArmData::Positions { 4 } else { 3 };
             match (i / 8) % n_kinds {

@@ -6,6 +6,7 @@
 //! through [`hapcal_calibrate`].*
 
 pub mod arm_blind;
+pub mod blind_cli;
 pub mod figures;
 pub mod force;
 pub mod paper;

@@ -339,19 +339,72 @@ const JOINTED: &[Recording] = &[
     R::Haptic,
 ];
 
+/// The arms with markers (the camera, motion-capture and simulated recordings) and the haptic
+/// log.
+const MARKERS_AND_HAPTIC: &[Recording] = &[
+    R::Ur10,
+    R::Tiago,
+    R::Humanoid,
+    R::Positioner,
+    R::SimIiwa,
+    R::SimPanda,
+    R::Haptic,
+];
+
+/// The arms with markers (the camera, motion-capture and simulated recordings).
+const MARKERS: &[Recording] = &[
+    R::Ur10,
+    R::Tiago,
+    R::Humanoid,
+    R::Positioner,
+    R::SimIiwa,
+    R::SimPanda,
+];
+
+/// The recordings with orientation quaternions.
+const QUATERNIONS: &[Recording] = &[R::Positioner, R::Ur10Quaternion];
+
+/// The socket recordings.
+const SOCKETS: &[Recording] = &[R::SocketsIiwa, R::SocketsPanda];
+
+/// A row of [`FAMILIES`].
+const fn spec(
+    family: Family,
+    name: &'static str,
+    expect: Expect,
+    recordings: &'static [Recording],
+) -> FamilySpec {
+    FamilySpec {
+        family,
+        name,
+        expect,
+        recordings,
+    }
+}
+
+/// A row of [`FAMILIES`] whose family must stop naming its own class, with `flag` in the fix.
+const fn stop(
+    family: Family,
+    name: &'static str,
+    flag: Option<&'static str>,
+    recordings: &'static [Recording],
+) -> FamilySpec {
+    spec(family, name, Expect::Stop(name, flag), recordings)
+}
+
 /// The table of expectations: each family, what the check should say, and where it applies.
 pub const FAMILIES: &[FamilySpec] = &[
-    FamilySpec {
-        family: Family::ColumnUnit,
-        name: "column-unit",
-        expect: Expect::Stop("column-unit", Some("--column-unit")),
-        recordings: JOINTED,
-    },
-    FamilySpec {
-        family: Family::AngleUnit,
-        name: "angle-unit",
-        expect: Expect::Stop("angle-unit", Some("--angle-unit")),
-        recordings: &[
+    stop(
+        Family::ColumnUnit,
+        "column-unit",
+        Some("--column-unit"),
+        JOINTED,
+    ),
+    stop(
+        Family::AngleUnit,
+        "angle-unit",
+        Some("--angle-unit"),
+        &[
             R::Ur10,
             R::Tiago,
             R::Humanoid,
@@ -361,44 +414,36 @@ pub const FAMILIES: &[FamilySpec] = &[
             R::SimIiwa,
             R::SimPanda,
         ],
-    },
-    FamilySpec {
-        family: Family::LengthUnit,
-        name: "length-unit",
-        expect: Expect::Stop("length-unit", Some("--length-unit")),
-        recordings: &[
-            R::Ur10,
-            R::Tiago,
-            R::Humanoid,
-            R::Positioner,
-            R::SimIiwa,
-            R::SimPanda,
-            R::Haptic,
-        ],
-    },
-    FamilySpec {
-        family: Family::MarkerUnit,
-        name: "marker-unit",
-        expect: Expect::Stop("length-unit", Some("--column-unit")),
-        recordings: &[R::Tiago, R::Humanoid],
-    },
-    FamilySpec {
-        family: Family::ColumnSign,
-        name: "column-sign",
-        expect: Expect::Stop("column-sign", Some("--column-sign")),
-        recordings: JOINTED,
-    },
-    FamilySpec {
-        family: Family::ColumnZero,
-        name: "column-zero",
-        expect: Expect::Stop("column-zero", Some("--column-offset")),
-        recordings: JOINTED,
-    },
-    FamilySpec {
-        family: Family::JointOrder,
-        name: "joint-order",
-        expect: Expect::Stop("joint-order", None),
-        recordings: &[
+    ),
+    stop(
+        Family::LengthUnit,
+        "length-unit",
+        Some("--length-unit"),
+        MARKERS_AND_HAPTIC,
+    ),
+    spec(
+        Family::MarkerUnit,
+        "marker-unit",
+        Expect::Stop("length-unit", Some("--column-unit")),
+        &[R::Tiago, R::Humanoid],
+    ),
+    stop(
+        Family::ColumnSign,
+        "column-sign",
+        Some("--column-sign"),
+        JOINTED,
+    ),
+    stop(
+        Family::ColumnZero,
+        "column-zero",
+        Some("--column-offset"),
+        JOINTED,
+    ),
+    stop(
+        Family::JointOrder,
+        "joint-order",
+        None,
+        &[
             R::Ur10,
             R::Tiago,
             R::Humanoid,
@@ -407,77 +452,39 @@ pub const FAMILIES: &[FamilySpec] = &[
             R::SimIiwa,
             R::SimPanda,
         ],
-    },
-    FamilySpec {
-        family: Family::RowShift,
-        name: "row-shift",
-        expect: Expect::Stop("row-shift", None),
-        recordings: &[
-            R::Ur10,
-            R::Tiago,
-            R::Humanoid,
-            R::Positioner,
-            R::SimIiwa,
-            R::SimPanda,
-            R::Haptic,
-        ],
-    },
-    FamilySpec {
-        family: Family::RowMismatch,
-        name: "row-mismatch",
-        expect: Expect::Stop("row-mismatch", None),
-        recordings: &[
-            R::Ur10,
-            R::Tiago,
-            R::Humanoid,
-            R::Positioner,
-            R::SimIiwa,
-            R::SimPanda,
-            R::Haptic,
-        ],
-    },
-    FamilySpec {
-        family: Family::QuaternionOrder,
-        name: "quaternion-order",
-        expect: Expect::Stop("quaternion-order", None),
-        recordings: &[R::Positioner, R::Ur10Quaternion],
-    },
-    FamilySpec {
-        family: Family::QuaternionInverse,
-        name: "quaternion-inverse",
-        expect: Expect::Stop("quaternion-inverse", None),
-        recordings: &[R::Positioner, R::Ur10Quaternion],
-    },
-    FamilySpec {
-        family: Family::EulerOrder,
-        name: "euler-order",
-        expect: Expect::Stop("euler-order", None),
-        recordings: &[R::Ur10, R::PositionerEuler],
-    },
-    FamilySpec {
-        family: Family::MirroredAxis,
-        name: "mirrored-axis",
-        expect: Expect::Stop("mirrored-axis", None),
-        recordings: &[
-            R::Ur10,
-            R::Tiago,
-            R::Humanoid,
-            R::Positioner,
-            R::SimIiwa,
-            R::SimPanda,
-        ],
-    },
-    FamilySpec {
-        family: Family::SwappedTips,
-        name: "swapped-tips",
-        expect: Expect::Stop("swapped-tips", None),
-        recordings: &[R::Humanoid],
-    },
-    FamilySpec {
-        family: Family::TipLink,
-        name: "tip-link",
-        expect: Expect::Stop("tip-link", Some("--tip")),
-        recordings: &[
+    ),
+    stop(Family::RowShift, "row-shift", None, MARKERS_AND_HAPTIC),
+    stop(
+        Family::RowMismatch,
+        "row-mismatch",
+        None,
+        MARKERS_AND_HAPTIC,
+    ),
+    stop(
+        Family::QuaternionOrder,
+        "quaternion-order",
+        None,
+        QUATERNIONS,
+    ),
+    stop(
+        Family::QuaternionInverse,
+        "quaternion-inverse",
+        None,
+        QUATERNIONS,
+    ),
+    stop(
+        Family::EulerOrder,
+        "euler-order",
+        None,
+        &[R::Ur10, R::PositionerEuler],
+    ),
+    stop(Family::MirroredAxis, "mirrored-axis", None, MARKERS),
+    stop(Family::SwappedTips, "swapped-tips", None, &[R::Humanoid]),
+    stop(
+        Family::TipLink,
+        "tip-link",
+        Some("--tip"),
+        &[
             R::Ur10,
             R::Tiago,
             R::Humanoid,
@@ -485,36 +492,31 @@ pub const FAMILIES: &[FamilySpec] = &[
             R::SimIiwa,
             R::SimPanda,
         ],
-    },
-    FamilySpec {
-        family: Family::AnotherDevice,
-        name: "another-device",
-        expect: Expect::Stop("another-device", None),
-        recordings: &[R::Ur10, R::SimIiwa, R::SimPanda, R::HapticMotion],
-    },
-    FamilySpec {
-        family: Family::SocketDistance,
-        name: "socket-distance",
-        expect: Expect::Stop("socket-distance", Some("--socket-distance-m")),
-        recordings: &[R::SocketsIiwa, R::SocketsPanda],
-    },
-    FamilySpec {
-        family: Family::WrongSocket,
-        name: "wrong-socket",
-        expect: Expect::Stop("wrong-socket", None),
-        recordings: &[R::SocketsIiwa, R::SocketsPanda],
-    },
-    FamilySpec {
-        family: Family::Latency,
-        name: LATENCY_CLASS,
-        expect: Expect::Note(LATENCY_CLASS),
-        recordings: &[R::HapticMotion],
-    },
-    FamilySpec {
-        family: Family::AsIs,
-        name: "correct-as-is",
-        expect: Expect::Clean,
-        recordings: &[
+    ),
+    stop(
+        Family::AnotherDevice,
+        "another-device",
+        None,
+        &[R::Ur10, R::SimIiwa, R::SimPanda, R::HapticMotion],
+    ),
+    stop(
+        Family::SocketDistance,
+        "socket-distance",
+        Some("--socket-distance-m"),
+        SOCKETS,
+    ),
+    stop(Family::WrongSocket, "wrong-socket", None, SOCKETS),
+    spec(
+        Family::Latency,
+        LATENCY_CLASS,
+        Expect::Note(LATENCY_CLASS),
+        &[R::HapticMotion],
+    ),
+    spec(
+        Family::AsIs,
+        "correct-as-is",
+        Expect::Clean,
+        &[
             R::Ur10,
             R::Ur10Quaternion,
             R::Tiago,
@@ -526,12 +528,12 @@ pub const FAMILIES: &[FamilySpec] = &[
             R::Haptic,
             R::HapticMotion,
         ],
-    },
-    FamilySpec {
-        family: Family::Resampled,
-        name: "correct-resampled",
-        expect: Expect::Clean,
-        recordings: &[
+    ),
+    spec(
+        Family::Resampled,
+        "correct-resampled",
+        Expect::Clean,
+        &[
             R::Ur10,
             R::Tiago,
             R::Humanoid,
@@ -540,24 +542,24 @@ pub const FAMILIES: &[FamilySpec] = &[
             R::SocketsPanda,
             R::Haptic,
         ],
-    },
-    FamilySpec {
-        family: Family::SimEffects,
-        name: "correct-sim-effects",
-        expect: Expect::Clean,
-        recordings: &[R::SimIiwa, R::SimPanda],
-    },
-    FamilySpec {
-        family: Family::HapticEffects,
-        name: "correct-haptic-effects",
-        expect: Expect::Clean,
-        recordings: &[R::HapticMotion],
-    },
-    FamilySpec {
-        family: Family::ChangePoint,
-        name: "change-point",
-        expect: Expect::Stop("change-point", None),
-        recordings: &[
+    ),
+    spec(
+        Family::SimEffects,
+        "correct-sim-effects",
+        Expect::Clean,
+        &[R::SimIiwa, R::SimPanda],
+    ),
+    spec(
+        Family::HapticEffects,
+        "correct-haptic-effects",
+        Expect::Clean,
+        &[R::HapticMotion],
+    ),
+    stop(
+        Family::ChangePoint,
+        "change-point",
+        None,
+        &[
             R::Tiago,
             R::Humanoid,
             R::Ur10Quaternion,
@@ -567,18 +569,18 @@ pub const FAMILIES: &[FamilySpec] = &[
             R::Haptic,
             R::HapticMotion,
         ],
-    },
-    FamilySpec {
-        family: Family::ColumnScale,
-        name: "column-scale",
-        expect: Expect::Stop("column-scale", Some("--column-scale")),
-        recordings: JOINTED,
-    },
-    FamilySpec {
-        family: Family::ColumnCoupling,
-        name: "column-coupling",
-        expect: Expect::Stop("column-coupling", Some("--column-coupling")),
-        recordings: &[
+    ),
+    stop(
+        Family::ColumnScale,
+        "column-scale",
+        Some("--column-scale"),
+        JOINTED,
+    ),
+    stop(
+        Family::ColumnCoupling,
+        "column-coupling",
+        Some("--column-coupling"),
+        &[
             R::Ur10,
             R::Tiago,
             R::Humanoid,
@@ -587,25 +589,18 @@ pub const FAMILIES: &[FamilySpec] = &[
             R::SimPanda,
             R::Haptic,
         ],
-    },
-    FamilySpec {
-        family: Family::PartUnit,
-        name: "part-unit",
-        expect: Expect::Stop("length-unit", None),
-        recordings: &[
-            R::Ur10,
-            R::Tiago,
-            R::Humanoid,
-            R::Positioner,
-            R::SimIiwa,
-            R::SimPanda,
-        ],
-    },
-    FamilySpec {
-        family: Family::GlitchRow,
-        name: "glitch-row",
-        expect: Expect::Listed,
-        recordings: &[
+    ),
+    spec(
+        Family::PartUnit,
+        "part-unit",
+        Expect::Stop("length-unit", None),
+        MARKERS,
+    ),
+    spec(
+        Family::GlitchRow,
+        "glitch-row",
+        Expect::Listed,
+        &[
             R::Ur10,
             R::Tiago,
             R::Humanoid,
@@ -615,19 +610,19 @@ pub const FAMILIES: &[FamilySpec] = &[
             R::SimPanda,
             R::Haptic,
         ],
-    },
-    FamilySpec {
-        family: Family::WrongVariant,
-        name: "wrong-variant",
-        expect: Expect::Stop("another-device", None),
-        recordings: &[R::Ur10, R::SocketsIiwa, R::SimIiwa],
-    },
-    FamilySpec {
-        family: Family::Mounting,
-        name: "mounting",
-        expect: Expect::Stop("mounting", Some("--gravity")),
-        recordings: &[R::Humanoid],
-    },
+    ),
+    spec(
+        Family::WrongVariant,
+        "wrong-variant",
+        Expect::Stop("another-device", None),
+        &[R::Ur10, R::SocketsIiwa, R::SimIiwa],
+    ),
+    stop(
+        Family::Mounting,
+        "mounting",
+        Some("--gravity"),
+        &[R::Humanoid],
+    ),
 ];
 
 impl Family {

@@ -72,8 +72,8 @@ use rand_distr::{Distribution, Normal, StandardNormal};
 use serde::Serialize;
 
 use crate::arm_blind::{
-    ArmCaseKind, Injected, apply_point_effects, names_right, open_torque_models, pct, signed,
-    vector, verdict_or_error, verdict_words, wilson_95,
+    ArmCaseKind, Injected, apply_point_effects, draw_pair, names_right, open_torque_models, pct,
+    signed, vector, verdict_or_error, verdict_words, wilson_95,
 };
 
 /// Rows of a case (the last [`TEST_FRACTION`] held out).
@@ -126,15 +126,7 @@ pub struct TreeCase {
 impl TreeCase {
     /// The right verdict: the injected library effects, or none.
     pub fn expected(&self) -> Verdict {
-        match self.kind {
-            ArmCaseKind::One | ArmCaseKind::Two => {
-                let named: Vec<Effect> = (self.injected.parts().iter())
-                    .filter_map(|p| p.effect())
-                    .collect();
-                Verdict::of(&named)
-            }
-            _ => Verdict::None,
-        }
+        self.injected.expected(self.kind)
     }
 
     /// Whether `verdict` is right: exactly the expected effects, a named compliance whose
@@ -335,21 +327,7 @@ pub fn draw_case(i: u64, setup: &TreeSetup) -> TreeCase {
             let pool: Vec<Effect> = (lib.iter().copied())
                 .filter(|e| *e != Effect::TransversalCompliance)
                 .collect();
-            let a = pool[rng.random_range(0..pool.len())];
-            let others: Vec<Effect> = (pool.iter().copied())
-                .filter(|&b| b != a && !(a.is_joint_compliance() && b.is_joint_compliance()))
-                .collect();
-            let b = others[rng.random_range(0..others.len())];
-            let position = |e: Effect| pool.iter().position(|&x| x == e);
-            let (a, b) = if position(a) < position(b) {
-                (a, b)
-            } else {
-                (b, a)
-            };
-            Injected::Pair(
-                Box::new(library_effect(&mut rng, a)),
-                Box::new(library_effect(&mut rng, b)),
-            )
+            draw_pair(&mut rng, &pool, &library_effect)
         }
         ArmCaseKind::Outside => match slot % 3 {
             0 => {

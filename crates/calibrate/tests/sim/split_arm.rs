@@ -4,22 +4,21 @@
 //! harmonic or a gear-ratio error). Shared by the coverage test and its sweep.
 #![allow(clippy::unwrap_used, clippy::expect_used, dead_code, unreachable_pub)]
 
-use std::path::PathBuf;
-
-use hapcal_calibrate::measured::{Robot, robot_from_urdf};
-use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
-use hapcal_kinematics::{FrameSpec, Isometry3, Tree, Vector3};
+use hapcal_calibrate::measured::Robot;
+use hapcal_io::MeasurementTable;
+use hapcal_kinematics::Tree;
 use rand::{Rng, SeedableRng};
-use rand_distr::{Distribution, Normal};
+use rand_distr::Normal;
 
 /// Marker noise per axis, m (a laser tracker).
 pub const NOISE_M: f64 = 5e-5;
 
+#[path = "tracker.rs"]
+pub mod tracker;
+
 /// The iiwa 14 with its ball on the last link.
 pub fn robot() -> Robot {
-    let urdf =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/mukca/urdf/iiwa14.urdf");
-    robot_from_urdf(&urdf, &["ball_link".to_owned()]).unwrap()
+    tracker::iiwa()
 }
 
 /// An error of joint 1's own angle that no rung models: the true angle is the reading plus
@@ -68,31 +67,12 @@ pub fn truth(robot: &Robot, seed: u64, effect: Effect) -> Truth {
 /// [`truth`] with the placement deviations scaled by `scale`.
 pub fn truth_scaled(robot: &Robot, seed: u64, effect: Effect, scale: f64) -> Truth {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let base = FrameSpec {
-        name: "instrument".into(),
-        nominal: Isometry3::new(Vector3::new(2.5, -0.4, -0.8), Vector3::new(0.0, 0.0, 1.2)),
-    };
-    let marker = FrameSpec {
-        name: "marker1".into(),
-        nominal: Isometry3::translation(0.02, 0.01, 0.06),
-    };
+    let base = tracker::instrument([2.5, -0.4, -0.8], [0.0, 0.0, 1.2]);
+    let marker = tracker::marker("marker1", 0.02, 0.01, 0.06);
     let framed = (robot.tree.with_joint_offsets())
         .with_frames(&base, &[(0, marker)])
         .unwrap();
-    let lin = Normal::new(0.0, 5e-4 * scale).unwrap();
-    let ang = Normal::new(0.0, 1e-3 * scale).unwrap();
-    let names: Vec<String> = framed.params().iter().map(|p| p.name.clone()).collect();
-    let x = (names.iter().enumerate())
-        .map(|(i, name)| {
-            if i < 6 || name.starts_with("marker") {
-                0.0
-            } else if name.ends_with(".x") || name.ends_with(".y") || name.ends_with(".z") {
-                lin.sample(&mut rng)
-            } else {
-                ang.sample(&mut rng)
-            }
-        })
-        .collect();
+    let x = tracker::placement_deviations(&framed, scale, &mut rng);
     Truth {
         joint: 0,
         framed,
@@ -115,35 +95,15 @@ pub fn rows(
     let noise = Normal::new(0.0, NOISE_M).unwrap();
     let rows = (0..n)
         .map(|i| {
-            let mut q: Vec<f64> = (robot.limits.iter())
-                .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
-                .collect();
+            let mut q = tracker::within_limits(robot, &mut rng);
             let j = truth.joint;
             q[j] = rng.random_range(q1.0..q1.1);
             let mut moved = q.clone();
             moved[j] += truth.effect.error_rad(q[j]);
             let p = truth.framed.tips()[0].end_point(&truth.x, &moved);
-            MeasuredRow {
-                line: i as u64 + 2,
-                q,
-                t_s: None,
-                markers: vec![MarkerSample {
-                    marker: 0,
-                    position_m: std::array::from_fn(|k| p[k] + noise.sample(&mut rng)),
-                    rotation: None,
-                }],
-                distance_m: None,
-            }
+            let marker = tracker::sample(0, &p, &noise, &mut rng);
+            tracker::row(i as u64 + 2, q, vec![marker])
         })
         .collect();
-    MeasurementTable {
-        name: name.to_owned(),
-        path: PathBuf::from(format!("{name}.csv")),
-        rows,
-        n_markers: 1,
-        has_orientation: false,
-        has_distance: false,
-        ignored_columns: Vec::new(),
-        warnings: Vec::new(),
-    }
+    tracker::table(name, format!("{name}.csv"), 1, rows)
 }

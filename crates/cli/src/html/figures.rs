@@ -1,7 +1,8 @@
 //! The figures of the HTML report: each an inline SVG drawn with `plotters`' SVG backend (text
 //! as `<text>` elements, no font file read), its caption and the numbers it plots.
 
-use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
+use plotters::coord::{CoordTranslate, Shift};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use serde_json::{Value, json};
@@ -42,6 +43,16 @@ pub struct Figure {
 }
 
 impl Figure {
+    /// The figure `id` of `caption`, drawn as `svg`, plotting `values`.
+    fn new(id: &str, caption: String, svg: String, values: Value) -> Figure {
+        Figure {
+            id: id.to_owned(),
+            caption,
+            svg,
+            values,
+        }
+    }
+
     /// The `<figure>` element: the SVG inline, the caption, the numbers in `data-values`.
     pub fn html(&self) -> String {
         let svg = match self.svg.find("<svg") {
@@ -96,6 +107,37 @@ fn svg(
             escape(&e)
         ),
     }
+}
+
+/// The legend of `chart`'s labelled series, in its upper right corner.
+fn legend<'a, 'b: 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, SVGBackend<'b>, CT>,
+) -> Drawn {
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FONT, 12))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    Ok(())
+}
+
+/// `labels` right-aligned left of `chart`'s rows, the first at the top: label `i` beside
+/// `(x, n − 1 − i)`, `n` labels.
+fn row_labels(
+    root: &DrawingArea<SVGBackend<'_>, Shift>,
+    chart: &ChartContext<'_, SVGBackend<'_>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    x: f64,
+    labels: &[String],
+) -> Drawn {
+    let n = labels.len();
+    let style = TextStyle::from((FONT, 12).into_font()).pos(Pos::new(HPos::Right, VPos::Center));
+    for (i, label) in labels.iter().enumerate() {
+        let (px, py) = chart.backend_coord(&(x, (n - 1 - i) as f64));
+        root.draw(&Text::new(label.clone(), (px - 8, py), style.clone()))?;
+    }
+    Ok(())
 }
 
 /// A drawing error as the boxed error [`Drawn`] holds.
@@ -246,13 +288,7 @@ pub(crate) fn bars(
             }
         }
         if groups.len() > 1 || groups.iter().any(|g| !g.label.is_empty()) {
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .label_font((FONT, 12))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()?;
+            legend(&mut chart)?;
         }
         Ok(())
     });
@@ -264,12 +300,7 @@ pub(crate) fn bars(
             "errors": g.errors.as_ref().map(|e| rounded(e)),
         })).collect::<Vec<_>>(),
     });
-    Figure {
-        id: id.to_owned(),
-        caption,
-        svg,
-        values,
-    }
+    Figure::new(id, caption, svg, values)
 }
 
 /// Horizontal bars, one per name (top to bottom), values in `unit`; a dashed line at ±`mark`.
@@ -299,12 +330,7 @@ pub(crate) fn hbars(
             .label_style((FONT, 12))
             .axis_desc_style((FONT, 13))
             .draw()?;
-        let style =
-            TextStyle::from((FONT, 12).into_font()).pos(Pos::new(HPos::Right, VPos::Center));
-        for (i, label) in names.iter().enumerate() {
-            let (px, py) = chart.backend_coord(&(lo, (n - 1 - i) as f64));
-            root.draw(&Text::new(label.clone(), (px - 8, py), style.clone()))?;
-        }
+        row_labels(root, &chart, lo, names)?;
         chart.draw_series((values.iter().enumerate()).map(|(i, v)| {
             let y = (n - 1 - i) as f64;
             let color = if v.abs() >= mark { BLUE_ } else { GREY };
@@ -321,12 +347,7 @@ pub(crate) fn hbars(
         Ok(())
     });
     let values = json!({ "names": names, "values": rounded(values) });
-    Figure {
-        id: id.to_owned(),
-        caption,
-        svg,
-        values,
-    }
+    Figure::new(id, caption, svg, values)
 }
 
 /// A series of points.
@@ -377,13 +398,7 @@ pub(crate) fn scatter(
                 .label(s.label.as_str())
                 .legend(move |(x, y)| Circle::new((x + 6, y), 4, color.filled()));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font((FONT, 12))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()?;
+        legend(&mut chart)?;
         Ok(())
     });
     let values = json!(
@@ -396,12 +411,7 @@ pub(crate) fn scatter(
             }))
             .collect::<Vec<_>>()
     );
-    Figure {
-        id: id.to_owned(),
-        caption,
-        svg,
-        values,
-    }
+    Figure::new(id, caption, svg, values)
 }
 
 /// One panel of small multiples: a title and its series.
@@ -489,13 +499,7 @@ pub(crate) fn histograms(
                         PathElement::new(vec![(x, y), (x + 14, y)], color.stroke_width(2))
                     });
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .label_font((FONT, 12))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()?;
+            legend(&mut chart)?;
         }
         Ok(())
     });
@@ -511,12 +515,7 @@ pub(crate) fn histograms(
             }))
             .collect::<Vec<_>>()
     );
-    Figure {
-        id: id.to_owned(),
-        caption,
-        svg,
-        values,
-    }
+    Figure::new(id, caption, svg, values)
 }
 
 /// Binned means: per bin, its centre, the mean and the interval's ends.
@@ -606,12 +605,7 @@ pub(crate) fn binned_panels(
             }))
             .collect::<Vec<_>>()
     );
-    Figure {
-        id: id.to_owned(),
-        caption,
-        svg,
-        values,
-    }
+    Figure::new(id, caption, svg, values)
 }
 
 /// One joint's row of the coverage figure: its name, training range and the readings of the
@@ -668,12 +662,7 @@ pub(crate) fn ranges(id: &str, caption: String, rows: &[RangeRow]) -> Figure {
             .label_style((FONT, 12))
             .axis_desc_style((FONT, 12))
             .draw()?;
-        let style =
-            TextStyle::from((FONT, 12).into_font()).pos(Pos::new(HPos::Right, VPos::Center));
-        for (i, label) in labels.iter().enumerate() {
-            let (px, py) = chart.backend_coord(&(lo, (n - 1 - i) as f64));
-            root.draw(&Text::new(label.clone(), (px - 8, py), style.clone()))?;
-        }
+        row_labels(root, &chart, lo, &labels)?;
         for (i, r) in rows.iter().enumerate() {
             let y = (n - 1 - i) as f64;
             chart.draw_series(std::iter::once(Rectangle::new(
@@ -705,13 +694,7 @@ pub(crate) fn ranges(id: &str, caption: String, rows: &[RangeRow]) -> Figure {
             .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
             .label("workspace")
             .legend(|(x, y)| Circle::new((x + 6, y), 3, GREEN_.filled()));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font((FONT, 12))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()?;
+        legend(&mut chart)?;
         Ok(())
     });
     let values = json!(
@@ -724,20 +707,10 @@ pub(crate) fn ranges(id: &str, caption: String, rows: &[RangeRow]) -> Figure {
             }))
             .collect::<Vec<_>>()
     );
-    Figure {
-        id: id.to_owned(),
-        caption,
-        svg,
-        values,
-    }
+    Figure::new(id, caption, svg, values)
 }
 
 /// A figure made elsewhere (an SVG document written by hand), with its caption and numbers.
 pub(crate) fn external(id: &str, caption: String, svg: String, values: Value) -> Figure {
-    Figure {
-        id: id.to_owned(),
-        caption,
-        svg,
-        values,
-    }
+    Figure::new(id, caption, svg, values)
 }

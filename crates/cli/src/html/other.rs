@@ -28,13 +28,15 @@ pub struct DiagnosisView {
     pub notes: Vec<String>,
 }
 
-impl DiagnosisView {
-    /// A haptic device's diagnosis.
-    pub fn haptic(d: &Diagnosis) -> DiagnosisView {
+/// The view of a diagnosis `$d` (haptic or arm: the same fields by name) whose floor is
+/// `$floor`.
+macro_rules! view_of {
+    ($d:expr, $floor:expr) => {{
+        let d = $d;
         DiagnosisView {
             verdict: d.verdict.to_string(),
             heldout_rms_m: (d.heldout_rms_m, d.heldout_rms_final_m),
-            floor_rms_m: Some(d.floor_rms_m),
+            floor_rms_m: $floor,
             gap: (d.gap_rms_m, d.gap_closed_pct),
             candidates: (d.candidates.iter())
                 .map(|c| {
@@ -62,6 +64,13 @@ impl DiagnosisView {
                 .collect(),
             notes: d.notes.clone(),
         }
+    }};
+}
+
+impl DiagnosisView {
+    /// A haptic device's diagnosis.
+    pub fn haptic(d: &Diagnosis) -> DiagnosisView {
+        view_of!(d, Some(d.floor_rms_m))
     }
 
     /// The view with the diagnosis' `warnings` (as the command prints them) before its notes.
@@ -72,37 +81,7 @@ impl DiagnosisView {
 
     /// A serial arm's diagnosis.
     pub fn arm(d: &ArmDiagnosis) -> DiagnosisView {
-        DiagnosisView {
-            verdict: d.verdict.to_string(),
-            heldout_rms_m: (d.heldout_rms_m, d.heldout_rms_final_m),
-            floor_rms_m: d.floor_rms_m,
-            gap: (d.gap_rms_m, d.gap_closed_pct),
-            candidates: (d.candidates.iter())
-                .map(|c| {
-                    let (b, a) = (c.heldout_rms_before_m, c.heldout_rms_after_m);
-                    (
-                        c.round,
-                        c.effect.name().to_owned(),
-                        b,
-                        a,
-                        c.gap_closed_pct,
-                        c.accepted,
-                        c.reason.clone(),
-                    )
-                })
-                .collect(),
-            steps: (d.steps.iter())
-                .map(|s| {
-                    (
-                        s.effect.name().to_owned(),
-                        s.heldout_rms_before_m,
-                        s.heldout_rms_after_m,
-                        s.gap_closed_pct,
-                    )
-                })
-                .collect(),
-            notes: d.notes.clone(),
-        }
+        view_of!(d, d.floor_rms_m)
     }
 }
 

@@ -5,11 +5,11 @@
 use std::path::Path;
 
 use crate::predict::calibrated_ur10;
-use crate::{hapcal, iiwa, root, scratch, show, stderr};
+use crate::{hapcal, iiwa, root, scratch, show, stderr, ur10_csv};
 
 /// `hapcal predict` of the UR10's bundled poses on `urdf` with `tip`.
 fn predict(urdf: &Path, tip: &str) -> std::process::Output {
-    let data = root().join("fixtures/figaroh/ur10/calibration.csv");
+    let data = ur10_csv();
     hapcal(&[
         "predict",
         "--device",

@@ -8,13 +8,9 @@ use std::sync::OnceLock;
 
 use serde_json::Value;
 
-use super::{hapcal, root, scratch, show, stderr};
+use super::{hapcal, root, scratch, show, stderr, ur10_csv, ur10_urdf};
 
 const TIP: &str = "wrist_3_link";
-
-fn ur10_urdf() -> String {
-    show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf"))
-}
 
 /// `hapcal calibrate --json` of `device` (and `tip`, if any) on `data` with `flags`.
 fn calibrate(device: &str, tip: Option<&str>, data: &Path, flags: &[&str]) -> Value {
@@ -33,15 +29,14 @@ fn calibrate(device: &str, tip: Option<&str>, data: &Path, flags: &[&str]) -> Va
 fn ur10_si() -> &'static Value {
     static SI: OnceLock<Value> = OnceLock::new();
     SI.get_or_init(|| {
-        let csv = root().join("fixtures/figaroh/ur10/calibration.csv");
+        let csv = ur10_csv();
         calibrate(&ur10_urdf(), Some(TIP), &csv, &["--model", "geometric"])
     })
 }
 
 /// A copy of the UR10 file in `dir` with `column`'s cells mapped by `edit`.
 fn ur10_copy(dir: &Path, column: &str, edit: impl Fn(f64) -> f64) -> PathBuf {
-    let text = std::fs::read_to_string(root().join("fixtures/figaroh/ur10/calibration.csv"))
-        .expect("UR10 data");
+    let text = std::fs::read_to_string(ur10_csv()).expect("UR10 data");
     let mut lines = text.lines();
     let header = lines.next().expect("a header");
     let c = (header.split(',').position(|h| h == column)).expect("the column");

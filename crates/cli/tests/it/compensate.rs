@@ -3,7 +3,10 @@
 
 use hapcal_runtime::Robot;
 
-use crate::{hapcal, iiwa, scratch, stderr};
+use std::path::Path;
+use std::process::Output;
+
+use crate::{assert_exit, hapcal, hapcal_ok, iiwa, scratch, show, succeeded};
 
 /// Writes the calibrated robot (a copy of the URDF and its sidecar) into `dir`.
 fn calibrated_robot(dir: &std::path::Path) -> std::path::PathBuf {
@@ -18,6 +21,21 @@ fn calibrated_robot(dir: &std::path::Path) -> std::path::PathBuf {
     }
     std::fs::write(dir.join("robot.calibration.toml"), sidecar).expect("write");
     urdf
+}
+
+/// `hapcal compensate` of `targets` on the robot `urdf` (tip `ball_link`) into `out`.
+fn compensate(urdf: &Path, targets: &Path, out: &Path) -> Output {
+    hapcal(&[
+        "compensate",
+        "--device",
+        &show(urdf),
+        "--tip",
+        "ball_link",
+        "--targets",
+        &show(targets),
+        "--out",
+        &show(out),
+    ])
 }
 
 #[test]
@@ -59,19 +77,8 @@ fn compensate_writes_reached_commands_and_reports_the_unreachable_row() {
     let targets = dir.join("targets.csv");
     std::fs::write(&targets, &text).expect("write");
     let out = dir.join("commands.csv");
-    let run = hapcal(&[
-        "compensate",
-        "--device",
-        &urdf.display().to_string(),
-        "--tip",
-        "ball_link",
-        "--targets",
-        &targets.display().to_string(),
-        "--out",
-        &out.display().to_string(),
-    ]);
-    let err = stderr(&run);
-    assert_eq!(run.status.code(), Some(2), "{err}");
+    let run = compensate(&urdf, &targets, &out);
+    let err = assert_exit(&run, 2, &[]);
     assert!(
         err.contains(&format!("{}:4: not reached", targets.display())),
         "{err}"
@@ -105,20 +112,8 @@ fn compensate_writes_reached_commands_and_reports_the_unreachable_row() {
     // Run again onto the same --out: a target is still missed, so the existing file (an
     // earlier result, maybe complete) is not replaced, and the message says so.
     std::fs::write(&out, "an earlier result\n").expect("write");
-    let again = hapcal(&[
-        "compensate",
-        "--device",
-        &urdf.display().to_string(),
-        "--tip",
-        "ball_link",
-        "--targets",
-        &targets.display().to_string(),
-        "--out",
-        &out.display().to_string(),
-    ]);
-    let err = stderr(&again);
-    assert_eq!(again.status.code(), Some(2), "{err}");
-    assert!(err.contains("exists and was left as it was"), "{err}");
+    let again = compensate(&urdf, &targets, &out);
+    assert_exit(&again, 2, &["exists and was left as it was"]);
     assert_eq!(
         std::fs::read_to_string(&out).expect("kept"),
         "an earlier result\n"
@@ -131,19 +126,8 @@ fn compensate_names_the_bad_cell() {
     let urdf = calibrated_robot(&dir);
     let targets = dir.join("targets.csv");
     std::fs::write(&targets, "x,y,z\n0.4,0.1,0.6\n0.4,1;2,0.6\n").expect("write");
-    let run = hapcal(&[
-        "compensate",
-        "--device",
-        &urdf.display().to_string(),
-        "--tip",
-        "ball_link",
-        "--targets",
-        &targets.display().to_string(),
-        "--out",
-        &dir.join("commands.csv").display().to_string(),
-    ]);
-    let err = stderr(&run);
-    assert_eq!(run.status.code(), Some(2), "{err}");
+    let run = compensate(&urdf, &targets, &dir.join("commands.csv"));
+    let err = assert_exit(&run, 2, &[]);
     assert!(
         err.contains(&format!(
             "{}:3:2: expected a number in column \"y\", found \"1;2\"",
@@ -159,14 +143,13 @@ fn compensate_names_the_bad_cell() {
 fn compensate_reads_what_calibrate_writes() {
     let dir = scratch("compensate-calibrated");
     let urdf = dir.join("robot.urdf");
-    let run = hapcal(&[
+    hapcal_ok(&[
         "calibrate",
         "--model",
         "compliance",
         "--out",
         &urdf.display().to_string(),
     ]);
-    assert!(run.status.success(), "{}", stderr(&run));
     let sidecar = std::fs::read_to_string(dir.join("robot.calibration.toml")).expect("sidecar");
     assert!(
         sidecar.contains("\"compliance.joint_a4\"") && sidecar.contains("unit = \"rad/m\""),
@@ -177,18 +160,7 @@ fn compensate_reads_what_calibrate_writes() {
     let targets = dir.join("targets.csv");
     std::fs::write(&targets, "x,y,z\n0.45,0.1,0.7\n0.5,-0.1,0.6\n").expect("write");
     let out = dir.join("commands.csv");
-    let run = hapcal(&[
-        "compensate",
-        "--device",
-        &urdf.display().to_string(),
-        "--tip",
-        "ball_link",
-        "--targets",
-        &targets.display().to_string(),
-        "--out",
-        &out.display().to_string(),
-    ]);
-    assert!(run.status.success(), "{}", stderr(&run));
+    succeeded(compensate(&urdf, &targets, &out));
     let written = std::fs::read_to_string(&out).expect("commands");
     assert_eq!(written.lines().count(), 3, "{written}");
 }
@@ -310,7 +282,7 @@ fn compensation_with_a_calibration_from_simulated_data() {
     let train = dir.join("train.csv");
     std::fs::write(&train, csv).expect("write");
     let calibrated = dir.join("robot.urdf");
-    let run = hapcal(&[
+    hapcal_ok(&[
         "calibrate",
         "--device",
         &nominal_urdf.display().to_string(),
@@ -323,7 +295,6 @@ fn compensation_with_a_calibration_from_simulated_data() {
         "--out",
         &calibrated.display().to_string(),
     ]);
-    assert!(run.status.success(), "{}", stderr(&run));
     let loaded = Robot::load_urdf(&calibrated, &["ball_link"]).expect("calibrated");
     assert!(loaded.has_compliance());
     // The calibration identified the instrument frame (which absorbs the deviations of the
@@ -335,13 +306,7 @@ fn compensation_with_a_calibration_from_simulated_data() {
     let model = loaded.with_marker(0, &marker).expect("valid");
     let mut ws_m = model.workspace();
     let to_root = instrument.inverse();
-    let cfg = CompensationConfig {
-        tolerance_m: 1e-6,
-        tolerance_rad: 1e-6,
-        max_iterations: 50,
-        damping_m: 1e-3,
-        orientation_scale_m: 0.1,
-    };
+    let cfg = CompensationConfig::default();
     let gap = |a: &Pose, b: &Pose| {
         (0..3)
             .map(|i| (a.translation_m[i] - b.translation_m[i]).powi(2))
@@ -415,7 +380,7 @@ fn compensation_with_a_calibration_from_simulated_data() {
     let targets = dir.join("targets.csv");
     std::fs::write(&targets, text).expect("write");
     let out = dir.join("commands.csv");
-    let run = hapcal(&[
+    hapcal_ok(&[
         "compensate",
         "--device",
         &calibrated.display().to_string(),
@@ -427,7 +392,6 @@ fn compensation_with_a_calibration_from_simulated_data() {
         "--out",
         &out.display().to_string(),
     ]);
-    assert!(run.status.success(), "{}", stderr(&run));
     let written = std::fs::read_to_string(&out).expect("commands");
     assert_eq!(written.lines().count(), 21, "{written}");
     for (row, (_, target)) in written.lines().skip(1).zip(&cli_rows) {

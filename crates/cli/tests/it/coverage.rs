@@ -4,14 +4,13 @@
 //! standard errors and make the test rows worse (4.46 → 5.53 mm RMS,
 //! docs/results/extrapolation.md); the joint-range fold stops them.
 
-use super::{hapcal, root, scratch, show, stderr};
+use super::{on_ur10, scratch, show, stderr, ur10_csv};
 use serde_json::Value;
 
 /// The UR10 recording's rows split on wrist_1_joint at 0 rad, written to `dir`: (the rows at
 /// or above, the rows below).
 fn split_on_wrist_1(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
-    let data = root().join("fixtures/figaroh/ur10/calibration.csv");
-    let text = std::fs::read_to_string(&data).expect("UR10 data");
+    let text = std::fs::read_to_string(ur10_csv()).expect("UR10 data");
     let mut lines = text.lines();
     let header = lines.next().expect("header");
     let column = (header.split(','))
@@ -39,21 +38,9 @@ fn split_on_wrist_1(dir: &std::path::Path) -> (std::path::PathBuf, std::path::Pa
 fn the_report_names_the_uncovered_range_and_what_the_model_choice_did() {
     let dir = scratch("coverage");
     let (above, below) = split_on_wrist_1(&dir);
-    let urdf = show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf"));
-    let args = [
-        "calibrate",
-        "--device",
-        &urdf,
-        "--tip",
-        "wrist_3_link",
-        "--data",
-        &show(&above),
-        "--test",
-        &show(&below),
-        "--workspace",
-        &show(&below),
-    ];
-    let out = hapcal(&args);
+    let below = show(&below);
+    let args = ["--test", below.as_str(), "--workspace", below.as_str()];
+    let out = on_ur10("calibrate", &above, &args);
     assert!(out.status.success(), "{}", stderr(&out));
     let text = String::from_utf8_lossy(&out.stdout);
     for expected in [
@@ -69,7 +56,7 @@ fn the_report_names_the_uncovered_range_and_what_the_model_choice_did() {
     }
     let mut json_args = args.to_vec();
     json_args.push("--json");
-    let out = hapcal(&json_args);
+    let out = on_ur10("calibrate", &above, &json_args);
     assert!(out.status.success(), "{}", stderr(&out));
     let report: Value = serde_json::from_slice(&out.stdout).expect("JSON");
     let coverage = &report["coverage"];

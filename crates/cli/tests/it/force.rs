@@ -1,6 +1,6 @@
 //! `hapcal calibrate` on a haptic device's log and `hapcal force` end to end.
 
-use super::{hapcal, root, scratch, stderr};
+use super::{hapcal, hapcal_ok, root, scratch, stderr};
 
 /// The committed calibrated reference device is exactly what `hapcal calibrate` writes from
 /// the committed log (no truth file), and `hapcal force` prints the Fig. 12 table, the distributions and writes
@@ -10,7 +10,7 @@ fn force_reports_fig12_and_distributions() {
     let dir = root().join("fixtures/reference-device");
     let out = scratch("force");
     let calibrated = out.join("calibrated.toml");
-    let run = hapcal(&[
+    hapcal_ok(&[
         "calibrate",
         "--device",
         &dir.join("device.toml").display().to_string(),
@@ -19,13 +19,12 @@ fn force_reports_fig12_and_distributions() {
         "--out",
         &calibrated.display().to_string(),
     ]);
-    assert!(run.status.success(), "{}", stderr(&run));
     let written = std::fs::read_to_string(&calibrated).unwrap();
     let committed = std::fs::read_to_string(dir.join("calibrated.toml")).unwrap();
     assert_same_numbers(&written, &committed);
 
     let svg = out.join("fig12.svg");
-    let run = hapcal(&[
+    let run = hapcal_ok(&[
         "force",
         "--device",
         &dir.join("device.toml").display().to_string(),
@@ -38,7 +37,6 @@ fn force_reports_fig12_and_distributions() {
         "--svg",
         &svg.display().to_string(),
     ]);
-    assert!(run.status.success(), "{}", stderr(&run));
     let text = String::from_utf8_lossy(&run.stdout);
     for needle in [
         "| nominal | 0 |",
@@ -118,7 +116,7 @@ fn compliance_on_a_haptic_log_is_reported_written_and_read_back() {
     let out = scratch("haptic-compliance");
     let simulate = |seed: &str, poses: &str, name: &str| {
         let log = out.join(name);
-        let run = hapcal(&[
+        hapcal_ok(&[
             "simulate",
             "--truth",
             &dir.join("truth.toml").display().to_string(),
@@ -131,7 +129,6 @@ fn compliance_on_a_haptic_log_is_reported_written_and_read_back() {
             "--out",
             &log.display().to_string(),
         ]);
-        assert!(run.status.success(), "{}", stderr(&run));
         log.display().to_string()
     };
     let (train, test) = (
@@ -180,7 +177,7 @@ fn compliance_on_a_haptic_log_is_reported_written_and_read_back() {
         .find(|v| v.name == "joint_compliance.j2")
         .unwrap();
     assert_eq!(value.unit, "rad/(N·m)");
-    let run = hapcal(&[
+    hapcal_ok(&[
         "force",
         "--device",
         &device,
@@ -193,5 +190,4 @@ fn compliance_on_a_haptic_log_is_reported_written_and_read_back() {
         "--svg",
         &out.join("fig12.svg").display().to_string(),
     ]);
-    assert!(run.status.success(), "{}", stderr(&run));
 }

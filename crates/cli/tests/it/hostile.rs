@@ -3,7 +3,7 @@
 //! lengths, and a `--model` the data do not take. Each must end with a clear message and exit
 //! code, never a panic.
 
-use super::{hapcal, root, scratch, stderr};
+use super::{assert_exit, hapcal, hapcal_ok, root, scratch, show, stderr, ur10_csv, ur10_urdf};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
@@ -13,10 +13,6 @@ fn reference(file: &str) -> String {
         .join(file)
         .display()
         .to_string()
-}
-
-fn show(p: &Path) -> String {
-    p.display().to_string()
 }
 
 /// Runs `hapcal args` with its standard output on a pipe whose reading end is already closed:
@@ -35,14 +31,13 @@ fn hapcal_into_closed_pipe(args: &[&str]) -> Output {
 /// A simulated log of `poses` poses of the reference device, in `dir`.
 fn simulated_log(dir: &Path, poses: usize) -> PathBuf {
     let log = dir.join("log.csv");
-    let out = hapcal(&[
+    hapcal_ok(&[
         "simulate",
         "--poses",
         &poses.to_string(),
         "--out",
         &show(&log),
     ]);
-    assert!(out.status.success(), "{}", stderr(&out));
     log
 }
 
@@ -92,8 +87,7 @@ fn an_output_in_a_missing_folder_names_the_path_and_the_folder() {
     let missing = dir.join("no-such-folder");
     let out_path = missing.join("log.csv");
     let out = hapcal(&["simulate", "--poses", "5", "--out", &show(&out_path)]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let err = assert_exit(&out, 2, &[]);
     assert!(
         err.contains(&format!("cannot write {}", out_path.display()))
             && err.contains(&format!("{} does not exist", missing.display())),
@@ -126,8 +120,7 @@ fn an_output_that_is_an_input_is_refused_and_left_intact() {
             "--out",
             &show(alias),
         ]);
-        let err = stderr(&out);
-        assert_eq!(out.status.code(), Some(2), "{err}");
+        let err = assert_exit(&out, 2, &[]);
         assert!(
             err.contains(&format!("cannot write {}", alias.display()))
                 && err.contains("is an input"),
@@ -241,8 +234,7 @@ fn more_folds_than_training_configurations_is_an_error_naming_both() {
         "--folds",
         "1000",
     ]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let err = assert_exit(&out, 2, &[]);
     assert!(
         err.contains("--folds 1000") && err.contains("62 training configurations"),
         "{err}"
@@ -268,8 +260,7 @@ fn absurd_finite_lengths_are_refused_where_they_are_read() {
         "--data",
         &show(&bad_log),
     ]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let err = assert_exit(&out, 2, &[]);
     assert!(
         err.contains("bad.csv:3:8: distance_m = 1e308 m is out of range")
             && err.contains("±1000 m")
@@ -288,8 +279,7 @@ fn absurd_finite_lengths_are_refused_where_they_are_read() {
         "--out",
         &show(&dir.join("z.csv")),
     ]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let err = assert_exit(&out, 2, &[]);
     assert!(
         err.contains("big.toml:") && err.contains("a_m = 1e308 m is out of range"),
         "{err}"
@@ -306,8 +296,7 @@ fn absurd_finite_lengths_are_refused_where_they_are_read() {
     )
     .unwrap();
     let out = hapcal(&["import-urdf", &show(&big), "--tip", "ball_link"]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let err = assert_exit(&out, 2, &[]);
     assert!(
         err.contains("big.urdf:")
             && err.contains("joint \"joint_a2\" <origin xyz> = 1e308 m is out of range"),
@@ -399,8 +388,7 @@ fn compliance_on_a_haptic_device_without_a_handle_mass_is_refused_in_words() {
         "compliance",
     ];
     let out = hapcal(&args);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let err = assert_exit(&out, 2, &[]);
     assert!(
         err.contains("needs the handle's weight") && err.contains("no [handle] section"),
         "{err}"
@@ -437,8 +425,7 @@ fn transmissions_without_external_encoder_columns_is_refused() {
         "--model",
         "transmissions",
     ]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let err = assert_exit(&out, 2, &[]);
     assert!(
         err.contains("--model transmissions needs the external-encoder columns"),
         "{err}"
@@ -447,8 +434,8 @@ fn transmissions_without_external_encoder_columns_is_refused() {
 
 #[test]
 fn a_model_the_measurement_files_do_not_take_is_refused_by_its_value() {
-    let urdf = show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf"));
-    let csv = show(&root().join("fixtures/figaroh/ur10/calibration.csv"));
+    let urdf = ur10_urdf();
+    let csv = show(&ur10_csv());
     let args = ["--device", &urdf, "--tip", "wrist_3_link", "--data", &csv];
     let err = refused_model(&args, "transmissions");
     assert!(

@@ -5,7 +5,7 @@
 //! every file named on the command line, and of the files in every folder named, before and
 //! after). Fixtures are written into a scratch folder or read from `fixtures/` (never written).
 
-use super::{root, scratch};
+use super::{root, scratch, show};
 use std::collections::BTreeMap;
 use std::hash::{DefaultHasher, Hash, Hasher};
 use std::path::{Path, PathBuf};
@@ -31,10 +31,6 @@ const TIMEOUT: Duration = Duration::from_secs(120);
 
 fn fixture(relative: &str) -> String {
     show(&root().join("fixtures").join(relative))
-}
-
-fn show(p: &Path) -> String {
-    p.display().to_string()
 }
 
 /// Hash of every file `args` name, and of the files directly inside every folder they name.

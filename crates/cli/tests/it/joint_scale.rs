@@ -2,24 +2,8 @@
 //! calibrate` stops (exit 2) naming the class and the flag that fixes it, and with that flag
 //! the calibration goes on (exit 0). Tried on the UR10's camera recording (23 poses).
 
-use super::{hapcal, root, scratch, show, stderr};
+use super::{column, csv, on_ur10, scratch, stderr, ur10_rows};
 use std::path::Path;
-
-/// The UR10's camera recording, one row of cells per line (the header first).
-fn ur10_rows() -> Vec<Vec<String>> {
-    let text = std::fs::read_to_string(root().join("fixtures/figaroh/ur10/calibration.csv"))
-        .expect("the UR10 recording");
-    text.lines()
-        .map(|l| l.split(',').map(str::to_owned).collect())
-        .collect()
-}
-
-fn column(rows: &[Vec<String>], name: &str) -> usize {
-    rows[0]
-        .iter()
-        .position(|c| c == name)
-        .unwrap_or_else(|| panic!("no column {name}"))
-}
 
 /// Column `a` of the data rows replaced by `f(a, b)` of the values of columns `a` and `b`.
 fn edit(rows: &mut [Vec<String>], a: &str, b: &str, f: impl Fn(f64, f64) -> f64) {
@@ -31,21 +15,9 @@ fn edit(rows: &mut [Vec<String>], a: &str, b: &str, f: impl Fn(f64, f64) -> f64)
 }
 
 fn calibrate(data: &Path, extra: &[&str]) -> std::process::Output {
-    let urdf = show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf"));
-    let data = show(data);
-    let mut args = vec![
-        "calibrate",
-        "--device",
-        &urdf,
-        "--tip",
-        "wrist_3_link",
-        "--data",
-        &data,
-        "--model",
-        "frames-only",
-    ];
+    let mut args = vec!["--model", "frames-only"];
     args.extend_from_slice(extra);
-    hapcal(&args)
+    on_ur10("calibrate", data, &args)
 }
 
 /// The flag and its value printed after `fix: ` in `err`, as two arguments.
@@ -96,8 +68,7 @@ fn a_scaled_or_coupled_joint_stops_the_calibration_and_its_printed_flag_fixes_it
             ("elbow_joint", "elbow_joint")
         };
         edit(&mut rows, a, b, f);
-        let text: String = rows.iter().map(|r| r.join(",") + "\n").collect();
-        std::fs::write(&data, text).expect("write");
+        std::fs::write(&data, csv(&rows)).expect("write");
         let out = calibrate(&data, &[]);
         let err = stderr(&out);
         assert_eq!(out.status.code(), Some(2), "{name}: {err}");

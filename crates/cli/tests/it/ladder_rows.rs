@@ -2,18 +2,13 @@
 //! held out with the rows they copy, so they cannot move the ladder; few rows stop the ladder
 //! at the rungs every cross-validation fold can fit, with a note, not an error.
 
-use super::{hapcal, root, scratch, show, stderr};
+use super::{on_ur10, scratch, show, stderr, ur10_csv};
 use serde_json::Value;
 use std::path::Path;
 
-fn ur10() -> String {
-    show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf"))
-}
-
 /// The UR10's camera recording: its header and its 23 rows.
 fn ur10_lines() -> (String, Vec<String>) {
-    let text = std::fs::read_to_string(root().join("fixtures/figaroh/ur10/calibration.csv"))
-        .expect("the UR10 recording");
+    let text = std::fs::read_to_string(ur10_csv()).expect("the UR10 recording");
     let mut lines = text.lines().map(str::to_owned);
     let header = lines.next().expect("a header");
     (header, lines.collect())
@@ -28,20 +23,7 @@ fn write(dir: &Path, name: &str, header: &str, rows: &[String]) -> String {
 /// The JSON report of `hapcal calibrate --model auto` on the UR10 and `data` (exit 0 asserted),
 /// and its standard error.
 fn auto(data: &str) -> (Value, String) {
-    let ur10 = ur10();
-    let args = [
-        "calibrate",
-        "--device",
-        &ur10,
-        "--tip",
-        "wrist_3_link",
-        "--data",
-        data,
-        "--model",
-        "auto",
-        "--json",
-    ];
-    let out = hapcal(&args);
+    let out = on_ur10("calibrate", Path::new(data), &["--model", "auto", "--json"]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     let v = serde_json::from_slice(&out.stdout).expect("one JSON document");
     (v, stderr(&out))
@@ -181,18 +163,7 @@ fn few_rows_stop_the_ladder_at_the_rungs_every_fold_can_fit() {
         params >= residuals && residuals == 6 * 6,
         "{rung}: {params}, {residuals}"
     );
-    let ur10 = ur10();
-    let out = hapcal(&[
-        "calibrate",
-        "--device",
-        &ur10,
-        "--tip",
-        "wrist_3_link",
-        "--data",
-        &six,
-        "--model",
-        &rung,
-    ]);
+    let out = on_ur10("calibrate", Path::new(&six), &["--model", &rung]);
     assert_ne!(out.status.code(), Some(0), "--model {rung} on 6 rows");
     let err = stderr(&out);
     assert!(

@@ -37,6 +37,17 @@ fn hapcal(args: &[&str]) -> Output {
         .expect("the binary runs")
 }
 
+/// `hapcal args`, whose success is asserted.
+fn hapcal_ok(args: &[&str]) -> Output {
+    succeeded(hapcal(args))
+}
+
+/// `out`, whose success is asserted.
+fn succeeded(out: Output) -> Output {
+    assert!(out.status.success(), "{}", stderr(&out));
+    out
+}
+
 fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
@@ -44,6 +55,65 @@ fn stderr(out: &Output) -> String {
 /// A path as an argument.
 fn show(p: &Path) -> String {
     p.display().to_string()
+}
+
+/// Asserts that `out` ended with exit code `code` and that its standard error holds each of
+/// `needles`; returns that standard error.
+fn assert_exit(out: &Output, code: i32, needles: &[&str]) -> String {
+    let err = stderr(out);
+    assert_eq!(out.status.code(), Some(code), "{err}");
+    for n in needles {
+        assert!(err.contains(n), "{n:?} not in: {err}");
+    }
+    err
+}
+
+/// The bundled UR10's URDF (figaroh), as an argument.
+fn ur10_urdf() -> String {
+    show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf"))
+}
+
+/// The bundled UR10's camera recording (figaroh): 23 rows of 3 positions, roll, pitch, yaw,
+/// then the 6 joints.
+fn ur10_csv() -> PathBuf {
+    root().join("fixtures/figaroh/ur10/calibration.csv")
+}
+
+/// `hapcal <command> --device <the UR10's URDF> --tip wrist_3_link --data <data>` and `extra`.
+fn on_ur10(command: &str, data: &Path, extra: &[&str]) -> Output {
+    let (urdf, data) = (ur10_urdf(), show(data));
+    let mut args = vec![
+        command,
+        "--device",
+        &urdf,
+        "--tip",
+        "wrist_3_link",
+        "--data",
+        &data,
+    ];
+    args.extend_from_slice(extra);
+    hapcal(&args)
+}
+
+/// The UR10's camera recording, one row of cells per line (the header first).
+fn ur10_rows() -> Vec<Vec<String>> {
+    let text = std::fs::read_to_string(ur10_csv()).expect("the UR10 recording");
+    text.lines()
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect()
+}
+
+/// Rows of cells (the header first) as CSV text.
+fn csv(rows: &[Vec<String>]) -> String {
+    rows.iter().map(|r| r.join(",") + "\n").collect()
+}
+
+/// The index of column `name` in the header `rows[0]`.
+fn column(rows: &[Vec<String>], name: &str) -> usize {
+    rows[0]
+        .iter()
+        .position(|c| c == name)
+        .unwrap_or_else(|| panic!("no column {name}"))
 }
 
 /// The residual before → after in a setup finding, mm: the numbers after `key` (the
@@ -327,8 +397,7 @@ fn zero_counts_are_usage_errors_naming_the_argument() {
 
 #[test]
 fn import_urdf_writes_a_device_file_that_calibrates_alike() {
-    let out = hapcal(&["import-urdf", &iiwa(), "--tip", "ball_link"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    let out = hapcal_ok(&["import-urdf", &iiwa(), "--tip", "ball_link"]);
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(
         text.contains("joint_a4") && text.contains("ball_joint"),
@@ -359,7 +428,7 @@ fn simulated_log_calibrates_with_the_distance_model() {
     let dir = scratch("simulate");
     let log = dir.join("log.csv");
     let truth = root().join("fixtures/reference-device/truth.toml");
-    let out = hapcal(&[
+    hapcal_ok(&[
         "simulate",
         "--truth",
         &truth.display().to_string(),
@@ -370,7 +439,6 @@ fn simulated_log_calibrates_with_the_distance_model() {
         "--out",
         &log.display().to_string(),
     ]);
-    assert!(out.status.success(), "{}", stderr(&out));
     let text = std::fs::read_to_string(&log).unwrap();
     assert_eq!(text.lines().count(), 121, "header + 120 rows");
     // Without the external encoders' columns auto has no transmissions rung: geometric, then
@@ -439,8 +507,7 @@ fn without_ext_columns(text: &str) -> String {
 /// margins it states for `--model auto` are the ones the code uses.
 #[test]
 fn every_help_is_plain_text() {
-    let top = hapcal(&["--help"]);
-    assert!(top.status.success(), "{}", stderr(&top));
+    let top = hapcal_ok(&["--help"]);
     let top = String::from_utf8_lossy(&top.stdout).into_owned();
     // The subcommands, as `hapcal --help` lists them.
     let subcommands: Vec<String> = (top.lines())
@@ -504,8 +571,7 @@ fn every_help_is_plain_text() {
 /// words, never by a Rust name.
 #[test]
 fn reports_name_models_by_their_command_line_values() {
-    let out = hapcal(&["calibrate", "--model", "mass-compliance"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    let out = hapcal_ok(&["calibrate", "--model", "mass-compliance"]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("model: mass-compliance;"), "{text}");
     assert!(text.contains("LM: converged ("), "{text}");
@@ -616,7 +682,7 @@ fn plan_poses_writes_the_chosen_readings_and_beats_a_random_set() {
     let dir = scratch("plan");
     let out = dir.join("poses.csv");
     let device = root().join("fixtures/reference-device/device.toml");
-    let run = hapcal(&[
+    let run = hapcal_ok(&[
         "plan-poses",
         "--device",
         device.to_str().unwrap(),
@@ -629,7 +695,6 @@ fn plan_poses_writes_the_chosen_readings_and_beats_a_random_set() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert!(run.status.success(), "{}", stderr(&run));
     let csv = std::fs::read_to_string(&out).unwrap();
     let mut lines = csv.lines();
     assert_eq!(lines.next(), Some("q1,q2,q3,q4,q5,q6,q7"));
@@ -697,11 +762,11 @@ fn diagnose_reports_name_the_baseline_and_the_data_in_words() {
     let arm = hapcal(&[
         "diagnose",
         "--device",
-        &show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf")),
+        &ur10_urdf(),
         "--tip",
         "wrist_3_link",
         "--data",
-        &show(&root().join("fixtures/figaroh/ur10/calibration.csv")),
+        &show(&ur10_csv()),
         "--test-last",
         "0.3",
         "--svg",
@@ -802,7 +867,7 @@ fn diagnosis_and_calibration_give_the_same_cross_validated_error_on_distance_log
 fn a_workspace_beyond_the_training_range_adds_joint_range_folds() {
     let dir = scratch("workspace");
     let show = |p: &Path| p.display().to_string();
-    let data = root().join("fixtures/figaroh/ur10/calibration.csv");
+    let data = ur10_csv();
     // The first training row with shoulder_pan_joint 1 rad past the largest reading (the
     // UR10's readings lie within ±π, its limits ±2π).
     let text = std::fs::read_to_string(&data).expect("UR10 data");
@@ -827,10 +892,10 @@ fn a_workspace_beyond_the_training_range_adds_joint_range_folds() {
     let cells: Vec<String> = beyond.iter().map(f64::to_string).collect();
     let workspace = dir.join("workspace.csv");
     std::fs::write(&workspace, format!("{header}\n{}\n", cells.join(","))).expect("write");
-    let out = hapcal(&[
+    let out = hapcal_ok(&[
         "calibrate",
         "--device",
-        &show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf")),
+        &ur10_urdf(),
         "--tip",
         "wrist_3_link",
         "--data",
@@ -839,7 +904,6 @@ fn a_workspace_beyond_the_training_range_adds_joint_range_folds() {
         &show(&workspace),
         "--json",
     ]);
-    assert!(out.status.success(), "{}", stderr(&out));
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
     let folds = report["range_folds"].as_array().expect("range folds");
     assert!(
@@ -850,12 +914,7 @@ fn a_workspace_beyond_the_training_range_adds_joint_range_folds() {
     );
     // Socket recordings have no joint-range folds: the option is refused by name.
     let sockets = hapcal(&["calibrate", "--workspace", &show(&workspace)]);
-    assert_eq!(sockets.status.code(), Some(2), "{}", stderr(&sockets));
-    assert!(
-        stderr(&sockets).contains("--workspace"),
-        "{}",
-        stderr(&sockets)
-    );
+    assert_exit(&sockets, 2, &["--workspace"]);
 }
 
 /// The diagnosis and the calibration fit one model with one code path: on the bundled UR10

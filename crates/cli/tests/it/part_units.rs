@@ -4,21 +4,11 @@
 //! in millimetres (past the reader's ±1000 m, so the reader stops first) and in centimetres
 //! (within the reader's range: the check's own hypotheses find them).
 
-use super::{hapcal, root, scratch, show, stderr};
+use super::{csv, on_ur10, scratch, stderr, ur10_rows};
 use std::path::Path;
 
-/// The UR10's camera recording, one row of cells per line (the header first).
-fn ur10_rows() -> Vec<Vec<String>> {
-    let text = std::fs::read_to_string(root().join("fixtures/figaroh/ur10/calibration.csv"))
-        .expect("the UR10 recording");
-    text.lines()
-        .map(|l| l.split(',').map(str::to_owned).collect())
-        .collect()
-}
-
 fn write_rows(path: &Path, rows: &[Vec<String>]) {
-    let text: String = rows.iter().map(|r| r.join(",") + "\n").collect();
-    std::fs::write(path, text).expect("write");
+    std::fs::write(path, csv(rows)).expect("write");
 }
 
 /// `rows` (header first) with the positions `x1, y1, z1` of data rows `from..` times `factor`.
@@ -32,17 +22,7 @@ fn scale_positions(rows: &mut [Vec<String>], from: usize, factor: f64) {
 }
 
 fn check(data: &Path) -> std::process::Output {
-    let urdf = show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf"));
-    let data = show(data);
-    hapcal(&[
-        "check",
-        "--device",
-        &urdf,
-        "--tip",
-        "wrist_3_link",
-        "--data",
-        &data,
-    ])
+    on_ur10("check", data, &[])
 }
 
 #[test]

@@ -1,14 +1,10 @@
 //! `hapcal plan-poses --data … --workspace …`: the poses to add to rows already measured, on
 //! figaroh's UR10 camera data (23 poses of a marker), and its refusals in words.
 
-use super::{hapcal, root, scratch, show, stderr};
-
-fn ur10() -> String {
-    show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf"))
-}
+use super::{hapcal, scratch, show, stderr, ur10_csv, ur10_urdf};
 
 fn measured() -> String {
-    show(&root().join("fixtures/figaroh/ur10/calibration.csv"))
+    show(&ur10_csv())
 }
 
 /// A workspace of `n` configurations with the elbow bent one way (−3 to 0 rad), the other
@@ -57,7 +53,7 @@ fn poses_added_to_measured_rows_are_written_and_lower_the_predicted_sigma() {
     let args = [
         "plan-poses",
         "--device",
-        &ur10(),
+        &ur10_urdf(),
         "--tip",
         "wrist_3_link",
         "--data",
@@ -114,7 +110,13 @@ fn poses_added_to_measured_rows_are_refused_in_words() {
     let ws = workspace(&dir, 5);
     let joints_only = dir.join("joints.csv");
     std::fs::write(&joints_only, "q1,q2,q3,q4,q5,q6\n0,0,0,0,0,0\n").expect("written");
-    let base = ["plan-poses", "--device", &ur10(), "--tip", "wrist_3_link"];
+    let base = [
+        "plan-poses",
+        "--device",
+        &ur10_urdf(),
+        "--tip",
+        "wrist_3_link",
+    ];
     let data = measured();
     let joints = show(&joints_only);
     let cases: [(Vec<&str>, &str); 5] = [

@@ -3,18 +3,19 @@
 //! a hand-written two-joint arm with a schema-1 calibration record (region flag, σ).
 
 use std::path::{Path, PathBuf};
+use std::process::Output;
 
 use hapcal_runtime::{Pose, Robot};
 use serde_json::Value;
 
-use crate::{hapcal, root, scratch, show, stderr};
+use crate::{hapcal, hapcal_ok, root, scratch, show, stderr, succeeded, ur10_csv};
 
 /// The UR10 calibrated (geometric) on the bundled poses, written as `dir/ur10.urdf` with its
 /// sidecar; returns the URDF and the calibration's JSON report.
 pub(crate) fn calibrated_ur10(dir: &Path) -> (PathBuf, Value) {
     let ur10 = root().join("fixtures/figaroh/ur10");
     let out = dir.join("ur10.urdf");
-    let run = hapcal(&[
+    let run = hapcal_ok(&[
         "calibrate",
         "--device",
         &show(&ur10.join("ur10_robot.urdf")),
@@ -28,7 +29,6 @@ pub(crate) fn calibrated_ur10(dir: &Path) -> (PathBuf, Value) {
         "--out",
         &show(&out),
     ]);
-    assert!(run.status.success(), "{}", stderr(&run));
     let report = serde_json::from_slice(&run.stdout).expect("one JSON document");
     (out, report)
 }
@@ -79,9 +79,9 @@ fn rpy_rotation(roll: f64, pitch: f64, yaw: f64) -> [[f64; 3]; 3] {
 fn predictions_at_the_training_rows_are_the_runtime_s_and_the_errors_the_calibration_s() {
     let dir = scratch("predict-ur10");
     let (urdf, report) = calibrated_ur10(&dir);
-    let data = root().join("fixtures/figaroh/ur10/calibration.csv");
+    let data = ur10_csv();
     let root_csv = dir.join("root.csv");
-    let run = hapcal(&[
+    let run = hapcal_ok(&[
         "predict",
         "--device",
         &show(&urdf),
@@ -93,10 +93,9 @@ fn predictions_at_the_training_rows_are_the_runtime_s_and_the_errors_the_calibra
         "--out",
         &show(&root_csv),
     ]);
-    assert!(run.status.success(), "{}", stderr(&run));
     let summary = String::from_utf8_lossy(&run.stdout);
     assert!(summary.contains("predicted 23 rows"), "{summary}");
-    let run = hapcal(&[
+    let run = hapcal_ok(&[
         "predict",
         "--device",
         &show(&urdf),
@@ -107,7 +106,6 @@ fn predictions_at_the_training_rows_are_the_runtime_s_and_the_errors_the_calibra
         "--instrument-frame",
         "--json",
     ]);
-    assert!(run.status.success(), "{}", stderr(&run));
     let v: Value = serde_json::from_slice(&run.stdout).expect("one JSON document");
 
     let robot = Robot::load_urdf(&urdf, &["wrist_3_link"]).expect("the written robot");
@@ -258,18 +256,18 @@ lower = [{:?}]
 const READINGS: &str = "joint1,joint2\n0.1,0.7\n0.2,1.5\n-0.54,0.5\n";
 
 fn predict_json(urdf: &Path, readings: &Path) -> Value {
-    let run = hapcal(&[
-        "predict",
-        "--device",
-        &show(urdf),
-        "--tip",
-        "tip",
-        "--data",
-        &show(readings),
-        "--json",
-    ]);
-    assert!(run.status.success(), "{}", stderr(&run));
+    let run = succeeded(predict_arm(urdf, readings, &["--json"]));
     serde_json::from_slice(&run.stdout).expect("one JSON document")
+}
+
+/// `hapcal predict` of the arm `urdf` (tip `tip`) on `readings`, with `extra`.
+fn predict_arm(urdf: &Path, readings: &Path, extra: &[&str]) -> Output {
+    let (urdf, readings) = (show(urdf), show(readings));
+    let mut args = vec![
+        "predict", "--device", &urdf, "--tip", "tip", "--data", &readings,
+    ];
+    args.extend_from_slice(extra);
+    hapcal(&args)
 }
 
 /// The region flag (needs the runtime to read the record's `[region]`), in `predict` and in
@@ -290,17 +288,7 @@ fn a_reading_outside_the_calibration_s_region_is_flagged() {
     assert_eq!(v["n_outside_region"], 1);
     // The text names the line, the joint and the distance.
     let out = dir.join("predicted.csv");
-    let run = hapcal(&[
-        "predict",
-        "--device",
-        &show(&urdf),
-        "--tip",
-        "tip",
-        "--data",
-        &show(&readings),
-        "--out",
-        &show(&out),
-    ]);
+    let run = predict_arm(&urdf, &readings, &["--out", &show(&out)]);
     let text = String::from_utf8_lossy(&run.stdout);
     assert!(
         text.contains(&format!(
@@ -393,32 +381,14 @@ fn bad_readings_and_outputs_are_named() {
     std::fs::write(&urdf, ARM).expect("write");
     let readings = dir.join("readings.csv");
     std::fs::write(&readings, "joint1,joint2\n0.1,0.7\n0.2,abc\n").expect("write");
-    let run = hapcal(&[
-        "predict",
-        "--device",
-        &show(&urdf),
-        "--tip",
-        "tip",
-        "--data",
-        &show(&readings),
-    ]);
+    let run = predict_arm(&urdf, &readings, &[]);
     assert_eq!(run.status.code(), Some(2));
     let err = stderr(&run);
     assert!(
         err.contains(&format!("{}:3:2", readings.display())) && err.contains("abc"),
         "{err}"
     );
-    let run = hapcal(&[
-        "predict",
-        "--device",
-        &show(&urdf),
-        "--tip",
-        "tip",
-        "--data",
-        &show(&readings),
-        "--out",
-        &show(&readings),
-    ]);
+    let run = predict_arm(&urdf, &readings, &["--out", &show(&readings)]);
     assert_eq!(run.status.code(), Some(2));
     assert!(
         std::fs::read_to_string(&readings).is_ok_and(|t| t.contains("abc")),
@@ -426,16 +396,7 @@ fn bad_readings_and_outputs_are_named() {
     );
     // Good readings of the robot without a record: predicted, no σ, said so.
     std::fs::write(&readings, "joint1,joint2\n0.1,0.7\n").expect("write");
-    let run = hapcal(&[
-        "predict",
-        "--device",
-        &show(&urdf),
-        "--tip",
-        "tip",
-        "--data",
-        &show(&readings),
-    ]);
-    assert!(run.status.success(), "{}", stderr(&run));
+    let run = succeeded(predict_arm(&urdf, &readings, &[]));
     let csv = String::from_utf8_lossy(&run.stdout);
     let mut lines = csv.lines();
     assert_eq!(

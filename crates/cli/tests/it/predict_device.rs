@@ -9,7 +9,7 @@ use std::path::Path;
 
 use serde_json::Value;
 
-use crate::{hapcal, root, scratch, show, stderr};
+use crate::{assert_exit, hapcal, hapcal_ok, root, scratch, show, stderr};
 
 /// Agreement of predict's and calibrate's training RMS, m: the same model in two
 /// implementations, written with every digit; rounding stays far below it.
@@ -98,12 +98,7 @@ fn a_calibrated_dh_robot_predicts_its_training_rows_as_calibrate_reported_them()
         "--data",
         &show(&data),
     ]);
-    assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
-    assert!(
-        stderr(&refused).contains("predict it without --tip"),
-        "{}",
-        stderr(&refused)
-    );
+    assert_exit(&refused, 2, &["predict it without --tip"]);
     compensate_onto_predictions(&dir, &out, &v);
 }
 
@@ -121,7 +116,7 @@ fn compensate_onto_predictions(dir: &Path, device: &Path, root_frame: &Value) {
     let targets_path = dir.join("targets.csv");
     std::fs::write(&targets_path, targets).expect("write the targets");
     let commands = dir.join("commands.csv");
-    let run = hapcal(&[
+    hapcal_ok(&[
         "compensate",
         "--device",
         &show(device),
@@ -130,7 +125,6 @@ fn compensate_onto_predictions(dir: &Path, device: &Path, root_frame: &Value) {
         "--out",
         &show(&commands),
     ]);
-    assert!(run.status.success(), "{}", stderr(&run));
     let text = std::fs::read_to_string(&commands).expect("the commands");
     assert_eq!(text.lines().count(), 6, "{text}");
     assert!(text.starts_with("line,q1,q2,"), "{text}");
@@ -195,10 +189,5 @@ fn a_calibrated_haptic_device_predicts_its_log_s_distances_as_calibrate_reported
         &show(&log),
         "--instrument-frame",
     ]);
-    assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
-    assert!(
-        stderr(&refused).contains("it has no instrument frame"),
-        "{}",
-        stderr(&refused)
-    );
+    assert_exit(&refused, 2, &["it has no instrument frame"]);
 }

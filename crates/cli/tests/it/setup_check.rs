@@ -6,23 +6,13 @@
 //! millimetres and below a degree, frames only): the mistake must be named with its fix, and
 //! the command must stop with exit code 2.
 
-use super::{before_after_mm, calibration_warnings, hapcal, root, scratch, show, stderr};
+use super::{
+    assert_exit, before_after_mm, calibration_warnings, column, csv, hapcal, root, scratch, show,
+    stderr, ur10_csv, ur10_rows, ur10_urdf,
+};
 use hapcal_kinematics::UnitQuaternion;
 use std::path::{Path, PathBuf};
 use std::process::Output;
-
-/// The UR10's camera recording (23 rows: 3 positions, roll, pitch, yaw, then the 6 joints).
-fn ur10_rows() -> Vec<Vec<String>> {
-    let text = std::fs::read_to_string(root().join("fixtures/figaroh/ur10/calibration.csv"))
-        .expect("the UR10 recording");
-    text.lines()
-        .map(|l| l.split(',').map(str::to_owned).collect())
-        .collect()
-}
-
-fn csv(rows: &[Vec<String>]) -> String {
-    rows.iter().map(|r| r.join(",") + "\n").collect()
-}
 
 fn write(dir: &Path, name: &str, rows: &[Vec<String>]) -> String {
     let path = dir.join(name);
@@ -30,19 +20,8 @@ fn write(dir: &Path, name: &str, rows: &[Vec<String>]) -> String {
     show(&path)
 }
 
-fn ur10() -> String {
-    show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf"))
-}
-
 fn tiago_csv() -> PathBuf {
     root().join("fixtures/figaroh/tiago/qualysis_base_hand_calibration.csv")
-}
-
-fn column(rows: &[Vec<String>], name: &str) -> usize {
-    rows[0]
-        .iter()
-        .position(|c| c == name)
-        .unwrap_or_else(|| panic!("no column {name}"))
 }
 
 /// `rows` with `f` applied to the numbers of column `name`.
@@ -117,17 +96,18 @@ fn check(args: &[&str]) -> Output {
 fn ur10_finds(data: &str, tip: &str, extra: &[&str], needles: &[&str]) -> String {
     let mut args = vec!["--device", &ur10_path_leak(), "--tip", tip, "--data", data];
     args.extend_from_slice(extra);
-    let out = check(&args);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    for n in needles {
-        assert!(err.contains(n), "{n:?} not in: {err}");
-    }
-    err
+    assert_exit(&check(&args), 2, needles)
+}
+
+/// [`ur10_finds`] on `rows` written as `dir/name` with the tip `wrist_3_link`; each fix it
+/// names restores the residual of the recording as given ([`assert_restored`]).
+fn ur10_restored(dir: &Path, name: &str, rows: &[Vec<String>], needles: &[&str]) {
+    let err = ur10_finds(&write(dir, name, rows), "wrist_3_link", &[], needles);
+    assert_restored(&err);
 }
 
 fn ur10_path_leak() -> &'static str {
-    Box::leak(ur10().into_boxed_str())
+    Box::leak(ur10_urdf().into_boxed_str())
 }
 
 /// The frames-only position residual of the UR10 recording as given: a few millimetres
@@ -151,11 +131,11 @@ fn bundled_measurement_recordings() -> Vec<Vec<String>> {
     vec![
         vec![
             "--device".into(),
-            ur10(),
+            ur10_urdf(),
             "--tip".into(),
             "wrist_3_link".into(),
             "--data".into(),
-            show(&root().join("fixtures/figaroh/ur10/calibration.csv")),
+            show(&ur10_csv()),
         ],
         vec![
             "--device".into(),
@@ -219,10 +199,11 @@ fn positions_in_millimetres_read_as_metres_name_the_length_unit() {
     let urdf = show(&root().join("fixtures/figaroh/tiago/tiago.urdf"));
     let args = ["--device", &urdf, "--tip", "arm_7_link", "--data", &data];
     let out = check(&args);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(err.contains("millimetres, read as metres"), "{err}");
-    assert!(err.contains("fix: --length-unit mm"), "{err}");
+    let err = assert_exit(
+        &out,
+        2,
+        &["millimetres, read as metres", "fix: --length-unit mm"],
+    );
     // Motion capture of a mobile manipulator's hand: a frames-only residual of millimetres
     // once read in mm, hundreds of metres before.
     let (before, after) = before_after_mm(&err, "frames-only RMS");
@@ -232,25 +213,15 @@ fn positions_in_millimetres_read_as_metres_name_the_length_unit() {
     calibrate.extend_from_slice(&args);
     calibrate.extend_from_slice(&["--model", "frames-only"]);
     let out = hapcal(&calibrate);
-    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("--length-unit mm"),
-        "{}",
-        stderr(&out)
-    );
+    assert_exit(&out, 2, &["--length-unit mm"]);
     calibrate.push("--accept-setup");
     let out = hapcal(&calibrate);
-    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("accepted with --accept-setup"),
-        "{}",
-        stderr(&out)
-    );
+    assert_exit(&out, 0, &["accepted with --accept-setup"]);
 }
 
 #[test]
 fn metres_read_as_millimetres_name_the_length_unit() {
-    let data = show(&root().join("fixtures/figaroh/ur10/calibration.csv"));
+    let data = show(&ur10_csv());
     let err = ur10_finds(
         &data,
         "wrist_3_link",
@@ -262,7 +233,7 @@ fn metres_read_as_millimetres_name_the_length_unit() {
 
 #[test]
 fn angles_in_radians_read_as_degrees_name_the_angle_unit() {
-    let data = show(&root().join("fixtures/figaroh/ur10/calibration.csv"));
+    let data = show(&ur10_csv());
     let err = ur10_finds(
         &data,
         "wrist_3_link",
@@ -279,37 +250,35 @@ fn orientations_in_degrees_name_the_orientation_columns() {
     for c in ["phix1", "phiy1", "phiz1"] {
         map_column(&mut rows, c, &f64::to_degrees);
     }
-    let err = ur10_finds(
-        &write(&dir, "phi_deg.csv", &rows),
-        "wrist_3_link",
-        &[],
+    ur10_restored(
+        &dir,
+        "phi_deg.csv",
+        &rows,
         &[
             "phix, phiy, phiz are in degrees",
             "fix: convert phix, phiy, phiz to radians",
         ],
     );
-    assert_restored(&err);
 }
 
 #[test]
 fn quaternions_scalar_last_name_the_order() {
     let dir = scratch("setup-xyzw");
     let rows = with_quaternions(&ur10_rows(), &|[w, x, y, z]| [x, y, z, w]);
-    let err = ur10_finds(
-        &write(&dir, "xyzw.csv", &rows),
-        "wrist_3_link",
-        &[],
+    ur10_restored(
+        &dir,
+        "xyzw.csv",
+        &rows,
         &[
             "[quaternion-order]",
             "rename the columns qw, qx, qy, qz to qx, qy, qz, qw",
         ],
     );
-    assert_restored(&err);
     // The same quaternions in the right order pass.
     let rows = with_quaternions(&ur10_rows(), &|q| q);
     let out = check(&[
         "--device",
-        &ur10(),
+        &ur10_urdf(),
         "--tip",
         "wrist_3_link",
         "--data",
@@ -322,13 +291,12 @@ fn quaternions_scalar_last_name_the_order() {
 fn inverse_quaternions_name_the_conjugate() {
     let dir = scratch("setup-conj");
     let rows = with_quaternions(&ur10_rows(), &|[w, x, y, z]| [w, -x, -y, -z]);
-    let err = ur10_finds(
-        &write(&dir, "conj.csv", &rows),
-        "wrist_3_link",
-        &[],
+    ur10_restored(
+        &dir,
+        "conj.csv",
+        &rows,
         &["[quaternion-inverse]", "negate qx, qy, qz"],
     );
-    assert_restored(&err);
 }
 
 #[test]
@@ -336,13 +304,12 @@ fn roll_and_yaw_swapped_name_the_columns() {
     let dir = scratch("setup-euler");
     let mut rows = ur10_rows();
     swap_names(&mut rows, "phix1", "phiz1");
-    let err = ur10_finds(
-        &write(&dir, "euler.csv", &rows),
-        "wrist_3_link",
-        &[],
+    ur10_restored(
+        &dir,
+        "euler.csv",
+        &rows,
         &["[euler-order]", "swap the columns phix and phiz"],
     );
-    assert_restored(&err);
 }
 
 #[test]
@@ -359,13 +326,12 @@ fn a_mirrored_axis_is_named() {
         mirror[(2, 2)] = 1.0;
         UnitQuaternion::from_matrix(&(mirror * m * mirror))
     });
-    let err = ur10_finds(
-        &write(&dir, "mirror.csv", &rows),
-        "wrist_3_link",
-        &[],
+    ur10_restored(
+        &dir,
+        "mirror.csv",
+        &rows,
         &["[mirrored-axis]", "left-handed frame", "negate that column"],
     );
-    assert_restored(&err);
 }
 
 #[test]
@@ -381,13 +347,12 @@ fn swapped_position_axes_are_named() {
         p[(1, 1)] = 1.0;
         UnitQuaternion::from_matrix(&(p * m * p))
     });
-    let err = ur10_finds(
-        &write(&dir, "swapxz.csv", &rows),
-        "wrist_3_link",
-        &[],
+    ur10_restored(
+        &dir,
+        "swapxz.csv",
+        &rows,
         &["[mirrored-axis]", "two axes swapped", "swap those columns"],
     );
-    assert_restored(&err);
 }
 
 #[test]
@@ -408,7 +373,7 @@ fn swapped_joint_columns_are_named() {
     let out = hapcal(&[
         "diagnose",
         "--device",
-        &ur10(),
+        &ur10_urdf(),
         "--tip",
         "wrist_3_link",
         "--data",
@@ -416,11 +381,10 @@ fn swapped_joint_columns_are_named() {
         "--svg",
         &svg,
     ]);
-    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("swap the columns wrist_1_joint and wrist_2_joint"),
-        "{}",
-        stderr(&out)
+    assert_exit(
+        &out,
+        2,
+        &["swap the columns wrist_1_joint and wrist_2_joint"],
     );
 }
 
@@ -441,13 +405,12 @@ fn reversed_joint_columns_are_named() {
             *c = joints[5 - j].to_owned();
         }
     }
-    let err = ur10_finds(
-        &write(&dir, "rev.csv", &rows),
-        "wrist_3_link",
-        &[],
+    ur10_restored(
+        &dir,
+        "rev.csv",
+        &rows,
         &["reversed", "fix: reverse the order of the joint columns"],
     );
-    assert_restored(&err);
 }
 
 #[test]
@@ -474,13 +437,12 @@ fn joint_rows_out_of_step_are_named_with_the_shift() {
             }
             out.push(row);
         }
-        let err = ur10_finds(
-            &write(&dir, &format!("shift{shift}.csv"), &out),
-            "wrist_3_link",
-            &[],
+        ur10_restored(
+            &dir,
+            &format!("shift{shift}.csv"),
+            &out,
             &["[row-shift]", needle, "move the joint columns"],
         );
-        assert_restored(&err);
     }
 }
 
@@ -507,7 +469,7 @@ fn a_frozen_joint_column_is_named() {
 
 #[test]
 fn a_tip_one_or_two_links_too_high_names_the_tip() {
-    let data = show(&root().join("fixtures/figaroh/ur10/calibration.csv"));
+    let data = show(&ur10_csv());
     for (tip, needle) in [
         ("wrist_2_link", "1 moving joint below the tip wrist_2_link"),
         ("wrist_1_link", "2 moving joints below the tip wrist_1_link"),
@@ -530,10 +492,7 @@ fn a_tip_below_the_markers_whose_joint_has_no_column_names_the_tip_above() {
         "--data",
         &data,
     ]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(err.contains("[tip-link]"), "{err}");
-    assert!(err.contains("fix: use --tip hand_palm_link"), "{err}");
+    assert_exit(&out, 2, &["[tip-link]", "fix: use --tip hand_palm_link"]);
     // The calibration stops with the same fix, where the reader alone named the column.
     let out = hapcal(&[
         "calibrate",
@@ -544,12 +503,7 @@ fn a_tip_below_the_markers_whose_joint_has_no_column_names_the_tip_above() {
         "--data",
         &data,
     ]);
-    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("use --tip hand_palm_link"),
-        "{}",
-        stderr(&out)
-    );
+    assert_exit(&out, 2, &["use --tip hand_palm_link"]);
 }
 
 #[test]
@@ -559,8 +513,7 @@ fn tips_in_the_wrong_order_are_named() {
     let out = check(&[
         "--device", &urdf, "--tip", "r_hand", "--tip", "l_hand", "--data", &data,
     ]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let err = assert_exit(&out, 2, &[]);
     assert!(
         err.contains("[swapped-tips]") || err.contains("swapped"),
         "{err}"
@@ -608,8 +561,7 @@ fn another_robots_data_fit_no_hypothesis() {
         "--out",
         &dir.join("cal.toml").display().to_string(),
     ]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(0), "{err}");
+    let err = assert_exit(&out, 0, &[]);
     assert!(
         err.contains("[another-device]: the calibrated frames-only model still misses"),
         "{err}"
@@ -624,7 +576,7 @@ fn check_json_is_one_document_with_the_findings() {
     let data = write(&dir, "swapj.csv", &rows);
     let out = check(&[
         "--device",
-        &ur10(),
+        &ur10_urdf(),
         "--tip",
         "wrist_3_link",
         "--data",
@@ -661,11 +613,7 @@ fn tiago_calibrate_fails(data: &str, needles: &[&str]) -> String {
         "--model",
         "frames-only",
     ]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    for n in needles {
-        assert!(err.contains(n), "{n:?} not in: {err}");
-    }
+    let err = assert_exit(&out, 2, needles);
     err
 }
 
@@ -752,7 +700,7 @@ fn camera_positions_far_noisier_than_a_camera_warn() {
     let data = write(&dir, "noisy.csv", &rows);
     let warnings = calibration_warnings(&[
         "--device",
-        &ur10(),
+        &ur10_urdf(),
         "--tip",
         "wrist_3_link",
         "--data",
@@ -775,8 +723,7 @@ fn a_tip_one_short_link_too_high_whose_joint_the_file_names_is_an_error() {
     let urdf = show(&root().join("fixtures/figaroh/tiago/tiago.urdf"));
     let data = show(&tiago_csv());
     let out = check(&["--device", &urdf, "--tip", "arm_6_link", "--data", &data]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let err = assert_exit(&out, 2, &[]);
     for n in [
         "[tip-link]",
         "the files have a column for arm_7_joint",

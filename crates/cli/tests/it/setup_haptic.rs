@@ -7,7 +7,7 @@
 //! deviations and transmission errors, a few millimetres (2.5 mm on the reference truth);
 //! every corrected residual must come back to that, and the mistaken one be far above it.
 
-use super::{before_after_mm, hapcal, root, scratch, stderr};
+use super::{assert_exit, before_after_mm, hapcal, hapcal_ok, root, scratch, stderr};
 use std::path::Path;
 
 fn device() -> String {
@@ -79,11 +79,7 @@ fn finds(name: &str, edit: &Edit, needles: &[&str], absent: &[&str], restored: b
     edit(&header, &mut rows);
     let bad = write(&dir.join(format!("{name}.csv")), &header, &rows);
     let out = hapcal(&["check", "--device", &device(), "--data", &bad]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    for n in needles {
-        assert!(err.contains(n), "{n:?} not in: {err}");
-    }
+    let err = assert_exit(&out, 2, needles);
     for n in absent {
         assert!(!err.contains(n), "{n:?} in: {err}");
     }
@@ -94,9 +90,7 @@ fn finds(name: &str, edit: &Edit, needles: &[&str], absent: &[&str], restored: b
     }
     // `calibrate` stops on the same finding before it fits anything.
     let calibrate = hapcal(&["calibrate", "--device", &device(), "--data", &bad]);
-    let err = stderr(&calibrate);
-    assert_eq!(calibrate.status.code(), Some(2), "{err}");
-    assert!(err.contains("setup check ["), "{err}");
+    assert_exit(&calibrate, 2, &["setup check ["]);
 }
 
 #[test]
@@ -294,7 +288,7 @@ fn a_real_latency_is_warned_not_stopped_after_the_fit() {
     // −34.8 mm at 10 standard deviations.
     let dir = scratch("setup-haptic-latency");
     let lagged = dir.join("lagged.csv").display().to_string();
-    let simulate = hapcal(&[
+    hapcal_ok(&[
         "simulate",
         "--seed",
         "899",
@@ -308,7 +302,6 @@ fn a_real_latency_is_warned_not_stopped_after_the_fit() {
         "--out",
         &lagged,
     ]);
-    assert!(simulate.status.success(), "{}", stderr(&simulate));
     let out = hapcal(&[
         "calibrate",
         "--device",
@@ -318,9 +311,7 @@ fn a_real_latency_is_warned_not_stopped_after_the_fit() {
         "--model",
         "geometric",
     ]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(0), "{err}");
-    assert!(err.contains("[latency]: the joint readings lag"), "{err}");
+    let err = assert_exit(&out, 0, &["[latency]: the joint readings lag"]);
     assert!(
         err.contains("[latency]: the calibration moves"),
         "the lengths the lag moves are not named: {err}"

@@ -6,7 +6,9 @@
 //! its socket scatter must come back to the bundled one's within 1 %; the mistaken one must be
 //! far above what manufacturing deviations leave (the 50 mm of the plausibility bound).
 
-use super::{before_after_mm, calibration_warnings, hapcal, iiwa, root, scratch, show, stderr};
+use super::{
+    assert_exit, before_after_mm, calibration_warnings, hapcal, iiwa, root, scratch, show, stderr,
+};
 use std::path::{Path, PathBuf};
 
 fn front() -> PathBuf {
@@ -52,11 +54,7 @@ fn bundled_mm() -> f64 {
 /// before is implausible and the one after is the bundled placement's.
 fn finds(data: &str, tip: &str, needles: &[&str]) -> String {
     let out = hapcal(&["check", "--device", &iiwa(), "--tip", tip, "--data", data]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    for n in needles {
-        assert!(err.contains(n), "{n:?} not in: {err}");
-    }
+    let err = assert_exit(&out, 2, needles);
     err
 }
 
@@ -116,10 +114,14 @@ fn socket_readings_in_degrees_name_the_unit_with_the_reading_past_its_limit() {
     assert_restored(&err);
     // calibrate stops the same way, before the reader's limit check, and keeps its location.
     let out = hapcal(&["calibrate", "--device", &iiwa(), "--data", &data]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(err.contains("hole_0.csv:1:1: joint \"joint_a1\""), "{err}");
-    assert!(err.contains("in degrees, read as radians"), "{err}");
+    assert_exit(
+        &out,
+        2,
+        &[
+            "hole_0.csv:1:1: joint \"joint_a1\"",
+            "in degrees, read as radians",
+        ],
+    );
 }
 
 #[test]

@@ -2,11 +2,7 @@
 //! figures the report printed: the written kinematics, with the instrument and marker frames
 //! fitted again (`--model frames-only`), give the report's calibrated errors.
 
-use super::{hapcal, json, root, scratch};
-
-fn show(p: &std::path::Path) -> String {
-    p.display().to_string()
-}
+use super::{hapcal, json, root, scratch, show};
 use serde_json::Value;
 
 /// Position mean, RMS and max (m) of each data set of a report, `when` = "before" or "after".

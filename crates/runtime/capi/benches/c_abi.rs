@@ -148,13 +148,7 @@ fn bench_robot(c: &mut Criterion) {
         .expect("valid")
         .tip_pose(0, &Q, &mut ws)
         .expect("valid");
-    let cfg = CompensationConfig {
-        tolerance_m: 1e-6,
-        tolerance_rad: 1e-6,
-        max_iterations: 50,
-        damping_m: 1e-3,
-        orientation_scale_m: 0.1,
-    };
+    let cfg = CompensationConfig::default();
     let c_cfg = HapcalCompensationConfig {
         tolerance_m: cfg.tolerance_m,
         tolerance_rad: cfg.tolerance_rad,

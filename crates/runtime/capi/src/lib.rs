@@ -254,10 +254,32 @@ unsafe fn str_arg<'a>(text: *const c_char, what: &'static str) -> Result<&'a str
         .map_err(|_| Failure::Utf8(what))
 }
 
-fn store(out: *mut *mut HapcalModel, model: Result<Model, LoadError>) -> Result<(), Failure> {
+/// Stores a new handle holding `value` in `*out`: the one way every constructor of the ABI
+/// hands a handle over (freed by [`free`]).
+///
+/// # Safety
+/// `out` is non-null and valid for one write.
+unsafe fn store<T>(out: *mut *mut T, value: T) {
+    // SAFETY: the caller's contract.
+    unsafe { *out = Box::into_raw(Box::new(value)) };
+}
+
+/// Releases a handle made by [`store`]; NULL is ignored.
+///
+/// # Safety
+/// `handle` is NULL or a handle from [`store`] not yet freed.
+unsafe fn free<T>(handle: *mut T) {
+    if !handle.is_null() {
+        // SAFETY: a live handle made by `Box::into_raw`, by the caller's contract.
+        drop(unsafe { Box::from_raw(handle) });
+    }
+}
+
+/// Stores the loaded `model`'s new handle in `*out` (`out` checked non-null by the caller).
+fn store_model(out: *mut *mut HapcalModel, model: Result<Model, LoadError>) -> Result<(), Failure> {
     let model = model.map_err(Failure::Load)?;
     // SAFETY: `out` was checked non-null by the caller and is valid for a write.
-    unsafe { *out = Box::into_raw(Box::new(HapcalModel(model))) };
+    unsafe { store(out, HapcalModel(model)) };
     Ok(())
 }
 
@@ -280,7 +302,7 @@ pub unsafe extern "C" fn hapcal_model_load(
         if out.is_null() {
             return Err(Failure::Null("out"));
         }
-        store(out, Model::load(Path::new(path)))
+        store_model(out, Model::load(Path::new(path)))
     })
 }
 
@@ -300,7 +322,7 @@ pub unsafe extern "C" fn hapcal_model_from_toml(
         if out.is_null() {
             return Err(Failure::Null("out"));
         }
-        store(out, Model::from_toml(text, "<string>"))
+        store_model(out, Model::from_toml(text, "<string>"))
     })
 }
 
@@ -311,10 +333,8 @@ pub unsafe extern "C" fn hapcal_model_from_toml(
 /// yet freed; it must not be used afterwards.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn hapcal_model_free(model: *mut HapcalModel) {
-    if !model.is_null() {
-        // SAFETY: a live handle made by `Box::into_raw`, by the caller's contract.
-        drop(unsafe { Box::from_raw(model) });
-    }
+    // SAFETY: the caller's contract.
+    unsafe { free(model) }
 }
 
 /// Number of joints of the model (0 for NULL).

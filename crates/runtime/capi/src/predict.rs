@@ -172,15 +172,14 @@ pub unsafe extern "C" fn hapcal_predictor_new(
         let predictor = Predictor::new(robot, frame).map_err(Failure::Robot)?;
         let ws = predictor.workspace();
         let tips = vec![TipPrediction::default(); robot.tip_names().len()];
+        let handle = HapcalPredictor {
+            predictor,
+            ws,
+            tips,
+            given,
+        };
         // SAFETY: `out` is non-null and valid for a write by the caller's contract.
-        unsafe {
-            *out = Box::into_raw(Box::new(HapcalPredictor {
-                predictor,
-                ws,
-                tips,
-                given,
-            }));
-        }
+        unsafe { crate::store(out, handle) };
         Ok(())
     })
 }
@@ -192,10 +191,8 @@ pub unsafe extern "C" fn hapcal_predictor_new(
 /// be used afterwards.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn hapcal_predictor_free(predictor: *mut HapcalPredictor) {
-    if !predictor.is_null() {
-        // SAFETY: a live handle made by `Box::into_raw`, by the caller's contract.
-        drop(unsafe { Box::from_raw(predictor) });
-    }
+    // SAFETY: the caller's contract.
+    unsafe { crate::free(predictor) }
 }
 
 /// What the predictions' σ rests on; `NoRecord` for NULL.

@@ -255,16 +255,8 @@ pub unsafe extern "C" fn hapcal_robot_load(
             return Err(Failure::Null("out"));
         }
         let robot = Robot::load_urdf(Path::new(path), &names).map_err(Failure::Load)?;
-        let ws = robot.workspace();
-        let poses = vec![Pose::IDENTITY; robot.tip_names().len()];
-        let handle = HapcalRobot {
-            robot,
-            ws,
-            given: names.len(),
-            poses,
-        };
         // SAFETY: `out` is non-null and valid for a write by the caller's contract.
-        unsafe { *out = Box::into_raw(Box::new(handle)) };
+        unsafe { store_robot(out, robot, names.len()) };
         Ok(())
     })
 }
@@ -276,10 +268,8 @@ pub unsafe extern "C" fn hapcal_robot_load(
 /// afterwards.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn hapcal_robot_free(robot: *mut HapcalRobot) {
-    if !robot.is_null() {
-        // SAFETY: a live handle made by `Box::into_raw`, by the caller's contract.
-        drop(unsafe { Box::from_raw(robot) });
-    }
+    // SAFETY: the caller's contract.
+    unsafe { crate::free(robot) }
 }
 
 /// Number of moving joints n of the robot (0 for NULL).
@@ -808,7 +798,36 @@ unsafe fn store_robot(out: *mut *mut HapcalRobot, robot: Robot, given: usize) {
         poses,
     };
     // SAFETY: the caller's contract.
-    unsafe { *out = Box::into_raw(Box::new(handle)) };
+    unsafe { crate::store(out, handle) };
+}
+
+/// The pattern of the `hapcal_robot_with_*` functions: the robot behind `robot`, the
+/// arguments `args` reads for it, `out` checked, then the robot `make` derives from it (given
+/// how many tips the caller gave) stored in a new handle with as many tips given; the first
+/// failure in that order is returned.
+///
+/// # Safety
+/// `robot` is NULL or a live handle; `out` NULL or valid for one write; `args` may
+/// dereference only pointers valid by the caller's contract.
+unsafe fn derive<A>(
+    robot: *const HapcalRobot,
+    out: *mut *mut HapcalRobot,
+    args: impl FnOnce(&Robot) -> Result<A, Failure>,
+    make: impl FnOnce(&Robot, usize, A) -> Result<Robot, Failure>,
+) -> HapcalStatus {
+    guard(|| {
+        // SAFETY: the caller's contract.
+        let handle = unsafe { crate::get(robot, "robot") }?;
+        let (robot, given) = (&handle.robot, handle.given);
+        let args = args(robot)?;
+        if out.is_null() {
+            return Err(Failure::Null("out"));
+        }
+        let derived = make(robot, given, args)?;
+        // SAFETY: `out` is non-null and valid for a write by the caller's contract.
+        unsafe { store_robot(out, derived, given) };
+        Ok(())
+    })
 }
 
 /// Joint limits of the robot, into `lower_out[n_joints]` and `upper_out[n_joints]` (rad, m for
@@ -941,31 +960,24 @@ pub unsafe extern "C" fn hapcal_robot_with_marker(
     marker: *const HapcalPose,
     out: *mut *mut HapcalRobot,
 ) -> HapcalStatus {
-    guard(|| {
-        // SAFETY: the caller's contract.
-        let given = unsafe { crate::get(robot, "robot") }?.given;
-        // SAFETY: the caller's contract, for every pointer.
-        let (robot, marker) = unsafe {
-            (
-                &crate::get(robot, "robot")?.robot,
-                crate::get(marker, "marker")?,
-            )
-        };
-        if out.is_null() {
-            return Err(Failure::Null("out"));
-        }
-        let marker = Pose {
-            rotation: marker.rotation,
-            translation_m: marker.translation_m,
-        };
-        if tip >= given {
-            return Err(Failure::Robot(past_given(tip)));
-        }
-        let moved = robot.with_marker(tip, &marker).map_err(Failure::Robot)?;
-        // SAFETY: `out` is non-null and valid for a write by the caller's contract.
-        unsafe { store_robot(out, moved, given) };
-        Ok(())
-    })
+    // SAFETY: the caller's contract, for every pointer.
+    unsafe {
+        derive(
+            robot,
+            out,
+            |_| crate::get(marker, "marker"),
+            |robot, given, marker| {
+                let marker = Pose {
+                    rotation: marker.rotation,
+                    translation_m: marker.translation_m,
+                };
+                if tip >= given {
+                    return Err(Failure::Robot(past_given(tip)));
+                }
+                robot.with_marker(tip, &marker).map_err(Failure::Robot)
+            },
+        )
+    }
 }
 
 /// A new handle in `*out`: the robot with the joint compliances `k[n_joints]` (rad/(N·m)
@@ -984,23 +996,18 @@ pub unsafe extern "C" fn hapcal_robot_with_compliances(
     n_joints: usize,
     out: *mut *mut HapcalRobot,
 ) -> HapcalStatus {
-    guard(|| {
-        // SAFETY: the caller's contract.
-        let given = unsafe { crate::get(robot, "robot") }?.given;
-        // SAFETY: the caller's contract, for every pointer.
-        let (robot, k) = unsafe {
-            let robot = &crate::get(robot, "robot")?.robot;
-            check_n(robot, n_joints)?;
-            (robot, slice(k, n_joints, "k")?)
-        };
-        if out.is_null() {
-            return Err(Failure::Null("out"));
-        }
-        let changed = robot.with_compliances(k).map_err(Failure::Robot)?;
-        // SAFETY: `out` is non-null and valid for a write by the caller's contract.
-        unsafe { store_robot(out, changed, given) };
-        Ok(())
-    })
+    // SAFETY: the caller's contract, for every pointer.
+    unsafe {
+        derive(
+            robot,
+            out,
+            |robot| {
+                check_n(robot, n_joints)?;
+                slice(k, n_joints, "k")
+            },
+            |robot, _, k| robot.with_compliances(k).map_err(Failure::Robot),
+        )
+    }
 }
 
 /// A new handle in `*out`: the robot with the calibration record's value `name` (UTF-8,
@@ -1022,29 +1029,22 @@ pub unsafe extern "C" fn hapcal_robot_with_value(
     value: f64,
     out: *mut *mut HapcalRobot,
 ) -> HapcalStatus {
-    guard(|| {
-        // SAFETY: the caller's contract.
-        let given = unsafe { crate::get(robot, "robot") }?.given;
-        // SAFETY: the caller's contract, for every pointer.
-        let (robot, name) = unsafe {
-            (
-                &crate::get(robot, "robot")?.robot,
-                crate::str_arg(name, "name")?,
-            )
-        };
-        if out.is_null() {
-            return Err(Failure::Null("out"));
-        }
-        let changed = robot.with_value(name, value).map_err(|e| match e {
-            Error::Invalid { .. } => {
-                Failure::Message(HapcalStatus::InvalidArgument, format!("{name:?}: {e}"))
-            }
-            e => Failure::Robot(e),
-        })?;
-        // SAFETY: `out` is non-null and valid for a write by the caller's contract.
-        unsafe { store_robot(out, changed, given) };
-        Ok(())
-    })
+    // SAFETY: the caller's contract, for every pointer.
+    unsafe {
+        derive(
+            robot,
+            out,
+            |_| crate::str_arg(name, "name"),
+            |robot, _, name| {
+                robot.with_value(name, value).map_err(|e| match e {
+                    Error::Invalid { .. } => {
+                        Failure::Message(HapcalStatus::InvalidArgument, format!("{name:?}: {e}"))
+                    }
+                    e => Failure::Robot(e),
+                })
+            },
+        )
+    }
 }
 
 /// The joint angles θ the calibrated robot takes when commanded `q` (rad, m for a prismatic

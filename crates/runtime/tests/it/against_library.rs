@@ -2,26 +2,12 @@
 
 use hapcal_io::read_device;
 use hapcal_kinematics::{Chain, DhConvention as KinConvention, DhRow as KinRow};
-use hapcal_runtime::{DhConvention, DhRow, Drive, Evaluation, Model, Pose};
-use nalgebra::Isometry3;
+use hapcal_runtime::{DhConvention, DhRow, Drive, Evaluation, Model};
 
+use crate::robot::pose_gap;
 use crate::{fixture, readings};
 
 const TOL: f64 = 1e-12;
-
-/// Largest difference between a runtime pose and a library pose (rotation entries and
-/// translation, m).
-fn pose_gap(ours: &Pose, theirs: &Isometry3<f64>) -> f64 {
-    let r = theirs.rotation.to_rotation_matrix();
-    let mut gap: f64 = 0.0;
-    for i in 0..3 {
-        for j in 0..3 {
-            gap = gap.max((ours.rotation[i][j] - r[(i, j)]).abs());
-        }
-        gap = gap.max((ours.translation_m[i] - theirs.translation.vector[i]).abs());
-    }
-    gap
-}
 
 fn wrenches() -> [[f64; 6]; 3] {
     [

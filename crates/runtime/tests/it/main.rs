@@ -3,8 +3,10 @@
 //! central differences, and its error paths.
 
 mod against_library;
+mod counting;
 mod errors;
 mod haptic_record;
+mod iiwa_masses;
 mod no_alloc;
 mod record;
 mod robot;

@@ -3,39 +3,16 @@
 //! origin deviations plus gravity compliance, commanded with the nominal inverse kinematics
 //! and with the compensated commands.
 
-use hapcal_problems::GravityCompliance;
 use hapcal_runtime::{Compensation, CompensationConfig, Pose, Robot, Target, compensate};
 
 use crate::fixture;
+use crate::iiwa_masses::{JOINTS, with_iiwa_masses};
 use crate::robot::{calibrated_iiwa_text, compliance, joint_samples, scratch, write_calibrated};
-
-const JOINTS: [&str; 7] = [
-    "joint_a1", "joint_a2", "joint_a3", "joint_a4", "joint_a5", "joint_a6", "joint_a7",
-];
 
 /// Joint compliances of the simulated truth, rad/(N·m): 1/k from 10 kN·m/rad at the base to
 /// 3.3 kN·m/rad at the wrist, the order of the iiwa's joint stiffness (its joint torque
 /// sensors make each joint an elastic element).
 const K_TRUTH: [f64; 7] = [1e-4, 1e-4, 1.5e-4, 1.5e-4, 2e-4, 3e-4, 3e-4];
-
-/// `urdf_text` with Drake's iiwa 14 link masses (`GravityCompliance::published`) as
-/// `<inertial>`s of `link_1` … `link_7`.
-pub(crate) fn with_iiwa_masses(urdf_text: &str) -> String {
-    let names: Vec<String> = JOINTS.iter().map(|j| (*j).to_owned()).collect();
-    let model = GravityCompliance::published(&names).expect("iiwa joint names");
-    let mut text = urdf_text.to_owned();
-    for m in &model.masses {
-        let link = format!("<link name=\"link_{}\">", m.joint + 1);
-        let c = m.com_m;
-        let inertial = format!(
-            "{link}\n    <inertial><origin xyz=\"{:?} {:?} {:?}\" rpy=\"0 0 0\"/><mass value=\"{:?}\"/><inertia ixx=\"0.01\" ixy=\"0\" ixz=\"0\" iyy=\"0.01\" iyz=\"0\" izz=\"0.01\"/></inertial>",
-            c.x, c.y, c.z, m.mass_kg
-        );
-        assert!(text.contains(&link), "{link}");
-        text = text.replacen(&link, &inertial, 1);
-    }
-    text
-}
 
 /// The simulated truth (calibrated origins, masses, compliance) and the nominal robot.
 fn truth_and_nominal(name: &str) -> (Robot, Robot) {

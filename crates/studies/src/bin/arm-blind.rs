@@ -3,43 +3,25 @@
 //! progress on stderr. With `--setup-check`, the setup check of every positions case of
 //! `0..N` instead ([`hapcal_studies::arm_blind::setup_sweep`]): one line per case with a
 //! finding, then the counts.
-#![allow(clippy::print_stdout, clippy::print_stderr)] // a command-line report
+#![allow(clippy::print_stdout)] // a command-line report
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use hapcal_studies::arm_blind;
+use hapcal_studies::blind_cli::BlindArgs;
 
 fn main() -> Result<()> {
-    let mut cases: u64 = 256;
-    let mut rows = arm_blind::N_POSITIONS;
-    let mut json: Option<String> = None;
-    let mut setup_check = false;
+    let args = BlindArgs::parse(std::env::args().skip(1), 256, arm_blind::N_POSITIONS, true)?;
+    let (cases, rows) = (args.cases, args.rows);
     let mut cfg = hapcal_diagnose::arm::ArmConfig::default();
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        let mut value = || args.next().with_context(|| format!("{a} needs a value"));
-        match a.as_str() {
-            "--cases" => cases = value()?.parse().context("--cases")?,
-            "--rows" => rows = value()?.parse().context("--rows")?,
-            "--json" => json = Some(value()?),
-            "--folds" => cfg.folds = value()?.parse().context("--folds")?,
-            "--setup-check" => setup_check = true,
-            other => anyhow::bail!("unknown argument {other:?}"),
-        }
+    if let Some(folds) = args.folds {
+        cfg.folds = folds;
     }
-    let total = cases as usize;
-    if setup_check {
+    if args.setup_check {
         let sweep = arm_blind::setup_sweep(cases, rows)?;
         println!("{}", sweep.text());
         return Ok(());
     }
-    let outcomes = arm_blind::run(cases, rows, &cfg, &|done| {
-        eprint!("\r{done}/{total} cases");
-    })?;
-    eprintln!();
-    if let Some(path) = json {
-        std::fs::write(&path, serde_json::to_string_pretty(&outcomes)?)
-            .with_context(|| format!("writing {path}"))?;
-    }
+    let outcomes = args.run_cases(|progress| arm_blind::run(cases, rows, &cfg, progress))?;
     let machine = std::env::var("ARM_BLIND_MACHINE").unwrap_or_else(|_| "2 cores".into());
     let command = format!("cargo xtask blind-test-arm --cases {cases}");
     println!(

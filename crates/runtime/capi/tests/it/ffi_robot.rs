@@ -1,8 +1,6 @@
 //! The robot C ABI called from Rust: statuses and messages for every kind of bad input,
 //! name queries, position targets, and no allocation per call.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::ffi::{CStr, CString, c_char};
 use std::ptr;
 
@@ -10,6 +8,7 @@ use hapcal_runtime::{Pose, Robot};
 use hapcal_runtime_c::*;
 
 use crate::c_robot::robot_path;
+use crate::counting::allocations;
 
 fn message() -> String {
     // SAFETY: never NULL, NUL-terminated.
@@ -559,29 +558,6 @@ fn frames_markers_values_and_predictors_fail_with_statuses_and_messages() {
     }
 }
 
-struct Counting;
-
-thread_local! {
-    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
-}
-
-// SAFETY: forwards to the system allocator; the counter is a const-initialised thread-local
-// that never allocates.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
-        // SAFETY: the caller's contract.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: the caller's contract.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
-
 #[test]
 fn robot_calls_do_not_allocate() {
     let robot = load();
@@ -620,7 +596,7 @@ fn robot_calls_do_not_allocate() {
             pose,
         }
     };
-    let before = ALLOCATIONS.with(Cell::get);
+    let before = allocations();
     for _ in 0..10 {
         // SAFETY: as above.
         let statuses = unsafe {
@@ -668,7 +644,7 @@ fn robot_calls_do_not_allocate() {
         };
         assert!(statuses.iter().all(|s| *s == HapcalStatus::Ok));
     }
-    assert_eq!(ALLOCATIONS.with(Cell::get) - before, 0);
+    assert_eq!(allocations() - before, 0);
     assert!(result.reached && found && predicted[0].has_sigma);
     // SAFETY: live handles, freed once.
     unsafe {

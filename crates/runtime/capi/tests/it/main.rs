@@ -5,6 +5,8 @@
 mod binding;
 mod c_example;
 mod c_robot;
+#[path = "../../../tests/it/counting.rs"]
+mod counting;
 mod ffi;
 mod ffi_robot;
 mod haptic_record;

@@ -1,0 +1,60 @@
+//! The runtime against the calibration library on a written calibration, as the round-trip
+//! tests compare them: each one's marker positions, the largest distance between the two, and
+//! a record value set in both.
+#![allow(clippy::unwrap_used, dead_code, unreachable_pub)]
+
+use hapcal_problems::CalibratedModel;
+use hapcal_runtime::{Pose, Robot};
+
+/// Distance between two points, m.
+pub fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// The runtime's position of marker `k` (on tip `k`) in the instrument frame at readings `q`.
+pub fn runtime_marker(robot: &Robot, q: &[f64], k: usize) -> [f64; 3] {
+    let mut ws = robot.workspace();
+    let mut poses = vec![Pose::IDENTITY; robot.tip_names().len()];
+    robot.deflected_tip_poses(q, &mut ws, &mut poses).unwrap();
+    let instrument = robot.frame("instrument").unwrap_or(Pose::IDENTITY);
+    let marker = robot
+        .frame(&format!("marker{}", k + 1))
+        .unwrap_or(Pose::IDENTITY);
+    instrument.compose(&poses[k]).compose(&marker).translation_m
+}
+
+/// Largest distance between the runtime's and the library's markers (one on each of the
+/// first `n_tips` tips) over `rows`, m.
+pub fn worst_gap(
+    robot: &Robot,
+    library: &CalibratedModel,
+    rows: &[Vec<f64>],
+    n_tips: usize,
+) -> f64 {
+    let tips: Vec<usize> = (0..n_tips).collect();
+    let mut worst: f64 = 0.0;
+    for q in rows {
+        for (k, pose) in library.end_poses_of(&tips, q).iter().enumerate() {
+            let p = pose.translation.vector;
+            worst = worst.max(distance(&runtime_marker(robot, q, k), &[p.x, p.y, p.z]));
+        }
+    }
+    worst
+}
+
+/// `runtime` with its record's value `name` set to `value`, and the same value set in
+/// `library` (whose joints are `joint_names`); panics where either does not hold the value.
+pub fn set_in_both(
+    runtime: &Robot,
+    library: &mut CalibratedModel,
+    joint_names: &[String],
+    name: &str,
+    value: f64,
+) -> Robot {
+    let set = runtime.with_value(name, value).unwrap();
+    assert!(
+        hapcal_calibrate::record::set_model_value(library, joint_names, name, value),
+        "{name} is not a value of the library's model"
+    );
+    set
+}
