@@ -376,7 +376,7 @@ impl<'a> LogReader<'a> {
         for (c, ((cell, column), name)) in record.iter().zip(columns).zip(names).enumerate() {
             let col = c as u64 + 1;
             let parse = || number(path, line, col, name, cell);
-            let parse_si = || si_of(&conversion, c, &raw_of);
+            let parse_si = || si_of(conversion, c, &raw_of);
             match *column {
                 Column::Q(j) => {
                     let value = parse_si()?;

@@ -489,7 +489,7 @@ pub fn draw_case(i: u64, n_joints: usize) -> ArmCase {
             let slot = (i / 8) * 5 + (i % 8 - 2);
             library_effect(&mut rng, lib[(slot % lib.len() as u64) as usize])
         }
-        ArmCaseKind::Two => draw_pair(&mut rng, &lib, &library_effect),
+        ArmCaseKind::Two => draw_pair(&mut rng, &lib, library_effect),
         ArmCaseKind::Outside => {
             let n_kinds = if data == ArmData::Positions { 4 } else { 3 };
             match (i / 8) % n_kinds {

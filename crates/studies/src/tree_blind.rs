@@ -327,7 +327,7 @@ pub fn draw_case(i: u64, setup: &TreeSetup) -> TreeCase {
             let pool: Vec<Effect> = (lib.iter().copied())
                 .filter(|e| *e != Effect::TransversalCompliance)
                 .collect();
-            draw_pair(&mut rng, &pool, &library_effect)
+            draw_pair(&mut rng, &pool, library_effect)
         }
         ArmCaseKind::Outside => match slot % 3 {
             0 => {

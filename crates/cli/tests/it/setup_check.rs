@@ -613,8 +613,7 @@ fn tiago_calibrate_fails(data: &str, needles: &[&str]) -> String {
         "--model",
         "frames-only",
     ]);
-    let err = assert_exit(&out, 2, needles);
-    err
+    assert_exit(&out, 2, needles)
 }
 
 #[test]

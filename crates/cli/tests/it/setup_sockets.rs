@@ -54,8 +54,7 @@ fn bundled_mm() -> f64 {
 /// before is implausible and the one after is the bundled placement's.
 fn finds(data: &str, tip: &str, needles: &[&str]) -> String {
     let out = hapcal(&["check", "--device", &iiwa(), "--tip", tip, "--data", data]);
-    let err = assert_exit(&out, 2, needles);
-    err
+    assert_exit(&out, 2, needles)
 }
 
 fn assert_restored(err: &str) {

@@ -418,8 +418,9 @@ fn its_row_blocks_are_the_linearisation_rows_sample_by_sample() {
         .collect();
     let lin = m.linearise(&state).unwrap();
     let distances = m.distance_residuals_m(&state).unwrap();
-    for i in 0..n {
-        assert_eq!(distances[i], lin.residuals[i] * lin.sigma[i]);
+    assert_eq!(distances.len(), n);
+    for (i, d) in distances.iter().enumerate() {
+        assert_eq!(*d, lin.residuals[i] * lin.sigma[i]);
     }
     let problem = crate::DistanceLogProblem::new(m, &state).unwrap();
     let blocks = problem
