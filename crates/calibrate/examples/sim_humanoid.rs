@@ -1,10 +1,7 @@
 //! Writes the simulated two-arm humanoid recording (`tests/sim/humanoid.rs`) to a folder:
 //! `humanoid.urdf` (a CAD mass on every link), `mocap.csv` (550 rows: the 17 joint readings,
 //! then a motion-capture marker on each hand, 0.2 mm noise per axis) and `truth.toml` (every
-//! simulated parameter by name: geometric deviations, axial and transversal compliance);
-//! and the recording that behaves like real motion capture (`sim::real_like`): `real-like.csv`
-//! (350 rows, per-axis transversal compliance, link masses 10 % off the URDF's CAD masses,
-//! 2 mm noise per axis) and `real-like-truth.toml` (its parameters and true masses).
+//! simulated parameter by name: geometric deviations, axial and transversal compliance).
 //!
 //! ```sh
 //! cargo run --release -p hapcal-calibrate --example sim_humanoid -- fixtures/sim-humanoid
@@ -32,42 +29,6 @@ fn main() -> anyhow::Result<()> {
     let robot = sim::humanoid(&["l_hand", "r_hand"]);
     let truth = sim::truth(&robot, 11);
     let table = sim::table(&robot, &truth, &[0, 1], 550, 12);
-    std::fs::write(out.join("mocap.csv"), csv_of(&robot, &table)?)?;
-    let toml = String::from(
-        "# The simulated truth of mocap.csv: every parameter of the measurement model by name\n\
-         # (m, rad; compliance in rad/(N·m)); instrument and marker frames at their nominal\n\
-         # values. Marker noise 0.2 mm per axis.\n",
-    );
-    std::fs::write(out.join("truth.toml"), truth_toml(toml, &truth)?)?;
-    let (truth, masses, table) = sim::real_like(&robot, 21);
-    std::fs::write(out.join("real-like.csv"), csv_of(&robot, &table)?)?;
-    let mut toml = truth_toml(
-        String::from(
-            "# The simulated truth of real-like.csv: every parameter of the measurement model by\n\
-             # name (m, rad; compliance in rad/(N·m)); instrument and marker frames at their\n\
-             # nominal values. Marker noise 2 mm per axis. The gravity loads are those of the\n\
-             # masses below (kg, per joint whose child link carries them), each off the URDF's\n\
-             # by 10 % (standard deviation).\n",
-        ),
-        &truth,
-    )?;
-    for (m, cad) in masses.iter().zip(&robot.masses) {
-        writeln!(
-            toml,
-            "\n[[mass]]\njoint = \"{}\"\nkg = {:e}\nurdf_kg = {:e}",
-            robot.joint_names[m.joint], m.mass_kg, cad.mass_kg
-        )?;
-    }
-    std::fs::write(out.join("real-like-truth.toml"), toml)?;
-    println!("wrote {}", out.display());
-    Ok(())
-}
-
-/// The recording's CSV: the joint readings, then each hand's marker.
-fn csv_of(
-    robot: &hapcal_calibrate::measured::Robot,
-    table: &hapcal_io::MeasurementTable,
-) -> anyhow::Result<String> {
     let mut csv = robot.joint_names.join(",");
     csv.push_str(",x1,y1,z1,x2,y2,z2\n");
     for row in &table.rows {
@@ -77,14 +38,17 @@ fn csv_of(
             .collect();
         writeln!(csv, "{},{}", q.join(","), p.join(","))?;
     }
-    Ok(csv)
-}
-
-/// `head` then every parameter of `truth` by name.
-fn truth_toml(mut toml: String, truth: &sim::Truth) -> anyhow::Result<String> {
+    std::fs::write(out.join("mocap.csv"), csv)?;
+    let mut toml = String::from(
+        "# The simulated truth of mocap.csv: every parameter of the measurement model by name\n\
+         # (m, rad; compliance in rad/(N·m)); instrument and marker frames at their nominal\n\
+         # values. Marker noise 0.2 mm per axis.\n",
+    );
     let layout = truth.problem.layout();
     for i in 0..layout.len() {
         writeln!(toml, "\"{}\" = {:e}", layout.name(i), truth.x[i])?;
     }
-    Ok(toml)
+    std::fs::write(out.join("truth.toml"), toml)?;
+    println!("wrote {}", out.display());
+    Ok(())
 }

@@ -24,27 +24,6 @@ pub fn identify_config(sigma_m: Option<f64>) -> IdentifyConfig {
 
 pub use crate::report::termination_text;
 
-/// Plausible compliance of a robot joint, rad/(N·m): the prior of the rank decision
-/// ([`hapcal_identify::RankConfig::prior_of`]) for the compliances about a joint's axis
-/// (`compliance.*`) and across it (`transversal.*`) when the gravity torques are in N·m (the
-/// URDF's masses). A harmonic drive's torsional stiffness is 10⁴–10⁵ N·m/rad at arm sizes
-/// (compliance 10⁻⁵–10⁻⁴ rad/(N·m)); the smallest drives and the links' bending across an
-/// axis reach a few 10⁻⁴. The angle prior (10 mrad, read as 10⁻² rad/(N·m)) let a
-/// compliance whose column the tilts of its joint nearly reproduce be kept at ±10⁻³ and
-/// absorb them, a valley the solver crosses slowly and leaves at negative compliances; with
-/// this prior such a compliance is pruned and reported with the parameters it is collinear
-/// with (docs/engine.md, "Identification").
-pub const JOINT_COMPLIANCE_PRIOR: f64 = 1e-4;
-
-/// The rank decision's priors by name for compliances in rad/(N·m)
-/// ([`JOINT_COMPLIANCE_PRIOR`] for `compliance.*` and `transversal.*`).
-pub fn compliance_priors() -> Vec<(String, f64)> {
-    ["compliance.", "transversal."]
-        .iter()
-        .map(|prefix| ((*prefix).to_owned(), JOINT_COMPLIANCE_PRIOR))
-        .collect()
-}
-
 /// Repeats of the cross-validation: repeat `r` shifts every block boundary by `r/CV_REPEATS` of
 /// a block. Averaging the held-out errors over shifted partitions makes the choice less
 /// sensitive to where the fold boundaries fall (measured for 3…10 folds on the MUKCa training
@@ -217,10 +196,7 @@ pub fn blocked_mean_difference(a: &[f64], b: &[f64], block: &[usize]) -> (f64, f
 /// The model choice of `--model auto` from the held-out errors of each candidate: the one rule
 /// of [`crate::model::climb`] over the candidates' ladder levels `level` (candidate 0 the
 /// geometric model, the reference of the reported differences). A candidate beats another when
-/// its held-out squared error is lower by [`crate::model::LADDER_SIGNIFICANCE_Z`] blocked
-/// standard errors; one that contains another alternative of its level
-/// ([`crate::model::ModelRules::contains`]) must beat that one too, and its report says by
-/// how much ([`crate::report::CvReport::nested`]).
+/// its held-out squared error is lower by [`crate::model::LADDER_SIGNIFICANCE_Z`] blocked standard errors.
 ///
 /// # Panics
 /// If `held`, `level` and `candidates` differ in length or are empty.
@@ -240,24 +216,11 @@ pub(crate) fn choose(
         let (d, se) = blocked_difference(&held[i], &held[j]);
         i != j && d + crate::model::LADDER_SIGNIFICANCE_Z * se < 0.0
     };
-    use crate::model::ModelRules;
-    let contains = |i: usize, j: usize| candidates[i].contains(candidates[j]);
-    let chosen = crate::model::climb(level, &beats, &|i| rms(&held[i]), &contains);
+    let chosen = crate::model::climb(level, &beats, &|i| rms(&held[i]));
     // The rung each candidate was compared with: the one chosen on the levels below its own.
     let compared = |i: usize| {
         let below = level.iter().take_while(|&&l| l < level[i]).count();
-        (below > 0)
-            .then(|| crate::model::climb(&level[..below], &beats, &|j| rms(&held[j]), &contains))
-    };
-    // The alternative of its own level each candidate contains, and the comparison with it.
-    let nested = |i: usize| {
-        (0..candidates.len())
-            .find(|&j| j != i && level[j] == level[i] && contains(i, j))
-            .map(|j| crate::report::NestedComparison {
-                contains: candidates[j],
-                difference: blocked_difference(&held[i], &held[j]),
-                beats: beats(i, j),
-            })
+        (below > 0).then(|| crate::model::climb(&level[..below], &beats, &|j| rms(&held[j])))
     };
     let reports = (candidates.iter().zip(held).enumerate())
         .map(|(i, (candidate, h))| crate::report::CvReport {
@@ -272,7 +235,6 @@ pub(crate) fn choose(
                 blocked_difference(h, &held[0])
             },
             beats_geometric: beats(i, 0),
-            nested: nested(i),
             n_kept: 0,
         })
         .collect();

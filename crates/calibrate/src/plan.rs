@@ -1089,7 +1089,7 @@ pub fn plan_after(
     let mut prior = block_of(&jac, 0, n_measured_residuals);
     prior = prior.transpose() * &prior;
     for (k, &j) in kept.iter().enumerate() {
-        let p = rank.prior_of(free_layout.spec(j));
+        let p = rank.prior_scale(free_layout.spec(j).unit);
         prior[(k, k)] += (s / p).powi(2);
     }
     let blocks: Vec<Mat<f64>> = (0..candidates.len())

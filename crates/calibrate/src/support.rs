@@ -104,7 +104,7 @@ pub fn warnings(
                  it keeps its nominal value",
                 p.name,
                 p.std_if_kept,
-                cfg.prior_of(layout.spec(p.index))
+                cfg.prior_scale(layout.spec(p.index).unit)
             )),
             _ => out.push(format!(
                 "the data cannot support {}: it is not determined; it keeps its nominal value",
@@ -129,7 +129,7 @@ pub fn warnings(
         if j >= n_model {
             continue;
         }
-        let prior = cfg.prior_of(layout.spec(j));
+        let prior = cfg.prior_scale(layout.spec(j).unit);
         if std > 0.25 * prior {
             out.push(format!(
                 "{} is poorly determined: ±{std:.3e} {} is more than a quarter of its plausible \

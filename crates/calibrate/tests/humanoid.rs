@@ -265,10 +265,7 @@ fn a_ceiling_mount_is_named_and_its_fix_gives_the_upright_compliances() {
     };
     let (a, b) = (compliances(&fixed), compliances(&reference));
     assert_eq!(a.len(), b.len());
-    // The torso's pitches and both arms' first four joints: the wrists' compliances, which
-    // this model (without the transversal bending the data hold) determines only to more
-    // than the compliance prior, are pruned.
-    assert!(a.len() >= 10, "{a:?}");
+    assert!(a.len() >= 14, "{a:?}");
     for ((name, value, std), (name_b, value_b, _)) in a.iter().zip(&b) {
         assert_eq!(name, name_b);
         assert!(
@@ -331,98 +328,4 @@ fn an_unconverged_fit_is_left_out_of_the_ladder_and_a_finding_when_given() {
     .unwrap();
     assert_ne!(free.rung, ModelName::FramesOnly);
     assert!(free.implausible.is_empty(), "{:?}", free.implausible);
-}
-
-/// The simulated humanoid that behaves like the real data (`sim::real_like`, the bundled
-/// fixtures/sim-humanoid/real-like.csv): per-axis transversal compliance, link masses 10 %
-/// off the URDF's, 2 mm of marker noise, 350 rows. Every rung of the ladder converges (none
-/// is left out), no compliance comes out negative, the held-out error lies within 10 % of
-/// the noise floor, and the per-axis rung, given, converges in a few iterations with the
-/// compliances its data cannot tell from the tilts pruned and named.
-#[test]
-fn the_real_like_humanoid_converges_in_every_rung_and_reaches_its_noise_floor() {
-    use hapcal_calibrate::report::UNCONVERGED_RUNG_NOTE;
-    let robot = humanoid(&["l_hand", "r_hand"]);
-    let (_, _, table) = sim::real_like(&robot, 21);
-    // `--test-last 0.3`: the first 70 % of the rows train.
-    let n_train = table.rows.len() * 7 / 10;
-    let mut train = table.clone();
-    train.rows.truncate(n_train);
-    let mut test = table;
-    test.rows.drain(..n_train);
-    let out = calibrate_measured(
-        &robot,
-        std::slice::from_ref(&train),
-        std::slice::from_ref(&test),
-        &config(None, vec![0, 1]),
-    )
-    .unwrap();
-    let unconverged: Vec<&String> = (out.warnings.iter())
-        .filter(|w| w.starts_with(UNCONVERGED_RUNG_NOTE))
-        .collect();
-    assert!(unconverged.is_empty(), "{unconverged:?}");
-    assert_eq!(out.ladder.len(), 8, "ladder {:?}", out.ladder);
-    assert!(out.implausible.is_empty(), "{:?}", out.implausible);
-    // The per-axis rung reports its comparison with the isotropic one it contains.
-    let axes = (out.ladder.iter())
-        .find(|r| r.rung == ModelName::TransversalAxes)
-        .unwrap();
-    let nested = axes.nested.as_ref().expect("per axis contains isotropic");
-    assert_eq!(nested.contains, ModelName::TransversalCompliance);
-    // Held out, a marker's error is the noise, √3·σ in 3-D, plus the estimation error of
-    // ~100 parameters from 1,470 residuals (√(100/1470) ≈ 26 % of σ per axis, 3 % of the
-    // RMS): within 10 %.
-    let floor = 3f64.sqrt() * sim::REAL_LIKE_NOISE_M;
-    let after = out.sets[1].4.position_rms_m;
-    assert!(after < 1.1 * floor, "test RMS {after} m, floor {floor} m");
-    // The per-axis rung given: converged in a few iterations, no compliance below zero by
-    // more than the bound of the check after the fit (5 % over the compliances estimated,
-    // Bonferroni: of ~40 estimates of true values near zero, one falls below −2σ by chance).
-    let given = calibrate_measured(
-        &robot,
-        std::slice::from_ref(&train),
-        std::slice::from_ref(&test),
-        &config(Some(ModelName::TransversalAxes), vec![0, 1]),
-    )
-    .unwrap();
-    let id = &given.fitted.identified;
-    assert!(id.fit.termination.is_success(), "{:?}", id.fit.termination);
-    assert!(
-        id.fit.n_evaluations <= 30,
-        "{} evaluations",
-        id.fit.n_evaluations
-    );
-    assert!(given.implausible.is_empty(), "{:?}", given.implausible);
-    let estimates: Vec<(&str, f64, f64)> = (id.covariance.free.iter())
-        .zip(id.covariance.std())
-        .map(|(&i, std)| (id.layout.name(i), id.fit.x[i], std))
-        .filter(|(name, _, _)| name.starts_with("compliance.") || name.starts_with("transversal."))
-        .collect();
-    let z = hapcal_contract::negative_compliance_sigmas(estimates.len());
-    for (name, value, std) in &estimates {
-        assert!(
-            value + z * std > 0.0,
-            "{name} = {value} ± {std}, bound {z} σ"
-        );
-    }
-    // What the data cannot tell apart is pruned and named with what it is collinear with:
-    // compliances the angle prior (10⁻² rad/(N·m)) would have kept, determined only to more
-    // than the compliance prior.
-    let prior = hapcal_calibrate::fit::JOINT_COMPLIANCE_PRIOR;
-    let by_the_prior: Vec<_> = (id.identifiability.pruned.iter())
-        .filter(|p| p.name.starts_with("compliance.") || p.name.starts_with("transversal."))
-        .filter(|p| p.std_if_kept > prior && p.std_if_kept <= 1e-2)
-        .collect();
-    assert!(!by_the_prior.is_empty(), "{:?}", id.identifiability.pruned);
-    for p in &by_the_prior {
-        assert!(
-            matches!(
-                &p.reason,
-                hapcal_identify::PruneReason::Dependent { on } if !on.is_empty()
-            ),
-            "{}: {}",
-            p.name,
-            p.reason
-        );
-    }
 }

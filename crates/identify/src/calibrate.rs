@@ -261,9 +261,6 @@ fn check_identify_config(cfg: &IdentifyConfig) -> Result<(), Error> {
     check_config("prior_m", cfg.rank.prior_m, true)?;
     check_config("prior_rad", cfg.rank.prior_rad, true)?;
     check_config("prior_dimensionless", cfg.rank.prior_dimensionless, true)?;
-    for &(_, prior) in &cfg.rank.prior_by_name {
-        check_config("prior_by_name", prior, true)?;
-    }
     check_config("rel_tol", cfg.rank.rel_tol, false)
 }
 
@@ -433,9 +430,6 @@ fn identify_dense(
     check_config("prior_m", cfg.rank.prior_m, true)?;
     check_config("prior_rad", cfg.rank.prior_rad, true)?;
     check_config("prior_dimensionless", cfg.rank.prior_dimensionless, true)?;
-    for &(_, prior) in &cfg.rank.prior_by_name {
-        check_config("prior_by_name", prior, true)?;
-    }
     check_config("rel_tol", cfg.rank.rel_tol, false)?;
     let layout = p.layout().clone();
     let n = layout.len();

@@ -143,8 +143,8 @@ pub fn observability(jac: MatRef<'_, f64>, n_poses: usize) -> Option<Observabili
     ))
 }
 
-/// The columns `cols` of `jac` (`m × layout.len()`), each multiplied by its prior (by name,
-/// else of its unit: `prior_m`, `prior_rad` or `prior_dimensionless` of `priors`): an `m × cols.len()` matrix whose
+/// The columns `cols` of `jac` (`m × layout.len()`), each multiplied by the prior of its unit
+/// (`prior_m`, `prior_rad` or `prior_dimensionless` of `priors`): an `m × cols.len()` matrix whose
 /// unit column step is a plausible parameter deviation.
 ///
 /// Source of the scaling: J. M. Hollerbach, C. W. Wampler, "The calibration index and taxonomy
@@ -163,7 +163,10 @@ pub fn scale_by_priors(
 ) -> Mat<f64> {
     assert_eq!(jac.ncols(), layout.len(), "jacobian columns vs layout");
     let cfg = priors.with_sigma(1.0);
-    let scale: Vec<f64> = cols.iter().map(|&j| cfg.prior_of(layout.spec(j))).collect();
+    let scale: Vec<f64> = cols
+        .iter()
+        .map(|&j| cfg.prior_scale(layout.spec(j).unit))
+        .collect();
     Mat::from_fn(jac.nrows(), cols.len(), |i, k| jac[(i, cols[k])] * scale[k])
 }
 

@@ -11,7 +11,7 @@ use std::fmt;
 
 use faer::{Mat, MatRef};
 
-use crate::problem::{ParamLayout, ParamSpec, Role, Unit};
+use crate::problem::{ParamLayout, Role, Unit};
 
 /// Priors and numerical floor of the rank decision, without the noise level.
 ///
@@ -25,9 +25,6 @@ pub struct RankConfigBase {
     pub prior_rad: f64,
     /// Plausible deviation of a dimensionless parameter.
     pub prior_dimensionless: f64,
-    /// Plausible deviations by name: `(prefix, prior)`, a parameter whose name starts with
-    /// `prefix` takes `prior` (in its unit) instead of its unit's (the first match applies).
-    pub prior_by_name: Vec<(String, f64)>,
     /// Numerical floor on `|R_kk|` of the unit-norm scaled columns.
     pub rel_tol: f64,
     /// Which of two tied candidates becomes the pivot (see [`TieBreak`]).
@@ -53,14 +50,13 @@ impl Default for RankConfigBase {
     /// `prior_m = 0.01` (1 cm: machining and assembly deviations of desktop haptic devices and
     /// small arms are millimetres), `prior_rad = 0.01` (≈ 0.6°, encoder zero offsets and
     /// axis misalignments), `prior_dimensionless = 1.0` (ratios, gains: order one),
-    /// no prior by name, `rel_tol = 1e-10` (columns closer than this to the span of the others are dependent at
+    /// `rel_tol = 1e-10` (columns closer than this to the span of the others are dependent at
     /// working precision: √ε ≈ 1.5e-8 would drop genuinely weak ones, ε·m noise is ≈ 1e-13).
     fn default() -> Self {
         Self {
             prior_m: 0.01,
             prior_rad: 0.01,
             prior_dimensionless: 1.0,
-            prior_by_name: Vec::new(),
             rel_tol: 1e-10,
             tie_break: TieBreak::EarlierInLayout,
         }
@@ -75,7 +71,6 @@ impl RankConfigBase {
             prior_m: self.prior_m,
             prior_rad: self.prior_rad,
             prior_dimensionless: self.prior_dimensionless,
-            prior_by_name: self.prior_by_name.clone(),
             rel_tol: self.rel_tol,
             tie_break: self.tie_break,
         }
@@ -85,7 +80,7 @@ impl RankConfigBase {
 /// Configuration of [`identifiability`].
 ///
 /// A parameter is kept when its standard deviation `sigma / (c_j·|R_kk|)` (given the parameters
-/// kept before it) is at most its prior scale ([`RankConfig::prior_of`]): the data then tell
+/// kept before it) is at most its prior scale ([`RankConfig::prior_scale`]): the data then tell
 /// more about it than we knew beforehand.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RankConfig {
@@ -97,10 +92,6 @@ pub struct RankConfig {
     pub prior_rad: f64,
     /// Plausible deviation of a dimensionless parameter (default 1.0).
     pub prior_dimensionless: f64,
-    /// Plausible deviations by name, `(prefix, prior)` in the parameter's unit, before the
-    /// unit's (default none; [`RankConfig::prior_of`]). A caller that knows the physics of a
-    /// family gives it here: a joint compliance in rad/(N·m) is not an angle of 10 mrad.
-    pub prior_by_name: Vec<(String, f64)>,
     /// Numerical floor (default 1e-10): a scaled column whose distance to the span of the kept
     /// columns, `|R_kk|`, is below `rel_tol` (relative to the unit norm of the scaled columns,
     /// which is `|R_00|` of their pivoted QR) is always pruned; so is a column whose norm is
@@ -118,15 +109,6 @@ impl RankConfig {
             Unit::Radian => self.prior_rad,
             Unit::Dimensionless => self.prior_dimensionless,
         }
-    }
-
-    /// Plausible deviation of the parameter `spec`, in its unit: the first entry of
-    /// [`RankConfig::prior_by_name`] whose prefix starts its name, else its unit's
-    /// ([`RankConfig::prior_scale`]).
-    pub fn prior_of(&self, spec: &ParamSpec) -> f64 {
-        (self.prior_by_name.iter())
-            .find(|(prefix, _)| spec.name.starts_with(prefix.as_str()))
-            .map_or_else(|| self.prior_scale(spec.unit), |&(_, prior)| prior)
     }
 }
 
@@ -238,7 +220,7 @@ const TIE_NOISE_REL: f64 = 1e-2;
 ///    orthogonal complement of the kept nuisance columns.
 /// 2. **Model candidates** are then pivoted. A model parameter is eligible at step `k` when its
 ///    distance to the span of the columns kept so far, `ρ_j = |R_kk|` if chosen, satisfies
-///    `ρ_j ≥ rel_tol` and `sigma / (c_j·ρ_j) ≤ prior_of(spec)` (its standard deviation given
+///    `ρ_j ≥ rel_tol` and `sigma / (c_j·ρ_j) ≤ prior_scale(unit)` (its standard deviation given
 ///    the parameters before it is below its plausible deviation). The pivot is the eligible
 ///    column of largest `ρ_j`; a column that fails a test is pruned at once, since `ρ_j` only
 ///    decreases as columns are kept. Pivoting stops when no column is eligible.
@@ -288,11 +270,7 @@ pub fn identifiability(
         cfg.rel_tol.is_finite() && cfg.rel_tol >= 0.0,
         "rel_tol must be finite and >= 0"
     );
-    let named = cfg.prior_by_name.iter().map(|&(_, p)| p);
-    for prior in [cfg.prior_m, cfg.prior_rad, cfg.prior_dimensionless]
-        .into_iter()
-        .chain(named)
-    {
+    for prior in [cfg.prior_m, cfg.prior_rad, cfg.prior_dimensionless] {
         assert!(
             prior.is_finite() && prior > 0.0,
             "priors must be finite and > 0"
@@ -328,7 +306,10 @@ pub fn identifiability(
     };
     let rows = w.first().map_or(0, Vec::len);
     let c: Vec<f64> = cols.iter().map(|&j| norm[j]).collect();
-    let prior: Vec<f64> = cols.iter().map(|&j| cfg.prior_of(layout.spec(j))).collect();
+    let prior: Vec<f64> = cols
+        .iter()
+        .map(|&j| cfg.prior_scale(layout.spec(j).unit))
+        .collect();
     let is_nuisance: Vec<bool> = cols
         .iter()
         .map(|&j| layout.spec(j).role == Role::Nuisance)

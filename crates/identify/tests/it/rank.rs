@@ -207,38 +207,3 @@ proptest! {
         prop_assert_eq!(id.kept, id_scaled.kept);
     }
 }
-
-/// A prior by name replaces its unit's: an angle-unit compliance whose standard deviation
-/// (σ/(c·ρ) = 0.001/(10·0.05) = 2·10⁻⁴) is below the angle prior (10⁻²) is kept, and pruned
-/// under a compliance prior of 10⁻⁴ as dependent on the tilt it nearly copies; the tilt,
-/// matched by no name, keeps its unit's prior.
-#[test]
-fn a_prior_by_name_prunes_what_its_unit_would_keep() {
-    // Column 1 is 10·(0.9987·e0 + 0.05·e1): nearly the tilt's column, 10 times longer.
-    let m = 40;
-    let mut jac = Mat::<f64>::zeros(m, 2);
-    for i in 0..m {
-        let e0 = if i == 0 { 1.0 } else { 0.0 };
-        let e1 = if i == 1 { 1.0 } else { 0.0 };
-        jac[(i, 0)] = e0;
-        jac[(i, 1)] = 10.0 * ((1.0f64 - 0.05 * 0.05).sqrt() * e0 + 0.05 * e1);
-    }
-    let layout = ParamLayout::new(vec![
-        spec("j.rx", Unit::Radian, Role::Model),
-        spec("compliance.j", Unit::Radian, Role::Model),
-    ]);
-    let by_unit = cfg(0.001);
-    assert_eq!(
-        identifiability(jac.as_ref(), &layout, &all(2), &by_unit).kept,
-        [0, 1]
-    );
-    let by_name = RankConfig {
-        prior_by_name: vec![("compliance.".to_owned(), 1e-4)],
-        ..cfg(0.001)
-    };
-    assert_eq!(by_name.prior_of(layout.spec(0)), 1e-2);
-    assert_eq!(by_name.prior_of(layout.spec(1)), 1e-4);
-    let id = identifiability(jac.as_ref(), &layout, &all(2), &by_name);
-    assert_eq!(id.kept, [0]);
-    assert!(!dependent_on(&id, "compliance.j").is_empty());
-}
