@@ -362,12 +362,7 @@ pub(crate) fn unbounded(device: &Device) -> Device {
 /// [`MAX_CHECK_ROWS`] rows ([`thinned`]) and the [`MAX_ROW_SHIFT`] rows on either side that
 /// a shift of the readings by whole rows moves into it; every row of a shorter log.
 fn judged_stretch(n_rows: usize) -> std::ops::Range<usize> {
-    let keep = MAX_CHECK_ROWS + 2 * MAX_ROW_SHIFT;
-    if n_rows <= keep {
-        return 0..n_rows;
-    }
-    let start = (n_rows - keep) / 2;
-    start..start + keep
+    middle_range(n_rows, MAX_CHECK_ROWS + 2 * MAX_ROW_SHIFT)
 }
 
 /// The rows of the log at `path` whose indices lie in `keep`, every row read and checked
@@ -402,14 +397,18 @@ fn thinned(rows: Vec<LogRow>) -> Vec<LogRow> {
     middle(rows, MAX_CHECK_ROWS)
 }
 
-/// The `keep` rows in the middle of `rows` (from row `(len − keep)/2`), or every row.
+/// The indices of the `keep` rows in the middle of `n_rows` rows (from row
+/// `(n_rows − keep)/2`), or of every row.
+fn middle_range(n_rows: usize, keep: usize) -> std::ops::Range<usize> {
+    let start = n_rows.saturating_sub(keep) / 2;
+    start..n_rows.min(start + keep)
+}
+
+/// The `keep` rows in the middle of `rows` ([`middle_range`]).
 fn middle(mut rows: Vec<LogRow>, keep: usize) -> Vec<LogRow> {
-    if rows.len() <= keep {
-        return rows;
-    }
-    let start = (rows.len() - keep) / 2;
-    rows.truncate(start + keep);
-    rows.drain(..start);
+    let range = middle_range(rows.len(), keep);
+    rows.truncate(range.end);
+    rows.drain(..range.start);
     rows.shrink_to_fit();
     rows
 }

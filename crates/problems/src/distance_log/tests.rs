@@ -356,19 +356,31 @@ fn distance_row_adds_the_joint_variances() {
     assert!(noisy.sigma_m > plain.sigma_m);
 }
 
-#[test]
-fn as_an_identify_problem_its_x_is_the_state_and_its_rows_the_linearisation() {
+/// The reference device's model of an `n`-row log with its transmissions' external-encoder
+/// rows and one handle compliance per joint, and a state: perturbed (the deviations of
+/// [`x_kin`], compliance `1e-3·j` on joint j) or at zero.
+fn compliance_model(n: usize, perturbed: bool) -> (DistanceLogModel, DistanceLogState) {
     let device = reference_device();
     let chain = device.chain().unwrap();
     let trans = transmissions(&device);
-    let mut m = model(&device, log(&device, 30));
+    let mut m = model(&device, log(&device, n));
     m.set_ext_joints(trans.iter().map(LogTransmission::joint).collect())
         .unwrap();
     let mut state = m.initial_state(trans);
-    state.x_kin = x_kin(&chain);
+    let scale = if perturbed { 1e-3 } else { 0.0 };
+    if perturbed {
+        state.x_kin = x_kin(&chain);
+    }
     state.terms = (0..chain.n_joints())
-        .map(|j| (EffectTerm::handle_compliance(j), 1e-3 * j as f64))
+        .map(|j| (EffectTerm::handle_compliance(j), scale * j as f64))
         .collect();
+    (m, state)
+}
+
+#[test]
+fn as_an_identify_problem_its_x_is_the_state_and_its_rows_the_linearisation() {
+    let chain = reference_device().chain().unwrap();
+    let (m, state) = compliance_model(30, true);
     let lin = m.linearise(&state).unwrap();
     let problem = crate::DistanceLogProblem::new(m, &state).unwrap();
     // Named, with units, in the model's column order: 3 capstans, 11 coefficients, the chain,
@@ -402,20 +414,10 @@ fn as_an_identify_problem_its_x_is_the_state_and_its_rows_the_linearisation() {
 
 #[test]
 fn its_row_blocks_are_the_linearisation_rows_sample_by_sample() {
-    let device = reference_device();
-    let chain = device.chain().unwrap();
-    let trans = transmissions(&device);
     // More samples than one block holds, and a last block shorter than the others.
     let n = crate::SAMPLES_PER_BLOCK + 37;
-    let mut m = model(&device, log(&device, n));
-    m.set_ext_joints(trans.iter().map(LogTransmission::joint).collect())
-        .unwrap();
+    let (m, state) = compliance_model(n, true);
     let n_ext = m.ext_joints().len();
-    let mut state = m.initial_state(trans);
-    state.x_kin = x_kin(&chain);
-    state.terms = (0..chain.n_joints())
-        .map(|j| (EffectTerm::handle_compliance(j), 1e-3 * j as f64))
-        .collect();
     let lin = m.linearise(&state).unwrap();
     let distances = m.distance_residuals_m(&state).unwrap();
     assert_eq!(distances.len(), n);
@@ -462,17 +464,7 @@ fn its_row_blocks_are_the_linearisation_rows_sample_by_sample() {
 #[test]
 fn streamed_in_row_blocks_it_fits_what_the_dense_back_end_fits() {
     use hapcal_identify::{Backend, IdentifyConfig, identify};
-    let device = reference_device();
-    let chain = device.chain().unwrap();
-    let trans = transmissions(&device);
-    let mut m = model(&device, log(&device, 2 * crate::SAMPLES_PER_BLOCK + 11));
-    m.set_ext_joints(trans.iter().map(LogTransmission::joint).collect())
-        .unwrap();
-    let mut state = m.initial_state(trans);
-    state.x_kin = vec![0.0; chain.n_params()];
-    state.terms = (0..chain.n_joints())
-        .map(|j| (EffectTerm::handle_compliance(j), 0.0))
-        .collect();
+    let (m, state) = compliance_model(2 * crate::SAMPLES_PER_BLOCK + 11, false);
     let problem = crate::DistanceLogProblem::new(m, &state).unwrap();
     let fit = |backend| {
         let cfg = IdentifyConfig {
