@@ -196,7 +196,10 @@ pub fn blocked_mean_difference(a: &[f64], b: &[f64], block: &[usize]) -> (f64, f
 /// The model choice of `--model auto` from the held-out errors of each candidate: the one rule
 /// of [`crate::model::climb`] over the candidates' ladder levels `level` (candidate 0 the
 /// geometric model, the reference of the reported differences). A candidate beats another when
-/// its held-out squared error is lower by [`crate::model::LADDER_SIGNIFICANCE_Z`] blocked standard errors.
+/// its held-out squared error is lower by [`crate::model::LADDER_SIGNIFICANCE_Z`] blocked
+/// standard errors; one that contains another alternative of its level
+/// ([`crate::model::ModelRules::contains`]) must beat that one too, and its report says by
+/// how much ([`crate::report::CvReport::nested`]).
 ///
 /// # Panics
 /// If `held`, `level` and `candidates` differ in length or are empty.
@@ -216,11 +219,25 @@ pub(crate) fn choose(
         let (d, se) = blocked_difference(&held[i], &held[j]);
         i != j && d + crate::model::LADDER_SIGNIFICANCE_Z * se < 0.0
     };
-    let chosen = crate::model::climb(level, &beats, &|i| rms(&held[i]));
+    use crate::model::ModelRules;
+    let contains = |i: usize, j: usize| candidates[i].contains(candidates[j]);
+    let chosen = crate::model::climb(level, &beats, &|i| rms(&held[i]), &contains);
     // The rung each candidate was compared with: the one chosen on the levels below its own.
     let compared = |i: usize| {
         let below = level.iter().take_while(|&&l| l < level[i]).count();
-        (below > 0).then(|| crate::model::climb(&level[..below], &beats, &|j| rms(&held[j])))
+        (below > 0).then(|| {
+            crate::model::climb(&level[..below], &beats, &|j| rms(&held[j]), &contains)
+        })
+    };
+    // The alternative of its own level each candidate contains, and the comparison with it.
+    let nested = |i: usize| {
+        (0..candidates.len())
+            .find(|&j| j != i && level[j] == level[i] && contains(i, j))
+            .map(|j| crate::report::NestedComparison {
+                contains: candidates[j],
+                difference: blocked_difference(&held[i], &held[j]),
+                beats: beats(i, j),
+            })
     };
     let reports = (candidates.iter().zip(held).enumerate())
         .map(|(i, (candidate, h))| crate::report::CvReport {
@@ -235,6 +252,7 @@ pub(crate) fn choose(
                 blocked_difference(h, &held[0])
             },
             beats_geometric: beats(i, 0),
+            nested: nested(i),
             n_kept: 0,
         })
         .collect();

@@ -1960,6 +1960,7 @@ pub fn calibrate_measured(
                     range_rms_m: evidence.rms_m(i),
                     range_difference_to_frames: evidence.mean_difference(i, 0),
                     range_predicted_to_frames: evidence.judge(i, 0).predicted,
+                    nested: None,
                     n_kept: 0,
                 });
             }
@@ -1992,12 +1993,23 @@ pub fn calibrate_measured(
             // stay, for the check after the fit to name the mounting.
             let unit = compliance_unit_of(robot);
             let mut left_out: Vec<(usize, String)> = Vec::new();
+            // Parsimony within a level: a rung that contains another alternative of its level
+            // (per-axis transversal compliance holds the isotropic one) must beat it too.
+            let contains_of = |i: usize, j: usize| {
+                i != j && ladder_levels[i] == ladder_levels[j] && rungs[i].contains(rungs[j])
+            };
             let chosen = loop {
                 stops.borrow_mut().clear();
                 let allowed =
                     |i: usize, j: usize| left_out.iter().all(|(k, _)| *k != i) && beats(i, j);
-                let chosen =
-                    crate::model::climb(&ladder_levels, &allowed, &|i| rms(&scores[i].squared));
+                let contains =
+                    |i: usize, j: usize| contains_of(i, j) && left_out.iter().all(|(k, _)| *k != j);
+                let chosen = crate::model::climb(
+                    &ladder_levels,
+                    &allowed,
+                    &|i| rms(&scores[i].squared),
+                    &contains,
+                );
                 let (chosen_model, chosen_fit) = &fits[chosen];
                 let (negative, n_compliances) =
                     crate::fit::negative_compliances(&chosen_fit.identified, 1.0);
@@ -2028,6 +2040,18 @@ pub fn calibrate_measured(
                      absorbs an effect it lacks); the ladder keeps the {} model",
                     rungs[*i], rungs[chosen]
                 ));
+            }
+            for (i, report) in ladder.iter_mut().enumerate() {
+                // The comparison as the climb made it, without recording a stop again.
+                report.nested = (0..rungs.len()).find(|&j| contains_of(i, j)).map(|j| {
+                    let (d, se) = blocked_difference(&scores[i].score, &scores[j].score);
+                    crate::report::NestedComparison {
+                        contains: rungs[j],
+                        difference: (d, se),
+                        beats: d + crate::model::LADDER_SIGNIFICANCE_Z * se < 0.0
+                            && (evidence.is_empty() || evidence.judge(i, j).allows()),
+                    }
+                });
             }
             range_folds_used = ranges.into_iter().map(|r| r.report).collect();
             range_stops = stops.into_inner();

@@ -167,6 +167,24 @@ pub struct PrunedReport {
     pub std_if_kept: f64,
 }
 
+/// A model's comparison with the simpler alternative of its own ladder level that it contains
+/// ([`crate::model::ModelRules::contains`]: per-axis transversal compliance holds the
+/// isotropic one, harmonic2 holds harmonic): the richer model is taken only where it beats the
+/// simpler by [`crate::model::LADDER_SIGNIFICANCE_Z`] blocked standard errors.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct NestedComparison {
+    /// The simpler alternative it contains.
+    pub contains: ModelName,
+    /// Mean held-out score per row of this model minus the simpler one's, and its blocked
+    /// standard error, in the units of the report's other differences (m² for
+    /// [`CvReport`], the weighted squared error `Σ e²/σ²` for [`RungReport`]).
+    pub difference: (f64, f64),
+    /// Whether the difference is below zero by [`crate::model::LADDER_SIGNIFICANCE_Z`]
+    /// standard errors (and, on marker data, the joint-range folds allow it): the condition
+    /// for taking this model over the simpler one.
+    pub beats: bool,
+}
+
 /// Cross-validation score of one candidate model.
 #[derive(Clone, Debug, Serialize)]
 pub struct CvReport {
@@ -190,6 +208,11 @@ pub struct CvReport {
     /// difference is below zero by [`crate::model::LADDER_SIGNIFICANCE_Z`] standard errors
     /// (and it has the lowest held-out RMS of its level's passing alternatives).
     pub difference_to_compared_m2: (f64, f64),
+    /// The comparison with the alternative of its own level this model contains
+    /// ([`crate::model::ModelRules::contains`]; difference in m²), which it must also beat to
+    /// be taken; `None` when it contains none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nested: Option<NestedComparison>,
     /// Number of kept parameters on the full training data.
     pub n_kept: usize,
 }
@@ -424,6 +447,10 @@ pub struct RungReport {
     /// their extrapolation, evaluated at the share needed on its side, averaged over the
     /// folds (`(0, 0)` without such folds).
     pub range_predicted_to_frames: (f64, f64),
+    /// The comparison with the alternative of its own level this rung contains, which it must
+    /// also beat to be taken; `None` when it contains none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nested: Option<NestedComparison>,
     /// Kept model parameters (kinematic and compliance) on the full training data.
     pub n_kept: usize,
 }

@@ -192,6 +192,11 @@ pub fn render(r: &CalibrationReport) -> String {
     s
 }
 
+/// `beats it` or `does not beat it`: a ladder comparison's verdict in words.
+fn beats_words(beats: bool) -> &'static str {
+    if beats { "beats it" } else { "does not beat it" }
+}
+
 /// The text report without the wall time: the machine-independent results (what the HTML
 /// report shows in its words).
 pub fn render_results(r: &CalibrationReport) -> String {
@@ -239,9 +244,18 @@ pub fn render_results(r: &CalibrationReport) -> String {
                 _ if cv.beats_geometric => "  beats".to_owned(),
                 _ => String::new(),
             };
+            let nested = cv.nested.as_ref().map_or_else(String::new, |n| {
+                format!(
+                    "; against {}, which it contains: {:+.0} ± {:.0} µm², {}",
+                    n.contains,
+                    n.difference.0 * 1e12,
+                    n.difference.1 * 1e12,
+                    beats_words(n.beats)
+                )
+            });
             let _ = writeln!(
                 s,
-                "  {:<width$} {:>9.4} mm {:>+10.0} ± {:<8.0} µm²{against}",
+                "  {:<width$} {:>9.4} mm {:>+10.0} ± {:<8.0} µm²{against}{nested}",
                 cv.model.to_string(),
                 cv.heldout_rms_m * 1e3,
                 diff * 1e12,
@@ -281,9 +295,18 @@ pub fn render_results(r: &CalibrationReport) -> String {
                 ),
                 None => String::new(),
             };
+            let nested = l.nested.as_ref().map_or_else(String::new, |n| {
+                format!(
+                    "   against {}, which it contains: {:+.2} ± {:.2}, {}",
+                    n.contains,
+                    n.difference.0,
+                    n.difference.1,
+                    beats_words(n.beats)
+                )
+            });
             let _ = writeln!(
                 s,
-                "  {:<width$} {:>9.4} mm {:>+9.2} ± {:<7.2}{range}",
+                "  {:<width$} {:>9.4} mm {:>+9.2} ± {:<7.2}{range}{nested}",
                 l.rung.to_string(),
                 l.heldout_rms_m * 1e3,
                 diff,

@@ -59,6 +59,7 @@ fn report(name: &str, n_train: usize, n_test: usize) -> CalibrationReport {
         range_rms_m: None,
         range_difference_to_frames: 0.0,
         range_predicted_to_frames: (0.0, 0.0),
+        nested: None,
         n_kept: 3,
     };
     CalibrationReport {
