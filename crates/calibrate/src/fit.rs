@@ -221,13 +221,13 @@ pub(crate) fn choose(
     };
     use crate::model::ModelRules;
     let contains = |i: usize, j: usize| candidates[i].contains(candidates[j]);
-    let chosen = crate::model::climb(level, &beats, &|i| rms(&held[i]), &contains);
+    let nested = |i: usize, j: usize| contains(i, j).then(|| beats(i, j));
+    let chosen = crate::model::climb(level, &beats, &|i| rms(&held[i]), &nested);
     // The rung each candidate was compared with: the one chosen on the levels below its own.
     let compared = |i: usize| {
         let below = level.iter().take_while(|&&l| l < level[i]).count();
-        (below > 0).then(|| {
-            crate::model::climb(&level[..below], &beats, &|j| rms(&held[j]), &contains)
-        })
+        (below > 0)
+            .then(|| crate::model::climb(&level[..below], &beats, &|j| rms(&held[j]), &nested))
     };
     // The alternative of its own level each candidate contains, and the comparison with it.
     let nested = |i: usize| {

@@ -1994,21 +1994,33 @@ pub fn calibrate_measured(
             let unit = compliance_unit_of(robot);
             let mut left_out: Vec<(usize, String)> = Vec::new();
             // Parsimony within a level: a rung that contains another alternative of its level
-            // (per-axis transversal compliance holds the isotropic one) must beat it too.
+            // (per-axis transversal compliance holds the isotropic one) must beat it too, on
+            // the blocked folds (crate::model::climb).
             let contains_of = |i: usize, j: usize| {
                 i != j && ladder_levels[i] == ladder_levels[j] && rungs[i].contains(rungs[j])
+            };
+            let nested_difference = |i: usize, j: usize| {
+                contains_of(i, j).then(|| {
+                    let (d, se) = blocked_difference(&scores[i].score, &scores[j].score);
+                    ((d, se), d + crate::model::LADDER_SIGNIFICANCE_Z * se < 0.0)
+                })
             };
             let chosen = loop {
                 stops.borrow_mut().clear();
                 let allowed =
                     |i: usize, j: usize| left_out.iter().all(|(k, _)| *k != i) && beats(i, j);
-                let contains =
-                    |i: usize, j: usize| contains_of(i, j) && left_out.iter().all(|(k, _)| *k != j);
+                // A contained rung left out (negative compliances) no longer holds the richer one back.
+                let nested = |i: usize, j: usize| {
+                    if left_out.iter().any(|(k, _)| *k == j) {
+                        return None;
+                    }
+                    nested_difference(i, j).map(|(_, b)| b)
+                };
                 let chosen = crate::model::climb(
                     &ladder_levels,
                     &allowed,
                     &|i| rms(&scores[i].squared),
-                    &contains,
+                    &nested,
                 );
                 let (chosen_model, chosen_fit) = &fits[chosen];
                 let (negative, n_compliances) =
@@ -2042,15 +2054,13 @@ pub fn calibrate_measured(
                 ));
             }
             for (i, report) in ladder.iter_mut().enumerate() {
-                // The comparison as the climb made it, without recording a stop again.
-                report.nested = (0..rungs.len()).find(|&j| contains_of(i, j)).map(|j| {
-                    let (d, se) = blocked_difference(&scores[i].score, &scores[j].score);
-                    crate::report::NestedComparison {
+                report.nested = (0..rungs.len()).find_map(|j| {
+                    let (difference, beats) = nested_difference(i, j)?;
+                    Some(crate::report::NestedComparison {
                         contains: rungs[j],
-                        difference: (d, se),
-                        beats: d + crate::model::LADDER_SIGNIFICANCE_Z * se < 0.0
-                            && (evidence.is_empty() || evidence.judge(i, j).allows()),
-                    }
+                        difference,
+                        beats,
+                    })
                 });
             }
             range_folds_used = ranges.into_iter().map(|r| r.report).collect();

@@ -547,13 +547,18 @@ pub const LADDER_SIGNIFICANCE_Z: f64 = 2.0;
 /// the ladder (candidates in ladder order, candidate 0 the bottom rung, level 0);
 /// `beats(i, j)` whether candidate `i` beats candidate `j` (its held-out score lower by
 /// [`LADDER_SIGNIFICANCE_Z`] blocked standard errors, and no worse where the calibration
-/// extrapolates); `rms(i)` its held-out RMS; `contains(i, j)` whether candidate `i` contains
-/// candidate `j` ([`ModelRules::contains`]). Level by level, among the alternatives that beat
-/// the rung chosen so far, and beat every alternative of their level they contain
-/// (parsimony: a richer model must earn its extra parameters against the simpler one by the
-/// same margin), the one with the lowest held-out RMS is chosen; a level where none does is
-/// passed over (the next is compared with the same rung). Returns the chosen candidate's
-/// index.
+/// extrapolates); `rms(i)` its held-out RMS; `nested(i, j)`, where candidate `i` contains
+/// candidate `j` ([`ModelRules::contains`]), whether it beats `j` by the same margin on the
+/// blocked folds (`None` where it does not contain it). Level by level, among the
+/// alternatives that beat the rung chosen so far, and beat every alternative of their level
+/// they contain (parsimony: a richer model must earn its extra parameters against the simpler
+/// one), the one with the lowest held-out RMS is chosen; a level where none does is passed
+/// over (the next is compared with the same rung). Returns the chosen candidate's index.
+///
+/// Parsimony is judged on the blocked folds alone, as the choice of the lowest held-out RMS
+/// among a level's alternatives is: the joint-range folds judge a rung against the one chosen
+/// below it, the safe model where the calibration extrapolates, not one alternative against
+/// another of the same level.
 ///
 /// # Panics
 /// If `level` is empty.
@@ -561,15 +566,15 @@ pub fn climb(
     level: &[usize],
     beats: &dyn Fn(usize, usize) -> bool,
     rms: &dyn Fn(usize) -> f64,
-    contains: &dyn Fn(usize, usize) -> bool,
+    nested: &dyn Fn(usize, usize) -> Option<bool>,
 ) -> usize {
     assert!(!level.is_empty(), "a ladder has at least one rung");
     let mut chosen = 0;
     let top = level.iter().copied().max().unwrap_or(0);
     let parsimonious = |i: usize| {
         (0..level.len())
-            .filter(|&j| j != i && level[j] == level[i] && contains(i, j))
-            .all(|j| beats(i, j))
+            .filter(|&j| j != i && level[j] == level[i])
+            .all(|j| nested(i, j).unwrap_or(true))
     };
     for l in (level[0] + 1)..=top {
         let passing = (0..level.len())
@@ -711,7 +716,7 @@ mod tests {
         // Level 1 fails, level 2: candidates 2 and 4 beat the bottom, 3 does not (lower RMS
         // but inside the margin); level 3 does not beat candidate 4.
         let beats = |i: usize, j: usize| matches!((i, j), (2, 0) | (4, 0) | (5, 2));
-        let none = |_: usize, _: usize| false;
+        let none = |_: usize, _: usize| None;
         assert_eq!(climb(&level, &beats, &|i| rms[i], &none), 4);
         // A rung is compared with the one chosen so far, not with the bottom.
         let beats = |i: usize, j: usize| matches!((i, j), (1, 0) | (2, 0) | (5, 1));
@@ -730,12 +735,18 @@ mod tests {
         let rungs = [M::Geometric, M::TransversalCompliance, M::TransversalAxes];
         let level = [0, 1, 1];
         let rms = [5.0, 3.96, 3.95];
-        let contains = |i: usize, j: usize| rungs[i].contains(rungs[j]);
-        let beats = |i: usize, j: usize| matches!((i, j), (1, 0) | (2, 0));
-        assert_eq!(climb(&level, &beats, &|i| rms[i], &contains), 1);
-        // Where it does beat the isotropic one by the margin, the per-axis rung is taken.
         let beats = |i: usize, j: usize| matches!((i, j), (1, 0) | (2, 0) | (2, 1));
-        assert_eq!(climb(&level, &beats, &|i| rms[i], &contains), 2);
+        let nested = |i: usize, j: usize| rungs[i].contains(rungs[j]).then(|| beats(i, j));
+        // Where it does beat the isotropic one by the margin, the per-axis rung is taken.
+        assert_eq!(climb(&level, &beats, &|i| rms[i], &nested), 2);
+        let beats = |i: usize, j: usize| matches!((i, j), (1, 0) | (2, 0));
+        let nested = |i: usize, j: usize| rungs[i].contains(rungs[j]).then(|| beats(i, j));
+        assert_eq!(climb(&level, &beats, &|i| rms[i], &nested), 1);
+        // The nested comparison is its own: a rung the range folds would not let past the
+        // isotropic one is still taken where the blocked folds say it earns its parameters.
+        let beats = |i: usize, j: usize| matches!((i, j), (1, 0) | (2, 0));
+        let nested = |i: usize, j: usize| rungs[i].contains(rungs[j]).then_some(true);
+        assert_eq!(climb(&level, &beats, &|i| rms[i], &nested), 2);
         // The harmonics nest the same way; the compliance sources do not.
         assert!(M::Harmonic2.contains(M::Harmonic) && !M::Harmonic.contains(M::Harmonic2));
         assert!(!M::MassCompliance.contains(M::Compliance));

@@ -180,8 +180,9 @@ pub struct NestedComparison {
     /// [`CvReport`], the weighted squared error `Σ e²/σ²` for [`RungReport`]).
     pub difference: (f64, f64),
     /// Whether the difference is below zero by [`crate::model::LADDER_SIGNIFICANCE_Z`]
-    /// standard errors (and, on marker data, the joint-range folds allow it): the condition
-    /// for taking this model over the simpler one.
+    /// standard errors: the condition for taking this model over the simpler one (the
+    /// joint-range folds of marker data judge a rung against the one chosen below it, not
+    /// against the alternative it contains).
     pub beats: bool,
 }
 
