@@ -577,8 +577,8 @@ pub fn climb(
             .all(|j| nested(i, j).unwrap_or(true))
     };
     for l in (level[0] + 1)..=top {
-        let passing = (0..level.len())
-            .filter(|&i| level[i] == l && beats(i, chosen) && parsimonious(i));
+        let passing =
+            (0..level.len()).filter(|&i| level[i] == l && beats(i, chosen) && parsimonious(i));
         if let Some(best) = passing.min_by(|&a, &b| rms(a).total_cmp(&rms(b))) {
             chosen = best;
         }

@@ -194,7 +194,11 @@ pub fn render(r: &CalibrationReport) -> String {
 
 /// `beats it` or `does not beat it`: a ladder comparison's verdict in words.
 fn beats_words(beats: bool) -> &'static str {
-    if beats { "beats it" } else { "does not beat it" }
+    if beats {
+        "beats it"
+    } else {
+        "does not beat it"
+    }
 }
 
 /// The text report without the wall time: the machine-independent results (what the HTML
