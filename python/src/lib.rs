@@ -5,7 +5,6 @@
 //! (python/hapcal) wraps this module with NumPy / pandas conveniences; everything numeric
 //! happens here, in the same library functions the `hapcal` command line calls.
 
-use hapcal_calibrate::model::ModelName;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 

@@ -6,7 +6,6 @@
 use std::path::Path;
 
 use anyhow::{Context, Result, anyhow, bail};
-use hapcal_io::JointSchema;
 use hapcal_runtime::{Compensation, CompensationConfig, Pose, Robot, Target, compensate};
 
 /// What to compensate: the calibrated robot, its tips, the targets file and the frame.
@@ -88,17 +87,14 @@ fn load_robot(input: &CompensateInput<'_>) -> Result<Robot> {
     Robot::load_urdf(device, &tips).with_context(context)
 }
 
-/// The targets of `input.targets` for `robot`, each with its line and its start command.
-fn read_targets(path: &Path, robot: &Robot) -> Result<Vec<(u64, Target, Option<Vec<f64>>)>> {
-    let prismatic: Vec<bool> = (0..robot.n_joints())
-        .map(|j| robot.is_prismatic(j))
-        .collect();
-    let schema = JointSchema {
-        names: robot.joint_names(),
-        prismatic: &prismatic,
-        limits: robot.limits(),
-    };
-    let rows = hapcal_io::read_targets(path, &schema).map_err(|e| match e {
+/// A target of the targets file: its line, the target, the command to start from if given.
+type FileTarget = (u64, Target, Option<Vec<f64>>);
+
+/// The targets of the file `path` for `robot`, in the frame the file gives them in.
+fn read_targets(path: &Path, robot: &Robot) -> Result<Vec<FileTarget>> {
+    let read =
+        crate::predict::with_joint_schema(robot, |schema| hapcal_io::read_targets(path, schema));
+    let rows = read.map_err(|e| match e {
         hapcal_io::Error::Io { source, .. } => {
             anyhow!(source).context(format!("cannot read the targets file {}", path.display()))
         }

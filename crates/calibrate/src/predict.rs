@@ -131,6 +131,18 @@ fn quaternion_of(r: &[[f64; 3]; 3]) -> [f64; 4] {
     }
 }
 
+/// `f` of the joints of `robot` as the readers check them: their names, kinds and limits.
+pub(crate) fn with_joint_schema<T>(robot: &Robot, f: impl FnOnce(&JointSchema<'_>) -> T) -> T {
+    let prismatic: Vec<bool> = (0..robot.n_joints())
+        .map(|j| robot.is_prismatic(j))
+        .collect();
+    f(&JointSchema {
+        names: robot.joint_names(),
+        prismatic: &prismatic,
+        limits: robot.limits(),
+    })
+}
+
 /// Reads the measurement file `path` with `robot`'s joints (the columns calibrate reads).
 fn read_data(path: &Path, robot: &Robot, units: &Units) -> Result<MeasurementTable> {
     if path.is_dir() {
@@ -141,16 +153,10 @@ fn read_data(path: &Path, robot: &Robot, units: &Units) -> Result<MeasurementTab
         );
     }
     crate::data::check_csv_header(path)?;
-    let prismatic: Vec<bool> = (0..robot.n_joints())
-        .map(|j| robot.is_prismatic(j))
-        .collect();
-    let schema = JointSchema {
-        names: robot.joint_names(),
-        prismatic: &prismatic,
-        limits: robot.limits(),
-    };
-    let table = hapcal_io::read_measurement_file(path, &schema, units)
-        .with_context(|| format!("reading joint readings {}", path.display()))?;
+    let table = with_joint_schema(robot, |schema| {
+        hapcal_io::read_measurement_file(path, schema, units)
+    })
+    .with_context(|| format!("reading joint readings {}", path.display()))?;
     if table.rows.is_empty() {
         bail!(
             "{}: no data row: expected one joint configuration per row",
@@ -482,4 +488,34 @@ pub fn predict_haptic(
 /// (the calibration identified none: they are compared in the robot's root link frame).
 pub fn errors_without_instrument(predictor: &Predictor, prediction: &Prediction) -> bool {
     prediction.errors.is_some() && predictor.robot().frame("instrument").is_none()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hapcal_runtime::Pose;
+
+    #[test]
+    fn quaternions_of_rotations_are_the_analytic_ones_with_w_positive() {
+        // Rotations by θ about x, y and z: q = (cos θ/2, sin θ/2 · axis), through every branch
+        // of the conversion (positive trace, then each diagonal element the largest).
+        for theta in [0.3_f64, 2.0, 3.1, std::f64::consts::PI] {
+            let (c, s) = ((theta / 2.0).cos(), (theta / 2.0).sin());
+            for axis in 0..3 {
+                let mut q = [c, 0.0, 0.0, 0.0];
+                q[axis + 1] = s;
+                let got = quaternion_of(&Pose::rotation_of_quaternion(q));
+                for (g, w) in got.iter().zip(q) {
+                    assert!(
+                        (g - w).abs() < 1e-12,
+                        "θ {theta} axis {axis}: {got:?} vs {q:?}"
+                    );
+                }
+                // The same rotation from −q: w ≥ 0 picks q again.
+                let again = quaternion_of(&Pose::rotation_of_quaternion(q.map(|v| -v)));
+                assert!(again[0] >= 0.0, "{again:?}");
+                assert!((again[axis + 1] - s).abs() < 1e-12, "{again:?}");
+            }
+        }
+    }
 }
