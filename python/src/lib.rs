@@ -5,13 +5,13 @@
 //! (python/hapcal) wraps this module with NumPy / pandas conveniences; everything numeric
 //! happens here, in the same library functions the `hapcal` command line calls.
 
-use hapcal_calibrate::model::ModelName;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, anyhow, bail};
 use hapcal_calibrate::calibrate::{self, ModelChoice, Outcome, Plan};
 use hapcal_calibrate::measured::{self, Robot};
+use hapcal_calibrate::setup::Gated;
 use hapcal_io::{
     AngleUnit, JOINT_LIMIT_SLACK, LengthUnit, MarkerSample, MeasuredRow, MeasurementTable, Units,
 };
@@ -806,35 +806,14 @@ fn load_sources(sources: &[Source], robot: &Robot) -> Result<Vec<MeasurementTabl
     Ok(out)
 }
 
-/// The setup check before a calibration or diagnosis of files, as the command line's: its
-/// warnings, the error finding accepted with `accept_setup` (in the words the command line's
-/// notes give it) and the classes of the findings, or the error naming the mistake.
-fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<SetupGated> {
+/// The setup check before a calibration or diagnosis of files, as the command line's
+/// (`hapcal_calibrate::setup::gate`, its messages naming `accept_setup=True`).
+fn setup_gate(plan: &Plan, accept_setup: bool) -> Result<Gated> {
     let cfg = hapcal_calibrate::setup::SetupConfig {
         accept_setup,
         accept_option: "accept_setup=True",
     };
-    let gated = hapcal_calibrate::setup::gate(plan, &cfg)?;
-    let accepted = gated.accepted.map(|f| {
-        format!(
-            "setup check (accepted with accept_setup=True) [{}]: {}",
-            f.class,
-            f.text()
-        )
-    });
-    Ok(SetupGated {
-        warnings: gated.warnings,
-        accepted,
-        classes: gated.classes,
-    })
-}
-
-/// What [`setup_gate`] lets through: the warnings, the accepted error finding in the command
-/// line's words, and the classes of every finding (for the check after the fit).
-struct SetupGated {
-    warnings: Vec<String>,
-    accepted: Option<String>,
-    classes: Vec<hapcal_calibrate::setup::MistakeClass>,
+    hapcal_calibrate::setup::gate(plan, &cfg)
 }
 
 /// The paths and units of `sources`, if every one is a file.
@@ -1187,24 +1166,14 @@ fn _diagnose(
                     ..hapcal_diagnose::DiagnoseConfig::default()
                 };
                 // The setup check of the log, as the command line runs it.
-                let gate_plan = Plan {
-                    workspace: None,
-                    device: device_path.clone(),
-                    tip: "ball_link".to_owned(),
-                    tips: Vec::new(),
-                    units: Units::default(),
-                    gravity: hapcal_calibrate::calibrate::GRAVITY_DOWN,
-                    sigma_rad: None,
-                    test_last: None,
-                    data: vec![data.clone()],
-                    test: Vec::new(),
-                    socket_distance_m: 0.05,
-                    model: ModelName::Geometric.into(),
+                let gate_plan = Plan::log_check(
+                    device_path.clone(),
+                    vec![data.clone()],
+                    Units::default(),
+                    0.05,
                     folds,
-                    sigma_m: None,
-                    joint: false,
-                };
-                let SetupGated {
+                );
+                let Gated {
                     mut warnings,
                     accepted,
                     ..
@@ -1244,11 +1213,7 @@ fn _diagnose(
     let robot = device.robot.as_ref();
     py.detach(move || -> Result<(String, Vec<String>)> {
         // Files that share their units go through the command line's loaders and setup check.
-        let mut gated = SetupGated {
-            warnings: Vec::new(),
-            accepted: None,
-            classes: Vec::new(),
-        };
+        let mut gated = Gated::default();
         let baseline = match files {
             Some((tr, te)) if tr.iter().chain(&te).all(|(_, u)| *u == tr[0].1) => {
                 plan.units = tr[0].1.clone();
@@ -1274,7 +1239,7 @@ fn _diagnose(
         };
         let mut d = hapcal_diagnose::arm::diagnose_arm(&baseline, &cfg)
             .context("diagnosing the geometric baseline")?;
-        let SetupGated {
+        let Gated {
             mut warnings,
             accepted,
             ..

@@ -129,6 +129,36 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// The plan of the setup check of a haptic device's logs `data` (read with `units`)
+    /// before its diagnosis: the checks `hapcal calibrate` runs on them (units, column order,
+    /// rows out of step, the external encoders), with the defaults of every setting the logs
+    /// do not use.
+    pub fn log_check(
+        device: PathBuf,
+        data: Vec<PathBuf>,
+        units: hapcal_io::Units,
+        socket_distance_m: f64,
+        folds: usize,
+    ) -> Plan {
+        Plan {
+            workspace: None,
+            device,
+            tip: "ball_link".to_owned(),
+            tips: Vec::new(),
+            units,
+            sigma_rad: None,
+            test_last: None,
+            data,
+            test: Vec::new(),
+            socket_distance_m,
+            model: crate::model::ModelName::Geometric.into(),
+            folds,
+            sigma_m: None,
+            joint: false,
+            gravity: GRAVITY_DOWN,
+        }
+    }
+
     /// Checks the settings that need no file: folds, socket distance, the σ ranges
     /// ([`SIGMA_M_RANGE`], [`SIGMA_RAD_RANGE`]) and the held-out share, so that the Rust API
     /// and the Python package refuse what the command line refuses, in its words (the

@@ -8,6 +8,7 @@
 
 pub mod baseline;
 pub mod calibrate;
+pub mod compensate;
 pub mod data;
 pub mod fit;
 pub mod haptic;
@@ -16,6 +17,7 @@ pub mod measured;
 pub mod model;
 pub mod noise;
 pub mod plan;
+pub mod predict;
 pub mod record;
 pub mod report;
 pub mod robust;

@@ -2474,9 +2474,10 @@ pub fn gate_after_fit(
 pub struct Gated {
     /// The findings as warnings to print, errors first.
     pub warnings: Vec<String>,
-    /// The error finding the user accepted with [`SetupConfig::accept_setup`], if any: a
-    /// diagnosis then names no physical effect.
-    pub accepted: Option<Finding>,
+    /// The error finding the user accepted with [`SetupConfig::accept_setup`], if any, in the
+    /// words of the notes (`setup check (accepted with --accept-setup) [class]: …`): a
+    /// diagnosis then names no physical effect and says why.
+    pub accepted: Option<String>,
     /// The classes of every finding, in the order of [`Gated::warnings`]: what the check after
     /// the fit ([`gate_after_fit`]) weighs its own finding against.
     pub classes: Vec<MistakeClass>,
@@ -2517,7 +2518,14 @@ pub fn gate(plan: &crate::inputs::Plan, cfg: &SetupConfig) -> Result<Gated> {
                 format!("setup check{accepted} [{}]: {}", f.class, f.text())
             })
             .collect(),
-        accepted: report.overwhelming().cloned(),
+        accepted: report.overwhelming().map(|f| {
+            format!(
+                "setup check (accepted with {}) [{}]: {}",
+                cfg.accept_option,
+                f.class,
+                f.text()
+            )
+        }),
         classes: report.findings.iter().map(|f| f.class).collect(),
     })
 }

@@ -906,26 +906,14 @@ fn run(cli: Cli) -> Result<()> {
                 }
                 // The setup check of the log (units, column order, rows out of step, the
                 // external encoders), as `calibrate` runs it.
-                let (accepted, _) = setup_gate(
-                    &Plan {
-                        workspace: None,
-                        device: device.clone(),
-                        tip: "ball_link".to_owned(),
-                        tips: Vec::new(),
-                        units: units.units(),
-                        sigma_rad: None,
-                        test_last: None,
-                        data: data.clone(),
-                        test: Vec::new(),
-                        socket_distance_m,
-                        model: calibrate::ModelName::Geometric.into(),
-                        folds,
-                        sigma_m: None,
-                        joint: false,
-                        gravity: calibrate::GRAVITY_DOWN,
-                    },
-                    accept_setup,
-                )?;
+                let check = Plan::log_check(
+                    device.clone(),
+                    data.clone(),
+                    units.units(),
+                    socket_distance_m,
+                    folds,
+                );
+                let (accepted, _) = setup_gate(&check, accept_setup)?;
                 let plan = hapcal::diagnose::DiagnosePlan {
                     units: units.units(),
                     ..hapcal::diagnose::DiagnosePlan::new(
@@ -1079,14 +1067,7 @@ fn setup_gate(
     for warning in &gated.warnings {
         note!("hapcal: warning: {warning}");
     }
-    let accepted = gated.accepted.map(|f| {
-        format!(
-            "setup check (accepted with --accept-setup) [{}]: {}",
-            f.class,
-            f.text()
-        )
-    });
-    Ok((accepted, gated.classes))
+    Ok((gated.accepted, gated.classes))
 }
 
 /// The verdict of a diagnosis whose setup the check found wrong and the user accepted: no

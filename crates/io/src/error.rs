@@ -496,6 +496,20 @@ pub enum Error {
         /// column.
         source: hapcal_contract::ContractError,
     },
+    /// A targets file (the positions and orientations a compensation is asked to reach) that
+    /// does not hold targets: no header, missing or unknown columns, a row of the wrong width,
+    /// a quaternion that is not a unit one, a start command outside the joint limits.
+    #[error("{}: {message}", place(path, *line, *column))]
+    Targets {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line (0 when the file as a whole is at fault).
+        line: u64,
+        /// 1-based column (0 when the line as a whole is at fault).
+        column: u64,
+        /// What is wrong and what was expected.
+        message: String,
+    },
     /// A calibrated value cannot be applied to the device.
     #[error("parameter {name:?}: {message}")]
     Parameter {
@@ -551,6 +565,16 @@ impl Error {
             path: path.into(),
             source,
         }
+    }
+}
+
+/// `path`, `path:line` or `path:line:column` as far as `line` and `column` are known (0 for
+/// unknown).
+fn place(path: &std::path::Path, line: u64, column: u64) -> String {
+    match (line, column) {
+        (0, _) => path.display().to_string(),
+        (line, 0) => format!("{}:{line}", path.display()),
+        (line, column) => format!("{}:{line}:{column}", path.display()),
     }
 }
 

@@ -76,6 +76,7 @@ mod log;
 mod measure;
 mod mukca;
 mod table;
+mod targets;
 mod urdf;
 
 pub use columns::{AngleUnit, ColumnChange, ColumnEdit, ColumnUnit, LengthUnit, Units};
@@ -98,6 +99,7 @@ pub use mukca::{
     SocketPlacement, SocketSamples, read_mukca_paths, read_mukca_paths_for, read_mukca_paths_in,
     read_mukca_placement, read_mukca_placement_for,
 };
+pub use targets::{TargetRow, read_targets};
 pub use urdf::{
     LinkInertial, MAX_CHAIN_LENGTH_M, UrdfTree, import_urdf, import_urdf_tips, import_urdf_tree,
     load_tips, read_urdf, write_calibrated_urdf,

@@ -21,6 +21,31 @@ impl Pose {
         translation_m: [0.0; 3],
     };
 
+    /// The rotation matrix of the quaternion `q = [w, x, y, z]`, normalised first (a
+    /// measured or written quaternion whose norm is 1 up to rounding). The one conversion the
+    /// runtime, `predict`'s errors and the targets of `compensate` share.
+    pub fn rotation_of_quaternion(q: [f64; 4]) -> [[f64; 3]; 3] {
+        let norm = libm::sqrt(q.iter().map(|v| v * v).sum::<f64>());
+        let [w, x, y, z] = q.map(|v| v / norm);
+        [
+            [
+                1.0 - 2.0 * (y * y + z * z),
+                2.0 * (x * y - w * z),
+                2.0 * (x * z + w * y),
+            ],
+            [
+                2.0 * (x * y + w * z),
+                1.0 - 2.0 * (x * x + z * z),
+                2.0 * (y * z - w * x),
+            ],
+            [
+                2.0 * (x * z - w * y),
+                2.0 * (y * z + w * x),
+                1.0 - 2.0 * (x * x + y * y),
+            ],
+        ]
+    }
+
     /// The composition `self · other` (`a_T_c = a_T_b · b_T_c`).
     #[inline]
     pub fn compose(&self, other: &Pose) -> Pose {

@@ -182,29 +182,6 @@ fn rotation_angle(r: &[[f64; 3]; 3]) -> f64 {
     libm::atan2(norm / 2.0, (r[0][0] + r[1][1] + r[2][2] - 1.0) / 2.0)
 }
 
-/// The rotation matrix of the quaternion `[w, x, y, z]` (normalised first).
-fn quaternion_rotation(q: [f64; 4]) -> [[f64; 3]; 3] {
-    let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let [w, x, y, z] = q.map(|v| v / norm);
-    [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ]
-}
-
 /// One marker as an instrument measured it in one row of a measurement file.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MarkerObservation {
@@ -597,7 +574,7 @@ impl Predictor {
                 .position
                 .push((e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt());
             if let Some(wxyz) = m.rotation_wxyz {
-                let measured = quaternion_rotation(wxyz);
+                let measured = Pose::rotation_of_quaternion(wxyz);
                 errors
                     .orientation
                     .push(rotation_angle(&relative(&pose.rotation, &measured)));

@@ -5,7 +5,7 @@ use hapcal_diagnose::arm::ArmDiagnosis;
 
 use super::figures::{self, BLUE_, BarGroup, Figure, GREY, Points, RED_};
 use super::{Input, Page};
-use crate::predict::Prediction;
+use hapcal_calibrate::predict::Prediction;
 
 /// A diagnosis as its HTML report shows it, whichever the device: the gap, the candidates of
 /// every round, the accepted effects, the verdict, the residual maps and the text report.

@@ -6,6 +6,7 @@ mod fuzz;
 mod log;
 mod measure;
 mod mukca;
+mod targets;
 mod urdf;
 
 use std::path::PathBuf;
