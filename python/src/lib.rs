@@ -737,7 +737,7 @@ fn library_positions(outcome: &Outcome, q: &[Vec<f64>]) -> Result<Vec<Vec<[f64; 
         }
     }
     let device = &outcome.device;
-    let haptic = !device.capstans.is_empty() || device.parallelogram.is_some();
+    let haptic = device.has_transmissions();
     if let (true, Some(calibrated)) = (haptic, &outcome.calibrated) {
         use hapcal_calibrate::haptic;
         let nominal = haptic::HapticDevice::new(device.clone())?;
@@ -890,7 +890,7 @@ fn _calibrate(
             let robot = device.robot.as_ref();
             py.detach(|| -> Result<Outcome> {
                 let start = Instant::now();
-                if !hapcal_device.capstans.is_empty() || hapcal_device.parallelogram.is_some() {
+                if hapcal_device.has_transmissions() {
                     bail!(
                         "{}: a haptic device with transmissions is calibrated from its log files (Measurements.from_csv); arrays hold marker or distance measurements of an external instrument",
                         plan.device.display()
@@ -1121,7 +1121,7 @@ fn _diagnose(
     if folds < 2 {
         return Err(py_err(anyhow!("folds must be at least 2, got {folds}")));
     }
-    if !hapcal_device.capstans.is_empty() || hapcal_device.parallelogram.is_some() {
+    if hapcal_device.has_transmissions() {
         // The reference device's diagnosis: one log, its own held-out folds.
         let path = match train.as_slice() {
             [Source::Path { path, units }] if *units == Units::default() => path,

@@ -111,7 +111,7 @@ pub struct GeometricBaseline {
 /// the reference device's); too few configurations for the geometric model.
 pub fn geometric_baseline(plan: &Plan, ladder: bool) -> Result<GeometricBaseline> {
     let device = load_device(&plan.device, &plan.tip)?;
-    if !device.capstans.is_empty() || device.parallelogram.is_some() {
+    if device.has_transmissions() {
         bail!(
             "{}: a haptic device with transmissions is diagnosed from its own log (the reference \
              device's diagnosis), not as a serial arm",

@@ -83,7 +83,7 @@ impl Data {
 /// log, socket folders mixed with measurement files, and whatever the readers report (file,
 /// line, column).
 pub fn load(plan: &Plan, device: &Device) -> Result<Data> {
-    if !device.capstans.is_empty() || device.parallelogram.is_some() {
+    if device.has_transmissions() {
         let read = |paths: &[PathBuf]| -> Result<Vec<NamedLog>> {
             paths
                 .iter()

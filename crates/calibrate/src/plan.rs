@@ -112,7 +112,7 @@ pub fn planned_model(
     measurement: Measurement,
     choice: ModelChoice,
 ) -> Result<ModelName> {
-    let haptic = !device.capstans.is_empty() || device.parallelogram.is_some();
+    let haptic = device.has_transmissions();
     let kind = match (haptic, measurement) {
         (true, Measurement::Distance) => DataKind::HapticLogs,
         (false, Measurement::Distance) => DataKind::Distances,

@@ -363,7 +363,7 @@ pub fn haptic_device(device: &Path) -> Result<Option<hapcal_io::Device>> {
     }
     let d = hapcal_io::read_device(device)
         .with_context(|| format!("reading device {}", device.display()))?;
-    Ok((!d.capstans.is_empty() || d.parallelogram.is_some()).then_some(d))
+    Ok(d.has_transmissions().then_some(d))
 }
 
 /// Per row of a haptic device's log its line, the joint readings (rad) and the cable

@@ -1693,7 +1693,7 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
 /// An unreadable device or file, and as [`check_setup`].
 pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
     let device = crate::data::load_device(&plan.device, &plan.tip)?;
-    if !device.capstans.is_empty() || device.parallelogram.is_some() {
+    if device.has_transmissions() {
         if plan.data.iter().all(|p| p.is_file()) {
             return crate::setup_haptic::check_logs(&device, &plan.data, &plan.units).map(Some);
         }

@@ -475,7 +475,7 @@ fn check_socket_folders(plan: &Plan) -> Result<()> {
     let Ok(device) = calibrate::load_device(&plan.device, &plan.tip) else {
         return Ok(());
     };
-    if !device.capstans.is_empty() || device.parallelogram.is_some() {
+    if device.has_transmissions() {
         return Ok(());
     }
     for folder in folders {
@@ -883,8 +883,7 @@ fn run(cli: Cli) -> Result<()> {
             let haptic = !device
                 .extension()
                 .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
-                && hapcal_io::read_device(&device)
-                    .is_ok_and(|d| !d.capstans.is_empty() || d.parallelogram.is_some());
+                && hapcal_io::read_device(&device).is_ok_and(|d| d.has_transmissions());
             let (text, json_text, svg_text, view) = if haptic {
                 if data.len() != 1 || !test.is_empty() {
                     anyhow::bail!("a haptic device is diagnosed from one log: --data <log.csv>");

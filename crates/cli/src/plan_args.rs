@@ -174,7 +174,7 @@ fn plan_after_measured(
              poses to add to measurement files"
         );
     }
-    if !device.capstans.is_empty() || device.parallelogram.is_some() {
+    if device.has_transmissions() {
         bail!(
             "{}: --data plans poses to add to measurement files of a robot (marker positions, \
              poses, anchor distances); a haptic device's poses are planned without --data",

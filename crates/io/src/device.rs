@@ -288,6 +288,14 @@ pub fn parse_device(text: &str, path: &Path) -> Result<Device, Error> {
 }
 
 impl Device {
+    /// Whether the device has transmissions between its motors and joints: capstan drives
+    /// (`[[capstan]]`) or a parallelogram (`[parallelogram]`), as a haptic device of the
+    /// paper's kind has (its joint angles then come from the motor encoders through them, and
+    /// a haptic log's external encoders identify them).
+    pub fn has_transmissions(&self) -> bool {
+        !self.capstans.is_empty() || self.parallelogram.is_some()
+    }
+
     /// The number of joints of the chain (non-fixed `[[dh]]` rows, or placements with an axis,
     /// branches included).
     pub fn n_joints(&self) -> usize {
