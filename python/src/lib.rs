@@ -1604,16 +1604,10 @@ fn _predict(
                 data.display()
             );
         }
-        let prismatic: Vec<bool> = (0..robot.n_joints())
-            .map(|j| robot.is_prismatic(j))
-            .collect();
-        let schema = hapcal_io::JointSchema {
-            names: robot.joint_names(),
-            prismatic: &prismatic,
-            limits: robot.limits(),
-        };
-        let table = hapcal_io::read_measurement_file(&data, &schema, &units)
-            .with_context(|| format!("reading joint readings {}", data.display()))?;
+        let table = hapcal_calibrate::predict::with_joint_schema(&robot, |schema| {
+            hapcal_io::read_measurement_file(&data, schema, &units)
+        })
+        .with_context(|| format!("reading joint readings {}", data.display()))?;
         if table.rows.is_empty() {
             bail!(
                 "{}: no data row: expected one joint configuration per row",
@@ -1654,14 +1648,10 @@ fn _predict(
             poses.push(
                 (out.iter())
                     .map(|t| {
-                        let r = nalgebra::Rotation3::from_matrix_unchecked(
-                            nalgebra::Matrix3::from_fn(|i, j| t.pose.rotation[i][j]),
-                        );
-                        let q = UnitQuaternion::from_rotation_matrix(&r);
-                        let (w, v) = (q.w, q.imag());
-                        let s = if w < 0.0 { -1.0 } else { 1.0 };
+                        let [w, x, y, z] =
+                            hapcal_calibrate::predict::quaternion_of(&t.pose.rotation);
                         let p = t.pose.translation_m;
-                        [p[0], p[1], p[2], s * w, s * v.x, s * v.y, s * v.z]
+                        [p[0], p[1], p[2], w, x, y, z]
                     })
                     .collect(),
             );

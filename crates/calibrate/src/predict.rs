@@ -117,10 +117,11 @@ pub struct Prediction {
     pub rows: Vec<PredictedRow>,
 }
 
-/// The quaternion `[w, x, y, z]` (w ≥ 0) of the rotation matrix `r` (nalgebra's conversion,
-/// Shepperd's method: the largest of the four squared components first, for accuracy at every
-/// angle).
-fn quaternion_of(r: &[[f64; 3]; 3]) -> [f64; 4] {
+/// The quaternion `[w, x, y, z]` (w ≥ 0) of the rotation matrix `r` (row-major, a proper
+/// rotation; nalgebra's conversion, Shepperd's method: the largest of the four squared
+/// components first, for accuracy at every angle). How `hapcal predict --poses` and the Python
+/// package write orientations.
+pub fn quaternion_of(r: &[[f64; 3]; 3]) -> [f64; 4] {
     let m = nalgebra::Matrix3::from_fn(|i, j| r[i][j]);
     let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m));
     let wxyz = [q.w, q.i, q.j, q.k];
@@ -131,8 +132,10 @@ fn quaternion_of(r: &[[f64; 3]; 3]) -> [f64; 4] {
     }
 }
 
-/// `f` of the joints of `robot` as the readers check them: their names, kinds and limits.
-pub(crate) fn with_joint_schema<T>(robot: &Robot, f: impl FnOnce(&JointSchema<'_>) -> T) -> T {
+/// `f` of the joints of `robot` as the measurement readers check them
+/// ([`hapcal_io::JointSchema`]: their names, kinds and limits, rad or m); what `predict`,
+/// `compensate` and the Python package read a robot's data files with.
+pub fn with_joint_schema<T>(robot: &Robot, f: impl FnOnce(&JointSchema<'_>) -> T) -> T {
     let prismatic: Vec<bool> = (0..robot.n_joints())
         .map(|j| robot.is_prismatic(j))
         .collect();
