@@ -221,16 +221,22 @@ pub(crate) fn choose(
     };
     use crate::model::ModelRules;
     let contains = |i: usize, j: usize| candidates[i].contains(candidates[j]);
-    let nested = |i: usize, j: usize| contains(i, j).then(|| beats(i, j));
-    let chosen = crate::model::climb(level, &beats, &|i| rms(&held[i]), &nested);
+    let beats_contained = |i: usize, j: usize| contains(i, j).then(|| beats(i, j));
+    let chosen = crate::model::climb(level, &beats, &|i| rms(&held[i]), &beats_contained);
     // The rung each candidate was compared with: the one chosen on the levels below its own.
     let compared = |i: usize| {
         let below = level.iter().take_while(|&&l| l < level[i]).count();
-        (below > 0)
-            .then(|| crate::model::climb(&level[..below], &beats, &|j| rms(&held[j]), &nested))
+        (below > 0).then(|| {
+            crate::model::climb(
+                &level[..below],
+                &beats,
+                &|j| rms(&held[j]),
+                &beats_contained,
+            )
+        })
     };
     // The alternative of its own level each candidate contains, and the comparison with it.
-    let nested = |i: usize| {
+    let nested_report = |i: usize| {
         (0..candidates.len())
             .find(|&j| j != i && level[j] == level[i] && contains(i, j))
             .map(|j| crate::report::NestedComparison {
@@ -252,7 +258,7 @@ pub(crate) fn choose(
                 blocked_difference(h, &held[0])
             },
             beats_geometric: beats(i, 0),
-            nested: nested(i),
+            nested: nested_report(i),
             n_kept: 0,
         })
         .collect();

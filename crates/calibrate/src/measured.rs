@@ -2009,8 +2009,9 @@ pub fn calibrate_measured(
                 stops.borrow_mut().clear();
                 let allowed =
                     |i: usize, j: usize| left_out.iter().all(|(k, _)| *k != i) && beats(i, j);
-                // A contained rung left out (negative compliances) no longer holds the richer one back.
-                let nested = |i: usize, j: usize| {
+                // A contained rung left out (negative compliances) no longer holds the richer
+                // one back.
+                let beats_contained = |i: usize, j: usize| {
                     if left_out.iter().any(|(k, _)| *k == j) {
                         return None;
                     }
@@ -2020,7 +2021,7 @@ pub fn calibrate_measured(
                     &ladder_levels,
                     &allowed,
                     &|i| rms(&scores[i].squared),
-                    &nested,
+                    &beats_contained,
                 );
                 let (chosen_model, chosen_fit) = &fits[chosen];
                 let (negative, n_compliances) =
