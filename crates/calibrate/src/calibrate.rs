@@ -445,6 +445,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         covariance: &identified.covariance,
         frames: &[],
         frame_values: &[],
+        held: crate::record::held_values(&identified),
         ranges,
         rows: n_training_rows,
     });

@@ -2277,8 +2277,7 @@ pub fn calibrate_measured(
         && model.equilibrium
     {
         // The fixed point was iterated and is still not reached: the iteration does not
-        // contract, and where it stops depends on rounding (the runtime's evaluation of the
-        // same record stops elsewhere).
+        // contract, and its prediction is where a fixed number of steps happens to stop.
         no_equilibrium = Some(crate::report::Implausible {
             kind: crate::report::ImplausibleKind::NoEquilibrium,
             message: format!(
@@ -2286,8 +2285,8 @@ pub fn calibrate_measured(
                  no equilibrium its deflection reaches: after {} fixed-point steps of θ = q + \
                  k∘τ(θ), one more still moves the tips by up to {:.3} mm, more than \
                  {EQUILIBRIUM_SHARE} of the noise ({:.3} mm per axis); no real robot bends that \
-                 far under its own weight, and no evaluation of these values (predict, the \
-                 runtime) reproduces the fit; the model absorbs an effect it lacks or a setup \
+                 far under its own weight, and the fit's predictions are where a fixed number \
+                 of steps happens to stop; the model absorbs an effect it lacks or a setup \
                  mistake",
                 hapcal_problems::EQUILIBRIUM_ITERATIONS,
                 step * 1e3,
@@ -3387,6 +3386,7 @@ pub fn run_tables(
         covariance: &id.covariance,
         frames: &report.frames,
         frame_values: &frame_values,
+        held: crate::record::held_values(id),
         ranges: training_ranges(&train, robot.joint_names.len()),
         rows: train.iter().map(|t| t.rows.len()).sum(),
     });

@@ -37,6 +37,9 @@ pub(crate) struct MeasuredRecord<'a> {
     /// `marker<k>.rz`) with their σ: recorded so that a prediction in the instrument frame
     /// carries the frames' uncertainty.
     pub frame_values: &'a [ParamReport],
+    /// The values the final identification held at its warm start rather than estimated
+    /// ([`held_values`]): part of the model all the same.
+    pub held: Vec<ParamReport>,
     /// Each joint's training range, rad or m (`training_ranges`).
     pub ranges: Vec<(f64, f64)>,
     /// Number of training rows.
@@ -87,10 +90,16 @@ pub(crate) fn measured_record(m: &MeasuredRecord<'_>) -> Calibration {
         .chain(m.frame_values)
         .map(|p| value_of(p, compliance_unit, p.std))
         .collect();
-    // A kinematic value the final identification held rather than estimated (its warm start
-    // from an earlier fit) is part of the model all the same: recorded with σ 0, outside the
-    // covariance.
+    // A value the final identification held rather than estimated (its warm start from an
+    // earlier fit: a per-axis compliance at the isotropic rung's estimate, a value the torque
+    // equilibrium's refits moved) is part of the model all the same: recorded with σ 0,
+    // outside the covariance; so is a kinematic value held outside the identification.
     let mut values = values;
+    for p in &m.held {
+        if !values.iter().any(|v| v.name == p.name) {
+            values.push(value_of(p, compliance_unit, 0.0));
+        }
+    }
     let chain = m.calibrated.tips.first().unwrap_or(&m.calibrated.chain);
     for (p, &x) in chain.params().iter().zip(&m.calibrated.x_kin) {
         let frame = p.name.starts_with("instrument.") || p.name.starts_with("marker");
@@ -177,6 +186,25 @@ pub(crate) fn bound_record(
 
 /// The record's value of `p` with standard deviation `std`, in the unit of the torque source
 /// `compliance_unit` for a compliance.
+/// The values of `id` that its rank decision pruned but that are not zero (their warm start
+/// from an earlier fit, which the fit held), frames (`instrument.*`, `marker*`) excluded:
+/// each with σ 0 and its unit's symbol.
+pub(crate) fn held_values(id: &hapcal_identify::Identified) -> Vec<ParamReport> {
+    (0..id.layout.len())
+        .filter(|i| !id.covariance.free.contains(i))
+        .filter(|&i| {
+            let name = id.layout.name(i);
+            id.fit.x[i] != 0.0 && !name.starts_with("instrument.") && !name.starts_with("marker")
+        })
+        .map(|i| ParamReport {
+            name: id.layout.name(i).to_owned(),
+            value: id.fit.x[i],
+            std: 0.0,
+            unit: id.layout.spec(i).unit.symbol(),
+        })
+        .collect()
+}
+
 fn value_of(
     p: &ParamReport,
     compliance_unit: Option<&str>,
