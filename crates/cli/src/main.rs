@@ -998,9 +998,17 @@ fn run(cli: Cli) -> Result<()> {
             story,
         } => {
             let bar = indicatif::ProgressBar::new(cases as u64);
-            let md = hapcal::diagnose::blind_report(cases, first_seed, story, &|done| {
-                bar.set_position(done as u64)
-            })?;
+            let truth_file = hapcal::project_root().join("fixtures/reference-device/truth.toml");
+            let truth = hapcal_sim::read_truth(&truth_file)?;
+            let device = truth.read_device(&truth_file)?;
+            let md = hapcal_diagnose::blind::report(
+                &device,
+                &truth,
+                cases,
+                first_seed,
+                story,
+                &|done| bar.set_position(done as u64),
+            )?;
             bar.finish_and_clear();
             emit(&md);
             Ok(())
