@@ -943,7 +943,23 @@ impl AtWarm {
         let m: usize = ranges.iter().map(|r| r.len()).sum();
         let idx: Vec<usize> = ranges.into_iter().flatten().collect();
         let r = Col::from_fn(m, |i| self.r[idx[i]]);
-        let jac = Mat::from_fn(m, self.jac.ncols(), |i, j| self.jac[(idx[i], j)]);
+        // Column by column, through the columns' slices: indexing the matrix entry by entry
+        // took about 4 % of the humanoid's ladder.
+        let mut jac = Mat::zeros(m, self.jac.ncols());
+        for (j, dst) in jac.col_iter_mut().enumerate() {
+            match (
+                self.jac.col(j).try_as_col_major(),
+                dst.try_as_col_major_mut(),
+            ) {
+                (Some(src), Some(dst)) => {
+                    let src = src.as_slice();
+                    for (d, &i) in dst.as_slice_mut().iter_mut().zip(&idx) {
+                        *d = src[i];
+                    }
+                }
+                _ => unreachable!("the columns of an owned matrix are contiguous"),
+            }
+        }
         (r, jac)
     }
 }
