@@ -418,19 +418,12 @@ fn identify_sparse(
     })
 }
 
-/// [`identify`] on the dense back end.
+/// [`identify`] on the dense back end (`cfg` already checked by [`identify`]).
 fn identify_dense(
     p: &impl Problem,
     x0: Col<f64>,
     cfg: &IdentifyConfig,
 ) -> Result<Identified, Error> {
-    if let Some(sigma) = cfg.sigma {
-        check_config("sigma", sigma, true)?;
-    }
-    check_config("prior_m", cfg.rank.prior_m, true)?;
-    check_config("prior_rad", cfg.rank.prior_rad, true)?;
-    check_config("prior_dimensionless", cfg.rank.prior_dimensionless, true)?;
-    check_config("rel_tol", cfg.rank.rel_tol, false)?;
     let layout = p.layout().clone();
     let n = layout.len();
     if x0.nrows() != n {
