@@ -2090,9 +2090,8 @@ pub fn calibrate_measured(
     let (model, fitted, equilibrium_iterations) = equilibrate(
         rung, robot, &framed, &offsets, train, weights, model, fitted,
     )?;
-    let is_frame = |name: &str| name.starts_with("instrument.") || name.starts_with("marker");
     let n_kept = (fitted.identified.identifiability.kept.iter())
-        .filter(|&&i| !is_frame(fitted.identified.layout.name(i)))
+        .filter(|&&i| !crate::report::is_frame_param(fitted.identified.layout.name(i)))
         .count();
     if let Some(r) = ladder.iter_mut().find(|r| r.rung == rung) {
         r.n_kept = n_kept;
@@ -3307,10 +3306,9 @@ pub fn run_tables(
     let out = calibrate_measured(robot, &train, &test, &cfg)?;
     warnings.extend(out.warnings.iter().cloned());
     let id = &out.fitted.identified;
-    let is_frame = |name: &str| name.starts_with("instrument.") || name.starts_with("marker");
     let parameters = (id.covariance.free.iter())
         .zip(id.covariance.std())
-        .filter(|(i, _)| !is_frame(id.layout.name(**i)))
+        .filter(|(i, _)| !crate::report::is_frame_param(id.layout.name(**i)))
         .map(|(&i, std)| ParamReport {
             name: id.layout.name(i).to_owned(),
             value: id.fit.x[i],
@@ -3321,7 +3319,7 @@ pub fn run_tables(
         .collect();
     let pruned = crate::fit::pruned_report(id)
         .into_iter()
-        .filter(|p| !is_frame(&p.name))
+        .filter(|p| !crate::report::is_frame_param(&p.name))
         .collect();
     let correlated = (id.covariance.correlated_pairs(0.95).into_iter())
         .map(|(a, b, c)| {
@@ -3331,7 +3329,7 @@ pub fn run_tables(
                 c,
             )
         })
-        .filter(|(a, b, _)| !is_frame(a) && !is_frame(b))
+        .filter(|(a, b, _)| !crate::report::is_frame_param(a) && !crate::report::is_frame_param(b))
         .collect();
     let placements = (out.sets.iter().zip(&out.sample_errors))
         .map(|((name, role, n_rows, before, after), errors)| {
@@ -3383,7 +3381,7 @@ pub fn run_tables(
     };
     let frame_values: Vec<ParamReport> = (id.covariance.free.iter())
         .zip(id.covariance.std())
-        .filter(|(i, _)| is_frame(id.layout.name(**i)))
+        .filter(|(i, _)| crate::report::is_frame_param(id.layout.name(**i)))
         .map(|(&i, std)| ParamReport {
             name: id.layout.name(i).to_owned(),
             value: id.fit.x[i],

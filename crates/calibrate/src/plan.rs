@@ -1073,14 +1073,13 @@ pub fn plan_after(
         .iter()
         .map(|&k| free_layout.name(k).to_owned())
         .collect();
-    let is_frame = |name: &str| name.starts_with("instrument.") || name.starts_with("marker");
     let unseen: Vec<String> = (kept.iter())
         .filter(|k| !seen.kept.contains(k))
         .map(|&k| free_layout.name(k).to_owned())
-        .filter(|name| !is_frame(name))
+        .filter(|name| !crate::report::is_frame_param(name))
         .collect();
     let undetermined: Vec<String> = (ident.pruned_names().into_iter())
-        .filter(|name| !is_frame(name))
+        .filter(|name| !crate::report::is_frame_param(name))
         .map(str::to_owned)
         .collect();
     let block_of = |jac: &Mat<f64>, start: usize, nrows: usize| {

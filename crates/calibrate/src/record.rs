@@ -102,7 +102,7 @@ pub(crate) fn measured_record(m: &MeasuredRecord<'_>) -> Calibration {
     }
     let chain = m.calibrated.tips.first().unwrap_or(&m.calibrated.chain);
     for (p, &x) in chain.params().iter().zip(&m.calibrated.x_kin) {
-        let frame = p.name.starts_with("instrument.") || p.name.starts_with("marker");
+        let frame = crate::report::is_frame_param(&p.name);
         if x != 0.0 && !frame && !values.iter().any(|v| v.name == p.name) {
             values.push(hapcal_contract::CalibratedValue {
                 name: p.name.clone(),
@@ -184,18 +184,13 @@ pub(crate) fn bound_record(
     }
 }
 
-/// The record's value of `p` with standard deviation `std`, in the unit of the torque source
-/// `compliance_unit` for a compliance.
 /// The values of `id` that its rank decision pruned but that are not zero (their warm start
 /// from an earlier fit, which the fit held), frames (`instrument.*`, `marker*`) excluded:
 /// each with σ 0 and its unit's symbol.
 pub(crate) fn held_values(id: &hapcal_identify::Identified) -> Vec<ParamReport> {
     (0..id.layout.len())
         .filter(|i| !id.covariance.free.contains(i))
-        .filter(|&i| {
-            let name = id.layout.name(i);
-            id.fit.x[i] != 0.0 && !name.starts_with("instrument.") && !name.starts_with("marker")
-        })
+        .filter(|&i| id.fit.x[i] != 0.0 && !crate::report::is_frame_param(id.layout.name(i)))
         .map(|i| ParamReport {
             name: id.layout.name(i).to_owned(),
             value: id.fit.x[i],
@@ -205,6 +200,8 @@ pub(crate) fn held_values(id: &hapcal_identify::Identified) -> Vec<ParamReport> 
         .collect()
 }
 
+/// The record's value of `p` with standard deviation `std`, in the unit of the torque source
+/// `compliance_unit` for a compliance.
 fn value_of(
     p: &ParamReport,
     compliance_unit: Option<&str>,

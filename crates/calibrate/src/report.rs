@@ -456,6 +456,12 @@ pub struct RungReport {
     pub n_kept: usize,
 }
 
+/// Whether the parameter `name` belongs to the instrument's or a marker's frame
+/// (`instrument.x` … `marker<k>.rz`) rather than to the robot.
+pub(crate) fn is_frame_param(name: &str) -> bool {
+    name.starts_with("instrument.") || name.starts_with("marker")
+}
+
 /// An identified frame: the instrument-to-base transform or a marker on its link.
 #[derive(Clone, Debug, Serialize)]
 pub struct FrameReport {

@@ -2076,12 +2076,11 @@ fn another_device(
         return None;
     }
     let id = &out.fitted.identified;
-    let is_frame = |name: &str| name.starts_with("instrument.") || name.starts_with("marker");
     let parameters: Vec<crate::report::ParamReport> = (id.covariance.free.iter())
         .zip(id.covariance.std())
         .filter(|(i, _)| {
             id.layout.spec(**i).unit == hapcal_identify::Unit::Meter
-                && !is_frame(id.layout.name(**i))
+                && !crate::report::is_frame_param(id.layout.name(**i))
         })
         .map(|(&i, std)| crate::report::ParamReport {
             name: id.layout.name(i).to_owned(),
