@@ -865,6 +865,7 @@ fn _calibrate(
         socket_distance_m,
         model,
         folds,
+        ladder_rows: hapcal_calibrate::fit::LADDER_ROWS,
         sigma_m,
         joint,
     };
@@ -1206,6 +1207,7 @@ fn _diagnose(
         socket_distance_m: 0.05,
         model: ModelChoice::Auto,
         folds,
+        ladder_rows: hapcal_calibrate::fit::LADDER_ROWS,
         sigma_m,
         joint: false,
     };

@@ -387,6 +387,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         model: choice,
         folds: plan.folds,
         cross_validation,
+        cross_validated_rows: None,
         ladder: Vec::new(),
         frames: Vec::new(),
         sigma_m: identified.sigma,

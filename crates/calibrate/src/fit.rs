@@ -31,6 +31,64 @@ pub use crate::report::termination_text;
 /// moves between two compliance models), at three times the cost of one k-fold pass.
 pub const CV_REPEATS: usize = 3;
 
+/// The index ranges of sets of `lengths[i]` rows held one after the other.
+pub fn log_ranges(lengths: &[usize]) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+    lengths.iter().scan(0, |start, &len| {
+        *start += len;
+        Some(*start - len..*start)
+    })
+}
+
+/// Training rows beyond which `--model auto` on haptic logs chooses its model on a sample of
+/// them ([`ladder_sample`]); the chosen model is then fitted on every row. The ladder refits
+/// each rung `CV_REPEATS × folds` times, so its cost grows with the rows while the choice does
+/// not need them: on a simulated log of the reference device with transmission errors and no
+/// compliance (`hapcal simulate --truth fixtures/reference-device/truth.toml --seed 7 --poses
+/// 100000`), 20,000 of its rows put the transmissions 134 blocked standard errors ahead of
+/// the deviations alone (all 100,000 rows: 126) and the compliance no better than the
+/// transmissions, the choice of all the rows (docs/engine.md, "Long logs").
+pub const LADDER_ROWS: usize = 20_000;
+
+/// The training rows a long log's ladder judges ([`ladder_sample`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LadderSample {
+    /// Every `stride`-th row of each log, from the log's first.
+    pub stride: usize,
+    /// Indices of the sampled rows in the logs' rows one after the other, increasing.
+    pub rows: Vec<usize>,
+    /// Sampled rows of each log, in the logs' order.
+    pub lengths: Vec<usize>,
+}
+
+/// The rows of logs of `lengths[i]` rows (one after the other) that the ladder judges when
+/// they hold more than `cap` rows in all: every `stride`-th row of each log, from its first,
+/// the stride the smallest that leaves at most `cap` rows. A stride keeps the log's spread
+/// over time and joint space, and its blocked folds stay contiguous in time. `None` when the
+/// logs hold `cap` rows or fewer: every row is judged.
+pub fn ladder_sample(lengths: &[usize], cap: usize) -> Option<LadderSample> {
+    let n: usize = lengths.iter().sum();
+    if n <= cap || cap == 0 {
+        return None;
+    }
+    // ceil(len / stride) rows of each log; the smallest stride whose sum fits under the cap.
+    let kept = |stride: usize| -> usize { lengths.iter().map(|l| l.div_ceil(stride)).sum() };
+    let mut stride = n.div_ceil(cap);
+    while kept(stride) > cap {
+        stride += 1;
+    }
+    let mut rows = Vec::with_capacity(kept(stride));
+    let mut start = 0;
+    for &len in lengths {
+        rows.extend((start..start + len).step_by(stride));
+        start += len;
+    }
+    Some(LadderSample {
+        stride,
+        rows,
+        lengths: lengths.iter().map(|l| l.div_ceil(stride)).collect(),
+    })
+}
+
 /// Held-out errors of one candidate: one entry per training row, in a fixed order.
 #[derive(Clone, Debug, Default)]
 pub struct HeldOut {
@@ -534,6 +592,38 @@ mod tests {
     use super::{
         CV_REPEATS, blocked_folds, first_repeat_blocks, fold_of, folds_of_rows, originals,
     };
+
+    #[test]
+    fn a_long_logs_ladder_sample_is_spread_over_every_log_and_under_the_cap() {
+        assert_eq!(super::ladder_sample(&[300, 200], 500), None);
+        for (lengths, cap) in [
+            (vec![1_000_000], 20_000),
+            (vec![100_001], 20_000),
+            (vec![7, 50_000, 3, 12_345], 1_000),
+            (vec![20_001], 20_000),
+        ] {
+            let n: usize = lengths.iter().sum();
+            let s = super::ladder_sample(&lengths, cap).expect("more rows than the cap");
+            assert!(s.rows.len() <= cap, "{lengths:?}: {} rows", s.rows.len());
+            // The smallest stride: one less would exceed the cap.
+            assert!(s.stride >= 2, "{lengths:?}: stride {}", s.stride);
+            let more: usize = lengths.iter().map(|l| l.div_ceil(s.stride - 1)).sum();
+            assert!(more > cap, "{lengths:?}: stride {}", s.stride);
+            assert_eq!(s.lengths.iter().sum::<usize>(), s.rows.len());
+            assert!(s.rows.windows(2).all(|w| w[0] < w[1]) && s.rows.last() < Some(&n));
+            // Each log's first row is sampled, and its rows are its own.
+            let mut start = 0;
+            let mut taken = 0;
+            for (&len, &kept) in lengths.iter().zip(&s.lengths) {
+                let own = &s.rows[taken..taken + kept];
+                assert_eq!(own.first(), Some(&start));
+                assert!(own.iter().all(|&i| (start..start + len).contains(&i)));
+                assert!(own.windows(2).all(|w| w[1] - w[0] == s.stride));
+                start += len;
+                taken += kept;
+            }
+        }
+    }
 
     #[test]
     fn copies_fall_in_the_fold_of_the_row_they_copy_in_every_repeat() {

@@ -1073,7 +1073,7 @@ impl HapticRungFit {
     ///
     /// # Errors
     /// Rows without the ext columns the rung needs, rows the model refuses, or a failed fit.
-    pub fn refit_residuals_m<R: Borrow<LogRow>>(
+    pub fn refit_residuals_m<R: Borrow<LogRow> + Sync>(
         &self,
         r: &HapticDevice,
         fit_rows: &[R],
@@ -1179,15 +1179,17 @@ fn refit_transmissions<R: Borrow<LogRow>>(
 }
 
 /// Distance residuals (model − measured, m) of `rows` on `r`'s chain at deviations `x`, the
-/// readings corrected by `t` (raw when `None`).
-fn kinematic_residuals_m<R: Borrow<LogRow>>(
+/// readings corrected by `t` (raw when `None`); the rows shared among the cores.
+fn kinematic_residuals_m<R: Borrow<LogRow> + Sync>(
     r: &HapticDevice,
     rows: &[R],
     x: &[f64],
     t: Option<&TransmissionFit>,
 ) -> Vec<f64> {
-    (rows_of(rows))
+    use rayon::prelude::*;
+    (rows.par_iter())
         .map(|row| {
+            let row: &LogRow = row.borrow();
             let q = t.map_or_else(|| row.q.clone(), |t| t.corrected(&row.q));
             r.chain.end_point(x, &q).coords.norm() - row.distance_m
         })
@@ -1337,7 +1339,7 @@ fn report_values(parameters: &[crate::report::ParamReport]) -> Vec<CalibratedVal
 pub fn calibrate_logs(
     plan: &crate::inputs::Plan,
     device: Device,
-    train: Vec<NamedLog>,
+    mut train: Vec<NamedLog>,
     test: Vec<NamedLog>,
     start: std::time::Instant,
 ) -> Result<crate::report::Outcome> {
@@ -1347,18 +1349,20 @@ pub fn calibrate_logs(
     let mut warnings: Vec<String> = (train.iter().chain(&test))
         .flat_map(|log| log.warnings.iter().cloned())
         .collect();
-    let rows: Vec<LogRow> = train
-        .iter()
-        .flat_map(|log| log.rows.iter().cloned())
+    let lengths: Vec<usize> = train.iter().map(|log| log.rows.len()).collect();
+    // The training rows one log after the other, moved out of their logs: a long log is held
+    // once as measured (and once more where the Huber loss bounds a row).
+    let raw: Vec<LogRow> = (train.iter_mut())
+        .flat_map(|log| std::mem::take(&mut log.rows))
         .collect();
-    if rows.is_empty() {
+    if raw.is_empty() {
         bail!("the training logs have no row");
     }
     let has_ext = (1..=PARALLELOGRAM_JOINT).all(|j| {
         let needed =
             j == PARALLELOGRAM_JOINT || haptic.device.capstans.iter().any(|c| c.joint == j);
         !needed
-            || rows
+            || raw
                 .iter()
                 .all(|r| r.ext.get(j - 1).copied().flatten().is_some())
     });
@@ -1371,160 +1375,66 @@ pub fn calibrate_logs(
     // A row that repeats an earlier row of its log adds no information, but the fit's
     // covariance counts it: the compliances' σ, judged for plausibility, grows back by
     // √(rows / distinct rows).
-    let n_copies: usize = (train.iter())
-        .map(|log| crate::fit::originals(log.rows.iter().map(LogRow::repeat_key)))
+    let n_copies: usize = (crate::fit::log_ranges(&lengths))
+        .map(|range| crate::fit::originals(raw[range].iter().map(LogRow::repeat_key)))
         .map(|o| crate::fit::n_copies(&o))
         .sum();
-    let std_scale = (rows.len() as f64 / rows.len().saturating_sub(n_copies).max(1) as f64).sqrt();
+    let std_scale = (raw.len() as f64 / raw.len().saturating_sub(n_copies).max(1) as f64).sqrt();
+    let copies = (n_copies, std_scale);
     // Gross errors bounded by the Huber loss: every fit below sees the winsorized distances;
     // the figures are of the logs as measured.
-    let (rows, downweighted, judge) = winsorize(&haptic, &train, rows, has_ext);
+    let Winsorized {
+        rows,
+        downweighted,
+        judge,
+        transmissions: step1,
+    } = winsorize(&haptic, &train, &lengths, &raw, has_ext);
+    let rows: &[LogRow] = rows.as_deref().unwrap_or(&raw);
     warnings.extend(crate::robust::bounded_warning(
         &downweighted,
         "log rows",
         &judge.to_string(),
     ));
+    // Step 1 reads the joint and external encoders, never the distances the Huber loss
+    // bounds: its fit on the logs as measured is its fit on the winsorized rows.
+    let step1_of_every_row = || match &step1 {
+        Some(t) => Ok(t.clone()),
+        None => identify_transmissions(&haptic, rows).context("step 1 (transmissions)"),
+    };
     // `--model auto`: the ladder geometric → transmissions → compliance, each rung the logs and
     // the device carry, climbed by the rule of every workflow (crate::model::climb) on the
     // rungs' held-out errors.
-    let mut cross_validation = Vec::new();
-    let chosen = if let ModelChoice::Model(chosen) = plan.model {
-        chosen
-    } else {
-        let has_mass = haptic.device.handle.is_some_and(|h| h.mass_kg > 0.0);
-        let (rungs, levels) = haptic_rungs(has_ext, has_mass);
-        let geometric = identify_kinematics(&haptic, &rows, None)
-            .context("kinematics")?
-            .1;
-        let two_steps = if has_ext {
-            let t = identify_transmissions(&haptic, &rows).context("step 1 (transmissions)")?;
-            let (_, kin) =
-                identify_kinematics(&haptic, &rows, Some(&t)).context("step 2 (kinematics)")?;
-            Some((t, kin))
-        } else {
-            None
-        };
-        // A rung whose identification fails on every training row (the compliance of a
-        // device whose logs cannot tell it from the deviations: a singular covariance) is
-        // left out of the climb, and the report says so.
-        let mut fits = Vec::new();
-        let (mut tried, mut tried_levels) = (Vec::new(), Vec::new());
-        for (&m, &level) in rungs.iter().zip(&levels) {
-            let fit = match m {
-                ModelName::Transmissions => {
-                    let (t, kin) = two_steps.clone().context("no transmissions fitted")?;
-                    HapticRungFit::Transmissions(t, kin)
+    let (chosen, mut cross_validation, cross_validated_rows) = match plan.model {
+        ModelChoice::Model(chosen) => (chosen, Vec::new(), None),
+        ModelChoice::Auto => {
+            // A long log's model is chosen on a sample spread over it: the choice needs far
+            // fewer rows than the parameters' precision (docs/engine.md, "Long logs").
+            let sample = crate::fit::ladder_sample(&lengths, plan.ladder_rows);
+            let (chosen, reports) = match &sample {
+                Some(sample) => {
+                    let rows: Vec<LogRow> = sample.rows.iter().map(|&i| rows[i].clone()).collect();
+                    choose_model(
+                        &haptic,
+                        &rows,
+                        &sample.lengths,
+                        Step1::of(has_ext, None),
+                        plan.folds,
+                        copies,
+                        &mut warnings,
+                    )?
                 }
-                ModelName::Compliance => {
-                    let (t, kin) = match &two_steps {
-                        Some((t, kin)) => (Some(t), kin),
-                        None => (None, &geometric),
-                    };
-                    match identify_with_compliance(&haptic, &rows, t, kin) {
-                        Ok(fit) => HapticRungFit::Compliance(fit, t.cloned()),
-                        Err(e) => {
-                            warnings.push(format!(
-                                "the {m} model was not tried: {e:#}; the ladder stops below it"
-                            ));
-                            continue;
-                        }
-                    }
-                }
-                _ => HapticRungFit::Geometric(geometric.clone()),
+                None => choose_model(
+                    &haptic,
+                    rows,
+                    &lengths,
+                    Step1::of(has_ext, step1.as_ref()),
+                    plan.folds,
+                    copies,
+                    &mut warnings,
+                )?,
             };
-            fits.push(fit);
-            tried.push(m);
-            tried_levels.push(level);
+            (chosen, reports, sample.map(|s| s.rows.len()))
         }
-        let lengths: Vec<usize> = train.iter().map(|log| log.rows.len()).collect();
-        // A rung that a cross-validation fold's training rows cannot fit (few rows: the fold
-        // keeps four fifths of them) cannot be judged: the ladder stops below it and says so;
-        // when not even the first rung can be judged, it is taken without cross-validation.
-        let mut held = Vec::new();
-        let mut unjudged = None;
-        for fit in &fits {
-            match cross_validate_rungs(
-                &haptic,
-                &rows,
-                &lengths,
-                std::slice::from_ref(fit),
-                plan.folds,
-            ) {
-                Ok(h) => held.extend(h),
-                Err(e) => {
-                    let why = format!(
-                        "{e:#} ({} training rows, {}-fold cross-validation)",
-                        rows.len(),
-                        plan.folds
-                    );
-                    if held.is_empty() {
-                        unjudged = Some(why);
-                    } else {
-                        warnings.push(format!(
-                            "the {} model was not tried: {why}; the ladder stops below it",
-                            fit.model()
-                        ));
-                    }
-                    break;
-                }
-            }
-        }
-        let judged = held.len();
-        let (rungs, levels) = (&tried[..judged], &tried_levels[..judged]);
-        let choice = if let Some(why) = unjudged {
-            let first = *tried.first().context("no model could be fitted")?;
-            warnings.push(format!(
-                "cross-validation cannot judge any model on these rows: {why}; the {first} \
-                 model is taken without it (record more rows for the ladder to compare models)"
-            ));
-            first
-        } else {
-            let (mut choice, reports) = crate::fit::choose(rungs, levels, &held);
-            cross_validation = reports;
-            // A chosen rung whose estimate no real device has (compliances below zero beyond
-            // the bound, an unconverged fit) is never the result: the ladder keeps the best of
-            // the rungs below it, and says why.
-            while let Some(k) = rungs.iter().position(|&r| r == choice)
-                && k > 0
-                && let Some(i) = crate::fit::implausible_estimates(
-                    fits[k].identified(),
-                    choice,
-                    false,
-                    HANDLE_COMPLIANCE_UNIT,
-                    std_scale,
-                )
-                .into_iter()
-                .next()
-            {
-                let (below, _) = crate::fit::choose(&rungs[..k], &levels[..k], &held[..k]);
-                warnings.push(format!(
-                    "the {choice} model predicted the held-out rows best but was left out: {}; \
-                     the ladder keeps the {below} model",
-                    i.message
-                ));
-                choice = below;
-            }
-            choice
-        };
-        warnings.extend(crate::fit::copies_warning(n_copies));
-        if choice == ModelName::Geometric && has_ext && rungs.contains(&ModelName::Transmissions) {
-            warnings.push(
-                "the transmissions did not beat the kinematic deviations alone on held-out \
-                 training rows: they are not identified (ask for --model transmissions to fit \
-                 them anyway)"
-                    .to_owned(),
-            );
-        }
-        if choice == ModelName::Compliance && !has_ext {
-            warnings.push(
-                "the compliance model predicted the held-out training rows best, but without \
-                 the external-encoder columns its compliances also absorb the transmission \
-                 errors: they are not the handle's alone (record the external encoders to tell \
-                 them apart)"
-                    .to_owned(),
-            );
-        }
-        choice
     };
     let mut parameters = Vec::new();
     let push_kept = |parameters: &mut Vec<ParamReport>, id: &Identified| {
@@ -1554,14 +1464,14 @@ pub fn calibrate_logs(
     let (transmissions, kin, model, calibrated) = if chosen == ModelName::Compliance {
         handle_mass_kg(&haptic.device)?;
         let t = if has_ext {
-            Some(identify_transmissions(&haptic, &rows).context("step 1 (transmissions)")?)
+            Some(step1_of_every_row()?)
         } else {
             warnings.push(no_ext_warning());
             None
         };
         let (_, kin) =
-            identify_kinematics(&haptic, &rows, t.as_ref()).context("step 2 (kinematics)")?;
-        let fit = identify_with_compliance(&haptic, &rows, t.as_ref(), &kin)?;
+            identify_kinematics(&haptic, rows, t.as_ref()).context("step 2 (kinematics)")?;
+        let fit = identify_with_compliance(&haptic, rows, t.as_ref(), &kin)?;
         let values = compliance_values(&fit);
         parameters.extend(
             (values.iter().zip(&fit.identified.covariance.free)).map(|(v, &i)| ParamReport {
@@ -1582,16 +1492,16 @@ pub fn calibrate_logs(
             },
             rows.len()
         );
-        let calibrated = compliance_device(&haptic, &rows, &fit, notes)?;
+        let calibrated = compliance_device(&haptic, rows, &fit, notes)?;
         let identified = fit.identified.clone();
         compliance = Some(fit);
         (t, identified, ModelName::Compliance, calibrated)
     } else if has_ext && chosen != ModelName::Geometric {
-        let t = identify_transmissions(&haptic, &rows).context("step 1 (transmissions)")?;
+        let t = step1_of_every_row()?;
         let (_, kin) =
-            identify_kinematics(&haptic, &rows, Some(&t)).context("step 2 (kinematics)")?;
+            identify_kinematics(&haptic, rows, Some(&t)).context("step 2 (kinematics)")?;
         let (t, kin, covariance) = if plan.joint {
-            let (problem, joint) = identify_jointly(&haptic, &rows, &t, &kin)?;
+            let (problem, joint) = identify_jointly(&haptic, rows, &t, &kin)?;
             // The joint covariance carries both steps' uncertainty: report and record it.
             push_kept(&mut parameters, &joint);
             let covariance = block_covariance(&[&joint.covariance]);
@@ -1624,7 +1534,7 @@ pub fn calibrate_logs(
         );
         let record = haptic_record(
             &haptic,
-            &rows,
+            rows,
             ModelName::Transmissions,
             report_values(&parameters),
             Some(covariance),
@@ -1637,11 +1547,11 @@ pub fn calibrate_logs(
         if !has_ext {
             warnings.push(no_ext_warning());
         }
-        let (_, kin) = identify_kinematics(&haptic, &rows, None).context("kinematics")?;
+        let (_, kin) = identify_kinematics(&haptic, rows, None).context("kinematics")?;
         push_kept(&mut parameters, &kin);
         let record = haptic_record(
             &haptic,
-            &rows,
+            rows,
             ModelName::Geometric,
             report_values(&parameters),
             Some(block_covariance(&[&kin.covariance])),
@@ -1654,7 +1564,7 @@ pub fn calibrate_logs(
         let calibrated = haptic.device.with_record(record)?;
         (None, kin, ModelName::Geometric, calibrated)
     };
-    check_distinct_configurations(&rows, transmissions.as_ref(), &kin)?;
+    check_distinct_configurations(rows, transmissions.as_ref(), &kin)?;
     if let Some(cv) = cross_validation.iter_mut().find(|cv| cv.model == model) {
         cv.n_kept = parameters.len();
     }
@@ -1663,13 +1573,8 @@ pub fn calibrate_logs(
         None => kin.fit.x.iter().copied().collect(),
     };
     let zero = vec![0.0; haptic.chain.n_params()];
-    let residuals_m = |rows: &[LogRow], x: &[f64], t: Option<&TransmissionFit>| -> Vec<f64> {
-        rows.iter()
-            .map(|row| {
-                let q = t.map_or_else(|| row.q.clone(), |t| t.corrected(&row.q));
-                haptic.chain.end_point(x, &q).coords.norm() - row.distance_m
-            })
-            .collect()
+    let residuals_m = |rows: &[LogRow], x: &[f64], t: Option<&TransmissionFit>| {
+        kinematic_residuals_m(&haptic, rows, x, t)
     };
     let figures = |r: &[f64]| Figures {
         mean_absolute_error_m: None,
@@ -1678,24 +1583,25 @@ pub fn calibrate_logs(
         pose: None,
     };
     let mut placements = Vec::new();
-    for (role, sets) in [(SetRole::Train, &train), (SetRole::Test, &test)] {
-        for NamedLog { name, rows, .. } in sets {
-            // The calibrated model is the fitted one: with the compliance, its transmissions
-            // and compliances on every log, training and test.
-            let after = match &compliance {
-                Some(fit) => compliance_distance_residuals_m(&haptic, fit, rows)
-                    .with_context(|| format!("log {name}: the calibrated model"))?,
-                None => residuals_m(rows, &x_kin, transmissions.as_ref()),
-            };
-            placements.push(SetReport {
-                name: name.clone(),
-                role,
-                n_rows: rows.len(),
-                before: figures(&residuals_m(rows, &zero, None)),
-                after: figures(&after),
-                errors: None,
-            });
-        }
+    let train_logs = (train.iter().zip(crate::fit::log_ranges(&lengths)))
+        .map(|(log, range)| (SetRole::Train, &log.name, &raw[range]));
+    let test_logs = (test.iter()).map(|log| (SetRole::Test, &log.name, &log.rows[..]));
+    for (role, name, rows) in train_logs.chain(test_logs) {
+        // The calibrated model is the fitted one: with the compliance, its transmissions
+        // and compliances on every log, training and test.
+        let after = match &compliance {
+            Some(fit) => compliance_distance_residuals_m(&haptic, fit, rows)
+                .with_context(|| format!("log {name}: the calibrated model"))?,
+            None => residuals_m(rows, &x_kin, transmissions.as_ref()),
+        };
+        placements.push(SetReport {
+            name: name.clone(),
+            role,
+            n_rows: rows.len(),
+            before: figures(&residuals_m(rows, &zero, None)),
+            after: figures(&after),
+            errors: None,
+        });
     }
     for p in placements.iter().filter(|p| p.role == SetRole::Test) {
         if let (Some(before), Some(after)) = (p.before.distance_rms_m, p.after.distance_rms_m)
@@ -1754,6 +1660,7 @@ pub fn calibrate_logs(
         model,
         folds: plan.folds,
         cross_validation,
+        cross_validated_rows,
         ladder: Vec::new(),
         frames: Vec::new(),
         sigma_m,
@@ -1793,6 +1700,204 @@ pub fn calibrate_logs(
     })
 }
 
+/// Step 1 of a set of training rows: what the ladder knows of it before it starts.
+#[derive(Clone, Copy)]
+enum Step1<'a> {
+    /// The rows lack the external-encoder columns: no transmissions rung.
+    NoEncoders,
+    /// The rows carry them; step 1 is still to be fitted on them.
+    ToFit,
+    /// Step 1 fitted on the rows.
+    Fitted(&'a TransmissionFit),
+}
+
+impl<'a> Step1<'a> {
+    /// The step 1 of rows that carry the external encoders or not (`has_ext`), `fitted` on
+    /// them or not.
+    fn of(has_ext: bool, fitted: Option<&'a TransmissionFit>) -> Self {
+        match (has_ext, fitted) {
+            (false, _) => Step1::NoEncoders,
+            (true, None) => Step1::ToFit,
+            (true, Some(t)) => Step1::Fitted(t),
+        }
+    }
+}
+
+/// The model `--model auto` takes on the training `rows` (`lengths[i]` rows of log `i`, one
+/// after the other, gross errors already bounded): the haptic ladder geometric →
+/// transmissions (when the logs have the external-encoder columns, `step1`) → compliance
+/// (when the device file has a handle mass), each rung fitted on every row of `rows`, judged
+/// by repeated blocked cross-validation with `folds` folds ([`cross_validate_rungs`]) and
+/// climbed by the rule of every workflow ([`crate::fit::choose`]); a chosen rung with an
+/// implausible estimate ([`crate::fit::implausible_estimates`]) gives way to the best rung
+/// below it. `step1` says whether the logs carry the external encoders and whether step 1 is
+/// already fitted on `rows`. `copies` is every training row's count of rows that repeat an earlier row of
+/// their log and the factor `√(rows / distinct rows)` the fits' σ are scaled by when judged
+/// ([`crate::fit::copies_warning`]), also when `rows` is a sample of them. Returns the model
+/// and every judged rung's held-out figures; what the report must say (a rung not tried, a
+/// rung left out, the copies, the transmissions not beating the deviations alone) is pushed
+/// to `warnings`.
+///
+/// # Errors
+/// A failed identification of the transmissions or the deviations on every row.
+fn choose_model(
+    haptic: &HapticDevice,
+    rows: &[LogRow],
+    lengths: &[usize],
+    step1: Step1<'_>,
+    folds: usize,
+    copies: (usize, f64),
+    warnings: &mut Vec<String>,
+) -> Result<(ModelName, Vec<crate::report::CvReport>)> {
+    let (n_copies, std_scale) = copies;
+    let has_ext = !matches!(step1, Step1::NoEncoders);
+    let mut cross_validation = Vec::new();
+    let has_mass = haptic.device.handle.is_some_and(|h| h.mass_kg > 0.0);
+    let (rungs, levels) = haptic_rungs(has_ext, has_mass);
+    let geometric = identify_kinematics(haptic, rows, None)
+        .context("kinematics")?
+        .1;
+    let two_steps = if has_ext {
+        let t = match step1 {
+            Step1::Fitted(t) => t.clone(),
+            _ => identify_transmissions(haptic, rows).context("step 1 (transmissions)")?,
+        };
+        let (_, kin) =
+            identify_kinematics(haptic, rows, Some(&t)).context("step 2 (kinematics)")?;
+        Some((t, kin))
+    } else {
+        None
+    };
+    // A rung whose identification fails on every training row (the compliance of a
+    // device whose logs cannot tell it from the deviations: a singular covariance) is
+    // left out of the climb, and the report says so.
+    let mut fits = Vec::new();
+    let (mut tried, mut tried_levels) = (Vec::new(), Vec::new());
+    for (&m, &level) in rungs.iter().zip(&levels) {
+        let fit = match m {
+            ModelName::Transmissions => {
+                let (t, kin) = two_steps.clone().context("no transmissions fitted")?;
+                HapticRungFit::Transmissions(t, kin)
+            }
+            ModelName::Compliance => {
+                let (t, kin) = match &two_steps {
+                    Some((t, kin)) => (Some(t), kin),
+                    None => (None, &geometric),
+                };
+                match identify_with_compliance(haptic, rows, t, kin) {
+                    Ok(fit) => HapticRungFit::Compliance(fit, t.cloned()),
+                    Err(e) => {
+                        warnings.push(format!(
+                            "the {m} model was not tried: {e:#}; the ladder stops below it"
+                        ));
+                        continue;
+                    }
+                }
+            }
+            _ => HapticRungFit::Geometric(geometric.clone()),
+        };
+        fits.push(fit);
+        tried.push(m);
+        tried_levels.push(level);
+    }
+    // A rung that a cross-validation fold's training rows cannot fit (few rows: the fold
+    // keeps four fifths of them) cannot be judged: the ladder stops below it and says so;
+    // when not even the first rung can be judged, it is taken without cross-validation.
+    let mut held = Vec::new();
+    let mut unjudged = None;
+    for fit in &fits {
+        match cross_validate_rungs(haptic, rows, lengths, std::slice::from_ref(fit), folds) {
+            Ok(h) => held.extend(h),
+            Err(e) => {
+                let why = format!(
+                    "{e:#} ({} training rows, {}-fold cross-validation)",
+                    rows.len(),
+                    folds
+                );
+                if held.is_empty() {
+                    unjudged = Some(why);
+                } else {
+                    warnings.push(format!(
+                        "the {} model was not tried: {why}; the ladder stops below it",
+                        fit.model()
+                    ));
+                }
+                break;
+            }
+        }
+    }
+    let judged = held.len();
+    let (rungs, levels) = (&tried[..judged], &tried_levels[..judged]);
+    let choice = if let Some(why) = unjudged {
+        let first = *tried.first().context("no model could be fitted")?;
+        warnings.push(format!(
+            "cross-validation cannot judge any model on these rows: {why}; the {first} \
+             model is taken without it (record more rows for the ladder to compare models)"
+        ));
+        first
+    } else {
+        let (mut choice, reports) = crate::fit::choose(rungs, levels, &held);
+        cross_validation = reports;
+        // A chosen rung whose estimate no real device has (compliances below zero beyond
+        // the bound, an unconverged fit) is never the result: the ladder keeps the best of
+        // the rungs below it, and says why.
+        while let Some(k) = rungs.iter().position(|&r| r == choice)
+            && k > 0
+            && let Some(i) = crate::fit::implausible_estimates(
+                fits[k].identified(),
+                choice,
+                false,
+                HANDLE_COMPLIANCE_UNIT,
+                std_scale,
+            )
+            .into_iter()
+            .next()
+        {
+            let (below, _) = crate::fit::choose(&rungs[..k], &levels[..k], &held[..k]);
+            warnings.push(format!(
+                "the {choice} model predicted the held-out rows best but was left out: {}; \
+                 the ladder keeps the {below} model",
+                i.message
+            ));
+            choice = below;
+        }
+        choice
+    };
+    warnings.extend(crate::fit::copies_warning(n_copies));
+    if choice == ModelName::Geometric && has_ext && rungs.contains(&ModelName::Transmissions) {
+        warnings.push(
+            "the transmissions did not beat the kinematic deviations alone on held-out \
+             training rows: they are not identified (ask for --model transmissions to fit \
+             them anyway)"
+                .to_owned(),
+        );
+    }
+    if choice == ModelName::Compliance && !has_ext {
+        warnings.push(
+            "the compliance model predicted the held-out training rows best, but without \
+             the external-encoder columns its compliances also absorb the transmission \
+             errors: they are not the handle's alone (record the external encoders to tell \
+             them apart)"
+                .to_owned(),
+        );
+    }
+    Ok((choice, cross_validation))
+}
+
+/// The training rows as the Huber loss sees them ([`winsorize`]).
+struct Winsorized {
+    /// The rows, each distance beyond the corner pulled back onto it; `None` when none lies
+    /// beyond it (the rows as measured).
+    rows: Option<Vec<LogRow>>,
+    /// The bounded rows, with their log and line.
+    downweighted: Vec<crate::report::Downweighted>,
+    /// The model that judged them.
+    judge: ModelName,
+    /// Step 1's transmissions fitted on the rows (`None` without the external encoders, or
+    /// when they cannot be fitted).
+    transmissions: Option<TransmissionFit>,
+}
+
 /// The training rows as the Huber loss sees them ([`crate::robust::bound_gross_errors`]):
 /// step 2's kinematic deviations fitted to the cable distances (the readings corrected by
 /// step 1's transmissions when the logs carry the external encoders: the transmissions
@@ -1805,12 +1910,13 @@ pub fn calibrate_logs(
 fn winsorize(
     r: &HapticDevice,
     logs: &[NamedLog],
-    rows: Vec<LogRow>,
+    lengths: &[usize],
+    rows: &[LogRow],
     has_ext: bool,
-) -> (Vec<LogRow>, Vec<crate::report::Downweighted>, ModelName) {
+) -> Winsorized {
     use crate::robust::{Dim, Round, bound_gross_errors, redundancy};
     let transmissions = if has_ext {
-        identify_transmissions(r, &rows).ok()
+        identify_transmissions(r, rows).ok()
     } else {
         None
     };
@@ -1822,7 +1928,7 @@ fn winsorize(
     // Every row's distance error and modelled distance under the last fit, m.
     let mut last: Vec<(f64, f64)> = Vec::new();
     let winsorized = |last: &[(f64, f64)], bounds: &[crate::robust::Bound]| {
-        let mut out = rows.clone();
+        let mut out = rows.to_vec();
         for b in bounds {
             let (e, model) = last[b.sample];
             out[b.sample].distance_m = model + e * (b.corner / b.norm);
@@ -1849,10 +1955,15 @@ fn winsorize(
         })
     });
     if bounds.is_empty() {
-        return (rows, Vec::new(), judge);
+        return Winsorized {
+            rows: None,
+            downweighted: Vec::new(),
+            judge,
+            transmissions,
+        };
     }
-    let files: Vec<&std::path::Path> = (logs.iter())
-        .flat_map(|log| log.rows.iter().map(|_| log.path.as_path()))
+    let files: Vec<&std::path::Path> = (logs.iter().zip(lengths))
+        .flat_map(|(log, &len)| std::iter::repeat_n(log.path.as_path(), len))
         .collect();
     let listed = (bounds.iter())
         .map(|b| crate::report::Downweighted {
@@ -1865,7 +1976,12 @@ fn winsorize(
             bound_m: b.corner,
         })
         .collect();
-    (winsorized(&last, &bounds), listed, judge)
+    Winsorized {
+        rows: Some(winsorized(&last, &bounds)),
+        downweighted: listed,
+        judge,
+        transmissions,
+    }
 }
 
 /// Number of distinct joint-reading vectors among `rows`, or of distinct readings of joint

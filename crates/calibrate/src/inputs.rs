@@ -117,6 +117,10 @@ pub struct Plan {
     pub model: ModelChoice,
     /// Folds of the cross-validation (time-contiguous blocks per socket).
     pub folds: usize,
+    /// Haptic logs: `--model auto` judges its rungs on at most this many training rows, a
+    /// sample spread over the logs ([`crate::fit::ladder_sample`]); the chosen model is
+    /// fitted on every row. [`crate::fit::LADDER_ROWS`] by default.
+    pub ladder_rows: usize,
     /// Measurement noise (m) if known; otherwise estimated from the residuals.
     pub sigma_m: Option<f64>,
     /// For a haptic device: identify the transmissions and the kinematics in one problem
@@ -153,6 +157,7 @@ impl Plan {
             socket_distance_m,
             model: crate::model::ModelName::Geometric.into(),
             folds,
+            ladder_rows: crate::fit::LADDER_ROWS,
             sigma_m: None,
             joint: false,
             gravity: GRAVITY_DOWN,
@@ -217,6 +222,7 @@ impl Plan {
             socket_distance_m: 0.05,
             model: ModelChoice::Auto,
             folds: 5,
+            ladder_rows: crate::fit::LADDER_ROWS,
             sigma_m: None,
             joint: false,
             gravity: GRAVITY_DOWN,

@@ -3354,6 +3354,7 @@ pub fn run_tables(
         model: out.rung,
         folds: plan.folds,
         cross_validation: Vec::new(),
+        cross_validated_rows: None,
         ladder: out.ladder.clone(),
         frames: out.frames.clone(),
         sigma_m: out.weights.sigma_position_m * id.sigma,

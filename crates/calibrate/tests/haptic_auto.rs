@@ -9,7 +9,7 @@ use hapcal_io::LogRow;
 
 #[path = "sim/haptic_log.rs"]
 mod haptic_log;
-use haptic_log::{calibrate_rows, log, reference};
+use haptic_log::{calibrate_rows, calibrate_rows_judging, log, reference};
 
 /// `hapcal calibrate --model auto` on the training log `rows` of the reference device.
 fn auto(rows: Vec<LogRow>) -> CalibrationReport {
@@ -188,4 +188,34 @@ fn few_rows_stop_the_ladder_at_the_highest_rung_its_folds_can_fit() {
         "{:#?}",
         report.warnings
     );
+}
+
+#[test]
+fn a_long_logs_ladder_judges_a_sample_and_the_chosen_model_is_fitted_on_every_row() {
+    use ModelName as M;
+    let rows = log(53, 600, &["gravity_compliance:j2=5e-3,j3=5e-3"]);
+    let report = calibrate_rows_judging(ModelChoice::Auto, rows.clone(), 300);
+    // Every second row: 300 rows judged.
+    assert_eq!(report.cross_validated_rows, Some(300));
+    assert_eq!(
+        rungs(&report),
+        [M::Geometric, M::Transmissions, M::Compliance]
+    );
+    assert_eq!(
+        report.model,
+        M::Compliance,
+        "{:#?}",
+        report.cross_validation
+    );
+    // The model the sample chose, fitted on all 600 rows: the values of `--model compliance`
+    // on them, to the last bit (the same fit), not the sample's.
+    let given = calibrate_rows(ModelChoice::Model(M::Compliance), rows);
+    assert_eq!(given.cross_validated_rows, None);
+    assert_eq!(report.placements[0].n_rows, 600);
+    let values = |r: &CalibrationReport| -> Vec<(String, f64)> {
+        (r.parameters.iter())
+            .map(|p| (p.name.clone(), p.value))
+            .collect()
+    };
+    assert_eq!(values(&report), values(&given));
 }

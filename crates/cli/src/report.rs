@@ -201,6 +201,18 @@ fn beats_words(beats: bool) -> &'static str {
     }
 }
 
+/// The rows the model choice judged, in the report's words: "the training data", or a
+/// long log's sample ([`CalibrationReport::cross_validated_rows`]).
+pub(crate) fn judged_rows(r: &CalibrationReport) -> String {
+    match r.cross_validated_rows {
+        None => "the training data".to_owned(),
+        Some(n) => format!(
+            "{n} rows spread over the training data (the chosen model is then fitted on every \
+             row)"
+        ),
+    }
+}
+
 /// The text report without the wall time: the machine-independent results (what the HTML
 /// report shows in its words).
 pub fn render_results(r: &CalibrationReport) -> String {
@@ -209,10 +221,11 @@ pub fn render_results(r: &CalibrationReport) -> String {
     if !r.cross_validation.is_empty() {
         let _ = writeln!(
             s,
-            "\nmodel choice by {}-fold cross-validation on the training data (held-out RMS; \
-             held-out squared error minus the geometric model's, ± its standard error; a model \
-             is taken only if it beats the one chosen below it by {} standard errors):",
+            "\nmodel choice by {}-fold cross-validation on {} (held-out RMS; held-out squared \
+             error minus the geometric model's, ± its standard error; a model is taken only if \
+             it beats the one chosen below it by {} standard errors):",
             r.folds,
+            judged_rows(r),
             hapcal_calibrate::model::LADDER_SIGNIFICANCE_Z
         );
         // The names' column as wide as the longest (mass-compliance-harmonic).

@@ -89,6 +89,12 @@ pub struct DiagnoseConfig {
     /// Smallest share of its round's gap a winner must close, 0–1: the cross-validated error
     /// left by the effects accepted before it, above the floor.
     pub min_gap_share: f64,
+    /// Most rows diagnosed: a longer log is diagnosed on every `s`-th row from its first,
+    /// the smallest stride that leaves at most this many (`hapcal_calibrate::fit::ladder_sample`),
+    /// and the diagnosis's notes say so. The candidates' columns take about 57 kB a row (567 MB
+    /// peak at 10,000 rows of the reference device, `hapcal diagnose`, release build), so
+    /// 10,000 keeps a day's log within 1 GB.
+    pub max_rows: usize,
 }
 
 impl Default for DiagnoseConfig {
@@ -104,6 +110,7 @@ impl Default for DiagnoseConfig {
             alpha: 0.01,
             max_effects: 3,
             min_gap_share: 0.2,
+            max_rows: 10_000,
         }
     }
 }
@@ -1040,9 +1047,23 @@ pub fn diagnose(
             ),
         });
     }
+    let mut notes = Vec::new();
+    let sampled: Vec<LogRow>;
+    let rows = match hapcal_calibrate::fit::ladder_sample(&[rows.len()], cfg.max_rows) {
+        Some(sample) => {
+            notes.push(format!(
+                "the log's {} rows are diagnosed on {} of them, one row in {} from the first",
+                rows.len(),
+                sample.rows.len(),
+                sample.stride
+            ));
+            sampled = sample.rows.iter().map(|&i| rows[i].clone()).collect();
+            &sampled[..]
+        }
+        None => rows,
+    };
     let data = log_data(rows)?;
     let n = data.n_rows();
-    let mut notes = Vec::new();
     let mut setup = Setup::new(device, chain, data.clone())?;
     let trans_joints: Vec<usize> = device.capstans.iter().map(|c| c.joint - 1).collect();
     let mut baseline = cfg.baseline;

@@ -32,12 +32,22 @@ pub(crate) fn calibrate_rows(
     model: hapcal_calibrate::model::ModelChoice,
     rows: Vec<LogRow>,
 ) -> hapcal_calibrate::report::CalibrationReport {
+    calibrate_rows_judging(model, rows, hapcal_calibrate::fit::LADDER_ROWS)
+}
+
+/// [`calibrate_rows`] whose ladder judges at most `ladder_rows` of the rows.
+pub(crate) fn calibrate_rows_judging(
+    model: hapcal_calibrate::model::ModelChoice,
+    rows: Vec<LogRow>,
+    ladder_rows: usize,
+) -> hapcal_calibrate::report::CalibrationReport {
     let (device, _) = reference();
     let plan = hapcal_calibrate::inputs::Plan {
         device: "fixtures/reference-device/device.toml".into(),
         model,
         data: Vec::new(),
         test: Vec::new(),
+        ladder_rows,
         ..hapcal_calibrate::inputs::Plan::bundled_default()
     };
     let train = vec![hapcal_calibrate::data::NamedLog {

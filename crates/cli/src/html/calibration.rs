@@ -63,10 +63,11 @@ fn ladder_why(r: &CalibrationReport) -> String {
         return format!("The model was given: {}.", r.model);
     }
     format!(
-        "Taken: {}. Scores by {}-fold cross-validation on the training data; a rung is taken \
-         only if its held-out error beats the rung chosen below it by {z} standard errors{}.",
+        "Taken: {}. Scores by {}-fold cross-validation on {}; a rung is taken only if its \
+         held-out error beats the rung chosen below it by {z} standard errors{}.",
         r.model,
         r.folds,
+        crate::report::judged_rows(r),
         if r.coverage.as_ref().is_some_and(|c| !c.stopped.is_empty()) {
             ", and on the joint-range folds where the calibration must extrapolate (see the \
              text report)"

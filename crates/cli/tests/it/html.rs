@@ -67,6 +67,7 @@ fn report(name: &str, n_train: usize, n_test: usize) -> CalibrationReport {
         model: ModelName::Geometric,
         folds: 5,
         cross_validation: Vec::new(),
+        cross_validated_rows: None,
         ladder: vec![
             rung(ModelName::FramesOnly, 2e-3, 0.0),
             rung(ModelName::Geometric, 5e-4, -8.0),

@@ -161,3 +161,33 @@ fn blind_cases_small_set() {
         }
     }
 }
+
+#[test]
+fn a_log_longer_than_max_rows_is_diagnosed_on_every_kth_row_and_says_so() {
+    let (device, truth) = reference();
+    let cable = device.cable_encoder.expect("fixture has a cable encoder");
+    let cfg = SimConfig::new(13, 400).with_noise(NoiseModel::paper(&cable));
+    let effects = vec!["backlash:j2=4e-4".parse().expect("valid effect")];
+    let rows = simulate_motion(&device, &truth, &cfg, &MotionConfig::default(), &effects)
+        .expect("simulates");
+    let capped = DiagnoseConfig {
+        max_rows: 200,
+        ..DiagnoseConfig::default()
+    };
+    let d = diagnose(&device, &rows, &capped).expect("diagnoses");
+    assert_eq!(d.n_samples, 200);
+    assert!(
+        d.notes
+            .iter()
+            .any(|n| n.contains("400 rows are diagnosed on 200 of them, one row in 2")),
+        "{:?}",
+        d.notes
+    );
+    assert_eq!(d.verdict, "backlash", "{:?}", d.candidates);
+    // The diagnosis of every second row, given as the log: the same, but for the note.
+    let every_second: Vec<_> = rows.iter().step_by(2).cloned().collect();
+    let mut direct =
+        diagnose(&device, &every_second, &DiagnoseConfig::default()).expect("diagnoses");
+    direct.notes.insert(0, d.notes[0].clone());
+    assert_eq!(d, direct);
+}
