@@ -14,6 +14,18 @@ use xshell::{Shell, cmd};
 /// The heading of the section this task writes in docs/results/bench.md.
 pub(crate) const SECTION: &str = "## Commands on long logs";
 
+/// What the section says below its table: where the time and the memory go.
+const EXPLAINED: &str = "
+`check` reads the log as a stream and keeps only the rows it judges; its memory past the
+executable's is the repeat detector's hash table. `calibrate --model auto` judges its ladder
+on at most 20,000 rows spread over a longer log (`hapcal_calibrate::fit::LADDER_ROWS`,
+docs/engine.md \"Long logs\") and fits the chosen model on every row; its memory past that
+is the log's rows as read and their winsorized copy, and the fits stream their Jacobians in
+row blocks past 4,000,000 entries. `diagnose` diagnoses at most 10,000 rows, one in `s`
+(`hapcal_diagnose::DiagnoseConfig::max_rows`; its candidates' columns take about 57 kB a
+row), and says so in its notes. Wall time is CPU time stretched by the load given above.
+";
+
 /// One command's run: wall and CPU seconds, peak resident memory in MB.
 struct Run {
     wall_s: f64,
@@ -184,12 +196,13 @@ pub(crate) fn run(sh: &Shell, rows: &[usize]) -> Result<()> {
             ));
         }
     }
+    md.push_str(EXPLAINED);
     let page = sh.current_dir().join("docs/results/bench.md");
     let before = std::fs::read_to_string(&page).unwrap_or_default();
     let kept = before
         .find(SECTION)
         .map_or(before.as_str(), |i| &before[..i]);
-    std::fs::write(&page, format!("{}\n{md}", kept.trim_end()))?;
+    std::fs::write(&page, format!("{}\n\n{md}", kept.trim_end()))?;
     println!("wrote {}", page.display());
     Ok(())
 }
