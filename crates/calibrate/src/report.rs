@@ -229,9 +229,9 @@ pub struct CalibrationReport {
     pub folds: usize,
     /// Cross-validation scores (empty when the model was given).
     pub cross_validation: Vec<CvReport>,
-    /// The training rows the cross-validation judged when it judged a sample of them
-    /// ([`crate::fit::ladder_sample`], a log longer than [`crate::fit::LADDER_ROWS`]);
-    /// `None` when it judged every one.
+    /// The training rows the cross-validation judged when it judged a sample of them, spread
+    /// over every log (a log longer than the ladder's row cap, 20,000 rows); `None` when it
+    /// judged every one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cross_validated_rows: Option<usize>,
     /// Marker data: held-out score of each rung of the model ladder (empty otherwise).
