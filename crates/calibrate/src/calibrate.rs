@@ -6,6 +6,7 @@
 
 use anyhow::{Context, Result, bail};
 use hapcal_identify::{Identified, Problem};
+use hapcal_io::Device;
 use hapcal_metrics::socket_figures;
 use hapcal_problems::{CalibratedModel, CalibrationProblem, RowKind};
 use std::path::{Path, PathBuf};
@@ -92,12 +93,41 @@ fn n_rows(set: &DataSet) -> usize {
 }
 
 /// Runs a calibration: reads everything, chooses the model by cross-validation on the training
-/// data, identifies, and evaluates on training and test data.
+/// data, identifies, and evaluates on training and test data. The stages: [`load_checked`],
+/// then the workflow of the data's kind (a haptic device's logs in
+/// [`crate::haptic::calibrate_logs`], measurement files in [`crate::measured::run_tables`],
+/// socket recordings and distance logs in [`calibrate_joints`]).
 ///
 /// # Errors
 /// Unreadable or inconsistent input, or too few configurations for the kept parameters.
 pub fn run(plan: &Plan) -> Result<Outcome> {
     let start = Instant::now();
+    let (device, data) = load_checked(plan)?;
+    match data {
+        Data::HapticLogs { train, test } => {
+            refuse_options(
+                plan,
+                "a haptic device's log (the cable-encoder σ comes from the residuals, the \
+                 held-out data from --test)",
+            )?;
+            crate::haptic::calibrate_logs(plan, device, train, test, start)
+        }
+        Data::Measurements { robot, train, test } => {
+            crate::measured::run_tables(plan, &device, &robot, train, test, start)
+        }
+        Data::Joints { kind, train, test } => {
+            calibrate_joints(plan, device, kind, train, test, start)
+        }
+    }
+}
+
+/// The load stage of [`run`]: the plan's own checks, the device and the data, and the options
+/// that do not apply to the data's kind refused.
+///
+/// # Errors
+/// An invalid plan, an unreadable device or data file, or an option the data's kind has no use
+/// for (`--joint`, `--workspace`, `--gravity`), named with the flag's value.
+fn load_checked(plan: &Plan) -> Result<(Device, Data)> {
     plan.validate()?;
     check_distinct_inputs(plan)?;
     let device = if plan.tips.is_empty() {
@@ -129,44 +159,36 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             kind.words()
         );
     }
-    let (train, test) = match data {
-        Data::HapticLogs { train, test } => {
-            refuse_options(
-                plan,
-                "a haptic device's log (the cable-encoder σ comes from the residuals, the \
-                 held-out data from --test)",
-            )?;
-            return crate::haptic::calibrate_logs(plan, device, train, test, start);
-        }
-        Data::Measurements { robot, train, test } => {
-            return crate::measured::run_tables(plan, &device, &robot, train, test, start);
-        }
-        Data::Joints { train, test, .. } => (train, test),
-    };
-    if plan.test_last.is_some() {
-        bail!(
-            "--test-last applies to measurement files (positions, poses, distances); hold out \
-             MUKCa socket folders or distance logs with --test"
-        );
-    }
-    let chain = device
-        .chain()
-        .with_context(|| format!("building the kinematic chain of {}", plan.device.display()))?;
+    Ok((device, data))
+}
 
-    // The geometric fit on all training data comes first: it refuses data that cannot determine
-    // the model before any time goes into cross-validation, and it is the answer whenever the
-    // geometric model is chosen.
-    // Gross errors bounded by the Huber loss: every fit below weights the bounded rows by
-    // their Huber weights; the figures are of the data as measured.
-    let (bounds, downweighted) = crate::solve::winsorize(&chain, &train, plan);
+/// The training rows of a socket or distance-log calibration as every fit sees them: the
+/// gross errors bounded by the Huber loss (every fit weights the bounded rows by their Huber
+/// weights; the figures are of the data as measured).
+struct JointRows {
+    /// Each bounded row's bound, by (set, socket, row).
+    bounds: crate::solve::RowBounds,
+    /// The bounded rows, for the report.
+    downweighted: Vec<crate::report::Downweighted>,
+    /// Per-residual scale of the bounded rows (empty when none is bounded).
+    scale: Vec<f64>,
+    /// Every training row's observation.
+    obs: hapcal_problems::Observations,
+    /// Each joint's range over the rows (rad or m), for the record.
+    ranges: Vec<(f64, f64)>,
+    /// Distinct configurations: copies of one add residuals but no information.
+    n_configurations: usize,
+}
+
+/// The rows stage of [`calibrate_joints`]: bounds the gross errors of `train` and builds the
+/// observations every fit shares ([`JointRows`]).
+fn joint_rows(chain: &hapcal_kinematics::Chain, train: &[DataSet], plan: &Plan) -> JointRows {
+    let (bounds, downweighted) = crate::solve::winsorize(chain, train, plan);
     let all = |_: usize, _: usize, _: usize| true;
-    let scale = residual_scale(&train, &bounds, &all);
-    let obs = observations(&train, plan.socket_distance_m, &all);
-    // The training region: each joint's range over the rows, for the record.
+    let scale = residual_scale(train, &bounds, &all);
+    let obs = observations(train, plan.socket_distance_m, &all);
     let ranges =
         crate::measured::reading_ranges(obs.rows.iter().map(|r| r.q.as_slice()), chain.n_joints());
-    let n_training_rows = obs.rows.len();
-    // Copies of a configuration add residuals but no information: count distinct ones.
     let n_configurations = (obs.rows.iter())
         .map(|row| {
             let point = match row.kind {
@@ -178,72 +200,202 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         })
         .collect::<std::collections::HashSet<_>>()
         .len();
+    JointRows {
+        bounds,
+        downweighted,
+        scale,
+        obs,
+        ranges,
+        n_configurations,
+    }
+}
+
+/// Kinematic parameters (indices below the points' offset) an identification kept.
+fn n_kept(problem: &CalibrationProblem, identified: &Identified) -> usize {
+    (identified.identifiability.kept.iter())
+        .filter(|&&i| i < problem.points_offset())
+        .count()
+}
+
+/// The model choice of a socket or distance-log calibration: the plan's model, or with
+/// `--model auto` the ladder's choice by blocked cross-validation.
+struct JointChoice {
+    /// The chosen model.
+    model: ModelName,
+    /// The ladder's held-out scores (empty when the model was given).
+    cross_validation: Vec<CvReport>,
+    /// The warning about copies of a configuration, if the training data hold any.
+    copies: Option<String>,
+}
+
+/// The ladder stage of [`calibrate_joints`]: with `--model auto`, every rung of the data's
+/// ladder the robot carries (transversal compliance needs rotation deviations on a revolute
+/// joint) cross-validated and chosen by the rule every workflow uses (docs/engine.md). Within
+/// one placement the gravity torques hardly change, so compliance and geometry are nearly
+/// confounded and a win inside the noise does not carry to other placements: hence the margin.
+///
+/// # Errors
+/// A cross-validation fit that fails.
+fn choose_joint_model(
+    chain: &hapcal_kinematics::Chain,
+    train: &[DataSet],
+    plan: &Plan,
+    kind: DataKind,
+    bounds: &crate::solve::RowBounds,
+) -> Result<JointChoice> {
+    if let ModelChoice::Model(fixed) = plan.model {
+        return Ok(JointChoice {
+            model: fixed,
+            cross_validation: Vec::new(),
+            copies: None,
+        });
+    }
+    let (candidates, level) =
+        crate::model::ladder_for(kind, chain.joint_names(), std::slice::from_ref(chain));
+    let held = (candidates.iter())
+        .map(|&candidate| cross_validate(chain, train, plan, candidate, CV_REPEATS, bounds))
+        .collect::<Result<Vec<_>>>()?;
+    let (model, cross_validation) = crate::fit::choose(&candidates, &level, &held);
+    let n_copies = (crate::solve::set_originals(train).iter().flatten())
+        .map(|o| crate::fit::n_copies(o))
+        .sum();
+    Ok(JointChoice {
+        model,
+        cross_validation,
+        copies: crate::fit::copies_warning(n_copies),
+    })
+}
+
+/// The workflow of socket recordings and distance logs: rows ([`joint_rows`]) → geometric fit
+/// (it refuses data that cannot determine the model before any time goes into
+/// cross-validation, and it is the answer whenever the geometric model is chosen) → ladder
+/// ([`choose_joint_model`]) → final fit → report ([`joint_report`]) → record.
+///
+/// # Errors
+/// `--test-last` (measurement files only), a chain the device cannot build, too few
+/// configurations for the kept parameters or the folds, a fit or a figure that fails.
+fn calibrate_joints(
+    plan: &Plan,
+    device: Device,
+    kind: DataKind,
+    train: Vec<DataSet>,
+    test: Vec<DataSet>,
+    start: Instant,
+) -> Result<Outcome> {
+    if plan.test_last.is_some() {
+        bail!(
+            "--test-last applies to measurement files (positions, poses, distances); hold out \
+             MUKCa socket folders or distance logs with --test"
+        );
+    }
+    let chain = device
+        .chain()
+        .with_context(|| format!("building the kinematic chain of {}", plan.device.display()))?;
+    let rows = joint_rows(&chain, &train, plan);
+    let n_training_rows = rows.obs.rows.len();
     let geometric = solve(
         &chain,
-        obs.clone(),
+        rows.obs.clone(),
         ModelName::Geometric,
         plan.sigma_m,
-        &scale,
+        &rows.scale,
     )?;
-    let n_kept = |p: &CalibrationProblem, id: &Identified| {
-        id.identifiability
-            .kept
-            .iter()
-            .filter(|&&i| i < p.points_offset())
-            .count()
-    };
     check_determined(
-        n_configurations,
+        rows.n_configurations,
         n_kept(&geometric.0, &geometric.1),
         geometric.0.points_offset(),
     )?;
     // Cross-validation splits the training configurations into `folds` blocks: more folds than
     // configurations would leave folds without a row to hold out.
+    let n_configurations = rows.n_configurations;
     if n_configurations > 0 && plan.folds > n_configurations {
         bail!(
             "--folds {} is not possible with {n_configurations} training configurations (2 to {n_configurations})",
             plan.folds
         );
     }
-    let mut cross_validation = Vec::new();
-    let mut copies = None;
-    let choice = match plan.model {
-        ModelChoice::Auto => {
-            // The ladder of the data's kind, every rung the robot carries (transversal
-            // compliance needs rotation deviations on a revolute joint), chosen by the rule
-            // every workflow uses (docs/engine.md). Within one placement the gravity torques
-            // hardly change, so compliance and geometry are nearly confounded and a win inside
-            // the noise does not carry to other placements: hence the margin.
-            let (candidates, level) =
-                crate::model::ladder_for(kind, chain.joint_names(), std::slice::from_ref(&chain));
-            let held = (candidates.iter())
-                .map(|&candidate| {
-                    cross_validate(&chain, &train, plan, candidate, CV_REPEATS, &bounds)
-                })
-                .collect::<Result<Vec<_>>>()?;
-            let (choice, reports) = crate::fit::choose(&candidates, &level, &held);
-            cross_validation = reports;
-            let n_copies = (crate::solve::set_originals(&train).iter().flatten())
-                .map(|o| crate::fit::n_copies(o))
-                .sum();
-            copies = crate::fit::copies_warning(n_copies);
-            choice
-        }
-        ModelChoice::Model(fixed) => fixed,
-    };
-    let (problem, identified) = if choice == ModelName::Geometric {
+    let mut choice = choose_joint_model(&chain, &train, plan, kind, &rows.bounds)?;
+    let (problem, identified) = if choice.model == ModelName::Geometric {
         geometric
     } else {
-        solve(&chain, obs, choice, plan.sigma_m, &scale)?
+        solve(&chain, rows.obs, choice.model, plan.sigma_m, &rows.scale)?
     };
     let model = problem.model(identified.fit.x.as_ref());
-    let layout = problem.layout();
     let n_kept_model = n_kept(&problem, &identified);
     check_determined(n_configurations, n_kept_model, problem.points_offset())?;
-    if let Some(cv) = cross_validation.iter_mut().find(|c| c.model == choice) {
+    if let Some(cv) = (choice.cross_validation.iter_mut()).find(|c| c.model == choice.model) {
         cv.n_kept = n_kept_model;
     }
+    let fitted = JointFit {
+        chain: &chain,
+        problem: &problem,
+        identified: &identified,
+        model: &model,
+        n_configurations,
+    };
+    let report = joint_report(
+        plan,
+        kind,
+        &fitted,
+        choice,
+        rows.downweighted,
+        (&train, &test),
+        start,
+    )?;
+    let record = joint_record(
+        plan,
+        &device,
+        &fitted,
+        &report,
+        rows.ranges,
+        n_training_rows,
+    );
+    Ok(Outcome {
+        report,
+        device,
+        device_path: plan.device.clone(),
+        model,
+        calibrated: None,
+        record: Some(record),
+    })
+}
 
+/// The final fit of a socket or distance-log calibration, as its report and record read it.
+struct JointFit<'a> {
+    /// The robot's chain.
+    chain: &'a hapcal_kinematics::Chain,
+    /// The chosen model's problem.
+    problem: &'a CalibrationProblem,
+    /// Its identification on every training row.
+    identified: &'a Identified,
+    /// The calibrated model at the identified values.
+    model: &'a CalibratedModel,
+    /// Distinct training configurations.
+    n_configurations: usize,
+}
+
+/// The report stage of [`calibrate_joints`]: parameters, pruned and correlated ones, the
+/// lengths refitted, observability, warnings and every placement's figures before and after.
+///
+/// # Errors
+/// A placement's figures that cannot be computed.
+fn joint_report(
+    plan: &Plan,
+    kind: DataKind,
+    fitted: &JointFit<'_>,
+    choice: JointChoice,
+    downweighted: Vec<crate::report::Downweighted>,
+    (train, test): (&[DataSet], &[DataSet]),
+    start: Instant,
+) -> Result<CalibrationReport> {
+    let JointFit {
+        chain,
+        problem,
+        identified,
+        model,
+        n_configurations,
+    } = *fitted;
+    let layout = problem.layout();
     let stds = identified.covariance.std();
     let parameters = identified
         .covariance
@@ -258,7 +410,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             unit: layout.spec(i).unit.symbol(),
         })
         .collect();
-    let pruned = pruned_report(&identified);
+    let pruned = pruned_report(identified);
     // The lengths the fit held at nominal (pruned), and every length after fitting them.
     let lengths: Vec<usize> = (0..problem.points_offset())
         .filter(|&i| layout.spec(i).unit == hapcal_identify::Unit::Meter)
@@ -270,7 +422,7 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     // others' configurations, pulls the weak directions the held lengths lie along.
     let refitted_lengths = if downweighted.is_empty() {
         crate::fit::refitted_lengths(
-            &problem,
+            problem,
             identified.fit.x.as_ref(),
             identified.sigma,
             &identified.identifiability.kept,
@@ -287,58 +439,127 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
         .filter(|(a, b, _)| *a < problem.points_offset() && *b < problem.points_offset())
         .map(|(a, b, c)| (layout.name(a).to_string(), layout.name(b).to_string(), c))
         .collect();
-
     let priors = identify_config(plan.sigma_m).rank;
     let observability =
-        crate::support::observability_report(&problem, &identified, &priors, n_configurations);
+        crate::support::observability_report(problem, identified, &priors, n_configurations);
     let mut warnings = crate::support::warnings(
-        &identified,
+        identified,
         &priors,
         problem.points_offset(),
         0.95,
         observability.as_ref(),
     );
-    // The calibrated residual against the stated σ or, for sockets, the robots' repeatability
-    // (crate::noise): far above it, the model lacks an effect or the setup is wrong.
-    if plan.sigma_m.is_none()
-        && matches!(
+    warnings.extend(residual_warning(plan, choice.model, identified, train));
+    let placements = joint_placements(plan, chain, model, train, test)?;
+    // A test placement the calibration made worse is the first thing an engineer must see.
+    warnings.splice(0..0, worse_placements(&placements));
+    warnings.extend(choice.copies);
+    warnings.extend(bounded_warnings(kind, &downweighted));
+    Ok(CalibrationReport {
+        device: plan.device.display().to_string(),
+        model: choice.model,
+        folds: plan.folds,
+        cross_validation: choice.cross_validation,
+        cross_validated_rows: None,
+        ladder: Vec::new(),
+        frames: Vec::new(),
+        sigma_m: identified.sigma,
+        sigma_source: identified.sigma_source.name(),
+        parameters,
+        pruned,
+        correlated,
+        observability,
+        warnings,
+        termination: identified.fit.termination.clone(),
+        backend: backend_of(identified),
+        n_evaluations: identified.fit.n_evaluations,
+        n_jacobians: identified.fit.n_jacobians,
+        rounds: identified.rounds,
+        placements,
+        elapsed_s: start.elapsed().as_secs_f64(),
+        downweighted,
+        range_folds: Vec::new(),
+        coverage: None,
+        equilibrium_step_m: None,
+        equilibrium_refits: 0,
+        // What no real robot has: an unconverged fit, compliances below zero beyond the bound.
+        implausible: crate::fit::implausible_estimates(
+            identified,
+            choice.model,
+            matches!(plan.model, ModelChoice::Model(_)),
+            compliance_unit_of(model),
+            1.0,
+        ),
+        refitted_lengths,
+        origins: crate::report::joint_origins(std::slice::from_ref(chain)),
+    })
+}
+
+/// The calibrated residual against the stated σ or, for sockets, the robots' repeatability
+/// ([`crate::noise`]): far above it, the model lacks an effect or the setup is wrong. `None`
+/// when the plan states σ or the fit did not estimate it from the residuals.
+fn residual_warning(
+    plan: &Plan,
+    choice: ModelName,
+    identified: &Identified,
+    train: &[DataSet],
+) -> Option<String> {
+    if plan.sigma_m.is_some()
+        || !matches!(
             identified.sigma_source,
             hapcal_identify::SigmaSource::Residuals
         )
     {
-        let sockets = train.iter().any(|s| matches!(s, DataSet::Sockets(_)));
-        let (sigma, class) = if sockets {
-            (
-                crate::noise::SOCKET_SIGMA_M,
-                "a robot's repeatability in a socket",
-            )
-        } else {
-            (crate::noise::ANCHOR_DISTANCE_SIGMA_M, "a draw-wire encoder")
-        };
-        warnings.extend(crate::noise::residual_warning(
-            &choice.to_string(),
-            identified.sigma,
-            sigma,
-            Some(class),
-            crate::noise::DEFAULT_SIGMA_RATIO,
-        ));
+        return None;
     }
+    let sockets = train.iter().any(|s| matches!(s, DataSet::Sockets(_)));
+    let (sigma, class) = if sockets {
+        (
+            crate::noise::SOCKET_SIGMA_M,
+            "a robot's repeatability in a socket",
+        )
+    } else {
+        (crate::noise::ANCHOR_DISTANCE_SIGMA_M, "a draw-wire encoder")
+    };
+    crate::noise::residual_warning(
+        &choice.to_string(),
+        identified.sigma,
+        sigma,
+        Some(class),
+        crate::noise::DEFAULT_SIGMA_RATIO,
+    )
+}
 
+/// Every training and test placement's figures with the nominal and the calibrated model.
+///
+/// # Errors
+/// A placement's figures that cannot be computed.
+fn joint_placements(
+    plan: &Plan,
+    chain: &hapcal_kinematics::Chain,
+    model: &CalibratedModel,
+    train: &[DataSet],
+    test: &[DataSet],
+) -> Result<Vec<SetReport>> {
     let nominal = CalibratedModel::nominal(chain.clone());
     let mut placements = Vec::new();
-    for (role, sets) in [(SetRole::Train, &train), (SetRole::Test, &test)] {
+    for (role, sets) in [(SetRole::Train, train), (SetRole::Test, test)] {
         for set in sets.iter() {
             placements.push(SetReport {
                 name: set.name().to_string(),
                 role,
                 n_rows: n_rows(set),
                 before: figures(set, &nominal, plan.socket_distance_m)?,
-                after: figures(set, &model, plan.socket_distance_m)?,
+                after: figures(set, model, plan.socket_distance_m)?,
                 errors: None,
             });
         }
     }
-    // A test placement the calibration made worse is the first thing an engineer must see.
+    Ok(placements)
+}
+
+/// One warning per test placement the calibration made worse than the nominal model.
+fn worse_placements(placements: &[SetReport]) -> Vec<String> {
     let mut worse = Vec::new();
     for p in placements.iter().filter(|p| p.role == SetRole::Test) {
         if let (Some(before), Some(after)) = (
@@ -357,18 +578,20 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             ));
         }
     }
-    warnings.splice(0..0, worse);
-    warnings.extend(copies);
+    worse
+}
+
+/// The warnings about rows the Huber loss bounded, and those left out of every fit.
+fn bounded_warnings(kind: DataKind, downweighted: &[crate::report::Downweighted]) -> Vec<String> {
     let rows = if kind == DataKind::Sockets {
         "socket rows"
     } else {
         "log rows"
     };
-    warnings.extend(crate::robust::bounded_warning(
-        &downweighted,
-        rows,
-        &ModelName::Geometric.to_string(),
-    ));
+    let mut warnings: Vec<String> =
+        crate::robust::bounded_warning(downweighted, rows, &ModelName::Geometric.to_string())
+            .into_iter()
+            .collect();
     let n_left_out = (downweighted.iter())
         .filter(|d| d.residual_m > crate::robust::REJECTION * d.bound_m)
         .count();
@@ -382,46 +605,22 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
             crate::robust::REJECTION
         ));
     }
-    let report = CalibrationReport {
-        device: plan.device.display().to_string(),
-        model: choice,
-        folds: plan.folds,
-        cross_validation,
-        cross_validated_rows: None,
-        ladder: Vec::new(),
-        frames: Vec::new(),
-        sigma_m: identified.sigma,
-        sigma_source: identified.sigma_source.name(),
-        parameters,
-        pruned,
-        correlated,
-        observability,
-        warnings,
-        termination: identified.fit.termination.clone(),
-        backend: backend_of(&identified),
-        n_evaluations: identified.fit.n_evaluations,
-        n_jacobians: identified.fit.n_jacobians,
-        rounds: identified.rounds,
-        placements,
-        elapsed_s: start.elapsed().as_secs_f64(),
-        downweighted,
-        range_folds: Vec::new(),
-        coverage: None,
-        equilibrium_step_m: None,
-        equilibrium_refits: 0,
-        // What no real robot has: an unconverged fit, compliances below zero beyond the bound.
-        implausible: crate::fit::implausible_estimates(
-            &identified,
-            choice,
-            matches!(plan.model, ModelChoice::Model(_)),
-            compliance_unit_of(&model),
-            1.0,
-        ),
-        refitted_lengths,
-        origins: crate::report::joint_origins(std::slice::from_ref(&chain)),
-    };
+    warnings
+}
+
+/// The record stage of [`calibrate_joints`]: the record of the calibrated chain (the URDF's
+/// tip when the device is a URDF robot).
+fn joint_record(
+    plan: &Plan,
+    device: &Device,
+    fitted: &JointFit<'_>,
+    report: &CalibrationReport,
+    ranges: Vec<(f64, f64)>,
+    n_training_rows: usize,
+) -> hapcal_contract::Calibration {
+    let chain = fitted.chain;
     let joint_names = chain.joint_names().to_vec();
-    let prismatic: Vec<bool> = (hapcal_kinematics::joint_motions(std::slice::from_ref(&chain)))
+    let prismatic: Vec<bool> = (hapcal_kinematics::joint_motions(std::slice::from_ref(chain)))
         .into_iter()
         .map(|m| m == Some(hapcal_kinematics::Motion::Translation))
         .collect();
@@ -435,28 +634,20 @@ pub fn run(plan: &Plan) -> Result<Outcome> {
     } else {
         Vec::new()
     };
-    let record = crate::record::measured_record(&crate::record::MeasuredRecord {
-        model: choice,
+    crate::record::measured_record(&crate::record::MeasuredRecord {
+        model: report.model,
         tips: &tips,
         load_tips: &[],
         joint_names: &joint_names,
         prismatic: &prismatic,
-        calibrated: &model,
+        calibrated: fitted.model,
         parameters: &report.parameters,
-        covariance: &identified.covariance,
+        covariance: &fitted.identified.covariance,
         frames: &[],
         frame_values: &[],
-        held: crate::record::held_values(&identified),
+        held: crate::record::held_values(fitted.identified),
         ranges,
         rows: n_training_rows,
-    });
-    Ok(Outcome {
-        report,
-        device,
-        device_path: plan.device.clone(),
-        model,
-        calibrated: None,
-        record: Some(record),
     })
 }
 
