@@ -23,6 +23,8 @@ use hapcal_sim::NoiseModel;
 use hapcal_transmission::{Capstan, CapstanParams, Chebyshev, JointRad};
 
 use crate::data::NamedLog;
+use crate::model::ModelChoice;
+use crate::report::{CalibrationReport, Figures, ParamReport, SetReport, SetRole};
 
 /// Degree of the joint-4 polynomial (paper: tenth order).
 pub const POLY_DEGREE: usize = 10;
@@ -1343,44 +1345,11 @@ pub fn calibrate_logs(
     test: Vec<NamedLog>,
     start: std::time::Instant,
 ) -> Result<crate::report::Outcome> {
-    use crate::model::{ModelChoice, ModelName};
-    use crate::report::{CalibrationReport, Figures, ParamReport, SetReport, SetRole};
     let haptic = HapticDevice::new(device)?;
     let mut warnings: Vec<String> = (train.iter().chain(&test))
         .flat_map(|log| log.warnings.iter().cloned())
         .collect();
-    let lengths: Vec<usize> = train.iter().map(|log| log.rows.len()).collect();
-    // The training rows one log after the other, moved out of their logs: a long log is held
-    // once as measured (and once more where the Huber loss bounds a row).
-    let raw: Vec<LogRow> = (train.iter_mut())
-        .flat_map(|log| std::mem::take(&mut log.rows))
-        .collect();
-    if raw.is_empty() {
-        bail!("the training logs have no row");
-    }
-    let has_ext = (1..=PARALLELOGRAM_JOINT).all(|j| {
-        let needed =
-            j == PARALLELOGRAM_JOINT || haptic.device.capstans.iter().any(|c| c.joint == j);
-        !needed
-            || raw
-                .iter()
-                .all(|r| r.ext.get(j - 1).copied().flatten().is_some())
-    });
-    if plan.model == ModelChoice::Model(ModelName::Transmissions) && !has_ext {
-        bail!(
-            "--model transmissions needs the external-encoder columns (ext1..ext{PARALLELOGRAM_JOINT}) \
-             in every training log; ask for --model geometric (or auto) on logs without them"
-        );
-    }
-    // A row that repeats an earlier row of its log adds no information, but the fit's
-    // covariance counts it: the compliances' σ, judged for plausibility, grows back by
-    // √(rows / distinct rows).
-    let n_copies: usize = (crate::fit::log_ranges(&lengths))
-        .map(|range| crate::fit::originals(raw[range].iter().map(LogRow::repeat_key)))
-        .map(|o| crate::fit::n_copies(&o))
-        .sum();
-    let std_scale = (raw.len() as f64 / raw.len().saturating_sub(n_copies).max(1) as f64).sqrt();
-    let copies = (n_copies, std_scale);
+    let training = LogTraining::of(plan, &haptic, &mut train)?;
     // Gross errors bounded by the Huber loss: every fit below sees the winsorized distances;
     // the figures are of the logs as measured.
     let Winsorized {
@@ -1388,238 +1357,499 @@ pub fn calibrate_logs(
         downweighted,
         judge,
         transmissions: step1,
-    } = winsorize(&haptic, &train, &lengths, &raw, has_ext);
-    let rows: &[LogRow] = rows.as_deref().unwrap_or(&raw);
+    } = winsorize(
+        &haptic,
+        &train,
+        &training.lengths,
+        &training.raw,
+        training.has_ext,
+    );
+    let rows: &[LogRow] = rows.as_deref().unwrap_or(&training.raw);
     warnings.extend(crate::robust::bounded_warning(
         &downweighted,
         "log rows",
         &judge.to_string(),
     ));
-    // Step 1 reads the joint and external encoders, never the distances the Huber loss
-    // bounds: its fit on the logs as measured is its fit on the winsorized rows.
-    let step1_of_every_row = || match &step1 {
-        Some(t) => Ok(t.clone()),
-        None => identify_transmissions(&haptic, rows).context("step 1 (transmissions)"),
+    let (chosen, mut cross_validation, cross_validated_rows) = ladder_of_logs(
+        plan,
+        &haptic,
+        rows,
+        &training,
+        step1.as_ref(),
+        &mut warnings,
+    )?;
+    let step1 = Step1::of(training.has_ext, step1.as_ref());
+    let mut fit = match chosen {
+        ModelName::Compliance => fit_compliance(&haptic, rows, step1, &mut warnings)?,
+        ModelName::Geometric => fit_geometric(&haptic, rows, training.has_ext, &mut warnings)?,
+        _ if training.has_ext => fit_transmissions(plan, &haptic, rows, step1)?,
+        _ => fit_geometric(&haptic, rows, training.has_ext, &mut warnings)?,
     };
-    // `--model auto`: the ladder geometric → transmissions → compliance, each rung the logs and
-    // the device carry, climbed by the rule of every workflow (crate::model::climb) on the
-    // rungs' held-out errors.
-    let (chosen, mut cross_validation, cross_validated_rows) = match plan.model {
-        ModelChoice::Model(chosen) => (chosen, Vec::new(), None),
-        ModelChoice::Auto => {
-            // A long log's model is chosen on a sample spread over it: the choice needs far
-            // fewer rows than the parameters' precision (docs/engine.md, "Long logs").
-            let sample = crate::fit::ladder_sample(&lengths, plan.ladder_rows);
-            let (chosen, reports) = match &sample {
-                Some(sample) => {
-                    let rows: Vec<LogRow> = sample.rows.iter().map(|&i| rows[i].clone()).collect();
-                    choose_model(
-                        &haptic,
-                        &rows,
-                        &sample.lengths,
-                        Step1::of(has_ext, None),
-                        plan.folds,
-                        copies,
-                        &mut warnings,
-                    )?
-                }
-                None => choose_model(
-                    &haptic,
-                    rows,
-                    &lengths,
-                    Step1::of(has_ext, step1.as_ref()),
-                    plan.folds,
-                    copies,
-                    &mut warnings,
-                )?,
-            };
-            (chosen, reports, sample.map(|s| s.rows.len()))
+    check_distinct_configurations(rows, fit.transmissions.as_ref(), &fit.kin)?;
+    if let Some(cv) = cross_validation.iter_mut().find(|cv| cv.model == fit.model) {
+        cv.n_kept = fit.parameters.len();
+    }
+    let x_kin: Vec<f64> = match &fit.compliance {
+        Some(c) => c.state.x_kin.clone(),
+        None => fit.kin.fit.x.iter().copied().collect(),
+    };
+    let train_logs = (train.iter().zip(crate::fit::log_ranges(&training.lengths)))
+        .map(|(log, range)| (SetRole::Train, &log.name, &training.raw[range]));
+    let test_logs = (test.iter()).map(|log| (SetRole::Test, &log.name, &log.rows[..]));
+    let placements = log_placements(&haptic, &fit, &x_kin, train_logs.chain(test_logs))?;
+    for warning in worse_logs(&placements) {
+        warnings.insert(0, warning);
+    }
+    let parameters = std::mem::take(&mut fit.parameters);
+    let choice = LogsChoice {
+        cross_validation,
+        cross_validated_rows,
+        std_scale: training.copies.1,
+    };
+    let findings = LogsFindings {
+        placements,
+        downweighted,
+        warnings,
+    };
+    let report = logs_report(plan, &haptic, &fit, parameters, choice, findings, start);
+    let kin_model = hapcal_problems::CalibratedModel {
+        x_kin,
+        ..hapcal_problems::CalibratedModel::nominal(haptic.chain.clone())
+    };
+    Ok(crate::report::Outcome {
+        report,
+        device: haptic.device.clone(),
+        device_path: plan.device.clone(),
+        model: kin_model,
+        calibrated: Some(fit.calibrated),
+        record: None,
+    })
+}
+
+/// The training rows of a haptic calibration, one log after the other, moved out of their
+/// logs: a long log is held once as measured (and once more where the Huber loss bounds a row).
+struct LogTraining {
+    /// Rows of each training log, in order.
+    lengths: Vec<usize>,
+    /// Every training row as measured.
+    raw: Vec<LogRow>,
+    /// Whether every training row has the external encoders the transmissions need.
+    has_ext: bool,
+    /// Rows repeating an earlier row of their log, and the factor √(rows / distinct rows) by
+    /// which the fit's covariance understates the compliances' σ.
+    copies: (usize, f64),
+}
+
+impl LogTraining {
+    /// The load stage of [`calibrate_logs`]: takes the rows out of `train`.
+    ///
+    /// # Errors
+    /// No training row; `--model transmissions` on logs without the external encoders.
+    fn of(
+        plan: &crate::inputs::Plan,
+        haptic: &HapticDevice,
+        train: &mut [NamedLog],
+    ) -> Result<Self> {
+        let lengths: Vec<usize> = train.iter().map(|log| log.rows.len()).collect();
+        let raw: Vec<LogRow> = (train.iter_mut())
+            .flat_map(|log| std::mem::take(&mut log.rows))
+            .collect();
+        if raw.is_empty() {
+            bail!("the training logs have no row");
         }
+        let has_ext = (1..=PARALLELOGRAM_JOINT).all(|j| {
+            let needed =
+                j == PARALLELOGRAM_JOINT || haptic.device.capstans.iter().any(|c| c.joint == j);
+            !needed
+                || raw
+                    .iter()
+                    .all(|r| r.ext.get(j - 1).copied().flatten().is_some())
+        });
+        if plan.model == ModelChoice::Model(ModelName::Transmissions) && !has_ext {
+            bail!(
+                "--model transmissions needs the external-encoder columns (ext1..ext{PARALLELOGRAM_JOINT}) \
+                 in every training log; ask for --model geometric (or auto) on logs without them"
+            );
+        }
+        // A row that repeats an earlier row of its log adds no information, but the fit's
+        // covariance counts it: the compliances' σ, judged for plausibility, grows back by
+        // √(rows / distinct rows).
+        let n_copies: usize = (crate::fit::log_ranges(&lengths))
+            .map(|range| crate::fit::originals(raw[range].iter().map(LogRow::repeat_key)))
+            .map(|o| crate::fit::n_copies(&o))
+            .sum();
+        let std_scale =
+            (raw.len() as f64 / raw.len().saturating_sub(n_copies).max(1) as f64).sqrt();
+        Ok(Self {
+            lengths,
+            raw,
+            has_ext,
+            copies: (n_copies, std_scale),
+        })
+    }
+}
+
+/// The ladder stage of [`calibrate_logs`]: the plan's model, or with `--model auto` the ladder
+/// geometric → transmissions → compliance, each rung the logs and the device carry, climbed by
+/// the rule of every workflow ([`crate::model::climb`]) on the rungs' held-out errors. A long
+/// log's model is chosen on a sample spread over it: the choice needs far fewer rows than the
+/// parameters' precision (docs/engine.md, "Long logs"). Returns the model, the rungs' reports
+/// and the rows judged when a sample was.
+///
+/// # Errors
+/// A rung's cross-validation fit that fails.
+fn ladder_of_logs(
+    plan: &crate::inputs::Plan,
+    haptic: &HapticDevice,
+    rows: &[LogRow],
+    training: &LogTraining,
+    step1: Option<&TransmissionFit>,
+    warnings: &mut Vec<String>,
+) -> Result<(ModelName, Vec<crate::report::CvReport>, Option<usize>)> {
+    if let ModelChoice::Model(chosen) = plan.model {
+        return Ok((chosen, Vec::new(), None));
+    }
+    let sample = crate::fit::ladder_sample(&training.lengths, plan.ladder_rows);
+    let (chosen, reports) = match &sample {
+        Some(sample) => {
+            let rows: Vec<LogRow> = sample.rows.iter().map(|&i| rows[i].clone()).collect();
+            choose_model(
+                haptic,
+                &rows,
+                &sample.lengths,
+                Step1::of(training.has_ext, None),
+                plan.folds,
+                training.copies,
+                warnings,
+            )?
+        }
+        None => choose_model(
+            haptic,
+            rows,
+            &training.lengths,
+            Step1::of(training.has_ext, step1),
+            plan.folds,
+            training.copies,
+            warnings,
+        )?,
     };
-    let mut parameters = Vec::new();
-    let push_kept = |parameters: &mut Vec<ParamReport>, id: &Identified| {
-        for (&i, &std) in id.covariance.free.iter().zip(id.covariance.std().iter()) {
+    Ok((chosen, reports, sample.map(|s| s.rows.len())))
+}
+
+/// Step 1 on every row: the fit the Huber loss's judge already made, or a new one. Step 1
+/// reads the joint and external encoders, never the distances the Huber loss bounds: its fit on
+/// the logs as measured is its fit on the winsorized rows.
+///
+/// # Errors
+/// A failed identification of the transmissions.
+fn transmissions_of(
+    haptic: &HapticDevice,
+    rows: &[LogRow],
+    step1: Step1<'_>,
+) -> Result<TransmissionFit> {
+    match step1 {
+        Step1::Fitted(t) => Ok(t.clone()),
+        _ => identify_transmissions(haptic, rows).context("step 1 (transmissions)"),
+    }
+}
+
+/// The kept parameters of one identification as the report lists them.
+fn kept_parameters(id: &Identified) -> Vec<ParamReport> {
+    (id.covariance.free.iter().zip(id.covariance.std().iter()))
+        .map(|(&i, &std)| {
             let spec = id.layout.spec(i);
-            parameters.push(ParamReport {
+            ParamReport {
                 name: spec.name.clone(),
                 value: id.fit.x[i],
                 std,
                 unit: spec.unit.symbol(),
-            });
-        }
-    };
-    let no_ext_warning = || {
-        format!(
-            "the training logs have no external-encoder columns (ext1..ext{PARALLELOGRAM_JOINT}): \
-             the transmissions are not identified and the kinematic deviations absorb their errors \
-             (the paper's \"transmission errors left out\"); record the external encoders to \
-             calibrate the transmissions"
-        )
-    };
-    // `--model compliance`: both steps as the start, then the transmissions (when the logs have
-    // the ext columns), the kinematics and the handle's compliances in one problem.
-    let mut compliance: Option<ComplianceFit> = None;
-    // `--model geometric`: the kinematic deviations alone, whether or not the logs could carry
-    // the transmissions.
-    let (transmissions, kin, model, calibrated) = if chosen == ModelName::Compliance {
-        handle_mass_kg(&haptic.device)?;
-        let t = if has_ext {
-            Some(step1_of_every_row()?)
-        } else {
-            warnings.push(no_ext_warning());
-            None
-        };
-        let (_, kin) =
-            identify_kinematics(&haptic, rows, t.as_ref()).context("step 2 (kinematics)")?;
-        let fit = identify_with_compliance(&haptic, rows, t.as_ref(), &kin)?;
-        let values = compliance_values(&fit);
-        parameters.extend(
-            (values.iter().zip(&fit.identified.covariance.free)).map(|(v, &i)| ParamReport {
-                name: v.name.clone(),
-                value: v.value,
-                std: v.std,
-                unit: compliance_fit_unit(&fit, i),
-            }),
-        );
-        let notes = format!(
-            "{} with the handle's gravity compliance (joint_compliance.j*, rad/(N·m), a joint \
-             angle gains c·τ, τ the gravity torque of the [handle] mass) on {} rows; written by \
-             `hapcal calibrate --model compliance`",
-            if t.is_some() {
-                "transmissions, kinematic deviations"
-            } else {
-                "kinematic deviations"
-            },
-            rows.len()
-        );
-        let calibrated = compliance_device(&haptic, rows, &fit, notes)?;
-        let identified = fit.identified.clone();
-        compliance = Some(fit);
-        (t, identified, ModelName::Compliance, calibrated)
-    } else if has_ext && chosen != ModelName::Geometric {
-        let t = step1_of_every_row()?;
-        let (_, kin) =
-            identify_kinematics(&haptic, rows, Some(&t)).context("step 2 (kinematics)")?;
-        let (t, kin, covariance) = if plan.joint {
-            let (problem, joint) = identify_jointly(&haptic, rows, &t, &kin)?;
-            // The joint covariance carries both steps' uncertainty: report and record it.
-            push_kept(&mut parameters, &joint);
-            let covariance = block_covariance(&[&joint.covariance]);
-            let (t, kin) = split_joint(&problem, &joint, t, kin)?;
-            (t, kin, covariance)
-        } else {
-            for c in &t.capstans {
-                push_kept(&mut parameters, &c.identified);
             }
-            push_kept(&mut parameters, &t.poly_identified);
-            push_kept(&mut parameters, &kin);
-            // Each step's own covariance; the steps' sensors are independent, and step 2's
-            // block is its own (what the report's σ are).
-            let mut blocks: Vec<&hapcal_identify::Covariance> = (t.capstans.iter())
-                .map(|c| &c.identified.covariance)
-                .collect();
-            blocks.push(&t.poly_identified.covariance);
-            blocks.push(&kin.covariance);
-            let covariance = block_covariance(&blocks);
-            (t, kin, covariance)
-        };
-        let notes = format!(
-            "the paper's {} on {} rows; written by `hapcal calibrate`",
-            if plan.joint {
-                "joint identification"
-            } else {
-                "two steps"
-            },
-            rows.len()
-        );
-        let record = haptic_record(
-            &haptic,
-            rows,
-            ModelName::Transmissions,
-            report_values(&parameters),
-            Some(covariance),
-            None,
-            notes,
-        );
-        let calibrated = haptic.device.with_record(record)?;
-        (Some(t), kin, ModelName::Transmissions, calibrated)
+        })
+        .collect()
+}
+
+/// The warning of logs without the external encoders.
+fn no_ext_warning() -> String {
+    format!(
+        "the training logs have no external-encoder columns (ext1..ext{PARALLELOGRAM_JOINT}): \
+         the transmissions are not identified and the kinematic deviations absorb their errors \
+         (the paper's \"transmission errors left out\"); record the external encoders to \
+         calibrate the transmissions"
+    )
+}
+
+/// The final fit of a haptic calibration: what the report, the placements and the written
+/// device file read.
+struct LogFit {
+    /// Step 1's transmissions (`None` for kinematics alone).
+    transmissions: Option<TransmissionFit>,
+    /// Step 2's identification (the compliance fit's joint problem with the compliance model).
+    kin: Identified,
+    /// The model fitted.
+    model: ModelName,
+    /// The device file of the calibration.
+    calibrated: Device,
+    /// The compliance fit (`--model compliance`).
+    compliance: Option<ComplianceFit>,
+    /// The report's parameters, in the order of the record.
+    parameters: Vec<ParamReport>,
+}
+
+/// The final fit of `--model compliance`: both steps as the start, then the transmissions
+/// (when the logs have the ext columns), the kinematics and the handle's compliances in one
+/// problem.
+///
+/// # Errors
+/// A device file without a handle mass, or a failed identification.
+fn fit_compliance(
+    haptic: &HapticDevice,
+    rows: &[LogRow],
+    step1: Step1<'_>,
+    warnings: &mut Vec<String>,
+) -> Result<LogFit> {
+    handle_mass_kg(&haptic.device)?;
+    let t = if matches!(step1, Step1::NoEncoders) {
+        warnings.push(no_ext_warning());
+        None
     } else {
-        if !has_ext {
-            warnings.push(no_ext_warning());
+        Some(transmissions_of(haptic, rows, step1)?)
+    };
+    let (_, kin) = identify_kinematics(haptic, rows, t.as_ref()).context("step 2 (kinematics)")?;
+    let fit = identify_with_compliance(haptic, rows, t.as_ref(), &kin)?;
+    let values = compliance_values(&fit);
+    let parameters = (values.iter().zip(&fit.identified.covariance.free))
+        .map(|(v, &i)| ParamReport {
+            name: v.name.clone(),
+            value: v.value,
+            std: v.std,
+            unit: compliance_fit_unit(&fit, i),
+        })
+        .collect();
+    let notes = format!(
+        "{} with the handle's gravity compliance (joint_compliance.j*, rad/(N·m), a joint \
+         angle gains c·τ, τ the gravity torque of the [handle] mass) on {} rows; written by \
+         `hapcal calibrate --model compliance`",
+        if t.is_some() {
+            "transmissions, kinematic deviations"
+        } else {
+            "kinematic deviations"
+        },
+        rows.len()
+    );
+    let calibrated = compliance_device(haptic, rows, &fit, notes)?;
+    Ok(LogFit {
+        transmissions: t,
+        kin: fit.identified.clone(),
+        model: ModelName::Compliance,
+        calibrated,
+        compliance: Some(fit),
+        parameters,
+    })
+}
+
+/// The final fit of the transmissions model: the paper's two steps, or both in one problem
+/// when `plan.joint` (whose covariance carries both steps' uncertainty; the two steps' sensors
+/// are independent, so otherwise each step's own covariance is its block).
+///
+/// # Errors
+/// A failed identification or a record the device cannot take.
+fn fit_transmissions(
+    plan: &crate::inputs::Plan,
+    haptic: &HapticDevice,
+    rows: &[LogRow],
+    step1: Step1<'_>,
+) -> Result<LogFit> {
+    let t = transmissions_of(haptic, rows, step1)?;
+    let (_, kin) = identify_kinematics(haptic, rows, Some(&t)).context("step 2 (kinematics)")?;
+    let mut parameters = Vec::new();
+    let (t, kin, covariance) = if plan.joint {
+        let (problem, joint) = identify_jointly(haptic, rows, &t, &kin)?;
+        parameters.extend(kept_parameters(&joint));
+        let covariance = block_covariance(&[&joint.covariance]);
+        let (t, kin) = split_joint(&problem, &joint, t, kin)?;
+        (t, kin, covariance)
+    } else {
+        for c in &t.capstans {
+            parameters.extend(kept_parameters(&c.identified));
         }
-        let (_, kin) = identify_kinematics(&haptic, rows, None).context("kinematics")?;
-        push_kept(&mut parameters, &kin);
-        let record = haptic_record(
-            &haptic,
-            rows,
-            ModelName::Geometric,
-            report_values(&parameters),
-            Some(block_covariance(&[&kin.covariance])),
-            None,
-            format!(
-                "kinematics only (no external encoders) on {} rows; written by `hapcal calibrate`",
-                rows.len()
-            ),
-        );
-        let calibrated = haptic.device.with_record(record)?;
-        (None, kin, ModelName::Geometric, calibrated)
+        parameters.extend(kept_parameters(&t.poly_identified));
+        parameters.extend(kept_parameters(&kin));
+        let mut blocks: Vec<&hapcal_identify::Covariance> = (t.capstans.iter())
+            .map(|c| &c.identified.covariance)
+            .collect();
+        blocks.push(&t.poly_identified.covariance);
+        blocks.push(&kin.covariance);
+        let covariance = block_covariance(&blocks);
+        (t, kin, covariance)
     };
-    check_distinct_configurations(rows, transmissions.as_ref(), &kin)?;
-    if let Some(cv) = cross_validation.iter_mut().find(|cv| cv.model == model) {
-        cv.n_kept = parameters.len();
+    let notes = format!(
+        "the paper's {} on {} rows; written by `hapcal calibrate`",
+        if plan.joint {
+            "joint identification"
+        } else {
+            "two steps"
+        },
+        rows.len()
+    );
+    let record = haptic_record(
+        haptic,
+        rows,
+        ModelName::Transmissions,
+        report_values(&parameters),
+        Some(covariance),
+        None,
+        notes,
+    );
+    let calibrated = haptic.device.with_record(record)?;
+    Ok(LogFit {
+        transmissions: Some(t),
+        kin,
+        model: ModelName::Transmissions,
+        calibrated,
+        compliance: None,
+        parameters,
+    })
+}
+
+/// The final fit of `--model geometric` (or of logs without external encoders): the kinematic
+/// deviations alone, whether or not the logs could carry the transmissions.
+///
+/// # Errors
+/// A failed identification or a record the device cannot take.
+fn fit_geometric(
+    haptic: &HapticDevice,
+    rows: &[LogRow],
+    has_ext: bool,
+    warnings: &mut Vec<String>,
+) -> Result<LogFit> {
+    if !has_ext {
+        warnings.push(no_ext_warning());
     }
-    let x_kin: Vec<f64> = match &compliance {
-        Some(fit) => fit.state.x_kin.clone(),
-        None => kin.fit.x.iter().copied().collect(),
-    };
-    let zero = vec![0.0; haptic.chain.n_params()];
-    let residuals_m = |rows: &[LogRow], x: &[f64], t: Option<&TransmissionFit>| {
-        kinematic_residuals_m(&haptic, rows, x, t)
-    };
-    let figures = |r: &[f64]| Figures {
+    let (_, kin) = identify_kinematics(haptic, rows, None).context("kinematics")?;
+    let parameters = kept_parameters(&kin);
+    let record = haptic_record(
+        haptic,
+        rows,
+        ModelName::Geometric,
+        report_values(&parameters),
+        Some(block_covariance(&[&kin.covariance])),
+        None,
+        format!(
+            "kinematics only (no external encoders) on {} rows; written by `hapcal calibrate`",
+            rows.len()
+        ),
+    );
+    let calibrated = haptic.device.with_record(record)?;
+    Ok(LogFit {
+        transmissions: None,
+        kin,
+        model: ModelName::Geometric,
+        calibrated,
+        compliance: None,
+        parameters,
+    })
+}
+
+/// Distance RMS figures of one log's residuals.
+fn distance_figures(residuals_m: &[f64]) -> Figures {
+    Figures {
         mean_absolute_error_m: None,
         distance_error_m: None,
-        distance_rms_m: Some(hapcal_metrics::rms(r)),
+        distance_rms_m: Some(hapcal_metrics::rms(residuals_m)),
         pose: None,
-    };
+    }
+}
+
+/// The placements stage of [`calibrate_logs`]: each log's distance RMS with the nominal model
+/// on the raw readings and with the calibrated one (with the compliance, its transmissions and
+/// compliances on every log, training and test).
+///
+/// # Errors
+/// A log the compliance model cannot evaluate.
+fn log_placements<'a>(
+    haptic: &HapticDevice,
+    fit: &LogFit,
+    x_kin: &[f64],
+    logs: impl Iterator<Item = (SetRole, &'a String, &'a [LogRow])>,
+) -> Result<Vec<SetReport>> {
+    let zero = vec![0.0; haptic.chain.n_params()];
     let mut placements = Vec::new();
-    let train_logs = (train.iter().zip(crate::fit::log_ranges(&lengths)))
-        .map(|(log, range)| (SetRole::Train, &log.name, &raw[range]));
-    let test_logs = (test.iter()).map(|log| (SetRole::Test, &log.name, &log.rows[..]));
-    for (role, name, rows) in train_logs.chain(test_logs) {
-        // The calibrated model is the fitted one: with the compliance, its transmissions
-        // and compliances on every log, training and test.
-        let after = match &compliance {
-            Some(fit) => compliance_distance_residuals_m(&haptic, fit, rows)
+    for (role, name, rows) in logs {
+        let after = match &fit.compliance {
+            Some(c) => compliance_distance_residuals_m(haptic, c, rows)
                 .with_context(|| format!("log {name}: the calibrated model"))?,
-            None => residuals_m(rows, &x_kin, transmissions.as_ref()),
+            None => kinematic_residuals_m(haptic, rows, x_kin, fit.transmissions.as_ref()),
         };
         placements.push(SetReport {
             name: name.clone(),
             role,
             n_rows: rows.len(),
-            before: figures(&residuals_m(rows, &zero, None)),
-            after: figures(&after),
+            before: distance_figures(&kinematic_residuals_m(haptic, rows, &zero, None)),
+            after: distance_figures(&after),
             errors: None,
         });
     }
-    for p in placements.iter().filter(|p| p.role == SetRole::Test) {
-        if let (Some(before), Some(after)) = (p.before.distance_rms_m, p.after.distance_rms_m)
-            && after > before
-        {
-            warnings.insert(
-                0,
-                format!(
+    Ok(placements)
+}
+
+/// One warning per test log the calibration made worse than the nominal model, in the order
+/// of the logs.
+fn worse_logs(placements: &[SetReport]) -> Vec<String> {
+    (placements.iter().filter(|p| p.role == SetRole::Test))
+        .filter_map(
+            |p| match (p.before.distance_rms_m, p.after.distance_rms_m) {
+                (Some(before), Some(after)) if after > before => Some(format!(
                     "test log {}: the calibrated model is worse than the nominal one (distance RMS \
-                     {:.1} → {:.1} µm): do not use this calibration there",
+                 {:.1} → {:.1} µm): do not use this calibration there",
                     p.name,
                     before * 1e6,
                     after * 1e6
-                ),
-            );
-        }
-    }
-    let pruned = crate::fit::pruned_report(&kin);
+                )),
+                _ => None,
+            },
+        )
+        .collect()
+}
+
+/// What the ladder stage gives the report of [`calibrate_logs`].
+struct LogsChoice {
+    /// The rungs' held-out scores (empty when the model was given).
+    cross_validation: Vec<crate::report::CvReport>,
+    /// The training rows the ladder judged when it judged a sample.
+    cross_validated_rows: Option<usize>,
+    /// √(rows / distinct rows), the factor the compliances' σ are judged with.
+    std_scale: f64,
+}
+
+/// What the report of [`calibrate_logs`] lists beside the fit.
+struct LogsFindings {
+    /// Each training and test log's figures.
+    placements: Vec<SetReport>,
+    /// The rows the Huber loss bounded.
+    downweighted: Vec<crate::report::Downweighted>,
+    /// The warnings so far, in the order they are shown.
+    warnings: Vec<String>,
+}
+
+/// The report stage of [`calibrate_logs`]: pruned and correlated parameters, the cable
+/// residual against the encoder's noise, what no real device has (an unconverged fit,
+/// compliances below zero beyond the bound). `parameters` are the fit's, moved out of it.
+fn logs_report(
+    plan: &crate::inputs::Plan,
+    haptic: &HapticDevice,
+    fit: &LogFit,
+    parameters: Vec<ParamReport>,
+    choice: LogsChoice,
+    findings: LogsFindings,
+    start: std::time::Instant,
+) -> CalibrationReport {
+    let LogsFindings {
+        placements,
+        downweighted,
+        mut warnings,
+    } = findings;
+    let kin = &fit.kin;
+    let pruned = crate::fit::pruned_report(kin);
     let correlated = (kin.covariance.correlated_pairs(0.95).into_iter())
         .map(|(a, b, c)| {
             (
@@ -1641,26 +1871,25 @@ pub fn calibrate_logs(
             floor_m * 1e6
         ));
     }
-    // What no real device has: an unconverged fit, compliances below zero beyond the bound.
     let given = matches!(plan.model, ModelChoice::Model(_));
-    let implausible = match &compliance {
-        Some(fit) => crate::fit::implausible_estimates(
-            &fit.identified,
-            model,
+    let implausible = match &fit.compliance {
+        Some(c) => crate::fit::implausible_estimates(
+            &c.identified,
+            fit.model,
             given,
             HANDLE_COMPLIANCE_UNIT,
-            std_scale,
+            choice.std_scale,
         ),
-        None => crate::fit::unconverged(&kin, model, given)
+        None => crate::fit::unconverged(kin, fit.model, given)
             .into_iter()
             .collect(),
     };
-    let report = CalibrationReport {
+    CalibrationReport {
         device: plan.device.display().to_string(),
-        model,
+        model: fit.model,
         folds: plan.folds,
-        cross_validation,
-        cross_validated_rows,
+        cross_validation: choice.cross_validation,
+        cross_validated_rows: choice.cross_validated_rows,
         ladder: Vec::new(),
         frames: Vec::new(),
         sigma_m,
@@ -1671,7 +1900,7 @@ pub fn calibrate_logs(
         observability: None,
         warnings,
         termination: kin.fit.termination.clone(),
-        backend: crate::fit::backend_of(&kin),
+        backend: crate::fit::backend_of(kin),
         n_evaluations: kin.fit.n_evaluations,
         n_jacobians: kin.fit.n_jacobians,
         rounds: kin.rounds,
@@ -1685,19 +1914,7 @@ pub fn calibrate_logs(
         implausible,
         refitted_lengths: Vec::new(),
         origins: Vec::new(),
-    };
-    let kin_model = hapcal_problems::CalibratedModel {
-        x_kin: x_kin.clone(),
-        ..hapcal_problems::CalibratedModel::nominal(haptic.chain.clone())
-    };
-    Ok(crate::report::Outcome {
-        report,
-        device: haptic.device.clone(),
-        device_path: plan.device.clone(),
-        model: kin_model,
-        calibrated: Some(calibrated),
-        record: None,
-    })
+    }
 }
 
 /// Step 1 of a set of training rows: what the ladder knows of it before it starts.
