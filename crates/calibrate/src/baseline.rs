@@ -286,6 +286,57 @@ fn kept_in_full_layout(id: &hapcal_identify::Identified, names: &[String]) -> Ve
     kept
 }
 
+/// Each test set as a held-out problem at the training estimate: the shared (kinematic)
+/// parameters `x[..n_shared]` and each socket at the mean of the estimate's end points of its
+/// configurations.
+///
+/// # Errors
+/// A test set whose problem cannot be built.
+fn held_out_sets(
+    chain: &Chain,
+    test: &[DataSet],
+    socket_distance_m: f64,
+    model: &hapcal_problems::CalibratedModel,
+    x: &Col<f64>,
+    n_shared: usize,
+) -> Result<Vec<HeldOutSet>> {
+    let all = |_: usize, _: usize, _: usize| true;
+    let mut tests = Vec::new();
+    for set in test {
+        let obs = crate::solve::observations(std::slice::from_ref(set), socket_distance_m, &all);
+        let n = obs.rows.len();
+        let held = CalibrationProblem::new(chain.clone(), obs, Weights::default(), None)
+            .context("building the held-out problem")?;
+        let mut xt = held.initial_guess();
+        for i in 0..n_shared {
+            xt[i] = x[i];
+        }
+        // Each socket at the mean of the estimate's end points of its configurations.
+        let mut sums = vec![(Vector3::zeros(), 0usize); held.observations().n_points];
+        for row in &held.observations().rows {
+            if let hapcal_problems::RowKind::Point { point } = row.kind {
+                sums[point].0 += model.end_point(&row.q).coords;
+                sums[point].1 += 1;
+            }
+        }
+        let off = held.points_offset();
+        for (p, (sum, k)) in sums.iter().enumerate() {
+            let mean = sum / (*k).max(1) as f64;
+            for a in 0..3 {
+                xt[off + 3 * p + a] = mean[a];
+            }
+        }
+        tests.push(HeldOutSet {
+            name: set.name().to_owned(),
+            problem: held,
+            x: xt,
+            configuration: (0..n).collect(),
+            time: None,
+        });
+    }
+    Ok(tests)
+}
+
 /// [`geometric_baseline`] on socket placements or distance logs in memory, for `chain` (the
 /// calibration chain of the device file) and `robot` (its link masses and joints).
 ///
@@ -351,40 +402,7 @@ pub fn baseline_from_sets(
     }
     let configuration = (0..n_rows).collect();
     let model = problem.model(x.as_ref());
-    let mut tests = Vec::new();
-    for set in test {
-        let obs =
-            crate::solve::observations(std::slice::from_ref(set), plan.socket_distance_m, &all);
-        let n = obs.rows.len();
-        let held = CalibrationProblem::new(chain.clone(), obs, Weights::default(), None)
-            .context("building the held-out problem")?;
-        let mut xt = held.initial_guess();
-        for i in 0..n_shared {
-            xt[i] = x[i];
-        }
-        // Each socket at the mean of the estimate's end points of its configurations.
-        let mut sums = vec![(Vector3::zeros(), 0usize); held.observations().n_points];
-        for row in &held.observations().rows {
-            if let hapcal_problems::RowKind::Point { point } = row.kind {
-                sums[point].0 += model.end_point(&row.q).coords;
-                sums[point].1 += 1;
-            }
-        }
-        let off = held.points_offset();
-        for (p, (sum, k)) in sums.iter().enumerate() {
-            let mean = sum / (*k).max(1) as f64;
-            for a in 0..3 {
-                xt[off + 3 * p + a] = mean[a];
-            }
-        }
-        tests.push(HeldOutSet {
-            name: set.name().to_owned(),
-            problem: held,
-            x: xt,
-            configuration: (0..n).collect(),
-            time: None,
-        });
-    }
+    let tests = held_out_sets(chain, test, plan.socket_distance_m, &model, &x, n_shared)?;
     let mut rungs = Vec::new();
     if ladder {
         let point_rms = |p: &CalibrationProblem, x: &Col<f64>| -> Result<f64> {

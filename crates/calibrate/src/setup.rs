@@ -1539,35 +1539,7 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
         None => frames_only_residual(input.robot, input.tables, &given_tips)
             .context("the frames-only fit of the data as given failed")?,
     };
-    // Per-row residuals under frames fitted to the rows that fit (rows that do not belong
-    // pull the frames of a fit to every row, and every row's residual with them): the rows
-    // within 3 medians of the last fit, refitted until the rows kept no longer change.
-    let mut robust: Option<ClosedForm> = None;
-    let mut kept: Option<Vec<bool>> = None;
-    for _ in 0..ROBUST_REFITS {
-        let Some(fit) = robust.as_ref().or(closed_form.as_ref()) else {
-            break;
-        };
-        let mut sorted: Vec<f64> = fit.per_row.iter().map(|r| r.2).collect();
-        sorted.sort_by(f64::total_cmp);
-        let Some(&median) = sorted.get(sorted.len() / 2) else {
-            break;
-        };
-        let keep: Vec<bool> = fit.per_row.iter().map(|r| r.2 <= 3.0 * median).collect();
-        // The rows kept last, or every row of the first fit: the fit would be the same.
-        if kept
-            .as_ref()
-            .map_or(keep.iter().all(|k| *k), |kept| *kept == keep)
-        {
-            break;
-        }
-        let Some(next) = closed_form_fit(input.robot, input.tables, &given_tips, Some(&keep))
-        else {
-            break;
-        };
-        robust = Some(next);
-        kept = Some(keep);
-    }
+    let robust = robust_closed_form(input, &given_tips, closed_form.as_ref());
     let per_row = robust
         .as_ref()
         .or(closed_form.as_ref())
@@ -1607,17 +1579,91 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
     let explained = findings.iter().any(|f| f.severity == Severity::Error);
     let frozen = frozen_joints(input.robot, input.tables);
     let n_rows: usize = input.tables.iter().map(|t| t.rows.len()).sum();
-    for &(j, value) in &frozen {
+    findings.extend(frozen_findings(
+        input,
+        &frozen,
+        !explained && !as_given.is_plausible(),
+        as_given,
+    ));
+    // Another robot's lengths: a residual above what right data leave (a plausible one too,
+    // when a free instrument frame absorbs much of the lengths' effect, as a UR5e's
+    // description does of a UR10e's data) that a geometric calibration explains.
+    let another = (!explained && frozen.is_empty() && !as_given.is_clean())
+        .then(|| another_device(input.robot, input.tables, &given_tips, &as_given))
+        .flatten();
+    let explained = explained || another.is_some();
+    findings.extend(another);
+    if !explained && frozen.is_empty() && !as_given.is_plausible() {
+        findings.push(no_hypothesis_finding(input, per_row, as_given, n_results));
+    }
+    findings.sort_by_key(|f| f.severity != Severity::Error);
+    Ok(SetupReport {
+        n_rows,
+        as_given,
+        n_hypotheses: n_results,
+        closest: judged.closest,
+        findings,
+    })
+}
+
+/// Per-row residuals under frames fitted to the rows that fit (rows that do not belong pull
+/// the frames of a fit to every row, and every row's residual with them): the rows within 3
+/// medians of the last fit, refitted until the rows kept no longer change (at most
+/// `ROBUST_REFITS` times). `None` when no refit was made.
+fn robust_closed_form(
+    input: &SetupInput<'_>,
+    given_tips: &[usize],
+    closed_form: Option<&ClosedForm>,
+) -> Option<ClosedForm> {
+    let mut robust: Option<ClosedForm> = None;
+    let mut kept: Option<Vec<bool>> = None;
+    for _ in 0..ROBUST_REFITS {
+        let Some(fit) = robust.as_ref().or(closed_form) else {
+            break;
+        };
+        let mut sorted: Vec<f64> = fit.per_row.iter().map(|r| r.2).collect();
+        sorted.sort_by(f64::total_cmp);
+        let Some(&median) = sorted.get(sorted.len() / 2) else {
+            break;
+        };
+        let keep: Vec<bool> = fit.per_row.iter().map(|r| r.2 <= 3.0 * median).collect();
+        // The rows kept last, or every row of the first fit: the fit would be the same.
+        if kept
+            .as_ref()
+            .map_or(keep.iter().all(|k| *k), |kept| *kept == keep)
+        {
+            break;
+        }
+        let Some(next) = closed_form_fit(input.robot, input.tables, given_tips, Some(&keep)) else {
+            break;
+        };
+        robust = Some(next);
+        kept = Some(keep);
+    }
+    robust
+}
+
+/// One finding per joint that reads one value in every row (`frozen`: joint index and
+/// value): an error when `moved` (the residual says the joint did move and nothing else
+/// explains it), a warning otherwise.
+fn frozen_findings(
+    input: &SetupInput<'_>,
+    frozen: &[(usize, f64)],
+    moved: bool,
+    as_given: Residual,
+) -> Vec<Finding> {
+    let n_rows: usize = input.tables.iter().map(|t| t.rows.len()).sum();
+    let mut findings = Vec::new();
+    for &(j, value) in frozen {
         let (lo, hi) = input.robot.limits.get(j).copied().unwrap_or((0.0, 0.0));
         let unit = if input.robot.prismatic.get(j) == Some(&true) {
             "m"
         } else {
             "rad"
         };
-        let error = !explained && !as_given.is_plausible();
         findings.push(Finding {
             class: MistakeClass::FrozenJoint,
-            severity: if error {
+            severity: if moved {
                 Severity::Error
             } else {
                 Severity::Warning
@@ -1627,7 +1673,7 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
                  description lets it move over [{lo}, {hi}] {unit}: a frozen encoder or a \
                  copied column{}",
                 joint_label(input.robot, j),
-                if error {
+                if moved {
                     ", and the residual says the joint did move"
                 } else {
                     ", or the joint was held still (then its parameters cannot be identified)"
@@ -1641,47 +1687,39 @@ pub fn check_setup(input: &SetupInput<'_>) -> Result<SetupReport> {
             after: None,
         });
     }
-    // Another robot's lengths: a residual above what right data leave (a plausible one too,
-    // when a free instrument frame absorbs much of the lengths' effect, as a UR5e's
-    // description does of a UR10e's data) that a geometric calibration explains.
-    let another = (!explained && frozen.is_empty() && !as_given.is_clean())
-        .then(|| another_device(input.robot, input.tables, &given_tips, &as_given))
-        .flatten();
-    let explained = explained || another.is_some();
-    findings.extend(another);
-    if !explained && frozen.is_empty() && !as_given.is_plausible() {
-        // No cause is named: where the residual lies is.
-        let names: Vec<String> = input.tables.iter().map(file_name).collect();
-        let location = per_row
-            .and_then(|rows| residual_location(rows, &names))
-            .map_or_else(String::new, |w| format!("; {w}"));
-        findings.push(Finding {
-            class: MistakeClass::NoHypothesis,
-            severity: Severity::Error,
-            message: format!(
-                "the nominal model misses the measurements by {} RMS with the instrument and \
-                 marker frames fitted, more than manufacturing deviations of a real robot \
-                 produce ({} mm, {:.1}°), and none of the {} checked mistakes explains it{location}: \
-                 these data do not come from this robot (or the setup is wrong in a way not \
-                 checked)",
-                as_given.text(),
-                mm(PLAUSIBLE_FRAMES_ONLY_RMS_M),
-                PLAUSIBLE_FRAMES_ONLY_RAD.to_degrees(),
-                n_results
-            ),
-            fix: "check --device, --tip, the units and the columns of the files".to_owned(),
-            before: as_given,
-            after: None,
-        });
+    findings
+}
+
+/// The finding of a residual no checked mistake explains: where it lies, in the user's files.
+fn no_hypothesis_finding(
+    input: &SetupInput<'_>,
+    per_row: Option<&[(usize, u64, f64)]>,
+    as_given: Residual,
+    n_results: usize,
+) -> Finding {
+    // No cause is named: where the residual lies is.
+    let names: Vec<String> = input.tables.iter().map(file_name).collect();
+    let location = per_row
+        .and_then(|rows| residual_location(rows, &names))
+        .map_or_else(String::new, |w| format!("; {w}"));
+    Finding {
+        class: MistakeClass::NoHypothesis,
+        severity: Severity::Error,
+        message: format!(
+            "the nominal model misses the measurements by {} RMS with the instrument and \
+             marker frames fitted, more than manufacturing deviations of a real robot \
+             produce ({} mm, {:.1}°), and none of the {} checked mistakes explains it{location}: \
+             these data do not come from this robot (or the setup is wrong in a way not \
+             checked)",
+            as_given.text(),
+            mm(PLAUSIBLE_FRAMES_ONLY_RMS_M),
+            PLAUSIBLE_FRAMES_ONLY_RAD.to_degrees(),
+            n_results
+        ),
+        fix: "check --device, --tip, the units and the columns of the files".to_owned(),
+        before: as_given,
+        after: None,
     }
-    findings.sort_by_key(|f| f.severity != Severity::Error);
-    Ok(SetupReport {
-        n_rows,
-        as_given,
-        n_hypotheses: n_results,
-        closest: judged.closest,
-        findings,
-    })
 }
 
 /// The setup check of a `hapcal calibrate` or `hapcal diagnose` plan: measurement files
