@@ -905,7 +905,68 @@ pub fn plan_after(
     workspace: &[Vec<f64>],
     cfg: &AfterConfig,
 ) -> Result<AfterPlan> {
-    use crate::measured::{MeasuredConfig, calibrate_measured};
+    check_after(robot, workspace, cfg)?;
+    let n_measured: usize = measured.iter().map(|t| t.rows.len()).sum();
+    let (out, model_note) = calibrated_for_planning(robot, measured, workspace, cfg, n_measured)?;
+    let planning = PlanningProblem::build(robot, measured, workspace, cfg, &out)?;
+    let info = PlanningInformation::of(&planning, &out, workspace.len(), cfg.sigma_m)?;
+    let design_cfg = DesignConfig {
+        weight: Some(info.weight.clone()),
+        prior: Some(info.prior.clone()),
+        ..DesignConfig::new(cfg.criterion)
+    };
+    let design =
+        select_poses(&info.blocks, cfg.count, &design_cfg).context("choosing the poses")?;
+    let mut readings: Vec<Vec<f64>> = (design.selected.iter())
+        .map(|&c| planning.candidates[c].clone())
+        .collect();
+    let x = &out.fitted.x;
+    let row = |q: &[f64]| info.row_block(&planning, x, q);
+    if cfg.refine {
+        coordinate_exchange_after(
+            &mut readings,
+            &row,
+            cfg.criterion,
+            &info.weight,
+            Some(&info.prior),
+            &planning.limits,
+            50,
+        )?;
+    }
+    let planned: Vec<Mat<f64>> = readings.iter().map(|q| row(q)).collect();
+    let random: Vec<Mat<f64>> = info.blocks.iter().take(cfg.count).cloned().collect();
+    Ok(AfterPlan {
+        rms_before_m: info.rms(&[]),
+        rms_after_m: info.rms(&planned),
+        rms_random_m: info.rms(&random),
+        readings,
+        model: out.rung,
+        model_note,
+        columns: info.columns,
+        undetermined: info.undetermined,
+        unseen: info.unseen,
+        n_measured,
+        n_workspace: workspace.len(),
+        sigma_m: info.sigma_m,
+        sigma_source: info.sigma_source,
+        design,
+        refined: cfg.refine,
+        n_candidates: cfg.n_candidates,
+        criterion: cfg.criterion,
+    })
+}
+
+/// The checks of [`plan_after`]'s settings before any fit.
+///
+/// # Errors
+/// A count outside 1..=candidates, a criterion other than i- or d-optimal, no workspace or a
+/// workspace configuration of another length than the robot's joints, `--model frames-only`
+/// or a model that does not fit measurement files.
+fn check_after(
+    robot: &crate::data::Robot,
+    workspace: &[Vec<f64>],
+    cfg: &AfterConfig,
+) -> Result<()> {
     if cfg.count == 0 || cfg.count > cfg.n_candidates {
         bail!(
             "--count must be between 1 and the number of candidates ({}), got {}",
@@ -939,8 +1000,23 @@ pub fn plan_after(
              parameter to plan the poses for; plan for geometric"
         );
     }
-    cfg.model.check_fits(DataKind::Measurements)?;
-    let n_measured: usize = measured.iter().map(|t| t.rows.len()).sum();
+    cfg.model.check_fits(DataKind::Measurements)
+}
+
+/// The calibration of the measured rows the poses are planned for, and a note of the model
+/// when the plan did not name it: with `--model auto` the ladder's choice, geometric where
+/// the ladder keeps frames only (the model the new rows are to determine).
+///
+/// # Errors
+/// A calibration of the measured rows that fails.
+fn calibrated_for_planning(
+    robot: &crate::data::Robot,
+    measured: &[hapcal_io::MeasurementTable],
+    workspace: &[Vec<f64>],
+    cfg: &AfterConfig,
+    n_measured: usize,
+) -> Result<(crate::measured::MeasuredOutcome, Option<String>)> {
+    use crate::measured::{MeasuredConfig, calibrate_measured};
     let calibrate = |rung: Option<ModelName>| {
         let mcfg = MeasuredConfig {
             rung,
@@ -954,232 +1030,342 @@ pub fn plan_after(
         calibrate_measured(robot, measured, &[], &mcfg)
             .context("calibrating the measured rows (the model the poses are planned for)")
     };
-    let mut out = calibrate(cfg.model.model())?;
-    let mut model_note = None;
+    let out = calibrate(cfg.model.model())?;
     if out.rung == ModelName::FramesOnly {
-        model_note = Some(
-            "on the measured rows the calibration keeps frames only (no model beat it held \
-             out): planned for geometric, the model the new rows are to determine"
-                .to_owned(),
-        );
-        out = calibrate(Some(ModelName::Geometric))?;
-    } else if cfg.model == ModelChoice::Auto {
-        model_note = Some(format!(
-            "the model the calibration chooses on the measured rows: {}",
-            out.rung
+        let note = "on the measured rows the calibration keeps frames only (no model beat it \
+                    held out): planned for geometric, the model the new rows are to determine";
+        return Ok((
+            calibrate(Some(ModelName::Geometric))?,
+            Some(note.to_owned()),
         ));
     }
-    let rung = out.rung;
-    let offsets_robot = crate::data::Robot {
-        tree: robot.tree.with_joint_offsets(),
-        ..robot.clone()
-    };
-    let terms = crate::measured::terms(rung, &offsets_robot)?;
-    let shape = RowShape::of(measured);
-    let n_markers = shape.orientation.len();
-    let n_predicted = n_markers.max(1);
-
-    // One problem: measured rows, then the candidates' rows, then the workspace's markers.
-    let limits = candidate_limits(robot);
-    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-    let candidates: Vec<Vec<f64>> = (0..cfg.n_candidates)
-        .map(|_| {
-            (limits.iter())
-                .map(|&(lo, hi)| {
-                    let u: f64 = rand::Rng::random(&mut rng);
-                    (lo + (hi - lo) * u).clamp(lo, hi)
-                })
-                .collect()
-        })
-        .collect();
-    let mut obs = crate::measured::observations(measured, &|_, _| true);
-    let n_measured_residuals: usize = obs.rows.iter().map(|r| r.kind.n_residuals()).sum();
-    let candidate_obs = |qs: &[Vec<f64>]| {
-        observations_of(
-            qs.iter().map(|q| shape.predicted(&out.model, q)).collect(),
-            n_markers,
+    let note = (cfg.model == ModelChoice::Auto).then(|| {
+        format!(
+            "the model the calibration chooses on the measured rows: {}",
+            out.rung
         )
-    };
-    let cand = candidate_obs(&candidates);
-    let rows_per_pose: usize = cand
-        .rows
-        .iter()
-        .map(|r| r.kind.n_residuals())
-        .sum::<usize>()
-        / candidates.len().max(1);
-    obs.rows.extend(cand.rows);
-    for q in workspace {
-        let tips: Vec<usize> = (0..n_predicted).collect();
-        for (tip, pose) in out.model.end_poses_of(&tips, q).into_iter().enumerate() {
-            obs.rows.push(Row {
-                q: q.clone(),
-                kind: RowKind::Marker {
-                    tip,
-                    position_m: pose.translation.vector.into(),
-                },
-            });
-        }
-    }
-    let weights = out.weights;
-    let problem = CalibrationProblem::on_tree(out.tree.clone(), obs, weights, terms)
-        .context("building the planning problem")?;
-    let layout = problem.layout().clone();
-    let names: Vec<&str> = (0..layout.len()).map(|i| layout.name(i)).collect();
-    if names != out.fitted.names {
-        bail!("the planning problem's parameters differ from the calibration's");
-    }
-    let x = &out.fitted.x;
-    let mut jac = Mat::<f64>::zeros(problem.n_residuals(), layout.len());
-    problem
-        .jacobian(x.as_ref(), jac.as_mut())
-        .map_err(|e| anyhow::anyhow!("{e}"))
-        .context("evaluating the identification Jacobian")?;
+    });
+    Ok((out, note))
+}
 
-    // The model's free parameters, in the identification's layout.
-    let id = &out.fitted.identified;
-    let free_layout = id.layout.clone();
-    let free: Vec<usize> = (0..free_layout.len())
-        .map(|k| {
-            layout
-                .index_of(free_layout.name(k))
-                .with_context(|| format!("no parameter {}", free_layout.name(k)))
-        })
-        .collect::<Result<_>>()?;
-    let n_free = free.len();
-    let n_candidate_residuals = rows_per_pose * candidates.len();
-    let distances_only = shape.orientation.is_empty();
-    let sigma_w = if distances_only {
-        weights.sigma_distance_m
-    } else {
-        weights.sigma_position_m
-    };
-    let (sigma_m, sigma_source) = match cfg.sigma_m {
-        Some(s) => (s, SigmaSource::Stated),
-        None => (sigma_w * id.sigma, SigmaSource::TrainingResidual),
-    };
-    let s = sigma_m / sigma_w;
-    let rank = crate::fit::identify_config(None).rank.with_sigma(s);
-    let sub = |rows: std::ops::Range<usize>| {
-        Mat::from_fn(rows.len(), n_free, |i, k| jac[(rows.start + i, free[k])])
-    };
-    let all: Vec<usize> = (0..n_free).collect();
-    let stacked = sub(0..n_measured_residuals + n_candidate_residuals);
-    let ident = identifiability(stacked.as_ref(), &free_layout, &all, &rank);
-    let measured_jac = sub(0..n_measured_residuals);
-    let seen = identifiability(measured_jac.as_ref(), &free_layout, &all, &rank);
-    let kept = ident.kept.clone();
-    let n = kept.len();
-    let columns: Vec<String> = kept
-        .iter()
-        .map(|&k| free_layout.name(k).to_owned())
-        .collect();
-    let unseen: Vec<String> = (kept.iter())
-        .filter(|k| !seen.kept.contains(k))
-        .map(|&k| free_layout.name(k).to_owned())
-        .filter(|name| !crate::report::is_frame_param(name))
-        .collect();
-    let undetermined: Vec<String> = (ident.pruned_names().into_iter())
-        .filter(|name| !crate::report::is_frame_param(name))
-        .map(str::to_owned)
-        .collect();
-    let block_of = |jac: &Mat<f64>, start: usize, nrows: usize| {
-        Mat::from_fn(nrows, n, |i, k| jac[(start + i, free[kept[k]])])
-    };
-    let mut prior = block_of(&jac, 0, n_measured_residuals);
-    prior = prior.transpose() * &prior;
-    for (k, &j) in kept.iter().enumerate() {
-        let p = rank.prior_scale(free_layout.spec(j).unit);
-        prior[(k, k)] += (s / p).powi(2);
-    }
-    let blocks: Vec<Mat<f64>> = (0..candidates.len())
-        .map(|c| {
-            block_of(
-                &jac,
-                n_measured_residuals + c * rows_per_pose,
-                rows_per_pose,
-            )
-        })
-        .collect();
-    // W over the workspace's marker positions, m per parameter unit, base frame.
-    let ws_start = n_measured_residuals + n_candidate_residuals;
-    let instrument: Vec<bool> = (kept.iter())
-        .map(|&k| free_layout.name(k).starts_with("instrument."))
-        .collect();
-    let mut weight = Mat::<f64>::zeros(n, n);
-    for i in 0..workspace.len() * n_predicted {
-        let g = Mat::from_fn(3, n, |a, k| {
-            if instrument[k] {
-                0.0
-            } else {
-                weights.sigma_position_m * jac[(ws_start + 3 * i + a, free[kept[k]])]
-            }
-        });
-        weight += g.transpose() * &g;
-    }
-    weight /= (workspace.len() * n_predicted) as f64;
+/// One identification problem of [`plan_after`]: the measured rows, then the candidates'
+/// rows (predicted by the calibrated model), then the workspace's markers, with its
+/// Jacobian at the calibrated estimate.
+struct PlanningProblem<'a> {
+    /// The calibration the poses are planned for.
+    out: &'a crate::measured::MeasuredOutcome,
+    /// What each planned pose measures.
+    shape: RowShape,
+    /// Markers of the measured rows.
+    n_markers: usize,
+    /// Each joint's candidate range (rad or m).
+    limits: Vec<(f64, f64)>,
+    /// The candidate joint configurations, drawn uniformly in `limits`.
+    candidates: Vec<Vec<f64>>,
+    /// Residuals of the measured rows (the first rows of the problem).
+    n_measured_residuals: usize,
+    /// Residuals of one candidate pose.
+    rows_per_pose: usize,
+    /// The problem.
+    problem: CalibrationProblem,
+    /// Its layout (every parameter of the calibration, in its order).
+    layout: hapcal_identify::ParamLayout,
+    /// Its Jacobian at the calibrated estimate, residuals × parameters.
+    jac: Mat<f64>,
+}
 
-    let design_cfg = DesignConfig {
-        weight: Some(weight.clone()),
-        prior: Some(prior.clone()),
-        ..DesignConfig::new(cfg.criterion)
-    };
-    let design = select_poses(&blocks, cfg.count, &design_cfg).context("choosing the poses")?;
-    let mut readings: Vec<Vec<f64>> = (design.selected.iter())
-        .map(|&c| candidates[c].clone())
-        .collect();
-    let row = |q: &[f64]| -> Mat<f64> {
-        let one = candidate_obs(std::slice::from_ref(&q.to_vec()));
-        let Ok(p) = problem.with_observations(one) else {
-            return Mat::zeros(rows_per_pose, n);
+impl<'a> PlanningProblem<'a> {
+    /// Builds the problem and its Jacobian.
+    ///
+    /// # Errors
+    /// A problem that cannot be built, parameters that differ from the calibration's, or a
+    /// Jacobian that cannot be evaluated.
+    fn build(
+        robot: &crate::data::Robot,
+        measured: &[hapcal_io::MeasurementTable],
+        workspace: &[Vec<f64>],
+        cfg: &AfterConfig,
+        out: &'a crate::measured::MeasuredOutcome,
+    ) -> Result<Self> {
+        let offsets_robot = crate::data::Robot {
+            tree: robot.tree.with_joint_offsets(),
+            ..robot.clone()
         };
-        let mut j = Mat::<f64>::zeros(p.n_residuals(), layout.len());
-        if p.jacobian(x.as_ref(), j.as_mut()).is_err() {
-            return Mat::zeros(rows_per_pose, n);
+        let terms = crate::measured::terms(out.rung, &offsets_robot)?;
+        let shape = RowShape::of(measured);
+        let n_markers = shape.orientation.len();
+        let n_predicted = n_markers.max(1);
+        let limits = candidate_limits(robot);
+        let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+        let candidates: Vec<Vec<f64>> = (0..cfg.n_candidates)
+            .map(|_| {
+                (limits.iter())
+                    .map(|&(lo, hi)| {
+                        let u: f64 = rand::Rng::random(&mut rng);
+                        (lo + (hi - lo) * u).clamp(lo, hi)
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut obs = crate::measured::observations(measured, &|_, _| true);
+        let n_measured_residuals: usize = obs.rows.iter().map(|r| r.kind.n_residuals()).sum();
+        let cand = candidate_observations(&shape, out, n_markers, &candidates);
+        let rows_per_pose: usize = cand
+            .rows
+            .iter()
+            .map(|r| r.kind.n_residuals())
+            .sum::<usize>()
+            / candidates.len().max(1);
+        obs.rows.extend(cand.rows);
+        for q in workspace {
+            let tips: Vec<usize> = (0..n_predicted).collect();
+            for (tip, pose) in out.model.end_poses_of(&tips, q).into_iter().enumerate() {
+                obs.rows.push(Row {
+                    q: q.clone(),
+                    kind: RowKind::Marker {
+                        tip,
+                        position_m: pose.translation.vector.into(),
+                    },
+                });
+            }
         }
-        block_of(&j, 0, p.n_residuals())
-    };
-    if cfg.refine {
-        coordinate_exchange_after(
-            &mut readings,
-            &row,
-            cfg.criterion,
-            &weight,
-            Some(&prior),
-            &limits,
-            50,
-        )?;
+        let problem = CalibrationProblem::on_tree(out.tree.clone(), obs, out.weights, terms)
+            .context("building the planning problem")?;
+        let layout = problem.layout().clone();
+        let names: Vec<&str> = (0..layout.len()).map(|i| layout.name(i)).collect();
+        if names != out.fitted.names {
+            bail!("the planning problem's parameters differ from the calibration's");
+        }
+        let mut jac = Mat::<f64>::zeros(problem.n_residuals(), layout.len());
+        problem
+            .jacobian(out.fitted.x.as_ref(), jac.as_mut())
+            .map_err(|e| anyhow::anyhow!("{e}"))
+            .context("evaluating the identification Jacobian")?;
+        Ok(Self {
+            out,
+            shape,
+            n_markers,
+            limits,
+            candidates,
+            n_measured_residuals,
+            rows_per_pose,
+            problem,
+            layout,
+            jac,
+        })
     }
-    let rms = |added: &[Mat<f64>]| -> f64 {
+}
+
+/// The observations of candidate configurations `qs`: the rows of the measured rows' kind,
+/// as the calibrated model predicts them.
+fn candidate_observations(
+    shape: &RowShape,
+    out: &crate::measured::MeasuredOutcome,
+    n_markers: usize,
+    qs: &[Vec<f64>],
+) -> Observations {
+    observations_of(
+        qs.iter().map(|q| shape.predicted(&out.model, q)).collect(),
+        n_markers,
+    )
+}
+
+/// What [`plan_after`]'s design reads of the planning problem: the columns it plans for (the
+/// calibration's free parameters the measured rows and candidates determine), the measured
+/// rows' information as the prior, each candidate's block and the workspace's weight.
+struct PlanningInformation {
+    /// The calibration's free parameters, as indices of the planning layout.
+    free: Vec<usize>,
+    /// The columns planned for, as indices of `free`.
+    kept: Vec<usize>,
+    /// Their names.
+    columns: Vec<String>,
+    /// Columns the measured rows alone do not determine (frames left out).
+    unseen: Vec<String>,
+    /// Columns neither the measured rows nor the candidates determine (frames left out).
+    undetermined: Vec<String>,
+    /// The measurement σ, m.
+    sigma_m: f64,
+    /// Where `sigma_m` comes from.
+    sigma_source: SigmaSource,
+    /// `sigma_m` over the weights' σ: the scale of the scaled Jacobian's rows.
+    s: f64,
+    /// The measured rows' information plus the identification's prior, n × n.
+    prior: Mat<f64>,
+    /// Each candidate's rows over the planned columns.
+    blocks: Vec<Mat<f64>>,
+    /// W over the workspace's marker positions, m² per parameter unit², base frame.
+    weight: Mat<f64>,
+}
+
+impl PlanningInformation {
+    /// The design's inputs from the planning problem; `n_workspace` workspace configurations,
+    /// `stated_sigma_m` the plan's σ if any.
+    ///
+    /// # Errors
+    /// A free parameter of the calibration the planning layout does not hold.
+    fn of(
+        planning: &PlanningProblem<'_>,
+        out: &crate::measured::MeasuredOutcome,
+        n_workspace: usize,
+        stated_sigma_m: Option<f64>,
+    ) -> Result<Self> {
+        let (jac, layout) = (&planning.jac, &planning.layout);
+        let id = &out.fitted.identified;
+        let free_layout = &id.layout;
+        let free: Vec<usize> = (0..free_layout.len())
+            .map(|k| {
+                layout
+                    .index_of(free_layout.name(k))
+                    .with_context(|| format!("no parameter {}", free_layout.name(k)))
+            })
+            .collect::<Result<_>>()?;
+        let n_free = free.len();
+        let n_measured_residuals = planning.n_measured_residuals;
+        let n_candidate_residuals = planning.rows_per_pose * planning.candidates.len();
+        let weights = out.weights;
+        let sigma_w = if planning.shape.orientation.is_empty() {
+            weights.sigma_distance_m
+        } else {
+            weights.sigma_position_m
+        };
+        let (sigma_m, sigma_source) = match stated_sigma_m {
+            Some(s) => (s, SigmaSource::Stated),
+            None => (sigma_w * id.sigma, SigmaSource::TrainingResidual),
+        };
+        let s = sigma_m / sigma_w;
+        let rank = crate::fit::identify_config(None).rank.with_sigma(s);
+        let sub = |rows: std::ops::Range<usize>| {
+            Mat::from_fn(rows.len(), n_free, |i, k| jac[(rows.start + i, free[k])])
+        };
+        let all: Vec<usize> = (0..n_free).collect();
+        let stacked = sub(0..n_measured_residuals + n_candidate_residuals);
+        let ident = identifiability(stacked.as_ref(), free_layout, &all, &rank);
+        let measured_jac = sub(0..n_measured_residuals);
+        let seen = identifiability(measured_jac.as_ref(), free_layout, &all, &rank);
+        let kept = ident.kept.clone();
+        let columns: Vec<String> = (kept.iter())
+            .map(|&k| free_layout.name(k).to_owned())
+            .collect();
+        let unseen: Vec<String> = (kept.iter())
+            .filter(|k| !seen.kept.contains(k))
+            .map(|&k| free_layout.name(k).to_owned())
+            .filter(|name| !crate::report::is_frame_param(name))
+            .collect();
+        let undetermined: Vec<String> = (ident.pruned_names().into_iter())
+            .filter(|name| !crate::report::is_frame_param(name))
+            .map(str::to_owned)
+            .collect();
+        let mut info = Self {
+            free,
+            kept,
+            columns,
+            unseen,
+            undetermined,
+            sigma_m,
+            sigma_source,
+            s,
+            prior: Mat::zeros(0, 0),
+            blocks: Vec::new(),
+            weight: Mat::zeros(0, 0),
+        };
+        let mut prior = info.block_of(jac, 0, n_measured_residuals);
+        prior = prior.transpose() * &prior;
+        for (k, &j) in info.kept.iter().enumerate() {
+            let p = rank.prior_scale(free_layout.spec(j).unit);
+            prior[(k, k)] += (s / p).powi(2);
+        }
+        info.prior = prior;
+        info.blocks = (0..planning.candidates.len())
+            .map(|c| {
+                info.block_of(
+                    jac,
+                    n_measured_residuals + c * planning.rows_per_pose,
+                    planning.rows_per_pose,
+                )
+            })
+            .collect();
+        info.weight = info.workspace_weight(
+            planning,
+            free_layout,
+            n_measured_residuals + n_candidate_residuals,
+            n_workspace,
+        );
+        Ok(info)
+    }
+
+    /// Rows `start..start + nrows` of `jac` over the planned columns.
+    fn block_of(&self, jac: &Mat<f64>, start: usize, nrows: usize) -> Mat<f64> {
+        Mat::from_fn(nrows, self.kept.len(), |i, k| {
+            jac[(start + i, self.free[self.kept[k]])]
+        })
+    }
+
+    /// W over the workspace's marker positions (rows from `ws_start` of the planning
+    /// Jacobian), m per parameter unit, base frame: the instrument frame's columns, which move
+    /// no marker in the base frame, left out.
+    fn workspace_weight(
+        &self,
+        planning: &PlanningProblem<'_>,
+        free_layout: &hapcal_identify::ParamLayout,
+        ws_start: usize,
+        n_workspace: usize,
+    ) -> Mat<f64> {
+        let n = self.kept.len();
+        let n_predicted = planning.n_markers.max(1);
+        let sigma_position_m = planning.out.weights.sigma_position_m;
+        let instrument: Vec<bool> = (self.kept.iter())
+            .map(|&k| free_layout.name(k).starts_with("instrument."))
+            .collect();
+        let mut weight = Mat::<f64>::zeros(n, n);
+        for i in 0..n_workspace * n_predicted {
+            let g = Mat::from_fn(3, n, |a, k| {
+                if instrument[k] {
+                    0.0
+                } else {
+                    sigma_position_m * planning.jac[(ws_start + 3 * i + a, self.free[self.kept[k]])]
+                }
+            });
+            weight += g.transpose() * &g;
+        }
+        weight /= (n_workspace * n_predicted) as f64;
+        weight
+    }
+
+    /// The block of one configuration `q` off the candidates (coordinate exchange), at the
+    /// calibrated estimate `x`; zeros where the model cannot evaluate it.
+    fn row_block(&self, planning: &PlanningProblem<'_>, x: &faer::Col<f64>, q: &[f64]) -> Mat<f64> {
+        let n = self.kept.len();
+        let one = candidate_observations(
+            &planning.shape,
+            planning.out,
+            planning.n_markers,
+            std::slice::from_ref(&q.to_vec()),
+        );
+        let Ok(p) = planning.problem.with_observations(one) else {
+            return Mat::zeros(planning.rows_per_pose, n);
+        };
+        let mut j = Mat::<f64>::zeros(p.n_residuals(), planning.layout.len());
+        if p.jacobian(x.as_ref(), j.as_mut()).is_err() {
+            return Mat::zeros(planning.rows_per_pose, n);
+        }
+        self.block_of(&j, 0, p.n_residuals())
+    }
+
+    /// RMS prediction σ over the workspace, m, with the measured rows and `added` blocks.
+    fn rms(&self, added: &[Mat<f64>]) -> f64 {
         use faer::linalg::solvers::DenseSolveCore;
-        let mut m = prior.clone();
+        let mut m = self.prior.clone();
         for b in added {
             m += b.transpose() * b;
         }
         m.llt(faer::Side::Lower).map_or(f64::INFINITY, |llt| {
-            s * trace_of_product(&weight, &llt.inverse()).max(0.0).sqrt()
+            self.s
+                * trace_of_product(&self.weight, &llt.inverse())
+                    .max(0.0)
+                    .sqrt()
         })
-    };
-    let planned: Vec<Mat<f64>> = readings.iter().map(|q| row(q)).collect();
-    let random: Vec<Mat<f64>> = blocks.iter().take(cfg.count).cloned().collect();
-    Ok(AfterPlan {
-        rms_before_m: rms(&[]),
-        rms_after_m: rms(&planned),
-        rms_random_m: rms(&random),
-        readings,
-        model: rung,
-        model_note,
-        columns,
-        undetermined,
-        unseen,
-        n_measured,
-        n_workspace: workspace.len(),
-        sigma_m,
-        sigma_source,
-        design,
-        refined: cfg.refine,
-        n_candidates: cfg.n_candidates,
-        criterion: cfg.criterion,
-    })
+    }
 }
 
 /// Text summary of [`plan_after`]: the model, the columns, the noise σ and the workspace's
