@@ -253,6 +253,56 @@ pub fn candidate_blocks(
     )
 }
 
+/// The transmission basis columns of [`candidate_blocks_for`] (when `transmission_rows`):
+/// per transmission joint its index and the evaluator of its basis at a joint angle (rad) — a
+/// capstan's linearisation about a perfect drive, the parallelogram joint's Chebyshev basis of
+/// degree [`POLY_DEGREE`] — with the columns' names pushed onto `columns`.
+///
+/// # Errors
+/// A parallelogram joint without limits, or a capstan or polynomial that cannot be built.
+fn transmission_bases(
+    device: &Device,
+    transmission_rows: bool,
+    columns: &mut Vec<String>,
+) -> Result<Vec<(usize, Basis)>> {
+    let parallelogram = device
+        .parallelogram
+        .is_some()
+        .then_some(crate::haptic::PARALLELOGRAM_JOINT);
+    let limits = device.joint_limits();
+    let mut transmissions: Vec<(usize, Basis)> = Vec::new();
+    let capstans = if transmission_rows {
+        device.capstans.as_slice()
+    } else {
+        &[]
+    };
+    for c in capstans {
+        let j = c.joint - 1;
+        if Some(c.joint) == parallelogram {
+            let (lo, hi) = *limits
+                .get(j)
+                .with_context(|| format!("no limits for joint {}", c.joint))?;
+            let cheb = Chebyshev::try_new(lo, hi, vec![0.0; POLY_DEGREE + 1])?;
+            for k in 0..=POLY_DEGREE {
+                columns.push(format!("joint{}.cheb{k}", c.joint));
+            }
+            transmissions.push((j, Box::new(move |t: f64| cheb.basis(t))));
+        } else {
+            // The capstan's own linearisation about a perfect drive (Cartesian eccentricity
+            // coordinates: the paper's polar ones have no phase column at zero eccentricity).
+            let capstan = Capstan::try_new(c.ratio, c.drum_distance_m)?;
+            for name in ["c", "a", "sin", "cos", "sin_r", "cos_r"] {
+                columns.push(format!("capstan{}.{name}", c.joint));
+            }
+            transmissions.push((
+                j,
+                Box::new(move |t: f64| capstan.linear_basis(JointRad(t)).to_vec()),
+            ));
+        }
+    }
+    Ok(transmissions)
+}
+
 /// [`candidate_blocks`] for `model`: the measurement rows span the columns of every parameter
 /// family `model` frees that the candidates determine (kinematic, gravity compliance with
 /// lumped unit weights or the published masses, transversal compliance, joint harmonics;
@@ -318,42 +368,7 @@ pub fn candidate_blocks_for(
     let kept = ident.kept.clone();
     let mut columns: Vec<String> = kept.iter().map(|&j| layout.name(j).to_owned()).collect();
 
-    // Transmission basis columns: (joint index, basis function count, evaluator).
-    let parallelogram = device
-        .parallelogram
-        .is_some()
-        .then_some(crate::haptic::PARALLELOGRAM_JOINT);
-    let limits = device.joint_limits();
-    let mut transmissions: Vec<(usize, Basis)> = Vec::new();
-    let capstans = if transmission_rows {
-        device.capstans.as_slice()
-    } else {
-        &[]
-    };
-    for c in capstans {
-        let j = c.joint - 1;
-        if Some(c.joint) == parallelogram {
-            let (lo, hi) = *limits
-                .get(j)
-                .with_context(|| format!("no limits for joint {}", c.joint))?;
-            let cheb = Chebyshev::try_new(lo, hi, vec![0.0; POLY_DEGREE + 1])?;
-            for k in 0..=POLY_DEGREE {
-                columns.push(format!("joint{}.cheb{k}", c.joint));
-            }
-            transmissions.push((j, Box::new(move |t: f64| cheb.basis(t))));
-        } else {
-            // The capstan's own linearisation about a perfect drive (Cartesian eccentricity
-            // coordinates: the paper's polar ones have no phase column at zero eccentricity).
-            let capstan = Capstan::try_new(c.ratio, c.drum_distance_m)?;
-            for name in ["c", "a", "sin", "cos", "sin_r", "cos_r"] {
-                columns.push(format!("capstan{}.{name}", c.joint));
-            }
-            transmissions.push((
-                j,
-                Box::new(move |t: f64| capstan.linear_basis(JointRad(t)).to_vec()),
-            ));
-        }
-    }
+    let transmissions = transmission_bases(device, transmission_rows, &mut columns)?;
     let n_cols = columns.len();
     let n_rows = rows_per_pose + transmissions.len();
     let x0 = vec![0.0; chain_for_weight.n_params()];
