@@ -636,18 +636,18 @@ impl Calibration {
     /// # Errors
     /// The first fault, at the line of its key where it can be found.
     pub fn check(&self, text: &str, origin: &str) -> Result<(), ContractError> {
-        // At the value the path names (the record's own line for it), else the first line
-        // naming `key`.
-        let fail_at = |path: &[Step<'_>], key: &str, message: String| {
-            let (line, column) = locate_path(text, path).unwrap_or_else(|| locate(text, key));
-            Err(ContractError {
-                origin: origin.to_owned(),
-                line,
-                column,
-                message,
-            })
-        };
-        let fail = |key: &str, message: String| fail_at(&[Step::Key(key)], key, message);
+        let at = RecordText { text, origin };
+        self.check_schema(&at)?;
+        self.check_torque(&at)?;
+        self.check_region(&at)?;
+        self.check_frames(&at)?;
+        self.check_values(&at)?;
+        self.check_covariance(&at)
+    }
+
+    /// The schema's keys: a record of schema 1 begins with `schema_version` and names its model
+    /// and region; a key of schema 1 without the version is a record whose first line was lost.
+    fn check_schema(&self, at: &RecordText<'_>) -> Result<(), ContractError> {
         if self.schema_version.is_none() {
             // An earlier hapcal's record holds frames and values only: a key of schema 1
             // without the version is a record whose first line was lost or edited away.
@@ -661,37 +661,37 @@ impl Calibration {
                 ("covariance", self.covariance.is_some()),
             ];
             if let Some((key, _)) = present.iter().find(|(_, p)| *p) {
-                return fail(
+                return at.fail(
                     key,
                     format!(
                         "missing key schema_version: `{key}` is a key of calibration records \
-                         of schema 1, which begin with schema_version = {SCHEMA_VERSION}; add \
-                         that line (a record without it is read as an earlier hapcal's: frames \
-                         and values only)"
+                     of schema 1, which begin with schema_version = {SCHEMA_VERSION}; add \
+                     that line (a record without it is read as an earlier hapcal's: frames \
+                     and values only)"
                     ),
                 );
             }
         }
         if let Some(v) = self.schema_version {
             if v > SCHEMA_VERSION {
-                return fail(
+                return at.fail(
                     "schema_version",
                     format!(
                         "schema_version = {v}: written by a newer hapcal; this one reads \
-                         calibration records up to version {SCHEMA_VERSION}"
+                     calibration records up to version {SCHEMA_VERSION}"
                     ),
                 );
             }
             if v == 0 {
-                return fail(
+                return at.fail(
                     "schema_version",
                     "schema_version = 0: expected 1 (or no schema_version for a record written \
-                     before versions were recorded)"
+                 before versions were recorded)"
                         .to_owned(),
                 );
             }
             if self.model.is_none() {
-                return fail(
+                return at.fail(
                     "schema_version",
                     format!(
                         "missing key model: expected the identified model's name, one of {}",
@@ -700,25 +700,31 @@ impl Calibration {
                 );
             }
             if self.region.is_none() {
-                return fail(
+                return at.fail(
                     "schema_version",
                     "missing table [region]: expected rows and each joint's training range"
                         .to_owned(),
                 );
             }
         }
+        Ok(())
+    }
+
+    /// The `[torque]` table: a unit gravity direction, a positive acceleration, finite non-
+    /// negative masses at finite points, the masses its source needs.
+    fn check_torque(&self, at: &RecordText<'_>) -> Result<(), ContractError> {
         if let Some(t) = &self.torque {
             let g = t.gravity_direction;
             let norm = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
             if !norm.is_finite() || (norm - 1.0).abs() > 1e-6 {
-                return fail_at(
+                return at.fail_at(
                     &[Step::Key("torque"), Step::Key("gravity_direction")],
                     "gravity_direction",
                     format!("torque.gravity_direction = {g:?}: expected a unit vector"),
                 );
             }
             if !(t.gravity_m_s2.is_finite() && t.gravity_m_s2 > 0.0) {
-                return fail_at(
+                return at.fail_at(
                     &[Step::Key("torque"), Step::Key("gravity_m_s2")],
                     "gravity_m_s2",
                     format!(
@@ -736,7 +742,7 @@ impl Calibration {
                     } else {
                         "mass_kg"
                     };
-                    return fail_at(
+                    return at.fail_at(
                         &[
                             Step::Key("torque"),
                             Step::Key("mass"),
@@ -746,7 +752,7 @@ impl Calibration {
                         "torque",
                         format!(
                             "torque mass on joint {:?}: {} kg at {:?} m is not a finite, \
-                             non-negative mass at a finite point",
+                         non-negative mass at a finite point",
                             m.joint, m.mass_kg, m.com_m
                         ),
                     );
@@ -757,7 +763,7 @@ impl Calibration {
                 TorqueSource::UrdfMasses | TorqueSource::PublishedMasses
             );
             if needs_masses && t.masses.is_empty() {
-                return fail_at(
+                return at.fail_at(
                     &[Step::Key("torque"), Step::Key("source")],
                     "torque",
                     format!(
@@ -769,13 +775,18 @@ impl Calibration {
             if t.source == TorqueSource::HandleMass
                 && !t.handle_mass_kg.is_some_and(|m| m.is_finite() && m > 0.0)
             {
-                return fail_at(
+                return at.fail_at(
                     &[Step::Key("torque"), Step::Key("source")],
                     "torque",
                     "torque.source = \"handle-mass\": expected handle_mass_kg > 0".to_owned(),
                 );
             }
         }
+        Ok(())
+    }
+
+    /// The `[region]` table: each joint's finite range, min ≤ max, in rad or m.
+    fn check_region(&self, at: &RecordText<'_>) -> Result<(), ContractError> {
         if let Some(r) = &self.region {
             for (k, j) in r.joints.iter().enumerate() {
                 let entry = |field| {
@@ -787,7 +798,7 @@ impl Calibration {
                     ]
                 };
                 if !(j.min.is_finite() && j.max.is_finite() && j.min <= j.max) {
-                    return fail_at(
+                    return at.fail_at(
                         &entry(if j.min.is_finite() { "max" } else { "min" }),
                         "region",
                         format!(
@@ -797,7 +808,7 @@ impl Calibration {
                     );
                 }
                 if j.unit != "rad" && j.unit != "m" {
-                    return fail_at(
+                    return at.fail_at(
                         &entry("unit"),
                         "region",
                         format!(
@@ -808,10 +819,15 @@ impl Calibration {
                 }
             }
         }
+        Ok(())
+    }
+
+    /// The `[frames]` and `[nominal]` tables: finite values.
+    fn check_frames(&self, at: &RecordText<'_>) -> Result<(), ContractError> {
         for (table, frames) in [("frames", &self.frames), ("nominal", &self.nominal)] {
             for (name, f) in frames {
                 if f.xyz_m.iter().chain(&f.rpy_rad).any(|v| !v.is_finite()) {
-                    return fail_at(
+                    return at.fail_at(
                         &[Step::Key(table), Step::Key(name)],
                         &format!("{table}.{name}"),
                         format!("{table}.{name}: a value is not finite"),
@@ -819,9 +835,15 @@ impl Calibration {
                 }
             }
         }
+        Ok(())
+    }
+
+    /// The `[values]`: names the contract parses, finite values and σ ≥ 0, compliances only
+    /// under a `[torque]` table, units their kind allows, only values the record's model holds.
+    fn check_values(&self, at: &RecordText<'_>) -> Result<(), ContractError> {
         for v in &self.values {
             let at_value = |message: String| {
-                fail_at(&[Step::Key("values"), Step::Key(&v.name)], &v.name, message)
+                at.fail_at(&[Step::Key("values"), Step::Key(&v.name)], &v.name, message)
             };
             let parsed = match ValueName::parse(&v.name) {
                 Ok(p) => p,
@@ -836,7 +858,7 @@ impl Calibration {
             if parsed.is_compliance() && self.torque.is_none() && !self.is_legacy() {
                 return at_value(format!(
                     "{:?} is a compliance, but the record has no [torque] table: expected \
-                         the load it was identified under",
+                     the load it was identified under",
                     v.name
                 ));
             }
@@ -859,10 +881,16 @@ impl Calibration {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// The `[covariance]`: n(n+1)/2 entries for n names, each name a recorded value, finite
+    /// entries and a non-negative diagonal.
+    fn check_covariance(&self, at: &RecordText<'_>) -> Result<(), ContractError> {
         if let Some(c) = &self.covariance {
             let n = c.names.len();
             if c.lower.len() != n * (n + 1) / 2 {
-                return fail_at(
+                return at.fail_at(
                     &[Step::Key("covariance"), Step::Key("lower")],
                     "lower",
                     format!(
@@ -888,18 +916,18 @@ impl Calibration {
                         .filter(|v| !c.names.contains(&v.name))
                         .max_by_key(likeness)
                     {
-                        return fail_at(
+                        return at.fail_at(
                             &[Step::Key("values"), Step::Key(&v.name)],
                             &v.name,
                             format!(
                                 "{:?} is not among the covariance's names, which name {name:?} \
-                                 instead: a misnamed value (expected the name the calibration \
-                                 recorded, {name:?})",
+                             instead: a misnamed value (expected the name the calibration \
+                             recorded, {name:?})",
                                 v.name
                             ),
                         );
                     }
-                    return fail_at(
+                    return at.fail_at(
                         &[Step::Key("covariance"), Step::Key("names")],
                         "names",
                         format!("covariance names {name:?}, which is not a recorded value"),
@@ -907,7 +935,7 @@ impl Calibration {
                 }
             }
             if c.lower.iter().any(|x| !x.is_finite()) || (0..n).any(|i| c.get(i, i) < 0.0) {
-                return fail_at(
+                return at.fail_at(
                     &[Step::Key("covariance"), Step::Key("lower")],
                     "lower",
                     "covariance.lower: expected finite entries and a non-negative diagonal"
@@ -916,6 +944,33 @@ impl Calibration {
             }
         }
         Ok(())
+    }
+}
+
+/// A record's text and where it came from, for the errors of [`Calibration::check`].
+struct RecordText<'a> {
+    /// The record's TOML text.
+    text: &'a str,
+    /// Where the text came from (a file name), for the error.
+    origin: &'a str,
+}
+
+impl RecordText<'_> {
+    /// An error at the value `path` names (the record's own line for it), else at the first
+    /// line naming `key`.
+    fn fail_at(&self, path: &[Step<'_>], key: &str, message: String) -> Result<(), ContractError> {
+        let (line, column) = locate_path(self.text, path).unwrap_or_else(|| locate(self.text, key));
+        Err(ContractError {
+            origin: self.origin.to_owned(),
+            line,
+            column,
+            message,
+        })
+    }
+
+    /// An error at the top-level key `key`.
+    fn fail(&self, key: &str, message: String) -> Result<(), ContractError> {
+        self.fail_at(&[Step::Key(key)], key, message)
     }
 }
 
