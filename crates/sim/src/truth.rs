@@ -274,32 +274,90 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
             message: e.message().trim_end().to_owned(),
         }
     })?;
-    let invalid = |offset: usize, message: String| {
-        let (line, column) = hapcal_io::line_column(text, offset);
+    let at = TruthText { text, path };
+    if raw.device.get_ref().as_os_str().is_empty() {
+        return Err(at.invalid(
+            raw.device.span().start,
+            "the device path is empty".to_owned(),
+        ));
+    }
+    let deviations = at.deviations(&raw)?;
+    let capstans = at.capstans(&raw)?;
+    let parallelogram = match &raw.parallelogram {
+        None => None,
+        Some(p) => Some(ParallelogramTruth {
+            dl1_m: at.bounded("dl1_m", &p.dl1_m, LENGTH_DEVIATION_M, "m")?,
+            dl2_m: at.bounded("dl2_m", &p.dl2_m, LENGTH_DEVIATION_M, "m")?,
+            dl3_m: at.bounded("dl3_m", &p.dl3_m, LENGTH_DEVIATION_M, "m")?,
+            dl4_m: at.bounded("dl4_m", &p.dl4_m, LENGTH_DEVIATION_M, "m")?,
+            phi0_rad: at.crank_angle(&p.phi0_rad)?,
+        }),
+    };
+    Ok(Truth {
+        device: raw.device.into_inner(),
+        deviations,
+        capstans,
+        parallelogram,
+    })
+}
+
+// Plausible ranges: a truth is a small correction of the nominal device (its lengths are
+// tenths of a metre, its deviations millimetres and milliradians), so a value outside these
+// is a typo, not a device: `da1 = 1e10` would put the tool 10⁷ km away.
+/// Largest length deviation of a truth, m.
+const LENGTH_DEVIATION_M: f64 = 0.1;
+/// Largest angle deviation of a truth, rad.
+const ANGLE_DEVIATION_RAD: f64 = std::f64::consts::FRAC_PI_4;
+/// Largest phase, rad.
+const PHASE_RAD: f64 = std::f64::consts::TAU;
+/// Largest eccentricity radius, m.
+const ECCENTRICITY_M: f64 = 0.01;
+/// Largest capstan ratio error (relative).
+const RATIO_ERROR: f64 = 1.0;
+
+/// A truth file's text and path, for the errors of [`parse_truth`] at a value's line and
+/// column.
+struct TruthText<'a> {
+    /// The file's text.
+    text: &'a str,
+    /// The file's path, for messages.
+    path: &'a Path,
+}
+
+impl TruthText<'_> {
+    /// An [`Error::InvalidTruth`] at byte `offset` of the text.
+    fn invalid(&self, offset: usize, message: String) -> Error {
+        let (line, column) = hapcal_io::line_column(self.text, offset);
         Error::InvalidTruth {
-            path: path.to_path_buf(),
+            path: self.path.to_path_buf(),
             line,
             column,
             message,
         }
-    };
-    let finite = |name: &str, value: &Spanned<f64>| {
+    }
+
+    /// `value` if finite.
+    fn finite(&self, name: &str, value: &Spanned<f64>) -> Result<f64, Error> {
         let v = *value.get_ref();
         if v.is_finite() {
             Ok(v)
         } else {
-            Err(invalid(
+            Err(self.invalid(
                 value.span().start,
                 format!("expected a finite number for {name:?}, found {v}"),
             ))
         }
-    };
+    }
 
-    // Plausible ranges: a truth is a small correction of the nominal device (its lengths are
-    // tenths of a metre, its deviations millimetres and milliradians), so a value outside these
-    // is a typo, not a device: `da1 = 1e10` would put the tool 10⁷ km away.
-    let bounded = |name: &str, value: &Spanned<f64>, limit: f64, unit: &str| {
-        let v = finite(name, value)?;
+    /// `value` if finite and within ±`limit` (in `unit`, named in the message).
+    fn bounded(
+        &self,
+        name: &str,
+        value: &Spanned<f64>,
+        limit: f64,
+        unit: &str,
+    ) -> Result<f64, Error> {
+        let v = self.finite(name, value)?;
         if v.abs() <= limit {
             Ok(v)
         } else {
@@ -308,7 +366,7 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
             } else {
                 format!(" {unit}")
             };
-            Err(invalid(
+            Err(self.invalid(
                 value.span().start,
                 format!(
                     "{name} = {v:e}{unit} is outside ±{limit}{unit}: a truth deviates from the \
@@ -316,19 +374,14 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
                 ),
             ))
         }
-    };
-    const LENGTH_DEVIATION_M: f64 = 0.1;
-    const ANGLE_DEVIATION_RAD: f64 = std::f64::consts::FRAC_PI_4;
-    const PHASE_RAD: f64 = std::f64::consts::TAU;
-    const ECCENTRICITY_M: f64 = 0.01;
-    const RATIO_ERROR: f64 = 1.0;
+    }
 
-    // An eccentricity is a radius and a phase: a negative radius is the same eccentricity
-    // with the phase turned by π, a sign slip rather than a device.
-    let radius = |name: &str, value: &Spanned<f64>| {
-        let v = bounded(name, value, ECCENTRICITY_M, "m")?;
+    /// An eccentricity radius, m: a radius and a phase, so a negative radius is the same
+    /// eccentricity with the phase turned by π, a sign slip rather than a device.
+    fn radius(&self, name: &str, value: &Spanned<f64>) -> Result<f64, Error> {
+        let v = self.bounded(name, value, ECCENTRICITY_M, "m")?;
         if v < 0.0 {
-            return Err(invalid(
+            return Err(self.invalid(
                 value.span().start,
                 format!(
                     "{name} = {v:e} m is negative: an eccentricity radius lies in [0, {ECCENTRICITY_M}] m (its direction is the phase beta_*_rad)"
@@ -336,98 +389,83 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
             ));
         }
         Ok(v)
-    };
-    // The ideal parallelogram folds flat at crank angles 0 and π: outside (0, π) it renders
-    // the joint mirrored.
-    let crank_angle = |value: &Spanned<f64>| {
-        let v = finite("phi0_rad", value)?;
+    }
+
+    /// The parallelogram's crank angle, rad: the ideal parallelogram folds flat at crank
+    /// angles 0 and π, and outside (0, π) it renders the joint mirrored.
+    fn crank_angle(&self, value: &Spanned<f64>) -> Result<f64, Error> {
+        let v = self.finite("phi0_rad", value)?;
         if v > 0.0 && v < std::f64::consts::PI {
             return Ok(v);
         }
-        Err(invalid(
+        Err(self.invalid(
             value.span().start,
             format!(
                 "phi0_rad = {v} rad is outside (0, π) = (0, 3.14159…) rad: the crank angle at joint-4 reading 0, where the parallelogram does not fold flat (π/2 − (lo + hi)/2 puts the crank perpendicular mid-range)"
             ),
         ))
-    };
-
-    if raw.device.get_ref().as_os_str().is_empty() {
-        return Err(invalid(
-            raw.device.span().start,
-            "the device path is empty".to_owned(),
-        ));
     }
 
-    let mut entries: Vec<_> = raw.deviations.iter().collect();
-    entries.sort_by_key(|(name, _)| name.span().start);
-    let mut deviations = Vec::with_capacity(entries.len());
-    for (name, value) in entries {
-        if !is_param_name(name.get_ref()) {
-            return Err(invalid(
-                name.span().start,
-                format!(
-                    "{:?} is not a parameter name: expected da, dalpha, dd, dtheta or dbeta \
-                     followed by a row number, e.g. \"dtheta3\"",
-                    name.get_ref()
-                ),
-            ));
+    /// The D-H deviations, in the file's order: known parameter names, angles within
+    /// ±[`ANGLE_DEVIATION_RAD`], lengths within ±[`LENGTH_DEVIATION_M`].
+    fn deviations(&self, raw: &RawTruth) -> Result<Vec<(String, f64)>, Error> {
+        let mut entries: Vec<_> = raw.deviations.iter().collect();
+        entries.sort_by_key(|(name, _)| name.span().start);
+        let mut deviations = Vec::with_capacity(entries.len());
+        for (name, value) in entries {
+            if !is_param_name(name.get_ref()) {
+                return Err(self.invalid(
+                    name.span().start,
+                    format!(
+                        "{:?} is not a parameter name: expected da, dalpha, dd, dtheta or dbeta \
+                         followed by a row number, e.g. \"dtheta3\"",
+                        name.get_ref()
+                    ),
+                ));
+            }
+            let n = name.get_ref();
+            let angle = ["dalpha", "dtheta", "dbeta"]
+                .iter()
+                .any(|p| n.starts_with(p));
+            let v = if angle {
+                self.bounded(n, value, ANGLE_DEVIATION_RAD, "rad")?
+            } else {
+                self.bounded(n, value, LENGTH_DEVIATION_M, "m")?
+            };
+            deviations.push((n.clone(), v));
         }
-        let n = name.get_ref();
-        let angle = ["dalpha", "dtheta", "dbeta"]
-            .iter()
-            .any(|p| n.starts_with(p));
-        let v = if angle {
-            bounded(n, value, ANGLE_DEVIATION_RAD, "rad")?
-        } else {
-            bounded(n, value, LENGTH_DEVIATION_M, "m")?
-        };
-        deviations.push((n.clone(), v));
+        Ok(deviations)
     }
 
-    let mut capstans: Vec<CapstanTruth> = Vec::with_capacity(raw.capstans.len());
-    for c in &raw.capstans {
-        let joint = *c.joint.get_ref();
-        if joint == 0 {
-            return Err(invalid(
-                c.joint.span().start,
-                "capstan joint numbers are 1-based; found 0".to_owned(),
-            ));
+    /// The capstans' truths: 1-based joints, one per joint, values within their bounds.
+    fn capstans(&self, raw: &RawTruth) -> Result<Vec<CapstanTruth>, Error> {
+        let mut capstans: Vec<CapstanTruth> = Vec::with_capacity(raw.capstans.len());
+        for c in &raw.capstans {
+            let joint = *c.joint.get_ref();
+            if joint == 0 {
+                return Err(self.invalid(
+                    c.joint.span().start,
+                    "capstan joint numbers are 1-based; found 0".to_owned(),
+                ));
+            }
+            if capstans.iter().any(|earlier| earlier.joint == joint) {
+                return Err(self.invalid(
+                    c.joint.span().start,
+                    format!("a second [[capstan]] for joint {joint}"),
+                ));
+            }
+            capstans.push(CapstanTruth {
+                joint,
+                c_rad: self.bounded("c_rad", &c.c_rad, PHASE_RAD, "rad")?,
+                re: self.bounded("re", &c.re, RATIO_ERROR, "")?,
+                r_o_m: self.radius("r_o_m", &c.r_o_m)?,
+                beta_o_rad: self.bounded("beta_o_rad", &c.beta_o_rad, PHASE_RAD, "rad")?,
+                r_i_m: self.radius("r_i_m", &c.r_i_m)?,
+                beta_i_rad: self.bounded("beta_i_rad", &c.beta_i_rad, PHASE_RAD, "rad")?,
+            });
         }
-        if capstans.iter().any(|earlier| earlier.joint == joint) {
-            return Err(invalid(
-                c.joint.span().start,
-                format!("a second [[capstan]] for joint {joint}"),
-            ));
-        }
-        capstans.push(CapstanTruth {
-            joint,
-            c_rad: bounded("c_rad", &c.c_rad, PHASE_RAD, "rad")?,
-            re: bounded("re", &c.re, RATIO_ERROR, "")?,
-            r_o_m: radius("r_o_m", &c.r_o_m)?,
-            beta_o_rad: bounded("beta_o_rad", &c.beta_o_rad, PHASE_RAD, "rad")?,
-            r_i_m: radius("r_i_m", &c.r_i_m)?,
-            beta_i_rad: bounded("beta_i_rad", &c.beta_i_rad, PHASE_RAD, "rad")?,
-        });
+        Ok(capstans)
     }
-
-    let parallelogram = match &raw.parallelogram {
-        None => None,
-        Some(p) => Some(ParallelogramTruth {
-            dl1_m: bounded("dl1_m", &p.dl1_m, LENGTH_DEVIATION_M, "m")?,
-            dl2_m: bounded("dl2_m", &p.dl2_m, LENGTH_DEVIATION_M, "m")?,
-            dl3_m: bounded("dl3_m", &p.dl3_m, LENGTH_DEVIATION_M, "m")?,
-            dl4_m: bounded("dl4_m", &p.dl4_m, LENGTH_DEVIATION_M, "m")?,
-            phi0_rad: crank_angle(&p.phi0_rad)?,
-        }),
-    };
-
-    Ok(Truth {
-        device: raw.device.into_inner(),
-        deviations,
-        capstans,
-        parallelogram,
-    })
 }
 
 /// Whether `name` has the form of a D-H chain parameter: `da3`, `dalpha0`, `dbeta12`, …
