@@ -13,7 +13,7 @@ use std::str::FromStr;
 
 use hapcal_contract::Effect as Vocabulary;
 use hapcal_io::{Device, LogRow, N_EXT};
-use hapcal_kinematics::Point3;
+use hapcal_kinematics::{Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -384,6 +384,70 @@ fn check_effects(device: &Device, effects: &[Injected]) -> Result<(), Error> {
     Ok(())
 }
 
+/// The noise and the motion of [`simulate_motion`] checked: finite σ ≥ 0, a sample period
+/// > 0.
+///
+/// # Errors
+/// [`Error::InvalidNoise`], [`Error::Effect`] for the motion.
+fn check_motion(cfg: &SimConfig, motion: &MotionConfig) -> Result<(), Error> {
+    let noise = cfg.noise;
+    for (name, value) in [
+        ("sigma_e_rad", noise.sigma_e_rad),
+        ("sigma_m_m", noise.sigma_m_m),
+    ] {
+        if !(value.is_finite() && value >= 0.0) {
+            return Err(Error::InvalidNoise { name, value });
+        }
+    }
+    if !(motion.sample_period_s.is_finite() && motion.sample_period_s > 0.0) {
+        return Err(Error::Effect {
+            spec: "motion".to_owned(),
+            message: format!("sample period {} s must be > 0", motion.sample_period_s),
+        });
+    }
+    Ok(())
+}
+
+/// Each joint's path over `duration_s` within its `limits` (rad or m): two sines of 5–10 and
+/// 11–19 periods over the log, at random phases, drawn from `rng` joint after joint.
+fn joint_paths(limits: &[(f64, f64)], rng: &mut ChaCha8Rng, duration_s: f64) -> Vec<JointPath> {
+    (limits.iter())
+        .map(|&(lo, hi)| {
+            let c1: f64 = 5.0 + 5.0 * rng.random::<f64>();
+            let c2: f64 = 11.0 + 8.0 * rng.random::<f64>();
+            JointPath {
+                mid: 0.5 * (lo + hi),
+                half: 0.5 * (hi - lo),
+                w: [TAU * c1 / duration_s, TAU * c2 / duration_s],
+                phi: [TAU * rng.random::<f64>(), TAU * rng.random::<f64>()],
+            }
+        })
+        .collect()
+}
+
+/// The cable distance, m, to the end point `p` (m, base frame) at time `t_s`, with the cable
+/// effects of `effects` (cable angle, thermal drift, offset, drum runout) added to `|p|`;
+/// `drum_radius_m` the cable encoder's drum.
+fn cable_distance_m(effects: &[Injected], p: &Vector3<f64>, t: f64, drum_radius_m: f64) -> f64 {
+    let d_true = p.norm();
+    let mut d = d_true;
+    for e in effects {
+        d += match e.kind {
+            EffectKind::CableAngle => {
+                let (g, _) = hapcal_problems::cable_angle(&Point3::from(*p));
+                e.get("k") * (g - g.sin())
+            }
+            EffectKind::ThermalDrift => d_true * e.get("k") * t,
+            EffectKind::CableOffset => e.get("c"),
+            EffectKind::CableDrumRunout => {
+                e.get("a") * (d_true / drum_radius_m + e.get("phase")).sin()
+            }
+            _ => 0.0,
+        };
+    }
+    d
+}
+
 /// Simulates a time-ordered log of the truth device with unmodelled `effects`.
 ///
 /// Motion: [`MotionConfig`] (`cfg.n_poses` samples, `t_s = k·sample_period_s`). Per sample,
@@ -406,20 +470,7 @@ pub fn simulate_motion(
     effects: &[Injected],
 ) -> Result<Vec<LogRow>, Error> {
     let noise = cfg.noise;
-    for (name, value) in [
-        ("sigma_e_rad", noise.sigma_e_rad),
-        ("sigma_m_m", noise.sigma_m_m),
-    ] {
-        if !(value.is_finite() && value >= 0.0) {
-            return Err(Error::InvalidNoise { name, value });
-        }
-    }
-    if !(motion.sample_period_s.is_finite() && motion.sample_period_s > 0.0) {
-        return Err(Error::Effect {
-            spec: "motion".to_owned(),
-            message: format!("sample period {} s must be > 0", motion.sample_period_s),
-        });
-    }
+    check_motion(cfg, motion)?;
     check_effects(device, effects)?;
     let chain = device.chain().map_err(|source| Error::Device { source })?;
     let x = truth_deviations(&chain, truth)?;
@@ -442,18 +493,7 @@ pub fn simulate_motion(
 
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
     let duration_s = motion.sample_period_s * cfg.n_poses.max(1) as f64;
-    let paths: Vec<JointPath> = (limits.iter())
-        .map(|&(lo, hi)| {
-            let c1: f64 = 5.0 + 5.0 * rng.random::<f64>();
-            let c2: f64 = 11.0 + 8.0 * rng.random::<f64>();
-            JointPath {
-                mid: 0.5 * (lo + hi),
-                half: 0.5 * (hi - lo),
-                w: [TAU * c1 / duration_s, TAU * c2 / duration_s],
-                phi: [TAU * rng.random::<f64>(), TAU * rng.random::<f64>()],
-            }
-        })
-        .collect();
+    let paths = joint_paths(&limits, &mut rng, duration_s);
 
     // True joint angles at time t: truth transmissions of θ(t), then the joint effects.
     let joint_angles = |t: f64| -> Result<Vec<f64>, Error> {
@@ -519,22 +559,7 @@ pub fn simulate_motion(
             q_true.clone()
         };
         let p = chain.end_point(&x, &q_cable).coords;
-        let d_true = p.norm();
-        let mut d = d_true;
-        for e in effects {
-            d += match e.kind {
-                EffectKind::CableAngle => {
-                    let (g, _) = hapcal_problems::cable_angle(&Point3::from(p));
-                    e.get("k") * (g - g.sin())
-                }
-                EffectKind::ThermalDrift => d_true * e.get("k") * t,
-                EffectKind::CableOffset => e.get("c"),
-                EffectKind::CableDrumRunout => {
-                    e.get("a") * (d_true / drum_radius_m + e.get("phase")).sin()
-                }
-                _ => 0.0,
-            };
-        }
+        let d = cable_distance_m(effects, &p, t, drum_radius_m);
         let z_m: f64 = rng.sample(StandardNormal);
         let distance_m = d + noise.sigma_m_m * z_m;
         let ext = (0..N_EXT)
