@@ -254,33 +254,22 @@ fn add_info(m: &mut Mat<f64>, b: MatRef<'_, f64>, sign: f64) {
     }
 }
 
-/// Chooses `n_select` of the candidate blocks that maximise `cfg.criterion` (greedy start and
-/// DETMAX-like exchange, see the module docs).
-///
-/// `blocks[c]` is candidate `c`'s rows of the scaled Jacobian (`r_c × n`, any `r_c ≥ 1`, the same
-/// `n` columns for all; residuals divided by their σ, columns scaled by their priors, e.g.
-/// [`scale_by_priors`](crate::scale_by_priors)); only parameters the candidates determine should
-/// be columns (prune first with [`identifiability`](crate::identifiability)). A candidate is used
-/// at most once. Returns the chosen indices and their observability.
+/// The checks of [`select_poses`]: `n_select` of the candidates, blocks of one width `n`, a
+/// weight for I-optimality, a prior of that width; and the candidates together must
+/// determine the parameters. Returns `n` and the prior information (zeros without one).
 ///
 /// # Errors
-/// - [`Error::TooFewCandidates`] if `n_select` exceeds the number of candidates or is 0;
-/// - [`Error::BlockShape`] if a block has no row, another column count than block 0, or a
-///   non-finite entry;
-/// - [`Error::MissingWeight`] for [`Criterion::IOptimal`] without a finite `n × n` weight;
-/// - [`Error::NotDetermined`] if even all candidates together leave `JᵀJ` singular (a column
-///   is not determined by any selection), or if `n_select` poses cannot give a non-singular
-///   `JᵀJ` (too few rows); `JᵀJ` includes [`DesignConfig::prior`] when given.
+/// [`Error::TooFewCandidates`], the errors of the blocks' check, [`Error::MissingWeight`],
+/// [`Error::NotDetermined`].
 ///
 /// # Panics
-/// If [`DesignConfig::prior`] is not `n × n` or has a non-finite entry (misuse: the caller
-/// builds it from the same columns as the blocks).
+/// If the prior is not `n × n` and finite.
 #[track_caller]
-pub fn select_poses(
+fn checked_information(
     blocks: &[Mat<f64>],
     n_select: usize,
     cfg: &DesignConfig,
-) -> Result<Design, Error> {
+) -> Result<(usize, Mat<f64>), Error> {
     let n_candidates = blocks.len();
     if n_select == 0 || n_select > n_candidates {
         return Err(Error::TooFewCandidates {
@@ -320,6 +309,25 @@ pub fn select_poses(
             n_select,
         });
     }
+    Ok((n, prior))
+}
+
+/// The greedy start of [`select_poses`]: `n_select` candidates added one by one, each the
+/// best D-optimal addition (`in_set` per candidate).
+///
+/// # Errors
+/// [`Error::NotDetermined`] when the information stops being positive definite.
+fn greedy_start(
+    blocks: &[Mat<f64>],
+    prior: &Mat<f64>,
+    n_select: usize,
+) -> Result<Vec<bool>, Error> {
+    let n_candidates = blocks.len();
+    let n = prior.nrows();
+    let mut total = prior.clone();
+    for b in blocks {
+        add_info(&mut total, b.as_ref(), 1.0);
+    }
     // Greedy start on M = δI + Σ BᵢᵀBᵢ; δ is 1e-8 of the average diagonal of one candidate's
     // information, small enough not to steer the choice once n rows are in.
     let mean_diag = (0..n).map(|i| total[(i, i)]).sum::<f64>() / (n * n_candidates) as f64;
@@ -340,6 +348,87 @@ pub fn select_poses(
         in_set[c] = true;
         add_info(&mut m, blocks[c].as_ref(), 1.0);
     }
+    Ok(in_set)
+}
+
+/// The exchange's addition: the candidate outside the set `in_set` with the best criterion
+/// for S ∪ {j}, given the information `m` of S and its Cholesky factor `l`. `Err(())` when
+/// the I-optimal criterion cannot be scored (no weight, or `m` not invertible): the search
+/// stops there, unconverged.
+fn best_added(
+    blocks: &[Mat<f64>],
+    in_set: &[bool],
+    cfg: &DesignConfig,
+    m: &Mat<f64>,
+    l: &Mat<f64>,
+    n_select: usize,
+) -> Result<Option<usize>, ()> {
+    let n_candidates = blocks.len();
+    Ok(match cfg.criterion {
+        Criterion::DOptimal | Criterion::O1 => best_addition(blocks, in_set, l).map(|b| b.0),
+        Criterion::IOptimal => {
+            let (Some(w), Some(minv)) = (cfg.weight.as_ref(), spd_inverse(m)) else {
+                return Err(());
+            };
+            (0..n_candidates)
+                .filter(|&c| !in_set[c])
+                .filter_map(|c| i_change(&minv, w, blocks[c].as_ref(), 1.0).map(|d| (c, d)))
+                .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)))
+                .map(|b| b.0)
+        }
+        _ => {
+            let mut gains = additions(blocks, in_set, l);
+            gains.sort_by(|a, b| b.1.total_cmp(&a.1));
+            gains
+                .iter()
+                .take(cfg.shortlist.max(1))
+                .map(|&(c, _)| {
+                    let mut trial = m.clone();
+                    add_info(&mut trial, blocks[c].as_ref(), 1.0);
+                    (c, score(cfg, &trial, n_select + 1))
+                })
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|b| b.0)
+        }
+    })
+}
+
+/// Chooses `n_select` of the candidate blocks that maximise `cfg.criterion` (greedy start and
+/// DETMAX-like exchange, see the module docs).
+///
+/// `blocks[c]` is candidate `c`'s rows of the scaled Jacobian (`r_c × n`, any `r_c ≥ 1`, the same
+/// `n` columns for all; residuals divided by their σ, columns scaled by their priors, e.g.
+/// [`scale_by_priors`](crate::scale_by_priors)); only parameters the candidates determine should
+/// be columns (prune first with [`identifiability`](crate::identifiability)). A candidate is used
+/// at most once. Returns the chosen indices and their observability.
+///
+/// # Errors
+/// - [`Error::TooFewCandidates`] if `n_select` exceeds the number of candidates or is 0;
+/// - [`Error::BlockShape`] if a block has no row, another column count than block 0, or a
+///   non-finite entry;
+/// - [`Error::MissingWeight`] for [`Criterion::IOptimal`] without a finite `n × n` weight;
+/// - [`Error::NotDetermined`] if even all candidates together leave `JᵀJ` singular (a column
+///   is not determined by any selection), or if `n_select` poses cannot give a non-singular
+///   `JᵀJ` (too few rows); `JᵀJ` includes [`DesignConfig::prior`] when given.
+///
+/// # Panics
+/// If [`DesignConfig::prior`] is not `n × n` or has a non-finite entry (misuse: the caller
+/// builds it from the same columns as the blocks).
+#[track_caller]
+pub fn select_poses(
+    blocks: &[Mat<f64>],
+    n_select: usize,
+    cfg: &DesignConfig,
+) -> Result<Design, Error> {
+    let n_candidates = blocks.len();
+    if n_select == 0 || n_select > n_candidates {
+        return Err(Error::TooFewCandidates {
+            n_candidates,
+            n_select,
+        });
+    }
+    let (n, prior) = checked_information(blocks, n_select, cfg)?;
+    let mut in_set = greedy_start(blocks, &prior, n_select)?;
     let mut m = prior.clone();
     for (c, b) in blocks.iter().enumerate() {
         if in_set[c] {
@@ -361,32 +450,8 @@ pub fn select_poses(
         let Some(l) = cholesky(&m) else {
             break;
         };
-        let added = match cfg.criterion {
-            Criterion::DOptimal | Criterion::O1 => best_addition(blocks, &in_set, &l).map(|b| b.0),
-            Criterion::IOptimal => {
-                let (Some(w), Some(minv)) = (cfg.weight.as_ref(), spd_inverse(&m)) else {
-                    break;
-                };
-                (0..n_candidates)
-                    .filter(|&c| !in_set[c])
-                    .filter_map(|c| i_change(&minv, w, blocks[c].as_ref(), 1.0).map(|d| (c, d)))
-                    .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)))
-                    .map(|b| b.0)
-            }
-            _ => {
-                let mut gains = additions(blocks, &in_set, &l);
-                gains.sort_by(|a, b| b.1.total_cmp(&a.1));
-                gains
-                    .iter()
-                    .take(cfg.shortlist.max(1))
-                    .map(|&(c, _)| {
-                        let mut trial = m.clone();
-                        add_info(&mut trial, blocks[c].as_ref(), 1.0);
-                        (c, score(cfg, &trial, n_select + 1))
-                    })
-                    .max_by(|a, b| a.1.total_cmp(&b.1))
-                    .map(|b| b.0)
-            }
+        let Ok(added) = best_added(blocks, &in_set, cfg, &m, &l, n_select) else {
+            break;
         };
         let Some(added) = added else {
             converged = true;
