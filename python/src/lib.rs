@@ -266,6 +266,100 @@ fn check_len(what: &str, got: usize, want: usize) -> Result<()> {
     Ok(())
 }
 
+/// The marker columns of one array input, flattened row-major: `positions` `(n, k, 3)` in
+/// the input's length unit, with `quaternions` `(n, k, 4)` (w, x, y, z) or `rpy` `(n, k, 3)`
+/// in its angle unit; `length` and `angle` convert to m and rad.
+struct FlatMarkers<'a> {
+    /// Markers per row.
+    n_markers: usize,
+    /// Positions, `n · k · 3`.
+    positions: &'a [f64],
+    /// Unit quaternions, `n · k · 4`.
+    quaternions: Option<&'a [f64]>,
+    /// Roll, pitch, yaw, `n · k · 3`.
+    rpy: Option<&'a [f64]>,
+    /// The length unit in m.
+    length: f64,
+    /// The angle unit in rad.
+    angle: f64,
+}
+
+impl FlatMarkers<'_> {
+    /// The markers seen in row `i` (0-based; a marker not seen has every cell NaN).
+    ///
+    /// # Errors
+    /// NaN beside values, a value not finite, a quaternion not of unit norm; each names
+    /// `name`, the row and the marker (1-based).
+    fn row(&self, name: &str, i: usize) -> Result<Vec<MarkerSample>> {
+        let n_markers = self.n_markers;
+        let mut seen = Vec::new();
+        for k in 0..n_markers {
+            let pos = &self.positions[(i * n_markers + k) * 3..][..3];
+            let rot: Option<(&[f64], bool)> = match (self.quaternions, self.rpy) {
+                (Some(r), _) => Some((&r[(i * n_markers + k) * 4..][..4], true)),
+                (_, Some(r)) => Some((&r[(i * n_markers + k) * 3..][..3], false)),
+                _ => None,
+            };
+            let cells: Vec<f64> = pos
+                .iter()
+                .chain(rot.map_or(&[][..], |r| r.0))
+                .copied()
+                .collect();
+            let nan = cells.iter().filter(|v| v.is_nan()).count();
+            if nan == cells.len() {
+                continue; // not seen in this row
+            }
+            if nan > 0 {
+                bail!(
+                    "{name}: row {}, marker {}: NaN beside values ({cells:?}): a marker not seen has all its cells NaN",
+                    i + 1,
+                    k + 1
+                );
+            }
+            if cells.iter().any(|v| !v.is_finite()) {
+                bail!(
+                    "{name}: row {}, marker {}: not finite: {cells:?}",
+                    i + 1,
+                    k + 1
+                );
+            }
+            let position_m = [
+                pos[0] * self.length,
+                pos[1] * self.length,
+                pos[2] * self.length,
+            ];
+            let rotation = match rot {
+                Some((r, true)) => {
+                    let norm = r.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    if (norm - 1.0).abs() > 1e-3 {
+                        bail!(
+                            "{name}: row {}, marker {}: expected a unit quaternion (w, x, y, z), found one of norm {norm}",
+                            i + 1,
+                            k + 1
+                        );
+                    }
+                    Some([r[0] / norm, r[1] / norm, r[2] / norm, r[3] / norm])
+                }
+                Some((r, false)) => {
+                    let rotation = UnitQuaternion::from_euler_angles(
+                        r[0] * self.angle,
+                        r[1] * self.angle,
+                        r[2] * self.angle,
+                    );
+                    Some([rotation.w, rotation.i, rotation.j, rotation.k])
+                }
+                None => None,
+            };
+            seen.push(MarkerSample {
+                marker: k,
+                position_m,
+                rotation,
+            });
+        }
+        Ok(seen)
+    }
+}
+
 #[pymethods]
 impl PyMeasurements {
     #[staticmethod]
@@ -381,72 +475,17 @@ impl PyMeasurements {
                     );
                 }
             }
-            let mut markers = Vec::with_capacity(n_rows);
-            for i in 0..n_rows {
-                let mut seen = Vec::new();
-                if let Some(p) = &positions {
-                    for k in 0..n_markers {
-                        let pos = &p[(i * n_markers + k) * 3..][..3];
-                        let rot: Option<(&[f64], bool)> = match (&quaternions, &rpy) {
-                            (Some(r), _) => Some((&r[(i * n_markers + k) * 4..][..4], true)),
-                            (_, Some(r)) => Some((&r[(i * n_markers + k) * 3..][..3], false)),
-                            _ => None,
-                        };
-                        let cells: Vec<f64> = pos
-                            .iter()
-                            .chain(rot.map_or(&[][..], |r| r.0))
-                            .copied()
-                            .collect();
-                        let nan = cells.iter().filter(|v| v.is_nan()).count();
-                        if nan == cells.len() {
-                            continue; // not seen in this row
-                        }
-                        if nan > 0 {
-                            bail!(
-                                "{name}: row {}, marker {}: NaN beside values ({cells:?}): a marker not seen has all its cells NaN",
-                                i + 1,
-                                k + 1
-                            );
-                        }
-                        if cells.iter().any(|v| !v.is_finite()) {
-                            bail!(
-                                "{name}: row {}, marker {}: not finite: {cells:?}",
-                                i + 1,
-                                k + 1
-                            );
-                        }
-                        let position_m = [pos[0] * length, pos[1] * length, pos[2] * length];
-                        let rotation = match rot {
-                            Some((r, true)) => {
-                                let norm = r.iter().map(|v| v * v).sum::<f64>().sqrt();
-                                if (norm - 1.0).abs() > 1e-3 {
-                                    bail!(
-                                        "{name}: row {}, marker {}: expected a unit quaternion (w, x, y, z), found one of norm {norm}",
-                                        i + 1,
-                                        k + 1
-                                    );
-                                }
-                                Some([r[0] / norm, r[1] / norm, r[2] / norm, r[3] / norm])
-                            }
-                            Some((r, false)) => {
-                                let rotation = UnitQuaternion::from_euler_angles(
-                                    r[0] * angle,
-                                    r[1] * angle,
-                                    r[2] * angle,
-                                );
-                                Some([rotation.w, rotation.i, rotation.j, rotation.k])
-                            }
-                            None => None,
-                        };
-                        seen.push(MarkerSample {
-                            marker: k,
-                            position_m,
-                            rotation,
-                        });
-                    }
-                }
-                markers.push(seen);
-            }
+            let flat = positions.as_deref().map(|positions| FlatMarkers {
+                n_markers,
+                positions,
+                quaternions: quaternions.as_deref(),
+                rpy: rpy.as_deref(),
+                length,
+                angle,
+            });
+            let markers = (0..n_rows)
+                .map(|i| flat.as_ref().map_or(Ok(Vec::new()), |f| f.row(&name, i)))
+                .collect::<Result<Vec<_>>>()?;
             let distances = match distances {
                 Some(d) => Some(
                     d.iter()
