@@ -291,6 +291,135 @@ struct Frozen {
 /// (one frozen chain), small enough that a block's Jacobian stays in cache.
 const ROWS_PER_BLOCK: usize = 256;
 
+/// The torque tips must exist and have the tree's `n_joints` joints.
+///
+/// # Errors
+/// [`Error::NoSuchParam`] with the first joint count that differs (0 without any tip).
+fn check_torque_tips(torque_tips: &[Chain], n_joints: usize) -> Result<(), Error> {
+    let wrong = match torque_tips.iter().find(|t| t.n_joints() != n_joints) {
+        Some(t) => Some(t.n_joints()),
+        None => torque_tips.is_empty().then_some(0),
+    };
+    match wrong {
+        Some(index) => Err(Error::NoSuchParam {
+            index,
+            n_params: n_joints,
+        }),
+        None => Ok(()),
+    }
+}
+
+/// The angle terms' basis, row after row: each row's joint torques (N·m, one per joint under
+/// the compliance model) then its harmonics' basis; `n_terms` terms a row.
+fn angle_basis(
+    obs: &Observations,
+    torques: &[Vec<f64>],
+    harmonics: Option<&JointHarmonics>,
+    n_terms: usize,
+) -> Vec<f64> {
+    let mut basis = Vec::with_capacity(obs.rows.len() * n_terms);
+    for (row_idx, row) in obs.rows.iter().enumerate() {
+        if let Some(t) = torques.get(row_idx) {
+            basis.extend_from_slice(t);
+        }
+        if let Some(h) = harmonics {
+            basis.extend(h.basis(&row.q));
+        }
+    }
+    basis
+}
+
+/// Checks that every σ of `weights` is finite and positive.
+///
+/// # Errors
+/// [`Error::BadSigma`] naming the first that is not.
+fn check_weights(weights: &Weights) -> Result<(), Error> {
+    for (name, value) in [
+        ("sigma_distance_m", weights.sigma_distance_m),
+        ("sigma_position_m", weights.sigma_position_m),
+        ("sigma_point_m", weights.sigma_point_m),
+        ("sigma_point_distance_m", weights.sigma_point_distance_m),
+        ("sigma_orientation_rad", weights.sigma_orientation_rad),
+    ] {
+        if !(value.is_finite() && value > 0.0) {
+            return Err(Error::BadSigma { name, value });
+        }
+    }
+    Ok(())
+}
+
+/// The compliance parameters of `model` on `chain`: one per group of joints,
+/// `compliance.<joint>+<joint>…`, in rad (compliance × torque is an angle).
+fn compliance_specs(chain: &Chain, model: &GravityCompliance) -> Vec<ParamSpec> {
+    let n_joints = chain.n_joints();
+    let names = chain.joint_names();
+    (0..model.n_params(n_joints))
+        .map(|g| {
+            let joints: Vec<&str> = (0..n_joints)
+                .filter(|&j| model.group(j) == g)
+                .map(|j| names[j].as_str())
+                .collect();
+            ParamSpec {
+                name: format!("compliance.{}", joints.join("+")),
+                unit: Unit::Radian,
+                role: Role::Model,
+            }
+        })
+        .collect()
+}
+
+/// Each row's joint loads under `model` on `torque_tips`, at the row's readings or at
+/// `load_angles` (one configuration per row). Rows of one configuration (several markers, a
+/// distance) follow each other: their loads are computed once.
+fn row_loads(
+    model: &GravityCompliance,
+    torque_tips: &[Chain],
+    obs: &Observations,
+    load_angles: Option<&[Vec<f64>]>,
+) -> Vec<Vec<crate::JointLoad>> {
+    let mut out: Vec<Vec<crate::JointLoad>> = Vec::with_capacity(obs.rows.len());
+    for (r, row) in obs.rows.iter().enumerate() {
+        let at = load_angles.map_or(&row.q, |a| &a[r]);
+        let previous = r
+            .checked_sub(1)
+            .map(|p| load_angles.map_or(&obs.rows[p].q, |a| &a[p]));
+        match (previous, out.last()) {
+            (Some(p), Some(last)) if p == at => out.push(last.clone()),
+            _ => out.push(model.joint_loads(torque_tips, at)),
+        }
+    }
+    out
+}
+
+/// Each joint's angle parameter (the screw's `param`) over every tip, `None` for a joint
+/// without one.
+fn joint_params(tips: &[Chain], n_joints: usize) -> Vec<Option<usize>> {
+    let mut joint_param = vec![None; n_joints];
+    for tip in tips {
+        for factor in tip.factors() {
+            if let hapcal_kinematics::Factor::Screw {
+                param: Some(p),
+                joint: Some(j),
+                ..
+            } = factor
+            {
+                joint_param[*j] = Some(*p);
+            }
+        }
+    }
+    joint_param
+}
+
+/// The angle terms of each angle parameter: `angle_terms` holds (joint, parameter) per term.
+fn terms_of_param(angle_terms: &[(usize, usize)]) -> Vec<Vec<usize>> {
+    let n_params = angle_terms.iter().map(|&(_, p)| p + 1).max().unwrap_or(0);
+    let mut of = vec![Vec::new(); n_params];
+    for (t, &(_, p)) in angle_terms.iter().enumerate() {
+        of[p].push(t);
+    }
+    of
+}
+
 /// Checks every row of `obs` (its joint count `n_joints`, finite values, the tip among
 /// `n_tips` and the point it names) and counts the residuals: 1 per distance, 3 per position,
 /// marker or point, 6 per pose, 1 per point distance.
@@ -654,32 +783,8 @@ impl CalibrationProblem {
             });
         };
         let torque_tips = torque_tips.unwrap_or_else(|| tips.clone());
-        // The torque tips must exist and have the tree's joints: the first joint count that
-        // differs is reported (0 without any tip).
-        let wrong = match torque_tips
-            .iter()
-            .find(|t| t.n_joints() != chain.n_joints())
-        {
-            Some(t) => Some(t.n_joints()),
-            None => torque_tips.is_empty().then_some(0),
-        };
-        if let Some(index) = wrong {
-            return Err(Error::NoSuchParam {
-                index,
-                n_params: chain.n_joints(),
-            });
-        }
-        for (name, value) in [
-            ("sigma_distance_m", weights.sigma_distance_m),
-            ("sigma_position_m", weights.sigma_position_m),
-            ("sigma_point_m", weights.sigma_point_m),
-            ("sigma_point_distance_m", weights.sigma_point_distance_m),
-            ("sigma_orientation_rad", weights.sigma_orientation_rad),
-        ] {
-            if !(value.is_finite() && value > 0.0) {
-                return Err(Error::BadSigma { name, value });
-            }
-        }
+        check_torque_tips(&torque_tips, chain.n_joints())?;
+        check_weights(&weights)?;
         let n_joints = chain.n_joints();
         let n_residuals = checked_residuals(&obs, n_joints, tips.len())?;
         let mut specs: Vec<ParamSpec> = chain
@@ -710,32 +815,8 @@ impl CalibrationProblem {
         }
         let loads: Vec<Vec<crate::JointLoad>> = match &compliance {
             Some(model) => {
-                let names = chain.joint_names();
-                specs.extend((0..model.n_params(n_joints)).map(|g| {
-                    let joints: Vec<&str> = (0..n_joints)
-                        .filter(|&j| model.group(j) == g)
-                        .map(|j| names[j].as_str())
-                        .collect();
-                    ParamSpec {
-                        name: format!("compliance.{}", joints.join("+")),
-                        unit: Unit::Radian,
-                        role: Role::Model,
-                    }
-                }));
-                // Rows of one configuration (several markers, a distance) follow each other:
-                // their loads are computed once.
-                let mut out: Vec<Vec<crate::JointLoad>> = Vec::with_capacity(obs.rows.len());
-                for (r, row) in obs.rows.iter().enumerate() {
-                    let at = load_angles.as_ref().map_or(&row.q, |a| &a[r]);
-                    let previous = r
-                        .checked_sub(1)
-                        .map(|p| load_angles.as_ref().map_or(&obs.rows[p].q, |a| &a[p]));
-                    match (previous, out.last()) {
-                        (Some(p), Some(last)) if p == at => out.push(last.clone()),
-                        _ => out.push(model.joint_loads(&torque_tips, at)),
-                    }
-                }
-                out
+                specs.extend(compliance_specs(&chain, model));
+                row_loads(model, &torque_tips, &obs, load_angles.as_deref())
             }
             None => Vec::new(),
         };
@@ -776,40 +857,18 @@ impl CalibrationProblem {
             specs.extend(transversal_specs(&chain, &terms, transversal));
             terms
         };
-        let mut joint_param = vec![None; n_joints];
-        for tip in &tips {
-            for factor in tip.factors() {
-                if let hapcal_kinematics::Factor::Screw {
-                    param: Some(p),
-                    joint: Some(j),
-                    ..
-                } = factor
-                {
-                    joint_param[*j] = Some(*p);
-                }
-            }
-        }
+        let joint_param = joint_params(&tips, n_joints);
         let tilt_basis: Vec<[f64; 3]> = (loads.iter())
             .flat_map(|l| transversal_terms.iter().map(|t| t.tilt(&l[t.joint]).into()))
             .collect();
-        let mut angle_basis = Vec::with_capacity(obs.rows.len() * angle_terms.len());
-        for (row_idx, row) in obs.rows.iter().enumerate() {
-            if let Some(t) = torques.get(row_idx) {
-                angle_basis.extend_from_slice(t);
-            }
-            if let Some(h) = &harmonics {
-                angle_basis.extend(h.basis(&row.q));
-            }
-        }
-        for point in 0..obs.n_points {
-            for axis in ["x", "y", "z"] {
-                specs.push(ParamSpec {
-                    name: format!("point{point}.{axis}"),
-                    unit: Unit::Meter,
-                    role: Role::Nuisance,
-                });
-            }
-        }
+        let angle_basis = angle_basis(&obs, &torques, harmonics.as_ref(), angle_terms.len());
+        specs.extend((0..obs.n_points).flat_map(|point| {
+            ["x", "y", "z"].map(|axis| ParamSpec {
+                name: format!("point{point}.{axis}"),
+                unit: Unit::Meter,
+                role: Role::Nuisance,
+            })
+        }));
         let blocks = row_blocks(&obs);
         let plain = angle_terms.is_empty() && transversal_terms.is_empty();
         let lanes = DistanceLanes::of(&chain, &obs, &blocks, plain);
@@ -825,14 +884,7 @@ impl CalibrationProblem {
             equilibrium: load_angles.is_some(),
             joint_param,
             tilt_basis,
-            terms_of_param: {
-                let n_params = angle_terms.iter().map(|&(_, p)| p + 1).max().unwrap_or(0);
-                let mut of = vec![Vec::new(); n_params];
-                for (t, &(_, p)) in angle_terms.iter().enumerate() {
-                    of[p].push(t);
-                }
-                of
-            },
+            terms_of_param: terms_of_param(&angle_terms),
             angle_terms,
             angle_basis,
             layout: ParamLayout::new(specs),
