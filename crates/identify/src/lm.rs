@@ -660,12 +660,7 @@ pub(crate) fn run(
 
     let termination = 'outer: loop {
         let col_norms = lin.col_norms();
-        for (d, &c) in diag.iter_mut().zip(&col_norms) {
-            *d = if first { c } else { d.max(c) };
-            if *d == 0.0 {
-                *d = 1.0;
-            }
-        }
+        update_scaling(&mut diag, &col_norms, first);
         if first {
             x_norm = scaled_norm(&diag, &x);
             delta = if x_norm > 0.0 {
@@ -677,11 +672,7 @@ pub(crate) fn run(
         if f_norm == 0.0 {
             break Termination::GtolReached;
         }
-        let g_cos = (0..nf)
-            .filter(|&j| col_norms[j] > 0.0)
-            .map(|j| lin.gradient_abs(j) / (col_norms[j] * f_norm))
-            .fold(0.0_f64, f64::max);
-        if g_cos <= gtol {
+        if gradient_cosine(lin, &col_norms, f_norm) <= gtol {
             break Termination::GtolReached;
         }
         n_iterations += 1;
@@ -730,32 +721,15 @@ pub(crate) fn run(
                 }
             };
             last_trial = Some((x_trial.clone(), f_norm_trial));
-            // Actual relative reduction of ‖r‖² (MINPACK actred).
-            let actual = if 0.1 * f_norm_trial < f_norm {
-                1.0 - (f_norm_trial / f_norm).powi(2)
-            } else {
-                -1.0
-            };
-            let ratio = if predicted != 0.0 {
-                actual / predicted
-            } else {
-                0.0
-            };
-            if ratio <= 0.25 {
-                let mut shrink = if actual >= 0.0 {
-                    0.5
-                } else {
-                    0.5 * directional / (directional + 0.5 * actual)
-                };
-                if 0.1 * f_norm_trial >= f_norm || shrink < 0.1 {
-                    shrink = 0.1;
-                }
-                delta = shrink * delta.min(u_norm / 0.1);
-                lambda /= shrink;
-            } else if lambda == 0.0 || ratio >= 0.75 {
-                delta = u_norm / 0.5;
-                lambda *= 0.5;
-            }
+            let Reduction { actual, ratio } = update_trust_region(
+                &mut TrustRegion {
+                    delta: &mut delta,
+                    lambda: &mut lambda,
+                },
+                (f_norm, f_norm_trial),
+                (predicted, directional),
+                u_norm,
+            );
             let accepted = ratio >= 1e-4;
             if accepted {
                 std::mem::swap(&mut x, &mut x_trial);
@@ -796,6 +770,81 @@ pub(crate) fn run(
         linearised_at_x,
         error,
     }
+}
+
+/// MINPACK's `gnorm`: the largest cosine between a column of the Jacobian (norms
+/// `col_norms`) and the residual vector (norm `f_norm`); 0 at a stationary point.
+fn gradient_cosine(lin: &impl Linearised, col_norms: &[f64], f_norm: f64) -> f64 {
+    (0..col_norms.len())
+        .filter(|&j| col_norms[j] > 0.0)
+        .map(|j| lin.gradient_abs(j) / (col_norms[j] * f_norm))
+        .fold(0.0_f64, f64::max)
+}
+
+/// MINPACK's column scaling: `diag[j]` the largest norm column `j` has had (its norm at the
+/// first iteration), 1 for a zero column.
+fn update_scaling(diag: &mut [f64], col_norms: &[f64], first: bool) {
+    for (d, &c) in diag.iter_mut().zip(col_norms) {
+        *d = if first { c } else { d.max(c) };
+        if *d == 0.0 {
+            *d = 1.0;
+        }
+    }
+}
+
+/// The trust region's radius Δ (scaled) and the Levenberg–Marquardt parameter λ.
+struct TrustRegion<'a> {
+    /// Δ.
+    delta: &'a mut f64,
+    /// λ.
+    lambda: &'a mut f64,
+}
+
+/// The actual relative reduction of ‖r‖² of a trial step and its ratio to the predicted one.
+struct Reduction {
+    /// MINPACK's `actred` (−1 when the trial residual is ten times larger).
+    actual: f64,
+    /// `actred / prered` (0 when nothing was predicted).
+    ratio: f64,
+}
+
+/// MINPACK's trust-region update after a trial step of scaled length `u_norm`: from the
+/// residual norms `(f_norm, f_norm_trial)` and the predicted reduction and directional
+/// derivative `(predicted, directional)`, shrinks Δ (and grows λ) when the step did poorly
+/// (ratio ≤ 0.25), widens Δ to twice the step (and halves λ) when it did well (ratio ≥ 0.75,
+/// or a Gauss–Newton step).
+fn update_trust_region(
+    region: &mut TrustRegion<'_>,
+    (f_norm, f_norm_trial): (f64, f64),
+    (predicted, directional): (f64, f64),
+    u_norm: f64,
+) -> Reduction {
+    let actual = if 0.1 * f_norm_trial < f_norm {
+        1.0 - (f_norm_trial / f_norm).powi(2)
+    } else {
+        -1.0
+    };
+    let ratio = if predicted != 0.0 {
+        actual / predicted
+    } else {
+        0.0
+    };
+    if ratio <= 0.25 {
+        let mut shrink = if actual >= 0.0 {
+            0.5
+        } else {
+            0.5 * directional / (directional + 0.5 * actual)
+        };
+        if 0.1 * f_norm_trial >= f_norm || shrink < 0.1 {
+            shrink = 0.1;
+        }
+        *region.delta = shrink * region.delta.min(u_norm / 0.1);
+        *region.lambda /= shrink;
+    } else if *region.lambda == 0.0 || ratio >= 0.75 {
+        *region.delta = u_norm / 0.5;
+        *region.lambda *= 0.5;
+    }
+    Reduction { actual, ratio }
 }
 
 /// `‖v‖` (plain sum of squares; the iterates depend on this exact summation order).
