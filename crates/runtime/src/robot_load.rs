@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use hapcal_contract::{Calibration, ElementField, TorqueSource, ValueName};
+use hapcal_contract::{Calibration, ElementField, Region, Torque, TorqueSource, ValueName};
 use serde::Deserialize;
 
 use crate::dh_table::{DhTable, add_dh, dh_frames};
@@ -794,97 +794,152 @@ impl Robot {
             self.frames
                 .push((name.clone(), origin_pose(f.xyz_m, f.rpy_rad)));
         }
-        // A refusal of the value `name` at its line.
-        let at_value =
-            |name: &str, message: String| at_line(origin, crate::load::locate(text, name), message);
-        let joint_index = |this: &Robot, what: &str, joint: &str| {
-            this.joint_names.iter().position(|n| n == joint).ok_or_else(|| {
-                at_value(
+        let at = RecordAt { text, origin };
+        if let Some(torque) = &record.torque {
+            self.apply_torque(torque, &at)?;
+        }
+        let tip_deviation = self.apply_values(&record, &at, tip_elements)?;
+        if (self.has_compliance() || !self.transversal.is_empty()) && record.torque.is_none() {
+            return Err(invalid(
+                origin,
+                "the record holds compliances but no [torque] table (their gravity load)"
+                    .to_owned(),
+            ));
+        }
+        self.check_nominal(&record, text, origin, known_joints)?;
+        self.apply_nominal(&tip_deviation);
+        if let Some(region) = &record.region {
+            self.apply_region(region, &at, known_joints)?;
+        }
+        self.record = Some(record);
+        Ok(())
+    }
+
+    /// The index of the moving joint `joint`, for the value `what` of the record at `at`.
+    ///
+    /// # Errors
+    /// No moving joint of that name on the paths to the tips, at the value's line.
+    fn joint_index_at(
+        &self,
+        at: &RecordAt<'_>,
+        what: &str,
+        joint: &str,
+    ) -> Result<usize, LoadError> {
+        self.joint_names
+            .iter()
+            .position(|n| n == joint)
+            .ok_or_else(|| {
+                at.value(
                     what,
                     format!(
                         "{what}: no moving joint {joint:?} on the paths to the tips; joints: {}",
-                        this.joint_names.join(", ")
+                        self.joint_names.join(", ")
                     ),
                 )
             })
-        };
-        if let Some(torque) = &record.torque {
-            let g = torque.gravity_direction;
-            let norm = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
-            if !(norm > 1e-12 && norm.is_finite()) {
+    }
+
+    /// The record's `[torque]` table: the gravity direction and acceleration, the load model
+    /// (lumped weights at the tips, or the link masses) and which tips and joints carry it.
+    ///
+    /// # Errors
+    /// A gravity direction of zero length, a haptic device's load, a mass on a joint the robot
+    /// does not have, lumped weights at tips the robot was not loaded with.
+    fn apply_torque(&mut self, torque: &Torque, at: &RecordAt<'_>) -> Result<(), LoadError> {
+        let origin = at.origin;
+        let g = torque.gravity_direction;
+        let norm = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+        if !(norm > 1e-12 && norm.is_finite()) {
+            return Err(invalid(
+                origin,
+                format!("torque.gravity_direction {g:?} has no direction"),
+            ));
+        }
+        self.gravity_dir = [g[0] / norm, g[1] / norm, g[2] / norm];
+        self.gravity_m_s2 = torque.gravity_m_s2;
+        self.equilibrium = torque.equilibrium;
+        match torque.source {
+            TorqueSource::HandleMass => {
                 return Err(invalid(
                     origin,
-                    format!("torque.gravity_direction {g:?} has no direction"),
+                    "torque.source = \"handle-mass\" is a haptic device's load, not a URDF robot's"
+                        .to_owned(),
                 ));
             }
-            self.gravity_dir = [g[0] / norm, g[1] / norm, g[2] / norm];
-            self.gravity_m_s2 = torque.gravity_m_s2;
-            self.equilibrium = torque.equilibrium;
-            match torque.source {
-                TorqueSource::HandleMass => {
-                    return Err(invalid(
-                        origin,
-                        "torque.source = \"handle-mass\" is a haptic device's load, not a URDF robot's".to_owned(),
-                    ));
-                }
-                TorqueSource::LumpedUnitWeights => {
-                    self.gravity = GravityModel::Lumped;
-                    self.masses.clear();
-                }
-                TorqueSource::UrdfMasses | TorqueSource::PublishedMasses => {
-                    self.gravity = GravityModel::Masses;
-                    if !torque.masses.is_empty() {
-                        let mut masses = Vec::with_capacity(torque.masses.len());
-                        for m in &torque.masses {
-                            masses.push(PointMass {
-                                joint: joint_index(self, "torque.mass", &m.joint)?,
-                                mass_kg: m.mass_kg,
-                                com_m: m.com_m,
-                            });
-                        }
-                        self.masses = masses;
-                    }
-                }
+            TorqueSource::LumpedUnitWeights => {
+                self.gravity = GravityModel::Lumped;
+                self.masses.clear();
             }
-            // The lumped weights hang at the calibration's tips and the joints on their paths.
-            let missing: Vec<&str> = (torque.tips.iter())
-                .filter(|t| !self.tip_names.contains(t))
-                .map(String::as_str)
-                .collect();
-            if self.gravity == GravityModel::Lumped && !missing.is_empty() {
-                return Err(invalid(
-                    origin,
-                    format!(
-                        "the calibration's gravity loads hang at the tips {}: load the robot with {} as tips too",
-                        torque.tips.join(", "),
-                        missing.join(", ")
-                    ),
-                ));
-            }
-            if !torque.tips.is_empty() {
-                for joint in &mut self.joints {
-                    joint.weight = false;
-                }
-                for k in 0..self.tips.len() {
-                    let carries = torque.tips.contains(&self.tip_names[k]);
-                    self.tips[k].weight = carries;
-                    let mut at = if carries { self.tips[k].parent } else { None };
-                    while let Some(j) = at {
-                        self.joints[j].weight = true;
-                        at = self.joints[j].parent;
+            TorqueSource::UrdfMasses | TorqueSource::PublishedMasses => {
+                self.gravity = GravityModel::Masses;
+                if !torque.masses.is_empty() {
+                    let mut masses = Vec::with_capacity(torque.masses.len());
+                    for m in &torque.masses {
+                        masses.push(PointMass {
+                            joint: self.joint_index_at(at, "torque.mass", &m.joint)?,
+                            mass_kg: m.mass_kg,
+                            com_m: m.com_m,
+                        });
                     }
+                    self.masses = masses;
                 }
             }
         }
+        // The lumped weights hang at the calibration's tips and the joints on their paths.
+        let missing: Vec<&str> = (torque.tips.iter())
+            .filter(|t| !self.tip_names.contains(t))
+            .map(String::as_str)
+            .collect();
+        if self.gravity == GravityModel::Lumped && !missing.is_empty() {
+            return Err(invalid(
+                origin,
+                format!(
+                    "the calibration's gravity loads hang at the tips {}: load the robot with {} as tips too",
+                    torque.tips.join(", "),
+                    missing.join(", ")
+                ),
+            ));
+        }
+        if !torque.tips.is_empty() {
+            for joint in &mut self.joints {
+                joint.weight = false;
+            }
+            for k in 0..self.tips.len() {
+                let carries = torque.tips.contains(&self.tip_names[k]);
+                self.tips[k].weight = carries;
+                let mut at = if carries { self.tips[k].parent } else { None };
+                while let Some(j) = at {
+                    self.joints[j].weight = true;
+                    at = self.joints[j].parent;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The record's `[values]`: each joint's placement deviation, compliances, transversal
+    /// compliances and joint harmonics set on the robot; returns each tip's deviation (tips
+    /// sharing an element share it; `tip_elements` names each tip's element).
+    ///
+    /// # Errors
+    /// A value name the contract does not parse, a value of another kind of robot (D-H on a
+    /// URDF robot, placement on a D-H one, a haptic device's), a joint or element the robot
+    /// does not have, a transversal compliance on a prismatic joint or a D-H row.
+    fn apply_values(
+        &mut self,
+        record: &Calibration,
+        at: &RecordAt<'_>,
+        tip_elements: &[Option<String>],
+    ) -> Result<Vec<[f64; 6]>, LoadError> {
         let mut tip_deviation = vec![[0.0; 6]; self.tips.len()];
         for v in &record.values {
-            let name = ValueName::parse(&v.name).map_err(|e| at_value(&v.name, e))?;
+            let name = ValueName::parse(&v.name).map_err(|e| at.value(&v.name, e))?;
             match name {
                 ValueName::Element { element, field } => {
                     let k = field_index(field);
                     let joint = self.joint_names.iter().position(|n| *n == element);
                     if let (Some(_), Some(_)) = (joint, &self.dh) {
-                        return Err(at_value(
+                        return Err(at.value(
                             &v.name,
                             format!(
                                 "{:?} is a placement deviation: a D-H robot's record holds D-H deviations (da<i>, dalpha<i>, dd<i>, dtheta<i>, dbeta<i>)",
@@ -908,7 +963,7 @@ impl Robot {
                             }
                         }
                     } else {
-                        return Err(at_value(
+                        return Err(at.value(
                             &v.name,
                             format!(
                                 "{:?}: no moving joint or tip element {element:?} of this name on the paths to the tips; joints: {}",
@@ -920,14 +975,14 @@ impl Robot {
                 }
                 ValueName::Compliance { joints } => {
                     for joint in &joints {
-                        let j = joint_index(self, &v.name, joint)?;
+                        let j = self.joint_index_at(at, &v.name, joint)?;
                         self.compliance[j] = v.value;
                     }
                 }
                 ValueName::Transversal { joint, axis } => {
-                    let j = joint_index(self, &v.name, &joint)?;
+                    let j = self.joint_index_at(at, &v.name, &joint)?;
                     if self.dh.is_some() {
-                        return Err(at_value(
+                        return Err(at.value(
                             &v.name,
                             format!(
                                 "{:?}: a transversal compliance tilts a joint's placement, which a D-H row does not have",
@@ -936,7 +991,7 @@ impl Robot {
                         ));
                     }
                     if self.joints[j].prismatic {
-                        return Err(at_value(
+                        return Err(at.value(
                             &v.name,
                             format!("{:?}: joint {joint:?} is prismatic", v.name),
                         ));
@@ -952,7 +1007,7 @@ impl Robot {
                     });
                 }
                 ValueName::Harmonic { joint, order, sine } => {
-                    let j = joint_index(self, &v.name, &joint)?;
+                    let j = self.joint_index_at(at, &v.name, &joint)?;
                     self.harmonics.push(HarmonicTerm {
                         joint: j,
                         order,
@@ -963,7 +1018,7 @@ impl Robot {
                 // A D-H robot's rows already hold it (its nominal rows were read without it).
                 ValueName::Dh { .. } if self.dh.is_some() => {}
                 ValueName::Dh { .. } => {
-                    return Err(at_value(
+                    return Err(at.value(
                         &v.name,
                         format!(
                             "{:?} is a D-H deviation: a calibrated URDF's record holds placement deviations (<joint>.x … .rz, .offset)",
@@ -974,7 +1029,7 @@ impl Robot {
                 ValueName::HandleCompliance { .. }
                 | ValueName::Capstan { .. }
                 | ValueName::Chebyshev { .. } => {
-                    return Err(at_value(
+                    return Err(at.value(
                         &v.name,
                         format!(
                             "{:?} is a haptic device's value, not a URDF robot's",
@@ -984,15 +1039,12 @@ impl Robot {
                 }
             }
         }
-        if (self.has_compliance() || !self.transversal.is_empty()) && record.torque.is_none() {
-            return Err(invalid(
-                origin,
-                "the record holds compliances but no [torque] table (their gravity load)"
-                    .to_owned(),
-            ));
-        }
-        self.check_nominal(&record, text, origin, known_joints)?;
-        // The nominal geometry: the URDF's origins hold `nominal · Δ · motion(offset)`.
+        Ok(tip_deviation)
+    }
+
+    /// The nominal geometry of the deviated joints and tips: the URDF's origins hold
+    /// `nominal · Δ · motion(offset)`.
+    fn apply_nominal(&mut self, tip_deviation: &[[f64; 6]]) {
         for joint in &mut self.joints {
             if joint.deviation == [0.0; 7] {
                 continue;
@@ -1005,39 +1057,64 @@ impl Robot {
             joint.nominal = joint.origin.compose(&undo);
             self.nominal_differs = true;
         }
-        for (tip, d) in self.tips.iter_mut().zip(&tip_deviation) {
+        for (tip, d) in self.tips.iter_mut().zip(tip_deviation) {
             if *d != [0.0; 6] {
                 tip.nominal_offset = tip.offset.compose(&deviation_pose(d).inverse());
                 self.nominal_differs = true;
             }
         }
-        if let Some(region) = &record.region {
-            for r in &region.joints {
-                if !known_joints.iter().any(|(n, _)| *n == r.name) {
-                    return Err(at_line(
-                        origin,
-                        region_line(text, &r.name),
-                        format!(
-                            "[region] joint {:?}: the robot has no joint of this name ({}): the \
-                             record was written for another robot",
-                            r.name,
-                            (known_joints.iter())
-                                .map(|(n, _)| *n)
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    ));
-                }
-                // A joint off the paths to the tips given has no reading to judge.
-                let Some(j) = self.joint_names.iter().position(|n| *n == r.name) else {
-                    continue;
-                };
-                let slack = hapcal_contract::REGION_SLACK_SHARE * (r.max - r.min).max(0.0);
-                self.region.push((j, r.min, r.max, slack));
+    }
+
+    /// The record's `[region]`: each joint's training range with its slack.
+    ///
+    /// # Errors
+    /// A joint the robot does not have (the record was written for another robot).
+    fn apply_region(
+        &mut self,
+        region: &Region,
+        at: &RecordAt<'_>,
+        known_joints: &[(&str, Pose)],
+    ) -> Result<(), LoadError> {
+        let (text, origin) = (at.text, at.origin);
+        for r in &region.joints {
+            if !known_joints.iter().any(|(n, _)| *n == r.name) {
+                return Err(at_line(
+                    origin,
+                    region_line(text, &r.name),
+                    format!(
+                        "[region] joint {:?}: the robot has no joint of this name ({}): the \
+                         record was written for another robot",
+                        r.name,
+                        (known_joints.iter())
+                            .map(|(n, _)| *n)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                ));
             }
+            // A joint off the paths to the tips given has no reading to judge.
+            let Some(j) = self.joint_names.iter().position(|n| *n == r.name) else {
+                continue;
+            };
+            let slack = hapcal_contract::REGION_SLACK_SHARE * (r.max - r.min).max(0.0);
+            self.region.push((j, r.min, r.max, slack));
         }
-        self.record = Some(record);
         Ok(())
+    }
+}
+
+/// A calibration record's text and where it came from, for errors at a value's line.
+struct RecordAt<'a> {
+    /// The record's TOML text.
+    text: &'a str,
+    /// Where it came from (a file name).
+    origin: &'a str,
+}
+
+impl RecordAt<'_> {
+    /// A refusal of the value `name` at its line.
+    fn value(&self, name: &str, message: String) -> LoadError {
+        at_line(self.origin, crate::load::locate(self.text, name), message)
     }
 }
 
