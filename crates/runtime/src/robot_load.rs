@@ -164,7 +164,6 @@ impl Robot {
             .chain((load_tips.iter().map(String::as_str)).filter(|t| !tips.contains(t)))
             .collect();
         let tips = all_tips.as_slice();
-        let parent_joint = |link: &str| robot.joints.iter().find(|j| j.child.link == link);
         let mut joints: Vec<RobotJoint> = Vec::new();
         let mut joint_names: Vec<String> = Vec::new();
         let mut limits = Vec::new();
@@ -186,19 +185,7 @@ impl Robot {
                     ),
                 ));
             }
-            let mut path = Vec::new();
-            let mut link = tip;
-            while let Some(joint) = parent_joint(link) {
-                if path.len() >= robot.joints.len() {
-                    return Err(invalid(
-                        origin,
-                        format!("the joints above link {tip:?} form a loop"),
-                    ));
-                }
-                path.push(joint);
-                link = &joint.parent.link;
-            }
-            path.reverse();
+            let path = path_to(&robot, tip, origin)?;
             let mut parent: Option<usize> = None;
             let mut pending = Pose::IDENTITY;
             let mut last_fixed: Option<String> = None;
@@ -235,29 +222,12 @@ impl Robot {
                     pending = Pose::IDENTITY;
                     continue;
                 }
-                let axis = joint.axis.xyz.0;
-                let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
-                if !norm.is_finite() || norm < 1e-12 {
-                    return Err(invalid(
-                        origin,
-                        format!("joint {name:?}: axis {axis:?} has no direction"),
-                    ));
-                }
-                let (lower, upper) = match joint.joint_type {
-                    urdf_rs::JointType::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
-                    _ => (joint.limit.lower, joint.limit.upper),
-                };
-                if lower.is_nan() || upper.is_nan() || lower > upper {
-                    return Err(invalid(
-                        origin,
-                        format!("joint {name:?}: limits [{lower}, {upper}] are not lower ≤ upper"),
-                    ));
-                }
+                let (axis, (lower, upper)) = axis_and_limits(joint, origin)?;
                 let origin = pending.compose(&joint_pose(joint));
                 joints.push(RobotJoint {
                     parent,
                     origin,
-                    axis: [axis[0] / norm, axis[1] / norm, axis[2] / norm],
+                    axis,
                     prismatic,
                     nominal: origin,
                     deviation: [0.0; 7],
@@ -283,45 +253,7 @@ impl Robot {
                 "no moving joint between the root link and the tips".to_owned(),
             ));
         }
-        // Link masses, each in the frame of the nearest moving joint above it.
-        let mut masses = Vec::new();
-        for l in &robot.links {
-            let mass_kg = l.inertial.mass.value;
-            let xyz = l.inertial.origin.xyz.0;
-            if !(mass_kg.is_finite() && mass_kg >= 0.0) || xyz.iter().any(|v| !v.is_finite()) {
-                return Err(invalid(
-                    origin,
-                    format!(
-                        "link {:?}: inertial mass {mass_kg} kg at {xyz:?} m is not a finite, non-negative mass at a finite point",
-                        l.name
-                    ),
-                ));
-            }
-            if mass_kg == 0.0 {
-                continue;
-            }
-            let mut frame = Pose::IDENTITY;
-            let mut link = l.name.as_str();
-            let mut above = None;
-            for _ in 0..=robot.joints.len() {
-                let Some(joint) = parent_joint(link) else {
-                    break;
-                };
-                if let Some(j) = joint_names.iter().position(|n| *n == joint.name) {
-                    above = Some(j);
-                    break;
-                }
-                frame = joint_pose(joint).compose(&frame);
-                link = &joint.parent.link;
-            }
-            if let Some(joint) = above {
-                masses.push(PointMass {
-                    joint,
-                    mass_kg,
-                    com_m: crate::robot::transform_point(&frame, &xyz),
-                });
-            }
-        }
+        let masses = link_masses(&robot, &joint_names, origin)?;
         let gravity = if masses.is_empty() {
             GravityModel::Lumped
         } else {
@@ -1116,6 +1048,118 @@ impl RecordAt<'_> {
     fn value(&self, name: &str, message: String) -> LoadError {
         at_line(self.origin, crate::load::locate(self.text, name), message)
     }
+}
+
+/// The joints from the root link down to link `tip`, root first.
+///
+/// # Errors
+/// Joints above `tip` that form a loop.
+fn path_to<'r>(
+    robot: &'r urdf_rs::Robot,
+    tip: &str,
+    origin: &str,
+) -> Result<Vec<&'r urdf_rs::Joint>, LoadError> {
+    let parent_joint = |link: &str| robot.joints.iter().find(|j| j.child.link == link);
+    let mut path = Vec::new();
+    let mut link = tip;
+    while let Some(joint) = parent_joint(link) {
+        if path.len() >= robot.joints.len() {
+            return Err(invalid(
+                origin,
+                format!("the joints above link {tip:?} form a loop"),
+            ));
+        }
+        path.push(joint);
+        link = &joint.parent.link;
+    }
+    path.reverse();
+    Ok(path)
+}
+
+/// A moving joint's unit axis (in its frame) and limits (rad or m; a continuous joint's are
+/// infinite).
+///
+/// # Errors
+/// An axis without direction, limits that are not lower ≤ upper.
+fn axis_and_limits(
+    joint: &urdf_rs::Joint,
+    origin: &str,
+) -> Result<([f64; 3], (f64, f64)), LoadError> {
+    let name = &joint.name;
+    let axis = joint.axis.xyz.0;
+    let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
+    if !norm.is_finite() || norm < 1e-12 {
+        return Err(invalid(
+            origin,
+            format!("joint {name:?}: axis {axis:?} has no direction"),
+        ));
+    }
+    let (lower, upper) = match joint.joint_type {
+        urdf_rs::JointType::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
+        _ => (joint.limit.lower, joint.limit.upper),
+    };
+    if lower.is_nan() || upper.is_nan() || lower > upper {
+        return Err(invalid(
+            origin,
+            format!("joint {name:?}: limits [{lower}, {upper}] are not lower ≤ upper"),
+        ));
+    }
+    Ok((
+        [axis[0] / norm, axis[1] / norm, axis[2] / norm],
+        (lower, upper),
+    ))
+}
+
+/// The links' masses, each in the frame of the nearest moving joint above it (`joint_names`,
+/// the robot's moving joints); massless links and links above every moving joint left out.
+///
+/// # Errors
+/// A mass that is not finite and non-negative, or at a point that is not finite.
+fn link_masses(
+    robot: &urdf_rs::Robot,
+    joint_names: &[String],
+    origin: &str,
+) -> Result<Vec<PointMass>, LoadError> {
+    let parent_joint = |link: &str| robot.joints.iter().find(|j| j.child.link == link);
+    let mut masses = Vec::new();
+    for l in &robot.links {
+        let mass_kg = l.inertial.mass.value;
+        let xyz = l.inertial.origin.xyz.0;
+        if !(mass_kg.is_finite() && mass_kg >= 0.0) || xyz.iter().any(|v| !v.is_finite()) {
+            return Err(invalid(
+                origin,
+                format!(
+                    "link {:?}: inertial mass {mass_kg} kg at {xyz:?} m is not a finite, non-negative mass at a finite point",
+                    l.name
+                ),
+            ));
+        }
+        if mass_kg == 0.0 {
+            continue;
+        }
+        let mut frame = Pose::IDENTITY;
+        let mut link = l.name.as_str();
+        let mut above = None;
+        for _ in 0..=robot.joints.len() {
+            let Some(joint) = parent_joint(link) else {
+                break;
+            };
+            if let Some(j) = joint_names.iter().position(|n| *n == joint.name) {
+                above = Some(j);
+                break;
+            }
+            frame = joint_pose(joint).compose(&frame);
+            link = &joint.parent.link;
+        }
+        if let Some(joint) = above {
+            masses.push(PointMass {
+                joint,
+                mass_kg,
+                com_m: crate::robot::transform_point(&frame, &xyz),
+            });
+        }
+    }
+    Ok(masses)
 }
 
 /// The two axes normal to a revolute joint's unit `axis` (in its frame) that a per-axis
