@@ -1650,6 +1650,81 @@ pub fn calibrate_measured(
     test: &[MeasurementTable],
     cfg: &MeasuredConfig,
 ) -> Result<MeasuredOutcome> {
+    let n_rows = check_training_rows(train, cfg)?;
+    let (frames, weights) = weighted_frames_only(robot, train, cfg, n_rows)?;
+    let start_x = frames.fitted.x.clone();
+    let start = Start {
+        tree: &frames.framed,
+        x: &start_x,
+        nested: None,
+        max_evaluations: cfg.max_evaluations,
+    };
+    let measured = Fits {
+        robot: &frames.robot,
+        start: &start,
+        offsets: &frames.offsets,
+        train,
+        weights,
+    };
+    let ladder_rungs = ladder_of(&frames.robot);
+    let richest = richest_rung(cfg, &ladder_rungs);
+    let mut bounded = bounded_training(richest, &measured, (frames.model, frames.fitted))?;
+    let richest_fit = bounded.richest_fit.take();
+    let fits = Fits {
+        train: &bounded.tables,
+        ..measured
+    };
+    let (frames_model, frames_only) = &bounded.frames;
+    let frames_fit = (frames_model, frames_only);
+    let choice = choose_rung(&fits, cfg, test, frames_fit, richest_fit, &ladder_rungs)?;
+    let Choice {
+        rung,
+        chosen,
+        mut ladder,
+    } = choice;
+    let settled = settle(&fits, rung, chosen, &mut ladder.reports)?;
+    let review = Review {
+        cfg,
+        fits: &fits,
+        rung,
+        settled: &settled,
+        frames_model,
+        bounded: &bounded,
+        train,
+        test,
+        n_rows,
+    };
+    let reviewed = review_fit(&review, &ladder);
+    let markers = (&frames.base, frames.markers.as_slice());
+    let found = findings(&review, markers, reviewed.equilibrium.no_equilibrium);
+    Ok(MeasuredOutcome {
+        refitted_lengths: found.refitted_lengths,
+        rung,
+        ladder: ladder.reports,
+        fitted: settled.fitted,
+        frames_only: bounded.frames.1,
+        model: settled.model,
+        frames: found.frames,
+        tree: frames.framed,
+        sets: reviewed.figures.sets,
+        sample_errors: reviewed.figures.sample_errors,
+        weights,
+        coverage: reviewed.coverage,
+        range_folds: ladder.range_folds,
+        training_ranges: reviewed.ranges,
+        downweighted: bounded.downweighted,
+        equilibrium_step_m: reviewed.equilibrium.step_m,
+        equilibrium_refits: settled.equilibrium_refits,
+        warnings: reviewed.warnings,
+        implausible: found.implausible,
+    })
+}
+
+/// The training rows of `train`, when they are enough for `cfg.folds`-fold cross-validation.
+///
+/// # Errors
+/// No training row, a single one, or fewer rows than folds (or fewer than 2 folds).
+fn check_training_rows(train: &[MeasurementTable], cfg: &MeasuredConfig) -> Result<usize> {
     let n_rows: usize = train.iter().map(|t| t.rows.len()).sum();
     if n_rows == 0 {
         bail!("the training files have no row");
@@ -1673,36 +1748,82 @@ pub fn calibrate_measured(
             k = cfg.folds
         );
     }
+    Ok(n_rows)
+}
+
+/// The frames-only fit of `train` ([`frames_only`]) at the weights every later fit uses: the
+/// σ given, or the RMS of each residual group after a frames-only fit at unit weights, the
+/// fit redone at them when they changed. `n_rows`: the training rows.
+///
+/// # Errors
+/// As [`frames_only`]; too few distinct configurations for the frames.
+fn weighted_frames_only(
+    robot: &Robot,
+    train: &[MeasurementTable],
+    cfg: &MeasuredConfig,
+    n_rows: usize,
+) -> Result<(FramesOnly, Weights)> {
     // Weights: given, or the RMS of each residual group after a frames-only fit at unit weights.
-    let mut weights = Weights {
+    let initial_weights = Weights {
         sigma_position_m: cfg.sigma_m.unwrap_or(1e-3),
         sigma_distance_m: cfg.sigma_m.unwrap_or(1e-3),
         sigma_orientation_rad: cfg.sigma_rad.unwrap_or(1e-2),
         ..Weights::default()
     };
-    let initial_weights = weights;
-    let all = |_: usize, _: usize| true;
-    let FramesOnly {
-        robot,
-        offsets,
-        base,
-        markers,
-        framed,
-        model: m0,
-        fitted: f0,
-    } = frames_only(robot, train, cfg, weights)?;
-    let robot = &robot;
-    // Repeated configurations add residuals but no information: the distinct ones must
-    // determine the frames with some redundancy, or σ (and every standard deviation) is zero.
+    let unweighted = frames_only(robot, train, cfg, initial_weights)?;
+    check_distinct_configurations(train, n_rows, &unweighted.fitted)?;
+    let (weights, reweighted) = estimated_weights(cfg, &unweighted.model, train, initial_weights);
+    // Weights move a frames-only estimate only when they balance residuals of two kinds, but
+    // they always scale its σ and covariance: the fit at the unit weights is redone at the
+    // estimated ones whenever they changed (position-only data printed σ²/1 mm before).
+    let weights_changed = weights != initial_weights;
+    if !(reweighted || weights_changed) {
+        return Ok((unweighted, weights));
+    }
+    let (model, fitted) = fit(
+        ModelName::FramesOnly,
+        &unweighted.robot,
+        &Start {
+            tree: &unweighted.framed,
+            x: &unweighted.fitted.x,
+            nested: None,
+            max_evaluations: None,
+        },
+        &unweighted.offsets,
+        train,
+        weights,
+        &|_, _| true,
+    )?;
+    Ok((
+        FramesOnly {
+            model,
+            fitted,
+            ..unweighted
+        },
+        weights,
+    ))
+}
+
+/// Repeated configurations add residuals but no information: the distinct ones of `train`
+/// must determine the frames of `frames_only` (its fit) with some redundancy, or σ (and every
+/// standard deviation) is zero.
+///
+/// # Errors
+/// Too few distinct configurations.
+fn check_distinct_configurations(
+    train: &[MeasurementTable],
+    n_rows: usize,
+    frames_only: &Fitted,
+) -> Result<()> {
     let mut distinct: Vec<&[f64]> = Vec::new();
     for row in train.iter().flat_map(|t| &t.rows) {
         if !distinct.contains(&row.q.as_slice()) {
             distinct.push(&row.q);
         }
     }
-    let n_residuals = f0.identified.n_residuals;
+    let n_residuals = frames_only.identified.n_residuals;
     let per_configuration = n_residuals as f64 / n_rows as f64;
-    let n_kept = f0.identified.identifiability.kept.len();
+    let n_kept = frames_only.identified.identifiability.kept.len();
     if (distinct.len() as f64) * per_configuration <= n_kept as f64 {
         bail!(
             "the training data hold {} distinct joint configurations ({n_rows} rows), about {:.0} \
@@ -1712,383 +1833,651 @@ pub fn calibrate_measured(
             distinct.len() as f64 * per_configuration
         );
     }
-    let mut reweighted = false;
-    if cfg.sigma_m.is_none() || cfg.sigma_rad.is_none() {
-        let (mut pos, mut rot, mut dist) = (Vec::new(), Vec::new(), Vec::new());
-        for ti in 0..train.len() {
-            let e = errors(&m0, train, ti, None);
-            pos.extend(e.position);
-            rot.extend(e.orientation);
-            dist.extend(e.distance);
-        }
-        // Per axis: a 3-D error of RMS e has about e/√3 per axis.
-        let (_, pos_rms, _) = stats(&pos);
-        let (_, rot_rms, _) = stats(&rot);
-        let (_, dist_rms, _) = stats(&dist);
-        if cfg.sigma_m.is_none() && pos_rms > 0.0 {
-            weights.sigma_position_m = pos_rms / 3f64.sqrt();
-        }
-        if cfg.sigma_m.is_none() && dist_rms > 0.0 {
-            weights.sigma_distance_m = dist_rms;
-        }
-        if cfg.sigma_rad.is_none() && rot_rms > 0.0 {
-            weights.sigma_orientation_rad = rot_rms / 3f64.sqrt();
-        }
-        // Weights move a frames-only estimate only when they balance residuals of two kinds.
-        let kinds =
-            [&pos, &dist].iter().filter(|v| !v.is_empty()).count() + usize::from(!rot.is_empty());
-        reweighted = kinds > 1;
+    Ok(())
+}
+
+/// The weights of `cfg`'s σ, each missing one the RMS of its residual group under the
+/// frames-only model `m0` (`weights` otherwise), and whether they balance residuals of two
+/// kinds (so that they move a frames-only estimate).
+fn estimated_weights(
+    cfg: &MeasuredConfig,
+    m0: &CalibratedModel,
+    train: &[MeasurementTable],
+    mut weights: Weights,
+) -> (Weights, bool) {
+    if cfg.sigma_m.is_some() && cfg.sigma_rad.is_some() {
+        return (weights, false);
     }
-    // Weights move a frames-only estimate only when they balance residuals of two kinds, but
-    // they always scale its σ and covariance: the fit at the unit weights is redone at the
-    // estimated ones whenever they changed (position-only data printed σ²/1 mm before).
-    let weights_changed = weights != initial_weights;
-    let (frames_model, frames_only) = if reweighted || weights_changed {
+    let (mut pos, mut rot, mut dist) = (Vec::new(), Vec::new(), Vec::new());
+    for ti in 0..train.len() {
+        let e = errors(m0, train, ti, None);
+        pos.extend(e.position);
+        rot.extend(e.orientation);
+        dist.extend(e.distance);
+    }
+    // Per axis: a 3-D error of RMS e has about e/√3 per axis.
+    let (_, pos_rms, _) = stats(&pos);
+    let (_, rot_rms, _) = stats(&rot);
+    let (_, dist_rms, _) = stats(&dist);
+    if cfg.sigma_m.is_none() && pos_rms > 0.0 {
+        weights.sigma_position_m = pos_rms / 3f64.sqrt();
+    }
+    if cfg.sigma_m.is_none() && dist_rms > 0.0 {
+        weights.sigma_distance_m = dist_rms;
+    }
+    if cfg.sigma_rad.is_none() && rot_rms > 0.0 {
+        weights.sigma_orientation_rad = rot_rms / 3f64.sqrt();
+    }
+    // Weights move a frames-only estimate only when they balance residuals of two kinds.
+    let kinds =
+        [&pos, &dist].iter().filter(|v| !v.is_empty()).count() + usize::from(!rot.is_empty());
+    (weights, kinds > 1)
+}
+
+/// What every fit after the frames-only one shares: the robot with joint offsets, where the
+/// fits start, its joint-offset parameters, the training tables it fits and the weights.
+#[derive(Clone, Copy)]
+struct Fits<'a> {
+    robot: &'a Robot,
+    start: &'a Start<'a>,
+    offsets: &'a [Option<usize>],
+    train: &'a [MeasurementTable],
+    weights: Weights,
+}
+
+impl Fits<'_> {
+    /// `rung` fitted on every training row from `start` ([`fit`]).
+    fn fit_from(&self, rung: ModelName, start: &Start<'_>) -> Result<(CalibratedModel, Fitted)> {
+        let all = |_: usize, _: usize| true;
         fit(
-            ModelName::FramesOnly,
-            robot,
-            &Start {
-                tree: &framed,
-                x: &f0.x,
-                nested: None,
-                max_evaluations: None,
-            },
-            &offsets,
-            train,
-            weights,
+            rung,
+            self.robot,
+            start,
+            self.offsets,
+            self.train,
+            self.weights,
             &all,
-        )?
-    } else {
-        (m0, f0)
-    };
-    let start_x = frames_only.x.clone();
-    let start = Start {
-        tree: &framed,
-        x: &start_x,
-        nested: None,
-        max_evaluations: cfg.max_evaluations,
-    };
-    // Gross errors bounded by the Huber loss: every fit below sees the winsorized samples;
-    // the figures are of the data as measured.
-    let (ladder_rungs, ladder_levels) = ladder_of(robot);
-    // The richest rung: the first alternative of the ladder's top level.
+        )
+    }
+
+    /// `rung` fitted on every training row from the shared start.
+    fn fit(&self, rung: ModelName) -> Result<(CalibratedModel, Fitted)> {
+        self.fit_from(rung, self.start)
+    }
+
+    /// What a refit of `rung` needs ([`mounting_test`], [`plausibility`]).
+    fn refit(&self, rung: ModelName) -> Refit<'_> {
+        Refit {
+            rung,
+            robot: self.robot,
+            start: self.start,
+            offsets: self.offsets,
+            train: self.train,
+            weights: self.weights,
+        }
+    }
+}
+
+/// The richest rung: the one given, or the first alternative of the ladder's top level
+/// (`ladder`: rungs and levels, [`ladder_of`]).
+fn richest_rung(cfg: &MeasuredConfig, ladder: &(Vec<ModelName>, Vec<usize>)) -> ModelName {
+    let (ladder_rungs, ladder_levels) = ladder;
     let top = ladder_levels.iter().copied().max().unwrap_or(0);
-    let richest = cfg.rung.unwrap_or_else(|| {
-        (ladder_rungs.iter().zip(&ladder_levels))
+    cfg.rung.unwrap_or_else(|| {
+        (ladder_rungs.iter().zip(ladder_levels))
             .find(|&(_, &l)| l == top)
             .map_or(ModelName::Geometric, |(&r, _)| r)
-    });
-    let (fit_tables, downweighted, mut richest_fit, judge) =
-        winsorize(richest, robot, &start, &offsets, train, weights)?;
-    let (frames_model, frames_only) = if downweighted.is_empty() {
-        (frames_model, frames_only)
-    } else {
-        fit(
-            ModelName::FramesOnly,
-            robot,
-            &start,
-            &offsets,
-            &fit_tables,
-            weights,
-            &all,
-        )?
-    };
-    let train_measured = train;
-    let train: &[MeasurementTable] = &fit_tables;
+    })
+}
 
-    let mut ladder = Vec::new();
-    let mut range_folds_used = Vec::new();
-    let mut range_stops = Vec::new();
-    let mut untried: Vec<Untried> = Vec::new();
-    // Rungs of the ladder whose fit on every training row did not converge, with that fit.
-    let mut unconverged: Vec<(ModelName, hapcal_identify::Fit)> = Vec::new();
-    // Why the ladder left out the rung that predicted best.
-    let mut ladder_notes: Vec<String> = Vec::new();
-    let (rung, (model, fitted)) = match cfg.rung {
-        Some(r) if r == ModelName::FramesOnly => (r, (frames_model.clone(), frames_only.clone())),
-        Some(r) => match richest_fit.take() {
-            Some((used, f)) if used == r => (r, f),
-            _ => (r, fit(r, robot, &start, &offsets, train, weights, &all)?),
-        },
-        None => {
-            let rungs = &ladder_rungs;
-            // Where the calibration will be used: the test rows and the workspace given.
-            let beyond: Vec<&[f64]> = (test.iter().flat_map(|t| &t.rows))
-                .map(|r| r.q.as_slice())
-                .chain(cfg.workspace.iter().map(Vec::as_slice))
-                .collect();
-            // Only the sides where the calibration will be used beyond its training range.
-            let ranges = range_folds(robot, train, &beyond);
-            use rayon::prelude::*;
-            let cached = std::sync::Mutex::new(richest_fit.take());
-            let full_fit = |r: ModelName, nested: Option<&Fitted>| {
-                let f = if r == ModelName::FramesOnly {
-                    (frames_model.clone(), frames_only.clone())
-                } else if let Some((_, f)) =
-                    (cached.lock().ok()).and_then(|mut c| c.take_if(|(used, _)| *used == r))
-                {
-                    f
-                } else {
-                    let start = Start { nested, ..start };
-                    fit(r, robot, &start, &offsets, train, weights, &all)?
-                };
-                Ok(f)
-            };
-            // Each rung fitted on every training row (the one the Huber pass fitted already
-            // was, when it bounded nothing), then cross-validated from its estimate. A rung
-            // that nests another ([`nested_in`]) starts from its estimate, the others from the
-            // frames-only one: each chain of nested rungs is one task (its fits in order, then
-            // its cross-validations, the nested rung's first), the chains in parallel, the
-            // longest first. The fits of one rung do not wait for another chain's, so no core
-            // idles while a nested rung is fitted (on two cores the per-axis transversal
-            // compliance fit, the ladder's slowest, ran alone before).
-            let parent: Vec<Option<usize>> = (rungs.iter())
-                .map(|&r| nested_in(r).and_then(|p| rungs.iter().position(|&q| q == p)))
-                .collect();
-            let chains = rung_chains(&parent);
-            // The fewest residuals a blocked fold trains on: a rung keeping more parameters on
-            // every row cannot be refitted on that fold.
-            let (fold_residuals, fold_rows) = fewest_fold_residuals(train, cfg.folds);
-            // A rung whose fit on every training row has fewer residuals than parameters, or
-            // whose refit on some fold's training rows would, is not tried (`Err`); its fit on
-            // every row, if any, still starts the rungs that nest it.
-            type Tried = std::result::Result<(CalibratedModel, Fitted), (Untried, Option<Fitted>)>;
-            let try_rung = |i: usize, nested: Option<&Fitted>| -> Result<Tried> {
-                let (model, fitted) = match full_fit(rungs[i], nested) {
-                    Ok(f) => f,
-                    Err(e) => {
-                        let Some((n_residuals, n_params)) = too_few_residuals(&e) else {
-                            return Err(e);
-                        };
-                        let untried = Untried {
-                            rung: rungs[i],
-                            n_residuals,
-                            n_params,
-                            fold_rows: None,
-                        };
-                        return Ok(Err((untried, None)));
-                    }
-                };
-                let n_params = fitted.identified.identifiability.kept.len();
-                if fold_residuals < n_params {
-                    let untried = Untried {
-                        rung: rungs[i],
-                        n_residuals: fold_residuals,
-                        n_params,
-                        fold_rows: Some(fold_rows),
-                    };
-                    return Ok(Err((untried, Some(fitted))));
-                }
-                Ok(Ok((model, fitted)))
-            };
-            // Per rung: its fit (or why it was not tried) and, when tried, its
-            // cross-validation.
-            type Run = (Result<Tried>, Option<Result<Scores>>);
-            let run_chain = |chain: &Vec<usize>| -> Vec<(usize, Run)> {
-                // Fits in nesting order (a rung whose parent has no fit starts from the
-                // frames-only estimate), then cross-validations, the last fitted first (the
-                // nested rungs are the slowest).
-                let mut fitted: Vec<(usize, Result<Tried>)> = Vec::new();
-                for &i in chain {
-                    let nested = parent[i].and_then(|p| {
-                        let (_, tried) = fitted.iter().find(|(k, _)| *k == p)?;
-                        match tried.as_ref().ok()? {
-                            Ok((_, f)) | Err((_, Some(f))) => Some(f),
-                            Err((_, None)) => None,
-                        }
-                    });
-                    let tried = try_rung(i, nested);
-                    fitted.push((i, tried));
-                }
-                let mut out: Vec<(usize, Run)> = (fitted.into_iter().rev())
-                    .map(|(i, tried)| {
-                        let scores = match &tried {
-                            Ok(Ok((_, f))) => Some(cross_validate(
-                                rungs[i],
-                                robot,
-                                &framed,
-                                &Warm::of(f),
-                                train,
-                                cfg,
-                                weights,
-                                &ranges,
-                            )),
-                            _ => None,
-                        };
-                        (i, (tried, scores))
-                    })
-                    .collect();
-                out.reverse();
-                out
-            };
-            let mut runs: Vec<Option<Run>> = (0..rungs.len()).map(|_| None).collect();
-            for (i, run) in (chains.par_iter().map(run_chain).flatten()).collect::<Vec<_>>() {
-                runs[i] = Some(run);
-            }
-            // A failed fit first (in ladder order), then the ladder's foot, then a failed
-            // cross-validation.
-            let mut tried = Vec::new();
-            let mut tried_fits = Vec::new();
-            let mut tried_scores = Vec::new();
-            for (i, (fit, scores)) in
-                (runs.into_iter().enumerate()).filter_map(|(i, run)| run.map(|run| (i, run)))
-            {
-                match fit? {
-                    // An unconverged fit is never a result: the rung is left out (frames only,
-                    // the ladder's foot, stays; an unconverged final fit is a finding).
-                    Ok((_, f)) if i > 0 && !f.identified.fit.termination.is_success() => {
-                        unconverged.push((rungs[i], f.identified.fit.clone()));
-                    }
-                    Ok(f) => {
-                        tried.push(i);
-                        tried_fits.push(f);
-                        tried_scores.push(scores);
-                    }
-                    Err((u, _)) => untried.push(u),
-                }
-            }
-            // Frames only is the ladder's foot: without it nothing can be compared.
-            if tried.first() != Some(&0) {
-                let reason = untried.first().map_or_else(String::new, Untried::reason);
-                bail!(
-                    "the training rows cannot determine even the {} model ({reason}): record \
-                     more configurations",
-                    ModelName::FramesOnly
-                );
-            }
-            let scores: Vec<Scores> = (tried_scores.into_iter())
-                .map(|s| s.unwrap_or_else(|| bail!("a tried rung was not cross-validated")))
-                .collect::<Result<_>>()?;
-            let tried_rungs: Vec<ModelName> = tried.iter().map(|&i| rungs[i]).collect();
-            let rungs = &tried_rungs;
-            let ladder_levels: Vec<usize> = tried.iter().map(|&i| ladder_levels[i]).collect();
-            let mut fits = tried_fits;
-            let rms = |h: &HeldOut| {
-                (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt()
-            };
-            let evidence = RangeEvidence::new(&ranges, train, &scores);
-            for (i, r) in rungs.iter().enumerate() {
-                let to_frames = blocked_difference(&scores[i].score, &scores[0].score);
-                ladder.push(RungReport {
-                    rung: *r,
-                    heldout_rms_m: rms(&scores[i].squared),
-                    score_difference_to_frames: if i == 0 { (0.0, 0.0) } else { to_frames },
-                    range_rms_m: evidence.rms_m(i),
-                    range_difference_to_frames: evidence.mean_difference(i, 0),
-                    range_predicted_to_frames: evidence.judge(i, 0).predicted,
-                    nested: None,
-                    n_kept: 0,
-                });
-            }
-            // The one rule of every workflow (crate::model::climb): a rung must beat the one
-            // chosen so far by LADDER_SIGNIFICANCE_Z blocked standard errors and, where the
-            // calibration will be used beyond its training range, pass the joint-range folds
-            // (RangeVerdict::allows). Each rung the folds stop is recorded.
-            let stops = std::cell::RefCell::new(Vec::new());
-            let beats = |i: usize, j: usize| {
-                let (d, se) = blocked_difference(&scores[i].score, &scores[j].score);
-                if i == j || d + crate::model::LADDER_SIGNIFICANCE_Z * se >= 0.0 {
-                    return false;
-                }
-                let verdict = evidence.judge(i, j);
-                let allowed = evidence.is_empty() || verdict.allows();
-                if !allowed {
-                    stops.borrow_mut().push(RangeStop {
-                        rung: rungs[i],
-                        compared_with: rungs[j],
-                        range_difference: verdict.predicted,
-                        range_growth: verdict.growth,
-                        judged: verdict.judged,
-                    });
-                }
-                allowed
-            };
-            // A chosen rung whose compliances no real robot has (below zero beyond the bound)
-            // and no other mounting explains is never the result: the ladder keeps the best
-            // of the others, and says why. Negative compliances another mounting explains
-            // stay, for the check after the fit to name the mounting.
-            let unit = compliance_unit_of(robot);
-            let mut left_out: Vec<(usize, String)> = Vec::new();
-            // Parsimony within a level: a rung that contains another alternative of its level
-            // (per-axis transversal compliance holds the isotropic one) must beat it too, on
-            // the blocked folds (crate::model::climb).
-            let contains_of = |i: usize, j: usize| {
-                i != j && ladder_levels[i] == ladder_levels[j] && rungs[i].contains(rungs[j])
-            };
-            let nested_difference = |i: usize, j: usize| {
-                contains_of(i, j).then(|| {
-                    let (d, se) = blocked_difference(&scores[i].score, &scores[j].score);
-                    ((d, se), d + crate::model::LADDER_SIGNIFICANCE_Z * se < 0.0)
-                })
-            };
-            let chosen = loop {
-                stops.borrow_mut().clear();
-                let allowed =
-                    |i: usize, j: usize| left_out.iter().all(|(k, _)| *k != i) && beats(i, j);
-                // A contained rung left out (negative compliances) no longer holds the richer
-                // one back.
-                let beats_contained = |i: usize, j: usize| {
-                    if left_out.iter().any(|(k, _)| *k == j) {
-                        return None;
-                    }
-                    nested_difference(i, j).map(|(_, b)| b)
-                };
-                let chosen = crate::model::climb(
-                    &ladder_levels,
-                    &allowed,
-                    &|i| rms(&scores[i].squared),
-                    &beats_contained,
-                );
-                let (chosen_model, chosen_fit) = &fits[chosen];
-                let (negative, n_compliances) =
-                    crate::fit::negative_compliances(&chosen_fit.identified, 1.0);
-                if chosen == 0 || negative.is_empty() {
-                    break chosen;
-                }
-                let refit = Refit {
-                    rung: rungs[chosen],
-                    robot,
-                    start: &start,
-                    offsets: &offsets,
-                    train,
-                    weights,
-                };
-                let (_, given_rms, _) = stats(&position_errors(chosen_model, train));
-                if negative.len() >= 2 && mounting_test(&refit, given_rms).is_some() {
-                    break chosen;
-                }
-                left_out.push((
-                    chosen,
-                    crate::fit::negative_compliance_words(&negative, n_compliances, unit),
-                ));
-            };
-            for (i, words) in &left_out {
-                ladder_notes.push(format!(
-                    "the {} model predicted the held-out rows best but was left out: its \
-                     compliances are negative ({words}) and no mounting explains them (it \
-                     absorbs an effect it lacks); the ladder keeps the {} model",
-                    rungs[*i], rungs[chosen]
-                ));
-            }
-            for (i, report) in ladder.iter_mut().enumerate() {
-                report.nested = (0..rungs.len()).find_map(|j| {
-                    let (difference, beats) = nested_difference(i, j)?;
-                    Some(crate::report::NestedComparison {
-                        contains: rungs[j],
-                        difference,
-                        beats,
-                    })
-                });
-            }
-            range_folds_used = ranges.into_iter().map(|r| r.report).collect();
-            range_stops = stops.into_inner();
-            (rungs[chosen], fits.swap_remove(chosen))
+/// The training tables as the Huber loss sees them ([`bounded_training`]), with the
+/// frames-only fit on them.
+struct Bounded {
+    /// The training tables with the gross errors bounded (as measured when none was).
+    tables: Vec<MeasurementTable>,
+    /// The samples the Huber loss bounded, file order.
+    downweighted: Vec<Downweighted>,
+    /// The rung the Huber loss was evaluated with and its fit, when it bounded nothing.
+    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    /// The rung the Huber loss was evaluated with.
+    judge: ModelName,
+    /// The frames-only model and identification on `tables`.
+    frames: (CalibratedModel, Fitted),
+}
+
+/// Gross errors bounded by the Huber loss ([`winsorize`], evaluated with `richest`): every fit
+/// after it sees the winsorized samples; the figures are of the data as measured. The
+/// frames-only fit `frames` is redone on the winsorized tables when a sample was bounded.
+///
+/// # Errors
+/// A failed identification.
+fn bounded_training(
+    richest: ModelName,
+    measured: &Fits<'_>,
+    frames: (CalibratedModel, Fitted),
+) -> Result<Bounded> {
+    let (tables, downweighted, richest_fit, judge) = winsorize(
+        richest,
+        measured.robot,
+        measured.start,
+        measured.offsets,
+        measured.train,
+        measured.weights,
+    )?;
+    let frames = if downweighted.is_empty() {
+        frames
+    } else {
+        Fits {
+            train: &tables,
+            ..*measured
+        }
+        .fit(ModelName::FramesOnly)?
+    };
+    Ok(Bounded {
+        tables,
+        downweighted,
+        richest_fit,
+        judge,
+        frames,
+    })
+}
+
+/// What the ladder left out, and why ([`ladder_warnings`]).
+#[derive(Default)]
+struct LeftOut {
+    /// Rungs the training rows cannot fit.
+    untried: Vec<Untried>,
+    /// Rungs of the ladder whose fit on every training row did not converge, with that fit.
+    unconverged: Vec<(ModelName, hapcal_identify::Fit)>,
+    /// Why the ladder left out the rung that predicted best.
+    notes: Vec<String>,
+}
+
+/// The ladder that chose a rung (empty when the rung was given).
+#[derive(Default)]
+struct LadderOutcome {
+    /// Cross-validation scores, simplest rung first.
+    reports: Vec<RungReport>,
+    /// The joint-range folds the ladder judged extrapolation by.
+    range_folds: Vec<RangeFold>,
+    /// The rungs the joint-range folds stopped.
+    range_stops: Vec<RangeStop>,
+    left_out: LeftOut,
+}
+
+/// The rung chosen (or given), its fit on every training row, and the ladder that chose it.
+struct Choice {
+    rung: ModelName,
+    /// The chosen rung's model and identification.
+    chosen: (CalibratedModel, Fitted),
+    ladder: LadderOutcome,
+}
+
+/// The rung given in `cfg` fitted on every training row (the Huber pass's `richest_fit` when
+/// it is that rung, `frames` for frames only), or the rung chosen on the ladder
+/// ([`climb_ladder`]).
+///
+/// # Errors
+/// A failed identification.
+fn choose_rung(
+    fits: &Fits<'_>,
+    cfg: &MeasuredConfig,
+    test: &[MeasurementTable],
+    frames: (&CalibratedModel, &Fitted),
+    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    ladder: &(Vec<ModelName>, Vec<usize>),
+) -> Result<Choice> {
+    let Some(rung) = cfg.rung else {
+        return climb_ladder(fits, cfg, test, frames, richest_fit, ladder);
+    };
+    let chosen = if rung == ModelName::FramesOnly {
+        (frames.0.clone(), frames.1.clone())
+    } else {
+        match richest_fit {
+            Some((used, f)) if used == rung => f,
+            _ => fits.fit(rung)?,
         }
     };
-    // The torque equilibrium: where the deflection changes the loads by more than the noise
-    // can show, the loads are re-evaluated at the deflected robot and the rung refitted.
-    let (model, fitted, equilibrium_iterations) = equilibrate(
-        rung, robot, &framed, &offsets, train, weights, model, fitted,
+    Ok(Choice {
+        rung,
+        chosen,
+        ladder: LadderOutcome::default(),
+    })
+}
+
+/// The rung chosen on the ladder (`ladder`: rungs and levels): each rung fitted and
+/// cross-validated ([`ladder_runs`]), the rungs the rows cannot fit left out, and the ladder
+/// climbed ([`climb_tried`]).
+///
+/// # Errors
+/// A failed identification or cross-validation; rows that cannot fit frames only.
+fn climb_ladder(
+    fits: &Fits<'_>,
+    cfg: &MeasuredConfig,
+    test: &[MeasurementTable],
+    frames: (&CalibratedModel, &Fitted),
+    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    (rungs, levels): &(Vec<ModelName>, Vec<usize>),
+) -> Result<Choice> {
+    // Where the calibration will be used: the test rows and the workspace given.
+    let beyond: Vec<&[f64]> = (test.iter().flat_map(|t| &t.rows))
+        .map(|r| r.q.as_slice())
+        .chain(cfg.workspace.iter().map(Vec::as_slice))
+        .collect();
+    // Only the sides where the calibration will be used beyond its training range.
+    let ranges = range_folds(fits.robot, fits.train, &beyond);
+    // The fewest residuals a blocked fold trains on: a rung keeping more parameters on
+    // every row cannot be refitted on that fold.
+    let (fold_residuals, fold_rows) = fewest_fold_residuals(fits.train, cfg.folds);
+    let runs = ladder_runs(&LadderRuns {
+        fits,
+        cfg,
+        rungs,
+        parent: (rungs.iter())
+            .map(|&r| nested_in(r).and_then(|p| rungs.iter().position(|&q| q == p)))
+            .collect(),
+        ranges: &ranges,
+        frames,
+        cached: std::sync::Mutex::new(richest_fit),
+        fold_residuals,
+        fold_rows,
+    });
+    let mut left_out = LeftOut::default();
+    let tried = sort_runs(runs, rungs, &mut left_out)?;
+    let tried_rungs: Vec<ModelName> = tried.index.iter().map(|&i| rungs[i]).collect();
+    let tried_levels: Vec<usize> = tried.index.iter().map(|&i| levels[i]).collect();
+    let evidence = RangeEvidence::new(&ranges, fits.train, &tried.scores);
+    let judge = LadderJudge {
+        rungs: &tried_rungs,
+        levels: &tried_levels,
+        scores: &tried.scores,
+        evidence: &evidence,
+        stops: std::cell::RefCell::new(Vec::new()),
+    };
+    let mut ladder = ladder_reports(&judge);
+    let (chosen, negative) = climb_tried(&judge, fits, &tried.fits);
+    for (i, words) in &negative {
+        left_out.notes.push(format!(
+            "the {} model predicted the held-out rows best but was left out: its \
+             compliances are negative ({words}) and no mounting explains them (it \
+             absorbs an effect it lacks); the ladder keeps the {} model",
+            tried_rungs[*i], tried_rungs[chosen]
+        ));
+    }
+    for (i, report) in ladder.iter_mut().enumerate() {
+        report.nested = (0..tried_rungs.len()).find_map(|j| {
+            let (difference, beats) = judge.nested_difference(i, j)?;
+            Some(crate::report::NestedComparison {
+                contains: tried_rungs[j],
+                difference,
+                beats,
+            })
+        });
+    }
+    let mut fits_tried = tried.fits;
+    Ok(Choice {
+        rung: tried_rungs[chosen],
+        chosen: fits_tried.swap_remove(chosen),
+        ladder: LadderOutcome {
+            reports: ladder,
+            range_folds: ranges.into_iter().map(|r| r.report).collect(),
+            range_stops: judge.stops.into_inner(),
+            left_out,
+        },
+    })
+}
+
+/// A rung of the ladder fitted on every training row, or why it was not tried: a rung whose
+/// fit on every training row has fewer residuals than parameters, or whose refit on some
+/// fold's training rows would, is not tried (`Err`); its fit on every row, if any, still
+/// starts the rungs that nest it.
+type Tried = std::result::Result<(CalibratedModel, Fitted), (Untried, Option<Fitted>)>;
+
+/// Per rung: its fit (or why it was not tried) and, when tried, its cross-validation.
+type Run = (Result<Tried>, Option<Result<Scores>>);
+
+/// What fitting and cross-validating the ladder's rungs share ([`ladder_runs`]).
+struct LadderRuns<'a> {
+    fits: &'a Fits<'a>,
+    cfg: &'a MeasuredConfig,
+    rungs: &'a [ModelName],
+    /// Per rung, the rung it starts from ([`nested_in`]), by index.
+    parent: Vec<Option<usize>>,
+    /// The joint-range folds the rungs are cross-validated on too.
+    ranges: &'a [RangeSplit],
+    /// The frames-only model and identification (the ladder's foot, fitted already).
+    frames: (&'a CalibratedModel, &'a Fitted),
+    /// The fit of the Huber pass, taken by its rung.
+    cached: std::sync::Mutex<Option<(ModelName, (CalibratedModel, Fitted))>>,
+    /// The fewest residuals a blocked fold trains on, and its training rows.
+    fold_residuals: usize,
+    fold_rows: usize,
+}
+
+impl LadderRuns<'_> {
+    /// Rung `r` fitted on every training row (from the estimate of the rung it nests, if
+    /// any): frames only and the Huber pass's rung are fitted already.
+    fn full_fit(&self, r: ModelName, nested: Option<&Fitted>) -> Result<(CalibratedModel, Fitted)> {
+        let f = if r == ModelName::FramesOnly {
+            (self.frames.0.clone(), self.frames.1.clone())
+        } else if let Some((_, f)) =
+            (self.cached.lock().ok()).and_then(|mut c| c.take_if(|(used, _)| *used == r))
+        {
+            f
+        } else {
+            let start = Start {
+                nested,
+                ..*self.fits.start
+            };
+            self.fits.fit_from(r, &start)?
+        };
+        Ok(f)
+    }
+
+    /// Rung `i` fitted on every training row, or why it is not tried ([`Tried`]).
+    fn try_rung(&self, i: usize, nested: Option<&Fitted>) -> Result<Tried> {
+        let (model, fitted) = match self.full_fit(self.rungs[i], nested) {
+            Ok(f) => f,
+            Err(e) => {
+                let Some((n_residuals, n_params)) = too_few_residuals(&e) else {
+                    return Err(e);
+                };
+                let untried = Untried {
+                    rung: self.rungs[i],
+                    n_residuals,
+                    n_params,
+                    fold_rows: None,
+                };
+                return Ok(Err((untried, None)));
+            }
+        };
+        let n_params = fitted.identified.identifiability.kept.len();
+        if self.fold_residuals < n_params {
+            let untried = Untried {
+                rung: self.rungs[i],
+                n_residuals: self.fold_residuals,
+                n_params,
+                fold_rows: Some(self.fold_rows),
+            };
+            return Ok(Err((untried, Some(fitted))));
+        }
+        Ok(Ok((model, fitted)))
+    }
+
+    /// The runs of one chain of nested rungs ([`rung_chains`]): fits in nesting order (a rung
+    /// whose parent has no fit starts from the frames-only estimate), then
+    /// cross-validations, the last fitted first (the nested rungs are the slowest).
+    fn run_chain(&self, chain: &Vec<usize>) -> Vec<(usize, Run)> {
+        let mut fitted: Vec<(usize, Result<Tried>)> = Vec::new();
+        for &i in chain {
+            let nested = self.parent[i].and_then(|p| {
+                let (_, tried) = fitted.iter().find(|(k, _)| *k == p)?;
+                match tried.as_ref().ok()? {
+                    Ok((_, f)) | Err((_, Some(f))) => Some(f),
+                    Err((_, None)) => None,
+                }
+            });
+            let tried = self.try_rung(i, nested);
+            fitted.push((i, tried));
+        }
+        let mut out: Vec<(usize, Run)> = (fitted.into_iter().rev())
+            .map(|(i, tried)| {
+                let scores = match &tried {
+                    Ok(Ok((_, f))) => Some(cross_validate(
+                        self.rungs[i],
+                        self.fits.robot,
+                        self.fits.start.tree,
+                        &Warm::of(f),
+                        self.fits.train,
+                        self.cfg,
+                        self.fits.weights,
+                        self.ranges,
+                    )),
+                    _ => None,
+                };
+                (i, (tried, scores))
+            })
+            .collect();
+        out.reverse();
+        out
+    }
+}
+
+/// Each rung fitted on every training row (the one the Huber pass fitted already was, when
+/// it bounded nothing), then cross-validated from its estimate; per rung of the ladder, its
+/// run. A rung that nests another ([`nested_in`]) starts from its estimate, the others from
+/// the frames-only one: each chain of nested rungs is one task (its fits in order, then its
+/// cross-validations, the nested rung's first), the chains in parallel, the longest first.
+/// The fits of one rung do not wait for another chain's, so no core idles while a nested
+/// rung is fitted (on two cores the per-axis transversal compliance fit, the ladder's
+/// slowest, ran alone before).
+fn ladder_runs(runs: &LadderRuns<'_>) -> Vec<Option<Run>> {
+    use rayon::prelude::*;
+    let chains = rung_chains(&runs.parent);
+    let mut out: Vec<Option<Run>> = (0..runs.rungs.len()).map(|_| None).collect();
+    let chain_runs = chains.par_iter().map(|c| runs.run_chain(c)).flatten();
+    for (i, run) in chain_runs.collect::<Vec<_>>() {
+        out[i] = Some(run);
+    }
+    out
+}
+
+/// The rungs of the ladder tried, in ladder order: their indices, fits on every training row
+/// and cross-validation scores.
+struct TriedRungs {
+    index: Vec<usize>,
+    fits: Vec<(CalibratedModel, Fitted)>,
+    scores: Vec<Scores>,
+}
+
+/// The rungs of `runs` tried, the others in `left_out` (not tried, or unconverged).
+///
+/// # Errors
+/// A failed fit first (in ladder order), then the ladder's foot not tried, then a failed
+/// cross-validation.
+fn sort_runs(
+    runs: Vec<Option<Run>>,
+    rungs: &[ModelName],
+    left_out: &mut LeftOut,
+) -> Result<TriedRungs> {
+    let mut tried = Vec::new();
+    let mut tried_fits = Vec::new();
+    let mut tried_scores = Vec::new();
+    for (i, (fit, scores)) in
+        (runs.into_iter().enumerate()).filter_map(|(i, run)| run.map(|run| (i, run)))
+    {
+        match fit? {
+            // An unconverged fit is never a result: the rung is left out (frames only,
+            // the ladder's foot, stays; an unconverged final fit is a finding).
+            Ok((_, f)) if i > 0 && !f.identified.fit.termination.is_success() => {
+                left_out
+                    .unconverged
+                    .push((rungs[i], f.identified.fit.clone()));
+            }
+            Ok(f) => {
+                tried.push(i);
+                tried_fits.push(f);
+                tried_scores.push(scores);
+            }
+            Err((u, _)) => left_out.untried.push(u),
+        }
+    }
+    // Frames only is the ladder's foot: without it nothing can be compared.
+    if tried.first() != Some(&0) {
+        let reason = (left_out.untried.first()).map_or_else(String::new, Untried::reason);
+        bail!(
+            "the training rows cannot determine even the {} model ({reason}): record \
+             more configurations",
+            ModelName::FramesOnly
+        );
+    }
+    let scores: Vec<Scores> = (tried_scores.into_iter())
+        .map(|s| s.unwrap_or_else(|| bail!("a tried rung was not cross-validated")))
+        .collect::<Result<_>>()?;
+    Ok(TriedRungs {
+        index: tried,
+        fits: tried_fits,
+        scores,
+    })
+}
+
+/// Held-out RMS position error of `h`, m.
+fn heldout_rms(h: &HeldOut) -> f64 {
+    (h.sq_errors.iter().sum::<f64>() / h.sq_errors.len().max(1) as f64).sqrt()
+}
+
+/// The comparisons of the tried rungs ([`climb_tried`]): their cross-validation scores and
+/// joint-range evidence, with the rungs the joint-range folds stopped.
+struct LadderJudge<'a> {
+    rungs: &'a [ModelName],
+    levels: &'a [usize],
+    scores: &'a [Scores],
+    evidence: &'a RangeEvidence,
+    /// Each rung the joint-range folds stopped in the last climb.
+    stops: std::cell::RefCell<Vec<RangeStop>>,
+}
+
+impl LadderJudge<'_> {
+    /// The one rule of every workflow (crate::model::climb): rung `i` must beat rung `j`
+    /// (the one chosen so far) by LADDER_SIGNIFICANCE_Z blocked standard errors and, where
+    /// the calibration will be used beyond its training range, pass the joint-range folds
+    /// (RangeVerdict::allows). Each rung the folds stop is recorded.
+    fn beats(&self, i: usize, j: usize) -> bool {
+        let scores = self.scores;
+        let (d, se) = blocked_difference(&scores[i].score, &scores[j].score);
+        if i == j || d + crate::model::LADDER_SIGNIFICANCE_Z * se >= 0.0 {
+            return false;
+        }
+        let verdict = self.evidence.judge(i, j);
+        let allowed = self.evidence.is_empty() || verdict.allows();
+        if !allowed {
+            self.stops.borrow_mut().push(RangeStop {
+                rung: self.rungs[i],
+                compared_with: self.rungs[j],
+                range_difference: verdict.predicted,
+                range_growth: verdict.growth,
+                judged: verdict.judged,
+            });
+        }
+        allowed
+    }
+
+    /// Parsimony within a level: whether rung `i` contains another alternative `j` of its
+    /// level (per-axis transversal compliance holds the isotropic one), which it must beat
+    /// too, on the blocked folds (crate::model::climb).
+    fn contains(&self, i: usize, j: usize) -> bool {
+        i != j && self.levels[i] == self.levels[j] && self.rungs[i].contains(self.rungs[j])
+    }
+
+    /// When rung `i` contains rung `j`: their blocked difference and whether `i` beats `j`.
+    fn nested_difference(&self, i: usize, j: usize) -> Option<((f64, f64), bool)> {
+        self.contains(i, j).then(|| {
+            let (d, se) = blocked_difference(&self.scores[i].score, &self.scores[j].score);
+            ((d, se), d + crate::model::LADDER_SIGNIFICANCE_Z * se < 0.0)
+        })
+    }
+}
+
+/// The ladder's report of each tried rung (`nested` and `n_kept` filled later).
+fn ladder_reports(judge: &LadderJudge<'_>) -> Vec<RungReport> {
+    let (scores, evidence) = (judge.scores, judge.evidence);
+    let mut ladder = Vec::new();
+    for (i, r) in judge.rungs.iter().enumerate() {
+        let to_frames = blocked_difference(&scores[i].score, &scores[0].score);
+        ladder.push(RungReport {
+            rung: *r,
+            heldout_rms_m: heldout_rms(&scores[i].squared),
+            score_difference_to_frames: if i == 0 { (0.0, 0.0) } else { to_frames },
+            range_rms_m: evidence.rms_m(i),
+            range_difference_to_frames: evidence.mean_difference(i, 0),
+            range_predicted_to_frames: evidence.judge(i, 0).predicted,
+            nested: None,
+            n_kept: 0,
+        });
+    }
+    ladder
+}
+
+/// The tried rung the ladder climbs to ([`crate::model::climb`]), with the rungs left out
+/// on the way and the words of their compliances. A chosen rung whose compliances no real
+/// robot has (below zero beyond the bound) and no other mounting explains is never the
+/// result: the ladder keeps the best of the others, and says why. Negative compliances
+/// another mounting explains stay, for the check after the fit to name the mounting.
+fn climb_tried(
+    judge: &LadderJudge<'_>,
+    fits: &Fits<'_>,
+    tried_fits: &[(CalibratedModel, Fitted)],
+) -> (usize, Vec<(usize, String)>) {
+    let unit = compliance_unit_of(fits.robot);
+    let mut left_out: Vec<(usize, String)> = Vec::new();
+    let chosen = loop {
+        judge.stops.borrow_mut().clear();
+        let allowed =
+            |i: usize, j: usize| left_out.iter().all(|(k, _)| *k != i) && judge.beats(i, j);
+        // A contained rung left out (negative compliances) no longer holds the richer
+        // one back.
+        let beats_contained = |i: usize, j: usize| {
+            if left_out.iter().any(|(k, _)| *k == j) {
+                return None;
+            }
+            judge.nested_difference(i, j).map(|(_, b)| b)
+        };
+        let chosen = crate::model::climb(
+            judge.levels,
+            &allowed,
+            &|i| heldout_rms(&judge.scores[i].squared),
+            &beats_contained,
+        );
+        let (chosen_model, chosen_fit) = &tried_fits[chosen];
+        let (negative, n_compliances) =
+            crate::fit::negative_compliances(&chosen_fit.identified, 1.0);
+        if chosen == 0 || negative.is_empty() {
+            break chosen;
+        }
+        let refit = fits.refit(judge.rungs[chosen]);
+        let (_, given_rms, _) = stats(&position_errors(chosen_model, fits.train));
+        if negative.len() >= 2 && mounting_test(&refit, given_rms).is_some() {
+            break chosen;
+        }
+        left_out.push((
+            chosen,
+            crate::fit::negative_compliance_words(&negative, n_compliances, unit),
+        ));
+    };
+    (chosen, left_out)
+}
+
+/// The chosen rung at its torque equilibrium ([`settle`]).
+struct Settled {
+    model: CalibratedModel,
+    fitted: Fitted,
+    /// Refits [`equilibrate`] made.
+    equilibrium_refits: usize,
+    /// Kinematic parameters kept (not the frames').
+    n_kept: usize,
+}
+
+/// The torque equilibrium of the chosen rung ([`equilibrate`]): where the deflection changes
+/// the loads by more than the noise can show, the loads are re-evaluated at the deflected
+/// robot and the rung refitted. Its kinematic parameters kept go into its `ladder` report.
+///
+/// # Errors
+/// A failed identification.
+fn settle(
+    fits: &Fits<'_>,
+    rung: ModelName,
+    (model, fitted): (CalibratedModel, Fitted),
+    ladder: &mut [RungReport],
+) -> Result<Settled> {
+    let (model, fitted, equilibrium_refits) = equilibrate(
+        rung,
+        fits.robot,
+        fits.start.tree,
+        fits.offsets,
+        fits.train,
+        fits.weights,
+        model,
+        fitted,
     )?;
     let n_kept = (fitted.identified.identifiability.kept.iter())
         .filter(|&&i| !crate::report::is_frame_param(fitted.identified.layout.name(i)))
@@ -2096,13 +2485,30 @@ pub fn calibrate_measured(
     if let Some(r) = ladder.iter_mut().find(|r| r.rung == rung) {
         r.n_kept = n_kept;
     }
+    Ok(Settled {
+        model,
+        fitted,
+        equilibrium_refits,
+        n_kept,
+    })
+}
+
+/// Warnings of the model choice of `rung` on `ladder`: copied tables, rungs left out, and
+/// frames only kept.
+fn ladder_warnings(
+    cfg: &MeasuredConfig,
+    fits: &Fits<'_>,
+    rung: ModelName,
+    ladder: &LadderOutcome,
+) -> Vec<String> {
+    let (left_out, range_stops) = (&ladder.left_out, &ladder.range_stops);
     let mut warnings = Vec::new();
     if cfg.rung.is_none() {
-        warnings.extend(crate::fit::copies_warning(n_table_copies(train)));
+        warnings.extend(crate::fit::copies_warning(n_table_copies(fits.train)));
     }
-    warnings.extend(untried_note(&ladder, &untried));
-    warnings.extend(ladder_notes);
-    for (r, f) in &unconverged {
+    warnings.extend(untried_note(&ladder.reports, &left_out.untried));
+    warnings.extend(left_out.notes.iter().cloned());
+    for (r, f) in &left_out.unconverged {
         warnings.push(format!(
             "{UNCONVERGED_RUNG_NOTE}{r} model: its least-squares fit stopped after {} evaluations, \
              {}, so its estimate is the last iterate, not a minimum; the ladder keeps {rung}",
@@ -2125,6 +2531,13 @@ pub fn calibrate_measured(
                 .to_owned(),
         );
     }
+    warnings
+}
+
+/// Warnings of the final fit `fitted` of `rung` (`n_kept` kinematic parameters kept): none
+/// determined, too few residuals per parameter, not converged.
+fn fit_warnings(rung: ModelName, n_kept: usize, fitted: &Fitted) -> Vec<String> {
+    let mut warnings = Vec::new();
     if rung != ModelName::FramesOnly && n_kept == 0 {
         warnings.push(format!(
             "the data determine none of the {} model's kinematic parameters: only the \
@@ -2150,12 +2563,25 @@ pub fn calibrate_measured(
             fitted.identified.fit.n_evaluations
         ));
     }
-    // Two scales, each where it means something: the frames-only residual against what a
-    // real robot's manufacturing deviations produce (an uncalibrated robot is no mistake; a
-    // file in the wrong units or with the wrong joint order is), the calibrated residual
-    // against the instrument's stated σ (far above it: an effect the model lacks).
+    warnings
+}
+
+/// Warnings of the residuals, on two scales, each where it means something: the frames-only
+/// residual (`frames_model`) against what a real robot's manufacturing deviations produce
+/// (an uncalibrated robot is no mistake; a file in the wrong units or with the wrong joint
+/// order is), the calibrated residual (`fitted`, of `rung`) against the instrument's stated
+/// σ (far above it: an effect the model lacks).
+fn residual_warnings(
+    cfg: &MeasuredConfig,
+    fits: &Fits<'_>,
+    frames_model: &CalibratedModel,
+    rung: ModelName,
+    fitted: &Fitted,
+) -> Vec<String> {
+    let mut warnings = Vec::new();
+    let train = fits.train;
     let frames_rms = {
-        let e = position_errors(&frames_model, train);
+        let e = position_errors(frames_model, train);
         (e.iter().map(|e| e * e).sum::<f64>() / e.len().max(1) as f64).sqrt()
     };
     if frames_rms > PLAUSIBLE_FRAMES_ONLY_RMS_M {
@@ -2179,7 +2605,7 @@ pub fn calibrate_measured(
             (sigma, Some(class))
         }
     };
-    let calibrated = weights.sigma_position_m * fitted.identified.sigma;
+    let calibrated = fits.weights.sigma_position_m * fitted.identified.sigma;
     let ratio = if default_of.is_some() {
         crate::noise::DEFAULT_SIGMA_RATIO
     } else {
@@ -2192,14 +2618,166 @@ pub fn calibrate_measured(
         default_of,
         ratio,
     ));
+    warnings
+}
 
+/// The final fit and what it is judged by ([`review_fit`], [`findings`]).
+struct Review<'a> {
+    cfg: &'a MeasuredConfig,
+    /// The fits of the ladder (on the training tables as the Huber loss sees them).
+    fits: &'a Fits<'a>,
+    rung: ModelName,
+    settled: &'a Settled,
+    /// The frames-only model.
+    frames_model: &'a CalibratedModel,
+    /// The training tables the Huber loss saw, and the samples it bounded.
+    bounded: &'a Bounded,
+    /// The training tables as measured.
+    train: &'a [MeasurementTable],
+    test: &'a [MeasurementTable],
+    /// Training rows.
+    n_rows: usize,
+}
+
+/// The warnings, figures and coverage of the final fit ([`review_fit`]).
+struct Reviewed {
+    warnings: Vec<String>,
+    figures: SetFigures,
+    /// Each joint's training range (rad, m for a prismatic joint), chain order.
+    ranges: Vec<(f64, f64)>,
+    coverage: Option<Coverage>,
+    equilibrium: EquilibriumCheck,
+}
+
+/// The final fit judged: the warnings of the model choice (`ladder`), of the fit and its
+/// residuals, the figures of every data set, extrapolation, bounded samples, the torque
+/// equilibrium and coverage, in that order (a test set made worse first of all).
+fn review_fit(review: &Review<'_>, ladder: &LadderOutcome) -> Reviewed {
+    let (cfg, fits, rung, settled) = (review.cfg, review.fits, review.rung, review.settled);
+    let robot = fits.robot;
+    let mut warnings = ladder_warnings(cfg, fits, rung, ladder);
+    warnings.extend(fit_warnings(rung, settled.n_kept, &settled.fitted));
+    let frames_model = review.frames_model;
+    warnings.extend(residual_warnings(
+        cfg,
+        fits,
+        frames_model,
+        rung,
+        &settled.fitted,
+    ));
+    let (train, test) = (review.train, review.test);
+    let mut figures = set_figures(robot, rung, frames_model, &settled.model, train, test);
+    for w in std::mem::take(&mut figures.test_warnings) {
+        warnings.insert(0, w);
+    }
+    let ranges = training_ranges(fits.train, robot.joint_names.len());
+    let sets = Extrapolation {
+        train,
+        test,
+        ranges: &ranges,
+        n_rows: review.n_rows,
+    };
+    warnings.extend(extrapolation_warnings(fits, rung, &settled.fitted, &sets));
+    warnings.extend(crate::robust::bounded_warning(
+        &review.bounded.downweighted,
+        "training samples",
+        &review.bounded.judge.to_string(),
+    ));
+    let mut equilibrium = equilibrium_check(rung, settled, fits.weights, train);
+    warnings.extend(equilibrium.warning.take());
+    let coverage = coverage(
+        robot,
+        &ranges,
+        &cfg.workspace,
+        test,
+        cfg.rung.is_none(),
+        &ladder.range_folds,
+        ladder.range_stops.clone(),
+    );
+    warnings.extend(coverage.iter().flat_map(unvalidated_warnings));
+    Reviewed {
+        warnings,
+        figures,
+        ranges,
+        coverage,
+        equilibrium,
+    }
+}
+
+/// What the check after the fit found ([`findings`]).
+struct Findings {
+    /// Identified frames.
+    frames: Vec<FrameReport>,
+    /// Estimates no real robot can have.
+    implausible: Vec<crate::report::Implausible>,
+    /// The lengths the chosen rung held, refitted at the estimate.
+    refitted_lengths: Vec<crate::report::ParamReport>,
+}
+
+/// The identified frames (`markers`: the nominal instrument frame and marker frames), the
+/// estimates no real robot can have ([`plausibility`], then `no_equilibrium`), and the held
+/// lengths refitted ([`refit_held_lengths`]) when the Huber loss bounded no sample.
+fn findings(
+    review: &Review<'_>,
+    (base, markers): (&FrameSpec, &[(usize, FrameSpec)]),
+    no_equilibrium: Option<crate::report::Implausible>,
+) -> Findings {
+    let (fits, rung, settled) = (review.fits, review.rung, review.settled);
+    let framed = fits.start.tree;
+    let frames = frame_reports(base, markers, &settled.fitted.x, framed.params());
+    let mut implausible = plausibility(
+        &fits.refit(rung),
+        &settled.model,
+        &settled.fitted,
+        &frames,
+        review.cfg.rung.is_some(),
+    );
+    implausible.extend(no_equilibrium);
+    // Not after the Huber loss bounded samples: a bounded sample's leftover residual, far from
+    // the others' configurations, pulls the weak directions the held lengths lie along.
+    let refitted_lengths = if review.bounded.downweighted.is_empty() {
+        let (robot, train, weights) = (fits.robot, fits.train, fits.weights);
+        refit_held_lengths(rung, robot, framed, &settled.fitted, train, weights)
+    } else {
+        Vec::new()
+    };
+    Findings {
+        frames,
+        implausible,
+        refitted_lengths,
+    }
+}
+
+/// Figures of every data set for frames only and the chosen rung ([`set_figures`]).
+struct SetFigures {
+    /// Per data set (training first): name, role, rows, frames-only and calibrated figures.
+    sets: Vec<(String, SetRole, usize, PoseFigures, PoseFigures)>,
+    /// Per data set, the errors of every sample.
+    sample_errors: Vec<SampleErrors>,
+    /// Per test set where the calibration is worse than frames only, in the order they were
+    /// found (each goes to the front of the warnings).
+    test_warnings: Vec<String>,
+}
+
+/// The figures and sample errors of every training table as measured (`train`) and test
+/// table under `frames_model` and `model` (of `rung`), with a warning for each test set the
+/// calibration makes worse.
+fn set_figures(
+    robot: &Robot,
+    rung: ModelName,
+    frames_model: &CalibratedModel,
+    model: &CalibratedModel,
+    train: &[MeasurementTable],
+    test: &[MeasurementTable],
+) -> SetFigures {
     let mut sets = Vec::new();
     let mut sample_errors = Vec::new();
-    for (role, tables) in [(SetRole::Train, train_measured), (SetRole::Test, test)] {
+    let mut test_warnings = Vec::new();
+    for (role, tables) in [(SetRole::Train, train), (SetRole::Test, test)] {
         for ti in 0..tables.len() {
             let (e0, e1) = (
-                errors(&frames_model, tables, ti, None),
-                errors(&model, tables, ti, None),
+                errors(frames_model, tables, ti, None),
+                errors(model, tables, ti, None),
             );
             sample_errors.push(SampleErrors {
                 position_before_m: e0.position,
@@ -2209,26 +2787,10 @@ pub fn calibrate_measured(
                 rows: crate::report::sample_rows(&tables[ti]),
                 joints: crate::report::joint_units(&robot.joint_names, &robot.prismatic),
             });
-            let before = figures(&frames_model, tables, ti);
-            let after = figures(&model, tables, ti);
-            let worse = |kind: &str, b: f64, a: f64| {
-                format!(
-                    "test set {}: the {rung} model is worse than frames only ({kind} RMS {:.3} → \
-                     {:.3} mm): do not use this calibration there",
-                    tables[ti].name,
-                    b * 1e3,
-                    a * 1e3
-                )
-            };
-            if role == SetRole::Test && after.position_rms_m > before.position_rms_m {
-                let w = worse("position", before.position_rms_m, after.position_rms_m);
-                warnings.insert(0, w);
-            }
-            if role == SetRole::Test
-                && let (Some(b), Some(a)) = (before.distance_rms_m, after.distance_rms_m)
-                && a > b
-            {
-                warnings.insert(0, worse("distance", b, a));
+            let before = figures(frames_model, tables, ti);
+            let after = figures(model, tables, ti);
+            if role == SetRole::Test {
+                test_warnings.extend(worse_warnings(rung, &tables[ti], &before, &after));
             }
             sets.push((
                 tables[ti].name.clone(),
@@ -2239,61 +2801,145 @@ pub fn calibrate_measured(
             ));
         }
     }
-    let ranges = training_ranges(train, robot.joint_names.len());
-    // The model's own uncertainty where a test set extrapolates, beside its value on (up to
-    // 100 evenly spaced) training rows.
+    SetFigures {
+        sets,
+        sample_errors,
+        test_warnings,
+    }
+}
+
+/// Warnings of a test `table` on which the `rung` model's figures `after` are worse than
+/// frames only's `before`: position first, then distance.
+fn worse_warnings(
+    rung: ModelName,
+    table: &MeasurementTable,
+    before: &PoseFigures,
+    after: &PoseFigures,
+) -> Vec<String> {
+    let worse = |kind: &str, b: f64, a: f64| {
+        format!(
+            "test set {}: the {rung} model is worse than frames only ({kind} RMS {:.3} → \
+             {:.3} mm): do not use this calibration there",
+            table.name,
+            b * 1e3,
+            a * 1e3
+        )
+    };
+    let mut out = Vec::new();
+    if after.position_rms_m > before.position_rms_m {
+        out.push(worse(
+            "position",
+            before.position_rms_m,
+            after.position_rms_m,
+        ));
+    }
+    if let (Some(b), Some(a)) = (before.distance_rms_m, after.distance_rms_m)
+        && a > b
+    {
+        out.push(worse("distance", b, a));
+    }
+    out
+}
+
+/// The data sets an extrapolation is judged on ([`extrapolation_warnings`]).
+struct Extrapolation<'a> {
+    /// The training tables as measured.
+    train: &'a [MeasurementTable],
+    test: &'a [MeasurementTable],
+    /// Each joint's training range (rad, m for a prismatic joint), chain order.
+    ranges: &'a [(f64, f64)],
+    /// Training rows.
+    n_rows: usize,
+}
+
+/// The model's own uncertainty where a test set extrapolates, beside its value on (up to
+/// 100 evenly spaced) training rows ([`outside_warnings`]); nothing when no test row lies
+/// beyond the training ranges.
+fn extrapolation_warnings(
+    fits: &Fits<'_>,
+    rung: ModelName,
+    fitted: &Fitted,
+    sets: &Extrapolation<'_>,
+) -> Vec<String> {
+    let (robot, framed, weights) = (fits.robot, fits.start.tree, fits.weights);
+    let ranges = sets.ranges;
     let outside_any = |t: &MeasurementTable| {
         (t.rows.iter())
-            .any(|r| (r.q.iter().zip(&ranges)).any(|(&q, &range)| past_range(q, range).is_some()))
+            .any(|r| (r.q.iter().zip(ranges)).any(|(&q, &range)| past_range(q, range).is_some()))
     };
-    if test.iter().any(outside_any) {
-        let rms = |v: &[f64]| (v.iter().map(|s| s * s).sum::<f64>() / v.len().max(1) as f64).sqrt();
-        let sample: Vec<MeasurementTable> = (train_measured.iter())
-            .map(|t| MeasurementTable {
-                rows: (t.rows.iter())
-                    .step_by((n_rows / 100).max(1))
-                    .cloned()
-                    .collect(),
-                ..t.clone()
-            })
-            .collect();
-        let reference: Vec<f64> =
-            prediction_sigmas(rung, robot, &framed, &fitted, &sample, weights)
-                .into_iter()
-                .flatten()
-                .collect();
-        for t in test.iter().filter(|t| outside_any(t)) {
-            let sigmas = prediction_sigmas(
-                rung,
-                robot,
-                &framed,
-                &fitted,
-                std::slice::from_ref(t),
-                weights,
-            );
-            let sigmas = sigmas.first().map_or(&[][..], Vec::as_slice);
-            warnings.extend(outside_warnings(t, robot, &ranges, sigmas, rms(&reference)));
-        }
+    let mut warnings = Vec::new();
+    if !sets.test.iter().any(outside_any) {
+        return warnings;
     }
-    warnings.extend(crate::robust::bounded_warning(
-        &downweighted,
-        "training samples",
-        &judge.to_string(),
-    ));
+    let rms = |v: &[f64]| (v.iter().map(|s| s * s).sum::<f64>() / v.len().max(1) as f64).sqrt();
+    let sample: Vec<MeasurementTable> = (sets.train.iter())
+        .map(|t| MeasurementTable {
+            rows: (t.rows.iter())
+                .step_by((sets.n_rows / 100).max(1))
+                .cloned()
+                .collect(),
+            ..t.clone()
+        })
+        .collect();
+    let reference: Vec<f64> = prediction_sigmas(rung, robot, framed, fitted, &sample, weights)
+        .into_iter()
+        .flatten()
+        .collect();
+    for t in sets.test.iter().filter(|t| outside_any(t)) {
+        let sigmas = prediction_sigmas(
+            rung,
+            robot,
+            framed,
+            fitted,
+            std::slice::from_ref(t),
+            weights,
+        );
+        let sigmas = sigmas.first().map_or(&[][..], Vec::as_slice);
+        warnings.extend(outside_warnings(t, robot, ranges, sigmas, rms(&reference)));
+    }
+    warnings
+}
+
+/// How far the chosen model is from its torque equilibrium ([`equilibrium_check`]).
+struct EquilibriumCheck {
+    /// With compliance: one more fixed-point step's largest tip motion over the training
+    /// rows, m.
+    step_m: Option<f64>,
+    /// The finding of a fixed point iterated and still not reached.
+    no_equilibrium: Option<crate::report::Implausible>,
+    /// The warning of loads evaluated at the undeflected robot that the deflection changes.
+    warning: Option<String>,
+}
+
+/// One more fixed-point step of the torque equilibrium of the `settled` model (of `rung`)
+/// over the training rows as measured (`train`), against [`EQUILIBRIUM_SHARE`] of the noise
+/// (`weights`, scaled by the fit's σ): a finding when the model iterated the equilibrium, a
+/// warning when it evaluates the loads of the undeflected robot.
+fn equilibrium_check(
+    rung: ModelName,
+    settled: &Settled,
+    weights: Weights,
+    train: &[MeasurementTable],
+) -> EquilibriumCheck {
+    let model = &settled.model;
     let equilibrium_step_m = model.compliance.is_some().then(|| {
-        (train_measured.iter().flat_map(|t| &t.rows))
+        (train.iter().flat_map(|t| &t.rows))
             .map(|r| model.equilibrium_step_m(&r.q))
             .fold(0.0, f64::max)
     });
-    let noise = weights.sigma_position_m * fitted.identified.sigma;
-    let mut no_equilibrium = None;
+    let noise = weights.sigma_position_m * settled.fitted.identified.sigma;
+    let mut check = EquilibriumCheck {
+        step_m: equilibrium_step_m,
+        no_equilibrium: None,
+        warning: None,
+    };
     if let Some(step) = equilibrium_step_m
         && step > EQUILIBRIUM_SHARE * noise
         && model.equilibrium
     {
         // The fixed point was iterated and is still not reached: the iteration does not
         // contract, and its prediction is where a fixed number of steps happens to stop.
-        no_equilibrium = Some(crate::report::Implausible {
+        check.no_equilibrium = Some(crate::report::Implausible {
             kind: crate::report::ImplausibleKind::NoEquilibrium,
             message: format!(
                 "the compliances of the {rung} model are so large that the robot's weight has \
@@ -2314,7 +2960,7 @@ pub fn calibrate_measured(
     } else if let Some(step) = equilibrium_step_m
         && step > EQUILIBRIUM_SHARE * noise
     {
-        warnings.push(format!(
+        check.warning = Some(format!(
             "the deflection changes the gravity loads: one more fixed-point step of the torque \
              equilibrium moves the tips by up to {:.3} mm, more than {EQUILIBRIUM_SHARE} of the \
              noise ({:.3} mm per axis), and the model evaluates the loads of the undeflected \
@@ -2323,60 +2969,7 @@ pub fn calibrate_measured(
             noise * 1e3
         ));
     }
-    let coverage = coverage(
-        robot,
-        &ranges,
-        &cfg.workspace,
-        test,
-        cfg.rung.is_none(),
-        &range_folds_used,
-        range_stops,
-    );
-    warnings.extend(coverage.iter().flat_map(unvalidated_warnings));
-    let frames = frame_reports(&base, &markers, &fitted.x, framed.params());
-    let mut implausible = plausibility(
-        &Refit {
-            rung,
-            robot,
-            start: &start,
-            offsets: &offsets,
-            train,
-            weights,
-        },
-        &model,
-        &fitted,
-        &frames,
-        cfg.rung.is_some(),
-    );
-    implausible.extend(no_equilibrium);
-    // Not after the Huber loss bounded samples: a bounded sample's leftover residual, far from
-    // the others' configurations, pulls the weak directions the held lengths lie along.
-    let refitted_lengths = if downweighted.is_empty() {
-        refit_held_lengths(rung, robot, &framed, &fitted, train, weights)
-    } else {
-        Vec::new()
-    };
-    Ok(MeasuredOutcome {
-        refitted_lengths,
-        rung,
-        ladder,
-        fitted,
-        frames_only,
-        model,
-        frames,
-        tree: framed,
-        sets,
-        sample_errors,
-        weights,
-        coverage,
-        range_folds: range_folds_used,
-        training_ranges: ranges,
-        downweighted,
-        equilibrium_step_m,
-        equilibrium_refits: equilibrium_iterations,
-        warnings,
-        implausible,
-    })
+    check
 }
 
 pub use hapcal_contract::{
@@ -3250,13 +3843,39 @@ pub fn run_tables(
     mut test: Vec<MeasurementTable>,
     start: std::time::Instant,
 ) -> Result<crate::report::Outcome> {
-    use crate::report::{CalibrationReport, Figures, ParamReport, SetReport};
     let tips: Vec<String> = std::iter::once(plan.tip.clone())
         .chain(plan.tips.iter().cloned())
         .collect();
     split_test_last(&mut train, &mut test, plan.test_last)?;
+    let mut warnings = table_warnings(robot, &train, &test);
+    let cfg = plan_config(plan, robot, tips.len())?;
+    let robot = &Robot {
+        gravity_dir: Vector3::from(plan.gravity),
+        ..robot.clone()
+    };
+    let out = calibrate_measured(robot, &train, &test, &cfg)?;
+    warnings.extend(out.warnings.iter().cloned());
+    let report = calibration_report(plan, robot, &out, warnings, start);
+    let record = calibration_record(robot, &out, &report, &tips, &train);
+    Ok(crate::report::Outcome {
+        report,
+        device: device.clone(),
+        device_path: plan.device.clone(),
+        model: out.model,
+        calibrated: None,
+        record: Some(record),
+    })
+}
+
+/// The warnings of the tables as read: the columns they ignored (with a hint for the joints
+/// off the measured paths of `robot`), then each table's own warnings, once each.
+fn table_warnings(
+    robot: &Robot,
+    train: &[MeasurementTable],
+    test: &[MeasurementTable],
+) -> Vec<String> {
     let mut warnings: Vec<String> = Vec::new();
-    let mut ignored: Vec<String> = (train.iter().chain(&test))
+    let mut ignored: Vec<String> = (train.iter().chain(test))
         .flat_map(|t| t.ignored_columns.iter().cloned())
         .collect();
     ignored.sort();
@@ -3279,12 +3898,21 @@ pub fn run_tables(
         };
         warnings.push(format!("columns ignored: {}{hint}", ignored.join(", ")));
     }
-    for w in (train.iter().chain(&test)).flat_map(|t| &t.warnings) {
+    for w in (train.iter().chain(test)).flat_map(|t| &t.warnings) {
         if !warnings.contains(w) {
             warnings.push(w.clone());
         }
     }
-    let cfg = MeasuredConfig {
+    warnings
+}
+
+/// The settings of [`calibrate_measured`] from `plan`, with marker `k` on tip `k` of the
+/// `n_tips` tips.
+///
+/// # Errors
+/// A model measurement files cannot fit; an unreadable workspace file.
+fn plan_config(plan: &crate::inputs::Plan, robot: &Robot, n_tips: usize) -> Result<MeasuredConfig> {
+    Ok(MeasuredConfig {
         rung: {
             plan.model.check_fits(DataKind::Measurements)?;
             plan.model.model()
@@ -3292,36 +3920,51 @@ pub fn run_tables(
         folds: plan.folds,
         sigma_m: plan.sigma_m,
         sigma_rad: plan.sigma_rad,
-        marker_tips: (0..tips.len()).collect(),
+        marker_tips: (0..n_tips).collect(),
         workspace: match &plan.workspace {
             Some(path) => workspace_configurations(path, robot, &plan.units)?,
             None => Vec::new(),
         },
         max_evaluations: None,
-    };
-    let robot = &Robot {
-        gravity_dir: Vector3::from(plan.gravity),
-        ..robot.clone()
-    };
-    let out = calibrate_measured(robot, &train, &test, &cfg)?;
-    warnings.extend(out.warnings.iter().cloned());
-    let id = &out.fitted.identified;
-    let parameters = (id.covariance.free.iter())
+    })
+}
+
+/// The identified values of `id` with their σ (frames excluded, or only the frames with
+/// `frames`), in the units of `robot`'s compliances (`masses`: with link masses).
+fn identified_values(
+    id: &Identified,
+    frames: bool,
+    masses: bool,
+) -> Vec<crate::report::ParamReport> {
+    (id.covariance.free.iter())
         .zip(id.covariance.std())
-        .filter(|(i, _)| !crate::report::is_frame_param(id.layout.name(**i)))
-        .map(|(&i, std)| ParamReport {
+        .filter(|(i, _)| crate::report::is_frame_param(id.layout.name(**i)) == frames)
+        .map(|(&i, std)| crate::report::ParamReport {
             name: id.layout.name(i).to_owned(),
             value: id.fit.x[i],
             std,
-            unit: compliance_unit(id.layout.name(i), !robot.masses.is_empty())
-                .unwrap_or_else(|| id.layout.spec(i).unit.symbol()),
+            unit: if frames {
+                None
+            } else {
+                compliance_unit(id.layout.name(i), masses)
+            }
+            .unwrap_or_else(|| id.layout.spec(i).unit.symbol()),
         })
-        .collect();
-    let pruned = crate::fit::pruned_report(id)
+        .collect()
+}
+
+/// The kinematic parameters of `id` the data did not determine (frames excluded).
+fn pruned_kinematics(id: &Identified) -> Vec<crate::report::PrunedReport> {
+    crate::fit::pruned_report(id)
         .into_iter()
         .filter(|p| !crate::report::is_frame_param(&p.name))
-        .collect();
-    let correlated = (id.covariance.correlated_pairs(0.95).into_iter())
+        .collect()
+}
+
+/// The pairs of kinematic parameters of `id` correlated beyond 0.95, with their correlation
+/// (frames excluded).
+fn correlated_kinematics(id: &Identified) -> Vec<(String, String, f64)> {
+    (id.covariance.correlated_pairs(0.95).into_iter())
         .map(|(a, b, c)| {
             (
                 id.layout.name(a).to_owned(),
@@ -3330,8 +3973,14 @@ pub fn run_tables(
             )
         })
         .filter(|(a, b, _)| !crate::report::is_frame_param(a) && !crate::report::is_frame_param(b))
-        .collect();
-    let placements = (out.sets.iter().zip(&out.sample_errors))
+        .collect()
+}
+
+/// The report of each data set of `out`: its frames-only and calibrated figures and the
+/// errors of every sample.
+fn set_reports(out: &MeasuredOutcome) -> Vec<crate::report::SetReport> {
+    use crate::report::{Figures, SetReport};
+    (out.sets.iter().zip(&out.sample_errors))
         .map(|((name, role, n_rows, before, after), errors)| {
             let f = |p: &PoseFigures| Figures {
                 mean_absolute_error_m: None,
@@ -3348,8 +3997,20 @@ pub fn run_tables(
                 errors: Some(errors.clone()),
             }
         })
-        .collect();
-    let report = CalibrationReport {
+        .collect()
+}
+
+/// The report of the measured calibration `out` of `robot` with `plan`'s settings:
+/// `warnings` the tables' and the calibration's, `start` when the command began.
+fn calibration_report(
+    plan: &crate::inputs::Plan,
+    robot: &Robot,
+    out: &MeasuredOutcome,
+    warnings: Vec<String>,
+    start: std::time::Instant,
+) -> crate::report::CalibrationReport {
+    let id = &out.fitted.identified;
+    crate::report::CalibrationReport {
         device: plan.device.display().to_string(),
         model: out.rung,
         folds: plan.folds,
@@ -3359,9 +4020,9 @@ pub fn run_tables(
         frames: out.frames.clone(),
         sigma_m: out.weights.sigma_position_m * id.sigma,
         sigma_source: id.sigma_source.name(),
-        parameters,
-        pruned,
-        correlated,
+        parameters: identified_values(id, false, !robot.masses.is_empty()),
+        pruned: pruned_kinematics(id),
+        correlated: correlated_kinematics(id),
         observability: None,
         warnings,
         termination: id.fit.termination.clone(),
@@ -3369,7 +4030,7 @@ pub fn run_tables(
         n_evaluations: id.fit.n_evaluations,
         n_jacobians: id.fit.n_jacobians,
         rounds: id.rounds,
-        placements,
+        placements: set_reports(out),
         elapsed_s: start.elapsed().as_secs_f64(),
         downweighted: out.downweighted.clone(),
         range_folds: out.range_folds.clone(),
@@ -3379,20 +4040,24 @@ pub fn run_tables(
         implausible: out.implausible.clone(),
         refitted_lengths: out.refitted_lengths.clone(),
         origins: crate::report::joint_origins(robot.tree.tips()),
-    };
-    let frame_values: Vec<ParamReport> = (id.covariance.free.iter())
-        .zip(id.covariance.std())
-        .filter(|(i, _)| crate::report::is_frame_param(id.layout.name(**i)))
-        .map(|(&i, std)| ParamReport {
-            name: id.layout.name(i).to_owned(),
-            value: id.fit.x[i],
-            std,
-            unit: id.layout.spec(i).unit.symbol(),
-        })
-        .collect();
-    let record = crate::record::measured_record(&crate::record::MeasuredRecord {
+    }
+}
+
+/// The calibration record of `out` ([`crate::record::measured_record`]): `report` its report,
+/// `tips` the calibration's tip links in marker order, `train` the training tables (the
+/// joints' training ranges and rows).
+fn calibration_record(
+    robot: &Robot,
+    out: &MeasuredOutcome,
+    report: &crate::report::CalibrationReport,
+    tips: &[String],
+    train: &[MeasurementTable],
+) -> hapcal_contract::Calibration {
+    let id = &out.fitted.identified;
+    let frame_values = identified_values(id, true, !robot.masses.is_empty());
+    crate::record::measured_record(&crate::record::MeasuredRecord {
         model: out.rung,
-        tips: &tips,
+        tips,
         load_tips: &robot.load_tips,
         joint_names: &robot.joint_names,
         prismatic: &robot.prismatic,
@@ -3402,16 +4067,8 @@ pub fn run_tables(
         frames: &report.frames,
         frame_values: &frame_values,
         held: crate::record::held_values(id),
-        ranges: training_ranges(&train, robot.joint_names.len()),
+        ranges: training_ranges(train, robot.joint_names.len()),
         rows: train.iter().map(|t| t.rows.len()).sum(),
-    });
-    Ok(crate::report::Outcome {
-        report,
-        device: device.clone(),
-        device_path: plan.device.clone(),
-        model: out.model,
-        calibrated: None,
-        record: Some(record),
     })
 }
 
