@@ -233,158 +233,22 @@ impl Model {
             message,
         };
         let model_error = |what: &str, e: Error| invalid(format!("{what}: {e}"));
-        let mut pending: Vec<Pending> = (0..n_joints).map(|_| Pending::Direct).collect();
-        for c in &file.capstan {
-            let slot = (c.joint.checked_sub(1))
-                .and_then(|j| pending.get_mut(j))
-                .ok_or_else(|| {
-                    invalid(format!(
-                        "[[capstan]] on joint {}: the device has joints 1..={n_joints}",
-                        c.joint
-                    ))
-                })?;
-            if matches!(slot, Pending::Capstan { .. }) {
-                return Err(invalid(format!(
-                    "two [[capstan]] entries on joint {}",
-                    c.joint
-                )));
-            }
-            *slot = Pending::Capstan {
-                ratio: c.ratio,
-                drum_distance_m: c.drum_distance_m,
-                params: CapstanParams::default(),
-            };
-        }
-
+        let mut pending = pending_capstans(&file, n_joints, origin)?;
         let mut cheb: Vec<Vec<Option<f64>>> = vec![Vec::new(); n_joints];
         let mut compliance = vec![0.0; n_joints];
         let record = file.calibration.unwrap_or_default();
         record
             .check(text, origin)
             .map_err(|e| contract_error(e, origin))?;
-        // A refusal at the line of the value's name.
-        let at = |name: &str, message: String| {
-            let (line, column) = locate(text, name);
-            contract_error(
-                ContractError {
-                    origin: origin.to_owned(),
-                    line,
-                    column,
-                    message: format!("[calibration.values] {name}: {message}"),
-                },
-                origin,
-            )
-        };
-        let joint_slot = |name: &str, joint: usize| {
-            (1..=n_joints)
-                .contains(&joint)
-                .then_some(joint - 1)
-                .ok_or_else(|| at(name, format!("the device has joints 1..={n_joints}")))
-        };
-        for v in &record.values {
-            let name = v.name.as_str();
-            // The contract's check parsed every name.
-            let parsed = ValueName::parse(name).map_err(|message| at(name, message))?;
-            match parsed {
-                ValueName::Dh { row, .. } => {
-                    // A kinematic deviation, already in the rows.
-                    if row >= rows.len() {
-                        return Err(at(
-                            name,
-                            format!("the [[dh]] table has rows 0..{}", rows.len()),
-                        ));
-                    }
-                }
-                ValueName::Capstan { joint, field } => {
-                    let slot = &mut pending[joint_slot(name, joint)?];
-                    let Pending::Capstan { params, .. } = slot else {
-                        return Err(at(name, format!("joint {joint} has no [[capstan]]")));
-                    };
-                    *match field {
-                        CapstanField::C => &mut params.c_rad,
-                        CapstanField::Re => &mut params.re,
-                        CapstanField::ROut => &mut params.r_o_m,
-                        CapstanField::BetaOut => &mut params.beta_o_rad,
-                        CapstanField::RIn => &mut params.r_i_m,
-                        CapstanField::BetaIn => &mut params.beta_i_rad,
-                    } = v.value;
-                }
-                ValueName::Chebyshev { joint, index } => {
-                    let coeffs = &mut cheb[joint_slot(name, joint)?];
-                    if index >= crate::MAX_COEFFS {
-                        return Err(at(
-                            name,
-                            format!(
-                                "the runtime holds at most {} coefficients",
-                                crate::MAX_COEFFS
-                            ),
-                        ));
-                    }
-                    if coeffs.len() <= index {
-                        coeffs.resize(index + 1, None);
-                    }
-                    coeffs[index] = Some(v.value);
-                }
-                ValueName::HandleCompliance { joint } => {
-                    compliance[joint_slot(name, joint)?] = v.value;
-                }
-                // A frame of the measurement rig, not part of the evaluated model.
-                ValueName::Element { element, .. } if record.frames.contains_key(&element) => {}
-                ValueName::Element { .. }
-                | ValueName::Compliance { .. }
-                | ValueName::Transversal { .. }
-                | ValueName::Harmonic { .. } => {
-                    return Err(at(
-                        name,
-                        "a robot's value, which a haptic device's model cannot evaluate: the \
-                         runtime's device model holds capstans (capstan<j>.*), joint \
-                         polynomials (joint<j>.cheb<k>), the handle's compliance \
-                         (joint_compliance.j<k>) and D-H deviations; load a D-H robot's device \
-                         file with Robot::load_device, a calibrated URDF with Robot::load_urdf"
-                            .to_owned(),
-                    ));
-                }
-            }
-        }
+        apply_values(
+            &record,
+            &RecordText { text, origin },
+            rows.len(),
+            &mut pending,
+            (&mut cheb, &mut compliance),
+        )?;
 
-        let mut drives = Vec::with_capacity(n_joints);
-        for (j, (p, coeffs)) in pending.iter().zip(&cheb).enumerate() {
-            let joint = j + 1;
-            let ratio = match p {
-                Pending::Direct => 1.0,
-                Pending::Capstan { ratio, .. } => *ratio,
-            };
-            let drive = if coeffs.is_empty() {
-                match p {
-                    Pending::Direct => Ok(Drive::DIRECT),
-                    Pending::Capstan {
-                        ratio,
-                        drum_distance_m,
-                        params,
-                    } => Drive::capstan(*ratio, *drum_distance_m, *params),
-                }
-                .map_err(|e| model_error(&format!("capstan{joint}"), e))?
-            } else {
-                let mut dense = [0.0; crate::MAX_COEFFS];
-                for (k, c) in coeffs.iter().enumerate() {
-                    dense[k] = c.ok_or_else(|| {
-                        invalid(format!(
-                            "joint{joint}.cheb{k} is missing (coefficients 0..={})",
-                            coeffs.len() - 1
-                        ))
-                    })?;
-                }
-                let limits = &file.joint[j];
-                Drive::polynomial(
-                    ratio,
-                    limits.lower_rad,
-                    limits.upper_rad,
-                    &dense[..coeffs.len()],
-                )
-                .map_err(|e| model_error(&format!("joint{joint}.cheb*"), e))?
-            };
-            drives.push(drive);
-        }
+        let drives = drives_of(&pending, &cheb, &file.joint, origin)?;
         let model =
             Model::from_dh(convention, &rows, &drives).map_err(|e| model_error("[[dh]]", e))?;
         let model = if compliance.iter().any(|&k| k != 0.0) {
@@ -435,6 +299,208 @@ impl Model {
             None => Ok(model),
         }
     }
+}
+
+/// The drives the device file's `[[capstan]]` entries declare, before their calibrated
+/// values: a capstan per entry, direct elsewhere.
+///
+/// # Errors
+/// A capstan on a joint the device does not have, or two on one joint.
+fn pending_capstans(file: &File, n_joints: usize, origin: &str) -> Result<Vec<Pending>, LoadError> {
+    let invalid = |message: String| LoadError::Invalid {
+        origin: origin.to_owned(),
+        message,
+    };
+    let mut pending: Vec<Pending> = (0..n_joints).map(|_| Pending::Direct).collect();
+    for c in &file.capstan {
+        let slot = (c.joint.checked_sub(1))
+            .and_then(|j| pending.get_mut(j))
+            .ok_or_else(|| {
+                invalid(format!(
+                    "[[capstan]] on joint {}: the device has joints 1..={n_joints}",
+                    c.joint
+                ))
+            })?;
+        if matches!(slot, Pending::Capstan { .. }) {
+            return Err(invalid(format!(
+                "two [[capstan]] entries on joint {}",
+                c.joint
+            )));
+        }
+        *slot = Pending::Capstan {
+            ratio: c.ratio,
+            drum_distance_m: c.drum_distance_m,
+            params: CapstanParams::default(),
+        };
+    }
+    Ok(pending)
+}
+
+/// A device file's text and where it came from, for errors at a value's line.
+struct RecordText<'a> {
+    /// The file's text.
+    text: &'a str,
+    /// Where it came from (a file name).
+    origin: &'a str,
+}
+
+/// The record's `[calibration.values]` set on the device: capstan parameters into `pending`,
+/// Chebyshev coefficients and handle compliances into `(cheb, compliance)` (per joint);
+/// D-H deviations are already in the `n_rows` rows.
+///
+/// # Errors
+/// A value on a joint or row the device does not have, a capstan value on a joint without
+/// capstan, more coefficients than the runtime holds, a robot's value.
+fn apply_values(
+    record: &Calibration,
+    at_text: &RecordText<'_>,
+    n_rows: usize,
+    pending: &mut [Pending],
+    (cheb, compliance): (&mut [Vec<Option<f64>>], &mut [f64]),
+) -> Result<(), LoadError> {
+    let (text, origin) = (at_text.text, at_text.origin);
+    let n_joints = pending.len();
+    // A refusal at the line of the value's name.
+    let at = |name: &str, message: String| {
+        let (line, column) = locate(text, name);
+        contract_error(
+            ContractError {
+                origin: origin.to_owned(),
+                line,
+                column,
+                message: format!("[calibration.values] {name}: {message}"),
+            },
+            origin,
+        )
+    };
+    let joint_slot = |name: &str, joint: usize| {
+        (1..=n_joints)
+            .contains(&joint)
+            .then_some(joint - 1)
+            .ok_or_else(|| at(name, format!("the device has joints 1..={n_joints}")))
+    };
+    for v in &record.values {
+        let name = v.name.as_str();
+        // The contract's check parsed every name.
+        let parsed = ValueName::parse(name).map_err(|message| at(name, message))?;
+        match parsed {
+            ValueName::Dh { row, .. } => {
+                // A kinematic deviation, already in the rows.
+                if row >= n_rows {
+                    return Err(at(name, format!("the [[dh]] table has rows 0..{n_rows}")));
+                }
+            }
+            ValueName::Capstan { joint, field } => {
+                let slot = &mut pending[joint_slot(name, joint)?];
+                let Pending::Capstan { params, .. } = slot else {
+                    return Err(at(name, format!("joint {joint} has no [[capstan]]")));
+                };
+                *match field {
+                    CapstanField::C => &mut params.c_rad,
+                    CapstanField::Re => &mut params.re,
+                    CapstanField::ROut => &mut params.r_o_m,
+                    CapstanField::BetaOut => &mut params.beta_o_rad,
+                    CapstanField::RIn => &mut params.r_i_m,
+                    CapstanField::BetaIn => &mut params.beta_i_rad,
+                } = v.value;
+            }
+            ValueName::Chebyshev { joint, index } => {
+                let coeffs = &mut cheb[joint_slot(name, joint)?];
+                if index >= crate::MAX_COEFFS {
+                    return Err(at(
+                        name,
+                        format!(
+                            "the runtime holds at most {} coefficients",
+                            crate::MAX_COEFFS
+                        ),
+                    ));
+                }
+                if coeffs.len() <= index {
+                    coeffs.resize(index + 1, None);
+                }
+                coeffs[index] = Some(v.value);
+            }
+            ValueName::HandleCompliance { joint } => {
+                compliance[joint_slot(name, joint)?] = v.value;
+            }
+            // A frame of the measurement rig, not part of the evaluated model.
+            ValueName::Element { element, .. } if record.frames.contains_key(&element) => {}
+            ValueName::Element { .. }
+            | ValueName::Compliance { .. }
+            | ValueName::Transversal { .. }
+            | ValueName::Harmonic { .. } => {
+                return Err(at(
+                    name,
+                    "a robot's value, which a haptic device's model cannot evaluate: the \
+                     runtime's device model holds capstans (capstan<j>.*), joint \
+                     polynomials (joint<j>.cheb<k>), the handle's compliance \
+                     (joint_compliance.j<k>) and D-H deviations; load a D-H robot's device \
+                     file with Robot::load_device, a calibrated URDF with Robot::load_urdf"
+                        .to_owned(),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Each joint's drive: a polynomial where the record holds Chebyshev coefficients, else the
+/// capstan or direct drive of `pending`; `joints` are the file's `[[joint]]` entries (their limits,
+/// rad, bound the polynomial).
+///
+/// # Errors
+/// A missing coefficient, or a drive the runtime cannot build.
+fn drives_of(
+    pending: &[Pending],
+    cheb: &[Vec<Option<f64>>],
+    joints: &[JointEntry],
+    origin: &str,
+) -> Result<Vec<Drive>, LoadError> {
+    let invalid = |message: String| LoadError::Invalid {
+        origin: origin.to_owned(),
+        message,
+    };
+    let model_error = |what: &str, e: Error| invalid(format!("{what}: {e}"));
+    let n_joints = pending.len();
+    let mut drives = Vec::with_capacity(n_joints);
+    for (j, (p, coeffs)) in pending.iter().zip(cheb).enumerate() {
+        let joint = j + 1;
+        let ratio = match p {
+            Pending::Direct => 1.0,
+            Pending::Capstan { ratio, .. } => *ratio,
+        };
+        let drive = if coeffs.is_empty() {
+            match p {
+                Pending::Direct => Ok(Drive::DIRECT),
+                Pending::Capstan {
+                    ratio,
+                    drum_distance_m,
+                    params,
+                } => Drive::capstan(*ratio, *drum_distance_m, *params),
+            }
+            .map_err(|e| model_error(&format!("capstan{joint}"), e))?
+        } else {
+            let mut dense = [0.0; crate::MAX_COEFFS];
+            for (k, c) in coeffs.iter().enumerate() {
+                dense[k] = c.ok_or_else(|| {
+                    invalid(format!(
+                        "joint{joint}.cheb{k} is missing (coefficients 0..={})",
+                        coeffs.len() - 1
+                    ))
+                })?;
+            }
+            let limits = &joints[j];
+            Drive::polynomial(
+                ratio,
+                limits.lower_rad,
+                limits.upper_rad,
+                &dense[..coeffs.len()],
+            )
+            .map_err(|e| model_error(&format!("joint{joint}.cheb*"), e))?
+        };
+        drives.push(drive);
+    }
+    Ok(drives)
 }
 
 /// Largest magnitude of a length (m) or an angle (rad) that a device file may hold: a key
