@@ -93,10 +93,10 @@ fn n_rows(set: &DataSet) -> usize {
 }
 
 /// Runs a calibration: reads everything, chooses the model by cross-validation on the training
-/// data, identifies, and evaluates on training and test data. The stages: [`load_checked`],
+/// data, identifies, and evaluates on training and test data. The stages: `load_checked`,
 /// then the workflow of the data's kind (a haptic device's logs in
 /// [`crate::haptic::calibrate_logs`], measurement files in [`crate::measured::run_tables`],
-/// socket recordings and distance logs in [`calibrate_joints`]).
+/// socket recordings and distance logs in `calibrate_joints`).
 ///
 /// # Errors
 /// Unreadable or inconsistent input, or too few configurations for the kept parameters.
