@@ -3062,6 +3062,18 @@ fn said_cell(r: &CaseResult) -> String {
 /// the check said; every mistake's ratio.
 pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> String {
     let mut s = String::new();
+    write_report_intro(&mut s, command, machine);
+    write_visible_summaries(&mut s, results);
+    write_family_tables(&mut s, results);
+    write_invisible_mistakes(&mut s, results);
+    write_not_named_right(&mut s, results);
+    write_every_ratio(&mut s, results);
+    s
+}
+
+/// The report's title, what the outcomes mean, how visibility is screened, and the command
+/// and machine of the run.
+fn write_report_intro(s: &mut String, command: &str, machine: &str) {
     let frames = ModelName::FramesOnly.name();
     let geometric = ModelName::Geometric.name();
     let _ = writeln!(s, "# Setup check: the hostile sweep\n");
@@ -3107,6 +3119,11 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
     );
     let _ = writeln!(s, "Command: `{command}`  ");
     let _ = writeln!(s, "Machine: {machine}\n");
+}
+
+/// Per half, and within it for the earlier and the newer families: the one-line summary over
+/// visible mistakes ([`VisibleSummary::line`]).
+fn write_visible_summaries(s: &mut String, results: &[CaseResult]) {
     let _ = writeln!(s, "## Over visible mistakes\n");
     for half in [Half::Tuning, Half::HeldBack] {
         let sum = VisibleSummary::of(results.iter().filter(|r| r.case.half == half));
@@ -3129,6 +3146,11 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
         "\nFalse alarms are counted over the correct data and the visible mistakes of the \
          latency family (a stop on them is a false alarm).\n"
     );
+}
+
+/// The family tables over all cases and per half, then per half over the visible mistakes
+/// and the correct data.
+fn write_family_tables(s: &mut String, results: &[CaseResult]) {
     let halves = [
         ("All cases", None),
         ("Tuning half", Some(Half::Tuning)),
@@ -3139,7 +3161,7 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
             .filter(|r| filter.is_none_or(|h| r.case.half == h))
             .collect();
         let _ = writeln!(s, "## {title} ({} cases)\n", sel.len());
-        family_table(&mut s, &sel);
+        family_table(s, &sel);
     }
     for (title, half) in [
         ("Tuning half", Half::Tuning),
@@ -3156,8 +3178,12 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
             "## {title}, visible mistakes only ({n_visible} mistakes, {} correct)\n",
             sel.len() - n_visible
         );
-        family_table(&mut s, &sel);
+        family_table(s, &sel);
     }
+}
+
+/// The table of the mistakes invisible in the data, with their ratio and outcome.
+fn write_invisible_mistakes(s: &mut String, results: &[CaseResult]) {
     let invisible: Vec<&CaseResult> = (results.iter())
         .filter(|r| !r.case.family.is_correct() && r.visibility.is_invisible())
         .collect();
@@ -3182,6 +3208,10 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
         );
     }
     let _ = writeln!(s);
+}
+
+/// The table of the mistakes not named right and of the false alarms.
+fn write_not_named_right(s: &mut String, results: &[CaseResult]) {
     let _ = writeln!(s, "## Cases not named right\n");
     let _ = writeln!(
         s,
@@ -3215,6 +3245,10 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
         );
     }
     let _ = writeln!(s);
+}
+
+/// The table of every mistake's screening: its ratio, or why there is none.
+fn write_every_ratio(s: &mut String, results: &[CaseResult]) {
     let _ = writeln!(s, "## Every mistake's ratio\n");
     let _ = writeln!(
         s,
@@ -3241,5 +3275,4 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
             r.outcome.name(),
         );
     }
-    s
 }
