@@ -273,15 +273,9 @@ fn agreement(verdict: &str, calibrated: &Value) -> String {
     words
 }
 
-/// Runs every recording; with `check`, verifies the required verdicts without writing.
-pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
-    let (hapcal, pre) = crate::hapcal_cmd(bin);
-    let (hapcal, pre) = (&hapcal, pre.as_slice());
-    let _ = M;
-    let dir = "docs/results/diagnose-real";
-    let tmp = sh.create_temp_dir()?;
-    let mut md = String::from(
-        "# The sim-to-real gap of real robots\n\nWritten by `cargo xtask diagnose-real` (release \
+/// The report's title and how to read it: what the diagnosis starts from, when it names an
+/// effect, what the ladder gives.
+const INTRO: &str = "# The sim-to-real gap of real robots\n\nWritten by `cargo xtask diagnose-real` (release \
          build): one `hapcal diagnose … --json` per recording, the command below each heading. \
          The diagnosis starts from the geometric calibration of the training rows; its floor is \
          the stated instrument σ, else the repeatability of repeated poses, else the sockets' \
@@ -291,195 +285,44 @@ pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
          over the blocked cross-validation folds undercuts the baseline's by two standard \
          errors, and it closes at least 20 % of the gap above the floor (docs/diagnosis.md §7). The ladder gives the RMS of the 3-D error \
          (mm): cross-validated on the training rows, and on each held-out set. Residual maps: \
-         docs/results/diagnose-real/*.svg.\n\nMachine: 2 cores.\n",
-    );
+         docs/results/diagnose-real/*.svg.\n\nMachine: 2 cores.\n";
+
+/// Folder of the residual maps.
+const MAPS_DIR: &str = "docs/results/diagnose-real";
+
+/// How to run `hapcal`: the program and the arguments before the subcommand.
+#[derive(Clone, Copy)]
+struct Hapcal<'a> {
+    program: &'a std::ffi::OsStr,
+    pre: &'a [std::ffi::OsString],
+}
+
+/// Runs every recording; with `check`, verifies the required verdicts without writing.
+pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
+    let (program, pre) = crate::hapcal_cmd(bin);
+    let hapcal = Hapcal {
+        program: &program,
+        pre: pre.as_slice(),
+    };
+    let _ = M;
+    let tmp = sh.create_temp_dir()?;
+    let mut md = String::from(INTRO);
     let mut failures = Vec::new();
     for rec in RECORDINGS {
-        let args: &[&str] = rec.args;
         let svg = if check {
             tmp.path().join(format!("{}.svg", rec.id))
         } else {
-            sh.create_dir(dir)?;
-            std::path::PathBuf::from(format!("{dir}/{}.svg", rec.id))
+            sh.create_dir(MAPS_DIR)?;
+            std::path::PathBuf::from(format!("{MAPS_DIR}/{}.svg", rec.id))
         };
-        let json = cmd!(
-            sh,
-            "{hapcal} {pre...} diagnose {args...} --json --svg {svg}"
-        )
-        .read()
-        .with_context(|| format!("diagnosing {}", rec.name))?;
-        let d: Value = serde_json::from_str(&json).context("parsing the JSON report")?;
+        let d = diagnose(sh, hapcal, rec, &svg)?;
         let verdict = d["verdict"].as_str().unwrap_or("?").to_owned();
-        let required = rec.required.map(|r| {
-            let names: Vec<&str> = r.iter().map(|e| e.name()).collect();
-            if names.is_empty() {
-                "none".to_owned()
-            } else {
-                names.join("+")
-            }
-        });
-        if let Some(req) = required
-            && verdict != req
-        {
-            failures.push(format!("{}: verdict {verdict}, expected {req}", rec.id));
-        }
+        failures.extend(required_failure(rec, &verdict));
         if check {
             println!("diagnose-real: {}: {verdict}", rec.id);
             continue;
         }
-        md.push_str(&format!(
-            "\n## {}\n\n`hapcal diagnose {}`\n\nKnown: {}.\n\n",
-            rec.name,
-            rec.args.join(" "),
-            rec.known
-        ));
-        md.push_str(&format!(
-            "- **Verdict: {verdict}.** {} training configurations, {} geometric parameters kept.\n",
-            d["n_configurations"], d["n_baseline_params"]
-        ));
-        let calibrated = cmd!(sh, "{hapcal} {pre...} calibrate {args...} --json")
-            .ignore_stderr()
-            .read()
-            .with_context(|| format!("calibrating {}", rec.name))?;
-        let c: Value = serde_json::from_str(&calibrated).context("parsing calibrate's JSON")?;
-        md.push_str(&format!("- {}\n", agreement(&verdict, &c)));
-        md.push_str(&format!(
-            "- Floor: {}.\n",
-            d["floor_method"].as_str().unwrap_or("?")
-        ));
-        match d["floor_rms_m"].as_f64() {
-            Some(_) => md.push_str(&format!(
-                "- Cross-validated RMS {} mm, floor {} mm, gap {} mm (p = {:.1e}).\n",
-                mm(&d["cv_rms_m"]),
-                mm(&d["floor_rms_m"]),
-                mm(&d["gap_rms_m"]),
-                d["gap_p_value"].as_f64().unwrap_or(f64::NAN)
-            )),
-            None => md.push_str(&format!(
-                "- Cross-validated RMS {} mm; no floor.\n",
-                mm(&d["cv_rms_m"])
-            )),
-        }
-        let per_test = |key: &str| -> String {
-            (d[key].as_array().into_iter().flatten())
-                .map(mm)
-                .collect::<Vec<_>>()
-                .join(", ")
-        };
-        let accepted: Vec<&str> = (d["steps"].as_array().into_iter().flatten())
-            .filter_map(|s| s["effect"].as_str())
-            .collect();
-        if d["test_rms_m"].as_array().is_some_and(|t| !t.is_empty()) {
-            md.push_str(&format!(
-                "- Test-file RMS (training estimate carried over): {} mm geometric",
-                per_test("test_rms_m")
-            ));
-            if !accepted.is_empty() {
-                md.push_str(&format!(
-                    ", {} mm with {}",
-                    per_test("test_rms_final_m"),
-                    accepted.join(" + ")
-                ));
-            }
-            md.push_str(".\n");
-        }
-        let flagged = (d["where"].as_array().into_iter().flatten())
-            .filter(|b| b["flagged"] == true)
-            .count();
-        let n_bins = d["where"].as_array().map_or(0, Vec::len);
-        md.push_str(&format!(
-            "- Where: {flagged} of {n_bins} bins of the residual map significantly above the \
-             floor (Holm), [maps]({}/{}.svg).\n",
-            "diagnose-real", rec.id
-        ));
-        for st in d["steps"].as_array().into_iter().flatten() {
-            let params: Vec<String> = (st["parameters"].as_array().into_iter().flatten())
-                .map(|p| {
-                    format!(
-                        "{} = {:.3e} ± {:.1e} {}",
-                        p["name"].as_str().unwrap_or("?"),
-                        p["value"].as_f64().unwrap_or(f64::NAN),
-                        p["std"].as_f64().unwrap_or(f64::NAN),
-                        p["unit"].as_str().unwrap_or("")
-                    )
-                })
-                .collect();
-            md.push_str(&format!(
-                "- Named: **{}**, cross-validated RMS {} → {} mm, {:.0} % of the gap ({:.0} % of \
-                 the gap its round faced); {}.\n",
-                st["effect"].as_str().unwrap_or("?"),
-                mm(&st["cv_rms_before_m"]),
-                mm(&st["cv_rms_after_m"]),
-                st["gap_closed_pct"].as_f64().unwrap_or(f64::NAN),
-                st["round_gap_closed_pct"].as_f64().unwrap_or(f64::NAN),
-                params.join(", ")
-            ));
-            for a in st["alike"].as_array().into_iter().flatten() {
-                md.push_str(&format!(
-                    "- Torque model open: {} in its place predicts as well (within two standard \
-                     errors, beside the other named effects).\n",
-                    a.as_str().unwrap_or("?")
-                ));
-            }
-            for c in st["confusable_with"].as_array().into_iter().flatten() {
-                md.push_str(&format!(
-                    "- Confusable with {} on these data; to separate them, record {}.\n",
-                    c[0].as_str().unwrap_or("?"),
-                    c[1].as_str().unwrap_or("?")
-                ));
-            }
-        }
-        // The candidates of the first round, best held-out prediction first.
-        let mut cands: Vec<&Value> = (d["candidates"].as_array().into_iter().flatten())
-            .filter(|c| c["round"] == 1)
-            .collect();
-        cands.sort_by(|a, b| {
-            let f = |v: &Value| v["cv_rms_after_m"].as_f64().unwrap_or(f64::INFINITY);
-            f(a).total_cmp(&f(b))
-        });
-        md.push_str(
-            "\n| candidate (round 1) | k | CV RMS after, mm | CV improvement, standard errors | p (CV, one-sided) | p (F, Holm) | decision |\n|---|---|---|---|---|---|---|\n",
-        );
-        for c in cands {
-            let imp = &c["cv_improvement"];
-            md.push_str(&format!(
-                "| {} | {} | {} | {} | {:.1e} | {:.1e} | {} |\n",
-                c["effect"].as_str().unwrap_or("?"),
-                c["n_visible"],
-                mm(&c["cv_rms_after_m"]),
-                match (imp[0].as_f64(), imp[1].as_f64()) {
-                    (Some(m), Some(se)) if se > 0.0 => format!("{:+.1}", m / se),
-                    _ => "–".to_owned(),
-                },
-                c["cv_p_value"].as_f64().unwrap_or(f64::NAN),
-                c["f_p_value"].as_f64().unwrap_or(f64::NAN),
-                c["reason"].as_str().unwrap_or("").replace('|', "/")
-            ));
-        }
-        let tests: Vec<&str> = (d["test_sets"].as_array().into_iter().flatten())
-            .filter_map(Value::as_str)
-            .collect();
-        md.push_str(&format!(
-            "\n| rung | CV, training | {} |\n|---|---|{}\n",
-            (tests.iter().map(|t| format!("test: {t}")))
-                .collect::<Vec<_>>()
-                .join(" | "),
-            "---|".repeat(tests.len())
-        ));
-        for r in d["ladder"].as_array().into_iter().flatten() {
-            let t: Vec<String> = (r["test_rms_m"].as_array().into_iter().flatten())
-                .map(mm)
-                .collect();
-            md.push_str(&format!(
-                "| {} | {} | {} |\n",
-                r["rung"].as_str().unwrap_or("?"),
-                mm(&r["cv_rms_m"]),
-                t.join(" | ")
-            ));
-        }
-        for n in d["notes"].as_array().into_iter().flatten() {
-            md.push_str(&format!("\nNote: {}\n", n.as_str().unwrap_or("")));
-        }
+        write_recording(sh, hapcal, rec, &d, &verdict, &mut md)?;
     }
     if !failures.is_empty() {
         bail!("diagnose-real: {}", failures.join("; "));
@@ -491,4 +334,231 @@ pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
     sh.write_file("docs/results/diagnose-real.md", md)?;
     println!("wrote docs/results/diagnose-real.md");
     Ok(())
+}
+
+/// `hapcal diagnose` on `rec` with its residual maps written to `svg`: the JSON report.
+///
+/// # Errors
+/// A failed diagnosis or a report that is not JSON.
+fn diagnose(sh: &Shell, hapcal: Hapcal<'_>, rec: &Recording, svg: &Path) -> Result<Value> {
+    let (hapcal, pre, args) = (hapcal.program, hapcal.pre, rec.args);
+    let json = cmd!(
+        sh,
+        "{hapcal} {pre...} diagnose {args...} --json --svg {svg}"
+    )
+    .read()
+    .with_context(|| format!("diagnosing {}", rec.name))?;
+    serde_json::from_str(&json).context("parsing the JSON report")
+}
+
+/// The failure of `rec`'s check: its `verdict` is not the required one (`None`: it is, or none
+/// is required).
+fn required_failure(rec: &Recording, verdict: &str) -> Option<String> {
+    let required = rec.required.map(|r| {
+        let names: Vec<&str> = r.iter().map(|e| e.name()).collect();
+        if names.is_empty() {
+            "none".to_owned()
+        } else {
+            names.join("+")
+        }
+    });
+    match required {
+        Some(req) if verdict != req => {
+            Some(format!("{}: verdict {verdict}, expected {req}", rec.id))
+        }
+        _ => None,
+    }
+}
+
+/// The section of `rec` (diagnosis report `d`, its `verdict`): the command, what is known,
+/// the verdict beside the calibration's rung (`hapcal calibrate` runs here), the floor and
+/// gap, the test files, the named effects, the round-1 candidates and the ladder.
+///
+/// # Errors
+/// A failed calibration or a report that is not JSON.
+fn write_recording(
+    sh: &Shell,
+    hapcal: Hapcal<'_>,
+    rec: &Recording,
+    d: &Value,
+    verdict: &str,
+    md: &mut String,
+) -> Result<()> {
+    md.push_str(&format!(
+        "\n## {}\n\n`hapcal diagnose {}`\n\nKnown: {}.\n\n",
+        rec.name,
+        rec.args.join(" "),
+        rec.known
+    ));
+    md.push_str(&format!(
+        "- **Verdict: {verdict}.** {} training configurations, {} geometric parameters kept.\n",
+        d["n_configurations"], d["n_baseline_params"]
+    ));
+    let (program, pre, args) = (hapcal.program, hapcal.pre, rec.args);
+    let calibrated = cmd!(sh, "{program} {pre...} calibrate {args...} --json")
+        .ignore_stderr()
+        .read()
+        .with_context(|| format!("calibrating {}", rec.name))?;
+    let c: Value = serde_json::from_str(&calibrated).context("parsing calibrate's JSON")?;
+    md.push_str(&format!("- {}\n", agreement(verdict, &c)));
+    write_floor_and_tests(d, md);
+    let flagged = (d["where"].as_array().into_iter().flatten())
+        .filter(|b| b["flagged"] == true)
+        .count();
+    let n_bins = d["where"].as_array().map_or(0, Vec::len);
+    md.push_str(&format!(
+        "- Where: {flagged} of {n_bins} bins of the residual map significantly above the \
+         floor (Holm), [maps]({}/{}.svg).\n",
+        "diagnose-real", rec.id
+    ));
+    write_named_effects(d, md);
+    write_candidates(d, md);
+    write_ladder(d, md);
+    for n in d["notes"].as_array().into_iter().flatten() {
+        md.push_str(&format!("\nNote: {}\n", n.as_str().unwrap_or("")));
+    }
+    Ok(())
+}
+
+/// The floor, the cross-validated RMS and gap, and the test files' RMS (geometric, and with
+/// the named effects) of diagnosis report `d`.
+fn write_floor_and_tests(d: &Value, md: &mut String) {
+    md.push_str(&format!(
+        "- Floor: {}.\n",
+        d["floor_method"].as_str().unwrap_or("?")
+    ));
+    match d["floor_rms_m"].as_f64() {
+        Some(_) => md.push_str(&format!(
+            "- Cross-validated RMS {} mm, floor {} mm, gap {} mm (p = {:.1e}).\n",
+            mm(&d["cv_rms_m"]),
+            mm(&d["floor_rms_m"]),
+            mm(&d["gap_rms_m"]),
+            d["gap_p_value"].as_f64().unwrap_or(f64::NAN)
+        )),
+        None => md.push_str(&format!(
+            "- Cross-validated RMS {} mm; no floor.\n",
+            mm(&d["cv_rms_m"])
+        )),
+    }
+    let per_test = |key: &str| -> String {
+        (d[key].as_array().into_iter().flatten())
+            .map(mm)
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let accepted: Vec<&str> = (d["steps"].as_array().into_iter().flatten())
+        .filter_map(|s| s["effect"].as_str())
+        .collect();
+    if d["test_rms_m"].as_array().is_some_and(|t| !t.is_empty()) {
+        md.push_str(&format!(
+            "- Test-file RMS (training estimate carried over): {} mm geometric",
+            per_test("test_rms_m")
+        ));
+        if !accepted.is_empty() {
+            md.push_str(&format!(
+                ", {} mm with {}",
+                per_test("test_rms_final_m"),
+                accepted.join(" + ")
+            ));
+        }
+        md.push_str(".\n");
+    }
+}
+
+/// Each effect diagnosis report `d` names: its gap closed and parameters, an open torque
+/// model, what it is confusable with.
+fn write_named_effects(d: &Value, md: &mut String) {
+    for st in d["steps"].as_array().into_iter().flatten() {
+        let params: Vec<String> = (st["parameters"].as_array().into_iter().flatten())
+            .map(|p| {
+                format!(
+                    "{} = {:.3e} ± {:.1e} {}",
+                    p["name"].as_str().unwrap_or("?"),
+                    p["value"].as_f64().unwrap_or(f64::NAN),
+                    p["std"].as_f64().unwrap_or(f64::NAN),
+                    p["unit"].as_str().unwrap_or("")
+                )
+            })
+            .collect();
+        md.push_str(&format!(
+            "- Named: **{}**, cross-validated RMS {} → {} mm, {:.0} % of the gap ({:.0} % of \
+             the gap its round faced); {}.\n",
+            st["effect"].as_str().unwrap_or("?"),
+            mm(&st["cv_rms_before_m"]),
+            mm(&st["cv_rms_after_m"]),
+            st["gap_closed_pct"].as_f64().unwrap_or(f64::NAN),
+            st["round_gap_closed_pct"].as_f64().unwrap_or(f64::NAN),
+            params.join(", ")
+        ));
+        for a in st["alike"].as_array().into_iter().flatten() {
+            md.push_str(&format!(
+                "- Torque model open: {} in its place predicts as well (within two standard \
+                 errors, beside the other named effects).\n",
+                a.as_str().unwrap_or("?")
+            ));
+        }
+        for c in st["confusable_with"].as_array().into_iter().flatten() {
+            md.push_str(&format!(
+                "- Confusable with {} on these data; to separate them, record {}.\n",
+                c[0].as_str().unwrap_or("?"),
+                c[1].as_str().unwrap_or("?")
+            ));
+        }
+    }
+}
+
+/// The table of the candidates of the first round of diagnosis report `d`, best held-out
+/// prediction first.
+fn write_candidates(d: &Value, md: &mut String) {
+    let mut cands: Vec<&Value> = (d["candidates"].as_array().into_iter().flatten())
+        .filter(|c| c["round"] == 1)
+        .collect();
+    cands.sort_by(|a, b| {
+        let f = |v: &Value| v["cv_rms_after_m"].as_f64().unwrap_or(f64::INFINITY);
+        f(a).total_cmp(&f(b))
+    });
+    md.push_str(
+        "\n| candidate (round 1) | k | CV RMS after, mm | CV improvement, standard errors | p (CV, one-sided) | p (F, Holm) | decision |\n|---|---|---|---|---|---|---|\n",
+    );
+    for c in cands {
+        let imp = &c["cv_improvement"];
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {:.1e} | {:.1e} | {} |\n",
+            c["effect"].as_str().unwrap_or("?"),
+            c["n_visible"],
+            mm(&c["cv_rms_after_m"]),
+            match (imp[0].as_f64(), imp[1].as_f64()) {
+                (Some(m), Some(se)) if se > 0.0 => format!("{:+.1}", m / se),
+                _ => "–".to_owned(),
+            },
+            c["cv_p_value"].as_f64().unwrap_or(f64::NAN),
+            c["f_p_value"].as_f64().unwrap_or(f64::NAN),
+            c["reason"].as_str().unwrap_or("").replace('|', "/")
+        ));
+    }
+}
+
+/// The ladder of diagnosis report `d`: per rung, the cross-validated RMS and each test set's.
+fn write_ladder(d: &Value, md: &mut String) {
+    let tests: Vec<&str> = (d["test_sets"].as_array().into_iter().flatten())
+        .filter_map(Value::as_str)
+        .collect();
+    md.push_str(&format!(
+        "\n| rung | CV, training | {} |\n|---|---|{}\n",
+        (tests.iter().map(|t| format!("test: {t}")))
+            .collect::<Vec<_>>()
+            .join(" | "),
+        "---|".repeat(tests.len())
+    ));
+    for r in d["ladder"].as_array().into_iter().flatten() {
+        let t: Vec<String> = (r["test_rms_m"].as_array().into_iter().flatten())
+            .map(mm)
+            .collect();
+        md.push_str(&format!(
+            "| {} | {} | {} |\n",
+            r["rung"].as_str().unwrap_or("?"),
+            mm(&r["cv_rms_m"]),
+            t.join(" | ")
+        ));
+    }
 }

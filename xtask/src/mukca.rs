@@ -164,9 +164,44 @@ fn mm(v: &Value, role: &str, name: &str, when: &str, key: &str) -> Result<f64> {
         .with_context(|| format!("{name}: {when}.{key} missing"))
 }
 
+/// Mean of `r` (0 for no value).
+fn mean(r: &[f64]) -> f64 {
+    r.iter().sum::<f64>() / r.len().max(1) as f64
+}
+
+/// Calibrates every split (default settings, each fold count of the sweep, each fixed model)
+/// and writes docs/results/mukca.md; with `check`, verifies the acceptance instead of writing.
 pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     cmd!(sh, "cargo build --release --quiet -p hapcal").run()?;
-    let mut rows = Vec::new();
+    let units = splits();
+    let calibrated = calibrate_splits(sh, &units)?;
+    let mut md = String::new();
+    let failures = write_comparison(&mut md, &calibrated.rows)?;
+    write_model_choice(&mut md, &calibrated.cv_lines)?;
+    write_fold_stability(sh, &mut md, &units)?;
+    write_fixed_models(sh, &mut md, &units)?;
+    writeln!(md)?;
+    md.push_str(WHAT_WAS_TRIED);
+    writeln!(md)?;
+    writeln!(
+        md,
+        "Speed: docs/results/speed.md (instruction counts and the criterion bench; wall times depend on the machine's load)."
+    )?;
+    println!("{md}");
+    if check {
+        if !failures.is_empty() {
+            bail!("MUKCa check failed:\n{}", failures.join("\n"));
+        }
+    } else {
+        sh.write_file("docs/results/mukca.md", &md)?;
+        eprintln!("wrote docs/results/mukca.md");
+    }
+    Ok(())
+}
+
+/// The splits to calibrate: the reference placements grouped by unit (in [`REFERENCE`]'s
+/// order), then panda_2 with its eight test placements.
+fn splits() -> Vec<Split<'static>> {
     let mut units: Vec<Split<'_>> = Vec::new();
     for &(unit, urdf, train, test, theirs) in REFERENCE {
         match units.iter_mut().find(|u| u.0 == unit) {
@@ -184,27 +219,28 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
         PANDA_2_TESTS.to_vec(),
         vec![None; PANDA_2_TESTS.len()],
     ));
+    units
+}
+
+/// The default calibration of every split: one row per test placement, and one line of the
+/// model-choice table per split.
+struct Calibrated {
+    rows: Vec<Row>,
+    /// `| unit | chosen | candidates |` rows.
+    cv_lines: Vec<String>,
+}
+
+/// Calibrates every split with the default settings (`--model auto`, 5 folds).
+///
+/// # Errors
+/// A failed calibration or a report without a test placement's figures.
+fn calibrate_splits(sh: &Shell, units: &[Split<'_>]) -> Result<Calibrated> {
+    let mut rows = Vec::new();
     let mut cv_lines = Vec::new();
-    for (unit, urdf, train, tests, theirs) in &units {
+    for (unit, urdf, train, tests, theirs) in units {
         let v = calibrate(sh, unit, urdf, train, tests, &[])?;
         let model = v["model"].as_str().unwrap_or("?").to_string();
-        let mut cells = Vec::new();
-        for c in v["cross_validation"].as_array().into_iter().flatten() {
-            let d = &c["difference_to_geometric_m2"];
-            cells.push(format!(
-                "{} {:.0} µm ({:+.0} ± {:.0} µm²{})",
-                c["model"].as_str().unwrap_or("?"),
-                c["heldout_rms_m"].as_f64().unwrap_or(f64::NAN) * 1e6,
-                d[0].as_f64().unwrap_or(f64::NAN) * 1e12,
-                d[1].as_f64().unwrap_or(f64::NAN) * 1e12,
-                if c["beats_geometric"].as_bool() == Some(true) {
-                    ", beats"
-                } else {
-                    ""
-                },
-            ));
-        }
-        cv_lines.push(format!("| {unit} | {model} | {} |", cells.join("; ")));
+        cv_lines.push(cv_line(unit, &model, &v));
         for (test, theirs) in tests.iter().zip(theirs) {
             rows.push(Row {
                 unit: unit.to_string(),
@@ -218,7 +254,35 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
             });
         }
     }
-    let mut md = String::new();
+    Ok(Calibrated { rows, cv_lines })
+}
+
+/// The model-choice row of `unit` (chosen `model`, calibration report `v`): each candidate's
+/// held-out RMS and its squared-error difference to the geometric model.
+fn cv_line(unit: &str, model: &str, v: &Value) -> String {
+    let mut cells = Vec::new();
+    for c in v["cross_validation"].as_array().into_iter().flatten() {
+        let d = &c["difference_to_geometric_m2"];
+        cells.push(format!(
+            "{} {:.0} µm ({:+.0} ± {:.0} µm²{})",
+            c["model"].as_str().unwrap_or("?"),
+            c["heldout_rms_m"].as_f64().unwrap_or(f64::NAN) * 1e6,
+            d[0].as_f64().unwrap_or(f64::NAN) * 1e12,
+            d[1].as_f64().unwrap_or(f64::NAN) * 1e12,
+            if c["beats_geometric"].as_bool() == Some(true) {
+                ", beats"
+            } else {
+                ""
+            },
+        ));
+    }
+    format!("| {unit} | {model} | {} |", cells.join("; "))
+}
+
+/// The report's title and the table of ours beside MUKCa's figures per test placement, with
+/// the mean ratio; returns the acceptance failures (a `before` that differs from MUKCa's, an
+/// `after` more than 10 % worse).
+fn write_comparison(md: &mut String, rows: &[Row]) -> Result<Vec<String>> {
     writeln!(md, "# hapcal on MUKCa real-robot recordings")?;
     writeln!(md)?;
     writeln!(
@@ -233,22 +297,11 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|")?;
     let mut ratios_default = Vec::new();
     let mut failures = Vec::new();
-    for r in &rows {
+    for r in rows {
         let (tb, ta, td, change) = match r.theirs {
             Some([b, a, d]) => {
                 ratios_default.push(r.after / a);
-                if (r.before - b).abs() > 0.0005 {
-                    failures.push(format!(
-                        "{} {}: before {:.4} mm differs from MUKCa's {b:.3}",
-                        r.unit, r.test, r.before
-                    ));
-                }
-                if r.after > 1.10 * a {
-                    failures.push(format!(
-                        "{} {}: after {:.3} mm is more than 10 % worse than {a:.3}",
-                        r.unit, r.test, r.after
-                    ));
-                }
+                failures.extend(acceptance_failures(r, b, a));
                 (
                     format!("{b:.3}"),
                     format!("{a:.3}"),
@@ -269,7 +322,6 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
             r.unit, r.train, r.test, r.before, r.model, r.after, r.dist_after
         )?;
     }
-    let mean = |r: &[f64]| r.iter().sum::<f64>() / r.len().max(1) as f64;
     let mean_ratio = mean(&ratios_default);
     writeln!(md)?;
     writeln!(
@@ -284,8 +336,31 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
         md,
         "The target, −20 % on average, is not met (see \"What was tried\" below)."
     )?;
+    Ok(failures)
+}
 
-    // How the choice was made: the cross-validation of each split at the default 5 folds.
+/// What `--check` verifies of row `r` against MUKCa's MAE before (`b`) and after (`a`), mm:
+/// the same data (before within 0.0005 mm), and after no more than 10 % worse.
+fn acceptance_failures(r: &Row, b: f64, a: f64) -> Vec<String> {
+    let mut failures = Vec::new();
+    if (r.before - b).abs() > 0.0005 {
+        failures.push(format!(
+            "{} {}: before {:.4} mm differs from MUKCa's {b:.3}",
+            r.unit, r.test, r.before
+        ));
+    }
+    if r.after > 1.10 * a {
+        failures.push(format!(
+            "{} {}: after {:.3} mm is more than 10 % worse than {a:.3}",
+            r.unit, r.test, r.after
+        ));
+    }
+    failures
+}
+
+/// How the choice was made: the cross-validation of each split at the default 5 folds
+/// (`cv_lines`: one row per split).
+fn write_model_choice(md: &mut String, cv_lines: &[String]) -> Result<()> {
     writeln!(md)?;
     writeln!(md, "## Model choice")?;
     writeln!(md)?;
@@ -296,11 +371,18 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     writeln!(md)?;
     writeln!(md, "| unit | chosen | candidates |")?;
     writeln!(md, "|---|---|---|")?;
-    for line in &cv_lines {
+    for line in cv_lines {
         writeln!(md, "{line}")?;
     }
+    Ok(())
+}
 
-    // Stability of the choice over the fold count.
+/// Stability of the choice over the fold count: every split again with `--folds F` for each F
+/// of [`FOLD_SWEEP`].
+///
+/// # Errors
+/// A failed calibration or a report without a test placement's figures.
+fn write_fold_stability(sh: &Shell, md: &mut String, units: &[Split<'_>]) -> Result<()> {
     writeln!(md)?;
     writeln!(md, "## Stability over the number of folds")?;
     writeln!(md)?;
@@ -317,7 +399,7 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
     )?;
     writeln!(md, "|---|{}---|---|", "---|".repeat(names.len()))?;
     for folds in FOLD_SWEEP {
-        let (picks, all) = run_splits(sh, &units, &["--folds".into(), folds.to_string()])?;
+        let (picks, all) = run_splits(sh, units, &["--folds".into(), folds.to_string()])?;
         let worst = all.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         writeln!(
             md,
@@ -327,8 +409,15 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
             worst
         )?;
     }
+    Ok(())
+}
 
-    // Every fixed model on the test placements: a diagnostic, never used for a choice.
+/// Every fixed model of [`FIXED_MODELS`] on the test placements: a diagnostic, never used for
+/// a choice (the splits with reference figures only).
+///
+/// # Errors
+/// A failed calibration or a report without a test placement's figures.
+fn write_fixed_models(sh: &Shell, md: &mut String, units: &[Split<'_>]) -> Result<()> {
     writeln!(md)?;
     writeln!(md, "## Every model, fixed (diagnostic)")?;
     writeln!(md)?;
@@ -356,22 +445,6 @@ pub(crate) fn run(sh: &Shell, check: bool) -> Result<()> {
             cells.join(" | "),
             mean(&all)
         )?;
-    }
-    writeln!(md)?;
-    md.push_str(WHAT_WAS_TRIED);
-    writeln!(md)?;
-    writeln!(
-        md,
-        "Speed: docs/results/speed.md (instruction counts and the criterion bench; wall times depend on the machine's load)."
-    )?;
-    println!("{md}");
-    if check {
-        if !failures.is_empty() {
-            bail!("MUKCa check failed:\n{}", failures.join("\n"));
-        }
-    } else {
-        sh.write_file("docs/results/mukca.md", &md)?;
-        eprintln!("wrote docs/results/mukca.md");
     }
     Ok(())
 }

@@ -120,41 +120,110 @@ pub fn run(
     calibrated: &Device,
     plan: &ForcePlan,
 ) -> Result<ForceReport> {
-    let truth_model = ForceModel::truth(device, truth).context("building the truth model")?;
-    let floor_device = with_true_unidentifiable(calibrated, truth)?;
-    let models = [
-        (
-            "nominal",
-            ForceModel::nominal(device).context("building the nominal model")?,
-        ),
-        (
-            "calibrated",
-            ForceModel::calibrated(calibrated).context("building the calibrated model")?,
-        ),
-        (
-            "calibrated, true pruned",
-            ForceModel::calibrated(&floor_device)
-                .context("building the calibrated model with the true unidentifiable parameters")?,
-        ),
-    ];
-    let open = WallConfig::paper();
-    let closed = open.with_gain(plan.gain);
+    let bench = ForceBench::build(device, truth, calibrated, plan)?;
+    let mut md = String::new();
+    let wall = wall_section(&bench, plan, &mut md)?;
+    write_at_home(&bench, &mut md)?;
+    let swept = sweep_section(&bench, plan, &mut md)?;
+    write_quantisation_share(&bench, &swept.poses, &mut md)?;
+    write_reductions(&swept.p95_force, plan.gain, &mut md)?;
+    write_floor(device, truth, calibrated, &mut md)?;
+    let svg = fig12_svg(&wall.curves)?;
+    Ok(ForceReport {
+        markdown: md,
+        files: vec![
+            ("fig12_force.svg".into(), svg),
+            ("fig12_force.csv".into(), wall.csv),
+            ("force_distributions.csv".into(), swept.distributions_csv),
+        ],
+    })
+}
+
+/// What every part of the force experiment runs on: the device, its truth model, the three
+/// models under test and the two wall controllers.
+struct ForceBench<'a> {
+    /// The nominal device file.
+    device: &'a Device,
+    /// The device itself (truth).
+    truth_model: ForceModel,
+    /// (name, model): nominal, calibrated, calibrated with the pruned parameters at their truth.
+    models: [(&'static str, ForceModel); 3],
+    /// The paper's open-loop wall.
+    open: WallConfig,
+    /// The same wall with the force-feedback gain.
+    closed: WallConfig,
+}
+
+impl<'a> ForceBench<'a> {
+    /// Builds the models of [`run`].
+    ///
+    /// # Errors
+    /// A model that cannot be built from its file.
+    fn build(
+        device: &'a Device,
+        truth: &hapcal_sim::Truth,
+        calibrated: &Device,
+        plan: &ForcePlan,
+    ) -> Result<Self> {
+        let truth_model = ForceModel::truth(device, truth).context("building the truth model")?;
+        let floor_device = with_true_unidentifiable(calibrated, truth)?;
+        let models = [
+            (
+                "nominal",
+                ForceModel::nominal(device).context("building the nominal model")?,
+            ),
+            (
+                "calibrated",
+                ForceModel::calibrated(calibrated).context("building the calibrated model")?,
+            ),
+            (
+                "calibrated, true pruned",
+                ForceModel::calibrated(&floor_device).context(
+                    "building the calibrated model with the true unidentifiable parameters",
+                )?,
+            ),
+        ];
+        let open = WallConfig::paper();
+        let closed = open.with_gain(plan.gain);
+        Ok(Self {
+            device,
+            truth_model,
+            models,
+            open,
+            closed,
+        })
+    }
+}
+
+/// The virtual wall at the Fig. 12 pose: its CSV (every model, gain and travel step) and the
+/// open-loop curves of each model for the figure.
+struct WallSection {
+    /// `fig12_force.csv`.
+    csv: String,
+    /// (model name, open-loop wall samples).
+    curves: Vec<(String, Vec<WallSample>)>,
+}
+
+/// Fig. 12 at the paper's pose: the section's text with the pose's condition numbers and the
+/// table of the final wrench of each model and gain.
+///
+/// # Errors
+/// A singular pose or a failed wall experiment.
+fn wall_section(bench: &ForceBench<'_>, plan: &ForcePlan, md: &mut String) -> Result<WallSection> {
+    let (device, open) = (bench.device, bench.open);
     let pose = fig12_pose(device);
     let pose_cond = hapcal_force::condition_number(
-        &truth_model,
+        &bench.truth_model,
         &pose,
         Some(open.locked_joint),
         plan.sweep.length_m,
     )?;
     let exact_home_cond = hapcal_force::condition_number(
-        &truth_model,
+        &bench.truth_model,
         &home_readings(device),
         Some(open.locked_joint),
         plan.sweep.length_m,
     )?;
-    let mut md = String::new();
-
-    // ---- Fig. 12 at the paper's pose.
     writeln!(
         md,
         "## Force control: virtual wall (paper Figs. 11–12)\n\nHandle fixed at readings ({}) rad: home (mid-range) except the wrist joint 6 at half its upper limit, because at home (q6 = 0) joints 5 and 7 are collinear and the fixed-handle statics is singular (truth condition number {:.0} there, {:.1} here; linear rows / {} m). Joint {} locked at home, wall K = {} N/m moved {} mm along the tip z axis (desired force 2 N along z at the end). Controller readings quantised to the encoders; device = truth. Forces in the handle (sensor) frame at 20 mm; transverse = |(Fx, Fy)|/|Fz|.\n",
@@ -174,11 +243,11 @@ pub fn run(
         "| model | G | Fx (mN) | Fy (mN) | Fz − 2 N (mN) | transverse (% of Fz) | direction error (deg) |"
     )?;
     writeln!(md, "|---|---|---|---|---|---|---|")?;
-    let mut wall_curves: Vec<(String, Vec<WallSample>)> = Vec::new();
+    let mut curves: Vec<(String, Vec<WallSample>)> = Vec::new();
     let mut csv = String::from("model,gain,travel_m,desired_n,fx_n,fy_n,fz_n,mx_nm,my_nm,mz_nm\n");
-    for (name, model) in &models {
-        for cfg in [open, closed] {
-            let wall = virtual_wall(device, model, &truth_model, &pose, &cfg)
+    for (name, model) in &bench.models {
+        for cfg in [open, bench.closed] {
+            let wall = virtual_wall(device, model, &bench.truth_model, &pose, &cfg)
                 .with_context(|| format!("wall experiment, {name} model"))?;
             for s in &wall {
                 let w = s.wrench;
@@ -189,28 +258,48 @@ pub fn run(
                 )?;
             }
             let Some(last) = wall.last() else { continue };
-            let w = last.wrench;
-            let transverse = w[0].hypot(w[1]) / w[2].abs() * 100.0;
-            let dir_deg = w[0].hypot(w[1]).atan2(w[2]).to_degrees();
-            writeln!(
-                md,
-                "| {name} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.4} |",
-                cfg.gain,
-                w[0] * 1e3,
-                w[1] * 1e3,
-                (w[2] - last.desired_n) * 1e3,
-                transverse,
-                dir_deg
-            )?;
+            write_wall_row(name, cfg.gain, last, md)?;
             if cfg.gain == 0.0 {
-                wall_curves.push((name.to_string(), wall));
+                curves.push((name.to_string(), wall));
             }
         }
     }
+    Ok(WallSection { csv, curves })
+}
 
-    // The exact home pose, for comparison: singular, so every error is amplified.
+/// The wall table's row of model `name` at gain `gain`: its `last` sample's wrench.
+fn write_wall_row(name: &str, gain: f64, last: &WallSample, md: &mut String) -> Result<()> {
+    let w = last.wrench;
+    let transverse = w[0].hypot(w[1]) / w[2].abs() * 100.0;
+    let dir_deg = w[0].hypot(w[1]).atan2(w[2]).to_degrees();
+    writeln!(
+        md,
+        "| {name} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.4} |",
+        gain,
+        w[0] * 1e3,
+        w[1] * 1e3,
+        (w[2] - last.desired_n) * 1e3,
+        transverse,
+        dir_deg
+    )?;
+    Ok(())
+}
+
+/// The exact home pose, for comparison: singular, so every error is amplified. The open-loop
+/// transverse force of the nominal and the calibrated model there.
+///
+/// # Errors
+/// A failed wall experiment.
+fn write_at_home(bench: &ForceBench<'_>, md: &mut String) -> Result<()> {
+    let device = bench.device;
     let at_home = |model: &ForceModel| -> Result<f64> {
-        let wall = virtual_wall(device, model, &truth_model, &home_readings(device), &open)?;
+        let wall = virtual_wall(
+            device,
+            model,
+            &bench.truth_model,
+            &home_readings(device),
+            &bench.open,
+        )?;
         Ok(wall.last().map_or(f64::NAN, |s| {
             s.wrench[0].hypot(s.wrench[1]) / s.wrench[2].abs() * 100.0
         }))
@@ -218,12 +307,35 @@ pub fn run(
     writeln!(
         md,
         "\nAt the exact home pose (q6 = 0, singular) the open-loop transverse force is {:.3} % of Fz with the nominal model and {:.3} % with the calibrated one.",
-        at_home(&models[0].1)?,
-        at_home(&models[1].1)?
+        at_home(&bench.models[0].1)?,
+        at_home(&bench.models[1].1)?
     )?;
+    Ok(())
+}
 
-    // ---- Random poses.
-    let (poses, drawn) = sample_poses(device, &truth_model, open.locked_joint, &plan.sweep)
+/// The sweep over random poses: the poses drawn, `force_distributions.csv` and each (model,
+/// gain)'s pooled 95th-percentile force direction error (deg).
+struct SweepSection {
+    /// The readings of the random poses (rad).
+    poses: Vec<Vec<f64>>,
+    /// `force_distributions.csv`.
+    distributions_csv: String,
+    /// (model name, gain, pooled force direction p95 in deg).
+    p95_force: Vec<(String, f64, f64)>,
+}
+
+/// Random poses, six wrench directions: the section's text, the pooled table of each model and
+/// gain, and the per-direction table.
+///
+/// # Errors
+/// No valid random pose or a failed sweep.
+fn sweep_section(
+    bench: &ForceBench<'_>,
+    plan: &ForcePlan,
+    md: &mut String,
+) -> Result<SweepSection> {
+    let (device, open) = (bench.device, bench.open);
+    let (poses, drawn) = sample_poses(device, &bench.truth_model, open.locked_joint, &plan.sweep)
         .context("drawing random poses")?;
     writeln!(
         md,
@@ -247,9 +359,9 @@ pub fn run(
     let mut per_direction = String::from(
         "\nPer direction (|direction error| in deg, |magnitude error| in %, median / 95th percentile):\n\n| model | G | direction | dir. median | dir. p95 | mag. median | mag. p95 |\n|---|---|---|---|---|---|---|\n",
     );
-    for (name, model) in &models {
-        for cfg in [open, closed] {
-            let e = sweep(device, model, &truth_model, &poses, &cfg)
+    for (name, model) in &bench.models {
+        for cfg in [open, bench.closed] {
+            let e = sweep(device, model, &bench.truth_model, &poses, &cfg)
                 .with_context(|| format!("sweep, {name} model"))?;
             let p = pooled(&e);
             writeln!(
@@ -265,50 +377,87 @@ pub fn run(
                 p.moment[2],
                 p.moment[3]
             )?;
-            for d in Direction::ALL {
-                let dir: Vec<f64> = e.errors[d.index()]
-                    .iter()
-                    .map(|w| w.direction_deg.abs())
-                    .collect();
-                let mag: Vec<f64> = e.errors[d.index()]
-                    .iter()
-                    .map(|w| w.magnitude_pct.abs())
-                    .collect();
-                let q = [
-                    quantile(&dir, 0.5),
-                    quantile(&dir, 0.95),
-                    quantile(&mag, 0.5),
-                    quantile(&mag, 0.95),
-                ];
-                let (gain, d) = (cfg.gain, d.name());
-                writeln!(
-                    per_direction,
-                    "| {name} | {gain} | {d} | {:.4} | {:.4} | {:.3} | {:.3} |",
-                    q[0], q[1], q[2], q[3]
-                )?;
-                writeln!(
-                    dist,
-                    "{name},{gain},{d},{},{},{},{}",
-                    q[0], q[1], q[2], q[3]
-                )?;
-            }
+            write_per_direction(name, cfg.gain, &e, &mut per_direction, &mut dist)?;
             p95_force.push((name.to_string(), cfg.gain, p.force[1]));
         }
     }
     md.push_str(&per_direction);
-    // The quantisation share of the floor: the best model again, with exact readings.
+    Ok(SweepSection {
+        poses,
+        distributions_csv: dist,
+        p95_force,
+    })
+}
+
+/// The rows of model `name` at gain `gain` in the per-direction table (`per_direction`) and in
+/// `force_distributions.csv` (`dist`): median and 95th percentile of |direction error| (deg)
+/// and |magnitude error| (%) of each wrench direction of the sweep `e`.
+fn write_per_direction(
+    name: &str,
+    gain: f64,
+    e: &SweepErrors,
+    per_direction: &mut String,
+    dist: &mut String,
+) -> Result<()> {
+    for d in Direction::ALL {
+        let dir: Vec<f64> = e.errors[d.index()]
+            .iter()
+            .map(|w| w.direction_deg.abs())
+            .collect();
+        let mag: Vec<f64> = e.errors[d.index()]
+            .iter()
+            .map(|w| w.magnitude_pct.abs())
+            .collect();
+        let q = [
+            quantile(&dir, 0.5),
+            quantile(&dir, 0.95),
+            quantile(&mag, 0.5),
+            quantile(&mag, 0.95),
+        ];
+        let d = d.name();
+        writeln!(
+            per_direction,
+            "| {name} | {gain} | {d} | {:.4} | {:.4} | {:.3} | {:.3} |",
+            q[0], q[1], q[2], q[3]
+        )?;
+        writeln!(
+            dist,
+            "{name},{gain},{d},{},{},{},{}",
+            q[0], q[1], q[2], q[3]
+        )?;
+    }
+    Ok(())
+}
+
+/// The quantisation share of the floor: the best model ("calibrated, true pruned") swept again
+/// over `poses` with exact readings, open loop.
+///
+/// # Errors
+/// A failed sweep.
+fn write_quantisation_share(
+    bench: &ForceBench<'_>,
+    poses: &[Vec<f64>],
+    md: &mut String,
+) -> Result<()> {
     let exact = WallConfig {
         quantise: false,
-        ..open
+        ..bench.open
     };
-    let (_, best) = &models[2];
-    let e = sweep(device, best, &truth_model, &poses, &exact).context("sweep, exact readings")?;
+    let (_, best) = &bench.models[2];
+    let e = sweep(bench.device, best, &bench.truth_model, poses, &exact)
+        .context("sweep, exact readings")?;
     let p = pooled(&e);
     writeln!(
         md,
         "\nWithout quantising the controller's readings, the \"calibrated, true pruned\" model's force direction error is {:.4}° median, {:.4}° p95 (G = 0): the rest of its error is the estimation noise of the calibration.",
         p.force[0], p.force[1]
     )?;
+    Ok(())
+}
+
+/// The reductions of the 95th-percentile force direction error between models, from
+/// `p95_force` ((model name, gain, p95 in deg) of the sweep), open loop and at `gain`.
+fn write_reductions(p95_force: &[(String, f64, f64)], gain: f64, md: &mut String) -> Result<()> {
     let ratio = |a: &str, b: &str, g: f64| {
         let find = |n: &str| {
             p95_force
@@ -325,13 +474,25 @@ pub fn run(
         md,
         "\nReduction of the 95th-percentile force direction error, nominal / calibrated: {:.1}× open loop, {:.1}× with G = {}; nominal / (calibrated with the pruned parameters at their truth): {:.1}× open loop.\n",
         ratio("nominal", "calibrated", 0.0),
-        ratio("nominal", "calibrated", plan.gain),
-        plan.gain,
+        ratio("nominal", "calibrated", gain),
+        gain,
         ratio("nominal", "calibrated, true pruned", 0.0),
     )?;
+    Ok(())
+}
 
-    // What the calibrated model cannot know: truth deviations it does not list that act on
-    // the handle frame (row 0 only moves the base, which body-frame wrenches do not see).
+/// What the calibrated model cannot know: truth deviations it does not list that act on the
+/// handle frame (row 0 only moves the base, which body-frame wrenches do not see), each with
+/// the force-direction floor it sets.
+///
+/// # Errors
+/// An invalid chain in `device`.
+fn write_floor(
+    device: &Device,
+    truth: &hapcal_sim::Truth,
+    calibrated: &Device,
+    md: &mut String,
+) -> Result<()> {
     let listed: Vec<&str> = (calibrated.calibration.iter())
         .flat_map(|c| c.values.iter().map(|v| v.name.as_str()))
         .collect();
@@ -354,16 +515,7 @@ pub fn run(
             v.abs().sin() * 100.0
         )?;
     }
-
-    let svg = fig12_svg(&wall_curves)?;
-    Ok(ForceReport {
-        markdown: md,
-        files: vec![
-            ("fig12_force.svg".into(), svg),
-            ("fig12_force.csv".into(), csv),
-            ("force_distributions.csv".into(), dist),
-        ],
-    })
+    Ok(())
 }
 
 /// The pose of the Fig. 12 experiment (readings, rad): the home readings (mid-range) with

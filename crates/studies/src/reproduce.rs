@@ -83,13 +83,65 @@ pub fn run(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Reproduction> {
     let r = Reference::load(truth_path)?;
-    // Seeds in parallel (rayon); each seed is computed alone from its own RNG and `collect`
-    // keeps seed order, so the result does not depend on the number of threads.
+    let seeds = run_seeds(&r, n_seeds, n_poses, choice, progress)?;
+    let mut draft = Draft {
+        files: Vec::new(),
+        golden: Vec::new(),
+        md: String::new(),
+    };
+    write_header(&r, n_seeds, n_poses, choice, &mut draft.md)?;
+    let two_step = table3_two_step(&r, &seeds, &mut draft)?;
+    table3_joint(&r, &seeds, &two_step, &mut draft)?;
+    table2_capstans(&r, &seeds, &mut draft)?;
+    table2_full_revolution(&r, &seeds[0], n_poses, &mut draft)?;
+    fig7_polynomial(&r, &seeds[0], &mut draft)?;
+    fig8_validation(&seeds, n_poses, &mut draft)?;
+    // ---- Force control (paper Figs. 11–12) with seed 0's calibrated model.
+    let s0 = &seeds[0];
+    crate::force::append_to_reproduction(
+        &r,
+        &s0.transmissions,
+        &s0.kinematics,
+        &mut draft.files,
+        &mut draft.md,
+    )?;
+    draft.files.push(("README.md".into(), draft.md.clone()));
+    Ok(Reproduction {
+        files: draft.files,
+        golden: draft.golden,
+        summary: draft.md,
+    })
+}
+
+/// The reproduction while its stages write it: each stage appends its files, golden values and
+/// Markdown section, in the order of the report.
+struct Draft {
+    /// (file name, CSV, SVG or Markdown text), in writing order.
+    files: Vec<(String, String)>,
+    /// Values compared by `--check`, in writing order.
+    golden: Vec<Golden>,
+    /// The Markdown summary so far.
+    md: String,
+}
+
+/// Runs the `n_seeds` seeds in parallel (rayon), calling `progress` with the number done; each
+/// seed is computed alone from its own RNG and `collect` keeps seed order, so the result does
+/// not depend on the number of threads.
+///
+/// # Errors
+/// A failed seed (the first in seed order), or no seed at all.
+fn run_seeds(
+    r: &Reference,
+    n_seeds: usize,
+    n_poses: usize,
+    choice: &paper::PoseChoice<'_>,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<Vec<SeedResult>> {
     let done = std::sync::atomic::AtomicUsize::new(0);
     let seeds: Vec<SeedResult> = (0..n_seeds)
         .into_par_iter()
         .map(|seed| {
-            let result = paper::run_seed_with(&r, seed as u64, n_poses, choice)
+            let result = paper::run_seed_with(r, seed as u64, n_poses, choice)
                 .with_context(|| format!("seed {seed}"));
             progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
             result
@@ -98,9 +150,17 @@ pub fn run(
     if seeds.is_empty() {
         bail!("--seeds must be at least 1");
     }
-    let mut files = Vec::new();
-    let mut golden: Vec<Golden> = Vec::new();
-    let mut md = String::new();
+    Ok(seeds)
+}
+
+/// The summary's title and its paragraphs on the setup (and on the planned poses, if any).
+fn write_header(
+    r: &Reference,
+    n_seeds: usize,
+    n_poses: usize,
+    choice: &paper::PoseChoice<'_>,
+    md: &mut String,
+) -> Result<()> {
     writeln!(
         md,
         "# Reproduction of Baser & Konukseven on the simulated reference device\n"
@@ -120,17 +180,99 @@ pub fn run(
             "**Planned poses:** the {n_poses} identification poses of each seed are chosen {name} from {n_candidates} random candidates by their joint readings alone (`--design {name} --candidates {n_candidates}`), instead of the paper's {n_poses} random poses; validation poses stay random.\n"
         )?;
     }
+    Ok(())
+}
 
-    // ---- Table 3: kinematic parameters.
-    let names: Vec<String> = r.chain.params().iter().map(|p| p.name.clone()).collect();
+/// Names of the reference chain's kinematic parameters, in layout order.
+fn param_names(r: &Reference) -> Vec<String> {
+    r.chain.params().iter().map(|p| p.name.clone()).collect()
+}
+
+/// What the seeds say about kinematic parameter `i` (assigned value `assigned`, SI): over the
+/// seeds that kept it, its improvements, normalised errors, variances and 95 % coverage.
+struct SeedSpread {
+    /// I% (eq. 8) per seed that kept it; empty when `assigned` is 0 (I% undefined).
+    imp: Vec<f64>,
+    /// (identified − assigned)/std per seed that kept it.
+    z: Vec<f64>,
+    /// Sum of std² over the seeds that kept it (SI unit squared).
+    var_sum: f64,
+    /// Seeds whose 95 % interval holds `assigned`.
+    covered: usize,
+    /// Seeds that kept it (not pruned).
+    kept: usize,
+}
+
+impl SeedSpread {
+    /// Collects parameter `i` over `outcomes` (one `Vec` of parameter outcomes per seed).
+    fn of(outcomes: &[Vec<paper::ParamOutcome>], i: usize, assigned: f64) -> Result<Self> {
+        let mut spread = Self {
+            imp: Vec::new(),
+            z: Vec::new(),
+            var_sum: 0.0,
+            covered: 0,
+            kept: 0,
+        };
+        for o in outcomes {
+            if let (Some(v), Some(s)) = (o[i].identified, o[i].std) {
+                spread.kept += 1;
+                if assigned != 0.0 {
+                    spread
+                        .imp
+                        .push(parameter_improvement_pct(assigned, v, 0.0)?);
+                }
+                if (v - assigned).abs() <= Z95 * s {
+                    spread.covered += 1;
+                }
+                spread.z.push((v - assigned) / s);
+                spread.var_sum += s * s;
+            }
+        }
+        Ok(spread)
+    }
+
+    /// Percentage of the seeds that kept it whose 95 % interval holds the assigned value.
+    fn coverage_pct(&self) -> f64 {
+        100.0 * self.covered as f64 / self.kept as f64
+    }
+
+    /// Percentage of the `n_seeds` seeds that kept it.
+    fn kept_pct(&self, n_seeds: usize) -> f64 {
+        100.0 * self.kept as f64 / n_seeds as f64
+    }
+}
+
+/// The improvement bars of Table 3's figure: per parameter with a defined I%, its median, 5th
+/// and 95th percentile over the seeds and the paper's value.
+#[derive(Default)]
+struct ImprovementBars {
+    names: Vec<String>,
+    med: Vec<f64>,
+    p5: Vec<f64>,
+    p95: Vec<f64>,
+    paper: Vec<Option<f64>>,
+}
+
+/// Table 3 (step 2, two-step identification): table3.csv, its figure, the Markdown table with
+/// its golden values, and seed 0's pruned parameters. Returns the per-seed parameter outcomes.
+///
+/// # Errors
+/// An unreadable paper table or a failed figure.
+fn table3_two_step(
+    r: &Reference,
+    seeds: &[SeedResult],
+    draft: &mut Draft,
+) -> Result<Vec<Vec<paper::ParamOutcome>>> {
+    let n_seeds = seeds.len();
     let outcomes: Vec<Vec<paper::ParamOutcome>> = seeds
         .iter()
-        .map(|s| paper::kinematic_outcomes(&r, &s.kinematics))
+        .map(|s| paper::kinematic_outcomes(r, &s.kinematics))
         .collect();
     let paper3 = read_paper_table(&crate::project_root().join("fixtures/golden/paper/table3.csv"))?;
     let mut t3 = String::from(
         "param,assigned,identified_seed0,std_seed0,ci95_lo_seed0,ci95_hi_seed0,median_improvement_pct,p5_improvement_pct,p95_improvement_pct,coverage95_pct,normalised_error_sd,bound_median_improvement_pct,kept_pct,paper_improvement_pct,unit\n",
     );
+    let md = &mut draft.md;
     writeln!(md, "## Table 3: kinematic parameters (step 2)\n")?;
     writeln!(
         md,
@@ -143,123 +285,49 @@ pub fn run(
         "| param | assigned | seed 0: identified ± std | median I% (5th–95th) | noise bound | paper I% | 95 % CI coverage | normalised error SD | kept |"
     )?;
     writeln!(md, "|---|---|---|---|---|---|---|---|---|")?;
-    let mut pruned_always = Vec::new();
-    let (mut bar_names, mut bar_med, mut bar_p5, mut bar_p95, mut bar_paper) =
-        (vec![], vec![], vec![], vec![], vec![]);
-    for (i, name) in names.iter().enumerate() {
-        let (f, unit) = display_unit(name);
+    let mut bars = ImprovementBars::default();
+    for (i, name) in param_names(r).iter().enumerate() {
         let assigned = r.x_truth[i];
-        let mut imp = Vec::new();
-        let mut z = Vec::new();
-        let mut var_sum = 0.0;
-        let (mut covered, mut kept) = (0usize, 0usize);
-        for o in &outcomes {
-            if let (Some(v), Some(s)) = (o[i].identified, o[i].std) {
-                kept += 1;
-                if assigned != 0.0 {
-                    imp.push(parameter_improvement_pct(assigned, v, 0.0)?);
-                }
-                if (v - assigned).abs() <= Z95 * s {
-                    covered += 1;
-                }
-                z.push((v - assigned) / s);
-                var_sum += s * s;
-            }
-        }
+        let spread = SeedSpread::of(&outcomes, i, assigned)?;
         let paper_imp = paper3.iter().find(|(n, _)| n == name).map(|(_, v)| *v);
-        if kept == 0 {
-            pruned_always.push(name.clone());
-            writeln!(
-                t3,
-                "{name},{},,,,,,,,,,,0,{},{unit}",
-                assigned * f,
-                paper_imp.map_or(String::new(), |v| v.to_string())
-            )?;
-            writeln!(
-                md,
-                "| {name} | {:.3} {unit} | pruned | – | – | {} | – | – | 0 % |",
-                assigned * f,
-                paper_imp.map_or("–".into(), |v| format!("{v:.2}"))
-            )?;
+        let row = Table3Row {
+            name,
+            assigned,
+            seed0: &outcomes[0][i],
+            paper_imp,
+            n_seeds,
+        };
+        if spread.kept == 0 {
+            write_table3_pruned_row(&row, &mut t3, &mut draft.md)?;
             continue;
         }
-        let s0 = &outcomes[0][i];
-        let (v0, sd0) = (
-            s0.identified.unwrap_or(f64::NAN),
-            s0.std.unwrap_or(f64::NAN),
-        );
-        let coverage = 100.0 * covered as f64 / kept as f64;
-        let kept_pct = 100.0 * kept as f64 / seeds.len() as f64;
-        let z_sd = sample_sd(&z);
-        let seed0 = if s0.identified.is_some() {
-            format!("{:.4} ± {:.4}", v0 * f, sd0 * f)
-        } else {
-            "pruned".to_owned()
-        };
-        // I% (eq. 8) is undefined for a zero deviation.
-        let improvement = (assigned != 0.0).then(|| {
-            let med = quantile(&mut imp.clone(), 0.5);
-            let p5 = quantile(&mut imp.clone(), 0.05);
-            let p95 = quantile(&mut imp.clone(), 0.95);
-            let bound = 100.0 * (1.0 - 0.674 * (var_sum / kept as f64).sqrt() / assigned.abs());
-            (med, p5, p95, bound)
-        });
-        let (csv_med, csv_bound) = improvement.map_or((",,".to_owned(), String::new()), |i| {
-            (format!("{},{},{}", i.0, i.1, i.2), i.3.to_string())
-        });
-        writeln!(
-            t3,
-            "{name},{},{},{},{},{},{csv_med},{coverage},{},{csv_bound},{kept_pct},{},{unit}",
-            assigned * f,
-            v0 * f,
-            sd0 * f,
-            (v0 - Z95 * sd0) * f,
-            (v0 + Z95 * sd0) * f,
-            csv_number(z_sd),
-            paper_imp.map_or(String::new(), |v| v.to_string())
-        )?;
-        let (md_improvement, md_bound) = improvement.map_or(
-            ("undefined (assigned 0)".to_owned(), "–".to_owned()),
-            |(med, p5, p95, bound)| {
-                (
-                    format!("{med:.2} ({p5:.2}–{p95:.2})"),
-                    format!("{bound:.2}"),
-                )
-            },
-        );
-        writeln!(
-            md,
-            "| {name} | {:.3} {unit} | {seed0} | {md_improvement} | {md_bound} | {} | {coverage:.0} % | {} | {kept_pct:.0} % |",
-            assigned * f,
-            paper_imp.map_or("–".into(), |v| format!("{v:.2}")),
-            if z.len() > 1 {
-                format!("{z_sd:.2}")
-            } else {
-                "–".into()
-            }
-        )?;
-        let Some((med, p5, p95, _)) = improvement else {
+        let coverage = spread.coverage_pct();
+        let Some((med, p5, p95, _)) = write_table3_row(&row, &spread, &mut t3, &mut draft.md)?
+        else {
             continue;
         };
-        bar_names.push(name.clone());
-        bar_med.push(med);
-        bar_p5.push(p5);
-        bar_p95.push(p95);
-        bar_paper.push(paper_imp);
-        golden.push((
+        bars.names.push(name.clone());
+        bars.med.push(med);
+        bars.p5.push(p5);
+        bars.p95.push(p95);
+        bars.paper.push(paper_imp);
+        draft.golden.push((
             format!("table3.{name}.median_improvement_pct"),
             med,
             0.05,
             "%",
         ));
-        golden.push((format!("table3.{name}.coverage95_pct"), coverage, 0.5, "%"));
+        draft
+            .golden
+            .push((format!("table3.{name}.coverage95_pct"), coverage, 0.5, "%"));
     }
-    files.push(("table3.csv".into(), t3));
-    files.push((
+    draft.files.push(("table3.csv".into(), t3));
+    draft.files.push((
         "table3_improvement.svg".into(),
-        crate::figures::improvement_bars(&bar_names, &bar_med, &bar_p5, &bar_p95, &bar_paper)?,
+        crate::figures::improvement_bars(&bars.names, &bars.med, &bars.p5, &bars.p95, &bars.paper)?,
     ));
     // Which parameters the pruning removed in seed 0, and why.
+    let md = &mut draft.md;
     writeln!(
         md,
         "\nPruned by the rank test (seed 0; not a hand-written list):\n"
@@ -268,15 +336,138 @@ pub fn run(
         writeln!(md, "- `{}`: {}", p.name, p.reason)?;
     }
     writeln!(md)?;
+    Ok(outcomes)
+}
 
-    // ---- Table 3 again, from the joint identification (both steps in one problem).
+/// One parameter of Table 3, the same for its CSV and Markdown rows.
+struct Table3Row<'a> {
+    /// Parameter name.
+    name: &'a str,
+    /// Assigned (truth) deviation, SI.
+    assigned: f64,
+    /// Seed 0's outcome for it.
+    seed0: &'a paper::ParamOutcome,
+    /// The paper's I%, if it printed one.
+    paper_imp: Option<f64>,
+    /// Number of seeds.
+    n_seeds: usize,
+}
+
+/// The rows of a parameter that every seed pruned.
+fn write_table3_pruned_row(row: &Table3Row<'_>, t3: &mut String, md: &mut String) -> Result<()> {
+    let Table3Row {
+        name,
+        assigned,
+        paper_imp,
+        ..
+    } = *row;
+    let (f, unit) = display_unit(name);
+    writeln!(
+        t3,
+        "{name},{},,,,,,,,,,,0,{},{unit}",
+        assigned * f,
+        paper_imp.map_or(String::new(), |v| v.to_string())
+    )?;
+    writeln!(
+        md,
+        "| {name} | {:.3} {unit} | pruned | – | – | {} | – | – | 0 % |",
+        assigned * f,
+        paper_imp.map_or("–".into(), |v| format!("{v:.2}"))
+    )?;
+    Ok(())
+}
+
+/// The rows of a parameter that some seed kept; returns its (median, 5th, 95th percentile I%,
+/// noise bound), `None` when I% is undefined (assigned 0).
+fn write_table3_row(
+    row: &Table3Row<'_>,
+    spread: &SeedSpread,
+    t3: &mut String,
+    md: &mut String,
+) -> Result<Option<(f64, f64, f64, f64)>> {
+    let Table3Row {
+        name,
+        assigned,
+        seed0: s0,
+        paper_imp,
+        n_seeds,
+    } = *row;
+    let (f, unit) = display_unit(name);
+    let (v0, sd0) = (
+        s0.identified.unwrap_or(f64::NAN),
+        s0.std.unwrap_or(f64::NAN),
+    );
+    let coverage = spread.coverage_pct();
+    let kept_pct = spread.kept_pct(n_seeds);
+    let z_sd = sample_sd(&spread.z);
+    let seed0 = if s0.identified.is_some() {
+        format!("{:.4} ± {:.4}", v0 * f, sd0 * f)
+    } else {
+        "pruned".to_owned()
+    };
+    // I% (eq. 8) is undefined for a zero deviation.
+    let improvement = (assigned != 0.0).then(|| {
+        let med = quantile(&mut spread.imp.clone(), 0.5);
+        let p5 = quantile(&mut spread.imp.clone(), 0.05);
+        let p95 = quantile(&mut spread.imp.clone(), 0.95);
+        let bound =
+            100.0 * (1.0 - 0.674 * (spread.var_sum / spread.kept as f64).sqrt() / assigned.abs());
+        (med, p5, p95, bound)
+    });
+    let (csv_med, csv_bound) = improvement.map_or((",,".to_owned(), String::new()), |i| {
+        (format!("{},{},{}", i.0, i.1, i.2), i.3.to_string())
+    });
+    writeln!(
+        t3,
+        "{name},{},{},{},{},{},{csv_med},{coverage},{},{csv_bound},{kept_pct},{},{unit}",
+        assigned * f,
+        v0 * f,
+        sd0 * f,
+        (v0 - Z95 * sd0) * f,
+        (v0 + Z95 * sd0) * f,
+        csv_number(z_sd),
+        paper_imp.map_or(String::new(), |v| v.to_string())
+    )?;
+    let (md_improvement, md_bound) = improvement.map_or(
+        ("undefined (assigned 0)".to_owned(), "–".to_owned()),
+        |(med, p5, p95, bound)| {
+            (
+                format!("{med:.2} ({p5:.2}–{p95:.2})"),
+                format!("{bound:.2}"),
+            )
+        },
+    );
+    writeln!(
+        md,
+        "| {name} | {:.3} {unit} | {seed0} | {md_improvement} | {md_bound} | {} | {coverage:.0} % | {} | {kept_pct:.0} % |",
+        assigned * f,
+        paper_imp.map_or("–".into(), |v| format!("{v:.2}")),
+        if spread.z.len() > 1 {
+            format!("{z_sd:.2}")
+        } else {
+            "–".into()
+        }
+    )?;
+    Ok(improvement)
+}
+
+/// Table 3 again, from the joint identification (both steps in one problem): table3_joint.csv,
+/// the Markdown table beside the two-step median (`two_step`: per-seed outcomes of
+/// [`table3_two_step`]) and its golden values.
+fn table3_joint(
+    r: &Reference,
+    seeds: &[SeedResult],
+    two_step: &[Vec<paper::ParamOutcome>],
+    draft: &mut Draft,
+) -> Result<()> {
     let joint_out: Vec<Vec<paper::ParamOutcome>> = seeds
         .iter()
-        .map(|s| paper::kinematic_outcomes_at(&r, &s.joint, s.joint_offset))
+        .map(|s| paper::kinematic_outcomes_at(r, &s.joint, s.joint_offset))
         .collect();
     let mut t3j = String::from(
         "param,assigned,median_improvement_pct,p5_improvement_pct,p95_improvement_pct,coverage95_pct,normalised_error_sd,kept_pct,unit\n",
     );
+    let md = &mut draft.md;
     writeln!(
         md,
         "## Table 3, joint identification (transmissions and kinematics in one problem)\n"
@@ -290,40 +481,34 @@ pub fn run(
         "| param | median I% (5th–95th) | two-step median I% | 95 % CI coverage | normalised error SD | kept |"
     )?;
     writeln!(md, "|---|---|---|---|---|---|")?;
-    for (i, name) in names.iter().enumerate() {
+    for (i, name) in param_names(r).iter().enumerate() {
         let (_, unit) = display_unit(name);
         let assigned = r.x_truth[i];
         if assigned == 0.0 {
             continue;
         }
-        let (mut imp, mut imp2, mut z) = (Vec::new(), Vec::new(), Vec::new());
-        let (mut covered, mut kept) = (0usize, 0usize);
-        for (o, o2) in joint_out.iter().zip(&outcomes) {
-            if let (Some(v), Some(sd)) = (o[i].identified, o[i].std) {
-                kept += 1;
-                z.push((v - assigned) / sd);
-                imp.push(parameter_improvement_pct(assigned, v, 0.0)?);
-                if (v - assigned).abs() <= Z95 * sd {
-                    covered += 1;
-                }
-            }
+        let spread = SeedSpread::of(&joint_out, i, assigned)?;
+        let mut imp2 = Vec::new();
+        for o2 in two_step {
             if let Some(v) = o2[i].identified {
                 imp2.push(parameter_improvement_pct(assigned, v, 0.0)?);
             }
         }
-        if kept == 0 {
+        let md = &mut draft.md;
+        if spread.kept == 0 {
             writeln!(md, "| {name} | pruned | – | – | – | 0 % |")?;
             continue;
         }
+        let imp = &spread.imp;
         let med = quantile(&mut imp.clone(), 0.5);
         let (p5, p95) = (
             quantile(&mut imp.clone(), 0.05),
             quantile(&mut imp.clone(), 0.95),
         );
         let med2 = quantile(&mut imp2, 0.5);
-        let coverage = 100.0 * covered as f64 / kept as f64;
-        let kept_pct = 100.0 * kept as f64 / seeds.len() as f64;
-        let z_sd = sample_sd(&z);
+        let coverage = spread.coverage_pct();
+        let kept_pct = spread.kept_pct(seeds.len());
+        let z_sd = sample_sd(&spread.z);
         writeln!(
             t3j,
             "{name},{},{med},{p5},{p95},{coverage},{},{kept_pct},{unit}",
@@ -339,27 +524,55 @@ pub fn run(
                 format!("{z_sd:.2}")
             }
         )?;
-        golden.push((
+        draft.golden.push((
             format!("table3_joint.{name}.median_improvement_pct"),
             med,
             0.05,
             "%",
         ));
-        golden.push((
+        draft.golden.push((
             format!("table3_joint.{name}.coverage95_pct"),
             coverage,
             0.5,
             "%",
         ));
     }
-    files.push(("table3_joint.csv".into(), t3j));
-    writeln!(md)?;
+    draft.files.push(("table3_joint.csv".into(), t3j));
+    writeln!(draft.md)?;
+    Ok(())
+}
 
-    // ---- Table 2: capstans (step 1).
+/// A capstan's parameter `k` in SI: 0 c, 1 re, 2 r_o, 3 beta_o, 4 r_i, 5 beta_i (the order of
+/// [`CAPSTAN_SHORT`]).
+fn capstan_field(p: &hapcal_transmission::CapstanParams, k: usize) -> f64 {
+    [p.c_rad, p.re, p.r_o_m, p.beta_o_rad, p.r_i_m, p.beta_i_rad][k]
+}
+
+/// Short names of a capstan's parameters, in [`capstan_field`]'s order.
+const CAPSTAN_SHORT: [&str; 6] = ["c", "re", "r_o", "beta_o", "r_i", "beta_i"];
+
+/// The truth's parameters of the capstan at `joint`.
+///
+/// # Errors
+/// No capstan at `joint` in the truth.
+fn truth_capstan(r: &Reference, joint: usize) -> Result<hapcal_transmission::CapstanParams> {
+    Ok(r.truth
+        .capstans
+        .iter()
+        .find(|c| c.joint == joint)
+        .context("truth capstan")?
+        .params())
+}
+
+/// Table 2 (step 1, capstan drives over the joint range): table2.csv, the Markdown table with
+/// its golden values, and the median correlation of the ratio error with the output-drum
+/// eccentricity.
+fn table2_capstans(r: &Reference, seeds: &[SeedResult], draft: &mut Draft) -> Result<()> {
     let paper2 = read_paper_table(&crate::project_root().join("fixtures/golden/paper/table2.csv"))?;
     let mut t2 = String::from(
         "param,assigned,identified_seed0,std_seed0,median_improvement_pct,p5_improvement_pct,p95_improvement_pct,coverage95_pct,median_abs_corr_re_r_o,paper_improvement_pct,unit\n",
     );
+    let md = &mut draft.md;
     writeln!(
         md,
         "## Table 2: capstan drives (step 1, external encoders over the joint range)\n"
@@ -369,51 +582,24 @@ pub fn run(
         "| param | assigned | seed 0: identified ± std | median I% (5th–95th) | paper I% | 95 % CI coverage |"
     )?;
     writeln!(md, "|---|---|---|---|---|---|")?;
-    let field = |p: &hapcal_transmission::CapstanParams, k: usize| {
-        [p.c_rad, p.re, p.r_o_m, p.beta_o_rad, p.r_i_m, p.beta_i_rad][k]
-    };
-    let short = ["c", "re", "r_o", "beta_o", "r_i", "beta_i"];
     let mut corr_notes = String::new();
     for (ci, fit0) in seeds[0].transmissions.capstans.iter().enumerate() {
         let joint = fit0.joint;
-        let truth = r
-            .truth
-            .capstans
-            .iter()
-            .find(|c| c.joint == joint)
-            .context("truth capstan")?
-            .params();
-        for (k, short_name) in short.iter().enumerate().skip(1) {
+        let truth = truth_capstan(r, joint)?;
+        for (k, short_name) in CAPSTAN_SHORT.iter().enumerate().skip(1) {
             let name = format!("capstan{joint}.{short_name}");
             let (f, unit) = display_unit(&name);
-            let assigned = field(&truth, k);
-            let mut imp = Vec::new();
-            let mut covered = 0;
-            let mut corr = Vec::new();
-            for s in &seeds {
-                let fit = &s.transmissions.capstans[ci];
-                let v = field(&fit.params, k);
-                let std = fit.identified.std(&name).unwrap_or(f64::NAN);
-                imp.push(parameter_improvement_pct(assigned, v, 0.0)?);
-                if (v - assigned).abs() <= Z95 * std {
-                    covered += 1;
-                }
-                let c = fit.identified.covariance.correlation();
-                let ia = fit.identified.covariance.free.iter().position(|&i| i == 1);
-                let ib = fit.identified.covariance.free.iter().position(|&i| i == 2);
-                if let (Some(a), Some(b)) = (ia, ib) {
-                    corr.push(c[(a, b)].abs());
-                }
-            }
-            let v0 = field(&fit0.params, k);
+            let assigned = capstan_field(&truth, k);
+            let spread = CapstanSpread::of(seeds, ci, k, &name, assigned)?;
+            let v0 = capstan_field(&fit0.params, k);
             let sd0 = fit0.identified.std(&name).unwrap_or(f64::NAN);
-            let med = quantile(&mut imp.clone(), 0.5);
+            let med = quantile(&mut spread.imp.clone(), 0.5);
             let (p5, p95) = (
-                quantile(&mut imp.clone(), 0.05),
-                quantile(&mut imp.clone(), 0.95),
+                quantile(&mut spread.imp.clone(), 0.05),
+                quantile(&mut spread.imp.clone(), 0.95),
             );
-            let coverage = 100.0 * covered as f64 / seeds.len() as f64;
-            let mcorr = quantile(&mut corr, 0.5);
+            let coverage = 100.0 * spread.covered as f64 / seeds.len() as f64;
+            let mcorr = quantile(&mut spread.corr.clone(), 0.5);
             let paper_imp = paper2.iter().find(|(n, _)| *n == name).map(|(_, v)| *v);
             writeln!(
                 t2,
@@ -424,14 +610,14 @@ pub fn run(
                 paper_imp.map_or(String::new(), |v| v.to_string())
             )?;
             writeln!(
-                md,
+                draft.md,
                 "| {name} | {:.4} {unit} | {:.5} ± {:.5} | {med:.2} ({p5:.2}–{p95:.2}) | {} | {coverage:.0} % |",
                 assigned * f,
                 v0 * f,
                 sd0 * f,
                 paper_imp.map_or("–".into(), |v| format!("{v:.2}"))
             )?;
-            golden.push((
+            draft.golden.push((
                 format!("table2.{name}.median_improvement_pct"),
                 med,
                 0.05,
@@ -445,13 +631,61 @@ pub fn run(
             }
         }
     }
-    files.push(("table2.csv".into(), t2));
+    draft.files.push(("table2.csv".into(), t2));
     writeln!(
-        md,
+        draft.md,
         "\nCorrelation of the ratio error with the output-drum eccentricity within the joint range:\n\n{corr_notes}"
     )?;
+    Ok(())
+}
 
-    // Full output revolution (documented option): seed 0's capstans again, θ over ±π.
+/// What the seeds say about one capstan parameter: improvements, 95 % coverage and the
+/// correlation of the ratio error with the output-drum eccentricity.
+struct CapstanSpread {
+    /// I% (eq. 8) per seed.
+    imp: Vec<f64>,
+    /// Seeds whose 95 % interval holds the assigned value.
+    covered: usize,
+    /// |corr(re, r_o)| per seed where both are free.
+    corr: Vec<f64>,
+}
+
+impl CapstanSpread {
+    /// Collects parameter `k` ([`capstan_field`]) named `name` of capstan fit `ci` over `seeds`
+    /// (`assigned` in SI).
+    fn of(seeds: &[SeedResult], ci: usize, k: usize, name: &str, assigned: f64) -> Result<Self> {
+        let mut imp = Vec::new();
+        let mut covered = 0;
+        let mut corr = Vec::new();
+        for s in seeds {
+            let fit = &s.transmissions.capstans[ci];
+            let v = capstan_field(&fit.params, k);
+            let std = fit.identified.std(name).unwrap_or(f64::NAN);
+            imp.push(parameter_improvement_pct(assigned, v, 0.0)?);
+            if (v - assigned).abs() <= Z95 * std {
+                covered += 1;
+            }
+            let c = fit.identified.covariance.correlation();
+            let ia = fit.identified.covariance.free.iter().position(|&i| i == 1);
+            let ib = fit.identified.covariance.free.iter().position(|&i| i == 2);
+            if let (Some(a), Some(b)) = (ia, ib) {
+                corr.push(c[(a, b)].abs());
+            }
+        }
+        Ok(Self { imp, covered, corr })
+    }
+}
+
+/// The documented option: seed 0's capstans identified again from `n_poses` external-encoder
+/// samples over a full output revolution (θ ∈ [−π, π]): table2_full_revolution.csv and the
+/// Markdown table beside the joint-range fit.
+fn table2_full_revolution(
+    r: &Reference,
+    seed0: &SeedResult,
+    n_poses: usize,
+    draft: &mut Draft,
+) -> Result<()> {
+    let md = &mut draft.md;
     writeln!(
         md,
         "### Option: external-encoder run over a full output revolution (θ ∈ [−π, π], 200 samples, seed 0)\n"
@@ -462,60 +696,74 @@ pub fn run(
     )?;
     writeln!(md, "|---|---|---|---|")?;
     let mut full_csv = String::from("param,assigned,identified,std,unit\n");
-    for fit0 in &seeds[0].transmissions.capstans {
+    for fit0 in &seed0.transmissions.capstans {
         let joint = fit0.joint;
-        let truth = r
-            .truth
-            .capstans
-            .iter()
-            .find(|c| c.joint == joint)
-            .context("truth capstan")?
-            .params();
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(joint as u64);
-        let noise = Normal::new(0.0, r.noise.sigma_e_rad)?;
-        let theta: Vec<f64> = (0..n_poses)
-            .map(|k| {
-                -std::f64::consts::PI
-                    + 2.0 * std::f64::consts::PI * (k as f64 + 0.5) / n_poses as f64
-            })
-            .collect();
-        let ext: Vec<f64> = theta
-            .iter()
-            .map(|&t| fit0.capstan.output_rad(&truth, JointRad(t)) + noise.sample(&mut rng))
-            .collect();
-        let problem = CapstanProblem::new(fit0.capstan, joint, theta, ext, r.noise.sigma_e_rad)?;
-        let full = identify(
-            &problem,
-            problem.initial_guess(),
-            &paper::transmission_config(),
-        )?;
+        let truth = truth_capstan(r, joint)?;
+        let full = identify_full_revolution(r, fit0, &truth, n_poses)?;
         let p_full = CapstanProblem::params(full.fit.x.as_ref());
-        for (k, short_name) in short.iter().enumerate().skip(1) {
+        for (k, short_name) in CAPSTAN_SHORT.iter().enumerate().skip(1) {
             let name = format!("capstan{joint}.{short_name}");
             let (f, unit) = display_unit(&name);
             let sd_full = full.std(&name).unwrap_or(f64::NAN);
             writeln!(
                 full_csv,
                 "{name},{},{},{},{unit}",
-                field(&truth, k) * f,
-                field(&p_full, k) * f,
+                capstan_field(&truth, k) * f,
+                capstan_field(&p_full, k) * f,
                 sd_full * f
             )?;
             writeln!(
-                md,
+                draft.md,
                 "| {name} | {:.5} {unit} | {:.5} ± {:.5} | {:.5} ± {:.5} |",
-                field(&truth, k) * f,
-                field(&fit0.params, k) * f,
+                capstan_field(&truth, k) * f,
+                capstan_field(&fit0.params, k) * f,
                 fit0.identified.std(&name).unwrap_or(f64::NAN) * f,
-                field(&p_full, k) * f,
+                capstan_field(&p_full, k) * f,
                 sd_full * f
             )?;
         }
     }
-    files.push(("table2_full_revolution.csv".into(), full_csv));
+    draft
+        .files
+        .push(("table2_full_revolution.csv".into(), full_csv));
+    Ok(())
+}
 
-    // ---- Fig. 7: joint-4 polynomial.
-    let poly = &seeds[0].transmissions.poly;
+/// Simulates `n_poses` evenly spaced joint angles over [−π, π] with the true capstan `truth`
+/// and encoder noise (RNG seeded by the joint), and identifies the capstan of `fit0` from them.
+///
+/// # Errors
+/// An invalid noise level or a failed identification.
+fn identify_full_revolution(
+    r: &Reference,
+    fit0: &paper::CapstanFit,
+    truth: &hapcal_transmission::CapstanParams,
+    n_poses: usize,
+) -> Result<hapcal_identify::Identified> {
+    let joint = fit0.joint;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(joint as u64);
+    let noise = Normal::new(0.0, r.noise.sigma_e_rad)?;
+    let theta: Vec<f64> = (0..n_poses)
+        .map(|k| {
+            -std::f64::consts::PI + 2.0 * std::f64::consts::PI * (k as f64 + 0.5) / n_poses as f64
+        })
+        .collect();
+    let ext: Vec<f64> = theta
+        .iter()
+        .map(|&t| fit0.capstan.output_rad(truth, JointRad(t)) + noise.sample(&mut rng))
+        .collect();
+    let problem = CapstanProblem::new(fit0.capstan, joint, theta, ext, r.noise.sigma_e_rad)?;
+    Ok(identify(
+        &problem,
+        problem.initial_guess(),
+        &paper::transmission_config(),
+    )?)
+}
+
+/// Fig. 7 (seed 0's joint-4 polynomial against the true transmission error over the joint
+/// range, 201 samples): its CSV and SVG, the Markdown section and the golden RMS.
+fn fig7_polynomial(r: &Reference, seed0: &SeedResult, draft: &mut Draft) -> Result<()> {
+    let poly = &seed0.transmissions.poly;
     let (lo, hi) = r.device.joint_limits()[paper::PARALLELOGRAM_JOINT - 1];
     let mut fig7 = String::from("theta_rad,true_error_rad,polynomial_rad\n");
     let mut fit_err = Vec::new();
@@ -532,7 +780,7 @@ pub fn run(
         writeln!(fig7, "{t},{e},{}", poly.eval(t))?;
         fit_err.push(poly.eval(t) - e);
     }
-    files.push(("fig7_polynomial.csv".into(), fig7));
+    draft.files.push(("fig7_polynomial.csv".into(), fig7));
     {
         let (mut th, mut te, mut tp) = (vec![], vec![], vec![]);
         for (k, err) in fit_err.iter().enumerate() {
@@ -541,13 +789,14 @@ pub fn run(
             tp.push(poly.eval(t));
             te.push(poly.eval(t) - err);
         }
-        files.push((
+        draft.files.push((
             "fig7_polynomial.svg".into(),
             crate::figures::fig7_polynomial(&th, &te, &tp, &[])?,
         ));
     }
     let poly_rms = hapcal_metrics::rms(&fit_err);
     let k = poly.to_monomial();
+    let md = &mut draft.md;
     writeln!(
         md,
         "## Fig. 7: joint-4 transmission error, 10th-order polynomial (seed 0)\n"
@@ -567,40 +816,81 @@ pub fn run(
             .collect::<Vec<_>>()
             .join(", ")
     )?;
-    golden.push((
+    draft.golden.push((
         "fig7.poly_rms_over_sigma_e".into(),
         poly_rms / r.noise.sigma_e_rad,
         0.05,
         "1",
     ));
+    Ok(())
+}
 
-    // ---- Fig. 8 and the transmissions' effect.
+/// Accuracy improvement in % (eq. 9), NaN when the baseline is zero.
+fn accuracy_pct(after: f64, before: f64) -> f64 {
+    accuracy_improvement_pct(after, before).unwrap_or(f64::NAN)
+}
+
+/// (median, 5th, 95th percentile) of a per-seed figure.
+fn spread(v: &[f64]) -> (f64, f64, f64) {
+    let mut v = v.to_vec();
+    (
+        quantile(&mut v, 0.5),
+        quantile(&mut v, 0.05),
+        quantile(&mut v, 0.95),
+    )
+}
+
+/// Per-seed improvements (%, eq. 9) of the validation on fresh poses, each as (median, 5th,
+/// 95th percentile) over the seeds.
+struct ValidationSpread {
+    /// Position RMS.
+    position: (f64, f64, f64),
+    /// Orientation RMS.
+    orientation: (f64, f64, f64),
+    /// Cable distance, full calibration.
+    distance_full: (f64, f64, f64),
+    /// Cable distance, kinematics only (transmissions left out).
+    distance_kinematics: (f64, f64, f64),
+    /// Median over the seeds of the orientation RMS the pruned parameters explain (rad).
+    orientation_left_median_rad: f64,
+}
+
+impl ValidationSpread {
+    /// Collects the validations of `seeds`.
+    fn of(seeds: &[SeedResult]) -> Self {
+        // One figure per seed, from its validation.
+        let per_seed = |f: &dyn Fn(&crate::paper::Validation) -> f64| -> Vec<f64> {
+            seeds.iter().map(|s| f(&s.validation)).collect()
+        };
+        let pos_i = per_seed(&|v| accuracy_pct(v.position_rms_after_m, v.position_rms_before_m));
+        let ori_i =
+            per_seed(&|v| accuracy_pct(v.orientation_rms_after_rad, v.orientation_rms_before_rad));
+        let dist_full =
+            per_seed(&|v| accuracy_pct(v.distance_rms_after_m, v.distance_rms_before_m));
+        let dist_kin =
+            per_seed(&|v| accuracy_pct(v.distance_rms_kinematics_only_m, v.distance_rms_before_m));
+        let mut ori_left = per_seed(&|v| {
+            v.orientation_rms_after_rad - v.orientation_rms_after_true_unidentifiable_rad
+        });
+        Self {
+            position: spread(&pos_i),
+            orientation: spread(&ori_i),
+            distance_full: spread(&dist_full),
+            distance_kinematics: spread(&dist_kin),
+            orientation_left_median_rad: quantile(&mut ori_left, 0.5),
+        }
+    }
+}
+
+/// Fig. 8 (validation on `n_poses` fresh poses) and the transmissions' effect on accuracy: the
+/// Markdown sections, fig8_validation.csv and .svg, and their golden values.
+fn fig8_validation(seeds: &[SeedResult], n_poses: usize, draft: &mut Draft) -> Result<()> {
+    let n_seeds = seeds.len();
     let v0 = seeds[0].validation;
-    let imp = |a: f64, b: f64| accuracy_improvement_pct(a, b).unwrap_or(f64::NAN);
-    // One figure per seed, from its validation.
-    let per_seed = |f: &dyn Fn(&crate::paper::Validation) -> f64| -> Vec<f64> {
-        seeds.iter().map(|s| f(&s.validation)).collect()
-    };
-    let pos_i = per_seed(&|v| imp(v.position_rms_after_m, v.position_rms_before_m));
-    let ori_i = per_seed(&|v| imp(v.orientation_rms_after_rad, v.orientation_rms_before_rad));
-    let dist_full = per_seed(&|v| imp(v.distance_rms_after_m, v.distance_rms_before_m));
-    let dist_kin = per_seed(&|v| imp(v.distance_rms_kinematics_only_m, v.distance_rms_before_m));
-    let mut ori_left = per_seed(&|v| {
-        v.orientation_rms_after_rad - v.orientation_rms_after_true_unidentifiable_rad
-    });
-    // (median, 5th, 95th percentile) of a per-seed figure.
-    let spread = |v: &[f64]| {
-        let mut v = v.to_vec();
-        (
-            quantile(&mut v, 0.5),
-            quantile(&mut v, 0.05),
-            quantile(&mut v, 0.95),
-        )
-    };
-    let (pos_med, pos_lo, pos_hi) = spread(&pos_i);
-    let (ori_med, ori_lo, ori_hi) = spread(&ori_i);
-    let (full_med, full_lo, full_hi) = spread(&dist_full);
-    let (kin_med, kin_lo, kin_hi) = spread(&dist_kin);
+    let s = ValidationSpread::of(seeds);
+    let (pos_med, pos_lo, pos_hi) = s.position;
+    let (ori_med, ori_lo, ori_hi) = s.orientation;
+    let md = &mut draft.md;
     writeln!(
         md,
         "## Fig. 8: validation on {n_poses} fresh poses, device base frame\n"
@@ -615,7 +905,7 @@ pub fn run(
         "| position RMS | {:.3} mm | {:.4} mm | {:.2} | {:.2} ({:.2}–{:.2}) |",
         v0.position_rms_before_m * 1e3,
         v0.position_rms_after_m * 1e3,
-        imp(v0.position_rms_after_m, v0.position_rms_before_m),
+        accuracy_pct(v0.position_rms_after_m, v0.position_rms_before_m),
         pos_med,
         pos_lo,
         pos_hi
@@ -625,7 +915,7 @@ pub fn run(
         "| orientation RMS | {:.3} mrad | {:.3} mrad | {:.2} | {:.2} ({:.2}–{:.2}) |",
         v0.orientation_rms_before_rad * 1e3,
         v0.orientation_rms_after_rad * 1e3,
-        imp(v0.orientation_rms_after_rad, v0.orientation_rms_before_rad),
+        accuracy_pct(v0.orientation_rms_after_rad, v0.orientation_rms_before_rad),
         ori_med,
         ori_lo,
         ori_hi
@@ -636,8 +926,48 @@ pub fn run(
         v0.orientation_rms_after_true_unidentifiable_rad * 1e3,
         v0.orientation_rms_after_rad * 1e3,
         (v0.orientation_rms_after_rad - v0.orientation_rms_after_true_unidentifiable_rad) * 1e3,
-        quantile(&mut ori_left, 0.5) * 1e3
+        s.orientation_left_median_rad * 1e3
     )?;
+    write_transmission_effect(&v0, &s, n_seeds, md)?;
+    draft
+        .files
+        .push(("fig8_validation.csv".into(), fig8_csv(seeds)?));
+    let [pb, pa, ob, oa] = &seeds[0].pose_errors;
+    draft.files.push((
+        "fig8_validation.svg".into(),
+        crate::figures::fig8_validation(pb, pa, ob, oa)?,
+    ));
+    draft.golden.push((
+        "fig8.median_position_improvement_pct".into(),
+        pos_med,
+        0.01,
+        "%",
+    ));
+    draft.golden.push((
+        "distance.median_improvement_full_pct".into(),
+        s.distance_full.0,
+        0.01,
+        "%",
+    ));
+    draft.golden.push((
+        "distance.median_improvement_kinematics_only_pct".into(),
+        s.distance_kinematics.0,
+        0.05,
+        "%",
+    ));
+    Ok(())
+}
+
+/// The section on the transmissions' effect on accuracy: seed 0's cable-distance RMS (`v0`) and
+/// the improvements over the `n_seeds` seeds with and without the transmissions.
+fn write_transmission_effect(
+    v0: &crate::paper::Validation,
+    s: &ValidationSpread,
+    n_seeds: usize,
+    md: &mut String,
+) -> Result<()> {
+    let (full_med, full_lo, full_hi) = s.distance_full;
+    let (kin_med, kin_lo, kin_hi) = s.distance_kinematics;
     writeln!(
         md,
         "## Transmissions' effect on accuracy (the paper's 96.6 % vs 44.7 %, real device)\n"
@@ -654,6 +984,11 @@ pub fn run(
         "Median I% (eq. 9) over {n_seeds} seeds: full calibration {:.2} % (5th–95th {:.2}–{:.2}), transmissions left out {:.2} % ({:.2}–{:.2}).\n",
         full_med, full_lo, full_hi, kin_med, kin_lo, kin_hi
     )?;
+    Ok(())
+}
+
+/// fig8_validation.csv: each seed's validation RMS values (m, rad).
+fn fig8_csv(seeds: &[SeedResult]) -> Result<String> {
     let mut fig8 = String::from(
         "seed,position_rms_before_m,position_rms_after_m,orientation_rms_before_rad,orientation_rms_after_rad,orientation_rms_after_true_unidentifiable_rad,distance_rms_before_m,distance_rms_after_m,distance_rms_kinematics_only_m\n",
     );
@@ -672,45 +1007,7 @@ pub fn run(
             v.distance_rms_kinematics_only_m
         )?;
     }
-    files.push(("fig8_validation.csv".into(), fig8));
-    let [pb, pa, ob, oa] = &seeds[0].pose_errors;
-    files.push((
-        "fig8_validation.svg".into(),
-        crate::figures::fig8_validation(pb, pa, ob, oa)?,
-    ));
-    golden.push((
-        "fig8.median_position_improvement_pct".into(),
-        pos_med,
-        0.01,
-        "%",
-    ));
-    golden.push((
-        "distance.median_improvement_full_pct".into(),
-        full_med,
-        0.01,
-        "%",
-    ));
-    golden.push((
-        "distance.median_improvement_kinematics_only_pct".into(),
-        kin_med,
-        0.05,
-        "%",
-    ));
-    // ---- Force control (paper Figs. 11–12) with seed 0's calibrated model.
-    let s0 = &seeds[0];
-    crate::force::append_to_reproduction(
-        &r,
-        &s0.transmissions,
-        &s0.kinematics,
-        &mut files,
-        &mut md,
-    )?;
-    files.push(("README.md".into(), md.clone()));
-    Ok(Reproduction {
-        files,
-        golden,
-        summary: md,
-    })
+    Ok(fig8)
 }
 
 fn read_paper_table(path: &Path) -> Result<Vec<(String, f64)>> {

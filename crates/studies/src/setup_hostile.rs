@@ -1419,6 +1419,11 @@ impl Sources {
     fn arm(&self, robot: ArmRobot) -> &arm_blind::ArmSetup {
         &self.arms[robot as usize]
     }
+
+    /// The absolute path of `path`, relative to the project root.
+    fn abs(&self, path: &str) -> String {
+        self.root.join(path).display().to_string()
+    }
 }
 
 /// A simulated arm's positions table (`t_s`, joints by name, `x,y,z`) for `case` with the
@@ -1518,6 +1523,84 @@ enum Base {
     Sockets(Table, Table),
 }
 
+impl Base {
+    /// The tables to write, in file order (a socket case: `hole_0`, then `hole_1`).
+    fn tables_mut(&mut self) -> Vec<&mut Table> {
+        match self {
+            Base::Table(t) => vec![t],
+            Base::Sockets(a, b) => vec![a, b],
+        }
+    }
+
+    /// The first table (the socket case's `hole_0`).
+    fn first(&self) -> &Table {
+        match self {
+            Base::Table(t) | Base::Sockets(t, _) => t,
+        }
+    }
+
+    /// The file a line number names: the first socket file, or the measurement file.
+    fn data_name(&self) -> &'static str {
+        match self {
+            Base::Table(_) => "data.csv",
+            Base::Sockets(..) => "hole_0.csv",
+        }
+    }
+}
+
+/// The joint columns of a case's data, to name a column the way a fix does.
+struct JointColumns {
+    /// The revolute joint columns, in the order the mistakes index them.
+    revolute: Vec<String>,
+    /// Every joint column, in chain order (a prismatic joint included).
+    joints: Vec<String>,
+}
+
+impl JointColumns {
+    /// The name of revolute column `c` (empty past the last).
+    fn name_of(&self, c: usize) -> String {
+        self.revolute.get(c).cloned().unwrap_or_default()
+    }
+
+    /// The words that name revolute column `c`: its joint name and `q<k>`, its place among all
+    /// joints.
+    fn words(&self, c: usize) -> Vec<String> {
+        let name = self.name_of(c);
+        let k = self.joints.iter().position(|j| *j == name).unwrap_or(c);
+        vec![name, format!("q{}", k + 1)]
+    }
+}
+
+/// The invocation of a case while its mistake is made: the device and tips it names, extra
+/// arguments, and what the fix must name and what locates the mistake.
+struct InvocationDraft {
+    /// The device file (absolute path).
+    device: String,
+    /// The tips, in `--tip` order.
+    tips: Vec<String>,
+    /// Arguments after the data.
+    extra: Vec<String>,
+    /// See [`Invocation::fix_words`].
+    fix_words: Vec<Vec<String>>,
+    /// See [`Invocation::locate_words`].
+    locate_words: Vec<String>,
+}
+
+/// One table of a case as a mistake is made in it.
+struct TableSite<'a> {
+    /// The case.
+    case: &'a Case,
+    /// Its joint columns (of the first table).
+    columns: &'a JointColumns,
+    /// The file a line number names ([`Base::data_name`]).
+    data_name: &'static str,
+    /// Index of this table among the case's tables (0: the first, which alone adds the words
+    /// of a mistake made in every table).
+    t_idx: usize,
+    /// Number of tables (2 for socket files).
+    n_tables: usize,
+}
+
 /// Writes `case` into `dir` (a fresh folder) and returns what to run. `simulate` runs
 /// `hapcal simulate` with the given arguments (haptic logs along a motion: the sweep passes
 /// the release binary; a test may pass a function that refuses).
@@ -1531,344 +1614,457 @@ pub fn write_case(
     simulate: &dyn Fn(&[String]) -> Result<()>,
 ) -> Result<Invocation> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let root = &sources.root;
     let rec = case.recording;
-    let abs = |p: &str| root.join(p).display().to_string();
-    let mut device = abs(rec.device());
-    let mut tips: Vec<String> = rec.tips().iter().map(|s| (*s).to_owned()).collect();
-    let mut extra: Vec<String> = Vec::new();
+    let mut draft = InvocationDraft {
+        device: sources.abs(rec.device()),
+        tips: rec.tips().iter().map(|s| (*s).to_owned()).collect(),
+        extra: Vec::new(),
+        fix_words: Vec::new(),
+        locate_words: Vec::new(),
+    };
     let mut rng = ChaCha8Rng::seed_from_u64(case.seed ^ 0xC0FF_EE00);
     let mut base = load_base(case, sources, dir, simulate)?;
-    let simulated = rec.sim_arm().is_some() || rec == R::HapticMotion;
-    if case.part > 0 && !simulated {
-        let tables: Vec<&mut Table> = match &mut base {
-            Base::Table(t) => vec![t],
-            Base::Sockets(a, b) => vec![a, b],
-        };
-        for t in tables {
-            let n = t.rows.len();
-            let mut keep: Vec<usize> = (0..n).collect();
-            keep.shuffle(&mut rng);
-            keep.truncate(n - n / 5);
-            keep.sort_unstable();
-            t.rows = keep.iter().map(|&i| t.rows[i].clone()).collect();
-        }
-    }
-
-    // Column names (the revolute joints) and what the fix must name.
-    let revolute = match &base {
-        Base::Table(t) | Base::Sockets(t, _) => rec.revolute(t),
+    thin_recorded(case, &mut base, &mut rng);
+    let columns = JointColumns {
+        revolute: rec.revolute(base.first()),
+        joints: joint_side(base.first()),
     };
-    // A column is named by its joint name or by `q<k>`, its place among all joints (chain
-    // order, a prismatic joint included).
-    let joints = match &base {
-        Base::Table(t) | Base::Sockets(t, _) => joint_side(t),
-    };
-    let col_words = |c: usize| -> Vec<String> {
-        let name = revolute.get(c).cloned().unwrap_or_default();
-        let k = joints.iter().position(|j| *j == name).unwrap_or(c);
-        vec![name, format!("q{}", k + 1)]
-    };
-    let mut fix_words: Vec<Vec<String>> = Vec::new();
     if let Expect::Stop(_, Some(flag)) = case.family.spec().expect {
-        fix_words.push(vec![flag.to_owned()]);
+        draft.fix_words.push(vec![flag.to_owned()]);
     }
-    let mut locate_words: Vec<String> = Vec::new();
-    // The file a line number names: the first socket file, or the measurement file.
-    let data_name = match &base {
-        Base::Table(_) => "data.csv",
-        Base::Sockets(..) => "hole_0.csv",
-    };
-    let tables: Vec<&mut Table> = match &mut base {
-        Base::Table(t) => vec![t],
-        Base::Sockets(a, b) => vec![a, b],
-    };
+    let data_name = base.data_name();
+    let tables = base.tables_mut();
     let n_tables = tables.len();
     for (t_idx, t) in tables.into_iter().enumerate() {
-        let name_of = |c: usize| revolute.get(c).cloned().unwrap_or_default();
-        match &case.mistake {
-            Mistake::ColumnUnit { col, unit } => {
-                let f = unit.per_rad();
-                t.map_col(&name_of(*col), |v| v * f);
-                if t_idx == 0 {
-                    fix_words.push(col_words(*col));
-                    fix_words.push(vec![unit.name().to_owned()]);
-                }
-            }
-            Mistake::AllDegrees => {
-                let names: Vec<String> = (t.header.iter())
-                    .filter(|h| revolute.contains(h) || h.starts_with("phi"))
-                    .cloned()
-                    .collect();
-                for n in names {
-                    t.map_col(&n, f64::to_degrees);
-                }
-                if t_idx == 0 {
-                    fix_words.push(vec!["deg".to_owned()]);
-                }
-            }
-            Mistake::Lengths(u) => {
-                let f = u.per_m();
-                let names: Vec<String> = (t.header.iter())
-                    .filter(|h| is_position(h) || *h == "distance_m")
-                    .cloned()
-                    .collect();
-                for n in names {
-                    t.map_col(&n, |v| v * f);
-                }
-                fix_words.push(vec![u.name().to_owned()]);
-            }
-            Mistake::MarkerMm(m) => {
-                for a in ["x", "y", "z"] {
-                    t.map_col(&format!("{a}{m}"), |v| v * 1e3);
-                }
-                fix_words.push(vec![format!("x{m}")]);
-                fix_words.push(vec!["mm".to_owned()]);
-            }
-            Mistake::Sign(c) => {
-                t.map_col(&name_of(*c), |v| -v);
-                if t_idx == 0 {
-                    fix_words.push(col_words(*c));
-                }
-            }
-            Mistake::Zero(c, o) => {
-                t.map_col(&name_of(*c), |v| v + o);
-                if t_idx == 0 {
-                    fix_words.push(col_words(*c));
-                }
-            }
-            Mistake::Swap(a, b) => {
-                t.swap_cols(&name_of(*a), &name_of(*b));
-                if t_idx == 0 {
-                    let mut w = col_words(*a);
-                    w.extend(col_words(*b));
-                    fix_words.push(w);
-                }
-            }
-            Mistake::Reverse => {
-                let n = revolute.len();
-                for i in 0..n / 2 {
-                    t.swap_cols(&name_of(i), &name_of(n - 1 - i));
-                }
-            }
-            Mistake::Arms => {
-                for j in 1..=7 {
-                    t.swap_cols(&format!("l_{j}"), &format!("r_{j}"));
-                }
-            }
-            Mistake::Shift(k) => shift_rows(t, &joint_side(t), 0, *k),
-            Mistake::ShiftFrom(p) => {
-                let from = t.rows.len() * p / 100;
-                shift_rows(t, &joint_side(t), from, 1);
-            }
-            Mistake::Decouple(p) => decouple(t, &joint_side(t), *p, &mut rng),
-            Mistake::Xyzw => {
-                let s = quaternion_suffix(t);
-                // The file's qw,qx,qy,qz hold x, y, z, w.
-                let idx: Vec<usize> = (["qw", "qx", "qy", "qz"].iter())
-                    .filter_map(|n| t.col(&format!("{n}{s}")))
-                    .collect();
-                if idx.len() == 4 {
-                    for row in &mut t.rows {
-                        let (w, x, y, z) = (row[idx[0]], row[idx[1]], row[idx[2]], row[idx[3]]);
-                        row[idx[0]] = x;
-                        row[idx[1]] = y;
-                        row[idx[2]] = z;
-                        row[idx[3]] = w;
-                    }
-                }
-            }
-            Mistake::Conjugate => {
-                let s = quaternion_suffix(t);
-                for n in ["qx", "qy", "qz"] {
-                    t.map_col(&format!("{n}{s}"), |v| -v);
-                }
-            }
-            Mistake::EulerXyz => {
-                let s = if t.col("phix1").is_some() { "1" } else { "" };
-                let idx: Vec<usize> = (["phix", "phiy", "phiz"].iter())
-                    .filter_map(|n| t.col(&format!("{n}{s}")))
-                    .collect();
-                if idx.len() == 3 {
-                    for row in &mut t.rows {
-                        let e = euler_xyz_of(row[idx[0]], row[idx[1]], row[idx[2]]);
-                        for (i, v) in idx.iter().zip(e) {
-                            row[*i] = v;
-                        }
-                    }
-                }
-            }
-            Mistake::Mirror(a) => {
-                let names: Vec<String> = (t.header.iter())
-                    .filter(|h| is_position(h) && h.starts_with(axis(*a)))
-                    .cloned()
-                    .collect();
-                for n in names {
-                    t.map_col(&n, |v| -v);
-                }
-            }
-            Mistake::SwapAxes(a, b) => {
-                let names: Vec<String> = (t.header.iter())
-                    .filter(|h| is_position(h) && h.starts_with(axis(*a)))
-                    .cloned()
-                    .collect();
-                for n in names {
-                    let other = format!("{}{}", axis(*b), &n[1..]);
-                    t.swap_cols(&n, &other);
-                }
-            }
-            Mistake::TipsSwapped => tips.reverse(),
-            Mistake::TipUp => {
-                if t_idx == 0 {
-                    let up = rec.tip_up().context("a tip one joint up")?;
-                    tips[0] = up.to_owned();
-                    fix_words.push(rec.tip_aliases().iter().map(|s| (*s).to_owned()).collect());
-                }
-            }
-            Mistake::TipDown => {
-                if t_idx == 0 {
-                    fix_words.push(vec![rec.tip_up().unwrap_or_default().to_owned()]);
-                }
-            }
-            Mistake::OtherRobot => {
-                if rec == R::SimIiwa {
-                    device = abs(R::SimPanda.device());
-                    let panda = &sources.arm(ArmRobot::Panda).robot.joint_names;
-                    for (h, p) in t
-                        .header
-                        .iter_mut()
-                        .filter(|h| h.starts_with("joint_a"))
-                        .zip(panda)
-                    {
-                        h.clone_from(p);
-                    }
-                }
-            }
-            Mistake::SocketDistance(f) => {
-                if t_idx == 0 {
-                    extra.push("--socket-distance-m".to_owned());
-                    extra.push(format!("{}", SOCKET_DISTANCE_M * f));
-                }
-            }
-            Mistake::Shuffled => t.rows.shuffle(&mut rng),
-            Mistake::EveryNth(n) => {
-                let rows = std::mem::take(&mut t.rows);
-                t.rows = rows.into_iter().step_by(*n).collect();
-            }
-            Mistake::TrackerMoved { from_pct, deg, mm } => {
-                let from = t.rows.len() * *from_pct as usize / 100;
-                let axis = nalgebra::Unit::new_normalize(random_direction(&mut rng));
-                let turn = UnitQuaternion::from_axis_angle(&axis, f64::from(*deg).to_radians());
-                let shift = random_direction(&mut rng) * (f64::from(*mm) / 1e3);
-                move_poses(t, from, |p, q| (turn * p + shift, turn * q));
-                locate_words.extend(lines_near(data_name, from + 2));
-                fix_words.push(lines_near(data_name, from + 2));
-            }
-            Mistake::MarkerMoved { from_pct, mm } => {
-                let from = t.rows.len() * *from_pct as usize / 100;
-                let offset = random_direction(&mut rng) * (f64::from(*mm) / 1e3);
-                move_poses(t, from, |p, q| (p + q * offset, q));
-                locate_words.extend(lines_near(data_name, from + 2));
-                fix_words.push(lines_near(data_name, from + 2));
-            }
-            Mistake::ZeroFrom {
-                col,
-                from_pct,
-                mrad,
-            } => {
-                let from = t.rows.len() * *from_pct as usize / 100;
-                if let Some(c) = t.col(&name_of(*col)) {
-                    for row in &mut t.rows[from..] {
-                        row[c] += f64::from(*mrad) / 1e3;
-                    }
-                }
-                locate_words.extend(lines_near(data_name, from + 2));
-                locate_words.extend(col_words(*col));
-                fix_words.push(lines_near(data_name, from + 2));
-            }
-            Mistake::Scale { col, factor } => {
-                let f = factor.per_rad();
-                t.map_col(&name_of(*col), |v| v * f);
-                if t_idx == 0 {
-                    fix_words.push(col_words(*col));
-                    locate_words.extend(col_words(*col));
-                }
-            }
-            Mistake::Coupling { col, centi } => {
-                let c = f64::from(*centi) / 100.0;
-                if let (Some(a), Some(b)) = (t.col(&name_of(*col)), t.col(&name_of(col - 1))) {
-                    for row in &mut t.rows {
-                        row[a] += c * row[b];
-                    }
-                }
-                if t_idx == 0 {
-                    fix_words.push(col_words(*col));
-                    locate_words.extend(col_words(*col));
-                }
-            }
-            Mistake::PartMm(p) => {
-                let from = t.rows.len() * *p as usize / 100;
-                let cols: Vec<usize> = (t.header.iter().enumerate())
-                    .filter(|(_, h)| is_position(h))
-                    .map(|(i, _)| i)
-                    .collect();
-                for row in &mut t.rows[from..] {
-                    for &c in &cols {
-                        row[c] *= 1e3;
-                    }
-                }
-                let line = from + 2;
-                locate_words.push(format!("{data_name}:{line}"));
-                fix_words.push(vec![format!("{data_name}:{line}"), format!("{line}")]);
-            }
-            Mistake::Glitch { col, at_pct } => {
-                if t_idx == 0 {
-                    let row = t.rows.len() * *at_pct as usize / 100;
-                    if let Some(c) = t.col(&name_of(*col)) {
-                        t.rows[row][c] += 0.2;
-                    }
-                    // Socket files have no header: row 0 is line 1.
-                    let line = if n_tables == 2 { row + 1 } else { row + 2 };
-                    locate_words.push(format!("{data_name}:{line}"));
-                }
-            }
-            Mistake::Variant => {
-                if t_idx == 0 {
-                    device = abs(match rec {
-                        R::Ur10 => "fixtures/wrong-robot/ur5e_lengths.urdf",
-                        _ => "fixtures/wrong-robot/iiwa7_lengths.urdf",
-                    });
-                }
-            }
-            Mistake::Ceiling => {
-                if t_idx == 0 {
-                    let text = std::fs::read_to_string(root.join(rec.device()))?;
-                    let upright = r#"<origin xyz="0 0 0.3" rpy="0 0 0"/>"#;
-                    let turned = text.replacen(
-                        upright,
-                        r#"<origin xyz="0 0 0.3" rpy="3.141592653589793 0 0"/>"#,
-                        1,
-                    );
-                    if turned == text {
-                        bail!("the humanoid's root joint origin is not {upright}");
-                    }
-                    let path = dir.join("humanoid_ceiling.urdf");
-                    write(&path, &turned)?;
-                    device = path.display().to_string();
-                }
-            }
-            Mistake::WrongSocket(_)
-            | Mistake::LongerLinks(_)
-            | Mistake::LatencyMs(_)
-            | Mistake::None
-            | Mistake::Draw(_)
-            | Mistake::HapticEffect(..) => {}
-        }
+        let site = TableSite {
+            case,
+            columns: &columns,
+            data_name,
+            t_idx,
+            n_tables,
+        };
+        make_mistake(&site, sources, dir, t, &mut draft, &mut rng)?;
     }
-    if let (Mistake::WrongSocket(p), Base::Sockets(a, b)) = (&case.mistake, &mut base) {
+    move_to_wrong_socket(&case.mistake, &mut base, &mut rng);
+    write_data(rec, &base, dir, draft)
+}
+
+/// A repeat of a mistake on a recorded file (`case.part > 0`) first drops a seeded fifth of
+/// the rows of each table (a simulated one differs by its seed instead).
+fn thin_recorded(case: &Case, base: &mut Base, rng: &mut ChaCha8Rng) {
+    let rec = case.recording;
+    let simulated = rec.sim_arm().is_some() || rec == R::HapticMotion;
+    if case.part == 0 || simulated {
+        return;
+    }
+    for t in base.tables_mut() {
+        let n = t.rows.len();
+        let mut keep: Vec<usize> = (0..n).collect();
+        keep.shuffle(rng);
+        keep.truncate(n - n / 5);
+        keep.sort_unstable();
+        t.rows = keep.iter().map(|&i| t.rows[i].clone()).collect();
+    }
+}
+
+/// Makes the case's mistake in table `t` (or in the invocation), adding what the fix must name
+/// and what locates it to `draft`.
+///
+/// # Errors
+/// A recording without the tip or root joint the mistake needs, an unreadable or unwritable
+/// device file.
+fn make_mistake(
+    site: &TableSite<'_>,
+    sources: &Sources,
+    dir: &Path,
+    t: &mut Table,
+    draft: &mut InvocationDraft,
+    rng: &mut ChaCha8Rng,
+) -> Result<()> {
+    match &site.case.mistake {
+        Mistake::ColumnUnit { .. }
+        | Mistake::AllDegrees
+        | Mistake::Lengths(_)
+        | Mistake::MarkerMm(_)
+        | Mistake::Sign(_)
+        | Mistake::Zero(..)
+        | Mistake::Swap(..)
+        | Mistake::Reverse
+        | Mistake::Arms
+        | Mistake::Scale { .. }
+        | Mistake::Coupling { .. } => column_mistake(site, t, draft),
+        Mistake::Shift(_)
+        | Mistake::ShiftFrom(_)
+        | Mistake::Decouple(_)
+        | Mistake::Shuffled
+        | Mistake::EveryNth(_) => row_mistake(&site.case.mistake, t, rng),
+        Mistake::Xyzw
+        | Mistake::Conjugate
+        | Mistake::EulerXyz
+        | Mistake::Mirror(_)
+        | Mistake::SwapAxes(..) => frame_mistake(&site.case.mistake, t),
+        Mistake::TrackerMoved { .. }
+        | Mistake::MarkerMoved { .. }
+        | Mistake::ZeroFrom { .. }
+        | Mistake::PartMm(_)
+        | Mistake::Glitch { .. } => partial_mistake(site, t, draft, rng),
+        Mistake::TipsSwapped
+        | Mistake::TipUp
+        | Mistake::TipDown
+        | Mistake::OtherRobot
+        | Mistake::SocketDistance(_)
+        | Mistake::Variant
+        | Mistake::Ceiling => setup_mistake(site, sources, dir, t, draft)?,
+        Mistake::WrongSocket(_)
+        | Mistake::LongerLinks(_)
+        | Mistake::LatencyMs(_)
+        | Mistake::None
+        | Mistake::Draw(_)
+        | Mistake::HapticEffect(..) => {}
+    }
+    Ok(())
+}
+
+/// A mistake in whole columns: a unit, a sign, a zero, a scale or a coupling of a joint
+/// column, swapped or reversed joint columns, the arms swapped, lengths or a marker in another
+/// unit.
+fn column_mistake(site: &TableSite<'_>, t: &mut Table, draft: &mut InvocationDraft) {
+    let (columns, first) = (site.columns, site.t_idx == 0);
+    let revolute = &columns.revolute;
+    let fix_words = &mut draft.fix_words;
+    match &site.case.mistake {
+        Mistake::ColumnUnit { col, unit } => {
+            let f = unit.per_rad();
+            t.map_col(&columns.name_of(*col), |v| v * f);
+            if first {
+                fix_words.push(columns.words(*col));
+                fix_words.push(vec![unit.name().to_owned()]);
+            }
+        }
+        Mistake::AllDegrees => {
+            let names: Vec<String> = (t.header.iter())
+                .filter(|h| revolute.contains(h) || h.starts_with("phi"))
+                .cloned()
+                .collect();
+            for n in names {
+                t.map_col(&n, f64::to_degrees);
+            }
+            if first {
+                fix_words.push(vec!["deg".to_owned()]);
+            }
+        }
+        Mistake::Lengths(u) => {
+            let f = u.per_m();
+            let names: Vec<String> = (t.header.iter())
+                .filter(|h| is_position(h) || *h == "distance_m")
+                .cloned()
+                .collect();
+            for n in names {
+                t.map_col(&n, |v| v * f);
+            }
+            fix_words.push(vec![u.name().to_owned()]);
+        }
+        Mistake::MarkerMm(m) => {
+            for a in ["x", "y", "z"] {
+                t.map_col(&format!("{a}{m}"), |v| v * 1e3);
+            }
+            fix_words.push(vec![format!("x{m}")]);
+            fix_words.push(vec!["mm".to_owned()]);
+        }
+        Mistake::Sign(c) => {
+            t.map_col(&columns.name_of(*c), |v| -v);
+            if first {
+                fix_words.push(columns.words(*c));
+            }
+        }
+        Mistake::Zero(c, o) => {
+            t.map_col(&columns.name_of(*c), |v| v + o);
+            if first {
+                fix_words.push(columns.words(*c));
+            }
+        }
+        Mistake::Swap(a, b) => {
+            t.swap_cols(&columns.name_of(*a), &columns.name_of(*b));
+            if first {
+                let mut w = columns.words(*a);
+                w.extend(columns.words(*b));
+                fix_words.push(w);
+            }
+        }
+        Mistake::Reverse => {
+            let n = revolute.len();
+            for i in 0..n / 2 {
+                t.swap_cols(&columns.name_of(i), &columns.name_of(n - 1 - i));
+            }
+        }
+        Mistake::Arms => {
+            for j in 1..=7 {
+                t.swap_cols(&format!("l_{j}"), &format!("r_{j}"));
+            }
+        }
+        Mistake::Scale { col, factor } => {
+            let f = factor.per_rad();
+            t.map_col(&columns.name_of(*col), |v| v * f);
+            if first {
+                fix_words.push(columns.words(*col));
+                draft.locate_words.extend(columns.words(*col));
+            }
+        }
+        Mistake::Coupling { col, centi } => {
+            let c = f64::from(*centi) / 100.0;
+            if let (Some(a), Some(b)) = (
+                t.col(&columns.name_of(*col)),
+                t.col(&columns.name_of(col - 1)),
+            ) {
+                for row in &mut t.rows {
+                    row[a] += c * row[b];
+                }
+            }
+            if first {
+                fix_words.push(columns.words(*col));
+                draft.locate_words.extend(columns.words(*col));
+            }
+        }
+        _ => {}
+    }
+}
+
+/// A mistake in the rows: joint readings shifted against the measurements (from the start or
+/// from a row on), decoupled, shuffled, or every n-th row kept.
+fn row_mistake(mistake: &Mistake, t: &mut Table, rng: &mut ChaCha8Rng) {
+    match mistake {
+        Mistake::Shift(k) => shift_rows(t, &joint_side(t), 0, *k),
+        Mistake::ShiftFrom(p) => {
+            let from = t.rows.len() * p / 100;
+            shift_rows(t, &joint_side(t), from, 1);
+        }
+        Mistake::Decouple(p) => decouple(t, &joint_side(t), *p, rng),
+        Mistake::Shuffled => t.rows.shuffle(rng),
+        Mistake::EveryNth(n) => {
+            let rows = std::mem::take(&mut t.rows);
+            t.rows = rows.into_iter().step_by(*n).collect();
+        }
+        _ => {}
+    }
+}
+
+/// A mistake in the frames of the measurements: quaternions in x, y, z, w order or
+/// conjugated, Euler angles of another convention, a position axis mirrored or two swapped.
+fn frame_mistake(mistake: &Mistake, t: &mut Table) {
+    match mistake {
+        Mistake::Xyzw => {
+            let s = quaternion_suffix(t);
+            // The file's qw,qx,qy,qz hold x, y, z, w.
+            let idx: Vec<usize> = (["qw", "qx", "qy", "qz"].iter())
+                .filter_map(|n| t.col(&format!("{n}{s}")))
+                .collect();
+            if idx.len() == 4 {
+                for row in &mut t.rows {
+                    let (w, x, y, z) = (row[idx[0]], row[idx[1]], row[idx[2]], row[idx[3]]);
+                    row[idx[0]] = x;
+                    row[idx[1]] = y;
+                    row[idx[2]] = z;
+                    row[idx[3]] = w;
+                }
+            }
+        }
+        Mistake::Conjugate => {
+            let s = quaternion_suffix(t);
+            for n in ["qx", "qy", "qz"] {
+                t.map_col(&format!("{n}{s}"), |v| -v);
+            }
+        }
+        Mistake::EulerXyz => {
+            let s = if t.col("phix1").is_some() { "1" } else { "" };
+            let idx: Vec<usize> = (["phix", "phiy", "phiz"].iter())
+                .filter_map(|n| t.col(&format!("{n}{s}")))
+                .collect();
+            if idx.len() == 3 {
+                for row in &mut t.rows {
+                    let e = euler_xyz_of(row[idx[0]], row[idx[1]], row[idx[2]]);
+                    for (i, v) in idx.iter().zip(e) {
+                        row[*i] = v;
+                    }
+                }
+            }
+        }
+        Mistake::Mirror(a) => {
+            let names: Vec<String> = (t.header.iter())
+                .filter(|h| is_position(h) && h.starts_with(axis(*a)))
+                .cloned()
+                .collect();
+            for n in names {
+                t.map_col(&n, |v| -v);
+            }
+        }
+        Mistake::SwapAxes(a, b) => {
+            let names: Vec<String> = (t.header.iter())
+                .filter(|h| is_position(h) && h.starts_with(axis(*a)))
+                .cloned()
+                .collect();
+            for n in names {
+                let other = format!("{}{}", axis(*b), &n[1..]);
+                t.swap_cols(&n, &other);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// A mistake from a row on: the tracker or the marker moved, a joint's zero moved, positions
+/// in mm, or one glitched reading; each names the line where it starts.
+fn partial_mistake(
+    site: &TableSite<'_>,
+    t: &mut Table,
+    draft: &mut InvocationDraft,
+    rng: &mut ChaCha8Rng,
+) {
+    let (columns, data_name) = (site.columns, site.data_name);
+    let (fix_words, locate_words) = (&mut draft.fix_words, &mut draft.locate_words);
+    match &site.case.mistake {
+        Mistake::TrackerMoved { from_pct, deg, mm } => {
+            let from = t.rows.len() * *from_pct as usize / 100;
+            let axis = nalgebra::Unit::new_normalize(random_direction(rng));
+            let turn = UnitQuaternion::from_axis_angle(&axis, f64::from(*deg).to_radians());
+            let shift = random_direction(rng) * (f64::from(*mm) / 1e3);
+            move_poses(t, from, |p, q| (turn * p + shift, turn * q));
+            locate_words.extend(lines_near(data_name, from + 2));
+            fix_words.push(lines_near(data_name, from + 2));
+        }
+        Mistake::MarkerMoved { from_pct, mm } => {
+            let from = t.rows.len() * *from_pct as usize / 100;
+            let offset = random_direction(rng) * (f64::from(*mm) / 1e3);
+            move_poses(t, from, |p, q| (p + q * offset, q));
+            locate_words.extend(lines_near(data_name, from + 2));
+            fix_words.push(lines_near(data_name, from + 2));
+        }
+        Mistake::ZeroFrom {
+            col,
+            from_pct,
+            mrad,
+        } => {
+            let from = t.rows.len() * *from_pct as usize / 100;
+            if let Some(c) = t.col(&columns.name_of(*col)) {
+                for row in &mut t.rows[from..] {
+                    row[c] += f64::from(*mrad) / 1e3;
+                }
+            }
+            locate_words.extend(lines_near(data_name, from + 2));
+            locate_words.extend(columns.words(*col));
+            fix_words.push(lines_near(data_name, from + 2));
+        }
+        Mistake::PartMm(p) => {
+            let from = t.rows.len() * *p as usize / 100;
+            let cols: Vec<usize> = (t.header.iter().enumerate())
+                .filter(|(_, h)| is_position(h))
+                .map(|(i, _)| i)
+                .collect();
+            for row in &mut t.rows[from..] {
+                for &c in &cols {
+                    row[c] *= 1e3;
+                }
+            }
+            let line = from + 2;
+            locate_words.push(format!("{data_name}:{line}"));
+            fix_words.push(vec![format!("{data_name}:{line}"), format!("{line}")]);
+        }
+        Mistake::Glitch { col, at_pct } if site.t_idx == 0 => {
+            let row = t.rows.len() * *at_pct as usize / 100;
+            if let Some(c) = t.col(&columns.name_of(*col)) {
+                t.rows[row][c] += 0.2;
+            }
+            // Socket files have no header: row 0 is line 1.
+            let line = if site.n_tables == 2 { row + 1 } else { row + 2 };
+            locate_words.push(format!("{data_name}:{line}"));
+        }
+        _ => {}
+    }
+}
+
+/// A mistake in the setup rather than the data: the tips swapped or one joint off, another
+/// robot's joint names or device, a wrong socket distance, a variant's or a ceiling-mounted
+/// device file (written into `dir`).
+///
+/// # Errors
+/// A recording without a tip one joint up, an unreadable device file or one whose root joint
+/// is not upright, an unwritable `dir`.
+fn setup_mistake(
+    site: &TableSite<'_>,
+    sources: &Sources,
+    dir: &Path,
+    t: &mut Table,
+    draft: &mut InvocationDraft,
+) -> Result<()> {
+    let rec = site.case.recording;
+    let first = site.t_idx == 0;
+    match &site.case.mistake {
+        Mistake::TipsSwapped => draft.tips.reverse(),
+        Mistake::TipUp if first => {
+            let up = rec.tip_up().context("a tip one joint up")?;
+            draft.tips[0] = up.to_owned();
+            (draft.fix_words).push(rec.tip_aliases().iter().map(|s| (*s).to_owned()).collect());
+        }
+        Mistake::TipDown if first => {
+            (draft.fix_words).push(vec![rec.tip_up().unwrap_or_default().to_owned()]);
+        }
+        Mistake::OtherRobot if rec == R::SimIiwa => {
+            draft.device = sources.abs(R::SimPanda.device());
+            let panda = &sources.arm(ArmRobot::Panda).robot.joint_names;
+            for (h, p) in t
+                .header
+                .iter_mut()
+                .filter(|h| h.starts_with("joint_a"))
+                .zip(panda)
+            {
+                h.clone_from(p);
+            }
+        }
+        Mistake::SocketDistance(f) if first => {
+            draft.extra.push("--socket-distance-m".to_owned());
+            draft.extra.push(format!("{}", SOCKET_DISTANCE_M * f));
+        }
+        Mistake::Variant if first => {
+            draft.device = sources.abs(match rec {
+                R::Ur10 => "fixtures/wrong-robot/ur5e_lengths.urdf",
+                _ => "fixtures/wrong-robot/iiwa7_lengths.urdf",
+            });
+        }
+        Mistake::Ceiling if first => {
+            draft.device = write_ceiling_device(sources, rec, dir)?;
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
+/// Writes `rec`'s device file turned upside down at its root joint into `dir`
+/// (`humanoid_ceiling.urdf`) and returns its path.
+///
+/// # Errors
+/// An unreadable device file, a root joint origin that is not upright, an unwritable `dir`.
+fn write_ceiling_device(sources: &Sources, rec: Recording, dir: &Path) -> Result<String> {
+    let text = std::fs::read_to_string(sources.root.join(rec.device()))?;
+    let upright = r#"<origin xyz="0 0 0.3" rpy="0 0 0"/>"#;
+    let turned = text.replacen(
+        upright,
+        r#"<origin xyz="0 0 0.3" rpy="3.141592653589793 0 0"/>"#,
+        1,
+    );
+    if turned == text {
+        bail!("the humanoid's root joint origin is not {upright}");
+    }
+    let path = dir.join("humanoid_ceiling.urdf");
+    write(&path, &turned)?;
+    Ok(path.display().to_string())
+}
+
+/// The wrong-socket mistake: a seeded `p` % (at least one) of `hole_0`'s rows moved to the end
+/// of `hole_1`.
+fn move_to_wrong_socket(mistake: &Mistake, base: &mut Base, rng: &mut ChaCha8Rng) {
+    if let (Mistake::WrongSocket(p), Base::Sockets(a, b)) = (mistake, base) {
         let n_move = (a.rows.len() * *p as usize).div_ceil(100).max(1);
         let mut idx: Vec<usize> = (0..a.rows.len()).collect();
-        idx.shuffle(&mut rng);
+        idx.shuffle(rng);
         let mut moved: Vec<usize> = idx.into_iter().take(n_move).collect();
         moved.sort_unstable();
         for i in moved.into_iter().rev() {
@@ -1876,15 +2072,25 @@ pub fn write_case(
             b.rows.push(row);
         }
     }
-    let _ = n_tables;
+}
 
-    // Write the data.
-    let mut args = vec!["--device".to_owned(), device];
-    for tip in &tips {
+/// Writes the case's data into `dir` (`data.csv`, or `placement/hole_0.csv` and `hole_1.csv`)
+/// and returns the invocation that reads them.
+///
+/// # Errors
+/// An unwritable `dir`.
+fn write_data(
+    rec: Recording,
+    base: &Base,
+    dir: &Path,
+    draft: InvocationDraft,
+) -> Result<Invocation> {
+    let mut args = vec!["--device".to_owned(), draft.device];
+    for tip in &draft.tips {
         args.push("--tip".to_owned());
         args.push(tip.clone());
     }
-    match &base {
+    match base {
         Base::Table(t) => {
             let path = dir.join("data.csv");
             write(&path, &t.to_csv(false))?;
@@ -1904,11 +2110,11 @@ pub fn write_case(
             args.push(folder.display().to_string());
         }
     }
-    args.extend(extra);
+    args.extend(draft.extra);
     Ok(Invocation {
         args,
-        fix_words,
-        locate_words,
+        fix_words: draft.fix_words,
+        locate_words: draft.locate_words,
     })
 }
 
@@ -2856,6 +3062,18 @@ fn said_cell(r: &CaseResult) -> String {
 /// the check said; every mistake's ratio.
 pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> String {
     let mut s = String::new();
+    write_report_intro(&mut s, command, machine);
+    write_visible_summaries(&mut s, results);
+    write_family_tables(&mut s, results);
+    write_invisible_mistakes(&mut s, results);
+    write_not_named_right(&mut s, results);
+    write_every_ratio(&mut s, results);
+    s
+}
+
+/// The report's title, what the outcomes mean, how visibility is screened, and the command
+/// and machine of the run.
+fn write_report_intro(s: &mut String, command: &str, machine: &str) {
     let frames = ModelName::FramesOnly.name();
     let geometric = ModelName::Geometric.name();
     let _ = writeln!(s, "# Setup check: the hostile sweep\n");
@@ -2901,6 +3119,11 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
     );
     let _ = writeln!(s, "Command: `{command}`  ");
     let _ = writeln!(s, "Machine: {machine}\n");
+}
+
+/// Per half, and within it for the earlier and the newer families: the one-line summary over
+/// visible mistakes ([`VisibleSummary::line`]).
+fn write_visible_summaries(s: &mut String, results: &[CaseResult]) {
     let _ = writeln!(s, "## Over visible mistakes\n");
     for half in [Half::Tuning, Half::HeldBack] {
         let sum = VisibleSummary::of(results.iter().filter(|r| r.case.half == half));
@@ -2923,6 +3146,11 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
         "\nFalse alarms are counted over the correct data and the visible mistakes of the \
          latency family (a stop on them is a false alarm).\n"
     );
+}
+
+/// The family tables over all cases and per half, then per half over the visible mistakes
+/// and the correct data.
+fn write_family_tables(s: &mut String, results: &[CaseResult]) {
     let halves = [
         ("All cases", None),
         ("Tuning half", Some(Half::Tuning)),
@@ -2933,7 +3161,7 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
             .filter(|r| filter.is_none_or(|h| r.case.half == h))
             .collect();
         let _ = writeln!(s, "## {title} ({} cases)\n", sel.len());
-        family_table(&mut s, &sel);
+        family_table(s, &sel);
     }
     for (title, half) in [
         ("Tuning half", Half::Tuning),
@@ -2950,8 +3178,12 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
             "## {title}, visible mistakes only ({n_visible} mistakes, {} correct)\n",
             sel.len() - n_visible
         );
-        family_table(&mut s, &sel);
+        family_table(s, &sel);
     }
+}
+
+/// The table of the mistakes invisible in the data, with their ratio and outcome.
+fn write_invisible_mistakes(s: &mut String, results: &[CaseResult]) {
     let invisible: Vec<&CaseResult> = (results.iter())
         .filter(|r| !r.case.family.is_correct() && r.visibility.is_invisible())
         .collect();
@@ -2976,6 +3208,10 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
         );
     }
     let _ = writeln!(s);
+}
+
+/// The table of the mistakes not named right and of the false alarms.
+fn write_not_named_right(s: &mut String, results: &[CaseResult]) {
     let _ = writeln!(s, "## Cases not named right\n");
     let _ = writeln!(
         s,
@@ -3009,6 +3245,10 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
         );
     }
     let _ = writeln!(s);
+}
+
+/// The table of every mistake's screening: its ratio, or why there is none.
+fn write_every_ratio(s: &mut String, results: &[CaseResult]) {
     let _ = writeln!(s, "## Every mistake's ratio\n");
     let _ = writeln!(
         s,
@@ -3035,5 +3275,4 @@ pub fn report_markdown(results: &[CaseResult], command: &str, machine: &str) -> 
             r.outcome.name(),
         );
     }
-    s
 }
