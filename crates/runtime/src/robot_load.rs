@@ -172,19 +172,7 @@ impl Robot {
         // in fixed joints (the calibration's tip element carries that name).
         let mut tip_elements: Vec<Option<String>> = Vec::new();
         for (i, &tip) in tips.iter().enumerate() {
-            if tips[..i].contains(&tip) {
-                return Err(invalid(origin, format!("tip link {tip:?} is given twice")));
-            }
-            if !robot.links.iter().any(|l| l.name == tip) {
-                let names: Vec<&str> = robot.links.iter().map(|l| l.name.as_str()).collect();
-                return Err(invalid(
-                    origin,
-                    format!(
-                        "no link {tip:?} to use as a tip; links: {}",
-                        names.join(", ")
-                    ),
-                ));
-            }
+            check_tip(&robot, &tips[..i], tip, origin)?;
             let path = path_to(&robot, tip, origin)?;
             let mut parent: Option<usize> = None;
             let mut pending = Pose::IDENTITY;
@@ -1048,6 +1036,32 @@ impl RecordAt<'_> {
     fn value(&self, name: &str, message: String) -> LoadError {
         at_line(self.origin, crate::load::locate(self.text, name), message)
     }
+}
+
+/// Checks that `tip` is a link of `robot` and not among the tips `before` it.
+///
+/// # Errors
+/// A tip given twice, or no link of that name (the links are listed).
+fn check_tip(
+    robot: &urdf_rs::Robot,
+    before: &[&str],
+    tip: &str,
+    origin: &str,
+) -> Result<(), LoadError> {
+    if before.contains(&tip) {
+        return Err(invalid(origin, format!("tip link {tip:?} is given twice")));
+    }
+    if !robot.links.iter().any(|l| l.name == tip) {
+        let names: Vec<&str> = robot.links.iter().map(|l| l.name.as_str()).collect();
+        return Err(invalid(
+            origin,
+            format!(
+                "no link {tip:?} to use as a tip; links: {}",
+                names.join(", ")
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The joints from the root link down to link `tip`, root first.
