@@ -281,12 +281,10 @@ pub fn run(args: &PredictArgs, units: &Units) -> Result<(String, Vec<String>)> {
     // A progress bar when the work is long (rows × robots evaluated), on a terminal only.
     let work = table.rows.len() * (2 * predictor.n_values() + 1);
     let bar = (work > 200_000).then(|| {
-        let bar = indicatif::ProgressBar::new(table.rows.len() as u64);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template("predicting {bar:40} {pos}/{len} rows")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        bar
+        crate::progress_bar(
+            table.rows.len() as u64,
+            "predicting {bar:40} {pos}/{len} rows",
+        )
     });
     let mut progress = |done: usize| {
         if let Some(bar) = &bar {
