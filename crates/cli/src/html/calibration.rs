@@ -641,16 +641,7 @@ fn tables(r: &CalibrationReport, page: &mut Page) {
     }
     page.section("parameter-table", "Parameters");
     let rows: Vec<Vec<String>> = (r.parameters.iter())
-        .map(|p| {
-            let (v, unit) = crate::report::scaled(p.value, p.unit);
-            let (sd, _) = crate::report::scaled(p.std, p.unit);
-            vec![
-                p.name.clone(),
-                format!("{v:+.4}"),
-                format!("{sd:.4}"),
-                unit.to_owned(),
-            ]
-        })
+        .map(|p| crate::report::parameter_cells(p).to_vec())
         .collect();
     page.paragraph(&format!(
         "{} identified parameters (value and standard deviation σ):",
