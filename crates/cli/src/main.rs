@@ -248,7 +248,7 @@ struct CalibrateArgs {
     #[arg(long, default_value_t = 0.05, allow_hyphen_values = true)]
     socket_distance_m: f64,
     /// Cross-validation folds (time-contiguous blocks, at least 2).
-    #[arg(long, default_value_t = 5, value_parser = count_at_least::<2>)]
+    #[arg(long, default_value_t = 5, value_parser = hapcal::count_in::<2, { usize::MAX }>)]
     folds: usize,
     /// Measurement noise standard deviation, m (default: estimated from the residuals).
     #[arg(long, allow_hyphen_values = true)]
@@ -378,7 +378,7 @@ struct DiagnoseArgs {
     #[arg(long)]
     baseline: Option<String>,
     /// Cross-validation folds (time-contiguous blocks, at least 2).
-    #[arg(long, default_value_t = 5, value_parser = count_at_least::<2>)]
+    #[arg(long, default_value_t = 5, value_parser = hapcal::count_in::<2, { usize::MAX }>)]
     folds: usize,
     /// Print one JSON document instead of the table.
     #[arg(long)]
@@ -464,27 +464,7 @@ struct ForceArgs {
 /// of models says nothing.
 const MAX_FORCE_GAIN: f64 = 1000.0;
 
-/// Parses a whole number that must be at least `MIN` (poses, cases, folds); clap reports a
-/// smaller or non-numeric value as a usage error naming the argument.
-fn count_at_least<const MIN: usize>(text: &str) -> std::result::Result<usize, String> {
-    match text.trim().parse::<usize>() {
-        Ok(n) if n >= MIN => Ok(n),
-        Ok(n) => Err(format!("must be at least {MIN}, got {n}")),
-        Err(_) => Err(format!("expected a whole number, got {text:?}")),
-    }
-}
-
 use hapcal::{SIGMA_M_RANGE, SIGMA_RAD_RANGE, check_sigma};
-
-/// `Err` naming `option` and its value unless `value` (if given) is finite and positive.
-fn check_positive(option: &str, value: Option<f64>, unit: &str) -> Result<()> {
-    match value {
-        Some(v) if !(v.is_finite() && v > 0.0) => {
-            anyhow::bail!("{option} must be a finite, positive {unit}, got {v}")
-        }
-        _ => Ok(()),
-    }
-}
 
 /// Reads the MUKCa socket folders among `plan`'s data with the device's joint limits, so that
 /// a reading past a limit by more than [`hapcal_io::JOINT_LIMIT_SLACK`] of the joint's range
@@ -800,7 +780,12 @@ fn check_golden(
 /// `hapcal simulate`: a log of `--poses` readings of the truth device, written to `--out`.
 fn run_simulate(args: &SimulateArgs) -> Result<()> {
     calibrate::check_extension(&args.out, &["csv"], "the simulated log", false)?;
-    check_positive("--period-s", Some(args.period_s), "time, s")?;
+    if !(args.period_s.is_finite() && args.period_s > 0.0) {
+        anyhow::bail!(
+            "--period-s must be a finite, positive time, s, got {}",
+            args.period_s
+        );
+    }
     let mut inputs: Vec<PathBuf> = args.device.iter().chain(&args.truth).cloned().collect();
     if let Some(t) = (args.truth.as_ref()).and_then(|t| Some((t, hapcal_sim::read_truth(t).ok()?)))
     {
@@ -1000,7 +985,10 @@ fn diagnose_haptic(args: &DiagnoseArgs) -> Result<Diagnosed> {
         )?
     };
     let (mut d, warnings) = hapcal::diagnose::run(&plan)?;
-    setup_verdict(&mut d.verdict, &mut d.notes, accepted);
+    // No physical effect is named on data set up wrong: the note says what the check found.
+    if let Some(finding) = accepted {
+        d.verdict.on_accepted_setup(&mut d.notes, finding);
+    }
     warn_all(&warnings);
     let text = hapcal::diagnose::render(&d);
     emit_report(args.json, || serde_json::to_string_pretty(&d), &text)?;
@@ -1044,7 +1032,10 @@ fn diagnose_arm(args: &DiagnoseArgs) -> Result<Diagnosed> {
         ..Default::default()
     };
     let (mut d, warnings) = hapcal::diagnose_arm::run_arm(&plan, &cfg)?;
-    setup_verdict(&mut d.verdict, &mut d.notes, accepted);
+    // No physical effect is named on data set up wrong: the note says what the check found.
+    if let Some(finding) = accepted {
+        d.verdict.on_accepted_setup(&mut d.notes, finding);
+    }
     warn_all(&warnings);
     let text = hapcal::diagnose_arm::render_arm(&d);
     emit_report(args.json, || serde_json::to_string_pretty(&d), &text)?;
@@ -1093,18 +1084,6 @@ fn setup_config(accept_setup: bool) -> hapcal_calibrate::setup::SetupConfig {
     hapcal_calibrate::setup::SetupConfig {
         accept_setup,
         accept_option: "--accept-setup",
-    }
-}
-
-/// The verdict of a diagnosis whose setup the check found wrong and the user accepted: no
-/// physical effect is named on data set up wrong; the note says what the check found.
-fn setup_verdict(
-    verdict: &mut hapcal_diagnose::Verdict,
-    notes: &mut Vec<String>,
-    accepted: Option<String>,
-) {
-    if let Some(finding) = accepted {
-        verdict.on_accepted_setup(notes, finding);
     }
 }
 
