@@ -290,9 +290,11 @@ fn cross_validation(s: &mut String, r: &CalibrationReport) -> fmt::Result {
         let against = match (cv.compared_with, bottom) {
             (Some(m), Some(b)) if m != b => {
                 let (d, e) = cv.difference_to_compared_m2;
-                let beats = (cv.beats_geometric)
-                    .then(|| format!("  beats {b}"))
-                    .unwrap_or_default();
+                let beats = if cv.beats_geometric {
+                    format!("  beats {b}")
+                } else {
+                    String::new()
+                };
                 let words = beats_words(d + z * e < 0.0);
                 format!("{beats}; against {m}: {}, {words}", um2(d, e))
             }
