@@ -1,7 +1,7 @@
 //! `hapcal diagnose`: read a device and a log, run [`hapcal_diagnose::diagnose`], render the
 //! table and the residual maps (SVG).
 
-use std::fmt::Write as _;
+use std::fmt::{self, Write as _};
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
@@ -62,153 +62,140 @@ fn um(m: f64) -> String {
     format!("{:.1}", m * 1e6)
 }
 
+/// `significant` or `not significant`.
+pub(crate) fn significance(significant: bool) -> &'static str {
+    if significant {
+        "significant"
+    } else {
+        "not significant"
+    }
+}
+
 /// The diagnosis as a text report: gap, where (flagged bins and signals), which (every
 /// candidate), how far (accepted effects with their parameters), verdict.
 pub fn render(d: &Diagnosis) -> String {
     let mut s = String::new();
-    let _ = writeln!(
+    let sections: [fn(&mut String, &Diagnosis) -> fmt::Result; 4] = [gap, where_, which, how_far];
+    for section in sections {
+        let _ = section(&mut s, d);
+    }
+    s
+}
+
+/// The baseline, the noise floor and the gap above it.
+fn gap(s: &mut String, d: &Diagnosis) -> fmt::Result {
+    let (samples, params) = (d.n_samples, d.n_params);
+    let baseline = d.baseline.name();
+    writeln!(
         s,
-        "baseline: {}, {} samples, {} identifiable parameters",
-        d.baseline.name(),
-        d.n_samples,
-        d.n_params
-    );
-    let _ = writeln!(s, "floor: {}", d.floor_method);
-    let _ = writeln!(
+        "baseline: {baseline}, {samples} samples, {params} identifiable parameters"
+    )?;
+    writeln!(s, "floor: {}", d.floor_method)?;
+    let (heldout, floor, gap) = (um(d.heldout_rms_m), um(d.floor_rms_m), um(d.gap_rms_m));
+    writeln!(
         s,
-        "held-out RMS {} µm, floor {} µm, gap {} µm = {:.2} floors (p = {:.1e}, {})",
-        um(d.heldout_rms_m),
-        um(d.floor_rms_m),
-        um(d.gap_rms_m),
+        "held-out RMS {heldout} µm, floor {floor} µm, gap {gap} µm = {:.2} floors (p = {:.1e}, {})",
         d.gap_in_floors,
         d.gap_p_value,
-        if d.gap_significant {
-            "significant"
-        } else {
-            "not significant"
-        }
-    );
-    let _ = writeln!(
+        significance(d.gap_significant)
+    )
+}
+
+/// WHERE: the signals the residual depends on, with their bins above the floor, and how much
+/// of it a free joint-angle error explains.
+fn where_(s: &mut String, d: &Diagnosis) -> fmt::Result {
+    writeln!(
         s,
         "\nWHERE (signals the residual depends on; bins above the floor)"
-    );
+    )?;
     for t in d.signals.iter().filter(|t| t.significant) {
         let bins: Vec<String> = (d.where_.iter())
             .filter(|b| b.signal == t.signal && b.flagged)
             .map(|b| format!("[{:.3}, {:.3}) {} µm", b.lo, b.hi, um(b.rms_m)))
             .collect();
-        let _ = writeln!(
-            s,
-            "  {:14} p = {:.1e}  {}",
-            t.signal,
-            t.p_value,
-            bins.join("; ")
-        );
+        let bins = bins.join("; ");
+        writeln!(s, "  {:14} p = {:.1e}  {bins}", t.signal, t.p_value)?;
     }
     let flagged = d.where_.iter().filter(|b| b.flagged).count();
-    let _ = writeln!(s, "  {flagged} of {} bins flagged", d.where_.len());
+    writeln!(s, "  {flagged} of {} bins flagged", d.where_.len())?;
     let joints: Vec<String> = (d.joints.iter())
         .map(|j| format!("j{} {:.0}%", j.joint, j.explained_pct))
         .collect();
-    let _ = writeln!(
+    writeln!(
         s,
         "  free joint-angle error explains: {}",
         joints.join(", ")
-    );
-    let _ = writeln!(s, "\nWHICH (held-out RMS before → after, share of the gap)");
-    let _ = writeln!(
+    )
+}
+
+/// WHICH: every candidate of every round, its held-out RMS before and after and the
+/// decision.
+fn which(s: &mut String, d: &Diagnosis) -> fmt::Result {
+    writeln!(s, "\nWHICH (held-out RMS before → after, share of the gap)")?;
+    writeln!(
         s,
         "  {:>2} {:22} {:>9} {:>9} {:>7} {:>9}  decision",
         "rd", "effect", "before µm", "after µm", "gap %", "p"
-    );
+    )?;
     for c in &d.candidates {
-        let _ = writeln!(
+        let (before, after) = (um(c.heldout_rms_before_m), um(c.heldout_rms_after_m));
+        let accepted = if c.accepted { "ACCEPTED: " } else { "" };
+        writeln!(
             s,
-            "  {:>2} {:22} {:>9} {:>9} {:>7.0} {:>9.1e}  {}{}",
-            c.round,
-            c.effect,
-            um(c.heldout_rms_before_m),
-            um(c.heldout_rms_after_m),
-            c.gap_closed_pct,
-            c.p_value,
-            if c.accepted { "ACCEPTED: " } else { "" },
-            c.reason
-        );
+            "  {:>2} {:22} {before:>9} {after:>9} {:>7.0} {:>9.1e}  {accepted}{}",
+            c.round, c.effect, c.gap_closed_pct, c.p_value, c.reason
+        )?;
     }
-    let _ = writeln!(s, "\nHOW FAR");
+    Ok(())
+}
+
+/// HOW FAR: each accepted effect's share of the gap and its parameters; what is still
+/// unexplained, the notes and the verdict.
+fn how_far(s: &mut String, d: &Diagnosis) -> fmt::Result {
+    writeln!(s, "\nHOW FAR")?;
     for st in &d.steps {
-        let _ = writeln!(
+        let (before, after) = (um(st.heldout_rms_before_m), um(st.heldout_rms_after_m));
+        writeln!(
             s,
-            "  + {}: held-out RMS {} → {} µm, closes {:.0} % of the gap",
-            st.effect,
-            um(st.heldout_rms_before_m),
-            um(st.heldout_rms_after_m),
-            st.gap_closed_pct
-        );
+            "  + {}: held-out RMS {before} → {after} µm, closes {:.0} % of the gap",
+            st.effect, st.gap_closed_pct
+        )?;
         for p in &st.parameters {
-            let _ = writeln!(
-                s,
-                "      {:34} {:>12.4e} ± {:.1e} {}",
-                p.name, p.value, p.std, p.unit
-            );
+            let (name, value, std, unit) = (&p.name, p.value, p.std, &p.unit);
+            writeln!(s, "      {name:34} {value:>12.4e} ± {std:.1e} {unit}")?;
         }
         if !st.confusable_with.is_empty() {
             let names: Vec<&str> = st.confusable_with.iter().map(|e| e.name()).collect();
-            let _ = writeln!(s, "      resembles: {}", names.join(", "));
+            writeln!(s, "      resembles: {}", names.join(", "))?;
         }
     }
-    let _ = writeln!(
-        s,
-        "  final held-out RMS {} µm; gap closed {:.0} %",
-        um(d.heldout_rms_final_m),
-        d.gap_closed_pct
-    );
+    let (rms, closed) = (um(d.heldout_rms_final_m), d.gap_closed_pct);
+    writeln!(s, "  final held-out RMS {rms} µm; gap closed {closed:.0} %")?;
     if !d.leads.is_empty() {
-        let _ = writeln!(s, "  still unexplained along: {}", d.leads.join(", "));
+        writeln!(s, "  still unexplained along: {}", d.leads.join(", "))?;
     }
     for n in &d.notes {
-        let _ = writeln!(s, "note: {n}");
+        writeln!(s, "note: {n}")?;
     }
-    let _ = writeln!(s, "\nverdict: {}", d.verdict);
-    s
+    writeln!(s, "\nverdict: {}", d.verdict)
 }
 
 /// The residual maps as one SVG document: per signal, each bin's held-out RMS (bar, µm; red
 /// when flagged above the floor) and the floor (black tick) ([`bar_panels_svg`]).
 pub fn residual_map_svg(d: &Diagnosis) -> String {
-    let mut panels: Vec<Panel> = Vec::new();
-    for b in &d.where_ {
-        if !panels.iter().any(|p| p.name == b.signal) {
-            panels.push(Panel {
-                name: b.signal.clone(),
-                bold: d
-                    .signals
-                    .iter()
-                    .any(|t| t.signal == b.signal && t.significant),
-                bars: Vec::new(),
-            });
-        }
-        let panel = panels.iter_mut().find(|p| p.name == b.signal);
-        if let Some(p) = panel {
-            p.bars.push(Bar {
-                value_m: b.rms_m,
-                floor_m: b.floor_rms_m,
-                flagged: b.flagged,
-                title: format!(
-                    "[{:.3}, {:.3}) rms {:.1} µm, floor {:.1} µm, n {}",
-                    b.lo,
-                    b.hi,
-                    b.rms_m * 1e6,
-                    b.floor_rms_m * 1e6,
-                    b.n
-                ),
-            });
-        }
-    }
-    let ymax = (d.where_.iter())
-        .map(|b| b.rms_m.max(b.floor_rms_m))
-        .fold(0.0, f64::max)
-        .max(1e-9);
+    let bins = d.where_.iter().map(|b| {
+        let title = format!(
+            "[{:.3}, {:.3}) rms {:.1} µm, floor {:.1} µm, n {}",
+            b.lo,
+            b.hi,
+            b.rms_m * 1e6,
+            b.floor_rms_m * 1e6,
+            b.n
+        );
+        (b.signal.as_str(), b.rms_m, b.floor_rms_m, b.flagged, title)
+    });
+    let significant = |name: &str| (d.signals.iter()).any(|t| t.signal == name && t.significant);
+    let (panels, ymax) = grouped(bins, |name, _| significant(name), 1e-9);
     bar_panels_svg(
         &format!(
             "Held-out residual RMS per bin (µm, common scale to {:.0} µm); red: above the floor; tick: floor. Verdict: {}",
@@ -218,6 +205,41 @@ pub fn residual_map_svg(d: &Diagnosis) -> String {
         &panels,
         ymax,
     )
+}
+
+/// The bars of `bins` (signal, held-out RMS and floor in m, flagged, tooltip) as one panel per
+/// signal in the order the signals first appear, and their common scale: the largest RMS or
+/// floor, at least `least` (m). A panel is in bold if `bold` holds for any of its bars.
+pub fn grouped<'a>(
+    bins: impl IntoIterator<Item = (&'a str, f64, f64, bool, String)>,
+    bold: impl Fn(&str, &Bar) -> bool,
+    least: f64,
+) -> (Vec<Panel>, f64) {
+    let mut panels: Vec<Panel> = Vec::new();
+    let mut ymax = 0.0_f64;
+    for (name, value_m, floor_m, flagged, title) in bins {
+        ymax = ymax.max(value_m.max(floor_m));
+        let k = panels
+            .iter()
+            .position(|p| p.name == name)
+            .unwrap_or_else(|| {
+                panels.push(Panel {
+                    name: name.to_owned(),
+                    bold: false,
+                    bars: Vec::new(),
+                });
+                panels.len() - 1
+            });
+        let bar = Bar {
+            value_m,
+            floor_m,
+            flagged,
+            title,
+        };
+        panels[k].bold |= bold(name, &bar);
+        panels[k].bars.push(bar);
+    }
+    (panels, ymax.max(least))
 }
 
 /// One bar of a residual map: the held-out RMS of a bin and its floor.

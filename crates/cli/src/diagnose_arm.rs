@@ -2,7 +2,7 @@
 //! the geometric baseline of [`hapcal_calibrate::baseline`], the diagnosis of
 //! [`hapcal_diagnose::arm`], rendered as a text report and residual maps (SVG).
 
-use std::fmt::Write as _;
+use std::fmt::{self, Write as _};
 
 use anyhow::{Context, Result};
 use hapcal_calibrate::baseline::{DataKind, geometric_baseline};
@@ -36,146 +36,157 @@ fn kind_name(kind: DataKind) -> &'static str {
     }
 }
 
+/// A section of the text report, appended to the text.
+type Section = fn(&mut String, &ArmDiagnosis) -> fmt::Result;
+
 /// The diagnosis as a text report: floor and gap, where (flagged bins), which (every
 /// candidate), how far (accepted effects with their parameters), the ladder, the verdict.
 pub fn render_arm(d: &ArmDiagnosis) -> String {
     let mut s = String::new();
-    let _ = writeln!(
+    let sections: [Section; 6] = [gap, where_, which, how_far, ladder, verdict];
+    for section in sections {
+        let _ = section(&mut s, d);
+    }
+    s
+}
+
+/// The baseline, the noise floor and the gap above it.
+fn gap(s: &mut String, d: &ArmDiagnosis) -> fmt::Result {
+    writeln!(
         s,
         "geometric baseline: {} data, {} training configurations, {} parameters kept",
         kind_name(d.kind),
         d.n_configurations,
         d.n_baseline_params
-    );
-    let _ = writeln!(s, "floor: {}", d.floor_method);
-    match d.floor_rms_m {
-        Some(f) => {
-            let _ = writeln!(
-                s,
-                "held-out RMS {} mm, floor {} mm, gap {} mm (p = {:.1e}, {})",
-                mm(d.heldout_rms_m),
-                mm(f),
-                mm(d.gap_rms_m),
-                d.gap_p_value,
-                if d.gap_significant {
-                    "significant"
-                } else {
-                    "not significant"
-                }
-            );
-        }
-        None => {
-            let _ = writeln!(
-                s,
-                "held-out RMS {} mm; no floor: gap to the best model found {} mm",
-                mm(d.heldout_rms_m),
-                mm(d.gap_rms_m)
-            );
-        }
-    }
-    let _ = writeln!(s, "\nWHERE (bins significantly above the floor, Holm)");
+    )?;
+    writeln!(s, "floor: {}", d.floor_method)?;
+    let (heldout, gap) = (mm(d.heldout_rms_m), mm(d.gap_rms_m));
+    let Some(floor) = d.floor_rms_m else {
+        return writeln!(
+            s,
+            "held-out RMS {heldout} mm; no floor: gap to the best model found {gap} mm"
+        );
+    };
+    let significant = crate::diagnose::significance(d.gap_significant);
+    writeln!(
+        s,
+        "held-out RMS {heldout} mm, floor {} mm, gap {gap} mm (p = {:.1e}, {significant})",
+        mm(floor),
+        d.gap_p_value,
+    )
+}
+
+/// WHERE: the bins of the residual maps significantly above the floor.
+fn where_(s: &mut String, d: &ArmDiagnosis) -> fmt::Result {
+    writeln!(s, "\nWHERE (bins significantly above the floor, Holm)")?;
     let flagged: Vec<_> = d.where_.iter().filter(|b| b.flagged).collect();
     for b in &flagged {
-        let _ = writeln!(
+        let (rms, floor) = (mm(b.rms_m), mm(b.floor_rms_m));
+        writeln!(
             s,
-            "  {:10} [{:.3}, {:.3}]  {} mm over {} mm, n {}",
-            b.signal,
-            b.lo,
-            b.hi,
-            mm(b.rms_m),
-            mm(b.floor_rms_m),
-            b.n
-        );
+            "  {:10} [{:.3}, {:.3}]  {rms} mm over {floor} mm, n {}",
+            b.signal, b.lo, b.hi, b.n
+        )?;
     }
-    let _ = writeln!(s, "  {} of {} bins flagged", flagged.len(), d.where_.len());
-    let _ = writeln!(
+    writeln!(s, "  {} of {} bins flagged", flagged.len(), d.where_.len())
+}
+
+/// WHICH: every candidate of every round, its held-out RMS before and after and the
+/// decision.
+fn which(s: &mut String, d: &ArmDiagnosis) -> fmt::Result {
+    writeln!(
         s,
         "\nWHICH (held-out RMS before → after; improvement ± blocked SE; Holm p)"
-    );
-    let _ = writeln!(
+    )?;
+    writeln!(
         s,
         "  {:>2} {:20} {:>4} {:>9} {:>9} {:>7} {:>9} {:>9}  decision",
         "rd", "effect", "k", "before mm", "after mm", "gap %", "p (cv)", "p (F)"
-    );
+    )?;
     for c in &d.candidates {
-        let _ = writeln!(
+        let (before, after) = (mm(c.heldout_rms_before_m), mm(c.heldout_rms_after_m));
+        let named = if c.accepted { "NAMED: " } else { "" };
+        writeln!(
             s,
-            "  {:>2} {:20} {:>4} {:>9} {:>9} {:>7.0} {:>9.1e} {:>9.1e}  {}{}",
+            "  {:>2} {:20} {:>4} {before:>9} {after:>9} {:>7.0} {:>9.1e} {:>9.1e}  {named}{}",
             c.round,
             c.effect,
             c.n_visible,
-            mm(c.heldout_rms_before_m),
-            mm(c.heldout_rms_after_m),
             c.gap_closed_pct,
             c.heldout_p_value,
             c.f_p_value,
-            if c.accepted { "NAMED: " } else { "" },
             c.reason
-        );
+        )?;
     }
-    let _ = writeln!(s, "\nHOW FAR");
+    Ok(())
+}
+
+/// HOW FAR: each named effect's share of the gap, its parameters, and the effects it cannot
+/// be told from on these data.
+fn how_far(s: &mut String, d: &ArmDiagnosis) -> fmt::Result {
+    writeln!(s, "\nHOW FAR")?;
     for st in &d.steps {
-        let _ = writeln!(
+        let (before, after) = (mm(st.heldout_rms_before_m), mm(st.heldout_rms_after_m));
+        writeln!(
             s,
-            "  + {}: held-out RMS {} → {} mm, closes {:.0} % of the gap",
-            st.effect,
-            mm(st.heldout_rms_before_m),
-            mm(st.heldout_rms_after_m),
-            st.gap_closed_pct
-        );
+            "  + {}: held-out RMS {before} → {after} mm, closes {:.0} % of the gap",
+            st.effect, st.gap_closed_pct
+        )?;
         for p in &st.parameters {
-            let _ = writeln!(
-                s,
-                "      {:40} {:>12.4e} ± {:.1e} {}",
-                p.name, p.value, p.std, p.unit
-            );
+            let (name, value, std, unit) = (&p.name, p.value, p.std, &p.unit);
+            writeln!(s, "      {name:40} {value:>12.4e} ± {std:.1e} {unit}")?;
         }
         for other in &st.alike {
-            let _ = writeln!(
+            writeln!(
                 s,
                 "      the torque model is open: {other} in its place predicts as well (within two \
                  standard errors, beside the other named effects); to tell them apart record {}",
                 st.effect.separating_measurement(*other)
-            );
+            )?;
         }
         for (other, how) in (st.confusable_with.iter()).filter(|(o, _)| !st.alike.contains(o)) {
-            let _ = writeln!(
+            writeln!(
                 s,
                 "      confusable with {other} on these data; to separate them record {how}"
-            );
+            )?;
         }
     }
-    let _ = writeln!(
+    writeln!(
         s,
         "  final held-out RMS {} mm; gap closed {:.0} %",
         mm(d.heldout_rms_final_m),
         d.gap_closed_pct
-    );
+    )
+}
+
+/// LADDER: each kinematic rung's cross-validated and held-out RMS.
+fn ladder(s: &mut String, d: &ArmDiagnosis) -> fmt::Result {
     let error = if d.kind == DataKind::Distances {
         "distance"
     } else {
         "3-D position"
     };
-    let _ = writeln!(s, "\nLADDER (RMS of the {error} error, mm)");
-    let _ = writeln!(
-        s,
-        "  {:40} {:>9}  {}",
-        "rung",
-        "CV train",
-        d.test_sets.join("  ")
-    );
+    writeln!(s, "\nLADDER (RMS of the {error} error, mm)")?;
+    let tests = d.test_sets.join("  ");
+    writeln!(s, "  {:40} {:>9}  {tests}", "rung", "CV train")?;
     for r in &d.ladder {
         let tests: Vec<String> = r.test_rms_m.iter().map(|v| mm(*v)).collect();
-        let _ = writeln!(
+        writeln!(
             s,
             "  {:40} {:>9}  {}",
             r.rung,
             mm(r.cv_rms_m),
             tests.join("  ")
-        );
+        )?;
     }
+    Ok(())
+}
+
+/// The notes, the verdict (with the torque models left open) and the calibration model of
+/// the named effects.
+fn verdict(s: &mut String, d: &ArmDiagnosis) -> fmt::Result {
     for n in &d.notes {
-        let _ = writeln!(s, "note: {n}");
+        writeln!(s, "note: {n}")?;
     }
     let open: Vec<String> = (d.steps.iter())
         .filter(|st| d.verdict.effects().contains(&st.effect))
@@ -186,17 +197,13 @@ pub fn render_arm(d: &ArmDiagnosis) -> String {
         })
         .collect();
     if open.is_empty() {
-        let _ = writeln!(s, "\nverdict: {}", d.verdict);
+        writeln!(s, "\nverdict: {}", d.verdict)?;
     } else {
-        let _ = writeln!(
-            s,
-            "\nverdict: {} (torque model open: {})",
-            d.verdict,
-            open.join(", ")
-        );
+        let open = open.join(", ");
+        writeln!(s, "\nverdict: {} (torque model open: {open})", d.verdict)?;
     }
-    model_of_verdict(&mut s, d.verdict.effects());
-    s
+    model_of_verdict(s, d.verdict.effects());
+    Ok(())
 }
 
 /// The calibration model that describes the named effects (`hapcal calibrate --model …`), or
@@ -241,38 +248,20 @@ fn model_of_verdict(s: &mut String, named: &[Effect]) {
 /// red when significantly above the floor, Holm) and the floor (black tick), on one common
 /// scale ([`crate::diagnose::bar_panels_svg`]).
 pub fn arm_map_svg(d: &ArmDiagnosis) -> String {
-    use crate::diagnose::{Bar, Panel, bar_panels_svg};
-    let mut panels: Vec<Panel> = Vec::new();
-    for b in &d.where_ {
-        if !panels.iter().any(|p| p.name == b.signal) {
-            panels.push(Panel {
-                name: b.signal.clone(),
-                bold: false,
-                bars: Vec::new(),
-            });
-        }
-        if let Some(p) = panels.iter_mut().find(|p| p.name == b.signal) {
-            p.bold |= b.flagged;
-            p.bars.push(Bar {
-                value_m: b.rms_m,
-                floor_m: b.floor_rms_m,
-                flagged: b.flagged,
-                title: format!(
-                    "[{:.3}, {:.3}] rms {:.4} mm, floor {:.4} mm, n {}, p {:.1e}",
-                    b.lo,
-                    b.hi,
-                    b.rms_m * 1e3,
-                    b.floor_rms_m * 1e3,
-                    b.n,
-                    b.p_value
-                ),
-            });
-        }
-    }
-    let ymax = (d.where_.iter())
-        .map(|b| b.rms_m.max(b.floor_rms_m))
-        .fold(0.0, f64::max)
-        .max(1e-12);
+    use crate::diagnose::{bar_panels_svg, grouped};
+    let bins = d.where_.iter().map(|b| {
+        let title = format!(
+            "[{:.3}, {:.3}] rms {:.4} mm, floor {:.4} mm, n {}, p {:.1e}",
+            b.lo,
+            b.hi,
+            b.rms_m * 1e3,
+            b.floor_rms_m * 1e3,
+            b.n,
+            b.p_value
+        );
+        (b.signal.as_str(), b.rms_m, b.floor_rms_m, b.flagged, title)
+    });
+    let (panels, ymax) = grouped(bins, |_, bar| bar.flagged, 1e-12);
     bar_panels_svg(
         &format!(
             "Held-out 3-D residual RMS per bin (common scale to {:.3} mm); red: above the floor (Holm); tick: {}. Verdict: {}",

@@ -14,10 +14,10 @@ pub mod report;
 pub use hapcal_calibrate::{calibrate, haptic, plan, project_root, support};
 pub use hapcal_studies::{figures, force, paper, pose_study, reproduce};
 
-/// Parses a whole number within `MIN..=MAX` (poses, candidates, cases, seeds); clap reports
-/// any other value as a usage error naming the argument. The upper bounds keep a typo (an
-/// extra three zeros) from asking for more memory than a workstation has: every count is
-/// bounded where its arrays are allocated.
+/// Parses a whole number within `MIN..=MAX` (poses, candidates, cases, seeds, folds); clap
+/// reports any other value as a usage error naming the argument. The upper bounds keep a typo
+/// (an extra three zeros) from asking for more memory than a workstation has: every count is
+/// bounded where its arrays are allocated. `MAX = usize::MAX`: at least `MIN` (folds).
 ///
 /// # Errors
 /// A message with the bounds and the value found.
@@ -26,6 +26,7 @@ pub fn count_in<const MIN: usize, const MAX: usize>(
 ) -> std::result::Result<usize, String> {
     match text.trim().parse::<usize>() {
         Ok(n) if (MIN..=MAX).contains(&n) => Ok(n),
+        Ok(n) if MAX == usize::MAX => Err(format!("must be at least {MIN}, got {n}")),
         Ok(n) => Err(format!("must lie between {MIN} and {MAX}, got {n}")),
         Err(_) => Err(format!("expected a whole number, got {text:?}")),
     }
@@ -77,4 +78,15 @@ impl<E: clap::ValueEnum + Clone + Send + Sync + 'static> clap::builder::TypedVal
             });
         Some(Box::new(values))
     }
+}
+
+/// A progress bar of `len` steps drawn with the `indicatif` template `template` (the default
+/// bar if the template does not parse).
+pub fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(len);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(template)
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar
 }

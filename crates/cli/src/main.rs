@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use hapcal::calibrate::{self, ModelChoice, Plan};
 use std::io::{ErrorKind, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 /// A message on standard error, `format!`-style; a failed write is ignored (there is nowhere
@@ -120,147 +120,14 @@ enum Command {
     /// With no arguments: MUKCa kuka_14, training on the front placement, testing on left_back
     /// and raised_left (bundled in fixtures/mukca).
     #[command(allow_negative_numbers = true)]
-    Calibrate {
-        /// Device file (.toml) or URDF (.urdf, with --tip).
-        #[arg(long)]
-        device: Option<PathBuf>,
-        /// Tip link when the device is a URDF; repeat it for a tree with several tips (marker
-        /// k sits on the k-th tip given, markers past the last on the last).
-        #[arg(long = "tip", default_values_t = ["ball_link".to_owned()])]
-        tips: Vec<String>,
-        /// Training data: MUKCa placement folders (hole_0.csv, hole_1.csv), run folders of
-        /// placements, hapcal log CSV files, or measurement files.
-        ///
-        /// Measurement CSV columns: joints as q1..qn (chain order) or by the device's joint
-        /// names in any order; markers x,y,z or x1,y1,z1,x2,… in the instrument's frame;
-        /// orientation per marker as qw,qx,qy,qz (qw1,…) or figaroh's phix,phiy,phiz (roll,
-        /// pitch, yaw: R = Rz·Ry·Rx); distance_m, distance or d for a distance from an anchor
-        /// (cable encoder, ballbar) to the first marker's frame, on a device without a
-        /// cable_encoder table of its own; t or t_s for time; other columns are reported once and
-        /// ignored. industrial_calibration's measurements.yaml is read as it is (m, rad). The
-        /// instrument frame (the anchor) and each marker's frame on its link are identified.
-        #[arg(long, num_args = 1..)]
-        data: Vec<PathBuf>,
-        /// Test data, same kinds; only evaluated, never fitted.
-        #[arg(long, num_args = 1..)]
-        test: Vec<PathBuf>,
-        /// Measurement files: a CSV of the joint configurations where the calibration will be
-        /// used (joint columns as in the data). The model choice also judges each model where
-        /// they lie beyond a joint's training range, and the report names them.
-        #[arg(long)]
-        workspace: Option<PathBuf>,
-        /// Write the calibrated device: .urdf (a copy of the source URDF with the calibrated
-        /// joint origins) or .toml (a device file with a calibration table).
-        #[arg(long)]
-        out: Option<PathBuf>,
-        /// Print the report as one JSON document instead of a table.
-        #[arg(long)]
-        json: bool,
-        /// Also write the report as one self-contained HTML file (figures, tables, the text
-        /// report; nothing fetched, readable offline).
-        #[arg(long)]
-        report: Option<PathBuf>,
-        /// Model to identify (--help says what each value fits to each kind of data).
-        ///
-        /// Which values apply, and what they fit, depends on the data: socket recordings and
-        /// distance logs, measurement files, or a haptic device's logs; a value the data do not
-        /// take is refused.
-        #[arg(long, value_enum, default_value_t = ModelChoice::Auto)]
-        model: ModelChoice,
-        /// Known distance between the two sockets of a placement, m.
-        #[arg(long, default_value_t = 0.05, allow_hyphen_values = true)]
-        socket_distance_m: f64,
-        /// Cross-validation folds (time-contiguous blocks, at least 2).
-        #[arg(long, default_value_t = 5, value_parser = count_at_least::<2>)]
-        folds: usize,
-        /// Measurement noise standard deviation, m (default: estimated from the residuals).
-        #[arg(long, allow_hyphen_values = true)]
-        sigma_m: Option<f64>,
-        /// Orientation noise standard deviation of pose data, rad (default: estimated).
-        #[arg(long, allow_hyphen_values = true)]
-        sigma_rad: Option<f64>,
-        /// Measurement files: hold out this fraction of each training file's rows, the last
-        /// ones in file order, as a test set (0.3: the first 70 % train).
-        #[arg(long, allow_hyphen_values = true)]
-        test_last: Option<f64>,
-        /// Measurement files: the direction of gravity in the robot's root frame, the mounting
-        /// the compliance models load the joints with: -z upright on a floor (the default), +z
-        /// hanging from a ceiling, ±x or ±y on a wall, or three numbers gx,gy,gz. It is written
-        /// into the calibration record.
-        #[arg(long, allow_hyphen_values = true, value_parser = calibrate::parse_gravity)]
-        gravity: Option<[f64; 3]>,
-        #[command(flatten)]
-        units: UnitArgs,
-        /// Haptic device with transmissions: identify the transmissions and the kinematics in
-        /// one problem instead of the paper's two steps.
-        #[arg(long)]
-        joint: bool,
-        /// Calibrate measurement files as they are even when the setup check finds a mistake
-        /// (hapcal check).
-        #[arg(long)]
-        accept_setup: bool,
-    },
+    Calibrate(CalibrateArgs),
     /// Reproduce the paper's tables on the simulated reference device (Tables 2, 3, Figs. 7, 8)
     /// and write them to --out; with --check, compare with fixtures/golden/ours/paper.csv.
-    Reproduce {
-        /// Truth file (its device file is named inside).
-        #[arg(long)]
-        truth: Option<PathBuf>,
-        /// Monte Carlo seeds (seed 0 is the single-seed run; at most 10,000).
-        #[arg(long, default_value_t = 100, value_parser = hapcal::count_in::<0, 10_000>)]
-        seeds: usize,
-        /// Poses per identification and per validation (1 to 100,000).
-        #[arg(long, default_value_t = 200, value_parser = hapcal::count_in::<1, 100_000>)]
-        poses: usize,
-        /// Output folder.
-        #[arg(long, default_value = "docs/results/paper")]
-        out: PathBuf,
-        /// Compare with the golden file instead of writing (UPDATE_GOLDEN=1 rewrites it and fails).
-        #[arg(long)]
-        check: bool,
-        /// Choose the identification poses from --candidates random ones by this criterion of
-        /// the distance Jacobian at the nominal model (d-optimal, o1, o3, o4, o5, i-optimal)
-        /// instead of taking random poses as the paper does.
-        #[arg(long)]
-        design: Option<hapcal_identify::Criterion>,
-        /// Random candidates per seed for --design (1 to 100,000).
-        #[arg(long, default_value_t = 2000, value_parser = hapcal::count_in::<1, 100_000>)]
-        candidates: usize,
-    },
+    Reproduce(ReproduceArgs),
     /// Simulate a measurement log (docs/design.md §5) from a truth device: joint readings quantised
     /// to the encoders, true transmissions and deviations, Gaussian encoder and cable noise.
     #[command(allow_negative_numbers = true)]
-    Simulate {
-        /// Nominal device file (TOML); defaults to the truth's device, or the reference device.
-        #[arg(long)]
-        device: Option<PathBuf>,
-        /// Truth file (deviations and transmission parameters); without it, the nominal device.
-        #[arg(long)]
-        truth: Option<PathBuf>,
-        /// Random seed (the log is the same for the same seed).
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Number of poses (1 to 1,000,000).
-        #[arg(long, default_value_t = 200, value_parser = hapcal::count_in::<1, 1_000_000>)]
-        poses: usize,
-        /// Cable noise: paper (σ_m = 2π·R_d·σ_e, the paper's formula) or arc-length (R_d·σ_e).
-        #[arg(long, default_value = "paper")]
-        noise: String,
-        /// Output log CSV.
-        #[arg(long)]
-        out: PathBuf,
-        /// Inject an unmodelled effect (docs/design.md §6), e.g. backlash:j2=1e-3 or
-        /// cable_angle:k=2e-4; repeatable. Implies --motion.
-        #[arg(long = "effect")]
-        effects: Vec<String>,
-        /// Time-ordered motion (t_s column, every joint in both directions) instead of
-        /// independent random poses.
-        #[arg(long)]
-        motion: bool,
-        /// Time between samples of the time-ordered motion, s.
-        #[arg(long, default_value_t = 0.5, allow_hyphen_values = true)]
-        period_s: f64,
-    },
+    Simulate(SimulateArgs),
     /// Diagnose the sim-to-real gap: how far the calibrated model's held-out residual lies
     /// above the noise floor, where (residual maps), which unmodelled effect explains it and
     /// how far it shrinks. A haptic device's TOML with its log: the reference device's
@@ -268,59 +135,7 @@ enum Command {
     /// calibrate reads (MUKCa socket folders, distance logs, marker / pose / distance files):
     /// the serial-arm diagnosis on the geometric calibration, with the model ladder. Prints a
     /// table (or one JSON document with --json); with --svg FILE, also the residual maps.
-    Diagnose {
-        /// Device: a haptic device's TOML, a URDF (with --tip) or a D-H device file.
-        #[arg(long)]
-        device: PathBuf,
-        /// Tip link of a URDF; repeat for a tree (marker k sits on the k-th tip).
-        #[arg(long = "tip", default_values_t = ["ball_link".to_owned()])]
-        tips: Vec<String>,
-        /// Data: the haptic device's log (CSV, docs/design.md §5), or the training data of an
-        /// arm as hapcal calibrate --data takes them.
-        #[arg(long, num_args = 1..)]
-        data: Vec<PathBuf>,
-        /// Held-out data of an arm (never used to fit or to choose): its error at each rung.
-        #[arg(long, num_args = 1..)]
-        test: Vec<PathBuf>,
-        /// Measurement files: hold out this fraction of each training file's last rows.
-        #[arg(long)]
-        test_last: Option<f64>,
-        /// Instrument position σ, m per axis: the noise floor (default: repeated poses, socket
-        /// replicates, or no floor).
-        #[arg(long)]
-        sigma_m: Option<f64>,
-        /// Orientation σ of pose data, rad (default: estimated).
-        #[arg(long)]
-        sigma_rad: Option<f64>,
-        /// Known distance between the two sockets of a placement, m.
-        #[arg(long, default_value_t = 0.05)]
-        socket_distance_m: f64,
-        #[command(flatten)]
-        units: UnitArgs,
-        /// The model the gap is measured against, by its --model name. A haptic device's log:
-        /// transmissions (the paper's full calibration, the default) or geometric (the
-        /// kinematic deviations alone; the transmission models then join the candidates); full
-        /// and kinematics are read as these. Any other robot: geometric, the only one.
-        #[arg(long)]
-        baseline: Option<String>,
-        /// Cross-validation folds (time-contiguous blocks, at least 2).
-        #[arg(long, default_value_t = 5, value_parser = count_at_least::<2>)]
-        folds: usize,
-        /// Print one JSON document instead of the table.
-        #[arg(long)]
-        json: bool,
-        /// Also write the residual maps (SVG) to this file; without it no file is written.
-        #[arg(long)]
-        svg: Option<PathBuf>,
-        /// Also write the diagnosis as one self-contained HTML file (the verdict, the
-        /// candidates, the residual maps, the text report).
-        #[arg(long)]
-        report: Option<PathBuf>,
-        /// Diagnose measurement files as they are even when the setup check finds a mistake
-        /// (hapcal check).
-        #[arg(long)]
-        accept_setup: bool,
-    },
+    Diagnose(DiagnoseArgs),
     /// Check the setup of measurement files, a haptic device's logs or socket folders before
     /// calibrating: units, quaternion and Euler order, mirrored or swapped axes, joint column
     /// order, joint rows out of step, frozen joints, the tip link, the order of the tips,
@@ -330,67 +145,16 @@ enum Command {
     ///
     /// Exit codes: 0 nothing found or only warnings, 2 a mistake the data show overwhelmingly
     /// (the message names the fix) or bad input.
-    Check {
-        /// Device: a URDF (with --tip) or a D-H device file.
-        #[arg(long)]
-        device: PathBuf,
-        /// Tip link of a URDF; repeat for a tree (marker k sits on the k-th tip).
-        #[arg(long = "tip", default_values_t = ["ball_link".to_owned()])]
-        tips: Vec<String>,
-        /// Measurement files (marker positions, poses, distances), a haptic device's logs, or
-        /// MUKCa socket folders.
-        #[arg(long, num_args = 1..)]
-        data: Vec<PathBuf>,
-        /// Known distance between the two sockets of a placement, m (socket folders).
-        #[arg(long, default_value_t = 0.05)]
-        socket_distance_m: f64,
-        #[command(flatten)]
-        units: UnitArgs,
-        /// Print the findings as one JSON document instead of text.
-        #[arg(long)]
-        json: bool,
-    },
+    Check(CheckArgs),
     /// Run the blind test of diagnose on the reference device and print the Markdown report
     /// (confusion matrix, the paper's story); cargo xtask blind-test writes it to
     /// docs/results/diagnose.md.
-    BlindTest {
-        /// Number of cases (kinds stratified: 1/8 none, 1/8 outside, 1/8 two, 5/8 one effect).
-        #[arg(long, default_value_t = 240, value_parser = hapcal::count_in::<1, 100_000>)]
-        cases: usize,
-        /// First seed.
-        #[arg(long, default_value_t = 0)]
-        first_seed: u64,
-        /// Seeds of the paper's story (geometric baseline on static poses).
-        #[arg(long, default_value_t = 5)]
-        story: usize,
-    },
+    BlindTest(BlindTestArgs),
     /// Force rendering before and after calibration (paper Figs. 11–12): the virtual-wall
     /// experiment at the home pose and the errors over random poses, printed as Markdown; writes
     /// the Fig. 12 SVG (Fx, Fy, Fz − Fd against the wall travel).
     #[command(allow_negative_numbers = true)]
-    Force {
-        /// Nominal device file (the uncalibrated model).
-        #[arg(long)]
-        device: PathBuf,
-        /// Truth file (the simulated device).
-        #[arg(long)]
-        truth: PathBuf,
-        /// Calibrated device file (from hapcal calibrate --out calibrated.toml).
-        #[arg(long)]
-        calibrated: PathBuf,
-        /// Force-feedback gain G of the closed-loop rows.
-        #[arg(long, default_value_t = 10.0, allow_hyphen_values = true)]
-        gain: f64,
-        /// Random poses (1 to 100,000).
-        #[arg(long, default_value_t = 200, value_parser = hapcal::count_in::<1, 100_000>)]
-        poses: usize,
-        /// Seed of the random poses.
-        #[arg(long, default_value_t = 4)]
-        seed: u64,
-        /// Where to write the SVG.
-        #[arg(long, default_value = "fig12_force.svg")]
-        svg: PathBuf,
-    },
+    Force(ForceArgs),
     /// Choose the poses to measure: from candidates sampled within the joint limits, the ones
     /// that maximise an observability criterion of the identification Jacobian at the nominal
     /// model (greedy start + DETMAX exchange). With --data and --workspace: the poses to add
@@ -431,32 +195,276 @@ enum Command {
     },
 }
 
+/// Flags of `hapcal calibrate`.
+#[derive(clap::Args, Debug)]
+struct CalibrateArgs {
+    /// Device file (.toml) or URDF (.urdf, with --tip).
+    #[arg(long)]
+    device: Option<PathBuf>,
+    /// Tip link when the device is a URDF; repeat it for a tree with several tips (marker
+    /// k sits on the k-th tip given, markers past the last on the last).
+    #[arg(long = "tip", default_values_t = ["ball_link".to_owned()])]
+    tips: Vec<String>,
+    /// Training data: MUKCa placement folders (hole_0.csv, hole_1.csv), run folders of
+    /// placements, hapcal log CSV files, or measurement files.
+    ///
+    /// Measurement CSV columns: joints as q1..qn (chain order) or by the device's joint
+    /// names in any order; markers x,y,z or x1,y1,z1,x2,… in the instrument's frame;
+    /// orientation per marker as qw,qx,qy,qz (qw1,…) or figaroh's phix,phiy,phiz (roll,
+    /// pitch, yaw: R = Rz·Ry·Rx); distance_m, distance or d for a distance from an anchor
+    /// (cable encoder, ballbar) to the first marker's frame, on a device without a
+    /// cable_encoder table of its own; t or t_s for time; other columns are reported once and
+    /// ignored. industrial_calibration's measurements.yaml is read as it is (m, rad). The
+    /// instrument frame (the anchor) and each marker's frame on its link are identified.
+    #[arg(long, num_args = 1..)]
+    data: Vec<PathBuf>,
+    /// Test data, same kinds; only evaluated, never fitted.
+    #[arg(long, num_args = 1..)]
+    test: Vec<PathBuf>,
+    /// Measurement files: a CSV of the joint configurations where the calibration will be
+    /// used (joint columns as in the data). The model choice also judges each model where
+    /// they lie beyond a joint's training range, and the report names them.
+    #[arg(long)]
+    workspace: Option<PathBuf>,
+    /// Write the calibrated device: .urdf (a copy of the source URDF with the calibrated
+    /// joint origins) or .toml (a device file with a calibration table).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print the report as one JSON document instead of a table.
+    #[arg(long)]
+    json: bool,
+    /// Also write the report as one self-contained HTML file (figures, tables, the text
+    /// report; nothing fetched, readable offline).
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Model to identify (--help says what each value fits to each kind of data).
+    ///
+    /// Which values apply, and what they fit, depends on the data: socket recordings and
+    /// distance logs, measurement files, or a haptic device's logs; a value the data do not
+    /// take is refused.
+    #[arg(long, value_enum, default_value_t = ModelChoice::Auto)]
+    model: ModelChoice,
+    /// Known distance between the two sockets of a placement, m.
+    #[arg(long, default_value_t = 0.05, allow_hyphen_values = true)]
+    socket_distance_m: f64,
+    /// Cross-validation folds (time-contiguous blocks, at least 2).
+    #[arg(long, default_value_t = 5, value_parser = hapcal::count_in::<2, { usize::MAX }>)]
+    folds: usize,
+    /// Measurement noise standard deviation, m (default: estimated from the residuals).
+    #[arg(long, allow_hyphen_values = true)]
+    sigma_m: Option<f64>,
+    /// Orientation noise standard deviation of pose data, rad (default: estimated).
+    #[arg(long, allow_hyphen_values = true)]
+    sigma_rad: Option<f64>,
+    /// Measurement files: hold out this fraction of each training file's rows, the last
+    /// ones in file order, as a test set (0.3: the first 70 % train).
+    #[arg(long, allow_hyphen_values = true)]
+    test_last: Option<f64>,
+    /// Measurement files: the direction of gravity in the robot's root frame, the mounting
+    /// the compliance models load the joints with: -z upright on a floor (the default), +z
+    /// hanging from a ceiling, ±x or ±y on a wall, or three numbers gx,gy,gz. It is written
+    /// into the calibration record.
+    #[arg(long, allow_hyphen_values = true, value_parser = calibrate::parse_gravity)]
+    gravity: Option<[f64; 3]>,
+    #[command(flatten)]
+    units: UnitArgs,
+    /// Haptic device with transmissions: identify the transmissions and the kinematics in
+    /// one problem instead of the paper's two steps.
+    #[arg(long)]
+    joint: bool,
+    /// Calibrate measurement files as they are even when the setup check finds a mistake
+    /// (hapcal check).
+    #[arg(long)]
+    accept_setup: bool,
+}
+
+/// Flags of `hapcal reproduce`.
+#[derive(clap::Args, Debug)]
+struct ReproduceArgs {
+    /// Truth file (its device file is named inside).
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    /// Monte Carlo seeds (seed 0 is the single-seed run; at most 10,000).
+    #[arg(long, default_value_t = 100, value_parser = hapcal::count_in::<0, 10_000>)]
+    seeds: usize,
+    /// Poses per identification and per validation (1 to 100,000).
+    #[arg(long, default_value_t = 200, value_parser = hapcal::count_in::<1, 100_000>)]
+    poses: usize,
+    /// Output folder.
+    #[arg(long, default_value = "docs/results/paper")]
+    out: PathBuf,
+    /// Compare with the golden file instead of writing (UPDATE_GOLDEN=1 rewrites it and fails).
+    #[arg(long)]
+    check: bool,
+    /// Choose the identification poses from --candidates random ones by this criterion of
+    /// the distance Jacobian at the nominal model (d-optimal, o1, o3, o4, o5, i-optimal)
+    /// instead of taking random poses as the paper does.
+    #[arg(long)]
+    design: Option<hapcal_identify::Criterion>,
+    /// Random candidates per seed for --design (1 to 100,000).
+    #[arg(long, default_value_t = 2000, value_parser = hapcal::count_in::<1, 100_000>)]
+    candidates: usize,
+}
+
+/// Flags of `hapcal simulate`.
+#[derive(clap::Args, Debug)]
+struct SimulateArgs {
+    /// Nominal device file (TOML); defaults to the truth's device, or the reference device.
+    #[arg(long)]
+    device: Option<PathBuf>,
+    /// Truth file (deviations and transmission parameters); without it, the nominal device.
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    /// Random seed (the log is the same for the same seed).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Number of poses (1 to 1,000,000).
+    #[arg(long, default_value_t = 200, value_parser = hapcal::count_in::<1, 1_000_000>)]
+    poses: usize,
+    /// Cable noise: paper (σ_m = 2π·R_d·σ_e, the paper's formula) or arc-length (R_d·σ_e).
+    #[arg(long, default_value = "paper")]
+    noise: String,
+    /// Output log CSV.
+    #[arg(long)]
+    out: PathBuf,
+    /// Inject an unmodelled effect (docs/design.md §6), e.g. backlash:j2=1e-3 or
+    /// cable_angle:k=2e-4; repeatable. Implies --motion.
+    #[arg(long = "effect")]
+    effects: Vec<String>,
+    /// Time-ordered motion (t_s column, every joint in both directions) instead of
+    /// independent random poses.
+    #[arg(long)]
+    motion: bool,
+    /// Time between samples of the time-ordered motion, s.
+    #[arg(long, default_value_t = 0.5, allow_hyphen_values = true)]
+    period_s: f64,
+}
+
+/// Flags of `hapcal diagnose`.
+#[derive(clap::Args, Debug)]
+struct DiagnoseArgs {
+    /// Device: a haptic device's TOML, a URDF (with --tip) or a D-H device file.
+    #[arg(long)]
+    device: PathBuf,
+    /// Tip link of a URDF; repeat for a tree (marker k sits on the k-th tip).
+    #[arg(long = "tip", default_values_t = ["ball_link".to_owned()])]
+    tips: Vec<String>,
+    /// Data: the haptic device's log (CSV, docs/design.md §5), or the training data of an
+    /// arm as hapcal calibrate --data takes them.
+    #[arg(long, num_args = 1..)]
+    data: Vec<PathBuf>,
+    /// Held-out data of an arm (never used to fit or to choose): its error at each rung.
+    #[arg(long, num_args = 1..)]
+    test: Vec<PathBuf>,
+    /// Measurement files: hold out this fraction of each training file's last rows.
+    #[arg(long)]
+    test_last: Option<f64>,
+    /// Instrument position σ, m per axis: the noise floor (default: repeated poses, socket
+    /// replicates, or no floor).
+    #[arg(long)]
+    sigma_m: Option<f64>,
+    /// Orientation σ of pose data, rad (default: estimated).
+    #[arg(long)]
+    sigma_rad: Option<f64>,
+    /// Known distance between the two sockets of a placement, m.
+    #[arg(long, default_value_t = 0.05)]
+    socket_distance_m: f64,
+    #[command(flatten)]
+    units: UnitArgs,
+    /// The model the gap is measured against, by its --model name. A haptic device's log:
+    /// transmissions (the paper's full calibration, the default) or geometric (the
+    /// kinematic deviations alone; the transmission models then join the candidates); full
+    /// and kinematics are read as these. Any other robot: geometric, the only one.
+    #[arg(long)]
+    baseline: Option<String>,
+    /// Cross-validation folds (time-contiguous blocks, at least 2).
+    #[arg(long, default_value_t = 5, value_parser = hapcal::count_in::<2, { usize::MAX }>)]
+    folds: usize,
+    /// Print one JSON document instead of the table.
+    #[arg(long)]
+    json: bool,
+    /// Also write the residual maps (SVG) to this file; without it no file is written.
+    #[arg(long)]
+    svg: Option<PathBuf>,
+    /// Also write the diagnosis as one self-contained HTML file (the verdict, the
+    /// candidates, the residual maps, the text report).
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Diagnose measurement files as they are even when the setup check finds a mistake
+    /// (hapcal check).
+    #[arg(long)]
+    accept_setup: bool,
+}
+
+/// Flags of `hapcal check`.
+#[derive(clap::Args, Debug)]
+struct CheckArgs {
+    /// Device: a URDF (with --tip) or a D-H device file.
+    #[arg(long)]
+    device: PathBuf,
+    /// Tip link of a URDF; repeat for a tree (marker k sits on the k-th tip).
+    #[arg(long = "tip", default_values_t = ["ball_link".to_owned()])]
+    tips: Vec<String>,
+    /// Measurement files (marker positions, poses, distances), a haptic device's logs, or
+    /// MUKCa socket folders.
+    #[arg(long, num_args = 1..)]
+    data: Vec<PathBuf>,
+    /// Known distance between the two sockets of a placement, m (socket folders).
+    #[arg(long, default_value_t = 0.05)]
+    socket_distance_m: f64,
+    #[command(flatten)]
+    units: UnitArgs,
+    /// Print the findings as one JSON document instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Flags of `hapcal blind-test`.
+#[derive(clap::Args, Debug)]
+struct BlindTestArgs {
+    /// Number of cases (kinds stratified: 1/8 none, 1/8 outside, 1/8 two, 5/8 one effect).
+    #[arg(long, default_value_t = 240, value_parser = hapcal::count_in::<1, 100_000>)]
+    cases: usize,
+    /// First seed.
+    #[arg(long, default_value_t = 0)]
+    first_seed: u64,
+    /// Seeds of the paper's story (geometric baseline on static poses).
+    #[arg(long, default_value_t = 5)]
+    story: usize,
+}
+
+/// Flags of `hapcal force`.
+#[derive(clap::Args, Debug)]
+struct ForceArgs {
+    /// Nominal device file (the uncalibrated model).
+    #[arg(long)]
+    device: PathBuf,
+    /// Truth file (the simulated device).
+    #[arg(long)]
+    truth: PathBuf,
+    /// Calibrated device file (from hapcal calibrate --out calibrated.toml).
+    #[arg(long)]
+    calibrated: PathBuf,
+    /// Force-feedback gain G of the closed-loop rows.
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true)]
+    gain: f64,
+    /// Random poses (1 to 100,000).
+    #[arg(long, default_value_t = 200, value_parser = hapcal::count_in::<1, 100_000>)]
+    poses: usize,
+    /// Seed of the random poses.
+    #[arg(long, default_value_t = 4)]
+    seed: u64,
+    /// Where to write the SVG.
+    #[arg(long, default_value = "fig12_force.svg")]
+    svg: PathBuf,
+}
+
 /// Largest `force --gain` (dimensionless): a hundred times the default of 10. Far above it the
 /// closed loop renders the desired wrench to rounding whatever the model, and the comparison
 /// of models says nothing.
 const MAX_FORCE_GAIN: f64 = 1000.0;
 
-/// Parses a whole number that must be at least `MIN` (poses, cases, folds); clap reports a
-/// smaller or non-numeric value as a usage error naming the argument.
-fn count_at_least<const MIN: usize>(text: &str) -> std::result::Result<usize, String> {
-    match text.trim().parse::<usize>() {
-        Ok(n) if n >= MIN => Ok(n),
-        Ok(n) => Err(format!("must be at least {MIN}, got {n}")),
-        Err(_) => Err(format!("expected a whole number, got {text:?}")),
-    }
-}
-
 use hapcal::{SIGMA_M_RANGE, SIGMA_RAD_RANGE, check_sigma};
-
-/// `Err` naming `option` and its value unless `value` (if given) is finite and positive.
-fn check_positive(option: &str, value: Option<f64>, unit: &str) -> Result<()> {
-    match value {
-        Some(v) if !(v.is_finite() && v > 0.0) => {
-            anyhow::bail!("{option} must be a finite, positive {unit}, got {v}")
-        }
-        _ => Ok(()),
-    }
-}
 
 /// Reads the MUKCa socket folders among `plan`'s data with the device's joint limits, so that
 /// a reading past a limit by more than [`hapcal_io::JOINT_LIMIT_SLACK`] of the joint's range
@@ -496,348 +504,14 @@ fn check_socket_folders(plan: &Plan) -> Result<()> {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Calibrate {
-            device,
-            tips,
-            data,
-            test,
-            workspace,
-            out,
-            json,
-            report,
-            model,
-            socket_distance_m,
-            folds,
-            sigma_m,
-            sigma_rad,
-            test_last,
-            gravity,
-            units,
-            joint,
-            accept_setup,
-        } => {
-            let units = units.units();
-            let gravity = gravity.unwrap_or(calibrate::GRAVITY_DOWN);
-            let (tip, more_tips) = match tips.split_first() {
-                Some((first, rest)) => (first.clone(), rest.to_vec()),
-                None => ("ball_link".to_owned(), Vec::new()),
-            };
-            let default = Plan::bundled_default();
-            let plan = if device.is_none() && data.is_empty() && test.is_empty() {
-                Plan {
-                    workspace,
-                    model,
-                    socket_distance_m,
-                    folds,
-                    sigma_m,
-                    joint,
-                    sigma_rad,
-                    units,
-                    test_last,
-                    gravity,
-                    ..default
-                }
-            } else {
-                Plan {
-                    workspace,
-                    device: device.unwrap_or(default.device),
-                    tip,
-                    tips: more_tips,
-                    units,
-                    sigma_rad,
-                    test_last,
-                    data,
-                    test,
-                    socket_distance_m,
-                    model,
-                    folds,
-                    ladder_rows: default.ladder_rows,
-                    sigma_m,
-                    joint,
-                    gravity,
-                }
-            };
-            let inputs: Vec<&std::path::Path> = (plan.data.iter().chain(&plan.test))
-                .chain(&plan.workspace)
-                .map(PathBuf::as_path)
-                .collect();
-            if let Some(out) = &out {
-                calibrate::check_outputs(&plan.device, out, &inputs)?;
-            }
-            if let Some(report) = &report {
-                hapcal::html::check(report, &[&[plan.device.as_path()], &inputs[..]].concat())?;
-            }
-            plan.validate()?;
-            // The setup check first: socket files in degrees or with swapped columns are named
-            // before the reader's joint-limit check reports the first reading past a limit.
-            let (_, warned) = setup_gate(&plan, accept_setup)?;
-            check_socket_folders(&plan)?;
-            let outcome = calibrate::run(&plan)?;
-            for ladder_note in outcome.report.ladder_notes() {
-                note!("hapcal: note: {ladder_note}");
-            }
-            // After the fit: deviations no real device has say the data are another's.
-            let cfg = hapcal_calibrate::setup::SetupConfig {
-                accept_setup,
-                accept_option: "--accept-setup",
-            };
-            if let Some(warning) =
-                hapcal_calibrate::setup::gate_after_fit(&outcome.report, &cfg, &warned)?
-            {
-                note!("hapcal: warning: {warning}");
-            }
-            if json {
-                emit(&format!(
-                    "{}\n",
-                    serde_json::to_string_pretty(&outcome.report)?
-                ));
-            } else {
-                emit(&hapcal::report::render(&outcome.report));
-            }
-            if let Some(path) = &report {
-                hapcal::html::write_calibration(path, &outcome.report, &plan.device, &inputs)?;
-                note!("hapcal: wrote {}", path.display());
-            }
-            if let Some(out) = out {
-                for path in calibrate::write_outputs_beside(&outcome, &out, &inputs)? {
-                    note!("hapcal: wrote {}", path.display());
-                }
-            }
-            Ok(())
-        }
-        Command::Reproduce {
-            truth,
-            seeds,
-            poses,
-            out,
-            check,
-            design,
-            candidates,
-        } => {
-            let root = hapcal::project_root();
-            let truth = truth.unwrap_or_else(|| root.join("fixtures/reference-device/truth.toml"));
-            let golden_path = root.join("fixtures/golden/ours/paper.csv");
-            // The truth's device file is an input too; an unreadable truth fails in `run` below.
-            let truth_device = hapcal_sim::read_truth(&truth)
-                .ok()
-                .map(|t| t.device_path(&truth));
-            let mut inputs: Vec<&std::path::Path> = vec![&truth];
-            inputs.extend(truth_device.as_deref());
-            if !check {
-                if out.exists() && !out.is_dir() {
-                    anyhow::bail!(
-                        "cannot write {}: --out is an output folder, and this is a file",
-                        out.display()
-                    );
-                }
-                if !out.exists() {
-                    std::fs::create_dir_all(&out)
-                        .with_context(|| format!("cannot create the folder {}", out.display()))?;
-                }
-            }
-            let bar = indicatif::ProgressBar::new(seeds as u64);
-            bar.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "{msg} [{bar:40}] {pos}/{len} seeds, eta {eta}",
-                )
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-            );
-            bar.set_message("reproducing");
-            let select = |reference: &hapcal::paper::Reference,
-                          readings: &[Vec<f64>],
-                          n: usize|
-             -> anyhow::Result<Vec<usize>> {
-                let criterion = design.unwrap_or(hapcal_identify::Criterion::DOptimal);
-                let c = hapcal::plan::candidate_blocks(
-                    &reference.device,
-                    readings,
-                    hapcal::plan::Measurement::Distance,
-                    Some(reference.noise.sigma_m_m),
-                    true,
-                )?;
-                let mut cfg = hapcal_identify::DesignConfig::new(criterion);
-                cfg.weight = Some(c.weight);
-                Ok(hapcal_identify::select_poses(&c.blocks, n, &cfg)?.selected)
-            };
-            let choice = match design {
-                None => hapcal::paper::PoseChoice::Random,
-                Some(criterion) => hapcal::paper::PoseChoice::Planned {
-                    n_candidates: candidates,
-                    name: criterion.to_string(),
-                    select: &select,
-                },
-            };
-            let result = hapcal::reproduce::run(&truth, seeds, poses, &choice, &|done| {
-                bar.set_position(done as u64)
-            })?;
-            bar.finish_and_clear();
-            if check {
-                if std::env::var_os("UPDATE_GOLDEN").is_some() {
-                    calibrate::write_new(
-                        &golden_path,
-                        &hapcal::reproduce::golden_csv(&result.golden),
-                        &inputs,
-                    )?;
-                    anyhow::bail!(
-                        "UPDATE_GOLDEN: rewrote {}; review the diff and run again without it",
-                        golden_path.display()
-                    );
-                }
-                let bad = hapcal::reproduce::check_golden(&result.golden, &golden_path)?;
-                if !bad.is_empty() {
-                    anyhow::bail!(
-                        "reproduction differs from {}:\n{}",
-                        golden_path.display(),
-                        bad.join("\n")
-                    );
-                }
-                emit(&format!(
-                    "reproduce --check: {} values within tolerance of {}\n",
-                    result.golden.len(),
-                    golden_path.display()
-                ));
-            } else {
-                for (name, text) in &result.files {
-                    calibrate::write_new(&out.join(name), text, &inputs)?;
-                }
-                emit(&result.summary);
-                note!(
-                    "hapcal: wrote {} files to {}",
-                    result.files.len(),
-                    out.display()
-                );
-            }
-            Ok(())
-        }
-        Command::Simulate {
-            device,
-            truth,
-            seed,
-            poses,
-            noise,
-            out,
-            effects,
-            motion,
-            period_s,
-        } => {
-            let root = hapcal::project_root();
-            calibrate::check_extension(&out, &["csv"], "the simulated log", false)?;
-            check_positive("--period-s", Some(period_s), "time, s")?;
-            let mut inputs: Vec<PathBuf> = device.iter().chain(&truth).cloned().collect();
-            if let Some(t) =
-                (truth.as_ref()).and_then(|t| Some((t, hapcal_sim::read_truth(t).ok()?)))
-            {
-                inputs.push(t.1.device_path(t.0));
-            }
-            let inputs: Vec<&std::path::Path> = inputs.iter().map(PathBuf::as_path).collect();
-            calibrate::check_output(&out, &inputs)?;
-            let truth_file = truth.clone();
-            let (device, truth) = match (device, truth) {
-                (device, Some(truth_path)) => {
-                    let truth = hapcal_sim::read_truth(&truth_path)?;
-                    let device = match device {
-                        Some(d) => hapcal_io::read_device(&d)?,
-                        None => truth.read_device(&truth_path)?,
-                    };
-                    (device, truth)
-                }
-                (device, None) => {
-                    let path = device
-                        .unwrap_or_else(|| root.join("fixtures/reference-device/device.toml"));
-                    let device = hapcal_io::read_device(&path)?;
-                    let truth = hapcal_sim::Truth::nominal(path, &device);
-                    (device, truth)
-                }
-            };
-            let Some(cable) = device.cable_encoder.as_ref() else {
-                anyhow::bail!(
-                    "the device has no [cable_encoder]: nothing to simulate the distance with"
-                );
-            };
-            let noise = match noise.as_str() {
-                "paper" => hapcal_sim::NoiseModel::paper(cable),
-                "arc-length" => hapcal_sim::NoiseModel::arc_length(cable),
-                other => anyhow::bail!("--noise must be `paper` or `arc-length`, got {other:?}"),
-            };
-            let cfg = hapcal_sim::SimConfig::new(seed, poses).with_noise(noise);
-            let effects = (effects.iter())
-                .map(|e| e.parse::<hapcal_sim::Injected>())
-                .collect::<Result<Vec<_>, _>>()?;
-            let rows = if motion || !effects.is_empty() {
-                let motion = hapcal_sim::MotionConfig {
-                    sample_period_s: period_s,
-                };
-                hapcal_sim::simulate_motion(&device, &truth, &cfg, &motion, &effects)
-            } else {
-                hapcal_sim::simulate(&device, &truth, &cfg)
-            }
-            .with_context(|| match &truth_file {
-                Some(t) => format!("simulating the truth {}", t.display()),
-                None => "simulating the nominal device".to_owned(),
-            })?;
-            calibrate::write_new(&out, &hapcal_io::write_log(&rows), &inputs)?;
-            note!("hapcal: wrote {} poses to {}", rows.len(), out.display());
-            Ok(())
-        }
-        Command::Force {
-            device,
-            truth,
-            calibrated,
-            gain,
-            poses,
-            seed,
-            svg,
-        } => {
-            calibrate::check_extension(&svg, &["svg"], "the Fig. 12 plot", true)?;
-            if !(gain.is_finite() && (0.0..=MAX_FORCE_GAIN).contains(&gain)) {
-                anyhow::bail!(
-                    "--gain must lie between 0 and {MAX_FORCE_GAIN} (a force-feedback gain, \
-                     dimensionless), got {gain:e}"
-                );
-            }
-            let inputs = [device.as_path(), truth.as_path(), calibrated.as_path()];
-            calibrate::check_output(&svg, &inputs)?;
-            let read_device = |p: &PathBuf| {
-                hapcal_io::read_device(p).with_context(|| format!("reading {}", p.display()))
-            };
-            let nominal = read_device(&device)?;
-            let cal = read_device(&calibrated)?;
-            let truth_file = hapcal_sim::read_truth(&truth)
-                .with_context(|| format!("reading {}", truth.display()))?;
-            let mut plan = hapcal::force::ForcePlan::reference_device();
-            plan.gain = gain;
-            plan.sweep.n_poses = poses;
-            plan.sweep.seed = seed;
-            let report =
-                hapcal::force::run(&nominal, &truth_file, &cal, &plan).with_context(|| {
-                    format!(
-                        "force experiment with {}, {}, {}",
-                        device.display(),
-                        truth.display(),
-                        calibrated.display()
-                    )
-                })?;
-            emit(&report.markdown);
-            if let Some((_, text)) = report.files.iter().find(|(n, _)| n.ends_with(".svg")) {
-                calibrate::write_new(&svg, text, &inputs)?;
-                note!("hapcal: wrote {}", svg.display());
-            }
-            Ok(())
-        }
-        Command::PlanPoses { plan, units } => {
-            let planned = hapcal::plan_args::run_plan(&plan, &units.units())?;
-            match &planned.out {
-                Some(out) => {
-                    emit(&planned.summary);
-                    note!("hapcal: wrote {}", out.display());
-                }
-                None => {
-                    note!("{}", planned.summary.trim_end());
-                    emit(&planned.csv);
-                }
-            }
-            Ok(())
-        }
+        Command::Calibrate(args) => run_calibrate(&args),
+        Command::Reproduce(args) => run_reproduce(&args),
+        Command::Simulate(args) => run_simulate(&args),
+        Command::Diagnose(args) => run_diagnose(&args),
+        Command::Check(args) => run_check(&args),
+        Command::BlindTest(args) => run_blind_test(&args),
+        Command::Force(args) => run_force(&args),
+        Command::PlanPoses { plan, units } => run_plan_poses(&plan, &units),
         Command::PoseStudy(args) => {
             let bar = indicatif::ProgressBar::new(args.seeds);
             let text = hapcal::pose_study::run_study(&args, &|done| bar.set_position(done))?;
@@ -847,200 +521,14 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::PoseBound(args) => {
-            let text = hapcal::pose_study::run_bound(&args, &|stage| note!("hapcal: {stage}"))?;
-            emit(&text);
+            emit(&hapcal::pose_study::run_bound(&args, &|stage| {
+                note!("hapcal: {stage}")
+            })?);
             note!("hapcal: wrote {}", args.out.display());
             Ok(())
         }
-        Command::Diagnose {
-            device,
-            tips,
-            data,
-            test,
-            test_last,
-            sigma_m,
-            sigma_rad,
-            socket_distance_m,
-            units,
-            baseline,
-            folds,
-            json,
-            svg,
-            report,
-            accept_setup,
-        } => {
-            let mut inputs: Vec<&std::path::Path> = vec![device.as_path()];
-            inputs.extend(data.iter().chain(&test).map(PathBuf::as_path));
-            if let Some(svg) = &svg {
-                calibrate::check_extension(svg, &["svg"], "the residual maps", false)?;
-                calibrate::check_output(svg, &inputs)?;
-            }
-            if let Some(report) = &report {
-                hapcal::html::check(report, &inputs)?;
-            }
-            if data.is_empty() {
-                anyhow::bail!("--data: give the log or the measurements to diagnose");
-            }
-            let haptic = !device
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
-                && hapcal_io::read_device(&device).is_ok_and(|d| d.has_transmissions());
-            let (text, json_text, svg_text, view) = if haptic {
-                if data.len() != 1 || !test.is_empty() {
-                    anyhow::bail!("a haptic device is diagnosed from one log: --data <log.csv>");
-                }
-                // The floor comes from the encoders' specification, the held-out rows from
-                // cross-validation: these options would be silently ignored.
-                for (option, given) in [
-                    ("--sigma-m", sigma_m.is_some()),
-                    ("--sigma-rad", sigma_rad.is_some()),
-                    ("--test-last", test_last.is_some()),
-                ] {
-                    if given {
-                        anyhow::bail!(
-                            "{option} does not apply to a haptic device's diagnosis (the floor \
-                             comes from the encoders' specification, the held-out rows from \
-                             --folds)"
-                        );
-                    }
-                }
-                // The setup check of the log (units, column order, rows out of step, the
-                // external encoders), as `calibrate` runs it.
-                let check = Plan::log_check(
-                    device.clone(),
-                    data.clone(),
-                    units.units(),
-                    socket_distance_m,
-                    folds,
-                );
-                let (accepted, _) = setup_gate(&check, accept_setup)?;
-                let plan = hapcal::diagnose::DiagnosePlan {
-                    units: units.units(),
-                    ..hapcal::diagnose::DiagnosePlan::new(
-                        device.clone(),
-                        data[0].clone(),
-                        (baseline.as_deref())
-                            .unwrap_or(hapcal_contract::ModelName::Transmissions.name()),
-                        folds,
-                    )?
-                };
-                let (mut d, warnings) = hapcal::diagnose::run(&plan)?;
-                setup_verdict(&mut d.verdict, &mut d.notes, accepted);
-                for w in &warnings {
-                    note!("hapcal: warning: {w}");
-                }
-                (
-                    hapcal::diagnose::render(&d),
-                    serde_json::to_string_pretty(&d)?,
-                    hapcal::diagnose::residual_map_svg(&d),
-                    hapcal::html::DiagnosisView::haptic(&d).with_warnings(warnings),
-                )
-            } else {
-                hapcal_diagnose::arm::robot_baseline(baseline.as_deref())?;
-                check_sigma("--sigma-m", sigma_m, SIGMA_M_RANGE, "m")?;
-                check_sigma("--sigma-rad", sigma_rad, SIGMA_RAD_RANGE, "rad")?;
-                let (tip, more_tips) = match tips.split_first() {
-                    Some((first, rest)) => (first.clone(), rest.to_vec()),
-                    None => ("ball_link".to_owned(), Vec::new()),
-                };
-                let plan = Plan {
-                    workspace: None,
-                    device: device.clone(),
-                    tip,
-                    tips: more_tips,
-                    units: units.units(),
-                    sigma_rad,
-                    test_last,
-                    data: data.clone(),
-                    test: test.clone(),
-                    socket_distance_m,
-                    model: calibrate::ModelName::Geometric.into(),
-                    folds,
-                    ladder_rows: hapcal_calibrate::fit::LADDER_ROWS,
-                    sigma_m,
-                    joint: false,
-                    gravity: calibrate::GRAVITY_DOWN,
-                };
-                let (accepted, _) = setup_gate(&plan, accept_setup)?;
-                let cfg = hapcal_diagnose::arm::ArmConfig {
-                    folds,
-                    ..Default::default()
-                };
-                let (mut d, warnings) = hapcal::diagnose_arm::run_arm(&plan, &cfg)?;
-                setup_verdict(&mut d.verdict, &mut d.notes, accepted);
-                for w in &warnings {
-                    note!("hapcal: warning: {w}");
-                }
-                (
-                    hapcal::diagnose_arm::render_arm(&d),
-                    serde_json::to_string_pretty(&d)?,
-                    hapcal::diagnose_arm::arm_map_svg(&d),
-                    hapcal::html::DiagnosisView::arm(&d).with_warnings(warnings),
-                )
-            };
-            if json {
-                emit(&format!("{json_text}\n"));
-            } else {
-                emit(&text);
-            }
-            // The maps are an output asked for: failing to write them fails the command.
-            if let Some(svg) = &svg {
-                calibrate::write_new(svg, &svg_text, &inputs)?;
-                note!("hapcal: wrote residual maps to {}", svg.display());
-            }
-            if let Some(path) = &report {
-                hapcal::html::write_diagnosis(path, &view, &text, &svg_text, &inputs)?;
-                note!("hapcal: wrote {}", path.display());
-            }
-            Ok(())
-        }
-        Command::BlindTest {
-            cases,
-            first_seed,
-            story,
-        } => {
-            let bar = indicatif::ProgressBar::new(cases as u64);
-            let truth_file = hapcal::project_root().join("fixtures/reference-device/truth.toml");
-            let truth = hapcal_sim::read_truth(&truth_file)?;
-            let device = truth.read_device(&truth_file)?;
-            let md = hapcal_diagnose::blind::report(
-                &device,
-                &truth,
-                cases,
-                first_seed,
-                story,
-                &|done| bar.set_position(done as u64),
-            )?;
-            bar.finish_and_clear();
-            emit(&md);
-            Ok(())
-        }
-        Command::Check {
-            device,
-            tips,
-            data,
-            socket_distance_m,
-            units,
-            json,
-        } => run_check(
-            Plan {
-                device,
-                tip: tips
-                    .first()
-                    .cloned()
-                    .unwrap_or_else(|| "ball_link".to_owned()),
-                tips: tips.iter().skip(1).cloned().collect(),
-                units: units.units(),
-                data,
-                test: Vec::new(),
-                socket_distance_m,
-                ..Plan::bundled_default()
-            },
-            json,
-        ),
         Command::Compensate(args) => {
-            let summary = hapcal::compensate::run(&args)?;
-            emit(&summary);
+            emit(&hapcal::compensate::run(&args)?);
             Ok(())
         }
         Command::Predict { args, units } => {
@@ -1052,11 +540,529 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::ImportUrdf { urdf, tips } => {
-            let device = hapcal_io::import_urdf_tree(&urdf, &tips)?;
-            emit(&hapcal_io::write_device(&device));
+            emit(&hapcal_io::write_device(&hapcal_io::import_urdf_tree(
+                &urdf, &tips,
+            )?));
             Ok(())
         }
     }
+}
+
+/// `tips` as a plan takes them: the first (`ball_link` if none) and the others.
+fn split_tips(tips: &[String]) -> (String, Vec<String>) {
+    match tips.split_first() {
+        Some((first, rest)) => (first.clone(), rest.to_vec()),
+        None => ("ball_link".to_owned(), Vec::new()),
+    }
+}
+
+/// Prints the report as one JSON document (`doc()`) with `--json`, else its text `text`.
+fn emit_report(
+    json: bool,
+    doc: impl FnOnce() -> serde_json::Result<String>,
+    text: &str,
+) -> Result<()> {
+    if json {
+        emit(&format!("{}\n", doc()?));
+    } else {
+        emit(text);
+    }
+    Ok(())
+}
+
+/// Each of `warnings` on standard error.
+fn warn_all(warnings: &[String]) {
+    for w in warnings {
+        note!("hapcal: warning: {w}");
+    }
+}
+
+impl CalibrateArgs {
+    /// The plan these flags ask for: with no device and no data, the bundled MUKCa kuka_14
+    /// ([`Plan::bundled_default`]) with the flags' settings.
+    fn plan(&self) -> Plan {
+        let plan = Plan {
+            workspace: self.workspace.clone(),
+            model: self.model,
+            socket_distance_m: self.socket_distance_m,
+            folds: self.folds,
+            sigma_m: self.sigma_m,
+            joint: self.joint,
+            sigma_rad: self.sigma_rad,
+            units: self.units.units(),
+            test_last: self.test_last,
+            gravity: self.gravity.unwrap_or(calibrate::GRAVITY_DOWN),
+            ..Plan::bundled_default()
+        };
+        if self.device.is_none() && self.data.is_empty() && self.test.is_empty() {
+            return plan;
+        }
+        let (tip, tips) = split_tips(&self.tips);
+        Plan {
+            device: self.device.clone().unwrap_or(plan.device),
+            tip,
+            tips,
+            data: self.data.clone(),
+            test: self.test.clone(),
+            ..plan
+        }
+    }
+}
+
+/// `hapcal calibrate`: the setup check, the fit, the report on standard output, then the
+/// HTML report (`--report`) and the calibrated device (`--out`).
+fn run_calibrate(args: &CalibrateArgs) -> Result<()> {
+    let plan = args.plan();
+    let inputs: Vec<&Path> = (plan.data.iter().chain(&plan.test))
+        .chain(&plan.workspace)
+        .map(PathBuf::as_path)
+        .collect();
+    if let Some(out) = &args.out {
+        calibrate::check_outputs(&plan.device, out, &inputs)?;
+    }
+    if let Some(report) = &args.report {
+        hapcal::html::check(report, &[&[plan.device.as_path()], &inputs[..]].concat())?;
+    }
+    plan.validate()?;
+    // The setup check first: socket files in degrees or with swapped columns are named
+    // before the reader's joint-limit check reports the first reading past a limit.
+    let (_, warned) = setup_gate(&plan, args.accept_setup)?;
+    check_socket_folders(&plan)?;
+    let outcome = calibrate::run(&plan)?;
+    for ladder_note in outcome.report.ladder_notes() {
+        note!("hapcal: note: {ladder_note}");
+    }
+    // After the fit: deviations no real device has say the data are another's.
+    let cfg = setup_config(args.accept_setup);
+    if let Some(warning) = hapcal_calibrate::setup::gate_after_fit(&outcome.report, &cfg, &warned)?
+    {
+        note!("hapcal: warning: {warning}");
+    }
+    let text = hapcal::report::render(&outcome.report);
+    emit_report(
+        args.json,
+        || serde_json::to_string_pretty(&outcome.report),
+        &text,
+    )?;
+    if let Some(path) = &args.report {
+        hapcal::html::write_calibration(path, &outcome.report, &plan.device, &inputs)?;
+        note!("hapcal: wrote {}", path.display());
+    }
+    if let Some(out) = &args.out {
+        for path in calibrate::write_outputs_beside(&outcome, out, &inputs)? {
+            note!("hapcal: wrote {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+/// `hapcal reproduce`: the paper's tables on the simulated reference device, written to
+/// `--out` or, with `--check`, compared with the golden file.
+fn run_reproduce(args: &ReproduceArgs) -> Result<()> {
+    let root = hapcal::project_root();
+    let truth =
+        (args.truth.clone()).unwrap_or_else(|| root.join("fixtures/reference-device/truth.toml"));
+    // The truth's device file is an input too; an unreadable truth fails in `run` below.
+    let truth_device = hapcal_sim::read_truth(&truth)
+        .ok()
+        .map(|t| t.device_path(&truth));
+    let mut inputs: Vec<&Path> = vec![&truth];
+    inputs.extend(truth_device.as_deref());
+    if !args.check {
+        output_folder(&args.out)?;
+    }
+    let bar = hapcal::progress_bar(
+        args.seeds as u64,
+        "{msg} [{bar:40}] {pos}/{len} seeds, eta {eta}",
+    );
+    bar.set_message("reproducing");
+    let select = |reference: &hapcal::paper::Reference, readings: &[Vec<f64>], n: usize| {
+        planned_poses(reference, readings, n, args.design)
+    };
+    let choice = match args.design {
+        None => hapcal::paper::PoseChoice::Random,
+        Some(criterion) => hapcal::paper::PoseChoice::Planned {
+            n_candidates: args.candidates,
+            name: criterion.to_string(),
+            select: &select,
+        },
+    };
+    let result = hapcal::reproduce::run(&truth, args.seeds, args.poses, &choice, &|done| {
+        bar.set_position(done as u64)
+    })?;
+    bar.finish_and_clear();
+    if args.check {
+        return check_golden(
+            &result,
+            &root.join("fixtures/golden/ours/paper.csv"),
+            &inputs,
+        );
+    }
+    for (name, text) in &result.files {
+        calibrate::write_new(&args.out.join(name), text, &inputs)?;
+    }
+    emit(&result.summary);
+    note!(
+        "hapcal: wrote {} files to {}",
+        result.files.len(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// Creates the output folder `out` if it does not exist; `Err` if it is a file.
+fn output_folder(out: &Path) -> Result<()> {
+    if out.exists() && !out.is_dir() {
+        anyhow::bail!(
+            "cannot write {}: --out is an output folder, and this is a file",
+            out.display()
+        );
+    }
+    if !out.exists() {
+        std::fs::create_dir_all(out)
+            .with_context(|| format!("cannot create the folder {}", out.display()))?;
+    }
+    Ok(())
+}
+
+/// The `n` poses `reproduce --design` identifies from: chosen among the candidate `readings`
+/// by `design` (d-optimal by default) on the distance Jacobian at the nominal model.
+fn planned_poses(
+    reference: &hapcal::paper::Reference,
+    readings: &[Vec<f64>],
+    n: usize,
+    design: Option<hapcal_identify::Criterion>,
+) -> Result<Vec<usize>> {
+    let criterion = design.unwrap_or(hapcal_identify::Criterion::DOptimal);
+    let c = hapcal::plan::candidate_blocks(
+        &reference.device,
+        readings,
+        hapcal::plan::Measurement::Distance,
+        Some(reference.noise.sigma_m_m),
+        true,
+    )?;
+    let mut cfg = hapcal_identify::DesignConfig::new(criterion);
+    cfg.weight = Some(c.weight);
+    Ok(hapcal_identify::select_poses(&c.blocks, n, &cfg)?.selected)
+}
+
+/// `reproduce --check`: the reproduction against the golden file `golden_path` (rewritten,
+/// and the command failed, with `UPDATE_GOLDEN` set).
+fn check_golden(
+    result: &hapcal::reproduce::Reproduction,
+    golden_path: &Path,
+    inputs: &[&Path],
+) -> Result<()> {
+    if std::env::var_os("UPDATE_GOLDEN").is_some() {
+        let csv = hapcal::reproduce::golden_csv(&result.golden);
+        calibrate::write_new(golden_path, &csv, inputs)?;
+        anyhow::bail!(
+            "UPDATE_GOLDEN: rewrote {}; review the diff and run again without it",
+            golden_path.display()
+        );
+    }
+    let bad = hapcal::reproduce::check_golden(&result.golden, golden_path)?;
+    if !bad.is_empty() {
+        anyhow::bail!(
+            "reproduction differs from {}:\n{}",
+            golden_path.display(),
+            bad.join("\n")
+        );
+    }
+    emit(&format!(
+        "reproduce --check: {} values within tolerance of {}\n",
+        result.golden.len(),
+        golden_path.display()
+    ));
+    Ok(())
+}
+
+/// `hapcal simulate`: a log of `--poses` readings of the truth device, written to `--out`.
+fn run_simulate(args: &SimulateArgs) -> Result<()> {
+    calibrate::check_extension(&args.out, &["csv"], "the simulated log", false)?;
+    if !(args.period_s.is_finite() && args.period_s > 0.0) {
+        anyhow::bail!(
+            "--period-s must be a finite, positive time, s, got {}",
+            args.period_s
+        );
+    }
+    let mut inputs: Vec<PathBuf> = args.device.iter().chain(&args.truth).cloned().collect();
+    if let Some(t) = (args.truth.as_ref()).and_then(|t| Some((t, hapcal_sim::read_truth(t).ok()?)))
+    {
+        inputs.push(t.1.device_path(t.0));
+    }
+    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    calibrate::check_output(&args.out, &inputs)?;
+    let (device, truth) = simulated_device(args)?;
+    let Some(cable) = device.cable_encoder.as_ref() else {
+        anyhow::bail!("the device has no [cable_encoder]: nothing to simulate the distance with");
+    };
+    let noise = match args.noise.as_str() {
+        "paper" => hapcal_sim::NoiseModel::paper(cable),
+        "arc-length" => hapcal_sim::NoiseModel::arc_length(cable),
+        other => anyhow::bail!("--noise must be `paper` or `arc-length`, got {other:?}"),
+    };
+    let cfg = hapcal_sim::SimConfig::new(args.seed, args.poses).with_noise(noise);
+    let effects = (args.effects.iter())
+        .map(|e| e.parse::<hapcal_sim::Injected>())
+        .collect::<Result<Vec<_>, _>>()?;
+    let rows = if args.motion || !effects.is_empty() {
+        let motion = hapcal_sim::MotionConfig {
+            sample_period_s: args.period_s,
+        };
+        hapcal_sim::simulate_motion(&device, &truth, &cfg, &motion, &effects)
+    } else {
+        hapcal_sim::simulate(&device, &truth, &cfg)
+    }
+    .with_context(|| match &args.truth {
+        Some(t) => format!("simulating the truth {}", t.display()),
+        None => "simulating the nominal device".to_owned(),
+    })?;
+    calibrate::write_new(&args.out, &hapcal_io::write_log(&rows), &inputs)?;
+    note!(
+        "hapcal: wrote {} poses to {}",
+        rows.len(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// The nominal device and the truth `simulate` draws from: `--truth` (on its own device, or
+/// on `--device`), else the nominal `--device` (the reference device by default).
+fn simulated_device(args: &SimulateArgs) -> Result<(hapcal_io::Device, hapcal_sim::Truth)> {
+    let Some(truth_path) = &args.truth else {
+        let path = (args.device.clone()).unwrap_or_else(|| {
+            hapcal::project_root().join("fixtures/reference-device/device.toml")
+        });
+        let device = hapcal_io::read_device(&path)?;
+        let truth = hapcal_sim::Truth::nominal(path, &device);
+        return Ok((device, truth));
+    };
+    let truth = hapcal_sim::read_truth(truth_path)?;
+    let device = match &args.device {
+        Some(d) => hapcal_io::read_device(d)?,
+        None => truth.read_device(truth_path)?,
+    };
+    Ok((device, truth))
+}
+
+/// `hapcal force`: the force experiment's Markdown on standard output, its Fig. 12 to `--svg`.
+fn run_force(args: &ForceArgs) -> Result<()> {
+    let ForceArgs {
+        device,
+        truth,
+        calibrated,
+        gain,
+        ..
+    } = args;
+    calibrate::check_extension(&args.svg, &["svg"], "the Fig. 12 plot", true)?;
+    if !(gain.is_finite() && (0.0..=MAX_FORCE_GAIN).contains(gain)) {
+        anyhow::bail!(
+            "--gain must lie between 0 and {MAX_FORCE_GAIN} (a force-feedback gain, \
+             dimensionless), got {gain:e}"
+        );
+    }
+    let inputs = [device.as_path(), truth.as_path(), calibrated.as_path()];
+    calibrate::check_output(&args.svg, &inputs)?;
+    let read_device =
+        |p: &PathBuf| hapcal_io::read_device(p).with_context(|| format!("reading {}", p.display()));
+    let nominal = read_device(device)?;
+    let cal = read_device(calibrated)?;
+    let truth_file =
+        hapcal_sim::read_truth(truth).with_context(|| format!("reading {}", truth.display()))?;
+    let mut plan = hapcal::force::ForcePlan::reference_device();
+    plan.gain = *gain;
+    plan.sweep.n_poses = args.poses;
+    plan.sweep.seed = args.seed;
+    let report = hapcal::force::run(&nominal, &truth_file, &cal, &plan).with_context(|| {
+        format!(
+            "force experiment with {}, {}, {}",
+            device.display(),
+            truth.display(),
+            calibrated.display()
+        )
+    })?;
+    emit(&report.markdown);
+    if let Some((_, text)) = report.files.iter().find(|(n, _)| n.ends_with(".svg")) {
+        calibrate::write_new(&args.svg, text, &inputs)?;
+        note!("hapcal: wrote {}", args.svg.display());
+    }
+    Ok(())
+}
+
+/// `hapcal plan-poses`: the planned poses to `--out` (the summary on standard output), or
+/// to standard output (the summary on standard error).
+fn run_plan_poses(plan: &hapcal::plan_args::PlanArgs, units: &UnitArgs) -> Result<()> {
+    let planned = hapcal::plan_args::run_plan(plan, &units.units())?;
+    match &planned.out {
+        Some(out) => {
+            emit(&planned.summary);
+            note!("hapcal: wrote {}", out.display());
+        }
+        None => {
+            note!("{}", planned.summary.trim_end());
+            emit(&planned.csv);
+        }
+    }
+    Ok(())
+}
+
+/// A diagnosis as the command writes it besides standard output: its text report, its
+/// residual maps (SVG) and the view of its HTML report.
+struct Diagnosed {
+    /// The text report.
+    text: String,
+    /// The residual maps.
+    svg: String,
+    /// What the HTML report shows.
+    view: hapcal::html::DiagnosisView,
+}
+
+/// `hapcal diagnose`: a haptic device's log ([`diagnose_haptic`]) or an arm's data
+/// ([`diagnose_arm`]); then the residual maps (`--svg`) and the HTML report (`--report`).
+fn run_diagnose(args: &DiagnoseArgs) -> Result<()> {
+    let mut inputs: Vec<&Path> = vec![args.device.as_path()];
+    inputs.extend(args.data.iter().chain(&args.test).map(PathBuf::as_path));
+    if let Some(svg) = &args.svg {
+        calibrate::check_extension(svg, &["svg"], "the residual maps", false)?;
+        calibrate::check_output(svg, &inputs)?;
+    }
+    if let Some(report) = &args.report {
+        hapcal::html::check(report, &inputs)?;
+    }
+    if args.data.is_empty() {
+        anyhow::bail!("--data: give the log or the measurements to diagnose");
+    }
+    let haptic = !(args.device.extension()).is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
+        && hapcal_io::read_device(&args.device).is_ok_and(|d| d.has_transmissions());
+    let d = if haptic {
+        diagnose_haptic(args)?
+    } else {
+        diagnose_arm(args)?
+    };
+    // The maps are an output asked for: failing to write them fails the command.
+    if let Some(svg) = &args.svg {
+        calibrate::write_new(svg, &d.svg, &inputs)?;
+        note!("hapcal: wrote residual maps to {}", svg.display());
+    }
+    if let Some(path) = &args.report {
+        hapcal::html::write_diagnosis(path, &d.view, &d.text, &d.svg, &inputs)?;
+        note!("hapcal: wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// A haptic device's diagnosis from its one log, after the setup check of the log as
+/// `calibrate` runs it (units, column order, rows out of step, the external encoders).
+fn diagnose_haptic(args: &DiagnoseArgs) -> Result<Diagnosed> {
+    if args.data.len() != 1 || !args.test.is_empty() {
+        anyhow::bail!("a haptic device is diagnosed from one log: --data <log.csv>");
+    }
+    // The floor comes from the encoders' specification, the held-out rows from
+    // cross-validation: these options would be silently ignored.
+    for (option, given) in [
+        ("--sigma-m", args.sigma_m.is_some()),
+        ("--sigma-rad", args.sigma_rad.is_some()),
+        ("--test-last", args.test_last.is_some()),
+    ] {
+        if given {
+            anyhow::bail!(
+                "{option} does not apply to a haptic device's diagnosis (the floor comes from \
+                 the encoders' specification, the held-out rows from --folds)"
+            );
+        }
+    }
+    let (accepted, _) = setup_gate(&log_plan(args), args.accept_setup)?;
+    let baseline =
+        (args.baseline.as_deref()).unwrap_or(hapcal_contract::ModelName::Transmissions.name());
+    let plan = hapcal::diagnose::DiagnosePlan {
+        units: args.units.units(),
+        ..hapcal::diagnose::DiagnosePlan::new(
+            args.device.clone(),
+            args.data[0].clone(),
+            baseline,
+            args.folds,
+        )?
+    };
+    let (mut d, warnings) = hapcal::diagnose::run(&plan)?;
+    // No physical effect is named on data set up wrong: the note says what the check found.
+    if let Some(finding) = accepted {
+        d.verdict.on_accepted_setup(&mut d.notes, finding);
+    }
+    warn_all(&warnings);
+    let text = hapcal::diagnose::render(&d);
+    emit_report(args.json, || serde_json::to_string_pretty(&d), &text)?;
+    Ok(Diagnosed {
+        svg: hapcal::diagnose::residual_map_svg(&d),
+        view: hapcal::html::DiagnosisView::haptic(&d).with_warnings(warnings),
+        text,
+    })
+}
+
+/// The plan of `diagnose`'s data with the defaults of everything else
+/// ([`Plan::log_check`]: the geometric model).
+fn log_plan(args: &DiagnoseArgs) -> Plan {
+    Plan::log_check(
+        args.device.clone(),
+        args.data.clone(),
+        args.units.units(),
+        args.socket_distance_m,
+        args.folds,
+    )
+}
+
+/// A serial arm's diagnosis on its geometric calibration, after the setup check.
+fn diagnose_arm(args: &DiagnoseArgs) -> Result<Diagnosed> {
+    hapcal_diagnose::arm::robot_baseline(args.baseline.as_deref())?;
+    check_sigma("--sigma-m", args.sigma_m, SIGMA_M_RANGE, "m")?;
+    check_sigma("--sigma-rad", args.sigma_rad, SIGMA_RAD_RANGE, "rad")?;
+    let (tip, tips) = split_tips(&args.tips);
+    let plan = Plan {
+        tip,
+        tips,
+        sigma_m: args.sigma_m,
+        sigma_rad: args.sigma_rad,
+        test_last: args.test_last,
+        test: args.test.clone(),
+        ..log_plan(args)
+    };
+    let (accepted, _) = setup_gate(&plan, args.accept_setup)?;
+    let cfg = hapcal_diagnose::arm::ArmConfig {
+        folds: args.folds,
+        ..Default::default()
+    };
+    let (mut d, warnings) = hapcal::diagnose_arm::run_arm(&plan, &cfg)?;
+    // No physical effect is named on data set up wrong: the note says what the check found.
+    if let Some(finding) = accepted {
+        d.verdict.on_accepted_setup(&mut d.notes, finding);
+    }
+    warn_all(&warnings);
+    let text = hapcal::diagnose_arm::render_arm(&d);
+    emit_report(args.json, || serde_json::to_string_pretty(&d), &text)?;
+    Ok(Diagnosed {
+        svg: hapcal::diagnose_arm::arm_map_svg(&d),
+        view: hapcal::html::DiagnosisView::arm(&d).with_warnings(warnings),
+        text,
+    })
+}
+
+/// `hapcal blind-test`: the blind test's Markdown report on standard output.
+fn run_blind_test(args: &BlindTestArgs) -> Result<()> {
+    let bar = indicatif::ProgressBar::new(args.cases as u64);
+    let truth_file = hapcal::project_root().join("fixtures/reference-device/truth.toml");
+    let truth = hapcal_sim::read_truth(&truth_file)?;
+    let device = truth.read_device(&truth_file)?;
+    let md = hapcal_diagnose::blind::report(
+        &device,
+        &truth,
+        args.cases,
+        args.first_seed,
+        args.story,
+        &|done| bar.set_position(done as u64),
+    )?;
+    bar.finish_and_clear();
+    emit(&md);
+    Ok(())
 }
 
 /// The setup check at the start of a calibration or diagnosis: its findings printed as
@@ -1068,31 +1074,32 @@ fn setup_gate(
     plan: &Plan,
     accept_setup: bool,
 ) -> Result<(Option<String>, Vec<hapcal_calibrate::setup::MistakeClass>)> {
-    let cfg = hapcal_calibrate::setup::SetupConfig {
-        accept_setup,
-        accept_option: "--accept-setup",
-    };
-    let gated = hapcal_calibrate::setup::gate(plan, &cfg)?;
-    for warning in &gated.warnings {
-        note!("hapcal: warning: {warning}");
-    }
+    let gated = hapcal_calibrate::setup::gate(plan, &setup_config(accept_setup))?;
+    warn_all(&gated.warnings);
     Ok((gated.accepted, gated.classes))
 }
 
-/// The verdict of a diagnosis whose setup the check found wrong and the user accepted: no
-/// physical effect is named on data set up wrong; the note says what the check found.
-fn setup_verdict(
-    verdict: &mut hapcal_diagnose::Verdict,
-    notes: &mut Vec<String>,
-    accepted: Option<String>,
-) {
-    if let Some(finding) = accepted {
-        verdict.on_accepted_setup(notes, finding);
+/// The setup check's settings: `accept_setup` as `--accept-setup` says it.
+fn setup_config(accept_setup: bool) -> hapcal_calibrate::setup::SetupConfig {
+    hapcal_calibrate::setup::SetupConfig {
+        accept_setup,
+        accept_option: "--accept-setup",
     }
 }
 
 /// `hapcal check`: the findings on standard output; an overwhelming one is the error.
-fn run_check(plan: Plan, json: bool) -> Result<()> {
+fn run_check(args: &CheckArgs) -> Result<()> {
+    let (tip, tips) = split_tips(&args.tips);
+    let plan = Plan {
+        device: args.device.clone(),
+        tip,
+        tips,
+        units: args.units.units(),
+        data: args.data.clone(),
+        test: Vec::new(),
+        socket_distance_m: args.socket_distance_m,
+        ..Plan::bundled_default()
+    };
     if plan.data.is_empty() {
         anyhow::bail!("--data: give the measurement files to check");
     }
@@ -1111,11 +1118,11 @@ fn run_check(plan: Plan, json: bool) -> Result<()> {
                 .join(", ")
         );
     };
-    if json {
-        emit(&format!("{}\n", serde_json::to_string_pretty(&report)?));
-    } else {
-        emit(&report.render());
-    }
+    emit_report(
+        args.json,
+        || serde_json::to_string_pretty(&report),
+        &report.render(),
+    )?;
     match report.overwhelming() {
         Some(f) => anyhow::bail!("setup check [{}]: {}", f.class, f.text()),
         None => Ok(()),

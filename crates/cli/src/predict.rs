@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 use hapcal_calibrate::predict::{
-    Prediction, errors_without_instrument, haptic_device, predict_haptic, predict_robot, prepare,
-    unbound_record_note,
+    Errors, Figures, Prediction, errors_without_instrument, haptic_device, predict_haptic,
+    predict_robot, prepare, unbound_record_note,
 };
 use hapcal_io::Units;
 use hapcal_runtime::Robot;
@@ -203,25 +203,29 @@ pub fn summary(prediction: &Prediction, model: &SummaryModel<'_>) -> String {
             s,
             "errors against the measured columns (no refit; mean, RMS, max):"
         );
-        let lines = [
-            ("position   ", e.position_m, "mm", "marker samples"),
-            ("orientation", e.orientation_rad, "mrad", "samples"),
-            ("distance   ", e.distance_m, "mm", "rows"),
-        ];
-        for (what, figures, unit, over) in lines {
-            if let Some(f) = figures {
-                let _ = writeln!(
-                    s,
-                    "  {what}  {:.4} {:.4} {:.4} {unit} over {} {over}",
-                    f.mean * 1e3,
-                    f.rms * 1e3,
-                    f.max * 1e3,
-                    f.count
-                );
-            }
+        for (what, f, unit, over) in error_kinds(e) {
+            let (mean, rms, max) = (f.mean * 1e3, f.rms * 1e3, f.max * 1e3);
+            let count = f.count;
+            let _ = writeln!(
+                s,
+                "  {what:<11}  {mean:.4} {rms:.4} {max:.4} {unit} over {count} {over}"
+            );
         }
     }
     s
+}
+
+/// The errors of `e` that were measured, as both reports show them: name, figures (m or
+/// rad), the unit they are shown in (mm or mrad) and what they are counted over.
+pub(crate) fn error_kinds(e: &Errors) -> Vec<(&'static str, Figures, &'static str, &'static str)> {
+    let kinds = [
+        ("position", e.position_m, "mm", "marker samples"),
+        ("orientation", e.orientation_rad, "mrad", "samples"),
+        ("distance", e.distance_m, "mm", "rows"),
+    ];
+    (kinds.into_iter())
+        .filter_map(|(what, f, unit, over)| Some((what, f?, unit, over)))
+        .collect()
 }
 
 /// Runs `hapcal predict`: returns what to print on standard output and the messages for
@@ -281,12 +285,10 @@ pub fn run(args: &PredictArgs, units: &Units) -> Result<(String, Vec<String>)> {
     // A progress bar when the work is long (rows × robots evaluated), on a terminal only.
     let work = table.rows.len() * (2 * predictor.n_values() + 1);
     let bar = (work > 200_000).then(|| {
-        let bar = indicatif::ProgressBar::new(table.rows.len() as u64);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template("predicting {bar:40} {pos}/{len} rows")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        bar
+        crate::progress_bar(
+            table.rows.len() as u64,
+            "predicting {bar:40} {pos}/{len} rows",
+        )
     });
     let mut progress = |done: usize| {
         if let Some(bar) = &bar {
@@ -341,14 +343,9 @@ fn finish(
         notes.push(format!("hapcal: wrote {}", out.display()));
     }
     if let Some(path) = &args.report {
-        let command = crate::html::this_command();
-        let html = crate::html::prediction_page(
-            prediction,
-            &text_for_report,
-            &command,
-            &crate::html::inputs(inputs),
-        );
-        crate::html::write(path, &html, inputs)?;
+        crate::html::write_page(path, inputs, |command, files| {
+            crate::html::prediction_page(prediction, &text_for_report, command, files)
+        })?;
         notes.push(format!("hapcal: wrote {}", path.display()));
     }
     Ok((stdout, notes))

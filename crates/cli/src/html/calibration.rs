@@ -105,48 +105,77 @@ pub fn figures(r: &CalibrationReport) -> Vec<Figure> {
     out
 }
 
+/// One rung of the model choice as the HTML report shows it: of the ladder of measurement
+/// files, or of the cross-validation of sockets and haptic logs.
+struct Score {
+    /// The rung's (or model's) name.
+    name: String,
+    /// Held-out RMS, mm.
+    rms_mm: f64,
+    /// Held-out score minus the bottom rung's, and its standard error: weighted squared
+    /// error per row (the ladder), or squared error in mm² (the cross-validation).
+    diff: (f64, f64),
+    /// RMS on the joint-range folds, m (the ladder's, if any).
+    range_rms_m: Option<f64>,
+    /// Kept parameters.
+    n_kept: usize,
+}
+
+/// The model choice's scores, and whether they are the ladder's (else the
+/// cross-validation's); `None` without either.
+fn scores(r: &CalibrationReport) -> Option<(bool, Vec<Score>)> {
+    if !r.ladder.is_empty() {
+        let rows = (r.ladder.iter()).map(|l| Score {
+            name: l.rung.to_string(),
+            rms_mm: l.heldout_rms_m * 1e3,
+            diff: l.score_difference_to_frames,
+            range_rms_m: l.range_rms_m,
+            n_kept: l.n_kept,
+        });
+        return Some((true, rows.collect()));
+    }
+    let rows = (r.cross_validation.iter()).map(|c| Score {
+        name: c.model.to_string(),
+        rms_mm: c.heldout_rms_m * 1e3,
+        diff: (
+            c.difference_to_geometric_m2.0 * 1e6,
+            c.difference_to_geometric_m2.1 * 1e6,
+        ),
+        range_rms_m: None,
+        n_kept: c.n_kept,
+    });
+    (!r.cross_validation.is_empty()).then(|| (false, rows.collect()))
+}
+
 /// The ladder's figures: each rung's held-out score difference ± its standard error, and its
 /// held-out RMS.
 fn ladder(r: &CalibrationReport, out: &mut Vec<Figure>) {
-    let (names, rms, diff, se, y_desc, what) = if !r.ladder.is_empty() {
+    let Some((is_ladder, scores)) = scores(r) else {
+        return;
+    };
+    let (y_desc, what) = if is_ladder {
         (
-            r.ladder
-                .iter()
-                .map(|l| l.rung.to_string())
-                .collect::<Vec<_>>(),
-            r.ladder
-                .iter()
-                .map(|l| l.heldout_rms_m * 1e3)
-                .collect::<Vec<_>>(),
-            r.ladder
-                .iter()
-                .map(|l| l.score_difference_to_frames.0)
-                .collect::<Vec<_>>(),
-            r.ladder
-                .iter()
-                .map(|l| l.score_difference_to_frames.1)
-                .collect::<Vec<_>>(),
             "Σ e²/σ² per row minus frames only's",
             "held-out weighted squared error per row minus frames only's",
         )
-    } else if !r.cross_validation.is_empty() {
-        let cv = &r.cross_validation;
+    } else {
         (
-            cv.iter().map(|c| c.model.to_string()).collect(),
-            cv.iter().map(|c| c.heldout_rms_m * 1e3).collect(),
-            cv.iter()
-                .map(|c| c.difference_to_geometric_m2.0 * 1e6)
-                .collect(),
-            cv.iter()
-                .map(|c| c.difference_to_geometric_m2.1 * 1e6)
-                .collect(),
             "mm² minus the geometric model's",
             "held-out squared error minus the geometric model's, mm²",
         )
-    } else {
-        return;
     };
+    let names: Vec<String> = scores.iter().map(|x| x.name.clone()).collect();
     let taken = names.iter().position(|n| *n == r.model.to_string());
+    let group = |values: Vec<f64>, errors| {
+        [BarGroup {
+            label: String::new(),
+            color: BLUE_,
+            values: values.into_iter().map(Some).collect(),
+            errors,
+        }]
+    };
+    let diff = scores.iter().map(|x| x.diff.0).collect();
+    let se = scores.iter().map(|x| x.diff.1).collect();
     out.push(figures::bars(
         "fig-ladder",
         format!(
@@ -156,12 +185,7 @@ fn ladder(r: &CalibrationReport, out: &mut Vec<Figure>) {
         ),
         y_desc,
         &names,
-        &[BarGroup {
-            label: String::new(),
-            color: BLUE_,
-            values: diff.into_iter().map(Some).collect(),
-            errors: Some(se),
-        }],
+        &group(diff, Some(se)),
         taken,
     ));
     out.push(figures::bars(
@@ -169,14 +193,53 @@ fn ladder(r: &CalibrationReport, out: &mut Vec<Figure>) {
         "Model ladder: each rung's held-out RMS error over all folds, mm.".to_owned(),
         "held-out RMS, mm",
         &names,
-        &[BarGroup {
-            label: String::new(),
-            color: BLUE_,
-            values: rms.into_iter().map(Some).collect(),
-            errors: None,
-        }],
+        &group(scores.iter().map(|x| x.rms_mm).collect(), None),
         taken,
     ));
+}
+
+/// The table of the model choice's scores (the ladder's, or the cross-validation's).
+fn score_table(r: &CalibrationReport, page: &mut Page) {
+    let Some((is_ladder, scores)) = scores(r) else {
+        return;
+    };
+    let rows: Vec<Vec<String>> = (scores.iter())
+        .map(|x| {
+            let (d, e) = x.diff;
+            let mut row = vec![x.name.clone(), format!("{:.4}", x.rms_mm)];
+            if is_ladder {
+                row.push(format!("{d:+.2} ± {e:.2}"));
+                row.push(
+                    x.range_rms_m
+                        .map_or_else(|| "–".to_owned(), |v| format!("{:.4}", v * 1e3)),
+                );
+            } else {
+                row.push(format!("{d:+.4} ± {e:.4}"));
+            }
+            row.push(x.n_kept.to_string());
+            row
+        })
+        .collect();
+    if is_ladder {
+        page.section("ladder-table", "Ladder scores");
+        let head = [
+            "rung",
+            "held-out RMS, mm",
+            "Σe²/σ² per row minus frames only's",
+            "joint-range folds RMS, mm",
+            "kept parameters",
+        ];
+        page.table(&head, &rows);
+    } else {
+        page.section("ladder-table", "Cross-validation scores");
+        let head = [
+            "model",
+            "held-out RMS, mm",
+            "minus the geometric model's, mm²",
+            "kept parameters",
+        ];
+        page.table(&head, &rows);
+    }
 }
 
 /// The per-set figure: each set's error before and after calibration.
@@ -584,73 +647,12 @@ fn ranges(r: &CalibrationReport, out: &mut Vec<Figure>) {
     ));
 }
 
-/// The tables: ladder scores, sets, parameters with σ, pruned ones, correlated pairs.
+/// The tables: ladder scores, parameters with σ, pruned ones, correlated pairs.
 fn tables(r: &CalibrationReport, page: &mut Page) {
-    if !r.ladder.is_empty() {
-        page.section("ladder-table", "Ladder scores");
-        let rows: Vec<Vec<String>> = (r.ladder.iter())
-            .map(|l| {
-                vec![
-                    l.rung.to_string(),
-                    format!("{:.4}", l.heldout_rms_m * 1e3),
-                    format!(
-                        "{:+.2} ± {:.2}",
-                        l.score_difference_to_frames.0, l.score_difference_to_frames.1
-                    ),
-                    l.range_rms_m
-                        .map_or_else(|| "–".to_owned(), |v| format!("{:.4}", v * 1e3)),
-                    l.n_kept.to_string(),
-                ]
-            })
-            .collect();
-        page.table(
-            &[
-                "rung",
-                "held-out RMS, mm",
-                "Σe²/σ² per row minus frames only's",
-                "joint-range folds RMS, mm",
-                "kept parameters",
-            ],
-            &rows,
-        );
-    } else if !r.cross_validation.is_empty() {
-        page.section("ladder-table", "Cross-validation scores");
-        let rows: Vec<Vec<String>> = (r.cross_validation.iter())
-            .map(|c| {
-                vec![
-                    c.model.to_string(),
-                    format!("{:.4}", c.heldout_rms_m * 1e3),
-                    format!(
-                        "{:+.4} ± {:.4}",
-                        c.difference_to_geometric_m2.0 * 1e6,
-                        c.difference_to_geometric_m2.1 * 1e6
-                    ),
-                    c.n_kept.to_string(),
-                ]
-            })
-            .collect();
-        page.table(
-            &[
-                "model",
-                "held-out RMS, mm",
-                "minus the geometric model's, mm²",
-                "kept parameters",
-            ],
-            &rows,
-        );
-    }
+    score_table(r, page);
     page.section("parameter-table", "Parameters");
     let rows: Vec<Vec<String>> = (r.parameters.iter())
-        .map(|p| {
-            let (v, unit) = crate::report::scaled(p.value, p.unit);
-            let (sd, _) = crate::report::scaled(p.std, p.unit);
-            vec![
-                p.name.clone(),
-                format!("{v:+.4}"),
-                format!("{sd:.4}"),
-                unit.to_owned(),
-            ]
-        })
+        .map(|p| crate::report::parameter_cells(p).to_vec())
         .collect();
     page.paragraph(&format!(
         "{} identified parameters (value and standard deviation σ):",

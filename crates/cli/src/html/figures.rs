@@ -79,8 +79,8 @@ pub(crate) fn round6(v: f64) -> f64 {
 }
 
 /// `values` rounded by [`round6`], as JSON.
-pub(crate) fn rounded(values: &[f64]) -> Value {
-    json!(values.iter().map(|v| round6(*v)).collect::<Vec<_>>())
+pub(crate) fn rounded<'a>(values: impl IntoIterator<Item = &'a f64>) -> Value {
+    values.into_iter().map(|v| round6(*v)).collect()
 }
 
 /// Draws with `draw` into an SVG of `size` pixels; on a drawing error, an SVG that says so.
@@ -297,7 +297,7 @@ pub(crate) fn bars(
         "groups": groups.iter().map(|g| json!({
             "label": g.label,
             "values": g.values.iter().map(|v| v.map(round6)).collect::<Vec<_>>(),
-            "errors": g.errors.as_ref().map(|e| rounded(e)),
+            "errors": g.errors.as_ref().map(rounded),
         })).collect::<Vec<_>>(),
     });
     Figure::new(id, caption, svg, values)
@@ -401,16 +401,15 @@ pub(crate) fn scatter(
         legend(&mut chart)?;
         Ok(())
     });
-    let values = json!(
-        series
-            .iter()
-            .map(|s| json!({
+    let values: Value = (series.iter())
+        .map(|s| {
+            json!({
                 "label": s.label,
-                "x": rounded(&s.points.iter().map(|p| p.0).collect::<Vec<_>>()),
-                "y": rounded(&s.points.iter().map(|p| p.1).collect::<Vec<_>>()),
-            }))
-            .collect::<Vec<_>>()
-    );
+                "x": rounded(s.points.iter().map(|p| &p.0)),
+                "y": rounded(s.points.iter().map(|p| &p.1)),
+            })
+        })
+        .collect::<Value>();
     Figure::new(id, caption, svg, values)
 }
 
@@ -503,18 +502,17 @@ pub(crate) fn histograms(
         }
         Ok(())
     });
-    let values = json!(
-        panels
-            .iter()
-            .zip(&data)
-            .map(|(p, (width, counts))| json!({
+    let values: Value = (panels.iter())
+        .zip(&data)
+        .map(|(p, (width, counts))| {
+            json!({
                 "title": p.title,
                 "bin_width": round6(*width),
                 "series": p.series.iter().map(|s| s.label.clone()).collect::<Vec<_>>(),
                 "counts": counts,
-            }))
-            .collect::<Vec<_>>()
-    );
+            })
+        })
+        .collect::<Value>();
     Figure::new(id, caption, svg, values)
 }
 
@@ -590,21 +588,20 @@ pub(crate) fn binned_panels(
         }
         Ok(())
     });
-    let values = json!(
-        panels
-            .iter()
-            .map(|p| json!({
+    let values: Value = (panels.iter())
+        .map(|p| {
+            json!({
                 "title": p.title,
                 "series": p.series.iter().map(|s| json!({
                     "label": s.label,
-                    "centre": rounded(&s.bins.iter().map(|b| b.0).collect::<Vec<_>>()),
-                    "mean": rounded(&s.bins.iter().map(|b| b.1).collect::<Vec<_>>()),
-                    "low": rounded(&s.bins.iter().map(|b| b.2).collect::<Vec<_>>()),
-                    "high": rounded(&s.bins.iter().map(|b| b.3).collect::<Vec<_>>()),
+                    "centre": rounded(s.bins.iter().map(|b| &b.0)),
+                    "mean": rounded(s.bins.iter().map(|b| &b.1)),
+                    "low": rounded(s.bins.iter().map(|b| &b.2)),
+                    "high": rounded(s.bins.iter().map(|b| &b.3)),
                 })).collect::<Vec<_>>(),
-            }))
-            .collect::<Vec<_>>()
-    );
+            })
+        })
+        .collect::<Value>();
     Figure::new(id, caption, svg, values)
 }
 

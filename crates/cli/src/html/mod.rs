@@ -124,8 +124,9 @@ pub fn write_calibration(
     let files: Vec<&Path> = std::iter::once(device)
         .chain(inputs.iter().copied())
         .collect();
-    let html = calibration_page(report, &this_command(), &self::inputs(&files));
-    write(path, &html, &files)
+    write_page(path, &files, |command, files| {
+        calibration_page(report, command, files)
+    })
 }
 
 /// Writes the HTML report of a diagnosis (`view`, its text report `text` and residual maps
@@ -140,8 +141,22 @@ pub fn write_diagnosis(
     maps_svg: &str,
     inputs: &[&Path],
 ) -> Result<()> {
-    let html = diagnosis_page(view, text, maps_svg, &this_command(), &self::inputs(inputs));
-    write(path, &html, inputs)
+    write_page(path, inputs, |command, files| {
+        diagnosis_page(view, text, maps_svg, command, files)
+    })
+}
+
+/// Writes the HTML report `page(command, inputs)` made from the files `inputs` by this
+/// process's command line to `path`.
+///
+/// # Errors
+/// As [`write()`].
+pub fn write_page(
+    path: &Path,
+    inputs: &[&Path],
+    page: impl FnOnce(&str, &[Input]) -> String,
+) -> Result<()> {
+    write(path, &page(&this_command(), &self::inputs(inputs)), inputs)
 }
 
 /// The command line of this process, as [`command_line`] writes it.

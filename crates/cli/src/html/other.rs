@@ -226,23 +226,19 @@ pub fn prediction_page(p: &Prediction, text: &str, command: &str, inputs: &[Inpu
     }
     if let Some(e) = &p.errors {
         page.section("errors", "Errors against the measured columns");
-        let mut rows = Vec::new();
-        for (what, f, scale, unit) in [
-            ("position", e.position_m, 1e3, "mm"),
-            ("orientation", e.orientation_rad, 1e3, "mrad"),
-            ("distance", e.distance_m, 1e3, "mm"),
-        ] {
-            if let Some(f) = f {
-                rows.push(vec![
+        let rows: Vec<Vec<String>> = (crate::predict::error_kinds(e).into_iter())
+            .map(|(what, f, unit, _)| {
+                let [mean, rms, max] = [f.mean, f.rms, f.max].map(|v| format!("{:.4}", v * 1e3));
+                vec![
                     what.to_owned(),
                     f.count.to_string(),
-                    format!("{:.4}", f.mean * scale),
-                    format!("{:.4}", f.rms * scale),
-                    format!("{:.4}", f.max * scale),
+                    mean,
+                    rms,
+                    max,
                     unit.to_owned(),
-                ]);
-            }
-        }
+                ]
+            })
+            .collect();
         page.table(
             &["error", "samples", "mean", "RMS", "largest", "unit"],
             &rows,
