@@ -5,7 +5,11 @@ use hapcal_calibrate::haptic::{
 };
 use hapcal_sim::{MotionConfig, NoiseModel, SimConfig, simulate_motion};
 
-use super::*;
+use super::baseline::fit_transmissions;
+use super::cv::Base;
+use crate::model::{Setup, Trans, log_data};
+use crate::solve::{lstsq, refine};
+use crate::stats::chi2_sf;
 
 /// The `transmissions` baseline and `hapcal calibrate`'s joint identification
 /// (`hapcal_calibrate::haptic::identify_jointly`) fit the same model to the same clean log:
