@@ -291,6 +291,47 @@ struct Frozen {
 /// (one frozen chain), small enough that a block's Jacobian stays in cache.
 const ROWS_PER_BLOCK: usize = 256;
 
+/// What every row of one evaluation of [`CalibrationProblem`] shares: the parameters `x`, the
+/// chain frozen at them, and the problem's term counts.
+#[derive(Clone, Copy)]
+struct RowContext<'a> {
+    /// The parameters.
+    x: ColRef<'a, f64>,
+    /// The chains frozen at `x`'s kinematic part.
+    frozen: &'a Frozen,
+    /// Kinematic parameters.
+    n_kin: usize,
+    /// Compliance and harmonic parameters.
+    n_angle: usize,
+    /// `n_angle` and the transversal compliances.
+    n_comp: usize,
+    /// Angle terms per row.
+    n_terms: usize,
+    /// Transversal tilts per row.
+    n_tilts: usize,
+    /// Whether the angle terms' columns come from their joints' parameter columns.
+    angles_from_params: bool,
+    /// Offset of the points' parameters.
+    off: usize,
+}
+
+/// Scratch of the row-by-row evaluations, allocated on first use and reused row after row.
+#[derive(Default)]
+struct RowScratch {
+    /// Forward-kinematics workspace.
+    ws: Option<FkWorkspace>,
+    /// A row's point or pose Jacobian over the kinematic parameters.
+    buf: Vec<f64>,
+    /// A row's effective joint angles.
+    q_buf: Vec<f64>,
+    /// A distance row's gradient.
+    grad: Vec<f64>,
+    /// The kinematic part of `x`.
+    x_kin: Vec<f64>,
+    /// A row's effective kinematic parameters.
+    x_buf: Vec<f64>,
+}
+
 /// The torque tips must exist and have the tree's `n_joints` joints.
 ///
 /// # Errors
@@ -1311,12 +1352,18 @@ impl CalibrationProblem {
             }
         }
         // Scratch of the row-by-row paths, allocated on first use.
-        let mut ws: Option<FkWorkspace> = None;
-        let mut buf = Vec::new();
-        let mut q_buf = Vec::new();
-        let mut grad = Vec::new();
-        let mut x_kin: Vec<f64> = Vec::new();
-        let mut x_buf: Vec<f64> = Vec::new();
+        let mut scratch = RowScratch::default();
+        let ctx = RowContext {
+            x,
+            frozen: &frozen,
+            n_kin,
+            n_angle,
+            n_comp,
+            n_terms,
+            n_tilts,
+            angles_from_params,
+            off,
+        };
         let n_joints = self.chain.n_joints();
         let s_distance = self.weights.sigma_distance_m;
         let inv_s_distance = 1.0 / s_distance;
@@ -1380,10 +1427,11 @@ impl CalibrationProblem {
                 let trig = self.row_trig(row_idx);
                 let p = match (jac.as_mut(), trig) {
                     (Some(j), _) => {
+                        let RowScratch { ws, grad, .. } = &mut scratch;
                         grad.resize(n_kin, 0.0);
                         let ws = ws.get_or_insert_with(|| FkWorkspace::new(&self.chain));
-                        let p = frozen.chain.distance_gradient(&row.q, trig, &mut grad, ws);
-                        for (c, g) in j.iter_mut().zip(&grad) {
+                        let p = frozen.chain.distance_gradient(&row.q, trig, grad, ws);
+                        for (c, g) in j.iter_mut().zip(grad.iter()) {
                             c[r] = g / s_distance;
                         }
                         p
@@ -1397,168 +1445,267 @@ impl CalibrationProblem {
                 r += 1;
                 continue;
             }
-            if let RowKind::Marker { tip, position_m }
-            | RowKind::Pose {
-                tip, position_m, ..
-            } = &row.kind
-            {
-                let q_eff = self.effective_q(row_idx, x, &mut q_buf);
-                let chain = &self.tips[*tip];
-                if x_kin.is_empty() {
-                    x_kin.extend((0..n_kin).map(|i| x[i]));
+            if matches!(row.kind, RowKind::Marker { .. } | RowKind::Pose { .. }) {
+                let (o, j) = (out.as_deref_mut(), jac.as_deref_mut());
+                r += self.eval_tip_row(&ctx, row_idx, &mut scratch, r, o, j);
+                continue;
+            }
+            let (o, j) = (out.as_deref_mut(), jac.as_deref_mut());
+            r += self.eval_chain_row(&ctx, row_idx, &mut scratch, r, o, j);
+        }
+        self.eval_point_distances(x, point_distances, r, out, jac);
+    }
+
+    /// One marker or pose row on its tip's chain (`RowKind::Marker`, `RowKind::Pose`): its
+    /// residuals from row `r` of `out` and its Jacobian rows in `jac`; returns the residuals
+    /// written (3, or 6 for a pose; 0 for a row of another kind).
+    fn eval_tip_row(
+        &self,
+        ctx: &RowContext<'_>,
+        row_idx: usize,
+        scratch: &mut RowScratch,
+        r: usize,
+        mut out: Option<&mut [f64]>,
+        mut jac: Option<&mut [&mut [f64]]>,
+    ) -> usize {
+        let RowContext {
+            x,
+            frozen,
+            n_kin,
+            n_angle,
+            n_comp,
+            n_terms,
+            n_tilts,
+            angles_from_params,
+            ..
+        } = *ctx;
+        let RowScratch {
+            ws,
+            buf,
+            q_buf,
+            x_kin,
+            x_buf,
+            ..
+        } = scratch;
+        let row = &self.obs.rows[row_idx];
+        let start = r;
+        let mut r = r;
+        let (RowKind::Marker { tip, position_m }
+        | RowKind::Pose {
+            tip, position_m, ..
+        }) = &row.kind
+        else {
+            return 0;
+        };
+        let q_eff = self.effective_q(row_idx, x, q_buf);
+        let chain = &self.tips[*tip];
+        if x_kin.is_empty() {
+            x_kin.extend((0..n_kin).map(|i| x[i]));
+        }
+        let x_eff = self.effective_x(row_idx, x, x_kin, x_buf);
+        // A marker without transversal tilts needs only the tip's point: the tip's chain
+        // frozen at x (the constant factors between joints folded once), 3 Jacobian rows
+        // per parameter. A pose, or tilts that change the deviations row by row: the
+        // chain itself, 6 rows per parameter (position first).
+        let frozen_tip = match row.kind {
+            RowKind::Marker { .. } if n_tilts == 0 => frozen.tips.get(*tip),
+            _ => None,
+        };
+        let (pose, stride) = match (frozen_tip, jac.is_some()) {
+            (Some(f), true) => {
+                buf.resize(3 * n_kin, 0.0);
+                let ws = ws.get_or_insert_with(|| FkWorkspace::new(chain));
+                let p = f.point_and_jacobian(q_eff, buf, ws);
+                (Isometry3::translation(p.x, p.y, p.z), 3)
+            }
+            (Some(f), false) => {
+                let p = f.end_point(q_eff);
+                (Isometry3::translation(p.x, p.y, p.z), 3)
+            }
+            (None, true) => {
+                buf.resize(6 * n_kin, 0.0);
+                let ws = ws.get_or_insert_with(|| FkWorkspace::new(chain));
+                (chain.pose_and_jacobian_in(x_eff, q_eff, ws, buf), 6)
+            }
+            (None, false) => (chain.end_pose(x_eff, q_eff), 6),
+        };
+        let jq = (n_angle > 0 && jac.is_some() && !angles_from_params)
+            .then(|| chain.geometric_jacobian(x_eff, q_eff));
+        let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
+        let tilts = &self.tilt_basis[row_idx * n_tilts..(row_idx + 1) * n_tilts];
+        // Row k of the pose Jacobian (0–2 position, 3–5 rotation vector) at column col.
+        let dpose = |k: usize, col: usize| -> f64 {
+            self.column(buf, stride, k, col, jq.as_ref(), basis, tilts)
+        };
+        let s = self.weights.sigma_position_m;
+        let p = pose.translation.vector;
+        if let Some(o) = out.as_mut() {
+            for k in 0..3 {
+                o[r + k] = (p[k] - position_m[k]) / s;
+            }
+        }
+        if let Some(j) = jac.as_mut() {
+            self.position_columns(j, r, s, buf, stride, n_comp, &dpose);
+        }
+        r += 3;
+        if let RowKind::Pose { rotation, .. } = &row.kind {
+            let s = self.weights.sigma_orientation_rad;
+            let [w, qx, qy, qz] = *rotation;
+            let measured = UnitQuaternion::from_quaternion(Quaternion::new(w, qx, qy, qz));
+            let phi = (measured.inverse() * pose.rotation).scaled_axis();
+            // dφ = J_r⁻¹(φ)·Rᵀ·ω for a base-frame rotation ω of the tip.
+            let to_phi = right_jacobian_inverse(&phi)
+                * pose.rotation.inverse().to_rotation_matrix().matrix();
+            if let Some(o) = out.as_mut() {
+                for k in 0..3 {
+                    o[r + k] = phi[k] / s;
                 }
-                let x_eff = self.effective_x(row_idx, x, &x_kin, &mut x_buf);
-                // A marker without transversal tilts needs only the tip's point: the tip's chain
-                // frozen at x (the constant factors between joints folded once), 3 Jacobian rows
-                // per parameter. A pose, or tilts that change the deviations row by row: the
-                // chain itself, 6 rows per parameter (position first).
-                let frozen_tip = match row.kind {
-                    RowKind::Marker { .. } if n_tilts == 0 => frozen.tips.get(*tip),
-                    _ => None,
-                };
-                let (pose, stride) = match (frozen_tip, jac.is_some()) {
-                    (Some(f), true) => {
-                        buf.resize(3 * n_kin, 0.0);
-                        let ws = ws.get_or_insert_with(|| FkWorkspace::new(chain));
-                        let p = f.point_and_jacobian(q_eff, &mut buf, ws);
-                        (Isometry3::translation(p.x, p.y, p.z), 3)
+            }
+            if let Some(j) = jac.as_mut() {
+                for (col, c) in j.iter_mut().enumerate().take(n_kin + n_comp) {
+                    let omega = Vector3::new(dpose(3, col), dpose(4, col), dpose(5, col));
+                    let d = to_phi * omega;
+                    for k in 0..3 {
+                        c[r + k] = d[k] / s;
                     }
-                    (Some(f), false) => {
-                        let p = f.end_point(q_eff);
-                        (Isometry3::translation(p.x, p.y, p.z), 3)
+                }
+            }
+            r += 3;
+        }
+        r - start
+    }
+
+    /// One row on the first tip's chain (a distance with angle or transversal terms, a
+    /// position, a point): its residuals from row `r` of `out` and its Jacobian rows in `jac`;
+    /// returns the residuals written (1 or 3; 0 for a marker or pose, evaluated on its tip's
+    /// chain by [`Self::eval_tip_row`]).
+    fn eval_chain_row(
+        &self,
+        ctx: &RowContext<'_>,
+        row_idx: usize,
+        scratch: &mut RowScratch,
+        r: usize,
+        mut out: Option<&mut [f64]>,
+        mut jac: Option<&mut [&mut [f64]]>,
+    ) -> usize {
+        let RowContext {
+            x,
+            frozen,
+            n_kin,
+            n_angle,
+            n_comp,
+            n_terms,
+            n_tilts,
+            angles_from_params,
+            off,
+        } = *ctx;
+        let RowScratch {
+            ws,
+            buf,
+            q_buf,
+            x_kin,
+            x_buf,
+            ..
+        } = scratch;
+        let row = &self.obs.rows[row_idx];
+        let start = r;
+        let mut r = r;
+        let q_eff = self.effective_q(row_idx, x, q_buf);
+        let p = if n_tilts > 0 {
+            // Transversal tilts change the deviations row by row: the chain itself.
+            if x_kin.is_empty() {
+                x_kin.extend((0..n_kin).map(|i| x[i]));
+            }
+            let x_eff = self.effective_x(row_idx, x, x_kin, x_buf);
+            if jac.is_some() {
+                buf.resize(3 * n_kin, 0.0);
+                let ws = ws.get_or_insert_with(|| FkWorkspace::new(&self.chain));
+                self.chain.point_and_jacobian_in(x_eff, q_eff, ws, buf)
+            } else {
+                self.chain.end_point(x_eff, q_eff)
+            }
+        } else if jac.is_some() {
+            buf.resize(3 * n_kin, 0.0);
+            let ws = ws.get_or_insert_with(|| FkWorkspace::new(&self.chain));
+            frozen.chain.point_and_jacobian(q_eff, buf, ws)
+        } else {
+            frozen.chain.end_point(q_eff)
+        };
+        // ∂p/∂k_j = (∂p/∂q_j)·τ̂_j (and ∂p/∂a_jh = (∂p/∂q_j)·sin(h·q_j), …), from the
+        // geometric Jacobian's linear rows.
+        let jq = if n_angle > 0 && jac.is_some() && !angles_from_params {
+            if x_kin.is_empty() {
+                x_kin.extend((0..n_kin).map(|i| x[i]));
+            }
+            let x_eff = self.effective_x(row_idx, x, x_kin, x_buf);
+            Some(self.chain.geometric_jacobian(x_eff, q_eff))
+        } else {
+            None
+        };
+        let tilts = &self.tilt_basis[row_idx * n_tilts..(row_idx + 1) * n_tilts];
+        let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
+        let dp = |k: usize, col: usize| -> f64 {
+            self.column(buf, 3, k, col, jq.as_ref(), basis, tilts)
+        };
+        match &row.kind {
+            RowKind::Distance { distance_m } => {
+                let s = self.weights.sigma_distance_m;
+                let (norm, u) = length_and_direction(&p.coords);
+                if let Some(o) = out.as_mut() {
+                    o[r] = (norm - distance_m) / s;
+                }
+                if let Some(j) = jac.as_mut() {
+                    for (col, c) in j.iter_mut().enumerate().take(n_kin + n_comp) {
+                        c[r] = (0..3).map(|k| u[k] * dp(k, col)).sum::<f64>() / s;
                     }
-                    (None, true) => {
-                        buf.resize(6 * n_kin, 0.0);
-                        let ws = ws.get_or_insert_with(|| FkWorkspace::new(chain));
-                        (chain.pose_and_jacobian_in(x_eff, q_eff, ws, &mut buf), 6)
-                    }
-                    (None, false) => (chain.end_pose(x_eff, q_eff), 6),
-                };
-                let jq = (n_angle > 0 && jac.is_some() && !angles_from_params)
-                    .then(|| chain.geometric_jacobian(x_eff, q_eff));
-                let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
-                let tilts = &self.tilt_basis[row_idx * n_tilts..(row_idx + 1) * n_tilts];
-                // Row k of the pose Jacobian (0–2 position, 3–5 rotation vector) at column col.
-                let dpose = |k: usize, col: usize| -> f64 {
-                    self.column(&buf, stride, k, col, jq.as_ref(), basis, tilts)
-                };
+                }
+                r += 1;
+            }
+            RowKind::Position { position_m } => {
                 let s = self.weights.sigma_position_m;
-                let p = pose.translation.vector;
                 if let Some(o) = out.as_mut() {
                     for k in 0..3 {
                         o[r + k] = (p[k] - position_m[k]) / s;
                     }
                 }
                 if let Some(j) = jac.as_mut() {
-                    self.position_columns(j, r, s, &buf, stride, n_comp, &dpose);
+                    self.position_columns(j, r, s, buf, 3, n_comp, &dp);
                 }
                 r += 3;
-                if let RowKind::Pose { rotation, .. } = &row.kind {
-                    let s = self.weights.sigma_orientation_rad;
-                    let [w, qx, qy, qz] = *rotation;
-                    let measured = UnitQuaternion::from_quaternion(Quaternion::new(w, qx, qy, qz));
-                    let phi = (measured.inverse() * pose.rotation).scaled_axis();
-                    // dφ = J_r⁻¹(φ)·Rᵀ·ω for a base-frame rotation ω of the tip.
-                    let to_phi = right_jacobian_inverse(&phi)
-                        * pose.rotation.inverse().to_rotation_matrix().matrix();
-                    if let Some(o) = out.as_mut() {
-                        for k in 0..3 {
-                            o[r + k] = phi[k] / s;
-                        }
-                    }
-                    if let Some(j) = jac.as_mut() {
-                        for (col, c) in j.iter_mut().enumerate().take(n_kin + n_comp) {
-                            let omega = Vector3::new(dpose(3, col), dpose(4, col), dpose(5, col));
-                            let d = to_phi * omega;
-                            for k in 0..3 {
-                                c[r + k] = d[k] / s;
-                            }
-                        }
-                    }
-                    r += 3;
-                }
-                continue;
             }
-            let q_eff = self.effective_q(row_idx, x, &mut q_buf);
-            let p = if n_tilts > 0 {
-                // Transversal tilts change the deviations row by row: the chain itself.
-                if x_kin.is_empty() {
-                    x_kin.extend((0..n_kin).map(|i| x[i]));
+            RowKind::Point { point } => {
+                let s = self.weights.sigma_point_m;
+                if let Some(o) = out.as_mut() {
+                    for k in 0..3 {
+                        o[r + k] = (p[k] - x[off + 3 * point + k]) / s;
+                    }
                 }
-                let x_eff = self.effective_x(row_idx, x, &x_kin, &mut x_buf);
-                if jac.is_some() {
-                    buf.resize(3 * n_kin, 0.0);
-                    let ws = ws.get_or_insert_with(|| FkWorkspace::new(&self.chain));
-                    self.chain.point_and_jacobian_in(x_eff, q_eff, ws, &mut buf)
-                } else {
-                    self.chain.end_point(x_eff, q_eff)
+                if let Some(j) = jac.as_mut() {
+                    self.position_columns(j, r, s, buf, 3, n_comp, &dp);
+                    for k in 0..3 {
+                        j[off + 3 * point + k][r + k] = -1.0 / s;
+                    }
                 }
-            } else if jac.is_some() {
-                buf.resize(3 * n_kin, 0.0);
-                let ws = ws.get_or_insert_with(|| FkWorkspace::new(&self.chain));
-                frozen.chain.point_and_jacobian(q_eff, &mut buf, ws)
-            } else {
-                frozen.chain.end_point(q_eff)
-            };
-            // ∂p/∂k_j = (∂p/∂q_j)·τ̂_j (and ∂p/∂a_jh = (∂p/∂q_j)·sin(h·q_j), …), from the
-            // geometric Jacobian's linear rows.
-            let jq = if n_angle > 0 && jac.is_some() && !angles_from_params {
-                let x_kin: Vec<f64> = (0..n_kin).map(|i| x[i]).collect();
-                let x_eff = self.effective_x(row_idx, x, &x_kin, &mut x_buf);
-                Some(self.chain.geometric_jacobian(x_eff, q_eff))
-            } else {
-                None
-            };
-            let tilts = &self.tilt_basis[row_idx * n_tilts..(row_idx + 1) * n_tilts];
-            let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
-            let dp = |k: usize, col: usize| -> f64 {
-                self.column(&buf, 3, k, col, jq.as_ref(), basis, tilts)
-            };
-            match &row.kind {
-                RowKind::Distance { distance_m } => {
-                    let s = self.weights.sigma_distance_m;
-                    let (norm, u) = length_and_direction(&p.coords);
-                    if let Some(o) = out.as_mut() {
-                        o[r] = (norm - distance_m) / s;
-                    }
-                    if let Some(j) = jac.as_mut() {
-                        for (col, c) in j.iter_mut().enumerate().take(n_kin + n_comp) {
-                            c[r] = (0..3).map(|k| u[k] * dp(k, col)).sum::<f64>() / s;
-                        }
-                    }
-                    r += 1;
-                }
-                RowKind::Position { position_m } => {
-                    let s = self.weights.sigma_position_m;
-                    if let Some(o) = out.as_mut() {
-                        for k in 0..3 {
-                            o[r + k] = (p[k] - position_m[k]) / s;
-                        }
-                    }
-                    if let Some(j) = jac.as_mut() {
-                        self.position_columns(j, r, s, &buf, 3, n_comp, &dp);
-                    }
-                    r += 3;
-                }
-                RowKind::Point { point } => {
-                    let s = self.weights.sigma_point_m;
-                    if let Some(o) = out.as_mut() {
-                        for k in 0..3 {
-                            o[r + k] = (p[k] - x[off + 3 * point + k]) / s;
-                        }
-                    }
-                    if let Some(j) = jac.as_mut() {
-                        self.position_columns(j, r, s, &buf, 3, n_comp, &dp);
-                        for k in 0..3 {
-                            j[off + 3 * point + k][r + k] = -1.0 / s;
-                        }
-                    }
-                    r += 3;
-                }
-                // Evaluated on their tip's chain above.
-                RowKind::Marker { .. } | RowKind::Pose { .. } => {}
+                r += 3;
             }
+            // Evaluated on their tip's chain above.
+            RowKind::Marker { .. } | RowKind::Pose { .. } => {}
         }
+        r - start
+    }
+
+    /// The point-distance rows `point_distances` from row `r` of `out`: `|p_a − p_b|` of the
+    /// points' parameters (from offset [`Self::points_offset`] of `x`) against the measured
+    /// distance, divided by σ, with their Jacobian rows in `jac`.
+    fn eval_point_distances(
+        &self,
+        x: ColRef<'_, f64>,
+        point_distances: &[PointDistance],
+        mut r: usize,
+        mut out: Option<&mut [f64]>,
+        mut jac: Option<&mut [&mut [f64]]>,
+    ) {
+        let off = self.points_offset();
         let s = self.weights.sigma_point_distance_m;
         for pd in point_distances {
             let d = Vector3::from_fn(|k, _| x[off + 3 * pd.a + k] - x[off + 3 * pd.b + k]);
