@@ -1185,6 +1185,50 @@ fn candidate_observations(
     )
 }
 
+/// Rows `start..start + nrows` of `jac` over the planned columns `kept` (indices of `free`,
+/// the calibration's free parameters as columns of `jac`).
+fn block_over(
+    jac: &Mat<f64>,
+    free: &[usize],
+    kept: &[usize],
+    start: usize,
+    nrows: usize,
+) -> Mat<f64> {
+    Mat::from_fn(nrows, kept.len(), |i, k| jac[(start + i, free[kept[k]])])
+}
+
+/// W over the workspace's marker positions (rows from `ws_start` of the planning Jacobian),
+/// m per parameter unit, base frame, over the planned columns (`free`, `kept` as in
+/// [`block_over`]): the instrument frame's columns, which move no marker in the base frame,
+/// left out.
+fn workspace_weight(
+    planning: &PlanningProblem<'_>,
+    (free, kept): (&[usize], &[usize]),
+    free_layout: &hapcal_identify::ParamLayout,
+    ws_start: usize,
+    n_workspace: usize,
+) -> Mat<f64> {
+    let n = kept.len();
+    let n_predicted = planning.n_markers.max(1);
+    let sigma_position_m = planning.out.weights.sigma_position_m;
+    let instrument: Vec<bool> = (kept.iter())
+        .map(|&k| free_layout.name(k).starts_with("instrument."))
+        .collect();
+    let mut weight = Mat::<f64>::zeros(n, n);
+    for i in 0..n_workspace * n_predicted {
+        let g = Mat::from_fn(3, n, |a, k| {
+            if instrument[k] {
+                0.0
+            } else {
+                sigma_position_m * planning.jac[(ws_start + 3 * i + a, free[kept[k]])]
+            }
+        });
+        weight += g.transpose() * &g;
+    }
+    weight /= (n_workspace * n_predicted) as f64;
+    weight
+}
+
 /// What [`plan_after`]'s design reads of the planning problem: the columns it plans for (the
 /// calibration's free parameters the measured rows and candidates determine), the measured
 /// rows' information as the prior, each candidate's block and the workspace's weight.
@@ -1271,7 +1315,29 @@ impl PlanningInformation {
             .filter(|name| !crate::report::is_frame_param(name))
             .map(str::to_owned)
             .collect();
-        let mut info = Self {
+        let block_of = |start: usize, nrows: usize| block_over(jac, &free, &kept, start, nrows);
+        let mut prior = block_of(0, n_measured_residuals);
+        prior = prior.transpose() * &prior;
+        for (k, &j) in kept.iter().enumerate() {
+            let p = rank.prior_scale(free_layout.spec(j).unit);
+            prior[(k, k)] += (s / p).powi(2);
+        }
+        let blocks = (0..planning.candidates.len())
+            .map(|c| {
+                block_of(
+                    n_measured_residuals + c * planning.rows_per_pose,
+                    planning.rows_per_pose,
+                )
+            })
+            .collect();
+        let weight = workspace_weight(
+            planning,
+            (&free, &kept),
+            free_layout,
+            n_measured_residuals + n_candidate_residuals,
+            n_workspace,
+        );
+        Ok(Self {
             free,
             kept,
             columns,
@@ -1280,71 +1346,10 @@ impl PlanningInformation {
             sigma_m,
             sigma_source,
             s,
-            prior: Mat::zeros(0, 0),
-            blocks: Vec::new(),
-            weight: Mat::zeros(0, 0),
-        };
-        let mut prior = info.block_of(jac, 0, n_measured_residuals);
-        prior = prior.transpose() * &prior;
-        for (k, &j) in info.kept.iter().enumerate() {
-            let p = rank.prior_scale(free_layout.spec(j).unit);
-            prior[(k, k)] += (s / p).powi(2);
-        }
-        info.prior = prior;
-        info.blocks = (0..planning.candidates.len())
-            .map(|c| {
-                info.block_of(
-                    jac,
-                    n_measured_residuals + c * planning.rows_per_pose,
-                    planning.rows_per_pose,
-                )
-            })
-            .collect();
-        info.weight = info.workspace_weight(
-            planning,
-            free_layout,
-            n_measured_residuals + n_candidate_residuals,
-            n_workspace,
-        );
-        Ok(info)
-    }
-
-    /// Rows `start..start + nrows` of `jac` over the planned columns.
-    fn block_of(&self, jac: &Mat<f64>, start: usize, nrows: usize) -> Mat<f64> {
-        Mat::from_fn(nrows, self.kept.len(), |i, k| {
-            jac[(start + i, self.free[self.kept[k]])]
+            prior,
+            blocks,
+            weight,
         })
-    }
-
-    /// W over the workspace's marker positions (rows from `ws_start` of the planning
-    /// Jacobian), m per parameter unit, base frame: the instrument frame's columns, which move
-    /// no marker in the base frame, left out.
-    fn workspace_weight(
-        &self,
-        planning: &PlanningProblem<'_>,
-        free_layout: &hapcal_identify::ParamLayout,
-        ws_start: usize,
-        n_workspace: usize,
-    ) -> Mat<f64> {
-        let n = self.kept.len();
-        let n_predicted = planning.n_markers.max(1);
-        let sigma_position_m = planning.out.weights.sigma_position_m;
-        let instrument: Vec<bool> = (self.kept.iter())
-            .map(|&k| free_layout.name(k).starts_with("instrument."))
-            .collect();
-        let mut weight = Mat::<f64>::zeros(n, n);
-        for i in 0..n_workspace * n_predicted {
-            let g = Mat::from_fn(3, n, |a, k| {
-                if instrument[k] {
-                    0.0
-                } else {
-                    sigma_position_m * planning.jac[(ws_start + 3 * i + a, self.free[self.kept[k]])]
-                }
-            });
-            weight += g.transpose() * &g;
-        }
-        weight /= (n_workspace * n_predicted) as f64;
-        weight
     }
 
     /// The block of one configuration `q` off the candidates (coordinate exchange), at the
@@ -1364,7 +1369,7 @@ impl PlanningInformation {
         if p.jacobian(x.as_ref(), j.as_mut()).is_err() {
             return Mat::zeros(planning.rows_per_pose, n);
         }
-        self.block_of(&j, 0, p.n_residuals())
+        block_over(&j, &self.free, &self.kept, 0, p.n_residuals())
     }
 
     /// RMS prediction σ over the workspace, m, with the measured rows and `added` blocks.
