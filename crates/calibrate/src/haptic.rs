@@ -1379,10 +1379,11 @@ pub fn calibrate_logs(
         &mut warnings,
     )?;
     let step1 = Step1::of(training.has_ext, step1.as_ref());
-    let mut fit = match chosen {
+    let fit = match chosen {
         ModelName::Compliance => fit_compliance(&haptic, rows, step1, &mut warnings)?,
-        ModelName::Geometric => fit_geometric(&haptic, rows, training.has_ext, &mut warnings)?,
-        _ if training.has_ext => fit_transmissions(plan, &haptic, rows, step1)?,
+        m if m != ModelName::Geometric && training.has_ext => {
+            fit_transmissions(plan, &haptic, rows, step1)?
+        }
         _ => fit_geometric(&haptic, rows, training.has_ext, &mut warnings)?,
     };
     check_distinct_configurations(rows, fit.transmissions.as_ref(), &fit.kin)?;
@@ -1400,7 +1401,6 @@ pub fn calibrate_logs(
     for warning in worse_logs(&placements) {
         warnings.insert(0, warning);
     }
-    let parameters = std::mem::take(&mut fit.parameters);
     let choice = LogsChoice {
         cross_validation,
         cross_validated_rows,
@@ -1411,7 +1411,7 @@ pub fn calibrate_logs(
         downweighted,
         warnings,
     };
-    let report = logs_report(plan, &haptic, &fit, parameters, choice, findings, start);
+    let report = logs_report(plan, &haptic, &fit, choice, findings, start);
     let kin_model = hapcal_problems::CalibratedModel {
         x_kin,
         ..hapcal_problems::CalibratedModel::nominal(haptic.chain.clone())
@@ -1833,12 +1833,11 @@ struct LogsFindings {
 
 /// The report stage of [`calibrate_logs`]: pruned and correlated parameters, the cable
 /// residual against the encoder's noise, what no real device has (an unconverged fit,
-/// compliances below zero beyond the bound). `parameters` are the fit's, moved out of it.
+/// compliances below zero beyond the bound).
 fn logs_report(
     plan: &crate::inputs::Plan,
     haptic: &HapticDevice,
     fit: &LogFit,
-    parameters: Vec<ParamReport>,
     choice: LogsChoice,
     findings: LogsFindings,
     start: std::time::Instant,
@@ -1894,7 +1893,7 @@ fn logs_report(
         frames: Vec::new(),
         sigma_m,
         sigma_source: kin.sigma_source.name(),
-        parameters,
+        parameters: fit.parameters.clone(),
         pruned,
         correlated,
         observability: None,
