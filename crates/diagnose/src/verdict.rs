@@ -89,6 +89,16 @@ impl PartialEq<&str> for Verdict {
     }
 }
 
+/// Why the rounds named no further effect after `named` of at most `max_effects`: the cap, or
+/// no candidate of the library passing (the haptic and the arm diagnosis word it alike).
+pub(crate) fn stop_reason(named: usize, max_effects: usize) -> String {
+    if named >= max_effects {
+        format!("the search stops at {max_effects} effects (max_effects)")
+    } else {
+        "no further candidate of the library passes".to_owned()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

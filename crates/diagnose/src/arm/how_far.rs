@@ -94,14 +94,7 @@ pub(super) fn how_far(
         && p_after[named - 1] < cfg.alpha
     {
         let final_mse = steps[named - 1].heldout_rms_after_m.powi(2);
-        let why = if named >= cfg.max_effects {
-            format!(
-                "the search stops at {} effects (max_effects)",
-                cfg.max_effects
-            )
-        } else {
-            "no further candidate of the library passes".to_owned()
-        };
+        let why = crate::verdict::stop_reason(named, cfg.max_effects);
         notes.push(format!(
             "after {verdict} the cross-validated RMS is {:.3} mm, {:.1}× the floor's {:.3} mm, \
              a significant residual: another effect is at work that the verdict does not name \

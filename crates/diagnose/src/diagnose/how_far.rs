@@ -99,14 +99,7 @@ fn residual_note(
 ) -> String {
     let final_mse = run.steps[named - 1].heldout_rms_after_m.powi(2);
     let floor0 = b.gap.floor0;
-    let why = if named >= cfg.max_effects {
-        format!(
-            "the search stops at {} effects (max_effects)",
-            cfg.max_effects
-        )
-    } else {
-        "no further candidate of the library passes".to_owned()
-    };
+    let why = crate::verdict::stop_reason(named, cfg.max_effects);
     format!(
         "after {verdict} the cross-validated RMS is {:.1} µm, {:.1}× the floor's {:.1} µm, a \
          significant residual: another effect is at work that the verdict does not name \
