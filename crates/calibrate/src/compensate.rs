@@ -3,10 +3,14 @@
 //! and one compensated joint command per target ([`hapcal_runtime::compensate`]): the command
 //! that brings the deflected tip onto the target. What `hapcal compensate` writes.
 
+use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::{Context, Result, anyhow, bail};
-use hapcal_runtime::{Compensation, CompensationConfig, Pose, Robot, Target, compensate};
+use hapcal_runtime::{Compensation, Pose, Robot, Target, compensate};
+
+/// Tolerances and steps of each compensation ([`hapcal_runtime::compensate`]).
+pub use hapcal_runtime::CompensationConfig;
 
 /// What to compensate: the calibrated robot, its tips, the targets file and the frame.
 #[derive(Clone, Debug)]
@@ -193,4 +197,70 @@ pub fn compensate_targets(input: &CompensateInput<'_>) -> Result<Compensated> {
         rows,
         unbound_note,
     })
+}
+
+/// What `hapcal compensate` reports of a [`Compensated`]: the CSV of the reached targets, the
+/// targets missed and the commands outside the calibration's region, each named by file:line.
+#[derive(Clone, Debug)]
+pub struct CompensationSummary {
+    /// Per reached target its line in the targets file, the joint commands (rad, m for a
+    /// prismatic joint) and the residuals (`position_error_m`, `orientation_error_rad`); a
+    /// header of the joint names.
+    pub csv: String,
+    /// The largest position residual of a reached target, m.
+    pub worst_position_m: f64,
+    /// The largest orientation residual of a reached target, rad.
+    pub worst_orientation_rad: f64,
+    /// Each target not reached, in words: file:line, the residuals (mm, mrad), the steps.
+    pub missed: Vec<String>,
+    /// Each command outside the calibration's region, in words: file:line, the joint and how
+    /// far past its training range (rad, m for a prismatic joint).
+    pub outside: Vec<String>,
+}
+
+impl Compensated {
+    /// The summary of these compensations of the targets file `targets`.
+    pub fn summary(&self, targets: &Path) -> CompensationSummary {
+        let robot = &self.robot;
+        let mut s = CompensationSummary {
+            csv: format!(
+                "line{},position_error_m,orientation_error_rad\n",
+                (robot.joint_names().iter()).fold(String::new(), |h, n| h + "," + n)
+            ),
+            worst_position_m: 0.0,
+            worst_orientation_rad: 0.0,
+            missed: Vec::new(),
+            outside: Vec::new(),
+        };
+        for row in &self.rows {
+            let c = &row.result;
+            if let Some((j, past)) = row.outside_region {
+                let (joint, prismatic) = (&robot.joint_names()[j], robot.is_prismatic(j));
+                let file = targets.display().to_string();
+                (s.outside).push(crate::predict::outside_region_words(
+                    &file, row.line, joint, past, prismatic,
+                ));
+            }
+            if c.reached {
+                let (m, rad) = (c.position_error_m, c.orientation_error_rad);
+                let _ = write!(s.csv, "{}", row.line);
+                for q in &row.command {
+                    let _ = write!(s.csv, ",{q:?}");
+                }
+                let _ = writeln!(s.csv, ",{m:?},{rad:?}");
+                s.worst_position_m = s.worst_position_m.max(m);
+                s.worst_orientation_rad = s.worst_orientation_rad.max(rad);
+            } else {
+                s.missed.push(format!(
+                    "{}:{}: not reached: {:.4} mm and {:.4} mrad from the target after {} steps",
+                    targets.display(),
+                    row.line,
+                    c.position_error_m * 1e3,
+                    c.orientation_error_rad * 1e3,
+                    c.iterations
+                ));
+            }
+        }
+        s
+    }
 }

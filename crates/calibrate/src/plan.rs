@@ -1388,6 +1388,58 @@ impl PlanningInformation {
     }
 }
 
+/// [`plan_after`] on files: the rows already measured in the measurement files `files`
+/// (marker positions, poses or anchor distances, as calibrate reads them) on the robot of
+/// `device` (read from `device_path`, a URDF with the tip link `tip`, or a D-H device file),
+/// and the joint configurations of the CSV `workspace`, in `units`.
+///
+/// # Errors
+/// A haptic device, no `workspace`, a file that is not a measurement file, unreadable files (file, line,
+/// column), and as [`plan_after`].
+pub fn plan_after_files(
+    device_path: &std::path::Path,
+    tip: &str,
+    device: &Device,
+    files: &[std::path::PathBuf],
+    workspace: Option<&std::path::Path>,
+    units: &hapcal_io::Units,
+    cfg: &AfterConfig,
+) -> Result<AfterPlan> {
+    use crate::data;
+    if device.has_transmissions() {
+        bail!(
+            "{}: --data plans poses to add to measurement files of a robot (marker positions, \
+             poses, anchor distances); a haptic device's poses are planned without --data",
+            device_path.display()
+        );
+    }
+    let Some(workspace) = workspace else {
+        bail!(
+            "--workspace: give the joint configurations where the calibration will be used (a \
+             CSV with the data's joint columns); the poses are planned to predict there"
+        );
+    };
+    for path in files {
+        data::check_csv_header(path)?;
+        if !data::is_marker_file(path, device.cable_encoder.is_none()) {
+            bail!(
+                "{}: not a measurement file: --data takes marker positions (x,y,z), poses \
+                 (qw,qx,qy,qz) or anchor distances (distance_m) with the joint columns",
+                path.display()
+            );
+        }
+    }
+    let is_urdf = (device_path.extension()).is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    let robot = if is_urdf {
+        data::robot_from_urdf(device_path, &[tip.to_owned()])?
+    } else {
+        data::robot_from_device(device)?
+    };
+    let measured = data::load_tables(files, &robot, units)?;
+    let configurations = data::workspace_configurations(workspace, &robot, units)?;
+    plan_after(&robot, &measured, &configurations, cfg)
+}
+
 /// Text summary of [`plan_after`]: the model, the columns, the noise σ and the workspace's
 /// RMS prediction σ before and after (and after as many random poses).
 pub fn after_summary(plan: &AfterPlan) -> String {

@@ -5,6 +5,7 @@
 //! handle's position from the joint readings of a log ([`hapcal_runtime::Model`]) and, with
 //! its cable distances, the distance errors. What `hapcal predict` prints and writes.
 
+use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
@@ -435,7 +436,7 @@ pub fn predict_haptic(
     data: &Path,
     units: &Units,
     poses: bool,
-) -> Result<(Prediction, Model)> {
+) -> Result<(Prediction, SummaryModel)> {
     let model = Model::load(device_path)
         .with_context(|| format!("loading the calibrated device {}", device_path.display()))?;
     let (log, warnings) = read_haptic_rows(data, device, units)?;
@@ -484,13 +485,280 @@ pub fn predict_haptic(
         warnings,
         rows,
     };
-    Ok((prediction, model))
+    let view = SummaryModel {
+        has_region: model.has_region(),
+        prismatic: vec![false; joint_names.len()],
+        joint_names,
+    };
+    Ok((prediction, view))
 }
 
-/// Whether the data's measured columns are compared without an identified instrument frame
-/// (the calibration identified none: they are compared in the robot's root link frame).
-pub fn errors_without_instrument(predictor: &Predictor, prediction: &Prediction) -> bool {
-    prediction.errors.is_some() && predictor.robot().frame("instrument").is_none()
+/// A prediction with what `hapcal predict` says of it.
+#[derive(Clone, Debug)]
+pub struct Predicted {
+    /// The prediction.
+    pub prediction: Prediction,
+    /// Its summary in words ([`summary`]).
+    pub summary: String,
+    /// Notes and warnings beside the reader's (an unbound record, errors compared without an
+    /// instrument frame), each a whole line starting `hapcal:`.
+    pub notes: Vec<String>,
+}
+
+/// Rows × robots evaluated above which [`predict`] reports its progress.
+const LONG_PREDICTION: usize = 200_000;
+
+/// Predicts the joint readings of the file `data` (in `units`) with the calibrated `device`:
+/// a haptic device's handle ([`predict_haptic`]), or a URDF's tips `tips` or a device file's
+/// tip ([`prepare`], [`predict_robot`]), in the calibration's instrument frame with
+/// `instrument_frame`, with the orientations with `poses`. `progress` is called with the rows
+/// done and the rows in all after each row, when the work is long (more than 200,000 rows ×
+/// robots evaluated), else never.
+///
+/// # Errors
+/// Tips or `instrument_frame` given for a haptic device; as [`prepare`], [`predict_robot`] and
+/// [`predict_haptic`].
+pub fn predict(
+    device: &Path,
+    tips: &[String],
+    data: &Path,
+    units: &Units,
+    instrument_frame: bool,
+    poses: bool,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Predicted> {
+    if let Some(haptic) = haptic_device(device)? {
+        if !tips.is_empty() {
+            bail!(
+                "--tip {}: {} is a haptic device, whose prediction is its handle; predict it \
+                 without --tip",
+                tips.join(" --tip "),
+                device.display()
+            );
+        }
+        if instrument_frame {
+            bail!(
+                "--instrument-frame: {} is a haptic device, calibrated from cable distances \
+                 measured in its base frame: it has no instrument frame",
+                device.display()
+            );
+        }
+        let (prediction, view) = predict_haptic(device, &haptic, data, units, poses)?;
+        return Ok(Predicted {
+            summary: summary(&prediction, &view),
+            prediction,
+            notes: Vec::new(),
+        });
+    }
+    let (predictor, table) = prepare(device, tips, data, units, instrument_frame)?;
+    let rows = table.rows.len();
+    let long = rows * (2 * predictor.n_values() + 1) > LONG_PREDICTION;
+    let mut each_row = |done: usize| {
+        if long {
+            progress(done, rows);
+        }
+    };
+    let prediction = predict_robot(&predictor, &table, data, poses, &mut each_row)?;
+    let mut notes: Vec<String> = unbound_record_note(device, predictor.robot())
+        .into_iter()
+        .collect();
+    // Without an identified instrument frame the measured columns are compared in the root frame.
+    let no_instrument = predictor.robot().frame("instrument").is_none();
+    if !prediction.rows.is_empty() && prediction.errors.is_some() && no_instrument {
+        notes.push(
+            "hapcal: warning: the calibration identified no instrument frame: the measured \
+             columns are compared in the robot's root link frame"
+                .to_owned(),
+        );
+    }
+    Ok(Predicted {
+        summary: summary(&prediction, &SummaryModel::of_robot(predictor.robot())),
+        prediction,
+        notes,
+    })
+}
+
+/// The CSV of `prediction`: `line`, per tip `x, y, z` (numbered `x1, y1, z1, …` for several
+/// tips), with `poses` also `qw, qx, qy, qz`, then `sigma_m` (with `poses` also `sigma_rad`),
+/// then `outside_region` (0 or 1), `region_joint` and `region_past`; m and rad.
+pub fn csv(prediction: &Prediction, poses: bool) -> String {
+    let numbered = prediction.tips.len() > 1;
+    let mut out = String::from("line");
+    for k in 1..=prediction.tips.len() {
+        let n = if numbered {
+            k.to_string()
+        } else {
+            String::new()
+        };
+        for c in ["x", "y", "z"] {
+            let _ = write!(out, ",{c}{n}");
+        }
+        if poses {
+            for c in ["qw", "qx", "qy", "qz"] {
+                let _ = write!(out, ",{c}{n}");
+            }
+        }
+        let _ = write!(out, ",sigma{n}_m");
+        if poses {
+            let _ = write!(out, ",sigma{n}_rad");
+        }
+    }
+    out.push_str(",outside_region,region_joint,region_past\n");
+    let number = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:?}"));
+    for row in &prediction.rows {
+        let _ = write!(out, "{}", row.line);
+        for t in &row.tips {
+            for v in t.position_m {
+                let _ = write!(out, ",{v:?}");
+            }
+            if let Some(q) = t.quaternion_wxyz {
+                for v in q {
+                    let _ = write!(out, ",{v:?}");
+                }
+            }
+            let _ = write!(out, ",{}", number(t.sigma_m));
+            if poses {
+                let _ = write!(out, ",{}", number(t.sigma_rad));
+            }
+        }
+        match &row.outside_region {
+            Some(o) => {
+                let _ = writeln!(out, ",1,{},{:?}", o.joint, o.past);
+            }
+            None => out.push_str(",0,,\n"),
+        }
+    }
+    out
+}
+
+/// What the summary needs to know of the calibrated model: whether its record holds a
+/// training region, and which joints are prismatic (their ranges in m).
+pub struct SummaryModel {
+    /// Whether the record holds a training region.
+    pub has_region: bool,
+    /// The joints' names, in the order of the readings.
+    pub joint_names: Vec<String>,
+    /// Whether each joint is prismatic.
+    pub prismatic: Vec<bool>,
+}
+
+impl SummaryModel {
+    /// The summary's view of `robot`.
+    pub fn of_robot(robot: &Robot) -> SummaryModel {
+        SummaryModel {
+            has_region: (robot.calibration()).is_some_and(|c| c.region.is_some()),
+            joint_names: robot.joint_names().to_vec(),
+            prismatic: (0..robot.n_joints())
+                .map(|j| robot.is_prismatic(j))
+                .collect(),
+        }
+    }
+}
+
+/// The summary of `prediction` in words: what was predicted in which frame, what σ rests on,
+/// the readings outside the calibration's region (the first ten) and the errors against the
+/// measured columns (mm, mrad).
+pub fn summary(prediction: &Prediction, model: &SummaryModel) -> String {
+    let mut s = String::new();
+    let frame = match prediction.frame {
+        "instrument" => "markers in the calibration's instrument frame",
+        "base" => "the handle in the device's base frame, where the cable encoder is",
+        _ => "tip links in the root link frame",
+    };
+    let _ = writeln!(
+        s,
+        "predicted {} rows of {} at {} ({}), m",
+        prediction.rows.len(),
+        prediction.data,
+        prediction.tips.join(", "),
+        frame
+    );
+    match &prediction.uncertainty_note {
+        Some(note) => {
+            let _ = writeln!(s, "{note}");
+        }
+        None => {
+            let _ = writeln!(
+                s,
+                "σ: 1σ of each predicted position from the calibration's covariance of {} values",
+                prediction.n_values
+            );
+        }
+    }
+    if !model.has_region {
+        let _ = writeln!(
+            s,
+            "region: the calibration records no training region; no reading is flagged"
+        );
+    } else if prediction.n_outside_region == 0 {
+        let _ = writeln!(
+            s,
+            "region: every reading lies inside the calibration's region"
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "region: {} of {} readings lie outside the calibration's region (extrapolated):",
+            prediction.n_outside_region,
+            prediction.rows.len()
+        );
+        let outside =
+            (prediction.rows.iter()).filter_map(|r| r.outside_region.as_ref().map(|o| (r.line, o)));
+        for (line, o) in outside.clone().take(10) {
+            let j = model.joint_names.iter().position(|j| *j == o.joint);
+            let prismatic = j.is_some_and(|j| model.prismatic.get(j) == Some(&true));
+            let words = outside_region_words(&prediction.data, line, &o.joint, o.past, prismatic);
+            let _ = writeln!(s, "  {words}");
+        }
+        if prediction.n_outside_region > 10 {
+            let _ = writeln!(s, "  … and {} more", prediction.n_outside_region - 10);
+        }
+    }
+    if let Some(e) = &prediction.errors {
+        let _ = writeln!(
+            s,
+            "errors against the measured columns (no refit; mean, RMS, max):"
+        );
+        for (what, f, unit, over) in error_kinds(e) {
+            let (mean, rms, max) = (f.mean * 1e3, f.rms * 1e3, f.max * 1e3);
+            let count = f.count;
+            let _ = writeln!(
+                s,
+                "  {what:<11}  {mean:.4} {rms:.4} {max:.4} {unit} over {count} {over}"
+            );
+        }
+    }
+    s
+}
+
+/// A reading outside the calibration's region in words: `file:line`, the joint and how far
+/// `past` its training range (positive above it), m for a `prismatic` joint, else rad.
+pub fn outside_region_words(
+    file: &str,
+    line: u64,
+    joint: &str,
+    past: f64,
+    prismatic: bool,
+) -> String {
+    let unit = if prismatic { "m" } else { "rad" };
+    let side = if past > 0.0 { "above" } else { "below" };
+    format!(
+        "{file}:{line}: {joint} {:.4} {unit} {side} its training range",
+        past.abs()
+    )
+}
+
+/// The errors of `e` that were measured, as the summary and the HTML report show them: name,
+/// figures (m or rad), the unit they are shown in (mm or mrad) and what they are counted over.
+pub fn error_kinds(e: &Errors) -> Vec<(&'static str, Figures, &'static str, &'static str)> {
+    let kinds = [
+        ("position", e.position_m, "mm", "marker samples"),
+        ("orientation", e.orientation_rad, "mrad", "samples"),
+        ("distance", e.distance_m, "mm", "rows"),
+    ];
+    (kinds.into_iter())
+        .filter_map(|(what, f, unit, over)| Some((what, f?, unit, over)))
+        .collect()
 }
 
 #[cfg(test)]

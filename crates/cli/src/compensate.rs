@@ -1,13 +1,13 @@
-//! Flags of `hapcal compensate` and the rendering of its result
-//! ([`hapcal_calibrate::compensate`]): the commands of the reached targets to a CSV file, the
-//! targets missed and outside the calibration's region in words.
+//! Flags of `hapcal compensate` and the output of its summary
+//! ([`hapcal_calibrate::compensate::CompensationSummary`]): the commands of the reached targets
+//! to a CSV file, the targets missed and outside the calibration's region in words.
 
-use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Result, bail};
-use hapcal_calibrate::compensate::{CompensateInput, Compensated, compensate_targets};
-use hapcal_runtime::CompensationConfig;
+use hapcal_calibrate::compensate::{
+    CompensateInput, CompensationConfig, CompensationSummary, compensate_targets,
+};
 
 /// Flags of `hapcal compensate`.
 #[derive(Clone, Debug, clap::Args)]
@@ -83,62 +83,24 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
             ..CompensationConfig::default()
         },
     };
-    let Compensated {
-        robot,
-        rows,
-        unbound_note: unbound,
-    } = compensate_targets(&input)?;
-    let mut out = String::from("line");
-    for name in robot.joint_names() {
-        let _ = write!(out, ",{name}");
-    }
-    out.push_str(",position_error_m,orientation_error_rad\n");
-    let mut missed = Vec::new();
-    let mut outside = Vec::new();
-    let (mut worst_m, mut worst_rad) = (0.0_f64, 0.0_f64);
-    for row in &rows {
-        let c = &row.result;
-        if let Some((j, past)) = row.outside_region {
-            outside.push(format!(
-                "{}:{}: {} {:.4} {} {} its training range",
-                args.targets.display(),
-                row.line,
-                robot.joint_names()[j],
-                past.abs(),
-                if robot.is_prismatic(j) { "m" } else { "rad" },
-                if past > 0.0 { "above" } else { "below" }
-            ));
-        }
-        if c.reached {
-            let _ = write!(out, "{}", row.line);
-            for q in &row.command {
-                let _ = write!(out, ",{q:?}");
-            }
-            let _ = writeln!(
-                out,
-                ",{:?},{:?}",
-                c.position_error_m, c.orientation_error_rad
-            );
-            worst_m = worst_m.max(c.position_error_m);
-            worst_rad = worst_rad.max(c.orientation_error_rad);
-        } else {
-            missed.push(format!(
-                "{}:{}: not reached: {:.4} mm and {:.4} mrad from the target after {} steps",
-                args.targets.display(),
-                row.line,
-                c.position_error_m * 1e3,
-                c.orientation_error_rad * 1e3,
-                c.iterations
-            ));
-        }
-    }
+    let compensated = compensate_targets(&input)?;
+    let CompensationSummary {
+        csv,
+        missed,
+        outside,
+        worst_position_m,
+        worst_orientation_rad,
+    } = compensated.summary(&args.targets);
+    let (reached, targets) = (
+        compensated.rows.len() - missed.len(),
+        compensated.rows.len(),
+    );
     // A partial result never replaces an earlier complete one: with a target missed, an
     // existing --out is left as it was.
     let kept = !missed.is_empty() && args.out.exists();
     if !kept {
-        crate::calibrate::write_new(&args.out, &out, &[&args.device, &args.targets])?;
+        crate::calibrate::write_new(&args.out, &csv, &[&args.device, &args.targets])?;
     }
-    let reached = rows.len() - missed.len();
     let region = if outside.is_empty() {
         String::new()
     } else {
@@ -161,7 +123,7 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
         bail!(
             "{} of {} targets not reached within {} mm / {} mrad ({written}):\n{}{}",
             missed.len(),
-            rows.len(),
+            targets,
             args.tolerance_mm,
             args.tolerance_mrad,
             missed.join("\n"),
@@ -174,9 +136,9 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
     }
     Ok(format!(
         "{reached} targets reached; largest residual {:.3e} mm, {:.3e} mrad; wrote {}\n{region}{}",
-        worst_m * 1e3,
-        worst_rad * 1e3,
+        worst_position_m * 1e3,
+        worst_orientation_rad * 1e3,
         args.out.display(),
-        unbound.map_or(String::new(), |n| format!("{n}\n"))
+        (compensated.unbound_note).map_or(String::new(), |n| format!("{n}\n"))
     ))
 }

@@ -4,8 +4,6 @@
 //! Architecture invariant: *the library part never prints; `main.rs` prints what it returns.*
 
 pub mod compensate;
-pub mod diagnose;
-pub mod diagnose_arm;
 pub mod html;
 pub mod plan_args;
 pub mod predict;

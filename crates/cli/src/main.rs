@@ -660,8 +660,7 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<()> {
 /// `--out` or, with `--check`, compared with the golden file.
 fn run_reproduce(args: &ReproduceArgs) -> Result<()> {
     let root = hapcal::project_root();
-    let truth =
-        (args.truth.clone()).unwrap_or_else(|| root.join("fixtures/reference-device/truth.toml"));
+    let truth = (args.truth.clone()).unwrap_or_else(|| root.join(hapcal_sim::REFERENCE_TRUTH));
     // The truth's device file is an input too; an unreadable truth fails in `run` below.
     let truth_device = hapcal_sim::read_truth(&truth)
         .ok()
@@ -676,8 +675,9 @@ fn run_reproduce(args: &ReproduceArgs) -> Result<()> {
         "{msg} [{bar:40}] {pos}/{len} seeds, eta {eta}",
     );
     bar.set_message("reproducing");
+    let criterion = (args.design).unwrap_or(hapcal_identify::Criterion::DOptimal);
     let select = |reference: &hapcal::paper::Reference, readings: &[Vec<f64>], n: usize| {
-        planned_poses(reference, readings, n, args.design)
+        hapcal::reproduce::planned_poses(reference, readings, n, criterion)
     };
     let choice = match args.design {
         None => hapcal::paper::PoseChoice::Random,
@@ -692,11 +692,12 @@ fn run_reproduce(args: &ReproduceArgs) -> Result<()> {
     })?;
     bar.finish_and_clear();
     if args.check {
-        return check_golden(
-            &result,
-            &root.join("fixtures/golden/ours/paper.csv"),
-            &inputs,
-        );
+        let golden = root.join(hapcal::reproduce::GOLDEN_FILE);
+        let update = std::env::var_os("UPDATE_GOLDEN").is_some();
+        emit(&hapcal::reproduce::check_against_golden(
+            &result, &golden, &inputs, update,
+        )?);
+        return Ok(());
     }
     for (name, text) in &result.files {
         calibrate::write_new(&args.out.join(name), text, &inputs)?;
@@ -725,58 +726,6 @@ fn output_folder(out: &Path) -> Result<()> {
     Ok(())
 }
 
-/// The `n` poses `reproduce --design` identifies from: chosen among the candidate `readings`
-/// by `design` (d-optimal by default) on the distance Jacobian at the nominal model.
-fn planned_poses(
-    reference: &hapcal::paper::Reference,
-    readings: &[Vec<f64>],
-    n: usize,
-    design: Option<hapcal_identify::Criterion>,
-) -> Result<Vec<usize>> {
-    let criterion = design.unwrap_or(hapcal_identify::Criterion::DOptimal);
-    let c = hapcal::plan::candidate_blocks(
-        &reference.device,
-        readings,
-        hapcal::plan::Measurement::Distance,
-        Some(reference.noise.sigma_m_m),
-        true,
-    )?;
-    let mut cfg = hapcal_identify::DesignConfig::new(criterion);
-    cfg.weight = Some(c.weight);
-    Ok(hapcal_identify::select_poses(&c.blocks, n, &cfg)?.selected)
-}
-
-/// `reproduce --check`: the reproduction against the golden file `golden_path` (rewritten,
-/// and the command failed, with `UPDATE_GOLDEN` set).
-fn check_golden(
-    result: &hapcal::reproduce::Reproduction,
-    golden_path: &Path,
-    inputs: &[&Path],
-) -> Result<()> {
-    if std::env::var_os("UPDATE_GOLDEN").is_some() {
-        let csv = hapcal::reproduce::golden_csv(&result.golden);
-        calibrate::write_new(golden_path, &csv, inputs)?;
-        anyhow::bail!(
-            "UPDATE_GOLDEN: rewrote {}; review the diff and run again without it",
-            golden_path.display()
-        );
-    }
-    let bad = hapcal::reproduce::check_golden(&result.golden, golden_path)?;
-    if !bad.is_empty() {
-        anyhow::bail!(
-            "reproduction differs from {}:\n{}",
-            golden_path.display(),
-            bad.join("\n")
-        );
-    }
-    emit(&format!(
-        "reproduce --check: {} values within tolerance of {}\n",
-        result.golden.len(),
-        golden_path.display()
-    ));
-    Ok(())
-}
-
 /// `hapcal simulate`: a log of `--poses` readings of the truth device, written to `--out`.
 fn run_simulate(args: &SimulateArgs) -> Result<()> {
     calibrate::check_extension(&args.out, &["csv"], "the simulated log", false)?;
@@ -797,10 +746,11 @@ fn run_simulate(args: &SimulateArgs) -> Result<()> {
     let Some(cable) = device.cable_encoder.as_ref() else {
         anyhow::bail!("the device has no [cable_encoder]: nothing to simulate the distance with");
     };
-    let noise = match args.noise.as_str() {
-        "paper" => hapcal_sim::NoiseModel::paper(cable),
-        "arc-length" => hapcal_sim::NoiseModel::arc_length(cable),
-        other => anyhow::bail!("--noise must be `paper` or `arc-length`, got {other:?}"),
+    let Some(noise) = hapcal_sim::NoiseModel::named(&args.noise, cable) else {
+        anyhow::bail!(
+            "--noise must be `paper` or `arc-length`, got {:?}",
+            args.noise
+        );
     };
     let cfg = hapcal_sim::SimConfig::new(args.seed, args.poses).with_noise(noise);
     let effects = (args.effects.iter())
@@ -831,9 +781,8 @@ fn run_simulate(args: &SimulateArgs) -> Result<()> {
 /// on `--device`), else the nominal `--device` (the reference device by default).
 fn simulated_device(args: &SimulateArgs) -> Result<(hapcal_io::Device, hapcal_sim::Truth)> {
     let Some(truth_path) = &args.truth else {
-        let path = (args.device.clone()).unwrap_or_else(|| {
-            hapcal::project_root().join("fixtures/reference-device/device.toml")
-        });
+        let path = (args.device.clone())
+            .unwrap_or_else(|| hapcal::project_root().join(hapcal_sim::REFERENCE_DEVICE));
         let device = hapcal_io::read_device(&path)?;
         let truth = hapcal_sim::Truth::nominal(path, &device);
         return Ok((device, truth));
@@ -933,8 +882,8 @@ fn run_diagnose(args: &DiagnoseArgs) -> Result<()> {
     if args.data.is_empty() {
         anyhow::bail!("--data: give the log or the measurements to diagnose");
     }
-    let haptic = !(args.device.extension()).is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
-        && hapcal_io::read_device(&args.device).is_ok_and(|d| d.has_transmissions());
+    // A device file that does not read is left to the arm's loaders, which name the fault.
+    let haptic = hapcal_calibrate::predict::haptic_device(&args.device).is_ok_and(|d| d.is_some());
     let d = if haptic {
         diagnose_haptic(args)?
     } else {
@@ -973,27 +922,25 @@ fn diagnose_haptic(args: &DiagnoseArgs) -> Result<Diagnosed> {
         }
     }
     let (accepted, _) = setup_gate(&log_plan(args), args.accept_setup)?;
-    let baseline =
-        (args.baseline.as_deref()).unwrap_or(hapcal_contract::ModelName::Transmissions.name());
-    let plan = hapcal::diagnose::DiagnosePlan {
-        units: args.units.units(),
-        ..hapcal::diagnose::DiagnosePlan::new(
-            args.device.clone(),
-            args.data[0].clone(),
-            baseline,
-            args.folds,
-        )?
+    let baseline = (args.baseline.as_deref())
+        .unwrap_or(hapcal_calibrate::model::ModelName::Transmissions.name());
+    let config = hapcal_diagnose::DiagnoseConfig {
+        baseline: hapcal_diagnose::baseline_model(baseline)?,
+        folds: args.folds,
+        ..Default::default()
     };
-    let (mut d, warnings) = hapcal::diagnose::run(&plan)?;
+    let units = args.units.units();
+    let (mut d, warnings) =
+        hapcal_diagnose::plan::diagnose_log(&args.device, &args.data[0], &units, &config)?;
     // No physical effect is named on data set up wrong: the note says what the check found.
     if let Some(finding) = accepted {
         d.verdict.on_accepted_setup(&mut d.notes, finding);
     }
     warn_all(&warnings);
-    let text = hapcal::diagnose::render(&d);
+    let text = hapcal_diagnose::text::render(&d);
     emit_report(args.json, || serde_json::to_string_pretty(&d), &text)?;
     Ok(Diagnosed {
-        svg: hapcal::diagnose::residual_map_svg(&d),
+        svg: hapcal_diagnose::maps::residual_map_svg(&d),
         view: hapcal::html::DiagnosisView::haptic(&d).with_warnings(warnings),
         text,
     })
@@ -1031,16 +978,16 @@ fn diagnose_arm(args: &DiagnoseArgs) -> Result<Diagnosed> {
         folds: args.folds,
         ..Default::default()
     };
-    let (mut d, warnings) = hapcal::diagnose_arm::run_arm(&plan, &cfg)?;
+    let (mut d, warnings) = hapcal_diagnose::plan::diagnose_arm_data(&plan, &cfg)?;
     // No physical effect is named on data set up wrong: the note says what the check found.
     if let Some(finding) = accepted {
         d.verdict.on_accepted_setup(&mut d.notes, finding);
     }
     warn_all(&warnings);
-    let text = hapcal::diagnose_arm::render_arm(&d);
+    let text = hapcal_diagnose::text::render_arm(&d);
     emit_report(args.json, || serde_json::to_string_pretty(&d), &text)?;
     Ok(Diagnosed {
-        svg: hapcal::diagnose_arm::arm_map_svg(&d),
+        svg: hapcal_diagnose::maps::arm_map_svg(&d),
         view: hapcal::html::DiagnosisView::arm(&d).with_warnings(warnings),
         text,
     })
@@ -1049,7 +996,7 @@ fn diagnose_arm(args: &DiagnoseArgs) -> Result<Diagnosed> {
 /// `hapcal blind-test`: the blind test's Markdown report on standard output.
 fn run_blind_test(args: &BlindTestArgs) -> Result<()> {
     let bar = indicatif::ProgressBar::new(args.cases as u64);
-    let truth_file = hapcal::project_root().join("fixtures/reference-device/truth.toml");
+    let truth_file = hapcal::project_root().join(hapcal_sim::REFERENCE_TRUTH);
     let truth = hapcal_sim::read_truth(&truth_file)?;
     let device = truth.read_device(&truth_file)?;
     let md = hapcal_diagnose::blind::report(

@@ -6,7 +6,8 @@ use anyhow::{Result, bail};
 use hapcal_calibrate::model::ModelChoice;
 use hapcal_calibrate::model::ModelName;
 use hapcal_calibrate::plan::{
-    AfterConfig, Measurement, PlanConfig, after_summary, plan_after, plan_poses, poses_csv, summary,
+    AfterConfig, Measurement, PlanConfig, after_summary, plan_after_files, plan_poses, poses_csv,
+    summary,
 };
 use hapcal_identify::Criterion;
 use std::path::{Path, PathBuf};
@@ -159,7 +160,6 @@ fn plan_after_measured(
     device: &hapcal_io::Device,
     units: &hapcal_io::Units,
 ) -> Result<(String, Vec<Vec<f64>>)> {
-    use hapcal_calibrate::data;
     if let Some(m) = args.measurement {
         bail!(
             "--measurement {}: with --data the poses measure what the measured rows do; leave \
@@ -174,37 +174,6 @@ fn plan_after_measured(
              poses to add to measurement files"
         );
     }
-    if device.has_transmissions() {
-        bail!(
-            "{}: --data plans poses to add to measurement files of a robot (marker positions, \
-             poses, anchor distances); a haptic device's poses are planned without --data",
-            args.device.display()
-        );
-    }
-    let Some(workspace) = &args.workspace else {
-        bail!(
-            "--workspace: give the joint configurations where the calibration will be used (a \
-             CSV with the data's joint columns); the poses are planned to predict there"
-        );
-    };
-    for path in &args.data {
-        data::check_csv_header(path)?;
-        if !data::is_marker_file(path, device.cable_encoder.is_none()) {
-            bail!(
-                "{}: not a measurement file: --data takes marker positions (x,y,z), poses \
-                 (qw,qx,qy,qz) or anchor distances (distance_m) with the joint columns",
-                path.display()
-            );
-        }
-    }
-    let is_urdf = (args.device.extension()).is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
-    let robot = if is_urdf {
-        data::robot_from_urdf(&args.device, std::slice::from_ref(&args.tip))?
-    } else {
-        data::robot_from_device(device)?
-    };
-    let measured = data::load_tables(&args.data, &robot, units)?;
-    let configurations = data::workspace_configurations(workspace, &robot, units)?;
     let cfg = AfterConfig {
         count: args.count,
         n_candidates: args.candidates,
@@ -215,6 +184,14 @@ fn plan_after_measured(
         sigma_rad: args.sigma_rad,
         refine: args.refine,
     };
-    let plan = plan_after(&robot, &measured, &configurations, &cfg)?;
+    let plan = plan_after_files(
+        &args.device,
+        &args.tip,
+        device,
+        &args.data,
+        args.workspace.as_deref(),
+        units,
+        &cfg,
+    )?;
     Ok((after_summary(&plan), plan.readings))
 }

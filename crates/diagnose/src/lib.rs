@@ -7,6 +7,9 @@
 //! - [`diagnose`]: baseline fit (paper Fig. 6, or kinematics alone), held-out gap against
 //!   the floor of the encoder specification, residual map, candidate tests, greedy
 //!   attribution, before/after held-out RMS.
+//! - [`plan`]: the diagnoses of files: a haptic device's log, a serial arm's data.
+//! - [`maps`]: the residual maps (SVG) of the haptic and the arm diagnosis.
+//! - [`text`]: the text reports of the haptic and the arm diagnosis.
 //! - [`blind`]: the blind test: draw an effect (or none, or one outside the library, or
 //!   two) with a seed, simulate, diagnose, score.
 //!
@@ -37,9 +40,12 @@ pub mod arm;
 pub mod blind;
 mod diagnose;
 mod error;
+pub mod maps;
 mod model;
+pub mod plan;
 mod solve;
 mod stats;
+pub mod text;
 mod verdict;
 
 pub use diagnose::{

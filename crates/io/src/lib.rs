@@ -72,6 +72,7 @@ pub const MAX_LENGTH_M: f64 = 1e3;
 mod columns;
 mod device;
 mod error;
+mod input_files;
 mod log;
 mod measure;
 mod mukca;
@@ -87,6 +88,7 @@ pub use device::{
 };
 pub use error::{Error, line_column};
 pub use hapcal_kinematics::{DhConvention, DhRow, Placement};
+pub use input_files::{InputFile, input_files};
 pub use log::{
     Log, LogReader, LogRow, LogSummary, N_EXT, RepeatKey, count_log_rows, read_log, read_log_in,
     write_log,

@@ -54,6 +54,14 @@ mod truth;
 
 pub use effects::{DEFAULT_HANDLE_MASS_KG, EffectKind, Injected, MotionConfig, simulate_motion};
 pub use error::Error;
+
+/// The reference device's file below the project's root: the nominal device a simulation
+/// draws from by default.
+pub const REFERENCE_DEVICE: &str = "fixtures/reference-device/device.toml";
+
+/// The reference device's truth file below the project's root: the simulated device of the
+/// paper's reproduction and of the blind test.
+pub const REFERENCE_TRUTH: &str = "fixtures/reference-device/truth.toml";
 /// Gravity of the handle model, m/s² (the measurement model's, `hapcal_problems`).
 pub use hapcal_problems::GRAVITY_M_S2;
 pub use sim::{

@@ -65,6 +65,16 @@ impl NoiseModel {
         NoiseModel::new(sigma_e_rad, cable.drum_radius_m * sigma_e_rad)
     }
 
+    /// The noise model named `name` for `cable`: `paper` ([`NoiseModel::paper`]) or
+    /// `arc-length` ([`NoiseModel::arc_length`]); `None` for any other name.
+    pub fn named(name: &str, cable: &CableEncoder) -> Option<NoiseModel> {
+        match name {
+            "paper" => Some(NoiseModel::paper(cable)),
+            "arc-length" => Some(NoiseModel::arc_length(cable)),
+            _ => None,
+        }
+    }
+
     fn check(&self) -> Result<(), Error> {
         for (name, value) in [
             ("sigma_e_rad", self.sigma_e_rad),

@@ -1066,3 +1066,66 @@ pub fn check_golden(golden: &[Golden], path: &Path) -> Result<Vec<String>> {
     }
     Ok(bad)
 }
+
+/// The golden file of the reproduction below the project's root: the values `reproduce
+/// --check` compares with.
+pub const GOLDEN_FILE: &str = "fixtures/golden/ours/paper.csv";
+
+/// The reproduction `result` against the golden file `path`: the line to print when every
+/// value lies within its tolerance. With `update`, the golden file is rewritten from `result`
+/// (never over one of `inputs`) and the check fails, asking for a review.
+///
+/// # Errors
+/// Values outside their tolerance (each named), an unreadable or malformed golden file; with
+/// `update`, always.
+pub fn check_against_golden(
+    result: &Reproduction,
+    path: &Path,
+    inputs: &[&Path],
+    update: bool,
+) -> Result<String> {
+    if update {
+        hapcal_calibrate::calibrate::write_new(path, &golden_csv(&result.golden), inputs)?;
+        bail!(
+            "UPDATE_GOLDEN: rewrote {}; review the diff and run again without it",
+            path.display()
+        );
+    }
+    let bad = check_golden(&result.golden, path)?;
+    if !bad.is_empty() {
+        bail!(
+            "reproduction differs from {}:\n{}",
+            path.display(),
+            bad.join("\n")
+        );
+    }
+    Ok(format!(
+        "reproduce --check: {} values within tolerance of {}\n",
+        result.golden.len(),
+        path.display()
+    ))
+}
+
+/// The `n` poses `reproduce --design` identifies from: chosen among the candidate `readings`
+/// (rad, one per candidate) by `criterion` on the distance Jacobian at the nominal model of
+/// `reference`, weighted by its distance noise; their indices.
+///
+/// # Errors
+/// A candidate the Jacobian cannot be evaluated at, or a failed selection.
+pub fn planned_poses(
+    reference: &Reference,
+    readings: &[Vec<f64>],
+    n: usize,
+    criterion: hapcal_identify::Criterion,
+) -> Result<Vec<usize>> {
+    let c = hapcal_calibrate::plan::candidate_blocks(
+        &reference.device,
+        readings,
+        hapcal_calibrate::plan::Measurement::Distance,
+        Some(reference.noise.sigma_m_m),
+        true,
+    )?;
+    let mut cfg = hapcal_identify::DesignConfig::new(criterion);
+    cfg.weight = Some(c.weight);
+    Ok(hapcal_identify::select_poses(&c.blocks, n, &cfg)?.selected)
+}

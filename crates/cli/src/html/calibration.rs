@@ -2,10 +2,11 @@
 
 use hapcal_calibrate::report::{CalibrationReport, SetReport, SetRole};
 
+use super::Page;
 use super::figures::{
     self, BLUE_, BarGroup, Binned, Figure, GREY, ORANGE, Panel, Points, RangeRow, Samples,
 };
-use super::{Input, Page};
+use hapcal_io::InputFile;
 
 /// Bins of the residual-against-joint figure.
 const JOINT_BINS: usize = 8;
@@ -17,7 +18,7 @@ const MIN_BIN_SAMPLES: usize = 3;
 /// joint's reading), the joints' training ranges against the test rows and the workspace,
 /// the parameters with σ, the pruned ones and the correlated pairs, the warnings and the text
 /// report's words.
-pub fn calibration_page(r: &CalibrationReport, command: &str, inputs: &[Input]) -> String {
+pub fn calibration_page(r: &CalibrationReport, command: &str, inputs: &[InputFile]) -> String {
     let mut page = Page::new(&format!("hapcal calibrate: {}", r.device), command, inputs);
     page.section("summary", "Result");
     page.paragraph(&format!(

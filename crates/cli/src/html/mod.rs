@@ -18,7 +18,7 @@ pub use other::{
 };
 
 use anyhow::{Context, Result};
-use sha2::{Digest, Sha256};
+use hapcal_io::InputFile;
 use std::fmt::Write;
 use std::path::Path;
 
@@ -36,57 +36,6 @@ pub fn escape(text: &str) -> String {
         }
     }
     out
-}
-
-/// A data file the report was made from, with its SHA-256 (hex) or why it has none.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Input {
-    /// The path as given.
-    pub path: String,
-    /// SHA-256 of its bytes, lower-case hex; or the reason it could not be read.
-    pub sha256: std::result::Result<String, String>,
-}
-
-/// The inputs at `paths` with their hashes: a folder (a MUKCa placement) contributes each of its
-/// files, sorted by name; a file that cannot be read is listed with the reason, a path that
-/// does not exist (an optional sidecar) is left out.
-pub fn inputs(paths: &[&Path]) -> Vec<Input> {
-    let mut out = Vec::new();
-    for path in paths.iter().filter(|p| p.exists()) {
-        if path.is_dir() {
-            let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(path)
-                .map(|d| {
-                    d.flatten()
-                        .map(|e| e.path())
-                        .filter(|p| p.is_file())
-                        .collect()
-                })
-                .unwrap_or_default();
-            files.sort();
-            for f in files {
-                out.push(hashed(&f));
-            }
-        } else {
-            out.push(hashed(path));
-        }
-    }
-    out
-}
-
-/// One file and its SHA-256.
-fn hashed(path: &Path) -> Input {
-    Input {
-        path: path.display().to_string(),
-        sha256: std::fs::read(path)
-            .map(|bytes| {
-                let digest = Sha256::digest(&bytes);
-                digest.iter().fold(String::new(), |mut s, b| {
-                    let _ = write!(s, "{b:02x}");
-                    s
-                })
-            })
-            .map_err(|e| e.to_string()),
-    }
 }
 
 /// Writes the HTML report `html` to `path` (atomically, never over one of `inputs`), after
@@ -154,9 +103,13 @@ pub fn write_diagnosis(
 pub fn write_page(
     path: &Path,
     inputs: &[&Path],
-    page: impl FnOnce(&str, &[Input]) -> String,
+    page: impl FnOnce(&str, &[InputFile]) -> String,
 ) -> Result<()> {
-    write(path, &page(&this_command(), &self::inputs(inputs)), inputs)
+    write(
+        path,
+        &page(&this_command(), &hapcal_io::input_files(inputs)),
+        inputs,
+    )
 }
 
 /// The command line of this process, as [`command_line`] writes it.
@@ -203,7 +156,7 @@ pub struct Page {
 
 impl Page {
     /// A page titled `title` that records the command line `command` and the `inputs`.
-    pub fn new(title: &str, command: &str, inputs: &[Input]) -> Page {
+    pub fn new(title: &str, command: &str, inputs: &[InputFile]) -> Page {
         let mut body = String::new();
         let _ = write!(
             body,

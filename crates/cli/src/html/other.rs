@@ -3,9 +3,10 @@
 use hapcal_diagnose::Diagnosis;
 use hapcal_diagnose::arm::ArmDiagnosis;
 
+use super::Page;
 use super::figures::{self, BLUE_, BarGroup, Figure, GREY, Points, RED_};
-use super::{Input, Page};
 use hapcal_calibrate::predict::Prediction;
+use hapcal_io::InputFile;
 
 /// A diagnosis as its HTML report shows it, whichever the device: the gap, the candidates of
 /// every round, the accepted effects, the verdict, the residual maps and the text report.
@@ -92,7 +93,7 @@ pub fn diagnosis_page(
     text: &str,
     maps_svg: &str,
     command: &str,
-    inputs: &[Input],
+    inputs: &[InputFile],
 ) -> String {
     let mut page = Page::new("hapcal diagnose", command, inputs);
     page.section("verdict", "Verdict");
@@ -206,7 +207,7 @@ pub fn diagnosis_figures(view: &DiagnosisView, maps_svg: &str) -> Vec<Figure> {
 
 /// The HTML report of a prediction: the errors against the measured columns, each row's
 /// predicted 1σ with the rows outside the calibration's region, and those rows.
-pub fn prediction_page(p: &Prediction, text: &str, command: &str, inputs: &[Input]) -> String {
+pub fn prediction_page(p: &Prediction, text: &str, command: &str, inputs: &[InputFile]) -> String {
     let mut page = Page::new(&format!("hapcal predict: {}", p.data), command, inputs);
     page.section("summary", "Prediction");
     page.paragraph(&format!(
@@ -226,7 +227,7 @@ pub fn prediction_page(p: &Prediction, text: &str, command: &str, inputs: &[Inpu
     }
     if let Some(e) = &p.errors {
         page.section("errors", "Errors against the measured columns");
-        let rows: Vec<Vec<String>> = (crate::predict::error_kinds(e).into_iter())
+        let rows: Vec<Vec<String>> = (hapcal_calibrate::predict::error_kinds(e).into_iter())
             .map(|(what, f, unit, _)| {
                 let [mean, rms, max] = [f.mean, f.rms, f.max].map(|v| format!("{:.4}", v * 1e3));
                 vec![

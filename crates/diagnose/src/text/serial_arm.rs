@@ -1,26 +1,11 @@
-//! `hapcal diagnose` on a serial arm (a URDF or D-H device and what `hapcal calibrate` reads):
-//! the geometric baseline of [`hapcal_calibrate::baseline`], the diagnosis of
-//! [`hapcal_diagnose::arm`], rendered as a text report and residual maps (SVG).
+//! The text report of a serial arm's diagnosis ([`crate::arm`]), with the ladder of kinematic
+//! rungs and the calibration model of the named effects.
 
 use std::fmt::{self, Write as _};
 
-use anyhow::{Context, Result};
-use hapcal_calibrate::baseline::{DataKind, geometric_baseline};
-use hapcal_calibrate::calibrate::Plan;
+use crate::arm::ArmDiagnosis;
+use hapcal_calibrate::baseline::DataKind;
 use hapcal_contract::{Effect, ModelName};
-use hapcal_diagnose::arm::{ArmConfig, ArmDiagnosis, diagnose_arm};
-
-/// Loads `plan`'s device and data, fits the geometric baseline (with the kinematic ladder)
-/// and diagnoses it; returns the diagnosis and the loaders' warnings.
-///
-/// # Errors
-/// Unreadable or invalid files (named with line and column), too few configurations, a failed
-/// baseline fit.
-pub fn run_arm(plan: &Plan, cfg: &ArmConfig) -> Result<(ArmDiagnosis, Vec<String>)> {
-    let baseline = geometric_baseline(plan, true)?;
-    let d = diagnose_arm(&baseline, cfg).context("diagnosing the geometric baseline")?;
-    Ok((d, baseline.warnings))
-}
 
 fn mm(m: f64) -> String {
     format!("{:.3}", m * 1e3)
@@ -67,7 +52,7 @@ fn gap(s: &mut String, d: &ArmDiagnosis) -> fmt::Result {
             "held-out RMS {heldout} mm; no floor: gap to the best model found {gap} mm"
         );
     };
-    let significant = crate::diagnose::significance(d.gap_significant);
+    let significant = super::haptic::significance(d.gap_significant);
     writeln!(
         s,
         "held-out RMS {heldout} mm, floor {} mm, gap {gap} mm (p = {:.1e}, {significant})",
@@ -241,39 +226,4 @@ fn model_of_verdict(s: &mut String, named: &[Effect]) {
     for (e, reason) in &f.beyond {
         let _ = writeln!(s, "  {e}: {reason}");
     }
-}
-
-/// The residual maps as one SVG document: per signal (each joint reading, time, each joint's
-/// gravity torque, the tip's reach, height and azimuth), each bin's held-out 3-D RMS (bar, mm;
-/// red when significantly above the floor, Holm) and the floor (black tick), on one common
-/// scale ([`crate::diagnose::bar_panels_svg`]).
-pub fn arm_map_svg(d: &ArmDiagnosis) -> String {
-    use crate::diagnose::{bar_panels_svg, grouped};
-    let bins = d.where_.iter().map(|b| {
-        let title = format!(
-            "[{:.3}, {:.3}] rms {:.4} mm, floor {:.4} mm, n {}, p {:.1e}",
-            b.lo,
-            b.hi,
-            b.rms_m * 1e3,
-            b.floor_rms_m * 1e3,
-            b.n,
-            b.p_value
-        );
-        (b.signal.as_str(), b.rms_m, b.floor_rms_m, b.flagged, title)
-    });
-    let (panels, ymax) = grouped(bins, |_, bar| bar.flagged, 1e-12);
-    bar_panels_svg(
-        &format!(
-            "Held-out 3-D residual RMS per bin (common scale to {:.3} mm); red: above the floor (Holm); tick: {}. Verdict: {}",
-            ymax * 1e3,
-            if d.floor_rms_m.is_some() {
-                "floor"
-            } else {
-                "overall RMS (no floor)"
-            },
-            d.verdict
-        ),
-        &panels,
-        ymax,
-    )
 }
