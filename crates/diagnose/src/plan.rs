@@ -16,7 +16,7 @@ use crate::{DiagnoseConfig, Diagnosis, diagnose};
 /// log with `config`; returns the diagnosis and the log's warnings.
 ///
 /// # Errors
-/// Unreadable or invalid files (named with line and column), settings [`diagnose`] refuses, or
+/// Unreadable or invalid files (named with line and column), settings [`diagnose()`] refuses, or
 /// a failed baseline fit.
 pub fn diagnose_log(
     device: &Path,

@@ -1,4 +1,4 @@
-//! The text report of a haptic device's diagnosis ([`crate::diagnose`]).
+//! The text report of a haptic device's diagnosis ([`crate::Diagnosis`]).
 
 use std::fmt::{self, Write as _};
 
