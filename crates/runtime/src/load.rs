@@ -130,7 +130,8 @@ impl Model {
     /// the text in messages.
     ///
     /// # Errors
-    /// [`LoadError::Parse`] for TOML syntax, a missing or unknown key or a wrong type, and
+    /// [`LoadError::Parse`] for TOML syntax, a missing or unknown key or a wrong type (an
+    /// unknown `convention`, a `[[dh]]` joint that is neither a number ≥ 1 nor `"fixed"`), and
     /// for a `[calibration]` the contract refuses or a value naming a joint, row or
     /// coefficient the device does not have (or a capstan value on a joint without a
     /// capstan), at its line and column;

@@ -75,7 +75,8 @@ impl Robot {
     /// for a malformed sidecar, an unknown value name, a wrong unit, a missing key or a newer
     /// schema, and for a record that does not bind to this URDF and these tips (above);
     /// [`LoadError::Invalid`] for a URDF that urdf-rs cannot read, a tip that is not a
-    /// link (listing them), a tip named twice, a floating or planar joint on a path, a joint
+    /// link (listing them), a tip named twice, a link on a path with two parent joints or
+    /// joints above a tip that form a loop, a floating or planar joint on a path, a joint
     /// without axis, a non-finite number, a negative mass, a value of a joint or element not
     /// on the paths to the tips, a haptic device's value, lumped loads whose tips are not all
     /// loaded.
@@ -1023,10 +1024,10 @@ fn check_tip(
     Ok(())
 }
 
-/// The joints from the root link down to link `tip`, root first.
+/// The joints from the root link down to link `tip`, root first (the contract's URDF walk).
 ///
 /// # Errors
-/// Joints above `tip` that form a loop.
+/// A link above `tip` with two parent joints, or joints above it that form a loop.
 fn path_to<'r>(
     robot: &'r urdf::Robot,
     tip: &str,
