@@ -1093,9 +1093,7 @@ fn link_masses(
         if mass_kg == 0.0 {
             continue;
         }
-        let walk = urdf::walk_up(robot, &l.name, |joint| {
-            joint_names.iter().any(|n| *n == joint.name)
-        });
+        let walk = urdf::walk_up(robot, &l.name, |joint| joint_names.contains(&joint.name));
         let above = (walk.stop).and_then(|stop| joint_names.iter().position(|n| *n == stop.name));
         if let Some(joint) = above {
             let frame = (walk.passed.iter()).fold(Pose::IDENTITY, |frame, joint| {
