@@ -6,6 +6,10 @@
 //! *One set of types, in the lowest crate: the writer and every reader parse and check the
 //! record here, so they cannot disagree on a name or a unit.*
 //!
+//! The robot description's readers live here too, once, for the same reason: [`urdf`] parses
+//! a URDF and walks its tree, [`device`] reads a device file's tables, for `hapcal-io` and the
+//! runtime alike.
+//!
 //! A record ([`Calibration`]) carries the model's name, every identified value with its unit
 //! and standard deviation, the parameter covariance (for the prediction's uncertainty at a
 //! configuration), each compliance's torque source ([`Torque`]), the calibration's tips, the
@@ -43,9 +47,11 @@
 //! # Ok::<(), hapcal_contract::ContractError>(())
 //! ```
 
+pub mod device;
 mod effect;
 mod locate;
 mod names;
+pub mod urdf;
 mod write;
 
 pub use effect::{Effect, ModelFor, SeparatingMeasurement};

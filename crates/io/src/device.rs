@@ -1,8 +1,9 @@
 //! The device file (TOML, docs/design.md §5): kinematic chain, joint limits, transmissions,
 //! measurement rig and, once calibrated, the identified values.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
+use hapcal_contract::device::{BranchEntry, Convention, DeviceFile, PlacementEntry};
 use hapcal_kinematics::{Chain, DhConvention, DhRow, Isometry3, Placement, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -17,6 +18,12 @@ mod tests;
 
 pub use write::write_device;
 
+// The tables the one device-file reader (`hapcal-contract`) reads, as this crate's device
+// holds them.
+pub use hapcal_contract::device::{
+    CableEncoder, Capstan, DhEntry, Handle, JointRef, JointSpec, Parallelogram, UrdfSource,
+};
+
 /// A device as described by its TOML file (docs/design.md §5), lengths in m, angles in rad.
 ///
 /// The kinematic chain is either a D-H table (`[[dh]]` rows) or URDF-style joint placements
@@ -25,192 +32,119 @@ pub use write::write_device;
 /// A value returned by [`read_device`] has passed every check listed there; a value built
 /// by hand is checked when [`Device::chain`] compiles it.
 ///
-/// Unknown keys are rejected (a misspelt `[parallelogam]` must not vanish silently); new
-/// sections are added as typed fields.
+/// The file is read by the one device-file reader, `hapcal_contract::device::DeviceFile`
+/// (unknown keys refused: a misspelt `[parallelogam]` must not vanish silently), whose tables
+/// this type holds with the placements and the convention as kinematics types.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(from = "DeviceFile")]
 pub struct Device {
     /// Free-form device name.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub name: Option<String>,
     /// D-H convention of the `[[dh]]` rows: `"dh"` (standard, the default) or `"mdh"`
     /// (modified). Ignored for placement chains.
-    #[serde(
-        default = "serde_helpers::standard",
-        with = "serde_helpers::convention"
-    )]
+    #[serde(serialize_with = "serde_helpers::serialize_convention")]
     pub convention: DhConvention,
     /// D-H rows, row 0 first (`[[dh]]`); empty for a placement chain.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    #[serde(skip_serializing_if = "Vec::is_empty")]
     pub dh: Vec<DhEntry>,
     /// The URDF the placements came from (`[urdf]`), for writing the calibration back.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub urdf: Option<UrdfSource>,
     /// URDF joint placements, root to tip (`[[placement]]`); empty for a D-H chain.
     #[serde(
-        default,
         rename = "placement",
-        with = "serde_helpers::placements",
+        serialize_with = "serde_helpers::serialize_placements",
         skip_serializing_if = "Vec::is_empty"
     )]
     pub placements: Vec<Placement>,
     /// Further branches of a placement tree (`[[branch]]`), one per further tip: a robot with
     /// several tips (two arms on one torso). `placements` is then the path to the first tip.
-    #[serde(default, rename = "branch", skip_serializing_if = "Vec::is_empty")]
+    #[serde(rename = "branch", skip_serializing_if = "Vec::is_empty")]
     pub branches: Vec<Branch>,
     /// One entry per joint of the chain, in joint order (`[[joint]]`); for a tree, the joints
     /// of `placements` first, then those of each branch in order.
-    #[serde(default, rename = "joint")]
+    #[serde(rename = "joint")]
     pub joints: Vec<JointSpec>,
     /// Capstan drives (`[[capstan]]`).
-    #[serde(default, rename = "capstan", skip_serializing_if = "Vec::is_empty")]
+    #[serde(rename = "capstan", skip_serializing_if = "Vec::is_empty")]
     pub capstans: Vec<Capstan>,
     /// Parallelogram (four-bar) transmission (`[parallelogram]`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub parallelogram: Option<Parallelogram>,
     /// The cable encoder of the measurement rig (`[cable_encoder]`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub cable_encoder: Option<CableEncoder>,
     /// The handle, the one link not statically balanced (`[handle]`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub handle: Option<Handle>,
     /// Identified values of a calibrated device (`[calibration]`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub calibration: Option<Calibration>,
+}
+
+impl From<DeviceFile> for Device {
+    /// The file's tables, the placements and the convention as kinematics types.
+    fn from(file: DeviceFile) -> Device {
+        Device {
+            name: file.name,
+            convention: match file.convention {
+                Convention::Standard => DhConvention::Standard,
+                Convention::Modified => DhConvention::Modified,
+            },
+            dh: file.dh,
+            urdf: file.urdf,
+            placements: placements_of(file.placements),
+            branches: file.branches.into_iter().map(Branch::from).collect(),
+            joints: file.joints,
+            capstans: file.capstans,
+            parallelogram: file.parallelogram,
+            cable_encoder: file.cable_encoder,
+            handle: file.handle,
+            calibration: file.calibration,
+        }
+    }
+}
+
+/// The `[[placement]]` rows as kinematics placements.
+fn placements_of(rows: Vec<PlacementEntry>) -> Vec<Placement> {
+    (rows.into_iter())
+        .map(|r| Placement {
+            name: r.name,
+            xyz_m: r.xyz_m,
+            rpy_rad: r.rpy_rad,
+            axis: r.axis,
+            prismatic: r.prismatic,
+        })
+        .collect()
 }
 
 /// One branch of a placement tree (`[[branch]]`): the placements below the placement `from`
 /// down to a further tip. Its path from the root is the path to `from` (on the main chain or
 /// an earlier branch) followed by `placements`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(from = "BranchEntry")]
 pub struct Branch {
     /// The placement the branch hangs below; absent: the branch starts at the root link.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub from: Option<String>,
     /// The branch's placements, root side first (`[[branch.placement]]`, as `[[placement]]`).
     #[serde(
-        default,
         rename = "placement",
-        with = "serde_helpers::placements",
+        serialize_with = "serde_helpers::serialize_placements",
         skip_serializing_if = "Vec::is_empty"
     )]
     pub placements: Vec<Placement>,
 }
 
-/// One `[[dh]]` row as written in the device file (docs/design.md §2, paper eq. 3).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DhEntry {
-    /// Link length `a`, m.
-    pub a_m: f64,
-    /// Link twist `alpha`, rad.
-    pub alpha_rad: f64,
-    /// Link offset `d`, m.
-    pub d_m: f64,
-    /// Joint angle offset `theta`, rad (the joint reading is added to it).
-    pub theta_rad: f64,
-    /// Hayati `beta`, rad, for near-parallel consecutive axes; absent = no beta.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub beta_rad: Option<f64>,
-    /// The row's joint: a 1-based joint number or `"fixed"`.
-    pub joint: JointRef,
-}
-
-/// Which joint a `[[dh]]` row carries: `joint = 3` or `joint = "fixed"`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum JointRef {
-    /// Revolute joint number, 1-based (`q1` is joint 1); 0 is invalid.
-    Joint(usize),
-    /// No joint: a constant transform (e.g. row 0, rig → base).
-    Fixed,
-}
-
-/// Where a placement chain came from (`[urdf]`).
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct UrdfSource {
-    /// The URDF file, relative to the device file's folder (or absolute).
-    pub path: PathBuf,
-    /// The link whose origin is the chain's tip.
-    pub tip: String,
-}
-
-impl UrdfSource {
-    /// The URDF's path for a device read from `device_file`: `path` itself if absolute,
-    /// else `path` relative to `device_file`'s folder.
-    pub fn resolve(&self, device_file: &Path) -> PathBuf {
-        if self.path.is_absolute() {
-            return self.path.clone();
-        }
-        match device_file.parent() {
-            Some(dir) => dir.join(&self.path),
-            None => self.path.clone(),
+impl From<BranchEntry> for Branch {
+    /// The branch's rows, the placements as kinematics placements.
+    fn from(entry: BranchEntry) -> Branch {
+        Branch {
+            from: entry.from,
+            placements: placements_of(entry.placements),
         }
     }
-}
-
-/// One `[[joint]]`: name, limits and encoder of a joint, in joint order.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct JointSpec {
-    /// Joint name (`q1`, `joint_a1`, …), used in messages.
-    pub name: String,
-    /// Lower joint limit, rad; m for a prismatic joint, whose file keys are `lower_m` and
-    /// `upper_m`.
-    #[serde(alias = "lower_m")]
-    pub lower_rad: f64,
-    /// Upper joint limit, rad; m for a prismatic joint (> `lower_rad`).
-    #[serde(alias = "upper_m")]
-    pub upper_rad: f64,
-    /// Encoder counts per revolution of the encoder shaft (the motor, for a capstan joint:
-    /// docs/design.md §2), if known.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub counts_per_rev: Option<u32>,
-}
-
-/// One capstan drive (`[[capstan]]`, paper eq. 1).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Capstan {
-    /// The driven joint, 1-based.
-    pub joint: usize,
-    /// Transmission ratio `R` (motor angle / joint angle), > 0.
-    pub ratio: f64,
-    /// Distance `D` between the drum centres, m, > 0.
-    pub drum_distance_m: f64,
-}
-
-/// The parallelogram (four-bar) driving joint 4 (`[parallelogram]`, paper eq. 2).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Parallelogram {
-    /// Crank length `L1`, m.
-    pub l1_m: f64,
-    /// Coupler length `L2`, m.
-    pub l2_m: f64,
-    /// Rocker length `L3`, m.
-    pub l3_m: f64,
-    /// Ground length `L4`, m.
-    pub l4_m: f64,
-}
-
-/// The cable encoder measuring the distance to the end point (`[cable_encoder]`).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct CableEncoder {
-    /// Drum radius `R_d`, m.
-    pub drum_radius_m: f64,
-    /// Encoder counts per drum revolution.
-    pub counts_per_rev: u32,
-}
-
-/// The handle (`[handle]`): a point mass at the end point.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Handle {
-    /// Mass, kg (≥ 0).
-    pub mass_kg: f64,
 }
 
 /// The calibration record of a calibrated device (`[calibration]`): the contract's record
@@ -272,17 +206,19 @@ pub fn read_device(path: &Path) -> Result<Device, Error> {
 ///
 /// As [`read_device`], except [`Error::Io`].
 pub fn parse_device(text: &str, path: &Path) -> Result<Device, Error> {
-    let device: Device = toml::from_str(text).map_err(|e| {
-        let (line, column) = e
-            .span()
-            .map_or((1, 1), |span| crate::error::line_column(text, span.start));
-        Error::Toml {
-            path: path.to_path_buf(),
-            line,
-            column,
-            message: e.message().trim_end().to_owned(),
-        }
-    })?;
+    let device: Device = DeviceFile::from_toml_str(text)
+        .map(Device::from)
+        .map_err(|e| {
+            let (line, column) = e
+                .span()
+                .map_or((1, 1), |span| crate::error::line_column(text, span.start));
+            Error::Toml {
+                path: path.to_path_buf(),
+                line,
+                column,
+                message: e.message().trim_end().to_owned(),
+            }
+        })?;
     validate::validate(&device, &validate::Locator::new(path, text))?;
     Ok(device)
 }

@@ -11,6 +11,8 @@ use quick_xml::XmlVersion;
 use quick_xml::events::{BytesStart, Event};
 use quick_xml::reader::Reader;
 
+use hapcal_contract::urdf;
+
 use crate::Error;
 use crate::device::{Branch, Device, JointSpec, UrdfSource};
 use crate::error::line_column;
@@ -178,7 +180,7 @@ pub fn import_urdf_tips(path: &Path, tips: &[String]) -> Result<UrdfTree, Error>
         check_chain_length(&chain, tip, path)?;
         chains.push(chain);
     }
-    let root_of = |chain: &[&urdf_rs::Joint], tip: &str| {
+    let root_of = |chain: &[&urdf::Joint], tip: &str| {
         chain
             .first()
             .map_or(tip.to_owned(), |j| j.parent.link.clone())
@@ -248,29 +250,23 @@ pub fn load_tips(path: &Path, tips: &[String], read: &[String]) -> Result<Vec<St
         return Ok(Vec::new());
     }
     let robot = read_robot(path)?;
-    let on_paths = |name: &str| tree.joints.iter().any(|j| j.name == name);
+    let on_paths = |joint: &urdf::Joint| tree.joints.iter().any(|j| j.name == joint.name);
     // Per link: the moving joints between it and the paths, if each is read (else `None`:
-    // the link cannot be a tip whose every joint has a reading).
-    let parent_joint = |link: &str| robot.joints.iter().find(|j| j.child.link == link);
+    // the link cannot be a tip whose every joint has a reading; or the walk met the root,
+    // never meeting a path).
     let reach = |link: &str| -> Option<Vec<String>> {
+        let walk = urdf::walk_up(&robot, link, on_paths);
+        walk.stop?;
         let mut off = Vec::new();
-        let mut at = link;
-        for _ in 0..=robot.joints.len() {
-            let Some(joint) = parent_joint(at) else {
-                return None; // the root, never meeting a path
-            };
-            if on_paths(&joint.name) {
-                return Some(off);
-            }
-            if !matches!(joint.joint_type, urdf_rs::JointType::Fixed) {
+        for joint in walk.passed {
+            if !matches!(joint.joint_type, urdf::JointType::Fixed) {
                 if !read.contains(&joint.name) {
                     return None;
                 }
                 off.push(joint.name.clone());
             }
-            at = &joint.parent.link;
         }
-        None
+        Some(off)
     };
     let candidates: Vec<(String, Vec<String>)> = (robot.links.iter())
         .filter(|l| !tips.contains(&l.name))
@@ -303,35 +299,29 @@ pub fn load_tips(path: &Path, tips: &[String], read: &[String]) -> Result<Vec<St
 /// measurement reads is held rigid there), so the link's weight loads every measured joint
 /// above it; those moving joints are returned second.
 fn inertials(
-    robot: &urdf_rs::Robot,
+    robot: &urdf::Robot,
     joints: &[JointSpec],
     path: &Path,
 ) -> Result<(Vec<LinkInertial>, Vec<String>), Error> {
-    let parent_joint = |link: &str| robot.joints.iter().find(|j| j.child.link == link);
     let mut out: Vec<LinkInertial> = Vec::new();
     let mut held: Vec<String> = Vec::new();
     for l in &robot.links {
         // Walk up from the link to the nearest measured moving joint, composing the origins
-        // of the joints passed (bounded by the joint count: the tree has no loop).
-        let mut frame = Isometry3::identity();
-        let mut link = l.name.as_str();
-        let mut above = None;
-        let mut passed: Vec<&str> = Vec::new();
-        for _ in 0..=robot.joints.len() {
-            let Some(joint) = parent_joint(link) else {
-                break;
-            };
-            if let Some(j) = joints.iter().position(|s| s.name == joint.name) {
-                above = Some(j);
-                break;
-            }
-            if !matches!(joint.joint_type, urdf_rs::JointType::Fixed) {
-                passed.push(&joint.name);
-            }
-            frame = origin_of(joint) * frame;
-            link = &joint.parent.link;
-        }
-        let Some(j) = above else { continue };
+        // of the joints passed.
+        let walk = urdf::walk_up(robot, &l.name, |joint| {
+            joints.iter().any(|s| s.name == joint.name)
+        });
+        let Some(j) = (walk.stop).and_then(|stop| joints.iter().position(|s| s.name == stop.name))
+        else {
+            continue;
+        };
+        let frame = (walk.passed.iter()).fold(Isometry3::identity(), |frame, joint| {
+            origin_of(joint) * frame
+        });
+        let passed: Vec<&str> = (walk.passed.iter())
+            .filter(|joint| !matches!(joint.joint_type, urdf::JointType::Fixed))
+            .map(|joint| joint.name.as_str())
+            .collect();
         if l.inertial.mass.value > 0.0 {
             for name in passed {
                 if !held.iter().any(|h| h == name) {
@@ -365,14 +355,14 @@ fn inertials(
 }
 
 /// Reads and parses a URDF, with XML errors located: [`read_urdf`].
-fn read_robot(path: &Path) -> Result<Arc<urdf_rs::Robot>, Error> {
+fn read_robot(path: &Path) -> Result<Arc<urdf::Robot>, Error> {
     read_urdf(path)
 }
 
 /// URDF texts parsed last, with their descriptions, the latest last: a check or a calibration
 /// reads one URDF many times (each set of tips, each hypothesis), and parsing the XML takes
 /// milliseconds where reading the text takes microseconds.
-static PARSED: Mutex<Vec<(String, Arc<urdf_rs::Robot>)>> = Mutex::new(Vec::new());
+static PARSED: Mutex<Vec<(String, Arc<urdf::Robot>)>> = Mutex::new(Vec::new());
 
 /// URDF texts [`PARSED`] keeps.
 const PARSED_KEPT: usize = 8;
@@ -388,14 +378,14 @@ const PARSED_KEPT: usize = 8;
 /// XML; [`Error::UrdfStructure`] (file:line:column) for a joint naming an undefined link, a
 /// link with two parent joints, several roots or a loop; [`Error::Urdf`] if urdf-rs cannot
 /// parse it.
-pub fn read_urdf(path: &Path) -> Result<Arc<urdf_rs::Robot>, Error> {
+pub fn read_urdf(path: &Path) -> Result<Arc<urdf::Robot>, Error> {
     let text = Error::read_text(path, |line, column, message| Error::Xml {
         path: path.to_path_buf(),
         line,
         column,
         message,
     })?;
-    let parsed = |cache: &mut Vec<(String, Arc<urdf_rs::Robot>)>| {
+    let parsed = |cache: &mut Vec<(String, Arc<urdf::Robot>)>| {
         let at = cache.iter().position(|(t, _)| *t == text)?;
         let hit = cache.remove(at);
         let robot = Arc::clone(&hit.1);
@@ -406,8 +396,7 @@ pub fn read_urdf(path: &Path) -> Result<Arc<urdf_rs::Robot>, Error> {
         return Ok(robot);
     }
     check_xml(&text, path)?;
-    let robot = urdf_rs::read_from_string(&text)
-        .map_err(|e| urdf_error(path, format!("not a valid URDF: {e}")))?;
+    let robot = urdf::parse(&text).map_err(|e| urdf_error(path, e.to_string()))?;
     check_tree(&robot, &text, path)?;
     let robot = Arc::new(robot);
     if let Ok(mut cache) = PARSED.lock() {
@@ -428,7 +417,7 @@ pub const MAX_CHAIN_LENGTH_M: f64 = 50.0;
 /// `Ok` if the links and joints of `robot` form one tree: every joint's parent and child
 /// link is defined, no link has two parent joints, and exactly one link has none (the root;
 /// with none, the joints form a loop). Errors name the joint or link and its line in `text`.
-fn check_tree(robot: &urdf_rs::Robot, text: &str, path: &Path) -> Result<(), Error> {
+fn check_tree(robot: &urdf::Robot, text: &str, path: &Path) -> Result<(), Error> {
     let at = |element: &str, name: &str, message: String| {
         let (line, column) = element_position(text, element, name);
         Error::UrdfStructure {
@@ -555,8 +544,8 @@ fn element_positions(text: &str, element: &str, name: &str) -> Vec<(u64, u64)> {
 /// `Err(`[`Error::UrdfStructure`]`)` if the `<origin xyz>` lengths of `chain` (root to tip)
 /// add up to more than [`MAX_CHAIN_LENGTH_M`]: lengths in millimetres. The error points at the
 /// longest origin's joint in the file at `text_path`.
-fn check_chain_length(chain: &[&urdf_rs::Joint], tip: &str, text_path: &Path) -> Result<(), Error> {
-    let length = |j: &urdf_rs::Joint| {
+fn check_chain_length(chain: &[&urdf::Joint], tip: &str, text_path: &Path) -> Result<(), Error> {
+    let length = |j: &urdf::Joint| {
         let [x, y, z] = j.origin.xyz.0;
         (x * x + y * y + z * z).sqrt()
     };
@@ -592,10 +581,10 @@ fn urdf_error(path: &Path, message: String) -> Error {
 
 /// The joints from the root link down to `tip`, root first.
 fn chain_to<'r>(
-    robot: &'r urdf_rs::Robot,
+    robot: &'r urdf::Robot,
     tip: &str,
     path: &Path,
-) -> Result<Vec<&'r urdf_rs::Joint>, Error> {
+) -> Result<Vec<&'r urdf::Joint>, Error> {
     if !robot.links.iter().any(|l| l.name == tip) {
         return Err(Error::TipNotFound {
             path: path.to_path_buf(),
@@ -603,31 +592,7 @@ fn chain_to<'r>(
             available: robot.links.iter().map(|l| l.name.clone()).collect(),
         });
     }
-    let mut chain = Vec::new();
-    let mut link = tip;
-    loop {
-        let mut parents = robot.joints.iter().filter(|j| j.child.link == link);
-        let Some(joint) = parents.next() else { break };
-        if let Some(other) = parents.next() {
-            return Err(urdf_error(
-                path,
-                format!(
-                    "link {link:?} has two parent joints, {:?} and {:?}",
-                    joint.name, other.name
-                ),
-            ));
-        }
-        if chain.len() >= robot.joints.len() {
-            return Err(urdf_error(
-                path,
-                format!("the joints above link {tip:?} form a loop"),
-            ));
-        }
-        chain.push(joint);
-        link = &joint.parent.link;
-    }
-    chain.reverse();
-    Ok(chain)
+    urdf::path_to(robot, tip).map_err(|e| urdf_error(path, e.to_string()))
 }
 
 /// How wide a continuous joint's limits are.
@@ -640,7 +605,7 @@ enum Limits {
 }
 
 /// The joint's origin as an isometry (m).
-fn origin_of(joint: &urdf_rs::Joint) -> Isometry3<f64> {
+fn origin_of(joint: &urdf::Joint) -> Isometry3<f64> {
     let [x, y, z] = joint.origin.xyz.0;
     let [roll, pitch, yaw] = joint.origin.rpy.0;
     Isometry3::from_parts(
@@ -651,7 +616,7 @@ fn origin_of(joint: &urdf_rs::Joint) -> Isometry3<f64> {
 
 /// A URDF joint as a placement, with its joint entry if it moves.
 fn placement_of(
-    joint: &urdf_rs::Joint,
+    joint: &urdf::Joint,
     path: &Path,
     limits: Limits,
 ) -> Result<(Placement, Option<JointSpec>), Error> {
@@ -663,12 +628,10 @@ fn placement_of(
             format!("joint {name:?}: origin xyz {xyz:?} rpy {rpy:?} is not finite"),
         ));
     }
-    let prismatic = joint.joint_type == urdf_rs::JointType::Prismatic;
+    let prismatic = joint.joint_type == urdf::JointType::Prismatic;
     let axis = match joint.joint_type {
-        urdf_rs::JointType::Fixed => None,
-        urdf_rs::JointType::Revolute
-        | urdf_rs::JointType::Continuous
-        | urdf_rs::JointType::Prismatic => {
+        urdf::JointType::Fixed => None,
+        urdf::JointType::Revolute | urdf::JointType::Continuous | urdf::JointType::Prismatic => {
             let axis = joint.axis.xyz.0;
             let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
             if !norm.is_finite() || norm < 1e-12 {
@@ -689,10 +652,10 @@ fn placement_of(
     };
     let spec = if axis.is_some() {
         let (lower, upper) = match (&joint.joint_type, limits) {
-            (urdf_rs::JointType::Continuous, Limits::Continuous1Turn) => {
+            (urdf::JointType::Continuous, Limits::Continuous1Turn) => {
                 (-std::f64::consts::PI, std::f64::consts::PI)
             }
-            (urdf_rs::JointType::Continuous, Limits::Continuous1000) => (-1e3, 1e3),
+            (urdf::JointType::Continuous, Limits::Continuous1000) => (-1e3, 1e3),
             _ => (joint.limit.lower, joint.limit.upper),
         };
         let unit = if prismatic { "m" } else { "rad" };
@@ -774,7 +737,7 @@ pub fn write_calibrated_urdf(
     }
 
     let edits = plan_edits(&text, path, &targets)?;
-    urdf_rs::read_from_string(&text).map_err(|e| urdf_err(format!("not a valid URDF: {e}")))?;
+    urdf::parse(&text).map_err(|e| urdf_err(e.to_string()))?;
     if let Some(missing) = placements.iter().find(|p| !edits.joints.contains(&p.name)) {
         return Err(Error::UnknownJoint {
             path: path.to_path_buf(),
@@ -791,9 +754,10 @@ pub fn write_calibrated_urdf(
         out.replace_range(range, &replacement);
     }
 
-    let robot = urdf_rs::read_from_string(&out).map_err(|e| {
+    let robot = urdf::parse(&out).map_err(|e| {
         urdf_err(format!(
-            "internal error: the written URDF does not parse: {e}"
+            "internal error: the written URDF does not parse: {}",
+            e.reason
         ))
     })?;
     for p in placements {

@@ -1,8 +1,7 @@
 //! Loading a device file (TOML, docs/design.md §5.1), as `hapcal calibrate` writes it.
 
+use hapcal_contract::device::{Convention, DeviceFile, JointRef, JointSpec};
 use hapcal_contract::{Calibration, CapstanField, ContractError, TorqueSource, ValueName};
-use serde::Deserialize;
-use serde::de::IgnoredAny;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -65,86 +64,6 @@ impl fmt::Display for LoadError {
 }
 
 impl std::error::Error for LoadError {}
-
-/// A device file's tables, as [`Model::from_toml`] and [`crate::Robot::from_device_str`]
-/// read them.
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct File {
-    #[serde(default)]
-    #[expect(
-        dead_code,
-        reason = "read so that the key is known; the runtime needs no name"
-    )]
-    name: Option<String>,
-    #[serde(default)]
-    pub(crate) convention: Option<String>,
-    #[serde(default)]
-    pub(crate) dh: Vec<DhEntry>,
-    #[serde(default)]
-    pub(crate) urdf: Option<IgnoredAny>,
-    #[serde(default)]
-    pub(crate) placement: Vec<IgnoredAny>,
-    #[serde(default)]
-    pub(crate) branch: Vec<IgnoredAny>,
-    #[serde(default)]
-    pub(crate) joint: Vec<JointEntry>,
-    #[serde(default)]
-    pub(crate) capstan: Vec<CapstanEntry>,
-    #[serde(default)]
-    pub(crate) parallelogram: Option<IgnoredAny>,
-    #[serde(default)]
-    #[expect(
-        dead_code,
-        reason = "the measurement rig: not part of the evaluated model"
-    )]
-    cable_encoder: Option<IgnoredAny>,
-    #[serde(default)]
-    pub(crate) handle: Option<HandleEntry>,
-    #[serde(default)]
-    pub(crate) calibration: Option<Calibration>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct HandleEntry {
-    mass_kg: f64,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct DhEntry {
-    a_m: f64,
-    alpha_rad: f64,
-    d_m: f64,
-    theta_rad: f64,
-    #[serde(default)]
-    beta_rad: Option<f64>,
-    joint: toml::Value,
-}
-
-/// One `[[joint]]`: its name and limits.
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct JointEntry {
-    pub(crate) name: String,
-    pub(crate) lower_rad: f64,
-    pub(crate) upper_rad: f64,
-    #[serde(default)]
-    #[expect(
-        dead_code,
-        reason = "readings arrive in rad; the resolution is not needed"
-    )]
-    counts_per_rev: Option<u32>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct CapstanEntry {
-    joint: usize,
-    ratio: f64,
-    drum_distance_m: f64,
-}
 
 /// The drive of one joint while the calibration is read.
 enum Pending {
@@ -211,7 +130,8 @@ impl Model {
     /// the text in messages.
     ///
     /// # Errors
-    /// [`LoadError::Parse`] for TOML syntax, a missing or unknown key or a wrong type, and
+    /// [`LoadError::Parse`] for TOML syntax, a missing or unknown key or a wrong type (an
+    /// unknown `convention`, a `[[dh]]` joint that is neither a number ≥ 1 nor `"fixed"`), and
     /// for a `[calibration]` the contract refuses or a value naming a joint, row or
     /// coefficient the device does not have (or a capstan value on a joint without a
     /// capstan), at its line and column;
@@ -222,7 +142,7 @@ impl Model {
     /// under another torque source, or a model value [`Model::from_dh`], [`Drive`] or
     /// [`Model::with_handle_compliance`] refuses.
     pub fn from_toml(text: &str, origin: &str) -> Result<Model, LoadError> {
-        let DeviceFile {
+        let DhFile {
             file,
             convention,
             rows,
@@ -248,7 +168,7 @@ impl Model {
             (&mut cheb, &mut compliance),
         )?;
 
-        let drives = drives_of(&pending, &cheb, &file.joint, origin)?;
+        let drives = drives_of(&pending, &cheb, &file.joints, origin)?;
         let model =
             Model::from_dh(convention, &rows, &drives).map_err(|e| model_error("[[dh]]", e))?;
         let model = if compliance.iter().any(|&k| k != 0.0) {
@@ -306,13 +226,17 @@ impl Model {
 ///
 /// # Errors
 /// A capstan on a joint the device does not have, or two on one joint.
-fn pending_capstans(file: &File, n_joints: usize, origin: &str) -> Result<Vec<Pending>, LoadError> {
+fn pending_capstans(
+    file: &DeviceFile,
+    n_joints: usize,
+    origin: &str,
+) -> Result<Vec<Pending>, LoadError> {
     let invalid = |message: String| LoadError::Invalid {
         origin: origin.to_owned(),
         message,
     };
     let mut pending: Vec<Pending> = (0..n_joints).map(|_| Pending::Direct).collect();
-    for c in &file.capstan {
+    for c in &file.capstans {
         let slot = (c.joint.checked_sub(1))
             .and_then(|j| pending.get_mut(j))
             .ok_or_else(|| {
@@ -453,7 +377,7 @@ fn apply_values(
 fn drives_of(
     pending: &[Pending],
     cheb: &[Vec<Option<f64>>],
-    joints: &[JointEntry],
+    joints: &[JointSpec],
     origin: &str,
 ) -> Result<Vec<Drive>, LoadError> {
     let invalid = |message: String| LoadError::Invalid {
@@ -623,9 +547,9 @@ fn locate_path(text: &str, path: &[Step]) -> (usize, usize) {
 
 /// A device file's `[[dh]]` chain, read and checked: the tables, the convention, the rows
 /// (as written) and the number of joints.
-pub(crate) struct DeviceFile {
-    /// The file's tables.
-    pub(crate) file: File,
+pub(crate) struct DhFile {
+    /// The file's tables, as the one device-file reader (`hapcal-contract`) reads them.
+    pub(crate) file: DeviceFile,
     /// Standard or modified D-H.
     pub(crate) convention: DhConvention,
     /// The `[[dh]]` rows as written.
@@ -640,8 +564,8 @@ pub(crate) struct DeviceFile {
 ///
 /// # Errors
 /// As [`Model::from_toml`] for these checks.
-pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DeviceFile, LoadError> {
-    let file: File = toml::from_str(text).map_err(|e| {
+pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DhFile, LoadError> {
+    let file = DeviceFile::from_toml_str(text).map_err(|e| {
         let (line, column) = e
             .span()
             .map_or((0, 0), |span| line_column(text, span.start));
@@ -658,29 +582,23 @@ pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DeviceFile, L
         message,
     };
 
-    if !file.placement.is_empty() || !file.branch.is_empty() || file.urdf.is_some() {
+    if !file.placements.is_empty() || !file.branches.is_empty() || file.urdf.is_some() {
         return Err(invalid(
             "[[placement]] (URDF) chains are not supported by the runtime: use a [[dh]] \
                  chain"
                 .to_owned(),
         ));
     }
-    let convention = match file.convention.as_deref() {
-        None | Some("dh") => DhConvention::Standard,
-        Some("mdh") => DhConvention::Modified,
-        Some(other) => {
-            return Err(invalid(format!(
-                "unknown convention {other:?}, expected \"dh\" (standard) or \"mdh\" \
-                     (modified)"
-            )));
-        }
+    let convention = match file.convention {
+        Convention::Standard => DhConvention::Standard,
+        Convention::Modified => DhConvention::Modified,
     };
     let mut rows = Vec::with_capacity(file.dh.len());
     let mut n_joints = 0usize;
     for (i, entry) in file.dh.iter().enumerate() {
-        let joint = match &entry.joint {
-            toml::Value::String(s) if s == "fixed" => false,
-            toml::Value::Integer(j) if usize::try_from(*j).ok() == Some(n_joints + 1) => true,
+        let joint = match entry.joint {
+            JointRef::Fixed => false,
+            JointRef::Joint(j) if j == n_joints + 1 => true,
             other => {
                 return Err(invalid(format!(
                     "[[dh]] row {i}: joint = {other}, expected {} (joints numbered in row \
@@ -699,13 +617,13 @@ pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DeviceFile, L
             joint,
         });
     }
-    if file.joint.len() != n_joints {
+    if file.joints.len() != n_joints {
         return Err(invalid(format!(
             "the chain has {n_joints} joints but {} [[joint]] entries",
-            file.joint.len()
+            file.joints.len()
         )));
     }
-    for j in &file.joint {
+    for j in &file.joints {
         if !j.lower_rad.is_finite() || !j.upper_rad.is_finite() || j.lower_rad >= j.upper_rad {
             return Err(invalid(format!(
                 "[[joint]] {:?}: lower_rad = {} must be finite and below upper_rad = {}",
@@ -713,7 +631,7 @@ pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DeviceFile, L
             )));
         }
     }
-    Ok(DeviceFile {
+    Ok(DhFile {
         file,
         convention,
         rows,

@@ -5,43 +5,13 @@
 
 use std::path::Path;
 
+use hapcal_contract::urdf;
 use hapcal_contract::{Calibration, ElementField, Region, Torque, TorqueSource, ValueName};
-use serde::Deserialize;
 
 use crate::dh_table::{DhTable, add_dh, dh_frames};
 use crate::robot::deviation_pose;
 use crate::robot::{HarmonicTerm, PointMass, RobotJoint, RobotTip, TransversalJoint};
 use crate::{GravityModel, LoadError, Pose, Robot};
-
-/// The sidecar: `[frames.<name>]` and `[values]` (as `hapcal-calibrate`'s `sidecar_toml`).
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Sidecar {
-    #[serde(default)]
-    frames: std::collections::BTreeMap<String, FrameEntry>,
-    #[serde(default)]
-    values: std::collections::BTreeMap<String, ValueEntry>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct FrameEntry {
-    xyz_m: [f64; 3],
-    rpy_rad: [f64; 3],
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct ValueEntry {
-    value: f64,
-    #[serde(default)]
-    #[expect(
-        dead_code,
-        reason = "the runtime evaluates the values, not their spread"
-    )]
-    std: Option<f64>,
-    unit: String,
-}
 
 /// The rotation `Rz(yaw)·Ry(pitch)·Rx(roll)` and translation `xyz` of a URDF `<origin>`.
 pub(crate) fn origin_pose(xyz: [f64; 3], rpy: [f64; 3]) -> Pose {
@@ -66,7 +36,7 @@ fn invalid(origin: &str, message: String) -> LoadError {
     }
 }
 
-fn joint_pose(joint: &urdf_rs::Joint) -> Pose {
+fn joint_pose(joint: &urdf::Joint) -> Pose {
     origin_pose(joint.origin.xyz.0, joint.origin.rpy.0)
 }
 
@@ -105,7 +75,8 @@ impl Robot {
     /// for a malformed sidecar, an unknown value name, a wrong unit, a missing key or a newer
     /// schema, and for a record that does not bind to this URDF and these tips (above);
     /// [`LoadError::Invalid`] for a URDF that urdf-rs cannot read, a tip that is not a
-    /// link (listing them), a tip named twice, a floating or planar joint on a path, a joint
+    /// link (listing them), a tip named twice, a link on a path with two parent joints or
+    /// joints above a tip that form a loop, a floating or planar joint on a path, a joint
     /// without axis, a non-finite number, a negative mass, a value of a joint or element not
     /// on the paths to the tips, a haptic device's value, lumped loads whose tips are not all
     /// loaded.
@@ -138,8 +109,7 @@ impl Robot {
         sidecar: Option<(&str, &str)>,
         tips: &[&str],
     ) -> Result<Robot, LoadError> {
-        let robot = urdf_rs::read_from_string(urdf)
-            .map_err(|e| invalid(origin, format!("not a valid URDF: {e}")))?;
+        let robot = urdf::parse(urdf).map_err(|e| invalid(origin, e.to_string()))?;
         if tips.is_empty() {
             return Err(invalid(origin, "no tip link given".to_owned()));
         }
@@ -187,13 +157,13 @@ impl Robot {
                     ));
                 }
                 let prismatic = match joint.joint_type {
-                    urdf_rs::JointType::Fixed => {
+                    urdf::JointType::Fixed => {
                         pending = pending.compose(&joint_pose(joint));
                         last_fixed = Some(name.clone());
                         continue;
                     }
-                    urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => false,
-                    urdf_rs::JointType::Prismatic => true,
+                    urdf::JointType::Revolute | urdf::JointType::Continuous => false,
+                    urdf::JointType::Prismatic => true,
                     ref other => {
                         return Err(invalid(
                             origin,
@@ -292,40 +262,30 @@ impl Robot {
     ) -> Result<(), LoadError> {
         let record = record.map_err(|e| crate::load::contract_error(e, origin))?;
         if record.is_legacy() {
-            return self.apply_legacy_sidecar(text, origin);
+            return self.apply_legacy_sidecar(&record, origin);
         }
         self.apply_record(record, text, origin, tip_elements, urdf_joints)
     }
 
-    /// Reads an earlier hapcal's sidecar: its frames and compliances.
-    fn apply_legacy_sidecar(&mut self, text: &str, origin: &str) -> Result<(), LoadError> {
-        let sidecar: Sidecar = toml::from_str(text).map_err(|e| match e.span() {
-            Some(span) => {
-                let (line, column) = crate::load::line_column(text, span.start);
-                LoadError::Parse {
-                    origin: origin.to_owned(),
-                    line,
-                    column,
-                    message: e.message().to_owned(),
-                }
-            }
-            None => invalid(origin, e.message().to_owned()),
-        })?;
-        for (name, f) in &sidecar.frames {
-            if f.xyz_m.iter().chain(&f.rpy_rad).any(|v| !v.is_finite()) {
-                return Err(invalid(
-                    origin,
-                    format!("frames.{name}: a value is not finite"),
-                ));
-            }
+    /// Reads an earlier hapcal's sidecar (`record`, parsed and checked by the contract): its
+    /// frames and compliances, the values in name order.
+    fn apply_legacy_sidecar(
+        &mut self,
+        record: &Calibration,
+        origin: &str,
+    ) -> Result<(), LoadError> {
+        for (name, f) in &record.frames {
             self.frames
                 .push((name.clone(), origin_pose(f.xyz_m, f.rpy_rad)));
         }
+        let mut values: Vec<&hapcal_contract::CalibratedValue> = record.values.iter().collect();
+        values.sort_by(|a, b| a.name.cmp(&b.name));
         let unit = match self.gravity {
             GravityModel::Masses => "rad/(N·m)",
             GravityModel::Lumped => "rad/m",
         };
-        for (name, v) in &sidecar.values {
+        for v in values {
+            let name = &v.name;
             let Some(joints) = name.strip_prefix("compliance.") else {
                 return Err(invalid(
                     origin,
@@ -416,13 +376,13 @@ impl Robot {
     /// record values a D-H robot cannot hold (placement deviations, transversal compliances,
     /// a haptic device's values) or that name no joint `q<j>` of the chain.
     pub fn from_device_str(text: &str, origin: &str) -> Result<Robot, LoadError> {
-        let crate::load::DeviceFile {
+        let crate::load::DhFile {
             file,
             convention,
             rows,
             n_joints,
         } = crate::load::read_device_file(text, origin)?;
-        if !file.capstan.is_empty() || file.parallelogram.is_some() {
+        if !file.capstans.is_empty() || file.parallelogram.is_some() {
             return Err(invalid(
                 origin,
                 "a haptic device (its file has [[capstan]] or [parallelogram] tables): its \
@@ -506,7 +466,7 @@ impl Robot {
             joints,
             joint_names: (1..=n_joints).map(|j| format!("q{j}")).collect(),
             limits: file
-                .joint
+                .joints
                 .iter()
                 .map(|j| (j.lower_rad, j.upper_rad))
                 .collect(),
@@ -1043,7 +1003,7 @@ impl RecordAt<'_> {
 /// # Errors
 /// A tip given twice, or no link of that name (the links are listed).
 fn check_tip(
-    robot: &urdf_rs::Robot,
+    robot: &urdf::Robot,
     before: &[&str],
     tip: &str,
     origin: &str,
@@ -1064,30 +1024,16 @@ fn check_tip(
     Ok(())
 }
 
-/// The joints from the root link down to link `tip`, root first.
+/// The joints from the root link down to link `tip`, root first (the contract's URDF walk).
 ///
 /// # Errors
-/// Joints above `tip` that form a loop.
+/// A link above `tip` with two parent joints, or joints above it that form a loop.
 fn path_to<'r>(
-    robot: &'r urdf_rs::Robot,
+    robot: &'r urdf::Robot,
     tip: &str,
     origin: &str,
-) -> Result<Vec<&'r urdf_rs::Joint>, LoadError> {
-    let parent_joint = |link: &str| robot.joints.iter().find(|j| j.child.link == link);
-    let mut path = Vec::new();
-    let mut link = tip;
-    while let Some(joint) = parent_joint(link) {
-        if path.len() >= robot.joints.len() {
-            return Err(invalid(
-                origin,
-                format!("the joints above link {tip:?} form a loop"),
-            ));
-        }
-        path.push(joint);
-        link = &joint.parent.link;
-    }
-    path.reverse();
-    Ok(path)
+) -> Result<Vec<&'r urdf::Joint>, LoadError> {
+    urdf::path_to(robot, tip).map_err(|e| invalid(origin, e.to_string()))
 }
 
 /// A moving joint's unit axis (in its frame) and limits (rad or m; a continuous joint's are
@@ -1095,10 +1041,7 @@ fn path_to<'r>(
 ///
 /// # Errors
 /// An axis without direction, limits that are not lower ≤ upper.
-fn axis_and_limits(
-    joint: &urdf_rs::Joint,
-    origin: &str,
-) -> Result<([f64; 3], (f64, f64)), LoadError> {
+fn axis_and_limits(joint: &urdf::Joint, origin: &str) -> Result<([f64; 3], (f64, f64)), LoadError> {
     let name = &joint.name;
     let axis = joint.axis.xyz.0;
     let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
@@ -1109,7 +1052,7 @@ fn axis_and_limits(
         ));
     }
     let (lower, upper) = match joint.joint_type {
-        urdf_rs::JointType::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
+        urdf::JointType::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
         _ => (joint.limit.lower, joint.limit.upper),
     };
     if lower.is_nan() || upper.is_nan() || lower > upper {
@@ -1130,11 +1073,10 @@ fn axis_and_limits(
 /// # Errors
 /// A mass that is not finite and non-negative, or at a point that is not finite.
 fn link_masses(
-    robot: &urdf_rs::Robot,
+    robot: &urdf::Robot,
     joint_names: &[String],
     origin: &str,
 ) -> Result<Vec<PointMass>, LoadError> {
-    let parent_joint = |link: &str| robot.joints.iter().find(|j| j.child.link == link);
     let mut masses = Vec::new();
     for l in &robot.links {
         let mass_kg = l.inertial.mass.value;
@@ -1151,21 +1093,12 @@ fn link_masses(
         if mass_kg == 0.0 {
             continue;
         }
-        let mut frame = Pose::IDENTITY;
-        let mut link = l.name.as_str();
-        let mut above = None;
-        for _ in 0..=robot.joints.len() {
-            let Some(joint) = parent_joint(link) else {
-                break;
-            };
-            if let Some(j) = joint_names.iter().position(|n| *n == joint.name) {
-                above = Some(j);
-                break;
-            }
-            frame = joint_pose(joint).compose(&frame);
-            link = &joint.parent.link;
-        }
+        let walk = urdf::walk_up(robot, &l.name, |joint| joint_names.contains(&joint.name));
+        let above = (walk.stop).and_then(|stop| joint_names.iter().position(|n| *n == stop.name));
         if let Some(joint) = above {
+            let frame = (walk.passed.iter()).fold(Pose::IDENTITY, |frame, joint| {
+                joint_pose(joint).compose(&frame)
+            });
             masses.push(PointMass {
                 joint,
                 mass_kg,

@@ -2,7 +2,7 @@
 
 use std::fmt::Write as _;
 
-use super::serde_helpers::convention;
+use super::serde_helpers::convention_name;
 use super::{Device, JointRef};
 
 /// The device file text of `device` (docs/design.md §5); [`parse_device`](crate::parse_device)
@@ -23,7 +23,7 @@ pub fn write_device(device: &Device) -> String {
     if !device.dh.is_empty() {
         line(format!(
             "convention = {}",
-            string(convention::name(device.convention))
+            string(convention_name(device.convention))
         ));
     }
     for row in &device.dh {

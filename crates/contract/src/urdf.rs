@@ -1,0 +1,217 @@
+//! The URDF reader every crate shares: a URDF's text parsed into its description (links with
+//! their `<inertial>` masses, joints with their type, `<origin>`, `<axis>`, `<limit>`, parent
+//! and child link) and the walks over its tree that every reader makes (root to a tip, a link
+//! up to the nearest joint of a set).
+//!
+//! `hapcal-io` adds its checks (well-formed XML, one tree, file positions) and converts the
+//! description into kinematics types; the runtime converts it into its fixed-size model.
+//! Neither parses URDF text itself.
+
+/// The parsed description: [`Robot`] (links and joints), as urdf-rs reads it.
+pub use urdf_rs::{Joint, JointType, Link, Robot};
+
+/// Text that is not a URDF ([`parse`]); displayed as `not a valid URDF: ` and the reason.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct NotUrdf {
+    /// urdf-rs's reason.
+    pub reason: String,
+}
+
+impl std::fmt::Display for NotUrdf {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "not a valid URDF: {}", self.reason)
+    }
+}
+
+impl std::error::Error for NotUrdf {}
+
+/// Parses a URDF's text into its description.
+///
+/// # Errors
+/// [`NotUrdf`]: text that urdf-rs cannot read as a URDF.
+pub fn parse(text: &str) -> Result<Robot, NotUrdf> {
+    urdf_rs::read_from_string(text).map_err(|e| NotUrdf {
+        reason: e.to_string(),
+    })
+}
+
+/// The joint whose child is `link` (the first in file order, should a malformed file give
+/// the link two); `None` for the root link or a link no joint names.
+pub fn parent_joint<'r>(robot: &'r Robot, link: &str) -> Option<&'r Joint> {
+    robot.joints.iter().find(|j| j.child.link == link)
+}
+
+/// Why [`path_to`] found no path.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum PathError {
+    /// Link `link` is the child of two joints, `first` and `second` (file order).
+    TwoParents {
+        /// The link.
+        link: String,
+        /// Its first parent joint.
+        first: String,
+        /// Its second parent joint.
+        second: String,
+    },
+    /// The joints above `tip` form a loop.
+    Loop {
+        /// The link the walk started from.
+        tip: String,
+    },
+}
+
+impl std::fmt::Display for PathError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PathError::TwoParents {
+                link,
+                first,
+                second,
+            } => write!(
+                f,
+                "link {link:?} has two parent joints, {first:?} and {second:?}"
+            ),
+            PathError::Loop { tip } => write!(f, "the joints above link {tip:?} form a loop"),
+        }
+    }
+}
+
+impl std::error::Error for PathError {}
+
+/// The joints from the root link down to the link `tip`, root first: from `tip`, each link's
+/// parent joint up to a link without one. Empty for the root link (or a link no joint names:
+/// whether `tip` is a link at all is the caller's check).
+///
+/// # Errors
+/// [`PathError::TwoParents`] for a link on the way that is the child of two joints;
+/// [`PathError::Loop`] when the walk passes more joints than the robot has.
+pub fn path_to<'r>(robot: &'r Robot, tip: &str) -> Result<Vec<&'r Joint>, PathError> {
+    let mut path = Vec::new();
+    let mut link = tip;
+    loop {
+        let mut parents = robot.joints.iter().filter(|j| j.child.link == link);
+        let Some(joint) = parents.next() else { break };
+        if let Some(other) = parents.next() {
+            return Err(PathError::TwoParents {
+                link: link.to_owned(),
+                first: joint.name.clone(),
+                second: other.name.clone(),
+            });
+        }
+        if path.len() >= robot.joints.len() {
+            return Err(PathError::Loop {
+                tip: tip.to_owned(),
+            });
+        }
+        path.push(joint);
+        link = &joint.parent.link;
+    }
+    path.reverse();
+    Ok(path)
+}
+
+/// The walk from a link up to the nearest joint above it that `stop` accepts
+/// ([`walk_up`]).
+#[derive(Clone, Debug)]
+pub struct WalkUp<'r> {
+    /// The joints passed on the way, nearest the link first (`stop` refused each).
+    pub passed: Vec<&'r Joint>,
+    /// The joint `stop` accepted; `None` when the walk reached the root link (or passed as
+    /// many joints as the robot has) first.
+    pub stop: Option<&'r Joint>,
+}
+
+/// Walks from `link` up its parent joints ([`parent_joint`]) to the nearest joint that `stop`
+/// accepts: the moving joint whose frame carries a link's mass, the path a link hangs from.
+/// Bounded by the robot's joint count (a loop ends the walk without a stop).
+pub fn walk_up<'r>(robot: &'r Robot, link: &str, stop: impl Fn(&Joint) -> bool) -> WalkUp<'r> {
+    let mut passed = Vec::new();
+    let mut at = link;
+    for _ in 0..=robot.joints.len() {
+        let Some(joint) = parent_joint(robot, at) else {
+            break;
+        };
+        if stop(joint) {
+            return WalkUp {
+                passed,
+                stop: Some(joint),
+            };
+        }
+        passed.push(joint);
+        at = &joint.parent.link;
+    }
+    WalkUp { passed, stop: None }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const ARM: &str = r#"<robot name="arm">
+        <link name="base"/>
+        <link name="upper"><inertial><mass value="2.0"/><origin xyz="0 0 0.1"/>
+            <inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>
+        <link name="hand"/>
+        <link name="tool"/>
+        <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
+            <origin xyz="0 0 0.3"/><axis xyz="0 0 1"/>
+            <limit lower="-1" upper="1" effort="0" velocity="0"/></joint>
+        <joint name="elbow" type="revolute"><parent link="upper"/><child link="hand"/>
+            <origin xyz="0 0 0.4"/><axis xyz="0 1 0"/>
+            <limit lower="-2" upper="2" effort="0" velocity="0"/></joint>
+        <joint name="flange" type="fixed"><parent link="hand"/><child link="tool"/>
+            <origin xyz="0 0 0.05"/></joint>
+    </robot>"#;
+
+    fn names(joints: &[&Joint]) -> Vec<String> {
+        joints.iter().map(|j| j.name.clone()).collect()
+    }
+
+    #[test]
+    fn path_runs_from_the_root_to_the_tip() -> Result<(), Box<dyn std::error::Error>> {
+        let robot = parse(ARM)?;
+        assert_eq!(
+            names(&path_to(&robot, "tool")?),
+            ["shoulder", "elbow", "flange"]
+        );
+        assert!(path_to(&robot, "base")?.is_empty());
+        assert_eq!(robot.links[1].inertial.mass.value, 2.0);
+        Ok(())
+    }
+
+    #[test]
+    fn walk_up_stops_at_the_first_accepted_joint() -> Result<(), Box<dyn std::error::Error>> {
+        let robot = parse(ARM)?;
+        let walk = walk_up(&robot, "tool", |j| j.name == "shoulder");
+        assert_eq!(names(&walk.passed), ["flange", "elbow"]);
+        assert_eq!(walk.stop.map(|j| j.name.as_str()), Some("shoulder"));
+        let none = walk_up(&robot, "tool", |_| false);
+        assert_eq!(none.passed.len(), 3);
+        assert!(none.stop.is_none());
+        Ok(())
+    }
+
+    #[test]
+    fn a_link_with_two_parents_and_a_loop_are_refused() -> Result<(), Box<dyn std::error::Error>> {
+        let two = ARM.replace(
+            "</robot>",
+            r#"<joint name="extra" type="fixed"><parent link="base"/><child link="hand"/></joint></robot>"#,
+        );
+        let robot = parse(&two)?;
+        assert_eq!(
+            path_to(&robot, "tool").err().map(|e| e.to_string()),
+            Some("link \"hand\" has two parent joints, \"elbow\" and \"extra\"".to_owned())
+        );
+        let looped = ARM.replace(
+            "</robot>",
+            r#"<joint name="back" type="fixed"><parent link="hand"/><child link="base"/></joint></robot>"#,
+        );
+        let robot = parse(&looped)?;
+        assert_eq!(
+            path_to(&robot, "tool").err().map(|e| e.to_string()),
+            Some("the joints above link \"tool\" form a loop".to_owned())
+        );
+        assert!(parse("<robot").is_err_and(|e| e.to_string().starts_with("not a valid URDF: ")));
+        Ok(())
+    }
+}
