@@ -152,7 +152,7 @@ pub(super) fn read_rows(
         body.repeats.see(measured_values(&row), line);
         body.identical.see(body.n_rows, &row.markers);
         body.any_measured |= !row.markers.is_empty() || row.distance_m.is_some();
-        if body.n_rows % stride == 0 {
+        if body.n_rows.is_multiple_of(stride) {
             body.rows.push(row);
         }
         body.n_rows += 1;
