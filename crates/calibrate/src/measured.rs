@@ -83,8 +83,8 @@ pub struct MeasuredOutcome {
     /// Cross-validation scores, simplest rung first (empty when the rung was given).
     pub ladder: Vec<RungReport>,
     /// The training rows the ladder judged, when it judged a sample spread over more than
-    /// [`crate::fit::LADDER_ROWS`] residuals' worth of them ([`crate::fit::ladder_sample`]:
-    /// 3,333 rows of two markers); `None` when it judged every row or the rung was given.
+    /// [`crate::fit::LADDER_ROWS`] of them ([`crate::fit::ladder_sample`]); `None` when it
+    /// judged every row or the rung was given.
     pub cross_validated_rows: Option<usize>,
     /// Final identification of the chosen rung on all training rows.
     pub fitted: Fitted,
@@ -2036,7 +2036,7 @@ fn choose_rung(
 ) -> Result<Choice> {
     let Some(rung) = cfg.rung else {
         let lengths: Vec<usize> = fits.train.iter().map(|t| t.rows.len()).collect();
-        return match crate::fit::ladder_sample(&lengths, ladder_rows(fits.train)) {
+        return match crate::fit::ladder_sample(&lengths, crate::fit::LADDER_ROWS) {
             Some(sample) => climb_sample(fits, cfg, test, frames, richest_fit, ladder, &sample),
             None => climb_ladder(fits, cfg, test, frames, richest_fit, ladder),
         };
@@ -2054,21 +2054,6 @@ fn choose_rung(
         chosen,
         ladder: LadderOutcome::default(),
     })
-}
-
-/// Most training rows the ladder judges: [`crate::fit::LADDER_ROWS`] residuals' worth of rows
-/// (at least one a row). The ladder's cost grows with the residuals, not the rows: each fold's
-/// refit starts from the Jacobian of every judged row at the rung's estimate (`AtWarm`, a
-/// residual by every parameter), so a row of a distance log (one residual) counts once and a
-/// row of two markers (six) six times: 3,333 rows of the simulated humanoid, whose recording
-/// (550 rows, 3,300 residuals) is judged whole.
-fn ladder_rows(train: &[MeasurementTable]) -> usize {
-    let rows: usize = train.iter().map(|t| t.rows.len()).sum();
-    let residuals: usize = (train.iter().flat_map(|t| &t.rows))
-        .map(row_residuals)
-        .sum();
-    let per_row = residuals.div_ceil(rows.max(1)).max(1);
-    crate::fit::LADDER_ROWS / per_row
 }
 
 /// The rung chosen on the ladder of a long recording: the ladder ([`climb_ladder`]) judged on
