@@ -1,10 +1,12 @@
-//! `cargo xtask bench --scale`: the command line on long haptic logs. Each size's log is
-//! written by `hapcal simulate` (the reference device's truth, seed 7), then `check`,
-//! `calibrate --model auto`, `predict` and `diagnose` run on it under `/usr/bin/time -v`:
-//! wall time, CPU time and peak RSS, per row, and a straight line fitted through the sizes
-//! (time and memory against rows). It writes the section "Commands on long logs" of
-//! docs/results/bench.md (the rest of the page is `cargo xtask bench`'s). A benchmark, never a
-//! test: the figures depend on the machine and its load, which the section gives.
+//! `cargo xtask bench --scale`: the command line on long recordings of both kinds. Each size's
+//! haptic log is written by `hapcal simulate` (the reference device's truth, seed 7), each
+//! size's marker file by the simulated two-arm humanoid (`sim_humanoid --rows N`, streamed,
+//! seed 12); then `check`, `calibrate --model auto`, `predict` and `diagnose` run on it under
+//! `/usr/bin/time -v`: wall time, CPU time and peak RSS, per row, and a straight line fitted
+//! through the sizes (time and memory against rows). It writes the section "Commands on long
+//! logs" of docs/results/bench.md (the rest of the page is `cargo xtask bench`'s). A
+//! benchmark, never a test: the figures depend on the machine and its load, which the section
+//! gives.
 
 use std::path::{Path, PathBuf};
 
@@ -14,7 +16,7 @@ use xshell::{Shell, cmd};
 /// The heading of the section this task writes in docs/results/bench.md.
 pub(crate) const SECTION: &str = "## Commands on long logs";
 
-/// What the section says below its table: where the time and the memory go.
+/// What the section says below the haptic logs' table: where the time and the memory go.
 const EXPLAINED: &str = "
 `check` reads the log as a stream and keeps only the rows it judges; its memory past the
 executable's is the repeat detector's hash table. `calibrate --model auto` judges its ladder
@@ -76,100 +78,183 @@ fn line(points: &[(f64, f64)]) -> (f64, f64) {
     (my - b * mx, b)
 }
 
-/// Runs the scale benchmark at `rows` (data rows of each log) and writes its section of
-/// docs/results/bench.md.
-pub(crate) fn run(sh: &Shell, rows: &[usize]) -> Result<()> {
-    let target =
-        std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| PathBuf::from("target"), PathBuf::from);
-    cmd!(sh, "cargo build --release --quiet -p hapcal --bin hapcal").run()?;
-    let hapcal = sh.current_dir().join(target.join("release/hapcal"));
-    let dir = sh.current_dir().join(target.join("bench-scale"));
-    sh.create_dir(&dir)?;
-    let device = "fixtures/reference-device/device.toml";
-    let truth = "fixtures/reference-device/truth.toml";
-    let load_before = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let date = cmd!(sh, "date -u +%Y-%m-%dT%H:%MZ").read()?;
-    let commands = ["check", "calibrate --model auto", "predict", "diagnose"];
-    // runs[c][s]: command c at size s.
-    let mut runs: Vec<Vec<Run>> = commands.iter().map(|_| Vec::new()).collect();
-    for &n in rows {
-        let log = dir.join(format!("log-{n}.csv"));
-        if !log.exists() {
-            let poses = n.to_string();
+/// What the section says below the marker files' table: where the time and the memory go.
+const EXPLAINED_MARKERS: &str = "
+On a marker file, `check` reads every row and checks it, and keeps every `s`-th row (at most
+20,000, the ladder's sample, `hapcal_calibrate::fit::ladder_sample`) for the setup check to
+judge, so its memory past the executable's is the repeat detector's hash table and the sample;
+its findings still name file:line. `calibrate --model auto` judges its ladder on that sample
+and fits the chosen model on every row, after the Huber loss has bounded the gross errors of
+every row; the report says \"model choice by 5-fold cross-validation on N rows spread over the
+training data\". Its memory past that is the file's rows as read (17 joint readings and two
+markers: a few hundred bytes a row) and the fits on every row.
+";
+
+/// The commands each file is measured with, in the tables' order.
+const COMMANDS: [&str; 4] = ["check", "calibrate --model auto", "predict", "diagnose"];
+
+/// The simulated humanoid's URDF and tips (fixtures/sim-humanoid).
+const HUMANOID: &str = "fixtures/sim-humanoid/humanoid.urdf";
+
+/// A kind of recording the benchmark measures.
+#[derive(Clone, Copy)]
+enum Kind {
+    /// A haptic log of the reference device (`hapcal simulate`).
+    Haptic,
+    /// A motion-capture marker file of the simulated humanoid (`sim_humanoid --rows`).
+    Markers,
+}
+
+/// The arguments of each of [`COMMANDS`] on the recording `data` of `kind`; `n` names the
+/// files the commands write under `dir`.
+fn command_args(kind: Kind, data: &Path, dir: &Path, n: usize) -> [Vec<String>; 4] {
+    let s = |p: &Path| p.display().to_string();
+    let v = |args: &[&str]| {
+        args.iter()
+            .map(|a| (*a).to_owned())
+            .collect::<Vec<String>>()
+    };
+    let data = s(data);
+    match kind {
+        Kind::Haptic => {
+            let device = "fixtures/reference-device/device.toml";
+            let calibrated = s(&dir.join(format!("calibrated-{n}.toml")));
+            let predicted = s(&dir.join(format!("predicted-{n}.csv")));
+            [
+                v(&["check", "--device", device, "--data", &data]),
+                v(&[
+                    "calibrate",
+                    "--device",
+                    device,
+                    "--data",
+                    &data,
+                    "--model",
+                    "auto",
+                    "--out",
+                    &calibrated,
+                ]),
+                v(&[
+                    "predict",
+                    "--device",
+                    &calibrated,
+                    "--data",
+                    &data,
+                    "--out",
+                    &predicted,
+                ]),
+                v(&["diagnose", "--device", device, "--data", &data]),
+            ]
+        }
+        Kind::Markers => {
+            let tips = ["--tip", "l_hand", "--tip", "r_hand"];
+            let calibrated = s(&dir.join(format!("humanoid-calibrated-{n}.urdf")));
+            let predicted = s(&dir.join(format!("humanoid-predicted-{n}.csv")));
+            let with = |head: &[&str], tail: &[&str]| {
+                let mut args = v(head);
+                args.extend(v(&tips));
+                args.extend(v(tail));
+                args
+            };
+            [
+                with(&["check", "--device", HUMANOID], &["--data", &data]),
+                with(
+                    &["calibrate", "--device", HUMANOID],
+                    &[
+                        "--data",
+                        &data,
+                        "--test-last",
+                        "0.3",
+                        "--model",
+                        "auto",
+                        "--out",
+                        &calibrated,
+                    ],
+                ),
+                with(
+                    &["predict", "--device", &calibrated],
+                    &["--data", &data, "--out", &predicted],
+                ),
+                with(
+                    &["diagnose", "--device", HUMANOID],
+                    &["--data", &data, "--test-last", "0.3"],
+                ),
+            ]
+        }
+    }
+}
+
+/// Writes the recording of `kind` with `n` data rows to `path`, unless it exists.
+fn write_recording(
+    sh: &Shell,
+    kind: Kind,
+    hapcal: &Path,
+    generator: &Path,
+    path: &Path,
+    n: usize,
+) -> Result<()> {
+    if path.exists() {
+        return Ok(());
+    }
+    let rows = n.to_string();
+    match kind {
+        Kind::Haptic => {
+            let truth = "fixtures/reference-device/truth.toml";
             cmd!(
                 sh,
-                "{hapcal} simulate --truth {truth} --seed 7 --poses {poses} --out {log}"
+                "{hapcal} simulate --truth {truth} --seed 7 --poses {rows} --out {path}"
             )
             .quiet()
             .run()?;
         }
-        let calibrated = dir.join(format!("calibrated-{n}.toml"));
-        let _ = std::fs::remove_file(&calibrated);
-        let s = |p: &Path| p.display().to_string();
-        let args: [Vec<String>; 4] = [
-            vec![
-                "check".into(),
-                "--device".into(),
-                device.into(),
-                "--data".into(),
-                s(&log),
-            ],
-            vec![
-                "calibrate".into(),
-                "--device".into(),
-                device.into(),
-                "--data".into(),
-                s(&log),
-                "--model".into(),
-                "auto".into(),
-                "--out".into(),
-                s(&calibrated),
-            ],
-            vec![
-                "predict".into(),
-                "--device".into(),
-                s(&calibrated),
-                "--data".into(),
-                s(&log),
-                "--out".into(),
-                s(&dir.join(format!("predicted-{n}.csv"))),
-            ],
-            vec![
-                "diagnose".into(),
-                "--device".into(),
-                device.into(),
-                "--data".into(),
-                s(&log),
-            ],
-        ];
-        for (c, args) in args.iter().enumerate() {
-            let out = dir.join(format!("{}-{n}.txt", args[0]));
-            let run = measured(sh, &hapcal, args, &out)?;
+        Kind::Markers => {
+            let folder = path.with_extension("d");
+            cmd!(sh, "{generator} --rows {rows} {folder}")
+                .quiet()
+                .run()?;
+            std::fs::rename(folder.join("mocap.csv"), path)?;
+            std::fs::remove_dir_all(&folder)?;
+        }
+    }
+    Ok(())
+}
+
+/// Each command's runs (`runs[c][s]`: command `c` at size `s`) on recordings of `kind`.
+fn measure_kind(
+    sh: &Shell,
+    kind: Kind,
+    (hapcal, generator): (&Path, &Path),
+    dir: &Path,
+    rows: &[usize],
+) -> Result<Vec<Vec<Run>>> {
+    let mut runs: Vec<Vec<Run>> = COMMANDS.iter().map(|_| Vec::new()).collect();
+    let stem = match kind {
+        Kind::Haptic => "log",
+        Kind::Markers => "humanoid",
+    };
+    for &n in rows {
+        let data = dir.join(format!("{stem}-{n}.csv"));
+        write_recording(sh, kind, hapcal, generator, &data, n)?;
+        for (c, args) in command_args(kind, &data, dir, n).iter().enumerate() {
+            let out = dir.join(format!("{stem}-{}-{n}.txt", args[0]));
+            let run = measured(sh, hapcal, args, &out)?;
             println!(
-                "{n} rows, {}: {:.2} s wall, {:.2} s CPU, {:.0} MB",
-                commands[c], run.wall_s, run.cpu_s, run.peak_mb
+                "{stem}, {n} rows, {}: {:.2} s wall, {:.2} s CPU, {:.0} MB",
+                COMMANDS[c], run.wall_s, run.cpu_s, run.peak_mb
             );
             runs[c].push(run);
         }
     }
-    let load_after = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
-    let load = |s: &str| s.split_whitespace().take(3).collect::<Vec<_>>().join(" ");
-    let sizes: Vec<String> = rows.iter().map(usize::to_string).collect();
-    let mut md = format!(
-        "{SECTION}\n\n`cargo xtask bench --scale --rows {}` ({date}, {cores} cores, load {} before \
-         and {} after): logs of the reference device written by `hapcal simulate --truth {truth} \
-         --seed 7 --poses N` (13 columns, about 234 bytes a row), each command of the release \
-         `hapcal` run once under `/usr/bin/time -v` (wall and CPU time, peak resident memory). \
-         `calibrate` writes the device file `predict` then reads. The last two columns are the \
-         slope of a straight line fitted through the sizes: what one more row costs.\n\n\
-         | command | rows | wall | CPU | peak RSS | bytes a row | µs a row (wall) | slope: µs a row | slope: bytes a row |\n\
+    Ok(runs)
+}
+
+/// The table of `runs` at `rows`: each command at each size, and the slopes of the lines
+/// fitted through the sizes.
+fn table(rows: &[usize], runs: &[Vec<Run>]) -> String {
+    let mut md = String::from(
+        "| command | rows | wall | CPU | peak RSS | bytes a row | µs a row (wall) | slope: µs a row | slope: bytes a row |\n\
          |---|---|---|---|---|---|---|---|---|\n",
-        sizes.join(","),
-        load(&load_before),
-        load(&load_after)
     );
-    for (c, command) in commands.iter().enumerate() {
+    for (c, command) in COMMANDS.iter().enumerate() {
         let time = line(
             &(rows.iter().zip(&runs[c]))
                 .map(|(&n, r)| (n as f64, r.wall_s))
@@ -196,7 +281,57 @@ pub(crate) fn run(sh: &Shell, rows: &[usize]) -> Result<()> {
             ));
         }
     }
-    md.push_str(EXPLAINED);
+    md
+}
+
+/// Runs the scale benchmark at `rows` (data rows of each recording) and writes its section of
+/// docs/results/bench.md.
+pub(crate) fn run(sh: &Shell, rows: &[usize]) -> Result<()> {
+    let target =
+        std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| PathBuf::from("target"), PathBuf::from);
+    cmd!(sh, "cargo build --release --quiet -p hapcal --bin hapcal").run()?;
+    cmd!(
+        sh,
+        "cargo build --release --quiet -p hapcal-calibrate --example sim_humanoid"
+    )
+    .run()?;
+    let hapcal = sh.current_dir().join(target.join("release/hapcal"));
+    let generator = sh
+        .current_dir()
+        .join(target.join("release/examples/sim_humanoid"));
+    let dir = sh.current_dir().join(target.join("bench-scale"));
+    sh.create_dir(&dir)?;
+    let load_before = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let date = cmd!(sh, "date -u +%Y-%m-%dT%H:%MZ").read()?;
+    let programs = (hapcal.as_path(), generator.as_path());
+    let haptic = measure_kind(sh, Kind::Haptic, programs, &dir, rows)?;
+    let markers = measure_kind(sh, Kind::Markers, programs, &dir, rows)?;
+    let load_after = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    let load = |s: &str| s.split_whitespace().take(3).collect::<Vec<_>>().join(" ");
+    let sizes: Vec<String> = rows.iter().map(usize::to_string).collect();
+    let md = format!(
+        "{SECTION}\n\n`cargo xtask bench --scale --rows {}` ({date}, {cores} cores, load {} before \
+         and {} after): each command of the release `hapcal` run once under `/usr/bin/time -v` \
+         (wall and CPU time, peak resident memory). `calibrate` writes the calibrated device \
+         `predict` then reads. The last two columns are the slope of a straight line fitted \
+         through the sizes: what one more row costs.\n\n\
+         ### Haptic logs\n\n\
+         Logs of the reference device written by `hapcal simulate --truth \
+         fixtures/reference-device/truth.toml --seed 7 --poses N` (13 columns, about 234 bytes a \
+         row).\n\n{}{EXPLAINED}\n\
+         ### Marker files\n\n\
+         Motion-capture files of the simulated two-arm humanoid written by `cargo run --release \
+         -p hapcal-calibrate --example sim_humanoid -- --rows N <folder>` (17 joint readings and \
+         two markers, 23 columns, about 280 bytes a row; fixtures/sim-humanoid), the commands \
+         with `--device {HUMANOID} --tip l_hand --tip r_hand`, `calibrate` and `diagnose` with \
+         `--test-last 0.3`.\n\n{}{EXPLAINED_MARKERS}",
+        sizes.join(","),
+        load(&load_before),
+        load(&load_after),
+        table(rows, &haptic),
+        table(rows, &markers),
+    );
     let page = sh.current_dir().join("docs/results/bench.md");
     let before = std::fs::read_to_string(&page).unwrap_or_default();
     let kept = before

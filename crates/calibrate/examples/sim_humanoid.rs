@@ -3,8 +3,13 @@
 //! then a motion-capture marker on each hand, 0.2 mm noise per axis) and `truth.toml` (every
 //! simulated parameter by name: geometric deviations, axial and transversal compliance).
 //!
+//! `--rows N` writes `mocap.csv` of `N` rows instead (the same seed: its first 550 rows are
+//! the recording's), each row written as it is drawn, so a file of millions of rows takes no
+//! more memory than one of ten: the long marker files of `cargo xtask bench --scale`.
+//!
 //! ```sh
 //! cargo run --release -p hapcal-calibrate --example sim_humanoid -- fixtures/sim-humanoid
+//! cargo run --release -p hapcal-calibrate --example sim_humanoid -- --rows 1000000 /tmp/humanoid
 //! hapcal calibrate --device fixtures/sim-humanoid/humanoid.urdf --tip l_hand --tip r_hand \
 //!     --data fixtures/sim-humanoid/mocap.csv --test-last 0.3
 //! ```
@@ -14,31 +19,45 @@
 mod sim;
 
 use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::PathBuf;
 
 use hapcal_identify::Problem;
 
+/// Rows of the bundled recording.
+const RECORDING_ROWS: usize = 550;
+
 fn main() -> anyhow::Result<()> {
-    let out = PathBuf::from(
-        std::env::args()
-            .nth(1)
-            .unwrap_or_else(|| "fixtures/sim-humanoid".to_owned()),
-    );
+    let mut out = PathBuf::from("fixtures/sim-humanoid");
+    let mut n_rows = RECORDING_ROWS;
+    let mut args = std::env::args().skip(1);
+    while let Some(arg) = args.next() {
+        if arg == "--rows" {
+            let value = args.next().unwrap_or_default();
+            n_rows = value.parse().map_err(|_| {
+                anyhow::anyhow!("--rows: expected a number of rows, found {value:?}")
+            })?;
+        } else {
+            out = PathBuf::from(arg);
+        }
+    }
     std::fs::create_dir_all(&out)?;
     std::fs::write(out.join("humanoid.urdf"), sim::humanoid_urdf())?;
     let robot = sim::humanoid(&["l_hand", "r_hand"]);
     let truth = sim::truth(&robot, 11);
-    let table = sim::table(&robot, &truth, &[0, 1], 550, 12);
-    let mut csv = robot.joint_names.join(",");
-    csv.push_str(",x1,y1,z1,x2,y2,z2\n");
-    for row in &table.rows {
-        let q: Vec<String> = row.q.iter().map(|v| format!("{v:.9}")).collect();
-        let p: Vec<String> = (row.markers.iter())
-            .flat_map(|m| m.position_m.iter().map(|v| format!("{v:.9}")))
-            .collect();
-        writeln!(csv, "{},{}", q.join(","), p.join(","))?;
+    let mut csv = std::io::BufWriter::new(std::fs::File::create(out.join("mocap.csv"))?);
+    writeln!(csv, "{},x1,y1,z1,x2,y2,z2", robot.joint_names.join(","))?;
+    let mut line = String::new();
+    for row in sim::rows_with_noise(&robot, &truth, &[0, 1], 12, sim::NOISE_M).take(n_rows) {
+        line.clear();
+        let values = (row.q.iter()).chain(row.markers.iter().flat_map(|m| &m.position_m));
+        for (i, v) in values.enumerate() {
+            let comma = if i == 0 { "" } else { "," };
+            write!(line, "{comma}{v:.9}")?;
+        }
+        writeln!(csv, "{line}")?;
     }
-    std::fs::write(out.join("mocap.csv"), csv)?;
+    csv.flush()?;
     let mut toml = String::from(
         "# The simulated truth of mocap.csv: every parameter of the measurement model by name\n\
          # (m, rad; compliance in rad/(N·m)); instrument and marker frames at their nominal\n\

@@ -264,6 +264,22 @@ pub fn load_tables(
     robot: &Robot,
     units: &Units,
 ) -> Result<Vec<MeasurementTable>> {
+    Ok(load_tables_every(paths, robot, units, 1)?.0)
+}
+
+/// Reads the measurement files of `robot` as [`load_tables`] does (every row read and
+/// checked), keeping every `stride`-th row of each file from its first
+/// ([`MeasurementTable::read_every`]): a sample of a long file read in the memory of the sample.
+/// Returns the tables and each file's number of data rows.
+///
+/// # Errors
+/// As [`load_tables`].
+pub fn load_tables_every(
+    paths: &[std::path::PathBuf],
+    robot: &Robot,
+    units: &Units,
+    stride: usize,
+) -> Result<(Vec<MeasurementTable>, Vec<usize>)> {
     let schema = JointSchema {
         names: &robot.joint_names,
         prismatic: &robot.prismatic,
@@ -272,7 +288,7 @@ pub fn load_tables(
     paths
         .iter()
         .map(|p| {
-            let t = hapcal_io::read_measurement_file(p, &schema, units)
+            let (t, n_rows) = MeasurementTable::read_every(p, &schema, units, stride)
                 .with_context(|| format!("reading measurements {}", p.display()))?;
             if t.n_markers == 0 && !t.has_distance {
                 bail!(
@@ -282,7 +298,7 @@ pub fn load_tables(
                     t.ignored_columns.join(", ")
                 );
             }
-            Ok(t)
+            Ok((t, n_rows))
         })
         .collect()
 }

@@ -82,6 +82,10 @@ pub struct MeasuredOutcome {
     pub rung: ModelName,
     /// Cross-validation scores, simplest rung first (empty when the rung was given).
     pub ladder: Vec<RungReport>,
+    /// The training rows the ladder judged, when it judged a sample spread over more than
+    /// [`crate::fit::LADDER_ROWS`] of them ([`crate::fit::ladder_sample`]); `None` when it
+    /// judged every row or the rung was given.
+    pub cross_validated_rows: Option<usize>,
     /// Final identification of the chosen rung on all training rows.
     pub fitted: Fitted,
     /// The frames-only identification on all training rows (the reference of every figure).
@@ -1700,6 +1704,7 @@ pub fn calibrate_measured(
     Ok(MeasuredOutcome {
         refitted_lengths: found.refitted_lengths,
         rung,
+        cross_validated_rows: ladder.judged_rows,
         ladder: ladder.reports,
         fitted: settled.fitted,
         frames_only: bounded.frames.1,
@@ -2003,6 +2008,8 @@ struct LadderOutcome {
     /// The rungs the joint-range folds stopped.
     range_stops: Vec<RangeStop>,
     left_out: LeftOut,
+    /// The training rows judged, when a sample of them was ([`crate::fit::ladder_sample`]).
+    judged_rows: Option<usize>,
 }
 
 /// The rung chosen (or given), its fit on every training row, and the ladder that chose it.
@@ -2028,7 +2035,11 @@ fn choose_rung(
     ladder: &(Vec<ModelName>, Vec<usize>),
 ) -> Result<Choice> {
     let Some(rung) = cfg.rung else {
-        return climb_ladder(fits, cfg, test, frames, richest_fit, ladder);
+        let lengths: Vec<usize> = fits.train.iter().map(|t| t.rows.len()).collect();
+        return match crate::fit::ladder_sample(&lengths, crate::fit::LADDER_ROWS) {
+            Some(sample) => climb_sample(fits, cfg, test, frames, richest_fit, ladder, &sample),
+            None => climb_ladder(fits, cfg, test, frames, richest_fit, ladder),
+        };
     };
     let chosen = if rung == ModelName::FramesOnly {
         (frames.0.clone(), frames.1.clone())
@@ -2043,6 +2054,61 @@ fn choose_rung(
         chosen,
         ladder: LadderOutcome::default(),
     })
+}
+
+/// The rung chosen on the ladder of a long recording: the ladder ([`climb_ladder`]) judged on
+/// the training rows `sample` keeps (every `s`-th row of each table, their frames-only fit
+/// the sample's own), the rung it chooses then fitted on every training row (the Huber pass's
+/// fit when it is that rung). The choice needs far fewer rows than the parameters' precision
+/// (docs/engine.md, "Long logs"); the ladder's reports are those of the sample.
+///
+/// # Errors
+/// As [`climb_ladder`]; a failed identification on every row.
+fn climb_sample(
+    fits: &Fits<'_>,
+    cfg: &MeasuredConfig,
+    test: &[MeasurementTable],
+    frames: (&CalibratedModel, &Fitted),
+    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    ladder: &(Vec<ModelName>, Vec<usize>),
+    sample: &crate::fit::LadderSample,
+) -> Result<Choice> {
+    let sampled: Vec<MeasurementTable> = (fits.train.iter())
+        .map(|t| MeasurementTable {
+            name: t.name.clone(),
+            path: t.path.clone(),
+            rows: t.rows.iter().step_by(sample.stride).cloned().collect(),
+            warnings: Vec::new(),
+            n_markers: t.n_markers,
+            has_orientation: t.has_orientation,
+            has_distance: t.has_distance,
+            ignored_columns: Vec::new(),
+        })
+        .collect();
+    let on_sample = Fits {
+        train: &sampled,
+        ..*fits
+    };
+    let (sample_model, sample_frames) = on_sample.fit(ModelName::FramesOnly)?;
+    let mut choice = climb_ladder(
+        &on_sample,
+        cfg,
+        test,
+        (&sample_model, &sample_frames),
+        None,
+        ladder,
+    )?;
+    drop(sampled);
+    choice.chosen = if choice.rung == ModelName::FramesOnly {
+        (frames.0.clone(), frames.1.clone())
+    } else {
+        match richest_fit {
+            Some((used, f)) if used == choice.rung => f,
+            _ => fits.fit(choice.rung)?,
+        }
+    };
+    choice.ladder.judged_rows = Some(sample.rows.len());
+    Ok(choice)
 }
 
 /// The rung chosen on the ladder (`ladder`: rungs and levels): each rung fitted and
@@ -2123,6 +2189,7 @@ fn climb_ladder(
             range_folds: ranges.into_iter().map(|r| r.report).collect(),
             range_stops: judge.stops.into_inner(),
             left_out,
+            judged_rows: None,
         },
     })
 }
@@ -4015,7 +4082,7 @@ fn calibration_report(
         model: out.rung,
         folds: plan.folds,
         cross_validation: Vec::new(),
-        cross_validated_rows: None,
+        cross_validated_rows: out.cross_validated_rows,
         ladder: out.ladder.clone(),
         frames: out.frames.clone(),
         sigma_m: out.weights.sigma_position_m * id.sigma,

@@ -43,8 +43,9 @@ use crate::setup_families::{
     fitted_hypotheses, general_hypotheses, residual_location, row_hypotheses,
 };
 pub use crate::setup_findings::{
-    ClosestHypothesis, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OVERWHELMING_FACTOR,
-    PLAUSIBLE_FRAMES_ONLY_RAD, Residual, ResidualOf, SUGGESTIVE_FACTOR, SetupReport, Severity,
+    CHECK_SAMPLE_ROWS, ClosestHypothesis, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass,
+    OVERWHELMING_FACTOR, PLAUSIBLE_FRAMES_ONLY_RAD, Residual, ResidualOf, SUGGESTIVE_FACTOR,
+    SetupReport, Severity,
 };
 use crate::setup_findings::{
     Corrected, OPEN_LIMIT, ResidualFn, Scoring, judge, mm, nearest_rotation, nearest_rotation_from,
@@ -949,7 +950,7 @@ fn angle_rereads(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correct
         ..(*units).clone()
     };
     let paths: Vec<PathBuf> = tables.iter().map(|t| t.path.clone()).collect();
-    if let Ok(reread) = measured::load_tables(&paths, robot, &other_units)
+    if let Ok(reread) = load_sample(&paths, robot, &other_units)
         && reread
             .iter()
             .zip(tables.iter())
@@ -1178,7 +1179,7 @@ fn tip_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correc
             .zip(named)
         {
             let Some(other) = other else { continue };
-            let Ok(reread) = measured::load_tables(&paths, &other, units) else {
+            let Ok(reread) = load_sample(&paths, &other, units) else {
                 continue;
             };
             let k = steps.unsigned_abs();
@@ -1757,7 +1758,7 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
         .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
     // The robot the calibration builds: a URDF's read joints off the measured paths load it.
     let robot = crate::data::robot_of(plan, &device)?;
-    let tables = match measured::load_tables(&files, &robot, &plan.units) {
+    let tables = match load_sample(&files, &robot, &plan.units) {
         Ok(tables) => tables,
         Err(e) => {
             // A tip below the markers' link may need a joint the files have no column for; a
@@ -1793,6 +1794,27 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
     .map(Some)
 }
 
+/// The rows of `files` the check judges, read for `robot` in `units`: every row of a
+/// recording of up to [`CHECK_SAMPLE_ROWS`] rows; of a longer one, a sample spread over it,
+/// every `s`-th row of each file from its first (the stride of
+/// [`crate::fit::ladder_sample`]), read as the files stream, so the check's memory does not
+/// grow with the rows. Every row is still read and checked; the rows kept keep their lines,
+/// and the same files always give the same sample (the check's rereads in other units line
+/// up row for row).
+///
+/// # Errors
+/// As [`crate::data::load_tables`].
+fn load_sample(
+    files: &[PathBuf],
+    robot: &Robot,
+    units: &hapcal_io::Units,
+) -> Result<Vec<MeasurementTable>> {
+    let lengths: Vec<usize> = files.iter().map(|p| hapcal_io::count_log_rows(p)).collect();
+    let stride =
+        crate::fit::ladder_sample(&lengths, CHECK_SAMPLE_ROWS).map_or(1, |sample| sample.stride);
+    Ok(crate::data::load_tables_every(files, robot, units, stride)?.0)
+}
+
 /// The setup check of files that the reader refused with `limit_error` (a reading past its
 /// joint's limits), read again with every range opened to ±[`OPEN_LIMIT`]: when the check
 /// finds an error (a mistake such as degrees or swapped columns, or data of another robot),
@@ -1815,7 +1837,7 @@ fn past_limits(
     for l in &mut open.limits {
         *l = (-OPEN_LIMIT, OPEN_LIMIT);
     }
-    let tables = measured::load_tables(files, &open, &plan.units).ok()?;
+    let tables = load_sample(files, &open, &plan.units).ok()?;
     let mut report = check_setup(&SetupInput {
         robot: &open,
         tables: &tables,
@@ -1872,7 +1894,7 @@ fn past_length_range(
         let edit = hapcal_io::ColumnEdit::parse_unit(&format!("{group}=mm")).ok()?;
         groups.push(group);
         units = units.with_columns([edit]);
-        match measured::load_tables(files, robot, &units) {
+        match load_sample(files, robot, &units) {
             Ok(tables) => break tables,
             Err(e) => message = e.root_cause().to_string(),
         }
@@ -2012,7 +2034,7 @@ fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> O
             let Ok(robot) = measured::robot_from_urdf(urdf, &other_tips) else {
                 continue;
             };
-            let Ok(tables) = measured::load_tables(files, &robot, &units) else {
+            let Ok(tables) = load_sample(files, &robot, &units) else {
                 continue;
             };
             let marker_tips: Vec<usize> = (0..other_tips.len()).collect();
@@ -2578,7 +2600,7 @@ mod tests {
             &["wrist_3_link".to_owned()],
         )
         .expect("the UR10 URDF");
-        let tables = measured::load_tables(
+        let tables = load_sample(
             &[root.join("figaroh/ur10/calibration.csv")],
             &robot,
             &Units::default(),

@@ -41,6 +41,15 @@ pub const FROZEN_SPREAD: f64 = 1e-9;
 /// calibration on long recordings.
 pub const MAX_CHECK_ROWS: usize = 200;
 
+/// Most rows of the measurement files the setup check keeps to judge: a longer recording is
+/// read whole (every row checked, file:line kept) but judged on a sample spread over it, every
+/// `s`-th row of each file ([`crate::fit::ladder_sample`] with this cap). Each hypothesis holds
+/// a corrected copy of the rows kept (about 16 kB a row in all on the simulated humanoid), so the
+/// cap bounds the check's memory: a 5,000-row sample of a 1,000,000-row file takes about 80 MB.
+/// 25 times the rows the residuals are judged on ([`MAX_CHECK_ROWS`]), and more than every
+/// bundled recording holds (at most 550 rows), which the check reads whole.
+pub const CHECK_SAMPLE_ROWS: usize = 5_000;
+
 /// Half-width (rad or m) of the joint ranges with which the checks read files again after a
 /// reading past a joint's limit (the measurement-file check's `past_limits`, the haptic
 /// check's logs): wide enough for any reading in degrees or millimetres.

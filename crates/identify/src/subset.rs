@@ -1,14 +1,18 @@
 //! A problem with some parameters held at fixed values: the model ladder's rungs (frames
 //! only, joint offsets, …) fit subsets of one problem's parameters.
 
+use std::ops::Range;
+
 use faer::{Col, ColMut, ColRef, Mat, MatMut};
 
-use crate::{EvalError, ParamLayout, Problem};
+use crate::{EvalError, ParamLayout, Problem, RowBlocks};
 
 /// `problem` restricted to the parameters `free`; the others stay at their values in `x_full`.
 ///
 /// Its layout is the free parameters' specs in ascending index order; residuals are the
-/// problem's; the Jacobian is the problem's free columns.
+/// problem's; the Jacobian is the problem's free columns. It has the problem's row blocks
+/// ([`Problem::row_blocks`]) when the problem has them, each block's Jacobian its free
+/// columns, so a long problem's subset streams as the problem does.
 #[derive(Debug)]
 pub struct Subset<'a, P: Problem + ?Sized> {
     problem: &'a P,
@@ -78,7 +82,7 @@ impl<'a, P: Problem + ?Sized> Subset<'a, P> {
     }
 }
 
-impl<P: Problem + ?Sized> Problem for Subset<'_, P> {
+impl<P: Problem + Sync + ?Sized> Problem for Subset<'_, P> {
     fn layout(&self) -> &ParamLayout {
         &self.layout
     }
@@ -112,6 +116,58 @@ impl<P: Problem + ?Sized> Problem for Subset<'_, P> {
         let mut full = Mat::<f64>::zeros(self.problem.n_residuals(), x.nrows());
         self.problem
             .residuals_and_jacobian(x.as_ref(), out, full.as_mut())?;
+        for (k, &i) in self.free.iter().enumerate() {
+            jac.as_mut().col_mut(k).copy_from(full.col(i));
+        }
+        Ok(())
+    }
+
+    fn row_blocks(&self) -> Option<&dyn RowBlocks> {
+        self.problem.row_blocks().map(|_| self as &dyn RowBlocks)
+    }
+}
+
+impl<P: Problem + ?Sized> Subset<'_, P> {
+    /// The problem's row blocks (present whenever [`Problem::row_blocks`] of the subset is).
+    fn blocks(&self) -> Result<&dyn RowBlocks, EvalError> {
+        self.problem.row_blocks().ok_or_else(|| EvalError {
+            reason: "the problem has no row blocks".to_owned(),
+        })
+    }
+}
+
+impl<P: Problem + Sync + ?Sized> RowBlocks for Subset<'_, P> {
+    fn n_blocks(&self) -> usize {
+        self.problem.row_blocks().map_or(0, RowBlocks::n_blocks)
+    }
+
+    fn block_rows(&self, block: usize) -> Range<usize> {
+        self.problem
+            .row_blocks()
+            .map_or(0..0, |b| b.block_rows(block))
+    }
+
+    fn block_residuals(
+        &self,
+        x: ColRef<'_, f64>,
+        block: usize,
+        out: ColMut<'_, f64>,
+    ) -> Result<(), EvalError> {
+        let x = self.full_checked(x)?;
+        self.blocks()?.block_residuals(x.as_ref(), block, out)
+    }
+
+    fn block_jacobian(
+        &self,
+        x: ColRef<'_, f64>,
+        block: usize,
+        r_out: ColMut<'_, f64>,
+        mut jac: MatMut<'_, f64>,
+    ) -> Result<(), EvalError> {
+        let x = self.full_checked(x)?;
+        let blocks = self.blocks()?;
+        let mut full = Mat::<f64>::zeros(blocks.block_rows(block).len(), x.nrows());
+        blocks.block_jacobian(x.as_ref(), block, r_out, full.as_mut())?;
         for (k, &i) in self.free.iter().enumerate() {
             jac.as_mut().col_mut(k).copy_from(full.col(i));
         }

@@ -169,39 +169,66 @@ pub fn read_measurement_file(
     schema: &JointSchema<'_>,
     units: &Units,
 ) -> Result<MeasurementTable, Error> {
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
-    if matches!(ext.as_deref(), Some("yaml" | "yml")) {
-        return yaml::read_industrial_yaml_in(path, schema, units);
+    MeasurementTable::read_every(path, schema, units, 1).map(|(table, _)| table)
+}
+
+impl MeasurementTable {
+    /// Reads a measurement file as [`read_measurement_file`] does (every row read and checked,
+    /// the same errors and warnings, its checks over all rows), keeping in
+    /// [`MeasurementTable::rows`] only every `stride`-th data row from the first (rows `0,
+    /// stride, 2·stride, …`; every row for a stride of 0 or 1). A CSV file is streamed: the
+    /// memory is that of the rows kept, and of the repeat detector's 16 bytes a row, whatever
+    /// the file's length. Returns the table and the number of data rows in the file.
+    ///
+    /// # Errors
+    /// As [`read_measurement_file`].
+    pub fn read_every(
+        path: &Path,
+        schema: &JointSchema<'_>,
+        units: &Units,
+        stride: usize,
+    ) -> Result<(MeasurementTable, usize), Error> {
+        let stride = stride.max(1);
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase());
+        if matches!(ext.as_deref(), Some("yaml" | "yml")) {
+            let mut table = yaml::read_industrial_yaml_in(path, schema, units)?;
+            let n_rows = table.rows.len();
+            if stride > 1 {
+                let rows = std::mem::take(&mut table.rows);
+                table.rows = rows.into_iter().step_by(stride).collect();
+            }
+            return Ok((table, n_rows));
+        }
+        let mut table = Table::open(path)?;
+        let header = header::read_header(path, &mut table, schema, units)?;
+        let body = rows::read_rows(path, &mut table, schema, &header, stride)?;
+        check_measured(path, &header, &body)?;
+        check_frozen(path, &header, &body)?;
+        let n_markers = header.markers.len();
+        let mut warnings: Vec<String> = body.outside.warning().into_iter().collect();
+        warnings.extend(body.repeats.warning(path));
+        warnings.extend(body.identical.warnings(path));
+        let table = MeasurementTable {
+            name: stem(path),
+            path: path.to_path_buf(),
+            rows: body.rows,
+            warnings,
+            n_markers,
+            has_orientation: (header.markers.iter())
+                .any(|m| m.quaternion[0].is_some() || m.rpy[0].is_some()),
+            has_distance: header.distance_column.is_some(),
+            ignored_columns: header.ignored_columns,
+        };
+        Ok((table, body.n_rows))
     }
-    let mut table = Table::open(path)?;
-    let header = header::read_header(path, &mut table, schema, units)?;
-    let body = rows::read_rows(path, &mut table, schema, &header)?;
-    check_measured(path, &header, &body)?;
-    check_frozen(path, &header, &body)?;
-    let n_markers = header.markers.len();
-    let mut warnings: Vec<String> = body.outside.warning().into_iter().collect();
-    warnings.extend(body.repeats.warning(path));
-    warnings.extend(identical_markers(path, &body.rows, n_markers));
-    Ok(MeasurementTable {
-        name: stem(path),
-        path: path.to_path_buf(),
-        rows: body.rows,
-        warnings,
-        n_markers,
-        has_orientation: (header.markers.iter())
-            .any(|m| m.quaternion[0].is_some() || m.rpy[0].is_some()),
-        has_distance: header.distance_column.is_some(),
-        ignored_columns: header.ignored_columns,
-    })
 }
 
 /// At least one data row; and in a file with marker or distance columns, at least one of
 /// their cells given (else the file holds joint readings and nothing measured).
 fn check_measured(path: &Path, header: &Header, body: &Body) -> Result<(), Error> {
-    let rows = &body.rows;
-    if rows.is_empty() {
+    if body.n_rows == 0 {
         return Err(Error::TooFewRows {
             path: path.to_path_buf(),
             min: 1,
@@ -210,8 +237,7 @@ fn check_measured(path: &Path, header: &Header, body: &Body) -> Result<(), Error
     }
     let (markers, names) = (&header.markers, &header.names);
     let has_measurements = !markers.is_empty() || header.distance_column.is_some();
-    let nothing = (rows.iter()).all(|r| r.markers.is_empty() && r.distance_m.is_none());
-    if !(has_measurements && nothing) {
+    if !has_measurements || body.any_measured {
         return Ok(());
     }
     let first = (markers.iter().flat_map(|m| m.position.iter().flatten()))
@@ -228,7 +254,7 @@ fn check_measured(path: &Path, header: &Header, body: &Body) -> Result<(), Error
         line: header.line,
         column: first as u64 + 1,
         columns: measured.join(", "),
-        rows: rows.len(),
+        rows: body.n_rows,
     })
 }
 
@@ -267,53 +293,74 @@ fn check_frozen(path: &Path, header: &Header, body: &Body) -> Result<(), Error> 
     Ok(())
 }
 
-/// A warning for each set of markers seen in the same rows at the same positions (a column
-/// set copied twice: the same point would count twice in the fit). Linear in the number of
-/// cells: markers are grouped by the sequence of their (row, position) pairs.
-fn identical_markers(path: &Path, rows: &[MeasuredRow], n_markers: usize) -> Vec<String> {
-    let mut seen: Vec<Vec<(usize, [u64; 3])>> = vec![Vec::new(); n_markers];
-    for (i, row) in rows.iter().enumerate() {
-        for m in &row.markers {
-            if let Some(list) = seen.get_mut(m.marker) {
-                list.push((i, m.position_m.map(|v| (v + 0.0).to_bits())));
+/// Each marker's positions where it is seen, to warn about markers seen in the same rows at
+/// the same positions (a column set copied twice: the same point would count twice in the
+/// fit). Streams: a 64-bit hash of each marker's sequence of (row, position) pairs and their
+/// number, so its memory does not grow with the rows; two different sequences share a hash
+/// with probability 2⁻⁶⁴.
+#[derive(Default)]
+pub(crate) struct IdenticalMarkers {
+    /// Per marker: the hash of its (row, position) pairs so far, and how many.
+    seen: Vec<(std::hash::DefaultHasher, usize)>,
+}
+
+impl IdenticalMarkers {
+    /// Records the markers seen in data row `i` (0-based, every row of the file).
+    pub(crate) fn see(&mut self, i: usize, markers: &[MarkerSample]) {
+        use std::hash::Hasher as _;
+        for m in markers {
+            if self.seen.len() <= m.marker {
+                self.seen.resize_with(m.marker + 1, Default::default);
+            }
+            if let Some((hash, n)) = self.seen.get_mut(m.marker) {
+                hash.write_usize(i);
+                for v in m.position_m {
+                    hash.write_u64((v + 0.0).to_bits());
+                }
+                *n += 1;
             }
         }
     }
-    let mut groups: std::collections::HashMap<&[(usize, [u64; 3])], Vec<usize>> =
-        std::collections::HashMap::new();
-    for (k, list) in seen.iter().enumerate() {
-        if !list.is_empty() {
-            groups.entry(list.as_slice()).or_default().push(k);
+
+    /// A warning for each set of markers seen in the same rows at the same positions.
+    pub(crate) fn warnings(&self, path: &Path) -> Vec<String> {
+        use std::hash::Hasher as _;
+        let mut groups: std::collections::HashMap<(u64, usize), Vec<usize>> =
+            std::collections::HashMap::new();
+        for (k, (hash, n)) in self.seen.iter().enumerate() {
+            if *n > 0 {
+                groups.entry((hash.finish(), *n)).or_default().push(k);
+            }
         }
+        let mut groups: Vec<(usize, Vec<usize>)> = (groups.into_iter())
+            .filter(|(_, markers)| markers.len() > 1)
+            .map(|((_, n), markers)| (n, markers))
+            .collect();
+        groups.sort_by_key(|(_, markers)| markers.first().copied());
+        groups
+            .into_iter()
+            .filter_map(|(both, markers)| {
+                let numbers: Vec<String> = markers.iter().map(|k| (k + 1).to_string()).collect();
+                let (last, others) = numbers.split_last()?;
+                Some(format!(
+                    "{}: markers {} and {last} have the same position in all {both} rows where {} \
+                     seen: one point counted {} (drop the copied column sets)",
+                    path.display(),
+                    others.join(", "),
+                    if numbers.len() == 2 {
+                        "both are"
+                    } else {
+                        "they are"
+                    },
+                    if numbers.len() == 2 {
+                        "twice".to_owned()
+                    } else {
+                        format!("{} times", numbers.len())
+                    },
+                ))
+            })
+            .collect()
     }
-    let mut groups: Vec<(usize, Vec<usize>)> = (groups.into_iter())
-        .filter(|(_, markers)| markers.len() > 1)
-        .map(|(list, markers)| (list.len(), markers))
-        .collect();
-    groups.sort_by_key(|(_, markers)| markers.first().copied());
-    groups
-        .into_iter()
-        .filter_map(|(both, markers)| {
-            let numbers: Vec<String> = markers.iter().map(|k| (k + 1).to_string()).collect();
-            let (last, others) = numbers.split_last()?;
-            Some(format!(
-                "{}: markers {} and {last} have the same position in all {both} rows where {} \
-                 seen: one point counted {} (drop the copied column sets)",
-                path.display(),
-                others.join(", "),
-                if numbers.len() == 2 {
-                    "both are"
-                } else {
-                    "they are"
-                },
-                if numbers.len() == 2 {
-                    "twice".to_owned()
-                } else {
-                    format!("{} times", numbers.len())
-                },
-            ))
-        })
-        .collect()
 }
 
 /// A row's joint readings and measurements (not its time or line), to find repeated rows;

@@ -425,37 +425,8 @@ pub fn table_with_noise(
     seed: u64,
     noise_m: f64,
 ) -> MeasurementTable {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    // The robot deflects until the gravity loads of its deflected links balance: the torque
-    // equilibrium, not one step from the undeflected robot.
-    let model = hapcal_problems::CalibratedModel {
-        equilibrium: true,
-        ..truth.problem.model(truth.x.as_ref())
-    };
-    let noise = Normal::new(0.0, noise_m).unwrap();
-    let rows = (0..n)
-        .map(|i| {
-            let q: Vec<f64> = (robot.limits.iter())
-                .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
-                .collect();
-            let samples = (markers.iter().enumerate())
-                .map(|(k, &tip)| {
-                    let p = model.end_pose_of(tip, &q).translation.vector;
-                    MarkerSample {
-                        marker: k,
-                        position_m: std::array::from_fn(|a| p[a] + noise.sample(&mut rng)),
-                        rotation: None,
-                    }
-                })
-                .collect();
-            MeasuredRow {
-                line: i as u64 + 2,
-                q,
-                t_s: None,
-                markers: samples,
-                distance_m: None,
-            }
-        })
+    let rows = rows_with_noise(robot, truth, markers, seed, noise_m)
+        .take(n)
         .collect();
     MeasurementTable {
         name: format!("seed{seed}"),
@@ -467,4 +438,46 @@ pub fn table_with_noise(
         ignored_columns: Vec::new(),
         warnings: Vec::new(),
     }
+}
+
+/// The rows of [`table_with_noise`] one at a time, without end (take as many as wanted): row
+/// `i` at line `i + 2`, the same rows for the same `seed` whatever the number taken, so a long
+/// file is written as it is drawn, never held whole.
+pub fn rows_with_noise<'a>(
+    robot: &'a Robot,
+    truth: &Truth,
+    markers: &'a [usize],
+    seed: u64,
+    noise_m: f64,
+) -> impl Iterator<Item = MeasuredRow> + 'a {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    // The robot deflects until the gravity loads of its deflected links balance: the torque
+    // equilibrium, not one step from the undeflected robot.
+    let model = hapcal_problems::CalibratedModel {
+        equilibrium: true,
+        ..truth.problem.model(truth.x.as_ref())
+    };
+    let noise = Normal::new(0.0, noise_m).unwrap();
+    (0u64..).map(move |i| {
+        let q: Vec<f64> = (robot.limits.iter())
+            .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
+            .collect();
+        let samples = (markers.iter().enumerate())
+            .map(|(k, &tip)| {
+                let p = model.end_pose_of(tip, &q).translation.vector;
+                MarkerSample {
+                    marker: k,
+                    position_m: std::array::from_fn(|a| p[a] + noise.sample(&mut rng)),
+                    rotation: None,
+                }
+            })
+            .collect();
+        MeasuredRow {
+            line: i + 2,
+            q,
+            t_s: None,
+            markers: samples,
+            distance_m: None,
+        }
+    })
 }

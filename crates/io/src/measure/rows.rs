@@ -8,15 +8,23 @@ use std::path::Path;
 use nalgebra::UnitQuaternion;
 
 use super::header::{Header, MarkerColumns};
-use super::{JointSchema, MarkerSample, MeasuredRow, Reach, measured_values, reach};
+use super::{
+    IdenticalMarkers, JointSchema, MarkerSample, MeasuredRow, Reach, measured_values, reach,
+};
 use crate::Error;
 use crate::columns::{Conversion, si_of};
 use crate::table::{Frozen, Repeats, Table, check_separator, number};
 
 /// The rows stage's output.
 pub(super) struct Body {
-    /// The data rows, in file order.
+    /// The data rows kept (every `stride`-th from the first), in file order.
     pub(super) rows: Vec<MeasuredRow>,
+    /// How many data rows the file has.
+    pub(super) n_rows: usize,
+    /// Whether any row has a marker seen or a distance.
+    pub(super) any_measured: bool,
+    /// The markers' positions, to find copied column sets.
+    pub(super) identical: IdenticalMarkers,
     pub(super) outside: Outside,
     pub(super) repeats: Repeats,
     /// The distance column's values.
@@ -90,7 +98,8 @@ impl Cells<'_> {
     }
 }
 
-/// Reads the data rows of `table` after its header `h`.
+/// Reads the data rows of `table` after its header `h`, keeping every `stride`-th (≥ 1) from
+/// the first; every row is checked and seen by the checks over all rows.
 ///
 /// # Errors
 /// As [`super::read_measurement_file`], for a row.
@@ -99,9 +108,13 @@ pub(super) fn read_rows(
     table: &mut Table<'_>,
     schema: &JointSchema<'_>,
     h: &Header,
+    stride: usize,
 ) -> Result<Body, Error> {
     let mut body = Body {
         rows: Vec::new(),
+        n_rows: 0,
+        any_measured: false,
+        identical: IdenticalMarkers::default(),
         outside: Outside::default(),
         repeats: Repeats::default(),
         frozen_distance: Frozen::default(),
@@ -137,7 +150,12 @@ pub(super) fn read_rows(
             distance_m,
         };
         body.repeats.see(measured_values(&row), line);
-        body.rows.push(row);
+        body.identical.see(body.n_rows, &row.markers);
+        body.any_measured |= !row.markers.is_empty() || row.distance_m.is_some();
+        if body.n_rows.is_multiple_of(stride) {
+            body.rows.push(row);
+        }
+        body.n_rows += 1;
     }
     Ok(body)
 }

@@ -611,3 +611,40 @@ fn frozen_industrial_yaml_poses_are_refused() {
          not change (a frozen or disconnected sensor?)"
     );
 }
+
+#[test]
+fn every_stride_th_row_is_kept_and_every_row_is_checked() {
+    let schema = Schema::revolute(&["a", "b"]);
+    // Ten rows; markers 1 and 2 are one column set copied; row 8 (line 9) repeats row 1.
+    let mut text = String::from("a,b,x1,y1,z1,x2,y2,z2\n");
+    for i in 0..10 {
+        let k = if i == 7 { 0 } else { i };
+        let (q, p) = (0.1 * f64::from(k), f64::from(k));
+        text.push_str(&format!("{q},{q},{p},1,2,{p},1,2\n"));
+    }
+    let path = temp_file("every.csv", &text);
+    let units = Units::default();
+    let whole = read_measurement_file(&path, &schema.get(), &units).unwrap();
+    let (sampled, n_rows) = MeasurementTable::read_every(&path, &schema.get(), &units, 3).unwrap();
+    assert_eq!(n_rows, 10);
+    let lines: Vec<u64> = sampled.rows.iter().map(|r| r.line).collect();
+    assert_eq!(lines, [2, 5, 8, 11]);
+    for row in &sampled.rows {
+        let same = whole.rows.iter().find(|r| r.line == row.line).unwrap();
+        assert_eq!(row, same);
+    }
+    // The checks over all rows see every row: the repeat and the copied markers.
+    assert_eq!(whole.warnings.len(), 2, "{:?}", whole.warnings);
+    assert_eq!(sampled.warnings, whole.warnings);
+    assert_contains(&sampled.warnings[1], &["same position in all 10 rows"]);
+    // A row the sample leaves out is still checked, its line named.
+    let bad = text.replace("0.5,0.5,5,1,2,5,1,2", "0.5,x,5,1,2,5,1,2");
+    let path = temp_file("every-bad.csv", &bad);
+    let err = message(MeasurementTable::read_every(
+        &path,
+        &schema.get(),
+        &units,
+        3,
+    ));
+    assert_contains(&err, &["every-bad.csv", "7"]);
+}
