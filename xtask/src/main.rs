@@ -140,12 +140,13 @@ enum Task {
         /// Also run the criterion benchmarks (`cargo bench -p hapcal-identify --bench scale`).
         #[arg(long)]
         criterion: bool,
-        /// Instead, the command line on long haptic logs (`check`, `calibrate --model auto`,
-        /// `predict`, `diagnose`): time and peak memory per row, into the section "Commands
-        /// on long logs" of docs/results/bench.md (xtask/src/bench_scale.rs).
+        /// Instead, the command line on long haptic logs and marker files (`check`,
+        /// `calibrate --model auto`, `predict`, `diagnose`): time and peak memory per row,
+        /// into the section "Commands on long logs" of docs/results/bench.md
+        /// (xtask/src/bench_scale.rs).
         #[arg(long)]
         scale: bool,
-        /// With `--scale`: the logs' numbers of rows.
+        /// With `--scale`: the numbers of rows of the logs and marker files.
         #[arg(long, value_delimiter = ',', default_value = "10000,100000,1000000")]
         rows: Vec<usize>,
     },

@@ -322,11 +322,17 @@ fn ladder(s: &mut String, r: &CalibrationReport) -> fmt::Result {
     }
     writeln!(
         s,
-        "\nmodel ladder by {}-fold blocked cross-validation on the training rows (held-out \
-         position RMS; held-out weighted squared error per row, Σ e²/σ², minus frames \
-         only's, ± its standard error; a rung is taken only if it beats the one chosen \
-         below it by {} standard errors):",
-        r.folds, LADDER_SIGNIFICANCE_Z
+        "\nmodel ladder by {}-fold blocked cross-validation on {} (held-out position RMS; \
+         held-out weighted squared error per row, Σ e²/σ², minus frames only's, ± its \
+         standard error; a rung is taken only if it beats the one chosen below it by {} \
+         standard errors):",
+        r.folds,
+        // A long file's ladder is judged on a sample of its training rows.
+        match r.cross_validated_rows {
+            None => "the training rows".to_owned(),
+            Some(_) => judged_rows(r),
+        },
+        LADDER_SIGNIFICANCE_Z
     )?;
     let width = (r.ladder.iter())
         .map(|l| l.rung.to_string().len())
