@@ -308,8 +308,9 @@ impl Chain {
         self.params.iter().position(|p| p.name == name)
     }
 
+    /// Panics unless `x` has one entry per parameter.
     #[track_caller]
-    fn check_shapes(&self, x: &[f64], q: &[f64]) {
+    pub(crate) fn check_params_len(&self, x: &[f64]) {
         assert_eq!(
             x.len(),
             self.n_params(),
@@ -317,6 +318,11 @@ impl Chain {
             x.len(),
             self.n_params()
         );
+    }
+
+    #[track_caller]
+    fn check_shapes(&self, x: &[f64], q: &[f64]) {
+        self.check_params_len(x);
         assert_eq!(
             q.len(),
             self.n_joints(),
