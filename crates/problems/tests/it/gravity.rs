@@ -2,6 +2,7 @@
 //! is the derivative of the potential energy, and the transversal compliance's analytic
 //! Jacobian agrees with central differences.
 
+use super::{pose_and_marker_weights, pose_or_marker_row};
 use faer::Col;
 use hapcal_identify::Problem;
 use hapcal_kinematics::{Chain, Factor, FrameSpec, Isometry3, Placement, Point3, Tree, Vector3};
@@ -192,25 +193,9 @@ fn transversal_jacobian_matches_central_differences(transversal: hapcal_problems
             (0.4 * t).sin() * 1.5,
             (1.7 * t + 0.3).cos(),
         ];
-        let kind = if i % 2 == 0 {
-            RowKind::Pose {
-                tip: i % 3 % 2,
-                position_m: [1.0, 0.2, -0.1],
-                rotation: [0.9, 0.1, -0.3, 0.2],
-            }
-        } else {
-            RowKind::Marker {
-                tip: 1,
-                position_m: [0.5, 0.4, 0.3],
-            }
-        };
-        obs.rows.push(Row { q, kind });
+        obs.rows.push(pose_or_marker_row(i, q));
     }
-    let weights = Weights {
-        sigma_position_m: 1e-3,
-        sigma_orientation_rad: 2e-3,
-        ..Weights::default()
-    };
+    let weights = pose_and_marker_weights();
     let n_joints = tree.n_joints();
     let problem = CalibrationProblem::on_tree(
         tree,

@@ -18,6 +18,34 @@ use hapcal_problems::{
 };
 use proptest::prelude::*;
 
+/// Row `i` of the mixed observations on a two-tip tree, at configuration `q` (rad): on even
+/// rows a pose of tip `i % 3 % 2` (position m, unit-free quaternion `w, x, y, z`), on odd rows a
+/// marker position of tip 1 (m).
+fn pose_or_marker_row(i: usize, q: Vec<f64>) -> Row {
+    let kind = if i % 2 == 0 {
+        RowKind::Pose {
+            tip: i % 3 % 2,
+            position_m: [1.0, 0.2, -0.1],
+            rotation: [0.9, 0.1, -0.3, 0.2],
+        }
+    } else {
+        RowKind::Marker {
+            tip: 1,
+            position_m: [0.5, 0.4, 0.3],
+        }
+    };
+    Row { q, kind }
+}
+
+/// Weights of [`pose_or_marker_row`]'s rows: position σ 1 mm, orientation σ 2 mrad.
+fn pose_and_marker_weights() -> Weights {
+    Weights {
+        sigma_position_m: 1e-3,
+        sigma_orientation_rad: 2e-3,
+        ..Weights::default()
+    }
+}
+
 /// iiwa-like chain from URDF placements (MUKCa `iiwa14.urdf` joint origins).
 fn iiwa_like() -> Chain {
     let rev = |name: &str, xyz: [f64; 3], axis: [f64; 3]| Placement {

@@ -1,6 +1,7 @@
 //! Marker and pose rows on a kinematic tree with instrument and marker frames: the analytic
 //! Jacobian against central differences, and frames recovered from exact data.
 
+use super::{pose_and_marker_weights, pose_or_marker_row};
 use faer::Col;
 use hapcal_identify::{IdentifyConfig, Problem, Subset, identify};
 use hapcal_kinematics::{FrameSpec, Isometry3, Placement, Tree, Vector3};
@@ -92,25 +93,9 @@ fn pose_rows_jacobian_matches_central_differences() {
     let tree = framed(&two_arm_tree());
     let mut obs = Observations::default();
     for (i, q) in configurations(6).into_iter().enumerate() {
-        let kind = if i % 2 == 0 {
-            RowKind::Pose {
-                tip: i % 3 % 2,
-                position_m: [1.0, 0.2, -0.1],
-                rotation: [0.9, 0.1, -0.3, 0.2],
-            }
-        } else {
-            RowKind::Marker {
-                tip: 1,
-                position_m: [0.5, 0.4, 0.3],
-            }
-        };
-        obs.rows.push(Row { q, kind });
+        obs.rows.push(pose_or_marker_row(i, q));
     }
-    let weights = Weights {
-        sigma_position_m: 1e-3,
-        sigma_orientation_rad: 2e-3,
-        ..Weights::default()
-    };
+    let weights = pose_and_marker_weights();
     let n_joints = tree.n_joints();
     let torque = two_arm_tree().tips().to_vec();
     let problem = CalibrationProblem::on_tree(
