@@ -13,8 +13,8 @@ use std::path::{Path, PathBuf};
 mod haptic_log;
 use haptic_log::{calibrate_rows, log};
 
-/// Asserts that every parameter of `bounded` (calibrated with `what`) names the same value as
-/// `clean`'s and lies within `clean`'s standard deviation of it.
+/// Asserts that every parameter of `bounded` (calibrated with `what`) is named as `clean`'s and
+/// lies within `clean`'s standard deviation of its value.
 fn assert_within_one_std(bounded: &CalibrationReport, clean: &CalibrationReport, what: &str) {
     for (g, c) in bounded.parameters.iter().zip(&clean.parameters) {
         assert_eq!(g.name, c.name);
