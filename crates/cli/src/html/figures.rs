@@ -140,7 +140,10 @@ fn row_labels(
     Ok(())
 }
 
-/// A drawing error as the boxed error [`Drawn`] holds.
+/// A chart on an SVG drawing area with `f64` coordinates on both axes.
+type RowChart<'a, 'b> =
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
 /// A chart of one row per label (top to bottom, at `y = n − 1 − i`) over `x` from `lo` to
 /// `hi`: its x mesh described by `x_desc` (axis descriptions `desc_size` px) and the labels
 /// right-aligned in a margin `label_width` px wide.
@@ -151,10 +154,7 @@ fn labelled_rows<'a, 'b>(
     label_width: u32,
     x_desc: &str,
     desc_size: u32,
-) -> std::result::Result<
-    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
-    Box<dyn std::error::Error>,
-> {
+) -> std::result::Result<RowChart<'a, 'b>, Box<dyn std::error::Error>> {
     let n = labels.len().max(1);
     let mut chart = ChartBuilder::on(root)
         .margin(12)
@@ -174,6 +174,7 @@ fn labelled_rows<'a, 'b>(
     Ok(chart)
 }
 
+/// A drawing error as the boxed error [`Drawn`] holds.
 fn boxed<E: std::error::Error + 'static>(e: E) -> Box<dyn std::error::Error> {
     Box::new(e)
 }
