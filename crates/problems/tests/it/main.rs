@@ -71,7 +71,7 @@ fn framed(tree: &Tree) -> Tree {
 /// rows a pose of tip `i % 3 % 2` (position m, unit-free quaternion `w, x, y, z`), on odd rows a
 /// marker position of tip 1 (m).
 fn pose_or_marker_row(i: usize, q: Vec<f64>) -> Row {
-    let kind = if i % 2 == 0 {
+    let kind = if i.is_multiple_of(2) {
         RowKind::Pose {
             tip: i % 3 % 2,
             position_m: [1.0, 0.2, -0.1],
