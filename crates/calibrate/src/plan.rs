@@ -1769,16 +1769,22 @@ mod tests {
         assert!(c.weight[(da0 + 1, da0 + 1)] > 0.0);
     }
 
+    /// The workspace weight of the line `(1, q)` on `q` uniform in `[−1, 1]`:
+    /// `W = ∫(1, q)ᵀ(1, q) dq/2 = diag(1, 1/3)`.
+    fn line_workspace_weight() -> Mat<f64> {
+        Mat::from_fn(2, 2, |i, j| match (i, j) {
+            (0, 0) => 1.0,
+            (1, 1) => 1.0 / 3.0,
+            _ => 0.0,
+        })
+    }
+
     #[test]
     fn coordinate_exchange_moves_a_line_design_to_the_ends_of_the_range() {
         // Straight line (1, q) on [−1, 1]: the D- and I-optimal 2-point designs are {−1, 1}
         // (I: W = ∫(1, q)ᵀ(1, q) dq/2 = diag(1, 1/3), tr(W M⁻¹) = (1 + 1/3)/2 there).
         let row = |q: &[f64]| Mat::from_fn(1, 2, |_, k| if k == 0 { 1.0 } else { q[0] });
-        let w = Mat::from_fn(2, 2, |i, j| match (i, j) {
-            (0, 0) => 1.0,
-            (1, 1) => 1.0 / 3.0,
-            _ => 0.0,
-        });
+        let w = line_workspace_weight();
         for criterion in [Criterion::IOptimal, Criterion::DOptimal] {
             let mut poses = vec![vec![-0.3], vec![0.5]];
             let v = coordinate_exchange(&mut poses, &row, criterion, &w, &[(-1.0, 1.0)], 20)
@@ -1810,11 +1816,7 @@ mod tests {
         // lowers tr(W·M⁻¹) by 2·vᵀP⁻¹WP⁻¹v/(1 + 2·vᵀP⁻¹v) (Sherman–Morrison), which grows with
         // q² for P = p·I, p > 4: the pose goes to an end of [−1, 1].
         let row = |q: &[f64]| Mat::from_fn(2, 2, |_, k| if k == 0 { 1.0 } else { q[0] });
-        let w = Mat::from_fn(2, 2, |i, j| match (i, j) {
-            (0, 0) => 1.0,
-            (1, 1) => 1.0 / 3.0,
-            _ => 0.0,
-        });
+        let w = line_workspace_weight();
         let prior = Mat::<f64>::identity(2, 2) * 10.0;
         let mut poses = vec![vec![0.3]];
         let v = coordinate_exchange_after(

@@ -110,13 +110,21 @@ fn number_before(text: &str, after: &str, unit: &str) -> f64 {
     head[start..].trim().parse().unwrap()
 }
 
-/// The change-point error of `report`, with the line it names.
-fn change_point(report: &SetupReport) -> (String, u64) {
+/// The message of the change-point error the check of `table` gives, asserted to name the
+/// first line after the change (within `LINE_SLACK` lines).
+fn change_point(robot: &Robot, table: &MeasurementTable) -> String {
+    let report = check(robot, std::slice::from_ref(table), &tips());
     let f = report
         .overwhelming()
         .unwrap_or_else(|| panic!("no error:\n{}", report.render()));
     assert_eq!(f.class, MistakeClass::ChangePoint, "{}", report.render());
-    named_line(&f.message)
+    let (message, line) = named_line(&f.message);
+    assert!(
+        line.abs_diff(change_line(table)) <= LINE_SLACK,
+        "{}",
+        report.render()
+    );
+    message
 }
 
 /// The message of a change-point finding, with the line it names as the first after the
@@ -141,13 +149,7 @@ fn an_instrument_moved_from_a_row_on_is_named_with_its_line_and_move() {
     let right = recording(&robot, 11, 1.0, Vector3::zeros());
     let moved = instrument_move();
     let table = instrument_moved(&right, &moved);
-    let report = check(&robot, std::slice::from_ref(&table), &tips());
-    let (message, line) = change_point(&report);
-    assert!(
-        line.abs_diff(change_line(&table)) <= LINE_SLACK,
-        "{}",
-        report.render()
-    );
+    let message = change_point(&robot, &table);
     assert!(message.contains("the instrument moved"), "{message}");
     // The parts' instrument frames are fitted to 60 rows each, with the placement deviations
     // (0.5 mm, 1 mrad: about 1 mm at the ball, the residual of the right rows) absorbed
@@ -180,13 +182,7 @@ fn a_marker_mounted_again_from_a_row_on_is_named_with_its_line_and_move() {
     let right = recording(&robot, 12, PRECISE, Vector3::zeros());
     let remounted = recording(&robot, 12, PRECISE, marker_move());
     let table = spliced(&right, &remounted);
-    let report = check(&robot, std::slice::from_ref(&table), &tips());
-    let (message, line) = change_point(&report);
-    assert!(
-        line.abs_diff(change_line(&table)) <= LINE_SLACK,
-        "{}",
-        report.render()
-    );
+    let message = change_point(&robot, &table);
     assert!(message.contains("marker 1 was mounted again"), "{message}");
     assert!(!message.contains("the instrument moved"), "{message}");
     // One instrument frame for both parts, a marker offset each: each offset is fitted to 60

@@ -13,6 +13,22 @@ use std::path::{Path, PathBuf};
 mod haptic_log;
 use haptic_log::{calibrate_rows, log};
 
+/// Asserts that every parameter of `bounded` (calibrated with `what`) is named as `clean`'s and
+/// lies within `clean`'s standard deviation of its value.
+fn assert_within_one_std(bounded: &CalibrationReport, clean: &CalibrationReport, what: &str) {
+    for (g, c) in bounded.parameters.iter().zip(&clean.parameters) {
+        assert_eq!(g.name, c.name);
+        assert!(
+            (g.value - c.value).abs() < c.std,
+            "{}: {:.6e} with {what}, {:.6e} ± {:.3e} without",
+            c.name,
+            g.value,
+            c.value,
+            c.std
+        );
+    }
+}
+
 /// A copy of `fixtures/mukca/data/kuka_14/front` in a fresh folder, with `edit` applied to
 /// the rows of `hole_1.csv` (no header: row `k` is line `k + 1`).
 fn front_copy(tag: &str, edit: impl Fn(usize, &mut Vec<f64>)) -> PathBuf {
@@ -80,16 +96,7 @@ fn one_glitch_row_of_a_socket_folder_is_bounded_listed_and_moves_no_parameter_by
         r.parameters.iter().map(|p| p.name.clone()).collect()
     };
     assert_eq!(names(&glitch), names(&clean));
-    for (g, c) in glitch.parameters.iter().zip(&clean.parameters) {
-        assert!(
-            (g.value - c.value).abs() < c.std,
-            "{}: {:.6e} with the glitch, {:.6e} ± {:.3e} without",
-            c.name,
-            g.value,
-            c.value,
-            c.std
-        );
-    }
+    assert_within_one_std(&glitch, &clean, "the glitch");
     // Five rows in sixty-two at the corner (≈ 4 σ) at most: σ grows by less than half.
     assert!(
         glitch.sigma_m < 1.5 * clean.sigma_m,
@@ -139,15 +146,5 @@ fn five_gross_distances_of_a_haptic_log_are_bounded_and_listed() {
         out.sigma_m * 1e6,
         clean.sigma_m * 1e6
     );
-    for (g, c) in out.parameters.iter().zip(&clean.parameters) {
-        assert_eq!(g.name, c.name);
-        assert!(
-            (g.value - c.value).abs() < c.std,
-            "{}: {:.6e} with the gross rows, {:.6e} ± {:.3e} without",
-            c.name,
-            g.value,
-            c.value,
-            c.std
-        );
-    }
+    assert_within_one_std(&out, &clean, "the gross rows");
 }

@@ -55,16 +55,7 @@ fn gamma_q(a: f64, x: f64) -> f64 {
         for i in 1..10_000 {
             let an = -(i as f64) * (i as f64 - a);
             b += 2.0;
-            d = an * d + b;
-            if d.abs() < tiny {
-                d = tiny;
-            }
-            c = b + an / c;
-            if c.abs() < tiny {
-                c = tiny;
-            }
-            d = 1.0 / d;
-            let del = d * c;
+            let del = lentz_step(an, b, &mut c, &mut d, tiny);
             h *= del;
             if (del - 1.0).abs() < 1e-15 {
                 break;
@@ -72,6 +63,22 @@ fn gamma_q(a: f64, x: f64) -> f64 {
         }
         (-x + a * x.ln() - gln).exp() * h
     }
+}
+
+/// One term of a continued fraction `… + a/(b + …)` by the modified Lentz method (Numerical
+/// Recipes): updates the ratios `c` and `d` with the term's numerator `a` and denominator
+/// `b`, raising magnitudes below `tiny` to it, and returns the factor `c·d` the value changes by.
+fn lentz_step(a: f64, b: f64, c: &mut f64, d: &mut f64, tiny: f64) -> f64 {
+    *d = a * *d + b;
+    if d.abs() < tiny {
+        *d = tiny;
+    }
+    *c = b + a / *c;
+    if c.abs() < tiny {
+        *c = tiny;
+    }
+    *d = 1.0 / *d;
+    *d * *c
 }
 
 fn beta_cf(a: f64, b: f64, x: f64) -> f64 {
@@ -88,27 +95,9 @@ fn beta_cf(a: f64, b: f64, x: f64) -> f64 {
         let m = m as f64;
         let m2 = 2.0 * m;
         let aa = m * (b - m) * x / ((qam + m2) * (a + m2));
-        d = 1.0 + aa * d;
-        if d.abs() < tiny {
-            d = tiny;
-        }
-        c = 1.0 + aa / c;
-        if c.abs() < tiny {
-            c = tiny;
-        }
-        d = 1.0 / d;
-        h *= d * c;
+        h *= lentz_step(aa, 1.0, &mut c, &mut d, tiny);
         let aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
-        d = 1.0 + aa * d;
-        if d.abs() < tiny {
-            d = tiny;
-        }
-        c = 1.0 + aa / c;
-        if c.abs() < tiny {
-            c = tiny;
-        }
-        d = 1.0 / d;
-        let del = d * c;
+        let del = lentz_step(aa, 1.0, &mut c, &mut d, tiny);
         h *= del;
         if (del - 1.0).abs() < 1e-15 {
             break;

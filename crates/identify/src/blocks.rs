@@ -391,19 +391,7 @@ pub(crate) fn streaming_fit(
     let f_norm = lin.r_norm_sq.sqrt();
     if free.is_empty() {
         let cost = 0.5 * lin.r_norm_sq;
-        return (
-            Fit {
-                x: x0,
-                termination: Termination::GtolReached,
-                n_evaluations: 1,
-                n_jacobians: 0,
-                n_iterations: 0,
-                cost,
-                residuals: Col::zeros(0),
-            },
-            lin,
-            true,
-        );
+        return (Fit::nothing_free(x0, cost, Col::zeros(0)), lin, true);
     }
     let mut s = Streaming::new(blocks, n, free, lin);
     let run = run(&mut s, x0, free, cfg, f_norm);

@@ -117,6 +117,22 @@ pub struct Fit {
     pub residuals: Col<f64>,
 }
 
+impl Fit {
+    /// The fit when no parameter is free: `x0` itself, after the one evaluation of `r` there
+    /// (`cost = ½‖r(x0)‖²`; `residuals` as the back end keeps them).
+    pub(crate) fn nothing_free(x0: Col<f64>, cost: f64, residuals: Col<f64>) -> Self {
+        Fit {
+            x: x0,
+            termination: Termination::GtolReached,
+            n_evaluations: 1,
+            n_jacobians: 0,
+            n_iterations: 0,
+            cost,
+            residuals,
+        }
+    }
+}
+
 /// The input checks of the dense and streaming LM: `x0` has one entry per layout parameter,
 /// `free` is valid ([`check_free`]), the tolerances and the trust-region factor are valid, and
 /// the problem has at least as many residuals as free parameters.
@@ -356,15 +372,7 @@ pub(crate) fn levenberg_marquardt_at(
     let nf = free.len();
     if nf == 0 {
         let cost = 0.5 * r.squared_norm_l2();
-        return Fit {
-            x: x0,
-            termination: Termination::GtolReached,
-            n_evaluations: 1,
-            n_jacobians: 0,
-            n_iterations: 0,
-            cost,
-            residuals: r,
-        };
+        return Fit::nothing_free(x0, cost, r);
     }
     let f_norm = col_norm(r.as_ref());
     let mut dense = Dense::new(p, free, r, jac);

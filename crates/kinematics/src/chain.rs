@@ -308,8 +308,9 @@ impl Chain {
         self.params.iter().position(|p| p.name == name)
     }
 
+    /// Panics unless `x` has one entry per parameter.
     #[track_caller]
-    fn check_shapes(&self, x: &[f64], q: &[f64]) {
+    pub(crate) fn check_params_len(&self, x: &[f64]) {
         assert_eq!(
             x.len(),
             self.n_params(),
@@ -317,6 +318,11 @@ impl Chain {
             x.len(),
             self.n_params()
         );
+    }
+
+    #[track_caller]
+    fn check_shapes(&self, x: &[f64], q: &[f64]) {
+        self.check_params_len(x);
         assert_eq!(
             q.len(),
             self.n_joints(),
@@ -512,17 +518,10 @@ impl Chain {
     /// If `x.len() != n_params()` or `q.len() != n_joints()`.
     #[track_caller]
     pub fn pose_jacobian_wrt_params(&self, x: &[f64], q: &[f64]) -> Matrix6xX<f64> {
-        let poses = self.frame_poses(x, q);
-        let mut jac = Matrix6xX::zeros(self.n_params());
-        self.add_twists(
-            &poses,
-            |f| match f {
-                Factor::Screw { param, .. } => *param,
-                Factor::Fixed(_) => None,
-            },
-            &mut jac,
-        );
-        jac
+        self.twist_jacobian(x, q, self.n_params(), |f| match f {
+            Factor::Screw { param, .. } => *param,
+            Factor::Fixed(_) => None,
+        })
     }
 
     /// Geometric Jacobian with respect to the joints: 6 × `n_joints()`, base frame, per
@@ -535,31 +534,28 @@ impl Chain {
     /// If `x.len() != n_params()` or `q.len() != n_joints()`.
     #[track_caller]
     pub fn geometric_jacobian(&self, x: &[f64], q: &[f64]) -> Matrix6xX<f64> {
-        let poses = self.frame_poses(x, q);
-        let mut jac = Matrix6xX::zeros(self.n_joints());
-        self.add_twists(
-            &poses,
-            |f| match f {
-                Factor::Screw { joint, .. } => *joint,
-                Factor::Fixed(_) => None,
-            },
-            &mut jac,
-        );
-        jac
+        self.twist_jacobian(x, q, self.n_joints(), |f| match f {
+            Factor::Screw { joint, .. } => *joint,
+            Factor::Fixed(_) => None,
+        })
     }
 
-    /// Adds each screw's twist (linear part at the tip, angular part) to the column that
-    /// `column_of` assigns it.
-    fn add_twists(
+    /// The 6 × `n_columns` Jacobian at `x`, `q` that adds each screw's twist (linear part at
+    /// the tip, angular part) to the column that `column_of` assigns it.
+    #[track_caller]
+    fn twist_jacobian(
         &self,
-        poses: &[Isometry3<f64>],
+        x: &[f64],
+        q: &[f64],
+        n_columns: usize,
         column_of: impl Fn(&Factor) -> Option<usize>,
-        jac: &mut Matrix6xX<f64>,
-    ) {
+    ) -> Matrix6xX<f64> {
+        let poses = self.frame_poses(x, q);
+        let mut jac = Matrix6xX::zeros(n_columns);
         let tip = poses
             .last()
             .map_or(Vector3::zeros(), |t| t.translation.vector);
-        for (factor, pose) in self.factors.iter().zip(poses) {
+        for (factor, pose) in self.factors.iter().zip(&poses) {
             let (Factor::Screw { motion, axis, .. }, Some(j)) = (factor, column_of(factor)) else {
                 continue;
             };
@@ -573,5 +569,6 @@ impl Chain {
             let mut ang_rows = jac.fixed_view_mut::<3, 1>(3, j);
             ang_rows += angular;
         }
+        jac
     }
 }

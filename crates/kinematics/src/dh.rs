@@ -38,6 +38,23 @@ pub struct DhRow {
     pub joint: Option<usize>,
 }
 
+impl DhRow {
+    /// A standard-convention row with link length `a_m` (m), twist `alpha_rad` (rad) and
+    /// offset `d_m` (m), no joint angle offset and no Hayati `beta`; `joint` as in
+    /// [`DhRow::joint`].
+    pub const fn standard(a_m: f64, alpha_rad: f64, d_m: f64, joint: Option<usize>) -> DhRow {
+        DhRow {
+            convention: DhConvention::Standard,
+            a_m,
+            alpha_rad,
+            d_m,
+            theta_rad: 0.0,
+            beta_rad: None,
+            joint,
+        }
+    }
+}
+
 fn screw(
     motion: Motion,
     axis: Unit<Vector3<f64>>,

@@ -295,13 +295,7 @@ impl Chain {
     /// If `x.len() != n_params()`.
     #[track_caller]
     pub fn freeze_into(&self, x: &[f64], frozen: &mut FrozenChain) {
-        assert_eq!(
-            x.len(),
-            self.n_params(),
-            "x has length {}, but the chain has {} parameters",
-            x.len(),
-            self.n_params()
-        );
+        self.check_params_len(x);
         let FrozenChain {
             segments,
             taps,

@@ -117,15 +117,7 @@ const PAPER_TABLE: [(f64, f64, f64, Option<usize>); 8] = [
 fn paper_chain() -> Chain {
     let rows: Vec<DhRow> = PAPER_TABLE
         .iter()
-        .map(|&(a_m, alpha_rad, d_m, joint)| DhRow {
-            convention: DhConvention::Standard,
-            a_m,
-            alpha_rad,
-            d_m,
-            theta_rad: 0.0,
-            beta_rad: None,
-            joint,
-        })
+        .map(|&(a_m, alpha_rad, d_m, joint)| DhRow::standard(a_m, alpha_rad, d_m, joint))
         .collect();
     Chain::from_dh(&rows).expect("the paper's table is valid")
 }

@@ -140,6 +140,40 @@ fn row_labels(
     Ok(())
 }
 
+/// A chart on an SVG drawing area with `f64` coordinates on both axes.
+type RowChart<'a, 'b> =
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A chart of one row per label (top to bottom, at `y = n − 1 − i`) over `x` from `lo` to
+/// `hi`: its x mesh described by `x_desc` (axis descriptions `desc_size` px) and the labels
+/// right-aligned in a margin `label_width` px wide.
+fn labelled_rows<'a, 'b>(
+    root: &'a DrawingArea<SVGBackend<'b>, Shift>,
+    (lo, hi): (f64, f64),
+    labels: &[String],
+    label_width: u32,
+    x_desc: &str,
+    desc_size: u32,
+) -> std::result::Result<RowChart<'a, 'b>, Box<dyn std::error::Error>> {
+    let n = labels.len().max(1);
+    let mut chart = ChartBuilder::on(root)
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(label_width)
+        .build_cartesian_2d(lo..hi, -0.5..n as f64 - 0.5)?;
+    chart
+        .configure_mesh()
+        .light_line_style(LIGHT)
+        .disable_y_mesh()
+        .y_label_formatter(&|_| String::new())
+        .x_desc(x_desc)
+        .label_style((FONT, 12))
+        .axis_desc_style((FONT, desc_size))
+        .draw()?;
+    row_labels(root, &chart, lo, labels)?;
+    Ok(chart)
+}
+
 /// A drawing error as the boxed error [`Drawn`] holds.
 fn boxed<E: std::error::Error + 'static>(e: E) -> Box<dyn std::error::Error> {
     Box::new(e)
@@ -316,21 +350,7 @@ pub(crate) fn hbars(
     let height = (18 * n as u32 + 90).clamp(160, 4000);
     let (lo, hi) = padded(values.iter().copied().chain([-mark, mark]), true);
     let svg = svg((760, height), |root| {
-        let mut chart = ChartBuilder::on(root)
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(210)
-            .build_cartesian_2d(lo..hi, -0.5..n as f64 - 0.5)?;
-        chart
-            .configure_mesh()
-            .light_line_style(LIGHT)
-            .disable_y_mesh()
-            .y_label_formatter(&|_| String::new())
-            .x_desc(x_desc)
-            .label_style((FONT, 12))
-            .axis_desc_style((FONT, 13))
-            .draw()?;
-        row_labels(root, &chart, lo, names)?;
+        let mut chart = labelled_rows(root, (lo, hi), names, 210, x_desc, 13)?;
         chart.draw_series((values.iter().enumerate()).map(|(i, v)| {
             let y = (n - 1 - i) as f64;
             let color = if v.abs() >= mark { BLUE_ } else { GREY };
@@ -643,23 +663,9 @@ pub(crate) fn ranges(id: &str, caption: String, rows: &[RangeRow]) -> Figure {
         .map(|r| format!("{} [{:.3}, {:.3}]", r.label, r.training.0, r.training.1))
         .collect();
     let svg = svg((860, height), |root| {
-        let mut chart = ChartBuilder::on(root)
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(230)
-            .build_cartesian_2d(lo..hi, -0.5..n as f64 - 0.5)?;
-        chart
-            .configure_mesh()
-            .light_line_style(LIGHT)
-            .disable_y_mesh()
-            .y_label_formatter(&|_| String::new())
-            .x_desc(
-                "reading as a share of the joint's training range (0: its minimum, 1: its maximum)",
-            )
-            .label_style((FONT, 12))
-            .axis_desc_style((FONT, 12))
-            .draw()?;
-        row_labels(root, &chart, lo, &labels)?;
+        let x_desc =
+            "reading as a share of the joint's training range (0: its minimum, 1: its maximum)";
+        let mut chart = labelled_rows(root, (lo, hi), &labels, 230, x_desc, 12)?;
         for (i, r) in rows.iter().enumerate() {
             let y = (n - 1 - i) as f64;
             chart.draw_series(std::iter::once(Rectangle::new(

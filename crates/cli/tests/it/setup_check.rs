@@ -58,6 +58,20 @@ fn map_rotations(rows: &mut [Vec<String>], f: &dyn Fn(UnitQuaternion<f64>) -> Un
     }
 }
 
+/// Every orientation `R` of `rows` turned into `P·R·P`, `P` the signed permutation whose
+/// nonzero entries are `entries` (row, column, ±1): the orientations an instrument with
+/// mirrored or swapped axes reads.
+fn conjugate_rotations(rows: &mut [Vec<String>], entries: [(usize, usize, f64); 3]) {
+    map_rotations(rows, &|r| {
+        let m = r.to_rotation_matrix().into_inner();
+        let mut p = m * 0.0;
+        for (i, j, v) in entries {
+            p[(i, j)] = v;
+        }
+        UnitQuaternion::from_matrix(&(p * m * p))
+    });
+}
+
 /// The UR10's orientations as quaternion columns `qw1, qx1, qy1, qz1` holding `order(q)`.
 fn with_quaternions(
     rows: &[Vec<String>],
@@ -318,14 +332,7 @@ fn a_mirrored_axis_is_named() {
     let mut rows = ur10_rows();
     // The instrument's y axis reversed: y → −y for positions, R → M·R·M for orientations.
     map_column(&mut rows, "y1", &|v| -v);
-    map_rotations(&mut rows, &|r| {
-        let m = r.to_rotation_matrix().into_inner();
-        let mut mirror = m * 0.0;
-        mirror[(0, 0)] = 1.0;
-        mirror[(1, 1)] = -1.0;
-        mirror[(2, 2)] = 1.0;
-        UnitQuaternion::from_matrix(&(mirror * m * mirror))
-    });
+    conjugate_rotations(&mut rows, [(0, 0, 1.0), (1, 1, -1.0), (2, 2, 1.0)]);
     ur10_restored(
         &dir,
         "mirror.csv",
@@ -339,14 +346,7 @@ fn swapped_position_axes_are_named() {
     let dir = scratch("setup-swapxz");
     let mut rows = ur10_rows();
     swap_names(&mut rows, "x1", "z1");
-    map_rotations(&mut rows, &|r| {
-        let m = r.to_rotation_matrix().into_inner();
-        let mut p = m * 0.0;
-        p[(0, 2)] = 1.0;
-        p[(2, 0)] = 1.0;
-        p[(1, 1)] = 1.0;
-        UnitQuaternion::from_matrix(&(p * m * p))
-    });
+    conjugate_rotations(&mut rows, [(0, 2, 1.0), (2, 0, 1.0), (1, 1, 1.0)]);
     ur10_restored(
         &dir,
         "swapxz.csv",

@@ -104,6 +104,17 @@ fn read(dir: &Path, name: &str, text: &str, units: &Units) -> Result<Measurement
     read_measurement_file(&path, &Arm::new().schema(), units)
 }
 
+/// `rows` written in SI units to `<dir>/si.csv` and read back with the default units.
+fn read_si(dir: &Path, rows: &[[f64; 9]]) -> MeasurementTable {
+    read(
+        dir,
+        "si.csv",
+        &csv(rows, |_| 1.0, |_, v| v),
+        &Units::default(),
+    )
+    .unwrap()
+}
+
 /// Every value of `a` equals `b`'s within `rel` relative (and 1e-300 absolute).
 #[track_caller]
 fn assert_same(a: &MeasurementTable, b: &MeasurementTable, rel: f64) {
@@ -136,13 +147,7 @@ const REL: f64 = 1e-15 * 8.0;
 fn a_column_in_another_unit_read_with_its_edit_equals_the_si_file() {
     let dir = scratch("units");
     let rows = si_rows();
-    let si = read(
-        &dir,
-        "si.csv",
-        &csv(&rows, |_| 1.0, |_, v| v),
-        &Units::default(),
-    )
-    .unwrap();
+    let si = read_si(&dir, &rows);
     // Column index, its unit, the edit naming it (by the header's name or a joint's alias).
     let cases = [
         (1, ColumnUnit::Angle(AngleUnit::Deg), "q2=deg"),
@@ -175,13 +180,7 @@ fn a_column_in_another_unit_read_with_its_edit_equals_the_si_file() {
 fn a_reversed_column_read_with_its_sign_and_an_offset_equal_the_original() {
     let dir = scratch("sign");
     let rows = si_rows();
-    let si = read(
-        &dir,
-        "si.csv",
-        &csv(&rows, |_| 1.0, |_, v| v),
-        &Units::default(),
-    )
-    .unwrap();
+    let si = read_si(&dir, &rows);
     let reversed = csv(&rows, |_| 1.0, |c, v| if c == 2 { -v } else { v });
     let units = Units::default().with_columns([ColumnEdit::parse_sign("elbow").unwrap()]);
     assert_eq!(
@@ -366,13 +365,7 @@ fn a_haptic_log_reads_its_columns_in_their_units() {
 fn a_scaled_or_coupled_column_read_with_its_edit_equals_the_si_file() {
     let dir = scratch("scale");
     let rows = si_rows();
-    let si = read(
-        &dir,
-        "si.csv",
-        &csv(&rows, |_| 1.0, |_, v| v),
-        &Units::default(),
-    )
-    .unwrap();
+    let si = read_si(&dir, &rows);
     // The elbow read on the motor side of a 100:1 gear.
     let motor = csv(&rows, |c| if c == 2 { 0.01 } else { 1.0 }, |_, v| v);
     let units = Units::default().with_columns([ColumnEdit::parse_scale("elbow=0.01").unwrap()]);

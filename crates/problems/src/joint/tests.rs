@@ -1,6 +1,6 @@
 use faer::{Col, Mat};
 use hapcal_identify::Problem;
-use hapcal_kinematics::{Chain, DhConvention, DhRow};
+use hapcal_kinematics::{Chain, DhRow};
 use hapcal_transmission::JointRad;
 
 use super::*;
@@ -11,15 +11,7 @@ const SIGMA_D: f64 = 1e-5;
 
 /// A spatial three-joint chain (standard D-H) with a fixed rig → base row.
 fn chain() -> Chain {
-    let row = |a_m: f64, alpha_rad: f64, d_m: f64, joint: Option<usize>| DhRow {
-        convention: DhConvention::Standard,
-        a_m,
-        alpha_rad,
-        d_m,
-        theta_rad: 0.0,
-        beta_rad: None,
-        joint,
-    };
+    let row = DhRow::standard;
     Chain::from_dh(&[
         row(0.1, 0.0, 0.2, None),
         row(0.0, std::f64::consts::FRAC_PI_2, 0.05, Some(0)),

@@ -2,43 +2,19 @@
 //! is the derivative of the potential energy, and the transversal compliance's analytic
 //! Jacobian agrees with central differences.
 
+use super::{framed, pose_and_marker_weights, pose_or_marker_row, torso_and_two_arms};
 use faer::Col;
 use hapcal_identify::Problem;
-use hapcal_kinematics::{Chain, Factor, FrameSpec, Isometry3, Placement, Point3, Tree, Vector3};
+use hapcal_kinematics::{Chain, Factor, Isometry3, Point3, Tree, Vector3};
 use hapcal_problems::{
     CalibrationProblem, GravityCompliance, LinkMass, ModelTerms, Observations, Row, RowKind,
     Weights,
 };
 
-fn placement(name: &str, xyz_m: [f64; 3], axis: [f64; 3]) -> Placement {
-    Placement {
-        name: name.into(),
-        xyz_m,
-        rpy_rad: [0.1, -0.2, 0.05],
-        axis: Some(axis),
-        prismatic: false,
-    }
-}
-
 /// A torso that pitches (axis y, so that both arms load it) under two arms of two revolute
 /// joints each, with a fixed tool.
 fn torso_tree() -> Tree {
-    let torso = placement("torso", [0.0, 0.0, 0.4], [0.0, 1.0, 0.0]);
-    let arm = |side: &str, y: f64| {
-        vec![
-            torso.clone(),
-            placement(&format!("{side}_1"), [0.1, y, 0.2], [0.0, 1.0, 0.0]),
-            placement(&format!("{side}_2"), [0.3, 0.0, 0.0], [1.0, 0.0, 0.3]),
-            Placement {
-                name: format!("{side}_tool"),
-                xyz_m: [0.2, 0.0, 0.05],
-                rpy_rad: [0.0; 3],
-                axis: None,
-                prismatic: false,
-            },
-        ]
-    };
-    Tree::from_placement_paths(&[arm("left", 0.2), arm("right", -0.2)]).expect("valid tree")
+    torso_and_two_arms([0.0, 1.0, 0.0], false, [1.0, 0.0, 0.3])
 }
 
 /// A mass on every link, centres of mass off every axis.
@@ -171,17 +147,7 @@ fn transversal_jacobian_matches_central_differences(transversal: hapcal_problems
         1
     };
     let robot = torso_tree();
-    let base = FrameSpec {
-        name: "instrument".into(),
-        nominal: Isometry3::new(Vector3::new(1.0, -0.5, 0.3), Vector3::new(0.2, 0.1, -0.4)),
-    };
-    let marker = |name: &str| FrameSpec {
-        name: name.into(),
-        nominal: Isometry3::new(Vector3::new(0.02, 0.01, 0.03), Vector3::new(-0.1, 0.3, 0.2)),
-    };
-    let tree = (robot.with_joint_offsets())
-        .with_frames(&base, &[(0, marker("marker1")), (1, marker("marker2"))])
-        .expect("valid frames");
+    let tree = framed(&robot);
     let mut obs = Observations::default();
     for i in 0..6 {
         let t = i as f64;
@@ -192,25 +158,9 @@ fn transversal_jacobian_matches_central_differences(transversal: hapcal_problems
             (0.4 * t).sin() * 1.5,
             (1.7 * t + 0.3).cos(),
         ];
-        let kind = if i % 2 == 0 {
-            RowKind::Pose {
-                tip: i % 3 % 2,
-                position_m: [1.0, 0.2, -0.1],
-                rotation: [0.9, 0.1, -0.3, 0.2],
-            }
-        } else {
-            RowKind::Marker {
-                tip: 1,
-                position_m: [0.5, 0.4, 0.3],
-            }
-        };
-        obs.rows.push(Row { q, kind });
+        obs.rows.push(pose_or_marker_row(i, q));
     }
-    let weights = Weights {
-        sigma_position_m: 1e-3,
-        sigma_orientation_rad: 2e-3,
-        ..Weights::default()
-    };
+    let weights = pose_and_marker_weights();
     let n_joints = tree.n_joints();
     let problem = CalibrationProblem::on_tree(
         tree,

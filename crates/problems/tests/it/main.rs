@@ -11,12 +11,89 @@ mod tree;
 
 use faer::{Col, Mat};
 use hapcal_identify::Problem;
-use hapcal_kinematics::{Chain, Placement, Vector3};
+use hapcal_kinematics::{Chain, FrameSpec, Isometry3, Placement, Tree, Vector3};
 use hapcal_problems::{
     CalibrationProblem, GravityCompliance, JointHarmonics, LinkMass, Observations, PointDistance,
     Row, RowKind, Weights,
 };
 use proptest::prelude::*;
+
+/// A joint origin at `xyz_m` (m) tilted by the same roll, pitch and yaw (rad) for every
+/// joint, moving along or about `axis`.
+fn tilted_placement(name: &str, xyz_m: [f64; 3], axis: [f64; 3], prismatic: bool) -> Placement {
+    Placement {
+        name: name.into(),
+        xyz_m,
+        rpy_rad: [0.1, -0.2, 0.05],
+        axis: Some(axis),
+        prismatic,
+    }
+}
+
+/// A torso joint about (or, `prismatic`, along) `torso_axis` under two arms, `left` and
+/// `right`, of two revolute joints each (about y, then about `second_axis`) and a fixed tool.
+fn torso_and_two_arms(torso_axis: [f64; 3], prismatic: bool, second_axis: [f64; 3]) -> Tree {
+    let torso = tilted_placement("torso", [0.0, 0.0, 0.4], torso_axis, prismatic);
+    let arm = |side: &str, y: f64| {
+        vec![
+            torso.clone(),
+            tilted_placement(&format!("{side}_1"), [0.1, y, 0.2], [0.0, 1.0, 0.0], false),
+            tilted_placement(&format!("{side}_2"), [0.3, 0.0, 0.0], second_axis, false),
+            Placement {
+                name: format!("{side}_tool"),
+                xyz_m: [0.2, 0.0, 0.05],
+                rpy_rad: [0.0; 3],
+                axis: None,
+                prismatic: false,
+            },
+        ]
+    };
+    Tree::from_placement_paths(&[arm("left", 0.2), arm("right", -0.2)]).expect("valid tree")
+}
+
+/// `tree` with joint offsets, an instrument frame and a marker frame on each of its first two
+/// tips.
+fn framed(tree: &Tree) -> Tree {
+    let base = FrameSpec {
+        name: "instrument".into(),
+        nominal: Isometry3::new(Vector3::new(1.0, -0.5, 0.3), Vector3::new(0.2, 0.1, -0.4)),
+    };
+    let marker = |name: &str| FrameSpec {
+        name: name.into(),
+        nominal: Isometry3::new(Vector3::new(0.02, 0.01, 0.03), Vector3::new(-0.1, 0.3, 0.2)),
+    };
+    tree.with_joint_offsets()
+        .with_frames(&base, &[(0, marker("marker1")), (1, marker("marker2"))])
+        .expect("valid frames")
+}
+
+/// Row `i` of the mixed observations on a two-tip tree, at configuration `q` (rad): on even
+/// rows a pose of tip `i % 3 % 2` (position m, unit-free quaternion `w, x, y, z`), on odd rows a
+/// marker position of tip 1 (m).
+fn pose_or_marker_row(i: usize, q: Vec<f64>) -> Row {
+    let kind = if i.is_multiple_of(2) {
+        RowKind::Pose {
+            tip: i % 3 % 2,
+            position_m: [1.0, 0.2, -0.1],
+            rotation: [0.9, 0.1, -0.3, 0.2],
+        }
+    } else {
+        RowKind::Marker {
+            tip: 1,
+            position_m: [0.5, 0.4, 0.3],
+        }
+    };
+    Row { q, kind }
+}
+
+/// Weights of [`pose_or_marker_row`]'s rows: position σ 1 mm, orientation σ 2 mrad.
+fn pose_and_marker_weights() -> Weights {
+    Weights {
+        sigma_position_m: 1e-3,
+        sigma_orientation_rad: 2e-3,
+        ..Weights::default()
+    }
+}
 
 /// iiwa-like chain from URDF placements (MUKCa `iiwa14.urdf` joint origins).
 fn iiwa_like() -> Chain {

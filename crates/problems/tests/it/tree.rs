@@ -1,60 +1,17 @@
 //! Marker and pose rows on a kinematic tree with instrument and marker frames: the analytic
 //! Jacobian against central differences, and frames recovered from exact data.
 
+use super::{framed, pose_and_marker_weights, pose_or_marker_row, torso_and_two_arms};
 use faer::Col;
 use hapcal_identify::{IdentifyConfig, Problem, Subset, identify};
-use hapcal_kinematics::{FrameSpec, Isometry3, Placement, Tree, Vector3};
+use hapcal_kinematics::Tree;
 use hapcal_problems::{
     CalibrationProblem, GravityCompliance, ModelTerms, Observations, Row, RowKind, Weights,
 };
 
-fn placement(name: &str, xyz_m: [f64; 3], axis: [f64; 3], prismatic: bool) -> Placement {
-    Placement {
-        name: name.into(),
-        xyz_m,
-        rpy_rad: [0.1, -0.2, 0.05],
-        axis: Some(axis),
-        prismatic,
-    }
-}
-
 /// A torso (prismatic) under two arms of two revolute joints each, with a fixed tool.
 fn two_arm_tree() -> Tree {
-    let torso = placement("torso", [0.0, 0.0, 0.4], [0.0, 0.0, 1.0], true);
-    let arm = |side: &str, y: f64| {
-        vec![
-            torso.clone(),
-            placement(&format!("{side}_1"), [0.1, y, 0.2], [0.0, 1.0, 0.0], false),
-            placement(
-                &format!("{side}_2"),
-                [0.3, 0.0, 0.0],
-                [0.0, 0.0, 1.0],
-                false,
-            ),
-            Placement {
-                name: format!("{side}_tool"),
-                xyz_m: [0.2, 0.0, 0.05],
-                rpy_rad: [0.0; 3],
-                axis: None,
-                prismatic: false,
-            },
-        ]
-    };
-    Tree::from_placement_paths(&[arm("left", 0.2), arm("right", -0.2)]).expect("valid tree")
-}
-
-fn framed(tree: &Tree) -> Tree {
-    let base = FrameSpec {
-        name: "instrument".into(),
-        nominal: Isometry3::new(Vector3::new(1.0, -0.5, 0.3), Vector3::new(0.2, 0.1, -0.4)),
-    };
-    let marker = |name: &str| FrameSpec {
-        name: name.into(),
-        nominal: Isometry3::new(Vector3::new(0.02, 0.01, 0.03), Vector3::new(-0.1, 0.3, 0.2)),
-    };
-    tree.with_joint_offsets()
-        .with_frames(&base, &[(0, marker("marker1")), (1, marker("marker2"))])
-        .expect("valid frames")
+    torso_and_two_arms([0.0, 0.0, 1.0], true, [0.0, 0.0, 1.0])
 }
 
 fn configurations(n: usize) -> Vec<Vec<f64>> {
@@ -92,25 +49,9 @@ fn pose_rows_jacobian_matches_central_differences() {
     let tree = framed(&two_arm_tree());
     let mut obs = Observations::default();
     for (i, q) in configurations(6).into_iter().enumerate() {
-        let kind = if i % 2 == 0 {
-            RowKind::Pose {
-                tip: i % 3 % 2,
-                position_m: [1.0, 0.2, -0.1],
-                rotation: [0.9, 0.1, -0.3, 0.2],
-            }
-        } else {
-            RowKind::Marker {
-                tip: 1,
-                position_m: [0.5, 0.4, 0.3],
-            }
-        };
-        obs.rows.push(Row { q, kind });
+        obs.rows.push(pose_or_marker_row(i, q));
     }
-    let weights = Weights {
-        sigma_position_m: 1e-3,
-        sigma_orientation_rad: 2e-3,
-        ..Weights::default()
-    };
+    let weights = pose_and_marker_weights();
     let n_joints = tree.n_joints();
     let torque = two_arm_tree().tips().to_vec();
     let problem = CalibrationProblem::on_tree(

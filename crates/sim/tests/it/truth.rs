@@ -169,26 +169,28 @@ fn line_of(text: &str, needle: &str) -> usize {
     (text.lines().position(|l| l.contains(needle))).expect("the needle is in the text") + 1
 }
 
+/// The error of the fixture with `from` replaced by `to`, and the 1-based line of the first
+/// occurrence of `needle` in the edited text.
+fn error_at(from: &str, to: &str, needle: &str) -> (String, usize) {
+    let text = edited(from, to);
+    (parse_err(&text), line_of(&text, needle))
+}
+
 #[test]
 fn reader_errors_name_file_line_and_column() {
-    let text = edited("dl3_m = 0.0", "dl3_mm = 0.0");
-    let err = parse_err(&text);
-    let line = line_of(&text, "dl3_mm");
+    let (err, line) = error_at("dl3_m = 0.0", "dl3_mm = 0.0", "dl3_mm");
     assert!(
         err.starts_with(&format!("t.toml:{line}:1: unknown field `dl3_mm`")),
         "{err}"
     );
 
-    let text = edited("dd4 = -1.3e-3", "dd4 = nan");
-    let line = line_of(&text, "dd4 = nan");
+    let (err, line) = error_at("dd4 = -1.3e-3", "dd4 = nan", "dd4 = nan");
     assert_eq!(
-        parse_err(&text),
+        err,
         format!("t.toml:{line}:7: expected a finite number for \"dd4\", found NaN")
     );
 
-    let text = edited("dtheta3 = ", "dtheat3 = ");
-    let line = line_of(&text, "dtheat3");
-    let err = parse_err(&text);
+    let (err, line) = error_at("dtheta3 = ", "dtheat3 = ", "dtheat3");
     assert!(
         err.starts_with(&format!(
             "t.toml:{line}:1: \"dtheat3\" is not a parameter name"
@@ -208,16 +210,13 @@ fn reader_errors_name_file_line_and_column() {
         format!("t.toml:{line}:9: a second [[capstan]] for joint 2")
     );
 
-    let text = edited("joint = 1", "joint = 0");
-    let line = line_of(&text, "joint = 0");
+    let (err, line) = error_at("joint = 1", "joint = 0", "joint = 0");
     assert_eq!(
-        parse_err(&text),
+        err,
         format!("t.toml:{line}:9: capstan joint numbers are 1-based; found 0")
     );
 
-    let text = edited("re = 0.015", "re = \"0.015\"");
-    let err = parse_err(&text);
-    let line = line_of(&text, "re = \"0.015\"");
+    let (err, line) = error_at("re = 0.015", "re = \"0.015\"", "re = \"0.015\"");
     assert!(err.starts_with(&format!("t.toml:{line}:6: ")), "{err}");
 
     let text = edited("device = \"device.toml\"", "");
