@@ -9,7 +9,7 @@
 //!
 //! ```sh
 //! cargo run --release -p hapcal-calibrate --example sim_humanoid -- fixtures/sim-humanoid
-//! cargo run --release -p hapcal-calibrate --example sim_humanoid -- --rows 1000000 /tmp/humanoid
+//! cargo run --release -p hapcal-calibrate --example sim_humanoid -- --rows 1000000 long-humanoid
 //! hapcal calibrate --device fixtures/sim-humanoid/humanoid.urdf --tip l_hand --tip r_hand \
 //!     --data fixtures/sim-humanoid/mocap.csv --test-last 0.3
 //! ```
