@@ -418,6 +418,7 @@ fn _calibrate(
         model,
         folds,
         ladder_rows: hapcal_calibrate::fit::LADDER_ROWS,
+        read_rows: None,
         sigma_m,
         joint,
     };
@@ -760,6 +761,7 @@ fn _diagnose(
         model: ModelChoice::Auto,
         folds,
         ladder_rows: hapcal_calibrate::fit::LADDER_ROWS,
+        read_rows: None,
         sigma_m,
         joint: false,
     };

@@ -72,6 +72,37 @@ impl Data {
     }
 }
 
+/// The training and test tables of `plan`'s marker files for `robot`: every row, or with
+/// [`Plan::read_rows`] and more rows than it in all, every `s`-th row of each file (the
+/// stride of [`crate::fit::ladder_sample`] over the files' rows), each sampled table's
+/// warnings saying so.
+///
+/// # Errors
+/// As [`load_tables`].
+fn load_marker_rows(
+    plan: &Plan,
+    robot: &Robot,
+) -> Result<(Vec<MeasurementTable>, Vec<MeasurementTable>)> {
+    let files: Vec<PathBuf> = plan.data.iter().chain(&plan.test).cloned().collect();
+    let stride = plan.read_rows.map_or(1, |cap| {
+        let lengths: Vec<usize> = files.iter().map(|p| hapcal_io::count_log_rows(p)).collect();
+        crate::fit::ladder_sample(&lengths, cap).map_or(1, |sample| sample.stride)
+    });
+    let (mut tables, n_rows) = load_tables_every(&files, robot, &plan.units, stride)?;
+    if stride > 1 {
+        for (t, n) in tables.iter_mut().zip(n_rows) {
+            t.warnings.push(format!(
+                "{}: {n} rows, of which one in {stride} ({} rows, spread over the file) is \
+                 used",
+                t.path.display(),
+                t.rows.len()
+            ));
+        }
+    }
+    let test = tables.split_off(plan.data.len());
+    Ok((tables, test))
+}
+
 /// Reads `plan`'s training and held-out paths for `device`, each with the reader of its kind:
 /// a haptic device's logs when the device has transmissions; measurement files when any
 /// training file is a measurement file ([`is_marker_file`]: marker, pose or, on a device
@@ -117,8 +148,7 @@ pub fn load(plan: &Plan, device: &Device) -> Result<Data> {
             );
         }
         let robot = robot_of(plan, device)?;
-        let train = load_tables(&plan.data, &robot, &plan.units)?;
-        let test = load_tables(&plan.test, &robot, &plan.units)?;
+        let (train, test) = load_marker_rows(plan, &robot)?;
         return Ok(Data::Measurements { robot, train, test });
     }
     let train = load_data(&plan.data, device, &plan.units)?;
@@ -568,4 +598,54 @@ pub fn check_sockets(placement: &SocketPlacement) -> Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The simulated humanoid's 550-row recording read for at most 100 rows: one row in
+    /// `s` of the file from its first, with its line, and a warning that says so.
+    #[test]
+    fn a_marker_file_longer_than_read_rows_is_read_one_row_in_s() {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/sim-humanoid");
+        let mut plan = Plan::bundled_default();
+        plan.device = root.join("humanoid.urdf");
+        plan.tip = "l_hand".to_owned();
+        plan.tips = vec!["r_hand".to_owned()];
+        plan.data = vec![root.join("mocap.csv")];
+        plan.test = Vec::new();
+        let device = load_device_tips(&plan.device, &plan.tip, &plan.tips).expect("the URDF");
+        let mut tables = |read_rows| {
+            plan.read_rows = read_rows;
+            match load(&plan, &device).expect("the recording") {
+                Data::Measurements { train, .. } => train,
+                _ => panic!("a marker file is read as measurements"),
+            }
+        };
+        let every = tables(None);
+        let sampled = tables(Some(100));
+        let (every, sampled) = (&every[0], &sampled[0]);
+        assert_eq!(every.rows.len(), 550);
+        let stride = every.rows.len().div_ceil(100);
+        assert_eq!(sampled.rows.len(), every.rows.len().div_ceil(stride));
+        for (k, row) in sampled.rows.iter().enumerate() {
+            let whole = &every.rows[k * stride];
+            assert_eq!(
+                (row.line, &row.q),
+                (whole.line, &whole.q),
+                "sampled row {k}"
+            );
+        }
+        let said = format!(
+            "550 rows, of which one in {stride} ({} rows",
+            sampled.rows.len()
+        );
+        assert!(
+            sampled.warnings.iter().any(|w| w.contains(&said)),
+            "{:?}",
+            sampled.warnings
+        );
+        assert!(!every.warnings.iter().any(|w| w.contains("of which one in")));
+    }
 }

@@ -121,6 +121,11 @@ pub struct Plan {
     /// sample spread over the logs ([`crate::fit::ladder_sample`]); the chosen model is
     /// fitted on every row. [`crate::fit::LADDER_ROWS`] by default.
     pub ladder_rows: usize,
+    /// Marker files: read at most about this many of their rows in all, every `s`-th row of
+    /// each file from its first (the stride of [`crate::fit::ladder_sample`]), every row still
+    /// read and checked, and say so in the tables' warnings; `None` (the default): keep every
+    /// row. The arm diagnosis sets it: its memory grows with the rows it diagnoses.
+    pub read_rows: Option<usize>,
     /// Measurement noise (m) if known; otherwise estimated from the residuals.
     pub sigma_m: Option<f64>,
     /// For a haptic device: identify the transmissions and the kinematics in one problem
@@ -158,6 +163,7 @@ impl Plan {
             model: crate::model::ModelName::Geometric.into(),
             folds,
             ladder_rows: crate::fit::LADDER_ROWS,
+            read_rows: None,
             sigma_m: None,
             joint: false,
             gravity: GRAVITY_DOWN,
@@ -223,6 +229,7 @@ impl Plan {
             model: ModelChoice::Auto,
             folds: 5,
             ladder_rows: crate::fit::LADDER_ROWS,
+            read_rows: None,
             sigma_m: None,
             joint: false,
             gravity: GRAVITY_DOWN,

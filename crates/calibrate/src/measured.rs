@@ -4166,6 +4166,8 @@ pub(crate) fn split_test_last(
         }
         let mut held = t.clone();
         held.rows = t.rows.split_off(k);
+        // The file's warnings are said once, with its training part.
+        held.warnings.clear();
         held.name = format!("{} (last {})", t.name, n - k);
         t.name = format!("{} (first {k})", t.name);
         test.push(held);

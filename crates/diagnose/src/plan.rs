@@ -33,14 +33,26 @@ pub fn diagnose_log(
     Ok((d, log.warnings))
 }
 
-/// Loads `plan`'s device and data, fits the geometric baseline (with the kinematic ladder)
-/// and diagnoses it; returns the diagnosis and the loaders' warnings.
+/// Marker rows a serial arm's diagnosis reads at most, in all: a longer recording is
+/// diagnosed on every `s`-th row of each file, spread over it, and its warnings say so
+/// (`hapcal_calibrate::calibrate::Plan::read_rows`). The diagnosis's candidate columns take
+/// about 90 kB a row, so 5,000 rows keep it well under 1 GB; the bundled recordings have at
+/// most 550 rows.
+pub const ARM_MAX_ROWS: usize = 5_000;
+
+/// Loads `plan`'s device and data (at most about [`ARM_MAX_ROWS`] marker rows), fits the
+/// geometric baseline (with the kinematic ladder) and diagnoses it; returns the diagnosis and
+/// the loaders' warnings.
 ///
 /// # Errors
 /// Unreadable or invalid files (named with line and column), too few configurations, a failed
 /// baseline fit.
 pub fn diagnose_arm_data(plan: &Plan, cfg: &ArmConfig) -> Result<(ArmDiagnosis, Vec<String>)> {
-    let baseline = geometric_baseline(plan, true)?;
+    let plan = Plan {
+        read_rows: Some(ARM_MAX_ROWS),
+        ..plan.clone()
+    };
+    let baseline = geometric_baseline(&plan, true)?;
     let d = diagnose_arm(&baseline, cfg).context("diagnosing the geometric baseline")?;
     Ok((d, baseline.warnings))
 }
