@@ -761,7 +761,8 @@ fn _diagnose(
         model: ModelChoice::Auto,
         folds,
         ladder_rows: hapcal_calibrate::fit::LADDER_ROWS,
-        read_rows: None,
+        // Files are read as the command line reads them: at most the arm diagnosis's rows.
+        read_rows: Some(hapcal_diagnose::plan::ARM_MAX_ROWS),
         sigma_m,
         joint: false,
     };
