@@ -3,7 +3,7 @@
 
 use std::ops::Range;
 
-use faer::{Col, ColMut, ColRef, Mat, MatMut};
+use faer::{Col, ColMut, ColRef, Mat, MatMut, MatRef};
 
 use crate::{EvalError, ParamLayout, Problem, RowBlocks};
 
@@ -68,6 +68,14 @@ impl<'a, P: Problem + ?Sized> Subset<'a, P> {
         x
     }
 
+    /// Copies the free parameters' columns of the problem's Jacobian `full` (rows × all
+    /// parameters) into `jac` (rows × free parameters).
+    fn free_columns(&self, full: MatRef<'_, f64>, mut jac: MatMut<'_, f64>) {
+        for (k, &i) in self.free.iter().enumerate() {
+            jac.as_mut().col_mut(k).copy_from(full.col(i));
+        }
+    }
+
     fn full_checked(&self, x_free: ColRef<'_, f64>) -> Result<Col<f64>, EvalError> {
         if x_free.nrows() != self.free.len() {
             return Err(EvalError {
@@ -96,13 +104,11 @@ impl<P: Problem + Sync + ?Sized> Problem for Subset<'_, P> {
         self.problem.residuals(x.as_ref(), out)
     }
 
-    fn jacobian(&self, x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+    fn jacobian(&self, x: ColRef<'_, f64>, jac: MatMut<'_, f64>) -> Result<(), EvalError> {
         let x = self.full_checked(x)?;
         let mut full = Mat::<f64>::zeros(self.problem.n_residuals(), x.nrows());
         self.problem.jacobian(x.as_ref(), full.as_mut())?;
-        for (k, &i) in self.free.iter().enumerate() {
-            jac.as_mut().col_mut(k).copy_from(full.col(i));
-        }
+        self.free_columns(full.as_ref(), jac);
         Ok(())
     }
 
@@ -110,15 +116,13 @@ impl<P: Problem + Sync + ?Sized> Problem for Subset<'_, P> {
         &self,
         x: ColRef<'_, f64>,
         out: ColMut<'_, f64>,
-        mut jac: MatMut<'_, f64>,
+        jac: MatMut<'_, f64>,
     ) -> Result<(), EvalError> {
         let x = self.full_checked(x)?;
         let mut full = Mat::<f64>::zeros(self.problem.n_residuals(), x.nrows());
         self.problem
             .residuals_and_jacobian(x.as_ref(), out, full.as_mut())?;
-        for (k, &i) in self.free.iter().enumerate() {
-            jac.as_mut().col_mut(k).copy_from(full.col(i));
-        }
+        self.free_columns(full.as_ref(), jac);
         Ok(())
     }
 
@@ -162,15 +166,13 @@ impl<P: Problem + Sync + ?Sized> RowBlocks for Subset<'_, P> {
         x: ColRef<'_, f64>,
         block: usize,
         r_out: ColMut<'_, f64>,
-        mut jac: MatMut<'_, f64>,
+        jac: MatMut<'_, f64>,
     ) -> Result<(), EvalError> {
         let x = self.full_checked(x)?;
         let blocks = self.blocks()?;
         let mut full = Mat::<f64>::zeros(blocks.block_rows(block).len(), x.nrows());
         blocks.block_jacobian(x.as_ref(), block, r_out, full.as_mut())?;
-        for (k, &i) in self.free.iter().enumerate() {
-            jac.as_mut().col_mut(k).copy_from(full.col(i));
-        }
+        self.free_columns(full.as_ref(), jac);
         Ok(())
     }
 }
