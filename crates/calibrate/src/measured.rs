@@ -2041,19 +2041,31 @@ fn choose_rung(
             None => climb_ladder(fits, cfg, test, frames, richest_fit, ladder),
         };
     };
-    let chosen = if rung == ModelName::FramesOnly {
-        (frames.0.clone(), frames.1.clone())
-    } else {
-        match richest_fit {
-            Some((used, f)) if used == rung => f,
-            _ => fits.fit(rung)?,
-        }
-    };
     Ok(Choice {
         rung,
-        chosen,
+        chosen: fit_on_every_row(fits, rung, frames, richest_fit)?,
         ladder: LadderOutcome::default(),
     })
+}
+
+/// `rung` fitted on every training row: `frames` for frames only, the Huber pass's
+/// `richest_fit` when it is that rung, else a new fit.
+///
+/// # Errors
+/// A failed identification.
+fn fit_on_every_row(
+    fits: &Fits<'_>,
+    rung: ModelName,
+    frames: (&CalibratedModel, &Fitted),
+    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+) -> Result<(CalibratedModel, Fitted)> {
+    if rung == ModelName::FramesOnly {
+        return Ok((frames.0.clone(), frames.1.clone()));
+    }
+    match richest_fit {
+        Some((used, f)) if used == rung => Ok(f),
+        _ => fits.fit(rung),
+    }
 }
 
 /// The rung chosen on the ladder of a long recording: the ladder ([`climb_ladder`]) judged on
@@ -2099,14 +2111,7 @@ fn climb_sample(
         ladder,
     )?;
     drop(sampled);
-    choice.chosen = if choice.rung == ModelName::FramesOnly {
-        (frames.0.clone(), frames.1.clone())
-    } else {
-        match richest_fit {
-            Some((used, f)) if used == choice.rung => f,
-            _ => fits.fit(choice.rung)?,
-        }
-    };
+    choice.chosen = fit_on_every_row(fits, choice.rung, frames, richest_fit)?;
     choice.ladder.judged_rows = Some(sample.rows.len());
     Ok(choice)
 }
