@@ -676,74 +676,17 @@ fn _diagnose(
         return Err(py_err(anyhow!("folds must be at least 2, got {folds}")));
     }
     if hapcal_device.has_transmissions() {
-        // The reference device's diagnosis: one log, its own held-out folds.
-        let path = match train.as_slice() {
-            [Source::Path { path, units }] if *units == Units::default() => path,
-            [Source::Path { path, .. }] => {
-                return Err(py_err(anyhow!(
-                    "{}: a log is in m and rad; read it with Measurements.from_csv(path)",
-                    path.display()
-                )));
-            }
-            [Source::Arrays(a)] => {
-                return Err(py_err(anyhow!(
-                    "{}: diagnose reads a log file; give its path or \
-                     Measurements.from_csv(path)",
-                    a.name
-                )));
-            }
-            _ => {
-                return Err(py_err(anyhow!(
-                    "{}: a haptic device is diagnosed from one log file, found {}",
-                    device.path.display(),
-                    train.len()
-                )));
-            }
-        };
-        if !test.is_empty() || sigma_m.is_some() || test_last.is_some() {
-            return Err(py_err(anyhow!(
-                "test, sigma_m and test_last apply to robots measured by an instrument, not to \
-                 a haptic device's log"
-            )));
-        }
-        let data = path.clone();
-        let device_path = device.path.clone();
-        return py
-            .detach(move || -> Result<(String, Vec<String>)> {
-                let baseline = hapcal_diagnose::baseline_model(
-                    (baseline.as_deref())
-                        .unwrap_or(hapcal_calibrate::model::ModelName::Transmissions.name()),
-                )?;
-                let config = hapcal_diagnose::DiagnoseConfig {
-                    baseline,
-                    folds,
-                    ..hapcal_diagnose::DiagnoseConfig::default()
-                };
-                // The setup check of the log, as the command line runs it.
-                let gate_plan = Plan::log_check(
-                    device_path.clone(),
-                    vec![data.clone()],
-                    Units::default(),
-                    0.05,
-                    folds,
-                );
-                let Gated {
-                    mut warnings,
-                    accepted,
-                    ..
-                } = setup_gate(&gate_plan, accept_setup)?;
-                let log = hapcal_io::read_log(&data, hapcal_device)
-                    .with_context(|| format!("reading log {}", data.display()))?;
-                let mut d = hapcal_diagnose::diagnose(hapcal_device, &log.rows, &config)
-                    .with_context(|| format!("diagnosing {}", data.display()))?;
-                if let Some(finding) = accepted {
-                    d.verdict.on_accepted_setup(&mut d.notes, finding);
-                }
-                let json = serde_json::to_string_pretty(&d).context("serialising the diagnosis")?;
-                warnings.extend(log.warnings);
-                Ok((json, warnings))
-            })
-            .map_err(py_err);
+        return diagnose_log_file(
+            py,
+            device,
+            &train,
+            &test,
+            baseline,
+            folds,
+            sigma_m,
+            test_last,
+            accept_setup,
+        );
     }
     hapcal_diagnose::arm::robot_baseline(baseline.as_deref()).map_err(|e| py_err(e.into()))?;
     let mut plan = Plan {
@@ -761,41 +704,42 @@ fn _diagnose(
         model: ModelChoice::Auto,
         folds,
         ladder_rows: hapcal_calibrate::fit::LADDER_ROWS,
-        // Files are read as the command line reads them: at most the arm diagnosis's rows.
-        read_rows: Some(hapcal_diagnose::plan::ARM_MAX_ROWS),
+        read_rows: None,
         sigma_m,
         joint: false,
     };
     let files = file_sources(&train).zip(file_sources(&test));
     let robot = device.robot.as_ref();
+    let cfg = hapcal_diagnose::arm::ArmConfig {
+        folds,
+        ..Default::default()
+    };
     py.detach(move || -> Result<(String, Vec<String>)> {
-        // Files that share their units go through the command line's loaders and setup check.
+        // Files that share their units go through the command line's loaders, setup check
+        // and diagnosis.
         let mut gated = Gated::default();
-        let baseline = match files {
+        let (mut d, baseline_warnings) = match files {
             Some((tr, te)) if tr.iter().chain(&te).all(|(_, u)| *u == tr[0].1) => {
                 plan.units = tr[0].1.clone();
                 plan.data = tr.into_iter().map(|(p, _)| p).collect();
                 plan.test = te.into_iter().map(|(p, _)| p).collect();
                 gated = setup_gate(&plan, accept_setup)?;
-                hapcal_calibrate::baseline::geometric_baseline(&plan, true)?
+                hapcal_diagnose::plan::diagnose_arm_data(&plan, &cfg)?
             }
             _ => {
                 let robot = robot.map_err(|e| anyhow!("{e}"))?;
-                hapcal_calibrate::baseline::baseline_from_tables(
+                let baseline = hapcal_calibrate::baseline::baseline_from_tables(
                     robot,
                     load_sources(&train, robot)?,
                     load_sources(&test, robot)?,
                     &plan,
                     true,
-                )?
+                )?;
+                let d = hapcal_diagnose::arm::diagnose_arm(&baseline, &cfg)
+                    .context("diagnosing the geometric baseline")?;
+                (d, baseline.warnings)
             }
         };
-        let cfg = hapcal_diagnose::arm::ArmConfig {
-            folds,
-            ..Default::default()
-        };
-        let mut d = hapcal_diagnose::arm::diagnose_arm(&baseline, &cfg)
-            .context("diagnosing the geometric baseline")?;
         let Gated {
             mut warnings,
             accepted,
@@ -805,7 +749,92 @@ fn _diagnose(
             d.verdict.on_accepted_setup(&mut d.notes, finding);
         }
         let json = serde_json::to_string_pretty(&d).context("serialising the diagnosis")?;
-        warnings.extend(baseline.warnings);
+        warnings.extend(baseline_warnings);
+        Ok((json, warnings))
+    })
+    .map_err(py_err)
+}
+
+/// [`_diagnose`] of a haptic device: the reference device's diagnosis of one log file
+/// (`train`), its own held-out folds, with the command line's setup check of the log.
+/// The arguments are [`_diagnose`]'s; `sigma_m`, `test_last` and `test` are refused (they
+/// apply to robots measured by an instrument).
+#[allow(clippy::too_many_arguments)]
+fn diagnose_log_file(
+    py: Python<'_>,
+    device: &PyDevice,
+    train: &[Source],
+    test: &[Source],
+    baseline: Option<String>,
+    folds: usize,
+    sigma_m: Option<f64>,
+    test_last: Option<f64>,
+    accept_setup: bool,
+) -> PyResult<(String, Vec<String>)> {
+    let hapcal_device = &device.device;
+    let path = match train {
+        [Source::Path { path, units }] if *units == Units::default() => path,
+        [Source::Path { path, .. }] => {
+            return Err(py_err(anyhow!(
+                "{}: a log is in m and rad; read it with Measurements.from_csv(path)",
+                path.display()
+            )));
+        }
+        [Source::Arrays(a)] => {
+            return Err(py_err(anyhow!(
+                "{}: diagnose reads a log file; give its path or \
+                 Measurements.from_csv(path)",
+                a.name
+            )));
+        }
+        _ => {
+            return Err(py_err(anyhow!(
+                "{}: a haptic device is diagnosed from one log file, found {}",
+                device.path.display(),
+                train.len()
+            )));
+        }
+    };
+    if !test.is_empty() || sigma_m.is_some() || test_last.is_some() {
+        return Err(py_err(anyhow!(
+            "test, sigma_m and test_last apply to robots measured by an instrument, not to \
+             a haptic device's log"
+        )));
+    }
+    let data = path.clone();
+    let device_path = device.path.clone();
+    py.detach(move || -> Result<(String, Vec<String>)> {
+        let baseline = hapcal_diagnose::baseline_model(
+            (baseline.as_deref())
+                .unwrap_or(hapcal_calibrate::model::ModelName::Transmissions.name()),
+        )?;
+        let config = hapcal_diagnose::DiagnoseConfig {
+            baseline,
+            folds,
+            ..hapcal_diagnose::DiagnoseConfig::default()
+        };
+        // The setup check of the log, as the command line runs it.
+        let gate_plan = Plan::log_check(
+            device_path.clone(),
+            vec![data.clone()],
+            Units::default(),
+            0.05,
+            folds,
+        );
+        let Gated {
+            mut warnings,
+            accepted,
+            ..
+        } = setup_gate(&gate_plan, accept_setup)?;
+        let log = hapcal_io::read_log(&data, hapcal_device)
+            .with_context(|| format!("reading log {}", data.display()))?;
+        let mut d = hapcal_diagnose::diagnose(hapcal_device, &log.rows, &config)
+            .with_context(|| format!("diagnosing {}", data.display()))?;
+        if let Some(finding) = accepted {
+            d.verdict.on_accepted_setup(&mut d.notes, finding);
+        }
+        let json = serde_json::to_string_pretty(&d).context("serialising the diagnosis")?;
+        warnings.extend(log.warnings);
         Ok((json, warnings))
     })
     .map_err(py_err)
