@@ -1,7 +1,8 @@
 //! `cargo xtask bench --scale`: the command line on long recordings of both kinds. Each size's
 //! haptic log is written by `hapcal simulate` (the reference device's truth, seed 7), each
 //! size's marker file by the simulated two-arm humanoid (`sim_humanoid --rows N`, streamed,
-//! seed 12); then `check`, `calibrate --model auto`, `predict` and `diagnose` run on it under
+//! seed 12); then `check`, `calibrate --model auto`, `predict` and `diagnose` run on it (on a
+//! marker file also `compensate` and `plan-poses --data`, [`command_args`]) under
 //! `/usr/bin/time -v`: wall time, CPU time and peak RSS, per row, and a straight line fitted
 //! through the sizes (time and memory against rows). It writes the section "Commands on long
 //! logs" of docs/results/bench.md (the rest of the page is `cargo xtask bench`'s). A
@@ -90,11 +91,15 @@ training data\". Its memory past that is the file's rows as read (17 joint readi
 markers: a few hundred bytes a row) and the fits on every row.
 ";
 
-/// The commands each file is measured with, in the tables' order.
-const COMMANDS: [&str; 4] = ["check", "calibrate --model auto", "predict", "diagnose"];
-
 /// The simulated humanoid's URDF and tips (fixtures/sim-humanoid).
 const HUMANOID: &str = "fixtures/sim-humanoid/humanoid.urdf";
+
+/// Joint columns of the simulated humanoid's marker files (the first columns), then the left
+/// hand's marker `x1, y1, z1`.
+const HUMANOID_JOINTS: usize = 17;
+
+/// Workspace configurations `plan-poses --data` plans for: the first rows' joint readings.
+const WORKSPACE_ROWS: usize = 50;
 
 /// A kind of recording the benchmark measures.
 #[derive(Clone, Copy)]
@@ -105,9 +110,12 @@ enum Kind {
     Markers,
 }
 
-/// The arguments of each of [`COMMANDS`] on the recording `data` of `kind`; `n` names the
-/// files the commands write under `dir`.
-fn command_args(kind: Kind, data: &Path, dir: &Path, n: usize) -> [Vec<String>; 4] {
+/// The commands measured on the recording `data` of `kind`, in the table's order: each one's
+/// name in the table and its arguments; `n` names the files the commands write under `dir`.
+/// `calibrate` writes the calibrated device that `predict` and `compensate` read. A haptic
+/// device has no `compensate` (its commands are forces, `hapcal force`) and no `plan-poses
+/// --data` (its poses are planned without data).
+fn command_args(kind: Kind, data: &Path, dir: &Path, n: usize) -> Vec<(&'static str, Vec<String>)> {
     let s = |p: &Path| p.display().to_string();
     let v = |args: &[&str]| {
         args.iter()
@@ -120,67 +128,174 @@ fn command_args(kind: Kind, data: &Path, dir: &Path, n: usize) -> [Vec<String>; 
             let device = "fixtures/reference-device/device.toml";
             let calibrated = s(&dir.join(format!("calibrated-{n}.toml")));
             let predicted = s(&dir.join(format!("predicted-{n}.csv")));
-            [
-                v(&["check", "--device", device, "--data", &data]),
-                v(&[
-                    "calibrate",
-                    "--device",
-                    device,
-                    "--data",
-                    &data,
-                    "--model",
-                    "auto",
-                    "--out",
-                    &calibrated,
-                ]),
-                v(&[
+            vec![
+                ("check", v(&["check", "--device", device, "--data", &data])),
+                (
+                    "calibrate --model auto",
+                    v(&[
+                        "calibrate",
+                        "--device",
+                        device,
+                        "--data",
+                        &data,
+                        "--model",
+                        "auto",
+                        "--out",
+                        &calibrated,
+                    ]),
+                ),
+                (
                     "predict",
-                    "--device",
-                    &calibrated,
-                    "--data",
-                    &data,
-                    "--out",
-                    &predicted,
-                ]),
-                v(&["diagnose", "--device", device, "--data", &data]),
+                    v(&[
+                        "predict",
+                        "--device",
+                        &calibrated,
+                        "--data",
+                        &data,
+                        "--out",
+                        &predicted,
+                    ]),
+                ),
+                (
+                    "diagnose",
+                    v(&["diagnose", "--device", device, "--data", &data]),
+                ),
             ]
         }
         Kind::Markers => {
             let tips = ["--tip", "l_hand", "--tip", "r_hand"];
             let calibrated = s(&dir.join(format!("humanoid-calibrated-{n}.urdf")));
             let predicted = s(&dir.join(format!("humanoid-predicted-{n}.csv")));
+            let commands = s(&dir.join(format!("humanoid-commands-{n}.csv")));
+            let targets = s(&dir.join(format!("humanoid-targets-{n}.csv")));
+            let one_marker = s(&dir.join(format!("humanoid-left-{n}.csv")));
+            let workspace = s(&dir.join("humanoid-workspace.csv"));
             let with = |head: &[&str], tail: &[&str]| {
                 let mut args = v(head);
                 args.extend(v(&tips));
                 args.extend(v(tail));
                 args
             };
-            [
-                with(&["check", "--device", HUMANOID], &["--data", &data]),
-                with(
-                    &["calibrate", "--device", HUMANOID],
-                    &[
-                        "--data",
-                        &data,
-                        "--test-last",
-                        "0.3",
-                        "--model",
-                        "auto",
-                        "--out",
+            vec![
+                (
+                    "check",
+                    with(&["check", "--device", HUMANOID], &["--data", &data]),
+                ),
+                (
+                    "calibrate --model auto",
+                    with(
+                        &["calibrate", "--device", HUMANOID],
+                        &[
+                            "--data",
+                            &data,
+                            "--test-last",
+                            "0.3",
+                            "--model",
+                            "auto",
+                            "--out",
+                            &calibrated,
+                        ],
+                    ),
+                ),
+                (
+                    "predict",
+                    with(
+                        &["predict", "--device", &calibrated],
+                        &["--data", &data, "--out", &predicted],
+                    ),
+                ),
+                (
+                    "diagnose",
+                    with(
+                        &["diagnose", "--device", HUMANOID],
+                        &["--data", &data, "--test-last", "0.3"],
+                    ),
+                ),
+                (
+                    "compensate",
+                    v(&[
+                        "compensate",
+                        "--device",
                         &calibrated,
-                    ],
+                        "--tip",
+                        "l_hand",
+                        "--other-tip",
+                        "r_hand",
+                        "--instrument-frame",
+                        "--targets",
+                        &targets,
+                        "--out",
+                        &commands,
+                    ]),
                 ),
-                with(
-                    &["predict", "--device", &calibrated],
-                    &["--data", &data, "--out", &predicted],
-                ),
-                with(
-                    &["diagnose", "--device", HUMANOID],
-                    &["--data", &data, "--test-last", "0.3"],
+                (
+                    "plan-poses --data",
+                    v(&[
+                        "plan-poses",
+                        "--device",
+                        HUMANOID,
+                        "--tip",
+                        "l_hand",
+                        "--data",
+                        &one_marker,
+                        "--workspace",
+                        &workspace,
+                        "--count",
+                        "10",
+                    ]),
                 ),
             ]
         }
     }
+}
+
+/// The files the marker commands read beside the marker file `data` (`n` rows), written
+/// from it under `dir` unless they exist: `compensate`'s targets (each row's joint readings,
+/// its start, and the left hand's marker as the target `x, y, z`, in the instrument frame),
+/// `plan-poses --data`'s one-marker file (the joint readings and the left hand's marker: it
+/// plans for one tip) and its workspace (the first rows' joint readings).
+fn write_marker_inputs(data: &Path, dir: &Path, n: usize) -> Result<()> {
+    use std::io::{BufRead, BufWriter, Write};
+    let targets = dir.join(format!("humanoid-targets-{n}.csv"));
+    let one_marker = dir.join(format!("humanoid-left-{n}.csv"));
+    let workspace = dir.join("humanoid-workspace.csv");
+    if targets.exists() && one_marker.exists() && workspace.exists() {
+        return Ok(());
+    }
+    let reader = std::io::BufReader::new(std::fs::File::open(data)?);
+    let mut t = BufWriter::new(std::fs::File::create(&targets)?);
+    let mut o = BufWriter::new(std::fs::File::create(&one_marker)?);
+    let mut w = BufWriter::new(std::fs::File::create(&workspace)?);
+    for (i, line) in reader.lines().enumerate() {
+        let line = line?;
+        let cells: Vec<&str> = line.split(',').collect();
+        if cells.len() < HUMANOID_JOINTS + 3 {
+            bail!(
+                "{}:{}: fewer than {} columns",
+                data.display(),
+                i + 1,
+                HUMANOID_JOINTS + 3
+            );
+        }
+        let (joints, marker) = (
+            &cells[..HUMANOID_JOINTS],
+            &cells[HUMANOID_JOINTS..HUMANOID_JOINTS + 3],
+        );
+        let target = if i == 0 {
+            vec!["x", "y", "z"]
+        } else {
+            marker.to_vec()
+        };
+        writeln!(t, "{},{}", joints.join(","), target.join(","))?;
+        writeln!(o, "{},{}", joints.join(","), marker.join(","))?;
+        if i <= WORKSPACE_ROWS {
+            writeln!(w, "{}", joints.join(","))?;
+        }
+    }
+    for mut f in [t, o, w] {
+        f.flush()?;
+    }
+    Ok(())
 }
 
 /// Writes the recording of `kind` with `n` data rows to `path`, unless it exists.
@@ -218,15 +333,17 @@ fn write_recording(
     Ok(())
 }
 
-/// Each command's runs (`runs[c][s]`: command `c` at size `s`) on recordings of `kind`.
+/// The commands measured on recordings of `kind` ([`command_args`]) and their runs
+/// (`runs[c][s]`: command `c` at size `s`).
 fn measure_kind(
     sh: &Shell,
     kind: Kind,
     (hapcal, generator): (&Path, &Path),
     dir: &Path,
     rows: &[usize],
-) -> Result<Vec<Vec<Run>>> {
-    let mut runs: Vec<Vec<Run>> = COMMANDS.iter().map(|_| Vec::new()).collect();
+) -> Result<(Vec<&'static str>, Vec<Vec<Run>>)> {
+    let mut runs: Vec<Vec<Run>> = Vec::new();
+    let mut names = Vec::new();
     let stem = match kind {
         Kind::Haptic => "log",
         Kind::Markers => "humanoid",
@@ -234,27 +351,33 @@ fn measure_kind(
     for &n in rows {
         let data = dir.join(format!("{stem}-{n}.csv"));
         write_recording(sh, kind, hapcal, generator, &data, n)?;
-        for (c, args) in command_args(kind, &data, dir, n).iter().enumerate() {
+        if let Kind::Markers = kind {
+            write_marker_inputs(&data, dir, n)?;
+        }
+        let commands = command_args(kind, &data, dir, n);
+        runs.resize_with(commands.len(), Vec::new);
+        names = commands.iter().map(|(name, _)| *name).collect();
+        for (c, (name, args)) in commands.iter().enumerate() {
             let out = dir.join(format!("{stem}-{}-{n}.txt", args[0]));
             let run = measured(sh, hapcal, args, &out)?;
             println!(
-                "{stem}, {n} rows, {}: {:.2} s wall, {:.2} s CPU, {:.0} MB",
-                COMMANDS[c], run.wall_s, run.cpu_s, run.peak_mb
+                "{stem}, {n} rows, {name}: {:.2} s wall, {:.2} s CPU, {:.0} MB",
+                run.wall_s, run.cpu_s, run.peak_mb
             );
             runs[c].push(run);
         }
     }
-    Ok(runs)
+    Ok((names, runs))
 }
 
 /// The table of `runs` at `rows`: each command at each size, and the slopes of the lines
 /// fitted through the sizes.
-fn table(rows: &[usize], runs: &[Vec<Run>]) -> String {
+fn table(rows: &[usize], (names, runs): &(Vec<&str>, Vec<Vec<Run>>)) -> String {
     let mut md = String::from(
         "| command | rows | wall | CPU | peak RSS | bytes a row | µs a row (wall) | slope: µs a row | slope: bytes a row |\n\
          |---|---|---|---|---|---|---|---|---|\n",
     );
-    for (c, command) in COMMANDS.iter().enumerate() {
+    for (c, command) in names.iter().enumerate() {
         let time = line(
             &(rows.iter().zip(&runs[c]))
                 .map(|(&n, r)| (n as f64, r.wall_s))
@@ -325,7 +448,11 @@ pub(crate) fn run(sh: &Shell, rows: &[usize]) -> Result<()> {
          -p hapcal-calibrate --example sim_humanoid -- --rows N <folder>` (17 joint readings and \
          two markers, 23 columns, about 280 bytes a row; fixtures/sim-humanoid), the commands \
          with `--device {HUMANOID} --tip l_hand --tip r_hand`, `calibrate` and `diagnose` with \
-         `--test-last 0.3`.\n\n{}{EXPLAINED_MARKERS}",
+         `--test-last 0.3`; `compensate` with the calibrated URDF, `--tip l_hand --other-tip \
+         r_hand --instrument-frame`, its targets each row's left-hand marker (the row's joint \
+         readings its start); `plan-poses --data` on the joint readings and the left hand's \
+         marker alone, `--tip l_hand --count 10`, for the first {WORKSPACE_ROWS} rows' \
+         configurations as the workspace.\n\n{}{EXPLAINED_MARKERS}",
         sizes.join(","),
         load(&load_before),
         load(&load_after),

@@ -139,7 +139,12 @@ fn into_root(to_root: &Pose, target: Target) -> Target {
 /// without an instrument frame under [`CompensateInput::instrument_frame`], a target the
 /// runtime refuses (file:line). A target not reached is no error: see
 /// [`CompensatedRow::result`].
-pub fn compensate_targets(input: &CompensateInput<'_>) -> Result<Compensated> {
+///
+/// `progress` is called with the targets done and the targets in all after each target.
+pub fn compensate_targets(
+    input: &CompensateInput<'_>,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Compensated> {
     let robot = load_robot(input)?;
     let unbound_note = crate::predict::unbound_record_note(input.device, &robot);
     let mut targets = read_targets(input.targets, &robot)?;
@@ -191,6 +196,7 @@ pub fn compensate_targets(input: &CompensateInput<'_>) -> Result<Compensated> {
             result,
             outside_region,
         });
+        progress(rows.len(), targets.len());
     }
     Ok(Compensated {
         robot,

@@ -1077,7 +1077,10 @@ struct PlanningProblem<'a> {
     limits: Vec<(f64, f64)>,
     /// The candidate joint configurations, drawn uniformly in `limits`.
     candidates: Vec<Vec<f64>>,
-    /// Residuals of the measured rows (the first rows of the problem).
+    /// Rows of `jac` that carry the measured rows (its first rows): their residuals, or, for
+    /// measured rows whose Jacobian would exceed [`hapcal_identify::STREAMING_AUTO_ENTRIES`]
+    /// entries, the rows of its R factor ([`measured_r_factor`]), which has the same Gram
+    /// matrix and so the same identifiability and information.
     n_measured_residuals: usize,
     /// Residuals of one candidate pose.
     rows_per_pose: usize,
@@ -1085,8 +1088,74 @@ struct PlanningProblem<'a> {
     problem: CalibrationProblem,
     /// Its layout (every parameter of the calibration, in its order).
     layout: hapcal_identify::ParamLayout,
-    /// Its Jacobian at the calibrated estimate, residuals × parameters.
+    /// Its Jacobian at the calibrated estimate, residuals × parameters (the measured rows'
+    /// part possibly reduced to its R factor: see `n_measured_residuals`).
     jac: Mat<f64>,
+}
+
+/// Measured rows whose Jacobian [`measured_r_factor`] evaluates at once.
+const MEASURED_BLOCK_ROWS: usize = 20_000;
+
+/// The R factor (`n × n`, `n = layout.len()`) of the Jacobian of the rows `obs` at `x` over
+/// `layout`'s parameters, evaluated `block_rows` rows at a time on `problem`'s
+/// model (`CalibrationProblem::with_observations`), each block's columns matched by name (a
+/// block without some marker has no column of its frame: zeros there), and stacked under the
+/// R of the blocks before it for a Householder QR (a tall-skinny QR: `Rᵀ·R = Jᵀ·J`, Golub–Van
+/// Loan §5.2). Its memory is one block's Jacobian, whatever the number of rows.
+///
+/// # Errors
+/// A block the model cannot build or evaluate.
+fn measured_r_factor(
+    problem: &CalibrationProblem,
+    layout: &hapcal_identify::ParamLayout,
+    x: &faer::Col<f64>,
+    obs: Observations,
+    block_rows: usize,
+) -> Result<Mat<f64>> {
+    let n = layout.len();
+    let mut r = Mat::<f64>::zeros(0, n);
+    let mut rows = obs.rows.into_iter().peekable();
+    while rows.peek().is_some() {
+        let block = Observations {
+            rows: rows.by_ref().take(block_rows.max(1)).collect(),
+            ..Observations::default()
+        };
+        let p = problem
+            .with_observations(block)
+            .context("building a block of the measured rows")?;
+        let block_layout = p.layout();
+        let to_full: Vec<usize> = (0..block_layout.len())
+            .map(|k| {
+                layout.index_of(block_layout.name(k)).with_context(|| {
+                    format!(
+                        "no parameter {} in the planning problem",
+                        block_layout.name(k)
+                    )
+                })
+            })
+            .collect::<Result<_>>()?;
+        let x_block = faer::Col::from_fn(to_full.len(), |k| x[to_full[k]]);
+        let mut j = Mat::<f64>::zeros(p.n_residuals(), to_full.len());
+        p.jacobian(x_block.as_ref(), j.as_mut())
+            .map_err(|e| anyhow::anyhow!("{e}"))
+            .context("evaluating the measured rows' Jacobian")?;
+        let mut stacked = Mat::<f64>::zeros(r.nrows() + j.nrows(), n);
+        stacked
+            .as_mut()
+            .submatrix_mut(0, 0, r.nrows(), n)
+            .copy_from(&r);
+        for (k, &c) in to_full.iter().enumerate() {
+            stacked
+                .as_mut()
+                .col_mut(c)
+                .subrows_mut(r.nrows(), j.nrows())
+                .copy_from(j.col(k));
+        }
+        let qr = stacked.qr();
+        let full = qr.R();
+        r = full.submatrix(0, 0, full.nrows().min(n), n).to_owned();
+    }
+    Ok(r)
 }
 
 impl<'a> PlanningProblem<'a> {
@@ -1124,6 +1193,14 @@ impl<'a> PlanningProblem<'a> {
             .collect();
         let mut obs = crate::measured::observations(measured, &|_, _| true);
         let n_measured_residuals: usize = obs.rows.iter().map(|r| r.kind.n_residuals()).sum();
+        // Measured rows too many for one Jacobian are taken by their R factor, in row blocks.
+        let n_layout = out.fitted.names.len();
+        let blocked =
+            n_measured_residuals.saturating_mul(n_layout) > hapcal_identify::STREAMING_AUTO_ENTRIES;
+        let measured_obs = blocked.then(|| Observations {
+            rows: std::mem::take(&mut obs.rows),
+            ..Observations::default()
+        });
         let cand = candidate_observations(&shape, out, n_markers, &candidates);
         let rows_per_pose: usize = cand
             .rows
@@ -1156,6 +1233,29 @@ impl<'a> PlanningProblem<'a> {
             .jacobian(out.fitted.x.as_ref(), jac.as_mut())
             .map_err(|e| anyhow::anyhow!("{e}"))
             .context("evaluating the identification Jacobian")?;
+        let n_measured_residuals = match measured_obs {
+            None => n_measured_residuals,
+            Some(measured_obs) => {
+                let r = measured_r_factor(
+                    &problem,
+                    &layout,
+                    &out.fitted.x,
+                    measured_obs,
+                    MEASURED_BLOCK_ROWS,
+                )?;
+                let mut stacked = Mat::<f64>::zeros(r.nrows() + jac.nrows(), layout.len());
+                stacked
+                    .as_mut()
+                    .submatrix_mut(0, 0, r.nrows(), r.ncols())
+                    .copy_from(&r);
+                (stacked
+                    .as_mut()
+                    .submatrix_mut(r.nrows(), 0, jac.nrows(), jac.ncols()))
+                .copy_from(&jac);
+                jac = stacked;
+                r.nrows()
+            }
+        };
         Ok(Self {
             out,
             shape,
@@ -1833,6 +1933,57 @@ mod tests {
         // M = 10·I + 2·(1, ±1)ᵀ(1, ±1) = [[12, ±2], [±2, 12]], M⁻¹ = [[12, ∓2], [∓2, 12]]/140:
         // tr(W·M⁻¹) = (12 + 12/3)/140.
         assert!((v - 16.0 / 140.0).abs() < 1e-12, "{v}");
+    }
+
+    #[test]
+    fn the_measured_rows_r_factor_in_blocks_has_their_jacobians_gram_matrix() {
+        // The iiwa's geometric problem on 50 marker rows: the R factor stacked from blocks of
+        // 7 rows (the last one short) against the Jacobian of all rows at once.
+        let robot = crate::data::robot_from_device(&iiwa()).expect("robot");
+        let terms = crate::measured::terms(ModelName::Geometric, &robot).expect("terms");
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let rows: Vec<Row> = (0..50)
+            .map(|_| Row {
+                q: (robot.limits.iter())
+                    .map(|&(lo, hi)| rand::Rng::random_range(&mut rng, lo..hi))
+                    .collect(),
+                kind: RowKind::Marker {
+                    tip: 0,
+                    position_m: [0.0; 3],
+                },
+            })
+            .collect();
+        let obs = |rows: &[Row]| Observations {
+            rows: rows.to_vec(),
+            ..Observations::default()
+        };
+        let problem =
+            CalibrationProblem::on_tree(robot.tree.clone(), obs(&rows), Weights::default(), terms)
+                .expect("problem");
+        let layout = problem.layout().clone();
+        let x = faer::Col::<f64>::zeros(layout.len());
+        let mut jac = Mat::<f64>::zeros(problem.n_residuals(), layout.len());
+        problem
+            .jacobian(x.as_ref(), jac.as_mut())
+            .expect("jacobian");
+        let r = measured_r_factor(&problem, &layout, &x, obs(&rows), 7).expect("r factor");
+        assert_eq!((r.nrows(), r.ncols()), (layout.len(), layout.len()));
+        let (gram, from_r) = (jac.transpose() * &jac, r.transpose() * &r);
+        // Rounding of a QR over entries of order 1 (m per rad): relative to the largest entry.
+        let scale = (0..gram.nrows())
+            .map(|i| gram[(i, i)])
+            .fold(0.0_f64, f64::max);
+        for i in 0..gram.nrows() {
+            for j in 0..gram.ncols() {
+                let d = (gram[(i, j)] - from_r[(i, j)]).abs();
+                assert!(
+                    d <= 1e-12 * scale,
+                    "({i}, {j}): {} vs {}",
+                    gram[(i, j)],
+                    from_r[(i, j)]
+                );
+            }
+        }
     }
 
     fn iiwa() -> Device {

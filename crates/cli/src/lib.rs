@@ -88,3 +88,20 @@ pub fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
     );
     bar
 }
+
+/// Runs `work` under a spinner on standard error that says `message` and the time elapsed, for
+/// a command whose length is not known beforehand (a calibration, a diagnosis, a setup check:
+/// tens of seconds on a day's log); cleared when `work` returns. Drawn on a terminal only
+/// (indicatif hides it when standard error is a file or a pipe), so no output changes.
+pub fn with_spinner<T>(message: &str, work: impl FnOnce() -> T) -> T {
+    let bar = indicatif::ProgressBar::new_spinner();
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+    );
+    bar.set_message(message.to_owned());
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    let out = work();
+    bar.finish_and_clear();
+    out
+}

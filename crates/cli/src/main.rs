@@ -628,7 +628,7 @@ fn run_calibrate(args: &CalibrateArgs) -> Result<()> {
     // before the reader's joint-limit check reports the first reading past a limit.
     let (_, warned) = setup_gate(&plan, args.accept_setup)?;
     check_socket_folders(&plan)?;
-    let outcome = calibrate::run(&plan)?;
+    let outcome = hapcal::with_spinner("calibrating", || calibrate::run(&plan))?;
     for ladder_note in outcome.report.ladder_notes() {
         note!("hapcal: note: {ladder_note}");
     }
@@ -842,7 +842,9 @@ fn run_force(args: &ForceArgs) -> Result<()> {
 /// `hapcal plan-poses`: the planned poses to `--out` (the summary on standard output), or
 /// to standard output (the summary on standard error).
 fn run_plan_poses(plan: &hapcal::plan_args::PlanArgs, units: &UnitArgs) -> Result<()> {
-    let planned = hapcal::plan_args::run_plan(plan, &units.units())?;
+    let planned = hapcal::with_spinner("planning poses", || {
+        hapcal::plan_args::run_plan(plan, &units.units())
+    })?;
     match &planned.out {
         Some(out) => {
             emit(&planned.summary);
@@ -930,8 +932,9 @@ fn diagnose_haptic(args: &DiagnoseArgs) -> Result<Diagnosed> {
         ..Default::default()
     };
     let units = args.units.units();
-    let (mut d, warnings) =
-        hapcal_diagnose::plan::diagnose_log(&args.device, &args.data[0], &units, &config)?;
+    let (mut d, warnings) = hapcal::with_spinner("diagnosing", || {
+        hapcal_diagnose::plan::diagnose_log(&args.device, &args.data[0], &units, &config)
+    })?;
     // No physical effect is named on data set up wrong: the note says what the check found.
     if let Some(finding) = accepted {
         d.verdict.on_accepted_setup(&mut d.notes, finding);
@@ -978,7 +981,9 @@ fn diagnose_arm(args: &DiagnoseArgs) -> Result<Diagnosed> {
         folds: args.folds,
         ..Default::default()
     };
-    let (mut d, warnings) = hapcal_diagnose::plan::diagnose_arm_data(&plan, &cfg)?;
+    let (mut d, warnings) = hapcal::with_spinner("diagnosing", || {
+        hapcal_diagnose::plan::diagnose_arm_data(&plan, &cfg)
+    })?;
     // No physical effect is named on data set up wrong: the note says what the check found.
     if let Some(finding) = accepted {
         d.verdict.on_accepted_setup(&mut d.notes, finding);
@@ -1054,7 +1059,10 @@ fn run_check(args: &CheckArgs) -> Result<()> {
         anyhow::bail!("--data {}: no such file", missing.display());
     }
     plan.validate()?;
-    let Some(report) = hapcal_calibrate::setup::check_plan(&plan)? else {
+    let Some(report) = hapcal::with_spinner("checking the setup", || {
+        hapcal_calibrate::setup::check_plan(&plan)
+    })?
+    else {
         anyhow::bail!(
             "hapcal check applies to measurement files (marker positions, poses, distances), \
              a haptic device's logs and socket folders; {} holds none",
