@@ -173,30 +173,32 @@ pub fn compensate_targets(
         .collect();
     let mut command = vec![0.0; robot.n_joints()];
     let mut rows = Vec::with_capacity(targets.len());
-    for (line, target, start) in &targets {
+    let n_targets = targets.len();
+    // By value: each target's start command is freed once it is compensated.
+    for (line, target, start) in targets {
         let start = start.as_deref().unwrap_or(&previous);
         let result = compensate(
             &robot,
             0,
-            target,
+            &target,
             start,
             &input.config,
             &mut ws,
             &mut command,
         )
-        .map_err(|e| anyhow!("{}: {e}", at(*line)))?;
+        .map_err(|e| anyhow!("{}: {e}", at(line)))?;
         let outside_region =
-            (robot.outside_region(&command)).map_err(|e| anyhow!("{}: {e}", at(*line)))?;
+            (robot.outside_region(&command)).map_err(|e| anyhow!("{}: {e}", at(line)))?;
         if result.reached {
             previous.copy_from_slice(&command);
         }
         rows.push(CompensatedRow {
-            line: *line,
+            line,
             command: command.clone(),
             result,
             outside_region,
         });
-        progress(rows.len(), targets.len());
+        progress(rows.len(), n_targets);
     }
     Ok(Compensated {
         robot,
@@ -217,12 +219,21 @@ pub struct CompensationSummary {
     pub worst_position_m: f64,
     /// The largest orientation residual of a reached target, rad.
     pub worst_orientation_rad: f64,
-    /// Each target not reached, in words: file:line, the residuals (mm, mrad), the steps.
+    /// The first [`LISTED`] targets not reached, in words: file:line, the residuals (mm,
+    /// mrad), the steps.
     pub missed: Vec<String>,
-    /// Each command outside the calibration's region, in words: file:line, the joint and how
-    /// far past its training range (rad, m for a prismatic joint).
+    /// Targets not reached, all of them.
+    pub n_missed: usize,
+    /// The first [`LISTED`] commands outside the calibration's region, in words: file:line,
+    /// the joint and how far past its training range (rad, m for a prismatic joint).
     pub outside: Vec<String>,
+    /// Commands outside the calibration's region, all of them.
+    pub n_outside: usize,
 }
+
+/// Targets missed, and commands outside the region, that [`CompensationSummary`] words (the
+/// others are counted): a day's targets may hold a million.
+pub const LISTED: usize = 10;
 
 impl Compensated {
     /// The summary of these compensations of the targets file `targets`.
@@ -236,11 +247,14 @@ impl Compensated {
             worst_position_m: 0.0,
             worst_orientation_rad: 0.0,
             missed: Vec::new(),
+            n_missed: 0,
             outside: Vec::new(),
+            n_outside: 0,
         };
         for row in &self.rows {
             let c = &row.result;
-            if let Some((j, past)) = row.outside_region {
+            s.n_outside += usize::from(row.outside_region.is_some());
+            if let Some((j, past)) = row.outside_region.filter(|_| s.outside.len() < LISTED) {
                 let (joint, prismatic) = (&robot.joint_names()[j], robot.is_prismatic(j));
                 let file = targets.display().to_string();
                 (s.outside).push(crate::predict::outside_region_words(
@@ -256,7 +270,8 @@ impl Compensated {
                 let _ = writeln!(s.csv, ",{m:?},{rad:?}");
                 s.worst_position_m = s.worst_position_m.max(m);
                 s.worst_orientation_rad = s.worst_orientation_rad.max(rad);
-            } else {
+            } else if s.missed.len() < LISTED {
+                s.n_missed += 1;
                 s.missed.push(format!(
                     "{}:{}: not reached: {:.4} mm and {:.4} mrad from the target after {} steps",
                     targets.display(),
@@ -265,6 +280,8 @@ impl Compensated {
                     c.orientation_error_rad * 1e3,
                     c.iterations
                 ));
+            } else {
+                s.n_missed += 1;
             }
         }
         s

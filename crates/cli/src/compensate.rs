@@ -97,30 +97,37 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
     let CompensationSummary {
         csv,
         missed,
+        n_missed,
         outside,
+        n_outside,
         worst_position_m,
         worst_orientation_rad,
     } = compensated.summary(&args.targets);
-    let (reached, targets) = (
-        compensated.rows.len() - missed.len(),
-        compensated.rows.len(),
-    );
+    let (reached, targets) = (compensated.rows.len() - n_missed, compensated.rows.len());
+    // The first ones in words, the others counted.
+    let listed = |words: &[String], n: usize| {
+        let more = n - words.len();
+        let tail = (more > 0).then(|| format!("… and {more} more"));
+        (words.iter().cloned())
+            .chain(tail)
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
     // A partial result never replaces an earlier complete one: with a target missed, an
     // existing --out is left as it was.
-    let kept = !missed.is_empty() && args.out.exists();
+    let kept = n_missed > 0 && args.out.exists();
     if !kept {
         crate::calibrate::write_new(&args.out, &csv, &[&args.device, &args.targets])?;
     }
-    let region = if outside.is_empty() {
+    let region = if n_outside == 0 {
         String::new()
     } else {
         format!(
-            "warning: the commands of {} targets lie outside the calibration's region (the model extrapolates there):\n{}\n",
-            outside.len(),
-            outside.join("\n")
+            "warning: the commands of {n_outside} targets lie outside the calibration's region (the model extrapolates there):\n{}\n",
+            listed(&outside, n_outside)
         )
     };
-    if !missed.is_empty() {
+    if n_missed > 0 {
         let written = if kept {
             format!(
                 "{} exists and was left as it was: the {reached} reached are not written; \
@@ -131,12 +138,10 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
             format!("wrote the {reached} reached to {}", args.out.display())
         };
         bail!(
-            "{} of {} targets not reached within {} mm / {} mrad ({written}):\n{}{}",
-            missed.len(),
-            targets,
+            "{n_missed} of {targets} targets not reached within {} mm / {} mrad ({written}):\n{}{}",
             args.tolerance_mm,
             args.tolerance_mrad,
-            missed.join("\n"),
+            listed(&missed, n_missed),
             if region.is_empty() {
                 String::new()
             } else {
