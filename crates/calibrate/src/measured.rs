@@ -1006,40 +1006,44 @@ fn refit(
     let start = (at_warm.map(|a| a.rows(tables, keep))).filter(|(r, jac)| {
         r.nrows() == problem.n_residuals() && jac.ncols() == problem.layout().len()
     });
-    let fit = fold_fit(&problem, warm, &lm, start, REFIT_MAX_ENTRIES)
-        .with_context(|| format!("refitting the {rung} model on a fold"))?;
+    let fit = lm_alone(
+        &problem,
+        warm.x.clone(),
+        &warm.free,
+        &lm,
+        start,
+        REFIT_MAX_ENTRIES,
+    )
+    .with_context(|| format!("refitting the {rung} model on a fold"))?;
     Ok(problem.model(fit.x.as_ref()))
 }
 
-/// A fold's Levenberg–Marquardt fit of `problem` from `warm` over its kept parameters: from
-/// the residuals and Jacobian `start` already evaluated at `warm.x` when given; on the
-/// streaming back end ([`hapcal_identify::levenberg_marquardt_streaming`], the Jacobian in
-/// row blocks, never held whole) when the Jacobian has more than `max_entries` entries and
-/// the problem has row blocks; dense otherwise. The three take the same steps up to rounding.
+/// Levenberg–Marquardt alone on `problem` from `x0` over the parameters `free` (a fold's
+/// refit, a torque-equilibrium refit): from the residuals and Jacobian `start` already
+/// evaluated at `x0` when given; on the streaming back end
+/// ([`hapcal_identify::levenberg_marquardt_streaming`], the Jacobian in row blocks, never held
+/// whole) when the Jacobian has more than `max_entries` entries and the problem has row
+/// blocks; dense otherwise. The three take the same steps up to rounding.
 ///
 /// # Errors
 /// As [`hapcal_identify::levenberg_marquardt`].
-fn fold_fit<P: Problem + Sync>(
+fn lm_alone<P: Problem + Sync>(
     problem: &P,
-    warm: &Warm,
+    x0: Col<f64>,
+    free: &[usize],
     lm: &hapcal_identify::LmConfig,
     start: Option<(Col<f64>, Mat<f64>)>,
     max_entries: usize,
 ) -> std::result::Result<hapcal_identify::Fit, hapcal_identify::Error> {
     let entries = (problem.n_residuals()).saturating_mul(problem.layout().len());
     match start {
-        Some((r0, jac0)) => hapcal_identify::levenberg_marquardt_from(
-            problem,
-            warm.x.clone(),
-            &warm.free,
-            lm,
-            r0,
-            jac0,
-        ),
-        None if problem.row_blocks().is_some() && entries > max_entries => {
-            hapcal_identify::levenberg_marquardt_streaming(problem, warm.x.clone(), &warm.free, lm)
+        Some((r0, jac0)) => {
+            hapcal_identify::levenberg_marquardt_from(problem, x0, free, lm, r0, jac0)
         }
-        None => hapcal_identify::levenberg_marquardt(problem, warm.x.clone(), &warm.free, lm),
+        None if problem.row_blocks().is_some() && entries > max_entries => {
+            hapcal_identify::levenberg_marquardt_streaming(problem, x0, free, lm)
+        }
+        None => hapcal_identify::levenberg_marquardt(problem, x0, free, lm),
     }
 }
 
@@ -3288,7 +3292,9 @@ fn equilibrate(
     let mut model = model;
     let mut previous: Option<Vec<Vec<f64>>> = None;
     let mut refits = 0;
-    let obs = observations(train, &|_, _| true);
+    // The observations are built for each problem rather than copied from one held beside
+    // it: one copy of every row at a time.
+    let all = |_: usize, _: usize| true;
     let lm = crate::fit::identify_config(None).lm;
     while refits < EQUILIBRIUM_REFITS {
         let solving = CalibratedModel {
@@ -3317,10 +3323,20 @@ fn equilibrate(
             load_angles: Some(at.clone()),
             ..terms(rung, robot)?
         };
-        let problem = CalibrationProblem::on_tree(tree.clone(), obs.clone(), weights, terms)
+        let obs = observations(train, &all);
+        let problem = CalibrationProblem::on_tree(tree.clone(), obs, weights, terms)
             .context("building the calibration problem")?;
-        let fit = hapcal_identify::levenberg_marquardt(&problem, x.clone(), &warm.free, &lm)
-            .context("refitting at the torque equilibrium")?;
+        // Past the dense back end's bound, in row blocks: the Jacobian of every training row
+        // is never held.
+        let fit = lm_alone(
+            &problem,
+            x.clone(),
+            &warm.free,
+            &lm,
+            None,
+            REFIT_MAX_ENTRIES,
+        )
+        .context("refitting at the torque equilibrium")?;
         model = problem.model(fit.x.as_ref());
         x = fit.x;
         previous = Some(at);
@@ -3344,7 +3360,7 @@ fn equilibrate(
             max_evaluations: None,
         },
         offsets,
-        obs,
+        observations(train, &all),
         weights,
     )?;
     Ok((model, fitted, refits))
@@ -4236,11 +4252,18 @@ pub(crate) fn split_test_last(
                 t.path.display()
             );
         }
-        let mut held = t.clone();
-        held.rows = t.rows.split_off(k);
-        // The file's warnings are said once, with its training part.
-        held.warnings.clear();
-        held.name = format!("{} (last {})", t.name, n - k);
+        // Field by field: a clone of the table would copy every row first. The file's
+        // warnings are said once, with its training part.
+        let held = MeasurementTable {
+            name: format!("{} (last {})", t.name, n - k),
+            path: t.path.clone(),
+            rows: t.rows.split_off(k),
+            warnings: Vec::new(),
+            n_markers: t.n_markers,
+            has_orientation: t.has_orientation,
+            has_distance: t.has_distance,
+            ignored_columns: t.ignored_columns.clone(),
+        };
         t.name = format!("{} (first {k})", t.name);
         test.push(held);
     }
@@ -4357,7 +4380,7 @@ pub fn sidecar_toml(frames: &[FrameReport], leftover: &[hapcal_io::CalibratedVal
 
 #[cfg(test)]
 mod tests {
-    use super::{Line, RangeVerdict, Warm, fold_fit, negative_compliance_sigmas, rung_chains};
+    use super::{Line, RangeVerdict, lm_alone, negative_compliance_sigmas, rung_chains};
     use faer::{Col, ColMut, ColRef, MatMut};
     use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
 
@@ -4455,17 +4478,15 @@ mod tests {
     }
 
     #[test]
-    fn a_fold_past_the_entry_bound_streams_and_finds_the_dense_estimate() {
+    fn a_refit_past_the_entry_bound_streams_and_finds_the_dense_estimate() {
         let problem = Quadratic::new(100);
-        let warm = Warm {
-            x: Col::from_fn(3, |i| [0.25, -0.1, 0.4][i]),
-            free: vec![0, 1, 2],
-        };
+        let x0 = || Col::from_fn(3, |i| [0.25, -0.1, 0.4][i]);
+        let free = [0, 1, 2];
         let lm = crate::fit::identify_config(None).lm;
-        // 300 entries: under a bound of 300 the fold is dense, under 299 it streams (the
+        // 300 entries: under a bound of 300 the fit is dense, under 299 it streams (the
         // streaming back end keeps no residuals).
-        let dense = fold_fit(&problem, &warm, &lm, None, 300).expect("a well-posed fit");
-        let streamed = fold_fit(&problem, &warm, &lm, None, 299).expect("a well-posed fit");
+        let dense = lm_alone(&problem, x0(), &free, &lm, None, 300).expect("a well-posed fit");
+        let streamed = lm_alone(&problem, x0(), &free, &lm, None, 299).expect("a well-posed fit");
         assert_eq!(dense.residuals.nrows(), 100);
         assert_eq!(streamed.residuals.nrows(), 0);
         // The same steps up to rounding: the estimates agree far below their scatter (the
