@@ -37,7 +37,9 @@ pub use crate::data::{
     Robot, is_marker_file, load_tables, robot_from_device, robot_from_urdf,
     workspace_configurations,
 };
-use crate::fit::{CV_REPEATS, FOLD_TOLERANCE, Fold, HeldOut, blocked_difference};
+use crate::fit::{
+    CV_REPEATS, FOLD_TOLERANCE, Fold, HeldOut, REFIT_MAX_ENTRIES, blocked_difference,
+};
 use crate::model::{DataKind, ModelRules};
 pub use crate::noise::{CALIBRATED_SIGMA_RATIO, PLAUSIBLE_FRAMES_ONLY_RMS_M};
 use crate::report::SetRole;
@@ -917,7 +919,9 @@ impl AtWarm {
             }
             first.push(offsets);
         }
-        if at != m || warm.x.nrows() != n {
+        // Past the dense back end's bound each fold streams its Jacobian in row blocks
+        // ([`refit`]): no Jacobian of every row is held for the folds to copy from.
+        if at != m || warm.x.nrows() != n || m.saturating_mul(n) > REFIT_MAX_ENTRIES {
             return None;
         }
         let mut r = Col::zeros(m);
@@ -972,7 +976,9 @@ impl AtWarm {
 /// (the identifiability decided on all training rows): Levenberg–Marquardt alone, a few
 /// iterations from a nearby start, from the residuals and Jacobian at `warm` that `at_warm`
 /// holds for every training row (the same values the fold's problem evaluates there), when
-/// given.
+/// given. A fold whose Jacobian has more than [`REFIT_MAX_ENTRIES`] entries is fitted on the
+/// streaming back end ([`hapcal_identify::levenberg_marquardt_streaming`]): its Jacobian
+/// passes in row blocks and is never held whole.
 #[allow(clippy::too_many_arguments)]
 fn refit(
     rung: ModelName,
@@ -1000,19 +1006,45 @@ fn refit(
     let start = (at_warm.map(|a| a.rows(tables, keep))).filter(|(r, jac)| {
         r.nrows() == problem.n_residuals() && jac.ncols() == problem.layout().len()
     });
-    let fit = match start {
-        Some((r0, jac0)) => hapcal_identify::levenberg_marquardt_from(
-            &problem,
-            warm.x.clone(),
-            &warm.free,
-            &lm,
-            r0,
-            jac0,
-        ),
-        None => hapcal_identify::levenberg_marquardt(&problem, warm.x.clone(), &warm.free, &lm),
-    }
+    let fit = lm_alone(
+        &problem,
+        warm.x.clone(),
+        &warm.free,
+        &lm,
+        start,
+        REFIT_MAX_ENTRIES,
+    )
     .with_context(|| format!("refitting the {rung} model on a fold"))?;
     Ok(problem.model(fit.x.as_ref()))
+}
+
+/// Levenberg–Marquardt alone on `problem` from `x0` over the parameters `free` (a fold's
+/// refit, a torque-equilibrium refit): from the residuals and Jacobian `start` already
+/// evaluated at `x0` when given; on the streaming back end
+/// ([`hapcal_identify::levenberg_marquardt_streaming`], the Jacobian in row blocks, never held
+/// whole) when the Jacobian has more than `max_entries` entries and the problem has row
+/// blocks; dense otherwise. The three take the same steps up to rounding.
+///
+/// # Errors
+/// As [`hapcal_identify::levenberg_marquardt`].
+fn lm_alone<P: Problem + Sync>(
+    problem: &P,
+    x0: Col<f64>,
+    free: &[usize],
+    lm: &hapcal_identify::LmConfig,
+    start: Option<(Col<f64>, Mat<f64>)>,
+    max_entries: usize,
+) -> std::result::Result<hapcal_identify::Fit, hapcal_identify::Error> {
+    let entries = (problem.n_residuals()).saturating_mul(problem.layout().len());
+    match start {
+        Some((r0, jac0)) => {
+            hapcal_identify::levenberg_marquardt_from(problem, x0, free, lm, r0, jac0)
+        }
+        None if problem.row_blocks().is_some() && entries > max_entries => {
+            hapcal_identify::levenberg_marquardt_streaming(problem, x0, free, lm)
+        }
+        None => hapcal_identify::levenberg_marquardt(problem, x0, free, lm),
+    }
 }
 
 /// The original of every row of every table ([`crate::fit::originals`] by the reader's
@@ -1672,7 +1704,7 @@ pub fn calibrate_measured(
     };
     let ladder_rungs = ladder_of(&frames.robot);
     let richest = richest_rung(cfg, &ladder_rungs);
-    let mut bounded = bounded_training(richest, &measured, (frames.model, frames.fitted))?;
+    let mut bounded = bounded_training(richest, &measured, train, (frames.model, frames.fitted))?;
     let richest_fit = bounded.richest_fit.take();
     let fits = Fits {
         train: &bounded.tables,
@@ -1937,9 +1969,10 @@ fn richest_rung(cfg: &MeasuredConfig, ladder: &(Vec<ModelName>, Vec<usize>)) -> 
 
 /// The training tables as the Huber loss sees them ([`bounded_training`]), with the
 /// frames-only fit on them.
-struct Bounded {
-    /// The training tables with the gross errors bounded (as measured when none was).
-    tables: Vec<MeasurementTable>,
+struct Bounded<'a> {
+    /// The training tables with the gross errors bounded (as measured, not a copy, when none
+    /// was).
+    tables: std::borrow::Cow<'a, [MeasurementTable]>,
     /// The samples the Huber loss bounded, file order.
     downweighted: Vec<Downweighted>,
     /// The rung the Huber loss was evaluated with and its fit, when it bounded nothing.
@@ -1953,20 +1986,22 @@ struct Bounded {
 /// Gross errors bounded by the Huber loss ([`winsorize`], evaluated with `richest`): every fit
 /// after it sees the winsorized samples; the figures are of the data as measured. The
 /// frames-only fit `frames` is redone on the winsorized tables when a sample was bounded.
+/// `train`: the training tables of `measured`, borrowed as long as the tables returned.
 ///
 /// # Errors
 /// A failed identification.
-fn bounded_training(
+fn bounded_training<'t>(
     richest: ModelName,
     measured: &Fits<'_>,
+    train: &'t [MeasurementTable],
     frames: (CalibratedModel, Fitted),
-) -> Result<Bounded> {
+) -> Result<Bounded<'t>> {
     let (tables, downweighted, richest_fit, judge) = winsorize(
         richest,
         measured.robot,
         measured.start,
         measured.offsets,
-        measured.train,
+        train,
         measured.weights,
     )?;
     let frames = if downweighted.is_empty() {
@@ -2703,7 +2738,7 @@ struct Review<'a> {
     /// The frames-only model.
     frames_model: &'a CalibratedModel,
     /// The training tables the Huber loss saw, and the samples it bounded.
-    bounded: &'a Bounded,
+    bounded: &'a Bounded<'a>,
     /// The training tables as measured.
     train: &'a [MeasurementTable],
     test: &'a [MeasurementTable],
@@ -2944,13 +2979,20 @@ fn extrapolation_warnings(
         return warnings;
     }
     let rms = |v: &[f64]| (v.iter().map(|s| s * s).sum::<f64>() / v.len().max(1) as f64).sqrt();
+    // Built field by field: `..t.clone()` would copy every row of the table first.
     let sample: Vec<MeasurementTable> = (sets.train.iter())
         .map(|t| MeasurementTable {
+            name: t.name.clone(),
+            path: t.path.clone(),
             rows: (t.rows.iter())
                 .step_by((sets.n_rows / 100).max(1))
                 .cloned()
                 .collect(),
-            ..t.clone()
+            warnings: t.warnings.clone(),
+            n_markers: t.n_markers,
+            has_orientation: t.has_orientation,
+            has_distance: t.has_distance,
+            ignored_columns: t.ignored_columns.clone(),
         })
         .collect();
     let reference: Vec<f64> = prediction_sigmas(rung, robot, framed, fitted, &sample, weights)
@@ -3250,7 +3292,9 @@ fn equilibrate(
     let mut model = model;
     let mut previous: Option<Vec<Vec<f64>>> = None;
     let mut refits = 0;
-    let obs = observations(train, &|_, _| true);
+    // The observations are built for each problem rather than copied from one held beside
+    // it: one copy of every row at a time.
+    let all = |_: usize, _: usize| true;
     let lm = crate::fit::identify_config(None).lm;
     while refits < EQUILIBRIUM_REFITS {
         let solving = CalibratedModel {
@@ -3279,10 +3323,20 @@ fn equilibrate(
             load_angles: Some(at.clone()),
             ..terms(rung, robot)?
         };
-        let problem = CalibrationProblem::on_tree(tree.clone(), obs.clone(), weights, terms)
+        let obs = observations(train, &all);
+        let problem = CalibrationProblem::on_tree(tree.clone(), obs, weights, terms)
             .context("building the calibration problem")?;
-        let fit = hapcal_identify::levenberg_marquardt(&problem, x.clone(), &warm.free, &lm)
-            .context("refitting at the torque equilibrium")?;
+        // Past the dense back end's bound, in row blocks: the Jacobian of every training row
+        // is never held.
+        let fit = lm_alone(
+            &problem,
+            x.clone(),
+            &warm.free,
+            &lm,
+            None,
+            REFIT_MAX_ENTRIES,
+        )
+        .context("refitting at the torque equilibrium")?;
         model = problem.model(fit.x.as_ref());
         x = fit.x;
         previous = Some(at);
@@ -3306,7 +3360,7 @@ fn equilibrate(
             max_evaluations: None,
         },
         offsets,
-        obs,
+        observations(train, &all),
         weights,
     )?;
     Ok((model, fitted, refits))
@@ -3397,31 +3451,56 @@ fn prediction_sigmas(
             else {
                 return Vec::new();
             };
-            let mut jac = faer::Mat::<f64>::zeros(problem.n_residuals(), problem.layout().len());
-            if problem.jacobian(fitted.x.as_ref(), jac.as_mut()).is_err() {
-                return Vec::new();
-            }
+            let n = problem.layout().len();
             let s = weights.sigma_position_m;
-            (0..n_samples)
-                .map(|i| {
-                    let mut trace = 0.0;
-                    for k in 0..3 {
-                        let row = 3 * i + k;
-                        let g: Vec<f64> = (columns.iter())
-                            .map(|c| c.map_or(0.0, |c| s * jac[(row, c)]))
-                            .collect();
-                        for (a, ga) in g.iter().enumerate() {
-                            if *ga == 0.0 {
-                                continue;
-                            }
-                            for (b, gb) in g.iter().enumerate() {
-                                trace += ga * cov.matrix[(a, b)] * gb;
-                            }
+            // σ of sample `i` from its three Jacobian rows `jac` (3 × n).
+            let sigma = |jac: faer::MatRef<'_, f64>| {
+                let mut trace = 0.0;
+                for k in 0..3 {
+                    let g: Vec<f64> = (columns.iter())
+                        .map(|c| c.map_or(0.0, |c| s * jac[(k, c)]))
+                        .collect();
+                    for (a, ga) in g.iter().enumerate() {
+                        if *ga == 0.0 {
+                            continue;
+                        }
+                        for (b, gb) in g.iter().enumerate() {
+                            trace += ga * cov.matrix[(a, b)] * gb;
                         }
                     }
-                    trace.max(0.0).sqrt()
-                })
-                .collect()
+                }
+                f64::max(trace, 0.0).sqrt()
+            };
+            // Block by block where the problem has row blocks (of whole samples, 3 rows
+            // each): the memory of one block, not of the table's Jacobian.
+            let mut out = Vec::with_capacity(n_samples);
+            match problem.row_blocks() {
+                Some(blocks) => {
+                    for b in 0..blocks.n_blocks() {
+                        let len = blocks.block_rows(b).len();
+                        let mut r = Col::<f64>::zeros(len);
+                        let mut jac = Mat::<f64>::zeros(len, n);
+                        let x = fitted.x.as_ref();
+                        if len % 3 != 0
+                            || (blocks.block_jacobian(x, b, r.as_mut(), jac.as_mut())).is_err()
+                        {
+                            return Vec::new();
+                        }
+                        out.extend((0..len / 3).map(|i| sigma(jac.as_ref().subrows(3 * i, 3))));
+                    }
+                }
+                None => {
+                    let mut jac = Mat::<f64>::zeros(problem.n_residuals(), n);
+                    if problem.jacobian(fitted.x.as_ref(), jac.as_mut()).is_err() {
+                        return Vec::new();
+                    }
+                    out.extend((0..n_samples).map(|i| sigma(jac.as_ref().subrows(3 * i, 3))));
+                }
+            }
+            if out.len() != n_samples {
+                return Vec::new();
+            }
+            out
         })
         .collect()
 }
@@ -3600,10 +3679,11 @@ fn outside_warnings(
     out
 }
 
-/// The training tables as the Huber loss sees them, the samples it bounded, the rung it was
-/// evaluated with and its fit when it bounded none, and that rung.
-type Winsorized = (
-    Vec<MeasurementTable>,
+/// The training tables as the Huber loss sees them (the tables as measured, not a copy, when
+/// it bounded none), the samples it bounded, the rung it was evaluated with and its fit when
+/// it bounded none, and that rung.
+type Winsorized<'a> = (
+    std::borrow::Cow<'a, [MeasurementTable]>,
     Vec<Downweighted>,
     Option<(ModelName, (CalibratedModel, Fitted))>,
     ModelName,
@@ -3642,14 +3722,14 @@ type Evaluated = (usize, usize, usize, Vector3<f64>, Vector3<f64>);
 /// A rung with fewer than [`crate::robust::MIN_REDUNDANCY`] residuals per kept parameter
 /// gives way to the geometric rung. With nothing bounded, the rung used and its fit on the
 /// tables as measured are returned too.
-fn winsorize(
+fn winsorize<'a>(
     rung: ModelName,
     robot: &Robot,
     start: &Start<'_>,
     offsets: &[Option<usize>],
-    train: &[MeasurementTable],
+    train: &'a [MeasurementTable],
     weights: Weights,
-) -> Result<Winsorized> {
+) -> Result<Winsorized<'a>> {
     use crate::robust::{Dim, Round, bound_gross_errors, redundancy};
     let all = |_: usize, _: usize| true;
     let n_samples: usize = (train.iter().flat_map(|t| &t.rows))
@@ -3661,12 +3741,15 @@ fn winsorize(
     // Every sample of the last fit: table, row, marker, residual, model position.
     let mut evaluated: Vec<Evaluated> = Vec::new();
     let winsorized = |evaluated: &[Evaluated], bounds: &[crate::robust::Bound]| {
+        if bounds.is_empty() {
+            return std::borrow::Cow::Borrowed(train);
+        }
         let mut tables = train.to_vec();
         for b in bounds {
             let (ti, ri, mi, e, p) = evaluated[b.sample];
             tables[ti].rows[ri].markers[mi].position_m = (p + e * (b.corner / b.norm)).into();
         }
-        tables
+        std::borrow::Cow::Owned(tables)
     };
     let bounds = bound_gross_errors(n_samples, Dim::Three, |bounds| {
         let tables = winsorized(&evaluated, bounds);
@@ -3708,7 +3791,7 @@ fn winsorize(
         })
     });
     if bounds.is_empty() {
-        return Ok((train.to_vec(), Vec::new(), first, rung));
+        return Ok((std::borrow::Cow::Borrowed(train), Vec::new(), first, rung));
     }
     let downweighted = (bounds.iter())
         .map(|b| {
@@ -4169,11 +4252,18 @@ pub(crate) fn split_test_last(
                 t.path.display()
             );
         }
-        let mut held = t.clone();
-        held.rows = t.rows.split_off(k);
-        // The file's warnings are said once, with its training part.
-        held.warnings.clear();
-        held.name = format!("{} (last {})", t.name, n - k);
+        // Field by field: a clone of the table would copy every row first. The file's
+        // warnings are said once, with its training part.
+        let held = MeasurementTable {
+            name: format!("{} (last {})", t.name, n - k),
+            path: t.path.clone(),
+            rows: t.rows.split_off(k),
+            warnings: Vec::new(),
+            n_markers: t.n_markers,
+            has_orientation: t.has_orientation,
+            has_distance: t.has_distance,
+            ignored_columns: t.ignored_columns.clone(),
+        };
         t.name = format!("{} (first {k})", t.name);
         test.push(held);
     }
@@ -4290,7 +4380,127 @@ pub fn sidecar_toml(frames: &[FrameReport], leftover: &[hapcal_io::CalibratedVal
 
 #[cfg(test)]
 mod tests {
-    use super::{Line, RangeVerdict, negative_compliance_sigmas, rung_chains};
+    use super::{Line, RangeVerdict, lm_alone, negative_compliance_sigmas, rung_chains};
+    use faer::{Col, ColMut, ColRef, MatMut};
+    use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
+
+    /// `y_i = a + b·t_i + c·t_i²`, in row blocks of 7.
+    struct Quadratic {
+        layout: ParamLayout,
+        t: Vec<f64>,
+        y: Vec<f64>,
+    }
+
+    impl Quadratic {
+        fn new(n: usize) -> Quadratic {
+            let spec = |name: &str| ParamSpec {
+                name: name.into(),
+                unit: Unit::Meter,
+                role: Role::Model,
+            };
+            let t: Vec<f64> = (0..n).map(|i| i as f64 / n as f64).collect();
+            // Noise of ±1e-3 so that the fit has a residual to settle.
+            let y = (t.iter().enumerate())
+                .map(|(i, &t)| 0.3 - 0.2 * t + 0.5 * t * t + 1e-3 * ((i * 7 % 5) as f64 - 2.0))
+                .collect();
+            Quadratic {
+                layout: ParamLayout::new(vec![spec("a"), spec("b"), spec("c")]),
+                t,
+                y,
+            }
+        }
+        fn row(&self, x: ColRef<'_, f64>, i: usize) -> (f64, [f64; 3]) {
+            let t = self.t[i];
+            (x[0] + x[1] * t + x[2] * t * t - self.y[i], [1.0, t, t * t])
+        }
+    }
+
+    impl Problem for Quadratic {
+        fn layout(&self) -> &ParamLayout {
+            &self.layout
+        }
+        fn n_residuals(&self) -> usize {
+            self.t.len()
+        }
+        fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
+            for i in 0..self.t.len() {
+                out[i] = self.row(x, i).0;
+            }
+            Ok(())
+        }
+        fn jacobian(&self, x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+            for i in 0..self.t.len() {
+                for (j, d) in self.row(x, i).1.into_iter().enumerate() {
+                    jac[(i, j)] = d;
+                }
+            }
+            Ok(())
+        }
+        fn row_blocks(&self) -> Option<&dyn RowBlocks> {
+            Some(self)
+        }
+    }
+
+    impl RowBlocks for Quadratic {
+        fn n_blocks(&self) -> usize {
+            self.t.len().div_ceil(7)
+        }
+        fn block_rows(&self, block: usize) -> std::ops::Range<usize> {
+            7 * block..(7 * block + 7).min(self.t.len())
+        }
+        fn block_residuals(
+            &self,
+            x: ColRef<'_, f64>,
+            block: usize,
+            mut out: ColMut<'_, f64>,
+        ) -> Result<(), EvalError> {
+            for (k, i) in self.block_rows(block).enumerate() {
+                out[k] = self.row(x, i).0;
+            }
+            Ok(())
+        }
+        fn block_jacobian(
+            &self,
+            x: ColRef<'_, f64>,
+            block: usize,
+            mut r_out: ColMut<'_, f64>,
+            mut jac: MatMut<'_, f64>,
+        ) -> Result<(), EvalError> {
+            for (k, i) in self.block_rows(block).enumerate() {
+                let (r, d) = self.row(x, i);
+                r_out[k] = r;
+                for (j, d) in d.into_iter().enumerate() {
+                    jac[(k, j)] = d;
+                }
+            }
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_refit_past_the_entry_bound_streams_and_finds_the_dense_estimate() {
+        let problem = Quadratic::new(100);
+        let x0 = || Col::from_fn(3, |i| [0.25, -0.1, 0.4][i]);
+        let free = [0, 1, 2];
+        let lm = crate::fit::identify_config(None).lm;
+        // 300 entries: under a bound of 300 the fit is dense, under 299 it streams (the
+        // streaming back end keeps no residuals).
+        let dense = lm_alone(&problem, x0(), &free, &lm, None, 300).expect("a well-posed fit");
+        let streamed = lm_alone(&problem, x0(), &free, &lm, None, 299).expect("a well-posed fit");
+        assert_eq!(dense.residuals.nrows(), 100);
+        assert_eq!(streamed.residuals.nrows(), 0);
+        // The same steps up to rounding: the estimates agree far below their scatter (the
+        // noise of 1e-3 over 100 rows moves them by about 1e-4).
+        for k in 0..3 {
+            assert!(
+                (dense.x[k] - streamed.x[k]).abs() < 1e-10,
+                "parameter {k}: dense {} streamed {}",
+                dense.x[k],
+                streamed.x[k]
+            );
+        }
+        assert!((dense.x[2] - 0.5).abs() < 1e-2, "c = {}", dense.x[2]);
+    }
 
     #[test]
     fn the_negative_compliance_bound_is_the_bonferroni_normal_quantile() {
