@@ -403,3 +403,22 @@ fn compensation_with_a_calibration_from_simulated_data() {
         assert!(e < 5.0 * sigma_m, "{e} m: {row}");
     }
 }
+
+#[test]
+fn compensate_words_the_first_ten_targets_missed_and_counts_the_others() {
+    // Twelve targets 3 m away, beyond the arm's reach: ten named by file:line, two counted.
+    let dir = scratch("compensate-many-missed");
+    let urdf = calibrated_robot(&dir);
+    let mut text = String::from("x,y,z\n");
+    for k in 0..12 {
+        text.push_str(&format!("3.0,{:?},0.5\n", 0.01 * f64::from(k)));
+    }
+    let targets = dir.join("targets.csv");
+    std::fs::write(&targets, &text).expect("write");
+    let run = compensate(&urdf, &targets, &dir.join("commands.csv"));
+    let err = assert_exit(&run, 2, &["12 of 12 targets not reached", "… and 2 more"]);
+    let named = |line: usize| format!("{}:{line}: not reached", targets.display());
+    // Lines 2 to 11 are the first ten targets; 12 and 13 are only counted.
+    assert!((2..=11).all(|line| err.contains(&named(line))), "{err}");
+    assert!(!err.contains(&named(12)) && !err.contains(&named(13)), "{err}");
+}
