@@ -14,7 +14,11 @@
 //!   two tips), the size of a real humanoid upper body;
 //! - `ladder_humanoid`: the whole ladder at the size of a real humanoid's recording: the
 //!   19-joint humanoid, 350 configurations of two markers (the ladder's time budget, 1 s on
-//!   two cores, is set at this size).
+//!   two cores, is set at this size);
+//! - `ladder_real_like`: the whole ladder on the simulated humanoid that behaves like real
+//!   motion capture (`sim::real_like`, the bundled fixtures/sim-humanoid/real-like.csv: 17
+//!   joints, per-axis transversal compliance, link masses 10 % off the URDF's, 2 mm of marker
+//!   noise), its 245 training rows of `--test-last 0.3`.
 #![allow(missing_docs, clippy::unwrap_used)] // criterion's macros generate undocumented items
 
 #[path = "../tests/sim/humanoid.rs"]
@@ -150,6 +154,15 @@ fn bench(c: &mut Criterion) {
     group.warm_up_time(std::time::Duration::from_secs(1));
     let table = humanoid::table(&robot, &truth, &[0, 1], 350, 13);
     group.bench_function("ladder_humanoid", |b| {
+        b.iter(|| {
+            calibrate_measured(&robot, std::slice::from_ref(black_box(&table)), &[], &cfg).unwrap()
+        })
+    });
+    let robot = humanoid::humanoid(&["l_hand", "r_hand"]);
+    let (_, _, mut table) = humanoid::real_like(&robot, humanoid::REAL_LIKE_SEED);
+    // `--test-last 0.3`: the first 70 % of the rows train.
+    table.rows.truncate(table.rows.len() * 7 / 10);
+    group.bench_function("ladder_real_like", |b| {
         b.iter(|| {
             calibrate_measured(&robot, std::slice::from_ref(black_box(&table)), &[], &cfg).unwrap()
         })

@@ -340,9 +340,79 @@ pub fn truth(robot: &Robot, seed: u64) -> Truth {
     truth_with(robot, seed, hapcal_problems::Transversal::Isotropic)
 }
 
+/// Marker noise per axis of the recording that behaves like real motion capture, m.
+pub const REAL_LIKE_NOISE_M: f64 = 2e-3;
+
+/// Relative standard deviation of a link's true mass from the URDF's (a CAD model's mass
+/// leaves out cables, fasteners and covers).
+pub const CAD_MASS_ERROR: f64 = 0.1;
+
+/// Rows of the recording that behaves like real motion capture.
+pub const REAL_LIKE_ROWS: usize = 350;
+
+/// The link masses the robot really has: the URDF's (CAD) masses each scaled by
+/// `1 + CAD_MASS_ERROR·z`, `z` standard normal drawn from `seed`, in the URDF's order.
+pub fn true_masses(robot: &Robot, seed: u64) -> Vec<hapcal_problems::LinkMass> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let z = Normal::new(0.0, CAD_MASS_ERROR).unwrap();
+    (robot.masses.iter())
+        .map(|m| hapcal_problems::LinkMass {
+            mass_kg: m.mass_kg * (1.0 + z.sample(&mut rng)),
+            ..m.clone()
+        })
+        .collect()
+}
+
+/// Seed of the bundled recording that behaves like real motion capture
+/// (fixtures/sim-humanoid/real-like.csv).
+pub const REAL_LIKE_SEED: u64 = 21;
+
+/// The truth of the simulated two-arm humanoid that behaves like the real data: per-axis
+/// transversal compliance ([`transversal_axes_of`]), geometric deviations drawn from `seed`,
+/// and the gravity loads of the link masses of [`true_masses`] (seed `seed + 100`) where the
+/// URDF gives the CAD ones. Returns the truth and its masses.
+pub fn real_like_truth(robot: &Robot, seed: u64) -> (Truth, Vec<hapcal_problems::LinkMass>) {
+    let masses = true_masses(robot, seed + 100);
+    let truth = truth_of(
+        robot,
+        seed,
+        hapcal_problems::Transversal::PerAxis,
+        masses.clone(),
+    );
+    (truth, masses)
+}
+
+/// The recording of [`real_like_truth`]: [`REAL_LIKE_ROWS`] rows of both hands' markers with
+/// [`REAL_LIKE_NOISE_M`] noise (seed `seed + 1`). Returns the truth, its masses and the table.
+pub fn real_like(
+    robot: &Robot,
+    seed: u64,
+) -> (Truth, Vec<hapcal_problems::LinkMass>, MeasurementTable) {
+    let (truth, masses) = real_like_truth(robot, seed);
+    let table = table_with_noise(
+        robot,
+        &truth,
+        &[0, 1],
+        REAL_LIKE_ROWS,
+        seed + 1,
+        REAL_LIKE_NOISE_M,
+    );
+    (truth, masses, table)
+}
+
 /// As [`truth`], with the transversal compliance `transversal` ([`transversal_axes_of`] for
 /// per-axis).
 pub fn truth_with(robot: &Robot, seed: u64, transversal: hapcal_problems::Transversal) -> Truth {
+    truth_of(robot, seed, transversal, robot.masses.clone())
+}
+
+/// As [`truth_with`], the gravity loads from the link masses `masses`.
+pub fn truth_of(
+    robot: &Robot,
+    seed: u64,
+    transversal: hapcal_problems::Transversal,
+    masses: Vec<hapcal_problems::LinkMass>,
+) -> Truth {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let base = FrameSpec {
         name: "instrument".into(),
@@ -371,10 +441,7 @@ pub fn truth_with(robot: &Robot, seed: u64, transversal: hapcal_problems::Transv
         dummy,
         Weights::default(),
         ModelTerms {
-            compliance: Some(GravityCompliance::from_link_masses(
-                robot.masses.clone(),
-                -Vector3::z(),
-            )),
+            compliance: Some(GravityCompliance::from_link_masses(masses, -Vector3::z())),
             transversal,
             harmonics: None,
             torque_tips: Some(robot.tree.tips().to_vec()),
