@@ -176,15 +176,13 @@ fn run_rounds(b: &Baseline<'_>, cfg: &ArmConfig, excluded: &[Effect]) -> Run {
 
 /// Whether `effect` is a candidate beside the effects `accepted`. Gravity and lumped compliance
 /// are one effect under two torque models, the two transversal compliances one effect in two
-/// forms: once one is named, the other is not a further effect. A transversal compliance is
-/// tested once a joint compliance is named ([`super::ARM_BESIDE_COMPLIANCE`]).
+/// forms: once one is named, the other is not a further effect. A transversal compliance is a
+/// candidate from the first round on, on the loads of [`super::columns::transversal_loads`].
 fn offered(effect: Effect, accepted: &[Effect], excluded: &[Effect]) -> bool {
     !(accepted.contains(&effect)
         || excluded.contains(&effect)
         || (effect.is_joint_compliance() && accepted.iter().any(|e| e.is_joint_compliance()))
-        || (effect.is_transversal()
-            && (accepted.iter().any(|e| e.is_transversal())
-                || !accepted.iter().any(|e| e.is_joint_compliance()))))
+        || (effect.is_transversal() && accepted.iter().any(|e| e.is_transversal())))
 }
 
 /// Tests `effect` beside the round's model `fit`: its visible columns, the in-sample F-test,
