@@ -88,7 +88,7 @@ pub(super) fn how_far(
             named -= 1;
         }
     }
-    let verdict = Verdict::of(&model_order(&accepted[..named]));
+    let verdict = Verdict::of(&accepted[..named]);
     if named > 0
         && let Some(f) = floor0
         && p_after[named - 1] < cfg.alpha
@@ -121,45 +121,5 @@ pub(super) fn how_far(
         gap2,
         closed,
         notes,
-    }
-}
-
-/// The named effects `named` in the order the verdict lists them: the order they were named,
-/// except that a joint compliance comes before a transversal compliance named before it, as
-/// the calibration's `transversal-compliance` model holds them (the compliance, then the
-/// tilts on its loads).
-fn model_order(named: &[Effect]) -> Vec<Effect> {
-    let mut out = named.to_vec();
-    if let (Some(t), Some(j)) = (
-        out.iter().position(|e| e.is_transversal()),
-        out.iter().position(|e| e.is_joint_compliance()),
-    ) && t < j
-    {
-        let compliance = out.remove(j);
-        out.insert(t, compliance);
-    }
-    out
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_joint_compliance_is_listed_before_its_tilts() {
-        use Effect::{Backlash, GravityCompliance, LumpedCompliance, TransversalCompliance};
-        assert_eq!(
-            model_order(&[TransversalCompliance, Backlash, LumpedCompliance]),
-            [LumpedCompliance, TransversalCompliance, Backlash]
-        );
-        // Already in that order, or without a joint compliance: the order named.
-        assert_eq!(
-            model_order(&[GravityCompliance, TransversalCompliance]),
-            [GravityCompliance, TransversalCompliance]
-        );
-        assert_eq!(
-            model_order(&[Backlash, TransversalCompliance]),
-            [Backlash, TransversalCompliance]
-        );
     }
 }

@@ -137,9 +137,12 @@ pub const ARM_LIBRARY: [Effect; 9] = [
 /// their axes are then named without a joint compliance they do not have, and the columns
 /// differ from a joint compliance's (a rotation about the axis) and from a geometric error
 /// (constant in the link frame, where the tilt follows the moment through the configurations).
-/// A transversal compliance named before a joint compliance keeps its loads; one named after it
-/// takes the compliance's, and the joint compliance is then left out of the verdict when the
-/// tilts predict as well without it ([`ArmDiagnosis::verdict`]).
+/// When the rounds name a transversal compliance and then a joint compliance, they are run
+/// again with the tilts tested only beside a named joint compliance, on its loads: the pair is
+/// then tested as the calibration fits it (a per-axis tilt named first on the masses' loads
+/// absorbs part of the joint compliance's columns, which its isotropic alternative beside the
+/// joint compliance would then lack). A joint compliance named with the tilts is left out of
+/// the verdict when the tilts predict as well without it ([`ArmDiagnosis::verdict`]).
 pub const ARM_TRANSVERSAL: [Effect; 2] =
     [Effect::TransversalCompliance, Effect::TransversalAxes];
 
