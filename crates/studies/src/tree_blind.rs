@@ -1020,7 +1020,9 @@ fn targets_section(md: &mut String, outcomes: &[TreeOutcome]) {
             outcomes,
             &format!("{}: transversal compliance alone", class_name(kind)),
             &|o| {
-                o.case.kind == kind && o.case.confounded().is_none() && o.case.is_transversal_alone()
+                o.case.kind == kind
+                    && o.case.confounded().is_none()
+                    && o.case.is_transversal_alone()
             },
             false,
         );

@@ -153,11 +153,12 @@ pub(super) fn transversal_loads(
     if let Some(&compliance) = with.iter().find(|e| e.is_joint_compliance()) {
         return Ok((compliance, ctx.torque_model(compliance)?));
     }
-    (ctx.torque_model(Effect::GravityCompliance).map(|m| (Effect::GravityCompliance, m)))
-        .or_else(|_| {
-            let m = ctx.torque_model(Effect::LumpedCompliance)?;
-            Ok((Effect::LumpedCompliance, m))
-        })
+    (ctx.torque_model(Effect::GravityCompliance)
+        .map(|m| (Effect::GravityCompliance, m)))
+    .or_else(|_| {
+        let m = ctx.torque_model(Effect::LumpedCompliance)?;
+        Ok((Effect::LumpedCompliance, m))
+    })
 }
 
 /// The parameter names of transversal compliance terms (`effect.joint`, and `.u` / `.v` per

@@ -143,8 +143,7 @@ pub const ARM_LIBRARY: [Effect; 9] = [
 /// absorbs part of the joint compliance's columns, which its isotropic alternative beside the
 /// joint compliance would then lack). A joint compliance named with the tilts is left out of
 /// the verdict when the tilts predict as well without it ([`ArmDiagnosis::verdict`]).
-pub const ARM_TRANSVERSAL: [Effect; 2] =
-    [Effect::TransversalCompliance, Effect::TransversalAxes];
+pub const ARM_TRANSVERSAL: [Effect; 2] = [Effect::TransversalCompliance, Effect::TransversalAxes];
 
 /// Every candidate of the diagnosis, in report order: [`ARM_LIBRARY`], then
 /// [`ARM_TRANSVERSAL`].

@@ -83,8 +83,14 @@ pub(super) fn select(b: &Baseline<'_>, cfg: &ArmConfig) -> Selection {
             revisions.push(format!(
                 "{} was named before {}: the rounds were run again with the transversal \
                  compliance tested beside the joint compliance, on its loads",
-                run.accepted.iter().find(|e| e.is_transversal()).map_or("", |e| e.name()),
-                run.accepted.iter().find(|e| e.is_joint_compliance()).map_or("", |e| e.name()),
+                run.accepted
+                    .iter()
+                    .find(|e| e.is_transversal())
+                    .map_or("", |e| e.name()),
+                run.accepted
+                    .iter()
+                    .find(|e| e.is_joint_compliance())
+                    .map_or("", |e| e.name()),
             ));
             run = run_rounds(b, cfg, &excluded, alone);
         }
