@@ -137,7 +137,15 @@ pub const ARM_LIBRARY: [Effect; 9] = [
 /// their axes are then named without a joint compliance they do not have, and the columns
 /// differ from a joint compliance's (a rotation about the axis) and from a geometric error
 /// (constant in the link frame, where the tilt follows the moment through the configurations).
-/// When the rounds name a transversal compliance and then a joint compliance, they are run
+/// Alone only on measurement files: socket recordings (the tip held at two points) have no
+/// transversal rung on the calibration's ladder, and there the tilts alone mimic a joint
+/// compliance (on the arm blind test's socket data they took 3 of its 64 two-effect cases).
+/// The tilts alone take a round from a joint compliance that passes it only when they predict
+/// better by two blocked standard errors, the entry margin (the calibration nests the two:
+/// `transversal-compliance` is `compliance` plus the tilts; on the serial arms' socket data of
+/// the arm blind test, per-axis tilts with twice the parameters otherwise took some joint
+/// compliances' first round). When the rounds name a transversal compliance and then a joint
+/// compliance, they are run
 /// again with the tilts tested only beside a named joint compliance, on its loads: the pair is
 /// then tested as the calibration fits it (a per-axis tilt named first on the masses' loads
 /// absorbs part of the joint compliance's columns, which its isotropic alternative beside the

@@ -3,6 +3,7 @@
 //! gap), the greedy choice of each round, the stepwise revision of the named effects, and the
 //! torque models a named compliance leaves open.
 
+use hapcal_calibrate::baseline::DataKind;
 use hapcal_calibrate::calibrate::blocked_mean_difference;
 use hapcal_contract::Effect;
 use nalgebra::{DMatrix, DVector};
@@ -71,8 +72,10 @@ pub(super) fn select(b: &Baseline<'_>, cfg: &ArmConfig) -> Selection {
     let mut revisions: Vec<String> = Vec::new();
     // The run before a swap, the alternative and the effect left out.
     let mut before_swap: Option<(Effect, Effect, Run)> = None;
-    // Whether a transversal compliance is a candidate before a joint compliance is named.
-    let mut alone = true;
+    // Whether a transversal compliance is a candidate before a joint compliance is named: not
+    // on socket recordings, whose calibration ladder holds no transversal rung (the tip at two
+    // points, where the tilts alone mimic a joint compliance).
+    let mut alone = b.ctx.baseline.kind != DataKind::Sockets;
     loop {
         let mut run = run_rounds(b, cfg, &excluded, alone);
         if alone && tilts_before_compliance(&run.accepted) {
@@ -374,6 +377,29 @@ fn judge(
             })
             .min_by_key(|(i, t)| (t.cand.n_visible, *i))
             .map_or(b, |(i, _)| i)
+    });
+    // The tilts alone against a joint compliance: the calibration nests the two (its
+    // `transversal-compliance` model is `compliance` plus the tilts), so the tilts take the
+    // round from a joint compliance that passes only when they predict better by the entry
+    // margin of HELDOUT_SIGNIFICANCE_Z blocked standard errors; otherwise the joint compliance
+    // is named and the tilts are tested beside it in the next round.
+    let winner = winner.map(|w| {
+        let Some(win) = tested[w]
+            .held
+            .as_ref()
+            .filter(|_| tested[w].effect.is_transversal())
+        else {
+            return w;
+        };
+        (tested.iter().enumerate())
+            .filter(|(_, t)| t.cand.accepted && t.effect.is_joint_compliance())
+            .filter(|(_, t)| {
+                let Some(h) = &t.held else { return false };
+                let (d, se, _) = blocked_mean_difference(&h.score, &win.score, block);
+                d <= HELDOUT_SIGNIFICANCE_Z * se
+            })
+            .max_by(|a, b| a.1.improvement.total_cmp(&b.1.improvement))
+            .map_or(w, |(i, _)| i)
     });
     for (i, t) in tested.iter_mut().enumerate() {
         if Some(i) != winner && t.cand.accepted {
