@@ -124,9 +124,13 @@ pub struct TreeCase {
 }
 
 impl TreeCase {
-    /// The right verdict: the injected library effects, or none.
+    /// The right verdict: the injected library effects, or none (an outside effect is never
+    /// named; a transversal compliance beside it is).
     pub fn expected(&self) -> Verdict {
-        self.injected.expected(self.kind)
+        let named: Vec<Effect> = (self.injected.parts().iter())
+            .filter_map(|p| p.effect())
+            .collect();
+        Verdict::of(&named)
     }
 
     /// Whether `verdict` is right: exactly the expected effects, a named compliance whose
@@ -152,6 +156,16 @@ impl TreeCase {
         } else {
             None
         }
+    }
+
+    /// Whether the case injects a transversal compliance without a joint compliance (links
+    /// that bend sideways on drives stiff about their axes), alone or beside another effect.
+    pub fn is_transversal_alone(&self) -> bool {
+        let parts = self.injected.parts();
+        parts
+            .iter()
+            .any(|p| matches!(p, Injected::TransversalCompliance { .. }))
+            && !(parts.iter()).any(|p| p.effect().is_some_and(Effect::is_joint_compliance))
     }
 
     /// Whether the case is a joint compliance with a transversal compliance.
@@ -226,10 +240,13 @@ pub fn load_setup() -> Result<TreeSetup> {
 }
 
 /// Draws case `i` (its seed): class by [`kind_of`]; a single effect cycling through
-/// [`library`]; of the pairs, every third a joint compliance (gravity and lumped in turn)
-/// with a transversal compliance, the others two distinct effects of [`library`] drawn at
-/// random (not both joint compliances, no transversal compliance); outside effects cycling
-/// through coupling, third harmonic and quadratic drift. Magnitudes as the module docs.
+/// [`library`]; of the pairs, in turn a joint compliance (gravity and lumped in turn) with a
+/// transversal compliance, a transversal compliance alone (on the link masses' loads) with
+/// one of the other effects of [`library`] drawn at random (not a joint compliance), and two
+/// distinct effects of [`library`] drawn at random (not both joint compliances, no transversal
+/// compliance); outside effects cycling through coupling, third harmonic and quadratic drift,
+/// every second round of the three beside a transversal compliance alone. Magnitudes as the
+/// module docs.
 pub fn draw_case(i: u64, setup: &TreeSetup) -> TreeCase {
     let mut rng = ChaCha8Rng::seed_from_u64(0x7EE0_0000 + i);
     let kind = kind_of(i);
@@ -247,16 +264,7 @@ pub fn draw_case(i: u64, setup: &TreeSetup) -> TreeCase {
             .collect::<Vec<f64>>()
     };
     let uniform = |lo: f64, hi: f64| move |_: usize| (lo, hi);
-    let harmonic = |rng: &mut ChaCha8Rng, h: u8| {
-        let (mut a, mut b) = (Vec::new(), Vec::new());
-        for _ in 0..n {
-            let amp = rng.random_range(3e-4..=1.5e-3);
-            let phase = rng.random_range(0.0..2.0 * PI);
-            a.push(amp * phase.cos());
-            b.push(amp * phase.sin());
-        }
-        Injected::Harmonic { h, a, b }
-    };
+    let harmonic = |rng: &mut ChaCha8Rng, h: u8| harmonic_draw(rng, h, n);
     // Transversal compliance under the loads of `joint` (masses unless lumped).
     let transversal = |rng: &mut ChaCha8Rng, lumped: bool| Injected::TransversalCompliance {
         c: per_joint(
@@ -323,33 +331,65 @@ pub fn draw_case(i: u64, setup: &TreeSetup) -> TreeCase {
                 Box::new(transversal(&mut rng, lumped)),
             )
         }
+        ArmCaseKind::Two if slot % 3 == 1 => {
+            let pool: Vec<Effect> = (lib.iter().copied())
+                .filter(|e| !e.is_joint_compliance() && !e.is_transversal())
+                .collect();
+            let other = pool[rng.random_range(0..pool.len())];
+            Injected::Pair(
+                Box::new(library_effect(&mut rng, other)),
+                Box::new(transversal(&mut rng, false)),
+            )
+        }
         ArmCaseKind::Two => {
             let pool: Vec<Effect> = (lib.iter().copied())
                 .filter(|e| *e != Effect::TransversalCompliance)
                 .collect();
             draw_pair(&mut rng, &pool, library_effect)
         }
-        ArmCaseKind::Outside => match slot % 3 {
-            0 => {
-                let j = rng.random_range(0..n);
-                let k = (j + rng.random_range(1..n)) % n;
-                Injected::Coupling {
-                    j,
-                    k,
-                    c: signed(&mut rng, 3e-4, 1e-3),
-                }
-            }
-            1 => harmonic(&mut rng, 3),
-            _ => Injected::QuadraticDrift {
-                v: vector(&mut rng, 4e-4, 2e-3),
-            },
-        },
+        ArmCaseKind::Outside if (slot / 3) % 2 == 1 => {
+            let outside = outside_effect(&mut rng, slot, n);
+            Injected::Pair(Box::new(outside), Box::new(transversal(&mut rng, false)))
+        }
+        ArmCaseKind::Outside => outside_effect(&mut rng, slot, n),
     };
     TreeCase {
         seed: i,
         kind,
         injected,
     }
+}
+
+/// The outside effect of outside case `slot` (of a robot with `n` joints): a coupling
+/// between two joints, a third harmonic and a drift quadratic in time in turn.
+fn outside_effect(rng: &mut ChaCha8Rng, slot: u64, n: usize) -> Injected {
+    match slot % 3 {
+        0 => {
+            let j = rng.random_range(0..n);
+            let k = (j + rng.random_range(1..n)) % n;
+            Injected::Coupling {
+                j,
+                k,
+                c: signed(rng, 3e-4, 1e-3),
+            }
+        }
+        1 => harmonic_draw(rng, 3, n),
+        _ => Injected::QuadraticDrift {
+            v: vector(rng, 4e-4, 2e-3),
+        },
+    }
+}
+
+/// Harmonic `h` of `n` joints, amplitude 0.3–1.5 mrad per joint at a random phase.
+fn harmonic_draw(rng: &mut ChaCha8Rng, h: u8, n: usize) -> Injected {
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for _ in 0..n {
+        let amp = rng.random_range(3e-4..=1.5e-3);
+        let phase = rng.random_range(0.0..2.0 * PI);
+        a.push(amp * phase.cos());
+        b.push(amp * phase.sin());
+    }
+    Injected::Harmonic { h, a, b }
 }
 
 /// A record value in `unit`.
@@ -722,10 +762,24 @@ pub fn run(
     n_rows: usize,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<TreeOutcome>> {
+    run_seeds(0..n_cases, n_rows, progress)
+}
+
+/// Runs the cases `seeds` as [`run`] does: the report's cases are `0..n`, and a rule is tuned
+/// on cases drawn from another range (the classes cycle with the seed modulo 4 and 12, so a
+/// range starting at a multiple of 24 draws the same mix).
+///
+/// # Errors
+/// As [`run`].
+pub fn run_seeds(
+    seeds: std::ops::Range<u64>,
+    n_rows: usize,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<Vec<TreeOutcome>> {
     use rayon::prelude::*;
     let setup = load_setup()?;
     let done = std::sync::atomic::AtomicUsize::new(0);
-    Ok((0..n_cases)
+    Ok(seeds
         .into_par_iter()
         .map(|i| {
             let case = draw_case(i, &setup);
@@ -850,15 +904,20 @@ fn setup_section(md: &mut String, n_rows: usize) {
          `hapcal_calibrate::baseline` fits the geometric baseline and \
          `hapcal_diagnose::arm::diagnose_arm` (default settings, σ stated) names the effects.\n\n\
          The verdict is right when it names exactly the injected library effects (any order), \
-         or `none` for clean data and outside effects; a named joint compliance whose torque \
-         model the diagnosis leaves open stands for either model, and a transversal \
-         compliance's torque model follows its joint compliance's. Single effects cycle \
-         through gravity, lumped and transversal compliance, first and second harmonics, \
-         backlash, gear ratio and thermal drift; of the pairs, every third is a joint \
-         compliance (gravity and lumped in turn) with a transversal compliance, the others two \
-         distinct effects drawn at random (not both joint compliances); outside effects cycle \
-         through a coupling between two joints, a third harmonic and a drift quadratic in \
-         time. Instrument scale (absorbed by the geometric baseline) and link deflection (the \
+         or `none` for clean data and an outside effect alone; an outside effect is never \
+         named; a named joint compliance whose torque model the diagnosis leaves open stands \
+         for either model, and a transversal compliance's torque model follows its joint \
+         compliance's (the link masses' when it is alone). Single effects cycle through \
+         gravity, lumped and transversal compliance, first and second harmonics, backlash, \
+         gear ratio and thermal drift; the pairs are in turn a joint compliance (gravity and \
+         lumped in turn) with a transversal compliance, a transversal compliance alone (no \
+         compliance about the joint axes) with another effect drawn at random (a harmonic, \
+         backlash, gear ratio or thermal drift), and two distinct effects drawn at random (not \
+         both joint compliances, no transversal compliance); outside effects cycle through a \
+         coupling between two joints, a third harmonic and a drift quadratic in time, every \
+         second round of the three beside a transversal compliance alone. Transversal \
+         compliance alone is thus drawn in every class that holds an effect (clean cases hold \
+         none). Instrument scale (absorbed by the geometric baseline) and link deflection (the \
          diagnosis's column takes the first tip's reach for every marker) are not drawn; the \
          magnitudes and why are in the module's documentation.\n\n",
         SIGMA_GEOMETRY_M * 1e3,
@@ -922,8 +981,19 @@ fn targets_section(md: &mut String, outcomes: &[TreeOutcome]) {
     target_line(
         md,
         outcomes,
+        "two: transversal compliance alone + another effect",
+        &|o| o.case.kind == ArmCaseKind::Two && o.case.is_transversal_alone(),
+        false,
+    );
+    target_line(
+        md,
+        outcomes,
         "two: other pairs",
-        &|o| o.case.kind == ArmCaseKind::Two && !o.case.is_compliance_pair(),
+        &|o| {
+            o.case.kind == ArmCaseKind::Two
+                && !o.case.is_compliance_pair()
+                && !o.case.is_transversal_alone()
+        },
         false,
     );
     md.push_str(
@@ -943,6 +1013,27 @@ fn targets_section(md: &mut String, outcomes: &[TreeOutcome]) {
             true,
         );
     }
+    // Clean cases hold no effect, so no transversal compliance either.
+    for kind in [ArmCaseKind::One, ArmCaseKind::Two, ArmCaseKind::Outside] {
+        target_line(
+            md,
+            outcomes,
+            &format!("{}: transversal compliance alone", class_name(kind)),
+            &|o| {
+                o.case.kind == kind
+                    && o.case.confounded().is_none()
+                    && o.case.is_transversal_alone()
+            },
+            false,
+        );
+    }
+    target_line(
+        md,
+        outcomes,
+        "transversal compliance alone, every class",
+        &|o| o.case.confounded().is_none() && o.case.is_transversal_alone(),
+        true,
+    );
     for reason in CONFOUNDED {
         target_line(
             md,
@@ -1023,13 +1114,16 @@ fn joint_ranges_section(md: &mut String, arm_limit_rad: f64) {
          and {:.1} % of `cos 3q`. Over ±π they hold {:.1} %, {:.1} % and {:.1} %. Where the \
          diagnosis names a first and second harmonic for a third, or a first harmonic for a \
          gear ratio beside it, the data hold little else to tell them apart.\n\n\
-         ## Transversal compliance alone\n\nThe diagnosis tests a transversal compliance \
-         beside a named joint compliance, under its loads (`hapcal_diagnose::arm::\
-         ARM_BESIDE_COMPLIANCE`, as the calibration fits it on top of the joint compliance). \
-         Once the revisions stand, the joint compliance is left out of the verdict when, \
-         without it, the transversal compliance and the other named effects predict as well \
-         (not worse by the entry margin of 2 blocked standard errors): the verdict then names \
-         the transversal compliance alone, and the calibration's `transversal-compliance` \
+         ## Transversal compliance alone\n\nThe diagnosis tests a transversal compliance in \
+         every round (`hapcal_diagnose::arm::ARM_TRANSVERSAL`): beside a named joint \
+         compliance on that compliance's loads (the calibration fits it on top of the joint \
+         compliance), alone on the gravity moments of the link masses, which load each joint \
+         normal to its axis in every configuration. Its columns tilt a joint's frame by a \
+         moment that changes with the configuration: neither a rotation about the joint axis (a \
+         joint compliance) nor a constant placement error (the geometric baseline). A joint \
+         compliance named beside it is left out of the verdict when, without it, the \
+         transversal compliance and the other named effects predict as well (not worse by the \
+         entry margin of 2 blocked standard errors); the calibration's `transversal-compliance` \
          model still holds the joint compliance, which these data leave near zero.\n",
         share(|q| q, &h1),
         share(|q| (3.0 * q).sin(), &h12),
@@ -1089,7 +1183,8 @@ mod tests {
     fn draws_are_stratified_and_in_the_library() {
         let setup = setup();
         let mut compliance_pairs = 0;
-        for i in 0..48 {
+        let mut transversal_alone = BTreeMap::new();
+        for i in 0..96 {
             let c = draw_case(i, &setup);
             assert_eq!(c.kind, kind_of(i));
             let parts = c.injected.parts();
@@ -1099,14 +1194,34 @@ mod tests {
                     for p in parts {
                         assert!(library().contains(&p.effect().expect("a library effect")));
                     }
-                    assert!(c.is_right_with(&c.expected(), &[]));
                     compliance_pairs += usize::from(c.is_compliance_pair());
                 }
-                _ => assert!(Effect::from_name(&c.injected.label()).is_none(), "{c:?}"),
+                ArmCaseKind::Outside => {
+                    // One outside effect, alone or beside a transversal compliance.
+                    assert_eq!(parts.iter().filter(|p| p.effect().is_none()).count(), 1);
+                    for p in parts.iter().filter_map(|p| p.effect()) {
+                        assert_eq!(p, Effect::TransversalCompliance, "{c:?}");
+                    }
+                }
+                ArmCaseKind::None => assert_eq!(parts, [&Injected::None]),
+            }
+            assert!(c.is_right_with(&c.expected(), &[]));
+            if c.is_transversal_alone() {
+                *transversal_alone.entry(class_name(c.kind)).or_insert(0) += 1;
+                let expected = c.expected();
+                assert!(expected.effects().contains(&Effect::TransversalCompliance));
+                assert!(!expected.effects().iter().any(|e| e.is_joint_compliance()));
             }
         }
-        // 12 pairs, every third a joint with a transversal compliance.
-        assert_eq!(compliance_pairs, 4);
+        // 24 pairs, a third each a joint with a transversal compliance and a transversal
+        // compliance alone beside another effect.
+        assert_eq!(compliance_pairs, 8);
+        // Singles cycle through 8 effects (3 of 24), pairs 8 of 24, outside every second
+        // round of three (12 of 24).
+        assert_eq!(
+            transversal_alone,
+            BTreeMap::from([("one", 3), ("outside", 12), ("two", 8)])
+        );
     }
 
     /// The truth without effects is the calibration library's nominal robot: the runtime's

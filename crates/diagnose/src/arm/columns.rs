@@ -140,6 +140,27 @@ fn transversal_block(
     m
 }
 
+/// The torque model a transversal compliance is tested on beside the effects `with`, and the
+/// joint compliance whose loads it is: the named joint compliance's among them; alone, the
+/// link masses' gravity loads ([`Effect::GravityCompliance`]: what bends a link sideways is
+/// the weight below it, and a tilt normal to the joint axis needs a moment normal to it), or
+/// unit weights at the tips ([`Effect::LumpedCompliance`]) when the robot's masses are
+/// unknown. `Err` with the reason when neither can be built.
+pub(super) fn transversal_loads(
+    ctx: &Context<'_>,
+    with: &[Effect],
+) -> Result<(Effect, GravityCompliance), String> {
+    if let Some(&compliance) = with.iter().find(|e| e.is_joint_compliance()) {
+        return Ok((compliance, ctx.torque_model(compliance)?));
+    }
+    (ctx.torque_model(Effect::GravityCompliance)
+        .map(|m| (Effect::GravityCompliance, m)))
+    .or_else(|_| {
+        let m = ctx.torque_model(Effect::LumpedCompliance)?;
+        Ok((Effect::LumpedCompliance, m))
+    })
+}
+
 /// The parameter names of transversal compliance terms (`effect.joint`, and `.u` / `.v` per
 /// axis, the calibration's `transversal.{joint}[.u|.v]`), and their unit under `compliance`'s
 /// loads.
@@ -351,10 +372,7 @@ pub(super) fn effect_columns(
             Ok((m, vec![("instrument_scale.s".into(), "1")]))
         }
         Effect::TransversalCompliance | Effect::TransversalAxes => {
-            let Some(&compliance) = with.iter().find(|e| e.is_joint_compliance()) else {
-                return Err("tested beside a joint compliance, none is named".into());
-            };
-            let model = ctx.torque_model(compliance)?;
+            let (compliance, model) = transversal_loads(ctx, with)?;
             let terms = &ctx.transversal.as_ref().map_err(Clone::clone)?
                 [usize::from(effect == Effect::TransversalAxes)];
             let loads: Vec<Vec<JointLoad>> = (rows.q.iter())

@@ -22,10 +22,11 @@
 //! `max_effects`. Once they stop, each named effect is checked beside the others (`revise`,
 //! stepwise selection with backward elimination): one the others do not need, or whose
 //! alternative predicts better, is left out and the rounds run again; a swap stands only if the
-//! rounds then name the alternative. A joint compliance named with a transversal compliance
-//! beside it is last checked the other way round: when the transversal compliance (on the
-//! joint compliance's loads) and the other effects predict as well without it, the verdict
-//! names the transversal compliance alone.
+//! rounds then name the alternative. A transversal compliance is a candidate of every round,
+//! alone on the link masses' gravity loads; a joint compliance named with a transversal
+//! compliance beside it is last checked the other way round: when the transversal compliance
+//! and the other effects predict as well without it, the verdict names the transversal
+//! compliance alone.
 //!
 //! Errors are lengths: the 3-D error of a position, or the error of a distance (a distance
 //! log); the RMS figures below are of those.
@@ -109,7 +110,7 @@ pub const REPEAT_TOLERANCE: f64 = 1e-4;
 
 /// The serial-arm diagnosis's library, in report order: the effects it tests on measurement
 /// files and socket recordings (one vocabulary with calibration: [`Effect`]), from the first
-/// round on; [`ARM_BESIDE_COMPLIANCE`] adds the effects tested once a joint compliance is named.
+/// round on, with [`ARM_TRANSVERSAL`].
 pub const ARM_LIBRARY: [Effect; 9] = [
     Effect::GravityCompliance,
     Effect::LumpedCompliance,
@@ -122,31 +123,40 @@ pub const ARM_LIBRARY: [Effect; 9] = [
     Effect::InstrumentScale,
 ];
 
-/// The effects the serial-arm diagnosis tests beside a joint compliance, in the rounds after
-/// [`Effect::GravityCompliance`] or [`Effect::LumpedCompliance`] is named, with that
-/// compliance's weights as their loads: transversal compliance, one per revolute joint
-/// (isotropic) or one per axis normal to the joint axis, each the other's alternative. Wherever
-/// the calibration can fit them: a robot whose revolute joints carry rotation deviations (URDF
-/// placements).
+/// The transversal compliances the serial-arm diagnosis tests, from the first round on: one
+/// per revolute joint (isotropic) or one per axis normal to the joint axis, each the other's
+/// alternative; wherever the calibration can fit them (a robot whose revolute joints carry
+/// rotation deviations: URDF placements).
 ///
-/// Why after the joint compliance rather than as one candidate with its columns: the
-/// calibration fits transversal compliance only with the joint compliance, from the same gravity
-/// loads (`--model transversal-compliance` is `compliance` plus the tilts, the rung above it on
-/// the ladder), so the verdict names the two effects of that model, each on its own evidence:
-/// the joint compliance against the geometric baseline, the tilts against what it leaves. A
-/// candidate holding both would be named for the joint compliance alone (its columns carry
-/// most of the signal), with 33 parameters where 16 explain it, and would fix the torque model
-/// of the joint compliance to its own instead of leaving it to the joint compliance's test
-/// ([`ArmStep::alike`]). Links that bend sideways without any compliance about the joint
-/// axes are still named: the joint compliance is named first (the tilts' signal projects on
-/// its columns), then left out of the verdict when the tilts predict as well without it.
-pub const ARM_BESIDE_COMPLIANCE: [Effect; 2] =
-    [Effect::TransversalCompliance, Effect::TransversalAxes];
+/// Their loads: beside a named joint compliance, that compliance's (the calibration fits the
+/// tilts on top of it, `--model transversal-compliance` being `compliance` plus the tilts);
+/// alone, the gravity moments of the link masses (of unit weights at the tips when the masses
+/// are unknown). A tilt normal to a joint axis needs a moment normal to it, which the weight
+/// of the links below gives in every configuration, so the candidate is tested on those loads
+/// rather than after a joint compliance: links that bend sideways on gearboxes stiff about
+/// their axes are then named without a joint compliance they do not have, and the columns
+/// differ from a joint compliance's (a rotation about the axis) and from a geometric error
+/// (constant in the link frame, where the tilt follows the moment through the configurations).
+/// Alone only on measurement files: socket recordings (the tip held at two points) have no
+/// transversal rung on the calibration's ladder, and there the tilts alone mimic a joint
+/// compliance (on the arm blind test's socket data they took 3 of its 64 two-effect cases).
+/// The tilts alone take a round from a joint compliance that passes it only when they predict
+/// better by two blocked standard errors, the entry margin (the calibration nests the two:
+/// `transversal-compliance` is `compliance` plus the tilts; on the serial arms' socket data of
+/// the arm blind test, per-axis tilts with twice the parameters otherwise took some joint
+/// compliances' first round). When the rounds name a transversal compliance and then a joint
+/// compliance, they are run
+/// again with the tilts tested only beside a named joint compliance, on its loads: the pair is
+/// then tested as the calibration fits it (a per-axis tilt named first on the masses' loads
+/// absorbs part of the joint compliance's columns, which its isotropic alternative beside the
+/// joint compliance would then lack). A joint compliance named with the tilts is left out of
+/// the verdict when the tilts predict as well without it ([`ArmDiagnosis::verdict`]).
+pub const ARM_TRANSVERSAL: [Effect; 2] = [Effect::TransversalCompliance, Effect::TransversalAxes];
 
 /// Every candidate of the diagnosis, in report order: [`ARM_LIBRARY`], then
-/// [`ARM_BESIDE_COMPLIANCE`].
+/// [`ARM_TRANSVERSAL`].
 fn arm_candidates() -> impl Iterator<Item = Effect> {
-    ARM_LIBRARY.into_iter().chain(ARM_BESIDE_COMPLIANCE)
+    ARM_LIBRARY.into_iter().chain(ARM_TRANSVERSAL)
 }
 
 /// Settings of [`diagnose_arm`].

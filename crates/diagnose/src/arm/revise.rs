@@ -166,7 +166,7 @@ fn needed(m: f64, se: f64) -> bool {
 /// better by [`HELDOUT_SIGNIFICANCE_Z`] blocked standard errors, the entry margin — the data
 /// show the links bending sideways and no compliance about the joint axes. Returns the joint
 /// compliance and the note that says why; the rounds are not run again, since the transversal
-/// compliance is tested on the joint compliance's loads ([`super::ARM_BESIDE_COMPLIANCE`]).
+/// compliance is tested on the joint compliance's loads ([`super::ARM_TRANSVERSAL`]).
 ///
 /// The verdict then names the transversal compliance alone; the calibration still fits it on
 /// top of a joint compliance (`transversal-compliance`), whose estimates the data leave near

@@ -3,6 +3,7 @@
 //! gap), the greedy choice of each round, the stepwise revision of the named effects, and the
 //! torque models a named compliance leaves open.
 
+use hapcal_calibrate::baseline::DataKind;
 use hapcal_calibrate::calibrate::blocked_mean_difference;
 use hapcal_contract::Effect;
 use nalgebra::{DMatrix, DVector};
@@ -71,8 +72,31 @@ pub(super) fn select(b: &Baseline<'_>, cfg: &ArmConfig) -> Selection {
     let mut revisions: Vec<String> = Vec::new();
     // The run before a swap, the alternative and the effect left out.
     let mut before_swap: Option<(Effect, Effect, Run)> = None;
+    // Whether a transversal compliance is a candidate before a joint compliance is named: not
+    // on socket recordings, whose calibration ladder holds no transversal rung (the tip at two
+    // points, where the tilts alone mimic a joint compliance).
+    let mut alone = b.ctx.baseline.kind != DataKind::Sockets;
     loop {
-        let run = run_rounds(b, cfg, &excluded);
+        let mut run = run_rounds(b, cfg, &excluded, alone);
+        if alone && tilts_before_compliance(&run.accepted) {
+            // The tilts took the first round and a joint compliance followed: the pair is the
+            // calibration's `transversal-compliance` model, tested as it is fitted (the joint
+            // compliance first, the tilts on its loads), so the rounds run again so.
+            alone = false;
+            revisions.push(format!(
+                "{} was named before {}: the rounds were run again with the transversal \
+                 compliance tested beside the joint compliance, on its loads",
+                run.accepted
+                    .iter()
+                    .find(|e| e.is_transversal())
+                    .map_or("", |e| e.name()),
+                run.accepted
+                    .iter()
+                    .find(|e| e.is_joint_compliance())
+                    .map_or("", |e| e.name()),
+            ));
+            run = run_rounds(b, cfg, &excluded, alone);
+        }
         if let Some((alt, left_out, saved)) = before_swap.take()
             && !run.accepted.contains(&alt)
         {
@@ -102,6 +126,18 @@ pub(super) fn select(b: &Baseline<'_>, cfg: &ArmConfig) -> Selection {
     }
 }
 
+/// Whether the effects `accepted` (in the order named) name a transversal compliance before a
+/// joint compliance.
+fn tilts_before_compliance(accepted: &[Effect]) -> bool {
+    match (
+        accepted.iter().position(|e| e.is_transversal()),
+        accepted.iter().position(|e| e.is_joint_compliance()),
+    ) {
+        (Some(t), Some(j)) => t < j,
+        _ => false,
+    }
+}
+
 /// The selection of `run` once its revisions stand: the joint compliance a named transversal
 /// compliance does not need, if any ([`compliance_not_needed`]), with its note.
 fn finish(b: &Baseline<'_>, cfg: &ArmConfig, run: Run, revisions: Vec<String>) -> Selection {
@@ -116,8 +152,9 @@ fn finish(b: &Baseline<'_>, cfg: &ArmConfig, run: Run, revisions: Vec<String>) -
 /// One run of the rounds from the geometric baseline, the effects `excluded` left out of the
 /// library: each round tests the candidates beside the effects named before, names the best
 /// that passes, and the rounds stop when none passes, at `max_effects`, or when what is left
-/// is consistent with the floor.
-fn run_rounds(b: &Baseline<'_>, cfg: &ArmConfig, excluded: &[Effect]) -> Run {
+/// is consistent with the floor. With `alone`, a transversal compliance is a candidate from
+/// the first round on; without, only beside a named joint compliance.
+fn run_rounds(b: &Baseline<'_>, cfg: &ArmConfig, excluded: &[Effect], alone: bool) -> Run {
     let mut run = Run {
         base: b.held.clone(),
         candidates: Vec::new(),
@@ -144,7 +181,7 @@ fn run_rounds(b: &Baseline<'_>, cfg: &ArmConfig, excluded: &[Effect]) -> Run {
         };
         // The candidates are independent: tested in parallel, taken in the library's order.
         let offered_now: Vec<Effect> = arm_candidates()
-            .filter(|&e| offered(e, &run.accepted, excluded))
+            .filter(|&e| offered(e, &run.accepted, excluded, alone))
             .collect();
         let results: Vec<Result<Tested, String>> = (offered_now.par_iter())
             .map(|&effect| test_candidate(b, &fit, &run, effect, cfg))
@@ -176,15 +213,16 @@ fn run_rounds(b: &Baseline<'_>, cfg: &ArmConfig, excluded: &[Effect]) -> Run {
 
 /// Whether `effect` is a candidate beside the effects `accepted`. Gravity and lumped compliance
 /// are one effect under two torque models, the two transversal compliances one effect in two
-/// forms: once one is named, the other is not a further effect. A transversal compliance is
-/// tested once a joint compliance is named ([`super::ARM_BESIDE_COMPLIANCE`]).
-fn offered(effect: Effect, accepted: &[Effect], excluded: &[Effect]) -> bool {
+/// forms: once one is named, the other is not a further effect. A transversal compliance is a
+/// candidate from the first round on (`alone`), on the loads of
+/// [`super::columns::transversal_loads`], or only once a joint compliance is named.
+fn offered(effect: Effect, accepted: &[Effect], excluded: &[Effect], alone: bool) -> bool {
+    let compliance = accepted.iter().any(|e| e.is_joint_compliance());
     !(accepted.contains(&effect)
         || excluded.contains(&effect)
-        || (effect.is_joint_compliance() && accepted.iter().any(|e| e.is_joint_compliance()))
+        || (effect.is_joint_compliance() && compliance)
         || (effect.is_transversal()
-            && (accepted.iter().any(|e| e.is_transversal())
-                || !accepted.iter().any(|e| e.is_joint_compliance()))))
+            && (accepted.iter().any(|e| e.is_transversal()) || !(alone || compliance))))
 }
 
 /// Tests `effect` beside the round's model `fit`: its visible columns, the in-sample F-test,
@@ -339,6 +377,29 @@ fn judge(
             })
             .min_by_key(|(i, t)| (t.cand.n_visible, *i))
             .map_or(b, |(i, _)| i)
+    });
+    // The tilts alone against a joint compliance: the calibration nests the two (its
+    // `transversal-compliance` model is `compliance` plus the tilts), so the tilts take the
+    // round from a joint compliance that passes only when they predict better by the entry
+    // margin of HELDOUT_SIGNIFICANCE_Z blocked standard errors; otherwise the joint compliance
+    // is named and the tilts are tested beside it in the next round.
+    let winner = winner.map(|w| {
+        let Some(win) = tested[w]
+            .held
+            .as_ref()
+            .filter(|_| tested[w].effect.is_transversal())
+        else {
+            return w;
+        };
+        (tested.iter().enumerate())
+            .filter(|(_, t)| t.cand.accepted && t.effect.is_joint_compliance())
+            .filter(|(_, t)| {
+                let Some(h) = &t.held else { return false };
+                let (d, se, _) = blocked_mean_difference(&h.score, &win.score, block);
+                d <= HELDOUT_SIGNIFICANCE_Z * se
+            })
+            .max_by(|a, b| a.1.improvement.total_cmp(&b.1.improvement))
+            .map_or(w, |(i, _)| i)
     });
     for (i, t) in tested.iter_mut().enumerate() {
         if Some(i) != winner && t.cand.accepted {
