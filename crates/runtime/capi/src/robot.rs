@@ -143,7 +143,7 @@ impl From<Compensation> for HapcalCompensation {
 }
 
 /// Checks that `n_joints` is the robot's.
-fn check_n(robot: &Robot, n_joints: usize) -> Result<(), Failure> {
+pub(crate) fn check_n(robot: &Robot, n_joints: usize) -> Result<(), Failure> {
     if n_joints == robot.n_joints() {
         Ok(())
     } else {
@@ -767,20 +767,36 @@ pub unsafe extern "C" fn hapcal_robot_outside_region(
 ) -> HapcalStatus {
     guard(|| {
         // SAFETY: the caller's contract, for every pointer.
-        let (robot, q, joint, distance) = unsafe {
+        unsafe {
             let robot = &crate::get(robot, "robot")?.robot;
-            check_n(robot, n_joints)?;
-            (
-                robot,
-                slice(q, n_joints, "q")?,
-                joint_out.as_mut().ok_or(Failure::Null("joint_out"))?,
-                distance_out.as_mut().ok_or(Failure::Null("distance_out"))?,
-            )
-        };
-        let flag = robot.outside_region(q).map_err(Failure::Robot)?;
-        (*joint, *distance) = flag.unwrap_or((HAPCAL_INSIDE_REGION, 0.0));
-        Ok(())
+            outside_region(robot, q, n_joints, joint_out, distance_out)
+        }
     })
+}
+
+/// [`hapcal_robot_outside_region`] on `robot`, for the robot's and the predictor's calls.
+///
+/// # Safety
+/// As [`hapcal_robot_outside_region`], for `q`, `joint_out` and `distance_out`.
+pub(crate) unsafe fn outside_region(
+    robot: &Robot,
+    q: *const f64,
+    n_joints: usize,
+    joint_out: *mut usize,
+    distance_out: *mut f64,
+) -> Result<(), Failure> {
+    check_n(robot, n_joints)?;
+    // SAFETY: the caller's contract, for every pointer.
+    let (q, joint, distance) = unsafe {
+        (
+            slice(q, n_joints, "q")?,
+            joint_out.as_mut().ok_or(Failure::Null("joint_out"))?,
+            distance_out.as_mut().ok_or(Failure::Null("distance_out"))?,
+        )
+    };
+    let flag = robot.outside_region(q).map_err(Failure::Robot)?;
+    (*joint, *distance) = flag.unwrap_or((HAPCAL_INSIDE_REGION, 0.0));
+    Ok(())
 }
 
 /// Stores a new handle holding `robot` (and a workspace made for it), of which the caller
