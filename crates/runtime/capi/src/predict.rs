@@ -8,7 +8,6 @@
 //! calibration record's covariance (GUM, JCGM 100:2008, §5.1.2), as `hapcal predict` prints it.
 
 use std::ffi::c_char;
-use std::panic::{AssertUnwindSafe, catch_unwind};
 
 use hapcal_runtime::{
     PredictionFrame, PredictionWorkspace, Predictor, TipPrediction, UncertaintyBasis,
@@ -102,18 +101,9 @@ fn with_predictor(
         usize,
     ) -> Result<(), Failure>,
 ) -> HapcalStatus {
-    let Some(handle) = handle else {
-        return record(HapcalStatus::NullPointer, "predictor is NULL".to_owned());
-    };
-    let given = handle.given;
-    let status = guard(|| f(&handle.predictor, &mut handle.ws, &mut handle.tips, given));
-    if status == HapcalStatus::Panic {
-        let predictor = &handle.predictor;
-        if let Ok(ws) = catch_unwind(AssertUnwindSafe(|| predictor.workspace())) {
-            handle.ws = ws;
-        }
-    }
-    status
+    let rebuild = |h: &mut HapcalPredictor| h.ws = h.predictor.workspace();
+    let run = |h: &mut HapcalPredictor| f(&h.predictor, &mut h.ws, &mut h.tips, h.given);
+    crate::guard_handle(handle, "predictor", run, rebuild)
 }
 
 /// Makes the predictor of `robot` in `frame` ([`HAPCAL_FRAME_ROOT`] or

@@ -8,7 +8,6 @@
 //! on one thread at a time per handle (one handle per thread for parallel use).
 
 use std::ffi::{CStr, c_char};
-use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::Path;
 
 use hapcal_runtime::{
@@ -155,8 +154,6 @@ pub(crate) fn check_n(robot: &Robot, n_joints: usize) -> Result<(), Failure> {
     }
 }
 
-/// Runs `f` on a handle (`None`: a NULL pointer) under [`guard`]; after a caught panic the
-/// workspace is rebuilt (a panic may leave it half taken apart).
 /// [`with_robot`] for a call on tip `tip`: `InvalidArgument` for a tip past the tips the
 /// caller gave ([`hapcal_robot_n_tips`]), before `f` runs.
 fn with_robot_tip(
@@ -182,21 +179,14 @@ fn past_given(tip: usize) -> Error {
     }
 }
 
+/// Runs `f` on a handle (`None`: a NULL pointer) under [`guard`], its workspace rebuilt after
+/// a caught panic ([`crate::guard_handle`]).
 fn with_robot(
     handle: Option<&mut HapcalRobot>,
     f: impl FnOnce(&Robot, &mut RobotWorkspace) -> Result<(), Failure>,
 ) -> HapcalStatus {
-    let Some(handle) = handle else {
-        return record(HapcalStatus::NullPointer, "robot is NULL".to_owned());
-    };
-    let status = guard(|| f(&handle.robot, &mut handle.ws));
-    if status == HapcalStatus::Panic {
-        let robot = &handle.robot;
-        if let Ok(ws) = catch_unwind(AssertUnwindSafe(|| robot.workspace())) {
-            handle.ws = ws;
-        }
-    }
-    status
+    let rebuild = |h: &mut HapcalRobot| h.ws = h.robot.workspace();
+    crate::guard_handle(handle, "robot", |h| f(&h.robot, &mut h.ws), rebuild)
 }
 
 /// Loads the calibrated robot `urdf_path` (UTF-8, NUL-terminated) with the links `tips[0 ..

@@ -377,28 +377,20 @@ fn loading_errors_name_the_file_and_what_is_wrong() {
         .to_string();
     assert!(m.contains("transversal.torso_joint"), "{m}");
     // A malformed sidecar: file, line and column.
-    std::fs::write(
-        path.with_extension("calibration.toml"),
-        "[values]\n\"compliance.torso_joint\" = 3\n",
-    )
-    .expect("write");
-    let m = Robot::load_urdf(&path, &["r_tool"])
-        .expect_err("invalid")
-        .to_string();
-    let sidecar = path
-        .with_extension("calibration.toml")
-        .display()
-        .to_string();
+    let sidecar = path.with_extension("calibration.toml");
+    let refused = |text: &str| {
+        std::fs::write(&sidecar, text).expect("write");
+        Robot::load_urdf(&path, &["r_tool"])
+            .expect_err("invalid")
+            .to_string()
+    };
+    let m = refused("[values]\n\"compliance.torso_joint\" = 3\n");
+    let sidecar = sidecar.display().to_string();
     assert!(m.starts_with(&format!("{sidecar}:2:")), "{m}");
     // An earlier hapcal's sidecar (frames and values, no schema_version) is refused.
-    std::fs::write(
-        path.with_extension("calibration.toml"),
+    let m = refused(
         "[values]\n\"compliance.torso_joint\" = { value = 1e-4, std = 0.0, unit = \"rad/(N·m)\" }\n",
-    )
-    .expect("write");
-    let m = Robot::load_urdf(&path, &["r_tool"])
-        .expect_err("invalid")
-        .to_string();
+    );
     assert!(
         m.starts_with(&format!("{sidecar}:1:1: missing key schema_version")),
         "{m}"
