@@ -14,7 +14,7 @@ use hapcal_runtime::{
 };
 
 use crate::robot::{HapcalRobot, copy_text};
-use crate::{Failure, HapcalPose, HapcalStatus, guard, record, slice, slice_mut};
+use crate::{Failure, HapcalPose, HapcalStatus, guard, slice, slice_mut};
 
 /// [`hapcal_predictor_new`]'s `frame`: poses of the tip links in the robot's root link frame.
 pub const HAPCAL_FRAME_ROOT: u32 = 0;
