@@ -20,7 +20,23 @@ Q = [0.3, 0.7, -0.2, -1.2, 0.4, 0.9, 0.1]
 def _calibrated(tmp_path: Path) -> Path:
     urdf = tmp_path / "robot.urdf"
     shutil.copy(IIWA, urdf)
-    lines = ["[values]"]
+    # A calibration record (schema 1) of joint compliances under the lumped unit weights (the
+    # URDF has no masses), gravity along -z at the torque equilibrium.
+    lines = [
+        "schema_version = 1",
+        'model = "compliance"',
+        "",
+        "[torque]",
+        'source = "lumped-unit-weights"',
+        "gravity_direction = [0.0, 0.0, -1.0]",
+        "gravity_m_s2 = 9.80665",
+        "equilibrium = true",
+        "",
+        "[region]",
+        "rows = 100",
+        "",
+        "[values]",
+    ]
     for j in range(1, 8):
         lines.append(
             f'"compliance.joint_a{j}" = {{ value = {2e-4 + 1e-4 * j!r}, std = 1e-5, unit = "rad/m" }}'

@@ -919,39 +919,19 @@ pub fn write_outputs_beside(
         let text = hapcal_io::write_device(calibrated);
         return write_all(outcome, vec![(out.to_path_buf(), text)], inputs);
     }
-    // A compliance is in rad per unit of load: rad/(N·m) under link masses, rad/m under the
-    // lumped unit weights (the report's layout calls it an angle, rad); the sidecar says which,
-    // so that a reader (hapcal-runtime's `Robot::load_urdf`) can check its loads are the same.
-    let compliance_unit =
-        (outcome.model.compliance.as_ref()).map(|_| compliance_unit_of(&outcome.model));
-    let all: Vec<hapcal_io::CalibratedValue> = if let Some(record) = &outcome.record {
-        record.values.clone()
-    } else {
-        (outcome.report.parameters.iter())
-            .map(|p| hapcal_io::CalibratedValue {
-                name: p.name.clone(),
-                value: p.value,
-                std: p.std,
-                unit: match compliance_unit {
-                    Some(unit)
-                        if p.name.starts_with("compliance.")
-                            || p.name.starts_with("transversal.") =>
-                    {
-                        unit.to_owned()
-                    }
-                    _ => p.unit.to_string(),
-                },
-            })
-            .collect()
+    // Every workflow but the haptic one (its device file, above) records its calibration.
+    let Some(record) = &outcome.record else {
+        bail!(
+            "the calibration of {} holds no record (model, loads, region, values): nothing was \
+             written",
+            outcome.device_path.display()
+        );
     };
     let device_tree = outcome.device.tree()?;
-    let (values, leftover): (Vec<_>, Vec<_>) =
-        if outcome.report.frames.is_empty() && outcome.record.is_none() {
-            (all.into_iter()).partition(|v| outcome.model.chain.param_index(&v.name).is_some())
-        } else {
-            (crate::measured::fold_joint_offsets(&outcome.device, &all)?.into_iter())
-                .partition(|v| device_tree.params().iter().any(|p| p.name == v.name))
-        };
+    let values: Vec<_> = (crate::measured::fold_joint_offsets(&outcome.device, &record.values)?
+        .into_iter())
+    .filter(|v| device_tree.params().iter().any(|p| p.name == v.name))
+    .collect();
     let meta = hapcal_io::CalibrationMeta {
         date: None,
         data_hash: None,
@@ -967,9 +947,7 @@ pub fn write_outputs_beside(
         .context("applying the identified deviations to the device description")?;
     // A device file's `[calibration]` is the whole record (its kinematic values, offsets
     // folded, are those just applied to the rows and placements).
-    if let Some(record) = &outcome.record {
-        calibrated.calibration = Some(record.clone());
-    }
+    calibrated.calibration = Some(record.clone());
     let urdf_output = out
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
@@ -1005,21 +983,12 @@ pub fn write_outputs_beside(
         hapcal_io::write_device(&calibrated)
     };
     let mut files = vec![(out.to_path_buf(), text.clone())];
-    let sidecar_text = match &outcome.record {
-        // The record holds every value as identified (the runtime evaluates the transversal
-        // tilts and the gravity loads from the kinematic ones), the model, its loads and its
-        // region, and what binds it to the URDF written beside it (its digest and the nominal
-        // origins of the joints its values deviate).
-        Some(record) if urdf_output => {
-            Some(crate::record::bound_record(record, &text, &outcome.device).to_sidecar_toml())
-        }
-        // A device file holds the record in its `[calibration]` table.
-        Some(_) => None,
-        None if !outcome.report.frames.is_empty() || !leftover.is_empty() => Some(
-            crate::measured::sidecar_toml(&outcome.report.frames, &leftover),
-        ),
-        None => None,
-    };
+    // The record holds every value as identified (the runtime evaluates the transversal tilts
+    // and the gravity loads from the kinematic ones), the model, its loads and its region, and
+    // what binds it to the URDF written beside it (its digest and the nominal origins of the
+    // joints its values deviate); a device file holds it in its `[calibration]` table.
+    let sidecar_text = urdf_output
+        .then(|| crate::record::bound_record(record, &text, &outcome.device).to_sidecar_toml());
     if let Some(text) = sidecar_text {
         files.push((out.with_extension("calibration.toml"), text));
     }

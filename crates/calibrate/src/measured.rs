@@ -4350,34 +4350,6 @@ pub fn fold_joint_offsets(
     Ok(out)
 }
 
-/// The sidecar of a measured calibration (TOML): the identified instrument and marker frames
-/// and every identified value the device description cannot carry (compliance, offsets of a
-/// tree's other tips), so that nothing identified is dropped.
-pub fn sidecar_toml(frames: &[FrameReport], leftover: &[hapcal_io::CalibratedValue]) -> String {
-    use std::fmt::Write;
-    let mut s = String::from(
-        "# Identified by `hapcal calibrate` with the kinematics, not part of the robot description.\n",
-    );
-    for f in frames {
-        let _ = writeln!(
-            s,
-            "\n[frames.{}]\nxyz_m = [{:?}, {:?}, {:?}]\nrpy_rad = [{:?}, {:?}, {:?}]",
-            f.name, f.xyz_m[0], f.xyz_m[1], f.xyz_m[2], f.rpy_rad[0], f.rpy_rad[1], f.rpy_rad[2]
-        );
-    }
-    if !leftover.is_empty() {
-        let _ = writeln!(s, "\n[values]");
-        for v in leftover {
-            let _ = writeln!(
-                s,
-                "{:?} = {{ value = {:?}, std = {:?}, unit = {:?} }}",
-                v.name, v.value, v.std, v.unit
-            );
-        }
-    }
-    s
-}
-
 #[cfg(test)]
 mod tests {
     use super::{Line, RangeVerdict, lm_alone, negative_compliance_sigmas, rung_chains};

@@ -328,8 +328,8 @@ pub struct Outcome {
     /// parameters to `device`.
     pub calibrated: Option<Device>,
     /// The calibration record the written files carry (model, tips, torque source, region,
-    /// values as identified, covariance; `hapcal-contract`); `None`: the workflow records only
-    /// its values (written as a record without them).
+    /// values as identified, covariance; `hapcal-contract`); `None`: a haptic calibration,
+    /// whose calibrated device file (`calibrated`) holds its record.
     pub record: Option<hapcal_contract::Calibration>,
 }
 

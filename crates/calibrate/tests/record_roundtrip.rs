@@ -15,13 +15,13 @@ mod roundtrip;
 #[path = "sim/split_arm.rs"]
 mod split_arm;
 
-use roundtrip::{distance, runtime_marker, set_in_both, worst_gap};
+use roundtrip::{calibrate_tables, distance, runtime_marker, scratch, set_in_both, worst_gap};
 
 use hapcal_calibrate::model::ModelName;
 use std::path::{Path, PathBuf};
 
 use hapcal_calibrate::inputs::Plan;
-use hapcal_calibrate::measured::{Robot as ArmRobot, run_tables};
+use hapcal_calibrate::measured::Robot as ArmRobot;
 use hapcal_calibrate::model::ModelChoice;
 use hapcal_calibrate::report::Outcome;
 use hapcal_io::MeasurementTable;
@@ -31,26 +31,8 @@ use hapcal_runtime::{Pose, Robot};
 /// equations in double precision; 1e-9 m leaves six orders of magnitude to rounding.
 const TOLERANCE_M: f64 = 1e-9;
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!(
-        "hapcal-record-roundtrip-{}-{name}",
-        std::process::id()
-    ));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-/// Calibrates `model` on `train`, `test` and writes `<dir>/cal-<model>.urdf` with its record.
-fn calibrate_and_write(
-    urdf: &Path,
-    tips: &[&str],
-    robot: &ArmRobot,
-    model: ModelChoice,
-    train: MeasurementTable,
-    test: MeasurementTable,
-    dir: &Path,
-) -> (Outcome, PathBuf) {
-    let (outcome, out) = calibrated(urdf, tips, robot, model, train, test, dir);
+/// The calibration `calibrated` returns, written to its path with its record.
+fn written((outcome, out): (Outcome, PathBuf)) -> (Outcome, PathBuf) {
     hapcal_calibrate::calibrate::write_outputs_beside(&outcome, &out, &[]).unwrap();
     (outcome, out)
 }
@@ -77,18 +59,8 @@ fn calibrated(
     };
     let tip_names: Vec<String> = plan.tips.clone();
     let device = hapcal_calibrate::data::load_device_tips(urdf, tips[0], &tip_names).unwrap();
-    let outcome = run_tables(
-        &plan,
-        &device,
-        robot,
-        vec![train],
-        vec![test],
-        std::time::Instant::now(),
-    )
-    .unwrap();
     let out = dir.join(format!("cal-{model}.urdf"));
-    let _ = std::fs::remove_file(&out);
-    let _ = std::fs::remove_file(out.with_extension("calibration.toml"));
+    let outcome = calibrate_tables(&plan, &device, robot, train, test, &out);
     (outcome, out)
 }
 
@@ -119,7 +91,7 @@ fn round_trip(
         .map(|r| r.q.clone())
         .collect();
     let dir = scratch(&format!("{model}-{}", tips.join("-")));
-    let (outcome, out) = calibrate_and_write(urdf, tips, robot, model, train, test, &dir);
+    let (outcome, out) = written(calibrated(urdf, tips, robot, model, train, test, &dir));
     let runtime = Robot::load_urdf(&out, tips).unwrap();
     let record = runtime.calibration().expect("a record").clone();
     assert_eq!(record.model.map(|m| m.name()), Some(model.name()));
@@ -291,39 +263,16 @@ fn socket_calibrations_round_trip_into_the_runtime() {
 /// ones, a continuous joint about a skew axis, a head off the paths, link masses): simulated
 /// tracker markers on both tools.
 fn torso_tables(n: usize, seed: u64) -> (PathBuf, ArmRobot, MeasurementTable, MeasurementTable) {
-    use rand::{Rng, SeedableRng};
-    use rand_distr::Normal;
-    use split_arm::tracker;
+    use rand::Rng;
     let urdf =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../runtime/test_data/torso_two_arms.urdf");
     let tips = ["l_tool".to_owned(), "r_tool".to_owned()];
     let robot = hapcal_calibrate::measured::robot_from_urdf(&urdf, &tips).unwrap();
-    let base = tracker::instrument([2.0, 0.3, -0.5], [0.0, 0.0, 2.9]);
-    let marker = |name: &str| tracker::marker(name, 0.03, 0.0, 0.05);
-    let framed = (robot.tree.with_joint_offsets())
-        .with_frames(&base, &[(0, marker("marker1")), (1, marker("marker2"))])
-        .unwrap();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let x = tracker::deviations(&framed, 5e-4, &mut rng);
-    let noise = Normal::new(0.0, 5e-5).unwrap();
-    let mut table = |rows: usize, name: &str| {
-        let rows = (0..rows)
-            .map(|i| {
-                let q: Vec<f64> = (robot.limits.iter())
-                    .map(|&(lo, hi)| rng.random_range(0.8 * lo.max(-2.0)..0.8 * hi.min(2.0)))
-                    .collect();
-                let markers = (0..2)
-                    .map(|k| {
-                        tracker::sample(k, &framed.tips()[k].end_point(&x, &q), &noise, &mut rng)
-                    })
-                    .collect();
-                tracker::row(i as u64 + 2, q, markers)
-            })
-            .collect();
-        tracker::table(name, format!("{name}.csv"), 2, rows)
-    };
-    let train = table(n, "train");
-    let test = table(n / 2, "test");
+    let (train, test) = split_arm::tracker::tracker_tables(&robot, n, seed, |rng| {
+        (robot.limits.iter())
+            .map(|&(lo, hi)| rng.random_range(0.8 * lo.max(-2.0)..0.8 * hi.min(2.0)))
+            .collect()
+    });
     (urdf, robot, train, test)
 }
 
@@ -397,8 +346,15 @@ fn report_against_predict(
     test: &MeasurementTable,
 ) -> (f64, f64, f64) {
     let dir = scratch(&format!("report-{model}-{}", tips.join("-")));
-    let (outcome, out) =
-        calibrate_and_write(urdf, tips, robot, model, train.clone(), test.clone(), &dir);
+    let (outcome, out) = written(calibrated(
+        urdf,
+        tips,
+        robot,
+        model,
+        train.clone(),
+        test.clone(),
+        &dir,
+    ));
     let sets = &outcome.report.placements;
     assert_eq!(sets.len(), 2, "{model}: one training and one test set");
     let mut worst: f64 = 0.0;
@@ -500,8 +456,15 @@ fn predict_sigma_covers_the_held_out_errors_of_the_simulated_humanoid() {
     let urdf = dir.join("humanoid.urdf");
     std::fs::write(&urdf, humanoid::humanoid_urdf()).unwrap();
     let model = ModelChoice::Model(ModelName::TransversalCompliance);
-    let (outcome, out) =
-        calibrate_and_write(&urdf, &tips, &robot, model, train, test.clone(), &dir);
+    let (outcome, out) = written(calibrated(
+        &urdf,
+        &tips,
+        &robot,
+        model,
+        train,
+        test.clone(),
+        &dir,
+    ));
     let record = outcome.record.as_ref().expect("a record");
     let covariance = record.covariance.as_ref().expect("a covariance");
     let estimated = (record.values.iter()).filter(|v| v.std > 0.0).count();
@@ -698,7 +661,7 @@ fn the_files_of_a_plausible_calibration_reproduce_it() {
     let tips = ["l_hand", "r_hand"];
     let dir = scratch("reproduced");
     let model = ModelChoice::Model(ModelName::TransversalAxes);
-    let (outcome, out) = calibrate_and_write(&urdf, &tips, &robot, model, train, test, &dir);
+    let (outcome, out) = written(calibrated(&urdf, &tips, &robot, model, train, test, &dir));
     assert!(
         outcome.report.implausible.is_empty(),
         "{:?}",

@@ -12,22 +12,20 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use hapcal_calibrate::model::ModelName;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use hapcal_calibrate::inputs::Plan;
-use hapcal_calibrate::measured::{Robot as ArmRobot, run_tables};
+use hapcal_calibrate::measured::Robot as ArmRobot;
 use hapcal_calibrate::model::ModelChoice;
 use hapcal_io::MeasurementTable;
 use hapcal_runtime::Robot;
-use rand::SeedableRng;
-use rand_distr::Normal;
 
 #[path = "sim/roundtrip.rs"]
 mod roundtrip;
 #[path = "sim/tracker.rs"]
 mod tracker;
 
-use roundtrip::{distance, set_in_both};
+use roundtrip::{distance, scratch, set_in_both};
 
 /// Agreement required between the runtime and the library, m: both evaluate the same
 /// equations in double precision; 1e-9 m leaves six orders of magnitude to rounding.
@@ -63,41 +61,10 @@ fn device_text(convention: &str) -> String {
     s
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!(
-        "hapcal-record-roundtrip-dh-{}-{name}",
-        std::process::id()
-    ));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-/// Simulated tracker positions of one marker on the arm: random geometric deviations (σ
-/// 0.5 mm, 0.5 mrad) of the D-H rows, an instrument 2 m away, noise σ 50 µm; training and
-/// held-out tables.
+/// Simulated tracker positions of one marker on the arm ([`tracker::tracker_tables`]) at
+/// readings within 80 % of the limits: training and held-out tables.
 fn tables(robot: &ArmRobot, n: usize, seed: u64) -> (MeasurementTable, MeasurementTable) {
-    let base = tracker::instrument([2.0, 0.3, -0.5], [0.0, 0.0, 2.9]);
-    let marker = tracker::marker("marker1", 0.03, 0.0, 0.05);
-    let framed = (robot.tree.with_joint_offsets())
-        .with_frames(&base, &[(0, marker)])
-        .unwrap();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let x = tracker::deviations(&framed, 5e-4, &mut rng);
-    let noise = Normal::new(0.0, 5e-5).unwrap();
-    let mut table = |rows: usize, name: &str| {
-        let rows = (0..rows)
-            .map(|i| {
-                let q = tracker::within_limits(robot, &mut rng);
-                let p = framed.tips()[0].end_point(&x, &q);
-                let marker = tracker::sample(0, &p, &noise, &mut rng);
-                tracker::row(i as u64 + 2, q, vec![marker])
-            })
-            .collect();
-        tracker::table(name, format!("{name}.csv"), 1, rows)
-    };
-    let train = table(n, "train");
-    let test = table(n / 2, "test");
-    (train, test)
+    tracker::tracker_tables(robot, n, seed, |rng| tracker::within_limits(robot, rng))
 }
 
 /// The runtime's position of marker 1 in the instrument frame.
@@ -145,17 +112,8 @@ fn round_trip(
         ..Plan::bundled_default()
     };
     let device = hapcal_io::read_device(device_path).unwrap();
-    let outcome = run_tables(
-        &plan,
-        &device,
-        robot,
-        vec![train],
-        vec![test],
-        std::time::Instant::now(),
-    )
-    .unwrap();
     let out = dir.join(format!("cal-{model}.toml"));
-    let _ = std::fs::remove_file(&out);
+    let outcome = roundtrip::calibrate_tables(&plan, &device, robot, train, test, &out);
     hapcal_calibrate::calibrate::write_outputs_beside(&outcome, &out, &[]).unwrap();
     let runtime = Robot::load_device(&out).unwrap();
     let record = runtime.calibration().expect("a record").clone();

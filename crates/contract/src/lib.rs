@@ -66,8 +66,8 @@ pub use names::{CapstanField, DhField, ElementField, ValueName};
 
 /// The schema version this crate writes and the newest it reads. Version 1 is the first
 /// record with a model name, torque source, region and covariance; a record without
-/// `schema_version` was written by an earlier hapcal (frames and values only, read as before:
-/// [`Calibration::is_legacy`]).
+/// `schema_version` was written by an earlier hapcal (frames and values only,
+/// [`Calibration::is_legacy`]): read in a device file's `[calibration]`, refused as a sidecar.
 pub const SCHEMA_VERSION: u32 = 1;
 
 /// The model a calibration identified: the rung of `hapcal calibrate`'s ladder, by the name
@@ -547,12 +547,13 @@ pub fn digest(bytes: &[u8]) -> String {
 }
 
 impl Calibration {
-    /// A sidecar's text (`robot.calibration.toml`), parsed and checked ([`Self::check`]);
-    /// `origin` names it in errors.
+    /// A sidecar's text (`robot.calibration.toml`, as [`Self::to_sidecar_toml`] writes it),
+    /// parsed and checked ([`Self::check`]); `origin` names it in errors.
     ///
     /// # Errors
-    /// TOML syntax, a missing or unknown key or a wrong type at its line and column; then as
-    /// [`Self::check`].
+    /// TOML syntax, a missing or unknown key or a wrong type at its line and column; as
+    /// [`Self::check`]; a sidecar without `schema_version` (an earlier hapcal's,
+    /// [`Self::is_legacy`]).
     pub fn from_sidecar_str(text: &str, origin: &str) -> Result<Calibration, ContractError> {
         let record: Calibration = toml::from_str(text).map_err(|e| {
             let (line, column) = e.span().map_or((0, 0), |s| line_column(text, s.start));
@@ -564,6 +565,21 @@ impl Calibration {
             }
         })?;
         record.check(text, origin)?;
+        if record.is_legacy() {
+            // A device file's `[calibration]` may still be an earlier hapcal's values; a
+            // sidecar is written by `Calibration::to_sidecar_toml` only.
+            return Err(ContractError {
+                origin: origin.to_owned(),
+                line: 1,
+                column: 1,
+                message: format!(
+                    "missing key schema_version: a calibration record begins with \
+                     schema_version = {SCHEMA_VERSION}; a sidecar without it (frames and values \
+                     only) was written by an earlier hapcal, whose sidecars this one does not \
+                     read: calibrate again"
+                ),
+            });
+        }
         if record.model == Some(ModelName::Transmissions) {
             let (line, column) = locate_path(text, &[Step::Key("model")]).unwrap_or((0, 0));
             return Err(ContractError {

@@ -163,14 +163,21 @@ fn a_missing_key_is_refused_with_what_is_expected() {
 }
 
 #[test]
-fn a_record_of_an_earlier_hapcal_reads_as_before() {
+fn a_sidecar_of_an_earlier_hapcal_is_refused() {
     let text = "# Identified by `hapcal calibrate` with the kinematics.\n\n[frames.instrument]\n\
                 xyz_m = [1.0, 2.0, 3.0]\nrpy_rad = [0.0, 0.0, 0.0]\n\n[values]\n\
                 \"compliance.joint_a2\" = { value = 1e-4, std = 1e-6, unit = \"rad/m\" }\n";
-    let r = Calibration::from_sidecar_str(text, "old").expect("reads");
+    let e = Calibration::from_sidecar_str(text, "old").expect_err("refused");
+    assert_eq!((e.line, e.column), (1, 1), "{e}");
+    assert!(
+        e.message.starts_with("missing key schema_version")
+            && e.message.contains("calibrate again"),
+        "{e}"
+    );
+    // The same values in a device file's `[calibration]` still read (an earlier hapcal's).
+    let r: Calibration = toml::from_str(text).expect("parses");
     assert!(r.is_legacy());
-    assert_eq!(r.values.len(), 1);
-    assert_eq!(r.frames.len(), 1);
+    r.check(text, "old").expect("an earlier hapcal's record");
 }
 
 #[test]

@@ -457,18 +457,7 @@ impl ForceModel {
     /// four-bar cannot close; [`Error::Evaluate`] for a reading the runtime refuses (NaN or
     /// infinite).
     pub fn joint_angles(&self, theta: &[f64]) -> Result<Vec<f64>, Error> {
-        self.check_readings(theta)?;
-        match &self.eval {
-            Eval::Runtime(model) => Ok(ForceModel::runtime_angles(model, theta)?.0),
-            Eval::Library { drives, .. } => (drives.iter().zip(theta).enumerate())
-                .map(|(j, (d, &t))| {
-                    d.angle_rad(t).map_err(|source| Error::Transmission {
-                        joint: j + 1,
-                        source,
-                    })
-                })
-                .collect(),
-        }
+        self.drive_maps(theta, false)
     }
 
     /// `dq/dθ` of each drive at readings `theta` (rad/rad, one per joint).
@@ -476,12 +465,26 @@ impl ForceModel {
     /// # Errors
     /// As [`ForceModel::joint_angles`].
     pub fn angle_derivatives(&self, theta: &[f64]) -> Result<Vec<f64>, Error> {
+        self.drive_maps(theta, true)
+    }
+
+    /// Each drive's map at readings `theta`: the joint angles (rad) or, with `derivative`,
+    /// `dq/dθ` (rad/rad); errors as [`ForceModel::joint_angles`].
+    fn drive_maps(&self, theta: &[f64], derivative: bool) -> Result<Vec<f64>, Error> {
         self.check_readings(theta)?;
         match &self.eval {
-            Eval::Runtime(model) => Ok(ForceModel::runtime_angles(model, theta)?.1),
+            Eval::Runtime(model) => {
+                let (q, dq) = ForceModel::runtime_angles(model, theta)?;
+                Ok(if derivative { dq } else { q })
+            }
             Eval::Library { drives, .. } => (drives.iter().zip(theta).enumerate())
                 .map(|(j, (d, &t))| {
-                    d.angle_derivative(t).map_err(|source| Error::Transmission {
+                    let map = if derivative {
+                        d.angle_derivative(t)
+                    } else {
+                        d.angle_rad(t)
+                    };
+                    map.map_err(|source| Error::Transmission {
                         joint: j + 1,
                         source,
                     })

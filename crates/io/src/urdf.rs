@@ -367,6 +367,16 @@ static PARSED: Mutex<Vec<(String, Arc<urdf::Robot>)>> = Mutex::new(Vec::new());
 /// URDF texts [`PARSED`] keeps.
 const PARSED_KEPT: usize = 8;
 
+/// A URDF's text; invalid UTF-8 is an [`Error::Xml`] at its line and column.
+fn read_urdf_text(path: &Path) -> Result<String, Error> {
+    Error::read_text(path, |line, column, message| Error::Xml {
+        path: path.to_path_buf(),
+        line,
+        column,
+        message,
+    })
+}
+
 /// The description of the URDF at `path` as urdf-rs parses it, after the checks every import
 /// makes (well-formed XML, one root, every joint's links defined, no loop). The file is read
 /// each time; a text read before is not parsed again (the description is kept by its text, so
@@ -379,12 +389,7 @@ const PARSED_KEPT: usize = 8;
 /// link with two parent joints, several roots or a loop; [`Error::Urdf`] if urdf-rs cannot
 /// parse it.
 pub fn read_urdf(path: &Path) -> Result<Arc<urdf::Robot>, Error> {
-    let text = Error::read_text(path, |line, column, message| Error::Xml {
-        path: path.to_path_buf(),
-        line,
-        column,
-        message,
-    })?;
+    let text = read_urdf_text(path)?;
     let parsed = |cache: &mut Vec<(String, Arc<urdf::Robot>)>| {
         let at = cache.iter().position(|(t, _)| *t == text)?;
         let hit = cache.remove(at);
@@ -709,12 +714,7 @@ pub fn write_calibrated_urdf(
     placements: &[Placement],
 ) -> Result<String, Error> {
     let path = source_urdf;
-    let text = Error::read_text(path, |line, column, message| Error::Xml {
-        path: path.to_path_buf(),
-        line,
-        column,
-        message,
-    })?;
+    let text = read_urdf_text(path)?;
     let urdf_err = |message: String| Error::Urdf {
         path: path.to_path_buf(),
         message,

@@ -403,39 +403,8 @@ impl Chain {
         ws: &mut FkWorkspace,
         jac_out: &mut [f64],
     ) -> Point3<f64> {
-        self.check_shapes(x, q);
-        assert_eq!(
-            jac_out.len(),
-            3 * self.n_params(),
-            "jac_out has length {}, expected 3 × {} parameters",
-            jac_out.len(),
-            self.n_params()
-        );
-        self.fill_poses(x, q, &mut ws.poses);
-        let tip = ws
-            .poses
-            .last()
-            .map_or(Vector3::zeros(), |t| t.translation.vector);
-        jac_out.fill(0.0);
-        for (factor, pose) in self.factors.iter().zip(&ws.poses) {
-            if let Factor::Screw {
-                motion,
-                axis,
-                param: Some(j),
-                ..
-            } = factor
-            {
-                let w = pose.rotation * axis.into_inner();
-                let col = match motion {
-                    Motion::Rotation => w.cross(&(tip - pose.translation.vector)),
-                    Motion::Translation => w,
-                };
-                for (out, c) in jac_out[3 * j..3 * j + 3].iter_mut().zip(col.iter()) {
-                    *out += c;
-                }
-            }
-        }
-        Point3::from(tip)
+        let end = self.jacobian_rows_in(x, q, ws, jac_out, 3);
+        Point3::from(end.translation.vector)
     }
 
     /// Tip pose (base frame, m) and its Jacobian with respect to `x`, without allocating
@@ -458,11 +427,27 @@ impl Chain {
         ws: &mut FkWorkspace,
         jac_out: &mut [f64],
     ) -> Isometry3<f64> {
+        self.jacobian_rows_in(x, q, ws, jac_out, 6)
+    }
+
+    /// Tip pose and the first `rows` rows of its Jacobian with respect to `x` into `jac_out`
+    /// (column-major `rows × n_params()`): 3, the end point's
+    /// ([`Chain::point_and_jacobian_in`]); 6, with the rotation vector's
+    /// ([`Chain::pose_and_jacobian_in`]).
+    #[track_caller]
+    fn jacobian_rows_in(
+        &self,
+        x: &[f64],
+        q: &[f64],
+        ws: &mut FkWorkspace,
+        jac_out: &mut [f64],
+        rows: usize,
+    ) -> Isometry3<f64> {
         self.check_shapes(x, q);
         assert_eq!(
             jac_out.len(),
-            6 * self.n_params(),
-            "jac_out has length {}, expected 6 × {} parameters",
+            rows * self.n_params(),
+            "jac_out has length {}, expected {rows} × {} parameters",
             jac_out.len(),
             self.n_params()
         );
@@ -483,10 +468,14 @@ impl Chain {
                     Motion::Rotation => (w.cross(&(tip - pose.translation.vector)), w),
                     Motion::Translation => (w, Vector3::zeros()),
                 };
-                let col = &mut jac_out[6 * j..6 * j + 6];
+                let col = &mut jac_out[rows * j..rows * (j + 1)];
                 for k in 0..3 {
                     col[k] += linear[k];
-                    col[3 + k] += angular[k];
+                }
+                if rows == 6 {
+                    for k in 0..3 {
+                        col[3 + k] += angular[k];
+                    }
                 }
             }
         }

@@ -13,8 +13,9 @@ mod iiwa_masses;
 
 use iiwa_masses::{JOINTS, with_iiwa_masses};
 
-/// The bundled iiwa 14 URDF with Drake's masses as `<inertial>`s and a sidecar of joint
-/// compliances from 1e-4 to 3e-4 rad/(N·m).
+/// The bundled iiwa 14 URDF with Drake's masses as `<inertial>`s and joint compliances from
+/// 1e-4 to 3e-4 rad/(N·m) (`Robot::with_compliances`: loads on the calibrated geometry at the
+/// torque equilibrium).
 fn compliant_iiwa() -> Robot {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -22,19 +23,8 @@ fn compliant_iiwa() -> Robot {
     );
     let text = with_iiwa_masses(&std::fs::read_to_string(path).expect("bundled fixture"));
     let k = [1e-4, 1e-4, 1.5e-4, 1.5e-4, 2e-4, 3e-4, 3e-4];
-    let mut sidecar = String::from("[values]\n");
-    for (j, k) in JOINTS.iter().zip(k) {
-        sidecar.push_str(&format!(
-            "\"compliance.{j}\" = {{ value = {k:?}, std = 0.0, unit = \"rad/(N·m)\" }}\n"
-        ));
-    }
-    Robot::from_urdf_str(
-        &text,
-        "iiwa14.urdf",
-        Some((&sidecar, "sidecar")),
-        &["ball_link"],
-    )
-    .expect("valid")
+    let robot = Robot::from_urdf_str(&text, "iiwa14.urdf", None, &["ball_link"]).expect("valid");
+    robot.with_compliances(&k).expect("valid")
 }
 
 /// The iiwa 14 as `hapcal calibrate --model mass-compliance` writes it: the URDF's origins

@@ -59,16 +59,15 @@ impl Robot {
     /// base of the transversal tilts), the compliances `compliance.<joint>[+<joint>…]`, the
     /// transversal compliances `transversal.<joint>[.u|.v]` and the joint harmonics
     /// `harmonic.<joint>.sin<h>|cos<h>`; the region ([`Robot::outside_region`]). A sidecar of
-    /// an earlier hapcal (no `schema_version`) reads as that hapcal read it: frames and
-    /// compliances, loads on the calibrated geometry at the torque equilibrium. Gravity is
-    /// along −z of the root link (ROS REP 103) unless the record says otherwise.
+    /// an earlier hapcal (no `schema_version`) is refused. Gravity is along −z of the root
+    /// link (ROS REP 103) unless the record says otherwise.
     ///
     /// A record binds to its robot: it is refused beside another URDF than the one it was
     /// written beside (its `urdf_digest`), for tips it was not made for (its `tips` and load
     /// tips), with a region joint the URDF lacks, and with values that, from the record's
     /// nominal origins, do not give the URDF's joint origins (a value edited by hand in one
-    /// of the two files); a record without digest or nominal origins (an earlier hapcal's)
-    /// loads as before.
+    /// of the two files); a record without digest or nominal origins is not bound to one
+    /// URDF.
     ///
     /// # Errors
     /// [`LoadError::Io`] for a file that cannot be read; [`LoadError::Parse`] (line, column)
@@ -249,9 +248,8 @@ impl Robot {
     }
 
     /// Reads the sidecar into the robot: a calibration record (`hapcal-contract`, schema 1 on)
-    /// through [`Robot::apply_record`]; an earlier hapcal's sidecar (no `schema_version`:
-    /// frames and compliances only) as that hapcal read it.
-    /// `record` is `text` parsed ([`Calibration::from_sidecar_str`]).
+    /// through [`Robot::apply_record`]. `record` is `text` parsed
+    /// ([`Calibration::from_sidecar_str`], which refuses an earlier hapcal's sidecar).
     fn apply_sidecar(
         &mut self,
         record: Result<Calibration, hapcal_contract::ContractError>,
@@ -261,73 +259,7 @@ impl Robot {
         urdf_joints: &[(&str, Pose)],
     ) -> Result<(), LoadError> {
         let record = record.map_err(|e| crate::load::contract_error(e, origin))?;
-        if record.is_legacy() {
-            return self.apply_legacy_sidecar(&record, origin);
-        }
         self.apply_record(record, text, origin, tip_elements, urdf_joints)
-    }
-
-    /// Reads an earlier hapcal's sidecar (`record`, parsed and checked by the contract): its
-    /// frames and compliances, the values in name order.
-    fn apply_legacy_sidecar(
-        &mut self,
-        record: &Calibration,
-        origin: &str,
-    ) -> Result<(), LoadError> {
-        for (name, f) in &record.frames {
-            self.frames
-                .push((name.clone(), origin_pose(f.xyz_m, f.rpy_rad)));
-        }
-        let mut values: Vec<&hapcal_contract::CalibratedValue> = record.values.iter().collect();
-        values.sort_by(|a, b| a.name.cmp(&b.name));
-        let unit = match self.gravity {
-            GravityModel::Masses => "rad/(N·m)",
-            GravityModel::Lumped => "rad/m",
-        };
-        for v in values {
-            let name = &v.name;
-            let Some(joints) = name.strip_prefix("compliance.") else {
-                return Err(invalid(
-                    origin,
-                    format!(
-                        "{name:?}: the runtime evaluates the compliances (compliance.<joint>) of a sidecar, not this value"
-                    ),
-                ));
-            };
-            if v.unit != unit {
-                return Err(invalid(
-                    origin,
-                    format!(
-                        "{name:?} is in {:?}, expected {unit:?} ({})",
-                        v.unit,
-                        match self.gravity {
-                            GravityModel::Masses => "the URDF has link masses",
-                            GravityModel::Lumped =>
-                                "the URDF has no link masses: lumped unit weights",
-                        }
-                    ),
-                ));
-            }
-            if !v.value.is_finite() {
-                return Err(invalid(
-                    origin,
-                    format!("{name:?} = {} is not finite", v.value),
-                ));
-            }
-            for joint in joints.split('+') {
-                let Some(j) = self.joint_names.iter().position(|n| n == joint) else {
-                    return Err(invalid(
-                        origin,
-                        format!(
-                            "{name:?}: no moving joint {joint:?} on the paths to the tips; joints: {}",
-                            self.joint_names.join(", ")
-                        ),
-                    ));
-                };
-                self.compliance[j] = v.value;
-            }
-        }
-        Ok(())
     }
 }
 

@@ -1,10 +1,44 @@
 //! The runtime against the calibration library on a written calibration, as the round-trip
-//! tests compare them: each one's marker positions, the largest distance between the two, and
-//! a record value set in both.
+//! tests compare them: the calibration of simulated tables, each one's marker positions, the
+//! largest distance between the two, and a record value set in both.
 #![allow(clippy::unwrap_used, dead_code, unreachable_pub)]
 
+use std::path::Path;
+
+use hapcal_calibrate::inputs::Plan;
+use hapcal_calibrate::measured::{Robot as ArmRobot, run_tables};
+use hapcal_calibrate::report::Outcome;
+use hapcal_io::{Device, MeasurementTable};
 use hapcal_problems::CalibratedModel;
 use hapcal_runtime::{Pose, Robot};
+
+/// Calibrates `plan` on the tables `train` and `test` of `robot` (`run_tables`) and clears
+/// the files an earlier run wrote at `out` (the output and its sidecar).
+pub fn calibrate_tables(
+    plan: &Plan,
+    device: &Device,
+    robot: &ArmRobot,
+    train: MeasurementTable,
+    test: MeasurementTable,
+    out: &Path,
+) -> Outcome {
+    let start = std::time::Instant::now();
+    let outcome = run_tables(plan, device, robot, vec![train], vec![test], start).unwrap();
+    let _ = std::fs::remove_file(out);
+    let _ = std::fs::remove_file(out.with_extension("calibration.toml"));
+    outcome
+}
+
+/// A fresh folder `name` of this test binary under the system's temporary directory.
+pub fn scratch(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "hapcal-{}-{}-{name}",
+        env!("CARGO_CRATE_NAME"),
+        std::process::id()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
 
 /// Distance between two points, m.
 pub fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {

@@ -106,6 +106,45 @@ pub fn table(
     }
 }
 
+/// Simulated tracker tables of `robot`, one marker per tip (`marker<k+1>` 3 cm along x and
+/// 5 cm along z of tip k's link): random geometric deviations (σ 0.5 mm, 0.5 mrad,
+/// [`deviations`]), the instrument 2 m away, noise σ 50 µm; `n` training rows and `n / 2`
+/// held-out ones at the readings `reading` draws.
+pub fn tracker_tables(
+    robot: &Robot,
+    n: usize,
+    seed: u64,
+    mut reading: impl FnMut(&mut rand_chacha::ChaCha8Rng) -> Vec<f64>,
+) -> (MeasurementTable, MeasurementTable) {
+    use rand::SeedableRng;
+    let n_tips = robot.tree.tips().len();
+    let base = instrument([2.0, 0.3, -0.5], [0.0, 0.0, 2.9]);
+    let markers: Vec<(usize, FrameSpec)> = (0..n_tips)
+        .map(|k| (k, marker(&format!("marker{}", k + 1), 0.03, 0.0, 0.05)))
+        .collect();
+    let framed = (robot.tree.with_joint_offsets())
+        .with_frames(&base, &markers)
+        .unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let x = deviations(&framed, 5e-4, &mut rng);
+    let noise = Normal::new(0.0, 5e-5).unwrap();
+    let mut table = |rows: usize, name: &str| {
+        let rows = (0..rows)
+            .map(|i| {
+                let q = reading(&mut rng);
+                let samples = (0..n_tips)
+                    .map(|k| sample(k, &framed.tips()[k].end_point(&x, &q), &noise, &mut rng))
+                    .collect();
+                row(i as u64 + 2, q, samples)
+            })
+            .collect();
+        table(name, format!("{name}.csv"), n_tips, rows)
+    };
+    let train = table(n, "train");
+    let test = table(n / 2, "test");
+    (train, test)
+}
+
 /// Placement deviations drawn from N(0, 0.5 mm × `scale`) for every length and N(0, 1 mrad ×
 /// `scale`) for every angle of `framed` but the instrument frame's (the first 6) and the
 /// markers'.

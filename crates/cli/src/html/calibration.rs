@@ -49,12 +49,7 @@ pub fn calibration_page(r: &CalibrationReport, command: &str, inputs: &[InputFil
         page.figure(&f);
     }
     tables(r, &mut page);
-    page.section("text", "The text report");
-    page.preformatted(
-        "as hapcal calibrate prints it",
-        &crate::report::render_results(r),
-    );
-    page.finish()
+    page.finish_with_text("hapcal calibrate", &crate::report::render_results(r))
 }
 
 /// Why the rung was taken, in words.

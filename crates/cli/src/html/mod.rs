@@ -246,14 +246,17 @@ impl Page {
         self.body.push_str("</table></div>\n");
     }
 
-    /// A block of preformatted text (a text report), folded under `summary`.
-    pub fn preformatted(&mut self, summary: &str, text: &str) {
+    /// The finished document, ending with the section "The text report": `text` as
+    /// `command` (`hapcal calibrate`, …) prints it, preformatted and folded.
+    pub fn finish_with_text(mut self, command: &str, text: &str) -> String {
+        self.section("text", "The text report");
         let _ = writeln!(
             self.body,
             "<details open><summary>{}</summary><pre>{}</pre></details>",
-            escape(summary),
+            escape(&format!("as {command} prints it")),
             escape(text)
         );
+        self.finish()
     }
 
     /// A figure (its SVG, its caption and its numbers).
@@ -262,7 +265,7 @@ impl Page {
     }
 
     /// The finished document.
-    pub fn finish(mut self) -> String {
+    fn finish(mut self) -> String {
         self.close_section();
         format!(
             "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\

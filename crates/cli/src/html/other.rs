@@ -141,9 +141,7 @@ pub fn diagnosis_page(
         ],
         &rows,
     );
-    page.section("text", "The text report");
-    page.preformatted("as hapcal diagnose prints it", text);
-    page.finish()
+    page.finish_with_text("hapcal diagnose", text)
 }
 
 /// The diagnosis' figures: the held-out RMS after each accepted effect (`fig-steps`), each
@@ -273,9 +271,7 @@ pub fn prediction_page(p: &Prediction, text: &str, command: &str, inputs: &[Inpu
             &outside,
         );
     }
-    page.section("text", "The text report");
-    page.preformatted("as hapcal predict prints it", text);
-    page.finish()
+    page.finish_with_text("hapcal predict", text)
 }
 
 /// The prediction's figure: each row's predicted 1σ of the first tip's position against its

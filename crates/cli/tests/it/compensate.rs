@@ -1,4 +1,4 @@
-//! `hapcal compensate`: a calibrated iiwa 14 (the bundled URDF with a sidecar of lumped-weight
+//! `hapcal compensate`: a calibrated iiwa 14 (the bundled URDF with a record of lumped-weight
 //! compliances), targets where the rigid arm puts its tip, one unreachable row.
 
 use hapcal_runtime::Robot;
@@ -12,7 +12,13 @@ use crate::{assert_exit, hapcal, hapcal_ok, iiwa, scratch, show, succeeded};
 fn calibrated_robot(dir: &std::path::Path) -> std::path::PathBuf {
     let urdf = dir.join("robot.urdf");
     std::fs::copy(iiwa(), &urdf).expect("copy");
-    let mut sidecar = String::from("[values]\n");
+    // A calibration record (schema 1): lumped-weight compliances (the URDF has no masses),
+    // gravity along -z at the torque equilibrium.
+    let mut sidecar = String::from(
+        "schema_version = 1\nmodel = \"compliance\"\n\n[torque]\n\
+         source = \"lumped-unit-weights\"\ngravity_direction = [0.0, 0.0, -1.0]\n\
+         gravity_m_s2 = 9.80665\nequilibrium = true\n\n[region]\nrows = 100\n\n[values]\n",
+    );
     for j in 1..=7 {
         let k = 2e-4 + 1e-4 * f64::from(j);
         sidecar.push_str(&format!(
@@ -223,17 +229,10 @@ fn compensation_with_a_calibration_from_simulated_data() {
     let truth_text = hapcal_io::write_calibrated_urdf(std::path::Path::new(&iiwa()), &placements)
         .expect("fixture");
     std::fs::write(&truth_urdf, with_masses(&truth_text)).expect("write");
-    let mut sidecar = String::from("[values]\n");
-    for (j, k) in JOINTS
-        .iter()
-        .zip([1e-4, 1e-4, 1.5e-4, 1.5e-4, 2e-4, 3e-4, 3e-4])
-    {
-        sidecar.push_str(&format!(
-            "\"compliance.{j}\" = {{ value = {k:?}, std = 0.0, unit = \"rad/(N·m)\" }}\n"
-        ));
-    }
-    std::fs::write(truth_dir.join("truth.calibration.toml"), sidecar).expect("write");
+    // Its joint compliances, loads on its own geometry at the torque equilibrium.
     let truth = Robot::load_urdf(&truth_urdf, &["ball_link"]).expect("truth");
+    let k = [1e-4, 1e-4, 1.5e-4, 1.5e-4, 2e-4, 3e-4, 3e-4];
+    let truth = truth.with_compliances(&k).expect("truth");
     let nominal = Robot::load_urdf(&nominal_urdf, &["ball_link"]).expect("nominal");
     let (mut ws_t, mut ws_n) = (truth.workspace(), nominal.workspace());
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);

@@ -9,6 +9,8 @@ use std::path::{Path, PathBuf};
 use hapcal_force::{ForceModel, Readings, SweepConfig, Vector6, sample_poses, wrench_map};
 use hapcal_io::{Device, read_device};
 
+use crate::readings::readings;
+
 /// Rounding bound: every quantity is O(1) (m, rad, N·m per N) and both sides compute it in a
 /// few dozen floating-point operations, so they agree to far below 1e-12 unless the models
 /// differ.
@@ -18,27 +20,6 @@ fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../fixtures/reference-device")
         .join(name)
-}
-
-/// `n` readings spread over the joint ranges `limits` (rad), deterministic (a Weyl sequence
-/// per joint).
-fn readings(limits: &[(f64, f64)], n: usize) -> Vec<Vec<f64>> {
-    const PHI: [f64; 7] = [
-        0.618_033_988_7,
-        0.414_213_562_4,
-        0.732_050_807_6,
-        0.236_067_977_5,
-        0.645_751_311_1,
-        0.316_624_790_4,
-        0.872_983_346_2,
-    ];
-    (0..n)
-        .map(|i| {
-            (limits.iter().enumerate())
-                .map(|(j, &(lo, hi))| lo + (hi - lo) * ((i as f64 + 0.5) * PHI[j % 7]).fract())
-                .collect()
-        })
-        .collect()
 }
 
 fn wrenches() -> [Vector6<f64>; 3] {

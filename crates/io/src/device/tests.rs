@@ -123,6 +123,28 @@ fn toml_strings_and_keys_are_escaped() {
     assert_eq!(again, device);
 }
 
+/// The gap between `device`'s nominal chain moved by `deltas` (one per parameter) and the
+/// chain of the device calibrated with them at joint angles `q`: position (m) and rotation
+/// (rad).
+fn deviated_gap(device: &Device, deltas: &[f64], q: &[f64]) -> (f64, f64) {
+    let nominal = device.chain().unwrap();
+    assert_eq!(nominal.n_params(), deltas.len());
+    let values: Vec<CalibratedValue> = (nominal.params().iter().zip(deltas))
+        .map(|(p, d)| value(&p.name, *d, p.unit.symbol()))
+        .collect();
+    let calibrated = device
+        .with_calibration(&values, CalibrationMeta::default())
+        .unwrap()
+        .chain()
+        .unwrap();
+    let want = nominal.end_pose(deltas, q);
+    let got = calibrated.end_pose(&vec![0.0; deltas.len()], q);
+    (
+        (want.translation.vector - got.translation.vector).norm(),
+        want.rotation.angle_to(&got.rotation),
+    )
+}
+
 proptest! {
     #[test]
     fn every_finite_number_survives_the_round_trip(
@@ -161,21 +183,7 @@ proptest! {
         deltas in prop::collection::vec(-0.05..0.05f64, 48),
         q in prop::collection::vec(-2.0..2.0f64, 7),
     ) {
-        let device = iiwa();
-        let nominal = device.chain().unwrap();
-        prop_assert_eq!(nominal.n_params(), deltas.len());
-        let values: Vec<CalibratedValue> = (nominal.params().iter().zip(&deltas))
-            .map(|(p, d)| value(&p.name, *d, p.unit.symbol()))
-            .collect();
-        let calibrated = device
-            .with_calibration(&values, CalibrationMeta::default())
-            .unwrap()
-            .chain()
-            .unwrap();
-        let want = nominal.end_pose(&deltas, &q);
-        let got = calibrated.end_pose(&vec![0.0; deltas.len()], &q);
-        let dp = (want.translation.vector - got.translation.vector).norm();
-        let dr = want.rotation.angle_to(&got.rotation);
+        let (dp, dr) = deviated_gap(&iiwa(), &deltas, &q);
         prop_assert!(dp < 1e-12 && dr < 1e-12, "{} m, {} rad", dp, dr);
     }
 
@@ -185,20 +193,7 @@ proptest! {
         deltas in prop::collection::vec(-0.05..0.05f64, 32),
         q in prop::collection::vec(-1.0..1.0f64, 7),
     ) {
-        let device = reference();
-        let nominal = device.chain().unwrap();
-        prop_assert_eq!(nominal.n_params(), deltas.len());
-        let values: Vec<CalibratedValue> = (nominal.params().iter().zip(&deltas))
-            .map(|(p, d)| value(&p.name, *d, p.unit.symbol()))
-            .collect();
-        let calibrated = device
-            .with_calibration(&values, CalibrationMeta::default())
-            .unwrap()
-            .chain()
-            .unwrap();
-        let want = nominal.end_pose(&deltas, &q);
-        let got = calibrated.end_pose(&vec![0.0; deltas.len()], &q);
-        let dp = (want.translation.vector - got.translation.vector).norm();
+        let (dp, _) = deviated_gap(&reference(), &deltas, &q);
         prop_assert!(dp < 1e-12, "{} m", dp);
     }
 }

@@ -97,18 +97,11 @@ impl<'a> Locator<'a> {
             return Ok(());
         }
         let (line, column) = self.at(keys);
-        let name = keys
-            .iter()
-            .map(|k| match k {
-                N(n) => format!(".{n}"),
-                I(i) => format!("[{i}]"),
-            })
-            .collect::<String>();
         Err(Error::NotFinite {
             path: self.path.to_path_buf(),
             line,
             column,
-            name: name.trim_start_matches('.').to_owned(),
+            name: key_name(keys),
             found: format!("{value}"),
         })
     }
@@ -117,14 +110,7 @@ impl<'a> Locator<'a> {
     fn length(&self, keys: &[Key<'_>], value: f64) -> Result<(), Error> {
         self.finite(keys, value)?;
         let (line, column) = self.at(keys);
-        let name = keys
-            .iter()
-            .map(|k| match k {
-                N(n) => format!(".{n}"),
-                I(i) => format!("[{i}]"),
-            })
-            .collect::<String>();
-        Error::check_length(self.path, line, column, name.trim_start_matches('.'), value)
+        Error::check_length(self.path, line, column, &key_name(keys), value)
     }
 
     /// Checks `value` is finite and `ok(value)`, else reports `requirement` at `keys`.
@@ -445,6 +431,17 @@ fn check_transmissions(device: &Device, loc: &Locator<'_>) -> Result<(), Error> 
         )?;
     }
     Ok(())
+}
+
+/// The dotted name of the value at `keys` (`dh[2].a_m`), as messages give it.
+fn key_name(keys: &[Key<'_>]) -> String {
+    let name: String = (keys.iter())
+        .map(|k| match k {
+            N(n) => format!(".{n}"),
+            I(i) => format!("[{i}]"),
+        })
+        .collect();
+    name.trim_start_matches('.').to_owned()
 }
 
 fn check_calibration(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {

@@ -420,7 +420,7 @@ enum HapcalStatus hapcal_predictor_marker_poses(struct HapcalPredictor *predicto
 
 // Whether the readings `q` lie outside the region the calibration was fitted on, as
 // [`crate::hapcal_robot_outside_region`] on the predictor's robot: `*joint_out` the joint
-// farthest past its range or [`HAPCAL_INSIDE_REGION`], `*distance_out` how far (rad or m).
+// farthest past its range or [`crate::HAPCAL_INSIDE_REGION`], `*distance_out` how far (rad or m).
 //
 // Returns `Ok`, `NullPointer`, `Length` or `NotFinite`; the out-params are written only on
 // `Ok`.

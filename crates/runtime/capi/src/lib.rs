@@ -140,6 +140,25 @@ fn record(status: HapcalStatus, message: String) -> HapcalStatus {
     status
 }
 
+/// Runs `f` on a handle (`None`: a NULL pointer, named `what`) under [`guard`]; after a
+/// caught panic `rebuild` makes the handle's workspace anew (a panic may leave it half taken
+/// apart; a panic of `rebuild` itself leaves the handle as it was).
+fn guard_handle<H>(
+    handle: Option<&mut H>,
+    what: &str,
+    f: impl FnOnce(&mut H) -> Result<(), Failure>,
+    rebuild: impl FnOnce(&mut H),
+) -> HapcalStatus {
+    let Some(handle) = handle else {
+        return record(HapcalStatus::NullPointer, format!("{what} is NULL"));
+    };
+    let status = guard(|| f(&mut *handle));
+    if status == HapcalStatus::Panic {
+        let _ = catch_unwind(AssertUnwindSafe(|| rebuild(handle)));
+    }
+    status
+}
+
 /// Runs `f`, turning its failure or panic into a status and a stored message.
 fn guard(f: impl FnOnce() -> Result<(), Failure>) -> HapcalStatus {
     match catch_unwind(AssertUnwindSafe(f)) {

@@ -8,14 +8,13 @@
 //! calibration record's covariance (GUM, JCGM 100:2008, §5.1.2), as `hapcal predict` prints it.
 
 use std::ffi::c_char;
-use std::panic::{AssertUnwindSafe, catch_unwind};
 
 use hapcal_runtime::{
     PredictionFrame, PredictionWorkspace, Predictor, TipPrediction, UncertaintyBasis,
 };
 
-use crate::robot::{HAPCAL_INSIDE_REGION, HapcalRobot, copy_text};
-use crate::{Failure, HapcalPose, HapcalStatus, guard, record, slice, slice_mut};
+use crate::robot::{HapcalRobot, copy_text};
+use crate::{Failure, HapcalPose, HapcalStatus, guard, slice, slice_mut};
 
 /// [`hapcal_predictor_new`]'s `frame`: poses of the tip links in the robot's root link frame.
 pub const HAPCAL_FRAME_ROOT: u32 = 0;
@@ -102,32 +101,9 @@ fn with_predictor(
         usize,
     ) -> Result<(), Failure>,
 ) -> HapcalStatus {
-    let Some(handle) = handle else {
-        return record(HapcalStatus::NullPointer, "predictor is NULL".to_owned());
-    };
-    let given = handle.given;
-    let status = guard(|| f(&handle.predictor, &mut handle.ws, &mut handle.tips, given));
-    if status == HapcalStatus::Panic {
-        let predictor = &handle.predictor;
-        if let Ok(ws) = catch_unwind(AssertUnwindSafe(|| predictor.workspace())) {
-            handle.ws = ws;
-        }
-    }
-    status
-}
-
-/// Checks that `n_joints` is the predictor's robot's.
-fn check_n(predictor: &Predictor, n_joints: usize) -> Result<(), Failure> {
-    let n = predictor.robot().n_joints();
-    if n_joints == n {
-        Ok(())
-    } else {
-        Err(Failure::Robot(hapcal_runtime::Error::Length {
-            what: "n_joints",
-            expected: n,
-            found: n_joints,
-        }))
-    }
+    let rebuild = |h: &mut HapcalPredictor| h.ws = h.predictor.workspace();
+    let run = |h: &mut HapcalPredictor| f(&h.predictor, &mut h.ws, &mut h.tips, h.given);
+    crate::guard_handle(handle, "predictor", run, rebuild)
 }
 
 /// Makes the predictor of `robot` in `frame` ([`HAPCAL_FRAME_ROOT`] or
@@ -282,7 +258,7 @@ pub unsafe extern "C" fn hapcal_predictor_predict(
     // SAFETY: the caller's contract.
     let handle = unsafe { predictor.as_mut() };
     with_predictor(handle, |predictor, ws, tips, given| {
-        check_n(predictor, n_joints)?;
+        crate::robot::check_n(predictor.robot(), n_joints)?;
         if n_tips != given {
             return Err(Failure::Robot(hapcal_runtime::Error::Length {
                 what: "n_tips",
@@ -322,7 +298,7 @@ pub unsafe extern "C" fn hapcal_predictor_marker_poses(
     // SAFETY: the caller's contract.
     let handle = unsafe { predictor.as_mut() };
     with_predictor(handle, |predictor, ws, _, _| {
-        check_n(predictor, n_joints)?;
+        crate::robot::check_n(predictor.robot(), n_joints)?;
         // SAFETY: the caller's contract, for every pointer; `HapcalPose` has `Pose`'s layout
         // (checked in robot.rs).
         let (q, poses) = unsafe {
@@ -341,7 +317,7 @@ pub unsafe extern "C" fn hapcal_predictor_marker_poses(
 
 /// Whether the readings `q` lie outside the region the calibration was fitted on, as
 /// [`crate::hapcal_robot_outside_region`] on the predictor's robot: `*joint_out` the joint
-/// farthest past its range or [`HAPCAL_INSIDE_REGION`], `*distance_out` how far (rad or m).
+/// farthest past its range or [`crate::HAPCAL_INSIDE_REGION`], `*distance_out` how far (rad or m).
 ///
 /// Returns `Ok`, `NullPointer`, `Length` or `NotFinite`; the out-params are written only on
 /// `Ok`.
@@ -359,18 +335,9 @@ pub unsafe extern "C" fn hapcal_predictor_outside_region(
 ) -> HapcalStatus {
     guard(|| {
         // SAFETY: the caller's contract, for every pointer.
-        let (predictor, q, joint, distance) = unsafe {
-            let predictor = &crate::get(predictor, "predictor")?.predictor;
-            check_n(predictor, n_joints)?;
-            (
-                predictor,
-                slice(q, n_joints, "q")?,
-                joint_out.as_mut().ok_or(Failure::Null("joint_out"))?,
-                distance_out.as_mut().ok_or(Failure::Null("distance_out"))?,
-            )
-        };
-        let flag = (predictor.robot().outside_region(q)).map_err(Failure::Robot)?;
-        (*joint, *distance) = flag.unwrap_or((HAPCAL_INSIDE_REGION, 0.0));
-        Ok(())
+        unsafe {
+            let robot = crate::get(predictor, "predictor")?.predictor.robot();
+            crate::robot::outside_region(robot, q, n_joints, joint_out, distance_out)
+        }
     })
 }

@@ -8,7 +8,6 @@
 //! on one thread at a time per handle (one handle per thread for parallel use).
 
 use std::ffi::{CStr, c_char};
-use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::Path;
 
 use hapcal_runtime::{
@@ -143,7 +142,7 @@ impl From<Compensation> for HapcalCompensation {
 }
 
 /// Checks that `n_joints` is the robot's.
-fn check_n(robot: &Robot, n_joints: usize) -> Result<(), Failure> {
+pub(crate) fn check_n(robot: &Robot, n_joints: usize) -> Result<(), Failure> {
     if n_joints == robot.n_joints() {
         Ok(())
     } else {
@@ -155,8 +154,6 @@ fn check_n(robot: &Robot, n_joints: usize) -> Result<(), Failure> {
     }
 }
 
-/// Runs `f` on a handle (`None`: a NULL pointer) under [`guard`]; after a caught panic the
-/// workspace is rebuilt (a panic may leave it half taken apart).
 /// [`with_robot`] for a call on tip `tip`: `InvalidArgument` for a tip past the tips the
 /// caller gave ([`hapcal_robot_n_tips`]), before `f` runs.
 fn with_robot_tip(
@@ -182,21 +179,14 @@ fn past_given(tip: usize) -> Error {
     }
 }
 
+/// Runs `f` on a handle (`None`: a NULL pointer) under [`guard`], its workspace rebuilt after
+/// a caught panic ([`crate::guard_handle`]).
 fn with_robot(
     handle: Option<&mut HapcalRobot>,
     f: impl FnOnce(&Robot, &mut RobotWorkspace) -> Result<(), Failure>,
 ) -> HapcalStatus {
-    let Some(handle) = handle else {
-        return record(HapcalStatus::NullPointer, "robot is NULL".to_owned());
-    };
-    let status = guard(|| f(&handle.robot, &mut handle.ws));
-    if status == HapcalStatus::Panic {
-        let robot = &handle.robot;
-        if let Ok(ws) = catch_unwind(AssertUnwindSafe(|| robot.workspace())) {
-            handle.ws = ws;
-        }
-    }
-    status
+    let rebuild = |h: &mut HapcalRobot| h.ws = h.robot.workspace();
+    crate::guard_handle(handle, "robot", |h| f(&h.robot, &mut h.ws), rebuild)
 }
 
 /// Loads the calibrated robot `urdf_path` (UTF-8, NUL-terminated) with the links `tips[0 ..
@@ -767,20 +757,36 @@ pub unsafe extern "C" fn hapcal_robot_outside_region(
 ) -> HapcalStatus {
     guard(|| {
         // SAFETY: the caller's contract, for every pointer.
-        let (robot, q, joint, distance) = unsafe {
+        unsafe {
             let robot = &crate::get(robot, "robot")?.robot;
-            check_n(robot, n_joints)?;
-            (
-                robot,
-                slice(q, n_joints, "q")?,
-                joint_out.as_mut().ok_or(Failure::Null("joint_out"))?,
-                distance_out.as_mut().ok_or(Failure::Null("distance_out"))?,
-            )
-        };
-        let flag = robot.outside_region(q).map_err(Failure::Robot)?;
-        (*joint, *distance) = flag.unwrap_or((HAPCAL_INSIDE_REGION, 0.0));
-        Ok(())
+            outside_region(robot, q, n_joints, joint_out, distance_out)
+        }
     })
+}
+
+/// [`hapcal_robot_outside_region`] on `robot`, for the robot's and the predictor's calls.
+///
+/// # Safety
+/// As [`hapcal_robot_outside_region`], for `q`, `joint_out` and `distance_out`.
+pub(crate) unsafe fn outside_region(
+    robot: &Robot,
+    q: *const f64,
+    n_joints: usize,
+    joint_out: *mut usize,
+    distance_out: *mut f64,
+) -> Result<(), Failure> {
+    check_n(robot, n_joints)?;
+    // SAFETY: the caller's contract, for every pointer.
+    let (q, joint, distance) = unsafe {
+        (
+            slice(q, n_joints, "q")?,
+            joint_out.as_mut().ok_or(Failure::Null("joint_out"))?,
+            distance_out.as_mut().ok_or(Failure::Null("distance_out"))?,
+        )
+    };
+    let flag = robot.outside_region(q).map_err(Failure::Robot)?;
+    (*joint, *distance) = flag.unwrap_or((HAPCAL_INSIDE_REGION, 0.0));
+    Ok(())
 }
 
 /// Stores a new handle holding `robot` (and a workspace made for it), of which the caller

@@ -45,7 +45,12 @@ fn robot_evaluation_and_compensation_do_not_allocate() {
         8e-4,
         "rad/(N·m)",
     )];
-    let path = crate::robot::write_calibrated(&crate::robot::scratch("no-alloc"), &text, &values);
+    let path = crate::robot::write_calibrated(
+        &crate::robot::scratch("no-alloc"),
+        &text,
+        &values,
+        &["l_gripper", "r_tool"],
+    );
     let robot = Robot::load_urdf(&path, &["l_gripper", "r_tool"]).expect("valid");
     let mut ws = robot.workspace();
     let q = [0.1, 0.3, -0.4, 0.6, 0.2, 0.5, -0.7, 0.3];

@@ -3,7 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
-use hapcal_calibrate::measured::{FrameReport, sidecar_toml};
+use hapcal_contract::{
+    Calibration, Frame, ModelName, PointMass, Region, SCHEMA_VERSION, Torque, TorqueSource,
+};
 use hapcal_io::CalibratedValue;
 use hapcal_kinematics::{Isometry3, Tree, Vector3};
 use hapcal_problems::{CalibratedModel, GravityCompliance, LinkMass};
@@ -51,19 +53,62 @@ pub(crate) fn compliance(joints: &str, value: f64, unit: &str) -> CalibratedValu
     }
 }
 
-/// Writes `urdf_text` as `<dir>/robot.urdf` and the sidecar of `values` beside it, as
-/// `hapcal calibrate --out robot.urdf` does; returns the URDF's path.
-pub(crate) fn write_calibrated(dir: &Path, urdf_text: &str, values: &[CalibratedValue]) -> PathBuf {
+/// Writes `urdf_text` as `<dir>/robot.urdf` and beside it the record of `values` (a
+/// `compliance` model with an instrument frame; loads from the URDF's link masses for `tips`,
+/// else lumped unit weights; gravity along −z at the equilibrium) through the contract's one
+/// writer, as `hapcal calibrate --out robot.urdf` does; returns the URDF's path.
+pub(crate) fn write_calibrated(
+    dir: &Path,
+    urdf_text: &str,
+    values: &[CalibratedValue],
+    tips: &[&str],
+) -> PathBuf {
     let urdf = dir.join("robot.urdf");
     std::fs::write(&urdf, urdf_text).expect("write urdf");
-    let frames = [FrameReport {
-        name: "instrument".to_owned(),
-        xyz_m: [1.2, -0.3, 0.05],
-        rpy_rad: [0.01, -0.02, 1.5],
-    }];
+    let tips: Vec<String> = tips.iter().map(|t| (*t).to_owned()).collect();
+    let tree = hapcal_io::import_urdf_tips(&urdf, &tips).expect("valid urdf");
+    let masses: Vec<PointMass> = (tree.inertials.iter())
+        .map(|l| PointMass {
+            joint: tree.joints[l.joint].name.clone(),
+            mass_kg: l.mass_kg,
+            com_m: l.com_m,
+        })
+        .collect();
+    let source = if masses.is_empty() {
+        TorqueSource::LumpedUnitWeights
+    } else {
+        TorqueSource::UrdfMasses
+    };
+    let record = Calibration {
+        schema_version: Some(SCHEMA_VERSION),
+        model: Some(ModelName::Compliance),
+        torque: Some(Torque {
+            source,
+            gravity_direction: [0.0, 0.0, -1.0],
+            gravity_m_s2: hapcal_runtime::STANDARD_GRAVITY,
+            equilibrium: true,
+            tips: Vec::new(),
+            masses,
+            handle_mass_kg: None,
+        }),
+        region: Some(Region {
+            rows: 100,
+            joints: Vec::new(),
+        }),
+        frames: [(
+            "instrument".to_owned(),
+            Frame {
+                xyz_m: [1.2, -0.3, 0.05],
+                rpy_rad: [0.01, -0.02, 1.5],
+            },
+        )]
+        .into(),
+        values: values.to_vec(),
+        ..Calibration::default()
+    };
     std::fs::write(
         urdf.with_extension("calibration.toml"),
-        sidecar_toml(&frames, values),
+        record.to_sidecar_toml(),
     )
     .expect("write sidecar");
     urdf
@@ -191,12 +236,15 @@ const TREE_K: [(&str, f64); 7] = [
     ("r_joint3", 1e-3),
 ];
 
+/// The tips of the tree fixture's calibrations.
+const TREE_TIPS: [&str; 2] = ["l_gripper", "r_tool"];
+
 #[test]
 fn tree_with_masses_and_compliance_matches_the_calibrated_model() {
     let text = std::fs::read_to_string(test_data("torso_two_arms.urdf")).expect("fixture");
     let dir = scratch("tree");
-    let path = write_calibrated(&dir, &text, &tree_compliances());
-    let tips = ["l_gripper", "r_tool"];
+    let path = write_calibrated(&dir, &text, &tree_compliances(), &TREE_TIPS);
+    let tips = TREE_TIPS;
     let robot = Robot::load_urdf(&path, &tips).expect("valid");
     assert_eq!(robot.gravity_model(), GravityModel::Masses);
     // lift, torso, three per arm; the head joint is on no path.
@@ -231,8 +279,8 @@ fn tree_comparison_detects_a_changed_compliance() {
     let dir = scratch("tree-changed");
     let mut values = tree_compliances();
     values[3].value *= 1.01;
-    let path = write_calibrated(&dir, &text, &values);
-    let tips = ["l_gripper", "r_tool"];
+    let path = write_calibrated(&dir, &text, &values, &TREE_TIPS);
+    let tips = TREE_TIPS;
     let robot = Robot::load_urdf(&path, &tips).expect("valid");
     let model = library_model(&path, &tips, &TREE_K);
     let (worst, _) = compare(&robot, &model);
@@ -275,7 +323,7 @@ fn seven_joint_arm_with_lumped_weights_matches_the_calibrated_model() {
     let values: Vec<CalibratedValue> = (k.iter())
         .map(|(n, v)| compliance(n, *v, "rad/m"))
         .collect();
-    let path = write_calibrated(&dir, &calibrated_iiwa_text(), &values);
+    let path = write_calibrated(&dir, &calibrated_iiwa_text(), &values, &["ball_link"]);
     let robot = Robot::load_urdf(&path, &["ball_link"]).expect("valid");
     assert_eq!(robot.gravity_model(), GravityModel::Lumped);
     assert_eq!(robot.joint_names(), names);
@@ -289,7 +337,7 @@ fn seven_joint_arm_with_lumped_weights_matches_the_calibrated_model() {
 fn loading_errors_name_the_file_and_what_is_wrong() {
     let text = std::fs::read_to_string(test_data("torso_two_arms.urdf")).expect("fixture");
     let dir = scratch("errors");
-    let path = write_calibrated(&dir, &text, &tree_compliances());
+    let path = write_calibrated(&dir, &text, &tree_compliances(), &TREE_TIPS);
     let message = |tips: &[&str]| {
         Robot::load_urdf(&path, tips)
             .expect_err("invalid")
@@ -309,13 +357,13 @@ fn loading_errors_name_the_file_and_what_is_wrong() {
         m.contains("\"l_joint1\"") && m.contains("no moving joint"),
         "{m}"
     );
-    // A compliance in the lumped unit beside link masses.
+    // A compliance in the lumped unit beside link masses (the record's source).
     let wrong = [compliance("torso_joint", 1e-4, "rad/m")];
-    let path = write_calibrated(&dir, &text, &wrong);
+    let path = write_calibrated(&dir, &text, &wrong, &TREE_TIPS);
     let m = Robot::load_urdf(&path, &["r_tool"])
         .expect_err("invalid")
         .to_string();
-    assert!(m.contains("rad/(N·m)") && m.contains("link masses"), "{m}");
+    assert!(m.contains("is in \"rad/m\", expected \"rad/(N·m)\""), "{m}");
     // A value the runtime does not evaluate.
     let transversal = [CalibratedValue {
         name: "transversal.torso_joint".to_owned(),
@@ -323,23 +371,28 @@ fn loading_errors_name_the_file_and_what_is_wrong() {
         std: 0.0,
         unit: "rad/(N·m)".to_owned(),
     }];
-    let path = write_calibrated(&dir, &text, &transversal);
+    let path = write_calibrated(&dir, &text, &transversal, &TREE_TIPS);
     let m = Robot::load_urdf(&path, &["r_tool"])
         .expect_err("invalid")
         .to_string();
     assert!(m.contains("transversal.torso_joint"), "{m}");
     // A malformed sidecar: file, line and column.
-    std::fs::write(
-        path.with_extension("calibration.toml"),
-        "[values]\n\"compliance.torso_joint\" = 3\n",
-    )
-    .expect("write");
-    let m = Robot::load_urdf(&path, &["r_tool"])
-        .expect_err("invalid")
-        .to_string();
-    let sidecar = path
-        .with_extension("calibration.toml")
-        .display()
-        .to_string();
+    let sidecar = path.with_extension("calibration.toml");
+    let refused = |text: &str| {
+        std::fs::write(&sidecar, text).expect("write");
+        Robot::load_urdf(&path, &["r_tool"])
+            .expect_err("invalid")
+            .to_string()
+    };
+    let m = refused("[values]\n\"compliance.torso_joint\" = 3\n");
+    let sidecar = sidecar.display().to_string();
     assert!(m.starts_with(&format!("{sidecar}:2:")), "{m}");
+    // An earlier hapcal's sidecar (frames and values, no schema_version) is refused.
+    let m = refused(
+        "[values]\n\"compliance.torso_joint\" = { value = 1e-4, std = 0.0, unit = \"rad/(N·m)\" }\n",
+    );
+    assert!(
+        m.starts_with(&format!("{sidecar}:1:1: missing key schema_version")),
+        "{m}"
+    );
 }

@@ -20,7 +20,12 @@ fn truth_and_nominal(name: &str) -> (Robot, Robot) {
     let values: Vec<_> = (JOINTS.iter().zip(K_TRUTH))
         .map(|(j, k)| compliance(j, k, "rad/(N·m)"))
         .collect();
-    let truth_path = write_calibrated(&dir, &with_iiwa_masses(&calibrated_iiwa_text()), &values);
+    let truth_path = write_calibrated(
+        &dir,
+        &with_iiwa_masses(&calibrated_iiwa_text()),
+        &values,
+        &["ball_link"],
+    );
     let truth = Robot::load_urdf(&truth_path, &["ball_link"]).expect("valid");
     let nominal_text = with_iiwa_masses(
         &std::fs::read_to_string(fixture("mukca/urdf/iiwa14.urdf")).expect("fixture"),

@@ -216,40 +216,33 @@ fn a_target_rotation_must_be_a_rotation() {
         let mut pose = zero_pose();
         let s = hapcal_robot_tip_pose(robot, 0, Q.as_ptr(), 7, &mut pose);
         assert_eq!(s, HapcalStatus::Ok);
-        let mut command = [0.0; 7];
-        let mut result = HapcalCompensation::default();
+        let compensate = |target: &HapcalTarget| {
+            let (mut command, mut result) = ([0.0; 7], HapcalCompensation::default());
+            let q = Q.as_ptr();
+            hapcal_robot_compensate(
+                robot,
+                0,
+                target,
+                q,
+                7,
+                &cfg,
+                command.as_mut_ptr(),
+                &mut result,
+            )
+        };
         let mut target = HapcalTarget {
             kind: HAPCAL_TARGET_POSE,
             pose,
         };
         // The tip's own pose is a rotation: reachable.
-        let s = hapcal_robot_compensate(
-            robot,
-            0,
-            &target,
-            Q.as_ptr(),
-            7,
-            &cfg,
-            command.as_mut_ptr(),
-            &mut result,
-        );
-        assert_eq!(s, HapcalStatus::Ok, "{}", message());
+        assert_eq!(compensate(&target), HapcalStatus::Ok, "{}", message());
         // Twice the rotation, and a reflection: refused.
         let twice = pose.rotation.map(|row| row.map(|x| 2.0 * x));
         let mut reflection = pose.rotation;
         reflection[2] = reflection[2].map(|x| -x);
         for (r, words) in [(twice, "|RᵀR − I|"), (reflection, "not a reflection")] {
             target.pose.rotation = r;
-            let s = hapcal_robot_compensate(
-                robot,
-                0,
-                &target,
-                Q.as_ptr(),
-                7,
-                &cfg,
-                command.as_mut_ptr(),
-                &mut result,
-            );
+            let s = compensate(&target);
             assert_eq!(s, HapcalStatus::InvalidArgument, "{}", message());
             assert!(message().contains(words), "{words}: {}", message());
         }

@@ -207,13 +207,17 @@ fn c_robot_example_prints_the_library_numbers() {
         [jac_deflection.iterations as f64]
     );
     assert_eq!(text(&stdout, "frames_found"), "1 1 0");
-    // The test robot's sidecar (frames and values, no record): predictions without σ.
-    assert_eq!(predictor.basis(), UncertaintyBasis::NoRecord);
-    assert_eq!(text(&stdout, "predictor"), "2 0 0");
-    assert_eq!(text(&stdout, "predicted0_has_sigma"), "0");
+    // The test robot's record (the compliances' stds, no covariance): σ from every value.
+    assert_eq!(predictor.basis(), UncertaintyBasis::StdsOnly);
+    assert_eq!(
+        text(&stdout, "predictor"),
+        format!("1 1 {}", predictor.n_values())
+    );
+    assert_eq!(predictor.n_values(), 7);
+    assert_eq!(text(&stdout, "predicted0_has_sigma"), "1");
     assert_eq!(
         text(&stdout, "uncertainty_note"),
-        predictor.uncertainty_note().expect("a note without record")
+        predictor.uncertainty_note().expect("a note on stds only")
     );
     // The record robot (stds, no covariance): σ from every value; the region flag as Rust's.
     assert_eq!(record_predictor.basis(), UncertaintyBasis::StdsOnly);

@@ -446,16 +446,16 @@ fn frames_markers_values_and_predictors_fail_with_statuses_and_messages() {
         assert_eq!(s, HapcalStatus::Ok);
         // In the root frame the prediction is the deflected tip link.
         assert_eq!(tips[0].pose, a[0]);
-        // The test robot's sidecar is frames and values without a record: no σ.
-        assert!(!tips[0].has_sigma && tips[0].sigma_m.is_nan());
+        // The test robot's record holds the compliances' stds, no covariance: σ from them.
+        assert!(tips[0].has_sigma && tips[0].sigma_m > 0.0);
         assert_eq!(
             hapcal_predictor_basis(predictor),
-            HapcalUncertaintyBasis::NoRecord
+            HapcalUncertaintyBasis::StdsOnly
         );
         let mut len = 0;
         let s = hapcal_predictor_uncertainty_note(predictor, ptr::null_mut(), 0, &mut len);
         assert_eq!(s, HapcalStatus::Ok);
-        assert!(len > 0, "no record: a note");
+        assert!(len > 0, "stds only: a note");
         let mut small = [0 as c_char; 8];
         let s = hapcal_predictor_uncertainty_note(predictor, small.as_mut_ptr(), 8, &mut len);
         assert_eq!(s, HapcalStatus::Length);

@@ -9,6 +9,10 @@ use std::ffi::{CString, c_char};
 use std::path::PathBuf;
 use std::ptr;
 
+use hapcal_contract::{
+    CalibratedValue, Calibration, Frame, ModelName, PointMass, Region, SCHEMA_VERSION, Torque,
+    TorqueSource,
+};
 use hapcal_runtime::{Pose, Robot};
 use hapcal_runtime_c::*;
 
@@ -82,4 +86,119 @@ fn every_recorded_value_is_evaluated_as_rust_evaluates_it() {
     assert!(moved > 1e-3, "{moved}");
     // SAFETY: the handle from hapcal_robot_load, freed once.
     unsafe { hapcal_robot_free(handle) };
+}
+
+/// The record of the C ABI's test robot (`tests/data/iiwa14_calibrated.urdf`): made-up
+/// identified frames (the instrument, marker 1) and joint compliances of 1e-4 to 3e-4
+/// rad/(N·m) (σ 1 %) under the URDF's link masses, gravity along −z at the torque
+/// equilibrium, bound to the URDF by its digest.
+fn test_robot_record(urdf: &std::path::Path) -> Calibration {
+    let tips = ["ball_link".to_owned(), "tool0".to_owned()];
+    let tree = hapcal_io::import_urdf_tips(urdf, &tips).expect("test robot");
+    let text = std::fs::read(urdf).expect("test robot");
+    let frame = |xyz_m, rpy_rad| Frame { xyz_m, rpy_rad };
+    let k = [1e-4, 1e-4, 1.5e-4, 1.5e-4, 2e-4, 3e-4, 3e-4];
+    let std = [1e-6, 1e-6, 1.5e-6, 1.5e-6, 2e-6, 3e-6, 3e-6];
+    Calibration {
+        schema_version: Some(SCHEMA_VERSION),
+        model: Some(ModelName::Compliance),
+        notes: Some(
+            "the C ABI's test robot: made-up identified frames and joint compliances".to_owned(),
+        ),
+        urdf_digest: Some(hapcal_contract::digest(&text)),
+        torque: Some(Torque {
+            source: TorqueSource::UrdfMasses,
+            gravity_direction: [0.0, 0.0, -1.0],
+            gravity_m_s2: hapcal_runtime::STANDARD_GRAVITY,
+            equilibrium: true,
+            tips: Vec::new(),
+            masses: (tree.inertials.iter())
+                .map(|l| PointMass {
+                    joint: tree.joints[l.joint].name.clone(),
+                    mass_kg: l.mass_kg,
+                    com_m: l.com_m,
+                })
+                .collect(),
+            handle_mass_kg: None,
+        }),
+        region: Some(Region {
+            rows: 200,
+            joints: Vec::new(),
+        }),
+        frames: [
+            (
+                "instrument".to_owned(),
+                frame([1.2, -0.3, 0.05], [0.01, -0.02, 1.5]),
+            ),
+            (
+                "marker1".to_owned(),
+                frame([0.001, -0.002, 0.003], [0.0, 0.0, 0.0]),
+            ),
+        ]
+        .into(),
+        values: (tree.joints.iter().zip(k).zip(std))
+            .map(|((j, k), std)| CalibratedValue {
+                name: format!("compliance.{}", j.name),
+                value: k,
+                std,
+                unit: "rad/(N·m)".to_owned(),
+            })
+            .collect(),
+        ..Calibration::default()
+    }
+}
+
+/// The test robot's sidecar is the record above as the contract's one writer writes it
+/// (`UPDATE_GOLDEN=1` rewrites it and fails, for review).
+#[test]
+fn the_test_robots_sidecar_is_written_by_the_contract() {
+    let urdf = record_robot().with_file_name("iiwa14_calibrated.urdf");
+    let sidecar = urdf.with_extension("calibration.toml");
+    let expected = test_robot_record(&urdf).to_sidecar_toml();
+    let found = std::fs::read_to_string(&sidecar).unwrap_or_default();
+    if found != expected && std::env::var_os("UPDATE_GOLDEN").is_some() {
+        std::fs::write(&sidecar, &expected).expect("written");
+        panic!(
+            "UPDATE_GOLDEN: rewrote {}; review the diff and run again without it",
+            sidecar.display()
+        );
+    }
+    assert_eq!(
+        found,
+        expected,
+        "{} (UPDATE_GOLDEN=1 rewrites it)",
+        sidecar.display()
+    );
+}
+
+/// The record's loads are the URDF's link masses at the equilibrium, as the robot's own
+/// defaults: loaded with its sidecar, the test robot deflects bit for bit as the bare URDF
+/// with the record's compliances set.
+#[test]
+fn the_test_robots_record_loads_the_urdfs_own_masses() {
+    let urdf = record_robot().with_file_name("iiwa14_calibrated.urdf");
+    let tips = ["ball_link", "tool0"];
+    let recorded = Robot::load_urdf(&urdf, &tips).expect("test robot");
+    let text = std::fs::read_to_string(&urdf).expect("test robot");
+    let bare = Robot::from_urdf_str(&text, "bare", None, &tips).expect("test robot");
+    let bare = bare
+        .with_compliances(recorded.compliances())
+        .expect("valid");
+    assert!(recorded.has_compliance());
+    let mut ws = recorded.workspace();
+    for k in 0..20 {
+        let q: Vec<f64> = (0..7)
+            .map(|j| 1.6 * ((k * 7 + j) as f64 * 0.37).sin())
+            .collect();
+        let (mut ours, mut theirs) = ([Pose::IDENTITY; 2], [Pose::IDENTITY; 2]);
+        recorded
+            .deflected_tip_poses(&q, &mut ws, &mut ours)
+            .expect("valid");
+        bare.deflected_tip_poses(&q, &mut ws, &mut theirs)
+            .expect("valid");
+        for (a, b) in ours.iter().zip(&theirs) {
+            assert_eq!(a.translation_m, b.translation_m, "q {q:?}");
+            assert_eq!(a.rotation, b.rotation, "q {q:?}");
+        }
+    }
 }
