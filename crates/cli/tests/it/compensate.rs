@@ -419,5 +419,8 @@ fn compensate_words_the_first_ten_targets_missed_and_counts_the_others() {
     let named = |line: usize| format!("{}:{line}: not reached", targets.display());
     // Lines 2 to 11 are the first ten targets; 12 and 13 are only counted.
     assert!((2..=11).all(|line| err.contains(&named(line))), "{err}");
-    assert!(!err.contains(&named(12)) && !err.contains(&named(13)), "{err}");
+    assert!(
+        !err.contains(&named(12)) && !err.contains(&named(13)),
+        "{err}"
+    );
 }
