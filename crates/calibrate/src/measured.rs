@@ -1852,16 +1852,22 @@ fn check_distinct_configurations(
     n_rows: usize,
     frames_only: &Fitted,
 ) -> Result<()> {
+    let n_residuals = frames_only.identified.n_residuals;
+    let per_configuration = n_residuals as f64 / n_rows as f64;
+    let n_kept = frames_only.identified.identifiability.kept.len();
+    let enough = |n_distinct: usize| (n_distinct as f64) * per_configuration > n_kept as f64;
+    // Counted until there are enough: each row is compared with the few distinct ones before
+    // it, so a file of a million rows costs a million short scans, not a million squared.
     let mut distinct: Vec<&[f64]> = Vec::new();
     for row in train.iter().flat_map(|t| &t.rows) {
+        if enough(distinct.len()) {
+            return Ok(());
+        }
         if !distinct.contains(&row.q.as_slice()) {
             distinct.push(&row.q);
         }
     }
-    let n_residuals = frames_only.identified.n_residuals;
-    let per_configuration = n_residuals as f64 / n_rows as f64;
-    let n_kept = frames_only.identified.identifiability.kept.len();
-    if (distinct.len() as f64) * per_configuration <= n_kept as f64 {
+    if !enough(distinct.len()) {
         bail!(
             "the training data hold {} distinct joint configurations ({n_rows} rows), about {:.0} \
              independent residuals, not more than the {n_kept} frame parameters: record the \
