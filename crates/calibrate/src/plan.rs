@@ -1079,7 +1079,7 @@ struct PlanningProblem<'a> {
     candidates: Vec<Vec<f64>>,
     /// Rows of `jac` that carry the measured rows (its first rows): their residuals, or, for
     /// measured rows whose Jacobian would exceed [`hapcal_identify::STREAMING_AUTO_ENTRIES`]
-    /// entries, the rows of its R factor ([`measured_r_factor`]), which has the same Gram
+    /// entries, the rows of its R factor (streamed in row blocks), which has the same Gram
     /// matrix and so the same identifiability and information.
     n_measured_residuals: usize,
     /// Residuals of one candidate pose.
@@ -1093,69 +1093,41 @@ struct PlanningProblem<'a> {
     jac: Mat<f64>,
 }
 
-/// Measured rows whose Jacobian [`measured_r_factor`] evaluates at once.
-const MEASURED_BLOCK_ROWS: usize = 20_000;
-
-/// The R factor (`n × n`, `n = layout.len()`) of the Jacobian of the rows `obs` at `x` over
-/// `layout`'s parameters, evaluated `block_rows` rows at a time on `problem`'s
-/// model (`CalibrationProblem::with_observations`), each block's columns matched by name (a
-/// block without some marker has no column of its frame: zeros there), and stacked under the
-/// R of the blocks before it for a Householder QR (a tall-skinny QR: `Rᵀ·R = Jᵀ·J`, Golub–Van
-/// Loan §5.2). Its memory is one block's Jacobian, whatever the number of rows.
+/// The R factor of the Jacobian of the rows `obs` at `x` over `layout`'s parameters
+/// (`k × n`, `n = layout.len()`, `Rᵀ·R = Jᵀ·J`): their problem on `problem`'s model
+/// (`CalibrationProblem::with_observations`), its Jacobian streamed in row blocks
+/// ([`hapcal_identify::jacobian_r_factor`]), its columns placed by name (a parameter the rows
+/// do not have, such as the frame of a marker they never see, is a zero column).
 ///
 /// # Errors
-/// A block the model cannot build or evaluate.
+/// Rows the model cannot build or evaluate.
 fn measured_r_factor(
     problem: &CalibrationProblem,
     layout: &hapcal_identify::ParamLayout,
     x: &faer::Col<f64>,
     obs: Observations,
-    block_rows: usize,
 ) -> Result<Mat<f64>> {
-    let n = layout.len();
-    let mut r = Mat::<f64>::zeros(0, n);
-    let mut rows = obs.rows.into_iter().peekable();
-    while rows.peek().is_some() {
-        let block = Observations {
-            rows: rows.by_ref().take(block_rows.max(1)).collect(),
-            ..Observations::default()
-        };
-        let p = problem
-            .with_observations(block)
-            .context("building a block of the measured rows")?;
-        let block_layout = p.layout();
-        let to_full: Vec<usize> = (0..block_layout.len())
-            .map(|k| {
-                layout.index_of(block_layout.name(k)).with_context(|| {
-                    format!(
-                        "no parameter {} in the planning problem",
-                        block_layout.name(k)
-                    )
-                })
+    let p = (problem.with_observations(obs)).context("building the measured rows' problem")?;
+    let rows_layout = p.layout();
+    let to_full: Vec<usize> = (0..rows_layout.len())
+        .map(|k| {
+            layout.index_of(rows_layout.name(k)).with_context(|| {
+                format!(
+                    "no parameter {} in the planning problem",
+                    rows_layout.name(k)
+                )
             })
-            .collect::<Result<_>>()?;
-        let x_block = faer::Col::from_fn(to_full.len(), |k| x[to_full[k]]);
-        let mut j = Mat::<f64>::zeros(p.n_residuals(), to_full.len());
-        p.jacobian(x_block.as_ref(), j.as_mut())
-            .map_err(|e| anyhow::anyhow!("{e}"))
-            .context("evaluating the measured rows' Jacobian")?;
-        let mut stacked = Mat::<f64>::zeros(r.nrows() + j.nrows(), n);
-        stacked
-            .as_mut()
-            .submatrix_mut(0, 0, r.nrows(), n)
-            .copy_from(&r);
-        for (k, &c) in to_full.iter().enumerate() {
-            stacked
-                .as_mut()
-                .col_mut(c)
-                .subrows_mut(r.nrows(), j.nrows())
-                .copy_from(j.col(k));
-        }
-        let qr = stacked.qr();
-        let full = qr.R();
-        r = full.submatrix(0, 0, full.nrows().min(n), n).to_owned();
+        })
+        .collect::<Result<_>>()?;
+    let x_rows = faer::Col::from_fn(to_full.len(), |k| x[to_full[k]]);
+    let r = hapcal_identify::jacobian_r_factor(&p, x_rows.as_ref())
+        .map_err(|e| anyhow::anyhow!("{e}"))
+        .context("evaluating the measured rows' Jacobian")?;
+    let mut full = Mat::<f64>::zeros(r.nrows(), layout.len());
+    for (k, &c) in to_full.iter().enumerate() {
+        full.as_mut().col_mut(c).copy_from(r.col(k));
     }
-    Ok(r)
+    Ok(full)
 }
 
 impl<'a> PlanningProblem<'a> {
@@ -1236,13 +1208,7 @@ impl<'a> PlanningProblem<'a> {
         let n_measured_residuals = match measured_obs {
             None => n_measured_residuals,
             Some(measured_obs) => {
-                let r = measured_r_factor(
-                    &problem,
-                    &layout,
-                    &out.fitted.x,
-                    measured_obs,
-                    MEASURED_BLOCK_ROWS,
-                )?;
+                let r = measured_r_factor(&problem, &layout, &out.fitted.x, measured_obs)?;
                 let mut stacked = Mat::<f64>::zeros(r.nrows() + jac.nrows(), layout.len());
                 stacked
                     .as_mut()
@@ -1936,9 +1902,9 @@ mod tests {
     }
 
     #[test]
-    fn the_measured_rows_r_factor_in_blocks_has_their_jacobians_gram_matrix() {
-        // The iiwa's geometric problem on 50 marker rows: the R factor stacked from blocks of
-        // 7 rows (the last one short) against the Jacobian of all rows at once.
+    fn the_measured_rows_r_factor_has_their_jacobians_gram_matrix() {
+        // The iiwa's geometric problem on 50 marker rows: the R factor streamed in the
+        // problem's row blocks against the Jacobian of all rows at once.
         let robot = crate::data::robot_from_device(&iiwa()).expect("robot");
         let terms = crate::measured::terms(ModelName::Geometric, &robot).expect("terms");
         let mut rng = ChaCha8Rng::seed_from_u64(5);
@@ -1966,7 +1932,7 @@ mod tests {
         problem
             .jacobian(x.as_ref(), jac.as_mut())
             .expect("jacobian");
-        let r = measured_r_factor(&problem, &layout, &x, obs(&rows), 7).expect("r factor");
+        let r = measured_r_factor(&problem, &layout, &x, obs(&rows)).expect("r factor");
         assert_eq!((r.nrows(), r.ncols()), (layout.len(), layout.len()));
         let (gram, from_r) = (jac.transpose() * &jac, r.transpose() * &r);
         // Rounding of a QR over entries of order 1 (m per rad): relative to the largest entry.

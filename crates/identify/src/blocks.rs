@@ -377,6 +377,23 @@ pub fn levenberg_marquardt_streaming(
     Ok(streaming_fit(blocks, n, x0, free, cfg, lin).0)
 }
 
+/// The R factor (`n × n`, `n = p.layout().len()`) of the Jacobian of `p` at `x`, streamed
+/// through its row blocks as [`levenberg_marquardt_streaming`] linearises (TSQR, see the module
+/// source): `Rᵀ·R = Jᵀ·J`, so it carries the rows' identifiability and information at the
+/// memory of [`N_LEAVES`] triangles and one block per thread, never `J`.
+///
+/// # Errors
+/// [`Error::NoRowBlocks`] if the problem does not provide [`Problem::row_blocks`]; an evaluation
+/// error or a non-finite entry of `J` or `r`, as [`levenberg_marquardt_streaming`] at `x0`.
+pub fn jacobian_r_factor(p: &impl Problem, x: ColRef<'_, f64>) -> Result<Mat<f64>, Error> {
+    let blocks = p.row_blocks().ok_or(Error::NoRowBlocks)?;
+    let n = p.layout().len();
+    let lin = linearise(blocks, x, n).map_err(|e| error_at_x0(e, p.layout()))?;
+    // The first n columns of the R of [J r] are the R of J: the QR of a column never touches
+    // the columns before it.
+    Ok(lin.r_aug.submatrix(0, 0, n, n).to_owned())
+}
+
 /// The LM iteration on a linearisation at `x0`; returns the fit and the last linearisation
 /// (at the fit's estimate, or at the point before the last accepted step when the stopping
 /// test fired right after it).
