@@ -270,18 +270,19 @@ impl Compensated {
                 let _ = writeln!(s.csv, ",{m:?},{rad:?}");
                 s.worst_position_m = s.worst_position_m.max(m);
                 s.worst_orientation_rad = s.worst_orientation_rad.max(rad);
-            } else if s.missed.len() < LISTED {
-                s.n_missed += 1;
-                s.missed.push(format!(
-                    "{}:{}: not reached: {:.4} mm and {:.4} mrad from the target after {} steps",
-                    targets.display(),
-                    row.line,
-                    c.position_error_m * 1e3,
-                    c.orientation_error_rad * 1e3,
-                    c.iterations
-                ));
             } else {
                 s.n_missed += 1;
+                if s.missed.len() < LISTED {
+                    s.missed.push(format!(
+                        "{}:{}: not reached: {:.4} mm and {:.4} mrad from the target after {} \
+                         steps",
+                        targets.display(),
+                        row.line,
+                        c.position_error_m * 1e3,
+                        c.orientation_error_rad * 1e3,
+                        c.iterations
+                    ));
+                }
             }
         }
         s

@@ -84,16 +84,9 @@ pub fn run(args: &CompensateArgs) -> Result<String> {
         },
     };
     // A progress bar on a terminal, once the targets are read.
-    let mut bar = None;
-    let compensated = compensate_targets(&input, &mut |done, targets| {
-        let bar = bar.get_or_insert_with(|| {
-            crate::progress_bar(targets as u64, "compensating {bar:40} {pos}/{len} targets")
-        });
-        bar.set_position(done as u64);
+    let compensated = crate::with_bar("compensating {bar:40} {pos}/{len} targets", |progress| {
+        compensate_targets(&input, progress)
     })?;
-    if let Some(bar) = &bar {
-        bar.finish_and_clear();
-    }
     let CompensationSummary {
         csv,
         missed,

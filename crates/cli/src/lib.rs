@@ -89,6 +89,21 @@ pub fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
     bar
 }
 
+/// Runs `work` with a progress callback `(done, all)` that draws a progress bar with the
+/// `indicatif` template `template` from its first call (work that never reports draws none),
+/// cleared when `work` returns; on a terminal only, as [`with_spinner`].
+pub fn with_bar<T>(template: &str, work: impl FnOnce(&mut dyn FnMut(usize, usize)) -> T) -> T {
+    let mut bar: Option<indicatif::ProgressBar> = None;
+    let out = work(&mut |done, all| {
+        let bar = bar.get_or_insert_with(|| progress_bar(all as u64, template));
+        bar.set_position(done as u64);
+    });
+    if let Some(bar) = &bar {
+        bar.finish_and_clear();
+    }
+    out
+}
+
 /// Runs `work` under a spinner on standard error that says `message` and the time elapsed, for
 /// a command whose length is not known beforehand (a calibration, a diagnosis, a setup check:
 /// tens of seconds on a day's log); cleared when `work` returns. Drawn on a terminal only

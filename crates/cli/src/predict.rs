@@ -66,26 +66,11 @@ pub fn run(args: &PredictArgs, units: &Units) -> Result<(String, Vec<String>)> {
         crate::html::check(report, &inputs)?;
     }
     // A progress bar when the work is long, on a terminal only.
-    let mut bar = None;
     let (device, data) = (&args.device, &args.data);
     let (tips, frame, poses) = (&args.tips, args.instrument_frame, args.poses);
-    let predicted = predict(
-        device,
-        tips,
-        data,
-        units,
-        frame,
-        poses,
-        &mut |done, rows| {
-            let bar = bar.get_or_insert_with(|| {
-                crate::progress_bar(rows as u64, "predicting {bar:40} {pos}/{len} rows")
-            });
-            bar.set_position(done as u64);
-        },
-    )?;
-    if let Some(bar) = &bar {
-        bar.finish_and_clear();
-    }
+    let predicted = crate::with_bar("predicting {bar:40} {pos}/{len} rows", |progress| {
+        predict(device, tips, data, units, frame, poses, progress)
+    })?;
     finish(args, &inputs, &predicted)
 }
 
