@@ -32,6 +32,7 @@ use hapcal_kinematics::{FrameSpec, Isometry3, Point3, Tree, UnitQuaternion, Vect
 use hapcal_problems::{
     CalibratedModel, CalibrationProblem, ModelTerms, Observations, Row, RowKind, Weights,
 };
+use std::sync::Arc;
 
 pub use crate::data::{
     Robot, is_marker_file, load_tables, robot_from_device, robot_from_urdf,
@@ -265,32 +266,29 @@ fn linear_frames(
     if samples.len() * 3 < n_unknowns + 3 {
         return None;
     }
-    let mut a = nalgebra::DMatrix::<f64>::zeros(3 * samples.len(), n_unknowns);
-    let mut b = nalgebra::DVector::<f64>::zeros(3 * samples.len());
-    for (i, s) in samples.iter().enumerate() {
+    // The normal equations, summed over blocks of samples: the system is small (12 + 27 per
+    // marker unknowns) and tall, and its rows never all held (a million samples would take
+    // gigabytes); an initial guess needs no better than their precision.
+    let (ata, atb) = normal_equations(samples, n_unknowns, |s, a, b| {
         let p = s.tip.translation.vector;
         let rt = s.tip.rotation.to_rotation_matrix();
         for r in 0..3 {
-            let row = 3 * i + r;
             // R[r, c]·p[c]: unknown R stored row-major at 0..9.
             for c in 0..3 {
-                a[(row, 3 * r + c)] = p[c];
+                a[(r, 3 * r + c)] = p[c];
             }
-            a[(row, 9 + r)] = 1.0;
+            a[(r, 9 + r)] = 1.0;
             // Σ_{j,l} R_tip[j, l]·N_{k,j,l}[r], N_{k,j,l} = R[:, j]·m_k[l].
             for j in 0..3 {
                 for l in 0..3 {
-                    a[(row, 12 + 27 * s.marker + 9 * j + 3 * l + r)] = rt[(j, l)];
+                    a[(r, 12 + 27 * s.marker + 9 * j + 3 * l + r)] = rt[(j, l)];
                 }
             }
-            b[row] = s.measured[r];
+            b[r] = s.measured[r];
         }
-    }
-    // Normal equations: the system is small (12 + 27 per marker unknowns) and tall; an initial
-    // guess needs no better than their precision. Singular values of A are the square roots of
-    // AᵀA's eigenvalues; a ratio below 1e-6 means the samples do not determine the unknowns.
-    let ata = a.tr_mul(&a);
-    let atb = a.tr_mul(&b);
+    });
+    // Singular values of A are the square roots of AᵀA's eigenvalues; a ratio below 1e-6 means
+    // the samples do not determine the unknowns.
     let eig = ata.clone().symmetric_eigen();
     let (emin, emax) = (eig.eigenvalues.min(), eig.eigenvalues.max());
     if emax.is_nan() || emax <= 0.0 || emin < 1e-12 * emax {
@@ -306,26 +304,53 @@ fn linear_frames(
     }
     let rotation = nalgebra::Rotation3::from_matrix_unchecked(u * d * v_t);
     // With R fixed: p_meas − R·p_tip = t + R·R_tip·m_k, linear in t and the m_k.
-    let mut a2 = nalgebra::DMatrix::<f64>::zeros(3 * samples.len(), 3 + 3 * n_markers);
-    let mut b2 = nalgebra::DVector::<f64>::zeros(3 * samples.len());
-    for (i, s) in samples.iter().enumerate() {
+    let (ata2, atb2) = normal_equations(samples, 3 + 3 * n_markers, |s, a, b| {
         let rr = rotation.matrix() * s.tip.rotation.to_rotation_matrix().matrix();
         let rhs = s.measured.coords - rotation * s.tip.translation.vector;
         for r in 0..3 {
-            a2[(3 * i + r, r)] = 1.0;
+            a[(r, r)] = 1.0;
             for c in 0..3 {
-                a2[(3 * i + r, 3 + 3 * s.marker + c)] = rr[(r, c)];
+                a[(r, 3 + 3 * s.marker + c)] = rr[(r, c)];
             }
-            b2[3 * i + r] = rhs[r];
+            b[r] = rhs[r];
         }
-    }
-    let y = a2.tr_mul(&a2).cholesky()?.solve(&a2.tr_mul(&b2));
+    });
+    let y = ata2.cholesky()?.solve(&atb2);
     let t = Vector3::new(y[0], y[1], y[2]);
     let offsets: Vec<Vector3<f64>> = (0..n_markers)
         .map(|k| Vector3::new(y[3 + 3 * k], y[4 + 3 * k], y[5 + 3 * k]))
         .collect();
     let base = Isometry3::from_parts(t.into(), UnitQuaternion::from_rotation_matrix(&rotation));
     offsets_finite(&base, &offsets).then_some((base, offsets))
+}
+
+/// Samples per block of [`normal_equations`]: the bundled recordings' few hundred fit in one.
+const NORMAL_EQUATION_BLOCK: usize = 20_000;
+
+/// `(AᵀA, Aᵀb)` of the linear system whose three rows per sample `row` writes (into a zeroed
+/// `3 × n_unknowns` block of `A` and 3 entries of `b`), summed over blocks of
+/// [`NORMAL_EQUATION_BLOCK`] samples: never more than a block's rows held.
+fn normal_equations(
+    samples: &[Sample],
+    n_unknowns: usize,
+    row: impl Fn(
+        &Sample,
+        &mut nalgebra::DMatrixViewMut<'_, f64>,
+        &mut nalgebra::DVectorViewMut<'_, f64>,
+    ),
+) -> (nalgebra::DMatrix<f64>, nalgebra::DVector<f64>) {
+    let mut ata = nalgebra::DMatrix::<f64>::zeros(n_unknowns, n_unknowns);
+    let mut atb = nalgebra::DVector::<f64>::zeros(n_unknowns);
+    for block in samples.chunks(NORMAL_EQUATION_BLOCK) {
+        let mut a = nalgebra::DMatrix::<f64>::zeros(3 * block.len(), n_unknowns);
+        let mut b = nalgebra::DVector::<f64>::zeros(3 * block.len());
+        for (i, s) in block.iter().enumerate() {
+            row(s, &mut a.rows_mut(3 * i, 3), &mut b.rows_mut(3 * i, 3));
+        }
+        ata += a.tr_mul(&a);
+        atb += a.tr_mul(&b);
+    }
+    (ata, atb)
 }
 
 /// Whether a closed-form solution is finite (a degenerate system can yield NaN).
@@ -3296,7 +3321,7 @@ fn equilibrate(
     let warm = Warm::of(&fitted);
     let mut x = fitted.x.clone();
     let mut model = model;
-    let mut previous: Option<Vec<Vec<f64>>> = None;
+    let mut previous: Option<Arc<[f64]>> = None;
     let mut refits = 0;
     // The observations are built for each problem rather than copied from one held beside
     // it: one copy of every row at a time.
@@ -3307,16 +3332,16 @@ fn equilibrate(
             equilibrium: true,
             ..model.clone()
         };
-        // One entry per observation row, in the order of `observations`.
+        let obs = observations(train, &all);
+        // One configuration's angles after another, in the order of the observations.
         let mut at = Vec::new();
-        for row in rows() {
-            let (angles, _) = solving.load_angles(&row.q);
-            let n = usize::from(row.distance_m.is_some()) + row.markers.len();
-            at.extend(std::iter::repeat_n(angles, n));
+        for rows in obs.configurations() {
+            at.extend(solving.load_angles(&obs.rows[rows.start].q).0);
         }
+        let at: Arc<[f64]> = at.into();
         if let Some(p) = &previous {
-            let change = (p.iter().zip(&at))
-                .flat_map(|(a, b)| a.iter().zip(b).map(|(a, b)| (a - b).abs()))
+            let change = (p.iter().zip(at.iter()))
+                .map(|(a, b)| (a - b).abs())
                 .fold(0.0, f64::max);
             // Ten microradians move a tip a metre out by ten micrometres: below the noise of
             // a tracker or motion capture. Each refit shrinks the change about twentyfold on
@@ -3326,10 +3351,9 @@ fn equilibrate(
             }
         }
         let terms = ModelTerms {
-            load_angles: Some(at.clone()),
+            load_angles: Some(Arc::clone(&at)),
             ..terms(rung, robot)?
         };
-        let obs = observations(train, &all);
         let problem = CalibrationProblem::on_tree(tree.clone(), obs, weights, terms)
             .context("building the calibration problem")?;
         // Past the dense back end's bound, in row blocks: the Jacobian of every training row

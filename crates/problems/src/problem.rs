@@ -86,11 +86,13 @@ pub struct ModelTerms {
     /// robot without the instrument frame, every tip of its tree,
     /// [`GravityCompliance::joint_loads`]); `None` = the problem's own tips.
     pub torque_tips: Option<Vec<Chain>>,
-    /// Per observation row, the joint angles at which the gravity loads are evaluated (the
-    /// torque equilibrium of a previous estimate, [`CalibratedModel::load_angles`]); `None`:
-    /// at the readings. With them, the model the problem describes solves the equilibrium
-    /// ([`CalibratedModel::equilibrium`]).
-    pub load_angles: Option<Vec<Vec<f64>>>,
+    /// Per configuration of the observations ([`Observations::configurations`]), the joint
+    /// angles at which the gravity loads are evaluated (the torque equilibrium of a previous
+    /// estimate, [`CalibratedModel::load_angles`]), rad, row-major
+    /// (`n_configurations × n_joints`; shared, so that a caller keeps them beside the problem
+    /// without a copy); `None`: at the readings. With them, the model the problem describes
+    /// solves the equilibrium ([`CalibratedModel::equilibrium`]).
+    pub load_angles: Option<Arc<[f64]>>,
 }
 
 /// How many transversal compliances a revolute joint has ([`ModelTerms::transversal`]).
@@ -194,6 +196,20 @@ pub struct Observations {
     pub n_points: usize,
 }
 
+impl Observations {
+    /// The configurations of the rows: each run of consecutive rows with equal joint readings
+    /// (a file row's markers and distance), as a range of row indices, in row order. The
+    /// gravity loads of a compliance model are evaluated once per configuration.
+    pub fn configurations(&self) -> impl Iterator<Item = Range<usize>> + '_ {
+        let mut start = 0;
+        self.rows.chunk_by(|a, b| a.q == b.q).map(move |run| {
+            let range = start..start + run.len();
+            start = range.end;
+            range
+        })
+    }
+}
+
 /// Standard deviations that weight each measurement type (residual = error / sigma).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Weights {
@@ -244,8 +260,9 @@ pub struct CalibrationProblem {
     /// has none. With one for every joint of an angle term, the angle terms' columns come
     /// from the pose Jacobian, without a second pass for the geometric Jacobian.
     joint_param: Vec<Option<usize>>,
-    /// Tilt of each transversal term per row (row-major, `n_rows × transversal.len()`), the
-    /// transversal moment in the joint's frame ([`TransversalTerm`]).
+    /// Tilt of each transversal term per configuration (row-major,
+    /// `n_configurations × transversal.len()`), the transversal moment in the joint's frame
+    /// ([`TransversalTerm`]).
     tilt_basis: Vec<[f64; 3]>,
     /// Joint-angle terms of the compliance and harmonic models: (joint, parameter index after
     /// the kinematic ones). Empty for a purely geometric problem.
@@ -253,9 +270,13 @@ pub struct CalibrationProblem {
     /// Per angle parameter (index after the kinematic ones), its terms' indices in
     /// [`Self::angle_terms`]: a Jacobian column sums only its own terms.
     terms_of_param: Vec<Vec<usize>>,
-    /// Basis value of each angle term per row (row-major, `n_rows × angle_terms.len()`):
-    /// gravity torque (m or N·m) for compliance terms, `sin`/`cos` for harmonic terms.
+    /// Basis value of each angle term per configuration (row-major,
+    /// `n_configurations × angle_terms.len()`): gravity torque (m or N·m) for compliance
+    /// terms, `sin`/`cos` for harmonic terms.
     angle_basis: Vec<f64>,
+    /// Each row's configuration ([`Observations::configurations`]), the index of its bases;
+    /// empty for a problem without angle or transversal terms.
+    row_config: Vec<usize>,
     layout: ParamLayout,
     n_residuals: usize,
     /// `[sin q, cos q]` per joint of the distance rows outside [`Self::lane_groups`]
@@ -311,8 +332,6 @@ struct RowContext<'a> {
     n_angle: usize,
     /// `n_angle` and the transversal compliances.
     n_comp: usize,
-    /// Angle terms per row.
-    n_terms: usize,
     /// Transversal tilts per row.
     n_tilts: usize,
     /// Whether the angle terms' columns come from their joints' parameter columns.
@@ -426,14 +445,15 @@ impl CalibrationProblem {
             torque_tips,
             load_angles,
         } = terms;
-        if let Some(a) = &load_angles
-            && (a.len() != obs.rows.len() || a.iter().any(|q| q.len() != tips[0].n_joints()))
-        {
-            return Err(Error::JointCount {
-                row: a.len(),
-                expected: obs.rows.len(),
-                found: a.len(),
-            });
+        if let Some(a) = &load_angles {
+            let expected = obs.configurations().count() * tips.first().map_or(0, Chain::n_joints);
+            if a.len() != expected {
+                return Err(Error::JointCount {
+                    row: 0,
+                    expected,
+                    found: a.len(),
+                });
+            }
         }
         let Some(chain) = tips.first().cloned() else {
             return Err(Error::NoSuchParam {
@@ -472,16 +492,9 @@ impl CalibrationProblem {
                 });
             }
         }
-        let loads: Vec<Vec<crate::JointLoad>> = match &compliance {
-            Some(model) => {
-                specs.extend(compliance_specs(&chain, model));
-                row_loads(model, &torque_tips, &obs, load_angles.as_deref())
-            }
-            None => Vec::new(),
-        };
-        let torques: Vec<Vec<f64>> = (loads.iter())
-            .map(|l| l.iter().map(|l| l.torque).collect())
-            .collect();
+        if let Some(model) = &compliance {
+            specs.extend(compliance_specs(&chain, model));
+        }
         let n_comp = compliance.as_ref().map_or(0, |c| c.n_params(n_joints));
         let mut angle_terms: Vec<(usize, usize)> = match &compliance {
             Some(c) => (0..n_joints).map(|j| (j, c.group(j))).collect(),
@@ -517,10 +530,14 @@ impl CalibrationProblem {
             terms
         };
         let joint_param = joint_params(&tips, n_joints);
-        let tilt_basis: Vec<[f64; 3]> = (loads.iter())
-            .flat_map(|l| transversal_terms.iter().map(|t| t.tilt(&l[t.joint]).into()))
-            .collect();
-        let angle_basis = angle_basis(&obs, &torques, harmonics.as_ref(), angle_terms.len());
+        let (angle_basis, tilt_basis, row_config) = row_bases(
+            &obs,
+            compliance.as_ref().map(|c| (c, torque_tips.as_slice())),
+            load_angles.as_deref(),
+            harmonics.as_ref(),
+            &transversal_terms,
+            angle_terms.len(),
+        );
         specs.extend((0..obs.n_points).flat_map(|point| {
             ["x", "y", "z"].map(|axis| ParamSpec {
                 name: format!("point{point}.{axis}"),
@@ -546,6 +563,7 @@ impl CalibrationProblem {
             terms_of_param: terms_of_param(&angle_terms),
             angle_terms,
             angle_basis,
+            row_config,
             layout: ParamLayout::new(specs),
             n_residuals,
             trig: lanes.trig,
@@ -727,6 +745,20 @@ impl CalibrationProblem {
             .collect()
     }
 
+    /// The angle terms' basis of row `row_idx` (`angle_terms.len()` values).
+    fn angle_basis_of(&self, row_idx: usize) -> &[f64] {
+        let n = self.angle_terms.len();
+        let c = self.row_config.get(row_idx).copied().unwrap_or(0);
+        &self.angle_basis[c * n..(c + 1) * n]
+    }
+
+    /// The transversal terms' tilts of row `row_idx` (`transversal.len()` vectors).
+    fn tilts_of(&self, row_idx: usize) -> &[[f64; 3]] {
+        let n = self.transversal.len();
+        let c = self.row_config.get(row_idx).copied().unwrap_or(0);
+        &self.tilt_basis[c * n..(c + 1) * n]
+    }
+
     /// The joint angles the chain sees in row `row_idx`: the readings, deflected by the
     /// compliance when there is one (written to `buf`).
     fn effective_q<'a>(
@@ -740,8 +772,7 @@ impl CalibrationProblem {
             return q;
         }
         let n = self.chain.n_params();
-        let n_terms = self.angle_terms.len();
-        let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
+        let basis = self.angle_basis_of(row_idx);
         buf.clear();
         buf.extend_from_slice(q);
         for (&(j, param), b) in self.angle_terms.iter().zip(basis) {
@@ -834,8 +865,7 @@ impl CalibrationProblem {
             return x_kin;
         }
         let first = self.chain.n_params() + self.n_compliance() + self.n_harmonics();
-        let n_terms = self.transversal.len();
-        let basis = &self.tilt_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
+        let basis = self.tilts_of(row_idx);
         buf.clear();
         buf.extend_from_slice(x_kin);
         for (t, (term, v)) in self.transversal.iter().zip(basis).enumerate() {
@@ -942,7 +972,6 @@ impl CalibrationProblem {
         let n_kin = self.chain.n_params();
         let n_angle = self.n_compliance() + self.n_harmonics();
         let n_comp = n_angle + self.n_transversal();
-        let n_terms = self.angle_terms.len();
         let n_tilts = self.transversal.len();
         // The angle terms' Jacobian columns from their joints' parameter columns (exact: the
         // parameter adds to the joint's value), when every such joint has one.
@@ -977,7 +1006,6 @@ impl CalibrationProblem {
             n_kin,
             n_angle,
             n_comp,
-            n_terms,
             n_tilts,
             angles_from_params,
             off,
@@ -1092,7 +1120,6 @@ impl CalibrationProblem {
             n_kin,
             n_angle,
             n_comp,
-            n_terms,
             n_tilts,
             angles_from_params,
             ..
@@ -1149,8 +1176,8 @@ impl CalibrationProblem {
         };
         let jq = (n_angle > 0 && jac.is_some() && !angles_from_params)
             .then(|| chain.geometric_jacobian(x_eff, q_eff));
-        let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
-        let tilts = &self.tilt_basis[row_idx * n_tilts..(row_idx + 1) * n_tilts];
+        let basis = self.angle_basis_of(row_idx);
+        let tilts = self.tilts_of(row_idx);
         // Row k of the pose Jacobian (0–2 position, 3–5 rotation vector) at column col.
         let dpose = |k: usize, col: usize| -> f64 {
             self.column(buf, stride, k, col, jq.as_ref(), basis, tilts)
@@ -1212,7 +1239,6 @@ impl CalibrationProblem {
             n_kin,
             n_angle,
             n_comp,
-            n_terms,
             n_tilts,
             angles_from_params,
             off,
@@ -1260,8 +1286,8 @@ impl CalibrationProblem {
         } else {
             None
         };
-        let tilts = &self.tilt_basis[row_idx * n_tilts..(row_idx + 1) * n_tilts];
-        let basis = &self.angle_basis[row_idx * n_terms..(row_idx + 1) * n_terms];
+        let tilts = self.tilts_of(row_idx);
+        let basis = self.angle_basis_of(row_idx);
         let dp = |k: usize, col: usize| -> f64 {
             self.column(buf, 3, k, col, jq.as_ref(), basis, tilts)
         };

@@ -20,24 +20,48 @@ pub(super) fn check_torque_tips(torque_tips: &[Chain], n_joints: usize) -> Resul
     }
 }
 
-/// The angle terms' basis, row after row: each row's joint torques (N·m, one per joint under
-/// the compliance model) then its harmonics' basis; `n_terms` terms a row.
-pub(super) fn angle_basis(
+/// The rows' bases, one configuration at a time ([`Observations::configurations`]: rows of
+/// one configuration, a file row's markers and distance, share them): per configuration its
+/// angle terms' basis (its joint torques under the compliance model, N·m or m·kg without
+/// masses, one per joint; then its harmonics' basis, `sin`/`cos`) and its transversal terms'
+/// tilts ([`TransversalTerm::tilt`]). `compliance` gives the model and the tips of its loads,
+/// `load_angles` the joint angles of each configuration's loads (a torque equilibrium,
+/// `n_joints` a configuration; the readings without). Returns `(angle basis,
+/// n_configurations × n_terms; tilts, n_configurations × transversal.len(); each row's
+/// configuration)`, all empty when there is no term; no configuration's loads are held past
+/// its own.
+pub(super) fn row_bases(
     obs: &Observations,
-    torques: &[Vec<f64>],
+    compliance: Option<(&GravityCompliance, &[Chain])>,
+    load_angles: Option<&[f64]>,
     harmonics: Option<&JointHarmonics>,
+    transversal: &[TransversalTerm],
     n_terms: usize,
-) -> Vec<f64> {
-    let mut basis = Vec::with_capacity(obs.rows.len() * n_terms);
-    for (row_idx, row) in obs.rows.iter().enumerate() {
-        if let Some(t) = torques.get(row_idx) {
-            basis.extend_from_slice(t);
+) -> (Vec<f64>, Vec<[f64; 3]>, Vec<usize>) {
+    if n_terms == 0 && transversal.is_empty() {
+        return (Vec::new(), Vec::new(), Vec::new());
+    }
+    let mut basis = Vec::new();
+    let mut tilts = Vec::new();
+    let mut row_config = Vec::with_capacity(obs.rows.len());
+    for (c, rows) in obs.configurations().enumerate() {
+        let q = &obs.rows[rows.start].q;
+        if let Some((model, torque_tips)) = compliance {
+            let at = load_angles.map_or(q.as_slice(), |a| &a[c * q.len()..(c + 1) * q.len()]);
+            let loads = model.joint_loads(torque_tips, at);
+            basis.extend(loads.iter().map(|l| l.torque));
+            tilts.extend(
+                transversal
+                    .iter()
+                    .map(|t| <[f64; 3]>::from(t.tilt(&loads[t.joint]))),
+            );
         }
         if let Some(h) = harmonics {
-            basis.extend(h.basis(&row.q));
+            basis.extend(h.basis(q));
         }
+        row_config.extend(std::iter::repeat_n(c, rows.len()));
     }
-    basis
+    (basis, tilts, row_config)
 }
 
 /// Checks that every σ of `weights` is finite and positive.
@@ -77,29 +101,6 @@ pub(super) fn compliance_specs(chain: &Chain, model: &GravityCompliance) -> Vec<
             }
         })
         .collect()
-}
-
-/// Each row's joint loads under `model` on `torque_tips`, at the row's readings or at
-/// `load_angles` (one configuration per row). Rows of one configuration (several markers, a
-/// distance) follow each other: their loads are computed once.
-pub(super) fn row_loads(
-    model: &GravityCompliance,
-    torque_tips: &[Chain],
-    obs: &Observations,
-    load_angles: Option<&[Vec<f64>]>,
-) -> Vec<Vec<crate::JointLoad>> {
-    let mut out: Vec<Vec<crate::JointLoad>> = Vec::with_capacity(obs.rows.len());
-    for (r, row) in obs.rows.iter().enumerate() {
-        let at = load_angles.map_or(&row.q, |a| &a[r]);
-        let previous = r
-            .checked_sub(1)
-            .map(|p| load_angles.map_or(&obs.rows[p].q, |a| &a[p]));
-        match (previous, out.last()) {
-            (Some(p), Some(last)) if p == at => out.push(last.clone()),
-            _ => out.push(model.joint_loads(torque_tips, at)),
-        }
-    }
-    out
 }
 
 /// Each joint's angle parameter (the screw's `param`) over every tip, `None` for a joint

@@ -128,3 +128,86 @@ fn frames_recovered_from_exact_poses() {
     assert!((a.translation.vector - b.translation.vector).norm() < 1e-9);
     assert!(a.rotation.angle_to(&b.rotation) < 1e-9);
 }
+
+/// The rows of one configuration (two markers at one reading) share its gravity loads: every
+/// row's residuals and Jacobian row on the whole observations equal those of a problem on that
+/// row alone, and loads given per configuration at the readings reproduce the readings' own.
+#[test]
+fn a_configurations_rows_share_its_loads() {
+    let tree = framed(&two_arm_tree());
+    let mut obs = Observations::default();
+    for (i, q) in configurations(5).into_iter().enumerate() {
+        // Two markers per configuration, a single one for every third.
+        for tip in 0..if i % 3 == 0 { 1 } else { 2 } {
+            let position_m = [0.5 + 0.1 * tip as f64, 0.4, 0.3 - 0.05 * i as f64];
+            obs.rows.push(Row {
+                q: q.clone(),
+                kind: RowKind::Marker { tip, position_m },
+            });
+        }
+    }
+    let n_configurations = obs.configurations().count();
+    assert_eq!(n_configurations, 5);
+    let terms = ModelTerms {
+        compliance: Some(GravityCompliance::default()),
+        torque_tips: Some(two_arm_tree().tips().to_vec()),
+        ..ModelTerms::default()
+    };
+    let weights = pose_and_marker_weights();
+    let problem = CalibrationProblem::on_tree(tree.clone(), obs.clone(), weights, terms.clone())
+        .expect("valid problem");
+    let n = problem.layout().len();
+    // Compliance values of 1e-2 per unit load: the loads move every marker by millimetres.
+    let x = Col::from_fn(n, |i| 1e-2 * ((i * 7 % 11) as f64 - 5.0) / 5.0);
+    let mut all = Col::zeros(problem.n_residuals());
+    problem
+        .residuals(x.as_ref(), all.as_mut())
+        .expect("residuals");
+    for (r, row) in obs.rows.iter().enumerate() {
+        let alone = problem
+            .with_observations(Observations {
+                rows: vec![row.clone()],
+                ..Observations::default()
+            })
+            .expect("one row");
+        let mut one = Col::zeros(3);
+        alone
+            .residuals(x.as_ref(), one.as_mut())
+            .expect("residuals");
+        for k in 0..3 {
+            assert_eq!(all[3 * r + k], one[k], "row {r}, residual {k}");
+        }
+    }
+    // The equilibrium's angles given per configuration, here the readings themselves.
+    let at: Vec<f64> = obs
+        .configurations()
+        .flat_map(|rows| obs.rows[rows.start].q.clone())
+        .collect();
+    let at_readings = CalibrationProblem::on_tree(
+        tree.clone(),
+        obs.clone(),
+        weights,
+        ModelTerms {
+            load_angles: Some(at.clone().into()),
+            ..terms.clone()
+        },
+    )
+    .expect("valid problem");
+    let mut given = Col::zeros(problem.n_residuals());
+    at_readings
+        .residuals(x.as_ref(), given.as_mut())
+        .expect("residuals");
+    assert_eq!(given, all);
+    // One angle per row (the former layout) is refused.
+    let per_row: Vec<f64> = obs.rows.iter().flat_map(|r| r.q.clone()).collect();
+    let wrong = CalibrationProblem::on_tree(
+        tree,
+        obs,
+        weights,
+        ModelTerms {
+            load_angles: Some(per_row.into()),
+            ..terms
+        },
+    );
+    assert!(wrong.is_err());
+}
