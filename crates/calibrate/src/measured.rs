@@ -230,7 +230,10 @@ struct Sample {
 /// The samples of `tables` at the nominal kinematics.
 fn samples(robot: &Robot, tables: &[MeasurementTable], cfg: &MeasuredConfig) -> Vec<Sample> {
     let zero = vec![0.0; robot.tree.n_params()];
-    let mut out = Vec::new();
+    let n_samples = (tables.iter().flat_map(|t| &t.rows))
+        .map(|row| row.markers.len())
+        .sum();
+    let mut out = Vec::with_capacity(n_samples);
     for t in tables {
         for row in &t.rows {
             for m in &row.markers {
@@ -531,37 +534,50 @@ pub(crate) fn observations(
     tables: &[MeasurementTable],
     keep: &dyn Fn(usize, usize) -> bool,
 ) -> Observations {
-    let mut obs = Observations::default();
-    for (ti, t) in tables.iter().enumerate() {
-        for (ri, row) in t.rows.iter().enumerate() {
-            if !keep(ti, ri) {
-                continue;
-            }
-            if let Some(distance_m) = row.distance_m {
-                // From the instrument origin (the anchor) to marker 1's frame.
-                obs.rows.push(Row {
-                    q: row.q.clone(),
-                    kind: RowKind::Distance { distance_m },
-                });
-            }
-            for m in &row.markers {
-                // Tip k of the framed tree is marker k.
-                let kind = match m.rotation {
-                    Some(rotation) => RowKind::Pose {
-                        tip: m.marker,
-                        position_m: m.position_m,
-                        rotation,
-                    },
-                    None => RowKind::Marker {
-                        tip: m.marker,
-                        position_m: m.position_m,
-                    },
-                };
-                obs.rows.push(Row {
-                    q: row.q.clone(),
-                    kind,
-                });
-            }
+    let kept = || {
+        (tables.iter().enumerate())
+            .flat_map(|(ti, t)| {
+                t.rows
+                    .iter()
+                    .enumerate()
+                    .map(move |(ri, row)| (ti, ri, row))
+            })
+            .filter(|&(ti, ri, _)| keep(ti, ri))
+    };
+    // Counted first: a million rows pushed into a growing vector reserve up to twice their
+    // size.
+    let n_rows = kept()
+        .map(|(_, _, row)| usize::from(row.distance_m.is_some()) + row.markers.len())
+        .sum();
+    let mut obs = Observations {
+        rows: Vec::with_capacity(n_rows),
+        ..Observations::default()
+    };
+    for (_, _, row) in kept() {
+        if let Some(distance_m) = row.distance_m {
+            // From the instrument origin (the anchor) to marker 1's frame.
+            obs.rows.push(Row {
+                q: row.q.clone(),
+                kind: RowKind::Distance { distance_m },
+            });
+        }
+        for m in &row.markers {
+            // Tip k of the framed tree is marker k.
+            let kind = match m.rotation {
+                Some(rotation) => RowKind::Pose {
+                    tip: m.marker,
+                    position_m: m.position_m,
+                    rotation,
+                },
+                None => RowKind::Marker {
+                    tip: m.marker,
+                    position_m: m.position_m,
+                },
+            };
+            obs.rows.push(Row {
+                q: row.q.clone(),
+                kind,
+            });
         }
     }
     obs

@@ -157,6 +157,8 @@ pub(super) fn read_rows(
         }
         body.n_rows += 1;
     }
+    // The rows were pushed one by one: give back what the vector's growth reserved.
+    body.rows.shrink_to_fit();
     Ok(body)
 }
 
@@ -265,7 +267,7 @@ fn marker_samples(
     markers: &[MarkerColumns],
     frozen_position: &mut [Frozen],
 ) -> Result<Vec<MarkerSample>, Error> {
-    let mut seen = Vec::new();
+    let mut seen = Vec::with_capacity(markers.len());
     for (k, m) in markers.iter().enumerate() {
         if !marker_seen(cells, k, m)? {
             continue;
