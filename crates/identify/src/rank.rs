@@ -54,12 +54,14 @@ impl Default for RankConfigBase {
     /// `prior_m = 0.01` (1 cm: machining and assembly deviations of desktop haptic devices and
     /// small arms are millimetres), `prior_rad = 0.01` (≈ 0.6°, encoder zero offsets and
     /// axis misalignments), `prior_dimensionless = 1.0` (ratios, gains: order one),
-    /// `prior_rad_per_n_m = 1e-3` (a compliance is a value, not a deviation from a nominal
+    /// `prior_rad_per_n_m = 2e-3` (a compliance is a value, not a deviation from a nominal
     /// zero: a joint through a harmonic drive is of order 1e-4 rad/(N·m), a torsional
-    /// stiffness of order 1e4 N·m/rad, and one through a cable or belt of order 1e-3, the
-    /// upper end), `prior_rad_per_m = 1e-2` (the same 1e-3 rad/(N·m) under a weight of about
-    /// 10 N, a 1 kg link, at each point of unit weight: the value the angle prior gave such
-    /// parameters before they had a unit of their own),
+    /// stiffness of order 1e4 N·m/rad, and one through a cable or belt of order 1e-3; twice
+    /// that, since the torques come from CAD masses that miss cables, markers and tools and a
+    /// compliance per CAD torque grows by the missing share; docs/engine.md gives what 1e-3
+    /// does to the bundled recordings), `prior_rad_per_m = 1e-2` (the lumped unit weights
+    /// absorb an unknown weight, so no physical scale tightens it: the angle prior such
+    /// parameters had before they had a unit of their own, 2e-3 rad/(N·m) under 5 N a point),
     /// `rel_tol = 1e-10` (columns closer than this to the span of the others are dependent at
     /// working precision: √ε ≈ 1.5e-8 would drop genuinely weak ones, ε·m noise is ≈ 1e-13).
     fn default() -> Self {
@@ -67,7 +69,7 @@ impl Default for RankConfigBase {
             prior_m: 0.01,
             prior_rad: 0.01,
             prior_dimensionless: 1.0,
-            prior_rad_per_n_m: 1e-3,
+            prior_rad_per_n_m: 2e-3,
             prior_rad_per_m: 1e-2,
             rel_tol: 1e-10,
             tie_break: TieBreak::EarlierInLayout,
@@ -106,7 +108,7 @@ pub struct RankConfig {
     pub prior_rad: f64,
     /// Plausible deviation of a dimensionless parameter (default 1.0).
     pub prior_dimensionless: f64,
-    /// Plausible value of a compliance under a torque, in rad/(N·m) (default 1e-3): a
+    /// Plausible value of a compliance under a torque, in rad/(N·m) (default 2e-3): a
     /// compliance whose standard deviation given the data exceeds it is pruned, since the data
     /// then tell less about it than the physics of joints does.
     pub prior_rad_per_n_m: f64,

@@ -229,7 +229,7 @@ fn tilt_and_compliance(tilt_norm: f64, c: f64, theta: f64, unit: Unit) -> (Mat<f
 fn a_compliance_the_data_cannot_separate_from_a_tilt_is_pruned_under_its_physical_prior() {
     // 2 mm of noise; the compliance's column is 10 m per rad/(N·m) (a 0.5 m lever under
     // 20 N·m) at 2.9° from the tilt's (correlation 0.9987): given the tilt its standard
-    // deviation is 2e-3 / (10·0.05) = 4e-3 rad/(N·m), four times the 1e-3 prior: pruned, as
+    // deviation is 2e-3 / (10·0.05) = 4e-3 rad/(N·m), twice the 2e-3 prior: pruned, as
     // dependent on the tilt (coefficient 10·cos θ rad per rad/(N·m)). The tilt itself is
     // determined to 2e-3 rad.
     let sigma = 2e-3;
