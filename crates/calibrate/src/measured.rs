@@ -3735,16 +3735,6 @@ type Winsorized<'a> = (
     ModelName,
 );
 
-/// The unit of a compliance parameter (`compliance.*`, `transversal.*`): rad/(N·m) under the
-/// URDF's link masses, rad/m under the lumped unit weights; `None` for any other parameter.
-fn compliance_unit(name: &str, masses: bool) -> Option<&'static str> {
-    (name.starts_with("compliance.") || name.starts_with("transversal.")).then_some(if masses {
-        "rad/(N·m)"
-    } else {
-        "rad/m"
-    })
-}
-
 /// The unit of `robot`'s compliances: rad/(N·m) with masses (loads are torques), rad/m
 /// without (loads are lever arms).
 fn compliance_unit_of(robot: &Robot) -> &'static str {
@@ -4131,12 +4121,8 @@ fn plan_config(plan: &crate::inputs::Plan, robot: &Robot, n_tips: usize) -> Resu
 }
 
 /// The identified values of `id` with their σ (frames excluded, or only the frames with
-/// `frames`), in the units of `robot`'s compliances (`masses`: with link masses).
-fn identified_values(
-    id: &Identified,
-    frames: bool,
-    masses: bool,
-) -> Vec<crate::report::ParamReport> {
+/// `frames`), each in its layout unit (a compliance's rad/(N·m) or rad/m).
+fn identified_values(id: &Identified, frames: bool) -> Vec<crate::report::ParamReport> {
     (id.covariance.free.iter())
         .zip(id.covariance.std())
         .filter(|(i, _)| crate::report::is_frame_param(id.layout.name(**i)) == frames)
@@ -4144,12 +4130,7 @@ fn identified_values(
             name: id.layout.name(i).to_owned(),
             value: id.fit.x[i],
             std,
-            unit: if frames {
-                None
-            } else {
-                compliance_unit(id.layout.name(i), masses)
-            }
-            .unwrap_or_else(|| id.layout.spec(i).unit.symbol()),
+            unit: id.layout.spec(i).unit.symbol(),
         })
         .collect()
 }
@@ -4221,7 +4202,7 @@ fn calibration_report(
         frames: out.frames.clone(),
         sigma_m: out.weights.sigma_position_m * id.sigma,
         sigma_source: id.sigma_source.name(),
-        parameters: identified_values(id, false, !robot.masses.is_empty()),
+        parameters: identified_values(id, false),
         pruned: pruned_kinematics(id),
         correlated: correlated_kinematics(id),
         observability: None,
@@ -4255,7 +4236,7 @@ fn calibration_record(
     train: &[MeasurementTable],
 ) -> hapcal_contract::Calibration {
     let id = &out.fitted.identified;
-    let frame_values = identified_values(id, true, !robot.masses.is_empty());
+    let frame_values = identified_values(id, true);
     crate::record::measured_record(&crate::record::MeasuredRecord {
         model: out.rung,
         tips,

@@ -605,9 +605,12 @@ fn iiwa_pose_tables(seed: u64, n: usize) -> (ArmRobot, MeasurementTable, Measure
 }
 
 /// Compliances so large that the torque equilibrium's fixed-point iteration does not
-/// contract (the z-axes humanoid's truth compliances ×−100, a robot that would bend against
-/// its weight, as the real two-arm humanoid's unconverged transversal-axes fit had them): the
-/// fit is named implausible (`hapcal calibrate` stops with exit 2 and writes nothing). The
+/// contract (the z-axes humanoid's truth compliances ×100, a robot that would fold under its
+/// weight): the fit is named implausible (`hapcal calibrate` stops with exit 2 and writes
+/// nothing). (×−100, a robot that would bend against its weight, as the real two-arm
+/// humanoid's unconverged transversal-axes fit had them, no longer reaches this finding: the
+/// compliance prior prunes the compliances its data cannot determine, and the fit is stopped
+/// on its negative compliances instead.) The
 /// files it would write still evaluate as the calibration does: the runtime iterates the same
 /// steps, and the values the fit held at their warm start are in the record.
 #[test]
@@ -621,7 +624,7 @@ fn an_equilibrium_the_deflection_does_not_reach_is_implausible() {
     for i in 0..layout.len() {
         let name = layout.name(i);
         if name.starts_with("compliance.") || name.starts_with("transversal.") {
-            truth.x[i] *= -100.0;
+            truth.x[i] *= 100.0;
         }
     }
     let train = humanoid::table_with_noise(&robot, &truth, &[0, 1], 150, 32, 2e-3);

@@ -261,6 +261,8 @@ fn check_identify_config(cfg: &IdentifyConfig) -> Result<(), Error> {
     check_config("prior_m", cfg.rank.prior_m, true)?;
     check_config("prior_rad", cfg.rank.prior_rad, true)?;
     check_config("prior_dimensionless", cfg.rank.prior_dimensionless, true)?;
+    check_config("prior_rad_per_n_m", cfg.rank.prior_rad_per_n_m, true)?;
+    check_config("prior_rad_per_m", cfg.rank.prior_rad_per_m, true)?;
     check_config("rel_tol", cfg.rank.rel_tol, false)
 }
 

@@ -144,7 +144,8 @@ pub fn observability(jac: MatRef<'_, f64>, n_poses: usize) -> Option<Observabili
 }
 
 /// The columns `cols` of `jac` (`m × layout.len()`), each multiplied by the prior of its unit
-/// (`prior_m`, `prior_rad` or `prior_dimensionless` of `priors`): an `m × cols.len()` matrix whose
+/// (`prior_m`, `prior_rad`, `prior_dimensionless`, `prior_rad_per_n_m` or `prior_rad_per_m`
+/// of `priors`): an `m × cols.len()` matrix whose
 /// unit column step is a plausible parameter deviation.
 ///
 /// Source of the scaling: J. M. Hollerbach, C. W. Wampler, "The calibration index and taxonomy

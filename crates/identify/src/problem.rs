@@ -12,15 +12,23 @@ pub enum Unit {
     Radian,
     /// A pure number (ratio, scale factor, polynomial coefficient).
     Dimensionless,
+    /// A compliance under a torque in N·m, rad/(N·m): the angle a joint turns per unit
+    /// torque.
+    RadianPerNewtonMeter,
+    /// A compliance under a lever arm in m, rad/m: the angle per metre of lever arm of a unit
+    /// weight, where the weight itself is unknown and absorbed into the parameter.
+    RadianPerMeter,
 }
 
 impl Unit {
-    /// Symbol used in reports: `m`, `rad` or `1`.
+    /// Symbol used in reports: `m`, `rad`, `1`, `rad/(N·m)` or `rad/m`.
     pub fn symbol(self) -> &'static str {
         match self {
             Unit::Meter => "m",
             Unit::Radian => "rad",
             Unit::Dimensionless => "1",
+            Unit::RadianPerNewtonMeter => "rad/(N·m)",
+            Unit::RadianPerMeter => "rad/m",
         }
     }
 }

@@ -25,6 +25,10 @@ pub struct RankConfigBase {
     pub prior_rad: f64,
     /// Plausible deviation of a dimensionless parameter.
     pub prior_dimensionless: f64,
+    /// Plausible value of a compliance under a torque, in rad/(N·m).
+    pub prior_rad_per_n_m: f64,
+    /// Plausible value of a compliance under a lever arm of unknown weight, in rad/m.
+    pub prior_rad_per_m: f64,
     /// Numerical floor on `|R_kk|` of the unit-norm scaled columns.
     pub rel_tol: f64,
     /// Which of two tied candidates becomes the pivot (see [`TieBreak`]).
@@ -50,6 +54,14 @@ impl Default for RankConfigBase {
     /// `prior_m = 0.01` (1 cm: machining and assembly deviations of desktop haptic devices and
     /// small arms are millimetres), `prior_rad = 0.01` (≈ 0.6°, encoder zero offsets and
     /// axis misalignments), `prior_dimensionless = 1.0` (ratios, gains: order one),
+    /// `prior_rad_per_n_m = 2e-3` (a compliance is a value, not a deviation from a nominal
+    /// zero: a joint through a harmonic drive is of order 1e-4 rad/(N·m), a torsional
+    /// stiffness of order 1e4 N·m/rad, and one through a cable or belt of order 1e-3; twice
+    /// that, since the torques come from CAD masses that miss cables, markers and tools and a
+    /// compliance per CAD torque grows by the missing share; docs/engine.md gives what 1e-3
+    /// does to the bundled recordings), `prior_rad_per_m = 1e-2` (the lumped unit weights
+    /// absorb an unknown weight, so no physical scale tightens it: the angle prior such
+    /// parameters had before they had a unit of their own, 2e-3 rad/(N·m) under 5 N a point),
     /// `rel_tol = 1e-10` (columns closer than this to the span of the others are dependent at
     /// working precision: √ε ≈ 1.5e-8 would drop genuinely weak ones, ε·m noise is ≈ 1e-13).
     fn default() -> Self {
@@ -57,6 +69,8 @@ impl Default for RankConfigBase {
             prior_m: 0.01,
             prior_rad: 0.01,
             prior_dimensionless: 1.0,
+            prior_rad_per_n_m: 2e-3,
+            prior_rad_per_m: 1e-2,
             rel_tol: 1e-10,
             tie_break: TieBreak::EarlierInLayout,
         }
@@ -71,6 +85,8 @@ impl RankConfigBase {
             prior_m: self.prior_m,
             prior_rad: self.prior_rad,
             prior_dimensionless: self.prior_dimensionless,
+            prior_rad_per_n_m: self.prior_rad_per_n_m,
+            prior_rad_per_m: self.prior_rad_per_m,
             rel_tol: self.rel_tol,
             tie_break: self.tie_break,
         }
@@ -92,6 +108,13 @@ pub struct RankConfig {
     pub prior_rad: f64,
     /// Plausible deviation of a dimensionless parameter (default 1.0).
     pub prior_dimensionless: f64,
+    /// Plausible value of a compliance under a torque, in rad/(N·m) (default 2e-3): a
+    /// compliance whose standard deviation given the data exceeds it is pruned, since the data
+    /// then tell less about it than the physics of joints does.
+    pub prior_rad_per_n_m: f64,
+    /// Plausible value of a compliance under a lever arm of unknown weight, in rad/m
+    /// (default 1e-2).
+    pub prior_rad_per_m: f64,
     /// Numerical floor (default 1e-10): a scaled column whose distance to the span of the kept
     /// columns, `|R_kk|`, is below `rel_tol` (relative to the unit norm of the scaled columns,
     /// which is `|R_00|` of their pivoted QR) is always pruned; so is a column whose norm is
@@ -108,6 +131,8 @@ impl RankConfig {
             Unit::Meter => self.prior_m,
             Unit::Radian => self.prior_rad,
             Unit::Dimensionless => self.prior_dimensionless,
+            Unit::RadianPerNewtonMeter => self.prior_rad_per_n_m,
+            Unit::RadianPerMeter => self.prior_rad_per_m,
         }
     }
 }
@@ -270,7 +295,13 @@ pub fn identifiability(
         cfg.rel_tol.is_finite() && cfg.rel_tol >= 0.0,
         "rel_tol must be finite and >= 0"
     );
-    for prior in [cfg.prior_m, cfg.prior_rad, cfg.prior_dimensionless] {
+    for prior in [
+        cfg.prior_m,
+        cfg.prior_rad,
+        cfg.prior_dimensionless,
+        cfg.prior_rad_per_n_m,
+        cfg.prior_rad_per_m,
+    ] {
         assert!(
             prior.is_finite() && prior > 0.0,
             "priors must be finite and > 0"

@@ -520,13 +520,13 @@ impl CalibrationProblem {
         let transversal_terms = if transversal == Transversal::None {
             Vec::new()
         } else {
-            if compliance.is_none() {
+            let Some(model) = &compliance else {
                 return Err(Error::NoTransversal {
                     reason: "it needs the gravity compliance model",
                 });
-            }
+            };
             let terms = transversal_terms_of(&chain, &torque_tips, transversal)?;
-            specs.extend(transversal_specs(&chain, &terms, transversal));
+            specs.extend(transversal_specs(&chain, model, &terms, transversal));
             terms
         };
         let joint_param = joint_params(&tips, n_joints);

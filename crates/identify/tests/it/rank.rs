@@ -207,3 +207,89 @@ proptest! {
         prop_assert_eq!(id.kept, id_scaled.kept);
     }
 }
+
+/// A tilt (rad, column `tilt_norm·e₀`) and a compliance of `unit` whose column, of norm
+/// `c`, makes the angle `theta` with the tilt's: `c·(cos θ·e₀ + sin θ·e₁)`. Given the tilt,
+/// the compliance's standard deviation is `sigma / (c·sin θ)`.
+fn tilt_and_compliance(tilt_norm: f64, c: f64, theta: f64, unit: Unit) -> (Mat<f64>, ParamLayout) {
+    let jac = Mat::from_fn(3, 2, |i, j| match (i, j) {
+        (0, 0) => tilt_norm,
+        (0, 1) => c * theta.cos(),
+        (1, 1) => c * theta.sin(),
+        _ => 0.0,
+    });
+    let layout = ParamLayout::new(vec![
+        spec("tilt", Unit::Radian, Role::Model),
+        spec("compliance", unit, Role::Model),
+    ]);
+    (jac, layout)
+}
+
+#[test]
+fn a_compliance_the_data_cannot_separate_from_a_tilt_is_pruned_under_its_physical_prior() {
+    // 2 mm of noise; the compliance's column is 10 m per rad/(N·m) (a 0.5 m lever under
+    // 20 N·m) at 2.9° from the tilt's (correlation 0.9987): given the tilt its standard
+    // deviation is 2e-3 / (10·0.05) = 4e-3 rad/(N·m), twice the 2e-3 prior: pruned, as
+    // dependent on the tilt (coefficient 10·cos θ rad per rad/(N·m)). The tilt itself is
+    // determined to 2e-3 rad.
+    let sigma = 2e-3;
+    let theta = 0.05_f64.asin();
+    let (jac, layout) = tilt_and_compliance(1.0, 10.0, theta, Unit::RadianPerNewtonMeter);
+    let id = identifiability(jac.as_ref(), &layout, &all(2), &cfg(sigma));
+    assert_eq!(id.kept, [0]);
+    let pruned = id.find_pruned("compliance").expect("pruned");
+    assert!((pruned.std_if_kept - 4e-3).abs() < 1e-12, "{pruned:?}");
+    let on = dependent_on(&id, "compliance");
+    assert_eq!(on.len(), 1);
+    assert_eq!(on[0].0, "tilt");
+    assert!((on[0].1 - 10.0 * theta.cos()).abs() < 1e-10, "{on:?}");
+    // Loosened to the angle prior (what such a parameter was held to as an angle): kept.
+    let loose = RankConfigBase {
+        prior_rad_per_n_m: RankConfigBase::default().prior_rad,
+        ..RankConfigBase::default()
+    };
+    let kept = identifiability(jac.as_ref(), &layout, &all(2), &loose.with_sigma(sigma));
+    assert_eq!(kept.kept, [0, 1]);
+    // The lumped compliance (rad/m) keeps the angle prior's 1e-2: kept too.
+    let (jac_lumped, layout_lumped) = tilt_and_compliance(1.0, 10.0, theta, Unit::RadianPerMeter);
+    let lumped = identifiability(jac_lumped.as_ref(), &layout_lumped, &all(2), &cfg(sigma));
+    assert_eq!(lumped.kept, [0, 1]);
+    // Ten times farther from the tilt (sin θ = 0.5): 4e-4 rad/(N·m), within the prior.
+    let (jac_far, _) = tilt_and_compliance(1.0, 10.0, 0.5_f64.asin(), Unit::RadianPerNewtonMeter);
+    let far = identifiability(jac_far.as_ref(), &layout, &all(2), &cfg(sigma));
+    assert_eq!(far.kept, [0, 1]);
+}
+
+#[test]
+fn compliance_units_have_their_symbols() {
+    assert_eq!(Unit::RadianPerNewtonMeter.symbol(), "rad/(N·m)");
+    assert_eq!(Unit::RadianPerMeter.symbol(), "rad/m");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(128))]
+
+    /// The compliance is kept exactly when its standard deviation given the tilt,
+    /// `sigma / (c·sin θ)`, is within the compliance prior (not the angle prior, which stays at
+    /// its default), and pruned as dependent on the tilt otherwise.
+    #[test]
+    fn a_compliance_is_kept_exactly_when_its_std_is_within_its_prior(
+        theta in 1e-3..1.5f64, log_c in -1.0..2.0f64, log_prior in -5.0..-1.0f64,
+    ) {
+        let (sigma, c, prior) = (2e-3, 10f64.powf(log_c), 10f64.powf(log_prior));
+        let std = sigma / (c * theta.sin());
+        prop_assume!((std / prior - 1.0).abs() > 1e-6);
+        let (jac, layout) = tilt_and_compliance(1.0, c, theta, Unit::RadianPerNewtonMeter);
+        let base = RankConfigBase { prior_rad_per_n_m: prior, ..RankConfigBase::default() };
+        let id = identifiability(jac.as_ref(), &layout, &all(2), &base.with_sigma(sigma));
+        prop_assert_eq!(id.kept.contains(&1), std <= prior, "std {} prior {}", std, prior);
+        if let Some(pruned) = id.find_pruned("compliance") {
+            prop_assert!((pruned.std_if_kept / std - 1.0).abs() < 1e-9);
+            // cos θ > 0.05 on this range: listed as dependent on the tilt.
+            let PruneReason::Dependent { on } = &pruned.reason else {
+                return Err(TestCaseError::fail(format!("{:?}", pruned.reason)));
+            };
+            prop_assert_eq!(on[0].0.as_str(), "tilt");
+        }
+    }
+}

@@ -83,9 +83,21 @@ pub(super) fn check_weights(weights: &Weights) -> Result<(), Error> {
     Ok(())
 }
 
+/// The unit of `model`'s compliances: rad/(N·m) under link masses (the loads are torques),
+/// rad/m under the lumped unit weights (the loads are lever arms). The rank decision holds
+/// each to its unit's prior ([`hapcal_identify::RankConfig::prior_scale`]).
+pub(super) fn compliance_unit(model: &GravityCompliance) -> Unit {
+    if model.masses.is_empty() {
+        Unit::RadianPerMeter
+    } else {
+        Unit::RadianPerNewtonMeter
+    }
+}
+
 /// The compliance parameters of `model` on `chain`: one per group of joints,
-/// `compliance.<joint>+<joint>…`, in rad (compliance × torque is an angle).
+/// `compliance.<joint>+<joint>…`, in the unit of [`compliance_unit`].
 pub(super) fn compliance_specs(chain: &Chain, model: &GravityCompliance) -> Vec<ParamSpec> {
+    let unit = compliance_unit(model);
     let n_joints = chain.n_joints();
     let names = chain.joint_names();
     (0..model.n_params(n_joints))
@@ -96,7 +108,7 @@ pub(super) fn compliance_specs(chain: &Chain, model: &GravityCompliance) -> Vec<
                 .collect();
             ParamSpec {
                 name: format!("compliance.{}", joints.join("+")),
-                unit: Unit::Radian,
+                unit,
                 role: Role::Model,
             }
         })
@@ -266,14 +278,17 @@ pub(super) fn transversal_terms_of(
     Ok(transversal_terms)
 }
 
-/// The parameters of the transversal `terms`: `transversal.<joint>`, or `.u` and `.v` per
-/// joint (`Transversal::PerAxis`). Compliance × moment is an angle: the parameter's unit is the
-/// rotation it scales, as for the axial compliance.
+/// The parameters of the transversal `terms` under `model`'s loads: `transversal.<joint>`, or
+/// `.u` and `.v` per joint (`Transversal::PerAxis`), in the unit of the axial compliances
+/// ([`compliance_unit`]): a moment about an axis normal to the joint's deflects it as a torque
+/// about the joint's axis does.
 pub(super) fn transversal_specs(
     chain: &Chain,
+    model: &GravityCompliance,
     terms: &[TransversalTerm],
     transversal: Transversal,
 ) -> Vec<ParamSpec> {
+    let unit = compliance_unit(model);
     let names = chain.joint_names();
     let n_per_joint = if transversal == Transversal::PerAxis {
         2
@@ -287,7 +302,7 @@ pub(super) fn transversal_specs(
                 (_, 0) => format!("transversal.{}.u", names[t.joint]),
                 _ => format!("transversal.{}.v", names[t.joint]),
             },
-            unit: Unit::Radian,
+            unit,
             role: Role::Model,
         })
         .collect()

@@ -223,6 +223,43 @@ fn transversal_compliance_needs_the_compliance_model() {
     assert!(err.to_string().contains("gravity compliance"), "{err}");
 }
 
+/// The compliance and transversal parameters carry the unit of their loads, which sets the
+/// prior the rank decision holds them to: rad/(N·m) under link masses, rad/m under the lumped
+/// unit weights; the joints' own parameters stay in m and rad.
+#[test]
+fn compliances_carry_the_unit_of_their_loads() {
+    use hapcal_identify::Unit;
+    let robot = torso_tree();
+    let obs = || Observations {
+        rows: vec![pose_or_marker_row(1, vec![0.1; 5])],
+        ..Observations::default()
+    };
+    let n_joints = robot.n_joints();
+    let units = |terms: ModelTerms| {
+        let problem =
+            CalibrationProblem::on_tree(framed(&robot), obs(), pose_and_marker_weights(), terms)
+                .expect("valid problem");
+        let unit_of = |prefix: &str| -> Vec<Unit> {
+            (problem.layout().specs().iter())
+                .filter(|s| s.name.starts_with(prefix))
+                .map(|s| s.unit)
+                .collect()
+        };
+        (unit_of("compliance."), unit_of("transversal."))
+    };
+    let per_axis = hapcal_problems::Transversal::PerAxis;
+    let (axial, transversal) = units(gravity_terms(n_joints, robot.tips(), per_axis));
+    assert_eq!(axial, vec![Unit::RadianPerNewtonMeter; n_joints]);
+    assert_eq!(transversal, vec![Unit::RadianPerNewtonMeter; 2 * n_joints]);
+    let lumped = ModelTerms {
+        compliance: Some(GravityCompliance::default()),
+        ..gravity_terms(n_joints, robot.tips(), per_axis)
+    };
+    let (axial, transversal) = units(lumped);
+    assert_eq!(axial, vec![Unit::RadianPerMeter; n_joints]);
+    assert_eq!(transversal, vec![Unit::RadianPerMeter; 2 * n_joints]);
+}
+
 #[test]
 fn the_torque_equilibrium_is_a_fixed_point() {
     let tree = torso_tree();
