@@ -277,6 +277,12 @@ pub struct CalibrationProblem {
     /// Each row's configuration ([`Observations::configurations`]), the index of its bases;
     /// empty for a problem without angle or transversal terms.
     row_config: Vec<usize>,
+    /// Whether the bases are kept (`angle_basis`, `tilt_basis`) rather than evaluated row by
+    /// row: up to [`STORED_BASES_MAX`] values.
+    stored_bases: bool,
+    /// The joint angles of each configuration's loads (a torque equilibrium,
+    /// [`ModelTerms::load_angles`]), kept to evaluate the bases row by row.
+    load_angles: Option<Arc<[f64]>>,
     layout: ParamLayout,
     n_residuals: usize,
     /// `[sin q, cos q]` per joint of the distance rows outside [`Self::lane_groups`]
@@ -318,6 +324,11 @@ struct Frozen {
 /// (one frozen chain), small enough that a block's Jacobian stays in cache.
 const ROWS_PER_BLOCK: usize = 256;
 
+/// Most basis values (angle terms and three per transversal tilt, per configuration) a
+/// problem keeps; past it each evaluation computes a configuration's bases as its rows come
+/// (a gravity-load pass per configuration and evaluation, in place of 8 bytes a value held).
+const STORED_BASES_MAX: usize = 4_000_000;
+
 /// What every row of one evaluation of [`CalibrationProblem`] shares: the parameters `x`, the
 /// chain frozen at them, and the problem's term counts.
 #[derive(Clone, Copy)]
@@ -355,6 +366,20 @@ struct RowScratch {
     x_kin: Vec<f64>,
     /// A row's effective kinematic parameters.
     x_buf: Vec<f64>,
+    /// The bases of the configuration last evaluated, when the problem does not keep them.
+    bases: ConfigBases,
+}
+
+/// One configuration's bases, evaluated row by row when the problem does not keep them
+/// ([`STORED_BASES_MAX`]).
+#[derive(Default)]
+struct ConfigBases {
+    /// The configuration they are for.
+    config: Option<usize>,
+    /// Its angle terms' basis.
+    angle: Vec<f64>,
+    /// Its transversal terms' tilts.
+    tilts: Vec<[f64; 3]>,
 }
 
 impl CalibrationProblem {
@@ -530,14 +555,18 @@ impl CalibrationProblem {
             terms
         };
         let joint_param = joint_params(&tips, n_joints);
-        let (angle_basis, tilt_basis, row_config) = row_bases(
+        let basis_terms = BasisTerms {
+            compliance: compliance.as_ref().map(|c| (c, torque_tips.as_slice())),
+            harmonics: harmonics.as_ref(),
+            transversal: &transversal_terms,
+        };
+        let bases = row_bases(
             &obs,
-            compliance.as_ref().map(|c| (c, torque_tips.as_slice())),
+            &basis_terms,
             load_angles.as_deref(),
-            harmonics.as_ref(),
-            &transversal_terms,
             angle_terms.len(),
         );
+        let stored_bases = bases.stored;
         specs.extend((0..obs.n_points).flat_map(|point| {
             ["x", "y", "z"].map(|axis| ParamSpec {
                 name: format!("point{point}.{axis}"),
@@ -558,12 +587,14 @@ impl CalibrationProblem {
             harmonics,
             transversal: transversal_terms,
             equilibrium: load_angles.is_some(),
+            load_angles,
             joint_param,
-            tilt_basis,
+            tilt_basis: bases.tilts,
             terms_of_param: terms_of_param(&angle_terms),
             angle_terms,
-            angle_basis,
-            row_config,
+            angle_basis: bases.angle,
+            row_config: bases.row_config,
+            stored_bases,
             layout: ParamLayout::new(specs),
             n_residuals,
             trig: lanes.trig,
@@ -598,6 +629,20 @@ impl CalibrationProblem {
             problem.layout = self.layout.clone();
         }
         Ok(problem)
+    }
+
+    /// The same problem evaluating each configuration's compliance and harmonic bases (its
+    /// gravity loads) as its rows come instead of keeping them: the same residuals and
+    /// Jacobian, bit for bit, for a gravity-load pass per configuration and evaluation in
+    /// place of 8 bytes per basis value held. A problem of more than 4,000,000 basis values is
+    /// built this way.
+    pub fn without_stored_bases(mut self) -> Self {
+        if !self.row_config.is_empty() {
+            self.stored_bases = false;
+            self.angle_basis = Vec::new();
+            self.tilt_basis = Vec::new();
+        }
+        self
     }
 
     /// The weights of the residuals.
@@ -745,25 +790,50 @@ impl CalibrationProblem {
             .collect()
     }
 
-    /// The angle terms' basis of row `row_idx` (`angle_terms.len()` values).
-    fn angle_basis_of(&self, row_idx: usize) -> &[f64] {
-        let n = self.angle_terms.len();
+    /// Row `row_idx`'s angle terms' basis (`angle_terms.len()` values) and transversal
+    /// terms' tilts (`transversal.len()` vectors): its configuration's, kept by the problem or,
+    /// past [`STORED_BASES_MAX`], evaluated into `scratch` once for the rows of its
+    /// configuration that follow each other.
+    fn bases_of<'a>(
+        &'a self,
+        row_idx: usize,
+        scratch: &'a mut ConfigBases,
+    ) -> (&'a [f64], &'a [[f64; 3]]) {
         let c = self.row_config.get(row_idx).copied().unwrap_or(0);
-        &self.angle_basis[c * n..(c + 1) * n]
+        let (n, n_tilts) = (self.angle_terms.len(), self.transversal.len());
+        if !self.stored_bases {
+            if scratch.config != Some(c) {
+                scratch.angle.clear();
+                scratch.tilts.clear();
+                let q = &self.obs.rows[row_idx].q;
+                let at = (self.load_angles.as_deref()).map(|a| &a[c * q.len()..(c + 1) * q.len()]);
+                self.terms_of()
+                    .bases(q, at, &mut scratch.angle, &mut scratch.tilts);
+                scratch.config = Some(c);
+            }
+            return (&scratch.angle, &scratch.tilts);
+        }
+        (
+            &self.angle_basis[c * n..(c + 1) * n],
+            &self.tilt_basis[c * n_tilts..(c + 1) * n_tilts],
+        )
     }
 
-    /// The transversal terms' tilts of row `row_idx` (`transversal.len()` vectors).
-    fn tilts_of(&self, row_idx: usize) -> &[[f64; 3]] {
-        let n = self.transversal.len();
-        let c = self.row_config.get(row_idx).copied().unwrap_or(0);
-        &self.tilt_basis[c * n..(c + 1) * n]
+    /// The model terms that give a configuration's bases.
+    fn terms_of(&self) -> BasisTerms<'_> {
+        BasisTerms {
+            compliance: (self.compliance.as_ref()).map(|c| (c, self.torque_tips.as_slice())),
+            harmonics: self.harmonics.as_ref(),
+            transversal: &self.transversal,
+        }
     }
 
     /// The joint angles the chain sees in row `row_idx`: the readings, deflected by the
-    /// compliance when there is one (written to `buf`).
+    /// compliance when there is one (its angle terms' `basis`; written to `buf`).
     fn effective_q<'a>(
         &'a self,
         row_idx: usize,
+        basis: &[f64],
         x: ColRef<'_, f64>,
         buf: &'a mut Vec<f64>,
     ) -> &'a [f64] {
@@ -772,7 +842,6 @@ impl CalibrationProblem {
             return q;
         }
         let n = self.chain.n_params();
-        let basis = self.angle_basis_of(row_idx);
         buf.clear();
         buf.extend_from_slice(q);
         for (&(j, param), b) in self.angle_terms.iter().zip(basis) {
@@ -851,12 +920,12 @@ impl CalibrationProblem {
         }
     }
 
-    /// The kinematic deviations the chain sees in row `row_idx`: `x_kin` with the transversal
-    /// tilts added to their joints' rotation deviations (written to `buf`), or `x_kin` itself
+    /// The kinematic deviations the chain sees in a row: `x_kin` with its transversal
+    /// tilts (`basis`) added to their joints' rotation deviations (written to `buf`), or `x_kin` itself
     /// without transversal compliance.
     fn effective_x<'a>(
         &'a self,
-        row_idx: usize,
+        basis: &[[f64; 3]],
         x: ColRef<'_, f64>,
         x_kin: &'a [f64],
         buf: &'a mut Vec<f64>,
@@ -865,7 +934,6 @@ impl CalibrationProblem {
             return x_kin;
         }
         let first = self.chain.n_params() + self.n_compliance() + self.n_harmonics();
-        let basis = self.tilts_of(row_idx);
         buf.clear();
         buf.extend_from_slice(x_kin);
         for (t, (term, v)) in self.transversal.iter().zip(basis).enumerate() {
@@ -1130,11 +1198,13 @@ impl CalibrationProblem {
             q_buf,
             x_kin,
             x_buf,
+            bases,
             ..
         } = scratch;
         let row = &self.obs.rows[row_idx];
         let start = r;
         let mut r = r;
+        let (basis, tilts) = self.bases_of(row_idx, bases);
         let (RowKind::Marker { tip, position_m }
         | RowKind::Pose {
             tip, position_m, ..
@@ -1142,12 +1212,12 @@ impl CalibrationProblem {
         else {
             return 0;
         };
-        let q_eff = self.effective_q(row_idx, x, q_buf);
+        let q_eff = self.effective_q(row_idx, basis, x, q_buf);
         let chain = &self.tips[*tip];
         if x_kin.is_empty() {
             x_kin.extend((0..n_kin).map(|i| x[i]));
         }
-        let x_eff = self.effective_x(row_idx, x, x_kin, x_buf);
+        let x_eff = self.effective_x(tilts, x, x_kin, x_buf);
         // A marker without transversal tilts needs only the tip's point: the tip's chain
         // frozen at x (the constant factors between joints folded once), 3 Jacobian rows
         // per parameter. A pose, or tilts that change the deviations row by row: the
@@ -1176,8 +1246,6 @@ impl CalibrationProblem {
         };
         let jq = (n_angle > 0 && jac.is_some() && !angles_from_params)
             .then(|| chain.geometric_jacobian(x_eff, q_eff));
-        let basis = self.angle_basis_of(row_idx);
-        let tilts = self.tilts_of(row_idx);
         // Row k of the pose Jacobian (0–2 position, 3–5 rotation vector) at column col.
         let dpose = |k: usize, col: usize| -> f64 {
             self.column(buf, stride, k, col, jq.as_ref(), basis, tilts)
@@ -1249,18 +1317,20 @@ impl CalibrationProblem {
             q_buf,
             x_kin,
             x_buf,
+            bases,
             ..
         } = scratch;
         let row = &self.obs.rows[row_idx];
         let start = r;
         let mut r = r;
-        let q_eff = self.effective_q(row_idx, x, q_buf);
+        let (basis, tilts) = self.bases_of(row_idx, bases);
+        let q_eff = self.effective_q(row_idx, basis, x, q_buf);
         let p = if n_tilts > 0 {
             // Transversal tilts change the deviations row by row: the chain itself.
             if x_kin.is_empty() {
                 x_kin.extend((0..n_kin).map(|i| x[i]));
             }
-            let x_eff = self.effective_x(row_idx, x, x_kin, x_buf);
+            let x_eff = self.effective_x(tilts, x, x_kin, x_buf);
             if jac.is_some() {
                 buf.resize(3 * n_kin, 0.0);
                 let ws = ws.get_or_insert_with(|| FkWorkspace::new(&self.chain));
@@ -1281,13 +1351,11 @@ impl CalibrationProblem {
             if x_kin.is_empty() {
                 x_kin.extend((0..n_kin).map(|i| x[i]));
             }
-            let x_eff = self.effective_x(row_idx, x, x_kin, x_buf);
+            let x_eff = self.effective_x(tilts, x, x_kin, x_buf);
             Some(self.chain.geometric_jacobian(x_eff, q_eff))
         } else {
             None
         };
-        let tilts = self.tilts_of(row_idx);
-        let basis = self.angle_basis_of(row_idx);
         let dp = |k: usize, col: usize| -> f64 {
             self.column(buf, 3, k, col, jq.as_ref(), basis, tilts)
         };

@@ -20,48 +20,94 @@ pub(super) fn check_torque_tips(torque_tips: &[Chain], n_joints: usize) -> Resul
     }
 }
 
-/// The rows' bases, one configuration at a time ([`Observations::configurations`]: rows of
-/// one configuration, a file row's markers and distance, share them): per configuration its
-/// angle terms' basis (its joint torques under the compliance model, N·m or m·kg without
-/// masses, one per joint; then its harmonics' basis, `sin`/`cos`) and its transversal terms'
-/// tilts ([`TransversalTerm::tilt`]). `compliance` gives the model and the tips of its loads,
-/// `load_angles` the joint angles of each configuration's loads (a torque equilibrium,
-/// `n_joints` a configuration; the readings without). Returns `(angle basis,
-/// n_configurations × n_terms; tilts, n_configurations × transversal.len(); each row's
-/// configuration)`, all empty when there is no term; no configuration's loads are held past
-/// its own.
-pub(super) fn row_bases(
-    obs: &Observations,
-    compliance: Option<(&GravityCompliance, &[Chain])>,
-    load_angles: Option<&[f64]>,
-    harmonics: Option<&JointHarmonics>,
-    transversal: &[TransversalTerm],
-    n_terms: usize,
-) -> (Vec<f64>, Vec<[f64; 3]>, Vec<usize>) {
-    if n_terms == 0 && transversal.is_empty() {
-        return (Vec::new(), Vec::new(), Vec::new());
-    }
-    let mut basis = Vec::new();
-    let mut tilts = Vec::new();
-    let mut row_config = Vec::with_capacity(obs.rows.len());
-    for (c, rows) in obs.configurations().enumerate() {
-        let q = &obs.rows[rows.start].q;
-        if let Some((model, torque_tips)) = compliance {
-            let at = load_angles.map_or(q.as_slice(), |a| &a[c * q.len()..(c + 1) * q.len()]);
-            let loads = model.joint_loads(torque_tips, at);
-            basis.extend(loads.iter().map(|l| l.torque));
+/// The model terms whose bases a configuration's gravity loads and joint angles give.
+pub(super) struct BasisTerms<'a> {
+    /// The compliance model and the tips of its loads.
+    pub(super) compliance: Option<(&'a GravityCompliance, &'a [Chain])>,
+    /// The joint harmonics.
+    pub(super) harmonics: Option<&'a JointHarmonics>,
+    /// The transversal terms.
+    pub(super) transversal: &'a [TransversalTerm],
+}
+
+impl BasisTerms<'_> {
+    /// Appends one configuration's bases: to `angle` its angle terms' (its joint torques under
+    /// the compliance model, N·m or m·kg without masses, one per joint; then its harmonics'
+    /// basis at the readings `q`, `sin`/`cos`), to `tilts` its transversal terms' tilts
+    /// ([`TransversalTerm::tilt`]); the loads at `at` (a torque equilibrium's angles, rad)
+    /// or at `q`.
+    pub(super) fn bases(
+        &self,
+        q: &[f64],
+        at: Option<&[f64]>,
+        angle: &mut Vec<f64>,
+        tilts: &mut Vec<[f64; 3]>,
+    ) {
+        if let Some((model, torque_tips)) = self.compliance {
+            let loads = model.joint_loads(torque_tips, at.unwrap_or(q));
+            angle.extend(loads.iter().map(|l| l.torque));
             tilts.extend(
-                transversal
-                    .iter()
-                    .map(|t| <[f64; 3]>::from(t.tilt(&loads[t.joint]))),
+                (self.transversal.iter()).map(|t| <[f64; 3]>::from(t.tilt(&loads[t.joint]))),
             );
         }
-        if let Some(h) = harmonics {
-            basis.extend(h.basis(q));
+        if let Some(h) = self.harmonics {
+            angle.extend(h.basis(q));
         }
-        row_config.extend(std::iter::repeat_n(c, rows.len()));
     }
-    (basis, tilts, row_config)
+}
+
+/// The rows' bases ([`row_bases`]).
+pub(super) struct RowBases {
+    /// Angle terms' basis per configuration (`n_configurations × n_terms`); empty unless
+    /// `stored`.
+    pub(super) angle: Vec<f64>,
+    /// Transversal tilts per configuration (`n_configurations × transversal.len()`); empty
+    /// unless `stored`.
+    pub(super) tilts: Vec<[f64; 3]>,
+    /// Each row's configuration; empty without terms.
+    pub(super) row_config: Vec<usize>,
+    /// Whether the bases are kept (at most [`STORED_BASES_MAX`] values) rather than
+    /// evaluated row by row.
+    pub(super) stored: bool,
+}
+
+/// The rows' configurations ([`Observations::configurations`]: rows of one configuration, a
+/// file row's markers and distance, share their bases) and, up to [`STORED_BASES_MAX`]
+/// values, every configuration's bases ([`BasisTerms::bases`]; `load_angles`, the joint
+/// angles of each configuration's loads, `n_joints` a configuration, or the readings). Past
+/// that, the problem evaluates them row by row: a million two-marker rows of a 20-joint robot
+/// would keep half a gigabyte of bases.
+pub(super) fn row_bases(
+    obs: &Observations,
+    terms: &BasisTerms<'_>,
+    load_angles: Option<&[f64]>,
+    n_terms: usize,
+) -> RowBases {
+    let mut bases = RowBases {
+        angle: Vec::new(),
+        tilts: Vec::new(),
+        row_config: Vec::new(),
+        stored: true,
+    };
+    if n_terms == 0 && terms.transversal.is_empty() {
+        return bases;
+    }
+    bases.row_config.reserve_exact(obs.rows.len());
+    for (c, rows) in obs.configurations().enumerate() {
+        bases.row_config.extend(std::iter::repeat_n(c, rows.len()));
+    }
+    let n_configurations = bases.row_config.last().map_or(0, |c| c + 1);
+    let per_configuration = n_terms + 3 * terms.transversal.len();
+    bases.stored = n_configurations * per_configuration <= STORED_BASES_MAX;
+    if !bases.stored {
+        return bases;
+    }
+    for (c, rows) in obs.configurations().enumerate() {
+        let q = &obs.rows[rows.start].q;
+        let at = load_angles.map(|a| &a[c * q.len()..(c + 1) * q.len()]);
+        terms.bases(q, at, &mut bases.angle, &mut bases.tilts);
+    }
+    bases
 }
 
 /// Checks that every σ of `weights` is finite and positive.

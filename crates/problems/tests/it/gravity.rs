@@ -358,3 +358,96 @@ fn equal_per_axis_compliances_are_the_isotropic_one() {
         }
     }
 }
+
+/// Residuals and Jacobian of `problem` at `x`.
+fn evaluated(problem: &CalibrationProblem, x: &Col<f64>) -> (Col<f64>, faer::Mat<f64>) {
+    let mut r = Col::zeros(problem.n_residuals());
+    let mut j = faer::Mat::zeros(problem.n_residuals(), problem.layout().len());
+    problem
+        .residuals_and_jacobian(x.as_ref(), r.as_mut(), j.as_mut())
+        .expect("evaluation");
+    (r, j)
+}
+
+/// A problem that evaluates its configurations' bases row by row (as one past the bound of
+/// kept values is built) gives the kept bases' residuals and Jacobian bit for bit: per-axis
+/// transversal compliance on two markers a configuration, at the readings and at given load
+/// angles, and compliance with harmonics on a chain's distance, position and point rows.
+#[test]
+fn bases_evaluated_row_by_row_equal_the_kept_ones() {
+    let robot = torso_tree();
+    let tree = framed(&robot);
+    let mut obs = Observations::default();
+    for i in 0..7 {
+        let t = i as f64;
+        let q = vec![
+            0.3 * (0.7 * t).sin(),
+            (1.3 * t).sin(),
+            (0.9 * t + 1.0).cos(),
+            (0.4 * t).sin() * 1.5,
+            (1.7 * t + 0.3).cos(),
+        ];
+        for tip in 0..2 {
+            obs.rows.push(Row {
+                q: q.clone(),
+                kind: RowKind::Marker {
+                    tip,
+                    position_m: [0.4, 0.1 * t, 0.9 - 0.2 * tip as f64],
+                },
+            });
+        }
+    }
+    let n_joints = tree.n_joints();
+    let terms = gravity_terms(
+        n_joints,
+        robot.tips(),
+        hapcal_problems::Transversal::PerAxis,
+    );
+    // Load angles 20 mrad off the readings: the loads, and so the bases, differ from theirs.
+    let at: Vec<f64> = (obs.configurations())
+        .flat_map(|rows| obs.rows[rows.start].q.iter().map(|q| q + 0.02))
+        .collect();
+    let at: std::sync::Arc<[f64]> = at.into();
+    for load_angles in [None, Some(at)] {
+        let terms = ModelTerms {
+            load_angles,
+            ..terms.clone()
+        };
+        let build = || {
+            CalibrationProblem::on_tree(
+                tree.clone(),
+                obs.clone(),
+                pose_and_marker_weights(),
+                terms.clone(),
+            )
+            .expect("valid problem")
+        };
+        let kept = build();
+        let x = Col::from_fn(kept.layout().len(), |i| 1e-3 * ((i * 7 % 11) as f64 - 5.0));
+        let per_row = build().without_stored_bases();
+        assert_eq!(evaluated(&kept, &x), evaluated(&per_row, &x));
+    }
+    let qs: Vec<Vec<f64>> = (0..12)
+        .map(|i| {
+            let t = i as f64;
+            (0..7).map(|j| (0.3 * t + 0.7 * j as f64).sin()).collect()
+        })
+        .collect();
+    let harmonics = hapcal_problems::JointHarmonics {
+        joints: vec![1, 3],
+        orders: vec![1, 2],
+    };
+    let chain = || {
+        crate::problem_with_models(
+            &qs,
+            Some(GravityCompliance::default()),
+            Some(harmonics.clone()),
+        )
+    };
+    let kept = chain();
+    let x = Col::from_fn(kept.layout().len(), |i| 1e-3 * ((i * 5 % 7) as f64 - 3.0));
+    assert_eq!(
+        evaluated(&kept, &x),
+        evaluated(&chain().without_stored_bases(), &x)
+    );
+}
