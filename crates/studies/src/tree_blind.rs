@@ -669,16 +669,12 @@ fn simulate(case: &TreeCase, setup: &TreeSetup, n_rows: usize) -> Result<Simulat
         })
         .collect();
     Ok(Simulated {
-        table: MeasurementTable {
-            name: format!("tree-{}", case.seed),
-            path: PathBuf::from(format!("tree-{}.csv", case.seed)),
+        table: MeasurementTable::positions(
+            format!("tree-{}", case.seed),
+            format!("tree-{}.csv", case.seed),
+            2,
             rows,
-            n_markers: 2,
-            has_orientation: false,
-            has_distance: false,
-            ignored_columns: Vec::new(),
-            warnings: Vec::new(),
-        },
+        ),
         effect_rms_m,
     })
 }
