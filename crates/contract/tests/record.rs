@@ -77,6 +77,21 @@ fn record() -> Calibration {
     }
 }
 
+/// `r` written as a device file's `[calibration]` table, the file's text and the record read
+/// back from it (not yet checked).
+fn under_a_device_table(r: &Calibration) -> (String, Calibration) {
+    let mut device = String::from("name = \"d\"\n");
+    r.write_toml(Some("calibration"), &mut device);
+    #[derive(serde::Deserialize)]
+    struct File {
+        #[allow(dead_code)]
+        name: String,
+        calibration: Calibration,
+    }
+    let file: File = toml::from_str(&device).expect("parses");
+    (device, file.calibration)
+}
+
 fn refused(text: &str) -> ContractError {
     Calibration::from_sidecar_str(text, "robot.calibration.toml").expect_err("refused")
 }
@@ -88,17 +103,9 @@ fn a_record_reads_back_bit_for_bit() {
     let again = Calibration::from_sidecar_str(&text, "x").expect("reads");
     assert_eq!(again, r);
     // Under a device file's table too.
-    let mut device = String::from("name = \"d\"\n");
-    r.write_toml(Some("calibration"), &mut device);
-    #[derive(serde::Deserialize)]
-    struct File {
-        #[allow(dead_code)]
-        name: String,
-        calibration: Calibration,
-    }
-    let file: File = toml::from_str(&device).expect("parses");
-    file.calibration.check(&device, "d").expect("checks");
-    assert_eq!(file.calibration, r);
+    let (device, again) = under_a_device_table(&r);
+    again.check(&device, "d").expect("checks");
+    assert_eq!(again, r);
     assert_eq!(r.covariance.as_ref().map(|c| c.get(0, 1)), Some(1e-13));
 }
 
@@ -286,23 +293,12 @@ fn a_region_with_min_above_max_is_refused_at_its_line() {
                   joint = [{ name = \"a\", min = 0.5, max = 0.1, unit = \"rad\" }]\n";
     let e = refused(inline);
     assert_eq!(e.line, 6, "{e}");
-    let mut device = String::from("name = \"d\"\n");
     let mut r = record();
     if let Some(region) = &mut r.region {
         region.joints[0].max = -3.0;
     }
-    r.write_toml(Some("calibration"), &mut device);
-    #[derive(serde::Deserialize)]
-    struct File {
-        #[allow(dead_code)]
-        name: String,
-        calibration: Calibration,
-    }
-    let file: File = toml::from_str(&device).expect("parses");
-    let e = file
-        .calibration
-        .check(&device, "d.toml")
-        .expect_err("refused");
+    let (device, again) = under_a_device_table(&r);
+    let e = again.check(&device, "d.toml").expect_err("refused");
     assert_eq!(e.line, line_of(&device, "max = -3.0"), "{e}");
 }
 

@@ -233,35 +233,26 @@ fn calibrated_urdf_reproduces_the_calibrated_figures() {
     let front = root().join("fixtures/mukca/data/kuka_14/front");
     let test = root().join("fixtures/mukca/data/kuka_14/left_back");
     let (front, test) = (front.display().to_string(), test.display().to_string());
-    let args = [
-        "calibrate",
-        "--device",
-        &iiwa(),
-        "--data",
-        &front,
-        "--test",
-        &test,
-        "--model",
-        "geometric",
-        "--json",
-    ];
-    let mut with_out = args.to_vec();
     let out_s = out_urdf.display().to_string();
-    with_out.extend(["--out", &out_s]);
-    let first = json(&hapcal(&with_out));
+    let calibrate = |device: &str, more: &[&str]| {
+        let mut args = vec![
+            "calibrate",
+            "--device",
+            device,
+            "--data",
+            &front,
+            "--test",
+            &test,
+            "--model",
+            "geometric",
+            "--json",
+        ];
+        args.extend_from_slice(more);
+        json(&hapcal(&args))
+    };
+    let first = calibrate(&iiwa(), &["--out", &out_s]);
     // Calibrating again from the written URDF starts where the first calibration ended.
-    let second = json(&hapcal(&[
-        "calibrate",
-        "--device",
-        &out_s,
-        "--data",
-        &front,
-        "--test",
-        &test,
-        "--model",
-        "geometric",
-        "--json",
-    ]));
+    let second = calibrate(&out_s, &[]);
     let after = figure(&first, "left_back", "after", "mean_absolute_error_m");
     let before_again = figure(&second, "left_back", "before", "mean_absolute_error_m");
     assert!(
