@@ -374,6 +374,23 @@ impl ArmCase {
     }
 }
 
+/// Harmonic `h` of `n` joints, each at an amplitude (rad) drawn from `amp` and a random phase.
+pub(crate) fn harmonic_draw(
+    rng: &mut ChaCha8Rng,
+    h: u8,
+    n: usize,
+    amp: std::ops::RangeInclusive<f64>,
+) -> Injected {
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for _ in 0..n {
+        let amp = rng.random_range(amp.clone());
+        let phase = rng.random_range(0.0..2.0 * PI);
+        a.push(amp * phase.cos());
+        b.push(amp * phase.sin());
+    }
+    Injected::Harmonic { h, a, b }
+}
+
 /// Whether `verdict` names exactly the effects `expected` (in any order), a named compliance
 /// whose torque model the diagnosis left open (`open`: the named effect and the other model
 /// it predicts alike) standing for either model.
@@ -450,16 +467,7 @@ pub fn draw_case(i: u64, n_joints: usize) -> ArmCase {
             })
             .collect()
     };
-    let harmonic = |rng: &mut ChaCha8Rng, h: u8| {
-        let (mut a, mut b) = (Vec::new(), Vec::new());
-        for _ in 0..n_joints {
-            let amp = rng.random_range(2e-4..=1e-3);
-            let phase = rng.random_range(0.0..2.0 * PI);
-            a.push(amp * phase.cos());
-            b.push(amp * phase.sin());
-        }
-        Injected::Harmonic { h, a, b }
-    };
+    let harmonic = |rng: &mut ChaCha8Rng, h: u8| harmonic_draw(rng, h, n_joints, 2e-4..=1e-3);
     let library_effect = |rng: &mut ChaCha8Rng, effect: Effect| -> Injected {
         match effect {
             Effect::GravityCompliance => Injected::GravityCompliance {

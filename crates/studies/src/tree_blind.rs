@@ -72,8 +72,8 @@ use rand_distr::{Distribution, Normal, StandardNormal};
 use serde::Serialize;
 
 use crate::arm_blind::{
-    ArmCaseKind, BlindOutcome, Injected, apply_point_effects, draw_pair, names_right, pct, signed,
-    vector, verdict_words, wilson_95,
+    ArmCaseKind, BlindOutcome, Injected, apply_point_effects, draw_pair, harmonic_draw,
+    names_right, pct, signed, vector, verdict_words, wilson_95,
 };
 
 /// Rows of a case (the last [`TEST_FRACTION`] held out).
@@ -264,7 +264,6 @@ pub fn draw_case(i: u64, setup: &TreeSetup) -> TreeCase {
             .collect::<Vec<f64>>()
     };
     let uniform = |lo: f64, hi: f64| move |_: usize| (lo, hi);
-    let harmonic = |rng: &mut ChaCha8Rng, h: u8| harmonic_draw(rng, h, n);
     // Transversal compliance under the loads of `joint` (masses unless lumped).
     let transversal = |rng: &mut ChaCha8Rng, lumped: bool| Injected::TransversalCompliance {
         c: per_joint(
@@ -299,8 +298,8 @@ pub fn draw_case(i: u64, setup: &TreeSetup) -> TreeCase {
             Effect::LumpedCompliance => Injected::LumpedCompliance {
                 k: per_joint(rng, &uniform(2e-4, 1e-3), false),
             },
-            Effect::FirstHarmonic => harmonic(rng, 1),
-            Effect::SecondHarmonic => harmonic(rng, 2),
+            Effect::FirstHarmonic => harmonic(rng, 1, n),
+            Effect::SecondHarmonic => harmonic(rng, 2, n),
             Effect::Backlash => Injected::Backlash {
                 b: per_joint(rng, &uniform(3e-4, 1.5e-3), false),
             },
@@ -373,7 +372,7 @@ fn outside_effect(rng: &mut ChaCha8Rng, slot: u64, n: usize) -> Injected {
                 c: signed(rng, 3e-4, 1e-3),
             }
         }
-        1 => harmonic_draw(rng, 3, n),
+        1 => harmonic(rng, 3, n),
         _ => Injected::QuadraticDrift {
             v: vector(rng, 4e-4, 2e-3),
         },
@@ -381,15 +380,8 @@ fn outside_effect(rng: &mut ChaCha8Rng, slot: u64, n: usize) -> Injected {
 }
 
 /// Harmonic `h` of `n` joints, amplitude 0.3–1.5 mrad per joint at a random phase.
-fn harmonic_draw(rng: &mut ChaCha8Rng, h: u8, n: usize) -> Injected {
-    let (mut a, mut b) = (Vec::new(), Vec::new());
-    for _ in 0..n {
-        let amp = rng.random_range(3e-4..=1.5e-3);
-        let phase = rng.random_range(0.0..2.0 * PI);
-        a.push(amp * phase.cos());
-        b.push(amp * phase.sin());
-    }
-    Injected::Harmonic { h, a, b }
+fn harmonic(rng: &mut ChaCha8Rng, h: u8, n: usize) -> Injected {
+    harmonic_draw(rng, h, n, 3e-4..=1.5e-3)
 }
 
 /// A record value in `unit`.
