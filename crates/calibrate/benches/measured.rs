@@ -84,7 +84,7 @@ fn positions(robot: &Robot) -> MeasurementTable {
             tracker::row(i + 2, q, vec![marker])
         })
         .collect();
-    tracker::table("tracker", "tracker.csv", 1, rows)
+    hapcal_io::MeasurementTable::positions("tracker", "tracker.csv", 1, rows)
 }
 
 fn bench(c: &mut Criterion) {

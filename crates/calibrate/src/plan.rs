@@ -872,16 +872,7 @@ impl RowShape {
 /// Observations of `rows` as the measured workflow builds them
 /// ([`crate::measured::observations`]).
 fn observations_of(rows: Vec<hapcal_io::MeasuredRow>, n_markers: usize) -> Observations {
-    let table = hapcal_io::MeasurementTable {
-        name: String::new(),
-        path: std::path::PathBuf::new(),
-        rows,
-        warnings: Vec::new(),
-        n_markers,
-        has_orientation: false,
-        has_distance: false,
-        ignored_columns: Vec::new(),
-    };
+    let table = hapcal_io::MeasurementTable::positions("", "", n_markers, rows);
     crate::measured::observations(std::slice::from_ref(&table), &|_, _| true)
 }
 

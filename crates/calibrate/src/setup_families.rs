@@ -42,7 +42,9 @@
 //! is kept only when it leaves what right data leave ([`Residual::is_clean`]) and divides the
 //! residual by [`crate::setup_findings::OVERWHELMING_FACTOR`] or more.
 
-use crate::setup_findings::{Corrected, MistakeClass, OVERWHELMING_FACTOR, Residual, ResidualFn};
+use crate::setup_findings::{
+    Corrected, Judged, MistakeClass, OVERWHELMING_FACTOR, Residual, ResidualFn, Scoring, judge,
+};
 
 /// A general family of setup mistakes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -693,6 +695,30 @@ pub(crate) fn fitted_hypotheses<D: SetupData>(
     out
 }
 
+/// The hypotheses of a check whose only residual is its quick one, judged by it: the fitted
+/// ones ([`fitted_hypotheses`]) added to `hypotheses` first when the data as given
+/// (`as_given`) leave more than right data do ([`Residual::is_clean`]).
+pub(crate) fn judge_with_fitted<D: SetupData + Sync>(
+    as_given: Residual,
+    given: &D,
+    layout: &Layout,
+    hypotheses: &mut Vec<Corrected<D>>,
+    screen: ResidualFn<'_, D>,
+) -> Judged {
+    if !as_given.is_clean() {
+        hypotheses.extend(fitted_hypotheses(given, layout, &as_given, screen));
+    }
+    judge(
+        as_given,
+        given,
+        hypotheses,
+        &Scoring {
+            screen,
+            refine: None,
+        },
+    )
+}
+
 /// The minimum of `f` on `[lo, hi]`: the best of [`GRID_POINTS`] evenly spaced points, then
 /// [`GOLDEN_STEPS`] golden-section steps between its neighbours; `(x, f(x))`.
 fn minimise(f: &dyn Fn(f64) -> f64, lo: f64, hi: f64) -> (f64, f64) {
@@ -1145,9 +1171,16 @@ impl Residual {
 }
 
 /// Fails the test when the classes of `hypotheses` do not cover exactly the families `kind`
-/// generates before the fit.
+/// generates before the fit, or hold no hypothesis of one of `classes`.
 #[cfg(test)]
-pub(crate) fn assert_families<T>(kind: DataKind, hypotheses: &[Corrected<T>]) {
+pub(crate) fn assert_families<T>(
+    kind: DataKind,
+    hypotheses: &[Corrected<T>],
+    classes: &[MistakeClass],
+) {
+    for class in classes {
+        assert!(hypotheses.iter().any(|h| h.class == *class), "{class}");
+    }
     let (generated, _) = kind.families();
     let mut got: Vec<Family> = hypotheses.iter().filter_map(|h| h.class.family()).collect();
     got.dedup();

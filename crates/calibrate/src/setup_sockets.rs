@@ -19,11 +19,11 @@ use hapcal_kinematics::Chain;
 
 use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
 use crate::setup_families::{
-    JointColumn, Layout, SetupData, Tier, fitted_hypotheses, general_hypotheses,
+    JointColumn, Layout, SetupData, Tier, general_hypotheses, judge_with_fitted,
 };
 use crate::setup_findings::{
-    Corrected, Finding, MistakeClass, Residual, ResidualOf, Scoring, SetupReport, Severity, judge,
-    mm, tip_candidates,
+    Corrected, Finding, MistakeClass, Residual, ResidualOf, SetupReport, Severity, mm,
+    tip_candidates,
 };
 
 /// Rows (over every socket of the training placements) below which the socket check judges
@@ -499,24 +499,9 @@ pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
             }),
         )
     };
-    if !as_given.is_clean() {
-        hypotheses.extend(fitted_hypotheses(
-            &given,
-            &layout_of(input),
-            &as_given,
-            &screen,
-        ));
-    }
+    let layout = layout_of(input);
+    let judged = judge_with_fitted(as_given, &given, &layout, &mut hypotheses, &screen);
     let n_hypotheses = hypotheses.len();
-    let judged = judge(
-        as_given,
-        &given,
-        &hypotheses,
-        &Scoring {
-            screen: &screen,
-            refine: None,
-        },
-    );
     let mut findings: Vec<Finding> = judged.finding.into_iter().collect();
     // The socket distance judged directly: the nominal model measures it to a few millimetres
     // (the scatter), so a distance given wrong by a factor stands out however little it
@@ -774,11 +759,7 @@ mod tests {
         crate::setup_families::assert_families(
             crate::setup_families::DataKind::SocketFolders,
             &hypotheses,
-        );
-        assert!(
-            hypotheses
-                .iter()
-                .any(|h| h.class == MistakeClass::SocketDistance)
+            &[MistakeClass::SocketDistance],
         );
     }
 }

@@ -46,7 +46,7 @@ fn table(robot: &Robot, seed: u64, edit: impl Fn(&mut [f64])) -> MeasurementTabl
             tracker::row(i as u64 + 2, q, vec![marker])
         })
         .collect();
-    tracker::table(format!("seed{seed}"), "tracker.csv", 1, rows)
+    MeasurementTable::positions(format!("seed{seed}"), "tracker.csv", 1, rows)
 }
 
 fn check(robot: &Robot, table: &MeasurementTable) -> SetupReport {

@@ -45,7 +45,7 @@ fn marker_row(
 
 /// The tracker file `tracker.csv` of one marker holding `rows`, named after `seed`.
 fn tracker_table(seed: u64, rows: Vec<MeasuredRow>) -> MeasurementTable {
-    tracker::table(format!("seed{seed}"), "tracker.csv", 1, rows)
+    MeasurementTable::positions(format!("seed{seed}"), "tracker.csv", 1, rows)
 }
 
 fn config() -> MeasuredConfig {

@@ -71,7 +71,7 @@ fn measure(robot: &Robot, qs: &[Vec<f64>], rng: &mut ChaCha8Rng) -> MeasurementT
             tracker::row(i as u64 + 2, q.clone(), vec![marker])
         })
         .collect();
-    tracker::table("tracker", "tracker.csv", 1, rows)
+    MeasurementTable::positions("tracker", "tracker.csv", 1, rows)
 }
 
 /// The geometric calibration of `train`, and its 3-D RMS error on `test`, m.

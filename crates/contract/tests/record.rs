@@ -77,6 +77,28 @@ fn record() -> Calibration {
     }
 }
 
+/// `r` written as a device file's `[calibration]` table, the file's text and the record read
+/// back from it (not yet checked).
+fn under_a_device_table(r: &Calibration) -> (String, Calibration) {
+    let mut device = String::from("name = \"d\"\n");
+    r.write_toml(Some("calibration"), &mut device);
+    #[derive(serde::Deserialize)]
+    struct File {
+        #[allow(dead_code)]
+        name: String,
+        calibration: Calibration,
+    }
+    let file: File = toml::from_str(&device).expect("parses");
+    (device, file.calibration)
+}
+
+/// The refusal of the record's sidecar with `from` (which it holds) replaced by `to`.
+fn refused_edit(from: &str, to: &str) -> ContractError {
+    let text = record().to_sidecar_toml();
+    assert!(text.contains(from), "{from:?} is not in the record");
+    refused(&text.replace(from, to))
+}
+
 fn refused(text: &str) -> ContractError {
     Calibration::from_sidecar_str(text, "robot.calibration.toml").expect_err("refused")
 }
@@ -88,26 +110,15 @@ fn a_record_reads_back_bit_for_bit() {
     let again = Calibration::from_sidecar_str(&text, "x").expect("reads");
     assert_eq!(again, r);
     // Under a device file's table too.
-    let mut device = String::from("name = \"d\"\n");
-    r.write_toml(Some("calibration"), &mut device);
-    #[derive(serde::Deserialize)]
-    struct File {
-        #[allow(dead_code)]
-        name: String,
-        calibration: Calibration,
-    }
-    let file: File = toml::from_str(&device).expect("parses");
-    file.calibration.check(&device, "d").expect("checks");
-    assert_eq!(file.calibration, r);
+    let (device, again) = under_a_device_table(&r);
+    again.check(&device, "d").expect("checks");
+    assert_eq!(again, r);
     assert_eq!(r.covariance.as_ref().map(|c| c.get(0, 1)), Some(1e-13));
 }
 
 #[test]
 fn a_newer_schema_is_refused_in_words() {
-    let text = record()
-        .to_sidecar_toml()
-        .replace("schema_version = 1", "schema_version = 7");
-    let e = refused(&text);
+    let e = refused_edit("schema_version = 1", "schema_version = 7");
     assert!(e.message.contains("newer hapcal"), "{e}");
     assert_eq!(e.line, 2, "{e}");
 }
@@ -115,34 +126,22 @@ fn a_newer_schema_is_refused_in_words() {
 #[test]
 fn an_unknown_name_or_a_wrong_unit_is_refused_at_its_line() {
     let text = record().to_sidecar_toml();
-    let line_of = |needle: &str| {
-        text.lines()
-            .position(|l| l.starts_with(needle))
-            .map(|i| i + 1)
-            .expect("present")
-    };
-    let bad = text.replace("\"left_1.rx\"", "\"left_1.rw\"");
-    let e = refused(&bad);
+    let e = refused_edit("\"left_1.rx\"", "\"left_1.rw\"");
     assert!(e.message.contains("unknown value name"), "{e}");
-    assert_eq!(e.line, line_of("\"left_1.rx\""), "{e}");
+    assert_eq!(e.line, line_of(&text, "\"left_1.rx\""), "{e}");
 
-    let bad = text.replace(
+    let e = refused_edit(
         "\"compliance.left_1\" = { value = 0.0001234567890123, std = 3e-6, unit = \"rad/(N·m)\"",
         "\"compliance.left_1\" = { value = 0.0001234567890123, std = 3e-6, unit = \"rad/m\"",
     );
-    assert_ne!(bad, text, "the replaced line is in the record");
-    let e = refused(&bad);
     assert!(e.message.contains("expected \"rad/(N·m)\""), "{e}");
-    assert_eq!(e.line, line_of("\"compliance.left_1\""), "{e}");
+    assert_eq!(e.line, line_of(&text, "\"compliance.left_1\""), "{e}");
     assert!(e.to_string().starts_with("robot.calibration.toml:"), "{e}");
 }
 
 #[test]
 fn a_missing_key_is_refused_with_what_is_expected() {
-    let text = record()
-        .to_sidecar_toml()
-        .replace("model = \"transversal-compliance\"\n", "");
-    let e = refused(&text);
+    let e = refused_edit("model = \"transversal-compliance\"\n", "");
     assert!(e.message.contains("missing key model"), "{e}");
 
     let mut r = record();
@@ -150,15 +149,11 @@ fn a_missing_key_is_refused_with_what_is_expected() {
     let e = refused(&r.to_sidecar_toml());
     assert!(e.message.contains("no [torque] table"), "{e}");
 
-    let text = record().to_sidecar_toml().replace("rows = 412\n", "");
-    let e = refused(&text);
+    let e = refused_edit("rows = 412\n", "");
     assert!(e.message.contains("missing field `rows`"), "{e}");
     assert!(e.line > 0, "{e}");
 
-    let text = record()
-        .to_sidecar_toml()
-        .replace("source = \"urdf-masses\"", "source = \"guessed\"");
-    let e = refused(&text);
+    let e = refused_edit("source = \"urdf-masses\"", "source = \"guessed\"");
     assert!(e.message.contains("lumped-unit-weights"), "{e}");
 }
 
@@ -249,8 +244,9 @@ fn a_record_beside_another_urdf_is_refused_in_words() {
 
 #[test]
 fn a_missing_schema_version_is_refused_at_the_first_key_of_schema_1() {
-    let text = record().to_sidecar_toml();
-    let bad = text.replace("schema_version = 1\n", "");
+    let bad = record()
+        .to_sidecar_toml()
+        .replace("schema_version = 1\n", "");
     let e = refused(&bad);
     assert!(e.message.contains("missing key schema_version"), "{e}");
     assert!(!e.message.contains("unknown field"), "{e}");
@@ -286,23 +282,12 @@ fn a_region_with_min_above_max_is_refused_at_its_line() {
                   joint = [{ name = \"a\", min = 0.5, max = 0.1, unit = \"rad\" }]\n";
     let e = refused(inline);
     assert_eq!(e.line, 6, "{e}");
-    let mut device = String::from("name = \"d\"\n");
     let mut r = record();
     if let Some(region) = &mut r.region {
         region.joints[0].max = -3.0;
     }
-    r.write_toml(Some("calibration"), &mut device);
-    #[derive(serde::Deserialize)]
-    struct File {
-        #[allow(dead_code)]
-        name: String,
-        calibration: Calibration,
-    }
-    let file: File = toml::from_str(&device).expect("parses");
-    let e = file
-        .calibration
-        .check(&device, "d.toml")
-        .expect_err("refused");
+    let (device, again) = under_a_device_table(&r);
+    let e = again.check(&device, "d.toml").expect_err("refused");
     assert_eq!(e.line, line_of(&device, "max = -3.0"), "{e}");
 }
 
@@ -310,21 +295,19 @@ fn a_region_with_min_above_max_is_refused_at_its_line() {
 fn the_model_constrains_the_values_its_record_holds() {
     let text = record().to_sidecar_toml();
     // A geometric record with compliance values.
-    let bad = text.replace(
+    let e = refused_edit(
         "model = \"transversal-compliance\"",
         "model = \"geometric\"",
     );
-    let e = refused(&bad);
     assert!(e.message.contains("identifies no compliance"), "{e}");
-    assert_eq!(e.line, line_of(&bad, "\"compliance.left_1\""), "{e}");
+    assert_eq!(e.line, line_of(&text, "\"compliance.left_1\""), "{e}");
     // A compliance record with a transversal compliance.
-    let bad = text.replace(
+    let e = refused_edit(
         "model = \"transversal-compliance\"",
         "model = \"compliance\"",
     );
-    let e = refused(&bad);
     assert!(e.message.contains("no transversal"), "{e}");
-    assert_eq!(e.line, line_of(&bad, "\"transversal.left_1\""), "{e}");
+    assert_eq!(e.line, line_of(&text, "\"transversal.left_1\""), "{e}");
     // A haptic device's model on a URDF's sidecar.
     let mut r = record();
     r.model = Some(ModelName::Transmissions);

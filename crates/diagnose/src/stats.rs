@@ -1,6 +1,6 @@
-//! Tail probabilities of the χ² and F distributions, Holm–Bonferroni, and the small dense
-//! column selection the tests use (column-pivoted Gram–Schmidt); the solves are in
-//! [`crate::solve`].
+//! Tail probabilities of the χ² and F distributions, Holm–Bonferroni, the mean, and the
+//! small dense column selection the tests use (column-pivoted Gram–Schmidt); the solves are
+//! in [`crate::solve`].
 //!
 //! Special functions: Press et al., *Numerical Recipes*, 3rd ed., 2007, §6.1 (Lanczos
 //! log-gamma), §6.2 (incomplete gamma, series and continued fraction), §6.4 (incomplete
@@ -158,6 +158,12 @@ pub fn holm(p: &[f64]) -> Vec<f64> {
 /// rad, which an effect that does depend on it (the cable angle on the base twist) then
 /// follows.
 pub(crate) const NUMERICAL_ZERO_COLUMN: f64 = 1e-9;
+
+/// Mean of `values` (0 for none).
+pub(crate) fn mean<T: std::borrow::Borrow<f64>>(values: impl IntoIterator<Item = T>) -> f64 {
+    let (sum, n) = (values.into_iter()).fold((0.0, 0usize), |(s, n), v| (s + v.borrow(), n + 1));
+    if n == 0 { 0.0 } else { sum / n as f64 }
+}
 
 /// Column-pivoted modified Gram–Schmidt on the columns `cols` of `a`, after projecting out the
 /// orthonormal columns of `against` (N × p, may have 0 columns).

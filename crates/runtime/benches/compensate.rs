@@ -4,7 +4,8 @@
 
 use std::hint::black_box;
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::measurement::WallTime;
+use criterion::{BenchmarkGroup, Criterion, criterion_group, criterion_main};
 use hapcal_problems::GravityCompliance;
 use hapcal_runtime::{CompensationConfig, Pose, Robot, Target, compensate};
 
@@ -78,14 +79,27 @@ fn recorded_iiwa() -> Robot {
 
 const Q: [f64; 7] = [0.3, 0.7, -0.2, -1.2, 0.4, 0.9, 0.1];
 
-fn bench(c: &mut Criterion) {
-    let robot = compliant_iiwa();
-    let rigid = robot.with_compliances(&[0.0; 7]).expect("valid");
+/// `compensate_pose` of `group`: the compensation of `robot` to the target where its rigid
+/// (nominal) copy puts the tip at `Q`, so that `Q` is the nominal inverse kinematics' solution
+/// and the compensation corrects the sag.
+fn compensate_pose(group: &mut BenchmarkGroup<'_, WallTime>, robot: &Robot) {
     let mut ws = robot.workspace();
-    // The target: where the rigid (nominal) arm puts its tip at Q, so Q is the nominal
-    // inverse kinematics' solution and the compensation corrects the sag.
+    let rigid = robot.with_compliances(&[0.0; 7]).expect("valid");
     let target = Target::Pose(rigid.tip_pose(0, &Q, &mut ws).expect("valid"));
     let cfg = CompensationConfig::default();
+    group.bench_function("compensate_pose", |b| {
+        let mut q = [0.0; 7];
+        b.iter(|| {
+            let c = compensate(robot, 0, black_box(&target), &Q, &cfg, &mut ws, &mut q);
+            assert!(c.is_ok_and(|c| c.reached));
+            q[0]
+        })
+    });
+}
+
+fn bench(c: &mut Criterion) {
+    let robot = compliant_iiwa();
+    let mut ws = robot.workspace();
     let mut group = c.benchmark_group("iiwa14_compliant");
     group.bench_function("deflected_tip_pose", |b| {
         let mut out = [Pose::IDENTITY];
@@ -95,20 +109,11 @@ fn bench(c: &mut Criterion) {
                 .map(|d| d.iterations)
         })
     });
-    group.bench_function("compensate_pose", |b| {
-        let mut q = [0.0; 7];
-        b.iter(|| {
-            let c = compensate(&robot, 0, black_box(&target), &Q, &cfg, &mut ws, &mut q);
-            assert!(c.is_ok_and(|c| c.reached));
-            q[0]
-        })
-    });
+    compensate_pose(&mut group, &robot);
     group.finish();
 
     // As calibrate writes it: loads of the robot at its readings, nominal geometry for them.
     let robot = recorded_iiwa();
-    let rigid = robot.with_compliances(&[0.0; 7]).expect("valid");
-    let target = Target::Pose(rigid.tip_pose(0, &Q, &mut ws).expect("valid"));
     let mut ws = robot.workspace();
     let mut group = c.benchmark_group("iiwa14_recorded");
     group.bench_function("pose_jacobian_deflected", |b| {
@@ -138,14 +143,7 @@ fn bench(c: &mut Criterion) {
                 .map(|(p, _)| p.translation_m[0])
         })
     });
-    group.bench_function("compensate_pose", |b| {
-        let mut q = [0.0; 7];
-        b.iter(|| {
-            let c = compensate(&robot, 0, black_box(&target), &Q, &cfg, &mut ws, &mut q);
-            assert!(c.is_ok_and(|c| c.reached));
-            q[0]
-        })
-    });
+    compensate_pose(&mut group, &robot);
     group.finish();
 }
 

@@ -91,10 +91,7 @@ impl Model {
     /// [`LoadError::Io`] if the file cannot be read; otherwise as [`Model::from_toml`],
     /// with the path as origin.
     pub fn load(path: &Path) -> Result<Model, LoadError> {
-        let text = std::fs::read_to_string(path).map_err(|e| LoadError::Io {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        let text = read_text(path)?;
         Model::from_toml(&text, &path.display().to_string())
     }
 
@@ -543,6 +540,17 @@ fn locate_path(text: &str, path: &[Step]) -> (usize, usize) {
         current = Some(next);
     }
     span.map_or((1, 1), |s| line_column(text, s.start))
+}
+
+/// The text of the file at `path`.
+///
+/// # Errors
+/// [`LoadError::Io`] if it cannot be read.
+pub(crate) fn read_text(path: &Path) -> Result<String, LoadError> {
+    std::fs::read_to_string(path).map_err(|e| LoadError::Io {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
 }
 
 /// A device file's `[[dh]]` chain, read and checked: the tables, the convention, the rows

@@ -326,23 +326,10 @@ impl Model {
     /// As [`Model::joint_angles`] for the readings.
     pub fn outside_region(&self, theta: &[f64]) -> Result<Option<(usize, f64)>, Error> {
         self.check_readings(theta)?;
-        let mut worst: Option<(usize, f64, f64)> = None;
-        for (j, (&(min, max, slack), &v)) in
-            self.region[..self.n_region].iter().zip(theta).enumerate()
-        {
-            let past = if v > max + slack {
-                v - max
-            } else if v < min - slack {
-                v - min
-            } else {
-                continue;
-            };
-            let share = past.abs() / (max - min).max(f64::MIN_POSITIVE);
-            if worst.is_none_or(|(_, _, s)| share > s) {
-                worst = Some((j, past, share));
-            }
-        }
-        Ok(worst.map(|(j, past, _)| (j, past)))
+        let region = self.region[..self.n_region].iter().zip(theta).enumerate();
+        Ok(farthest_outside(region.map(
+            |(j, (&(min, max, slack), &v))| (j, v, min, max, slack),
+        )))
     }
 
     /// Whether the model has a recorded region ([`Model::with_region`]).
@@ -638,4 +625,28 @@ impl Model {
         }
         (pose, axes, origins)
     }
+}
+
+/// Of `(joint, value, min, max, slack)` entries, the joint whose value lies past
+/// `[min − slack, max + slack]` by the largest share of its range `max − min`, with how far
+/// past its range it lies (positive above, negative below); `None` when every value is
+/// within its slack.
+pub(crate) fn farthest_outside(
+    entries: impl Iterator<Item = (usize, f64, f64, f64, f64)>,
+) -> Option<(usize, f64)> {
+    let mut worst: Option<(usize, f64, f64)> = None;
+    for (j, v, min, max, slack) in entries {
+        let past = if v > max + slack {
+            v - max
+        } else if v < min - slack {
+            v - min
+        } else {
+            continue;
+        };
+        let share = past.abs() / (max - min).max(f64::MIN_POSITIVE);
+        if worst.is_none_or(|(_, _, s)| share > s) {
+            worst = Some((j, past, share));
+        }
+    }
+    worst.map(|(j, past, _)| (j, past))
 }

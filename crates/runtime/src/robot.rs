@@ -4,6 +4,7 @@
 
 use crate::error::{check_finite, check_len};
 use crate::math::{sin_cos, sin_cos_near};
+use crate::model::farthest_outside;
 use crate::pose::cross;
 use crate::{Error, Pose};
 
@@ -450,22 +451,9 @@ impl Robot {
     /// reading.
     pub fn outside_region(&self, q: &[f64]) -> Result<Option<(usize, f64)>, Error> {
         self.check_joints("joint angles", q)?;
-        let mut worst: Option<(usize, f64, f64)> = None;
-        for &(j, min, max, slack) in &self.region {
-            let v = q[j];
-            let past = if v > max + slack {
-                v - max
-            } else if v < min - slack {
-                v - min
-            } else {
-                continue;
-            };
-            let share = past.abs() / (max - min).max(f64::MIN_POSITIVE);
-            if worst.is_none_or(|(_, _, s)| share > s) {
-                worst = Some((j, past, share));
-            }
-        }
-        Ok(worst.map(|(j, past, _)| (j, past)))
+        Ok(farthest_outside(
+            (self.region.iter()).map(|&(j, min, max, slack)| (j, q[j], min, max, slack)),
+        ))
     }
 
     /// The same robot with compliances `k` (one per joint; rad/(N·m) or rad/m as

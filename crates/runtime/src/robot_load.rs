@@ -9,6 +9,7 @@ use hapcal_contract::urdf;
 use hapcal_contract::{Calibration, ElementField, Region, Torque, TorqueSource, ValueName};
 
 use crate::dh_table::{DhTable, add_dh, dh_frames};
+use crate::load::read_text;
 use crate::robot::deviation_pose;
 use crate::robot::{HarmonicTerm, PointMass, RobotJoint, RobotTip, TransversalJoint};
 use crate::{GravityModel, LoadError, Pose, Robot};
@@ -80,16 +81,13 @@ impl Robot {
     /// on the paths to the tips, a haptic device's value, lumped loads whose tips are not all
     /// loaded.
     pub fn load_urdf(urdf: &Path, tips: &[&str]) -> Result<Robot, LoadError> {
-        let read = |path: &Path| {
-            std::fs::read_to_string(path).map_err(|e| LoadError::Io {
-                path: path.to_path_buf(),
-                message: e.to_string(),
-            })
-        };
-        let text = read(urdf)?;
+        let text = read_text(urdf)?;
         let sidecar_path = urdf.with_extension("calibration.toml");
         let sidecar = if sidecar_path.is_file() {
-            Some((read(&sidecar_path)?, sidecar_path.display().to_string()))
+            Some((
+                read_text(&sidecar_path)?,
+                sidecar_path.display().to_string(),
+            ))
         } else {
             None
         };
@@ -271,10 +269,7 @@ impl Robot {
     /// [`LoadError::Io`] for a file that cannot be read; otherwise as
     /// [`Robot::from_device_str`], with the path as origin.
     pub fn load_device(path: &Path) -> Result<Robot, LoadError> {
-        let text = std::fs::read_to_string(path).map_err(|e| LoadError::Io {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        let text = read_text(path)?;
         Robot::from_device_str(&text, &path.display().to_string())
     }
 

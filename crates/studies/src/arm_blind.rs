@@ -374,6 +374,23 @@ impl ArmCase {
     }
 }
 
+/// Harmonic `h` of `n` joints, each at an amplitude (rad) drawn from `amp` and a random phase.
+pub(crate) fn harmonic_draw(
+    rng: &mut ChaCha8Rng,
+    h: u8,
+    n: usize,
+    amp: std::ops::RangeInclusive<f64>,
+) -> Injected {
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for _ in 0..n {
+        let amp = rng.random_range(amp.clone());
+        let phase = rng.random_range(0.0..2.0 * PI);
+        a.push(amp * phase.cos());
+        b.push(amp * phase.sin());
+    }
+    Injected::Harmonic { h, a, b }
+}
+
 /// Whether `verdict` names exactly the effects `expected` (in any order), a named compliance
 /// whose torque model the diagnosis left open (`open`: the named effect and the other model
 /// it predicts alike) standing for either model.
@@ -450,16 +467,7 @@ pub fn draw_case(i: u64, n_joints: usize) -> ArmCase {
             })
             .collect()
     };
-    let harmonic = |rng: &mut ChaCha8Rng, h: u8| {
-        let (mut a, mut b) = (Vec::new(), Vec::new());
-        for _ in 0..n_joints {
-            let amp = rng.random_range(2e-4..=1e-3);
-            let phase = rng.random_range(0.0..2.0 * PI);
-            a.push(amp * phase.cos());
-            b.push(amp * phase.sin());
-        }
-        Injected::Harmonic { h, a, b }
-    };
+    let harmonic = |rng: &mut ChaCha8Rng, h: u8| harmonic_draw(rng, h, n_joints, 2e-4..=1e-3);
     let library_effect = |rng: &mut ChaCha8Rng, effect: Effect| -> Injected {
         match effect {
             Effect::GravityCompliance => Injected::GravityCompliance {
@@ -576,20 +584,22 @@ pub fn load_setup(which: ArmRobot) -> Result<ArmSetup> {
     })
 }
 
-/// The result of one case.
+/// The result of one case of a blind test of the arm diagnosis: `C` the case (an
+/// [`ArmCase`], a [`crate::tree_blind::TreeCase`]), `S` what the study records beside the
+/// diagnosis's figures ([`ArmRecord`], [`crate::tree_blind::TreeRecord`]).
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct ArmOutcome {
+pub struct BlindOutcome<C, S> {
     /// The case.
-    pub case: ArmCase,
+    pub case: C,
     /// The diagnosis's verdict, or the error that stopped the pipeline (serialised as the
     /// report writes it: `gravity_compliance+backlash`, `none`, `error: …`).
     #[serde(serialize_with = "verdict_or_error")]
     pub verdict: Result<Verdict, String>,
-    /// Whether it names the injected effects ([`ArmCase::is_right_with`]: a compliance whose
-    /// torque model the diagnosis left open stands for either model).
+    /// Whether it names the injected effects (a compliance whose torque model the diagnosis
+    /// left open stands for either model; [`ArmCase::is_right_with`]).
     pub right: bool,
-    /// Whether it equals [`ArmCase::expected`] as written (an open torque model counted as the
-    /// one the verdict names).
+    /// Whether it equals the case's expected verdict as written (an open torque model counted
+    /// as the one the verdict names).
     pub right_as_written: bool,
     /// Each named compliance whose torque model the diagnosis left open, with the other
     /// model.
@@ -600,13 +610,67 @@ pub struct ArmOutcome {
     pub heldout_rms_m: f64,
     /// Its floor, m.
     pub floor_rms_m: f64,
+    /// What the study records beside (serialised as fields of the outcome).
+    #[serde(flatten)]
+    pub study: S,
+    /// Wall time of the case, s.
+    pub seconds: f64,
+}
+
+impl<C, S> BlindOutcome<C, S> {
+    /// The outcome of `case`, whose right verdict names the effects `expected`, from its
+    /// diagnosis `d`, begun at `start`; `study` what the study records beside.
+    pub(crate) fn of(
+        case: C,
+        expected: &[Effect],
+        d: ArmDiagnosis,
+        study: S,
+        start: std::time::Instant,
+    ) -> Self {
+        let open = open_torque_models(&d);
+        BlindOutcome {
+            case,
+            right: names_right(expected, &d.verdict, &open),
+            right_as_written: names_right(expected, &d.verdict, &[]),
+            torque_model_open: open,
+            verdict: Ok(d.verdict),
+            gap_closed_pct: d.gap_closed_pct,
+            heldout_rms_m: d.heldout_rms_m,
+            floor_rms_m: d.floor_rms_m.unwrap_or(f64::NAN),
+            study,
+            seconds: start.elapsed().as_secs_f64(),
+        }
+    }
+
+    /// The outcome of `case` whose pipeline stopped with `error` (an `error: …` verdict, no
+    /// figures); `study` what the study records beside.
+    pub(crate) fn failed(case: C, error: &anyhow::Error, study: S) -> Self {
+        BlindOutcome {
+            case,
+            verdict: Err(format!("{error:#}")),
+            right: false,
+            right_as_written: false,
+            torque_model_open: Vec::new(),
+            gap_closed_pct: f64::NAN,
+            heldout_rms_m: f64::NAN,
+            floor_rms_m: f64::NAN,
+            study,
+            seconds: 0.0,
+        }
+    }
+}
+
+/// What the arm study records of a case beside the diagnosis's figures.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ArmRecord {
     /// Whether the gap above the floor was significant.
     pub gap_significant: bool,
     /// Per library effect, the round-1 candidate's held-out RMS after, m, and its reason.
     pub round1: Vec<(Effect, f64, String)>,
-    /// Wall time of the case, s.
-    pub seconds: f64,
 }
+
+/// The result of one case of the arm study.
+pub type ArmOutcome = BlindOutcome<ArmCase, ArmRecord>;
 
 /// Simulates, calibrates and diagnoses `case` (`n_rows` positions configurations) with
 /// [`ArmConfig::default`].
@@ -631,23 +695,21 @@ pub fn run_case_with(
     let start = std::time::Instant::now();
     let baseline = simulate_baseline(case, setup, n_rows)?;
     let d = diagnose_arm(&baseline, cfg)?;
-    let open = open_torque_models(&d);
-    Ok(ArmOutcome {
-        case: case.clone(),
-        right: case.is_right_with(&d.verdict, &open),
-        right_as_written: case.is_right(&d.verdict),
-        torque_model_open: open,
-        verdict: Ok(d.verdict),
-        gap_closed_pct: d.gap_closed_pct,
-        heldout_rms_m: d.heldout_rms_m,
-        floor_rms_m: d.floor_rms_m.unwrap_or(f64::NAN),
+    let record = ArmRecord {
         gap_significant: d.gap_significant,
         round1: (d.candidates.iter())
             .filter(|c| c.round == 1)
             .map(|c| (c.effect, c.heldout_rms_after_m, c.reason.clone()))
             .collect(),
-        seconds: start.elapsed().as_secs_f64(),
-    })
+    };
+    let expected = case.expected();
+    Ok(ArmOutcome::of(
+        case.clone(),
+        expected.effects(),
+        d,
+        record,
+        start,
+    ))
 }
 
 /// Each named compliance of `d`'s verdict whose torque model the diagnosis left open, with
@@ -906,19 +968,8 @@ pub fn run(
             let robot = ArmRobot::ALL[((i / 8) % 2) as usize];
             let setup = &setups[robot as usize];
             let case = draw_case(i, setup.robot.joint_names.len());
-            let out = run_case_with(&case, setup, n_rows, cfg).unwrap_or_else(|e| ArmOutcome {
-                right: false,
-                right_as_written: false,
-                torque_model_open: Vec::new(),
-                verdict: Err(format!("{e:#}")),
-                gap_closed_pct: f64::NAN,
-                heldout_rms_m: f64::NAN,
-                floor_rms_m: f64::NAN,
-                gap_significant: false,
-                round1: Vec::new(),
-                seconds: 0.0,
-                case,
-            });
+            let out = run_case_with(&case, setup, n_rows, cfg)
+                .unwrap_or_else(|e| ArmOutcome::failed(case, &e, ArmRecord::default()));
             progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
             out
         })

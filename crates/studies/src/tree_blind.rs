@@ -72,8 +72,8 @@ use rand_distr::{Distribution, Normal, StandardNormal};
 use serde::Serialize;
 
 use crate::arm_blind::{
-    ArmCaseKind, Injected, apply_point_effects, draw_pair, names_right, open_torque_models, pct,
-    signed, vector, verdict_or_error, verdict_words, wilson_95,
+    ArmCaseKind, BlindOutcome, Injected, apply_point_effects, draw_pair, harmonic_draw,
+    names_right, pct, signed, vector, verdict_words, wilson_95,
 };
 
 /// Rows of a case (the last [`TEST_FRACTION`] held out).
@@ -264,7 +264,6 @@ pub fn draw_case(i: u64, setup: &TreeSetup) -> TreeCase {
             .collect::<Vec<f64>>()
     };
     let uniform = |lo: f64, hi: f64| move |_: usize| (lo, hi);
-    let harmonic = |rng: &mut ChaCha8Rng, h: u8| harmonic_draw(rng, h, n);
     // Transversal compliance under the loads of `joint` (masses unless lumped).
     let transversal = |rng: &mut ChaCha8Rng, lumped: bool| Injected::TransversalCompliance {
         c: per_joint(
@@ -299,8 +298,8 @@ pub fn draw_case(i: u64, setup: &TreeSetup) -> TreeCase {
             Effect::LumpedCompliance => Injected::LumpedCompliance {
                 k: per_joint(rng, &uniform(2e-4, 1e-3), false),
             },
-            Effect::FirstHarmonic => harmonic(rng, 1),
-            Effect::SecondHarmonic => harmonic(rng, 2),
+            Effect::FirstHarmonic => harmonic(rng, 1, n),
+            Effect::SecondHarmonic => harmonic(rng, 2, n),
             Effect::Backlash => Injected::Backlash {
                 b: per_joint(rng, &uniform(3e-4, 1.5e-3), false),
             },
@@ -373,7 +372,7 @@ fn outside_effect(rng: &mut ChaCha8Rng, slot: u64, n: usize) -> Injected {
                 c: signed(rng, 3e-4, 1e-3),
             }
         }
-        1 => harmonic_draw(rng, 3, n),
+        1 => harmonic(rng, 3, n),
         _ => Injected::QuadraticDrift {
             v: vector(rng, 4e-4, 2e-3),
         },
@@ -381,15 +380,8 @@ fn outside_effect(rng: &mut ChaCha8Rng, slot: u64, n: usize) -> Injected {
 }
 
 /// Harmonic `h` of `n` joints, amplitude 0.3–1.5 mrad per joint at a random phase.
-fn harmonic_draw(rng: &mut ChaCha8Rng, h: u8, n: usize) -> Injected {
-    let (mut a, mut b) = (Vec::new(), Vec::new());
-    for _ in 0..n {
-        let amp = rng.random_range(3e-4..=1.5e-3);
-        let phase = rng.random_range(0.0..2.0 * PI);
-        a.push(amp * phase.cos());
-        b.push(amp * phase.sin());
-    }
-    Injected::Harmonic { h, a, b }
+fn harmonic(rng: &mut ChaCha8Rng, h: u8, n: usize) -> Injected {
+    harmonic_draw(rng, h, n, 3e-4..=1.5e-3)
 }
 
 /// A record value in `unit`.
@@ -669,48 +661,27 @@ fn simulate(case: &TreeCase, setup: &TreeSetup, n_rows: usize) -> Result<Simulat
         })
         .collect();
     Ok(Simulated {
-        table: MeasurementTable {
-            name: format!("tree-{}", case.seed),
-            path: PathBuf::from(format!("tree-{}.csv", case.seed)),
+        table: MeasurementTable::positions(
+            format!("tree-{}", case.seed),
+            format!("tree-{}.csv", case.seed),
+            2,
             rows,
-            n_markers: 2,
-            has_orientation: false,
-            has_distance: false,
-            ignored_columns: Vec::new(),
-            warnings: Vec::new(),
-        },
+        ),
         effect_rms_m,
     })
 }
 
-/// The result of one case.
+/// What the tree study records of a case beside the diagnosis's figures.
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct TreeOutcome {
-    /// The case.
-    pub case: TreeCase,
-    /// The verdict, or the error that stopped the pipeline (serialised as the report writes
-    /// it).
-    #[serde(serialize_with = "verdict_or_error")]
-    pub verdict: Result<Verdict, String>,
-    /// Whether it names the injected effects ([`TreeCase::is_right_with`]).
-    pub right: bool,
-    /// Whether it equals [`TreeCase::expected`] as written.
-    pub right_as_written: bool,
-    /// Each named compliance whose torque model the diagnosis left open, with the other.
-    pub torque_model_open: Vec<(Effect, Effect)>,
-    /// Share of the gap above the floor the named effects closed, %.
-    pub gap_closed_pct: f64,
-    /// Held-out 3-D position RMS of the geometric baseline, m.
-    pub heldout_rms_m: f64,
-    /// Its floor, m.
-    pub floor_rms_m: f64,
+pub struct TreeRecord {
     /// RMS of the injected effects' 3-D displacement of the markers, m.
     pub effect_rms_m: f64,
     /// Per candidate of round 1: the effect and its reason.
     pub round1: Vec<(Effect, String)>,
-    /// Wall time of the case, s.
-    pub seconds: f64,
 }
+
+/// The result of one case of the tree study.
+pub type TreeOutcome = BlindOutcome<TreeCase, TreeRecord>;
 
 /// Simulates, calibrates and diagnoses `case` with `n_rows` rows ([`ArmConfig::default`]).
 ///
@@ -732,23 +703,21 @@ pub fn run_case(case: &TreeCase, setup: &TreeSetup, n_rows: usize) -> Result<Tre
     };
     let baseline = baseline_from_tables(&setup.robot, vec![sim.table], Vec::new(), &plan, false)?;
     let d = diagnose_arm(&baseline, &ArmConfig::default())?;
-    let open = open_torque_models(&d);
-    Ok(TreeOutcome {
-        case: case.clone(),
-        right: case.is_right_with(&d.verdict, &open),
-        right_as_written: case.is_right_with(&d.verdict, &[]),
-        torque_model_open: open,
-        verdict: Ok(d.verdict),
-        gap_closed_pct: d.gap_closed_pct,
-        heldout_rms_m: d.heldout_rms_m,
-        floor_rms_m: d.floor_rms_m.unwrap_or(f64::NAN),
+    let record = TreeRecord {
         effect_rms_m: sim.effect_rms_m,
         round1: (d.candidates.iter())
             .filter(|c| c.round == 1)
             .map(|c| (c.effect, c.reason.clone()))
             .collect(),
-        seconds: start.elapsed().as_secs_f64(),
-    })
+    };
+    let expected = case.expected();
+    Ok(TreeOutcome::of(
+        case.clone(),
+        expected.effects(),
+        d,
+        record,
+        start,
+    ))
 }
 
 /// Runs cases `0..n_cases` in parallel (rayon); `progress` is called after each case with
@@ -783,18 +752,12 @@ pub fn run_seeds(
         .into_par_iter()
         .map(|i| {
             let case = draw_case(i, &setup);
-            let out = run_case(&case, &setup, n_rows).unwrap_or_else(|e| TreeOutcome {
-                case,
-                verdict: Err(format!("{e:#}")),
-                right: false,
-                right_as_written: false,
-                torque_model_open: Vec::new(),
-                gap_closed_pct: f64::NAN,
-                heldout_rms_m: f64::NAN,
-                floor_rms_m: f64::NAN,
-                effect_rms_m: f64::NAN,
-                round1: Vec::new(),
-                seconds: 0.0,
+            let out = run_case(&case, &setup, n_rows).unwrap_or_else(|e| {
+                let record = TreeRecord {
+                    effect_rms_m: f64::NAN,
+                    round1: Vec::new(),
+                };
+                TreeOutcome::failed(case, &e, record)
             });
             progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
             out
@@ -1147,7 +1110,7 @@ fn wrong_cases_section(md: &mut String, outcomes: &[TreeOutcome]) {
         let reasons: Vec<String> = (o.case.injected.parts().iter())
             .filter_map(|p| p.effect())
             .map(|e| {
-                let reason = (o.round1.iter())
+                let reason = (o.study.round1.iter())
                     .find(|c| c.0 == e)
                     .map_or("not a round-1 candidate", |c| c.1.as_str());
                 format!("{e}: {reason}")
@@ -1159,7 +1122,7 @@ fn wrong_cases_section(md: &mut String, outcomes: &[TreeOutcome]) {
             class_name(o.case.kind),
             o.case.injected.label(),
             verdict_words(&o.verdict).replace('|', "/"),
-            o.effect_rms_m * 1e6,
+            o.study.effect_rms_m * 1e6,
             o.heldout_rms_m * 1e6,
             o.floor_rms_m * 1e6,
             if reasons.is_empty() {

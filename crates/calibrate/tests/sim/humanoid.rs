@@ -6,7 +6,6 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, dead_code, unreachable_pub)]
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
 
 use faer::Col;
 use hapcal_calibrate::measured::{Robot, robot_from_urdf};
@@ -495,16 +494,7 @@ pub fn table_with_noise(
     let rows = rows_with_noise(robot, truth, markers, seed, noise_m)
         .take(n)
         .collect();
-    MeasurementTable {
-        name: format!("seed{seed}"),
-        path: PathBuf::from("mocap.csv"),
-        rows,
-        n_markers: markers.len(),
-        has_orientation: false,
-        has_distance: false,
-        ignored_columns: Vec::new(),
-        warnings: Vec::new(),
-    }
+    MeasurementTable::positions(format!("seed{seed}"), "mocap.csv", markers.len(), rows)
 }
 
 /// The rows of [`table_with_noise`] one at a time, without end (take as many as wanted): row

@@ -105,5 +105,5 @@ pub fn rows(
             tracker::row(i as u64 + 2, q, vec![marker])
         })
         .collect();
-    tracker::table(name, format!("{name}.csv"), 1, rows)
+    MeasurementTable::positions(name, format!("{name}.csv"), 1, rows)
 }

@@ -86,26 +86,6 @@ pub fn row(line: u64, q: Vec<f64>, markers: Vec<MarkerSample>) -> MeasuredRow {
     }
 }
 
-/// A tracker table named `name` read from `path`: `rows` of `n_markers` marker positions, no
-/// orientation, no distance.
-pub fn table(
-    name: impl Into<String>,
-    path: impl Into<PathBuf>,
-    n_markers: usize,
-    rows: Vec<MeasuredRow>,
-) -> MeasurementTable {
-    MeasurementTable {
-        name: name.into(),
-        path: path.into(),
-        rows,
-        n_markers,
-        has_orientation: false,
-        has_distance: false,
-        ignored_columns: Vec::new(),
-        warnings: Vec::new(),
-    }
-}
-
 /// Simulated tracker tables of `robot`, one marker per tip (`marker<k+1>` 3 cm along x and
 /// 5 cm along z of tip k's link): random geometric deviations (σ 0.5 mm, 0.5 mrad,
 /// [`deviations`]), the instrument 2 m away, noise σ 50 µm; `n` training rows and `n / 2`
@@ -138,7 +118,7 @@ pub fn tracker_tables(
                 row(i as u64 + 2, q, samples)
             })
             .collect();
-        table(name, format!("{name}.csv"), n_tips, rows)
+        MeasurementTable::positions(name, format!("{name}.csv"), n_tips, rows)
     };
     let train = table(n, "train");
     let test = table(n / 2, "test");

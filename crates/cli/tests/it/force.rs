@@ -1,6 +1,8 @@
 //! `hapcal calibrate` on a haptic device's log and `hapcal force` end to end.
 
-use super::{hapcal, hapcal_ok, root, scratch, stderr};
+use std::process::Output;
+
+use super::{hapcal, hapcal_ok, root, scratch, stderr, succeeded};
 
 /// The committed calibrated reference device is exactly what `hapcal calibrate` writes from
 /// the committed log (no truth file), and `hapcal force` prints the Fig. 12 table, the distributions and writes
@@ -24,19 +26,10 @@ fn force_reports_fig12_and_distributions() {
     assert_same_numbers(&written, &committed);
 
     let svg = out.join("fig12.svg");
-    let run = hapcal_ok(&[
-        "force",
-        "--device",
-        &dir.join("device.toml").display().to_string(),
-        "--truth",
-        &dir.join("truth.toml").display().to_string(),
-        "--calibrated",
+    let run = succeeded(force(
         &calibrated.display().to_string(),
-        "--poses",
-        "20",
-        "--svg",
-        &svg.display().to_string(),
-    ]);
+        &["--poses", "20", "--svg", &svg.display().to_string()],
+    ));
     let text = String::from_utf8_lossy(&run.stdout);
     for needle in [
         "| nominal | 0 |",
@@ -49,19 +42,29 @@ fn force_reports_fig12_and_distributions() {
     assert!(std::fs::read_to_string(&svg).unwrap().starts_with("<svg"));
 }
 
+/// `hapcal force` on the reference device, its truth file and the calibrated device file
+/// `calibrated`, with the arguments `more`.
+fn force(calibrated: &str, more: &[&str]) -> Output {
+    let dir = root().join("fixtures/reference-device");
+    let device = dir.join("device.toml").display().to_string();
+    let truth = dir.join("truth.toml").display().to_string();
+    let mut args = vec![
+        "force",
+        "--device",
+        &device,
+        "--truth",
+        &truth,
+        "--calibrated",
+        calibrated,
+    ];
+    args.extend_from_slice(more);
+    hapcal(&args)
+}
+
 /// A missing calibrated file is an error that names it.
 #[test]
 fn force_names_a_missing_file() {
-    let dir = root().join("fixtures/reference-device");
-    let run = hapcal(&[
-        "force",
-        "--device",
-        &dir.join("device.toml").display().to_string(),
-        "--truth",
-        &dir.join("truth.toml").display().to_string(),
-        "--calibrated",
-        "no/such/calibrated.toml",
-    ]);
+    let run = force("no/such/calibrated.toml", &[]);
     assert_eq!(run.status.code(), Some(2));
     assert!(
         stderr(&run).contains("no/such/calibrated.toml"),
@@ -177,17 +180,13 @@ fn compliance_on_a_haptic_log_is_reported_written_and_read_back() {
         .find(|v| v.name == "joint_compliance.j2")
         .unwrap();
     assert_eq!(value.unit, "rad/(N·m)");
-    hapcal_ok(&[
-        "force",
-        "--device",
-        &device,
-        "--truth",
-        &dir.join("truth.toml").display().to_string(),
-        "--calibrated",
+    succeeded(force(
         &calibrated.display().to_string(),
-        "--poses",
-        "5",
-        "--svg",
-        &out.join("fig12.svg").display().to_string(),
-    ]);
+        &[
+            "--poses",
+            "5",
+            "--svg",
+            &out.join("fig12.svg").display().to_string(),
+        ],
+    ));
 }

@@ -177,6 +177,22 @@ fn json(out: &Output) -> Value {
     serde_json::from_slice(&out.stdout).expect("stdout is one JSON document")
 }
 
+/// The JSON report of `hapcal command` with the flags `common`, then `more`.
+fn json_of(command: &str, common: &[&str], more: &[&str]) -> Value {
+    let args: Vec<&str> = (std::iter::once(command))
+        .chain(common.iter().copied())
+        .chain(more.iter().copied())
+        .collect();
+    json(&hapcal(&args))
+}
+
+/// The text `field` of each entry of the array `list` of the JSON report `v`.
+fn fields<'a>(v: &'a Value, list: &str, field: &str) -> Vec<&'a str> {
+    (v[list].as_array().expect("an array").iter())
+        .map(|entry| entry[field].as_str().expect("a text"))
+        .collect()
+}
+
 fn figure(v: &Value, name: &str, when: &str, key: &str) -> f64 {
     let p = v["placements"]
         .as_array()
@@ -196,24 +212,13 @@ fn bundled_default_reproduces_mukca_before_figures_and_improves_on_test_data() {
     assert!(
         (figure(&v, "raised_left", "before", "mean_absolute_error_m") - 0.804e-3).abs() < 0.5e-6
     );
-    let roles: Vec<&str> = v["placements"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| p["role"].as_str().unwrap())
-        .collect();
-    assert_eq!(roles, ["train", "test", "test"]);
+    assert_eq!(fields(&v, "placements", "role"), ["train", "test", "test"]);
     // Calibration removes most of the error on the held-out placements (MUKCa: 0.131, 0.404 mm).
     assert!(figure(&v, "left_back", "after", "mean_absolute_error_m") < 0.2e-3);
     assert!(figure(&v, "raised_left", "after", "mean_absolute_error_m") < 0.45e-3);
     assert!(figure(&v, "front", "after", "distance_error_m") < 0.05e-3);
     // The three gauge freedoms of the base translation are found by the pruning.
-    let pruned: Vec<&str> = v["pruned"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| p["name"].as_str().unwrap())
-        .collect();
+    let pruned = fields(&v, "pruned", "name");
     for name in [
         "joint_a1.x",
         "joint_a1.y",
@@ -233,35 +238,26 @@ fn calibrated_urdf_reproduces_the_calibrated_figures() {
     let front = root().join("fixtures/mukca/data/kuka_14/front");
     let test = root().join("fixtures/mukca/data/kuka_14/left_back");
     let (front, test) = (front.display().to_string(), test.display().to_string());
-    let args = [
-        "calibrate",
-        "--device",
-        &iiwa(),
-        "--data",
-        &front,
-        "--test",
-        &test,
-        "--model",
-        "geometric",
-        "--json",
-    ];
-    let mut with_out = args.to_vec();
     let out_s = out_urdf.display().to_string();
-    with_out.extend(["--out", &out_s]);
-    let first = json(&hapcal(&with_out));
+    let calibrate = |device: &str, more: &[&str]| {
+        let mut args = vec![
+            "calibrate",
+            "--device",
+            device,
+            "--data",
+            &front,
+            "--test",
+            &test,
+            "--model",
+            "geometric",
+            "--json",
+        ];
+        args.extend_from_slice(more);
+        json(&hapcal(&args))
+    };
+    let first = calibrate(&iiwa(), &["--out", &out_s]);
     // Calibrating again from the written URDF starts where the first calibration ended.
-    let second = json(&hapcal(&[
-        "calibrate",
-        "--device",
-        &out_s,
-        "--data",
-        &front,
-        "--test",
-        &test,
-        "--model",
-        "geometric",
-        "--json",
-    ]));
+    let second = calibrate(&out_s, &[]);
     let after = figure(&first, "left_back", "after", "mean_absolute_error_m");
     let before_again = figure(&second, "left_back", "before", "mean_absolute_error_m");
     assert!(
@@ -272,35 +268,28 @@ fn calibrated_urdf_reproduces_the_calibrated_figures() {
 
 #[test]
 fn missing_data_folder_is_one_clear_error() {
-    let out = hapcal(&[
-        "calibrate",
-        "--device",
-        &iiwa(),
-        "--data",
-        "/nonexistent/placement",
-    ]);
-    assert_eq!(out.status.code(), Some(2));
-    let err = stderr(&out);
+    let err = iiwa_refused("/nonexistent/placement", &[]);
     assert!(
         err.starts_with("hapcal: error: reading measurements in /nonexistent/placement"),
         "{err}"
     );
-    assert!(!err.contains("panicked"), "{err}");
 }
 
-fn bad_placement_error(name: &str, content: &str) -> String {
-    let dir = placement_with(name, content);
-    let out = hapcal(&[
-        "calibrate",
-        "--device",
-        &iiwa(),
-        "--data",
-        &dir.display().to_string(),
-    ]);
+/// `hapcal calibrate` of the bundled iiwa on `data` with the arguments `more`, which must
+/// exit 2 without a panic; its standard error.
+fn iiwa_refused(data: &str, more: &[&str]) -> String {
+    let iiwa = iiwa();
+    let mut args = vec!["calibrate", "--device", &iiwa, "--data", data];
+    args.extend_from_slice(more);
+    let out = hapcal(&args);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     let err = stderr(&out);
     assert!(!err.contains("panicked"), "{err}");
     err
+}
+
+fn bad_placement_error(name: &str, content: &str) -> String {
+    iiwa_refused(&placement_with(name, content).display().to_string(), &[])
 }
 
 const GOOD: &str = "0.1,0.2,0.3,-1.0,0.5,0.6,0.7\n";
@@ -346,17 +335,7 @@ fn fewer_configurations_than_parameters_is_an_error() {
     )
     .unwrap();
     std::fs::write(dir.join("hole_1.csv"), "0.1,0.25,0.3,-1.0,0.5,0.6,0.75\n").unwrap();
-    let out = hapcal(&[
-        "calibrate",
-        "--device",
-        &iiwa(),
-        "--data",
-        &dir.display().to_string(),
-        "--model",
-        "geometric",
-    ]);
-    assert_eq!(out.status.code(), Some(2));
-    let err = stderr(&out);
+    let err = iiwa_refused(&dir.display().to_string(), &["--model", "geometric"]);
     assert!(err.contains("3 configurations"), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
@@ -456,10 +435,10 @@ fn simulated_log_calibrates_with_the_distance_model() {
         &log.display().to_string(),
         "--json",
     ]));
-    let rungs: Vec<&str> = (v["cross_validation"].as_array().unwrap().iter())
-        .map(|cv| cv["model"].as_str().unwrap())
-        .collect();
-    assert_eq!(rungs, ["geometric", "compliance"]);
+    assert_eq!(
+        fields(&v, "cross_validation", "model"),
+        ["geometric", "compliance"]
+    );
     assert_eq!(v["model"], "geometric");
     assert!(
         (v["warnings"].as_array().unwrap().iter()).any(|w| {
@@ -932,10 +911,7 @@ fn diagnosis_and_calibration_give_the_same_held_out_error_for_the_same_model() {
         "0.3",
         "--json",
     ];
-    let mut diagnose = vec!["diagnose"];
-    diagnose.extend(common);
-    diagnose.extend(["--svg", svg.as_str()]);
-    let d = json(&hapcal(&diagnose));
+    let d = json_of("diagnose", &common, &["--svg", svg.as_str()]);
     let ladder = d["ladder"].as_array().expect("a ladder");
     let mut compared = 0;
     for rung in ["frames-only", "joint-offsets", "geometric"] {
@@ -943,10 +919,7 @@ fn diagnosis_and_calibration_give_the_same_held_out_error_for_the_same_model() {
             .find(|r| r["rung"] == rung)
             .and_then(|r| r["test_rms_m"][0].as_f64())
             .unwrap_or_else(|| panic!("the ladder has no {rung} rung: {ladder:?}"));
-        let mut calibrate = vec!["calibrate"];
-        calibrate.extend(common);
-        calibrate.extend(["--model", rung]);
-        let c = json(&hapcal(&calibrate));
+        let c = json_of("calibrate", &common, &["--model", rung]);
         let from_calibration = (c["placements"].as_array().expect("placements").iter())
             .find(|p| p["role"] == "test")
             .and_then(|p| p["after"]["pose"]["position_rms_m"].as_f64())
@@ -992,17 +965,12 @@ fn diagnosis_and_calibration_give_the_same_cross_validated_error_on_sockets() {
 /// error (one cross-validation, the same folds; 1e-9 relative). Returns the diagnosis's JSON
 /// and that error, m.
 fn same_geometric_cross_validation(common: &[&str], svg: &str) -> (Value, f64) {
-    let mut diagnose = vec!["diagnose"];
-    diagnose.extend(common);
-    diagnose.extend(["--svg", svg]);
-    let d = json(&hapcal(&diagnose));
+    let d = json_of("diagnose", common, &["--svg", svg]);
     let from_diagnosis = (d["ladder"].as_array().expect("a ladder").iter())
         .find(|r| r["rung"] == "geometric")
         .and_then(|r| r["cv_rms_m"].as_f64())
         .expect("a geometric rung");
-    let mut calibrate = vec!["calibrate"];
-    calibrate.extend(common);
-    let c = json(&hapcal(&calibrate));
+    let c = json_of("calibrate", common, &[]);
     let from_calibration = (c["cross_validation"]
         .as_array()
         .expect("a model table")

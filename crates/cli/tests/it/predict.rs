@@ -81,31 +81,20 @@ fn predictions_at_the_training_rows_are_the_runtime_s_and_the_errors_the_calibra
     let (urdf, report) = calibrated_ur10(&dir);
     let data = ur10_csv();
     let root_csv = dir.join("root.csv");
-    let run = hapcal_ok(&[
-        "predict",
-        "--device",
-        &show(&urdf),
-        "--tip",
+    let run = succeeded(predict_tip(
+        &urdf,
         "wrist_3_link",
-        "--data",
-        &show(&data),
-        "--poses",
-        "--out",
-        &show(&root_csv),
-    ]);
+        &data,
+        &["--poses", "--out", &show(&root_csv)],
+    ));
     let summary = String::from_utf8_lossy(&run.stdout);
     assert!(summary.contains("predicted 23 rows"), "{summary}");
-    let run = hapcal_ok(&[
-        "predict",
-        "--device",
-        &show(&urdf),
-        "--tip",
+    let run = succeeded(predict_tip(
+        &urdf,
         "wrist_3_link",
-        "--data",
-        &show(&data),
-        "--instrument-frame",
-        "--json",
-    ]);
+        &data,
+        &["--instrument-frame", "--json"],
+    ));
     let v: Value = serde_json::from_slice(&run.stdout).expect("one JSON document");
 
     let robot = Robot::load_urdf(&urdf, &["wrist_3_link"]).expect("the written robot");
@@ -262,9 +251,14 @@ fn predict_json(urdf: &Path, readings: &Path) -> Value {
 
 /// `hapcal predict` of the arm `urdf` (tip `tip`) on `readings`, with `extra`.
 fn predict_arm(urdf: &Path, readings: &Path, extra: &[&str]) -> Output {
+    predict_tip(urdf, "tip", readings, extra)
+}
+
+/// `hapcal predict` of the robot `urdf` at the tip link `tip` on `readings`, with `extra`.
+fn predict_tip(urdf: &Path, tip: &str, readings: &Path, extra: &[&str]) -> Output {
     let (urdf, readings) = (show(urdf), show(readings));
     let mut args = vec![
-        "predict", "--device", &urdf, "--tip", "tip", "--data", &readings,
+        "predict", "--device", &urdf, "--tip", tip, "--data", &readings,
     ];
     args.extend_from_slice(extra);
     hapcal(&args)

@@ -7,7 +7,7 @@ use hapcal_problems::GravityCompliance;
 use nalgebra::{DMatrix, DVector, Vector3};
 
 use super::columns::library_transversal;
-use super::cv::{HeldOut, cross_validate, folds_of, mean};
+use super::cv::{HeldOut, cross_validate, folds_of};
 use super::problem::{
     Context, Derivatives, Rows, jacobian_sets, median_step, reading_derivatives, residuals,
     rotation_params,
@@ -15,6 +15,7 @@ use super::problem::{
 use super::{ArmConfig, FloorSource, REPEAT_TOLERANCE};
 use crate::Error;
 use crate::stats::chi2_sf;
+use crate::stats::mean;
 
 /// The floor: per-axis position variance, and where it came from.
 pub(super) struct Floor {

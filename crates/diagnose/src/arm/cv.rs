@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use super::problem::Rows;
 use super::{CV_REPEATS, VISIBLE_TOL};
 use crate::solve::lstsq_leverage;
-use crate::stats::{f_sf, largest_column_norm, pivoted_basis_beside};
+use crate::stats::{f_sf, largest_column_norm, mean, pivoted_basis_beside};
 
 /// The fold of each configuration in each of [`CV_REPEATS`] repeats (contiguous blocks within
 /// each group, repeat `r` shifting the boundaries by `r/CV_REPEATS` of a block,
@@ -50,14 +50,6 @@ pub(super) struct HeldOut {
 impl HeldOut {
     pub(super) fn mse(&self) -> f64 {
         mean(&self.position_m2)
-    }
-}
-
-pub(super) fn mean(v: &[f64]) -> f64 {
-    if v.is_empty() {
-        0.0
-    } else {
-        v.iter().sum::<f64>() / v.len() as f64
     }
 }
 

@@ -8,7 +8,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::baseline::Baseline;
 use super::columns::effect_columns;
-use super::cv::{beside, cross_validate, mean};
+use super::cv::{beside, cross_validate};
 use super::problem::{
     Context, Derivatives, Rows, jacobian_sets, reading_derivatives, residuals, rotation_params,
 };
@@ -16,6 +16,7 @@ use super::revise::Named;
 use super::{ArmConfig, ArmLadderRung, ArmRung};
 use crate::Error;
 use crate::solve::lstsq;
+use crate::stats::mean;
 
 /// The ladder stage's output.
 pub(super) struct Ladder {

@@ -66,7 +66,9 @@ impl Rows {
         let mut res = Vec::new();
         let mut measured = Vec::new();
         for (row, &c) in obs.rows.iter().zip(configuration) {
-            match &row.kind {
+            // Three position residuals (measured where the row gives the position), then the
+            // orientation's three.
+            let (position, sigma, n_orientation) = match &row.kind {
                 RowKind::Distance { distance_m } => {
                     res.push((
                         Res::Distance {
@@ -75,47 +77,21 @@ impl Rows {
                         c,
                     ));
                     measured.push(Some([*distance_m, 0.0, 0.0]));
+                    continue;
                 }
                 RowKind::Position { position_m } | RowKind::Marker { position_m, .. } => {
-                    for axis in 0..3 {
-                        res.push((
-                            Res::Position {
-                                axis,
-                                sigma: w.sigma_position_m,
-                            },
-                            c,
-                        ));
-                        measured.push(Some(*position_m));
-                    }
+                    (Some(*position_m), w.sigma_position_m, 0)
                 }
-                RowKind::Pose { position_m, .. } => {
-                    for axis in 0..3 {
-                        res.push((
-                            Res::Position {
-                                axis,
-                                sigma: w.sigma_position_m,
-                            },
-                            c,
-                        ));
-                        measured.push(Some(*position_m));
-                    }
-                    for _ in 0..3 {
-                        res.push((Res::Orientation, c));
-                        measured.push(None);
-                    }
-                }
-                RowKind::Point { .. } => {
-                    for axis in 0..3 {
-                        res.push((
-                            Res::Position {
-                                axis,
-                                sigma: w.sigma_point_m,
-                            },
-                            c,
-                        ));
-                        measured.push(None);
-                    }
-                }
+                RowKind::Pose { position_m, .. } => (Some(*position_m), w.sigma_position_m, 3),
+                RowKind::Point { .. } => (None, w.sigma_point_m, 0),
+            };
+            for axis in 0..3 {
+                res.push((Res::Position { axis, sigma }, c));
+                measured.push(position);
+            }
+            for _ in 0..n_orientation {
+                res.push((Res::Orientation, c));
+                measured.push(None);
             }
         }
         for _ in 0..obs.point_distances.len() {

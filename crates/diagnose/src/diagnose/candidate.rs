@@ -7,10 +7,11 @@ use nalgebra::{DMatrix, DVector};
 
 use super::VISIBLE_TOL;
 use super::baseline::Fit;
-use super::cv::{cross_validate, mean};
+use super::cv::cross_validate;
 use super::{Candidate, ParamValue};
 use crate::model::{Data, Linear, Setup, State, Term};
 use crate::solve::{lstsq, refine};
+use crate::stats::mean;
 use crate::stats::{f_sf, largest_column_norm, pivoted_basis_beside};
 
 /// What the candidates of one round are tested against.

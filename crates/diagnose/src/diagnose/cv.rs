@@ -5,7 +5,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::model::{Linear, RANK_TOL};
 use crate::solve::lstsq;
-use crate::stats::pivoted_basis;
+use crate::stats::{mean, pivoted_basis};
 
 /// Cross-validated distance residuals.
 pub(super) struct Cv {
@@ -31,11 +31,6 @@ impl Cv {
             .map(|(e, v)| e * e / v.max(1e-300))
             .sum()
     }
-}
-
-pub(super) fn mean(it: impl Iterator<Item = f64>) -> f64 {
-    let (s, n) = it.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
-    if n == 0 { 0.0 } else { s / n as f64 }
 }
 
 /// Held-out residuals of the linear model with columns `cols` of `lin.j` and extra `cand`

@@ -8,9 +8,10 @@ use hapcal_contract::Effect;
 use hapcal_io::Device;
 use hapcal_kinematics::Point3;
 
-use super::cv::{Cv, mean};
+use super::cv::Cv;
 use super::{Bin, SignalTest};
 use crate::model::{Data, Linear};
+use crate::stats::mean;
 use crate::stats::{chi2_sf, f_sf};
 
 /// A binned signal: name, value per sample, bin edges.

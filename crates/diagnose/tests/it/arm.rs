@@ -125,16 +125,7 @@ fn repeated_positions(n: usize, repeats: usize, sigma: f64, seed: u64) -> Measur
             });
         }
     }
-    MeasurementTable {
-        name: "positions".into(),
-        path: "positions.csv".into(),
-        rows,
-        warnings: Vec::new(),
-        n_markers: 1,
-        has_orientation: false,
-        has_distance: false,
-        ignored_columns: Vec::new(),
-    }
+    MeasurementTable::positions("positions", "positions.csv", 1, rows)
 }
 
 #[test]

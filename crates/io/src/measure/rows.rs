@@ -9,11 +9,35 @@ use nalgebra::UnitQuaternion;
 
 use super::header::{Header, MarkerColumns};
 use super::{
-    IdenticalMarkers, JointSchema, MarkerSample, MeasuredRow, Reach, measured_values, reach,
+    IdenticalMarkers, JointSchema, MarkerSample, MeasuredRow, MeasurementTable, Reach,
+    measured_values, reach,
 };
 use crate::Error;
 use crate::columns::{Conversion, si_of};
 use crate::table::{Frozen, Repeats, Table, check_separator, number};
+
+impl MeasurementTable {
+    /// A table of marker positions built in memory (a simulation, a test) rather than read:
+    /// `rows` with `n_markers` markers each, named `name` as if read from `path`; no
+    /// orientation, no distance, no warnings, no ignored columns.
+    pub fn positions(
+        name: impl Into<String>,
+        path: impl Into<std::path::PathBuf>,
+        n_markers: usize,
+        rows: Vec<MeasuredRow>,
+    ) -> MeasurementTable {
+        MeasurementTable {
+            name: name.into(),
+            path: path.into(),
+            rows,
+            warnings: Vec::new(),
+            n_markers,
+            has_orientation: false,
+            has_distance: false,
+            ignored_columns: Vec::new(),
+        }
+    }
+}
 
 /// The rows stage's output.
 pub(super) struct Body {

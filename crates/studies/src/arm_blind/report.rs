@@ -282,7 +282,7 @@ pub(super) fn write_missed(md: &mut String, outcomes: &[ArmOutcome]) {
             continue;
         }
         let injected = o.case.injected.effect();
-        let reason = (o.round1.iter())
+        let reason = (o.study.round1.iter())
             .find(|c| Some(c.0) == injected)
             .map_or("not tested", |c| c.2.split(" (").next().unwrap_or(""));
         let reason = if o.verdict.as_ref().is_ok_and(|v| *v != Verdict::None) {

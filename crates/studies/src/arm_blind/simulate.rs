@@ -204,16 +204,12 @@ pub(super) fn simulate_positions(
             }
         })
         .collect();
-    MeasurementTable {
-        name: format!("sim-{}", case.seed),
-        path: PathBuf::from(format!("sim-{}.csv", case.seed)),
+    MeasurementTable::positions(
+        format!("sim-{}", case.seed),
+        format!("sim-{}.csv", case.seed),
+        1,
         rows,
-        warnings: Vec::new(),
-        n_markers: 1,
-        has_orientation: false,
-        has_distance: false,
-        ignored_columns: Vec::new(),
-    }
+    )
 }
 
 /// Adds the displacements of the measurement-frame effects to `points` (time = index).
