@@ -3775,7 +3775,7 @@ fn winsorize<'a>(
     let mut first_redundancy = 1.0;
     let mut rung = rung;
     // Every sample of the last fit: table, row, marker, residual, model position.
-    let mut evaluated: Vec<Evaluated> = Vec::new();
+    let mut evaluated: Vec<Evaluated> = Vec::with_capacity(n_samples);
     let winsorized = |evaluated: &[Evaluated], bounds: &[crate::robust::Bound]| {
         if bounds.is_empty() {
             return std::borrow::Cow::Borrowed(train);

@@ -140,6 +140,18 @@ fn per_axis_transversal_compliance_jacobian_matches_central_differences() {
     transversal_jacobian_matches_central_differences(hapcal_problems::Transversal::PerAxis);
 }
 
+/// Configuration `i` of the torso tree's five joints (rad), spread over their ranges.
+fn torso_configuration(i: usize) -> Vec<f64> {
+    let t = i as f64;
+    vec![
+        0.3 * (0.7 * t).sin(),
+        (1.3 * t).sin(),
+        (0.9 * t + 1.0).cos(),
+        (0.4 * t).sin() * 1.5,
+        (1.7 * t + 0.3).cos(),
+    ]
+}
+
 fn transversal_jacobian_matches_central_differences(transversal: hapcal_problems::Transversal) {
     let per_joint = if transversal == hapcal_problems::Transversal::PerAxis {
         2
@@ -150,14 +162,7 @@ fn transversal_jacobian_matches_central_differences(transversal: hapcal_problems
     let tree = framed(&robot);
     let mut obs = Observations::default();
     for i in 0..6 {
-        let t = i as f64;
-        let q = vec![
-            0.3 * (0.7 * t).sin(),
-            (1.3 * t).sin(),
-            (0.9 * t + 1.0).cos(),
-            (0.4 * t).sin() * 1.5,
-            (1.7 * t + 0.3).cos(),
-        ];
+        let q = torso_configuration(i);
         obs.rows.push(pose_or_marker_row(i, q));
     }
     let weights = pose_and_marker_weights();
@@ -379,20 +384,13 @@ fn bases_evaluated_row_by_row_equal_the_kept_ones() {
     let tree = framed(&robot);
     let mut obs = Observations::default();
     for i in 0..7 {
-        let t = i as f64;
-        let q = vec![
-            0.3 * (0.7 * t).sin(),
-            (1.3 * t).sin(),
-            (0.9 * t + 1.0).cos(),
-            (0.4 * t).sin() * 1.5,
-            (1.7 * t + 0.3).cos(),
-        ];
+        let q = torso_configuration(i);
         for tip in 0..2 {
             obs.rows.push(Row {
                 q: q.clone(),
                 kind: RowKind::Marker {
                     tip,
-                    position_m: [0.4, 0.1 * t, 0.9 - 0.2 * tip as f64],
+                    position_m: [0.4, 0.1 * i as f64, 0.9 - 0.2 * tip as f64],
                 },
             });
         }
