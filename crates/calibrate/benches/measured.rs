@@ -105,12 +105,8 @@ fn bench(c: &mut Criterion) {
     ] {
         let cfg = MeasuredConfig {
             rung,
-            folds: 5,
             sigma_m: Some(1e-4),
-            sigma_rad: None,
-            marker_tips: Vec::new(),
-            workspace: Vec::new(),
-            max_evaluations: None,
+            ..MeasuredConfig::default()
         };
         group.bench_function(name, |b| {
             b.iter(|| {
@@ -126,13 +122,8 @@ fn bench(c: &mut Criterion) {
     let truth = humanoid::truth(&robot, 11);
     let table = humanoid::table(&robot, &truth, &[0, 1], 500, 12);
     let cfg = MeasuredConfig {
-        rung: None,
-        folds: 5,
-        sigma_m: None,
-        sigma_rad: None,
         marker_tips: vec![0, 1],
-        workspace: Vec::new(),
-        max_evaluations: None,
+        ..MeasuredConfig::default()
     };
     group.bench_function("humanoid_500_auto", |b| {
         b.iter(|| {

@@ -63,13 +63,8 @@ fn bench(c: &mut Criterion) {
             })
         });
         let cfg = MeasuredConfig {
-            rung: None,
-            folds: 5,
-            sigma_m: None,
-            sigma_rad: None,
             marker_tips: vec![0],
-            workspace: Vec::new(),
-            max_evaluations: None,
+            ..MeasuredConfig::default()
         };
         group.bench_function("calibration", |b| {
             b.iter(|| calibrate_measured(&robot, black_box(&tables), &[], &cfg).unwrap())

@@ -26,13 +26,7 @@ fn main() -> Result<()> {
     let k = (0.7 * train[0].rows.len() as f64).round() as usize;
     test[0].rows = train[0].rows.split_off(k);
     let cfg = MeasuredConfig {
-        rung: None,
-        folds: 5,
-        sigma_m: None,
-        sigma_rad: None,
-        marker_tips: Vec::new(),
-        workspace: Vec::new(),
-        max_evaluations: None,
+        ..MeasuredConfig::default()
     };
     let out = calibrate_measured(&robot, &train, &test, &cfg)?;
     println!("chosen model: {}", out.rung);

@@ -151,8 +151,7 @@ pub fn baseline_from_tables(
         sigma_m: plan.sigma_m,
         sigma_rad: plan.sigma_rad,
         marker_tips: (0..n_tips).collect(),
-        workspace: Vec::new(),
-        max_evaluations: None,
+        ..MeasuredConfig::default()
     };
     let out = calibrate_measured(robot, &train, &test, &cfg(Some(ModelName::Geometric)))?;
     let mut warnings: Vec<String> = (train.iter().chain(&test))

@@ -39,6 +39,10 @@ pub fn log_ranges(lengths: &[usize]) -> impl Iterator<Item = std::ops::Range<usi
     })
 }
 
+/// Cross-validation folds of the model ladder unless told otherwise (the command line's
+/// `--folds` default).
+pub const DEFAULT_FOLDS: usize = 5;
+
 /// Training rows beyond which `--model auto` on haptic logs chooses its model on a sample of
 /// them ([`ladder_sample`]); the chosen model is then fitted on every row. The ladder refits
 /// each rung `CV_REPEATS × folds` times, so its cost grows with the rows while the choice does

@@ -227,7 +227,7 @@ impl Plan {
             ],
             socket_distance_m: 0.05,
             model: ModelChoice::Auto,
-            folds: 5,
+            folds: crate::fit::DEFAULT_FOLDS,
             ladder_rows: crate::fit::LADDER_ROWS,
             read_rows: None,
             sigma_m: None,

@@ -78,6 +78,23 @@ pub struct MeasuredConfig {
     pub max_evaluations: Option<usize>,
 }
 
+impl Default for MeasuredConfig {
+    /// Choose the rung by [`crate::fit::DEFAULT_FOLDS`]-fold cross-validation, σ estimated from the
+    /// frames-only residuals, every marker on the first tip, no workspace besides the test
+    /// rows, the solver's own evaluation limit.
+    fn default() -> Self {
+        Self {
+            rung: None,
+            folds: crate::fit::DEFAULT_FOLDS,
+            sigma_m: None,
+            sigma_rad: None,
+            marker_tips: Vec::new(),
+            workspace: Vec::new(),
+            max_evaluations: None,
+        }
+    }
+}
+
 /// Everything the measured workflow found.
 #[derive(Clone, Debug)]
 pub struct MeasuredOutcome {

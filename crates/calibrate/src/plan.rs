@@ -1026,12 +1026,12 @@ fn calibrated_for_planning(
     let calibrate = |rung: Option<ModelName>| {
         let mcfg = MeasuredConfig {
             rung,
-            folds: 5.min(n_measured).max(2),
+            folds: crate::fit::DEFAULT_FOLDS.min(n_measured).max(2),
             sigma_m: cfg.sigma_m,
             sigma_rad: cfg.sigma_rad,
             marker_tips: (0..robot.tree.tips().len()).collect(),
             workspace: workspace.to_vec(),
-            max_evaluations: None,
+            ..MeasuredConfig::default()
         };
         calibrate_measured(robot, measured, &[], &mcfg)
             .context("calibrating the measured rows (the model the poses are planned for)")

@@ -142,11 +142,8 @@ pub fn frames_only_residual(
     let cfg = MeasuredConfig {
         rung: Some(ModelName::FramesOnly),
         folds: 2,
-        sigma_m: None,
-        sigma_rad: None,
         marker_tips: marker_tips.to_vec(),
-        workspace: Vec::new(),
-        max_evaluations: None,
+        ..MeasuredConfig::default()
     };
     let tables = thinned(tables);
     let fo = measured::frames_only(robot, &tables, &cfg, check_weights()).ok()?;
@@ -2123,11 +2120,8 @@ fn another_device(
     let cfg = MeasuredConfig {
         rung: Some(ModelName::Geometric),
         folds: 2,
-        sigma_m: None,
-        sigma_rad: None,
         marker_tips: marker_tips.to_vec(),
-        workspace: Vec::new(),
-        max_evaluations: None,
+        ..MeasuredConfig::default()
     };
     let tables = thinned(tables);
     let out = measured::calibrate_measured(robot, &tables, &[], &cfg).ok()?;

@@ -13,12 +13,8 @@ use sim::Effect;
 fn config(rung: Option<ModelName>, workspace: Vec<Vec<f64>>) -> MeasuredConfig {
     MeasuredConfig {
         rung,
-        folds: 5,
-        sigma_m: None,
-        sigma_rad: None,
-        marker_tips: Vec::new(),
         workspace,
-        max_evaluations: None,
+        ..MeasuredConfig::default()
     }
 }
 

@@ -15,12 +15,8 @@ use sim::{NOISE_M, compliance_of, humanoid, table, transversal_of, truth, truth_
 fn config(rung: Option<ModelName>, marker_tips: Vec<usize>) -> MeasuredConfig {
     MeasuredConfig {
         rung,
-        folds: 5,
-        sigma_m: None,
-        sigma_rad: None,
         marker_tips,
-        workspace: Vec::new(),
-        max_evaluations: None,
+        ..MeasuredConfig::default()
     }
 }
 

@@ -50,13 +50,7 @@ fn tracker_table(seed: u64, rows: Vec<MeasuredRow>) -> MeasurementTable {
 
 fn config() -> MeasuredConfig {
     MeasuredConfig {
-        rung: None,
-        folds: 5,
-        sigma_m: None,
-        sigma_rad: None,
-        marker_tips: Vec::new(),
-        workspace: Vec::new(),
-        max_evaluations: None,
+        ..MeasuredConfig::default()
     }
 }
 

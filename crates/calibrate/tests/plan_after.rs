@@ -78,12 +78,8 @@ fn measure(robot: &Robot, qs: &[Vec<f64>], rng: &mut ChaCha8Rng) -> MeasurementT
 fn heldout_rms(robot: &Robot, train: &[MeasurementTable], test: &MeasurementTable) -> f64 {
     let cfg = MeasuredConfig {
         rung: Some(ModelName::Geometric),
-        folds: 5,
-        sigma_m: None,
-        sigma_rad: None,
         marker_tips: vec![0],
-        workspace: Vec::new(),
-        max_evaluations: None,
+        ..MeasuredConfig::default()
     };
     let out = calibrate_measured(robot, train, std::slice::from_ref(test), &cfg).unwrap();
     out.sets.last().unwrap().4.position_rms_m

@@ -248,7 +248,11 @@ struct CalibrateArgs {
     #[arg(long, default_value_t = 0.05, allow_hyphen_values = true)]
     socket_distance_m: f64,
     /// Cross-validation folds (time-contiguous blocks, at least 2).
-    #[arg(long, default_value_t = 5, value_parser = hapcal::count_in::<2, { usize::MAX }>)]
+    #[arg(
+        long,
+        default_value_t = hapcal_calibrate::fit::DEFAULT_FOLDS,
+        value_parser = hapcal::count_in::<2, { usize::MAX }>
+    )]
     folds: usize,
     /// Measurement noise standard deviation, m (default: estimated from the residuals).
     #[arg(long, allow_hyphen_values = true)]
