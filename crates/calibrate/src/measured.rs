@@ -244,13 +244,17 @@ struct Sample {
     rotation: Option<UnitQuaternion<f64>>,
 }
 
+/// Marker samples in `tables`: one per marker seen in each row.
+fn n_marker_samples(tables: &[MeasurementTable]) -> usize {
+    (tables.iter().flat_map(|t| &t.rows))
+        .map(|row| row.markers.len())
+        .sum()
+}
+
 /// The samples of `tables` at the nominal kinematics.
 fn samples(robot: &Robot, tables: &[MeasurementTable], cfg: &MeasuredConfig) -> Vec<Sample> {
     let zero = vec![0.0; robot.tree.n_params()];
-    let n_samples = (tables.iter().flat_map(|t| &t.rows))
-        .map(|row| row.markers.len())
-        .sum();
-    let mut out = Vec::with_capacity(n_samples);
+    let mut out = Vec::with_capacity(n_marker_samples(tables));
     for t in tables {
         for row in &t.rows {
             for m in &row.markers {
@@ -3785,9 +3789,7 @@ fn winsorize<'a>(
 ) -> Result<Winsorized<'a>> {
     use crate::robust::{Dim, Round, bound_gross_errors, redundancy};
     let all = |_: usize, _: usize| true;
-    let n_samples: usize = (train.iter().flat_map(|t| &t.rows))
-        .map(|r| r.markers.len())
-        .sum();
+    let n_samples = n_marker_samples(train);
     let mut first = None;
     let mut first_redundancy = 1.0;
     let mut rung = rung;
