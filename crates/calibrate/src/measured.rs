@@ -3359,6 +3359,8 @@ fn equilibrate(
     let mut x = fitted.x.clone();
     let mut model = model;
     let mut previous: Option<Arc<[f64]>> = None;
+    // The observations of the pass that found the loads converged, for the final fit.
+    let mut converged = None;
     let mut refits = 0;
     // The observations are built for each problem rather than copied from one held beside
     // it: one copy of every row at a time.
@@ -3384,6 +3386,7 @@ fn equilibrate(
             // a tracker or motion capture. Each refit shrinks the change about twentyfold on
             // the simulated humanoid (0.75 mrad, 34 µrad, 1.6 µrad).
             if change < 1e-5 {
+                converged = Some(obs);
                 break;
             }
         }
@@ -3427,7 +3430,7 @@ fn equilibrate(
             max_evaluations: None,
         },
         offsets,
-        observations(train, &all),
+        converged.unwrap_or_else(|| observations(train, &all)),
         weights,
     )?;
     Ok((model, fitted, refits))
