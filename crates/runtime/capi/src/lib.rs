@@ -283,6 +283,17 @@ unsafe fn store<T>(out: *mut *mut T, value: T) {
     unsafe { *out = Box::into_raw(Box::new(value)) };
 }
 
+/// Writes `value` to `*out` unless `out` is NULL: the optional outputs of the ABI.
+///
+/// # Safety
+/// `out` is NULL or valid for one write.
+unsafe fn put<T>(out: *mut T, value: impl Into<T>) {
+    // SAFETY: the caller's contract: NULL or valid for one write.
+    if let Some(out) = unsafe { out.as_mut() } {
+        *out = value.into();
+    }
+}
+
 /// Releases a handle made by [`store`]; NULL is ignored.
 ///
 /// # Safety
@@ -484,9 +495,7 @@ unsafe fn jacobian(
         }
         .map_err(Failure::Model)?;
         // SAFETY: the caller's contract: NULL or valid for one write.
-        if let Some(out) = unsafe { pose_out.as_mut() } {
-            *out = pose.into();
-        }
+        unsafe { put(pose_out, pose) };
         Ok(())
     })
 }
@@ -676,9 +685,7 @@ pub unsafe extern "C" fn hapcal_evaluate(
         let n = n_joints.min(MAX_JOINTS);
         tau.copy_from_slice(&out.motor_torques_nm[..n]);
         // SAFETY: the caller's contract: NULL or valid for one write.
-        if let Some(pose) = unsafe { pose_out.as_mut() } {
-            *pose = out.pose.into();
-        }
+        unsafe { put(pose_out, out.pose) };
         if !jac_out.is_null() {
             // SAFETY: non-null, valid for 6·n writes by the caller's contract.
             let jac = unsafe { slice_mut(jac_out.cast::<[f64; 6]>(), n, "jac_out") }?;

@@ -15,7 +15,7 @@ use hapcal_runtime::{
     Target, compensate,
 };
 
-use crate::{Failure, HapcalPose, HapcalStatus, guard, record, slice, slice_mut};
+use crate::{Failure, HapcalPose, HapcalStatus, guard, put, record, slice, slice_mut};
 
 // `HapcalPose` and `hapcal_runtime::Pose` are both `#[repr(C)]` with the same fields: a caller's
 // array of `HapcalPose` is written as an array of `Pose`.
@@ -154,21 +154,6 @@ pub(crate) fn check_n(robot: &Robot, n_joints: usize) -> Result<(), Failure> {
     }
 }
 
-/// [`with_robot`] for a call on tip `tip`: `InvalidArgument` for a tip past the tips the
-/// caller gave ([`hapcal_robot_n_tips`]), before `f` runs.
-fn with_robot_tip(
-    handle: Option<&mut HapcalRobot>,
-    tip: usize,
-    f: impl FnOnce(&Robot, &mut RobotWorkspace) -> Result<(), Failure>,
-) -> HapcalStatus {
-    if let Some(h) = &handle
-        && tip >= h.given
-    {
-        return guard(|| Err(Failure::Robot(past_given(tip))));
-    }
-    with_robot(handle, f)
-}
-
 /// The error of a tip index past the tips given (the runtime's words for a tip past the
 /// last).
 fn past_given(tip: usize) -> Error {
@@ -180,13 +165,26 @@ fn past_given(tip: usize) -> Error {
 }
 
 /// Runs `f` on a handle (`None`: a NULL pointer) under [`guard`], its workspace rebuilt after
-/// a caught panic ([`crate::guard_handle`]).
+/// a caught panic ([`crate::guard_handle`]). Before `f` runs: for a call on tip `tip`,
+/// `InvalidArgument` for a tip past the tips the caller gave ([`hapcal_robot_n_tips`]); then
+/// `Length` unless `n_joints` is the robot's ([`check_n`]).
 fn with_robot(
     handle: Option<&mut HapcalRobot>,
+    tip: Option<usize>,
+    n_joints: usize,
     f: impl FnOnce(&Robot, &mut RobotWorkspace) -> Result<(), Failure>,
 ) -> HapcalStatus {
+    if let (Some(h), Some(tip)) = (&handle, tip)
+        && tip >= h.given
+    {
+        return guard(|| Err(Failure::Robot(past_given(tip))));
+    }
     let rebuild = |h: &mut HapcalRobot| h.ws = h.robot.workspace();
-    crate::guard_handle(handle, "robot", |h| f(&h.robot, &mut h.ws), rebuild)
+    let checked = |h: &mut HapcalRobot| {
+        check_n(&h.robot, n_joints)?;
+        f(&h.robot, &mut h.ws)
+    };
+    crate::guard_handle(handle, "robot", checked, rebuild)
 }
 
 /// Loads the calibrated robot `urdf_path` (UTF-8, NUL-terminated) with the links `tips[0 ..
@@ -350,9 +348,7 @@ pub(crate) unsafe fn copy_text(
 ) -> Result<(), Failure> {
     let bytes = text.as_bytes();
     // SAFETY: the caller's contract: NULL or valid for one write.
-    if let Some(len) = unsafe { len_out.as_mut() } {
-        *len = bytes.len();
-    }
+    unsafe { put(len_out, bytes.len()) };
     if buf.is_null() && buf_len == 0 {
         return Ok(());
     }
@@ -432,8 +428,7 @@ pub unsafe extern "C" fn hapcal_robot_tip_pose(
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
     let handle = unsafe { robot.as_mut() };
-    with_robot_tip(handle, tip, |robot, ws| {
-        check_n(robot, n_joints)?;
+    with_robot(handle, Some(tip), n_joints, |robot, ws| {
         // SAFETY: the caller's contract, for every pointer.
         let q = unsafe { slice(q, n_joints, "q") }?;
         if pose_out.is_null() {
@@ -474,8 +469,7 @@ pub unsafe extern "C" fn hapcal_robot_deflected_tip_poses(
     };
     let given = handle.given;
     let mut all = core::mem::take(&mut handle.poses);
-    let status = with_robot(Some(&mut *handle), |robot, ws| {
-        check_n(robot, n_joints)?;
+    let status = with_robot(Some(&mut *handle), None, n_joints, |robot, ws| {
         if n_tips != given {
             return Err(Failure::Robot(Error::Length {
                 what: "n_tips",
@@ -494,17 +488,25 @@ pub unsafe extern "C" fn hapcal_robot_deflected_tip_poses(
         let deflection = (robot.deflected_tip_poses(q, ws, &mut all)).map_err(Failure::Robot)?;
         poses.copy_from_slice(&all[..given]);
         // SAFETY: the caller's contract: NULL or valid for one write.
-        if let Some(out) = unsafe { deflection_out.as_mut() } {
-            *out = deflection.into();
-        }
+        unsafe { put(deflection_out, deflection) };
         Ok(())
     });
     handle.poses = all;
     status
 }
 
+/// Which Jacobian a call wants: the deflected one also writes what the deflection did to its
+/// pointer unless it is NULL.
+#[derive(Clone, Copy)]
+enum JacobianKind {
+    Spatial,
+    Body,
+    DeflectedSpatial(*mut HapcalDeflection),
+}
+
 /// # Safety
-/// As [`hapcal_robot_spatial_jacobian`].
+/// As [`hapcal_robot_deflected_spatial_jacobian`], with `kind`'s pointer for
+/// `deflection_out`.
 unsafe fn jacobian(
     robot: *mut HapcalRobot,
     tip: usize,
@@ -512,12 +514,11 @@ unsafe fn jacobian(
     n_joints: usize,
     jac_out: *mut f64,
     pose_out: *mut HapcalPose,
-    body: bool,
+    kind: JacobianKind,
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
     let handle = unsafe { robot.as_mut() };
-    with_robot_tip(handle, tip, |robot, ws| {
-        check_n(robot, n_joints)?;
+    with_robot(handle, Some(tip), n_joints, |robot, ws| {
         // SAFETY: the caller's contract, for every pointer; `[f64; 6]` has the layout of
         // six consecutive doubles, so 6·n doubles are n columns.
         let (q, jac) = unsafe {
@@ -526,16 +527,21 @@ unsafe fn jacobian(
                 slice_mut(jac_out.cast::<[f64; 6]>(), n_joints, "jac_out")?,
             )
         };
-        let pose = if body {
-            robot.body_jacobian(tip, q, ws, jac)
-        } else {
-            robot.spatial_jacobian(tip, q, ws, jac)
+        let pose = match kind {
+            JacobianKind::Spatial => robot.spatial_jacobian(tip, q, ws, jac),
+            JacobianKind::Body => robot.body_jacobian(tip, q, ws, jac),
+            JacobianKind::DeflectedSpatial(deflection_out) => {
+                let deflected = robot.deflected_spatial_jacobian(tip, q, ws, jac);
+                deflected.map(|(pose, deflection)| {
+                    // SAFETY: the caller's contract: NULL or valid for one write.
+                    unsafe { put(deflection_out, deflection) };
+                    pose
+                })
+            }
         }
         .map_err(Failure::Robot)?;
         // SAFETY: the caller's contract: NULL or valid for one write.
-        if let Some(out) = unsafe { pose_out.as_mut() } {
-            *out = pose.into();
-        }
+        unsafe { put(pose_out, pose) };
         Ok(())
     })
 }
@@ -562,8 +568,9 @@ pub unsafe extern "C" fn hapcal_robot_spatial_jacobian(
     jac_out: *mut f64,
     pose_out: *mut HapcalPose,
 ) -> HapcalStatus {
+    let kind = JacobianKind::Spatial;
     // SAFETY: forwarded contract.
-    unsafe { jacobian(robot, tip, q, n_joints, jac_out, pose_out, false) }
+    unsafe { jacobian(robot, tip, q, n_joints, jac_out, pose_out, kind) }
 }
 
 /// Body Jacobian of tip `tip` of the rigid robot at joint angles `q`: the spatial Jacobian's
@@ -581,8 +588,9 @@ pub unsafe extern "C" fn hapcal_robot_body_jacobian(
     jac_out: *mut f64,
     pose_out: *mut HapcalPose,
 ) -> HapcalStatus {
+    let kind = JacobianKind::Body;
     // SAFETY: forwarded contract.
-    unsafe { jacobian(robot, tip, q, n_joints, jac_out, pose_out, true) }
+    unsafe { jacobian(robot, tip, q, n_joints, jac_out, pose_out, kind) }
 }
 
 /// Gravity torque of every joint at joint angles `q` (no deflection), into
@@ -604,8 +612,7 @@ pub unsafe extern "C" fn hapcal_robot_gravity_torques(
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
     let handle = unsafe { robot.as_mut() };
-    with_robot(handle, |robot, ws| {
-        check_n(robot, n_joints)?;
+    with_robot(handle, None, n_joints, |robot, ws| {
         // SAFETY: the caller's contract, for every pointer.
         let (q, tau) = unsafe {
             (
@@ -711,8 +718,7 @@ pub unsafe extern "C" fn hapcal_robot_compensate(
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
     let handle = unsafe { robot.as_mut() };
-    with_robot_tip(handle, tip, |robot, ws| {
-        check_n(robot, n_joints)?;
+    with_robot(handle, Some(tip), n_joints, |robot, ws| {
         // SAFETY: the caller's contract, for every pointer.
         let (target, q_start, cfg, q_out) = unsafe {
             (
@@ -726,9 +732,7 @@ pub unsafe extern "C" fn hapcal_robot_compensate(
         let c =
             compensate(robot, tip, &target, q_start, &cfg, ws, q_out).map_err(Failure::Robot)?;
         // SAFETY: the caller's contract: NULL or valid for one write.
-        if let Some(out) = unsafe { result_out.as_mut() } {
-            *out = c.into();
-        }
+        unsafe { put(result_out, c) };
         Ok(())
     })
 }
@@ -1075,8 +1079,7 @@ pub unsafe extern "C" fn hapcal_robot_deflect(
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
     let handle = unsafe { robot.as_mut() };
-    with_robot(handle, |robot, ws| {
-        check_n(robot, n_joints)?;
+    with_robot(handle, None, n_joints, |robot, ws| {
         // SAFETY: the caller's contract, for every pointer.
         let (q, theta) = unsafe {
             (
@@ -1086,9 +1089,7 @@ pub unsafe extern "C" fn hapcal_robot_deflect(
         };
         let deflection = robot.deflect(q, ws, theta).map_err(Failure::Robot)?;
         // SAFETY: the caller's contract: NULL or valid for one write.
-        if let Some(out) = unsafe { deflection_out.as_mut() } {
-            *out = deflection.into();
-        }
+        unsafe { put(deflection_out, deflection) };
         Ok(())
     })
 }
@@ -1118,29 +1119,7 @@ pub unsafe extern "C" fn hapcal_robot_deflected_spatial_jacobian(
     pose_out: *mut HapcalPose,
     deflection_out: *mut HapcalDeflection,
 ) -> HapcalStatus {
-    // SAFETY: the caller's contract.
-    let handle = unsafe { robot.as_mut() };
-    with_robot_tip(handle, tip, |robot, ws| {
-        check_n(robot, n_joints)?;
-        // SAFETY: the caller's contract, for every pointer; `[f64; 6]` has the layout of
-        // six consecutive doubles, so 6·n doubles are n columns.
-        let (q, jac) = unsafe {
-            (
-                slice(q, n_joints, "q")?,
-                slice_mut(jac_out.cast::<[f64; 6]>(), n_joints, "jac_out")?,
-            )
-        };
-        let (pose, deflection) =
-            (robot.deflected_spatial_jacobian(tip, q, ws, jac)).map_err(Failure::Robot)?;
-        // SAFETY: the caller's contract: NULL or valid for one write each.
-        unsafe {
-            if let Some(out) = pose_out.as_mut() {
-                *out = pose.into();
-            }
-            if let Some(out) = deflection_out.as_mut() {
-                *out = deflection.into();
-            }
-        }
-        Ok(())
-    })
+    let kind = JacobianKind::DeflectedSpatial(deflection_out);
+    // SAFETY: forwarded contract.
+    unsafe { jacobian(robot, tip, q, n_joints, jac_out, pose_out, kind) }
 }
