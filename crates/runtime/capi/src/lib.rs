@@ -460,11 +460,13 @@ pub unsafe extern "C" fn hapcal_end_pose_at_joints(
     })
 }
 
-/// Which Jacobian a call wants, and from what.
+/// Which Jacobian a call wants, and from what: readings θ or joint angles q.
 #[derive(Clone, Copy)]
 enum JacobianKind {
     Body,
     Spatial,
+    BodyAtJoints,
+    SpatialAtJoints,
 }
 
 /// # Safety
@@ -476,22 +478,25 @@ unsafe fn jacobian(
     jac_out: *mut f64,
     pose_out: *mut HapcalPose,
     kind: JacobianKind,
-    at_joints: bool,
 ) -> HapcalStatus {
+    let input_name = match kind {
+        JacobianKind::Body | JacobianKind::Spatial => "theta",
+        JacobianKind::BodyAtJoints | JacobianKind::SpatialAtJoints => "q",
+    };
     guard(|| {
         // SAFETY: the caller's contract, for every pointer; `[f64; 6]` has the layout of six
         // consecutive doubles, so 6·n doubles are n columns.
         let (model, input, jac) = unsafe {
             let model = model_and_n(model, n_joints)?;
-            let input = slice(input, n_joints, if at_joints { "q" } else { "theta" })?;
+            let input = slice(input, n_joints, input_name)?;
             let jac = slice_mut(jac_out.cast::<[f64; 6]>(), n_joints, "jac_out")?;
             (model, input, jac)
         };
-        let pose = match (kind, at_joints) {
-            (JacobianKind::Body, false) => model.body_jacobian(input, jac),
-            (JacobianKind::Spatial, false) => model.spatial_jacobian(input, jac),
-            (JacobianKind::Body, true) => model.body_jacobian_at_joints(input, jac),
-            (JacobianKind::Spatial, true) => model.spatial_jacobian_at_joints(input, jac),
+        let pose = match kind {
+            JacobianKind::Body => model.body_jacobian(input, jac),
+            JacobianKind::Spatial => model.spatial_jacobian(input, jac),
+            JacobianKind::BodyAtJoints => model.body_jacobian_at_joints(input, jac),
+            JacobianKind::SpatialAtJoints => model.spatial_jacobian_at_joints(input, jac),
         }
         .map_err(Failure::Model)?;
         // SAFETY: the caller's contract: NULL or valid for one write.
@@ -519,18 +524,9 @@ pub unsafe extern "C" fn hapcal_body_jacobian(
     jac_out: *mut f64,
     pose_out: *mut HapcalPose,
 ) -> HapcalStatus {
+    let kind = JacobianKind::Body;
     // SAFETY: forwarded contract.
-    unsafe {
-        jacobian(
-            model,
-            theta,
-            n_joints,
-            jac_out,
-            pose_out,
-            JacobianKind::Body,
-            false,
-        )
-    }
+    unsafe { jacobian(model, theta, n_joints, jac_out, pose_out, kind) }
 }
 
 /// Spatial Jacobian (the geometric Jacobian of the end point in the base frame, 6 ×
@@ -550,18 +546,9 @@ pub unsafe extern "C" fn hapcal_spatial_jacobian(
     jac_out: *mut f64,
     pose_out: *mut HapcalPose,
 ) -> HapcalStatus {
+    let kind = JacobianKind::Spatial;
     // SAFETY: forwarded contract.
-    unsafe {
-        jacobian(
-            model,
-            theta,
-            n_joints,
-            jac_out,
-            pose_out,
-            JacobianKind::Spatial,
-            false,
-        )
-    }
+    unsafe { jacobian(model, theta, n_joints, jac_out, pose_out, kind) }
 }
 
 /// [`hapcal_body_jacobian`] at joint angles `q` (rad) instead of readings.
@@ -576,18 +563,9 @@ pub unsafe extern "C" fn hapcal_body_jacobian_at_joints(
     jac_out: *mut f64,
     pose_out: *mut HapcalPose,
 ) -> HapcalStatus {
+    let kind = JacobianKind::BodyAtJoints;
     // SAFETY: forwarded contract.
-    unsafe {
-        jacobian(
-            model,
-            q,
-            n_joints,
-            jac_out,
-            pose_out,
-            JacobianKind::Body,
-            true,
-        )
-    }
+    unsafe { jacobian(model, q, n_joints, jac_out, pose_out, kind) }
 }
 
 /// [`hapcal_spatial_jacobian`] at joint angles `q` (rad) instead of readings.
@@ -602,18 +580,9 @@ pub unsafe extern "C" fn hapcal_spatial_jacobian_at_joints(
     jac_out: *mut f64,
     pose_out: *mut HapcalPose,
 ) -> HapcalStatus {
+    let kind = JacobianKind::SpatialAtJoints;
     // SAFETY: forwarded contract.
-    unsafe {
-        jacobian(
-            model,
-            q,
-            n_joints,
-            jac_out,
-            pose_out,
-            JacobianKind::Spatial,
-            true,
-        )
-    }
+    unsafe { jacobian(model, q, n_joints, jac_out, pose_out, kind) }
 }
 
 /// Motor torques (N·m, `tau_out[n_joints]`) that render `wrench[6]` = (force N, moment N·m

@@ -89,11 +89,12 @@ pub struct HapcalPredictor {
     given: usize,
 }
 
-/// Runs `f` on a handle (`None`: a NULL pointer) under [`guard`]; after a caught panic the
-/// workspace is rebuilt. `f` gets the predictor, its workspace, every tip's buffer and how
+/// Runs `f` on a handle (`None`: a NULL pointer) under [`guard`], once `n_joints` is checked
+/// to be the robot's (`Length`); after a caught panic the workspace is rebuilt. `f` gets the predictor, its workspace, every tip's buffer and how
 /// many tips were given (the first ones, those written).
 fn with_predictor(
     handle: Option<&mut HapcalPredictor>,
+    n_joints: usize,
     f: impl FnOnce(
         &Predictor,
         &mut PredictionWorkspace,
@@ -102,7 +103,10 @@ fn with_predictor(
     ) -> Result<(), Failure>,
 ) -> HapcalStatus {
     let rebuild = |h: &mut HapcalPredictor| h.ws = h.predictor.workspace();
-    let run = |h: &mut HapcalPredictor| f(&h.predictor, &mut h.ws, &mut h.tips, h.given);
+    let run = |h: &mut HapcalPredictor| {
+        crate::robot::check_n(h.predictor.robot(), n_joints)?;
+        f(&h.predictor, &mut h.ws, &mut h.tips, h.given)
+    };
     crate::guard_handle(handle, "predictor", run, rebuild)
 }
 
@@ -257,15 +261,8 @@ pub unsafe extern "C" fn hapcal_predictor_predict(
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
     let handle = unsafe { predictor.as_mut() };
-    with_predictor(handle, |predictor, ws, tips, given| {
-        crate::robot::check_n(predictor.robot(), n_joints)?;
-        if n_tips != given {
-            return Err(Failure::Robot(hapcal_runtime::Error::Length {
-                what: "n_tips",
-                expected: given,
-                found: n_tips,
-            }));
-        }
+    with_predictor(handle, n_joints, |predictor, ws, tips, given| {
+        crate::robot::check_count("n_tips", given, n_tips)?;
         // SAFETY: the caller's contract, for every pointer.
         let (q, out) = unsafe { (slice(q, n_joints, "q")?, slice_mut(out, n_tips, "out")?) };
         predictor.predict(q, ws, tips).map_err(Failure::Robot)?;
@@ -297,8 +294,7 @@ pub unsafe extern "C" fn hapcal_predictor_marker_poses(
 ) -> HapcalStatus {
     // SAFETY: the caller's contract.
     let handle = unsafe { predictor.as_mut() };
-    with_predictor(handle, |predictor, ws, _, _| {
-        crate::robot::check_n(predictor.robot(), n_joints)?;
+    with_predictor(handle, n_joints, |predictor, ws, _, _| {
         // SAFETY: the caller's contract, for every pointer; `HapcalPose` has `Pose`'s layout
         // (checked in robot.rs).
         let (q, poses) = unsafe {

@@ -143,13 +143,23 @@ impl From<Compensation> for HapcalCompensation {
 
 /// Checks that `n_joints` is the robot's.
 pub(crate) fn check_n(robot: &Robot, n_joints: usize) -> Result<(), Failure> {
-    if n_joints == robot.n_joints() {
+    check_count("n_joints", robot.n_joints(), n_joints)
+}
+
+/// `Length` naming `what` (a robot call's error) unless the caller's count `found` is
+/// `expected`.
+pub(crate) fn check_count(
+    what: &'static str,
+    expected: usize,
+    found: usize,
+) -> Result<(), Failure> {
+    if found == expected {
         Ok(())
     } else {
         Err(Failure::Robot(Error::Length {
-            what: "n_joints",
-            expected: robot.n_joints(),
-            found: n_joints,
+            what,
+            expected,
+            found,
         }))
     }
 }
@@ -470,13 +480,7 @@ pub unsafe extern "C" fn hapcal_robot_deflected_tip_poses(
     let given = handle.given;
     let mut all = core::mem::take(&mut handle.poses);
     let status = with_robot(Some(&mut *handle), None, n_joints, |robot, ws| {
-        if n_tips != given {
-            return Err(Failure::Robot(Error::Length {
-                what: "n_tips",
-                expected: given,
-                found: n_tips,
-            }));
-        }
+        check_count("n_tips", given, n_tips)?;
         // SAFETY: the caller's contract, for every pointer; `HapcalPose` has `Pose`'s
         // layout (checked above).
         let (q, poses) = unsafe {
