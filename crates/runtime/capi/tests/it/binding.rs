@@ -2,19 +2,14 @@
 //! for tips it was not made for, with a region joint the robot lacks; a robot reports the
 //! tips it was given; a target rotation must be a rotation.
 
-use std::ffi::{CStr, CString, c_char};
+use std::ffi::{CString, c_char};
 use std::path::{Path, PathBuf};
 use std::ptr;
 
 use hapcal_runtime::{Pose, Robot};
 use hapcal_runtime_c::*;
 
-fn message() -> String {
-    // SAFETY: never NULL, NUL-terminated.
-    unsafe { CStr::from_ptr(hapcal_last_error_message()) }
-        .to_string_lossy()
-        .into_owned()
-}
+use crate::message;
 
 /// A copy of the test robot with the record schema 1 (`iiwa14_record`) in a folder of its
 /// own, the sidecar's text changed by `edit`; returns the URDF's path.

@@ -1,16 +1,11 @@
 //! The C ABI called from Rust: status codes, messages, null pointers, no panic.
 
-use std::ffi::{CStr, CString};
+use std::ffi::CString;
 use std::ptr;
 
 use hapcal_runtime_c::*;
 
-fn message() -> String {
-    // SAFETY: never NULL, NUL-terminated.
-    unsafe { CStr::from_ptr(hapcal_last_error_message()) }
-        .to_string_lossy()
-        .into_owned()
-}
+use crate::{fails_with, message};
 
 fn load() -> *mut HapcalModel {
     let path = CString::new(concat!(
@@ -108,11 +103,9 @@ fn failures_are_status_codes_with_messages() {
             wrench.as_ptr(),
             tau.as_mut_ptr(),
         );
-        assert_eq!(s, HapcalStatus::NullPointer);
-        assert_eq!(message(), "model is NULL");
+        fails_with(s, HapcalStatus::NullPointer, "model is NULL");
         let s = hapcal_motor_torques(model, theta.as_ptr(), 7, ptr::null(), tau.as_mut_ptr());
-        assert_eq!(s, HapcalStatus::NullPointer);
-        assert_eq!(message(), "wrench is NULL");
+        fails_with(s, HapcalStatus::NullPointer, "wrench is NULL");
         let s = hapcal_motor_torques(model, theta.as_ptr(), 8, wrench.as_ptr(), tau.as_mut_ptr());
         assert_eq!(s, HapcalStatus::Length);
         assert_eq!(message(), "n_joints: expected 7 values, found 8");
@@ -131,8 +124,7 @@ fn failures_are_status_codes_with_messages() {
             bad_wrench.as_ptr(),
             untouched.as_mut_ptr(),
         );
-        assert_eq!(s, HapcalStatus::NotFinite);
-        assert_eq!(message(), "wrench[2] = inf is not finite");
+        fails_with(s, HapcalStatus::NotFinite, "wrench[2] = inf is not finite");
         let mut far = theta;
         far[3] = 100.0;
         let s = hapcal_motor_torques(

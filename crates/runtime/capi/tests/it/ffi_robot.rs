@@ -7,15 +7,10 @@ use std::ptr;
 use hapcal_runtime::{Pose, Robot};
 use hapcal_runtime_c::*;
 
+use crate::{fails_with, message};
+
 use crate::c_robot::robot_path;
 use crate::counting::allocations;
-
-fn message() -> String {
-    // SAFETY: never NULL, NUL-terminated.
-    unsafe { CStr::from_ptr(hapcal_last_error_message()) }
-        .to_string_lossy()
-        .into_owned()
-}
 
 const Q: [f64; 7] = [0.3, 0.7, -0.2, -1.2, 0.4, 0.9, 0.1];
 
@@ -132,20 +127,11 @@ fn evaluation_failures_are_statuses_with_messages() {
         assert!(!hapcal_robot_has_link_masses(ptr::null()));
         hapcal_robot_free(ptr::null_mut());
         let s = hapcal_robot_tip_pose(ptr::null_mut(), 0, Q.as_ptr(), 7, &mut pose);
-        assert_eq!(
-            (s, message().as_str()),
-            (HapcalStatus::NullPointer, "robot is NULL")
-        );
+        fails_with(s, HapcalStatus::NullPointer, "robot is NULL");
         let s = hapcal_robot_tip_pose(robot, 0, Q.as_ptr(), 7, ptr::null_mut());
-        assert_eq!(
-            (s, message().as_str()),
-            (HapcalStatus::NullPointer, "pose_out is NULL")
-        );
+        fails_with(s, HapcalStatus::NullPointer, "pose_out is NULL");
         let s = hapcal_robot_gravity_torques(robot, ptr::null(), 7, tau.as_mut_ptr());
-        assert_eq!(
-            (s, message().as_str()),
-            (HapcalStatus::NullPointer, "q is NULL")
-        );
+        fails_with(s, HapcalStatus::NullPointer, "q is NULL");
         let s = hapcal_robot_gravity_torques(robot, nan.as_ptr(), 7, tau.as_mut_ptr());
         assert_eq!(s, HapcalStatus::NotFinite);
         assert_eq!(message(), "joint angles[6] = inf is not finite");
@@ -209,13 +195,10 @@ fn evaluation_failures_are_statuses_with_messages() {
         target.kind = HAPCAL_TARGET_POSITION;
         assert_eq!(compensate(&target, &CONFIG, &Q), HapcalStatus::Ok);
         target.kind = 7;
-        assert_eq!(
+        fails_with(
             compensate(&target, &CONFIG, &Q),
-            HapcalStatus::InvalidArgument
-        );
-        assert_eq!(
-            message(),
-            "target kind 7 is invalid: expected 0 (position) or 1 (pose)"
+            HapcalStatus::InvalidArgument,
+            "target kind 7 is invalid: expected 0 (position) or 1 (pose)",
         );
         target = HapcalTarget {
             kind: HAPCAL_TARGET_POSE,
@@ -230,10 +213,10 @@ fn evaluation_failures_are_statuses_with_messages() {
             message()
         );
         cfg.damping_m = -1e-3;
-        assert_eq!(compensate(&target, &cfg, &Q), HapcalStatus::InvalidArgument);
-        assert_eq!(
-            message(),
-            "damping_m = -0.001 is invalid: expected a finite, positive value"
+        fails_with(
+            compensate(&target, &cfg, &Q),
+            HapcalStatus::InvalidArgument,
+            "damping_m = -0.001 is invalid: expected a finite, positive value",
         );
         assert_eq!(compensate(&target, &CONFIG, &nan), HapcalStatus::NotFinite);
         let s = hapcal_robot_compensate(
@@ -257,10 +240,7 @@ fn evaluation_failures_are_statuses_with_messages() {
             command.as_mut_ptr(),
             ptr::null_mut(),
         );
-        assert_eq!(
-            (s, message().as_str()),
-            (HapcalStatus::NullPointer, "target is NULL")
-        );
+        fails_with(s, HapcalStatus::NullPointer, "target is NULL");
 
         // The region flag.
         let (mut joint, mut distance) = (0, 1.0);
@@ -308,13 +288,10 @@ fn names_query_their_length_and_fill_a_buffer() {
             (CStr::from_ptr(buf.as_ptr()).to_str(), len),
             (Ok("joint_a7"), 8)
         );
-        assert_eq!(
+        fails_with(
             hapcal_robot_joint_name(robot, 7, buf.as_mut_ptr(), buf.len(), &mut len),
-            HapcalStatus::InvalidArgument
-        );
-        assert_eq!(
-            message(),
-            "joint index 7 is past the last joint: the robot has 7"
+            HapcalStatus::InvalidArgument,
+            "joint index 7 is past the last joint: the robot has 7",
         );
         assert_eq!(
             hapcal_robot_joint_name(robot, 0, ptr::null_mut(), 4, &mut len),
@@ -383,29 +360,19 @@ fn frames_markers_values_and_predictors_fail_with_statuses_and_messages() {
     // SAFETY: every pointer is NULL or valid for the stated sizes.
     unsafe {
         let s = hapcal_robot_frame(robot, ptr::null(), &mut pose, &mut found);
-        assert_eq!(
-            (s, message().as_str()),
-            (HapcalStatus::NullPointer, "name is NULL")
-        );
+        fails_with(s, HapcalStatus::NullPointer, "name is NULL");
         let s = hapcal_robot_frame(robot, name.as_ptr(), &mut pose, ptr::null_mut());
-        assert_eq!(
-            (s, message().as_str()),
-            (HapcalStatus::NullPointer, "found_out is NULL")
-        );
+        fails_with(s, HapcalStatus::NullPointer, "found_out is NULL");
         let s = hapcal_robot_with_marker(robot, 2, &pose, &mut out);
-        assert_eq!(s, HapcalStatus::InvalidArgument);
-        assert_eq!(
-            message(),
-            "tip = 2 is invalid: expected a tip index below the number of tips"
+        fails_with(
+            s,
+            HapcalStatus::InvalidArgument,
+            "tip = 2 is invalid: expected a tip index below the number of tips",
         );
         let s = hapcal_robot_with_marker(robot, 0, &nan_marker, &mut out);
-        assert_eq!(s, HapcalStatus::NotFinite);
-        assert_eq!(message(), "marker[8] = NaN is not finite");
+        fails_with(s, HapcalStatus::NotFinite, "marker[8] = NaN is not finite");
         let s = hapcal_robot_with_marker(robot, 0, ptr::null(), &mut out);
-        assert_eq!(
-            (s, message().as_str()),
-            (HapcalStatus::NullPointer, "marker is NULL")
-        );
+        fails_with(s, HapcalStatus::NullPointer, "marker is NULL");
         let s = hapcal_robot_with_compliances(robot, [0.0; 6].as_ptr(), 6, &mut out);
         assert_eq!(s, HapcalStatus::Length);
         let unknown = c_string("compliance.no_such_joint");
@@ -426,10 +393,10 @@ fn frames_markers_values_and_predictors_fail_with_statuses_and_messages() {
 
         let mut predictor = ptr::null_mut();
         let s = hapcal_predictor_new(robot, 2, &mut predictor);
-        assert_eq!(s, HapcalStatus::InvalidArgument);
-        assert_eq!(
-            message(),
-            "frame 2 is invalid: expected 0 (root link) or 1 (instrument)"
+        fails_with(
+            s,
+            HapcalStatus::InvalidArgument,
+            "frame 2 is invalid: expected 0 (root link) or 1 (instrument)",
         );
         let s = hapcal_predictor_new(robot, HAPCAL_FRAME_ROOT, &mut predictor);
         assert_eq!(s, HapcalStatus::Ok);

@@ -2,22 +2,17 @@
 //! deflected end points the Rust runtime gives (which hapcal-runtime's tests hold to the
 //! calibration library's predictions within 1 nm).
 
-use std::ffi::{CStr, CString};
+use std::ffi::CString;
 use std::ptr;
 
 use hapcal_runtime_c::*;
+
+use crate::message;
 
 const FIXTURE: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../../../fixtures/reference-device/compliance-calibrated.toml"
 );
-
-fn message() -> String {
-    // SAFETY: never NULL, NUL-terminated.
-    unsafe { CStr::from_ptr(hapcal_last_error_message()) }
-        .to_string_lossy()
-        .into_owned()
-}
 
 #[test]
 fn a_handle_compliance_deflects_the_end_point_through_the_abi() {

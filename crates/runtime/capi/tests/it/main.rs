@@ -12,3 +12,21 @@ mod ffi_robot;
 mod haptic_record;
 mod header;
 mod record;
+
+use std::ffi::CStr;
+
+use hapcal_runtime_c::{HapcalStatus, hapcal_last_error_message};
+
+/// The message of the last failed call on this thread.
+fn message() -> String {
+    // SAFETY: never NULL, NUL-terminated.
+    unsafe { CStr::from_ptr(hapcal_last_error_message()) }
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// Asserts that a call returned `expected` with the message `text`.
+#[track_caller]
+fn fails_with(status: HapcalStatus, expected: HapcalStatus, text: &str) {
+    assert_eq!((status, message().as_str()), (expected, text));
+}
