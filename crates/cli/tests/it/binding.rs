@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use crate::predict::calibrated_ur10;
-use crate::{hapcal, iiwa, root, scratch, show, stderr, ur10_csv};
+use crate::{assert_exit, hapcal, iiwa, root, scratch, show, stderr, ur10_csv};
 
 /// `hapcal predict` of the UR10's bundled poses on `urdf` with `tip`.
 fn predict(urdf: &Path, tip: &str) -> std::process::Output {
@@ -91,15 +91,15 @@ fn a_record_is_refused_beside_another_urdf_for_another_tip_or_edited_by_hand() {
         "--out",
         &show(&other.join("commands.csv")),
     ]);
-    assert_eq!(run.status.code(), Some(2), "{}", stderr(&run));
-    assert!(stderr(&run).contains("urdf_digest"), "{}", stderr(&run));
+    assert_exit(&run, 2, &["urdf_digest"]);
 
     // Another tip than the calibration's.
     let run = predict(&urdf, "forearm_link");
-    assert_eq!(run.status.code(), Some(2), "{}", stderr(&run));
-    let err = stderr(&run);
-    assert!(err.contains("tips = [\"wrist_3_link\"]"), "{err}");
-    assert!(err.contains("--tip wrist_3_link"), "{err}");
+    assert_exit(
+        &run,
+        2,
+        &["tips = [\"wrist_3_link\"]", "--tip wrist_3_link"],
+    );
 
     // A value edited by hand to 10 m: refused with its line and both numbers.
     let (line, name, value) = first_length(&sidecar);

@@ -2,7 +2,7 @@
 
 use std::process::Output;
 
-use super::{hapcal, hapcal_ok, root, scratch, stderr, succeeded};
+use super::{assert_exit, hapcal, hapcal_ok, root, scratch, stderr, succeeded};
 
 /// The committed calibrated reference device is exactly what `hapcal calibrate` writes from
 /// the committed log (no truth file), and `hapcal force` prints the Fig. 12 table, the distributions and writes
@@ -65,12 +65,7 @@ fn force(calibrated: &str, more: &[&str]) -> Output {
 #[test]
 fn force_names_a_missing_file() {
     let run = force("no/such/calibrated.toml", &[]);
-    assert_eq!(run.status.code(), Some(2));
-    assert!(
-        stderr(&run).contains("no/such/calibrated.toml"),
-        "{}",
-        stderr(&run)
-    );
+    assert_exit(&run, 2, &["no/such/calibrated.toml"]);
 }
 
 /// The two device files have the same text up to the last digits of their numbers: numbers

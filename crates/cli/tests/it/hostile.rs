@@ -137,8 +137,7 @@ fn an_output_that_is_an_input_is_refused_and_left_intact() {
         "--out",
         &show(&log),
     ]);
-    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(stderr(&out).contains("is an input"), "{}", stderr(&out));
+    assert_exit(&out, 2, &["is an input"]);
     assert_eq!(std::fs::read_to_string(&device).expect("read"), before);
 }
 

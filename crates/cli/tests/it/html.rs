@@ -216,7 +216,5 @@ fn report_is_refused_over_an_input() {
         "--report",
         data.to_str().unwrap(),
     ]);
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains(".html"), "{err}");
+    crate::assert_exit(&out, 2, &[".html"]);
 }
