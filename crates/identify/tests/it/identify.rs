@@ -1,43 +1,19 @@
 //! The whole procedure: prune, fit, re-decide at the estimate, covariance.
 
-use faer::{Col, ColMut, ColRef, Mat, MatMut, col};
+use faer::{Col, Mat, col};
 use hapcal_identify::{
-    Error, EvalError, IdentifyConfig, ParamLayout, Problem, PruneReason, Role, SigmaSource, Unit,
-    identify,
+    Error, IdentifyConfig, ParamLayout, PruneReason, Role, SigmaSource, Unit, identify,
 };
 
-use crate::problems::{Linear, mean_std, meters, normal, random_matrix, rng, spec};
+use crate::problems::{Curve, Linear, mean_std, meters, normal, random_matrix, rng, spec};
 
-/// `y = a·t + a·b·t²`: at `a = 0` the column of `b` is zero, at the estimate it is not.
-struct Product {
-    layout: ParamLayout,
-    t: Vec<f64>,
-    y: Vec<f64>,
+/// `y = a·t + a·b·t²` and its gradient in `(a, b)`: at `a = 0` the column of `b` is zero, at
+/// the estimate it is not.
+fn product_model([a, b]: [f64; 2], t: f64) -> (f64, [f64; 2]) {
+    (a * t + a * b * t * t, [t + b * t * t, a * t * t])
 }
 
-impl Problem for Product {
-    fn layout(&self) -> &ParamLayout {
-        &self.layout
-    }
-    fn n_residuals(&self) -> usize {
-        self.t.len()
-    }
-    fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
-        for (i, (&t, &y)) in self.t.iter().zip(&self.y).enumerate() {
-            out[i] = x[0] * t + x[0] * x[1] * t * t - y;
-        }
-        Ok(())
-    }
-    fn jacobian(&self, x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
-        for (i, &t) in self.t.iter().enumerate() {
-            jac[(i, 0)] = t + x[1] * t * t;
-            jac[(i, 1)] = x[0] * t * t;
-        }
-        Ok(())
-    }
-}
-
-fn product(sigma: f64, seed: u64) -> Product {
+fn product(sigma: f64, seed: u64) -> Curve {
     let (a, b) = (0.5, 0.2);
     let mut rng = rng(seed);
     let t: Vec<f64> = (1..=40).map(|i| 0.05 * i as f64).collect();
@@ -49,7 +25,12 @@ fn product(sigma: f64, seed: u64) -> Product {
         spec("a", Unit::Dimensionless, Role::Model),
         spec("b", Unit::Dimensionless, Role::Model),
     ]);
-    Product { layout, t, y }
+    Curve {
+        layout,
+        t,
+        y,
+        model: product_model,
+    }
 }
 
 #[test]

@@ -4,7 +4,7 @@ use faer::linalg::solvers::SolveLstsq;
 use faer::{Col, Mat, col};
 use hapcal_identify::{LmConfig, ParamLayout, Role, Unit, levenberg_marquardt};
 
-use crate::problems::{Exponential, Linear, meters, random_matrix, rng, spec};
+use crate::problems::{Curve, Linear, exponential, meters, random_matrix, rng, spec};
 
 #[test]
 fn exponential_fit_on_exact_data_recovers_the_parameters() {
@@ -15,7 +15,12 @@ fn exponential_fit_on_exact_data_recovers_the_parameters() {
         spec("a", Unit::Dimensionless, Role::Model),
         spec("b", Unit::Dimensionless, Role::Model),
     ]);
-    let p = Exponential { layout, t, y };
+    let p = Curve {
+        layout,
+        t,
+        y,
+        model: exponential,
+    };
     let fit =
         levenberg_marquardt(&p, col![1.0, 0.0], &[0, 1], &LmConfig::default()).expect("valid");
     assert!(fit.termination.is_success(), "{:?}", fit.termination);

@@ -66,14 +66,16 @@ impl Problem for Linear {
     }
 }
 
-/// `y_i = a·exp(b·t_i)`: `r_i = a·exp(b·t_i) − y_i`.
-pub(crate) struct Exponential {
+/// `y_i = f(x, t_i)` for a model `f` of two parameters: `r_i = f(x, t_i) − y_i`.
+pub(crate) struct Curve {
     pub(crate) layout: ParamLayout,
     pub(crate) t: Vec<f64>,
     pub(crate) y: Vec<f64>,
+    /// `f(x, t)` and its gradient in `x`.
+    pub(crate) model: fn([f64; 2], f64) -> (f64, [f64; 2]),
 }
 
-impl Problem for Exponential {
+impl Problem for Curve {
     fn layout(&self) -> &ParamLayout {
         &self.layout
     }
@@ -82,18 +84,22 @@ impl Problem for Exponential {
     }
     fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
         for (i, (&t, &y)) in self.t.iter().zip(&self.y).enumerate() {
-            out[i] = x[0] * (x[1] * t).exp() - y;
+            out[i] = (self.model)([x[0], x[1]], t).0 - y;
         }
         Ok(())
     }
     fn jacobian(&self, x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
         for (i, &t) in self.t.iter().enumerate() {
-            let e = (x[1] * t).exp();
-            jac[(i, 0)] = e;
-            jac[(i, 1)] = x[0] * t * e;
+            [jac[(i, 0)], jac[(i, 1)]] = (self.model)([x[0], x[1]], t).1;
         }
         Ok(())
     }
+}
+
+/// `a·exp(b·t)` and its gradient in `(a, b)`.
+pub(crate) fn exponential([a, b]: [f64; 2], t: f64) -> (f64, [f64; 2]) {
+    let e = (b * t).exp();
+    (a * e, [e, a * t * e])
 }
 
 /// Sample standard deviation and mean.
