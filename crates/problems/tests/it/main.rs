@@ -223,16 +223,27 @@ fn distance_runs_problem(qs: &[Vec<f64>]) -> CalibrationProblem {
             },
         })
         .collect();
+    chain_problem(reference_chain(), rows, 1e-5, 2e-5)
+}
+
+/// The calibration problem of `chain` on `rows`, with σ `sigma_distance_m` (m) for each
+/// distance and `sigma_position_m` (m) for each position coordinate.
+fn chain_problem(
+    chain: Chain,
+    rows: Vec<Row>,
+    sigma_distance_m: f64,
+    sigma_position_m: f64,
+) -> CalibrationProblem {
     let obs = Observations {
         rows,
         ..Observations::default()
     };
     let weights = Weights {
-        sigma_distance_m: 1e-5,
-        sigma_position_m: 2e-5,
+        sigma_distance_m,
+        sigma_position_m,
         ..Weights::default()
     };
-    CalibrationProblem::new(reference_chain(), obs, weights, None).expect("valid")
+    CalibrationProblem::new(chain, obs, weights, None).expect("valid")
 }
 
 /// The largest error of the analytic Jacobian of `problem` at `x` against central differences

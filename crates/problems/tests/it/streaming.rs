@@ -2,7 +2,9 @@
 
 use faer::Col;
 use hapcal_identify::{Backend, Identified, IdentifyConfig, Problem, identify};
-use hapcal_problems::{CalibrationProblem, Observations, Row, RowKind, Weights};
+use hapcal_problems::{CalibrationProblem, Row, RowKind, Weights};
+
+use crate::chain_problem;
 
 /// Deterministic numbers in [−1, 1) (64-bit LCG, Knuth's MMIX constants).
 fn lcg(state: &mut u64) -> f64 {
@@ -57,15 +59,8 @@ fn reference_distance_problem(n_rows: usize) -> CalibrationProblem {
             }
         })
         .collect();
-    let obs = Observations {
-        rows,
-        ..Observations::default()
-    };
-    let weights = Weights {
-        sigma_distance_m: 1e-5,
-        ..Weights::default()
-    };
-    CalibrationProblem::new(chain, obs, weights, None).expect("problem")
+    let default_position = Weights::default().sigma_position_m;
+    chain_problem(chain, rows, 1e-5, default_position)
 }
 
 fn with_backend(p: &CalibrationProblem, backend: Backend) -> Identified {
@@ -145,16 +140,7 @@ fn streaming_identify_matches_dense_on_points_and_positions() {
         };
         rows.push(Row { q, kind });
     }
-    let obs = Observations {
-        rows,
-        ..Observations::default()
-    };
-    let weights = Weights {
-        sigma_distance_m: 1e-5,
-        sigma_position_m: 1e-5,
-        ..Weights::default()
-    };
-    let p = CalibrationProblem::new(chain, obs, weights, None).expect("problem");
+    let p = chain_problem(chain, rows, 1e-5, 1e-5);
     let dense = with_backend(&p, Backend::Dense);
     let streaming = with_backend(&p, Backend::Streaming);
     assert_same(&dense, &streaming, &p);
