@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use crate::predict::calibrated_ur10;
-use crate::{assert_exit, hapcal, iiwa, root, scratch, show, stderr, ur10_csv};
+use crate::{assert_exit, compensate, hapcal, iiwa, root, scratch, show, stderr, ur10_csv};
 
 /// `hapcal predict` of the UR10's bundled poses on `urdf` with `tip`.
 fn predict(urdf: &Path, tip: &str) -> std::process::Output {
@@ -80,17 +80,8 @@ fn a_record_is_refused_beside_another_urdf_for_another_tip_or_edited_by_hand() {
     }
     let targets = other.join("targets.csv");
     std::fs::write(&targets, "x,y,z\n0.5,0.2,0.6\n").expect("write");
-    let run = hapcal(&[
-        "compensate",
-        "--device",
-        &show(&nominal),
-        "--tip",
-        "wrist_3_link",
-        "--targets",
-        &show(&targets),
-        "--out",
-        &show(&other.join("commands.csv")),
-    ]);
+    let out = other.join("commands.csv");
+    let run = compensate(&nominal, "wrist_3_link", &targets, &out);
     assert_exit(&run, 2, &["urdf_digest"]);
 
     // Another tip than the calibration's.
@@ -167,17 +158,7 @@ fn compensate_names_start_commands_outside_the_limits() {
                 0.5,0.1,0.8,17.2,40.1,-11.5,-68.8,22.9,51.6,1.5\n";
     let targets = dir.join("targets.csv");
     std::fs::write(&targets, text).expect("write");
-    let run = hapcal(&[
-        "compensate",
-        "--device",
-        &show(&urdf),
-        "--tip",
-        "ball_link",
-        "--targets",
-        &show(&targets),
-        "--out",
-        &show(&dir.join("commands.csv")),
-    ]);
+    let run = compensate(&urdf, "ball_link", &targets, &dir.join("commands.csv"));
     assert_eq!(run.status.code(), Some(2), "{}", stderr(&run));
     let err = stderr(&run);
     for words in [

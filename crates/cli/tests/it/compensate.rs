@@ -3,10 +3,7 @@
 
 use hapcal_runtime::Robot;
 
-use std::path::Path;
-use std::process::Output;
-
-use crate::{assert_exit, hapcal, hapcal_ok, iiwa, scratch, show, succeeded};
+use crate::{assert_exit, compensate, hapcal_ok, iiwa, scratch, succeeded};
 
 /// Writes the calibrated robot (a copy of the URDF and its sidecar) into `dir`.
 fn calibrated_robot(dir: &std::path::Path) -> std::path::PathBuf {
@@ -27,21 +24,6 @@ fn calibrated_robot(dir: &std::path::Path) -> std::path::PathBuf {
     }
     std::fs::write(dir.join("robot.calibration.toml"), sidecar).expect("write");
     urdf
-}
-
-/// `hapcal compensate` of `targets` on the robot `urdf` (tip `ball_link`) into `out`.
-fn compensate(urdf: &Path, targets: &Path, out: &Path) -> Output {
-    hapcal(&[
-        "compensate",
-        "--device",
-        &show(urdf),
-        "--tip",
-        "ball_link",
-        "--targets",
-        &show(targets),
-        "--out",
-        &show(out),
-    ])
 }
 
 #[test]
@@ -83,7 +65,7 @@ fn compensate_writes_reached_commands_and_reports_the_unreachable_row() {
     let targets = dir.join("targets.csv");
     std::fs::write(&targets, &text).expect("write");
     let out = dir.join("commands.csv");
-    let run = compensate(&urdf, &targets, &out);
+    let run = compensate(&urdf, "ball_link", &targets, &out);
     assert_exit(&run, 2, &[&format!("{}:4: not reached", targets.display())]);
     let written = std::fs::read_to_string(&out).expect("commands written");
     let rows: Vec<&str> = written.lines().collect();
@@ -114,7 +96,7 @@ fn compensate_writes_reached_commands_and_reports_the_unreachable_row() {
     // Run again onto the same --out: a target is still missed, so the existing file (an
     // earlier result, maybe complete) is not replaced, and the message says so.
     std::fs::write(&out, "an earlier result\n").expect("write");
-    let again = compensate(&urdf, &targets, &out);
+    let again = compensate(&urdf, "ball_link", &targets, &out);
     assert_exit(&again, 2, &["exists and was left as it was"]);
     assert_eq!(
         std::fs::read_to_string(&out).expect("kept"),
@@ -128,7 +110,7 @@ fn compensate_names_the_bad_cell() {
     let urdf = calibrated_robot(&dir);
     let targets = dir.join("targets.csv");
     std::fs::write(&targets, "x,y,z\n0.4,0.1,0.6\n0.4,1;2,0.6\n").expect("write");
-    let run = compensate(&urdf, &targets, &dir.join("commands.csv"));
+    let run = compensate(&urdf, "ball_link", &targets, &dir.join("commands.csv"));
     assert_exit(
         &run,
         2,
@@ -162,7 +144,7 @@ fn compensate_reads_what_calibrate_writes() {
     let targets = dir.join("targets.csv");
     std::fs::write(&targets, "x,y,z\n0.45,0.1,0.7\n0.5,-0.1,0.6\n").expect("write");
     let out = dir.join("commands.csv");
-    succeeded(compensate(&urdf, &targets, &out));
+    succeeded(compensate(&urdf, "ball_link", &targets, &out));
     let written = std::fs::read_to_string(&out).expect("commands");
     assert_eq!(written.lines().count(), 3, "{written}");
 }
@@ -410,7 +392,7 @@ fn compensate_words_the_first_ten_targets_missed_and_counts_the_others() {
     }
     let targets = dir.join("targets.csv");
     std::fs::write(&targets, &text).expect("write");
-    let run = compensate(&urdf, &targets, &dir.join("commands.csv"));
+    let run = compensate(&urdf, "ball_link", &targets, &dir.join("commands.csv"));
     let err = assert_exit(&run, 2, &["12 of 12 targets not reached", "… and 2 more"]);
     let named = |line: usize| format!("{}:{line}: not reached", targets.display());
     // Lines 2 to 11 are the first ten targets; 12 and 13 are only counted.

@@ -68,6 +68,21 @@ fn assert_exit(out: &Output, code: i32, needles: &[&str]) -> String {
     err
 }
 
+/// `hapcal compensate` of `targets` on the robot `urdf` with the tip link `tip`, into `out`.
+fn compensate(urdf: &Path, tip: &str, targets: &Path, out: &Path) -> Output {
+    hapcal(&[
+        "compensate",
+        "--device",
+        &show(urdf),
+        "--tip",
+        tip,
+        "--targets",
+        &show(targets),
+        "--out",
+        &show(out),
+    ])
+}
+
 /// The bundled UR10's URDF (figaroh), as an argument.
 fn ur10_urdf() -> String {
     show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf"))

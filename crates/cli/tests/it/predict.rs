@@ -304,17 +304,7 @@ fn a_reading_outside_the_calibration_s_region_is_flagged() {
     }
     let targets_path = dir.join("targets.csv");
     std::fs::write(&targets_path, targets).expect("write");
-    let run = hapcal(&[
-        "compensate",
-        "--device",
-        &show(&urdf),
-        "--tip",
-        "tip",
-        "--targets",
-        &show(&targets_path),
-        "--out",
-        &show(&dir.join("commands.csv")),
-    ]);
+    let run = crate::compensate(&urdf, "tip", &targets_path, &dir.join("commands.csv"));
     let text = String::from_utf8_lossy(&run.stdout);
     assert!(run.status.success(), "{}", stderr(&run));
     assert!(
