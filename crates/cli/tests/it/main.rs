@@ -83,6 +83,18 @@ fn compensate(urdf: &Path, tip: &str, targets: &Path, out: &Path) -> Output {
     ])
 }
 
+/// The CSV file at `path` with a header: the header's names and each row's cells through
+/// `number`.
+fn read_table(path: &Path, number: impl Fn(&str) -> f64) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).expect("readable");
+    let mut lines = text.lines();
+    let header = (lines.next().expect("a header").split(','))
+        .map(str::to_owned)
+        .collect();
+    let rows = lines.map(|l| l.split(',').map(&number).collect()).collect();
+    (header, rows)
+}
+
 /// The bundled UR10's URDF (figaroh), as an argument.
 fn ur10_urdf() -> String {
     show(&root().join("fixtures/figaroh/ur10/ur10_robot.urdf"))

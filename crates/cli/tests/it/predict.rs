@@ -33,21 +33,10 @@ pub(crate) fn calibrated_ur10(dir: &Path) -> (PathBuf, Value) {
     (out, report)
 }
 
-/// The rows of a CSV file with a header: the header's names and each row's numbers.
+/// The rows of a CSV file with a header: the header's names and each row's numbers (NaN for
+/// a cell that is not a number).
 fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).expect("readable");
-    let mut lines = text.lines();
-    let header = (lines.next().expect("a header").split(','))
-        .map(str::to_owned)
-        .collect();
-    let rows = lines
-        .map(|l| {
-            l.split(',')
-                .map(|c| c.parse().unwrap_or(f64::NAN))
-                .collect()
-        })
-        .collect();
-    (header, rows)
+    crate::read_table(path, |c| c.parse().unwrap_or(f64::NAN))
 }
 
 fn column(header: &[String], name: &str) -> usize {

@@ -39,17 +39,9 @@ fn simulated(dir: &Path, name: &str, seed: u32, poses: u32, extra: &[&str]) -> S
     out
 }
 
-/// The log at `path` as a header and rows of numbers.
+/// The log at `path` as a header and rows of numbers (every cell one).
 fn read(path: &str) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).expect("the log");
-    let mut lines = text.lines();
-    let header = (lines.next().expect("a header").split(','))
-        .map(str::to_owned)
-        .collect();
-    let rows = lines
-        .map(|l| l.split(',').map(|v| v.parse().expect("a number")).collect())
-        .collect();
-    (header, rows)
+    crate::read_table(Path::new(path), |v| v.parse().expect("a number"))
 }
 
 fn write(path: &Path, header: &[String], rows: &[Vec<f64>]) -> String {
