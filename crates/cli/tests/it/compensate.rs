@@ -304,17 +304,8 @@ fn compensation_with_a_calibration_from_simulated_data() {
             .deflected_tip_poses(&q, &mut ws_t, &mut tip)
             .expect("valid");
         before.push(gap(&tip[0], &target));
-        let goal = to_root.compose(&target);
-        let c = compensate(
-            &model,
-            0,
-            &Target::Pose(goal),
-            &q,
-            &cfg,
-            &mut ws_m,
-            &mut q_cmd,
-        )
-        .expect("valid");
+        let goal = Target::Pose(to_root.compose(&target));
+        let c = compensate(&model, 0, &goal, &q, &cfg, &mut ws_m, &mut q_cmd).expect("valid");
         unreached += usize::from(!c.reached);
         truth
             .deflected_tip_poses(&q_cmd, &mut ws_t, &mut tip)

@@ -180,16 +180,9 @@ fn a_position_target_is_reached_and_an_unreachable_one_is_reported() {
     // A pose target's translation is checked as its rotation is (entries 9–11).
     let mut pose = goal;
     pose.translation_m[1] = f64::INFINITY;
-    let e = compensate(
-        &truth,
-        0,
-        &Target::Pose(pose),
-        &start,
-        &CONFIG,
-        &mut ws,
-        &mut q,
-    )
-    .expect_err("infinite translation");
+    let pose = Target::Pose(pose);
+    let e = compensate(&truth, 0, &pose, &start, &CONFIG, &mut ws, &mut q)
+        .expect_err("infinite translation");
     assert_eq!(e.to_string(), "target[10] = inf is not finite");
     let e = compensate(&truth, 1, &far, &start, &CONFIG, &mut ws, &mut q).expect_err("tip");
     assert!(e.to_string().contains("tip"), "{e}");
@@ -207,16 +200,8 @@ fn compensation_accounts_for_the_deflection() {
         .tip_pose(0, &start, &mut nominal.workspace())
         .expect("valid");
     let mut q = vec![0.0; 7];
-    let c = compensate(
-        &truth,
-        0,
-        &Target::Pose(target),
-        &start,
-        &CONFIG,
-        &mut ws,
-        &mut q,
-    )
-    .expect("valid");
+    let goal = Target::Pose(target);
+    let c = compensate(&truth, 0, &goal, &start, &CONFIG, &mut ws, &mut q).expect("valid");
     assert!(c.reached, "{c:?}");
     let at_rigid = rigid.tip_pose(0, &q, &mut ws).expect("valid");
     let (sag_m, _) = distance(&at_rigid, &target);

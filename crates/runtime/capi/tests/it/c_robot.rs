@@ -71,16 +71,8 @@ fn c_robot_example_prints_the_library_numbers() {
         orientation_scale_m: 0.1,
     };
     let mut command = [0.0; 7];
-    let c = compensate(
-        &robot,
-        0,
-        &Target::Pose(pose),
-        &q,
-        &cfg,
-        &mut ws,
-        &mut command,
-    )
-    .expect("valid");
+    let target = Target::Pose(pose);
+    let c = compensate(&robot, 0, &target, &q, &cfg, &mut ws, &mut command).expect("valid");
 
     let (lower, upper): (Vec<f64>, Vec<f64>) = robot.limits().iter().copied().unzip();
     let mut theta = [0.0; 7];
