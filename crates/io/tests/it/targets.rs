@@ -1,9 +1,9 @@
 //! The targets reader: rows with their lines, and errors naming file, line, column and what
 //! was expected.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use hapcal_io::{JointSchema, read_targets};
+use hapcal_io::{JointSchema, TargetRow, read_targets};
 
 use crate::message;
 
@@ -16,28 +16,25 @@ fn file(name: &str, text: &str) -> PathBuf {
     path
 }
 
-/// Two joints: a revolute one within ±2 rad, a prismatic one within 0..0.5 m.
-fn joints() -> (Vec<String>, Vec<bool>, Vec<(f64, f64)>) {
-    (
-        vec!["shoulder".to_owned(), "slide".to_owned()],
-        vec![false, true],
-        vec![(-2.0, 2.0), (0.0, 0.5)],
-    )
+/// The targets in `path` for two joints: a revolute one within ±2 rad, a prismatic one within
+/// 0..0.5 m.
+fn read(path: &Path) -> Result<Vec<TargetRow>, hapcal_io::Error> {
+    let names = ["shoulder".to_owned(), "slide".to_owned()];
+    let schema = JointSchema {
+        names: &names,
+        prismatic: &[false, true],
+        limits: &[(-2.0, 2.0), (0.0, 0.5)],
+    };
+    read_targets(path, &schema)
 }
 
 #[test]
 fn targets_keep_their_lines_past_comments_and_blank_lines() {
-    let (names, prismatic, limits) = joints();
-    let schema = JointSchema {
-        names: &names,
-        prismatic: &prismatic,
-        limits: &limits,
-    };
     let text = "# targets of the test\n\nx, y, z, qw, qx, qy, qz, slide, shoulder\n\
                 0.1,0.2,0.3,1,0,0,0,0.25,-1.5\n  # a note\n   \n\
                 -0.1,0.0,0.5,0.0,0.0,0.6,0.8,0.0,0.5\n";
     let path = file("good.csv", text);
-    let rows = read_targets(&path, &schema).expect("valid targets");
+    let rows = read(&path).expect("valid targets");
     assert_eq!(rows.len(), 2);
     assert_eq!(rows[0].line, 4);
     assert_eq!(rows[1].line, 7);
@@ -48,19 +45,13 @@ fn targets_keep_their_lines_past_comments_and_blank_lines() {
     assert_eq!(rows[1].start, Some(vec![0.5, 0.0]));
 
     let positions = file("positions.csv", "x,y,z\n1,2,3\n");
-    let rows = read_targets(&positions, &schema).expect("valid targets");
+    let rows = read(&positions).expect("valid targets");
     assert_eq!(rows[0].orientation_wxyz, None);
     assert_eq!(rows[0].start, None);
 }
 
 #[test]
 fn each_bad_targets_file_names_file_line_and_what_was_expected() {
-    let (names, prismatic, limits) = joints();
-    let schema = JointSchema {
-        names: &names,
-        prismatic: &prismatic,
-        limits: &limits,
-    };
     let cases = [
         (
             "empty.csv",
@@ -126,7 +117,7 @@ fn each_bad_targets_file_names_file_line_and_what_was_expected() {
     ];
     for (name, text, expected) in cases {
         let path = file(name, text);
-        let got = message(read_targets(&path, &schema));
+        let got = message(read(&path));
         let want = format!("{}{expected}", path.display());
         assert_eq!(got, want, "{name}");
     }
