@@ -753,19 +753,11 @@ fn diagnose_reports_name_the_baseline_and_the_data_in_words() {
         "no file is announced: {}",
         stderr(&haptic)
     );
-    let arm = hapcal(&[
+    let arm = on_ur10(
         "diagnose",
-        "--device",
-        &ur10_urdf(),
-        "--tip",
-        "wrist_3_link",
-        "--data",
-        &show(&ur10_csv()),
-        "--test-last",
-        "0.3",
-        "--svg",
-        &show(&dir.join("arm.svg")),
-    ]);
+        &ur10_csv(),
+        &["--test-last", "0.3", "--svg", &show(&dir.join("arm.svg"))],
+    );
     for (out, first) in [
         (&haptic, "baseline: transmissions, "),
         (&arm, "geometric baseline: marker data, "),
@@ -886,18 +878,11 @@ fn a_workspace_beyond_the_training_range_adds_joint_range_folds() {
     let cells: Vec<String> = beyond.iter().map(f64::to_string).collect();
     let workspace = dir.join("workspace.csv");
     std::fs::write(&workspace, format!("{header}\n{}\n", cells.join(","))).expect("write");
-    let out = hapcal_ok(&[
+    let out = succeeded(on_ur10(
         "calibrate",
-        "--device",
-        &ur10_urdf(),
-        "--tip",
-        "wrist_3_link",
-        "--data",
-        &show(&data),
-        "--workspace",
-        &show(&workspace),
-        "--json",
-    ]);
+        &data,
+        &["--workspace", &show(&workspace), "--json"],
+    ));
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
     let folds = report["range_folds"].as_array().expect("range folds");
     assert!(

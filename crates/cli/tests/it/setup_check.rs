@@ -7,8 +7,8 @@
 //! the command must stop with exit code 2.
 
 use super::{
-    assert_exit, before_after_mm, calibration_warnings, column, csv, hapcal, root, scratch, show,
-    stderr, ur10_csv, ur10_rows, ur10_urdf,
+    assert_exit, before_after_mm, calibration_warnings, column, csv, hapcal, on_ur10, root,
+    scratch, show, stderr, ur10_csv, ur10_rows, ur10_urdf,
 };
 use hapcal_kinematics::UnitQuaternion;
 use std::path::{Path, PathBuf};
@@ -370,17 +370,7 @@ fn swapped_joint_columns_are_named() {
     assert_restored(&err);
     // diagnose runs the same check first.
     let svg = show(&dir.join("maps.svg"));
-    let out = hapcal(&[
-        "diagnose",
-        "--device",
-        &ur10_urdf(),
-        "--tip",
-        "wrist_3_link",
-        "--data",
-        &data,
-        "--svg",
-        &svg,
-    ]);
+    let out = on_ur10("diagnose", Path::new(&data), &["--svg", &svg]);
     assert_exit(
         &out,
         2,
