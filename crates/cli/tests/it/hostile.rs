@@ -15,6 +15,14 @@ fn reference(file: &str) -> String {
         .to_string()
 }
 
+/// `hapcal calibrate` of the reference device on the log `log`, with `more`.
+fn calibrate_reference(log: &Path, more: &[&str]) -> Output {
+    let (device, log) = (reference("device.toml"), show(log));
+    let mut args = vec!["calibrate", "--device", &device, "--data", &log];
+    args.extend_from_slice(more);
+    hapcal(&args)
+}
+
 /// Runs `hapcal args` with its standard output on a pipe whose reading end is already closed:
 /// every write gets a broken pipe.
 fn hapcal_into_closed_pipe(args: &[&str]) -> Output {
@@ -249,13 +257,7 @@ fn absurd_finite_lengths_are_refused_where_they_are_read() {
     cells[7] = "1e308"; // distance_m, the 8th column of a 7-joint log
     lines[2] = cells.join(",");
     std::fs::write(&bad_log, lines.join("\n") + "\n").expect("write");
-    let out = hapcal(&[
-        "calibrate",
-        "--device",
-        &reference("device.toml"),
-        "--data",
-        &show(&bad_log),
-    ]);
+    let out = calibrate_reference(&bad_log, &[]);
     let err = assert_exit(&out, 2, &[]);
     assert!(
         err.contains("bad.csv:3:8: distance_m = 1e308 m is out of range")
@@ -303,15 +305,7 @@ fn absurd_finite_lengths_are_refused_where_they_are_read() {
 fn folds_on_the_haptic_path_set_the_model_ladders_cross_validation() {
     let dir = scratch("hostile-haptic-folds");
     let log = simulated_log(&dir, 40);
-    let out = hapcal(&[
-        "calibrate",
-        "--device",
-        &reference("device.toml"),
-        "--data",
-        &show(&log),
-        "--folds",
-        "7",
-    ]);
+    let out = calibrate_reference(&log, &["--folds", "7"]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     // The report (on standard output): the ladder's table, no warning about the folds.
     let report = String::from_utf8_lossy(&out.stdout);
@@ -410,15 +404,7 @@ fn transmissions_without_external_encoder_columns_is_refused() {
         .map(|l| l.split(',').take(n_keep).collect::<Vec<_>>().join(",") + "\n")
         .collect();
     std::fs::write(&log, stripped).unwrap();
-    let out = hapcal(&[
-        "calibrate",
-        "--device",
-        &reference("device.toml"),
-        "--data",
-        &show(&log),
-        "--model",
-        "transmissions",
-    ]);
+    let out = calibrate_reference(&log, &["--model", "transmissions"]);
     assert_exit(
         &out,
         2,
