@@ -138,12 +138,7 @@ fn a_record_without_a_digest_loads_with_a_note() {
         .collect();
     std::fs::write(&sidecar_path, old).expect("write");
     let run = predict(&urdf, "wrist_3_link");
-    assert!(run.status.success(), "{}", stderr(&run));
-    assert!(
-        stderr(&run).contains("holds no digest of the URDF"),
-        "{}",
-        stderr(&run)
-    );
+    assert_exit(&run, 0, &["holds no digest of the URDF"]);
 }
 
 #[test]

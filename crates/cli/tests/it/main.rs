@@ -645,13 +645,12 @@ fn plan_poses_refines_the_distance_poses_of_a_separate_transmission_run() {
         .args(args(&["--refine"]))
         .output()
         .unwrap();
-    assert_eq!(refused.status.code(), Some(2));
-    assert!(
-        stderr(&refused).contains(
-            "refining the poses over the joint box needs distance measurements planned without the transmission rows"
-        ),
-        "{}",
-        stderr(&refused)
+    assert_exit(
+        &refused,
+        2,
+        &[
+            "refining the poses over the joint box needs distance measurements planned without the transmission rows",
+        ],
     );
     // The refinement itself takes about two minutes in a debug build.
     if std::env::var_os("RUN_SLOW_TESTS").is_none() {
