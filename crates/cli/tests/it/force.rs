@@ -2,7 +2,7 @@
 
 use std::process::Output;
 
-use super::{assert_exit, hapcal, hapcal_ok, root, scratch, stderr, succeeded};
+use super::{assert_exit, hapcal, hapcal_ok, root, scratch, succeeded};
 
 /// The committed calibrated reference device is exactly what `hapcal calibrate` writes from
 /// the committed log (no truth file), and `hapcal force` prints the Fig. 12 table, the distributions and writes
@@ -152,8 +152,7 @@ fn compliance_on_a_haptic_log_is_reported_written_and_read_back() {
         if write {
             args.extend(["--out", path.as_str()]);
         }
-        let run = hapcal(&args);
-        assert!(run.status.success(), "{}", stderr(&run));
+        let run = hapcal_ok(&args);
         serde_json::from_slice::<serde_json::Value>(&run.stdout).unwrap()
     };
     let v = calibrate("compliance", true);

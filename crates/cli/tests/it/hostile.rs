@@ -388,8 +388,7 @@ fn compliance_on_a_haptic_device_without_a_handle_mass_is_refused_in_words() {
     // The other models do not need it.
     let mut args = args.to_vec();
     args[6] = "transmissions";
-    let out = hapcal(&args);
-    assert!(out.status.success(), "{}", stderr(&out));
+    hapcal_ok(&args);
 }
 
 #[test]

@@ -34,8 +34,7 @@ fn simulated(dir: &Path, name: &str, seed: u32, poses: u32, extra: &[&str]) -> S
         &out,
     ];
     args.extend_from_slice(extra);
-    let run = hapcal(&args);
-    assert!(run.status.success(), "{}", stderr(&run));
+    hapcal_ok(&args);
     out
 }
 
@@ -262,8 +261,7 @@ fn diagnose_names_no_effect_on_an_accepted_mistake() {
     assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
     let mut accepted_args = args.to_vec();
     accepted_args.push("--accept-setup");
-    let out = hapcal(&accepted_args);
-    assert!(out.status.success(), "{}", stderr(&out));
+    let out = hapcal_ok(&accepted_args);
     let d: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
     assert_eq!(d["verdict"], "setup", "{d}");
     let notes = d["notes"].to_string();
