@@ -161,25 +161,9 @@ fn compensation_with_a_calibration_from_simulated_data() {
     use rand::{Rng, SeedableRng};
     use rand_distr::{Distribution, Normal};
 
-    const JOINTS: [&str; 7] = [
-        "joint_a1", "joint_a2", "joint_a3", "joint_a4", "joint_a5", "joint_a6", "joint_a7",
-    ];
+    use crate::iiwa_masses::{JOINTS, with_iiwa_masses as with_masses};
+
     let dir = scratch("compensate-study");
-    let names: Vec<String> = JOINTS.iter().map(|j| (*j).to_owned()).collect();
-    let masses = hapcal_problems::GravityCompliance::published(&names).expect("iiwa");
-    let with_masses = |text: &str| {
-        let mut text = text.to_owned();
-        for m in &masses.masses {
-            let link = format!("<link name=\"link_{}\">", m.joint + 1);
-            let c = m.com_m;
-            let inertial = format!(
-                "{link}<inertial><origin xyz=\"{:?} {:?} {:?}\"/><mass value=\"{:?}\"/><inertia ixx=\"0.01\" ixy=\"0\" ixz=\"0\" iyy=\"0.01\" iyz=\"0\" izz=\"0.01\"/></inertial>",
-                c.x, c.y, c.z, m.mass_kg
-            );
-            text = text.replacen(&link, &inertial, 1);
-        }
-        text
-    };
     // The nominal robot (with masses) and the truth.
     let nominal_urdf = dir.join("nominal.urdf");
     std::fs::write(

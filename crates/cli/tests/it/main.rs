@@ -11,6 +11,8 @@ mod force;
 mod hostile;
 mod hostile_cases;
 mod html;
+#[path = "../../../runtime/tests/it/iiwa_masses.rs"]
+mod iiwa_masses;
 mod joint_scale;
 mod ladder_rows;
 mod part_units;

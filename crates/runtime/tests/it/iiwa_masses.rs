@@ -1,5 +1,6 @@
 //! The iiwa 14's joint names and Drake's link masses written into its URDF: shared by the
-//! accuracy study's tests and the compensation benchmark (`benches/compensate.rs`).
+//! accuracy study's tests, the compensation benchmark (`benches/compensate.rs`) and the
+//! command line's compensation test (`crates/cli/tests/it/compensate.rs`).
 
 use hapcal_problems::GravityCompliance;
 
