@@ -17,6 +17,18 @@ fn all(n: usize) -> Vec<usize> {
     (0..n).collect()
 }
 
+/// `base` with one more column, entry `i` of which is `last(row i of base)`.
+fn with_last_column(base: &Mat<f64>, last: impl Fn(&dyn Fn(usize) -> f64) -> f64) -> Mat<f64> {
+    let n = base.ncols();
+    Mat::from_fn(base.nrows(), n + 1, |i, j| {
+        if j == n {
+            last(&|k| base[(i, k)])
+        } else {
+            base[(i, j)]
+        }
+    })
+}
+
 /// The `(name, coefficient)` list of a `Dependent` reason; panics otherwise.
 fn dependent_on<'a>(id: &'a Identifiability, name: &str) -> &'a [(String, f64)] {
     match &id.find_pruned(name).expect("pruned").reason {
@@ -31,13 +43,7 @@ fn duplicated_column_with_factor_two_prunes_exactly_one_of_the_pair() {
     // the one earlier in the layout (p1) is kept.
     let mut rng = rng(10);
     let base = random_matrix(&mut rng, 30, 4);
-    let jac = Mat::from_fn(30, 5, |i, j| {
-        if j == 4 {
-            2.0 * base[(i, 1)]
-        } else {
-            base[(i, j)]
-        }
-    });
+    let jac = with_last_column(&base, |row| 2.0 * row(1));
     let id = identifiability(jac.as_ref(), &meters(5), &all(5), &cfg(1e-6));
     assert_eq!(id.kept, [0, 1, 2, 3]);
     assert_eq!(id.pruned_names(), ["p4"]);
@@ -120,13 +126,7 @@ fn changing_the_unit_of_one_parameter_does_not_change_the_kept_set() {
     // the kept set is the same and the coefficient on p1 is 1000× larger.
     let mut rng = rng(13);
     let base = random_matrix(&mut rng, 40, 5);
-    let jac = Mat::from_fn(40, 6, |i, j| {
-        if j == 5 {
-            base[(i, 1)] + base[(i, 2)]
-        } else {
-            base[(i, j)]
-        }
-    });
+    let jac = with_last_column(&base, |row| row(1) + row(2));
     let mut jac_mm = jac.clone();
     for i in 0..40 {
         jac_mm[(i, 1)] /= 1000.0;
@@ -161,13 +161,7 @@ fn candidates_restrict_the_decision() {
 
 fn dependent_jacobian(seed: u64, alpha: f64, beta: f64) -> Mat<f64> {
     let base = random_matrix(&mut rng(seed), 20, 5);
-    Mat::from_fn(20, 6, |i, j| {
-        if j == 5 {
-            alpha * base[(i, 0)] + beta * base[(i, 3)]
-        } else {
-            base[(i, j)]
-        }
-    })
+    with_last_column(&base, |row| alpha * row(0) + beta * row(3))
 }
 
 proptest! {
