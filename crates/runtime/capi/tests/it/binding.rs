@@ -9,7 +9,7 @@ use std::ptr;
 use hapcal_runtime::{Pose, Robot};
 use hapcal_runtime_c::*;
 
-use crate::message;
+use crate::{message, zero_pose};
 
 /// A copy of the test robot with the record schema 1 (`iiwa14_record`) in a folder of its
 /// own, the sidecar's text changed by `edit`; returns the URDF's path.
@@ -48,13 +48,6 @@ fn line_of(text: &str, needle: &str) -> usize {
 }
 
 const Q: [f64; 7] = [0.3, 0.7, -0.2, -1.2, 0.4, 0.9, 0.1];
-
-fn zero_pose() -> HapcalPose {
-    HapcalPose {
-        rotation: [[0.0; 3]; 3],
-        translation_m: [0.0; 3],
-    }
-}
 
 /// The record's loads hang at two tips (its torque tips), the caller gives one: the runtime
 /// loads the other after it to load the joints (why the robot had 2 tips), and the ABI counts,

@@ -5,7 +5,7 @@ use std::ptr;
 
 use hapcal_runtime_c::*;
 
-use crate::{fails_with, message};
+use crate::{fails_with, message, zero_pose};
 
 fn load() -> *mut HapcalModel {
     let path = CString::new(concat!(
@@ -26,10 +26,7 @@ fn evaluation_through_the_abi_matches_the_library() {
     let theta = [0.1, 0.5, -0.2, 1.0, 0.3, 0.6, -0.4];
     let wrench = [0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
     let (mut tau, mut jac) = ([0.0; 7], [0.0; 42]);
-    let mut pose = HapcalPose {
-        rotation: [[0.0; 3]; 3],
-        translation_m: [0.0; 3],
-    };
+    let mut pose = zero_pose();
     // SAFETY: a live model and arrays of the stated sizes.
     let status = unsafe {
         hapcal_evaluate(

@@ -7,7 +7,7 @@ use std::ptr;
 use hapcal_runtime::{Pose, Robot};
 use hapcal_runtime_c::*;
 
-use crate::{fails_with, message};
+use crate::{fails_with, message, zero_pose};
 
 use crate::c_robot::robot_path;
 use crate::counting::allocations;
@@ -44,13 +44,6 @@ fn load() -> *mut HapcalRobot {
     );
     assert_eq!(status, HapcalStatus::Ok, "{}", message());
     robot
-}
-
-fn zero_pose() -> HapcalPose {
-    HapcalPose {
-        rotation: [[0.0; 3]; 3],
-        translation_m: [0.0; 3],
-    }
 }
 
 #[test]

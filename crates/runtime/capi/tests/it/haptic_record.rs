@@ -7,7 +7,7 @@ use std::ptr;
 
 use hapcal_runtime_c::*;
 
-use crate::message;
+use crate::{message, zero_pose};
 
 const FIXTURE: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
@@ -30,10 +30,7 @@ fn a_handle_compliance_deflects_the_end_point_through_the_abi() {
         [-0.3, 0.2, 0.4, 0.7, -0.5, 0.1, 0.2],
     ];
     for theta in readings {
-        let mut pose = HapcalPose {
-            rotation: [[0.0; 3]; 3],
-            translation_m: [0.0; 3],
-        };
+        let mut pose = zero_pose();
         let mut q = [0.0; 7];
         let mut dq = [0.0; 7];
         // SAFETY: a live model and arrays of the stated sizes.

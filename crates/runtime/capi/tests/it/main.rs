@@ -15,7 +15,7 @@ mod record;
 
 use std::ffi::CStr;
 
-use hapcal_runtime_c::{HapcalStatus, hapcal_last_error_message};
+use hapcal_runtime_c::{HapcalPose, HapcalStatus, hapcal_last_error_message};
 
 /// The message of the last failed call on this thread.
 fn message() -> String {
@@ -29,4 +29,12 @@ fn message() -> String {
 #[track_caller]
 fn fails_with(status: HapcalStatus, expected: HapcalStatus, text: &str) {
     assert_eq!((status, message().as_str()), (expected, text));
+}
+
+/// A pose of zeros, to be written over.
+fn zero_pose() -> HapcalPose {
+    HapcalPose {
+        rotation: [[0.0; 3]; 3],
+        translation_m: [0.0; 3],
+    }
 }

@@ -16,6 +16,8 @@ use hapcal_contract::{
 use hapcal_runtime::{Pose, Robot};
 use hapcal_runtime_c::*;
 
+use crate::zero_pose;
+
 fn record_robot() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/iiwa14_record.urdf")
 }
@@ -41,10 +43,7 @@ fn every_recorded_value_is_evaluated_as_rust_evaluates_it() {
         let mut ours = [Pose::IDENTITY];
         rust.deflected_tip_poses(&q, &mut ws, &mut ours)
             .expect("valid");
-        let mut theirs = [HapcalPose {
-            rotation: [[0.0; 3]; 3],
-            translation_m: [0.0; 3],
-        }];
+        let mut theirs = [zero_pose()];
         let mut deflection = HapcalDeflection::default();
         // SAFETY: valid handle, arrays of the stated lengths.
         let status = unsafe {
