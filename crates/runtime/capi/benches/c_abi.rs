@@ -36,6 +36,14 @@ type Evaluate = unsafe extern "C" fn(
     *mut f64,
 ) -> HapcalStatus;
 
+/// A pose of zeros, to be written over.
+fn zero_pose() -> HapcalPose {
+    HapcalPose {
+        rotation: [[0.0; 3]; 3],
+        translation_m: [0.0; 3],
+    }
+}
+
 fn bench(c: &mut Criterion) {
     let path = CString::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -47,10 +55,7 @@ fn bench(c: &mut Criterion) {
     let status = unsafe { hapcal_model_load(path.as_ptr(), &mut model) };
     assert_eq!(status, HapcalStatus::Ok);
     let evaluate: Evaluate = black_box(hapcal_evaluate);
-    let mut pose = HapcalPose {
-        rotation: [[0.0; 3]; 3],
-        translation_m: [0.0; 3],
-    };
+    let mut pose = zero_pose();
     let (mut jac, mut tau) = ([0.0; 42], [0.0; 7]);
     let mut group = c.benchmark_group("c_abi");
     group.bench_function("hapcal_evaluate", |b| {
@@ -158,18 +163,12 @@ fn bench_robot(c: &mut Criterion) {
     };
     let c_target = HapcalTarget {
         kind: HAPCAL_TARGET_POSE,
-        pose: HapcalPose {
-            rotation: rigid.rotation,
-            translation_m: rigid.translation_m,
-        },
+        pose: rigid.into(),
     };
 
     let mut group = c.benchmark_group("robot_cycle");
     group.bench_function("c_abi", |b| {
-        let mut pose = HapcalPose {
-            rotation: [[0.0; 3]; 3],
-            translation_m: [0.0; 3],
-        };
+        let mut pose = zero_pose();
         let mut tips = [pose];
         let mut jac = [0.0; 42];
         b.iter(|| {
@@ -200,10 +199,7 @@ fn bench_robot(c: &mut Criterion) {
     // deflection, the Jacobian at the deflected angles), what a controller calls per cycle.
     let mut group = c.benchmark_group("robot_pose_jacobian");
     group.bench_function("c_abi", |b| {
-        let mut pose = HapcalPose {
-            rotation: [[0.0; 3]; 3],
-            translation_m: [0.0; 3],
-        };
+        let mut pose = zero_pose();
         let mut jac = [0.0; 42];
         b.iter(|| {
             let q = black_box(&Q);
@@ -224,10 +220,7 @@ fn bench_robot(c: &mut Criterion) {
 
     let mut group = c.benchmark_group("robot_deflected_pose_jacobian");
     group.bench_function("c_abi", |b| {
-        let mut pose = HapcalPose {
-            rotation: [[0.0; 3]; 3],
-            translation_m: [0.0; 3],
-        };
+        let mut pose = zero_pose();
         let mut jac = [0.0; 42];
         b.iter(|| {
             let q = black_box(&Q);
