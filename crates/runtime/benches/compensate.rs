@@ -10,6 +10,10 @@ use hapcal_problems::GravityCompliance;
 use hapcal_runtime::{CompensationConfig, Pose, Robot, Target, compensate};
 
 #[path = "../tests/it/iiwa_masses.rs"]
+#[allow(
+    dead_code,
+    reason = "the benchmark takes the masses, not the calibrated copy"
+)]
 mod iiwa_masses;
 
 use iiwa_masses::{JOINTS, with_iiwa_masses};

@@ -161,7 +161,7 @@ fn compensation_with_a_calibration_from_simulated_data() {
     use rand::{Rng, SeedableRng};
     use rand_distr::{Distribution, Normal};
 
-    use crate::iiwa_masses::{JOINTS, with_iiwa_masses as with_masses};
+    use crate::iiwa_masses::{JOINTS, calibrated_iiwa_text, with_iiwa_masses as with_masses};
 
     let dir = scratch("compensate-study");
     // The nominal robot (with masses) and the truth.
@@ -171,26 +171,10 @@ fn compensation_with_a_calibration_from_simulated_data() {
         with_masses(&std::fs::read_to_string(iiwa()).expect("fixture")),
     )
     .expect("write");
-    let device =
-        hapcal_io::import_urdf(std::path::Path::new(&iiwa()), "ball_link").expect("fixture");
-    let mut placements = device.placements.clone();
-    for (k, p) in placements.iter_mut().enumerate() {
-        if p.axis.is_none() {
-            continue;
-        }
-        let kf = k as f64;
-        for i in 0..3 {
-            let s = |j: usize| if (k + j).is_multiple_of(2) { 1.0 } else { -1.0 };
-            p.xyz_m[i] += s(i) * (2e-4 + 2e-4 * ((kf + i as f64) % 4.0));
-            p.rpy_rad[i] += s(i + 1) * (3e-4 + 3e-4 * ((kf + 2.0 * i as f64) % 4.0));
-        }
-    }
     let truth_dir = dir.join("truth");
     std::fs::create_dir_all(&truth_dir).expect("dir");
     let truth_urdf = truth_dir.join("truth.urdf");
-    let truth_text = hapcal_io::write_calibrated_urdf(std::path::Path::new(&iiwa()), &placements)
-        .expect("fixture");
-    std::fs::write(&truth_urdf, with_masses(&truth_text)).expect("write");
+    std::fs::write(&truth_urdf, with_masses(&calibrated_iiwa_text())).expect("write");
     // Its joint compliances, loads on its own geometry at the torque equilibrium.
     let truth = Robot::load_urdf(&truth_urdf, &["ball_link"]).expect("truth");
     let k = [1e-4, 1e-4, 1.5e-4, 1.5e-4, 2e-4, 3e-4, 3e-4];

@@ -11,7 +11,8 @@ use hapcal_kinematics::{Isometry3, Tree, Vector3};
 use hapcal_problems::{CalibratedModel, GravityCompliance, LinkMass};
 use hapcal_runtime::{GravityModel, Pose, Robot};
 
-use crate::{fixture, readings};
+use crate::iiwa_masses::calibrated_iiwa_text;
+use crate::readings;
 
 const TOL: f64 = 1e-12;
 
@@ -288,27 +289,6 @@ fn tree_comparison_detects_a_changed_compliance() {
         worst > 1e-7,
         "largest gap {worst:e}: the change went unseen"
     );
-}
-
-/// The iiwa 14 with calibrated joint origins written by `hapcal_io::write_calibrated_urdf`
-/// (the writer of `hapcal calibrate --out robot.urdf`): each moving joint's origin off by
-/// 0.2–0.8 mm and 0.3–1.2 mrad, deterministic.
-pub(crate) fn calibrated_iiwa_text() -> String {
-    let source = fixture("mukca/urdf/iiwa14.urdf");
-    let device = hapcal_io::import_urdf(&source, "ball_link").expect("fixture");
-    let mut placements = device.placements.clone();
-    for (k, p) in placements.iter_mut().enumerate() {
-        if p.axis.is_none() {
-            continue;
-        }
-        let s = |i: usize| if (k + i).is_multiple_of(2) { 1.0 } else { -1.0 };
-        let kf = k as f64;
-        for i in 0..3 {
-            p.xyz_m[i] += s(i) * (2e-4 + 2e-4 * ((kf + i as f64) % 4.0));
-            p.rpy_rad[i] += s(i + 1) * (3e-4 + 3e-4 * ((kf + 2.0 * i as f64) % 4.0));
-        }
-    }
-    hapcal_io::write_calibrated_urdf(&source, &placements).expect("fixture")
 }
 
 #[test]

@@ -6,8 +6,8 @@
 use hapcal_runtime::{Compensation, CompensationConfig, Pose, Robot, Target, compensate};
 
 use crate::fixture;
-use crate::iiwa_masses::{JOINTS, with_iiwa_masses};
-use crate::robot::{calibrated_iiwa_text, compliance, joint_samples, scratch, write_calibrated};
+use crate::iiwa_masses::{JOINTS, calibrated_iiwa_text, with_iiwa_masses};
+use crate::robot::{compliance, joint_samples, scratch, write_calibrated};
 
 /// Joint compliances of the simulated truth, rad/(N·m): 1/k from 10 kN·m/rad at the base to
 /// 3.3 kN·m/rad at the wrist, the order of the iiwa's joint stiffness (its joint torque
