@@ -129,42 +129,29 @@ fn check_vocabulary(file: &str, text: &str) -> Vec<Finding> {
         if line.trim_start().starts_with("//") {
             continue;
         }
-        for effect in hapcal_contract::Effect::ALL {
-            use hapcal_contract::Effect::{Capstans, Geometric, JointOffsets, Parallelogram};
-            // These words are also a model's `--model` name (the model that frees just this
-            // effect) or a device file's element: written in those roles too.
-            if matches!(effect, Geometric | JointOffsets | Capstans | Parallelogram) {
-                continue;
-            }
-            let name = effect.name();
+        use hapcal_contract::Effect::{Capstans, Geometric, JointOffsets, Parallelogram};
+        // These effects' words are also a model's `--model` name (the model that frees just
+        // this effect) or a device file's element: written in those roles too.
+        let effects = (hapcal_contract::Effect::ALL.into_iter())
+            .filter(|e| !matches!(e, Geometric | JointOffsets | Capstans | Parallelogram))
+            .map(|e| ("effect", e.name(), "Effect", VOCABULARY));
+        // `geometric` is also the effect of that name, exempt above; a command-line
+        // argument's id (`mut_arg("transmissions", …)`) is not a model's name.
+        let models = (hapcal_contract::ModelName::ALL.into_iter())
+            .filter(|m| {
+                file != MODEL_VOCABULARY
+                    && *m != hapcal_contract::ModelName::Geometric
+                    && !line.contains("mut_arg(")
+            })
+            .map(|m| ("model", m.name(), "ModelName", MODEL_VOCABULARY));
+        for (kind, name, type_name, vocabulary) in effects.chain(models) {
             if line.contains(&format!("\"{name}\"")) {
                 out.push(Finding {
                     file: file.to_owned(),
                     line: i + 1,
                     message: format!(
-                        "the effect name \"{name}\" written out: take it from \
-                         hapcal_contract::Effect (one vocabulary, {VOCABULARY})"
-                    ),
-                });
-            }
-        }
-        if file == MODEL_VOCABULARY {
-            continue;
-        }
-        for model in hapcal_contract::ModelName::ALL {
-            let name = model.name();
-            // `geometric` is also the effect of that name, exempt above; a command-line
-            // argument's id (`mut_arg("transmissions", …)`) is not a model's name.
-            if model != hapcal_contract::ModelName::Geometric
-                && !line.contains("mut_arg(")
-                && line.contains(&format!("\"{name}\""))
-            {
-                out.push(Finding {
-                    file: file.to_owned(),
-                    line: i + 1,
-                    message: format!(
-                        "the model name \"{name}\" written out: take it from \
-                         hapcal_contract::ModelName (one vocabulary, {MODEL_VOCABULARY})"
+                        "the {kind} name \"{name}\" written out: take it from \
+                         hapcal_contract::{type_name} (one vocabulary, {vocabulary})"
                     ),
                 });
             }
@@ -488,6 +475,35 @@ mod tests {
         let found = check_links("docs/results/b.md", text, &tracked);
         assert_eq!(found.len(), 1, "{found:?}");
         assert_eq!(found[0].line, 5);
+    }
+
+    #[test]
+    fn vocabulary() {
+        let effect = hapcal_contract::Effect::Backlash.name();
+        let model = hapcal_contract::ModelName::FramesOnly.name();
+        let text = format!(
+            "let a = \"{effect}\";\nlet b = \"{model}\";\nlet c = mut_arg(\"{model}\");\n\
+             // \"{effect}\"\nlet d = \"geometric\";\n"
+        );
+        let found = check_vocabulary("crates/x/src/a.rs", &text);
+        let lines: Vec<usize> = found.iter().map(|f| f.line).collect();
+        assert_eq!(lines, [1, 2]);
+        assert_eq!(
+            found[0].message,
+            format!(
+                "the effect name \"{effect}\" written out: take it from hapcal_contract::Effect \
+                 (one vocabulary, {VOCABULARY})"
+            )
+        );
+        assert_eq!(
+            found[1].message,
+            format!(
+                "the model name \"{model}\" written out: take it from \
+                 hapcal_contract::ModelName (one vocabulary, {MODEL_VOCABULARY})"
+            )
+        );
+        // The models' own module spells their names.
+        assert!(check_vocabulary(MODEL_VOCABULARY, &format!("\"{model}\"")).is_empty());
     }
 
     #[test]
