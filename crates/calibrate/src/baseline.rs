@@ -20,7 +20,7 @@ use serde::Serialize;
 use crate::data::{Data, DataSet, load_device};
 use crate::fit::CV_REPEATS;
 use crate::inputs::Plan;
-use crate::measured::{MeasuredConfig, Robot, calibrate_measured};
+use crate::measured::{MeasuredConfig, Robot, calibrate_measured, ladder_heldout};
 pub use crate::model::DataKind;
 use crate::model::Rung;
 
@@ -103,6 +103,13 @@ pub struct GeometricBaseline {
     pub warnings: Vec<String>,
 }
 
+/// The kinematic rungs of a baseline's ladder ([`KinematicRung`]), simplest first.
+const KINEMATIC_RUNGS: [ModelName; 3] = [
+    ModelName::FramesOnly,
+    ModelName::JointOffsets,
+    ModelName::Geometric,
+];
+
 /// Loads `plan`'s device and data as `calibrate::run` does, and fits the geometric
 /// baseline on the training data; `ladder`: also cross-validate the simpler kinematic rungs.
 ///
@@ -153,7 +160,29 @@ pub fn baseline_from_tables(
         marker_tips: (0..n_tips).collect(),
         ..MeasuredConfig::default()
     };
-    let out = calibrate_measured(robot, &train, &test, &cfg(Some(ModelName::Geometric)))?;
+    let fit = |rung| calibrate_measured(robot, &train, &test, &cfg(Some(rung)));
+    // The geometric fit and, for the ladder, the kinematic rungs' held-out errors as the
+    // ladder of `--model auto` reports them and the simpler rungs' fits, independent of each
+    // other: side by side on the cores.
+    let (out, kinematic) = rayon::join(
+        || fit(ModelName::Geometric),
+        || {
+            if !ladder {
+                return None;
+            }
+            let (heldout, (frames, offsets)) = rayon::join(
+                || ladder_heldout(robot, &train, &test, &cfg(None), &KINEMATIC_RUNGS),
+                || {
+                    rayon::join(
+                        || fit(ModelName::FramesOnly),
+                        || fit(ModelName::JointOffsets),
+                    )
+                },
+            );
+            Some((heldout, frames, offsets))
+        },
+    );
+    let out = out?;
     let mut warnings: Vec<String> = (train.iter().chain(&test))
         .flat_map(|t| t.warnings.iter().cloned())
         .collect();
@@ -203,18 +232,12 @@ pub fn baseline_from_tables(
         Rotation3::from_euler_angles(f.rpy_rad[0], f.rpy_rad[1], f.rpy_rad[2])
     });
     let mut rungs = Vec::new();
-    if ladder {
-        let auto = calibrate_measured(robot, &train, &test, &cfg(None))?;
-        for rung in [
-            ModelName::FramesOnly,
-            ModelName::JointOffsets,
-            ModelName::Geometric,
-        ] {
-            let fitted = if rung == ModelName::Geometric {
-                None
-            } else {
-                Some(calibrate_measured(robot, &train, &test, &cfg(Some(rung)))?)
-            };
+    if let Some((heldout, frames, offsets)) = kinematic {
+        let (heldout, frames, offsets) = (heldout?, frames?, offsets?);
+        for (rung, fitted) in KINEMATIC_RUNGS
+            .into_iter()
+            .zip([Some(frames), Some(offsets), None])
+        {
             let o = fitted.as_ref().unwrap_or(&out);
             let rms = |p: &crate::measured::PoseFigures| {
                 p.distance_rms_m
@@ -223,7 +246,7 @@ pub fn baseline_from_tables(
             };
             rungs.push(KinematicRung {
                 rung: Rung::Model(rung),
-                cv_rms_m: (auto.ladder.iter())
+                cv_rms_m: (heldout.iter())
                     .find(|r| r.rung == rung)
                     .map_or(f64::NAN, |r| r.heldout_rms_m),
                 test_rms_m: (o.sets.iter())

@@ -1748,6 +1748,136 @@ pub fn calibrate_measured(
     test: &[MeasurementTable],
     cfg: &MeasuredConfig,
 ) -> Result<MeasuredOutcome> {
+    on_bounded_training(robot, train, cfg, |p| {
+        let Prepared {
+            n_rows,
+            frames,
+            fits,
+            bounded,
+            richest_fit,
+            ladder_rungs,
+        } = p;
+        let (frames_model, frames_only) = &bounded.frames;
+        let frames_fit = (frames_model, frames_only);
+        let choice = choose_rung(&fits, cfg, test, frames_fit, richest_fit, &ladder_rungs)?;
+        let Choice {
+            rung,
+            chosen,
+            mut ladder,
+        } = choice;
+        let settled = settle(&fits, rung, chosen, &mut ladder.reports)?;
+        let review = Review {
+            cfg,
+            fits: &fits,
+            rung,
+            settled: &settled,
+            frames_model,
+            bounded,
+            train,
+            test,
+            n_rows,
+        };
+        let reviewed = review_fit(&review, &ladder);
+        let markers = (&frames.base, frames.markers.as_slice());
+        let found = findings(&review, markers, reviewed.equilibrium.no_equilibrium);
+        Ok(MeasuredOutcome {
+            refitted_lengths: found.refitted_lengths,
+            rung,
+            cross_validated_rows: ladder.judged_rows,
+            ladder: ladder.reports,
+            fitted: settled.fitted,
+            frames_only: frames_only.clone(),
+            model: settled.model,
+            frames: found.frames,
+            tree: frames.framed.clone(),
+            sets: reviewed.figures.sets,
+            sample_errors: reviewed.figures.sample_errors,
+            weights: fits.weights,
+            coverage: reviewed.coverage,
+            range_folds: ladder.range_folds,
+            training_ranges: reviewed.ranges,
+            downweighted: bounded.downweighted.clone(),
+            equilibrium_step_m: reviewed.equilibrium.step_m,
+            equilibrium_refits: settled.equilibrium_refits,
+            warnings: reviewed.warnings,
+            implausible: found.implausible,
+        })
+    })
+}
+
+/// The cross-validated held-out error of each of `rungs` on the training rows, as the ladder
+/// of [`calibrate_measured`] with `cfg.rung` `None` reports it (the same frames-only start,
+/// Huber pass judged with the whole ladder's richest rung, folds and fits, so the same
+/// figures), without fitting or cross-validating the ladder's other rungs nor settling and
+/// reviewing the rung it would choose. Reports in ladder order; a rung the robot does not
+/// carry, or the rows cannot fit, has none. The geometric baseline of a diagnosis reports its
+/// kinematic rungs' errors so ([`crate::baseline`]).
+///
+/// # Errors
+/// As [`calibrate_measured`]: too few training rows, a failed identification or
+/// cross-validation of one of `rungs`.
+pub fn ladder_heldout(
+    robot: &Robot,
+    train: &[MeasurementTable],
+    test: &[MeasurementTable],
+    cfg: &MeasuredConfig,
+    rungs: &[ModelName],
+) -> Result<Vec<RungReport>> {
+    let cfg = &MeasuredConfig {
+        rung: None,
+        ..cfg.clone()
+    };
+    on_bounded_training(robot, train, cfg, |p| {
+        let (all, levels) = &p.ladder_rungs;
+        let (some, some_levels): (Vec<ModelName>, Vec<usize>) = (all.iter().zip(levels))
+            .filter(|(r, _)| rungs.contains(r))
+            .map(|(&r, &l)| (r, l))
+            .unzip();
+        if some.is_empty() {
+            return Ok(Vec::new());
+        }
+        let (frames_model, frames_only) = &p.bounded.frames;
+        let choice = climb(
+            &p.fits,
+            cfg,
+            test,
+            (frames_model, frames_only),
+            p.richest_fit,
+            &(some, some_levels),
+            false,
+        )?;
+        Ok(choice.ladder.reports)
+    })
+}
+
+/// What every fit after the frames-only one starts from ([`on_bounded_training`]).
+struct Prepared<'a> {
+    /// Training rows.
+    n_rows: usize,
+    /// The frames-only fit of the training rows as measured.
+    frames: &'a FramesOnly,
+    /// The fits on the training tables as the Huber loss sees them.
+    fits: Fits<'a>,
+    /// Those tables, the samples the loss bounded and the frames-only fit on them.
+    bounded: &'a Bounded<'a>,
+    /// The Huber pass's fit of its rung, when it bounded nothing.
+    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    /// The rungs of the robot's ladder and their levels ([`ladder_of`]).
+    ladder_rungs: (Vec<ModelName>, Vec<usize>),
+}
+
+/// `then` of the training rows `train` prepared for the ladder: checked, the weights and
+/// frames-only fit ([`weighted_frames_only`]), the gross errors bounded by the Huber loss with
+/// the richest rung `cfg` may fit ([`bounded_training`]).
+///
+/// # Errors
+/// As [`check_training_rows`], [`weighted_frames_only`], [`bounded_training`], or `then`'s.
+fn on_bounded_training<T>(
+    robot: &Robot,
+    train: &[MeasurementTable],
+    cfg: &MeasuredConfig,
+    then: impl FnOnce(Prepared<'_>) -> Result<T>,
+) -> Result<T> {
     let n_rows = check_training_rows(train, cfg)?;
     let (frames, weights) = weighted_frames_only(robot, train, cfg, n_rows)?;
     let start_x = frames.fitted.x.clone();
@@ -1766,56 +1896,19 @@ pub fn calibrate_measured(
     };
     let ladder_rungs = ladder_of(&frames.robot);
     let richest = richest_rung(cfg, &ladder_rungs);
-    let mut bounded = bounded_training(richest, &measured, train, (frames.model, frames.fitted))?;
+    let frames_fit = (frames.model.clone(), frames.fitted.clone());
+    let mut bounded = bounded_training(richest, &measured, train, frames_fit)?;
     let richest_fit = bounded.richest_fit.take();
-    let fits = Fits {
-        train: &bounded.tables,
-        ..measured
-    };
-    let (frames_model, frames_only) = &bounded.frames;
-    let frames_fit = (frames_model, frames_only);
-    let choice = choose_rung(&fits, cfg, test, frames_fit, richest_fit, &ladder_rungs)?;
-    let Choice {
-        rung,
-        chosen,
-        mut ladder,
-    } = choice;
-    let settled = settle(&fits, rung, chosen, &mut ladder.reports)?;
-    let review = Review {
-        cfg,
-        fits: &fits,
-        rung,
-        settled: &settled,
-        frames_model,
-        bounded: &bounded,
-        train,
-        test,
+    then(Prepared {
         n_rows,
-    };
-    let reviewed = review_fit(&review, &ladder);
-    let markers = (&frames.base, frames.markers.as_slice());
-    let found = findings(&review, markers, reviewed.equilibrium.no_equilibrium);
-    Ok(MeasuredOutcome {
-        refitted_lengths: found.refitted_lengths,
-        rung,
-        cross_validated_rows: ladder.judged_rows,
-        ladder: ladder.reports,
-        fitted: settled.fitted,
-        frames_only: bounded.frames.1,
-        model: settled.model,
-        frames: found.frames,
-        tree: frames.framed,
-        sets: reviewed.figures.sets,
-        sample_errors: reviewed.figures.sample_errors,
-        weights,
-        coverage: reviewed.coverage,
-        range_folds: ladder.range_folds,
-        training_ranges: reviewed.ranges,
-        downweighted: bounded.downweighted,
-        equilibrium_step_m: reviewed.equilibrium.step_m,
-        equilibrium_refits: settled.equilibrium_refits,
-        warnings: reviewed.warnings,
-        implausible: found.implausible,
+        frames: &frames,
+        fits: Fits {
+            train: &bounded.tables,
+            ..measured
+        },
+        bounded: &bounded,
+        richest_fit,
+        ladder_rungs,
     })
 }
 
@@ -2138,17 +2231,40 @@ fn choose_rung(
     ladder: &(Vec<ModelName>, Vec<usize>),
 ) -> Result<Choice> {
     let Some(rung) = cfg.rung else {
-        let lengths: Vec<usize> = fits.train.iter().map(|t| t.rows.len()).collect();
-        return match crate::fit::ladder_sample(&lengths, crate::fit::LADDER_ROWS) {
-            Some(sample) => climb_sample(fits, cfg, test, frames, richest_fit, ladder, &sample),
-            None => climb_ladder(fits, cfg, test, frames, richest_fit, ladder),
-        };
+        return climb(fits, cfg, test, frames, richest_fit, ladder, true);
     };
     Ok(Choice {
         rung,
         chosen: fit_on_every_row(fits, rung, frames, richest_fit)?,
         ladder: LadderOutcome::default(),
     })
+}
+
+/// The rung chosen on the ladder `ladder` ([`climb_ladder`]), judged on a sample of the
+/// training rows of a long recording ([`climb_sample`]); `refit_sampled`: the rung chosen on
+/// a sample then fitted on every training row (the Huber pass's `richest_fit` when it is that
+/// rung), else its fit on the sample is returned.
+///
+/// # Errors
+/// As [`climb_ladder`]; a failed identification on every row.
+fn climb(
+    fits: &Fits<'_>,
+    cfg: &MeasuredConfig,
+    test: &[MeasurementTable],
+    frames: (&CalibratedModel, &Fitted),
+    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    ladder: &(Vec<ModelName>, Vec<usize>),
+    refit_sampled: bool,
+) -> Result<Choice> {
+    let lengths: Vec<usize> = fits.train.iter().map(|t| t.rows.len()).collect();
+    let Some(sample) = crate::fit::ladder_sample(&lengths, crate::fit::LADDER_ROWS) else {
+        return climb_ladder(fits, cfg, test, frames, richest_fit, ladder);
+    };
+    let mut choice = climb_sample(fits, cfg, test, ladder, &sample)?;
+    if refit_sampled {
+        choice.chosen = fit_on_every_row(fits, choice.rung, frames, richest_fit)?;
+    }
+    Ok(choice)
 }
 
 /// `rung` fitted on every training row: `frames` for frames only, the Huber pass's
@@ -2173,18 +2289,16 @@ fn fit_on_every_row(
 
 /// The rung chosen on the ladder of a long recording: the ladder ([`climb_ladder`]) judged on
 /// the training rows `sample` keeps (every `s`-th row of each table, their frames-only fit
-/// the sample's own), the rung it chooses then fitted on every training row (the Huber pass's
-/// fit when it is that rung). The choice needs far fewer rows than the parameters' precision
+/// the sample's own), with the chosen rung's fit on the sample ([`climb`] fits it on every
+/// training row). The choice needs far fewer rows than the parameters' precision
 /// (docs/engine.md, "Long logs"); the ladder's reports are those of the sample.
 ///
 /// # Errors
-/// As [`climb_ladder`]; a failed identification on every row.
+/// As [`climb_ladder`].
 fn climb_sample(
     fits: &Fits<'_>,
     cfg: &MeasuredConfig,
     test: &[MeasurementTable],
-    frames: (&CalibratedModel, &Fitted),
-    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
     ladder: &(Vec<ModelName>, Vec<usize>),
     sample: &crate::fit::LadderSample,
 ) -> Result<Choice> {
@@ -2214,7 +2328,6 @@ fn climb_sample(
         ladder,
     )?;
     drop(sampled);
-    choice.chosen = fit_on_every_row(fits, choice.rung, frames, richest_fit)?;
     choice.ladder.judged_rows = Some(sample.rows.len());
     Ok(choice)
 }

@@ -2,7 +2,9 @@
 //! ladder climbs as far as the simulated deviations ask, and no further.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use hapcal_calibrate::measured::{MeasuredConfig, Robot, calibrate_measured};
+use hapcal_calibrate::measured::{
+    MeasuredConfig, Robot, RungReport, calibrate_measured, ladder_heldout,
+};
 use hapcal_calibrate::model::ModelName;
 use hapcal_io::{MeasuredRow, MeasurementTable};
 use hapcal_kinematics::Vector3;
@@ -206,6 +208,33 @@ fn a_gross_error_is_bounded_and_listed() {
         rms(&out),
         rms(&reference)
     );
+}
+
+/// The kinematic rungs' held-out errors of `ladder_heldout` (what a diagnosis's baseline
+/// reports) are the whole ladder's, bit for bit, also when the Huber loss bounds a sample: it
+/// is judged with the whole ladder's richest rung, not with the rungs asked for.
+#[test]
+fn the_kinematic_rungs_score_as_on_the_whole_ladder() {
+    let robot = robot();
+    let mut train = table(&robot, 120, 1e-3, 1);
+    train.rows[37].markers[0].position_m[1] += 0.02;
+    let (train, test) = ([train], [table(&robot, 60, 1e-3, 2)]);
+    let whole = calibrate_measured(&robot, &train, &test, &config()).unwrap();
+    assert!(!whole.downweighted.is_empty(), "no sample bounded");
+    let rungs = [
+        ModelName::FramesOnly,
+        ModelName::JointOffsets,
+        ModelName::Geometric,
+    ];
+    let some = ladder_heldout(&robot, &train, &test, &config(), &rungs).unwrap();
+    let scores = |reports: &[RungReport]| -> Vec<(ModelName, u64)> {
+        (reports.iter())
+            .filter(|r| rungs.contains(&r.rung))
+            .map(|r| (r.rung, r.heldout_rms_m.to_bits()))
+            .collect()
+    };
+    assert_eq!(some.len(), rungs.len(), "{some:?}");
+    assert_eq!(scores(&some), scores(&whole.ladder));
 }
 
 #[test]
