@@ -460,6 +460,7 @@ pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
             let (reason, depends_on) = match &p.reason {
                 PruneReason::NearZeroColumn => (PruneCause::NearZeroColumn, Vec::new()),
                 PruneReason::Dependent { on } => (PruneCause::Dependent, on.clone()),
+                PruneReason::AtBound => (PruneCause::AtZero, Vec::new()),
                 _ => (PruneCause::Insensitive, Vec::new()),
             };
             PrunedReport {
@@ -504,6 +505,53 @@ pub(crate) fn negative_compliances(
     let score = |c: &(String, f64, f64)| c.1 / c.2.max(f64::MIN_POSITIVE);
     negative.sort_by(|a, b| score(a).total_cmp(&score(b)));
     (negative, n)
+}
+
+/// The compliance estimates of `identified` below zero, as `(layout index, σ)`: those
+/// [`hold_compliances_at_zero`] holds.
+fn compliances_below_zero(identified: &Identified) -> Vec<(usize, f64)> {
+    let is_compliance =
+        |name: &str| hapcal_contract::ValueName::parse(name).is_ok_and(|v| v.is_compliance());
+    (identified.covariance.free.iter())
+        .zip(identified.covariance.std())
+        .filter(|&(&i, _)| identified.fit.x[i] < 0.0 && is_compliance(identified.layout.name(i)))
+        .map(|(&i, std)| (i, std))
+        .collect()
+}
+
+/// The physical bound compliance ≥ 0 on the identification `free_fit` of `problem` (`cfg` its
+/// configuration): when none of its compliances is below zero by more than
+/// [`negative_compliances`]' bound (that is a stop, [`implausible_estimates`], judged on the
+/// fit with every compliance free), those below zero are held at zero and the others
+/// refitted from the estimate ([`hapcal_identify::identify_held`]), again until none is
+/// below zero: each held one is reported among the pruned parameters, at zero, with its σ
+/// in the fit that had it free. `free_fit` itself when no compliance is below zero or one is
+/// significantly.
+///
+/// # Errors
+/// As [`hapcal_identify::identify`] for a refit.
+pub(crate) fn hold_compliances_at_zero(
+    problem: &(impl hapcal_identify::Problem + Sync),
+    cfg: &hapcal_identify::IdentifyConfig,
+    free_fit: Identified,
+) -> Result<Identified, hapcal_identify::Error> {
+    if !negative_compliances(&free_fit, 1.0).0.is_empty() {
+        return Ok(free_fit);
+    }
+    let mut id = free_fit;
+    let mut held: Vec<(usize, f64)> = Vec::new();
+    loop {
+        let more = compliances_below_zero(&id);
+        if more.is_empty() {
+            return Ok(id);
+        }
+        let mut start = id.fit.x.clone();
+        for &(i, _) in &more {
+            start[i] = 0.0;
+        }
+        held.extend(more);
+        id = hapcal_identify::identify_held(problem, start, cfg, &held)?;
+    }
 }
 
 /// "`k` of `n` below zero by more than z standard deviations: name value ± σ unit, …" for the
