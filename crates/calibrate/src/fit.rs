@@ -813,9 +813,9 @@ mod bound_tests {
 
     #[test]
     fn a_compliance_below_zero_within_the_noise_is_held_at_zero_and_reported() {
-        // The second compliance's truth is zero: its free estimate is a draw of the noise
-        // (σ ≈ 1e-3/(10·√40) ≈ 1.6e-5); this seed puts it below zero, within the bound.
-        let p = problem(0.0);
+        // The second compliance's truth, −2.5e-5, is some 1.5 σ below zero (σ ≈ 1e-3/(10·√40)
+        // ≈ 1.6e-5): this seed's noise puts its free estimate below zero, within the bound.
+        let p = problem(-2.5e-5);
         let cfg = IdentifyConfig::default();
         let free = identify(&p, Col::zeros(3), &cfg).expect("valid");
         assert!(free.fit.x[2] < 0.0, "{}", free.fit.x[2]);
