@@ -4009,6 +4009,9 @@ pub fn frames_only(
     let Some((_, (base, markers))) = best else {
         bail!("no initial guess of the instrument frame");
     };
+    // The samples at the nominal kinematics (128 bytes each) are not held through the fit,
+    // whose problem has a row per sample of its own.
+    drop((samples, distances));
     let framed = with_offsets
         .with_frames(&base, &markers)
         .context("attaching the instrument and marker frames")?;
@@ -4835,8 +4838,8 @@ mod tests {
             (moved - beyond).abs() < 1e-12,
             "{moved} m against {beyond} m"
         );
-        // What every fit after the pass reads: the copy of the tables the pass used to make,
-        // with the bounded position written in.
+        // What every fit after the pass reads: the tables with the bounded position written
+        // in.
         let mut copy = tables.to_vec();
         copy[0].rows[37].markers[0].position_m = samples[0].position_m;
         let all = |_: usize, _: usize| true;
