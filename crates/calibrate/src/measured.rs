@@ -3431,12 +3431,22 @@ fn equilibrate(
             ..model.clone()
         };
         let obs = observations(train, &all);
-        // One configuration's angles after another, in the order of the observations.
-        let mut at = Vec::new();
-        for rows in obs.configurations() {
-            at.extend(solving.load_angles(&obs.rows[rows.start].q).0);
-        }
-        let at: Arc<[f64]> = at.into();
+        // One configuration's angles after another, in the order of the observations,
+        // collected from an iterator of known length straight into the shared slice: one
+        // allocation of the angles (a vector grown by extending reserves up to twice them, and
+        // turning it into the slice copies them once more).
+        let starts: Vec<usize> = obs.configurations().map(|rows| rows.start).collect();
+        let n_joints = obs.rows.first().map_or(0, |r| r.q.len());
+        let mut angles = Vec::new();
+        let at: Arc<[f64]> = (0..starts.len() * n_joints)
+            .map(|i| {
+                if i % n_joints == 0 {
+                    angles = solving.load_angles(&obs.rows[starts[i / n_joints]].q).0;
+                }
+                angles[i % n_joints]
+            })
+            .collect();
+        drop(starts);
         if let Some(p) = &previous {
             let change = (p.iter().zip(at.iter()))
                 .map(|(a, b)| (a - b).abs())
