@@ -285,7 +285,8 @@ pub fn baseline_from_tables(
 /// Observations of every row of `tables` ([`crate::measured::observations`]) and the
 /// configuration of each problem row.
 fn table_observations(tables: &[MeasurementTable]) -> (Observations, Vec<usize>) {
-    let obs = crate::measured::observations(tables, &|_, _| true);
+    let obs =
+        crate::measured::observations(crate::measured::Training::measured(tables), &|_, _| true);
     let mut configuration = Vec::with_capacity(obs.rows.len());
     let mut c = 0;
     for t in tables {

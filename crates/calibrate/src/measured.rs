@@ -549,32 +549,87 @@ fn mean_marker_rotation(
     }
 }
 
-/// Observations of the tables' rows for which `keep(table, row)` holds: per row its distance
-/// (if any), then each marker sample, in file order.
+/// A marker sample the Huber loss bounded ([`winsorize`]): where it lies in the training
+/// tables and the position every fit after the Huber pass sees instead of the measured one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct BoundedSample {
+    /// Table, row of the table and sample of the row (index into its `markers`), 0-based.
+    pub(crate) at: (usize, usize, usize),
+    /// The bounded position in the instrument frame, m.
+    pub(crate) position_m: [f64; 3],
+}
+
+/// Training tables as the fits see them: the tables as measured, with the marker samples the
+/// Huber loss bounded at their bounded positions. Nothing is copied: a row holding a bounded
+/// sample is rebuilt when it is read ([`Training::row`]), the others are borrowed.
+#[derive(Clone, Copy)]
+pub(crate) struct Training<'a> {
+    /// The tables as measured.
+    pub(crate) tables: &'a [MeasurementTable],
+    /// The bounded samples, sorted by place.
+    bounded: &'a [BoundedSample],
+}
+
+impl<'a> Training<'a> {
+    /// `tables` as measured, nothing bounded.
+    pub(crate) fn measured(tables: &'a [MeasurementTable]) -> Self {
+        Training {
+            tables,
+            bounded: &[],
+        }
+    }
+
+    /// `tables` with the samples `bounded` (sorted by place) at their bounded positions.
+    fn with_bounded(tables: &'a [MeasurementTable], bounded: &'a [BoundedSample]) -> Self {
+        debug_assert!(bounded.is_sorted_by_key(|b| b.at));
+        Training { tables, bounded }
+    }
+
+    /// Row `ri` of table `ti`, its bounded samples at their bounded positions: borrowed from
+    /// the table when none of its samples was bounded.
+    pub(crate) fn row(&self, ti: usize, ri: usize) -> std::borrow::Cow<'a, MeasuredRow> {
+        let row = &self.tables[ti].rows[ri];
+        let first = (self.bounded).partition_point(|b| (b.at.0, b.at.1) < (ti, ri));
+        let mut out = std::borrow::Cow::Borrowed(row);
+        for b in self.bounded[first..].iter() {
+            if (b.at.0, b.at.1) != (ti, ri) {
+                break;
+            }
+            out.to_mut().markers[b.at.2].position_m = b.position_m;
+        }
+        out
+    }
+
+    /// The rows of table `ti` in file order ([`Training::row`]).
+    fn rows(&self, ti: usize) -> impl Iterator<Item = std::borrow::Cow<'a, MeasuredRow>> + '_ {
+        (0..self.tables[ti].rows.len()).map(move |ri| self.row(ti, ri))
+    }
+}
+
+/// Observations of the rows of `tables` for which `keep(table, row)` holds: per row its
+/// distance (if any), then each marker sample (bounded ones at their bounded positions), in
+/// file order.
 pub(crate) fn observations(
-    tables: &[MeasurementTable],
+    tables: Training<'_>,
     keep: &dyn Fn(usize, usize) -> bool,
 ) -> Observations {
     let kept = || {
-        (tables.iter().enumerate())
-            .flat_map(|(ti, t)| {
-                t.rows
-                    .iter()
-                    .enumerate()
-                    .map(move |(ri, row)| (ti, ri, row))
-            })
-            .filter(|&(ti, ri, _)| keep(ti, ri))
+        (tables.tables.iter().enumerate())
+            .flat_map(|(ti, t)| (0..t.rows.len()).map(move |ri| (ti, ri)))
+            .filter(|&(ti, ri)| keep(ti, ri))
     };
     // Counted first: a million rows pushed into a growing vector reserve up to twice their
     // size.
     let n_rows = kept()
-        .map(|(_, _, row)| usize::from(row.distance_m.is_some()) + row.markers.len())
+        .map(|(ti, ri)| &tables.tables[ti].rows[ri])
+        .map(|row| usize::from(row.distance_m.is_some()) + row.markers.len())
         .sum();
     let mut obs = Observations {
         rows: Vec::with_capacity(n_rows),
         ..Observations::default()
     };
-    for (_, _, row) in kept() {
+    for (ti, ri) in kept() {
+        let row = tables.row(ti, ri);
         if let Some(distance_m) = row.distance_m {
             // From the instrument origin (the anchor) to marker 1's frame.
             obs.rows.push(Row {
@@ -721,7 +776,7 @@ fn fit(
     robot: &Robot,
     start: &Start<'_>,
     offsets: &[Option<usize>],
-    tables: &[MeasurementTable],
+    tables: Training<'_>,
     weights: Weights,
     keep: &dyn Fn(usize, usize) -> bool,
 ) -> Result<(CalibratedModel, Fitted)> {
@@ -838,13 +893,13 @@ struct Errors {
 /// The errors of table `table` under `model`; scores with `weights`.
 fn errors(
     model: &CalibratedModel,
-    tables: &[MeasurementTable],
+    tables: Training<'_>,
     table: usize,
     weights: Option<&Weights>,
 ) -> Errors {
     let mut out = Errors::default();
-    for row in &tables[table].rows {
-        push_row_errors(model, row, weights, &mut out);
+    for row in tables.rows(table) {
+        push_row_errors(model, &row, weights, &mut out);
     }
     out
 }
@@ -902,7 +957,7 @@ fn stats(v: &[f64]) -> (f64, f64, f64) {
 }
 
 fn figures(model: &CalibratedModel, tables: &[MeasurementTable], table: usize) -> PoseFigures {
-    let e = errors(model, tables, table, None);
+    let e = errors(model, Training::measured(tables), table, None);
     let (pm, pr, px) = stats(&e.position);
     let (om, or, ox) = stats(&e.orientation);
     let abs: Vec<f64> = e.distance.iter().map(|d| d.abs()).collect();
@@ -965,7 +1020,7 @@ impl AtWarm {
         rung: ModelName,
         robot: &Robot,
         tree: &Tree,
-        tables: &[MeasurementTable],
+        tables: Training<'_>,
         weights: Weights,
         warm: &Warm,
     ) -> Option<AtWarm> {
@@ -973,9 +1028,9 @@ impl AtWarm {
         let terms = terms(rung, robot).ok()?;
         let problem = CalibrationProblem::on_tree(tree.clone(), obs, weights, terms).ok()?;
         let (m, n) = (problem.n_residuals(), problem.layout().len());
-        let mut first = Vec::with_capacity(tables.len());
+        let mut first = Vec::with_capacity(tables.tables.len());
         let mut at = 0;
-        for t in tables {
+        for t in tables.tables {
             let mut offsets = Vec::with_capacity(t.rows.len());
             for row in &t.rows {
                 offsets.push(at);
@@ -1048,7 +1103,7 @@ fn refit(
     rung: ModelName,
     robot: &Robot,
     tree: &Tree,
-    tables: &[MeasurementTable],
+    tables: Training<'_>,
     weights: Weights,
     keep: &dyn Fn(usize, usize) -> bool,
     warm: &Warm,
@@ -1067,7 +1122,7 @@ fn refit(
         xtol: FOLD_TOLERANCE,
         ..crate::fit::identify_config(None).lm
     };
-    let start = (at_warm.map(|a| a.rows(tables, keep))).filter(|(r, jac)| {
+    let start = (at_warm.map(|a| a.rows(tables.tables, keep))).filter(|(r, jac)| {
         r.nrows() == problem.n_residuals() && jac.ncols() == problem.layout().len()
     });
     let fit = lm_alone(
@@ -1113,14 +1168,14 @@ fn lm_alone<P: Problem + Sync>(
 
 /// The original of every row of every table ([`crate::fit::originals`] by the reader's
 /// repeat key): a row that repeats an earlier row of its table is held out with it.
-fn table_originals(tables: &[MeasurementTable]) -> Vec<Vec<usize>> {
-    (tables.iter())
-        .map(|t| crate::fit::originals(t.rows.iter().map(MeasuredRow::repeat_key)))
+fn table_originals(tables: Training<'_>) -> Vec<Vec<usize>> {
+    (0..tables.tables.len())
+        .map(|ti| crate::fit::originals(tables.rows(ti).map(|row| row.repeat_key())))
         .collect()
 }
 
 /// Training rows of `tables` that repeat an earlier row of their table.
-pub(crate) fn n_table_copies(tables: &[MeasurementTable]) -> usize {
+fn n_table_copies(tables: Training<'_>) -> usize {
     table_originals(tables)
         .iter()
         .map(|o| crate::fit::n_copies(o))
@@ -1203,12 +1258,12 @@ fn row_residuals(row: &MeasuredRow) -> usize {
 
 /// The fewest residuals the training rows of a blocked cross-validation fold of `tables`
 /// give, and that fold's training rows.
-fn fewest_fold_residuals(tables: &[MeasurementTable], k: usize) -> (usize, usize) {
+fn fewest_fold_residuals(tables: Training<'_>, k: usize) -> (usize, usize) {
     (crate::fit::blocked_folds(&table_originals(tables), k).iter())
         .map(|fold| {
             let mut residuals = 0;
             let mut rows = 0;
-            for (t, held) in tables.iter().zip(fold) {
+            for (t, held) in tables.tables.iter().zip(fold) {
                 for (row, _) in t.rows.iter().zip(held).filter(|(_, h)| !**h) {
                     residuals += row_residuals(row);
                     rows += 1;
@@ -1651,7 +1706,7 @@ fn cross_validate(
     robot: &Robot,
     tree: &Tree,
     warm: &Warm,
-    tables: &[MeasurementTable],
+    tables: Training<'_>,
     cfg: &MeasuredConfig,
     weights: Weights,
     ranges: &[RangeSplit],
@@ -1687,10 +1742,10 @@ fn cross_validate(
                 Err(e) => return Err(e),
             };
             let mut out = Vec::new();
-            for (ti, t) in tables.iter().enumerate() {
-                for (r, row) in t.rows.iter().enumerate() {
+            for (ti, t) in tables.tables.iter().enumerate() {
+                for r in 0..t.rows.len() {
                     if fold[ti][r] {
-                        let (sq, score) = row_error(&model, row, &weights);
+                        let (sq, score) = row_error(&model, &tables.row(ti, r), &weights);
                         out.push((ti, r, sq, score));
                     }
                 }
@@ -1699,14 +1754,14 @@ fn cross_validate(
         })
         .collect::<Result<_>>()?;
     let k = cfg.folds;
-    let offsets: Vec<usize> = (tables.iter())
+    let offsets: Vec<usize> = (tables.tables.iter())
         .scan(0, |acc, t| {
             let start = *acc;
             *acc += t.rows.len();
             Some(start)
         })
         .collect();
-    let n_rows: usize = tables.iter().map(|t| t.rows.len()).sum();
+    let n_rows: usize = tables.tables.iter().map(|t| t.rows.len()).sum();
     let (mut sq, mut score) = (vec![0.0; n_rows], vec![0.0; n_rows]);
     let block = crate::fit::first_repeat_blocks(&originals, k);
     for fold in held[..blocked.len()].iter().flatten() {
@@ -1861,7 +1916,7 @@ struct Prepared<'a> {
     /// The fits on the training tables as the Huber loss sees them.
     fits: Fits<'a>,
     /// Those tables, the samples the loss bounded and the frames-only fit on them.
-    bounded: &'a Bounded<'a>,
+    bounded: &'a Bounded,
     /// The Huber pass's fit of its rung, when it bounded nothing.
     richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
     /// The rungs of the robot's ladder and their levels ([`ladder_of`]).
@@ -1893,7 +1948,7 @@ fn on_bounded_training<T>(
         robot: &frames.robot,
         start: &start,
         offsets: &frames.offsets,
-        train,
+        train: Training::measured(train),
         weights,
     };
     let ladder_rungs = ladder_of(&frames.robot);
@@ -1905,7 +1960,7 @@ fn on_bounded_training<T>(
         n_rows,
         frames: &frames,
         fits: Fits {
-            train: &bounded.tables,
+            train: Training::with_bounded(train, &bounded.samples),
             ..measured
         },
         bounded: &bounded,
@@ -1984,7 +2039,7 @@ fn weighted_frames_only(
             max_evaluations: None,
         },
         &unweighted.offsets,
-        train,
+        Training::measured(train),
         weights,
         &|_, _| true,
     )?;
@@ -2050,7 +2105,7 @@ fn estimated_weights(
     }
     let (mut pos, mut rot, mut dist) = (Vec::new(), Vec::new(), Vec::new());
     for ti in 0..train.len() {
-        let e = errors(m0, train, ti, None);
+        let e = errors(m0, Training::measured(train), ti, None);
         pos.extend(e.position);
         rot.extend(e.orientation);
         dist.extend(e.distance);
@@ -2081,7 +2136,7 @@ struct Fits<'a> {
     robot: &'a Robot,
     start: &'a Start<'a>,
     offsets: &'a [Option<usize>],
-    train: &'a [MeasurementTable],
+    train: Training<'a>,
     weights: Weights,
 }
 
@@ -2130,36 +2185,37 @@ fn richest_rung(cfg: &MeasuredConfig, ladder: &(Vec<ModelName>, Vec<usize>)) -> 
     })
 }
 
-/// The training tables as the Huber loss sees them ([`bounded_training`]), with the
-/// frames-only fit on them.
-struct Bounded<'a> {
-    /// The training tables with the gross errors bounded (as measured, not a copy, when none
-    /// was).
-    tables: std::borrow::Cow<'a, [MeasurementTable]>,
+/// The samples the Huber loss bounded in the training tables ([`bounded_training`]), with the
+/// frames-only fit on the tables as it sees them.
+struct Bounded {
+    /// The bounded samples at their bounded positions, sorted by place (none when nothing
+    /// was bounded): the training tables are read through them ([`Training`]), not copied.
+    samples: Vec<BoundedSample>,
     /// The samples the Huber loss bounded, file order.
     downweighted: Vec<Downweighted>,
     /// The rung the Huber loss was evaluated with and its fit, when it bounded nothing.
     richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
     /// The rung the Huber loss was evaluated with.
     judge: ModelName,
-    /// The frames-only model and identification on `tables`.
+    /// The frames-only model and identification on the training tables with `samples`
+    /// bounded.
     frames: (CalibratedModel, Fitted),
 }
 
 /// Gross errors bounded by the Huber loss ([`winsorize`], evaluated with `richest`): every fit
 /// after it sees the winsorized samples; the figures are of the data as measured. The
 /// frames-only fit `frames` is redone on the winsorized tables when a sample was bounded.
-/// `train`: the training tables of `measured`, borrowed as long as the tables returned.
+/// `train`: the training tables of `measured`, as measured.
 ///
 /// # Errors
 /// A failed identification.
-fn bounded_training<'t>(
+fn bounded_training(
     richest: ModelName,
     measured: &Fits<'_>,
-    train: &'t [MeasurementTable],
+    train: &[MeasurementTable],
     frames: (CalibratedModel, Fitted),
-) -> Result<Bounded<'t>> {
-    let (tables, downweighted, richest_fit, judge) = winsorize(
+) -> Result<Bounded> {
+    let (samples, downweighted, richest_fit, judge) = winsorize(
         richest,
         measured.robot,
         measured.start,
@@ -2171,13 +2227,13 @@ fn bounded_training<'t>(
         frames
     } else {
         Fits {
-            train: &tables,
+            train: Training::with_bounded(train, &samples),
             ..*measured
         }
         .fit(ModelName::FramesOnly)?
     };
     Ok(Bounded {
-        tables,
+        samples,
         downweighted,
         richest_fit,
         judge,
@@ -2258,7 +2314,7 @@ fn climb(
     ladder: &(Vec<ModelName>, Vec<usize>),
     refit_sampled: bool,
 ) -> Result<Choice> {
-    let lengths: Vec<usize> = fits.train.iter().map(|t| t.rows.len()).collect();
+    let lengths: Vec<usize> = fits.train.tables.iter().map(|t| t.rows.len()).collect();
     let Some(sample) = crate::fit::ladder_sample(&lengths, crate::fit::LADDER_ROWS) else {
         return climb_ladder(fits, cfg, test, frames, richest_fit, ladder);
     };
@@ -2304,11 +2360,14 @@ fn climb_sample(
     ladder: &(Vec<ModelName>, Vec<usize>),
     sample: &crate::fit::LadderSample,
 ) -> Result<Choice> {
-    let sampled: Vec<MeasurementTable> = (fits.train.iter())
-        .map(|t| MeasurementTable {
+    let sampled: Vec<MeasurementTable> = (fits.train.tables.iter().enumerate())
+        .map(|(ti, t)| MeasurementTable {
             name: t.name.clone(),
             path: t.path.clone(),
-            rows: t.rows.iter().step_by(sample.stride).cloned().collect(),
+            rows: (fits.train.rows(ti))
+                .step_by(sample.stride)
+                .map(std::borrow::Cow::into_owned)
+                .collect(),
             warnings: Vec::new(),
             n_markers: t.n_markers,
             has_orientation: t.has_orientation,
@@ -2317,7 +2376,7 @@ fn climb_sample(
         })
         .collect();
     let on_sample = Fits {
-        train: &sampled,
+        train: Training::measured(&sampled),
         ..*fits
     };
     let (sample_model, sample_frames) = on_sample.fit(ModelName::FramesOnly)?;
@@ -2354,7 +2413,7 @@ fn climb_ladder(
         .chain(cfg.workspace.iter().map(Vec::as_slice))
         .collect();
     // Only the sides where the calibration will be used beyond its training range.
-    let ranges = range_folds(fits.robot, fits.train, &beyond);
+    let ranges = range_folds(fits.robot, fits.train.tables, &beyond);
     // The fewest residuals a blocked fold trains on: a rung keeping more parameters on
     // every row cannot be refitted on that fold.
     let (fold_residuals, fold_rows) = fewest_fold_residuals(fits.train, cfg.folds);
@@ -2375,7 +2434,7 @@ fn climb_ladder(
     let tried = sort_runs(runs, rungs, &mut left_out)?;
     let tried_rungs: Vec<ModelName> = tried.index.iter().map(|&i| rungs[i]).collect();
     let tried_levels: Vec<usize> = tried.index.iter().map(|&i| levels[i]).collect();
-    let evidence = RangeEvidence::new(&ranges, fits.train, &tried.scores);
+    let evidence = RangeEvidence::new(&ranges, fits.train.tables, &tried.scores);
     let judge = LadderJudge {
         rungs: &tried_rungs,
         levels: &tried_levels,
@@ -2725,7 +2784,7 @@ fn climb_tried(
             break chosen;
         }
         let refit = fits.refit(judge.rungs[chosen]);
-        let (_, given_rms, _) = stats(&position_errors(chosen_model, fits.train));
+        let (_, given_rms, _) = stats(&training_position_errors(chosen_model, fits.train));
         if negative.len() >= 2 && mounting_test(&refit, given_rms).is_some() {
             break chosen;
         }
@@ -2871,7 +2930,7 @@ fn residual_warnings(
     let mut warnings = Vec::new();
     let train = fits.train;
     let frames_rms = {
-        let e = position_errors(frames_model, train);
+        let e = training_position_errors(frames_model, train);
         (e.iter().map(|e| e * e).sum::<f64>() / e.len().max(1) as f64).sqrt()
     };
     if frames_rms > PLAUSIBLE_FRAMES_ONLY_RMS_M {
@@ -2889,8 +2948,8 @@ fn residual_warnings(
     let (sigma, default_of) = match cfg.sigma_m {
         Some(stated) => (stated, None),
         None => {
-            let poses = train.iter().any(|t| t.has_orientation);
-            let positions = train.iter().any(|t| t.n_markers > 0);
+            let poses = train.tables.iter().any(|t| t.has_orientation);
+            let positions = train.tables.iter().any(|t| t.n_markers > 0);
             let (sigma, class) = crate::noise::default_sigma_m(poses, positions);
             (sigma, Some(class))
         }
@@ -2920,8 +2979,8 @@ struct Review<'a> {
     settled: &'a Settled,
     /// The frames-only model.
     frames_model: &'a CalibratedModel,
-    /// The training tables the Huber loss saw, and the samples it bounded.
-    bounded: &'a Bounded<'a>,
+    /// The samples the Huber loss bounded, and the frames-only fit after it.
+    bounded: &'a Bounded,
     /// The training tables as measured.
     train: &'a [MeasurementTable],
     test: &'a [MeasurementTable],
@@ -2960,7 +3019,7 @@ fn review_fit(review: &Review<'_>, ladder: &LadderOutcome) -> Reviewed {
     for w in std::mem::take(&mut figures.test_warnings) {
         warnings.insert(0, w);
     }
-    let ranges = training_ranges(fits.train, robot.joint_names.len());
+    let ranges = training_ranges(fits.train.tables, robot.joint_names.len());
     let sets = Extrapolation {
         train,
         test,
@@ -3066,8 +3125,8 @@ fn set_figures(
     for (role, tables) in [(SetRole::Train, train), (SetRole::Test, test)] {
         for ti in 0..tables.len() {
             let (e0, e1) = (
-                errors(frames_model, tables, ti, None),
-                errors(model, tables, ti, None),
+                errors(frames_model, Training::measured(tables), ti, None),
+                errors(model, Training::measured(tables), ti, None),
             );
             sample_errors.push(SampleErrors {
                 position_before_m: e0.position,
@@ -3290,7 +3349,7 @@ struct Refit<'a> {
     robot: &'a Robot,
     start: &'a Start<'a>,
     offsets: &'a [Option<usize>],
-    train: &'a [MeasurementTable],
+    train: Training<'a>,
     weights: Weights,
 }
 
@@ -3345,7 +3404,7 @@ fn mounting_test(r: &Refit<'_>, given_rms_m: f64) -> Option<(Vector3<f64>, f64)>
             {
                 return None;
             }
-            let (_, rms, _) = stats(&position_errors(&model, r.train));
+            let (_, rms, _) = stats(&training_position_errors(&model, r.train));
             Some((*g, rms))
         })
         .collect();
@@ -3382,7 +3441,7 @@ fn plausibility(
         let unit = compliance_unit_of(r.robot);
         let given_g = gravity_text(&r.robot.gravity_dir);
         let counted = crate::fit::negative_compliance_words(&negative, n_compliances, unit);
-        let (_, given_rms, _) = stats(&position_errors(model, r.train));
+        let (_, given_rms, _) = stats(&training_position_errors(model, r.train));
         // A pattern is tested against the mounting; one estimate alone is what it is.
         let mounting = (negative.len() >= 2)
             .then(|| mounting_test(r, given_rms))
@@ -3452,7 +3511,7 @@ fn equilibrate(
     robot: &Robot,
     tree: &Tree,
     offsets: &[Option<usize>],
-    train: &[MeasurementTable],
+    train: Training<'_>,
     weights: Weights,
     model: CalibratedModel,
     fitted: Fitted,
@@ -3460,7 +3519,7 @@ fn equilibrate(
     if model.compliance.is_none() {
         return Ok((model, fitted, 0));
     }
-    let rows = || train.iter().flat_map(|t| &t.rows);
+    let rows = || train.tables.iter().flat_map(|t| &t.rows);
     let noise = weights.sigma_position_m * fitted.identified.sigma;
     let step = rows()
         .map(|r| model.equilibrium_step_m(&r.q))
@@ -3487,12 +3546,22 @@ fn equilibrate(
             ..model.clone()
         };
         let obs = observations(train, &all);
-        // One configuration's angles after another, in the order of the observations.
-        let mut at = Vec::new();
-        for rows in obs.configurations() {
-            at.extend(solving.load_angles(&obs.rows[rows.start].q).0);
-        }
-        let at: Arc<[f64]> = at.into();
+        // One configuration's angles after another, in the order of the observations,
+        // collected from an iterator of known length straight into the shared slice: one
+        // allocation of the angles (a vector grown by extending reserves up to twice them, and
+        // turning it into the slice copies them once more).
+        let starts: Vec<usize> = obs.configurations().map(|rows| rows.start).collect();
+        let n_joints = obs.rows.first().map_or(0, |r| r.q.len());
+        let mut angles = Vec::new();
+        let at: Arc<[f64]> = (0..starts.len() * n_joints)
+            .map(|i| {
+                if i % n_joints == 0 {
+                    angles = solving.load_angles(&obs.rows[starts[i / n_joints]].q).0;
+                }
+                angles[i % n_joints]
+            })
+            .collect();
+        drop(starts);
         if let Some(p) = &previous {
             let change = (p.iter().zip(at.iter()))
                 .map(|(a, b)| (a - b).abs())
@@ -3566,7 +3635,7 @@ fn refit_held_lengths(
     robot: &Robot,
     tree: &Tree,
     fitted: &Fitted,
-    tables: &[MeasurementTable],
+    tables: Training<'_>,
     weights: Weights,
 ) -> Vec<crate::report::ParamReport> {
     let obs = observations(tables, &|_, _| true);
@@ -3618,7 +3687,7 @@ fn prediction_sigmas(
         .collect();
     (0..tables.len())
         .map(|ti| {
-            let mut obs = observations(tables, &|t, _| t == ti);
+            let mut obs = observations(Training::measured(tables), &|t, _| t == ti);
             // Positions only: one 3-row block per marker sample, in the rows' order.
             obs.rows
                 .retain(|r| matches!(r.kind, RowKind::Marker { .. } | RowKind::Pose { .. }));
@@ -3864,11 +3933,11 @@ fn outside_warnings(
     out
 }
 
-/// The training tables as the Huber loss sees them (the tables as measured, not a copy, when
-/// it bounded none), the samples it bounded, the rung it was evaluated with and its fit when
-/// it bounded none, and that rung.
-type Winsorized<'a> = (
-    std::borrow::Cow<'a, [MeasurementTable]>,
+/// The samples the Huber loss bounded at their bounded positions (sorted by place; the
+/// training tables are read through them, [`Training`]), the same samples as the report lists
+/// them, the rung it was evaluated with and its fit when it bounded none, and that rung.
+type Winsorized = (
+    Vec<BoundedSample>,
     Vec<Downweighted>,
     Option<(ModelName, (CalibratedModel, Fitted))>,
     ModelName,
@@ -3886,48 +3955,40 @@ fn compliance_unit_of(robot: &Robot) -> &'static str {
 
 pub use crate::robust::HUBER_CORNER;
 
-/// A marker sample under one fit: table, row, marker, residual and model position, m.
-type Evaluated = (usize, usize, usize, Vector3<f64>, Vector3<f64>);
-
 /// The training tables as the Huber loss sees them ([`crate::robust::bound_gross_errors`]):
 /// `rung` is fitted (the richest rung of the ladder, or the rung given) and every marker
 /// sample whose 3-D residual `e` exceeds the corner replaced by `model + e·c/|e|`, until the
-/// set of bounded samples no longer changes. Tables unchanged and no sample listed when
-/// nothing exceeds the corner, with fewer than 20 samples, or when the rung cannot be fitted.
+/// set of bounded samples no longer changes. No sample bounded or listed when nothing
+/// exceeds the corner, with fewer than 20 samples, or when the rung cannot be fitted.
 /// A rung with fewer than [`crate::robust::MIN_REDUNDANCY`] residuals per kept parameter
 /// gives way to the geometric rung. With nothing bounded, the rung used and its fit on the
-/// tables as measured are returned too.
-fn winsorize<'a>(
+/// tables as measured are returned too. The tables are never copied: each fit reads them
+/// through the bounded samples ([`Training`]), and only each sample's residual norm is kept
+/// between rounds.
+fn winsorize(
     rung: ModelName,
     robot: &Robot,
     start: &Start<'_>,
     offsets: &[Option<usize>],
-    train: &'a [MeasurementTable],
+    train: &[MeasurementTable],
     weights: Weights,
-) -> Result<Winsorized<'a>> {
+) -> Result<Winsorized> {
     use crate::robust::{Dim, Round, bound_gross_errors, redundancy};
     let all = |_: usize, _: usize| true;
     let n_samples = n_marker_samples(train);
     let mut first = None;
     let mut first_redundancy = 1.0;
     let mut rung = rung;
-    // Every sample of the last fit: table, row, marker, residual, model position.
-    let mut evaluated: Vec<Evaluated> = Vec::with_capacity(n_samples);
-    let winsorized = |evaluated: &[Evaluated], bounds: &[crate::robust::Bound]| {
-        if bounds.is_empty() {
-            return std::borrow::Cow::Borrowed(train);
-        }
-        let mut tables = train.to_vec();
-        for b in bounds {
-            let (ti, ri, mi, e, p) = evaluated[b.sample];
-            tables[ti].rows[ri].markers[mi].position_m = (p + e * (b.corner / b.norm)).into();
-        }
-        std::borrow::Cow::Owned(tables)
-    };
+    // The model of the last fit, whose residuals the next bounds are set from.
+    let mut last: Option<CalibratedModel> = None;
     let bounds = bound_gross_errors(n_samples, Dim::Three, |bounds| {
-        let tables = winsorized(&evaluated, bounds);
+        let samples = match &last {
+            Some(model) => bounded_samples(model, train, bounds),
+            None => Vec::new(),
+        };
+        let tables = Training::with_bounded(train, &samples);
         let (model, fitted, redundancy) = loop {
-            let (model, fitted) = fit(rung, robot, start, offsets, &tables, weights, &all).ok()?;
+            let (model, fitted) = fit(rung, robot, start, offsets, tables, weights, &all).ok()?;
             let n_residuals = fitted.identified.n_residuals;
             let n_kept = fitted.identified.identifiability.kept.len();
             match redundancy(n_residuals, n_kept) {
@@ -3943,32 +4004,29 @@ fn winsorize<'a>(
                 None => return None,
             }
         };
-        evaluated.clear();
-        for (ti, t) in train.iter().enumerate() {
-            for (ri, row) in t.rows.iter().enumerate() {
-                let tips: Vec<usize> = row.markers.iter().map(|m| m.marker).collect();
-                let poses = model.end_poses_of(&tips, &row.q);
-                for (mi, (m, pose)) in row.markers.iter().zip(poses).enumerate() {
-                    let p = pose.translation.vector;
-                    evaluated.push((ti, ri, mi, Vector3::from(m.position_m) - p, p));
-                }
+        // Each sample's residual from the measured position, file order.
+        let mut norms = Vec::with_capacity(n_samples);
+        for row in train.iter().flat_map(|t| &t.rows) {
+            let tips: Vec<usize> = row.markers.iter().map(|m| m.marker).collect();
+            let poses = model.end_poses_of(&tips, &row.q);
+            for (m, pose) in row.markers.iter().zip(poses) {
+                norms.push((Vector3::from(m.position_m) - pose.translation.vector).norm());
             }
         }
+        last = Some(model.clone());
         if first.is_none() {
             first = Some((rung, (model, fitted)));
             first_redundancy = redundancy;
         }
-        Some(Round {
-            norms: evaluated.iter().map(|s| s.3.norm()).collect(),
-            redundancy,
-        })
+        Some(Round { norms, redundancy })
     });
-    if bounds.is_empty() {
-        return Ok((std::borrow::Cow::Borrowed(train), Vec::new(), first, rung));
-    }
-    let downweighted = (bounds.iter())
-        .map(|b| {
-            let (ti, ri, mi, _, _) = evaluated[b.sample];
+    let (Some(model), false) = (&last, bounds.is_empty()) else {
+        return Ok((Vec::new(), Vec::new(), first, rung));
+    };
+    let samples = bounded_samples(model, train, &bounds);
+    let downweighted = (bounds.iter().zip(&samples))
+        .map(|(b, s)| {
+            let (ti, ri, mi) = s.at;
             Downweighted {
                 file: train[ti].path.display().to_string(),
                 line: train[ti].rows[ri].line,
@@ -3978,7 +4036,46 @@ fn winsorize<'a>(
             }
         })
         .collect();
-    Ok((winsorized(&evaluated, &bounds), downweighted, None, rung))
+    Ok((samples, downweighted, None, rung))
+}
+
+/// The marker samples `bounds` (by index among the samples of `train`, file order, sorted)
+/// at their bounded positions under `model`, the fit whose residuals bounded them:
+/// `p + e·c/|e|` with `p` the model's position, `e` the measured position minus `p` and `c`
+/// the corner, m; sorted by place.
+fn bounded_samples(
+    model: &CalibratedModel,
+    train: &[MeasurementTable],
+    bounds: &[crate::robust::Bound],
+) -> Vec<BoundedSample> {
+    debug_assert!(bounds.is_sorted_by_key(|b| b.sample));
+    let mut out = Vec::with_capacity(bounds.len());
+    let mut next = bounds.iter().peekable();
+    let mut first_sample = 0;
+    for (ti, t) in train.iter().enumerate() {
+        for (ri, row) in t.rows.iter().enumerate() {
+            if next.peek().is_none() {
+                return out;
+            }
+            let end = first_sample + row.markers.len();
+            let mut poses = None;
+            while let Some(b) = next.next_if(|b| b.sample < end) {
+                let mi = b.sample - first_sample;
+                let poses = poses.get_or_insert_with(|| {
+                    let tips: Vec<usize> = row.markers.iter().map(|m| m.marker).collect();
+                    model.end_poses_of(&tips, &row.q)
+                });
+                let p = poses[mi].translation.vector;
+                let e = Vector3::from(row.markers[mi].position_m) - p;
+                out.push(BoundedSample {
+                    at: (ti, ri, mi),
+                    position_m: (p + e * (b.corner / b.norm)).into(),
+                });
+            }
+            first_sample = end;
+        }
+    }
+    out
 }
 
 /// The frames-only fit of the training tables ([`frames_only`]).
@@ -4037,6 +4134,9 @@ pub fn frames_only(
     let Some((_, (base, markers))) = best else {
         bail!("no initial guess of the instrument frame");
     };
+    // The samples at the nominal kinematics (128 bytes each) are not held through the fit,
+    // whose problem has a row per sample of its own.
+    drop((samples, distances));
     let framed = with_offsets
         .with_frames(&base, &markers)
         .context("attaching the instrument and marker frames")?;
@@ -4051,7 +4151,7 @@ pub fn frames_only(
             max_evaluations: None,
         },
         &offsets,
-        tables,
+        Training::measured(tables),
         weights,
         &|_, _| true,
     )?;
@@ -4068,7 +4168,13 @@ pub fn frames_only(
 
 /// 3-D position error (m) of every marker sample of `tables` under `model`, file order.
 pub fn position_errors(model: &CalibratedModel, tables: &[MeasurementTable]) -> Vec<f64> {
-    (0..tables.len())
+    training_position_errors(model, Training::measured(tables))
+}
+
+/// [`position_errors`] of the training tables as the fits see them (bounded samples at their
+/// bounded positions).
+fn training_position_errors(model: &CalibratedModel, tables: Training<'_>) -> Vec<f64> {
+    (0..tables.tables.len())
         .flat_map(|t| errors(model, tables, t, None).position)
         .collect()
 }
@@ -4516,7 +4622,9 @@ pub fn fold_joint_offsets(
 
 #[cfg(test)]
 mod tests {
-    use super::{Line, RangeVerdict, lm_alone, negative_compliance_sigmas, rung_chains};
+    use super::{
+        Line, ModelName, RangeVerdict, Vector3, lm_alone, negative_compliance_sigmas, rung_chains,
+    };
     use faer::{Col, ColMut, ColRef, MatMut};
     use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
 
@@ -4714,5 +4822,155 @@ mod tests {
             ..verdict(-3.0, 1.0, -0.5)
         };
         assert!(!unfit.allows());
+    }
+
+    /// A marker sample at `position_m`, no orientation.
+    fn marker_sample(marker: usize, position_m: [f64; 3]) -> hapcal_io::MarkerSample {
+        hapcal_io::MarkerSample {
+            marker,
+            position_m,
+            rotation: None,
+        }
+    }
+
+    #[test]
+    fn training_rows_show_their_bounded_samples_and_borrow_the_others() {
+        use super::{BoundedSample, Training};
+        let row = |line: u64| hapcal_io::MeasuredRow {
+            line,
+            q: vec![0.1 * line as f64; 3],
+            t_s: None,
+            markers: vec![
+                marker_sample(0, [line as f64, 0.0, 0.0]),
+                marker_sample(1, [0.0, line as f64, 0.0]),
+            ],
+            distance_m: None,
+        };
+        let table = |first: u64| {
+            let rows = (first..first + 3).map(row).collect();
+            hapcal_io::MeasurementTable::positions("t", "t.csv", 2, rows)
+        };
+        let tables = [table(2), table(10)];
+        let bounded = [
+            BoundedSample {
+                at: (0, 1, 1),
+                position_m: [7.0, 8.0, 9.0],
+            },
+            BoundedSample {
+                at: (1, 0, 0),
+                position_m: [4.0, 5.0, 6.0],
+            },
+            BoundedSample {
+                at: (1, 0, 1),
+                position_m: [1.0, 2.0, 3.0],
+            },
+        ];
+        let seen = Training::with_bounded(&tables, &bounded);
+        // The same rows as a copy of the tables with the bounded positions written in.
+        let mut copy = tables.to_vec();
+        for b in &bounded {
+            let (ti, ri, mi) = b.at;
+            copy[ti].rows[ri].markers[mi].position_m = b.position_m;
+        }
+        for (ti, t) in copy.iter().enumerate() {
+            for (ri, expected) in t.rows.iter().enumerate() {
+                let row = seen.row(ti, ri);
+                assert_eq!(*row, *expected, "table {ti}, row {ri}");
+                let has_bounded = bounded.iter().any(|b| (b.at.0, b.at.1) == (ti, ri));
+                assert_eq!(
+                    matches!(row, std::borrow::Cow::Owned(_)),
+                    has_bounded,
+                    "table {ti}, row {ri}: only a row with a bounded sample is rebuilt"
+                );
+            }
+        }
+        let all = |_: usize, _: usize| true;
+        assert_eq!(
+            super::observations(seen, &all),
+            super::observations(Training::measured(&copy), &all)
+        );
+        assert_ne!(
+            super::observations(Training::measured(&tables), &all),
+            super::observations(seen, &all)
+        );
+    }
+
+    #[test]
+    fn the_huber_pass_bounds_a_gross_error_where_the_fits_read_it() {
+        use super::{Start, Training, observations, weighted_frames_only, winsorize};
+        use rand::{Rng, SeedableRng};
+        let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fixtures/mukca/urdf/iiwa14.urdf");
+        let robot = super::robot_from_urdf(&urdf, &["ball_link".to_owned()]).expect("the iiwa");
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let nominal = vec![0.0; robot.tree.n_params()];
+        // 120 rows of the nominal robot, noise of ±0.1 mm per axis; row 37 20 mm off along y
+        // (two hundred times the noise).
+        let rows: Vec<hapcal_io::MeasuredRow> = (0..120)
+            .map(|i| {
+                let q: Vec<f64> = (robot.limits.iter())
+                    .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
+                    .collect();
+                let p = robot.tree.tips()[0].end_point(&nominal, &q);
+                let mut position_m: [f64; 3] =
+                    std::array::from_fn(|a| p[a] + rng.random_range(-1e-4..1e-4));
+                if i == 37 {
+                    position_m[1] += 0.02;
+                }
+                hapcal_io::MeasuredRow {
+                    line: i as u64 + 2,
+                    q,
+                    t_s: None,
+                    markers: vec![marker_sample(0, position_m)],
+                    distance_m: None,
+                }
+            })
+            .collect();
+        let tables = [hapcal_io::MeasurementTable::positions(
+            "tracker",
+            "tracker.csv",
+            1,
+            rows,
+        )];
+        let cfg = super::MeasuredConfig::default();
+        let (frames, weights) = weighted_frames_only(&robot, &tables, &cfg, 120).expect("frames");
+        let start = Start {
+            tree: &frames.framed,
+            x: &frames.fitted.x,
+            nested: None,
+            max_evaluations: None,
+        };
+        let (samples, downweighted, _, _) = winsorize(
+            ModelName::JointOffsets,
+            &frames.robot,
+            &start,
+            &frames.offsets,
+            &tables,
+            weights,
+        )
+        .expect("the Huber pass");
+        assert_eq!(samples.len(), 1, "{samples:?}");
+        assert_eq!(samples[0].at, (0, 37, 0));
+        assert_eq!(downweighted.len(), 1);
+        assert_eq!(downweighted[0].line, 39);
+        // The bounded position is `p + e·c/|e|`: the measured one moved toward the model by
+        // the residual beyond the corner (rounding of a few ulps of the 1 m positions).
+        let measured = Vector3::from(tables[0].rows[37].markers[0].position_m);
+        let moved = (measured - Vector3::from(samples[0].position_m)).norm();
+        let beyond = downweighted[0].residual_m - downweighted[0].bound_m;
+        assert!(beyond > 0.01, "{downweighted:?}");
+        assert!(
+            (moved - beyond).abs() < 1e-12,
+            "{moved} m against {beyond} m"
+        );
+        // What every fit after the pass reads: the tables with the bounded position written
+        // in.
+        let mut copy = tables.to_vec();
+        copy[0].rows[37].markers[0].position_m = samples[0].position_m;
+        let all = |_: usize, _: usize| true;
+        assert_eq!(
+            observations(Training::with_bounded(&tables, &samples), &all),
+            observations(Training::measured(&copy), &all)
+        );
     }
 }

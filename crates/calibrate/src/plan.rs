@@ -873,7 +873,10 @@ impl RowShape {
 /// ([`crate::measured::observations`]).
 fn observations_of(rows: Vec<hapcal_io::MeasuredRow>, n_markers: usize) -> Observations {
     let table = hapcal_io::MeasurementTable::positions("", "", n_markers, rows);
-    crate::measured::observations(std::slice::from_ref(&table), &|_, _| true)
+    crate::measured::observations(
+        crate::measured::Training::measured(std::slice::from_ref(&table)),
+        &|_, _| true,
+    )
 }
 
 /// Plans the `cfg.count` poses to measure next, given the rows already `measured`, so that
@@ -1154,7 +1157,10 @@ impl<'a> PlanningProblem<'a> {
                     .collect()
             })
             .collect();
-        let mut obs = crate::measured::observations(measured, &|_, _| true);
+        let mut obs = crate::measured::observations(
+            crate::measured::Training::measured(measured),
+            &|_, _| true,
+        );
         let n_measured_residuals: usize = obs.rows.iter().map(|r| r.kind.n_residuals()).sum();
         // Measured rows too many for one Jacobian are taken by their R factor, in row blocks.
         let n_layout = out.fitted.names.len();
