@@ -16,6 +16,9 @@ struct Recording {
     name: &'static str,
     /// `hapcal diagnose` arguments (device, tips, data, held-out data).
     args: &'static [&'static str],
+    /// Whether the last rows of the data are held out (`--test-last`, the fraction
+    /// `cargo xtask real-data` holds out) rather than held-out files in `args`.
+    test_last: bool,
     /// What is known about it from elsewhere (docs/results/mukca.md, the publishers).
     known: &'static str,
     /// The verdict the checks require, if any.
@@ -33,6 +36,15 @@ pub(crate) fn panda_recordings() -> impl Iterator<Item = (&'static str, &'static
         .map(|r| (r.name, r.args))
 }
 
+impl Recording {
+    /// The full `hapcal diagnose` (and `calibrate`) arguments: `args`, then the split.
+    fn args(&self) -> Vec<&'static str> {
+        let split = ["--test-last", crate::real_data::TEST_LAST];
+        let split = if self.test_last { &split[..] } else { &[] };
+        [self.args, split].concat()
+    }
+}
+
 const RECORDINGS: &[Recording] = &[
     Recording {
         id: "kuka_14",
@@ -46,6 +58,7 @@ const RECORDINGS: &[Recording] = &[
             "fixtures/mukca/data/kuka_14/left_back",
             "fixtures/mukca/data/kuka_14/raised_left",
         ],
+        test_last: false,
         known: "cross-validation of the calibration's models chooses gravity compliance with the \
                 published link masses (docs/results/mukca.md): held-out 163 → 107 µm",
         required: Some(&[Effect::GravityCompliance]),
@@ -62,6 +75,7 @@ const RECORDINGS: &[Recording] = &[
             "fixtures/mukca/data/panda_1/back-high",
             "fixtures/mukca/data/panda_1/right",
         ],
+        test_last: false,
         known: "no compliance model beats the geometric one by a standard error \
                 (docs/results/mukca.md)",
         required: None,
@@ -84,6 +98,7 @@ const RECORDINGS: &[Recording] = &[
             "fixtures/mukca/data/panda_2/mid_left",
             "fixtures/mukca/data/panda_2/mid_right",
         ],
+        test_last: false,
         known: "geometric model chosen (docs/results/mukca.md)",
         required: None,
     },
@@ -99,6 +114,7 @@ const RECORDINGS: &[Recording] = &[
             "fixtures/mukca/data/panda_6/left",
             "fixtures/mukca/data/panda_6/right",
         ],
+        test_last: false,
         known: "no non-geometric model tried does better than the geometric one by more than \
                 5 % on the test placements (docs/results/mukca.md)",
         required: Some(&[]),
@@ -114,6 +130,7 @@ const RECORDINGS: &[Recording] = &[
             "--test",
             "fixtures/mukca/data/panda_7/right",
         ],
+        test_last: false,
         known: "compliance passes the calibration's one-standard-error rule by 1.8 standard \
                 errors but no non-geometric model does better on the test placement by more than \
                 5 % (docs/results/mukca.md)",
@@ -122,16 +139,8 @@ const RECORDINGS: &[Recording] = &[
     Recording {
         id: "ur10",
         name: "UR10, camera + checkerboard poses (figaroh-examples), first 70 % train",
-        args: &[
-            "--device",
-            "fixtures/figaroh/ur10/ur10_robot.urdf",
-            "--tip",
-            "wrist_3_link",
-            "--data",
-            "fixtures/figaroh/ur10/calibration.csv",
-            "--test-last",
-            "0.3",
-        ],
+        args: crate::real_data::UR10,
+        test_last: true,
         known: "23 poses; figaroh's full calibration lowers the held-out RMS from 4.45 to 4.04 mm \
                 (docs/results/real-data.md)",
         required: None,
@@ -139,16 +148,8 @@ const RECORDINGS: &[Recording] = &[
     Recording {
         id: "tiago",
         name: "TIAGo, four motion-capture markers (figaroh-examples), first 70 % train",
-        args: &[
-            "--device",
-            "fixtures/figaroh/tiago/tiago.urdf",
-            "--tip",
-            "arm_7_link",
-            "--data",
-            "fixtures/figaroh/tiago/qualysis_base_hand_calibration.csv",
-            "--test-last",
-            "0.3",
-        ],
+        args: crate::real_data::TIAGO,
+        test_last: true,
         known: "34 configurations; every calibrated rung is worse than frames only held out \
                 (docs/results/real-data.md)",
         required: None,
@@ -156,14 +157,8 @@ const RECORDINGS: &[Recording] = &[
     Recording {
         id: "positioner",
         name: "Two-axis positioner seen by a camera (industrial_calibration), first 70 % train",
-        args: &[
-            "--device",
-            "fixtures/industrial-calibration/two_axis_positioner.toml",
-            "--data",
-            "fixtures/industrial-calibration/measurements.yaml",
-            "--test-last",
-            "0.3",
-        ],
+        args: crate::real_data::POSITIONER,
+        test_last: true,
         known: "205 poses; the D-H calibration lowers the in-sample error from 3.82 to 1.74 mm \
                 (the publisher's figure)",
         required: None,
@@ -172,18 +167,8 @@ const RECORDINGS: &[Recording] = &[
         id: "humanoid",
         name: "Simulated two-arm humanoid, a motion-capture marker on each hand (sim_humanoid), \
                first 70 % train",
-        args: &[
-            "--device",
-            "fixtures/sim-humanoid/humanoid.urdf",
-            "--tip",
-            "l_hand",
-            "--tip",
-            "r_hand",
-            "--data",
-            "fixtures/sim-humanoid/mocap.csv",
-            "--test-last",
-            "0.3",
-        ],
+        args: crate::real_data::HUMANOID,
+        test_last: true,
         known: "simulated with geometric deviations, joint compliance and transversal compliance \
                 under the links' weight (fixtures/sim-humanoid/truth.toml); the calibration's \
                 ladder takes transversal-compliance (docs/results/real-data.md)",
@@ -341,7 +326,7 @@ pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
 /// # Errors
 /// A failed diagnosis or a report that is not JSON.
 fn diagnose(sh: &Shell, hapcal: Hapcal<'_>, rec: &Recording, svg: &Path) -> Result<Value> {
-    let (hapcal, pre, args) = (hapcal.program, hapcal.pre, rec.args);
+    let (hapcal, pre, args) = (hapcal.program, hapcal.pre, rec.args());
     let json = cmd!(
         sh,
         "{hapcal} {pre...} diagnose {args...} --json --svg {svg}"
@@ -387,14 +372,14 @@ fn write_recording(
     md.push_str(&format!(
         "\n## {}\n\n`hapcal diagnose {}`\n\nKnown: {}.\n\n",
         rec.name,
-        rec.args.join(" "),
+        rec.args().join(" "),
         rec.known
     ));
     md.push_str(&format!(
         "- **Verdict: {verdict}.** {} training configurations, {} geometric parameters kept.\n",
         d["n_configurations"], d["n_baseline_params"]
     ));
-    let (program, pre, args) = (hapcal.program, hapcal.pre, rec.args);
+    let (program, pre, args) = (hapcal.program, hapcal.pre, rec.args());
     let calibrated = cmd!(sh, "{program} {pre...} calibrate {args...} --json")
         .ignore_stderr()
         .read()

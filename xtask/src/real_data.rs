@@ -20,17 +20,54 @@ struct Dataset {
     truth: Option<(&'static str, f64)>,
 }
 
+/// The UR10 camera poses (figaroh-examples):
+/// device, tips and data, the arguments of `hapcal calibrate` and `diagnose`.
+pub(crate) const UR10: &[&str] = &[
+    "--device",
+    "fixtures/figaroh/ur10/ur10_robot.urdf",
+    "--tip",
+    "wrist_3_link",
+    "--data",
+    "fixtures/figaroh/ur10/calibration.csv",
+];
+
+/// The TIAGo hand markers (figaroh-examples):
+/// device, tips and data, the arguments of `hapcal calibrate` and `diagnose`.
+pub(crate) const TIAGO: &[&str] = &[
+    "--device",
+    "fixtures/figaroh/tiago/tiago.urdf",
+    "--tip",
+    "arm_7_link",
+    "--data",
+    "fixtures/figaroh/tiago/qualysis_base_hand_calibration.csv",
+];
+
+/// The two-axis positioner (industrial_calibration):
+/// device, tips and data, the arguments of `hapcal calibrate` and `diagnose`.
+pub(crate) const POSITIONER: &[&str] = &[
+    "--device",
+    "fixtures/industrial-calibration/two_axis_positioner.toml",
+    "--data",
+    "fixtures/industrial-calibration/measurements.yaml",
+];
+
+/// The simulated humanoid's hand markers (sim_humanoid):
+/// device, tips and data, the arguments of `hapcal calibrate` and `diagnose`.
+pub(crate) const HUMANOID: &[&str] = &[
+    "--device",
+    "fixtures/sim-humanoid/humanoid.urdf",
+    "--tip",
+    "l_hand",
+    "--tip",
+    "r_hand",
+    "--data",
+    "fixtures/sim-humanoid/mocap.csv",
+];
+
 const DATASETS: &[Dataset] = &[
     Dataset {
         name: "UR10, camera + checkerboard poses (figaroh-examples)",
-        args: &[
-            "--device",
-            "fixtures/figaroh/ur10/ur10_robot.urdf",
-            "--tip",
-            "wrist_3_link",
-            "--data",
-            "fixtures/figaroh/ur10/calibration.csv",
-        ],
+        args: UR10,
         published: "figaroh 1.0.2, same split: frames only 4.28 / 4.45 / 6.59 mm, 0.65 / 0.71 / \
                     1.11°; calibrated 3.84 / 4.04 / 6.18 mm, 0.51 / 0.54 / 0.82° (mean / RMS / \
                     max, fixtures/figaroh/README.md)",
@@ -38,14 +75,7 @@ const DATASETS: &[Dataset] = &[
     },
     Dataset {
         name: "TIAGo, four motion-capture markers on the hand (figaroh-examples)",
-        args: &[
-            "--device",
-            "fixtures/figaroh/tiago/tiago.urdf",
-            "--tip",
-            "arm_7_link",
-            "--data",
-            "fixtures/figaroh/tiago/qualysis_base_hand_calibration.csv",
-        ],
+        args: TIAGO,
         published: "figaroh 1.0.2, same split, marker 1: frames only 3.36 / 3.70 / 7.59 mm; \
                     joint offsets 4.08 / 4.24 / 5.45 mm, full parameters 3.80 / 4.07 / 5.60 mm \
                     (both worse than frames only; fixtures/figaroh/README.md)",
@@ -53,12 +83,7 @@ const DATASETS: &[Dataset] = &[
     },
     Dataset {
         name: "Two-axis positioner seen by a static camera (industrial_calibration)",
-        args: &[
-            "--device",
-            "fixtures/industrial-calibration/two_axis_positioner.toml",
-            "--data",
-            "fixtures/industrial-calibration/measurements.yaml",
-        ],
+        args: POSITIONER,
         published: "industrial_calibration, all 205 poses in-sample: static D-H 3.82 mm (σ 1.45), \
                     0.0053 rad; calibrated D-H 1.74 mm (σ 0.92), 0.0032 rad (mean position and \
                     orientation difference, fixtures/industrial-calibration/README.md)",
@@ -66,16 +91,7 @@ const DATASETS: &[Dataset] = &[
     },
     Dataset {
         name: "Simulated two-arm humanoid, a motion-capture marker on each hand (sim_humanoid)",
-        args: &[
-            "--device",
-            "fixtures/sim-humanoid/humanoid.urdf",
-            "--tip",
-            "l_hand",
-            "--tip",
-            "r_hand",
-            "--data",
-            "fixtures/sim-humanoid/mocap.csv",
-        ],
+        args: HUMANOID,
         published: "simulated by `cargo run --release -p hapcal-calibrate --example sim_humanoid \
                     -- fixtures/sim-humanoid` (truth in fixtures/sim-humanoid/truth.toml): \
                     geometric deviations of 0.3 mm and 0.3 mrad, axial and transversal \
@@ -114,7 +130,7 @@ pub(crate) fn recordings() -> impl Iterator<Item = (&'static str, &'static [&'st
 }
 
 /// Fraction of each file's rows, the last in file order, held out.
-const TEST_LAST: &str = "0.3";
+pub(crate) const TEST_LAST: &str = "0.3";
 
 /// Figures of one data set in the JSON report: (position mean, RMS, max in m; orientation
 /// mean, RMS, max in rad if any).

@@ -421,9 +421,7 @@ impl Model {
     /// # Errors
     /// As [`Model::joint_angles`], and [`Error::Length`] unless `jac` has n columns.
     pub fn body_jacobian(&self, theta: &[f64], jac: &mut [[f64; 6]]) -> Result<Pose, Error> {
-        let (q, _) = self.angles(theta)?;
-        check_len("jacobian columns", self.n_joints, jac.len())?;
-        Ok(self.kinematics(&q, Some((Frame::Body, jac))))
+        self.jacobian(self.angles(theta).map(|(q, _)| q), Frame::Body, jac)
     }
 
     /// Spatial Jacobian with respect to the joint angles at readings `theta`, and the tip
@@ -438,9 +436,7 @@ impl Model {
     /// # Errors
     /// As [`Model::body_jacobian`].
     pub fn spatial_jacobian(&self, theta: &[f64], jac: &mut [[f64; 6]]) -> Result<Pose, Error> {
-        let (q, _) = self.angles(theta)?;
-        check_len("jacobian columns", self.n_joints, jac.len())?;
-        Ok(self.kinematics(&q, Some((Frame::Spatial, jac))))
+        self.jacobian(self.angles(theta).map(|(q, _)| q), Frame::Spatial, jac)
     }
 
     /// [`Model::body_jacobian`] at joint angles `q_rad` (rad).
@@ -452,9 +448,7 @@ impl Model {
         q_rad: &[f64],
         jac: &mut [[f64; 6]],
     ) -> Result<Pose, Error> {
-        let q = self.joint_array(q_rad)?;
-        check_len("jacobian columns", self.n_joints, jac.len())?;
-        Ok(self.kinematics(&q, Some((Frame::Body, jac))))
+        self.jacobian(self.joint_array(q_rad), Frame::Body, jac)
     }
 
     /// [`Model::spatial_jacobian`] at joint angles `q_rad` (rad).
@@ -466,9 +460,7 @@ impl Model {
         q_rad: &[f64],
         jac: &mut [[f64; 6]],
     ) -> Result<Pose, Error> {
-        let q = self.joint_array(q_rad)?;
-        check_len("jacobian columns", self.n_joints, jac.len())?;
-        Ok(self.kinematics(&q, Some((Frame::Spatial, jac))))
+        self.jacobian(self.joint_array(q_rad), Frame::Spatial, jac)
     }
 
     /// Motor torques (N·m, one per joint) that render the wrench `wrench` at readings
@@ -574,6 +566,23 @@ impl Model {
         let mut q = [0.0; MAX_JOINTS];
         q[..self.n_joints].copy_from_slice(q_rad);
         Ok(q)
+    }
+
+    /// Tip pose and the `frame` Jacobian in `jac` at joint angles `q` (the error of reading
+    /// or checking them, if any, comes first).
+    ///
+    /// # Errors
+    /// `q`'s error; [`Error::Length`] unless `jac` has n columns.
+    #[inline]
+    fn jacobian(
+        &self,
+        q: Result<[f64; MAX_JOINTS], Error>,
+        frame: Frame,
+        jac: &mut [[f64; 6]],
+    ) -> Result<Pose, Error> {
+        let q = q?;
+        check_len("jacobian columns", self.n_joints, jac.len())?;
+        Ok(self.kinematics(&q, Some((frame, jac))))
     }
 
     /// Tip pose at joint angles `q` (first n entries), and optionally a Jacobian in `jac`

@@ -42,6 +42,44 @@ fn joint_pose(joint: &urdf::Joint) -> Pose {
 }
 
 impl Robot {
+    /// A robot of `joints` (named `joint_names`, limits `limits` in rad or m) and `tips`
+    /// (named `tip_names`) as a file describes it before any calibration record: rigid (zero
+    /// compliance), gravity lumped at the tips at standard gravity along −z, loads at
+    /// equilibrium, nominal frames, no frames, region, transversal terms or harmonics, no
+    /// tip element names (one `None` per tip) and no D-H table.
+    fn rigid(
+        joints: Vec<RobotJoint>,
+        joint_names: Vec<String>,
+        limits: Vec<(f64, f64)>,
+        tips: Vec<RobotTip>,
+        tip_names: Vec<String>,
+    ) -> Robot {
+        let (n, n_tips) = (joints.len(), tips.len());
+        Robot {
+            joints,
+            joint_names,
+            limits,
+            tips,
+            tip_names,
+            masses: Vec::new(),
+            compliance: vec![0.0; n],
+            gravity: GravityModel::Lumped,
+            gravity_dir: [0.0, 0.0, -1.0],
+            frames: Vec::new(),
+            record: None,
+            region: Vec::new(),
+            gravity_m_s2: crate::STANDARD_GRAVITY,
+            equilibrium: true,
+            nominal_differs: false,
+            transversal: Vec::new(),
+            harmonics: Vec::new(),
+            tip_elements: vec![None; n_tips],
+            dh: None,
+        }
+    }
+}
+
+impl Robot {
     /// Loads the calibrated robot `urdf` with the links `tips` as tips, and its sidecar
     /// `<urdf stem>.calibration.toml` beside it if there is one (as `hapcal calibrate --out
     /// robot.urdf` writes them).
@@ -214,27 +252,12 @@ impl Robot {
         } else {
             GravityModel::Masses
         };
-        let n = joints.len();
+        let tip_names = tips.iter().map(|t| (*t).to_owned()).collect();
         let mut out = Robot {
-            joints,
-            joint_names,
-            limits,
-            tips: robot_tips,
-            tip_names: tips.iter().map(|t| (*t).to_owned()).collect(),
             masses,
-            compliance: vec![0.0; n],
             gravity,
-            gravity_dir: [0.0, 0.0, -1.0],
-            frames: Vec::new(),
-            record: None,
-            region: Vec::new(),
-            gravity_m_s2: crate::STANDARD_GRAVITY,
-            equilibrium: true,
-            nominal_differs: false,
-            transversal: Vec::new(),
-            harmonics: Vec::new(),
             tip_elements: tip_elements.clone(),
-            dh: None,
+            ..Robot::rigid(joints, joint_names, limits, robot_tips, tip_names)
         };
         if let Some((record, text, sidecar_origin)) = parsed {
             let urdf_joints: Vec<(&str, Pose)> = (robot.joints.iter())
@@ -389,33 +412,17 @@ impl Robot {
         let tip_name = (record.as_ref())
             .and_then(|r| r.tips.first().cloned())
             .unwrap_or_else(|| "tip".to_owned());
+        let joint_names = (1..=n_joints).map(|j| format!("q{j}")).collect();
+        let limits = (file.joints.iter())
+            .map(|j| (j.lower_rad, j.upper_rad))
+            .collect();
         let mut out = Robot {
-            joints,
-            joint_names: (1..=n_joints).map(|j| format!("q{j}")).collect(),
-            limits: file
-                .joints
-                .iter()
-                .map(|j| (j.lower_rad, j.upper_rad))
-                .collect(),
-            tips: vec![tip],
-            tip_names: vec![tip_name],
-            masses: Vec::new(),
-            compliance: vec![0.0; n_joints],
-            gravity: GravityModel::Lumped,
-            gravity_dir: [0.0, 0.0, -1.0],
-            frames: Vec::new(),
-            record: None,
-            region: Vec::new(),
-            gravity_m_s2: crate::STANDARD_GRAVITY,
-            equilibrium: true,
             nominal_differs: nominal != rows,
-            transversal: Vec::new(),
-            harmonics: Vec::new(),
-            tip_elements: vec![None],
             dh: Some(DhTable {
                 convention,
                 nominal,
             }),
+            ..Robot::rigid(joints, joint_names, limits, vec![tip], vec![tip_name])
         };
         if let Some(record) = record {
             // Every marker of a device file's calibration sits on its one tip, which carries

@@ -14,9 +14,11 @@ use nalgebra::DMatrix;
 use super::DiagnoseConfig;
 use super::cv::Base;
 use crate::Error;
-use crate::model::{Data, POLY_DEGREE, RANK_TOL, Setup, State, Trans, ext_available, log_data};
+use crate::model::{
+    Data, Linear, POLY_DEGREE, RANK_TOL, Setup, State, Term, Trans, ext_available, log_data,
+};
 use crate::solve::refine;
-use crate::stats::{chi2_sf, pivoted_basis};
+use crate::stats::{chi2_sf, largest_column_norm, pivoted_basis, pivoted_basis_beside};
 
 /// How the floor is found with the reading quantisation (the default).
 const FLOOR_QUANTISED: &str = "spec: sigma_m = 2*pi*R_d*sigma_e, sigma_e = 2*pi/counts/3 (paper noise model), plus joint-reading quantisation rho^2/12 through dd/dq; held-out floor sigma^2*(1+h)";
@@ -68,6 +70,37 @@ pub(super) struct Gap {
 pub(super) struct Fit {
     pub(super) state: State,
     pub(super) base: Base,
+}
+
+/// New terms beside a fit's baseline ([`Fit::beside`]): the linearisation, the terms'
+/// columns, the basis of their part outside the baseline's span and each column's place in it.
+type Beside = (Linear, DMatrix<f64>, DMatrix<f64>, Vec<Option<f64>>);
+
+impl Fit {
+    /// `terms`, added at 0 to this fit's state and linearised by `setup`, beside the
+    /// baseline: the linearisation (the baseline's columns first), the terms' columns (one
+    /// per term), and [`pivoted_basis_beside`] of those against the baseline at relative
+    /// tolerance `rel_tol` with the baseline's largest column the reference (the basis of
+    /// their part outside the baseline's span, and each column's place in it).
+    ///
+    /// # Errors
+    /// A failed linearisation.
+    pub(super) fn beside(
+        &self,
+        setup: &Setup,
+        terms: Vec<Term>,
+        rel_tol: f64,
+    ) -> Result<Beside, hapcal_problems::Error> {
+        let base = &self.base;
+        let k = terms.len();
+        let mut s = self.state.clone();
+        s.terms.extend(terms.into_iter().map(|t| (t, 0.0)));
+        let lin = setup.linearise(&s)?;
+        let cols = lin.j.columns(base.lin.j.ncols(), k).into_owned();
+        let reference = largest_column_norm(&base.lin.j);
+        let (basis, picked) = pivoted_basis_beside(&cols, &base.q, rel_tol, reference);
+        Ok((lin, cols, basis, picked))
+    }
 }
 
 /// The stage on `rows` of `device`: the context, and the baseline's fit.

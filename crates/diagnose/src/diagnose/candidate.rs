@@ -11,8 +11,8 @@ use super::cv::cross_validate;
 use super::{Candidate, ParamValue};
 use crate::model::{Data, Linear, Setup, State, Term};
 use crate::solve::{lstsq, refine};
+use crate::stats::f_sf;
 use crate::stats::mean;
-use crate::stats::{f_sf, largest_column_norm, pivoted_basis_beside};
 
 /// What the candidates of one round are tested against.
 pub(super) struct Round<'a> {
@@ -125,17 +125,9 @@ struct Signature {
 /// The candidate's `terms` linearised at the round's state and set beside its baseline.
 fn signature(r: &Round<'_>, terms: &[Term]) -> Result<Signature, String> {
     let base = &r.fit.base;
-    let mut s = r.fit.state.clone();
-    s.terms.extend(terms.iter().cloned().map(|t| (t, 0.0)));
-    let lin = r.setup.linearise(&s).map_err(|e| e.to_string())?;
     let k_all = terms.len();
-    let c_all = lin.j.columns(base.lin.j.ncols(), k_all).into_owned();
-    let (qc, picked) = pivoted_basis_beside(
-        &c_all,
-        &base.q,
-        VISIBLE_TOL,
-        largest_column_norm(&base.lin.j),
-    );
+    let beside = r.fit.beside(r.setup, terms.to_vec(), VISIBLE_TOL);
+    let (lin, c_all, qc, picked) = beside.map_err(|e| e.to_string())?;
     let visible: Vec<usize> = (0..k_all).filter(|&c| picked[c].is_some()).collect();
     let visible_fraction: Vec<f64> = (0..k_all)
         .map(|c| {

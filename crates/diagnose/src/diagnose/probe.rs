@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use super::JointProbe;
 use super::baseline::{Baseline, Fit};
 use crate::model::{Term, TermKind};
-use crate::stats::{f_sf, largest_column_norm, pivoted_basis_beside};
+use crate::stats::f_sf;
 
 /// Degree of a joint's probe polynomial.
 const PROBE_DEGREE: usize = 6;
@@ -32,17 +32,8 @@ pub(super) fn joint_probes(device: &Device, b: &Baseline, fit: &Fit) -> Vec<Join
 /// F-test.
 fn probe_joint(device: &Device, b: &Baseline, fit: &Fit, j: usize) -> Option<JointProbe> {
     let base = &fit.base;
-    let mut s = fit.state.clone();
-    s.terms
-        .extend(probe_terms(device, b, j)?.into_iter().map(|t| (t, 0.0)));
-    let lin = b.setup.linearise(&s).ok()?;
-    let c = lin.j.columns(base.lin.j.ncols(), PROBE_DEGREE).into_owned();
-    let (qc, _) = pivoted_basis_beside(
-        &c,
-        &base.q,
-        PROBE_VISIBLE_TOL,
-        largest_column_norm(&base.lin.j),
-    );
+    let terms = probe_terms(device, b, j)?;
+    let (_, _, qc, _) = fit.beside(&b.setup, terms, PROBE_VISIBLE_TOL).ok()?;
     let k = qc.ncols() as f64;
     let drss = (qc.transpose() * &base.r_perp).norm_squared();
     let excess = base.rss - base.dof();
