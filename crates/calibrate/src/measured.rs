@@ -1901,7 +1901,7 @@ pub fn calibrate_measured(
 /// figures), without fitting or cross-validating the ladder's other rungs nor settling and
 /// reviewing the rung it would choose. Reports in ladder order; a rung the robot does not
 /// carry, or the rows cannot fit, has none. The geometric baseline of a diagnosis reports its
-/// kinematic rungs' errors so ([`crate::baseline`]).
+/// kinematic rungs' errors so (`baseline.rs`).
 ///
 /// # Errors
 /// As [`calibrate_measured`]: too few training rows, a failed identification or
