@@ -2,7 +2,7 @@
 //! `compensate` refuse it beside another URDF, for another tip, or with a value edited by
 //! hand, each in words at its line; `compensate` names start commands outside the limits.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::predict::calibrated_ur10;
 use crate::{assert_exit, compensate, hapcal, iiwa, root, scratch, show, stderr, ur10_csv};
@@ -19,6 +19,15 @@ fn predict(urdf: &Path, tip: &str) -> std::process::Output {
         "--data",
         &show(&data),
     ])
+}
+
+/// The UR10 calibrated in the scratch folder `name`: the written URDF, its record's path and
+/// the record's text.
+fn calibrated_ur10_record(name: &str) -> (PathBuf, PathBuf, String) {
+    let (urdf, _) = calibrated_ur10(&scratch(name));
+    let sidecar_path = urdf.with_extension("calibration.toml");
+    let sidecar = std::fs::read_to_string(&sidecar_path).expect("a sidecar");
+    (urdf, sidecar_path, sidecar)
 }
 
 /// The first value in metres of a record's `[values]`: its line (1-based), name and number.
@@ -42,10 +51,7 @@ fn first_length(sidecar: &str) -> (usize, String, f64) {
 
 #[test]
 fn a_record_is_refused_beside_another_urdf_for_another_tip_or_edited_by_hand() {
-    let dir = scratch("binding");
-    let (urdf, _) = calibrated_ur10(&dir);
-    let sidecar_path = urdf.with_extension("calibration.toml");
-    let sidecar = std::fs::read_to_string(&sidecar_path).expect("a sidecar");
+    let (urdf, sidecar_path, sidecar) = calibrated_ur10_record("binding");
     assert!(sidecar.contains("urdf_digest = \"fnv1a64:"), "{sidecar}");
     assert!(sidecar.contains("[nominal."), "{sidecar}");
     // The files as written agree: the record's values and nominal origins give the URDF's.
@@ -128,10 +134,7 @@ fn a_record_is_refused_beside_another_urdf_for_another_tip_or_edited_by_hand() {
 
 #[test]
 fn a_record_without_a_digest_loads_with_a_note() {
-    let dir = scratch("binding-note");
-    let (urdf, _) = calibrated_ur10(&dir);
-    let sidecar_path = urdf.with_extension("calibration.toml");
-    let sidecar = std::fs::read_to_string(&sidecar_path).expect("a sidecar");
+    let (urdf, sidecar_path, sidecar) = calibrated_ur10_record("binding-note");
     let old: String = (sidecar.lines())
         .filter(|l| !l.starts_with("urdf_digest"))
         .map(|l| format!("{l}\n"))
