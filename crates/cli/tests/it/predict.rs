@@ -238,6 +238,17 @@ fn predict_json(urdf: &Path, readings: &Path) -> Value {
     serde_json::from_slice(&run.stdout).expect("one JSON document")
 }
 
+/// The arm calibrated in the scratch folder `name` ([`calibrated_arm`]) and [`READINGS`]
+/// written there: the folder, the URDF, the readings' path and `predict --json` of them.
+fn arm_predicted(name: &str) -> (PathBuf, PathBuf, PathBuf, Value) {
+    let dir = scratch(name);
+    let urdf = calibrated_arm(&dir);
+    let readings = dir.join("readings.csv");
+    std::fs::write(&readings, READINGS).expect("write");
+    let v = predict_json(&urdf, &readings);
+    (dir, urdf, readings, v)
+}
+
 /// `hapcal predict` of the arm `urdf` (tip `tip`) on `readings`, with `extra`.
 fn predict_arm(urdf: &Path, readings: &Path, extra: &[&str]) -> Output {
     predict_tip(urdf, "tip", readings, extra)
@@ -257,11 +268,7 @@ fn predict_tip(urdf: &Path, tip: &str, readings: &Path, extra: &[&str]) -> Outpu
 /// `compensate`.
 #[test]
 fn a_reading_outside_the_calibration_s_region_is_flagged() {
-    let dir = scratch("predict-region");
-    let urdf = calibrated_arm(&dir);
-    let readings = dir.join("readings.csv");
-    std::fs::write(&readings, READINGS).expect("write");
-    let v = predict_json(&urdf, &readings);
+    let (dir, urdf, readings, v) = arm_predicted("predict-region");
     let rows = v["rows"].as_array().expect("rows");
     let flags: Vec<&Value> = rows.iter().map(|r| &r["outside_region"]).collect();
     assert!(flags[0].is_null() && flags[2].is_null(), "{flags:?}");
@@ -311,11 +318,7 @@ fn a_reading_outside_the_calibration_s_region_is_flagged() {
 /// to the differences' truncation, far below 1e-5 relative for a deflection this smooth in k.
 #[test]
 fn sigma_is_the_derivative_times_the_standard_deviation() {
-    let dir = scratch("predict-sigma");
-    let urdf = calibrated_arm(&dir);
-    let readings = dir.join("readings.csv");
-    std::fs::write(&readings, READINGS).expect("write");
-    let v = predict_json(&urdf, &readings);
+    let (_, urdf, _, v) = arm_predicted("predict-sigma");
     assert_eq!(v["uncertainty"], "covariance", "{v}");
     assert_eq!(v["n_values"], 1, "{v}");
     let robot = Robot::load_urdf(&urdf, &["tip"]).expect("the arm");
