@@ -23,6 +23,23 @@ fn position_figures(v: &Value, when: &str) -> Vec<(String, [f64; 3])> {
         .collect()
 }
 
+/// Asserts that the figures `got` ([`position_figures`], m) are those of `want` within half
+/// the report's last digit: it prints mm to 3 decimals, so 0.5 µm. `what` names the pair in
+/// the message.
+fn assert_same_figures(want: &[(String, [f64; 3])], got: &[(String, [f64; 3])], what: &str) {
+    assert_eq!(want.len(), got.len(), "{what}: data sets");
+    for ((set, w), (_, g)) in want.iter().zip(got) {
+        for k in 0..3 {
+            assert!(
+                (w[k] - g[k]).abs() < 0.5e-6,
+                "{what} {set}: figure {k}: {} m against {} m",
+                w[k],
+                g[k]
+            );
+        }
+    }
+}
+
 /// Calibrates `device` (tips `tips`) on `data` with the geometric model, writes it to each of
 /// `x.toml` and `x.urdf`, and checks that the written device, with its frames fitted again,
 /// reproduces the report's calibrated figures.
@@ -68,18 +85,7 @@ fn written_device_reproduces_the_report(name: &str, device: &str, tips: &[&str],
             "--json",
         ]);
         let read_back = position_figures(&json(&hapcal(&again)), "before");
-        assert_eq!(read_back.len(), reported.len());
-        for ((set, want), (_, got)) in reported.iter().zip(&read_back) {
-            for k in 0..3 {
-                // The report prints mm to 3 decimals: equal within half its last digit.
-                assert!(
-                    (want[k] - got[k]).abs() < 0.5e-6,
-                    "{name} {ext} {set}: figure {k} reported {} m, from the written file {} m",
-                    want[k],
-                    got[k]
-                );
-            }
-        }
+        assert_same_figures(&reported, &read_back, &format!("{name} {ext}"));
     }
 }
 
@@ -148,18 +154,8 @@ fn imported_tree_reads_back_to_the_urdf_figures() {
     from_toml.extend(common);
     let want = position_figures(&json(&hapcal(&from_urdf)), "after");
     let got = position_figures(&json(&hapcal(&from_toml)), "after");
-    assert_eq!(want.len(), got.len());
-    for ((set, w), (_, g)) in want.iter().zip(&got) {
-        for k in 0..3 {
-            // Same model, data and fit: equal within half the report's last digit (1 µm).
-            assert!(
-                (w[k] - g[k]).abs() < 0.5e-6,
-                "{set}: figure {k}: {} vs {}",
-                w[k],
-                g[k]
-            );
-        }
-    }
+    // Same model, data and fit.
+    assert_same_figures(&want, &got, "URDF and TOML");
 }
 
 /// One hand of the two-arm tree measured, every joint read: the other arm's readings load
