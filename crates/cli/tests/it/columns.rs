@@ -105,17 +105,31 @@ fn assert_same(a: &Value, b: &Value, at: &str) {
     }
 }
 
+/// Calibrates (geometric) a copy of the UR10 file, written in the scratch folder `name` with
+/// `column`'s cells mapped by `edit`, with `flags`, and asserts that it gives the calibration
+/// of the original file; returns the copy's path.
+fn calibrates_as_the_original(
+    name: &str,
+    column: &str,
+    edit: impl Fn(f64) -> f64,
+    flags: &[&str],
+) -> PathBuf {
+    let copy = ur10_copy(&scratch(name), column, edit);
+    let mut flags = flags.to_vec();
+    flags.extend(["--model", "geometric"]);
+    let v = calibrate(&ur10_urdf(), Some(TIP), &copy, &flags);
+    assert_same(&calibration(&v), &calibration(ur10_si()), "$");
+    copy
+}
+
 #[test]
 fn column_unit_q3_deg_calibrates_a_copy_in_degrees_as_the_original() {
-    let dir = scratch("columns-unit");
-    let copy = ur10_copy(&dir, "elbow_joint", f64::to_degrees);
-    let v = calibrate(
-        &ur10_urdf(),
-        Some(TIP),
-        &copy,
-        &["--column-unit", "q3=deg", "--model", "geometric"],
+    let copy = calibrates_as_the_original(
+        "columns-unit",
+        "elbow_joint",
+        f64::to_degrees,
+        &["--column-unit", "q3=deg"],
     );
-    assert_same(&calibration(&v), &calibration(ur10_si()), "$");
     // A column the file lacks, and a malformed value: the flag and the value are named.
     let out = hapcal(&[
         "calibrate",
@@ -136,28 +150,22 @@ fn column_unit_q3_deg_calibrates_a_copy_in_degrees_as_the_original() {
 
 #[test]
 fn column_sign_calibrates_a_reversed_encoder_as_the_original() {
-    let dir = scratch("columns-sign");
-    let copy = ur10_copy(&dir, "wrist_2_joint", |v| -v);
-    let v = calibrate(
-        &ur10_urdf(),
-        Some(TIP),
-        &copy,
-        &["--column-sign", "wrist_2_joint", "--model", "geometric"],
+    calibrates_as_the_original(
+        "columns-sign",
+        "wrist_2_joint",
+        |v| -v,
+        &["--column-sign", "wrist_2_joint"],
     );
-    assert_same(&calibration(&v), &calibration(ur10_si()), "$");
 }
 
 #[test]
 fn column_offset_calibrates_a_shifted_zero_as_the_original() {
-    let dir = scratch("columns-offset");
-    let copy = ur10_copy(&dir, "shoulder_lift_joint", |v| v + 0.25);
-    let v = calibrate(
-        &ur10_urdf(),
-        Some(TIP),
-        &copy,
-        &["--column-offset", "q2=-0.25", "--model", "geometric"],
+    calibrates_as_the_original(
+        "columns-offset",
+        "shoulder_lift_joint",
+        |v| v + 0.25,
+        &["--column-offset", "q2=-0.25"],
     );
-    assert_same(&calibration(&v), &calibration(ur10_si()), "$");
 }
 
 #[test]
