@@ -60,6 +60,14 @@ fn col(header: &[String], name: &str) -> usize {
     (header.iter().position(|c| c == name)).unwrap_or_else(|| panic!("no column {name}"))
 }
 
+/// The edit that swaps the columns `a` and `b` of every row.
+fn swap_columns<'a>(a: &'a str, b: &'a str) -> impl Fn(&[String], &mut Vec<Vec<f64>>) + 'a {
+    move |h, rows| {
+        let (a, b) = (col(h, a), col(h, b));
+        rows.iter_mut().for_each(|r| r.swap(a, b));
+    }
+}
+
 /// `hapcal check` on the log `edit` makes of a right one: exit code 2, each of `needles`
 /// named and none of `absent`; with `restored`, the residual back to a right log's (1–10 mm)
 /// from at least five times that.
@@ -142,10 +150,7 @@ fn joints_in_degrees_name_the_angle_unit_not_a_limit() {
 fn swapped_joint_columns_are_named_and_their_encoders_not_blamed() {
     finds(
         "swap",
-        &|h, rows| {
-            let (a, b) = (col(h, "q1"), col(h, "q2"));
-            rows.iter_mut().for_each(|r| r.swap(a, b));
-        },
+        &swap_columns("q1", "q2"),
         &["[joint-order]", "q1 and q2"],
         &["ext1 follows", "ext2 follows"],
         true,
@@ -208,10 +213,7 @@ fn a_frozen_joint_column_is_named() {
 fn swapped_external_encoders_are_named() {
     finds(
         "ext-swap",
-        &|h, rows| {
-            let (a, b) = (col(h, "ext1"), col(h, "ext2"));
-            rows.iter_mut().for_each(|r| r.swap(a, b));
-        },
+        &swap_columns("ext1", "ext2"),
         &["[joint-order]", "ext1 follows joint 2"],
         &[],
         false,
