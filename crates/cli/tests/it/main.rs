@@ -177,6 +177,26 @@ fn calibration_warnings(args: &[&str]) -> Vec<String> {
         .collect()
 }
 
+/// Asserts that `hapcal calibrate` with `args` warns of no residual above its instrument's
+/// typical σ.
+fn assert_within_default_noise(args: &[&str]) {
+    let warnings = calibration_warnings(args);
+    assert!(
+        !warnings.iter().any(|w| w.contains("typical σ")),
+        "{args:?}: {warnings:?}"
+    );
+}
+
+/// The next number in [0, 1) of a fixed linear congruential sequence whose state `state`
+/// holds (advanced): test noise that is the same on every run.
+fn next_uniform(state: &std::cell::Cell<u64>) -> f64 {
+    let s = (state.get())
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    state.set(s);
+    (s >> 11) as f64 / (1u64 << 53) as f64
+}
+
 /// A fresh scratch folder per test.
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("hapcal-cli-{}-{name}", std::process::id()));

@@ -1,7 +1,7 @@
 //! `hapcal plan-poses --data … --workspace …`: the poses to add to rows already measured, on
 //! figaroh's UR10 camera data (23 poses of a marker), and its refusals in words.
 
-use super::{hapcal, scratch, show, stderr, ur10_csv, ur10_urdf};
+use super::{hapcal, next_uniform, scratch, show, stderr, ur10_csv, ur10_urdf};
 
 fn measured() -> String {
     show(&ur10_csv())
@@ -10,20 +10,14 @@ fn measured() -> String {
 /// A workspace of `n` configurations with the elbow bent one way (−3 to 0 rad), the other
 /// joints within ±3 rad, by a fixed linear congruential sequence.
 fn workspace(dir: &std::path::Path, n: usize) -> String {
-    let mut state = 99_u64;
-    let mut next = || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let state = std::cell::Cell::new(99_u64);
     let mut text = "shoulder_pan_joint,shoulder_lift_joint,elbow_joint,wrist_1_joint,\
                     wrist_2_joint,wrist_3_joint\n"
         .to_owned();
     for _ in 0..n {
         let q: Vec<String> = (0..6)
             .map(|j| {
-                let u = next();
+                let u = next_uniform(&state);
                 let v = if j == 2 { -3.0 * u } else { 6.0 * u - 3.0 };
                 format!("{v:.4}")
             })

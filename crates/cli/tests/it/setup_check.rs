@@ -7,8 +7,8 @@
 //! the command must stop with exit code 2.
 
 use super::{
-    assert_exit, before_after_mm, calibration_warnings, column, csv, hapcal, on_ur10, root,
-    scratch, show, stderr, ur10_csv, ur10_rows, ur10_urdf,
+    assert_exit, assert_within_default_noise, before_after_mm, calibration_warnings, column, csv,
+    hapcal, next_uniform, on_ur10, root, scratch, show, stderr, ur10_csv, ur10_rows, ur10_urdf,
 };
 use hapcal_kinematics::UnitQuaternion;
 use std::path::{Path, PathBuf};
@@ -666,11 +666,7 @@ fn bundled_recordings_stay_within_their_instruments_default_noise() {
     let cases = bundled_measurement_recordings();
     for args in cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        let warnings = calibration_warnings(&args);
-        assert!(
-            !warnings.iter().any(|w| w.contains("typical σ")),
-            "{args:?}: {warnings:?}"
-        );
+        assert_within_default_noise(&args);
     }
 }
 
@@ -684,12 +680,7 @@ fn camera_positions_far_noisier_than_a_camera_warn() {
     let state = std::cell::Cell::new(98765u64);
     for name in ["x1", "y1", "z1"] {
         map_column(&mut rows, name, &|v| {
-            let s = state
-                .get()
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            state.set(s);
-            v + ((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.024
+            v + (next_uniform(&state) - 0.5) * 0.024
         });
     }
     let data = write(&dir, "noisy.csv", &rows);

@@ -7,7 +7,8 @@
 //! far above what manufacturing deviations leave (the 50 mm of the plausibility bound).
 
 use super::{
-    assert_exit, before_after_mm, calibration_warnings, hapcal, iiwa, root, scratch, show, stderr,
+    assert_exit, assert_within_default_noise, before_after_mm, calibration_warnings, hapcal, iiwa,
+    next_uniform, root, scratch, show, stderr,
 };
 use std::path::{Path, PathBuf};
 
@@ -206,11 +207,7 @@ fn bundled_socket_calibrations_stay_within_the_default_noise() {
         vec!["--device", &iiwa(), "--data", &show(&front())],
         vec!["--device", &panda, "--data", &front_right],
     ] {
-        let warnings = calibration_warnings(&args);
-        assert!(
-            !warnings.iter().any(|w| w.contains("typical σ")),
-            "{args:?}: {warnings:?}"
-        );
+        assert_within_default_noise(&args);
     }
 }
 
@@ -223,14 +220,7 @@ fn a_socket_residual_far_above_the_robots_repeatability_warns() {
     let state = std::cell::Cell::new(12345u64);
     let data = mapped(&dir, &|q| {
         q.iter()
-            .map(|v| {
-                let s = state
-                    .get()
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                state.set(s);
-                v + ((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 1e-2
-            })
+            .map(|v| v + (next_uniform(&state) - 0.5) * 1e-2)
             .collect()
     });
     let warnings = calibration_warnings(&["--device", &iiwa(), "--data", &data, "--accept-setup"]);
