@@ -107,7 +107,6 @@ fn evaluation_failures_are_statuses_with_messages() {
     let mut jac = [0.0; 42];
     let mut tau = [0.0; 7];
     let mut poses = [zero_pose(); 2];
-    let mut command = [0.0; 7];
     let nan = {
         let mut q = Q;
         q[6] = f64::INFINITY;
@@ -126,30 +125,36 @@ fn evaluation_failures_are_statuses_with_messages() {
         let s = hapcal_robot_gravity_torques(robot, ptr::null(), 7, tau.as_mut_ptr());
         fails_with(s, HapcalStatus::NullPointer, "q is NULL");
         let s = hapcal_robot_gravity_torques(robot, nan.as_ptr(), 7, tau.as_mut_ptr());
-        assert_eq!(s, HapcalStatus::NotFinite);
-        assert_eq!(message(), "joint angles[6] = inf is not finite");
+        fails_with(
+            s,
+            HapcalStatus::NotFinite,
+            "joint angles[6] = inf is not finite",
+        );
         let s = hapcal_robot_body_jacobian(robot, 0, Q.as_ptr(), 8, jac.as_mut_ptr(), &mut pose);
-        assert_eq!(s, HapcalStatus::Length);
-        assert_eq!(message(), "n_joints: expected 7 values, found 8");
-        let s = hapcal_robot_deflected_tip_poses(
-            robot,
-            Q.as_ptr(),
-            7,
-            poses.as_mut_ptr(),
-            1,
-            ptr::null_mut(),
+        fails_with(
+            s,
+            HapcalStatus::Length,
+            "n_joints: expected 7 values, found 8",
         );
-        assert_eq!(s, HapcalStatus::Length);
-        assert_eq!(message(), "n_tips: expected 2 values, found 1");
-        let s = hapcal_robot_deflected_tip_poses(
-            robot,
-            nan.as_ptr(),
-            7,
-            poses.as_mut_ptr(),
-            2,
-            ptr::null_mut(),
-        );
-        assert_eq!(s, HapcalStatus::NotFinite);
+        for (q, n_tips, status, text) in [
+            (
+                Q,
+                1,
+                HapcalStatus::Length,
+                "n_tips: expected 2 values, found 1",
+            ),
+            (
+                nan,
+                2,
+                HapcalStatus::NotFinite,
+                "joint angles[6] = inf is not finite",
+            ),
+        ] {
+            let p = poses.as_mut_ptr();
+            let s =
+                hapcal_robot_deflected_tip_poses(robot, q.as_ptr(), 7, p, n_tips, ptr::null_mut());
+            fails_with(s, status, text);
+        }
 
         // Compensation: every number of the target and the settings is checked.
         let rigid = {
@@ -160,18 +165,22 @@ fn evaluation_failures_are_statuses_with_messages() {
             );
             p
         };
+        let compensate_tip =
+            |tip: usize, target: *const HapcalTarget, cfg: &HapcalCompensationConfig, q: &[f64]| {
+                let mut out = [0.0; 7];
+                hapcal_robot_compensate(
+                    robot,
+                    tip,
+                    target,
+                    q.as_ptr(),
+                    7,
+                    cfg,
+                    out.as_mut_ptr(),
+                    ptr::null_mut(),
+                )
+            };
         let compensate = |target: &HapcalTarget, cfg: &HapcalCompensationConfig, q: &[f64]| {
-            let mut out = [0.0; 7];
-            hapcal_robot_compensate(
-                robot,
-                0,
-                target,
-                q.as_ptr(),
-                7,
-                cfg,
-                out.as_mut_ptr(),
-                ptr::null_mut(),
-            )
+            compensate_tip(0, target, cfg, q)
         };
         let mut target = HapcalTarget {
             kind: HAPCAL_TARGET_POSE,
@@ -212,27 +221,9 @@ fn evaluation_failures_are_statuses_with_messages() {
             "damping_m = -0.001 is invalid: expected a finite, positive value",
         );
         assert_eq!(compensate(&target, &CONFIG, &nan), HapcalStatus::NotFinite);
-        let s = hapcal_robot_compensate(
-            robot,
-            5,
-            &target,
-            Q.as_ptr(),
-            7,
-            &CONFIG,
-            command.as_mut_ptr(),
-            ptr::null_mut(),
-        );
+        let s = compensate_tip(5, &target, &CONFIG, &Q);
         assert_eq!(s, HapcalStatus::InvalidArgument);
-        let s = hapcal_robot_compensate(
-            robot,
-            0,
-            ptr::null(),
-            Q.as_ptr(),
-            7,
-            &CONFIG,
-            command.as_mut_ptr(),
-            ptr::null_mut(),
-        );
+        let s = compensate_tip(0, ptr::null(), &CONFIG, &Q);
         fails_with(s, HapcalStatus::NullPointer, "target is NULL");
 
         // The region flag.
@@ -400,8 +391,11 @@ fn frames_markers_values_and_predictors_fail_with_statuses_and_messages() {
             has_sigma: false,
         }; 2];
         let s = hapcal_predictor_predict(predictor, Q.as_ptr(), 7, tips.as_mut_ptr(), 1);
-        assert_eq!(s, HapcalStatus::Length);
-        assert_eq!(message(), "n_tips: expected 2 values, found 1");
+        fails_with(
+            s,
+            HapcalStatus::Length,
+            "n_tips: expected 2 values, found 1",
+        );
         let s = hapcal_predictor_predict(predictor, Q.as_ptr(), 7, tips.as_mut_ptr(), 2);
         assert_eq!(s, HapcalStatus::Ok);
         // In the root frame the prediction is the deflected tip link.
