@@ -69,9 +69,30 @@ pub(crate) fn row(stdout: &str, key: &str) -> Vec<f64> {
         .collect()
 }
 
-/// Checks the example's output against the library; returns how many numbers were
-/// bit-identical and how many there were.
-fn check(stdout: &str) -> (usize, usize) {
+/// Asserts that the line of each key of `expected` in a C program's output `stdout` holds
+/// the library's numbers, each bit-identical (to the bit: the C library is the same compiled
+/// code as the library the test links); returns how many numbers there were.
+pub(crate) fn assert_rows_bit_identical(stdout: &str, expected: &[(&str, Vec<f64>)]) -> usize {
+    let (mut identical, mut total) = (0, 0);
+    for (key, want) in expected {
+        let got = row(stdout, key);
+        assert_eq!(got.len(), want.len(), "{key}");
+        for (g, w) in got.iter().zip(want) {
+            assert!((g - w).abs() <= 1e-12, "{key}: C {g:e} vs Rust {w:e}");
+            identical += usize::from(g.to_bits() == w.to_bits());
+            total += 1;
+        }
+    }
+    assert_eq!(
+        identical, total,
+        "{identical} of {total} numbers bit-identical"
+    );
+    total
+}
+
+/// Checks the example's output against the library: every number bit-identical (the
+/// libraries are the same compiled code as the library the test links).
+fn check(stdout: &str) {
     let model = Model::load(&fixture()).expect("fixture");
     let theta = [0.1, 0.5, -0.2, 1.0, 0.3, 0.6, -0.4];
     let wrench = [1.5, -2.0, 0.5, 0.05, -0.02, 0.1];
@@ -88,22 +109,12 @@ fn check(stdout: &str) -> (usize, usize) {
         ("body_jacobian", jac),
         ("motor_torques_nm", out.motor_torques_nm[..n].to_vec()),
     ];
-    let (mut identical, mut total) = (0, 0);
-    for (key, want) in expected {
-        let got = row(stdout, key);
-        assert_eq!(got.len(), want.len(), "{key}");
-        for (g, w) in got.iter().zip(&want) {
-            assert!((g - w).abs() <= 1e-12, "{key}: C {g:e} vs Rust {w:e}");
-            identical += usize::from(g.to_bits() == w.to_bits());
-            total += 1;
-        }
-    }
+    assert_rows_bit_identical(stdout, &expected);
     assert!(
         stdout.contains("wrong_length_status 2 n_joints: expected 7 values, found 6"),
         "{stdout}"
     );
     assert!(stdout.contains("null_status 1 theta is NULL"), "{stdout}");
-    (identical, total)
 }
 
 #[test]
@@ -115,12 +126,7 @@ fn c_example_on_the_static_library_prints_the_library_numbers() {
         "reference_reading_static",
         &[lib.display().to_string()],
     );
-    let (identical, total) = check(&run(&exe, &fixture()));
-    // The staticlib is the same compiled code as the library the test links.
-    assert_eq!(
-        identical, total,
-        "{identical} of {total} numbers bit-identical"
-    );
+    check(&run(&exe, &fixture()));
 }
 
 #[test]
@@ -139,9 +145,5 @@ fn c_example_on_the_shared_library_prints_the_library_numbers() {
             "-lhapcal_runtime_c".to_owned(),
         ],
     );
-    let (identical, total) = check(&run(&exe, &fixture()));
-    assert_eq!(
-        identical, total,
-        "{identical} of {total} numbers bit-identical"
-    );
+    check(&run(&exe, &fixture()));
 }

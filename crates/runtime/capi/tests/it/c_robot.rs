@@ -9,7 +9,7 @@ use hapcal_runtime::{
     UncertaintyBasis, compensate,
 };
 
-use crate::c_example::{compile, lib_dir, row};
+use crate::c_example::{assert_rows_bit_identical, compile, lib_dir, row};
 
 pub(crate) fn robot_path() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/iiwa14_calibrated.urdf")
@@ -163,21 +163,7 @@ fn c_robot_example_prints_the_library_numbers() {
         ),
         ("record_predicted0_sigma", sigma(&record_predicted[0])),
     ];
-    let (mut identical, mut total) = (0, 0);
-    for (key, want) in expected {
-        let got = row(&stdout, key);
-        assert_eq!(got.len(), want.len(), "{key}");
-        for (g, w) in got.iter().zip(&want) {
-            assert!((g - w).abs() <= 1e-12, "{key}: C {g:e} vs Rust {w:e}");
-            identical += usize::from(g.to_bits() == w.to_bits());
-            total += 1;
-        }
-    }
-    // The static library is the same compiled code as the library the test links.
-    assert_eq!(
-        identical, total,
-        "{identical} of {total} numbers bit-identical"
-    );
+    let total = assert_rows_bit_identical(&stdout, &expected);
     assert_eq!(
         total,
         9 + 3 + 42 + 42 + 7 + 2 * 12 + 7 // rigid, deflected, compensated
