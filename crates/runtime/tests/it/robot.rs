@@ -163,10 +163,12 @@ pub(crate) fn joint_samples(robot: &Robot, n: usize) -> Vec<Vec<f64>> {
     readings(&limits, n)
 }
 
-/// Deflected tip poses, rigid spatial and body Jacobians against the library; returns the
-/// largest gap and the largest deflection of a tip (m), so that callers can check that the
-/// compliance mattered.
-fn compare(robot: &Robot, model: &CalibratedModel) -> (f64, f64) {
+/// Deflected tip poses, rigid spatial and body Jacobians against the library's model of the
+/// same file ([`library_model`] of `path`, `tips`, `k`); returns the largest gap and the
+/// largest deflection of a tip (m), so that callers can check that the compliance mattered.
+fn compare(robot: &Robot, path: &Path, tips: &[&str], k: &[(&str, f64)]) -> (f64, f64) {
+    let model = library_model(path, tips, k);
+    assert_eq!(model.chain.joint_names(), robot.joint_names());
     let n = robot.n_joints();
     let n_tips = robot.tip_names().len();
     let tips: Vec<usize> = (0..n_tips).collect();
@@ -240,11 +242,16 @@ const TREE_K: [(&str, f64); 7] = [
 /// The tips of the tree fixture's calibrations.
 const TREE_TIPS: [&str; 2] = ["l_gripper", "r_tool"];
 
+/// The tree fixture with the compliance `values` at [`TREE_TIPS`], written into the scratch
+/// folder `name`; returns the written URDF.
+fn calibrated_tree(name: &str, values: &[CalibratedValue]) -> PathBuf {
+    let text = std::fs::read_to_string(test_data("torso_two_arms.urdf")).expect("fixture");
+    write_calibrated(&scratch(name), &text, values, &TREE_TIPS)
+}
+
 #[test]
 fn tree_with_masses_and_compliance_matches_the_calibrated_model() {
-    let text = std::fs::read_to_string(test_data("torso_two_arms.urdf")).expect("fixture");
-    let dir = scratch("tree");
-    let path = write_calibrated(&dir, &text, &tree_compliances(), &TREE_TIPS);
+    let path = calibrated_tree("tree", &tree_compliances());
     let tips = TREE_TIPS;
     let robot = Robot::load_urdf(&path, &tips).expect("valid");
     assert_eq!(robot.gravity_model(), GravityModel::Masses);
@@ -265,9 +272,7 @@ fn tree_with_masses_and_compliance_matches_the_calibrated_model() {
     assert_eq!(robot.compliances()[3], 8e-4);
     assert_eq!(robot.compliances()[6], 8e-4);
     assert!(robot.frame("instrument").is_some());
-    let model = library_model(&path, &tips, &TREE_K);
-    assert_eq!(model.chain.joint_names(), robot.joint_names());
-    let (worst, moved) = compare(&robot, &model);
+    let (worst, moved) = compare(&robot, &path, &tips, &TREE_K);
     assert!(worst <= TOL, "largest gap {worst:e}");
     // The deflection is large enough for the comparison to see it (millimetres).
     assert!(moved > 1e-3, "largest deflection {moved:e} m");
@@ -276,15 +281,12 @@ fn tree_with_masses_and_compliance_matches_the_calibrated_model() {
 /// Negative control: a compliance 1 % off moves the comparison far past its tolerance.
 #[test]
 fn tree_comparison_detects_a_changed_compliance() {
-    let text = std::fs::read_to_string(test_data("torso_two_arms.urdf")).expect("fixture");
-    let dir = scratch("tree-changed");
     let mut values = tree_compliances();
     values[3].value *= 1.01;
-    let path = write_calibrated(&dir, &text, &values, &TREE_TIPS);
+    let path = calibrated_tree("tree-changed", &values);
     let tips = TREE_TIPS;
     let robot = Robot::load_urdf(&path, &tips).expect("valid");
-    let model = library_model(&path, &tips, &TREE_K);
-    let (worst, _) = compare(&robot, &model);
+    let (worst, _) = compare(&robot, &path, &tips, &TREE_K);
     assert!(
         worst > 1e-7,
         "largest gap {worst:e}: the change went unseen"
@@ -307,8 +309,7 @@ fn seven_joint_arm_with_lumped_weights_matches_the_calibrated_model() {
     let robot = Robot::load_urdf(&path, &["ball_link"]).expect("valid");
     assert_eq!(robot.gravity_model(), GravityModel::Lumped);
     assert_eq!(robot.joint_names(), names);
-    let model = library_model(&path, &["ball_link"], &k);
-    let (worst, moved) = compare(&robot, &model);
+    let (worst, moved) = compare(&robot, &path, &["ball_link"], &k);
     assert!(worst <= TOL, "largest gap {worst:e}");
     assert!(moved > 1e-4, "largest deflection {moved:e} m");
 }
