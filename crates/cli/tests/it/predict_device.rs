@@ -33,6 +33,38 @@ fn training(report: &Value, key: &str) -> f64 {
         .unwrap_or_else(|| panic!("no {key} in {after}"))
 }
 
+/// `hapcal calibrate --model compliance --json` of `device` on `data`, written to `out`: the
+/// report and the written device file's text.
+fn calibrated_with_compliance(device: &Path, data: &Path, out: &Path) -> (Value, String) {
+    let report = json_of(&[
+        "calibrate",
+        "--device",
+        &show(device),
+        "--data",
+        &show(data),
+        "--model",
+        "compliance",
+        "--json",
+        "--out",
+        &show(out),
+    ]);
+    let written = std::fs::read_to_string(out).expect("the calibrated device file");
+    (report, written)
+}
+
+/// Asserts that every row of `predict --json`'s `v` lies in the calibration's region and
+/// that its RMS of `errors` (`position_m` or `distance_m`) is the report's training figure
+/// `key` within [`TOLERANCE_M`].
+fn assert_reproduces_training(v: &Value, report: &Value, errors: &str, key: &str) {
+    assert_eq!(v["n_outside_region"], 0, "training rows lie in the region");
+    let predicted = v["errors"][errors]["rms"].as_f64().expect("the errors");
+    let calibrated = training(report, key);
+    assert!(
+        (predicted - calibrated).abs() <= TOLERANCE_M,
+        "predict {predicted} m, calibrate {calibrated} m"
+    );
+}
+
 #[test]
 fn a_calibrated_dh_robot_predicts_its_training_rows_as_calibrate_reported_them() {
     let dir = scratch("predict-positioner");
@@ -40,20 +72,8 @@ fn a_calibrated_dh_robot_predicts_its_training_rows_as_calibrate_reported_them()
     let device = fixtures.join("two_axis_positioner.toml");
     let data = fixtures.join("measurements.yaml");
     let out = dir.join("positioner.toml");
-    let report = json_of(&[
-        "calibrate",
-        "--device",
-        &show(&device),
-        "--data",
-        &show(&data),
-        "--model",
-        "compliance",
-        "--json",
-        "--out",
-        &show(&out),
-    ]);
+    let (report, written) = calibrated_with_compliance(&device, &data, &out);
     assert_eq!(report["model"], "compliance", "{}", report["model"]);
-    let written = std::fs::read_to_string(&out).expect("the calibrated device file");
     assert!(written.contains("lumped-unit-weights"), "{written}");
     let v = json_of(&[
         "predict",
@@ -65,18 +85,10 @@ fn a_calibrated_dh_robot_predicts_its_training_rows_as_calibrate_reported_them()
     ]);
     let n_rows = v["rows"].as_array().expect("rows").len();
     assert!(n_rows > 10, "{n_rows} rows");
-    assert_eq!(v["n_outside_region"], 0, "training rows lie in the region");
     assert_eq!(v["uncertainty"], "covariance", "{}", v["uncertainty_note"]);
     let sigma = v["rows"][0]["tips"][0]["sigma_m"].as_f64().expect("a σ");
     assert!(sigma > 0.0 && sigma < 1e-2, "σ {sigma} m");
-    let predicted = v["errors"]["position_m"]["rms"]
-        .as_f64()
-        .expect("position errors");
-    let calibrated = training(&report, "position_rms_m");
-    assert!(
-        (predicted - calibrated).abs() <= TOLERANCE_M,
-        "predict {predicted} m, calibrate {calibrated} m"
-    );
+    assert_reproduces_training(&v, &report, "position_m", "position_rms_m");
     // The instrument frame: the same errors, the predictions are the markers.
     let framed = json_of(&[
         "predict",
@@ -136,19 +148,7 @@ fn a_calibrated_haptic_device_predicts_its_log_s_distances_as_calibrate_reported
     let fixtures = root().join("fixtures/reference-device");
     let log = fixtures.join("log.csv");
     let out = dir.join("calibrated.toml");
-    let report = json_of(&[
-        "calibrate",
-        "--device",
-        &show(&fixtures.join("device.toml")),
-        "--data",
-        &show(&log),
-        "--model",
-        "compliance",
-        "--json",
-        "--out",
-        &show(&out),
-    ]);
-    let written = std::fs::read_to_string(&out).expect("the calibrated device file");
+    let (report, written) = calibrated_with_compliance(&fixtures.join("device.toml"), &log, &out);
     assert!(written.contains("joint_compliance.j"), "{written}");
     let csv = dir.join("handle.csv");
     let v = json_of(&[
@@ -164,16 +164,8 @@ fn a_calibrated_haptic_device_predicts_its_log_s_distances_as_calibrate_reported
     assert_eq!(v["frame"], "base");
     assert_eq!(v["tips"][0], "handle");
     assert_eq!(v["rows"].as_array().expect("rows").len(), 200);
-    assert_eq!(v["n_outside_region"], 0, "training rows lie in the region");
-    let predicted = v["errors"]["distance_m"]["rms"]
-        .as_f64()
-        .expect("distance errors");
     assert_eq!(v["errors"]["distance_m"]["count"], 200);
-    let calibrated = training(&report, "distance_rms_m");
-    assert!(
-        (predicted - calibrated).abs() <= TOLERANCE_M,
-        "predict {predicted} m, calibrate {calibrated} m"
-    );
+    assert_reproduces_training(&v, &report, "distance_m", "distance_rms_m");
     // The handle's predicted position is at the predicted distance: the CSV's x, y, z.
     let text = std::fs::read_to_string(&csv).expect("the predictions");
     assert!(
