@@ -149,6 +149,25 @@ fn compensate_reads_what_calibrate_writes() {
     assert_eq!(written.lines().count(), 3, "{written}");
 }
 
+/// The unit quaternion `(w, (x, y, z))` of the rotation matrix `r` (its trace branch: `w`
+/// kept from 0, as for the rotations of this file, far from a half turn).
+fn quaternion(r: &[[f64; 3]; 3]) -> (f64, [f64; 3]) {
+    let w = 0.5 * (1.0 + r[0][0] + r[1][1] + r[2][2]).max(1e-12).sqrt();
+    let v = [
+        (r[2][1] - r[1][2]) / (4.0 * w),
+        (r[0][2] - r[2][0]) / (4.0 * w),
+        (r[1][0] - r[0][1]) / (4.0 * w),
+    ];
+    (w, v)
+}
+
+/// Appends `cells` to `csv` as one line, every number with all its digits.
+fn push_row(csv: &mut String, cells: impl Iterator<Item = f64>) {
+    let cells: Vec<String> = cells.map(|v| format!("{v:?}")).collect();
+    csv.push_str(&cells.join(","));
+    csv.push('\n');
+}
+
 /// The accuracy study with a calibration from simulated data (docs/results/runtime.md): a
 /// simulated iiwa 14 truth (joint origins off by 0.2–0.8 mm and 0.3–1.2 mrad, Drake's link
 /// masses, compliances of 1e-4 to 3e-4 rad/(N·m)) measured at 300 poses (marker pose at the
@@ -204,25 +223,15 @@ fn compensation_with_a_calibration_from_simulated_data() {
         truth
             .deflected_tip_poses(&q, &mut ws_t, &mut tip)
             .expect("valid");
-        let r = tip[0].rotation;
-        let w = 0.5 * (1.0 + r[0][0] + r[1][1] + r[2][2]).max(1e-12).sqrt();
-        let v = [
-            (r[2][1] - r[1][2]) / (4.0 * w),
-            (r[0][2] - r[2][0]) / (4.0 * w),
-            (r[1][0] - r[0][1]) / (4.0 * w),
-        ];
+        let (w, v) = quaternion(&tip[0].rotation);
         // A small rotation noise: v += δ/2 (first order), then normalised.
         let d: Vec<f64> = (0..3).map(|_| 0.5 * noise_r.sample(&mut rng)).collect();
         let (qx, qy, qz) = (v[0] + w * d[0], v[1] + w * d[1], v[2] + w * d[2]);
         let n = (w * w + qx * qx + qy * qy + qz * qz).sqrt();
         let t = tip[0].translation_m;
-        let cells: Vec<String> = (q.iter().copied())
-            .chain((0..3).map(|i| t[i] + noise_p.sample(&mut rng)))
-            .chain([w / n, qx / n, qy / n, qz / n])
-            .map(|v| format!("{v:?}"))
-            .collect();
-        csv.push_str(&cells.join(","));
-        csv.push('\n');
+        let position = (0..3).map(|i| t[i] + noise_p.sample(&mut rng));
+        let cells = (q.iter().copied()).chain(position);
+        push_row(&mut csv, cells.chain([w / n, qx / n, qy / n, qz / n]));
     }
     let train = dir.join("train.csv");
     std::fs::write(&train, csv).expect("write");
@@ -297,21 +306,10 @@ fn compensation_with_a_calibration_from_simulated_data() {
     // The same through `hapcal compensate --instrument-frame` on 20 of the targets.
     let mut text = format!("x,y,z,qw,qx,qy,qz,{}\n", JOINTS.join(","));
     for (q, t) in &cli_rows {
-        let r = t.rotation;
-        let w = 0.5 * (1.0 + r[0][0] + r[1][1] + r[2][2]).max(1e-12).sqrt();
-        let v = [
-            (r[2][1] - r[1][2]) / (4.0 * w),
-            (r[0][2] - r[2][0]) / (4.0 * w),
-            (r[1][0] - r[0][1]) / (4.0 * w),
-        ];
+        let (w, v) = quaternion(&t.rotation);
         let p = t.translation_m;
-        let cells: Vec<String> = (p.iter().copied())
-            .chain([w, v[0], v[1], v[2]])
-            .chain(q.iter().copied())
-            .map(|v| format!("{v:?}"))
-            .collect();
-        text.push_str(&cells.join(","));
-        text.push('\n');
+        let cells = (p.iter().copied()).chain([w, v[0], v[1], v[2]]);
+        push_row(&mut text, cells.chain(q.iter().copied()));
     }
     let targets = dir.join("targets.csv");
     std::fs::write(&targets, text).expect("write");
