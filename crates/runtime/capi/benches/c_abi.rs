@@ -16,8 +16,8 @@ use std::ptr;
 use criterion::{Criterion, criterion_group, criterion_main};
 use hapcal_runtime::{CompensationConfig, Pose, Robot, Target, compensate};
 use hapcal_runtime_c::{
-    HAPCAL_TARGET_POSE, HapcalCompensation, HapcalCompensationConfig, HapcalPose, HapcalStatus,
-    HapcalTarget, hapcal_evaluate, hapcal_model_free, hapcal_model_load, hapcal_robot_compensate,
+    HAPCAL_TARGET_POSE, HapcalCompensation, HapcalCompensationConfig, HapcalStatus, HapcalTarget,
+    hapcal_evaluate, hapcal_model_free, hapcal_robot_compensate,
     hapcal_robot_deflected_spatial_jacobian, hapcal_robot_deflected_tip_poses, hapcal_robot_free,
     hapcal_robot_load, hapcal_robot_spatial_jacobian, hapcal_robot_tip_pose,
 };
@@ -25,24 +25,12 @@ use hapcal_runtime_c::{
 const THETA: [f64; 7] = [0.1, 0.5, -0.2, 1.0, 0.3, 0.6, -0.4];
 const WRENCH: [f64; 6] = [1.5, -2.0, 0.5, 0.05, -0.02, 0.1];
 
-/// A pose of zeros, to be written over.
-fn zero_pose() -> HapcalPose {
-    HapcalPose {
-        rotation: [[0.0; 3]; 3],
-        translation_m: [0.0; 3],
-    }
-}
+#[path = "../tests/it/reference_model.rs"]
+mod reference_model;
+use reference_model::{load_reference_model, zero_pose};
 
 fn bench(c: &mut Criterion) {
-    let path = CString::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../fixtures/reference-device/calibrated.toml"
-    ))
-    .expect("no NUL");
-    let mut model = ptr::null_mut();
-    // SAFETY: a valid string and out pointer.
-    let status = unsafe { hapcal_model_load(path.as_ptr(), &mut model) };
-    assert_eq!(status, HapcalStatus::Ok);
+    let model = load_reference_model();
     let evaluate = black_box::<unsafe extern "C" fn(_, _, _, _, _, _, _) -> _>(hapcal_evaluate);
     let mut pose = zero_pose();
     let (mut jac, mut tau) = ([0.0; 42], [0.0; 7]);

@@ -5,24 +5,12 @@ use std::ptr;
 
 use hapcal_runtime_c::*;
 
+use crate::reference_model::load_reference_model;
 use crate::{fails_with, message, zero_pose};
-
-fn load() -> *mut HapcalModel {
-    let path = CString::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../fixtures/reference-device/calibrated.toml"
-    ))
-    .expect("no NUL");
-    let mut model = ptr::null_mut();
-    // SAFETY: valid string and out pointer.
-    let status = unsafe { hapcal_model_load(path.as_ptr(), &mut model) };
-    assert_eq!(status, HapcalStatus::Ok, "{}", message());
-    model
-}
 
 #[test]
 fn evaluation_through_the_abi_matches_the_library() {
-    let model = load();
+    let model = load_reference_model();
     let theta = [0.1, 0.5, -0.2, 1.0, 0.3, 0.6, -0.4];
     let wrench = [0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
     let (mut tau, mut jac) = ([0.0; 7], [0.0; 42]);
@@ -86,7 +74,7 @@ fn evaluation_through_the_abi_matches_the_library() {
 
 #[test]
 fn failures_are_status_codes_with_messages() {
-    let model = load();
+    let model = load_reference_model();
     // Joint 4 within its polynomial's domain (the joint's limits, 0.3 to 1.8 rad).
     let theta = [0.1, 0.1, 0.1, 1.0, 0.1, 0.1, 0.1];
     let mut tau = [0.0; 7];

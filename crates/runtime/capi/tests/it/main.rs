@@ -12,10 +12,12 @@ mod ffi_robot;
 mod haptic_record;
 mod header;
 mod record;
+mod reference_model;
 
 use std::ffi::CStr;
 
-use hapcal_runtime_c::{HapcalPose, HapcalStatus, hapcal_last_error_message};
+use hapcal_runtime_c::{HapcalStatus, hapcal_last_error_message};
+use reference_model::zero_pose;
 
 /// The message of the last failed call on this thread.
 fn message() -> String {
@@ -29,12 +31,4 @@ fn message() -> String {
 #[track_caller]
 fn fails_with(status: HapcalStatus, expected: HapcalStatus, text: &str) {
     assert_eq!((status, message().as_str()), (expected, text));
-}
-
-/// A pose of zeros, to be written over.
-fn zero_pose() -> HapcalPose {
-    HapcalPose {
-        rotation: [[0.0; 3]; 3],
-        translation_m: [0.0; 3],
-    }
 }
