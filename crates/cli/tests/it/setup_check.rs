@@ -382,17 +382,15 @@ fn swapped_joint_columns_are_named() {
 fn reversed_joint_columns_are_named() {
     let dir = scratch("setup-rev");
     let mut rows = ur10_rows();
-    let joints = [
-        "shoulder_pan_joint",
-        "shoulder_lift_joint",
-        "elbow_joint",
-        "wrist_1_joint",
-        "wrist_2_joint",
-        "wrist_3_joint",
-    ];
+    // The joint columns, in the file's (the chain's) order, named in the reverse order.
+    let joints: Vec<String> = (rows[0].iter())
+        .filter(|c| c.ends_with("_joint"))
+        .cloned()
+        .collect();
+    assert_eq!(joints.len(), 6, "{joints:?}");
     for c in rows[0].iter_mut() {
         if let Some(j) = joints.iter().position(|n| n == c) {
-            *c = joints[5 - j].to_owned();
+            *c = joints[5 - j].clone();
         }
     }
     ur10_restored(
