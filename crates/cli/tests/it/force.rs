@@ -2,7 +2,7 @@
 
 use std::process::Output;
 
-use super::{assert_exit, hapcal, hapcal_ok, root, scratch, succeeded};
+use super::{assert_exit, hapcal, hapcal_ok, root, scratch, set_figure, succeeded};
 
 /// The committed calibrated reference device is exactly what `hapcal calibrate` writes from
 /// the committed log (no truth file), and `hapcal force` prints the Fig. 12 table, the distributions and writes
@@ -95,13 +95,6 @@ fn assert_same_numbers(written: &str, committed: &str) {
     }
 }
 
-/// The held-out (test-log) distance RMS of a `hapcal calibrate --json` report, m.
-fn test_rms(v: &serde_json::Value) -> f64 {
-    let placements = v["placements"].as_array().unwrap();
-    let test = placements.iter().find(|p| p["role"] == "test").unwrap();
-    test["after"]["distance_rms_m"].as_f64().unwrap()
-}
-
 /// `hapcal calibrate --model compliance` on a simulated log of the reference device whose
 /// handle sags (compliances of 5e-3 rad/(N·m) on joints 2 and 3): the report names the model
 /// and lists the compliances in rad/(N·m), the test log's distance RMS is near the cable
@@ -162,9 +155,9 @@ fn compliance_on_a_haptic_log_is_reported_written_and_read_back() {
         .find(|p| p["name"] == "joint_compliance.j2")
         .expect("joint_compliance.j2 reported");
     assert_eq!(j2["unit"], "rad/(N·m)");
-    let held_out = test_rms(&v);
+    let held_out = set_figure(&v, "test", "distance_rms_m");
     assert!(held_out < 13e-6, "{held_out}");
-    let two_steps = test_rms(&calibrate("transmissions", false));
+    let two_steps = set_figure(&calibrate("transmissions", false), "test", "distance_rms_m");
     assert!(two_steps > 2.0 * held_out, "{two_steps} vs {held_out}");
 
     let written = hapcal_io::read_device(&calibrated).expect("the written file reads back");

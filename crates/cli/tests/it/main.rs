@@ -242,6 +242,19 @@ fn fields<'a>(v: &'a Value, list: &str, field: &str) -> Vec<&'a str> {
         .collect()
 }
 
+/// The figure `key` after the fit (m or rad, as the key says) of the data set of `role`
+/// (`train` or `test`) in a `hapcal calibrate --json` report: at the set's top level or among
+/// its pose figures.
+fn set_figure(report: &Value, role: &str, key: &str) -> f64 {
+    let set = (report["placements"].as_array().expect("placements").iter())
+        .find(|p| p["role"] == role)
+        .unwrap_or_else(|| panic!("no {role} set"));
+    let after = &set["after"];
+    (after[key].as_f64())
+        .or_else(|| after["pose"][key].as_f64())
+        .unwrap_or_else(|| panic!("no {key} in {after}"))
+}
+
 fn figure(v: &Value, name: &str, when: &str, key: &str) -> f64 {
     let p = v["placements"]
         .as_array()
@@ -948,10 +961,7 @@ fn diagnosis_and_calibration_give_the_same_held_out_error_for_the_same_model() {
             .and_then(|r| r["test_rms_m"][0].as_f64())
             .unwrap_or_else(|| panic!("the ladder has no {rung} rung: {ladder:?}"));
         let c = json_of("calibrate", &common, &["--model", rung]);
-        let from_calibration = (c["placements"].as_array().expect("placements").iter())
-            .find(|p| p["role"] == "test")
-            .and_then(|p| p["after"]["pose"]["position_rms_m"].as_f64())
-            .expect("a test set with a position RMS");
+        let from_calibration = set_figure(&c, "test", "position_rms_m");
         assert!(
             (from_diagnosis - from_calibration).abs() <= 1e-9 * from_calibration,
             "{rung}: diagnose {from_diagnosis} m, calibrate {from_calibration} m"

@@ -8,7 +8,7 @@ use std::process::Output;
 use hapcal_runtime::{Pose, Robot};
 use serde_json::Value;
 
-use crate::{hapcal, hapcal_ok, root, scratch, show, stderr, succeeded, ur10_csv};
+use crate::{hapcal, hapcal_ok, root, scratch, set_figure, show, stderr, succeeded, ur10_csv};
 
 /// The UR10 calibrated (geometric) on the bundled poses, written as `dir/ur10.urdf` with its
 /// sidecar; returns the URDF and the calibration's JSON report.
@@ -152,12 +152,7 @@ fn predictions_at_the_training_rows_are_the_runtime_s_and_the_errors_the_calibra
     // The calibration's report for its training rows: the same model, evaluated by the
     // calibration library before writing (1e-9 relative: the URDF's origins are written with
     // every digit).
-    let train = (report["placements"].as_array().expect("placements").iter())
-        .find(|p| p["role"] == "train")
-        .expect("the training set");
-    let from_calibration = train["after"]["pose"]["position_rms_m"]
-        .as_f64()
-        .expect("position RMS");
+    let from_calibration = set_figure(&report, "train", "position_rms_m");
     assert!(
         (reported - from_calibration).abs() <= 1e-9 * from_calibration,
         "predict {reported} m, calibrate {from_calibration} m"

@@ -9,7 +9,7 @@ use std::path::Path;
 
 use serde_json::Value;
 
-use crate::{assert_exit, hapcal, hapcal_ok, root, scratch, show, stderr};
+use crate::{assert_exit, hapcal, hapcal_ok, root, scratch, set_figure, show, stderr};
 
 /// Agreement of predict's and calibrate's training RMS, m: the same model in two
 /// implementations, written with every digit; rounding stays far below it.
@@ -20,17 +20,6 @@ fn json_of(args: &[&str]) -> Value {
     let run = hapcal(args);
     assert!(run.status.success(), "{args:?}: {}", stderr(&run));
     serde_json::from_slice(&run.stdout).expect("one JSON document")
-}
-
-/// The training set's figure `key` of `hapcal calibrate --json`'s report.
-fn training(report: &Value, key: &str) -> f64 {
-    let train = (report["placements"].as_array().expect("placements").iter())
-        .find(|p| p["role"] == "train")
-        .expect("a training set");
-    let after = &train["after"];
-    (after[key].as_f64())
-        .or_else(|| after["pose"][key].as_f64())
-        .unwrap_or_else(|| panic!("no {key} in {after}"))
 }
 
 /// `hapcal calibrate --model compliance --json` of `device` on `data`, written to `out`: the
@@ -58,7 +47,7 @@ fn calibrated_with_compliance(device: &Path, data: &Path, out: &Path) -> (Value,
 fn assert_reproduces_training(v: &Value, report: &Value, errors: &str, key: &str) {
     assert_eq!(v["n_outside_region"], 0, "training rows lie in the region");
     let predicted = v["errors"][errors]["rms"].as_f64().expect("the errors");
-    let calibrated = training(report, key);
+    let calibrated = set_figure(report, "train", key);
     assert!(
         (predicted - calibrated).abs() <= TOLERANCE_M,
         "predict {predicted} m, calibrate {calibrated} m"

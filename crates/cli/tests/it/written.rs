@@ -2,7 +2,7 @@
 //! figures the report printed: the written kinematics, with the instrument and marker frames
 //! fitted again (`--model frames-only`), give the report's calibrated errors.
 
-use super::{hapcal, json, root, scratch, show};
+use super::{hapcal, json, root, scratch, set_figure, show};
 use serde_json::Value;
 
 /// Position mean, RMS and max (m) of each data set of a report, `when` = "before" or "after".
@@ -203,12 +203,7 @@ fn the_other_arms_readings_load_the_tree() {
         !(warnings.iter()).any(|w| w.as_str().is_some_and(|w| w.starts_with("columns ignored"))),
         "{warnings:?}"
     );
-    let test = (report["placements"].as_array().expect("sets").iter())
-        .find(|s| s["role"] == "test")
-        .expect("a test set");
-    let rms = test["after"]["pose"]["position_rms_m"]
-        .as_f64()
-        .expect("RMS");
+    let rms = set_figure(&report, "test", "position_rms_m");
     assert!(rms < 1.3 * 3f64.sqrt() * 0.2e-3, "held-out RMS {rms} m");
     // The test rows alone, predicted from the written calibration.
     let n_test = 165;
