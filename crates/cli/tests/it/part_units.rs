@@ -4,7 +4,7 @@
 //! in millimetres (past the reader's ±1000 m, so the reader stops first) and in centimetres
 //! (within the reader's range: the check's own hypotheses find them).
 
-use super::{csv, on_ur10, scratch, stderr, ur10_rows};
+use super::{assert_exit, csv, on_ur10, scratch, stderr, ur10_rows};
 use std::path::Path;
 
 fn write_rows(path: &Path, rows: &[Vec<String>]) {
@@ -34,18 +34,12 @@ fn the_last_rows_in_another_unit_are_located_and_their_edit_passes() {
         // The last 6 of 23 poses: file lines 19 to 24.
         scale_positions(&mut rows, 17, factor);
         write_rows(&data, &rows);
-        let out = check(&data);
-        let err = stderr(&out);
-        assert_eq!(out.status.code(), Some(2), "{unit}: {err}");
-        assert!(
-            err.contains(&format!(
-                "rows 19–24 of tail.csv look like {unit} while the rest are in metres"
-            )),
-            "{unit}: {err}"
-        );
-        assert!(
-            err.contains("no flag reads part of a file"),
-            "{unit}: {err}"
+        let located =
+            format!("rows 19–24 of tail.csv look like {unit} while the rest are in metres");
+        let err = assert_exit(
+            &check(&data),
+            2,
+            &[&located, "no flag reads part of a file"],
         );
         assert!(
             !err.contains("fix: --length-unit"),
