@@ -2,6 +2,7 @@
 //! library, runs it on the bundled calibrated reference device, and compares every printed
 //! number with `hapcal_runtime`'s.
 
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -45,10 +46,10 @@ pub(crate) fn compile(source: &str, name: &str, lib_args: &[String]) -> PathBuf 
     out
 }
 
-/// Runs `exe` with `arg`; its standard output.
-pub(crate) fn run(exe: &Path, arg: &Path) -> String {
+/// Runs `exe` with `args`; its standard output (exit code 0 asserted).
+pub(crate) fn run(exe: &Path, args: &[&OsStr]) -> String {
     let output = Command::new(exe)
-        .arg(arg)
+        .args(args)
         .output()
         .expect("run the C example");
     let stderr = String::from_utf8_lossy(&output.stderr);
@@ -126,7 +127,7 @@ fn c_example_on_the_static_library_prints_the_library_numbers() {
         "reference_reading_static",
         &[lib.display().to_string()],
     );
-    check(&run(&exe, &fixture()));
+    check(&run(&exe, &[fixture().as_os_str()]));
 }
 
 #[test]
@@ -145,5 +146,5 @@ fn c_example_on_the_shared_library_prints_the_library_numbers() {
             "-lhapcal_runtime_c".to_owned(),
         ],
     );
-    check(&run(&exe, &fixture()));
+    check(&run(&exe, &[fixture().as_os_str()]));
 }

@@ -2,6 +2,7 @@
 //! robot (`tests/data/iiwa14_calibrated.urdf` and its sidecar of compliances), and compares
 //! every printed number with `hapcal_runtime::Robot`'s.
 
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 
 use hapcal_runtime::{
@@ -9,7 +10,7 @@ use hapcal_runtime::{
     UncertaintyBasis, compensate,
 };
 
-use crate::c_example::{assert_rows_bit_identical, compile, lib_dir, row};
+use crate::c_example::{assert_rows_bit_identical, compile, lib_dir, row, run};
 
 pub(crate) fn robot_path() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/iiwa14_calibrated.urdf")
@@ -35,15 +36,13 @@ fn c_robot_example_prints_the_library_numbers() {
     assert!(lib.exists(), "{} was not built", lib.display());
     let exe = compile("robot.c", "robot_static", &[lib.display().to_string()]);
     let record_path = robot_path().with_file_name("iiwa14_record.urdf");
-    let output = std::process::Command::new(&exe)
-        .arg(robot_path())
-        .arg("--record")
-        .arg(&record_path)
-        .output()
-        .expect("run the C example");
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "C example failed: {stderr}");
-    let stdout = String::from_utf8(output.stdout).expect("UTF-8");
+    let robot = robot_path();
+    let args = [
+        robot.as_os_str(),
+        OsStr::new("--record"),
+        record_path.as_os_str(),
+    ];
+    let stdout = run(&exe, &args);
 
     let robot = Robot::load_urdf(&robot_path(), &["ball_link", "tool0"]).expect("test robot");
     assert!(robot.has_compliance());
