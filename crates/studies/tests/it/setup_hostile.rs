@@ -11,8 +11,8 @@ use std::path::{Path, PathBuf};
 
 use hapcal_studies::setup_hostile::{
     AngleUnit, Case, CaseResult, DEFAULT_CASES_PER_FAMILY, FAMILIES, Family, FixApplied, Half,
-    Mistake, Outcome, Recording, Residual, Sources, Table, Visibility, VisibleSummary, cases,
-    correct_twin, euler_xyz_of, fix_flags, judge, stop_fix, twin_key, with_fix, write_case,
+    Invocation, Mistake, Outcome, Recording, Residual, Sources, Table, Visibility, VisibleSummary,
+    cases, correct_twin, euler_xyz_of, fix_flags, judge, stop_fix, twin_key, with_fix, write_case,
 };
 use nalgebra::{Rotation3, Vector3};
 
@@ -44,6 +44,23 @@ fn case(family: Family, recording: Recording, mistake: Mistake) -> Case {
         part: 0,
         half: Half::Tuning,
     }
+}
+
+/// `c` and its correct twin ([`correct_twin`]) written into the scratch folders `name` and
+/// `name-twin` (removed afterwards): `c`'s invocation, its data file and the twin's, read.
+fn with_correct_twin(c: &Case, name: &str) -> (Invocation, Table, Table) {
+    let sources = Sources::load(&root()).expect("fixtures");
+    let (dir, twin_dir) = (scratch(name), scratch(&format!("{name}-twin")));
+    let inv = write_case(c, &sources, &dir, &no_simulation).expect("written");
+    let twin = write_case(&correct_twin(c), &sources, &twin_dir, &no_simulation).expect("twin");
+    let data = |inv: &Invocation| {
+        let i = inv.args.iter().position(|a| a == "--data").expect("--data");
+        Table::read_csv(Path::new(&inv.args[i + 1]), None).expect("written file")
+    };
+    let (mistaken, correct) = (data(&inv), data(&twin));
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&twin_dir);
+    (inv, mistaken, correct)
 }
 
 #[test]
@@ -295,8 +312,6 @@ fn a_fix_is_read_as_flags_and_applied_to_the_command() {
 
 #[test]
 fn a_tracker_moved_from_a_row_on_moves_every_later_pose_rigidly() {
-    let sources = Sources::load(&root()).expect("fixtures");
-    let dir = scratch("tracker");
     let c = case(
         Family::ChangePoint,
         Recording::Positioner,
@@ -306,14 +321,7 @@ fn a_tracker_moved_from_a_row_on_moves_every_later_pose_rigidly() {
             mm: 30,
         },
     );
-    let inv = write_case(&c, &sources, &dir, &no_simulation).expect("written");
-    let twin_dir = scratch("tracker-twin");
-    let twin = write_case(&correct_twin(&c), &sources, &twin_dir, &no_simulation).expect("twin");
-    let data = |inv: &hapcal_studies::setup_hostile::Invocation| {
-        let i = inv.args.iter().position(|a| a == "--data").expect("--data");
-        Table::read_csv(Path::new(&inv.args[i + 1]), None).expect("written file")
-    };
-    let (moved, orig) = (data(&inv), data(&twin));
+    let (inv, moved, orig) = with_correct_twin(&c, "tracker");
     let from = orig.rows.len() / 2;
     let p = |t: &Table, r: usize| {
         let c = |n: &str| t.rows[r][t.col(n).expect("column")];
@@ -348,8 +356,6 @@ fn a_tracker_moved_from_a_row_on_moves_every_later_pose_rigidly() {
     }
     // The change is located by the lines around the first moved row (header on line 1).
     assert!(inv.locate_words.contains(&format!("data.csv:{}", from + 2)));
-    let _ = std::fs::remove_dir_all(&dir);
-    let _ = std::fs::remove_dir_all(&twin_dir);
 }
 
 /// A report of `hapcal calibrate --json` as the screening reads it: training sets of
@@ -438,8 +444,6 @@ fn a_mistake_within_5_percent_of_its_correct_twins_residual_is_invisible() {
 
 #[test]
 fn a_correct_twin_is_the_mistaken_data_without_the_mistake() {
-    let sources = Sources::load(&root()).expect("fixtures");
-    let (dir, twin_dir) = (scratch("sign"), scratch("sign-twin"));
     // Part 1 drops a seeded fifth of the rows: the twin must drop the same ones.
     let c = Case {
         part: 1,
@@ -448,13 +452,7 @@ fn a_correct_twin_is_the_mistaken_data_without_the_mistake() {
     let twin = correct_twin(&c);
     assert_eq!(twin.mistake, Mistake::None);
     assert_eq!(twin_key(&c), twin_key(&twin));
-    let inv = write_case(&c, &sources, &dir, &no_simulation).expect("written");
-    let twin_inv = write_case(&twin, &sources, &twin_dir, &no_simulation).expect("written");
-    let data = |inv: &hapcal_studies::setup_hostile::Invocation| {
-        let i = inv.args.iter().position(|a| a == "--data").expect("--data");
-        Table::read_csv(Path::new(&inv.args[i + 1]), None).expect("written file")
-    };
-    let (mistaken, correct) = (data(&inv), data(&twin_inv));
+    let (_, mistaken, correct) = with_correct_twin(&c, "sign");
     assert_eq!(mistaken.header, correct.header);
     assert_eq!(correct.rows.len(), 23 - 23 / 5);
     // Exactly one column differs, the second revolute joint's, by its sign.
@@ -465,6 +463,4 @@ fn a_correct_twin_is_the_mistaken_data_without_the_mistake() {
             assert_eq!(a.to_bits(), want.to_bits(), "column {k}");
         }
     }
-    let _ = std::fs::remove_dir_all(&dir);
-    let _ = std::fs::remove_dir_all(&twin_dir);
 }
