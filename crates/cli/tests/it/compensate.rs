@@ -3,7 +3,7 @@
 
 use hapcal_runtime::Robot;
 
-use crate::{assert_exit, compensate, hapcal_ok, iiwa, scratch, succeeded};
+use crate::{assert_exit, compensate, compensate_with, hapcal_ok, iiwa, scratch, succeeded};
 
 /// Writes the calibrated robot (a copy of the URDF and its sidecar) into `dir`.
 fn calibrated_robot(dir: &std::path::Path) -> std::path::PathBuf {
@@ -314,18 +314,14 @@ fn compensation_with_a_calibration_from_simulated_data() {
     let targets = dir.join("targets.csv");
     std::fs::write(&targets, text).expect("write");
     let out = dir.join("commands.csv");
-    hapcal_ok(&[
-        "compensate",
-        "--device",
-        &calibrated.display().to_string(),
-        "--tip",
-        "ball_link",
-        "--instrument-frame",
-        "--targets",
-        &targets.display().to_string(),
-        "--out",
-        &out.display().to_string(),
-    ]);
+    let extra = ["--instrument-frame"];
+    succeeded(compensate_with(
+        &calibrated,
+        Some("ball_link"),
+        &targets,
+        &out,
+        &extra,
+    ));
     let written = std::fs::read_to_string(&out).expect("commands");
     assert_eq!(written.lines().count(), 21, "{written}");
     for (row, (_, target)) in written.lines().skip(1).zip(&cli_rows) {

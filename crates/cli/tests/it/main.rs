@@ -72,17 +72,24 @@ fn assert_exit(out: &Output, code: i32, needles: &[&str]) -> String {
 
 /// `hapcal compensate` of `targets` on the robot `urdf` with the tip link `tip`, into `out`.
 fn compensate(urdf: &Path, tip: &str, targets: &Path, out: &Path) -> Output {
-    hapcal(&[
-        "compensate",
-        "--device",
-        &show(urdf),
-        "--tip",
-        tip,
-        "--targets",
-        &show(targets),
-        "--out",
-        &show(out),
-    ])
+    compensate_with(urdf, Some(tip), targets, out, &[])
+}
+
+/// `hapcal compensate` of `targets` on `device` (a URDF with the tip link `tip`, or a device
+/// file with `None`), into `out`, with the flags `extra`.
+fn compensate_with(
+    device: &Path,
+    tip: Option<&str>,
+    targets: &Path,
+    out: &Path,
+    extra: &[&str],
+) -> Output {
+    let (device, targets, out) = (show(device), show(targets), show(out));
+    let mut args = vec!["compensate", "--device", &device];
+    args.extend(tip.iter().flat_map(|t| ["--tip", t]));
+    args.extend(["--targets", &targets, "--out", &out]);
+    args.extend_from_slice(extra);
+    hapcal(&args)
 }
 
 /// The CSV file at `path` with a header: the header's names and each row's cells through

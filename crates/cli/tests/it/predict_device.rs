@@ -9,7 +9,9 @@ use std::path::Path;
 
 use serde_json::Value;
 
-use crate::{assert_exit, hapcal, hapcal_ok, root, scratch, set_figure, show, stderr};
+use crate::{
+    assert_exit, compensate_with, hapcal, root, scratch, set_figure, show, stderr, succeeded,
+};
 
 /// Agreement of predict's and calibrate's training RMS, m: the same model in two
 /// implementations, written with every digit; rounding stays far below it.
@@ -117,15 +119,7 @@ fn compensate_onto_predictions(dir: &Path, device: &Path, root_frame: &Value) {
     let targets_path = dir.join("targets.csv");
     std::fs::write(&targets_path, targets).expect("write the targets");
     let commands = dir.join("commands.csv");
-    hapcal_ok(&[
-        "compensate",
-        "--device",
-        &show(device),
-        "--targets",
-        &show(&targets_path),
-        "--out",
-        &show(&commands),
-    ]);
+    succeeded(compensate_with(device, None, &targets_path, &commands, &[]));
     let text = std::fs::read_to_string(&commands).expect("the commands");
     assert_eq!(text.lines().count(), 6, "{text}");
     assert!(text.starts_with("line,q1,q2,"), "{text}");
