@@ -103,123 +103,113 @@ fn bench_robot(c: &mut Criterion) {
         pose: rigid.into(),
     };
 
-    let mut group = c.benchmark_group("robot_cycle");
-    group.bench_function("c_abi", |b| {
-        let mut pose = zero_pose();
-        let mut tips = [pose];
-        let mut jac = [0.0; 42];
-        b.iter(|| {
+    let (mut pose, mut c_tips, mut c_jac) = (zero_pose(), [zero_pose()], [0.0; 42]);
+    let (mut tips, mut jac) = ([Pose::IDENTITY], [[0.0; 6]; 7]);
+    c_abi_and_rust(
+        c,
+        "robot_cycle",
+        || {
             let q = black_box(&Q);
             // SAFETY: a live handle and arrays of the stated sizes.
             unsafe {
                 let s1 = tip_pose(handle, 0, q.as_ptr(), 7, &mut pose);
-                let s2 = spatial(handle, 0, q.as_ptr(), 7, jac.as_mut_ptr(), ptr::null_mut());
-                let s3 = deflected(handle, q.as_ptr(), 7, tips.as_mut_ptr(), 1, ptr::null_mut());
-                (s1, s2, s3, tips[0].translation_m[0])
+                let s2 = spatial(
+                    handle,
+                    0,
+                    q.as_ptr(),
+                    7,
+                    c_jac.as_mut_ptr(),
+                    ptr::null_mut(),
+                );
+                let s3 = deflected(
+                    handle,
+                    q.as_ptr(),
+                    7,
+                    c_tips.as_mut_ptr(),
+                    1,
+                    ptr::null_mut(),
+                );
+                (s1, s2, s3, c_tips[0].translation_m[0])
             }
-        })
-    });
-    group.bench_function("rust", |b| {
-        let mut tips = [Pose::IDENTITY];
-        let mut jac = [[0.0; 6]; 7];
-        b.iter(|| {
+        },
+        || {
             let q = black_box(&Q);
             let pose = robot.tip_pose(0, q, &mut ws).map(|p| p.translation_m[0]);
             let j = robot.spatial_jacobian(0, q, &mut ws, &mut jac).is_ok();
             let d = robot.deflected_tip_poses(q, &mut ws, &mut tips).is_ok();
             (pose, j, d, tips[0].translation_m[0])
-        })
-    });
-    group.finish();
+        },
+    );
 
     // Pose + Jacobian in one call: of the rigid robot, and of the deflected robot (one
     // deflection, the Jacobian at the deflected angles), what a controller calls per cycle.
-    let mut group = c.benchmark_group("robot_pose_jacobian");
-    group.bench_function("c_abi", |b| {
-        let mut pose = zero_pose();
-        let mut jac = [0.0; 42];
-        b.iter(|| {
+    c_abi_and_rust(
+        c,
+        "robot_pose_jacobian",
+        || {
             let q = black_box(&Q);
             // SAFETY: a live handle and arrays of the stated sizes.
-            let s = unsafe { spatial(handle, 0, q.as_ptr(), 7, jac.as_mut_ptr(), &mut pose) };
-            (s, pose.translation_m[0], jac[0])
-        })
-    });
-    group.bench_function("rust", |b| {
-        let mut jac = [[0.0; 6]; 7];
-        b.iter(|| {
+            let s = unsafe { spatial(handle, 0, q.as_ptr(), 7, c_jac.as_mut_ptr(), &mut pose) };
+            (s, pose.translation_m[0], c_jac[0])
+        },
+        || {
             let q = black_box(&Q);
             let pose = robot.spatial_jacobian(0, q, &mut ws, &mut jac);
             (pose.map(|p| p.translation_m[0]), jac[0][0])
-        })
-    });
-    group.finish();
-
-    let mut group = c.benchmark_group("robot_deflected_pose_jacobian");
-    group.bench_function("c_abi", |b| {
-        let mut pose = zero_pose();
-        let mut jac = [0.0; 42];
-        b.iter(|| {
+        },
+    );
+    c_abi_and_rust(
+        c,
+        "robot_deflected_pose_jacobian",
+        || {
             let q = black_box(&Q);
+            let (jac, pose) = (c_jac.as_mut_ptr(), &mut pose);
             // SAFETY: a live handle and arrays of the stated sizes.
-            let s = unsafe {
-                deflected_jacobian(
-                    handle,
-                    0,
-                    q.as_ptr(),
-                    7,
-                    jac.as_mut_ptr(),
-                    &mut pose,
-                    ptr::null_mut(),
-                )
-            };
-            (s, pose.translation_m[0], jac[0])
-        })
-    });
-    group.bench_function("rust", |b| {
-        let mut jac = [[0.0; 6]; 7];
-        b.iter(|| {
+            let s =
+                unsafe { deflected_jacobian(handle, 0, q.as_ptr(), 7, jac, pose, ptr::null_mut()) };
+            (s, pose.translation_m[0], c_jac[0])
+        },
+        || {
             let q = black_box(&Q);
             let out = robot.deflected_spatial_jacobian(0, q, &mut ws, &mut jac);
             (out.map(|(p, _)| p.translation_m[0]), jac[0][0])
-        })
-    });
-    group.finish();
+        },
+    );
 
-    let mut group = c.benchmark_group("robot_compensate_pose");
-    group.bench_function("c_abi", |b| {
-        let mut q = [0.0; 7];
-        let mut result = HapcalCompensation::default();
-        b.iter(|| {
+    let (mut c_q, mut result, mut q) = ([0.0; 7], HapcalCompensation::default(), [0.0; 7]);
+    let target = Target::Pose(rigid);
+    c_abi_and_rust(
+        c,
+        "robot_compensate_pose",
+        || {
+            let (target, out) = (black_box(&c_target), c_q.as_mut_ptr());
             // SAFETY: a live handle and arrays of the stated sizes.
-            let s = unsafe {
-                comp(
-                    handle,
-                    0,
-                    black_box(&c_target),
-                    Q.as_ptr(),
-                    7,
-                    &c_cfg,
-                    q.as_mut_ptr(),
-                    &mut result,
-                )
-            };
+            let s = unsafe { comp(handle, 0, target, Q.as_ptr(), 7, &c_cfg, out, &mut result) };
             assert!(s == HapcalStatus::Ok && result.reached);
-            q[0]
-        })
-    });
-    group.bench_function("rust", |b| {
-        let mut q = [0.0; 7];
-        let target = Target::Pose(rigid);
-        b.iter(|| {
+            c_q[0]
+        },
+        || {
             let c = compensate(&robot, 0, black_box(&target), &Q, &cfg, &mut ws, &mut q);
             assert!(c.is_ok_and(|c| c.reached));
             q[0]
-        })
-    });
-    group.finish();
+        },
+    );
     // SAFETY: a live handle, freed once.
     unsafe { hapcal_robot_free(handle) };
+}
+
+/// Benchmark group `name`: the same work through the C ABI (`c_abi`) and through
+/// `hapcal_runtime` directly (`rust`), each routine called once per iteration.
+fn c_abi_and_rust<A, B>(
+    c: &mut Criterion,
+    name: &str,
+    mut c_abi: impl FnMut() -> A,
+    mut rust: impl FnMut() -> B,
+) {
+    let mut group = c.benchmark_group(name);
+    group.bench_function("c_abi", |b| b.iter(&mut c_abi));
+    group.bench_function("rust", |b| b.iter(&mut rust));
+    group.finish();
 }
 
 criterion_group!(benches, bench, bench_robot);
