@@ -2,7 +2,7 @@
 
 use std::process::Output;
 
-use super::{assert_exit, hapcal, hapcal_ok, root, scratch, set_figure, succeeded};
+use super::{assert_exit, force_args, hapcal, hapcal_ok, root, scratch, set_figure, succeeded};
 
 /// The committed calibrated reference device is exactly what `hapcal calibrate` writes from
 /// the committed log (no truth file), and `hapcal force` prints the Fig. 12 table, the distributions and writes
@@ -48,17 +48,7 @@ fn force(calibrated: &str, more: &[&str]) -> Output {
     let dir = root().join("fixtures/reference-device");
     let device = dir.join("device.toml").display().to_string();
     let truth = dir.join("truth.toml").display().to_string();
-    let mut args = vec![
-        "force",
-        "--device",
-        &device,
-        "--truth",
-        &truth,
-        "--calibrated",
-        calibrated,
-    ];
-    args.extend_from_slice(more);
-    hapcal(&args)
+    hapcal(&force_args(&device, &truth, calibrated, more))
 }
 
 /// A missing calibrated file is an error that names it.

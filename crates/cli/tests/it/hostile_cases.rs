@@ -5,7 +5,7 @@
 //! every file named on the command line, and of the files in every folder named, before and
 //! after). Fixtures are written into a scratch folder or read from `fixtures/` (never written).
 
-use super::{root, scratch, show};
+use super::{force_args, root, scratch, show};
 use std::collections::BTreeMap;
 use std::hash::{DefaultHasher, Hash, Hasher};
 use std::path::{Path, PathBuf};
@@ -1882,51 +1882,27 @@ fn option_cases(t: &mut Table) {
         ),
         (
             "force --gain negative",
-            vec![
-                "force",
-                "--device",
+            force_args(
                 &device,
-                "--truth",
                 &truth,
-                "--calibrated",
                 &calibrated,
-                "--gain",
-                "-5",
-                "--svg",
-                "unused.svg",
-            ],
+                &["--gain", "-5", "--svg", "unused.svg"],
+            ),
             vec!["--gain must lie between 0 and 1000", "got -5e0"],
         ),
         (
             "force --gain NaN",
-            vec![
-                "force",
-                "--device",
+            force_args(
                 &device,
-                "--truth",
                 &truth,
-                "--calibrated",
                 &calibrated,
-                "--gain",
-                "NaN",
-                "--svg",
-                "unused.svg",
-            ],
+                &["--gain", "NaN", "--svg", "unused.svg"],
+            ),
             vec!["--gain must lie between 0 and 1000", "got NaN"],
         ),
         (
             "force --poses 0",
-            vec![
-                "force",
-                "--device",
-                &device,
-                "--truth",
-                &truth,
-                "--calibrated",
-                &calibrated,
-                "--poses",
-                "0",
-            ],
+            force_args(&device, &truth, &calibrated, &["--poses", "0"]),
             vec!["--poses", "must lie between 1 and"],
         ),
         (
@@ -2250,53 +2226,36 @@ fn output_cases(t: &mut Table) {
         ),
         (
             "force --svg = the device",
-            [
-                "force",
-                "--device",
-                &device_copy,
-                "--truth",
-                &truth,
-                "--calibrated",
-                &calibrated,
-                "--svg",
-                &device_copy,
-            ]
-            .map(str::to_owned)
-            .to_vec(),
+            force_args(&device_copy, &truth, &calibrated, &["--svg", &device_copy])
+                .into_iter()
+                .map(str::to_owned)
+                .collect(),
             vec!["is written as .svg, not as .toml".into()],
         ),
         (
             "force --svg in a missing folder",
-            [
-                "force",
-                "--device",
+            force_args(
                 &device_copy,
-                "--truth",
                 &truth,
-                "--calibrated",
                 &calibrated,
-                "--svg",
-                &format!("{missing}/f.svg"),
-            ]
+                &["--svg", &format!("{missing}/f.svg")],
+            )
+            .into_iter()
             .map(str::to_owned)
-            .to_vec(),
+            .collect(),
             vec![format!("cannot write {missing}/f.svg")],
         ),
         (
             "force --svg .png",
-            [
-                "force",
-                "--device",
+            force_args(
                 &device_copy,
-                "--truth",
                 &truth,
-                "--calibrated",
                 &calibrated,
-                "--svg",
-                &t.path("outputs/f.png"),
-            ]
+                &["--svg", &t.path("outputs/f.png")],
+            )
+            .into_iter()
             .map(str::to_owned)
-            .to_vec(),
+            .collect(),
             vec!["is written as .svg, not as .png".into()],
         ),
         (
@@ -2491,17 +2450,7 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
         ),
         (
             "force --poses 10⁸",
-            args(&[
-                "force",
-                "--device",
-                &device,
-                "--truth",
-                &truth,
-                "--calibrated",
-                &calibrated,
-                "--poses",
-                "100000000",
-            ]),
+            args(&force_args(&device, &truth, &calibrated, &["--poses", "100000000"])),
             2,
             vec![
                 "--poses".to_owned(),
@@ -2527,17 +2476,7 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
         ),
         (
             "force --gain 1e300",
-            args(&[
-                "force",
-                "--device",
-                &device,
-                "--truth",
-                &truth,
-                "--calibrated",
-                &calibrated,
-                "--gain",
-                "1e300",
-            ]),
+            args(&force_args(&device, &truth, &calibrated, &["--gain", "1e300"])),
             2,
             vec![
                 "--gain must lie between 0 and 1000".to_owned(),
@@ -2582,15 +2521,7 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
         ),
         (
             "force with a truth whose phi0_rad = -0.1",
-            args(&[
-                "force",
-                "--device",
-                &device,
-                "--truth",
-                &phi0_negative,
-                "--calibrated",
-                &calibrated,
-            ]),
+            args(&force_args(&device, &phi0_negative, &calibrated, &[])),
             2,
             vec![format!("{phi0_negative}:106:12: phi0_rad = -0.1 rad is outside (0, π)")],
         ),
@@ -2604,29 +2535,13 @@ fn limit_cases(t: &mut Table) -> Vec<PathBuf> {
         ),
         (
             "force with a truth whose capstan eccentricity radius is negative",
-            args(&[
-                "force",
-                "--device",
-                &device,
-                "--truth",
-                &negative_radius,
-                "--calibrated",
-                &calibrated,
-            ]),
+            args(&force_args(&device, &negative_radius, &calibrated, &[])),
             2,
             vec![format!("{negative_radius}:53:9: r_o_m = -2e-4 m is negative")],
         ),
         (
             "force with a truth whose capstan ratio error is 1e6",
-            args(&[
-                "force",
-                "--device",
-                &device,
-                "--truth",
-                &ratio_truth,
-                "--calibrated",
-                &calibrated,
-            ]),
+            args(&force_args(&device, &ratio_truth, &calibrated, &[])),
             2,
             vec![format!("{ratio_truth}:52:6: re = 1e6 is outside ±1")],
         ),

@@ -70,6 +70,27 @@ fn assert_exit(out: &Output, code: i32, needles: &[&str]) -> String {
     err
 }
 
+/// The `hapcal force` command line on the nominal device file `device`, the truth file `truth`
+/// and the calibrated device file `calibrated`, then `more`.
+fn force_args<'a>(
+    device: &'a str,
+    truth: &'a str,
+    calibrated: &'a str,
+    more: &[&'a str],
+) -> Vec<&'a str> {
+    let mut args = vec![
+        "force",
+        "--device",
+        device,
+        "--truth",
+        truth,
+        "--calibrated",
+        calibrated,
+    ];
+    args.extend_from_slice(more);
+    args
+}
+
 /// `hapcal compensate` of `targets` on the robot `urdf` with the tip link `tip`, into `out`.
 fn compensate(urdf: &Path, tip: &str, targets: &Path, out: &Path) -> Output {
     compensate_with(urdf, Some(tip), targets, out, &[])
