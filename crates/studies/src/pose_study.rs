@@ -409,20 +409,17 @@ pub struct StudyArgs {
     pub out: std::path::PathBuf,
 }
 
-/// The reference device of a study: `truth`, or the bundled reference truth.
-fn reference_from(truth: Option<&std::path::PathBuf>) -> Result<crate::paper::Reference> {
-    let truth = truth
+/// The truth file of a study: `truth`, or the bundled reference truth.
+fn truth_file(truth: Option<&std::path::PathBuf>) -> std::path::PathBuf {
+    truth
         .cloned()
-        .unwrap_or_else(|| crate::project_root().join("fixtures/reference-device/truth.toml"));
-    crate::paper::Reference::load(&truth)
+        .unwrap_or_else(|| crate::project_root().join("fixtures/reference-device/truth.toml"))
 }
 
 /// The files a study reads, which its report must not replace: the truth file (given or the
 /// bundled one) and the device file it names.
 fn study_inputs(truth: Option<&std::path::PathBuf>) -> Vec<std::path::PathBuf> {
-    let truth = truth
-        .cloned()
-        .unwrap_or_else(|| crate::project_root().join("fixtures/reference-device/truth.toml"));
+    let truth = truth_file(truth);
     let device = hapcal_sim::read_truth(&truth)
         .ok()
         .map(|t| t.device_path(&truth));
@@ -439,15 +436,31 @@ fn check_report(out: &std::path::Path, truth: Option<&std::path::PathBuf>) -> Re
     check_output(out, &inputs)
 }
 
-/// Writes a study's Markdown report atomically, never over one of its inputs.
-fn write_report(
+/// Runs a study end to end: checks that its Markdown report `out` can be written
+/// ([`check_report`]), loads the reference device (`truth`, or the bundled reference truth),
+/// runs `study` on it for the report's text, writes that text atomically, never over one of
+/// the study's inputs, and returns it.
+///
+/// # Errors
+/// An output that cannot be written, an unreadable truth, or `study`'s error.
+fn run_and_write(
     out: &std::path::Path,
-    text: &str,
     truth: Option<&std::path::PathBuf>,
-) -> Result<()> {
+    study: impl FnOnce(&crate::paper::Reference) -> Result<String>,
+) -> Result<String> {
+    check_report(out, truth)?;
+    let r = crate::paper::Reference::load(&truth_file(truth))?;
+    let text = study(&r)?;
     let inputs = study_inputs(truth);
     let inputs: Vec<&std::path::Path> = inputs.iter().map(|p| p.as_path()).collect();
-    hapcal_calibrate::calibrate::write_new(out, text, &inputs)
+    hapcal_calibrate::calibrate::write_new(out, &text, &inputs)?;
+    Ok(text)
+}
+
+/// `counts` as the command line gives them: comma-separated.
+fn count_list(counts: &[usize]) -> String {
+    let counts: Vec<String> = counts.iter().map(usize::to_string).collect();
+    counts.join(",")
 }
 
 /// Runs `hapcal pose-study`, writes the Markdown and returns it.
@@ -455,8 +468,6 @@ fn write_report(
 /// # Errors
 /// Unreadable truth, a simulation or identification failure, or an unwritable output.
 pub fn run_study(args: &StudyArgs, progress: &dyn Fn(u64)) -> Result<String> {
-    check_report(&args.out, args.truth.as_ref())?;
-    let r = reference_from(args.truth.as_ref())?;
     let cfg = StudyConfig {
         seeds: args.seeds,
         counts: args.counts.clone(),
@@ -467,12 +478,10 @@ pub fn run_study(args: &StudyArgs, progress: &dyn Fn(u64)) -> Result<String> {
         refine: args.refine,
         weight_rows: args.weight_rows,
     };
-    let study = pose_study(&r, &cfg, progress)?;
-    let counts: Vec<String> = args.counts.iter().map(usize::to_string).collect();
     let command = format!(
         "cargo run --release -p hapcal -- pose-study --seeds {} --counts {} --random {} --candidates {} --criterion {} --transmissions {}{}{} --out {}",
         args.seeds,
-        counts.join(","),
+        count_list(&args.counts),
         args.random,
         args.candidates,
         args.criterion,
@@ -485,9 +494,10 @@ pub fn run_study(args: &StudyArgs, progress: &dyn Fn(u64)) -> Result<String> {
         },
         args.out.display()
     );
-    let text = study_markdown(&study, &cfg, &command);
-    write_report(&args.out, &text, args.truth.as_ref())?;
-    Ok(text)
+    run_and_write(&args.out, args.truth.as_ref(), |r| {
+        let study = pose_study(r, &cfg, progress)?;
+        Ok(study_markdown(&study, &cfg, &command))
+    })
 }
 
 /// Settings of [`design_bound`].
@@ -938,8 +948,6 @@ pub struct BoundArgs {
 /// # Errors
 /// Unreadable truth, a design failure, or an unwritable output.
 pub fn run_bound(args: &BoundArgs, progress: &dyn Fn(&str)) -> Result<String> {
-    check_report(&args.out, args.truth.as_ref())?;
-    let r = reference_from(args.truth.as_ref())?;
     let cfg = BoundConfig {
         n_candidates: args.candidates,
         seeds: args.seeds,
@@ -948,21 +956,20 @@ pub fn run_bound(args: &BoundArgs, progress: &dyn Fn(&str)) -> Result<String> {
         noise: args.noise,
         rounds: args.rounds,
     };
-    let b = design_bound(&r, &cfg, progress)?;
-    let counts: Vec<String> = args.counts.iter().map(usize::to_string).collect();
     let command = format!(
         "cargo run --release -p hapcal -- pose-bound --candidates {} --seeds {} --random {} --counts {} --noise {} --rounds {} --out {}",
         args.candidates,
         args.seeds,
         args.random,
-        counts.join(","),
+        count_list(&args.counts),
         args.noise.name(),
         args.rounds,
         args.out.display()
     );
-    let text = bound_markdown(&b, &cfg, &command);
-    write_report(&args.out, &text, args.truth.as_ref())?;
-    Ok(text)
+    run_and_write(&args.out, args.truth.as_ref(), |r| {
+        let b = design_bound(r, &cfg, progress)?;
+        Ok(bound_markdown(&b, &cfg, &command))
+    })
 }
 
 /// `W_S = mean over readings of G_qᵀG_q`, `G_q` the 3 × `kept.len()` end-point Jacobian (m per
