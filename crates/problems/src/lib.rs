@@ -185,14 +185,13 @@ impl Error {
         expected: usize,
         found: usize,
     ) -> Result<(), Error> {
-        if found == expected {
-            Ok(())
-        } else {
-            Err(Error::JointCount {
+        if found != expected {
+            return Err(Error::JointCount {
                 row,
                 expected,
                 found,
-            })
+            });
         }
+        Ok(())
     }
 }
