@@ -232,6 +232,14 @@ fn semantic_checks_point_at_the_offending_value() {
     }
 }
 
+/// Asserts that the device file `text` with its first `from` replaced by `to`, read
+/// as `t.toml`, is refused with a message holding every one of `parts`.
+#[track_caller]
+fn refused_edit(text: &str, (from, to): (&str, &str), parts: &[&str]) {
+    let edited = text.replacen(from, to, 1);
+    assert_contains(&message(parse_device(&edited, Path::new("t.toml"))), parts);
+}
+
 #[test]
 fn missing_device_file_is_an_io_error() {
     let msg = message(read_device(&data("no_such_device.toml")));
@@ -260,33 +268,31 @@ fn prismatic_joint_survives_the_device_file_with_its_unit() {
     assert_eq!(back.prismatic_joints(), device.prismatic_joints());
 
     // The limit keys name the unit and must match the joint.
-    let as_rad = text.replacen(
-        "lower_m = 0.0\nupper_m = 0.35",
-        "lower_rad = 0.0\nupper_rad = 0.35",
-        1,
-    );
-    assert_contains(
-        &message(parse_device(&as_rad, Path::new("t.toml"))),
+    refused_edit(
+        &text,
+        (
+            "lower_m = 0.0\nupper_m = 0.35",
+            "lower_rad = 0.0\nupper_rad = 0.35",
+        ),
         &[
             "t.toml:",
             "joint \"torso_lift_joint\" is a prismatic joint: its limits are lengths, expected lower_m (in m), found lower_rad",
         ],
     );
-    let as_m = text.replacen(
-        "name = \"arm_1_joint\"\nlower_rad = ",
-        "name = \"arm_1_joint\"\nlower_m = ",
-        1,
-    );
-    assert_contains(
-        &message(parse_device(&as_m, Path::new("t.toml"))),
+    refused_edit(
+        &text,
+        (
+            "name = \"arm_1_joint\"\nlower_rad = ",
+            "name = \"arm_1_joint\"\nlower_m = ",
+        ),
         &[
             "joint \"arm_1_joint\" is a revolute joint: its limits are angles, expected lower_rad (in rad), found lower_m",
         ],
     );
     // A prismatic limit is a length: 2000 m is out of range.
-    let far = text.replacen("upper_m = 0.35", "upper_m = 2000.0", 1);
-    assert_contains(
-        &message(parse_device(&far, Path::new("t.toml"))),
+    refused_edit(
+        &text,
+        ("upper_m = 0.35", "upper_m = 2000.0"),
         &["t.toml:70:11: joint[0].upper_m = 2e3 m is out of range"],
     );
 }
@@ -320,18 +326,17 @@ fn placement_tree_survives_the_device_file() {
     let back = parse_device(&text, Path::new("humanoid.toml")).unwrap();
     assert_eq!(back, device);
 
-    let bad = text.replacen("from = \"torso_3\"", "from = \"r_3\"", 1);
-    let err = message(parse_device(&bad, Path::new("h.toml")));
-    assert_contains(
-        &err,
+    refused_edit(
+        &text,
+        ("from = \"torso_3\"", "from = \"r_3\""),
         &[
-            "h.toml:",
+            "t.toml:",
             "branch from = \"r_3\": no placement of the main chain or of an earlier branch has that name",
         ],
     );
-    let bad = text.replacen("from = \"torso_3\"", "from = \"torso_9\"", 1);
-    assert_contains(
-        &message(parse_device(&bad, Path::new("h.toml"))),
+    refused_edit(
+        &text,
+        ("from = \"torso_3\"", "from = \"torso_9\""),
         &["torso_9"],
     );
 }
