@@ -99,6 +99,16 @@ fn refused_edit(from: &str, to: &str) -> ContractError {
     refused(&text.replace(from, to))
 }
 
+/// The refusal of the record's sidecar with `from` replaced by `to`, asserted to hold `part` in
+/// its message and to stand at the line of the unedited sidecar that starts with `needle`.
+#[track_caller]
+fn refused_at((from, to): (&str, &str), part: &str, needle: &str) -> ContractError {
+    let e = refused_edit(from, to);
+    assert!(e.message.contains(part), "{e}");
+    assert_eq!(e.line, line_of(&record().to_sidecar_toml(), needle), "{e}");
+    e
+}
+
 fn refused(text: &str) -> ContractError {
     Calibration::from_sidecar_str(text, "robot.calibration.toml").expect_err("refused")
 }
@@ -125,17 +135,20 @@ fn a_newer_schema_is_refused_in_words() {
 
 #[test]
 fn an_unknown_name_or_a_wrong_unit_is_refused_at_its_line() {
-    let text = record().to_sidecar_toml();
-    let e = refused_edit("\"left_1.rx\"", "\"left_1.rw\"");
-    assert!(e.message.contains("unknown value name"), "{e}");
-    assert_eq!(e.line, line_of(&text, "\"left_1.rx\""), "{e}");
-
-    let e = refused_edit(
-        "\"compliance.left_1\" = { value = 0.0001234567890123, std = 3e-6, unit = \"rad/(N·m)\"",
-        "\"compliance.left_1\" = { value = 0.0001234567890123, std = 3e-6, unit = \"rad/m\"",
+    refused_at(
+        ("\"left_1.rx\"", "\"left_1.rw\""),
+        "unknown value name",
+        "\"left_1.rx\"",
     );
-    assert!(e.message.contains("expected \"rad/(N·m)\""), "{e}");
-    assert_eq!(e.line, line_of(&text, "\"compliance.left_1\""), "{e}");
+
+    let e = refused_at(
+        (
+            "\"compliance.left_1\" = { value = 0.0001234567890123, std = 3e-6, unit = \"rad/(N·m)\"",
+            "\"compliance.left_1\" = { value = 0.0001234567890123, std = 3e-6, unit = \"rad/m\"",
+        ),
+        "expected \"rad/(N·m)\"",
+        "\"compliance.left_1\"",
+    );
     assert!(e.to_string().starts_with("robot.calibration.toml:"), "{e}");
 }
 
@@ -293,21 +306,24 @@ fn a_region_with_min_above_max_is_refused_at_its_line() {
 
 #[test]
 fn the_model_constrains_the_values_its_record_holds() {
-    let text = record().to_sidecar_toml();
     // A geometric record with compliance values.
-    let e = refused_edit(
-        "model = \"transversal-compliance\"",
-        "model = \"geometric\"",
+    refused_at(
+        (
+            "model = \"transversal-compliance\"",
+            "model = \"geometric\"",
+        ),
+        "identifies no compliance",
+        "\"compliance.left_1\"",
     );
-    assert!(e.message.contains("identifies no compliance"), "{e}");
-    assert_eq!(e.line, line_of(&text, "\"compliance.left_1\""), "{e}");
     // A compliance record with a transversal compliance.
-    let e = refused_edit(
-        "model = \"transversal-compliance\"",
-        "model = \"compliance\"",
+    refused_at(
+        (
+            "model = \"transversal-compliance\"",
+            "model = \"compliance\"",
+        ),
+        "no transversal",
+        "\"transversal.left_1\"",
     );
-    assert!(e.message.contains("no transversal"), "{e}");
-    assert_eq!(e.line, line_of(&text, "\"transversal.left_1\""), "{e}");
     // A haptic device's model on a URDF's sidecar.
     let mut r = record();
     r.model = Some(ModelName::Transmissions);
