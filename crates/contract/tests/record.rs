@@ -109,6 +109,16 @@ fn refused_at((from, to): (&str, &str), part: &str, needle: &str) -> ContractErr
     e
 }
 
+/// The refusal of the sidecar text `bad`, asserted to hold `part` in its message and to stand
+/// at line `line`.
+#[track_caller]
+fn refused_with(bad: &str, part: &str, line: usize) -> ContractError {
+    let e = refused(bad);
+    assert!(e.message.contains(part), "{e}");
+    assert_eq!(e.line, line, "{e}");
+    e
+}
+
 fn refused(text: &str) -> ContractError {
     Calibration::from_sidecar_str(text, "robot.calibration.toml").expect_err("refused")
 }
@@ -260,19 +270,15 @@ fn a_missing_schema_version_is_refused_at_the_first_key_of_schema_1() {
     let bad = record()
         .to_sidecar_toml()
         .replace("schema_version = 1\n", "");
-    let e = refused(&bad);
-    assert!(e.message.contains("missing key schema_version"), "{e}");
+    let e = refused_with(&bad, "missing key schema_version", line_of(&bad, "model ="));
     assert!(!e.message.contains("unknown field"), "{e}");
-    assert_eq!(e.line, line_of(&bad, "model ="), "{e}");
 }
 
 #[test]
 fn negative_masses_are_refused_at_their_own_line() {
     let text = record().to_sidecar_toml();
     let bad = with_line(&text, "mass_kg", "mass_kg = -1.25");
-    let e = refused(&bad);
-    assert!(e.message.contains("non-negative mass"), "{e}");
-    assert_eq!(e.line, line_of(&bad, "mass_kg"), "{e}");
+    refused_with(&bad, "non-negative mass", line_of(&bad, "mass_kg"));
     // A negative compliance is judged where it is estimated (calibrate stops on one beyond
     // negative_compliance_sigmas); the record reads what it holds.
     let negative = with_line(
@@ -287,9 +293,7 @@ fn negative_masses_are_refused_at_their_own_line() {
 fn a_region_with_min_above_max_is_refused_at_its_line() {
     let text = record().to_sidecar_toml();
     let bad = with_line(&text, "max = 1.0", "max = -3.0");
-    let e = refused(&bad);
-    assert!(e.message.contains("min ≤ max"), "{e}");
-    assert_eq!(e.line, line_of(&bad, "max = -3.0"), "{e}");
+    refused_with(&bad, "min ≤ max", line_of(&bad, "max = -3.0"));
     // The inline form of the documentation, and under a device file's [calibration].
     let inline = "schema_version = 1\nmodel = \"geometric\"\n\n[region]\nrows = 3\n\
                   joint = [{ name = \"a\", min = 0.5, max = 0.1, unit = \"rad\" }]\n";
@@ -330,9 +334,7 @@ fn the_model_constrains_the_values_its_record_holds() {
     r.values.retain(|v| v.name == "left_1.rx");
     r.covariance = None;
     let bad = r.to_sidecar_toml();
-    let e = refused(&bad);
-    assert!(e.message.contains("haptic device"), "{e}");
-    assert_eq!(e.line, line_of(&bad, "model ="), "{e}");
+    refused_with(&bad, "haptic device", line_of(&bad, "model ="));
     // A second-order harmonic on a first-order harmonic model.
     let mut r = record();
     r.model = Some(ModelName::Harmonic);
@@ -352,9 +354,7 @@ fn the_model_constrains_the_values_its_record_holds() {
 fn a_misnamed_value_is_refused_at_its_own_line() {
     let text = record().to_sidecar_toml();
     let bad = text.replace("\"left_1.rx\" =", "\"left_9.rx\" =");
-    let e = refused(&bad);
-    assert_eq!(e.line, line_of(&bad, "\"left_9.rx\""), "{e}");
-    assert!(e.message.contains("misnamed"), "{e}");
+    let e = refused_with(&bad, "misnamed", line_of(&bad, "\"left_9.rx\""));
     assert!(e.message.contains("left_1.rx"), "{e}");
 }
 

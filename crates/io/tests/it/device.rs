@@ -240,6 +240,22 @@ fn refused_edit(text: &str, (from, to): (&str, &str), parts: &[&str]) {
     assert_contains(&message(parse_device(&edited, Path::new("t.toml"))), parts);
 }
 
+/// Asserts that the device file `text` with its first `from` replaced by `to`, read as
+/// `t.toml`, is refused at column 1 of the edited text's first line that starts with `needle`,
+/// with a message that goes on with `start`.
+#[track_caller]
+fn refused_edit_at(text: &str, (from, to): (&str, &str), needle: &str, start: &str) {
+    let edited = text.replacen(from, to, 1);
+    let line = 1
+        + (edited.lines().position(|l| l.starts_with(needle)))
+            .unwrap_or_else(|| panic!("no line starts with {needle:?}"));
+    let err = message(parse_device(&edited, Path::new("t.toml")));
+    assert!(
+        err.starts_with(&format!("t.toml:{line}:1: {start}")),
+        "{err}"
+    );
+}
+
 #[test]
 fn missing_device_file_is_an_io_error() {
     let msg = message(read_device(&data("no_such_device.toml")));
@@ -357,29 +373,23 @@ fn a_calibration_record_is_checked_at_its_line() {
         parse_device(&write_device(&device), Path::new("again.toml")).unwrap(),
         device
     );
-    let line_of =
-        |text: &str, start: &str| 1 + text.lines().position(|l| l.starts_with(start)).unwrap();
-    let mistyped = text.replacen("\"joint_compliance.j3\"", "\"joint_compliance.k3\"", 1);
-    let at = line_of(&mistyped, "\"joint_compliance.k3\"");
-    let err = message(parse_device(&mistyped, Path::new("cal.toml")));
-    assert!(
-        err.starts_with(&format!(
-            "cal.toml:{at}:1: [calibration]: \"joint_compliance.k3\": unknown value name"
-        )),
-        "{err}"
+    refused_edit_at(
+        &text,
+        ("\"joint_compliance.j3\"", "\"joint_compliance.k3\""),
+        "\"joint_compliance.k3\"",
+        "[calibration]: \"joint_compliance.k3\": unknown value name",
     );
-    let newer = text.replacen("schema_version = 1", "schema_version = 2", 1);
-    let at = line_of(&newer, "schema_version");
-    let err = message(parse_device(&newer, Path::new("cal.toml")));
-    assert!(
-        err.starts_with(&format!(
-            "cal.toml:{at}:1: [calibration]: schema_version = 2"
-        )),
-        "{err}"
+    refused_edit_at(
+        &text,
+        ("schema_version = 1", "schema_version = 2"),
+        "schema_version",
+        "[calibration]: schema_version = 2",
     );
-    let no_model = text.replacen("model = \"compliance\"\n", "", 1);
-    let err = message(parse_device(&no_model, Path::new("cal.toml")));
-    assert!(err.contains("missing key model"), "{err}");
+    refused_edit(
+        &text,
+        ("model = \"compliance\"\n", ""),
+        &["missing key model"],
+    );
     // An earlier hapcal's record (no schema_version, model, region: notes and values) reads
     // as before.
     let device_part = &text[..text.find("[calibration]").expect("a calibration table")];
