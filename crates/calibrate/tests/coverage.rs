@@ -155,7 +155,15 @@ fn a_rung_that_extrapolates_is_still_taken_beyond_half_a_joints_range() {
 /// One set of the sweep, in this order: its name, the joint split (chain index), the effect's
 /// amplitude (rad, or the ratio error), the placement deviations' scale, the harmonics' phase
 /// shift (rad), the share of the joint's range trained on, the truth seeds.
-type SweepSet = (&'static str, usize, f64, f64, f64, f64, std::ops::Range<u64>);
+type SweepSet = (
+    &'static str,
+    usize,
+    f64,
+    f64,
+    f64,
+    f64,
+    std::ops::Range<u64>,
+);
 
 /// The sets the rule was tuned on, then the sets held back to report it (docs/engine.md,
 /// "Extrapolation").
@@ -202,9 +210,7 @@ fn sweep() {
                 order: 2.0,
                 phase_rad: 1.1 + phase_rad,
             },
-            Effect::Ratio {
-                epsilon: amplitude,
-            },
+            Effect::Ratio { epsilon: amplitude },
         ];
         for effect in effects {
             for seed in seeds.clone() {

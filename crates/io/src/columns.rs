@@ -115,8 +115,12 @@ fn by_symbol<T: Copy>(
     what: &str,
     s: &str,
 ) -> Result<T, String> {
-    (units.iter().copied().find(|u| symbol(*u) == s))
-        .ok_or_else(|| format!("expected {what}, one of {}, found {s:?}", listed(units, symbol)))
+    (units.iter().copied().find(|u| symbol(*u) == s)).ok_or_else(|| {
+        format!(
+            "expected {what}, one of {}, found {s:?}",
+            listed(units, symbol)
+        )
+    })
 }
 
 impl fmt::Display for LengthUnit {
