@@ -537,22 +537,33 @@ pub(crate) fn residuals_jump(per_row: &[(usize, u64, f64)]) -> bool {
     })
 }
 
+/// The links of `urdf` joined to `link` by one fixed joint (its parent or its child), in the
+/// file's order of the joints.
+pub(crate) fn fixed_neighbours<'a>(
+    urdf: &'a urdf_rs::Robot,
+    link: &'a str,
+) -> impl Iterator<Item = &'a String> + 'a {
+    (urdf.joints.iter())
+        .filter(|j| matches!(j.joint_type, urdf_rs::JointType::Fixed))
+        .filter_map(move |j| {
+            if j.child.link == link {
+                Some(&j.parent.link)
+            } else if j.parent.link == link {
+                Some(&j.child.link)
+            } else {
+                None
+            }
+        })
+}
+
 /// A link of `urdf` joined to `tip` by fixed joints only (the same rigid body: the tool
 /// flange above a ball, a frame below it), the nearest first, that is not in `taken`; `None`
 /// when the tip's moving link has no other.
 pub(crate) fn fixed_twin(urdf: &urdf_rs::Robot, tip: &str, taken: &[String]) -> Option<String> {
-    let fixed = |j: &&urdf_rs::Joint| matches!(j.joint_type, urdf_rs::JointType::Fixed);
     let mut seen = vec![tip.to_owned()];
     let mut frontier = std::collections::VecDeque::from([tip.to_owned()]);
     while let Some(link) = frontier.pop_front() {
-        for j in urdf.joints.iter().filter(fixed) {
-            let other = if j.child.link == link {
-                &j.parent.link
-            } else if j.parent.link == link {
-                &j.child.link
-            } else {
-                continue;
-            };
+        for other in fixed_neighbours(urdf, &link) {
             if seen.contains(other) {
                 continue;
             }

@@ -299,18 +299,10 @@ fn column_label(names: &[String], j: usize) -> String {
 /// The links joined to `link` by fixed joints only (children and parents, transitively),
 /// `link` excluded: the other names of the same rigid body.
 fn fixed_relatives(urdf: &urdf_rs::Robot, link: &str) -> Vec<String> {
-    let fixed = |j: &urdf_rs::Joint| matches!(j.joint_type, urdf_rs::JointType::Fixed);
     let mut seen = vec![link.to_owned()];
     let mut frontier = vec![link.to_owned()];
     while let Some(l) = frontier.pop() {
-        for j in urdf.joints.iter().filter(|j| fixed(j)) {
-            let next = if j.parent.link == l {
-                &j.child.link
-            } else if j.child.link == l {
-                &j.parent.link
-            } else {
-                continue;
-            };
+        for next in crate::setup_change::fixed_neighbours(urdf, &l) {
             if !seen.contains(next) {
                 seen.push(next.clone());
                 frontier.push(next.clone());

@@ -152,57 +152,36 @@ fn a_rung_that_extrapolates_is_still_taken_beyond_half_a_joints_range() {
     );
 }
 
-/// One set of the sweep: the joint split (chain index), the effect's amplitude (rad, or the
-/// ratio error), the placement deviations' scale, the harmonics' phase shift (rad), the share
-/// of the joint's range trained on, the truth seeds.
-struct SweepSet {
-    name: &'static str,
-    joint: usize,
-    amplitude: f64,
-    scale: f64,
-    phase_rad: f64,
-    split: f64,
-    seeds: std::ops::Range<u64>,
-}
-
-/// A [`SweepSet`], its fields in their order.
-const fn set(
-    name: &'static str,
-    joint: usize,
-    amplitude: f64,
-    scale: f64,
-    phase_rad: f64,
-    split: f64,
-    seeds: std::ops::Range<u64>,
-) -> SweepSet {
-    SweepSet {
-        name,
-        joint,
-        amplitude,
-        scale,
-        phase_rad,
-        split,
-        seeds,
-    }
-}
+/// One set of the sweep, in this order: its name, the joint split (chain index), the effect's
+/// amplitude (rad, or the ratio error), the placement deviations' scale, the harmonics' phase
+/// shift (rad), the share of the joint's range trained on, the truth seeds.
+type SweepSet = (
+    &'static str,
+    usize,
+    f64,
+    f64,
+    f64,
+    f64,
+    std::ops::Range<u64>,
+);
 
 /// The sets the rule was tuned on, then the sets held back to report it (docs/engine.md,
 /// "Extrapolation").
 const SWEEP: [SweepSet; 13] = [
     // name, joint, amplitude, scale, phase_rad, split, seeds
-    set("tuning", 1, 2e-3, 0.5, 0.0, 0.5, 0..8),
-    set("tuning", 3, 2e-3, 0.5, 0.0, 0.5, 3..6),
-    set("tuning", 1, 3e-3, 1.0, 0.0, 0.5, 3..6),
-    set("tuning", 1, 2e-3, 0.5, 0.0, 0.4, 3..6),
-    set("tuning", 1, 2e-3, 0.5, 0.7, 0.5, 8..13),
-    set("tuning", 3, 1.5e-3, 0.5, 0.7, 0.5, 8..11),
-    set("tuning", 0, 3e-3, 0.5, 0.7, 0.5, 8..11),
-    set("tuning", 0, 5e-3, 0.3, 0.0, 0.5, 0..5),
-    set("held-back", 1, 2.5e-3, 0.7, 1.5, 0.5, 13..18),
-    set("held-back", 3, 2e-3, 0.5, 1.5, 0.5, 13..16),
-    set("held-back", 0, 4e-3, 0.5, 1.5, 0.5, 13..16),
-    set("held-back", 5, 2e-3, 0.5, 1.5, 0.5, 13..16),
-    set("held-back", 2, 2e-3, 0.5, 1.5, 0.5, 13..16),
+    ("tuning", 1, 2e-3, 0.5, 0.0, 0.5, 0..8),
+    ("tuning", 3, 2e-3, 0.5, 0.0, 0.5, 3..6),
+    ("tuning", 1, 3e-3, 1.0, 0.0, 0.5, 3..6),
+    ("tuning", 1, 2e-3, 0.5, 0.0, 0.4, 3..6),
+    ("tuning", 1, 2e-3, 0.5, 0.7, 0.5, 8..13),
+    ("tuning", 3, 1.5e-3, 0.5, 0.7, 0.5, 8..11),
+    ("tuning", 0, 3e-3, 0.5, 0.7, 0.5, 8..11),
+    ("tuning", 0, 5e-3, 0.3, 0.0, 0.5, 0..5),
+    ("held-back", 1, 2.5e-3, 0.7, 1.5, 0.5, 13..18),
+    ("held-back", 3, 2e-3, 0.5, 1.5, 0.5, 13..16),
+    ("held-back", 0, 4e-3, 0.5, 1.5, 0.5, 13..16),
+    ("held-back", 5, 2e-3, 0.5, 1.5, 0.5, 13..16),
+    ("held-back", 2, 2e-3, 0.5, 1.5, 0.5, 13..16),
 ];
 
 /// The sweep behind the rule: every set of [`SWEEP`], three effects (first and second
@@ -219,29 +198,27 @@ fn sweep() {
     let robot = sim::robot();
     let forced = std::env::var_os("SWEEP_FORCED").is_some();
     let mut ratios: Vec<(&str, f64, ModelName)> = Vec::new();
-    for set in &SWEEP {
+    for (name, joint, amplitude, scale, phase_rad, split, seeds) in SWEEP {
         let effects = [
             Effect::Harmonic {
-                amplitude_rad: set.amplitude,
+                amplitude_rad: amplitude,
                 order: 1.0,
-                phase_rad: 0.3 + set.phase_rad,
+                phase_rad: 0.3 + phase_rad,
             },
             Effect::Harmonic {
-                amplitude_rad: set.amplitude,
+                amplitude_rad: amplitude,
                 order: 2.0,
-                phase_rad: 1.1 + set.phase_rad,
+                phase_rad: 1.1 + phase_rad,
             },
-            Effect::Ratio {
-                epsilon: set.amplitude,
-            },
+            Effect::Ratio { epsilon: amplitude },
         ];
         for effect in effects {
-            for seed in set.seeds.clone() {
-                let mut truth = sim::truth_scaled(&robot, 100 + seed, effect, set.scale);
-                truth.joint = set.joint;
-                let (lo, hi) = robot.limits[set.joint];
+            for seed in seeds.clone() {
+                let mut truth = sim::truth_scaled(&robot, 100 + seed, effect, scale);
+                truth.joint = joint;
+                let (lo, hi) = robot.limits[joint];
                 let (lo, hi) = (0.97 * lo, 0.97 * hi);
-                let cut = lo + (hi - lo) * set.split;
+                let cut = lo + (hi - lo) * split;
                 let train = sim::rows(&robot, &truth, 100, (lo, cut), 200 + seed, "train");
                 let test = sim::rows(&robot, &truth, 80, (cut, hi), 300 + seed, "test");
                 let workspace: Vec<Vec<f64>> =
@@ -254,8 +231,8 @@ fn sweep() {
                 let (chosen, frames) = test_rms(&out);
                 let mut line = format!(
                     "{} joint {} {effect:?} seed {seed}: {} {:.3} mm, frames only {:.3} mm",
-                    set.name,
-                    set.joint + 1,
+                    name,
+                    joint + 1,
                     out.rung,
                     chosen * 1e3,
                     frames * 1e3
@@ -269,7 +246,7 @@ fn sweep() {
                     }
                 }
                 eprintln!("{line}");
-                ratios.push((set.name, chosen / frames, out.rung));
+                ratios.push((name, chosen / frames, out.rung));
             }
         }
     }

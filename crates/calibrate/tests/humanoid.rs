@@ -55,17 +55,7 @@ fn both_hands_recover_every_compliance_and_reach_the_noise_floor() {
     // Held out, the error of a marker is the noise: √3·σ in 3-D, plus the estimation error
     // of ~150 parameters from 2,400 residuals (√(150/2400) ≈ 25 % of σ per axis).
     let floor = 3f64.sqrt() * NOISE_M;
-    let (_, _, _, before, after) = &out.sets[1];
-    assert!(
-        after.position_rms_m < 1.15 * floor,
-        "test RMS {} m, floor {floor} m",
-        after.position_rms_m
-    );
-    assert!(
-        before.position_rms_m > 10.0 * floor,
-        "frames only {} m",
-        before.position_rms_m
-    );
+    tracker::assert_test_rms(&out, floor, 1.15, (10.0, f64::INFINITY));
     let found = compliances(&out);
     // Every joint but the vertical torso yaw carries a gravity torque: 16 axial and 17
     // transversal compliances.

@@ -64,20 +64,10 @@ fn joint_offsets_are_found_and_the_test_error_reaches_the_noise() {
     let test = table(&robot, 60, 1e-3, 2);
     let out = calibrate_measured(&robot, &[train], &[test], &config()).unwrap();
     assert!(out.rung >= ModelName::JointOffsets, "chose {}", out.rung);
-    let (_, _, _, before, after) = &out.sets[1];
     // 3-D RMS of noise σ per axis is √3·σ; allow 50 % for the estimation error of ~60
     // parameters from 360 residuals.
     let floor = 3f64.sqrt() * NOISE_M;
-    assert!(
-        after.position_rms_m < 1.5 * floor,
-        "test RMS {} m",
-        after.position_rms_m
-    );
-    assert!(
-        before.position_rms_m > 5.0 * floor,
-        "frames only {} m",
-        before.position_rms_m
-    );
+    tracker::assert_test_rms(&out, floor, 1.5, (5.0, f64::INFINITY));
 }
 
 #[test]
@@ -86,19 +76,9 @@ fn nominal_robot_keeps_frames_only() {
     let train = table(&robot, 60, 0.0, 3);
     let test = table(&robot, 30, 0.0, 4);
     let out = calibrate_measured(&robot, &[train], &[test], &config()).unwrap();
-    let (_, _, _, before, after) = &out.sets[1];
     // Whatever the rung, the test error stays at the noise: nothing to gain, little to lose.
     let floor = 3f64.sqrt() * NOISE_M;
-    assert!(
-        before.position_rms_m < 1.3 * floor,
-        "frames only {} m",
-        before.position_rms_m
-    );
-    assert!(
-        after.position_rms_m < 1.3 * floor,
-        "calibrated {} m",
-        after.position_rms_m
-    );
+    tracker::assert_test_rms(&out, floor, 1.3, (0.0, 1.3));
 }
 
 /// A cable encoder (or ballbar) anchored at an unknown point: `n` distances from it to the

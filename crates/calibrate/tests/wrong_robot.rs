@@ -7,9 +7,7 @@
 
 use hapcal_calibrate::inputs::Plan;
 use hapcal_calibrate::report::CalibrationReport;
-use hapcal_calibrate::setup::{
-    Finding, MistakeClass, SetupConfig, after_fit, check_plan, gate_after_fit,
-};
+use hapcal_calibrate::setup::{MistakeClass, SetupConfig, after_fit, check_plan, gate_after_fit};
 use std::path::PathBuf;
 
 fn root() -> PathBuf {
@@ -48,13 +46,19 @@ fn checked_another_device(plan: &Plan) -> String {
     f.text()
 }
 
-/// The deviation the calibration gives `name`: after the fit of the lengths it held at
-/// nominal when it held some, else identified; m.
-fn moved(report: &CalibrationReport, name: &str) -> f64 {
-    (report.refitted_lengths.iter().chain(&report.parameters))
+/// Asserts that the deviation the calibration gives `name` (after the fit of the lengths it
+/// held at nominal when it held some, else identified) is `expected_m` within `tol_m`, m.
+#[track_caller]
+fn assert_moved(report: &CalibrationReport, name: &str, expected_m: f64, tol_m: f64) {
+    let moved = (report.refitted_lengths.iter().chain(&report.parameters))
         .find(|p| p.name == name)
         .unwrap_or_else(|| panic!("no {name} among {:?}", names(report)))
-        .value
+        .value;
+    assert!(
+        (moved - expected_m).abs() < tol_m,
+        "{name} {moved} m; {:?}",
+        names(report)
+    );
 }
 
 fn names(report: &CalibrationReport) -> Vec<(String, f64)> {
@@ -64,10 +68,11 @@ fn names(report: &CalibrationReport) -> Vec<(String, f64)> {
         .collect()
 }
 
-/// The after-fit finding, which must be another device's, and `hapcal calibrate`'s refusal
-/// (exit 2) with it.
-fn another_device(report: &CalibrationReport) -> Finding {
-    let finding = after_fit(report, &[]).unwrap_or_else(|| {
+/// [`calibrate`] of `device`, `tip` and `data`, and the text of its after-fit finding, which
+/// must be another device's, with `hapcal calibrate`'s refusal (exit 2).
+fn another_device(device: &str, tip: &str, data: &[&str]) -> (CalibrationReport, String) {
+    let report = calibrate(device, tip, data);
+    let finding = after_fit(&report, &[]).unwrap_or_else(|| {
         panic!(
             "no finding after the fit; lengths {:?}, held {:?}",
             report.parameters, report.refitted_lengths
@@ -83,12 +88,13 @@ fn another_device(report: &CalibrationReport) -> Finding {
         accept_setup: false,
         accept_option: "--accept-setup",
     };
-    let refused = gate_after_fit(report, &cfg, &[]).expect_err("calibrate stops");
+    let refused = gate_after_fit(&report, &cfg, &[]).expect_err("calibrate stops");
     assert!(
         refused.to_string().contains("[another-device]"),
         "{refused}"
     );
-    finding
+    let text = finding.text();
+    (report, text)
 }
 
 #[test]
@@ -97,13 +103,11 @@ fn a_ur5e_description_of_the_ur10e_recording_is_another_robot_with_longer_arms()
     // UR5e's (−0.425, −0.3922 m) make the upper arm 187.7 mm and the forearm 179.35 mm too
     // short. The 23 poses cannot identify these lengths at the default priors: the
     // calibration prunes them, and the fit of the pruned lengths finds them.
-    let report = calibrate(
+    let (report, text) = another_device(
         "fixtures/wrong-robot/ur5e_lengths.urdf",
         "wrist_3_link",
         &["fixtures/figaroh/ur10/calibration.csv"],
     );
-    let finding = another_device(&report);
-    let text = finding.text();
     assert!(text.contains("another robot or variant"), "{text}");
     // The check before the fit says so too (frames only leave 22 mm, a residual a real robot
     // can leave, but more than right data do).
@@ -129,31 +133,19 @@ fn a_ur5e_description_of_the_ur10e_recording_is_another_robot_with_longer_arms()
     }
     assert!(text.contains("longer than the URDF says"), "{text}");
     // The upper arm's length along the joint's x axis (nominal −0.425 m, true −0.6127 m).
-    let upper = moved(&report, "elbow_joint.x");
-    assert!(
-        (upper - -0.1877).abs() < 0.010,
-        "elbow_joint.x {upper} m; {:?}",
-        names(&report)
-    );
-    let forearm = moved(&report, "wrist_1_joint.x");
-    assert!(
-        (forearm - -0.17935).abs() < 0.010,
-        "wrist_1_joint.x {forearm} m; {:?}",
-        names(&report)
-    );
+    assert_moved(&report, "elbow_joint.x", -0.1877, 0.010);
+    assert_moved(&report, "wrist_1_joint.x", -0.17935, 0.010);
 }
 
 #[test]
 fn an_iiwa7_description_of_the_iiwa14_sockets_is_another_robot() {
     // The iiwa 7's upper arm (joint_a2 → joint_a4) is 0.40 m, the iiwa 14's 0.42 m; its base
     // height (0.34 against 0.36 m) is the socket points' gauge and cannot be seen.
-    let report = calibrate(
+    let (report, text) = another_device(
         "fixtures/wrong-robot/iiwa7_lengths.urdf",
         "ball_link",
         &["fixtures/mukca/data/kuka_14/front"],
     );
-    let finding = another_device(&report);
-    let text = finding.text();
     assert!(
         text.contains("the link after joint_a3 (the origin of joint_a4) is about"),
         "{text}"
@@ -162,12 +154,7 @@ fn an_iiwa7_description_of_the_iiwa14_sockets_is_another_robot() {
     // The check before the fit does not calibrate socket folders (the setup checks sit below
     // the workflows): its nominal scatter, 11 mm, is what a right Panda's manufacturing
     // deviations leave too; the check after the fit names the variant.
-    let upper = moved(&report, "joint_a4.z");
-    assert!(
-        (upper - 0.020).abs() < 0.004,
-        "joint_a4.z {upper} m; {:?}",
-        names(&report)
-    );
+    assert_moved(&report, "joint_a4.z", 0.020, 0.004);
 }
 
 /// Whether `RUN_SLOW_TESTS` is set (the sweep over every MUKCa placement).

@@ -438,26 +438,21 @@ mod tests {
         use Effect::*;
         let of = |e: &[Effect]| ModelName::for_effects(e);
         assert_eq!(of(&[]).model, Ok(None));
-        assert_eq!(
-            of(&[GravityCompliance]).model,
-            Ok(Some(ModelName::Compliance))
-        );
-        assert_eq!(
-            of(&[LumpedCompliance]).model,
-            Ok(Some(ModelName::Compliance))
-        );
-        assert_eq!(
-            of(&[GravityCompliance, FirstHarmonic]).model,
-            Ok(Some(ModelName::ComplianceHarmonic))
-        );
-        assert_eq!(
-            of(&[GravityCompliance, TransversalCompliance]).model,
-            Ok(Some(ModelName::TransversalCompliance))
-        );
-        assert_eq!(
-            of(&[FirstHarmonic, SecondHarmonic]).model,
-            Ok(Some(ModelName::Harmonic2))
-        );
+        for (effects, model) in [
+            (&[GravityCompliance][..], ModelName::Compliance),
+            (&[LumpedCompliance], ModelName::Compliance),
+            (
+                &[GravityCompliance, FirstHarmonic],
+                ModelName::ComplianceHarmonic,
+            ),
+            (
+                &[GravityCompliance, TransversalCompliance],
+                ModelName::TransversalCompliance,
+            ),
+            (&[FirstHarmonic, SecondHarmonic], ModelName::Harmonic2),
+        ] {
+            assert_eq!(of(effects).model, Ok(Some(model)), "{effects:?}");
+        }
         // No one model has transversal compliance and harmonics together.
         assert_eq!(
             of(&[TransversalCompliance, FirstHarmonic]).model,

@@ -193,24 +193,22 @@ mod tests {
 
     #[test]
     fn a_link_with_two_parents_and_a_loop_are_refused() -> Result<(), Box<dyn std::error::Error>> {
-        let two = ARM.replace(
-            "</robot>",
-            r#"<joint name="extra" type="fixed"><parent link="base"/><child link="hand"/></joint></robot>"#,
-        );
-        let robot = parse(&two)?;
-        assert_eq!(
-            path_to(&robot, "tool").err().map(|e| e.to_string()),
-            Some("link \"hand\" has two parent joints, \"elbow\" and \"extra\"".to_owned())
-        );
-        let looped = ARM.replace(
-            "</robot>",
-            r#"<joint name="back" type="fixed"><parent link="hand"/><child link="base"/></joint></robot>"#,
-        );
-        let robot = parse(&looped)?;
-        assert_eq!(
-            path_to(&robot, "tool").err().map(|e| e.to_string()),
-            Some("the joints above link \"tool\" form a loop".to_owned())
-        );
+        for (extra_joint, refusal) in [
+            (
+                r#"<joint name="extra" type="fixed"><parent link="base"/><child link="hand"/></joint>"#,
+                "link \"hand\" has two parent joints, \"elbow\" and \"extra\"",
+            ),
+            (
+                r#"<joint name="back" type="fixed"><parent link="hand"/><child link="base"/></joint>"#,
+                "the joints above link \"tool\" form a loop",
+            ),
+        ] {
+            let robot = parse(&ARM.replace("</robot>", &format!("{extra_joint}</robot>")))?;
+            assert_eq!(
+                path_to(&robot, "tool").err().map(|e| e.to_string()),
+                Some(refusal.to_owned())
+            );
+        }
         assert!(parse("<robot").is_err_and(|e| e.to_string().starts_with("not a valid URDF: ")));
         Ok(())
     }

@@ -99,6 +99,26 @@ fn refused_edit(from: &str, to: &str) -> ContractError {
     refused(&text.replace(from, to))
 }
 
+/// The refusal of the record's sidecar with `from` replaced by `to`, asserted to hold `part` in
+/// its message and to stand at the line of the unedited sidecar that starts with `needle`.
+#[track_caller]
+fn refused_at((from, to): (&str, &str), part: &str, needle: &str) -> ContractError {
+    let e = refused_edit(from, to);
+    assert!(e.message.contains(part), "{e}");
+    assert_eq!(e.line, line_of(&record().to_sidecar_toml(), needle), "{e}");
+    e
+}
+
+/// The refusal of the sidecar text `bad`, asserted to hold `part` in its message and to stand
+/// at line `line`.
+#[track_caller]
+fn refused_with(bad: &str, part: &str, line: usize) -> ContractError {
+    let e = refused(bad);
+    assert!(e.message.contains(part), "{e}");
+    assert_eq!(e.line, line, "{e}");
+    e
+}
+
 fn refused(text: &str) -> ContractError {
     Calibration::from_sidecar_str(text, "robot.calibration.toml").expect_err("refused")
 }
@@ -125,17 +145,20 @@ fn a_newer_schema_is_refused_in_words() {
 
 #[test]
 fn an_unknown_name_or_a_wrong_unit_is_refused_at_its_line() {
-    let text = record().to_sidecar_toml();
-    let e = refused_edit("\"left_1.rx\"", "\"left_1.rw\"");
-    assert!(e.message.contains("unknown value name"), "{e}");
-    assert_eq!(e.line, line_of(&text, "\"left_1.rx\""), "{e}");
-
-    let e = refused_edit(
-        "\"compliance.left_1\" = { value = 0.0001234567890123, std = 3e-6, unit = \"rad/(N·m)\"",
-        "\"compliance.left_1\" = { value = 0.0001234567890123, std = 3e-6, unit = \"rad/m\"",
+    refused_at(
+        ("\"left_1.rx\"", "\"left_1.rw\""),
+        "unknown value name",
+        "\"left_1.rx\"",
     );
-    assert!(e.message.contains("expected \"rad/(N·m)\""), "{e}");
-    assert_eq!(e.line, line_of(&text, "\"compliance.left_1\""), "{e}");
+
+    let e = refused_at(
+        (
+            "\"compliance.left_1\" = { value = 0.0001234567890123, std = 3e-6, unit = \"rad/(N·m)\"",
+            "\"compliance.left_1\" = { value = 0.0001234567890123, std = 3e-6, unit = \"rad/m\"",
+        ),
+        "expected \"rad/(N·m)\"",
+        "\"compliance.left_1\"",
+    );
     assert!(e.to_string().starts_with("robot.calibration.toml:"), "{e}");
 }
 
@@ -247,19 +270,15 @@ fn a_missing_schema_version_is_refused_at_the_first_key_of_schema_1() {
     let bad = record()
         .to_sidecar_toml()
         .replace("schema_version = 1\n", "");
-    let e = refused(&bad);
-    assert!(e.message.contains("missing key schema_version"), "{e}");
+    let e = refused_with(&bad, "missing key schema_version", line_of(&bad, "model ="));
     assert!(!e.message.contains("unknown field"), "{e}");
-    assert_eq!(e.line, line_of(&bad, "model ="), "{e}");
 }
 
 #[test]
 fn negative_masses_are_refused_at_their_own_line() {
     let text = record().to_sidecar_toml();
     let bad = with_line(&text, "mass_kg", "mass_kg = -1.25");
-    let e = refused(&bad);
-    assert!(e.message.contains("non-negative mass"), "{e}");
-    assert_eq!(e.line, line_of(&bad, "mass_kg"), "{e}");
+    refused_with(&bad, "non-negative mass", line_of(&bad, "mass_kg"));
     // A negative compliance is judged where it is estimated (calibrate stops on one beyond
     // negative_compliance_sigmas); the record reads what it holds.
     let negative = with_line(
@@ -274,9 +293,7 @@ fn negative_masses_are_refused_at_their_own_line() {
 fn a_region_with_min_above_max_is_refused_at_its_line() {
     let text = record().to_sidecar_toml();
     let bad = with_line(&text, "max = 1.0", "max = -3.0");
-    let e = refused(&bad);
-    assert!(e.message.contains("min ≤ max"), "{e}");
-    assert_eq!(e.line, line_of(&bad, "max = -3.0"), "{e}");
+    refused_with(&bad, "min ≤ max", line_of(&bad, "max = -3.0"));
     // The inline form of the documentation, and under a device file's [calibration].
     let inline = "schema_version = 1\nmodel = \"geometric\"\n\n[region]\nrows = 3\n\
                   joint = [{ name = \"a\", min = 0.5, max = 0.1, unit = \"rad\" }]\n";
@@ -293,30 +310,31 @@ fn a_region_with_min_above_max_is_refused_at_its_line() {
 
 #[test]
 fn the_model_constrains_the_values_its_record_holds() {
-    let text = record().to_sidecar_toml();
     // A geometric record with compliance values.
-    let e = refused_edit(
-        "model = \"transversal-compliance\"",
-        "model = \"geometric\"",
+    refused_at(
+        (
+            "model = \"transversal-compliance\"",
+            "model = \"geometric\"",
+        ),
+        "identifies no compliance",
+        "\"compliance.left_1\"",
     );
-    assert!(e.message.contains("identifies no compliance"), "{e}");
-    assert_eq!(e.line, line_of(&text, "\"compliance.left_1\""), "{e}");
     // A compliance record with a transversal compliance.
-    let e = refused_edit(
-        "model = \"transversal-compliance\"",
-        "model = \"compliance\"",
+    refused_at(
+        (
+            "model = \"transversal-compliance\"",
+            "model = \"compliance\"",
+        ),
+        "no transversal",
+        "\"transversal.left_1\"",
     );
-    assert!(e.message.contains("no transversal"), "{e}");
-    assert_eq!(e.line, line_of(&text, "\"transversal.left_1\""), "{e}");
     // A haptic device's model on a URDF's sidecar.
     let mut r = record();
     r.model = Some(ModelName::Transmissions);
     r.values.retain(|v| v.name == "left_1.rx");
     r.covariance = None;
     let bad = r.to_sidecar_toml();
-    let e = refused(&bad);
-    assert!(e.message.contains("haptic device"), "{e}");
-    assert_eq!(e.line, line_of(&bad, "model ="), "{e}");
+    refused_with(&bad, "haptic device", line_of(&bad, "model ="));
     // A second-order harmonic on a first-order harmonic model.
     let mut r = record();
     r.model = Some(ModelName::Harmonic);
@@ -336,9 +354,7 @@ fn the_model_constrains_the_values_its_record_holds() {
 fn a_misnamed_value_is_refused_at_its_own_line() {
     let text = record().to_sidecar_toml();
     let bad = text.replace("\"left_1.rx\" =", "\"left_9.rx\" =");
-    let e = refused(&bad);
-    assert_eq!(e.line, line_of(&bad, "\"left_9.rx\""), "{e}");
-    assert!(e.message.contains("misnamed"), "{e}");
+    let e = refused_with(&bad, "misnamed", line_of(&bad, "\"left_9.rx\""));
     assert!(e.message.contains("left_1.rx"), "{e}");
 }
 

@@ -20,8 +20,7 @@ use std::cell::RefCell;
 use faer::prelude::SolveLstsq;
 use faer::{Col, ColMut, ColRef, Mat, MatMut};
 use hapcal_identify::{
-    EvalError, LmConfig, ParamLayout, ParamSpec, Problem, Role, Unit, covariance,
-    levenberg_marquardt,
+    EvalError, LmConfig, ParamLayout, Problem, Unit, covariance, levenberg_marquardt,
 };
 use nalgebra::{DMatrix, DVector};
 
@@ -32,19 +31,6 @@ use crate::stats::{NUMERICAL_ZERO_COLUMN, largest_column_norm, pivoted_basis};
 /// picked before it (the scaled problem's numerical rank; the SVD solve it replaces cut
 /// singular values below `1e-9·s_max`).
 const LSTSQ_RANK_TOL: f64 = 1e-9;
-
-/// A layout of `k` dimensionless parameters `x0 … x{k−1}`.
-fn dimensionless_layout(k: usize) -> ParamLayout {
-    ParamLayout::new(
-        (0..k)
-            .map(|j| ParamSpec {
-                name: format!("x{j}"),
-                unit: Unit::Dimensionless,
-                role: Role::Model,
-            })
-            .collect(),
-    )
-}
 
 /// `min_x ½‖a·x − b‖²`.
 struct LinearProblem {
@@ -94,7 +80,7 @@ pub(crate) fn lstsq(a: &DMatrix<f64>, b: &DVector<f64>) -> (DVector<f64>, DMatri
         return (x, cov);
     }
     let problem = LinearProblem {
-        layout: dimensionless_layout(k),
+        layout: ParamLayout::numbered("x", k, Unit::Dimensionless),
         a: Mat::from_fn(m, k, |i, j| a[(i, j)]),
         b: Col::from_fn(m, |i| b[i]),
     };
@@ -290,7 +276,7 @@ pub(crate) fn fit_model(
 ) -> Result<(State, Linear), hapcal_problems::Error> {
     let mut lin = setup.linearise(&s)?;
     let (m, n) = lin.j.shape();
-    let layout = dimensionless_layout(n);
+    let layout = ParamLayout::numbered("x", n, Unit::Dimensionless);
     let mut free = independent_columns(&lin, rank_tol);
     let budget = iters * TRIALS_PER_ITERATION;
     let mut used = 0;

@@ -5,9 +5,7 @@ use std::hint::black_box;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use faer::{Col, ColMut, ColRef, Mat, MatMut};
-use hapcal_identify::{
-    EvalError, LmConfig, ParamLayout, ParamSpec, Problem, Role, Unit, levenberg_marquardt,
-};
+use hapcal_identify::{EvalError, LmConfig, ParamLayout, Problem, Unit, levenberg_marquardt};
 
 /// `r_i = Σ_j A_ij·sin(x_j) − y_i`, `y = A·sin(x*)`: dense, mildly nonlinear, zero residual.
 struct DenseSine {
@@ -52,15 +50,7 @@ fn dense_sine(m: usize, n: usize) -> DenseSine {
     let a = Mat::from_fn(m, n, |_, _| lcg(&mut state));
     let truth = Col::from_fn(n, |_| 0.5 * lcg(&mut state));
     let y = &a * Col::from_fn(n, |j| truth[j].sin());
-    let layout = ParamLayout::new(
-        (0..n)
-            .map(|j| ParamSpec {
-                name: format!("x{j}"),
-                unit: Unit::Radian,
-                role: Role::Model,
-            })
-            .collect(),
-    );
+    let layout = ParamLayout::numbered("x", n, Unit::Radian);
     DenseSine { layout, a, y }
 }
 

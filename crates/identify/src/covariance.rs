@@ -153,18 +153,10 @@ mod tests {
     use faer::Col;
 
     use super::*;
-    use crate::problem::{ParamSpec, Role, Unit};
+    use crate::problem::Unit;
 
     fn layout(n: usize) -> ParamLayout {
-        ParamLayout::new(
-            (0..n)
-                .map(|j| ParamSpec {
-                    name: format!("p{j}"),
-                    unit: Unit::Meter,
-                    role: Role::Model,
-                })
-                .collect(),
-        )
+        ParamLayout::numbered("p", n, Unit::Meter)
     }
 
     #[test]

@@ -927,16 +927,22 @@ mod tests {
         }
     }
 
-    #[test]
-    fn exchange_beats_a_bad_greedy_start_and_matches_brute_force() {
-        // 12 random 2-row blocks in 4 parameters; choose 3. Compare with all 220 subsets.
-        let mut state = 12345_u64;
-        let mut next = || {
+    /// Deterministic entries in [−0.5, 0.5) from `seed` (a 64-bit LCG, Knuth's MMIX
+    /// constants).
+    fn uniform(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
             state = state
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
             ((state >> 11) as f64 / (1u64 << 53) as f64) - 0.5
-        };
+        }
+    }
+
+    #[test]
+    fn exchange_beats_a_bad_greedy_start_and_matches_brute_force() {
+        // 12 random 2-row blocks in 4 parameters; choose 3. Compare with all 220 subsets.
+        let mut next = uniform(12345);
         let blocks: Vec<Mat<f64>> = (0..12).map(|_| Mat::from_fn(2, 4, |_, _| next())).collect();
         let d = select_poses(&blocks, 3, &DesignConfig::new(Criterion::DOptimal)).expect("design");
         let mut best = f64::NEG_INFINITY;
@@ -987,13 +993,7 @@ mod tests {
         }
         // On random blocks and a random positive definite prior, the I-optimal pair is the
         // best of all 28 pairs, found by enumeration.
-        let mut state = 4242_u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64) - 0.5
-        };
+        let mut next = uniform(4242);
         let blocks: Vec<Mat<f64>> = (0..8).map(|_| Mat::from_fn(1, 3, |_, _| next())).collect();
         let a = Mat::from_fn(3, 3, |_, _| next());
         let prior = a.transpose() * &a + Mat::<f64>::identity(3, 3) * 0.01;
@@ -1025,13 +1025,7 @@ mod tests {
 
     #[test]
     fn i_optimal_design_is_swap_optimal() {
-        let mut state = 777_u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64) - 0.5
-        };
+        let mut next = uniform(777);
         let blocks: Vec<Mat<f64>> = (0..10).map(|_| Mat::from_fn(2, 3, |_, _| next())).collect();
         // Only parameter 0's prediction matters: W = e0·e0ᵀ, the criterion is −Var(x0)/σ².
         let w = Mat::from_fn(3, 3, |i, j| if i == 0 && j == 0 { 1.0 } else { 0.0 });

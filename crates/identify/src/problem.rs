@@ -66,6 +66,19 @@ impl ParamLayout {
     pub fn new(specs: Vec<ParamSpec>) -> Self {
         Self { specs }
     }
+    /// A layout of `n` model parameters ([`Role::Model`]) of one `unit`, named `{prefix}0` to
+    /// `{prefix}{n−1}`: the unknowns of a generic least-squares problem.
+    pub fn numbered(prefix: &str, n: usize, unit: Unit) -> Self {
+        Self::new(
+            (0..n)
+                .map(|j| ParamSpec {
+                    name: format!("{prefix}{j}"),
+                    unit,
+                    role: Role::Model,
+                })
+                .collect(),
+        )
+    }
     /// Number of parameters `n`.
     pub fn len(&self) -> usize {
         self.specs.len()

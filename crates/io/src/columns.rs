@@ -107,6 +107,22 @@ fn listed<T: Copy>(units: &[T], symbol: fn(T) -> &'static str) -> String {
         .join(", ")
 }
 
+/// The unit of `units` whose symbol is `s`; otherwise `expected {what}, one of {symbols},
+/// found "s"`.
+fn by_symbol<T: Copy>(
+    units: &[T],
+    symbol: fn(T) -> &'static str,
+    what: &str,
+    s: &str,
+) -> Result<T, String> {
+    (units.iter().copied().find(|u| symbol(*u) == s)).ok_or_else(|| {
+        format!(
+            "expected {what}, one of {}, found {s:?}",
+            listed(units, symbol)
+        )
+    })
+}
+
 impl fmt::Display for LengthUnit {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.symbol())
@@ -123,12 +139,7 @@ impl std::str::FromStr for LengthUnit {
     type Err = String;
     /// One of [`LengthUnit::ALL`]'s symbols: `m`, `mm`, `cm`, `in`, `ft`.
     fn from_str(s: &str) -> Result<Self, String> {
-        (Self::ALL.into_iter().find(|u| u.symbol() == s)).ok_or_else(|| {
-            format!(
-                "expected a length unit, one of {}, found {s:?}",
-                listed(&Self::ALL, Self::symbol)
-            )
-        })
+        by_symbol(&Self::ALL, Self::symbol, "a length unit", s)
     }
 }
 
@@ -136,12 +147,7 @@ impl std::str::FromStr for AngleUnit {
     type Err = String;
     /// One of [`AngleUnit::ALL`]'s symbols: `rad`, `deg`, `grad`, `rev`.
     fn from_str(s: &str) -> Result<Self, String> {
-        (Self::ALL.into_iter().find(|u| u.symbol() == s)).ok_or_else(|| {
-            format!(
-                "expected an angle unit, one of {}, found {s:?}",
-                listed(&Self::ALL, Self::symbol)
-            )
-        })
+        by_symbol(&Self::ALL, Self::symbol, "an angle unit", s)
     }
 }
 

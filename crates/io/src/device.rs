@@ -191,13 +191,18 @@ pub struct CalibrationMeta {
 /// joints; [`Error::InvalidDevice`] for any other failed check. All name the file, line and
 /// column.
 pub fn read_device(path: &Path) -> Result<Device, Error> {
-    let text = Error::read_text(path, |line, column, message| Error::Toml {
+    let text = Error::read_text(path, toml_error(path))?;
+    parse_device(&text, path)
+}
+
+/// [`Error::Toml`] in `path` at a 1-based line and column, with what the parser said.
+fn toml_error(path: &Path) -> impl FnOnce(u64, u64, String) -> Error + '_ {
+    move |line, column, message| Error::Toml {
         path: path.to_path_buf(),
         line,
         column,
         message,
-    })?;
-    parse_device(&text, path)
+    }
 }
 
 /// Parses and checks device-file text; `path` is only used in messages. See [`read_device`].
@@ -209,15 +214,8 @@ pub fn parse_device(text: &str, path: &Path) -> Result<Device, Error> {
     let device: Device = DeviceFile::from_toml_str(text)
         .map(Device::from)
         .map_err(|e| {
-            let (line, column) = e
-                .span()
-                .map_or((1, 1), |span| crate::error::line_column(text, span.start));
-            Error::Toml {
-                path: path.to_path_buf(),
-                line,
-                column,
-                message: e.message().trim_end().to_owned(),
-            }
+            let (line, column, message) = crate::toml_error_at(text, &e);
+            toml_error(path)(line, column, message)
         })?;
     validate::validate(&device, &validate::Locator::new(path, text))?;
     Ok(device)

@@ -86,7 +86,7 @@ pub use device::{
     Handle, JointRef, JointSpec, Parallelogram, UrdfSource, parse_device, read_device,
     write_device,
 };
-pub use error::{Error, line_column};
+pub use error::{Error, line_column, toml_error_at};
 pub use hapcal_kinematics::{DhConvention, DhRow, Placement};
 pub use input_files::{InputFile, input_files};
 pub use log::{

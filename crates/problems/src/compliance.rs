@@ -38,13 +38,7 @@ pub fn handle_gravity_torques_nm(
             found: x.len(),
         });
     }
-    if q.len() != chain.n_joints() {
-        return Err(Error::JointCount {
-            row: 0,
-            expected: chain.n_joints(),
-            found: q.len(),
-        });
-    }
+    Error::check_joint_count(0, chain.n_joints(), q.len())?;
     let jac = chain.geometric_jacobian(x, q);
     let up: Vector3<f64> = if jac.ncols() > 0 {
         Vector3::new(jac[(3, 0)], jac[(4, 0)], jac[(5, 0)])

@@ -89,13 +89,7 @@ pub fn distance_row(
             found: x_kin.len(),
         });
     }
-    if q.len() != n_joints {
-        return Err(Error::JointCount {
-            row: 0,
-            expected: n_joints,
-            found: q.len(),
-        });
-    }
+    Error::check_joint_count(0, n_joints, q.len())?;
     if !joint_var_rad2.is_empty() && joint_var_rad2.len() != n_joints {
         return Err(Error::LengthMismatch {
             name: "joint_var_rad2",
@@ -185,13 +179,7 @@ impl DistanceLog {
             }
         }
         for (row, r) in q.iter().enumerate() {
-            if r.len() != n_joints {
-                return Err(Error::JointCount {
-                    row,
-                    expected: n_joints,
-                    found: r.len(),
-                });
-            }
+            Error::check_joint_count(row, n_joints, r.len())?;
             let finite = r.iter().all(|v| v.is_finite())
                 && distance_m[row].is_finite()
                 && t_s.as_ref().is_none_or(|t| t[row].is_finite())
@@ -586,12 +574,8 @@ impl DistanceLogModel {
         handle_mass_kg: f64,
     ) -> Result<Self, Error> {
         let n_joints = chain.n_joints();
-        if let Some((row, q)) = log.q.iter().enumerate().find(|(_, q)| q.len() != n_joints) {
-            return Err(Error::JointCount {
-                row,
-                expected: n_joints,
-                found: q.len(),
-            });
+        for (row, q) in log.q.iter().enumerate() {
+            Error::check_joint_count(row, n_joints, q.len())?;
         }
         if noise.resolution_rad.len() != n_joints {
             return Err(Error::LengthMismatch {

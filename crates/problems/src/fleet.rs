@@ -86,13 +86,7 @@ impl FleetProblem {
         for (d, dev) in devices.iter().enumerate() {
             let n = dev.distance_m.len();
             let start = *row_start.last().unwrap_or(&0);
-            if dev.q_rad.len() != n * nj {
-                return Err(Error::JointCount {
-                    row: start,
-                    expected: n * nj,
-                    found: dev.q_rad.len(),
-                });
-            }
+            Error::check_joint_count(start, n * nj, dev.q_rad.len())?;
             let bad = dev
                 .q_rad
                 .iter()
@@ -208,12 +202,7 @@ impl Problem for FleetProblem {
     }
 
     fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
-        check(
-            x.nrows(),
-            self.layout.len(),
-            out.nrows(),
-            self.n_residuals(),
-        )?;
+        self.check_shape(x.nrows(), out.nrows())?;
         let mut r = Vec::new();
         for d in 0..self.devices.len() {
             let (a, b) = (self.row_start[d], self.row_start[d + 1]);
@@ -227,12 +216,7 @@ impl Problem for FleetProblem {
     }
 
     fn jacobian(&self, x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
-        check(
-            x.nrows(),
-            self.layout.len(),
-            jac.nrows(),
-            self.n_residuals(),
-        )?;
+        self.check_shape(x.nrows(), jac.nrows())?;
         jac.fill(0.0);
         let np = self.device_params.len();
         let [ci, ki] = self.shared();
@@ -325,15 +309,20 @@ impl SparseJacobian for FleetProblem {
     }
 }
 
-fn check(nx: usize, n: usize, nr: usize, m: usize) -> Result<(), EvalError> {
-    if nx != n || nr != m {
-        return Err(EvalError {
-            reason: format!(
-                "shape mismatch: x has {nx} entries (expected {n}), output {nr} rows (expected {m})"
-            ),
-        });
+impl FleetProblem {
+    /// `x` of `nx` entries and an output of `nr` rows: the layout's length and the number of
+    /// residuals, else the shape mismatch.
+    fn check_shape(&self, nx: usize, nr: usize) -> Result<(), EvalError> {
+        let (n, m) = (self.layout.len(), self.n_residuals());
+        if nx != n || nr != m {
+            return Err(EvalError {
+                reason: format!(
+                    "shape mismatch: x has {nx} entries (expected {n}), output {nr} rows (expected {m})"
+                ),
+            });
+        }
+        Ok(())
     }
-    Ok(())
 }
 
 /// Start vector of a fleet: all deviations 0, the rig parameters 0.

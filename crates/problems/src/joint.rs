@@ -152,13 +152,7 @@ impl JointProblem {
             return Err(err);
         }
         for (row, q) in theta.iter().enumerate() {
-            if q.len() != n_joints {
-                return Err(Error::JointCount {
-                    row,
-                    expected: n_joints,
-                    found: q.len(),
-                });
-            }
+            Error::check_joint_count(row, n_joints, q.len())?;
             let finite = q
                 .iter()
                 .chain(ext.iter().map(|col| &col[row]))

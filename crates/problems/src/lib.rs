@@ -176,3 +176,22 @@ pub enum Error {
     #[error(transparent)]
     Transmission(#[from] hapcal_transmission::Error),
 }
+
+impl Error {
+    /// `Ok(())` when observation `row` holds the `expected` joint angles (it holds `found`),
+    /// else [`Error::JointCount`].
+    pub(crate) fn check_joint_count(
+        row: usize,
+        expected: usize,
+        found: usize,
+    ) -> Result<(), Error> {
+        if found != expected {
+            return Err(Error::JointCount {
+                row,
+                expected,
+                found,
+            });
+        }
+        Ok(())
+    }
+}

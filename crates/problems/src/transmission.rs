@@ -7,35 +7,8 @@ use hapcal_identify::{
     EvalError, IdentifyConfig, ParamLayout, ParamSpec, Problem, RankConfigBase, Role, Unit,
 };
 use hapcal_transmission::{
-    Capstan, CapstanParams, Chebyshev, Error as TransmissionError, JointRad,
+    Capstan, CapstanParams, Chebyshev, Error as TransmissionError, JointRad, all_finite, positive,
 };
-
-/// `Ok(value)` if finite and `> 0`, else [`TransmissionError::NotFinite`] or
-/// [`TransmissionError::NonPositive`].
-fn positive(name: &'static str, value: f64) -> Result<f64, TransmissionError> {
-    if !value.is_finite() {
-        return Err(TransmissionError::NotFinite {
-            name: name.to_owned(),
-            value,
-        });
-    }
-    if value <= 0.0 {
-        return Err(TransmissionError::NonPositive { name, value });
-    }
-    Ok(value)
-}
-
-/// `Ok(())` if every entry of `values` is finite, else [`TransmissionError::NotFinite`] naming
-/// `name[i]`.
-fn all_finite(name: &'static str, values: &[f64]) -> Result<(), TransmissionError> {
-    match values.iter().position(|v| !v.is_finite()) {
-        Some(i) => Err(TransmissionError::NotFinite {
-            name: format!("{name}[{i}]"),
-            value: values[i],
-        }),
-        None => Ok(()),
-    }
-}
 
 /// Checks paired readings/measurements: non-empty, equal lengths, finite; and `sigma_rad > 0`.
 fn check_data(theta: &[f64], ext: &[f64], sigma_rad: f64) -> Result<(), TransmissionError> {

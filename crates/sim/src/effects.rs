@@ -603,22 +603,15 @@ mod tests {
         assert_eq!(e.get("j1"), 0.0);
         let round: Injected = e.to_string().parse().expect("round trip");
         assert_eq!(round, e);
-        let err = "backlash:k=1"
-            .parse::<Injected>()
-            .expect_err("k is not a backlash key");
-        assert!(err.to_string().contains("unknown parameter \"k\""), "{err}");
-        let err = "wobble:k=1"
-            .parse::<Injected>()
-            .expect_err("unknown effect");
-        assert!(err.to_string().contains("unknown effect"), "{err}");
-        let err = "latency:tau=x"
-            .parse::<Injected>()
-            .expect_err("not a number");
-        assert!(err.to_string().contains("expected a number"), "{err}");
-        let err = "latency:tau=1,tau=2"
-            .parse::<Injected>()
-            .expect_err("twice");
-        assert!(err.to_string().contains("twice"), "{err}");
+        for (spec, refusal) in [
+            ("backlash:k=1", "unknown parameter \"k\""),
+            ("wobble:k=1", "unknown effect"),
+            ("latency:tau=x", "expected a number"),
+            ("latency:tau=1,tau=2", "twice"),
+        ] {
+            let err = spec.parse::<Injected>().expect_err(spec);
+            assert!(err.to_string().contains(refusal), "{spec}: {err}");
+        }
         assert!("cable_offset".parse::<Injected>().is_ok());
     }
 }

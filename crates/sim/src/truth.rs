@@ -264,14 +264,12 @@ pub fn read_truth(path: &Path) -> Result<Truth, Error> {
 /// As [`read_truth`], except [`Error::Io`].
 pub fn parse_truth(text: &str, path: &Path) -> Result<Truth, Error> {
     let raw: RawTruth = toml::from_str(text).map_err(|e| {
-        let (line, column) = e
-            .span()
-            .map_or((1, 1), |span| hapcal_io::line_column(text, span.start));
+        let (line, column, message) = hapcal_io::toml_error_at(text, &e);
         Error::Toml {
             path: path.to_path_buf(),
             line,
             column,
-            message: e.message().trim_end().to_owned(),
+            message,
         }
     })?;
     let at = TruthText { text, path };

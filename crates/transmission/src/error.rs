@@ -67,8 +67,13 @@ pub enum Error {
     },
 }
 
-/// `Ok(value)` if finite and `> 0`, else [`Error::NotFinite`] or [`Error::NonPositive`].
-pub(crate) fn positive(name: &'static str, value: f64) -> Result<f64, Error> {
+/// `Ok(value)` if finite and `> 0`, else [`Error::NotFinite`] or [`Error::NonPositive`]
+/// naming `name`: the check of every positive model value (a ratio, a drum distance, a link
+/// length in m, a noise σ), here and in the identification problems of `hapcal-problems`.
+///
+/// # Errors
+/// [`Error::NotFinite`] for a NaN or infinite value, [`Error::NonPositive`] for `value ≤ 0`.
+pub fn positive(name: &'static str, value: f64) -> Result<f64, Error> {
     if !value.is_finite() {
         return Err(Error::NotFinite {
             name: name.to_owned(),
@@ -81,8 +86,12 @@ pub(crate) fn positive(name: &'static str, value: f64) -> Result<f64, Error> {
     Ok(value)
 }
 
-/// `Ok(())` if every entry of `values` is finite, else [`Error::NotFinite`] naming `name[i]`.
-pub(crate) fn all_finite(name: &'static str, values: &[f64]) -> Result<(), Error> {
+/// `Ok(())` if every entry of `values` is finite, else [`Error::NotFinite`] naming `name[i]`
+/// (any length, any unit).
+///
+/// # Errors
+/// [`Error::NotFinite`] for the first NaN or infinite entry.
+pub fn all_finite(name: &'static str, values: &[f64]) -> Result<(), Error> {
     match values.iter().position(|v| !v.is_finite()) {
         Some(i) => Err(Error::NotFinite {
             name: format!("{name}[{i}]"),

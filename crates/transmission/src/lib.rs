@@ -40,5 +40,5 @@ mod four_bar;
 
 pub use capstan::{Capstan, CapstanParams, JointRad, MotorRad};
 pub use chebyshev::Chebyshev;
-pub use error::Error;
+pub use error::{Error, all_finite, positive};
 pub use four_bar::{FourBar, Joint4Transmission};

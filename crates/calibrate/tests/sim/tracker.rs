@@ -6,7 +6,7 @@
 use std::ops::Index;
 use std::path::PathBuf;
 
-use hapcal_calibrate::measured::{Robot, robot_from_urdf};
+use hapcal_calibrate::measured::{MeasuredOutcome, Robot, robot_from_urdf};
 use hapcal_io::{MarkerSample, MeasuredRow, MeasurementTable};
 use hapcal_kinematics::{FrameSpec, Isometry3, Tree, Vector3};
 use rand::Rng;
@@ -184,4 +184,26 @@ pub fn offsets_truth(robot: &Robot, offset_rad: f64) -> (Tree, Vec<f64>) {
         x[6 + p.unwrap()] = if j % 2 == 0 { offset_rad } else { -offset_rad };
     }
     (framed, x)
+}
+
+/// Asserts the 3-D position RMS of the first test set of `out`, in units of `floor` (the
+/// noise's 3-D RMS, m): the calibrated model's below `calibrated_below`, frames only's above
+/// `frames_only.0` and below `frames_only.1`.
+#[track_caller]
+pub fn assert_test_rms(
+    out: &MeasuredOutcome,
+    floor: f64,
+    calibrated_below: f64,
+    (above, below): (f64, f64),
+) {
+    let (_, _, _, frames_only, calibrated) = &out.sets[1];
+    let (frames_only, calibrated) = (frames_only.position_rms_m, calibrated.position_rms_m);
+    assert!(
+        calibrated < calibrated_below * floor,
+        "test RMS {calibrated} m, floor {floor} m"
+    );
+    assert!(
+        frames_only > above * floor && frames_only < below * floor,
+        "frames only {frames_only} m, floor {floor} m"
+    );
 }

@@ -88,6 +88,11 @@ fn capstan_of(device: &Device, j: usize) -> Option<&Capstan> {
     device.capstans.iter().find(|c| c.joint == j + 1)
 }
 
+/// The joints of the first `n_joints` (0-based, in order) with a capstan drive, and its drive.
+fn capstan_joints(device: &Device, n_joints: usize) -> impl Iterator<Item = (usize, &Capstan)> {
+    (0..n_joints).filter_map(|j| capstan_of(device, j).map(|c| (j, c)))
+}
+
 /// Half the dead band against each joint's direction of motion.
 fn backlash(data: &Data, n_joints: usize) -> Result<Vec<Term>, String> {
     need_t(data)?;
@@ -129,10 +134,7 @@ fn first_harmonic(device: &Device, data: &Data, n_joints: usize) -> Vec<Term> {
 fn capstan_harmonic(device: &Device, data: &Data, n_joints: usize) -> Vec<Term> {
     let effect = Effect::CapstanHarmonic;
     let mut terms = Vec::new();
-    for j in 0..n_joints {
-        let Some(c) = capstan_of(device, j) else {
-            continue;
-        };
+    for (j, c) in capstan_joints(device, n_joints) {
         let r = c.ratio;
         terms.push(joint_term(
             format!("{effect}.j{}_sin", j + 1),
@@ -171,10 +173,7 @@ fn thermal_drift(data: &Data) -> Result<Vec<Term>, String> {
 fn capstans(device: &Device, data: &Data, n_joints: usize) -> Vec<Term> {
     let effect = Effect::Capstans;
     let mut terms = Vec::new();
-    for j in 0..n_joints {
-        let Some(c) = capstan_of(device, j) else {
-            continue;
-        };
+    for (j, c) in capstan_joints(device, n_joints) {
         if device.parallelogram.is_some() && j + 1 == hapcal_sim::PARALLELOGRAM_JOINT {
             continue;
         }

@@ -79,24 +79,34 @@ fn largest_gap(runtime: &ForceModel, library: &ForceModel, device: &Device) -> f
     worst
 }
 
+/// A constructor of a [`ForceModel`] from a device.
+type Build = fn(&Device) -> Result<ForceModel, hapcal_force::Error>;
+
+/// Asserts that the model `on_runtime` builds from the fixture `name` and the one
+/// `on_library` builds from it agree within [`TOL`] ([`largest_gap`]).
+#[track_caller]
+fn runtime_matches_library(name: &str, on_runtime: Build, on_library: Build) {
+    let device = read_device(&fixture(name)).expect("fixture");
+    let runtime = on_runtime(&device).expect("runtime model");
+    let library = on_library(&device).expect("library model");
+    let worst = largest_gap(&runtime, &library, &device);
+    assert!(worst <= TOL, "{name}: largest gap {worst:e}");
+}
+
 #[test]
 fn calibrated_model_on_the_runtime_matches_the_library() {
-    let device = read_device(&fixture("calibrated.toml")).expect("fixture");
-    let runtime = ForceModel::calibrated(&device).expect("runtime model");
-    let library = ForceModel::calibrated_library(&device).expect("library model");
-    let worst = largest_gap(&runtime, &library, &device);
-    assert!(worst <= TOL, "largest gap {worst:e}");
+    runtime_matches_library(
+        "calibrated.toml",
+        ForceModel::calibrated,
+        ForceModel::calibrated_library,
+    );
 }
 
 #[test]
 fn nominal_model_on_the_runtime_matches_the_library() {
     // The calibrated file: `nominal` must drop its `[calibration]` (ideal drives).
     for name in ["device.toml", "calibrated.toml"] {
-        let device = read_device(&fixture(name)).expect("fixture");
-        let runtime = ForceModel::nominal(&device).expect("runtime model");
-        let library = ForceModel::nominal_library(&device).expect("library model");
-        let worst = largest_gap(&runtime, &library, &device);
-        assert!(worst <= TOL, "{name}: largest gap {worst:e}");
+        runtime_matches_library(name, ForceModel::nominal, ForceModel::nominal_library);
     }
 }
 

@@ -3,7 +3,7 @@
 use faer::{Col, Mat};
 use hapcal_identify::{LmConfig, covariance, levenberg_marquardt};
 
-use crate::problems::{Linear, mean_std, meters, normal, random_matrix, rng};
+use crate::problems::{Linear, assert_standard_normal, meters, normal, random_matrix, rng};
 
 /// Inverse of a 3 × 3 matrix by cofactors (independent of any QR).
 fn inverse3(a: &Mat<f64>) -> Mat<f64> {
@@ -81,12 +81,5 @@ fn normalised_errors_have_unit_standard_deviation_over_500_trials() {
             errors[j].push((fit.x[j] - truth[j]) / std[j]);
         }
     }
-    for (j, e) in errors.iter().enumerate() {
-        let (mean, sd) = mean_std(e);
-        assert!(
-            (0.9..=1.1).contains(&sd),
-            "p{j}: std of normalised errors {sd}"
-        );
-        assert!(mean.abs() < 0.15, "p{j}: mean of normalised errors {mean}");
-    }
+    assert_standard_normal(&errors);
 }

@@ -5,7 +5,9 @@ use hapcal_identify::{
     Error, IdentifyConfig, ParamLayout, PruneReason, Role, SigmaSource, Unit, identify,
 };
 
-use crate::problems::{Curve, Linear, mean_std, meters, normal, random_matrix, rng, spec};
+use crate::problems::{
+    Curve, Linear, assert_standard_normal, meters, normal, random_matrix, rng, spec,
+};
 
 /// `y = a·t + a·b·t²` and its gradient in `(a, b)`: at `a = 0` the column of `b` is zero, at
 /// the estimate it is not.
@@ -103,14 +105,7 @@ fn pruned_duplicate_and_covariance_are_consistent_over_500_trials() {
             e.push((id.value(&name).expect("in layout") - truth[j]) / std);
         }
     }
-    for (j, e) in errors.iter().enumerate() {
-        let (mean, sd) = mean_std(e);
-        assert!(
-            (0.9..=1.1).contains(&sd),
-            "p{j}: std of normalised errors {sd}"
-        );
-        assert!(mean.abs() < 0.15, "p{j}: mean {mean}");
-    }
+    assert_standard_normal(&errors);
 }
 
 #[test]

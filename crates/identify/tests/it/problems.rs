@@ -16,11 +16,7 @@ pub(crate) fn spec(name: &str, unit: Unit, role: Role) -> ParamSpec {
 
 /// `n` model parameters in m, named `p0`, `p1`, ….
 pub(crate) fn meters(n: usize) -> ParamLayout {
-    ParamLayout::new(
-        (0..n)
-            .map(|j| spec(&format!("p{j}"), Unit::Meter, Role::Model))
-            .collect(),
-    )
+    ParamLayout::numbered("p", n, Unit::Meter)
 }
 
 pub(crate) fn rng(seed: u64) -> ChaCha8Rng {
@@ -102,10 +98,20 @@ pub(crate) fn exponential([a, b]: [f64; 2], t: f64) -> (f64, [f64; 2]) {
     (a * e, [e, a * t * e])
 }
 
-/// Sample standard deviation and mean.
-pub(crate) fn mean_std(v: &[f64]) -> (f64, f64) {
-    let n = v.len() as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    (mean, var.sqrt())
+/// Asserts that the normalised errors `(x̂ − x*)/std` of each parameter `p{j}` (`errors[j]`, one
+/// per trial, 500 trials) are standard normal: their sample standard deviation within 0.9–1.1
+/// (±3/√(2·500) ≈ ±0.095 of 1, and room for a Student t's slightly wider spread) and their mean
+/// within ±0.15 (±3/√500 ≈ ±0.13 of 0).
+#[track_caller]
+pub(crate) fn assert_standard_normal(errors: &[Vec<f64>]) {
+    for (j, e) in errors.iter().enumerate() {
+        let n = e.len() as f64;
+        let mean = e.iter().sum::<f64>() / n;
+        let sd = (e.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        assert!(
+            (0.9..=1.1).contains(&sd),
+            "p{j}: std of normalised errors {sd}"
+        );
+        assert!(mean.abs() < 0.15, "p{j}: mean of normalised errors {mean}");
+    }
 }

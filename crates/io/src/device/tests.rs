@@ -70,21 +70,22 @@ fn placement_parameter_names_split_at_the_last_dot() {
 fn placement_calibration_rejects_fixed_placements_and_wrong_units() {
     let device = iiwa();
     let meta = CalibrationMeta::default;
-    // joint_a7-tool0 is fixed and folded into the tip element named after ball_joint.
-    let err = device
-        .with_calibration(&[value("joint_a7-tool0.z", 1e-3, "m")], meta())
-        .unwrap_err();
-    assert_eq!(
-        err.to_string(),
-        "parameter \"joint_a7-tool0.z\": no revolute or tip placement named \"joint_a7-tool0\" carries it"
-    );
-    let err = device
-        .with_calibration(&[value("joint_a1.rx", 1e-3, "m")], meta())
-        .unwrap_err();
-    assert_eq!(
-        err.to_string(),
-        "parameter \"joint_a1.rx\": unit is \"m\", expected \"rad\""
-    );
+    for (name, refusal) in [
+        // joint_a7-tool0 is fixed and folded into the tip element named after ball_joint.
+        (
+            "joint_a7-tool0.z",
+            "parameter \"joint_a7-tool0.z\": no revolute or tip placement named \"joint_a7-tool0\" carries it",
+        ),
+        (
+            "joint_a1.rx",
+            "parameter \"joint_a1.rx\": unit is \"m\", expected \"rad\"",
+        ),
+    ] {
+        let err = device
+            .with_calibration(&[value(name, 1e-3, "m")], meta())
+            .unwrap_err();
+        assert_eq!(err.to_string(), refusal);
+    }
     // Names that are not kinematic parameters are only recorded.
     let calibrated = device
         .with_calibration(&[value("socket0.c", 1.0, "1")], meta())

@@ -92,6 +92,24 @@ impl<'a> Locator<'a> {
         }
     }
 
+    /// Checks the `what` name `name` at `keys` is not empty and not among `names` (then adds
+    /// it): `{what} name is empty`, `{what} name "x" is used twice`.
+    fn new_name<'n>(
+        &self,
+        keys: &[Key<'_>],
+        what: &str,
+        name: &'n str,
+        names: &mut HashSet<&'n str>,
+    ) -> Result<(), Error> {
+        if name.is_empty() {
+            return Err(self.invalid(keys, format!("{what} name is empty")));
+        }
+        if !names.insert(name) {
+            return Err(self.invalid(keys, format!("{what} name {name:?} is used twice")));
+        }
+        Ok(())
+    }
+
     fn finite(&self, keys: &[Key<'_>], value: f64) -> Result<(), Error> {
         if value.is_finite() {
             return Ok(());
@@ -230,15 +248,7 @@ fn check_chain(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
     });
     for (row, p) in main.chain(branches) {
         let at = |field| [row.as_slice(), &[N(field)]].concat();
-        if p.name.is_empty() {
-            return Err(loc.invalid(&at("name"), "placement name is empty"));
-        }
-        if !names.insert(p.name.as_str()) {
-            return Err(loc.invalid(
-                &at("name"),
-                format!("placement name {:?} is used twice", p.name),
-            ));
-        }
+        loc.new_name(&at("name"), "placement", &p.name, &mut names)?;
         for (field, values) in [("xyz_m", p.xyz_m), ("rpy_rad", p.rpy_rad)]
             .into_iter()
             .chain(p.axis.map(|a| ("axis", a)))
@@ -301,15 +311,7 @@ fn check_joints(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
     let mut names = HashSet::new();
     for (i, joint) in device.joints.iter().enumerate() {
         let at = |field| [N("joint"), I(i), N(field)];
-        if joint.name.is_empty() {
-            return Err(loc.invalid(&at("name"), "joint name is empty"));
-        }
-        if !names.insert(joint.name.as_str()) {
-            return Err(loc.invalid(
-                &at("name"),
-                format!("joint name {:?} is used twice", joint.name),
-            ));
-        }
+        loc.new_name(&at("name"), "joint", &joint.name, &mut names)?;
         // A prismatic joint's limits are lengths (`lower_m`, `upper_m`), a revolute one's
         // angles (`lower_rad`, `upper_rad`): the key says the unit, and must match the joint.
         let is_prismatic = prismatic.get(i) == Some(&true);

@@ -232,6 +232,30 @@ fn semantic_checks_point_at_the_offending_value() {
     }
 }
 
+/// Asserts that the device file `text` with its first `from` replaced by `to`, read
+/// as `t.toml`, is refused with a message holding every one of `parts`.
+#[track_caller]
+fn refused_edit(text: &str, (from, to): (&str, &str), parts: &[&str]) {
+    let edited = text.replacen(from, to, 1);
+    assert_contains(&message(parse_device(&edited, Path::new("t.toml"))), parts);
+}
+
+/// Asserts that the device file `text` with its first `from` replaced by `to`, read as
+/// `t.toml`, is refused at column 1 of the edited text's first line that starts with `needle`,
+/// with a message that goes on with `start`.
+#[track_caller]
+fn refused_edit_at(text: &str, (from, to): (&str, &str), needle: &str, start: &str) {
+    let edited = text.replacen(from, to, 1);
+    let line = 1
+        + (edited.lines().position(|l| l.starts_with(needle)))
+            .unwrap_or_else(|| panic!("no line starts with {needle:?}"));
+    let err = message(parse_device(&edited, Path::new("t.toml")));
+    assert!(
+        err.starts_with(&format!("t.toml:{line}:1: {start}")),
+        "{err}"
+    );
+}
+
 #[test]
 fn missing_device_file_is_an_io_error() {
     let msg = message(read_device(&data("no_such_device.toml")));
@@ -260,33 +284,31 @@ fn prismatic_joint_survives_the_device_file_with_its_unit() {
     assert_eq!(back.prismatic_joints(), device.prismatic_joints());
 
     // The limit keys name the unit and must match the joint.
-    let as_rad = text.replacen(
-        "lower_m = 0.0\nupper_m = 0.35",
-        "lower_rad = 0.0\nupper_rad = 0.35",
-        1,
-    );
-    assert_contains(
-        &message(parse_device(&as_rad, Path::new("t.toml"))),
+    refused_edit(
+        &text,
+        (
+            "lower_m = 0.0\nupper_m = 0.35",
+            "lower_rad = 0.0\nupper_rad = 0.35",
+        ),
         &[
             "t.toml:",
             "joint \"torso_lift_joint\" is a prismatic joint: its limits are lengths, expected lower_m (in m), found lower_rad",
         ],
     );
-    let as_m = text.replacen(
-        "name = \"arm_1_joint\"\nlower_rad = ",
-        "name = \"arm_1_joint\"\nlower_m = ",
-        1,
-    );
-    assert_contains(
-        &message(parse_device(&as_m, Path::new("t.toml"))),
+    refused_edit(
+        &text,
+        (
+            "name = \"arm_1_joint\"\nlower_rad = ",
+            "name = \"arm_1_joint\"\nlower_m = ",
+        ),
         &[
             "joint \"arm_1_joint\" is a revolute joint: its limits are angles, expected lower_rad (in rad), found lower_m",
         ],
     );
     // A prismatic limit is a length: 2000 m is out of range.
-    let far = text.replacen("upper_m = 0.35", "upper_m = 2000.0", 1);
-    assert_contains(
-        &message(parse_device(&far, Path::new("t.toml"))),
+    refused_edit(
+        &text,
+        ("upper_m = 0.35", "upper_m = 2000.0"),
         &["t.toml:70:11: joint[0].upper_m = 2e3 m is out of range"],
     );
 }
@@ -320,18 +342,17 @@ fn placement_tree_survives_the_device_file() {
     let back = parse_device(&text, Path::new("humanoid.toml")).unwrap();
     assert_eq!(back, device);
 
-    let bad = text.replacen("from = \"torso_3\"", "from = \"r_3\"", 1);
-    let err = message(parse_device(&bad, Path::new("h.toml")));
-    assert_contains(
-        &err,
+    refused_edit(
+        &text,
+        ("from = \"torso_3\"", "from = \"r_3\""),
         &[
-            "h.toml:",
+            "t.toml:",
             "branch from = \"r_3\": no placement of the main chain or of an earlier branch has that name",
         ],
     );
-    let bad = text.replacen("from = \"torso_3\"", "from = \"torso_9\"", 1);
-    assert_contains(
-        &message(parse_device(&bad, Path::new("h.toml"))),
+    refused_edit(
+        &text,
+        ("from = \"torso_3\"", "from = \"torso_9\""),
         &["torso_9"],
     );
 }
@@ -352,29 +373,23 @@ fn a_calibration_record_is_checked_at_its_line() {
         parse_device(&write_device(&device), Path::new("again.toml")).unwrap(),
         device
     );
-    let line_of =
-        |text: &str, start: &str| 1 + text.lines().position(|l| l.starts_with(start)).unwrap();
-    let mistyped = text.replacen("\"joint_compliance.j3\"", "\"joint_compliance.k3\"", 1);
-    let at = line_of(&mistyped, "\"joint_compliance.k3\"");
-    let err = message(parse_device(&mistyped, Path::new("cal.toml")));
-    assert!(
-        err.starts_with(&format!(
-            "cal.toml:{at}:1: [calibration]: \"joint_compliance.k3\": unknown value name"
-        )),
-        "{err}"
+    refused_edit_at(
+        &text,
+        ("\"joint_compliance.j3\"", "\"joint_compliance.k3\""),
+        "\"joint_compliance.k3\"",
+        "[calibration]: \"joint_compliance.k3\": unknown value name",
     );
-    let newer = text.replacen("schema_version = 1", "schema_version = 2", 1);
-    let at = line_of(&newer, "schema_version");
-    let err = message(parse_device(&newer, Path::new("cal.toml")));
-    assert!(
-        err.starts_with(&format!(
-            "cal.toml:{at}:1: [calibration]: schema_version = 2"
-        )),
-        "{err}"
+    refused_edit_at(
+        &text,
+        ("schema_version = 1", "schema_version = 2"),
+        "schema_version",
+        "[calibration]: schema_version = 2",
     );
-    let no_model = text.replacen("model = \"compliance\"\n", "", 1);
-    let err = message(parse_device(&no_model, Path::new("cal.toml")));
-    assert!(err.contains("missing key model"), "{err}");
+    refused_edit(
+        &text,
+        ("model = \"compliance\"\n", ""),
+        &["missing key model"],
+    );
     // An earlier hapcal's record (no schema_version, model, region: notes and values) reads
     // as before.
     let device_part = &text[..text.find("[calibration]").expect("a calibration table")];

@@ -214,6 +214,16 @@ fn read_text(test: &str, name: &str, text: &str) -> Result<hapcal_io::Log, Error
     result
 }
 
+/// The refusal of the log `text` as [`read_text`] writes and reads it, from after the file's
+/// name `name` on (`:line:column: …`; the temporary folder before it varies).
+fn refusal(test: &str, name: &str, text: &str) -> String {
+    let msg = message(read_text(test, name, text));
+    match msg.split_once(name) {
+        Some((_, after)) => after.to_owned(),
+        None => panic!("{msg:?} does not name {name}"),
+    }
+}
+
 #[test]
 fn a_header_of_200000_unknown_columns_is_read_with_a_bounded_number_of_warnings() {
     // Duplicates used to be found by comparing each column with every earlier one: 40,000
@@ -249,13 +259,12 @@ fn external_encoder_readings_are_checked_against_their_joint_limits() {
     // Shoulder limits [-1.5, 1.5] rad, range 3 rad: ext1 may lie 0.3 rad past them (the
     // output angle differs from q1 by the transmission's error).
     let header = "q1,q2,distance_m,ext1,ext2\n";
-    let msg = message(read_text(
-        "ext",
-        "typo.csv",
-        &format!("{header}0.1,0.2,0.4,0.1,0.2\n0.2,0.3,0.5,1e10,0.3\n"),
-    ));
     assert_eq!(
-        msg.split_once("typo.csv").unwrap().1,
+        refusal(
+            "ext",
+            "typo.csv",
+            &format!("{header}0.1,0.2,0.4,0.1,0.2\n0.2,0.3,0.5,1e10,0.3\n"),
+        ),
         ":3:4: ext1 = 1e10 rad (the external encoder of joint \"shoulder\") is outside \
          [-1.8, 1.8] rad: the joint's limits [-1.5, 1.5] rad widened by 10% of its range"
     );
@@ -289,13 +298,8 @@ fn a_frozen_distance_is_refused_but_a_constant_joint_is_not() {
     let rows: String = (0..200)
         .map(|i| format!("{},0.5,0.512\n", f64::from(i) * 0.001))
         .collect();
-    let msg = message(read_text(
-        "frozen",
-        "log.csv",
-        &format!("q1,q2,distance_m\n{rows}"),
-    ));
     assert_eq!(
-        msg.split_once("log.csv").unwrap().1,
+        refusal("frozen", "log.csv", &format!("q1,q2,distance_m\n{rows}")),
         ":1:3: distance_m is 0.512 m in all 200 rows: the measurement does not change \
          (a frozen or disconnected sensor?)"
     );

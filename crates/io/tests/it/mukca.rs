@@ -2,6 +2,13 @@ use hapcal_io::{Error, read_mukca_paths, read_mukca_placement};
 
 use crate::{assert_contains, data, message, mukca};
 
+/// Asserts that the placement folder `test_data/<folder>` of a three-joint arm is refused with a
+/// message holding every one of `parts`.
+#[track_caller]
+fn refused(folder: &str, parts: &[&str]) {
+    assert_contains(&message(read_mukca_placement(&data(folder), 3)), parts);
+}
+
 #[test]
 fn kuka_front_has_two_sockets_of_31_rows_of_7_joints() {
     let placement = read_mukca_placement(&mukca("data/kuka_14/front"), 7).unwrap();
@@ -36,17 +43,20 @@ fn run_folder_lists_its_placements_in_name_order() {
 fn wrong_joint_count_names_the_first_line() {
     let msg = message(read_mukca_placement(&mukca("data/kuka_14/front"), 6));
     assert_contains(&msg, &["hole_0.csv:1:", "expected 6 joints", "found 7"]);
-    let msg = message(read_mukca_placement(&data("mukca_bad/joint_count"), 3));
-    assert_contains(&msg, &["joint_count/hole_0.csv:1: ", "found 4"]);
+    refused(
+        "mukca_bad/joint_count",
+        &["joint_count/hole_0.csv:1: ", "found 4"],
+    );
 }
 
 #[test]
 fn ragged_row_names_its_line() {
-    let msg = message(read_mukca_placement(&data("mukca_bad/ragged"), 3));
-    assert_contains(&msg, &["ragged/hole_0.csv:3: expected 3 fields, found 2"]);
-    let msg = message(read_mukca_placement(&data("mukca_bad/ragged_second"), 3));
-    assert_contains(
-        &msg,
+    refused(
+        "mukca_bad/ragged",
+        &["ragged/hole_0.csv:3: expected 3 fields, found 2"],
+    );
+    refused(
+        "mukca_bad/ragged_second",
         &["ragged_second/hole_1.csv:3: expected 3 fields, found 4"],
     );
 }
@@ -73,25 +83,24 @@ fn nan_is_not_finite() {
 
 #[test]
 fn non_numeric_cell_names_line_and_column() {
-    let msg = message(read_mukca_placement(&data("mukca_bad/not_a_number"), 3));
-    assert_contains(
-        &msg,
+    refused(
+        "mukca_bad/not_a_number",
         &["hole_0.csv:3:2: expected a number in column \"q2\", found \"abc\""],
     );
 }
 
 #[test]
 fn socket_files_must_be_contiguous_and_present() {
-    let msg = message(read_mukca_placement(&data("mukca_bad/gap"), 3));
-    assert_contains(&msg, &["gap: hole_1.csv is missing"]);
+    refused("mukca_bad/gap", &["gap: hole_1.csv is missing"]);
     // hole_0_pose.csv is not a socket file.
-    let msg = message(read_mukca_placement(&data("mukca_bad/no_sockets"), 3));
-    assert_contains(&msg, &["no_sockets: no socket file hole_0.csv"]);
+    refused(
+        "mukca_bad/no_sockets",
+        &["no_sockets: no socket file hole_0.csv"],
+    );
     let msg = message(read_mukca_paths(&[data("mukca_bad/no_sockets")], 3));
     assert_contains(&msg, &["no_sockets: no socket file hole_0.csv"]);
-    let msg = message(read_mukca_placement(&data("mukca_bad/empty"), 3));
-    assert_contains(
-        &msg,
+    refused(
+        "mukca_bad/empty",
         &["empty/hole_0.csv: expected at least 1 data rows, found 0"],
     );
 }

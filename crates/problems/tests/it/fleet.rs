@@ -4,12 +4,7 @@ use faer::{Col, Mat};
 use hapcal_identify::{Backend, IdentifyConfig, Problem, SparseJacobian, identify};
 use hapcal_problems::{FleetDevice, FleetProblem, cable_angle};
 
-fn lcg(state: &mut u64) -> f64 {
-    *state = state
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    (*state >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-}
+use crate::lcg;
 
 const HELD: [&str; 4] = ["dalpha0", "dd0", "dtheta0", "dalpha7"];
 

@@ -2,7 +2,9 @@
 //! is the derivative of the potential energy, and the transversal compliance's analytic
 //! Jacobian agrees with central differences.
 
-use super::{framed, pose_and_marker_weights, pose_or_marker_row, torso_and_two_arms};
+use super::{
+    framed, pose_and_marker_weights, pose_or_marker_row, torso_and_two_arms, torso_configuration,
+};
 use faer::Col;
 use hapcal_identify::Problem;
 use hapcal_kinematics::{Chain, Factor, Isometry3, Point3, Tree, Vector3};
@@ -140,18 +142,6 @@ fn per_axis_transversal_compliance_jacobian_matches_central_differences() {
     transversal_jacobian_matches_central_differences(hapcal_problems::Transversal::PerAxis);
 }
 
-/// Configuration `i` of the torso tree's five joints (rad), spread over their ranges.
-fn torso_configuration(i: usize) -> Vec<f64> {
-    let t = i as f64;
-    vec![
-        0.3 * (0.7 * t).sin(),
-        (1.3 * t).sin(),
-        (0.9 * t + 1.0).cos(),
-        (0.4 * t).sin() * 1.5,
-        (1.7 * t + 0.3).cos(),
-    ]
-}
-
 fn transversal_jacobian_matches_central_differences(transversal: hapcal_problems::Transversal) {
     let per_joint = if transversal == hapcal_problems::Transversal::PerAxis {
         2
@@ -162,7 +152,7 @@ fn transversal_jacobian_matches_central_differences(transversal: hapcal_problems
     let tree = framed(&robot);
     let mut obs = Observations::default();
     for i in 0..6 {
-        let q = torso_configuration(i);
+        let q = torso_configuration(i, 0.3);
         obs.rows.push(pose_or_marker_row(i, q));
     }
     let weights = pose_and_marker_weights();
@@ -384,7 +374,7 @@ fn bases_evaluated_row_by_row_equal_the_kept_ones() {
     let tree = framed(&robot);
     let mut obs = Observations::default();
     for i in 0..7 {
-        let q = torso_configuration(i);
+        let q = torso_configuration(i, 0.3);
         for tip in 0..2 {
             obs.rows.push(Row {
                 q: q.clone(),

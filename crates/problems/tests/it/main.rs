@@ -51,6 +51,19 @@ fn torso_and_two_arms(torso_axis: [f64; 3], prismatic: bool, second_axis: [f64; 
     Tree::from_placement_paths(&[arm("left", 0.2), arm("right", -0.2)]).expect("valid tree")
 }
 
+/// Configuration `i` of the five joints of [`torso_and_two_arms`] (rad; the torso's in m when
+/// prismatic), spread over their ranges, the torso's within ±`torso`.
+fn torso_configuration(i: usize, torso: f64) -> Vec<f64> {
+    let t = i as f64;
+    vec![
+        torso * (0.7 * t).sin(),
+        (1.3 * t).sin(),
+        (0.9 * t + 1.0).cos(),
+        (0.4 * t).sin() * 1.5,
+        (1.7 * t + 0.3).cos(),
+    ]
+}
+
 /// `tree` with joint offsets, an instrument frame and a marker frame on each of its first two
 /// tips.
 fn framed(tree: &Tree) -> Tree {
@@ -246,6 +259,37 @@ fn chain_problem(
     CalibrationProblem::new(chain, obs, weights, None).expect("valid")
 }
 
+/// Deterministic numbers in [−1, 1) (64-bit LCG, Knuth's MMIX constants).
+fn lcg(state: &mut u64) -> f64 {
+    *state = state
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    (*state >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+}
+
+/// The Jacobian of the residuals of `problem` at `x` (`m × n`) by central differences with
+/// step `h`.
+fn central_difference_jacobian(problem: &CalibrationProblem, x: &Col<f64>, h: f64) -> Mat<f64> {
+    let (m, n) = (problem.n_residuals(), problem.layout().len());
+    let (mut up, mut down) = (Col::<f64>::zeros(m), Col::<f64>::zeros(m));
+    let mut fd = Mat::zeros(m, n);
+    for col in 0..n {
+        let (mut xp, mut xm) = (x.clone(), x.clone());
+        xp[col] += h;
+        xm[col] -= h;
+        problem
+            .residuals(xp.as_ref(), up.as_mut())
+            .expect("residuals at x + h");
+        problem
+            .residuals(xm.as_ref(), down.as_mut())
+            .expect("residuals at x − h");
+        for row in 0..m {
+            fd[(row, col)] = (up[row] - down[row]) / (2.0 * h);
+        }
+    }
+    fd
+}
+
 /// The largest error of the analytic Jacobian of `problem` at `x` against central differences
 /// of its residuals with step `h`, relative to `1 + |entry|`.
 fn worst_relative_jacobian_error(problem: &CalibrationProblem, x: &Col<f64>, h: f64) -> f64 {
@@ -254,21 +298,11 @@ fn worst_relative_jacobian_error(problem: &CalibrationProblem, x: &Col<f64>, h: 
     problem
         .jacobian(x.as_ref(), jac.as_mut())
         .expect("jacobian");
+    let fd = central_difference_jacobian(problem, x, h);
     let mut worst: f64 = 0.0;
     for c in 0..n {
-        let (mut xp, mut xm) = (x.clone(), x.clone());
-        xp[c] += h;
-        xm[c] -= h;
-        let (mut rp, mut rm) = (Col::zeros(m), Col::zeros(m));
-        problem
-            .residuals(xp.as_ref(), rp.as_mut())
-            .expect("residuals");
-        problem
-            .residuals(xm.as_ref(), rm.as_mut())
-            .expect("residuals");
         for r in 0..m {
-            let fd = (rp[r] - rm[r]) / (2.0 * h);
-            worst = worst.max((fd - jac[(r, c)]).abs() / (1.0 + jac[(r, c)].abs()));
+            worst = worst.max((fd[(r, c)] - jac[(r, c)]).abs() / (1.0 + jac[(r, c)].abs()));
         }
     }
     worst
@@ -282,23 +316,10 @@ fn jacobian_agrees_with_central_differences(
     x: &Col<f64>,
     jac: &Mat<f64>,
 ) -> Result<(), TestCaseError> {
-    let (m, n) = (jac.nrows(), jac.ncols());
-    let h = 1e-6;
-    let (mut up, mut down) = (Col::<f64>::zeros(m), Col::<f64>::zeros(m));
-    for col in 0..n {
-        let mut xp = x.clone();
-        xp[col] += h;
-        let mut xm = x.clone();
-        xm[col] -= h;
-        problem
-            .residuals(xp.as_ref(), up.as_mut())
-            .expect("residuals at x + h");
-        problem
-            .residuals(xm.as_ref(), down.as_mut())
-            .expect("residuals at x − h");
-        for row in 0..m {
-            let fd = (up[row] - down[row]) / (2.0 * h);
-            let a = jac[(row, col)];
+    let fd = central_difference_jacobian(problem, x, 1e-6);
+    for col in 0..jac.ncols() {
+        for row in 0..jac.nrows() {
+            let (a, fd) = (jac[(row, col)], fd[(row, col)]);
             prop_assert!(
                 (a - fd).abs() <= 1e-3 + 1e-6 * fd.abs(),
                 "{}: row {row}: analytic {a} vs central difference {fd}",

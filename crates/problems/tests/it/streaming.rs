@@ -4,15 +4,7 @@ use faer::Col;
 use hapcal_identify::{Backend, Identified, IdentifyConfig, Problem, identify};
 use hapcal_problems::{CalibrationProblem, Row, RowKind, Weights};
 
-use crate::chain_problem;
-
-/// Deterministic numbers in [−1, 1) (64-bit LCG, Knuth's MMIX constants).
-fn lcg(state: &mut u64) -> f64 {
-    *state = state
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    (*state >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-}
+use crate::{chain_problem, lcg};
 
 fn root() -> std::path::PathBuf {
     std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")

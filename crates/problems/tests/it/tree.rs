@@ -1,7 +1,9 @@
 //! Marker and pose rows on a kinematic tree with instrument and marker frames: the analytic
 //! Jacobian against central differences, and frames recovered from exact data.
 
-use super::{framed, pose_and_marker_weights, pose_or_marker_row, torso_and_two_arms};
+use super::{
+    framed, pose_and_marker_weights, pose_or_marker_row, torso_and_two_arms, torso_configuration,
+};
 use faer::Col;
 use hapcal_identify::{IdentifyConfig, Problem, Subset, identify};
 use hapcal_kinematics::Tree;
@@ -14,19 +16,9 @@ fn two_arm_tree() -> Tree {
     torso_and_two_arms([0.0, 0.0, 1.0], true, [0.0, 0.0, 1.0])
 }
 
+/// `n` configurations of the tree, the torso's within ±0.1 m.
 fn configurations(n: usize) -> Vec<Vec<f64>> {
-    (0..n)
-        .map(|i| {
-            let t = i as f64;
-            vec![
-                0.1 * (0.7 * t).sin(),
-                (1.3 * t).sin(),
-                (0.9 * t + 1.0).cos(),
-                (0.4 * t).sin() * 1.5,
-                (1.7 * t + 0.3).cos(),
-            ]
-        })
-        .collect()
+    (0..n).map(|i| torso_configuration(i, 0.1)).collect()
 }
 
 #[test]

@@ -220,6 +220,13 @@ fn reader_errors_name_file_line_and_column() {
     );
 }
 
+/// Asserts that the message of `err` starts with `start`.
+#[track_caller]
+fn assert_starts(err: &impl std::fmt::Display, start: &str) {
+    let text = err.to_string();
+    assert!(text.starts_with(start), "{text}");
+}
+
 #[test]
 fn truth_must_match_the_device() {
     let (truth, device) = paper_truth();
@@ -229,10 +236,9 @@ fn truth_must_match_the_device() {
     let mut t = truth.clone();
     t.deviations.push(("da9".to_owned(), 1e-3));
     let err = simulate(&device, &t, &cfg).unwrap_err();
-    assert!(
-        err.to_string()
-            .starts_with("deviation \"da9\" is not a parameter of the chain; the chain has da0, dalpha0, dd0, dtheta0, da1"),
-        "{err}"
+    assert_starts(
+        &err,
+        "deviation \"da9\" is not a parameter of the chain; the chain has da0, dalpha0, dd0, dtheta0, da1",
     );
 
     let mut t = truth.clone();
@@ -264,20 +270,15 @@ fn truth_must_match_the_device() {
     let mut t = truth.clone();
     t.capstans[2].r_o_m = 0.07; // beyond the 0.06 m drum distance
     let err = simulate(&device, &t, &cfg).unwrap_err();
-    assert!(
-        err.to_string()
-            .starts_with("transmission of joint 3: r_o_m = 0.07 m"),
-        "{err}"
-    );
+    assert_starts(&err, "transmission of joint 3: r_o_m = 0.07 m");
 
     // A crank of 0.2 m on a 0.21 m ground cannot reach round with a 0.05 m rocker.
     let mut t = truth.clone();
     t.parallelogram.as_mut().unwrap().dl1_m = 0.15;
     let err = true_joint_angles(&device, &t, &theta).unwrap_err();
-    assert!(
-        err.to_string()
-            .starts_with("transmission of joint 4: the four-bar loop cannot close"),
-        "{err}"
+    assert_starts(
+        &err,
+        "transmission of joint 4: the four-bar loop cannot close",
     );
 
     let err = true_joint_angles(&device, &truth, &theta[..6]).unwrap_err();
