@@ -460,6 +460,7 @@ pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
             let (reason, depends_on) = match &p.reason {
                 PruneReason::NearZeroColumn => (PruneCause::NearZeroColumn, Vec::new()),
                 PruneReason::Dependent { on } => (PruneCause::Dependent, on.clone()),
+                PruneReason::AtBound => (PruneCause::AtZero, Vec::new()),
                 _ => (PruneCause::Insensitive, Vec::new()),
             };
             PrunedReport {
@@ -504,6 +505,78 @@ pub(crate) fn negative_compliances(
     let score = |c: &(String, f64, f64)| c.1 / c.2.max(f64::MIN_POSITIVE);
     negative.sort_by(|a, b| score(a).total_cmp(&score(b)));
     (negative, n)
+}
+
+/// The compliance estimates of `identified` below zero, as `(layout index, σ)`: those
+/// [`hold_compliances_at_zero`] holds.
+fn compliances_below_zero(identified: &Identified) -> Vec<(usize, f64)> {
+    let is_compliance =
+        |name: &str| hapcal_contract::ValueName::parse(name).is_ok_and(|v| v.is_compliance());
+    (identified.covariance.free.iter())
+        .zip(identified.covariance.std())
+        .filter(|&(&i, _)| identified.fit.x[i] < 0.0 && is_compliance(identified.layout.name(i)))
+        .map(|(&i, std)| (i, std))
+        .collect()
+}
+
+/// The covariance of the parameters of `held_fit` (a fit with compliances held at zero) as
+/// the fit that had them free, `free`, gives it: its block over `held_fit`'s free parameters,
+/// when `free` has every one of them; `held_fit` otherwise. The held compliances are not
+/// known to be zero, only not below it: the others are no better known than the data tell
+/// them with the held ones free.
+fn marginal_covariance(
+    free: &hapcal_identify::Covariance,
+    held_fit: hapcal_identify::Covariance,
+) -> hapcal_identify::Covariance {
+    let position: Option<Vec<usize>> = (held_fit.free.iter())
+        .map(|i| free.free.iter().position(|j| j == i))
+        .collect();
+    let Some(position) = position else {
+        return held_fit;
+    };
+    let matrix = faer::Mat::from_fn(position.len(), position.len(), |a, b| {
+        free.matrix[(position[a], position[b])]
+    });
+    hapcal_identify::Covariance { matrix, ..held_fit }
+}
+
+/// The physical bound compliance ≥ 0 on the identification `free_fit` of `problem` (`cfg` its
+/// configuration): when none of its compliances is below zero by more than
+/// [`negative_compliances`]' bound (that is a stop, [`implausible_estimates`], judged on the
+/// fit with every compliance free), those below zero are held at zero and the others
+/// refitted from the estimate ([`hapcal_identify::identify_held`]), again until none is
+/// below zero: each held one is reported among the pruned parameters, at zero, with its σ
+/// in the fit that had it free. `free_fit` itself when no compliance is below zero or one is
+/// significantly.
+///
+/// # Errors
+/// As [`hapcal_identify::identify`] for a refit.
+pub(crate) fn hold_compliances_at_zero(
+    problem: &(impl hapcal_identify::Problem + Sync),
+    cfg: &hapcal_identify::IdentifyConfig,
+    free_fit: Identified,
+) -> Result<Identified, hapcal_identify::Error> {
+    if !negative_compliances(&free_fit, 1.0).0.is_empty() {
+        return Ok(free_fit);
+    }
+    let free_covariance = free_fit.covariance.clone();
+    let mut id = free_fit;
+    let mut held: Vec<(usize, f64)> = Vec::new();
+    loop {
+        let more = compliances_below_zero(&id);
+        if more.is_empty() {
+            if !held.is_empty() {
+                id.covariance = marginal_covariance(&free_covariance, id.covariance);
+            }
+            return Ok(id);
+        }
+        let mut start = id.fit.x.clone();
+        for &(i, _) in &more {
+            start[i] = 0.0;
+        }
+        held.extend(more);
+        id = hapcal_identify::identify_held(problem, start, cfg, &held)?;
+    }
 }
 
 /// "`k` of `n` below zero by more than z standard deviations: name value ± σ unit, …" for the
@@ -675,5 +748,106 @@ mod tests {
                 .collect();
             assert_eq!(folds_of_rows(&own, k, r, CV_REPEATS), expected);
         }
+    }
+}
+
+#[cfg(test)]
+mod bound_tests {
+    use faer::{Col, ColMut, ColRef, Mat, MatMut};
+    use hapcal_identify::{
+        EvalError, IdentifyConfig, ParamLayout, ParamSpec, Problem, PruneReason, Role, Subset,
+        Unit, identify,
+    };
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    use super::{hold_compliances_at_zero, negative_compliances};
+
+    /// `r = A·x − y` over a joint offset and two compliances.
+    struct Linear {
+        layout: ParamLayout,
+        a: Mat<f64>,
+        y: Col<f64>,
+    }
+
+    impl Problem for Linear {
+        fn layout(&self) -> &ParamLayout {
+            &self.layout
+        }
+        fn n_residuals(&self) -> usize {
+            self.a.nrows()
+        }
+        fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
+            out.copy_from(&self.a * x - &self.y);
+            Ok(())
+        }
+        fn jacobian(&self, _x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+            jac.copy_from(&self.a);
+            Ok(())
+        }
+    }
+
+    /// 40 rows, noise 1e-3 per row: a joint offset (rad) and two compliances (rad/(N·m))
+    /// under torques of about 10 N·m, the second's truth `c2`.
+    fn problem(c2: f64) -> Linear {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(47);
+        let mut normal = || -> f64 { StandardNormal.sample(&mut rng) };
+        let a = Mat::from_fn(40, 3, |_, j| if j == 0 { 1.0 } else { 10.0 } * normal());
+        let truth = Col::from_fn(3, |j| [2e-3, 1e-4, c2][j]);
+        let y = &a * &truth + Col::from_fn(40, |_| 1e-3 * normal());
+        let spec = |name: &str, unit| ParamSpec {
+            name: name.to_owned(),
+            unit,
+            role: Role::Model,
+        };
+        Linear {
+            layout: ParamLayout::new(vec![
+                spec("j1.offset", Unit::Radian),
+                spec("compliance.j1", Unit::RadianPerNewtonMeter),
+                spec("compliance.j2", Unit::RadianPerNewtonMeter),
+            ]),
+            a,
+            y,
+        }
+    }
+
+    #[test]
+    fn a_compliance_below_zero_within_the_noise_is_held_at_zero_and_reported() {
+        // The second compliance's truth, −2.5e-5, is some 1.5 σ below zero (σ ≈ 1e-3/(10·√40)
+        // ≈ 1.6e-5): this seed's noise puts its free estimate below zero, within the bound.
+        let p = problem(-2.5e-5);
+        let cfg = IdentifyConfig::default();
+        let free = identify(&p, Col::zeros(3), &cfg).expect("valid");
+        assert!(free.fit.x[2] < 0.0, "{}", free.fit.x[2]);
+        assert!(negative_compliances(&free, 1.0).0.is_empty());
+        let free_std = free.std("compliance.j2").expect("kept");
+        let held = hold_compliances_at_zero(&p, &cfg, free).expect("valid");
+        assert_eq!(held.fit.x[2], 0.0);
+        let at_zero = held
+            .identifiability
+            .find_pruned("compliance.j2")
+            .expect("reported");
+        assert_eq!(at_zero.reason, PruneReason::AtBound);
+        assert_eq!(at_zero.std_if_kept, free_std);
+        // The others are the fit of the problem without it.
+        let without = Subset::new(&p, vec![0, 1], Col::zeros(3));
+        let reference = identify(&without, without.initial_free(), &cfg).expect("valid");
+        for k in 0..2 {
+            assert!((held.fit.x[k] - reference.fit.x[k]).abs() < 1e-12, "{k}");
+        }
+    }
+
+    #[test]
+    fn a_compliance_significantly_below_zero_is_left_for_the_stop() {
+        // Truth −1e-3, some 60 σ below zero: beyond the bound, the fit is returned as it is
+        // and the implausible-estimate stop sees it.
+        let p = problem(-1e-3);
+        let cfg = IdentifyConfig::default();
+        let free = identify(&p, Col::zeros(3), &cfg).expect("valid");
+        assert_eq!(negative_compliances(&free, 1.0).0.len(), 1);
+        let x = free.fit.x.clone();
+        let same = hold_compliances_at_zero(&p, &cfg, free).expect("valid");
+        assert_eq!(same.fit.x, x);
+        assert!(same.identifiability.find_pruned("compliance.j2").is_none());
     }
 }

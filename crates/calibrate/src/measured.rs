@@ -843,8 +843,10 @@ fn fit_terms(
     if let Some(n) = start.max_evaluations {
         config.lm.max_evaluations = n;
     }
-    let id = identify(&subset, x0, &config)
-        .with_context(|| format!("identifying the {rung} model from {n_rows} marker samples"))?;
+    let context = || format!("identifying the {rung} model from {n_rows} marker samples");
+    let free_fit = identify(&subset, x0, &config).with_context(context)?;
+    let id =
+        crate::fit::hold_compliances_at_zero(&subset, &config, free_fit).with_context(context)?;
     let x = subset.full_x(id.fit.x.as_ref());
     let model = problem.model(x.as_ref());
     let names: Vec<String> = (0..problem.layout().len())
