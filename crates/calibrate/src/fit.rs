@@ -547,7 +547,8 @@ fn marginal_covariance(
 /// refitted from the estimate ([`hapcal_identify::identify_held`]), again until none is
 /// below zero: each held one is reported among the pruned parameters, at zero, with its σ
 /// in the fit that had it free. `free_fit` itself when no compliance is below zero or one is
-/// significantly.
+/// significantly. `std_scale` as [`negative_compliances`]' (rows that repeat others add no
+/// information, so they do not make a compliance significantly negative).
 ///
 /// # Errors
 /// As [`hapcal_identify::identify`] for a refit.
@@ -555,8 +556,11 @@ pub(crate) fn hold_compliances_at_zero(
     problem: &(impl hapcal_identify::Problem + Sync),
     cfg: &hapcal_identify::IdentifyConfig,
     free_fit: Identified,
+    std_scale: impl FnOnce() -> f64,
 ) -> Result<Identified, hapcal_identify::Error> {
-    if !negative_compliances(&free_fit, 1.0).0.is_empty() {
+    if compliances_below_zero(&free_fit).is_empty()
+        || !negative_compliances(&free_fit, std_scale()).0.is_empty()
+    {
         return Ok(free_fit);
     }
     let free_covariance = free_fit.covariance.clone();
@@ -821,7 +825,7 @@ mod bound_tests {
         assert!(free.fit.x[2] < 0.0, "{}", free.fit.x[2]);
         assert!(negative_compliances(&free, 1.0).0.is_empty());
         let free_std = free.std("compliance.j2").expect("kept");
-        let held = hold_compliances_at_zero(&p, &cfg, free).expect("valid");
+        let held = hold_compliances_at_zero(&p, &cfg, free, || 1.0).expect("valid");
         assert_eq!(held.fit.x[2], 0.0);
         let at_zero = held
             .identifiability
@@ -846,7 +850,7 @@ mod bound_tests {
         let free = identify(&p, Col::zeros(3), &cfg).expect("valid");
         assert_eq!(negative_compliances(&free, 1.0).0.len(), 1);
         let x = free.fit.x.clone();
-        let same = hold_compliances_at_zero(&p, &cfg, free).expect("valid");
+        let same = hold_compliances_at_zero(&p, &cfg, free, || 1.0).expect("valid");
         assert_eq!(same.fit.x, x);
         assert!(same.identifiability.find_pruned("compliance.j2").is_none());
     }

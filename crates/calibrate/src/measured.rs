@@ -792,6 +792,36 @@ fn fit(
     )
 }
 
+/// Number of rows of `obs` that do not repeat an earlier row (the same joint readings and
+/// measurement, bit for bit, −0 as +0), by a 64-bit hash of each row (two different rows
+/// share one with probability about n²/2⁶⁵ among n rows): a copy adds residuals but no
+/// information.
+fn n_distinct_rows(obs: &Observations) -> usize {
+    use std::hash::{Hash, Hasher};
+    let mut seen = std::collections::HashSet::with_capacity(obs.rows.len());
+    for row in &obs.rows {
+        let mut h = std::hash::DefaultHasher::new();
+        let (tip, values): (usize, &[f64]) = match &row.kind {
+            RowKind::Distance { distance_m } => (0, std::slice::from_ref(distance_m)),
+            RowKind::Position { position_m } => (1, position_m),
+            RowKind::Point { point } => (2 + 2 * point, &[]),
+            RowKind::Marker { tip, position_m } => (3 + 2 * tip, position_m),
+            RowKind::Pose {
+                tip, position_m, ..
+            } => (3 + 2 * tip, position_m),
+        };
+        tip.hash(&mut h);
+        if let RowKind::Pose { rotation, .. } = &row.kind {
+            rotation
+                .iter()
+                .for_each(|v| (v + 0.0).to_bits().hash(&mut h));
+        }
+        (row.q.iter().chain(values)).for_each(|v| (v + 0.0).to_bits().hash(&mut h));
+        seen.insert(h.finish());
+    }
+    seen.len()
+}
+
 /// [`fit`] of the observations `obs` with the model terms `terms` (the rung's, with the
 /// loads at a torque equilibrium, say).
 fn fit_terms(
@@ -806,6 +836,7 @@ fn fit_terms(
     let framed = start.tree;
     let n_rows = obs.rows.len();
     let orientation = (obs.rows.iter()).any(|r| matches!(r.kind, RowKind::Pose { .. }));
+    let n_distinct = n_distinct_rows(&obs);
     let problem = CalibrationProblem::on_tree(framed.clone(), obs, weights, terms)
         .context("building the calibration problem")?;
     let n_layout = problem.layout().len();
@@ -845,8 +876,10 @@ fn fit_terms(
     }
     let context = || format!("identifying the {rung} model from {n_rows} marker samples");
     let free_fit = identify(&subset, x0, &config).with_context(context)?;
-    let id =
-        crate::fit::hold_compliances_at_zero(&subset, &config, free_fit).with_context(context)?;
+    let id = crate::fit::hold_compliances_at_zero(&subset, &config, free_fit, || {
+        (n_rows as f64 / n_distinct.max(1) as f64).sqrt()
+    })
+    .with_context(context)?;
     let x = subset.full_x(id.fit.x.as_ref());
     let model = problem.model(x.as_ref());
     let names: Vec<String> = (0..problem.layout().len())
@@ -4623,7 +4656,8 @@ pub fn fold_joint_offsets(
 #[cfg(test)]
 mod tests {
     use super::{
-        Line, ModelName, RangeVerdict, Vector3, lm_alone, negative_compliance_sigmas, rung_chains,
+        Line, ModelName, Observations, RangeVerdict, Row, RowKind, Vector3, lm_alone,
+        n_distinct_rows, negative_compliance_sigmas, rung_chains,
     };
     use faer::{Col, ColMut, ColRef, MatMut};
     use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
@@ -4972,5 +5006,29 @@ mod tests {
             observations(Training::with_bounded(&tables, &samples), &all),
             observations(Training::measured(&copy), &all)
         );
+    }
+
+    /// A row repeated counts once (−0 as +0); the same readings and position on another tip,
+    /// or another reading, are other rows.
+    #[test]
+    fn a_row_repeated_counts_once_among_the_distinct_rows() {
+        let marker = |q0: f64, tip: usize| Row {
+            q: vec![q0, 0.5],
+            kind: RowKind::Marker {
+                tip,
+                position_m: [1.0, 2.0, 3.0],
+            },
+        };
+        let obs = |rows| Observations {
+            rows,
+            point_distances: Vec::new(),
+            n_points: 0,
+        };
+        let once = vec![marker(0.1, 0), marker(0.0, 0), marker(0.1, 1)];
+        assert_eq!(n_distinct_rows(&obs(once.clone())), 3);
+        let twice: Vec<Row> = once.iter().chain(&once).cloned().collect();
+        assert_eq!(n_distinct_rows(&obs(twice)), 3);
+        let signed = vec![marker(0.0, 0), marker(-0.0, 0), marker(1e-300, 0)];
+        assert_eq!(n_distinct_rows(&obs(signed)), 2);
     }
 }
