@@ -519,34 +519,45 @@ fn compliances_below_zero(identified: &Identified) -> Vec<(usize, f64)> {
         .collect()
 }
 
-/// The covariance of the parameters of `held_fit` (a fit with compliances held at zero) as
-/// the fit that had them free, `free`, gives it: its block over `held_fit`'s free parameters,
-/// when `free` has every one of them; `held_fit` otherwise. The held compliances are not
-/// known to be zero, only not below it: the others are no better known than the data tell
-/// them with the held ones free.
-fn marginal_covariance(
+/// The covariance of a fit with compliances held at zero (`held_fit`, the held ones'
+/// layout indices `held`) as the fit that had them free gives it (`free`): its block over
+/// `held_fit`'s free parameters and the held ones, in layout order, when `free` has every one
+/// of them; `held_fit` otherwise. A held compliance is not known to be zero, only not below
+/// it: it is recorded as 0 ± its σ in the free fit, and the others are no better known than
+/// the data tell them with the held ones free. Predictions through this covariance carry the
+/// held compliances' uncertainty and their correlation with the others.
+fn bounded_covariance(
     free: &hapcal_identify::Covariance,
     held_fit: hapcal_identify::Covariance,
+    held: &[usize],
 ) -> hapcal_identify::Covariance {
-    let position: Option<Vec<usize>> = (held_fit.free.iter())
+    let mut order: Vec<usize> = (held_fit.free.iter()).chain(held).copied().collect();
+    order.sort_unstable();
+    order.dedup();
+    let position: Option<Vec<usize>> = (order.iter())
         .map(|i| free.free.iter().position(|j| j == i))
         .collect();
     let Some(position) = position else {
         return held_fit;
     };
-    let matrix = faer::Mat::from_fn(position.len(), position.len(), |a, b| {
-        free.matrix[(position[a], position[b])]
-    });
-    hapcal_identify::Covariance { matrix, ..held_fit }
+    hapcal_identify::Covariance {
+        matrix: faer::Mat::from_fn(position.len(), position.len(), |a, b| {
+            free.matrix[(position[a], position[b])]
+        }),
+        names: position.iter().map(|&a| free.names[a].clone()).collect(),
+        free: order,
+    }
 }
 
 /// The physical bound compliance ≥ 0 on the identification `free_fit` of `problem` (`cfg` its
 /// configuration): when none of its compliances is below zero by more than
 /// [`negative_compliances`]' bound (that is a stop, [`implausible_estimates`], judged on the
-/// fit with every compliance free), those below zero are held at zero and the others
-/// refitted from the estimate ([`hapcal_identify::identify_held`]), again until none is
+/// fit with every compliance free), those below zero are held at zero and the others that
+/// fit kept refitted from the estimate ([`hapcal_identify::identify_held`]; the parameters it
+/// pruned stay pruned, so none takes over a held compliance's effect), again until none is
 /// below zero: each held one is reported among the pruned parameters, at zero, with its σ
-/// in the fit that had it free. `free_fit` itself when no compliance is below zero or one is
+/// in the fit that had it free, and the covariance is that fit's ([`bounded_covariance`]: a
+/// held compliance is 0 ± that σ, written so in the record). `free_fit` itself when no compliance is below zero or one is
 /// significantly. `std_scale` as [`negative_compliances`]' (rows that repeat others add no
 /// information, so they do not make a compliance significantly negative).
 ///
@@ -564,13 +575,15 @@ pub(crate) fn hold_compliances_at_zero(
         return Ok(free_fit);
     }
     let free_covariance = free_fit.covariance.clone();
+    let free_identifiability = free_fit.identifiability.clone();
     let mut id = free_fit;
     let mut held: Vec<(usize, f64)> = Vec::new();
     loop {
         let more = compliances_below_zero(&id);
         if more.is_empty() {
             if !held.is_empty() {
-                id.covariance = marginal_covariance(&free_covariance, id.covariance);
+                let indices: Vec<usize> = held.iter().map(|&(i, _)| i).collect();
+                id.covariance = bounded_covariance(&free_covariance, id.covariance, &indices);
             }
             return Ok(id);
         }
@@ -579,7 +592,7 @@ pub(crate) fn hold_compliances_at_zero(
             start[i] = 0.0;
         }
         held.extend(more);
-        id = hapcal_identify::identify_held(problem, start, cfg, &held)?;
+        id = hapcal_identify::identify_held(problem, start, cfg, &held, &free_identifiability)?;
     }
 }
 
@@ -825,6 +838,7 @@ mod bound_tests {
         assert!(free.fit.x[2] < 0.0, "{}", free.fit.x[2]);
         assert!(negative_compliances(&free, 1.0).0.is_empty());
         let free_std = free.std("compliance.j2").expect("kept");
+        let free_offset_std = free.std("j1.offset").expect("kept");
         let held = hold_compliances_at_zero(&p, &cfg, free, || 1.0).expect("valid");
         assert_eq!(held.fit.x[2], 0.0);
         let at_zero = held
@@ -833,6 +847,11 @@ mod bound_tests {
             .expect("reported");
         assert_eq!(at_zero.reason, PruneReason::AtBound);
         assert_eq!(at_zero.std_if_kept, free_std);
+        // Bounded, not known: it stays in the covariance at its σ in the free fit, beside
+        // the others' block of that fit.
+        assert_eq!(held.covariance.free, [0, 1, 2]);
+        assert_eq!(held.std("compliance.j2"), Some(free_std));
+        assert_eq!(held.std("j1.offset"), Some(free_offset_std));
         // The others are the fit of the problem without it.
         let without = Subset::new(&p, vec![0, 1], Col::zeros(3));
         let reference = identify(&without, without.initial_free(), &cfg).expect("valid");
