@@ -789,41 +789,34 @@ fn fit(
         offsets,
         obs,
         weights,
+        &|| repeat_std_scale(tables, keep),
     )
 }
 
-/// Number of rows of `obs` that do not repeat an earlier row (the same joint readings and
-/// measurement, bit for bit, −0 as +0), by a 64-bit hash of each row (two different rows
-/// share one with probability about n²/2⁶⁵ among n rows): a copy adds residuals but no
-/// information.
-fn n_distinct_rows(obs: &Observations) -> usize {
-    use std::hash::{Hash, Hasher};
-    let mut seen = std::collections::HashSet::with_capacity(obs.rows.len());
-    for row in &obs.rows {
-        let mut h = std::hash::DefaultHasher::new();
-        let (tip, values): (usize, &[f64]) = match &row.kind {
-            RowKind::Distance { distance_m } => (0, std::slice::from_ref(distance_m)),
-            RowKind::Position { position_m } => (1, position_m),
-            RowKind::Point { point } => (2 + 2 * point, &[]),
-            RowKind::Marker { tip, position_m } => (3 + 2 * tip, position_m),
-            RowKind::Pose {
-                tip, position_m, ..
-            } => (3 + 2 * tip, position_m),
-        };
-        tip.hash(&mut h);
-        if let RowKind::Pose { rotation, .. } = &row.kind {
-            rotation
-                .iter()
-                .for_each(|v| (v + 0.0).to_bits().hash(&mut h));
-        }
-        (row.q.iter().chain(values)).for_each(|v| (v + 0.0).to_bits().hash(&mut h));
-        seen.insert(h.finish());
+/// `√(rows / distinct rows)` over the rows of `tables` that `keep` selects, a copy being a
+/// row that repeats an earlier row of its table by the reader's repeat key (as
+/// [`table_originals`] finds them for the folds): a copy adds residuals but no information,
+/// while the least-squares covariance counts it. It scales the identification's σ before
+/// the test of whether a compliance is significantly below zero
+/// ([`crate::fit::hold_compliances_at_zero`]), so that a recording appended to itself holds
+/// the compliances the recording holds. 1 without copies.
+fn repeat_std_scale(tables: Training<'_>, keep: &dyn Fn(usize, usize) -> bool) -> f64 {
+    let (mut n_rows, mut n_copies) = (0, 0);
+    for ti in 0..tables.tables.len() {
+        let keys = (tables.rows(ti).enumerate())
+            .filter(|&(ri, _)| keep(ti, ri))
+            .map(|(_, row)| row.repeat_key());
+        let originals = crate::fit::originals(keys);
+        n_rows += originals.len();
+        n_copies += crate::fit::n_copies(&originals);
     }
-    seen.len()
+    (n_rows as f64 / (n_rows - n_copies).max(1) as f64).sqrt()
 }
 
 /// [`fit`] of the observations `obs` with the model terms `terms` (the rung's, with the
-/// loads at a torque equilibrium, say).
+/// loads at a torque equilibrium, say); `std_scale` gives [`repeat_std_scale`] of the rows
+/// `obs` holds, asked for only when a compliance falls below zero.
+#[allow(clippy::too_many_arguments)]
 fn fit_terms(
     rung: ModelName,
     terms: ModelTerms,
@@ -832,11 +825,11 @@ fn fit_terms(
     offsets: &[Option<usize>],
     obs: Observations,
     weights: Weights,
+    std_scale: &dyn Fn() -> f64,
 ) -> Result<(CalibratedModel, Fitted)> {
     let framed = start.tree;
     let n_rows = obs.rows.len();
     let orientation = (obs.rows.iter()).any(|r| matches!(r.kind, RowKind::Pose { .. }));
-    let n_distinct = n_distinct_rows(&obs);
     let problem = CalibrationProblem::on_tree(framed.clone(), obs, weights, terms)
         .context("building the calibration problem")?;
     let n_layout = problem.layout().len();
@@ -876,10 +869,8 @@ fn fit_terms(
     }
     let context = || format!("identifying the {rung} model from {n_rows} marker samples");
     let free_fit = identify(&subset, x0, &config).with_context(context)?;
-    let id = crate::fit::hold_compliances_at_zero(&subset, &config, free_fit, || {
-        (n_rows as f64 / n_distinct.max(1) as f64).sqrt()
-    })
-    .with_context(context)?;
+    let id = crate::fit::hold_compliances_at_zero(&subset, &config, free_fit, std_scale)
+        .with_context(context)?;
     let x = subset.full_x(id.fit.x.as_ref());
     let model = problem.model(x.as_ref());
     let names: Vec<String> = (0..problem.layout().len())
@@ -3649,6 +3640,7 @@ fn equilibrate(
         offsets,
         converged.unwrap_or_else(|| observations(train, &all)),
         weights,
+        &|| repeat_std_scale(train, &all),
     )?;
     Ok((model, fitted, refits))
 }
@@ -4656,8 +4648,7 @@ pub fn fold_joint_offsets(
 #[cfg(test)]
 mod tests {
     use super::{
-        Line, ModelName, Observations, RangeVerdict, Row, RowKind, Vector3, lm_alone,
-        n_distinct_rows, negative_compliance_sigmas, rung_chains,
+        Line, ModelName, RangeVerdict, Vector3, lm_alone, negative_compliance_sigmas, rung_chains,
     };
     use faer::{Col, ColMut, ColRef, MatMut};
     use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
@@ -5008,27 +4999,42 @@ mod tests {
         );
     }
 
-    /// A row repeated counts once (−0 as +0); the same readings and position on another tip,
-    /// or another reading, are other rows.
+    /// Rows that repeat an earlier row of their table scale σ by √(rows / distinct rows):
+    /// a table appended to itself by √2, over the rows selected only; the same row in another
+    /// table, or with another reading (−0 is +0), is no copy.
     #[test]
-    fn a_row_repeated_counts_once_among_the_distinct_rows() {
-        let marker = |q0: f64, tip: usize| Row {
+    fn rows_that_repeat_others_scale_the_compliance_test_sigma() {
+        use super::{Training, repeat_std_scale};
+        let row = |q0: f64| hapcal_io::MeasuredRow {
+            line: 2,
             q: vec![q0, 0.5],
-            kind: RowKind::Marker {
-                tip,
-                position_m: [1.0, 2.0, 3.0],
-            },
+            t_s: None,
+            markers: vec![marker_sample(0, [1.0, 2.0, 3.0])],
+            distance_m: None,
         };
-        let obs = |rows| Observations {
-            rows,
-            point_distances: Vec::new(),
-            n_points: 0,
+        let table = |q: &[f64]| {
+            hapcal_io::MeasurementTable::positions(
+                "t",
+                "t.csv",
+                1,
+                q.iter().map(|&q| row(q)).collect(),
+            )
         };
-        let once = vec![marker(0.1, 0), marker(0.0, 0), marker(0.1, 1)];
-        assert_eq!(n_distinct_rows(&obs(once.clone())), 3);
-        let twice: Vec<Row> = once.iter().chain(&once).cloned().collect();
-        assert_eq!(n_distinct_rows(&obs(twice)), 3);
-        let signed = vec![marker(0.0, 0), marker(-0.0, 0), marker(1e-300, 0)];
-        assert_eq!(n_distinct_rows(&obs(signed)), 2);
+        let all = |_: usize, _: usize| true;
+        let once = [table(&[0.1, 0.2, 0.3])];
+        assert_eq!(repeat_std_scale(Training::measured(&once), &all), 1.0);
+        let twice = [table(&[0.1, 0.2, 0.3, 0.1, 0.2, 0.3])];
+        let scale = repeat_std_scale(Training::measured(&twice), &all);
+        assert!((scale - 2f64.sqrt()).abs() < 1e-15, "{scale}");
+        let first_half = |_: usize, ri: usize| ri < 3;
+        assert_eq!(
+            repeat_std_scale(Training::measured(&twice), &first_half),
+            1.0
+        );
+        let signed = [table(&[0.0, -0.0, 1e-300])];
+        let scale = repeat_std_scale(Training::measured(&signed), &all);
+        assert!((scale - 1.5f64.sqrt()).abs() < 1e-15, "{scale}");
+        let apart = [table(&[0.1]), table(&[0.1])];
+        assert_eq!(repeat_std_scale(Training::measured(&apart), &all), 1.0);
     }
 }
