@@ -519,32 +519,59 @@ fn compliances_below_zero(identified: &Identified) -> Vec<(usize, f64)> {
         .collect()
 }
 
-/// The covariance of a fit with compliances held at zero (`held_fit`, the held ones'
-/// layout indices `held`) as the fit that had them free gives it (`free`): its block over
-/// `held_fit`'s free parameters and the held ones, in layout order, when `free` has every one
-/// of them; `held_fit` otherwise. A held compliance is not known to be zero, only not below
-/// it: it is recorded as 0 ± its σ in the free fit, and the others are no better known than
-/// the data tell them with the held ones free. Predictions through this covariance carry the
-/// held compliances' uncertainty and their correlation with the others.
+/// The covariance of a fit with compliances held at zero (`held_fit`; the held ones' layout
+/// indices and σ in the fit that had them free, `held`) as the fit that had them free gives
+/// it (`free`): its block over `held_fit`'s free parameters and the held ones, in layout
+/// order (`layout` names them), when `free` has every one of them. A held compliance is not known to be zero, only
+/// not below it: it is recorded as 0 ± its σ in the free fit, and the others are no better
+/// known than the data tell them with the held ones free; predictions through this
+/// covariance carry the held compliances' uncertainty and their correlation with the others.
+/// When `held_fit` keeps a parameter `free` pruned (one the data could not tell from a held
+/// compliance), `held_fit`'s own covariance with each held compliance added at its σ,
+/// uncorrelated.
 fn bounded_covariance(
     free: &hapcal_identify::Covariance,
     held_fit: hapcal_identify::Covariance,
-    held: &[usize],
+    held: &[(usize, f64)],
+    layout: &hapcal_identify::ParamLayout,
 ) -> hapcal_identify::Covariance {
-    let mut order: Vec<usize> = (held_fit.free.iter()).chain(held).copied().collect();
+    let mut order: Vec<usize> = (held_fit.free.iter().copied())
+        .chain(held.iter().map(|&(i, _)| i))
+        .collect();
     order.sort_unstable();
     order.dedup();
     let position: Option<Vec<usize>> = (order.iter())
         .map(|i| free.free.iter().position(|j| j == i))
         .collect();
-    let Some(position) = position else {
-        return held_fit;
-    };
+    if let Some(position) = position {
+        return hapcal_identify::Covariance {
+            matrix: faer::Mat::from_fn(position.len(), position.len(), |a, b| {
+                free.matrix[(position[a], position[b])]
+            }),
+            names: (order.iter()).map(|&i| layout.name(i).to_owned()).collect(),
+            free: order,
+        };
+    }
+    // Each parameter's row in `held_fit`'s matrix, or its held σ.
+    let source: Vec<Result<usize, f64>> = (order.iter())
+        .map(|i| match held_fit.free.iter().position(|j| j == i) {
+            Some(a) => Ok(a),
+            None => Err(held
+                .iter()
+                .find(|&&(h, _)| h == *i)
+                .map_or(0.0, |&(_, s)| s)),
+        })
+        .collect();
+    let names = (order.iter()).map(|&i| layout.name(i).to_owned()).collect();
     hapcal_identify::Covariance {
-        matrix: faer::Mat::from_fn(position.len(), position.len(), |a, b| {
-            free.matrix[(position[a], position[b])]
+        matrix: faer::Mat::from_fn(order.len(), order.len(), |a, b| {
+            match (source[a], source[b]) {
+                (Ok(x), Ok(y)) => held_fit.matrix[(x, y)],
+                (Err(s), Err(_)) if a == b => s * s,
+                _ => 0.0,
+            }
         }),
-        names: position.iter().map(|&a| free.names[a].clone()).collect(),
+        names,
         free: order,
     }
 }
@@ -552,9 +579,8 @@ fn bounded_covariance(
 /// The physical bound compliance ≥ 0 on the identification `free_fit` of `problem` (`cfg` its
 /// configuration): when none of its compliances is below zero by more than
 /// [`negative_compliances`]' bound (that is a stop, [`implausible_estimates`], judged on the
-/// fit with every compliance free), those below zero are held at zero and the others that
-/// fit kept refitted from the estimate ([`hapcal_identify::identify_held`]; the parameters it
-/// pruned stay pruned, so none takes over a held compliance's effect), again until none is
+/// fit with every compliance free), those below zero are held at zero and the others
+/// refitted from the estimate ([`hapcal_identify::identify_held`]), again until none is
 /// below zero: each held one is reported among the pruned parameters, at zero, with its σ
 /// in the fit that had it free, and the covariance is that fit's ([`bounded_covariance`]: a
 /// held compliance is 0 ± that σ, written so in the record). `free_fit` itself when no compliance is below zero or one is
@@ -575,15 +601,14 @@ pub(crate) fn hold_compliances_at_zero(
         return Ok(free_fit);
     }
     let free_covariance = free_fit.covariance.clone();
-    let free_identifiability = free_fit.identifiability.clone();
     let mut id = free_fit;
     let mut held: Vec<(usize, f64)> = Vec::new();
     loop {
         let more = compliances_below_zero(&id);
         if more.is_empty() {
             if !held.is_empty() {
-                let indices: Vec<usize> = held.iter().map(|&(i, _)| i).collect();
-                id.covariance = bounded_covariance(&free_covariance, id.covariance, &indices);
+                id.covariance =
+                    bounded_covariance(&free_covariance, id.covariance, &held, &id.layout);
             }
             return Ok(id);
         }
@@ -592,7 +617,7 @@ pub(crate) fn hold_compliances_at_zero(
             start[i] = 0.0;
         }
         held.extend(more);
-        id = hapcal_identify::identify_held(problem, start, cfg, &held, &free_identifiability)?;
+        id = hapcal_identify::identify_held(problem, start, cfg, &held)?;
     }
 }
 

@@ -252,28 +252,23 @@ pub fn identify(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Result<
 /// (a compliance held at zero, which a fit with it free put below zero) while the others are
 /// identified. `held` gives each held parameter's index in `p`'s layout and its standard
 /// deviation in the fit that had it free (in its unit; reported as
-/// [`Pruned::std_if_kept`]). `earlier` is the identifiability of that fit: the parameters it
-/// pruned stay at their `x0` values with its reasons, and are not offered to the rank decision
-/// again (with a held parameter fixed, one that the data could not tell from it would take
-/// over its effect, past the bound).
+/// [`Pruned::std_if_kept`]).
 ///
 /// The result is over `p`'s whole layout, as [`identify`]'s: the held parameters keep their
-/// `x0` values and are listed among the pruned ones with [`PruneReason::AtBound`], beside
-/// `earlier`'s pruned ones; every other entry is [`identify`]'s of the problem over the
-/// parameters `earlier` kept and `held` does not hold ([`Subset`]).
+/// `x0` values and are listed among the pruned ones with [`PruneReason::AtBound`]; every
+/// other entry is [`identify`]'s of the problem without them ([`Subset`]).
 ///
 /// # Errors
 /// As [`identify`]; [`Error::WrongLength`] if `x0` is not of `p`'s layout length.
 ///
 /// # Panics
-/// If a held index or one of `earlier`'s is out of `p`'s layout.
+/// If a held index is out of `p`'s layout.
 #[track_caller]
 pub fn identify_held(
     p: &(impl Problem + Sync),
     x0: Col<f64>,
     cfg: &IdentifyConfig,
     held: &[(usize, f64)],
-    earlier: &Identifiability,
 ) -> Result<Identified, Error> {
     let layout = p.layout().clone();
     let n = layout.len();
@@ -284,15 +279,13 @@ pub fn identify_held(
         });
     }
     let is_held = |i: usize| held.iter().any(|&(h, _)| h == i);
-    for i in (held.iter().map(|&(h, _)| h)).chain(earlier.pruned.iter().map(|q| q.index)) {
-        assert!(i < n, "parameter {i} is out of range for {n} parameters");
+    for &(h, _) in held {
+        assert!(
+            h < n,
+            "held parameter {h} is out of range for {n} parameters"
+        );
     }
-    let before: Vec<&Pruned> = (earlier.pruned.iter())
-        .filter(|q| !is_held(q.index))
-        .collect();
-    let free: Vec<usize> = (0..n)
-        .filter(|&i| !is_held(i) && !before.iter().any(|q| q.index == i))
-        .collect();
+    let free: Vec<usize> = (0..n).filter(|&i| !is_held(i)).collect();
     let subset = Subset::new(p, free.clone(), x0);
     let inner = identify(&subset, subset.initial_free(), cfg)?;
     let x = subset.full_x(inner.fit.x.as_ref());
@@ -302,7 +295,6 @@ pub fn identify_held(
             ..q
         })
         .collect();
-    pruned.extend(before.iter().map(|&q| q.clone()));
     pruned.extend(held.iter().map(|&(index, std)| Pruned {
         index,
         name: layout.name(index).to_owned(),
@@ -314,14 +306,6 @@ pub fn identify_held(
         .map(|&k| free[k])
         .collect();
     let mut r_diag = inner.identifiability.r_diag;
-    // `earlier`'s pruned ones with their `ρ` there, then the held ones at 0.
-    for q in &before {
-        let rho = (earlier.pivot_order.iter().position(|&i| i == q.index))
-            .and_then(|k| earlier.r_diag.get(k).copied())
-            .unwrap_or(0.0);
-        pivot_order.push(q.index);
-        r_diag.push(rho);
-    }
     for &(index, _) in held {
         pivot_order.push(index);
         r_diag.push(0.0);
