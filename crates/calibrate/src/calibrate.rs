@@ -1100,9 +1100,9 @@ pub const REPRODUCTION_TOLERANCE_M: f64 = 1e-6;
 /// equilibrium the deflection does not reach (its finding,
 /// [`ImplausibleKind::NoEquilibrium`](crate::report::ImplausibleKind::NoEquilibrium), is the
 /// stop): the fixed-point iteration amplifies rounding, so its prediction is not a function
-/// of its values to any tolerance (on the simulated humanoid with its compliances ×100, a
-/// change of one compliance by 10⁻¹³ of itself moves a marker by 7 mm), and a difference
-/// would blame the files for what the finding names.
+/// of its values to any tolerance (on the simulated z-axes humanoid with its compliances
+/// ×100, changing one compliance by 10⁻¹³ of itself moves a marker by up to 1 m), and a
+/// difference would blame the files for what the finding names.
 ///
 /// # Errors
 /// A marker farther than the tolerance (the worst one named with its set, line and both
