@@ -522,9 +522,10 @@ fn compliances_below_zero(identified: &Identified) -> Vec<(usize, f64)> {
 /// The covariance of a fit with compliances held at zero (`held_fit`; the held ones' layout
 /// indices and σ in the fit that had them free, `held`) as the fit that had them free gives
 /// it (`free`): its block over `held_fit`'s free parameters and the held ones, in layout
-/// order (`layout` names them), when `free` has every one of them. A held compliance is not known to be zero, only
-/// not below it: it is recorded as 0 ± its σ in the free fit, and the others are no better
-/// known than the data tell them with the held ones free; predictions through this
+/// order (`layout` names them), when `free` has every one of them. A held compliance is not
+/// known to be zero, only not below it: it is recorded as 0 ± its σ in the free fit, and the
+/// others are no better known than the data tell them with the held ones free; predictions
+/// through this
 /// covariance carry the held compliances' uncertainty and their correlation with the others.
 /// When `held_fit` keeps a parameter `free` pruned (one the data could not tell from a held
 /// compliance), `held_fit`'s own covariance with each held compliance added at its σ,
@@ -583,8 +584,8 @@ fn bounded_covariance(
 /// refitted from the estimate ([`hapcal_identify::identify_held`]), again until none is
 /// below zero: each held one is reported among the pruned parameters, at zero, with its σ
 /// in the fit that had it free, and the covariance is that fit's ([`bounded_covariance`]: a
-/// held compliance is 0 ± that σ, written so in the record). `free_fit` itself when no compliance is below zero or one is
-/// significantly. `std_scale` as [`negative_compliances`]' (rows that repeat others add no
+/// held compliance is 0 ± that σ, written so in the record). `free_fit` itself when no
+/// compliance is below zero or one is significantly. `std_scale` as [`negative_compliances`]' (rows that repeat others add no
 /// information, so they do not make a compliance significantly negative).
 ///
 /// # Errors
@@ -803,7 +804,42 @@ mod bound_tests {
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
 
-    use super::{hold_compliances_at_zero, negative_compliances};
+    use super::{bounded_covariance, hold_compliances_at_zero, negative_compliances};
+
+    /// The covariance reported with compliance 1 held: the free fit's block over the kept
+    /// parameters and the held one; when the refit keeps parameter 2, which the free fit
+    /// pruned, the refit's own covariance with the held one at its σ, uncorrelated.
+    #[test]
+    fn a_held_compliance_stays_in_the_covariance_at_its_free_sigma() {
+        let spec = |name: &str| ParamSpec {
+            name: name.to_owned(),
+            unit: Unit::RadianPerNewtonMeter,
+            role: Role::Model,
+        };
+        let layout = ParamLayout::new(vec![spec("a"), spec("compliance.b"), spec("c")]);
+        let covariance = |free: Vec<usize>, m: &[f64]| {
+            let n = free.len();
+            hapcal_identify::Covariance {
+                names: free.iter().map(|&i| layout.name(i).to_owned()).collect(),
+                free,
+                matrix: Mat::from_fn(n, n, |a, b| m[a * n + b]),
+            }
+        };
+        let free = covariance(vec![0, 1], &[4.0, 1.0, 1.0, 9.0]);
+        let within = bounded_covariance(&free, covariance(vec![0], &[2.0]), &[(1, 3.0)], &layout);
+        assert_eq!(within.free, [0, 1]);
+        assert_eq!(within.names, ["a", "compliance.b"]);
+        assert_eq!(within.matrix, free.matrix);
+        let refit = covariance(vec![0, 2], &[2.0, 0.5, 0.5, 5.0]);
+        let beyond = bounded_covariance(&free, refit, &[(1, 3.0)], &layout);
+        assert_eq!(beyond.free, [0, 1, 2]);
+        assert_eq!(beyond.names, ["a", "compliance.b", "c"]);
+        let expected = [2.0, 0.0, 0.5, 0.0, 9.0, 0.0, 0.5, 0.0, 5.0];
+        assert_eq!(
+            beyond.matrix,
+            Mat::from_fn(3, 3, |a, b| expected[a * 3 + b])
+        );
+    }
 
     /// `r = A·x − y` over a joint offset and two compliances.
     struct Linear {
