@@ -460,6 +460,7 @@ pub fn pruned_report(identified: &Identified) -> Vec<PrunedReport> {
             let (reason, depends_on) = match &p.reason {
                 PruneReason::NearZeroColumn => (PruneCause::NearZeroColumn, Vec::new()),
                 PruneReason::Dependent { on } => (PruneCause::Dependent, on.clone()),
+                PruneReason::AtBound => (PruneCause::AtZero, Vec::new()),
                 _ => (PruneCause::Insensitive, Vec::new()),
             };
             PrunedReport {
@@ -504,6 +505,121 @@ pub(crate) fn negative_compliances(
     let score = |c: &(String, f64, f64)| c.1 / c.2.max(f64::MIN_POSITIVE);
     negative.sort_by(|a, b| score(a).total_cmp(&score(b)));
     (negative, n)
+}
+
+/// The compliance estimates of `identified` below zero, as `(layout index, σ)`: those
+/// [`hold_compliances_at_zero`] holds.
+fn compliances_below_zero(identified: &Identified) -> Vec<(usize, f64)> {
+    let is_compliance =
+        |name: &str| hapcal_contract::ValueName::parse(name).is_ok_and(|v| v.is_compliance());
+    (identified.covariance.free.iter())
+        .zip(identified.covariance.std())
+        .filter(|&(&i, _)| identified.fit.x[i] < 0.0 && is_compliance(identified.layout.name(i)))
+        .map(|(&i, std)| (i, std))
+        .collect()
+}
+
+/// The covariance of a fit with compliances held at zero (`held_fit`; the held ones' layout
+/// indices and σ in the fit that had them free, `held`) as the fit that had them free gives
+/// it (`free`): its block over `held_fit`'s free parameters and the held ones, in layout
+/// order (`layout` names them), when `free` has every one of them. A held compliance is not
+/// known to be zero, only not below it: it is recorded as 0 ± its σ in the free fit, and the
+/// others are no better known than the data tell them with the held ones free; predictions
+/// through this
+/// covariance carry the held compliances' uncertainty and their correlation with the others.
+/// When `held_fit` keeps a parameter `free` pruned (one the data could not tell from a held
+/// compliance), `held_fit`'s own covariance with each held compliance added at its σ,
+/// uncorrelated.
+fn bounded_covariance(
+    free: &hapcal_identify::Covariance,
+    held_fit: hapcal_identify::Covariance,
+    held: &[(usize, f64)],
+    layout: &hapcal_identify::ParamLayout,
+) -> hapcal_identify::Covariance {
+    let mut order: Vec<usize> = (held_fit.free.iter().copied())
+        .chain(held.iter().map(|&(i, _)| i))
+        .collect();
+    order.sort_unstable();
+    order.dedup();
+    let position: Option<Vec<usize>> = (order.iter())
+        .map(|i| free.free.iter().position(|j| j == i))
+        .collect();
+    if let Some(position) = position {
+        return hapcal_identify::Covariance {
+            matrix: faer::Mat::from_fn(position.len(), position.len(), |a, b| {
+                free.matrix[(position[a], position[b])]
+            }),
+            names: (order.iter()).map(|&i| layout.name(i).to_owned()).collect(),
+            free: order,
+        };
+    }
+    // Each parameter's row in `held_fit`'s matrix, or its held σ.
+    let source: Vec<Result<usize, f64>> = (order.iter())
+        .map(|i| match held_fit.free.iter().position(|j| j == i) {
+            Some(a) => Ok(a),
+            None => Err(held
+                .iter()
+                .find(|&&(h, _)| h == *i)
+                .map_or(0.0, |&(_, s)| s)),
+        })
+        .collect();
+    let names = (order.iter()).map(|&i| layout.name(i).to_owned()).collect();
+    hapcal_identify::Covariance {
+        matrix: faer::Mat::from_fn(order.len(), order.len(), |a, b| {
+            match (source[a], source[b]) {
+                (Ok(x), Ok(y)) => held_fit.matrix[(x, y)],
+                (Err(s), Err(_)) if a == b => s * s,
+                _ => 0.0,
+            }
+        }),
+        names,
+        free: order,
+    }
+}
+
+/// The physical bound compliance ≥ 0 on the identification `free_fit` of `problem` (`cfg` its
+/// configuration): when none of its compliances is below zero by more than
+/// [`negative_compliances`]' bound (that is a stop, [`implausible_estimates`], judged on the
+/// fit with every compliance free), those below zero are held at zero and the others
+/// refitted from the estimate ([`hapcal_identify::identify_held`]), again until none is
+/// below zero: each held one is reported among the pruned parameters, at zero, with its σ
+/// in the fit that had it free, and the covariance is that fit's ([`bounded_covariance`]: a
+/// held compliance is 0 ± that σ, written so in the record). `free_fit` itself when no
+/// compliance is below zero or one is significantly. `std_scale` as [`negative_compliances`]' (rows that repeat others add no
+/// information, so they do not make a compliance significantly negative).
+///
+/// # Errors
+/// As [`hapcal_identify::identify`] for a refit.
+pub(crate) fn hold_compliances_at_zero(
+    problem: &(impl hapcal_identify::Problem + Sync),
+    cfg: &hapcal_identify::IdentifyConfig,
+    free_fit: Identified,
+    std_scale: impl FnOnce() -> f64,
+) -> Result<Identified, hapcal_identify::Error> {
+    if compliances_below_zero(&free_fit).is_empty()
+        || !negative_compliances(&free_fit, std_scale()).0.is_empty()
+    {
+        return Ok(free_fit);
+    }
+    let free_covariance = free_fit.covariance.clone();
+    let mut id = free_fit;
+    let mut held: Vec<(usize, f64)> = Vec::new();
+    loop {
+        let more = compliances_below_zero(&id);
+        if more.is_empty() {
+            if !held.is_empty() {
+                id.covariance =
+                    bounded_covariance(&free_covariance, id.covariance, &held, &id.layout);
+            }
+            return Ok(id);
+        }
+        let mut start = id.fit.x.clone();
+        for &(i, _) in &more {
+            start[i] = 0.0;
+        }
+        held.extend(more);
+        id = hapcal_identify::identify_held(problem, start, cfg, &held)?;
+    }
 }
 
 /// "`k` of `n` below zero by more than z standard deviations: name value ± σ unit, …" for the
@@ -675,5 +791,147 @@ mod tests {
                 .collect();
             assert_eq!(folds_of_rows(&own, k, r, CV_REPEATS), expected);
         }
+    }
+}
+
+#[cfg(test)]
+mod bound_tests {
+    use faer::{Col, ColMut, ColRef, Mat, MatMut};
+    use hapcal_identify::{
+        EvalError, IdentifyConfig, ParamLayout, ParamSpec, Problem, PruneReason, Role, Subset,
+        Unit, identify,
+    };
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    use super::{bounded_covariance, hold_compliances_at_zero, negative_compliances};
+
+    /// The covariance reported with compliance 1 held: the free fit's block over the kept
+    /// parameters and the held one; when the refit keeps parameter 2, which the free fit
+    /// pruned, the refit's own covariance with the held one at its σ, uncorrelated.
+    #[test]
+    fn a_held_compliance_stays_in_the_covariance_at_its_free_sigma() {
+        let spec = |name: &str| ParamSpec {
+            name: name.to_owned(),
+            unit: Unit::RadianPerNewtonMeter,
+            role: Role::Model,
+        };
+        let layout = ParamLayout::new(vec![spec("a"), spec("compliance.b"), spec("c")]);
+        let covariance = |free: Vec<usize>, m: &[f64]| {
+            let n = free.len();
+            hapcal_identify::Covariance {
+                names: free.iter().map(|&i| layout.name(i).to_owned()).collect(),
+                free,
+                matrix: Mat::from_fn(n, n, |a, b| m[a * n + b]),
+            }
+        };
+        let free = covariance(vec![0, 1], &[4.0, 1.0, 1.0, 9.0]);
+        let within = bounded_covariance(&free, covariance(vec![0], &[2.0]), &[(1, 3.0)], &layout);
+        assert_eq!(within.free, [0, 1]);
+        assert_eq!(within.names, ["a", "compliance.b"]);
+        assert_eq!(within.matrix, free.matrix);
+        let refit = covariance(vec![0, 2], &[2.0, 0.5, 0.5, 5.0]);
+        let beyond = bounded_covariance(&free, refit, &[(1, 3.0)], &layout);
+        assert_eq!(beyond.free, [0, 1, 2]);
+        assert_eq!(beyond.names, ["a", "compliance.b", "c"]);
+        let expected = [2.0, 0.0, 0.5, 0.0, 9.0, 0.0, 0.5, 0.0, 5.0];
+        assert_eq!(
+            beyond.matrix,
+            Mat::from_fn(3, 3, |a, b| expected[a * 3 + b])
+        );
+    }
+
+    /// `r = A·x − y` over a joint offset and two compliances.
+    struct Linear {
+        layout: ParamLayout,
+        a: Mat<f64>,
+        y: Col<f64>,
+    }
+
+    impl Problem for Linear {
+        fn layout(&self) -> &ParamLayout {
+            &self.layout
+        }
+        fn n_residuals(&self) -> usize {
+            self.a.nrows()
+        }
+        fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
+            out.copy_from(&self.a * x - &self.y);
+            Ok(())
+        }
+        fn jacobian(&self, _x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+            jac.copy_from(&self.a);
+            Ok(())
+        }
+    }
+
+    /// 40 rows, noise 1e-3 per row: a joint offset (rad) and two compliances (rad/(N·m))
+    /// under torques of about 10 N·m, the second's truth `c2`.
+    fn problem(c2: f64) -> Linear {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(47);
+        let mut normal = || -> f64 { StandardNormal.sample(&mut rng) };
+        let a = Mat::from_fn(40, 3, |_, j| if j == 0 { 1.0 } else { 10.0 } * normal());
+        let truth = Col::from_fn(3, |j| [2e-3, 1e-4, c2][j]);
+        let y = &a * &truth + Col::from_fn(40, |_| 1e-3 * normal());
+        let spec = |name: &str, unit| ParamSpec {
+            name: name.to_owned(),
+            unit,
+            role: Role::Model,
+        };
+        Linear {
+            layout: ParamLayout::new(vec![
+                spec("j1.offset", Unit::Radian),
+                spec("compliance.j1", Unit::RadianPerNewtonMeter),
+                spec("compliance.j2", Unit::RadianPerNewtonMeter),
+            ]),
+            a,
+            y,
+        }
+    }
+
+    #[test]
+    fn a_compliance_below_zero_within_the_noise_is_held_at_zero_and_reported() {
+        // The second compliance's truth, −2.5e-5, is some 1.5 σ below zero (σ ≈ 1e-3/(10·√40)
+        // ≈ 1.6e-5): this seed's noise puts its free estimate below zero, within the bound.
+        let p = problem(-2.5e-5);
+        let cfg = IdentifyConfig::default();
+        let free = identify(&p, Col::zeros(3), &cfg).expect("valid");
+        assert!(free.fit.x[2] < 0.0, "{}", free.fit.x[2]);
+        assert!(negative_compliances(&free, 1.0).0.is_empty());
+        let free_std = free.std("compliance.j2").expect("kept");
+        let free_offset_std = free.std("j1.offset").expect("kept");
+        let held = hold_compliances_at_zero(&p, &cfg, free, || 1.0).expect("valid");
+        assert_eq!(held.fit.x[2], 0.0);
+        let at_zero = held
+            .identifiability
+            .find_pruned("compliance.j2")
+            .expect("reported");
+        assert_eq!(at_zero.reason, PruneReason::AtBound);
+        assert_eq!(at_zero.std_if_kept, free_std);
+        // Bounded, not known: it stays in the covariance at its σ in the free fit, beside
+        // the others' block of that fit.
+        assert_eq!(held.covariance.free, [0, 1, 2]);
+        assert_eq!(held.std("compliance.j2"), Some(free_std));
+        assert_eq!(held.std("j1.offset"), Some(free_offset_std));
+        // The others are the fit of the problem without it.
+        let without = Subset::new(&p, vec![0, 1], Col::zeros(3));
+        let reference = identify(&without, without.initial_free(), &cfg).expect("valid");
+        for k in 0..2 {
+            assert!((held.fit.x[k] - reference.fit.x[k]).abs() < 1e-12, "{k}");
+        }
+    }
+
+    #[test]
+    fn a_compliance_significantly_below_zero_is_left_for_the_stop() {
+        // Truth −1e-3, some 60 σ below zero: beyond the bound, the fit is returned as it is
+        // and the implausible-estimate stop sees it.
+        let p = problem(-1e-3);
+        let cfg = IdentifyConfig::default();
+        let free = identify(&p, Col::zeros(3), &cfg).expect("valid");
+        assert_eq!(negative_compliances(&free, 1.0).0.len(), 1);
+        let x = free.fit.x.clone();
+        let same = hold_compliances_at_zero(&p, &cfg, free, || 1.0).expect("valid");
+        assert_eq!(same.fit.x, x);
+        assert!(same.identifiability.find_pruned("compliance.j2").is_none());
     }
 }

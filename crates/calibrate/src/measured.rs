@@ -789,11 +789,34 @@ fn fit(
         offsets,
         obs,
         weights,
+        &|| repeat_std_scale(tables, keep),
     )
 }
 
+/// `√(rows / distinct rows)` over the rows of `tables` that `keep` selects, a copy being a
+/// row that repeats an earlier row of its table by the reader's repeat key (as
+/// [`table_originals`] finds them for the folds): a copy adds residuals but no information,
+/// while the least-squares covariance counts it. It scales the identification's σ before
+/// the test of whether a compliance is significantly below zero
+/// ([`crate::fit::hold_compliances_at_zero`]), so that a recording appended to itself holds
+/// the compliances the recording holds. 1 without copies.
+fn repeat_std_scale(tables: Training<'_>, keep: &dyn Fn(usize, usize) -> bool) -> f64 {
+    let (mut n_rows, mut n_copies) = (0, 0);
+    for ti in 0..tables.tables.len() {
+        let keys = (tables.rows(ti).enumerate())
+            .filter(|&(ri, _)| keep(ti, ri))
+            .map(|(_, row)| row.repeat_key());
+        let originals = crate::fit::originals(keys);
+        n_rows += originals.len();
+        n_copies += crate::fit::n_copies(&originals);
+    }
+    (n_rows as f64 / (n_rows - n_copies).max(1) as f64).sqrt()
+}
+
 /// [`fit`] of the observations `obs` with the model terms `terms` (the rung's, with the
-/// loads at a torque equilibrium, say).
+/// loads at a torque equilibrium, say); `std_scale` gives [`repeat_std_scale`] of the rows
+/// `obs` holds, asked for only when a compliance falls below zero.
+#[allow(clippy::too_many_arguments)]
 fn fit_terms(
     rung: ModelName,
     terms: ModelTerms,
@@ -802,6 +825,7 @@ fn fit_terms(
     offsets: &[Option<usize>],
     obs: Observations,
     weights: Weights,
+    std_scale: &dyn Fn() -> f64,
 ) -> Result<(CalibratedModel, Fitted)> {
     let framed = start.tree;
     let n_rows = obs.rows.len();
@@ -843,8 +867,10 @@ fn fit_terms(
     if let Some(n) = start.max_evaluations {
         config.lm.max_evaluations = n;
     }
-    let id = identify(&subset, x0, &config)
-        .with_context(|| format!("identifying the {rung} model from {n_rows} marker samples"))?;
+    let context = || format!("identifying the {rung} model from {n_rows} marker samples");
+    let free_fit = identify(&subset, x0, &config).with_context(context)?;
+    let id = crate::fit::hold_compliances_at_zero(&subset, &config, free_fit, std_scale)
+        .with_context(context)?;
     let x = subset.full_x(id.fit.x.as_ref());
     let model = problem.model(x.as_ref());
     let names: Vec<String> = (0..problem.layout().len())
@@ -3614,6 +3640,7 @@ fn equilibrate(
         offsets,
         converged.unwrap_or_else(|| observations(train, &all)),
         weights,
+        &|| repeat_std_scale(train, &all),
     )?;
     Ok((model, fitted, refits))
 }
@@ -4970,5 +4997,44 @@ mod tests {
             observations(Training::with_bounded(&tables, &samples), &all),
             observations(Training::measured(&copy), &all)
         );
+    }
+
+    /// Rows that repeat an earlier row of their table scale σ by √(rows / distinct rows):
+    /// a table appended to itself by √2, over the rows selected only; the same row in another
+    /// table, or with another reading (−0 is +0), is no copy.
+    #[test]
+    fn rows_that_repeat_others_scale_the_compliance_test_sigma() {
+        use super::{Training, repeat_std_scale};
+        let row = |q0: f64| hapcal_io::MeasuredRow {
+            line: 2,
+            q: vec![q0, 0.5],
+            t_s: None,
+            markers: vec![marker_sample(0, [1.0, 2.0, 3.0])],
+            distance_m: None,
+        };
+        let table = |q: &[f64]| {
+            hapcal_io::MeasurementTable::positions(
+                "t",
+                "t.csv",
+                1,
+                q.iter().map(|&q| row(q)).collect(),
+            )
+        };
+        let all = |_: usize, _: usize| true;
+        let once = [table(&[0.1, 0.2, 0.3])];
+        assert_eq!(repeat_std_scale(Training::measured(&once), &all), 1.0);
+        let twice = [table(&[0.1, 0.2, 0.3, 0.1, 0.2, 0.3])];
+        let scale = repeat_std_scale(Training::measured(&twice), &all);
+        assert!((scale - 2f64.sqrt()).abs() < 1e-15, "{scale}");
+        let first_half = |_: usize, ri: usize| ri < 3;
+        assert_eq!(
+            repeat_std_scale(Training::measured(&twice), &first_half),
+            1.0
+        );
+        let signed = [table(&[0.0, -0.0, 1e-300])];
+        let scale = repeat_std_scale(Training::measured(&signed), &all);
+        assert!((scale - 1.5f64.sqrt()).abs() < 1e-15, "{scale}");
+        let apart = [table(&[0.1]), table(&[0.1])];
+        assert_eq!(repeat_std_scale(Training::measured(&apart), &all), 1.0);
     }
 }

@@ -79,7 +79,8 @@ impl std::fmt::Display for SetRole {
     }
 }
 
-/// Why a parameter was pruned (JSON: `near_zero_column`, `dependent`).
+/// Why a parameter was pruned (JSON: `near_zero_column`, `dependent`, `insensitive`,
+/// `at_zero`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PruneCause {
@@ -90,6 +91,10 @@ pub enum PruneCause {
     /// Nearly independent of the kept ones but too small for the noise: its standard deviation
     /// would exceed its plausible range.
     Insensitive,
+    /// A compliance held at zero: fitted free it fell below zero within the noise
+    /// ([`hapcal_identify::PruneReason::AtBound`]); `std_if_kept` is its standard deviation
+    /// in that fit.
+    AtZero,
 }
 
 /// Figures of one data set under one model.

@@ -106,6 +106,11 @@ pub fn warnings(
                 p.std_if_kept,
                 cfg.prior_scale(layout.spec(p.index).unit)
             )),
+            PruneReason::AtBound => out.push(format!(
+                "{} is held at zero: fitted free it fell below zero, within the noise, and no \
+                 joint bends against its load; the other parameters were fitted with it at zero",
+                p.name
+            )),
             _ => out.push(format!(
                 "the data cannot support {}: it is not determined; it keeps its nominal value",
                 p.name

@@ -181,6 +181,8 @@ fn range_stops(s: &mut String, c: &Coverage) -> fmt::Result {
 pub(crate) fn pruned_why(p: &hapcal_calibrate::report::PrunedReport) -> String {
     if p.reason == hapcal_calibrate::report::PruneCause::NearZeroColumn {
         "no effect on the measurements".to_string()
+    } else if p.reason == hapcal_calibrate::report::PruneCause::AtZero {
+        "held at zero: below zero within the noise when fitted".to_string()
     } else if p.depends_on.is_empty() {
         "not determined better than its plausible range".to_string()
     } else {

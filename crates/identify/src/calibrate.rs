@@ -9,7 +9,8 @@ use crate::lm::{
     Fit, LmConfig, check_inputs, check_jacobian_finite, levenberg_marquardt, levenberg_marquardt_at,
 };
 use crate::problem::{EvalError, ParamLayout, Problem};
-use crate::rank::{Identifiability, RankConfigBase, identifiability};
+use crate::rank::{Identifiability, PruneReason, Pruned, RankConfigBase, identifiability};
+use crate::subset::Subset;
 
 /// Most fits [`identify`] runs while the kept set changes.
 pub const MAX_ROUNDS: usize = 3;
@@ -245,6 +246,86 @@ pub fn identify(p: &impl Problem, x0: Col<f64>, cfg: &IdentifyConfig) -> Result<
         format!("a {m} × {n} Jacobian, at most {STREAMING_AUTO_ENTRIES} entries or no row blocks"),
     );
     Ok(id)
+}
+
+/// [`identify`] with the parameters `held` held at their values in `x0`: a physical bound
+/// (a compliance held at zero, which a fit with it free put below zero) while the others are
+/// identified. `held` gives each held parameter's index in `p`'s layout and its standard
+/// deviation in the fit that had it free (in its unit; reported as
+/// [`Pruned::std_if_kept`]).
+///
+/// The result is over `p`'s whole layout, as [`identify`]'s: the held parameters keep their
+/// `x0` values and are listed among the pruned ones with [`PruneReason::AtBound`]; every
+/// other entry is [`identify`]'s of the problem without them ([`Subset`]).
+///
+/// # Errors
+/// As [`identify`]; [`Error::WrongLength`] if `x0` is not of `p`'s layout length.
+///
+/// # Panics
+/// If a held index is out of `p`'s layout.
+#[track_caller]
+pub fn identify_held(
+    p: &(impl Problem + Sync),
+    x0: Col<f64>,
+    cfg: &IdentifyConfig,
+    held: &[(usize, f64)],
+) -> Result<Identified, Error> {
+    let layout = p.layout().clone();
+    let n = layout.len();
+    if x0.nrows() != n {
+        return Err(Error::WrongLength {
+            expected: n,
+            found: x0.nrows(),
+        });
+    }
+    let is_held = |i: usize| held.iter().any(|&(h, _)| h == i);
+    for &(h, _) in held {
+        assert!(
+            h < n,
+            "held parameter {h} is out of range for {n} parameters"
+        );
+    }
+    let free: Vec<usize> = (0..n).filter(|&i| !is_held(i)).collect();
+    let subset = Subset::new(p, free.clone(), x0);
+    let inner = identify(&subset, subset.initial_free(), cfg)?;
+    let x = subset.full_x(inner.fit.x.as_ref());
+    let mut pruned: Vec<Pruned> = (inner.identifiability.pruned.into_iter())
+        .map(|q| Pruned {
+            index: free[q.index],
+            ..q
+        })
+        .collect();
+    pruned.extend(held.iter().map(|&(index, std)| Pruned {
+        index,
+        name: layout.name(index).to_owned(),
+        reason: PruneReason::AtBound,
+        std_if_kept: std,
+    }));
+    pruned.sort_by_key(|q| q.index);
+    let mut pivot_order: Vec<usize> = (inner.identifiability.pivot_order.iter())
+        .map(|&k| free[k])
+        .collect();
+    let mut r_diag = inner.identifiability.r_diag;
+    for &(index, _) in held {
+        pivot_order.push(index);
+        r_diag.push(0.0);
+    }
+    let mut covariance = inner.covariance;
+    covariance.free = covariance.free.iter().map(|&k| free[k]).collect();
+    Ok(Identified {
+        fit: Fit { x, ..inner.fit },
+        identifiability: Identifiability {
+            kept: (inner.identifiability.kept.iter())
+                .map(|&k| free[k])
+                .collect(),
+            pruned,
+            r_diag,
+            pivot_order,
+        },
+        covariance,
+        layout,
+        ..inner
+    })
 }
 
 fn check_identify_config(cfg: &IdentifyConfig) -> Result<(), Error> {

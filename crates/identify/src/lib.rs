@@ -76,7 +76,7 @@ mod subset;
 pub use blocks::{N_LEAVES, RowBlocks, jacobian_r_factor, levenberg_marquardt_streaming};
 pub use calibrate::{
     Backend, BackendChoice, DENSE_LIMIT_BYTES, Identified, IdentifyConfig, MAX_ROUNDS, SIGMA_FLOOR,
-    SPARSE_AUTO_DENSITY, STREAMING_AUTO_ENTRIES, SigmaSource, identify,
+    SPARSE_AUTO_DENSITY, STREAMING_AUTO_ENTRIES, SigmaSource, identify, identify_held,
 };
 pub use covariance::{Covariance, covariance, sigma_from_residuals};
 pub use design::{

@@ -157,6 +157,10 @@ pub enum PruneReason {
     /// Its column is nearly orthogonal to the kept ones (no scaled coefficient above 0.05) but
     /// too small for the noise: its standard deviation would exceed its prior.
     Insensitive,
+    /// Held at its physical bound (a compliance at zero) while the others were fitted
+    /// ([`identify_held`](crate::identify_held)): a fit with it free put it beyond the bound,
+    /// by less than the noise allows.
+    AtBound,
 }
 
 impl fmt::Display for PruneReason {
@@ -164,6 +168,7 @@ impl fmt::Display for PruneReason {
         match self {
             Self::NearZeroColumn => f.write_str("near-zero column"),
             Self::Insensitive => f.write_str("insensitive"),
+            Self::AtBound => f.write_str("held at its bound"),
             Self::Dependent { on } => {
                 f.write_str("dependent on")?;
                 for (k, (name, coefficient)) in on.iter().enumerate() {

@@ -149,3 +149,44 @@ fn bad_configuration_and_no_degrees_of_freedom_are_errors() {
     let id = identify(&square, Col::zeros(2), &cfg).expect("sigma given");
     assert!((id.value("p1").expect("p1") - 2e-4).abs() < 1e-15);
 }
+
+#[test]
+fn a_held_parameter_is_reported_at_its_bound_and_the_others_equal_a_fit_without_it() {
+    // Five parameters of a linear model, one of them (p2, truth −1e-4, noise 1e-3 per row)
+    // held at zero: the result lists p2 as held at its bound with the σ given, keeps it at
+    // zero, and every other estimate, σ and the noise level are those of identify on the
+    // problem whose p2 is fixed at zero (a Subset), to rounding.
+    let mut rng = rng(47);
+    let a = random_matrix(&mut rng, 60, 5);
+    let x_truth = col![0.01, -0.02, -1e-4, 0.005, 0.03];
+    let y = &a * &x_truth + Col::from_fn(60, |_| 1e-3 * normal(&mut rng));
+    let p = Linear {
+        layout: meters(5),
+        a,
+        y,
+    };
+    let cfg = IdentifyConfig::default();
+    let held =
+        hapcal_identify::identify_held(&p, Col::zeros(5), &cfg, &[(2, 1.5e-4)]).expect("valid");
+    let without = hapcal_identify::Subset::new(&p, vec![0, 1, 3, 4], Col::zeros(5));
+    let reference = identify(&without, without.initial_free(), &cfg).expect("valid");
+    assert_eq!(held.layout, p.layout);
+    assert_eq!(held.fit.x[2], 0.0);
+    let at_bound = held.identifiability.find_pruned("p2").expect("reported");
+    assert_eq!(at_bound.reason, PruneReason::AtBound);
+    assert_eq!(at_bound.index, 2);
+    assert_eq!(at_bound.std_if_kept, 1.5e-4);
+    assert_eq!(held.identifiability.kept, [0, 1, 3, 4]);
+    assert_eq!(held.covariance.free, [0, 1, 3, 4]);
+    assert_eq!(held.identifiability.pivot_order.len(), 5);
+    assert_eq!(held.identifiability.r_diag.len(), 5);
+    for (k, &j) in [0, 1, 3, 4].iter().enumerate() {
+        assert!((held.fit.x[j] - reference.fit.x[k]).abs() <= 1e-12, "{j}");
+        let (s, r) = (held.std(&format!("p{j}")), reference.std(&format!("p{j}")));
+        assert_eq!(s, r, "{j}");
+    }
+    assert_eq!(held.sigma, reference.sigma);
+    // Holding a parameter can only raise the cost of the fit that had it free.
+    let free = identify(&p, Col::zeros(5), &cfg).expect("valid");
+    assert!(held.fit.cost >= free.fit.cost);
+}
