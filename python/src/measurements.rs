@@ -464,7 +464,7 @@ pub(super) fn table(a: &Arrays, robot: &Robot) -> Result<MeasurementTable> {
         }
         rows.push(MeasuredRow {
             line: i as u64 + 1,
-            q,
+            q: q.into(),
             t_s: a.t_s.as_ref().map(|t| t[i]),
             markers: a.markers[i].clone(),
             distance_m: a.distances.as_ref().and_then(|d| d[i]),

@@ -52,7 +52,7 @@ fn sockets() -> CalibrationProblem {
         let first = obs.n_points;
         for (k, socket) in p.sockets.iter().enumerate() {
             obs.rows.extend(socket.q.iter().map(|q| Row {
-                q: q.clone(),
+                q: q[..].into(),
                 kind: RowKind::Point { point: first + k },
             }));
         }

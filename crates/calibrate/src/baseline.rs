@@ -224,7 +224,7 @@ pub fn baseline_from_tables(
                 (true, Some(t)) => t,
                 _ => offset + ri as f64,
             });
-            q.push(row.q.clone());
+            q.push(row.q.to_vec());
         }
         offset += t.rows.len() as f64;
     }

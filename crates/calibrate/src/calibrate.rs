@@ -188,7 +188,7 @@ fn joint_rows(chain: &hapcal_kinematics::Chain, train: &[DataSet], plan: &Plan) 
     let scale = residual_scale(train, &bounds, &all);
     let obs = observations(train, plan.socket_distance_m, &all);
     let ranges =
-        crate::measured::reading_ranges(obs.rows.iter().map(|r| r.q.as_slice()), chain.n_joints());
+        crate::measured::reading_ranges(obs.rows.iter().map(|r| &r.q[..]), chain.n_joints());
     let n_configurations = (obs.rows.iter())
         .map(|row| {
             let point = match row.kind {

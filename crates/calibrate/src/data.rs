@@ -357,7 +357,7 @@ pub fn workspace_configurations(
             path.display()
         );
     }
-    Ok(t.rows.into_iter().map(|r| r.q).collect())
+    Ok(t.rows.into_iter().map(|r| r.q.to_vec()).collect())
 }
 
 /// Reads one log of a haptic device.

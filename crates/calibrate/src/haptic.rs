@@ -275,7 +275,9 @@ fn kinematics_problem<R: Borrow<LogRow>>(
     let obs = Observations {
         rows: rows_of(rows)
             .map(|row| Row {
-                q: transmissions.map_or_else(|| row.q.clone(), |t| t.corrected(&row.q)),
+                q: transmissions
+                    .map_or_else(|| row.q.clone(), |t| t.corrected(&row.q))
+                    .into(),
                 kind: RowKind::Distance {
                     distance_m: row.distance_m,
                 },

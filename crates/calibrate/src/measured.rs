@@ -1335,7 +1335,7 @@ pub const RANGE_BLOCKS: usize = 5;
 /// The training range of every joint, rad or m: (min, max) over the training rows.
 pub fn training_ranges(tables: &[MeasurementTable], n_joints: usize) -> Vec<(f64, f64)> {
     reading_ranges(
-        tables.iter().flat_map(|t| &t.rows).map(|r| r.q.as_slice()),
+        tables.iter().flat_map(|t| &t.rows).map(|r| &r.q[..]),
         n_joints,
     )
 }
@@ -2099,7 +2099,7 @@ fn check_distinct_configurations(
         if enough(distinct.len()) {
             return Ok(());
         }
-        if !distinct.contains(&row.q.as_slice()) {
+        if !distinct.contains(&&row.q[..]) {
             distinct.push(&row.q);
         }
     }
@@ -2433,7 +2433,7 @@ fn climb_ladder(
 ) -> Result<Choice> {
     // Where the calibration will be used: the test rows and the workspace given.
     let beyond: Vec<&[f64]> = (test.iter().flat_map(|t| &t.rows))
-        .map(|r| r.q.as_slice())
+        .map(|r| &r.q[..])
         .chain(cfg.workspace.iter().map(Vec::as_slice))
         .collect();
     // Only the sides where the calibration will be used beyond its training range.
@@ -3570,24 +3570,8 @@ fn equilibrate(
             ..model.clone()
         };
         let obs = observations(train, &all);
-        // One configuration's angles after another, in the order of the observations,
-        // collected from an iterator of known length straight into the shared slice: one
-        // allocation of the angles (a vector grown by extending reserves up to twice them, and
-        // turning it into the slice copies them once more).
-        let starts: Vec<usize> = obs.configurations().map(|rows| rows.start).collect();
-        let n_joints = obs.rows.first().map_or(0, |r| r.q.len());
-        let mut angles = Vec::new();
-        let at: Arc<[f64]> = (0..starts.len() * n_joints)
-            .map(|i| {
-                if i % n_joints == 0 {
-                    angles = solving.load_angles(&obs.rows[starts[i / n_joints]].q).0;
-                }
-                angles[i % n_joints]
-            })
-            .collect();
-        drop(starts);
         if let Some(p) = &previous {
-            let change = (p.iter().zip(at.iter()))
+            let change = (p.iter().zip(equilibrium_angles(&solving, &obs)))
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0, f64::max);
             // Ten microradians move a tip a metre out by ten micrometres: below the noise of
@@ -3598,6 +3582,14 @@ fn equilibrate(
                 break;
             }
         }
+        // The last refit's angles are judged: dropped before the new ones are collected, so
+        // one set of angles is held at a time (the new ones are evaluated twice, once for the
+        // test above and once here, rather than held beside the old).
+        drop(previous.take());
+        // Collected from an iterator of known length straight into the shared slice: one
+        // allocation of the angles (a vector grown by extending reserves up to twice them, and
+        // turning it into the slice copies them once more).
+        let at: Arc<[f64]> = equilibrium_angles(&solving, &obs).collect();
         let terms = ModelTerms {
             load_angles: Some(Arc::clone(&at)),
             ..terms(rung, robot)?
@@ -3643,6 +3635,25 @@ fn equilibrate(
         &|| repeat_std_scale(train, &all),
     )?;
     Ok((model, fitted, refits))
+}
+
+/// The torque-equilibrium joint angles of `solving` ([`CalibratedModel::load_angles`]) at
+/// each configuration of `obs` ([`Observations::configurations`]), one configuration's
+/// `n_joints` angles (rad, m for a prismatic joint) after another: an iterator of known
+/// length, each configuration's angles evaluated as it is reached.
+fn equilibrium_angles<'a>(
+    solving: &'a CalibratedModel,
+    obs: &'a Observations,
+) -> impl ExactSizeIterator<Item = f64> + 'a {
+    let starts: Vec<usize> = obs.configurations().map(|rows| rows.start).collect();
+    let n_joints = obs.rows.first().map_or(0, |r| r.q.len());
+    let mut angles = Vec::new();
+    (0..starts.len() * n_joints).map(move |i| {
+        if i % n_joints == 0 {
+            angles = solving.load_angles(&obs.rows[starts[i / n_joints]].q).0;
+        }
+        angles[i % n_joints]
+    })
 }
 
 /// Share of the position noise σ below which the gravity loads of the undeflected robot are
@@ -3799,7 +3810,7 @@ fn coverage(
     stops: Vec<RangeStop>,
 ) -> Option<Coverage> {
     let test_q: Vec<&[f64]> = (test.iter().flat_map(|t| &t.rows))
-        .map(|r| r.q.as_slice())
+        .map(|r| &r.q[..])
         .collect();
     let workspace_q: Vec<&[f64]> = workspace.iter().map(Vec::as_slice).collect();
     if test_q.is_empty() && workspace_q.is_empty() {
@@ -4648,7 +4659,8 @@ pub fn fold_joint_offsets(
 #[cfg(test)]
 mod tests {
     use super::{
-        Line, ModelName, RangeVerdict, Vector3, lm_alone, negative_compliance_sigmas, rung_chains,
+        Arc, CalibrationProblem, Line, ModelName, RangeVerdict, Vector3, lm_alone,
+        negative_compliance_sigmas, rung_chains,
     };
     use faer::{Col, ColMut, ColRef, MatMut};
     use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
@@ -4863,7 +4875,7 @@ mod tests {
         use super::{BoundedSample, Training};
         let row = |line: u64| hapcal_io::MeasuredRow {
             line,
-            q: vec![0.1 * line as f64; 3],
+            q: vec![0.1 * line as f64; 3].into(),
             t_s: None,
             markers: vec![
                 marker_sample(0, [line as f64, 0.0, 0.0]),
@@ -4944,7 +4956,7 @@ mod tests {
                 }
                 hapcal_io::MeasuredRow {
                     line: i as u64 + 2,
-                    q,
+                    q: q.into(),
                     t_s: None,
                     markers: vec![marker_sample(0, position_m)],
                     distance_m: None,
@@ -5007,7 +5019,7 @@ mod tests {
         use super::{Training, repeat_std_scale};
         let row = |q0: f64| hapcal_io::MeasuredRow {
             line: 2,
-            q: vec![q0, 0.5],
+            q: vec![q0, 0.5].into(),
             t_s: None,
             markers: vec![marker_sample(0, [1.0, 2.0, 3.0])],
             distance_m: None,
@@ -5036,5 +5048,101 @@ mod tests {
         assert!((scale - 1.5f64.sqrt()).abs() < 1e-15, "{scale}");
         let apart = [table(&[0.1]), table(&[0.1])];
         assert_eq!(repeat_std_scale(Training::measured(&apart), &all), 1.0);
+    }
+
+    #[test]
+    fn observation_rows_share_their_file_rows_readings_and_give_the_same_residuals() {
+        use super::{Observations, Problem, Row, Training, observations, weighted_frames_only};
+        use rand::{Rng, SeedableRng};
+        let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fixtures/mukca/urdf/iiwa14.urdf");
+        let robot = super::robot_from_urdf(&urdf, &["ball_link".to_owned()]).expect("the iiwa");
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let nominal = vec![0.0; robot.tree.n_params()];
+        // 40 rows of the nominal robot, each a marker and a distance: two observation rows of
+        // one configuration.
+        let rows: Vec<hapcal_io::MeasuredRow> = (0..40)
+            .map(|i| {
+                let q: Vec<f64> = (robot.limits.iter())
+                    .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
+                    .collect();
+                let p = robot.tree.tips()[0].end_point(&nominal, &q);
+                hapcal_io::MeasuredRow {
+                    line: i as u64 + 2,
+                    q: q.into(),
+                    t_s: None,
+                    markers: vec![marker_sample(0, [p[0], p[1], p[2]])],
+                    distance_m: Some(p.coords.norm()),
+                }
+            })
+            .collect();
+        let mut tables = [hapcal_io::MeasurementTable::positions(
+            "tracker",
+            "tracker.csv",
+            1,
+            rows,
+        )];
+        let cfg = super::MeasuredConfig::default();
+        let (frames, weights) = weighted_frames_only(&robot, &tables, &cfg, 40).expect("frames");
+        tables[0].has_distance = true;
+        let all = |_: usize, _: usize| true;
+        let shared = observations(Training::measured(&tables), &all);
+        assert_eq!(shared.rows.len(), 80);
+        for (k, row) in tables[0].rows.iter().enumerate() {
+            for r in &shared.rows[2 * k..2 * k + 2] {
+                assert!(
+                    Arc::ptr_eq(&r.q, &row.q),
+                    "row {k}: its observation rows hold a copy of its readings"
+                );
+            }
+        }
+        // The same observations, each row with its own copy of the readings.
+        let copied = Observations {
+            rows: (shared.rows.iter())
+                .map(|r| Row::new(r.q.to_vec(), r.kind.clone()))
+                .collect(),
+            ..shared.clone()
+        };
+        assert!(!Arc::ptr_eq(&copied.rows[0].q, &copied.rows[1].q));
+        assert_eq!(shared.configurations().count(), 40);
+        assert_eq!(copied.configurations().count(), 40);
+        let problem = |obs: Observations| {
+            let terms = super::terms(ModelName::TransversalCompliance, &frames.robot)
+                .expect("the rung's terms");
+            CalibrationProblem::on_tree(frames.framed.clone(), obs, weights, terms)
+                .expect("the problem")
+        };
+        let (shared, copied) = (problem(shared), problem(copied));
+        let n = shared.layout().len();
+        assert_eq!(copied.layout().len(), n);
+        // Every deviation and compliance a little off zero, so that every term moves the
+        // residuals.
+        let x = Col::from_fn(n, |i| 1e-3 * ((i * 7 % 5) as f64 - 2.0));
+        let m = shared.n_residuals();
+        let (mut r_shared, mut r_copied) = (Col::zeros(m), Col::zeros(m));
+        shared
+            .residuals(x.as_ref(), r_shared.as_mut())
+            .expect("residuals");
+        copied
+            .residuals(x.as_ref(), r_copied.as_mut())
+            .expect("residuals");
+        let (mut j_shared, mut j_copied) = (faer::Mat::zeros(m, n), faer::Mat::zeros(m, n));
+        shared
+            .jacobian(x.as_ref(), j_shared.as_mut())
+            .expect("Jacobian");
+        copied
+            .jacobian(x.as_ref(), j_copied.as_mut())
+            .expect("Jacobian");
+        for i in 0..m {
+            assert_eq!(r_shared[i].to_bits(), r_copied[i].to_bits(), "residual {i}");
+            for j in 0..n {
+                assert_eq!(
+                    j_shared[(i, j)].to_bits(),
+                    j_copied[(i, j)].to_bits(),
+                    "Jacobian entry ({i}, {j})"
+                );
+            }
+        }
+        assert!(r_shared.norm_l2() > 0.0);
     }
 }

@@ -336,7 +336,7 @@ pub fn candidate_blocks_for(
         rows: readings
             .iter()
             .map(|q| Row {
-                q: q.clone(),
+                q: q[..].into(),
                 kind: kind.clone(),
             })
             .collect(),
@@ -859,7 +859,7 @@ impl RowShape {
             .collect();
         hapcal_io::MeasuredRow {
             line: 0,
-            q: q.to_vec(),
+            q: q.into(),
             t_s: None,
             markers,
             distance_m: self
@@ -1182,7 +1182,7 @@ impl<'a> PlanningProblem<'a> {
             let tips: Vec<usize> = (0..n_predicted).collect();
             for (tip, pose) in out.model.end_poses_of(&tips, q).into_iter().enumerate() {
                 obs.rows.push(Row {
-                    q: q.clone(),
+                    q: q[..].into(),
                     kind: RowKind::Marker {
                         tip,
                         position_m: pose.translation.vector.into(),

@@ -417,7 +417,7 @@ fn read_haptic_rows(path: &Path, device: &hapcal_io::Device, units: &Units) -> R
         );
     }
     let rows = (table.rows.into_iter())
-        .map(|r| (r.line, r.q, None))
+        .map(|r| (r.line, r.q.to_vec(), None))
         .collect();
     Ok((rows, table.warnings))
 }

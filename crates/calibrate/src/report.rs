@@ -413,7 +413,7 @@ pub fn sample_rows(table: &hapcal_io::MeasurementTable) -> Vec<SampleRow> {
     (table.rows.iter())
         .map(|r| SampleRow {
             line: r.line,
-            q: r.q.clone(),
+            q: r.q.to_vec(),
             markers: r.markers.iter().map(|m| m.marker).collect(),
             distance: r.distance_m.is_some(),
         })

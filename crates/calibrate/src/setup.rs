@@ -99,7 +99,11 @@ impl MeasuredData {
 
 impl SetupData for MeasuredData {
     fn with_joints(&self, f: &(dyn Fn(&mut [f64]) + Sync)) -> Self {
-        MeasuredData::tables(map_rows(&self.tables, &|row| f(&mut row.q)))
+        MeasuredData::tables(map_rows(&self.tables, &|row| {
+            let mut q = row.q.to_vec();
+            f(&mut q);
+            row.q = q.into();
+        }))
     }
 
     fn with_lengths(&self, group: Option<usize>, factor: f64) -> Self {
@@ -1490,7 +1494,11 @@ fn position_reflections(tables: &[MeasurementTable]) -> Vec<Corrected<MeasuredDa
 /// Joints whose readings never change (spread ≤ [`FROZEN_SPREAD`]) over two or more rows
 /// while their limits let them move: `(joint, value)`.
 pub fn frozen_joints(robot: &Robot, tables: &[MeasurementTable]) -> Vec<(usize, f64)> {
-    let rows: Vec<&Vec<f64>> = tables.iter().flat_map(|t| &t.rows).map(|r| &r.q).collect();
+    let rows: Vec<&[f64]> = tables
+        .iter()
+        .flat_map(|t| &t.rows)
+        .map(|r| &r.q[..])
+        .collect();
     if rows.len() < 2 {
         return Vec::new();
     }

@@ -33,7 +33,7 @@ pub(crate) fn observations(
                     for (row_idx, q) in socket.q.iter().enumerate() {
                         if keep(set_idx, socket_idx, row_idx) {
                             obs.rows.push(Row {
-                                q: q.clone(),
+                                q: q[..].into(),
                                 kind: RowKind::Point { point },
                             });
                         }
@@ -51,7 +51,7 @@ pub(crate) fn observations(
                 for (row_idx, (q, d)) in q.iter().zip(distance_m).enumerate() {
                     if keep(set_idx, 0, row_idx) {
                         obs.rows.push(Row {
-                            q: q.clone(),
+                            q: q[..].into(),
                             kind: RowKind::Distance { distance_m: *d },
                         });
                     }

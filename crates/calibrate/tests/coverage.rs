@@ -44,7 +44,7 @@ fn joint_2_split(effect: Effect, seed: u64) -> (MeasuredOutcome, (f64, f64, f64)
     let workspace: Vec<Vec<f64>> = (sim::rows(&robot, &truth, 40, (mid, hi), 400 + seed, "ws")
         .rows)
         .into_iter()
-        .map(|r| r.q)
+        .map(|r| r.q.to_vec())
         .collect();
     let out = calibrate_measured(
         &robot,
@@ -224,7 +224,7 @@ fn sweep() {
                 let workspace: Vec<Vec<f64>> =
                     (sim::rows(&robot, &truth, 40, (cut, hi), 400 + seed, "ws").rows)
                         .into_iter()
-                        .map(|r| r.q)
+                        .map(|r| r.q.to_vec())
                         .collect();
                 let (tr, te) = (std::slice::from_ref(&train), std::slice::from_ref(&test));
                 let out = calibrate_measured(&robot, tr, te, &config(None, workspace)).unwrap();

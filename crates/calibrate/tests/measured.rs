@@ -99,7 +99,7 @@ fn distances(robot: &Robot, n: usize, offset_rad: f64, seed: u64) -> Measurement
             let p = tree.tips()[0].end_point(&x, &q);
             MeasuredRow {
                 line: i as u64 + 2,
-                q,
+                q: q.into(),
                 t_s: None,
                 markers: Vec::new(),
                 distance_m: Some((p.coords - anchor).norm() + noise.sample(&mut rng)),

@@ -88,7 +88,7 @@ fn round_trip(
     test: MeasurementTable,
 ) -> (f64, f64, f64) {
     let rows: Vec<Vec<f64>> = (train.rows.iter().chain(&test.rows))
-        .map(|r| r.q.clone())
+        .map(|r| r.q.to_vec())
         .collect();
     let dir = scratch(&format!("{model}-{}", tips.join("-")));
     let (outcome, out) = written(calibrated(urdf, tips, robot, model, train, test, &dir));

@@ -102,7 +102,7 @@ fn round_trip(
     dir: &Path,
 ) -> Gaps {
     let rows: Vec<Vec<f64>> = (train.rows.iter().chain(&test.rows))
-        .map(|r| r.q.clone())
+        .map(|r| r.q.to_vec())
         .collect();
     let plan = Plan {
         device: device_path.to_path_buf(),

@@ -27,7 +27,7 @@ fn problem(urdf: &Path, placement: &Path) -> (hapcal_io::Device, CalibrationProb
     };
     for (point, socket) in p.sockets.iter().enumerate() {
         obs.rows.extend(socket.q.iter().map(|q| Row {
-            q: q.clone(),
+            q: q[..].into(),
             kind: RowKind::Point { point },
         }));
     }

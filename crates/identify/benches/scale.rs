@@ -63,7 +63,7 @@ fn case(n_poses: usize) -> Case {
     let q: Vec<Vec<f64>> = (0..n_poses).map(|k| s.q(k).to_vec()).collect();
     let rows = (0..n_poses)
         .map(|k| Row {
-            q: s.q(k).to_vec(),
+            q: s.q(k).into(),
             kind: RowKind::Distance {
                 distance_m: s.distance_m[k],
             },

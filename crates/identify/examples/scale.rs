@@ -92,7 +92,7 @@ fn read(path: &Path, n_joints: usize) -> Result<Vec<Row>> {
             }
         }
         rows.push(Row {
-            q,
+            q: q.into(),
             kind: RowKind::Distance { distance_m: d },
         });
     }

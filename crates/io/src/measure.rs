@@ -13,6 +13,7 @@ mod rows;
 mod yaml;
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use crate::Error;
 use crate::columns::Units;
@@ -49,8 +50,10 @@ pub struct MarkerSample {
 pub struct MeasuredRow {
     /// 1-based line in the file (for YAML, the line of the observation's key).
     pub line: u64,
-    /// Joint readings in chain order, rad (m for a prismatic joint).
-    pub q: Vec<f64>,
+    /// Joint readings in chain order, rad (m for a prismatic joint). A shared slice: the
+    /// observation rows built from this row (one per marker and distance) share it rather
+    /// than copy it.
+    pub q: Arc<[f64]>,
     /// Time, s, if the file has a `t` or `t_s` column.
     pub t_s: Option<f64>,
     /// The markers seen in this row (a marker whose cells are all empty is not seen).
@@ -366,7 +369,7 @@ impl IdenticalMarkers {
 /// A row's joint readings and measurements (not its time or line), to find repeated rows;
 /// an absent value is NaN.
 fn measured_values(row: &MeasuredRow) -> Vec<f64> {
-    let mut values = row.q.clone();
+    let mut values = row.q.to_vec();
     values.push(row.distance_m.unwrap_or(f64::NAN));
     for m in &row.markers {
         values.push(m.marker as f64);

@@ -40,7 +40,7 @@
 //!     alpha_rad: 0.0, d_m: 0.0, theta_rad: 0.0, beta_rad: None, joint: Some(joint) };
 //! let chain = Chain::from_dh(&[row(0.3, 0), row(0.2, 1)])?;
 //! let obs = Observations {
-//!     rows: vec![Row { q: vec![0.1, 0.2], kind: RowKind::Distance { distance_m: 0.49 } }],
+//!     rows: vec![Row::new(vec![0.1, 0.2], RowKind::Distance { distance_m: 0.49 })],
 //!     ..Observations::default()
 //! };
 //! let problem = CalibrationProblem::new(chain, obs, Weights::default(), None)?;

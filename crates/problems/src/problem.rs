@@ -168,10 +168,21 @@ fn normal_axes(axis: &Vector3<f64>) -> [Vector3<f64>; 2] {
 /// One measured configuration.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Row {
-    /// Joint readings, rad (length `n_joints`).
-    pub q: Vec<f64>,
+    /// Joint readings, rad (m for a prismatic joint; length `n_joints`). Shared, not copied,
+    /// between the rows of one configuration (a file row's markers and distance) and with the
+    /// table they were read from (the measurement reader's rows): a long marker file's rows
+    /// hold one copy of each configuration's readings.
+    pub q: Arc<[f64]>,
     /// What was measured.
     pub kind: RowKind,
+}
+
+impl Row {
+    /// A row measuring `kind` at joint readings `q` (rad, m for a prismatic joint): a
+    /// vector is moved into a shared slice, a shared slice ([`Row::q`]) is shared.
+    pub fn new(q: impl Into<Arc<[f64]>>, kind: RowKind) -> Self {
+        Row { q: q.into(), kind }
+    }
 }
 
 /// A known distance between two unknown points (e.g. MUKCa's two sockets, 0.05 m apart).

@@ -648,7 +648,7 @@ fn simulate(case: &TreeCase, setup: &TreeSetup, n_rows: usize) -> Result<Simulat
     let rows = (0..n_rows)
         .map(|i| MeasuredRow {
             line: i as u64 + 2,
-            q: read[i].clone(),
+            q: read[i][..].into(),
             t_s: Some(i as f64),
             markers: (0..2)
                 .map(|k| MarkerSample {

@@ -427,7 +427,7 @@ pub fn truth_of(
         .unwrap();
     let dummy = Observations {
         rows: vec![Row {
-            q: vec![0.0; robot.joint_names.len()],
+            q: vec![0.0; robot.joint_names.len()].into(),
             kind: RowKind::Marker {
                 tip: 0,
                 position_m: [0.0; 3],
@@ -531,7 +531,7 @@ pub fn rows_with_noise<'a>(
             .collect();
         MeasuredRow {
             line: i + 2,
-            q,
+            q: q.into(),
             t_s: None,
             markers: samples,
             distance_m: None,

@@ -79,7 +79,7 @@ pub fn sample(
 pub fn row(line: u64, q: Vec<f64>, markers: Vec<MarkerSample>) -> MeasuredRow {
     MeasuredRow {
         line,
-        q,
+        q: q.into(),
         t_s: None,
         markers,
         distance_m: None,

@@ -228,7 +228,7 @@ pub fn transversal_columns(
     let terms = library_transversal(robot).map_err(|message| Error::Data { message })?;
     let terms = &terms[usize::from(effect == Effect::TransversalAxes)];
     let obs = problem.observations();
-    let q: Vec<Vec<f64>> = obs.rows.iter().map(|r| r.q.clone()).collect();
+    let q: Vec<Vec<f64>> = obs.rows.iter().map(|r| r.q.to_vec()).collect();
     let n_rows = q.len();
     let rows = Rows::new(
         problem,

@@ -72,7 +72,7 @@ pub(super) fn ladder(
         let q: Vec<Vec<f64>> = {
             let mut q = vec![Vec::new(); n_c];
             for (row, &c) in t.problem.observations().rows.iter().zip(&t.configuration) {
-                q[c] = row.q.clone();
+                q[c] = row.q.to_vec();
             }
             q
         };

@@ -181,7 +181,9 @@ pub(super) fn reading_derivatives(
         let moved = |h: f64| -> Result<DVector<f64>, Error> {
             let mut o: Observations = obs.clone();
             for row in &mut o.rows {
-                row.q[j] += h;
+                let mut q = row.q.to_vec();
+                q[j] += h;
+                row.q = q.into();
             }
             let p = problem.with_observations(o).map_err(|e| Error::Baseline {
                 message: e.to_string(),

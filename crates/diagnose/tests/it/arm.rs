@@ -114,7 +114,7 @@ fn repeated_positions(n: usize, repeats: usize, sigma: f64, seed: u64) -> Measur
         for _ in 0..repeats {
             rows.push(MeasuredRow {
                 line: rows.len() as u64 + 2,
-                q: q.clone(),
+                q: q[..].into(),
                 t_s: Some(rows.len() as f64),
                 markers: vec![MarkerSample {
                     marker: 0,

@@ -168,7 +168,7 @@ pub(super) fn read_rows(
         let markers = marker_samples(&cells, &h.markers, &mut body.frozen_position)?;
         let row = MeasuredRow {
             line,
-            q,
+            q: q.into(),
             t_s,
             markers,
             distance_m,

@@ -270,7 +270,7 @@ fn observation_row(
     let q = UnitQuaternion::from_quaternion(Quaternion::new(p.qw, p.qx, p.qy, p.qz));
     Ok(MeasuredRow {
         line,
-        q: o.target_joints,
+        q: o.target_joints.into(),
         t_s: None,
         markers: vec![MarkerSample {
             marker: 0,

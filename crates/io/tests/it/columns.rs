@@ -121,7 +121,7 @@ fn assert_same(a: &MeasurementTable, b: &MeasurementTable, rel: f64) {
     let close = |x: f64, y: f64| (x - y).abs() <= rel * x.abs().max(y.abs()) + 1e-300;
     assert_eq!(a.rows.len(), b.rows.len());
     for (ra, rb) in a.rows.iter().zip(&b.rows) {
-        for (x, y) in ra.q.iter().zip(&rb.q) {
+        for (x, y) in ra.q.iter().zip(rb.q.iter()) {
             assert!(close(*x, *y), "line {}: q {x} != {y}", ra.line);
         }
         for (ma, mb) in ra.markers.iter().zip(&rb.markers) {

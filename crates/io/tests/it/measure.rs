@@ -93,8 +93,8 @@ fn joint_columns_by_name_in_any_order_with_markers_and_an_unknown_column() {
         unreachable!()
     };
     assert_eq!((r0.line, r1.line), (2, 3));
-    assert_eq!(r0.q, [0.1, 0.2, 0.3]);
-    assert_eq!(r1.q, [-0.1, -0.2, -0.3]);
+    assert_eq!(*r0.q, [0.1, 0.2, 0.3]);
+    assert_eq!(*r1.q, [-0.1, -0.2, -0.3]);
     assert_eq!(r0.markers.len(), 2);
     assert_eq!(r0.markers[0].marker, 0);
     assert_eq!(r0.markers[0].position_m, [1.0, 2.0, 3.0]);
@@ -256,7 +256,7 @@ fn readings_slightly_outside_the_limits_warn_and_far_outside_fail() {
     let text = "a,b\n0,0\n1.1,0.5\n";
     let table = read("slack.csv", text, &schema, Units::default()).unwrap();
     assert_eq!(table.rows.len(), 2);
-    assert_eq!(table.rows[1].q, [1.1, 0.5]);
+    assert_eq!(*table.rows[1].q, [1.1, 0.5]);
     assert_eq!(table.warnings.len(), 1, "{:?}", table.warnings);
     assert_contains(&table.warnings[0], &["slack.csv:3:1:", "\"a\"", "1.1"]);
 
@@ -317,8 +317,8 @@ fn industrial_yaml_observations_in_file_order() {
         unreachable!()
     };
     assert_eq!((r0.line, r1.line), (1, 14));
-    assert_eq!(r0.q, [0.5, 0.25]);
-    assert_eq!(r1.q, [-0.5, 1.5]);
+    assert_eq!(*r0.q, [0.5, 0.25]);
+    assert_eq!(*r1.q, [-0.5, 1.5]);
     assert_eq!(r0.markers[0].position_m, [0.1, 0.2, 0.3]);
     assert_eq!(r1.markers[0].position_m, [-1.0, -2.0, -3.0]);
     let close = |got: [f64; 4], want: [f64; 4]| {
@@ -344,7 +344,7 @@ fn bundled_industrial_calibration_fixture() {
     assert_eq!(table.rows.len(), 205);
     let first = &table.rows[0];
     assert_eq!(first.line, 1);
-    assert_eq!(first.q, [-0.5229825973510742, 0.0002200359886046499]);
+    assert_eq!(*first.q, [-0.5229825973510742, 0.0002200359886046499]);
     assert_eq!(
         first.markers[0].position_m,
         [-0.5325496958762886, -0.7712137113402057, 0.935626211340206]

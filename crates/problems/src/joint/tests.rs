@@ -147,7 +147,7 @@ fn residual_blocks_are_the_step_1_and_distance_residuals() {
                 }
                 q[2] += poly_x.eval(q[2]);
                 Row {
-                    q,
+                    q: q.into(),
                     kind: RowKind::Distance { distance_m },
                 }
             })

@@ -429,9 +429,7 @@ impl DistanceLanes {
         let mut lane_distance_m = Vec::with_capacity(lane_groups.len());
         for &first in &lane_groups {
             let group = &obs.rows[first..first + LANES];
-            lane_trig.extend(joint_trig_lanes(std::array::from_fn(|l| {
-                group[l].q.as_slice()
-            })));
+            lane_trig.extend(joint_trig_lanes(std::array::from_fn(|l| &group[l].q[..])));
             lane_distance_m.push(std::array::from_fn(|l| distance(&group[l]).unwrap_or(0.0)));
         }
         let mut trig = Vec::new();

@@ -52,7 +52,7 @@ fn reference_problem() -> CalibrationProblem {
             .rows
             .iter()
             .map(|row| Row {
-                q: row.q.clone(),
+                q: row.q[..].into(),
                 kind: RowKind::Distance {
                     distance_m: row.distance_m,
                 },

@@ -197,7 +197,7 @@ fn transversal_compliance_needs_the_compliance_model() {
     let robot = torso_tree();
     let obs = Observations {
         rows: vec![Row {
-            q: vec![0.0; 5],
+            q: vec![0.0; 5].into(),
             kind: RowKind::Marker {
                 tip: 0,
                 position_m: [0.0; 3],
@@ -304,7 +304,7 @@ fn equal_per_axis_compliances_are_the_isotropic_one() {
     let n_joints = tree.n_joints();
     let obs = Observations {
         rows: vec![Row {
-            q: vec![0.0; n_joints],
+            q: vec![0.0; n_joints].into(),
             kind: RowKind::Marker {
                 tip: 0,
                 position_m: [0.0; 3],
@@ -377,7 +377,7 @@ fn bases_evaluated_row_by_row_equal_the_kept_ones() {
         let q = torso_configuration(i, 0.3);
         for tip in 0..2 {
             obs.rows.push(Row {
-                q: q.clone(),
+                q: q[..].into(),
                 kind: RowKind::Marker {
                     tip,
                     position_m: [0.4, 0.1 * i as f64, 0.9 - 0.2 * tip as f64],

@@ -298,7 +298,7 @@ fn jacobian(chain: &Chain, measurement: Measurement, seed: u64) -> (Mat<f64>, Pa
             let rows = qs
                 .into_iter()
                 .map(|q| Row {
-                    q,
+                    q: q.into(),
                     kind: if measurement == Measurement::Distance {
                         RowKind::Distance { distance_m: 0.5 }
                     } else {
@@ -553,7 +553,7 @@ proptest! {
             rows: qs.into_iter().map(|q| {
                 let p = chain.end_point(&truth, &q);
                 let noise = [0; 3].map(|_| sigma * rng.sample::<f64, _>(rand_distr::StandardNormal));
-                Row { kind: RowKind::Position { position_m: [p.x + noise[0], p.y + noise[1], p.z + noise[2]] }, q }
+                Row { kind: RowKind::Position { position_m: [p.x + noise[0], p.y + noise[1], p.z + noise[2]] }, q: q.into() }
             }).collect(),
             ..Observations::default()
         };

@@ -96,7 +96,7 @@ fn pose_or_marker_row(i: usize, q: Vec<f64>) -> Row {
             position_m: [0.5, 0.4, 0.3],
         }
     };
-    Row { q, kind }
+    Row { q: q.into(), kind }
 }
 
 /// Weights of [`pose_or_marker_row`]'s rows: position σ 1 mm, orientation σ 2 mrad.
@@ -184,7 +184,10 @@ fn problem_with_models(
             2 => RowKind::Point { point: 0 },
             _ => RowKind::Point { point: 1 },
         };
-        rows.push(Row { q: q.clone(), kind });
+        rows.push(Row {
+            q: q[..].into(),
+            kind,
+        });
     }
     let obs = Observations {
         rows,
@@ -224,7 +227,7 @@ fn distance_runs_problem(qs: &[Vec<f64>]) -> CalibrationProblem {
         .iter()
         .enumerate()
         .map(|(i, q)| Row {
-            q: q.clone(),
+            q: q[..].into(),
             kind: if matches!(i, 0 | 1 | 19) {
                 RowKind::Position {
                     position_m: [0.1, 0.2, 0.8],
@@ -512,7 +515,7 @@ fn vertical_first_axis_has_no_gravity_torque() {
 fn wrong_joint_count_is_an_error() {
     let obs = Observations {
         rows: vec![Row {
-            q: vec![0.0; 6],
+            q: vec![0.0; 6].into(),
             kind: RowKind::Point { point: 0 },
         }],
         point_distances: vec![],
@@ -541,7 +544,7 @@ fn kuka_front() -> Observations {
                 .map(|v| v.trim().parse().expect("number"))
                 .collect();
             obs.rows.push(Row {
-                q,
+                q: q.into(),
                 kind: RowKind::Point { point },
             });
         }

@@ -46,7 +46,7 @@ fn reference_distance_problem(n_rows: usize) -> CalibrationProblem {
             };
             let d = chain.end_point(&x_truth, &q).coords.norm() + 1e-5 * lcg(&mut state);
             Row {
-                q,
+                q: q.into(),
                 kind: RowKind::Distance { distance_m: d },
             }
         })
@@ -130,7 +130,7 @@ fn streaming_identify_matches_dense_on_points_and_positions() {
                 ],
             }
         };
-        rows.push(Row { q, kind });
+        rows.push(Row { q: q.into(), kind });
     }
     let p = chain_problem(chain, rows, 1e-5, 1e-5);
     let dense = with_backend(&p, Backend::Dense);

@@ -89,7 +89,7 @@ fn frames_recovered_from_exact_poses() {
             let pose = tree.tips()[tip].end_pose(&truth, &q);
             let r = pose.rotation.quaternion();
             obs.rows.push(Row {
-                q: q.clone(),
+                q: q[..].into(),
                 kind: RowKind::Pose {
                     tip,
                     position_m: pose.translation.vector.into(),
@@ -133,7 +133,7 @@ fn a_configurations_rows_share_its_loads() {
         for tip in 0..if i % 3 == 0 { 1 } else { 2 } {
             let position_m = [0.5 + 0.1 * tip as f64, 0.4, 0.3 - 0.05 * i as f64];
             obs.rows.push(Row {
-                q: q.clone(),
+                q: q[..].into(),
                 kind: RowKind::Marker { tip, position_m },
             });
         }
@@ -173,7 +173,7 @@ fn a_configurations_rows_share_its_loads() {
     // The equilibrium's angles given per configuration, here the readings themselves.
     let at: Vec<f64> = obs
         .configurations()
-        .flat_map(|rows| obs.rows[rows.start].q.clone())
+        .flat_map(|rows| obs.rows[rows.start].q.iter().copied())
         .collect();
     let at_readings = CalibrationProblem::on_tree(
         tree.clone(),
@@ -191,7 +191,7 @@ fn a_configurations_rows_share_its_loads() {
         .expect("residuals");
     assert_eq!(given, all);
     // One angle per row (the former layout) is refused.
-    let per_row: Vec<f64> = obs.rows.iter().flat_map(|r| r.q.clone()).collect();
+    let per_row: Vec<f64> = obs.rows.iter().flat_map(|r| r.q.iter().copied()).collect();
     let wrong = CalibrationProblem::on_tree(
         tree,
         obs,

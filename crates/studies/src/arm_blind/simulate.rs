@@ -193,7 +193,7 @@ pub(super) fn simulate_positions(
             let p = meas[i] + Vector3::from_fn(|_, _| noise.sample(rng));
             MeasuredRow {
                 line: i as u64 + 2,
-                q: q_read,
+                q: q_read.into(),
                 t_s: Some(i as f64),
                 markers: vec![MarkerSample {
                     marker: 0,

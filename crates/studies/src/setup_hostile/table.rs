@@ -255,7 +255,7 @@ pub(super) fn arm_table(case: &ArmCase, setup: &arm_blind::ArmSetup) -> Result<T
         .enumerate()
         .map(|(i, r)| {
             let mut v = vec![r.t_s.unwrap_or(i as f64)];
-            v.extend(&r.q);
+            v.extend(r.q.iter());
             v.extend(r.markers.first().map_or([f64::NAN; 3], |s| s.position_m));
             v
         })
