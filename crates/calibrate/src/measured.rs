@@ -803,10 +803,7 @@ fn fit(
 fn repeat_std_scale(tables: Training<'_>, keep: &dyn Fn(usize, usize) -> bool) -> f64 {
     let (mut n_rows, mut n_copies) = (0, 0);
     for ti in 0..tables.tables.len() {
-        let keys = (tables.rows(ti).enumerate())
-            .filter(|&(ri, _)| keep(ti, ri))
-            .map(|(_, row)| row.repeat_key());
-        let originals = crate::fit::originals(keys);
+        let originals = row_originals(tables, ti, keep);
         n_rows += originals.len();
         n_copies += crate::fit::n_copies(&originals);
     }
@@ -1194,7 +1191,44 @@ fn lm_alone<P: Problem + Sync>(
 /// repeat key): a row that repeats an earlier row of its table is held out with it.
 fn table_originals(tables: Training<'_>) -> Vec<Vec<usize>> {
     (0..tables.tables.len())
-        .map(|ti| crate::fit::originals(tables.rows(ti).map(|row| row.repeat_key())))
+        .map(|ti| row_originals(tables, ti, &|_, _| true))
+        .collect()
+}
+
+/// The original of every row of table `ti` that `keep` selects, numbered in that order: what
+/// [`crate::fit::originals`] gives by the reader's repeat key ([`MeasuredRow::repeat_key`]),
+/// found by the reader's 64-bit hash of the same values ([`MeasuredRow::repeat_hash`]) so
+/// that the map holds 16 bytes a row rather than every value of every row (272 bytes a row
+/// of two markers). A row whose hash an earlier row holds is compared with it by their keys,
+/// and rows that share a hash without being copies are told apart by their keys, so a
+/// collision changes nothing.
+fn row_originals(
+    tables: Training<'_>,
+    ti: usize,
+    keep: &dyn Fn(usize, usize) -> bool,
+) -> Vec<usize> {
+    use std::collections::{HashMap, hash_map::Entry};
+    let kept: Vec<usize> = (0..tables.tables[ti].rows.len())
+        .filter(|&ri| keep(ti, ri))
+        .collect();
+    let mut first = HashMap::with_capacity(kept.len());
+    let mut collided = HashMap::new();
+    (kept.iter().enumerate())
+        .map(|(i, &ri)| {
+            let row = tables.row(ti, ri);
+            match first.entry(row.repeat_hash()) {
+                Entry::Vacant(slot) => *slot.insert(i),
+                Entry::Occupied(earlier) => {
+                    let p = *earlier.get();
+                    let key = row.repeat_key();
+                    if tables.row(ti, kept[p]).repeat_key() == key {
+                        p
+                    } else {
+                        *collided.entry(key).or_insert(i)
+                    }
+                }
+            }
+        })
         .collect()
 }
 

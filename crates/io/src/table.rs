@@ -194,7 +194,7 @@ impl Repeats {
 /// (−0 as +0) folded in by a multiply and a rotation, the whole then mixed by SplitMix64's
 /// finaliser (Steele, Lea & Flood 2014, "Fast splittable pseudorandom number generators",
 /// OOPSLA): the same hash on every run and machine.
-fn row_hash(values: impl IntoIterator<Item = f64>) -> u64 {
+pub(crate) fn row_hash(values: impl IntoIterator<Item = f64>) -> u64 {
     let mut h: u64 = 0x243F_6A88_85A3_08D3;
     for bits in values.into_iter().map(|v| (v + 0.0).to_bits()) {
         h = (h ^ bits)
