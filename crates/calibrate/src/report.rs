@@ -399,8 +399,9 @@ pub struct SampleErrors {
 pub struct SampleRow {
     /// 1-based line in the file.
     pub line: u64,
-    /// Joint readings in chain order, rad (m for a prismatic joint).
-    pub q: Vec<f64>,
+    /// Joint readings in chain order, rad (m for a prismatic joint): the measurement file
+    /// row's own readings ([`hapcal_io::MeasuredRow::q`]), shared rather than copied.
+    pub q: std::sync::Arc<[f64]>,
     /// The 0-based marker of each of the row's position samples, in the order of
     /// [`SampleErrors::position_before_m`].
     pub markers: Vec<usize>,
@@ -413,7 +414,7 @@ pub fn sample_rows(table: &hapcal_io::MeasurementTable) -> Vec<SampleRow> {
     (table.rows.iter())
         .map(|r| SampleRow {
             line: r.line,
-            q: r.q.to_vec(),
+            q: r.q.clone(),
             markers: r.markers.iter().map(|m| m.marker).collect(),
             distance: r.distance_m.is_some(),
         })

@@ -667,7 +667,7 @@ fn an_equilibrium_the_deflection_does_not_reach_is_implausible() {
     assert!(n_scaled > 0, "no compliance in the record");
     let rows: Vec<Vec<f64>> = (outcome.report.placements.iter())
         .filter_map(|set| set.errors.as_ref())
-        .flat_map(|e| e.rows.iter().map(|r| r.q.clone()))
+        .flat_map(|e| e.rows.iter().map(|r| r.q.to_vec()))
         .collect();
     let gap = worst_gap(&scaled, &library, &rows, tips.len());
     assert!(

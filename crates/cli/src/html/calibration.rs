@@ -610,7 +610,7 @@ fn ranges(r: &CalibrationReport, out: &mut Vec<Figure>) {
     let rows_of = |role: SetRole| -> Vec<&[f64]> {
         (r.placements.iter().filter(|p| p.role == role))
             .filter_map(|p| p.errors.as_ref())
-            .flat_map(|e| e.rows.iter().map(|row| row.q.as_slice()))
+            .flat_map(|e| e.rows.iter().map(|row| &row.q[..]))
             .collect()
     };
     let (train, test) = (rows_of(SetRole::Train), rows_of(SetRole::Test));

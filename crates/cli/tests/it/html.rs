@@ -17,7 +17,7 @@ fn report(name: &str, n_train: usize, n_test: usize) -> CalibrationReport {
         let rows: Vec<SampleRow> = (0..n)
             .map(|i| SampleRow {
                 line: (offset + i + 2) as u64,
-                q: vec![(offset + i) as f64 / 40.0, 0.3],
+                q: vec![(offset + i) as f64 / 40.0, 0.3].into(),
                 markers: vec![0],
                 distance: false,
             })
