@@ -4966,43 +4966,60 @@ mod tests {
         );
     }
 
-    #[test]
-    fn the_huber_pass_bounds_a_gross_error_where_the_fits_read_it() {
-        use super::{Start, Training, observations, weighted_frames_only, winsorize};
+    /// The iiwa of fixtures/mukca with its `ball_link` tip, and a tracker table of `n` rows,
+    /// each `row(i, q, p, rng)` at joint readings `q` drawn uniform in 80 % of the joint limits
+    /// (seed `seed`, the same generator `rng` the row may draw from next) where the nominal
+    /// robot puts the tip at `p` (m).
+    fn iiwa_tracker(
+        seed: u64,
+        n: usize,
+        mut row: impl FnMut(
+            usize,
+            Vec<f64>,
+            super::Point3<f64>,
+            &mut rand_chacha::ChaCha8Rng,
+        ) -> hapcal_io::MeasuredRow,
+    ) -> (super::Robot, hapcal_io::MeasurementTable) {
         use rand::{Rng, SeedableRng};
         let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../fixtures/mukca/urdf/iiwa14.urdf");
         let robot = super::robot_from_urdf(&urdf, &["ball_link".to_owned()]).expect("the iiwa");
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let nominal = vec![0.0; robot.tree.n_params()];
-        // 120 rows of the nominal robot, noise of ±0.1 mm per axis; row 37 20 mm off along y
-        // (two hundred times the noise).
-        let rows: Vec<hapcal_io::MeasuredRow> = (0..120)
+        let rows = (0..n)
             .map(|i| {
                 let q: Vec<f64> = (robot.limits.iter())
                     .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
                     .collect();
                 let p = robot.tree.tips()[0].end_point(&nominal, &q);
-                let mut position_m: [f64; 3] =
-                    std::array::from_fn(|a| p[a] + rng.random_range(-1e-4..1e-4));
-                if i == 37 {
-                    position_m[1] += 0.02;
-                }
-                hapcal_io::MeasuredRow {
-                    line: i as u64 + 2,
-                    q: q.into(),
-                    t_s: None,
-                    markers: vec![marker_sample(0, position_m)],
-                    distance_m: None,
-                }
+                row(i, q, p, &mut rng)
             })
             .collect();
-        let tables = [hapcal_io::MeasurementTable::positions(
-            "tracker",
-            "tracker.csv",
-            1,
-            rows,
-        )];
+        let table = hapcal_io::MeasurementTable::positions("tracker", "tracker.csv", 1, rows);
+        (robot, table)
+    }
+
+    #[test]
+    fn the_huber_pass_bounds_a_gross_error_where_the_fits_read_it() {
+        use super::{Start, Training, observations, weighted_frames_only, winsorize};
+        use rand::Rng;
+        // 120 rows of the nominal robot, noise of ±0.1 mm per axis; row 37 20 mm off along y
+        // (two hundred times the noise).
+        let (robot, table) = iiwa_tracker(3, 120, |i, q, p, rng| {
+            let mut position_m: [f64; 3] =
+                std::array::from_fn(|a| p[a] + rng.random_range(-1e-4..1e-4));
+            if i == 37 {
+                position_m[1] += 0.02;
+            }
+            hapcal_io::MeasuredRow {
+                line: i as u64 + 2,
+                q: q.into(),
+                t_s: None,
+                markers: vec![marker_sample(0, position_m)],
+                distance_m: None,
+            }
+        });
+        let tables = [table];
         let cfg = super::MeasuredConfig::default();
         let (frames, weights) = weighted_frames_only(&robot, &tables, &cfg, 120).expect("frames");
         let start = Start {
@@ -5087,35 +5104,16 @@ mod tests {
     #[test]
     fn observation_rows_share_their_file_rows_readings_and_give_the_same_residuals() {
         use super::{Observations, Problem, Row, Training, observations, weighted_frames_only};
-        use rand::{Rng, SeedableRng};
-        let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../fixtures/mukca/urdf/iiwa14.urdf");
-        let robot = super::robot_from_urdf(&urdf, &["ball_link".to_owned()]).expect("the iiwa");
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        let nominal = vec![0.0; robot.tree.n_params()];
         // 40 rows of the nominal robot, each a marker and a distance: two observation rows of
         // one configuration.
-        let rows: Vec<hapcal_io::MeasuredRow> = (0..40)
-            .map(|i| {
-                let q: Vec<f64> = (robot.limits.iter())
-                    .map(|(lo, hi)| rng.random_range(0.8 * lo..0.8 * hi))
-                    .collect();
-                let p = robot.tree.tips()[0].end_point(&nominal, &q);
-                hapcal_io::MeasuredRow {
-                    line: i as u64 + 2,
-                    q: q.into(),
-                    t_s: None,
-                    markers: vec![marker_sample(0, [p[0], p[1], p[2]])],
-                    distance_m: Some(p.coords.norm()),
-                }
-            })
-            .collect();
-        let mut tables = [hapcal_io::MeasurementTable::positions(
-            "tracker",
-            "tracker.csv",
-            1,
-            rows,
-        )];
+        let (robot, table) = iiwa_tracker(5, 40, |i, q, p, _| hapcal_io::MeasuredRow {
+            line: i as u64 + 2,
+            q: q.into(),
+            t_s: None,
+            markers: vec![marker_sample(0, [p[0], p[1], p[2]])],
+            distance_m: Some(p.coords.norm()),
+        });
+        let mut tables = [table];
         let cfg = super::MeasuredConfig::default();
         let (frames, weights) = weighted_frames_only(&robot, &tables, &cfg, 40).expect("frames");
         tables[0].has_distance = true;
