@@ -272,12 +272,7 @@ pub fn identify_held(
 ) -> Result<Identified, Error> {
     let layout = p.layout().clone();
     let n = layout.len();
-    if x0.nrows() != n {
-        return Err(Error::WrongLength {
-            expected: n,
-            found: x0.nrows(),
-        });
-    }
+    crate::error::check_x0_length(x0.as_ref(), &layout)?;
     let is_held = |i: usize| held.iter().any(|&(h, _)| h == i);
     for &(h, _) in held {
         assert!(
@@ -358,12 +353,7 @@ fn identify_streaming(
 ) -> Result<Identified, Error> {
     let layout = p.layout().clone();
     let n = layout.len();
-    if x0.nrows() != n {
-        return Err(Error::WrongLength {
-            expected: n,
-            found: x0.nrows(),
-        });
-    }
+    crate::error::check_x0_length(x0.as_ref(), &layout)?;
     check_config("ftol", cfg.lm.ftol, false)?;
     check_config("xtol", cfg.lm.xtol, false)?;
     check_config("gtol", cfg.lm.gtol, false)?;
@@ -509,12 +499,7 @@ fn identify_dense(
 ) -> Result<Identified, Error> {
     let layout = p.layout().clone();
     let n = layout.len();
-    if x0.nrows() != n {
-        return Err(Error::WrongLength {
-            expected: n,
-            found: x0.nrows(),
-        });
-    }
+    crate::error::check_x0_length(x0.as_ref(), &layout)?;
     let m = p.n_residuals();
     let mut r0 = Col::<f64>::zeros(m);
     p.residuals(x0.as_ref(), r0.as_mut())?;

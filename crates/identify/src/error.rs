@@ -1,6 +1,6 @@
 //! The crate's error type: input that the solvers cannot accept.
 
-use crate::problem::EvalError;
+use crate::problem::{EvalError, ParamLayout};
 
 /// Input that [`levenberg_marquardt`](crate::levenberg_marquardt),
 /// [`covariance`](crate::covariance) or [`identify`](crate::identify) cannot work with.
@@ -188,6 +188,21 @@ pub(crate) fn check_factor(value: f64) -> Result<(), Error> {
             field: "factor",
             value,
             requirement: "positive",
+        })
+    }
+}
+
+/// `x0` must have one entry per parameter of `layout` ([`Error::WrongLength`] otherwise).
+pub(crate) fn check_x0_length(
+    x0: faer::ColRef<'_, f64>,
+    layout: &ParamLayout,
+) -> Result<(), Error> {
+    if x0.nrows() == layout.len() {
+        Ok(())
+    } else {
+        Err(Error::WrongLength {
+            expected: layout.len(),
+            found: x0.nrows(),
         })
     }
 }

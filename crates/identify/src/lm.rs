@@ -143,13 +143,7 @@ pub(crate) fn check_inputs(
     cfg: &LmConfig,
 ) -> Result<(), Error> {
     let layout = p.layout();
-    let n = layout.len();
-    if x0.nrows() != n {
-        return Err(Error::WrongLength {
-            expected: n,
-            found: x0.nrows(),
-        });
-    }
+    crate::error::check_x0_length(x0, layout)?;
     check_free(free, layout)?;
     check_config("ftol", cfg.ftol, false)?;
     check_config("xtol", cfg.xtol, false)?;
