@@ -205,6 +205,33 @@ pub(crate) fn copies_warning(n_copies: usize) -> Option<String> {
     })
 }
 
+/// Change of χ² below which a fit of the measured workflow on every training row stops: with
+/// `χ² = Σ rᵢ²/σ²` (σ the residuals' noise, `‖r‖²/(m − n)` at the estimate for `m` residuals
+/// and `n` parameters), the fit stops when a step lowers χ², and the Gauss–Newton model
+/// predicts it would lower it, by at most this ([`full_fit_lm`]). The cost left above the
+/// minimum is then about that change, and `χ²(x) − χ²(x̂) = (x − x̂)ᵀ Σ⁻¹ (x − x̂)` near it
+/// (Σ the covariance), so every parameter is within `√(10⁻⁶) = 10⁻³` of its standard deviation
+/// of the least-squares estimate: a thousandth of what the data can tell, where the default
+/// relative tolerance of 10⁻¹² asks for 10⁻¹²·(m − n) of χ², 10⁻⁹ on the simulated humanoid's
+/// 2,310 residuals (Press et al., *Numerical Recipes*, 3rd ed., 2007, §15.5: stop once χ²
+/// decreases by a negligible amount). On that humanoid the per-axis transversal compliance
+/// crawled through 50 iterations whose last 18 lowered χ² by about 2·10⁻⁶ in all.
+pub(crate) const CHI2_TOLERANCE: f64 = 1e-6;
+
+/// The Levenberg–Marquardt settings of a fit on every training row of `n_residuals`
+/// residuals (`lm` the identification's): `ftol` raised to `CHI2_TOLERANCE / n_residuals`,
+/// the relative cost reduction that is a χ² change of [`CHI2_TOLERANCE`] or less (the
+/// residuals' sum of squares is about `(m − n)·σ²`, at most `m·σ²`); never lowered.
+pub(crate) fn full_fit_lm(
+    lm: hapcal_identify::LmConfig,
+    n_residuals: usize,
+) -> hapcal_identify::LmConfig {
+    hapcal_identify::LmConfig {
+        ftol: lm.ftol.max(CHI2_TOLERANCE / n_residuals.max(1) as f64),
+        ..lm
+    }
+}
+
 /// Relative tolerance (cost reduction, step) of a cross-validation fold's refit. A fold's
 /// estimate is judged by its held-out error: a relative cost reduction of 10⁻⁶ changes that
 /// error by about 10⁻⁶ of itself, far below the blocked standard errors the ladder compares

@@ -861,6 +861,7 @@ fn fit_terms(
     let subset = Subset::new(&problem, free, x_full);
     let x0 = subset.initial_free();
     let mut config = crate::fit::identify_config(None);
+    config.lm = crate::fit::full_fit_lm(config.lm, problem.n_residuals());
     if let Some(n) = start.max_evaluations {
         config.lm.max_evaluations = n;
     }
@@ -3636,7 +3637,7 @@ fn equilibrate(
             &problem,
             x.clone(),
             &warm.free,
-            &lm,
+            &crate::fit::full_fit_lm(lm.clone(), problem.n_residuals()),
             None,
             REFIT_MAX_ENTRIES,
         )
