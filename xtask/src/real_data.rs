@@ -259,7 +259,7 @@ pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
                     "| {} | {:.2} | {:+.2} ± {:.2} | {} |",
                     rung.replace('-', " "),
                     r["heldout_rms_m"].as_f64().unwrap_or(f64::NAN) * 1e3,
-                    diff[0].as_f64().unwrap_or(f64::NAN),
+                    signed_hundredths(diff[0].as_f64().unwrap_or(f64::NAN)),
                     diff[1].as_f64().unwrap_or(f64::NAN),
                     forced
                 );
@@ -334,4 +334,10 @@ pub(crate) fn run(sh: &Shell, check: bool, bin: Option<&Path>) -> Result<()> {
         println!("calibrated worse than frames only:\n{}", worse.join("\n"));
     }
     Ok(())
+}
+
+/// `x` rounded to hundredths with the sign of what is shown: a difference that rounds to zero
+/// prints `+0.00` whichever side of zero its rounding noise falls (`-7e-14` is not `-0.00`).
+fn signed_hundredths(x: f64) -> f64 {
+    (x * 100.0).round() / 100.0 + 0.0
 }
