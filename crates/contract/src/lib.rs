@@ -49,7 +49,7 @@
 
 pub mod device;
 mod effect;
-mod locate;
+pub mod locate;
 mod names;
 pub mod urdf;
 mod write;
@@ -61,7 +61,8 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
-use locate::{Step, locate_path};
+pub use locate::line_column;
+use locate::{Step, TomlSpans, key_line};
 pub use names::{CapstanField, DhField, ElementField, ValueName};
 
 /// The schema version this crate writes and the newest it reads. Version 1 is the first
@@ -500,35 +501,6 @@ impl fmt::Display for ContractError {
 
 impl std::error::Error for ContractError {}
 
-/// 1-based line and column of byte `offset` in `text`.
-pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
-    let before = text.get(..offset).unwrap_or(text);
-    let line = before.matches('\n').count() + 1;
-    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
-    (line, column)
-}
-
-/// Where the text names a key: the first line (1-based) that starts with `key =`, `"key" =`
-/// or `[key` after optional spaces, and its column; (0, 0) if none does.
-fn locate(text: &str, key: &str) -> (usize, usize) {
-    let quoted = format!("\"{key}\"");
-    for (i, line) in text.lines().enumerate() {
-        let trimmed = line.trim_start();
-        let column = line.len() - trimmed.len() + 1;
-        for candidate in [key, quoted.as_str()] {
-            if let Some(rest) = trimmed.strip_prefix(candidate)
-                && rest.trim_start().starts_with('=')
-            {
-                return (i + 1, column);
-            }
-        }
-        if trimmed.starts_with('[') && trimmed.trim_start_matches('[').starts_with(key) {
-            return (i + 1, column);
-        }
-    }
-    (0, 0)
-}
-
 /// The digest a record keeps of the robot description it was written beside
 /// ([`Calibration::urdf_digest`]): `fnv1a64:` and the 64-bit FNV-1a hash of `bytes` in 16
 /// lowercase hex digits (Fowler, Noll & Vo; offset basis 0xcbf29ce484222325, prime
@@ -581,7 +553,9 @@ impl Calibration {
             });
         }
         if record.model == Some(ModelName::Transmissions) {
-            let (line, column) = locate_path(text, &[Step::Key("model")]).unwrap_or((0, 0));
+            let (line, column) = TomlSpans::parse(text)
+                .record_line(&[Step::Key("model")])
+                .unwrap_or((0, 0));
             return Err(ContractError {
                 origin: origin.to_owned(),
                 line,
@@ -621,7 +595,9 @@ impl Calibration {
         if *recorded == found {
             return Ok(None);
         }
-        let (line, column) = locate_path(text, &[Step::Key("urdf_digest")]).unwrap_or((0, 0));
+        let (line, column) = TomlSpans::parse(text)
+            .record_line(&[Step::Key("urdf_digest")])
+            .unwrap_or((0, 0));
         Err(ContractError {
             origin: origin.to_owned(),
             line,
@@ -981,7 +957,10 @@ impl RecordText<'_> {
     /// An error at the value `path` names (the record's own line for it), else at the first
     /// line naming `key`.
     fn fail_at(&self, path: &[Step<'_>], key: &str, message: String) -> Result<(), ContractError> {
-        let (line, column) = locate_path(self.text, path).unwrap_or_else(|| locate(self.text, key));
+        let (line, column) = TomlSpans::parse(self.text)
+            .record_line(path)
+            .or_else(|| key_line(self.text, key))
+            .unwrap_or((0, 0));
         Err(ContractError {
             origin: self.origin.to_owned(),
             line,

@@ -5,6 +5,7 @@
 
 use std::path::Path;
 
+use hapcal_contract::locate::{Step, TomlSpans};
 use hapcal_contract::urdf;
 use hapcal_contract::{Calibration, ElementField, Region, Torque, TorqueSource, ValueName};
 
@@ -370,7 +371,9 @@ impl Robot {
             for v in &record.values {
                 if let Ok(ValueName::Dh { field, row }) = ValueName::parse(&v.name) {
                     let Some(r) = nominal.get_mut(row) else {
-                        let (line, column) = crate::load::locate(text, &v.name);
+                        let (line, column) = TomlSpans::parse(text)
+                            .value_line(&v.name)
+                            .unwrap_or((0, 0));
                         return Err(crate::load::contract_error(
                             hapcal_contract::ContractError {
                                 origin: origin.to_owned(),
@@ -890,11 +893,17 @@ impl Robot {
         known_joints: &[(&str, Pose)],
     ) -> Result<(), LoadError> {
         let (text, origin) = (at.text, at.origin);
-        for r in &region.joints {
+        for (k, r) in region.joints.iter().enumerate() {
             if !known_joints.iter().any(|(n, _)| *n == r.name) {
+                let entry = [
+                    Step::Key("region"),
+                    Step::Key("joint"),
+                    Step::Index(k),
+                    Step::Key("name"),
+                ];
                 return Err(at_line(
                     origin,
-                    region_line(text, &r.name),
+                    TomlSpans::parse(text).record_line(&entry).unwrap_or((1, 1)),
                     format!(
                         "[region] joint {:?}: the robot has no joint of this name ({}): the \
                          record was written for another robot",
@@ -928,7 +937,8 @@ struct RecordAt<'a> {
 impl RecordAt<'_> {
     /// A refusal of the value `name` at its line.
     fn value(&self, name: &str, message: String) -> LoadError {
-        at_line(self.origin, crate::load::locate(self.text, name), message)
+        let at = TomlSpans::parse(self.text).value_line(name);
+        at_line(self.origin, at.unwrap_or((0, 0)), message)
     }
 }
 
@@ -1061,18 +1071,6 @@ fn normal_axes(axis: &[f64; 3]) -> [[f64; 3]; 2] {
     [u, crate::pose::cross(axis, &u)]
 }
 
-/// 1-based line and column of the region entry of joint `name` in a record's text: the line
-/// `name = "<name>"` (a `[[region.joint]]` table's, or an inline entry's); (1, 1) if none.
-fn region_line(text: &str, name: &str) -> (usize, usize) {
-    let wanted = format!("name = \"{name}\"");
-    (text.lines().enumerate())
-        .find_map(|(i, line)| {
-            line.find(&wanted)
-                .map(|c| (i + 1, line[..c].chars().count() + 1))
-        })
-        .unwrap_or((1, 1))
-}
-
 /// Refuses tips the calibration was not made for: every tip given must be one of the
 /// record's tips or its load tips (a record of schema 1 that names them; an earlier hapcal's
 /// names none).
@@ -1090,7 +1088,9 @@ fn check_tips(
     else {
         return Ok(());
     };
-    let (line, column) = crate::load::locate(text, "tips");
+    let (line, column) = TomlSpans::parse(text)
+        .record_line(&[Step::Key("tips")])
+        .unwrap_or((0, 0));
     Err(at_line(
         origin,
         (line, column),
@@ -1157,7 +1157,7 @@ impl Robot {
             let Some((_, own)) = urdf_joints.iter().find(|(n, _)| *n == element) else {
                 return Err(at_line(
                     origin,
-                    header_line(text, &format!("nominal.{element}")),
+                    nominal_line(text, element),
                     format!(
                         "[nominal.{element}]: the URDF has no joint {element:?}: the record was \
                          written for another robot"
@@ -1203,7 +1203,7 @@ impl Robot {
                 }
                 let name = format!("{element}.{field}");
                 let unit = if k < 3 { "m" } else { "rad" };
-                let (line, _) = crate::load::locate(text, &name);
+                let line = TomlSpans::parse(text).value_line(&name).map_or(0, |(l, _)| l);
                 let at = if line > 0 {
                     format!(" (line {line})")
                 } else {
@@ -1217,9 +1217,8 @@ impl Robot {
             let first = (FIELDS.iter())
                 .map(|f| format!("{element}.{f}"))
                 .chain(core::iter::once(format!("{element}.offset")))
-                .map(|name| crate::load::locate(text, &name))
-                .find(|(line, _)| *line > 0)
-                .unwrap_or_else(|| header_line(text, &format!("nominal.{element}")));
+                .find_map(|name| TomlSpans::parse(text).value_line(&name))
+                .unwrap_or_else(|| nominal_line(text, element));
             return Err(at_line(
                 origin,
                 first,
@@ -1241,20 +1240,10 @@ impl Robot {
     }
 }
 
-/// 1-based line and column of the table header `[<table>]` (or `[<prefix>.<table>]`, a
-/// device file's) in `text`; (0, 0) if none.
-fn header_line(text: &str, table: &str) -> (usize, usize) {
-    let dotted = format!(".{table}");
-    for (i, line) in text.lines().enumerate() {
-        let trimmed = line.trim_start();
-        let name = trimmed
-            .trim_start_matches('[')
-            .trim_end()
-            .trim_end_matches(']')
-            .trim();
-        if trimmed.starts_with('[') && (name == table || name.ends_with(&dotted)) {
-            return (i + 1, line.len() - trimmed.len() + 1);
-        }
-    }
-    (0, 0)
+/// 1-based line and column of the record's `[nominal.<element>]` table in `text`; (0, 0) if
+/// none.
+fn nominal_line(text: &str, element: &str) -> (usize, usize) {
+    TomlSpans::parse(text)
+        .record_line(&[Step::Key("nominal"), Step::Key(element)])
+        .unwrap_or((0, 0))
 }

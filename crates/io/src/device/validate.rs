@@ -1,30 +1,21 @@
 //! Semantic checks of a parsed device file, with file:line:column of the offending value.
 
 use std::collections::HashSet;
-use std::ops::Range;
 use std::path::Path;
 
-use toml::Spanned;
-use toml::de::{DeTable, DeValue};
+use hapcal_contract::locate::{Step as Key, TomlSpans, dotted_name as key_name};
 
 use super::{Device, JointRef};
 use crate::Error;
-use crate::error::line_column;
 
-/// A step into the TOML document: a key of a table or an index of an array.
-#[derive(Clone, Copy)]
-pub(super) enum Key<'k> {
-    Name(&'k str),
-    Index(usize),
-}
+use Key::{Index as I, Key as N};
 
-use Key::{Index as I, Name as N};
-
-/// Finds where a value sits in the device file's text.
+/// Finds where a value sits in the device file's text ([`TomlSpans`], the one locator of
+/// every TOML reader) and names the file in errors.
 pub(super) struct Locator<'a> {
     path: &'a Path,
     text: &'a str,
-    root: Option<Spanned<DeTable<'a>>>,
+    spans: TomlSpans<'a>,
 }
 
 impl<'a> Locator<'a> {
@@ -32,54 +23,21 @@ impl<'a> Locator<'a> {
         Locator {
             path,
             text,
-            root: DeTable::parse(text).ok(),
+            spans: TomlSpans::parse(text),
         }
-    }
-
-    /// Span of the deepest value along `keys` that exists.
-    fn span(&self, keys: &[Key<'_>]) -> Option<Range<usize>> {
-        let root = self.root.as_ref()?;
-        let mut found = None;
-        let mut current: Option<&Spanned<DeValue<'_>>> = None;
-        for (k, key) in keys.iter().enumerate() {
-            let next = match (k, key) {
-                (0, N(name)) => root.get_ref().get(*name),
-                (0, I(_)) => None,
-                (_, N(name)) => current.and_then(|v| v.get_ref().get(*name)),
-                (_, I(i)) => current.and_then(|v| v.get_ref().get(*i)),
-            };
-            let Some(next) = next else { break };
-            found = Some(next.span());
-            current = Some(next);
-        }
-        found
     }
 
     /// Whether the file has a value at exactly `keys`.
     fn has(&self, keys: &[Key<'_>]) -> bool {
-        let Some(root) = self.root.as_ref() else {
-            return false;
-        };
-        let mut current: Option<&Spanned<DeValue<'_>>> = None;
-        for (k, key) in keys.iter().enumerate() {
-            current = match (k, key) {
-                (0, N(name)) => root.get_ref().get(*name),
-                (0, I(_)) => None,
-                (_, N(name)) => current.and_then(|v| v.get_ref().get(*name)),
-                (_, I(i)) => current.and_then(|v| v.get_ref().get(*i)),
-            };
-            if current.is_none() {
-                return false;
-            }
-        }
-        current.is_some()
+        self.spans.has(keys)
     }
 
     /// 1-based (line, column) of the value at `keys`, or of its nearest existing parent,
     /// or (1, 1).
     fn at(&self, keys: &[Key<'_>]) -> (u64, u64) {
-        self.span(keys)
-            .map_or((1, 1), |s| line_column(self.text, s.start))
+        self.spans
+            .line_column(keys)
+            .map_or((1, 1), |(line, column)| (line as u64, column as u64))
     }
 
     pub(super) fn invalid(&self, keys: &[Key<'_>], message: impl Into<String>) -> Error {
@@ -433,17 +391,6 @@ fn check_transmissions(device: &Device, loc: &Locator<'_>) -> Result<(), Error> 
         )?;
     }
     Ok(())
-}
-
-/// The dotted name of the value at `keys` (`dh[2].a_m`), as messages give it.
-fn key_name(keys: &[Key<'_>]) -> String {
-    let name: String = (keys.iter())
-        .map(|k| match k {
-            N(n) => format!(".{n}"),
-            I(i) => format!("[{i}]"),
-        })
-        .collect();
-    name.trim_start_matches('.').to_owned()
 }
 
 fn check_calibration(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
