@@ -416,6 +416,26 @@ pub struct CalibratedValue {
     pub unit: String,
 }
 
+impl CalibratedValue {
+    /// Checks that the value and its standard deviation are finite and the deviation is not
+    /// negative: the one check of a value's numbers, for [`Calibration::check`] and for a
+    /// reader applying values without a record.
+    ///
+    /// # Errors
+    /// What is wrong and what was expected: `value … with std …: expected finite numbers,
+    /// std ≥ 0` (without the value's name, which the caller gives).
+    pub fn check_numbers(&self) -> Result<(), String> {
+        if self.value.is_finite() && self.std.is_finite() && self.std >= 0.0 {
+            Ok(())
+        } else {
+            Err(format!(
+                "value {} with std {}: expected finite numbers, std ≥ 0",
+                self.value, self.std
+            ))
+        }
+    }
+}
+
 /// A calibration record: the sidecar of a calibrated URDF, or a device file's
 /// `[calibration]` table.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -847,11 +867,8 @@ impl Calibration {
                 Ok(p) => p,
                 Err(message) => return at_value(format!("{:?}: {message}", v.name)),
             };
-            if !v.value.is_finite() || !v.std.is_finite() || v.std < 0.0 {
-                return at_value(format!(
-                    "{:?}: value {} with std {}: expected finite numbers, std ≥ 0",
-                    v.name, v.value, v.std
-                ));
+            if let Err(message) = v.check_numbers() {
+                return at_value(format!("{:?}: {message}", v.name));
             }
             if parsed.is_compliance() && self.torque.is_none() && !self.is_legacy() {
                 return at_value(format!(

@@ -429,12 +429,7 @@ impl Device {
             if values.iter().take(k).any(|w| w.name == v.name) {
                 return Err(err("appears twice".into()));
             }
-            if !v.value.is_finite() || !v.std.is_finite() || v.std < 0.0 {
-                return Err(err(format!(
-                    "value {} with std {} must be finite, std ≥ 0",
-                    v.value, v.std
-                )));
-            }
+            v.check_numbers().map_err(err)?;
             let check_unit = |unit: &str| {
                 if v.unit == unit {
                     Ok(())
