@@ -116,7 +116,8 @@ impl Robot {
     /// [`LoadError::Invalid`] for a URDF that urdf-rs cannot read, a tip that is not a
     /// link (listing them), a tip named twice, a link on a path with two parent joints or
     /// joints above a tip that form a loop, a floating or planar joint on a path, a joint
-    /// without axis, a non-finite number, a negative mass, a value of a joint or element not
+    /// without axis, `<limit>` bounds that are not finite with lower < upper (a continuous
+    /// joint's are infinite), a non-finite number, a negative mass, a value of a joint or element not
     /// on the paths to the tips, a haptic device's value, lumped loads whose tips are not all
     /// loaded.
     pub fn load_urdf(urdf: &Path, tips: &[&str]) -> Result<Robot, LoadError> {
@@ -185,13 +186,7 @@ impl Robot {
             let mut last_fixed: Option<String> = None;
             for joint in path {
                 let name = &joint.name;
-                let (xyz, rpy) = (joint.origin.xyz.0, joint.origin.rpy.0);
-                if xyz.iter().chain(&rpy).any(|v| !v.is_finite()) {
-                    return Err(invalid(
-                        origin,
-                        format!("joint {name:?}: origin xyz {xyz:?} rpy {rpy:?} is not finite"),
-                    ));
-                }
+                urdf::origin(joint).map_err(|m| invalid(origin, m))?;
                 let prismatic = match joint.joint_type {
                     urdf::JointType::Fixed => {
                         pending = pending.compose(&joint_pose(joint));
@@ -981,34 +976,16 @@ fn path_to<'r>(
 }
 
 /// A moving joint's unit axis (in its frame) and limits (rad or m; a continuous joint's are
-/// infinite).
+/// infinite), checked by the contract's URDF reader ([`urdf::axis`], [`urdf::limits`]).
 ///
 /// # Errors
-/// An axis without direction, limits that are not lower ≤ upper.
+/// An axis without direction, limits that are not finite with lower < upper.
 fn axis_and_limits(joint: &urdf::Joint, origin: &str) -> Result<([f64; 3], (f64, f64)), LoadError> {
-    let name = &joint.name;
-    let axis = joint.axis.xyz.0;
+    let axis = urdf::axis(joint).map_err(|m| invalid(origin, m))?;
     let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
-    if !norm.is_finite() || norm < 1e-12 {
-        return Err(invalid(
-            origin,
-            format!("joint {name:?}: axis {axis:?} has no direction"),
-        ));
-    }
-    let (lower, upper) = match joint.joint_type {
-        urdf::JointType::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
-        _ => (joint.limit.lower, joint.limit.upper),
-    };
-    if lower.is_nan() || upper.is_nan() || lower > upper {
-        return Err(invalid(
-            origin,
-            format!("joint {name:?}: limits [{lower}, {upper}] are not lower ≤ upper"),
-        ));
-    }
-    Ok((
-        [axis[0] / norm, axis[1] / norm, axis[2] / norm],
-        (lower, upper),
-    ))
+    let limits = urdf::limits(joint, (f64::NEG_INFINITY, f64::INFINITY))
+        .map_err(|m| invalid(origin, m))?;
+    Ok(([axis[0] / norm, axis[1] / norm, axis[2] / norm], limits))
 }
 
 /// The links' masses, each in the frame of the nearest moving joint above it (`joint_names`,
@@ -1023,17 +1000,7 @@ fn link_masses(
 ) -> Result<Vec<PointMass>, LoadError> {
     let mut masses = Vec::new();
     for l in &robot.links {
-        let mass_kg = l.inertial.mass.value;
-        let xyz = l.inertial.origin.xyz.0;
-        if !(mass_kg.is_finite() && mass_kg >= 0.0) || xyz.iter().any(|v| !v.is_finite()) {
-            return Err(invalid(
-                origin,
-                format!(
-                    "link {:?}: inertial mass {mass_kg} kg at {xyz:?} m is not a finite, non-negative mass at a finite point",
-                    l.name
-                ),
-            ));
-        }
+        let (mass_kg, xyz) = urdf::inertial(l).map_err(|m| invalid(origin, m))?;
         if mass_kg == 0.0 {
             continue;
         }
