@@ -623,5 +623,4 @@ mod tests {
         assert_eq!(tidy(2e7), "2e7");
         assert_eq!(tidy(0.125), "0.125");
     }
-
 }

@@ -2,7 +2,7 @@
 
 use hapcal_contract::device::{Convention, DeviceFile, JointRef, JointSpec};
 use hapcal_contract::line_column;
-use hapcal_contract::locate::{Step, TomlSpans, dotted_name};
+use hapcal_contract::locate::TomlSpans;
 use hapcal_contract::{Calibration, CapstanField, ContractError, TorqueSource, ValueName};
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -277,9 +277,7 @@ fn apply_values(
     let n_joints = pending.len();
     // A refusal at the line of the value's name.
     let at = |name: &str, message: String| {
-        let (line, column) = TomlSpans::parse(text)
-            .value_line(name)
-            .unwrap_or((0, 0));
+        let (line, column) = TomlSpans::parse(text).value_line(name).unwrap_or((0, 0));
         contract_error(
             ContractError {
                 origin: origin.to_owned(),
@@ -420,92 +418,6 @@ fn drives_of(
     Ok(drives)
 }
 
-/// Largest magnitude of a length (m) or an angle (rad) that a device file may hold: a key
-/// ending in `_m` or `_rad`, or a calibrated value in m or rad. The command line's readers
-/// refuse lengths past 1 km (`hapcal_io::MAX_LENGTH_M`) the same way; 1 km or 1000 rad is a
-/// typo or a unit mistake on any device, and such numbers reach the kinematics as squares
-/// that overflow.
-pub(crate) const MAX_MAGNITUDE: f64 = 1e3;
-
-/// `Ok` when every float of the file is finite and every length or angle (a key ending in
-/// `_m` or `_rad`; a `value` of a calibrated value whose unit is `m` or `rad`) lies within
-/// ±[`MAX_MAGNITUDE`]; else [`LoadError::Parse`] at the number's line and column.
-fn check_numbers(text: &str, origin: &str) -> Result<(), LoadError> {
-    let Ok(root) = toml::from_str::<toml::Table>(text) else {
-        return Ok(()); // the typed parse reports syntax
-    };
-    let mut path = Vec::new();
-    let mut found = None;
-    walk_table(&root, &mut path, &mut found);
-    let Some((path, value, bounded)) = found else {
-        return Ok(());
-    };
-    let (line, column) = TomlSpans::parse(text)
-        .line_column(&path)
-        .unwrap_or((1, 1));
-    let name = dotted_name(&path);
-    let message = if bounded {
-        format!("{name} = {value:e} is past ±{MAX_MAGNITUDE} (m or rad): a typo or a unit mistake")
-    } else {
-        format!("{name} = {value} is not a finite number")
-    };
-    Err(LoadError::Parse {
-        origin: origin.to_owned(),
-        line,
-        column,
-        message,
-    })
-}
-
-/// The first float of `table` that [`check_numbers`] refuses: its path, value and whether it
-/// is finite but too large.
-fn walk_table<'a>(
-    table: &'a toml::Table,
-    path: &mut Vec<Step<'a>>,
-    found: &mut Option<(Vec<Step<'a>>, f64, bool)>,
-) {
-    let unit = table.get("unit").and_then(toml::Value::as_str);
-    let angle_or_length = matches!(unit, Some("m" | "rad"));
-    for (key, value) in table {
-        if found.is_some() {
-            return;
-        }
-        path.push(Step::Key(key));
-        let bounded =
-            key.ends_with("_m") || key.ends_with("_rad") || (key == "value" && angle_or_length);
-        walk_value(value, bounded, path, found);
-        path.pop();
-    }
-}
-
-fn walk_value<'a>(
-    value: &'a toml::Value,
-    bounded: bool,
-    path: &mut Vec<Step<'a>>,
-    found: &mut Option<(Vec<Step<'a>>, f64, bool)>,
-) {
-    match value {
-        toml::Value::Float(v) if !v.is_finite() => {
-            *found = Some((std::mem::take(path), *v, false));
-        }
-        toml::Value::Float(v) if bounded && v.abs() > MAX_MAGNITUDE => {
-            *found = Some((std::mem::take(path), *v, true));
-        }
-        toml::Value::Table(t) => walk_table(t, path, found),
-        toml::Value::Array(items) => {
-            for (i, item) in items.iter().enumerate() {
-                if found.is_some() {
-                    return;
-                }
-                path.push(Step::Index(i));
-                walk_value(item, bounded, path, found);
-                path.pop();
-            }
-        }
-        _ => {}
-    }
-}
-
 /// The text of the file at `path`.
 ///
 /// # Errors
@@ -548,7 +460,12 @@ pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DhFile, LoadE
             message: e.message().trim_end().to_owned(),
         }
     })?;
-    check_numbers(text, origin)?;
+    hapcal_contract::device::check_numbers(text).map_err(|bad| LoadError::Parse {
+        origin: origin.to_owned(),
+        line: bad.line,
+        column: bad.column,
+        message: bad.to_string(),
+    })?;
     let invalid = |message: String| LoadError::Invalid {
         origin: origin.to_owned(),
         message,

@@ -366,9 +366,8 @@ impl Robot {
             for v in &record.values {
                 if let Ok(ValueName::Dh { field, row }) = ValueName::parse(&v.name) {
                     let Some(r) = nominal.get_mut(row) else {
-                        let (line, column) = TomlSpans::parse(text)
-                            .value_line(&v.name)
-                            .unwrap_or((0, 0));
+                        let (line, column) =
+                            TomlSpans::parse(text).value_line(&v.name).unwrap_or((0, 0));
                         return Err(crate::load::contract_error(
                             hapcal_contract::ContractError {
                                 origin: origin.to_owned(),
@@ -983,8 +982,8 @@ fn path_to<'r>(
 fn axis_and_limits(joint: &urdf::Joint, origin: &str) -> Result<([f64; 3], (f64, f64)), LoadError> {
     let axis = urdf::axis(joint).map_err(|m| invalid(origin, m))?;
     let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
-    let limits = urdf::limits(joint, (f64::NEG_INFINITY, f64::INFINITY))
-        .map_err(|m| invalid(origin, m))?;
+    let limits =
+        urdf::limits(joint, (f64::NEG_INFINITY, f64::INFINITY)).map_err(|m| invalid(origin, m))?;
     Ok(([axis[0] / norm, axis[1] / norm, axis[2] / norm], limits))
 }
 
@@ -1170,7 +1169,9 @@ impl Robot {
                 }
                 let name = format!("{element}.{field}");
                 let unit = if k < 3 { "m" } else { "rad" };
-                let line = TomlSpans::parse(text).value_line(&name).map_or(0, |(l, _)| l);
+                let line = TomlSpans::parse(text)
+                    .value_line(&name)
+                    .map_or(0, |(l, _)| l);
                 let at = if line > 0 {
                     format!(" (line {line})")
                 } else {
