@@ -12,6 +12,7 @@ use serde::de::{self, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::Calibration;
+use crate::locate::{Step, TomlSpans, dotted_name};
 
 /// A device file's tables as written: the kinematic chain (a D-H table or URDF-style joint
 /// placements), joint limits, transmissions, measurement rig and, once calibrated, the
@@ -68,6 +69,132 @@ impl DeviceFile {
     /// locates it in `text`.
     pub fn from_toml_str(text: &str) -> Result<DeviceFile, toml::de::Error> {
         toml::from_str(text)
+    }
+}
+
+/// Largest magnitude of a length (m) or an angle (rad) that a device file may hold: a key
+/// ending in `_m` or `_rad`, or the `value` of a calibrated value whose unit is `m` or `rad`.
+/// 1 km or 1000 rad (about 159 turns) is a typo or a unit mistake (micrometres read as
+/// metres) on any device, and such numbers reach the kinematics as squares that overflow.
+pub const MAX_MAGNITUDE: f64 = 1e3;
+
+/// A number of a device file that no reader accepts ([`check_numbers`]): not finite, or a
+/// length or an angle past ±[`MAX_MAGNITUDE`]. Displayed as what was expected and found,
+/// without the file's place (the reader's error gives it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct BadNumber {
+    /// Dotted name of its key (`dh[1].d_m`, `calibration.values.da0.value`).
+    pub name: String,
+    /// 1-based line of the value.
+    pub line: usize,
+    /// 1-based column of the value.
+    pub column: usize,
+    /// The value as read.
+    pub value: f64,
+    /// `Some("m")` or `Some("rad")` for a finite length or angle past ±[`MAX_MAGNITUDE`];
+    /// `None` for a number that is not finite.
+    pub past_bound: Option<&'static str>,
+}
+
+impl fmt::Display for BadNumber {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (name, value) = (&self.name, self.value);
+        match self.past_bound {
+            None => write!(f, "expected a finite number in {name:?}, found {value}"),
+            Some(unit) => {
+                let kind = if unit == "m" { "a length" } else { "an angle" };
+                write!(
+                    f,
+                    "{name} = {value:e} {unit} is out of range: {kind} must lie within \
+                     ±{MAX_MAGNITUDE} {unit}"
+                )
+            }
+        }
+    }
+}
+
+/// Checks every number of a device file's text: each float finite, each length or angle (a
+/// key ending in `_m` or `_rad`; a calibrated value's `value` in `m` or `rad`) within
+/// ±[`MAX_MAGNITUDE`]. The one check of a device file's numbers, for `hapcal-io` and the
+/// runtime; text that is not TOML passes (the typed reader reports its syntax).
+///
+/// # Errors
+/// The first [`BadNumber`] in file order, at its line and column.
+pub fn check_numbers(text: &str) -> Result<(), BadNumber> {
+    let Ok(root) = toml::from_str::<toml::Table>(text) else {
+        return Ok(());
+    };
+    let mut path = Vec::new();
+    let Some((path, value, past_bound)) = first_bad_in_table(&root, &mut path) else {
+        return Ok(());
+    };
+    let (line, column) = TomlSpans::parse(text).line_column(&path).unwrap_or((1, 1));
+    Err(BadNumber {
+        name: dotted_name(&path),
+        line,
+        column,
+        value,
+        past_bound,
+    })
+}
+
+/// A refused number of [`check_numbers`] in `table`: its key path, value and bound's unit.
+type Found<'a> = (Vec<Step<'a>>, f64, Option<&'static str>);
+
+/// The first number of `table` (at `path`) that [`check_numbers`] refuses.
+fn first_bad_in_table<'a>(table: &'a toml::Table, path: &mut Vec<Step<'a>>) -> Option<Found<'a>> {
+    let unit = match table.get("unit").and_then(toml::Value::as_str) {
+        Some("m") => Some("m"),
+        Some("rad") => Some("rad"),
+        _ => None,
+    };
+    for (key, value) in table {
+        path.push(Step::Key(key));
+        let bound = if key.ends_with("_m") {
+            Some("m")
+        } else if key.ends_with("_rad") {
+            Some("rad")
+        } else if key == "value" {
+            unit
+        } else {
+            None
+        };
+        if let Some(found) = first_bad_in_value(value, bound, path) {
+            return Some(found);
+        }
+        path.pop();
+    }
+    None
+}
+
+/// The first number of `value` (at `path`, bounded in `bound`'s unit if any) that
+/// [`check_numbers`] refuses.
+fn first_bad_in_value<'a>(
+    value: &'a toml::Value,
+    bound: Option<&'static str>,
+    path: &mut Vec<Step<'a>>,
+) -> Option<Found<'a>> {
+    match value {
+        toml::Value::Float(v) if !v.is_finite() => Some((path.clone(), *v, None)),
+        toml::Value::Float(v) if bound.is_some() && v.abs() > MAX_MAGNITUDE => {
+            Some((path.clone(), *v, bound))
+        }
+        // A length written without a decimal point (`a_m = 5000`) is read as a number too.
+        toml::Value::Integer(i) if bound.is_some() && i.unsigned_abs() as f64 > MAX_MAGNITUDE => {
+            Some((path.clone(), *i as f64, bound))
+        }
+        toml::Value::Table(t) => first_bad_in_table(t, path),
+        toml::Value::Array(items) => {
+            for (i, item) in items.iter().enumerate() {
+                path.push(Step::Index(i));
+                if let Some(found) = first_bad_in_value(item, bound, path) {
+                    return Some(found);
+                }
+                path.pop();
+            }
+            None
+        }
+        _ => None,
     }
 }
 
@@ -336,6 +463,34 @@ mod tests {
             Convention::Standard
         );
         Ok(())
+    }
+
+    #[test]
+    fn every_number_is_finite_and_lengths_and_angles_are_bounded() {
+        let fault = |text: &str| check_numbers(text).err().map(|e| e.to_string());
+        assert_eq!(fault("[[dh]]\na_m = 0.5\ntheta_rad = -3.0\n"), None);
+        assert_eq!(
+            fault("[[dh]]\na_m = 0.5\n\n[[dh]]\nd_m = nan\n"),
+            Some("expected a finite number in \"dh[1].d_m\", found NaN".to_owned())
+        );
+        let e = check_numbers("x = 1\n[[joint]]\nname = \"q1\"\nupper_rad = 1e308\n").err();
+        assert_eq!(e.as_ref().map(|e| (e.line, e.column)), Some((4, 13)));
+        assert_eq!(
+            e.map(|e| e.to_string()),
+            Some("joint[0].upper_rad = 1e308 rad is out of range: an angle must lie within ±1000 rad".to_owned())
+        );
+        // A calibrated value is bounded by its unit; a count is not a length.
+        let value = |unit: &str| {
+            format!("[calibration.values]\nda0 = {{ value = 2e3, std = 0.0, unit = \"{unit}\" }}\n")
+        };
+        assert!(
+            fault(&value("m"))
+                .is_some_and(|m| m.starts_with("calibration.values.da0.value = 2e3 m"))
+        );
+        assert_eq!(fault(&value("1")), None);
+        assert_eq!(fault("counts_per_rev = 4096\nratio = 1e9\n"), None);
+        assert!(fault("[[dh]]\na_m = 5000\n").is_some_and(|m| m.starts_with("dh[0].a_m = 5e3 m")));
+        assert_eq!(fault("a = ["), None);
     }
 
     #[test]

@@ -49,7 +49,7 @@
 
 pub mod device;
 mod effect;
-mod locate;
+pub mod locate;
 mod names;
 pub mod urdf;
 mod write;
@@ -61,7 +61,8 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
-use locate::{Step, locate_path};
+pub use locate::line_column;
+use locate::{Step, TomlSpans, key_line};
 pub use names::{CapstanField, DhField, ElementField, ValueName};
 
 /// The schema version this crate writes and the newest it reads. Version 1 is the first
@@ -415,6 +416,26 @@ pub struct CalibratedValue {
     pub unit: String,
 }
 
+impl CalibratedValue {
+    /// Checks that the value and its standard deviation are finite and the deviation is not
+    /// negative: the one check of a value's numbers, for [`Calibration::check`] and for a
+    /// reader applying values without a record.
+    ///
+    /// # Errors
+    /// What is wrong and what was expected: `value … with std …: expected finite numbers,
+    /// std ≥ 0` (without the value's name, which the caller gives).
+    pub fn check_numbers(&self) -> Result<(), String> {
+        if self.value.is_finite() && self.std.is_finite() && self.std >= 0.0 {
+            Ok(())
+        } else {
+            Err(format!(
+                "value {} with std {}: expected finite numbers, std ≥ 0",
+                self.value, self.std
+            ))
+        }
+    }
+}
+
 /// A calibration record: the sidecar of a calibrated URDF, or a device file's
 /// `[calibration]` table.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -500,35 +521,6 @@ impl fmt::Display for ContractError {
 
 impl std::error::Error for ContractError {}
 
-/// 1-based line and column of byte `offset` in `text`.
-pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
-    let before = text.get(..offset).unwrap_or(text);
-    let line = before.matches('\n').count() + 1;
-    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
-    (line, column)
-}
-
-/// Where the text names a key: the first line (1-based) that starts with `key =`, `"key" =`
-/// or `[key` after optional spaces, and its column; (0, 0) if none does.
-fn locate(text: &str, key: &str) -> (usize, usize) {
-    let quoted = format!("\"{key}\"");
-    for (i, line) in text.lines().enumerate() {
-        let trimmed = line.trim_start();
-        let column = line.len() - trimmed.len() + 1;
-        for candidate in [key, quoted.as_str()] {
-            if let Some(rest) = trimmed.strip_prefix(candidate)
-                && rest.trim_start().starts_with('=')
-            {
-                return (i + 1, column);
-            }
-        }
-        if trimmed.starts_with('[') && trimmed.trim_start_matches('[').starts_with(key) {
-            return (i + 1, column);
-        }
-    }
-    (0, 0)
-}
-
 /// The digest a record keeps of the robot description it was written beside
 /// ([`Calibration::urdf_digest`]): `fnv1a64:` and the 64-bit FNV-1a hash of `bytes` in 16
 /// lowercase hex digits (Fowler, Noll & Vo; offset basis 0xcbf29ce484222325, prime
@@ -581,7 +573,9 @@ impl Calibration {
             });
         }
         if record.model == Some(ModelName::Transmissions) {
-            let (line, column) = locate_path(text, &[Step::Key("model")]).unwrap_or((0, 0));
+            let (line, column) = TomlSpans::parse(text)
+                .record_line(&[Step::Key("model")])
+                .unwrap_or((0, 0));
             return Err(ContractError {
                 origin: origin.to_owned(),
                 line,
@@ -621,7 +615,9 @@ impl Calibration {
         if *recorded == found {
             return Ok(None);
         }
-        let (line, column) = locate_path(text, &[Step::Key("urdf_digest")]).unwrap_or((0, 0));
+        let (line, column) = TomlSpans::parse(text)
+            .record_line(&[Step::Key("urdf_digest")])
+            .unwrap_or((0, 0));
         Err(ContractError {
             origin: origin.to_owned(),
             line,
@@ -871,11 +867,8 @@ impl Calibration {
                 Ok(p) => p,
                 Err(message) => return at_value(format!("{:?}: {message}", v.name)),
             };
-            if !v.value.is_finite() || !v.std.is_finite() || v.std < 0.0 {
-                return at_value(format!(
-                    "{:?}: value {} with std {}: expected finite numbers, std ≥ 0",
-                    v.name, v.value, v.std
-                ));
+            if let Err(message) = v.check_numbers() {
+                return at_value(format!("{:?}: {message}", v.name));
             }
             if parsed.is_compliance() && self.torque.is_none() && !self.is_legacy() {
                 return at_value(format!(
@@ -981,7 +974,10 @@ impl RecordText<'_> {
     /// An error at the value `path` names (the record's own line for it), else at the first
     /// line naming `key`.
     fn fail_at(&self, path: &[Step<'_>], key: &str, message: String) -> Result<(), ContractError> {
-        let (line, column) = locate_path(self.text, path).unwrap_or_else(|| locate(self.text, key));
+        let (line, column) = TomlSpans::parse(self.text)
+            .record_line(path)
+            .or_else(|| key_line(self.text, key))
+            .unwrap_or((0, 0));
         Err(ContractError {
             origin: self.origin.to_owned(),
             line,

@@ -41,6 +41,85 @@ pub fn parent_joint<'r>(robot: &'r Robot, link: &str) -> Option<&'r Joint> {
     robot.joints.iter().find(|j| j.child.link == link)
 }
 
+/// A joint's `<origin>`: `xyz` (m) and `rpy` (rad, roll-pitch-yaw about fixed x, y, z), the
+/// one check of it every reader makes.
+///
+/// # Errors
+/// A number that is not finite: `joint "j": origin xyz … rpy … is not finite`.
+pub fn origin(joint: &Joint) -> Result<([f64; 3], [f64; 3]), String> {
+    let (xyz, rpy) = (joint.origin.xyz.0, joint.origin.rpy.0);
+    if xyz.iter().chain(&rpy).any(|v| !v.is_finite()) {
+        return Err(format!(
+            "joint {:?}: origin xyz {xyz:?} rpy {rpy:?} is not finite",
+            joint.name
+        ));
+    }
+    Ok((xyz, rpy))
+}
+
+/// Shortest `<axis xyz>` (its Euclidean norm, in the joint's frame) that has a direction.
+pub const MIN_AXIS_NORM: f64 = 1e-12;
+
+/// A moving joint's `<axis xyz>` as written (not normalised), in the joint's frame.
+///
+/// # Errors
+/// An axis that is not finite or shorter than [`MIN_AXIS_NORM`]: `joint "j": axis … has no
+/// direction`.
+pub fn axis(joint: &Joint) -> Result<[f64; 3], String> {
+    let axis = joint.axis.xyz.0;
+    let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
+    if !norm.is_finite() || norm < MIN_AXIS_NORM {
+        return Err(format!(
+            "joint {:?}: axis {axis:?} has no direction",
+            joint.name
+        ));
+    }
+    Ok(axis)
+}
+
+/// A moving joint's limits `(lower, upper)`: its `<limit>` (rad; m for a prismatic joint), or
+/// `continuous` for a continuous joint (whose `<limit>` holds none), which is not checked.
+///
+/// # Errors
+/// `<limit>` bounds that are not finite with lower < upper, naming the joint, the bounds and
+/// their unit.
+pub fn limits(joint: &Joint, continuous: (f64, f64)) -> Result<(f64, f64), String> {
+    if joint.joint_type == JointType::Continuous {
+        return Ok(continuous);
+    }
+    let (lower, upper) = (joint.limit.lower, joint.limit.upper);
+    if !(lower.is_finite() && upper.is_finite() && lower < upper) {
+        let unit = if joint.joint_type == JointType::Prismatic {
+            "m"
+        } else {
+            "rad"
+        };
+        return Err(format!(
+            "joint {:?}: limits [{lower}, {upper}] {unit} are not finite with lower < upper",
+            joint.name
+        ));
+    }
+    Ok((lower, upper))
+}
+
+/// A link's `<inertial>`: its mass (kg) and centre of mass (m, in the link's frame).
+///
+/// # Errors
+/// A mass that is not finite and non-negative, or a centre of mass that is not finite:
+/// `link "l": inertial mass … kg at … m is not a finite, non-negative mass at a finite point`.
+pub fn inertial(link: &Link) -> Result<(f64, [f64; 3]), String> {
+    let mass_kg = link.inertial.mass.value;
+    let xyz = link.inertial.origin.xyz.0;
+    if !(mass_kg.is_finite() && mass_kg >= 0.0) || xyz.iter().any(|v| !v.is_finite()) {
+        return Err(format!(
+            "link {:?}: inertial mass {mass_kg} kg at {xyz:?} m is not a finite, non-negative \
+             mass at a finite point",
+            link.name
+        ));
+    }
+    Ok((mass_kg, xyz))
+}
+
 /// Why [`path_to`] found no path.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum PathError {
@@ -162,6 +241,38 @@ mod tests {
         <joint name="flange" type="fixed"><parent link="hand"/><child link="tool"/>
             <origin xyz="0 0 0.05"/></joint>
     </robot>"#;
+
+    #[test]
+    fn joints_and_links_are_checked_once() -> Result<(), Box<dyn std::error::Error>> {
+        let robot = parse(ARM)?;
+        let shoulder = &robot.joints[0];
+        assert_eq!(super::origin(shoulder)?, ([0.0, 0.0, 0.3], [0.0; 3]));
+        assert_eq!(super::axis(shoulder)?, [0.0, 0.0, 1.0]);
+        assert_eq!(super::limits(shoulder, (-9.0, 9.0))?, (-1.0, 1.0));
+        assert_eq!(super::inertial(&robot.links[1])?, (2.0, [0.0, 0.0, 0.1]));
+        let bad = ARM
+            .replace(
+                r#"<origin xyz="0 0 0.3"/><axis xyz="0 0 1"/>"#,
+                r#"<origin xyz="0 0 inf"/><axis xyz="0 0 0"/>"#,
+            )
+            .replace(r#"lower="-2" upper="2""#, r#"lower="2" upper="-2""#)
+            .replace(r#"<mass value="2.0"/>"#, r#"<mass value="-1"/>"#)
+            .replace(
+                r#"type="revolute"><parent link="base"/>"#,
+                r#"type="continuous"><parent link="base"/>"#,
+            );
+        let robot = parse(&bad)?;
+        let (shoulder, elbow) = (&robot.joints[0], &robot.joints[1]);
+        assert!(super::origin(shoulder).is_err_and(|m| m.contains("is not finite")));
+        assert!(
+            super::axis(shoulder).is_err_and(|m| m.contains("[0.0, 0.0, 0.0] has no direction"))
+        );
+        // A continuous joint's range is the caller's.
+        assert_eq!(super::limits(shoulder, (-9.0, 9.0))?, (-9.0, 9.0));
+        assert!(super::limits(elbow, (-9.0, 9.0)).is_err_and(|m| m.contains("[2, -2] rad")));
+        assert!(super::inertial(&robot.links[1]).is_err_and(|m| m.contains("mass -1 kg")));
+        Ok(())
+    }
 
     fn names(joints: &[&Joint]) -> Vec<String> {
         joints.iter().map(|j| j.name.clone()).collect()

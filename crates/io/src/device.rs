@@ -175,7 +175,9 @@ pub struct CalibrationMeta {
 
 /// Reads and checks a device file.
 ///
-/// Checks, beyond the TOML syntax and the types: every number is finite; the chain is
+/// Checks, beyond the TOML syntax and the types: every number is finite, every length (a key
+/// ending in `_m`, a value in m) and angle (`_rad`, a value in rad) within ±1000 m or rad
+/// (`hapcal_contract::device::check_numbers`, the runtime's check too); the chain is
 /// given by exactly one of `[[dh]]` or `[[placement]]` (`[urdf]` needs placements); D-H
 /// joints are numbered 1, 2, … in row order; placement names are unique and axes non-zero;
 /// the chain has at least one joint and exactly as many `[[joint]]` rows, with unique names
@@ -187,7 +189,8 @@ pub struct CalibrationMeta {
 ///
 /// [`Error::Io`] if the file cannot be read; [`Error::Toml`] for a syntax error, a missing
 /// or unknown key or a value of the wrong type; [`Error::NotFinite`] for a NaN or infinite
-/// number; [`Error::JointCount`] if `[[joint]]` and the chain disagree on the number of
+/// number; [`Error::LengthOutOfRange`] for a length past ±[`MAX_LENGTH_M`](crate::MAX_LENGTH_M);
+/// [`Error::JointCount`] if `[[joint]]` and the chain disagree on the number of
 /// joints; [`Error::InvalidDevice`] for any other failed check. All name the file, line and
 /// column.
 pub fn read_device(path: &Path) -> Result<Device, Error> {
@@ -429,12 +432,7 @@ impl Device {
             if values.iter().take(k).any(|w| w.name == v.name) {
                 return Err(err("appears twice".into()));
             }
-            if !v.value.is_finite() || !v.std.is_finite() || v.std < 0.0 {
-                return Err(err(format!(
-                    "value {} with std {} must be finite, std ≥ 0",
-                    v.value, v.std
-                )));
-            }
+            v.check_numbers().map_err(err)?;
             let check_unit = |unit: &str| {
                 if v.unit == unit {
                     Ok(())

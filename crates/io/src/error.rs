@@ -578,21 +578,12 @@ fn place(path: &std::path::Path, line: u64, column: u64) -> String {
     }
 }
 
-/// 1-based (line, column) of byte offset `offset` in `text`; the column counts characters
-/// (so a message points where an editor does). Offsets past the end or inside a multi-byte
-/// character are clamped; never panics. Used for TOML spans here and in `hapcal-sim`.
+/// 1-based (line, column) of byte offset `offset` in `text` as this crate's errors hold them:
+/// [`hapcal_contract::line_column`] (columns count characters; an offset past the end or
+/// inside a character is clamped; never panics). Used for TOML spans here and in `hapcal-sim`.
 pub fn line_column(text: &str, offset: usize) -> (u64, u64) {
-    let offset = offset.min(text.len());
-    // Step back to a char boundary so that slicing cannot panic.
-    let offset = (0..=offset)
-        .rev()
-        .find(|&i| text.is_char_boundary(i))
-        .unwrap_or(0);
-    let before = text.get(..offset).unwrap_or("");
-    let line = before.matches('\n').count() as u64 + 1;
-    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
-    let column = before.get(line_start..).unwrap_or("").chars().count() as u64 + 1;
-    (line, column)
+    let (line, column) = hapcal_contract::line_column(text, offset);
+    (line as u64, column as u64)
 }
 
 /// Where and what a TOML error is: the 1-based line and column of its span in `text` (1, 1
@@ -624,23 +615,12 @@ fn tidy(value: f64) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{line_column, tidy};
+    use super::tidy;
 
     #[test]
     fn tidy_rounds_sums_of_limits() {
         assert_eq!(tidy(-1.5 - 0.1 * 3.0), "-1.8");
         assert_eq!(tidy(2e7), "2e7");
         assert_eq!(tidy(0.125), "0.125");
-    }
-
-    #[test]
-    fn line_column_is_one_based() {
-        let text = "ab\ncdé\nf";
-        assert_eq!(line_column(text, 0), (1, 1));
-        assert_eq!(line_column(text, 1), (1, 2));
-        assert_eq!(line_column(text, 3), (2, 1));
-        assert_eq!(line_column(text, 7), (2, 4)); // after 'é' (2 bytes)
-        assert_eq!(line_column(text, 8), (3, 1));
-        assert_eq!(line_column(text, 100), (3, 2));
     }
 }

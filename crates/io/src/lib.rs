@@ -66,8 +66,10 @@
 /// of that kind used to reach the identification as finite numbers whose squares overflow
 /// (1e200 m → 1e400 = ∞): a panic in the rank decision, or a report of NaN with exit code 0.
 /// The bound leaves three orders of magnitude above any real device and keeps every square
-/// and sum of squares of a residual far from overflow.
-pub const MAX_LENGTH_M: f64 = 1e3;
+/// and sum of squares of a residual far from overflow. A device file's lengths and angles are
+/// bounded by the contract's check of its numbers, with this value
+/// ([`hapcal_contract::device::MAX_MAGNITUDE`]).
+pub const MAX_LENGTH_M: f64 = hapcal_contract::device::MAX_MAGNITUDE;
 
 mod columns;
 mod device;

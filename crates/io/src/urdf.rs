@@ -329,17 +329,8 @@ fn inertials(
                 }
             }
         }
-        let mass_kg = l.inertial.mass.value;
-        let xyz = l.inertial.origin.xyz.0;
+        let (mass_kg, xyz) = urdf::inertial(l).map_err(|m| urdf_error(path, m))?;
         let name = &l.name;
-        if !(mass_kg.is_finite() && mass_kg >= 0.0) || xyz.iter().any(|v| !v.is_finite()) {
-            return Err(urdf_error(
-                path,
-                format!(
-                    "link {name:?}: inertial mass {mass_kg} kg at {xyz:?} m is not a finite, non-negative mass at a finite point"
-                ),
-            ));
-        }
         if mass_kg == 0.0 {
             continue;
         }
@@ -626,26 +617,12 @@ fn placement_of(
     limits: Limits,
 ) -> Result<(Placement, Option<JointSpec>), Error> {
     let name = &joint.name;
-    let (xyz, rpy) = (joint.origin.xyz.0, joint.origin.rpy.0);
-    if xyz.iter().chain(&rpy).any(|v| !v.is_finite()) {
-        return Err(urdf_error(
-            path,
-            format!("joint {name:?}: origin xyz {xyz:?} rpy {rpy:?} is not finite"),
-        ));
-    }
+    let (xyz, rpy) = urdf::origin(joint).map_err(|m| urdf_error(path, m))?;
     let prismatic = joint.joint_type == urdf::JointType::Prismatic;
     let axis = match joint.joint_type {
         urdf::JointType::Fixed => None,
         urdf::JointType::Revolute | urdf::JointType::Continuous | urdf::JointType::Prismatic => {
-            let axis = joint.axis.xyz.0;
-            let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
-            if !norm.is_finite() || norm < 1e-12 {
-                return Err(urdf_error(
-                    path,
-                    format!("joint {name:?}: axis {axis:?} has no direction"),
-                ));
-            }
-            Some(axis)
+            Some(urdf::axis(joint).map_err(|m| urdf_error(path, m))?)
         }
         ref other => {
             return Err(Error::UnsupportedJoint {
@@ -656,22 +633,11 @@ fn placement_of(
         }
     };
     let spec = if axis.is_some() {
-        let (lower, upper) = match (&joint.joint_type, limits) {
-            (urdf::JointType::Continuous, Limits::Continuous1Turn) => {
-                (-std::f64::consts::PI, std::f64::consts::PI)
-            }
-            (urdf::JointType::Continuous, Limits::Continuous1000) => (-1e3, 1e3),
-            _ => (joint.limit.lower, joint.limit.upper),
+        let continuous = match limits {
+            Limits::Continuous1Turn => (-std::f64::consts::PI, std::f64::consts::PI),
+            Limits::Continuous1000 => (-1e3, 1e3),
         };
-        let unit = if prismatic { "m" } else { "rad" };
-        if !(lower.is_finite() && upper.is_finite() && lower < upper) {
-            return Err(urdf_error(
-                path,
-                format!(
-                    "joint {name:?}: limits [{lower}, {upper}] {unit} are not finite with lower < upper"
-                ),
-            ));
-        }
+        let (lower, upper) = urdf::limits(joint, continuous).map_err(|m| urdf_error(path, m))?;
         Some(JointSpec {
             name: name.clone(),
             lower_rad: lower,

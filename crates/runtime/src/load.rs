@@ -1,6 +1,8 @@
 //! Loading a device file (TOML, docs/design.md §5.1), as `hapcal calibrate` writes it.
 
 use hapcal_contract::device::{Convention, DeviceFile, JointRef, JointSpec};
+use hapcal_contract::line_column;
+use hapcal_contract::locate::TomlSpans;
 use hapcal_contract::{Calibration, CapstanField, ContractError, TorqueSource, ValueName};
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -73,14 +75,6 @@ enum Pending {
         drum_distance_m: f64,
         params: CapstanParams,
     },
-}
-
-/// 1-based line and column of byte `offset` in `text`.
-pub(crate) fn line_column(text: &str, offset: usize) -> (usize, usize) {
-    let before = text.get(..offset).unwrap_or(text);
-    let line = before.matches('\n').count() + 1;
-    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
-    (line, column)
 }
 
 impl Model {
@@ -283,7 +277,7 @@ fn apply_values(
     let n_joints = pending.len();
     // A refusal at the line of the value's name.
     let at = |name: &str, message: String| {
-        let (line, column) = locate(text, name);
+        let (line, column) = TomlSpans::parse(text).value_line(name).unwrap_or((0, 0));
         contract_error(
             ContractError {
                 origin: origin.to_owned(),
@@ -424,124 +418,6 @@ fn drives_of(
     Ok(drives)
 }
 
-/// Largest magnitude of a length (m) or an angle (rad) that a device file may hold: a key
-/// ending in `_m` or `_rad`, or a calibrated value in m or rad. The command line's readers
-/// refuse lengths past 1 km (`hapcal_io::MAX_LENGTH_M`) the same way; 1 km or 1000 rad is a
-/// typo or a unit mistake on any device, and such numbers reach the kinematics as squares
-/// that overflow.
-pub(crate) const MAX_MAGNITUDE: f64 = 1e3;
-
-/// One step of a key path into a TOML document.
-enum Step {
-    Key(String),
-    Index(usize),
-}
-
-/// `Ok` when every float of the file is finite and every length or angle (a key ending in
-/// `_m` or `_rad`; a `value` of a calibrated value whose unit is `m` or `rad`) lies within
-/// ±[`MAX_MAGNITUDE`]; else [`LoadError::Parse`] at the number's line and column.
-fn check_numbers(text: &str, origin: &str) -> Result<(), LoadError> {
-    let Ok(root) = toml::from_str::<toml::Table>(text) else {
-        return Ok(()); // the typed parse reports syntax
-    };
-    let mut path = Vec::new();
-    let mut found = None;
-    walk_table(&root, &mut path, &mut found);
-    let Some((path, value, bounded)) = found else {
-        return Ok(());
-    };
-    let (line, column) = locate_path(text, &path);
-    let name = (path.iter())
-        .map(|s| match s {
-            Step::Key(k) => format!(".{k}"),
-            Step::Index(i) => format!("[{i}]"),
-        })
-        .collect::<String>();
-    let name = name.trim_start_matches('.');
-    let message = if bounded {
-        format!("{name} = {value:e} is past ±{MAX_MAGNITUDE} (m or rad): a typo or a unit mistake")
-    } else {
-        format!("{name} = {value} is not a finite number")
-    };
-    Err(LoadError::Parse {
-        origin: origin.to_owned(),
-        line,
-        column,
-        message,
-    })
-}
-
-/// The first float of `table` that [`check_numbers`] refuses: its path, value and whether it
-/// is finite but too large.
-fn walk_table(
-    table: &toml::Table,
-    path: &mut Vec<Step>,
-    found: &mut Option<(Vec<Step>, f64, bool)>,
-) {
-    let unit = table.get("unit").and_then(toml::Value::as_str);
-    let angle_or_length = matches!(unit, Some("m" | "rad"));
-    for (key, value) in table {
-        if found.is_some() {
-            return;
-        }
-        path.push(Step::Key(key.clone()));
-        let bounded =
-            key.ends_with("_m") || key.ends_with("_rad") || (key == "value" && angle_or_length);
-        walk_value(value, bounded, path, found);
-        path.pop();
-    }
-}
-
-fn walk_value(
-    value: &toml::Value,
-    bounded: bool,
-    path: &mut Vec<Step>,
-    found: &mut Option<(Vec<Step>, f64, bool)>,
-) {
-    match value {
-        toml::Value::Float(v) if !v.is_finite() => {
-            *found = Some((std::mem::take(path), *v, false));
-        }
-        toml::Value::Float(v) if bounded && v.abs() > MAX_MAGNITUDE => {
-            *found = Some((std::mem::take(path), *v, true));
-        }
-        toml::Value::Table(t) => walk_table(t, path, found),
-        toml::Value::Array(items) => {
-            for (i, item) in items.iter().enumerate() {
-                if found.is_some() {
-                    return;
-                }
-                path.push(Step::Index(i));
-                walk_value(item, bounded, path, found);
-                path.pop();
-            }
-        }
-        _ => {}
-    }
-}
-
-/// 1-based line and column of the value at `path` in `text` (of its nearest existing parent;
-/// (1, 1) when none).
-fn locate_path(text: &str, path: &[Step]) -> (usize, usize) {
-    let Ok(root) = toml::de::DeTable::parse(text) else {
-        return (1, 1);
-    };
-    let mut span = None;
-    let mut current: Option<&toml::Spanned<toml::de::DeValue<'_>>> = None;
-    for (k, step) in path.iter().enumerate() {
-        let next = match (k, step) {
-            (0, Step::Key(key)) => root.get_ref().get(key.as_str()),
-            (0, Step::Index(_)) => None,
-            (_, Step::Key(key)) => current.and_then(|v| v.get_ref().get(key.as_str())),
-            (_, Step::Index(i)) => current.and_then(|v| v.get_ref().get(*i)),
-        };
-        let Some(next) = next else { break };
-        span = Some(next.span());
-        current = Some(next);
-    }
-    span.map_or((1, 1), |s| line_column(text, s.start))
-}
-
 /// The text of the file at `path`.
 ///
 /// # Errors
@@ -584,7 +460,12 @@ pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DhFile, LoadE
             message: e.message().trim_end().to_owned(),
         }
     })?;
-    check_numbers(text, origin)?;
+    hapcal_contract::device::check_numbers(text).map_err(|bad| LoadError::Parse {
+        origin: origin.to_owned(),
+        line: bad.line,
+        column: bad.column,
+        message: bad.to_string(),
+    })?;
     let invalid = |message: String| LoadError::Invalid {
         origin: origin.to_owned(),
         message,
@@ -662,22 +543,4 @@ pub(crate) fn contract_error(e: ContractError, origin: &str) -> LoadError {
             message: e.message,
         }
     }
-}
-
-/// Where the text names the value `name`: the first line that starts with `name =` or
-/// `"name" =` after optional spaces, and its column; (0, 0) if none does.
-pub(crate) fn locate(text: &str, name: &str) -> (usize, usize) {
-    let quoted = format!("\"{name}\"");
-    for (i, line) in text.lines().enumerate() {
-        let trimmed = line.trim_start();
-        let column = line.chars().count() - trimmed.chars().count() + 1;
-        for candidate in [name, quoted.as_str()] {
-            if let Some(rest) = trimmed.strip_prefix(candidate)
-                && rest.trim_start().starts_with('=')
-            {
-                return (i + 1, column);
-            }
-        }
-    }
-    (0, 0)
 }

@@ -5,6 +5,7 @@
 
 use std::path::Path;
 
+use hapcal_contract::locate::{Step, TomlSpans};
 use hapcal_contract::urdf;
 use hapcal_contract::{Calibration, ElementField, Region, Torque, TorqueSource, ValueName};
 
@@ -115,7 +116,8 @@ impl Robot {
     /// [`LoadError::Invalid`] for a URDF that urdf-rs cannot read, a tip that is not a
     /// link (listing them), a tip named twice, a link on a path with two parent joints or
     /// joints above a tip that form a loop, a floating or planar joint on a path, a joint
-    /// without axis, a non-finite number, a negative mass, a value of a joint or element not
+    /// without axis, `<limit>` bounds that are not finite with lower < upper (a continuous
+    /// joint's are infinite), a non-finite number, a negative mass, a value of a joint or element not
     /// on the paths to the tips, a haptic device's value, lumped loads whose tips are not all
     /// loaded.
     pub fn load_urdf(urdf: &Path, tips: &[&str]) -> Result<Robot, LoadError> {
@@ -184,13 +186,7 @@ impl Robot {
             let mut last_fixed: Option<String> = None;
             for joint in path {
                 let name = &joint.name;
-                let (xyz, rpy) = (joint.origin.xyz.0, joint.origin.rpy.0);
-                if xyz.iter().chain(&rpy).any(|v| !v.is_finite()) {
-                    return Err(invalid(
-                        origin,
-                        format!("joint {name:?}: origin xyz {xyz:?} rpy {rpy:?} is not finite"),
-                    ));
-                }
+                urdf::origin(joint).map_err(|m| invalid(origin, m))?;
                 let prismatic = match joint.joint_type {
                     urdf::JointType::Fixed => {
                         pending = pending.compose(&joint_pose(joint));
@@ -370,7 +366,8 @@ impl Robot {
             for v in &record.values {
                 if let Ok(ValueName::Dh { field, row }) = ValueName::parse(&v.name) {
                     let Some(r) = nominal.get_mut(row) else {
-                        let (line, column) = crate::load::locate(text, &v.name);
+                        let (line, column) =
+                            TomlSpans::parse(text).value_line(&v.name).unwrap_or((0, 0));
                         return Err(crate::load::contract_error(
                             hapcal_contract::ContractError {
                                 origin: origin.to_owned(),
@@ -890,11 +887,17 @@ impl Robot {
         known_joints: &[(&str, Pose)],
     ) -> Result<(), LoadError> {
         let (text, origin) = (at.text, at.origin);
-        for r in &region.joints {
+        for (k, r) in region.joints.iter().enumerate() {
             if !known_joints.iter().any(|(n, _)| *n == r.name) {
+                let entry = [
+                    Step::Key("region"),
+                    Step::Key("joint"),
+                    Step::Index(k),
+                    Step::Key("name"),
+                ];
                 return Err(at_line(
                     origin,
-                    region_line(text, &r.name),
+                    TomlSpans::parse(text).record_line(&entry).unwrap_or((1, 1)),
                     format!(
                         "[region] joint {:?}: the robot has no joint of this name ({}): the \
                          record was written for another robot",
@@ -928,7 +931,8 @@ struct RecordAt<'a> {
 impl RecordAt<'_> {
     /// A refusal of the value `name` at its line.
     fn value(&self, name: &str, message: String) -> LoadError {
-        at_line(self.origin, crate::load::locate(self.text, name), message)
+        let at = TomlSpans::parse(self.text).value_line(name);
+        at_line(self.origin, at.unwrap_or((0, 0)), message)
     }
 }
 
@@ -971,34 +975,16 @@ fn path_to<'r>(
 }
 
 /// A moving joint's unit axis (in its frame) and limits (rad or m; a continuous joint's are
-/// infinite).
+/// infinite), checked by the contract's URDF reader ([`urdf::axis`], [`urdf::limits`]).
 ///
 /// # Errors
-/// An axis without direction, limits that are not lower ≤ upper.
+/// An axis without direction, limits that are not finite with lower < upper.
 fn axis_and_limits(joint: &urdf::Joint, origin: &str) -> Result<([f64; 3], (f64, f64)), LoadError> {
-    let name = &joint.name;
-    let axis = joint.axis.xyz.0;
+    let axis = urdf::axis(joint).map_err(|m| invalid(origin, m))?;
     let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
-    if !norm.is_finite() || norm < 1e-12 {
-        return Err(invalid(
-            origin,
-            format!("joint {name:?}: axis {axis:?} has no direction"),
-        ));
-    }
-    let (lower, upper) = match joint.joint_type {
-        urdf::JointType::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
-        _ => (joint.limit.lower, joint.limit.upper),
-    };
-    if lower.is_nan() || upper.is_nan() || lower > upper {
-        return Err(invalid(
-            origin,
-            format!("joint {name:?}: limits [{lower}, {upper}] are not lower ≤ upper"),
-        ));
-    }
-    Ok((
-        [axis[0] / norm, axis[1] / norm, axis[2] / norm],
-        (lower, upper),
-    ))
+    let limits =
+        urdf::limits(joint, (f64::NEG_INFINITY, f64::INFINITY)).map_err(|m| invalid(origin, m))?;
+    Ok(([axis[0] / norm, axis[1] / norm, axis[2] / norm], limits))
 }
 
 /// The links' masses, each in the frame of the nearest moving joint above it (`joint_names`,
@@ -1013,17 +999,7 @@ fn link_masses(
 ) -> Result<Vec<PointMass>, LoadError> {
     let mut masses = Vec::new();
     for l in &robot.links {
-        let mass_kg = l.inertial.mass.value;
-        let xyz = l.inertial.origin.xyz.0;
-        if !(mass_kg.is_finite() && mass_kg >= 0.0) || xyz.iter().any(|v| !v.is_finite()) {
-            return Err(invalid(
-                origin,
-                format!(
-                    "link {:?}: inertial mass {mass_kg} kg at {xyz:?} m is not a finite, non-negative mass at a finite point",
-                    l.name
-                ),
-            ));
-        }
+        let (mass_kg, xyz) = urdf::inertial(l).map_err(|m| invalid(origin, m))?;
         if mass_kg == 0.0 {
             continue;
         }
@@ -1061,18 +1037,6 @@ fn normal_axes(axis: &[f64; 3]) -> [[f64; 3]; 2] {
     [u, crate::pose::cross(axis, &u)]
 }
 
-/// 1-based line and column of the region entry of joint `name` in a record's text: the line
-/// `name = "<name>"` (a `[[region.joint]]` table's, or an inline entry's); (1, 1) if none.
-fn region_line(text: &str, name: &str) -> (usize, usize) {
-    let wanted = format!("name = \"{name}\"");
-    (text.lines().enumerate())
-        .find_map(|(i, line)| {
-            line.find(&wanted)
-                .map(|c| (i + 1, line[..c].chars().count() + 1))
-        })
-        .unwrap_or((1, 1))
-}
-
 /// Refuses tips the calibration was not made for: every tip given must be one of the
 /// record's tips or its load tips (a record of schema 1 that names them; an earlier hapcal's
 /// names none).
@@ -1090,7 +1054,9 @@ fn check_tips(
     else {
         return Ok(());
     };
-    let (line, column) = crate::load::locate(text, "tips");
+    let (line, column) = TomlSpans::parse(text)
+        .record_line(&[Step::Key("tips")])
+        .unwrap_or((0, 0));
     Err(at_line(
         origin,
         (line, column),
@@ -1157,7 +1123,7 @@ impl Robot {
             let Some((_, own)) = urdf_joints.iter().find(|(n, _)| *n == element) else {
                 return Err(at_line(
                     origin,
-                    header_line(text, &format!("nominal.{element}")),
+                    nominal_line(text, element),
                     format!(
                         "[nominal.{element}]: the URDF has no joint {element:?}: the record was \
                          written for another robot"
@@ -1203,7 +1169,9 @@ impl Robot {
                 }
                 let name = format!("{element}.{field}");
                 let unit = if k < 3 { "m" } else { "rad" };
-                let (line, _) = crate::load::locate(text, &name);
+                let line = TomlSpans::parse(text)
+                    .value_line(&name)
+                    .map_or(0, |(l, _)| l);
                 let at = if line > 0 {
                     format!(" (line {line})")
                 } else {
@@ -1217,9 +1185,8 @@ impl Robot {
             let first = (FIELDS.iter())
                 .map(|f| format!("{element}.{f}"))
                 .chain(core::iter::once(format!("{element}.offset")))
-                .map(|name| crate::load::locate(text, &name))
-                .find(|(line, _)| *line > 0)
-                .unwrap_or_else(|| header_line(text, &format!("nominal.{element}")));
+                .find_map(|name| TomlSpans::parse(text).value_line(&name))
+                .unwrap_or_else(|| nominal_line(text, element));
             return Err(at_line(
                 origin,
                 first,
@@ -1241,20 +1208,10 @@ impl Robot {
     }
 }
 
-/// 1-based line and column of the table header `[<table>]` (or `[<prefix>.<table>]`, a
-/// device file's) in `text`; (0, 0) if none.
-fn header_line(text: &str, table: &str) -> (usize, usize) {
-    let dotted = format!(".{table}");
-    for (i, line) in text.lines().enumerate() {
-        let trimmed = line.trim_start();
-        let name = trimmed
-            .trim_start_matches('[')
-            .trim_end()
-            .trim_end_matches(']')
-            .trim();
-        if trimmed.starts_with('[') && (name == table || name.ends_with(&dotted)) {
-            return (i + 1, line.len() - trimmed.len() + 1);
-        }
-    }
-    (0, 0)
+/// 1-based line and column of the record's `[nominal.<element>]` table in `text`; (0, 0) if
+/// none.
+fn nominal_line(text: &str, element: &str) -> (usize, usize) {
+    TomlSpans::parse(text)
+        .record_line(&[Step::Key("nominal"), Step::Key(element)])
+        .unwrap_or((0, 0))
 }

@@ -808,7 +808,9 @@ fn device_cases(t: &mut Table) {
         t,
         "1e308 limit",
         edit("upper_rad = 1.0\n", "upper_rad = 1e308\n"),
-        &["@:66:13: upper_rad = 1e308 is outside ±1000 rad"],
+        &[
+            "@:66:13: joint[0].upper_rad = 1e308 rad is out of range: an angle must lie within ±1000 rad",
+        ],
     );
     simulate(
         t,

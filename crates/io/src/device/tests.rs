@@ -154,17 +154,18 @@ proptest! {
         tiny in -1e-300..1e-300f64,
         huge in prop::num::f64::POSITIVE | prop::num::f64::NORMAL,
     ) {
-        // Any finite angle; lengths within ±MAX_LENGTH_M (a longer one is refused, below).
+        // Angles within ±MAX_MAGNITUDE rad and lengths within ±MAX_LENGTH_M m, both 1000 (a
+        // larger one is refused, below).
         let max = crate::MAX_LENGTH_M;
         let mut device = reference();
-        device.dh[3].theta_rad = a;
+        device.dh[3].theta_rad = a.clamp(-max, max);
         device.dh[3].a_m = a.clamp(-max, max);
         device.dh[3].alpha_rad = alpha;
         device.dh[3].beta_rad = Some(tiny);
         device.cable_encoder = device.cable_encoder.map(|c| CableEncoder { drum_radius_m: huge.min(max), ..c });
         prop_assume!(huge.is_finite() && huge > 0.0);
         let again = parse_device(&write_device(&device), Path::new("p.toml")).unwrap();
-        prop_assert_eq!(again.dh[3].theta_rad.to_bits(), a.to_bits());
+        prop_assert_eq!(again.dh[3].theta_rad.to_bits(), a.clamp(-max, max).to_bits());
         prop_assert_eq!(again.dh[3].a_m.to_bits(), a.clamp(-max, max).to_bits());
         prop_assert_eq!(&again, &device);
         if a.abs() > max {
@@ -172,6 +173,14 @@ proptest! {
             let refused = parse_device(&write_device(&device), Path::new("p.toml"));
             prop_assert!(
                 matches!(refused, Err(crate::Error::LengthOutOfRange { .. })),
+                "{refused:?}"
+            );
+            device.dh[3].a_m = 0.0;
+            device.dh[3].theta_rad = a;
+            let refused = parse_device(&write_device(&device), Path::new("p.toml"));
+            prop_assert!(
+                matches!(&refused, Err(crate::Error::InvalidDevice { message, .. })
+                    if message.contains("an angle must lie within ±1000 rad")),
                 "{refused:?}"
             );
         }

@@ -1,30 +1,21 @@
 //! Semantic checks of a parsed device file, with file:line:column of the offending value.
 
 use std::collections::HashSet;
-use std::ops::Range;
 use std::path::Path;
 
-use toml::Spanned;
-use toml::de::{DeTable, DeValue};
+use hapcal_contract::locate::{Step as Key, TomlSpans};
 
 use super::{Device, JointRef};
 use crate::Error;
-use crate::error::line_column;
 
-/// A step into the TOML document: a key of a table or an index of an array.
-#[derive(Clone, Copy)]
-pub(super) enum Key<'k> {
-    Name(&'k str),
-    Index(usize),
-}
+use Key::{Index as I, Key as N};
 
-use Key::{Index as I, Name as N};
-
-/// Finds where a value sits in the device file's text.
+/// Finds where a value sits in the device file's text ([`TomlSpans`], the one locator of
+/// every TOML reader) and names the file in errors.
 pub(super) struct Locator<'a> {
     path: &'a Path,
     text: &'a str,
-    root: Option<Spanned<DeTable<'a>>>,
+    spans: TomlSpans<'a>,
 }
 
 impl<'a> Locator<'a> {
@@ -32,54 +23,21 @@ impl<'a> Locator<'a> {
         Locator {
             path,
             text,
-            root: DeTable::parse(text).ok(),
+            spans: TomlSpans::parse(text),
         }
-    }
-
-    /// Span of the deepest value along `keys` that exists.
-    fn span(&self, keys: &[Key<'_>]) -> Option<Range<usize>> {
-        let root = self.root.as_ref()?;
-        let mut found = None;
-        let mut current: Option<&Spanned<DeValue<'_>>> = None;
-        for (k, key) in keys.iter().enumerate() {
-            let next = match (k, key) {
-                (0, N(name)) => root.get_ref().get(*name),
-                (0, I(_)) => None,
-                (_, N(name)) => current.and_then(|v| v.get_ref().get(*name)),
-                (_, I(i)) => current.and_then(|v| v.get_ref().get(*i)),
-            };
-            let Some(next) = next else { break };
-            found = Some(next.span());
-            current = Some(next);
-        }
-        found
     }
 
     /// Whether the file has a value at exactly `keys`.
     fn has(&self, keys: &[Key<'_>]) -> bool {
-        let Some(root) = self.root.as_ref() else {
-            return false;
-        };
-        let mut current: Option<&Spanned<DeValue<'_>>> = None;
-        for (k, key) in keys.iter().enumerate() {
-            current = match (k, key) {
-                (0, N(name)) => root.get_ref().get(*name),
-                (0, I(_)) => None,
-                (_, N(name)) => current.and_then(|v| v.get_ref().get(*name)),
-                (_, I(i)) => current.and_then(|v| v.get_ref().get(*i)),
-            };
-            if current.is_none() {
-                return false;
-            }
-        }
-        current.is_some()
+        self.spans.has(keys)
     }
 
     /// 1-based (line, column) of the value at `keys`, or of its nearest existing parent,
     /// or (1, 1).
     fn at(&self, keys: &[Key<'_>]) -> (u64, u64) {
-        self.span(keys)
-            .map_or((1, 1), |s| line_column(self.text, s.start))
+        self.spans
+            .line_column(keys)
+            .map_or((1, 1), |(line, column)| (line as u64, column as u64))
     }
 
     pub(super) fn invalid(&self, keys: &[Key<'_>], message: impl Into<String>) -> Error {
@@ -110,28 +68,8 @@ impl<'a> Locator<'a> {
         Ok(())
     }
 
-    fn finite(&self, keys: &[Key<'_>], value: f64) -> Result<(), Error> {
-        if value.is_finite() {
-            return Ok(());
-        }
-        let (line, column) = self.at(keys);
-        Err(Error::NotFinite {
-            path: self.path.to_path_buf(),
-            line,
-            column,
-            name: key_name(keys),
-            found: format!("{value}"),
-        })
-    }
-
-    /// Checks `value` is a finite length within ±[`MAX_LENGTH_M`](crate::MAX_LENGTH_M).
-    fn length(&self, keys: &[Key<'_>], value: f64) -> Result<(), Error> {
-        self.finite(keys, value)?;
-        let (line, column) = self.at(keys);
-        Error::check_length(self.path, line, column, &key_name(keys), value)
-    }
-
-    /// Checks `value` is finite and `ok(value)`, else reports `requirement` at `keys`.
+    /// Checks `ok(value)` (a number [`check_numbers`] has found finite), else reports
+    /// `requirement` at `keys`.
     fn check(
         &self,
         keys: &[Key<'_>],
@@ -139,7 +77,6 @@ impl<'a> Locator<'a> {
         ok: impl Fn(f64) -> bool,
         requirement: &str,
     ) -> Result<(), Error> {
-        self.finite(keys, value)?;
         if ok(value) {
             Ok(())
         } else {
@@ -155,21 +92,13 @@ impl<'a> Locator<'a> {
     }
 }
 
-/// Largest magnitude of a joint limit in a device file, rad: a thousand radians (about 159
-/// turns) is far beyond any device's travel and keeps every angle's sine and square well
-/// conditioned.
-pub(crate) const MAX_JOINT_LIMIT_RAD: f64 = 1e3;
-
-fn any(_: f64) -> bool {
-    true
-}
-
 fn positive(v: f64) -> bool {
     v > 0.0
 }
 
 /// Every check listed at [`read_device`](super::read_device).
 pub(super) fn validate(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
+    check_numbers(loc)?;
     check_chain(device, loc)?;
     check_joints(device, loc)?;
     check_transmissions(device, loc)?;
@@ -182,6 +111,41 @@ pub(super) fn validate(device: &Device, loc: &Locator<'_>) -> Result<(), Error> 
         .tree()
         .map_err(|e| loc.invalid(&[N("branch")], e.to_string()))?;
     Ok(())
+}
+
+/// Every number of the file finite, every length and angle within ±1000 m or rad: the
+/// contract's [`check_numbers`](hapcal_contract::device::check_numbers), which the runtime
+/// makes too. A number that is not finite is an [`Error::NotFinite`], a length past the bound an
+/// [`Error::LengthOutOfRange`] (worded as the contract words it), an angle an
+/// [`Error::InvalidDevice`].
+fn check_numbers(loc: &Locator<'_>) -> Result<(), Error> {
+    let Err(bad) = hapcal_contract::device::check_numbers(loc.text) else {
+        return Ok(());
+    };
+    let (path, line, column) = (loc.path.to_path_buf(), bad.line as u64, bad.column as u64);
+    Err(match bad.past_bound {
+        None => Error::NotFinite {
+            path,
+            line,
+            column,
+            found: format!("{}", bad.value),
+            name: bad.name,
+        },
+        Some("m") => Error::LengthOutOfRange {
+            path,
+            line,
+            column,
+            value_m: bad.value,
+            limit_m: crate::MAX_LENGTH_M,
+            name: bad.name,
+        },
+        Some(_) => Error::InvalidDevice {
+            path,
+            line,
+            column,
+            message: bad.to_string(),
+        },
+    })
 }
 
 fn check_chain(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
@@ -209,18 +173,6 @@ fn check_chain(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
 
     let mut previous = 0;
     for (i, row) in device.dh.iter().enumerate() {
-        for (field, value) in [
-            ("a_m", row.a_m),
-            ("alpha_rad", row.alpha_rad),
-            ("d_m", row.d_m),
-            ("theta_rad", row.theta_rad),
-            ("beta_rad", row.beta_rad.unwrap_or(0.0)),
-        ] {
-            loc.finite(&[N("dh"), I(i), N(field)], value)?;
-        }
-        for (field, value) in [("a_m", row.a_m), ("d_m", row.d_m)] {
-            loc.length(&[N("dh"), I(i), N(field)], value)?;
-        }
         if let JointRef::Joint(j) = row.joint {
             if j != previous + 1 {
                 return Err(loc.invalid(
@@ -249,17 +201,6 @@ fn check_chain(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
     for (row, p) in main.chain(branches) {
         let at = |field| [row.as_slice(), &[N(field)]].concat();
         loc.new_name(&at("name"), "placement", &p.name, &mut names)?;
-        for (field, values) in [("xyz_m", p.xyz_m), ("rpy_rad", p.rpy_rad)]
-            .into_iter()
-            .chain(p.axis.map(|a| ("axis", a)))
-        {
-            for (k, v) in values.into_iter().enumerate() {
-                loc.finite(&[at(field).as_slice(), &[I(k)]].concat(), v)?;
-            }
-        }
-        for (k, v) in p.xyz_m.into_iter().enumerate() {
-            loc.length(&[at("xyz_m").as_slice(), &[I(k)]].concat(), v)?;
-        }
         if let Some(axis) = p.axis
             && axis.iter().map(|a| a * a).sum::<f64>().sqrt() < 1e-12
         {
@@ -342,17 +283,6 @@ fn check_joints(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
                 ));
             }
         }
-        if is_prismatic {
-            loc.length(&at(lower_key), joint.lower_rad)?;
-            loc.length(&at(upper_key), joint.upper_rad)?;
-        } else {
-            // A limit beyond ±MAX_JOINT_LIMIT_RAD (about 159 turns) is a wrong unit or a
-            // placeholder, and would let any reading pass the limit checks of the readers.
-            let within = |v: f64| v.abs() <= MAX_JOINT_LIMIT_RAD;
-            let requirement = format!("is outside ±{MAX_JOINT_LIMIT_RAD} rad");
-            loc.check(&at(lower_key), joint.lower_rad, within, &requirement)?;
-            loc.check(&at(upper_key), joint.upper_rad, within, &requirement)?;
-        }
         if joint.lower_rad >= joint.upper_rad {
             return Err(loc.invalid(
                 &at(lower_key),
@@ -393,7 +323,6 @@ fn check_transmissions(device: &Device, loc: &Locator<'_>) -> Result<(), Error> 
             positive,
             "must be positive",
         )?;
-        loc.length(&at("drum_distance_m"), c.drum_distance_m)?;
     }
     if let Some(p) = &device.parallelogram {
         for (field, value) in [
@@ -408,7 +337,6 @@ fn check_transmissions(device: &Device, loc: &Locator<'_>) -> Result<(), Error> 
                 positive,
                 "must be positive",
             )?;
-            loc.length(&[N("parallelogram"), N(field)], value)?;
         }
     }
     if let Some(c) = &device.cable_encoder {
@@ -419,7 +347,6 @@ fn check_transmissions(device: &Device, loc: &Locator<'_>) -> Result<(), Error> 
             positive,
             "must be positive",
         )?;
-        loc.length(&at("drum_radius_m"), c.drum_radius_m)?;
         if c.counts_per_rev == 0 {
             return Err(loc.invalid(&at("counts_per_rev"), "counts_per_rev must be positive"));
         }
@@ -433,17 +360,6 @@ fn check_transmissions(device: &Device, loc: &Locator<'_>) -> Result<(), Error> 
         )?;
     }
     Ok(())
-}
-
-/// The dotted name of the value at `keys` (`dh[2].a_m`), as messages give it.
-fn key_name(keys: &[Key<'_>]) -> String {
-    let name: String = (keys.iter())
-        .map(|k| match k {
-            N(n) => format!(".{n}"),
-            I(i) => format!("[{i}]"),
-        })
-        .collect();
-    name.trim_start_matches('.').to_owned()
 }
 
 fn check_calibration(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
@@ -468,12 +384,11 @@ fn check_calibration(device: &Device, loc: &Locator<'_>) -> Result<(), Error> {
             });
         }
     }
+    // An earlier hapcal's record too: each value's numbers, at its std.
     for v in &calibration.values {
-        let at = |field| [N("calibration"), N("values"), N(&v.name), N(field)];
-        loc.check(&at("value"), v.value, any, "")?;
-        loc.check(&at("std"), v.std, |s| s >= 0.0, "must not be negative")?;
-        if v.unit == "m" {
-            loc.length(&at("value"), v.value)?;
+        if let Err(message) = v.check_numbers() {
+            let at = [N("calibration"), N("values"), N(&v.name), N("std")];
+            return Err(loc.invalid(&at, format!("{}: {message}", v.name)));
         }
     }
     Ok(())

@@ -194,6 +194,11 @@ fn semantic_checks_point_at_the_offending_value() {
             "edited.toml:29:11: mass_kg = -0.2 must not be negative",
         ),
         (
+            // An earlier hapcal's record (no schema_version): its values are checked too.
+            with("[calibration.values]\nda0 = { value = 0.001, std = -1.0, unit = \"m\" }\n"),
+            "edited.toml:29:30: da0: value 0.001 with std -1: expected finite numbers, std ≥ 0",
+        ),
+        (
             with(
                 "[[placement]]\nname = \"a\"\nxyz_m = [0.0, 0.0, 0.0]\nrpy_rad = [0.0, 0.0, 0.0]\n",
             ),
