@@ -1,40 +1,23 @@
-//! Transmissions: the map from a joint reading θ to the joint angle q and its derivative.
+//! Transmissions: the map from a joint reading θ to the joint angle q and its derivative,
+//! evaluated by `hapcal-transmission` (the calibration library's own evaluation, with the
+//! runtime's elementary functions).
 
-use crate::math::{atan, sin_cos};
+/// Parameters of the capstan transmission error, paper eq. 1 (docs/design.md §3.2): the
+/// calibration library's type. `Default` is the ideal drive (no offset, exact ratio,
+/// concentric drums). The names are those of `[calibration.values]`: `capstan{j}.c`, `.re`,
+/// `.r_o`, `.beta_o`, `.r_i`, `.beta_i`.
+pub use hapcal_transmission::CapstanParams;
+use hapcal_transmission::{
+    Capstan, CapstanTransmission, JointRad, chebyshev_derivative, chebyshev_value,
+};
+
+use crate::math::RuntimeFunctions;
 use crate::{Error, MAX_COEFFS};
-
-/// Parameters of the capstan transmission error, paper eq. 1 (docs/design.md §3.2).
-///
-/// `Default` is the ideal drive (no offset, exact ratio, concentric drums). The names are
-/// those of `[calibration.values]`: `capstan{j}.c`, `.re`, `.r_o`, `.beta_o`, `.r_i`,
-/// `.beta_i`.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct CapstanParams {
-    /// Joint offset `c`, rad.
-    pub c_rad: f64,
-    /// Ratio error `Re` (the actual ratio is `R + Re`), dimensionless.
-    pub re: f64,
-    /// Output-drum eccentricity radius `r_o`, m.
-    pub r_o_m: f64,
-    /// Output-drum eccentricity phase `β_o`, rad.
-    pub beta_o_rad: f64,
-    /// Input-drum eccentricity radius `r_i`, m.
-    pub r_i_m: f64,
-    /// Input-drum eccentricity phase `β_i`, rad.
-    pub beta_i_rad: f64,
-}
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Kind {
     Direct,
-    Capstan {
-        drum_distance_m: f64,
-        p: CapstanParams,
-        /// `atan(r_o sin β_o / (D − r_o cos β_o))`, the output term at θ = 0.
-        ecc_o0: f64,
-        /// The input term at θ = 0.
-        ecc_i0: f64,
-    },
+    Capstan(CapstanTransmission<RuntimeFunctions>),
     Polynomial {
         lo: f64,
         hi: f64,
@@ -54,16 +37,6 @@ enum Kind {
 pub struct Drive {
     ratio: f64,
     kind: Kind,
-}
-
-/// One eccentricity term of eq. 1 and its derivative with respect to its phase φ:
-/// `atan(r sin φ / (D − r cos φ))` and `r (D cos φ − r) / (r² + D² − 2 r D cos φ)`.
-#[inline]
-fn ecc_and_dphi(r: f64, d: f64, phi: f64) -> (f64, f64) {
-    let (s, c) = sin_cos(phi);
-    let value = atan(r * s / (d - r * c));
-    let q = r * r + d * d - 2.0 * r * d * c;
-    (value, r * (d * c - r) / q)
 }
 
 fn positive(what: &'static str, value: f64) -> Result<f64, Error> {
@@ -136,12 +109,10 @@ impl Drive {
         }
         Ok(Drive {
             ratio,
-            kind: Kind::Capstan {
-                drum_distance_m: d,
+            kind: Kind::Capstan(CapstanTransmission::with_functions(
+                Capstan::new_unchecked(ratio, d),
                 p,
-                ecc_o0: ecc_and_dphi(p.r_o_m, d, p.beta_o_rad).0,
-                ecc_i0: ecc_and_dphi(p.r_i_m, d, p.beta_i_rad).0,
-            },
+            )),
         })
     }
 
@@ -235,26 +206,18 @@ impl Drive {
     }
 
     /// Joint angle q (rad) and `dq/dθ` (rad/rad) at reading `theta` (rad), analytic:
-    /// `1 + ∂Δθ_caps/∂θ` for a capstan (paper eq. 1 differentiated), `1 + p'(θ)` for a
+    /// `1 + ∂Δθ_caps/∂θ` for a capstan (paper eq. 1 differentiated,
+    /// `hapcal_transmission::CapstanTransmission::error_and_dtheta`), `1 + p'(θ)` for a
     /// polynomial (`T_k' = k·U_{k−1}`; Trefethen, *Approximation Theory and Approximation
-    /// Practice*, 2013, ch. 3). No allocation.
+    /// Practice*, 2013, ch. 3; `hapcal_transmission::chebyshev_value` and
+    /// `chebyshev_derivative`). No allocation.
     #[inline]
     pub fn angle_and_derivative(&self, theta: f64) -> (f64, f64) {
         match &self.kind {
             Kind::Direct => (theta, 1.0),
-            Kind::Capstan {
-                drum_distance_m: d,
-                p,
-                ecc_o0,
-                ecc_i0,
-            } => {
-                let (r, t) = (self.ratio, theta);
-                let (eo, dbo) = ecc_and_dphi(p.r_o_m, *d, t + p.beta_o_rad);
-                let (ei, dbi) = ecc_and_dphi(p.r_i_m, *d, r * t + p.beta_i_rad);
-                // Each eccentricity difference first, so that θ = 0 gives exactly `c`.
-                let error = p.c_rad - p.re / (p.re + r) * t + (eo - ecc_o0) + (ei - ecc_i0);
-                let derror = -p.re / (p.re + r) + dbo + r * dbi;
-                (t + error, 1.0 + derror)
+            Kind::Capstan(transmission) => {
+                let (error, derror) = transmission.error_and_dtheta(JointRad(theta));
+                (theta + error, 1.0 + derror)
             }
             Kind::Polynomial {
                 lo,
@@ -262,26 +225,11 @@ impl Drive {
                 n_coeffs,
                 coeffs,
             } => {
-                let w = hi - lo;
-                let u = (2.0 * theta - lo - hi) / w;
                 let coeffs = coeffs.get(..*n_coeffs).unwrap_or(&[]);
-                // Clenshaw's recurrence for p, the U_{k−1} recurrence for p'.
-                let (mut b1, mut b2) = (0.0, 0.0);
-                for &c in coeffs.iter().skip(1).rev() {
-                    let b0 = c + 2.0 * u * b1 - b2;
-                    b2 = b1;
-                    b1 = b0;
-                }
-                let value = coeffs.first().copied().unwrap_or(0.0) + u * b1 - b2;
-                let (mut u_prev, mut u_cur) = (0.0, 1.0);
-                let mut sum = 0.0;
-                for (k, &c) in coeffs.iter().enumerate().skip(1) {
-                    sum += c * k as f64 * u_cur;
-                    let next = 2.0 * u * u_cur - u_prev;
-                    u_prev = u_cur;
-                    u_cur = next;
-                }
-                (theta + value, 1.0 + sum * (2.0 / w))
+                (
+                    theta + chebyshev_value(*lo, *hi, coeffs, theta),
+                    1.0 + chebyshev_derivative(*lo, *hi, coeffs, theta),
+                )
             }
         }
     }

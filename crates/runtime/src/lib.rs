@@ -11,7 +11,8 @@
 //!
 //! - `q = θ + Δθ_caps(θ)` per capstan (paper eq. 1), `q = θ + p(θ)` for the joint-4
 //!   polynomial that models capstan plus parallelogram (paper eq. 2, docs/design.md §3.3),
-//!   and `dq/dθ`, analytic ([`Drive`]);
+//!   and `dq/dθ`, analytic ([`Drive`], evaluated by `hapcal-transmission`, the calibration
+//!   library's own evaluation of both);
 //! - the tip pose `T = A_0·A_1⋯A_n` (paper eqs. 3–4), the body Jacobian (tip frame) and the
 //!   spatial Jacobian (base frame) at the end point ([`Model::body_jacobian`],
 //!   [`Model::spatial_jacobian`]);

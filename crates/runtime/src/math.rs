@@ -1,7 +1,8 @@
 //! The few elementary functions the evaluation needs: libm's `sincos` in every build (one
 //! call for both), the platform's `atan` with `std` and libm's without (the same functions
 //! to within an ulp or so; the tests hold either to 1e-12), and sine and cosine of an angle
-//! near one whose sine and cosine are known.
+//! near one whose sine and cosine are known. The transmissions' formulas are
+//! `hapcal-transmission`'s, evaluated with these functions ([`RuntimeFunctions`]).
 
 /// Sine and cosine of `x` (rad) in one call (libm's, with or without `std`: the standard
 /// library computes them apart).
@@ -59,6 +60,24 @@ pub(crate) fn atan(x: f64) -> f64 {
 #[inline]
 pub(crate) fn atan(x: f64) -> f64 {
     libm::atan(x)
+}
+
+/// The runtime's elementary functions as `hapcal-transmission` takes them: the capstans'
+/// eq. 1 is the library's formula, evaluated with [`sin_cos`] and [`atan`] (libm's `sincos`
+/// is about half the cost of the standard library's sine plus cosine).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct RuntimeFunctions;
+
+impl hapcal_transmission::ElementaryFunctions for RuntimeFunctions {
+    #[inline]
+    fn sin_cos(x: f64) -> (f64, f64) {
+        sin_cos(x)
+    }
+
+    #[inline]
+    fn atan(x: f64) -> f64 {
+        atan(x)
+    }
 }
 
 #[cfg(all(test, feature = "std"))]

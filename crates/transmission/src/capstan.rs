@@ -1,6 +1,15 @@
 //! The capstan drive: ratio, drum distance and the transmission error of paper eq. 1.
 
+#[cfg(feature = "std")]
 use crate::error::{Error, positive};
+use core::marker::PhantomData;
+
+use crate::math::{DefaultFunctions, ElementaryFunctions};
+
+/// `(sin x, cos x)` of the crate's own functions, x in rad.
+fn sin_cos(x: f64) -> (f64, f64) {
+    DefaultFunctions::sin_cos(x)
+}
 
 /// Joint-side angle (motor angle / R), rad: what the device reports as the joint reading.
 #[derive(Clone, Copy, Debug, PartialEq, PartialOrd)]
@@ -55,16 +64,26 @@ pub struct Capstan {
     drum_distance_m: f64,
 }
 
-/// One eccentricity term of eq. 1, `atan(r sin φ / (D − r cos φ))`, rad.
-fn ecc(r: f64, d: f64, phi: f64) -> f64 {
-    (r * phi.sin() / (d - r * phi.cos())).atan()
+/// One eccentricity term of eq. 1, `atan(r sin φ / (D − r cos φ))` (rad), and its
+/// derivative with respect to its phase φ, rad/rad ([`ecc_grad_at`]).
+#[inline]
+fn ecc_and_dphi<F: ElementaryFunctions>(r: f64, d: f64, phi: f64) -> (f64, f64) {
+    let (s, c) = F::sin_cos(phi);
+    (F::atan(r * s / (d - r * c)), ecc_grad_at(r, d, s, c).1)
 }
 
-/// `(∂/∂r, ∂/∂φ)` of [`ecc`]: `(D sin φ, r (D cos φ − r)) / (r² + D² − 2 r D cos φ)`.
-fn ecc_grad(r: f64, d: f64, phi: f64) -> (f64, f64) {
-    let (s, c) = phi.sin_cos();
+/// `(∂/∂r, ∂/∂φ)` of the eccentricity term `atan(r sin φ / (D − r cos φ))`:
+/// `(D sin φ, r (D cos φ − r)) / (r² + D² − 2 r D cos φ)`, from `s = sin φ`, `c = cos φ`.
+#[inline]
+fn ecc_grad_at(r: f64, d: f64, s: f64, c: f64) -> (f64, f64) {
     let q = r * r + d * d - 2.0 * r * d * c;
     (d * s / q, r * (d * c - r) / q)
+}
+
+/// [`ecc_grad_at`] at phase `phi`, rad.
+fn ecc_grad(r: f64, d: f64, phi: f64) -> (f64, f64) {
+    let (s, c) = sin_cos(phi);
+    ecc_grad_at(r, d, s, c)
 }
 
 impl Capstan {
@@ -73,11 +92,23 @@ impl Capstan {
     ///
     /// # Errors
     /// [`Error::NotFinite`] or [`Error::NonPositive`] naming `ratio` or `drum_distance_m`.
+    #[cfg(feature = "std")]
     pub fn try_new(ratio: f64, drum_distance_m: f64) -> Result<Capstan, Error> {
         Ok(Capstan {
             ratio: positive("ratio", ratio)?,
             drum_distance_m: positive("drum_distance_m", drum_distance_m)?,
         })
+    }
+
+    /// A capstan of nominal ratio `ratio` and drum centre distance `drum_distance_m` (m),
+    /// unchecked: for a caller that has checked both are finite and positive with errors of
+    /// its own (`hapcal-runtime`, also without `std`, where [`Error`] does not exist).
+    /// Otherwise eq. 1 evaluates to NaN or ∞, or to numbers without meaning.
+    pub fn new_unchecked(ratio: f64, drum_distance_m: f64) -> Capstan {
+        Capstan {
+            ratio,
+            drum_distance_m,
+        }
     }
 
     /// Nominal ratio `R` (dimensionless).
@@ -100,6 +131,7 @@ impl Capstan {
     /// # Errors
     /// [`Error::NotFinite`] naming the field, [`Error::EccentricityTooLarge`] for `r_o_m` or
     /// `r_i_m`, [`Error::NonPositive`] named `ratio + re` when `R + Re ≤ 0`.
+    #[cfg(feature = "std")]
     pub fn check_params(&self, p: &CapstanParams) -> Result<(), Error> {
         let fields = [
             ("c_rad", p.c_rad),
@@ -143,13 +175,12 @@ impl Capstan {
     ///
     /// `theta` is the joint reading (motor angle / R); offset + ratio error + output-drum and
     /// input-drum eccentricity. `Δθ(0) = c` exactly. The value is only meaningful where
-    /// [`Capstan::check_params`] accepts `p` (otherwise it may be NaN or ∞).
+    /// [`Capstan::check_params`] accepts `p` (otherwise it may be NaN or ∞). Evaluated by
+    /// [`CapstanTransmission::error_and_dtheta`].
     pub fn error_rad(&self, p: &CapstanParams, theta: JointRad) -> f64 {
-        let (r, d, t) = (self.ratio, self.drum_distance_m, theta.0);
-        // Each eccentricity difference is formed first, so that θ = 0 gives exactly `c`.
-        let output_ecc = ecc(p.r_o_m, d, t + p.beta_o_rad) - ecc(p.r_o_m, d, p.beta_o_rad);
-        let input_ecc = ecc(p.r_i_m, d, r * t + p.beta_i_rad) - ecc(p.r_i_m, d, p.beta_i_rad);
-        p.c_rad - p.re / (p.re + r) * t + output_ecc + input_ecc
+        CapstanTransmission::new(*self, *p)
+            .error_and_dtheta(theta)
+            .0
     }
 
     /// The true output angle for reading `theta`: `θ + Δθ(θ)`, rad ([`Capstan::error_rad`],
@@ -194,22 +225,91 @@ impl Capstan {
     /// is what a design criterion evaluated at the nominal drive needs.
     pub fn linear_basis(&self, theta: JointRad) -> [f64; 6] {
         let (t, r) = (theta.0, self.ratio);
-        [
-            1.0,
-            t,
-            t.sin(),
-            t.cos() - 1.0,
-            (r * t).sin(),
-            (r * t).cos() - 1.0,
-        ]
+        let ((s, c), (sr, cr)) = (sin_cos(t), sin_cos(r * t));
+        [1.0, t, s, c - 1.0, sr, cr - 1.0]
     }
 
-    /// `∂Δθ/∂θ` (paper eq. 1), analytic, rad/rad.
+    /// `∂Δθ/∂θ` (paper eq. 1), analytic, rad/rad ([`CapstanTransmission::error_and_dtheta`]).
     pub fn error_dtheta(&self, p: &CapstanParams, theta: JointRad) -> f64 {
-        let (r, d, t) = (self.ratio, self.drum_distance_m, theta.0);
-        let (_, dbo) = ecc_grad(p.r_o_m, d, t + p.beta_o_rad);
-        let (_, dbi) = ecc_grad(p.r_i_m, d, r * t + p.beta_i_rad);
-        -p.re / (p.re + r) + dbo + r * dbi
+        CapstanTransmission::new(*self, *p)
+            .error_and_dtheta(theta)
+            .1
+    }
+}
+
+/// A capstan with its eq. 1 parameters, ready to evaluate at many readings: the two
+/// eccentricity terms at θ = 0 are computed once. The one evaluation of eq. 1 and its
+/// θ-derivative: [`Capstan::error_rad`] and [`Capstan::error_dtheta`] go through it, and
+/// `hapcal-runtime` holds one per capstan joint. No allocation.
+///
+/// `F` gives the sine, cosine and arctangent ([`ElementaryFunctions`]): the crate's own by
+/// default; the runtime passes its own.
+///
+/// Source: paper eq. 1; docs/design.md §3.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CapstanTransmission<F = DefaultFunctions> {
+    functions: PhantomData<F>,
+    capstan: Capstan,
+    params: CapstanParams,
+    /// `atan(r_o sin β_o / (D − r_o cos β_o))`, the output-drum term at θ = 0, rad.
+    output_ecc_at_zero: f64,
+    /// `atan(r_i sin β_i / (D − r_i cos β_i))`, the input-drum term at θ = 0, rad.
+    input_ecc_at_zero: f64,
+}
+
+impl CapstanTransmission {
+    /// `capstan` with parameters `params`, evaluated with the crate's own functions
+    /// ([`DefaultFunctions`]). The numbers are only meaningful where
+    /// [`Capstan::check_params`] accepts `params` (otherwise they may be NaN or ∞).
+    #[inline]
+    pub fn new(capstan: Capstan, params: CapstanParams) -> CapstanTransmission {
+        CapstanTransmission::with_functions(capstan, params)
+    }
+}
+
+impl<F: ElementaryFunctions> CapstanTransmission<F> {
+    /// As [`CapstanTransmission::new`], evaluated with the functions of `F`.
+    #[inline]
+    pub fn with_functions(capstan: Capstan, params: CapstanParams) -> CapstanTransmission<F> {
+        let d = capstan.drum_distance_m;
+        CapstanTransmission {
+            functions: PhantomData,
+            capstan,
+            params,
+            output_ecc_at_zero: ecc_and_dphi::<F>(params.r_o_m, d, params.beta_o_rad).0,
+            input_ecc_at_zero: ecc_and_dphi::<F>(params.r_i_m, d, params.beta_i_rad).0,
+        }
+    }
+
+    /// The capstan (ratio and drum distance).
+    pub fn capstan(&self) -> Capstan {
+        self.capstan
+    }
+
+    /// The eq. 1 parameters.
+    pub fn params(&self) -> &CapstanParams {
+        &self.params
+    }
+
+    /// Transmission error Δθ_caps(θ) (rad, paper eq. 1; see [`Capstan::error_rad`]) and its
+    /// derivative `∂Δθ_caps/∂θ` (rad/rad, eq. 1 differentiated) at reading `theta`: one
+    /// sine, cosine and arctangent per drum. `Δθ_caps(0) = c` exactly.
+    #[inline]
+    pub fn error_and_dtheta(&self, theta: JointRad) -> (f64, f64) {
+        let (r, d, t, p) = (
+            self.capstan.ratio,
+            self.capstan.drum_distance_m,
+            theta.0,
+            &self.params,
+        );
+        let (eo, dbo) = ecc_and_dphi::<F>(p.r_o_m, d, t + p.beta_o_rad);
+        let (ei, dbi) = ecc_and_dphi::<F>(p.r_i_m, d, r * t + p.beta_i_rad);
+        // Each eccentricity difference first, so that θ = 0 gives exactly `c`.
+        let error = p.c_rad - p.re / (p.re + r) * t
+            + (eo - self.output_ecc_at_zero)
+            + (ei - self.input_ecc_at_zero);
+        let derror = -p.re / (p.re + r) + dbo + r * dbi;
+        (error, derror)
     }
 }
 

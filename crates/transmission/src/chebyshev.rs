@@ -1,6 +1,7 @@
 //! Polynomials in the Chebyshev basis on a joint range, with conversion to the paper's
 //! monomial coefficients.
 
+#[cfg(feature = "std")]
 use crate::error::{Error, all_finite};
 
 /// Polynomial `p(θ) = Σ_k c_k T_k(u)` on `[lo, hi]` (rad) in the Chebyshev basis, with
@@ -12,6 +13,7 @@ use crate::error::{Error, all_finite};
 ///
 /// Source: L. N. Trefethen, *Approximation Theory and Approximation Practice*, SIAM 2013,
 /// ch. 3 (Chebyshev polynomials and series) and ch. 4 (the three-term recurrence, Clenshaw).
+#[cfg(feature = "std")]
 #[derive(Clone, Debug, PartialEq)]
 pub struct Chebyshev {
     /// Lower end of the domain, rad.
@@ -22,6 +24,7 @@ pub struct Chebyshev {
     pub coeffs: Vec<f64>,
 }
 
+#[cfg(feature = "std")]
 impl Chebyshev {
     /// A polynomial on `[lo, hi]` (rad) with Chebyshev coefficients `coeffs` (rad, `degree + 1`
     /// entries).
@@ -84,45 +87,22 @@ impl Chebyshev {
         self.coeffs.len().saturating_sub(1)
     }
 
-    /// `u(θ) = (2θ − lo − hi)/(hi − lo)`, and `du/dθ`, 1/rad.
-    fn u(&self, theta: f64) -> (f64, f64) {
-        let w = self.hi - self.lo;
-        ((2.0 * theta - self.lo - self.hi) / w, 2.0 / w)
-    }
-
-    /// `p(θ)`, rad, by Clenshaw's recurrence (Trefethen, ATAP ch. 3). Outside `[lo, hi]` the
-    /// polynomial is extrapolated.
+    /// `p(θ)`, rad, by Clenshaw's recurrence (Trefethen, ATAP ch. 3; [`chebyshev_value`]).
+    /// Outside `[lo, hi]` the polynomial is extrapolated.
     pub fn eval(&self, theta: f64) -> f64 {
-        let (u, _) = self.u(theta);
-        let (mut b1, mut b2) = (0.0, 0.0);
-        for &c in self.coeffs.iter().skip(1).rev() {
-            let b0 = c + 2.0 * u * b1 - b2;
-            b2 = b1;
-            b1 = b0;
-        }
-        self.coeffs.first().copied().unwrap_or(0.0) + u * b1 - b2
+        chebyshev_value(self.lo, self.hi, &self.coeffs, theta)
     }
 
     /// `dp/dθ`, rad/rad: `Σ_k c_k k U_{k−1}(u) · 2/(hi − lo)` (`T_k' = k U_{k−1}`, Trefethen,
-    /// ATAP ch. 3).
+    /// ATAP ch. 3; [`chebyshev_derivative`]).
     pub fn derivative(&self, theta: f64) -> f64 {
-        let (u, du) = self.u(theta);
-        // U_{k−1} for k = 1, 2, …: U_0 = 1, U_1 = 2u, U_{k+1} = 2u U_k − U_{k−1}.
-        let (mut u_prev, mut u_cur) = (0.0, 1.0);
-        let mut sum = 0.0;
-        for (k, &c) in self.coeffs.iter().enumerate().skip(1) {
-            sum += c * k as f64 * u_cur;
-            let next = 2.0 * u * u_cur - u_prev;
-            u_prev = u_cur;
-            u_cur = next;
-        }
-        sum * du
+        chebyshev_derivative(self.lo, self.hi, &self.coeffs, theta)
     }
 
     /// `T_k(u(θ))` for `k = 0..=degree` (length `degree + 1`): the Jacobian row of
     /// [`Chebyshev::eval`] with respect to `coeffs`, rad/rad.
     pub fn basis(&self, theta: f64) -> Vec<f64> {
-        chebyshev_basis(self.u(theta).0, self.coeffs.len())
+        chebyshev_basis(unit_u(self.lo, self.hi, theta).0, self.coeffs.len())
     }
 
     /// Monomial coefficients `k_0..k_n` (rad/radⁱ) of the same polynomial in θ (rad):
@@ -164,7 +144,49 @@ impl Chebyshev {
     }
 }
 
+/// `u(θ) = (2θ − lo − hi)/(hi − lo)`, and `du/dθ`, 1/rad.
+#[inline]
+fn unit_u(lo: f64, hi: f64, theta: f64) -> (f64, f64) {
+    let w = hi - lo;
+    ((2.0 * theta - lo - hi) / w, 2.0 / w)
+}
+
+/// `p(θ) = Σ_k coeffs[k]·T_k(u)` (rad) with `u = (2θ − lo − hi)/(hi − lo)`: the polynomial
+/// of [`Chebyshev::eval`] on `[lo, hi]` (rad) from a coefficient slice (rad, any length; 0
+/// when empty), by Clenshaw's recurrence (Trefethen, ATAP ch. 3). No allocation; unchecked
+/// (NaN or ∞ unless `lo < hi`). Outside `[lo, hi]` the polynomial is extrapolated.
+#[inline]
+pub fn chebyshev_value(lo: f64, hi: f64, coeffs: &[f64], theta: f64) -> f64 {
+    let (u, _) = unit_u(lo, hi, theta);
+    let (mut b1, mut b2) = (0.0, 0.0);
+    for &c in coeffs.iter().skip(1).rev() {
+        let b0 = c + 2.0 * u * b1 - b2;
+        b2 = b1;
+        b1 = b0;
+    }
+    coeffs.first().copied().unwrap_or(0.0) + u * b1 - b2
+}
+
+/// `dp/dθ` (rad/rad) of [`chebyshev_value`]'s polynomial:
+/// `Σ_k coeffs[k]·k·U_{k−1}(u) · 2/(hi − lo)` (`T_k' = k U_{k−1}`, Trefethen, ATAP ch. 3).
+/// No allocation; unchecked, as [`chebyshev_value`].
+#[inline]
+pub fn chebyshev_derivative(lo: f64, hi: f64, coeffs: &[f64], theta: f64) -> f64 {
+    let (u, du) = unit_u(lo, hi, theta);
+    // U_{k−1} for k = 1, 2, …: U_0 = 1, U_1 = 2u, U_{k+1} = 2u U_k − U_{k−1}.
+    let (mut u_prev, mut u_cur) = (0.0, 1.0);
+    let mut sum = 0.0;
+    for (k, &c) in coeffs.iter().enumerate().skip(1) {
+        sum += c * k as f64 * u_cur;
+        let next = 2.0 * u * u_cur - u_prev;
+        u_prev = u_cur;
+        u_cur = next;
+    }
+    sum * du
+}
+
 /// `[T_0(u), …, T_{len−1}(u)]` by the three-term recurrence.
+#[cfg(feature = "std")]
 pub(crate) fn chebyshev_basis(u: f64, len: usize) -> Vec<f64> {
     let mut t = Vec::with_capacity(len);
     for k in 0..len {
@@ -179,6 +201,7 @@ pub(crate) fn chebyshev_basis(u: f64, len: usize) -> Vec<f64> {
 }
 
 /// `Ok(())` if `lo < hi` are finite, else [`Error::Domain`].
+#[cfg(feature = "std")]
 pub(crate) fn check_domain(lo: f64, hi: f64) -> Result<(), Error> {
     if lo.is_finite() && hi.is_finite() && lo < hi {
         Ok(())

@@ -32,13 +32,30 @@
 //! assert_eq!(capstan.output_rad(&p, theta), 1.0 + capstan.error_rad(&p, theta));
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+//!
+//! **One evaluation.** `hapcal-runtime`, which evaluates a calibrated device in a control
+//! loop, evaluates its capstans and its joint-4 polynomial with this crate
+//! ([`CapstanTransmission`], [`chebyshev_value`], [`chebyshev_derivative`]): the formula a
+//! controller uses is the one the calibration fitted, with the runtime's own sine, cosine and
+//! arctangent ([`ElementaryFunctions`]; the same to the last bit or so). Without the default
+//! feature `std` the crate is `no_std`, allocates nothing and keeps only those evaluations
+//! (with [`Capstan::new_unchecked`]), with libm's elementary functions.
+#![cfg_attr(not(feature = "std"), no_std)]
 
 mod capstan;
 mod chebyshev;
+#[cfg(feature = "std")]
 mod error;
+#[cfg(feature = "std")]
 mod four_bar;
+mod math;
 
-pub use capstan::{Capstan, CapstanParams, JointRad, MotorRad};
+pub use capstan::{Capstan, CapstanParams, CapstanTransmission, JointRad, MotorRad};
+#[cfg(feature = "std")]
 pub use chebyshev::Chebyshev;
+pub use chebyshev::{chebyshev_derivative, chebyshev_value};
+#[cfg(feature = "std")]
 pub use error::{Error, all_finite, positive};
+#[cfg(feature = "std")]
 pub use four_bar::{FourBar, Joint4Transmission};
+pub use math::{DefaultFunctions, ElementaryFunctions};

@@ -1,8 +1,14 @@
-//! The runtime's numbers against the kinematics library's, to 1e-12.
+//! The runtime's numbers against the kinematics and transmission libraries', to 1e-12.
+
+use std::f64::consts::PI;
 
 use hapcal_io::read_device;
 use hapcal_kinematics::{Chain, DhConvention as KinConvention, DhRow as KinRow};
-use hapcal_runtime::{DhConvention, DhRow, Drive, Evaluation, Model};
+use hapcal_runtime::{
+    CapstanParams, DOMAIN_MARGIN, DhConvention, DhRow, Drive, Evaluation, MAX_COEFFS, Model,
+};
+use hapcal_transmission::{Capstan, Chebyshev, JointRad};
+use proptest::prelude::*;
 
 use crate::robot::pose_gap;
 use crate::{fixture, readings};
@@ -226,4 +232,100 @@ fn angle_derivatives_match_central_differences() {
             );
         }
     }
+}
+
+/// Joint readings over a joint range and past it by the polynomial domain's margin, rad.
+const READING_RAD: std::ops::RangeInclusive<f64> = -3.2..=3.2;
+
+/// Valid eq. 1 parameters for a drum distance `d` (m): offsets and ratio errors beyond any
+/// identified one, eccentricities up to 0.3 D, every phase.
+fn capstan_params(d: f64) -> impl Strategy<Value = CapstanParams> {
+    (
+        -0.05..=0.05f64,
+        -0.1..=0.1f64,
+        -0.3 * d..=0.3 * d,
+        -PI..=PI,
+        -0.3 * d..=0.3 * d,
+        -PI..=PI,
+    )
+        .prop_map(
+            |(c_rad, re, r_o_m, beta_o_rad, r_i_m, beta_i_rad)| CapstanParams {
+                c_rad,
+                re,
+                r_o_m,
+                beta_o_rad,
+                r_i_m,
+                beta_i_rad,
+            },
+        )
+}
+
+proptest! {
+    /// A capstan drive of the runtime gives the calibration library's joint angle
+    /// (`Capstan::output_rad`, paper eq. 1) and `dq/dθ` (`1 + Capstan::error_dtheta`).
+    /// Tolerance: both are sums of a few terms below 10 rad, so the rounding of one evaluation
+    /// is ~1e-15; 1e-12 rad (relative for `dq/dθ`, which reaches R·r/(D − r)) is any
+    /// difference in the formula, not rounding.
+    #[test]
+    fn capstan_drive_matches_the_library(
+        (ratio, d, p) in (2.0..=20.0f64, 0.02..=0.1f64)
+            .prop_flat_map(|(ratio, d)| (Just(ratio), Just(d), capstan_params(d))),
+        theta in READING_RAD,
+    ) {
+        let drive = Drive::capstan(ratio, d, p).expect("valid parameters");
+        let capstan = Capstan::try_new(ratio, d).expect("valid capstan");
+        capstan.check_params(&p).expect("valid parameters");
+        let (q, dq) = drive.angle_and_derivative(theta);
+        let q_lib = capstan.output_rad(&p, JointRad(theta));
+        let dq_lib = 1.0 + capstan.error_dtheta(&p, JointRad(theta));
+        prop_assert!((q - q_lib).abs() <= TOL, "q {q} vs {q_lib}");
+        prop_assert!((dq - dq_lib).abs() <= TOL * dq_lib.abs().max(1.0), "dq/dθ {dq} vs {dq_lib}");
+    }
+
+    /// A polynomial drive of the runtime gives the calibration library's joint angle
+    /// `θ + p(θ)` and `1 + p'(θ)` (`Chebyshev::eval`, `Chebyshev::derivative`) for 1 to
+    /// `MAX_COEFFS` coefficients, over the domain and its margin. Tolerance as for the
+    /// capstan: coefficients below 0.1 rad and |u| ≤ 1.1 keep every term small.
+    #[test]
+    fn polynomial_drive_matches_the_library(
+        lo in -2.0..=0.0f64,
+        width in 0.5..=3.0f64,
+        coeffs in prop::collection::vec(-0.1..=0.1f64, 1..=MAX_COEFFS),
+        share in -DOMAIN_MARGIN..=1.0 + DOMAIN_MARGIN,
+    ) {
+        let hi = lo + width;
+        let theta = lo + share * width;
+        let drive = Drive::polynomial(1.0, lo, hi, &coeffs).expect("valid polynomial");
+        let lib = Chebyshev::try_new(lo, hi, coeffs).expect("valid polynomial");
+        let (q, dq) = drive.angle_and_derivative(theta);
+        let (q_lib, dq_lib) = (theta + lib.eval(theta), 1.0 + lib.derivative(theta));
+        prop_assert!((q - q_lib).abs() <= TOL, "q {q} vs {q_lib}");
+        prop_assert!((dq - dq_lib).abs() <= TOL * dq_lib.abs().max(1.0), "dq/dθ {dq} vs {dq_lib}");
+    }
+}
+
+/// The property tests above can fail: a drive with one parameter off by 1e-9 (rad, or m for an
+/// eccentricity) is told apart from the library's at a reading away from zero.
+#[test]
+fn drive_comparison_detects_a_changed_parameter() {
+    let (ratio, d) = (10.0, 0.06);
+    let p = CapstanParams {
+        c_rad: 1e-3,
+        re: -0.025,
+        r_o_m: 0.2e-3,
+        beta_o_rad: -1.8,
+        r_i_m: 5e-6,
+        beta_i_rad: -0.26,
+    };
+    let capstan = Capstan::try_new(ratio, d).expect("valid capstan");
+    let theta = 0.7;
+    let q_lib = capstan.output_rad(&p, JointRad(theta));
+    let off = CapstanParams {
+        r_o_m: p.r_o_m + 1e-9,
+        ..p
+    };
+    let (q, _) = Drive::capstan(ratio, d, off)
+        .expect("valid parameters")
+        .angle_and_derivative(theta);
+    assert!((q - q_lib).abs() > TOL, "gap {:e}", (q - q_lib).abs());
 }
