@@ -25,14 +25,51 @@ impl std::fmt::Display for NotUrdf {
 
 impl std::error::Error for NotUrdf {}
 
+/// How deep a URDF's elements may nest: a URDF needs 5 or 6 levels (robot, link, visual,
+/// geometry, mesh), vendor extensions a few more. Deeper nesting is refused before urdf-rs,
+/// whose recursive descent overflows the stack on some 10⁴ levels.
+pub const MAX_XML_DEPTH: usize = 64;
+
 /// Parses a URDF's text into its description.
 ///
 /// # Errors
-/// [`NotUrdf`]: text that urdf-rs cannot read as a URDF.
+/// [`NotUrdf`]: elements nested deeper than [`MAX_XML_DEPTH`] (with the line and column of
+/// the first element past it), or text that urdf-rs cannot read as a URDF.
 pub fn parse(text: &str) -> Result<Robot, NotUrdf> {
+    check_depth(text)?;
     urdf_rs::read_from_string(text).map_err(|e| NotUrdf {
         reason: e.to_string(),
     })
+}
+
+/// Refuses elements nested deeper than [`MAX_XML_DEPTH`], scanning the text's start and end
+/// tags without recursion. Text that is not well-formed XML is left to urdf-rs, which says
+/// why (the scan stops there, so nothing past it reaches urdf-rs any deeper than the scan
+/// allowed before it: urdf-rs stops at the same fault).
+fn check_depth(text: &str) -> Result<(), NotUrdf> {
+    use quick_xml::events::Event;
+    let mut reader = quick_xml::Reader::from_str(text);
+    let mut depth = 0usize;
+    loop {
+        let start = usize::try_from(reader.buffer_position()).unwrap_or(usize::MAX);
+        match reader.read_event() {
+            Ok(Event::Start(_)) => {
+                depth += 1;
+                if depth > MAX_XML_DEPTH {
+                    let (line, column) = crate::locate::line_column(text, start);
+                    return Err(NotUrdf {
+                        reason: format!(
+                            "line {line}, column {column}: elements nested more than \
+                             {MAX_XML_DEPTH} deep (a URDF needs a handful)"
+                        ),
+                    });
+                }
+            }
+            Ok(Event::End(_)) => depth = depth.saturating_sub(1),
+            Ok(Event::Eof) | Err(_) => return Ok(()),
+            Ok(_) => {}
+        }
+    }
 }
 
 /// The joint whose child is `link` (the first in file order, should a malformed file give
@@ -225,6 +262,34 @@ pub fn walk_up<'r>(robot: &'r Robot, link: &str, stop: impl Fn(&Joint) -> bool) 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn nesting_past_the_limit_is_refused_at_its_line_without_overflowing_the_stack() {
+        // 200,000 levels overflowed the main thread's stack in urdf-rs before the check.
+        let n = 200_000;
+        let text = format!(
+            "<robot name=\"r\">\n<link name=\"a\"/>\n{}{}</robot>",
+            "<x>".repeat(n),
+            "</x>".repeat(n)
+        );
+        let e = parse(&text).unwrap_err();
+        // The robot is level 1, so the 64th <x> is the first element past the limit: line 3,
+        // column 1 + 63·3.
+        assert_eq!(
+            e.reason,
+            format!(
+                "line 3, column {}: elements nested more than {MAX_XML_DEPTH} deep (a URDF needs a handful)",
+                1 + 63 * 3
+            )
+        );
+        // At the limit the scan passes it on to urdf-rs.
+        let at_limit = format!(
+            "<robot name=\"r\"><link name=\"a\"/>{}{}</robot>",
+            "<x>".repeat(MAX_XML_DEPTH - 1),
+            "</x>".repeat(MAX_XML_DEPTH - 1)
+        );
+        assert!(check_depth(&at_limit).is_ok());
+    }
 
     const ARM: &str = r#"<robot name="arm">
         <link name="base"/>

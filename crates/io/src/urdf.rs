@@ -12,6 +12,7 @@ use quick_xml::events::{BytesStart, Event};
 use quick_xml::reader::Reader;
 
 use hapcal_contract::urdf;
+use hapcal_contract::urdf::MAX_XML_DEPTH;
 
 use crate::Error;
 use crate::device::{Branch, Device, JointSpec, UrdfSource};
@@ -760,11 +761,6 @@ struct OpenJoint<'p> {
     indent: String,
     has_origin: bool,
 }
-
-/// How deep elements may nest: a URDF needs 5 or 6 levels (robot, link, visual, geometry,
-/// mesh), vendor extensions a few more. Deeper nesting is refused before urdf-rs, whose
-/// recursive descent overflows the stack on some 10⁴ levels.
-const MAX_XML_DEPTH: usize = 64;
 
 fn plan_edits(
     text: &str,
