@@ -80,6 +80,14 @@ fn ecc_grad_at(r: f64, d: f64, s: f64, c: f64) -> (f64, f64) {
     (d * s / q, r * (d * c - r) / q)
 }
 
+/// `∂Δθ_caps/∂θ` (rad/rad, eq. 1 differentiated) of a capstan of ratio `r` with ratio error
+/// `re`, from each drum term's derivative with respect to its phase, `dbo` (output drum,
+/// phase θ + β_o) and `dbi` (input drum, phase R·θ + β_i).
+#[inline]
+fn error_dtheta_of(r: f64, re: f64, dbo: f64, dbi: f64) -> f64 {
+    -re / (re + r) + dbo + r * dbi
+}
+
 /// [`ecc_grad_at`] at phase `phi`, rad.
 fn ecc_grad(r: f64, d: f64, phi: f64) -> (f64, f64) {
     let (s, c) = sin_cos(phi);
@@ -229,18 +237,21 @@ impl Capstan {
         [1.0, t, s, c - 1.0, sr, cr - 1.0]
     }
 
-    /// `∂Δθ/∂θ` (paper eq. 1), analytic, rad/rad ([`CapstanTransmission::error_and_dtheta`]).
+    /// `∂Δθ/∂θ` (paper eq. 1), analytic, rad/rad: the derivative of
+    /// [`CapstanTransmission::error_and_dtheta`], without its arctangents (the derivative
+    /// needs only each drum's sine and cosine).
     pub fn error_dtheta(&self, p: &CapstanParams, theta: JointRad) -> f64 {
-        CapstanTransmission::new(*self, *p)
-            .error_and_dtheta(theta)
-            .1
+        let (r, d, t) = (self.ratio, self.drum_distance_m, theta.0);
+        let (_, dbo) = ecc_grad(p.r_o_m, d, t + p.beta_o_rad);
+        let (_, dbi) = ecc_grad(p.r_i_m, d, r * t + p.beta_i_rad);
+        error_dtheta_of(r, p.re, dbo, dbi)
     }
 }
 
 /// A capstan with its eq. 1 parameters, ready to evaluate at many readings: the two
-/// eccentricity terms at θ = 0 are computed once. The one evaluation of eq. 1 and its
-/// θ-derivative: [`Capstan::error_rad`] and [`Capstan::error_dtheta`] go through it, and
-/// `hapcal-runtime` holds one per capstan joint. No allocation.
+/// eccentricity terms at θ = 0 are computed once. The one evaluation of eq. 1:
+/// [`Capstan::error_rad`] goes through it, [`Capstan::error_dtheta`] shares its derivative's
+/// formula, and `hapcal-runtime` holds one per capstan joint. No allocation.
 ///
 /// `F` gives the sine, cosine and arctangent ([`ElementaryFunctions`]): the crate's own by
 /// default; the runtime passes its own.
@@ -308,8 +319,7 @@ impl<F: ElementaryFunctions> CapstanTransmission<F> {
         let error = p.c_rad - p.re / (p.re + r) * t
             + (eo - self.output_ecc_at_zero)
             + (ei - self.input_ecc_at_zero);
-        let derror = -p.re / (p.re + r) + dbo + r * dbi;
-        (error, derror)
+        (error, error_dtheta_of(r, p.re, dbo, dbi))
     }
 }
 
