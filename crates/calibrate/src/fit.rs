@@ -511,18 +511,8 @@ pub(crate) fn negative_compliances(
     identified: &Identified,
     std_scale: f64,
 ) -> (Vec<(String, f64, f64)>, usize) {
-    let is_compliance =
-        |name: &str| hapcal_contract::ValueName::parse(name).is_ok_and(|v| v.is_compliance());
-    let compliances: Vec<(String, f64, f64)> = (identified.covariance.free.iter())
-        .zip(identified.covariance.std())
-        .map(|(&i, std)| {
-            (
-                identified.layout.name(i).to_owned(),
-                identified.fit.x[i],
-                std * std_scale,
-            )
-        })
-        .filter(|(name, _, _)| is_compliance(name))
+    let compliances: Vec<(String, f64, f64)> = free_compliances(identified)
+        .map(|(i, value, std)| (identified.layout.name(i).to_owned(), value, std * std_scale))
         .collect();
     let n = compliances.len();
     let z = hapcal_contract::negative_compliance_sigmas(n);
@@ -534,15 +524,24 @@ pub(crate) fn negative_compliances(
     (negative, n)
 }
 
+/// The compliances among the free parameters of `identified`, in the covariance's order:
+/// `(layout index, estimate, σ)` (units of the compliance: rad/(N·m) or rad/m).
+fn free_compliances(identified: &Identified) -> impl Iterator<Item = (usize, f64, f64)> + '_ {
+    (identified.covariance.free.iter())
+        .zip(identified.covariance.std())
+        .filter(|&(&i, _)| {
+            hapcal_contract::ValueName::parse(identified.layout.name(i))
+                .is_ok_and(|v| v.is_compliance())
+        })
+        .map(|(&i, std)| (i, identified.fit.x[i], std))
+}
+
 /// The compliance estimates of `identified` below zero, as `(layout index, σ)`: those
 /// [`hold_compliances_at_zero`] holds.
 fn compliances_below_zero(identified: &Identified) -> Vec<(usize, f64)> {
-    let is_compliance =
-        |name: &str| hapcal_contract::ValueName::parse(name).is_ok_and(|v| v.is_compliance());
-    (identified.covariance.free.iter())
-        .zip(identified.covariance.std())
-        .filter(|&(&i, _)| identified.fit.x[i] < 0.0 && is_compliance(identified.layout.name(i)))
-        .map(|(&i, std)| (i, std))
+    free_compliances(identified)
+        .filter(|&(_, value, _)| value < 0.0)
+        .map(|(i, _, std)| (i, std))
         .collect()
 }
 
@@ -623,30 +622,24 @@ pub(crate) fn hold_compliances_at_zero(
     free_fit: Identified,
     std_scale: impl FnOnce() -> f64,
 ) -> Result<Identified, hapcal_identify::Error> {
-    if compliances_below_zero(&free_fit).is_empty()
-        || !negative_compliances(&free_fit, std_scale()).0.is_empty()
-    {
+    let mut more = compliances_below_zero(&free_fit);
+    if more.is_empty() || !negative_compliances(&free_fit, std_scale()).0.is_empty() {
         return Ok(free_fit);
     }
     let free_covariance = free_fit.covariance.clone();
     let mut id = free_fit;
     let mut held: Vec<(usize, f64)> = Vec::new();
-    loop {
-        let more = compliances_below_zero(&id);
-        if more.is_empty() {
-            if !held.is_empty() {
-                id.covariance =
-                    bounded_covariance(&free_covariance, id.covariance, &held, &id.layout);
-            }
-            return Ok(id);
-        }
+    while !more.is_empty() {
         let mut start = id.fit.x.clone();
         for &(i, _) in &more {
             start[i] = 0.0;
         }
         held.extend(more);
         id = hapcal_identify::identify_held(problem, start, cfg, &held)?;
+        more = compliances_below_zero(&id);
     }
+    id.covariance = bounded_covariance(&free_covariance, id.covariance, &held, &id.layout);
+    Ok(id)
 }
 
 /// "`k` of `n` below zero by more than z standard deviations: name value ± σ unit, …" for the
