@@ -61,8 +61,8 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
-pub use locate::line_column;
 use locate::{Step, TomlSpans, key_line};
+pub use locate::{line_column, toml_error_at};
 pub use names::{CapstanField, DhField, ElementField, ValueName};
 
 /// The schema version this crate writes and the newest it reads. Version 1 is the first
@@ -548,12 +548,12 @@ impl Calibration {
     /// [`Self::is_legacy`]).
     pub fn from_sidecar_str(text: &str, origin: &str) -> Result<Calibration, ContractError> {
         let record: Calibration = toml::from_str(text).map_err(|e| {
-            let (line, column) = e.span().map_or((0, 0), |s| line_column(text, s.start));
+            let (line, column, message) = locate::toml_error_at(text, &e);
             ContractError {
                 origin: origin.to_owned(),
                 line,
                 column,
-                message: e.message().trim_end().to_owned(),
+                message,
             }
         })?;
         record.check(text, origin)?;

@@ -25,6 +25,18 @@ pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
     (line, column)
 }
 
+/// Where and what a TOML syntax, key or type error is, the parts of a `file:line:column:
+/// message` error: the 1-based line and column of the start of its span in `text`
+/// ([`line_column`]; 1, 1 when the error has no span, the file as a whole) and its message
+/// without trailing white space. Every TOML reader (device files, sidecars, truth files)
+/// reports its parser's errors through this.
+pub fn toml_error_at(text: &str, e: &toml::de::Error) -> (usize, usize, String) {
+    let (line, column) = e
+        .span()
+        .map_or((1, 1), |span| line_column(text, span.start));
+    (line, column, e.message().trim_end().to_owned())
+}
+
 /// One step of a key path into a TOML document: a table's key or an array's index.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Step<'a> {

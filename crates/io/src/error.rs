@@ -586,15 +586,12 @@ pub fn line_column(text: &str, offset: usize) -> (u64, u64) {
     (line as u64, column as u64)
 }
 
-/// Where and what a TOML error is: the 1-based line and column of its span in `text` (1, 1
-/// when it has none) and its message without trailing white space, the parts of a
-/// `file:line:column: message` error. Used for device files here and truth files in
-/// `hapcal-sim`.
+/// [`hapcal_contract::toml_error_at`] with this crate's `u64` positions: the line and column
+/// of a TOML error in `text` (1, 1 when it has none) and its message. Used for device files
+/// here and truth files in `hapcal-sim`.
 pub fn toml_error_at(text: &str, e: &toml::de::Error) -> (u64, u64, String) {
-    let (line, column) = e
-        .span()
-        .map_or((1, 1), |span| line_column(text, span.start));
-    (line, column, e.message().trim_end().to_owned())
+    let (line, column, message) = hapcal_contract::toml_error_at(text, e);
+    (line as u64, column as u64, message)
 }
 
 /// `value` as a user reads it: scientific notation for magnitudes of a million and more (a

@@ -8,7 +8,7 @@
 /// `.r_o`, `.beta_o`, `.r_i`, `.beta_i`.
 pub use hapcal_transmission::CapstanParams;
 use hapcal_transmission::{
-    Capstan, CapstanTransmission, JointRad, chebyshev_derivative, chebyshev_value,
+    Capstan, CapstanFault, CapstanTransmission, JointRad, chebyshev_derivative, chebyshev_value,
 };
 
 use crate::math::RuntimeFunctions;
@@ -74,45 +74,34 @@ impl Drive {
     pub fn capstan(ratio: f64, drum_distance_m: f64, p: CapstanParams) -> Result<Drive, Error> {
         let ratio = positive("ratio", ratio)?;
         let d = positive("drum_distance_m", drum_distance_m)?;
-        let fields = [
-            ("c_rad", p.c_rad),
-            ("re", p.re),
-            ("r_o_m", p.r_o_m),
-            ("beta_o_rad", p.beta_o_rad),
-            ("r_i_m", p.r_i_m),
-            ("beta_i_rad", p.beta_i_rad),
-        ];
-        for (what, value) in fields {
-            if !value.is_finite() {
+        let capstan = Capstan::new_unchecked(ratio, d);
+        match capstan.params_fault(&p) {
+            None => {}
+            Some(CapstanFault::NotFinite { name, value }) => {
                 return Err(Error::NotFinite {
-                    what,
+                    what: name,
                     index: 0,
                     value,
                 });
             }
-        }
-        for (what, value) in [("r_o_m", p.r_o_m), ("r_i_m", p.r_i_m)] {
-            if value.abs() >= d {
+            Some(CapstanFault::EccentricityTooLarge { name, value }) => {
                 return Err(Error::Invalid {
-                    what,
+                    what: name,
                     value,
                     expected: "|r| < drum_distance_m",
                 });
             }
-        }
-        if ratio + p.re <= 0.0 {
-            return Err(Error::Invalid {
-                what: "ratio + re",
-                value: ratio + p.re,
-                expected: "a positive number",
-            });
+            Some(CapstanFault::RatioNotPositive { value }) => {
+                return Err(Error::Invalid {
+                    what: "ratio + re",
+                    value,
+                    expected: "a positive number",
+                });
+            }
         }
         Ok(Drive {
             ratio,
-            kind: Kind::Capstan(CapstanTransmission::with_functions(
-                Capstan::new_unchecked(ratio, d),
-                p,
-            )),
+            kind: Kind::Capstan(CapstanTransmission::with_functions(capstan, p)),
         })
     }
 

@@ -1,7 +1,6 @@
 //! Loading a device file (TOML, docs/design.md §5.1), as `hapcal calibrate` writes it.
 
 use hapcal_contract::device::{Convention, DeviceFile, JointRef, JointSpec};
-use hapcal_contract::line_column;
 use hapcal_contract::locate::TomlSpans;
 use hapcal_contract::{Calibration, CapstanField, ContractError, TorqueSource, ValueName};
 use std::fmt;
@@ -450,14 +449,12 @@ pub(crate) struct DhFile {
 /// As [`Model::from_toml`] for these checks.
 pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DhFile, LoadError> {
     let file = DeviceFile::from_toml_str(text).map_err(|e| {
-        let (line, column) = e
-            .span()
-            .map_or((0, 0), |span| line_column(text, span.start));
+        let (line, column, message) = hapcal_contract::toml_error_at(text, &e);
         LoadError::Parse {
             origin: origin.to_owned(),
             line,
             column,
-            message: e.message().trim_end().to_owned(),
+            message,
         }
     })?;
     hapcal_contract::device::check_numbers(text).map_err(|bad| LoadError::Parse {

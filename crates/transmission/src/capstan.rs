@@ -55,6 +55,32 @@ impl CapstanParams {
     }
 }
 
+/// Why eq. 1 is not defined for a capstan's parameters ([`Capstan::params_fault`]); each names
+/// the field as a device file writes it under `[[capstan]]` and gives its value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CapstanFault {
+    /// A field (`c_rad`, `re`, `r_o_m`, `beta_o_rad`, `r_i_m`, `beta_i_rad`) is NaN or
+    /// infinite.
+    NotFinite {
+        /// The field.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// An eccentricity radius (`r_o_m` or `r_i_m`, m) is not below the drum distance `D`.
+    EccentricityTooLarge {
+        /// The field.
+        name: &'static str,
+        /// Its value, m.
+        value: f64,
+    },
+    /// The actual ratio `R + Re` is not positive.
+    RatioNotPositive {
+        /// `R + Re`.
+        value: f64,
+    },
+}
+
 /// A capstan drive: nominal ratio `R` (> 0) and drum centre distance `D` (> 0, m).
 ///
 /// Source: paper, "Capstan drive" section and eq. 1; docs/design.md §3.
@@ -134,13 +160,11 @@ impl Capstan {
         JointRad(m.0 / self.ratio)
     }
 
-    /// Checks that eq. 1 is defined for `p`: finite fields, `|r_o|, |r_i| < D`, `R + Re > 0`.
-    ///
-    /// # Errors
-    /// [`Error::NotFinite`] naming the field, [`Error::EccentricityTooLarge`] for `r_o_m` or
-    /// `r_i_m`, [`Error::NonPositive`] named `ratio + re` when `R + Re ≤ 0`.
-    #[cfg(feature = "std")]
-    pub fn check_params(&self, p: &CapstanParams) -> Result<(), Error> {
+    /// The first reason eq. 1 is not defined for `p` on this capstan, or `None`: a field that
+    /// is not finite, `|r_o| ≥ D` or `|r_i| ≥ D`, or `R + Re ≤ 0`. Without `std`, for callers
+    /// that report it with errors of their own (`hapcal-runtime`); [`Self::check_params`]
+    /// reports it as an [`Error`] with `std`.
+    pub fn params_fault(&self, p: &CapstanParams) -> Option<CapstanFault> {
         let fields = [
             ("c_rad", p.c_rad),
             ("re", p.re),
@@ -150,27 +174,43 @@ impl Capstan {
             ("beta_i_rad", p.beta_i_rad),
         ];
         if let Some(&(name, value)) = fields.iter().find(|(_, v)| !v.is_finite()) {
-            return Err(Error::NotFinite {
-                name: name.to_owned(),
-                value,
-            });
+            return Some(CapstanFault::NotFinite { name, value });
         }
         for (name, value) in [("r_o_m", p.r_o_m), ("r_i_m", p.r_i_m)] {
             if value.abs() >= self.drum_distance_m {
-                return Err(Error::EccentricityTooLarge {
+                return Some(CapstanFault::EccentricityTooLarge { name, value });
+            }
+        }
+        let ratio = self.ratio + p.re;
+        (ratio <= 0.0).then_some(CapstanFault::RatioNotPositive { value: ratio })
+    }
+
+    /// Checks that eq. 1 is defined for `p`: finite fields, `|r_o|, |r_i| < D`, `R + Re > 0`
+    /// ([`Self::params_fault`]).
+    ///
+    /// # Errors
+    /// [`Error::NotFinite`] naming the field, [`Error::EccentricityTooLarge`] for `r_o_m` or
+    /// `r_i_m`, [`Error::NonPositive`] named `ratio + re` when `R + Re ≤ 0`.
+    #[cfg(feature = "std")]
+    pub fn check_params(&self, p: &CapstanParams) -> Result<(), Error> {
+        match self.params_fault(p) {
+            None => Ok(()),
+            Some(CapstanFault::NotFinite { name, value }) => Err(Error::NotFinite {
+                name: name.to_owned(),
+                value,
+            }),
+            Some(CapstanFault::EccentricityTooLarge { name, value }) => {
+                Err(Error::EccentricityTooLarge {
                     name,
                     value,
                     drum_distance_m: self.drum_distance_m,
-                });
+                })
             }
-        }
-        if self.ratio + p.re <= 0.0 {
-            return Err(Error::NonPositive {
+            Some(CapstanFault::RatioNotPositive { value }) => Err(Error::NonPositive {
                 name: "ratio + re",
-                value: self.ratio + p.re,
-            });
+                value,
+            }),
         }
-        Ok(())
     }
 
     /// Capstan transmission error Δθ_caps(θ), rad (paper eq. 1, as written in docs/design.md §3):
