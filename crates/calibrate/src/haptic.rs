@@ -8,6 +8,7 @@ use std::borrow::Borrow;
 
 use anyhow::{Context, Result, bail};
 use faer::Col;
+use hapcal_contract::drives::{HapticDrives, JointDrive, haptic_drives};
 use hapcal_contract::{
     Calibration, Covariance, JointRange, ModelName, Region, Torque, TorqueSource,
 };
@@ -736,117 +737,46 @@ fn state_distance_residuals_m<R: Borrow<LogRow>>(
 /// where it names none.
 ///
 /// # Errors
-/// A value of an unknown capstan field, a wrong unit, a joint the device does not have, or a
-/// gap in the Chebyshev indices.
+/// As [`haptic_drives`] (a value on a joint the device does not have, a gap in the
+/// Chebyshev indices, a robot's value), or a capstan or polynomial the library refuses.
 pub fn calibrated_log_state(device: &Device) -> Result<DistanceLogState> {
     let chain = device.chain()?;
-    let values = (device.calibration.as_ref()).map_or(&[][..], |c| &c.values[..]);
-    let n_joints = chain.n_joints();
-    let mut capstans: Vec<(usize, Capstan, CapstanParams)> = (device.capstans.iter())
-        .map(|c| {
-            Ok((
-                c.joint,
-                Capstan::try_new(c.ratio, c.drum_distance_m)?,
-                CapstanParams::default(),
-            ))
-        })
-        .collect::<Result<_>>()?;
-    let mut cheb: Vec<(usize, usize, f64)> = Vec::new();
-    let mut terms = Vec::new();
-    for v in values {
-        let unit = |expected: &str| {
-            if v.unit == expected {
-                Ok(())
-            } else {
-                Err(anyhow::anyhow!(
-                    "[calibration.values] {}: unit is {:?}, expected {expected:?}",
-                    v.name,
-                    v.unit
-                ))
-            }
-        };
-        let Some((element, field)) = v.name.split_once('.') else {
-            continue; // a kinematic deviation, already in the rows
-        };
-        let joint_of = |prefix: &str| {
-            (element.strip_prefix(prefix))
-                .and_then(|d| d.parse::<usize>().ok())
-                .filter(|&j| (1..=n_joints).contains(&j))
-        };
-        if element == "joint_compliance" {
-            let joint = (field.strip_prefix('j'))
-                .and_then(|d| d.parse::<usize>().ok())
-                .filter(|&j| (1..=n_joints).contains(&j))
-                .with_context(|| format!("[calibration.values] {}: no such joint", v.name))?;
-            unit(HANDLE_COMPLIANCE_UNIT)?;
-            terms.push((EffectTerm::handle_compliance(joint - 1), v.value));
-        } else if element.starts_with("capstan") {
-            let joint = joint_of("capstan")
-                .with_context(|| format!("[calibration.values] {}: no such joint", v.name))?;
-            let (_, _, p) = (capstans.iter_mut())
-                .find(|(j, _, _)| *j == joint)
-                .with_context(|| {
-                    format!(
-                        "[calibration.values] {}: no capstan on joint {joint}",
-                        v.name
-                    )
-                })?;
-            let Some((target, u)) = p.field_mut(field) else {
-                bail!(
-                    "[calibration.values] {}: unknown capstan parameter {field:?}",
-                    v.name
-                );
-            };
-            unit(u)?;
-            *target = v.value;
-        } else if let Some(joint) = joint_of("joint") {
-            let k = (field.strip_prefix("cheb"))
-                .and_then(|d| d.parse::<usize>().ok())
-                .with_context(|| {
-                    format!(
-                        "[calibration.values] {}: expected joint{{j}}.cheb{{k}}",
-                        v.name
-                    )
-                })?;
-            unit("rad")?;
-            cheb.push((joint, k, v.value));
-        }
-    }
-    let mut transmissions: Vec<LogTransmission> = (capstans.into_iter())
-        .filter(|(j, _, _)| !cheb.iter().any(|(pj, _, _)| pj == j))
-        .map(|(joint, capstan, params)| LogTransmission::Capstan {
-            joint: joint - 1,
-            capstan,
-            params,
-        })
-        .collect();
+    let HapticDrives {
+        drives,
+        handle_compliance,
+    } = haptic_drives(
+        &device.capstans,
+        chain.n_joints(),
+        device.dh.len(),
+        device.calibration.as_ref(),
+    )?;
     let limits = device.joint_limits();
-    let mut poly_joints: Vec<usize> = cheb.iter().map(|(j, _, _)| *j).collect();
-    poly_joints.sort_unstable();
-    poly_joints.dedup();
-    for joint in poly_joints {
-        let n = cheb
-            .iter()
-            .filter(|(j, _, _)| *j == joint)
-            .map(|(_, k, _)| k + 1)
-            .max()
-            .unwrap_or(0);
-        let mut coeffs = vec![None; n];
-        for (_, k, c) in cheb.iter().filter(|(j, _, _)| *j == joint) {
-            coeffs[*k] = Some(*c);
-        }
-        let coeffs = coeffs
-            .into_iter()
-            .enumerate()
-            .map(|(k, c)| c.with_context(|| format!("joint{joint}.cheb{k} is missing")))
-            .collect::<Result<Vec<f64>>>()?;
-        let (lo, hi) = limits[joint - 1];
-        transmissions.push(LogTransmission::Polynomial {
-            joint: joint - 1,
-            poly: Chebyshev::try_new(lo, hi, coeffs)?,
+    let mut transmissions = Vec::new();
+    for (joint, drive) in drives.into_iter().enumerate() {
+        transmissions.push(match drive {
+            JointDrive::Direct => continue,
+            JointDrive::Capstan {
+                ratio,
+                drum_distance_m,
+                params,
+            } => LogTransmission::Capstan {
+                joint,
+                capstan: Capstan::try_new(ratio, drum_distance_m)?,
+                params,
+            },
+            JointDrive::Polynomial { coeffs, .. } => {
+                let (lo, hi) = limits[joint];
+                LogTransmission::Polynomial {
+                    joint,
+                    poly: Chebyshev::try_new(lo, hi, coeffs)?,
+                }
+            }
         });
     }
-    transmissions.sort_by_key(LogTransmission::joint);
+    let terms = (handle_compliance.into_iter().enumerate())
+        .filter(|&(_, k)| k != 0.0)
+        .map(|(joint, k)| (EffectTerm::handle_compliance(joint), k))
+        .collect();
     Ok(DistanceLogState {
         transmissions,
         x_kin: vec![0.0; chain.n_params()],

@@ -48,6 +48,7 @@
 //! ```
 
 pub mod device;
+pub mod drives;
 mod effect;
 pub mod locate;
 mod names;

@@ -1,6 +1,7 @@
 //! The full static model of a device: kinematic chain plus one drive per joint, evaluated
 //! by the runtime (the models a controller runs) or by the calibration library (the truth).
 
+use hapcal_contract::drives::{JointDrive, haptic_drives};
 use hapcal_io::Device;
 use hapcal_kinematics::{Chain, Isometry3, Matrix6xX};
 use hapcal_runtime::{Evaluation, MAX_JOINTS};
@@ -251,108 +252,59 @@ impl ForceModel {
     /// [`ForceModel::calibrated`] evaluated by the calibration library instead of the
     /// runtime, the independent implementation the runtime is tested against: the D-H rows
     /// as written (the identified kinematic deviations are already applied, see
-    /// [`Device::with_calibration`]) and drives from `[calibration.values]`:
-    ///
-    /// - `capstan{j}.c`, `.re`, `.r_o`, `.beta_o`, `.r_i`, `.beta_i` (units `rad`, `1`, `m`,
-    ///   `rad`, `m`, `rad`; paper eq. 1) for the capstan of joint j; missing ones are 0;
-    /// - `joint{j}.cheb0` … `joint{j}.cheb{n}` (rad): the Chebyshev coefficients of the
-    ///   joint's error polynomial on its joint range (the paper's tenth-order joint-4 model);
-    ///   they replace the joint's capstan model, keeping its nominal ratio.
-    ///
-    /// Other names (the kinematic ones) are skipped. A device without `[calibration]` gives
-    /// the nominal model.
+    /// [`Device::with_calibration`]) and the drives of `[calibration.values]` as the runtime
+    /// reads them ([`haptic_drives`]): `capstan{j}.*` on each capstan (missing ones 0; paper
+    /// eq. 1), `joint{j}.cheb*` as the joint's error polynomial on its range (the paper's
+    /// tenth-order joint-4 model) in place of its capstan, keeping the nominal ratio. A
+    /// device without `[calibration]` gives the nominal model.
     ///
     /// # Errors
-    /// [`Error::Calibration`] naming the entry for an unknown suffix, a joint without a
-    /// capstan, a wrong unit, a gap in the Chebyshev indices or invalid capstan parameters;
-    /// and the errors of [`ForceModel::nominal_library`].
+    /// [`Error::Calibration`] naming the entry (`[[capstan]]` for the file's capstans) for a
+    /// record [`haptic_drives`] refuses or invalid capstan parameters or coefficients; and the
+    /// errors of [`ForceModel::nominal_library`].
     pub fn calibrated_library(device: &Device) -> Result<ForceModel, Error> {
-        let (chain, x, mut drives) = ForceModel::nominal_parts(device)?;
-        let Some(calibration) = &device.calibration else {
-            return ForceModel::try_new(chain, x, drives);
-        };
-        let n_joints = drives.len();
-        let mut cheb: Vec<Vec<Option<f64>>> = vec![Vec::new(); n_joints];
-        for v in &calibration.values {
-            let bad = |message: String| Error::Calibration {
-                name: v.name.clone(),
-                message,
-            };
-            let Some((element, field)) = v.name.split_once('.') else {
-                continue;
-            };
-            let joint_of = |prefix: &str| -> Option<usize> {
-                element
-                    .strip_prefix(prefix)
-                    .and_then(|d| d.parse::<usize>().ok())
-            };
-            let check_unit = |unit: &str| {
-                if v.unit == unit {
-                    Ok(())
-                } else {
-                    Err(bad(format!("unit is {:?}, expected {unit:?}", v.unit)))
-                }
-            };
-            if let Some(joint) = joint_of("capstan") {
-                let slot = (joint.checked_sub(1))
-                    .and_then(|j| drives.get_mut(j))
-                    .ok_or_else(|| bad(format!("the device has joints 1..={n_joints}")))?;
-                let Drive::Capstan { params, .. } = slot else {
-                    return Err(bad(format!("joint {joint} has no capstan")));
-                };
-                let Some((target, unit)) = params.field_mut(field) else {
-                    return Err(bad(format!(
-                        "unknown capstan parameter {field:?}: expected c, re, r_o, beta_o, r_i \
-                         or beta_i"
-                    )));
-                };
-                check_unit(unit)?;
-                *target = v.value;
-            } else if let Some(joint) = joint_of("joint") {
-                let Some(k) = field
-                    .strip_prefix("cheb")
-                    .and_then(|d| d.parse::<usize>().ok())
-                else {
-                    return Err(bad("expected joint{j}.cheb{k}".to_owned()));
-                };
-                check_unit("rad")?;
-                let coeffs = (joint.checked_sub(1))
-                    .and_then(|j| cheb.get_mut(j))
-                    .ok_or_else(|| bad(format!("the device has joints 1..={n_joints}")))?;
-                if coeffs.len() <= k {
-                    coeffs.resize(k + 1, None);
-                }
-                coeffs[k] = Some(v.value);
-            }
-        }
+        let (chain, x, _) = ForceModel::nominal_parts(device)?;
+        let bad = |name: String, message: String| Error::Calibration { name, message };
+        let read = haptic_drives(
+            &device.capstans,
+            chain.n_joints(),
+            device.dh.len(),
+            device.calibration.as_ref(),
+        )
+        .map_err(|f| {
+            bad(
+                f.value.clone().unwrap_or_else(|| "[[capstan]]".into()),
+                f.message,
+            )
+        })?;
         let limits = device.joint_limits();
-        for (j, coeffs) in cheb.into_iter().enumerate() {
-            if coeffs.is_empty() {
-                continue;
-            }
-            let name = format!("joint{}.cheb*", j + 1);
-            let bad = |message: String| Error::Calibration {
-                name: name.clone(),
-                message,
-            };
-            let coeffs: Vec<f64> = (coeffs.iter().enumerate())
-                .map(|(k, c)| c.ok_or_else(|| bad(format!("coefficient {k} is missing"))))
-                .collect::<Result<_, _>>()?;
-            let (lo, hi) = limits.get(j).copied().unwrap_or((-1.0, 1.0));
-            let poly = Chebyshev::try_new(lo, hi, coeffs).map_err(|e| bad(e.to_string()))?;
-            let ratio = drives[j].ratio();
-            drives[j] = Drive::Polynomial { ratio, poly };
-        }
-        for (j, drive) in drives.iter().enumerate() {
-            if let Drive::Capstan { capstan, params } = drive {
-                capstan
-                    .check_params(params)
-                    .map_err(|e| Error::Calibration {
-                        name: format!("capstan{}.*", j + 1),
-                        message: e.to_string(),
+        let drives = (read.drives.into_iter().enumerate())
+            .map(|(j, drive)| match drive {
+                JointDrive::Direct => Ok(Drive::Direct),
+                JointDrive::Capstan {
+                    ratio,
+                    drum_distance_m,
+                    params,
+                } => {
+                    let capstan = Capstan::try_new(ratio, drum_distance_m).map_err(|source| {
+                        Error::Transmission {
+                            joint: j + 1,
+                            source,
+                        }
                     })?;
-            }
-        }
+                    capstan
+                        .check_params(&params)
+                        .map_err(|e| bad(format!("capstan{}.*", j + 1), e.to_string()))?;
+                    Ok(Drive::Capstan { capstan, params })
+                }
+                JointDrive::Polynomial { ratio, coeffs } => {
+                    let (lo, hi) = limits.get(j).copied().unwrap_or((-1.0, 1.0));
+                    let poly = Chebyshev::try_new(lo, hi, coeffs)
+                        .map_err(|e| bad(format!("joint{}.cheb*", j + 1), e.to_string()))?;
+                    Ok(Drive::Polynomial { ratio, poly })
+                }
+            })
+            .collect::<Result<_, Error>>()?;
         ForceModel::try_new(chain, x, drives)
     }
 

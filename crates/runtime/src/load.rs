@@ -1,12 +1,13 @@
 //! Loading a device file (TOML, docs/design.md §5.1), as `hapcal calibrate` writes it.
 
 use hapcal_contract::device::{Convention, DeviceFile, JointRef, JointSpec};
+use hapcal_contract::drives::{DriveFault, HapticDrives, JointDrive, haptic_drives};
 use hapcal_contract::locate::TomlSpans;
-use hapcal_contract::{Calibration, CapstanField, ContractError, TorqueSource, ValueName};
+use hapcal_contract::{ContractError, TorqueSource};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use crate::{CapstanParams, DhConvention, DhRow, Drive, Error, Model};
+use crate::{DhConvention, DhRow, Drive, Error, Model};
 
 /// Gravity of a haptic device's handle, m/s²: `hapcal_problems::GRAVITY_M_S2`, the value its
 /// handle compliances (rad/(N·m)) were identified with, for a device file whose
@@ -65,16 +66,6 @@ impl fmt::Display for LoadError {
 }
 
 impl std::error::Error for LoadError {}
-
-/// The drive of one joint while the calibration is read.
-enum Pending {
-    Direct,
-    Capstan {
-        ratio: f64,
-        drum_distance_m: f64,
-        params: CapstanParams,
-    },
-}
 
 impl Model {
     /// Loads a device file (`fixtures/reference-device/calibrated.toml`, or any device
@@ -143,22 +134,16 @@ impl Model {
             message,
         };
         let model_error = |what: &str, e: Error| invalid(format!("{what}: {e}"));
-        let mut pending = pending_capstans(&file, n_joints, origin)?;
-        let mut cheb: Vec<Vec<Option<f64>>> = vec![Vec::new(); n_joints];
-        let mut compliance = vec![0.0; n_joints];
         let record = file.calibration.unwrap_or_default();
         record
             .check(text, origin)
             .map_err(|e| contract_error(e, origin))?;
-        apply_values(
-            &record,
-            &RecordText { text, origin },
-            rows.len(),
-            &mut pending,
-            (&mut cheb, &mut compliance),
-        )?;
-
-        let drives = drives_of(&pending, &cheb, &file.joints, origin)?;
+        let HapticDrives {
+            drives,
+            handle_compliance: compliance,
+        } = haptic_drives(&file.capstans, n_joints, rows.len(), Some(&record))
+            .map_err(|fault| drive_fault(fault, text, origin))?;
+        let drives = drives_of(&drives, &file.joints, origin)?;
         let model =
             Model::from_dh(convention, &rows, &drives).map_err(|e| model_error("[[dh]]", e))?;
         let model = if compliance.iter().any(|&k| k != 0.0) {
@@ -211,210 +196,54 @@ impl Model {
     }
 }
 
-/// The drives the device file's `[[capstan]]` entries declare, before their calibrated
-/// values: a capstan per entry, direct elsewhere.
-///
-/// # Errors
-/// A capstan on a joint the device does not have, or two on one joint.
-fn pending_capstans(
-    file: &DeviceFile,
-    n_joints: usize,
-    origin: &str,
-) -> Result<Vec<Pending>, LoadError> {
-    let invalid = |message: String| LoadError::Invalid {
-        origin: origin.to_owned(),
-        message,
-    };
-    let mut pending: Vec<Pending> = (0..n_joints).map(|_| Pending::Direct).collect();
-    for c in &file.capstans {
-        let slot = (c.joint.checked_sub(1))
-            .and_then(|j| pending.get_mut(j))
-            .ok_or_else(|| {
-                invalid(format!(
-                    "[[capstan]] on joint {}: the device has joints 1..={n_joints}",
-                    c.joint
-                ))
-            })?;
-        if matches!(slot, Pending::Capstan { .. }) {
-            return Err(invalid(format!(
-                "two [[capstan]] entries on joint {}",
-                c.joint
-            )));
-        }
-        *slot = Pending::Capstan {
-            ratio: c.ratio,
-            drum_distance_m: c.drum_distance_m,
-            params: CapstanParams::default(),
-        };
-    }
-    Ok(pending)
+/// A fault of the file's capstans or record values as the runtime reports it: at the line
+/// of the value's name in `text` when it names a value, else without a line.
+fn drive_fault(fault: DriveFault, text: &str, origin: &str) -> LoadError {
+    let line_column = (fault.value.as_deref())
+        .and_then(|name| TomlSpans::parse(text).value_line(name))
+        .unwrap_or((0, 0));
+    contract_error(
+        ContractError {
+            origin: origin.to_owned(),
+            line: line_column.0,
+            column: line_column.1,
+            message: fault.to_string(),
+        },
+        origin,
+    )
 }
 
-/// A device file's text and where it came from, for errors at a value's line.
-struct RecordText<'a> {
-    /// The file's text.
-    text: &'a str,
-    /// Where it came from (a file name).
-    origin: &'a str,
-}
-
-/// The record's `[calibration.values]` set on the device: capstan parameters into `pending`,
-/// Chebyshev coefficients and handle compliances into `(cheb, compliance)` (per joint);
-/// D-H deviations are already in the `n_rows` rows.
+/// Each joint's drive built from the file's and record's `drives` ([`haptic_drives`]);
+/// `joints` are the file's `[[joint]]` entries (their limits, rad, bound a polynomial).
 ///
 /// # Errors
-/// A value on a joint or row the device does not have, a capstan value on a joint without
-/// capstan, more coefficients than the runtime holds, a robot's value.
-fn apply_values(
-    record: &Calibration,
-    at_text: &RecordText<'_>,
-    n_rows: usize,
-    pending: &mut [Pending],
-    (cheb, compliance): (&mut [Vec<Option<f64>>], &mut [f64]),
-) -> Result<(), LoadError> {
-    let (text, origin) = (at_text.text, at_text.origin);
-    let n_joints = pending.len();
-    // A refusal at the line of the value's name.
-    let at = |name: &str, message: String| {
-        let (line, column) = TomlSpans::parse(text).value_line(name).unwrap_or((0, 0));
-        contract_error(
-            ContractError {
-                origin: origin.to_owned(),
-                line,
-                column,
-                message: format!("[calibration.values] {name}: {message}"),
-            },
-            origin,
-        )
-    };
-    let joint_slot = |name: &str, joint: usize| {
-        (1..=n_joints)
-            .contains(&joint)
-            .then_some(joint - 1)
-            .ok_or_else(|| at(name, format!("the device has joints 1..={n_joints}")))
-    };
-    for v in &record.values {
-        let name = v.name.as_str();
-        // The contract's check parsed every name.
-        let parsed = ValueName::parse(name).map_err(|message| at(name, message))?;
-        match parsed {
-            ValueName::Dh { row, .. } => {
-                // A kinematic deviation, already in the rows.
-                if row >= n_rows {
-                    return Err(at(name, format!("the [[dh]] table has rows 0..{n_rows}")));
-                }
-            }
-            ValueName::Capstan { joint, field } => {
-                let slot = &mut pending[joint_slot(name, joint)?];
-                let Pending::Capstan { params, .. } = slot else {
-                    return Err(at(name, format!("joint {joint} has no [[capstan]]")));
-                };
-                *match field {
-                    CapstanField::C => &mut params.c_rad,
-                    CapstanField::Re => &mut params.re,
-                    CapstanField::ROut => &mut params.r_o_m,
-                    CapstanField::BetaOut => &mut params.beta_o_rad,
-                    CapstanField::RIn => &mut params.r_i_m,
-                    CapstanField::BetaIn => &mut params.beta_i_rad,
-                } = v.value;
-            }
-            ValueName::Chebyshev { joint, index } => {
-                let coeffs = &mut cheb[joint_slot(name, joint)?];
-                if index >= crate::MAX_COEFFS {
-                    return Err(at(
-                        name,
-                        format!(
-                            "the runtime holds at most {} coefficients",
-                            crate::MAX_COEFFS
-                        ),
-                    ));
-                }
-                if coeffs.len() <= index {
-                    coeffs.resize(index + 1, None);
-                }
-                coeffs[index] = Some(v.value);
-            }
-            ValueName::HandleCompliance { joint } => {
-                compliance[joint_slot(name, joint)?] = v.value;
-            }
-            // A frame of the measurement rig, not part of the evaluated model.
-            ValueName::Element { element, .. } if record.frames.contains_key(&element) => {}
-            ValueName::Element { .. }
-            | ValueName::Compliance { .. }
-            | ValueName::Transversal { .. }
-            | ValueName::Harmonic { .. } => {
-                return Err(at(
-                    name,
-                    "a robot's value, which a haptic device's model cannot evaluate: the \
-                     runtime's device model holds capstans (capstan<j>.*), joint \
-                     polynomials (joint<j>.cheb<k>), the handle's compliance \
-                     (joint_compliance.j<k>) and D-H deviations; load a D-H robot's device \
-                     file with Robot::load_device, a calibrated URDF with Robot::load_urdf"
-                        .to_owned(),
-                ));
-            }
-        }
-    }
-    Ok(())
-}
-
-/// Each joint's drive: a polynomial where the record holds Chebyshev coefficients, else the
-/// capstan or direct drive of `pending`; `joints` are the file's `[[joint]]` entries (their limits,
-/// rad, bound the polynomial).
-///
-/// # Errors
-/// A missing coefficient, or a drive the runtime cannot build.
+/// A drive the runtime cannot build (more coefficients than it holds, capstan values outside
+/// eq. 1's domain).
 fn drives_of(
-    pending: &[Pending],
-    cheb: &[Vec<Option<f64>>],
+    drives: &[JointDrive],
     joints: &[JointSpec],
     origin: &str,
 ) -> Result<Vec<Drive>, LoadError> {
-    let invalid = |message: String| LoadError::Invalid {
+    let invalid = |what: &str, message: String| LoadError::Invalid {
         origin: origin.to_owned(),
-        message,
+        message: format!("{what}: {message}"),
     };
-    let model_error = |what: &str, e: Error| invalid(format!("{what}: {e}"));
-    let n_joints = pending.len();
-    let mut drives = Vec::with_capacity(n_joints);
-    for (j, (p, coeffs)) in pending.iter().zip(cheb).enumerate() {
-        let joint = j + 1;
-        let ratio = match p {
-            Pending::Direct => 1.0,
-            Pending::Capstan { ratio, .. } => *ratio,
-        };
-        let drive = if coeffs.is_empty() {
-            match p {
-                Pending::Direct => Ok(Drive::DIRECT),
-                Pending::Capstan {
-                    ratio,
-                    drum_distance_m,
-                    params,
-                } => Drive::capstan(*ratio, *drum_distance_m, *params),
-            }
-            .map_err(|e| model_error(&format!("capstan{joint}"), e))?
-        } else {
-            let mut dense = [0.0; crate::MAX_COEFFS];
-            for (k, c) in coeffs.iter().enumerate() {
-                dense[k] = c.ok_or_else(|| {
-                    invalid(format!(
-                        "joint{joint}.cheb{k} is missing (coefficients 0..={})",
-                        coeffs.len() - 1
-                    ))
-                })?;
-            }
+    let built = |(j, drive): (usize, &JointDrive)| match drive {
+        JointDrive::Direct => Ok(Drive::DIRECT),
+        JointDrive::Capstan {
+            ratio,
+            drum_distance_m,
+            params,
+        } => Drive::capstan(*ratio, *drum_distance_m, *params)
+            .map_err(|e| invalid(&format!("capstan{}", j + 1), e.to_string())),
+        JointDrive::Polynomial { ratio, coeffs } => {
+            let what = format!("joint{}.cheb*", j + 1);
             let limits = &joints[j];
-            Drive::polynomial(
-                ratio,
-                limits.lower_rad,
-                limits.upper_rad,
-                &dense[..coeffs.len()],
-            )
-            .map_err(|e| model_error(&format!("joint{joint}.cheb*"), e))?
-        };
-        drives.push(drive);
-    }
-    Ok(drives)
+            Drive::polynomial(*ratio, limits.lower_rad, limits.upper_rad, coeffs)
+                .map_err(|e| invalid(&what, e.to_string()))
+        }
+    };
+    drives.iter().enumerate().map(built).collect()
 }
 
 /// The text of the file at `path`.

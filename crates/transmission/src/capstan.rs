@@ -38,23 +38,6 @@ pub struct CapstanParams {
     pub beta_i_rad: f64,
 }
 
-impl CapstanParams {
-    /// The parameter a device file's `[calibration.values]` names `capstan{j}.{name}` (`c`,
-    /// `re`, `r_o`, `beta_o`, `r_i`, `beta_i`), with the unit it is written in (`rad`, `1`,
-    /// `m`); `None` for any other name.
-    pub fn field_mut(&mut self, name: &str) -> Option<(&mut f64, &'static str)> {
-        Some(match name {
-            "c" => (&mut self.c_rad, "rad"),
-            "re" => (&mut self.re, "1"),
-            "r_o" => (&mut self.r_o_m, "m"),
-            "beta_o" => (&mut self.beta_o_rad, "rad"),
-            "r_i" => (&mut self.r_i_m, "m"),
-            "beta_i" => (&mut self.beta_i_rad, "rad"),
-            _ => return None,
-        })
-    }
-}
-
 /// Why eq. 1 is not defined for a capstan's parameters ([`Capstan::params_fault`]); each names
 /// the field as a device file writes it under `[[capstan]]` and gives its value.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -263,38 +263,3 @@ fn linear_basis_is_the_first_order_expansion_of_eq1() {
         "gap {coarse} → {fine}: not second order"
     );
 }
-
-/// Each of the six names a device file writes reaches its own field, in its own unit; any
-/// other name reaches none.
-#[test]
-fn each_parameter_name_reaches_its_field() {
-    let mut p = CapstanParams::default();
-    for (i, (name, unit)) in [
-        ("c", "rad"),
-        ("re", "1"),
-        ("r_o", "m"),
-        ("beta_o", "rad"),
-        ("r_i", "m"),
-        ("beta_i", "rad"),
-    ]
-    .into_iter()
-    .enumerate()
-    {
-        let (field, u) = p.field_mut(name).expect("a capstan parameter");
-        assert_eq!(u, unit, "{name}");
-        *field = i as f64 + 1.0;
-    }
-    assert_eq!(
-        p,
-        CapstanParams {
-            c_rad: 1.0,
-            re: 2.0,
-            r_o_m: 3.0,
-            beta_o_rad: 4.0,
-            r_i_m: 5.0,
-            beta_i_rad: 6.0,
-        }
-    );
-    assert!(p.field_mut("ratio").is_none());
-    assert!(p.field_mut("C").is_none());
-}
