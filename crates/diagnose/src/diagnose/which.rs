@@ -6,7 +6,6 @@
 use hapcal_calibrate::model::ModelName;
 use hapcal_contract::Effect;
 use hapcal_io::Device;
-use hapcal_sim::EffectKind;
 use nalgebra::DVector;
 use rayon::prelude::*;
 
@@ -91,7 +90,7 @@ pub(super) fn select(
 /// The candidates: the simulator's library, and with the geometric baseline the paper's
 /// capstan and parallelogram models of a device that has them.
 fn library(device: &Device, model: ModelName) -> Vec<Effect> {
-    let mut library: Vec<Effect> = EffectKind::LIBRARY.iter().map(|k| k.effect()).collect();
+    let mut library = hapcal_sim::HAPTIC_LIBRARY.to_vec();
     if model == ModelName::Geometric && !device.capstans.is_empty() {
         library.push(Effect::Capstans);
         if device.parallelogram.is_some() {
