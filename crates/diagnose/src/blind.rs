@@ -403,7 +403,10 @@ pub fn summarise(outcomes: &[Outcome]) -> Summary {
     let mut s = Summary::default();
     let mut closed = Vec::new();
     for o in outcomes {
-        let e = s.by_kind.entry(o.case.kind.name().to_owned()).or_insert((0, 0));
+        let e = s
+            .by_kind
+            .entry(o.case.kind.name().to_owned())
+            .or_insert((0, 0));
         e.0 += usize::from(o.correct);
         e.1 += 1;
         if let Some(l) = o.localised {

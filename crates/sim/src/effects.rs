@@ -132,7 +132,10 @@ fn not_injectable(name: &str) -> Error {
         spec: name.to_owned(),
         message: format!(
             "unknown effect; expected one of {}",
-            injectable().map(Effect::name).collect::<Vec<_>>().join(", ")
+            injectable()
+                .map(Effect::name)
+                .collect::<Vec<_>>()
+                .join(", ")
         ),
     }
 }
@@ -300,8 +303,7 @@ fn check_effects(device: &Device, effects: &[Injected]) -> Result<(), Error> {
             if j == 0 || j > n {
                 return Err(bad(format!("{key}: the device has joints 1..{n}")));
             }
-            if e.effect == Effect::CapstanHarmonic
-                && !device.capstans.iter().any(|c| c.joint == j)
+            if e.effect == Effect::CapstanHarmonic && !device.capstans.iter().any(|c| c.joint == j)
             {
                 return Err(bad(format!("{key}: joint {j} has no capstan")));
             }
@@ -365,9 +367,7 @@ fn cable_distance_m(effects: &[Injected], p: &Vector3<f64>, t: f64, drum_radius_
             }
             Effect::ThermalDrift => d_true * e.get("k") * t,
             Effect::CableOffset => e.get("c"),
-            Effect::CableDrumRunout => {
-                e.get("a") * (d_true / drum_radius_m + e.get("phase")).sin()
-            }
+            Effect::CableDrumRunout => e.get("a") * (d_true / drum_radius_m + e.get("phase")).sin(),
             _ => 0.0,
         };
     }
