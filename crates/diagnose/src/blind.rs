@@ -13,15 +13,17 @@
 use std::collections::BTreeMap;
 use std::f64::consts::TAU;
 
+use hapcal_contract::Effect;
 use hapcal_io::{Device, LogRow};
 use hapcal_sim::{
-    EffectKind, Injected, MotionConfig, NoiseModel, SimConfig, Truth, simulate_motion,
+    HAPTIC_LIBRARY, Injected, MotionConfig, NoiseModel, OUTSIDE_LIBRARY, SimConfig, Truth,
+    injectable, simulate_motion,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use crate::{DiagnoseConfig, Diagnosis, Error, baseline_residuals_m, diagnose};
+use crate::{DiagnoseConfig, Diagnosis, Error, Verdict, baseline_residuals_m, diagnose};
 
 /// What a blind case holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
@@ -35,6 +37,18 @@ pub enum CaseKind {
     Outside,
     /// Two library effects: both should be named.
     Two,
+}
+
+impl CaseKind {
+    /// The kind as the report writes it: `none`, `one`, `outside`, `two`.
+    pub fn name(self) -> &'static str {
+        match self {
+            CaseKind::None => "none",
+            CaseKind::One => "one",
+            CaseKind::Outside => "outside",
+            CaseKind::Two => "two",
+        }
+    }
 }
 
 /// One blind case.
@@ -55,16 +69,25 @@ fn effects_as_strings<S: serde::Serializer>(e: &[Injected], s: S) -> Result<S::O
     s.collect_seq(e.iter().map(ToString::to_string))
 }
 
+/// `verdict` with its effects in the simulator's order ([`injectable`]; any other effect
+/// last): the order of a case's expected verdict.
+fn in_library_order(verdict: &Verdict) -> Verdict {
+    let mut effects = verdict.effects().to_vec();
+    effects.sort_by_key(|&e| injectable().position(|i| i == e).unwrap_or(usize::MAX));
+    match verdict {
+        Verdict::Effects(_) => Verdict::Effects(effects),
+        other => other.clone(),
+    }
+}
+
 impl Case {
-    /// The expected verdict: `none`, an effect name, or two names joined by `+` in library
-    /// order.
-    pub fn expected(&self) -> String {
+    /// The expected verdict: none, or the injected library effects in the simulator's order.
+    pub fn expected(&self) -> Verdict {
         match self.kind {
-            CaseKind::None | CaseKind::Outside => "none".to_owned(),
+            CaseKind::None | CaseKind::Outside => Verdict::None,
             _ => {
-                let mut names: Vec<EffectKind> = self.effects.iter().map(|e| e.kind).collect();
-                names.sort();
-                names.iter().map(|k| k.name()).collect::<Vec<_>>().join("+")
+                let injected: Vec<Effect> = self.effects.iter().map(|e| e.effect).collect();
+                in_library_order(&Verdict::of(&injected))
             }
         }
     }
@@ -77,20 +100,20 @@ impl Case {
             CaseKind::One => self
                 .effects
                 .first()
-                .map_or("?".to_owned(), |e| e.kind.name().to_owned()),
+                .map_or("?".to_owned(), |e| e.effect.name().to_owned()),
             CaseKind::Outside => format!(
                 "outside:{}",
-                self.effects.first().map_or("?", |e| e.kind.name())
+                self.effects.first().map_or("?", |e| e.effect.name())
             ),
             CaseKind::Two => "two".to_owned(),
         }
     }
 }
 
-/// A reference-size effect of `kind` with random joints and phases (amplitudes are scaled
-/// later).
+/// A reference-size `effect` (one the simulator injects) with random joints and phases
+/// (amplitudes are scaled later).
 fn reference_effect(
-    kind: EffectKind,
+    effect: Effect,
     device: &Device,
     rng: &mut ChaCha8Rng,
 ) -> Result<Injected, Error> {
@@ -106,22 +129,22 @@ fn reference_effect(
     let all: Vec<usize> = (1..=n).collect();
     // Joints with a gravity torque that varies (not the vertical joint 1, not the tip joint).
     let torque_joints: Vec<usize> = (2..n.max(2)).collect();
-    let params: Vec<(String, f64)> = match kind {
-        EffectKind::CableAngle => vec![("k".into(), 1e-3)],
-        EffectKind::ThermalDrift => vec![("k".into(), 1e-6)],
-        EffectKind::Latency => vec![("tau".into(), 1e-3)],
-        EffectKind::CableOffset => vec![("c".into(), 1e-3)],
-        EffectKind::GravityCompliance => vec![(format!("j{}", pick(rng, &torque_joints)), 1e-3)],
-        EffectKind::Backlash => vec![(format!("j{}", pick(rng, &all)), 1e-3)],
-        EffectKind::FirstHarmonic => {
+    let params: Vec<(String, f64)> = match effect {
+        Effect::CableAngle => vec![("k".into(), 1e-3)],
+        Effect::ThermalDrift => vec![("k".into(), 1e-6)],
+        Effect::Latency => vec![("tau".into(), 1e-3)],
+        Effect::CableOffset => vec![("c".into(), 1e-3)],
+        Effect::GravityCompliance => vec![(format!("j{}", pick(rng, &torque_joints)), 1e-3)],
+        Effect::Backlash => vec![(format!("j{}", pick(rng, &all)), 1e-3)],
+        Effect::FirstHarmonic => {
             let j = pick(rng, if direct.is_empty() { &all } else { &direct });
             vec![(format!("j{j}"), 1e-3), (format!("phase{j}"), phase(rng))]
         }
-        EffectKind::CapstanHarmonic => {
+        Effect::CapstanHarmonic => {
             let j = pick(rng, &capstan_joints);
             vec![(format!("j{j}"), 1e-3), (format!("phase{j}"), phase(rng))]
         }
-        EffectKind::JointBump => {
+        Effect::JointBump => {
             let j = pick(rng, &all);
             let (lo, hi) = device
                 .joint_limits()
@@ -135,9 +158,10 @@ fn reference_effect(
                 ("width".into(), 0.12 * (hi - lo)),
             ]
         }
-        EffectKind::CableDrumRunout => vec![("a".into(), 1e-4), ("phase".into(), phase(rng))],
+        Effect::CableDrumRunout => vec![("a".into(), 1e-4), ("phase".into(), phase(rng))],
+        _ => Vec::new(),
     };
-    Injected::try_new(kind, params).map_err(|e| Error::Blind {
+    Injected::try_new(effect, params).map_err(|e| Error::Blind {
         message: e.to_string(),
     })
 }
@@ -145,7 +169,7 @@ fn reference_effect(
 /// The effect with its amplitudes (not phases, positions or widths) multiplied by `factor`.
 fn scaled(e: &Injected, factor: f64) -> Injected {
     Injected {
-        kind: e.kind,
+        effect: e.effect,
         params: e
             .params
             .iter()
@@ -204,15 +228,15 @@ pub fn draw_case(
         CaseKind::One | CaseKind::Outside => 1,
         CaseKind::Two => 2,
     };
-    let mut kinds: Vec<EffectKind> = Vec::new();
-    while kinds.len() < n_effects {
-        let k = if kind == CaseKind::Outside {
-            EffectKind::OUTSIDE[rng.random_range(0..EffectKind::OUTSIDE.len())]
+    let mut drawn: Vec<Effect> = Vec::new();
+    while drawn.len() < n_effects {
+        let e = if kind == CaseKind::Outside {
+            OUTSIDE_LIBRARY[rng.random_range(0..OUTSIDE_LIBRARY.len())]
         } else {
-            EffectKind::LIBRARY[rng.random_range(0..EffectKind::LIBRARY.len())]
+            HAPTIC_LIBRARY[rng.random_range(0..HAPTIC_LIBRARY.len())]
         };
-        if !kinds.contains(&k) {
-            kinds.push(k);
+        if !drawn.contains(&e) {
+            drawn.push(e);
         }
     }
     let sim = sim_cfg(device, seed, cfg.n_samples);
@@ -225,11 +249,11 @@ pub fn draw_case(
     let clean = simulate(&[])?;
     let mut effects = Vec::new();
     let mut sizes = Vec::new();
-    if !kinds.is_empty() {
+    if !drawn.is_empty() {
         let r0 = baseline_residuals_m(device, &clean, &cfg.diagnose)?;
         let floor = (r0.iter().map(|r| r * r).sum::<f64>() / r0.len().max(1) as f64).sqrt();
-        for k in kinds {
-            let reference = reference_effect(k, device, &mut rng)?;
+        for e in drawn {
+            let reference = reference_effect(e, device, &mut rng)?;
             let sign = if rng.random::<bool>() { 1.0 } else { -1.0 };
             let (lo, hi) = cfg.size_range;
             let s = lo * (hi / lo).powf(rng.random::<f64>());
@@ -275,9 +299,9 @@ pub struct Outcome {
     /// Its confusion-matrix row label ([`Case::label`]).
     pub label: String,
     /// The expected verdict.
-    pub expected: String,
+    pub expected: Verdict,
     /// The verdict.
-    pub verdict: String,
+    pub verdict: Verdict,
     /// Whether the verdict is right.
     pub correct: bool,
     /// For outside effects: whether the residual map points at it (joint probe or signal of
@@ -292,19 +316,12 @@ pub struct Outcome {
 /// Scores a diagnosis against its case.
 pub fn score(case: &Case, d: &Diagnosis) -> Outcome {
     let expected = case.expected();
-    let named = d.verdict.to_string();
-    let mut got: Vec<&str> = named.split('+').collect();
-    got.sort_by_key(|name| {
-        name.parse::<EffectKind>()
-            .map_or(usize::MAX, |k| k as usize)
-    });
-    let verdict_sorted = got.join("+");
     let localised = (case.kind == CaseKind::Outside).then(|| {
         let Some(e) = case.effects.first() else {
             return false;
         };
-        match e.kind {
-            EffectKind::JointBump => {
+        match e.effect {
+            Effect::JointBump => {
                 let j = e
                     .params
                     .iter()
@@ -328,9 +345,9 @@ pub fn score(case: &Case, d: &Diagnosis) -> Outcome {
     });
     Outcome {
         label: case.label(),
-        correct: verdict_sorted == expected,
+        correct: in_library_order(&d.verdict) == expected,
         expected,
-        verdict: d.verdict.to_string(),
+        verdict: d.verdict.clone(),
         localised,
         gap_closed_pct: d.gap_closed_pct,
         gap_in_floors: d.gap_in_floors,
@@ -386,8 +403,10 @@ pub fn summarise(outcomes: &[Outcome]) -> Summary {
     let mut s = Summary::default();
     let mut closed = Vec::new();
     for o in outcomes {
-        let kind = format!("{:?}", o.case.kind).to_lowercase();
-        let e = s.by_kind.entry(kind).or_insert((0, 0));
+        let e = s
+            .by_kind
+            .entry(o.case.kind.name().to_owned())
+            .or_insert((0, 0));
         e.0 += usize::from(o.correct);
         e.1 += 1;
         if let Some(l) = o.localised {
@@ -402,7 +421,7 @@ pub fn summarise(outcomes: &[Outcome]) -> Summary {
         let col = if o.case.kind == CaseKind::Two && o.correct {
             "both".to_owned()
         } else {
-            o.verdict.clone()
+            o.verdict.to_string()
         };
         *s.matrix
             .entry(o.label.clone())

@@ -33,16 +33,6 @@ pub use baseline::baseline_residuals_m;
 /// the column to count as visible (below: indistinguishable from the baseline).
 const VISIBLE_TOL: f64 = 0.005;
 
-/// Share of its round's held-out gap (what the effects accepted before it left, above the
-/// floor) the last accepted effect must close, unless what it leaves is consistent with the
-/// floor (or it closes [`SUFFICIENT_SHARE_IN_SAMPLE`] of the round's in-sample excess); below
-/// it the effect is not named and the rule goes on with the one before it.
-const SUFFICIENT_SHARE: f64 = 0.8;
-
-/// The same on the in-sample weighted excess (an effect the baseline mostly absorbs is
-/// estimated poorly on training folds, so its held-out share understates it).
-const SUFFICIENT_SHARE_IN_SAMPLE: f64 = 0.9;
-
 /// The model a haptic device's log is diagnosed against, by the name `--baseline` takes: one
 /// of the two models `hapcal calibrate` fits to such a log ([`ModelName`], the one
 /// definition of a model):
@@ -121,16 +111,18 @@ impl Default for DiagnoseConfig {
     }
 }
 
-/// One identified parameter with its standard deviation.
+/// One identified effect parameter with its standard deviation (the haptic and the arm
+/// diagnosis).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ParamValue {
-    /// `effect.key`, e.g. `backlash.j2`.
+    /// `effect.key`: `backlash.j2`, `gravity_compliance.joint_a2`, or `effect.axis`.
     pub name: String,
     /// Value, in `unit`.
     pub value: f64,
-    /// Standard deviation, in `unit`.
+    /// Standard deviation, in `unit` (σ from the spec or the residuals, whichever is larger,
+    /// on a haptic device; from the residuals on a robot).
     pub std: f64,
-    /// SI unit.
+    /// SI unit (`rad`, `m`, `rad/(N·m)`, `rad/m`, `1`).
     pub unit: String,
 }
 
@@ -171,27 +163,32 @@ pub struct Candidate {
     pub bic_gain: f64,
 }
 
-/// One bin of the residual map.
+/// One bin of a residual map (the haptic and the arm diagnosis).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Bin {
-    /// The binned signal (`q3`, `motor_phase2`, `distance`, `cable_angle`, `direction5`,
-    /// `time`, `drum_phase`).
+    /// The binned signal: on a haptic device `q3`, `motor_phase2`, `distance`, `cable_angle`,
+    /// `direction5`, `time`, `drum_phase`; on a robot `q2`, `time`, `torque2`, `reach`,
+    /// `height`, `azimuth`.
     pub signal: String,
-    /// Bin edges in the signal's unit (rad, m, s; direction −1 or +1).
+    /// Lower edge, in the signal's unit (rad, m, s, N·m; direction −1 or +1).
     pub lo: f64,
     /// Upper edge.
     pub hi: f64,
-    /// Samples in the bin.
+    /// Samples (configurations on a robot) in the bin.
     pub n: usize,
-    /// Held-out residual RMS in the bin, m.
+    /// Held-out residual RMS in the bin (of the cable distance, or of the 3-D position), m.
     pub rms_m: f64,
-    /// Held-out residual mean in the bin, m.
-    pub mean_m: f64,
-    /// The floor's RMS in the bin, m.
+    /// Held-out residual mean in the bin, m (a haptic device's signed distance residual;
+    /// `None` for a robot's 3-D error, and then not written).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_m: Option<f64>,
+    /// The floor's RMS in the bin (on a robot without a floor, the overall held-out RMS), m.
     pub floor_rms_m: f64,
-    /// `P(χ²_n > Σ e²/var)`: the chance of this RMS from noise alone.
+    /// `P(χ²_n > Σ e²/var)`: the chance of this RMS from noise alone (Holm-adjusted over
+    /// every bin on a robot).
     pub p_value: f64,
-    /// Significantly above the floor (Bonferroni over all bins at `alpha`).
+    /// Significantly above the floor at `alpha` (Bonferroni over all bins on a haptic device,
+    /// Holm on a robot).
     pub flagged: bool,
 }
 
@@ -322,14 +319,7 @@ pub fn diagnose(
     rows: &[LogRow],
     cfg: &DiagnoseConfig,
 ) -> Result<Diagnosis, Error> {
-    if cfg.folds < 2 || !(cfg.alpha > 0.0 && cfg.alpha < 1.0) || cfg.max_effects == 0 {
-        return Err(Error::Config {
-            message: format!(
-                "need folds ≥ 2 (got {}), 0 < alpha < 1 (got {}), max_effects ≥ 1",
-                cfg.folds, cfg.alpha
-            ),
-        });
-    }
+    crate::error::check_rounds(cfg.folds, cfg.alpha, cfg.max_effects)?;
     let (b, fit) = baseline::baseline(device, rows, cfg)?;
     let (where_, signals) =
         residual_map::residual_map(device, &b.data, &fit.base.lin, &fit.base.cv, cfg.alpha);

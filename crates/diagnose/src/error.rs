@@ -30,3 +30,19 @@ pub enum Error {
         message: String,
     },
 }
+
+/// The settings the rounds of either diagnosis share, checked: `folds` ≥ 2, 0 < `alpha` < 1,
+/// `max_effects` ≥ 1.
+///
+/// # Errors
+/// [`Error::Config`] naming the values given.
+pub(crate) fn check_rounds(folds: usize, alpha: f64, max_effects: usize) -> Result<(), Error> {
+    if folds < 2 || !(alpha > 0.0 && alpha < 1.0) || max_effects == 0 {
+        return Err(Error::Config {
+            message: format!(
+                "need folds ≥ 2 (got {folds}), 0 < alpha < 1 (got {alpha}), max_effects ≥ 1"
+            ),
+        });
+    }
+    Ok(())
+}

@@ -273,6 +273,13 @@ fn norms_skip(rem2: &mut [f64], j: usize) {
     rem2[j] = -1.0;
 }
 
+/// `|cos|` of the angle between `a` and `b` (0 when either is zero): how alike two
+/// candidates' fits of a residual are.
+pub(crate) fn cosine(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
+    let d = a.norm() * b.norm();
+    if d > 0.0 { (a.dot(b) / d).abs() } else { 0.0 }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -89,13 +89,77 @@ impl PartialEq<&str> for Verdict {
     }
 }
 
-/// Why the rounds named no further effect after `named` of at most `max_effects`: the cap, or
-/// no candidate of the library passing (the haptic and the arm diagnosis word it alike).
-pub(crate) fn stop_reason(named: usize, max_effects: usize) -> String {
-    if named >= max_effects {
+/// Share of its round's held-out gap above the floor, and of its in-sample excess `RSS − dof`,
+/// one of which the last accepted effect must close unless what it leaves is consistent with
+/// the floor (docs/diagnosis.md §3 (d)): an effect estimated poorly on training folds closes
+/// less of the held-out gap than of the in-sample excess.
+const SUFFICIENT_SHARE: (f64, f64) = (0.8, 0.9);
+
+/// What an accepted effect closes of the gap its round faced: shares (0–1) of the held-out gap
+/// and of the in-sample excess, and whether a significant gap remains after it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RoundShare {
+    pub(crate) heldout: f64,
+    pub(crate) in_sample: f64,
+    pub(crate) significant: bool,
+}
+
+/// How many of the accepted effects (`shares`, in the order accepted) are named: from the
+/// last back, one closing less than [`SUFFICIENT_SHARE`] and leaving a significant gap explains
+/// a part of something else and is not named (`not_enough` is told its index).
+pub(crate) fn sufficient(shares: &[RoundShare], mut not_enough: impl FnMut(usize)) -> usize {
+    let mut named = shares.len();
+    while let Some(s) = named.checked_sub(1).map(|k| shares[k]) {
+        let (heldout, in_sample) = SUFFICIENT_SHARE;
+        if s.heldout >= heldout || s.in_sample >= in_sample || !s.significant {
+            break;
+        }
+        named -= 1;
+        not_enough(named);
+    }
+    named
+}
+
+/// The note on a significant residual after the `named` effects of `verdict` (at most
+/// `max_effects`): their cross-validated mean squared error against the floor's, m².
+pub(crate) fn residual_note(
+    verdict: &Verdict,
+    (final_mse, floor_mse): (f64, f64),
+    (named, max_effects): (usize, usize),
+    length: Length,
+) -> String {
+    let why = if named >= max_effects {
         format!("the search stops at {max_effects} effects (max_effects)")
     } else {
         "no further candidate of the library passes".to_owned()
+    };
+    let (rms, floor, unit) = (
+        length.of(final_mse.sqrt()),
+        length.of(floor_mse.sqrt()),
+        length.0,
+    );
+    format!(
+        "after {verdict} the cross-validated RMS is {rms} {unit}, {:.1}× the floor's {floor} \
+         {unit}, a significant residual: another effect is at work that the verdict does not \
+         name ({why})",
+        (final_mse / floor_mse).sqrt(),
+    )
+}
+
+/// The unit a report writes lengths in: name, metres per unit, decimals.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Length(pub(crate) &'static str, f64, usize);
+
+/// µm to 0.1: a haptic device's cable distance.
+pub(crate) const MICROMETRES: Length = Length("µm", 1e6, 1);
+
+/// mm to 0.001: a robot's positions.
+pub(crate) const MILLIMETRES: Length = Length("mm", 1e3, 3);
+
+impl Length {
+    /// `m` (m) in this unit, without the unit.
+    pub(crate) fn of(self, m: f64) -> String {
+        format!("{:.*}", self.2, m * self.1)
     }
 }
 

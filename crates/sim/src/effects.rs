@@ -3,15 +3,15 @@
 //! [`simulate_motion`] moves the truth device along a smooth multi-sine trajectory
 //! (every joint in both directions, several cycles per log), samples it every
 //! [`MotionConfig::sample_period_s`], and injects any number of [`Injected`]s on top of the
-//! truth transmissions and deviations. Each effect has a stable name ([`EffectKind`]),
-//! parameters given by key (`backlash:j2=1e-3`), a physical model and a source, listed on
-//! [`EffectKind`].
+//! truth transmissions and deviations. Each effect is one of the one vocabulary's
+//! ([`Effect`], its name), with parameters given by key (`backlash:j2=1e-3`), a physical model
+//! and a source, listed on [`HAPTIC_LIBRARY`] and [`OUTSIDE_LIBRARY`].
 
 use std::f64::consts::TAU;
 use std::fmt;
 use std::str::FromStr;
 
-use hapcal_contract::Effect as Vocabulary;
+use hapcal_contract::Effect;
 use hapcal_io::{Device, LogRow, N_EXT};
 use hapcal_kinematics::{Point3, Vector3};
 use rand::{Rng, SeedableRng};
@@ -23,13 +23,9 @@ use crate::{Error, SimConfig, Truth, quantise_readings, true_joint_angles, truth
 /// Handle mass used when the device file has no `[handle]`, kg (docs/design.md §2: 0.2 kg).
 pub const DEFAULT_HANDLE_MASS_KG: f64 = 0.2;
 
-/// The unmodelled effects the simulator can inject: a subset of the one vocabulary
-/// ([`Vocabulary`], `hapcal_contract::Effect`), by its names (docs/design.md §6, §6.1).
-///
-/// The first eight ([`EffectKind::LIBRARY`]) form the diagnosis library; the last two
-/// ([`EffectKind::OUTSIDE`]) exist only to test that `diagnose` answers `none` honestly
-/// for an effect it does not know. Parameters (key = value, SI units), with `j<k>` the
-/// 1-based joint `k`:
+/// The effects of the diagnosis library the simulator injects into a haptic device's log,
+/// in docs/design.md §6 order (the one vocabulary, [`Effect`]; docs/design.md §6.1).
+/// Parameters (key = value, SI units), with `j<k>` the 1-based joint `k`:
 ///
 /// | name | keys | model |
 /// |---|---|---|
@@ -41,8 +37,6 @@ pub const DEFAULT_HANDLE_MASS_KG: f64 = 0.2;
 /// | `thermal_drift` | `k` (1/s) | `d = d_true·(1 + k·(t − t_0))` |
 /// | `latency` | `tau` (s) | `d(t) = d_true(t + τ)` |
 /// | `cable_offset` | `c` (m) | `d = d_true + c` |
-/// | `joint_bump` | `j<k>` (rad), `at<k>` (rad), `width` (rad) | `Δθ_j = A_j·exp(−(θ_j − at_j)²/(2·width²))` |
-/// | `cable_drum_runout` | `a` (m), `phase` (rad) | `Δd = a·sin(d/R_d + φ)` |
 ///
 /// Joint effects change the true joint angle (the external encoders `ext1..ext4`, on the
 /// output shafts, see them too); cable effects change only `distance_m`.
@@ -58,166 +52,100 @@ pub const DEFAULT_HANDLE_MASS_KG: f64 = 0.2;
 /// around the exit eyelet of radius `k` lengthens the path by `k·(γ − sin γ)` (belt-wrap
 /// geometry); thermal expansion `ΔL = α·L·ΔT` with a temperature drifting linearly in time;
 /// latency, sampling the cable encoder `τ` after the joints.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum EffectKind {
-    /// Cable encoder error growing with the cable's angle from the rig z axis.
-    CableAngle,
-    /// Joint deflection proportional to the handle's gravity torque.
-    GravityCompliance,
-    /// Half-width offset signed by motion direction.
-    Backlash,
-    /// Once-per-revolution harmonic on direct-drive joints.
-    FirstHarmonic,
-    /// Second harmonic of the capstan's motor-drum eccentricity.
-    CapstanHarmonic,
-    /// Cable length scale drifting linearly in time.
-    ThermalDrift,
-    /// Time offset between joint and cable sampling.
-    Latency,
-    /// Zero offset of the cable encoder.
-    CableOffset,
-    /// Outside the library: a local bump in one joint's angle (a dent in a drum).
-    JointBump,
-    /// Outside the library: once-per-revolution error of the cable-encoder drum.
-    CableDrumRunout,
+pub const HAPTIC_LIBRARY: [Effect; 8] = [
+    Effect::CableAngle,
+    Effect::GravityCompliance,
+    Effect::Backlash,
+    Effect::FirstHarmonic,
+    Effect::CapstanHarmonic,
+    Effect::ThermalDrift,
+    Effect::Latency,
+    Effect::CableOffset,
+];
+
+/// The effects outside every library the simulator injects, to test that the diagnosis
+/// answers `none` honestly for an effect it does not know:
+///
+/// | name | keys | model |
+/// |---|---|---|
+/// | `joint_bump` | `j<k>` (rad), `at<k>` (rad), `width` (rad) | `Δθ_j = A_j·exp(−(θ_j − at_j)²/(2·width²))` |
+/// | `cable_drum_runout` | `a` (m), `phase` (rad) | `Δd = a·sin(d/R_d + φ)` |
+pub const OUTSIDE_LIBRARY: [Effect; 2] = [Effect::JointBump, Effect::CableDrumRunout];
+
+/// Every effect the simulator injects: [`HAPTIC_LIBRARY`], then [`OUTSIDE_LIBRARY`]; the
+/// order of its messages and of the blind test's expected verdicts.
+pub fn injectable() -> impl Iterator<Item = Effect> {
+    HAPTIC_LIBRARY.into_iter().chain(OUTSIDE_LIBRARY)
 }
 
-impl EffectKind {
-    /// The diagnosis library, in docs/design.md §6 order.
-    pub const LIBRARY: [EffectKind; 8] = [
-        EffectKind::CableAngle,
-        EffectKind::GravityCompliance,
-        EffectKind::Backlash,
-        EffectKind::FirstHarmonic,
-        EffectKind::CapstanHarmonic,
-        EffectKind::ThermalDrift,
-        EffectKind::Latency,
-        EffectKind::CableOffset,
-    ];
-    /// Effects outside the library, for blind tests.
-    pub const OUTSIDE: [EffectKind; 2] = [EffectKind::JointBump, EffectKind::CableDrumRunout];
+/// The keys `effect` takes, for messages; `None` for an effect the simulator does not inject.
+fn keys_help(effect: Effect) -> Option<&'static str> {
+    Some(match effect {
+        Effect::CableAngle | Effect::ThermalDrift => "k",
+        Effect::Latency => "tau",
+        Effect::CableOffset => "c",
+        Effect::GravityCompliance | Effect::Backlash => "j1, j2, …",
+        Effect::FirstHarmonic | Effect::CapstanHarmonic => "j1, j2, …, phase1, phase2, …",
+        Effect::JointBump => "j1, …, at1, …, width",
+        Effect::CableDrumRunout => "a, phase",
+        _ => return None,
+    })
+}
 
-    /// Every kind.
-    pub fn all() -> impl Iterator<Item = EffectKind> {
-        EffectKind::LIBRARY.into_iter().chain(EffectKind::OUTSIDE)
-    }
-
-    /// The effect of the one vocabulary this kind injects.
-    pub fn effect(self) -> Vocabulary {
-        match self {
-            EffectKind::CableAngle => Vocabulary::CableAngle,
-            EffectKind::GravityCompliance => Vocabulary::GravityCompliance,
-            EffectKind::Backlash => Vocabulary::Backlash,
-            EffectKind::FirstHarmonic => Vocabulary::FirstHarmonic,
-            EffectKind::CapstanHarmonic => Vocabulary::CapstanHarmonic,
-            EffectKind::ThermalDrift => Vocabulary::ThermalDrift,
-            EffectKind::Latency => Vocabulary::Latency,
-            EffectKind::CableOffset => Vocabulary::CableOffset,
-            EffectKind::JointBump => Vocabulary::JointBump,
-            EffectKind::CableDrumRunout => Vocabulary::CableDrumRunout,
-        }
-    }
-
-    /// The kind that injects `effect`; `None` for an effect the simulator cannot inject.
-    pub fn of(effect: Vocabulary) -> Option<EffectKind> {
-        EffectKind::all().find(|k| k.effect() == effect)
-    }
-
-    /// The effect's one name (`cable_angle`, …: [`Vocabulary::name`]).
-    pub fn name(self) -> &'static str {
-        self.effect().name()
-    }
-
-    /// Whether the diagnosis library contains this effect.
-    pub fn in_library(self) -> bool {
-        EffectKind::LIBRARY.contains(&self)
-    }
-
-    /// Whether a parameter key is valid for this effect.
-    fn accepts(self, key: &str) -> bool {
-        let joint_key = |prefix: &str| {
-            key.strip_prefix(prefix)
-                .and_then(|d| d.parse::<usize>().ok())
-                .is_some_and(|j| (1..=64).contains(&j))
-        };
-        match self {
-            EffectKind::CableAngle | EffectKind::ThermalDrift => key == "k",
-            EffectKind::Latency => key == "tau",
-            EffectKind::CableOffset => key == "c",
-            EffectKind::GravityCompliance | EffectKind::Backlash => joint_key("j"),
-            EffectKind::FirstHarmonic | EffectKind::CapstanHarmonic => {
-                joint_key("j") || joint_key("phase")
-            }
-            EffectKind::JointBump => joint_key("j") || joint_key("at") || key == "width",
-            EffectKind::CableDrumRunout => key == "a" || key == "phase",
-        }
-    }
-
-    /// The values a parameter may take: phases and bump positions within ±2π rad, a bump width
-    /// within [10⁻⁶, 2π] rad, a latency within [0, 1] s, a backlash half-width within
-    /// [0, 0.1] rad, every other amplitude or coefficient within ±1 (in its SI unit: rad, m,
-    /// m/rad, rad/(N·m), m/s). Wider values are not a perturbation of a haptic device: a
-    /// `cable_angle:k=1e300` writes distances of 1e299 m.
-    fn range(self, key: &str) -> (f64, f64) {
-        use std::f64::consts::TAU;
-        match self {
-            _ if key.starts_with("phase") || key.starts_with("at") => (-TAU, TAU),
-            EffectKind::JointBump if key == "width" => (1e-6, TAU),
-            EffectKind::Latency => (0.0, 1.0),
-            EffectKind::Backlash => (0.0, 0.1),
-            _ => (-1.0, 1.0),
-        }
-    }
-
-    /// Keys this effect accepts, for messages.
-    fn keys_help(self) -> &'static str {
-        match self {
-            EffectKind::CableAngle | EffectKind::ThermalDrift => "k",
-            EffectKind::Latency => "tau",
-            EffectKind::CableOffset => "c",
-            EffectKind::GravityCompliance | EffectKind::Backlash => "j1, j2, …",
-            EffectKind::FirstHarmonic | EffectKind::CapstanHarmonic => {
-                "j1, j2, …, phase1, phase2, …"
-            }
-            EffectKind::JointBump => "j1, …, at1, …, width",
-            EffectKind::CableDrumRunout => "a, phase",
-        }
+/// Whether a parameter key is valid for `effect` (one the simulator injects).
+fn accepts(effect: Effect, key: &str) -> bool {
+    let joint_key = |prefix: &str| {
+        key.strip_prefix(prefix)
+            .and_then(|d| d.parse::<usize>().ok())
+            .is_some_and(|j| (1..=64).contains(&j))
+    };
+    match effect {
+        Effect::CableAngle | Effect::ThermalDrift => key == "k",
+        Effect::Latency => key == "tau",
+        Effect::CableOffset => key == "c",
+        Effect::GravityCompliance | Effect::Backlash => joint_key("j"),
+        Effect::FirstHarmonic | Effect::CapstanHarmonic => joint_key("j") || joint_key("phase"),
+        Effect::JointBump => joint_key("j") || joint_key("at") || key == "width",
+        Effect::CableDrumRunout => key == "a" || key == "phase",
+        _ => false,
     }
 }
 
-impl fmt::Display for EffectKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+/// The values a parameter of `effect` may take: phases and bump positions within ±2π rad, a
+/// bump width within [10⁻⁶, 2π] rad, a latency within [0, 1] s, a backlash half-width within
+/// [0, 0.1] rad, every other amplitude or coefficient within ±1 (in its SI unit: rad, m,
+/// m/rad, rad/(N·m), m/s). Wider values are not a perturbation of a haptic device: a
+/// `cable_angle:k=1e300` writes distances of 1e299 m.
+fn range(effect: Effect, key: &str) -> (f64, f64) {
+    match effect {
+        _ if key.starts_with("phase") || key.starts_with("at") => (-TAU, TAU),
+        Effect::JointBump if key == "width" => (1e-6, TAU),
+        Effect::Latency => (0.0, 1.0),
+        Effect::Backlash => (0.0, 0.1),
+        _ => (-1.0, 1.0),
     }
 }
 
-impl FromStr for EffectKind {
-    type Err = Error;
-    /// Parses a stable name.
-    ///
-    /// # Errors
-    /// [`Error::Effect`] for an unknown name.
-    fn from_str(s: &str) -> Result<EffectKind, Error> {
-        EffectKind::all()
-            .find(|k| k.name() == s)
-            .ok_or_else(|| Error::Effect {
-                spec: s.to_owned(),
-                message: format!(
-                    "unknown effect; expected one of {}",
-                    EffectKind::all()
-                        .map(EffectKind::name)
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            })
+/// The refusal of an effect named `name` the simulator does not inject.
+fn not_injectable(name: &str) -> Error {
+    Error::Effect {
+        spec: name.to_owned(),
+        message: format!(
+            "unknown effect; expected one of {}",
+            injectable()
+                .map(Effect::name)
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
     }
 }
 
-/// One injected effect: its kind and parameters by key (SI units, see [`EffectKind`]).
+/// One injected effect and its parameters by key (SI units, see [`HAPTIC_LIBRARY`] and
+/// [`OUTSIDE_LIBRARY`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Injected {
-    /// Which effect.
-    pub kind: EffectKind,
+    /// Which effect: one of [`injectable`].
+    pub effect: Effect,
     /// `(key, value)` pairs; keys not given are 0 (`width` defaults to 0.1 rad).
     pub params: Vec<(String, f64)>,
 }
@@ -226,19 +154,17 @@ impl Injected {
     /// An effect with checked parameters.
     ///
     /// # Errors
-    /// [`Error::Effect`] for a key the effect does not accept, a repeated key or a
-    /// non-finite value.
-    pub fn try_new(kind: EffectKind, params: Vec<(String, f64)>) -> Result<Injected, Error> {
+    /// [`Error::Effect`] for an effect the simulator does not inject ([`injectable`]), a key
+    /// the effect does not accept, a repeated key or a non-finite value.
+    pub fn try_new(effect: Effect, params: Vec<(String, f64)>) -> Result<Injected, Error> {
+        let keys = keys_help(effect).ok_or_else(|| not_injectable(effect.name()))?;
         let bad = |message: String| Error::Effect {
-            spec: kind.name().to_owned(),
+            spec: effect.name().to_owned(),
             message,
         };
         for (i, (key, value)) in params.iter().enumerate() {
-            if !kind.accepts(key) {
-                return Err(bad(format!(
-                    "unknown parameter {key:?}; expected {}",
-                    kind.keys_help()
-                )));
+            if !accepts(effect, key) {
+                return Err(bad(format!("unknown parameter {key:?}; expected {keys}")));
             }
             if !value.is_finite() {
                 return Err(bad(format!("{key} = {value} is not finite")));
@@ -246,7 +172,7 @@ impl Injected {
             if params[..i].iter().any(|(k, _)| k == key) {
                 return Err(bad(format!("{key} is given twice")));
             }
-            let (lo, hi) = kind.range(key);
+            let (lo, hi) = range(effect, key);
             if !(lo..=hi).contains(value) {
                 return Err(bad(format!(
                     "{key} = {value:e} is outside [{lo}, {hi}]: an unmodelled effect is a small \
@@ -254,7 +180,7 @@ impl Injected {
                 )));
             }
         }
-        Ok(Injected { kind, params })
+        Ok(Injected { effect, params })
     }
 
     /// The value of `key`, or 0 when it is not given.
@@ -276,7 +202,7 @@ impl Injected {
 
 impl fmt::Display for Injected {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.kind)?;
+        f.write_str(self.effect.name())?;
         for (i, (k, v)) in self.params.iter().enumerate() {
             write!(f, "{}{k}={v:e}", if i == 0 { ':' } else { ',' })?;
         }
@@ -292,7 +218,10 @@ impl FromStr for Injected {
     /// [`Error::Effect`] for an unknown name or key, a malformed pair or a non-finite value.
     fn from_str(s: &str) -> Result<Injected, Error> {
         let (name, rest) = s.split_once(':').unwrap_or((s, ""));
-        let kind: EffectKind = name.trim().parse()?;
+        let name = name.trim();
+        let effect = injectable()
+            .find(|e| e.name() == name)
+            .ok_or_else(|| not_injectable(name))?;
         let mut params = Vec::new();
         for pair in rest.split(',').map(str::trim).filter(|p| !p.is_empty()) {
             let bad = |message: String| Error::Effect {
@@ -308,7 +237,7 @@ impl FromStr for Injected {
                 .map_err(|_| bad(format!("expected a number for {key}, found {value:?}")))?;
             params.push((key.trim().to_owned(), value));
         }
-        Injected::try_new(kind, params)
+        Injected::try_new(effect, params)
     }
 }
 
@@ -374,8 +303,7 @@ fn check_effects(device: &Device, effects: &[Injected]) -> Result<(), Error> {
             if j == 0 || j > n {
                 return Err(bad(format!("{key}: the device has joints 1..{n}")));
             }
-            if e.kind == EffectKind::CapstanHarmonic
-                && !device.capstans.iter().any(|c| c.joint == j)
+            if e.effect == Effect::CapstanHarmonic && !device.capstans.iter().any(|c| c.joint == j)
             {
                 return Err(bad(format!("{key}: joint {j} has no capstan")));
             }
@@ -432,16 +360,14 @@ fn cable_distance_m(effects: &[Injected], p: &Vector3<f64>, t: f64, drum_radius_
     let d_true = p.norm();
     let mut d = d_true;
     for e in effects {
-        d += match e.kind {
-            EffectKind::CableAngle => {
+        d += match e.effect {
+            Effect::CableAngle => {
                 let (g, _) = hapcal_problems::cable_angle(&Point3::from(*p));
                 e.get("k") * (g - g.sin())
             }
-            EffectKind::ThermalDrift => d_true * e.get("k") * t,
-            EffectKind::CableOffset => e.get("c"),
-            EffectKind::CableDrumRunout => {
-                e.get("a") * (d_true / drum_radius_m + e.get("phase")).sin()
-            }
+            Effect::ThermalDrift => d_true * e.get("k") * t,
+            Effect::CableOffset => e.get("c"),
+            Effect::CableDrumRunout => e.get("a") * (d_true / drum_radius_m + e.get("phase")).sin(),
             _ => 0.0,
         };
     }
@@ -502,7 +428,7 @@ pub fn simulate_motion(
         let mut q = true_joint_angles(device, truth, &theta)?;
         let torques = if effects
             .iter()
-            .any(|e| e.kind == EffectKind::GravityCompliance)
+            .any(|e| e.effect == Effect::GravityCompliance)
         {
             hapcal_problems::handle_gravity_torques_nm(&chain, &x, &q, mass_kg).map_err(|e| {
                 Error::Effect {
@@ -517,14 +443,14 @@ pub fn simulate_motion(
         for e in effects {
             for j in 0..n_joints {
                 let th = theta[j];
-                dq[j] += match e.kind {
-                    EffectKind::GravityCompliance => e.joint("j", j) * torques[j],
-                    EffectKind::Backlash => -e.joint("j", j) * rate[j].signum(),
-                    EffectKind::FirstHarmonic => e.joint("j", j) * (th + e.joint("phase", j)).sin(),
-                    EffectKind::CapstanHarmonic => {
+                dq[j] += match e.effect {
+                    Effect::GravityCompliance => e.joint("j", j) * torques[j],
+                    Effect::Backlash => -e.joint("j", j) * rate[j].signum(),
+                    Effect::FirstHarmonic => e.joint("j", j) * (th + e.joint("phase", j)).sin(),
+                    Effect::CapstanHarmonic => {
                         e.joint("j", j) * (2.0 * ratios[j] * th + e.joint("phase", j)).sin()
                     }
-                    EffectKind::JointBump => {
+                    Effect::JointBump => {
                         let w = e.get_or("width", 0.1).abs().max(1e-6);
                         let u = (th - e.joint("at", j)) / w;
                         e.joint("j", j) * (-0.5 * u * u).exp()
@@ -540,7 +466,7 @@ pub fn simulate_motion(
     };
 
     let latency_s: f64 = (effects.iter())
-        .filter(|e| e.kind == EffectKind::Latency)
+        .filter(|e| e.effect == Effect::Latency)
         .map(|e| e.get("tau"))
         .sum();
     let mut rows = Vec::with_capacity(cfg.n_poses);
@@ -585,20 +511,20 @@ mod tests {
     use super::*;
 
     #[test]
-    fn every_kind_survives_the_name_round_trip() {
-        for kind in EffectKind::all() {
-            assert_eq!(kind.name().parse::<EffectKind>().ok(), Some(kind));
-            assert_eq!(kind.to_string(), kind.name());
+    fn every_injectable_effect_parses_by_its_name_and_no_other_effect_does() {
+        for effect in Effect::ALL {
+            let parsed = effect.name().parse::<Injected>().map(|i| i.effect);
+            assert_eq!(parsed.ok(), injectable().find(|&e| e == effect), "{effect}");
         }
-        assert_eq!(EffectKind::all().count(), 10);
-        assert!(EffectKind::LIBRARY.iter().all(|k| k.in_library()));
-        assert!(EffectKind::OUTSIDE.iter().all(|k| !k.in_library()));
+        assert_eq!(injectable().count(), 10);
+        let refused = Injected::try_new(Effect::GearRatio, Vec::new()).expect_err("not injected");
+        assert!(refused.to_string().contains("unknown effect"), "{refused}");
     }
 
     #[test]
     fn effect_specs_parse_and_reject_bad_input() {
         let e: Injected = "backlash:j2=1e-3,j3=5e-4".parse().expect("valid");
-        assert_eq!(e.kind, EffectKind::Backlash);
+        assert_eq!(e.effect, Effect::Backlash);
         assert_eq!(e.joint("j", 1), 1e-3);
         assert_eq!(e.get("j1"), 0.0);
         let round: Injected = e.to_string().parse().expect("round trip");

@@ -104,7 +104,7 @@ pub enum Error {
         value: f64,
     },
     /// An unmodelled effect is malformed or does not fit the device (`--effect` syntax:
-    /// `name:key=value,…`, see [`crate::EffectKind`]).
+    /// `name:key=value,…`, see [`crate::injectable`]).
     #[error("effect {spec}: {message}")]
     Effect {
         /// The effect as given.

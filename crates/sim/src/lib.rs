@@ -16,7 +16,7 @@
 //!   angles of joints 1–4 `+ N(0, σ_e)`).
 //!
 //! - [`simulate_motion`] moves the device along a time-ordered trajectory and injects the
-//!   unmodelled effects of docs/design.md §6 ([`Injected`], [`EffectKind`]).
+//!   unmodelled effects of docs/design.md §6 ([`Injected`], [`HAPTIC_LIBRARY`]).
 //!
 //! The paper's truth and a 200-pose log (seed 1, paper noise) are in
 //! `fixtures/reference-device/` (`truth.toml`, `device.toml`, `log.csv`; the log is written by
@@ -52,7 +52,10 @@ mod error;
 mod sim;
 mod truth;
 
-pub use effects::{DEFAULT_HANDLE_MASS_KG, EffectKind, Injected, MotionConfig, simulate_motion};
+pub use effects::{
+    DEFAULT_HANDLE_MASS_KG, HAPTIC_LIBRARY, Injected, MotionConfig, OUTSIDE_LIBRARY, injectable,
+    simulate_motion,
+};
 pub use error::Error;
 
 /// The reference device's file below the project's root: the nominal device a simulation

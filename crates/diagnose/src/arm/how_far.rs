@@ -6,8 +6,9 @@ use hapcal_contract::Effect;
 
 use super::baseline::Baseline;
 use super::cv::HeldOut;
-use super::{ArmConfig, ArmStep, SUFFICIENT_SHARE, SUFFICIENT_SHARE_IN_SAMPLE};
+use super::{ArmConfig, ArmStep};
 use crate::Verdict;
+use crate::verdict::{MILLIMETRES, RoundShare, residual_note, sufficient};
 
 /// The how-far stage's output.
 pub(super) struct HowFar {
@@ -52,56 +53,50 @@ pub(super) fn how_far(
     } else {
         0.0
     };
-    // Sufficiency, from the last named effect back: an effect that closes less than
-    // SUFFICIENT_SHARE of the gap its round faced (what the effects before it left) and leaves
-    // a significant residual explains a part of something else, not itself; it is not named,
-    // and the rule applies to the one before it.
-    let mut named = accepted.len();
-    if let Some(f) = floor0 {
-        while named > 0 {
-            let st = &steps[named - 1];
-            let (before, after) = (
-                st.heldout_rms_before_m.powi(2),
-                st.heldout_rms_after_m.powi(2),
-            );
-            let faced = before - f;
-            let share = if faced > 0.0 {
-                (before - after) / faced
-            } else {
-                1.0
-            };
-            let share_in = in_sample_share[named - 1];
-            if share >= SUFFICIENT_SHARE
-                || share_in >= SUFFICIENT_SHARE_IN_SAMPLE
-                || p_after[named - 1] >= cfg.alpha
-            {
-                break;
-            }
-            notes.push(format!(
-                "{} closes {:.0} % of the gap left before it ({:.0} % in-sample) and a \
-                 significant residual remains: not enough to name it (the effect at work is \
-                 likely outside the library)",
-                st.effect,
-                100.0 * share,
-                100.0 * share_in
-            ));
-            named -= 1;
+    // Sufficiency (with a floor): the share of the gap its round faced is restated from the
+    // steps' held-out errors.
+    let named = match floor0 {
+        Some(f) => {
+            let shares: Vec<RoundShare> = (steps.iter().zip(in_sample_share).zip(p_after))
+                .map(|((st, &in_sample), &p)| {
+                    let before = st.heldout_rms_before_m.powi(2);
+                    let after = st.heldout_rms_after_m.powi(2);
+                    let faced = before - f;
+                    RoundShare {
+                        heldout: if faced > 0.0 {
+                            (before - after) / faced
+                        } else {
+                            1.0
+                        },
+                        in_sample,
+                        significant: p < cfg.alpha,
+                    }
+                })
+                .collect();
+            sufficient(&shares, |k| {
+                notes.push(format!(
+                    "{} closes {:.0} % of the gap left before it ({:.0} % in-sample) and a \
+                     significant residual remains: not enough to name it (the effect at work \
+                     is likely outside the library)",
+                    steps[k].effect,
+                    100.0 * shares[k].heldout,
+                    100.0 * shares[k].in_sample
+                ));
+            })
         }
-    }
+        None => accepted.len(),
+    };
     let verdict = Verdict::of(&accepted[..named]);
     if named > 0
         && let Some(f) = floor0
         && p_after[named - 1] < cfg.alpha
     {
         let final_mse = steps[named - 1].heldout_rms_after_m.powi(2);
-        let why = crate::verdict::stop_reason(named, cfg.max_effects);
-        notes.push(format!(
-            "after {verdict} the cross-validated RMS is {:.3} mm, {:.1}× the floor's {:.3} mm, \
-             a significant residual: another effect is at work that the verdict does not name \
-             ({why})",
-            final_mse.sqrt() * 1e3,
-            (final_mse / f).sqrt(),
-            f.sqrt() * 1e3
+        notes.push(residual_note(
+            &verdict,
+            (final_mse, f),
+            (named, cfg.max_effects),
+            MILLIMETRES,
         ));
     }
     if let Some(step) = steps.first()

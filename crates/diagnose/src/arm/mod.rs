@@ -59,9 +59,7 @@ use hapcal_contract::Effect;
 use crate::Error;
 
 pub use columns::{approach_signs, transversal_columns};
-pub use report::{
-    ArmBin, ArmCandidate, ArmDiagnosis, ArmLadderRung, ArmRung, ArmStep, EffectParam, FloorSource,
-};
+pub use report::{ArmCandidate, ArmDiagnosis, ArmLadderRung, ArmRung, ArmStep, FloorSource};
 
 /// Remaining fraction of a candidate column's norm, after projecting out the baseline, below
 /// which the column is absorbed by the baseline (invisible in these data).
@@ -74,18 +72,6 @@ const READING_STEP: f64 = 1e-6;
 /// The tip's reach or height must span more than this (m) for the workspace maps: at sockets
 /// it does not move.
 const WORKSPACE_SPREAD_M: f64 = 0.01;
-
-/// Share of the gap its round faced (the held-out error left by the effects before it, above
-/// the floor) the last named effect must close, unless what it leaves is consistent with the
-/// floor; below it the effect is not named, and the rule goes on with the one before it
-/// (docs/diagnosis.md, the reference device's rule taken round by round).
-const SUFFICIENT_SHARE: f64 = 0.8;
-
-/// The same on the in-sample excess `RSS − dof` (in floor units) of the round: an effect that
-/// is estimated poorly on training folds (a weakly determined parameter among several) closes
-/// less of the held-out gap than of the in-sample excess (the reference device's second
-/// chance).
-const SUFFICIENT_SHARE_IN_SAMPLE: f64 = 0.9;
 
 /// Blocked standard errors by which a candidate's held-out error must undercut the round's
 /// baseline: the calibration ladder's margin (`hapcal_calibrate::model::LADDER_SIGNIFICANCE_Z`).
@@ -220,14 +206,7 @@ pub fn robot_baseline(name: Option<&str>) -> Result<(), Error> {
 /// [`Error::Config`] for settings out of range; [`Error::Data`] for fewer than 2 folds'
 /// worth of configurations; [`Error::Baseline`] if the problem cannot be evaluated.
 pub fn diagnose_arm(baseline: &GeometricBaseline, cfg: &ArmConfig) -> Result<ArmDiagnosis, Error> {
-    if cfg.folds < 2 || !(cfg.alpha > 0.0 && cfg.alpha < 1.0) || cfg.max_effects == 0 {
-        return Err(Error::Config {
-            message: format!(
-                "need folds ≥ 2 (got {}), 0 < alpha < 1 (got {}), max_effects ≥ 1",
-                cfg.folds, cfg.alpha
-            ),
-        });
-    }
+    crate::error::check_rounds(cfg.folds, cfg.alpha, cfg.max_effects)?;
     let b = baseline::Baseline::new(baseline, cfg)?;
     let where_ = residual_map::residual_map(&b.ctx, &b.rows, &b.held, b.floor.var, cfg);
     let which::Selection {

@@ -6,7 +6,7 @@ use hapcal_calibrate::model::Rung;
 use hapcal_contract::Effect;
 use serde::Serialize;
 
-use crate::Verdict;
+use crate::{Bin, ParamValue, Verdict};
 
 /// Where the floor came from.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -28,19 +28,6 @@ pub enum FloorSource {
     },
     /// No floor: gaps are relative to the best model found.
     None,
-}
-
-/// One identified effect parameter.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct EffectParam {
-    /// `effect.joint` (`gravity_compliance.joint_a2`) or `effect.axis`.
-    pub name: String,
-    /// Value, in `unit`.
-    pub value: f64,
-    /// Standard deviation (σ from the residuals).
-    pub std: f64,
-    /// Unit (`rad/(N·m)`, `rad/m`, `rad`, `m`, `1`).
-    pub unit: String,
 }
 
 /// One candidate tested in one round.
@@ -77,28 +64,7 @@ pub struct ArmCandidate {
     /// Why it was, or was not.
     pub reason: String,
     /// Its parameters fitted with the baseline on all training rows.
-    pub parameters: Vec<EffectParam>,
-}
-
-/// One bin of the residual map.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct ArmBin {
-    /// Signal (`q2`, `time`, `torque2`, `reach`, `height`, `azimuth`).
-    pub signal: String,
-    /// Lower edge, in the signal's unit (rad, m, s, N·m).
-    pub lo: f64,
-    /// Upper edge.
-    pub hi: f64,
-    /// Configurations in the bin.
-    pub n: usize,
-    /// Held-out 3-D position RMS in the bin, m.
-    pub rms_m: f64,
-    /// The floor's RMS in the bin (the overall held-out RMS without a floor), m.
-    pub floor_rms_m: f64,
-    /// `P(χ² > Σe²/var)`, Holm-adjusted over every bin.
-    pub p_value: f64,
-    /// Significantly above the floor at `alpha`.
-    pub flagged: bool,
+    pub parameters: Vec<ParamValue>,
 }
 
 /// A rung of the diagnosis's ladder: a kinematic rung of the baseline (nominal, frames only,
@@ -158,7 +124,7 @@ pub struct ArmStep {
     /// Share of the gap its round faced (left by the effects before it) it closes, %.
     pub round_gap_closed_pct: f64,
     /// Its parameters ± std.
-    pub parameters: Vec<EffectParam>,
+    pub parameters: Vec<ParamValue>,
     /// Candidates the data confuse with it, each with the measurement that would separate them.
     pub confusable_with: Vec<(Effect, String)>,
     /// The same effect under another model that these data do not tell from it: for a
@@ -201,7 +167,7 @@ pub struct ArmDiagnosis {
     pub gap_significant: bool,
     /// The residual map of the baseline's held-out residuals.
     #[serde(rename = "where")]
-    pub where_: Vec<ArmBin>,
+    pub where_: Vec<Bin>,
     /// Every candidate of every round of the final run of the rounds (after the stepwise
     /// revision; effects left out by it are named in the notes, with why).
     pub candidates: Vec<ArmCandidate>,

@@ -4,7 +4,8 @@ use nalgebra::Vector3;
 
 use super::cv::HeldOut;
 use super::problem::{Context, Rows};
-use super::{ArmBin, ArmConfig, WORKSPACE_SPREAD_M};
+use super::{ArmConfig, WORKSPACE_SPREAD_M};
+use crate::Bin;
 use crate::stats::{chi2_sf, holm};
 
 /// The residual map: held-out position RMS in quantile bins of each signal (joint readings,
@@ -16,7 +17,7 @@ pub(super) fn residual_map(
     held: &HeldOut,
     floor_var: Option<f64>,
     cfg: &ArmConfig,
-) -> Vec<ArmBin> {
+) -> Vec<Bin> {
     let n_c = rows.n_configurations();
     let names = &ctx.baseline.robot.joint_names;
     let mut signals: Vec<(String, Vec<f64>)> = Vec::new();
@@ -100,12 +101,13 @@ pub(super) fn residual_map(
                 1.0
             };
             p_raw.push(p);
-            bins.push(ArmBin {
+            bins.push(Bin {
                 signal: name.clone(),
                 lo: v[members[0]],
                 hi: v[*members.last().unwrap_or(&members[0])],
                 n: members.len(),
                 rms_m: (ss / members.len() as f64).sqrt(),
+                mean_m: None,
                 floor_rms_m: (floor_ss / members.len() as f64).sqrt(),
                 p_value: p,
                 flagged: false,

@@ -14,11 +14,11 @@ use super::columns::effect_columns;
 use super::cv::{HeldOut, beside, cross_validate, one_sided_p, visible_columns};
 use super::revise::{Named, Revision, compliance_not_needed, revise, swapped};
 use super::{
-    ArmCandidate, ArmConfig, ArmStep, CONFUSABLE_COSINE, EffectParam, HELDOUT_SIGNIFICANCE_Z,
-    arm_candidates,
+    ArmCandidate, ArmConfig, ArmStep, CONFUSABLE_COSINE, HELDOUT_SIGNIFICANCE_Z, arm_candidates,
 };
+use crate::ParamValue;
 use crate::solve::lstsq;
-use crate::stats::{f_sf, holm, pivoted_basis};
+use crate::stats::{cosine, f_sf, holm, pivoted_basis};
 
 /// One run of the rounds: what they named and tested.
 #[derive(Clone)]
@@ -504,12 +504,12 @@ fn parameters(
     from: usize,
     names: &[(String, &'static str)],
     visible: &[usize],
-) -> (Vec<EffectParam>, DVector<f64>) {
+) -> (Vec<ParamValue>, DVector<f64>) {
     let (x, cov) = lstsq(a, r);
     let dof = (r.len() as f64 - a.ncols() as f64).max(1.0);
     let s2 = (r - a * &x).norm_squared() / dof;
     let params = (visible.iter().enumerate())
-        .map(|(k, &c)| EffectParam {
+        .map(|(k, &c)| ParamValue {
             name: names[c].0.clone(),
             value: x[from + k],
             std: (cov[(from + k, from + k)] * s2).sqrt(),
@@ -531,9 +531,4 @@ struct Tested {
     p_cv: f64,
     p_f: f64,
     improvement: f64,
-}
-
-fn cosine(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
-    let d = a.norm() * b.norm();
-    if d > 0.0 { (a.dot(b) / d).abs() } else { 0.0 }
 }

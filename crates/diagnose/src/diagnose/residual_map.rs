@@ -78,7 +78,7 @@ fn signal_bins(
                 hi: edges[b].1,
                 n: m.len(),
                 rms_m: mean(m.iter().map(|&i| cv.e[i].powi(2))).sqrt(),
-                mean_m: mean(m.iter().map(|&i| cv.e[i])),
+                mean_m: Some(mean(m.iter().map(|&i| cv.e[i]))),
                 floor_rms_m: mean(m.iter().map(|&i| cv.var[i])).sqrt(),
                 p_value: p,
                 flagged: p < bin_alpha,

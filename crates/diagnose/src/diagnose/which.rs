@@ -6,8 +6,6 @@
 use hapcal_calibrate::model::ModelName;
 use hapcal_contract::Effect;
 use hapcal_io::Device;
-use hapcal_sim::EffectKind;
-use nalgebra::DVector;
 use rayon::prelude::*;
 
 use super::baseline::{Baseline, Fit, baseline_error};
@@ -18,7 +16,8 @@ use super::{Candidate, DiagnoseConfig, ParamValue, Step};
 use crate::Error;
 use crate::model::{State, Term};
 use crate::solve::{lstsq, refine};
-use crate::stats::{chi2_sf, holm};
+use crate::stats::{chi2_sf, cosine, holm};
+use crate::verdict::RoundShare;
 
 /// Cosine of two candidates' fits of the round's residual above which they are reported as
 /// confusable with each other.
@@ -37,17 +36,6 @@ pub(super) struct Run {
     pub(super) shares: Vec<RoundShare>,
     /// The candidates that cannot be tested on this log, and why.
     pub(super) notes: Vec<String>,
-}
-
-/// What an accepted effect closes of the gap its round faced.
-#[derive(Clone, Copy)]
-pub(super) struct RoundShare {
-    /// Share of the round's held-out gap (above the floor).
-    pub(super) heldout: f64,
-    /// Share of the round's in-sample excess `RSS − dof`.
-    pub(super) in_sample: f64,
-    /// Whether a significant gap remains after it.
-    pub(super) significant: bool,
 }
 
 /// The rounds, from the baseline's `fit`, up to `cfg.max_effects`.
@@ -91,7 +79,7 @@ pub(super) fn select(
 /// The candidates: the simulator's library, and with the geometric baseline the paper's
 /// capstan and parallelogram models of a device that has them.
 fn library(device: &Device, model: ModelName) -> Vec<Effect> {
-    let mut library: Vec<Effect> = EffectKind::LIBRARY.iter().map(|k| k.effect()).collect();
+    let mut library = hapcal_sim::HAPTIC_LIBRARY.to_vec();
     if model == ModelName::Geometric && !device.capstans.is_empty() {
         library.push(Effect::Capstans);
         if device.parallelogram.is_some() {
@@ -208,11 +196,6 @@ fn rank(tested: &mut [Tested]) -> Option<(usize, Vec<Effect>)> {
         }
     }
     Some((w, confusable))
-}
-
-fn cosine(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
-    let d = a.norm() * b.norm();
-    if d > 0.0 { (a.dot(b) / d).abs() } else { 0.0 }
 }
 
 /// The round's winner `tested[w]` refitted with the baseline (Levenberg–Marquardt): its

@@ -2,19 +2,12 @@
 
 use std::fmt::{self, Write as _};
 
+use super::{significance, write_step};
 use crate::Diagnosis;
+use crate::verdict::MICROMETRES;
 
 fn um(m: f64) -> String {
-    format!("{:.1}", m * 1e6)
-}
-
-/// `significant` or `not significant`.
-pub(super) fn significance(significant: bool) -> &'static str {
-    if significant {
-        "significant"
-    } else {
-        "not significant"
-    }
+    MICROMETRES.of(m)
 }
 
 /// The diagnosis as a text report: gap, where (flagged bins and signals), which (every
@@ -100,16 +93,12 @@ fn which(s: &mut String, d: &Diagnosis) -> fmt::Result {
 fn how_far(s: &mut String, d: &Diagnosis) -> fmt::Result {
     writeln!(s, "\nHOW FAR")?;
     for st in &d.steps {
-        let (before, after) = (um(st.heldout_rms_before_m), um(st.heldout_rms_after_m));
-        writeln!(
-            s,
-            "  + {}: held-out RMS {before} → {after} µm, closes {:.0} % of the gap",
-            st.effect, st.gap_closed_pct
-        )?;
-        for p in &st.parameters {
-            let (name, value, std, unit) = (&p.name, p.value, p.std, &p.unit);
-            writeln!(s, "      {name:34} {value:>12.4e} ± {std:.1e} {unit}")?;
-        }
+        let rms = (
+            st.heldout_rms_before_m,
+            st.heldout_rms_after_m,
+            st.gap_closed_pct,
+        );
+        write_step(s, st.effect, rms, &st.parameters, (34, MICROMETRES))?;
         if !st.confusable_with.is_empty() {
             let names: Vec<&str> = st.confusable_with.iter().map(|e| e.name()).collect();
             writeln!(s, "      resembles: {}", names.join(", "))?;

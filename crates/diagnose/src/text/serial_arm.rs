@@ -3,12 +3,15 @@
 
 use std::fmt::{self, Write as _};
 
-use crate::arm::ArmDiagnosis;
 use hapcal_calibrate::baseline::DataKind;
 use hapcal_contract::{Effect, ModelName};
 
+use super::{significance, write_step};
+use crate::arm::ArmDiagnosis;
+use crate::verdict::MILLIMETRES;
+
 fn mm(m: f64) -> String {
-    format!("{:.3}", m * 1e3)
+    MILLIMETRES.of(m)
 }
 
 /// What the training rows measured, in words.
@@ -52,7 +55,7 @@ fn gap(s: &mut String, d: &ArmDiagnosis) -> fmt::Result {
             "held-out RMS {heldout} mm; no floor: gap to the best model found {gap} mm"
         );
     };
-    let significant = super::haptic::significance(d.gap_significant);
+    let significant = significance(d.gap_significant);
     writeln!(
         s,
         "held-out RMS {heldout} mm, floor {} mm, gap {gap} mm (p = {:.1e}, {significant})",
@@ -111,16 +114,12 @@ fn which(s: &mut String, d: &ArmDiagnosis) -> fmt::Result {
 fn how_far(s: &mut String, d: &ArmDiagnosis) -> fmt::Result {
     writeln!(s, "\nHOW FAR")?;
     for st in &d.steps {
-        let (before, after) = (mm(st.heldout_rms_before_m), mm(st.heldout_rms_after_m));
-        writeln!(
-            s,
-            "  + {}: held-out RMS {before} → {after} mm, closes {:.0} % of the gap",
-            st.effect, st.gap_closed_pct
-        )?;
-        for p in &st.parameters {
-            let (name, value, std, unit) = (&p.name, p.value, p.std, &p.unit);
-            writeln!(s, "      {name:40} {value:>12.4e} ± {std:.1e} {unit}")?;
-        }
+        let rms = (
+            st.heldout_rms_before_m,
+            st.heldout_rms_after_m,
+            st.gap_closed_pct,
+        );
+        write_step(s, st.effect, rms, &st.parameters, (40, MILLIMETRES))?;
         for other in &st.alike {
             writeln!(
                 s,

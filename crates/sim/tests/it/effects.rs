@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use hapcal_sim::{EffectKind, Injected, MotionConfig, NoiseModel, SimConfig, simulate_motion};
+use hapcal_sim::{HAPTIC_LIBRARY, Injected, MotionConfig, NoiseModel, SimConfig, simulate_motion};
 
 fn reference() -> (hapcal_io::Device, hapcal_sim::Truth) {
     let truth_file =
@@ -82,5 +82,5 @@ fn effects_that_do_not_fit_the_device_are_errors() {
     };
     let err = simulate_motion(&device, &truth, &cfg, &period, &[]).expect_err("period 0");
     assert!(err.to_string().contains("must be > 0"), "{err}");
-    assert_eq!(EffectKind::LIBRARY.len(), 8);
+    assert_eq!(HAPTIC_LIBRARY.len(), 8);
 }
