@@ -2,6 +2,7 @@
 //! only, joint offsets, …) fit subsets of one problem's parameters.
 
 use std::ops::Range;
+use std::sync::Mutex;
 
 use faer::{Col, ColMut, ColRef, Mat, MatMut, MatRef};
 
@@ -19,6 +20,11 @@ pub struct Subset<'a, P: Problem + ?Sized> {
     free: Vec<usize>,
     x_full: Col<f64>,
     layout: ParamLayout,
+    /// `0..free.len()`: every column of the subset.
+    all: Vec<usize>,
+    /// The problem's whole Jacobian of the last evaluation, kept for the next one (an
+    /// evaluation allocated and zeroed its own before, a tenth of a ladder's time).
+    scratch: Mutex<Mat<f64>>,
 }
 
 impl<'a, P: Problem + ?Sized> Subset<'a, P> {
@@ -38,9 +44,11 @@ impl<'a, P: Problem + ?Sized> Subset<'a, P> {
         );
         Self {
             problem,
+            all: (0..free.len()).collect(),
             free,
             x_full,
             layout,
+            scratch: Mutex::new(Mat::new()),
         }
     }
 
@@ -66,6 +74,15 @@ impl<'a, P: Problem + ?Sized> Subset<'a, P> {
             x[i] = x_free[k];
         }
         x
+    }
+
+    /// `f` with the kept whole-Jacobian buffer, or a new one while another evaluation holds
+    /// it.
+    fn with_scratch<T>(&self, f: impl FnOnce(&mut Mat<f64>) -> T) -> T {
+        match self.scratch.try_lock() {
+            Ok(mut scratch) => f(&mut scratch),
+            Err(_) => f(&mut Mat::new()),
+        }
     }
 
     /// Copies the free parameters' columns of the problem's Jacobian `full` (rows × all
@@ -105,11 +122,9 @@ impl<P: Problem + Sync + ?Sized> Problem for Subset<'_, P> {
     }
 
     fn jacobian(&self, x: ColRef<'_, f64>, jac: MatMut<'_, f64>) -> Result<(), EvalError> {
-        let x = self.full_checked(x)?;
-        let mut full = Mat::<f64>::zeros(self.problem.n_residuals(), x.nrows());
-        self.problem.jacobian(x.as_ref(), full.as_mut())?;
-        self.free_columns(full.as_ref(), jac);
-        Ok(())
+        self.with_scratch(|scratch| {
+            self.residuals_and_jacobian_columns(x, None, &self.all, jac, scratch)
+        })
     }
 
     fn residuals_and_jacobian(
@@ -118,12 +133,23 @@ impl<P: Problem + Sync + ?Sized> Problem for Subset<'_, P> {
         out: ColMut<'_, f64>,
         jac: MatMut<'_, f64>,
     ) -> Result<(), EvalError> {
+        self.with_scratch(|scratch| {
+            self.residuals_and_jacobian_columns(x, Some(out), &self.all, jac, scratch)
+        })
+    }
+
+    fn residuals_and_jacobian_columns(
+        &self,
+        x: ColRef<'_, f64>,
+        out: Option<ColMut<'_, f64>>,
+        cols: &[usize],
+        jac: MatMut<'_, f64>,
+        scratch: &mut Mat<f64>,
+    ) -> Result<(), EvalError> {
         let x = self.full_checked(x)?;
-        let mut full = Mat::<f64>::zeros(self.problem.n_residuals(), x.nrows());
-        self.problem
-            .residuals_and_jacobian(x.as_ref(), out, full.as_mut())?;
-        self.free_columns(full.as_ref(), jac);
-        Ok(())
+        // The subset's column k is the problem's column free[k].
+        let cols: Vec<usize> = cols.iter().map(|&k| self.free[k]).collect();
+        (self.problem).residuals_and_jacobian_columns(x.as_ref(), out, &cols, jac, scratch)
     }
 
     fn row_blocks(&self) -> Option<&dyn RowBlocks> {
