@@ -22,8 +22,8 @@ pub struct Subset<'a, P: Problem + ?Sized> {
     layout: ParamLayout,
     /// `0..free.len()`: every column of the subset.
     all: Vec<usize>,
-    /// The problem's whole Jacobian of the last evaluation, kept for the next one (an
-    /// evaluation allocated and zeroed its own before, a tenth of a ladder's time).
+    /// The problem's whole Jacobian of the last evaluation, kept for the next one rather than
+    /// allocated and zeroed again at every evaluation.
     scratch: Mutex<Mat<f64>>,
 }
 
@@ -200,5 +200,66 @@ impl<P: Problem + Sync + ?Sized> RowBlocks for Subset<'_, P> {
         blocks.block_jacobian(x.as_ref(), block, r_out, full.as_mut())?;
         self.free_columns(full.as_ref(), jac);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use faer::{Col, ColMut, ColRef, Mat, MatMut};
+
+    use super::Subset;
+    use crate::{EvalError, ParamLayout, Problem, Unit};
+
+    /// `r(x) = A·x` with a Jacobian that depends on nothing: each entry of `A` distinct.
+    struct Linear {
+        layout: ParamLayout,
+        a: Mat<f64>,
+    }
+
+    impl Problem for Linear {
+        fn layout(&self) -> &ParamLayout {
+            &self.layout
+        }
+        fn n_residuals(&self) -> usize {
+            self.a.nrows()
+        }
+        fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
+            out.copy_from(&self.a * x);
+            Ok(())
+        }
+        fn jacobian(&self, _x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+            jac.copy_from(&self.a);
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_subset_of_a_subset_evaluates_the_problems_columns_again_and_again() {
+        let p = Linear {
+            layout: ParamLayout::numbered("p", 6, Unit::Meter),
+            a: Mat::from_fn(9, 6, |i, j| (10 * i + j) as f64 + 0.5),
+        };
+        let outer = Subset::new(&p, vec![0, 2, 3, 5], Col::from_fn(6, |i| i as f64));
+        // Of the outer subset's parameters 0, 2, 3 (p0, p3, p5).
+        let inner = Subset::new(&outer, vec![0, 2, 3], outer.initial_free());
+        let x = Col::from_fn(3, |k| [0.25, -1.0, 2.0][k]);
+        for _ in 0..2 {
+            // Twice: the second evaluation reuses the first's buffer.
+            let (mut r, mut jac) = (Col::zeros(9), Mat::from_fn(9, 3, |_, _| f64::NAN));
+            inner
+                .residuals_and_jacobian(x.as_ref(), r.as_mut(), jac.as_mut())
+                .expect("evaluates");
+            for (k, j) in [0, 3, 5].into_iter().enumerate() {
+                for i in 0..9 {
+                    assert_eq!(jac[(i, k)], p.a[(i, j)]);
+                }
+            }
+            // p1 and p4 at the outer subset's start (1, 4), p2 at the inner one's (2).
+            let full = Col::from_fn(6, |i| [0.25, 1.0, 2.0, -1.0, 4.0, 2.0][i]);
+            let expected = &p.a * &full;
+            for i in 0..9 {
+                assert_eq!(r[i], expected[i]);
+            }
+        }
     }
 }
