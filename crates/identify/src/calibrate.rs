@@ -5,8 +5,10 @@ use faer::{Col, Mat};
 use crate::blocks::{Linearisation, RowBlocks, StreamError, error_at_x0, linearise, streaming_fit};
 use crate::covariance::{Covariance, covariance, sigma_from_residuals};
 use crate::error::{Error, check_config};
+use crate::householder;
 use crate::lm::{
-    Fit, LmConfig, check_inputs, check_jacobian_finite, levenberg_marquardt, levenberg_marquardt_at,
+    FOLD_ROWS, Fit, LmConfig, check_inputs, check_jacobian_finite, levenberg_marquardt,
+    levenberg_marquardt_at,
 };
 use crate::problem::{EvalError, ParamLayout, Problem};
 use crate::rank::{Identifiability, PruneReason, Pruned, RankConfigBase, identifiability};
@@ -513,9 +515,18 @@ fn identify_dense(
     let (mut sigma, sigma_source) = initial_sigma(cfg.sigma, r0.squared_norm_l2(), m);
     finite_sigma(sigma, true)?;
     let candidates: Vec<usize> = (0..n).collect();
+    // On the R factor of J (`n × n`, the same Gram matrix), as the streaming back end decides:
+    // the decision's own QR is then of n rows, not m. Where the unscaled fold is not finite
+    // (a haptic log of two poses, each a hundred times, gave such an R from a finite J), on J
+    // itself, whose columns the decision scales to unit norm first.
     let decide = |jac: &Mat<f64>, sigma: f64| {
+        let r = dense_r_factor(jac.as_ref());
         identifiability(
-            jac.as_ref(),
+            if r.is_all_finite() {
+                r.as_ref()
+            } else {
+                jac.as_ref()
+            },
             &layout,
             &candidates,
             &cfg.rank.with_sigma(sigma.max(SIGMA_FLOOR)),
@@ -580,6 +591,29 @@ fn identify_dense(
             reason: String::new(),
         },
     })
+}
+
+/// The R factor (`n × n`, upper triangular) of the dense `m × n` Jacobian `jac`: `RᵀR =
+/// JᵀJ`, folded block of rows by block of rows ([`householder::fold_rows`]) as the dense
+/// Levenberg–Marquardt folds `[J_f r]`, each block copied first (`jac` is left as it is).
+/// Column norms, distances to spans and the least-squares coefficients between columns are
+/// those of `jac` up to rounding, so the rank decision ([`identifiability`]) and its reasons
+/// are the same on `R` (the streaming back end decides on its `R` so).
+pub(crate) fn dense_r_factor(jac: faer::MatRef<'_, f64>) -> Mat<f64> {
+    let (m, n) = (jac.nrows(), jac.ncols());
+    let mut tri = vec![0.0; n * n];
+    let mut block = vec![0.0; FOLD_ROWS.min(m) * n];
+    for start in (0..m).step_by(FOLD_ROWS) {
+        let len = FOLD_ROWS.min(m - start);
+        for j in 0..n {
+            let col = jac.col(j).subrows(start, len);
+            for (i, b) in block[j * len..(j + 1) * len].iter_mut().enumerate() {
+                *b = col[i];
+            }
+        }
+        householder::fold_rows(&mut tri, n, &mut block, len, len);
+    }
+    Mat::from_fn(n, n, |i, j| tri[j * n + i])
 }
 
 /// `sigma` if it is finite and not negative, as the rank decision needs it; otherwise an
@@ -650,4 +684,81 @@ fn next_round(
         start[i] = x[i];
     }
     NextRound::Again(start)
+}
+
+#[cfg(test)]
+mod tests {
+    use faer::Mat;
+
+    use super::dense_r_factor;
+    use crate::problem::{ParamLayout, Unit};
+    use crate::rank::{PruneReason, RankConfigBase, identifiability};
+
+    #[test]
+    fn the_rank_decision_on_the_r_factor_is_the_decision_on_the_jacobian() {
+        // 700 rows (three row blocks of the fold) of 8 columns: p0..p2 generic, p3 = p0 + 2·p1
+        // exactly, p4 a copy of p2, p5 zero, p6 generic but tiny (σ/‖p6‖ above its prior),
+        // p7 = p0 − p2 plus a part orthogonal at 10⁻⁹ of it (dependent at working tolerance
+        // but not exactly).
+        let m = 700;
+        let g = |i: usize, j: usize| ((i * 31 + j * j * 17 + i * j * 7) as f64 * 0.37).sin();
+        let jac = Mat::from_fn(m, 8, |i, j| match j {
+            0..=2 => g(i, j),
+            3 => g(i, 0) + 2.0 * g(i, 1),
+            4 => g(i, 2),
+            5 => 0.0,
+            6 => 1e-9 * g(i, 6),
+            _ => g(i, 0) - g(i, 2) + 1e-9 * g(i, 7),
+        });
+        let layout = ParamLayout::numbered("p", 8, Unit::Meter);
+        let candidates: Vec<usize> = (0..8).collect();
+        let cfg = RankConfigBase::default().with_sigma(1e-4);
+        let on_j = identifiability(jac.as_ref(), &layout, &candidates, &cfg);
+        let r = dense_r_factor(jac.as_ref());
+        assert_eq!(r.nrows(), 8);
+        // Upper triangular with the Gram matrix of J, to rounding.
+        let gram = jac.transpose() * &jac;
+        let gram_r = r.transpose() * &r;
+        for a in 0..8 {
+            for b in 0..8 {
+                if a > b {
+                    assert_eq!(r[(a, b)], 0.0);
+                }
+                let scale = (gram[(a, a)] * gram[(b, b)]).sqrt().max(f64::MIN_POSITIVE);
+                assert!((gram[(a, b)] - gram_r[(a, b)]).abs() <= 1e-13 * scale);
+            }
+        }
+        let on_r = identifiability(r.as_ref(), &layout, &candidates, &cfg);
+        assert_eq!(on_j.kept, [0, 1, 2]);
+        assert_eq!(on_r.kept, on_j.kept);
+        assert_eq!(on_r.pivot_order, on_j.pivot_order);
+        assert_eq!(on_r.pruned_names(), on_j.pruned_names());
+        for (a, b) in on_r.pruned.iter().zip(&on_j.pruned) {
+            match (&a.reason, &b.reason) {
+                (PruneReason::Dependent { on: x }, PruneReason::Dependent { on: y }) => {
+                    assert_eq!(x.len(), y.len(), "{}", a.name);
+                    for ((nx, cx), (ny, cy)) in x.iter().zip(y) {
+                        assert_eq!(nx, ny);
+                        assert!((cx - cy).abs() <= 1e-9 * cy.abs().max(1.0), "{}", a.name);
+                    }
+                }
+                (x, y) => assert_eq!(x, y, "{}", a.name),
+            }
+            // σ if kept: of an exactly dependent column, rounding over a distance of
+            // 10⁻¹⁶ (above 10⁸ m, or infinite) in both; else the same to 10⁻⁵ (p7's distance
+            // of 10⁻⁹ keeps about seven digits of its cancellation in either factorisation).
+            if b.std_if_kept < 1e8 {
+                let rel = (a.std_if_kept - b.std_if_kept).abs() / b.std_if_kept;
+                assert!(
+                    rel < 1e-5,
+                    "{}: {} vs {}",
+                    a.name,
+                    a.std_if_kept,
+                    b.std_if_kept
+                );
+            } else {
+                assert!(a.std_if_kept >= 1e8, "{}: {}", a.name, a.std_if_kept);
+            }
+        }
+    }
 }

@@ -607,7 +607,7 @@ impl<P: Problem> Linearised for Dense<'_, P> {
 
 /// Rows of `[J_f r]` folded into the triangle at a time by the dense back end: a block of
 /// `256 × (n_f+1)` values stays in the L2 cache for the tens of columns of a calibration.
-const FOLD_ROWS: usize = 256;
+pub(crate) const FOLD_ROWS: usize = 256;
 
 /// Outcome of [`run`].
 pub(crate) struct Run {

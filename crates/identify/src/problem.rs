@@ -1,6 +1,6 @@
 //! The problem trait that every identification problem implements, and its named parameter layout.
 
-use faer::{ColMut, ColRef, MatMut};
+use faer::{ColMut, ColRef, Mat, MatMut};
 
 /// Physical unit of one parameter; used for reporting and for the rank tolerance.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -135,7 +135,9 @@ pub trait Problem {
     /// # Errors
     /// [`EvalError`] when the model cannot be evaluated at `x`.
     fn residuals(&self, x: ColRef<'_, f64>, out: ColMut<'_, f64>) -> Result<(), EvalError>;
-    /// Writes `∂r/∂x` into `jac` (`m × n`; row i = residual i, column j = `layout()` entry j).
+    /// Writes `∂r/∂x` into `jac` (`m × n`; row i = residual i, column j = `layout()` entry j),
+    /// every entry, zeros included: `jac` may hold anything before (Levenberg–Marquardt hands
+    /// back the buffer it factorised in place).
     ///
     /// # Errors
     /// [`EvalError`] when the model cannot be evaluated at `x`.
@@ -158,6 +160,50 @@ pub trait Problem {
     ) -> Result<(), EvalError> {
         self.residuals(x, out)?;
         self.jacobian(x, jac)
+    }
+    /// Writes `r(x)` into `out` (length `m`) when given, and the columns `cols` of `∂r/∂x` into
+    /// `jac` (`m × cols.len()`; column `k` = `layout()` entry `cols[k]`): what a
+    /// [`Subset`](crate::Subset) of the problem evaluates. `scratch` is a buffer the call
+    /// may use and keep (resized to `m × n` when it is not).
+    ///
+    /// The default evaluates the whole Jacobian into `scratch` and copies the columns; a
+    /// [`Subset`](crate::Subset) passes the columns on to its own problem, so a subset of a
+    /// subset fills one whole Jacobian, not one per level.
+    ///
+    /// # Errors
+    /// [`EvalError`] when the model cannot be evaluated at `x`.
+    ///
+    /// # Panics
+    /// If a column index is out of `layout()` or `jac` is not `m × cols.len()` (misuse).
+    #[track_caller]
+    fn residuals_and_jacobian_columns(
+        &self,
+        x: ColRef<'_, f64>,
+        out: Option<ColMut<'_, f64>>,
+        cols: &[usize],
+        mut jac: MatMut<'_, f64>,
+        scratch: &mut Mat<f64>,
+    ) -> Result<(), EvalError> {
+        let (m, n) = (self.n_residuals(), self.layout().len());
+        assert!(
+            jac.nrows() == m && jac.ncols() == cols.len(),
+            "jacobian columns are {} × {}, expected {m} × {}",
+            jac.nrows(),
+            jac.ncols(),
+            cols.len()
+        );
+        // Not zeroed again when kept: the Jacobian writes every entry.
+        if scratch.nrows() != m || scratch.ncols() != n {
+            *scratch = Mat::zeros(m, n);
+        }
+        match out {
+            Some(out) => self.residuals_and_jacobian(x, out, scratch.as_mut())?,
+            None => self.jacobian(x, scratch.as_mut())?,
+        }
+        for (k, &i) in cols.iter().enumerate() {
+            jac.as_mut().col_mut(k).copy_from(scratch.col(i));
+        }
+        Ok(())
     }
     /// The same residuals and Jacobian as independent row blocks, when the problem can
     /// evaluate them so; enables the streaming back end ([`Backend::Streaming`](crate::Backend)),

@@ -2,6 +2,7 @@
 //! only, joint offsets, …) fit subsets of one problem's parameters.
 
 use std::ops::Range;
+use std::sync::Mutex;
 
 use faer::{Col, ColMut, ColRef, Mat, MatMut, MatRef};
 
@@ -19,6 +20,11 @@ pub struct Subset<'a, P: Problem + ?Sized> {
     free: Vec<usize>,
     x_full: Col<f64>,
     layout: ParamLayout,
+    /// `0..free.len()`: every column of the subset.
+    all: Vec<usize>,
+    /// The problem's whole Jacobian of the last evaluation, kept for the next one rather than
+    /// allocated and zeroed again at every evaluation.
+    scratch: Mutex<Mat<f64>>,
 }
 
 impl<'a, P: Problem + ?Sized> Subset<'a, P> {
@@ -38,9 +44,11 @@ impl<'a, P: Problem + ?Sized> Subset<'a, P> {
         );
         Self {
             problem,
+            all: (0..free.len()).collect(),
             free,
             x_full,
             layout,
+            scratch: Mutex::new(Mat::new()),
         }
     }
 
@@ -66,6 +74,15 @@ impl<'a, P: Problem + ?Sized> Subset<'a, P> {
             x[i] = x_free[k];
         }
         x
+    }
+
+    /// `f` with the kept whole-Jacobian buffer, or a new one while another evaluation holds
+    /// it.
+    fn with_scratch<T>(&self, f: impl FnOnce(&mut Mat<f64>) -> T) -> T {
+        match self.scratch.try_lock() {
+            Ok(mut scratch) => f(&mut scratch),
+            Err(_) => f(&mut Mat::new()),
+        }
     }
 
     /// Copies the free parameters' columns of the problem's Jacobian `full` (rows × all
@@ -105,11 +122,9 @@ impl<P: Problem + Sync + ?Sized> Problem for Subset<'_, P> {
     }
 
     fn jacobian(&self, x: ColRef<'_, f64>, jac: MatMut<'_, f64>) -> Result<(), EvalError> {
-        let x = self.full_checked(x)?;
-        let mut full = Mat::<f64>::zeros(self.problem.n_residuals(), x.nrows());
-        self.problem.jacobian(x.as_ref(), full.as_mut())?;
-        self.free_columns(full.as_ref(), jac);
-        Ok(())
+        self.with_scratch(|scratch| {
+            self.residuals_and_jacobian_columns(x, None, &self.all, jac, scratch)
+        })
     }
 
     fn residuals_and_jacobian(
@@ -118,12 +133,23 @@ impl<P: Problem + Sync + ?Sized> Problem for Subset<'_, P> {
         out: ColMut<'_, f64>,
         jac: MatMut<'_, f64>,
     ) -> Result<(), EvalError> {
+        self.with_scratch(|scratch| {
+            self.residuals_and_jacobian_columns(x, Some(out), &self.all, jac, scratch)
+        })
+    }
+
+    fn residuals_and_jacobian_columns(
+        &self,
+        x: ColRef<'_, f64>,
+        out: Option<ColMut<'_, f64>>,
+        cols: &[usize],
+        jac: MatMut<'_, f64>,
+        scratch: &mut Mat<f64>,
+    ) -> Result<(), EvalError> {
         let x = self.full_checked(x)?;
-        let mut full = Mat::<f64>::zeros(self.problem.n_residuals(), x.nrows());
-        self.problem
-            .residuals_and_jacobian(x.as_ref(), out, full.as_mut())?;
-        self.free_columns(full.as_ref(), jac);
-        Ok(())
+        // The subset's column k is the problem's column free[k].
+        let cols: Vec<usize> = cols.iter().map(|&k| self.free[k]).collect();
+        (self.problem).residuals_and_jacobian_columns(x.as_ref(), out, &cols, jac, scratch)
     }
 
     fn row_blocks(&self) -> Option<&dyn RowBlocks> {
@@ -174,5 +200,66 @@ impl<P: Problem + Sync + ?Sized> RowBlocks for Subset<'_, P> {
         blocks.block_jacobian(x.as_ref(), block, r_out, full.as_mut())?;
         self.free_columns(full.as_ref(), jac);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use faer::{Col, ColMut, ColRef, Mat, MatMut};
+
+    use super::Subset;
+    use crate::{EvalError, ParamLayout, Problem, Unit};
+
+    /// `r(x) = A·x` with a Jacobian that depends on nothing: each entry of `A` distinct.
+    struct Linear {
+        layout: ParamLayout,
+        a: Mat<f64>,
+    }
+
+    impl Problem for Linear {
+        fn layout(&self) -> &ParamLayout {
+            &self.layout
+        }
+        fn n_residuals(&self) -> usize {
+            self.a.nrows()
+        }
+        fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
+            out.copy_from(&self.a * x);
+            Ok(())
+        }
+        fn jacobian(&self, _x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+            jac.copy_from(&self.a);
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_subset_of_a_subset_evaluates_the_problems_columns_again_and_again() {
+        let p = Linear {
+            layout: ParamLayout::numbered("p", 6, Unit::Meter),
+            a: Mat::from_fn(9, 6, |i, j| (10 * i + j) as f64 + 0.5),
+        };
+        let outer = Subset::new(&p, vec![0, 2, 3, 5], Col::from_fn(6, |i| i as f64));
+        // Of the outer subset's parameters 0, 2, 3 (p0, p3, p5).
+        let inner = Subset::new(&outer, vec![0, 2, 3], outer.initial_free());
+        let x = Col::from_fn(3, |k| [0.25, -1.0, 2.0][k]);
+        for _ in 0..2 {
+            // Twice: the second evaluation reuses the first's buffer.
+            let (mut r, mut jac) = (Col::zeros(9), Mat::from_fn(9, 3, |_, _| f64::NAN));
+            inner
+                .residuals_and_jacobian(x.as_ref(), r.as_mut(), jac.as_mut())
+                .expect("evaluates");
+            for (k, j) in [0, 3, 5].into_iter().enumerate() {
+                for i in 0..9 {
+                    assert_eq!(jac[(i, k)], p.a[(i, j)]);
+                }
+            }
+            // p1 and p4 at the outer subset's start (1, 4), p2 at the inner one's (2).
+            let full = Col::from_fn(6, |i| [0.25, 1.0, 2.0, -1.0, 4.0, 2.0][i]);
+            let expected = &p.a * &full;
+            for i in 0..9 {
+                assert_eq!(r[i], expected[i]);
+            }
+        }
     }
 }
