@@ -676,15 +676,6 @@ fn an_equilibrium_the_deflection_does_not_reach_is_implausible() {
     );
 }
 
-/// [`hapcal_calibrate::calibrate::check_reproduced`] with the runtime's markers of `robot`
-/// (as `hapcal calibrate` checks the files it is about to write).
-fn reproduced(outcome: &Outcome, robot: &Robot) -> anyhow::Result<()> {
-    let n = robot.tip_names().len();
-    hapcal_calibrate::calibrate::check_reproduced(outcome, &mut |q| {
-        Ok(Some((0..n).map(|k| runtime_marker(robot, q, k)).collect()))
-    })
-}
-
 /// The files of a plausible calibration (the per-axis transversal compliance of the z-axes
 /// humanoid, 2 mm noise) pass the check `hapcal calibrate` makes before writing them.
 #[test]
@@ -700,5 +691,5 @@ fn the_files_of_a_plausible_calibration_reproduce_it() {
         outcome.report.implausible
     );
     let runtime = Robot::load_urdf(&out, &tips).unwrap();
-    reproduced(&outcome, &runtime).unwrap();
+    hapcal_calibrate::calibrate::check_reproduced(&outcome, &runtime).unwrap();
 }
