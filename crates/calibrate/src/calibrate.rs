@@ -7,6 +7,7 @@
 use anyhow::{Context, Result, bail};
 use hapcal_identify::{Identified, Problem};
 use hapcal_io::Device;
+use hapcal_kinematics::Point3;
 use hapcal_metrics::socket_figures;
 use hapcal_problems::{CalibratedModel, CalibrationProblem, RowKind};
 use std::path::{Path, PathBuf};
@@ -24,6 +25,7 @@ pub use crate::inputs::{
     GRAVITY_DOWN, Plan, SIGMA_M_RANGE, SIGMA_RAD_RANGE, check_sigma, gravity_words, parse_gravity,
 };
 pub use crate::model::{DataKind, LADDER_SIGNIFICANCE_Z, ModelChoice, ModelName};
+use crate::record::{output_files, runtime_robot, runtime_robot_of, source_urdf};
 pub use crate::report::{
     CalibrationReport, CvReport, Figures, Outcome, ParamReport, PruneCause, PrunedReport,
     SetReport, SetRole,
@@ -49,18 +51,22 @@ fn check_determined(n_configurations: usize, n_kept: usize, n_model_params: usiz
     Ok(())
 }
 
-/// Figures of one data set under `model`.
+/// Figures of one data set with the end point `end_point` gives at each configuration (m,
+/// in the base frame): a calibrated model's ([`CalibratedModel::end_point`]) or the
+/// runtime's robot's ([`runtime_robot`]).
 ///
 /// # Errors
-/// A socket with no row.
-pub fn figures(set: &DataSet, model: &CalibratedModel, socket_distance_m: f64) -> Result<Figures> {
+/// A socket with no row; `end_point`'s own error.
+pub fn figures(
+    set: &DataSet,
+    end_point: &mut dyn FnMut(&[f64]) -> Result<Point3<f64>>,
+    socket_distance_m: f64,
+) -> Result<Figures> {
     Ok(match set {
         DataSet::Sockets(p) => {
-            let points: Vec<Vec<_>> = p
-                .sockets
-                .iter()
-                .map(|s| s.q.iter().map(|q| model.end_point(q)).collect())
-                .collect();
+            let points: Vec<Vec<_>> = (p.sockets.iter())
+                .map(|s| s.q.iter().map(|q| end_point(q)).collect::<Result<_>>())
+                .collect::<Result<_>>()?;
             let f = socket_figures(&points, socket_distance_m)?;
             Figures {
                 mean_absolute_error_m: Some(f.mean_absolute_error_m),
@@ -70,11 +76,9 @@ pub fn figures(set: &DataSet, model: &CalibratedModel, socket_distance_m: f64) -
             }
         }
         DataSet::Distances { q, distance_m, .. } => {
-            let r: Vec<f64> = q
-                .iter()
-                .zip(distance_m)
-                .map(|(q, d)| model.end_point(q).coords.norm() - d)
-                .collect();
+            let r: Vec<f64> = (q.iter().zip(distance_m))
+                .map(|(q, d)| Ok(end_point(q)?.coords.norm() - d))
+                .collect::<Result<_>>()?;
             Figures {
                 mean_absolute_error_m: None,
                 distance_error_m: None,
@@ -350,14 +354,24 @@ fn calibrate_joints(
         rows.ranges,
         n_training_rows,
     );
-    Ok(Outcome {
+    let mut outcome = Outcome {
         report,
         device,
         device_path: plan.device.clone(),
         model,
         calibrated: None,
         record: Some(record),
-    })
+    };
+    // The calibrated figures are the runtime's evaluation of the files calibrate writes.
+    if let Some(robot) = runtime_robot(&outcome)? {
+        let mut markers = crate::predict::MarkerPoses::new(&robot)?;
+        let mut end_point = |q: &[f64]| Ok(markers.at(q, &[0])?[0].translation.vector.into());
+        let sets = outcome.report.placements.iter_mut();
+        for (set, data) in sets.zip(train.iter().chain(&test)) {
+            set.after = figures(data, &mut end_point, plan.socket_distance_m)?;
+        }
+    }
+    Ok(outcome)
 }
 
 /// The final fit of a socket or distance-log calibration, as its report and record read it.
@@ -542,6 +556,7 @@ fn joint_placements(
     test: &[DataSet],
 ) -> Result<Vec<SetReport>> {
     let nominal = CalibratedModel::nominal(chain.clone());
+    let d = plan.socket_distance_m;
     let mut placements = Vec::new();
     for (role, sets) in [(SetRole::Train, train), (SetRole::Test, test)] {
         for set in sets.iter() {
@@ -549,8 +564,8 @@ fn joint_placements(
                 name: set.name().to_string(),
                 role,
                 n_rows: n_rows(set),
-                before: figures(set, &nominal, plan.socket_distance_m)?,
-                after: figures(set, model, plan.socket_distance_m)?,
+                before: figures(set, &mut |q| Ok(nominal.end_point(q)), d)?,
+                after: figures(set, &mut |q| Ok(model.end_point(q)), d)?,
                 errors: None,
             });
         }
@@ -899,100 +914,12 @@ pub fn write_outputs_beside(
     inputs: &[&Path],
 ) -> Result<Vec<PathBuf>> {
     check_outputs(&outcome.device_path, out, inputs)?;
-    let urdf_source = (outcome.device.urdf.as_ref()).map(|u| u.resolve(&outcome.device_path));
+    let urdf_source = source_urdf(outcome);
     let mut inputs: Vec<&Path> = inputs.to_vec();
     inputs.push(&outcome.device_path);
-    if let Some(u) = &urdf_source {
-        inputs.push(u);
-    }
-    let inputs = &inputs[..];
-    if let Some(calibrated) = &outcome.calibrated {
-        if !out
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
-        {
-            bail!(
-                "{}: the calibrated haptic device is written as a device file (.toml)",
-                out.display()
-            );
-        }
-        let text = hapcal_io::write_device(calibrated);
-        return write_all(outcome, vec![(out.to_path_buf(), text)], inputs);
-    }
-    // Every workflow but the haptic one (its device file, above) records its calibration.
-    let Some(record) = &outcome.record else {
-        bail!(
-            "the calibration of {} holds no record (model, loads, region, values): nothing was \
-             written",
-            outcome.device_path.display()
-        );
-    };
-    let device_tree = outcome.device.tree()?;
-    let values: Vec<_> = (crate::measured::fold_joint_offsets(&outcome.device, &record.values)?
-        .into_iter())
-    .filter(|v| device_tree.params().iter().any(|p| p.name == v.name))
-    .collect();
-    let meta = hapcal_io::CalibrationMeta {
-        date: None,
-        data_hash: None,
-        notes: Some(format!(
-            "hapcal calibrate, model {}; {} kept parameters; compliance terms are not part of the kinematic description",
-            outcome.report.model,
-            outcome.report.parameters.len()
-        )),
-    };
-    let mut calibrated = outcome
-        .device
-        .with_calibration(&values, meta)
-        .context("applying the identified deviations to the device description")?;
-    // A device file's `[calibration]` is the whole record (its kinematic values, offsets
-    // folded, are those just applied to the rows and placements).
-    calibrated.calibration = Some(record.clone());
-    let urdf_output = out
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
-    let text = if urdf_output {
-        let from_urdf = outcome
-            .device_path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
-        let source = if from_urdf {
-            Some(outcome.device_path.clone())
-        } else {
-            outcome
-                .device
-                .urdf
-                .as_ref()
-                .map(|u| u.resolve(&outcome.device_path))
-        };
-        let Some(source) = source else {
-            bail!(
-                "{} is a URDF output, but the device {} did not come from a URDF",
-                out.display(),
-                outcome.device_path.display()
-            );
-        };
-        let placements: Vec<_> = calibrated.all_placements().cloned().collect();
-        hapcal_io::write_calibrated_urdf(&source, &placements).with_context(|| {
-            format!(
-                "writing the calibrated joint origins into a copy of {}",
-                source.display()
-            )
-        })?
-    } else {
-        hapcal_io::write_device(&calibrated)
-    };
-    let mut files = vec![(out.to_path_buf(), text.clone())];
-    // The record holds every value as identified (the runtime evaluates the transversal tilts
-    // and the gravity loads from the kinematic ones), the model, its loads and its region, and
-    // what binds it to the URDF written beside it (its digest and the nominal origins of the
-    // joints its values deviate); a device file holds it in its `[calibration]` table.
-    let sidecar_text = urdf_output
-        .then(|| crate::record::bound_record(record, &text, &outcome.device).to_sidecar_toml());
-    if let Some(text) = sidecar_text {
-        files.push((out.with_extension("calibration.toml"), text));
-    }
-    write_all(outcome, files, inputs)
+    inputs.extend(urdf_source.as_deref());
+    let files = output_files(outcome, out)?;
+    write_all(outcome, files, &inputs)
 }
 
 /// Writes `files` (path, text; the calibrated URDF or device file first, then the sidecar)
@@ -1019,71 +946,20 @@ fn compliance_unit_of(model: &hapcal_problems::CalibratedModel) -> &'static str 
     }
 }
 
-/// Whether the files a calibration is about to write (`files`: path and text, the
-/// calibrated URDF first, then its sidecar) give its calibration as `predict` evaluates them:
-/// the URDF and record loaded by the runtime ([`hapcal_runtime::Robot::from_urdf_str`]), each marker `k` at
-/// the instrument frame ∘ tip `k`'s deflected pose ∘ frame `marker{k+1}`, compared with the
-/// calibration's own prediction by [`check_reproduced`]. A device
-/// file (a haptic device's, a D-H robot's), or a calibration without record or tips, is not
-/// checked here.
+/// Whether the files a calibration is about to write (`files`, [`output_files`]) give its
+/// calibration: their robot as the runtime loads it ([`runtime_robot_of`]) against the
+/// calibration's own prediction ([`check_reproduced`]); nothing is checked where the runtime
+/// reads no robot from them.
 ///
 /// # Errors
-/// A record the runtime refuses, or markers farther from the calibration's prediction than
+/// Files the runtime refuses, or markers farther from the calibration's prediction than
 /// [`REPRODUCTION_TOLERANCE_M`].
 pub fn check_written(outcome: &Outcome, files: &[(PathBuf, String)]) -> Result<()> {
-    let is_urdf = |p: &Path| {
-        p.extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
-    };
-    let (Some((urdf_path, urdf)), Some(record)) =
-        (files.iter().find(|(p, _)| is_urdf(p)), &outcome.record)
-    else {
-        return Ok(());
-    };
-    let tips: Vec<&str> = record.tips.iter().map(String::as_str).collect();
-    if tips.is_empty() {
-        return Ok(());
+    match runtime_robot_of(outcome, files)? {
+        Some(robot) => check_reproduced(outcome, &robot),
+        None => Ok(()),
     }
-    let sidecar_path = urdf_path.with_extension("calibration.toml");
-    let sidecar_name = sidecar_path.display().to_string();
-    let sidecar = (files.iter())
-        .find(|(p, _)| *p == sidecar_path)
-        .map(|(_, text)| (text.as_str(), sidecar_name.as_str()));
-    let robot = hapcal_runtime::Robot::from_urdf_str(
-        urdf,
-        &urdf_path.display().to_string(),
-        sidecar,
-        &tips,
-    )
-    .context("reading back the calibrated URDF and record before writing them")?;
-    let instrument = robot
-        .frame("instrument")
-        .unwrap_or(hapcal_runtime::Pose::IDENTITY);
-    let markers: Vec<hapcal_runtime::Pose> = (1..=tips.len())
-        .map(|k| {
-            robot
-                .frame(&format!("marker{k}"))
-                .unwrap_or(hapcal_runtime::Pose::IDENTITY)
-        })
-        .collect();
-    let mut ws = robot.workspace();
-    // The record's load tips come with it: the robot may have more tips than the markers.
-    let mut poses = vec![hapcal_runtime::Pose::IDENTITY; robot.tip_names().len()];
-    check_reproduced(outcome, &mut |q| {
-        robot
-            .deflected_tip_poses(q, &mut ws, &mut poses)
-            .context("evaluating the calibrated URDF and record")?;
-        Ok(Some(
-            (poses.iter().zip(&markers))
-                .map(|(p, m)| instrument.compose(p).compose(m).translation_m)
-                .collect(),
-        ))
-    })
 }
-
-/// The marker positions the written files give at joint readings `q` ([`check_reproduced`]):
-/// marker `k` at index `k`, m, in the instrument frame; `None` when the files give none.
-pub type WrittenMarkers<'a> = &'a mut dyn FnMut(&[f64]) -> Result<Option<Vec<[f64; 3]>>>;
 
 /// Largest distance, m, between a marker position the calibration predicts and the one its
 /// written files give ([`check_reproduced`]): both evaluate the same equations in double
@@ -1093,11 +969,11 @@ pub const REPRODUCTION_TOLERANCE_M: f64 = 1e-6;
 
 /// Whether the written files reproduce the calibration: at every row of every data set the
 /// report lists (training and test), each marker's position as the calibrated model predicts
-/// it (`Outcome::model`, m, in the instrument frame) and as `written` gives it from the files
-/// about to be written (marker `k` at index `k`, m), within [`REPRODUCTION_TOLERANCE_M`].
-/// `written` returning `None` (no marker positions from these files: a device file, a
-/// marker on no tip of its own) checks nothing. Nor does a calibration whose torque
-/// equilibrium the deflection does not reach (its finding,
+/// it (`Outcome::model`, m, in the instrument frame) and as `robot`, the runtime's robot of
+/// the files about to be written ([`runtime_robot_of`]), gives it
+/// ([`crate::predict::MarkerPoses`], as `hapcal predict` and the report's calibrated figures
+/// evaluate it), within [`REPRODUCTION_TOLERANCE_M`]. A calibration whose torque equilibrium
+/// the deflection does not reach is not compared (its finding,
 /// [`ImplausibleKind::NoEquilibrium`](crate::report::ImplausibleKind::NoEquilibrium), is the
 /// stop): the fixed-point iteration amplifies rounding, so its prediction is not a function
 /// of its values to any tolerance (on the simulated z-axes humanoid with its compliances
@@ -1106,14 +982,14 @@ pub const REPRODUCTION_TOLERANCE_M: f64 = 1e-6;
 ///
 /// # Errors
 /// A marker farther than the tolerance (the worst one named with its set, line and both
-/// positions), or `written`'s own error.
-pub fn check_reproduced(outcome: &Outcome, written: WrittenMarkers<'_>) -> Result<()> {
+/// positions), or a reading the runtime refuses.
+pub fn check_reproduced(outcome: &Outcome, robot: &hapcal_runtime::Robot) -> Result<()> {
     let no_equilibrium = (outcome.report.implausible.iter())
         .any(|i| i.kind == crate::report::ImplausibleKind::NoEquilibrium);
     if no_equilibrium {
         return Ok(());
     }
-    let n_tips = outcome.model.tips.len().max(1);
+    let mut markers = crate::predict::MarkerPoses::new(robot)?;
     // (distance, set, line, marker)
     let mut worst: Option<(f64, &str, u64, usize)> = None;
     for set in &outcome.report.placements {
@@ -1122,18 +998,10 @@ pub fn check_reproduced(outcome: &Outcome, written: WrittenMarkers<'_>) -> Resul
         };
         let rows = (errors.rows.iter()).filter(|r| !r.markers.is_empty());
         for row in rows {
-            if row.markers.iter().any(|&m| m >= n_tips) {
-                return Ok(());
-            }
-            let Some(from_files) = written(&row.q)? else {
-                return Ok(());
-            };
+            let from_files = markers.at(&row.q, &row.markers)?;
             let fitted = outcome.model.end_poses_of(&row.markers, &row.q);
-            for (pose, &m) in fitted.iter().zip(&row.markers) {
-                let Some(p) = from_files.get(m) else {
-                    return Ok(());
-                };
-                let d = (pose.translation.vector - hapcal_kinematics::Vector3::from(*p)).norm();
+            for ((pose, p), &m) in fitted.iter().zip(from_files).zip(&row.markers) {
+                let d = (pose.translation.vector - p.translation.vector).norm();
                 if worst.is_none_or(|w| d > w.0 || !d.is_finite()) {
                     worst = Some((d, &set.name, row.line, m));
                 }

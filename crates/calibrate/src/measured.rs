@@ -43,6 +43,7 @@ use crate::fit::{
 };
 use crate::model::{DataKind, ModelRules};
 pub use crate::noise::{CALIBRATED_SIGMA_RATIO, PLAUSIBLE_FRAMES_ONLY_RMS_M};
+use crate::record::deviation;
 use crate::report::SetRole;
 use crate::report::UNCONVERGED_RUNG_NOTE;
 pub use crate::report::{
@@ -926,26 +927,40 @@ fn errors(
     out
 }
 
-/// Pushes the errors of one row under `model` onto `out`: its distance and each marker
-/// sample's position and orientation errors, its squared error and its score with `weights`
-/// (0 without).
+/// Pushes the errors of one row under `model` onto `out` ([`push_errors`]).
 fn push_row_errors(
     model: &CalibratedModel,
     row: &MeasuredRow,
     weights: Option<&Weights>,
     out: &mut Errors,
 ) {
+    let tips: Vec<usize> = row.markers.iter().map(|m| m.marker).collect();
+    let marker1 = row.distance_m.map(|_| model.end_pose_of(0, &row.q));
+    let poses = model.end_poses_of(&tips, &row.q);
+    push_errors(row, &poses, marker1.as_ref(), weights, out);
+}
+
+/// Pushes the errors of one row onto `out` from the predicted pose of each of its marker
+/// samples (`poses`, in the order of `row.markers`, m, in the instrument frame) and, for a
+/// distance row, of marker 1 (`marker1`): its distance and each marker sample's position and
+/// orientation errors, its squared error and its score with `weights` (0 without).
+fn push_errors(
+    row: &MeasuredRow,
+    poses: &[Isometry3<f64>],
+    marker1: Option<&Isometry3<f64>>,
+    weights: Option<&Weights>,
+    out: &mut Errors,
+) {
     let (mut sq, mut score) = (0.0, 0.0);
-    if let Some(d) = row.distance_m {
-        let e = model.end_pose_of(0, &row.q).translation.vector.norm() - d;
+    if let (Some(d), Some(marker1)) = (row.distance_m, marker1) {
+        let e = marker1.translation.vector.norm() - d;
         sq += e * e;
         out.distance.push(e);
         if let Some(w) = weights {
             score += (e / w.sigma_distance_m).powi(2);
         }
     }
-    let tips: Vec<usize> = row.markers.iter().map(|m| m.marker).collect();
-    for (m, pose) in row.markers.iter().zip(model.end_poses_of(&tips, &row.q)) {
+    for (m, pose) in row.markers.iter().zip(poses) {
         let e = (pose.translation.vector - Vector3::from(m.position_m)).norm();
         sq += e * e;
         out.position.push(e);
@@ -979,7 +994,12 @@ fn stats(v: &[f64]) -> (f64, f64, f64) {
 }
 
 fn figures(model: &CalibratedModel, tables: &[MeasurementTable], table: usize) -> PoseFigures {
-    let e = errors(model, Training::measured(tables), table, None);
+    pose_figures(&errors(model, Training::measured(tables), table, None))
+}
+
+/// Mean, RMS and largest position, orientation (pose samples) and distance (distance rows)
+/// errors of `e`.
+fn pose_figures(e: &Errors) -> PoseFigures {
     let (pm, pr, px) = stats(&e.position);
     let (om, or, ox) = stats(&e.orientation);
     let abs: Vec<f64> = e.distance.iter().map(|d| d.abs()).collect();
@@ -4250,15 +4270,6 @@ fn training_position_errors(model: &CalibratedModel, tables: Training<'_>) -> Ve
         .collect()
 }
 
-/// `Tx(x)·Ty(y)·Tz(z)·Rx(rx)·Ry(ry)·Rz(rz)` of six deviations (m, rad), as the frames apply
-/// them ([`Tree::with_frames`]).
-fn deviation(d: &[f64]) -> Isometry3<f64> {
-    let r = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), d[3])
-        * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), d[4])
-        * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), d[5]);
-    Isometry3::from_parts(Vector3::new(d[0], d[1], d[2]).into(), r)
-}
-
 /// Half the weighted squared residual of the samples and of the `distances` (nominal pose of
 /// marker 1's tip, measured distance) seen through the frames `base` and `markers`: the cost a
 /// frames-only fit would start from.
@@ -4362,14 +4373,16 @@ pub fn run_tables(
     warnings.extend(out.warnings.iter().cloned());
     let report = calibration_report(plan, robot, &out, warnings, start);
     let record = calibration_record(robot, &out, &report, &tips, &train);
-    Ok(crate::report::Outcome {
+    let mut outcome = crate::report::Outcome {
         report,
         device: device.clone(),
         device_path: plan.device.clone(),
         model: out.model,
         calibrated: None,
         record: Some(record),
-    })
+    };
+    runtime_figures(&mut outcome, &train, &test)?;
+    Ok(outcome)
 }
 
 /// The warnings of the tables as read: the columns they ignored (with a hint for the joints
@@ -4496,6 +4509,45 @@ fn set_reports(out: &MeasuredOutcome) -> Vec<crate::report::SetReport> {
         .collect()
 }
 
+/// Sets the calibrated figures and sample errors of every data set of `outcome`'s report (the
+/// training tables `train`, then the test tables `test`, as [`set_reports`] lists them) to
+/// the runtime's evaluation of the files the calibration writes
+/// ([`crate::record::runtime_robot`], [`crate::predict::MarkerPoses`]): what `hapcal
+/// predict` gives on them. Left as the library's model gives them where the runtime reads no
+/// robot from the files (a device whose chain is made of placements).
+///
+/// # Errors
+/// Files the runtime refuses, or a reading it refuses (file:line).
+fn runtime_figures(
+    outcome: &mut crate::report::Outcome,
+    train: &[MeasurementTable],
+    test: &[MeasurementTable],
+) -> Result<()> {
+    let Some(robot) = crate::record::runtime_robot(outcome)? else {
+        return Ok(());
+    };
+    let mut markers = crate::predict::MarkerPoses::new(&robot)?;
+    let sets = outcome.report.placements.iter_mut();
+    for (set, table) in sets.zip(train.iter().chain(test)) {
+        let mut e = Errors::default();
+        for row in &table.rows {
+            // Each marker sample's marker, then marker 1 for the distance.
+            let mut wanted: Vec<usize> = row.markers.iter().map(|m| m.marker).collect();
+            wanted.extend(row.distance_m.map(|_| 0));
+            let mut poses = (markers.at(&row.q, &wanted))
+                .with_context(|| format!("{}:{}", table.path.display(), row.line))?;
+            let marker1 = row.distance_m.and_then(|_| poses.pop());
+            push_errors(row, &poses, marker1.as_ref(), None, &mut e);
+        }
+        set.after.pose = Some(pose_figures(&e));
+        if let Some(errors) = &mut set.errors {
+            errors.position_after_m = e.position;
+            errors.distance_after_m = e.distance;
+        }
+    }
+    Ok(())
+}
+
 /// The report of the measured calibration `out` of `robot` with `plan`'s settings:
 /// `warnings` the tables' and the calibration's, `start` when the command began.
 fn calibration_report(
@@ -4609,86 +4661,6 @@ pub(crate) fn split_test_last(
         test.push(held);
     }
     Ok(())
-}
-
-/// The kinematic values of a measured calibration as a placement device applies them
-/// ([`hapcal_io::Device::with_calibration`]): a joint's offset `{joint}.offset` (rotation about,
-/// or translation along, its axis just before the joint's motion) is folded into that joint's
-/// six deviations, `Δ' = Δ · Rot(axis, offset)` (or `· Trans(axis·offset)`), decomposed back
-/// into `Tx·Ty·Tz·Rx·Ry·Rz`; the standard deviation of each rotation it changes becomes the
-/// root sum of squares of the two. Values of D-H devices pass unchanged.
-///
-/// # Errors
-/// An offset of a joint the device has no placement for.
-pub fn fold_joint_offsets(
-    device: &hapcal_io::Device,
-    values: &[hapcal_io::CalibratedValue],
-) -> Result<Vec<hapcal_io::CalibratedValue>> {
-    use hapcal_io::CalibratedValue;
-    let mut out: Vec<CalibratedValue> = values
-        .iter()
-        .filter(|v| !v.name.ends_with(".offset"))
-        .cloned()
-        .collect();
-    for v in values.iter().filter(|v| v.name.ends_with(".offset")) {
-        let joint = v.name.trim_end_matches(".offset");
-        let Some(p) = device.all_placements().find(|p| p.name == joint) else {
-            bail!(
-                "{}: the device has no placement {joint:?} to fold it into",
-                v.name
-            );
-        };
-        let Some(axis) = p.axis else {
-            bail!("{}: {joint:?} is a fixed joint", v.name);
-        };
-        let axis = nalgebra::Unit::new_normalize(Vector3::from(axis));
-        let suffixes = ["x", "y", "z", "rx", "ry", "rz"];
-        let get = |s: &str| {
-            out.iter()
-                .find(|w| w.name == format!("{joint}.{s}"))
-                .map_or((0.0, 0.0), |w| (w.value, w.std))
-        };
-        let d: Vec<(f64, f64)> = suffixes.iter().map(|s| get(s)).collect();
-        let delta = deviation(&d.iter().map(|(v, _)| *v).collect::<Vec<_>>());
-        let motion = if p.prismatic {
-            Isometry3::from_parts(
-                (axis.into_inner() * v.value).into(),
-                UnitQuaternion::identity(),
-            )
-        } else {
-            Isometry3::from_parts(
-                Vector3::zeros().into(),
-                UnitQuaternion::from_axis_angle(&axis, v.value),
-            )
-        };
-        let folded = delta * motion;
-        let r = folded.rotation.to_rotation_matrix();
-        let b = r[(0, 2)].clamp(-1.0, 1.0).asin();
-        let a = (-r[(1, 2)]).atan2(r[(2, 2)]);
-        let c = (-r[(0, 1)]).atan2(r[(0, 0)]);
-        let t = folded.translation.vector;
-        let new = [t.x, t.y, t.z, a, b, c];
-        for (k, s) in suffixes.iter().enumerate() {
-            let name = format!("{joint}.{s}");
-            let changed = (new[k] - d[k].0).abs() > 0.0;
-            let std = if changed { d[k].1.hypot(v.std) } else { d[k].1 };
-            let unit = if k < 3 { "m" } else { "rad" };
-            match out.iter_mut().find(|w| w.name == name) {
-                Some(w) => {
-                    w.value = new[k];
-                    w.std = std;
-                }
-                None if new[k] != 0.0 => out.push(CalibratedValue {
-                    name,
-                    value: new[k],
-                    std,
-                    unit: unit.to_owned(),
-                }),
-                None => {}
-            }
-        }
-    }
-    Ok(out)
 }
 
 #[cfg(test)]

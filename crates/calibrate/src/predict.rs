@@ -133,6 +133,56 @@ pub fn quaternion_of(r: &[[f64; 3]; 3]) -> [f64; 4] {
     }
 }
 
+/// The runtime's poses of a calibrated robot's markers in the instrument frame
+/// ([`Predictor::marker_poses_into`]: marker `k + 1`'s frame on tip `min(k, last)`): what
+/// `hapcal predict` compares a measured row with, what `hapcal calibrate` reports its
+/// calibrated figures from and checks its written files by.
+pub struct MarkerPoses {
+    predictor: Predictor,
+    ws: hapcal_runtime::PredictionWorkspace,
+    poses: Vec<hapcal_runtime::Pose>,
+}
+
+impl MarkerPoses {
+    /// The marker poses of `robot`.
+    ///
+    /// # Errors
+    /// None in practice: [`Predictor::new`] in the root frame refuses no robot.
+    pub fn new(robot: &Robot) -> Result<Self> {
+        let predictor = Predictor::new(robot, PredictionFrame::Root)
+            .context("preparing the runtime's evaluation of the calibrated robot")?;
+        let ws = predictor.workspace();
+        Ok(MarkerPoses {
+            predictor,
+            ws,
+            poses: Vec::new(),
+        })
+    }
+
+    /// The poses of `markers` (0-based) at the joint readings `q` (rad, m for a prismatic
+    /// joint; the robot's joint order), in the order of `markers`, m, in the instrument frame.
+    ///
+    /// # Errors
+    /// A reading the runtime refuses (a wrong count, a value that is not finite).
+    pub fn at(&mut self, q: &[f64], markers: &[usize]) -> Result<Vec<nalgebra::Isometry3<f64>>> {
+        let n = markers.iter().max().map_or(0, |m| m + 1);
+        self.poses.resize(n, hapcal_runtime::Pose::IDENTITY);
+        (self.predictor)
+            .marker_poses_into(q, &mut self.ws, &mut self.poses)
+            .context("evaluating the calibrated robot")?;
+        Ok((markers.iter())
+            .map(|&m| {
+                let p = &self.poses[m];
+                let r = nalgebra::Matrix3::from_fn(|i, j| p.rotation[i][j]);
+                nalgebra::Isometry3::from_parts(
+                    nalgebra::Translation3::from(nalgebra::Vector3::from(p.translation_m)),
+                    UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)),
+                )
+            })
+            .collect())
+    }
+}
+
 /// `f` of the joints of `robot` as the measurement readers check them
 /// ([`hapcal_io::JointSchema`]: their names, kinds and limits, rad or m); what `predict`,
 /// `compensate` and the Python package read a robot's data files with.

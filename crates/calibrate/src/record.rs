@@ -1,6 +1,8 @@
 //! The calibration record of a calibration on measurement files (`hapcal-contract`,
 //! docs/design.md §5.6): what `hapcal calibrate --out` writes beside the calibrated URDF so
-//! that the runtime, `predict` and `compensate` evaluate the model that was identified.
+//! that the runtime, `predict` and `compensate` evaluate the model that was identified; the
+//! files that carry it, and the runtime's robot of them, which the report's calibrated
+//! figures are evaluated with.
 
 use hapcal_contract::{
     Calibration, Covariance, Frame, JointRange, ModelName, PointMass, Region, SCHEMA_VERSION,
@@ -8,7 +10,11 @@ use hapcal_contract::{
 };
 use hapcal_problems::CalibratedModel;
 
-use crate::report::{FrameReport, ParamReport};
+use anyhow::{Context, Result, bail};
+use hapcal_kinematics::{Isometry3, UnitQuaternion, Vector3};
+use std::path::{Path, PathBuf};
+
+use crate::report::{FrameReport, Outcome, ParamReport};
 
 /// Standard gravity, m/s² (CGPM 1901): the acceleration of the link masses' loads.
 const STANDARD_GRAVITY: f64 = 9.806_65;
@@ -318,4 +324,267 @@ pub fn set_model_value(
         }
         _ => false,
     }
+}
+
+/// `Tx(x)·Ty(y)·Tz(z)·Rx(rx)·Ry(ry)·Rz(rz)` of six deviations (m, rad), as the frames apply
+/// them ([`Tree::with_frames`]).
+pub(crate) fn deviation(d: &[f64]) -> Isometry3<f64> {
+    let r = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), d[3])
+        * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), d[4])
+        * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), d[5]);
+    Isometry3::from_parts(Vector3::new(d[0], d[1], d[2]).into(), r)
+}
+
+/// The kinematic values of a measured calibration as a placement device applies them
+/// ([`hapcal_io::Device::with_calibration`]): a joint's offset `{joint}.offset` (rotation about,
+/// or translation along, its axis just before the joint's motion) is folded into that joint's
+/// six deviations, `Δ' = Δ · Rot(axis, offset)` (or `· Trans(axis·offset)`), decomposed back
+/// into `Tx·Ty·Tz·Rx·Ry·Rz`; the standard deviation of each rotation it changes becomes the
+/// root sum of squares of the two. Values of D-H devices pass unchanged.
+///
+/// # Errors
+/// An offset of a joint the device has no placement for.
+pub fn fold_joint_offsets(
+    device: &hapcal_io::Device,
+    values: &[hapcal_io::CalibratedValue],
+) -> Result<Vec<hapcal_io::CalibratedValue>> {
+    use hapcal_io::CalibratedValue;
+    let mut out: Vec<CalibratedValue> = values
+        .iter()
+        .filter(|v| !v.name.ends_with(".offset"))
+        .cloned()
+        .collect();
+    for v in values.iter().filter(|v| v.name.ends_with(".offset")) {
+        let joint = v.name.trim_end_matches(".offset");
+        let Some(p) = device.all_placements().find(|p| p.name == joint) else {
+            bail!(
+                "{}: the device has no placement {joint:?} to fold it into",
+                v.name
+            );
+        };
+        let Some(axis) = p.axis else {
+            bail!("{}: {joint:?} is a fixed joint", v.name);
+        };
+        let axis = nalgebra::Unit::new_normalize(Vector3::from(axis));
+        let suffixes = ["x", "y", "z", "rx", "ry", "rz"];
+        let get = |s: &str| {
+            out.iter()
+                .find(|w| w.name == format!("{joint}.{s}"))
+                .map_or((0.0, 0.0), |w| (w.value, w.std))
+        };
+        let d: Vec<(f64, f64)> = suffixes.iter().map(|s| get(s)).collect();
+        let delta = deviation(&d.iter().map(|(v, _)| *v).collect::<Vec<_>>());
+        let motion = if p.prismatic {
+            Isometry3::from_parts(
+                (axis.into_inner() * v.value).into(),
+                UnitQuaternion::identity(),
+            )
+        } else {
+            Isometry3::from_parts(
+                Vector3::zeros().into(),
+                UnitQuaternion::from_axis_angle(&axis, v.value),
+            )
+        };
+        let folded = delta * motion;
+        let r = folded.rotation.to_rotation_matrix();
+        let b = r[(0, 2)].clamp(-1.0, 1.0).asin();
+        let a = (-r[(1, 2)]).atan2(r[(2, 2)]);
+        let c = (-r[(0, 1)]).atan2(r[(0, 0)]);
+        let t = folded.translation.vector;
+        let new = [t.x, t.y, t.z, a, b, c];
+        for (k, s) in suffixes.iter().enumerate() {
+            let name = format!("{joint}.{s}");
+            let changed = (new[k] - d[k].0).abs() > 0.0;
+            let std = if changed { d[k].1.hypot(v.std) } else { d[k].1 };
+            let unit = if k < 3 { "m" } else { "rad" };
+            match out.iter_mut().find(|w| w.name == name) {
+                Some(w) => {
+                    w.value = new[k];
+                    w.std = std;
+                }
+                None if new[k] != 0.0 => out.push(CalibratedValue {
+                    name,
+                    value: new[k],
+                    std,
+                    unit: unit.to_owned(),
+                }),
+                None => {}
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The files `--out out` writes for `outcome`, as path and text: the calibrated device (a
+/// haptic device's file; for a `.urdf` path a copy of the source URDF with the calibrated
+/// joint origins, then its record `<out>.calibration.toml`; otherwise a device file with the
+/// record in `[calibration]`).
+///
+/// # Errors
+/// A haptic device's output that is not `.toml`, a calibration without record, a `.urdf`
+/// output for a device that did not come from a URDF, values the device cannot take, or an
+/// unreadable source URDF.
+pub(crate) fn output_files(outcome: &Outcome, out: &Path) -> Result<Vec<(PathBuf, String)>> {
+    if let Some(calibrated) = &outcome.calibrated {
+        if !out
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
+        {
+            bail!(
+                "{}: the calibrated haptic device is written as a device file (.toml)",
+                out.display()
+            );
+        }
+        let text = hapcal_io::write_device(calibrated);
+        return Ok(vec![(out.to_path_buf(), text)]);
+    }
+    // Every workflow but the haptic one (its device file, above) records its calibration.
+    let Some(record) = &outcome.record else {
+        bail!(
+            "the calibration of {} holds no record (model, loads, region, values): nothing was \
+             written",
+            outcome.device_path.display()
+        );
+    };
+    let device_tree = outcome.device.tree()?;
+    let values: Vec<_> = (fold_joint_offsets(&outcome.device, &record.values)?.into_iter())
+        .filter(|v| device_tree.params().iter().any(|p| p.name == v.name))
+        .collect();
+    let meta = hapcal_io::CalibrationMeta {
+        date: None,
+        data_hash: None,
+        notes: Some(format!(
+            "hapcal calibrate, model {}; {} kept parameters; compliance terms are not part of the kinematic description",
+            outcome.report.model,
+            outcome.report.parameters.len()
+        )),
+    };
+    let mut calibrated = outcome
+        .device
+        .with_calibration(&values, meta)
+        .context("applying the identified deviations to the device description")?;
+    // A device file's `[calibration]` is the whole record (its kinematic values, offsets
+    // folded, are those just applied to the rows and placements).
+    calibrated.calibration = Some(record.clone());
+    let urdf_output = is_urdf_path(out);
+    let text = if urdf_output {
+        let Some(source) = source_urdf(outcome) else {
+            bail!(
+                "{} is a URDF output, but the device {} did not come from a URDF",
+                out.display(),
+                outcome.device_path.display()
+            );
+        };
+        let placements: Vec<_> = calibrated.all_placements().cloned().collect();
+        hapcal_io::write_calibrated_urdf(&source, &placements).with_context(|| {
+            format!(
+                "writing the calibrated joint origins into a copy of {}",
+                source.display()
+            )
+        })?
+    } else {
+        hapcal_io::write_device(&calibrated)
+    };
+    let mut files = vec![(out.to_path_buf(), text.clone())];
+    // The record holds every value as identified (the runtime evaluates the transversal tilts
+    // and the gravity loads from the kinematic ones), the model, its loads and its region, and
+    // what binds it to the URDF written beside it (its digest and the nominal origins of the
+    // joints its values deviate); a device file holds it in its `[calibration]` table.
+    let sidecar_text =
+        urdf_output.then(|| bound_record(record, &text, &outcome.device).to_sidecar_toml());
+    if let Some(text) = sidecar_text {
+        files.push((out.with_extension("calibration.toml"), text));
+    }
+    Ok(files)
+}
+
+/// The source URDF of `outcome`'s device: the device itself when it is a URDF, else the URDF
+/// its device file names; `None` for a device of its own (D-H rows, placements).
+pub(crate) fn source_urdf(outcome: &Outcome) -> Option<PathBuf> {
+    if is_urdf_path(&outcome.device_path) {
+        return Some(outcome.device_path.clone());
+    }
+    (outcome.device.urdf.as_ref()).map(|u| u.resolve(&outcome.device_path))
+}
+
+/// Whether `path` ends in `.urdf` (any case).
+fn is_urdf_path(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
+}
+
+/// The calibrated robot as `hapcal predict` evaluates it: the files `hapcal calibrate --out`
+/// writes for `outcome` (a calibrated URDF and its record for a URDF device, else the device
+/// file with its `[calibration]`), made in memory ([`output_files`]) and loaded by the
+/// runtime ([`runtime_robot_of`]). What the report's calibrated figures are evaluated with.
+/// `None` as [`runtime_robot_of`], for a device file that names a URDF (its tips are not the
+/// record's), and for a haptic device (its calibrated device file is a
+/// `hapcal_runtime::Model`).
+///
+/// # Errors
+/// As [`output_files`] and [`runtime_robot_of`].
+pub fn runtime_robot(outcome: &Outcome) -> Result<Option<hapcal_runtime::Robot>> {
+    if outcome.calibrated.is_some() || outcome.record.is_none() {
+        return Ok(None);
+    }
+    let out = if is_urdf_path(&outcome.device_path) {
+        "calibrated.urdf"
+    } else if source_urdf(outcome).is_none() {
+        "calibrated.toml"
+    } else {
+        return Ok(None);
+    };
+    runtime_robot_of(outcome, &output_files(outcome, Path::new(out))?)
+}
+
+/// The runtime's robot of `files`, the files a calibration writes ([`output_files`]: path
+/// and text, the calibrated URDF or device file first, then the sidecar), loaded as `hapcal
+/// predict` loads them: a URDF with its sidecar and the record's tips
+/// ([`hapcal_runtime::Robot::from_urdf_str`]), a D-H robot's device file
+/// ([`hapcal_runtime::Robot::from_device_str`]). `None` for what the runtime does not read
+/// as a robot: a calibration without record or, on a URDF, without tips; a device file of a
+/// device that came from a URDF or whose chain is made of placements.
+///
+/// # Errors
+/// Files the runtime refuses.
+pub fn runtime_robot_of(
+    outcome: &Outcome,
+    files: &[(PathBuf, String)],
+) -> Result<Option<hapcal_runtime::Robot>> {
+    let (Some((path, text)), Some(record)) = (files.first(), &outcome.record) else {
+        return Ok(None);
+    };
+    let context = || {
+        format!(
+            "reading back {} as the runtime reads it, before reporting or writing the \
+             calibration",
+            path.display()
+        )
+    };
+    if is_urdf_path(path) {
+        let tips: Vec<&str> = record.tips.iter().map(String::as_str).collect();
+        if tips.is_empty() {
+            return Ok(None);
+        }
+        let sidecar_path = path.with_extension("calibration.toml");
+        let sidecar_name = sidecar_path.display().to_string();
+        let sidecar = (files.iter())
+            .find(|(p, _)| *p == sidecar_path)
+            .map(|(_, text)| (text.as_str(), sidecar_name.as_str()));
+        let robot = (hapcal_runtime::Robot::from_urdf_str(
+            text,
+            &path.display().to_string(),
+            sidecar,
+            &tips,
+        ))
+        .with_context(context)?;
+        return Ok(Some(robot));
+    }
+    let device = &outcome.device;
+    if source_urdf(outcome).is_some() || device.dh.is_empty() || !device.placements.is_empty() {
+        return Ok(None);
+    }
+    let robot = hapcal_runtime::Robot::from_device_str(text, &path.display().to_string())
+        .with_context(context)?;
+    Ok(Some(robot))
 }

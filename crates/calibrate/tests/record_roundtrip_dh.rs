@@ -3,7 +3,8 @@
 //! the model, write the calibrated device file with its record in `[calibration]`
 //! (`calibrate::write_outputs_beside`), load it with `hapcal_runtime::Robot::load_device`, and
 //! the runtime's marker positions at the training and held-out configurations equal the
-//! calibration library's own predictions (`CalibratedModel::end_poses_of`) within 1e-9 m. The
+//! calibration library's own predictions (`CalibratedModel::end_poses_of`) within 1e-9 m, as
+//! the held-out position RMS the report prints equals `hapcal predict`'s on the file. The
 //! compliances and harmonics are then enlarged until each moves the marker by millimetres, in
 //! the library's model and through `Robot::with_value`, and the D-H deviations moved through
 //! `Robot::with_value` must move the runtime's marker as they move the library's: a runtime
@@ -79,6 +80,8 @@ fn worst_gap(robot: &Robot, library: &hapcal_problems::CalibratedModel, rows: &[
 
 /// What one model's round trip measured, m.
 struct Gaps {
+    /// The report's held-out position RMS against `hapcal predict`'s on the written file.
+    held_out: f64,
     /// Runtime against library, as identified.
     identified: f64,
     /// The same with the compliances and harmonics enlarged.
@@ -113,11 +116,12 @@ fn round_trip(
     };
     let device = hapcal_io::read_device(device_path).unwrap();
     let out = dir.join(format!("cal-{model}.toml"));
-    let outcome = roundtrip::calibrate_tables(&plan, &device, robot, train, test, &out);
+    let outcome = roundtrip::calibrate_tables(&plan, &device, robot, train, test.clone(), &out);
     hapcal_calibrate::calibrate::write_outputs_beside(&outcome, &out, &[]).unwrap();
     let runtime = Robot::load_device(&out).unwrap();
     let record = runtime.calibration().expect("a record").clone();
     assert_eq!(record.model.map(|m| m.name()), Some(model.name()));
+    let held_out = roundtrip::held_out_rms_gap(&outcome, &runtime, &test);
     assert_eq!(runtime.joint_names(), robot.joint_names.as_slice());
     let identified = worst_gap(&runtime, &outcome.model, &rows);
 
@@ -165,6 +169,7 @@ fn round_trip(
         n_dh += 1;
     }
     Gaps {
+        held_out,
         identified,
         enlarged: enlarged_gap,
         shifted,
@@ -188,6 +193,12 @@ fn check(convention: &str, models: &[(ModelChoice, bool)], seed: u64) {
             train.clone(),
             test.clone(),
             &dir,
+        );
+        assert!(
+            g.held_out < TOLERANCE_M,
+            "{convention} {model}: the report's held-out RMS and predict's on the written file \
+             differ by {:e} m",
+            g.held_out
         );
         assert!(
             g.identified < TOLERANCE_M,

@@ -10,7 +10,7 @@ use hapcal_calibrate::measured::{Robot as ArmRobot, run_tables};
 use hapcal_calibrate::report::Outcome;
 use hapcal_io::{Device, MeasurementTable};
 use hapcal_problems::CalibratedModel;
-use hapcal_runtime::{Pose, Robot};
+use hapcal_runtime::{Pose, PredictionFrame, Predictor, Robot};
 
 /// Calibrates `plan` on the tables `train` and `test` of `robot` (`run_tables`) and clears
 /// the files an earlier run wrote at `out` (the output and its sidecar).
@@ -91,4 +91,20 @@ pub fn set_in_both(
         "{name} is not a value of the library's model"
     );
     set
+}
+
+/// How far the held-out position RMS the report of `outcome` prints (its test set, m) lies
+/// from the one `hapcal predict` reports for `test` on the written robot `robot`
+/// (`predict::predict_table`: the errors against the measured columns), m.
+pub fn held_out_rms_gap(outcome: &Outcome, robot: &Robot, test: &MeasurementTable) -> f64 {
+    let predictor = Predictor::new(robot, PredictionFrame::Root).unwrap();
+    let (_, errors) =
+        hapcal_calibrate::predict::predict_table(&predictor, test, false, &mut |_| {}).unwrap();
+    let predicted = errors.expect("measured columns").position.rms();
+    let reported = (outcome.report.placements.iter())
+        .find(|s| s.role == hapcal_calibrate::report::SetRole::Test)
+        .and_then(|s| s.after.pose)
+        .expect("a test set with pose figures")
+        .position_rms_m;
+    (reported - predicted).abs()
 }
