@@ -946,7 +946,7 @@ fn compliance_unit_of(model: &hapcal_problems::CalibratedModel) -> &'static str 
     }
 }
 
-/// Whether the files a calibration is about to write (`files`, [`output_files`]) give its
+/// Whether the files a calibration is about to write (`files`, `output_files`) give its
 /// calibration: their robot as the runtime loads it ([`runtime_robot_of`]) against the
 /// calibration's own prediction ([`check_reproduced`]); nothing is checked where the runtime
 /// reads no robot from them.

@@ -515,14 +515,14 @@ fn is_urdf_path(path: &Path) -> bool {
 
 /// The calibrated robot as `hapcal predict` evaluates it: the files `hapcal calibrate --out`
 /// writes for `outcome` (a calibrated URDF and its record for a URDF device, else the device
-/// file with its `[calibration]`), made in memory ([`output_files`]) and loaded by the
+/// file with its `[calibration]`), made in memory (`output_files`) and loaded by the
 /// runtime ([`runtime_robot_of`]). What the report's calibrated figures are evaluated with.
 /// `None` as [`runtime_robot_of`], for a device file that names a URDF (its tips are not the
 /// record's), and for a haptic device (its calibrated device file is a
 /// `hapcal_runtime::Model`).
 ///
 /// # Errors
-/// As [`output_files`] and [`runtime_robot_of`].
+/// As `output_files` and [`runtime_robot_of`].
 pub fn runtime_robot(outcome: &Outcome) -> Result<Option<hapcal_runtime::Robot>> {
     if outcome.calibrated.is_some() || outcome.record.is_none() {
         return Ok(None);
@@ -537,7 +537,7 @@ pub fn runtime_robot(outcome: &Outcome) -> Result<Option<hapcal_runtime::Robot>>
     runtime_robot_of(outcome, &output_files(outcome, Path::new(out))?)
 }
 
-/// The runtime's robot of `files`, the files a calibration writes ([`output_files`]: path
+/// The runtime's robot of `files`, the files a calibration writes (`output_files`: path
 /// and text, the calibrated URDF or device file first, then the sidecar), loaded as `hapcal
 /// predict` loads them: a URDF with its sidecar and the record's tips
 /// ([`hapcal_runtime::Robot::from_urdf_str`]), a D-H robot's device file
