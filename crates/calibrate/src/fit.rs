@@ -816,10 +816,10 @@ mod tests {
 
 #[cfg(test)]
 mod bound_tests {
-    use faer::{Col, ColMut, ColRef, Mat, MatMut};
+    use faer::{Col, Mat};
     use hapcal_identify::{
-        EvalError, IdentifyConfig, ParamLayout, ParamSpec, Problem, PruneReason, Role, Subset,
-        Unit, identify,
+        IdentifyConfig, LinearProblem, ParamLayout, ParamSpec, PruneReason, Role, Subset, Unit,
+        identify,
     };
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
@@ -861,33 +861,9 @@ mod bound_tests {
         );
     }
 
-    /// `r = A·x − y` over a joint offset and two compliances.
-    struct Linear {
-        layout: ParamLayout,
-        a: Mat<f64>,
-        y: Col<f64>,
-    }
-
-    impl Problem for Linear {
-        fn layout(&self) -> &ParamLayout {
-            &self.layout
-        }
-        fn n_residuals(&self) -> usize {
-            self.a.nrows()
-        }
-        fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
-            out.copy_from(&self.a * x - &self.y);
-            Ok(())
-        }
-        fn jacobian(&self, _x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
-            jac.copy_from(&self.a);
-            Ok(())
-        }
-    }
-
     /// 40 rows, noise 1e-3 per row: a joint offset (rad) and two compliances (rad/(N·m))
     /// under torques of about 10 N·m, the second's truth `c2`.
-    fn problem(c2: f64) -> Linear {
+    fn problem(c2: f64) -> LinearProblem {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(47);
         let mut normal = || -> f64 { StandardNormal.sample(&mut rng) };
         let a = Mat::from_fn(40, 3, |_, j| if j == 0 { 1.0 } else { 10.0 } * normal());
@@ -898,7 +874,7 @@ mod bound_tests {
             unit,
             role: Role::Model,
         };
-        Linear {
+        LinearProblem {
             layout: ParamLayout::new(vec![
                 spec("j1.offset", Unit::Radian),
                 spec("compliance.j1", Unit::RadianPerNewtonMeter),

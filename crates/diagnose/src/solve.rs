@@ -20,7 +20,7 @@ use std::cell::RefCell;
 use faer::prelude::SolveLstsq;
 use faer::{Col, ColMut, ColRef, Mat, MatMut};
 use hapcal_identify::{
-    EvalError, LmConfig, ParamLayout, Problem, Unit, covariance, levenberg_marquardt,
+    EvalError, LinearProblem, LmConfig, ParamLayout, Problem, Unit, covariance, levenberg_marquardt,
 };
 use nalgebra::{DMatrix, DVector};
 
@@ -31,33 +31,6 @@ use crate::stats::{NUMERICAL_ZERO_COLUMN, largest_column_norm, pivoted_basis};
 /// picked before it (the scaled problem's numerical rank; the SVD solve it replaces cut
 /// singular values below `1e-9·s_max`).
 const LSTSQ_RANK_TOL: f64 = 1e-9;
-
-/// `min_x ½‖a·x − b‖²`.
-struct LinearProblem {
-    layout: ParamLayout,
-    a: Mat<f64>,
-    b: Col<f64>,
-}
-
-impl Problem for LinearProblem {
-    fn layout(&self) -> &ParamLayout {
-        &self.layout
-    }
-    fn n_residuals(&self) -> usize {
-        self.a.nrows()
-    }
-    fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
-        let ax = &self.a * x;
-        for i in 0..self.a.nrows() {
-            out[i] = ax[i] - self.b[i];
-        }
-        Ok(())
-    }
-    fn jacobian(&self, _x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
-        jac.copy_from(&self.a);
-        Ok(())
-    }
-}
 
 /// Linear least squares `min ‖a·x − b‖` on the columns of `a` that are independent at
 /// [`LSTSQ_RANK_TOL`] (the others get `x = 0`, and zero rows and columns in the covariance).
@@ -82,7 +55,7 @@ pub(crate) fn lstsq(a: &DMatrix<f64>, b: &DVector<f64>) -> (DVector<f64>, DMatri
     let problem = LinearProblem {
         layout: ParamLayout::numbered("x", k, Unit::Dimensionless),
         a: Mat::from_fn(m, k, |i, j| a[(i, j)]),
-        b: Col::from_fn(m, |i| b[i]),
+        y: Col::from_fn(m, |i| b[i]),
     };
     let cfg = LmConfig {
         // The initial evaluation and the one trial point of the Gauss–Newton step.

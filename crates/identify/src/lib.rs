@@ -88,7 +88,7 @@ pub use lm::{Fit, LmConfig, Termination, levenberg_marquardt, levenberg_marquard
 pub use observability::{
     Observability, observability, observability_from_singular_values, scale_by_priors,
 };
-pub use problem::{EvalError, ParamLayout, ParamSpec, Problem, Role, Unit};
+pub use problem::{EvalError, LinearProblem, ParamLayout, ParamSpec, Problem, Role, Unit};
 pub use rank::{
     Identifiability, PruneReason, Pruned, RankConfig, RankConfigBase, TieBreak, identifiability,
 };

@@ -1,6 +1,6 @@
 //! The problem trait that every identification problem implements, and its named parameter layout.
 
-use faer::{ColMut, ColRef, Mat, MatMut};
+use faer::{Col, ColMut, ColRef, Mat, MatMut};
 
 /// Physical unit of one parameter; used for reporting and for the rank tolerance.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -216,5 +216,37 @@ pub trait Problem {
     /// Jacobian would not fit in memory. `None` (the default) means dense only.
     fn sparse_jacobian(&self) -> Option<&dyn crate::SparseJacobian> {
         None
+    }
+}
+
+/// The linear least-squares problem `r(x) = A·x − y`: `A` is `n_residuals × n_params` (each
+/// column in its parameter's unit of `layout` per residual unit), `y` has `n_residuals`
+/// entries; its Jacobian is `A` at every `x`. A linear solve by the same machinery as every
+/// nonlinear fit (`hapcal-diagnose`'s least squares), and the problem whose exact answer
+/// tests of that machinery know.
+#[derive(Clone, Debug)]
+pub struct LinearProblem {
+    /// The parameters, one per column of `a`.
+    pub layout: ParamLayout,
+    /// The design matrix `A`.
+    pub a: Mat<f64>,
+    /// The observations `y`.
+    pub y: Col<f64>,
+}
+
+impl Problem for LinearProblem {
+    fn layout(&self) -> &ParamLayout {
+        &self.layout
+    }
+    fn n_residuals(&self) -> usize {
+        self.a.nrows()
+    }
+    fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
+        out.copy_from(&self.a * x - &self.y);
+        Ok(())
+    }
+    fn jacobian(&self, _x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+        jac.copy_from(&self.a);
+        Ok(())
     }
 }

@@ -205,39 +205,18 @@ impl<P: Problem + Sync + ?Sized> RowBlocks for Subset<'_, P> {
 
 #[cfg(test)]
 mod tests {
-    use faer::{Col, ColMut, ColRef, Mat, MatMut};
+    use faer::{Col, Mat};
 
     use super::Subset;
-    use crate::{EvalError, ParamLayout, Problem, Unit};
-
-    /// `r(x) = A·x` with a Jacobian that depends on nothing: each entry of `A` distinct.
-    struct Linear {
-        layout: ParamLayout,
-        a: Mat<f64>,
-    }
-
-    impl Problem for Linear {
-        fn layout(&self) -> &ParamLayout {
-            &self.layout
-        }
-        fn n_residuals(&self) -> usize {
-            self.a.nrows()
-        }
-        fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
-            out.copy_from(&self.a * x);
-            Ok(())
-        }
-        fn jacobian(&self, _x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
-            jac.copy_from(&self.a);
-            Ok(())
-        }
-    }
+    use crate::{LinearProblem, ParamLayout, Problem, Unit};
 
     #[test]
     fn a_subset_of_a_subset_evaluates_the_problems_columns_again_and_again() {
-        let p = Linear {
+        // r(x) = A·x, each entry of A distinct.
+        let p = LinearProblem {
             layout: ParamLayout::numbered("p", 6, Unit::Meter),
             a: Mat::from_fn(9, 6, |i, j| (10 * i + j) as f64 + 0.5),
+            y: Col::zeros(9),
         };
         let outer = Subset::new(&p, vec![0, 2, 3, 5], Col::from_fn(6, |i| i as f64));
         // Of the outer subset's parameters 0, 2, 3 (p0, p3, p5).

@@ -1,6 +1,6 @@
 //! Small test problems and helpers shared by the integration tests.
 
-use faer::{Col, ColMut, ColRef, Mat, MatMut};
+use faer::{ColMut, ColRef, Mat, MatMut};
 use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, Unit};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -38,29 +38,7 @@ pub(crate) fn random_matrix(rng: &mut ChaCha8Rng, nrows: usize, ncols: usize) ->
     a
 }
 
-/// Linear least squares: `r(x) = A·x − y`, `J = A`.
-pub(crate) struct Linear {
-    pub(crate) layout: ParamLayout,
-    pub(crate) a: Mat<f64>,
-    pub(crate) y: Col<f64>,
-}
-
-impl Problem for Linear {
-    fn layout(&self) -> &ParamLayout {
-        &self.layout
-    }
-    fn n_residuals(&self) -> usize {
-        self.a.nrows()
-    }
-    fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
-        out.copy_from(&self.a * x - &self.y);
-        Ok(())
-    }
-    fn jacobian(&self, _x: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
-        jac.copy_from(&self.a);
-        Ok(())
-    }
-}
+pub(crate) use hapcal_identify::LinearProblem as Linear;
 
 /// `y_i = f(x, t_i)` for a model `f` of two parameters: `r_i = f(x, t_i) − y_i`.
 pub(crate) struct Curve {
