@@ -89,7 +89,7 @@ pub fn capstan_field(p: &mut CapstanParams, field: CapstanField) -> &mut f64 {
 /// A capstan on a joint the device does not have or twice on one joint; a value on a joint
 /// or D-H row the device does not have, a capstan value on a joint without `[[capstan]]`, a
 /// gap in a joint's Chebyshev coefficients, a value in a unit its kind does not take
-/// ([`ValueName::units`]), or a robot's value (compliance, transversal,
+/// ([`ValueName::unexpected_unit`]), or a robot's value (compliance, transversal,
 /// harmonic, element deviation), which a haptic device's model does not hold.
 pub fn haptic_drives(
     capstans: &[Capstan],
@@ -124,6 +124,7 @@ pub fn haptic_drives(
     let mut handle_compliance = vec![0.0; n_joints];
     let mut cheb: Vec<Vec<Option<f64>>> = vec![Vec::new(); n_joints];
     let values = record.map_or(&[][..], |r| &r.values[..]);
+    let torque = record.and_then(|r| r.torque.as_ref()).map(|t| t.source);
     for v in values {
         let name = v.name.as_str();
         let joint_index = |joint: usize| {
@@ -133,10 +134,8 @@ pub fn haptic_drives(
                 .ok_or_else(|| fault(Some(name), format!("the device has joints 1..={n_joints}")))
         };
         let parsed = ValueName::parse(name).map_err(|message| fault(Some(name), message))?;
-        let units = parsed.units(record.and_then(|r| r.torque.as_ref()).map(|t| t.source));
-        if !units.contains(&v.unit.as_str()) {
-            let expected: Vec<String> = units.iter().map(|u| format!("{u:?}")).collect();
-            let message = format!("unit is {:?}, expected {}", v.unit, expected.join(" or "));
+        if let Some(expected) = parsed.unexpected_unit(&v.unit, torque) {
+            let message = format!("unit is {:?}, expected {expected}", v.unit);
             return Err(fault(Some(name), message));
         }
         match parsed {

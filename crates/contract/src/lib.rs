@@ -878,14 +878,11 @@ impl Calibration {
                     v.name
                 ));
             }
-            let allowed = parsed.units(self.torque.as_ref().map(|t| t.source));
-            if !allowed.is_empty() && !allowed.contains(&v.unit.as_str()) {
-                let expected: Vec<String> = allowed.iter().map(|u| format!("{u:?}")).collect();
+            let torque = self.torque.as_ref().map(|t| t.source);
+            if let Some(expected) = parsed.unexpected_unit(&v.unit, torque) {
                 return at_value(format!(
-                    "{:?} is in {:?}, expected {}",
-                    v.name,
-                    v.unit,
-                    expected.join(" or ")
+                    "{:?} is in {:?}, expected {expected}",
+                    v.name, v.unit
                 ));
             }
             if let Some(model) = self.model

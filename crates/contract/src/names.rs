@@ -268,6 +268,17 @@ impl ValueName {
         )
     }
 
+    /// `None` if `unit` is one the value may be in ([`Self::units`] under `torque`), else the
+    /// units expected, as a message gives them: `"m"`, or `"rad/(N·m)" or "rad/m"`.
+    pub fn unexpected_unit(&self, unit: &str, torque: Option<TorqueSource>) -> Option<String> {
+        let allowed = self.units(torque);
+        if allowed.is_empty() || allowed.contains(&unit) {
+            return None;
+        }
+        let expected: Vec<String> = allowed.iter().map(|u| format!("{u:?}")).collect();
+        Some(expected.join(" or "))
+    }
+
     /// The units the value may be in, given the record's torque source (`None`: none
     /// recorded, an earlier hapcal's record, whose compliances may be in either unit).
     pub fn units(&self, torque: Option<TorqueSource>) -> &'static [&'static str] {
