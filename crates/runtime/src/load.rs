@@ -199,18 +199,8 @@ impl Model {
 /// A fault of the file's capstans or record values as the runtime reports it: at the line
 /// of the value's name in `text` when it names a value, else without a line.
 fn drive_fault(fault: DriveFault, text: &str, origin: &str) -> LoadError {
-    let line_column = (fault.value.as_deref())
-        .and_then(|name| TomlSpans::parse(text).value_line(name))
-        .unwrap_or((0, 0));
-    contract_error(
-        ContractError {
-            origin: origin.to_owned(),
-            line: line_column.0,
-            column: line_column.1,
-            message: fault.to_string(),
-        },
-        origin,
-    )
+    let at = (fault.value.as_deref()).and_then(|name| TomlSpans::parse(text).value_line(name));
+    at_line(origin, at.unwrap_or((0, 0)), fault.to_string())
 }
 
 /// Each joint's drive built from the file's and record's `drives` ([`haptic_drives`]);
@@ -352,6 +342,19 @@ pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DhFile, LoadE
         rows,
         n_joints,
     })
+}
+
+/// A refusal at `(line, column)` of `origin`; without a line (0), of the file.
+pub(crate) fn at_line(origin: &str, (line, column): (usize, usize), message: String) -> LoadError {
+    contract_error(
+        ContractError {
+            origin: origin.to_owned(),
+            line,
+            column,
+            message,
+        },
+        origin,
+    )
 }
 
 /// A contract's refusal as a load error: at its line and column when known.

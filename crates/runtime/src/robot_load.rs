@@ -10,7 +10,7 @@ use hapcal_contract::urdf;
 use hapcal_contract::{Calibration, ElementField, Region, Torque, TorqueSource, ValueName};
 
 use crate::dh_table::{DhTable, add_dh, dh_frames};
-use crate::load::read_text;
+use crate::load::{at_line, read_text};
 use crate::robot::deviation_pose;
 use crate::robot::{HarmonicTerm, PointMass, RobotJoint, RobotTip, TransversalJoint};
 use crate::{GravityModel, LoadError, Pose, Robot};
@@ -366,21 +366,13 @@ impl Robot {
             for v in &record.values {
                 if let Ok(ValueName::Dh { field, row }) = ValueName::parse(&v.name) {
                     let Some(r) = nominal.get_mut(row) else {
-                        let (line, column) =
-                            TomlSpans::parse(text).value_line(&v.name).unwrap_or((0, 0));
-                        return Err(crate::load::contract_error(
-                            hapcal_contract::ContractError {
-                                origin: origin.to_owned(),
-                                line,
-                                column,
-                                message: format!(
-                                    "[calibration.values] {}: the [[dh]] table has rows 0..{}",
-                                    v.name,
-                                    rows.len()
-                                ),
-                            },
-                            origin,
-                        ));
+                        let at = TomlSpans::parse(text).value_line(&v.name);
+                        let message = format!(
+                            "[calibration.values] {}: the [[dh]] table has rows 0..{}",
+                            v.name,
+                            rows.len()
+                        );
+                        return Err(at_line(origin, at.unwrap_or((0, 0)), message));
                     };
                     add_dh(r, field, -v.value);
                 }
@@ -1071,19 +1063,6 @@ fn check_tips(
             record.tips.join(" --tip ")
         ),
     ))
-}
-
-/// A refusal at `(line, column)` of `origin`; without a line (0), of the file.
-fn at_line(origin: &str, (line, column): (usize, usize), message: String) -> LoadError {
-    crate::load::contract_error(
-        hapcal_contract::ContractError {
-            origin: origin.to_owned(),
-            line,
-            column,
-            message,
-        },
-        origin,
-    )
 }
 
 /// Largest difference between a URDF joint's `<origin>` and the record's nominal origin with
