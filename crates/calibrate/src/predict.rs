@@ -472,6 +472,26 @@ fn read_haptic_rows(path: &Path, device: &hapcal_io::Device, units: &Units) -> R
     Ok((rows, table.warnings))
 }
 
+/// The handle's pose (translation in m) in the frame of a haptic device's D-H row 0, the rig
+/// frame whose origin is the cable exit (docs/design.md §2.1), at one row of its log under
+/// `model`, the runtime's model of its device file, from the row's joint readings `theta`
+/// (rad, as the log gives them: motor angle / R); with the row's cable distance `distance_m`
+/// (m), the distance error `|p| − d` (m): how `hapcal predict` and the report of `hapcal calibrate` evaluate
+/// a haptic log's row.
+///
+/// # Errors
+/// A reading the model refuses ([`Model::end_pose`]).
+pub(crate) fn handle_at(
+    model: &Model,
+    theta: &[f64],
+    distance_m: Option<f64>,
+) -> Result<(hapcal_runtime::Pose, Option<f64>), hapcal_runtime::Error> {
+    let pose = model.end_pose(theta)?;
+    let p = pose.translation_m;
+    let error = distance_m.map(|d| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - d);
+    Ok((pose, error))
+}
+
 /// The handle's predictions of a haptic device (`hapcal_runtime::Model` of its calibrated
 /// device file) at every row of its log: the handle's position (pose) in the device's base
 /// frame from the joint readings, the region flag and, with the log's cable distances, the
@@ -495,10 +515,10 @@ pub fn predict_haptic(
     let mut rows = Vec::with_capacity(log.len());
     for (line, theta, d) in &log {
         let at = || format!("{}:{line}", data.display());
-        let pose = model.end_pose(theta).with_context(at)?;
+        let (pose, error) = handle_at(&model, theta, *d).with_context(at)?;
         let p = pose.translation_m;
-        if let Some(d) = d {
-            distance.push((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - d);
+        if let Some(e) = error {
+            distance.push(e);
         }
         let outside = model.outside_region(theta).with_context(at)?;
         rows.push(PredictedRow {

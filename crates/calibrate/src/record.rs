@@ -1,8 +1,8 @@
 //! The calibration record of a calibration on measurement files (`hapcal-contract`,
 //! docs/design.md §5.6): what `hapcal calibrate --out` writes beside the calibrated URDF so
 //! that the runtime, `predict` and `compensate` evaluate the model that was identified; the
-//! files that carry it, and the runtime's robot of them, which the report's calibrated
-//! figures are evaluated with.
+//! files that carry it, and the runtime's robot (a haptic device's model) of them, which the
+//! report's calibrated figures are evaluated with.
 
 use hapcal_contract::{
     Calibration, Covariance, Frame, JointRange, ModelName, PointMass, Region, SCHEMA_VERSION,
@@ -435,8 +435,7 @@ pub(crate) fn output_files(outcome: &Outcome, out: &Path) -> Result<Vec<(PathBuf
                 out.display()
             );
         }
-        let text = hapcal_io::write_device(calibrated);
-        return Ok(vec![(out.to_path_buf(), text)]);
+        return Ok(vec![(out.to_path_buf(), haptic_device_text(calibrated))]);
     }
     // Every workflow but the haptic one (its device file, above) records its calibration.
     let Some(record) = &outcome.record else {
@@ -498,6 +497,30 @@ pub(crate) fn output_files(outcome: &Outcome, out: &Path) -> Result<Vec<(PathBuf
     Ok(files)
 }
 
+/// The text of the device file `--out` writes for a haptic device's calibration, of its
+/// calibrated device `calibrated` (the D-H rows at the identified deviations, the record in
+/// `[calibration]`).
+fn haptic_device_text(calibrated: &hapcal_io::Device) -> String {
+    hapcal_io::write_device(calibrated)
+}
+
+/// The calibrated haptic device as `hapcal predict` evaluates it: the device file `hapcal
+/// calibrate --out` writes for the calibrated device `calibrated` (`output_files`), made in
+/// memory and loaded by the runtime ([`hapcal_runtime::Model::from_toml`]). What the report's
+/// calibrated figures of a haptic device's logs are evaluated with.
+///
+/// # Errors
+/// A device file the runtime refuses (its message names the line).
+pub fn runtime_device(calibrated: &hapcal_io::Device) -> Result<hapcal_runtime::Model> {
+    let path = "calibrated.toml";
+    hapcal_runtime::Model::from_toml(&haptic_device_text(calibrated), path).with_context(|| {
+        format!(
+            "reading back {path} as the runtime reads it, before reporting or writing the \
+             calibration"
+        )
+    })
+}
+
 /// The source URDF of `outcome`'s device: the device itself when it is a URDF, else the URDF
 /// its device file names; `None` for a device of its own (D-H rows, placements).
 pub(crate) fn source_urdf(outcome: &Outcome) -> Option<PathBuf> {
@@ -519,7 +542,7 @@ fn is_urdf_path(path: &Path) -> bool {
 /// runtime ([`runtime_robot_of`]). What the report's calibrated figures are evaluated with.
 /// `None` as [`runtime_robot_of`], for a device file that names a URDF (its tips are not the
 /// record's), and for a haptic device (its calibrated device file is a
-/// `hapcal_runtime::Model`).
+/// `hapcal_runtime::Model`: [`runtime_device`]).
 ///
 /// # Errors
 /// As `output_files` and [`runtime_robot_of`].

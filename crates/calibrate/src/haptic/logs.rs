@@ -15,14 +15,15 @@ use super::*;
 /// fitted with the transmissions and the kinematics in one problem
 /// ([`identify_with_compliance`]; `plan.joint` changes nothing there), the compliances
 /// reported and written in rad/(N·m). Figures: distance RMS of every training and test log,
-/// nominal model on the raw readings against the calibrated model (with its compliances) on
-/// the corrected ones.
+/// nominal model on the raw readings against the calibrated device file as the runtime
+/// evaluates it, which must give the calibrated model's own distances ([`log_placements`]).
 ///
 /// # Errors
 /// A device that is not the paper's kind ([`HapticDevice::new`]), `--model compliance` on a
 /// device file without a handle mass ([`handle_mass_kg`]), too few rows, no more distinct
-/// joint configurations than kept parameters ([`check_distinct_configurations`]), or a failed
-/// identification.
+/// joint configurations than kept parameters ([`check_distinct_configurations`]), a failed
+/// identification, or a calibrated device file that does not give the calibration
+/// ([`log_placements`]).
 pub fn calibrate_logs(
     plan: &crate::inputs::Plan,
     device: Device,
@@ -445,26 +446,42 @@ pub(super) fn distance_figures(residuals_m: &[f64]) -> Figures {
     }
 }
 
+/// Largest difference, m, between a log row's distance as the calibration's own model
+/// predicts it and as the runtime's model of the device file it writes gives it
+/// ([`log_placements`]): both evaluate the same equations in double precision (the runtime's
+/// folded chain against the library's parameterised one agree to rounding, far below a
+/// nanometre), so a nanometre, four orders of magnitude below the cable encoder's noise, is a
+/// difference of model, never of rounding.
+pub const RUNTIME_AGREEMENT_M: f64 = 1e-9;
+
 /// The placements stage of [`calibrate_logs`]: each log's distance RMS with the nominal model
-/// on the raw readings and with the calibrated one (with the compliance, its transmissions and
-/// compliances on every log, training and test).
+/// on the raw readings and with the calibrated one. The calibrated figures are the runtime's
+/// evaluation of the device file the calibration writes ([`crate::record::runtime_device`],
+/// each row as `hapcal predict` evaluates it), checked row by row against the calibration's
+/// own model (with the compliance, its transmissions and compliances; else the deviations on
+/// the readings corrected by the transmissions) within [`RUNTIME_AGREEMENT_M`], on every log,
+/// training and test.
 ///
 /// # Errors
-/// A log the compliance model cannot evaluate.
+/// A device file the runtime refuses, a log the compliance model or the runtime cannot
+/// evaluate (log and line), or a row whose distance the two models give farther apart than
+/// [`RUNTIME_AGREEMENT_M`] (log, line and both distances).
 pub(super) fn log_placements<'a>(
     haptic: &HapticDevice,
     fit: &LogFit,
     x_kin: &[f64],
     logs: impl Iterator<Item = (SetRole, &'a String, &'a [LogRow])>,
 ) -> Result<Vec<SetReport>> {
+    let runtime = crate::record::runtime_device(&fit.calibrated)?;
     let zero = vec![0.0; haptic.chain.n_params()];
     let mut placements = Vec::new();
     for (role, name, rows) in logs {
-        let after = match &fit.compliance {
+        let library = match &fit.compliance {
             Some(c) => compliance_distance_residuals_m(haptic, c, rows)
                 .with_context(|| format!("log {name}: the calibrated model"))?,
             None => kinematic_residuals_m(haptic, rows, x_kin, fit.transmissions.as_ref()),
         };
+        let after = runtime_residuals_m(&runtime, name, rows, &library)?;
         placements.push(SetReport {
             name: name.clone(),
             role,
@@ -475,6 +492,59 @@ pub(super) fn log_placements<'a>(
         });
     }
     Ok(placements)
+}
+
+/// Distance residuals (model − measured, m, one per row) of the log `name`'s `rows` under
+/// `runtime`, the runtime's model of the calibrated device file, each row as `hapcal predict`
+/// evaluates it ([`crate::predict::handle_at`]); `library` the same residuals under the
+/// calibration's own model, which they must equal within [`RUNTIME_AGREEMENT_M`].
+///
+/// # Errors
+/// A reading the runtime refuses (log and line), or the row farthest from the library's
+/// beyond the tolerance (log, line and both distances).
+fn runtime_residuals_m(
+    runtime: &hapcal_runtime::Model,
+    name: &str,
+    rows: &[LogRow],
+    library: &[f64],
+) -> Result<Vec<f64>> {
+    let mut residuals = Vec::with_capacity(rows.len());
+    // (difference, row)
+    let mut worst: Option<(f64, usize)> = None;
+    for (i, (row, lib)) in rows.iter().zip(library).enumerate() {
+        let (_, error) = crate::predict::handle_at(runtime, &row.q, Some(row.distance_m))
+            .with_context(|| {
+                format!(
+                    "log {name}, line {}: the calibrated device file as the runtime reads it",
+                    row.line
+                )
+            })?;
+        let e = error.unwrap_or(f64::NAN);
+        let gap = (e - lib).abs();
+        if worst.is_none_or(|(w, _)| gap > w || !gap.is_finite()) {
+            worst = Some((gap, i));
+        }
+        residuals.push(e);
+    }
+    match worst {
+        Some((gap, i)) if gap.is_nan() || gap > RUNTIME_AGREEMENT_M => {
+            let (row, d) = (&rows[i], rows[i].distance_m);
+            bail!(
+                "the device file calibrate would write does not give its calibration: at line \
+                 {} of log {name}, the handle lies {:.6} mm from the cable exit as the \
+                 calibration predicts it and {:.6} mm when the device file is evaluated as \
+                 hapcal predict evaluates it ({:.3e} m apart, more than {:.0e} m); nothing was \
+                 reported or written (a value of the fit the device file does not record, or \
+                 one the runtime evaluates otherwise)",
+                row.line,
+                (library[i] + d) * 1e3,
+                (residuals[i] + d) * 1e3,
+                gap,
+                RUNTIME_AGREEMENT_M
+            )
+        }
+        _ => Ok(residuals),
+    }
 }
 
 /// One warning per test log the calibration made worse than the nominal model, in the order
