@@ -954,3 +954,44 @@ pub(super) fn winsorize(
         transmissions,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::{RUNTIME_AGREEMENT_M, runtime_residuals_m};
+    use std::path::Path;
+
+    /// A library distance farther from the runtime's than [`RUNTIME_AGREEMENT_M`] on one row
+    /// of the bundled reference log stops the report, naming the log and the row's line; half
+    /// the tolerance passes and the figures are the runtime's.
+    #[test]
+    fn a_row_the_library_and_the_runtime_give_apart_stops_the_report() {
+        let fixtures =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/reference-device");
+        let runtime = hapcal_runtime::Model::load(&fixtures.join("calibrated.toml")).unwrap();
+        let device = hapcal_io::read_device(&fixtures.join("device.toml")).unwrap();
+        let rows = hapcal_io::read_log(&fixtures.join("log.csv"), &device)
+            .unwrap()
+            .rows;
+        let exact: Vec<f64> = (rows.iter())
+            .map(|r| {
+                let (_, e) = crate::predict::handle_at(&runtime, &r.q, Some(r.distance_m)).unwrap();
+                e.unwrap()
+            })
+            .collect();
+        let k = 17;
+        let mut library = exact.clone();
+        library[k] += 0.5 * RUNTIME_AGREEMENT_M;
+        let figures = runtime_residuals_m(&runtime, "log.csv", &rows, &library).unwrap();
+        assert_eq!(figures, exact);
+        library[k] = exact[k] + 2.0 * RUNTIME_AGREEMENT_M;
+        let e = runtime_residuals_m(&runtime, "log.csv", &rows, &library).unwrap_err();
+        let line = rows[k].line;
+        assert!(
+            e.to_string()
+                .contains(&format!("at line {line} of log log.csv")),
+            "{e}"
+        );
+        library[k] = f64::NAN;
+        assert!(runtime_residuals_m(&runtime, "log.csv", &rows, &library).is_err());
+    }
+}

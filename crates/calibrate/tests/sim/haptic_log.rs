@@ -1,5 +1,7 @@
 //! Simulated logs of the reference haptic device (fixtures/reference-device), for the tests
-//! of its calibration: the truth the test knows and the calibration does not.
+//! of its calibration: the truth the test knows and the calibration does not. Each test
+//! binary that includes it uses part of it.
+#![allow(dead_code)]
 
 use std::path::Path;
 
@@ -41,6 +43,18 @@ pub(crate) fn calibrate_rows_judging(
     rows: Vec<LogRow>,
     ladder_rows: usize,
 ) -> hapcal_calibrate::report::CalibrationReport {
+    calibrated(model, rows, Vec::new(), ladder_rows).report
+}
+
+/// `hapcal calibrate --model <model>` on the reference device with the training log `rows`,
+/// read from `train.csv`, and the test logs `test`, its ladder judging at most `ladder_rows`
+/// of the rows: the outcome (report and calibrated device file).
+pub(crate) fn calibrated(
+    model: hapcal_calibrate::model::ModelChoice,
+    rows: Vec<LogRow>,
+    test: Vec<hapcal_calibrate::data::NamedLog>,
+    ladder_rows: usize,
+) -> hapcal_calibrate::report::Outcome {
     let (device, _) = reference();
     let plan = hapcal_calibrate::inputs::Plan {
         device: "fixtures/reference-device/device.toml".into(),
@@ -57,7 +71,6 @@ pub(crate) fn calibrate_rows_judging(
         warnings: Vec::new(),
     }];
     let start = std::time::Instant::now();
-    hapcal_calibrate::haptic::calibrate_logs(&plan, device, train, Vec::new(), start)
+    hapcal_calibrate::haptic::calibrate_logs(&plan, device, train, test, start)
         .expect("a calibration of the simulated log")
-        .report
 }
