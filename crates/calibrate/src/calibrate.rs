@@ -949,7 +949,9 @@ fn compliance_unit_of(model: &hapcal_problems::CalibratedModel) -> &'static str 
 /// Whether the files a calibration is about to write (`files`, `output_files`) give its
 /// calibration: their robot as the runtime loads it ([`runtime_robot_of`]) against the
 /// calibration's own prediction ([`check_reproduced`]); nothing is checked where the runtime
-/// reads no robot from them.
+/// reads no robot from them. A haptic device's file needs no check here: its report's figures
+/// are already the runtime's evaluation of this text, checked row by row against the
+/// calibration's model ([`crate::haptic::calibrate_logs`]).
 ///
 /// # Errors
 /// Files the runtime refuses, or markers farther from the calibration's prediction than
