@@ -749,6 +749,14 @@ fn nested_in(rung: ModelName) -> Option<ModelName> {
     }
 }
 
+/// Per rung of `rungs`, the index of the rung it starts from ([`nested_in`]), if the ladder
+/// holds it.
+fn rung_parents(rungs: &[ModelName]) -> Vec<Option<usize>> {
+    (rungs.iter())
+        .map(|&r| nested_in(r).and_then(|p| rungs.iter().position(|&q| q == p)))
+        .collect()
+}
+
 /// The ladder's rungs in chains of nesting ([`nested_in`]; `parent[i]` the rung rung `i` starts
 /// from): each chain a rung that nests none, then the rungs that nest it, each after its
 /// parent; the longest chains first (their nested fits are the ladder's critical path), ties
@@ -769,6 +777,21 @@ fn rung_chains(parent: &[Option<usize>]) -> Vec<Vec<usize>> {
     chains.sort_by_key(|c| std::cmp::Reverse(c.len()));
     chains
 }
+
+/// The rung that heads the ladder's longest chain of nested rungs ([`rung_chains`]), when a
+/// rung nests it: its fit on every row starts the ladder's critical path (the per-axis
+/// transversal compliance from the isotropic one); `None` when no rung nests another.
+fn ladder_head(rungs: &[ModelName]) -> Option<ModelName> {
+    let chains = rung_chains(&rung_parents(rungs));
+    (chains.first())
+        .filter(|c| c.len() > 1)
+        .map(|c| rungs[c[0]])
+}
+
+/// Fits on every training row done before the ladder, by rung, each the fit the ladder would
+/// make itself (the same rows, weights and start): the Huber pass's rung when it bounded
+/// nothing, and the rung fitted beside it ([`on_bounded_training`]).
+type DoneFits = Vec<(ModelName, (CalibratedModel, Fitted))>;
 
 /// Fits `rung` on the rows `keep` selects: the problem and its identification (estimates
 /// mapped back to the full layout).
@@ -1884,18 +1907,18 @@ pub fn calibrate_measured(
     test: &[MeasurementTable],
     cfg: &MeasuredConfig,
 ) -> Result<MeasuredOutcome> {
-    on_bounded_training(robot, train, cfg, |p| {
+    on_bounded_training(robot, train, cfg, cfg.rung.is_none(), |p| {
         let Prepared {
             n_rows,
             frames,
             fits,
             bounded,
-            richest_fit,
+            done,
             ladder_rungs,
         } = p;
         let (frames_model, frames_only) = &bounded.frames;
         let frames_fit = (frames_model, frames_only);
-        let choice = choose_rung(&fits, cfg, test, frames_fit, richest_fit, &ladder_rungs)?;
+        let choice = choose_rung(&fits, cfg, test, frames_fit, done, &ladder_rungs)?;
         let Choice {
             rung,
             chosen,
@@ -1963,7 +1986,7 @@ pub fn ladder_heldout(
         rung: None,
         ..cfg.clone()
     };
-    on_bounded_training(robot, train, cfg, |p| {
+    on_bounded_training(robot, train, cfg, false, |p| {
         let (all, levels) = &p.ladder_rungs;
         let (some, some_levels): (Vec<ModelName>, Vec<usize>) = (all.iter().zip(levels))
             .filter(|(r, _)| rungs.contains(r))
@@ -1978,7 +2001,7 @@ pub fn ladder_heldout(
             cfg,
             test,
             (frames_model, frames_only),
-            p.richest_fit,
+            p.done,
             &(some, some_levels),
             false,
         )?;
@@ -1996,15 +2019,22 @@ struct Prepared<'a> {
     fits: Fits<'a>,
     /// Those tables, the samples the loss bounded and the frames-only fit on them.
     bounded: &'a Bounded,
-    /// The Huber pass's fit of its rung, when it bounded nothing.
-    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    /// The fits on every training row done beside the Huber pass ([`DoneFits`]).
+    done: DoneFits,
     /// The rungs of the robot's ladder and their levels ([`ladder_of`]).
     ladder_rungs: (Vec<ModelName>, Vec<usize>),
 }
 
 /// `then` of the training rows `train` prepared for the ladder: checked, the weights and
 /// frames-only fit ([`weighted_frames_only`]), the gross errors bounded by the Huber loss with
-/// the richest rung `cfg` may fit ([`bounded_training`]).
+/// the richest rung `cfg` may fit ([`bounded_training`]). With `whole_ladder` (the ladder of
+/// every rung will be climbed on every training row), the head of its longest chain of
+/// nested rungs ([`ladder_head`]) is fitted on every training row beside the Huber pass, on
+/// the rows as measured: when the pass bounds nothing, the ladder's own fit of that rung
+/// would be the same fit (the same rows, weights and start), and it is handed to the ladder
+/// ([`DoneFits`]); else it is dropped and the ladder fits the bounded rows. The Huber pass
+/// runs alone otherwise, with one core of two idle at times (its row blocks are evaluated in
+/// parallel, its QR folds are not), while that fit starts the ladder's critical path.
 ///
 /// # Errors
 /// As [`check_training_rows`], [`weighted_frames_only`], [`bounded_training`], or `then`'s.
@@ -2012,6 +2042,7 @@ fn on_bounded_training<T>(
     robot: &Robot,
     train: &[MeasurementTable],
     cfg: &MeasuredConfig,
+    whole_ladder: bool,
     then: impl FnOnce(Prepared<'_>) -> Result<T>,
 ) -> Result<T> {
     let n_rows = check_training_rows(train, cfg)?;
@@ -2033,8 +2064,24 @@ fn on_bounded_training<T>(
     let ladder_rungs = ladder_of(&frames.robot);
     let richest = richest_rung(cfg, &ladder_rungs);
     let frames_fit = (frames.model.clone(), frames.fitted.clone());
-    let mut bounded = bounded_training(richest, &measured, train, frames_fit)?;
-    let richest_fit = bounded.richest_fit.take();
+    let lengths: Vec<usize> = train.iter().map(|t| t.rows.len()).collect();
+    let beside = (whole_ladder
+        && crate::fit::ladder_sample(&lengths, crate::fit::LADDER_ROWS).is_none())
+    .then(|| ladder_head(&ladder_rungs.0))
+    .flatten()
+    .filter(|&r| r != richest);
+    let (bounded, beside_fit) = rayon::join(
+        || bounded_training(richest, &measured, train, frames_fit),
+        || beside.map(|r| (r, measured.fit(r))),
+    );
+    let mut bounded = bounded?;
+    let mut done: DoneFits = bounded.richest_fit.take().into_iter().collect();
+    // A failed fit is the ladder's to report, as it would be without this one.
+    if let Some((r, Ok(f))) = beside_fit
+        && bounded.samples.is_empty()
+    {
+        done.push((r, f));
+    }
     then(Prepared {
         n_rows,
         frames: &frames,
@@ -2043,7 +2090,7 @@ fn on_bounded_training<T>(
             ..measured
         },
         bounded: &bounded,
-        richest_fit,
+        done,
         ladder_rungs,
     })
 }
@@ -2353,9 +2400,8 @@ struct Choice {
     ladder: LadderOutcome,
 }
 
-/// The rung given in `cfg` fitted on every training row (the Huber pass's `richest_fit` when
-/// it is that rung, `frames` for frames only), or the rung chosen on the ladder
-/// ([`climb_ladder`]).
+/// The rung given in `cfg` fitted on every training row (its fit in `done` when there is
+/// one, `frames` for frames only), or the rung chosen on the ladder ([`climb_ladder`]).
 ///
 /// # Errors
 /// A failed identification.
@@ -2364,23 +2410,23 @@ fn choose_rung(
     cfg: &MeasuredConfig,
     test: &[MeasurementTable],
     frames: (&CalibratedModel, &Fitted),
-    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    done: DoneFits,
     ladder: &(Vec<ModelName>, Vec<usize>),
 ) -> Result<Choice> {
     let Some(rung) = cfg.rung else {
-        return climb(fits, cfg, test, frames, richest_fit, ladder, true);
+        return climb(fits, cfg, test, frames, done, ladder, true);
     };
     Ok(Choice {
         rung,
-        chosen: fit_on_every_row(fits, rung, frames, richest_fit)?,
+        chosen: fit_on_every_row(fits, rung, frames, done)?,
         ladder: LadderOutcome::default(),
     })
 }
 
 /// The rung chosen on the ladder `ladder` ([`climb_ladder`]), judged on a sample of the
 /// training rows of a long recording ([`climb_sample`]); `refit_sampled`: the rung chosen on
-/// a sample then fitted on every training row (the Huber pass's `richest_fit` when it is that
-/// rung), else its fit on the sample is returned.
+/// a sample then fitted on every training row (its fit in `done` when there is one), else
+/// its fit on the sample is returned.
 ///
 /// # Errors
 /// As [`climb_ladder`]; a failed identification on every row.
@@ -2389,23 +2435,23 @@ fn climb(
     cfg: &MeasuredConfig,
     test: &[MeasurementTable],
     frames: (&CalibratedModel, &Fitted),
-    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    done: DoneFits,
     ladder: &(Vec<ModelName>, Vec<usize>),
     refit_sampled: bool,
 ) -> Result<Choice> {
     let lengths: Vec<usize> = fits.train.tables.iter().map(|t| t.rows.len()).collect();
     let Some(sample) = crate::fit::ladder_sample(&lengths, crate::fit::LADDER_ROWS) else {
-        return climb_ladder(fits, cfg, test, frames, richest_fit, ladder);
+        return climb_ladder(fits, cfg, test, frames, done, ladder);
     };
     let mut choice = climb_sample(fits, cfg, test, ladder, &sample)?;
     if refit_sampled {
-        choice.chosen = fit_on_every_row(fits, choice.rung, frames, richest_fit)?;
+        choice.chosen = fit_on_every_row(fits, choice.rung, frames, done)?;
     }
     Ok(choice)
 }
 
-/// `rung` fitted on every training row: `frames` for frames only, the Huber pass's
-/// `richest_fit` when it is that rung, else a new fit.
+/// `rung` fitted on every training row: `frames` for frames only, its fit in `done` when
+/// there is one, else a new fit.
 ///
 /// # Errors
 /// A failed identification.
@@ -2413,14 +2459,14 @@ fn fit_on_every_row(
     fits: &Fits<'_>,
     rung: ModelName,
     frames: (&CalibratedModel, &Fitted),
-    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    mut done: DoneFits,
 ) -> Result<(CalibratedModel, Fitted)> {
     if rung == ModelName::FramesOnly {
         return Ok((frames.0.clone(), frames.1.clone()));
     }
-    match richest_fit {
-        Some((used, f)) if used == rung => Ok(f),
-        _ => fits.fit(rung),
+    match done.iter().position(|(used, _)| *used == rung) {
+        Some(k) => Ok(done.swap_remove(k).1),
+        None => fits.fit(rung),
     }
 }
 
@@ -2464,7 +2510,7 @@ fn climb_sample(
         cfg,
         test,
         (&sample_model, &sample_frames),
-        None,
+        Vec::new(),
         ladder,
     )?;
     drop(sampled);
@@ -2483,7 +2529,7 @@ fn climb_ladder(
     cfg: &MeasuredConfig,
     test: &[MeasurementTable],
     frames: (&CalibratedModel, &Fitted),
-    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    done: DoneFits,
     (rungs, levels): &(Vec<ModelName>, Vec<usize>),
 ) -> Result<Choice> {
     // Where the calibration will be used: the test rows and the workspace given.
@@ -2500,12 +2546,10 @@ fn climb_ladder(
         fits,
         cfg,
         rungs,
-        parent: (rungs.iter())
-            .map(|&r| nested_in(r).and_then(|p| rungs.iter().position(|&q| q == p)))
-            .collect(),
+        parent: rung_parents(rungs),
         ranges: &ranges,
         frames,
-        cached: std::sync::Mutex::new(richest_fit),
+        cached: std::sync::Mutex::new(done),
         fold_residuals,
         fold_rows,
     });
@@ -2575,8 +2619,8 @@ struct LadderRuns<'a> {
     ranges: &'a [RangeSplit],
     /// The frames-only model and identification (the ladder's foot, fitted already).
     frames: (&'a CalibratedModel, &'a Fitted),
-    /// The fit of the Huber pass, taken by its rung.
-    cached: std::sync::Mutex<Option<(ModelName, (CalibratedModel, Fitted))>>,
+    /// The fits done before the ladder ([`DoneFits`]), each taken by its rung.
+    cached: std::sync::Mutex<DoneFits>,
     /// The fewest residuals a blocked fold trains on, and its training rows.
     fold_residuals: usize,
     fold_rows: usize,
@@ -2584,13 +2628,14 @@ struct LadderRuns<'a> {
 
 impl LadderRuns<'_> {
     /// Rung `r` fitted on every training row (from the estimate of the rung it nests, if
-    /// any): frames only and the Huber pass's rung are fitted already.
+    /// any): frames only and the rungs of [`DoneFits`] are fitted already.
     fn full_fit(&self, r: ModelName, nested: Option<&Fitted>) -> Result<(CalibratedModel, Fitted)> {
         let f = if r == ModelName::FramesOnly {
             (self.frames.0.clone(), self.frames.1.clone())
-        } else if let Some((_, f)) =
-            (self.cached.lock().ok()).and_then(|mut c| c.take_if(|(used, _)| *used == r))
-        {
+        } else if let Some((_, f)) = (self.cached.lock().ok()).and_then(|mut c| {
+            let k = c.iter().position(|(used, _)| *used == r)?;
+            Some(c.swap_remove(k))
+        }) {
             f
         } else {
             let start = Start {
