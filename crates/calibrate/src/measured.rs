@@ -1016,10 +1016,6 @@ fn stats(v: &[f64]) -> (f64, f64, f64) {
     )
 }
 
-fn figures(model: &CalibratedModel, tables: &[MeasurementTable], table: usize) -> PoseFigures {
-    pose_figures(&errors(model, Training::measured(tables), table, None))
-}
-
 /// Mean, RMS and largest position, orientation (pose samples) and distance (distance rows)
 /// errors of `e`.
 fn pose_figures(e: &Errors) -> PoseFigures {
@@ -3252,6 +3248,7 @@ fn set_figures(
                 errors(frames_model, Training::measured(tables), ti, None),
                 errors(model, Training::measured(tables), ti, None),
             );
+            let (before, after) = (pose_figures(&e0), pose_figures(&e1));
             sample_errors.push(SampleErrors {
                 position_before_m: e0.position,
                 position_after_m: e1.position,
@@ -3260,8 +3257,6 @@ fn set_figures(
                 rows: crate::report::sample_rows(&tables[ti]),
                 joints: crate::report::joint_units(&robot.joint_names, &robot.prismatic),
             });
-            let before = figures(frames_model, tables, ti);
-            let after = figures(model, tables, ti);
             if role == SetRole::Test {
                 test_warnings.extend(worse_warnings(rung, &tables[ti], &before, &after));
             }
