@@ -1932,9 +1932,15 @@ pub fn calibrate_measured(
             test,
             n_rows,
         };
-        let reviewed = review_fit(&review, &ladder);
         let markers = (&frames.base, frames.markers.as_slice());
-        let found = findings(&review, markers, reviewed.equilibrium.no_equilibrium);
+        // Both read the settled fit only: side by side.
+        let (reviewed, mut found) = rayon::join(
+            || review_fit(&review, &ladder),
+            || findings(&review, markers),
+        );
+        found
+            .implausible
+            .extend(reviewed.equilibrium.no_equilibrium);
         Ok(MeasuredOutcome {
             refitted_lengths: found.refitted_lengths,
             rung,
@@ -3135,7 +3141,11 @@ fn review_fit(review: &Review<'_>, ladder: &LadderOutcome) -> Reviewed {
         &settled.fitted,
     ));
     let (train, test) = (review.train, review.test);
-    let mut figures = set_figures(robot, rung, frames_model, &settled.model, train, test);
+    // Each evaluates the settled model on every row: side by side.
+    let (mut figures, mut equilibrium) = rayon::join(
+        || set_figures(robot, rung, frames_model, &settled.model, train, test),
+        || equilibrium_check(rung, settled, fits.weights, train),
+    );
     for w in std::mem::take(&mut figures.test_warnings) {
         warnings.insert(0, w);
     }
@@ -3152,7 +3162,6 @@ fn review_fit(review: &Review<'_>, ladder: &LadderOutcome) -> Reviewed {
         "training samples",
         &review.bounded.judge.to_string(),
     ));
-    let mut equilibrium = equilibrium_check(rung, settled, fits.weights, train);
     warnings.extend(equilibrium.warning.take());
     let coverage = coverage(
         robot,
@@ -3184,24 +3193,20 @@ struct Findings {
 }
 
 /// The identified frames (`markers`: the nominal instrument frame and marker frames), the
-/// estimates no real robot can have ([`plausibility`], then `no_equilibrium`), and the held
-/// lengths refitted ([`refit_held_lengths`]) when the Huber loss bounded no sample.
-fn findings(
-    review: &Review<'_>,
-    (base, markers): (&FrameSpec, &[(usize, FrameSpec)]),
-    no_equilibrium: Option<crate::report::Implausible>,
-) -> Findings {
+/// estimates no real robot can have ([`plausibility`]; the review's torque-equilibrium
+/// finding, [`equilibrium_check`], follows them), and the held lengths refitted
+/// ([`refit_held_lengths`]) when the Huber loss bounded no sample.
+fn findings(review: &Review<'_>, (base, markers): (&FrameSpec, &[(usize, FrameSpec)])) -> Findings {
     let (fits, rung, settled) = (review.fits, review.rung, review.settled);
     let framed = fits.start.tree;
     let frames = frame_reports(base, markers, &settled.fitted.x, framed.params());
-    let mut implausible = plausibility(
+    let implausible = plausibility(
         &fits.refit(rung),
         &settled.model,
         &settled.fitted,
         &frames,
         review.cfg.rung.is_some(),
     );
-    implausible.extend(no_equilibrium);
     // Not after the Huber loss bounded samples: a bounded sample's leftover residual, far from
     // the others' configurations, pulls the weak directions the held lengths lie along.
     let refitted_lengths = if review.bounded.downweighted.is_empty() {
@@ -3666,9 +3671,7 @@ fn equilibrate(
         };
         let obs = observations(train, &all);
         if let Some(p) = &previous {
-            let change = (p.iter().zip(equilibrium_angles(&solving, &obs)))
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
+            let change = equilibrium_change(&solving, &obs, p);
             // Ten microradians move a tip a metre out by ten micrometres: below the noise of
             // a tracker or motion capture. Each refit shrinks the change about twentyfold on
             // the simulated humanoid (0.75 mrad, 34 µrad, 1.6 µrad).
@@ -3681,10 +3684,7 @@ fn equilibrate(
         // one set of angles is held at a time (the new ones are evaluated twice, once for the
         // test above and once here, rather than held beside the old).
         drop(previous.take());
-        // Collected from an iterator of known length straight into the shared slice: one
-        // allocation of the angles (a vector grown by extending reserves up to twice them, and
-        // turning it into the slice copies them once more).
-        let at: Arc<[f64]> = equilibrium_angles(&solving, &obs).collect();
+        let at = equilibrium_angles(&solving, &obs);
         let terms = ModelTerms {
             load_angles: Some(Arc::clone(&at)),
             ..terms(rung, robot)?
@@ -3734,21 +3734,37 @@ fn equilibrate(
 
 /// The torque-equilibrium joint angles of `solving` ([`CalibratedModel::load_angles`]) at
 /// each configuration of `obs` ([`Observations::configurations`]), one configuration's
-/// `n_joints` angles (rad, m for a prismatic joint) after another: an iterator of known
-/// length, each configuration's angles evaluated as it is reached.
-fn equilibrium_angles<'a>(
-    solving: &'a CalibratedModel,
-    obs: &'a Observations,
-) -> impl ExactSizeIterator<Item = f64> + 'a {
+/// `n_joints` angles (rad, m for a prismatic joint) after another. The configurations are
+/// solved in parallel (each on its own, so the angles do not depend on the threads), straight
+/// into the shared slice: one allocation of the angles.
+fn equilibrium_angles(solving: &CalibratedModel, obs: &Observations) -> Arc<[f64]> {
+    use rayon::prelude::*;
     let starts: Vec<usize> = obs.configurations().map(|rows| rows.start).collect();
     let n_joints = obs.rows.first().map_or(0, |r| r.q.len());
-    let mut angles = Vec::new();
-    (0..starts.len() * n_joints).map(move |i| {
-        if i % n_joints == 0 {
-            angles = solving.load_angles(&obs.rows[starts[i / n_joints]].q).0;
-        }
-        angles[i % n_joints]
-    })
+    let mut at: Arc<[f64]> = std::iter::repeat_n(0.0, starts.len() * n_joints).collect();
+    let Some(slots) = Arc::get_mut(&mut at) else {
+        unreachable!("a slice just collected has no other owner")
+    };
+    (slots.par_chunks_mut(n_joints.max(1)).zip(&starts))
+        .for_each(|(slot, &s)| slot.copy_from_slice(&solving.load_angles(&obs.rows[s].q).0));
+    at
+}
+
+/// The largest change, rad (m for a prismatic joint), of the torque-equilibrium joint angles of
+/// `solving` at the configurations of `obs` from `previous` (ordered as
+/// [`equilibrium_angles`] gives them), without holding the new angles: the configurations in
+/// parallel, each compared as it is solved.
+fn equilibrium_change(solving: &CalibratedModel, obs: &Observations, previous: &[f64]) -> f64 {
+    use rayon::prelude::*;
+    let starts: Vec<usize> = obs.configurations().map(|rows| rows.start).collect();
+    let n_joints = obs.rows.first().map_or(0, |r| r.q.len());
+    (previous.par_chunks(n_joints.max(1)).zip(&starts))
+        .map(|(p, &s)| {
+            (p.iter().zip(solving.load_angles(&obs.rows[s].q).0))
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max)
+        })
+        .reduce(|| 0.0, f64::max)
 }
 
 /// Share of the position noise σ below which the gravity loads of the undeflected robot are
