@@ -749,6 +749,14 @@ fn nested_in(rung: ModelName) -> Option<ModelName> {
     }
 }
 
+/// Per rung of `rungs`, the index of the rung it starts from ([`nested_in`]), if the ladder
+/// holds it.
+fn rung_parents(rungs: &[ModelName]) -> Vec<Option<usize>> {
+    (rungs.iter())
+        .map(|&r| nested_in(r).and_then(|p| rungs.iter().position(|&q| q == p)))
+        .collect()
+}
+
 /// The ladder's rungs in chains of nesting ([`nested_in`]; `parent[i]` the rung rung `i` starts
 /// from): each chain a rung that nests none, then the rungs that nest it, each after its
 /// parent; the longest chains first (their nested fits are the ladder's critical path), ties
@@ -769,6 +777,21 @@ fn rung_chains(parent: &[Option<usize>]) -> Vec<Vec<usize>> {
     chains.sort_by_key(|c| std::cmp::Reverse(c.len()));
     chains
 }
+
+/// The rung that heads the ladder's longest chain of nested rungs ([`rung_chains`]), when a
+/// rung nests it: its fit on every row starts the ladder's critical path (the per-axis
+/// transversal compliance from the isotropic one); `None` when no rung nests another.
+fn ladder_head(rungs: &[ModelName]) -> Option<ModelName> {
+    let chains = rung_chains(&rung_parents(rungs));
+    (chains.first())
+        .filter(|c| c.len() > 1)
+        .map(|c| rungs[c[0]])
+}
+
+/// Fits on every training row done before the ladder, by rung, each the fit the ladder would
+/// make itself (the same rows, weights and start): the Huber pass's rung when it bounded
+/// nothing, and the rung fitted beside it ([`on_bounded_training`]).
+type DoneFits = Vec<(ModelName, (CalibratedModel, Fitted))>;
 
 /// Fits `rung` on the rows `keep` selects: the problem and its identification (estimates
 /// mapped back to the full layout).
@@ -991,10 +1014,6 @@ fn stats(v: &[f64]) -> (f64, f64, f64) {
         (v.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
         v.iter().copied().fold(0.0, f64::max),
     )
-}
-
-fn figures(model: &CalibratedModel, tables: &[MeasurementTable], table: usize) -> PoseFigures {
-    pose_figures(&errors(model, Training::measured(tables), table, None))
 }
 
 /// Mean, RMS and largest position, orientation (pose samples) and distance (distance rows)
@@ -1884,18 +1903,18 @@ pub fn calibrate_measured(
     test: &[MeasurementTable],
     cfg: &MeasuredConfig,
 ) -> Result<MeasuredOutcome> {
-    on_bounded_training(robot, train, cfg, |p| {
+    on_bounded_training(robot, train, cfg, cfg.rung.is_none(), |p| {
         let Prepared {
             n_rows,
             frames,
             fits,
             bounded,
-            richest_fit,
+            done,
             ladder_rungs,
         } = p;
         let (frames_model, frames_only) = &bounded.frames;
         let frames_fit = (frames_model, frames_only);
-        let choice = choose_rung(&fits, cfg, test, frames_fit, richest_fit, &ladder_rungs)?;
+        let choice = choose_rung(&fits, cfg, test, frames_fit, done, &ladder_rungs)?;
         let Choice {
             rung,
             chosen,
@@ -1913,9 +1932,15 @@ pub fn calibrate_measured(
             test,
             n_rows,
         };
-        let reviewed = review_fit(&review, &ladder);
         let markers = (&frames.base, frames.markers.as_slice());
-        let found = findings(&review, markers, reviewed.equilibrium.no_equilibrium);
+        // Both read the settled fit only: side by side.
+        let (reviewed, mut found) = rayon::join(
+            || review_fit(&review, &ladder),
+            || findings(&review, markers),
+        );
+        found
+            .implausible
+            .extend(reviewed.equilibrium.no_equilibrium);
         Ok(MeasuredOutcome {
             refitted_lengths: found.refitted_lengths,
             rung,
@@ -1963,7 +1988,7 @@ pub fn ladder_heldout(
         rung: None,
         ..cfg.clone()
     };
-    on_bounded_training(robot, train, cfg, |p| {
+    on_bounded_training(robot, train, cfg, false, |p| {
         let (all, levels) = &p.ladder_rungs;
         let (some, some_levels): (Vec<ModelName>, Vec<usize>) = (all.iter().zip(levels))
             .filter(|(r, _)| rungs.contains(r))
@@ -1978,7 +2003,7 @@ pub fn ladder_heldout(
             cfg,
             test,
             (frames_model, frames_only),
-            p.richest_fit,
+            p.done,
             &(some, some_levels),
             false,
         )?;
@@ -1996,15 +2021,22 @@ struct Prepared<'a> {
     fits: Fits<'a>,
     /// Those tables, the samples the loss bounded and the frames-only fit on them.
     bounded: &'a Bounded,
-    /// The Huber pass's fit of its rung, when it bounded nothing.
-    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    /// The fits on every training row done beside the Huber pass ([`DoneFits`]).
+    done: DoneFits,
     /// The rungs of the robot's ladder and their levels ([`ladder_of`]).
     ladder_rungs: (Vec<ModelName>, Vec<usize>),
 }
 
 /// `then` of the training rows `train` prepared for the ladder: checked, the weights and
 /// frames-only fit ([`weighted_frames_only`]), the gross errors bounded by the Huber loss with
-/// the richest rung `cfg` may fit ([`bounded_training`]).
+/// the richest rung `cfg` may fit ([`bounded_training`]). With `whole_ladder` (the ladder of
+/// every rung will be climbed on every training row), the head of its longest chain of
+/// nested rungs ([`ladder_head`]) is fitted on every training row beside the Huber pass, on
+/// the rows as measured: when the pass bounds nothing, the ladder's own fit of that rung
+/// would be the same fit (the same rows, weights and start), and it is handed to the ladder
+/// ([`DoneFits`]); else it is dropped and the ladder fits the bounded rows. The Huber pass
+/// runs alone otherwise, with one core of two idle at times (its row blocks are evaluated in
+/// parallel, its QR folds are not), while that fit starts the ladder's critical path.
 ///
 /// # Errors
 /// As [`check_training_rows`], [`weighted_frames_only`], [`bounded_training`], or `then`'s.
@@ -2012,6 +2044,7 @@ fn on_bounded_training<T>(
     robot: &Robot,
     train: &[MeasurementTable],
     cfg: &MeasuredConfig,
+    whole_ladder: bool,
     then: impl FnOnce(Prepared<'_>) -> Result<T>,
 ) -> Result<T> {
     let n_rows = check_training_rows(train, cfg)?;
@@ -2033,8 +2066,24 @@ fn on_bounded_training<T>(
     let ladder_rungs = ladder_of(&frames.robot);
     let richest = richest_rung(cfg, &ladder_rungs);
     let frames_fit = (frames.model.clone(), frames.fitted.clone());
-    let mut bounded = bounded_training(richest, &measured, train, frames_fit)?;
-    let richest_fit = bounded.richest_fit.take();
+    let lengths: Vec<usize> = train.iter().map(|t| t.rows.len()).collect();
+    let beside = (whole_ladder
+        && crate::fit::ladder_sample(&lengths, crate::fit::LADDER_ROWS).is_none())
+    .then(|| ladder_head(&ladder_rungs.0))
+    .flatten()
+    .filter(|&r| r != richest);
+    let (bounded, beside_fit) = rayon::join(
+        || bounded_training(richest, &measured, train, frames_fit),
+        || beside.map(|r| (r, measured.fit(r))),
+    );
+    let mut bounded = bounded?;
+    let mut done: DoneFits = bounded.richest_fit.take().into_iter().collect();
+    // A failed fit is the ladder's to report, as it would be without this one.
+    if let Some((r, Ok(f))) = beside_fit
+        && bounded.samples.is_empty()
+    {
+        done.push((r, f));
+    }
     then(Prepared {
         n_rows,
         frames: &frames,
@@ -2043,7 +2092,7 @@ fn on_bounded_training<T>(
             ..measured
         },
         bounded: &bounded,
-        richest_fit,
+        done,
         ladder_rungs,
     })
 }
@@ -2353,9 +2402,8 @@ struct Choice {
     ladder: LadderOutcome,
 }
 
-/// The rung given in `cfg` fitted on every training row (the Huber pass's `richest_fit` when
-/// it is that rung, `frames` for frames only), or the rung chosen on the ladder
-/// ([`climb_ladder`]).
+/// The rung given in `cfg` fitted on every training row (its fit in `done` when there is
+/// one, `frames` for frames only), or the rung chosen on the ladder ([`climb_ladder`]).
 ///
 /// # Errors
 /// A failed identification.
@@ -2364,23 +2412,23 @@ fn choose_rung(
     cfg: &MeasuredConfig,
     test: &[MeasurementTable],
     frames: (&CalibratedModel, &Fitted),
-    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    done: DoneFits,
     ladder: &(Vec<ModelName>, Vec<usize>),
 ) -> Result<Choice> {
     let Some(rung) = cfg.rung else {
-        return climb(fits, cfg, test, frames, richest_fit, ladder, true);
+        return climb(fits, cfg, test, frames, done, ladder, true);
     };
     Ok(Choice {
         rung,
-        chosen: fit_on_every_row(fits, rung, frames, richest_fit)?,
+        chosen: fit_on_every_row(fits, rung, frames, done)?,
         ladder: LadderOutcome::default(),
     })
 }
 
 /// The rung chosen on the ladder `ladder` ([`climb_ladder`]), judged on a sample of the
 /// training rows of a long recording ([`climb_sample`]); `refit_sampled`: the rung chosen on
-/// a sample then fitted on every training row (the Huber pass's `richest_fit` when it is that
-/// rung), else its fit on the sample is returned.
+/// a sample then fitted on every training row (its fit in `done` when there is one), else
+/// its fit on the sample is returned.
 ///
 /// # Errors
 /// As [`climb_ladder`]; a failed identification on every row.
@@ -2389,23 +2437,23 @@ fn climb(
     cfg: &MeasuredConfig,
     test: &[MeasurementTable],
     frames: (&CalibratedModel, &Fitted),
-    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    done: DoneFits,
     ladder: &(Vec<ModelName>, Vec<usize>),
     refit_sampled: bool,
 ) -> Result<Choice> {
     let lengths: Vec<usize> = fits.train.tables.iter().map(|t| t.rows.len()).collect();
     let Some(sample) = crate::fit::ladder_sample(&lengths, crate::fit::LADDER_ROWS) else {
-        return climb_ladder(fits, cfg, test, frames, richest_fit, ladder);
+        return climb_ladder(fits, cfg, test, frames, done, ladder);
     };
     let mut choice = climb_sample(fits, cfg, test, ladder, &sample)?;
     if refit_sampled {
-        choice.chosen = fit_on_every_row(fits, choice.rung, frames, richest_fit)?;
+        choice.chosen = fit_on_every_row(fits, choice.rung, frames, done)?;
     }
     Ok(choice)
 }
 
-/// `rung` fitted on every training row: `frames` for frames only, the Huber pass's
-/// `richest_fit` when it is that rung, else a new fit.
+/// `rung` fitted on every training row: `frames` for frames only, its fit in `done` when
+/// there is one, else a new fit.
 ///
 /// # Errors
 /// A failed identification.
@@ -2413,14 +2461,14 @@ fn fit_on_every_row(
     fits: &Fits<'_>,
     rung: ModelName,
     frames: (&CalibratedModel, &Fitted),
-    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    mut done: DoneFits,
 ) -> Result<(CalibratedModel, Fitted)> {
     if rung == ModelName::FramesOnly {
         return Ok((frames.0.clone(), frames.1.clone()));
     }
-    match richest_fit {
-        Some((used, f)) if used == rung => Ok(f),
-        _ => fits.fit(rung),
+    match done.iter().position(|(used, _)| *used == rung) {
+        Some(k) => Ok(done.swap_remove(k).1),
+        None => fits.fit(rung),
     }
 }
 
@@ -2464,7 +2512,7 @@ fn climb_sample(
         cfg,
         test,
         (&sample_model, &sample_frames),
-        None,
+        Vec::new(),
         ladder,
     )?;
     drop(sampled);
@@ -2483,7 +2531,7 @@ fn climb_ladder(
     cfg: &MeasuredConfig,
     test: &[MeasurementTable],
     frames: (&CalibratedModel, &Fitted),
-    richest_fit: Option<(ModelName, (CalibratedModel, Fitted))>,
+    done: DoneFits,
     (rungs, levels): &(Vec<ModelName>, Vec<usize>),
 ) -> Result<Choice> {
     // Where the calibration will be used: the test rows and the workspace given.
@@ -2500,12 +2548,10 @@ fn climb_ladder(
         fits,
         cfg,
         rungs,
-        parent: (rungs.iter())
-            .map(|&r| nested_in(r).and_then(|p| rungs.iter().position(|&q| q == p)))
-            .collect(),
+        parent: rung_parents(rungs),
         ranges: &ranges,
         frames,
-        cached: std::sync::Mutex::new(richest_fit),
+        cached: std::sync::Mutex::new(done),
         fold_residuals,
         fold_rows,
     });
@@ -2575,8 +2621,8 @@ struct LadderRuns<'a> {
     ranges: &'a [RangeSplit],
     /// The frames-only model and identification (the ladder's foot, fitted already).
     frames: (&'a CalibratedModel, &'a Fitted),
-    /// The fit of the Huber pass, taken by its rung.
-    cached: std::sync::Mutex<Option<(ModelName, (CalibratedModel, Fitted))>>,
+    /// The fits done before the ladder ([`DoneFits`]), each taken by its rung.
+    cached: std::sync::Mutex<DoneFits>,
     /// The fewest residuals a blocked fold trains on, and its training rows.
     fold_residuals: usize,
     fold_rows: usize,
@@ -2584,13 +2630,14 @@ struct LadderRuns<'a> {
 
 impl LadderRuns<'_> {
     /// Rung `r` fitted on every training row (from the estimate of the rung it nests, if
-    /// any): frames only and the Huber pass's rung are fitted already.
+    /// any): frames only and the rungs of [`DoneFits`] are fitted already.
     fn full_fit(&self, r: ModelName, nested: Option<&Fitted>) -> Result<(CalibratedModel, Fitted)> {
         let f = if r == ModelName::FramesOnly {
             (self.frames.0.clone(), self.frames.1.clone())
-        } else if let Some((_, f)) =
-            (self.cached.lock().ok()).and_then(|mut c| c.take_if(|(used, _)| *used == r))
-        {
+        } else if let Some((_, f)) = (self.cached.lock().ok()).and_then(|mut c| {
+            let k = c.iter().position(|(used, _)| *used == r)?;
+            Some(c.swap_remove(k))
+        }) {
             f
         } else {
             let start = Start {
@@ -3094,7 +3141,11 @@ fn review_fit(review: &Review<'_>, ladder: &LadderOutcome) -> Reviewed {
         &settled.fitted,
     ));
     let (train, test) = (review.train, review.test);
-    let mut figures = set_figures(robot, rung, frames_model, &settled.model, train, test);
+    // Each evaluates the settled model on every row: side by side.
+    let (mut figures, mut equilibrium) = rayon::join(
+        || set_figures(robot, rung, frames_model, &settled.model, train, test),
+        || equilibrium_check(rung, settled, fits.weights, train),
+    );
     for w in std::mem::take(&mut figures.test_warnings) {
         warnings.insert(0, w);
     }
@@ -3111,7 +3162,6 @@ fn review_fit(review: &Review<'_>, ladder: &LadderOutcome) -> Reviewed {
         "training samples",
         &review.bounded.judge.to_string(),
     ));
-    let mut equilibrium = equilibrium_check(rung, settled, fits.weights, train);
     warnings.extend(equilibrium.warning.take());
     let coverage = coverage(
         robot,
@@ -3143,24 +3193,20 @@ struct Findings {
 }
 
 /// The identified frames (`markers`: the nominal instrument frame and marker frames), the
-/// estimates no real robot can have ([`plausibility`], then `no_equilibrium`), and the held
-/// lengths refitted ([`refit_held_lengths`]) when the Huber loss bounded no sample.
-fn findings(
-    review: &Review<'_>,
-    (base, markers): (&FrameSpec, &[(usize, FrameSpec)]),
-    no_equilibrium: Option<crate::report::Implausible>,
-) -> Findings {
+/// estimates no real robot can have ([`plausibility`]; the review's torque-equilibrium
+/// finding, [`equilibrium_check`], follows them), and the held lengths refitted
+/// ([`refit_held_lengths`]) when the Huber loss bounded no sample.
+fn findings(review: &Review<'_>, (base, markers): (&FrameSpec, &[(usize, FrameSpec)])) -> Findings {
     let (fits, rung, settled) = (review.fits, review.rung, review.settled);
     let framed = fits.start.tree;
     let frames = frame_reports(base, markers, &settled.fitted.x, framed.params());
-    let mut implausible = plausibility(
+    let implausible = plausibility(
         &fits.refit(rung),
         &settled.model,
         &settled.fitted,
         &frames,
         review.cfg.rung.is_some(),
     );
-    implausible.extend(no_equilibrium);
     // Not after the Huber loss bounded samples: a bounded sample's leftover residual, far from
     // the others' configurations, pulls the weak directions the held lengths lie along.
     let refitted_lengths = if review.bounded.downweighted.is_empty() {
@@ -3207,6 +3253,7 @@ fn set_figures(
                 errors(frames_model, Training::measured(tables), ti, None),
                 errors(model, Training::measured(tables), ti, None),
             );
+            let (before, after) = (pose_figures(&e0), pose_figures(&e1));
             sample_errors.push(SampleErrors {
                 position_before_m: e0.position,
                 position_after_m: e1.position,
@@ -3215,8 +3262,6 @@ fn set_figures(
                 rows: crate::report::sample_rows(&tables[ti]),
                 joints: crate::report::joint_units(&robot.joint_names, &robot.prismatic),
             });
-            let before = figures(frames_model, tables, ti);
-            let after = figures(model, tables, ti);
             if role == SetRole::Test {
                 test_warnings.extend(worse_warnings(rung, &tables[ti], &before, &after));
             }
@@ -3626,9 +3671,7 @@ fn equilibrate(
         };
         let obs = observations(train, &all);
         if let Some(p) = &previous {
-            let change = (p.iter().zip(equilibrium_angles(&solving, &obs)))
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
+            let change = equilibrium_change(&solving, &obs, p);
             // Ten microradians move a tip a metre out by ten micrometres: below the noise of
             // a tracker or motion capture. Each refit shrinks the change about twentyfold on
             // the simulated humanoid (0.75 mrad, 34 µrad, 1.6 µrad).
@@ -3641,10 +3684,7 @@ fn equilibrate(
         // one set of angles is held at a time (the new ones are evaluated twice, once for the
         // test above and once here, rather than held beside the old).
         drop(previous.take());
-        // Collected from an iterator of known length straight into the shared slice: one
-        // allocation of the angles (a vector grown by extending reserves up to twice them, and
-        // turning it into the slice copies them once more).
-        let at: Arc<[f64]> = equilibrium_angles(&solving, &obs).collect();
+        let at = equilibrium_angles(&solving, &obs);
         let terms = ModelTerms {
             load_angles: Some(Arc::clone(&at)),
             ..terms(rung, robot)?
@@ -3694,21 +3734,37 @@ fn equilibrate(
 
 /// The torque-equilibrium joint angles of `solving` ([`CalibratedModel::load_angles`]) at
 /// each configuration of `obs` ([`Observations::configurations`]), one configuration's
-/// `n_joints` angles (rad, m for a prismatic joint) after another: an iterator of known
-/// length, each configuration's angles evaluated as it is reached.
-fn equilibrium_angles<'a>(
-    solving: &'a CalibratedModel,
-    obs: &'a Observations,
-) -> impl ExactSizeIterator<Item = f64> + 'a {
+/// `n_joints` angles (rad, m for a prismatic joint) after another. The configurations are
+/// solved in parallel (each on its own, so the angles do not depend on the threads), straight
+/// into the shared slice: one allocation of the angles.
+fn equilibrium_angles(solving: &CalibratedModel, obs: &Observations) -> Arc<[f64]> {
+    use rayon::prelude::*;
     let starts: Vec<usize> = obs.configurations().map(|rows| rows.start).collect();
     let n_joints = obs.rows.first().map_or(0, |r| r.q.len());
-    let mut angles = Vec::new();
-    (0..starts.len() * n_joints).map(move |i| {
-        if i % n_joints == 0 {
-            angles = solving.load_angles(&obs.rows[starts[i / n_joints]].q).0;
-        }
-        angles[i % n_joints]
-    })
+    let mut at: Arc<[f64]> = std::iter::repeat_n(0.0, starts.len() * n_joints).collect();
+    let Some(slots) = Arc::get_mut(&mut at) else {
+        unreachable!("a slice just collected has no other owner")
+    };
+    (slots.par_chunks_mut(n_joints.max(1)).zip(&starts))
+        .for_each(|(slot, &s)| slot.copy_from_slice(&solving.load_angles(&obs.rows[s].q).0));
+    at
+}
+
+/// The largest change, rad (m for a prismatic joint), of the torque-equilibrium joint angles of
+/// `solving` at the configurations of `obs` from `previous` (ordered as
+/// [`equilibrium_angles`] gives them), without holding the new angles: the configurations in
+/// parallel, each compared as it is solved.
+fn equilibrium_change(solving: &CalibratedModel, obs: &Observations, previous: &[f64]) -> f64 {
+    use rayon::prelude::*;
+    let starts: Vec<usize> = obs.configurations().map(|rows| rows.start).collect();
+    let n_joints = obs.rows.first().map_or(0, |r| r.q.len());
+    (previous.par_chunks(n_joints.max(1)).zip(&starts))
+        .map(|(p, &s)| {
+            (p.iter().zip(solving.load_angles(&obs.rows[s].q).0))
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max)
+        })
+        .reduce(|| 0.0, f64::max)
 }
 
 /// Share of the position noise σ below which the gravity loads of the undeflected robot are
