@@ -169,6 +169,18 @@ pub enum ArmCaseKind {
     Two,
 }
 
+impl ArmCaseKind {
+    /// The class as the reports name it: `none`, `one`, `outside`, `two`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ArmCaseKind::None => "none",
+            ArmCaseKind::One => "one",
+            ArmCaseKind::Outside => "outside",
+            ArmCaseKind::Two => "two",
+        }
+    }
+}
+
 /// An injected effect with its true parameters. Joint vectors have one entry per joint
 /// (chain order).
 #[derive(Clone, Debug, PartialEq, Serialize)]
