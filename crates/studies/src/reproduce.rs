@@ -9,7 +9,6 @@ use hapcal_problems::CapstanProblem;
 use hapcal_transmission::JointRad;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
-use rayon::prelude::*;
 use std::fmt::Write;
 use std::path::Path;
 
@@ -137,16 +136,11 @@ fn run_seeds(
     choice: &paper::PoseChoice<'_>,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<SeedResult>> {
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    let seeds: Vec<SeedResult> = (0..n_seeds)
-        .into_par_iter()
-        .map(|seed| {
-            let result = paper::run_seed_with(r, seed as u64, n_poses, choice)
-                .with_context(|| format!("seed {seed}"));
-            progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
-            result
-        })
-        .collect::<Result<Vec<_>>>()?;
+    let seeds: Vec<SeedResult> = crate::par_map_counted(0..n_seeds as u64, progress, |seed| {
+        paper::run_seed_with(r, seed, n_poses, choice).with_context(|| format!("seed {seed}"))
+    })
+    .into_iter()
+    .collect::<Result<Vec<_>>>()?;
     if seeds.is_empty() {
         bail!("--seeds must be at least 1");
     }

@@ -745,24 +745,17 @@ pub fn run_seeds(
     n_rows: usize,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<TreeOutcome>> {
-    use rayon::prelude::*;
     let setup = load_setup()?;
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    Ok(seeds
-        .into_par_iter()
-        .map(|i| {
-            let case = draw_case(i, &setup);
-            let out = run_case(&case, &setup, n_rows).unwrap_or_else(|e| {
-                let record = TreeRecord {
-                    effect_rms_m: f64::NAN,
-                    round1: Vec::new(),
-                };
-                TreeOutcome::failed(case, &e, record)
-            });
-            progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
-            out
+    Ok(crate::par_map_counted(seeds, progress, |i| {
+        let case = draw_case(i, &setup);
+        run_case(&case, &setup, n_rows).unwrap_or_else(|e| {
+            let record = TreeRecord {
+                effect_rms_m: f64::NAN,
+                round1: Vec::new(),
+            };
+            TreeOutcome::failed(case, &e, record)
         })
-        .collect())
+    }))
 }
 
 /// Per injected effect: `(right, total)` and the count of each verdict.
