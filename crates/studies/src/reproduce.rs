@@ -3,6 +3,7 @@
 
 use crate::paper::{self, Reference, SeedResult};
 use anyhow::{Context, Result, bail};
+use hapcal_force::quantile;
 use hapcal_identify::identify;
 use hapcal_metrics::{accuracy_improvement_pct, parameter_improvement_pct};
 use hapcal_problems::CapstanProblem;
@@ -32,16 +33,6 @@ fn csv_number(v: f64) -> String {
     } else {
         v.to_string()
     }
-}
-
-fn quantile(v: &mut [f64], p: f64) -> f64 {
-    v.sort_by(f64::total_cmp);
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let pos = p * (v.len() - 1) as f64;
-    let (lo, hi) = (pos.floor() as usize, pos.ceil() as usize);
-    v[lo] + (v[hi] - v[lo]) * (pos - lo as f64)
 }
 
 /// Unit conversion for reports: (factor, unit) from SI.
@@ -401,9 +392,9 @@ fn write_table3_row(
     };
     // I% (eq. 8) is undefined for a zero deviation.
     let improvement = (assigned != 0.0).then(|| {
-        let med = quantile(&mut spread.imp.clone(), 0.5);
-        let p5 = quantile(&mut spread.imp.clone(), 0.05);
-        let p95 = quantile(&mut spread.imp.clone(), 0.95);
+        let med = quantile(&spread.imp, 0.5);
+        let p5 = quantile(&spread.imp, 0.05);
+        let p95 = quantile(&spread.imp, 0.95);
         let bound =
             100.0 * (1.0 - 0.674 * (spread.var_sum / spread.kept as f64).sqrt() / assigned.abs());
         (med, p5, p95, bound)
@@ -494,12 +485,9 @@ fn table3_joint(
             continue;
         }
         let imp = &spread.imp;
-        let med = quantile(&mut imp.clone(), 0.5);
-        let (p5, p95) = (
-            quantile(&mut imp.clone(), 0.05),
-            quantile(&mut imp.clone(), 0.95),
-        );
-        let med2 = quantile(&mut imp2, 0.5);
+        let med = quantile(imp, 0.5);
+        let (p5, p95) = (quantile(imp, 0.05), quantile(imp, 0.95));
+        let med2 = quantile(&imp2, 0.5);
         let coverage = spread.coverage_pct();
         let kept_pct = spread.kept_pct(seeds.len());
         let z_sd = sample_sd(&spread.z);
@@ -587,13 +575,10 @@ fn table2_capstans(r: &Reference, seeds: &[SeedResult], draft: &mut Draft) -> Re
             let spread = CapstanSpread::of(seeds, ci, k, &name, assigned)?;
             let v0 = capstan_field(&fit0.params, k);
             let sd0 = fit0.identified.std(&name).unwrap_or(f64::NAN);
-            let med = quantile(&mut spread.imp.clone(), 0.5);
-            let (p5, p95) = (
-                quantile(&mut spread.imp.clone(), 0.05),
-                quantile(&mut spread.imp.clone(), 0.95),
-            );
+            let med = quantile(&spread.imp, 0.5);
+            let (p5, p95) = (quantile(&spread.imp, 0.05), quantile(&spread.imp, 0.95));
             let coverage = 100.0 * spread.covered as f64 / seeds.len() as f64;
-            let mcorr = quantile(&mut spread.corr.clone(), 0.5);
+            let mcorr = quantile(&spread.corr, 0.5);
             let paper_imp = paper2.iter().find(|(n, _)| *n == name).map(|(_, v)| *v);
             writeln!(
                 t2,
@@ -826,12 +811,7 @@ fn accuracy_pct(after: f64, before: f64) -> f64 {
 
 /// (median, 5th, 95th percentile) of a per-seed figure.
 fn spread(v: &[f64]) -> (f64, f64, f64) {
-    let mut v = v.to_vec();
-    (
-        quantile(&mut v, 0.5),
-        quantile(&mut v, 0.05),
-        quantile(&mut v, 0.95),
-    )
+    (quantile(v, 0.5), quantile(v, 0.05), quantile(v, 0.95))
 }
 
 /// Per-seed improvements (%, eq. 9) of the validation on fresh poses, each as (median, 5th,
@@ -863,7 +843,7 @@ impl ValidationSpread {
             per_seed(&|v| accuracy_pct(v.distance_rms_after_m, v.distance_rms_before_m));
         let dist_kin =
             per_seed(&|v| accuracy_pct(v.distance_rms_kinematics_only_m, v.distance_rms_before_m));
-        let mut ori_left = per_seed(&|v| {
+        let ori_left = per_seed(&|v| {
             v.orientation_rms_after_rad - v.orientation_rms_after_true_unidentifiable_rad
         });
         Self {
@@ -871,7 +851,7 @@ impl ValidationSpread {
             orientation: spread(&ori_i),
             distance_full: spread(&dist_full),
             distance_kinematics: spread(&dist_kin),
-            orientation_left_median_rad: quantile(&mut ori_left, 0.5),
+            orientation_left_median_rad: quantile(&ori_left, 0.5),
         }
     }
 }
