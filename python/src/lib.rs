@@ -379,6 +379,20 @@ fn file_sources(sources: &[Source]) -> Option<Vec<(PathBuf, Units)>> {
         .collect()
 }
 
+/// A plan for `device` without data or test files (each call fills them in once it knows
+/// their units), with [`Plan::bundled_default`]'s settings otherwise: SI units, gravity down,
+/// sockets 0.05 m apart, the model chosen by cross-validation.
+fn device_plan(device: &PyDevice) -> Plan {
+    Plan {
+        device: device.path.clone(),
+        tip: device.tip.clone(),
+        tips: device.tips.clone(),
+        data: Vec::new(),
+        test: Vec::new(),
+        ..Plan::bundled_default()
+    }
+}
+
 /// Calibrates `device` from `train` (`test` only evaluated). See `hapcal.calibrate`.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
@@ -404,23 +418,14 @@ fn _calibrate(
     let train: Vec<Source> = train.iter().map(|m| m.source.clone()).collect();
     let test: Vec<Source> = test.iter().map(|m| m.source.clone()).collect();
     let mut plan = Plan {
-        workspace: None,
-        device: device.path.clone(),
-        tip: device.tip.clone(),
-        tips: device.tips.clone(),
-        units: Units::default(),
-        gravity: hapcal_calibrate::calibrate::GRAVITY_DOWN,
         sigma_rad,
         test_last,
-        data: Vec::new(),
-        test: Vec::new(),
         socket_distance_m,
         model,
         folds,
-        ladder_rows: hapcal_calibrate::fit::LADDER_ROWS,
-        read_rows: None,
         sigma_m,
         joint,
+        ..device_plan(device)
     };
     // Files that share their units go through `calibrate::run`, exactly as the command line.
     // The setup check runs on files, as the command line's (arrays are taken as given).
@@ -690,23 +695,10 @@ fn _diagnose(
     }
     hapcal_diagnose::arm::robot_baseline(baseline.as_deref()).map_err(|e| py_err(e.into()))?;
     let mut plan = Plan {
-        workspace: None,
-        device: device.path.clone(),
-        tip: device.tip.clone(),
-        tips: device.tips.clone(),
-        units: Units::default(),
-        gravity: hapcal_calibrate::calibrate::GRAVITY_DOWN,
-        sigma_rad: None,
         test_last,
-        data: Vec::new(),
-        test: Vec::new(),
-        socket_distance_m: 0.05,
-        model: ModelChoice::Auto,
         folds,
-        ladder_rows: hapcal_calibrate::fit::LADDER_ROWS,
-        read_rows: None,
         sigma_m,
-        joint: false,
+        ..device_plan(device)
     };
     let files = file_sources(&train).zip(file_sources(&test));
     let robot = device.robot.as_ref();
@@ -873,14 +865,10 @@ fn _check(
             );
         }
         Ok(Plan {
-            device: device.path.clone(),
-            tip: device.tip.clone(),
-            tips: device.tips.clone(),
             units,
             data: files.into_iter().map(|(p, _)| p).collect(),
-            test: Vec::new(),
             socket_distance_m,
-            ..Plan::bundled_default()
+            ..device_plan(device)
         })
     })()
     .map_err(py_err)?;

@@ -2,7 +2,6 @@
 //! reproduction runs that write `docs/results/`.
 #![allow(clippy::print_stdout, clippy::print_stderr)] // a task runner reports on the terminal
 
-mod arm_blind;
 mod bench;
 mod bench_scale;
 mod deny;
@@ -13,7 +12,6 @@ mod mukca;
 mod real_data;
 mod setup_hostile;
 mod tidy;
-mod tree_blind;
 
 use anyhow::Result;
 use clap::Parser;
@@ -189,8 +187,15 @@ fn main() -> Result<()> {
             peers, criterion, ..
         } => bench::run(&sh, peers, criterion),
         Task::BlindTest { cases } => blind_test(&sh, cases),
-        Task::BlindTestArm { cases, setup_check } => arm_blind::run(&sh, cases, setup_check),
-        Task::BlindTestTree { cases } => tree_blind::run(&sh, cases),
+        Task::BlindTestArm { cases, setup_check } => {
+            let (cases, page) = (cases.to_string(), "docs/results/diagnose-arm-blind.md");
+            let check = setup_check.then_some("--setup-check");
+            study_page(&sh, "arm-blind", &["--cases", &cases], check, page)
+        }
+        Task::BlindTestTree { cases } => {
+            let (cases, page) = (cases.to_string(), "docs/results/diagnose-tree-blind.md");
+            study_page(&sh, "tree-blind", &["--cases", &cases], None, page)
+        }
         Task::ReproduceTables { check } => reproduce_tables(&sh, check, None),
     }
 }
@@ -363,6 +368,30 @@ fn hapcal_cmd(bin: Option<&Path>) -> (OsString, Vec<OsString>) {
                 .to_vec(),
         ),
     }
+}
+
+/// Runs the release binary `bin` of hapcal-studies with `args` and writes its Markdown report
+/// to `page`; with `print_flag` added to `args` instead, prints what it says (nothing is
+/// written).
+fn study_page(
+    sh: &Shell,
+    bin: &str,
+    args: &[&str],
+    print_flag: Option<&str>,
+    page: &str,
+) -> Result<()> {
+    let text = cmd!(
+        sh,
+        "cargo run --release --quiet -p hapcal-studies --bin {bin} -- {args...} {print_flag...}"
+    )
+    .read()?;
+    if print_flag.is_some() {
+        println!("{text}");
+    } else {
+        sh.write_file(page, format!("{text}\n"))?;
+        println!("wrote {page}");
+    }
+    Ok(())
 }
 
 fn blind_test(sh: &Shell, cases: usize) -> Result<()> {

@@ -461,11 +461,6 @@ impl Units {
         self.columns.extend(edits);
         self
     }
-
-    /// Whether every column is read as SI with no edit (the readers' default).
-    pub fn is_si(&self) -> bool {
-        *self == Self::default()
-    }
 }
 
 /// What a column holds, for its unit and edits.

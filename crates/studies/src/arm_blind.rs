@@ -169,6 +169,18 @@ pub enum ArmCaseKind {
     Two,
 }
 
+impl ArmCaseKind {
+    /// The class as the reports name it: `none`, `one`, `outside`, `two`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ArmCaseKind::None => "none",
+            ArmCaseKind::One => "one",
+            ArmCaseKind::Outside => "outside",
+            ArmCaseKind::Two => "two",
+        }
+    }
+}
+
 /// An injected effect with its true parameters. Joint vectors have one entry per joint
 /// (chain order).
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -957,24 +969,16 @@ pub fn run(
     cfg: &ArmConfig,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<ArmOutcome>> {
-    use rayon::prelude::*;
     let setups = (ArmRobot::ALL.iter())
         .map(|&r| load_setup(r))
         .collect::<Result<Vec<_>>>()?;
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    let outcomes = (0..n_cases)
-        .into_par_iter()
-        .map(|i| {
-            let robot = ArmRobot::ALL[((i / 8) % 2) as usize];
-            let setup = &setups[robot as usize];
-            let case = draw_case(i, setup.robot.joint_names.len());
-            let out = run_case_with(&case, setup, n_rows, cfg)
-                .unwrap_or_else(|e| ArmOutcome::failed(case, &e, ArmRecord::default()));
-            progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
-            out
-        })
-        .collect();
-    Ok(outcomes)
+    Ok(crate::par_map_counted(0..n_cases, progress, |i| {
+        let robot = ArmRobot::ALL[((i / 8) % 2) as usize];
+        let setup = &setups[robot as usize];
+        let case = draw_case(i, setup.robot.joint_names.len());
+        run_case_with(&case, setup, n_rows, cfg)
+            .unwrap_or_else(|e| ArmOutcome::failed(case, &e, ArmRecord::default()))
+    }))
 }
 
 #[cfg(test)]

@@ -1,6 +1,5 @@
 //! SVG figures of the reproduction: the paper's Fig. 7 (joint-4 transmission error and its
-//! polynomial), Fig. 8 (validation errors before and after calibration), Table 3 as a chart, and
-//! the test-placement comparison with MUKCa.
+//! polynomial), Fig. 8 (validation errors before and after calibration) and Table 3 as a chart.
 //!
 //! Every function is pure: it takes slices in the units its name states (SI unless the name says
 //! `_mm` or `_pct`), converts to the plotted units (mrad, mm, %) itself and returns the SVG
@@ -53,8 +52,6 @@ pub const FIG7_TITLE: &str = "Joint-4 transmission error vs joint reading (cf. p
 pub const FIG8_TITLE: &str = "Validation errors before and after calibration (cf. paper Fig. 8)";
 /// Title of [`improvement_bars`].
 pub const IMPROVEMENT_TITLE: &str = "Improvement I per parameter (cf. paper Table 3)";
-/// Title of [`mukca_bars`].
-pub const MUKCA_TITLE: &str = "Test-placement MAE after calibration: ours vs MUKCa";
 /// Bottom of the y axis of [`improvement_bars`], in %; lower values are drawn at this value.
 pub const IMPROVEMENT_FLOOR_PCT: f64 = 70.0;
 
@@ -360,91 +357,6 @@ pub fn improvement_bars(
     Ok(svg)
 }
 
-/// Mean absolute error of the test placements after calibration, ours next to MUKCa's, in mm.
-///
-/// One group per entry of `labels` (e.g. a data set or device): a bar for `ours_mm[i]` and, where
-/// MUKCa reports one, a bar for `theirs_mm[i]`. Each bar carries its value as text. The y axis
-/// starts at 0 mm.
-///
-/// # Errors
-/// [`FigureError::LengthMismatch`] if `ours_mm` or `theirs_mm` is not as long as `labels`;
-/// [`FigureError::Drawing`] if plotters fails.
-pub fn mukca_bars(
-    labels: &[String],
-    ours_mm: &[f64],
-    theirs_mm: &[Option<f64>],
-) -> Result<String, FigureError> {
-    check_len(("labels", labels), ("ours_mm", ours_mm))?;
-    check_len(("labels", labels), ("theirs_mm", theirs_mm))?;
-    let theirs: Vec<f64> = theirs_mm.iter().map(|v| v.unwrap_or(f64::NAN)).collect();
-    let y_top = ours_mm
-        .iter()
-        .chain(&theirs)
-        .copied()
-        .filter(|v| v.is_finite())
-        .fold(0.0_f64, f64::max);
-    let y_end = padded_range([0.0, y_top * 1.1]).end;
-    let width = u32::try_from(labels.len()).map_or(u32::MAX, |n| (400 + 150 * n).max(900));
-
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (width, 520)).into_drawing_area();
-        root.fill(&WHITE).map_err(drawing)?;
-        let mut chart = category_chart(&root, MUKCA_TITLE, labels, 0.0..y_end)?;
-        chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .x_labels(labels.len() + 1)
-            .x_label_formatter(&|v| category_name(labels, v))
-            .y_desc("MAE of test placements after calibration (mm)")
-            .y_label_formatter(&|v| tick_label(*v, y_end))
-            .label_style((FONT, LABEL_SIZE))
-            .light_line_style(WHITE)
-            .draw()
-            .map_err(drawing)?;
-        let segment = segment_px(&chart, labels.len());
-        // Each group holds two bars side by side: ours on the left half, theirs on the right.
-        let (outer, gap) = (segment / 8, segment / 40);
-        let (left_margin, right_margin) = ((outer, segment / 2 + gap), (segment / 2 + gap, outer));
-        for (values, color, (l, r)) in [
-            (ours_mm, BLUE, left_margin),
-            (theirs.as_slice(), ORANGE, right_margin),
-        ] {
-            let finite = || (0..).zip(values).filter(|(_, v)| v.is_finite());
-            chart
-                .draw_series(finite().map(|(i, &v)| {
-                    let mut bar = Rectangle::new(
-                        [
-                            (SegmentValue::Exact(i), 0.0),
-                            (SegmentValue::Exact(i + 1), v),
-                        ],
-                        color.filled(),
-                    );
-                    bar.set_margin(0, 0, l, r);
-                    bar
-                }))
-                .map_err(drawing)?;
-            // The value above the bar's centre: the segment's left edge plus the bar's midpoint.
-            let mid = i32::try_from((l + segment - r) / 2).unwrap_or(0);
-            chart
-                .draw_series(finite().map(|(i, &v)| {
-                    EmptyElement::at((SegmentValue::Exact(i), v))
-                        + Text::new(format!("{v:.3}"), (mid, -4), centred_above((FONT, 13)))
-                }))
-                .map_err(drawing)?;
-        }
-        draw_side_legend(
-            &root,
-            &[
-                (Mark::Bar(BLUE.to_rgba()), "ours"),
-                (Mark::Bar(ORANGE.to_rgba()), "MUKCa"),
-            ],
-        )?;
-        root.present().map_err(drawing)?;
-    }
-    Ok(svg)
-}
-
 /// How much higher than the largest value the y axis of [`fig8_validation`] reaches, so that the
 /// legend box fits above the data.
 const LEGEND_HEADROOM: f64 = 1.4;
@@ -700,14 +612,6 @@ mod tests {
         )
     }
 
-    fn mukca() -> (Vec<String>, Vec<f64>, Vec<Option<f64>>) {
-        (
-            names(&["device A", "device B", "device C"]),
-            vec![0.21, 0.35, 0.18],
-            vec![Some(0.30), None, Some(0.25)],
-        )
-    }
-
     #[test]
     fn fig7_has_title_legend_and_one_circle_per_sample() {
         let (theta, truth, poly, noisy) = fig7_data(200, 40);
@@ -868,37 +772,6 @@ mod tests {
     }
 
     #[test]
-    fn mukca_bars_group_ours_and_theirs() {
-        let (l, ours, theirs) = mukca();
-        let svg = mukca_bars(&l, &ours, &theirs).expect("valid data");
-        assert!(svg.starts_with("<svg"));
-        assert!(svg.contains(MUKCA_TITLE));
-        for label in [
-            ">\nours\n<",
-            ">\nMUKCa\n<",
-            "(mm)",
-            "device B",
-            "0.350",
-            "0.250",
-        ] {
-            assert!(svg.contains(label), "missing {label:?}");
-        }
-        // 3 bars + legend for ours, 2 bars + legend for MUKCa.
-        assert_eq!(count(&svg, &fill(BLUE)), 4);
-        assert_eq!(count(&svg, &fill(ORANGE)), 3);
-    }
-
-    #[test]
-    fn mukca_bars_reject_mismatched_lengths() {
-        let (l, ours, theirs) = mukca();
-        let err = mukca_bars(&l, &ours, &theirs[..2]).expect_err("mismatch");
-        assert_eq!(
-            err.to_string(),
-            "length mismatch: labels has 3 values but theirs_mm has 2"
-        );
-    }
-
-    #[test]
     fn empty_and_non_finite_inputs_give_valid_svgs() {
         let empty: [f64; 0] = [];
         let svgs = [
@@ -913,8 +786,6 @@ mod tests {
                 &[1.0],
                 &[Some(f64::NAN)],
             ),
-            mukca_bars(&[], &empty, &[]),
-            mukca_bars(&names(&["x"]), &[f64::INFINITY], &[None]),
         ];
         for svg in svgs {
             let svg = svg.expect("empty data is drawn, not rejected");
@@ -923,14 +794,13 @@ mod tests {
         }
     }
 
-    /// Writes the four figures to the temporary directory, to look at them (e.g. convert with
+    /// Writes the three figures to the temporary directory, to look at them (e.g. convert with
     /// `rsvg-convert -o fig.png $TMPDIR/hapcal_fig7.svg`).
     #[test]
     fn figures_are_written_to_the_temp_dir() {
         let (theta, truth, poly, noisy) = fig7_data(200, 40);
         let [pb, pa, ob, oa] = fig8_data(25);
         let (n, med, p5, p95, paper) = table3();
-        let (l, ours, theirs) = mukca();
         let figures = [
             (
                 "hapcal_fig7.svg",
@@ -941,7 +811,6 @@ mod tests {
                 "hapcal_table3.svg",
                 improvement_bars(&n, &med, &p5, &p95, &paper),
             ),
-            ("hapcal_mukca.svg", mukca_bars(&l, &ours, &theirs)),
         ];
         for (file, svg) in figures {
             let path = std::env::temp_dir().join(file);

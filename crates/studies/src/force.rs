@@ -11,8 +11,8 @@
 use crate::paper::{Reference, TransmissionFit, calibrated_device};
 use anyhow::{Context, Result};
 use hapcal_force::{
-    Direction, ForceModel, SweepConfig, SweepErrors, WallConfig, WallSample, home_readings,
-    quantile, sample_poses, sweep, virtual_wall,
+    Direction, ForceModel, SweepConfig, SweepErrors, WallConfig, WallSample, WrenchError,
+    home_readings, quantile, sample_poses, sweep, virtual_wall,
 };
 use hapcal_identify::Identified;
 use hapcal_io::{CalibratedValue, CalibrationMeta, Device};
@@ -85,26 +85,28 @@ struct Pooled {
 }
 
 fn pooled(e: &SweepErrors) -> Pooled {
-    let stats = |dirs: &[Direction]| {
-        let dir: Vec<f64> = dirs
-            .iter()
-            .flat_map(|d| e.errors[d.index()].iter().map(|w| w.direction_deg.abs()))
-            .collect();
-        let mag: Vec<f64> = dirs
-            .iter()
-            .flat_map(|d| e.errors[d.index()].iter().map(|w| w.magnitude_pct.abs()))
-            .collect();
-        [
-            quantile(&dir, 0.5),
-            quantile(&dir, 0.95),
-            quantile(&mag, 0.5),
-            quantile(&mag, 0.95),
-        ]
-    };
     Pooled {
-        force: stats(&Direction::ALL[..3]),
-        moment: stats(&Direction::ALL[3..]),
+        force: direction_stats(e, &Direction::ALL[..3]),
+        moment: direction_stats(e, &Direction::ALL[3..]),
     }
+}
+
+/// Median and 95th percentile of |direction error| (deg), then of |magnitude error| (%), over
+/// the sweep's wrenches along the directions `dirs` together.
+fn direction_stats(e: &SweepErrors, dirs: &[Direction]) -> [f64; 4] {
+    let pooled = |of: fn(&WrenchError) -> f64| -> Vec<f64> {
+        (dirs.iter())
+            .flat_map(|d| e.errors[d.index()].iter().map(of))
+            .collect()
+    };
+    let dir = pooled(|w| w.direction_deg.abs());
+    let mag = pooled(|w| w.magnitude_pct.abs());
+    [
+        quantile(&dir, 0.5),
+        quantile(&dir, 0.95),
+        quantile(&mag, 0.5),
+        quantile(&mag, 0.95),
+    ]
 }
 
 /// The force experiment: Fig. 12 at the paper's pose (the home readings, joint 3 locked) and
@@ -400,20 +402,7 @@ fn write_per_direction(
     dist: &mut String,
 ) -> Result<()> {
     for d in Direction::ALL {
-        let dir: Vec<f64> = e.errors[d.index()]
-            .iter()
-            .map(|w| w.direction_deg.abs())
-            .collect();
-        let mag: Vec<f64> = e.errors[d.index()]
-            .iter()
-            .map(|w| w.magnitude_pct.abs())
-            .collect();
-        let q = [
-            quantile(&dir, 0.5),
-            quantile(&dir, 0.95),
-            quantile(&mag, 0.5),
-            quantile(&mag, 0.95),
-        ];
+        let q = direction_stats(e, &[d]);
         let d = d.name();
         writeln!(
             per_direction,

@@ -16,3 +16,21 @@ pub mod setup_hostile;
 pub mod tree_blind;
 
 pub use hapcal_calibrate::project_root;
+
+/// `run_one` of every seed of `seeds`, in parallel (rayon), calling `progress` after each with
+/// the number done; the results in seed order, so they do not depend on the number of threads.
+pub(crate) fn par_map_counted<T: Send>(
+    seeds: std::ops::Range<u64>,
+    progress: &(dyn Fn(usize) + Sync),
+    run_one: impl Fn(u64) -> T + Sync + Send,
+) -> Vec<T> {
+    use rayon::prelude::*;
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    (seeds.into_par_iter())
+        .map(|seed| {
+            let out = run_one(seed);
+            progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
+            out
+        })
+        .collect()
+}

@@ -99,15 +99,6 @@ pub struct SeedResult {
     pub pose_errors: [Vec<f64>; 4],
 }
 
-/// Runs the pipeline for one seed: simulate `n_poses` (seed), identify, validate on `n_poses`
-/// fresh poses (seed + 1_000_000).
-///
-/// # Errors
-/// Simulation or identification failures.
-pub fn run_seed(r: &Reference, seed: u64, n_poses: usize) -> Result<SeedResult> {
-    run_seed_with(r, seed, n_poses, &PoseChoice::Random)
-}
-
 /// Selects `n_select` of the candidate joint readings (rad, one `Vec` per candidate) of the
 /// reference device; returns their indices.
 pub type PoseSelector<'a> =
@@ -130,7 +121,8 @@ pub enum PoseChoice<'a> {
     },
 }
 
-/// [`run_seed`] with the identification poses chosen by `choice`.
+/// Runs the pipeline for one seed: simulate `n_poses` (seed) with the identification poses
+/// chosen by `choice`, identify, validate on `n_poses` fresh poses (seed + 1_000_000).
 ///
 /// # Errors
 /// Simulation, selection or identification failures.

@@ -426,20 +426,10 @@ fn study_inputs(truth: Option<&std::path::PathBuf>) -> Vec<std::path::PathBuf> {
     std::iter::once(truth).chain(device).collect()
 }
 
-/// Checks before a study runs that its Markdown report `out` can be written: see
-/// [`hapcal_calibrate::calibrate::check_output`].
-fn check_report(out: &std::path::Path, truth: Option<&std::path::PathBuf>) -> Result<()> {
-    use hapcal_calibrate::calibrate::{check_extension, check_output};
-    check_extension(out, &["md"], "the study's report", false)?;
-    let inputs = study_inputs(truth);
-    let inputs: Vec<&std::path::Path> = inputs.iter().map(|p| p.as_path()).collect();
-    check_output(out, &inputs)
-}
-
-/// Runs a study end to end: checks that its Markdown report `out` can be written
-/// ([`check_report`]), loads the reference device (`truth`, or the bundled reference truth),
-/// runs `study` on it for the report's text, writes that text atomically, never over one of
-/// the study's inputs, and returns it.
+/// Runs a study end to end: checks before it runs that its Markdown report `out` can be
+/// written ([`hapcal_calibrate::calibrate::check_output`]), loads the reference device
+/// (`truth`, or the bundled reference truth), runs `study` on it for the report's text, writes
+/// that text atomically, never over one of the study's inputs, and returns it.
 ///
 /// # Errors
 /// An output that cannot be written, an unreadable truth, or `study`'s error.
@@ -448,12 +438,14 @@ fn run_and_write(
     truth: Option<&std::path::PathBuf>,
     study: impl FnOnce(&crate::paper::Reference) -> Result<String>,
 ) -> Result<String> {
-    check_report(out, truth)?;
-    let r = crate::paper::Reference::load(&truth_file(truth))?;
-    let text = study(&r)?;
+    use hapcal_calibrate::calibrate::{check_extension, check_output, write_new};
+    check_extension(out, &["md"], "the study's report", false)?;
     let inputs = study_inputs(truth);
     let inputs: Vec<&std::path::Path> = inputs.iter().map(|p| p.as_path()).collect();
-    hapcal_calibrate::calibrate::write_new(out, &text, &inputs)?;
+    check_output(out, &inputs)?;
+    let r = crate::paper::Reference::load(&truth_file(truth))?;
+    let text = study(&r)?;
+    write_new(out, &text, &inputs)?;
     Ok(text)
 }
 

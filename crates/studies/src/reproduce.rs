@@ -3,13 +3,13 @@
 
 use crate::paper::{self, Reference, SeedResult};
 use anyhow::{Context, Result, bail};
+use hapcal_force::quantile;
 use hapcal_identify::identify;
 use hapcal_metrics::{accuracy_improvement_pct, parameter_improvement_pct};
 use hapcal_problems::CapstanProblem;
 use hapcal_transmission::JointRad;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
-use rayon::prelude::*;
 use std::fmt::Write;
 use std::path::Path;
 
@@ -33,16 +33,6 @@ fn csv_number(v: f64) -> String {
     } else {
         v.to_string()
     }
-}
-
-fn quantile(v: &mut [f64], p: f64) -> f64 {
-    v.sort_by(f64::total_cmp);
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let pos = p * (v.len() - 1) as f64;
-    let (lo, hi) = (pos.floor() as usize, pos.ceil() as usize);
-    v[lo] + (v[hi] - v[lo]) * (pos - lo as f64)
 }
 
 /// Unit conversion for reports: (factor, unit) from SI.
@@ -137,16 +127,11 @@ fn run_seeds(
     choice: &paper::PoseChoice<'_>,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<SeedResult>> {
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    let seeds: Vec<SeedResult> = (0..n_seeds)
-        .into_par_iter()
-        .map(|seed| {
-            let result = paper::run_seed_with(r, seed as u64, n_poses, choice)
-                .with_context(|| format!("seed {seed}"));
-            progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
-            result
-        })
-        .collect::<Result<Vec<_>>>()?;
+    let seeds: Vec<SeedResult> = crate::par_map_counted(0..n_seeds as u64, progress, |seed| {
+        paper::run_seed_with(r, seed, n_poses, choice).with_context(|| format!("seed {seed}"))
+    })
+    .into_iter()
+    .collect::<Result<Vec<_>>>()?;
     if seeds.is_empty() {
         bail!("--seeds must be at least 1");
     }
@@ -407,9 +392,9 @@ fn write_table3_row(
     };
     // I% (eq. 8) is undefined for a zero deviation.
     let improvement = (assigned != 0.0).then(|| {
-        let med = quantile(&mut spread.imp.clone(), 0.5);
-        let p5 = quantile(&mut spread.imp.clone(), 0.05);
-        let p95 = quantile(&mut spread.imp.clone(), 0.95);
+        let med = quantile(&spread.imp, 0.5);
+        let p5 = quantile(&spread.imp, 0.05);
+        let p95 = quantile(&spread.imp, 0.95);
         let bound =
             100.0 * (1.0 - 0.674 * (spread.var_sum / spread.kept as f64).sqrt() / assigned.abs());
         (med, p5, p95, bound)
@@ -500,12 +485,9 @@ fn table3_joint(
             continue;
         }
         let imp = &spread.imp;
-        let med = quantile(&mut imp.clone(), 0.5);
-        let (p5, p95) = (
-            quantile(&mut imp.clone(), 0.05),
-            quantile(&mut imp.clone(), 0.95),
-        );
-        let med2 = quantile(&mut imp2, 0.5);
+        let med = quantile(imp, 0.5);
+        let (p5, p95) = (quantile(imp, 0.05), quantile(imp, 0.95));
+        let med2 = quantile(&imp2, 0.5);
         let coverage = spread.coverage_pct();
         let kept_pct = spread.kept_pct(seeds.len());
         let z_sd = sample_sd(&spread.z);
@@ -593,13 +575,10 @@ fn table2_capstans(r: &Reference, seeds: &[SeedResult], draft: &mut Draft) -> Re
             let spread = CapstanSpread::of(seeds, ci, k, &name, assigned)?;
             let v0 = capstan_field(&fit0.params, k);
             let sd0 = fit0.identified.std(&name).unwrap_or(f64::NAN);
-            let med = quantile(&mut spread.imp.clone(), 0.5);
-            let (p5, p95) = (
-                quantile(&mut spread.imp.clone(), 0.05),
-                quantile(&mut spread.imp.clone(), 0.95),
-            );
+            let med = quantile(&spread.imp, 0.5);
+            let (p5, p95) = (quantile(&spread.imp, 0.05), quantile(&spread.imp, 0.95));
             let coverage = 100.0 * spread.covered as f64 / seeds.len() as f64;
-            let mcorr = quantile(&mut spread.corr.clone(), 0.5);
+            let mcorr = quantile(&spread.corr, 0.5);
             let paper_imp = paper2.iter().find(|(n, _)| *n == name).map(|(_, v)| *v);
             writeln!(
                 t2,
@@ -832,12 +811,7 @@ fn accuracy_pct(after: f64, before: f64) -> f64 {
 
 /// (median, 5th, 95th percentile) of a per-seed figure.
 fn spread(v: &[f64]) -> (f64, f64, f64) {
-    let mut v = v.to_vec();
-    (
-        quantile(&mut v, 0.5),
-        quantile(&mut v, 0.05),
-        quantile(&mut v, 0.95),
-    )
+    (quantile(v, 0.5), quantile(v, 0.05), quantile(v, 0.95))
 }
 
 /// Per-seed improvements (%, eq. 9) of the validation on fresh poses, each as (median, 5th,
@@ -869,7 +843,7 @@ impl ValidationSpread {
             per_seed(&|v| accuracy_pct(v.distance_rms_after_m, v.distance_rms_before_m));
         let dist_kin =
             per_seed(&|v| accuracy_pct(v.distance_rms_kinematics_only_m, v.distance_rms_before_m));
-        let mut ori_left = per_seed(&|v| {
+        let ori_left = per_seed(&|v| {
             v.orientation_rms_after_rad - v.orientation_rms_after_true_unidentifiable_rad
         });
         Self {
@@ -877,7 +851,7 @@ impl ValidationSpread {
             orientation: spread(&ori_i),
             distance_full: spread(&dist_full),
             distance_kinematics: spread(&dist_kin),
-            orientation_left_median_rad: quantile(&mut ori_left, 0.5),
+            orientation_left_median_rad: quantile(&ori_left, 0.5),
         }
     }
 }

@@ -54,6 +54,10 @@ pub use report::*;
 pub use table::*;
 pub use write::*;
 
+/// The units a column or every length may be written in by mistake: the readers' own
+/// (`--angle-unit`, `--length-unit`, `--column-unit` take their symbols).
+pub use hapcal_io::{AngleUnit, LengthUnit};
+
 /// Rows of a simulated arm's positions file (the blind test's walk, fewer rows for speed).
 pub const SIM_ROWS: usize = 120;
 
@@ -701,72 +705,6 @@ impl Half {
     }
 }
 
-/// A unit an angle column may be written in, read as rad.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum AngleUnit {
-    /// Degrees.
-    Deg,
-    /// Gradians.
-    Grad,
-    /// Revolutions.
-    Rev,
-}
-
-impl AngleUnit {
-    /// The flag's word.
-    pub fn name(self) -> &'static str {
-        match self {
-            AngleUnit::Deg => "deg",
-            AngleUnit::Grad => "grad",
-            AngleUnit::Rev => "rev",
-        }
-    }
-
-    /// The number written for 1 rad.
-    pub fn per_rad(self) -> f64 {
-        match self {
-            AngleUnit::Deg => 180.0 / PI,
-            AngleUnit::Grad => 200.0 / PI,
-            AngleUnit::Rev => 0.5 / PI,
-        }
-    }
-}
-
-/// A unit a length may be written in, read as m.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum LengthUnit {
-    /// Millimetres.
-    Mm,
-    /// Centimetres.
-    Cm,
-    /// Inches.
-    In,
-    /// Feet.
-    Ft,
-}
-
-impl LengthUnit {
-    /// The flag's word.
-    pub fn name(self) -> &'static str {
-        match self {
-            LengthUnit::Mm => "mm",
-            LengthUnit::Cm => "cm",
-            LengthUnit::In => "in",
-            LengthUnit::Ft => "ft",
-        }
-    }
-
-    /// The number written for 1 m.
-    pub fn per_m(self) -> f64 {
-        match self {
-            LengthUnit::Mm => 1e3,
-            LengthUnit::Cm => 1e2,
-            LengthUnit::In => 1.0 / 0.0254,
-            LengthUnit::Ft => 1.0 / 0.3048,
-        }
-    }
-}
-
 /// The mistake of a case, with its parameters (columns are found in the recording's table
 /// when the case is written: `col` is an index into its revolute joint columns).
 #[derive(Clone, Debug, PartialEq)]
@@ -928,9 +866,9 @@ impl Mistake {
     /// Its part of the case identity.
     fn label(&self) -> String {
         match self {
-            Mistake::ColumnUnit { col, unit } => format!("col{col}-{}", unit.name()),
+            Mistake::ColumnUnit { col, unit } => format!("col{col}-{}", unit.symbol()),
             Mistake::AllDegrees => "deg".to_owned(),
-            Mistake::Lengths(u) => u.name().to_owned(),
+            Mistake::Lengths(u) => u.symbol().to_owned(),
             Mistake::MarkerMm(m) => format!("marker{m}-mm"),
             Mistake::Sign(c) => format!("col{c}"),
             Mistake::Zero(c, o) => format!("col{c}{:+.0}deg", o.to_degrees()),

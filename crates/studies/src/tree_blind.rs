@@ -745,24 +745,17 @@ pub fn run_seeds(
     n_rows: usize,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<TreeOutcome>> {
-    use rayon::prelude::*;
     let setup = load_setup()?;
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    Ok(seeds
-        .into_par_iter()
-        .map(|i| {
-            let case = draw_case(i, &setup);
-            let out = run_case(&case, &setup, n_rows).unwrap_or_else(|e| {
-                let record = TreeRecord {
-                    effect_rms_m: f64::NAN,
-                    round1: Vec::new(),
-                };
-                TreeOutcome::failed(case, &e, record)
-            });
-            progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
-            out
+    Ok(crate::par_map_counted(seeds, progress, |i| {
+        let case = draw_case(i, &setup);
+        run_case(&case, &setup, n_rows).unwrap_or_else(|e| {
+            let record = TreeRecord {
+                effect_rms_m: f64::NAN,
+                round1: Vec::new(),
+            };
+            TreeOutcome::failed(case, &e, record)
         })
-        .collect())
+    }))
 }
 
 /// Per injected effect: `(right, total)` and the count of each verdict.
@@ -784,16 +777,6 @@ pub fn spanned_share(range: f64, f: fn(f64) -> f64, basis: &[fn(f64) -> f64], n:
     let mean = y.mean();
     let total: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
     1.0 - r.norm_squared() / total
-}
-
-/// The class of a case as the report names it.
-fn class_name(kind: ArmCaseKind) -> &'static str {
-    match kind {
-        ArmCaseKind::None => "none",
-        ArmCaseKind::One => "one",
-        ArmCaseKind::Two => "two",
-        ArmCaseKind::Outside => "outside",
-    }
 }
 
 /// `(right, total)` of the outcomes `keep` selects, by `right`.
@@ -926,13 +909,7 @@ fn targets_section(md: &mut String, outcomes: &[TreeOutcome]) {
          |---|---|---|---|---|\n",
     );
     for kind in CLASSES {
-        target_line(
-            md,
-            outcomes,
-            class_name(kind),
-            &|o| o.case.kind == kind,
-            true,
-        );
+        target_line(md, outcomes, kind.name(), &|o| o.case.kind == kind, true);
     }
     target_line(
         md,
@@ -971,7 +948,7 @@ fn targets_section(md: &mut String, outcomes: &[TreeOutcome]) {
         target_line(
             md,
             outcomes,
-            class_name(kind),
+            kind.name(),
             &|o| o.case.kind == kind && o.case.confounded().is_none(),
             true,
         );
@@ -981,7 +958,7 @@ fn targets_section(md: &mut String, outcomes: &[TreeOutcome]) {
         target_line(
             md,
             outcomes,
-            &format!("{}: transversal compliance alone", class_name(kind)),
+            &format!("{}: transversal compliance alone", kind.name()),
             &|o| {
                 o.case.kind == kind
                     && o.case.confounded().is_none()
@@ -1046,7 +1023,7 @@ fn by_effect_section(md: &mut String, outcomes: &[TreeOutcome]) {
             .join(", ");
         md.push_str(&format!(
             "| {} | {label} | {} | {verdicts} |\n",
-            class_name(kind),
+            kind.name(),
             pct(*r)
         ));
     }
@@ -1119,7 +1096,7 @@ fn wrong_cases_section(md: &mut String, outcomes: &[TreeOutcome]) {
         md.push_str(&format!(
             "| {} | {} | {} | {} | {:.0} | {:.0} / {:.0} | {} |\n",
             o.case.seed,
-            class_name(o.case.kind),
+            o.case.kind.name(),
             o.case.injected.label(),
             verdict_words(&o.verdict).replace('|', "/"),
             o.study.effect_rms_m * 1e6,
@@ -1170,7 +1147,7 @@ mod tests {
             }
             assert!(c.is_right_with(&c.expected(), &[]));
             if c.is_transversal_alone() {
-                *transversal_alone.entry(class_name(c.kind)).or_insert(0) += 1;
+                *transversal_alone.entry(c.kind.name()).or_insert(0) += 1;
                 let expected = c.expected();
                 assert!(expected.effects().contains(&Effect::TransversalCompliance));
                 assert!(!expected.effects().iter().any(|e| e.is_joint_compliance()));

@@ -15,10 +15,6 @@ fn sin_cos(x: f64) -> (f64, f64) {
 #[derive(Clone, Copy, Debug, PartialEq, PartialOrd)]
 pub struct JointRad(pub f64);
 
-/// Motor-side angle, rad (the motor encoder's angle, R times the joint-side angle).
-#[derive(Clone, Copy, Debug, PartialEq, PartialOrd)]
-pub struct MotorRad(pub f64);
-
 /// Parameters of the capstan transmission error, paper eq. 1.
 ///
 /// `Default` is the ideal drive (all zero: no offset, exact ratio, concentric drums).
@@ -136,11 +132,6 @@ impl Capstan {
     /// Drum centre distance `D`, m.
     pub fn drum_distance_m(&self) -> f64 {
         self.drum_distance_m
-    }
-
-    /// Joint-side reading of a motor angle: `m / R`, rad.
-    pub fn joint_from_motor(&self, m: MotorRad) -> JointRad {
-        JointRad(m.0 / self.ratio)
     }
 
     /// The first reason eq. 1 is not defined for `p` on this capstan, or `None`: a field that

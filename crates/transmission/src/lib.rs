@@ -50,7 +50,7 @@ mod error;
 mod four_bar;
 mod math;
 
-pub use capstan::{Capstan, CapstanFault, CapstanParams, CapstanTransmission, JointRad, MotorRad};
+pub use capstan::{Capstan, CapstanFault, CapstanParams, CapstanTransmission, JointRad};
 #[cfg(feature = "std")]
 pub use chebyshev::Chebyshev;
 pub use chebyshev::{chebyshev_derivative, chebyshev_value};

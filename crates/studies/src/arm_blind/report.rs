@@ -70,7 +70,7 @@ pub fn summarise(outcomes: &[ArmOutcome]) -> ArmSummary {
         e.1 += 1;
     };
     for o in outcomes {
-        let kind = format!("{:?}", o.case.kind).to_lowercase();
+        let kind = o.case.kind.name().to_owned();
         bump(&mut s.by_kind, kind.clone(), o.right);
         bump(&mut s.by_kind_as_written, kind.clone(), o.right_as_written);
         let named = o.verdict.as_ref().map_or(&[][..], |v| v.effects());

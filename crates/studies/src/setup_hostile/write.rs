@@ -221,11 +221,12 @@ pub(super) fn column_mistake(site: &TableSite<'_>, t: &mut Table, draft: &mut In
     let fix_words = &mut draft.fix_words;
     match &site.case.mistake {
         Mistake::ColumnUnit { col, unit } => {
-            let f = unit.per_rad();
+            // The number written for 1 rad (the same f64 as 180/π, 200/π or 1/(2π)).
+            let f = 1.0 / unit.to_rad();
             t.map_col(&columns.name_of(*col), |v| v * f);
             if first {
                 fix_words.push(columns.words(*col));
-                fix_words.push(vec![unit.name().to_owned()]);
+                fix_words.push(vec![unit.symbol().to_owned()]);
             }
         }
         Mistake::AllDegrees => {
@@ -241,7 +242,7 @@ pub(super) fn column_mistake(site: &TableSite<'_>, t: &mut Table, draft: &mut In
             }
         }
         Mistake::Lengths(u) => {
-            let f = u.per_m();
+            let f = 1.0 / u.to_m();
             let names: Vec<String> = (t.header.iter())
                 .filter(|h| is_position(h) || *h == "distance_m")
                 .cloned()
@@ -249,7 +250,7 @@ pub(super) fn column_mistake(site: &TableSite<'_>, t: &mut Table, draft: &mut In
             for n in names {
                 t.map_col(&n, |v| v * f);
             }
-            fix_words.push(vec![u.name().to_owned()]);
+            fix_words.push(vec![u.symbol().to_owned()]);
         }
         Mistake::MarkerMm(m) => {
             for a in ["x", "y", "z"] {

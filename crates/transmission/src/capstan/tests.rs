@@ -85,9 +85,8 @@ fn table2_values_match_the_formula_written_by_hand() {
 }
 
 #[test]
-fn joint_from_motor_divides_by_the_ratio() {
+fn accessors_return_the_ratio_and_drum_distance() {
     let cap = Capstan::try_new(12.0, D).unwrap();
-    assert_eq!(cap.joint_from_motor(MotorRad(6.0)), JointRad(0.5));
     assert_eq!(cap.ratio(), 12.0);
     assert_eq!(cap.drum_distance_m(), D);
 }
