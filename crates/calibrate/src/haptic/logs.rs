@@ -16,14 +16,14 @@ use super::*;
 /// ([`identify_with_compliance`]; `plan.joint` changes nothing there), the compliances
 /// reported and written in rad/(N·m). Figures: distance RMS of every training and test log,
 /// nominal model on the raw readings against the calibrated device file as the runtime
-/// evaluates it, which must give the calibrated model's own distances ([`log_placements`]).
+/// evaluates it, which must give the calibrated model's own distances (`log_placements`).
 ///
 /// # Errors
 /// A device that is not the paper's kind ([`HapticDevice::new`]), `--model compliance` on a
 /// device file without a handle mass ([`handle_mass_kg`]), too few rows, no more distinct
 /// joint configurations than kept parameters ([`check_distinct_configurations`]), a failed
 /// identification, or a calibrated device file that does not give the calibration
-/// ([`log_placements`]).
+/// (`log_placements`).
 pub fn calibrate_logs(
     plan: &crate::inputs::Plan,
     device: Device,
@@ -448,7 +448,7 @@ pub(super) fn distance_figures(residuals_m: &[f64]) -> Figures {
 
 /// Largest difference, m, between a log row's distance as the calibration's own model
 /// predicts it and as the runtime's model of the device file it writes gives it
-/// ([`log_placements`]): both evaluate the same equations in double precision (the runtime's
+/// (`log_placements`): both evaluate the same equations in double precision (the runtime's
 /// folded chain against the library's parameterised one agree to rounding, far below a
 /// nanometre), so a nanometre, four orders of magnitude below the cable encoder's noise, is a
 /// difference of model, never of rounding.
