@@ -874,9 +874,16 @@ fn fit_terms(
         for i in 0..n_layout {
             let name = problem.layout().name(i);
             // `transversal.{joint}.u` and `.v` start at `transversal.{joint}`.
-            let isotropic = (name.strip_suffix(".u").or_else(|| name.strip_suffix(".v")))
-                .filter(|n| n.starts_with("transversal."));
-            let found = (index.get(name)).or_else(|| isotropic.and_then(|n| index.get(n)));
+            let isotropic = match hapcal_contract::ValueName::parse(name) {
+                Ok(hapcal_contract::ValueName::Transversal {
+                    joint,
+                    axis: Some(_),
+                }) => {
+                    Some(hapcal_contract::ValueName::Transversal { joint, axis: None }.to_string())
+                }
+                _ => None,
+            };
+            let found = (index.get(name)).or_else(|| isotropic.and_then(|n| index.get(n.as_str())));
             if let Some(&k) = found {
                 x_full[i] = nested.x[k];
             }

@@ -6,7 +6,7 @@
 
 use hapcal_contract::{
     Calibration, Covariance, Frame, JointRange, ModelName, PointMass, Region, SCHEMA_VERSION,
-    Torque, TorqueSource,
+    Torque, TorqueSource, ValueName,
 };
 use hapcal_problems::CalibratedModel;
 
@@ -217,10 +217,8 @@ fn value_of(
         name: p.name.clone(),
         value: p.value,
         std,
-        unit: match compliance_unit {
-            Some(unit)
-                if p.name.starts_with("compliance.") || p.name.starts_with("transversal.") =>
-            {
+        unit: match (compliance_unit, ValueName::parse(&p.name)) {
+            (Some(unit), Ok(ValueName::Compliance { .. } | ValueName::Transversal { .. })) => {
                 unit.to_owned()
             }
             _ => p.unit.to_string(),

@@ -17,6 +17,25 @@ pub enum DhField {
     Beta,
 }
 
+impl DhField {
+    /// The fields by the prefix a name spells them with (`da3`, `dalpha3`, …), the longest
+    /// prefixes first (`dalpha3` also starts with `da`).
+    const PREFIXES: [(&'static str, DhField); 5] = [
+        ("dalpha", DhField::Alpha),
+        ("dtheta", DhField::Theta),
+        ("dbeta", DhField::Beta),
+        ("da", DhField::A),
+        ("dd", DhField::D),
+    ];
+
+    /// The prefix of the field's names: `da`, `dalpha`, `dd`, `dtheta` or `dbeta`.
+    pub fn prefix(self) -> &'static str {
+        (Self::PREFIXES.iter())
+            .find_map(|&(p, f)| (f == self).then_some(p))
+            .unwrap_or_default()
+    }
+}
+
 /// A deviation of a placement element (`{element}.x` … `.rz`, `.offset`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ElementField {
@@ -34,6 +53,31 @@ pub enum ElementField {
     Rz,
     /// A joint's zero offset about (rad) or along (m) its axis.
     Offset,
+}
+
+impl ElementField {
+    /// The fields by the suffix a name spells them with (`{element}.x`, …).
+    const SUFFIXES: [(&'static str, ElementField); 7] = [
+        ("x", ElementField::X),
+        ("y", ElementField::Y),
+        ("z", ElementField::Z),
+        ("rx", ElementField::Rx),
+        ("ry", ElementField::Ry),
+        ("rz", ElementField::Rz),
+        ("offset", ElementField::Offset),
+    ];
+
+    /// The field by its suffix (`x`, `y`, `z`, `rx`, `ry`, `rz`, `offset`).
+    pub fn parse(suffix: &str) -> Option<ElementField> {
+        (Self::SUFFIXES.iter()).find_map(|&(s, f)| (s == suffix).then_some(f))
+    }
+
+    /// The suffix of the field's names: `x`, `y`, `z`, `rx`, `ry`, `rz` or `offset`.
+    pub fn suffix(self) -> &'static str {
+        (Self::SUFFIXES.iter())
+            .find_map(|&(s, f)| (f == self).then_some(s))
+            .unwrap_or_default()
+    }
 }
 
 /// A capstan parameter of paper eq. 1 (`capstan{j}.c`, …).
@@ -54,17 +98,26 @@ pub enum CapstanField {
 }
 
 impl CapstanField {
+    /// The fields in the order of paper eq. 1's parameter vector, by their file names.
+    pub const ALL: [(&'static str, CapstanField); 6] = [
+        ("c", CapstanField::C),
+        ("re", CapstanField::Re),
+        ("r_o", CapstanField::ROut),
+        ("beta_o", CapstanField::BetaOut),
+        ("r_i", CapstanField::RIn),
+        ("beta_i", CapstanField::BetaIn),
+    ];
+
     /// The field by its file name (`c`, `re`, `r_o`, `beta_o`, `r_i`, `beta_i`).
     pub fn parse(name: &str) -> Option<CapstanField> {
-        Some(match name {
-            "c" => CapstanField::C,
-            "re" => CapstanField::Re,
-            "r_o" => CapstanField::ROut,
-            "beta_o" => CapstanField::BetaOut,
-            "r_i" => CapstanField::RIn,
-            "beta_i" => CapstanField::BetaIn,
-            _ => return None,
-        })
+        (Self::ALL.iter()).find_map(|&(n, f)| (n == name).then_some(f))
+    }
+
+    /// Its file name: `c`, `re`, `r_o`, `beta_o`, `r_i` or `beta_i`.
+    pub fn name(self) -> &'static str {
+        (Self::ALL.iter())
+            .find_map(|&(n, f)| (f == self).then_some(n))
+            .unwrap_or_default()
     }
 
     /// Its unit: `rad`, `1` or `m`.
@@ -225,15 +278,8 @@ impl ValueName {
             }
         }
         if let Some((element, field)) = name.rsplit_once('.') {
-            let field = match field {
-                "x" => ElementField::X,
-                "y" => ElementField::Y,
-                "z" => ElementField::Z,
-                "rx" => ElementField::Rx,
-                "ry" => ElementField::Ry,
-                "rz" => ElementField::Rz,
-                "offset" => ElementField::Offset,
-                _ => return unknown(),
+            let Some(field) = ElementField::parse(field) else {
+                return unknown();
             };
             if element.is_empty() {
                 return unknown();
@@ -243,14 +289,7 @@ impl ValueName {
                 field,
             });
         }
-        // Longest prefixes first: `dalpha3` also starts with `da`.
-        for (prefix, field) in [
-            ("dalpha", DhField::Alpha),
-            ("dtheta", DhField::Theta),
-            ("dbeta", DhField::Beta),
-            ("da", DhField::A),
-            ("dd", DhField::D),
-        ] {
+        for (prefix, field) in DhField::PREFIXES {
             if let Some(row) = name.strip_prefix(prefix).and_then(number) {
                 return Ok(ValueName::Dh { field, row });
             }
@@ -309,6 +348,30 @@ impl ValueName {
     }
 }
 
+/// The name as records, reports and layouts write it: the inverse of [`ValueName::parse`]
+/// (`dtheta3`, `joint_a2.rx`, `compliance.a+b`, `transversal.j.u`, `harmonic.j.sin2`,
+/// `joint_compliance.j3`, `capstan2.beta_o`, `joint4.cheb10`).
+impl std::fmt::Display for ValueName {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ValueName::Dh { field, row } => write!(f, "{}{row}", field.prefix()),
+            ValueName::Element { element, field } => write!(f, "{element}.{}", field.suffix()),
+            ValueName::Compliance { joints } => write!(f, "compliance.{}", joints.join("+")),
+            ValueName::Transversal { joint, axis } => match axis {
+                Some(axis) => write!(f, "transversal.{joint}.{axis}"),
+                None => write!(f, "transversal.{joint}"),
+            },
+            ValueName::Harmonic { joint, order, sine } => {
+                let term = if *sine { "sin" } else { "cos" };
+                write!(f, "harmonic.{joint}.{term}{order}")
+            }
+            ValueName::HandleCompliance { joint } => write!(f, "joint_compliance.j{joint}"),
+            ValueName::Capstan { joint, field } => write!(f, "capstan{joint}.{}", field.name()),
+            ValueName::Chebyshev { joint, index } => write!(f, "joint{joint}.cheb{index}"),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -346,6 +409,40 @@ mod tests {
                 sine: true
             }
         );
+    }
+
+    #[test]
+    fn every_name_is_written_as_it_parses() {
+        for name in [
+            "dalpha3",
+            "da0",
+            "dd12",
+            "dtheta7",
+            "dbeta2",
+            "joint_a2.rx",
+            "l_1.x",
+            "torso.2.rz",
+            "ball_joint.offset",
+            "compliance.joint_a2",
+            "compliance.a+b+c",
+            "transversal.left_1",
+            "transversal.left_1.u",
+            "transversal.left_1.v",
+            "harmonic.joint_a3.cos2",
+            "harmonic.j.sin11",
+            "joint_compliance.j3",
+            "capstan2.c",
+            "capstan2.re",
+            "capstan2.r_o",
+            "capstan2.beta_o",
+            "capstan2.r_i",
+            "capstan2.beta_i",
+            "joint4.cheb10",
+        ] {
+            let parsed = ValueName::parse(name).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(parsed.to_string(), name);
+            assert_eq!(ValueName::parse(&parsed.to_string()), Ok(parsed));
+        }
     }
 
     #[test]

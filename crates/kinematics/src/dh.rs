@@ -1,5 +1,6 @@
 //! Denavit–Hartenberg tables (standard, modified, with Hayati's beta).
 
+use hapcal_contract::{DhField, ValueName};
 use nalgebra::{Unit, Vector3};
 
 use crate::{Chain, Error, Factor, Motion, ParamInfo, ParamUnit};
@@ -118,19 +119,19 @@ impl Chain {
         let mut params = Vec::with_capacity(5 * rows.len());
         for (i, row) in rows.iter().enumerate() {
             let base = params.len();
-            let mut param = |prefix: &str, unit: ParamUnit| {
+            let mut param = |field: DhField, unit: ParamUnit| {
                 params.push(ParamInfo {
-                    name: format!("{prefix}{i}"),
+                    name: ValueName::Dh { field, row: i }.to_string(),
                     unit,
                     element: i,
                 });
             };
-            param("da", ParamUnit::Meter);
-            param("dalpha", ParamUnit::Radian);
-            param("dd", ParamUnit::Meter);
-            param("dtheta", ParamUnit::Radian);
+            param(DhField::A, ParamUnit::Meter);
+            param(DhField::Alpha, ParamUnit::Radian);
+            param(DhField::D, ParamUnit::Meter);
+            param(DhField::Theta, ParamUnit::Radian);
             if row.beta_rad.is_some() {
-                param("dbeta", ParamUnit::Radian);
+                param(DhField::Beta, ParamUnit::Radian);
             }
             let (p_a, p_alpha, p_d, p_theta, p_beta) =
                 (base, base + 1, base + 2, base + 3, base + 4);

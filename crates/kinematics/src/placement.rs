@@ -1,5 +1,6 @@
 //! URDF-style joint placements (`<origin xyz rpy>` + `<axis>`).
 
+use hapcal_contract::{ElementField as F, ValueName};
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 
 use crate::{Chain, Error, Factor, Motion, ParamInfo, ParamUnit};
@@ -44,10 +45,10 @@ pub(crate) fn push_deviation(
 ) {
     let axes = [Vector3::x_axis(), Vector3::y_axis(), Vector3::z_axis()];
     for (motion, unit, names) in [
-        (Motion::Translation, ParamUnit::Meter, ["x", "y", "z"]),
-        (Motion::Rotation, ParamUnit::Radian, ["rx", "ry", "rz"]),
+        (Motion::Translation, ParamUnit::Meter, [F::X, F::Y, F::Z]),
+        (Motion::Rotation, ParamUnit::Radian, [F::Rx, F::Ry, F::Rz]),
     ] {
-        for (axis, suffix) in axes.into_iter().zip(names) {
+        for (axis, field) in axes.into_iter().zip(names) {
             factors.push(Factor::Screw {
                 motion,
                 axis,
@@ -56,7 +57,11 @@ pub(crate) fn push_deviation(
                 joint: None,
             });
             params.push(ParamInfo {
-                name: format!("{name}.{suffix}"),
+                name: ValueName::Element {
+                    element: name.to_owned(),
+                    field,
+                }
+                .to_string(),
                 unit,
                 element,
             });

@@ -209,7 +209,11 @@ impl Tree {
                         .position(|e| e == name)
                         .unwrap_or(0);
                     params.push(ParamInfo {
-                        name: format!("{name}.offset"),
+                        name: hapcal_contract::ValueName::Element {
+                            element: name.clone(),
+                            field: hapcal_contract::ElementField::Offset,
+                        }
+                        .to_string(),
                         unit: match motion {
                             Motion::Rotation => ParamUnit::Radian,
                             Motion::Translation => ParamUnit::Meter,

@@ -317,7 +317,7 @@ impl LogTransmission {
     pub fn names(&self) -> Vec<String> {
         match self {
             Self::Capstan { joint, .. } => (CAPSTAN_PARAMS.iter())
-                .map(|(p, _)| capstan_param(joint + 1, p))
+                .map(|&(p, _)| capstan_param(joint + 1, p))
                 .collect(),
             Self::Polynomial { joint, poly } => (0..poly.coeffs.len())
                 .map(|k| chebyshev_param(joint + 1, k))

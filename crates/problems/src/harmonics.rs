@@ -1,5 +1,7 @@
 //! Joint-angle harmonic errors: encoder eccentricity and transmission ripple, linear in parameters.
 
+use hapcal_contract::ValueName;
+
 /// Harmonic angle errors of the joints (encoder eccentricity, once- and twice-per-revolution
 /// transmission error).
 ///
@@ -55,8 +57,13 @@ impl JointHarmonics {
         self.terms()
             .into_iter()
             .map(|(j, h, sin)| {
-                let joint = joint_names.get(j).map_or("?", |s| s.as_str());
-                format!("harmonic.{joint}.{}{h}", if sin { "sin" } else { "cos" })
+                let joint = joint_names.get(j).map_or("?", |s| s.as_str()).to_owned();
+                ValueName::Harmonic {
+                    joint,
+                    order: h,
+                    sine: sin,
+                }
+                .to_string()
             })
             .collect()
     }

@@ -5,6 +5,7 @@
 use std::ops::Range;
 
 use faer::{ColMut, ColRef, MatMut};
+use hapcal_contract::ValueName;
 use hapcal_identify::{EvalError, ParamLayout, Problem, RowBlocks, Unit};
 use hapcal_kinematics::ParamUnit;
 
@@ -22,7 +23,7 @@ impl EffectTerm {
     /// and the diagnosis's effect name), coefficient in [`HANDLE_COMPLIANCE_UNIT`].
     pub fn handle_compliance(joint: usize) -> EffectTerm {
         EffectTerm {
-            name: format!("joint_compliance.j{}", joint + 1),
+            name: ValueName::HandleCompliance { joint: joint + 1 }.to_string(),
             unit: HANDLE_COMPLIANCE_UNIT,
             kind: EffectTermKind::Compliance { joint },
         }

@@ -3,6 +3,7 @@
 
 use crate::{CalibratedModel, Error, GravityCompliance, JointHarmonics};
 use faer::{Col, ColMut, ColRef, Mat, MatMut};
+use hapcal_contract::ValueName;
 use hapcal_identify::{EvalError, ParamLayout, ParamSpec, Problem, Role, RowBlocks, Unit};
 use hapcal_kinematics::{
     Chain, FkWorkspace, FrozenChain, LANES, ParamUnit, Point3, UnitQuaternion, Vector3, joint_trig,

@@ -3,6 +3,7 @@
 //! (paper eqs. 1 and 2, the Chebyshev polynomial) are `hapcal_transmission`'s.
 
 use faer::{Col, ColMut, ColRef, Mat, MatMut};
+use hapcal_contract::{CapstanField, ValueName};
 use hapcal_identify::{
     EvalError, IdentifyConfig, ParamLayout, ParamSpec, Problem, RankConfigBase, Role, Unit,
 };
@@ -30,23 +31,25 @@ fn check_data(theta: &[f64], ext: &[f64], sigma_rad: f64) -> Result<(), Transmis
 
 /// A capstan drive's eq. 1 parameters in layout order (as [`CapstanProblem::params`] reads
 /// them), with their units; every problem names them `capstan{j}.{name}` ([`capstan_param`]).
-pub(crate) const CAPSTAN_PARAMS: [(&str, Unit); 6] = [
-    ("c", Unit::Radian),
-    ("re", Unit::Dimensionless),
-    ("r_o", Unit::Meter),
-    ("beta_o", Unit::Radian),
-    ("r_i", Unit::Meter),
-    ("beta_i", Unit::Radian),
+pub(crate) const CAPSTAN_PARAMS: [(CapstanField, Unit); 6] = [
+    (CapstanField::C, Unit::Radian),
+    (CapstanField::Re, Unit::Dimensionless),
+    (CapstanField::ROut, Unit::Meter),
+    (CapstanField::BetaOut, Unit::Radian),
+    (CapstanField::RIn, Unit::Meter),
+    (CapstanField::BetaIn, Unit::Radian),
 ];
 
-/// The name of parameter `name` of the capstan on joint `joint` (1-based).
-pub(crate) fn capstan_param(joint: usize, name: &str) -> String {
-    format!("capstan{joint}.{name}")
+/// The name of parameter `field` of the capstan on joint `joint` (1-based):
+/// [`ValueName::Capstan`].
+pub(crate) fn capstan_param(joint: usize, field: CapstanField) -> String {
+    ValueName::Capstan { joint, field }.to_string()
 }
 
-/// The name of Chebyshev coefficient `k` of the polynomial on joint `joint` (1-based).
+/// The name of Chebyshev coefficient `k` of the polynomial on joint `joint` (1-based):
+/// [`ValueName::Chebyshev`].
 pub(crate) fn chebyshev_param(joint: usize, k: usize) -> String {
-    format!("joint{joint}.cheb{k}")
+    ValueName::Chebyshev { joint, index: k }.to_string()
 }
 
 /// A model parameter's spec.
@@ -128,7 +131,7 @@ impl CapstanProblem {
         check_data(&theta, &ext, sigma_rad)?;
         let layout = ParamLayout::new(
             (CAPSTAN_PARAMS.iter())
-                .map(|(p, unit)| spec(capstan_param(joint, p), *unit))
+                .map(|&(p, unit)| spec(capstan_param(joint, p), unit))
                 .collect(),
         );
         Ok(CapstanProblem {

@@ -148,12 +148,12 @@ pub(super) fn compliance_specs(chain: &Chain, model: &GravityCompliance) -> Vec<
     let names = chain.joint_names();
     (0..model.n_params(n_joints))
         .map(|g| {
-            let joints: Vec<&str> = (0..n_joints)
+            let joints = (0..n_joints)
                 .filter(|&j| model.group(j) == g)
-                .map(|j| names[j].as_str())
+                .map(|j| names[j].clone())
                 .collect();
             ParamSpec {
-                name: format!("compliance.{}", joints.join("+")),
+                name: ValueName::Compliance { joints }.to_string(),
                 unit,
                 role: Role::Model,
             }
@@ -343,11 +343,15 @@ pub(super) fn transversal_specs(
     };
     (terms.iter().enumerate())
         .map(|(k, t)| ParamSpec {
-            name: match (n_per_joint, k % 2) {
-                (1, _) => format!("transversal.{}", names[t.joint]),
-                (_, 0) => format!("transversal.{}.u", names[t.joint]),
-                _ => format!("transversal.{}.v", names[t.joint]),
-            },
+            name: ValueName::Transversal {
+                joint: names[t.joint].clone(),
+                axis: match (n_per_joint, k % 2) {
+                    (1, _) => None,
+                    (_, 0) => Some('u'),
+                    _ => Some('v'),
+                },
+            }
+            .to_string(),
             unit,
             role: Role::Model,
         })
