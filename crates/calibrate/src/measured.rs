@@ -26,6 +26,7 @@
 use crate::model::ModelName;
 use anyhow::{Context, Result, bail};
 use faer::{Col, Mat};
+use hapcal_contract::ValueName;
 use hapcal_identify::{Identified, Problem, Subset, identify};
 use hapcal_io::{MeasuredRow, MeasurementTable};
 use hapcal_kinematics::{FrameSpec, Isometry3, Point3, Tree, UnitQuaternion, Vector3};
@@ -874,13 +875,11 @@ fn fit_terms(
         for i in 0..n_layout {
             let name = problem.layout().name(i);
             // `transversal.{joint}.u` and `.v` start at `transversal.{joint}`.
-            let isotropic = match hapcal_contract::ValueName::parse(name) {
-                Ok(hapcal_contract::ValueName::Transversal {
+            let isotropic = match ValueName::parse(name) {
+                Ok(ValueName::Transversal {
                     joint,
                     axis: Some(_),
-                }) => {
-                    Some(hapcal_contract::ValueName::Transversal { joint, axis: None }.to_string())
-                }
+                }) => Some(ValueName::Transversal { joint, axis: None }.to_string()),
                 _ => None,
             };
             let found = (index.get(name)).or_else(|| isotropic.and_then(|n| index.get(n.as_str())));

@@ -17,6 +17,18 @@ pub enum DhField {
     Beta,
 }
 
+/// The field a name spells `text` in `table` (spelling, field), if any.
+fn field<F: Copy>(table: &[(&str, F)], text: &str) -> Option<F> {
+    (table.iter()).find_map(|&(s, f)| (s == text).then_some(f))
+}
+
+/// How names spell `field` in `table` (spelling, field); every field of a table is in it.
+fn spelling<F: PartialEq>(table: &[(&'static str, F)], field: F) -> &'static str {
+    (table.iter())
+        .find_map(|(s, f)| (*f == field).then_some(*s))
+        .unwrap_or_default()
+}
+
 impl DhField {
     /// The fields by the prefix a name spells them with (`da3`, `dalpha3`, …), the longest
     /// prefixes first (`dalpha3` also starts with `da`).
@@ -30,9 +42,7 @@ impl DhField {
 
     /// The prefix of the field's names: `da`, `dalpha`, `dd`, `dtheta` or `dbeta`.
     pub fn prefix(self) -> &'static str {
-        (Self::PREFIXES.iter())
-            .find_map(|&(p, f)| (f == self).then_some(p))
-            .unwrap_or_default()
+        spelling(&Self::PREFIXES, self)
     }
 }
 
@@ -69,14 +79,12 @@ impl ElementField {
 
     /// The field by its suffix (`x`, `y`, `z`, `rx`, `ry`, `rz`, `offset`).
     pub fn parse(suffix: &str) -> Option<ElementField> {
-        (Self::SUFFIXES.iter()).find_map(|&(s, f)| (s == suffix).then_some(f))
+        field(&Self::SUFFIXES, suffix)
     }
 
     /// The suffix of the field's names: `x`, `y`, `z`, `rx`, `ry`, `rz` or `offset`.
     pub fn suffix(self) -> &'static str {
-        (Self::SUFFIXES.iter())
-            .find_map(|&(s, f)| (f == self).then_some(s))
-            .unwrap_or_default()
+        spelling(&Self::SUFFIXES, self)
     }
 }
 
@@ -110,14 +118,12 @@ impl CapstanField {
 
     /// The field by its file name (`c`, `re`, `r_o`, `beta_o`, `r_i`, `beta_i`).
     pub fn parse(name: &str) -> Option<CapstanField> {
-        (Self::ALL.iter()).find_map(|&(n, f)| (n == name).then_some(f))
+        field(&Self::ALL, name)
     }
 
     /// Its file name: `c`, `re`, `r_o`, `beta_o`, `r_i` or `beta_i`.
     pub fn name(self) -> &'static str {
-        (Self::ALL.iter())
-            .find_map(|&(n, f)| (f == self).then_some(n))
-            .unwrap_or_default()
+        spelling(&Self::ALL, self)
     }
 
     /// Its unit: `rad`, `1` or `m`.
