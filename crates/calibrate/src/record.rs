@@ -433,7 +433,10 @@ pub(crate) fn output_files(outcome: &Outcome, out: &Path) -> Result<Vec<(PathBuf
                 out.display()
             );
         }
-        return Ok(vec![(out.to_path_buf(), haptic_device_text(calibrated))]);
+        return Ok(vec![(
+            out.to_path_buf(),
+            hapcal_io::write_device(calibrated),
+        )]);
     }
     // Every workflow but the haptic one (its device file, above) records its calibration.
     let Some(record) = &outcome.record else {
@@ -495,13 +498,6 @@ pub(crate) fn output_files(outcome: &Outcome, out: &Path) -> Result<Vec<(PathBuf
     Ok(files)
 }
 
-/// The text of the device file `--out` writes for a haptic device's calibration, of its
-/// calibrated device `calibrated` (the D-H rows at the identified deviations, the record in
-/// `[calibration]`).
-fn haptic_device_text(calibrated: &hapcal_io::Device) -> String {
-    hapcal_io::write_device(calibrated)
-}
-
 /// The calibrated haptic device as `hapcal predict` evaluates it: the device file `hapcal
 /// calibrate --out` writes for the calibrated device `calibrated` (`output_files`), made in
 /// memory and loaded by the runtime ([`hapcal_runtime::Model::from_toml`]). What the report's
@@ -511,7 +507,8 @@ fn haptic_device_text(calibrated: &hapcal_io::Device) -> String {
 /// A device file the runtime refuses (its message names the line).
 pub fn runtime_device(calibrated: &hapcal_io::Device) -> Result<hapcal_runtime::Model> {
     let path = "calibrated.toml";
-    hapcal_runtime::Model::from_toml(&haptic_device_text(calibrated), path).with_context(|| {
+    let text = hapcal_io::write_device(calibrated);
+    hapcal_runtime::Model::from_toml(&text, path).with_context(|| {
         format!(
             "reading back {path} as the runtime reads it, before reporting or writing the \
              calibration"

@@ -4,6 +4,7 @@
 
 use std::collections::HashMap;
 
+use hapcal_contract::{ElementField, ValueName};
 use nalgebra::Isometry3;
 
 use crate::placement::push_deviation;
@@ -209,9 +210,9 @@ impl Tree {
                         .position(|e| e == name)
                         .unwrap_or(0);
                     params.push(ParamInfo {
-                        name: hapcal_contract::ValueName::Element {
+                        name: ValueName::Element {
                             element: name.clone(),
-                            field: hapcal_contract::ElementField::Offset,
+                            field: ElementField::Offset,
                         }
                         .to_string(),
                         unit: match motion {
