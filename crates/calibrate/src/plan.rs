@@ -322,15 +322,14 @@ pub fn candidate_blocks_for(
     let chain = device.chain().context("building the kinematic chain")?;
     let chain_for_weight = chain.clone();
     let (sigma_m, sigma_e) = sigmas(device, sigma_m);
-    let kind = match measurement {
-        Measurement::Distance => RowKind::Distance { distance_m: 0.0 },
-        Measurement::Position => RowKind::Position {
-            position_m: [0.0; 3],
-        },
-    };
-    let rows_per_pose = match measurement {
-        Measurement::Distance => 1,
-        Measurement::Position => 3,
+    let (kind, rows_per_pose) = match measurement {
+        Measurement::Distance => (RowKind::Distance { distance_m: 0.0 }, 1),
+        Measurement::Position => (
+            RowKind::Position {
+                position_m: [0.0; 3],
+            },
+            3,
+        ),
     };
     let obs = Observations {
         rows: readings
@@ -458,13 +457,7 @@ pub fn plan_poses_weighted(
     cfg: &PlanConfig,
     joint_var: Option<&JointVariance<'_>>,
 ) -> Result<PosePlan> {
-    if cfg.count == 0 || cfg.count > cfg.n_candidates {
-        bail!(
-            "--count must be between 1 and the number of candidates ({}), got {}",
-            cfg.n_candidates,
-            cfg.count
-        );
-    }
+    check_count(cfg.count, cfg.n_candidates)?;
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
     let candidates = hapcal_sim::sample_readings(device, &mut rng, cfg.n_candidates);
     if cfg.refine && (cfg.measurement != Measurement::Distance || cfg.transmission_rows) {
@@ -545,6 +538,19 @@ pub fn plan_poses_weighted(
         undetermined,
         refined_value,
     })
+}
+
+/// `Ok` when `count` poses can be chosen from `n_candidates`.
+///
+/// # Errors
+/// A count of 0 or above the candidates.
+fn check_count(count: usize, n_candidates: usize) -> Result<()> {
+    if count == 0 || count > n_candidates {
+        bail!(
+            "--count must be between 1 and the number of candidates ({n_candidates}), got {count}"
+        );
+    }
+    Ok(())
 }
 
 /// `trace(a·b)` of two square matrices of the same size.
@@ -976,13 +982,7 @@ fn check_after(
     workspace: &[Vec<f64>],
     cfg: &AfterConfig,
 ) -> Result<()> {
-    if cfg.count == 0 || cfg.count > cfg.n_candidates {
-        bail!(
-            "--count must be between 1 and the number of candidates ({}), got {}",
-            cfg.n_candidates,
-            cfg.count
-        );
-    }
+    check_count(cfg.count, cfg.n_candidates)?;
     if !matches!(cfg.criterion, Criterion::IOptimal | Criterion::DOptimal) {
         bail!(
             "--criterion {}: poses added to measured rows are planned i-optimal (the \
@@ -1102,17 +1102,7 @@ fn measured_r_factor(
     obs: Observations,
 ) -> Result<Mat<f64>> {
     let p = (problem.with_observations(obs)).context("building the measured rows' problem")?;
-    let rows_layout = p.layout();
-    let to_full: Vec<usize> = (0..rows_layout.len())
-        .map(|k| {
-            layout.index_of(rows_layout.name(k)).with_context(|| {
-                format!(
-                    "no parameter {} in the planning problem",
-                    rows_layout.name(k)
-                )
-            })
-        })
-        .collect::<Result<_>>()?;
+    let to_full = indices_in(layout, p.layout(), " in the planning problem")?;
     let x_rows = faer::Col::from_fn(to_full.len(), |k| x[to_full[k]]);
     let r = hapcal_identify::jacobian_r_factor(&p, x_rows.as_ref())
         .map_err(|e| anyhow::anyhow!("{e}"))
@@ -1122,6 +1112,23 @@ fn measured_r_factor(
         full.as_mut().col_mut(c).copy_from(r.col(k));
     }
     Ok(full)
+}
+
+/// The index in `layout` of each parameter of `names`, in its order.
+///
+/// # Errors
+/// A parameter `layout` does not hold: "no parameter {name}{where_}".
+fn indices_in(
+    layout: &hapcal_identify::ParamLayout,
+    names: &hapcal_identify::ParamLayout,
+    where_: &str,
+) -> Result<Vec<usize>> {
+    (0..names.len())
+        .map(|k| {
+            let name = names.name(k);
+            (layout.index_of(name)).with_context(|| format!("no parameter {name}{where_}"))
+        })
+        .collect()
 }
 
 impl<'a> PlanningProblem<'a> {
@@ -1206,17 +1213,11 @@ impl<'a> PlanningProblem<'a> {
             None => n_measured_residuals,
             Some(measured_obs) => {
                 let r = measured_r_factor(&problem, &layout, &out.fitted.x, measured_obs)?;
-                let mut stacked = Mat::<f64>::zeros(r.nrows() + jac.nrows(), layout.len());
-                stacked
-                    .as_mut()
-                    .submatrix_mut(0, 0, r.nrows(), r.ncols())
-                    .copy_from(&r);
-                (stacked
-                    .as_mut()
-                    .submatrix_mut(r.nrows(), 0, jac.nrows(), jac.ncols()))
-                .copy_from(&jac);
-                jac = stacked;
-                r.nrows()
+                let k = r.nrows();
+                jac = Mat::from_fn(k + jac.nrows(), layout.len(), |i, j| {
+                    if i < k { r[(i, j)] } else { jac[(i - k, j)] }
+                });
+                k
             }
         };
         Ok(Self {
@@ -1335,13 +1336,7 @@ impl PlanningInformation {
         let (jac, layout) = (&planning.jac, &planning.layout);
         let id = &out.fitted.identified;
         let free_layout = &id.layout;
-        let free: Vec<usize> = (0..free_layout.len())
-            .map(|k| {
-                layout
-                    .index_of(free_layout.name(k))
-                    .with_context(|| format!("no parameter {}", free_layout.name(k)))
-            })
-            .collect::<Result<_>>()?;
+        let free = indices_in(layout, free_layout, "")?;
         let n_free = free.len();
         let n_measured_residuals = planning.n_measured_residuals;
         let n_candidate_residuals = planning.rows_per_pose * planning.candidates.len();

@@ -40,7 +40,7 @@ use crate::setup_change::{
 };
 use crate::setup_families::{
     ANGLE_UNITS, JointColumn, LENGTH_UNITS, Layout, LengthGroup, SetupData, Tier,
-    fitted_hypotheses, general_hypotheses, residual_location, row_hypotheses,
+    fitted_hypotheses, general_hypotheses, residual_location, row_hypotheses, shift_readings,
 };
 pub use crate::setup_findings::{
     CHECK_SAMPLE_ROWS, ClosestHypothesis, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass,
@@ -48,8 +48,8 @@ pub use crate::setup_findings::{
     SetupReport, Severity,
 };
 use crate::setup_findings::{
-    Corrected, OPEN_LIMIT, ResidualFn, Scoring, judge, mm, nearest_rotation, nearest_rotation_from,
-    tip_candidates,
+    Corrected, OPEN_LIMIT, ResidualFn, Scoring, frozen_columns, judge, mm, nearest_rotation,
+    nearest_rotation_from, tip_candidates,
 };
 
 /// What the user accepts.
@@ -263,6 +263,13 @@ impl Frames {
         let mut marker_rot = vec![Matrix3::identity(); n_markers];
         let (mut r0, mut t) = (Matrix3::identity(), Vector3::zeros());
         let mut first = true;
+        let nearest = |m: &Matrix3<f64>, last: &Matrix3<f64>, first: bool| {
+            if first {
+                nearest_rotation(m)
+            } else {
+                nearest_rotation_from(m, last)
+            }
+        };
         for _ in 0..POLISHED_ITERATIONS {
             let (r0_before, t_before) = (r0, t);
             let (offsets_before, marker_rot_before) = (offsets.clone(), marker_rot.clone());
@@ -281,11 +288,7 @@ impl Frames {
                     h += ORIENTATION_WEIGHT_M2 * meas * model.transpose();
                 }
             }
-            r0 = if first {
-                nearest_rotation(&h)
-            } else {
-                nearest_rotation_from(&h, &r0)
-            };
+            r0 = nearest(&h, &r0, first);
             t = cb - r0 * ca;
             // Marker frames.
             let mut sum_m = vec![(Vector3::zeros(), 0usize); n_markers];
@@ -304,11 +307,7 @@ impl Frames {
                     offsets[k] = sum_m[k].0 / sum_m[k].1 as f64;
                 }
                 if sum_r[k] != Matrix3::zeros() {
-                    marker_rot[k] = if first {
-                        nearest_rotation(&sum_r[k])
-                    } else {
-                        nearest_rotation_from(&sum_r[k], &marker_rot[k])
-                    };
+                    marker_rot[k] = nearest(&sum_r[k], &marker_rot[k], first);
                 }
             }
             first = false;
@@ -377,6 +376,7 @@ impl Frames {
     /// [`POLISH_STEPS`].
     fn polish(&mut self, samples: &[Sample]) {
         use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Rotation3, Vector6};
+        use std::ops::{AddAssign, SubAssign};
         let n_markers = self.offsets.len();
         let n = 6 + 6 * n_markers;
         let skew = |v: Vector3<f64>| v.cross_matrix();
@@ -400,37 +400,27 @@ impl Frames {
                 let v = self.r0 * (s.r_tip * self.offsets[k] + s.p_tip);
                 let b = self.r0 * s.r_tip;
                 let vx = skew(v);
-                let mut upper = a00.fixed_view_mut::<3, 3>(0, 0);
-                upper += Matrix3::identity() * v.norm_squared() - v * v.transpose();
-                let mut cross = a00.fixed_view_mut::<3, 3>(0, 3);
-                cross += vx;
-                let mut lower = a00.fixed_view_mut::<3, 3>(3, 3);
-                lower += Matrix3::identity();
-                let mut g = g0.fixed_rows_mut::<3>(0);
-                g += v.cross(&e);
-                let mut g = g0.fixed_rows_mut::<3>(3);
-                g += e;
-                let mut block = a0k[k].fixed_view_mut::<3, 3>(0, 0);
-                block += vx * b;
-                let mut block = a0k[k].fixed_view_mut::<3, 3>(3, 0);
-                block += b;
-                let mut block = akk[k].fixed_view_mut::<3, 3>(0, 0);
-                block += Matrix3::identity();
-                let mut g = gk[k].fixed_rows_mut::<3>(0);
-                g += b.tr_mul(&e);
+                let id = Matrix3::<f64>::identity();
+                a00.fixed_view_mut::<3, 3>(0, 0)
+                    .add_assign(id * v.norm_squared() - v * v.transpose());
+                a00.fixed_view_mut::<3, 3>(0, 3).add_assign(vx);
+                a00.fixed_view_mut::<3, 3>(3, 3).add_assign(id);
+                g0.fixed_rows_mut::<3>(0).add_assign(v.cross(&e));
+                g0.fixed_rows_mut::<3>(3).add_assign(e);
+                a0k[k].fixed_view_mut::<3, 3>(0, 0).add_assign(vx * b);
+                a0k[k].fixed_view_mut::<3, 3>(3, 0).add_assign(b);
+                akk[k].fixed_view_mut::<3, 3>(0, 0).add_assign(id);
+                gk[k].fixed_rows_mut::<3>(0).add_assign(b.tr_mul(&e));
                 if let Some(r) = rot {
                     // Rotation rows: ∂/∂δ₀ = −c·I, ∂/∂δ_k = −c·R_model.
                     let model = b * self.marker_rot[k];
-                    let mut upper = a00.fixed_view_mut::<3, 3>(0, 0);
-                    upper += Matrix3::identity() * c2;
-                    let mut g = g0.fixed_rows_mut::<3>(0);
-                    g -= c * r;
-                    let mut block = a0k[k].fixed_view_mut::<3, 3>(0, 3);
-                    block += c2 * model;
-                    let mut block = akk[k].fixed_view_mut::<3, 3>(3, 3);
-                    block += Matrix3::identity() * c2;
-                    let mut g = gk[k].fixed_rows_mut::<3>(3);
-                    g -= c * model.tr_mul(&r);
+                    a00.fixed_view_mut::<3, 3>(0, 0).add_assign(id * c2);
+                    g0.fixed_rows_mut::<3>(0).sub_assign(c * r);
+                    a0k[k].fixed_view_mut::<3, 3>(0, 3).add_assign(c2 * model);
+                    akk[k].fixed_view_mut::<3, 3>(3, 3).add_assign(id * c2);
+                    gk[k]
+                        .fixed_rows_mut::<3>(3)
+                        .sub_assign(c * model.tr_mul(&r));
                 }
             }
             let mut jtj = DMatrix::<f64>::zeros(n, n);
@@ -543,30 +533,23 @@ fn closed_form_fit(
     }
     let mut frames = Frames::start(&fitted, n_markers);
     frames.polish(&fitted);
-    let Frames {
-        r0,
-        t,
-        ref offsets,
-        ref marker_rot,
-    } = frames;
     let (mut len_sq, mut rot_sq, mut n_rot) = (0.0, 0.0, 0usize);
     let mut row_sq = vec![0.0; rows.len()];
     let mut residuals = Vec::with_capacity(samples.len());
     for (s, &r) in samples.iter().zip(&sample_rows) {
-        let p = r0 * (s.r_tip * offsets[s.marker] + s.p_tip) + t;
-        let error = p - s.measured;
+        let error = frames.position_error(s);
         residuals.push(SampleResidual {
             file: rows[r].0,
             marker: s.marker,
             error_m: error,
-            in_tip_m: (r0 * s.r_tip).tr_mul(&error),
+            in_tip_m: (frames.r0 * s.r_tip).tr_mul(&error),
             measured_m: s.measured,
         });
         let e = error.norm_squared();
         len_sq += e;
         row_sq[r] += e;
         if let Some(meas) = &s.rotation {
-            let model = r0 * s.r_tip * marker_rot[s.marker];
+            let model = frames.r0 * s.r_tip * frames.marker_rot[s.marker];
             let rel = nalgebra::Rotation3::from_matrix_unchecked(model.transpose() * meas);
             let angle_sq = rel.angle().powi(2);
             rot_sq += angle_sq;
@@ -575,14 +558,8 @@ fn closed_form_fit(
             row_sq[r] += 2.0 * ORIENTATION_WEIGHT_M2 * angle_sq;
         }
     }
-    let rms = |sq: f64, n: usize| (n > 0).then(|| (sq / n as f64).sqrt());
     Some(ClosedForm {
-        residual: Residual {
-            of: ResidualOf::FramesOnly,
-            length_rms_m: rms(len_sq, samples.len()),
-            orientation_rms_rad: rms(rot_sq, n_rot),
-            spread_m: spread_of(&tables),
-        },
+        residual: frames_only_rms((len_sq, samples.len()), (rot_sq, n_rot), &tables),
         per_row: (rows.iter().zip(&row_sq))
             .map(|(&(f, line), sq)| (f, line, sq.sqrt()))
             .collect(),
@@ -613,6 +590,16 @@ fn residual_of(model: &CalibratedModel, tables: &[MeasurementTable]) -> Residual
             }
         }
     }
+    frames_only_rms((len_sq, n_len), (rot_sq, n_rot), tables)
+}
+
+/// The frames-only residual of `tables` from the sums of squared position (m²) and angle
+/// (rad²) errors with their counts: RMS of each (`None` without a sample), and the spread.
+fn frames_only_rms(
+    (len_sq, n_len): (f64, usize),
+    (rot_sq, n_rot): (f64, usize),
+    tables: &[MeasurementTable],
+) -> Residual {
     let rms = |sq: f64, n: usize| (n > 0).then(|| (sq / n as f64).sqrt());
     Residual {
         of: ResidualOf::FramesOnly,
@@ -714,27 +701,19 @@ fn shifted(
     from: Option<(usize, u64)>,
 ) -> Vec<MeasurementTable> {
     let mut out = tables.to_vec();
-    for (f, (t, src)) in out.iter_mut().zip(tables).enumerate() {
-        let start = match from {
+    for (f, t) in out.iter_mut().enumerate() {
+        let from = match from {
             None => 0,
             Some((file, _)) if file != f => continue,
-            Some((_, line)) => src.rows.iter().take_while(|r| r.line < line).count() as isize,
+            Some((_, line)) => line,
         };
-        let n = src.rows.len() as isize;
-        t.rows = (0..n)
-            .filter_map(|i| {
-                let mut row = src.rows.get(i as usize)?.clone();
-                if i < start {
-                    return Some(row);
-                }
-                let j = i + shift;
-                if j < 0 || j >= n {
-                    return None;
-                }
-                row.q.clone_from(&src.rows.get(j as usize)?.q);
-                Some(row)
-            })
-            .collect();
+        t.rows = shift_readings(
+            &t.rows,
+            shift,
+            from,
+            |r| r.line,
+            |r, p| r.q.clone_from(&p.q),
+        );
     }
     out
 }
@@ -831,15 +810,12 @@ fn layout_of(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Layout {
     let n_markers = input.tables.iter().map(|t| t.n_markers).max().unwrap_or(0);
     let mut lengths: Vec<LengthGroup> = (0..n_markers)
         .map(|k| {
-            let (x, y, z) = if named("x1") || !named("x") {
-                (
-                    format!("x{}", k + 1),
-                    format!("y{}", k + 1),
-                    format!("z{}", k + 1),
-                )
+            let n = if named("x1") || !named("x") {
+                (k + 1).to_string()
             } else {
-                ("x".to_owned(), "y".to_owned(), "z".to_owned())
+                String::new()
             };
+            let (x, y, z) = (format!("x{n}"), format!("y{n}"), format!("z{n}"));
             LengthGroup {
                 label: format!("{x},{y},{z}"),
                 words: format!("marker {}'s positions ({x}, {y}, {z})", k + 1),
@@ -921,7 +897,8 @@ fn own_hypotheses(
     out
 }
 
-/// The files read again in the other angle unit (all angles, or only the orientation angles).
+/// The files read again in the other angle unit (all angles, or only the orientation angles);
+/// none without orientation angles (`phix, phiy, phiz`) or a revolute joint.
 fn angle_rereads(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Corrected<MeasuredData>> {
     let SetupInput {
         robot,
@@ -929,13 +906,10 @@ fn angle_rereads(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correct
         units,
         ..
     } = input;
-    let mut out = Vec::new();
-    let mut push = |class, what: String, fix: String, t: Vec<MeasurementTable>| {
-        out.push(Corrected::new(class, what, fix, MeasuredData::tables(t)));
-    };
     let has_rpy = headers.iter().flatten().any(|c| c.starts_with("phix"));
-    // Angle unit: the files read again in the other unit (all angles, or only the
-    // orientation angles).
+    if !has_rpy || robot.prismatic.iter().all(|p| *p) {
+        return Vec::new();
+    }
     let (other, unit_word, other_word, flag) = match units.angle {
         AngleUnit::Rad => (AngleUnit::Deg, "radians", "degrees", "--angle-unit deg"),
         AngleUnit::Deg => (AngleUnit::Rad, "degrees", "radians", "--angle-unit rad"),
@@ -951,47 +925,42 @@ fn angle_rereads(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correct
         ..(*units).clone()
     };
     let paths: Vec<PathBuf> = tables.iter().map(|t| t.path.clone()).collect();
-    if let Ok(reread) = load_sample(&paths, robot, &other_units)
-        && reread
-            .iter()
-            .zip(tables.iter())
-            .all(|(a, b)| a.rows.len() == b.rows.len())
-    {
-        let any_revolute = robot.prismatic.iter().any(|p| !p);
-        // Every angle (joints and phix, phiy, phiz) in the other unit; the joints alone are a
-        // general hypothesis.
-        if any_revolute && has_rpy {
-            push(
-                MistakeClass::AngleUnit,
-                format!("the angles are in {other_word}, read as {unit_word}"),
-                flag.to_owned(),
-                reread.clone(),
-            );
-        }
-        if has_rpy && any_revolute {
-            let mut mixed = tables.to_vec();
-            for (t, r) in mixed.iter_mut().zip(&reread) {
-                for (row, rr) in t.rows.iter_mut().zip(&r.rows) {
-                    for (m, mr) in row.markers.iter_mut().zip(&rr.markers) {
-                        m.rotation = mr.rotation;
-                    }
-                }
+    let Ok(reread) = load_sample(&paths, robot, &other_units) else {
+        return Vec::new();
+    };
+    if (reread.iter().zip(tables.iter())).any(|(a, b)| a.rows.len() != b.rows.len()) {
+        return Vec::new();
+    }
+    // Every angle (joints and phix, phiy, phiz) in the other unit (the joints alone are a
+    // general hypothesis), or only the orientation angles.
+    let mut mixed = tables.to_vec();
+    for (t, r) in mixed.iter_mut().zip(&reread) {
+        for (row, rr) in t.rows.iter_mut().zip(&r.rows) {
+            for (m, mr) in row.markers.iter_mut().zip(&rr.markers) {
+                m.rotation = mr.rotation;
             }
-            push(
-                MistakeClass::OrientationUnit,
-                format!(
-                    "the orientation angles phix, phiy, phiz are in {other_word} while the joint \
-                     readings are in {unit_word}"
-                ),
-                format!(
-                    "convert phix, phiy, phiz to {unit_word} in the file ({flag} would convert \
-                     the joint readings too)"
-                ),
-                mixed,
-            );
         }
     }
-    out
+    vec![
+        Corrected::new(
+            MistakeClass::AngleUnit,
+            format!("the angles are in {other_word}, read as {unit_word}"),
+            flag.to_owned(),
+            MeasuredData::tables(reread),
+        ),
+        Corrected::new(
+            MistakeClass::OrientationUnit,
+            format!(
+                "the orientation angles phix, phiy, phiz are in {other_word} while the joint \
+                 readings are in {unit_word}"
+            ),
+            format!(
+                "convert phix, phiy, phiz to {unit_word} in the file ({flag} would convert the \
+                 joint readings too)"
+            ),
+            MeasuredData::tables(mixed),
+        ),
+    ]
 }
 
 /// The conventions of the orientations (quaternion order and conjugate, Euler orders) and of
@@ -1123,27 +1092,25 @@ fn tip_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correc
             tips.swap(a, b);
             let mut order: Vec<String> = input.tips.to_vec();
             order.swap(a, b);
-            let flags: Vec<String> = order.iter().map(|t| format!("--tip {t}")).collect();
-            out.push(Corrected {
-                class: MistakeClass::SwappedTips,
-                what: format!(
+            out.push(Corrected::new(
+                MistakeClass::SwappedTips,
+                format!(
                     "the markers of {} and {} are swapped (the tips in the wrong order)",
                     input.tips[a], input.tips[b]
                 ),
-                fix: format!(
+                format!(
                     "give the tips in the order of the markers: {} (or swap the marker columns \
                      x{}.. and x{}..)",
-                    flags.join(" "),
+                    tip_flags(&order),
                     a + 1,
                     b + 1
                 ),
-                data: MeasuredData {
+                MeasuredData {
                     robot: None,
                     tables: tables.to_vec(),
                     marker_tips: Some(tips),
                 },
-                evidence: Vec::new(),
-            });
+            ));
         }
     }
 
@@ -1186,13 +1153,12 @@ fn tip_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correc
             let k = steps.unsigned_abs();
             let joints = if k == 1 { "joint" } else { "joints" };
             let side = if steps > 0 { "below" } else { "above" };
-            let flags: Vec<String> = tips.iter().map(|t| format!("--tip {t}")).collect();
             out.push(Corrected {
                 class: MistakeClass::TipLink,
                 what: format!(
                     "the markers sit on {link}, {k} moving {joints} {side} the tip {tip}"
                 ),
-                fix: format!("use {}", flags.join(" ")),
+                fix: format!("use {}", tip_flags(&tips)),
                 data: MeasuredData {
                     robot: Some(other),
                     tables: reread,
@@ -1371,29 +1337,18 @@ fn line_ranges(lines: &[u64]) -> String {
 /// "rows 19–24 of tail.csv": the rows `rows` (indices) of `table` by their file lines.
 fn rows_of_file(table: &MeasurementTable, rows: &[usize]) -> String {
     let lines: Vec<u64> = rows.iter().map(|&i| table.rows[i].line).collect();
-    let file = (table.path.file_name())
-        .map_or_else(|| table.name.clone(), |f| f.to_string_lossy().into_owned());
-    format!("rows {} of {file}", line_ranges(&lines))
+    format!("rows {} of {}", line_ranges(&lines), file_name(table))
 }
 
-/// The name of the unit of [`PART_UNITS`] of `m` metres (`metres` for 1), if any.
+/// The words of the unit of [`LENGTH_UNITS`] of `m` metres (`metres` for 1), if any.
 fn part_unit_name(m: f64) -> Option<&'static str> {
-    (PART_UNITS.iter())
-        .find(|(u, _)| (u / m - 1.0).abs() < 1e-9)
-        .map(|&(_, name)| name)
+    (LENGTH_UNITS.iter())
+        .find(|(_, _, u)| (u / m - 1.0).abs() < 1e-9)
+        .map(|&(_, words, _)| words)
 }
-
-/// The length units a part of a file may be in, in metres, with their names.
-const PART_UNITS: [(f64, &str); 5] = [
-    (1.0, "metres"),
-    (1e-2, "centimetres"),
-    (1e-3, "millimetres"),
-    (0.0254, "inches"),
-    (0.3048, "feet"),
-];
 
 /// Part of a file in another length unit ([`magnitude_split`]): for each table whose rows
-/// split into two parts, the larger part's positions read in the unit (of [`PART_UNITS`],
+/// split into two parts, the larger part's positions read in the unit (of [`LENGTH_UNITS`],
 /// smaller than the file's `unit`) whose ratio to it lies nearest the parts' ratio. The
 /// answer locates the rows: no flag reads part of a file, so the fix is the edit of those
 /// rows.
@@ -1410,13 +1365,10 @@ fn part_unit_hypotheses(
         let Some((rows, ratio)) = magnitude_split(table) else {
             continue;
         };
-        let Some(&(part_m, part_name)) =
-            (PART_UNITS.iter())
-                .filter(|(m, _)| *m < file_m)
-                .min_by(|a, b| {
-                    let off = |m: f64| ((file_m / m) / ratio).ln().abs();
-                    off(a.0).total_cmp(&off(b.0))
-                })
+        let off = |m: f64| ((file_m / m) / ratio).ln().abs();
+        let Some(&(_, part_name, part_m)) = (LENGTH_UNITS.iter())
+            .filter(|(_, _, m)| *m < file_m)
+            .min_by(|a, b| off(a.2).total_cmp(&off(b.2)))
         else {
             continue;
         };
@@ -1494,26 +1446,13 @@ fn position_reflections(tables: &[MeasurementTable]) -> Vec<Corrected<MeasuredDa
 /// Joints whose readings never change (spread ≤ [`FROZEN_SPREAD`]) over two or more rows
 /// while their limits let them move: `(joint, value)`.
 pub fn frozen_joints(robot: &Robot, tables: &[MeasurementTable]) -> Vec<(usize, f64)> {
-    let rows: Vec<&[f64]> = tables
-        .iter()
-        .flat_map(|t| &t.rows)
+    let rows: Vec<&[f64]> = (tables.iter().flat_map(|t| &t.rows))
         .map(|r| &r.q[..])
         .collect();
     if rows.len() < 2 {
         return Vec::new();
     }
-    (0..robot.joint_names.len())
-        .filter_map(|j| {
-            let v: Vec<f64> = rows.iter().filter_map(|q| q.get(j).copied()).collect();
-            let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
-            let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            let moves = robot
-                .limits
-                .get(j)
-                .is_none_or(|(min, max)| max - min > FROZEN_SPREAD);
-            (hi - lo <= FROZEN_SPREAD && moves).then_some((j, lo))
-        })
-        .collect()
+    frozen_columns(&rows, &robot.limits, robot.joint_names.len())
 }
 
 /// Checks the setup of a measurement-file calibration: the frames-only residual of the data as
@@ -1667,31 +1606,20 @@ fn frozen_findings(
         } else {
             "rad"
         };
-        findings.push(Finding {
-            class: MistakeClass::FrozenJoint,
-            severity: if moved {
-                Severity::Error
-            } else {
-                Severity::Warning
-            },
-            message: format!(
-                "joint {} reads {value} {unit} in every one of the {n_rows} rows while the \
-                 description lets it move over [{lo}, {hi}] {unit}: a frozen encoder or a \
-                 copied column{}",
-                joint_label(input.robot, j),
-                if moved {
-                    ", and the residual says the joint did move"
-                } else {
-                    ", or the joint was held still (then its parameters cannot be identified)"
-                }
-            ),
-            fix: format!(
-                "check the export of the column of {}",
-                joint_label(input.robot, j)
-            ),
-            before: as_given,
-            after: None,
-        });
+        let joint = joint_label(input.robot, j);
+        let why = if moved {
+            ", and the residual says the joint did move"
+        } else {
+            ", or the joint was held still (then its parameters cannot be identified)"
+        };
+        let message = format!(
+            "joint {joint} reads {value} {unit} in every one of the {n_rows} rows while the \
+             description lets it move over [{lo}, {hi}] {unit}: a frozen encoder or a copied \
+             column{why}"
+        );
+        let fix = format!("check the export of the column of {joint}");
+        let finding = Finding::new(MistakeClass::FrozenJoint, Severity::of(moved), message, fix);
+        findings.push(finding.with_residuals(as_given, None));
     }
     findings
 }
@@ -1708,24 +1636,18 @@ fn no_hypothesis_finding(
     let location = per_row
         .and_then(|rows| residual_location(rows, &names))
         .map_or_else(String::new, |w| format!("; {w}"));
-    Finding {
-        class: MistakeClass::NoHypothesis,
-        severity: Severity::Error,
-        message: format!(
-            "the nominal model misses the measurements by {} RMS with the instrument and \
-             marker frames fitted, more than manufacturing deviations of a real robot \
-             produce ({} mm, {:.1}°), and none of the {} checked mistakes explains it{location}: \
-             these data do not come from this robot (or the setup is wrong in a way not \
-             checked)",
-            as_given.text(),
-            mm(PLAUSIBLE_FRAMES_ONLY_RMS_M),
-            PLAUSIBLE_FRAMES_ONLY_RAD.to_degrees(),
-            n_results
-        ),
-        fix: "check --device, --tip, the units and the columns of the files".to_owned(),
-        before: as_given,
-        after: None,
-    }
+    let message = format!(
+        "the nominal model misses the measurements by {} RMS with the instrument and marker \
+         frames fitted, more than manufacturing deviations of a real robot produce ({} mm, \
+         {:.1}°), and none of the {n_results} checked mistakes explains it{location}: these data \
+         do not come from this robot (or the setup is wrong in a way not checked)",
+        as_given.text(),
+        mm(PLAUSIBLE_FRAMES_ONLY_RMS_M),
+        PLAUSIBLE_FRAMES_ONLY_RAD.to_degrees(),
+    );
+    let fix = "check --device, --tip, the units and the columns of the files";
+    Finding::new(MistakeClass::NoHypothesis, Severity::Error, message, fix)
+        .with_residuals(as_given, None)
 }
 
 /// The setup check of a `hapcal calibrate` or `hapcal diagnose` plan: measurement files
@@ -1763,6 +1685,13 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
         .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
     // The robot the calibration builds: a URDF's read joints off the measured paths load it.
     let robot = crate::data::robot_of(plan, &device)?;
+    let read = PlanFiles {
+        robot: &robot,
+        files: &files,
+        tips: &tips,
+        plan,
+        is_urdf,
+    };
     let tables = match load_sample(&files, &robot, &plan.units) {
         Ok(tables) => tables,
         Err(e) => {
@@ -1770,33 +1699,19 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
             // column read past its joint's limits is there (a tip above it would leave it out
             // and hide the mistake: a motor-side or counted reading).
             let past_limit = e.root_cause().to_string().contains("is outside");
-            if is_urdf
-                && !past_limit
-                && let Some(report) = tip_above(&plan.device, &tips, &files, plan.units.clone())
-            {
-                return Ok(Some(report));
-            }
-            // A reading past its joint's limits: read again without the limits, so that the
-            // finding that put it there (degrees, swapped columns) is named with it.
-            if let Some(report) = past_limits(&robot, &files, &tips, plan, is_urdf, &e) {
-                return Ok(Some(report));
-            }
-            // A length past the readers' ±1000 m: millimetres read as metres, in every marker
-            // or in some.
-            if let Some(report) = past_length_range(&robot, &files, &tips, plan, is_urdf, &e) {
-                return Ok(Some(report));
-            }
-            return Err(e);
+            let report = (is_urdf && !past_limit)
+                .then(|| tip_above(&plan.device, &tips, &files, plan.units.clone()))
+                .flatten()
+                // A reading past its joint's limits: read again without the limits, so that
+                // the finding that put it there (degrees, swapped columns) is named with it.
+                .or_else(|| read.past_limits(&e))
+                // A length past the readers' ±1000 m: millimetres read as metres, in every
+                // marker or in some.
+                .or_else(|| read.past_length_range(&e));
+            return report.map(Some).ok_or(e);
         }
     };
-    check_setup(&SetupInput {
-        robot: &robot,
-        tables: &tables,
-        urdf: is_urdf.then_some(plan.device.as_path()),
-        tips: &tips,
-        units: plan.units.clone(),
-    })
-    .map(Some)
+    check_setup(&read.input(&robot, &tables, plan.units.clone())).map(Some)
 }
 
 /// The rows of `files` the check judges, read for `robot` in `units`: every row of a
@@ -1820,206 +1735,190 @@ fn load_sample(
     Ok(crate::data::load_tables_every(files, robot, units, stride)?.0)
 }
 
-/// The setup check of files that the reader refused with `limit_error` (a reading past its
-/// joint's limits), read again with every range opened to ±[`OPEN_LIMIT`]: when the check
-/// finds an error (a mistake such as degrees or swapped columns, or data of another robot),
-/// the report with the reader's message (`file:line:column: joint … is outside …`) at the start
-/// of that finding; `None` when the files do not read either or nothing explains the reading
-/// (then the reader's error stands).
-fn past_limits(
-    robot: &Robot,
-    files: &[PathBuf],
-    tips: &[String],
-    plan: &crate::inputs::Plan,
+/// The measurement files of a plan (`files`, the plan's `tips`, on `robot`, a URDF's when
+/// `is_urdf`), as the check reads them again when the reader refuses them.
+struct PlanFiles<'a> {
+    robot: &'a Robot,
+    files: &'a [PathBuf],
+    tips: &'a [String],
+    plan: &'a crate::inputs::Plan,
     is_urdf: bool,
-    limit_error: &anyhow::Error,
-) -> Option<SetupReport> {
-    let limit = limit_error.root_cause().to_string();
-    if !limit.contains("is outside") {
-        return None;
-    }
-    let mut open = robot.clone();
-    for l in &mut open.limits {
-        *l = (-OPEN_LIMIT, OPEN_LIMIT);
-    }
-    let tables = load_sample(files, &open, &plan.units).ok()?;
-    let mut report = check_setup(&SetupInput {
-        robot: &open,
-        tables: &tables,
-        urdf: is_urdf.then_some(plan.device.as_path()),
-        tips,
-        units: plan.units.clone(),
-    })
-    .ok()?;
-    let f = (report.findings.iter_mut()).find(|f| f.severity == Severity::Error)?;
-    f.message = format!("{limit}: {}", f.message);
-    Some(report)
 }
 
-/// The setup check of files that the reader refused with `range_error` (a length past the
-/// readers' ±1000 m), read again with the refused column's group (a marker's `x, y, z`, or the
-/// distance) in millimetres, group after group until they read: when the data then fit the
-/// robot, one finding names the groups in millimetres and the flag (`--length-unit mm` when
-/// every marker was); when the check of the data so read finds another error, that report;
-/// `None` when they do not read or nothing explains them (the reader's error stands).
-fn past_length_range(
-    robot: &Robot,
-    files: &[PathBuf],
-    tips: &[String],
-    plan: &crate::inputs::Plan,
-    is_urdf: bool,
-    range_error: &anyhow::Error,
-) -> Option<SetupReport> {
-    let first = range_error.root_cause().to_string();
-    let mut message = first.clone();
-    let mut groups: Vec<String> = Vec::new();
-    let mut units = plan.units.clone();
-    let tables = loop {
-        if !message.contains("a length must lie within") || groups.len() >= 16 {
+impl PlanFiles<'_> {
+    /// The check's input of `tables` read for `robot` in `units`.
+    fn input<'b>(
+        &'b self,
+        robot: &'b Robot,
+        tables: &'b [MeasurementTable],
+        units: Units,
+    ) -> SetupInput<'b> {
+        SetupInput {
+            robot,
+            tables,
+            urdf: self.is_urdf.then_some(self.plan.device.as_path()),
+            tips: self.tips,
+            units,
+        }
+    }
+
+    /// The setup check of files that the reader refused with `limit_error` (a reading past
+    /// its joint's limits), read again with every range opened to ±[`OPEN_LIMIT`]: when the
+    /// check finds an error (a mistake such as degrees or swapped columns, or data of another
+    /// robot), the report with the reader's message (`file:line:column: joint … is outside …`)
+    /// at the start of that finding; `None` when the files do not read either or nothing
+    /// explains the reading (then the reader's error stands).
+    fn past_limits(&self, limit_error: &anyhow::Error) -> Option<SetupReport> {
+        let limit = limit_error.root_cause().to_string();
+        if !limit.contains("is outside") {
             return None;
         }
-        // `file:line:column: x2 = 2.2e3 m is out of range: …`.
-        let name = message
-            .split(" = ")
-            .next()?
-            .rsplit(": ")
-            .next()?
-            .trim()
-            .to_owned();
-        let group = match name.split_at_checked(1) {
-            Some((axis @ ("x" | "y" | "z"), k)) if k.chars().all(|c| c.is_ascii_digit()) => {
-                let _ = axis;
-                format!("x{k},y{k},z{k}")
+        let mut open = self.robot.clone();
+        for l in &mut open.limits {
+            *l = (-OPEN_LIMIT, OPEN_LIMIT);
+        }
+        let tables = load_sample(self.files, &open, &self.plan.units).ok()?;
+        let mut report = check_setup(&self.input(&open, &tables, self.plan.units.clone())).ok()?;
+        let f = (report.findings.iter_mut()).find(|f| f.severity == Severity::Error)?;
+        f.message = format!("{limit}: {}", f.message);
+        Some(report)
+    }
+
+    /// The setup check of files that the reader refused with `range_error` (a length past the
+    /// readers' ±1000 m), read again with the refused column's group (a marker's `x, y, z`, or
+    /// the distance) in millimetres, group after group until they read: when the data then fit
+    /// the robot, one finding names the groups in millimetres and the flag (`--length-unit mm`
+    /// when every marker was); when the check of the data so read finds another error, that
+    /// report; `None` when they do not read or nothing explains them (the reader's error
+    /// stands).
+    fn past_length_range(&self, range_error: &anyhow::Error) -> Option<SetupReport> {
+        let first = range_error.root_cause().to_string();
+        let mut message = first.clone();
+        let mut groups: Vec<String> = Vec::new();
+        let mut units = self.plan.units.clone();
+        let tables = loop {
+            if !message.contains("a length must lie within") || groups.len() >= 16 {
+                return None;
             }
-            _ => name,
+            // `file:line:column: x2 = 2.2e3 m is out of range: …`.
+            let name = message
+                .split(" = ")
+                .next()?
+                .rsplit(": ")
+                .next()?
+                .trim()
+                .to_owned();
+            let group = match name.split_at_checked(1) {
+                Some(("x" | "y" | "z", k)) if k.chars().all(|c| c.is_ascii_digit()) => {
+                    format!("x{k},y{k},z{k}")
+                }
+                _ => name,
+            };
+            if groups.contains(&group) {
+                return None;
+            }
+            let edit = hapcal_io::ColumnEdit::parse_unit(&format!("{group}=mm")).ok()?;
+            groups.push(group);
+            units = units.with_columns([edit]);
+            match load_sample(self.files, self.robot, &units) {
+                Ok(tables) => break tables,
+                Err(e) => message = e.root_cause().to_string(),
+            }
         };
-        if groups.contains(&group) {
+        if let Some(report) = self.part_in_millimetres(&tables, &first) {
+            return Some(report);
+        }
+        let report = check_setup(&self.input(self.robot, &tables, units.clone())).ok()?;
+        if let Some(f) = report.overwhelming() {
+            let mut report = report.clone();
+            if let Some(e) = report.findings.iter_mut().find(|x| x.message == f.message) {
+                e.message = format!("{first}: {}", e.message);
+            }
+            return Some(report);
+        }
+        if !report.as_given.is_plausible() {
             return None;
         }
-        let edit = hapcal_io::ColumnEdit::parse_unit(&format!("{group}=mm")).ok()?;
-        groups.push(group);
-        units = units.with_columns([edit]);
-        match load_sample(files, robot, &units) {
-            Ok(tables) => break tables,
-            Err(e) => message = e.root_cause().to_string(),
-        }
-    };
-    if let Some(report) = part_in_millimetres(robot, &tables, tips, plan, is_urdf, &first) {
-        return Some(report);
-    }
-    let report = check_setup(&SetupInput {
-        robot,
-        tables: &tables,
-        urdf: is_urdf.then_some(plan.device.as_path()),
-        tips,
-        units: units.clone(),
-    })
-    .ok()?;
-    if let Some(f) = report.overwhelming() {
-        let mut report = report.clone();
-        if let Some(e) = report.findings.iter_mut().find(|x| x.message == f.message) {
-            e.message = format!("{first}: {}", e.message);
-        }
-        return Some(report);
-    }
-    if !report.as_given.is_plausible() {
-        return None;
-    }
-    let n_markers = tables.iter().map(|t| t.n_markers).max().unwrap_or(0);
-    let every_marker = groups.len() >= n_markers.max(1) && groups.iter().all(|g| g.contains(','));
-    let fix = if every_marker {
-        "--length-unit mm".to_owned()
-    } else {
-        (groups.iter())
-            .map(|g| format!("--column-unit {g}=mm"))
-            .collect::<Vec<_>>()
-            .join(" ")
-    };
-    let finding = Finding {
-        class: MistakeClass::LengthUnit,
-        severity: Severity::Error,
-        message: format!(
+        let n_markers = tables.iter().map(|t| t.n_markers).max().unwrap_or(0);
+        let every_marker =
+            groups.len() >= n_markers.max(1) && groups.iter().all(|g| g.contains(','));
+        let fix = if every_marker {
+            "--length-unit mm".to_owned()
+        } else {
+            (groups.iter())
+                .map(|g| format!("--column-unit {g}=mm"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        let message = format!(
             "{first}: the columns {} are in millimetres, read as metres (read in millimetres, \
              the data fit this robot)",
             groups.join(" and ")
-        ),
-        fix,
-        before: Residual::default(),
-        after: Some(report.as_given),
-    };
-    Some(SetupReport::of_unread(
-        report.n_rows,
-        finding,
-        report.as_given,
-    ))
-}
+        );
+        let finding = Finding::new(MistakeClass::LengthUnit, Severity::Error, message, fix);
+        Some(SetupReport::of_unread(
+            report.n_rows,
+            finding,
+            report.as_given,
+        ))
+    }
 
-/// Lengths past the reader's range in part of a file ([`past_length_range`], whose `tables`
-/// read the columns out of range in millimetres): when the rows split into two parts by the
-/// size of their positions ([`magnitude_split`]) and the smaller part read back in the file's
-/// unit makes the data fit the robot (no error finding, a plausible residual), the answer
-/// locates the rows in millimetres; `None` otherwise.
-fn part_in_millimetres(
-    robot: &Robot,
-    tables: &[MeasurementTable],
-    tips: &[String],
-    plan: &crate::inputs::Plan,
-    is_urdf: bool,
-    first: &str,
-) -> Option<SetupReport> {
-    let file_m = plan.units.length.to_m();
-    let file_name = part_unit_name(file_m)?;
-    let mut corrected = tables.to_vec();
-    let mut located = Vec::new();
-    for (t, table) in tables.iter().enumerate() {
-        let Some((large, _)) = magnitude_split(table) else {
-            continue;
-        };
-        let scale = file_m / 1e-3;
-        for (i, row) in corrected[t].rows.iter_mut().enumerate() {
-            if !large.contains(&i) {
-                for m in &mut row.markers {
-                    m.position_m = m.position_m.map(|v| v * scale);
+    /// Lengths past the reader's range in part of a file ([`PlanFiles::past_length_range`],
+    /// whose `tables` read the columns out of range in millimetres; `first` the reader's
+    /// message): when the rows split into two parts by the size of their positions
+    /// ([`magnitude_split`]) and the smaller part read back in the file's unit makes the data
+    /// fit the robot (no error finding, a plausible residual), the answer locates the rows in
+    /// millimetres; `None` otherwise.
+    fn part_in_millimetres(&self, tables: &[MeasurementTable], first: &str) -> Option<SetupReport> {
+        let file_m = self.plan.units.length.to_m();
+        let file_name = part_unit_name(file_m)?;
+        let mut corrected = tables.to_vec();
+        let mut located = Vec::new();
+        for (t, table) in tables.iter().enumerate() {
+            let Some((large, _)) = magnitude_split(table) else {
+                continue;
+            };
+            let scale = file_m / 1e-3;
+            for (i, row) in corrected[t].rows.iter_mut().enumerate() {
+                if !large.contains(&i) {
+                    for m in &mut row.markers {
+                        m.position_m = m.position_m.map(|v| v * scale);
+                    }
                 }
             }
+            located.push(rows_of_file(table, &large));
         }
-        located.push(rows_of_file(table, &large));
-    }
-    if located.is_empty() {
-        return None;
-    }
-    let report = check_setup(&SetupInput {
-        robot,
-        tables: &corrected,
-        urdf: is_urdf.then_some(plan.device.as_path()),
-        tips,
-        units: plan.units.clone(),
-    })
-    .ok()?;
-    if report.overwhelming().is_some() || !report.as_given.is_plausible() {
-        return None;
-    }
-    let where_ = located.join(" and ");
-    let finding = Finding {
-        class: MistakeClass::LengthUnit,
-        severity: Severity::Error,
-        message: format!(
+        if located.is_empty() {
+            return None;
+        }
+        let units = self.plan.units.clone();
+        let report = check_setup(&self.input(self.robot, &corrected, units)).ok()?;
+        if report.overwhelming().is_some() || !report.as_given.is_plausible() {
+            return None;
+        }
+        let where_ = located.join(" and ");
+        let message = format!(
             "{first}: {where_} look like millimetres while the rest are in {file_name} (read \
              so, the data fit this robot)"
-        ),
-        fix: format!(
+        );
+        let fix = format!(
             "no flag reads part of a file: convert the positions of {where_} to {file_name} \
              (×{}) or record them again",
             1e-3 / file_m
-        ),
-        before: Residual::default(),
-        after: Some(report.as_given),
-    };
-    Some(SetupReport::of_unread(
-        report.n_rows,
-        finding,
-        report.as_given,
-    ))
+        );
+        let finding = Finding::new(MistakeClass::LengthUnit, Severity::Error, message, fix);
+        Some(SetupReport::of_unread(
+            report.n_rows,
+            finding,
+            report.as_given,
+        ))
+    }
+}
+
+/// The `--tip` flags of `tips`, in their order: `--tip a --tip b`.
+fn tip_flags(tips: &[String]) -> String {
+    let flags: Vec<String> = tips.iter().map(|t| format!("--tip {t}")).collect();
+    flags.join(" ")
 }
 
 /// When the files do not read with the tips given: the first tip one or two moving joints up
@@ -2051,23 +1950,14 @@ fn tip_above(urdf: &Path, tips: &[String], files: &[PathBuf], units: Units) -> O
             }
             let k = steps.unsigned_abs();
             let joints = if k == 1 { "joint" } else { "joints" };
-            let flags: Vec<String> = other_tips.iter().map(|t| format!("--tip {t}")).collect();
-            let finding = Finding {
-                class: MistakeClass::TipLink,
-                severity: Severity::Error,
-                message: format!(
-                    "the files have no column for the joints between {link} and the tip {tip}: \
-                     the markers sit on {link}, {k} moving {joints} above the tip"
-                ),
-                fix: format!("use {}", flags.join(" ")),
-                before: Residual::default(),
-                after: Some(after),
-            };
-            return Some(SetupReport::of_unread(
-                tables.iter().map(|t| t.rows.len()).sum(),
-                finding,
-                after,
-            ));
+            let message = format!(
+                "the files have no column for the joints between {link} and the tip {tip}: the \
+                 markers sit on {link}, {k} moving {joints} above the tip"
+            );
+            let fix = format!("use {}", tip_flags(&other_tips));
+            let finding = Finding::new(MistakeClass::TipLink, Severity::Error, message, fix);
+            let n_rows = tables.iter().map(|t| t.rows.len()).sum();
+            return Some(SetupReport::of_unread(n_rows, finding, after));
         }
     }
     None
@@ -2164,21 +2054,17 @@ fn another_device(
             links.join("; ")
         )
     };
-    Some(Finding {
-        class: MistakeClass::AnotherDevice,
-        severity: Severity::Error,
-        message: format!(
-            "the nominal model misses the measurements by {} RMS with the instrument and marker \
-             frames fitted, and no checked mistake explains it; the geometric calibration fits \
-             them to {} RMS by moving {}: {conclusion}",
-            as_given.text(),
-            after.text(),
-            beyond.words(),
-        ),
-        fix: "calibrate with the robot's own description (--device), and check --tip".to_owned(),
-        before: *as_given,
-        after: Some(after),
-    })
+    let message = format!(
+        "the nominal model misses the measurements by {} RMS with the instrument and marker \
+         frames fitted, and no checked mistake explains it; the geometric calibration fits \
+         them to {} RMS by moving {}: {conclusion}",
+        as_given.text(),
+        after.text(),
+        beyond.words(),
+    );
+    let fix = "calibrate with the robot's own description (--device), and check --tip";
+    let finding = Finding::new(MistakeClass::AnotherDevice, Severity::Error, message, fix);
+    Some(finding.with_residuals(*as_given, Some(after)))
 }
 
 /// The setup check after a calibration: an identified length deviation beyond
@@ -2204,16 +2090,12 @@ pub fn after_fit(
     before: &[MistakeClass],
 ) -> Option<Finding> {
     use crate::report::ImplausibleKind;
-    let implausible = |i: &crate::report::Implausible| Finding {
-        class: match i.kind {
+    let implausible = |i: &crate::report::Implausible| {
+        let class = match i.kind {
             ImplausibleKind::Mounting => MistakeClass::Mounting,
             _ => MistakeClass::ImplausibleEstimate,
-        },
-        severity: Severity::Error,
-        message: i.message.clone(),
-        fix: i.fix.clone(),
-        before: Residual::default(),
-        after: None,
+        };
+        Finding::new(class, Severity::Error, i.message.clone(), i.fix.clone())
     };
     // An unconverged estimate first (nothing else about it means anything), then lengths of
     // another robot (its compliances absorb what the lengths leave), then the rest.
@@ -2229,21 +2111,19 @@ pub fn after_fit(
         if let Some(i) = report.implausible.first() {
             return Some(implausible(i));
         }
-        return Some(Finding {
-            class: MistakeClass::Latency,
-            severity: Severity::Warning,
-            message: format!(
-                "the calibration moves {}, as a lag between the joint readings and the \
-                 instrument makes a calibration that does not model it do (the latency warned \
-                 above)",
-                beyond.words()
-            ),
-            fix: "correct the lag before using the calibrated lengths (hapcal diagnose models \
-                  latency)"
-                .to_owned(),
-            before: Residual::default(),
-            after: None,
-        });
+        let message = format!(
+            "the calibration moves {}, as a lag between the joint readings and the instrument \
+             makes a calibration that does not model it do (the latency warned above)",
+            beyond.words()
+        );
+        let fix = "correct the lag before using the calibrated lengths (hapcal diagnose models \
+                   latency)";
+        return Some(Finding::new(
+            MistakeClass::Latency,
+            Severity::Warning,
+            message,
+            fix,
+        ));
     }
     Some(lengths_finding(report, &beyond))
 }
@@ -2258,32 +2138,26 @@ fn lengths_finding(
         &report.refitted_lengths,
         &report.origins,
     );
-    if links.is_empty() {
-        return Finding {
-            class: MistakeClass::AnotherDevice,
-            severity: Severity::Error,
-            message: format!(
+    let (message, fix) = if links.is_empty() {
+        (
+            format!(
                 "the calibration moves {}: these data come from another device or robot, or the \
                  device file is not the one measured",
                 beyond.words()
             ),
-            fix: "check --device (and --tip) against the device that recorded the data".to_owned(),
-            before: Residual::default(),
-            after: None,
-        };
-    }
-    Finding {
-        class: MistakeClass::AnotherDevice,
-        severity: Severity::Error,
-        message: format!(
-            "these data come from another robot or variant: {}; the calibration moves {}",
-            links.join("; "),
-            beyond.words()
-        ),
-        fix: "calibrate with the robot's own URDF (--device), and check --tip".to_owned(),
-        before: Residual::default(),
-        after: None,
-    }
+            "check --device (and --tip) against the device that recorded the data",
+        )
+    } else {
+        (
+            format!(
+                "these data come from another robot or variant: {}; the calibration moves {}",
+                links.join("; "),
+                beyond.words()
+            ),
+            "calibrate with the robot's own URDF (--device), and check --tip",
+        )
+    };
+    Finding::new(MistakeClass::AnotherDevice, Severity::Error, message, fix)
 }
 
 /// The training set the calibrated model misses by more than [`PLAUSIBLE_FRAMES_ONLY_RMS_M`]
@@ -2303,23 +2177,18 @@ fn misfit_after_calibration(report: &crate::report::CalibrationReport) -> Option
             Some((s.name.as_str(), rms))
         })
         .max_by(|a, b| a.1.total_cmp(&b.1))?;
-    (rms > PLAUSIBLE_FRAMES_ONLY_RMS_M).then(|| Finding {
-        class: MistakeClass::AnotherDevice,
-        severity: Severity::Error,
-        message: format!(
-            "the calibrated {} model still misses the training rows of {name} by {} mm RMS, more \
-             than the nominal model of a real device leaves ({} mm): these data come from \
-             another device or robot, or the setup is wrong in a way not checked",
-            report.model,
-            mm(rms),
-            mm(PLAUSIBLE_FRAMES_ONLY_RMS_M)
-        ),
-        fix: "check --device (and --tip) against the device that recorded the data, and the \
-              units and columns of the files"
-            .to_owned(),
-        before: Residual::default(),
-        after: None,
-    })
+    let message = format!(
+        "the calibrated {} model still misses the training rows of {name} by {} mm RMS, more \
+         than the nominal model of a real device leaves ({} mm): these data come from another \
+         device or robot, or the setup is wrong in a way not checked",
+        report.model,
+        mm(rms),
+        mm(PLAUSIBLE_FRAMES_ONLY_RMS_M)
+    );
+    let fix = "check --device (and --tip) against the device that recorded the data, and the \
+               units and columns of the files";
+    (rms > PLAUSIBLE_FRAMES_ONLY_RMS_M)
+        .then(|| Finding::new(MistakeClass::AnotherDevice, Severity::Error, message, fix))
 }
 
 /// The length deviations of [`after_fit`] (none: `None`): the identified ones beyond
@@ -2469,11 +2338,8 @@ impl LengthsBeyond<'_> {
             })
             .map(|o| {
                 let nominal = Vector3::from(o.origin_m);
-                let delta = Vector3::new(
-                    value(&format!("{}.x", o.joint)),
-                    value(&format!("{}.y", o.joint)),
-                    value(&format!("{}.z", o.joint)),
-                );
+                let delta =
+                    Vector3::from(["x", "y", "z"].map(|a| value(&format!("{}.{a}", o.joint))));
                 let change = (nominal + delta).norm() - nominal.norm();
                 let link = match &o.after {
                     Some(after) => format!("the link after {after} (the origin of {})", o.joint),
@@ -2511,23 +2377,27 @@ pub fn gate_after_fit(
     let Some(f) = after_fit(report, before) else {
         return Ok(None);
     };
-    if f.severity == Severity::Warning {
-        return Ok(Some(format!("setup check [{}]: {}", f.class, f.text())));
-    }
-    if !cfg.accept_setup {
+    if f.severity == Severity::Error && !cfg.accept_setup {
         anyhow::bail!(
-            "setup check [{}]: {}; {} uses the calibration as it is",
-            f.class,
-            f.text(),
+            "{}; {} uses the calibration as it is",
+            cfg.line(&f, false),
             cfg.accept_option
         );
     }
-    Ok(Some(format!(
-        "setup check (accepted with {}) [{}]: {}",
-        cfg.accept_option,
-        f.class,
-        f.text()
-    )))
+    Ok(Some(cfg.line(&f, true)))
+}
+
+impl SetupConfig {
+    /// A finding as the commands print it, `setup check [class]: …`, with the words
+    /// `(accepted with --accept-setup)` when `accepted` and it is an error.
+    fn line(&self, f: &Finding, accepted: bool) -> String {
+        let accepted = if accepted && f.severity == Severity::Error {
+            format!(" (accepted with {})", self.accept_option)
+        } else {
+            String::new()
+        };
+        format!("setup check{accepted} [{}]: {}", f.class, f.text())
+    }
 }
 
 /// What the setup check at the start of a calibration or diagnosis lets through.
@@ -2562,31 +2432,16 @@ pub fn gate(plan: &crate::inputs::Plan, cfg: &SetupConfig) -> Result<Gated> {
         && !cfg.accept_setup
     {
         anyhow::bail!(
-            "setup check [{}]: {}; {} uses the data as they are",
-            f.class,
-            f.text(),
+            "{}; {} uses the data as they are",
+            cfg.line(f, false),
             cfg.accept_option
         );
     }
     Ok(Gated {
         warnings: (report.findings.iter())
-            .map(|f| {
-                let accepted = if f.severity == Severity::Error {
-                    format!(" (accepted with {})", cfg.accept_option)
-                } else {
-                    String::new()
-                };
-                format!("setup check{accepted} [{}]: {}", f.class, f.text())
-            })
+            .map(|f| cfg.line(f, true))
             .collect(),
-        accepted: report.overwhelming().map(|f| {
-            format!(
-                "setup check (accepted with {}) [{}]: {}",
-                cfg.accept_option,
-                f.class,
-                f.text()
-            )
-        }),
+        accepted: report.overwhelming().map(|f| cfg.line(f, true)),
         classes: report.findings.iter().map(|f| f.class).collect(),
     })
 }

@@ -527,12 +527,7 @@ pub(crate) fn residuals_jump(per_row: &[(usize, u64, f64)]) -> bool {
             return false;
         }
         splits(&e, MIN_PART_ROWS, MIN_PART_ROWS).any(|(_, before, after)| {
-            let (lo, hi) = if before < after {
-                (before, after)
-            } else {
-                (after, before)
-            };
-            hi >= JUMP_FACTOR * lo.max(f64::MIN_POSITIVE)
+            before.max(after) >= JUMP_FACTOR * before.min(after).max(f64::MIN_POSITIVE)
         })
     })
 }

@@ -341,6 +341,27 @@ pub(crate) struct Layout {
     pub(crate) paired_rows: bool,
 }
 
+impl Layout {
+    /// Revolute joint columns `q1`, `q2`, … (`words(j)` names joint `j`, from 0) read in
+    /// radians, lengths in metres, the whole file's units as flags; no lengths, arms or paired
+    /// rows.
+    pub(crate) fn numbered(n_joints: usize, words: impl Fn(usize) -> String) -> Layout {
+        Layout {
+            joints: (0..n_joints)
+                .map(|j| JointColumn {
+                    label: format!("q{}", j + 1),
+                    words: words(j),
+                    revolute: true,
+                })
+                .collect(),
+            angle_unit: "rad",
+            length_unit: "m",
+            file_flags: true,
+            ..Layout::default()
+        }
+    }
+}
+
 /// How a kind of data is corrected; each method returns the data as the correction reads them.
 pub(crate) trait SetupData: Sized + Send + Sync {
     /// Every row's joint readings (rad, m) edited by `f`.
@@ -360,6 +381,15 @@ pub(crate) enum Tier {
     Always,
     /// Only when the data as given leave more than right data do: the per-column families.
     Suspicious,
+}
+
+/// `data` with joint `j`'s readings mapped by `f`.
+fn with_column<D: SetupData>(data: &D, j: usize, f: impl Fn(f64) -> f64 + Sync) -> D {
+    data.with_joints(&|q: &mut [f64]| {
+        if let Some(v) = q.get_mut(j) {
+            *v = f(*v);
+        }
+    })
 }
 
 /// The hypotheses of the general families of `tier` for `data` laid out as `layout`.
@@ -449,11 +479,7 @@ fn column_units<D: SetupData>(data: &D, layout: &Layout, out: &mut Vec<Corrected
                     unit_words(&ANGLE_UNITS, layout.angle_unit)
                 ),
                 format!("--column-unit {}={unit}", c.label),
-                data.with_joints(&|q: &mut [f64]| {
-                    if let Some(v) = q.get_mut(j) {
-                        *v *= ratio;
-                    }
-                }),
+                with_column(data, j, |v| v * ratio),
             ));
         }
     }
@@ -549,16 +575,8 @@ fn column_scales<D: SetupData>(data: &D, layout: &Layout, out: &mut Vec<Correcte
         for (k, why) in &suspects {
             let (what, fix) = scale_words(c, *k, why, 10);
             let s = 1.0 / k;
-            out.push(Corrected::new(
-                MistakeClass::ColumnScale,
-                what,
-                fix,
-                data.with_joints(&|q: &mut [f64]| {
-                    if let Some(v) = q.get_mut(j) {
-                        *v *= s;
-                    }
-                }),
-            ));
+            let scaled = with_column(data, j, |v| v * s);
+            out.push(Corrected::new(MistakeClass::ColumnScale, what, fix, scaled));
         }
     }
 }
@@ -764,11 +782,7 @@ fn signs_and_zeros<D: SetupData>(data: &D, layout: &Layout, out: &mut Vec<Correc
                 c.words
             ),
             format!("--column-sign {}", c.label),
-            data.with_joints(&|q: &mut [f64]| {
-                if let Some(v) = q.get_mut(j) {
-                    *v = -*v;
-                }
-            }),
+            with_column(data, j, |v| -v),
         ));
         if !c.revolute {
             continue;
@@ -784,11 +798,7 @@ fn signs_and_zeros<D: SetupData>(data: &D, layout: &Layout, out: &mut Vec<Correc
                     offset.to_degrees()
                 ),
                 format!("--column-offset {}={offset:.6}", c.label),
-                data.with_joints(&|q: &mut [f64]| {
-                    if let Some(v) = q.get_mut(j) {
-                        *v += offset;
-                    }
-                }),
+                with_column(data, j, |v| v + offset),
             ));
         }
     }
@@ -906,6 +916,30 @@ fn whole_file_shifts<D: SetupData>(
             }
         }
     }
+}
+
+/// One file's `rows` (in file order, each with its `line`) with the joint readings of every
+/// row from line `from` on taken from the row `shift` further down by `take_readings(row,
+/// partner)`: what [`SetupData::with_shift`] does to a file. Rows without a partner are
+/// dropped, the rows before `from` stay as they are.
+pub(crate) fn shift_readings<R: Clone>(
+    rows: &[R],
+    shift: isize,
+    from: u64,
+    line: impl Fn(&R) -> u64,
+    take_readings: impl Fn(&mut R, &R),
+) -> Vec<R> {
+    let start = rows.iter().take_while(|r| line(r) < from).count();
+    (rows.iter().enumerate())
+        .filter_map(|(i, row)| {
+            let mut row = row.clone();
+            if i >= start {
+                let partner = rows.get(i.checked_add_signed(shift)?)?;
+                take_readings(&mut row, partner);
+            }
+            Some(row)
+        })
+        .collect()
 }
 
 /// The hypotheses estimated from the per-row residuals of the data as given: joint readings

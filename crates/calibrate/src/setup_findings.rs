@@ -124,67 +124,56 @@ pub enum MistakeClass {
     ChangePoint,
 }
 
+/// Every class with its name in reports, in report order.
+const CLASS_NAMES: [(MistakeClass, &str); 26] = [
+    (MistakeClass::LengthUnit, "length-unit"),
+    (MistakeClass::AngleUnit, "angle-unit"),
+    (MistakeClass::OrientationUnit, "orientation-unit"),
+    (MistakeClass::QuaternionOrder, "quaternion-order"),
+    (MistakeClass::QuaternionInverse, "quaternion-inverse"),
+    (MistakeClass::EulerOrder, "euler-order"),
+    (MistakeClass::MirroredAxis, "mirrored-axis"),
+    (MistakeClass::JointOrder, "joint-order"),
+    (MistakeClass::RowShift, "row-shift"),
+    (MistakeClass::FrozenJoint, "frozen-joint"),
+    (MistakeClass::TipLink, "tip-link"),
+    (MistakeClass::SwappedTips, "swapped-tips"),
+    (MistakeClass::NoHypothesis, "no-hypothesis"),
+    (MistakeClass::ColumnUnit, "column-unit"),
+    (MistakeClass::ColumnSign, "column-sign"),
+    (MistakeClass::ColumnZero, "column-zero"),
+    (MistakeClass::ColumnScale, "column-scale"),
+    (MistakeClass::ColumnCoupling, "column-coupling"),
+    (MistakeClass::RowMismatch, "row-mismatch"),
+    (
+        MistakeClass::Latency,
+        hapcal_contract::Effect::Latency.name(),
+    ),
+    (MistakeClass::SocketDistance, "socket-distance"),
+    (MistakeClass::WrongSocket, "wrong-socket"),
+    (MistakeClass::AnotherDevice, "another-device"),
+    (MistakeClass::Mounting, "mounting"),
+    (MistakeClass::ImplausibleEstimate, "implausible-estimate"),
+    (MistakeClass::ChangePoint, "change-point"),
+];
+
 impl MistakeClass {
     /// Every class, in report order.
-    pub const ALL: [MistakeClass; 26] = [
-        MistakeClass::LengthUnit,
-        MistakeClass::AngleUnit,
-        MistakeClass::OrientationUnit,
-        MistakeClass::QuaternionOrder,
-        MistakeClass::QuaternionInverse,
-        MistakeClass::EulerOrder,
-        MistakeClass::MirroredAxis,
-        MistakeClass::JointOrder,
-        MistakeClass::RowShift,
-        MistakeClass::FrozenJoint,
-        MistakeClass::TipLink,
-        MistakeClass::SwappedTips,
-        MistakeClass::NoHypothesis,
-        MistakeClass::ColumnUnit,
-        MistakeClass::ColumnSign,
-        MistakeClass::ColumnZero,
-        MistakeClass::ColumnScale,
-        MistakeClass::ColumnCoupling,
-        MistakeClass::RowMismatch,
-        MistakeClass::Latency,
-        MistakeClass::SocketDistance,
-        MistakeClass::WrongSocket,
-        MistakeClass::AnotherDevice,
-        MistakeClass::Mounting,
-        MistakeClass::ImplausibleEstimate,
-        MistakeClass::ChangePoint,
-    ];
+    pub const ALL: [MistakeClass; 26] = {
+        let mut all = [MistakeClass::LengthUnit; 26];
+        let mut i = 0;
+        while i < all.len() {
+            all[i] = CLASS_NAMES[i].0;
+            i += 1;
+        }
+        all
+    };
 
     /// The class's name in reports.
     pub fn name(self) -> &'static str {
-        match self {
-            MistakeClass::LengthUnit => "length-unit",
-            MistakeClass::AngleUnit => "angle-unit",
-            MistakeClass::OrientationUnit => "orientation-unit",
-            MistakeClass::QuaternionOrder => "quaternion-order",
-            MistakeClass::QuaternionInverse => "quaternion-inverse",
-            MistakeClass::EulerOrder => "euler-order",
-            MistakeClass::MirroredAxis => "mirrored-axis",
-            MistakeClass::JointOrder => "joint-order",
-            MistakeClass::RowShift => "row-shift",
-            MistakeClass::FrozenJoint => "frozen-joint",
-            MistakeClass::TipLink => "tip-link",
-            MistakeClass::SwappedTips => "swapped-tips",
-            MistakeClass::NoHypothesis => "no-hypothesis",
-            MistakeClass::ColumnUnit => "column-unit",
-            MistakeClass::ColumnSign => "column-sign",
-            MistakeClass::ColumnZero => "column-zero",
-            MistakeClass::ColumnScale => "column-scale",
-            MistakeClass::ColumnCoupling => "column-coupling",
-            MistakeClass::RowMismatch => "row-mismatch",
-            MistakeClass::Latency => hapcal_contract::Effect::Latency.name(),
-            MistakeClass::SocketDistance => "socket-distance",
-            MistakeClass::WrongSocket => "wrong-socket",
-            MistakeClass::AnotherDevice => "another-device",
-            MistakeClass::Mounting => "mounting",
-            MistakeClass::ImplausibleEstimate => "implausible-estimate",
-            MistakeClass::ChangePoint => "change-point",
-        }
+        (CLASS_NAMES.iter())
+            .find(|(c, _)| *c == self)
+            .map_or("", |(_, name)| name)
     }
 }
 
@@ -218,6 +207,17 @@ pub enum Severity {
     Error,
     /// Worth a look; the calibration goes on.
     Warning,
+}
+
+impl Severity {
+    /// [`Severity::Error`] when `error`, else [`Severity::Warning`].
+    pub(crate) fn of(error: bool) -> Severity {
+        if error {
+            Severity::Error
+        } else {
+            Severity::Warning
+        }
+    }
 }
 
 /// Which fit a [`Residual`] is the residual of.
@@ -322,6 +322,34 @@ pub struct Finding {
 }
 
 impl Finding {
+    /// A finding of `class` from the data alone: no residual before (the default) or after;
+    /// [`Finding::with_residuals`] adds those a fit gave.
+    pub(crate) fn new(
+        class: MistakeClass,
+        severity: Severity,
+        message: String,
+        fix: impl Into<String>,
+    ) -> Finding {
+        Finding {
+            class,
+            severity,
+            message,
+            fix: fix.into(),
+            before: Residual::default(),
+            after: None,
+        }
+    }
+
+    /// The finding with the residual of the data as given, `before`, and as the fix reads
+    /// them, `after`.
+    pub(crate) fn with_residuals(self, before: Residual, after: Option<Residual>) -> Finding {
+        Finding {
+            before,
+            after,
+            ..self
+        }
+    }
+
     /// One line: the message, the residual before → after, the fix.
     pub fn text(&self) -> String {
         let unread = self.before == Residual::default();
@@ -358,7 +386,7 @@ pub struct ClosestHypothesis {
 }
 
 /// Everything the setup check found.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct SetupReport {
     /// Training rows checked.
     pub n_rows: usize,
@@ -376,8 +404,9 @@ pub struct SetupReport {
 
 impl SetupReport {
     /// The report of data that do not read as given, with the one `finding` that makes them
-    /// read (its residual `after`): the tip one or two links up.
+    /// read, its residual `after` (no residual before): the tip one or two links up.
     pub(crate) fn of_unread(n_rows: usize, finding: Finding, after: Residual) -> SetupReport {
+        let finding = finding.with_residuals(Residual::default(), Some(after));
         SetupReport {
             n_rows,
             as_given: Residual::default(),
@@ -403,17 +432,8 @@ impl SetupReport {
         if as_given.is_plausible() || findings.iter().any(|f| f.severity == Severity::Error) {
             return;
         }
-        findings.insert(
-            0,
-            Finding {
-                class: MistakeClass::NoHypothesis,
-                severity: Severity::Error,
-                message,
-                fix: fix.to_owned(),
-                before: as_given,
-                after: None,
-            },
-        );
+        let finding = Finding::new(MistakeClass::NoHypothesis, Severity::Error, message, fix);
+        findings.insert(0, finding.with_residuals(as_given, None));
     }
 
     /// The first finding of severity error, if any.
@@ -470,6 +490,28 @@ impl Finding {
             Severity::Warning => "warning",
         }
     }
+}
+
+/// The joints among the first `n_joints` whose readings in `rows` (rad or m) spread by at most
+/// [`FROZEN_SPREAD`] while `limits` let them move (a joint without limits moves): `(joint,
+/// its lowest reading)`.
+pub(crate) fn frozen_columns(
+    rows: &[&[f64]],
+    limits: &[(f64, f64)],
+    n_joints: usize,
+) -> Vec<(usize, f64)> {
+    (0..n_joints)
+        .filter_map(|j| {
+            let values = rows.iter().filter_map(|q| q.get(j).copied());
+            let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(v), hi.max(v))
+            });
+            let moves = limits
+                .get(j)
+                .is_none_or(|(min, max)| max - min > FROZEN_SPREAD);
+            (hi - lo <= FROZEN_SPREAD && moves).then_some((j, lo))
+        })
+        .collect()
 }
 
 /// The nearest rotation to `m` (its polar factor, by SVD; Horn 1987).
@@ -700,14 +742,15 @@ pub(crate) fn judge<T: Sync>(
             .collect();
         scores.sort_by(by_rank);
     }
+    let no_finding = |closest| Judged {
+        as_given,
+        closest,
+        finding: None,
+        error_at: None,
+        n_scored,
+    };
     let Some(best) = scores.first().copied() else {
-        return Judged {
-            as_given,
-            closest: None,
-            finding: None,
-            error_at: None,
-            n_scored,
-        };
+        return no_finding(None);
     };
     let h = &hypotheses[best.at];
     let closest = Some(ClosestHypothesis {
@@ -725,13 +768,7 @@ pub(crate) fn judge<T: Sync>(
     // cause, or not the only one, and its fix would fail again; the check then names no cause
     // (the residual nothing explains is located by the caller).
     if !error && (g < SUGGESTIVE_FACTOR || !plausible) {
-        return Judged {
-            as_given,
-            closest,
-            finding: None,
-            error_at: None,
-            n_scored,
-        };
+        return no_finding(closest);
     }
     let scale = if h.class == MistakeClass::LengthUnit {
         " relative to the spread of the positions"
@@ -785,18 +822,10 @@ pub(crate) fn judge<T: Sync>(
     Judged {
         as_given,
         closest,
-        finding: Some(Finding {
-            class: h.class,
-            severity: if error {
-                Severity::Error
-            } else {
-                Severity::Warning
-            },
-            message,
-            fix: h.fix.clone(),
-            before: as_given,
-            after: Some(best.after),
-        }),
+        finding: Some(
+            Finding::new(h.class, Severity::of(error), message, h.fix.clone())
+                .with_residuals(as_given, Some(best.after)),
+        ),
         error_at: error.then_some(best.at),
         n_scored,
     }

@@ -25,12 +25,12 @@ use hapcal_io::{Device, LogRow};
 
 use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
 use crate::setup_families::{
-    JointColumn, Layout, LengthGroup, MAX_ROW_SHIFT, SetupData, Tier, general_hypotheses,
-    judge_with_fitted, row_hypotheses,
+    Layout, LengthGroup, MAX_ROW_SHIFT, SetupData, Tier, general_hypotheses, judge_with_fitted,
+    row_hypotheses, shift_readings,
 };
 use crate::setup_findings::{
-    Corrected, FROZEN_SPREAD, Finding, MAX_CHECK_ROWS, MistakeClass, OPEN_LIMIT,
-    OVERWHELMING_FACTOR, Residual, ResidualOf, SetupReport, Severity,
+    Corrected, Finding, MAX_CHECK_ROWS, MistakeClass, OPEN_LIMIT, OVERWHELMING_FACTOR, Residual,
+    ResidualOf, SetupReport, Severity, frozen_columns,
 };
 
 /// RMS difference (rad) between an external encoder and its joint's reading beyond which the
@@ -125,17 +125,10 @@ pub fn check_logs(
         && let Some(limit) = &outside_limits
     {
         // Nothing explains the readings outside the limits: the reader's own words.
-        findings.insert(
-            0,
-            Finding {
-                class: MistakeClass::NoHypothesis,
-                severity: Severity::Error,
-                message: format!("{limit}, and none of the checked mistakes explains it"),
-                fix: "check the log's columns and units against the device file".to_owned(),
-                before: as_given,
-                after: None,
-            },
-        );
+        let message = format!("{limit}, and none of the checked mistakes explains it");
+        let fix = "check the log's columns and units against the device file";
+        let finding = Finding::new(MistakeClass::NoHypothesis, Severity::Error, message, fix);
+        findings.insert(0, finding.with_residuals(as_given, None));
     }
     findings.sort_by_key(|f| f.severity != Severity::Error);
     Ok(SetupReport {
@@ -179,22 +172,12 @@ fn log_hypotheses(
 /// them.
 fn log_layout(n_joints: usize) -> Layout {
     Layout {
-        joints: (0..n_joints)
-            .map(|j| JointColumn {
-                label: format!("q{}", j + 1),
-                words: format!("joint {} (q{})", j + 1, j + 1),
-                revolute: true,
-            })
-            .collect(),
         lengths: vec![LengthGroup {
             label: "distance_m".to_owned(),
             words: "the cable distances (distance_m)".to_owned(),
         }],
-        angle_unit: "rad",
-        length_unit: "m",
-        file_flags: true,
-        arms: Vec::new(),
         paired_rows: true,
+        ..Layout::numbered(n_joints, |j| format!("joint {} (q{})", j + 1, j + 1))
     }
 }
 
@@ -268,22 +251,17 @@ fn latency(
     } else {
         ("the joint readings lead", "ahead of")
     };
-    Some(Finding {
-        class: MistakeClass::Latency,
-        severity: Severity::Warning,
-        message: format!(
-            "{who} the cable distances by {:.2} rows{time}: a latency (the readings fit best \
-             {:.2} rows {how} the distances, between whole rows), not rows out of step",
-            lag.abs(),
-            lag.abs()
-        ),
-        fix: format!(
-            "sample the joints and the cable together, or let hapcal diagnose model the {}",
-            hapcal_contract::Effect::Latency.name()
-        ),
-        before: *as_given,
-        after: Some(best),
-    })
+    let lag_rows = lag.abs();
+    let message = format!(
+        "{who} the cable distances by {lag_rows:.2} rows{time}: a latency (the readings fit \
+         best {lag_rows:.2} rows {how} the distances, between whole rows), not rows out of step"
+    );
+    let fix = format!(
+        "sample the joints and the cable together, or let hapcal diagnose model the {}",
+        hapcal_contract::Effect::Latency.name()
+    );
+    let finding = Finding::new(MistakeClass::Latency, Severity::Warning, message, fix);
+    Some(finding.with_residuals(*as_given, Some(best)))
 }
 
 /// A haptic device's log rows, as the general families correct them.
@@ -300,22 +278,14 @@ impl SetupData for LogRows {
     }
 
     fn with_shift(&self, shift: isize, from: Option<(usize, u64)>) -> Option<Self> {
-        let rows = &self.0;
-        let n = rows.len();
-        let start = from.map_or(0, |(_, line)| {
-            rows.iter().take_while(|r| r.line < line).count()
-        });
-        let out: Vec<LogRow> = (0..n)
-            .filter_map(|i| {
-                let mut row = rows[i].clone();
-                if i < start {
-                    return Some(row);
-                }
-                let j = i.checked_add_signed(shift).filter(|&j| j < n)?;
-                row.q.clone_from(&rows[j].q);
-                Some(row)
-            })
-            .collect();
+        let from = from.map_or(0, |(_, line)| line);
+        let out = shift_readings(
+            &self.0,
+            shift,
+            from,
+            |r| r.line,
+            |r, p| r.q.clone_from(&p.q),
+        );
         (out.len() >= 6).then_some(LogRows(out))
     }
 }
@@ -433,22 +403,18 @@ fn cable_zero(
     if zero.is_nan() || zero.abs() <= CABLE_ZERO_MAX_M || !as_given.is_clean() {
         return None;
     }
-    Some(Finding {
-        class: MistakeClass::ColumnZero,
-        severity: Severity::Error,
-        message: format!(
-            "the cable distances are {:.1} mm {} than the nominal device's in every row (the \
-             median of {} rows; their residual about it is {}): the cable encoder's zero is off, \
-             a constant no link length has",
-            zero.abs() * 1e3,
-            if zero > 0.0 { "longer" } else { "shorter" },
-            rows.len(),
-            as_given.text()
-        ),
-        fix: format!("--column-offset distance_m={:.4}", -zero),
-        before: as_given,
-        after: None,
-    })
+    let message = format!(
+        "the cable distances are {:.1} mm {} than the nominal device's in every row (the median \
+         of {} rows; their residual about it is {}): the cable encoder's zero is off, a constant \
+         no link length has",
+        zero.abs() * 1e3,
+        if zero > 0.0 { "longer" } else { "shorter" },
+        rows.len(),
+        as_given.text()
+    );
+    let fix = format!("--column-offset distance_m={:.4}", -zero);
+    let finding = Finding::new(MistakeClass::ColumnZero, Severity::Error, message, fix);
+    Some(finding.with_residuals(as_given, None))
 }
 
 /// The nominal device's cable-distance errors of `rows`: `d − |P(q)|` per row, m.
@@ -521,31 +487,23 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Joint columns that never change while the device lets the joint move.
 fn frozen_joints(device: &Device, rows: &[LogRow]) -> Vec<Finding> {
     let limits = device.joint_limits();
-    (0..limits.len())
-        .filter_map(|j| {
-            let values = rows.iter().filter_map(|r| r.q.get(j).copied());
-            let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-                (lo.min(v), hi.max(v))
-            });
-            let (lower, upper) = limits[j];
-            (rows.len() > 2 && hi - lo <= FROZEN_SPREAD && upper - lower > FROZEN_SPREAD).then(
-                || Finding {
-                    class: MistakeClass::FrozenJoint,
-                    severity: Severity::Error,
-                    message: format!(
-                        "q{} reads {lo} on every row while the device lets the joint move: a \
-                         disconnected or frozen encoder column",
-                        j + 1
-                    ),
-                    fix: format!(
-                        "check the encoder of joint {} and the column q{}",
-                        j + 1,
-                        j + 1
-                    ),
-                    before: Residual::default(),
-                    after: None,
-                },
-            )
+    let q: Vec<&[f64]> = rows.iter().map(|r| &r.q[..]).collect();
+    if rows.len() <= 2 {
+        return Vec::new();
+    }
+    (frozen_columns(&q, &limits, limits.len()).into_iter())
+        .map(|(j, lo)| {
+            let message = format!(
+                "q{} reads {lo} on every row while the device lets the joint move: a \
+                 disconnected or frozen encoder column",
+                j + 1
+            );
+            let fix = format!(
+                "check the encoder of joint {} and the column q{}",
+                j + 1,
+                j + 1
+            );
+            Finding::new(MistakeClass::FrozenJoint, Severity::Error, message, fix)
         })
         .collect()
 }
@@ -575,50 +533,29 @@ fn external_encoders(rows: &[LogRow], n_joints: usize) -> Vec<Finding> {
             .filter_map(|j| Some((j, rms_against(k, j, 1.0)?)))
             .filter(|&(_, e)| e <= PLAUSIBLE_EXT_RAD && e * OVERWHELMING_FACTOR <= own)
             .min_by(|a, b| a.1.total_cmp(&b.1));
-        let (message, fix) = match (degrees, other) {
+        let n = k + 1;
+        let (class, message, fix) = match (degrees, other) {
             (Some(e), _) => (
+                MistakeClass::AngleUnit,
                 format!(
-                    "ext{} looks like degrees read as radians: it differs from q{} by {:.3} rad \
-                     RMS as given, {:.4} rad read as degrees",
-                    k + 1,
-                    k + 1,
-                    own,
-                    e
+                    "ext{n} looks like degrees read as radians: it differs from q{n} by {own:.3} \
+                     rad RMS as given, {e:.4} rad read as degrees"
                 ),
-                format!("write ext{} in radians (multiply by π/180)", k + 1),
+                format!("write ext{n} in radians (multiply by π/180)"),
             ),
             (None, Some((j, e))) => (
+                MistakeClass::JointOrder,
                 format!(
-                    "ext{} follows joint {} (RMS {:.4} rad from q{}), not joint {} ({:.3} rad \
-                     from q{}): the external-encoder columns look swapped",
-                    k + 1,
+                    "ext{n} follows joint {} (RMS {e:.4} rad from q{}), not joint {n} ({own:.3} \
+                     rad from q{n}): the external-encoder columns look swapped",
                     j + 1,
-                    e,
                     j + 1,
-                    k + 1,
-                    own,
-                    k + 1
                 ),
-                format!(
-                    "put joint {}'s external encoder in column ext{}",
-                    k + 1,
-                    k + 1
-                ),
+                format!("put joint {n}'s external encoder in column ext{n}"),
             ),
             (None, None) => continue,
         };
-        findings.push(Finding {
-            class: if degrees.is_some() {
-                MistakeClass::AngleUnit
-            } else {
-                MistakeClass::JointOrder
-            },
-            severity: Severity::Error,
-            message,
-            fix,
-            before: Residual::default(),
-            after: None,
-        });
+        findings.push(Finding::new(class, Severity::Error, message, fix));
     }
     findings
 }

@@ -18,9 +18,7 @@ use hapcal_io::SocketPlacement;
 use hapcal_kinematics::Chain;
 
 use crate::noise::PLAUSIBLE_FRAMES_ONLY_RMS_M;
-use crate::setup_families::{
-    JointColumn, Layout, SetupData, Tier, general_hypotheses, judge_with_fitted,
-};
+use crate::setup_families::{Layout, SetupData, Tier, general_hypotheses, judge_with_fitted};
 use crate::setup_findings::{
     Corrected, Finding, MistakeClass, Residual, ResidualOf, SetupReport, Severity, mm,
     tip_candidates,
@@ -154,15 +152,7 @@ fn nominal_socket_distance(chain: &Chain, placements: &[SocketPlacement]) -> Opt
         .filter(|p| p.sockets.len() == 2)
         .filter_map(|p| {
             let centres: Vec<nalgebra::Vector3<f64>> = (p.sockets.iter())
-                .map(|s| {
-                    let points: Vec<_> = (s.q.iter())
-                        .filter(|q| q.len() == chain.n_joints())
-                        .map(|q| chain.end_pose(&zero, q).translation.vector)
-                        .collect();
-                    let mean =
-                        points.iter().sum::<nalgebra::Vector3<f64>>() / points.len().max(1) as f64;
-                    trimmed_mean(&points, &trimmed_mean(&points, &mean))
-                })
+                .map(|s| centre(&tip_points(chain, &zero, s)))
                 .collect();
             Some((centres.first()? - centres.get(1)?).norm())
         })
@@ -214,8 +204,7 @@ pub fn socket_scatter(
             let points: Vec<Vector3<f64>> = poses.iter().map(|p| p.translation.vector).collect();
             // The socket's centre and scatter from the rows closest to it: a few rows off
             // their socket (a reading edited or mistyped) do not make the placement implausible.
-            let mean = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
-            let center = trimmed_mean(&points, &trimmed_mean(&points, &mean));
+            let center = centre(&points);
             let mut d: Vec<f64> = points.iter().map(|p| (p - center).norm_squared()).collect();
             d.sort_by(f64::total_cmp);
             let k = n_kept(points.len());
@@ -256,6 +245,26 @@ pub const KEPT_SHARE: f64 = 0.9;
 /// How many of `n` rows [`KEPT_SHARE`] keeps (at least one).
 fn n_kept(n: usize) -> usize {
     ((n as f64 * KEPT_SHARE).ceil() as usize).clamp(1, n.max(1))
+}
+
+/// The nominal tip positions (m) of the rows of `socket` that have `chain`'s joint count, at
+/// the parameters `x`.
+fn tip_points(
+    chain: &Chain,
+    x: &[f64],
+    socket: &hapcal_io::SocketSamples,
+) -> Vec<nalgebra::Vector3<f64>> {
+    (socket.q.iter())
+        .filter(|q| q.len() == chain.n_joints())
+        .map(|q| chain.end_pose(x, q).translation.vector)
+        .collect()
+}
+
+/// A socket's centre: the mean of the [`n_kept`] `points` closest to the mean of those
+/// closest to the mean of all (the origin for no points).
+fn centre(points: &[nalgebra::Vector3<f64>]) -> nalgebra::Vector3<f64> {
+    let mean = points.iter().sum::<nalgebra::Vector3<f64>>() / points.len().max(1) as f64;
+    trimmed_mean(points, &trimmed_mean(points, &mean))
 }
 
 /// The mean of the [`n_kept`] `points` closest to `center`.
@@ -352,19 +361,9 @@ fn rows_in_the_other_socket(
     let mut out = Vec::new();
     for p in placements.iter().filter(|p| p.sockets.len() == 2) {
         let points: Vec<Vec<nalgebra::Vector3<f64>>> = (p.sockets.iter())
-            .map(|s| {
-                (s.q.iter())
-                    .filter(|q| q.len() == chain.n_joints())
-                    .map(|q| chain.end_pose(&zero, q).translation.vector)
-                    .collect()
-            })
+            .map(|s| tip_points(chain, &zero, s))
             .collect();
-        let centres: Vec<nalgebra::Vector3<f64>> = (points.iter())
-            .map(|pts| {
-                let mean = pts.iter().sum::<nalgebra::Vector3<f64>>() / pts.len().max(1) as f64;
-                trimmed_mean(pts, &trimmed_mean(pts, &mean))
-            })
-            .collect();
+        let centres: Vec<nalgebra::Vector3<f64>> = points.iter().map(|pts| centre(pts)).collect();
         let apart = (centres[0] - centres[1]).norm();
         if !apart.is_finite() || apart <= 0.0 {
             continue;
@@ -384,21 +383,9 @@ fn rows_in_the_other_socket(
 /// The layout of socket files: joint columns by position (`q1..qn`), no lengths, no rows that
 /// pair readings with measurements.
 fn layout_of(input: &SocketInput<'_>) -> Layout {
-    Layout {
-        joints: (0..input.chain.n_joints())
-            .map(|j| JointColumn {
-                label: format!("q{}", j + 1),
-                words: column_label(input.joint_names, j),
-                revolute: true,
-            })
-            .collect(),
-        lengths: Vec::new(),
-        angle_unit: "rad",
-        length_unit: "m",
-        file_flags: true,
-        arms: Vec::new(),
-        paired_rows: false,
-    }
+    Layout::numbered(input.chain.n_joints(), |j| {
+        column_label(input.joint_names, j)
+    })
 }
 
 /// The socket folders' own hypotheses: another tip, the socket distance the nominal model
@@ -418,8 +405,7 @@ fn own_hypotheses(input: &SocketInput<'_>) -> Vec<Corrected<SocketData>> {
                 format!("use --tip {link}"),
                 SocketData {
                     chain: Some(chain),
-                    placements: input.placements.to_vec(),
-                    distance_m: input.socket_distance_m,
+                    ..given_data(input)
                 },
             ));
         }
@@ -444,9 +430,8 @@ fn own_hypotheses(input: &SocketInput<'_>) -> Vec<Corrected<SocketData>> {
             ),
             socket_distance_fix(given, d),
             SocketData {
-                chain: None,
-                placements: input.placements.to_vec(),
                 distance_m: d,
+                ..given_data(input)
             },
         ));
     }
@@ -510,26 +495,18 @@ pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
                 distance_m: d,
                 ..given_data(input)
             });
-            findings.insert(
-                0,
-                Finding {
-                    class: MistakeClass::SocketDistance,
-                    severity: Severity::Error,
-                    message: format!(
-                        "the sockets lie {} mm apart by the nominal model, {:.3} times the {} mm \
-                         given: a distance cannot be off by more than {:.0} % or {} times the \
-                         scatter",
-                        mm(d),
-                        d / given,
-                        mm(given),
-                        100.0 * SOCKET_DISTANCE_SHARE,
-                        SOCKET_DISTANCE_SCATTERS
-                    ),
-                    fix: socket_distance_fix(given, d),
-                    before: as_given,
-                    after,
-                },
+            let message = format!(
+                "the sockets lie {} mm apart by the nominal model, {:.3} times the {} mm given: a \
+                 distance cannot be off by more than {:.0} % or {SOCKET_DISTANCE_SCATTERS} times \
+                 the scatter",
+                mm(d),
+                d / given,
+                mm(given),
+                100.0 * SOCKET_DISTANCE_SHARE,
             );
+            let fix = socket_distance_fix(given, d);
+            let finding = Finding::new(MistakeClass::SocketDistance, Severity::Error, message, fix);
+            findings.insert(0, finding.with_residuals(as_given, after));
         }
     }
     let misfiled = rows_in_the_other_socket(input.chain, input.placements);
@@ -538,23 +515,16 @@ pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
             .map(|(file, line)| format!("{}:{line}", file.display()))
             .collect();
         let more = if misfiled.len() > 6 { ", …" } else { "" };
-        findings.push(Finding {
-            class: MistakeClass::WrongSocket,
-            severity: Severity::Error,
-            message: format!(
-                "{} row{} put the tip in the other socket of {} ({}{more})",
-                misfiled.len(),
-                if misfiled.len() == 1 { "" } else { "s" },
-                first
-                    .0
-                    .parent()
-                    .map_or_else(String::new, |p| p.display().to_string()),
-                lines.join(", ")
-            ),
-            fix: "move these rows to the other socket's file".to_owned(),
-            before: as_given,
-            after: None,
-        });
+        let message = format!(
+            "{} row{} put the tip in the other socket of {} ({}{more})",
+            misfiled.len(),
+            if misfiled.len() == 1 { "" } else { "s" },
+            (first.0.parent()).map_or_else(String::new, |p| p.display().to_string()),
+            lines.join(", ")
+        );
+        let fix = "move these rows to the other socket's file";
+        let finding = Finding::new(MistakeClass::WrongSocket, Severity::Error, message, fix);
+        findings.push(finding.with_residuals(as_given, None));
     }
     SetupReport::add_implausible(
         &mut findings,
@@ -570,17 +540,20 @@ pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
         "check --device, --tip and the columns and units of the socket files",
     );
     findings.sort_by_key(|f| f.severity != Severity::Error);
-    let n_rows = (input.placements.iter())
-        .flat_map(|p| &p.sockets)
-        .map(|s| s.q.len())
-        .sum();
     Ok(SetupReport {
-        n_rows,
+        n_rows: n_rows(input.placements),
         as_given,
         n_hypotheses,
         closest: judged.closest,
         findings,
     })
+}
+
+/// The rows of every socket of `placements`.
+fn n_rows(placements: &[SocketPlacement]) -> usize {
+    (placements.iter().flat_map(|p| &p.sockets))
+        .map(|s| s.q.len())
+        .sum()
 }
 
 /// The number of cells on the first line of the first socket file under `paths` (a placement
@@ -639,16 +612,10 @@ pub fn check_socket_plan(
         Ok(placements) => {
             // A scatter over a handful of rows says nothing about the setup (the calibration
             // refuses so few configurations in its own words).
-            let n_rows: usize = (placements.iter().flat_map(|p| &p.sockets))
-                .map(|s| s.q.len())
-                .sum();
-            if n_rows < MIN_CHECK_ROWS {
+            if n_rows(&placements) < MIN_CHECK_ROWS {
                 return Ok(SetupReport {
-                    n_rows,
-                    as_given: Residual::default(),
-                    n_hypotheses: 0,
-                    closest: None,
-                    findings: Vec::new(),
+                    n_rows: n_rows(&placements),
+                    ..SetupReport::default()
                 });
             }
             let mut report = check_sockets(&SocketInput {
@@ -699,22 +666,15 @@ pub fn check_socket_plan(
                 return Err(e.into());
             };
             let m = chain.n_joints();
-            let finding = Finding {
-                class: MistakeClass::TipLink,
-                severity: Severity::Error,
-                message: format!(
-                    "the socket files have {n} joint columns while the chain to the tip {} has \
-                     {m} moving joints: the ball sits on {link}",
-                    plan.tip
-                ),
-                fix: format!("use --tip {link}"),
-                before: Residual::default(),
-                after: Some(after),
-            };
-            let n_rows = hapcal_io::read_mukca_paths(&plan.data, n)
-                .map(|ps| ps.iter().flat_map(|p| &p.sockets).map(|s| s.q.len()).sum())
-                .unwrap_or(0);
-            Ok(SetupReport::of_unread(n_rows, finding, after))
+            let message = format!(
+                "the socket files have {n} joint columns while the chain to the tip {} has {m} \
+                 moving joints: the ball sits on {link}",
+                plan.tip
+            );
+            let fix = format!("use --tip {link}");
+            let finding = Finding::new(MistakeClass::TipLink, Severity::Error, message, fix);
+            let rows = hapcal_io::read_mukca_paths(&plan.data, n).map_or(0, |ps| n_rows(&ps));
+            Ok(SetupReport::of_unread(rows, finding, after))
         }
     }
 }
@@ -742,12 +702,7 @@ mod tests {
             urdf: Some(&urdf),
             tip: "ball_link",
         };
-        let given = SocketData {
-            chain: None,
-            placements: placements.clone(),
-            distance_m: input.socket_distance_m,
-        };
-        let hypotheses = socket_hypotheses(&input, &given, true);
+        let hypotheses = socket_hypotheses(&input, &given_data(&input), true);
         crate::setup_families::assert_families(
             crate::setup_families::DataKind::SocketFolders,
             &hypotheses,
