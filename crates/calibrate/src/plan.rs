@@ -513,23 +513,13 @@ pub fn plan_poses_weighted(
     let first: Vec<usize> = (0..cfg.count).collect();
     let random =
         design_quality(&blocks, &first).context("scoring a random set of the same size")?;
-    let mut readings: Vec<Vec<f64>> = design
-        .selected
-        .iter()
+    let mut readings: Vec<Vec<f64>> = (design.selected.iter())
         .map(|&c| candidates[c].clone())
         .collect();
-    let refined_value = if cfg.refine {
-        Some(coordinate_exchange(
-            &mut readings,
-            &row,
-            cfg.criterion,
-            &weight,
-            &device.joint_limits(),
-            50,
-        )?)
-    } else {
-        None
-    };
+    let limits = device.joint_limits();
+    let refined_value = (cfg.refine)
+        .then(|| coordinate_exchange(&mut readings, &row, cfg.criterion, &weight, &limits, 50))
+        .transpose()?;
     Ok(PosePlan {
         readings,
         design,
@@ -540,10 +530,7 @@ pub fn plan_poses_weighted(
     })
 }
 
-/// `Ok` when `count` poses can be chosen from `n_candidates`.
-///
-/// # Errors
-/// A count of 0 or above the candidates.
+/// `Ok` when `count` poses can be chosen from `n_candidates`, else the error in words.
 fn check_count(count: usize, n_candidates: usize) -> Result<()> {
     if count == 0 || count > n_candidates {
         bail!(

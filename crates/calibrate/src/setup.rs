@@ -250,10 +250,7 @@ const POLISH_STEPS: usize = 8;
 const POLISH_TOLERANCE: f64 = 1e-6;
 
 impl Frames {
-    /// The block iterations' start from identity frames: the instrument frame by Kabsch with
-    /// the orientations' term, then each marker's offset (the mean of the back-projected
-    /// measurements: `R₀·R_tip` is orthogonal) and rotation (the nearest rotation to the sum
-    /// of `(R₀·R_tip)ᵀ·R_meas`), each step lowering `Σ|e_p|² + w·Σ‖ΔR‖²_F`; at most
+    /// The block coordinate descent of [`closed_form_residual`] from identity frames, at most
     /// [`POLISHED_ITERATIONS`], fewer when the frames stop moving. The first iteration's
     /// rotations by SVD (a global answer from any start), the next ones by ascent from the
     /// last (the frames move little from one iteration to the next).
@@ -871,7 +868,6 @@ fn layout_of(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Layout {
         lengths,
         angle_unit: unit_name(&ANGLE_UNITS, input.units.angle.to_rad()),
         length_unit: unit_name(&LENGTH_UNITS, input.units.length.to_m()),
-        file_flags: true,
         arms,
         paired_rows: true,
     }
@@ -900,12 +896,7 @@ fn own_hypotheses(
 /// The files read again in the other angle unit (all angles, or only the orientation angles);
 /// none without orientation angles (`phix, phiy, phiz`) or a revolute joint.
 fn angle_rereads(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Corrected<MeasuredData>> {
-    let SetupInput {
-        robot,
-        tables,
-        units,
-        ..
-    } = input;
+    let (robot, tables, units) = (input.robot, input.tables, &input.units);
     let has_rpy = headers.iter().flatten().any(|c| c.starts_with("phix"));
     if !has_rpy || robot.prismatic.iter().all(|p| *p) {
         return Vec::new();
@@ -942,13 +933,13 @@ fn angle_rereads(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correct
         }
     }
     vec![
-        Corrected::new(
+        corrected(
             MistakeClass::AngleUnit,
             format!("the angles are in {other_word}, read as {unit_word}"),
-            flag.to_owned(),
-            MeasuredData::tables(reread),
+            flag,
+            reread,
         ),
-        Corrected::new(
+        corrected(
             MistakeClass::OrientationUnit,
             format!(
                 "the orientation angles phix, phiy, phiz are in {other_word} while the joint \
@@ -958,9 +949,19 @@ fn angle_rereads(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Correct
                 "convert phix, phiy, phiz to {unit_word} in the file ({flag} would convert the \
                  joint readings too)"
             ),
-            MeasuredData::tables(mixed),
+            mixed,
         ),
     ]
+}
+
+/// The hypothesis of `class` (`what` the mistake is, its `fix`) whose data are `tables`.
+fn corrected(
+    class: MistakeClass,
+    what: impl Into<String>,
+    fix: impl Into<String>,
+    tables: Vec<MeasurementTable>,
+) -> Corrected<MeasuredData> {
+    Corrected::new(class, what, fix, MeasuredData::tables(tables))
 }
 
 /// The conventions of the orientations (quaternion order and conjugate, Euler orders) and of
@@ -970,9 +971,6 @@ fn orientation_conventions(
     headers: &[Vec<String>],
 ) -> Vec<Corrected<MeasuredData>> {
     let mut out = Vec::new();
-    let mut push = |class, what: String, fix: String, t: Vec<MeasurementTable>| {
-        out.push(Corrected::new(class, what, fix, MeasuredData::tables(t)));
-    };
     let has_markers = tables.iter().any(|t| t.n_markers > 0);
     let has_orientation = tables.iter().any(|t| t.has_orientation);
     let has_rpy = headers.iter().flatten().any(|c| c.starts_with("phix"));
@@ -980,45 +978,42 @@ fn orientation_conventions(
         has_orientation && (!has_rpy || headers.iter().flatten().any(|c| c.starts_with("qw")));
     // Orientations.
     if has_quaternion {
-        push(
+        out.push(corrected(
             MistakeClass::QuaternionOrder,
-            "the quaternion columns qw, qx, qy, qz hold x, y, z, w (scalar last)".to_owned(),
+            "the quaternion columns qw, qx, qy, qz hold x, y, z, w (scalar last)",
             "rename the columns qw, qx, qy, qz to qx, qy, qz, qw (the scalar is the last \
-             component)"
-                .to_owned(),
+             component)",
             map_rotations(tables, &|r| {
                 let (w, x, y, z) = (r.w, r.i, r.j, r.k);
                 // Read as (w, x, y, z) = (x', y', z', w').
                 UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(z, w, x, y))
             }),
-        );
+        ));
     }
     if has_orientation {
-        push(
+        out.push(corrected(
             MistakeClass::QuaternionInverse,
-            "the orientations are inverted (the instrument in the marker's frame)".to_owned(),
+            "the orientations are inverted (the instrument in the marker's frame)",
             if has_rpy {
                 "invert the orientations: negate phix, phiy, phiz and reverse their order of \
                  rotation, or export the marker in the instrument's frame"
-                    .to_owned()
             } else {
                 "negate qx, qy, qz (the conjugate quaternion), or export the marker in the \
                  instrument's frame"
-                    .to_owned()
             },
             map_rotations(tables, &|r| r.inverse()),
-        );
+        ));
     }
     if has_rpy {
-        push(
+        out.push(corrected(
             MistakeClass::EulerOrder,
-            "roll and yaw are swapped: phix holds the yaw and phiz the roll".to_owned(),
-            "swap the columns phix and phiz".to_owned(),
+            "roll and yaw are swapped: phix holds the yaw and phiz the roll",
+            "swap the columns phix and phiz",
             map_rotations(tables, &|r| {
                 let (roll, pitch, yaw) = r.euler_angles();
                 UnitQuaternion::from_euler_angles(yaw, pitch, roll)
             }),
-        );
+        ));
         // The angles composed in another order than R = Rz(phiz)·Ry(phiy)·Rx(phix).
         for order in ["XYZ", "XZY", "YXZ", "YZX", "ZXY"] {
             let product = order
@@ -1026,7 +1021,7 @@ fn orientation_conventions(
                 .map(|c| format!("R{}(phi{})", c.to_ascii_lowercase(), c.to_ascii_lowercase()))
                 .collect::<Vec<_>>()
                 .join("·");
-            push(
+            out.push(corrected(
                 MistakeClass::EulerOrder,
                 format!(
                     "the orientation angles compose as R = {product} ({order} Euler angles), read \
@@ -1047,7 +1042,7 @@ fn orientation_conventions(
                         .chars()
                         .fold(UnitQuaternion::identity(), |acc, c| acc * axis(c))
                 }),
-            );
+            ));
         }
     }
 
@@ -1059,28 +1054,21 @@ fn orientation_conventions(
     if has_markers {
         let mut m = nalgebra::Matrix3::identity();
         m[(2, 2)] = -1.0;
-        push(
+        out.push(corrected(
             MistakeClass::MirroredAxis,
             "the positions are in a left-handed frame: one axis mirrored or two axes swapped \
-             (the fit cannot tell which: each is the other up to a rotation)"
-                .to_owned(),
+             (the fit cannot tell which: each is the other up to a rotation)",
             "find the axis the export mirrors (negate that column of the positions) or the two \
-             axes it swaps (swap those columns), and mirror the orientations with them"
-                .to_owned(),
+             axes it swaps (swap those columns), and mirror the orientations with them",
             reflect(tables, &m),
-        );
+        ));
     }
     out
 }
 
 /// The tips: given in the wrong order, or one link off the one the markers sit on.
 fn tip_hypotheses(input: &SetupInput<'_>, headers: &[Vec<String>]) -> Vec<Corrected<MeasuredData>> {
-    let SetupInput {
-        robot,
-        tables,
-        units,
-        ..
-    } = input;
+    let (robot, tables, units) = (input.robot, input.tables, &input.units);
     let mut out = Vec::new();
     let n = robot.joint_names.len();
     let paths: Vec<PathBuf> = tables.iter().map(|t| t.path.clone()).collect();
@@ -1373,21 +1361,21 @@ fn part_unit_hypotheses(
             continue;
         };
         let factor = part_m / file_m;
-        let mut corrected = tables.to_vec();
+        let mut rescaled = tables.to_vec();
         for &i in &rows {
-            for m in &mut corrected[t].rows[i].markers {
+            for m in &mut rescaled[t].rows[i].markers {
                 m.position_m = m.position_m.map(|v| v * factor);
             }
         }
         let where_ = rows_of_file(table, &rows);
-        out.push(Corrected::new(
+        out.push(corrected(
             MistakeClass::LengthUnit,
             format!("{where_} look like {part_name} while the rest are in {file_name}"),
             format!(
                 "no flag reads part of a file: convert the positions of {where_} to {file_name} \
                  (×{factor}) or record them again"
             ),
-            MeasuredData::tables(corrected),
+            rescaled,
         ));
     }
     out
@@ -1401,46 +1389,37 @@ fn position_reflections(tables: &[MeasurementTable]) -> Vec<Corrected<MeasuredDa
         return Vec::new();
     }
     let axes = ["x", "y", "z"];
-    let mut out = Vec::new();
-    let mut push = |m: nalgebra::Matrix3<f64>, what: String, fix: String| {
-        out.push(Corrected::new(
-            MistakeClass::MirroredAxis,
-            what,
-            fix,
-            MeasuredData::tables(map_rows(tables, &|row| {
-                for s in &mut row.markers {
-                    s.position_m = (m * Vector3::from(s.position_m)).into();
-                }
-            })),
-        ));
+    let reflected = |m: nalgebra::Matrix3<f64>, what: String, fix: String| {
+        let positions = map_rows(tables, &|row| {
+            for s in &mut row.markers {
+                s.position_m = (m * Vector3::from(s.position_m)).into();
+            }
+        });
+        corrected(MistakeClass::MirroredAxis, what, fix, positions)
     };
-    for (a, name) in axes.iter().enumerate() {
+    let mirrored = axes.iter().enumerate().map(|(a, name)| {
         let mut m = nalgebra::Matrix3::identity();
         m[(a, a)] = -1.0;
-        push(
+        let what = format!("the positions' {name} axis is mirrored while the orientations are not");
+        reflected(
             m,
-            format!("the positions' {name} axis is mirrored while the orientations are not"),
+            what,
             format!("negate the {name} columns of the positions"),
-        );
-    }
-    for (a, b) in [(0, 1), (0, 2), (1, 2)] {
-        let mut m = nalgebra::Matrix3::zeros();
-        m[(a, b)] = 1.0;
-        m[(b, a)] = 1.0;
-        m[(3 - a - b, 3 - a - b)] = 1.0;
-        push(
+        )
+    });
+    let swapped = [(0, 1), (0, 2), (1, 2)].map(|(a, b)| {
+        let mut m = nalgebra::Matrix3::identity();
+        m.swap_rows(a, b);
+        let (a, b) = (axes[a], axes[b]);
+        let what =
+            format!("the positions' {a} and {b} axes are exchanged while the orientations are not");
+        reflected(
             m,
-            format!(
-                "the positions' {} and {} axes are exchanged while the orientations are not",
-                axes[a], axes[b]
-            ),
-            format!(
-                "swap the {} and {} columns of the positions",
-                axes[a], axes[b]
-            ),
-        );
-    }
-    out
+            what,
+            format!("swap the {a} and {b} columns of the positions"),
+        )
+    });
+    mirrored.chain(swapped).collect()
 }
 
 /// Joints whose readings never change (spread ≤ [`FROZEN_SPREAD`]) over two or more rows
@@ -1679,10 +1658,7 @@ pub fn check_plan(plan: &crate::inputs::Plan) -> Result<Option<SetupReport>> {
     let tips: Vec<String> = std::iter::once(plan.tip.clone())
         .chain(plan.tips.iter().cloned())
         .collect();
-    let is_urdf = plan
-        .device
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    let is_urdf = (plan.device.extension()).is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
     // The robot the calibration builds: a URDF's read joints off the measured paths load it.
     let robot = crate::data::robot_of(plan, &device)?;
     let read = PlanFiles {
@@ -2362,10 +2338,8 @@ impl LengthsBeyond<'_> {
     }
 }
 
-/// [`after_fit`] as the commands apply it: the warning to print when `cfg` accepts the data,
-/// or the error. `before` holds the classes of the findings the check before the fit warned
-/// of ([`Gated::classes`]): after a latency warning, lengths beyond tolerance are the lag
-/// the geometric parameters absorbed, a latency warning and not another device.
+/// [`after_fit`] as the commands apply it (`before` as it takes it, [`Gated::classes`]): the
+/// line to print, a warning or an error `cfg` accepts, or the error.
 ///
 /// # Errors
 /// A finding without [`SetupConfig::accept_setup`].

@@ -190,16 +190,11 @@ fn parts(
     at: usize,
 ) -> (Vec<MeasurementTable>, Vec<MeasurementTable>) {
     let mut before = tables.to_vec();
-    let mut after = Vec::new();
-    if let Some(t) = before.get_mut(f) {
-        let mut second = t.clone();
-        let rows = std::mem::take(&mut t.rows);
-        let (a, b) = rows.split_at(at.min(rows.len()));
-        t.rows = a.to_vec();
-        second.rows = b.to_vec();
-        after.push(second);
-    }
-    (before, after)
+    let after = before.get_mut(f).map(|t| MeasurementTable {
+        rows: t.rows.split_off(at.min(t.rows.len())),
+        ..t.clone()
+    });
+    (before, after.into_iter().collect())
 }
 
 /// Whether a shift of file `f`'s samples from one of them on takes [`PROBE_SHARE`] or more

@@ -330,9 +330,6 @@ pub(crate) struct Layout {
     pub(crate) angle_unit: &'static str,
     /// The length unit the files were read with (a name of [`LENGTH_UNITS`]).
     pub(crate) length_unit: &'static str,
-    /// The whole file's units as a flag (`--angle-unit`, `--length-unit`) or `None` where the
-    /// data have no such flag (then the fix names the conversion).
-    pub(crate) file_flags: bool,
     /// The joints of each arm of a tree that no other arm moves, in chain order; empty for a
     /// chain.
     pub(crate) arms: Vec<(String, Vec<usize>)>,
@@ -343,8 +340,7 @@ pub(crate) struct Layout {
 
 impl Layout {
     /// Revolute joint columns `q1`, `q2`, … (`words(j)` names joint `j`, from 0) read in
-    /// radians, lengths in metres, the whole file's units as flags; no lengths, arms or paired
-    /// rows.
+    /// radians, lengths in metres; no lengths, arms or paired rows.
     pub(crate) fn numbered(n_joints: usize, words: impl Fn(usize) -> String) -> Layout {
         Layout {
             joints: (0..n_joints)
@@ -356,7 +352,6 @@ impl Layout {
                 .collect(),
             angle_unit: "rad",
             length_unit: "m",
-            file_flags: true,
             ..Layout::default()
         }
     }
@@ -417,22 +412,14 @@ fn file_units<D: SetupData>(data: &D, layout: &Layout, out: &mut Vec<Corrected<D
     let joints = &layout.joints;
     let any_revolute = joints.iter().any(|c| c.revolute);
     if any_revolute {
-        for (unit, words, factor, ratio) in others(&ANGLE_UNITS, layout.angle_unit) {
-            let fix = if layout.file_flags {
-                format!("--angle-unit {unit}")
-            } else {
-                format!(
-                    "convert the joint readings to radians (multiply by {})",
-                    factor_text(factor)
-                )
-            };
+        for (unit, words, ratio) in others(&ANGLE_UNITS, layout.angle_unit) {
             out.push(Corrected::new(
                 MistakeClass::AngleUnit,
                 format!(
                     "the joint readings are in {words}, read as {}",
                     unit_words(&ANGLE_UNITS, layout.angle_unit)
                 ),
-                fix,
+                format!("--angle-unit {unit}"),
                 data.with_joints(&|q: &mut [f64]| {
                     for (v, c) in q.iter_mut().zip(joints) {
                         if c.revolute {
@@ -444,21 +431,14 @@ fn file_units<D: SetupData>(data: &D, layout: &Layout, out: &mut Vec<Corrected<D
         }
     }
     if !layout.lengths.is_empty() {
-        for (unit, words, factor, ratio) in others(&LENGTH_UNITS, layout.length_unit) {
+        for (unit, words, ratio) in others(&LENGTH_UNITS, layout.length_unit) {
             out.push(Corrected::new(
                 MistakeClass::LengthUnit,
                 format!(
                     "the positions and distances are in {words}, read as {}",
                     unit_words(&LENGTH_UNITS, layout.length_unit)
                 ),
-                if layout.file_flags {
-                    format!("--length-unit {unit}")
-                } else {
-                    format!(
-                        "convert the lengths to metres (multiply by {})",
-                        factor_text(factor)
-                    )
-                },
+                format!("--length-unit {unit}"),
                 data.with_lengths(None, ratio),
             ));
         }
@@ -470,7 +450,7 @@ fn file_units<D: SetupData>(data: &D, layout: &Layout, out: &mut Vec<Corrected<D
 fn column_units<D: SetupData>(data: &D, layout: &Layout, out: &mut Vec<Corrected<D>>) {
     let joints = &layout.joints;
     for (j, c) in joints.iter().enumerate().filter(|(_, c)| c.revolute) {
-        for (unit, words, _, ratio) in others(&ANGLE_UNITS, layout.angle_unit) {
+        for (unit, words, ratio) in others(&ANGLE_UNITS, layout.angle_unit) {
             out.push(Corrected::new(
                 MistakeClass::ColumnUnit,
                 format!(
@@ -485,7 +465,7 @@ fn column_units<D: SetupData>(data: &D, layout: &Layout, out: &mut Vec<Corrected
     }
     if layout.lengths.len() > 1 {
         for (g, group) in layout.lengths.iter().enumerate() {
-            for (unit, words, _, ratio) in others(&LENGTH_UNITS, layout.length_unit) {
+            for (unit, words, ratio) in others(&LENGTH_UNITS, layout.length_unit) {
                 out.push(Corrected::new(
                     MistakeClass::LengthUnit,
                     format!(
@@ -847,8 +827,7 @@ fn permutations<D: SetupData>(data: &D, layout: &Layout, tier: Tier, out: &mut V
                 joints[last].words, joints[first].words, joints[first].words, joints[last].words
             ),
             "reverse the order of the joint columns (the first joint of the chain is the one at \
-             the base)"
-                .to_owned(),
+             the base)",
             data.with_joints(&|q: &mut [f64]| {
                 let src: Vec<f64> = q.to_vec();
                 for (slot, from) in order.iter().zip(order.iter().rev()) {
@@ -868,7 +847,6 @@ fn permutations<D: SetupData>(data: &D, layout: &Layout, tier: Tier, out: &mut V
                 {
                     continue;
                 }
-                let (ja, jb) = (ja.clone(), jb.clone());
                 let labels = |js: &[usize]| {
                     js.iter()
                         .map(|&j| joints[j].label.as_str())
@@ -880,11 +858,11 @@ fn permutations<D: SetupData>(data: &D, layout: &Layout, tier: Tier, out: &mut V
                     format!("the readings of the {arm_a} arm and of the {arm_b} arm are exchanged"),
                     format!(
                         "exchange the columns {} with {}, in order",
-                        labels(&ja),
-                        labels(&jb)
+                        labels(ja),
+                        labels(jb)
                     ),
                     data.with_joints(&|q: &mut [f64]| {
-                        for (a, b) in ja.iter().zip(&jb) {
+                        for (a, b) in ja.iter().zip(jb) {
                             if *a < q.len() && *b < q.len() {
                                 q.swap(*a, *b);
                             }
@@ -987,8 +965,7 @@ pub(crate) fn row_hypotheses<D: SetupData>(
             ),
             "check the export of these rows: the joint readings and the measurements of a row \
              must be taken at the same instant (rows copied, re-sorted or merged from another \
-             recording)"
-                .to_owned(),
+             recording)",
             d,
         ));
     }
@@ -1155,16 +1132,16 @@ fn shift_words(shift: isize, from: Option<(&str, u64)>) -> (String, String) {
     }
 }
 
-/// The units of `units` other than the one named `read`, each with its name, words, SI factor
-/// and the ratio that turns a value read in `read` into one in it.
+/// The units of `units` other than the one named `read`, each with its name, words and the
+/// ratio that turns a value read in `read` into one in it.
 fn others(
     units: &'static [(&'static str, &'static str, f64)],
     read: &'static str,
-) -> impl Iterator<Item = (&'static str, &'static str, f64, f64)> {
+) -> impl Iterator<Item = (&'static str, &'static str, f64)> {
     let read_factor = unit_factor(units, read);
     (units.iter())
         .filter(move |u| u.0 != read)
-        .map(move |&(name, words, factor)| (name, words, factor, factor / read_factor))
+        .map(move |&(name, words, factor)| (name, words, factor / read_factor))
 }
 
 /// The SI factor of the unit named `name` in `units` (1 when unknown).
@@ -1175,21 +1152,6 @@ fn unit_factor(units: &[(&str, &str, f64)], name: &str) -> f64 {
 /// The words of the unit named `name` in `units`.
 fn unit_words(units: &[(&'static str, &'static str, f64)], name: &str) -> &'static str {
     (units.iter()).find(|u| u.0 == name).map_or("?", |u| u.1)
-}
-
-/// A conversion factor as the fixes write it: `π/180`, `π/200`, `2π`, `0.0254`.
-fn factor_text(factor: f64) -> String {
-    let pi = std::f64::consts::PI;
-    for (f, text) in [
-        (pi / 180.0, "π/180"),
-        (pi / 200.0, "π/200"),
-        (2.0 * pi, "2π"),
-    ] {
-        if (factor - f).abs() < 1e-12 {
-            return text.to_owned();
-        }
-    }
-    format!("{factor}")
 }
 
 impl Residual {

@@ -598,11 +598,16 @@ pub(crate) struct Corrected<T> {
 }
 
 impl<T> Corrected<T> {
-    pub(crate) fn new(class: MistakeClass, what: String, fix: String, data: T) -> Self {
+    pub(crate) fn new(
+        class: MistakeClass,
+        what: impl Into<String>,
+        fix: impl Into<String>,
+        data: T,
+    ) -> Self {
         Corrected {
             class,
-            what,
-            fix,
+            what: what.into(),
+            fix: fix.into(),
             data,
             evidence: Vec::new(),
         }

@@ -83,7 +83,7 @@ pub fn check_logs(
     // A distance residual costs microseconds a row: every family, whatever the residual; the
     // free scales and couplings when the residual is more than right data leave.
     let screen = |d: &LogRows| Some(residual(&d.0));
-    let mut hypotheses = log_hypotheses(&chain, &given, true, paths);
+    let mut hypotheses = log_hypotheses(&chain, &given, paths);
     let layout = log_layout(n_joints);
     let judged = judge_with_fitted(as_given, &given, &layout, &mut hypotheses, &screen);
     let n_hypotheses = hypotheses.len();
@@ -140,31 +140,29 @@ pub fn check_logs(
     })
 }
 
-/// Every hypothesis of a mistake for the log rows `given` on `chain` (the general families;
-/// per column and per row too when the data are `suspicious`).
+/// Every hypothesis of a mistake for the log rows `given` (of the logs `paths`) on `chain`:
+/// the general families, per column and per row too (a distance residual costs microseconds a
+/// row).
 fn log_hypotheses(
     chain: &hapcal_kinematics::Chain,
     given: &LogRows,
-    suspicious: bool,
     paths: &[PathBuf],
 ) -> Vec<Corrected<LogRows>> {
     let layout = log_layout(chain.n_joints());
     let mut hypotheses = general_hypotheses(given, &layout, Tier::Always);
-    if suspicious {
-        hypotheses.extend(general_hypotheses(given, &layout, Tier::Suspicious));
-        let checked = thinned(given.0.clone());
-        let e = distance_errors(chain, &checked);
-        let zero = median(e.clone());
-        let per_row: Vec<(usize, u64, f64)> = (checked.iter().zip(&e))
-            .map(|(r, e)| (0, r.line, (e - zero).abs()))
-            .collect();
-        let names = vec![log_names(paths)];
-        hypotheses.extend(row_hypotheses(given, &layout, &per_row, &names, |drop| {
-            let mut rows = checked.clone();
-            rows.retain(|r| !drop.contains(&(0, r.line)));
-            Some(LogRows(rows))
-        }));
-    }
+    hypotheses.extend(general_hypotheses(given, &layout, Tier::Suspicious));
+    let checked = thinned(given.0.clone());
+    let e = distance_errors(chain, &checked);
+    let zero = median(e.clone());
+    let per_row: Vec<(usize, u64, f64)> = (checked.iter().zip(&e))
+        .map(|(r, e)| (0, r.line, (e - zero).abs()))
+        .collect();
+    let names = vec![log_names(paths)];
+    hypotheses.extend(row_hypotheses(given, &layout, &per_row, &names, |drop| {
+        let mut rows = checked.clone();
+        rows.retain(|r| !drop.contains(&(0, r.line)));
+        Some(LogRows(rows))
+    }));
     hypotheses
 }
 
@@ -577,7 +575,7 @@ mod tests {
         let (device, log) = reference();
         let rows = hapcal_io::read_log(&log, &device).expect("log").rows;
         let chain = device.chain().expect("chain");
-        let hypotheses = log_hypotheses(&chain, &LogRows(rows), true, &[log]);
+        let hypotheses = log_hypotheses(&chain, &LogRows(rows), &[log]);
         crate::setup_families::assert_families(
             crate::setup_families::DataKind::HapticLogs,
             &hypotheses,

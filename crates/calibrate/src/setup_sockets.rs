@@ -439,18 +439,12 @@ fn own_hypotheses(input: &SocketInput<'_>) -> Vec<Corrected<SocketData>> {
 }
 
 /// Every hypothesis of a mistake for `input` (the data as given, `given`): the folders' own
-/// families and the general ones, per column too when the data are `suspicious`.
-fn socket_hypotheses(
-    input: &SocketInput<'_>,
-    given: &SocketData,
-    suspicious: bool,
-) -> Vec<Corrected<SocketData>> {
+/// families and the general ones, per column too (a socket scatter costs microseconds a row).
+fn socket_hypotheses(input: &SocketInput<'_>, given: &SocketData) -> Vec<Corrected<SocketData>> {
     let layout = layout_of(input);
     let mut hypotheses = own_hypotheses(input);
     hypotheses.extend(general_hypotheses(given, &layout, Tier::Always));
-    if suspicious {
-        hypotheses.extend(general_hypotheses(given, &layout, Tier::Suspicious));
-    }
+    hypotheses.extend(general_hypotheses(given, &layout, Tier::Suspicious));
     hypotheses
 }
 
@@ -465,7 +459,7 @@ pub fn check_sockets(input: &SocketInput<'_>) -> anyhow::Result<SetupReport> {
     let given = given_data(input);
     // A socket scatter costs microseconds a row: every family, whatever the residual; the
     // free scales and couplings when the scatter is more than right data leave.
-    let mut hypotheses = socket_hypotheses(input, &given, true);
+    let mut hypotheses = socket_hypotheses(input, &given);
     let screen = |d: &SocketData| {
         let chain = d.chain.as_ref().unwrap_or(input.chain);
         Some(
@@ -600,10 +594,7 @@ pub fn check_socket_plan(
 ) -> anyhow::Result<SetupReport> {
     let chain = device.chain()?;
     let names: Vec<String> = device.joints.iter().map(|j| j.name.clone()).collect();
-    let is_urdf = plan
-        .device
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    let is_urdf = (plan.device.extension()).is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
     let urdf = is_urdf.then_some(plan.device.as_path());
     // Read with the units and column edits given, the joint ranges open: a file in degrees
     // is a hypothesis here, not a reading error.
@@ -646,19 +637,14 @@ pub fn check_socket_plan(
             let Some(n) = n_columns(&plan.data).filter(|&n| n != chain.n_joints()) else {
                 return Err(e.into());
             };
+            let placements = hapcal_io::read_mukca_paths(&plan.data, n).unwrap_or_default();
+            let rms = |r: &Residual| r.length_rms_m.unwrap_or(f64::INFINITY);
             let mut best: Option<(String, Residual)> = None;
             for (link, other) in tip_chains(urdf, &plan.tip, n) {
-                let Ok(placements) = hapcal_io::read_mukca_paths(&plan.data, n) else {
-                    continue;
-                };
                 let Some(r) = socket_scatter(&other, &placements, plan.socket_distance_m) else {
                     continue;
                 };
-                let better = best.as_ref().is_none_or(|(_, b)| {
-                    r.length_rms_m.unwrap_or(f64::INFINITY)
-                        < b.length_rms_m.unwrap_or(f64::INFINITY)
-                });
-                if r.is_plausible() && better {
+                if r.is_plausible() && best.as_ref().is_none_or(|(_, b)| rms(&r) < rms(b)) {
                     best = Some((link, r));
                 }
             }
@@ -673,8 +659,7 @@ pub fn check_socket_plan(
             );
             let fix = format!("use --tip {link}");
             let finding = Finding::new(MistakeClass::TipLink, Severity::Error, message, fix);
-            let rows = hapcal_io::read_mukca_paths(&plan.data, n).map_or(0, |ps| n_rows(&ps));
-            Ok(SetupReport::of_unread(rows, finding, after))
+            Ok(SetupReport::of_unread(n_rows(&placements), finding, after))
         }
     }
 }
@@ -702,7 +687,7 @@ mod tests {
             urdf: Some(&urdf),
             tip: "ball_link",
         };
-        let hypotheses = socket_hypotheses(&input, &given_data(&input), true);
+        let hypotheses = socket_hypotheses(&input, &given_data(&input));
         crate::setup_families::assert_families(
             crate::setup_families::DataKind::SocketFolders,
             &hypotheses,
