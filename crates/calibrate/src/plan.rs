@@ -1324,7 +1324,6 @@ impl PlanningInformation {
         let id = &out.fitted.identified;
         let free_layout = &id.layout;
         let free = indices_in(layout, free_layout, "")?;
-        let n_free = free.len();
         let n_measured_residuals = planning.n_measured_residuals;
         let n_candidate_residuals = planning.rows_per_pose * planning.candidates.len();
         let weights = out.weights;
@@ -1339,13 +1338,11 @@ impl PlanningInformation {
         };
         let s = sigma_m / sigma_w;
         let rank = crate::fit::identify_config(None).rank.with_sigma(s);
-        let sub = |rows: std::ops::Range<usize>| {
-            Mat::from_fn(rows.len(), n_free, |i, k| jac[(rows.start + i, free[k])])
-        };
-        let all: Vec<usize> = (0..n_free).collect();
-        let stacked = sub(0..n_measured_residuals + n_candidate_residuals);
+        let all: Vec<usize> = (0..free.len()).collect();
+        let n_residuals = n_measured_residuals + n_candidate_residuals;
+        let stacked = block_over(jac, &free, &all, 0, n_residuals);
         let ident = identifiability(stacked.as_ref(), free_layout, &all, &rank);
-        let measured_jac = sub(0..n_measured_residuals);
+        let measured_jac = block_over(jac, &free, &all, 0, n_measured_residuals);
         let seen = identifiability(measured_jac.as_ref(), free_layout, &all, &rank);
         let kept = ident.kept.clone();
         let columns: Vec<String> = (kept.iter())
@@ -1379,7 +1376,7 @@ impl PlanningInformation {
             planning,
             (&free, &kept),
             free_layout,
-            n_measured_residuals + n_candidate_residuals,
+            n_residuals,
             n_workspace,
         );
         Ok(Self {

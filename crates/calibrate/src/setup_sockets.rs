@@ -58,13 +58,13 @@ struct SocketData {
 
 impl SetupData for SocketData {
     fn with_joints(&self, f: &(dyn Fn(&mut [f64]) + Sync)) -> Self {
+        let mut placements = self.placements.clone();
+        for q in (placements.iter_mut().flat_map(|p| &mut p.sockets)).flat_map(|s| &mut s.q) {
+            f(&mut q[..]);
+        }
         SocketData {
             chain: None,
-            placements: map_q(&self.placements, &|q| {
-                let mut q = q.to_vec();
-                f(&mut q);
-                q
-            }),
+            placements,
             distance_m: self.distance_m,
         }
     }
@@ -285,26 +285,6 @@ fn trimmed_mean(
 /// [`socket_scatter`]: only ratios of the scale enter the judgement, so any length works.
 const TURN_LEVER_M: f64 = 1.0;
 
-/// `placements` with every joint reading mapped by `f` (one row in, one out).
-fn map_q(placements: &[SocketPlacement], f: &dyn Fn(&[f64]) -> Vec<f64>) -> Vec<SocketPlacement> {
-    let mut out = placements.to_vec();
-    for s in out.iter_mut().flat_map(|p| &mut p.sockets) {
-        for q in &mut s.q {
-            *q = f(q);
-        }
-    }
-    out
-}
-
-/// The joint's name with its column number: `joint_a3 (column 3)`.
-fn column_label(names: &[String], j: usize) -> String {
-    format!(
-        "{} (column {})",
-        names.get(j).map_or("?", String::as_str),
-        j + 1
-    )
-}
-
 /// The links joined to `link` by fixed joints only (children and parents, transitively),
 /// `link` excluded: the other names of the same rigid body.
 fn fixed_relatives(urdf: &urdf_rs::Robot, link: &str) -> Vec<String> {
@@ -380,11 +360,12 @@ fn rows_in_the_other_socket(
     out
 }
 
-/// The layout of socket files: joint columns by position (`q1..qn`), no lengths, no rows that
-/// pair readings with measurements.
+/// The layout of socket files: joint columns by position (`q1..qn`, in words `joint_a3
+/// (column 3)`), no lengths, no rows that pair readings with measurements.
 fn layout_of(input: &SocketInput<'_>) -> Layout {
+    let name = |j: usize| input.joint_names.get(j).map_or("?", String::as_str);
     Layout::numbered(input.chain.n_joints(), |j| {
-        column_label(input.joint_names, j)
+        format!("{} (column {})", name(j), j + 1)
     })
 }
 
