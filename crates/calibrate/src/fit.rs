@@ -238,6 +238,39 @@ pub(crate) fn full_fit_lm(
 /// (a few per cent of the error).
 pub(crate) const FOLD_TOLERANCE: f64 = 1e-6;
 
+/// How far, in χ² (the fit's cost in units of its residual variance), a marker fold's first
+/// Gauss–Newton step from the full-data estimate may miss the reduction its linearisation
+/// predicted and still be the fold's estimate ([`hapcal_identify::LmConfig::one_step`]). The
+/// full-data estimate lies within the statistical error of the fold's (a fifth of the rows
+/// moves it by about half a standard error), so one Gauss–Newton step leaves an error of
+/// second order in that distance (Le Cam's one-step estimator); when the linearisation held
+/// over the step to 0.1 of χ², a tenth of the Δχ² = 1 that marks one standard error, the
+/// step's estimate is taken, and the fold needs no Jacobian beyond the one at the full-data
+/// estimate that every fold shares. A step that missed by more is iterated as before. On the
+/// simulated humanoids this moved every rung's cross-validated RMS by at most 7·10⁻⁵ of
+/// itself and every blocked score difference by at most 0.01 of its standard error
+/// (docs/results/speed.md).
+pub(crate) const FOLD_STEP_CHI2: f64 = 0.1;
+
+/// The Levenberg–Marquardt settings of a marker fold's refit (`lm` the identification's) with
+/// `n_residuals` residuals and `n_free` free parameters: stopped at [`FOLD_TOLERANCE`], and
+/// at the first Gauss–Newton step when it is within [`FOLD_STEP_CHI2`] of its prediction (the
+/// relative tolerance `FOLD_STEP_CHI2 / (n_residuals − n_free)`, χ² being about
+/// `n_residuals − n_free` at the estimate).
+pub(crate) fn fold_step_lm(
+    lm: hapcal_identify::LmConfig,
+    n_residuals: usize,
+    n_free: usize,
+) -> hapcal_identify::LmConfig {
+    let dof = n_residuals.saturating_sub(n_free).max(1) as f64;
+    hapcal_identify::LmConfig {
+        ftol: FOLD_TOLERANCE,
+        xtol: FOLD_TOLERANCE,
+        one_step: Some(FOLD_STEP_CHI2 / dof),
+        ..lm
+    }
+}
+
 /// Mean over rows of `a − b` and its standard error from the block means (rows of one
 /// contiguous block are correlated, so the blocks, not the rows, are the independent units:
 /// Roberts et al. 2017, "Cross-validation strategies for data with temporal, spatial,

@@ -39,9 +39,7 @@ pub use crate::data::{
     Robot, is_marker_file, load_tables, robot_from_device, robot_from_urdf,
     workspace_configurations,
 };
-use crate::fit::{
-    CV_REPEATS, FOLD_TOLERANCE, Fold, HeldOut, REFIT_MAX_ENTRIES, blocked_difference,
-};
+use crate::fit::{CV_REPEATS, Fold, HeldOut, REFIT_MAX_ENTRIES, blocked_difference};
 use crate::model::{DataKind, ModelRules};
 pub use crate::noise::{CALIBRATED_SIGMA_RATIO, PLAUSIBLE_FRAMES_ONLY_RMS_M};
 use crate::record::deviation;
@@ -1184,11 +1182,13 @@ fn refit(
     // ladder compares (a few per cent of the error); the full fits keep the default 10⁻¹². On
     // the bundled recordings, 10⁻⁶ instead of 10⁻⁸ moves the ladder's figures in the fourth
     // digit at most (docs/results/real-data.md) and saves 7 % of the humanoid ladder's time.
-    let lm = hapcal_identify::LmConfig {
-        ftol: FOLD_TOLERANCE,
-        xtol: FOLD_TOLERANCE,
-        ..crate::fit::identify_config(None).lm
-    };
+    // A first Gauss–Newton step that its linearisation predicted ends the refit
+    // (crate::fit::FOLD_STEP_CHI2).
+    let lm = crate::fit::fold_step_lm(
+        crate::fit::identify_config(None).lm,
+        problem.n_residuals(),
+        warm.free.len(),
+    );
     let start = (at_warm.map(|a| a.rows(tables.tables, keep))).filter(|(r, jac)| {
         r.nrows() == problem.n_residuals() && jac.ncols() == problem.layout().len()
     });

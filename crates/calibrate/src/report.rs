@@ -648,6 +648,7 @@ pub fn termination_text(termination: &hapcal_identify::Termination) -> String {
         T::MaxEvaluations => "not converged (evaluation limit reached)".to_owned(),
         T::Numerical => "stopped (the step or the Jacobian is not finite)".to_owned(),
         T::EvalFailed(e) => format!("stopped ({e})"),
+        T::OneStep => "converged (one Gauss-Newton step, as linearised)".to_owned(),
         other if other.is_success() => "converged".to_owned(),
         _ => "stopped".to_owned(),
     }

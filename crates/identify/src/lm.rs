@@ -46,6 +46,16 @@ pub struct LmConfig {
     /// tries the full Gauss–Newton step first (the radius then starts at its length), which
     /// suits calibrations started near their solution at the nominal.
     pub factor: f64,
+    /// The one-step estimator (Le Cam's): when set, stop after the first step if it is a
+    /// Gauss–Newton step (`λ = 0`), accepted, whose actual relative reduction of the cost
+    /// differs from the one its linearisation predicted by at most this much
+    /// ([`Termination::OneStep`]); the trial point's Jacobian is then never evaluated. From a
+    /// start within the statistical error of the solution (a cross-validation fold refitted
+    /// from the full-data estimate), one Gauss–Newton step leaves an error of second order in
+    /// that distance; the test checks that the linearisation held over the step, and the
+    /// iteration goes on as without it when it did not. `None` (the default): every step is
+    /// iterated to `ftol`/`xtol`/`gtol`.
+    pub one_step: Option<f64>,
 }
 
 impl Default for LmConfig {
@@ -61,6 +71,7 @@ impl Default for LmConfig {
             gtol: 1e-12,
             max_evaluations: 200,
             factor: FACTOR,
+            one_step: None,
         }
     }
 }
@@ -83,14 +94,18 @@ pub enum Termination {
     Numerical,
     /// The Jacobian could not be evaluated at an accepted point.
     EvalFailed(crate::problem::EvalError),
+    /// The first step was a Gauss–Newton step whose actual reduction matched its predicted
+    /// one within [`LmConfig::one_step`]: the one-step estimate.
+    OneStep,
 }
 
 impl Termination {
-    /// True for the three convergence criteria (`Ftol`, `Xtol`, `Gtol`).
+    /// True for the three convergence criteria (`Ftol`, `Xtol`, `Gtol`) and for the one-step
+    /// estimate asked for ([`LmConfig::one_step`]).
     pub fn is_success(&self) -> bool {
         matches!(
             self,
-            Self::FtolReached | Self::XtolReached | Self::GtolReached
+            Self::FtolReached | Self::XtolReached | Self::GtolReached | Self::OneStep
         )
     }
 }
@@ -148,6 +163,9 @@ pub(crate) fn check_inputs(
     check_config("ftol", cfg.ftol, false)?;
     check_config("xtol", cfg.xtol, false)?;
     check_config("gtol", cfg.gtol, false)?;
+    if let Some(tol) = cfg.one_step {
+        check_config("one_step", tol, false)?;
+    }
     check_factor(cfg.factor)?;
     let m = p.n_residuals();
     if m < free.len() {
@@ -713,13 +731,16 @@ pub(crate) fn run(
             // returns the same step (λ = 0 again): the same trial point, whose residual norm
             // (and, for `accept`, residuals) the problem has just produced. Reuse it rather
             // than evaluate twice; the iterates are MINPACK's either way.
+            // A first Gauss–Newton step may be the one-step estimate (the test below).
+            let one_step = cfg.one_step.filter(|_| first && lambda == 0.0);
             let f_norm_trial = match &last_trial {
                 Some((xt, norm)) if xt.as_ref() == x_trial.as_ref() => *norm,
                 _ => {
                     n_evaluations += 1;
                     // A predicted reduction within `ftol` usually ends the iteration here
-                    // (the `ftol` test below), and the Jacobian there would go unused.
-                    lin.trial_norm(x_trial.as_ref(), predicted > ftol)
+                    // (the `ftol` test below), and the Jacobian there would go unused; so
+                    // does a step that may be the one-step estimate.
+                    lin.trial_norm(x_trial.as_ref(), predicted > ftol && one_step.is_none())
                 }
             };
             last_trial = Some((x_trial.clone(), f_norm_trial));
@@ -744,6 +765,9 @@ pub(crate) fn run(
             }
             if actual.abs() <= ftol && predicted <= ftol && 0.5 * ratio <= 1.0 {
                 break 'outer Termination::FtolReached;
+            }
+            if accepted && one_step.is_some_and(|tol| (actual - predicted).abs() <= tol) {
+                break 'outer Termination::OneStep;
             }
             if delta <= xtol * (x_norm + xtol) {
                 break 'outer Termination::XtolReached;

@@ -95,6 +95,86 @@ fn evaluation_budget_is_reported_as_a_termination() {
     assert_eq!(fit.n_evaluations, 3);
 }
 
+/// A straight line through three points that it misses: `r = [x1 + x2·t − y]` at
+/// `t = 0, 1, 2`, `y = 0, 2, 1`, least-squares solution (1/2, 1/2), residuals not zero.
+struct Line(ParamLayout);
+
+impl Problem for Line {
+    fn layout(&self) -> &ParamLayout {
+        &self.0
+    }
+    fn n_residuals(&self) -> usize {
+        3
+    }
+    fn residuals(&self, x: ColRef<'_, f64>, mut out: ColMut<'_, f64>) -> Result<(), EvalError> {
+        for (i, y) in [0.0, 2.0, 1.0].into_iter().enumerate() {
+            out[i] = x[0] + x[1] * i as f64 - y;
+        }
+        Ok(())
+    }
+    fn jacobian(&self, _: ColRef<'_, f64>, mut jac: MatMut<'_, f64>) -> Result<(), EvalError> {
+        for i in 0..3 {
+            jac[(i, 0)] = 1.0;
+            jac[(i, 1)] = i as f64;
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn one_step_on_a_linear_problem_is_its_solution_without_a_second_jacobian() {
+    let cfg = LmConfig {
+        one_step: Some(1e-9),
+        ..LmConfig::default()
+    };
+    let p = Line(layout(&["x1", "x2"]));
+    let fit = levenberg_marquardt(&p, col![3.0, -1.0], &[0, 1], &cfg).expect("valid input");
+    assert_eq!(fit.termination, Termination::OneStep);
+    assert!(fit.termination.is_success());
+    // The start's evaluation and the step's residuals, no Jacobian at the step.
+    assert_eq!((fit.n_evaluations, fit.n_jacobians), (2, 1));
+    // The linear model is exact: the step lands on the normal equations' solution, to the
+    // rounding of a 2 × 2 QR (unit-sized entries).
+    assert!(
+        (fit.x[0] - 0.5).abs() < 1e-12 && (fit.x[1] - 0.5).abs() < 1e-12,
+        "{:?}",
+        fit.x
+    );
+}
+
+#[test]
+fn one_step_is_taken_only_where_the_linearisation_held() {
+    // Rosenbrock from (0.9, 0.8): r = [−0.1, 0.1], J = [[−18, 10], [−1, 0]]. The Gauss–Newton
+    // step p = −J⁻¹r = (0.1, 0.19) predicts a zero residual (relative reduction 1); at
+    // (1, 0.99) the residual is [−0.1, 0], half the cost (actual reduction 0.5): accepted,
+    // and a miss of 0.5.
+    let p = rosenbrock();
+    let x0 = col![0.9, 0.8];
+    let plain = levenberg_marquardt(&p, x0.clone(), &[0, 1], &LmConfig::default()).unwrap();
+    // A tolerance below the miss: the iteration goes on, with MINPACK's iterates.
+    let strict = LmConfig {
+        one_step: Some(0.4),
+        ..LmConfig::default()
+    };
+    let fit = levenberg_marquardt(&p, x0.clone(), &[0, 1], &strict).unwrap();
+    assert_eq!(fit.x, plain.x);
+    assert_eq!(fit.termination, plain.termination);
+    assert_ne!(fit.termination, Termination::OneStep);
+    // A tolerance above it: the one Gauss–Newton step.
+    let loose = LmConfig {
+        one_step: Some(0.6),
+        ..LmConfig::default()
+    };
+    let fit = levenberg_marquardt(&p, x0, &[0, 1], &loose).unwrap();
+    assert_eq!(fit.termination, Termination::OneStep);
+    assert_eq!(fit.n_evaluations, 2);
+    assert!(
+        (fit.x[0] - 1.0).abs() < 1e-12 && (fit.x[1] - 0.99).abs() < 1e-12,
+        "{:?}",
+        fit.x
+    );
+}
+
 #[test]
 fn empty_free_set_returns_x0() {
     let fit = levenberg_marquardt(&rosenbrock(), col![-1.2, 1.0], &[], &LmConfig::default())
