@@ -587,21 +587,15 @@ impl Robot {
         }
     }
 
-    /// The pose of tip `tip`'s link (without its marker frame).
-    #[inline]
-    fn tip_link_from(&self, tip: usize, frames: &[Pose]) -> Pose {
-        let t = &self.tips[tip];
-        match t.parent {
-            Some(p) => frames[p].compose_fast(&t.offset),
-            None => t.offset,
-        }
-    }
-
-    /// The pose of tip `tip` (its marker frame on the tip link).
+    /// The pose of tip `tip` (its marker frame on the tip link) from the joint frames.
     #[inline]
     pub(crate) fn tip_from(&self, tip: usize, frames: &[Pose]) -> Pose {
-        self.tip_link_from(tip, frames)
-            .compose_fast(&self.tips[tip].marker)
+        let t = &self.tips[tip];
+        let link = match t.parent {
+            Some(p) => frames[p].compose_fast(&t.offset),
+            None => t.offset,
+        };
+        link.compose_fast(&t.marker)
     }
 
     /// The same robot with a frame `marker` on tip `tip`'s link (in the link's frame, e.g.
@@ -793,8 +787,8 @@ impl Robot {
 
     /// The gravity torques of the nominal geometry at the load angles `ws.load_at` into
     /// `ws.torque` (the sines and cosines from those of the readings `near`, `ws.sin_cos`),
-    /// without the joints' frames in the root: two passes of three- and four-vectors in the joints' own frames.
-    /// Forward, gravity's direction in each joint frame `g_j = R_jᵀ·ĝ` (one rotation by the
+    /// without the joints' frames in the root: two passes of three- and four-vectors in the
+    /// joints' own frames. Forward, gravity's direction in each joint frame `g_j = R_jᵀ·ĝ` (one rotation by the
     /// joint's origin and motion); backward, each subtree's weight `W_j` and first moment
     /// `C_j = Σ w·c` in joint `j`'s frame (a child's moved into its parent's frame by its
     /// origin and motion), and `τ_j = a_j · (C_j × g_j)` (the moment `(C − W·o_j) × ĝ` of

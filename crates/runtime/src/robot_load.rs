@@ -205,12 +205,17 @@ impl Robot {
                     pending = Pose::IDENTITY;
                     continue;
                 }
-                let (axis, (lower, upper)) = axis_and_limits(joint, origin)?;
+                // The contract's URDF reader checks the axis and the limits (a continuous
+                // joint's are infinite).
+                let axis = urdf::axis(joint).map_err(|m| invalid(origin, m))?;
+                let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
+                let (lower, upper) = urdf::limits(joint, (f64::NEG_INFINITY, f64::INFINITY))
+                    .map_err(|m| invalid(origin, m))?;
                 let origin = pending.compose(&joint_pose(joint));
                 joints.push(RobotJoint {
                     parent,
                     origin,
-                    axis,
+                    axis: axis.map(|a| a / norm),
                     prismatic,
                     nominal: origin,
                     deviation: [0.0; 7],
@@ -904,19 +909,6 @@ fn check_tip(
         ));
     }
     Ok(())
-}
-
-/// A moving joint's unit axis (in its frame) and limits (rad or m; a continuous joint's are
-/// infinite), checked by the contract's URDF reader ([`urdf::axis`], [`urdf::limits`]).
-///
-/// # Errors
-/// An axis without direction, limits that are not finite with lower < upper.
-fn axis_and_limits(joint: &urdf::Joint, origin: &str) -> Result<([f64; 3], (f64, f64)), LoadError> {
-    let axis = urdf::axis(joint).map_err(|m| invalid(origin, m))?;
-    let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
-    let limits =
-        urdf::limits(joint, (f64::NEG_INFINITY, f64::INFINITY)).map_err(|m| invalid(origin, m))?;
-    Ok(([axis[0] / norm, axis[1] / norm, axis[2] / norm], limits))
 }
 
 /// The links' masses, each in the frame of the nearest moving joint above it (`joint_names`,
