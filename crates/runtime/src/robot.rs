@@ -840,7 +840,7 @@ impl Robot {
                 motion_rotate(&joint.axis, sc, &g, true)
             };
         }
-        self.hang_weights(sums, true, |_, c| *c, &local_t);
+        self.hang_weights(sums, true, |_, c| *c, local_t);
         for j in (0..self.joints.len()).rev() {
             let joint = &self.joints[j];
             let [w, cx, cy, cz] = sums[j];
