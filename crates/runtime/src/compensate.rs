@@ -1,6 +1,7 @@
 //! Compensation: the joint command that brings a tip of the calibrated robot, deflection
 //! included, to a target position or pose (damped least squares).
 
+use crate::error::{check_finite_parts, check_len};
 use crate::robot::{Deflection, Robot, RobotWorkspace};
 use crate::{Error, Pose};
 
@@ -120,15 +121,7 @@ fn error(target: &Target, pose: &Pose) -> ([f64; 6], usize, f64, f64) {
     let Some(rt) = rotation else {
         return (e, 3, distance, 0.0);
     };
-    // R_target · Rᵀ.
-    let r = &pose.rotation;
-    let mut d = [[0.0; 3]; 3];
-    for (i, row) in d.iter_mut().enumerate() {
-        for (j, x) in row.iter_mut().enumerate() {
-            *x = rt[i][0] * r[j][0] + rt[i][1] * r[j][1] + rt[i][2] * r[j][2];
-        }
-    }
-    let w = rotation_vector(&d);
+    let w = rotation_vector(&crate::predict::relative(rt, &pose.rotation));
     e[3..].copy_from_slice(&w);
     let angle = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
     (e, 6, distance, angle)
@@ -289,27 +282,14 @@ pub fn compensate(
     robot.check_workspace(ws);
     robot.check_tip(tip)?;
     robot.check_joints("joint angles", q_start)?;
-    if q_out.len() != n {
-        return Err(Error::Length {
-            what: "joint command",
-            expected: n,
-            found: q_out.len(),
-        });
-    }
+    check_len("joint command", n, q_out.len())?;
     // Every number of the target: the position, or the rotation's 9 entries then the
     // translation's 3 (the index the error names).
-    let (first, second): (&[f64], &[f64]) = match target {
-        Target::Position(p) => (p, &[]),
-        Target::Pose(p) => (p.rotation.as_flattened(), &p.translation_m),
+    let parts: [&[f64]; 2] = match target {
+        Target::Position(p) => [p, &[]],
+        Target::Pose(p) => [p.rotation.as_flattened(), &p.translation_m],
     };
-    let values = first.iter().chain(second);
-    if let Some((index, value)) = values.enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(Error::NotFinite {
-            what: "target",
-            index,
-            value: *value,
-        });
-    }
+    check_finite_parts("target", &parts)?;
     if let Target::Pose(p) = target {
         check_rotation(&p.rotation)?;
     }
@@ -334,7 +314,8 @@ pub fn compensate(
         *c = s.clamp(*lo, *hi);
     }
     let scale = cfg.orientation_scale_m;
-    let (mut pose, mut deflection) = robot.deflected_pose(tip, &q, ws);
+    let mut deflection = robot.deflect_frames(&q, ws);
+    let mut pose = robot.tip_from(tip, &ws.frames);
     let (mut e, rows, mut distance, mut angle) = error(target, &pose);
     let mut current = cost(&e, rows, scale);
     let mut lambda = cfg.damping_m;
@@ -346,7 +327,7 @@ pub fn compensate(
     let within = |d: f64, a: f64| d <= cfg.tolerance_m && a <= cfg.tolerance_rad;
     while !within(distance, angle) && iterations < cfg.max_iterations {
         if !jacobian_at_q {
-            robot.deflected_columns(tip, &pose, ws);
+            robot.columns_from(tip, &ws.frames, &pose, &mut ws.jac, false);
             jacobian_at_q = true;
         }
         iterations += 1;
@@ -355,7 +336,8 @@ pub fn compensate(
         } else {
             step::<6>(&ws.jac, &e, scale, lambda, &q, limits, &mut trial);
         }
-        let (pose_t, deflection_t) = robot.deflected_pose(tip, &trial, ws);
+        let deflection_t = robot.deflect_frames(&trial, ws);
+        let pose_t = robot.tip_from(tip, &ws.frames);
         let (e_t, _, distance_t, angle_t) = error(target, &pose_t);
         let cost_t = cost(&e_t, rows, scale);
         if cost_t < current {

@@ -3,6 +3,7 @@
 
 use hapcal_contract::{Calibration, DhField, ValueName};
 
+use crate::model::dh_split;
 use crate::{DhConvention, DhRow, Pose};
 
 /// A D-H robot's table: the convention and the `[[dh]]` rows at the nominal geometry (the
@@ -15,42 +16,16 @@ pub(crate) struct DhTable {
     pub(crate) nominal: Vec<DhRow>,
 }
 
-/// `Rz(angle)`, `Rx(angle)`, `Ry(angle)`.
-fn rot_z(angle: f64) -> Pose {
-    let (s, c) = angle.sin_cos();
-    Pose::rot_z(s, c)
-}
-fn rot_x(angle: f64) -> Pose {
-    let (s, c) = angle.sin_cos();
-    Pose::rot_x(s, c)
-}
-fn rot_y(angle: f64) -> Pose {
-    let (s, c) = angle.sin_cos();
-    Pose::rot_y(s, c)
-}
-
-/// One D-H row split at its joint's motion `Rz(q)`: the factors before it and after it, in
-/// the order `hapcal_kinematics::Chain::from_dh` composes them. Standard:
-/// `Rz(θ) | Rz(q) | Tz(d)·Tx(a)·Rx(α)·Ry(β)`; modified (Craig):
-/// `Rx(α)·Ry(β)·Tx(a)·Rz(θ) | Rz(q) | Tz(d)` (`Ry(β)` only for a row with β).
+/// One D-H row split at its joint's motion `Rz(q)` ([`dh_split`], with the standard
+/// library's sines and cosines): the factors before it and after it. Standard:
+/// `Rz(θ) | Rz(q) | Tz(d)·Tx(a)·Rx(α)·Ry(β)`; modified:
+/// `Rx(α)·Ry(β)·Tx(a)·Rz(θ) | Rz(q) | Tz(d)`.
 fn dh_parts(convention: DhConvention, row: &DhRow) -> (Pose, Pose) {
-    let beta = row.beta_rad.map_or(Pose::IDENTITY, rot_y);
-    let tz = Pose::translation([0.0, 0.0, row.d_m]);
-    let tx = Pose::translation([row.a_m, 0.0, 0.0]);
+    let (pre, post) = dh_split(convention, row, f64::sin_cos);
+    let (s, c) = row.theta_rad.sin_cos();
     match convention {
-        DhConvention::Standard => (
-            rot_z(row.theta_rad),
-            tz.compose(&tx)
-                .compose(&rot_x(row.alpha_rad))
-                .compose(&beta),
-        ),
-        DhConvention::Modified => (
-            rot_x(row.alpha_rad)
-                .compose(&beta)
-                .compose(&tx)
-                .compose(&rot_z(row.theta_rad)),
-            tz,
-        ),
+        DhConvention::Standard => (Pose::rot_z(s, c), post),
+        DhConvention::Modified => (pre.compose(&Pose::rot_z(s, c)), post),
     }
 }
 

@@ -11,6 +11,7 @@ use hapcal_transmission::{
     Capstan, CapstanFault, CapstanTransmission, JointRad, chebyshev_derivative, chebyshev_value,
 };
 
+use crate::error::check_finite;
 use crate::math::RuntimeFunctions;
 use crate::{Error, MAX_COEFFS};
 
@@ -40,13 +41,7 @@ pub struct Drive {
 }
 
 fn positive(what: &'static str, value: f64) -> Result<f64, Error> {
-    if !value.is_finite() {
-        return Err(Error::NotFinite {
-            what,
-            index: 0,
-            value,
-        });
-    }
+    check_finite(what, &[value])?;
     if value <= 0.0 {
         return Err(Error::Invalid {
             what,
@@ -116,15 +111,7 @@ impl Drive {
     /// [`MAX_COEFFS`] coefficients.
     pub fn polynomial(ratio: f64, lo: f64, hi: f64, coeffs: &[f64]) -> Result<Drive, Error> {
         let ratio = positive("ratio", ratio)?;
-        for (index, value) in [lo, hi].into_iter().enumerate() {
-            if !value.is_finite() {
-                return Err(Error::NotFinite {
-                    what: "domain",
-                    index,
-                    value,
-                });
-            }
-        }
+        check_finite("domain", &[lo, hi])?;
         if lo >= hi {
             return Err(Error::Invalid {
                 what: "domain",
@@ -146,17 +133,9 @@ impl Drive {
                 max: MAX_COEFFS,
             });
         }
+        check_finite("coeffs", coeffs)?;
         let mut stored = [0.0; MAX_COEFFS];
-        for (index, (&c, slot)) in coeffs.iter().zip(&mut stored).enumerate() {
-            if !c.is_finite() {
-                return Err(Error::NotFinite {
-                    what: "coeffs",
-                    index,
-                    value: c,
-                });
-            }
-            *slot = c;
-        }
+        stored[..coeffs.len()].copy_from_slice(coeffs);
         Ok(Drive {
             ratio,
             kind: Kind::Polynomial {

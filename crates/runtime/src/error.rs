@@ -129,3 +129,14 @@ pub(crate) fn check_finite(what: &'static str, values: &[f64]) -> Result<(), Err
         }),
     }
 }
+
+/// [`check_finite`] of the entries of `parts` one after the other (a pose's rotation, then
+/// its translation), indexed across them.
+#[cfg(feature = "std")]
+pub(crate) fn check_finite_parts(what: &'static str, parts: &[&[f64]]) -> Result<(), Error> {
+    let values = parts.iter().flat_map(|part| part.iter());
+    match values.enumerate().find(|(_, v)| !v.is_finite()) {
+        None => Ok(()),
+        Some((index, &value)) => Err(Error::NotFinite { what, index, value }),
+    }
+}

@@ -129,11 +129,7 @@ impl Model {
             rows,
             n_joints,
         } = read_device_file(text, origin)?;
-        let invalid = |message: String| LoadError::Invalid {
-            origin: origin.to_owned(),
-            message,
-        };
-        let model_error = |what: &str, e: Error| invalid(format!("{what}: {e}"));
+        let model_error = |what: &str, e: Error| invalid(origin, format!("{what}: {e}"));
         let record = file.calibration.unwrap_or_default();
         record
             .check(text, origin)
@@ -150,13 +146,16 @@ impl Model {
             let (weight_n, direction) = match &record.torque {
                 Some(t) => {
                     if t.source != TorqueSource::HandleMass || t.equilibrium {
-                        return Err(invalid(format!(
-                            "[calibration.torque]: source = \"{}\", equilibrium = {}: the \
+                        return Err(invalid(
+                            origin,
+                            format!(
+                                "[calibration.torque]: source = \"{}\", equilibrium = {}: the \
                              handle compliances joint_compliance.j<k> are evaluated under the \
                              handle's weight at the undeflected angles (source = \
                              \"handle-mass\", equilibrium = false)",
-                            t.source, t.equilibrium
-                        )));
+                                t.source, t.equilibrium
+                            ),
+                        ));
                     }
                     // The contract's check asks a handle mass of this source.
                     let mass_kg = t.handle_mass_kg.unwrap_or(0.0);
@@ -167,6 +166,7 @@ impl Model {
                 None => {
                     let Some(handle) = &file.handle else {
                         return Err(invalid(
+                            origin,
                             "[calibration.values] holds joint_compliance.j<k>, but the file has \
                              neither [calibration.torque] nor [handle]: the handle's weight is \
                              unknown"
@@ -214,10 +214,7 @@ fn drives_of(
     joints: &[JointSpec],
     origin: &str,
 ) -> Result<Vec<Drive>, LoadError> {
-    let invalid = |what: &str, message: String| LoadError::Invalid {
-        origin: origin.to_owned(),
-        message: format!("{what}: {message}"),
-    };
+    let refused = |what: &str, message: String| invalid(origin, format!("{what}: {message}"));
     let built = |(j, drive): (usize, &JointDrive)| match drive {
         JointDrive::Direct => Ok(Drive::DIRECT),
         JointDrive::Capstan {
@@ -225,12 +222,12 @@ fn drives_of(
             drum_distance_m,
             params,
         } => Drive::capstan(*ratio, *drum_distance_m, *params)
-            .map_err(|e| invalid(&format!("capstan{}", j + 1), e.to_string())),
+            .map_err(|e| refused(&format!("capstan{}", j + 1), e.to_string())),
         JointDrive::Polynomial { ratio, coeffs } => {
             let what = format!("joint{}.cheb*", j + 1);
             let limits = &joints[j];
             Drive::polynomial(*ratio, limits.lower_rad, limits.upper_rad, coeffs)
-                .map_err(|e| invalid(&what, e.to_string()))
+                .map_err(|e| refused(&what, e.to_string()))
         }
     };
     drives.iter().enumerate().map(built).collect()
@@ -267,28 +264,16 @@ pub(crate) struct DhFile {
 /// # Errors
 /// As [`Model::from_toml`] for these checks.
 pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DhFile, LoadError> {
+    // Both name a line (1 for a fault without a place): a `Parse` error.
     let file = DeviceFile::from_toml_str(text).map_err(|e| {
         let (line, column, message) = hapcal_contract::toml_error_at(text, &e);
-        LoadError::Parse {
-            origin: origin.to_owned(),
-            line,
-            column,
-            message,
-        }
+        at_line(origin, (line, column), message)
     })?;
-    hapcal_contract::device::check_numbers(text).map_err(|bad| LoadError::Parse {
-        origin: origin.to_owned(),
-        line: bad.line,
-        column: bad.column,
-        message: bad.to_string(),
-    })?;
-    let invalid = |message: String| LoadError::Invalid {
-        origin: origin.to_owned(),
-        message,
-    };
-
+    hapcal_contract::device::check_numbers(text)
+        .map_err(|bad| at_line(origin, (bad.line, bad.column), bad.to_string()))?;
     if !file.placements.is_empty() || !file.branches.is_empty() || file.urdf.is_some() {
         return Err(invalid(
+            origin,
             "[[placement]] (URDF) chains are not supported by the runtime: use a [[dh]] \
                  chain"
                 .to_owned(),
@@ -305,11 +290,14 @@ pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DhFile, LoadE
             JointRef::Fixed => false,
             JointRef::Joint(j) if j == n_joints + 1 => true,
             other => {
-                return Err(invalid(format!(
-                    "[[dh]] row {i}: joint = {other}, expected {} (joints numbered in row \
+                return Err(invalid(
+                    origin,
+                    format!(
+                        "[[dh]] row {i}: joint = {other}, expected {} (joints numbered in row \
                          order) or \"fixed\"",
-                    n_joints + 1
-                )));
+                        n_joints + 1
+                    ),
+                ));
             }
         };
         n_joints += usize::from(joint);
@@ -323,17 +311,23 @@ pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DhFile, LoadE
         });
     }
     if file.joints.len() != n_joints {
-        return Err(invalid(format!(
-            "the chain has {n_joints} joints but {} [[joint]] entries",
-            file.joints.len()
-        )));
+        return Err(invalid(
+            origin,
+            format!(
+                "the chain has {n_joints} joints but {} [[joint]] entries",
+                file.joints.len()
+            ),
+        ));
     }
     for j in &file.joints {
         if !j.lower_rad.is_finite() || !j.upper_rad.is_finite() || j.lower_rad >= j.upper_rad {
-            return Err(invalid(format!(
-                "[[joint]] {:?}: lower_rad = {} must be finite and below upper_rad = {}",
-                j.name, j.lower_rad, j.upper_rad
-            )));
+            return Err(invalid(
+                origin,
+                format!(
+                    "[[joint]] {:?}: lower_rad = {} must be finite and below upper_rad = {}",
+                    j.name, j.lower_rad, j.upper_rad
+                ),
+            ));
         }
     }
     Ok(DhFile {
@@ -342,6 +336,14 @@ pub(crate) fn read_device_file(text: &str, origin: &str) -> Result<DhFile, LoadE
         rows,
         n_joints,
     })
+}
+
+/// A refusal of the content of `origin` ([`LoadError::Invalid`]).
+pub(crate) fn invalid(origin: &str, message: String) -> LoadError {
+    LoadError::Invalid {
+        origin: origin.to_owned(),
+        message,
+    }
 }
 
 /// A refusal at `(line, column)` of `origin`; without a line (0), of the file.
@@ -360,10 +362,7 @@ pub(crate) fn at_line(origin: &str, (line, column): (usize, usize), message: Str
 /// A contract's refusal as a load error: at its line and column when known.
 pub(crate) fn contract_error(e: ContractError, origin: &str) -> LoadError {
     if e.line == 0 {
-        LoadError::Invalid {
-            origin: origin.to_owned(),
-            message: e.message,
-        }
+        invalid(origin, e.message)
     } else {
         LoadError::Parse {
             origin: origin.to_owned(),

@@ -187,21 +187,7 @@ impl Model {
         let mut acc = Pose::IDENTITY;
         let mut joint = 0;
         for row in rows {
-            let rot = |angle: f64, f: fn(f64, f64) -> Pose| {
-                let (s, c) = sin_cos(angle);
-                f(s, c)
-            };
-            let beta = row.beta_rad.map_or(Pose::IDENTITY, |b| rot(b, Pose::rot_y));
-            let alpha = rot(row.alpha_rad, Pose::rot_x);
-            let tx = Pose::translation([row.a_m, 0.0, 0.0]);
-            let tz = Pose::translation([0.0, 0.0, row.d_m]);
-            let (pre, post) = match convention {
-                DhConvention::Standard => (
-                    Pose::IDENTITY,
-                    tz.compose(&tx).compose(&alpha).compose(&beta),
-                ),
-                DhConvention::Modified => (alpha.compose(&beta).compose(&tx), tz),
-            };
+            let (pre, post) = dh_split(convention, row, sin_cos);
             acc = acc.compose(&pre);
             if row.joint {
                 if joint == 0 {
@@ -213,7 +199,8 @@ impl Model {
                 acc = post;
                 joint += 1;
             } else {
-                acc = acc.compose(&rot(row.theta_rad, Pose::rot_z)).compose(&post);
+                let (s, c) = sin_cos(row.theta_rad);
+                acc = acc.compose(&Pose::rot_z(s, c)).compose(&post);
             }
         }
         model.links[n_joints - 1].after = acc;
@@ -633,6 +620,32 @@ impl Model {
             pose = pose.compose(&link.after);
         }
         (pose, axes, origins)
+    }
+}
+
+/// One D-H row's constant factors before and after its `Rz(θ + q)`, in the order
+/// `hapcal_kinematics::Chain::from_dh` composes them, with the sines and cosines of
+/// `sin_cos`. Standard: `I | Tz(d)·Tx(a)·Rx(α)·Ry(β)`; modified (Craig):
+/// `Rx(α)·Ry(β)·Tx(a) | Tz(d)` (`Ry(β)` only for a row with β).
+pub(crate) fn dh_split(
+    convention: DhConvention,
+    row: &DhRow,
+    sin_cos: fn(f64) -> (f64, f64),
+) -> (Pose, Pose) {
+    let rot = |angle: f64, f: fn(f64, f64) -> Pose| {
+        let (s, c) = sin_cos(angle);
+        f(s, c)
+    };
+    let beta = row.beta_rad.map_or(Pose::IDENTITY, |b| rot(b, Pose::rot_y));
+    let alpha = rot(row.alpha_rad, Pose::rot_x);
+    let tx = Pose::translation([row.a_m, 0.0, 0.0]);
+    let tz = Pose::translation([0.0, 0.0, row.d_m]);
+    match convention {
+        DhConvention::Standard => (
+            Pose::IDENTITY,
+            tz.compose(&tx).compose(&alpha).compose(&beta),
+        ),
+        DhConvention::Modified => (alpha.compose(&beta).compose(&tx), tz),
     }
 }
 

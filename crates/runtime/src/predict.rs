@@ -162,24 +162,23 @@ pub struct PredictionWorkspace {
     gradient: Vec<[f64; 6]>,
 }
 
-/// The rotation vector `ω` (axis × angle, rad) of the rotation matrix `r`: the angle from
-/// `atan2(‖v‖/2, (trace − 1)/2)` with `v = vee(R − Rᵀ) = 2 sin θ·axis`, accurate at every
-/// angle short of π (the differences here are of rotations a step apart).
-fn rotation_vector(r: &[[f64; 3]; 3]) -> [f64; 3] {
+/// Of the rotation matrix `r`: `v = vee(R − Rᵀ) = 2 sin θ·axis`, its norm, and the angle θ
+/// (rad, in `[0, π]`) from `atan2(‖v‖/2, (trace − 1)/2)`, accurate near 0, unlike
+/// `acos((trace − 1)/2)`.
+fn vee_and_angle(r: &[[f64; 3]; 3]) -> ([f64; 3], f64, f64) {
     let v = [r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1]];
     let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     let angle = libm::atan2(norm / 2.0, (r[0][0] + r[1][1] + r[2][2] - 1.0) / 2.0);
+    (v, norm, angle)
+}
+
+/// The rotation vector `ω` (axis × angle, rad) of the rotation matrix `r` ([`vee_and_angle`]),
+/// accurate at every angle short of π (the differences here are of rotations a step apart).
+fn rotation_vector(r: &[[f64; 3]; 3]) -> [f64; 3] {
+    let (v, norm, angle) = vee_and_angle(r);
     // ω = θ/(2 sin θ)·v; the factor tends to 1/2 as θ → 0.
     let factor = if norm < 1e-300 { 0.5 } else { angle / norm };
     [v[0] * factor, v[1] * factor, v[2] * factor]
-}
-
-/// The angle of the rotation matrix `r`, rad, in `[0, π]` (accurate near 0, unlike
-/// `acos((trace − 1)/2)`).
-fn rotation_angle(r: &[[f64; 3]; 3]) -> f64 {
-    let v = [r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1]];
-    let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    libm::atan2(norm / 2.0, (r[0][0] + r[1][1] + r[2][2] - 1.0) / 2.0)
 }
 
 /// One marker as an instrument measured it in one row of a measurement file.
@@ -253,14 +252,10 @@ pub struct MeasuredErrors {
 }
 
 /// `a · bᵀ` of two rotations.
-fn relative(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
-    let mut out = [[0.0; 3]; 3];
-    for (i, row) in out.iter_mut().enumerate() {
-        for (j, cell) in row.iter_mut().enumerate() {
-            *cell = (0..3).map(|k| a[i][k] * b[j][k]).sum();
-        }
-    }
-    out
+pub(crate) fn relative(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    core::array::from_fn(|i| {
+        core::array::from_fn(|j| a[i][0] * b[j][0] + a[i][1] * b[j][1] + a[i][2] * b[j][2])
+    })
 }
 
 impl Predictor {
@@ -476,9 +471,7 @@ impl Predictor {
         for (p, pose) in out.iter_mut().zip(plus.iter()) {
             *p = TipPrediction {
                 pose: *pose,
-                sigma_m: None,
-                sigma_axes_m: None,
-                sigma_rad: None,
+                ..TipPrediction::default()
             };
         }
         if !self.has_uncertainty() {
@@ -577,7 +570,7 @@ impl Predictor {
                 let measured = Pose::rotation_of_quaternion(wxyz);
                 errors
                     .orientation
-                    .push(rotation_angle(&relative(&pose.rotation, &measured)));
+                    .push(vee_and_angle(&relative(&pose.rotation, &measured)).2);
             }
         }
         Ok(())

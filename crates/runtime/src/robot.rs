@@ -2,7 +2,7 @@
 //! tips, link masses and joint compliances; poses, Jacobians and the deflection under its own
 //! weight, with no allocation per call (the buffers live in a [`RobotWorkspace`]).
 
-use crate::error::{check_finite, check_len};
+use crate::error::{check_finite, check_finite_parts, check_len};
 use crate::math::{sin_cos, sin_cos_near};
 use crate::model::farthest_outside;
 use crate::pose::cross;
@@ -205,9 +205,10 @@ pub struct Deflection {
     pub converged: bool,
 }
 
-/// The pose `Rot(axis, angle)` or `Trans(axis · d)` of one joint's motion.
+/// The pose `Rot(axis, angle)` or `Trans(axis · d)` of one joint's motion by `value` (rad,
+/// or m for a prismatic joint).
 #[inline]
-fn motion(joint: &RobotJoint, value: f64) -> Pose {
+pub(crate) fn joint_motion(joint: &RobotJoint, value: f64) -> Pose {
     let a = joint.axis;
     if joint.prismatic {
         return Pose {
@@ -277,24 +278,11 @@ pub(crate) fn deviation_pose(d: &[f64; 6]) -> Pose {
         .compose(&Pose::rot_z(sz, cz))
 }
 
-/// A joint's origin with its rotation deviations grown by `tilt` (rad):
-/// `nominal · Δ(x, y, z, rx + t₀, ry + t₁, rz + t₂) · motion(offset)`.
-fn tilted_origin(joint: &RobotJoint, tilt: &[f64; 3]) -> Pose {
-    let d = &joint.deviation;
-    let delta = deviation_pose(&[
-        d[0],
-        d[1],
-        d[2],
-        d[3] + tilt[0],
-        d[4] + tilt[1],
-        d[5] + tilt[2],
-    ]);
-    joint.nominal.compose(&delta).compose(&motion(joint, d[6]))
-}
-
-/// The motion of `joint` by `value` (rad, or m for a prismatic joint).
-pub(crate) fn joint_motion(joint: &RobotJoint, value: f64) -> Pose {
-    motion(joint, value)
+/// A joint's origin `nominal · Δ(d) · motion(offset)` at the placement deviation `d = [x, y,
+/// z, rx, ry, rz]` (m, rad; its own, or with its rotations grown by a transversal tilt) and
+/// its recorded offset.
+pub(crate) fn origin_at(joint: &RobotJoint, d: &[f64; 6]) -> Pose {
+    (joint.nominal.compose(&deviation_pose(d))).compose(&joint_motion(joint, joint.deviation[6]))
 }
 
 /// `R·v`, or `Rᵀ·v` with `inverse`, for the rotation `R` of a revolute joint's motion by the
@@ -585,10 +573,13 @@ impl Robot {
                 theta,
                 frames,
                 |k| {
-                    if tilt[k] == [0.0; 3] {
-                        self.joints[k].origin
+                    let (joint, t) = (&self.joints[k], &tilt[k]);
+                    if *t == [0.0; 3] {
+                        joint.origin
                     } else {
-                        tilted_origin(&self.joints[k], &tilt[k])
+                        let d = &joint.deviation;
+                        let d = [d[0], d[1], d[2], d[3] + t[0], d[4] + t[1], d[5] + t[2]];
+                        origin_at(joint, &d)
                     }
                 },
                 sc,
@@ -596,21 +587,15 @@ impl Robot {
         }
     }
 
-    /// The pose of tip `tip`'s link (without its marker frame).
-    #[inline]
-    fn tip_link_from(&self, tip: usize, frames: &[Pose]) -> Pose {
-        let t = &self.tips[tip];
-        match t.parent {
-            Some(p) => frames[p].compose_fast(&t.offset),
-            None => t.offset,
-        }
-    }
-
-    /// The pose of tip `tip` (its marker frame on the tip link).
+    /// The pose of tip `tip` (its marker frame on the tip link) from the joint frames.
     #[inline]
     pub(crate) fn tip_from(&self, tip: usize, frames: &[Pose]) -> Pose {
-        self.tip_link_from(tip, frames)
-            .compose_fast(&self.tips[tip].marker)
+        let t = &self.tips[tip];
+        let link = match t.parent {
+            Some(p) => frames[p].compose_fast(&t.offset),
+            None => t.offset,
+        };
+        link.compose_fast(&t.marker)
     }
 
     /// The same robot with a frame `marker` on tip `tip`'s link (in the link's frame, e.g.
@@ -623,15 +608,8 @@ impl Robot {
     /// for a non-finite pose entry.
     pub fn with_marker(&self, tip: usize, marker: &Pose) -> Result<Robot, Error> {
         self.check_tip(tip)?;
-        let values = marker.rotation.as_flattened().iter();
-        let values = values.chain(marker.translation_m.iter());
-        if let Some((index, value)) = values.enumerate().find(|(_, v)| !v.is_finite()) {
-            return Err(Error::NotFinite {
-                what: "marker",
-                index,
-                value: *value,
-            });
-        }
+        let parts = [marker.rotation.as_flattened(), &marker.translation_m];
+        check_finite_parts("marker", &parts)?;
         let mut robot = self.clone();
         robot.tips[tip].marker = *marker;
         Ok(robot)
@@ -742,8 +720,10 @@ impl Robot {
         pose
     }
 
-    /// Jacobian columns of `tip`, whose pose is `pose`, from the joint frames.
-    fn columns_from(
+    /// Jacobian columns of `tip`, whose pose is `pose`, from the joint frames (at the
+    /// deflected angles θ, the rigid Jacobian at θ: the compliance's own
+    /// `∂θ/∂q = (I − K·∂τ/∂θ)⁻¹`, a relative change of about `k·∂τ/∂θ`, is left out).
+    pub(crate) fn columns_from(
         &self,
         tip: usize,
         frames: &[Pose],
@@ -801,39 +781,29 @@ impl Robot {
         self.check_joints("joint angles", q)?;
         check_len("gravity torques", self.n_joints(), tau.len())?;
         self.forward(q, &mut ws.frames);
-        self.torques_from(&ws.frames, tau, &mut ws.sums);
+        self.loads_from(&ws.frames, false, tau, None, &mut ws.sums);
         Ok(())
     }
 
-    /// The gravity torques of the joints whose frames are `frames` into `tau` (calibrated
-    /// geometry; the public [`Robot::gravity_torques`]).
-    fn torques_from(&self, frames: &[Pose], tau: &mut [f64], sums: &mut [[f64; 4]]) {
-        self.loads_from(frames, false, tau, None, sums);
-    }
-
-    /// The gravity torques of the nominal geometry at the load angles `at` into `tau` (the
-    /// sines and cosines from those of the readings `near`, `near_sc`), without the joints'
-    /// frames in the root: two passes of three- and four-vectors in the joints' own frames.
-    /// Forward, gravity's direction in each joint frame `g_j = R_jᵀ·ĝ` (one rotation by the
+    /// The gravity torques of the nominal geometry at the load angles `ws.load_at` into
+    /// `ws.torque` (the sines and cosines from those of the readings `near`, `ws.sin_cos`),
+    /// without the joints' frames in the root: two passes of three- and four-vectors in the
+    /// joints' own frames. Forward, gravity's direction in each joint frame `g_j = R_jᵀ·ĝ` (one rotation by the
     /// joint's origin and motion); backward, each subtree's weight `W_j` and first moment
     /// `C_j = Σ w·c` in joint `j`'s frame (a child's moved into its parent's frame by its
     /// origin and motion), and `τ_j = a_j · (C_j × g_j)` (the moment `(C − W·o_j) × ĝ` of
     /// [`Robot::loads_from`] in the joint's frame, Featherstone, *Rigid Body Dynamics
     /// Algorithms*, 2008, §4.1). Linear in the joint count.
-    #[allow(
-        clippy::too_many_arguments,
-        reason = "the workspace's buffers, borrowed apart from the angles read"
-    )]
-    fn nominal_torques(
-        &self,
-        at: &[f64],
-        near: &[f64],
-        near_sc: &[(f64, f64)],
-        ws_sc: &mut [(f64, f64)],
-        g_local: &mut [[f64; 3]],
-        sums: &mut [[f64; 4]],
-        tau: &mut [f64],
-    ) {
+    fn nominal_torques(&self, near: &[f64], ws: &mut RobotWorkspace) {
+        let RobotWorkspace {
+            load_at: at,
+            sin_cos: near_sc,
+            load_sin_cos: ws_sc,
+            gravity_local: g_local,
+            sums,
+            torque: tau,
+            ..
+        } = ws;
         // The translation of joint k's frame in its parent's (origin and motion).
         let local_t = |k: usize| {
             let joint = &self.joints[k];
@@ -870,26 +840,7 @@ impl Robot {
                 motion_rotate(&joint.axis, sc, &g, true)
             };
         }
-        sums.fill([0.0; 4]);
-        match self.gravity {
-            GravityModel::Masses => {
-                for m in &self.masses {
-                    add_weight(&mut sums[m.joint], m.mass_kg * self.gravity_m_s2, &m.com_m);
-                }
-            }
-            GravityModel::Lumped => {
-                for (i, joint) in self.joints.iter().enumerate() {
-                    if let (true, Some(p)) = (joint.weight, joint.parent) {
-                        add_weight(&mut sums[p], 1.0, &local_t(i));
-                    }
-                }
-                for tip in &self.tips {
-                    if let (true, Some(p)) = (tip.weight, tip.parent) {
-                        add_weight(&mut sums[p], 1.0, &tip.nominal_offset.translation_m);
-                    }
-                }
-            }
-        }
+        self.hang_weights(sums, true, |_, c| *c, local_t);
         for j in (0..self.joints.len()).rev() {
             let joint = &self.joints[j];
             let [w, cx, cy, cz] = sums[j];
@@ -922,6 +873,46 @@ impl Robot {
         }
     }
 
+    /// Sets each joint's `sums` to the weight `w` and first moment `w·c` hung on it alone (the
+    /// subtrees not yet summed): the link masses' `m·g₀` at their centres, or the lumped unit
+    /// weights at the origin of every loaded joint below it (`joint_origin(i)` for joint i)
+    /// and at every loaded tip (its offset, the nominal one with `nominal`), a point `c` of
+    /// joint `j`'s frame placed by `place(j, c)` in the frame the sums are kept in.
+    #[inline(always)]
+    fn hang_weights(
+        &self,
+        sums: &mut [[f64; 4]],
+        nominal: bool,
+        place: impl Fn(usize, &[f64; 3]) -> [f64; 3],
+        joint_origin: impl Fn(usize) -> [f64; 3],
+    ) {
+        sums.fill([0.0; 4]);
+        match self.gravity {
+            GravityModel::Masses => {
+                for m in &self.masses {
+                    let c = place(m.joint, &m.com_m);
+                    add_weight(&mut sums[m.joint], m.mass_kg * self.gravity_m_s2, &c);
+                }
+            }
+            GravityModel::Lumped => {
+                for (i, joint) in self.joints.iter().enumerate() {
+                    if let (true, Some(p)) = (joint.weight, joint.parent) {
+                        add_weight(&mut sums[p], 1.0, &joint_origin(i));
+                    }
+                }
+                for tip in &self.tips {
+                    if let (true, Some(p)) = (tip.weight, tip.parent) {
+                        let offset = match nominal {
+                            true => &tip.nominal_offset,
+                            false => &tip.offset,
+                        };
+                        add_weight(&mut sums[p], 1.0, &place(p, &offset.translation_m));
+                    }
+                }
+            }
+        }
+    }
+
     /// The gravity torques (and with `moment` the moment vectors about each joint's origin,
     /// root frame) of the joints whose frames are `frames`; the tips' nominal offsets with
     /// `nominal`. One pass: every load is a weight `w` along the one gravity direction `ĝ`,
@@ -937,36 +928,8 @@ impl Robot {
         mut moment: Option<&mut [[f64; 3]]>,
         sums: &mut [[f64; 4]],
     ) {
-        sums.fill([0.0; 4]);
-        match self.gravity {
-            GravityModel::Masses => {
-                for m in &self.masses {
-                    let c = transform_point(&frames[m.joint], &m.com_m);
-                    add_weight(&mut sums[m.joint], m.mass_kg * self.gravity_m_s2, &c);
-                }
-            }
-            GravityModel::Lumped => {
-                for (i, joint) in self.joints.iter().enumerate() {
-                    if let (true, Some(p)) = (joint.weight, joint.parent) {
-                        add_weight(&mut sums[p], 1.0, &frames[i].translation_m);
-                    }
-                }
-                for tip in &self.tips {
-                    if let (true, Some(p)) = (tip.weight, tip.parent) {
-                        let offset = if nominal {
-                            &tip.nominal_offset
-                        } else {
-                            &tip.offset
-                        };
-                        add_weight(
-                            &mut sums[p],
-                            1.0,
-                            &transform_point(&frames[p], &offset.translation_m),
-                        );
-                    }
-                }
-            }
-        }
+        let place = |j: usize, c: &[f64; 3]| transform_point(&frames[j], c);
+        self.hang_weights(sums, nominal, place, |i| frames[i].translation_m);
         for j in (0..self.joints.len()).rev() {
             if let Some(p) = self.joints[j].parent {
                 let s = sums[j];
@@ -1047,22 +1010,13 @@ impl Robot {
         if self.has_compliance() || tilted {
             // Where the loads are evaluated: the readings, or the torque equilibrium
             // θ = q + k∘τ(θ) iterated from them (`CalibratedModel::load_angles`).
-            let at = &mut ws.load_at;
-            at.copy_from_slice(q);
+            ws.load_at.copy_from_slice(q);
             if self.equilibrium && self.has_compliance() {
                 for iteration in 1..=DEFLECTION_ITERATIONS {
-                    self.nominal_torques(
-                        at,
-                        q,
-                        &ws.sin_cos,
-                        &mut ws.load_sin_cos,
-                        &mut ws.gravity_local,
-                        &mut ws.sums,
-                        &mut ws.torque,
-                    );
+                    self.nominal_torques(q, ws);
                     let mut step: f64 = 0.0;
                     let values = q.iter().zip(&self.compliance).zip(&ws.torque);
-                    for (t, ((q, k), tau)) in at.iter_mut().zip(values) {
+                    for (t, ((q, k), tau)) in ws.load_at.iter_mut().zip(values) {
                         let next = q + k * tau;
                         step = step.max((next - *t).abs());
                         *t = next;
@@ -1079,19 +1033,11 @@ impl Robot {
             }
             if tilted {
                 // The tilts need the moment vectors and the nominal frames in the root.
-                self.forward_nominal(at, q, &ws.sin_cos, &mut ws.nominal);
+                self.forward_nominal(&ws.load_at, q, &ws.sin_cos, &mut ws.nominal);
                 let moment = Some(&mut ws.moment[..]);
                 self.loads_from(&ws.nominal, true, &mut ws.torque, moment, &mut ws.sums);
             } else {
-                self.nominal_torques(
-                    at,
-                    q,
-                    &ws.sin_cos,
-                    &mut ws.load_sin_cos,
-                    &mut ws.gravity_local,
-                    &mut ws.sums,
-                    &mut ws.torque,
-                );
+                self.nominal_torques(q, ws);
             }
             let values = q.iter().zip(&self.compliance).zip(&ws.torque);
             for (t, ((q, k), tau)) in theta.iter_mut().zip(values) {
@@ -1164,9 +1110,7 @@ impl Robot {
         self.check_workspace(ws);
         self.check_joints("joint angles", q)?;
         check_len("tip poses", self.tips.len(), out.len())?;
-        let mut theta = core::mem::take(&mut ws.theta);
-        let deflection = self.deflect_unchecked(q, ws, &mut theta);
-        ws.theta = theta;
+        let deflection = self.deflect_frames(q, ws);
         for (tip, pose) in out.iter_mut().enumerate() {
             *pose = self.tip_from(tip, &ws.frames);
         }
@@ -1196,33 +1140,18 @@ impl Robot {
         self.check_tip(tip)?;
         self.check_joints("joint angles", q)?;
         check_len("jacobian columns", self.n_joints(), jac.len())?;
-        let mut theta = core::mem::take(&mut ws.theta);
-        let deflection = self.deflect_unchecked(q, ws, &mut theta);
-        ws.theta = theta;
+        let deflection = self.deflect_frames(q, ws);
         let pose = self.jacobian_from(tip, &ws.frames, jac, false);
         Ok((pose, deflection))
     }
 
-    /// The deflected pose of tip `tip` at the command `q` (checked by the caller), with the
-    /// deflection's iterations; `ws.frames` holds the deflected joint frames after it (for
-    /// [`Robot::deflected_columns`]).
-    pub(crate) fn deflected_pose(
-        &self,
-        tip: usize,
-        q: &[f64],
-        ws: &mut RobotWorkspace,
-    ) -> (Pose, Deflection) {
+    /// [`Robot::deflect`] at the command `q` (checked by the caller) into `ws.theta`, leaving
+    /// `ws.frames` at the deflected joint frames (for [`Robot::tip_from`] and
+    /// [`Robot::columns_from`]).
+    pub(crate) fn deflect_frames(&self, q: &[f64], ws: &mut RobotWorkspace) -> Deflection {
         let mut theta = core::mem::take(&mut ws.theta);
         let deflection = self.deflect_unchecked(q, ws, &mut theta);
         ws.theta = theta;
-        (self.tip_from(tip, &ws.frames), deflection)
-    }
-
-    /// The spatial Jacobian of tip `tip` (pose `pose`) with respect to the deflected angles
-    /// θ into `ws.jac`, from the frames [`Robot::deflected_pose`] left (the rigid Jacobian at
-    /// θ; the compliance's own `∂θ/∂q = (I − K·∂τ/∂θ)⁻¹` is left out, a relative change of
-    /// about `k·∂τ/∂θ`).
-    pub(crate) fn deflected_columns(&self, tip: usize, pose: &Pose, ws: &mut RobotWorkspace) {
-        self.columns_from(tip, &ws.frames, pose, &mut ws.jac, false);
+        deflection
     }
 }

@@ -10,9 +10,9 @@ use hapcal_contract::urdf;
 use hapcal_contract::{Calibration, ElementField, Region, Torque, TorqueSource, ValueName};
 
 use crate::dh_table::{DhTable, add_dh, dh_frames};
-use crate::load::{at_line, read_text};
-use crate::robot::deviation_pose;
+use crate::load::{at_line, contract_error, invalid, read_text};
 use crate::robot::{HarmonicTerm, PointMass, RobotJoint, RobotTip, TransversalJoint};
+use crate::robot::{deviation_pose, joint_motion};
 use crate::{GravityModel, LoadError, Pose, Robot};
 
 /// The rotation `Rz(yaw)·Ry(pitch)·Rx(roll)` and translation `xyz` of a URDF `<origin>`.
@@ -28,13 +28,6 @@ pub(crate) fn origin_pose(xyz: [f64; 3], rpy: [f64; 3]) -> Pose {
             [-sp, cp * sr, cp * cr],
         ],
         translation_m: xyz,
-    }
-}
-
-fn invalid(origin: &str, message: String) -> LoadError {
-    LoadError::Invalid {
-        origin: origin.to_owned(),
-        message,
     }
 }
 
@@ -159,7 +152,7 @@ impl Robot {
             // The record binds to the URDF it was written beside, and to its tips.
             record
                 .check_urdf(text, sidecar_origin, urdf.as_bytes(), origin)
-                .map_err(|e| crate::load::contract_error(e, sidecar_origin))?;
+                .map_err(|e| contract_error(e, sidecar_origin))?;
             check_tips(record, text, sidecar_origin, tips)?;
         }
         let load_tips: Vec<String> = (parsed.as_ref())
@@ -180,7 +173,8 @@ impl Robot {
         let mut tip_elements: Vec<Option<String>> = Vec::new();
         for (i, &tip) in tips.iter().enumerate() {
             check_tip(&robot, &tips[..i], tip, origin)?;
-            let path = path_to(&robot, tip, origin)?;
+            // The contract's URDF walk: a link with two parent joints, or a loop, is refused.
+            let path = urdf::path_to(&robot, tip).map_err(|e| invalid(origin, e.to_string()))?;
             let mut parent: Option<usize> = None;
             let mut pending = Pose::IDENTITY;
             let mut last_fixed: Option<String> = None;
@@ -211,12 +205,17 @@ impl Robot {
                     pending = Pose::IDENTITY;
                     continue;
                 }
-                let (axis, (lower, upper)) = axis_and_limits(joint, origin)?;
+                // The contract's URDF reader checks the axis and the limits (a continuous
+                // joint's are infinite).
+                let axis = urdf::axis(joint).map_err(|m| invalid(origin, m))?;
+                let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
+                let (lower, upper) = urdf::limits(joint, (f64::NEG_INFINITY, f64::INFINITY))
+                    .map_err(|m| invalid(origin, m))?;
                 let origin = pending.compose(&joint_pose(joint));
                 joints.push(RobotJoint {
                     parent,
                     origin,
-                    axis,
+                    axis: axis.map(|a| a / norm),
                     prismatic,
                     nominal: origin,
                     deviation: [0.0; 7],
@@ -259,24 +258,10 @@ impl Robot {
             let urdf_joints: Vec<(&str, Pose)> = (robot.joints.iter())
                 .map(|j| (j.name.as_str(), joint_pose(j)))
                 .collect();
-            out.apply_sidecar(record, text, sidecar_origin, &tip_elements, &urdf_joints)?;
+            let record = record.map_err(|e| contract_error(e, sidecar_origin))?;
+            out.apply_record(record, text, sidecar_origin, &tip_elements, &urdf_joints)?;
         }
         Ok(out)
-    }
-
-    /// Reads the sidecar into the robot: a calibration record (`hapcal-contract`, schema 1 on)
-    /// through [`Robot::apply_record`]. `record` is `text` parsed
-    /// ([`Calibration::from_sidecar_str`], which refuses an earlier hapcal's sidecar).
-    fn apply_sidecar(
-        &mut self,
-        record: Result<Calibration, hapcal_contract::ContractError>,
-        text: &str,
-        origin: &str,
-        tip_elements: &[Option<String>],
-        urdf_joints: &[(&str, Pose)],
-    ) -> Result<(), LoadError> {
-        let record = record.map_err(|e| crate::load::contract_error(e, origin))?;
-        self.apply_record(record, text, origin, tip_elements, urdf_joints)
     }
 }
 
@@ -313,11 +298,11 @@ impl Robot {
     /// [`Robot`] feature (deflection, prediction, compensation) then works for it.
     ///
     /// # Errors
-    /// [`LoadError::Parse`] for TOML syntax, a missing or unknown key, a wrong type, a
-    /// `[calibration]` the contract refuses, or a D-H deviation of a row the table does not
-    /// have, at its line; [`LoadError::Invalid`] for a `[[placement]]` chain, joints not
-    /// numbered 1, 2, … in row order, a `[[joint]]` count that differs from the chain's,
-    /// bad limits, a chain without a joint or a non-finite row, a haptic device (capstans or
+    /// [`LoadError::Parse`] for TOML syntax, a missing or unknown key, a wrong type, a number
+    /// that is not finite, a `[calibration]` the contract refuses, or a D-H deviation of a row
+    /// the table does not have, at its line; [`LoadError::Invalid`] for a `[[placement]]`
+    /// chain, joints not numbered 1, 2, … in row order, a `[[joint]]` count that differs from
+    /// the chain's, bad limits, a chain without a joint, a haptic device (capstans or
     /// a parallelogram: its model is a [`crate::Model`], [`crate::Model::load`]), and the
     /// record values a D-H robot cannot hold (placement deviations, transversal compliances,
     /// a haptic device's values) or that name no joint `q<j>` of the chain.
@@ -342,27 +327,12 @@ impl Robot {
                 "the [[dh]] table has no joint row (joint = 1, 2, …)".to_owned(),
             ));
         }
-        for (i, r) in rows.iter().enumerate() {
-            let fields = [
-                r.a_m,
-                r.alpha_rad,
-                r.d_m,
-                r.theta_rad,
-                r.beta_rad.unwrap_or(0.0),
-            ];
-            if fields.iter().any(|v| !v.is_finite()) {
-                return Err(invalid(
-                    origin,
-                    format!("[[dh]] row {i}: a value is not finite"),
-                ));
-            }
-        }
         let record = file.calibration;
         let mut nominal = rows.clone();
         if let Some(record) = &record {
             record
                 .check(text, origin)
-                .map_err(|e| crate::load::contract_error(e, origin))?;
+                .map_err(|e| contract_error(e, origin))?;
             for v in &record.values {
                 if let Ok(ValueName::Dh { field, row }) = ValueName::parse(&v.name) {
                     let Some(r) = nominal.get_mut(row) else {
@@ -479,11 +449,8 @@ impl Robot {
                 } else if let Some(j) = out.joint_names.iter().position(|n| *n == element) {
                     let joint = &mut out.joints[j];
                     joint.deviation[k] = value;
-                    let d = joint.deviation;
-                    joint.origin = joint
-                        .nominal
-                        .compose(&deviation_pose(&[d[0], d[1], d[2], d[3], d[4], d[5]]))
-                        .compose(&crate::robot::joint_motion(joint, d[6]));
+                    let [x, y, z, rx, ry, rz, _] = joint.deviation;
+                    joint.origin = crate::robot::origin_at(joint, &[x, y, z, rx, ry, rz]);
                 } else {
                     let d = element_deviation(out.record.as_ref(), &element);
                     for (tip, e) in out.tips.iter_mut().zip(&out.tip_elements) {
@@ -506,10 +473,7 @@ impl Robot {
                 let Some(j) = out.joint_names.iter().position(|n| *n == joint) else {
                     return Err(unknown);
                 };
-                let direction = axis.map(|a| {
-                    let [u, w] = normal_axes(&out.joints[j].axis);
-                    if a == 'u' { u } else { w }
-                });
+                let direction = transversal_direction(&out.joints[j].axis, axis);
                 for t in &mut out.transversal {
                     if t.joint == j && t.direction == direction {
                         t.compliance = value;
@@ -547,20 +511,19 @@ impl Robot {
     }
 }
 
+/// The suffixes of a placement deviation's values `<element>.x` … `<element>.rz`, in the
+/// order of [`deviation_pose`]'s `d`.
+const DEVIATION_FIELDS: [&str; 6] = ["x", "y", "z", "rx", "ry", "rz"];
+
 /// The deviation `[x, y, z, rx, ry, rz]` (m, rad) the record's values `<element>.x` …
-/// `<element>.rz` give an element (a tip element or a frame); 0 for a value it lacks.
+/// `<element>.rz` give an element (a joint, a tip element or a frame); 0 for a value it lacks.
 fn element_deviation(record: Option<&Calibration>, element: &str) -> [f64; 6] {
-    let mut d = [0.0; 6];
-    let Some(record) = record else {
-        return d;
+    let value = |suffix: &str| {
+        record?
+            .value(&format!("{element}.{suffix}"))
+            .map(|v| v.value)
     };
-    for (slot, suffix) in d.iter_mut().zip(["x", "y", "z", "rx", "ry", "rz"]) {
-        let key = format!("{element}.{suffix}");
-        if let Some(v) = record.values.iter().find(|v| v.name == key) {
-            *slot = v.value;
-        }
-    }
-    d
+    DEVIATION_FIELDS.map(|suffix| value(suffix).unwrap_or(0.0))
 }
 
 /// The index of a placement deviation's field in a joint's `deviation`.
@@ -799,14 +762,10 @@ impl Robot {
                             format!("{:?}: joint {joint:?} is prismatic", v.name),
                         ));
                     }
-                    let direction = axis.map(|a| {
-                        let [u, w] = normal_axes(&self.joints[j].axis);
-                        if a == 'u' { u } else { w }
-                    });
                     self.transversal.push(TransversalJoint {
                         joint: j,
                         compliance: v.value,
-                        direction,
+                        direction: transversal_direction(&self.joints[j].axis, axis),
                     });
                 }
                 ValueName::Harmonic { joint, order, sine } => {
@@ -852,11 +811,9 @@ impl Robot {
             if joint.deviation == [0.0; 7] {
                 continue;
             }
-            let d = &joint.deviation;
-            let delta = deviation_pose(&[d[0], d[1], d[2], d[3], d[4], d[5]]);
-            let undo = delta
-                .compose(&crate::robot::joint_motion(joint, d[6]))
-                .inverse();
+            let [x, y, z, rx, ry, rz, offset] = joint.deviation;
+            let delta = deviation_pose(&[x, y, z, rx, ry, rz]);
+            let undo = delta.compose(&joint_motion(joint, offset)).inverse();
             joint.nominal = joint.origin.compose(&undo);
             self.nominal_differs = true;
         }
@@ -954,31 +911,6 @@ fn check_tip(
     Ok(())
 }
 
-/// The joints from the root link down to link `tip`, root first (the contract's URDF walk).
-///
-/// # Errors
-/// A link above `tip` with two parent joints, or joints above it that form a loop.
-fn path_to<'r>(
-    robot: &'r urdf::Robot,
-    tip: &str,
-    origin: &str,
-) -> Result<Vec<&'r urdf::Joint>, LoadError> {
-    urdf::path_to(robot, tip).map_err(|e| invalid(origin, e.to_string()))
-}
-
-/// A moving joint's unit axis (in its frame) and limits (rad or m; a continuous joint's are
-/// infinite), checked by the contract's URDF reader ([`urdf::axis`], [`urdf::limits`]).
-///
-/// # Errors
-/// An axis without direction, limits that are not finite with lower < upper.
-fn axis_and_limits(joint: &urdf::Joint, origin: &str) -> Result<([f64; 3], (f64, f64)), LoadError> {
-    let axis = urdf::axis(joint).map_err(|m| invalid(origin, m))?;
-    let norm = axis.iter().map(|a| a * a).sum::<f64>().sqrt();
-    let limits =
-        urdf::limits(joint, (f64::NEG_INFINITY, f64::INFINITY)).map_err(|m| invalid(origin, m))?;
-    Ok(([axis[0] / norm, axis[1] / norm, axis[2] / norm], limits))
-}
-
 /// The links' masses, each in the frame of the nearest moving joint above it (`joint_names`,
 /// the robot's moving joints); massless links and links above every moving joint left out.
 ///
@@ -1011,10 +943,12 @@ fn link_masses(
     Ok(masses)
 }
 
-/// The two axes normal to a revolute joint's unit `axis` (in its frame) that a per-axis
-/// transversal compliance bends about: `u = axis × e` with `e` the frame axis least aligned
-/// with the joint axis, normalised, and `v = axis × u` (`hapcal_problems`'s rule).
-fn normal_axes(axis: &[f64; 3]) -> [[f64; 3]; 2] {
+/// The axis in its frame that a transversal compliance of a revolute joint of unit `axis`
+/// bends about: `None` for an isotropic term; for a per-axis term `which` = `u` or `v`, one of
+/// the two axes normal to `axis`: `u = axis × e` with `e` the frame axis least aligned with the
+/// joint axis, normalised, and `v = axis × u` (`hapcal_problems`'s rule).
+fn transversal_direction(axis: &[f64; 3], which: Option<char>) -> Option<[f64; 3]> {
+    let which = which?;
     let mut k = 0;
     for i in 1..3 {
         if axis[i].abs() < axis[k].abs() {
@@ -1026,7 +960,11 @@ fn normal_axes(axis: &[f64; 3]) -> [[f64; 3]; 2] {
     let u = crate::pose::cross(axis, &e);
     let n = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
     let u = [u[0] / n, u[1] / n, u[2] / n];
-    [u, crate::pose::cross(axis, &u)]
+    Some(if which == 'u' {
+        u
+    } else {
+        crate::pose::cross(axis, &u)
+    })
 }
 
 /// Refuses tips the calibration was not made for: every tip given must be one of the
@@ -1097,7 +1035,6 @@ impl Robot {
         origin: &str,
         urdf_joints: &[(&str, Pose)],
     ) -> Result<(), LoadError> {
-        const FIELDS: [&str; 6] = ["x", "y", "z", "rx", "ry", "rz"];
         for (element, nominal) in &record.nominal {
             let Some((_, own)) = urdf_joints.iter().find(|(n, _)| *n == element) else {
                 return Err(at_line(
@@ -1109,17 +1046,10 @@ impl Robot {
                     ),
                 ));
             };
-            let value = |field: &str| {
-                let name = format!("{element}.{field}");
-                record.value(&name).map(|v| (name, v.value))
-            };
-            let mut d = [0.0; 6];
-            for (slot, field) in d.iter_mut().zip(FIELDS) {
-                *slot = value(field).map_or(0.0, |(_, v)| v);
-            }
-            let offset = value("offset").map_or(0.0, |(_, v)| v);
+            let d = element_deviation(Some(record), element);
+            let offset = (record.value(&format!("{element}.offset"))).map_or(0.0, |v| v.value);
             let motion = match self.joint_names.iter().position(|n| n == element) {
-                Some(j) => crate::robot::joint_motion(&self.joints[j], offset),
+                Some(j) => joint_motion(&self.joints[j], offset),
                 // A joint off the paths to the tips: its offset cannot be judged here.
                 None if offset != 0.0 => continue,
                 None => Pose::IDENTITY,
@@ -1142,7 +1072,7 @@ impl Robot {
             let angles = xyz_angles(&held.rotation);
             let implied: Vec<f64> = held.translation_m.iter().chain(&angles).copied().collect();
             let mut words = Vec::new();
-            for (k, field) in FIELDS.iter().enumerate() {
+            for (k, field) in DEVIATION_FIELDS.iter().enumerate() {
                 if (d[k] - implied[k]).abs() <= NOMINAL_TOLERANCE {
                     continue;
                 }
@@ -1161,7 +1091,7 @@ impl Robot {
                     d[k], implied[k]
                 ));
             }
-            let first = (FIELDS.iter())
+            let first = (DEVIATION_FIELDS.iter())
                 .map(|f| format!("{element}.{f}"))
                 .chain(core::iter::once(format!("{element}.offset")))
                 .find_map(|name| TomlSpans::parse(text).value_line(&name))
