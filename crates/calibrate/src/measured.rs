@@ -1920,13 +1920,34 @@ pub fn calibrate_measured(
         } = p;
         let (frames_model, frames_only) = &bounded.frames;
         let frames_fit = (frames_model, frames_only);
-        let choice = choose_rung(&fits, cfg, test, frames_fit, done, &ladder_rungs)?;
+        // The ladder's head fitted before the ladder (isotropic transversal compliance) is
+        // the rung a compliant tree most often settles on: its torque equilibrium is worked
+        // out beside the ladder, and taken when the ladder chooses that very fit.
+        let head = (cfg.rung.is_none())
+            .then(|| ladder_head(&ladder_rungs.0))
+            .flatten()
+            .and_then(|h| done.iter().find(|(r, _)| *r == h).cloned());
+        let (choice, early) = rayon::join(
+            || choose_rung(&fits, cfg, test, frames_fit, done, &ladder_rungs),
+            || {
+                head.map(|(r, (model, fitted))| {
+                    (
+                        r,
+                        fitted.x.clone(),
+                        equilibrate_fit(&fits, r, model, fitted),
+                    )
+                })
+            },
+        );
         let Choice {
             rung,
             chosen,
             mut ladder,
-        } = choice;
-        let settled = settle(&fits, rung, chosen, &mut ladder.reports)?;
+        } = choice?;
+        let early = early
+            .filter(|(r, x, _)| *r == rung && *x == chosen.1.x)
+            .map(|(_, _, settled)| settled);
+        let settled = settle(&fits, rung, chosen, early, &mut ladder.reports)?;
         let review = Review {
             cfg,
             fits: &fits,
@@ -2928,6 +2949,28 @@ fn climb_tried(
     (chosen, left_out)
 }
 
+/// [`equilibrate`] of `rung`'s fit `(model, fitted)` on the training rows of `fits`.
+///
+/// # Errors
+/// As [`equilibrate`].
+fn equilibrate_fit(
+    fits: &Fits<'_>,
+    rung: ModelName,
+    model: CalibratedModel,
+    fitted: Fitted,
+) -> Result<(CalibratedModel, Fitted, usize)> {
+    equilibrate(
+        rung,
+        fits.robot,
+        fits.start.tree,
+        fits.offsets,
+        fits.train,
+        fits.weights,
+        model,
+        fitted,
+    )
+}
+
 /// The chosen rung at its torque equilibrium ([`settle`]).
 struct Settled {
     model: CalibratedModel,
@@ -2940,7 +2983,9 @@ struct Settled {
 
 /// The torque equilibrium of the chosen rung ([`equilibrate`]): where the deflection changes
 /// the loads by more than the noise can show, the loads are re-evaluated at the deflected
-/// robot and the rung refitted. Its kinematic parameters kept go into its `ladder` report.
+/// robot and the rung refitted; `early`, that equilibrium of the same fit worked out already
+/// (beside the ladder), is taken as it is. Its kinematic parameters kept go into its `ladder`
+/// report.
 ///
 /// # Errors
 /// A failed identification.
@@ -2948,18 +2993,11 @@ fn settle(
     fits: &Fits<'_>,
     rung: ModelName,
     (model, fitted): (CalibratedModel, Fitted),
+    early: Option<Result<(CalibratedModel, Fitted, usize)>>,
     ladder: &mut [RungReport],
 ) -> Result<Settled> {
-    let (model, fitted, equilibrium_refits) = equilibrate(
-        rung,
-        fits.robot,
-        fits.start.tree,
-        fits.offsets,
-        fits.train,
-        fits.weights,
-        model,
-        fitted,
-    )?;
+    let (model, fitted, equilibrium_refits) =
+        early.unwrap_or_else(|| equilibrate_fit(fits, rung, model, fitted))?;
     let n_kept = (fitted.identified.identifiability.kept.iter())
         .filter(|&&i| !crate::report::is_frame_param(fitted.identified.layout.name(i)))
         .count();
