@@ -248,7 +248,7 @@ pub(crate) const FOLD_TOLERANCE: f64 = 1e-6;
 /// step's estimate is taken, and the fold needs no Jacobian beyond the one at the full-data
 /// estimate that every fold shares. A step that missed by more is iterated as before. On the
 /// simulated humanoids this moved every rung's cross-validated RMS by at most 7·10⁻⁵ of
-/// itself and every blocked score difference by at most 0.01 of its standard error
+/// itself and every blocked score difference by at most 0.04 of its standard error
 /// (docs/results/speed.md).
 pub(crate) const FOLD_STEP_CHI2: f64 = 0.1;
 
