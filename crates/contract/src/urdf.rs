@@ -10,6 +10,20 @@
 /// The parsed description: [`Robot`] (links and joints), as urdf-rs reads it.
 pub use urdf_rs::{Joint, JointType, Link, Robot};
 
+/// A joint type as a URDF file spells it in `<joint type="…">` (URDF specification, `joint`
+/// element): what a message names an unsupported joint by.
+pub fn joint_type_name(kind: &JointType) -> &'static str {
+    match kind {
+        JointType::Revolute => "revolute",
+        JointType::Continuous => "continuous",
+        JointType::Prismatic => "prismatic",
+        JointType::Fixed => "fixed",
+        JointType::Floating => "floating",
+        JointType::Planar => "planar",
+        JointType::Spherical => "spherical",
+    }
+}
+
 /// Text that is not a URDF ([`parse`]); displayed as `not a valid URDF: ` and the reason.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct NotUrdf {

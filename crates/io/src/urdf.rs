@@ -629,7 +629,7 @@ fn placement_of(
             return Err(Error::UnsupportedJoint {
                 path: path.to_path_buf(),
                 joint: name.clone(),
-                kind: format!("{other:?}").to_lowercase(),
+                kind: urdf::joint_type_name(other).to_owned(),
             });
         }
     };

@@ -194,7 +194,7 @@ impl Robot {
                             origin,
                             format!(
                                 "joint {name:?} is {}: the runtime evaluates revolute, continuous, prismatic and fixed joints",
-                                format!("{other:?}").to_lowercase()
+                                urdf::joint_type_name(other)
                             ),
                         ));
                     }

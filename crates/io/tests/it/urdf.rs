@@ -235,6 +235,12 @@ fn unsupported_and_malformed_urdfs_are_errors() {
     assert_contains(&msg, &["broken.urdf:3:3: "]);
     let msg = message(import_urdf(&data("no_such.urdf"), "a"));
     assert_contains(&msg, &["cannot read ", "no_such.urdf: "]);
+    // The joint type as the file spells it.
+    let msg = message(import_urdf(&data("floating.urdf"), "tool"));
+    assert_contains(
+        &msg,
+        &["floating.urdf: joint \"free_flyer\" is floating; only revolute"],
+    );
 }
 
 #[test]
