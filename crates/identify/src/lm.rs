@@ -717,22 +717,14 @@ pub(crate) fn run(
             if first {
                 delta = delta.min(u_norm);
             }
-            x_trial.copy_from(&x);
-            for ((&k, u), d) in free.iter().zip(&step.u).zip(&diag) {
-                x_trial[k] += u / d;
-            }
-            // Predicted relative reduction of ‖r‖² and directional derivative (MINPACK
-            // prered, dirder).
-            let t1 = step.jp_norm / f_norm;
-            let t2 = lambda.sqrt() * u_norm / f_norm;
-            let predicted = t1 * t1 + 2.0 * t2 * t2;
-            let directional = -(t1 * t1 + t2 * t2);
+            let (predicted, directional) =
+                trial_point(&x, free, &diag, &step, f_norm, &mut x_trial);
+            // A first Gauss–Newton step may be the one-step estimate (the test below).
+            let one_step = cfg.one_step.filter(|_| first && lambda == 0.0);
             // After a rejected Gauss–Newton step MINPACK sets Δ = ‖u‖, and the next `lmpar`
             // returns the same step (λ = 0 again): the same trial point, whose residual norm
             // (and, for `accept`, residuals) the problem has just produced. Reuse it rather
             // than evaluate twice; the iterates are MINPACK's either way.
-            // A first Gauss–Newton step may be the one-step estimate (the test below).
-            let one_step = cfg.one_step.filter(|_| first && lambda == 0.0);
             let f_norm_trial = match &last_trial {
                 Some((xt, norm)) if xt.as_ref() == x_trial.as_ref() => *norm,
                 _ => {
@@ -796,6 +788,27 @@ pub(crate) fn run(
         linearised_at_x,
         error,
     }
+}
+
+/// The trial point of `step` into `x_trial`: `x` with each free entry `free[i]` moved by
+/// `u_i / diag_i` (the scaled step back in the parameters' units). Returns the step's
+/// predicted relative reduction of `‖r‖²` and its directional derivative from `‖r‖ = f_norm`
+/// (MINPACK's `prered`, `dirder`).
+fn trial_point(
+    x: &Col<f64>,
+    free: &[usize],
+    diag: &[f64],
+    step: &Step,
+    f_norm: f64,
+    x_trial: &mut Col<f64>,
+) -> (f64, f64) {
+    x_trial.copy_from(x);
+    for ((&k, u), d) in free.iter().zip(&step.u).zip(diag) {
+        x_trial[k] += u / d;
+    }
+    let t1 = step.jp_norm / f_norm;
+    let t2 = step.lambda.sqrt() * step.u_norm / f_norm;
+    (t1 * t1 + 2.0 * t2 * t2, -(t1 * t1 + t2 * t2))
 }
 
 /// MINPACK's `gnorm`: the largest cosine between a column of the Jacobian (norms
