@@ -1070,6 +1070,9 @@ impl Warm {
 /// The residuals and the Jacobian of a rung's problem on every training row at its full-data
 /// estimate [`Warm::x`]: what every fold's refit starts from (its training rows' entries).
 struct AtWarm {
+    /// The problem on every training row, whose rows each fold's problem takes
+    /// ([`CalibrationProblem::with_rows`]).
+    problem: CalibrationProblem,
     /// `r(x)`, length `m` (every training row's residuals, tables and rows in file order).
     r: Col<f64>,
     /// `∂r/∂x`, `m × n` (`n` the problem's layout).
@@ -1113,7 +1116,32 @@ impl AtWarm {
         (problem
             .residuals_and_jacobian(warm.x.as_ref(), r.as_mut(), jac.as_mut())
             .ok())?;
-        Some(AtWarm { r, jac, first })
+        Some(AtWarm {
+            problem,
+            r,
+            jac,
+            first,
+        })
+    }
+
+    /// The problem on the rows `keep` selects: [`Self::problem`]'s rows of them (a table row
+    /// gives its distance and each marker sample, as [`observations`] orders them).
+    ///
+    /// # Errors
+    /// As [`CalibrationProblem::with_rows`].
+    fn problem_on(
+        &self,
+        tables: &[MeasurementTable],
+        keep: &dyn Fn(usize, usize) -> bool,
+    ) -> Result<CalibrationProblem> {
+        let mut rows = Vec::with_capacity(self.problem.observations().rows.len());
+        for (ti, t) in tables.iter().enumerate() {
+            for (ri, row) in t.rows.iter().enumerate() {
+                let n = usize::from(row.distance_m.is_some()) + row.markers.len();
+                rows.extend(std::iter::repeat_n(keep(ti, ri), n));
+            }
+        }
+        Ok(self.problem.with_rows(&rows)?)
     }
 
     /// The entries of the rows `keep` selects (in table and row order, as [`observations`]
@@ -1160,7 +1188,8 @@ impl AtWarm {
 /// (the identifiability decided on all training rows): Levenberg–Marquardt alone, a few
 /// iterations from a nearby start, from the residuals and Jacobian at `warm` that `at_warm`
 /// holds for every training row (the same values the fold's problem evaluates there), when
-/// given. A fold whose Jacobian has more than [`REFIT_MAX_ENTRIES`] entries is fitted on the
+/// given; the fold's problem is then that problem's on the fold's rows, its gravity loads not
+/// evaluated again ([`AtWarm::problem_on`]). A fold whose Jacobian has more than [`REFIT_MAX_ENTRIES`] entries is fitted on the
 /// streaming back end ([`hapcal_identify::levenberg_marquardt_streaming`]): its Jacobian
 /// passes in row blocks and is never held whole.
 #[allow(clippy::too_many_arguments)]
@@ -1174,9 +1203,17 @@ fn refit(
     warm: &Warm,
     at_warm: Option<&AtWarm>,
 ) -> Result<CalibratedModel> {
-    let obs = observations(tables, keep);
-    let problem = CalibrationProblem::on_tree(tree.clone(), obs, weights, terms(rung, robot)?)
-        .context("building the calibration problem")?;
+    let problem = match at_warm {
+        Some(at) => at.problem_on(tables.tables, keep),
+        None => CalibrationProblem::on_tree(
+            tree.clone(),
+            observations(tables, keep),
+            weights,
+            terms(rung, robot)?,
+        )
+        .map_err(Into::into),
+    }
+    .context("building the calibration problem")?;
     // A fold's estimate is judged by its held-out error: a relative cost reduction of 10⁻⁶
     // changes that error by about 10⁻⁶ of itself, far below the blocked standard errors the
     // ladder compares (a few per cent of the error); the full fits keep the default 10⁻¹². On

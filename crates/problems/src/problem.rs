@@ -433,6 +433,7 @@ impl CalibrationProblem {
                 torque_tips: None,
                 load_angles: None,
             },
+            None,
         )
     }
 
@@ -451,7 +452,7 @@ impl CalibrationProblem {
         weights: Weights,
         terms: ModelTerms,
     ) -> Result<Self, Error> {
-        let mut problem = Self::build(tree.tips().to_vec(), obs, weights, terms)?;
+        let mut problem = Self::build(tree.tips().to_vec(), obs, weights, terms, None)?;
         // The instrument and marker frames are nuisance parameters: identified, never pruned
         // as too uncertain (they start wherever the initial guess put them).
         let frames = tree.frame_params();
@@ -469,11 +470,14 @@ impl CalibrationProblem {
         Ok(problem)
     }
 
+    /// The problem of `terms` on `obs` seen by `tips`; `bases`, the rows' bases when they
+    /// are known already ([`Self::with_rows`]), else evaluated ([`row_bases`]).
     fn build(
         tips: Vec<Chain>,
         obs: Observations,
         weights: Weights,
         terms: ModelTerms,
+        bases: Option<RowBases>,
     ) -> Result<Self, Error> {
         let ModelTerms {
             compliance,
@@ -572,12 +576,14 @@ impl CalibrationProblem {
             harmonics: harmonics.as_ref(),
             transversal: &transversal_terms,
         };
-        let bases = row_bases(
-            &obs,
-            &basis_terms,
-            load_angles.as_deref(),
-            angle_terms.len(),
-        );
+        let bases = bases.unwrap_or_else(|| {
+            row_bases(
+                &obs,
+                &basis_terms,
+                load_angles.as_deref(),
+                angle_terms.len(),
+            )
+        });
         let stored_bases = bases.stored;
         specs.extend((0..obs.n_points).flat_map(|point| {
             ["x", "y", "z"].map(|axis| ParamSpec {
@@ -625,22 +631,80 @@ impl CalibrationProblem {
     /// # Errors
     /// As [`Self::new`] for the new observations.
     pub fn with_observations(&self, obs: Observations) -> Result<Self, Error> {
-        let mut problem = Self::build(
-            self.tips.clone(),
-            obs,
-            self.weights,
-            ModelTerms {
-                compliance: self.compliance.clone(),
-                transversal: self.transversal_kind(),
-                harmonics: self.harmonics.clone(),
-                torque_tips: Some(self.torque_tips.clone()),
-                load_angles: None,
-            },
-        )?;
+        let mut problem = Self::build(self.tips.clone(), obs, self.weights, self.terms(), None)?;
         if problem.layout.len() == self.layout.len() {
             problem.layout = self.layout.clone();
         }
         Ok(problem)
+    }
+
+    /// The same problem on the rows `keep` selects (one flag per row of
+    /// [`Self::observations`], in their order; the point distances kept): a cross-validation
+    /// fold's training rows. Its residuals and Jacobian are, bit for bit, those of the
+    /// problem built on the kept rows ([`Self::with_observations`]), and so are its layout
+    /// and its parameter roles, but each kept configuration's compliance and harmonic bases
+    /// (its gravity loads) are taken from this problem's instead of being evaluated again:
+    /// on a 20-joint two-arm tree that evaluation was the larger part of building a fold.
+    /// A problem whose loads were evaluated at a torque equilibrium, or that evaluates its
+    /// bases row by row, builds the kept rows' problem anew.
+    ///
+    /// # Errors
+    /// As [`Self::with_observations`].
+    ///
+    /// # Panics
+    /// If `keep` does not have one flag per row.
+    #[track_caller]
+    pub fn with_rows(&self, keep: &[bool]) -> Result<Self, Error> {
+        assert_eq!(
+            keep.len(),
+            self.obs.rows.len(),
+            "one flag per row of the problem"
+        );
+        let kept: Vec<usize> = (0..keep.len()).filter(|&i| keep[i]).collect();
+        let obs = Observations {
+            rows: kept.iter().map(|&i| self.obs.rows[i].clone()).collect(),
+            point_distances: self.obs.point_distances.clone(),
+            n_points: self.obs.n_points,
+        };
+        let bases = (self.stored_bases && !self.row_config.is_empty() && !self.equilibrium)
+            .then(|| self.kept_bases(&obs, &kept));
+        let mut problem = Self::build(self.tips.clone(), obs, self.weights, self.terms(), bases)?;
+        problem.layout = self.layout.clone();
+        Ok(problem)
+    }
+
+    /// The stored bases of the rows `obs` holds (`kept`: each one's row in this problem), a
+    /// configuration's being those of this problem's configuration of its first row (rows
+    /// of one configuration share their joint readings, and with them their bases).
+    fn kept_bases(&self, obs: &Observations, kept: &[usize]) -> RowBases {
+        let n_terms = self.angle_terms.len();
+        let n_transversal = self.transversal.len();
+        let mut bases = RowBases {
+            angle: Vec::new(),
+            tilts: Vec::new(),
+            row_config: Vec::with_capacity(kept.len()),
+            stored: true,
+        };
+        for (c, rows) in obs.configurations().enumerate() {
+            bases.row_config.extend(std::iter::repeat_n(c, rows.len()));
+            let from = self.row_config[kept[rows.start]];
+            (bases.angle).extend_from_slice(&self.angle_basis[from * n_terms..][..n_terms]);
+            (bases.tilts)
+                .extend_from_slice(&self.tilt_basis[from * n_transversal..][..n_transversal]);
+        }
+        bases
+    }
+
+    /// The model terms this problem was built with, the loads at the readings (not at a
+    /// torque equilibrium's angles).
+    fn terms(&self) -> ModelTerms {
+        ModelTerms {
+            compliance: self.compliance.clone(),
+            transversal: self.transversal_kind(),
+            harmonics: self.harmonics.clone(),
+            torque_tips: Some(self.torque_tips.clone()),
+            load_angles: None,
+        }
     }
 
     /// The same problem evaluating each configuration's compliance and harmonic bases (its

@@ -203,3 +203,70 @@ fn a_configurations_rows_share_its_loads() {
     );
     assert!(wrong.is_err());
 }
+
+/// A fold's problem taken from the whole problem's rows ([`CalibrationProblem::with_rows`])
+/// is the problem built on those rows, bit for bit: residuals, Jacobian and layout, with
+/// compliance, per-axis transversal compliance and harmonics, a configuration's rows kept or
+/// dropped together and apart, and two configurations of equal readings made adjacent by the
+/// rows dropped between them.
+#[test]
+fn a_problem_on_some_rows_is_the_problem_built_on_them() {
+    let tree = framed(&two_arm_tree());
+    let qs = configurations(6);
+    let mut obs = Observations::default();
+    // Configuration 4 repeats configuration 2's readings.
+    for (i, q) in [0, 1, 2, 3, 2, 5].into_iter().map(|k| &qs[k]).enumerate() {
+        for tip in 0..2 {
+            let position_m = [0.5 + 0.1 * tip as f64, 0.4, 0.3 - 0.05 * i as f64];
+            obs.rows.push(Row {
+                q: q[..].into(),
+                kind: RowKind::Marker { tip, position_m },
+            });
+        }
+    }
+    let terms = ModelTerms {
+        compliance: Some(GravityCompliance::default()),
+        transversal: hapcal_problems::Transversal::PerAxis,
+        harmonics: Some(hapcal_problems::JointHarmonics::first_order(tree.n_joints())),
+        torque_tips: Some(two_arm_tree().tips().to_vec()),
+        load_angles: None,
+    };
+    let weights = pose_and_marker_weights();
+    let whole = CalibrationProblem::on_tree(tree.clone(), obs.clone(), weights, terms.clone())
+        .expect("valid problem");
+    let n = whole.layout().len();
+    let x = Col::from_fn(n, |i| 1e-2 * ((i * 7 % 11) as f64 - 5.0) / 5.0);
+    for keep in [
+        // Configuration 3 dropped: 2 and its repeat become adjacent, one configuration.
+        vec![true, true, true, true, true, true, false, false, true, true, true, true],
+        // One marker of configurations 1 and 4 dropped, the whole of 5.
+        vec![true, true, false, true, true, true, true, true, true, false, false, false],
+    ] {
+        let rows: Vec<Row> = (obs.rows.iter().zip(&keep))
+            .filter(|(_, k)| **k)
+            .map(|(r, _)| r.clone())
+            .collect();
+        let built = CalibrationProblem::on_tree(
+            tree.clone(),
+            Observations {
+                rows,
+                ..Observations::default()
+            },
+            weights,
+            terms.clone(),
+        )
+        .expect("valid problem");
+        let taken = whole.with_rows(&keep).expect("valid rows");
+        assert_eq!(taken.layout(), built.layout());
+        let m = built.n_residuals();
+        assert_eq!(taken.n_residuals(), m);
+        let (mut r_built, mut r_taken) = (Col::zeros(m), Col::zeros(m));
+        let (mut j_built, mut j_taken) = (faer::Mat::zeros(m, n), faer::Mat::zeros(m, n));
+        (built.residuals_and_jacobian(x.as_ref(), r_built.as_mut(), j_built.as_mut()))
+            .expect("evaluated");
+        (taken.residuals_and_jacobian(x.as_ref(), r_taken.as_mut(), j_taken.as_mut()))
+            .expect("evaluated");
+        assert_eq!(r_taken, r_built, "residuals, keeping {keep:?}");
+        assert_eq!(j_taken, j_built, "Jacobian, keeping {keep:?}");
+    }
+}
