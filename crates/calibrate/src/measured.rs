@@ -1184,12 +1184,114 @@ impl AtWarm {
     }
 }
 
+/// Where each blocked fold's refit starts, at a rung's full-data estimate: the R factor of
+/// `[J_f r]` over the fold's training rows (`J_f` the refit's free columns) and their `‖r‖²`.
+/// The blocked folds come repeat by repeat, each repeat's held-out blocks a partition of the
+/// training rows ([`crate::fit::blocked_folds`]), so a fold trains on the other blocks of its
+/// repeat: each block's rows are reduced to their triangle once
+/// ([`hapcal_identify::rows_r_factor`]), and a fold's start is the triangles of the blocks
+/// before it and after it stacked ([`hapcal_identify::stacked_r_factor`], prefixes and
+/// suffixes of the repeat reused): `2k − 3` triangle merges a repeat instead of the
+/// `k(k − 1)` blocks the folds' Jacobians would fold, whose rows are never copied.
+struct FoldStarts(Vec<(Mat<f64>, f64)>);
+
+impl FoldStarts {
+    /// The starts of the folds of `blocked` (`k` folds a repeat) over the rows of `tables`
+    /// that `at` evaluated, columns `free`; `None` when a repeat's held-out blocks do not
+    /// partition the rows.
+    fn new(
+        at: &AtWarm,
+        tables: &[MeasurementTable],
+        blocked: &[Fold],
+        k: usize,
+        free: &[usize],
+    ) -> Option<Self> {
+        use rayon::prelude::*;
+        if k < 2 || blocked.len() % k != 0 {
+            return None;
+        }
+        for repeat in blocked.chunks(k) {
+            for (ti, t) in tables.iter().enumerate() {
+                for ri in 0..t.rows.len() {
+                    if repeat.iter().filter(|fold| fold[ti][ri]).count() != 1 {
+                        return None;
+                    }
+                }
+            }
+        }
+        let blocks: Vec<(Mat<f64>, f64)> = (blocked.par_iter())
+            .map(|fold| {
+                let mut rows = Vec::new();
+                for (ti, t) in tables.iter().enumerate() {
+                    for (ri, row) in t.rows.iter().enumerate() {
+                        if fold[ti][ri] {
+                            let start = at.first[ti][ri];
+                            rows.extend(start..start + row_residuals(row));
+                        }
+                    }
+                }
+                let r_norm_sq = rows.iter().map(|&i| at.r[i] * at.r[i]).sum::<f64>();
+                let tri =
+                    hapcal_identify::rows_r_factor(at.jac.as_ref(), at.r.as_ref(), &rows, free);
+                (tri, r_norm_sq)
+            })
+            .collect();
+        let starts = (blocks.par_chunks(k))
+            .flat_map_iter(|repeat| Self::of_repeat(repeat))
+            .collect();
+        Some(Self(starts))
+    }
+
+    /// The starts of one repeat's folds from its blocks' triangles and `‖r‖²` (fold `b` holds
+    /// out block `b`): the blocks before `b` stacked with those after it.
+    fn of_repeat(blocks: &[(Mat<f64>, f64)]) -> Vec<(Mat<f64>, f64)> {
+        let k = blocks.len();
+        let stack = |a: &Mat<f64>, b: &Mat<f64>| {
+            hapcal_identify::stacked_r_factor(&[a.as_ref(), b.as_ref()])
+        };
+        // prefix[b]: blocks 0..b stacked (b ≥ 1); suffix[b]: blocks b+1..k stacked (b < k−1).
+        let mut prefix: Vec<Option<Mat<f64>>> = vec![None; k];
+        let mut suffix: Vec<Option<Mat<f64>>> = vec![None; k];
+        for b in 1..k {
+            prefix[b] = Some(match &prefix[b - 1] {
+                Some(p) => stack(p, &blocks[b - 1].0),
+                None => blocks[b - 1].0.clone(),
+            });
+        }
+        for b in (0..k - 1).rev() {
+            suffix[b] = Some(match &suffix[b + 1] {
+                Some(s) => stack(&blocks[b + 1].0, s),
+                None => blocks[b + 1].0.clone(),
+            });
+        }
+        (prefix.into_iter().zip(suffix).enumerate())
+            .map(|(b, ends)| {
+                let tri = match ends {
+                    (Some(p), Some(s)) => stack(&p, &s),
+                    (Some(t), None) | (None, Some(t)) => t,
+                    (None, None) => unreachable!("a repeat of at least 2 folds"),
+                };
+                let r_norm_sq = (0..k).filter(|&c| c != b).map(|c| blocks[c].1).sum();
+                (tri, r_norm_sq)
+            })
+            .collect()
+    }
+
+    /// The start of blocked fold `f`; `None` past the blocked folds (a joint-range fold).
+    fn start_of(&self, f: usize) -> Option<(Mat<f64>, f64)> {
+        self.0.get(f).cloned()
+    }
+}
+
 /// `rung` refitted on the rows `keep` selects, from `warm` and over its kept parameters
 /// (the identifiability decided on all training rows): Levenberg–Marquardt alone, a few
 /// iterations from a nearby start, from the residuals and Jacobian at `warm` that `at_warm`
 /// holds for every training row (the same values the fold's problem evaluates there), when
 /// given; the fold's problem is then that problem's on the fold's rows, its gravity loads not
-/// evaluated again ([`AtWarm::problem_on`]). A fold whose Jacobian has more than [`REFIT_MAX_ENTRIES`] entries is fitted on the
+/// evaluated again ([`AtWarm::problem_on`]). With `reduced`, the R factor of `[J_f r]` over
+/// the fold's training rows at `warm` and their `‖r‖²` ([`FoldStarts`]), it starts from
+/// them on the streaming back end instead, the fold's Jacobian neither copied nor folded
+/// again. A fold whose Jacobian has more than [`REFIT_MAX_ENTRIES`] entries is fitted on the
 /// streaming back end ([`hapcal_identify::levenberg_marquardt_streaming`]): its Jacobian
 /// passes in row blocks and is never held whole.
 #[allow(clippy::too_many_arguments)]
@@ -1202,6 +1304,7 @@ fn refit(
     keep: &dyn Fn(usize, usize) -> bool,
     warm: &Warm,
     at_warm: Option<&AtWarm>,
+    reduced: Option<(Mat<f64>, f64)>,
 ) -> Result<CalibratedModel> {
     let problem = match at_warm {
         Some(at) => at.problem_on(tables.tables, keep),
@@ -1226,17 +1329,29 @@ fn refit(
         problem.n_residuals(),
         warm.free.len(),
     );
-    let start = (at_warm.map(|a| a.rows(tables.tables, keep))).filter(|(r, jac)| {
-        r.nrows() == problem.n_residuals() && jac.ncols() == problem.layout().len()
-    });
-    let fit = lm_alone(
-        &problem,
-        warm.x.clone(),
-        &warm.free,
-        &lm,
-        start,
-        REFIT_MAX_ENTRIES,
-    )
+    let fit = match reduced {
+        Some((r_free, r_norm_sq)) => hapcal_identify::levenberg_marquardt_streaming_from(
+            &problem,
+            warm.x.clone(),
+            &warm.free,
+            &lm,
+            r_free,
+            r_norm_sq,
+        ),
+        None => {
+            let start = (at_warm.map(|a| a.rows(tables.tables, keep))).filter(|(r, jac)| {
+                r.nrows() == problem.n_residuals() && jac.ncols() == problem.layout().len()
+            });
+            lm_alone(
+                &problem,
+                warm.x.clone(),
+                &warm.free,
+                &lm,
+                start,
+                REFIT_MAX_ENTRIES,
+            )
+        }
+    }
     .with_context(|| format!("refitting the {rung} model on a fold"))?;
     Ok(problem.model(fit.x.as_ref()))
 }
@@ -1865,6 +1980,8 @@ fn cross_validate(
     // Per fold, per held-out row: table, row, squared error (m²), weighted squared error.
     type Held = Option<Vec<(usize, usize, f64, f64)>>;
     let at_warm = AtWarm::new(rung, robot, tree, tables, weights, warm);
+    let starts = (at_warm.as_ref())
+        .and_then(|a| FoldStarts::new(a, tables.tables, &blocked, cfg.folds, &warm.free));
     let held: Vec<Held> = (folds.par_iter().enumerate())
         .map(|(f, fold)| {
             let fitted = refit(
@@ -1876,6 +1993,7 @@ fn cross_validate(
                 &|ti, r| !fold[ti][r],
                 warm,
                 at_warm.as_ref(),
+                starts.as_ref().and_then(|s| s.start_of(f)),
             );
             let model = match fitted {
                 Ok(model) => model,

@@ -377,6 +377,148 @@ pub fn levenberg_marquardt_streaming(
     Ok(streaming_fit(blocks, n, x0, free, cfg, lin).0)
 }
 
+/// [`levenberg_marquardt_streaming`] from a linearisation at `x0` already reduced to the free
+/// columns: `r_free`, the upper-triangular `(n_f+1) × (n_f+1)` R factor of `[J_f r]` at `x0`
+/// (`J_f` the columns `free`, in that order; any factor with the same Gram matrix, such as
+/// [`stacked_r_factor`] of the triangles of its rows), and `r_norm_sq = ‖r(x0)‖²`. A
+/// cross-validation fold's refit starts so from the triangles of its blocks of rows, reduced
+/// once for every fold that trains on them ([`rows_r_factor`]): the fold's `J` is never
+/// evaluated or copied at `x0`. The iterates are those of [`levenberg_marquardt_streaming`]
+/// from `x0` up to rounding; later linearisations are streamed as there.
+///
+/// # Errors
+/// As [`levenberg_marquardt_streaming`]; [`Error::Eval`] when `r_free` or `r_norm_sq` is not
+/// finite.
+///
+/// # Panics
+/// If `r_free` is not `(n_f+1) × (n_f+1)`.
+#[track_caller]
+pub fn levenberg_marquardt_streaming_from(
+    p: &impl Problem,
+    x0: Col<f64>,
+    free: &[usize],
+    cfg: &LmConfig,
+    r_free: Mat<f64>,
+    r_norm_sq: f64,
+) -> Result<Fit, Error> {
+    let n1 = free.len() + 1;
+    assert!(
+        r_free.nrows() == n1 && r_free.ncols() == n1,
+        "R factor of [J_f r]: {} × {}, expected {n1} × {n1}",
+        r_free.nrows(),
+        r_free.ncols()
+    );
+    let blocks = p.row_blocks().ok_or(Error::NoRowBlocks)?;
+    check_inputs(p, x0.as_ref(), free, cfg)?;
+    if !(r_free.is_all_finite() && r_norm_sq.is_finite()) {
+        return Err(Error::Eval(EvalError {
+            reason: "the linearisation at the start is not finite".to_owned(),
+        }));
+    }
+    if free.is_empty() {
+        return Ok(Fit::nothing_free(x0, 0.5 * r_norm_sq, Col::zeros(0)));
+    }
+    let n = p.layout().len();
+    let mut s = Streaming {
+        p: blocks,
+        n,
+        free,
+        r_f: r_free,
+        full: Linearisation {
+            r_aug: Mat::new(),
+            r_norm_sq,
+        },
+    };
+    let run = run(&mut s, x0, free, cfg, r_norm_sq.sqrt());
+    Ok(Fit {
+        x: run.x,
+        termination: run.termination,
+        n_evaluations: run.n_evaluations,
+        n_jacobians: run.n_jacobians,
+        n_iterations: run.n_iterations,
+        cost: 0.5 * run.f_norm * run.f_norm,
+        residuals: Col::zeros(0),
+    })
+}
+
+/// The upper-triangular `(k+1) × (k+1)` R factor `R₊` of `[J_S r]` over the rows `rows` of
+/// `jac` (`m × n`) and `r` (length `m`), `J_S` the columns `cols` (length `k`, in that order):
+/// `R₊ᵀR₊ = [J_S r]ᵀ[J_S r]` over those rows, folded 256 rows at a time
+/// by the structured Householder update (TSQR, see the module source). The triangles of
+/// disjoint blocks of rows, stacked ([`stacked_r_factor`]), give the R factor of their union.
+///
+/// # Panics
+/// If a row or column index is out of range.
+pub fn rows_r_factor(
+    jac: MatRef<'_, f64>,
+    r: ColRef<'_, f64>,
+    rows: &[usize],
+    cols: &[usize],
+) -> Mat<f64> {
+    let n1 = cols.len() + 1;
+    let chunk = crate::lm::FOLD_ROWS.min(rows.len()).max(1);
+    let mut tri = vec![0.0; n1 * n1];
+    let mut block = vec![0.0; chunk * n1];
+    for part in rows.chunks(chunk) {
+        let len = part.len();
+        for (c, dst) in block.chunks_exact_mut(len).take(n1).enumerate() {
+            match cols.get(c) {
+                Some(&j) => {
+                    let col = jac.col(j);
+                    for (d, &i) in dst.iter_mut().zip(part) {
+                        *d = col[i];
+                    }
+                }
+                None => {
+                    for (d, &i) in dst.iter_mut().zip(part) {
+                        *d = r[i];
+                    }
+                }
+            }
+        }
+        crate::householder::fold_rows(&mut tri, n1, &mut block, len, len);
+    }
+    Mat::from_fn(n1, n1, |i, j| tri[j * n1 + i])
+}
+
+/// The upper-triangular R factor of the triangles `parts` stacked (each `n1 × n1`, upper
+/// triangular, the R factor of a block of rows): `RᵀR = Σ TᵀT`, the R factor of the union of
+/// their rows ([`rows_r_factor`]): the first triangle, and each later one folded into it by
+/// the structured Householder update.
+///
+/// # Panics
+/// If the parts are not all `n1 × n1` (`n1` the first one's), or the first is not upper
+/// triangular.
+pub fn stacked_r_factor(parts: &[MatRef<'_, f64>]) -> Mat<f64> {
+    let n1 = parts.first().map_or(0, |t| t.nrows());
+    let mut tri = vec![0.0; n1 * n1];
+    let mut block = vec![0.0; n1 * n1];
+    for (p, t) in parts.iter().enumerate() {
+        assert!(
+            t.nrows() == n1 && t.ncols() == n1,
+            "triangle {} × {}, expected {n1} × {n1}",
+            t.nrows(),
+            t.ncols()
+        );
+        // The first is an R factor already: the others fold into it.
+        let dst = if p == 0 { &mut tri } else { &mut block };
+        for j in 0..n1 {
+            for i in 0..n1 {
+                dst[j * n1 + i] = t[(i, j)];
+            }
+        }
+        if p == 0 {
+            assert!(
+                (0..n1).all(|j| (j + 1..n1).all(|i| tri[j * n1 + i] == 0.0)),
+                "the first triangle is not upper triangular"
+            );
+        } else {
+            crate::householder::fold_rows(&mut tri, n1, &mut block, n1, n1);
+        }
+    }
+    Mat::from_fn(n1, n1, |i, j| tri[j * n1 + i])
+}
+
 /// The R factor (`n × n`, `n = p.layout().len()`) of the Jacobian of `p` at `x`, streamed
 /// through its row blocks as [`levenberg_marquardt_streaming`] linearises (TSQR, see the module
 /// source): `Rᵀ·R = Jᵀ·J`, so it carries the rows' identifiability and information at the

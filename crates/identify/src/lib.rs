@@ -73,7 +73,10 @@ mod rank;
 mod sparse;
 mod subset;
 
-pub use blocks::{N_LEAVES, RowBlocks, jacobian_r_factor, levenberg_marquardt_streaming};
+pub use blocks::{
+    N_LEAVES, RowBlocks, jacobian_r_factor, levenberg_marquardt_streaming,
+    levenberg_marquardt_streaming_from, rows_r_factor, stacked_r_factor,
+};
 pub use calibrate::{
     Backend, BackendChoice, DENSE_LIMIT_BYTES, Identified, IdentifyConfig, MAX_ROUNDS, SIGMA_FLOOR,
     SPARSE_AUTO_DENSITY, STREAMING_AUTO_ENTRIES, SigmaSource, identify, identify_held,

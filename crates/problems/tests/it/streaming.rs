@@ -168,3 +168,78 @@ fn auto_backend_streams_only_large_problems() {
     let id = with_backend(&p, Backend::Auto);
     assert_eq!(id.fit.residuals.nrows(), p.n_residuals());
 }
+
+/// A cross-validation fold's refit started from the triangles of the blocks of rows it trains
+/// on ([`hapcal_identify::rows_r_factor`], stacked by [`hapcal_identify::stacked_r_factor`])
+/// has the Gram matrix of the fold's rows and reaches the refit that evaluates the fold's
+/// Jacobian itself.
+#[test]
+fn a_fold_started_from_its_blocks_triangles_is_the_folds_refit() {
+    let p = reference_distance_problem(600);
+    let full = with_backend(&p, Backend::Dense);
+    let free = full.identifiability.kept.clone();
+    let (m, n) = (p.n_residuals(), p.layout().len());
+    // Moved off the full-data estimate, as a fold's start lies off the fold's own minimum.
+    let x0 = Col::from_fn(n, |i| full.fit.x[i] + 1e-5 * ((i % 5) as f64 - 2.0));
+    let (mut r, mut jac) = (Col::zeros(m), faer::Mat::zeros(m, n));
+    p.residuals_and_jacobian(x0.as_ref(), r.as_mut(), jac.as_mut())
+        .expect("evaluated");
+    // The fold holds out rows 200..300 (one residual per distance row) and trains on the
+    // blocks before and after them.
+    let before: Vec<usize> = (0..200).collect();
+    let after: Vec<usize> = (300..600).collect();
+    let blocks = [
+        hapcal_identify::rows_r_factor(jac.as_ref(), r.as_ref(), &before, &free),
+        hapcal_identify::rows_r_factor(jac.as_ref(), r.as_ref(), &after, &free),
+    ];
+    let tri = hapcal_identify::stacked_r_factor(&[blocks[0].as_ref(), blocks[1].as_ref()]);
+    let rows: Vec<usize> = before.iter().chain(&after).copied().collect();
+    let aug = faer::Mat::from_fn(rows.len(), free.len() + 1, |i, c| match free.get(c) {
+        Some(&j) => jac[(rows[i], j)],
+        None => r[rows[i]],
+    });
+    let (gram, gram_tri) = (aug.transpose() * &aug, tri.transpose() * &tri);
+    let scale = (0..gram.nrows()).map(|i| gram[(i, i)]).fold(0.0_f64, f64::max);
+    for i in 0..gram.nrows() {
+        for j in 0..gram.ncols() {
+            // Rounding of two Householder reductions of 500 rows: 1e-12 of the largest entry.
+            assert!(
+                (gram[(i, j)] - gram_tri[(i, j)]).abs() <= 1e-12 * scale,
+                "Gram entry ({i}, {j}): {:e} vs {:e}",
+                gram[(i, j)],
+                gram_tri[(i, j)]
+            );
+        }
+    }
+    let keep: Vec<bool> = (0..600).map(|k| !(200..300).contains(&k)).collect();
+    let fold = p.with_rows(&keep).expect("the fold's rows");
+    let r_norm_sq = rows.iter().map(|&i| r[i] * r[i]).sum::<f64>();
+    let cfg = hapcal_identify::LmConfig::default();
+    let started = hapcal_identify::levenberg_marquardt_streaming_from(
+        &fold,
+        x0.clone(),
+        &free,
+        &cfg,
+        tri,
+        r_norm_sq,
+    )
+    .expect("refit from the triangles");
+    let evaluated =
+        hapcal_identify::levenberg_marquardt(&fold, x0, &free, &cfg).expect("refit evaluating J");
+    assert!(started.termination.is_success() && evaluated.termination.is_success());
+    let std = full.covariance.std();
+    for &i in &free {
+        let (a, b) = (started.x[i], evaluated.x[i]);
+        let std_i = (full.covariance.free.iter())
+            .position(|&f| f == i)
+            .map_or(0.0, |k| std[k]);
+        // As the streaming and dense back ends: the same MINPACK tests, points apart by
+        // rounding along the weakest directions.
+        assert!(
+            (a - b).abs() <= 1e-9_f64.max(1e-4 * std_i),
+            "{}: from the triangles {a:e} vs evaluated {b:e} (std {std_i:e})",
+            p.layout().name(i)
+        );
+    }
+    assert!(started.n_iterations >= 1 && started.x != full.fit.x);
+}
