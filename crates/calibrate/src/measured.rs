@@ -1207,7 +1207,7 @@ impl FoldStarts {
         free: &[usize],
     ) -> Option<Self> {
         use rayon::prelude::*;
-        if k < 2 || blocked.len() % k != 0 {
+        if k < 2 || !blocked.len().is_multiple_of(k) {
             return None;
         }
         for repeat in blocked.chunks(k) {
@@ -1237,7 +1237,7 @@ impl FoldStarts {
             })
             .collect();
         let starts = (blocks.par_chunks(k))
-            .flat_map_iter(|repeat| Self::of_repeat(repeat))
+            .flat_map_iter(Self::of_repeat)
             .collect();
         Some(Self(starts))
     }
