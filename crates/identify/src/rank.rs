@@ -415,22 +415,46 @@ fn interchangeable(a: &[f64], b: &[f64], fails: impl Fn(f64, f64) -> bool) -> bo
     }
     // Components orthogonal to the other column, by projection (not √(1 − cos²), which loses
     // half the digits for nearly parallel columns).
-    let dot = a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let ab = dot(a, b);
     let perp = |u: &[f64], v: &[f64], nv: f64| {
-        let t = dot / (nv * nv);
+        let t = ab / (nv * nv);
         let r: Vec<f64> = u.iter().zip(v).map(|(x, y)| x - t * y).collect();
         norm_l2(&r)
     };
     fails(perp(a, b, nb), perp(b, a, na))
 }
 
+/// `‖x‖₂`: the plain sum of squares where it neither overflows nor underflows (the columns
+/// of the decision are scaled to unit norm, so it almost always does neither), else scaled
+/// like LAPACK's dnrm2.
 fn norm_l2(x: &[f64]) -> f64 {
-    // Scaled to avoid overflow and underflow, like LAPACK's dnrm2.
+    let sum = dot(x, x);
+    // Below 2⁻⁹⁰⁰ squares of small entries may have lost digits to underflow.
+    if sum.is_finite() && sum > f64::from_bits(0x07b0_0000_0000_0000) {
+        return sum.sqrt();
+    }
     let scale = x.iter().fold(0.0_f64, |a, &v| a.max(v.abs()));
     if scale == 0.0 {
         return 0.0;
     }
     scale * x.iter().map(|&v| (v / scale).powi(2)).sum::<f64>().sqrt()
+}
+
+/// `xᵀy` over the common length, in four partial sums (which the compiler vectorises; one
+/// running sum it may not reorder).
+fn dot(x: &[f64], y: &[f64]) -> f64 {
+    let n = x.len().min(y.len());
+    let (x, y) = (&x[..n], &y[..n]);
+    let mut acc = [0.0_f64; 4];
+    let (xc, yc) = (x.chunks_exact(4), y.chunks_exact(4));
+    let (xr, yr) = (xc.remainder(), yc.remainder());
+    for (a, b) in xc.zip(yc) {
+        for l in 0..4 {
+            acc[l] += a[l] * b[l];
+        }
+    }
+    let tail: f64 = xr.iter().zip(yr).map(|(a, b)| a * b).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// Householder step `k` on column `pivot` (rows `k..`), applied to the columns `apply_to`
@@ -441,14 +465,14 @@ fn reflect(w: &mut [Vec<f64>], k: usize, pivot: usize, apply_to: impl Fn(usize) 
     let alpha = if x[0] > 0.0 { -x_norm } else { x_norm };
     let mut v = x.to_vec();
     v[0] -= alpha;
-    let vtv: f64 = v.iter().map(|a| a * a).sum();
+    let vtv = dot(&v, &v);
     for (pos, col) in w.iter_mut().enumerate() {
         if pos == pivot {
             col[k] = alpha;
             col[k + 1..].iter_mut().for_each(|a| *a = 0.0);
         } else if apply_to(pos) && vtv > 0.0 {
             let y = &mut col[k..];
-            let f = 2.0 * v.iter().zip(y.iter()).map(|(a, b)| a * b).sum::<f64>() / vtv;
+            let f = 2.0 * dot(&v, y) / vtv;
             y.iter_mut().zip(&v).for_each(|(b, a)| *b -= f * a);
         }
     }
