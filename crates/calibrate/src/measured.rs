@@ -1124,6 +1124,35 @@ impl AtWarm {
         })
     }
 
+    /// The indices in [`Self::r`] of the residuals of the rows `keep` selects, in table and
+    /// row order.
+    fn entries(
+        &self,
+        tables: &[MeasurementTable],
+        keep: &dyn Fn(usize, usize) -> bool,
+    ) -> Vec<usize> {
+        let mut idx = Vec::new();
+        for (ti, t) in tables.iter().enumerate() {
+            for (ri, row) in t.rows.iter().enumerate() {
+                if keep(ti, ri) {
+                    let start = self.first[ti][ri];
+                    idx.extend(start..start + row_residuals(row));
+                }
+            }
+        }
+        idx
+    }
+
+    /// The residuals of the rows `keep` selects, in table and row order.
+    fn residuals_of(
+        &self,
+        tables: &[MeasurementTable],
+        keep: &dyn Fn(usize, usize) -> bool,
+    ) -> Col<f64> {
+        let idx = self.entries(tables, keep);
+        Col::from_fn(idx.len(), |i| self.r[idx[i]])
+    }
+
     /// The problem on the rows `keep` selects: [`Self::problem`]'s rows of them (a table row
     /// gives its distance and each marker sample, as [`observations`] orders them).
     ///
@@ -1151,17 +1180,8 @@ impl AtWarm {
         tables: &[MeasurementTable],
         keep: &dyn Fn(usize, usize) -> bool,
     ) -> (Col<f64>, Mat<f64>) {
-        let mut ranges = Vec::new();
-        for (ti, t) in tables.iter().enumerate() {
-            for (ri, row) in t.rows.iter().enumerate() {
-                if keep(ti, ri) {
-                    let start = self.first[ti][ri];
-                    ranges.push(start..start + row_residuals(row));
-                }
-            }
-        }
-        let m: usize = ranges.iter().map(|r| r.len()).sum();
-        let idx: Vec<usize> = ranges.into_iter().flatten().collect();
+        let idx = self.entries(tables, keep);
+        let m = idx.len();
         let r = Col::from_fn(m, |i| self.r[idx[i]]);
         // Column by column, through the columns' slices: indexing the matrix entry by entry
         // took about 4 % of the humanoid's ladder.
@@ -1185,15 +1205,15 @@ impl AtWarm {
 }
 
 /// Where each blocked fold's refit starts, at a rung's full-data estimate: the R factor of
-/// `[J_f r]` over the fold's training rows (`J_f` the refit's free columns) and their `‖r‖²`.
+/// `[J_f r]` over the fold's training rows (`J_f` the refit's free columns).
 /// The blocked folds come repeat by repeat, each repeat's held-out blocks a partition of the
 /// training rows ([`crate::fit::blocked_folds`]), so a fold trains on the other blocks of its
 /// repeat: each block's rows are reduced to their triangle once
 /// ([`hapcal_identify::rows_r_factor`]), and a fold's start is the triangles of the blocks
 /// before it and after it stacked ([`hapcal_identify::stacked_r_factor`], prefixes and
-/// suffixes of the repeat reused): `2k − 3` triangle merges a repeat instead of the
-/// `k(k − 1)` blocks the folds' Jacobians would fold, whose rows are never copied.
-struct FoldStarts(Vec<(Mat<f64>, f64)>);
+/// suffixes of the repeat reused): `3(k − 2)` merges of two triangles a repeat, where the
+/// folds' own Jacobians would fold `k(k − 1)` blocks of rows (their rows never copied).
+struct FoldStarts(Vec<Mat<f64>>);
 
 impl FoldStarts {
     /// The starts of the folds of `blocked` (`k` folds a repeat) over the rows of `tables`
@@ -1219,21 +1239,10 @@ impl FoldStarts {
                 }
             }
         }
-        let blocks: Vec<(Mat<f64>, f64)> = (blocked.par_iter())
+        let blocks: Vec<Mat<f64>> = (blocked.par_iter())
             .map(|fold| {
-                let mut rows = Vec::new();
-                for (ti, t) in tables.iter().enumerate() {
-                    for (ri, row) in t.rows.iter().enumerate() {
-                        if fold[ti][ri] {
-                            let start = at.first[ti][ri];
-                            rows.extend(start..start + row_residuals(row));
-                        }
-                    }
-                }
-                let r_norm_sq = rows.iter().map(|&i| at.r[i] * at.r[i]).sum::<f64>();
-                let tri =
-                    hapcal_identify::rows_r_factor(at.jac.as_ref(), at.r.as_ref(), &rows, free);
-                (tri, r_norm_sq)
+                let rows = at.entries(tables, &|ti, ri| fold[ti][ri]);
+                hapcal_identify::rows_r_factor(at.jac.as_ref(), at.r.as_ref(), &rows, free)
             })
             .collect();
         let starts = (blocks.par_chunks(k))
@@ -1242,9 +1251,9 @@ impl FoldStarts {
         Some(Self(starts))
     }
 
-    /// The starts of one repeat's folds from its blocks' triangles and `‖r‖²` (fold `b` holds
-    /// out block `b`): the blocks before `b` stacked with those after it.
-    fn of_repeat(blocks: &[(Mat<f64>, f64)]) -> Vec<(Mat<f64>, f64)> {
+    /// The starts of one repeat's folds from its blocks' triangles (fold `b` holds out block
+    /// `b`): the blocks before `b` stacked with those after it.
+    fn of_repeat(blocks: &[Mat<f64>]) -> Vec<Mat<f64>> {
         let k = blocks.len();
         let stack = |a: &Mat<f64>, b: &Mat<f64>| {
             hapcal_identify::stacked_r_factor(&[a.as_ref(), b.as_ref()])
@@ -1254,31 +1263,27 @@ impl FoldStarts {
         let mut suffix: Vec<Option<Mat<f64>>> = vec![None; k];
         for b in 1..k {
             prefix[b] = Some(match &prefix[b - 1] {
-                Some(p) => stack(p, &blocks[b - 1].0),
-                None => blocks[b - 1].0.clone(),
+                Some(p) => stack(p, &blocks[b - 1]),
+                None => blocks[b - 1].clone(),
             });
         }
         for b in (0..k - 1).rev() {
             suffix[b] = Some(match &suffix[b + 1] {
-                Some(s) => stack(&blocks[b + 1].0, s),
-                None => blocks[b + 1].0.clone(),
+                Some(s) => stack(&blocks[b + 1], s),
+                None => blocks[b + 1].clone(),
             });
         }
-        (prefix.into_iter().zip(suffix).enumerate())
-            .map(|(b, ends)| {
-                let tri = match ends {
-                    (Some(p), Some(s)) => stack(&p, &s),
-                    (Some(t), None) | (None, Some(t)) => t,
-                    (None, None) => unreachable!("a repeat of at least 2 folds"),
-                };
-                let r_norm_sq = (0..k).filter(|&c| c != b).map(|c| blocks[c].1).sum();
-                (tri, r_norm_sq)
+        (prefix.into_iter().zip(suffix))
+            .filter_map(|ends| match ends {
+                (Some(p), Some(s)) => Some(stack(&p, &s)),
+                (Some(t), None) | (None, Some(t)) => Some(t),
+                (None, None) => None,
             })
             .collect()
     }
 
     /// The start of blocked fold `f`; `None` past the blocked folds (a joint-range fold).
-    fn start_of(&self, f: usize) -> Option<(Mat<f64>, f64)> {
+    fn start_of(&self, f: usize) -> Option<Mat<f64>> {
         self.0.get(f).cloned()
     }
 }
@@ -1289,9 +1294,9 @@ impl FoldStarts {
 /// holds for every training row (the same values the fold's problem evaluates there), when
 /// given; the fold's problem is then that problem's on the fold's rows, its gravity loads not
 /// evaluated again ([`AtWarm::problem_on`]). With `reduced`, the R factor of `[J_f r]` over
-/// the fold's training rows at `warm` and their `‖r‖²` ([`FoldStarts`]), it starts from
-/// them on the streaming back end instead, the fold's Jacobian neither copied nor folded
-/// again. A fold whose Jacobian has more than [`REFIT_MAX_ENTRIES`] entries is fitted on the
+/// the fold's training rows at `warm` ([`FoldStarts`]), it starts from that triangle
+/// ([`hapcal_identify::levenberg_marquardt_from_triangle`]): the fold's Jacobian rows are
+/// neither copied nor folded again. A fold whose Jacobian has more than [`REFIT_MAX_ENTRIES`] entries is fitted on the
 /// streaming back end ([`hapcal_identify::levenberg_marquardt_streaming`]): its Jacobian
 /// passes in row blocks and is never held whole.
 #[allow(clippy::too_many_arguments)]
@@ -1304,7 +1309,7 @@ fn refit(
     keep: &dyn Fn(usize, usize) -> bool,
     warm: &Warm,
     at_warm: Option<&AtWarm>,
-    reduced: Option<(Mat<f64>, f64)>,
+    reduced: Option<Mat<f64>>,
 ) -> Result<CalibratedModel> {
     let problem = match at_warm {
         Some(at) => at.problem_on(tables.tables, keep),
@@ -1329,16 +1334,16 @@ fn refit(
         problem.n_residuals(),
         warm.free.len(),
     );
-    let fit = match reduced {
-        Some((r_free, r_norm_sq)) => hapcal_identify::levenberg_marquardt_streaming_from(
+    let fit = match (reduced, at_warm) {
+        (Some(r_free), Some(at)) => hapcal_identify::levenberg_marquardt_from_triangle(
             &problem,
             warm.x.clone(),
             &warm.free,
             &lm,
+            at.residuals_of(tables.tables, keep),
             r_free,
-            r_norm_sq,
         ),
-        None => {
+        _ => {
             let start = (at_warm.map(|a| a.rows(tables.tables, keep))).filter(|(r, jac)| {
                 r.nrows() == problem.n_residuals() && jac.ncols() == problem.layout().len()
             });

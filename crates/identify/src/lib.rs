@@ -74,8 +74,8 @@ mod sparse;
 mod subset;
 
 pub use blocks::{
-    N_LEAVES, RowBlocks, jacobian_r_factor, levenberg_marquardt_streaming,
-    levenberg_marquardt_streaming_from, rows_r_factor, stacked_r_factor,
+    N_LEAVES, RowBlocks, jacobian_r_factor, levenberg_marquardt_streaming, rows_r_factor,
+    stacked_r_factor,
 };
 pub use calibrate::{
     Backend, BackendChoice, DENSE_LIMIT_BYTES, Identified, IdentifyConfig, MAX_ROUNDS, SIGMA_FLOOR,
@@ -87,7 +87,10 @@ pub use design::{
     i_optimal_weights, select_poses,
 };
 pub use error::Error;
-pub use lm::{Fit, LmConfig, Termination, levenberg_marquardt, levenberg_marquardt_from};
+pub use lm::{
+    Fit, LmConfig, Termination, levenberg_marquardt, levenberg_marquardt_from,
+    levenberg_marquardt_from_triangle,
+};
 pub use observability::{
     Observability, observability, observability_from_singular_values, scale_by_priors,
 };

@@ -370,6 +370,66 @@ pub fn levenberg_marquardt_from(
     Ok(levenberg_marquardt_at(p, x0, free, cfg, r0, jac0))
 }
 
+/// [`levenberg_marquardt_from`] with the Jacobian at `x0` given reduced: `r_free`, the
+/// upper-triangular `(n_f+1) × (n_f+1)` R factor of `[J_f r]` at `x0` (`J_f` the columns
+/// `free`, in that order; any factor with the same Gram matrix, such as the triangles of its
+/// blocks of rows stacked, [`crate::stacked_r_factor`]), and `r0 = r(x0)`. A
+/// cross-validation fold's refit starts so from the triangles of its blocks of rows, reduced
+/// once for every fold that trains on them ([`crate::rows_r_factor`]): the fold's `J` is
+/// neither evaluated nor copied at `x0`. The column norms are taken from `r_free`. The
+/// iterates are those of [`levenberg_marquardt_from`] up to rounding; later linearisations
+/// evaluate `J` as there.
+///
+/// # Errors
+/// As [`levenberg_marquardt_from`]; [`Error::Eval`] when `r_free` is not finite.
+///
+/// # Panics
+/// If `r0` is not of length `m` or `r_free` not `(n_f+1) × (n_f+1)`.
+#[track_caller]
+pub fn levenberg_marquardt_from_triangle(
+    p: &impl Problem,
+    x0: Col<f64>,
+    free: &[usize],
+    cfg: &LmConfig,
+    r0: Col<f64>,
+    r_free: Mat<f64>,
+) -> Result<Fit, Error> {
+    let (m, n1) = (p.n_residuals(), free.len() + 1);
+    assert_eq!(r0.nrows(), m, "residuals at x0: length");
+    assert!(
+        r_free.nrows() == n1 && r_free.ncols() == n1,
+        "R factor of [J_f r]: {} × {}, expected {n1} × {n1}",
+        r_free.nrows(),
+        r_free.ncols()
+    );
+    check_inputs(p, x0.as_ref(), free, cfg)?;
+    if let Some(index) = (0..m).find(|&i| !r0[i].is_finite()) {
+        return Err(Error::NonFiniteResidual { index });
+    }
+    if !r_free.is_all_finite() {
+        return Err(Error::Eval(crate::problem::EvalError {
+            reason: "the reduced Jacobian at the start is not finite".to_owned(),
+        }));
+    }
+    if free.is_empty() {
+        let cost = 0.5 * r0.squared_norm_l2();
+        return Ok(Fit::nothing_free(x0, cost, r0));
+    }
+    let f_norm = col_norm(r0.as_ref());
+    let mut dense = Dense::from_triangle(p, free, r0, r_free.as_ref());
+    let run = run(&mut dense, x0, free, cfg, f_norm);
+    let cost = 0.5 * dense.r.squared_norm_l2();
+    Ok(Fit {
+        x: run.x,
+        termination: run.termination,
+        n_evaluations: run.n_evaluations,
+        n_jacobians: dense.n_jacobians,
+        n_iterations: run.n_iterations,
+        cost,
+        residuals: dense.r,
+    })
+}
+
 /// [`levenberg_marquardt`] from residuals `r` and Jacobian `jac` already evaluated (and found
 /// finite) at `x0`, with the inputs already checked ([`check_inputs`]); `jac` may be empty
 /// when `free` is. Counts the evaluations at `x0` as the caller's (1 each).
@@ -511,6 +571,36 @@ impl<'a, P: Problem> Dense<'a, P> {
         dense
     }
 
+    /// Linearised at `x0`, where `r` was evaluated and `[J_f r]` reduced to the triangle
+    /// `r_free` (`(n_f+1) × (n_f+1)`, upper triangular): `J` is evaluated only if the iteration
+    /// relinearises (its `m × n` scratch allocated then).
+    fn from_triangle(p: &'a P, free: &'a [usize], r: Col<f64>, r_free: MatRef<'_, f64>) -> Self {
+        let (m, n1) = (r.nrows(), free.len() + 1);
+        Self {
+            p,
+            free,
+            jac: Mat::new(),
+            r,
+            r_trial: Col::zeros(m),
+            trial_has_jac: false,
+            jac_is_current: false,
+            jac_at_next_trial: true,
+            n_jacobians: 0,
+            tri: (0..n1 * n1).map(|k| r_free[(k % n1, k / n1)]).collect(),
+            col_norms: (0..n1 - 1)
+                .map(|j| r_free.col(j).subrows(0, j + 1).norm_l2())
+                .collect(),
+            r_scratch: vec![0.0; m],
+        }
+    }
+
+    /// Allocates `jac` (`m × n`) if it is not (a start from a triangle).
+    fn ensure_jac(&mut self) {
+        if self.jac.nrows() == 0 {
+            self.jac = Mat::zeros(self.r.nrows(), self.p.layout().len());
+        }
+    }
+
     /// `tri ← R₊` of `[J_f r]`, folded in place block of rows by block of rows
     /// ([`householder::fold_cols`], each block in cache), after `col_norms ← ‖J_j‖`. The
     /// columns of `jac` are scratch afterwards (only a new evaluation writes `jac` again).
@@ -557,6 +647,9 @@ impl<'a, P: Problem> Dense<'a, P> {
 impl<P: Problem> Linearised for Dense<'_, P> {
     fn trial_norm(&mut self, x_trial: ColRef<'_, f64>, may_continue: bool) -> f64 {
         let with_jac = std::mem::take(&mut self.jac_at_next_trial) && may_continue;
+        if with_jac {
+            self.ensure_jac();
+        }
         self.trial_has_jac = with_jac
             && self
                 .p
@@ -586,6 +679,7 @@ impl<P: Problem> Linearised for Dense<'_, P> {
     }
     fn relinearise(&mut self, x: ColRef<'_, f64>) -> Result<(), Termination> {
         if !std::mem::take(&mut self.jac_is_current) {
+            self.ensure_jac();
             self.p
                 .jacobian(x, self.jac.as_mut())
                 .map_err(Termination::EvalFailed)?;
