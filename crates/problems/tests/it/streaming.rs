@@ -199,7 +199,9 @@ fn a_fold_started_from_its_blocks_triangles_is_the_folds_refit() {
         None => r[rows[i]],
     });
     let (gram, gram_tri) = (aug.transpose() * &aug, tri.transpose() * &tri);
-    let scale = (0..gram.nrows()).map(|i| gram[(i, i)]).fold(0.0_f64, f64::max);
+    let scale = (0..gram.nrows())
+        .map(|i| gram[(i, i)])
+        .fold(0.0_f64, f64::max);
     for i in 0..gram.nrows() {
         for j in 0..gram.ncols() {
             // Rounding of two Householder reductions of 500 rows: 1e-12 of the largest entry.
@@ -237,5 +239,9 @@ fn a_fold_started_from_its_blocks_triangles_is_the_folds_refit() {
     }
     assert!(started.n_iterations >= 1 && started.x != full.fit.x);
     // A second linearisation evaluated the fold's Jacobian itself.
-    assert!(started.n_jacobians >= 1, "{} Jacobians", started.n_jacobians);
+    assert!(
+        started.n_jacobians >= 1,
+        "{} Jacobians",
+        started.n_jacobians
+    );
 }

@@ -227,7 +227,9 @@ fn a_problem_on_some_rows_is_the_problem_built_on_them() {
     let terms = ModelTerms {
         compliance: Some(GravityCompliance::default()),
         transversal: hapcal_problems::Transversal::PerAxis,
-        harmonics: Some(hapcal_problems::JointHarmonics::first_order(tree.n_joints())),
+        harmonics: Some(hapcal_problems::JointHarmonics::first_order(
+            tree.n_joints(),
+        )),
         torque_tips: Some(two_arm_tree().tips().to_vec()),
         load_angles: None,
     };
@@ -238,9 +240,13 @@ fn a_problem_on_some_rows_is_the_problem_built_on_them() {
     let x = Col::from_fn(n, |i| 1e-2 * ((i * 7 % 11) as f64 - 5.0) / 5.0);
     for keep in [
         // Configuration 3 dropped: 2 and its repeat become adjacent, one configuration.
-        vec![true, true, true, true, true, true, false, false, true, true, true, true],
+        vec![
+            true, true, true, true, true, true, false, false, true, true, true, true,
+        ],
         // One marker of configurations 1 and 4 dropped, the whole of 5.
-        vec![true, true, false, true, true, true, true, true, true, false, false, false],
+        vec![
+            true, true, false, true, true, true, true, true, true, false, false, false,
+        ],
     ] {
         let rows: Vec<Row> = (obs.rows.iter().zip(&keep))
             .filter(|(_, k)| **k)
