@@ -562,14 +562,11 @@ pub(crate) fn negative_compliances(
 fn free_compliances(identified: &Identified) -> impl Iterator<Item = (usize, f64, f64)> + '_ {
     (identified.covariance.free.iter())
         .zip(identified.covariance.std())
-        .filter(|&(&i, _)| is_compliance(&identified.layout, i))
+        .filter(|&(&i, _)| {
+            hapcal_contract::ValueName::parse(identified.layout.name(i))
+                .is_ok_and(|v| v.is_compliance())
+        })
         .map(|(&i, std)| (i, identified.fit.x[i], std))
-}
-
-/// Whether parameter `i` of `layout` is a value a record names as a compliance
-/// (`compliance.*`, `transversal.*`, `joint_compliance.j*`).
-fn is_compliance(layout: &hapcal_identify::ParamLayout, i: usize) -> bool {
-    hapcal_contract::ValueName::parse(layout.name(i)).is_ok_and(|v| v.is_compliance())
 }
 
 /// The compliance estimates of `identified` below zero, as `(layout index, σ)`: those
@@ -639,111 +636,16 @@ fn bounded_covariance(
     }
 }
 
-/// The compliances [`hold_compliances_at_zero`]'s rounds end up holding in the linear model
-/// of the fit `free_fit` (its estimate x̂ and covariance Σ over its free parameters), and the
-/// estimate of the others there: the compliances below zero in x̂ are held, then those below
-/// zero in the conditional estimate, until none is.
-///
-/// For a linear least-squares problem, holding a set H of parameters at zero moves the
-/// others F to the conditional estimate `x̂_F − Σ_FH·Σ_HH⁻¹·x̂_H`, with the conditional
-/// covariance `Σ_FF − Σ_FH·Σ_HH⁻¹·Σ_HF`, and adds `x̂_Hᵀ·Σ_HH⁻¹·x̂_H` to the fit's χ² (the
-/// least-squares problem with H fixed, whatever order H was held in: Björck, *Numerical
-/// Methods for Least Squares Problems*, 1996, §5.1; a Gaussian's conditional distribution).
-///
-/// Returns the held compliances as `(layout index, σ)`, σ in the compliance's unit
-/// (rad/(N·m) or rad/m): for one below zero in x̂ its σ there, for one held later its σ in
-/// the conditional fit of the round before (what a refit of that round reports, to first
-/// order), with the residuals' σ grown as that fit's would be when `free_fit` estimated it
-/// from them (the sum of squares by σ²·Δχ², over |H| more degrees of freedom); and the
-/// conditional estimate over `free_fit`'s layout (length `layout.len()`: the held ones at
-/// zero, the pruned ones as in `free_fit`). Where Σ_HH is not positive definite in working
-/// precision the rounds stop there, with the held ones zeroed and the others at x̂.
-fn predicted_hold(free_fit: &Identified) -> (Vec<(usize, f64)>, faer::Col<f64>) {
-    use faer::prelude::Solve;
-    let cov = &free_fit.covariance;
-    let n = cov.free.len();
-    // Correlations and estimates in units of σ: the parameters' units differ by orders of
-    // magnitude, their correlation matrix does not.
-    let std: Vec<f64> = (cov.std().into_iter())
-        .map(|s| if s > 0.0 { s } else { 1.0 })
-        .collect();
-    let corr = faer::Mat::from_fn(n, n, |a, b| cov.matrix[(a, b)] / (std[a] * std[b]));
-    let z: Vec<f64> = (0..n)
-        .map(|a| free_fit.fit.x[cov.free[a]] / std[a])
-        .collect();
-    let compliance: Vec<bool> = (cov.free.iter())
-        .map(|&i| is_compliance(&free_fit.layout, i))
-        .collect();
-    let dof = free_fit.n_residuals.saturating_sub(n) as f64;
-    let mut held: Vec<usize> = (0..n).filter(|&a| compliance[a] && z[a] < 0.0).collect();
-    let mut held_std: Vec<f64> = held.iter().map(|&a| std[a]).collect();
-    loop {
-        let in_layout = (held.iter().zip(&held_std))
-            .map(|(&a, &s)| (cov.free[a], s))
-            .collect();
-        let mut x = free_fit.fit.x.clone();
-        for &a in &held {
-            x[cov.free[a]] = 0.0;
-        }
-        let k = held.len();
-        let c_hh = faer::Mat::from_fn(k, k, |p, q| corr[(held[p], held[q])]);
-        let Ok(llt) = c_hh.llt(faer::Side::Lower) else {
-            return (in_layout, x);
-        };
-        // w = C_HH⁻¹·z_H: the conditional estimate of a is z_a − C_aH·w, and Δχ² = z_H·w.
-        let w = llt.solve(faer::Col::from_fn(k, |p| z[held[p]]));
-        let free: Vec<usize> = (0..n).filter(|a| !held.contains(a)).collect();
-        let conditional: Vec<f64> = (free.iter())
-            .map(|&a| z[a] - (0..k).map(|p| corr[(a, held[p])] * w[p]).sum::<f64>())
-            .collect();
-        let more: Vec<usize> = (free.iter().zip(&conditional))
-            .filter(|&(&a, &c)| compliance[a] && c < 0.0)
-            .map(|(&a, _)| a)
-            .collect();
-        if more.is_empty() {
-            for (&a, &c) in free.iter().zip(&conditional) {
-                x[cov.free[a]] = c * std[a];
-            }
-            return (in_layout, x);
-        }
-        let sigma_ratio = match free_fit.sigma_source {
-            hapcal_identify::SigmaSource::Residuals => {
-                let d_chi2: f64 = (0..k).map(|p| z[held[p]] * w[p]).sum();
-                ((dof + d_chi2) / (dof + k as f64)).max(0.0).sqrt()
-            }
-            _ => 1.0,
-        };
-        // Their conditional variance, C_aa − C_aH·C_HH⁻¹·C_Ha, in units of σ_a².
-        for &a in &more {
-            let c_ha = llt.solve(faer::Col::from_fn(k, |p| corr[(held[p], a)]));
-            let explained: f64 = (0..k).map(|p| corr[(a, held[p])] * c_ha[p]).sum();
-            held_std.push(sigma_ratio * std[a] * (corr[(a, a)] - explained).max(0.0).sqrt());
-        }
-        held.extend(more);
-    }
-}
-
 /// The physical bound compliance ≥ 0 on the identification `free_fit` of `problem` (`cfg` its
 /// configuration): when none of its compliances is below zero by more than
 /// [`negative_compliances`]' bound (that is a stop, [`implausible_estimates`], judged on the
 /// fit with every compliance free), those below zero are held at zero and the others
-/// refitted, and the ones the refit puts below zero are held too, until none is (an active
-/// set that only grows). A refit is a full identification
-/// ([`hapcal_identify::identify_held`]: rank decision, Levenberg–Marquardt, covariance), so
-/// the rounds are run first in the free fit's linear model ([`predicted_hold`]: holding
-/// parameters at zero in a linear least-squares problem moves the others to their
-/// conditional estimate, `x̂_F − Σ_FH·Σ_HH⁻¹·x̂_H`), and one refit holds every compliance
-/// they hold, started from that conditional estimate. Where the problem is not linear over
-/// the step and that refit still puts compliances below zero, they are held too and it
-/// refits again, until none is.
-///
-/// Each held one is reported among the pruned parameters, at zero, with its σ in the fit
-/// that had it free (for one the linear model holds in a later round, its σ in that round's
-/// conditional fit: what a refit there reports, to first order), and the covariance is the
-/// free fit's ([`bounded_covariance`]: a held compliance is 0 ± that σ, written so in the
-/// record). `free_fit` itself when no compliance is below zero or one is significantly.
-/// `std_scale` as [`negative_compliances`]' (rows that repeat others add no information, so
-/// they do not make a compliance significantly negative).
+/// refitted from the estimate ([`hapcal_identify::identify_held`]), again until none is
+/// below zero: each held one is reported among the pruned parameters, at zero, with its σ
+/// in the fit that had it free, and the covariance is that fit's ([`bounded_covariance`]: a
+/// held compliance is 0 ± that σ, written so in the record). `free_fit` itself when no
+/// compliance is below zero or one is significantly. `std_scale` as [`negative_compliances`]' (rows that repeat others add no
+/// information, so they do not make a compliance significantly negative).
 ///
 /// # Errors
 /// As [`hapcal_identify::identify`] for a refit.
@@ -753,26 +655,24 @@ pub(crate) fn hold_compliances_at_zero(
     free_fit: Identified,
     std_scale: impl FnOnce() -> f64,
 ) -> Result<Identified, hapcal_identify::Error> {
-    if compliances_below_zero(&free_fit).is_empty()
-        || !negative_compliances(&free_fit, std_scale()).0.is_empty()
-    {
+    let mut more = compliances_below_zero(&free_fit);
+    if more.is_empty() || !negative_compliances(&free_fit, std_scale()).0.is_empty() {
         return Ok(free_fit);
     }
-    let (mut held, mut start) = predicted_hold(&free_fit);
-    let free_covariance = free_fit.covariance;
-    loop {
-        let mut id = hapcal_identify::identify_held(problem, start, cfg, &held)?;
-        let more = compliances_below_zero(&id);
-        if more.is_empty() {
-            id.covariance = bounded_covariance(&free_covariance, id.covariance, &held, &id.layout);
-            return Ok(id);
-        }
-        start = id.fit.x;
+    let free_covariance = free_fit.covariance.clone();
+    let mut id = free_fit;
+    let mut held: Vec<(usize, f64)> = Vec::new();
+    while !more.is_empty() {
+        let mut start = id.fit.x.clone();
         for &(i, _) in &more {
             start[i] = 0.0;
         }
         held.extend(more);
+        id = hapcal_identify::identify_held(problem, start, cfg, &held)?;
+        more = compliances_below_zero(&id);
     }
+    id.covariance = bounded_covariance(&free_covariance, id.covariance, &held, &id.layout);
+    Ok(id)
 }
 
 /// "`k` of `n` below zero by more than z standard deviations: name value ± σ unit, …" for the
@@ -952,15 +852,12 @@ mod bound_tests {
     use faer::{Col, Mat};
     use hapcal_identify::{
         IdentifyConfig, LinearProblem, ParamLayout, ParamSpec, PruneReason, Role, Subset, Unit,
-        identify, identify_held,
+        identify,
     };
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
 
-    use super::{
-        bounded_covariance, compliances_below_zero, hold_compliances_at_zero, negative_compliances,
-        predicted_hold,
-    };
+    use super::{bounded_covariance, hold_compliances_at_zero, negative_compliances};
 
     /// The covariance reported with compliance 1 held: the free fit's block over the kept
     /// parameters and the held one; when the refit keeps parameter 2, which the free fit
@@ -1065,152 +962,5 @@ mod bound_tests {
         let same = hold_compliances_at_zero(&p, &cfg, free, || 1.0).expect("valid");
         assert_eq!(same.fit.x, x);
         assert!(same.identifiability.find_pruned("compliance.j2").is_none());
-    }
-
-    /// A joint offset (rad) and three compliances (rad/(N·m)) under torques of about 10 N·m
-    /// over 40 rows, the first two compliances' columns nearly alike (their estimates
-    /// anti-correlated, ρ ≈ −0.96); the noise (1e-3 per row) is orthogonal to the columns, so
-    /// that the fit with every parameter free lands exactly on the estimate this builds.
-    /// `compliance.j1` sits one σ below zero, within the bound, and `compliance.j2` above
-    /// zero by half of what holding `compliance.j1` at zero takes from it: held, the first
-    /// drives the second below zero, and the refit holds it in a second round.
-    fn chained_problem(sigma: f64) -> LinearProblem {
-        use faer::linalg::solvers::DenseSolveCore;
-        let (m, n) = (40, 4);
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-        let mut normal = || -> f64 { StandardNormal.sample(&mut rng) };
-        let g: Vec<f64> = (0..m * 5).map(|_| normal()).collect();
-        let a = Mat::from_fn(m, n, |r, j| match j {
-            0 => g[r],
-            1 => 10.0 * g[m + r],
-            2 => 10.0 * (g[m + r] + 0.3 * g[2 * m + r]),
-            _ => 10.0 * g[3 * m + r],
-        });
-        let ata_inv = (a.transpose() * &a)
-            .llt(faer::Side::Lower)
-            .expect("independent columns")
-            .inverse();
-        let ata_inv = |p: usize, q: usize| ata_inv[(p, q)];
-        let cov = |p: usize, q: usize| sigma * sigma * ata_inv(p, q);
-        let c1 = -cov(1, 1).sqrt();
-        // Held at zero, compliance.j1 moves compliance.j2 by −Σ21/Σ11·c1 (negative).
-        let c2 = 0.5 * cov(2, 1) / cov(1, 1) * c1;
-        let x = Col::from_fn(n, |j| [2e-3, c1, c2, 3.0 * cov(3, 3).sqrt()][j]);
-        // The noise less its projection on the columns, A·(AᵀA)⁻¹·Aᵀ·e: residuals
-        // orthogonal to every column.
-        let e: Vec<f64> = (0..m).map(|r| sigma * g[4 * m + r]).collect();
-        let a_te: Vec<f64> = (0..n)
-            .map(|j| (0..m).map(|r| a[(r, j)] * e[r]).sum())
-            .collect();
-        let coef: Vec<f64> = (0..n)
-            .map(|p| (0..n).map(|q| ata_inv(p, q) * a_te[q]).sum())
-            .collect();
-        let y = Col::from_fn(m, |r| {
-            (0..n).map(|j| a[(r, j)] * (x[j] - coef[j])).sum::<f64>() + e[r]
-        });
-        let spec = |name: &str, unit| ParamSpec {
-            name: name.to_owned(),
-            unit,
-            role: Role::Model,
-        };
-        LinearProblem {
-            layout: ParamLayout::new(vec![
-                spec("j1.offset", Unit::Radian),
-                spec("compliance.j1", Unit::RadianPerNewtonMeter),
-                spec("compliance.j2", Unit::RadianPerNewtonMeter),
-                spec("compliance.j3", Unit::RadianPerNewtonMeter),
-            ]),
-            a,
-            y,
-        }
-    }
-
-    /// On a linear problem the prediction is exact: the one refit holds what the refits
-    /// round by round hold (`identify_held` until none is below zero, written out here), with
-    /// the same σ, and lands on the same estimate.
-    #[test]
-    fn one_refit_holds_what_the_rounds_hold_on_a_linear_problem() {
-        let sigma = 1e-3;
-        let p = chained_problem(sigma);
-        // σ given: the refits' covariance is then the conditional one exactly, not up to the
-        // residuals' estimate of σ.
-        let cfg = IdentifyConfig {
-            sigma: Some(sigma),
-            ..IdentifyConfig::default()
-        };
-        let free = identify(&p, Col::zeros(4), &cfg).expect("valid");
-        assert_eq!(free.covariance.free, [0, 1, 2, 3]);
-        assert!(
-            free.fit.x[1] < 0.0 && free.fit.x[2] > 0.0,
-            "{:?}",
-            free.fit.x
-        );
-        assert!(negative_compliances(&free, 1.0).0.is_empty());
-
-        let mut rounds = free.clone();
-        let mut held: Vec<(usize, f64)> = Vec::new();
-        let mut n_refits = 0;
-        loop {
-            let more = compliances_below_zero(&rounds);
-            if more.is_empty() {
-                break;
-            }
-            let mut start = rounds.fit.x.clone();
-            for &(i, _) in &more {
-                start[i] = 0.0;
-            }
-            held.extend(more);
-            rounds = identify_held(&p, start, &cfg, &held).expect("valid");
-            n_refits += 1;
-        }
-        assert_eq!(n_refits, 2, "held {held:?}");
-        assert_eq!(held.iter().map(|h| h.0).collect::<Vec<_>>(), [1, 2]);
-
-        // Levenberg–Marquardt stops within Δχ² ≤ ftol·χ² of the minimum, so each fit is
-        // within σ·√(ftol·χ²) of it (χ² = Σ rᵢ²/σ², about m − n); the two fits differ by at
-        // most twice that.
-        let chi2 = 2.0 * rounds.fit.cost / (sigma * sigma);
-        let free_std = free.covariance.std();
-        let within = |k: usize| 2.0 * (cfg.lm.ftol * chi2).sqrt() * free_std[k];
-        let (predicted, start) = predicted_hold(&free);
-        assert_eq!(predicted.len(), 2);
-        for (&(i, s), &(j, t)) in predicted.iter().zip(&held) {
-            assert_eq!(i, j);
-            assert!((s - t).abs() <= 1e-9 * t, "{i}: σ {s} vs {t}");
-        }
-        for k in 0..4 {
-            let d = (start[k] - rounds.fit.x[k]).abs();
-            assert!(
-                d <= within(k) + 1e-15,
-                "{k}: start {} vs {}",
-                start[k],
-                rounds.fit.x[k]
-            );
-        }
-
-        let one = hold_compliances_at_zero(&p, &cfg, free, || 1.0).expect("valid");
-        for name in ["compliance.j1", "compliance.j2"] {
-            let (a, b) = (
-                one.identifiability.find_pruned(name).expect("held"),
-                rounds.identifiability.find_pruned(name).expect("held"),
-            );
-            assert_eq!(a.reason, PruneReason::AtBound);
-            assert_eq!(b.reason, PruneReason::AtBound);
-            let (s, t) = (a.std_if_kept, b.std_if_kept);
-            assert!((s - t).abs() <= 1e-9 * t, "{name}: σ {s} vs {t}");
-        }
-        assert_eq!(
-            one.identifiability.pruned.len(),
-            rounds.identifiability.pruned.len()
-        );
-        for k in 0..4 {
-            let d = (one.fit.x[k] - rounds.fit.x[k]).abs();
-            assert!(
-                d <= within(k) + 1e-15,
-                "{k}: {} vs {}",
-                one.fit.x[k],
-                rounds.fit.x[k]
-            );
-        }
     }
 }
