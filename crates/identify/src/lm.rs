@@ -353,9 +353,7 @@ pub fn levenberg_marquardt_from(
         jac0.ncols()
     );
     check_inputs(p, x0.as_ref(), free, cfg)?;
-    if let Some(index) = (0..m).find(|&i| !r0[i].is_finite()) {
-        return Err(Error::NonFiniteResidual { index });
-    }
+    check_residuals_finite(r0.as_ref())?;
     if free.is_empty() {
         return Ok(levenberg_marquardt_at(
             p,
@@ -403,9 +401,7 @@ pub fn levenberg_marquardt_from_triangle(
         r_free.ncols()
     );
     check_inputs(p, x0.as_ref(), free, cfg)?;
-    if let Some(index) = (0..m).find(|&i| !r0[i].is_finite()) {
-        return Err(Error::NonFiniteResidual { index });
-    }
+    check_residuals_finite(r0.as_ref())?;
     if !r_free.is_all_finite() {
         return Err(Error::Eval(crate::problem::EvalError {
             reason: "the reduced Jacobian at the start is not finite".to_owned(),
@@ -415,11 +411,29 @@ pub fn levenberg_marquardt_from_triangle(
         let cost = 0.5 * r0.squared_norm_l2();
         return Ok(Fit::nothing_free(x0, cost, r0));
     }
-    let f_norm = col_norm(r0.as_ref());
-    let mut dense = Dense::from_triangle(p, free, r0, r_free.as_ref());
+    let dense = Dense::from_triangle(p, free, r0, r_free.as_ref());
+    Ok(dense_fit(dense, x0, free, cfg))
+}
+
+/// [`Error::NonFiniteResidual`] at the first residual of `r0` (at `x0`) that is not finite.
+fn check_residuals_finite(r0: ColRef<'_, f64>) -> Result<(), Error> {
+    match (0..r0.nrows()).find(|&i| !r0[i].is_finite()) {
+        Some(index) => Err(Error::NonFiniteResidual { index }),
+        None => Ok(()),
+    }
+}
+
+/// The iteration ([`run`]) on the dense back end linearised at `x0`, and its fit.
+fn dense_fit<P: Problem>(
+    mut dense: Dense<'_, P>,
+    x0: Col<f64>,
+    free: &[usize],
+    cfg: &LmConfig,
+) -> Fit {
+    let f_norm = col_norm(dense.r.as_ref());
     let run = run(&mut dense, x0, free, cfg, f_norm);
     let cost = 0.5 * dense.r.squared_norm_l2();
-    Ok(Fit {
+    Fit {
         x: run.x,
         termination: run.termination,
         n_evaluations: run.n_evaluations,
@@ -427,7 +441,7 @@ pub fn levenberg_marquardt_from_triangle(
         n_iterations: run.n_iterations,
         cost,
         residuals: dense.r,
-    })
+    }
 }
 
 /// [`levenberg_marquardt`] from residuals `r` and Jacobian `jac` already evaluated (and found
@@ -446,19 +460,7 @@ pub(crate) fn levenberg_marquardt_at(
         let cost = 0.5 * r.squared_norm_l2();
         return Fit::nothing_free(x0, cost, r);
     }
-    let f_norm = col_norm(r.as_ref());
-    let mut dense = Dense::new(p, free, r, jac);
-    let run = run(&mut dense, x0, free, cfg, f_norm);
-    let cost = 0.5 * dense.r.squared_norm_l2();
-    Fit {
-        x: run.x,
-        termination: run.termination,
-        n_evaluations: run.n_evaluations,
-        n_jacobians: dense.n_jacobians,
-        n_iterations: run.n_iterations,
-        cost,
-        residuals: dense.r,
-    }
+    dense_fit(Dense::new(p, free, r, jac), x0, free, cfg)
 }
 
 /// What the iteration needs from the problem, dense or streamed: residual norms at trial
