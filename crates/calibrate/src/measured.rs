@@ -792,6 +792,20 @@ fn ladder_head(rungs: &[ModelName]) -> Option<ModelName> {
 /// nothing, and the rung fitted beside it ([`on_bounded_training`]).
 type DoneFits = Vec<(ModelName, (CalibratedModel, Fitted))>;
 
+/// What was worked out before the ladder, each what the ladder would work out itself: fits
+/// on every training row ([`DoneFits`]), and whole chains of the ladder's runs ([`Run`]), by
+/// rung index ([`on_bounded_training`]).
+#[derive(Default)]
+struct Done {
+    fits: DoneFits,
+    runs: Vec<(usize, Run)>,
+}
+
+/// The torque equilibrium of the ladder head's fit ([`equilibrate_fit`]) worked out beside
+/// the ladder: the rung, the estimate it started from and the result. [`settle`] takes it
+/// when the ladder chooses that very fit.
+type EarlyEquilibrium = (ModelName, Col<f64>, Result<(CalibratedModel, Fitted, usize)>);
+
 /// Fits `rung` on the rows `keep` selects: the problem and its identification (estimates
 /// mapped back to the full layout).
 fn fit(
@@ -2069,33 +2083,37 @@ pub fn calibrate_measured(
     test: &[MeasurementTable],
     cfg: &MeasuredConfig,
 ) -> Result<MeasuredOutcome> {
-    on_bounded_training(robot, train, cfg, cfg.rung.is_none(), |p| {
+    on_bounded_training(robot, train, cfg, cfg.rung.is_none().then_some(test), |p| {
         let Prepared {
             n_rows,
             frames,
             fits,
             bounded,
             done,
+            equilibrium,
             ladder_rungs,
         } = p;
         let (frames_model, frames_only) = &bounded.frames;
         let frames_fit = (frames_model, frames_only);
         // The ladder's head fitted before the ladder (isotropic transversal compliance) is
         // the rung a compliant tree most often settles on: its torque equilibrium is worked
-        // out beside the ladder, and taken when the ladder chooses that very fit.
-        let head = (cfg.rung.is_none())
+        // out beside the ladder (before it, when its nested rungs' runs were), and taken when
+        // the ladder chooses that very fit.
+        let head = (cfg.rung.is_none() && equilibrium.is_none())
             .then(|| ladder_head(&ladder_rungs.0))
             .flatten()
-            .and_then(|h| done.iter().find(|(r, _)| *r == h).cloned());
+            .and_then(|h| done.fits.iter().find(|(r, _)| *r == h).cloned());
         let (choice, early) = rayon::join(
             || choose_rung(&fits, cfg, test, frames_fit, done, &ladder_rungs),
             || {
-                head.map(|(r, (model, fitted))| {
-                    (
-                        r,
-                        fitted.x.clone(),
-                        equilibrate_fit(&fits, r, model, fitted),
-                    )
+                equilibrium.or_else(|| {
+                    head.map(|(r, (model, fitted))| {
+                        (
+                            r,
+                            fitted.x.clone(),
+                            equilibrate_fit(&fits, r, model, fitted),
+                        )
+                    })
                 })
             },
         );
@@ -2175,7 +2193,7 @@ pub fn ladder_heldout(
         rung: None,
         ..cfg.clone()
     };
-    on_bounded_training(robot, train, cfg, false, |p| {
+    on_bounded_training(robot, train, cfg, None, |p| {
         let (all, levels) = &p.ladder_rungs;
         let (some, some_levels): (Vec<ModelName>, Vec<usize>) = (all.iter().zip(levels))
             .filter(|(r, _)| rungs.contains(r))
@@ -2208,22 +2226,35 @@ struct Prepared<'a> {
     fits: Fits<'a>,
     /// Those tables, the samples the loss bounded and the frames-only fit on them.
     bounded: &'a Bounded,
-    /// The fits on every training row done beside the Huber pass ([`DoneFits`]).
-    done: DoneFits,
+    /// The fits on every training row and the ladder's runs done beside the Huber pass
+    /// ([`Done`]).
+    done: Done,
+    /// The torque equilibrium of the ladder head's fit, when it was worked out beside the
+    /// Huber pass.
+    equilibrium: Option<EarlyEquilibrium>,
     /// The rungs of the robot's ladder and their levels ([`ladder_of`]).
     ladder_rungs: (Vec<ModelName>, Vec<usize>),
 }
 
 /// `then` of the training rows `train` prepared for the ladder: checked, the weights and
 /// frames-only fit ([`weighted_frames_only`]), the gross errors bounded by the Huber loss with
-/// the richest rung `cfg` may fit ([`bounded_training`]). With `whole_ladder` (the ladder of
-/// every rung will be climbed on every training row), the head of its longest chain of
-/// nested rungs ([`ladder_head`]) is fitted on every training row beside the Huber pass, on
-/// the rows as measured: when the pass bounds nothing, the ladder's own fit of that rung
-/// would be the same fit (the same rows, weights and start), and it is handed to the ladder
-/// ([`DoneFits`]); else it is dropped and the ladder fits the bounded rows. The Huber pass
-/// runs alone otherwise, with one core of two idle at times (its row blocks are evaluated in
-/// parallel, its QR folds are not), while that fit starts the ladder's critical path.
+/// the richest rung `cfg` may fit ([`bounded_training`]). With `ladder_test` (the ladder of
+/// every rung will be climbed on every training row, judged where the calibration is used
+/// on those test tables), the head of its longest chain of nested rungs ([`ladder_head`]) is
+/// fitted on every training row beside the Huber pass, on the rows as measured: when the
+/// pass bounds nothing, the ladder's own fit of that rung would be the same fit (the same
+/// rows, weights and start), and it is handed to the ladder ([`Done`]); else it is dropped
+/// and the ladder fits the bounded rows. The Huber pass runs alone otherwise, with one core
+/// of two idle at times (its row blocks are evaluated in parallel, its QR folds are not),
+/// while that fit starts the ladder's critical path.
+///
+/// Once the pass is known to bound nothing, the ladder's runs need not wait for it
+/// ([`EarlyLadder`]): the pass goes on to the runs of the chains the head does not start,
+/// and the head's fit, when it ends after the pass, to the runs of its own chain (the
+/// nested rungs' fits from its estimate, then the cross-validations) beside its torque
+/// equilibrium. Each is what the ladder would work out itself, so the results are the same
+/// whichever ends first; the core that idled while the head's fit ran now climbs the rest
+/// of the ladder.
 ///
 /// # Errors
 /// As [`check_training_rows`], [`weighted_frames_only`], [`bounded_training`], or `then`'s.
@@ -2231,7 +2262,7 @@ fn on_bounded_training<T>(
     robot: &Robot,
     train: &[MeasurementTable],
     cfg: &MeasuredConfig,
-    whole_ladder: bool,
+    ladder_test: Option<&[MeasurementTable]>,
     then: impl FnOnce(Prepared<'_>) -> Result<T>,
 ) -> Result<T> {
     let n_rows = check_training_rows(train, cfg)?;
@@ -2254,22 +2285,72 @@ fn on_bounded_training<T>(
     let richest = richest_rung(cfg, &ladder_rungs);
     let frames_fit = (frames.model.clone(), frames.fitted.clone());
     let lengths: Vec<usize> = train.iter().map(|t| t.rows.len()).collect();
-    let beside = (whole_ladder
+    let beside = (ladder_test.is_some()
         && crate::fit::ladder_sample(&lengths, crate::fit::LADDER_ROWS).is_none())
     .then(|| ladder_head(&ladder_rungs.0))
     .flatten()
     .filter(|&r| r != richest);
-    let (bounded, beside_fit) = rayon::join(
-        || bounded_training(richest, &measured, train, frames_fit),
-        || beside.map(|r| (r, measured.fit(r))),
+    let early = (beside.zip(ladder_test)).map(|(head, test)| EarlyLadder {
+        measured: &measured,
+        cfg,
+        test,
+        rungs: &ladder_rungs.0,
+        head,
+    });
+    // Whether the Huber pass bounded nothing, once it is known.
+    let nothing_bounded = std::sync::OnceLock::new();
+    let ((bounded, runs), beside_fit) = rayon::join(
+        || {
+            let mut bounded = bounded_training(richest, &measured, train, frames_fit);
+            let clean = matches!(&bounded, Ok(b) if b.samples.is_empty());
+            let _ = nothing_bounded.set(clean);
+            let runs = match (&mut bounded, &early) {
+                (Ok(b), Some(early)) if clean => {
+                    let done: DoneFits = b.richest_fit.take().into_iter().collect();
+                    early.runs((&b.frames.0, &b.frames.1), false, done)
+                }
+                _ => Vec::new(),
+            };
+            (bounded, runs)
+        },
+        || {
+            beside.map(|r| {
+                let fit = measured.fit(r);
+                let more = match (&fit, &early) {
+                    (Ok((model, fitted)), Some(early)) if nothing_bounded.get() == Some(&true) => {
+                        Some(rayon::join(
+                            || {
+                                let done = vec![(r, (model.clone(), fitted.clone()))];
+                                early.runs((&frames.model, &frames.fitted), true, done)
+                            },
+                            || {
+                                let settled =
+                                    equilibrate_fit(&measured, r, model.clone(), fitted.clone());
+                                (r, fitted.x.clone(), settled)
+                            },
+                        ))
+                    }
+                    _ => None,
+                };
+                (r, fit, more)
+            })
+        },
     );
     let mut bounded = bounded?;
-    let mut done: DoneFits = bounded.richest_fit.take().into_iter().collect();
+    let mut done = Done {
+        fits: bounded.richest_fit.take().into_iter().collect(),
+        runs,
+    };
+    let mut equilibrium = None;
     // A failed fit is the ladder's to report, as it would be without this one.
-    if let Some((r, Ok(f))) = beside_fit
+    if let Some((r, Ok(f), more)) = beside_fit
         && bounded.samples.is_empty()
     {
-        done.push((r, f));
+        done.fits.push((r, f));
+        if let Some((runs, settled)) = more {
+            done.runs.extend(runs);
+            equilibrium = Some(settled);
+        }
     }
     then(Prepared {
         n_rows,
@@ -2280,8 +2361,42 @@ fn on_bounded_training<T>(
         },
         bounded: &bounded,
         done,
+        equilibrium,
         ladder_rungs,
     })
+}
+
+/// The ladder's runs on the training rows as measured, worked out before the Huber pass's
+/// judgement is taken ([`on_bounded_training`]): what the ladder would work out itself when
+/// the pass bounds nothing (the same rows, weights, starts and folds).
+struct EarlyLadder<'a> {
+    /// The fits on the training rows as measured.
+    measured: &'a Fits<'a>,
+    cfg: &'a MeasuredConfig,
+    /// The test tables, where the calibration is used ([`FoldPlan`]).
+    test: &'a [MeasurementTable],
+    /// The ladder's rungs ([`ladder_of`]).
+    rungs: &'a [ModelName],
+    /// The rung fitted beside the Huber pass ([`ladder_head`]).
+    head: ModelName,
+}
+
+impl EarlyLadder<'_> {
+    /// With `of_head`, the runs of the chain the head starts ([`rung_chains`]), else those of
+    /// every other chain; from the frames-only fit `frames` and the fits `done`.
+    fn runs(
+        &self,
+        frames: (&CalibratedModel, &Fitted),
+        of_head: bool,
+        done: DoneFits,
+    ) -> Vec<(usize, Run)> {
+        let plan = FoldPlan::new(self.measured, self.cfg, self.test);
+        let runs = LadderRuns::new(self.measured, self.cfg, self.rungs, &plan, frames, done);
+        let chains: Vec<Vec<usize>> = (rung_chains(&runs.parent).into_iter())
+            .filter(|c| (self.rungs[c[0]] == self.head) == of_head)
+            .collect();
+        chain_runs(&runs, &chains)
+    }
 }
 
 /// The training rows of `train`, when they are enough for `cfg.folds`-fold cross-validation.
@@ -2599,7 +2714,7 @@ fn choose_rung(
     cfg: &MeasuredConfig,
     test: &[MeasurementTable],
     frames: (&CalibratedModel, &Fitted),
-    done: DoneFits,
+    done: Done,
     ladder: &(Vec<ModelName>, Vec<usize>),
 ) -> Result<Choice> {
     let Some(rung) = cfg.rung else {
@@ -2607,7 +2722,7 @@ fn choose_rung(
     };
     Ok(Choice {
         rung,
-        chosen: fit_on_every_row(fits, rung, frames, done)?,
+        chosen: fit_on_every_row(fits, rung, frames, done.fits)?,
         ladder: LadderOutcome::default(),
     })
 }
@@ -2624,7 +2739,7 @@ fn climb(
     cfg: &MeasuredConfig,
     test: &[MeasurementTable],
     frames: (&CalibratedModel, &Fitted),
-    done: DoneFits,
+    done: Done,
     ladder: &(Vec<ModelName>, Vec<usize>),
     refit_sampled: bool,
 ) -> Result<Choice> {
@@ -2634,7 +2749,7 @@ fn climb(
     };
     let mut choice = climb_sample(fits, cfg, test, ladder, &sample)?;
     if refit_sampled {
-        choice.chosen = fit_on_every_row(fits, choice.rung, frames, done)?;
+        choice.chosen = fit_on_every_row(fits, choice.rung, frames, done.fits)?;
     }
     Ok(choice)
 }
@@ -2699,7 +2814,7 @@ fn climb_sample(
         cfg,
         test,
         (&sample_model, &sample_frames),
-        Vec::new(),
+        Done::default(),
         ladder,
     )?;
     drop(sampled);
@@ -2718,30 +2833,15 @@ fn climb_ladder(
     cfg: &MeasuredConfig,
     test: &[MeasurementTable],
     frames: (&CalibratedModel, &Fitted),
-    done: DoneFits,
+    done: Done,
     (rungs, levels): &(Vec<ModelName>, Vec<usize>),
 ) -> Result<Choice> {
-    // Where the calibration will be used: the test rows and the workspace given.
-    let beyond: Vec<&[f64]> = (test.iter().flat_map(|t| &t.rows))
-        .map(|r| &r.q[..])
-        .chain(cfg.workspace.iter().map(Vec::as_slice))
-        .collect();
-    // Only the sides where the calibration will be used beyond its training range.
-    let ranges = range_folds(fits.robot, fits.train.tables, &beyond);
-    // The fewest residuals a blocked fold trains on: a rung keeping more parameters on
-    // every row cannot be refitted on that fold.
-    let (fold_residuals, fold_rows) = fewest_fold_residuals(fits.train, cfg.folds);
-    let runs = ladder_runs(&LadderRuns {
-        fits,
-        cfg,
-        rungs,
-        parent: rung_parents(rungs),
-        ranges: &ranges,
-        frames,
-        cached: std::sync::Mutex::new(done),
-        fold_residuals,
-        fold_rows,
-    });
+    let plan = FoldPlan::new(fits, cfg, test);
+    let runs = ladder_runs(
+        &LadderRuns::new(fits, cfg, rungs, &plan, frames, done.fits),
+        done.runs,
+    );
+    let ranges = plan.ranges;
     let mut left_out = LeftOut::default();
     let tried = sort_runs(runs, rungs, &mut left_out)?;
     let tried_rungs: Vec<ModelName> = tried.index.iter().map(|&i| rungs[i]).collect();
@@ -2797,6 +2897,34 @@ type Tried = std::result::Result<(CalibratedModel, Fitted), (Untried, Option<Fit
 /// Per rung: its fit (or why it was not tried) and, when tried, its cross-validation.
 type Run = (Result<Tried>, Option<Result<Scores>>);
 
+/// The folds besides the blocked ones and what the blocked ones allow: the joint-range folds
+/// on the sides where the calibration will be used beyond its training range (the test rows
+/// and the workspace given), and the fewest residuals a blocked fold trains on (a rung
+/// keeping more parameters on every row cannot be refitted on that fold), with its rows.
+struct FoldPlan {
+    ranges: Vec<RangeSplit>,
+    fold_residuals: usize,
+    fold_rows: usize,
+}
+
+impl FoldPlan {
+    /// The plan of the training rows of `fits`, `cfg.folds` blocked folds, used on `test`
+    /// and `cfg.workspace`.
+    fn new(fits: &Fits<'_>, cfg: &MeasuredConfig, test: &[MeasurementTable]) -> Self {
+        let beyond: Vec<&[f64]> = (test.iter().flat_map(|t| &t.rows))
+            .map(|r| &r.q[..])
+            .chain(cfg.workspace.iter().map(Vec::as_slice))
+            .collect();
+        let ranges = range_folds(fits.robot, fits.train.tables, &beyond);
+        let (fold_residuals, fold_rows) = fewest_fold_residuals(fits.train, cfg.folds);
+        FoldPlan {
+            ranges,
+            fold_residuals,
+            fold_rows,
+        }
+    }
+}
+
 /// What fitting and cross-validating the ladder's rungs share ([`ladder_runs`]).
 struct LadderRuns<'a> {
     fits: &'a Fits<'a>,
@@ -2815,7 +2943,30 @@ struct LadderRuns<'a> {
     fold_rows: usize,
 }
 
-impl LadderRuns<'_> {
+impl<'a> LadderRuns<'a> {
+    /// The runs of `rungs` on the training rows of `fits`, judged by `plan`, from the
+    /// frames-only fit `frames` and the fits `done` already.
+    fn new(
+        fits: &'a Fits<'a>,
+        cfg: &'a MeasuredConfig,
+        rungs: &'a [ModelName],
+        plan: &'a FoldPlan,
+        frames: (&'a CalibratedModel, &'a Fitted),
+        done: DoneFits,
+    ) -> Self {
+        LadderRuns {
+            fits,
+            cfg,
+            rungs,
+            parent: rung_parents(rungs),
+            ranges: &plan.ranges,
+            frames,
+            cached: std::sync::Mutex::new(done),
+            fold_residuals: plan.fold_residuals,
+            fold_rows: plan.fold_rows,
+        }
+    }
+
     /// Rung `r` fitted on every training row (from the estimate of the rung it nests, if
     /// any): frames only and the rungs of [`DoneFits`] are fitted already.
     fn full_fit(&self, r: ModelName, nested: Option<&Fitted>) -> Result<(CalibratedModel, Fitted)> {
@@ -2913,15 +3064,29 @@ impl LadderRuns<'_> {
 /// The fits of one rung do not wait for another chain's, so no core idles while a nested
 /// rung is fitted (on two cores the per-axis transversal compliance fit, the ladder's
 /// slowest, ran alone before).
-fn ladder_runs(runs: &LadderRuns<'_>) -> Vec<Option<Run>> {
-    use rayon::prelude::*;
-    let chains = rung_chains(&runs.parent);
+/// The chains of `done` were run before the ladder ([`Done`]): they are taken as they are.
+fn ladder_runs(runs: &LadderRuns<'_>, done: Vec<(usize, Run)>) -> Vec<Option<Run>> {
     let mut out: Vec<Option<Run>> = (0..runs.rungs.len()).map(|_| None).collect();
-    let chain_runs = chains.par_iter().map(|c| runs.run_chain(c)).flatten();
-    for (i, run) in chain_runs.collect::<Vec<_>>() {
+    for (i, run) in done {
+        out[i] = Some(run);
+    }
+    let chains: Vec<Vec<usize>> = (rung_chains(&runs.parent).into_iter())
+        .filter(|c| c.iter().any(|&i| out[i].is_none()))
+        .collect();
+    for (i, run) in chain_runs(runs, &chains) {
         out[i] = Some(run);
     }
     out
+}
+
+/// The runs of the ladder's chains `chains` ([`LadderRuns::run_chain`]), the chains in
+/// parallel, by rung index.
+fn chain_runs(runs: &LadderRuns<'_>, chains: &[Vec<usize>]) -> Vec<(usize, Run)> {
+    use rayon::prelude::*;
+    (chains.par_iter())
+        .map(|c| runs.run_chain(c))
+        .flatten()
+        .collect()
 }
 
 /// The rungs of the ladder tried, in ladder order: their indices, fits on every training row
