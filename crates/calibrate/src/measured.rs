@@ -3017,41 +3017,46 @@ impl<'a> LadderRuns<'a> {
         Ok(Ok((model, fitted)))
     }
 
-    /// The runs of one chain of nested rungs ([`rung_chains`]): fits in nesting order (a rung
-    /// whose parent has no fit starts from the frames-only estimate), then
-    /// cross-validations, the last fitted first (the nested rungs are the slowest).
-    fn run_chain(&self, chain: &Vec<usize>) -> Vec<(usize, Run)> {
-        let mut fitted: Vec<(usize, Result<Tried>)> = Vec::new();
-        for &i in chain {
-            let nested = self.parent[i].and_then(|p| {
-                let (_, tried) = fitted.iter().find(|(k, _)| *k == p)?;
-                match tried.as_ref().ok()? {
-                    Ok((_, f)) | Err((_, Some(f))) => Some(f),
-                    Err((_, None)) => None,
-                }
-            });
-            let tried = self.try_rung(i, nested);
-            fitted.push((i, tried));
+    /// The runs of one chain of nested rungs ([`rung_chains`]), in chain order: fits in
+    /// nesting order (a rung whose parent has no fit starts from the frames-only estimate),
+    /// each rung's cross-validation offered to an idle core beside the fits after it (they
+    /// start from its estimate, not its folds'); a core that finds none idle runs it after
+    /// them, the last fitted first (the nested rungs are the slowest).
+    fn run_chain(&self, chain: &[usize]) -> Vec<(usize, Run)> {
+        self.run_rest(chain, &[])
+    }
+
+    /// The runs of `chain` after the rungs fitted already, `before` (rung index and fit).
+    fn run_rest(&self, chain: &[usize], before: &[(usize, &Fitted)]) -> Vec<(usize, Run)> {
+        let Some((&i, rest)) = chain.split_first() else {
+            return Vec::new();
+        };
+        let nested = (self.parent[i])
+            .and_then(|p| before.iter().find(|(k, _)| *k == p))
+            .map(|(_, f)| *f);
+        let tried = self.try_rung(i, nested);
+        let mut fitted = before.to_vec();
+        if let Ok(Ok((_, f)) | Err((_, Some(f)))) = &tried {
+            fitted.push((i, f));
         }
-        let mut out: Vec<(usize, Run)> = (fitted.into_iter().rev())
-            .map(|(i, tried)| {
-                let scores = match &tried {
-                    Ok(Ok((_, f))) => Some(cross_validate(
-                        self.rungs[i],
-                        self.fits.robot,
-                        self.fits.start.tree,
-                        &Warm::of(f),
-                        self.fits.train,
-                        self.cfg,
-                        self.fits.weights,
-                        self.ranges,
-                    )),
-                    _ => None,
-                };
-                (i, (tried, scores))
-            })
-            .collect();
-        out.reverse();
+        let (mut out, scores) = rayon::join(
+            || self.run_rest(rest, &fitted),
+            || match &tried {
+                Ok(Ok((_, f))) => Some(cross_validate(
+                    self.rungs[i],
+                    self.fits.robot,
+                    self.fits.start.tree,
+                    &Warm::of(f),
+                    self.fits.train,
+                    self.cfg,
+                    self.fits.weights,
+                    self.ranges,
+                )),
+                _ => None,
+            },
+        );
+        drop(fitted);
+        out.insert(0, (i, (tried, scores)));
         out
     }
 }
