@@ -804,7 +804,11 @@ struct Done {
 /// The torque equilibrium of the ladder head's fit ([`equilibrate_fit`]) worked out beside
 /// the ladder: the rung, the estimate it started from and the result. [`settle`] takes it
 /// when the ladder chooses that very fit.
-type EarlyEquilibrium = (ModelName, Col<f64>, Result<(CalibratedModel, Fitted, usize)>);
+type EarlyEquilibrium = (
+    ModelName,
+    Col<f64>,
+    Result<(CalibratedModel, Fitted, usize)>,
+);
 
 /// Fits `rung` on the rows `keep` selects: the problem and its identification (estimates
 /// mapped back to the full layout).

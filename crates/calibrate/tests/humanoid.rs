@@ -340,3 +340,37 @@ fn an_unconverged_fit_is_left_out_of_the_ladder_and_a_finding_when_given() {
     assert_ne!(free.rung, ModelName::FramesOnly);
     assert!(free.implausible.is_empty(), "{:?}", free.implausible);
 }
+
+/// On a tree whose Huber pass bounds nothing, the ladder's runs start beside the fit of its
+/// head (isotropic transversal compliance) and the pass; their held-out figures are those of
+/// the ladder that waits for both (`ladder_heldout`, which starts nothing early), bit for bit.
+#[test]
+fn the_ladder_started_beside_its_head_scores_as_the_ladder_that_waits() {
+    let robot = humanoid(&["l_hand", "r_hand"]);
+    let seed = 41;
+    let truth = truth(&robot, seed);
+    let train = [table(&robot, &truth, &[0, 1], 160, seed + 1)];
+    let test = [table(&robot, &truth, &[0, 1], 40, seed + 2)];
+    let cfg = config(None, vec![0, 1]);
+    let whole = calibrate_measured(&robot, &train, &test, &cfg).unwrap();
+    assert!(whole.downweighted.is_empty(), "{:?}", whole.downweighted);
+    let rungs: Vec<ModelName> = whole.ladder.iter().map(|r| r.rung).collect();
+    for nested in [ModelName::TransversalCompliance, ModelName::TransversalAxes] {
+        assert!(rungs.contains(&nested), "{rungs:?}");
+    }
+    let waited =
+        hapcal_calibrate::measured::ladder_heldout(&robot, &train, &test, &cfg, &rungs).unwrap();
+    let figures =
+        |reports: &[hapcal_calibrate::measured::RungReport]| -> Vec<(ModelName, [u64; 3])> {
+            (reports.iter())
+                .map(|r| {
+                    let (d, s) = r.score_difference_to_frames;
+                    (
+                        r.rung,
+                        [r.heldout_rms_m.to_bits(), d.to_bits(), s.to_bits()],
+                    )
+                })
+                .collect()
+        };
+    assert_eq!(figures(&waited), figures(&whole.ladder));
+}
