@@ -2294,13 +2294,22 @@ fn on_bounded_training<T>(
     .then(|| ladder_head(&ladder_rungs.0))
     .flatten()
     .filter(|&r| r != richest);
-    let early = (beside.zip(ladder_test)).map(|(head, test)| EarlyLadder {
-        measured: &measured,
-        cfg,
-        test,
-        rungs: &ladder_rungs.0,
-        head,
-    });
+    // The Huber pass's fit is the ladder's fit of its rung and ends on the pass's core: not
+    // when a rung of the head's chain (which the head's core runs) is that rung.
+    let chains = rung_chains(&rung_parents(&ladder_rungs.0));
+    let in_head_chain = |head: ModelName, r: ModelName| {
+        (chains.iter())
+            .any(|c| ladder_rungs.0[c[0]] == head && c.iter().any(|&i| ladder_rungs.0[i] == r))
+    };
+    let early = (beside.zip(ladder_test))
+        .filter(|&(head, _)| !in_head_chain(head, richest))
+        .map(|(head, test)| EarlyLadder {
+            measured: &measured,
+            cfg,
+            test,
+            rungs: &ladder_rungs.0,
+            head,
+        });
     // Whether the Huber pass bounded nothing, once it is known.
     let nothing_bounded = std::sync::OnceLock::new();
     let ((bounded, runs), beside_fit) = rayon::join(
