@@ -621,8 +621,7 @@ pub(crate) fn observations(
     // Counted first: a million rows pushed into a growing vector reserve up to twice their
     // size.
     let n_rows = kept()
-        .map(|(ti, ri)| &tables.tables[ti].rows[ri])
-        .map(|row| usize::from(row.distance_m.is_some()) + row.markers.len())
+        .map(|(ti, ri)| observation_rows(&tables.tables[ti].rows[ri]))
         .sum();
     let mut obs = Observations {
         rows: Vec::with_capacity(n_rows),
@@ -1184,8 +1183,7 @@ impl AtWarm {
         let mut rows = Vec::with_capacity(self.problem.observations().rows.len());
         for (ti, t) in tables.iter().enumerate() {
             for (ri, row) in t.rows.iter().enumerate() {
-                let n = usize::from(row.distance_m.is_some()) + row.markers.len();
-                rows.extend(std::iter::repeat_n(keep(ti, ri), n));
+                rows.extend(std::iter::repeat_n(keep(ti, ri), observation_rows(row)));
             }
         }
         Ok(self.problem.with_rows(&rows)?)
@@ -1525,6 +1523,12 @@ fn too_few_residuals(e: &anyhow::Error) -> Option<(usize, usize)> {
             } => Some((*n_residuals, *n_free)),
             _ => None,
         })
+}
+
+/// The rows a table row gives [`observations`]: its distance, if any, then one per marker
+/// sample.
+fn observation_rows(row: &MeasuredRow) -> usize {
+    usize::from(row.distance_m.is_some()) + row.markers.len()
 }
 
 /// Residuals of one measured row: 1 for a distance, 3 per marker position, 6 per pose.
