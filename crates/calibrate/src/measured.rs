@@ -25,7 +25,7 @@
 
 use crate::model::ModelName;
 use anyhow::{Context, Result, bail};
-use faer::{Col, Mat};
+use faer::{Col, Mat, MatRef};
 use hapcal_contract::ValueName;
 use hapcal_identify::{Identified, Problem, Subset, identify};
 use hapcal_io::{MeasuredRow, MeasurementTable};
@@ -1299,8 +1299,8 @@ impl FoldStarts {
     }
 
     /// The start of blocked fold `f`; `None` past the blocked folds (a joint-range fold).
-    fn start_of(&self, f: usize) -> Option<Mat<f64>> {
-        self.0.get(f).cloned()
+    fn start_of(&self, f: usize) -> Option<MatRef<'_, f64>> {
+        self.0.get(f).map(Mat::as_ref)
     }
 }
 
@@ -1325,7 +1325,7 @@ fn refit(
     keep: &dyn Fn(usize, usize) -> bool,
     warm: &Warm,
     at_warm: Option<&AtWarm>,
-    reduced: Option<Mat<f64>>,
+    reduced: Option<MatRef<'_, f64>>,
 ) -> Result<CalibratedModel> {
     let problem = match at_warm {
         Some(at) => at.problem_on(tables.tables, keep),

@@ -390,7 +390,7 @@ pub fn levenberg_marquardt_from_triangle(
     free: &[usize],
     cfg: &LmConfig,
     r0: Col<f64>,
-    r_free: Mat<f64>,
+    r_free: MatRef<'_, f64>,
 ) -> Result<Fit, Error> {
     let (m, n1) = (p.n_residuals(), free.len() + 1);
     assert_eq!(r0.nrows(), m, "residuals at x0: length");
@@ -411,7 +411,7 @@ pub fn levenberg_marquardt_from_triangle(
         let cost = 0.5 * r0.squared_norm_l2();
         return Ok(Fit::nothing_free(x0, cost, r0));
     }
-    let dense = Dense::from_triangle(p, free, r0, r_free.as_ref());
+    let dense = Dense::from_triangle(p, free, r0, r_free);
     Ok(dense_fit(dense, x0, free, cfg))
 }
 

@@ -217,9 +217,15 @@ fn a_fold_started_from_its_blocks_triangles_is_the_folds_refit() {
     let fold = p.with_rows(&keep).expect("the fold's rows");
     let r0 = Col::from_fn(rows.len(), |i| r[rows[i]]);
     let cfg = hapcal_identify::LmConfig::default();
-    let started =
-        hapcal_identify::levenberg_marquardt_from_triangle(&fold, x0.clone(), &free, &cfg, r0, tri)
-            .expect("refit from the triangles");
+    let started = hapcal_identify::levenberg_marquardt_from_triangle(
+        &fold,
+        x0.clone(),
+        &free,
+        &cfg,
+        r0,
+        tri.as_ref(),
+    )
+    .expect("refit from the triangles");
     let evaluated =
         hapcal_identify::levenberg_marquardt(&fold, x0, &free, &cfg).expect("refit evaluating J");
     assert!(started.termination.is_success() && evaluated.termination.is_success());
