@@ -2298,21 +2298,20 @@ fn on_bounded_training<T>(
     .then(|| ladder_head(&ladder_rungs.0))
     .flatten()
     .filter(|&r| r != richest);
-    // The Huber pass's fit is the ladder's fit of its rung and ends on the pass's core: not
-    // when a rung of the head's chain (which the head's core runs) is that rung.
+    // With a rung fitted beside, the longest chain is the one it heads ([`ladder_head`]). The
+    // Huber pass's fit is the ladder's fit of its rung and ends on the pass's core: nothing
+    // starts early when a rung of the head's chain (which the head's core runs) is that rung.
     let chains = rung_chains(&rung_parents(&ladder_rungs.0));
-    let in_head_chain = |head: ModelName, r: ModelName| {
-        (chains.iter())
-            .any(|c| ladder_rungs.0[c[0]] == head && c.iter().any(|&i| ladder_rungs.0[i] == r))
-    };
+    let pass_in_head_chain =
+        (chains.first()).is_some_and(|c| c.iter().any(|&i| ladder_rungs.0[i] == richest));
     let early = (beside.zip(ladder_test))
-        .filter(|&(head, _)| !in_head_chain(head, richest))
-        .map(|(head, test)| EarlyLadder {
+        .filter(|_| !pass_in_head_chain)
+        .map(|(_, test)| EarlyLadder {
             measured: &measured,
             cfg,
-            test,
             rungs: &ladder_rungs.0,
-            head,
+            plan: FoldPlan::new(&measured, cfg, test),
+            chains,
         });
     // Whether the Huber pass bounded nothing, once it is known.
     let nothing_bounded = std::sync::OnceLock::new();
@@ -2390,29 +2389,34 @@ struct EarlyLadder<'a> {
     /// The fits on the training rows as measured.
     measured: &'a Fits<'a>,
     cfg: &'a MeasuredConfig,
-    /// The test tables, where the calibration is used ([`FoldPlan`]).
-    test: &'a [MeasurementTable],
     /// The ladder's rungs ([`ladder_of`]).
     rungs: &'a [ModelName],
-    /// The rung fitted beside the Huber pass ([`ladder_head`]).
-    head: ModelName,
+    /// Where the rungs are judged, on the test tables.
+    plan: FoldPlan,
+    /// The ladder's chains ([`rung_chains`]), the one the rung fitted beside the Huber pass
+    /// heads first ([`ladder_head`]).
+    chains: Vec<Vec<usize>>,
 }
 
 impl EarlyLadder<'_> {
-    /// With `of_head`, the runs of the chain the head starts ([`rung_chains`]), else those of
-    /// every other chain; from the frames-only fit `frames` and the fits `done`.
+    /// With `of_head`, the runs of the chain the head starts, else those of every other
+    /// chain; from the frames-only fit `frames` and the fits `done`.
     fn runs(
         &self,
         frames: (&CalibratedModel, &Fitted),
         of_head: bool,
         done: DoneFits,
     ) -> Vec<(usize, Run)> {
-        let plan = FoldPlan::new(self.measured, self.cfg, self.test);
-        let runs = LadderRuns::new(self.measured, self.cfg, self.rungs, &plan, frames, done);
-        let chains: Vec<Vec<usize>> = (rung_chains(&runs.parent).into_iter())
-            .filter(|c| (self.rungs[c[0]] == self.head) == of_head)
-            .collect();
-        chain_runs(&runs, &chains)
+        let runs = LadderRuns::new(
+            self.measured,
+            self.cfg,
+            self.rungs,
+            &self.plan,
+            frames,
+            done,
+        );
+        let (head, others) = self.chains.split_at(1.min(self.chains.len()));
+        chain_runs(&runs, if of_head { head } else { others })
     }
 }
 
